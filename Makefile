@@ -1,0 +1,190 @@
+# slimfarm - one plain Makefile, no configure step.
+#
+#   make            release build into build/rel (bin/ links to it)
+#   make check      deps, sanitizer build (-Werror, ASan+UBSan), every test
+#   make demo       deps, build, run the farm on embedded defaults (ONCE=1 exits)
+#   make bench      benchmarks against peers; prints figures, never fails on time
+#   make fuzz T=NAME SECS=60   long libFuzzer run of one parser
+#   make deps       install missing Debian packages (quiet when all present)
+#   make format / check-format / check-headers / install / clean
+#
+# Sources are found by wildcard: a new .c file in a library folder joins the
+# library, tests/unit/test_NAME.c becomes a test program, tests/fuzz/fuzz_NAME.c
+# a fuzz target.  Folders, in dependency order (scripts/check-layers.sh):
+# src/base src/mesh src/geom slicer drivers src/farm src/api src/cmd; sim uses base.
+
+SHELL := /bin/bash
+CC := gcc
+CXX := g++
+FUZZCC := clang-14
+PREFIX ?= /usr/local
+
+# Debian 12 packages the project needs; `make deps` installs what is missing.
+DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev libsqlite3-dev \
+	libmicrohttpd-dev libmosquitto-dev libinih-dev libqhull-dev libpolyclipping-dev \
+	libjansson-dev libzip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
+	libsuitesparse-dev clang-14 libclang-rt-14-dev python3 procps
+# Only for `make bench`: the independent peers and their helpers.
+BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy
+
+# Libraries with a pkg-config file; the rest get fixed flags (Debian ships no .pc).
+PKGS := libserialport libcurl sqlite3 libmicrohttpd libmosquitto inih qhull_r polyclipping \
+	jansson libzip expat cairo
+PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
+PKG_LIBS = $(shell pkg-config --libs $(PKGS) 2>/dev/null)
+EXT_CFLAGS = $(PKG_CFLAGS) -I/usr/include/suitesparse
+EXT_LIBS = $(PKG_LIBS) -lembree3 -ltet -lcholmod -lumfpack -lamd -lcolamd -lsuitesparseconfig \
+	-lstdc++ -lpthread -lm
+
+ifeq ($(SAN),1)
+BUILD := build/san
+OPT := -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer
+else
+BUILD := build/rel
+OPT := -O2 -g
+endif
+
+# Truncated messages are by design (fixed error buffers), so no format-truncation.
+WARN := -Wall -Wextra -Werror -Wshadow -Wformat=2 -Wno-format-nonliteral -Wno-format-truncation
+CFLAGS := -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -Wstrict-prototypes -Wmissing-prototypes \
+	-include src/base/compat.h -MMD -MP
+CXXFLAGS := -std=c++14 -D_GNU_SOURCE $(OPT) $(WARN) -MMD -MP
+LDFLAGS := $(filter -fsanitize=%,$(OPT))
+
+LIB_DIRS := src/base src/mesh src/geom slicer drivers src/farm src/api
+LIB_C := $(wildcard $(addsuffix /*.c,$(LIB_DIRS)))
+LIB_CXX := $(wildcard $(addsuffix /*.cpp,$(LIB_DIRS)))
+SIM_C := $(filter-out sim/slimfarm_sim.c,$(wildcard sim/*.c))
+CLI_C := src/cmd/slimfarm.c $(wildcard src/cmd/cmd_*.c)
+TEST_C := $(wildcard tests/unit/test_*.c)
+FUZZ_C := $(wildcard tests/fuzz/fuzz_*.c)
+
+obj = $(patsubst %.c,$(BUILD)/obj/%.o,$(patsubst %.cpp,$(BUILD)/obj/%.o,$(1)))
+LIB := $(BUILD)/libslimfarm.a
+SIMLIB := $(BUILD)/libsfsim.a
+PROGS := $(BUILD)/bin/slimfarm $(if $(wildcard src/cmd/slimfarmd.c),$(BUILD)/bin/slimfarmd) \
+	$(if $(wildcard sim/slimfarm_sim.c),$(BUILD)/bin/slimfarm-sim)
+TESTS := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(TEST_C)) \
+	$(patsubst tests/fuzz/fuzz_%.c,$(BUILD)/tests/test_fuzz_%,$(FUZZ_C))
+FUZZERS := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(FUZZ_C))
+
+.PHONY: all check tests demo bench fuzz fuzzers deps install clean format check-format \
+	check-headers check-layers
+.DEFAULT_GOAL := all
+
+all: $(PROGS)
+	@mkdir -p bin && for p in $(PROGS); do ln -sf ../$$p bin/; done
+
+tests: $(PROGS) $(TESTS)
+
+# V=1 shows whole command lines.
+Q := $(if $(V),,@)
+$(BUILD)/obj/%.o: %.c
+	@mkdir -p $(dir $@)
+	@$(if $(V),,echo "  CC    $<")
+	$(Q)$(CC) $(CFLAGS) $(EXT_CFLAGS) -c $< -o $@
+
+$(BUILD)/obj/%.o: %.cpp
+	@mkdir -p $(dir $@)
+	@$(if $(V),,echo "  CXX   $<")
+	$(Q)$(CXX) $(CXXFLAGS) $(EXT_CFLAGS) -c $< -o $@
+
+$(LIB): $(call obj,$(LIB_C) $(LIB_CXX))
+	@mkdir -p $(dir $@)
+	rm -f $@ && ar rcs $@ $^
+
+$(SIMLIB): $(call obj,$(SIM_C))
+	@mkdir -p $(dir $@)
+	rm -f $@ && ar rcs $@ $^ $(if $^,,)
+
+$(BUILD)/bin/slimfarm: $(call obj,$(CLI_C)) $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^ $(EXT_LIBS)
+
+$(BUILD)/bin/slimfarmd: $(call obj,src/cmd/slimfarmd.c) $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^ $(EXT_LIBS)
+
+$(BUILD)/bin/slimfarm-sim: $(call obj,sim/slimfarm_sim.c) $(SIMLIB) $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^ $(EXT_LIBS)
+
+$(BUILD)/tests/test_fuzz_%: $(call obj,tests/fuzz/replay.c) $(BUILD)/obj/tests/fuzz/fuzz_%.o $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^ $(EXT_LIBS)
+
+$(BUILD)/tests/test_%: $(BUILD)/obj/tests/unit/test_%.o $(call obj,tests/t.c) $(SIMLIB) $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $< $(call obj,tests/t.c) $(SIMLIB) $(LIB) $(EXT_LIBS)
+
+# libFuzzer builds (clang), in their own object tree: the library once with
+# coverage hooks (fuzzer-no-link), then one small link per target.
+FUZZ_SAN := -O1 -g -fsanitize=address,undefined -fno-sanitize-recover=all
+build/fuzz/obj/%.o: %.c
+	@mkdir -p $(dir $@)
+	@$(if $(V),,echo "  FUZZ  $<")
+	$(Q)$(FUZZCC) -std=c11 -D_GNU_SOURCE $(FUZZ_SAN) -fsanitize=fuzzer-no-link \
+		-include src/base/compat.h $(EXT_CFLAGS) -c $< -o $@
+build/fuzz/obj/%.o: %.cpp
+	@mkdir -p $(dir $@)
+	$(Q)clang++-14 -std=c++14 -D_GNU_SOURCE $(FUZZ_SAN) -fsanitize=fuzzer-no-link $(EXT_CFLAGS) -c $< -o $@
+build/fuzz/libslimfarm.a: $(patsubst %,build/fuzz/obj/%.o,$(basename $(LIB_C) $(LIB_CXX)))
+	rm -f $@ && ar rcs $@ $^
+build/fuzz/fuzz_%: build/fuzz/obj/tests/fuzz/fuzz_%.o build/fuzz/libslimfarm.a
+	$(FUZZCC) $(FUZZ_SAN) -fsanitize=fuzzer -o $@ $^ $(EXT_LIBS)
+fuzzers: $(FUZZERS)
+
+FUZZ_RUNS ?= 3000
+check: deps
+	$(MAKE) --no-print-directory SAN=1 tests
+	$(MAKE) --no-print-directory fuzzers
+	$(MAKE) --no-print-directory check-layers
+	FUZZ_RUNS=$(FUZZ_RUNS) tests/run.sh build/san $(T)
+
+T ?=
+SECS ?= 60
+fuzz: deps
+	@test -n "$(T)" || { echo "usage: make fuzz T=NAME [SECS=60]  (NAME from tests/fuzz/fuzz_NAME.c)"; exit 2; }
+	$(MAKE) --no-print-directory build/fuzz/fuzz_$(T)
+	mkdir -p build/fuzz/corpus-$(T) && build/fuzz/fuzz_$(T) -max_total_time=$(SECS) \
+		-dict=tests/fuzz/$(T).dict build/fuzz/corpus-$(T) tests/fuzz/corpus/$(T)
+
+demo: deps all
+	tests/demo.sh $(if $(ONCE),--once)
+
+bench: deps all
+	@missing=$$(for p in $(BENCH_PKGS); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done); \
+	if [ -n "$$missing" ]; then apt-get install -y -q $$missing >/dev/null; fi
+	tests/bench/run.sh build/rel
+
+deps:
+	@missing=$$(for p in $(DEB_PKGS); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done); \
+	if [ -n "$$missing" ]; then \
+		echo "installing: $$missing"; \
+		export DEBIAN_FRONTEND=noninteractive; \
+		apt-get update -q >/dev/null && apt-get install -y -q $$missing >/dev/null || \
+			{ echo "make deps: could not install $$missing (run as root?)"; exit 1; }; \
+	fi
+
+install: all
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/slimfarm
+	install -m 755 $(PROGS) $(DESTDIR)$(PREFIX)/bin/
+	cp -r config $(DESTDIR)$(PREFIX)/share/slimfarm/
+
+SRC_ALL = $(shell git ls-files '*.c' '*.h' '*.cpp' 2>/dev/null)
+format:
+	clang-format -i $(SRC_ALL)
+check-format:
+	clang-format --dry-run --Werror $(SRC_ALL)
+check-headers:
+	@for h in $(filter %.h,$(SRC_ALL)); do \
+		echo '#include "'$$h'"' | $(CC) -std=c11 -D_GNU_SOURCE -I. $(EXT_CFLAGS) -fsyntax-only -x c - || exit 1; \
+	done; echo "every header compiles alone"
+check-layers:
+	@tests/check-layers.sh
+
+clean:
+	rm -rf build bin
+
+-include $(shell find build -name '*.d' 2>/dev/null)
+

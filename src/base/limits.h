@@ -1,0 +1,46 @@
+/*
+ * limits.h - every cap on input from outside, each with its reason.
+ *
+ * A cap turns a hostile or broken input (a 4 GB "STL", a printer that sends
+ * an endless line) into a clear error instead of an exhausted machine.  Keep
+ * them generous: they guard the machine, they are not policy.
+ */
+#ifndef SF_BASE_LIMITS_H
+#define SF_BASE_LIMITS_H
+
+/* Largest mesh file read into memory: a 20M-facet binary STL is 1 GB. */
+#define SF_MESH_FILE_MAX ((size_t)1 << 30)
+
+/* Most triangles in one part: 20M facets is far past any printable part at
+   0.4 mm nozzle resolution and keeps a mesh under ~1 GB in memory. */
+#define SF_MESH_TRIS_MAX 20000000u
+
+/* Most vertices in one part, for the same reason. */
+#define SF_MESH_VERTS_MAX 20000000u
+
+/* Largest coordinate magnitude accepted, in mm: 100 m.  Beyond this a file
+   is in the wrong unit or corrupt, and float precision is gone anyway. */
+#define SF_MESH_COORD_MAX 1.0e5
+
+/* Longest text line in OBJ/ASCII STL: real files stay far below 1 KiB. */
+#define SF_TEXT_LINE_MAX 65536
+
+/* Largest uncompressed 3MF model part: same budget as a mesh file. */
+#define SF_3MF_MODEL_MAX ((size_t)1 << 30)
+
+/* Longest G-code line we accept: Marlin's MAX_CMD_SIZE is 96; slicers emit
+   long comments, which we strip, so allow 4 KiB of raw line. */
+#define SF_GCODE_LINE_MAX 4096
+
+/* Longest reply line from a printer before it is dropped as garbage:
+   M115 capability lines and M503 dumps stay under 512 bytes. */
+#define SF_PRINTER_LINE_MAX 1024
+
+/* Config file size: a farm of 1000 printers fits easily in 4 MiB. */
+#define SF_CONFIG_FILE_MAX ((size_t)4 << 20)
+
+/* Ray grid cells per side when measuring support: 1 mm pitch on a 4 m bed.
+   Guards memory when a caller passes a tiny pitch. */
+#define SF_GRID_CELLS_MAX 4000000u
+
+#endif

@@ -1,0 +1,42 @@
+/*
+ * cmd.h - subcommands of the `slimfarm` CLI.
+ *
+ * Each subcommand lives in its own src/cmd/cmd_NAME.c and registers itself
+ * with CMD_REGISTER, so adding one touches no shared table.  A command gets
+ * argv with argv[0] = its own name, returns the process exit status (0 ok,
+ * 1 failure, 2 usage error) and prints its own errors as
+ * "slimfarm NAME: message".
+ */
+#ifndef SF_CMD_CMD_H
+#define SF_CMD_CMD_H
+
+#include <stdbool.h>
+
+typedef int (*cmd_fn)(int argc, char **argv);
+
+struct cmd {
+    const char *name;    /* "inspect" */
+    const char *usage;   /* one line: "inspect PART [--up x,y,z] ..." */
+    const char *summary; /* one line: what it does */
+    cmd_fn run;
+};
+
+void cmd_register(const struct cmd *c);
+
+#define CMD_REGISTER(ident, name_, usage_, summary_, fn_)                                     \
+    static const struct cmd cmd_def_##ident = { name_, usage_, summary_, fn_ };               \
+    __attribute__((constructor)) static void cmd_reg_##ident(void)                            \
+    {                                                                                         \
+        cmd_register(&cmd_def_##ident);                                                       \
+    }
+
+/* True when stdout is a terminal and NO_COLOR-style progress is wanted. */
+bool cmd_stdout_is_tty(void);
+
+/*
+ * Draw "label [#####.....] 42%" on stderr when it is a terminal; a no-op
+ * otherwise.  done == total finishes the line.
+ */
+void cmd_progress(const char *label, double done, double total);
+
+#endif

@@ -1,0 +1,92 @@
+/*
+ * slimfarm.c - the command-line tool: runs any pipeline stage alone
+ * (inspect, orient, optimize, slice, send ...) or talks to a running
+ * slimfarmd.  Subcommands register themselves (cmd.h); this file only
+ * dispatches and prints help.
+ */
+#include "cmd.h"
+
+#include <stdio.h>
+#include <string.h>
+#include <unistd.h>
+
+#define CMD_MAX 64
+
+static const struct cmd *cmds[CMD_MAX];
+static int n_cmds;
+
+void
+cmd_register(const struct cmd *c)
+{
+    if (n_cmds < CMD_MAX)
+        cmds[n_cmds++] = c;
+}
+
+bool
+cmd_stdout_is_tty(void)
+{
+    return isatty(STDOUT_FILENO);
+}
+
+void
+cmd_progress(const char *label, double done, double total)
+{
+    if (!isatty(STDERR_FILENO) || total <= 0)
+        return;
+    double f = done / total;
+    if (f > 1)
+        f = 1;
+    char bar[31];
+    int fill = (int)(f * 30);
+    for (int i = 0; i < 30; i++)
+        bar[i] = i < fill ? '#' : '.';
+    bar[30] = '\0';
+    fprintf(stderr, "\r%-12s [%s] %3d%%%s", label, bar, (int)(f * 100), f >= 1 ? "\n" : "");
+    fflush(stderr);
+}
+
+static int
+cmp_cmd(const void *a, const void *b)
+{
+    return strcmp((*(const struct cmd *const *)a)->name, (*(const struct cmd *const *)b)->name);
+}
+
+static void
+usage(FILE *f)
+{
+    fprintf(f, "usage: slimfarm COMMAND [ARGS]\n\ncommands:\n");
+    for (int i = 0; i < n_cmds; i++)
+        fprintf(f, "  %-10s %s\n", cmds[i]->name, cmds[i]->summary);
+    fprintf(f, "\n'slimfarm help COMMAND' shows a command's usage.\n");
+}
+
+int
+main(int argc, char **argv)
+{
+    qsort(cmds, (size_t)n_cmds, sizeof(cmds[0]), cmp_cmd);
+    if (argc < 2 || strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0) {
+        usage(argc < 2 ? stderr : stdout);
+        return argc < 2 ? 2 : 0;
+    }
+    if (strcmp(argv[1], "help") == 0) {
+        if (argc < 3) {
+            usage(stdout);
+            return 0;
+        }
+        for (int i = 0; i < n_cmds; i++) {
+            if (strcmp(cmds[i]->name, argv[2]) == 0) {
+                printf("usage: slimfarm %s\n%s\n", cmds[i]->usage, cmds[i]->summary);
+                return 0;
+            }
+        }
+        fprintf(stderr, "slimfarm: unknown command '%s'\n", argv[2]);
+        return 2;
+    }
+    for (int i = 0; i < n_cmds; i++) {
+        if (strcmp(cmds[i]->name, argv[1]) == 0)
+            return cmds[i]->run(argc - 1, argv + 1);
+    }
+    fprintf(stderr, "slimfarm: unknown command '%s'\n", argv[1]);
+    usage(stderr);
+    return 2;
+}

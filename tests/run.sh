@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# tests/run.sh BUILD_DIR [FILTER]
+# Runs every unit test program in BUILD_DIR/tests, then the fuzz corpus
+# replays and integration tests, and ends with the line CI reads:
+#   total: N passed, N failed
+# A program that crashes counts all its cases as failed.
+set -u
+build=${1:?usage: tests/run.sh BUILD_DIR [FILTER]}
+filter=${2:-}
+pass=0 fail=0 skip=0 failed_progs=()
+for prog in "$build"/tests/test_*; do
+  [ -x "$prog" ] || continue
+  name=$(basename "$prog")
+  [ -n "$filter" ] && [[ "$name" != *"$filter"* ]] && continue
+  echo "== $name"
+  out=$("$prog" 2>&1); rc=$?
+  printf '%s\n' "$out" | grep -v '^ok ' || true
+  last=$(printf '%s\n' "$out" | tail -n 1)
+  if [[ "$last" =~ ^([0-9]+)\ passed,\ ([0-9]+)\ failed,\ ([0-9]+)\ skipped$ ]]; then
+    pass=$((pass + BASH_REMATCH[1])); fail=$((fail + BASH_REMATCH[2])); skip=$((skip + BASH_REMATCH[3]))
+    [ "$rc" -ne 0 ] && [ "${BASH_REMATCH[2]}" -eq 0 ] && { fail=$((fail + 1)); failed_progs+=("$name(rc=$rc)"); }
+    [ "${BASH_REMATCH[2]}" -ne 0 ] && failed_progs+=("$name")
+  else
+    n=$("$prog" --count 2>/dev/null || echo 1)
+    echo "   $name crashed (rc=$rc): counting its $n cases as failed"
+    fail=$((fail + n)); failed_progs+=("$name(crash)")
+  fi
+done
+for script in tests/integ/*.sh; do
+  [ -f "$script" ] || continue
+  name=$(basename "$script" .sh)
+  [ -n "$filter" ] && [[ "$name" != *"$filter"* ]] && continue
+  echo "== integ $name"
+  if BUILD="$build" bash "$script"; then pass=$((pass + 1)); else fail=$((fail + 1)); failed_progs+=("integ/$name"); fi
+done
+[ ${#failed_progs[@]} -gt 0 ] && echo "failed: ${failed_progs[*]}"
+echo "total: $pass passed, $fail failed, $skip skipped"
+[ "$fail" -eq 0 ]
