@@ -1,0 +1,90 @@
+/*
+ * measure.h - the support and deviation metrics every stage reports,
+ * computed in one place so the orienter, both shape optimizers, the slicer
+ * and the CLI agree on every number.
+ *
+ * Convention (Cura's support_angle, the support-slimming paper's
+ * tau = sin(alpha)): alpha is the largest self-supporting angle measured
+ * from the vertical.  A face with outward unit normal n needs support for
+ * up-direction d when n . d < -sin(alpha).  PrusaSlicer's
+ * support_material_threshold T is measured from the horizontal: T = 90 - alpha.
+ *
+ * Thread-safe on distinct outputs; the raycast may be shared.
+ */
+#ifndef SF_GEOM_MEASURE_H
+#define SF_GEOM_MEASURE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "../mesh/mesh.h"
+#include "raycast.h"
+
+struct support_params {
+    double angle_deg; /* alpha, largest self-supporting angle from vertical (default 45) */
+    double pitch_mm;  /* ray grid pitch (default 1) */
+    double min_gap_mm; /* a risky hit closer than this above the surface below needs no
+                          column (it rests on it); default 0.05 */
+};
+
+/* Defaults: 45 degrees, 1 mm grid, 0.05 mm gap. */
+void support_params_default(struct support_params *p);
+
+/* A support column found on the ray grid: from z_lo (bed or part below) up
+   to z_hi (the risky hit), heights along up above the bed. */
+struct support_column {
+    uint32_t cell; /* ray grid cell */
+    float lo, hi;  /* mm above the bed */
+    uint32_t tri;  /* the risky triangle it holds up */
+};
+
+struct support_metrics {
+    uint32_t n_risky;          /* faces with n . d < -sin(alpha) (bed contact excluded) */
+    double risky_area_mm2;     /* their area */
+    double proxy_mm3;          /* sum over risky faces: projected area * centroid height */
+    double volume_mm3;         /* ray-cast column volume: sum of column length * pitch^2 */
+    double contact_area_mm2;   /* columns * pitch^2: part surface touched by support */
+    uint32_t n_columns;        /* support columns on the grid */
+    uint32_t n_anchors;        /* clusters of adjacent supported grid points */
+    double com_height_mm;      /* centre of mass height above the bed */
+    double build_height_mm;    /* part height along d */
+};
+
+/*
+ * Risky faces and the proxy only (no ray cast): cheap, for pruning.
+ * Faces resting on the bed (centroid within min_gap of the lowest point)
+ * are not counted as risky.
+ */
+void measure_proxy(const struct mesh *m, struct vec3 up, const struct support_params *p,
+                   struct support_metrics *out);
+
+/*
+ * Support columns on a cast grid: walking up each ray, a hit on a risky
+ * face more than min_gap above the last surface below (the bed, or the
+ * part's last exit) needs a column from there.  *cols is allocated (free()).
+ */
+int measure_columns(const struct ray_grid *g, const struct support_params *p,
+                    struct support_column **cols, size_t *n_cols, struct sf_err *err);
+
+/* Everything in struct support_metrics for up-direction up. */
+int measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
+                    const struct support_params *p, struct support_metrics *out,
+                    struct sf_err *err);
+
+/* Shape deviation between two meshes with the same connectivity (a deformed copy). */
+struct deviation {
+    double max_mm, mean_mm; /* vertex displacement */
+    double mndr, andr;      /* max / mean displacement over the bbox diagonal of a */
+};
+int measure_deviation(const struct mesh *a, const struct mesh *b, struct deviation *out,
+                      struct sf_err *err);
+
+/*
+ * One-sided Hausdorff distance from a to b (max over a's vertices and
+ * triangle samples of the distance to b's surface), and the symmetric one.
+ */
+int measure_hausdorff(const struct mesh *a, const struct mesh *b, double *one_sided_mm,
+                      double *symmetric_mm, struct sf_err *err);
+
+#endif
