@@ -1,0 +1,114 @@
+/*
+ * drv.h - the printer driver interface: one vtable for every kind of
+ * printer (Marlin over serial/pty/TCP, OctoPrint, Moonraker, Bambu LAN), so
+ * the daemon never knows which protocol it talks.
+ *
+ * Shaped like SQLite's VFS: struct drv_ops holds a version and the
+ * operations; each driver embeds struct drv as its first member and casts.
+ * Drivers run on the loop thread (loop.h), never block and never own
+ * threads: they register their fds and timers with the loop and report
+ * through the on_event callback.
+ *
+ * Lifecycle: drv_new() parses the config and creates the driver without
+ * touching the device; ops->open() starts connecting (result arrives as a
+ * DRV_EV_STATE event); start_job/pause/resume/cancel act on the job;
+ * ops->close() disconnects; drv_free() destroys.  A driver whose link drops
+ * reports DRV_OFFLINE; the owner decides when to open() again (backoff).
+ */
+#ifndef SF_DRIVERS_DRV_H
+#define SF_DRIVERS_DRV_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "../src/base/err.h"
+#include "../src/base/loop.h"
+
+#define DRV_OPS_VERSION 1
+
+enum drv_state {
+    DRV_OFFLINE = 0, /* not connected */
+    DRV_CONNECTING,  /* link up, handshake in progress */
+    DRV_IDLE,        /* ready for a job */
+    DRV_PRINTING,    /* streaming a job */
+    DRV_PAUSED,      /* job paused (by us or by the printer) */
+    DRV_ERROR,       /* printer halted or reported a fatal error; needs attention */
+};
+
+enum drv_event {
+    DRV_EV_STATE,      /* status.state changed */
+    DRV_EV_PROGRESS,   /* lines acknowledged moved on (rate-limited by the driver) */
+    DRV_EV_TEMPS,      /* new temperature report */
+    DRV_EV_JOB_DONE,   /* the job's last line was acknowledged and executed */
+    DRV_EV_JOB_FAILED, /* the job stopped; status.message says why, lines_acked where */
+};
+
+struct drv_status {
+    enum drv_state state;
+    double nozzle_c, nozzle_target_c; /* last reported temperatures, deg C */
+    double bed_c, bed_target_c;
+    uint64_t lines_total;   /* command lines in the running job */
+    uint64_t lines_acked;   /* of those, acknowledged by the printer */
+    double progress;        /* 0..1 */
+    int64_t job_started_ms; /* loop time the job started */
+    char message[160];      /* last error or notice, for operators */
+};
+
+struct drv_caps {
+    char firmware[64];   /* FIRMWARE_NAME from M115, or the server's name */
+    bool advanced_ok;    /* replies carry ok N P B */
+    bool autoreport_temp; /* M155 supported */
+    bool host_actions;   /* // action: commands understood */
+    int buffer_lines;    /* command lines the firmware can queue (BUFSIZE) */
+};
+
+/* How to reach a printer (from the farm config). */
+struct drv_config {
+    const char *name;    /* printer name, for logs */
+    const char *kind;    /* "marlin", "octoprint", "moonraker", "bambu" */
+    const char *port;    /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
+    int baud;            /* serial baud rate (0: 115200) */
+    const char *url;     /* network printers: base URL */
+    const char *api_key; /* network printers: key or access code */
+};
+
+struct drv;
+typedef void (*drv_event_fn)(struct drv *d, enum drv_event ev, void *ud);
+
+struct drv_ops {
+    int version;      /* DRV_OPS_VERSION */
+    const char *kind; /* "marlin" */
+    int (*open)(struct drv *d, struct sf_err *err);
+    /* Stream gcode_path; first_line > 0 skips lines already printed (resume after interrupt). */
+    int (*start_job)(struct drv *d, const char *gcode_path, struct sf_err *err);
+    int (*pause)(struct drv *d, struct sf_err *err);
+    int (*resume)(struct drv *d, struct sf_err *err);
+    int (*cancel)(struct drv *d, struct sf_err *err);
+    /* Queue one manual command (console); SF_EAGAIN while printing. */
+    int (*command)(struct drv *d, const char *line, struct sf_err *err);
+    void (*close)(struct drv *d);
+    void (*destroy)(struct drv *d);
+};
+
+struct drv {
+    const struct drv_ops *ops;
+    struct loop *loop;
+    char name[64];          /* printer name, for logs */
+    drv_event_fn on_event;  /* owner's callback (loop thread) */
+    void *ud;               /* its argument */
+    struct drv_status status;
+    struct drv_caps caps;
+};
+
+/*
+ * Create the driver for cfg->kind on loop l.  Nothing is opened yet.
+ * SF_EINVAL / SF_EUNSUPP with a message for a bad or unknown config.
+ */
+struct drv *drv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event,
+                    void *ud, struct sf_err *err);
+/* close() if open, then destroy.  NULL is fine. */
+void drv_free(struct drv *d);
+
+const char *drv_state_name(enum drv_state s);
+
+#endif
