@@ -60,6 +60,24 @@ void measure_proxy(const struct mesh *m, struct vec3 up, const struct support_pa
                    struct support_metrics *out);
 
 /*
+ * The same proxy for many directions of one mesh: per-triangle normals,
+ * areas and centroids computed once (structure of arrays), so each
+ * direction costs a few multiply-adds per triangle.
+ */
+struct proxy_cache {
+    uint32_t n_tris, n_verts;
+    float *nx, *ny, *nz;  /* unit normals */
+    float *area;          /* mm2 */
+    float *cx, *cy, *cz;  /* centroids */
+    const struct mesh *m; /* for the vertex heights */
+};
+int proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *err);
+void proxy_cache_release(struct proxy_cache *pc);
+/* As measure_proxy (same numbers up to float rounding). */
+void measure_proxy_cached(const struct proxy_cache *pc, struct vec3 up,
+                          const struct support_params *p, struct support_metrics *out);
+
+/*
  * Support columns on a cast grid: walking up each ray, a hit on a risky
  * face more than min_gap above the last surface below (the bed, or the
  * part's last exit) needs a column from there.  *cols is allocated (free()).

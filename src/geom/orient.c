@@ -217,11 +217,15 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     support_params_default(&j.sp);
     j.sp.angle_deg = p->angle_deg;
     j.sp.pitch_mm = p->pitch_mm;
+    struct proxy_cache pc;
+    if ((rcode = proxy_cache_init(&pc, m, err)))
+        goto out;
     for (uint32_t i = 0; i < n; i++) {
         struct support_metrics s;
-        measure_proxy(m, cands[i].c.up, &j.sp, &s);
+        measure_proxy_cached(&pc, cands[i].c.up, &j.sp, &s);
         cands[i].proxy_cost = s.proxy_mm3 + p->w_contact_mm * s.risky_area_mm2;
     }
+    proxy_cache_release(&pc);
     todo = mem_array(n + 64, sizeof(uint32_t));
     if (!todo)
         goto oom;

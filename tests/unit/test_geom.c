@@ -187,3 +187,25 @@ T_CASE(deviation_and_hausdorff)
     mesh_release(&a);
     mesh_release(&b);
 }
+
+T_CASE(cached_proxy_agrees_with_the_direct_one)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    struct proxy_cache pc;
+    T_OK(proxy_cache_init(&pc, &m, &err), &err);
+    struct support_params p;
+    support_params_default(&p);
+    for (int i = 0; i < 20; i++) {
+        struct vec3 up = v3_normalize(v3(sin(i * 1.3), cos(i * 0.7), sin(i * 0.4 + 1)));
+        struct support_metrics a, b;
+        measure_proxy(&m, up, &p, &a);
+        measure_proxy_cached(&pc, up, &p, &b);
+        T_TRUE(abs((int)a.n_risky - (int)b.n_risky) <= 2); /* float rounding at the threshold */
+        T_EQ_DBL(b.proxy_mm3, a.proxy_mm3, 0.01 * a.proxy_mm3 + 1e-3);
+    }
+    proxy_cache_release(&pc);
+    mesh_release(&m);
+}
