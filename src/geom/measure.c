@@ -23,6 +23,7 @@
 #include <string.h>
 
 #include "../base/mem.h"
+#include "growth.h"
 
 void
 support_params_default(struct support_params *p)
@@ -275,6 +276,14 @@ measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
             com = area > 0 ? v3_scale(com, 1 / area) : com;
         }
         out->com_height_mm = v3_dot(com, up) - g.base;
+        struct growth_report gr;
+        rcode = growth_simulate(&g, cols, n, p->pitch_mm, &gr, err);
+        if (rcode == SF_OK) {
+            out->n_islands = gr.n_islands;
+            out->island_volume_mm3 = gr.island_volume_mm3;
+            out->volume_mm3 += gr.island_volume_mm3;
+            out->base_margin_mm = gr.min_margin_mm;
+        }
     }
     free(cols);
     ray_grid_release(&g);

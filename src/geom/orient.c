@@ -109,6 +109,9 @@ worker(void *arg)
         if (c->c.source != ORIENT_HULL &&
             bed_contact_area(j->m, c->c.up) < j->p->min_base_mm2 && c->c.m.n_columns == 0)
             c->dropped = true;
+        /* Growth simulation: the part built so far would tip off its base. */
+        if (c->c.m.base_margin_mm < 0)
+            c->dropped = true;
         unsigned d = atomic_fetch_add(&j->done, 1) + 1;
         if (j->p->progress)
             j->p->progress(j->p->progress_ud, j->progress_base + d, j->progress_total);

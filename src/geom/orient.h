@@ -6,8 +6,9 @@
  * orientation; a cheap proxy prunes them, the exact ray-cast metrics score
  * the survivors in parallel, and a finer cap of samples refines around the
  * best few.  Cost = support volume + w_contact * contact area + w_stability
- * * centre-of-mass height; a direction on which the part would stand on a
- * point with nothing holding it is dropped.
+ * * centre-of-mass height, support volume including what the growth
+ * simulation's islands need; a direction on which the part would stand on a
+ * point with nothing holding it, or would tip over while it grows, is dropped.
  *
  * Thread-safe: each call is independent; it starts its own worker threads.
  */

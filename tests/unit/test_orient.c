@@ -144,3 +144,22 @@ T_CASE(tiny_hull_face_is_not_a_base)
     T_EQ_DBL(r.best.m.volume_mm3, 0, 1e-9);
     mesh_release(&m);
 }
+
+T_CASE(leaning_tower_is_not_left_to_tip_over)
+{
+    /* leaning 40 degrees on a 10 mm foot: no support needed, but it would
+       topple while printing; the search must stand it on a real base */
+    double off = 60 * tan(40 * M_PI / 180);
+    double x[] = { 0, 10, 10 + off, off }, z[] = { 0, 0, 60, 60 };
+    struct mesh m;
+    struct sf_err err;
+    struct orient_result r;
+    mesh_init(&m);
+    T_OK(shape_extrude_xz(&m, x, z, 4, 20, &err), &err);
+    /* no stability weight: the input, first and supportless, would win a tie */
+    T_OK(find_w(&m, 0, &r, &err), &err);
+    T_TRUE(r.input.m.base_margin_mm < 0);
+    T_TRUE(r.best.m.base_margin_mm > 0);
+    T_TRUE(angle_deg(r.best.up, v3(0, 0, 1)) > 10);
+    mesh_release(&m);
+}
