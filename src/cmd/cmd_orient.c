@@ -14,7 +14,7 @@
 #include "cmd.h"
 
 static const char usage_line[] =
-    "orient PART -o OUT [--angle DEG] [--samples N] [--grid MM] [--bed X,Y] [--json]";
+    "orient PART -o OUT [--angle DEG] [--margin DEG] [--samples N] [--grid MM] [--bed X,Y] [--json]";
 
 static void
 progress(void *ud, double done, double total)
@@ -51,6 +51,7 @@ run(int argc, char **argv)
         { "output", required_argument, NULL, 'o' }, { "angle", required_argument, NULL, 'a' },
         { "samples", required_argument, NULL, 's' }, { "grid", required_argument, NULL, 'g' },
         { "bed", required_argument, NULL, 'b' },     { "json", no_argument, NULL, 'j' },
+        { "margin", required_argument, NULL, 'm' },
         { "help", no_argument, NULL, 'h' },          { NULL, 0, NULL, 0 }
     };
     struct orient_params p;
@@ -70,6 +71,14 @@ run(int argc, char **argv)
             p.angle_deg = strtod(optarg, &end);
             if (*end || !(p.angle_deg >= 0 && p.angle_deg < 90)) {
                 fprintf(stderr, "slimfarm orient: --angle wants degrees in [0, 90), got '%s'\n",
+                        optarg);
+                return 2;
+            }
+            break;
+        case 'm':
+            p.margin_deg = strtod(optarg, &end);
+            if (*end || !(p.margin_deg >= 0 && p.margin_deg < 45)) {
+                fprintf(stderr, "slimfarm orient: --margin wants degrees in [0, 45), got '%s'\n",
                         optarg);
                 return 2;
             }
@@ -152,8 +161,10 @@ run(int argc, char **argv)
         free(text);
         return 0;
     }
-    printf("%s -> %s: %u directions, %u ray-cast, %.2f s\n", argv[optind], out, r.n_candidates,
-           r.n_exact, r.seconds);
+    printf("%s -> %s: %u directions, %u ray-cast, %.3f s (setup %.3f, proxy %.3f, ray cast "
+           "%.3f)\n",
+           argv[optind], out, r.n_candidates, r.n_exact, r.seconds, r.seconds_setup,
+           r.seconds_proxy, r.seconds_exact);
     print_cand("best", &r.best);
     print_cand("input", &r.input);
     for (int i = 0; i < r.n_runners; i++)

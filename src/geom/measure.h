@@ -74,7 +74,7 @@ struct proxy_cache {
     float *nx, *ny, *nz;  /* unit normals */
     float *area;          /* mm2 */
     float *cx, *cy, *cz;  /* centroids */
-    const struct mesh *m; /* for the vertex heights */
+    float *vx, *vy, *vz;  /* vertices, for the lowest and highest point */
 };
 int proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *err);
 void proxy_cache_release(struct proxy_cache *pc);

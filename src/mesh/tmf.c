@@ -361,8 +361,12 @@ read_entry(zip_t *z, const char *entry, struct buf *out, const char *name, struc
     int rc = SF_OK;
     while ((n = zip_fread(f, chunk, sizeof(chunk))) > 0) {
         if (buf_append(out, chunk, (size_t)n) != SF_OK) {
-            rc = sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' unpacks to more than %zu bytes",
-                            name, entry, out->max);
+            if ((size_t)n > out->max - out->len)
+                rc = sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' unpacks to more than %zu bytes",
+                                name, entry, out->max);
+            else
+                rc = sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory reading '%s'", name,
+                                entry);
             break;
         }
     }
@@ -398,7 +402,12 @@ tmf_parse(const void *data, size_t len, const char *name, struct mesh *m, struct
     int rc = SF_OK;
 
     /* The relationships part says where the model is; fall back to the usual name. */
-    if (read_entry(z, "_rels/.rels", &xml, name, NULL) == SF_OK) {
+    int rels = read_entry(z, "_rels/.rels", &xml, name, NULL);
+    if (rels == SF_ENOMEM) {
+        rc = sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory", name);
+        goto out;
+    }
+    if (rels == SF_OK) {
         XML_Parser rp = XML_ParserCreate(NULL);
         if (rp) {
             XML_SetUserData(rp, model_path);
