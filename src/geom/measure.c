@@ -74,10 +74,12 @@ measure_proxy(const struct mesh *m, struct vec3 up, const struct support_params 
 }
 
 int
-proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *err)
+proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, const uint32_t *extreme,
+                 uint32_t n_extreme, struct sf_err *err)
 {
     memset(pc, 0, sizeof(*pc));
-    size_t nt = m->n_tris ? m->n_tris : 1, nv = m->n_verts ? m->n_verts : 1;
+    uint32_t n_v = extreme ? n_extreme : m->n_verts;
+    size_t nt = m->n_tris ? m->n_tris : 1, nv = n_v ? n_v : 1;
     float *block = mem_array(7 * nt + 3 * nv, sizeof(float));
     if (!block)
         return sf_err_set(err, SF_ENOMEM, "proxy: out of memory for %u triangles", m->n_tris);
@@ -90,7 +92,7 @@ proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *er
     pc->cx = arrays[4], pc->cy = arrays[5], pc->cz = arrays[6];
     pc->vx = arrays[7], pc->vy = arrays[8], pc->vz = arrays[9];
     pc->n_tris = m->n_tris;
-    pc->n_verts = m->n_verts;
+    pc->n_verts = n_v;
     for (uint32_t i = 0; i < m->n_tris; i++) {
         struct vec3 c = mesh_tri_cross(m, i), g = mesh_tri_centroid(m, i);
         double len = v3_len(c);
@@ -103,10 +105,11 @@ proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *er
         pc->cy[i] = (float)g.y;
         pc->cz[i] = (float)g.z;
     }
-    for (uint32_t i = 0; i < m->n_verts; i++) {
-        pc->vx[i] = (float)m->v[i].x;
-        pc->vy[i] = (float)m->v[i].y;
-        pc->vz[i] = (float)m->v[i].z;
+    for (uint32_t i = 0; i < n_v; i++) {
+        struct vec3 v = m->v[extreme ? extreme[i] : i];
+        pc->vx[i] = (float)v.x;
+        pc->vy[i] = (float)v.y;
+        pc->vz[i] = (float)v.z;
     }
     return SF_OK;
 }
@@ -273,18 +276,7 @@ measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
         out->contact_area_mm2 = (double)n * cell;
         out->n_columns = (uint32_t)n;
         out->n_anchors = count_anchors(&g, cols, n);
-        struct vec3 com;
-        double vol = mesh_volume(m, &com);
-        if (!(fabs(vol) > 1e-9)) { /* open soup: fall back to the surface centroid */
-            double area = 0;
-            com = v3(0, 0, 0);
-            for (uint32_t i = 0; i < m->n_tris; i++) {
-                double a = mesh_tri_area(m, i);
-                com = v3_add(com, v3_scale(mesh_tri_centroid(m, i), a));
-                area += a;
-            }
-            com = area > 0 ? v3_scale(com, 1 / area) : com;
-        }
+        struct vec3 com = raycast_com(rc);
         out->com_height_mm = v3_dot(com, up) - g.base;
         struct growth_report gr;
         rcode = growth_simulate(&g, cols, n, p->pitch_mm, &gr, err);

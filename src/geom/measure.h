@@ -70,13 +70,16 @@ void measure_proxy(const struct mesh *m, struct vec3 up, const struct support_pa
  * direction costs a few multiply-adds per triangle.
  */
 struct proxy_cache {
-    uint32_t n_tris, n_verts;
+    uint32_t n_tris, n_verts; /* n_verts: entries of vx, vy, vz */
     float *nx, *ny, *nz;  /* unit normals */
     float *area;          /* mm2 */
     float *cx, *cy, *cz;  /* centroids */
     float *vx, *vy, *vz;  /* vertices, for the lowest and highest point */
 };
-int proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *err);
+/* extreme: optional indices of the only vertices that can be lowest or highest
+   (the convex hull's, hull.h); NULL means all of them. */
+int proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, const uint32_t *extreme,
+                     uint32_t n_extreme, struct sf_err *err);
 void proxy_cache_release(struct proxy_cache *pc);
 /* As measure_proxy (same numbers up to float rounding). */
 void measure_proxy_cached(const struct proxy_cache *pc, struct vec3 up,

@@ -251,7 +251,8 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
 
     struct vec3 com;
     mesh_volume(m, &com);
-    if ((rcode = hull_bases(m, com, &bases, &n_bases, err)))
+    uint32_t *hull_verts = NULL, n_hull_verts = 0;
+    if ((rcode = hull_bases(m, com, &bases, &n_bases, &hull_verts, &n_hull_verts, err)))
         return rcode;
     if ((rcode = push(&cands, &n, &cap, v3(0, 0, 1), ORIENT_INPUT)))
         goto oom;
@@ -271,7 +272,8 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     order = mem_array(n + 3 * REFINE_PER, sizeof(uint32_t));
     if (!order)
         goto oom;
-    if ((rcode = proxy_cache_init(&pc, m, err)) || !(rc = raycast_new(m, err))) {
+    if ((rcode = proxy_cache_init(&pc, m, hull_verts, n_hull_verts, err)) ||
+        !(rc = raycast_new(m, err))) {
         rcode = rcode ? rcode : (err ? err->code : SF_ENOMEM);
         goto out;
     }
@@ -351,6 +353,7 @@ out:
     free(order);
     free(cands);
     free(bases);
+    free(hull_verts);
     return rcode;
 }
 

@@ -28,8 +28,33 @@
 struct raycast {
     RTCScene scene;
     const struct mesh *mesh;
-    float *normal; /* 3 per triangle: unit outward normals */
+    float *normal;   /* 3 per triangle: unit outward normals */
+    struct vec3 com; /* centre of mass (raycast_com) */
 };
+
+/* Solid centre of mass, or the area-weighted surface centroid for a soup. */
+static struct vec3
+centre_of_mass(const struct mesh *m)
+{
+    struct vec3 com;
+    double vol = mesh_volume(m, &com);
+    if (fabs(vol) > 1e-9)
+        return com;
+    double area = 0;
+    com = v3(0, 0, 0);
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        double a = mesh_tri_area(m, i);
+        com = v3_add(com, v3_scale(mesh_tri_centroid(m, i), a));
+        area += a;
+    }
+    return area > 0 ? v3_scale(com, 1 / area) : com;
+}
+
+struct vec3
+raycast_com(const struct raycast *rc)
+{
+    return rc->com;
+}
 
 static pthread_once_t device_once = PTHREAD_ONCE_INIT;
 static RTCDevice device;
@@ -135,6 +160,7 @@ raycast_new(const struct mesh *m, struct sf_err *err)
         return NULL;
     }
     rc->mesh = m;
+    rc->com = centre_of_mass(m);
     rc->normal = mem_array((size_t)m->n_tris * 3 + 3, sizeof(float));
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     float *vb = geom ? rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,

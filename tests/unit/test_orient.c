@@ -44,7 +44,10 @@ T_CASE(hull_bases_of_a_box)
     uint32_t n;
     struct vec3 com;
     mesh_volume(&m, &com);
-    T_OK(hull_bases(&m, com, &b, &n, &err), &err);
+    uint32_t *hv, n_hv;
+    T_OK(hull_bases(&m, com, &b, &n, &hv, &n_hv, &err), &err);
+    T_EQ_INT(n_hv, 8);
+    free(hv);
     T_EQ_INT(n, 6); /* coplanar triangles merged into faces */
     T_EQ_DBL(b[0].area_mm2, 600, 1e-6);
     T_EQ_DBL(b[0].margin_mm, 10, 1e-6); /* com 10 mm from the long edges of the 20 x 30 face */
