@@ -63,7 +63,8 @@ int mesh_load_mem(const void *data, size_t len, const char *name, struct mesh *m
                   struct mesh_load_info *info, struct sf_err *err);
 
 /*
- * Raw parsers: bytes to an unwelded (STL) or indexed (OBJ, 3MF) mesh with
+ * Raw parsers: bytes to an indexed mesh (binary STL merges bit-identical
+ * corners as it reads; ASCII STL is a soup until mesh_load welds it) with
  * every coordinate checked finite and inside SF_MESH_COORD_MAX and every
  * index in range.  Used by mesh_load_mem and the fuzz targets.
  */
