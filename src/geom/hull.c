@@ -78,8 +78,8 @@ hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **out, uint32
     struct angle_pt *poly = NULL;
     uint32_t n = 0, cap = 0;
     if (exitcode) {
-        rc = sf_err_set(err, SF_EINVAL, "convex hull failed (qhull exit %d): flat or degenerate part",
-                        exitcode);
+        rc = sf_err_set(err, SF_EINVAL,
+                        "convex hull failed (qhull exit %d): flat or degenerate part", exitcode);
         goto out;
     }
     facetT *facet;
@@ -144,8 +144,7 @@ hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **out, uint32
         }
         uint32_t k = 0;
         vertexT *vertex;
-        FORALLvertices
-        ids[k++] = (uint32_t)qh_pointid(qh, vertex->point);
+        FORALLvertices ids[k++] = (uint32_t)qh_pointid(qh, vertex->point);
         *verts = ids;
         *n_verts = k;
     }

@@ -298,9 +298,10 @@ measure_deviation(const struct mesh *a, const struct mesh *b, struct deviation *
 {
     memset(out, 0, sizeof(*out));
     if (a->n_verts != b->n_verts || a->n_tris != b->n_tris)
-        return sf_err_set(err, SF_EINVAL,
-                          "deviation needs the same connectivity (%u/%u vs %u/%u vertices/triangles)",
-                          a->n_verts, a->n_tris, b->n_verts, b->n_tris);
+        return sf_err_set(
+            err, SF_EINVAL,
+            "deviation needs the same connectivity (%u/%u vs %u/%u vertices/triangles)", a->n_verts,
+            a->n_tris, b->n_verts, b->n_tris);
     double sum = 0;
     for (uint32_t i = 0; i < a->n_verts; i++) {
         double d = v3_len(v3_sub(a->v[i], b->v[i]));

@@ -216,8 +216,8 @@ elapsed(const struct timespec *a)
  * min_deg apart (and from the ones in keep[0..n_keep)); returns the count.
  */
 static uint32_t
-pick_distinct(const struct cand *c, const uint32_t *order, uint32_t n, uint32_t max,
-              double min_deg, uint32_t *out)
+pick_distinct(const struct cand *c, const uint32_t *order, uint32_t n, uint32_t max, double min_deg,
+              uint32_t *out)
 {
     double min_cos = cos(min_deg * M_PI / 180);
     uint32_t k = 0;
@@ -314,8 +314,8 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
             order[n_coarse++] = n - 1;
         }
     }
-    if ((rcode = run_stage(&j, 1, order + n_coarse - n_seeds * REFINE_PER, n_seeds * REFINE_PER,
-                           err)))
+    if ((rcode =
+             run_stage(&j, 1, order + n_coarse - n_seeds * REFINE_PER, n_seeds * REFINE_PER, err)))
         goto out;
     qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
 

@@ -714,8 +714,7 @@ mesh_load_mem(const void *data, size_t len, const char *name, struct mesh *m,
         rc = tmf_parse(data, len, name, m, err);
         break;
     default:
-        return sf_err_set(err, SF_EINVAL, "'%s': not a mesh file (STL, OBJ or 3MF expected)",
-                          name);
+        return sf_err_set(err, SF_EINVAL, "'%s': not a mesh file (STL, OBJ or 3MF expected)", name);
     }
     if (rc)
         return rc;
@@ -871,8 +870,8 @@ mesh_save_obj(const struct mesh *m, const char *path, struct sf_err *err)
 {
     struct buf b;
     buf_init(&b, 0);
-    int rc = buf_printf(&b, "# written by slimfarm: %u vertices, %u triangles\n", m->n_verts,
-                        m->n_tris);
+    int rc =
+        buf_printf(&b, "# written by slimfarm: %u vertices, %u triangles\n", m->n_verts, m->n_tris);
     for (uint32_t i = 0; i < m->n_verts && rc == SF_OK; i++)
         rc = buf_printf(&b, "v %.9g %.9g %.9g\n", m->v[i].x, m->v[i].y, m->v[i].z);
     for (uint32_t i = 0; i < m->n_tris && rc == SF_OK; i++)

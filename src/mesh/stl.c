@@ -24,8 +24,8 @@ static int
 check_coord(double x, const char *name, const char *where, uint32_t facet, struct sf_err *err)
 {
     if (!isfinite(x))
-        return sf_err_set(err, SF_EINVAL, "stl '%s': %s %u: coordinate is %s", name, where,
-                          facet, isnan(x) ? "NaN" : "infinite");
+        return sf_err_set(err, SF_EINVAL, "stl '%s': %s %u: coordinate is %s", name, where, facet,
+                          isnan(x) ? "NaN" : "infinite");
     if (fabs(x) > SF_MESH_COORD_MAX)
         return sf_err_set(err, SF_EINVAL,
                           "stl '%s': %s %u: coordinate %g is beyond %g mm (wrong unit or corrupt)",
@@ -50,8 +50,8 @@ struct corner_table {
 static uint64_t
 corner_hash(const uint32_t b[3])
 {
-    uint64_t h = b[0] * 0x9E3779B97F4A7C15ULL ^ b[1] * 0xC2B2AE3D27D4EB4FULL ^
-                 b[2] * 0x165667B19E3779F9ULL;
+    uint64_t h =
+        b[0] * 0x9E3779B97F4A7C15ULL ^ b[1] * 0xC2B2AE3D27D4EB4FULL ^ b[2] * 0x165667B19E3779F9ULL;
     return h ^ (h >> 29);
 }
 
@@ -97,8 +97,8 @@ parse_binary(const unsigned char *p, size_t len, const char *name, struct mesh *
                           "only %zu bytes",
                           name, n, (unsigned long long)need, len);
     if (n > SF_MESH_TRIS_MAX)
-        return sf_err_set(err, SF_EINVAL, "stl '%s': %u triangles is over the limit of %u", name,
-                          n, SF_MESH_TRIS_MAX);
+        return sf_err_set(err, SF_EINVAL, "stl '%s': %u triangles is over the limit of %u", name, n,
+                          SF_MESH_TRIS_MAX);
     mesh_release(m);
     struct corner_table ct = { NULL, 0, 0 };
     size_t cap_v = (size_t)n / 2 + 16;
@@ -132,7 +132,8 @@ parse_binary(const unsigned char *p, size_t len, const char *name, struct mesh *
             uint32_t r;
             for (;;) {
                 r = ct.slot[s];
-                if (r == UINT32_MAX || (m->v[r].x == c[0] && m->v[r].y == c[1] && m->v[r].z == c[2]))
+                if (r == UINT32_MAX ||
+                    (m->v[r].x == c[0] && m->v[r].y == c[1] && m->v[r].z == c[2]))
                     break;
                 s = (s + 1) & ct.mask;
             }
@@ -226,8 +227,8 @@ parse_ascii(const char *data, size_t len, const char *name, struct mesh *m, stru
     mesh_release(m);
     for (;;) {
         if (!next_token(&s, &tok, &tl)) {
-            rc = sf_err_set(err, SF_EINVAL, "stl '%s': line %u: file ends before 'endsolid'",
-                            name, s.line);
+            rc = sf_err_set(err, SF_EINVAL, "stl '%s': line %u: file ends before 'endsolid'", name,
+                            s.line);
             goto fail;
         }
         if (tok_is(tok, tl, "endsolid"))
@@ -250,16 +251,16 @@ parse_ascii(const char *data, size_t len, const char *name, struct mesh *m, stru
             if (!tok_is(tok, tl, "normal") && !tok_is(tok, tl, "outer")) {
                 double dummy;
                 if (!tok_number(tok, tl, &dummy)) {
-                    rc = sf_err_set(err, SF_EINVAL,
-                                    "stl '%s': line %u: facet %u: unexpected '%.*s'", name,
-                                    s.line, facet, (int)(tl > 32 ? 32 : tl), tok);
+                    rc =
+                        sf_err_set(err, SF_EINVAL, "stl '%s': line %u: facet %u: unexpected '%.*s'",
+                                   name, s.line, facet, (int)(tl > 32 ? 32 : tl), tok);
                     goto fail;
                 }
             }
         }
         if (facet > SF_MESH_TRIS_MAX) {
-            rc = sf_err_set(err, SF_EINVAL, "stl '%s': more than %u facets", name,
-                            SF_MESH_TRIS_MAX);
+            rc =
+                sf_err_set(err, SF_EINVAL, "stl '%s': more than %u facets", name, SF_MESH_TRIS_MAX);
             goto fail;
         }
         if (m->n_verts + 3 > cap_v) {
@@ -292,8 +293,8 @@ parse_ascii(const char *data, size_t len, const char *name, struct mesh *m, stru
             for (int a = 0; a < 3; a++) {
                 if (!next_token(&s, &tok, &tl) || !tok_number(tok, tl, &c[a])) {
                     rc = sf_err_set(err, SF_EINVAL,
-                                    "stl '%s': line %u: facet %u: vertex coordinate expected",
-                                    name, s.line, facet);
+                                    "stl '%s': line %u: facet %u: vertex coordinate expected", name,
+                                    s.line, facet);
                     goto fail;
                 }
                 if ((rc = check_coord(c[a], name, "facet", facet, err)))

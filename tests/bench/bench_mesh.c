@@ -47,8 +47,10 @@ static int
 bench(const char *path)
 {
     enum { READ, PARSE, WELD, REPAIR, TOPO, SCENE, PROXY, GRID, N_STAGES };
-    static const char *names[] = { "read (reference)", "map + stl parse", "weld", "clean+orient", "topology",
-                                   "embree scene", "proxy", "ray grid+metrics" };
+    static const char *names[] = {
+        "read (reference)", "map + stl parse", "weld",  "clean+orient",
+        "topology",         "embree scene",    "proxy", "ray grid+metrics"
+    };
     double t[N_STAGES][RUNS];
     struct sf_err err;
     size_t bytes = 0;

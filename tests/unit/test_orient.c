@@ -64,8 +64,8 @@ T_CASE(tee_upside_down_and_tilted_comes_back)
     mesh_init(&m);
     T_OK(shape_tee(&m, &err), &err);
     /* upside down, then tilted 20 degrees about x */
-    struct mat3 rot = m3_mul(m3_axis_angle(v3(1, 0, 0), 20 * M_PI / 180),
-                             m3_axis_angle(v3(0, 1, 0), M_PI));
+    struct mat3 rot =
+        m3_mul(m3_axis_angle(v3(1, 0, 0), 20 * M_PI / 180), m3_axis_angle(v3(0, 1, 0), M_PI));
     mesh_transform(&m, rot, v3(0, 0, 0));
     T_OK(find(&m, &r, &err), &err);
     /* Two orientations need no support: on the bar's top (stem up) and lying
