@@ -70,23 +70,6 @@ struct job {
     uint32_t progress_total;
 };
 
-/* Area of faces lying on the bed (within 0.1 mm of the lowest point). */
-static double
-bed_contact_area(const struct mesh *m, struct vec3 up)
-{
-    double lo = INFINITY;
-    for (uint32_t i = 0; i < m->n_verts; i++)
-        lo = fmin(lo, v3_dot(m->v[i], up));
-    double area = 0;
-    for (uint32_t i = 0; i < m->n_tris; i++) {
-        const uint32_t *t = m->t[i];
-        if (v3_dot(m->v[t[0]], up) - lo < 0.1 && v3_dot(m->v[t[1]], up) - lo < 0.1 &&
-            v3_dot(m->v[t[2]], up) - lo < 0.1)
-            area += mesh_tri_area(m, i);
-    }
-    return area;
-}
-
 static double
 cost_of(const struct orient_params *p, const struct support_metrics *s)
 {
@@ -99,14 +82,14 @@ score_one(struct job *j, struct cand *c, struct sf_err *err)
 {
     if (j->stage == 0) {
         struct support_metrics s;
-        measure_proxy_cached(j->pc, c->c.up, &j->sp, &s);
+        proxy_eval(j->pc, c->c.up, &j->sp, &s);
         c->key = s.proxy_mm3 + j->p->w_contact_mm * s.risky_area_mm2;
         return SF_OK;
     }
     struct support_params sp = j->sp;
     if (j->stage == 1)
         sp.pitch_mm *= 2; /* coarse: a quarter of the rays, for ranking */
-    int rc = measure_support(j->m, j->rc, c->c.up, &sp, &c->c.m, err);
+    int rc = measure_support_cached(j->m, j->rc, j->pc, c->c.up, &sp, &c->c.m, err);
     if (rc)
         return rc;
     c->c.cost = c->key = cost_of(j->p, &c->c.m);
@@ -114,7 +97,7 @@ score_one(struct job *j, struct cand *c, struct sf_err *err)
     c->dropped = false;
     /* Standing on a point with no support column from the bed: it would topple. */
     if (c->c.source != ORIENT_HULL && c->c.m.n_columns == 0 &&
-        bed_contact_area(j->m, c->c.up) < j->p->min_base_mm2)
+        proxy_bed_contact(j->pc, c->c.up) < j->p->min_base_mm2)
         c->dropped = true;
     /* Growth simulation: the part built so far would tip off its base. */
     if (c->c.m.base_margin_mm < 0)
