@@ -319,12 +319,23 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
         best = 0; /* not worth turning the part */
     res->best = cands[best].c;
     res->input = cands[0].c;
+    /* report at the operator's angle: the margin only steers the choice */
+    struct support_params at = j.sp;
+    at.angle_deg = p->angle_deg;
+    if ((rcode = measure_support_cached(m, rc, &pc, res->best.up, &at, &res->best.m, err)) ||
+        (rcode = measure_support_cached(m, rc, &pc, res->input.up, &at, &res->input.m, err)))
+        goto out;
     res->n_candidates = n;
     res->n_exact = n_coarse + n_final;
     (void)n_first;
-    for (uint32_t i = 0; i < n_final && res->n_runners < 4; i++)
-        if (final[i] != best && !cands[final[i]].dropped)
-            res->runners[res->n_runners++] = cands[final[i]].c;
+    for (uint32_t i = 0; i < n_final && res->n_runners < 4; i++) {
+        if (final[i] == best || cands[final[i]].dropped)
+            continue;
+        struct orient_candidate *r = &res->runners[res->n_runners++];
+        *r = cands[final[i]].c;
+        if ((rcode = measure_support_cached(m, rc, &pc, r->up, &at, &r->m, err)))
+            goto out;
+    }
     res->seconds = elapsed(&t0);
     res->seconds_exact = res->seconds - res->seconds_setup - res->seconds_proxy;
     goto out;
