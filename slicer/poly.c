@@ -1,0 +1,203 @@
+/*
+ * poly.c - flat integer polygon sets (see poly.h).
+ *
+ * Two growable arrays and a handful of measures.  Areas use the shoelace
+ * formula in double on coordinates relative to the path's first point, so
+ * large offsets lose no precision.  Point-in-polygon is the winding number
+ * (nonzero), counted with exact integer orientation tests.
+ *
+ * Thread: none of its own; a set belongs to one thread at a time.
+ */
+#include "poly.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "../src/base/mem.h"
+
+void
+paths_init(struct paths *p)
+{
+    memset(p, 0, sizeof(*p));
+}
+
+void
+paths_release(struct paths *p)
+{
+    free(p->pts);
+    free(p->start);
+    paths_init(p);
+}
+
+void
+paths_reset(struct paths *p)
+{
+    p->n = 0;
+    if (p->start)
+        p->start[0] = 0;
+}
+
+static bool
+reserve_paths(struct paths *p, uint32_t need)
+{
+    if (p->start && need <= p->cap_paths)
+        return true;
+    size_t cap = p->cap_paths ? p->cap_paths : 8;
+    while (cap < need)
+        cap *= 2;
+    uint32_t *s = mem_realloc_array(p->start, cap + 1, sizeof(*s));
+    if (!s)
+        return false;
+    if (!p->start)
+        s[0] = 0;
+    p->start = s;
+    p->cap_paths = (uint32_t)cap;
+    return true;
+}
+
+static bool
+reserve_pts(struct paths *p, size_t need)
+{
+    if (need <= p->cap_pts)
+        return true;
+    size_t cap = p->cap_pts;
+    if (need < 64)
+        need = 64;
+    if (!mem_grow((void **)&p->pts, &cap, need, sizeof(struct ipt)))
+        return false;
+    p->cap_pts = cap;
+    return true;
+}
+
+bool
+paths_add(struct paths *p, const struct ipt *pts, uint32_t n)
+{
+    if (!paths_begin(p))
+        return false;
+    size_t at = p->start[p->n - 1];
+    if (!reserve_pts(p, at + n)) {
+        p->n--;
+        return false;
+    }
+    if (n)
+        memcpy(p->pts + at, pts, n * sizeof(*pts));
+    p->start[p->n] = (uint32_t)(at + n);
+    return true;
+}
+
+bool
+paths_begin(struct paths *p)
+{
+    if (!reserve_paths(p, p->n + 1))
+        return false;
+    p->start[p->n + 1] = p->start[p->n];
+    p->n++;
+    return true;
+}
+
+bool
+paths_push(struct paths *p, struct ipt pt)
+{
+    size_t at = p->start[p->n];
+    if (!reserve_pts(p, at + 1))
+        return false;
+    p->pts[at] = pt;
+    p->start[p->n] = (uint32_t)(at + 1);
+    return true;
+}
+
+bool
+paths_append(struct paths *dst, const struct paths *src)
+{
+    for (uint32_t k = 0; k < src->n; k++)
+        if (!paths_add(dst, src->pts + src->start[k], paths_len(src, k)))
+            return false;
+    return true;
+}
+
+void
+paths_move(struct paths *dst, struct paths *src)
+{
+    paths_release(dst);
+    *dst = *src;
+    paths_init(src);
+}
+
+double
+paths_area_k(const struct paths *p, uint32_t k)
+{
+    const struct ipt *q = p->pts + p->start[k];
+    uint32_t n = paths_len(p, k);
+    if (n < 3)
+        return 0;
+    double a = 0;
+    int64_t x0 = q[0].x, y0 = q[0].y;
+    for (uint32_t i = 1; i + 1 < n; i++) {
+        double ax = (double)(q[i].x - x0), ay = (double)(q[i].y - y0);
+        double bx = (double)(q[i + 1].x - x0), by = (double)(q[i + 1].y - y0);
+        a += ax * by - ay * bx;
+    }
+    return a / (2.0 * POLY_SCALE * POLY_SCALE);
+}
+
+double
+paths_area(const struct paths *p)
+{
+    double a = 0;
+    for (uint32_t k = 0; k < p->n; k++)
+        a += paths_area_k(p, k);
+    return a;
+}
+
+double
+paths_length_k(const struct paths *p, uint32_t k, bool closed)
+{
+    const struct ipt *q = p->pts + p->start[k];
+    uint32_t n = paths_len(p, k);
+    double l = 0;
+    for (uint32_t i = 1; i < n; i++)
+        l += hypot((double)(q[i].x - q[i - 1].x), (double)(q[i].y - q[i - 1].y));
+    if (closed && n > 2)
+        l += hypot((double)(q[0].x - q[n - 1].x), (double)(q[0].y - q[n - 1].y));
+    return l / POLY_SCALE;
+}
+
+bool
+paths_contains(const struct paths *p, struct ipt q)
+{
+    long wind = 0;
+    for (uint32_t k = 0; k < p->n; k++) {
+        const struct ipt *v = p->pts + p->start[k];
+        uint32_t n = paths_len(p, k);
+        for (uint32_t i = 0; i < n; i++) {
+            struct ipt a = v[i], b = v[(i + 1) % n];
+            /* orientation of q against a->b, in long double to avoid overflow */
+            long double cr = (long double)(b.x - a.x) * (q.y - a.y) -
+                             (long double)(q.x - a.x) * (b.y - a.y);
+            if (a.y <= q.y) {
+                if (b.y > q.y && cr > 0)
+                    wind++;
+            } else if (b.y <= q.y && cr < 0) {
+                wind--;
+            }
+        }
+    }
+    return wind != 0;
+}
+
+bool
+paths_bbox(const struct paths *p, struct ipt *lo, struct ipt *hi)
+{
+    size_t n = p->n ? p->start[p->n] : 0;
+    if (!n)
+        return false;
+    *lo = *hi = p->pts[0];
+    for (size_t i = 1; i < n; i++) {
+        struct ipt q = p->pts[i];
+        if (q.x < lo->x) lo->x = q.x;
+        if (q.y < lo->y) lo->y = q.y;
+        if (q.x > hi->x) hi->x = q.x;
+        if (q.y > hi->y) hi->y = q.y;
+    }
+    return true;
+}

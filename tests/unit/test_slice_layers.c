@@ -1,0 +1,163 @@
+/*
+ * test_slice_layers.c - cross-sections of analytic shapes: exact areas per
+ * layer, holes, vertices lying exactly on a cutting plane, sliver
+ * triangles, an open mesh.
+ */
+#include <math.h>
+
+#include "../../slicer/clip_shim.h"
+#include "../../slicer/layers.h"
+#include "../t.h"
+#include "shapes.h"
+
+T_CASE(slice_cube_layers_and_area)
+{
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(shape_box(&m, 0, 0, 0, 20, 20, 20) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 100, 100, &s, &err), &err);
+    T_EQ_INT(s.n, 100);
+    for (uint32_t k = 0; k < s.n; k++) {
+        T_EQ_DBL(paths_area(&s.l[k].region), 400.0, 1e-6);
+        T_EQ_INT(s.l[k].region.n, 1);
+    }
+    T_EQ_DBL(s.l[99].z_mm, 20.0, 1e-9);
+    struct ipt lo, hi;
+    T_TRUE(paths_bbox(&s.l[0].region, &lo, &hi));
+    T_EQ_DBL(poly_mm(lo.x), 90, 1e-9);
+    T_EQ_DBL(poly_mm(hi.y), 110, 1e-9);
+    layer_stack_release(&s);
+    shape_free(&m);
+}
+
+T_CASE(slice_pyramid_area_follows_formula)
+{
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(shape_pyramid(&m, 30, 15) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.3, 0.2, 0, 0, &s, &err), &err);
+    for (uint32_t k = 0; k < s.n; k++) {
+        double z = s.l[k].z_mm - s.l[k].h_mm / 2;
+        double side = 30 * (1 - z / 15);
+        T_EQ_DBL(paths_area(&s.l[k].region), side * side, 1e-3);
+    }
+    T_EQ_INT(s.n, 74); /* planes 0.15, then 0.4 ... 14.8 */
+    layer_stack_release(&s);
+    shape_free(&m);
+}
+
+T_CASE(slice_vertices_on_plane)
+{
+    /* equator at z = 10.1: exactly the plane of layer 50 (0.2 mm layers) */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(shape_octahedron(&m, 10, 10.1) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
+    T_EQ_INT(s.n, 101);
+    for (uint32_t k = 0; k < s.n; k++) {
+        double z = s.l[k].z_mm - s.l[k].h_mm / 2;
+        double r = 10 * (1 - fabs(z - 10.1) / 10.1);
+        T_EQ_DBL(paths_area(&s.l[k].region), 2 * r * r, 1e-3);
+        T_EQ_INT(s.l[k].region.n, 1);
+    }
+    T_EQ_INT(s.n_open, 0);
+    layer_stack_release(&s);
+    shape_free(&m);
+}
+
+T_CASE(slice_box_with_hole)
+{
+    /* a 30 mm frame with a 10 mm square hole: four boxes sharing faces */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(shape_box(&m, 0, 0, 0, 30, 10, 5) == 0);
+    T_TRUE(shape_box(&m, 0, 20, 0, 30, 30, 5) == 0);
+    T_TRUE(shape_box(&m, 0, 10, 0, 10, 20, 5) == 0);
+    T_TRUE(shape_box(&m, 20, 10, 0, 30, 20, 5) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 15, 15, &s, &err), &err);
+    T_EQ_INT(s.n, 25);
+    T_EQ_DBL(paths_area(&s.l[3].region), 800, 1e-6);
+    T_EQ_INT(s.l[3].region.n, 2); /* outer + hole */
+    T_TRUE(paths_area_k(&s.l[3].region, 0) > 0);
+    T_TRUE(paths_area_k(&s.l[3].region, 1) < 0);
+    T_TRUE(!paths_contains(&s.l[3].region, (struct ipt){ poly_i(15), poly_i(15) }));
+    T_TRUE(paths_contains(&s.l[3].region, (struct ipt){ poly_i(5), poly_i(15) }));
+    layer_stack_release(&s);
+    shape_free(&m);
+}
+
+T_CASE(slice_sliver_triangles)
+{
+    /* a cube whose front face is split through a point 1e-9 off its diagonal */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(shape_box(&m, 0, 0, 0, 10, 10, 10) == 0);
+    /* replace front face (tris 4,5: y = 0) by four triangles around p */
+    struct vec3 p = v3(5 + 1e-9, 0, 5);
+    struct vec3 *nv = mem_realloc_array(m.v, 9, sizeof(*nv));
+    T_TRUE(nv != NULL);
+    m.v = nv;
+    m.v[8] = p;
+    m.n_verts = 9;
+    uint32_t(*nt)[3] = mem_realloc_array(m.t, 14, sizeof(*nt));
+    T_TRUE(nt != NULL);
+    m.t = nt;
+    /* front face corners 0 (0,0,0) 1 (10,0,0) 5 (10,0,10) 4 (0,0,10) */
+    uint32_t f[4][3] = { { 0, 1, 8 }, { 1, 5, 8 }, { 5, 4, 8 }, { 4, 0, 8 } };
+    for (int c = 0; c < 3; c++) {
+        m.t[4][c] = f[0][c];
+        m.t[5][c] = f[1][c];
+        m.t[12][c] = f[2][c];
+        m.t[13][c] = f[3][c];
+    }
+    m.n_tris = 14;
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 5, 5, &s, &err), &err);
+    for (uint32_t k = 0; k < s.n; k++)
+        T_EQ_DBL(paths_area(&s.l[k].region), 100, 1e-6);
+    T_EQ_INT(s.n_open, 0);
+    layer_stack_release(&s);
+    shape_free(&m);
+}
+
+T_CASE(slice_open_mesh_still_closes)
+{
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(shape_box(&m, 0, 0, 0, 10, 10, 10) == 0);
+    m.t[4][0] = m.t[11][0]; /* drop the front face: overwrite two triangles */
+    m.t[4][1] = m.t[11][1];
+    m.t[4][2] = m.t[11][2];
+    m.t[5][0] = m.t[10][0];
+    m.t[5][1] = m.t[10][1];
+    m.t[5][2] = m.t[10][2];
+    m.n_tris = 10;
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 5, 5, &s, &err), &err);
+    T_TRUE(s.n_open > 0);
+    T_EQ_DBL(paths_area(&s.l[10].region), 100, 1e-6);
+    layer_stack_release(&s);
+    shape_free(&m);
+}
+
+T_CASE(clip_offset_and_difference)
+{
+    struct paths a, b, c;
+    paths_init(&a);
+    paths_init(&b);
+    paths_init(&c);
+    struct ipt sq[4] = { { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) } };
+    T_TRUE(paths_add(&a, sq, 4));
+    T_OK(clip_offset(&a, -1, CLIP_JOIN_MITER, &b), NULL);
+    T_EQ_DBL(paths_area(&b), 64, 1e-6);
+    T_OK(clip_bool(CLIP_DIFFERENCE, &a, &b, CLIP_NONZERO, &c), NULL);
+    T_EQ_DBL(paths_area(&c), 36, 1e-6);
+    T_EQ_INT(c.n, 2);
+    paths_release(&a);
+    paths_release(&b);
+    paths_release(&c);
+}
