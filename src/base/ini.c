@@ -176,7 +176,9 @@ ini_opt_set(const struct ini_opt *o, void *base, const char *value, bool append,
         char *old;
         memcpy(&old, field, sizeof(old));
         char *s;
-        if (append && o->type == INI_TEXT && old && old[0]) {
+        if (append && o->type != INI_TEXT)
+            return sf_err_set(err, SF_EINVAL, "option '%s' takes one line", o->key);
+        if (append && old && old[0]) {
             size_t a = strlen(old), b = strlen(value);
             s = mem_alloc(a + b + 2);
             if (s) {
@@ -185,8 +187,6 @@ ini_opt_set(const struct ini_opt *o, void *base, const char *value, bool append,
                 memcpy(s + a + 1, value, b + 1);
             }
         } else {
-            if (append)
-                return sf_err_set(err, SF_EINVAL, "option '%s' takes one line", o->key);
             s = mem_strdup(value);
         }
         if (!s)

@@ -8,13 +8,13 @@
 #include "../../slicer/clip_shim.h"
 #include "../../slicer/layers.h"
 #include "../t.h"
-#include "shapes.h"
+#include "slice_shapes.h"
 
 T_CASE(slice_cube_layers_and_area)
 {
     struct mesh m = { 0 };
     struct sf_err err;
-    T_TRUE(shape_box(&m, 0, 0, 0, 20, 20, 20) == 0);
+    T_TRUE(ts_box(&m, 0, 0, 0, 20, 20, 20) == 0);
     struct layer_stack s;
     T_OK(layers_slice(&m, 0.2, 0.2, 100, 100, &s, &err), &err);
     T_EQ_INT(s.n, 100);
@@ -28,14 +28,14 @@ T_CASE(slice_cube_layers_and_area)
     T_EQ_DBL(poly_mm(lo.x), 90, 1e-9);
     T_EQ_DBL(poly_mm(hi.y), 110, 1e-9);
     layer_stack_release(&s);
-    shape_free(&m);
+    ts_free(&m);
 }
 
 T_CASE(slice_pyramid_area_follows_formula)
 {
     struct mesh m = { 0 };
     struct sf_err err;
-    T_TRUE(shape_pyramid(&m, 30, 15) == 0);
+    T_TRUE(ts_pyramid(&m, 30, 15) == 0);
     struct layer_stack s;
     T_OK(layers_slice(&m, 0.3, 0.2, 0, 0, &s, &err), &err);
     for (uint32_t k = 0; k < s.n; k++) {
@@ -45,7 +45,7 @@ T_CASE(slice_pyramid_area_follows_formula)
     }
     T_EQ_INT(s.n, 74); /* planes 0.15, then 0.4 ... 14.8 */
     layer_stack_release(&s);
-    shape_free(&m);
+    ts_free(&m);
 }
 
 T_CASE(slice_vertices_on_plane)
@@ -53,7 +53,7 @@ T_CASE(slice_vertices_on_plane)
     /* equator at z = 10.1: exactly the plane of layer 50 (0.2 mm layers) */
     struct mesh m = { 0 };
     struct sf_err err;
-    T_TRUE(shape_octahedron(&m, 10, 10.1) == 0);
+    T_TRUE(ts_octahedron(&m, 10, 10.1) == 0);
     struct layer_stack s;
     T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
     T_EQ_INT(s.n, 101);
@@ -65,7 +65,7 @@ T_CASE(slice_vertices_on_plane)
     }
     T_EQ_INT(s.n_open, 0);
     layer_stack_release(&s);
-    shape_free(&m);
+    ts_free(&m);
 }
 
 T_CASE(slice_box_with_hole)
@@ -73,10 +73,10 @@ T_CASE(slice_box_with_hole)
     /* a 30 mm frame with a 10 mm square hole: four boxes sharing faces */
     struct mesh m = { 0 };
     struct sf_err err;
-    T_TRUE(shape_box(&m, 0, 0, 0, 30, 10, 5) == 0);
-    T_TRUE(shape_box(&m, 0, 20, 0, 30, 30, 5) == 0);
-    T_TRUE(shape_box(&m, 0, 10, 0, 10, 20, 5) == 0);
-    T_TRUE(shape_box(&m, 20, 10, 0, 30, 20, 5) == 0);
+    T_TRUE(ts_box(&m, 0, 0, 0, 30, 10, 5) == 0);
+    T_TRUE(ts_box(&m, 0, 20, 0, 30, 30, 5) == 0);
+    T_TRUE(ts_box(&m, 0, 10, 0, 10, 20, 5) == 0);
+    T_TRUE(ts_box(&m, 20, 10, 0, 30, 20, 5) == 0);
     struct layer_stack s;
     T_OK(layers_slice(&m, 0.2, 0.2, 15, 15, &s, &err), &err);
     T_EQ_INT(s.n, 25);
@@ -87,7 +87,7 @@ T_CASE(slice_box_with_hole)
     T_TRUE(!paths_contains(&s.l[3].region, (struct ipt){ poly_i(15), poly_i(15) }));
     T_TRUE(paths_contains(&s.l[3].region, (struct ipt){ poly_i(5), poly_i(15) }));
     layer_stack_release(&s);
-    shape_free(&m);
+    ts_free(&m);
 }
 
 T_CASE(slice_sliver_triangles)
@@ -95,7 +95,7 @@ T_CASE(slice_sliver_triangles)
     /* a cube whose front face is split through a point 1e-9 off its diagonal */
     struct mesh m = { 0 };
     struct sf_err err;
-    T_TRUE(shape_box(&m, 0, 0, 0, 10, 10, 10) == 0);
+    T_TRUE(ts_box(&m, 0, 0, 0, 10, 10, 10) == 0);
     /* replace front face (tris 4,5: y = 0) by four triangles around p */
     struct vec3 p = v3(5 + 1e-9, 0, 5);
     struct vec3 *nv = mem_realloc_array(m.v, 9, sizeof(*nv));
@@ -121,14 +121,14 @@ T_CASE(slice_sliver_triangles)
         T_EQ_DBL(paths_area(&s.l[k].region), 100, 1e-6);
     T_EQ_INT(s.n_open, 0);
     layer_stack_release(&s);
-    shape_free(&m);
+    ts_free(&m);
 }
 
 T_CASE(slice_open_mesh_still_closes)
 {
     struct mesh m = { 0 };
     struct sf_err err;
-    T_TRUE(shape_box(&m, 0, 0, 0, 10, 10, 10) == 0);
+    T_TRUE(ts_box(&m, 0, 0, 0, 10, 10, 10) == 0);
     m.t[4][0] = m.t[11][0]; /* drop the front face: overwrite two triangles */
     m.t[4][1] = m.t[11][1];
     m.t[4][2] = m.t[11][2];
@@ -141,7 +141,7 @@ T_CASE(slice_open_mesh_still_closes)
     T_TRUE(s.n_open > 0);
     T_EQ_DBL(paths_area(&s.l[10].region), 100, 1e-6);
     layer_stack_release(&s);
-    shape_free(&m);
+    ts_free(&m);
 }
 
 T_CASE(clip_offset_and_difference)

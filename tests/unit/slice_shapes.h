@@ -1,11 +1,11 @@
 /*
- * shapes.h - analytic test parts built in memory (no mesh loader needed):
+ * slice_shapes.h - analytic test parts built in memory (no mesh loader needed):
  * boxes, a pyramid, an octahedron, a T-shape.  Several closed shells may
  * be appended into one mesh.  Vertices and triangles are allocated with
- * mem.h and freed by shape_free().  Header-only, for the slicer tests.
+ * mem.h and freed by ts_free().  Header-only, for the slicer tests.
  */
-#ifndef SF_TESTS_SHAPES_H
-#define SF_TESTS_SHAPES_H
+#ifndef SF_TESTS_SLICE_SHAPES_H
+#define SF_TESTS_SLICE_SHAPES_H
 
 #include <stdlib.h>
 
@@ -13,7 +13,7 @@
 #include "../../src/mesh/mesh.h"
 
 static inline void
-shape_free(struct mesh *m)
+ts_free(struct mesh *m)
 {
     free(m->v);
     free(m->t);
@@ -24,7 +24,7 @@ shape_free(struct mesh *m)
 
 /* Append nv vertices and nt triangles (indices relative to the new vertices). */
 static inline int
-shape_add(struct mesh *m, const struct vec3 *v, uint32_t nv, const uint32_t (*t)[3], uint32_t nt)
+ts_add(struct mesh *m, const struct vec3 *v, uint32_t nv, const uint32_t (*t)[3], uint32_t nt)
 {
     struct vec3 *nvp = mem_realloc_array(m->v, m->n_verts + nv, sizeof(*nvp));
     if (!nvp)
@@ -46,7 +46,7 @@ shape_add(struct mesh *m, const struct vec3 *v, uint32_t nv, const uint32_t (*t)
 
 /* Axis-aligned box, outward CCW triangles. */
 static inline int
-shape_box(struct mesh *m, double x0, double y0, double z0, double x1, double y1, double z1)
+ts_box(struct mesh *m, double x0, double y0, double z0, double x1, double y1, double z1)
 {
     struct vec3 v[8];
     for (int i = 0; i < 8; i++)
@@ -59,38 +59,38 @@ shape_box(struct mesh *m, double x0, double y0, double z0, double x1, double y1,
         { 0, 4, 2 }, { 2, 4, 6 }, /* x0 */
         { 1, 3, 5 }, { 3, 7, 5 }, /* x1 */
     };
-    return shape_add(m, v, 8, t, 12);
+    return ts_add(m, v, 8, t, 12);
 }
 
 /* Square pyramid: base side a centred at (0,0) on z = 0, apex at height h. */
 static inline int
-shape_pyramid(struct mesh *m, double a, double h)
+ts_pyramid(struct mesh *m, double a, double h)
 {
     double s = a / 2;
     struct vec3 v[5] = { v3(-s, -s, 0), v3(s, -s, 0), v3(s, s, 0), v3(-s, s, 0), v3(0, 0, h) };
     static const uint32_t t[6][3] = { { 0, 2, 1 }, { 0, 3, 2 }, { 0, 1, 4 },
                                       { 1, 2, 4 }, { 2, 3, 4 }, { 3, 0, 4 } };
-    return shape_add(m, v, 5, t, 6);
+    return ts_add(m, v, 5, t, 6);
 }
 
 /* Octahedron: tips at z = 0 and z = 2 zc, equator square (radius r) at zc. */
 static inline int
-shape_octahedron(struct mesh *m, double r, double zc)
+ts_octahedron(struct mesh *m, double r, double zc)
 {
     struct vec3 v[6] = { v3(r, 0, zc), v3(0, r, zc), v3(-r, 0, zc), v3(0, -r, zc),
                          v3(0, 0, 2 * zc), v3(0, 0, 0) };
     static const uint32_t t[8][3] = { { 0, 1, 4 }, { 1, 2, 4 }, { 2, 3, 4 }, { 3, 0, 4 },
                                       { 1, 0, 5 }, { 2, 1, 5 }, { 3, 2, 5 }, { 0, 3, 5 } };
-    return shape_add(m, v, 6, t, 8);
+    return ts_add(m, v, 6, t, 8);
 }
 
 /* The peers' tee: a 10 x 20 stem 30 tall under a 50 x 20 x 5 bar. */
 static inline int
-shape_tee(struct mesh *m)
+ts_tee(struct mesh *m)
 {
-    if (shape_box(m, -5, -10, 0, 5, 10, 30) < 0)
+    if (ts_box(m, -5, -10, 0, 5, 10, 30) < 0)
         return -1;
-    return shape_box(m, -25, -10, 30, 25, 10, 35);
+    return ts_box(m, -25, -10, 30, 25, 10, 35);
 }
 
 #endif
