@@ -21,6 +21,8 @@
 #include "../src/base/mem.h"
 #include "clip_shim.h"
 
+#define LAYERS_SIMPLIFY_MM 0.01
+
 struct seg {
     struct ipt a, b;         /* from the above->below crossing to the below->above one */
     int64_t ka0, ka1;        /* edge of a (vertex indices, sorted) */
@@ -214,6 +216,10 @@ slice_one(struct job *j, uint32_t k, struct seg **segs, size_t *cap)
     }
     atomic_fetch_add(&j->n_open, n_open);
     rc = clip_bool(CLIP_UNION, &loops, NULL, CLIP_NONZERO, &L->region);
+    /* 10 um: far below what a 0.4 mm nozzle draws, and dense meshes give
+       loops with 0.05 mm segments that would slow every later stage */
+    if (rc == SF_OK && !paths_simplify(&L->region, LAYERS_SIMPLIFY_MM))
+        rc = SF_ENOMEM;
 out:
     paths_release(&loops);
     map_release(&by_edge);
@@ -287,6 +293,8 @@ layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, 
         out->l[k].h_mm = k ? layer_mm : first_mm;
         out->l[k].z_mm = first_mm + k * layer_mm;
         paths_init(&out->l[k].region);
+        paths_init(&out->l[k].inner);
+        paths_init(&out->l[k].skin);
         if (plane_of(out, k) >= height)
             break;
     }
@@ -376,8 +384,11 @@ fail:
 void
 layer_stack_release(struct layer_stack *s)
 {
-    for (uint32_t k = 0; s->l && k < s->n; k++)
+    for (uint32_t k = 0; s->l && k < s->n; k++) {
         paths_release(&s->l[k].region);
+        paths_release(&s->l[k].inner);
+        paths_release(&s->l[k].skin);
+    }
     free(s->l);
     memset(s, 0, sizeof(*s));
 }

@@ -30,6 +30,8 @@ struct layer {
     double z_mm;         /* top of the layer above the bed */
     double h_mm;         /* its thickness */
     struct paths region; /* part cross-section at z_mm - h_mm / 2 */
+    struct paths inner;  /* inside the perimeters: filled by toolpath_areas() */
+    struct paths skin;   /* inner not covered above or below, grown: toolpath_areas() */
 };
 
 struct layer_stack {

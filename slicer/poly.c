@@ -201,3 +201,106 @@ paths_bbox(const struct paths *p, struct ipt *lo, struct ipt *hi)
     }
     return true;
 }
+
+/* Squared distance from q to segment a-b, in units^2. */
+static double
+seg_dist2(struct ipt q, struct ipt a, struct ipt b)
+{
+    double dx = (double)(b.x - a.x), dy = (double)(b.y - a.y);
+    double px = (double)(q.x - a.x), py = (double)(q.y - a.y);
+    double l2 = dx * dx + dy * dy;
+    double t = l2 > 0 ? (px * dx + py * dy) / l2 : 0;
+    t = t < 0 ? 0 : t > 1 ? 1 : t;
+    double ex = px - t * dx, ey = py - t * dy;
+    return ex * ex + ey * ey;
+}
+
+/* Mark keep[] for q[a..b] (a and b kept) by Douglas-Peucker; stack holds pairs. */
+static void
+dp_range(const struct ipt *q, uint32_t a, uint32_t b, double tol2, uint8_t *keep, uint32_t *stack)
+{
+    uint32_t sp = 0;
+    stack[sp++] = a;
+    stack[sp++] = b;
+    while (sp) {
+        uint32_t hi = stack[--sp], lo = stack[--sp];
+        double best = tol2;
+        uint32_t at = 0;
+        for (uint32_t i = lo + 1; i < hi; i++) {
+            double d = seg_dist2(q[i], q[lo], q[hi]);
+            if (d > best)
+                best = d, at = i;
+        }
+        if (at) {
+            keep[at] = 1;
+            stack[sp++] = lo;
+            stack[sp++] = at;
+            stack[sp++] = at;
+            stack[sp++] = hi;
+        }
+    }
+}
+
+bool
+paths_simplify(struct paths *p, double tol_mm)
+{
+    uint32_t maxn = 0;
+    for (uint32_t k = 0; k < p->n; k++)
+        if (paths_len(p, k) > maxn)
+            maxn = paths_len(p, k);
+    if (!maxn)
+        return true;
+    /* the path is closed: work on pts 0..n (n = pts[0] again) */
+    uint8_t *keep = mem_alloc((size_t)maxn + 1);
+    uint32_t *stack = mem_array(4 * ((size_t)maxn + 1), sizeof(*stack));
+    struct ipt *q = mem_array((size_t)maxn + 1, sizeof(*q));
+    if (!keep || !stack || !q) {
+        free(keep);
+        free(stack);
+        free(q);
+        return false;
+    }
+    double tol2 = tol_mm * POLY_SCALE * tol_mm * POLY_SCALE;
+    size_t w = 0;
+    uint32_t nk = 0;
+    uint32_t s1 = p->start[0];
+    for (uint32_t k = 0; k < p->n; k++) {
+        /* read the original bounds before this iteration rewrites start[] */
+        uint32_t s0 = s1;
+        s1 = p->start[k + 1];
+        uint32_t n = s1 - s0;
+        memcpy(q, p->pts + s0, n * sizeof(*q));
+        size_t begin = w;
+        if (n >= 3) {
+            /* anchors: point 0 and the point farthest from it */
+            uint32_t far = 0;
+            double fd = -1;
+            for (uint32_t i = 1; i < n; i++) {
+                double dx = (double)(q[i].x - q[0].x), dy = (double)(q[i].y - q[0].y);
+                if (dx * dx + dy * dy > fd)
+                    fd = dx * dx + dy * dy, far = i;
+            }
+            q[n] = q[0];
+            memset(keep, 0, n + 1);
+            keep[0] = keep[far] = 1;
+            dp_range(q, 0, far, tol2, keep, stack);
+            dp_range(q, far, n, tol2, keep, stack);
+            for (uint32_t i = 0; i < n; i++)
+                if (keep[i])
+                    p->pts[w++] = q[i];
+        }
+        if (w - begin < 3) {
+            w = begin;
+            continue;
+        }
+        p->start[nk] = (uint32_t)begin;
+        p->start[++nk] = (uint32_t)w;
+    }
+    p->n = nk;
+    if (!nk && p->start)
+        p->start[0] = 0;
+    free(keep);
+    free(stack);
+    free(q);
+    return true;
+}

@@ -80,6 +80,14 @@ double paths_area(const struct paths *p);
 double paths_length_k(const struct paths *p, uint32_t k, bool closed);
 /* Point-in-polygon by the nonzero rule over the whole set. */
 bool paths_contains(const struct paths *p, struct ipt q);
+/*
+ * Douglas-Peucker in place: drop points closer than tol_mm to the chord
+ * of the kept ones (closed paths keep their two farthest-apart anchors).
+ * Paths reduced below 3 points are removed.  false when memory runs out
+ * (p unchanged).
+ */
+bool paths_simplify(struct paths *p, double tol_mm);
+
 /* Bounding box of all points; false when empty. */
 bool paths_bbox(const struct paths *p, struct ipt *lo, struct ipt *hi);
 

@@ -40,6 +40,7 @@ struct slice_profile {
     /* [print] */
     double layer_mm, first_layer_mm;
     int perimeters, top_layers, bottom_layers;
+    double skin_margin_mm;            /* solid skins grow this far into the infill */
     double infill_density;            /* 0..1 */
     char *infill_pattern;             /* "grid" or "rectilinear" */
     double width_mm;                  /* perimeters and sparse infill */

@@ -158,7 +158,8 @@ ray_columns(const struct mesh *m, const struct slice_profile *p, const struct la
 }
 
 struct tp_job {
-    const struct layer_stack *s;
+    struct layer_stack *s;
+    int phase; /* 0: inner areas, 1: toolpaths */
     const struct slice_profile *p;
     const struct support_layer *sup;
     struct layer_paths *lp;
@@ -174,7 +175,8 @@ tp_worker(void *arg)
         uint32_t k = atomic_fetch_add(&j->next, 1);
         if (k >= j->s->n || atomic_load(&j->rc) < 0)
             break;
-        int rc = toolpath_layer(j->s, k, j->p, j->sup ? &j->sup[k] : NULL, &j->lp[k]);
+        int rc = j->phase ? toolpath_layer(j->s, k, j->p, j->sup ? &j->sup[k] : NULL, &j->lp[k])
+                          : toolpath_areas(j->s, k, j->p);
         if (rc < 0)
             atomic_store(&j->rc, rc);
         atomic_fetch_add(&j->done, 1);
@@ -331,28 +333,30 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
         goto out;
     }
     struct tp_job j = { .s = &s, .p = p, .sup = sup, .lp = lp };
-    atomic_init(&j.next, 0);
-    atomic_init(&j.done, 0);
     atomic_init(&j.rc, SF_OK);
-    pthread_t th;
-    bool threaded = s.n > 4 && pthread_create(&th, NULL, tp_worker, &j) == 0;
-    if (progress && threaded) {
-        /* the helper thread works; this one reports, then joins the work */
-        while (atomic_load(&j.next) < s.n && atomic_load(&j.rc) == SF_OK) {
-            report(progress, ud, "toolpaths", (double)atomic_load(&j.done) / s.n);
-            uint32_t k = atomic_fetch_add(&j.next, 1);
-            if (k >= s.n)
-                break;
-            int r = toolpath_layer(&s, k, p, sup ? &sup[k] : NULL, &lp[k]);
-            if (r < 0)
-                atomic_store(&j.rc, r);
-            atomic_fetch_add(&j.done, 1);
+    for (j.phase = 0; j.phase < 2 && atomic_load(&j.rc) == SF_OK; j.phase++) {
+        atomic_init(&j.next, 0);
+        atomic_init(&j.done, 0);
+        pthread_t th;
+        bool threaded = s.n > 4 && pthread_create(&th, NULL, tp_worker, &j) == 0;
+        if (progress && threaded && j.phase == 1) {
+            /* this thread reports between layers it builds itself */
+            while (atomic_load(&j.rc) == SF_OK) {
+                report(progress, ud, "toolpaths", (double)atomic_load(&j.done) / s.n);
+                uint32_t k = atomic_fetch_add(&j.next, 1);
+                if (k >= s.n)
+                    break;
+                int r = toolpath_layer(&s, k, p, sup ? &sup[k] : NULL, &lp[k]);
+                if (r < 0)
+                    atomic_store(&j.rc, r);
+                atomic_fetch_add(&j.done, 1);
+            }
+        } else {
+            tp_worker(&j);
         }
-    } else {
-        tp_worker(&j);
+        if (threaded)
+            pthread_join(th, NULL);
     }
-    if (threaded)
-        pthread_join(th, NULL);
     rc = atomic_load(&j.rc);
     if (rc < 0) {
         sf_err_set(err, rc, "toolpaths: %s", rc == SF_ENOMEM ? "out of memory" : "clipping failed");

@@ -113,8 +113,8 @@ out:
     return rc;
 }
 
-/* out = intersection of the regions of layers [a, b); empty if a range
-   leaves the stack (a surface is within reach). */
+/* out = intersection of the inner areas of layers [a, b); empty if the
+   range leaves the stack (a surface is within reach). */
 static int
 intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
 {
@@ -123,16 +123,59 @@ intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
         return SF_OK;
     struct paths tmp;
     paths_init(&tmp);
-    if (!paths_append(out, &s->l[a].region)) {
+    if (!paths_append(out, &s->l[a].inner)) {
         paths_release(&tmp);
         return SF_ENOMEM;
     }
     int rc = SF_OK;
     for (long j = a + 1; j < b && rc == SF_OK && out->n; j++) {
-        rc = clip_bool(CLIP_INTERSECTION, out, &s->l[j].region, CLIP_NONZERO, &tmp);
+        rc = clip_bool(CLIP_INTERSECTION, out, &s->l[j].inner, CLIP_NONZERO, &tmp);
         paths_move(out, &tmp);
     }
     paths_release(&tmp);
+    return rc;
+}
+
+int
+toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
+{
+    struct layer *L = &s->l[k];
+    double sp = tp_spacing(p->width_mm, L->h_mm);
+    paths_reset(&L->inner);
+    paths_reset(&L->skin);
+    int rc;
+    if (p->perimeters > 0)
+        rc = clip_offset(&L->region, -(p->width_mm / 2 + (p->perimeters - 1) * sp + sp / 2),
+                         CLIP_JOIN_MITER, &L->inner);
+    else
+        rc = paths_append(&L->inner, &L->region) ? SF_OK : SF_ENOMEM;
+    if (rc < 0 || !L->inner.n || p->skin_margin_mm <= 0)
+        return rc;
+    /* the seed of the skins: inner area open to the air above or below */
+    struct paths a, b, c;
+    paths_init(&a);
+    paths_init(&b);
+    paths_init(&c);
+    if (k + 1 < s->n)
+        rc = clip_bool(CLIP_DIFFERENCE, &L->inner, &s->l[k + 1].region, CLIP_NONZERO, &a);
+    else if (!paths_append(&a, &L->inner))
+        rc = SF_ENOMEM;
+    if (rc == SF_OK && k > 0)
+        rc = clip_bool(CLIP_DIFFERENCE, &L->inner, &s->l[k - 1].region, CLIP_NONZERO, &b);
+    else if (rc == SF_OK && !paths_append(&b, &L->inner))
+        rc = SF_ENOMEM;
+    if (rc == SF_OK && !paths_append(&a, &b))
+        rc = SF_ENOMEM;
+    /* slivers thinner than a line are the shell's business, not a surface */
+    if (rc == SF_OK)
+        rc = clip_offset(&a, -p->solid_width_mm / 2, CLIP_JOIN_MITER, &b);
+    if (rc == SF_OK && b.n)
+        rc = clip_offset(&b, p->solid_width_mm / 2 + p->skin_margin_mm, CLIP_JOIN_SQUARE, &c);
+    if (rc == SF_OK && c.n)
+        rc = clip_bool(CLIP_INTERSECTION, &c, &L->inner, CLIP_NONZERO, &L->skin);
+    paths_release(&a);
+    paths_release(&b);
+    paths_release(&c);
     return rc;
 }
 
@@ -175,10 +218,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         TRY(clip_offset(&L->region, -(w / 2 + i * sp), CLIP_JOIN_MITER, &t[T_TMP]));
         TRY(add(out, &t[T_TMP], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w));
     }
-    if (p->perimeters > 0)
-        TRY(clip_offset(&L->region, -(w / 2 + (p->perimeters - 1) * sp + sp / 2),
-                        CLIP_JOIN_MITER, &t[T_AREA]));
-    else if (!paths_append(&t[T_AREA], &L->region))
+    if (!paths_append(&t[T_AREA], &L->inner))
         TRY(SF_ENOMEM);
     if (!t[T_AREA].n)
         goto out;
@@ -192,7 +232,21 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         TRY(SF_ENOMEM);
     TRY(clip_bool(CLIP_INTERSECTION, &t[T_TOPI], &t[T_BOTI], CLIP_NONZERO, &t[T_KEEP]));
     TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_KEEP], CLIP_NONZERO, &t[T_SOLID]));
-    TRY(clip_bool(CLIP_INTERSECTION, &t[T_AREA], &t[T_KEEP], CLIP_NONZERO, &t[T_SPARSE]));
+    if (p->skin_margin_mm > 0) {
+        /* surfaces within reach above and below, grown into the infill
+           (PrusaSlicer 2.5 anchors them 3 mm: EXTERNAL_INFILL_MARGIN) */
+        paths_reset(&t[T_LINES]);
+        for (long j = (long)k - p->bottom_layers + 1; j < (long)k + p->top_layers; j++)
+            if (j >= 0 && j < (long)s->n && !paths_append(&t[T_LINES], &s->l[j].skin))
+                TRY(SF_ENOMEM);
+        if (t[T_LINES].n) {
+            if (!paths_append(&t[T_LINES], &t[T_SOLID]))
+                TRY(SF_ENOMEM);
+            TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_TMP]));
+            TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+        }
+    }
+    TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
     if (p->top_layers > 0) {
         /* the part of the solid the next layer does not cover is the top surface */
         if (k + 1 < s->n) {

@@ -5,9 +5,10 @@
  * Per layer, from the cross-sections (layers.h) and the support regions
  * (support.h): perimeter loops by inward offsets of the region (outermost
  * is the external perimeter); the rest is the infill area, split into
- * top solid (not covered by the layer above), other solid (within
- * top_layers of a top or bottom_layers of a bottom surface, found by
- * intersecting the neighbouring layers) and sparse infill (grid or
+ * top solid (not covered by the layer above), other solid (wherever the
+ * areas inside the perimeters of the top_layers above and bottom_layers
+ * below do not all cover it: this keeps the shell thick on slopes too,
+ * like PrusaSlicer's "ensure vertical shell thickness") and sparse infill (grid or
  * rectilinear lines at a spacing set by the density).  Paths come in
  * print order of roles: support, interface, perimeters (inner first,
  * external last), solid, top, sparse.
@@ -73,7 +74,13 @@ struct support_layer {
 };
 
 /*
- * Build the paths of layer k of s.  sup (may be NULL) is that layer's
+ * Compute s->l[k].inner, the area inside layer k's perimeters.  Every
+ * layer's inner must exist before toolpath_layer runs on any layer.
+ */
+int toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p);
+
+/*
+ * Build the paths of layer k of s (after toolpath_areas on all layers).  sup (may be NULL) is that layer's
  * support.  SF_ENOMEM / SF_EBUG (Clipper).
  */
 int toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,

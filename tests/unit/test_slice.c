@@ -231,6 +231,8 @@ T_CASE(gcode_reads_back_into_the_same_moves)
     struct layer_paths *lp = mem_calloc(s.n, sizeof(*lp));
     T_TRUE(lp != NULL);
     for (uint32_t k = 0; k < s.n; k++)
+        T_OK(toolpath_areas(&s, k, &p), NULL);
+    for (uint32_t k = 0; k < s.n; k++)
         T_OK(toolpath_layer(&s, k, &p, NULL, &lp[k]), NULL);
     for (int rel = 0; rel < 2; rel++) {
         p.e_relative = rel;
