@@ -182,6 +182,8 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
     size_t *layer_block = NULL, cap_layers = 0;
     double pos[4] = { 0 }, f = 25, dwell = 0;
     bool rel_xyz = false, rel_e = false, support = false;
+    const char *type = NULL;
+    size_t type_len = 0;
     uint32_t lineno = 0;
     int rc = SF_OK;
     struct gcode_line gl;
@@ -208,6 +210,8 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
                 layer_block[out->n_layers++] = pl.n;
             } else if (has_prefix(s, l, ";TYPE:")) {
                 support = has_prefix(s, l, ";TYPE:Support material");
+                type = s + 6;
+                type_len = l - 6;
             }
             continue;
         }
@@ -247,8 +251,8 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
             memcpy(pos, tgt, sizeof(pos));
             out->n_moves++;
             if (on_move) {
-                struct est_move mv = { pos[0], pos[1], pos[2], pos[3], d[3], f, support,
-                                       out->n_layers ? out->n_layers - 1 : 0, lineno };
+                struct est_move mv = { pos[0], pos[1], pos[2], pos[3], d[3], f, support, type,
+                                       type_len, out->n_layers ? out->n_layers - 1 : 0, lineno };
                 if ((rc = on_move(ud, &mv)) < 0)
                     goto fail;
             }

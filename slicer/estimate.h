@@ -43,6 +43,8 @@ struct est_move {
     double de;          /* E change of this move */
     double f_mm_s;      /* requested feed rate */
     bool support;       /* under a support role tag */
+    const char *type;   /* text after the last ;TYPE: (into the input), or NULL */
+    size_t type_len;
     uint32_t layer;     /* layer number (0 before the first ;LAYER_CHANGE) */
     uint32_t line;      /* 1-based line in the text */
 };
