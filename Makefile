@@ -25,7 +25,7 @@ DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev li
 	libjansson-dev libzip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
 	libsuitesparse-dev clang-14 libclang-rt-14-dev python3 procps
 # Only for `make bench`: the independent peers and their helpers.
-BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy
+BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy bc
 
 # Libraries with a pkg-config file; the rest get fixed flags (Debian ships no .pc).
 PKGS := libserialport libcurl sqlite3 libmicrohttpd libmosquitto inih qhull_r polyclipping \
