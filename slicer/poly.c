@@ -162,24 +162,123 @@ paths_length_k(const struct paths *p, uint32_t k, bool closed)
     return l / POLY_SCALE;
 }
 
+/* Winding number of path k about q. */
+static long
+winding_k(const struct paths *p, uint32_t k, struct ipt q)
+{
+    long wind = 0;
+    const struct ipt *v = p->pts + p->start[k];
+    uint32_t n = paths_len(p, k);
+    for (uint32_t i = 0; i < n; i++) {
+        struct ipt a = v[i], b = v[i + 1 < n ? i + 1 : 0];
+        /* orientation of q against a->b, in long double to avoid overflow */
+        long double cr = (long double)(b.x - a.x) * (q.y - a.y) - (long double)(q.x - a.x) * (b.y - a.y);
+        if (a.y <= q.y) {
+            if (b.y > q.y && cr > 0)
+                wind++;
+        } else if (b.y <= q.y && cr < 0) {
+            wind--;
+        }
+    }
+    return wind;
+}
+
 bool
 paths_contains(const struct paths *p, struct ipt q)
 {
     long wind = 0;
-    for (uint32_t k = 0; k < p->n; k++) {
-        const struct ipt *v = p->pts + p->start[k];
-        uint32_t n = paths_len(p, k);
-        for (uint32_t i = 0; i < n; i++) {
-            struct ipt a = v[i], b = v[(i + 1) % n];
-            /* orientation of q against a->b, in long double to avoid overflow */
-            long double cr = (long double)(b.x - a.x) * (q.y - a.y) -
-                             (long double)(q.x - a.x) * (b.y - a.y);
-            if (a.y <= q.y) {
-                if (b.y > q.y && cr > 0)
-                    wind++;
-            } else if (b.y <= q.y && cr < 0) {
-                wind--;
+    for (uint32_t k = 0; k < p->n; k++)
+        wind += winding_k(p, k, q);
+    return wind != 0;
+}
+
+static uint32_t
+band_of(const struct paths_index *ix, int64_t y)
+{
+    if (y < ix->y0)
+        return 0;
+    uint64_t b = (uint64_t)(y - ix->y0) / (uint64_t)ix->band_h;
+    return b >= ix->n_bands ? ix->n_bands - 1 : (uint32_t)b;
+}
+
+bool
+paths_index_init(struct paths_index *ix, const struct paths *p)
+{
+    memset(ix, 0, sizeof(*ix));
+    ix->pts = p->pts;
+    struct ipt lo, hi;
+    size_t n_edges = p->n ? p->start[p->n] : 0;
+    if (!paths_bbox(p, &lo, &hi))
+        lo = hi = (struct ipt){ 0, 0 };
+    ix->y0 = lo.y;
+    ix->n_bands = n_edges / 4 > 1024 ? 1024 : (uint32_t)(n_edges / 4) + 1;
+    ix->band_h = (hi.y - lo.y) / ix->n_bands + 1;
+    ix->first = mem_calloc((size_t)ix->n_bands + 1, sizeof(*ix->first));
+    uint32_t *fill = mem_array(ix->n_bands, sizeof(*fill));
+    if (!ix->first || !fill) {
+        free(fill);
+        paths_index_release(ix);
+        return false;
+    }
+    size_t total = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t k = 0; k < p->n; k++) {
+            uint32_t s0 = p->start[k], n = paths_len(p, k);
+            for (uint32_t i = 0; i < n; i++) {
+                uint32_t a = s0 + i, b = s0 + (i + 1 < n ? i + 1 : 0);
+                int64_t ya = p->pts[a].y, yb = p->pts[b].y;
+                uint32_t b0 = band_of(ix, ya < yb ? ya : yb), b1 = band_of(ix, ya < yb ? yb : ya);
+                for (uint32_t bb = b0; bb <= b1; bb++) {
+                    if (pass == 0) {
+                        ix->first[bb + 1]++;
+                        total++;
+                    } else {
+                        ix->edges[fill[bb]][0] = a;
+                        ix->edges[fill[bb]++][1] = b;
+                    }
+                }
             }
+        }
+        if (pass == 0) {
+            for (uint32_t bb = 0; bb < ix->n_bands; bb++)
+                ix->first[bb + 1] += ix->first[bb];
+            memcpy(fill, ix->first, ix->n_bands * sizeof(*fill));
+            ix->edges = mem_array(total ? total : 1, sizeof(*ix->edges));
+            if (!ix->edges) {
+                free(fill);
+                paths_index_release(ix);
+                return false;
+            }
+        }
+    }
+    free(fill);
+    return true;
+}
+
+void
+paths_index_release(struct paths_index *ix)
+{
+    free(ix->first);
+    free(ix->edges);
+    ix->first = NULL;
+    ix->edges = NULL;
+}
+
+bool
+paths_index_contains(const struct paths_index *ix, struct ipt q)
+{
+    if (!ix->first)
+        return false;
+    uint32_t bb = band_of(ix, q.y);
+    long wind = 0;
+    for (uint32_t e = ix->first[bb]; e < ix->first[bb + 1]; e++) {
+        struct ipt a = ix->pts[ix->edges[e][0]], b = ix->pts[ix->edges[e][1]];
+        long double cr = (long double)(b.x - a.x) * (q.y - a.y) - (long double)(q.x - a.x) * (b.y - a.y);
+        if (a.y <= q.y) {
+            if (b.y > q.y && cr > 0)
+                wind++;
+        } else if (b.y <= q.y && cr < 0) {
+            wind--;
         }
     }
     return wind != 0;

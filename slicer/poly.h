@@ -88,6 +88,22 @@ bool paths_contains(const struct paths *p, struct ipt q);
  */
 bool paths_simplify(struct paths *p, double tol_mm);
 
+/*
+ * Point-in-polygon for many queries against one set: edges are bucketed
+ * into horizontal bands, so a query reads only the edges that cross its
+ * band (the only ones that can change the winding at its height).
+ */
+struct paths_index {
+    int64_t y0, band_h;  /* band b covers [y0 + b band_h, y0 + (b+1) band_h) */
+    uint32_t n_bands;
+    uint32_t *first;     /* n_bands + 1 offsets into edges */
+    uint32_t (*edges)[2]; /* point indices of each edge's ends */
+    const struct ipt *pts;
+};
+bool paths_index_init(struct paths_index *ix, const struct paths *p);
+void paths_index_release(struct paths_index *ix);
+bool paths_index_contains(const struct paths_index *ix, struct ipt q);
+
 /* Bounding box of all points; false when empty. */
 bool paths_bbox(const struct paths *p, struct ipt *lo, struct ipt *hi);
 

@@ -17,6 +17,7 @@
 #include "../src/base/mem.h"
 #include "clip_shim.h"
 
+
 const char *
 tp_role_name(enum tp_role r)
 {
@@ -73,8 +74,9 @@ add(struct layer_paths *lp, const struct paths *src, enum tp_role role, bool clo
     return SF_OK;
 }
 
-int
-tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, struct paths *out)
+/* Lines of one island (or any set) over its bounding box, clipped. */
+static int
+fill_set(const struct paths *region, double angle_deg, double spacing_mm, struct paths *out)
 {
     struct ipt lo, hi;
     if (!paths_bbox(region, &lo, &hi) || spacing_mm <= 0)
@@ -93,23 +95,202 @@ tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, s
     }
     t0 -= 1;
     t1 += 1;
-    struct paths lines;
+    struct paths lines, clipped;
     paths_init(&lines);
-    int rc = SF_ENOMEM;
-    for (double o = ceil(o0 / spacing_mm) * spacing_mm; o <= o1; o += spacing_mm) {
+    paths_init(&clipped);
+    int rc = SF_OK;
+    for (double o = ceil(o0 / spacing_mm) * spacing_mm; o <= o1 && rc == SF_OK; o += spacing_mm) {
         struct ipt seg[2] = { { poly_i(o * nx + t0 * dx), poly_i(o * ny + t0 * dy) },
                               { poly_i(o * nx + t1 * dx), poly_i(o * ny + t1 * dy) } };
         if (!paths_add(&lines, seg, 2))
-            goto out;
+            rc = SF_ENOMEM;
     }
-    struct paths clipped;
-    paths_init(&clipped);
-    rc = clip_lines(&lines, region, &clipped);
+    if (rc == SF_OK && lines.n)
+        rc = clip_lines(&lines, region, &clipped);
     if (rc == SF_OK && !paths_append(out, &clipped))
         rc = SF_ENOMEM;
-    paths_release(&clipped);
-out:
     paths_release(&lines);
+    paths_release(&clipped);
+    return rc;
+}
+
+int
+tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, struct paths *out)
+{
+    /* island by island: lines cover only their own island's box, so
+       Clipper does not intersect every line with every sliver of a layer */
+    struct paths isl;
+    paths_init(&isl);
+    int rc = SF_OK;
+    for (uint32_t a = 0; a < region->n && rc == SF_OK;) {
+        uint32_t b = a + 1;
+        while (b < region->n && paths_area_k(region, b) < 0)
+            b++;
+        paths_reset(&isl);
+        for (uint32_t k = a; k < b && rc == SF_OK; k++)
+            if (!paths_add(&isl, region->pts + region->start[k], paths_len(region, k)))
+                rc = SF_ENOMEM;
+        if (rc == SF_OK)
+            rc = fill_set(&isl, angle_deg, spacing_mm, out);
+        a = b;
+    }
+    paths_release(&isl);
+    return rc;
+}
+
+/* Squared distance between two points, in units^2. */
+static double
+d2(struct ipt a, struct ipt b)
+{
+    double dx = (double)(a.x - b.x), dy = (double)(a.y - b.y);
+    return dx * dx + dy * dy;
+}
+
+static bool
+link_inside(const struct paths_index *g, struct ipt a, struct ipt b)
+{
+    for (int i = 1; i <= 3; i++) {
+        struct ipt q = { a.x + (b.x - a.x) * i / 4, a.y + (b.y - a.y) * i / 4 };
+        if (!paths_index_contains(g, q))
+            return false;
+    }
+    return true;
+}
+
+/* Endpoints of a line set bucketed in square cells (CSR), for near-end queries. */
+struct ends {
+    int64_t x0, y0, cell;
+    uint32_t nx, ny;
+    uint32_t *first; /* nx*ny + 1 offsets into ids */
+    uint32_t *ids;   /* 2 * line + (0: start, 1: end) */
+};
+
+static int
+ends_build(struct ends *e, const struct paths *lines, double cell_mm)
+{
+    struct ipt lo, hi;
+    memset(e, 0, sizeof(*e));
+    if (!paths_bbox(lines, &lo, &hi))
+        return SF_OK;
+    e->cell = poly_i(cell_mm) > 0 ? poly_i(cell_mm) : 1;
+    e->x0 = lo.x;
+    e->y0 = lo.y;
+    uint64_t nx = (uint64_t)((hi.x - lo.x) / e->cell) + 1, ny = (uint64_t)((hi.y - lo.y) / e->cell) + 1;
+    while (nx * ny > 4u * lines->n + 64) { /* keep the table small: coarser cells */
+        e->cell *= 2;
+        nx = (uint64_t)((hi.x - lo.x) / e->cell) + 1;
+        ny = (uint64_t)((hi.y - lo.y) / e->cell) + 1;
+    }
+    e->nx = (uint32_t)nx;
+    e->ny = (uint32_t)ny;
+    e->first = mem_calloc(nx * ny + 1, sizeof(*e->first));
+    e->ids = mem_array(2 * (size_t)lines->n, sizeof(*e->ids));
+    uint32_t *fill = mem_array(nx * ny, sizeof(*fill));
+    if (!e->first || !e->ids || !fill) {
+        free(fill);
+        return SF_ENOMEM;
+    }
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t k = 0; k < 2 * lines->n; k++) {
+            uint32_t l = k / 2;
+            struct ipt q = lines->pts[k % 2 ? lines->start[l + 1] - 1 : lines->start[l]];
+            size_t c = (size_t)((q.y - e->y0) / e->cell) * e->nx + (size_t)((q.x - e->x0) / e->cell);
+            if (pass == 0)
+                e->first[c + 1]++;
+            else
+                e->ids[fill[c]++] = k;
+        }
+        if (pass == 0) {
+            for (size_t c = 0; c < nx * ny; c++)
+                e->first[c + 1] += e->first[c];
+            memcpy(fill, e->first, nx * ny * sizeof(*fill));
+        }
+    }
+    free(fill);
+    return SF_OK;
+}
+
+static void
+ends_release(struct ends *e)
+{
+    free(e->first);
+    free(e->ids);
+}
+
+int
+tp_link(struct paths *lines, const struct paths *region, double link_max_mm, double grow_mm)
+{
+    uint32_t n = lines->n;
+    if (n < 2)
+        return SF_OK;
+    struct paths g, out;
+    struct ends e = { 0 };
+    paths_init(&g);
+    paths_init(&out);
+    uint8_t *used = mem_calloc(n, 1);
+    int rc = used ? ends_build(&e, lines, link_max_mm) : SF_ENOMEM;
+    if (rc == SF_OK)
+        rc = clip_offset(region, grow_mm, CLIP_JOIN_MITER, &g);
+    struct paths_index gi = { 0 };
+    if (rc == SF_OK && !paths_index_init(&gi, &g))
+        rc = SF_ENOMEM;
+    double lim2 = link_max_mm * POLY_SCALE * link_max_mm * POLY_SCALE;
+    for (uint32_t s0 = 0; s0 < n && rc == SF_OK; s0++) {
+        if (used[s0])
+            continue;
+        used[s0] = 1;
+        const struct ipt *q = lines->pts + lines->start[s0];
+        uint32_t m = paths_len(lines, s0);
+        if (!paths_begin(&out)) {
+            rc = SF_ENOMEM;
+            break;
+        }
+        for (uint32_t i = 0; i < m && rc == SF_OK; i++)
+            if (!paths_push(&out, q[i]))
+                rc = SF_ENOMEM;
+        struct ipt end = q[m - 1];
+        for (;;) {
+            /* the nearest free line end, if close enough and the link stays inside */
+            double best = lim2;
+            uint32_t bk = UINT32_MAX;
+            bool brev = false;
+            long cx = (long)((end.x - e.x0) / e.cell), cy = (long)((end.y - e.y0) / e.cell);
+            for (long y = cy - 1; y <= cy + 1; y++) {
+                for (long x = cx - 1; x <= cx + 1; x++) {
+                    if (x < 0 || y < 0 || x >= (long)e.nx || y >= (long)e.ny)
+                        continue;
+                    size_t c = (size_t)y * e.nx + (size_t)x;
+                    for (uint32_t i = e.first[c]; i < e.first[c + 1]; i++) {
+                        uint32_t id = e.ids[i], k = id / 2;
+                        if (used[k])
+                            continue;
+                        struct ipt r = lines->pts[id % 2 ? lines->start[k + 1] - 1 : lines->start[k]];
+                        double d = d2(end, r);
+                        if (d < best || (d == best && k < bk))
+                            best = d, bk = k, brev = id % 2;
+                    }
+                }
+            }
+            if (bk == UINT32_MAX)
+                break;
+            const struct ipt *r = lines->pts + lines->start[bk];
+            uint32_t rm = paths_len(lines, bk);
+            if (!link_inside(&gi, end, brev ? r[rm - 1] : r[0]))
+                break;
+            used[bk] = 1;
+            for (uint32_t i = 0; i < rm && rc == SF_OK; i++)
+                if (!paths_push(&out, brev ? r[rm - 1 - i] : r[i]))
+                    rc = SF_ENOMEM;
+            end = brev ? r[0] : r[rm - 1];
+        }
+    }
+    if (rc == SF_OK)
+        paths_move(lines, &out);
+    free(used);
+    paths_index_release(&gi);
+    ends_release(&e);
+    paths_release(&g);
+    paths_release(&out);
     return rc;
 }
 
@@ -204,12 +385,14 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         TRY(add(out, &t[T_TMP], ROLE_SUPPORT, true, sw));
         paths_reset(&t[T_LINES]);
         TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, p->support_spacing_mm, &t[T_LINES]));
+        TRY(tp_link(&t[T_LINES], &t[T_TMP], 1.5 * p->support_spacing_mm, sw / 2));
         TRY(add(out, &t[T_LINES], ROLE_SUPPORT, false, sw));
     }
     if (sup && sup->iface.n) {
         paths_reset(&t[T_LINES]);
         TRY(clip_offset(&sup->iface, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
         TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, ssp, &t[T_LINES]));
+        TRY(tp_link(&t[T_LINES], &t[T_TMP], 2 * ssp, sw / 2));
         TRY(add(out, &t[T_LINES], ROLE_INTERFACE, false, sw));
     }
 
@@ -262,9 +445,11 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
     double ang = k % 2 ? 135 : 45;
     paths_reset(&t[T_LINES]);
     TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, &t[T_LINES]));
+    TRY(tp_link(&t[T_LINES], &t[T_SOLID], 2 * ssp, sw / 2));
     TRY(add(out, &t[T_LINES], ROLE_SOLID, false, sw));
     paths_reset(&t[T_LINES]);
     TRY(tp_fill_lines(&t[T_TOP], ang, ssp, &t[T_LINES]));
+    TRY(tp_link(&t[T_LINES], &t[T_TOP], 2 * ssp, sw / 2));
     TRY(add(out, &t[T_LINES], ROLE_TOP, false, sw));
     if (p->infill_density > 0 && t[T_SPARSE].n) {
         paths_reset(&t[T_LINES]);

@@ -93,4 +93,11 @@ int toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_p
 int tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm,
                   struct paths *out);
 
+/*
+ * Join lines end to end into zig-zag polylines: from each line's end to
+ * the nearest free line end within link_max_mm, if the link stays inside
+ * region grown by grow_mm (sampled at 3 points).  Replaces lines.
+ */
+int tp_link(struct paths *lines, const struct paths *region, double link_max_mm, double grow_mm);
+
 #endif

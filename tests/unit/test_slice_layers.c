@@ -161,3 +161,34 @@ T_CASE(clip_offset_and_difference)
     paths_release(&b);
     paths_release(&c);
 }
+
+T_CASE(poly_simplify_and_index)
+{
+    /* a 1000-gon circle of radius 10: 10 um tolerance keeps its area */
+    struct paths c;
+    paths_init(&c);
+    T_TRUE(paths_begin(&c));
+    for (int i = 0; i < 1000; i++) {
+        double a = 2 * M_PI * i / 1000;
+        T_TRUE(paths_push(&c, (struct ipt){ poly_i(10 * cos(a)), poly_i(10 * sin(a)) }));
+    }
+    struct ipt sq[4] = { { poly_i(-2), poly_i(-2) }, { poly_i(-2), poly_i(2) },
+                         { poly_i(2), poly_i(2) }, { poly_i(2), poly_i(-2) } }; /* a hole, CW */
+    T_TRUE(paths_add(&c, sq, 4));
+    double area = paths_area(&c);
+    T_TRUE(paths_simplify(&c, 0.01));
+    T_EQ_INT(c.n, 2);
+    T_TRUE(paths_len(&c, 0) < 300 && paths_len(&c, 0) > 50);
+    T_EQ_DBL(paths_area(&c), area, 0.001 * area);
+    /* the banded index answers as the plain winding test */
+    struct paths_index ix;
+    T_TRUE(paths_index_init(&ix, &c));
+    for (int i = 0; i < 400; i++) {
+        struct ipt q = { poly_i(-12 + 0.06 * i), poly_i(-11 + 0.055 * i) };
+        T_EQ_INT(paths_index_contains(&ix, q), paths_contains(&c, q));
+    }
+    T_TRUE(!paths_index_contains(&ix, (struct ipt){ 0, 0 }));
+    T_TRUE(paths_index_contains(&ix, (struct ipt){ poly_i(5), 0 }));
+    paths_index_release(&ix);
+    paths_release(&c);
+}
