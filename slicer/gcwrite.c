@@ -73,6 +73,7 @@ struct wr {
     double f;            /* last F written, mm/min */
     bool retracted;
     int role;            /* last ;TYPE: written, -1 none */
+    struct paths_index inside; /* this layer's region, for retract_only_crossing */
     float width;
     int rc;
 };
@@ -172,7 +173,10 @@ travel(struct wr *w, double x, double y)
     double d = hypot(x - w->x, y - w->y);
     if (d < 1e-9)
         return;
-    if (d > w->p->retract_min_travel_mm)
+    if (d > w->p->retract_min_travel_mm &&
+        (!w->p->retract_only_crossing || !w->inside.first ||
+         paths_index_crosses(&w->inside, (struct ipt){ poly_i(w->x), poly_i(w->y) },
+                             (struct ipt){ poly_i(x), poly_i(y) })))
         retract(w);
     emit(w, x, y, NAN, NAN, w->p->travel_mm_s * 60);
     w->st->travel_mm += d;
@@ -205,6 +209,7 @@ role_speed(const struct slice_profile *p, int role, bool first)
     case ROLE_INFILL: v = p->infill_mm_s; break;
     case ROLE_SOLID: v = p->solid_mm_s; break;
     case ROLE_TOP: v = p->top_mm_s; break;
+    case ROLE_BRIDGE: v = p->bridge_mm_s; break;
     default: v = p->support_mm_s; break;
     }
     return first && p->first_layer_mm_s < v ? p->first_layer_mm_s : v;
@@ -236,6 +241,8 @@ print_path(struct wr *w, const struct layer_paths *lp, uint32_t k, uint32_t at, 
     travel(w, poly_mm(q[i0].x), poly_mm(q[i0].y));
     unretract(w);
     double epm = gcw_e_per_mm(w->p, in->width_mm, h);
+    if (in->role == ROLE_BRIDGE) /* a round thread of nozzle width, hanging in air */
+        epm = in->width_mm * in->width_mm / (w->p->filament_mm * w->p->filament_mm) * w->p->flow;
     double f = role_speed(w->p, in->role, first) * 60;
     if (in->closed) {
         for (uint32_t s = 1; s <= n; s++) {
@@ -316,6 +323,9 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
         retract(&w);
         emit(&w, NAN, NAN, z, NAN, p->max_feed_z_mm_s * 60);
         w.z = z;
+        paths_index_release(&w.inside);
+        if (p->retract_only_crossing && !paths_index_init(&w.inside, &L->region))
+            w.rc = SF_ENOMEM;
         const struct layer_paths *l = &lp[k];
         for (uint32_t a = 0; a < l->p.n && w.rc == SF_OK;) {
             uint32_t b = a + 1;
@@ -326,6 +336,7 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
             a = b;
         }
     }
+    paths_index_release(&w.inside);
     retract(&w);
     if (w.rc < 0)
         return sf_err_set(err, SF_ENOMEM, "gcode: output larger than the cap of %zu bytes",

@@ -284,6 +284,40 @@ paths_index_contains(const struct paths_index *ix, struct ipt q)
     return wind != 0;
 }
 
+static int
+orient(struct ipt a, struct ipt b, struct ipt c)
+{
+    long double v = (long double)(b.x - a.x) * (c.y - a.y) - (long double)(b.y - a.y) * (c.x - a.x);
+    return v > 0 ? 1 : v < 0 ? -1 : 0;
+}
+
+static bool
+on_seg(struct ipt a, struct ipt b, struct ipt c) /* c on a-b, given collinear */
+{
+    return c.x >= (a.x < b.x ? a.x : b.x) && c.x <= (a.x < b.x ? b.x : a.x) &&
+           c.y >= (a.y < b.y ? a.y : b.y) && c.y <= (a.y < b.y ? b.y : a.y);
+}
+
+bool
+paths_index_crosses(const struct paths_index *ix, struct ipt a, struct ipt b)
+{
+    if (!ix->first)
+        return false;
+    uint32_t b0 = band_of(ix, a.y < b.y ? a.y : b.y), b1 = band_of(ix, a.y < b.y ? b.y : a.y);
+    for (uint32_t bb = b0; bb <= b1; bb++) {
+        for (uint32_t e = ix->first[bb]; e < ix->first[bb + 1]; e++) {
+            struct ipt c = ix->pts[ix->edges[e][0]], d = ix->pts[ix->edges[e][1]];
+            int o1 = orient(a, b, c), o2 = orient(a, b, d), o3 = orient(c, d, a), o4 = orient(c, d, b);
+            if (o1 != o2 && o3 != o4)
+                return true;
+            if ((!o1 && on_seg(a, b, c)) || (!o2 && on_seg(a, b, d)) || (!o3 && on_seg(c, d, a)) ||
+                (!o4 && on_seg(c, d, b)))
+                return true;
+        }
+    }
+    return false;
+}
+
 bool
 paths_bbox(const struct paths *p, struct ipt *lo, struct ipt *hi)
 {

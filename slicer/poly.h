@@ -103,6 +103,8 @@ struct paths_index {
 bool paths_index_init(struct paths_index *ix, const struct paths *p);
 void paths_index_release(struct paths_index *ix);
 bool paths_index_contains(const struct paths_index *ix, struct ipt q);
+/* True when segment a-b crosses or touches an edge of the set. */
+bool paths_index_crosses(const struct paths_index *ix, struct ipt a, struct ipt b);
 
 /* Bounding box of all points; false when empty. */
 bool paths_bbox(const struct paths *p, struct ipt *lo, struct ipt *hi);

@@ -24,6 +24,7 @@ tp_role_name(enum tp_role r)
     static const char *const names[ROLE_N] = {
         "Support material", "Support material interface", "Perimeter", "External perimeter",
         "Solid infill",     "Top solid infill",           "Internal infill",
+        "Bridge infill",
     };
     return (unsigned)r < ROLE_N ? names[r] : "Custom";
 }
@@ -443,6 +444,22 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         }
     }
     double ang = k % 2 ? 135 : 45;
+    if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0) {
+        /* solid over air is a bridge; slivers narrower than the nozzle are not */
+        double nz = p->nozzle_mm;
+        TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &s->l[k - 1].region, CLIP_NONZERO, &t[T_TMP]));
+        TRY(clip_offset(&t[T_TMP], -nz / 2, CLIP_JOIN_MITER, &t[T_KEEP]));
+        TRY(clip_offset(&t[T_KEEP], nz / 2, CLIP_JOIN_MITER, &t[T_TMP]));
+        if (t[T_TMP].n) {
+            TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_SOLID], CLIP_NONZERO, &t[T_KEEP]));
+            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
+            paths_move(&t[T_SOLID], &t[T_TMP]);
+            paths_reset(&t[T_LINES]);
+            TRY(tp_fill_lines(&t[T_KEEP], ang, nz + 0.05, &t[T_LINES]));
+            TRY(tp_link(&t[T_LINES], &t[T_KEEP], 2 * (nz + 0.05), nz / 2));
+            TRY(add(out, &t[T_LINES], ROLE_BRIDGE, false, nz));
+        }
+    }
     paths_reset(&t[T_LINES]);
     TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, &t[T_LINES]));
     TRY(tp_link(&t[T_LINES], &t[T_SOLID], 2 * ssp, sw / 2));

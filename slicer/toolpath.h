@@ -37,6 +37,7 @@ enum tp_role {
     ROLE_SOLID,
     ROLE_TOP,
     ROLE_INFILL,
+    ROLE_BRIDGE, /* solid over air: round lines of nozzle width, bridge speed */
     ROLE_N
 };
 

@@ -192,3 +192,20 @@ T_CASE(poly_simplify_and_index)
     paths_index_release(&ix);
     paths_release(&c);
 }
+
+T_CASE(poly_index_crossing)
+{
+    struct paths c;
+    paths_init(&c);
+    struct ipt sq[4] = { { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) } };
+    T_TRUE(paths_add(&c, sq, 4));
+    struct paths_index ix;
+    T_TRUE(paths_index_init(&ix, &c));
+    struct ipt in1 = { poly_i(1), poly_i(1) }, in2 = { poly_i(9), poly_i(8) };
+    struct ipt out = { poly_i(12), poly_i(5) };
+    T_TRUE(!paths_index_crosses(&ix, in1, in2));
+    T_TRUE(paths_index_crosses(&ix, in1, out));
+    T_TRUE(paths_index_crosses(&ix, (struct ipt){ poly_i(-1), poly_i(-1) }, (struct ipt){ poly_i(11), poly_i(11) }));
+    paths_index_release(&ix);
+    paths_release(&c);
+}
