@@ -201,6 +201,12 @@ band_of(const struct paths_index *ix, int64_t y)
     return b >= ix->n_bands ? ix->n_bands - 1 : (uint32_t)b;
 }
 
+uint32_t
+band_of_index(const struct paths_index *ix, int64_t y)
+{
+    return band_of(ix, y);
+}
+
 bool
 paths_index_init(struct paths_index *ix, const struct paths *p)
 {

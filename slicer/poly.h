@@ -103,6 +103,8 @@ struct paths_index {
 bool paths_index_init(struct paths_index *ix, const struct paths *p);
 void paths_index_release(struct paths_index *ix);
 bool paths_index_contains(const struct paths_index *ix, struct ipt q);
+/* The band of height y (for walking ix->edges of one band). */
+uint32_t band_of_index(const struct paths_index *ix, int64_t y);
 /* True when segment a-b crosses or touches an edge of the set. */
 bool paths_index_crosses(const struct paths_index *ix, struct ipt a, struct ipt b);
 

@@ -43,6 +43,7 @@ struct slice_profile {
     double skin_margin_mm;            /* solid skins grow this far into the infill */
     double infill_density;            /* 0..1 */
     char *infill_pattern;             /* "grid" or "rectilinear" */
+    double infill_anchor_mm;          /* sparse lines hook along the boundary this far */
     double width_mm;                  /* perimeters and sparse infill */
     double solid_width_mm;            /* solid, top and support lines */
     double perimeter_mm_s, ext_perimeter_mm_s, infill_mm_s, solid_mm_s, top_mm_s;

@@ -295,6 +295,167 @@ tp_link(struct paths *lines, const struct paths *region, double link_max_mm, dou
     return rc;
 }
 
+/* Where a line end sits on the region's boundary. */
+struct bpos {
+    uint32_t line, end;  /* end 0: first point, 1: last */
+    uint32_t path, a, b; /* boundary path and the edge's point indices (global) */
+    double s;            /* arc length from the path's first point, mm */
+    double stub;         /* anchor length, mm */
+};
+
+static int
+cmp_bpos(const void *x, const void *y)
+{
+    const struct bpos *p = x, *q = y;
+    if (p->path != q->path)
+        return p->path < q->path ? -1 : 1;
+    return p->s < q->s ? -1 : p->s > q->s;
+}
+
+static double
+dist_mm(struct ipt a, struct ipt b)
+{
+    return hypot((double)(a.x - b.x), (double)(a.y - b.y)) / POLY_SCALE;
+}
+
+/* Points of the walk forward along the boundary from pos for len mm (excluding the start). */
+static bool
+walk(const struct paths *r, const struct bpos *pos, struct ipt from, double len, struct paths *out)
+{
+    uint32_t s0 = r->start[pos->path], n = paths_len(r, pos->path);
+    uint32_t b = pos->b;
+    struct ipt cur = from;
+    for (uint32_t steps = 0; steps < n && len > 1e-6; steps++) {
+        struct ipt nx = r->pts[b];
+        double d = dist_mm(cur, nx);
+        if (d >= len) {
+            double t = len / d;
+            struct ipt q = { cur.x + (int64_t)llround((double)(nx.x - cur.x) * t),
+                             cur.y + (int64_t)llround((double)(nx.y - cur.y) * t) };
+            return paths_push(out, q);
+        }
+        if (!paths_push(out, nx))
+            return false;
+        len -= d;
+        cur = nx;
+        b = s0 + (b - s0 + 1) % n;
+    }
+    return true;
+}
+
+int
+tp_anchor(struct paths *lines, const struct paths *region, double len_mm)
+{
+    uint32_t n = lines->n;
+    if (!n || !region->n || len_mm <= 0)
+        return SF_OK;
+    struct paths_index ix = { 0 };
+    struct paths out, stub;
+    paths_init(&out);
+    paths_init(&stub);
+    size_t np = region->start[region->n];
+    double *cum = mem_array(np + 1, sizeof(*cum));
+    uint32_t *path_of = mem_array(np + 1, sizeof(*path_of));
+    struct bpos *bp = mem_array(2 * (size_t)n, sizeof(*bp));
+    int32_t *slot = mem_array(2 * (size_t)n, sizeof(*slot)); /* (line, end) -> index in bp or -1 */
+    int rc = cum && path_of && bp && slot && paths_index_init(&ix, region) ? SF_OK : SF_ENOMEM;
+    if (rc < 0)
+        goto out;
+    for (uint32_t k = 0; k < region->n; k++) {
+        double c = 0;
+        for (uint32_t i = region->start[k]; i < region->start[k + 1]; i++) {
+            cum[i] = c;
+            path_of[i] = k;
+            uint32_t j = i + 1 < region->start[k + 1] ? i + 1 : region->start[k];
+            c += dist_mm(region->pts[i], region->pts[j]);
+        }
+    }
+    /* locate every line end on its boundary edge */
+    size_t nb = 0;
+    for (uint32_t l = 0; l < n; l++) {
+        for (uint32_t e = 0; e < 2; e++) {
+            slot[2 * l + e] = -1;
+            struct ipt q = lines->pts[e ? lines->start[l + 1] - 1 : lines->start[l]];
+            uint32_t band = band_of_index(&ix, q.y);
+            double best = 4.0; /* units^2: Clipper rounds intersections to the unit */
+            uint32_t ba = 0, bb = 0;
+            bool found = false;
+            for (uint32_t i = ix.first[band]; i < ix.first[band + 1]; i++) {
+                struct ipt a = ix.pts[ix.edges[i][0]], b = ix.pts[ix.edges[i][1]];
+                double dx = (double)(b.x - a.x), dy = (double)(b.y - a.y);
+                double px = (double)(q.x - a.x), py = (double)(q.y - a.y);
+                double l2 = dx * dx + dy * dy, t = l2 > 0 ? (px * dx + py * dy) / l2 : 0;
+                t = t < 0 ? 0 : t > 1 ? 1 : t;
+                double ex = px - t * dx, ey = py - t * dy, d = ex * ex + ey * ey;
+                if (d <= best) {
+                    best = d;
+                    ba = ix.edges[i][0];
+                    bb = ix.edges[i][1];
+                    found = true;
+                }
+            }
+            if (!found)
+                continue;
+            struct bpos *p = &bp[nb];
+            p->line = l;
+            p->end = e;
+            p->path = path_of[ba];
+            p->a = ba;
+            p->b = bb;
+            p->s = cum[ba] + dist_mm(region->pts[ba], q);
+            nb++;
+        }
+    }
+    qsort(bp, nb, sizeof(*bp), cmp_bpos);
+    for (size_t i = 0; i < nb; i++) {
+        uint32_t k = bp[i].path;
+        uint32_t last = region->start[k + 1] - 1;
+        double per = cum[last] + dist_mm(region->pts[last], region->pts[region->start[k]]);
+        size_t j = i + 1 < nb && bp[i + 1].path == k ? i + 1 : i;
+        if (j == i) /* wrap to the first end on this path */
+            while (j > 0 && bp[j - 1].path == k)
+                j--;
+        double gap = j == i ? per : bp[j].s - bp[i].s;
+        if (gap <= 0)
+            gap += per;
+        bp[i].stub = fmin(len_mm, 0.45 * gap);
+        slot[2 * bp[i].line + bp[i].end] = (int32_t)i;
+    }
+    for (uint32_t l = 0; l < n && rc == SF_OK; l++) {
+        const struct ipt *q = lines->pts + lines->start[l];
+        uint32_t m = paths_len(lines, l);
+        if (!paths_begin(&out)) {
+            rc = SF_ENOMEM;
+            break;
+        }
+        if (slot[2 * l] >= 0) { /* the start's stub, walked out then reversed */
+            paths_reset(&stub);
+            if (!paths_begin(&stub) || !walk(region, &bp[slot[2 * l]], q[0], bp[slot[2 * l]].stub, &stub))
+                rc = SF_ENOMEM;
+            for (uint32_t i = paths_len(&stub, 0); rc == SF_OK && i-- > 0;)
+                if (!paths_push(&out, stub.pts[i]))
+                    rc = SF_ENOMEM;
+        }
+        for (uint32_t i = 0; i < m && rc == SF_OK; i++)
+            if (!paths_push(&out, q[i]))
+                rc = SF_ENOMEM;
+        if (rc == SF_OK && slot[2 * l + 1] >= 0)
+            if (!walk(region, &bp[slot[2 * l + 1]], q[m - 1], bp[slot[2 * l + 1]].stub, &out))
+                rc = SF_ENOMEM;
+    }
+    if (rc == SF_OK)
+        paths_move(lines, &out);
+out:
+    paths_index_release(&ix);
+    paths_release(&out);
+    paths_release(&stub);
+    free(cum);
+    free(path_of);
+    free(bp);
+    free(slot);
+    return rc;
+}
+
 /* out = intersection of the inner areas of layers [a, b); empty if the
    range leaves the stack (a surface is within reach). */
 static int
@@ -477,6 +638,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         } else {
             TRY(tp_fill_lines(&t[T_SPARSE], ang, sp / p->infill_density, &t[T_LINES]));
         }
+        TRY(tp_anchor(&t[T_LINES], &t[T_SPARSE], p->infill_anchor_mm));
         TRY(add(out, &t[T_LINES], ROLE_INFILL, false, w));
     }
 #undef TRY

@@ -101,4 +101,12 @@ int tp_fill_lines(const struct paths *region, double angle_deg, double spacing_m
  */
 int tp_link(struct paths *lines, const struct paths *region, double link_max_mm, double grow_mm);
 
+/*
+ * Anchor open lines clipped to region: each end gets a stub that follows
+ * the region's boundary forward for up to len_mm, and never more than
+ * 0.45 of the way to the next line end on that boundary (PrusaSlicer's
+ * infill anchors, 600 % of the line width by default).  Replaces lines.
+ */
+int tp_anchor(struct paths *lines, const struct paths *region, double len_mm);
+
 #endif

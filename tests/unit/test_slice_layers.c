@@ -7,6 +7,7 @@
 
 #include "../../slicer/clip_shim.h"
 #include "../../slicer/layers.h"
+#include "../../slicer/toolpath.h"
 #include "../t.h"
 #include "slice_shapes.h"
 
@@ -208,4 +209,28 @@ T_CASE(poly_index_crossing)
     T_TRUE(paths_index_crosses(&ix, (struct ipt){ poly_i(-1), poly_i(-1) }, (struct ipt){ poly_i(11), poly_i(11) }));
     paths_index_release(&ix);
     paths_release(&c);
+}
+
+T_CASE(infill_anchors_follow_the_boundary)
+{
+    /* two vertical lines across a 10 x 10 square, 4 mm apart: each end
+       gets a stub along the boundary of min(2.7, 0.45 * gap) mm */
+    struct paths sq, lines;
+    paths_init(&sq);
+    paths_init(&lines);
+    struct ipt s[4] = { { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) } };
+    T_TRUE(paths_add(&sq, s, 4));
+    struct ipt l1[2] = { { poly_i(3), 0 }, { poly_i(3), poly_i(10) } };
+    struct ipt l2[2] = { { poly_i(7), poly_i(10) }, { poly_i(7), 0 } };
+    T_TRUE(paths_add(&lines, l1, 2));
+    T_TRUE(paths_add(&lines, l2, 2));
+    T_OK(tp_anchor(&lines, &sq, 2.7), NULL);
+    T_EQ_INT(lines.n, 2);
+    /* gaps along the boundary: bottom 3->7 is 4 mm (stub 1.8), 7 -> 3 the
+       long way round is 16 (2.7); top 7 -> 3 is 4 (1.8), 3 -> 7 round 16 */
+    double total = paths_length_k(&lines, 0, false) + paths_length_k(&lines, 1, false);
+    T_EQ_DBL(total, 20 + 2 * 1.8 + 2 * 2.7, 1e-3);
+    T_TRUE(paths_len(&lines, 0) > 2);
+    paths_release(&sq);
+    paths_release(&lines);
 }
