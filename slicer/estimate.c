@@ -19,17 +19,17 @@
 #include "../src/base/mem.h"
 
 struct block {
-    float len;        /* mm (XYZ, or |E| for E-only moves) */
-    float v_nom;      /* nominal speed, mm/s */
-    float accel;      /* mm/s^2 */
-    float v_max_in;   /* junction limit, mm/s */
-    float v_safe;     /* jerk-limited speed from / to rest */
+    float len;      /* mm (XYZ, or |E| for E-only moves) */
+    float v_nom;    /* nominal speed, mm/s */
+    float accel;    /* mm/s^2 */
+    float v_max_in; /* junction limit, mm/s */
+    float v_safe;   /* jerk-limited speed from / to rest */
 };
 
 struct plan {
     struct block *b;
     size_t n, cap;
-    double prev_v[4];   /* axis velocities of the previous block at its nominal speed */
+    double prev_v[4]; /* axis velocities of the previous block at its nominal speed */
     double prev_unit[4];
     double prev_nom, prev_safe;
     bool have_prev;
@@ -132,7 +132,8 @@ trapezoid_s(double len, double v0, double v1, double vn, double a)
     return (vp - v0) / a + (vp - v1) / a;
 }
 
-/* Entry speeds (in place into v_max_in), then time of blocks [0, n); cum[i] = time before block i. */
+/* Entry speeds (in place into v_max_in), then time of blocks [0, n); cum[i] = time before block i.
+ */
 static double
 plan_time(struct plan *pl, double *cum)
 {
@@ -228,7 +229,8 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
                 tgt[a] = pos[a];
                 if (gcode_get(&gl, ax[a], &v) && !isnan(v)) {
                     if (!isfinite(v)) {
-                        rc = sf_err_set(err, SF_EINVAL, "%s:%u: %c is not finite", name, lineno, ax[a]);
+                        rc = sf_err_set(err, SF_EINVAL, "%s:%u: %c is not finite", name, lineno,
+                                        ax[a]);
                         goto fail;
                     }
                     tgt[a] = rel ? pos[a] + v : v;
@@ -251,8 +253,11 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
             memcpy(pos, tgt, sizeof(pos));
             out->n_moves++;
             if (on_move) {
-                struct est_move mv = { pos[0], pos[1], pos[2], pos[3], d[3], f, support, type,
-                                       type_len, out->n_layers ? out->n_layers - 1 : 0, lineno };
+                struct est_move mv = {
+                    pos[0], pos[1],  pos[2], pos[3],   d[3],
+                    f,      support, type,   type_len, out->n_layers ? out->n_layers - 1 : 0,
+                    lineno
+                };
                 if ((rc = on_move(ud, &mv)) < 0)
                     goto fail;
             }

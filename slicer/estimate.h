@@ -33,32 +33,32 @@
 struct est_limits {
     double max_feed_mm_s[4]; /* X Y Z E */
     double accel_extrude_mm_s2, accel_travel_mm_s2, accel_retract_mm_s2;
-    double jerk_mm_s[4];     /* X Y Z E */
-    double junction_dev_mm;  /* > 0: use it instead of jerk */
+    double jerk_mm_s[4];    /* X Y Z E */
+    double junction_dev_mm; /* > 0: use it instead of jerk */
 };
 
 /* One move as read back. */
 struct est_move {
-    double x, y, z, e;  /* position after the move (E absolute, machine sense) */
-    double de;          /* E change of this move */
-    double f_mm_s;      /* requested feed rate */
-    bool support;       /* under a support role tag */
-    const char *type;   /* text after the last ;TYPE: (into the input), or NULL */
+    double x, y, z, e; /* position after the move (E absolute, machine sense) */
+    double de;         /* E change of this move */
+    double f_mm_s;     /* requested feed rate */
+    bool support;      /* under a support role tag */
+    const char *type;  /* text after the last ;TYPE: (into the input), or NULL */
     size_t type_len;
-    uint32_t layer;     /* layer number (0 before the first ;LAYER_CHANGE) */
-    uint32_t line;      /* 1-based line in the text */
+    uint32_t layer; /* layer number (0 before the first ;LAYER_CHANGE) */
+    uint32_t line;  /* 1-based line in the text */
 };
 
 /* Called for every move; return < 0 to stop with that status. */
 typedef int (*est_move_fn)(void *ud, const struct est_move *mv);
 
 struct estimate {
-    double time_s;          /* whole print */
-    double filament_mm;     /* positive E with XY motion */
-    double support_mm;      /* of which under support tags */
+    double time_s;      /* whole print */
+    double filament_mm; /* positive E with XY motion */
+    double support_mm;  /* of which under support tags */
     uint32_t n_moves;
-    uint32_t n_layers;      /* ;LAYER_CHANGE count */
-    double *layer_start_s;  /* n_layers entries: time when each layer starts (free()) */
+    uint32_t n_layers;     /* ;LAYER_CHANGE count */
+    double *layer_start_s; /* n_layers entries: time when each layer starts (free()) */
 };
 
 /*

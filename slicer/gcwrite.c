@@ -69,10 +69,10 @@ struct wr {
     struct buf *out;
     const struct slice_profile *p;
     struct gcw_stats *st;
-    double x, y, z, e;   /* position as written */
-    double f;            /* last F written, mm/min */
+    double x, y, z, e; /* position as written */
+    double f;          /* last F written, mm/min */
     bool retracted;
-    int role;            /* last ;TYPE: written, -1 none */
+    int role;                  /* last ;TYPE: written, -1 none */
     struct paths_index inside; /* this layer's region, for retract_only_crossing */
     float width;
     int rc;
@@ -112,8 +112,7 @@ emit(struct wr *w, double x, double y, double z, double e, double f_mm_min)
     w->st->n_moves++;
 }
 
-static void __attribute__((format(printf, 2, 3)))
-put(struct wr *w, const char *fmt, ...)
+static void __attribute__((format(printf, 2, 3))) put(struct wr *w, const char *fmt, ...)
 {
     char line[256];
     va_list ap;
@@ -204,13 +203,27 @@ role_speed(const struct slice_profile *p, int role, bool first)
 {
     double v;
     switch (role) {
-    case ROLE_EXT_PERIMETER: v = p->ext_perimeter_mm_s; break;
-    case ROLE_PERIMETER: v = p->perimeter_mm_s; break;
-    case ROLE_INFILL: v = p->infill_mm_s; break;
-    case ROLE_SOLID: v = p->solid_mm_s; break;
-    case ROLE_TOP: v = p->top_mm_s; break;
-    case ROLE_BRIDGE: v = p->bridge_mm_s; break;
-    default: v = p->support_mm_s; break;
+    case ROLE_EXT_PERIMETER:
+        v = p->ext_perimeter_mm_s;
+        break;
+    case ROLE_PERIMETER:
+        v = p->perimeter_mm_s;
+        break;
+    case ROLE_INFILL:
+        v = p->infill_mm_s;
+        break;
+    case ROLE_SOLID:
+        v = p->solid_mm_s;
+        break;
+    case ROLE_TOP:
+        v = p->top_mm_s;
+        break;
+    case ROLE_BRIDGE:
+        v = p->bridge_mm_s;
+        break;
+    default:
+        v = p->support_mm_s;
+        break;
     }
     return first && p->first_layer_mm_s < v ? p->first_layer_mm_s : v;
 }
@@ -224,8 +237,8 @@ dist2(struct ipt a, double x, double y)
 
 /* Print path k starting at vertex `at` (reversed for open paths if rev). */
 static void
-print_path(struct wr *w, const struct layer_paths *lp, uint32_t k, uint32_t at, bool rev,
-           double h, bool first)
+print_path(struct wr *w, const struct layer_paths *lp, uint32_t k, uint32_t at, bool rev, double h,
+           bool first)
 {
     const struct tp_info *in = &lp->info[k];
     const struct ipt *q = lp->p.pts + lp->p.start[k];

@@ -24,10 +24,10 @@
 
 /* What the writer extruded, for cross-checks. */
 struct gcw_stats {
-    double e_mm[ROLE_N];  /* filament per role, mm */
-    double travel_mm;     /* XY travel */
+    double e_mm[ROLE_N]; /* filament per role, mm */
+    double travel_mm;    /* XY travel */
     uint32_t n_retracts;
-    uint32_t n_moves;     /* G1 lines written */
+    uint32_t n_moves; /* G1 lines written */
 };
 
 /*

@@ -24,15 +24,15 @@
 #define LAYERS_SIMPLIFY_MM 0.01
 
 struct seg {
-    struct ipt a, b;         /* from the above->below crossing to the below->above one */
-    int64_t ka0, ka1;        /* edge of a (vertex indices, sorted) */
-    int64_t kb0, kb1;        /* edge of b */
+    struct ipt a, b;  /* from the above->below crossing to the below->above one */
+    int64_t ka0, ka1; /* edge of a (vertex indices, sorted) */
+    int64_t kb0, kb1; /* edge of b */
 };
 
 /* Open-addressing map from a pair of int64 to a segment index. */
 struct map {
     int64_t (*k)[2];
-    uint32_t *v;  /* UINT32_MAX: empty */
+    uint32_t *v; /* UINT32_MAX: empty */
     size_t mask;
 };
 
@@ -304,7 +304,7 @@ layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, 
     int rc = SF_ENOMEM;
     uint32_t *first = mem_calloc((size_t)out->n + 1, sizeof(*first));
     uint32_t *tris = NULL;
-    uint32_t (*range)[2] = mem_array(m->n_tris, sizeof(*range));
+    uint32_t(*range)[2] = mem_array(m->n_tris, sizeof(*range));
     if (!first || !range)
         goto fail;
     size_t total = 0;

@@ -37,8 +37,8 @@ struct layer {
 struct layer_stack {
     struct layer *l;
     uint32_t n;
-    double dx, dy, dz;   /* translation applied to the mesh to place it */
-    uint32_t n_open;     /* open chains closed by force (an open mesh) */
+    double dx, dy, dz; /* translation applied to the mesh to place it */
+    uint32_t n_open;   /* open chains closed by force (an open mesh) */
 };
 
 /*

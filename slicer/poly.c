@@ -172,7 +172,8 @@ winding_k(const struct paths *p, uint32_t k, struct ipt q)
     for (uint32_t i = 0; i < n; i++) {
         struct ipt a = v[i], b = v[i + 1 < n ? i + 1 : 0];
         /* orientation of q against a->b, in long double to avoid overflow */
-        long double cr = (long double)(b.x - a.x) * (q.y - a.y) - (long double)(q.x - a.x) * (b.y - a.y);
+        long double cr =
+            (long double)(b.x - a.x) * (q.y - a.y) - (long double)(q.x - a.x) * (b.y - a.y);
         if (a.y <= q.y) {
             if (b.y > q.y && cr > 0)
                 wind++;
@@ -279,7 +280,8 @@ paths_index_contains(const struct paths_index *ix, struct ipt q)
     long wind = 0;
     for (uint32_t e = ix->first[bb]; e < ix->first[bb + 1]; e++) {
         struct ipt a = ix->pts[ix->edges[e][0]], b = ix->pts[ix->edges[e][1]];
-        long double cr = (long double)(b.x - a.x) * (q.y - a.y) - (long double)(q.x - a.x) * (b.y - a.y);
+        long double cr =
+            (long double)(b.x - a.x) * (q.y - a.y) - (long double)(q.x - a.x) * (b.y - a.y);
         if (a.y <= q.y) {
             if (b.y > q.y && cr > 0)
                 wind++;
@@ -313,7 +315,8 @@ paths_index_crosses(const struct paths_index *ix, struct ipt a, struct ipt b)
     for (uint32_t bb = b0; bb <= b1; bb++) {
         for (uint32_t e = ix->first[bb]; e < ix->first[bb + 1]; e++) {
             struct ipt c = ix->pts[ix->edges[e][0]], d = ix->pts[ix->edges[e][1]];
-            int o1 = orient(a, b, c), o2 = orient(a, b, d), o3 = orient(c, d, a), o4 = orient(c, d, b);
+            int o1 = orient(a, b, c), o2 = orient(a, b, d), o3 = orient(c, d, a),
+                o4 = orient(c, d, b);
             if (o1 != o2 && o3 != o4)
                 return true;
             if ((!o1 && on_seg(a, b, c)) || (!o2 && on_seg(a, b, d)) || (!o3 && on_seg(c, d, a)) ||
@@ -333,10 +336,14 @@ paths_bbox(const struct paths *p, struct ipt *lo, struct ipt *hi)
     *lo = *hi = p->pts[0];
     for (size_t i = 1; i < n; i++) {
         struct ipt q = p->pts[i];
-        if (q.x < lo->x) lo->x = q.x;
-        if (q.y < lo->y) lo->y = q.y;
-        if (q.x > hi->x) hi->x = q.x;
-        if (q.y > hi->y) hi->y = q.y;
+        if (q.x < lo->x)
+            lo->x = q.x;
+        if (q.y < lo->y)
+            lo->y = q.y;
+        if (q.x > hi->x)
+            hi->x = q.x;
+        if (q.y > hi->y)
+            hi->y = q.y;
     }
     return true;
 }

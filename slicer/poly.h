@@ -33,10 +33,10 @@ struct ipt {
 };
 
 struct paths {
-    struct ipt *pts;  /* all points, path after path */
-    uint32_t *start;  /* n + 1 offsets into pts (start[0] = 0) */
-    uint32_t n;       /* paths held */
-    size_t cap_pts;   /* allocated points */
+    struct ipt *pts;    /* all points, path after path */
+    uint32_t *start;    /* n + 1 offsets into pts (start[0] = 0) */
+    uint32_t n;         /* paths held */
+    size_t cap_pts;     /* allocated points */
     uint32_t cap_paths; /* allocated paths (start has cap_paths + 1) */
 };
 
@@ -94,9 +94,9 @@ bool paths_simplify(struct paths *p, double tol_mm);
  * band (the only ones that can change the winding at its height).
  */
 struct paths_index {
-    int64_t y0, band_h;  /* band b covers [y0 + b band_h, y0 + (b+1) band_h) */
+    int64_t y0, band_h; /* band b covers [y0 + b band_h, y0 + (b+1) band_h) */
     uint32_t n_bands;
-    uint32_t *first;     /* n_bands + 1 offsets into edges */
+    uint32_t *first;      /* n_bands + 1 offsets into edges */
     uint32_t (*edges)[2]; /* point indices of each edge's ends */
     const struct ipt *pts;
 };

@@ -198,14 +198,10 @@ static const struct {
     const char *name;
     double r, g, b;
 } role_colours[] = {
-    { "travel", 0.7, 0.7, 0.7 },
-    { "External perimeter", 1.0, 0.49, 0.22 },
-    { "Perimeter", 1.0, 0.9, 0.3 },
-    { "Internal infill", 0.69, 0.19, 0.16 },
-    { "Solid infill", 0.59, 0.33, 0.8 },
-    { "Top solid infill", 0.94, 0.25, 0.25 },
-    { "Bridge infill", 0.3, 0.5, 0.73 },
-    { "Support material interface", 0.0, 0.5, 0.25 },
+    { "travel", 0.7, 0.7, 0.7 },           { "External perimeter", 1.0, 0.49, 0.22 },
+    { "Perimeter", 1.0, 0.9, 0.3 },        { "Internal infill", 0.69, 0.19, 0.16 },
+    { "Solid infill", 0.59, 0.33, 0.8 },   { "Top solid infill", 0.94, 0.25, 0.25 },
+    { "Bridge infill", 0.3, 0.5, 0.73 },   { "Support material interface", 0.0, 0.5, 0.25 },
     { "Support material", 0.0, 1.0, 0.0 },
 };
 
@@ -280,7 +276,8 @@ preview_gcode(const char *text, size_t len, const char *name, const struct previ
         x1 = y1 = 1;
     }
     double sc = 0.9 * fmin(o->width_px / fmax(x1 - x0, 1), o->height_px / fmax(y1 - y0, 1));
-    double ox = o->width_px / 2.0 - sc * (x0 + x1) / 2, oy = o->height_px / 2.0 + sc * (y0 + y1) / 2;
+    double ox = o->width_px / 2.0 - sc * (x0 + x1) / 2,
+           oy = o->height_px / 2.0 + sc * (y0 + y1) / 2;
     cairo_surface_t *s = cairo_image_surface_create(CAIRO_FORMAT_ARGB32, o->width_px, o->height_px);
     cairo_t *cr = cairo_create(s);
     cairo_set_source_rgb(cr, 0.12, 0.12, 0.14);

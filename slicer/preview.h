@@ -20,10 +20,10 @@
 #include "../src/mesh/mesh.h"
 
 struct preview_opts {
-    int width_px, height_px;  /* image size (default 800 x 600) */
-    double angle_deg;         /* overhang angle from vertical (default 45) */
-    double pitch_mm;          /* column grid pitch (default 1) */
-    int layer;                /* G-code layer to draw, -1: the middle one */
+    int width_px, height_px; /* image size (default 800 x 600) */
+    double angle_deg;        /* overhang angle from vertical (default 45) */
+    double pitch_mm;         /* column grid pitch (default 1) */
+    int layer;               /* G-code layer to draw, -1: the middle one */
 };
 
 void preview_opts_default(struct preview_opts *o);

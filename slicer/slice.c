@@ -312,7 +312,8 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
         rc = ray_columns(m, p, &s, &g, &cols, &n_cols, &cap_cols, res, err);
         size_t n_ray = n_cols;
         if (rc == SF_OK && (rc = support_islands(&s, &g, &cols, &n_cols, &cap_cols)) < 0)
-            sf_err_set(err, rc, "support islands: %s", rc == SF_ENOMEM ? "out of memory" : "clipping failed");
+            sf_err_set(err, rc, "support islands: %s",
+                       rc == SF_ENOMEM ? "out of memory" : "clipping failed");
         res->n_island_columns = (uint32_t)(n_cols - n_ray);
         if (rc == SF_OK && !(sup = mem_calloc(s.n, sizeof(*sup))))
             rc = sf_err_set(err, SF_ENOMEM, "support: out of memory");

@@ -4,9 +4,8 @@
  * the daemon and the CLI need (with profile.h for the settings).
  *
  *     struct slice_profile p;
- *     if (slice_profile_load("config/printers/mk3.cfg", "config/materials/pla.cfg", &p, &err) < 0) ...
- *     struct slice_result r;
- *     if (slice_mesh(&mesh, &p, "part.gcode", &r, NULL, NULL, &err) < 0) ...
+ *     if (slice_profile_load("config/printers/mk3.cfg", "config/materials/pla.cfg", &p, &err) < 0)
+ * ... struct slice_result r; if (slice_mesh(&mesh, &p, "part.gcode", &r, NULL, NULL, &err) < 0) ...
  *     printf("%u layers, %.1f g, %.0f s\n", r.n_layers, r.filament_g, r.time_s);
  *     slice_profile_release(&p);
  *
@@ -33,10 +32,10 @@
 
 struct slice_result {
     uint32_t n_layers;
-    double height_mm;          /* part height */
-    double filament_mm;        /* all extrusion, mm of filament */
+    double height_mm;   /* part height */
+    double filament_mm; /* all extrusion, mm of filament */
     double filament_g;
-    double support_mm;         /* of which support and interface */
+    double support_mm; /* of which support and interface */
     double support_g;
     double time_s;             /* estimated print time */
     double support_volume_mm3; /* volume of the support regions printed (before infill density) */
@@ -57,8 +56,7 @@ typedef void (*slice_progress_fn)(void *ud, const char *stage, double done);
  * is removed), SF_ENOMEM, SF_EBUG.
  */
 int slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcode_path,
-               struct slice_result *res, slice_progress_fn progress, void *ud,
-               struct sf_err *err);
+               struct slice_result *res, slice_progress_fn progress, void *ud, struct sf_err *err);
 
 /*
  * Expand {placeholders} of G-code template t ("start_gcode" for messages)

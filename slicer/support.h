@@ -45,8 +45,8 @@ struct sup_col {
  * have no column ending near the island's bottom.  *cols (capacity *cap,
  * grown with mem_grow) holds *n columns.  SF_ENOMEM / SF_EBUG.
  */
-int support_islands(const struct layer_stack *s, const struct sup_grid *g,
-                    struct sup_col **cols, size_t *n, size_t *cap);
+int support_islands(const struct layer_stack *s, const struct sup_grid *g, struct sup_col **cols,
+                    size_t *n, size_t *cap);
 
 /*
  * Fill out[k] (s->n entries, initialised here; release each with

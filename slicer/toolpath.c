@@ -17,14 +17,12 @@
 #include "../src/base/mem.h"
 #include "clip_shim.h"
 
-
 const char *
 tp_role_name(enum tp_role r)
 {
     static const char *const names[ROLE_N] = {
-        "Support material", "Support material interface", "Perimeter", "External perimeter",
-        "Solid infill",     "Top solid infill",           "Internal infill",
-        "Bridge infill",
+        "Support material", "Support material interface", "Perimeter",       "External perimeter",
+        "Solid infill",     "Top solid infill",           "Internal infill", "Bridge infill",
     };
     return (unsigned)r < ROLE_N ? names[r] : "Custom";
 }
@@ -176,7 +174,8 @@ ends_build(struct ends *e, const struct paths *lines, double cell_mm)
     e->cell = poly_i(cell_mm) > 0 ? poly_i(cell_mm) : 1;
     e->x0 = lo.x;
     e->y0 = lo.y;
-    uint64_t nx = (uint64_t)((hi.x - lo.x) / e->cell) + 1, ny = (uint64_t)((hi.y - lo.y) / e->cell) + 1;
+    uint64_t nx = (uint64_t)((hi.x - lo.x) / e->cell) + 1,
+             ny = (uint64_t)((hi.y - lo.y) / e->cell) + 1;
     while (nx * ny > 4u * lines->n + 64) { /* keep the table small: coarser cells */
         e->cell *= 2;
         nx = (uint64_t)((hi.x - lo.x) / e->cell) + 1;
@@ -195,7 +194,8 @@ ends_build(struct ends *e, const struct paths *lines, double cell_mm)
         for (uint32_t k = 0; k < 2 * lines->n; k++) {
             uint32_t l = k / 2;
             struct ipt q = lines->pts[k % 2 ? lines->start[l + 1] - 1 : lines->start[l]];
-            size_t c = (size_t)((q.y - e->y0) / e->cell) * e->nx + (size_t)((q.x - e->x0) / e->cell);
+            size_t c =
+                (size_t)((q.y - e->y0) / e->cell) * e->nx + (size_t)((q.x - e->x0) / e->cell);
             if (pass == 0)
                 e->first[c + 1]++;
             else
@@ -265,7 +265,8 @@ tp_link(struct paths *lines, const struct paths *region, double link_max_mm, dou
                         uint32_t id = e.ids[i], k = id / 2;
                         if (used[k])
                             continue;
-                        struct ipt r = lines->pts[id % 2 ? lines->start[k + 1] - 1 : lines->start[k]];
+                        struct ipt r =
+                            lines->pts[id % 2 ? lines->start[k + 1] - 1 : lines->start[k]];
                         double d = d2(end, r);
                         if (d < best || (d == best && k < bk))
                             best = d, bk = k, brev = id % 2;
@@ -430,7 +431,8 @@ tp_anchor(struct paths *lines, const struct paths *region, double len_mm)
         }
         if (slot[2 * l] >= 0) { /* the start's stub, walked out then reversed */
             paths_reset(&stub);
-            if (!paths_begin(&stub) || !walk(region, &bp[slot[2 * l]], q[0], bp[slot[2 * l]].stub, &stub))
+            if (!paths_begin(&stub) ||
+                !walk(region, &bp[slot[2 * l]], q[0], bp[slot[2 * l]].stub, &stub))
                 rc = SF_ENOMEM;
             for (uint32_t i = paths_len(&stub, 0); rc == SF_OK && i-- > 0;)
                 if (!paths_push(&out, stub.pts[i]))
@@ -535,10 +537,10 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
     for (int i = 0; i < T_N; i++)
         paths_init(&t[i]);
     int rc = SF_OK;
-#define TRY(x)                                                                                \
-    do {                                                                                      \
-        if ((rc = (x)) < 0)                                                                   \
-            goto out;                                                                         \
+#define TRY(x)                                                                                     \
+    do {                                                                                           \
+        if ((rc = (x)) < 0)                                                                        \
+            goto out;                                                                              \
     } while (0)
 
     /* support first: it is printed before the part it holds */

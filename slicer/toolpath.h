@@ -81,8 +81,8 @@ struct support_layer {
 int toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p);
 
 /*
- * Build the paths of layer k of s (after toolpath_areas on all layers).  sup (may be NULL) is that layer's
- * support.  SF_ENOMEM / SF_EBUG (Clipper).
+ * Build the paths of layer k of s (after toolpath_areas on all layers).  sup (may be NULL) is that
+ * layer's support.  SF_ENOMEM / SF_EBUG (Clipper).
  */
 int toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
                    const struct support_layer *sup, struct layer_paths *out);

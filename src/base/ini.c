@@ -13,8 +13,8 @@
  */
 #include "ini.h"
 
-#include <ini.h>
 #include <errno.h>
+#include <ini.h>
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
@@ -130,15 +130,14 @@ parse_real(const struct ini_opt *o, const char *value, double *out, struct sf_er
     if (end == value || *end != '\0' || errno == ERANGE || !isfinite(v))
         return sf_err_set(err, SF_EINVAL, "option '%s': '%s' is not a number", o->key, value);
     if (v < o->min || v > o->max)
-        return sf_err_set(err, SF_EINVAL, "option '%s': %g is outside [%g, %g]", o->key, v,
-                          o->min, o->max);
+        return sf_err_set(err, SF_EINVAL, "option '%s': %g is outside [%g, %g]", o->key, v, o->min,
+                          o->max);
     *out = v;
     return SF_OK;
 }
 
 int
-ini_opt_set(const struct ini_opt *o, void *base, const char *value, bool append,
-            struct sf_err *err)
+ini_opt_set(const struct ini_opt *o, void *base, const char *value, bool append, struct sf_err *err)
 {
     char *field = (char *)base + o->offset;
     double v;
@@ -200,8 +199,7 @@ ini_opt_set(const struct ini_opt *o, void *base, const char *value, bool append,
 }
 
 int
-ini_opt_set_kv(const struct ini_opt *opts, size_t n, void *base, const char *kv,
-               struct sf_err *err)
+ini_opt_set_kv(const struct ini_opt *opts, size_t n, void *base, const char *kv, struct sf_err *err)
 {
     const char *eq = strchr(kv, '=');
     if (!eq || eq == kv)

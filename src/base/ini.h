@@ -29,8 +29,8 @@
  * without position ("option 'x' is not valid in section 'printer'");
  * the parser then stops and prefixes "NAME:LINE: ".
  */
-typedef int (*ini_fn)(void *ud, const char *section, const char *key, const char *value,
-                      bool cont, struct sf_err *err);
+typedef int (*ini_fn)(void *ud, const char *section, const char *key, const char *value, bool cont,
+                      struct sf_err *err);
 
 /* Parse len bytes of text; name is used in messages.  SF_EINVAL on syntax. */
 int ini_parse_mem(const char *text, size_t len, const char *name, ini_fn fn, void *ud,

@@ -55,36 +55,46 @@ run(int argc, char **argv)
     optind = 1;
     while ((c = getopt_long(argc, argv, "o:", opts, NULL)) != -1) {
         switch (c) {
-        case 'o': out = optarg; break;
+        case 'o':
+            out = optarg;
+            break;
         case 'l':
             if (!num(optarg, 0, 1e6, &v)) {
-                fprintf(stderr, "slimfarm preview: --layer wants a layer number, got '%s'\n", optarg);
+                fprintf(stderr, "slimfarm preview: --layer wants a layer number, got '%s'\n",
+                        optarg);
                 return 2;
             }
             po.layer = (int)v;
             break;
         case 'a':
             if (!num(optarg, 0, 89.9, &po.angle_deg)) {
-                fprintf(stderr, "slimfarm preview: --angle wants degrees in [0, 90), got '%s'\n", optarg);
+                fprintf(stderr, "slimfarm preview: --angle wants degrees in [0, 90), got '%s'\n",
+                        optarg);
                 return 2;
             }
             break;
         case 'g':
             if (!num(optarg, 0.1, 20, &po.pitch_mm)) {
-                fprintf(stderr, "slimfarm preview: --grid wants mm in [0.1, 20], got '%s'\n", optarg);
+                fprintf(stderr, "slimfarm preview: --grid wants mm in [0.1, 20], got '%s'\n",
+                        optarg);
                 return 2;
             }
             break;
         case 's':
             if (sscanf(optarg, "%dx%d", &w, &h) != 2 || w < 16 || h < 16 || w > 8192 || h > 8192) {
-                fprintf(stderr, "slimfarm preview: --size wants WxH in 16..8192, got '%s'\n", optarg);
+                fprintf(stderr, "slimfarm preview: --size wants WxH in 16..8192, got '%s'\n",
+                        optarg);
                 return 2;
             }
             po.width_px = w;
             po.height_px = h;
             break;
-        case 'h': printf("usage: slimfarm %s\n", usage_line); return 0;
-        default: fprintf(stderr, "usage: slimfarm %s\n", usage_line); return 2;
+        case 'h':
+            printf("usage: slimfarm %s\n", usage_line);
+            return 0;
+        default:
+            fprintf(stderr, "usage: slimfarm %s\n", usage_line);
+            return 2;
         }
     }
     if (optind != argc - 1 || !out) {

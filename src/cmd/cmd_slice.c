@@ -18,8 +18,8 @@
 #include "../mesh/mesh.h"
 #include "cmd.h"
 
-static const char usage_line[] =
-    "slice PART -o OUT.gcode [--printer NAME] [--material NAME] [--no-support] [--set key=value]...";
+static const char usage_line[] = "slice PART -o OUT.gcode [--printer NAME] [--material NAME] "
+                                 "[--no-support] [--set key=value]...";
 
 #define SET_MAX 64
 
@@ -48,8 +48,8 @@ static void
 on_progress(void *ud, const char *stage, double done)
 {
     (void)ud;
-    static const char *const stages[] = { "layers", "supports", "toolpaths", "gcode",
-                                          "estimate", "write", "done" };
+    static const char *const stages[] = { "layers",   "supports", "toolpaths", "gcode",
+                                          "estimate", "write",    "done" };
     int i = 0;
     while (i < 6 && strcmp(stages[i], stage) != 0)
         i++;
@@ -72,10 +72,18 @@ run(int argc, char **argv)
     optind = 1;
     while ((c = getopt_long(argc, argv, "o:", opts, NULL)) != -1) {
         switch (c) {
-        case 'o': out = optarg; break;
-        case 'p': printer = optarg; break;
-        case 'm': material = optarg; break;
-        case 'n': no_support = true; break;
+        case 'o':
+            out = optarg;
+            break;
+        case 'p':
+            printer = optarg;
+            break;
+        case 'm':
+            material = optarg;
+            break;
+        case 'n':
+            no_support = true;
+            break;
         case 's':
             if (n_sets == SET_MAX) {
                 fprintf(stderr, "slimfarm slice: more than %d --set options\n", SET_MAX);
@@ -83,8 +91,12 @@ run(int argc, char **argv)
             }
             sets[n_sets++] = optarg;
             break;
-        case 'h': printf("usage: slimfarm %s\n", usage_line); return 0;
-        default: fprintf(stderr, "usage: slimfarm %s\n", usage_line); return 2;
+        case 'h':
+            printf("usage: slimfarm %s\n", usage_line);
+            return 0;
+        default:
+            fprintf(stderr, "usage: slimfarm %s\n", usage_line);
+            return 2;
         }
     }
     if (optind != argc - 1 || !out) {
@@ -131,8 +143,8 @@ run(int argc, char **argv)
     long t = (long)(r.time_s + 0.5);
     printf("%s: %u layers, filament %.0f mm %.2f g (support %.2f g), "
            "estimated %ld:%02ld:%02ld, sliced in %.2f s\n",
-           out, r.n_layers, r.filament_mm, r.filament_g, r.support_g, t / 3600, t / 60 % 60,
-           t % 60, r.wall_s);
+           out, r.n_layers, r.filament_mm, r.filament_g, r.support_g, t / 3600, t / 60 % 60, t % 60,
+           r.wall_s);
     status = 0;
 out:
     mesh_release(&m);
@@ -140,4 +152,5 @@ out:
     return status;
 }
 
-CMD_REGISTER(slice, "slice", usage_line, "slice a part into Marlin G-code with column supports", run)
+CMD_REGISTER(slice, "slice", usage_line, "slice a part into Marlin G-code with column supports",
+             run)

@@ -77,8 +77,8 @@ ts_pyramid(struct mesh *m, double a, double h)
 static inline int
 ts_octahedron(struct mesh *m, double r, double zc)
 {
-    struct vec3 v[6] = { v3(r, 0, zc), v3(0, r, zc), v3(-r, 0, zc), v3(0, -r, zc),
-                         v3(0, 0, 2 * zc), v3(0, 0, 0) };
+    struct vec3 v[6] = { v3(r, 0, zc),  v3(0, r, zc),     v3(-r, 0, zc),
+                         v3(0, -r, zc), v3(0, 0, 2 * zc), v3(0, 0, 0) };
     static const uint32_t t[8][3] = { { 0, 1, 4 }, { 1, 2, 4 }, { 2, 3, 4 }, { 3, 0, 4 },
                                       { 1, 0, 5 }, { 2, 1, 5 }, { 3, 2, 5 }, { 0, 3, 5 } };
     return ts_add(m, v, 6, t, 8);

@@ -67,9 +67,10 @@ T_CASE(profile_errors_name_file_line_option_section)
     T_ERR(parse(&p, "[print]\nlayer_height = 7\n", "printer", &err), SF_EINVAL, &err,
           "printers/x.cfg:2: option 'layer_height': 7 is outside [0.02, 1]");
     T_ERR(parse(&p, "[printer]\nbed_x = 200\n[material]\ndensity = 1\n", "printer", &err),
-          SF_EINVAL, &err, "printers/x.cfg:4: section 'material' is not valid in a printer profile");
-    T_ERR(parse(&p, "[printer]\nthis line has no equals sign\n", "printer", &err), SF_EINVAL,
-          &err, "printers/x.cfg:2: expected '[section]' or 'key = value'");
+          SF_EINVAL, &err,
+          "printers/x.cfg:4: section 'material' is not valid in a printer profile");
+    T_ERR(parse(&p, "[printer]\nthis line has no equals sign\n", "printer", &err), SF_EINVAL, &err,
+          "printers/x.cfg:2: expected '[section]' or 'key = value'");
     T_ERR(parse(&p, "[print]\nsupport = maybe\n", "printer", &err), SF_EINVAL, &err,
           "printers/x.cfg:2: option 'support': 'maybe' is not a boolean");
     T_ERR(parse(&p, "[printer]\nbed_x = 200\n  300\n", "printer", &err), SF_EINVAL, &err,

@@ -293,8 +293,7 @@ T_CASE(slice_rejects_part_larger_than_bed)
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
     char path[512];
-    T_ERR(slice_to(&m, &p, "big", NULL, path, sizeof(path), &err), SF_EINVAL, &err,
-          "does not fit");
+    T_ERR(slice_to(&m, &p, "big", NULL, path, sizeof(path), &err), SF_EINVAL, &err, "does not fit");
     slice_profile_release(&p);
     mesh_release(&m);
 }

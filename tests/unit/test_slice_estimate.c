@@ -107,7 +107,8 @@ T_CASE(estimate_bad_line_names_it)
     struct estimate e;
     struct sf_err err;
     limits(&l, 1000, 10);
-    const char *g = "G1 X1\nG1 X\xff" "5\n";
+    const char *g = "G1 X1\nG1 X\xff"
+                    "5\n";
     int rc = estimate_gcode(g, strlen(g), "part.gcode", &l, NULL, NULL, &e, &err);
     T_TRUE(rc == SF_OK || (rc == SF_EINVAL && strstr(err.msg, "part.gcode:2") != NULL));
 }

@@ -151,7 +151,9 @@ T_CASE(clip_offset_and_difference)
     paths_init(&a);
     paths_init(&b);
     paths_init(&c);
-    struct ipt sq[4] = { { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) } };
+    struct ipt sq[4] = {
+        { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) }
+    };
     T_TRUE(paths_add(&a, sq, 4));
     T_OK(clip_offset(&a, -1, CLIP_JOIN_MITER, &b), NULL);
     T_EQ_DBL(paths_area(&b), 64, 1e-6);
@@ -173,8 +175,10 @@ T_CASE(poly_simplify_and_index)
         double a = 2 * M_PI * i / 1000;
         T_TRUE(paths_push(&c, (struct ipt){ poly_i(10 * cos(a)), poly_i(10 * sin(a)) }));
     }
-    struct ipt sq[4] = { { poly_i(-2), poly_i(-2) }, { poly_i(-2), poly_i(2) },
-                         { poly_i(2), poly_i(2) }, { poly_i(2), poly_i(-2) } }; /* a hole, CW */
+    struct ipt sq[4] = { { poly_i(-2), poly_i(-2) },
+                         { poly_i(-2), poly_i(2) },
+                         { poly_i(2), poly_i(2) },
+                         { poly_i(2), poly_i(-2) } }; /* a hole, CW */
     T_TRUE(paths_add(&c, sq, 4));
     double area = paths_area(&c);
     T_TRUE(paths_simplify(&c, 0.01));
@@ -198,7 +202,9 @@ T_CASE(poly_index_crossing)
 {
     struct paths c;
     paths_init(&c);
-    struct ipt sq[4] = { { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) } };
+    struct ipt sq[4] = {
+        { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) }
+    };
     T_TRUE(paths_add(&c, sq, 4));
     struct paths_index ix;
     T_TRUE(paths_index_init(&ix, &c));
@@ -206,7 +212,8 @@ T_CASE(poly_index_crossing)
     struct ipt out = { poly_i(12), poly_i(5) };
     T_TRUE(!paths_index_crosses(&ix, in1, in2));
     T_TRUE(paths_index_crosses(&ix, in1, out));
-    T_TRUE(paths_index_crosses(&ix, (struct ipt){ poly_i(-1), poly_i(-1) }, (struct ipt){ poly_i(11), poly_i(11) }));
+    T_TRUE(paths_index_crosses(&ix, (struct ipt){ poly_i(-1), poly_i(-1) },
+                               (struct ipt){ poly_i(11), poly_i(11) }));
     paths_index_release(&ix);
     paths_release(&c);
 }
@@ -218,7 +225,9 @@ T_CASE(infill_anchors_follow_the_boundary)
     struct paths sq, lines;
     paths_init(&sq);
     paths_init(&lines);
-    struct ipt s[4] = { { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) } };
+    struct ipt s[4] = {
+        { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) }
+    };
     T_TRUE(paths_add(&sq, s, 4));
     struct ipt l1[2] = { { poly_i(3), 0 }, { poly_i(3), poly_i(10) } };
     struct ipt l2[2] = { { poly_i(7), poly_i(10) }, { poly_i(7), 0 } };
