@@ -18,6 +18,11 @@
 #include "../src/base/limits.h"
 #include "../src/base/mem.h"
 
+/* Beyond these a file is broken (1 km of axis travel, 1000 km of filament),
+   and the planner's floats would overflow. */
+#define EST_COORD_MAX 1e6
+#define EST_E_MAX     1e9
+
 struct block {
     float len;      /* mm (XYZ, or |E| for E-only moves) */
     float v_nom;    /* nominal speed, mm/s */
@@ -228,19 +233,19 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
                 bool rel = a == 3 ? rel_e : rel_xyz;
                 tgt[a] = pos[a];
                 if (gcode_get(&gl, ax[a], &v) && !isnan(v)) {
-                    if (!isfinite(v)) {
-                        rc = sf_err_set(err, SF_EINVAL, "%s:%u: %c is not finite", name, lineno,
-                                        ax[a]);
+                    tgt[a] = rel ? pos[a] + v : v;
+                    if (!isfinite(tgt[a]) || fabs(tgt[a]) > (a == 3 ? EST_E_MAX : EST_COORD_MAX)) {
+                        rc = sf_err_set(err, SF_EINVAL, "%s:%u: %c%g is out of range", name, lineno,
+                                        ax[a], v);
                         goto fail;
                     }
-                    tgt[a] = rel ? pos[a] + v : v;
                     if (a < 2 && tgt[a] != pos[a])
                         xy = true;
                 }
                 d[a] = tgt[a] - pos[a];
             }
             if (gcode_get(&gl, 'F', &v) && isfinite(v) && v > 0)
-                f = v / 60;
+                f = fmin(v, EST_COORD_MAX) / 60;
             if ((rc = plan_add(&pl, lim, d, f)) < 0) {
                 sf_err_set(err, rc, "%s: out of memory", name);
                 goto fail;
@@ -273,16 +278,17 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
             static const char ax[4] = { 'X', 'Y', 'Z', 'E' };
             double v;
             for (int a = 0; a < 4; a++)
-                if (gcode_get(&gl, ax[a], &v) && isfinite(v))
+                if (gcode_get(&gl, ax[a], &v) && isfinite(v) &&
+                    fabs(v) <= (a == 3 ? EST_E_MAX : EST_COORD_MAX))
                     pos[a] = v;
         } else if (gcode_is(&gl, 'G', 28)) {
             pos[0] = pos[1] = pos[2] = 0;
         } else if (gcode_is(&gl, 'G', 4)) {
             double v;
             if (gcode_get(&gl, 'S', &v) && isfinite(v) && v > 0)
-                dwell += v;
+                dwell += fmin(v, EST_COORD_MAX);
             else if (gcode_get(&gl, 'P', &v) && isfinite(v) && v > 0)
-                dwell += v / 1000;
+                dwell += fmin(v / 1000, EST_COORD_MAX);
         }
     }
     double *cum = mem_array(pl.n + 1, sizeof(*cum));

@@ -307,17 +307,21 @@ int
 slice_profile_set(struct slice_profile *p, const char *kv, struct sf_err *err)
 {
     const char *eq = strchr(kv, '=');
-    size_t kl = eq ? (size_t)(eq - kv) : strlen(kv);
+    if (!eq || eq == kv)
+        return sf_err_set(err, SF_EINVAL, "--set '%s': expected key=value", kv);
+    /* "section.key" picks a section ("material.name"); a bare key takes the first match */
+    const char *dot = memchr(kv, '.', (size_t)(eq - kv));
+    const char *key = dot ? dot + 1 : kv;
+    size_t kl = (size_t)(eq - key), sl = dot ? (size_t)(dot - kv) : 0;
     for (size_t i = 0; i < N_POPTS; i++) {
         const struct ini_opt *o = &popts[i].o;
-        if (strlen(o->key) == kl && strncmp(o->key, kv, kl) == 0) {
-            /* "name" is in two sections: the first wins, use printer_name... */
-            if (!eq)
-                return sf_err_set(err, SF_EINVAL, "--set '%s': expected key=value", kv);
-            return ini_opt_set(o, p, eq + 1, false, err);
-        }
+        if (strlen(o->key) != kl || strncmp(o->key, key, kl) != 0)
+            continue;
+        if (dot && (strlen(popts[i].section) != sl || strncmp(popts[i].section, kv, sl) != 0))
+            continue;
+        return ini_opt_set(o, p, eq + 1, false, err);
     }
-    return sf_err_set(err, SF_EINVAL, "--set: no option '%.*s'", (int)kl, kv);
+    return sf_err_set(err, SF_EINVAL, "--set: no option '%.*s'", (int)(eq - kv), kv);
 }
 
 int

@@ -254,12 +254,20 @@ out:
     return rc;
 }
 
-static void
-report(slice_progress_fn fn, void *ud, const char *stage, double done)
+/* Report progress; true when the caller asks to cancel. */
+static bool
+cancelled(slice_progress_fn fn, void *ud, const char *stage, double done)
 {
-    if (fn)
-        fn(ud, stage, done);
+    return fn && fn(ud, stage, done) != 0;
 }
+
+#define STAGE(name)                                                                                \
+    do {                                                                                           \
+        if (cancelled(progress, ud, name, 0)) {                                                    \
+            rc = sf_err_set(err, SF_ECANCELED, "slice: cancelled before %s", name);                \
+            goto out;                                                                              \
+        }                                                                                          \
+    } while (0)
 
 int
 slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcode_path,
@@ -299,7 +307,8 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
     memset(&est, 0, sizeof(est));
     buf_init(&body, GCODE_BODY_MAX);
 
-    report(progress, ud, "layers", 0);
+    if (cancelled(progress, ud, "layers", 0))
+        return sf_err_set(err, SF_ECANCELED, "slice: cancelled before layers");
     rc = layers_slice(m, p->first_layer_mm, p->layer_mm, p->bed_x_mm / 2, p->bed_y_mm / 2, &s, err);
     if (rc < 0)
         return rc;
@@ -307,7 +316,7 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
     res->n_open_loops = s.n_open;
 
     if (p->support) {
-        report(progress, ud, "supports", 0);
+        STAGE("supports");
         struct sup_grid g;
         rc = ray_columns(m, p, &s, &g, &cols, &n_cols, &cap_cols, res, err);
         size_t n_ray = n_cols;
@@ -327,7 +336,7 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
         res->support_volume_mm3 = support_volume(&s, sup);
     }
 
-    report(progress, ud, "toolpaths", 0);
+    STAGE("toolpaths");
     lp = mem_calloc(s.n, sizeof(*lp));
     if (!lp) {
         rc = sf_err_set(err, SF_ENOMEM, "toolpaths: out of memory");
@@ -343,7 +352,10 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
         if (progress && threaded && j.phase == 1) {
             /* this thread reports between layers it builds itself */
             while (atomic_load(&j.rc) == SF_OK) {
-                report(progress, ud, "toolpaths", (double)atomic_load(&j.done) / s.n);
+                if (cancelled(progress, ud, "toolpaths", (double)atomic_load(&j.done) / s.n)) {
+                    atomic_store(&j.rc, SF_ECANCELED);
+                    break;
+                }
                 uint32_t k = atomic_fetch_add(&j.next, 1);
                 if (k >= s.n)
                     break;
@@ -360,15 +372,18 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
     }
     rc = atomic_load(&j.rc);
     if (rc < 0) {
-        sf_err_set(err, rc, "toolpaths: %s", rc == SF_ENOMEM ? "out of memory" : "clipping failed");
+        sf_err_set(err, rc, "toolpaths: %s",
+                   rc == SF_ECANCELED ? "cancelled"
+                   : rc == SF_ENOMEM  ? "out of memory"
+                                      : "clipping failed");
         goto out;
     }
 
-    report(progress, ud, "gcode", 0);
+    STAGE("gcode");
     struct gcw_stats st;
     if ((rc = gcw_body(&s, lp, p, &body, &st, err)) < 0)
         goto out;
-    report(progress, ud, "estimate", 0);
+    STAGE("estimate");
     struct est_limits lim;
     slice_limits(p, &lim);
     if ((rc = estimate_gcode(body.data ? body.data : "", body.len, "gcode body", &lim, NULL, NULL,
@@ -380,9 +395,10 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
     res->support_mm = est.support_mm;
     res->support_g = est.support_mm * g_per_mm;
     res->time_s = est.time_s;
-    report(progress, ud, "write", 0);
+    STAGE("write");
     rc = write_file(gcode_path, p, &body, &est, res, err);
-    report(progress, ud, "done", 1);
+    if (rc == SF_OK)
+        (void)cancelled(progress, ud, "done", 1);
 out:
     res->wall_s = now_s() - t0;
     estimate_release(&est);

@@ -46,14 +46,20 @@ struct slice_result {
     double wall_s;             /* slicing wall time */
 };
 
-/* Called between stages and per layer: stage name and fraction 0..1. */
-typedef void (*slice_progress_fn)(void *ud, const char *stage, double done);
+/*
+ * Called between stages ("layers", "supports", "toolpaths", "gcode",
+ * "estimate", "write", "done") and between toolpath layers, with the
+ * stage's fraction done (0..1).  Return 0 to go on, non-zero to cancel:
+ * slice_mesh then stops at once with SF_ECANCELED (a daemon cancelling a
+ * job), writing no file.
+ */
+typedef int (*slice_progress_fn)(void *ud, const char *stage, double done);
 
 /*
  * Slice m with p and write the G-code to gcode_path.  res (may be NULL)
  * receives the figures.  Errors: SF_EINVAL (the part does not fit the bed,
  * a bad profile or placeholder), SF_EIO (writing the file; a partial file
- * is removed), SF_ENOMEM, SF_EBUG.
+ * is removed), SF_ECANCELED (progress asked to stop), SF_ENOMEM, SF_EBUG.
  */
 int slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcode_path,
                struct slice_result *res, slice_progress_fn progress, void *ud, struct sf_err *err);

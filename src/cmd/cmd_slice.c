@@ -44,7 +44,7 @@ find_profile(const char *kind, const char *name, char *buf, size_t cap)
     return NULL;
 }
 
-static void
+static int
 on_progress(void *ud, const char *stage, double done)
 {
     (void)ud;
@@ -54,6 +54,7 @@ on_progress(void *ud, const char *stage, double done)
     while (i < 6 && strcmp(stages[i], stage) != 0)
         i++;
     cmd_progress("slicing", i + done, 6);
+    return 0;
 }
 
 static int

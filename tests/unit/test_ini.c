@@ -50,6 +50,13 @@ T_CASE(profile_parses_both_syntaxes_and_continuations)
     T_EQ_INT(p.perimeters, 3);
     T_OK(slice_profile_set(&p, "layer_height=0.1", &err), &err);
     T_EQ_DBL(p.layer_mm, 0.1, 0);
+    T_OK(slice_profile_set(&p, "material.name=petg", &err), &err);
+    T_EQ_STR(p.material_name, "petg");
+    T_EQ_STR(p.printer_name, "mk3");
+    T_OK(slice_profile_set(&p, "print.support=yes", &err), &err);
+    T_TRUE(p.support);
+    T_ERR(slice_profile_set(&p, "material.perimeters=3", &err), SF_EINVAL, &err,
+          "no option 'material.perimeters'");
     slice_profile_release(&p);
 }
 

@@ -6,6 +6,7 @@
  */
 #include <math.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "../../slicer/estimate.h"
 #include "../../slicer/gcwrite.h"
@@ -337,6 +338,70 @@ T_CASE(slice_shared_mesh_stays_on_bed)
     T_EQ_INT(c.out, 0);
     estimate_release(&e);
     buf_release(&b);
+    slice_profile_release(&p);
+    mesh_release(&m);
+}
+
+static int
+cancel_at_toolpaths(void *ud, const char *stage, double done)
+{
+    int *calls = ud;
+    (*calls)++;
+    return strcmp(stage, "toolpaths") == 0 && done > 0.2;
+}
+
+T_CASE(slice_progress_and_cancel)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    char path[512];
+    snprintf(path, sizeof(path), "%s/cancel.gcode", t_tmpdir());
+    int calls = 0;
+    T_ERR(slice_mesh(&m, &p, path, NULL, cancel_at_toolpaths, &calls, &err), SF_ECANCELED, &err,
+          "cancel");
+    T_TRUE(calls > 3);
+    FILE *f = fopen(path, "r");
+    T_TRUE(f == NULL); /* no file written */
+    slice_profile_release(&p);
+    mesh_release(&m);
+}
+
+T_CASE(slice_m73_progress_is_monotone)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_arch(&m, &err), &err);
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    char path[512];
+    struct slice_result r;
+    T_OK(slice_to(&m, &p, "arch", &r, path, sizeof(path), &err), &err);
+    FILE *f = fopen(path, "r");
+    T_TRUE(f != NULL);
+    char line[512];
+    long last_p = -1, last_r = 1L << 30, n = 0, layers = 0;
+    bool ok = true;
+    while (fgets(line, sizeof(line), f)) {
+        long pp, rr;
+        if (sscanf(line, "M73 P%ld R%ld", &pp, &rr) == 2) {
+            ok = ok && pp >= last_p && rr <= last_r && pp <= 100;
+            last_p = pp;
+            last_r = rr;
+            n++;
+        }
+        layers += strncmp(line, ";LAYER_CHANGE", 13) == 0;
+    }
+    fclose(f);
+    T_TRUE(ok);
+    T_EQ_INT(last_p, 100);
+    T_EQ_INT(last_r, 0);
+    T_EQ_INT(n, layers + 2);
+    T_EQ_INT(layers, r.n_layers);
     slice_profile_release(&p);
     mesh_release(&m);
 }

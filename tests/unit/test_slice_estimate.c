@@ -112,3 +112,14 @@ T_CASE(estimate_bad_line_names_it)
     int rc = estimate_gcode(g, strlen(g), "part.gcode", &l, NULL, NULL, &e, &err);
     T_TRUE(rc == SF_OK || (rc == SF_EINVAL && strstr(err.msg, "part.gcode:2") != NULL));
 }
+
+T_CASE(estimate_rejects_absurd_coordinates)
+{
+    struct est_limits l;
+    struct estimate e;
+    struct sf_err err;
+    limits(&l, 1000, 10);
+    const char *g = "G1 X10\nG1 X2000000\n";
+    T_ERR(estimate_gcode(g, strlen(g), "big.gcode", &l, NULL, NULL, &e, &err), SF_EINVAL, &err,
+          "big.gcode:2: X2e+06 is out of range");
+}
