@@ -434,7 +434,7 @@ tp_anchor(struct paths *lines, const struct paths *region, double len_mm)
             if (!paths_begin(&stub) ||
                 !walk(region, &bp[slot[2 * l]], q[0], bp[slot[2 * l]].stub, &stub))
                 rc = SF_ENOMEM;
-            for (uint32_t i = paths_len(&stub, 0); rc == SF_OK && i-- > 0;)
+            for (uint32_t i = rc == SF_OK ? paths_len(&stub, 0) : 0; i-- > 0;)
                 if (!paths_push(&out, stub.pts[i]))
                     rc = SF_ENOMEM;
         }
