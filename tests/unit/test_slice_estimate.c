@@ -123,3 +123,26 @@ T_CASE(estimate_rejects_absurd_coordinates)
     T_ERR(estimate_gcode(g, strlen(g), "big.gcode", &l, NULL, NULL, &e, &err), SF_EINVAL, &err,
           "big.gcode:2: X2e+06 is out of range");
 }
+
+T_CASE(estimate_junction_deviation_corner)
+{
+    /* JD 0.05 mm, 1000 mm/s^2, 100 mm/s, no jerk (start and end at rest):
+       a 90 degree corner allows v = sqrt(a * jd * s / (1 - s)), s = sin 45;
+       each 10 mm leg: up from 0 to 100, cruise, down to v (or the mirror) */
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 0);
+    l.junction_dev_mm = 0.05;
+    double a = 1000, vn = 100, len = 10, s = sqrt(0.5);
+    double v = sqrt(a * 0.05 * s / (1 - s));
+    double d_up = vn * vn / (2 * a), d_down = (vn * vn - v * v) / (2 * a);
+    double leg = vn / a + (vn - v) / a + (len - d_up - d_down) / vn;
+    T_EQ_DBL(est("G1 X10 F6000\nG1 Y10\n", &l, &e), 2 * leg, 1e-6);
+    estimate_release(&e);
+    /* straight on: no limit at the junction */
+    double two = est("G1 X10 F6000\nG1 X20\n", &l, &e);
+    estimate_release(&e);
+    double one = est("G1 X20 F6000\n", &l, &e);
+    estimate_release(&e);
+    T_EQ_DBL(two, one, 1e-9);
+}
