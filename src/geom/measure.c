@@ -218,6 +218,20 @@ measure_support_cached(const struct mesh *m, struct raycast *rc, const struct pr
         out->contact_area_mm2 = (double)n * cell;
         out->n_columns = (uint32_t)n;
         out->n_anchors = count_anchors(&g, cols, n);
+        for (size_t c = 0; c < (size_t)g.nu * g.nw; c++) {
+            if (g.first[c] == g.first[c + 1])
+                continue;
+            int depth = 0;
+            bool unmatched = false;
+            for (uint32_t k = g.first[c]; k < g.first[c + 1]; k++) {
+                if (g.hits[k].cos_up < 0)
+                    depth++;
+                else if (g.hits[k].cos_up > 0 && depth-- == 0)
+                    unmatched = true, depth = 0;
+            }
+            out->n_rays++;
+            out->n_rays_open += unmatched || depth != 0;
+        }
         struct vec3 com = raycast_com(rc);
         out->com_height_mm = v3_dot(com, up) - g.base;
         struct growth_report gr;
