@@ -13,6 +13,7 @@
  */
 #include "job.h"
 
+#include <stdio.h>
 #include <string.h>
 
 static const char *const job_names[JOB_STATE_COUNT] = {
@@ -215,4 +216,79 @@ printer_state_parse(const char *s, enum printer_state *out)
             return true;
         }
     return false;
+}
+
+void
+job_opts_init(struct job_opts *o)
+{
+    memset(o, 0, sizeof(*o));
+    snprintf(o->method, sizeof(o->method), "orient");
+    o->deviation_mm = 0.5;
+    o->copies = 1;
+    o->max_retries = 1;
+}
+
+bool
+job_name_valid(const char *s)
+{
+    size_t n = strlen(s);
+    if (n == 0 || n >= JOB_NAME_MAX || strcmp(s, ".") == 0 || strstr(s, ".."))
+        return false;
+    for (const unsigned char *p = (const unsigned char *)s; *p; p++)
+        if (*p < 0x20 || *p == 0x7f || *p == '/' || *p == '\\')
+            return false;
+    return true;
+}
+
+/* Names of printers, groups and materials: letters, digits, "-_." only. */
+static bool
+ident_valid(const char *s)
+{
+    for (; *s; s++)
+        if (!((*s >= 'a' && *s <= 'z') || (*s >= 'A' && *s <= 'Z') || (*s >= '0' && *s <= '9') ||
+              *s == '-' || *s == '_' || *s == '.'))
+            return false;
+    return true;
+}
+
+int
+job_opts_validate(const struct job_opts *o, struct sf_err *err)
+{
+    static const char *const methods[] = { "none", "orient", "slim", "surface" };
+    if (!job_name_valid(o->name))
+        return sf_err_set(err, SF_EINVAL,
+                          "name: '%s' is not a plain file name (no '/', '\\', '..' or control "
+                          "characters, 1..%d bytes)",
+                          o->name, JOB_NAME_MAX - 1);
+    bool known = false;
+    for (size_t i = 0; i < sizeof(methods) / sizeof(methods[0]); i++)
+        known |= strcmp(o->method, methods[i]) == 0;
+    if (!known)
+        return sf_err_set(err, SF_EINVAL,
+                          "method: '%s' is not one of none, orient, slim, surface", o->method);
+    if (!(o->deviation_mm >= 0 && o->deviation_mm <= 10))
+        return sf_err_set(err, SF_EINVAL, "deviation_mm: %g is not in 0..10", o->deviation_mm);
+    if (!(o->overhang_deg >= 0 && o->overhang_deg <= 89))
+        return sf_err_set(err, SF_EINVAL, "overhang_deg: %g is not in 0..89", o->overhang_deg);
+    if (o->copies < 1 || o->copies > JOB_COPIES_MAX)
+        return sf_err_set(err, SF_EINVAL, "copies: %d is not in 1..%d", o->copies,
+                          JOB_COPIES_MAX);
+    if (o->max_retries < 0 || o->max_retries > JOB_RETRIES_MAX)
+        return sf_err_set(err, SF_EINVAL, "max_retries: %d is not in 0..%d", o->max_retries,
+                          JOB_RETRIES_MAX);
+    if (o->priority < -JOB_PRIORITY_MAX || o->priority > JOB_PRIORITY_MAX)
+        return sf_err_set(err, SF_EINVAL, "priority: %d is not in -%d..%d", o->priority,
+                          JOB_PRIORITY_MAX, JOB_PRIORITY_MAX);
+    if (!ident_valid(o->material))
+        return sf_err_set(err, SF_EINVAL, "material: '%s' may hold only letters, digits, -_.",
+                          o->material);
+    if (!ident_valid(o->printer))
+        return sf_err_set(err, SF_EINVAL, "printer: '%s' may hold only letters, digits, -_.",
+                          o->printer);
+    if (!ident_valid(o->group))
+        return sf_err_set(err, SF_EINVAL, "group: '%s' may hold only letters, digits, -_.",
+                          o->group);
+    if (o->printer[0] && o->group[0])
+        return sf_err_set(err, SF_EINVAL, "printer and group: give one target, not both");
+    return SF_OK;
 }

@@ -88,6 +88,38 @@ const char *job_event_name(enum job_event ev);
 /* Parse a state name; false if unknown. */
 bool job_state_parse(const char *s, enum job_state *out);
 
+/* Caps on job options (each with its reason). */
+#define JOB_NAME_MAX 128   /* part file names: longer ones are not names but payloads */
+#define JOB_COPIES_MAX 1000 /* a farm batch; beyond this it is a typo */
+#define JOB_RETRIES_MAX 10  /* a print that failed 10 times needs a human */
+#define JOB_PRIORITY_MAX 1000000 /* |priority| bound, keeps arithmetic safe */
+
+/* What the operator asked for when submitting a job (plain data). */
+struct job_opts {
+    char name[JOB_NAME_MAX]; /* part file name as uploaded: no '/', no "..", printable */
+    char method[16];         /* "none" | "orient" | "slim" | "surface" (default "orient") */
+    double deviation_mm;     /* shape optimization's deviation budget, 0..10 mm (default 0.5) */
+    double overhang_deg;     /* overhang threshold; 0 = the target printer's own (default 0) */
+    int copies;              /* prints wanted, 1..JOB_COPIES_MAX (default 1) */
+    int max_retries;         /* failed prints tolerated per copy, 0..10 (default 1) */
+    char material[32];       /* "PLA", ...; "" = whatever the printer has loaded */
+    char printer[64];        /* target printer name; "" = any */
+    char group[64];          /* target printer group; "" = any */
+    int priority;            /* higher first; |priority| <= JOB_PRIORITY_MAX (default 0) */
+};
+
+/* Fill o with the defaults above (empty name). */
+void job_opts_init(struct job_opts *o);
+
+/*
+ * Check every field of o; SF_EINVAL naming the field ("copies: 0 is not in
+ * 1..1000", "name: '../x.stl' must not contain '/'") on the first bad one.
+ */
+int job_opts_validate(const struct job_opts *o, struct sf_err *err);
+
+/* True when s is a safe single path component to show or store as a name. */
+bool job_name_valid(const char *s);
+
 enum printer_state {
     PRINTER_OFFLINE = 0,    /* not connected */
     PRINTER_IDLE,           /* connected, bed clear, ready for a job */

@@ -181,3 +181,41 @@ T_CASE(printer_faults_and_drops)
     T_ERR(printer_next(PRINTER_IDLE, PRINTER_EV_CLEARED, false, &s, &err), SF_EINVAL, &err,
           "cannot clear a printer that is idle");
 }
+
+T_CASE(job_opts_defaults_valid_and_fields_checked)
+{
+    struct job_opts o;
+    struct sf_err err;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "bracket.stl");
+    T_OK(job_opts_validate(&o, &err), &err);
+    o.copies = 0;
+    T_ERR(job_opts_validate(&o, &err), SF_EINVAL, &err, "copies: 0");
+    o.copies = 2;
+    snprintf(o.method, sizeof(o.method), "magic");
+    T_ERR(job_opts_validate(&o, &err), SF_EINVAL, &err, "method: 'magic'");
+    snprintf(o.method, sizeof(o.method), "slim");
+    o.deviation_mm = -1;
+    T_ERR(job_opts_validate(&o, &err), SF_EINVAL, &err, "deviation_mm");
+    o.deviation_mm = 0.0 / 0.0;
+    T_ERR(job_opts_validate(&o, &err), SF_EINVAL, &err, "deviation_mm");
+    o.deviation_mm = 1;
+    snprintf(o.printer, sizeof(o.printer), "mk3");
+    snprintf(o.group, sizeof(o.group), "big");
+    T_ERR(job_opts_validate(&o, &err), SF_EINVAL, &err, "one target");
+    o.group[0] = '\0';
+    snprintf(o.material, sizeof(o.material), "PLA; drop");
+    T_ERR(job_opts_validate(&o, &err), SF_EINVAL, &err, "material");
+}
+
+T_CASE(job_names_reject_traversal)
+{
+    T_TRUE(job_name_valid("part v2.stl"));
+    T_TRUE(!job_name_valid("../etc/passwd"));
+    T_TRUE(!job_name_valid("a/b.stl"));
+    T_TRUE(!job_name_valid("a\\b.stl"));
+    T_TRUE(!job_name_valid(".."));
+    T_TRUE(!job_name_valid("."));
+    T_TRUE(!job_name_valid(""));
+    T_TRUE(!job_name_valid("a\nb"));
+}
