@@ -43,7 +43,8 @@ struct option {
 };
 
 #define F(field) offsetof(struct farmcfg, field), sizeof(((struct farmcfg *)0)->field)
-#define P(field) offsetof(struct farmcfg_printer, field), sizeof(((struct farmcfg_printer *)0)->field)
+#define P(field)                                                                                   \
+    offsetof(struct farmcfg_printer, field), sizeof(((struct farmcfg_printer *)0)->field)
 
 static const struct option options[] = {
     { "listen", false, K_LISTEN, 0, 0, 0, 0 },
@@ -71,19 +72,18 @@ static const char *const drivers[] = { "marlin", "octoprint", "moonraker", "bamb
 
 /* Parser state shared by the reader and the handler. */
 struct parse {
-    struct farmcfg *cfg;   /* being filled */
-    const char *name;      /* file name for messages */
-    const char *p, *end;   /* unread text */
-    int line;              /* line last handed to inih */
-    bool failed;           /* an error was recorded; stop */
-    struct sf_err *err;    /* where it went */
-    int section;           /* -2 none yet, -1 [farm], else printer index */
-    bool farm_seen;        /* [farm] appeared */
-    bool seen[N_OPTIONS];  /* options given in the current section */
+    struct farmcfg *cfg;  /* being filled */
+    const char *name;     /* file name for messages */
+    const char *p, *end;  /* unread text */
+    int line;             /* line last handed to inih */
+    bool failed;          /* an error was recorded; stop */
+    struct sf_err *err;   /* where it went */
+    int section;          /* -2 none yet, -1 [farm], else printer index */
+    bool farm_seen;       /* [farm] appeared */
+    bool seen[N_OPTIONS]; /* options given in the current section */
 };
 
-static int
-fail(struct parse *ps, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static int fail(struct parse *ps, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 static int
 fail(struct parse *ps, const char *fmt, ...)
@@ -259,15 +259,16 @@ parse_keys(struct parse *ps, const char *opt, const char *sec, const char *v, bo
         size_t n = strcspn(p, " ,");
         char key[FARMCFG_KEY_MAX + 1];
         if (n < FARMCFG_KEY_MIN || n > FARMCFG_KEY_MAX)
-            return fail(ps, "option '%s' in section '%s': each key must be %d..%d characters",
-                        opt, sec, FARMCFG_KEY_MIN, FARMCFG_KEY_MAX);
+            return fail(ps, "option '%s' in section '%s': each key must be %d..%d characters", opt,
+                        sec, FARMCFG_KEY_MIN, FARMCFG_KEY_MAX);
         memcpy(key, p, n);
         key[n] = '\0';
         for (size_t i = 0; i < n; i++)
             if (!((key[i] >= 'a' && key[i] <= 'z') || (key[i] >= 'A' && key[i] <= 'Z') ||
                   (key[i] >= '0' && key[i] <= '9') || key[i] == '-' || key[i] == '_'))
-                return fail(ps, "option '%s' in section '%s': keys may hold only letters, "
-                                "digits, '-' and '_'",
+                return fail(ps,
+                            "option '%s' in section '%s': keys may hold only letters, "
+                            "digits, '-' and '_'",
                             opt, sec);
         if (farmcfg_key(c, key))
             return fail(ps, "option '%s' in section '%s': key given twice", opt, sec);
@@ -302,8 +303,8 @@ parse_listen(struct parse *ps, const char *sec, const char *v)
                     colon + 1);
     struct in_addr a4;
     if (strcmp(host, "*") != 0 && inet_pton(AF_INET, host, &a4) != 1)
-        return fail(ps, "option 'listen' in section '%s': '%s' is not an IPv4 address or '*'",
-                    sec, host);
+        return fail(ps, "option 'listen' in section '%s': '%s' is not an IPv4 address or '*'", sec,
+                    host);
     snprintf(ps->cfg->listen_host, sizeof(ps->cfg->listen_host), "%s", host);
     ps->cfg->listen_port = (int)port;
     return 1;
@@ -337,8 +338,9 @@ handler(void *user, const char *section, const char *name, const char *value)
             return fail(ps, "option '%s' in section '%s': value is longer than %zu bytes", name,
                         section, o->size - 1);
         if (o->kind == K_IDENT && value[0] && !ident_ok(value))
-            return fail(ps, "option '%s' in section '%s': '%s' may hold only letters, digits, "
-                            "'-', '_', '.'",
+            return fail(ps,
+                        "option '%s' in section '%s': '%s' may hold only letters, digits, "
+                        "'-', '_', '.'",
                         name, section, value);
         snprintf(field, o->size, "%s", value);
         return 1;
@@ -348,8 +350,7 @@ handler(void *user, const char *section, const char *name, const char *value)
         if (!parse_double(value, &d) || d < o->lo || d > o->hi ||
             (o->kind != K_DBL && d != floor(d)))
             return fail(ps, "option '%s' in section '%s': '%s' is not a %s in %g..%g", name,
-                        section, value, o->kind == K_DBL ? "number" : "whole number", o->lo,
-                        o->hi);
+                        section, value, o->kind == K_DBL ? "number" : "whole number", o->lo, o->hi);
         if (o->kind == K_INT)
             *(int *)field = (int)d;
         else if (o->kind == K_DBL)
@@ -360,12 +361,11 @@ handler(void *user, const char *section, const char *name, const char *value)
     case K_BOOL:
         if (strcmp(value, "true") == 0 || strcmp(value, "yes") == 0 || strcmp(value, "1") == 0)
             *(bool *)field = true;
-        else if (strcmp(value, "false") == 0 || strcmp(value, "no") == 0 ||
-                 strcmp(value, "0") == 0)
+        else if (strcmp(value, "false") == 0 || strcmp(value, "no") == 0 || strcmp(value, "0") == 0)
             *(bool *)field = false;
         else
-            return fail(ps, "option '%s' in section '%s': '%s' is not true or false", name,
-                        section, value);
+            return fail(ps, "option '%s' in section '%s': '%s' is not true or false", name, section,
+                        value);
         return 1;
     case K_TRIPLE: {
         double v[3];
@@ -381,8 +381,9 @@ handler(void *user, const char *section, const char *name, const char *value)
             n++;
         }
         if (n != 3 || tok)
-            return fail(ps, "option '%s' in section '%s': '%s' is not X, Y, Z with each in "
-                            "%g..%g mm",
+            return fail(ps,
+                        "option '%s' in section '%s': '%s' is not X, Y, Z with each in "
+                        "%g..%g mm",
                         name, section, value, o->lo, o->hi);
         memcpy(field, v, sizeof(v));
         return 1;
@@ -408,16 +409,17 @@ check_printers(struct parse *ps)
         for (size_t d = 0; d < sizeof(drivers) / sizeof(drivers[0]); d++)
             known |= strcmp(p->driver, drivers[d]) == 0;
         if (!known)
-            return fail(ps, "section 'printer %s': option 'driver': '%s' is not one of marlin, "
-                            "octoprint, moonraker, bambu",
+            return fail(ps,
+                        "section 'printer %s': option 'driver': '%s' is not one of marlin, "
+                        "octoprint, moonraker, bambu",
                         p->name, p->driver);
         bool serial = strcmp(p->driver, "marlin") == 0;
         if (serial && !p->port[0])
             return fail(ps, "section 'printer %s': option 'port' is required by driver marlin",
                         p->name);
         if (!serial && !p->url[0])
-            return fail(ps, "section 'printer %s': option 'url' is required by driver %s",
-                        p->name, p->driver);
+            return fail(ps, "section 'printer %s': option 'url' is required by driver %s", p->name,
+                        p->driver);
     }
     return 1;
 }
@@ -441,11 +443,11 @@ farmcfg_release(struct farmcfg *c)
 }
 
 int
-farmcfg_parse(struct farmcfg *c, const char *text, size_t len, const char *name,
-              struct sf_err *err)
+farmcfg_parse(struct farmcfg *c, const char *text, size_t len, const char *name, struct sf_err *err)
 {
-    struct parse ps = { .cfg = c, .name = name, .p = text, .end = text + len, .err = err,
-                        .section = -2 };
+    struct parse ps = {
+        .cfg = c, .name = name, .p = text, .end = text + len, .err = err, .section = -2
+    };
     int rc = ini_parse_stream(read_line, &ps, handler, &ps);
     if (!ps.failed && rc > 0) {
         ps.line = rc;

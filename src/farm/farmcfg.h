@@ -19,9 +19,9 @@
 
 #include "../base/err.h"
 
-#define FARMCFG_KEY_MIN 16      /* shorter API keys are guessable */
-#define FARMCFG_KEY_MAX 128     /* longer ones are a paste error */
-#define FARMCFG_KEYS_MAX 64     /* API keys per farm */
+#define FARMCFG_KEY_MIN      16   /* shorter API keys are guessable */
+#define FARMCFG_KEY_MAX      128  /* longer ones are a paste error */
+#define FARMCFG_KEYS_MAX     64   /* API keys per farm */
 #define FARMCFG_PRINTERS_MAX 1000 /* printers per farm */
 
 /* One API key. */
@@ -32,29 +32,29 @@ struct farmcfg_key {
 
 /* One [printer NAME] section. */
 struct farmcfg_printer {
-    char name[64];        /* NAME: letters, digits, -_. */
-    int line;             /* line of the section header, for later messages */
-    char driver[16];      /* marlin | octoprint | moonraker | bambu (required) */
-    char port[256];       /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
-    int baud;             /* marlin serial speed (default 115200) */
-    char url[256];        /* network drivers: base URL */
-    char api_key[128];    /* network drivers: key or access code */
-    char profile[64];     /* printer profile for slicing (default "generic") */
-    char material[32];    /* loaded material (default "PLA") */
-    double nozzle_mm;     /* nozzle diameter (default 0.4) */
-    double bed_mm[3];     /* build volume x, y, z (default 220, 220, 250) */
-    double overhang_deg;  /* overhang threshold for this printer (default 45) */
-    bool enabled;         /* schedule jobs on it (default true) */
-    bool auto_eject;      /* clears its own bed: skip the bed-clear gate (default false) */
-    char group[64];       /* group name jobs may target; "" for none (default) */
+    char name[64];       /* NAME: letters, digits, -_. */
+    int line;            /* line of the section header, for later messages */
+    char driver[16];     /* marlin | octoprint | moonraker | bambu (required) */
+    char port[256];      /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
+    int baud;            /* marlin serial speed (default 115200) */
+    char url[256];       /* network drivers: base URL */
+    char api_key[128];   /* network drivers: key or access code */
+    char profile[64];    /* printer profile for slicing (default "generic") */
+    char material[32];   /* loaded material (default "PLA") */
+    double nozzle_mm;    /* nozzle diameter (default 0.4) */
+    double bed_mm[3];    /* build volume x, y, z (default 220, 220, 250) */
+    double overhang_deg; /* overhang threshold for this printer (default 45) */
+    bool enabled;        /* schedule jobs on it (default true) */
+    bool auto_eject;     /* clears its own bed: skip the bed-clear gate (default false) */
+    char group[64];      /* group name jobs may target; "" for none (default) */
 };
 
 struct farmcfg {
-    char listen_host[64];        /* address to listen on (default 127.0.0.1) */
-    int listen_port;             /* port (default 7420) */
-    char data_dir[512];          /* database and files (default /var/lib/slimfarm) */
-    size_t upload_max_bytes;     /* largest part upload (default 256 MiB) */
-    struct farmcfg_key *keys;    /* n_keys API keys; free with farmcfg_release */
+    char listen_host[64];     /* address to listen on (default 127.0.0.1) */
+    int listen_port;          /* port (default 7420) */
+    char data_dir[512];       /* database and files (default /var/lib/slimfarm) */
+    size_t upload_max_bytes;  /* largest part upload (default 256 MiB) */
+    struct farmcfg_key *keys; /* n_keys API keys; free with farmcfg_release */
     size_t n_keys;
     struct farmcfg_printer *printers; /* n_printers, in file order */
     size_t n_printers;

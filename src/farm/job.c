@@ -17,13 +17,13 @@
 #include <string.h>
 
 static const char *const job_names[JOB_STATE_COUNT] = {
-    "queued", "preparing", "ready", "printing", "paused",
-    "done", "failed", "cancelled", "interrupted",
+    "queued", "preparing", "ready",     "printing",    "paused",
+    "done",   "failed",    "cancelled", "interrupted",
 };
 
 static const char *const job_event_names[JOB_EVENT_COUNT] = {
-    "prepare", "prepared", "prepare-failed", "start", "pause", "resume",
-    "print-done", "print-failed", "cancel", "crashed", "restart",
+    "prepare",    "prepared",     "prepare-failed", "start",   "pause",   "resume",
+    "print-done", "print-failed", "cancel",         "crashed", "restart",
 };
 
 /* One legal move: in state `from`, the event leads to `to`. */
@@ -39,18 +39,26 @@ static const struct move job_moves[JOB_EVENT_COUNT][7] = {
     [JOB_EV_PREPARE_FAILED] = { { JOB_PREPARING, JOB_FAILED }, { -1, 0 } },
     [JOB_EV_START] = { { JOB_READY, JOB_PRINTING }, { -1, 0 } },
     [JOB_EV_PAUSE] = { { JOB_PRINTING, JOB_PAUSED }, { -1, 0 } },
-    [JOB_EV_RESUME] = { { JOB_PAUSED, JOB_PRINTING }, { JOB_INTERRUPTED, JOB_PRINTING },
+    [JOB_EV_RESUME] = { { JOB_PAUSED, JOB_PRINTING },
+                        { JOB_INTERRUPTED, JOB_PRINTING },
                         { -1, 0 } },
     /* `to` of the two below is the "more to go" outcome; job_next decides. */
     [JOB_EV_PRINT_DONE] = { { JOB_PRINTING, JOB_READY }, { -1, 0 } },
-    [JOB_EV_PRINT_FAILED] = { { JOB_PRINTING, JOB_READY }, { JOB_PAUSED, JOB_READY },
-                              { JOB_INTERRUPTED, JOB_READY }, { -1, 0 } },
-    [JOB_EV_CANCEL] = { { JOB_QUEUED, JOB_CANCELLED }, { JOB_PREPARING, JOB_CANCELLED },
-                        { JOB_READY, JOB_CANCELLED }, { JOB_PRINTING, JOB_CANCELLED },
-                        { JOB_PAUSED, JOB_CANCELLED }, { JOB_INTERRUPTED, JOB_CANCELLED },
+    [JOB_EV_PRINT_FAILED] = { { JOB_PRINTING, JOB_READY },
+                              { JOB_PAUSED, JOB_READY },
+                              { JOB_INTERRUPTED, JOB_READY },
+                              { -1, 0 } },
+    [JOB_EV_CANCEL] = { { JOB_QUEUED, JOB_CANCELLED },
+                        { JOB_PREPARING, JOB_CANCELLED },
+                        { JOB_READY, JOB_CANCELLED },
+                        { JOB_PRINTING, JOB_CANCELLED },
+                        { JOB_PAUSED, JOB_CANCELLED },
+                        { JOB_INTERRUPTED, JOB_CANCELLED },
                         { -1, 0 } },
-    [JOB_EV_CRASHED] = { { JOB_PRINTING, JOB_INTERRUPTED }, { JOB_PAUSED, JOB_INTERRUPTED },
-                         { JOB_PREPARING, JOB_QUEUED }, { -1, 0 } },
+    [JOB_EV_CRASHED] = { { JOB_PRINTING, JOB_INTERRUPTED },
+                         { JOB_PAUSED, JOB_INTERRUPTED },
+                         { JOB_PREPARING, JOB_QUEUED },
+                         { -1, 0 } },
     [JOB_EV_RESTART] = { { JOB_INTERRUPTED, JOB_READY }, { -1, 0 } },
 };
 
@@ -187,8 +195,8 @@ printer_next(enum printer_state from, enum printer_event ev, bool auto_eject,
                           (int)from);
     int t = find_move(printer_moves[ev], from);
     if (t < 0)
-        return sf_err_set(err, SF_EINVAL, "cannot %s a printer that is %s",
-                          printer_event_names[ev], printer_names[from]);
+        return sf_err_set(err, SF_EINVAL, "cannot %s a printer that is %s", printer_event_names[ev],
+                          printer_names[from]);
     if (ev == PRINTER_EV_FINISHED && auto_eject)
         t = PRINTER_IDLE;
     *to = (enum printer_state)t;
@@ -228,15 +236,39 @@ job_opts_init(struct job_opts *o)
     o->max_retries = 1;
 }
 
+/* Length of the valid UTF-8 sequence at p (1..4), or 0 if invalid. */
+static int
+utf8_len(const unsigned char *p)
+{
+    if (p[0] < 0x80)
+        return 1;
+    int n = p[0] >= 0xf0 ? 4 : p[0] >= 0xe0 ? 3 : p[0] >= 0xc2 ? 2 : 0;
+    if (n == 0 || p[0] > 0xf4)
+        return 0;
+    for (int i = 1; i < n; i++)
+        if ((p[i] & 0xc0) != 0x80)
+            return 0;
+    /* overlong 3/4-byte forms, surrogates, > U+10FFFF */
+    if ((p[0] == 0xe0 && p[1] < 0xa0) || (p[0] == 0xed && p[1] >= 0xa0) ||
+        (p[0] == 0xf0 && p[1] < 0x90) || (p[0] == 0xf4 && p[1] >= 0x90))
+        return 0;
+    return n;
+}
+
 bool
 job_name_valid(const char *s)
 {
     size_t n = strlen(s);
     if (n == 0 || n >= JOB_NAME_MAX || strcmp(s, ".") == 0 || strstr(s, ".."))
         return false;
-    for (const unsigned char *p = (const unsigned char *)s; *p; p++)
+    for (const unsigned char *p = (const unsigned char *)s; *p;) {
         if (*p < 0x20 || *p == 0x7f || *p == '/' || *p == '\\')
             return false;
+        int len = utf8_len(p);
+        if (!len)
+            return false;
+        p += len;
+    }
     return true;
 }
 
@@ -264,15 +296,14 @@ job_opts_validate(const struct job_opts *o, struct sf_err *err)
     for (size_t i = 0; i < sizeof(methods) / sizeof(methods[0]); i++)
         known |= strcmp(o->method, methods[i]) == 0;
     if (!known)
-        return sf_err_set(err, SF_EINVAL,
-                          "method: '%s' is not one of none, orient, slim, surface", o->method);
+        return sf_err_set(err, SF_EINVAL, "method: '%s' is not one of none, orient, slim, surface",
+                          o->method);
     if (!(o->deviation_mm >= 0 && o->deviation_mm <= 10))
         return sf_err_set(err, SF_EINVAL, "deviation_mm: %g is not in 0..10", o->deviation_mm);
     if (!(o->overhang_deg >= 0 && o->overhang_deg <= 89))
         return sf_err_set(err, SF_EINVAL, "overhang_deg: %g is not in 0..89", o->overhang_deg);
     if (o->copies < 1 || o->copies > JOB_COPIES_MAX)
-        return sf_err_set(err, SF_EINVAL, "copies: %d is not in 1..%d", o->copies,
-                          JOB_COPIES_MAX);
+        return sf_err_set(err, SF_EINVAL, "copies: %d is not in 1..%d", o->copies, JOB_COPIES_MAX);
     if (o->max_retries < 0 || o->max_retries > JOB_RETRIES_MAX)
         return sf_err_set(err, SF_EINVAL, "max_retries: %d is not in 0..%d", o->max_retries,
                           JOB_RETRIES_MAX);

@@ -28,30 +28,30 @@
 #include "../base/err.h"
 
 enum job_state {
-    JOB_QUEUED = 0,   /* waiting to be prepared */
-    JOB_PREPARING,    /* orient / shape / slice running on the pool */
-    JOB_READY,        /* G-code ready, waiting for a printer */
-    JOB_PRINTING,     /* a copy is printing */
-    JOB_PAUSED,       /* the printing copy is paused */
-    JOB_DONE,         /* every copy printed */
-    JOB_FAILED,       /* preparation failed or retries spent */
-    JOB_CANCELLED,    /* cancelled by an operator */
-    JOB_INTERRUPTED,  /* was printing when the daemon died; operator decides */
+    JOB_QUEUED = 0,  /* waiting to be prepared */
+    JOB_PREPARING,   /* orient / shape / slice running on the pool */
+    JOB_READY,       /* G-code ready, waiting for a printer */
+    JOB_PRINTING,    /* a copy is printing */
+    JOB_PAUSED,      /* the printing copy is paused */
+    JOB_DONE,        /* every copy printed */
+    JOB_FAILED,      /* preparation failed or retries spent */
+    JOB_CANCELLED,   /* cancelled by an operator */
+    JOB_INTERRUPTED, /* was printing when the daemon died; operator decides */
 };
 #define JOB_STATE_COUNT 9
 
 enum job_event {
-    JOB_EV_PREPARE = 0,   /* queued -> preparing: a worker picked it up */
-    JOB_EV_PREPARED,      /* preparing -> ready: G-code stored */
+    JOB_EV_PREPARE = 0,    /* queued -> preparing: a worker picked it up */
+    JOB_EV_PREPARED,       /* preparing -> ready: G-code stored */
     JOB_EV_PREPARE_FAILED, /* preparing -> failed */
-    JOB_EV_START,         /* ready -> printing: sent to a printer */
-    JOB_EV_PAUSE,         /* printing -> paused */
-    JOB_EV_RESUME,        /* paused -> printing; interrupted -> printing (from last line) */
-    JOB_EV_PRINT_DONE,    /* printing -> ready (copies left) | done */
-    JOB_EV_PRINT_FAILED,  /* printing|paused -> ready (retry left) | failed */
-    JOB_EV_CANCEL,        /* any live state -> cancelled */
-    JOB_EV_CRASHED,       /* on restart: printing|paused -> interrupted, preparing -> queued */
-    JOB_EV_RESTART,       /* interrupted -> ready: print the copy again from the start */
+    JOB_EV_START,          /* ready -> printing: sent to a printer */
+    JOB_EV_PAUSE,          /* printing -> paused */
+    JOB_EV_RESUME,         /* paused -> printing; interrupted -> printing (from last line) */
+    JOB_EV_PRINT_DONE,     /* printing -> ready (copies left) | done */
+    JOB_EV_PRINT_FAILED,   /* printing|paused -> ready (retry left) | failed */
+    JOB_EV_CANCEL,         /* any live state -> cancelled */
+    JOB_EV_CRASHED,        /* on restart: printing|paused -> interrupted, preparing -> queued */
+    JOB_EV_RESTART,        /* interrupted -> ready: print the copy again from the start */
 };
 #define JOB_EVENT_COUNT 11
 
@@ -89,9 +89,9 @@ const char *job_event_name(enum job_event ev);
 bool job_state_parse(const char *s, enum job_state *out);
 
 /* Caps on job options (each with its reason). */
-#define JOB_NAME_MAX 128   /* part file names: longer ones are not names but payloads */
-#define JOB_COPIES_MAX 1000 /* a farm batch; beyond this it is a typo */
-#define JOB_RETRIES_MAX 10  /* a print that failed 10 times needs a human */
+#define JOB_NAME_MAX     128     /* part file names: longer ones are not names but payloads */
+#define JOB_COPIES_MAX   1000    /* a farm batch; beyond this it is a typo */
+#define JOB_RETRIES_MAX  10      /* a print that failed 10 times needs a human */
 #define JOB_PRIORITY_MAX 1000000 /* |priority| bound, keeps arithmetic safe */
 
 /* What the operator asked for when submitting a job (plain data). */
@@ -117,7 +117,8 @@ void job_opts_init(struct job_opts *o);
  */
 int job_opts_validate(const struct job_opts *o, struct sf_err *err);
 
-/* True when s is a safe single path component to show or store as a name. */
+/* True when s is a safe single path component to show or store as a name:
+   valid UTF-8, no '/', '\\', ".." or control characters, 1..JOB_NAME_MAX-1 bytes. */
 bool job_name_valid(const char *s);
 
 enum printer_state {
@@ -136,9 +137,9 @@ enum printer_event {
     PRINTER_EV_START,         /* job sent */
     PRINTER_EV_PAUSE,
     PRINTER_EV_RESUME,
-    PRINTER_EV_FINISHED,      /* job ended (done, failed or cancelled) with the part on the bed */
-    PRINTER_EV_FAULT,         /* firmware halted or reported an error */
-    PRINTER_EV_CLEARED,       /* operator confirmed the bed is clear (or error acknowledged) */
+    PRINTER_EV_FINISHED, /* job ended (done, failed or cancelled) with the part on the bed */
+    PRINTER_EV_FAULT,    /* firmware halted or reported an error */
+    PRINTER_EV_CLEARED,  /* operator confirmed the bed is clear (or error acknowledged) */
 };
 #define PRINTER_EVENT_COUNT 8
 

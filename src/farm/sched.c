@@ -38,8 +38,7 @@ sched_fits_bed(const double s[3], const double b[3])
     return (s[0] <= b[0] && s[1] <= b[1]) || (s[1] <= b[0] && s[0] <= b[1]);
 }
 
-static void
-say(char *why, size_t cap, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+static void say(char *why, size_t cap, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 
 static void
 say(char *why, size_t cap, const char *fmt, ...)
@@ -100,8 +99,8 @@ explain(const struct sched_job *j, const struct sched_printer *printers, size_t 
             char why[160];
             sched_compatible(j, &printers[p], why, sizeof(why));
             size_t len = strlen(r);
-            snprintf(r + len, SCHED_REASON_MAX - len, "%s%s: %s", p ? "; " : "",
-                     printers[p].name, why);
+            snprintf(r + len, SCHED_REASON_MAX - len, "%s%s: %s", p ? "; " : "", printers[p].name,
+                     why);
             if (strlen(r) + 1 >= SCHED_REASON_MAX)
                 memcpy(r + SCHED_REASON_MAX - 4, "...", 4);
         }
@@ -122,8 +121,8 @@ explain(const struct sched_job *j, const struct sched_printer *printers, size_t 
         else
             snprintf(what, sizeof(what), "%s", printer_state_name(printers[p].state));
         size_t len = strlen(r);
-        snprintf(r + len, SCHED_REASON_MAX - len, "%s%s is %s", first ? "" : "; ",
-                 printers[p].name, what);
+        snprintf(r + len, SCHED_REASON_MAX - len, "%s%s is %s", first ? "" : "; ", printers[p].name,
+                 what);
         first = false;
         if (strlen(r) + 1 >= SCHED_REASON_MAX)
             memcpy(r + SCHED_REASON_MAX - 4, "...", 4);

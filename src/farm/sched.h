@@ -45,15 +45,15 @@ struct sched_printer {
 
 /* A job as the scheduler sees it. */
 struct sched_job {
-    int64_t id;               /* FIFO order: lower first */
-    enum job_state state;     /* only JOB_READY is placed; others only get reasons */
-    int priority;             /* higher first */
-    const char *material;     /* "" = any */
-    const char *printer;      /* target printer, "" = any */
-    const char *group;        /* target group, "" = any */
-    double nozzle_mm;         /* nozzle it was sliced for; 0 = not sliced yet */
-    double size_mm[3];        /* part bounding box as it will print; 0s = not known yet */
-    const char *avoid;        /* printer that failed it last, "" or NULL for none */
+    int64_t id;           /* FIFO order: lower first */
+    enum job_state state; /* only JOB_READY is placed; others only get reasons */
+    int priority;         /* higher first */
+    const char *material; /* "" = any */
+    const char *printer;  /* target printer, "" = any */
+    const char *group;    /* target group, "" = any */
+    double nozzle_mm;     /* nozzle it was sliced for; 0 = not sliced yet */
+    double size_mm[3];    /* part bounding box as it will print; 0s = not known yet */
+    const char *avoid;    /* printer that failed it last, "" or NULL for none */
 };
 
 /* One decision: jobs[job] starts on printers[printer]. */

@@ -37,16 +37,16 @@
 #define STORE_PATH_MAX 1024 /* data dir paths; deeper trees are a config error */
 
 struct store {
-    sqlite3 *db;               /* the connection, WAL mode, foreign keys on */
-    char dir[STORE_PATH_MAX];  /* data directory */
+    sqlite3 *db;              /* the connection, WAL mode, foreign keys on */
+    char dir[STORE_PATH_MAX]; /* data directory */
 };
 
 struct store_file {
-    struct store *s;              /* owner */
-    int fd;                       /* temporary file being written */
+    struct store *s;               /* owner */
+    int fd;                        /* temporary file being written */
     char tmp[STORE_PATH_MAX + 64]; /* its path */
-    EVP_MD_CTX *md;               /* running SHA-256 */
-    int64_t size;                 /* bytes written */
+    EVP_MD_CTX *md;                /* running SHA-256 */
+    int64_t size;                  /* bytes written */
 };
 
 /* Schema migrations; index i upgrades user_version i to i + 1. */
@@ -346,8 +346,8 @@ store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
         sf_err_set(err, SF_EIO, "store: '%s': cannot switch to WAL mode", path);
         goto fail;
     }
-    if (exec(s, "PRAGMA foreign_keys = ON; PRAGMA synchronous = FULL;", err) ||
-        migrate(s, err) || recover(s, rec, err))
+    if (exec(s, "PRAGMA foreign_keys = ON; PRAGMA synchronous = FULL;", err) || migrate(s, err) ||
+        recover(s, rec, err))
         goto fail;
     return s;
 fail:
@@ -820,8 +820,8 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
         goto fail;
     char kind[24], detail[192];
     snprintf(kind, sizeof(kind), "job-%s", job_event_name(ev));
-    snprintf(detail, sizeof(detail), "%s -> %s%s%s", job_state_name(from),
-             job_state_name(j.state), j.reason[0] ? ": " : "", j.reason);
+    snprintf(detail, sizeof(detail), "%s -> %s%s%s", job_state_name(from), job_state_name(j.state),
+             j.reason[0] ? ": " : "", j.reason);
     if ((rc = log_event(s, id, j.printer, kind, detail, err)) || (rc = commit(s, err)))
         goto fail;
     if (to)
@@ -833,8 +833,8 @@ fail:
 }
 
 static int
-update_job_field(struct store *s, int64_t id, const char *sql, sqlite3_int64 ival,
-                 const char *tval, struct sf_err *err)
+update_job_field(struct store *s, int64_t id, const char *sql, sqlite3_int64 ival, const char *tval,
+                 struct sf_err *err)
 {
     sqlite3_stmt *st;
     int rc = prepare(s, &st, sql, err);
@@ -900,8 +900,7 @@ store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_
 /* ---- printers ---- */
 
 int
-store_printer_set(struct store *s, const char *name, enum printer_state state,
-                  struct sf_err *err)
+store_printer_set(struct store *s, const char *name, enum printer_state state, struct sf_err *err)
 {
     int rc = begin(s, err);
     if (rc)
@@ -926,8 +925,7 @@ fail:
 }
 
 int
-store_printer_get(struct store *s, const char *name, enum printer_state *state,
-                  struct sf_err *err)
+store_printer_get(struct store *s, const char *name, enum printer_state *state, struct sf_err *err)
 {
     sqlite3_stmt *st;
     int rc = prepare(s, &st, "SELECT state FROM printers WHERE name = ?", err);
@@ -1023,6 +1021,17 @@ store_events(struct store *s, int64_t after_id, size_t max, struct event_row **r
     }
     sqlite3_finalize(st);
     return SF_OK;
+}
+
+int64_t
+store_event_last(struct store *s)
+{
+    sqlite3_stmt *st;
+    if (sqlite3_prepare_v2(s->db, "SELECT coalesce(max(id), 0) FROM events", -1, &st, NULL))
+        return 0;
+    int64_t id = sqlite3_step(st) == SQLITE_ROW ? sqlite3_column_int64(st, 0) : 0;
+    sqlite3_finalize(st);
+    return id;
 }
 
 /* Run a query whose first row, if any, is a violation described by column 0. */

@@ -39,18 +39,18 @@ struct store_recovery {
 
 /* A job as stored (plain data). */
 struct job_row {
-    int64_t id;                       /* > 0, assigned by store_job_add */
-    struct job_opts opts;             /* as submitted; opts.priority may change later */
-    enum job_state state;             /* current state */
-    struct job_counts counts;         /* copies, copies_done, failures, max_retries */
-    char file_sha[STORE_SHA_HEX];     /* the part file */
-    char gcode_sha[STORE_SHA_HEX];    /* the sliced G-code; "" until prepared */
-    double size_mm[3];                /* prepared part's bounding box x, y, z; 0 until prepared */
-    char printer[64];                 /* printer of the current copy; "" when not on one */
-    int64_t lines_acked;              /* last acknowledged line of the current copy */
-    char reason[160];                 /* why it waits or failed; "" if none */
-    int64_t created_ms;               /* wall clock, ms since the epoch */
-    int64_t updated_ms;               /* last change, same clock */
+    int64_t id;                    /* > 0, assigned by store_job_add */
+    struct job_opts opts;          /* as submitted; opts.priority may change later */
+    enum job_state state;          /* current state */
+    struct job_counts counts;      /* copies, copies_done, failures, max_retries */
+    char file_sha[STORE_SHA_HEX];  /* the part file */
+    char gcode_sha[STORE_SHA_HEX]; /* the sliced G-code; "" until prepared */
+    double size_mm[3];             /* prepared part's bounding box x, y, z; 0 until prepared */
+    char printer[64];              /* printer of the current copy; "" when not on one */
+    int64_t lines_acked;           /* last acknowledged line of the current copy */
+    char reason[160];              /* why it waits or failed; "" if none */
+    int64_t created_ms;            /* wall clock, ms since the epoch */
+    int64_t updated_ms;            /* last change, same clock */
 };
 
 /* Extra data some events carry (zero-initialise; unused fields ignored). */
@@ -65,27 +65,27 @@ struct job_event_args {
 
 /* One row of print history. */
 struct print_row {
-    int64_t id;           /* > 0 */
-    int64_t job_id;       /* the job */
-    int copy;             /* 1-based copy number */
-    char printer[64];     /* where it ran */
-    char material[32];    /* material the job asked for ("" = printer's loaded one) */
-    int64_t start_line;   /* first line streamed (> 0 when resumed after interrupt) */
-    int64_t lines_acked;  /* last acknowledged line */
-    double filament_mm;   /* filament used */
-    int64_t started_ms;   /* wall clock */
-    int64_t ended_ms;     /* 0 while running */
-    char outcome[16];     /* "" running, "done", "failed", "cancelled", "interrupted" */
+    int64_t id;          /* > 0 */
+    int64_t job_id;      /* the job */
+    int copy;            /* 1-based copy number */
+    char printer[64];    /* where it ran */
+    char material[32];   /* material the job asked for ("" = printer's loaded one) */
+    int64_t start_line;  /* first line streamed (> 0 when resumed after interrupt) */
+    int64_t lines_acked; /* last acknowledged line */
+    double filament_mm;  /* filament used */
+    int64_t started_ms;  /* wall clock */
+    int64_t ended_ms;    /* 0 while running */
+    char outcome[16];    /* "" running, "done", "failed", "cancelled", "interrupted" */
 };
 
 /* One entry of the event log. */
 struct event_row {
-    int64_t id;         /* increasing; SSE uses it as the event id */
-    int64_t at_ms;      /* wall clock */
-    int64_t job_id;     /* 0 if not about a job */
-    char printer[64];   /* "" if not about a printer */
-    char kind[24];      /* "job-start", "printer-state", ... */
-    char detail[192];   /* human-readable */
+    int64_t id;       /* increasing; SSE uses it as the event id */
+    int64_t at_ms;    /* wall clock */
+    int64_t job_id;   /* 0 if not about a job */
+    char printer[64]; /* "" if not about a printer */
+    char kind[24];    /* "job-start", "printer-state", ... */
+    char detail[192]; /* human-readable */
 };
 
 /*
@@ -114,8 +114,7 @@ void store_file_abort(struct store_file *f);
 int store_file_put(struct store *s, const void *data, size_t len, char sha[STORE_SHA_HEX],
                    struct sf_err *err);
 /* Path of a stored file into path; SF_ENOTFOUND if unknown, SF_EINVAL if sha is not hex. */
-int store_file_path(struct store *s, const char *sha, char *path, size_t cap,
-                    struct sf_err *err);
+int store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct sf_err *err);
 
 /* Add a queued job for a stored part file; o is validated (SF_EINVAL). */
 int store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, int64_t *id,
@@ -130,8 +129,8 @@ int store_job_list(struct store *s, struct job_row **rows, size_t *n, struct sf_
  * the new state.  SF_EINVAL if ev is not legal now (message from job_next),
  * SF_ENOTFOUND for no such job.
  */
-int store_job_event(struct store *s, int64_t id, enum job_event ev,
-                    const struct job_event_args *a, enum job_state *to, struct sf_err *err);
+int store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job_event_args *a,
+                    enum job_state *to, struct sf_err *err);
 /* Record how far the printing copy got (called on a timer, not per line). */
 int store_job_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_err *err);
 int store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err *err);
@@ -139,8 +138,7 @@ int store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_
 int store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_err *err);
 
 /* Record a printer's state (creating the row on first sight) and log the change. */
-int store_printer_set(struct store *s, const char *name, enum printer_state st,
-                      struct sf_err *err);
+int store_printer_set(struct store *s, const char *name, enum printer_state st, struct sf_err *err);
 /* SF_ENOTFOUND if never recorded. */
 int store_printer_get(struct store *s, const char *name, enum printer_state *st,
                       struct sf_err *err);
@@ -149,8 +147,11 @@ int store_printer_get(struct store *s, const char *name, enum printer_state *st,
 int store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
                  struct sf_err *err);
 /* Up to max events with id > after_id, oldest first, into *rows (free() it). */
-int store_events(struct store *s, int64_t after_id, size_t max, struct event_row **rows,
-                 size_t *n, struct sf_err *err);
+int store_events(struct store *s, int64_t after_id, size_t max, struct event_row **rows, size_t *n,
+                 struct sf_err *err);
+
+/* Id of the newest event (0 if none): where a live event stream starts. */
+int64_t store_event_last(struct store *s);
 
 /*
  * Check the database: SQLite's integrity and foreign-key checks plus the

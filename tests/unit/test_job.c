@@ -21,8 +21,8 @@ run(enum job_state s, struct job_counts *c, const enum job_event *evs, int n)
 T_CASE(job_happy_path)
 {
     struct job_counts c = { 1, 0, 0, 0 };
-    enum job_event evs[] = { JOB_EV_PREPARE, JOB_EV_PREPARED, JOB_EV_START, JOB_EV_PAUSE,
-                             JOB_EV_RESUME, JOB_EV_PRINT_DONE };
+    enum job_event evs[] = { JOB_EV_PREPARE, JOB_EV_PREPARED, JOB_EV_START,
+                             JOB_EV_PAUSE,   JOB_EV_RESUME,   JOB_EV_PRINT_DONE };
     T_EQ_INT(run(JOB_QUEUED, &c, evs, 6), JOB_DONE);
     T_EQ_INT(c.copies_done, 1);
 }
@@ -218,4 +218,7 @@ T_CASE(job_names_reject_traversal)
     T_TRUE(!job_name_valid("."));
     T_TRUE(!job_name_valid(""));
     T_TRUE(!job_name_valid("a\nb"));
+    T_TRUE(job_name_valid("st\xc3\xbctze.stl")); /* UTF-8 u-umlaut */
+    T_TRUE(!job_name_valid("bad\xc3.stl"));
+    T_TRUE(!job_name_valid("over\xc0\xaf.stl")); /* overlong '/' */
 }

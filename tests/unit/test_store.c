@@ -309,8 +309,7 @@ hammer(const char *dir, int fd, unsigned seed)
         if (i % 4 == 0)
             continue; /* leave it printing: the next crash interrupts it */
         struct job_event_args done = { .lines_acked = 10 };
-        store_job_event(s, id, i % 5 ? JOB_EV_PRINT_DONE : JOB_EV_PRINT_FAILED, &done, NULL,
-                        &err);
+        store_job_event(s, id, i % 5 ? JOB_EV_PRINT_DONE : JOB_EV_PRINT_FAILED, &done, NULL, &err);
     }
 }
 
@@ -336,8 +335,7 @@ T_CASE(store_survives_sigkill_mid_transaction)
            loaded the machine), then kill it a random 0..40 ms later: usually
            mid-transaction. */
         int64_t id;
-        for (int k = 0; k < 2 && read(pfd[0], &id, sizeof(id)) == sizeof(id) && n_acked < 4096;
-             k++)
+        for (int k = 0; k < 2 && read(pfd[0], &id, sizeof(id)) == sizeof(id) && n_acked < 4096; k++)
             acked[n_acked++] = id;
         struct timespec ts = { 0, (rand() % 40) * 1000000L };
         nanosleep(&ts, NULL);
@@ -359,8 +357,7 @@ T_CASE(store_survives_sigkill_mid_transaction)
         for (size_t i = 0; i < n_acked; i++) {
             struct job_row j;
             T_OK(store_job_get(s, acked[i], &j, &err), &err);
-            T_TRUE(j.state != JOB_PRINTING && j.state != JOB_PAUSED &&
-                   j.state != JOB_PREPARING);
+            T_TRUE(j.state != JOB_PRINTING && j.state != JOB_PAUSED && j.state != JOB_PREPARING);
         }
         struct job_row *rows;
         size_t n;
