@@ -25,7 +25,7 @@ DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev li
 	libjansson-dev libzip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
 	libsuitesparse-dev clang-14 libclang-rt-14-dev python3 procps libssl-dev
 # Only for `make bench`: the independent peers and their helpers.
-BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy
+BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy bc
 
 # Libraries with a pkg-config file; the rest get fixed flags (Debian ships no .pc).
 PKGS := libserialport libcurl sqlite3 libmicrohttpd libmosquitto inih qhull_r polyclipping \
@@ -58,6 +58,7 @@ SIM_C := $(filter-out sim/slimfarm_sim.c,$(wildcard sim/*.c))
 CLI_C := src/cmd/slimfarm.c $(wildcard src/cmd/cmd_*.c)
 TEST_C := $(wildcard tests/unit/test_*.c)
 FUZZ_C := $(wildcard tests/fuzz/fuzz_*.c)
+BENCH_C := $(wildcard tests/bench/bench_*.c)
 
 obj = $(patsubst %.c,$(BUILD)/obj/%.o,$(patsubst %.cpp,$(BUILD)/obj/%.o,$(1)))
 LIB := $(BUILD)/libslimfarm.a
@@ -66,6 +67,7 @@ PROGS := $(BUILD)/bin/slimfarm $(if $(wildcard src/cmd/slimfarmd.c),$(BUILD)/bin
 	$(if $(wildcard sim/slimfarm_sim.c),$(BUILD)/bin/slimfarm-sim)
 TESTS := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(TEST_C)) \
 	$(patsubst tests/fuzz/fuzz_%.c,$(BUILD)/tests/test_fuzz_%,$(FUZZ_C))
+BENCHES := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(BENCH_C))
 FUZZERS := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(FUZZ_C))
 
 .PHONY: all check tests demo bench fuzz fuzzers deps install clean format check-format \
@@ -106,6 +108,10 @@ $(BUILD)/bin/slimfarmd: $(call obj,src/cmd/slimfarmd.c) $(LIB)
 	$(CC) $(LDFLAGS) -o $@ $^ $(EXT_LIBS)
 
 $(BUILD)/bin/slimfarm-sim: $(call obj,sim/slimfarm_sim.c) $(SIMLIB) $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^ $(EXT_LIBS)
+
+$(BUILD)/bench/bench_%: $(BUILD)/obj/tests/bench/bench_%.o $(SIMLIB) $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $^ $(EXT_LIBS)
 
@@ -152,10 +158,10 @@ fuzz: deps
 demo: deps all
 	tests/demo.sh $(if $(ONCE),--once)
 
-bench: deps all
+bench: deps all $(BENCHES)
 	@missing=$$(for p in $(BENCH_PKGS); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done); \
 	if [ -n "$$missing" ]; then apt-get install -y -q $$missing >/dev/null; fi
-	tests/bench/run.sh build/rel
+	tests/bench/run.sh $(BUILD)
 
 deps:
 	@missing=$$(for p in $(DEB_PKGS); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done); \

@@ -146,6 +146,11 @@ run(int argc, char **argv)
                               sm.contact_area_mm2, "columns", (json_int_t)sm.n_columns, "anchors",
                               (json_int_t)sm.n_anchors, "com_height_mm", sm.com_height_mm,
                               "build_height_mm", sm.build_height_mm);
+        if (s)
+            json_object_update_new(s, json_pack("{s:i, s:f, s:f}", "islands",
+                                                (json_int_t)sm.n_islands, "island_volume_mm3",
+                                                sm.island_volume_mm3, "base_margin_mm",
+                                                sm.base_margin_mm));
         if (!o || !s || json_object_set_new(o, "support", s) != 0) {
             fprintf(stderr, "slimfarm inspect: out of memory\n");
             json_decref(o);
@@ -179,6 +184,10 @@ run(int argc, char **argv)
                sm.volume_mm3, sm.n_columns, sm.contact_area_mm2, sm.n_anchors);
         printf("  height %.1f mm, centre of mass at %.1f mm\n", sm.build_height_mm,
                sm.com_height_mm);
+        printf("  growth: %u island%s needing %.0f mm3 (included above), centre of mass %.1f mm "
+               "%s the base\n",
+               sm.n_islands, sm.n_islands == 1 ? "" : "s", sm.island_volume_mm3,
+               fabs(sm.base_margin_mm), sm.base_margin_mm >= 0 ? "inside" : "OUTSIDE");
     }
     rc = 0;
 out:

@@ -49,6 +49,11 @@ struct support_metrics {
     uint32_t n_anchors;        /* clusters of adjacent supported grid points */
     double com_height_mm;      /* centre of mass height above the bed */
     double build_height_mm;    /* part height along d */
+    /* growth simulation (growth.h), filled by measure_support */
+    uint32_t n_islands;        /* regions starting in mid-air with no column under them */
+    double island_volume_mm3;  /* support they need, included in volume_mm3 */
+    double base_margin_mm;     /* least margin of the growing part's centre of mass inside
+                                  its extended base; negative: it would tip over */
 };
 
 /*
@@ -60,6 +65,24 @@ void measure_proxy(const struct mesh *m, struct vec3 up, const struct support_pa
                    struct support_metrics *out);
 
 /*
+ * The same proxy for many directions of one mesh: per-triangle normals,
+ * areas and centroids computed once (structure of arrays), so each
+ * direction costs a few multiply-adds per triangle.
+ */
+struct proxy_cache {
+    uint32_t n_tris, n_verts;
+    float *nx, *ny, *nz;  /* unit normals */
+    float *area;          /* mm2 */
+    float *cx, *cy, *cz;  /* centroids */
+    const struct mesh *m; /* for the vertex heights */
+};
+int proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *err);
+void proxy_cache_release(struct proxy_cache *pc);
+/* As measure_proxy (same numbers up to float rounding). */
+void measure_proxy_cached(const struct proxy_cache *pc, struct vec3 up,
+                          const struct support_params *p, struct support_metrics *out);
+
+/*
  * Support columns on a cast grid: walking up each ray, a hit on a risky
  * face more than min_gap above the last surface below (the bed, or the
  * part's last exit) needs a column from there.  *cols is allocated (free()).
@@ -67,7 +90,7 @@ void measure_proxy(const struct mesh *m, struct vec3 up, const struct support_pa
 int measure_columns(const struct ray_grid *g, const struct support_params *p,
                     struct support_column **cols, size_t *n_cols, struct sf_err *err);
 
-/* Everything in struct support_metrics for up-direction up. */
+/* Everything in struct support_metrics for up-direction up, growth included. */
 int measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
                     const struct support_params *p, struct support_metrics *out,
                     struct sf_err *err);

@@ -214,6 +214,60 @@ weld_slot(struct weld_table *w, int64_t x, int64_t y, int64_t z, bool insert)
     }
 }
 
+static uint64_t
+vertex_hash(struct vec3 p)
+{
+    uint64_t a, b, c;
+    /* +0.0 so that -0.0 hashes like 0.0 (they compare equal) */
+    double x = p.x + 0.0, y = p.y + 0.0, z = p.z + 0.0;
+    memcpy(&a, &x, 8);
+    memcpy(&b, &y, 8);
+    memcpy(&c, &z, 8);
+    uint64_t h = a * 0x9E3779B97F4A7C15ULL ^ b * 0xC2B2AE3D27D4EB4FULL ^ c * 0x165667B19E3779F9ULL;
+    return h ^ (h >> 31);
+}
+
+/*
+ * Merge bit-identical vertices: one hash probe each, no tolerance.  STL
+ * soups repeat every vertex exactly (six times on average), so this pass
+ * does most of the work and leaves the tolerance pass a sixth of the input.
+ * Fills remap (old -> new) and compacts m->v in place.
+ */
+static int
+weld_exact(struct mesh *m, uint32_t *remap)
+{
+    uint64_t size = 1;
+    while (size < 2ull * m->n_verts)
+        size <<= 1;
+    uint32_t *slot = mem_array(size, sizeof(uint32_t));
+    if (!slot)
+        return SF_ENOMEM;
+    memset(slot, 0xff, size * sizeof(uint32_t));
+    uint32_t n_out = 0;
+    for (uint32_t i = 0; i < m->n_verts; i++) {
+        struct vec3 p = m->v[i];
+        uint64_t s = vertex_hash(p) & (size - 1);
+        for (;;) {
+            uint32_t r = slot[s];
+            if (r == UINT32_MAX) {
+                slot[s] = n_out;
+                m->v[n_out] = p; /* n_out <= i: never overwrites an unread vertex */
+                remap[i] = n_out++;
+                break;
+            }
+            struct vec3 q = m->v[r];
+            if (q.x == p.x && q.y == p.y && q.z == p.z) {
+                remap[i] = r;
+                break;
+            }
+            s = (s + 1) & (size - 1);
+        }
+    }
+    free(slot);
+    m->n_verts = n_out;
+    return SF_OK;
+}
+
 int
 mesh_weld(struct mesh *m, double tol, struct sf_err *err)
 {
@@ -221,6 +275,12 @@ mesh_weld(struct mesh *m, double tol, struct sf_err *err)
         return 0;
     if (!(tol > 0))
         tol = 1e-9;
+    uint32_t n_in = m->n_verts;
+    uint32_t *exact = mem_array(n_in, sizeof(uint32_t));
+    if (!exact || weld_exact(m, exact) != SF_OK) {
+        free(exact);
+        return sf_err_set(err, SF_ENOMEM, "out of memory welding %u vertices", n_in);
+    }
     uint64_t size = 1;
     while (size < 2ull * m->n_verts)
         size <<= 1;
@@ -236,31 +296,32 @@ mesh_weld(struct mesh *m, double tol, struct sf_err *err)
         goto out_free;
     }
     memset(w.head, 0xff, size * sizeof(uint32_t));
-    double inv = 1.0 / tol, tol2 = tol * tol;
+    /* Cells are 64 tolerances wide, so a point needs to look into a
+       neighbouring cell only along axes where it lies within tol of the
+       cell's wall: most points probe just their own cell. */
+    double cell = 64 * tol, inv = 1.0 / cell, tol2 = tol * tol;
     uint32_t n_out = 0;
     for (uint32_t i = 0; i < m->n_verts; i++) {
         struct vec3 p = m->v[i];
-        int64_t cx = (int64_t)floor(p.x * inv), cy = (int64_t)floor(p.y * inv),
-                cz = (int64_t)floor(p.z * inv);
+        double fx = floor(p.x * inv), fy = floor(p.y * inv), fz = floor(p.z * inv);
+        int64_t cx = (int64_t)fx, cy = (int64_t)fy, cz = (int64_t)fz;
+        double rx = p.x - fx * cell, ry = p.y - fy * cell, rz = p.z - fz * cell;
+        int lx = rx < tol ? -1 : 0, hx = rx > cell - tol ? 1 : 0;
+        int ly = ry < tol ? -1 : 0, hy = ry > cell - tol ? 1 : 0;
+        int lz = rz < tol ? -1 : 0, hz = rz > cell - tol ? 1 : 0;
         uint32_t found = UINT32_MAX;
-        /* own cell first: exact duplicates always land there */
-        for (int pass = 0; pass < 2 && found == UINT32_MAX; pass++) {
-            for (int dz = -1; dz <= 1 && found == UINT32_MAX; dz++)
-                for (int dy = -1; dy <= 1 && found == UINT32_MAX; dy++)
-                    for (int dx = -1; dx <= 1 && found == UINT32_MAX; dx++) {
-                        bool own = !dx && !dy && !dz;
-                        if (own != (pass == 0))
-                            continue;
-                        uint32_t *h = weld_slot(&w, cx + dx, cy + dy, cz + dz, false);
-                        for (uint32_t r = h ? *h : UINT32_MAX; r != UINT32_MAX; r = w.next[r]) {
-                            struct vec3 d = v3_sub(out[r], p);
-                            if (v3_dot(d, d) <= tol2) {
-                                found = r;
-                                break;
-                            }
+        for (int dz = lz; dz <= hz && found == UINT32_MAX; dz++)
+            for (int dy = ly; dy <= hy && found == UINT32_MAX; dy++)
+                for (int dx = lx; dx <= hx && found == UINT32_MAX; dx++) {
+                    uint32_t *h = weld_slot(&w, cx + dx, cy + dy, cz + dz, false);
+                    for (uint32_t r = h ? *h : UINT32_MAX; r != UINT32_MAX; r = w.next[r]) {
+                        struct vec3 d = v3_sub(out[r], p);
+                        if (v3_dot(d, d) <= tol2) {
+                            found = r;
+                            break;
                         }
                     }
-        }
+                }
         if (found == UINT32_MAX) {
             uint32_t *h = weld_slot(&w, cx, cy, cz, true);
             uint64_t slot = (uint64_t)(h - w.head);
@@ -276,8 +337,8 @@ mesh_weld(struct mesh *m, double tol, struct sf_err *err)
     }
     for (uint32_t i = 0; i < m->n_tris; i++)
         for (int k = 0; k < 3; k++)
-            m->t[i][k] = remap[m->t[i][k]];
-    rc = (int)(m->n_verts - n_out);
+            m->t[i][k] = remap[exact[m->t[i][k]]];
+    rc = (int)(n_in - n_out);
     free(m->v);
     m->v = mem_realloc_array(out, n_out ? n_out : 1, sizeof(struct vec3));
     if (!m->v)
@@ -285,6 +346,12 @@ mesh_weld(struct mesh *m, double tol, struct sf_err *err)
     out = NULL;
     m->n_verts = n_out;
 out_free:
+    if (rc < 0) { /* undo nothing: the exact pass already renumbered; keep it consistent */
+        for (uint32_t i = 0; i < m->n_tris; i++)
+            for (int k = 0; k < 3; k++)
+                m->t[i][k] = exact[m->t[i][k]];
+    }
+    free(exact);
     free(out);
     free(remap);
     free(w.key);
