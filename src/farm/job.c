@@ -23,7 +23,7 @@ static const char *const job_names[JOB_STATE_COUNT] = {
 
 static const char *const job_event_names[JOB_EVENT_COUNT] = {
     "prepare",    "prepared",     "prepare-failed", "start",   "pause",   "resume",
-    "print-done", "print-failed", "cancel",         "crashed", "restart",
+    "print-done", "print-failed", "cancel",         "crashed", "restart", "defer",
 };
 
 /* One legal move: in state `from`, the event leads to `to`. */
@@ -60,6 +60,7 @@ static const struct move job_moves[JOB_EVENT_COUNT][7] = {
                          { JOB_PREPARING, JOB_QUEUED },
                          { -1, 0 } },
     [JOB_EV_RESTART] = { { JOB_INTERRUPTED, JOB_READY }, { -1, 0 } },
+    [JOB_EV_DEFER] = { { JOB_PREPARING, JOB_QUEUED }, { -1, 0 } },
 };
 
 static int

@@ -52,8 +52,9 @@ enum job_event {
     JOB_EV_CANCEL,         /* any live state -> cancelled */
     JOB_EV_CRASHED,        /* on restart: printing|paused -> interrupted, preparing -> queued */
     JOB_EV_RESTART,        /* interrupted -> ready: print the copy again from the start */
+    JOB_EV_DEFER,          /* preparing -> queued: a stage is unavailable now; try later */
 };
-#define JOB_EVENT_COUNT 11
+#define JOB_EVENT_COUNT 12
 
 /* The counters a transition reads and updates. */
 struct job_counts {

@@ -76,6 +76,7 @@ static const char *const migrations[] = {
     "  priority INTEGER NOT NULL,"
     "  size_x REAL NOT NULL DEFAULT 0, size_y REAL NOT NULL DEFAULT 0,"
     "  size_z REAL NOT NULL DEFAULT 0,"
+    "  nozzle_mm REAL NOT NULL DEFAULT 0,"
     "  printer TEXT NOT NULL DEFAULT '',"
     "  lines_acked INTEGER NOT NULL DEFAULT 0,"
     "  reason TEXT NOT NULL DEFAULT '',"
@@ -112,7 +113,8 @@ static const char *const migrations[] = {
 static const char JOB_COLS[] =
     "id, name, file_sha, coalesce(gcode_sha, ''), state, method, deviation_mm, overhang_deg,"
     " copies, copies_done, failures, max_retries, material, target_printer, target_group,"
-    " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms";
+    " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"
+    " nozzle_mm";
 
 int
 store_schema_version(void)
@@ -559,6 +561,7 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     copy_text(j->reason, sizeof(j->reason), st, 21);
     j->created_ms = sqlite3_column_int64(st, 22);
     j->updated_ms = sqlite3_column_int64(st, 23);
+    j->nozzle_mm = sqlite3_column_double(st, 24);
 }
 
 int
@@ -719,6 +722,7 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
         snprintf(j->gcode_sha, sizeof(j->gcode_sha), "%s", a->gcode_sha);
         for (int i = 0; i < 3; i++)
             j->size_mm[i] = a->size_mm[i];
+        j->nozzle_mm = a->nozzle_mm;
         j->reason[0] = '\0';
         break;
     case JOB_EV_START:
@@ -764,6 +768,7 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
         j->reason[0] = '\0';
         break;
     case JOB_EV_PREPARE_FAILED:
+    case JOB_EV_DEFER:
         snprintf(j->reason, sizeof(j->reason), "%s", a->reason ? a->reason : "");
         break;
     case JOB_EV_PREPARE:
@@ -799,7 +804,7 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     if ((rc = prepare(s, &st,
                       "UPDATE jobs SET state = ?, copies_done = ?, failures = ?, gcode_sha = ?,"
                       " size_x = ?, size_y = ?, size_z = ?, printer = ?, lines_acked = ?,"
-                      " reason = ?, updated_ms = ? WHERE id = ?",
+                      " reason = ?, updated_ms = ?, nozzle_mm = ? WHERE id = ?",
                       err)))
         goto fail;
     sqlite3_bind_text(st, 1, job_state_name(j.state), -1, SQLITE_STATIC);
@@ -815,7 +820,8 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     sqlite3_bind_int64(st, 9, j.lines_acked);
     sqlite3_bind_text(st, 10, j.reason, -1, SQLITE_TRANSIENT);
     sqlite3_bind_int64(st, 11, now_ms());
-    sqlite3_bind_int64(st, 12, id);
+    sqlite3_bind_double(st, 12, j.nozzle_mm);
+    sqlite3_bind_int64(st, 13, id);
     if ((rc = step_done(s, st, err, "update job")))
         goto fail;
     char kind[24], detail[192];
