@@ -14,6 +14,7 @@
 #include "pool.h"
 
 #include <pthread.h>
+#include <signal.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
@@ -115,14 +116,21 @@ pool_new(struct loop *l, int n_threads, struct sf_err *err)
     p->next_id = 1;
     pthread_mutex_init(&p->mu, NULL);
     pthread_cond_init(&p->cv, NULL);
+    /* Workers inherit this thread's signal mask: block everything so
+       signals reach the loop thread (signalfd), never a worker. */
+    sigset_t all, old;
+    sigfillset(&all);
+    pthread_sigmask(SIG_SETMASK, &all, &old);
     for (int i = 0; i < n_threads; i++) {
         if (pthread_create(&p->threads[i], NULL, worker, p) != 0) {
             sf_err_set(err, SF_EIO, "pool: cannot start worker %d of %d", i + 1, n_threads);
+            pthread_sigmask(SIG_SETMASK, &old, NULL);
             pool_free(p);
             return NULL;
         }
         p->n++;
     }
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
     return p;
 }
 
