@@ -292,13 +292,14 @@ job_cancel(struct api *a, int64_t id, struct http_resp *resp)
 static json_t *
 printer_json(const struct api_printer_info *p)
 {
-    return json_pack("{ss ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf}", "name", p->name, "state",
+    return json_pack("{ss ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf ss}", "name", p->name, "state",
                      printer_state_name(p->state), "enabled", p->enabled, "material",
                      p->material ? p->material : "", "nozzle_mm", p->nozzle_mm, "bed_mm",
                      p->bed_mm[0], p->bed_mm[1], p->bed_mm[2], "group", p->group ? p->group : "",
                      "temps", "nozzle_c", p->nozzle_c, "nozzle_target_c", p->nozzle_target_c,
                      "bed_c", p->bed_c, "bed_target_c", p->bed_target_c, "job_id",
-                     (json_int_t)p->job_id, "progress", p->progress);
+                     (json_int_t)p->job_id, "progress", p->progress, "message",
+                     p->message ? p->message : "");
 }
 
 static void

@@ -45,8 +45,9 @@ struct api_printer_info {
     const char *group;                /* "" for none */
     double nozzle_c, nozzle_target_c; /* temperatures, deg C */
     double bed_c, bed_target_c;
-    int64_t job_id;  /* job printing, 0 if none */
-    double progress; /* 0..1 of the running job */
+    int64_t job_id;      /* job printing, 0 if none */
+    double progress;     /* 0..1 of the running job */
+    const char *message; /* why offline / in error; "" or NULL if nothing */
 };
 
 /* The owner's printer registry, as the API needs it. */

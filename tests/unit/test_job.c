@@ -101,6 +101,8 @@ T_CASE(job_crash_recovery_moves)
     T_OK(job_next(JOB_PREPARING, JOB_EV_CRASHED, &c, &to, NULL), NULL);
     T_EQ_INT(to, JOB_QUEUED);
     T_EQ_INT(job_next(JOB_READY, JOB_EV_CRASHED, &c, &to, NULL), SF_EINVAL);
+    T_OK(job_next(JOB_PREPARING, JOB_EV_DEFER, &c, &to, NULL), NULL);
+    T_EQ_INT(to, JOB_QUEUED);
     /* the operator's three choices */
     T_OK(job_next(JOB_INTERRUPTED, JOB_EV_RESUME, &c, &to, NULL), NULL);
     T_EQ_INT(to, JOB_PRINTING);
