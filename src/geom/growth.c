@@ -119,8 +119,8 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
         col_top[cols[i].cell] = fmaxf(col_top[cols[i].cell], cols[i].hi);
         if (cols[i].lo < layer_mm) {
             uint32_t c = cols[i].cell;
-            base[n_base++] = (struct pt){ g->u0 + (c % g->nu) * g->pitch,
-                                          g->w0 + (c / g->nu) * g->pitch };
+            base[n_base++] =
+                (struct pt){ g->u0 + (c % g->nu) * g->pitch, g->w0 + (c / g->nu) * g->pitch };
         }
     }
     double sx = 0, sy = 0, count = 0;

@@ -74,23 +74,25 @@ measure_proxy(const struct mesh *m, struct vec3 up, const struct support_params 
 }
 
 int
-proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *err)
+proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, const uint32_t *extreme,
+                 uint32_t n_extreme, struct sf_err *err)
 {
     memset(pc, 0, sizeof(*pc));
-    size_t n = m->n_tris ? m->n_tris : 1;
-    float *block = mem_array(n, 7 * sizeof(float));
+    uint32_t n_v = extreme ? n_extreme : m->n_verts;
+    size_t nt = m->n_tris ? m->n_tris : 1, nv = n_v ? n_v : 1;
+    float *block = mem_array(7 * nt + 3 * nv, sizeof(float));
     if (!block)
         return sf_err_set(err, SF_ENOMEM, "proxy: out of memory for %u triangles", m->n_tris);
-    pc->nx = block;
-    pc->ny = block + n;
-    pc->nz = block + 2 * n;
-    pc->area = block + 3 * n;
-    pc->cx = block + 4 * n;
-    pc->cy = block + 5 * n;
-    pc->cz = block + 6 * n;
+    float *arrays[10];
+    for (int k = 0; k < 7; k++)
+        arrays[k] = block + k * nt;
+    for (int k = 0; k < 3; k++)
+        arrays[7 + k] = block + 7 * nt + k * nv;
+    pc->nx = arrays[0], pc->ny = arrays[1], pc->nz = arrays[2], pc->area = arrays[3];
+    pc->cx = arrays[4], pc->cy = arrays[5], pc->cz = arrays[6];
+    pc->vx = arrays[7], pc->vy = arrays[8], pc->vz = arrays[9];
     pc->n_tris = m->n_tris;
-    pc->n_verts = m->n_verts;
-    pc->m = m;
+    pc->n_verts = n_v;
     for (uint32_t i = 0; i < m->n_tris; i++) {
         struct vec3 c = mesh_tri_cross(m, i), g = mesh_tri_centroid(m, i);
         double len = v3_len(c);
@@ -103,6 +105,12 @@ proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *er
         pc->cy[i] = (float)g.y;
         pc->cz[i] = (float)g.z;
     }
+    for (uint32_t i = 0; i < n_v; i++) {
+        struct vec3 v = m->v[extreme ? extreme[i] : i];
+        pc->vx[i] = (float)v.x;
+        pc->vy[i] = (float)v.y;
+        pc->vz[i] = (float)v.z;
+    }
     return SF_OK;
 }
 
@@ -113,31 +121,36 @@ proxy_cache_release(struct proxy_cache *pc)
     memset(pc, 0, sizeof(*pc));
 }
 
+/*
+ * The loops below are written branch-free over structure-of-arrays floats so
+ * the compiler vectorises them: this runs once per candidate direction,
+ * thousands of times per part.
+ */
 void
 measure_proxy_cached(const struct proxy_cache *pc, struct vec3 up, const struct support_params *p,
                      struct support_metrics *out)
 {
     memset(out, 0, sizeof(*out));
     up = v3_normalize(up);
-    double lo, hi;
-    height_range(pc->m, up, &lo, &hi);
     float ux = (float)up.x, uy = (float)up.y, uz = (float)up.z;
-    float tau = (float)sin(p->angle_deg * M_PI / 180), flo = (float)lo;
-    float gap = (float)p->min_gap_mm;
-    double area = 0, proxy = 0;
-    uint32_t n = 0;
+    float lo = INFINITY, hi = -INFINITY;
+    for (uint32_t i = 0; i < pc->n_verts; i++) {
+        float d = pc->vx[i] * ux + pc->vy[i] * uy + pc->vz[i] * uz;
+        lo = d < lo ? d : lo;
+        hi = d > hi ? d : hi;
+    }
+    float tau = (float)sin(p->angle_deg * M_PI / 180);
+    float floor_h = lo + (float)p->min_gap_mm;
+    float area = 0, proxy = 0, n = 0;
     for (uint32_t i = 0; i < pc->n_tris; i++) {
         float cosd = pc->nx[i] * ux + pc->ny[i] * uy + pc->nz[i] * uz;
-        if (cosd >= -tau)
-            continue;
-        float h = pc->cx[i] * ux + pc->cy[i] * uy + pc->cz[i] * uz - flo;
-        if (h < gap || pc->area[i] <= 0)
-            continue;
-        n++;
-        area += pc->area[i];
-        proxy += (double)(pc->area[i] * -cosd * h);
+        float h = pc->cx[i] * ux + pc->cy[i] * uy + pc->cz[i] * uz;
+        float risky = (cosd < -tau) & (h >= floor_h) ? 1.0f : 0.0f;
+        n += risky;
+        area += risky * pc->area[i];
+        proxy += risky * pc->area[i] * -cosd * (h - lo);
     }
-    out->n_risky = n;
+    out->n_risky = (uint32_t)n;
     out->risky_area_mm2 = area;
     out->proxy_mm3 = proxy;
     out->build_height_mm = hi - lo;
@@ -263,18 +276,7 @@ measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
         out->contact_area_mm2 = (double)n * cell;
         out->n_columns = (uint32_t)n;
         out->n_anchors = count_anchors(&g, cols, n);
-        struct vec3 com;
-        double vol = mesh_volume(m, &com);
-        if (!(fabs(vol) > 1e-9)) { /* open soup: fall back to the surface centroid */
-            double area = 0;
-            com = v3(0, 0, 0);
-            for (uint32_t i = 0; i < m->n_tris; i++) {
-                double a = mesh_tri_area(m, i);
-                com = v3_add(com, v3_scale(mesh_tri_centroid(m, i), a));
-                area += a;
-            }
-            com = area > 0 ? v3_scale(com, 1 / area) : com;
-        }
+        struct vec3 com = raycast_com(rc);
         out->com_height_mm = v3_dot(com, up) - g.base;
         struct growth_report gr;
         rcode = growth_simulate(&g, cols, n, p->pitch_mm, &gr, err);
@@ -296,9 +298,10 @@ measure_deviation(const struct mesh *a, const struct mesh *b, struct deviation *
 {
     memset(out, 0, sizeof(*out));
     if (a->n_verts != b->n_verts || a->n_tris != b->n_tris)
-        return sf_err_set(err, SF_EINVAL,
-                          "deviation needs the same connectivity (%u/%u vs %u/%u vertices/triangles)",
-                          a->n_verts, a->n_tris, b->n_verts, b->n_tris);
+        return sf_err_set(
+            err, SF_EINVAL,
+            "deviation needs the same connectivity (%u/%u vs %u/%u vertices/triangles)", a->n_verts,
+            a->n_tris, b->n_verts, b->n_tris);
     double sum = 0;
     for (uint32_t i = 0; i < a->n_verts; i++) {
         double d = v3_len(v3_sub(a->v[i], b->v[i]));

@@ -195,7 +195,7 @@ T_CASE(cached_proxy_agrees_with_the_direct_one)
     mesh_init(&m);
     T_OK(shape_sphere_on_stem(&m, &err), &err);
     struct proxy_cache pc;
-    T_OK(proxy_cache_init(&pc, &m, &err), &err);
+    T_OK(proxy_cache_init(&pc, &m, NULL, 0, &err), &err);
     struct support_params p;
     support_params_default(&p);
     for (int i = 0; i < 20; i++) {
