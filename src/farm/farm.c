@@ -47,10 +47,12 @@ struct farm {
     struct farm_hooks hooks;   /* drivers, prepare, notify */
     struct printer **printers; /* n_printers, config order */
     size_t n_printers;
-    uint64_t kick;        /* pending run() timer, 0 if none */
-    uint64_t progress;    /* progress timer */
-    int preparing;        /* prepare tasks in flight */
-    bool prepare_blocked; /* a stage is missing; do not retry until reload */
+    uint64_t kick;     /* pending run() timer, 0 if none */
+    uint64_t progress; /* progress timer */
+    int preparing;     /* prepare tasks in flight */
+    int64_t *deferred; /* jobs whose prepare hit a missing stage: not retried */
+    size_t n_deferred; /* until reload or restart */
+    size_t cap_deferred;
 };
 
 /* A prepare task: plain data copied for the worker. */
@@ -326,9 +328,11 @@ prep_done(struct loop *l, void *ud, int rc)
         /* A missing stage is the build's fault, not the job's: keep it. */
         struct job_event_args a = { .reason = t->err.msg };
         job_event(f, id, JOB_EV_DEFER, &a);
-        if (!f->prepare_blocked)
-            log_warn("farm", "%s; queued jobs wait", t->err.msg);
-        f->prepare_blocked = true;
+        if (f->n_deferred == 0)
+            log_warn("farm", "%s; such jobs stay queued", t->err.msg);
+        if (mem_grow((void **)&f->deferred, &f->cap_deferred, f->n_deferred + 1,
+                     sizeof(*f->deferred)))
+            f->deferred[f->n_deferred++] = id;
     } else if (rc != SF_ECANCELED) {
         struct job_event_args a = { .reason = t->err.msg[0] ? t->err.msg : sf_status_name(rc) };
         job_event(f, id, JOB_EV_PREPARE_FAILED, &a);
@@ -413,6 +417,15 @@ start(struct farm *f, const struct job_row *j, struct printer *p)
     }
 }
 
+static bool
+deferred(const struct farm *f, int64_t id)
+{
+    for (size_t i = 0; i < f->n_deferred; i++)
+        if (f->deferred[i] == id)
+            return true;
+    return false;
+}
+
 static void
 run(struct loop *l, void *ud)
 {
@@ -452,8 +465,8 @@ run(struct loop *l, void *ud)
         if (jobs[i].state != JOB_QUEUED)
             continue;
         const char *reason = why[i];
-        if (!reason[0] && f->prepare_blocked)
-            continue; /* keeps the reason the failed prepare gave */
+        if (!reason[0] && deferred(f, jobs[i].id))
+            continue; /* keeps the reason its prepare gave */
         if (!reason[0] && f->preparing < pool_size(f->pool)) {
             for (size_t p = 0; p < f->n_printers; p++)
                 if (sched_compatible(&sj[i], &sp[p], NULL, 0)) {
@@ -535,6 +548,7 @@ farm_free(struct farm *f)
     for (size_t i = 0; i < f->n_printers; i++)
         printer_free(f->printers[i]);
     free(f->printers);
+    free(f->deferred);
     free(f);
 }
 
@@ -597,7 +611,7 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
         f->printers[w++] = p;
     }
     f->n_printers = w;
-    f->prepare_blocked = false;
+    f->n_deferred = 0; /* a reload may bring what was missing */
     farm_kick(f);
     return SF_OK;
 }

@@ -46,7 +46,38 @@ start() {
 }
 start
 
-printf 'solid a\nendsolid a\n' > "$tmp/bracket.stl"
+cat > "$tmp/bracket.stl" <<STL
+solid t
+facet normal 0 0 -1
+outer loop
+vertex 0 0 0
+vertex 0 10 0
+vertex 10 0 0
+endloop
+endfacet
+facet normal 0 -1 0
+outer loop
+vertex 0 0 0
+vertex 10 0 0
+vertex 0 0 10
+endloop
+endfacet
+facet normal -1 0 0
+outer loop
+vertex 0 0 0
+vertex 0 0 10
+vertex 0 10 0
+endloop
+endfacet
+facet normal 1 1 1
+outer loop
+vertex 10 0 0
+vertex 0 10 0
+vertex 0 0 10
+endloop
+endfacet
+endsolid t
+STL
 out=$("$C" submit "$tmp/bracket.stl" --copies 2 --material PLA --method slim --priority 3) || fail "submit: $out"
 [ "$out" = "job 1 queued: bracket.stl x2" ] || fail "submit said: $out"
 out=$("$C" submit "$tmp/bracket.stl" --copies 0 2>&1) && fail "copies 0 accepted"
@@ -67,18 +98,24 @@ echo "$out" | grep -qE '^1 +queued +0/2 +3 .*bracket.stl .*slicing is not availa
 out=$("$C" printers) || fail "printers"
 echo "$out" | grep -qE "^mk3 +offline .*no 'marlin' driver in this build" || fail "printers: $out"
 
+# a part that is no mesh fails at once, saying why
+echo "not a mesh" > "$tmp/junk.stl"
+"$C" submit "$tmp/junk.stl" >/dev/null || fail "submit junk"
+sleep 0.3
+"$C" jobs | grep -qE "^2 +failed .*junk.stl .*not a mesh file" || fail "junk part: $("$C" jobs)"
+
 # live events: the watcher sees a submission and a cancel made after it started
 "$C" watch --count 2 > "$tmp/watch" 2>&1 &
 wpid=$!
 sleep 0.3
 "$C" submit "$tmp/bracket.stl" >/dev/null || fail "second submit"
-out=$("$C" cancel 2) || fail "cancel: $out"
-[ "$out" = "job 2: cancelled" ] || fail "cancel said: $out"
+out=$("$C" cancel 3) || fail "cancel: $out"
+[ "$out" = "job 3: cancelled" ] || fail "cancel said: $out"
 for _ in $(seq 50); do kill -0 $wpid 2>/dev/null || break; sleep 0.1; done
 kill $wpid 2>/dev/null && fail "watch did not end after 2 events"
 grep -q "job-add" "$tmp/watch" || fail "watch: $(cat "$tmp/watch")"
-out=$("$C" cancel 2 2>&1) && fail "cancelled twice"
-[[ "$out" == *"409: job 2: cannot cancel a cancelled job"* ]] || fail "double cancel: $out"
+out=$("$C" cancel 3 2>&1) && fail "cancelled twice"
+[[ "$out" == *"409: job 3: cannot cancel a cancelled job"* ]] || fail "double cancel: $out"
 out=$("$C" pause mk3 2>&1) && fail "paused an offline printer"
 [[ "$out" == *"409: "* ]] || fail "pause offline: $out"
 out=$("$C" cleared nosuch 2>&1) && fail "unknown printer"
@@ -99,8 +136,9 @@ kill -9 $pid; wait $pid 2>/dev/null; pid=
 start
 out=$("$C" jobs)
 echo "$out" | grep -qE '^1 +queued +0/2' || fail "job 1 after restart: $out"
-echo "$out" | grep -qE '^2 +cancelled' || fail "job 2 after restart: $out"
-[ "$(echo "$out" | wc -l)" -eq 3 ] || fail "job count after restart: $out"
+echo "$out" | grep -qE '^2 +failed' || fail "job 2 after restart: $out"
+echo "$out" | grep -qE '^3 +cancelled' || fail "job 3 after restart: $out"
+[ "$(echo "$out" | wc -l)" -eq 4 ] || fail "job count after restart: $out"
 
 kill -TERM $pid; wait $pid; rc=$?; pid=
 [ $rc -eq 0 ] || fail "SIGTERM exit status $rc"

@@ -395,25 +395,38 @@ T_CASE(farm_dropped_printer_fails_print_into_retry_and_reconnects)
     teardown();
 }
 
+/* A closed tetrahedron, 10 mm on each axis. */
+static const char tetra_stl[] = "solid t\n"
+                                "facet normal 0 0 -1\nouter loop\nvertex 0 0 0\nvertex 0 10 0\n"
+                                "vertex 10 0 0\nendloop\nendfacet\n"
+                                "facet normal 0 -1 0\nouter loop\nvertex 0 0 0\nvertex 10 0 0\n"
+                                "vertex 0 0 10\nendloop\nendfacet\n"
+                                "facet normal -1 0 0\nouter loop\nvertex 0 0 0\nvertex 0 0 10\n"
+                                "vertex 0 10 0\nendloop\nendfacet\n"
+                                "facet normal 1 1 1\nouter loop\nvertex 10 0 0\nvertex 0 10 0\n"
+                                "vertex 0 0 10\nendloop\nendfacet\n"
+                                "endsolid t\n";
+
 T_CASE(farm_without_drivers_or_slicer_keeps_jobs_queued_with_reasons)
 {
     struct sf_err err;
-    atomic_store(&prepares, 0);
     T_OK(setup("nodrv", farm_ini, NULL, prepare_part, &err), &err);
     struct farm_printer_info info;
     farm_printer_info(fx.f, 0, &info);
     T_EQ_INT(info.state, PRINTER_OFFLINE);
     T_TRUE(strstr(info.message, "no 'marlin' driver in this build") != NULL);
-    int64_t a = add("size 1 1 1", "PLA", 1), b = add("size 1 1 1", "", 1);
-    for (int i = 0; i < 50; i++)
+    int64_t a = add(tetra_stl, "PLA", 1), b = add("this is no mesh", "", 1);
+    T_TRUE(wait_job(b, JOB_FAILED));
+    for (int i = 0; i < 20; i++)
         loop_run_once(fx.l, 10);
     struct job_row j;
+    /* a good part waits for the slicer, saying so */
     T_OK(store_job_get(fx.s, a, &j, &err), &err);
     T_EQ_INT(j.state, JOB_QUEUED);
     T_TRUE(strstr(j.reason, "slicing is not available in this build") != NULL);
+    /* a broken part fails at once, naming the uploaded file */
     T_OK(store_job_get(fx.s, b, &j, &err), &err);
-    T_EQ_INT(j.state, JOB_QUEUED);
-    /* nothing is lost across a restart either */
+    T_TRUE(strstr(j.reason, "part.stl") != NULL);
     T_OK(store_check(fx.s, &err), &err);
     teardown();
 }
