@@ -30,6 +30,7 @@
 struct api {
     struct api_config cfg; /* as given */
     struct http *http;     /* the server */
+    unsigned tick;         /* api_tick() count: streams send progress when it moves */
 };
 
 /* An upload in progress: the store's writer, then the committed hash. */
@@ -40,9 +41,10 @@ struct upload {
 
 /* One event stream client. */
 struct sse {
-    struct api *a;   /* owner */
-    int64_t last_id; /* last event id sent */
-    struct buf out;  /* formatted, not yet sent */
+    struct api *a;      /* owner */
+    int64_t last_id;    /* last event id sent */
+    unsigned tick_seen; /* last api tick answered with progress or a keepalive */
+    struct buf out;     /* formatted, not yet sent */
 };
 
 /* ---- upload sink ---- */
@@ -353,6 +355,35 @@ printer_action(struct api *a, const char *name, const char *action, struct http_
 
 /* ---- events ---- */
 
+/*
+ * On each tick: the progress of every printer with a job, as an event
+ * without id (a snapshot, not part of the log), or a comment line that
+ * keeps proxies from closing a quiet stream.
+ */
+static void
+sse_progress(struct sse *s)
+{
+    const struct api_printer_ops *ops = s->a->cfg.printers;
+    size_t n = ops ? ops->count(s->a->cfg.printers_ud) : 0;
+    json_t *arr = json_array();
+    for (size_t i = 0; arr && i < n; i++) {
+        struct api_printer_info p;
+        memset(&p, 0, sizeof(p));
+        ops->get(s->a->cfg.printers_ud, i, &p);
+        if (p.job_id)
+            json_array_append_new(
+                arr, json_pack("{ss sI ss sf}", "printer", p.name, "job_id", (json_int_t)p.job_id,
+                               "state", printer_state_name(p.state), "progress", p.progress));
+    }
+    char *text = json_array_size(arr) ? json_dumps(arr, JSON_COMPACT) : NULL;
+    json_decref(arr);
+    if (text)
+        buf_printf(&s->out, "event: progress\ndata: %s\n\n", text);
+    else
+        buf_printf(&s->out, ": keepalive\n\n");
+    free(text);
+}
+
 static ssize_t
 sse_read(void *ud, char *buf, size_t max)
 {
@@ -375,6 +406,10 @@ sse_read(void *ud, char *buf, size_t max)
             s->last_id = ev[i].id;
         }
         free(ev);
+    }
+    if (s->out.len == 0 && s->tick_seen != s->a->tick) {
+        s->tick_seen = s->a->tick;
+        sse_progress(s);
     }
     size_t n = s->out.len < max ? s->out.len : max;
     if (n == 0)
@@ -408,6 +443,7 @@ events_stream(struct api *a, const struct http_req *req, struct http_resp *resp)
         s->last_id = id;
     else
         s->last_id = store_event_last(a->cfg.store);
+    s->tick_seen = a->tick;
     resp->stream = sse_read;
     resp->stream_ud = s;
     resp->stream_free = sse_free;
@@ -574,5 +610,12 @@ api_http(struct api *a)
 void
 api_notify(struct api *a)
 {
+    http_wake_streams(a->http);
+}
+
+void
+api_tick(struct api *a)
+{
+    a->tick++;
     http_wake_streams(a->http);
 }

@@ -11,7 +11,9 @@
  *   GET    /api/printers                  list printers with state, temperatures
  *   GET    /api/printers/NAME             one printer
  *   POST   /api/printers/NAME/ACTION      pause | resume | cancel | cleared
- *   GET    /api/events                    Server-Sent Events from the event log
+ *   GET    /api/events                    Server-Sent Events: the event log (id: N,
+ *                                         event: KIND; Last-Event-ID resumes) and
+ *                                         every API_TICK_MS a "progress" snapshot
  *
  * Errors are {"error": "message"}: 400 bad input, 401/403 keys, 404
  * unknown, 405 wrong method, 409 not legal in the current state, 413 too
@@ -87,5 +89,12 @@ struct http *api_http(struct api *a);
 
 /* The event log grew: wake the event streams. */
 void api_notify(struct api *a);
+
+/*
+ * Call every API_TICK_MS: each event stream then sends a "progress" event
+ * (printers with a job: name, job_id, state, progress) or a keepalive.
+ */
+#define API_TICK_MS 5000
+void api_tick(struct api *a);
 
 #endif

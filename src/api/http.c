@@ -411,7 +411,9 @@ mhd_log(void *cls, const char *fmt, va_list ap)
     size_t n = strlen(msg);
     while (n && msg[n - 1] == '\n')
         msg[--n] = '\0';
-    log_warn("http", "%s", msg);
+    /* MHD reports client disconnects here too (a watcher quitting), so
+       its messages are information, not warnings. */
+    log_info("http", "%s", msg);
 }
 
 int

@@ -384,9 +384,29 @@ struct watch {
     long left;       /* events still to print; < 0 for no limit */
 };
 
+/* A progress snapshot: one line per printer with a job. */
+static void
+print_progress(struct watch *w)
+{
+    json_t *arr = json_loadb(w->data.data ? w->data.data : "", w->data.len, 0, NULL);
+    size_t i;
+    json_t *p;
+    json_array_foreach(arr, i, p)
+    {
+        printf("progress %-12s job %-5lld %-10s %5.1f%%\n", str(p, "printer"), num(p, "job_id"),
+               str(p, "state"), 100 * json_number_value(json_object_get(p, "progress")));
+    }
+    fflush(stdout);
+    json_decref(arr);
+}
+
 static void
 print_event(struct watch *w)
 {
+    if (strcmp(w->event, "progress") == 0) {
+        print_progress(w);
+        return;
+    }
     json_t *e = json_loadb(w->data.data ? w->data.data : "", w->data.len, 0, NULL);
     time_t t = (time_t)(json_integer_value(json_object_get(e, "at_ms")) / 1000);
     struct tm tm;
@@ -419,7 +439,8 @@ on_sse(char *data, size_t size, size_t n, void *ud)
         if (!l[0]) {
             if (w->event[0] && w->left != 0) {
                 print_event(w);
-                if (w->left > 0 && --w->left == 0)
+                /* --count counts log events; progress snapshots are extra */
+                if (strcmp(w->event, "progress") != 0 && w->left > 0 && --w->left == 0)
                     return 0; /* enough: end the transfer */
             }
             w->event[0] = '\0';

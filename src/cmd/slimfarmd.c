@@ -38,6 +38,7 @@ struct daemon {
     struct api *api;         /* REST API */
     struct http_loop *hl;    /* the API on the loop */
     uint64_t wake;           /* pending event-stream wake timer */
+    uint64_t tick;           /* API_TICK_MS timer: progress for event streams */
 };
 
 /* ---- the API's view of the farm's printers ---- */
@@ -100,6 +101,15 @@ on_farm_event(void *ud)
     struct daemon *d = ud;
     if (d->api && d->hl && !d->wake)
         d->wake = loop_timer_add(d->l, 0, wake_streams, d);
+}
+
+static void
+on_tick(struct loop *l, void *ud)
+{
+    struct daemon *d = ud;
+    api_tick(d->api);
+    http_loop_kick(d->hl);
+    d->tick = loop_timer_add(l, API_TICK_MS, on_tick, d);
 }
 
 static void
@@ -208,6 +218,7 @@ main(int argc, char **argv)
                              .ud = &d };
     if (!(d.api = api_new(&ac, &err)) || !(d.hl = http_loop_attach(d.l, api_http(d.api), &err)))
         goto out;
+    d.tick = loop_timer_add(d.l, API_TICK_MS, on_tick, &d);
     if (loop_add_signal(d.l, SIGINT, on_stop, &d, &err) ||
         loop_add_signal(d.l, SIGTERM, on_stop, &d, &err) ||
         loop_add_signal(d.l, SIGHUP, on_reload, &d, &err))
