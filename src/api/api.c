@@ -289,6 +289,20 @@ job_cancel(struct api *a, int64_t id, struct http_resp *resp)
     changed(a);
 }
 
+/* The operator prints an interrupted job's copy again from the start. */
+static void
+job_restart(struct api *a, int64_t id, struct http_resp *resp)
+{
+    struct sf_err err;
+    int rc = store_job_event(a->cfg.store, id, JOB_EV_RESTART, NULL, NULL, &err);
+    if (rc) {
+        http_error(resp, status_of(rc), "%s", err.msg);
+        return;
+    }
+    job_get(a, id, resp);
+    changed(a);
+}
+
 /* ---- printers ---- */
 
 static json_t *
@@ -514,14 +528,16 @@ route(void *ud, const struct http_req *req, struct http_resp *resp)
         }
         if (n == 3)
             goto bad_method;
-        if (!seg_is(seg[3], len[3], "cancel"))
+        bool cancel = seg_is(seg[3], len[3], "cancel");
+        if (!cancel && !seg_is(seg[3], len[3], "restart"))
             goto not_found;
         if (!post)
             goto bad_method;
-        {
+        if (cancel)
             job_cancel(a, id, resp);
-            return;
-        }
+        else
+            job_restart(a, id, resp);
+        return;
     }
     if (seg_is(seg[1], len[1], "printers")) {
         if (n == 2) {

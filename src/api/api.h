@@ -8,6 +8,7 @@
  *   GET    /api/jobs/ID                   one job with its print history
  *   PATCH  /api/jobs/ID                   {"priority": N}
  *   POST   /api/jobs/ID/cancel            cancel (through the printer if printing)
+ *   POST   /api/jobs/ID/restart           interrupted job: print its copy again from the start
  *   GET    /api/printers                  list printers with state, temperatures
  *   GET    /api/printers/NAME             one printer
  *   POST   /api/printers/NAME/ACTION      pause | resume | cancel | cleared

@@ -324,10 +324,16 @@ action(const char *name, int argc, char **argv)
     }
     char path[256];
     long id;
-    bool job = strcmp(name, "cancel") == 0 && parse_long(argv[1], 1, 999999999999L, &id);
+    bool restart = strcmp(name, "restart") == 0;
+    bool job =
+        (restart || strcmp(name, "cancel") == 0) && parse_long(argv[1], 1, 999999999999L, &id);
+    if (restart && !job) {
+        fprintf(stderr, "usage: slimfarm restart JOB_ID\n");
+        return 2;
+    }
     char *esc = curl_easy_escape(NULL, argv[1], 0);
     if (job)
-        snprintf(path, sizeof(path), "/api/jobs/%ld/cancel", id);
+        snprintf(path, sizeof(path), "/api/jobs/%ld/%s", id, name);
     else
         snprintf(path, sizeof(path), "/api/printers/%s/%s", esc ? esc : "", name);
     curl_free(esc);
@@ -350,6 +356,12 @@ run_cancel(int argc, char **argv)
 }
 
 static int
+run_restart(int argc, char **argv)
+{
+    return action("restart", argc, argv);
+}
+
+static int
 run_pause(int argc, char **argv)
 {
     return action("pause", argc, argv);
@@ -369,6 +381,8 @@ run_cleared(int argc, char **argv)
 
 CMD_REGISTER(cancel, "cancel", "cancel JOB_ID|PRINTER", "cancel a job, or the job on a printer",
              run_cancel)
+CMD_REGISTER(restart, "restart", "restart JOB_ID",
+             "print an interrupted job's copy again from the start", run_restart)
 CMD_REGISTER(pause, "pause", "pause PRINTER", "pause the job on a printer", run_pause)
 CMD_REGISTER(resume, "resume", "resume PRINTER", "resume a paused printer", run_resume)
 CMD_REGISTER(cleared, "cleared", "cleared PRINTER",

@@ -106,6 +106,8 @@ serve(void *arg)
     return NULL;
 }
 
+static int start_api(struct sf_err *err);
+
 /* Open a store with one printing job (on printer "a") and start the API. */
 static int
 start(const char *name, struct sf_err *err)
@@ -147,6 +149,15 @@ start(const char *name, struct sf_err *err)
         (rc = store_job_event(f->store, id, JOB_EV_START, &go, NULL, err)))
         return rc;
     f->job[0] = id;
+    return start_api(err);
+}
+
+/* Start the API on srv.farm's store. */
+static int
+start_api(struct sf_err *err)
+{
+    struct farm *f = &srv.farm;
+    atomic_store(&srv.stop, false);
     struct farmcfg_key keys[2] = { { KEY_RW, false }, { KEY_RO, true } };
     struct api_config cfg = { .store = f->store,
                               .printers = &reg_ops,
@@ -441,6 +452,36 @@ T_CASE(api_cancel_and_printer_actions)
     T_EQ_INT(call("POST", "/api/jobs/2/cancel", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 200);
     T_EQ_STR(jstr(&b, "job", "state"), "cancelled");
     T_EQ_STR(jstr(&b, "job", "reason"), "cancelled by an operator");
+    buf_release(&b);
+    stop();
+}
+
+T_CASE(api_restart_interrupted_job)
+{
+    struct sf_err err;
+    T_OK(start("restart", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    T_EQ_INT(call("POST", "/api/jobs/1/restart", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 409);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "cannot restart a printing job") != NULL);
+    /* the daemon dies while job 1 prints; on restart it is interrupted */
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/restart", t_tmpdir());
+    stop();
+    struct store_recovery rec;
+    srv.farm.store = store_open(dir, &rec, &err);
+    T_TRUE(srv.farm.store != NULL);
+    T_EQ_INT(rec.interrupted, 1);
+    srv.farm.job[0] = 0;
+    srv.farm.p[0].state = PRINTER_OFFLINE;
+    T_OK(start_api(&err), &err);
+    T_EQ_INT(get("/api/jobs/1", KEY_RW, &b), 200);
+    T_EQ_STR(jstr(&b, "job", "state"), "interrupted");
+    T_EQ_STR(jstr(&b, "job", "printer"), "a");
+    T_EQ_INT(call("POST", "/api/jobs/1/restart", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 200);
+    T_EQ_STR(jstr(&b, "job", "state"), "ready");
+    T_EQ_INT(call("POST", "/api/jobs/1/explode", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 404);
+    T_EQ_INT(call("GET", "/api/jobs/1/restart", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 405);
     buf_release(&b);
     stop();
 }
