@@ -2,7 +2,7 @@
  * slimfarmd.c - the farm daemon: config, job store, event loop, worker
  * pool, printers, REST API, signals.
  *
- *     slimfarmd [-c CONFIG] [--check]
+ *     slimfarmd [-c CONFIG] [--check | --fsck]
  *
  * Why it is small: every part is a module (farmcfg, store, farm, api,
  * loop, pool); main() only builds them in dependency order, wires the
@@ -154,12 +154,36 @@ on_reload(struct loop *l, int signo, void *ud)
              d->cfg.n_printers, d->cfg.n_keys);
 }
 
+/* --fsck: crash recovery plus every store check; prints a summary. */
+static int
+run_fsck(struct farmcfg *cfg)
+{
+    struct sf_err err;
+    struct store_recovery rec;
+    struct store *s = store_open(cfg->data_dir, &rec, &err);
+    int status = 1;
+    struct job_row *jobs = NULL;
+    size_t n = 0;
+    if (s && store_check(s, &err) == SF_OK && store_job_list(s, &jobs, &n, &err) == SF_OK) {
+        printf("store %s: ok, %zu jobs, %d interrupted and %d requeued by recovery\n",
+               cfg->data_dir, n, rec.interrupted, rec.requeued);
+        status = 0;
+    } else {
+        fprintf(stderr, "slimfarmd: store %s: %s\n", cfg->data_dir, err.msg);
+    }
+    free(jobs);
+    store_close(s);
+    farmcfg_release(cfg);
+    return status;
+}
+
 static int
 usage(void)
 {
-    fprintf(stderr, "usage: slimfarmd [-c CONFIG] [--check]\n"
+    fprintf(stderr, "usage: slimfarmd [-c CONFIG] [--check | --fsck]\n"
                     "  -c CONFIG  farm config (default config/farm.ini)\n"
-                    "  --check    validate the config and exit\n");
+                    "  --check    validate the config and exit\n"
+                    "  --fsck     recover and check the job store, then exit\n");
     return 2;
 }
 
@@ -167,12 +191,14 @@ int
 main(int argc, char **argv)
 {
     struct daemon d = { .config_path = "config/farm.ini" };
-    bool check = false;
+    bool check = false, fsck = false;
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "-c") == 0 && i + 1 < argc)
             d.config_path = argv[++i];
         else if (strcmp(argv[i], "--check") == 0)
             check = true;
+        else if (strcmp(argv[i], "--fsck") == 0)
+            fsck = true;
         else
             return usage();
     }
@@ -189,6 +215,8 @@ main(int argc, char **argv)
         farmcfg_release(&d.cfg);
         return 0;
     }
+    if (fsck)
+        return run_fsck(&d.cfg);
     if (d.cfg.n_keys == 0)
         log_warn("slimfarmd", "%s has no api_keys: every API request will get 401", d.config_path);
     struct store_recovery rec;
