@@ -390,6 +390,50 @@ T_CASE(api_oversized_bodies_are_413)
     stop();
 }
 
+/* Reads `left` bytes of 'x' for a chunked upload. */
+static size_t
+read_x(char *buf, size_t size, size_t n, void *ud)
+{
+    size_t *left = ud, k = size * n < *left ? size * n : *left;
+    memset(buf, 'x', k);
+    *left -= k;
+    return k;
+}
+
+T_CASE(api_chunked_body_over_the_cap_is_413)
+{
+    /* No Content-Length to refuse early: the cap holds while streaming. */
+    struct sf_err err;
+    T_OK(start("chunked", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    CURL *c = curl_easy_init();
+    char url[128];
+    snprintf(url, sizeof(url), "%s/api/jobs/1", srv.base);
+    struct curl_slist *h = curl_slist_append(NULL, "X-Api-Key: " KEY_RW);
+    h = curl_slist_append(h, "Transfer-Encoding: chunked");
+    h = curl_slist_append(h, "Content-Type: application/json");
+    size_t left = API_BODY_MAX * 4;
+    curl_easy_setopt(c, CURLOPT_URL, url);
+    curl_easy_setopt(c, CURLOPT_UPLOAD, 1L);
+    curl_easy_setopt(c, CURLOPT_CUSTOMREQUEST, "PATCH");
+    curl_easy_setopt(c, CURLOPT_HTTPHEADER, h);
+    curl_easy_setopt(c, CURLOPT_READFUNCTION, read_x);
+    curl_easy_setopt(c, CURLOPT_READDATA, &left);
+    curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, on_body);
+    curl_easy_setopt(c, CURLOPT_WRITEDATA, &b);
+    curl_easy_setopt(c, CURLOPT_TIMEOUT, 10L);
+    T_EQ_INT(curl_easy_perform(c), CURLE_OK);
+    long status = 0;
+    curl_easy_getinfo(c, CURLINFO_RESPONSE_CODE, &status);
+    curl_slist_free_all(h);
+    curl_easy_cleanup(c);
+    T_EQ_INT(status, 413);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "over the limit") != NULL);
+    buf_release(&b);
+    stop();
+}
+
 T_CASE(api_path_traversal_in_file_names_is_refused)
 {
     struct sf_err err;
