@@ -53,7 +53,7 @@ LDFLAGS := $(filter -fsanitize=%,$(OPT))
 # Hot geometry kernels written as branch-free structure-of-arrays loops: -O3
 # lets gcc vectorise them (-O2's very-cheap cost model refuses loops that
 # need an epilogue).  Measured with callgrind in the commit that added this.
-HOT_OBJS := src/geom/measure.o
+HOT_OBJS := src/geom/proxy.o
 $(addprefix $(BUILD)/obj/,$(HOT_OBJS)): CFLAGS += -O3
 
 LIB_DIRS := src/base src/mesh src/geom slicer drivers src/farm src/api

@@ -74,89 +74,6 @@ measure_proxy(const struct mesh *m, struct vec3 up, const struct support_params 
 }
 
 int
-proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, const uint32_t *extreme,
-                 uint32_t n_extreme, struct sf_err *err)
-{
-    memset(pc, 0, sizeof(*pc));
-    uint32_t n_v = extreme ? n_extreme : m->n_verts;
-    size_t nt = m->n_tris ? m->n_tris : 1, nv = n_v ? n_v : 1;
-    float *block = mem_array(7 * nt + 3 * nv, sizeof(float));
-    if (!block)
-        return sf_err_set(err, SF_ENOMEM, "proxy: out of memory for %u triangles", m->n_tris);
-    float *arrays[10];
-    for (int k = 0; k < 7; k++)
-        arrays[k] = block + k * nt;
-    for (int k = 0; k < 3; k++)
-        arrays[7 + k] = block + 7 * nt + k * nv;
-    pc->nx = arrays[0], pc->ny = arrays[1], pc->nz = arrays[2], pc->area = arrays[3];
-    pc->cx = arrays[4], pc->cy = arrays[5], pc->cz = arrays[6];
-    pc->vx = arrays[7], pc->vy = arrays[8], pc->vz = arrays[9];
-    pc->n_tris = m->n_tris;
-    pc->n_verts = n_v;
-    for (uint32_t i = 0; i < m->n_tris; i++) {
-        struct vec3 c = mesh_tri_cross(m, i), g = mesh_tri_centroid(m, i);
-        double len = v3_len(c);
-        struct vec3 nrm = len > 0 ? v3_scale(c, 1 / len) : v3(0, 0, 0);
-        pc->nx[i] = (float)nrm.x;
-        pc->ny[i] = (float)nrm.y;
-        pc->nz[i] = (float)nrm.z;
-        pc->area[i] = (float)(0.5 * len);
-        pc->cx[i] = (float)g.x;
-        pc->cy[i] = (float)g.y;
-        pc->cz[i] = (float)g.z;
-    }
-    for (uint32_t i = 0; i < n_v; i++) {
-        struct vec3 v = m->v[extreme ? extreme[i] : i];
-        pc->vx[i] = (float)v.x;
-        pc->vy[i] = (float)v.y;
-        pc->vz[i] = (float)v.z;
-    }
-    return SF_OK;
-}
-
-void
-proxy_cache_release(struct proxy_cache *pc)
-{
-    free(pc->nx);
-    memset(pc, 0, sizeof(*pc));
-}
-
-/*
- * The loops below are written branch-free over structure-of-arrays floats so
- * the compiler vectorises them: this runs once per candidate direction,
- * thousands of times per part.
- */
-void
-measure_proxy_cached(const struct proxy_cache *pc, struct vec3 up, const struct support_params *p,
-                     struct support_metrics *out)
-{
-    memset(out, 0, sizeof(*out));
-    up = v3_normalize(up);
-    float ux = (float)up.x, uy = (float)up.y, uz = (float)up.z;
-    float lo = INFINITY, hi = -INFINITY;
-    for (uint32_t i = 0; i < pc->n_verts; i++) {
-        float d = pc->vx[i] * ux + pc->vy[i] * uy + pc->vz[i] * uz;
-        lo = d < lo ? d : lo;
-        hi = d > hi ? d : hi;
-    }
-    float tau = (float)sin(p->angle_deg * M_PI / 180);
-    float floor_h = lo + (float)p->min_gap_mm;
-    float area = 0, proxy = 0, n = 0;
-    for (uint32_t i = 0; i < pc->n_tris; i++) {
-        float cosd = pc->nx[i] * ux + pc->ny[i] * uy + pc->nz[i] * uz;
-        float h = pc->cx[i] * ux + pc->cy[i] * uy + pc->cz[i] * uz;
-        float risky = (cosd < -tau) & (h >= floor_h) ? 1.0f : 0.0f;
-        n += risky;
-        area += risky * pc->area[i];
-        proxy += risky * pc->area[i] * -cosd * (h - lo);
-    }
-    out->n_risky = (uint32_t)n;
-    out->risky_area_mm2 = area;
-    out->proxy_mm3 = proxy;
-    out->build_height_mm = hi - lo;
-}
-
-int
 measure_columns(const struct ray_grid *g, const struct support_params *p,
                 struct support_column **cols, size_t *n_cols, struct sf_err *err)
 {
@@ -258,8 +175,19 @@ int
 measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
                 const struct support_params *p, struct support_metrics *out, struct sf_err *err)
 {
+    return measure_support_cached(m, rc, NULL, up, p, out, err);
+}
+
+int
+measure_support_cached(const struct mesh *m, struct raycast *rc, const struct proxy_cache *pc,
+                       struct vec3 up, const struct support_params *p,
+                       struct support_metrics *out, struct sf_err *err)
+{
     up = v3_normalize(up);
-    measure_proxy(m, up, p, out);
+    if (pc)
+        proxy_eval(pc, up, p, out);
+    else
+        measure_proxy(m, up, p, out);
     struct ray_grid g;
     int rcode = raycast_grid(rc, up, p->pitch_mm, &g, err);
     if (rcode)

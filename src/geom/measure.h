@@ -19,6 +19,7 @@
 
 #include "../base/err.h"
 #include "../mesh/mesh.h"
+#include "proxy.h"
 #include "raycast.h"
 
 struct support_params {
@@ -65,27 +66,6 @@ void measure_proxy(const struct mesh *m, struct vec3 up, const struct support_pa
                    struct support_metrics *out);
 
 /*
- * The same proxy for many directions of one mesh: per-triangle normals,
- * areas and centroids computed once (structure of arrays), so each
- * direction costs a few multiply-adds per triangle.
- */
-struct proxy_cache {
-    uint32_t n_tris, n_verts; /* n_verts: entries of vx, vy, vz */
-    float *nx, *ny, *nz;      /* unit normals */
-    float *area;              /* mm2 */
-    float *cx, *cy, *cz;      /* centroids */
-    float *vx, *vy, *vz;      /* vertices, for the lowest and highest point */
-};
-/* extreme: optional indices of the only vertices that can be lowest or highest
-   (the convex hull's, hull.h); NULL means all of them. */
-int proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, const uint32_t *extreme,
-                     uint32_t n_extreme, struct sf_err *err);
-void proxy_cache_release(struct proxy_cache *pc);
-/* As measure_proxy (same numbers up to float rounding). */
-void measure_proxy_cached(const struct proxy_cache *pc, struct vec3 up,
-                          const struct support_params *p, struct support_metrics *out);
-
-/*
  * Support columns on a cast grid: walking up each ray, a hit on a risky
  * face more than min_gap above the last surface below (the bed, or the
  * part's last exit) needs a column from there.  *cols is allocated (free()).
@@ -97,6 +77,12 @@ int measure_columns(const struct ray_grid *g, const struct support_params *p,
 int measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
                     const struct support_params *p, struct support_metrics *out,
                     struct sf_err *err);
+
+/* The same, taking the risky-face figures from a proxy cache of m (for
+   callers that score many directions of one part). */
+int measure_support_cached(const struct mesh *m, struct raycast *rc, const struct proxy_cache *pc,
+                           struct vec3 up, const struct support_params *p,
+                           struct support_metrics *out, struct sf_err *err);
 
 /* Shape deviation between two meshes with the same connectivity (a deformed copy). */
 struct deviation {

@@ -70,23 +70,6 @@ struct job {
     uint32_t progress_total;
 };
 
-/* Area of faces lying on the bed (within 0.1 mm of the lowest point). */
-static double
-bed_contact_area(const struct mesh *m, struct vec3 up)
-{
-    double lo = INFINITY;
-    for (uint32_t i = 0; i < m->n_verts; i++)
-        lo = fmin(lo, v3_dot(m->v[i], up));
-    double area = 0;
-    for (uint32_t i = 0; i < m->n_tris; i++) {
-        const uint32_t *t = m->t[i];
-        if (v3_dot(m->v[t[0]], up) - lo < 0.1 && v3_dot(m->v[t[1]], up) - lo < 0.1 &&
-            v3_dot(m->v[t[2]], up) - lo < 0.1)
-            area += mesh_tri_area(m, i);
-    }
-    return area;
-}
-
 static double
 cost_of(const struct orient_params *p, const struct support_metrics *s)
 {
@@ -99,14 +82,14 @@ score_one(struct job *j, struct cand *c, struct sf_err *err)
 {
     if (j->stage == 0) {
         struct support_metrics s;
-        measure_proxy_cached(j->pc, c->c.up, &j->sp, &s);
+        proxy_eval(j->pc, c->c.up, &j->sp, &s);
         c->key = s.proxy_mm3 + j->p->w_contact_mm * s.risky_area_mm2;
         return SF_OK;
     }
     struct support_params sp = j->sp;
     if (j->stage == 1)
         sp.pitch_mm *= 2; /* coarse: a quarter of the rays, for ranking */
-    int rc = measure_support(j->m, j->rc, c->c.up, &sp, &c->c.m, err);
+    int rc = measure_support_cached(j->m, j->rc, j->pc, c->c.up, &sp, &c->c.m, err);
     if (rc)
         return rc;
     c->c.cost = c->key = cost_of(j->p, &c->c.m);
@@ -114,7 +97,7 @@ score_one(struct job *j, struct cand *c, struct sf_err *err)
     c->dropped = false;
     /* Standing on a point with no support column from the bed: it would topple. */
     if (c->c.source != ORIENT_HULL && c->c.m.n_columns == 0 &&
-        bed_contact_area(j->m, c->c.up) < j->p->min_base_mm2)
+        proxy_bed_contact(j->pc, c->c.up) < j->p->min_base_mm2)
         c->dropped = true;
     /* Growth simulation: the part built so far would tip off its base. */
     if (c->c.m.base_margin_mm < 0)
@@ -336,12 +319,23 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
         best = 0; /* not worth turning the part */
     res->best = cands[best].c;
     res->input = cands[0].c;
+    /* report at the operator's angle: the margin only steers the choice */
+    struct support_params at = j.sp;
+    at.angle_deg = p->angle_deg;
+    if ((rcode = measure_support_cached(m, rc, &pc, res->best.up, &at, &res->best.m, err)) ||
+        (rcode = measure_support_cached(m, rc, &pc, res->input.up, &at, &res->input.m, err)))
+        goto out;
     res->n_candidates = n;
     res->n_exact = n_coarse + n_final;
     (void)n_first;
-    for (uint32_t i = 0; i < n_final && res->n_runners < 4; i++)
-        if (final[i] != best && !cands[final[i]].dropped)
-            res->runners[res->n_runners++] = cands[final[i]].c;
+    for (uint32_t i = 0; i < n_final && res->n_runners < 4; i++) {
+        if (final[i] == best || cands[final[i]].dropped)
+            continue;
+        struct orient_candidate *r = &res->runners[res->n_runners++];
+        *r = cands[final[i]].c;
+        if ((rcode = measure_support_cached(m, rc, &pc, r->up, &at, &r->m, err)))
+            goto out;
+    }
     res->seconds = elapsed(&t0);
     res->seconds_exact = res->seconds - res->seconds_setup - res->seconds_proxy;
     goto out;

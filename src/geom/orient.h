@@ -48,8 +48,8 @@ enum orient_source { ORIENT_INPUT, ORIENT_HULL, ORIENT_SPHERE, ORIENT_REFINE };
 struct orient_candidate {
     struct vec3 up;            /* unit up-direction in the input frame */
     enum orient_source source; /* where it came from */
-    struct support_metrics m;  /* exact metrics */
-    double cost;               /* lower is better */
+    struct support_metrics m;  /* exact metrics at angle_deg (what the operator asked) */
+    double cost;               /* lower is better; scored at angle_deg - margin_deg */
 };
 
 struct orient_result {
