@@ -45,6 +45,7 @@ struct farm {
     struct store *s;           /* the job store */
     struct pool *pool;         /* prepare workers */
     struct farm_hooks hooks;   /* drivers, prepare, notify */
+    char profiles_dir[512];    /* slicing profiles (farmcfg profiles_dir) */
     struct printer **printers; /* n_printers, config order */
     size_t n_printers;
     uint64_t kick;     /* pending run() timer, 0 if none */
@@ -354,6 +355,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p)
     t->req.job_id = j->id;
     t->req.opts = j->opts;
     t->req.printer = p->cfg;
+    snprintf(t->req.profiles_dir, sizeof(t->req.profiles_dir), "%s", f->profiles_dir);
     snprintf(t->req.part_name, sizeof(t->req.part_name), "%s", j->opts.name);
     if (store_file_path(f->s, j->file_sha, t->req.part_path, sizeof(t->req.part_path), &err) ||
         store_file_path(f->s, j->file_sha, t->req.out_path, sizeof(t->req.out_path) - 16, &err)) {
@@ -526,6 +528,7 @@ farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcf
         return NULL;
     }
     *f = (struct farm){ .l = l, .s = s, .pool = pool, .hooks = *hooks };
+    snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
     for (size_t i = 0; i < cfg->n_printers; i++)
         if (add_printer(f, &cfg->printers[i], err)) {
             farm_free(f);
@@ -612,6 +615,7 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     }
     f->n_printers = w;
     f->n_deferred = 0; /* a reload may bring what was missing */
+    snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
     farm_kick(f);
     return SF_OK;
 }

@@ -49,6 +49,7 @@ struct option {
 static const struct option options[] = {
     { "listen", false, K_LISTEN, 0, 0, 0, 0 },
     { "data_dir", false, K_STR, F(data_dir), 0, 0 },
+    { "profiles_dir", false, K_STR, F(profiles_dir), 0, 0 },
     { "api_keys", false, K_KEYS, 0, 0, 0, 0 },
     { "api_keys_readonly", false, K_KEYS, 1, 0, 0, 0 },
     { "upload_max_mb", false, K_MIB, 0, 0, 1, 4096 },
@@ -117,7 +118,7 @@ printer_defaults(struct farmcfg_printer *p)
 {
     memset(p, 0, sizeof(*p));
     p->baud = 115200;
-    snprintf(p->profile, sizeof(p->profile), "generic");
+    snprintf(p->profile, sizeof(p->profile), "generic-marlin");
     snprintf(p->material, sizeof(p->material), "PLA");
     p->nozzle_mm = 0.4;
     p->bed_mm[0] = p->bed_mm[1] = 220;
@@ -334,6 +335,8 @@ handler(void *user, const char *section, const char *name, const char *value)
     switch (o->kind) {
     case K_STR:
     case K_IDENT:
+        if (!value[0] && strcmp(name, "profiles_dir") == 0)
+            return 1; /* empty: keep the default, the config file's directory */
         if (strlen(value) >= o->size)
             return fail(ps, "option '%s' in section '%s': value is longer than %zu bytes", name,
                         section, o->size - 1);
@@ -431,6 +434,7 @@ farmcfg_init(struct farmcfg *c)
     snprintf(c->listen_host, sizeof(c->listen_host), "127.0.0.1");
     c->listen_port = 7420;
     snprintf(c->data_dir, sizeof(c->data_dir), "/var/lib/slimfarm");
+    snprintf(c->profiles_dir, sizeof(c->profiles_dir), "config");
     c->upload_max_bytes = (size_t)256 << 20;
 }
 
@@ -470,8 +474,15 @@ farmcfg_load(struct farmcfg *c, const char *path, struct sf_err *err)
     struct buf b;
     buf_init(&b, SF_CONFIG_FILE_MAX);
     int rc = buf_read_file(&b, path, err);
-    if (rc == SF_OK)
+    if (rc == SF_OK) {
+        /* Profiles sit beside the config unless it says otherwise. */
+        const char *slash = strrchr(path, '/');
+        if (slash)
+            snprintf(c->profiles_dir, sizeof(c->profiles_dir), "%.*s", (int)(slash - path), path);
+        else
+            snprintf(c->profiles_dir, sizeof(c->profiles_dir), ".");
         rc = farmcfg_parse(c, b.data ? b.data : "", b.len, path, err);
+    }
     buf_release(&b);
     return rc;
 }

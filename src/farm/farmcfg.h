@@ -39,7 +39,7 @@ struct farmcfg_printer {
     int baud;            /* marlin serial speed (default 115200) */
     char url[256];       /* network drivers: base URL */
     char api_key[128];   /* network drivers: key or access code */
-    char profile[64];    /* printer profile for slicing (default "generic") */
+    char profile[64];    /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */
     char material[32];   /* loaded material (default "PLA") */
     double nozzle_mm;    /* nozzle diameter (default 0.4) */
     double bed_mm[3];    /* build volume x, y, z (default 220, 220, 250) */
@@ -53,6 +53,8 @@ struct farmcfg {
     char listen_host[64];     /* address to listen on (default 127.0.0.1) */
     int listen_port;          /* port (default 7420) */
     char data_dir[512];       /* database and files (default /var/lib/slimfarm) */
+    char profiles_dir[512];   /* printers/NAME.cfg, materials/NAME.cfg live here (default: the
+                                 config file's directory; "config" before a file is loaded) */
     size_t upload_max_bytes;  /* largest part upload (default 256 MiB) */
     struct farmcfg_key *keys; /* n_keys API keys; free with farmcfg_release */
     size_t n_keys;

@@ -94,28 +94,34 @@ out=$("$C" submit "$tmp/huge.stl" 2>&1) && fail "oversized upload accepted"
 
 sleep 0.3
 out=$("$C" jobs --key $RO) || fail "jobs"
-echo "$out" | grep -qE '^1 +queued +0/2 +3 .*bracket.stl .*slicing is not available' || fail "jobs: $out"
+echo "$out" | grep -qE "^1 +queued +0/2 +3 .*bracket.stl .*method 'slim' is not available" || fail "jobs: $out"
 out=$("$C" printers) || fail "printers"
 echo "$out" | grep -qE "^mk3 +offline .*no 'marlin' driver in this build" || fail "printers: $out"
+
+# orient + slice for real (config/printers, config/materials); waits for mk3
+cp -r config/printers config/materials "$tmp/"
+out=$("$C" submit "$tmp/bracket.stl" --method orient) || fail "submit orient: $out"
+for _ in $(seq 100); do "$C" jobs | grep -qE '^2 +ready' && break; sleep 0.1; done
+"$C" jobs | grep -qE '^2 +ready .*waits for a printer: mk3 is offline' || fail "orient job: $("$C" jobs)"
 
 # a part that is no mesh fails at once, saying why
 echo "not a mesh" > "$tmp/junk.stl"
 "$C" submit "$tmp/junk.stl" >/dev/null || fail "submit junk"
 sleep 0.3
-"$C" jobs | grep -qE "^2 +failed .*junk.stl .*not a mesh file" || fail "junk part: $("$C" jobs)"
+"$C" jobs | grep -qE "^3 +failed .*junk.stl .*not a mesh file" || fail "junk part: $("$C" jobs)"
 
 # live events: the watcher sees a submission and a cancel made after it started
 "$C" watch --count 2 > "$tmp/watch" 2>&1 &
 wpid=$!
 sleep 0.3
 "$C" submit "$tmp/bracket.stl" >/dev/null || fail "second submit"
-out=$("$C" cancel 3) || fail "cancel: $out"
-[ "$out" = "job 3: cancelled" ] || fail "cancel said: $out"
+out=$("$C" cancel 4) || fail "cancel: $out"
+[ "$out" = "job 4: cancelled" ] || fail "cancel said: $out"
 for _ in $(seq 50); do kill -0 $wpid 2>/dev/null || break; sleep 0.1; done
 kill $wpid 2>/dev/null && fail "watch did not end after 2 events"
 grep -q "job-add" "$tmp/watch" || fail "watch: $(cat "$tmp/watch")"
-out=$("$C" cancel 3 2>&1) && fail "cancelled twice"
-[[ "$out" == *"409: job 3: cannot cancel a cancelled job"* ]] || fail "double cancel: $out"
+out=$("$C" cancel 4 2>&1) && fail "cancelled twice"
+[[ "$out" == *"409: job 4: cannot cancel a cancelled job"* ]] || fail "double cancel: $out"
 out=$("$C" pause mk3 2>&1) && fail "paused an offline printer"
 [[ "$out" == *"409: "* ]] || fail "pause offline: $out"
 out=$("$C" cleared nosuch 2>&1) && fail "unknown printer"
@@ -136,9 +142,10 @@ kill -9 $pid; wait $pid 2>/dev/null; pid=
 start
 out=$("$C" jobs)
 echo "$out" | grep -qE '^1 +queued +0/2' || fail "job 1 after restart: $out"
-echo "$out" | grep -qE '^2 +failed' || fail "job 2 after restart: $out"
-echo "$out" | grep -qE '^3 +cancelled' || fail "job 3 after restart: $out"
-[ "$(echo "$out" | wc -l)" -eq 4 ] || fail "job count after restart: $out"
+echo "$out" | grep -qE '^2 +ready' || fail "job 2 after restart: $out"
+echo "$out" | grep -qE '^3 +failed' || fail "job 3 after restart: $out"
+echo "$out" | grep -qE '^4 +cancelled' || fail "job 4 after restart: $out"
+[ "$(echo "$out" | wc -l)" -eq 5 ] || fail "job count after restart: $out"
 
 kill -TERM $pid; wait $pid; rc=$?; pid=
 [ $rc -eq 0 ] || fail "SIGTERM exit status $rc"

@@ -31,7 +31,7 @@ printf 'solid t\nfacet normal 0 0 -1\nouter loop\nvertex 0 0 0\nvertex 0 10 0\nv
 # Client loop: submit, and cancel every third job; record acknowledged ids.
 client() {
   while true; do
-    out=$("$C" submit "$tmp/p.stl" 2>/dev/null) || continue
+    out=$("$C" submit "$tmp/p.stl" --method none 2>/dev/null) || continue
     id=$(echo "$out" | sed -n 's/^job \([0-9]*\) queued.*/\1/p')
     [ -n "$id" ] && echo "$id" >> "$tmp/acked"
     [ -n "$id" ] && [ $((id % 3)) -eq 0 ] && "$C" cancel "$id" >/dev/null 2>&1

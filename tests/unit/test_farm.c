@@ -234,10 +234,11 @@ teardown(void)
 }
 
 static int64_t
-add(const char *part, const char *material, int copies)
+add_m(const char *part, const char *material, int copies, const char *method)
 {
     struct job_opts o;
     job_opts_init(&o);
+    snprintf(o.method, sizeof(o.method), "%s", method);
     snprintf(o.name, sizeof(o.name), "part.stl");
     snprintf(o.material, sizeof(o.material), "%s", material);
     o.copies = copies;
@@ -248,6 +249,12 @@ add(const char *part, const char *material, int copies)
         return 0;
     farm_kick(fx.f);
     return id;
+}
+
+static int64_t
+add(const char *part, const char *material, int copies)
+{
+    return add_m(part, material, copies, "orient");
 }
 
 static enum job_state
@@ -407,27 +414,58 @@ static const char tetra_stl[] = "solid t\n"
                                 "vertex 0 0 10\nendloop\nendfacet\n"
                                 "endsolid t\n";
 
-T_CASE(farm_without_drivers_or_slicer_keeps_jobs_queued_with_reasons)
+T_CASE(farm_default_prepare_slices_and_defers_missing_stages)
 {
+    /* the real pipeline: src/mesh, src/geom orient, slicer/ with
+       config/printers and config/materials (tests run from the top) */
     struct sf_err err;
-    T_OK(setup("nodrv", farm_ini, NULL, prepare_part, &err), &err);
+    T_OK(setup("pipeline", farm_ini, NULL, prepare_part, &err), &err);
     struct farm_printer_info info;
     farm_printer_info(fx.f, 0, &info);
     T_EQ_INT(info.state, PRINTER_OFFLINE);
     T_TRUE(strstr(info.message, "no 'marlin' driver in this build") != NULL);
-    int64_t a = add(tetra_stl, "PLA", 1), b = add("this is no mesh", "", 1);
-    T_TRUE(wait_job(b, JOB_FAILED));
+    int64_t ok = add(tetra_stl, "PLA", 1), slim = add_m(tetra_stl, "PLA", 1, "slim"),
+            junk = add("this is no mesh", "", 1), abs = add_m(tetra_stl, "", 1, "none");
+    T_TRUE(wait_job(junk, JOB_FAILED));
+    T_TRUE(wait_job(ok, JOB_READY));
     for (int i = 0; i < 20; i++)
         loop_run_once(fx.l, 10);
     struct job_row j;
-    /* a good part waits for the slicer, saying so */
-    T_OK(store_job_get(fx.s, a, &j, &err), &err);
+    /* oriented and sliced for printer a (PLA, 0.4 mm), waiting for it */
+    T_OK(store_job_get(fx.s, ok, &j, &err), &err);
+    T_EQ_DBL(j.nozzle_mm, 0.4, 1e-9);
+    T_TRUE(j.size_mm[2] > 0 && j.size_mm[2] <= 10.0 * 1.7321 + 1e-6);
+    T_EQ_STR(j.reason, "waits for a printer: a is offline");
+    char path[1200];
+    T_OK(store_file_path(fx.s, j.gcode_sha, path, sizeof(path), &err), &err);
+    struct buf g;
+    buf_init(&g, 64 << 20);
+    T_OK(buf_read_file(&g, path, &err), &err);
+    T_TRUE(strstr(g.data, "G1 ") != NULL);
+    buf_release(&g);
+    /* a method whose stage is missing waits, saying so */
+    T_OK(store_job_get(fx.s, slim, &j, &err), &err);
     T_EQ_INT(j.state, JOB_QUEUED);
-    T_TRUE(strstr(j.reason, "slicing is not available in this build") != NULL);
+    T_TRUE(strstr(j.reason, "method 'slim' is not available in this build") != NULL);
     /* a broken part fails at once, naming the uploaded file */
-    T_OK(store_job_get(fx.s, b, &j, &err), &err);
-    T_TRUE(strstr(j.reason, "part.stl") != NULL);
+    T_OK(store_job_get(fx.s, junk, &j, &err), &err);
+    T_TRUE(strstr(j.reason, "'part.stl': not a mesh file") != NULL);
+    /* method none: sliced as uploaded */
+    T_TRUE(wait_job(abs, JOB_READY));
     T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+T_CASE(farm_missing_profile_fails_the_job_naming_the_file)
+{
+    struct sf_err err;
+    static const char ini[] = "[printer a]\ndriver: marlin\nport: x\nprofile: nosuch\n";
+    T_OK(setup("profile", ini, NULL, prepare_part, &err), &err);
+    int64_t id = add(tetra_stl, "", 1);
+    T_TRUE(wait_job(id, JOB_FAILED));
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_TRUE(strstr(j.reason, "profile 'nosuch' not found (config/printers/nosuch.cfg)") != NULL);
     teardown();
 }
 
