@@ -500,7 +500,7 @@ on_progress(struct loop *l, void *ud)
             store_job_progress(f->s, p->job_id, p->lines_acked, NULL) == SF_OK)
             p->lines_saved = p->lines_acked;
     }
-    f->progress = loop_timer_add(l, FARM_PROGRESS_MS, on_progress, f);
+    f->progress = loop_timer_add(l, f->hooks.progress_ms, on_progress, f);
 }
 
 /* ---- lifecycle ---- */
@@ -534,7 +534,9 @@ farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcf
             farm_free(f);
             return NULL;
         }
-    f->progress = loop_timer_add(l, FARM_PROGRESS_MS, on_progress, f);
+    if (f->hooks.progress_ms <= 0)
+        f->hooks.progress_ms = FARM_PROGRESS_MS;
+    f->progress = loop_timer_add(l, f->hooks.progress_ms, on_progress, f);
     farm_kick(f);
     return f;
 }

@@ -46,6 +46,7 @@ struct farm_hooks {
     farm_driver_fn driver;    /* NULL: no drivers in this build */
     prepare_fn prepare;       /* prepare_part, or a test's */
     void (*notify)(void *ud); /* the event log grew (wake event streams) */
+    int64_t progress_ms;      /* persist progress this often (0: FARM_PROGRESS_MS) */
     void *notify_ud;
 };
 

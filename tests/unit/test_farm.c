@@ -217,7 +217,7 @@ setup(const char *name, const char *ini, farm_driver_fn driver, prepare_fn prep,
     if (!(fx.l = loop_new(err)) || !(fx.s = store_open(dir, NULL, err)) ||
         !(fx.pool = pool_new(fx.l, 2, err)))
         return SF_EIO;
-    struct farm_hooks hooks = { .driver = driver, .prepare = prep };
+    struct farm_hooks hooks = { .driver = driver, .prepare = prep, .progress_ms = 50 };
     fx.f = farm_new(fx.l, fx.s, fx.pool, &fx.cfg, &hooks, err);
     return fx.f ? SF_OK : SF_EIO;
 }
@@ -467,6 +467,37 @@ T_CASE(farm_missing_profile_fails_the_job_naming_the_file)
     T_OK(store_job_get(fx.s, id, &j, &err), &err);
     T_TRUE(strstr(j.reason, "profile 'nosuch' not found (config/printers/nosuch.cfg)") != NULL);
     teardown();
+}
+
+T_CASE(farm_progress_is_persisted_and_survives_a_crash)
+{
+    struct sf_err err;
+    T_OK(setup("crash", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE, 1000));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    a->base.status.lines_acked = 1234;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    for (int i = 0; i < 20; i++)
+        loop_run_once(fx.l, 10); /* a few progress periods */
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 1234);
+    /* the daemon dies here: the store is reopened as on restart */
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/crash", t_tmpdir());
+    teardown();
+    struct store_recovery rec;
+    struct store *s = store_open(dir, &rec, &err);
+    T_TRUE(s != NULL);
+    T_EQ_INT(rec.interrupted, 1);
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    T_EQ_INT(j.lines_acked, 1234);
+    T_EQ_STR(j.printer, "a");
+    T_OK(store_check(s, &err), &err);
+    store_close(s);
 }
 
 T_CASE(farm_reload_adds_and_removes_printers)
