@@ -762,6 +762,12 @@ line_done(struct sim_marlin *s)
             return;
         }
         s->last_n = n;
+    } else if (strchr(cmd, '*')) {
+        /* Marlin 1.1's rule: a checksum without a line number is the tail of
+           a line whose head an RX flush ate; drop it, no resend, no ok.
+           (2.x dropped this check and can run such a tail: see the README.) */
+        emit(s, "Error:No Line Number with checksum, Last Line: %ld", s->last_n);
+        return;
     }
     int i = (s->q_head + s->q_len) % s->cfg.bufsize;
     snprintf(s->queue[i], MAX_CMD_SIZE, "%s", cmd);
@@ -977,7 +983,8 @@ step(struct sim_marlin *s)
     }
     bool busy = s->q_len > 0 || s->pl_len > 0 || s->tx.len > 0 || s->out_head ||
                 s->rx_len > 0 || (s->fd >= 0 && s->fd_events == 0) || s->boot_until_ms ||
-                fabs(s->t_noz - s->t_noz_target) > 0.5 || fabs(s->t_bed - s->t_bed_target) > 0.5;
+                fabs(s->t_noz - fmax(s->t_noz_target, AMBIENT_C)) > 0.5 ||
+                fabs(s->t_bed - fmax(s->t_bed_target, AMBIENT_C)) > 0.5;
     if (s->halted)
         busy = s->tx.len > 0 || s->out_head;
     if (s->tick)
