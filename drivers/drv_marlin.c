@@ -89,10 +89,12 @@ struct marlin {
     int settle_ms;            /* quiet time that ends settling (3 line times) */
     int64_t last_reply_ms;    /* last complete reply line */
     uint64_t settle_timer;    /* pending settle check */
+    uint64_t line_timer;      /* pending check of a reply line without its newline */
     int64_t progress_ms;      /* last protocol progress (ok, resend, busy...) */
     int64_t last_rx_ms;       /* last byte of any kind */
     int probes;               /* unanswered probes in a row */
     bool probe_out;           /* an unnumbered M105 probe awaits its ok */
+    bool probe_garbled;       /* it came back as an unknown command: its ok is next */
     int64_t poll_ms;          /* next M105 poll (no auto-report) */
     long bad_resend;          /* resend target out of range, seen once */
     char inject[INJECT_MAX][LINEWIN_LINE_MAX];
@@ -299,10 +301,16 @@ pump(struct marlin *m)
     for (int guard = 0; guard < 256 && m->t; guard++) {
         const struct linewin_entry *e = linewin_peek(&m->win);
         if (e) {
-            char line[LINEWIN_LINE_MAX + 1];
+            /* With one line in flight nothing follows to end a line whose
+               newline was garbled; "\r\n" ends it twice (Marlin skips the
+               empty line).  Streaming, the next line does that job. */
+            char line[LINEWIN_LINE_MAX + 2];
             memcpy(line, e->text, e->len);
-            line[e->len] = '\n';
-            line[e->len + 1] = '\0';
+            size_t k = e->len;
+            if (m->win.window == 1)
+                line[k++] = '\r';
+            line[k++] = '\n';
+            line[k] = '\0';
             linewin_sent(&m->win);
             m->st.lines_sent++;
             if (send_raw(m, line) < 0)
@@ -466,6 +474,31 @@ static void do_pause(struct marlin *m);
 static void do_resume(struct marlin *m);
 static void do_cancel(struct marlin *m);
 
+/*
+ * Ask the printer to show where it is: an unnumbered M105 answers "ok T:"
+ * only after every line before it was handled.  Used after a silence and
+ * at once when a reply looks garbled (a lost ok or Resend would otherwise
+ * cost a whole timeout).
+ */
+static void
+probe(struct marlin *m)
+{
+    if (m->probe_out || !m->t)
+        return;
+    m->probes++;
+    m->st.probes++;
+    m->probe_out = true;
+    m->probe_garbled = false;
+    m->progress_ms = loop_now_ms(m->base.loop);
+    send_raw(m, "M105\r\n");
+}
+
+static bool
+streaming(const struct marlin *m)
+{
+    return m->win.in_flight > 0 || m->win.next <= m->win.high;
+}
+
 static void
 handshake_done(struct marlin *m)
 {
@@ -532,6 +565,8 @@ on_resend(struct marlin *m, long k)
             start_settling(m);
         return;
     }
+    if (rc == 2 && !m->settling)
+        probe(m); /* garbled, or the printer is ahead: ask where it is */
     if (rc == SF_ENOTFOUND || k > m->win.high + 1) {
         /* Twice the same impossible request: the printer's counter is not ours. */
         if (m->bad_resend == k) {
@@ -602,20 +637,51 @@ on_line(struct marlin *m, const char *line, size_t len)
 
     switch (r.kind) {
     case MR_OK: {
-        if (r.b >= 0)
+        /* Only a whole ADVANCED_OK reply teaches the window: a garbled
+           temperature line must not. */
+        if (r.has_n && r.p >= 0 && r.b >= 0 && !r.has_temps)
             learn_window(m, r.b);
         if (r.has_temps && !r.has_n) {
             on_temp_ok(m, &r);
+        } else if (!r.has_n && m->probe_out && !m->win.swallow_ok &&
+                   (m->win.advanced || m->win.in_flight == 0 || m->probe_garbled || len > 6)) {
+            /* The probe's answer with its "T:" garbled. */
+            on_temp_ok(m, &r);
+        } else if (!r.has_n && m->win.advanced && !m->win.swallow_ok) {
+            /* Every numbered line's ok carries N: this one lost it on the wire. */
+            if (streaming(m) && !m->settling)
+                probe(m);
         } else {
             long before = m->win.acked;
-            linewin_on_ok(&m->win, r.has_n, r.n);
+            if (linewin_on_ok(&m->win, r.has_n, r.n) < 0 && !m->settling)
+                probe(m);
             credit(m, before, m->win.acked);
         }
-        m->probes = 0;
+        if (!m->probe_out)
+            m->probes = 0;
         break;
     }
+    case MR_OTHER:
+        /* Not a Marlin line: likely a garbled ok or Resend.  If an ok was
+           due after a Resend, this was it; if it ends like a temperature
+           report while a probe is out, it is the probe's damaged answer. */
+        m->win.swallow_ok = false;
+        if (m->probe_out && line[0] != ' ' && memmem(line, len, "@:", 2)) {
+            on_temp_ok(m, &r);
+            break;
+        }
+        if (streaming(m) && !m->settling)
+            probe(m);
+        break;
     case MR_RESEND:
         on_resend(m, r.resend);
+        if (r.tail)
+            m->win.swallow_ok = false; /* its ok was merged into this line */
+        break;
+    case MR_ECHO:
+        /* A garbled probe comes back as an unknown command, then its ok. */
+        if (m->probe_out && strstr(r.name, "Unknown command"))
+            m->probe_garbled = true;
         break;
     case MR_ERROR:
         if (r.err == MR_ERR_FATAL) {
@@ -624,6 +690,11 @@ on_line(struct marlin *m, const char *line, size_t len)
                 snprintf(why, sizeof(why), "printer halted: %.80s", r.name);
                 job_fail(m, DRV_ERROR, why);
             }
+        } else if (r.err == MR_ERR_LINE && !r.resend_follows) {
+            /* Our line lost its N on the wire (Marlin drops it without a
+               Resend), or the error text itself is garbled: ask. */
+            if (!m->settling && streaming(m))
+                probe(m);
         } else if (r.err == MR_ERR_OTHER) {
             log_printer(LOG_WARN, m->base.name, "printer error: %s", r.name);
         }
@@ -660,6 +731,28 @@ on_line(struct marlin *m, const char *line, size_t len)
     check_job_progress(m);
 }
 
+/*
+ * A reply line that stopped short for settle_ms lost its newline on the
+ * wire (replies carry no checksum): take it as it is rather than wait for
+ * a line that may never come.
+ */
+static void
+on_line_idle(struct loop *l, void *ud)
+{
+    struct marlin *m = ud;
+    m->line_timer = 0;
+    if (!m->t || m->rx_len == 0 || m->rx_skip)
+        return;
+    if (loop_now_ms(l) - m->last_rx_ms < m->settle_ms) {
+        m->line_timer = loop_timer_add(l, m->settle_ms, on_line_idle, m);
+        return;
+    }
+    size_t len = m->rx_len;
+    m->rx_len = 0;
+    on_line(m, m->rx, len);
+    pump(m);
+}
+
 static void
 on_data(void *ud, const char *data, size_t n)
 {
@@ -681,6 +774,8 @@ on_data(void *ud, const char *data, size_t n)
         if (!m->rx_skip)
             m->rx[m->rx_len++] = c;
     }
+    if (m->t && m->rx_len > 0 && !m->line_timer)
+        m->line_timer = loop_timer_add(m->base.loop, m->settle_ms, on_line_idle, m);
     pump(m);
 }
 
@@ -778,11 +873,8 @@ on_timer(struct loop *l, void *ud)
         }
         log_printer(LOG_WARN, m->base.name, "no reply for %d ms: probing with M105",
                     m->timeout_ms);
-        m->probes++;
-        m->st.probes++;
-        m->probe_out = true;
-        m->progress_ms = now;
-        send_raw(m, "M105\n");
+        m->probe_out = false; /* an unanswered probe is sent again */
+        probe(m);
     }
     pump(m);
     check_job_progress(m);
@@ -1017,6 +1109,9 @@ m_close(struct drv *d)
     if (m->settle_timer)
         loop_timer_cancel(d->loop, m->settle_timer);
     m->settle_timer = 0;
+    if (m->line_timer)
+        loop_timer_cancel(d->loop, m->line_timer);
+    m->line_timer = 0;
     m->settling = false;
     set_state(m, DRV_OFFLINE);
 }

@@ -42,7 +42,8 @@ linewin_release(struct linewin *w)
 void
 linewin_reset(struct linewin *w, long last)
 {
-    w->high = w->acked = last;
+    w->high = w->acked = w->recv = last;
+    w->synced = false;
     w->next = last + 1;
     w->in_flight = 0;
     w->swallow_ok = false;
@@ -104,16 +105,23 @@ long
 linewin_on_ok(struct linewin *w, bool has_n, long n)
 {
     if (w->swallow_ok) {
-        /* Marlin's "Resend: k" is followed by the rejected line's ok. */
+        /* Marlin's "Resend: k" is followed by the rejected line's ok, which
+           has no N; an ok with N means that one was lost on the wire. */
         w->swallow_ok = false;
-        return 0;
+        if (!(w->advanced && has_n))
+            return 0;
     }
     long before = w->acked;
     if (w->advanced) {
-        if (!has_n || n <= w->acked || n >= w->next)
-            return 0; /* M105's own ok, a rejection's ok, or a garbled number */
+        if (!has_n)
+            return 0; /* M105's own ok, or a rejection's */
+        if (n <= w->acked || n >= w->next)
+            return n <= w->acked && n > w->acked - w->window ? 0 : -1;
         w->acked = n;
-        w->in_flight = (int)(w->next - 1 - n);
+        if (n > w->recv)
+            w->recv = n;
+        long f = w->next - 1 - w->recv;
+        w->in_flight = f < 0 ? 0 : (int)f;
         if (n >= w->rewound_to)
             w->stale = 0;
     } else {
@@ -121,7 +129,10 @@ linewin_on_ok(struct linewin *w, bool has_n, long n)
             w->in_flight--;
         if (w->acked < w->next - 1)
             w->acked++;
+        if (w->acked > w->recv)
+            w->recv = w->acked;
     }
+    w->synced = false;
     return w->acked - before;
 }
 
@@ -129,7 +140,7 @@ int
 linewin_on_resend(struct linewin *w, long k)
 {
     if (k > w->high + 1 || k < 1)
-        return 1; /* asks for a line never pushed: garbled */
+        return 2; /* asks for a line never pushed: garbled */
     if (k == w->rewound_to && w->stale > 0) {
         w->stale--;
         w->swallow_ok = true;
@@ -141,11 +152,16 @@ linewin_on_resend(struct linewin *w, long k)
     w->stale = w->next - 1 - k;
     if (w->stale < 0)
         w->stale = 0;
+    /* The printer has every line before k.  After an answered probe it has
+       also run them; otherwise their oks are still to come. */
+    if (w->synced && w->acked < k - 1)
+        w->acked = k - 1;
+    w->synced = false;
     w->next = k;
+    w->recv = k - 1;
     if (w->acked > k - 1)
         w->acked = k - 1;
-    long queued = k - 1 - w->acked;
-    w->in_flight = queued > w->window ? w->window : (int)queued;
+    w->in_flight = 0;
     w->rewound_to = k;
     w->swallow_ok = true;
     w->rewinds++;
@@ -158,8 +174,12 @@ linewin_resync(struct linewin *w)
     w->in_flight = 0;
     w->stale = 0;
     w->swallow_ok = false;
-    if (w->next - 1 > w->acked && held(w, w->next - 1))
+    w->synced = true;
+    if (w->next - 1 > w->acked && held(w, w->next - 1)) {
         w->next--;
+        if (w->recv > w->next - 1)
+            w->recv = w->next - 1;
+    }
 }
 
 long

@@ -41,6 +41,8 @@ struct linewin {
     long high;       /* last number pushed */
     long next;       /* number the next send carries (<= high + 1) */
     long acked;      /* last line known processed by the printer */
+    long recv;       /* last line known received (queued or done) by the printer */
+    bool synced;     /* a probe was answered: everything received is processed */
     int in_flight;   /* lines sent whose reply is outstanding */
     int window;      /* most lines allowed in flight (>= 1) */
     bool advanced;   /* replies carry ADVANCED_OK's N */
@@ -69,13 +71,18 @@ const struct linewin_entry *linewin_peek(const struct linewin *w);
 /* The peeked line was written to the printer. */
 void linewin_sent(struct linewin *w);
 
-/* An ok arrived; has_n/n from ADVANCED_OK.  Returns how many lines it acknowledged. */
+/*
+ * An ok arrived; has_n/n from ADVANCED_OK.  Returns how many lines it
+ * acknowledged, or -1 when its line number is impossible (a garbled reply:
+ * the caller should probe).
+ */
 long linewin_on_ok(struct linewin *w, bool has_n, long n);
 
 /*
- * "Resend: k" arrived.  SF_OK: rewound to k.  1: a repeat or a garbled
- * number, ignored.  SF_ENOTFOUND: k is older than the ring holds (the
- * printer lost lines it had acknowledged: it was reset).
+ * "Resend: k" arrived.  SF_OK: rewound to k.  1: a repeat, ignored.  2: a
+ * line never pushed (garbled, or the printer counts ahead of us), ignored.
+ * SF_ENOTFOUND: k is older than the ring holds (the printer lost lines it
+ * had acknowledged: it was reset).
  */
 int linewin_on_resend(struct linewin *w, long k);
 

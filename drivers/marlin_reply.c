@@ -11,6 +11,7 @@
  */
 #include "marlin_reply.h"
 
+#include <ctype.h>
 #include <errno.h>
 #include <math.h>
 #include <stdlib.h>
@@ -25,6 +26,19 @@ get_long(const char *s, long lo, long hi, long *out)
     errno = 0;
     long v = strtol(s, &end, 10);
     if (errno || end == s || v < lo || v > hi)
+        return false;
+    *out = v;
+    return true;
+}
+
+/* A whole word: the number must end at a blank or the end of the line. */
+static bool
+get_word_long(const char *s, long lo, long hi, long *out)
+{
+    char *end;
+    errno = 0;
+    long v = strtol(s, &end, 10);
+    if (errno || end == s || (*end != '\0' && *end != ' ') || v < lo || v > hi)
         return false;
     *out = v;
     return true;
@@ -104,17 +118,22 @@ mreply_parse(const char *line, size_t len, struct mreply *r)
     while (*p == ' ')
         p++;
 
-    if (strncmp(p, "ok", 2) == 0 && (p[2] == '\0' || p[2] == ' ')) {
+    /* "ok" with one byte damaged: "oR T:...", "\x18k T:...", "ok\xcdN12 ...". */
+    bool ok_like = strncmp(p, "ok", 2) == 0 && !isalnum((unsigned char)p[2]) && p[2] != ':';
+    bool ok_damaged = !ok_like && strlen(p) > 4 && p[2] == ' ' && (p[0] == 'o' || p[1] == 'k') &&
+                      (strncmp(p + 3, "T:", 2) == 0 || p[3] == 'N');
+    if (ok_like || ok_damaged) {
         r->kind = MR_OK;
+        r->garbled = ok_damaged || (p[2] != '\0' && p[2] != ' ');
         const char *w;
         long v;
-        if ((w = find_word(p, "N")) && get_long(w, 0, 2147483647L, &v)) {
+        if ((w = find_word(p, "N")) && get_word_long(w, 0, 2147483647L, &v)) {
             r->has_n = true;
             r->n = v;
         }
-        if ((w = find_word(p, "P")) && get_long(w, 0, 4096, &v))
+        if ((w = find_word(p, "P")) && get_word_long(w, 0, 4096, &v))
             r->p = (int)v;
-        if ((w = find_word(p, "B")) && get_long(w, 0, 4096, &v))
+        if ((w = find_word(p, "B")) && get_word_long(w, 0, 4096, &v))
             r->b = (int)v;
         parse_temps(p, r);
         return;
@@ -127,6 +146,9 @@ mreply_parse(const char *line, size_t len, struct mreply *r)
         if (get_long(q, 0, 2147483647L, &v)) {
             r->kind = MR_RESEND;
             r->resend = v;
+            while (*q >= '0' && *q <= '9')
+                q++;
+            r->tail = *q != '\0';
         }
         return;
     }
@@ -137,8 +159,11 @@ mreply_parse(const char *line, size_t len, struct mreply *r)
         if (ll && get_long(ll + 10, -1, 2147483647L, &v))
             r->last_line = v;
         if (strstr(p, "checksum") || strstr(p, "Checksum") || strstr(p, "Line Number") ||
-            strstr(p, "Last Line"))
+            strstr(p, "Last Line")) {
             r->err = MR_ERR_LINE;
+            r->resend_follows = strstr(p, "mismatch") || strstr(p, "not Last") ||
+                                strstr(p, "No Checksum");
+        }
         else if (strstr(p, "halted") || strstr(p, "kill()") || strstr(p, "Thermal Runaway") ||
                  strstr(p, "MAXTEMP") || strstr(p, "MINTEMP") || strstr(p, "stopped") ||
                  strstr(p, "Heating failed") || strncmp(p, "!!", 2) == 0)
@@ -150,6 +175,11 @@ mreply_parse(const char *line, size_t len, struct mreply *r)
     }
     if (strncmp(p, "echo:busy:", 10) == 0 || strncmp(p, "busy:", 5) == 0) {
         r->kind = MR_BUSY;
+        return;
+    }
+    if (strncmp(p, "echo:", 5) == 0) {
+        r->kind = MR_ECHO;
+        snprintf(r->name, sizeof(r->name), "%s", p + 5);
         return;
     }
     if (strcmp(p, "wait") == 0) {

@@ -29,6 +29,7 @@ enum mreply_kind {
     MR_ACTION,    /* // action:NAME */
     MR_CAP,       /* Cap:NAME:0|1 */
     MR_FIRMWARE,  /* FIRMWARE_NAME:... */
+    MR_ECHO,      /* echo:... (messages, unknown command notices) */
 };
 
 enum mreply_error {
@@ -44,8 +45,11 @@ struct mreply {
     long n;
     int p, b;               /* ok P<planner free> B<queue free>; -1 if absent */
     long resend;            /* MR_RESEND: line wanted */
+    bool tail;              /* MR_RESEND: junk after the number (the next line merged in) */
     enum mreply_error err;  /* MR_ERROR: class */
     long last_line;         /* "Last Line: N" in an error, else -1 */
+    bool resend_follows;    /* MR_ERR_LINE that Marlin follows with Resend (not "No Line Number") */
+    bool garbled;           /* MR_OK recognised despite a damaged "ok" */
     bool has_temps;         /* T: present (MR_OK or MR_TEMP) */
     bool has_bed;           /* B: present */
     bool temp_wait;         /* W: present: an M109/M190 wait report */

