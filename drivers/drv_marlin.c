@@ -96,7 +96,8 @@ struct marlin {
     bool probe_out;           /* an unnumbered M105 probe awaits its ok */
     bool probe_garbled;       /* it came back as an unknown command: its ok is next */
     int64_t poll_ms;          /* next M105 poll (no auto-report) */
-    long bad_resend;          /* resend target out of range, seen once */
+    long bad_resend;          /* resend target out of range */
+    int bad_resend_count;     /* times in a row it was asked for */
     char inject[INJECT_MAX][LINEWIN_LINE_MAX];
     int inj_head, inj_len;
     /* job */
@@ -561,6 +562,7 @@ on_resend(struct marlin *m, long k)
     if (rc == SF_OK) {
         m->st.rewinds++;
         m->bad_resend = 0;
+        m->bad_resend_count = 0;
         if (m->win.stale > 0 || m->win.window > 1)
             start_settling(m);
         return;
@@ -568,13 +570,17 @@ on_resend(struct marlin *m, long k)
     if (rc == 2 && !m->settling)
         probe(m); /* garbled, or the printer is ahead: ask where it is */
     if (rc == SF_ENOTFOUND || k > m->win.high + 1) {
-        /* Twice the same impossible request: the printer's counter is not ours. */
-        if (m->bad_resend == k) {
+        /* The same impossible request three times running (a garbled number
+           does not repeat): the printer's counter is not ours. */
+        if (m->bad_resend == k && ++m->bad_resend_count >= 3) {
+            log_printer(LOG_WARN, m->base.name, "printer asks for line %ld; we hold %ld-%ld", k,
+                        m->win.high - m->win.cap + 1, m->win.high);
             m->bad_resend = 0;
             job_fail(m, DRV_CONNECTING, "printer lost its line count (reset?)");
             hello(m);
-        } else {
+        } else if (m->bad_resend != k) {
             m->bad_resend = k;
+            m->bad_resend_count = 1;
         }
     }
 }

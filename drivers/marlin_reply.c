@@ -67,25 +67,33 @@ find_word(const char *s, const char *key)
     return NULL;
 }
 
+/* "KEY:value /target": value into *v, target (if present) into *target. */
+static bool
+temp_pair(const char *s, const char *key, double *v, double *target)
+{
+    const char *p = find_word(s, key);
+    if (!p)
+        return false;
+    char *end;
+    errno = 0;
+    double x = strtod(p, &end);
+    if (errno || end == p || !isfinite(x) || x < -300 || x > 2000)
+        return false;
+    *v = x;
+    while (*end == ' ')
+        end++;
+    if (*end == '/')
+        get_double(end + 1, target);
+    return true;
+}
+
 static void
 parse_temps(const char *s, struct mreply *r)
 {
-    const char *t = find_word(s, "T:");
-    if (!t || !get_double(t, &r->t))
+    if (!temp_pair(s, "T:", &r->t, &r->t_target))
         return;
     r->has_temps = true;
-    const char *slash = strchr(t, '/');
-    const char *sp = strchr(t, ' ');
-    if (slash && (!sp || slash < sp))
-        get_double(slash + 1, &r->t_target);
-    const char *b = find_word(s, "B:");
-    if (b && get_double(b, &r->bed)) {
-        r->has_bed = true;
-        slash = strchr(b, '/');
-        sp = strchr(b, ' ');
-        if (slash && (!sp || slash < sp))
-            get_double(slash + 1, &r->bed_target);
-    }
+    r->has_bed = temp_pair(s, "B:", &r->bed, &r->bed_target);
     r->temp_wait = find_word(s, "W:") != NULL;
 }
 

@@ -394,7 +394,6 @@ T_CASE(marlin_survives_corruption_over_tcp)
     sim_marlin_config_init(&sc);
     sc.tcp_port = 0;
     T_OK(faults_parse(&sc.faults, "corrupt=0.01", NULL), NULL);
-    T_OK(faults_parse(&sc.faults, "drop-ok=0.005", NULL), NULL);
     stream_exact_frag(&sc, 0, 60000, 2);
 }
 
