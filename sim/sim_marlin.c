@@ -27,6 +27,7 @@
 #include <math.h>
 #include <stdarg.h>
 #include <netinet/in.h>
+#include <netinet/tcp.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -323,6 +324,8 @@ on_accept(struct loop *l, int fd, unsigned events, void *ud)
         close(c);
         return;
     }
+    int one = 1;
+    setsockopt(c, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one)); /* a UART does not batch */
     s->fd = c;
     s->fd_events = LOOP_READ;
     if (loop_add_fd(s->loop, c, LOOP_READ, on_fd, s, NULL) < 0) {
