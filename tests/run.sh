@@ -26,6 +26,20 @@ for prog in "$build"/tests/test_*; do
     fail=$((fail + n)); failed_progs+=("$name(crash)")
   fi
 done
+# libFuzzer smoke runs: a fixed number of mutations per parser (make fuzz runs long).
+for fz in build/fuzz/fuzz_*; do
+  [ -x "$fz" ] && [ -f "$fz" ] || continue
+  name=$(basename "$fz"); name=${name#fuzz_}
+  [ -n "$filter" ] && [[ "fuzz_$name" != *"$filter"* ]] && continue
+  work=$(mktemp -d); cp -r "tests/fuzz/corpus/$name/." "$work/" 2>/dev/null
+  dict=""; [ -f "tests/fuzz/$name.dict" ] && dict="-dict=tests/fuzz/$name.dict"
+  if "$fz" -runs="${FUZZ_RUNS:-3000}" -max_len=65536 $dict "$work" >"$work.log" 2>&1; then
+    echo "== fuzz $name: $(grep -o 'Done [0-9]* runs' "$work.log" | head -1)"; pass=$((pass + 1))
+  else
+    echo "== fuzz $name: FAILED"; tail -40 "$work.log"; fail=$((fail + 1)); failed_progs+=("fuzz_$name")
+  fi
+  rm -rf "$work" "$work.log"
+done
 for script in tests/integ/*.sh; do
   [ -f "$script" ] || continue
   name=$(basename "$script" .sh)

@@ -1,0 +1,359 @@
+/*
+ * orient.c - orientation search (see orient.h).
+ *
+ * Pipeline: candidates -> proxy score for all (O(tris) each, cheap) ->
+ * the exact_top best by proxy plus every stable hull base and the input ->
+ * exact ray-cast metrics on a pool of threads sharing one Embree scene ->
+ * a cap of refinement samples around the three best -> pick.
+ * Rays are rotated, never the mesh.  Hull bases that are too small or on
+ * which the centre of mass falls outside (margin) are rejected; other
+ * directions are kept only if the part either rests on a real face or is
+ * held by support columns from the bed.
+ */
+#include "orient.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../base/mem.h"
+#include "hull.h"
+
+void
+orient_params_default(struct orient_params *p)
+{
+    memset(p, 0, sizeof(*p));
+    p->angle_deg = 45;
+    p->margin_deg = 5;
+    p->pitch_mm = 1;
+    p->samples = 1000;
+    p->exact_top = 48;
+    p->w_contact_mm = 1;
+    p->w_stability_mm2 = 0.5;
+    p->min_gain = 0.05;
+    p->min_base_mm2 = 25;
+    p->min_margin_mm = 1;
+}
+
+const char *
+orient_source_name(enum orient_source s)
+{
+    static const char *names[] = { "input", "hull base", "sphere sample", "refinement" };
+    return (unsigned)s < 4 ? names[s] : "?";
+}
+
+struct cand {
+    struct orient_candidate c;
+    double key;   /* sort key of the current stage */
+    int stage;    /* 0: proxy only, 1: coarse ray cast, 2: full ray cast */
+    bool dropped; /* would stand on a point or tip over */
+};
+
+/* A batch of candidates scored on a pool of threads (one stage). */
+struct job {
+    const struct mesh *m;
+    const struct orient_params *p;
+    const struct proxy_cache *pc; /* proxy stage */
+    struct raycast *rc;           /* ray-cast stages */
+    struct support_params sp;
+    struct cand *cands;
+    const uint32_t *todo; /* indices of candidates to score */
+    uint32_t n_todo;
+    int stage;
+    atomic_uint next;
+    atomic_int failed; /* first error code, 0 if none */
+    atomic_uint *done; /* progress across stages */
+    uint32_t progress_total;
+};
+
+static double
+cost_of(const struct orient_params *p, const struct support_metrics *s)
+{
+    return s->volume_mm3 + p->w_contact_mm * s->contact_area_mm2 +
+           p->w_stability_mm2 * s->com_height_mm;
+}
+
+static int
+score_one(struct job *j, struct cand *c, struct sf_err *err)
+{
+    if (j->stage == 0) {
+        struct support_metrics s;
+        proxy_eval(j->pc, c->c.up, &j->sp, &s);
+        c->key = s.proxy_mm3 + j->p->w_contact_mm * s.risky_area_mm2;
+        return SF_OK;
+    }
+    struct support_params sp = j->sp;
+    if (j->stage == 1)
+        sp.pitch_mm *= 2; /* coarse: a quarter of the rays, for ranking */
+    int rc = measure_support_cached(j->m, j->rc, j->pc, c->c.up, &sp, &c->c.m, err);
+    if (rc)
+        return rc;
+    c->c.cost = c->key = cost_of(j->p, &c->c.m);
+    c->stage = j->stage;
+    c->dropped = false;
+    /* Standing on a point with no support column from the bed: it would topple. */
+    if (c->c.source != ORIENT_HULL && c->c.m.n_columns == 0 &&
+        proxy_bed_contact(j->pc, c->c.up) < j->p->min_base_mm2)
+        c->dropped = true;
+    /* Growth simulation: the part built so far would tip off its base. */
+    if (c->c.m.base_margin_mm < 0)
+        c->dropped = true;
+    return SF_OK;
+}
+
+static void *
+worker(void *arg)
+{
+    struct job *j = arg;
+    for (;;) {
+        uint32_t k = atomic_fetch_add(&j->next, 1);
+        if (k >= j->n_todo || atomic_load(&j->failed))
+            break;
+        struct sf_err err;
+        if (score_one(j, &j->cands[j->todo[k]], &err) != SF_OK) {
+            int zero = 0;
+            atomic_compare_exchange_strong(&j->failed, &zero, err.code ? err.code : SF_EBUG);
+            break;
+        }
+        if (j->stage > 0) {
+            unsigned d = atomic_fetch_add(j->done, 1) + 1;
+            if (j->p->progress)
+                j->p->progress(j->p->progress_ud, d, j->progress_total);
+        }
+    }
+    return NULL;
+}
+
+static int
+run_stage(struct job *j, int stage, const uint32_t *todo, uint32_t n, struct sf_err *err)
+{
+    j->stage = stage;
+    j->todo = todo;
+    j->n_todo = n;
+    atomic_store(&j->next, 0);
+    atomic_store(&j->failed, 0);
+    int threads = j->p->threads > 0 ? j->p->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
+    threads = threads < 1 ? 1 : threads > 64 ? 64 : threads;
+    pthread_t tid[64];
+    int started = 0;
+    for (int i = 1; i < threads && (uint32_t)i < n; i++)
+        if (pthread_create(&tid[started], NULL, worker, j) == 0)
+            started++;
+    worker(j);
+    for (int i = 0; i < started; i++)
+        pthread_join(tid[i], NULL);
+    int f = atomic_load(&j->failed);
+    if (f)
+        return sf_err_set(err, f, "orientation: scoring a direction failed");
+    return SF_OK;
+}
+
+/* Order: not dropped before dropped, then by key. */
+static int
+cmp_key(const void *a, const void *b, void *ud)
+{
+    const struct cand *c = ud, *x = &c[*(const uint32_t *)a], *y = &c[*(const uint32_t *)b];
+    if (x->dropped != y->dropped)
+        return x->dropped ? 1 : -1;
+    return (x->key > y->key) - (x->key < y->key);
+}
+
+static int
+push(struct cand **cands, uint32_t *n, size_t *cap, struct vec3 up, enum orient_source src)
+{
+    void *p = *cands;
+    if (!mem_grow(&p, cap, *n + 1, sizeof(struct cand)))
+        return SF_ENOMEM;
+    *cands = p;
+    struct cand *c = &(*cands)[(*n)++];
+    memset(c, 0, sizeof(*c));
+    c->c.up = v3_normalize(up);
+    c->c.source = src;
+    return SF_OK;
+}
+
+/* Fibonacci sphere: n near-uniform unit vectors. */
+static struct vec3
+fibonacci(int i, int n)
+{
+    double golden = M_PI * (3 - sqrt(5));
+    double z = 1 - (i + 0.5) * 2.0 / n;
+    double r = sqrt(fmax(0, 1 - z * z));
+    return v3(r * cos(golden * i), r * sin(golden * i), z);
+}
+
+static double
+elapsed(const struct timespec *a)
+{
+    struct timespec b;
+    clock_gettime(CLOCK_MONOTONIC, &b);
+    return (b.tv_sec - a->tv_sec) + (b.tv_nsec - a->tv_nsec) * 1e-9;
+}
+
+/*
+ * Pick up to max indices from sorted order[] whose directions are at least
+ * min_deg apart (and from the ones in keep[0..n_keep)); returns the count.
+ */
+static uint32_t
+pick_distinct(const struct cand *c, const uint32_t *order, uint32_t n, uint32_t max, double min_deg,
+              uint32_t *out)
+{
+    double min_cos = cos(min_deg * M_PI / 180);
+    uint32_t k = 0;
+    for (uint32_t i = 0; i < n && k < max; i++) {
+        bool distinct = true;
+        for (uint32_t q = 0; q < k && distinct; q++)
+            distinct = v3_dot(c[order[i]].c.up, c[out[q]].c.up) < min_cos;
+        if (distinct)
+            out[k++] = order[i];
+    }
+    return k;
+}
+
+int
+orient_find(const struct mesh *m, const struct orient_params *p, struct orient_result *res,
+            struct sf_err *err)
+{
+    enum { REFINE_PER = 16, FINAL = 6 };
+    memset(res, 0, sizeof(*res));
+    struct timespec t0;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    struct cand *cands = NULL;
+    uint32_t n = 0, *order = NULL;
+    size_t cap = 0;
+    struct hull_base *bases = NULL;
+    uint32_t n_bases = 0;
+    struct raycast *rc = NULL;
+    struct proxy_cache pc = { 0 };
+    atomic_uint done = 0;
+    int rcode = SF_OK;
+
+    struct vec3 com;
+    mesh_volume(m, &com);
+    uint32_t *hull_verts = NULL, n_hull_verts = 0;
+    if ((rcode = hull_bases(m, com, &bases, &n_bases, &hull_verts, &n_hull_verts, err)))
+        return rcode;
+    if ((rcode = push(&cands, &n, &cap, v3(0, 0, 1), ORIENT_INPUT)))
+        goto oom;
+    for (uint32_t i = 0; i < n_bases; i++)
+        if (bases[i].area_mm2 >= p->min_base_mm2 && bases[i].margin_mm >= p->min_margin_mm)
+            if ((rcode = push(&cands, &n, &cap, v3_scale(bases[i].normal, -1), ORIENT_HULL)))
+                goto oom;
+    for (int i = 0; i < p->samples; i++)
+        if ((rcode = push(&cands, &n, &cap, fibonacci(i, p->samples), ORIENT_SPHERE)))
+            goto oom;
+    uint32_t n_first = n;
+    /* room for the refinement samples, so cands never moves under the workers */
+    void *grow = cands;
+    if (!mem_grow(&grow, &cap, n + 3 * REFINE_PER, sizeof(struct cand)))
+        goto oom;
+    cands = grow;
+    order = mem_array(n + 3 * REFINE_PER, sizeof(uint32_t));
+    if (!order)
+        goto oom;
+    if ((rcode = proxy_cache_init(&pc, m, hull_verts, n_hull_verts, err)) ||
+        !(rc = raycast_new(m, err))) {
+        rcode = rcode ? rcode : (err ? err->code : SF_ENOMEM);
+        goto out;
+    }
+    res->seconds_setup = elapsed(&t0);
+
+    struct job j = { .m = m, .p = p, .pc = &pc, .rc = rc, .cands = cands, .done = &done };
+    support_params_default(&j.sp);
+    j.sp.angle_deg = fmax(0, p->angle_deg - p->margin_deg);
+    j.sp.pitch_mm = p->pitch_mm;
+
+    /* stage 0: proxy for every direction */
+    for (uint32_t i = 0; i < n; i++)
+        order[i] = i;
+    if ((rcode = run_stage(&j, 0, order, n, err)))
+        goto out;
+    res->seconds_proxy = elapsed(&t0) - res->seconds_setup;
+    qsort_r(order, n, sizeof(uint32_t), cmp_key, cands);
+
+    /* stage 1: coarse ray cast of the proxy's best, every hull base and the input */
+    uint32_t n_coarse = 0;
+    for (uint32_t k = 0; k < n; k++)
+        if ((int)k < p->exact_top || cands[order[k]].c.source != ORIENT_SPHERE)
+            order[n_coarse++] = order[k];
+    j.progress_total = n_coarse + 3 * REFINE_PER + FINAL + 1;
+    if ((rcode = run_stage(&j, 1, order, n_coarse, err)))
+        goto out;
+    qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
+
+    /* refine around the three best distinct directions, still coarse */
+    uint32_t seeds[3], n_seeds = pick_distinct(cands, order, n_coarse, 3, 10, seeds);
+    for (uint32_t b = 0; b < n_seeds; b++) {
+        struct mat3 to = m3_rotate_onto(v3(0, 0, 1), cands[seeds[b]].c.up);
+        for (int k = 0; k < REFINE_PER; k++) {
+            double ring = (k < 8 ? 3.0 : 7.0) * M_PI / 180;
+            double az = 2 * M_PI * (k % 8) / 8 + (k < 8 ? 0 : M_PI / 8);
+            struct vec3 local = v3(sin(ring) * cos(az), sin(ring) * sin(az), cos(ring));
+            push(&cands, &n, &cap, m3_mul_v(to, local), ORIENT_REFINE); /* room reserved */
+            order[n_coarse++] = n - 1;
+        }
+    }
+    if ((rcode =
+             run_stage(&j, 1, order + n_coarse - n_seeds * REFINE_PER, n_seeds * REFINE_PER, err)))
+        goto out;
+    qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
+
+    /* stage 2: the best few distinct directions and the input at the full pitch */
+    uint32_t final[FINAL + 1];
+    uint32_t n_final = pick_distinct(cands, order, n_coarse, FINAL, 3, final);
+    bool has_input = false;
+    for (uint32_t i = 0; i < n_final; i++)
+        has_input |= final[i] == 0;
+    if (!has_input)
+        final[n_final++] = 0;
+    if ((rcode = run_stage(&j, 2, final, n_final, err)))
+        goto out;
+    qsort_r(final, n_final, sizeof(uint32_t), cmp_key, cands);
+
+    uint32_t best = final[0];
+    if (!cands[0].dropped && cands[best].c.cost > (1 - p->min_gain) * cands[0].c.cost)
+        best = 0; /* not worth turning the part */
+    res->best = cands[best].c;
+    res->input = cands[0].c;
+    /* report at the operator's angle: the margin only steers the choice */
+    struct support_params at = j.sp;
+    at.angle_deg = p->angle_deg;
+    if ((rcode = measure_support_cached(m, rc, &pc, res->best.up, &at, &res->best.m, err)) ||
+        (rcode = measure_support_cached(m, rc, &pc, res->input.up, &at, &res->input.m, err)))
+        goto out;
+    res->n_candidates = n;
+    res->n_exact = n_coarse + n_final;
+    (void)n_first;
+    for (uint32_t i = 0; i < n_final && res->n_runners < 4; i++) {
+        if (final[i] == best || cands[final[i]].dropped)
+            continue;
+        struct orient_candidate *r = &res->runners[res->n_runners++];
+        *r = cands[final[i]].c;
+        if ((rcode = measure_support_cached(m, rc, &pc, r->up, &at, &r->m, err)))
+            goto out;
+    }
+    res->seconds = elapsed(&t0);
+    res->seconds_exact = res->seconds - res->seconds_setup - res->seconds_proxy;
+    goto out;
+oom:
+    rcode = sf_err_set(err, SF_ENOMEM, "orientation: out of memory");
+out:
+    proxy_cache_release(&pc);
+    raycast_free(rc);
+    free(order);
+    free(cands);
+    free(bases);
+    free(hull_verts);
+    return rcode;
+}
+
+void
+orient_apply(struct mesh *m, struct vec3 up, double cx, double cy)
+{
+    mesh_rotate_up(m, up);
+    mesh_place_on_bed(m, cx, cy);
+}

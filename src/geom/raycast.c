@@ -1,0 +1,375 @@
+/*
+ * raycast.c - the rays structure on Embree 3 (see raycast.h).
+ *
+ * One process-wide Embree device (created once; its thread pool is shared)
+ * and one scene per part.  A grid is cast row by row with rtcIntersect1M
+ * streams; an intersection filter on the geometry records every hit (ray
+ * id, distance, triangle) into the row's collector and rejects it, so one
+ * traversal per ray yields all hits, in no particular order.  The row's
+ * hits are then bucketed by cell (counting sort), each bucket sorted by
+ * height, and duplicates removed: a ray through an edge shared by two
+ * triangles facing the same way reports the crossing twice.
+ *
+ * The collector rides in an extended RTCIntersectContext (Embree passes the
+ * context to filters), so concurrent grids on one scene never share state.
+ */
+#include "raycast.h"
+
+#include <embree3/rtcore.h>
+#include <math.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../base/limits.h"
+#include "../base/log.h"
+#include "../base/mem.h"
+
+struct raycast {
+    RTCScene scene;
+    const struct mesh *mesh;
+    float *normal;   /* 3 per triangle: unit outward normals */
+    struct vec3 com; /* centre of mass (raycast_com) */
+};
+
+/* Solid centre of mass, or the area-weighted surface centroid for a soup. */
+static struct vec3
+centre_of_mass(const struct mesh *m)
+{
+    struct vec3 com;
+    double vol = mesh_volume(m, &com);
+    if (fabs(vol) > 1e-9)
+        return com;
+    double area = 0;
+    com = v3(0, 0, 0);
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        double a = mesh_tri_area(m, i);
+        com = v3_add(com, v3_scale(mesh_tri_centroid(m, i), a));
+        area += a;
+    }
+    return area > 0 ? v3_scale(com, 1 / area) : com;
+}
+
+struct vec3
+raycast_com(const struct raycast *rc)
+{
+    return rc->com;
+}
+
+static pthread_once_t device_once = PTHREAD_ONCE_INIT;
+static RTCDevice device;
+
+static void
+embree_error(void *ud, enum RTCError code, const char *str)
+{
+    (void)ud;
+    log_error("embree", "error %d: %s", (int)code, str ? str : "");
+}
+
+static void
+device_init(void)
+{
+    device = rtcNewDevice(NULL);
+    if (device)
+        rtcSetDeviceErrorFunction(device, embree_error, NULL);
+}
+
+/* Hits collected for one row of rays. */
+struct collector {
+    struct ray_hit *hits;
+    uint32_t *ray; /* ray (cell within the row) of each hit */
+    size_t n, cap;
+    bool oom; /* a growth failed: the row is incomplete */
+};
+
+struct hit_context {
+    struct RTCIntersectContext ctx; /* must be first: Embree hands us this pointer */
+    struct collector *col;
+    const struct raycast *rc;
+    struct vec3 up;
+};
+
+/* Embree's RTCRayN/RTCHitN accessors are C++-only; these follow its SOA layout
+   (rtcore_ray.h: tfar is the 9th float field, id the 11th, primID the 6th). */
+static inline float
+rayn_tfar(const struct RTCRayN *ray, unsigned n, unsigned i)
+{
+    return ((const float *)ray)[8 * n + i];
+}
+
+static inline unsigned
+rayn_id(const struct RTCRayN *ray, unsigned n, unsigned i)
+{
+    return ((const unsigned *)ray)[10 * n + i];
+}
+
+static inline unsigned
+hitn_prim(const struct RTCHitN *hit, unsigned n, unsigned i)
+{
+    return ((const unsigned *)hit)[5 * n + i];
+}
+
+static void
+collect_filter(const struct RTCFilterFunctionNArguments *args)
+{
+    struct hit_context *hc = (struct hit_context *)args->context;
+    struct collector *c = hc->col;
+    for (unsigned i = 0; i < args->N; i++) {
+        if (!args->valid[i])
+            continue;
+        args->valid[i] = 0; /* reject: traversal goes on to the next hit */
+        if (c->n == c->cap) {
+            size_t cap = c->cap;
+            void *h = c->hits, *r = c->ray;
+            if (!mem_grow(&h, &cap, c->n + 1, sizeof(*c->hits))) {
+                c->oom = true;
+                continue;
+            }
+            c->hits = h;
+            cap = c->cap;
+            if (!mem_grow(&r, &cap, c->n + 1, sizeof(*c->ray))) {
+                c->oom = true;
+                continue;
+            }
+            c->ray = r;
+            c->cap = cap;
+        }
+        uint32_t prim = hitn_prim(args->hit, args->N, i);
+        const float *n = hc->rc->normal + 3 * (size_t)prim;
+        struct ray_hit *h = &c->hits[c->n];
+        h->h = rayn_tfar(args->ray, args->N, i);
+        h->tri = prim;
+        h->cos_up = (float)(n[0] * hc->up.x + n[1] * hc->up.y + n[2] * hc->up.z);
+        c->ray[c->n] = rayn_id(args->ray, args->N, i);
+        c->n++;
+    }
+}
+
+struct raycast *
+raycast_new(const struct mesh *m, struct sf_err *err)
+{
+    pthread_once(&device_once, device_init);
+    if (!device) {
+        sf_err_set(err, SF_EIO, "embree: cannot create a device (error %d)",
+                   (int)rtcGetDeviceError(NULL));
+        return NULL;
+    }
+    struct raycast *rc = mem_calloc(1, sizeof(*rc));
+    if (!rc) {
+        sf_err_set(err, SF_ENOMEM, "out of memory");
+        return NULL;
+    }
+    rc->mesh = m;
+    rc->com = centre_of_mass(m);
+    rc->normal = mem_array((size_t)m->n_tris * 3 + 3, sizeof(float));
+    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    float *vb = geom ? rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                               3 * sizeof(float), m->n_verts + 1)
+                     : NULL;
+    unsigned *ib = geom ? rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                  3 * sizeof(unsigned), m->n_tris ? m->n_tris : 1)
+                        : NULL;
+    if (!rc->normal || !vb || !ib) {
+        if (geom)
+            rtcReleaseGeometry(geom);
+        raycast_free(rc);
+        sf_err_set(err, SF_ENOMEM, "embree: out of memory for %u triangles", m->n_tris);
+        return NULL;
+    }
+    for (uint32_t i = 0; i < m->n_verts; i++) {
+        vb[3 * i] = (float)m->v[i].x;
+        vb[3 * i + 1] = (float)m->v[i].y;
+        vb[3 * i + 2] = (float)m->v[i].z;
+    }
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        memcpy(ib + 3 * (size_t)i, m->t[i], 3 * sizeof(unsigned));
+        struct vec3 n = mesh_tri_normal(m, i);
+        rc->normal[3 * i] = (float)n.x;
+        rc->normal[3 * i + 1] = (float)n.y;
+        rc->normal[3 * i + 2] = (float)n.z;
+    }
+    rtcSetGeometryIntersectFilterFunction(geom, collect_filter);
+    rtcCommitGeometry(geom);
+    rc->scene = rtcNewScene(device);
+    if (!rc->scene) {
+        rtcReleaseGeometry(geom);
+        raycast_free(rc);
+        sf_err_set(err, SF_ENOMEM, "embree: cannot create a scene");
+        return NULL;
+    }
+    rtcSetSceneFlags(rc->scene, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneBuildQuality(rc->scene, RTC_BUILD_QUALITY_HIGH);
+    rtcAttachGeometry(rc->scene, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(rc->scene);
+    return rc;
+}
+
+void
+raycast_free(struct raycast *rc)
+{
+    if (!rc)
+        return;
+    if (rc->scene)
+        rtcReleaseScene(rc->scene);
+    free(rc->normal);
+    free(rc);
+}
+
+void
+ray_grid_release(struct ray_grid *g)
+{
+    free(g->first);
+    free(g->hits);
+    memset(g, 0, sizeof(*g));
+}
+
+/* Any unit vector perpendicular to d; +x for d = +z so grids align with the bed. */
+static struct vec3
+perpendicular(struct vec3 d)
+{
+    if (fabs(d.z) > 0.999999 && d.z > 0)
+        return v3(1, 0, 0);
+    struct vec3 a = fabs(d.x) < 0.9 ? v3(1, 0, 0) : v3(0, 1, 0);
+    return v3_normalize(v3_sub(a, v3_scale(d, v3_dot(a, d))));
+}
+
+static int
+cmp_hit(const void *a, const void *b)
+{
+    float x = ((const struct ray_hit *)a)->h, y = ((const struct ray_hit *)b)->h;
+    return (x > y) - (x < y);
+}
+
+int
+raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *g,
+             struct sf_err *err)
+{
+    memset(g, 0, sizeof(*g));
+    const struct mesh *m = rc->mesh;
+    if (!(pitch > 0) || m->n_verts == 0)
+        return sf_err_set(err, SF_EINVAL,
+                          "ray grid: pitch must be positive and the mesh non-empty");
+    g->up = v3_normalize(up);
+    g->u = perpendicular(g->up);
+    g->w = v3_cross(g->up, g->u);
+    g->pitch = pitch;
+    double ulo = INFINITY, uhi = -INFINITY, wlo = INFINITY, whi = -INFINITY;
+    double dlo = INFINITY, dhi = -INFINITY;
+    for (uint32_t i = 0; i < m->n_verts; i++) {
+        double u = v3_dot(m->v[i], g->u), w = v3_dot(m->v[i], g->w), d = v3_dot(m->v[i], g->up);
+        ulo = fmin(ulo, u), uhi = fmax(uhi, u);
+        wlo = fmin(wlo, w), whi = fmax(whi, w);
+        dlo = fmin(dlo, d), dhi = fmax(dhi, d);
+    }
+    double nu = ceil((uhi - ulo) / pitch), nw = ceil((whi - wlo) / pitch);
+    if (nu < 1)
+        nu = 1;
+    if (nw < 1)
+        nw = 1;
+    if (nu * nw > SF_GRID_CELLS_MAX)
+        return sf_err_set(err, SF_ENOMEM,
+                          "ray grid of %.0f x %.0f cells at %g mm is over the limit of %u", nu, nw,
+                          pitch, SF_GRID_CELLS_MAX);
+    g->nu = (uint32_t)nu;
+    g->nw = (uint32_t)nw;
+    /* centre the grid on the shadow; a tiny irrational offset keeps rays off the
+       edges and vertices of parts modelled on round coordinates */
+    g->u0 = 0.5 * (ulo + uhi) - 0.5 * (nu - 1) * pitch + 1.23e-4 * pitch * M_SQRT2;
+    g->w0 = 0.5 * (wlo + whi) - 0.5 * (nw - 1) * pitch + 1.17e-4 * pitch * M_PI;
+    g->base = dlo;
+
+    size_t cells = (size_t)g->nu * g->nw;
+    g->first = mem_array(cells + 1, sizeof(uint32_t));
+    struct RTCRayHit *rays = mem_array(g->nu, sizeof(struct RTCRayHit));
+    uint32_t *count = mem_array((size_t)g->nu + 1, sizeof(uint32_t));
+    struct collector col = { 0 };
+    size_t cap_hits = 0;
+    int rc_out = SF_OK;
+    if (!g->first || !rays || !count) {
+        rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory");
+        goto out;
+    }
+    double start = dlo - 1.0; /* rays start 1 mm below the part */
+    struct hit_context hc;
+    rtcInitIntersectContext(&hc.ctx);
+    hc.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    hc.col = &col;
+    hc.rc = rc;
+    hc.up = g->up;
+    g->first[0] = 0;
+    for (uint32_t j = 0; j < g->nw; j++) {
+        double wc = g->w0 + j * pitch;
+        for (uint32_t i = 0; i < g->nu; i++) {
+            struct vec3 o = v3_add(v3_add(v3_scale(g->u, g->u0 + i * pitch), v3_scale(g->w, wc)),
+                                   v3_scale(g->up, start));
+            struct RTCRayHit *r = &rays[i];
+            memset(r, 0, sizeof(*r));
+            r->ray.org_x = (float)o.x;
+            r->ray.org_y = (float)o.y;
+            r->ray.org_z = (float)o.z;
+            r->ray.dir_x = (float)g->up.x;
+            r->ray.dir_y = (float)g->up.y;
+            r->ray.dir_z = (float)g->up.z;
+            r->ray.tnear = 0;
+            r->ray.tfar = INFINITY;
+            r->ray.mask = UINT32_MAX;
+            r->ray.id = i;
+            r->hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        }
+        col.n = 0;
+        rtcIntersect1M(rc->scene, &hc.ctx, rays, g->nu, sizeof(struct RTCRayHit));
+        if (col.oom) {
+            rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
+            goto out;
+        }
+        /* bucket the row's hits by cell, then sort and dedupe each bucket */
+        memset(count, 0, sizeof(uint32_t) * (g->nu + 1));
+        for (size_t k = 0; k < col.n; k++)
+            count[col.ray[k] + 1]++;
+        for (uint32_t i = 0; i < g->nu; i++)
+            count[i + 1] += count[i];
+        size_t base = g->n_hits;
+        void *hp = g->hits;
+        if (!mem_grow(&hp, &cap_hits, base + col.n + 1, sizeof(struct ray_hit))) {
+            rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
+            goto out;
+        }
+        g->hits = hp;
+        struct ray_hit *row = g->hits + base;
+        for (size_t k = 0; k < col.n; k++)
+            row[count[col.ray[k]]++] = col.hits[k];
+        /* count[i] is now the end of bucket i; walk buckets in order */
+        size_t out_n = base, bstart = 0;
+        for (uint32_t i = 0; i < g->nu; i++) {
+            size_t bend = count[i];
+            struct ray_hit *b = row + bstart;
+            size_t bn = bend - bstart;
+            if (bn > 1)
+                qsort(b, bn, sizeof(*b), cmp_hit);
+            float eps = (float)(1e-5 * (dhi - dlo + 1));
+            for (size_t k = 0; k < bn; k++) {
+                struct ray_hit h = b[k];
+                h.h = (float)(h.h - 1.0); /* from the ray start to the bed */
+                if (out_n > g->first[ray_grid_cell(g, i, j)] &&
+                    fabsf(g->hits[out_n - 1].h - h.h) < eps &&
+                    (g->hits[out_n - 1].cos_up < 0) == (h.cos_up < 0))
+                    continue; /* the same crossing seen through a shared edge */
+                g->hits[out_n++] = h;
+            }
+            g->first[ray_grid_cell(g, i, j) + 1] = (uint32_t)out_n;
+            bstart = bend;
+        }
+        g->n_hits = out_n;
+        if (j + 1 < g->nw)
+            g->first[ray_grid_cell(g, 0, j + 1)] = (uint32_t)out_n;
+    }
+out:
+    free(rays);
+    free(count);
+    free(col.hits);
+    free(col.ray);
+    if (rc_out)
+        ray_grid_release(g);
+    return rc_out;
+}

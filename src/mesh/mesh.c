@@ -1,0 +1,896 @@
+/*
+ * mesh.c - the indexed triangle mesh: storage, measures, transforms,
+ * welding, topology and orientation repair, loading by content and saving.
+ *
+ * Welding hashes vertices into cells of the tolerance size and compares
+ * against the own cell first (exact duplicates, the common STL case) and
+ * then the 26 neighbours, so it is linear in the vertex count.  Topology is
+ * built from a vertex -> outgoing half-edge table (CSR) instead of a sort of
+ * all edges: each half-edge a->b finds its users by scanning the short
+ * lists of a and b.  Orientation repair flood-fills each component across
+ * manifold edges, then turns closed components with negative volume inside
+ * out.
+ *
+ * Single-threaded per mesh.
+ */
+#include "mesh.h"
+
+#include <fcntl.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "../base/buf.h"
+#include "../base/limits.h"
+#include "../base/mem.h"
+
+void
+mesh_init(struct mesh *m)
+{
+    memset(m, 0, sizeof(*m));
+}
+
+void
+mesh_release(struct mesh *m)
+{
+    free(m->v);
+    free(m->t);
+    mesh_init(m);
+}
+
+int
+mesh_alloc(struct mesh *m, uint32_t n_verts, uint32_t n_tris, struct sf_err *err)
+{
+    mesh_release(m);
+    if (n_verts > SF_MESH_VERTS_MAX || n_tris > SF_MESH_TRIS_MAX)
+        return sf_err_set(err, SF_ENOMEM, "mesh of %u vertices and %u triangles is over the limit",
+                          n_verts, n_tris);
+    m->v = mem_array(n_verts ? n_verts : 1, sizeof(*m->v));
+    m->t = mem_array(n_tris ? n_tris : 1, sizeof(*m->t));
+    if (!m->v || !m->t) {
+        mesh_release(m);
+        return sf_err_set(err, SF_ENOMEM, "out of memory for %u triangles", n_tris);
+    }
+    m->n_verts = n_verts;
+    m->n_tris = n_tris;
+    return SF_OK;
+}
+
+int
+mesh_copy(struct mesh *dst, const struct mesh *src, struct sf_err *err)
+{
+    int rc = mesh_alloc(dst, src->n_verts, src->n_tris, err);
+    if (rc)
+        return rc;
+    memcpy(dst->v, src->v, sizeof(*src->v) * src->n_verts);
+    memcpy(dst->t, src->t, sizeof(*src->t) * src->n_tris);
+    return SF_OK;
+}
+
+void
+mesh_bbox(const struct mesh *m, struct vec3 *lo, struct vec3 *hi)
+{
+    struct vec3 a = v3(0, 0, 0), b = v3(0, 0, 0);
+    if (m->n_verts) {
+        a = b = m->v[0];
+        for (uint32_t i = 1; i < m->n_verts; i++) {
+            a = v3_min(a, m->v[i]);
+            b = v3_max(b, m->v[i]);
+        }
+    }
+    if (lo)
+        *lo = a;
+    if (hi)
+        *hi = b;
+}
+
+double
+mesh_diag(const struct mesh *m)
+{
+    struct vec3 lo, hi;
+    mesh_bbox(m, &lo, &hi);
+    return v3_len(v3_sub(hi, lo));
+}
+
+struct vec3
+mesh_tri_cross(const struct mesh *m, uint32_t i)
+{
+    struct vec3 a = m->v[m->t[i][0]], b = m->v[m->t[i][1]], c = m->v[m->t[i][2]];
+    return v3_cross(v3_sub(b, a), v3_sub(c, a));
+}
+
+struct vec3
+mesh_tri_normal(const struct mesh *m, uint32_t i)
+{
+    return v3_normalize(mesh_tri_cross(m, i));
+}
+
+double
+mesh_tri_area(const struct mesh *m, uint32_t i)
+{
+    return 0.5 * v3_len(mesh_tri_cross(m, i));
+}
+
+struct vec3
+mesh_tri_centroid(const struct mesh *m, uint32_t i)
+{
+    struct vec3 a = m->v[m->t[i][0]], b = m->v[m->t[i][1]], c = m->v[m->t[i][2]];
+    return v3_scale(v3_add(v3_add(a, b), c), 1.0 / 3.0);
+}
+
+double
+mesh_area(const struct mesh *m)
+{
+    double s = 0;
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        s += mesh_tri_area(m, i);
+    return s;
+}
+
+double
+mesh_volume(const struct mesh *m, struct vec3 *centroid)
+{
+    /* Signed tetrahedra against a point inside the bbox (the bbox centre),
+       which keeps the sums well conditioned far from the origin. */
+    struct vec3 lo, hi;
+    mesh_bbox(m, &lo, &hi);
+    struct vec3 o = v3_scale(v3_add(lo, hi), 0.5);
+    double vol = 0;
+    struct vec3 c = v3(0, 0, 0);
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        struct vec3 a = v3_sub(m->v[m->t[i][0]], o);
+        struct vec3 b = v3_sub(m->v[m->t[i][1]], o);
+        struct vec3 d = v3_sub(m->v[m->t[i][2]], o);
+        double v6 = v3_dot(a, v3_cross(b, d));
+        vol += v6;
+        c = v3_add(c, v3_scale(v3_add(v3_add(a, b), d), v6));
+    }
+    vol /= 6.0;
+    if (centroid)
+        *centroid = fabs(vol) > 0 ? v3_add(o, v3_scale(c, 1.0 / (24.0 * vol))) : o;
+    return vol;
+}
+
+void
+mesh_transform(struct mesh *m, struct mat3 r, struct vec3 t)
+{
+    for (uint32_t i = 0; i < m->n_verts; i++)
+        m->v[i] = v3_add(m3_mul_v(r, m->v[i]), t);
+}
+
+void
+mesh_translate(struct mesh *m, struct vec3 t)
+{
+    for (uint32_t i = 0; i < m->n_verts; i++)
+        m->v[i] = v3_add(m->v[i], t);
+}
+
+void
+mesh_rotate_up(struct mesh *m, struct vec3 up)
+{
+    mesh_transform(m, m3_rotate_onto(v3_normalize(up), v3(0, 0, 1)), v3(0, 0, 0));
+}
+
+void
+mesh_place_on_bed(struct mesh *m, double cx, double cy)
+{
+    struct vec3 lo, hi;
+    mesh_bbox(m, &lo, &hi);
+    mesh_translate(m, v3(cx - 0.5 * (lo.x + hi.x), cy - 0.5 * (lo.y + hi.y), -lo.z));
+}
+
+/* ---- welding ---------------------------------------------------------- */
+
+static uint64_t
+cell_hash(int64_t x, int64_t y, int64_t z)
+{
+    uint64_t h = (uint64_t)x * 0x9E3779B97F4A7C15ULL;
+    h ^= (uint64_t)y * 0xC2B2AE3D27D4EB4FULL;
+    h ^= (uint64_t)z * 0x165667B19E3779F9ULL;
+    return h ^ (h >> 29);
+}
+
+struct weld_table {
+    uint64_t mask;
+    int64_t (*key)[3]; /* cell coordinates of each slot */
+    uint32_t *head;    /* first representative vertex in the cell, UINT32_MAX if empty */
+    uint32_t *next;    /* per representative: next in the same cell */
+};
+
+static uint32_t *
+weld_slot(struct weld_table *w, int64_t x, int64_t y, int64_t z, bool insert)
+{
+    uint64_t s = cell_hash(x, y, z) & w->mask;
+    for (;;) {
+        if (w->head[s] == UINT32_MAX)
+            return insert ? &w->head[s] : NULL;
+        if (w->key[s][0] == x && w->key[s][1] == y && w->key[s][2] == z)
+            return &w->head[s];
+        s = (s + 1) & w->mask;
+    }
+}
+
+static uint64_t
+vertex_hash(struct vec3 p)
+{
+    uint64_t a, b, c;
+    /* +0.0 so that -0.0 hashes like 0.0 (they compare equal) */
+    double x = p.x + 0.0, y = p.y + 0.0, z = p.z + 0.0;
+    memcpy(&a, &x, 8);
+    memcpy(&b, &y, 8);
+    memcpy(&c, &z, 8);
+    uint64_t h = a * 0x9E3779B97F4A7C15ULL ^ b * 0xC2B2AE3D27D4EB4FULL ^ c * 0x165667B19E3779F9ULL;
+    return h ^ (h >> 31);
+}
+
+/*
+ * Merge bit-identical vertices: one hash probe each, no tolerance.  STL
+ * soups repeat every vertex exactly (six times on average), so this pass
+ * does most of the work and leaves the tolerance pass a sixth of the input.
+ * Fills remap (old -> new) and compacts m->v in place.
+ */
+static int
+weld_exact(struct mesh *m, uint32_t *remap)
+{
+    uint64_t size = 1;
+    while (size < 2ull * m->n_verts)
+        size <<= 1;
+    uint32_t *slot = mem_array(size, sizeof(uint32_t));
+    if (!slot)
+        return SF_ENOMEM;
+    memset(slot, 0xff, size * sizeof(uint32_t));
+    uint32_t n_out = 0;
+    for (uint32_t i = 0; i < m->n_verts; i++) {
+        struct vec3 p = m->v[i];
+        uint64_t s = vertex_hash(p) & (size - 1);
+        for (;;) {
+            uint32_t r = slot[s];
+            if (r == UINT32_MAX) {
+                slot[s] = n_out;
+                m->v[n_out] = p; /* n_out <= i: never overwrites an unread vertex */
+                remap[i] = n_out++;
+                break;
+            }
+            struct vec3 q = m->v[r];
+            if (q.x == p.x && q.y == p.y && q.z == p.z) {
+                remap[i] = r;
+                break;
+            }
+            s = (s + 1) & (size - 1);
+        }
+    }
+    free(slot);
+    m->n_verts = n_out;
+    return SF_OK;
+}
+
+int
+mesh_weld(struct mesh *m, double tol, struct sf_err *err)
+{
+    if (m->n_verts == 0)
+        return 0;
+    if (!(tol > 0))
+        tol = 1e-9;
+    uint32_t n_in = m->n_verts;
+    uint32_t *exact = mem_array(n_in, sizeof(uint32_t));
+    if (!exact || weld_exact(m, exact) != SF_OK) {
+        free(exact);
+        return sf_err_set(err, SF_ENOMEM, "out of memory welding %u vertices", n_in);
+    }
+    uint64_t size = 1;
+    while (size < 2ull * m->n_verts)
+        size <<= 1;
+    struct weld_table w = { size - 1, NULL, NULL, NULL };
+    uint32_t *remap = mem_array(m->n_verts, sizeof(uint32_t));
+    struct vec3 *out = mem_array(m->n_verts, sizeof(struct vec3));
+    w.key = mem_array(size, sizeof(*w.key));
+    w.head = mem_array(size, sizeof(uint32_t));
+    w.next = mem_array(m->n_verts, sizeof(uint32_t));
+    int rc = SF_OK;
+    if (!remap || !out || !w.key || !w.head || !w.next) {
+        rc = sf_err_set(err, SF_ENOMEM, "out of memory welding %u vertices", m->n_verts);
+        goto out_free;
+    }
+    memset(w.head, 0xff, size * sizeof(uint32_t));
+    /* Cells are 64 tolerances wide, so a point needs to look into a
+       neighbouring cell only along axes where it lies within tol of the
+       cell's wall: most points probe just their own cell. */
+    double cell = 64 * tol, inv = 1.0 / cell, tol2 = tol * tol;
+    uint32_t n_out = 0;
+    for (uint32_t i = 0; i < m->n_verts; i++) {
+        struct vec3 p = m->v[i];
+        double fx = floor(p.x * inv), fy = floor(p.y * inv), fz = floor(p.z * inv);
+        int64_t cx = (int64_t)fx, cy = (int64_t)fy, cz = (int64_t)fz;
+        double rx = p.x - fx * cell, ry = p.y - fy * cell, rz = p.z - fz * cell;
+        int lx = rx < tol ? -1 : 0, hx = rx > cell - tol ? 1 : 0;
+        int ly = ry < tol ? -1 : 0, hy = ry > cell - tol ? 1 : 0;
+        int lz = rz < tol ? -1 : 0, hz = rz > cell - tol ? 1 : 0;
+        uint32_t found = UINT32_MAX;
+        for (int dz = lz; dz <= hz && found == UINT32_MAX; dz++)
+            for (int dy = ly; dy <= hy && found == UINT32_MAX; dy++)
+                for (int dx = lx; dx <= hx && found == UINT32_MAX; dx++) {
+                    uint32_t *h = weld_slot(&w, cx + dx, cy + dy, cz + dz, false);
+                    for (uint32_t r = h ? *h : UINT32_MAX; r != UINT32_MAX; r = w.next[r]) {
+                        struct vec3 d = v3_sub(out[r], p);
+                        if (v3_dot(d, d) <= tol2) {
+                            found = r;
+                            break;
+                        }
+                    }
+                }
+        if (found == UINT32_MAX) {
+            uint32_t *h = weld_slot(&w, cx, cy, cz, true);
+            uint64_t slot = (uint64_t)(h - w.head);
+            w.key[slot][0] = cx;
+            w.key[slot][1] = cy;
+            w.key[slot][2] = cz;
+            out[n_out] = p;
+            w.next[n_out] = *h;
+            *h = n_out;
+            found = n_out++;
+        }
+        remap[i] = found;
+    }
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        for (int k = 0; k < 3; k++)
+            m->t[i][k] = remap[exact[m->t[i][k]]];
+    rc = (int)(n_in - n_out);
+    free(m->v);
+    m->v = mem_realloc_array(out, n_out ? n_out : 1, sizeof(struct vec3));
+    if (!m->v)
+        m->v = out; /* shrinking failed: keep the larger block */
+    out = NULL;
+    m->n_verts = n_out;
+out_free:
+    if (rc < 0) { /* undo nothing: the exact pass already renumbered; keep it consistent */
+        for (uint32_t i = 0; i < m->n_tris; i++)
+            for (int k = 0; k < 3; k++)
+                m->t[i][k] = exact[m->t[i][k]];
+    }
+    free(exact);
+    free(out);
+    free(remap);
+    free(w.key);
+    free(w.head);
+    free(w.next);
+    return rc;
+}
+
+uint32_t
+mesh_drop_degenerate(struct mesh *m)
+{
+    uint32_t kept = 0;
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        uint32_t a = m->t[i][0], b = m->t[i][1], c = m->t[i][2];
+        if (a == b || b == c || a == c)
+            continue;
+        struct vec3 n = v3_cross(v3_sub(m->v[b], m->v[a]), v3_sub(m->v[c], m->v[a]));
+        if (!(v3_dot(n, n) > 0))
+            continue;
+        memcpy(m->t[kept++], m->t[i], sizeof(m->t[0]));
+    }
+    uint32_t dropped = m->n_tris - kept;
+    m->n_tris = kept;
+    return dropped;
+}
+
+void
+mesh_compact(struct mesh *m)
+{
+    uint32_t *map = mem_array(m->n_verts ? m->n_verts : 1, sizeof(uint32_t));
+    struct vec3 *v = mem_array(m->n_verts ? m->n_verts : 1, sizeof(struct vec3));
+    if (!map || !v) {
+        free(map);
+        free(v);
+        return; /* keeping unused vertices is harmless */
+    }
+    memset(map, 0xff, sizeof(uint32_t) * m->n_verts);
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        for (int k = 0; k < 3; k++) {
+            uint32_t old = m->t[i][k];
+            if (map[old] == UINT32_MAX) {
+                map[old] = n;
+                v[n++] = m->v[old];
+            }
+            m->t[i][k] = map[old];
+        }
+    free(m->v);
+    m->v = v;
+    m->n_verts = n;
+    free(map);
+}
+
+/* ---- topology ----------------------------------------------------------- */
+
+/* Outgoing half-edges per vertex, CSR: he[start[v] .. start[v+1]) = tri*3+k with t[tri][k] == v. */
+struct vert_he {
+    uint32_t *start;
+    uint32_t *he;
+};
+
+static int
+vert_he_build(const struct mesh *m, struct vert_he *vh)
+{
+    vh->start = mem_calloc((size_t)m->n_verts + 1, sizeof(uint32_t));
+    vh->he = mem_array((size_t)m->n_tris * 3 + 1, sizeof(uint32_t));
+    if (!vh->start || !vh->he)
+        return SF_ENOMEM;
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        for (int k = 0; k < 3; k++)
+            vh->start[m->t[i][k] + 1]++;
+    for (uint32_t v = 0; v < m->n_verts; v++)
+        vh->start[v + 1] += vh->start[v];
+    uint32_t *fill = mem_array(m->n_verts ? m->n_verts : 1, sizeof(uint32_t));
+    if (!fill)
+        return SF_ENOMEM;
+    memcpy(fill, vh->start, sizeof(uint32_t) * m->n_verts);
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        for (int k = 0; k < 3; k++)
+            vh->he[fill[m->t[i][k]]++] = i * 3 + (uint32_t)k;
+    free(fill);
+    return SF_OK;
+}
+
+static void
+vert_he_release(struct vert_he *vh)
+{
+    free(vh->start);
+    free(vh->he);
+}
+
+static inline uint32_t
+he_dst(const struct mesh *m, uint32_t he)
+{
+    return m->t[he / 3][(he % 3 + 1) % 3];
+}
+
+int
+mesh_topo_build(const struct mesh *m, struct mesh_topo *topo, struct sf_err *err)
+{
+    memset(topo, 0, sizeof(*topo));
+    struct vert_he vh = { 0 };
+    topo->adj = mem_array(m->n_tris ? m->n_tris : 1, sizeof(*topo->adj));
+    topo->comp = mem_array(m->n_tris ? m->n_tris : 1, sizeof(uint32_t));
+    uint32_t *queue = mem_array(m->n_tris ? m->n_tris : 1, sizeof(uint32_t));
+    if (!topo->adj || !topo->comp || !queue || vert_he_build(m, &vh) != SF_OK) {
+        free(queue);
+        vert_he_release(&vh);
+        mesh_topo_release(topo);
+        return sf_err_set(err, SF_ENOMEM, "out of memory for the topology of %u triangles",
+                          m->n_tris);
+    }
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        for (int k = 0; k < 3; k++) {
+            uint32_t he = i * 3 + (uint32_t)k;
+            uint32_t a = m->t[i][k], b = he_dst(m, he);
+            uint32_t users = 0, other = MESH_NO_TRI, lowest = he;
+            bool same_dir = false;
+            for (uint32_t s = vh.start[a]; s < vh.start[a + 1]; s++) {
+                uint32_t h = vh.he[s];
+                if (h != he && he_dst(m, h) == b) {
+                    users++;
+                    other = h / 3;
+                    same_dir = true;
+                    lowest = h < lowest ? h : lowest;
+                }
+            }
+            for (uint32_t s = vh.start[b]; s < vh.start[b + 1]; s++) {
+                uint32_t h = vh.he[s];
+                if (he_dst(m, h) == a) {
+                    users++;
+                    other = h / 3;
+                    lowest = h < lowest ? h : lowest;
+                }
+            }
+            topo->adj[i][k] = users == 1 ? other : MESH_NO_TRI;
+            if (lowest == he) { /* count each undirected edge once */
+                topo->n_edges++;
+                if (users == 0)
+                    topo->n_boundary++;
+                else if (users >= 2)
+                    topo->n_nonmanifold++;
+                else if (same_dir)
+                    topo->n_misoriented++;
+            }
+        }
+    }
+    /* components by breadth-first search over adjacency */
+    memset(topo->comp, 0xff, sizeof(uint32_t) * m->n_tris);
+    for (uint32_t seed = 0; seed < m->n_tris; seed++) {
+        if (topo->comp[seed] != UINT32_MAX)
+            continue;
+        uint32_t head = 0, tail = 0;
+        queue[tail++] = seed;
+        topo->comp[seed] = topo->n_comps;
+        while (head < tail) {
+            uint32_t i = queue[head++];
+            for (int k = 0; k < 3; k++) {
+                uint32_t j = topo->adj[i][k];
+                if (j != MESH_NO_TRI && topo->comp[j] == UINT32_MAX) {
+                    topo->comp[j] = topo->n_comps;
+                    queue[tail++] = j;
+                }
+            }
+        }
+        topo->n_comps++;
+    }
+    free(queue);
+    vert_he_release(&vh);
+    return SF_OK;
+}
+
+void
+mesh_topo_release(struct mesh_topo *topo)
+{
+    free(topo->adj);
+    free(topo->comp);
+    memset(topo, 0, sizeof(*topo));
+}
+
+bool
+mesh_topo_closed(const struct mesh_topo *topo)
+{
+    return topo->n_boundary == 0 && topo->n_nonmanifold == 0 && topo->n_misoriented == 0;
+}
+
+/* Does triangle t contain the directed edge a->b? */
+static bool
+tri_has_edge(const uint32_t t[3], uint32_t a, uint32_t b)
+{
+    for (int k = 0; k < 3; k++)
+        if (t[k] == a && t[(k + 1) % 3] == b)
+            return true;
+    return false;
+}
+
+int
+mesh_orient(struct mesh *m, struct sf_err *err)
+{
+    struct mesh_topo topo;
+    int rc = mesh_topo_build(m, &topo, err);
+    if (rc)
+        return rc;
+    uint8_t *seen = mem_calloc(m->n_tris ? m->n_tris : 1, 1);
+    uint32_t *queue = mem_array(m->n_tris ? m->n_tris : 1, sizeof(uint32_t));
+    bool *open = mem_calloc(topo.n_comps ? topo.n_comps : 1, sizeof(bool));
+    double *vol = mem_calloc(topo.n_comps ? topo.n_comps : 1, sizeof(double));
+    uint32_t(*orig)[3] = mem_array(m->n_tris ? m->n_tris : 1, sizeof(*orig));
+    if (!seen || !queue || !open || !vol || !orig) {
+        rc = sf_err_set(err, SF_ENOMEM, "out of memory orienting %u triangles", m->n_tris);
+        goto out;
+    }
+    memcpy(orig, m->t, sizeof(*orig) * m->n_tris);
+    int flipped = 0;
+    for (uint32_t seed = 0; seed < m->n_tris; seed++) {
+        if (seen[seed])
+            continue;
+        uint32_t head = 0, tail = 0;
+        queue[tail++] = seed;
+        seen[seed] = 1;
+        while (head < tail) {
+            uint32_t i = queue[head++];
+            for (int k = 0; k < 3; k++) {
+                uint32_t j = topo.adj[i][k];
+                if (j == MESH_NO_TRI || seen[j])
+                    continue;
+                /* adj is indexed by the edges of the original winding, which flips
+                   reorder: take the edge's vertices from the copy, its direction from i
+                   as it is now (final), and flip j if it runs the same way */
+                uint32_t a = orig[i][k], b = orig[i][(k + 1) % 3];
+                if (!tri_has_edge(m->t[i], a, b)) {
+                    uint32_t tmp = a;
+                    a = b;
+                    b = tmp;
+                }
+                if (tri_has_edge(m->t[j], a, b)) {
+                    uint32_t tmp = m->t[j][1];
+                    m->t[j][1] = m->t[j][2];
+                    m->t[j][2] = tmp;
+                    flipped++;
+                }
+                seen[j] = 1;
+                queue[tail++] = j;
+            }
+        }
+    }
+    /* turn closed components with negative volume inside out */
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        for (int k = 0; k < 3; k++)
+            if (topo.adj[i][k] == MESH_NO_TRI)
+                open[topo.comp[i]] = true;
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        struct vec3 a = m->v[m->t[i][0]], b = m->v[m->t[i][1]], c = m->v[m->t[i][2]];
+        vol[topo.comp[i]] += v3_dot(a, v3_cross(b, c));
+    }
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        uint32_t c = topo.comp[i];
+        if (!open[c] && vol[c] < 0) {
+            uint32_t tmp = m->t[i][1];
+            m->t[i][1] = m->t[i][2];
+            m->t[i][2] = tmp;
+            flipped++;
+        }
+    }
+    rc = flipped;
+out:
+    free(seen);
+    free(queue);
+    free(open);
+    free(vol);
+    free(orig);
+    mesh_topo_release(&topo);
+    return rc;
+}
+
+/* ---- formats ------------------------------------------------------------ */
+
+const char *
+mesh_format_name(enum mesh_format f)
+{
+    switch (f) {
+    case MESH_FMT_STL_BINARY:
+        return "binary STL";
+    case MESH_FMT_STL_ASCII:
+        return "ASCII STL";
+    case MESH_FMT_OBJ:
+        return "OBJ";
+    case MESH_FMT_3MF:
+        return "3MF";
+    case MESH_FMT_UNKNOWN:
+        break;
+    }
+    return "unknown";
+}
+
+enum mesh_format
+mesh_detect(const void *data, size_t len)
+{
+    const unsigned char *p = data;
+    if (len >= 4 && p[0] == 'P' && p[1] == 'K' && p[2] == 3 && p[3] == 4)
+        return MESH_FMT_3MF;
+    if (len >= 84) {
+        uint32_t n;
+        memcpy(&n, p + 80, 4);
+        if ((uint64_t)84 + (uint64_t)50 * n == len)
+            return MESH_FMT_STL_BINARY;
+    }
+    size_t i = 0;
+    while (i < len && (p[i] == ' ' || p[i] == '\t' || p[i] == '\r' || p[i] == '\n'))
+        i++;
+    if (len - i >= 5 && memcmp(p + i, "solid", 5) == 0)
+        return MESH_FMT_STL_ASCII;
+    /* OBJ: text whose first keyword lines are OBJ statements */
+    size_t scan = len < 4096 ? len : 4096;
+    bool text = true;
+    for (size_t k = 0; k < scan; k++)
+        if (p[k] == 0) {
+            text = false;
+            break;
+        }
+    if (text) {
+        for (size_t k = i; k + 2 < scan; k++) {
+            if ((k == 0 || p[k - 1] == '\n') &&
+                ((p[k] == 'v' && (p[k + 1] == ' ' || p[k + 1] == '\t')) ||
+                 (p[k] == 'f' && p[k + 1] == ' ') || (p[k] == 'o' && p[k + 1] == ' ') ||
+                 (p[k] == 'g' && p[k + 1] == ' ') || (p[k] == '#') ||
+                 (k + 6 < scan && memcmp(p + k, "mtllib", 6) == 0)))
+                return MESH_FMT_OBJ;
+        }
+    }
+    if (len >= 84)
+        return MESH_FMT_STL_BINARY; /* let the STL parser explain what is wrong */
+    return MESH_FMT_UNKNOWN;
+}
+
+int
+mesh_load_mem(const void *data, size_t len, const char *name, struct mesh *m,
+              struct mesh_load_info *info, struct sf_err *err)
+{
+    struct mesh_load_info local;
+    if (!info)
+        info = &local;
+    memset(info, 0, sizeof(*info));
+    mesh_release(m);
+    if (len == 0)
+        return sf_err_set(err, SF_EINVAL, "'%s': file is empty", name);
+    info->format = mesh_detect(data, len);
+    int rc;
+    switch (info->format) {
+    case MESH_FMT_STL_BINARY:
+    case MESH_FMT_STL_ASCII:
+        rc = stl_parse(data, len, name, m, err);
+        break;
+    case MESH_FMT_OBJ:
+        rc = obj_parse(data, len, name, m, err);
+        break;
+    case MESH_FMT_3MF:
+        rc = tmf_parse(data, len, name, m, err);
+        break;
+    default:
+        return sf_err_set(err, SF_EINVAL, "'%s': not a mesh file (STL, OBJ or 3MF expected)", name);
+    }
+    if (rc)
+        return rc;
+    info->n_input_tris = m->n_tris;
+    /* binary STL merges bit-identical corners while parsing: count those too */
+    uint32_t parse_merged = 0;
+    if (info->format == MESH_FMT_STL_BINARY || info->format == MESH_FMT_STL_ASCII)
+        parse_merged = 3 * m->n_tris - m->n_verts;
+    if (m->n_tris == 0) {
+        mesh_release(m);
+        return sf_err_set(err, SF_EINVAL, "'%s': no triangles", name);
+    }
+    double tol = 1e-6 * mesh_diag(m);
+    rc = mesh_weld(m, tol, err);
+    if (rc < 0)
+        goto fail;
+    info->n_merged = parse_merged + (uint32_t)rc;
+    info->n_degenerate = mesh_drop_degenerate(m);
+    mesh_compact(m);
+    if (m->n_tris == 0) {
+        mesh_release(m);
+        return sf_err_set(err, SF_EINVAL, "'%s': every triangle is degenerate (zero area)", name);
+    }
+    rc = mesh_orient(m, err);
+    if (rc < 0)
+        goto fail;
+    info->n_flipped = (uint32_t)rc;
+    return SF_OK;
+fail:
+    mesh_release(m);
+    return sf_err_prefix(err, "'%s'", name);
+}
+
+/*
+ * Files are mapped rather than read: the parser walks the page cache
+ * directly, with no copy and no first-touch faults on a fresh buffer (for a
+ * 50 MB STL, read() into a new buffer cost more than parsing it).  Non-regular
+ * files (pipes, /dev/stdin) fall back to a capped read.
+ */
+int
+mesh_load(const char *path, struct mesh *m, struct mesh_load_info *info, struct sf_err *err)
+{
+    const char *slash = strrchr(path, '/');
+    const char *name = slash ? slash + 1 : path;
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0)
+        return sf_err_sys(err, "cannot open '%s'", path);
+    struct stat st;
+    if (fstat(fd, &st) != 0) {
+        int rc = sf_err_sys(err, "cannot stat '%s'", path);
+        close(fd);
+        return rc;
+    }
+    if (S_ISDIR(st.st_mode)) {
+        close(fd);
+        return sf_err_set(err, SF_EINVAL, "'%s' is a directory", path);
+    }
+    if (S_ISREG(st.st_mode) && (uintmax_t)st.st_size > SF_MESH_FILE_MAX) {
+        close(fd);
+        return sf_err_set(err, SF_EINVAL, "'%s' is %jd bytes, over the limit of %zu", path,
+                          (intmax_t)st.st_size, SF_MESH_FILE_MAX);
+    }
+    if (S_ISREG(st.st_mode) && st.st_size > 0) {
+        void *map = mmap(NULL, (size_t)st.st_size, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd, 0);
+        close(fd);
+        if (map == MAP_FAILED)
+            return sf_err_sys(err, "cannot map '%s'", path);
+        int rc = mesh_load_mem(map, (size_t)st.st_size, name, m, info, err);
+        munmap(map, (size_t)st.st_size);
+        return rc;
+    }
+    close(fd);
+    struct buf b;
+    buf_init(&b, SF_MESH_FILE_MAX);
+    int rc = buf_read_file(&b, path, err);
+    if (rc == SF_OK)
+        rc = mesh_load_mem(b.data, b.len, name, m, info, err);
+    buf_release(&b);
+    return rc;
+}
+
+static int
+write_all(int fd, const void *data, size_t len)
+{
+    const char *p = data;
+    while (len) {
+        ssize_t n = write(fd, p, len);
+        if (n < 0)
+            return -1;
+        p += n;
+        len -= (size_t)n;
+    }
+    return 0;
+}
+
+/* Write to path.tmp then rename, so a crash never leaves a half-written part. */
+static int
+save_buf(const struct buf *b, const char *path, struct sf_err *err)
+{
+    char tmp[4096];
+    if (snprintf(tmp, sizeof(tmp), "%s.tmp", path) >= (int)sizeof(tmp))
+        return sf_err_set(err, SF_EINVAL, "path too long: '%s'", path);
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0)
+        return sf_err_sys(err, "cannot create '%s'", tmp);
+    if (write_all(fd, b->data, b->len) != 0 || fsync(fd) != 0) {
+        int rc = sf_err_sys(err, "cannot write '%s'", tmp);
+        close(fd);
+        unlink(tmp);
+        return rc;
+    }
+    close(fd);
+    if (rename(tmp, path) != 0) {
+        int rc = sf_err_sys(err, "cannot rename '%s' to '%s'", tmp, path);
+        unlink(tmp);
+        return rc;
+    }
+    return SF_OK;
+}
+
+int
+mesh_save_stl(const struct mesh *m, const char *path, struct sf_err *err)
+{
+    struct buf b;
+    buf_init(&b, 0);
+    char header[80] = "binary STL written by slimfarm";
+    uint32_t n = m->n_tris;
+    int rc = buf_append(&b, header, sizeof(header));
+    rc = rc ? rc : buf_append(&b, &n, 4);
+    for (uint32_t i = 0; i < m->n_tris && rc == SF_OK; i++) {
+        struct vec3 nn = mesh_tri_normal(m, i);
+        float rec[12] = { (float)nn.x, (float)nn.y, (float)nn.z };
+        for (int k = 0; k < 3; k++) {
+            struct vec3 p = m->v[m->t[i][k]];
+            rec[3 + 3 * k] = (float)p.x;
+            rec[4 + 3 * k] = (float)p.y;
+            rec[5 + 3 * k] = (float)p.z;
+        }
+        uint16_t attr = 0;
+        rc = buf_append(&b, rec, sizeof(rec));
+        rc = rc ? rc : buf_append(&b, &attr, 2);
+    }
+    if (rc)
+        rc = sf_err_set(err, SF_ENOMEM, "out of memory writing '%s'", path);
+    else
+        rc = save_buf(&b, path, err);
+    buf_release(&b);
+    return rc;
+}
+
+int
+mesh_save_obj(const struct mesh *m, const char *path, struct sf_err *err)
+{
+    struct buf b;
+    buf_init(&b, 0);
+    int rc =
+        buf_printf(&b, "# written by slimfarm: %u vertices, %u triangles\n", m->n_verts, m->n_tris);
+    for (uint32_t i = 0; i < m->n_verts && rc == SF_OK; i++)
+        rc = buf_printf(&b, "v %.9g %.9g %.9g\n", m->v[i].x, m->v[i].y, m->v[i].z);
+    for (uint32_t i = 0; i < m->n_tris && rc == SF_OK; i++)
+        rc = buf_printf(&b, "f %u %u %u\n", m->t[i][0] + 1, m->t[i][1] + 1, m->t[i][2] + 1);
+    if (rc)
+        rc = sf_err_set(err, SF_ENOMEM, "out of memory writing '%s'", path);
+    else
+        rc = save_buf(&b, path, err);
+    buf_release(&b);
+    return rc;
+}
+
+int
+mesh_save(const struct mesh *m, const char *path, struct sf_err *err)
+{
+    size_t n = strlen(path);
+    if (n > 4 && strcasecmp(path + n - 4, ".obj") == 0)
+        return mesh_save_obj(m, path, err);
+    if (n > 4 && strcasecmp(path + n - 4, ".stl") == 0)
+        return mesh_save_stl(m, path, err);
+    return sf_err_set(err, SF_EINVAL, "'%s': output must end in .stl or .obj", path);
+}

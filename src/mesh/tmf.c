@@ -1,0 +1,499 @@
+/*
+ * tmf.c - 3MF (the 3D Manufacturing Format) to one indexed mesh.
+ *
+ * A 3MF file is a zip package; _rels/.rels names the model part (usually
+ * 3D/3dmodel.model), an XML document with <object>s holding <mesh>es or
+ * <components>, and a <build> listing the <item>s to print with affine
+ * transforms.  Every build item is flattened into one mesh in millimetres
+ * (the model's unit attribute is honoured).
+ *
+ * Library choice: libzip + expat rather than lib3mf.  Debian 12's lib3mf is
+ * the 1.8 C++ COM-style API; libzip and expat are small, C, widely fuzzed,
+ * and let the whole loader run on a memory buffer under our own caps
+ * (uncompressed size, object count, nesting depth).  Only the core
+ * specification's geometry is read; materials, colours and slices are
+ * ignored because they do not change the shape to print.
+ */
+#include <expat.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#include <zip.h>
+
+#include "../base/buf.h"
+#include "../base/limits.h"
+#include "../base/mem.h"
+#include "mesh.h"
+
+#define TMF_OBJECTS_MAX 100000 /* objects per model: far past any real plate */
+#define TMF_DEPTH_MAX   16     /* component nesting */
+#define TMF_ITEMS_MAX   100000 /* build items and component references */
+
+/* 3MF affine transform: 3x3 then translation (m00 m01 m02 m10 ... m32), row vectors. */
+struct tmf_xform {
+    double m[12];
+};
+
+struct tmf_ref {
+    uint32_t object_id; /* referenced object */
+    struct tmf_xform xf;
+};
+
+struct tmf_object {
+    uint32_t id;
+    struct vec3 *v;
+    uint32_t n_v, cap_v;
+    uint32_t (*t)[3];
+    uint32_t n_t, cap_t;
+    struct tmf_ref *comps; /* components, if the object is an assembly */
+    uint32_t n_comps, cap_comps;
+};
+
+struct tmf_parse {
+    const char *name;
+    XML_Parser xp;
+    struct sf_err *err;
+    int rc;
+    double unit_mm;
+    struct tmf_object *objs;
+    uint32_t n_objs, cap_objs;
+    struct tmf_object *cur; /* object being read, or NULL */
+    struct tmf_ref *items;
+    uint32_t n_items, cap_items;
+    uint64_t n_tris_total;
+};
+
+static void
+xf_identity(struct tmf_xform *x)
+{
+    static const double id[12] = { 1, 0, 0, 0, 1, 0, 0, 0, 1, 0, 0, 0 };
+    memcpy(x->m, id, sizeof(id));
+}
+
+static struct vec3
+xf_apply(const struct tmf_xform *x, struct vec3 p)
+{
+    const double *m = x->m;
+    return v3(p.x * m[0] + p.y * m[3] + p.z * m[6] + m[9],
+              p.x * m[1] + p.y * m[4] + p.z * m[7] + m[10],
+              p.x * m[2] + p.y * m[5] + p.z * m[8] + m[11]);
+}
+
+/* a then b (apply a first). */
+static struct tmf_xform
+xf_then(const struct tmf_xform *a, const struct tmf_xform *b)
+{
+    struct tmf_xform r;
+    for (int i = 0; i < 4; i++) {
+        struct vec3 row = v3(a->m[3 * i], a->m[3 * i + 1], a->m[3 * i + 2]);
+        struct vec3 o;
+        if (i < 3)
+            o = v3(row.x * b->m[0] + row.y * b->m[3] + row.z * b->m[6],
+                   row.x * b->m[1] + row.y * b->m[4] + row.z * b->m[7],
+                   row.x * b->m[2] + row.y * b->m[5] + row.z * b->m[8]);
+        else
+            o = xf_apply(b, row);
+        r.m[3 * i] = o.x;
+        r.m[3 * i + 1] = o.y;
+        r.m[3 * i + 2] = o.z;
+    }
+    return r;
+}
+
+static void
+fail(struct tmf_parse *p, int code, const char *what)
+{
+    if (p->rc)
+        return;
+    p->rc = sf_err_set(p->err, code, "3mf '%s': model line %lu: %s", p->name,
+                       (unsigned long)XML_GetCurrentLineNumber(p->xp), what);
+    XML_StopParser(p->xp, XML_FALSE);
+}
+
+/* Element names may carry a namespace prefix ("m:vertex"); compare the local part. */
+static bool
+is(const char *el, const char *local)
+{
+    const char *colon = strrchr(el, ':');
+    return strcmp(colon ? colon + 1 : el, local) == 0;
+}
+
+static const char *
+attr(const char **atts, const char *key)
+{
+    for (int i = 0; atts[i]; i += 2)
+        if (strcmp(atts[i], key) == 0)
+            return atts[i + 1];
+    return NULL;
+}
+
+static bool
+num_attr(const char **atts, const char *key, double *out)
+{
+    const char *s = attr(atts, key);
+    if (!s)
+        return false;
+    char *end;
+    *out = strtod(s, &end);
+    return end != s && *end == '\0' && isfinite(*out);
+}
+
+static bool
+id_attr(const char **atts, const char *key, uint32_t *out)
+{
+    double d;
+    if (!num_attr(atts, key, &d) || d < 0 || d > 4294967295.0 || d != floor(d))
+        return false;
+    *out = (uint32_t)d;
+    return true;
+}
+
+static bool
+parse_xform(const char *s, struct tmf_xform *x)
+{
+    xf_identity(x);
+    if (!s)
+        return true;
+    for (int i = 0; i < 12; i++) {
+        char *end;
+        x->m[i] = strtod(s, &end);
+        if (end == s || !isfinite(x->m[i]))
+            return false;
+        s = end;
+    }
+    while (*s == ' ' || *s == '\t' || *s == '\n' || *s == '\r')
+        s++;
+    return *s == '\0';
+}
+
+static void XMLCALL
+on_start(void *ud, const char *el, const char **atts)
+{
+    struct tmf_parse *p = ud;
+    if (p->rc)
+        return;
+    if (is(el, "model")) {
+        const char *u = attr(atts, "unit");
+        static const struct {
+            const char *name;
+            double mm;
+        } units[] = { { "micron", 0.001 }, { "millimeter", 1 }, { "centimeter", 10 },
+                      { "inch", 25.4 },    { "foot", 304.8 },   { "meter", 1000 } };
+        if (u) {
+            p->unit_mm = 0;
+            for (size_t i = 0; i < sizeof(units) / sizeof(units[0]); i++)
+                if (strcmp(u, units[i].name) == 0)
+                    p->unit_mm = units[i].mm;
+            if (p->unit_mm == 0)
+                fail(p, SF_EINVAL, "unknown unit");
+        }
+    } else if (is(el, "object")) {
+        if (p->n_objs >= TMF_OBJECTS_MAX) {
+            fail(p, SF_EINVAL, "too many objects");
+            return;
+        }
+        void *o = p->objs;
+        size_t cap = p->cap_objs;
+        if (!mem_grow(&o, &cap, p->n_objs + 1, sizeof(*p->objs))) {
+            fail(p, SF_ENOMEM, "out of memory");
+            return;
+        }
+        p->objs = o;
+        p->cap_objs = (uint32_t)cap;
+        p->cur = &p->objs[p->n_objs++];
+        memset(p->cur, 0, sizeof(*p->cur));
+        if (!id_attr(atts, "id", &p->cur->id))
+            fail(p, SF_EINVAL, "object without a valid id");
+    } else if (is(el, "vertex")) {
+        double c[3];
+        if (!p->cur) {
+            fail(p, SF_EINVAL, "vertex outside an object");
+            return;
+        }
+        if (!num_attr(atts, "x", &c[0]) || !num_attr(atts, "y", &c[1]) ||
+            !num_attr(atts, "z", &c[2])) {
+            fail(p, SF_EINVAL, "vertex needs finite x, y and z");
+            return;
+        }
+        if (p->cur->n_v >= SF_MESH_VERTS_MAX) {
+            fail(p, SF_EINVAL, "too many vertices");
+            return;
+        }
+        void *v = p->cur->v;
+        size_t cap = p->cur->cap_v;
+        if (!mem_grow(&v, &cap, p->cur->n_v + 1, sizeof(struct vec3))) {
+            fail(p, SF_ENOMEM, "out of memory");
+            return;
+        }
+        p->cur->v = v;
+        p->cur->cap_v = (uint32_t)cap;
+        p->cur->v[p->cur->n_v++] = v3(c[0], c[1], c[2]);
+    } else if (is(el, "triangle")) {
+        uint32_t a, b, c;
+        if (!p->cur) {
+            fail(p, SF_EINVAL, "triangle outside an object");
+            return;
+        }
+        if (!id_attr(atts, "v1", &a) || !id_attr(atts, "v2", &b) || !id_attr(atts, "v3", &c)) {
+            fail(p, SF_EINVAL, "triangle needs indices v1, v2 and v3");
+            return;
+        }
+        if (a >= p->cur->n_v || b >= p->cur->n_v || c >= p->cur->n_v) {
+            fail(p, SF_EINVAL, "triangle index out of range");
+            return;
+        }
+        if (++p->n_tris_total > SF_MESH_TRIS_MAX) {
+            fail(p, SF_EINVAL, "too many triangles");
+            return;
+        }
+        void *t = p->cur->t;
+        size_t cap = p->cur->cap_t;
+        if (!mem_grow(&t, &cap, p->cur->n_t + 1, sizeof(*p->cur->t))) {
+            fail(p, SF_ENOMEM, "out of memory");
+            return;
+        }
+        p->cur->t = t;
+        p->cur->cap_t = (uint32_t)cap;
+        uint32_t *tri = p->cur->t[p->cur->n_t++];
+        tri[0] = a;
+        tri[1] = b;
+        tri[2] = c;
+    } else if (is(el, "component") || is(el, "item")) {
+        bool item = is(el, "item");
+        struct tmf_ref ref;
+        if (!item && !p->cur) {
+            fail(p, SF_EINVAL, "component outside an object");
+            return;
+        }
+        if (!id_attr(atts, "objectid", &ref.object_id)) {
+            fail(p, SF_EINVAL, "missing objectid");
+            return;
+        }
+        if (!parse_xform(attr(atts, "transform"), &ref.xf)) {
+            fail(p, SF_EINVAL, "transform needs 12 numbers");
+            return;
+        }
+        struct tmf_ref **arr = item ? &p->items : &p->cur->comps;
+        uint32_t *n = item ? &p->n_items : &p->cur->n_comps;
+        uint32_t *capp = item ? &p->cap_items : &p->cur->cap_comps;
+        if (*n >= TMF_ITEMS_MAX) {
+            fail(p, SF_EINVAL, "too many items or components");
+            return;
+        }
+        void *a = *arr;
+        size_t cap = *capp;
+        if (!mem_grow(&a, &cap, *n + 1, sizeof(struct tmf_ref))) {
+            fail(p, SF_ENOMEM, "out of memory");
+            return;
+        }
+        *arr = a;
+        *capp = (uint32_t)cap;
+        (*arr)[(*n)++] = ref;
+    }
+}
+
+static void XMLCALL
+on_end(void *ud, const char *el)
+{
+    struct tmf_parse *p = ud;
+    if (is(el, "object"))
+        p->cur = NULL;
+}
+
+static struct tmf_object *
+find_object(struct tmf_parse *p, uint32_t id)
+{
+    for (uint32_t i = 0; i < p->n_objs; i++)
+        if (p->objs[i].id == id)
+            return &p->objs[i];
+    return NULL;
+}
+
+/* Append object id (and its components) under transform xf to m. */
+static int
+flatten(struct tmf_parse *p, uint32_t id, const struct tmf_xform *xf, int depth, struct mesh *m,
+        uint32_t *cap_v, uint32_t *cap_t)
+{
+    struct tmf_object *o = find_object(p, id);
+    if (!o)
+        return sf_err_set(p->err, SF_EINVAL, "3mf '%s': reference to missing object %u", p->name,
+                          id);
+    if (depth > TMF_DEPTH_MAX)
+        return sf_err_set(p->err, SF_EINVAL,
+                          "3mf '%s': components nested deeper than %d (a cycle?)", p->name,
+                          TMF_DEPTH_MAX);
+    if ((uint64_t)m->n_tris + o->n_t > SF_MESH_TRIS_MAX ||
+        (uint64_t)m->n_verts + o->n_v > SF_MESH_VERTS_MAX)
+        return sf_err_set(p->err, SF_EINVAL, "3mf '%s': the build is over %u triangles", p->name,
+                          SF_MESH_TRIS_MAX);
+    void *v = m->v, *t = m->t;
+    size_t cv = *cap_v, ct = *cap_t;
+    if (!mem_grow(&v, &cv, m->n_verts + o->n_v, sizeof(struct vec3)))
+        return sf_err_set(p->err, SF_ENOMEM, "3mf '%s': out of memory", p->name);
+    m->v = v;
+    *cap_v = (uint32_t)cv;
+    if (!mem_grow(&t, &ct, m->n_tris + o->n_t, sizeof(*m->t)))
+        return sf_err_set(p->err, SF_ENOMEM, "3mf '%s': out of memory", p->name);
+    m->t = t;
+    *cap_t = (uint32_t)ct;
+    uint32_t base = m->n_verts;
+    for (uint32_t i = 0; i < o->n_v; i++) {
+        struct vec3 q = v3_scale(xf_apply(xf, o->v[i]), p->unit_mm);
+        if (!v3_isfinite(q) || fabs(q.x) > SF_MESH_COORD_MAX || fabs(q.y) > SF_MESH_COORD_MAX ||
+            fabs(q.z) > SF_MESH_COORD_MAX)
+            return sf_err_set(p->err, SF_EINVAL, "3mf '%s': object %u: vertex %u lies beyond %g mm",
+                              p->name, id, i, SF_MESH_COORD_MAX);
+        m->v[m->n_verts++] = q;
+    }
+    for (uint32_t i = 0; i < o->n_t; i++) {
+        for (int k = 0; k < 3; k++)
+            m->t[m->n_tris][k] = base + o->t[i][k];
+        m->n_tris++;
+    }
+    for (uint32_t c = 0; c < o->n_comps; c++) {
+        struct tmf_xform sub = xf_then(&o->comps[c].xf, xf);
+        int rc = flatten(p, o->comps[c].object_id, &sub, depth + 1, m, cap_v, cap_t);
+        if (rc)
+            return rc;
+    }
+    return SF_OK;
+}
+
+/* Find the model part's name from _rels/.rels (StartPart relationship). */
+static void XMLCALL
+on_rel(void *ud, const char *el, const char **atts)
+{
+    char *target = ud;
+    if (!is(el, "Relationship") || target[0])
+        return;
+    const char *type = attr(atts, "Type"), *t = attr(atts, "Target");
+    if (type && t && strstr(type, "3dmodel")) {
+        while (*t == '/')
+            t++;
+        snprintf(target, 512, "%s", t);
+    }
+}
+
+static int
+read_entry(zip_t *z, const char *entry, struct buf *out, const char *name, struct sf_err *err)
+{
+    zip_stat_t st;
+    if (zip_stat(z, entry, 0, &st) != 0)
+        return sf_err_set(err, SF_EINVAL, "3mf '%s': package has no '%s'", name, entry);
+    if ((st.valid & ZIP_STAT_SIZE) && st.size > SF_3MF_MODEL_MAX)
+        return sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' unpacks to more than %zu bytes", name,
+                          entry, SF_3MF_MODEL_MAX);
+    zip_file_t *f = zip_fopen(z, entry, 0);
+    if (!f)
+        return sf_err_set(err, SF_EINVAL, "3mf '%s': cannot open '%s': %s", name, entry,
+                          zip_strerror(z));
+    char chunk[65536];
+    zip_int64_t n;
+    int rc = SF_OK;
+    while ((n = zip_fread(f, chunk, sizeof(chunk))) > 0) {
+        if (buf_append(out, chunk, (size_t)n) != SF_OK) {
+            if ((size_t)n > out->max - out->len)
+                rc = sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' unpacks to more than %zu bytes",
+                                name, entry, out->max);
+            else
+                rc =
+                    sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory reading '%s'", name, entry);
+            break;
+        }
+    }
+    if (n < 0 && rc == SF_OK)
+        rc = sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' is corrupt: %s", name, entry,
+                        zip_file_strerror(f));
+    zip_fclose(f);
+    return rc;
+}
+
+int
+tmf_parse(const void *data, size_t len, const char *name, struct mesh *m, struct sf_err *err)
+{
+    zip_error_t ze;
+    zip_error_init(&ze);
+    mesh_release(m);
+    zip_source_t *src = zip_source_buffer_create(data, len, 0, &ze);
+    zip_t *z = src ? zip_open_from_source(src, ZIP_RDONLY | ZIP_CHECKCONS, &ze) : NULL;
+    if (!z) {
+        int rc = sf_err_set(err, SF_EINVAL, "3mf '%s': not a valid zip package: %s", name,
+                            zip_error_strerror(&ze));
+        if (src)
+            zip_source_free(src);
+        zip_error_fini(&ze);
+        return rc;
+    }
+    zip_error_fini(&ze);
+
+    struct buf xml;
+    buf_init(&xml, SF_3MF_MODEL_MAX);
+    char model_path[512] = "";
+    struct tmf_parse p = { .name = name, .err = err, .unit_mm = 1 };
+    int rc = SF_OK;
+
+    /* The relationships part says where the model is; fall back to the usual name. */
+    int rels = read_entry(z, "_rels/.rels", &xml, name, NULL);
+    if (rels == SF_ENOMEM) {
+        rc = sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory", name);
+        goto out;
+    }
+    if (rels == SF_OK) {
+        XML_Parser rp = XML_ParserCreate(NULL);
+        if (rp) {
+            XML_SetUserData(rp, model_path);
+            XML_SetStartElementHandler(rp, on_rel);
+            XML_Parse(rp, xml.data, (int)xml.len, XML_TRUE);
+            XML_ParserFree(rp);
+        }
+        buf_reset(&xml);
+    }
+    if (!model_path[0])
+        snprintf(model_path, sizeof(model_path), "3D/3dmodel.model");
+    if ((rc = read_entry(z, model_path, &xml, name, err)))
+        goto out;
+    if (xml.len > INT32_MAX) {
+        rc = sf_err_set(err, SF_EINVAL, "3mf '%s': model part too large", name);
+        goto out;
+    }
+    p.xp = XML_ParserCreate(NULL);
+    if (!p.xp) {
+        rc = sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory", name);
+        goto out;
+    }
+    XML_SetUserData(p.xp, &p);
+    XML_SetElementHandler(p.xp, on_start, on_end);
+    if (XML_Parse(p.xp, xml.data, (int)xml.len, XML_TRUE) == XML_STATUS_ERROR && !p.rc)
+        p.rc = sf_err_set(err, SF_EINVAL, "3mf '%s': model line %lu: %s", name,
+                          (unsigned long)XML_GetCurrentLineNumber(p.xp),
+                          XML_ErrorString(XML_GetErrorCode(p.xp)));
+    if ((rc = p.rc))
+        goto out;
+
+    uint32_t cap_v = 0, cap_t = 0;
+    if (p.n_items == 0 && p.n_objs > 0) {
+        /* no build section: print every object once, untransformed */
+        struct tmf_xform id;
+        xf_identity(&id);
+        for (uint32_t i = 0; i < p.n_objs && rc == SF_OK; i++)
+            rc = flatten(&p, p.objs[i].id, &id, 0, m, &cap_v, &cap_t);
+    }
+    for (uint32_t i = 0; i < p.n_items && rc == SF_OK; i++)
+        rc = flatten(&p, p.items[i].object_id, &p.items[i].xf, 0, m, &cap_v, &cap_t);
+    if (rc)
+        mesh_release(m);
+out:
+    if (p.xp)
+        XML_ParserFree(p.xp);
+    for (uint32_t i = 0; i < p.n_objs; i++) {
+        free(p.objs[i].v);
+        free(p.objs[i].t);
+        free(p.objs[i].comps);
+    }
+    free(p.objs);
+    free(p.items);
+    buf_release(&xml);
+    zip_discard(z);
+    return rc;
+}

@@ -1,0 +1,168 @@
+/*
+ * test_orient.c - the hull bases and the orientation search on generated
+ * parts with known best orientations.
+ */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../../src/geom/hull.h"
+#include "../../src/geom/orient.h"
+#include "../../src/mesh/shapes.h"
+#include "../t.h"
+
+static int
+find_w(const struct mesh *m, double w_stability, struct orient_result *r, struct sf_err *err)
+{
+    struct orient_params p;
+    orient_params_default(&p);
+    if (w_stability >= 0)
+        p.w_stability_mm2 = w_stability;
+    p.samples = 300; /* keeps the sanitizer build quick; bench uses 1000 */
+    p.pitch_mm = 1;
+    return orient_find(m, &p, r, err);
+}
+
+static int
+find(const struct mesh *m, struct orient_result *r, struct sf_err *err)
+{
+    return find_w(m, -1, r, err);
+}
+
+static double
+angle_deg(struct vec3 a, struct vec3 b)
+{
+    return acos(fmax(-1, fmin(1, v3_dot(v3_normalize(a), v3_normalize(b))))) * 180 / M_PI;
+}
+
+T_CASE(hull_bases_of_a_box)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 20, 30), &err), &err);
+    struct hull_base *b;
+    uint32_t n;
+    struct vec3 com;
+    mesh_volume(&m, &com);
+    uint32_t *hv, n_hv;
+    T_OK(hull_bases(&m, com, &b, &n, &hv, &n_hv, &err), &err);
+    T_EQ_INT(n_hv, 8);
+    free(hv);
+    T_EQ_INT(n, 6); /* coplanar triangles merged into faces */
+    T_EQ_DBL(b[0].area_mm2, 600, 1e-6);
+    T_EQ_DBL(b[0].margin_mm, 10, 1e-6); /* com 10 mm from the long edges of the 20 x 30 face */
+    T_EQ_DBL(b[5].area_mm2, 200, 1e-6);
+    free(b);
+    mesh_release(&m);
+}
+
+T_CASE(tee_upside_down_and_tilted_comes_back)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct orient_result r;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    /* upside down, then tilted 20 degrees about x */
+    struct mat3 rot =
+        m3_mul(m3_axis_angle(v3(1, 0, 0), 20 * M_PI / 180), m3_axis_angle(v3(0, 1, 0), M_PI));
+    mesh_transform(&m, rot, v3(0, 0, 0));
+    T_OK(find(&m, &r, &err), &err);
+    /* Two orientations need no support: on the bar's top (stem up) and lying
+       on the T's profile face (up = the extrusion axis, y).  The profile is
+       lower (20 vs 35 mm) and its centre of mass lower (10 vs 12 mm): best. */
+    struct vec3 extrusion = m3_mul_v(rot, v3(0, 1, 0));
+    T_TRUE(fabs(v3_dot(r.best.up, extrusion)) > cos(1 * M_PI / 180));
+    T_EQ_DBL(r.best.m.com_height_mm, 10, 1e-6);
+    bool stem_up_scored = false;
+    for (int i = 0; i < r.n_runners; i++)
+        if (angle_deg(r.runners[i].up, m3_mul_v(rot, v3(0, 0, -1))) < 1 &&
+            r.runners[i].m.volume_mm3 == 0)
+            stem_up_scored = true;
+    T_TRUE(stem_up_scored);
+    T_EQ_DBL(r.best.m.volume_mm3, 0, 1e-9);
+    T_TRUE(r.input.m.volume_mm3 > 1000);
+    mesh_release(&m);
+}
+
+T_CASE(cube_stays_on_a_face)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct orient_result r;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(20, 20, 20), &err), &err);
+    T_OK(find(&m, &r, &err), &err);
+    double ax = fmax(fabs(r.best.up.x), fmax(fabs(r.best.up.y), fabs(r.best.up.z)));
+    T_EQ_DBL(ax, 1, 1e-9);
+    T_EQ_DBL(r.best.m.volume_mm3, 0, 1e-9);
+    mesh_release(&m);
+}
+
+T_CASE(lbracket_lies_on_its_large_face)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct orient_result r;
+    mesh_init(&m);
+    T_OK(shape_lbracket(&m, &err), &err);
+    /* stand it on the wall's end: the plate then overhangs */
+    struct mat3 rot = m3_axis_angle(v3(0, 1, 0), -M_PI / 2);
+    mesh_transform(&m, rot, v3(0, 0, 0));
+    T_OK(find(&m, &r, &err), &err);
+    /* the large face is the plate's underside, 40 x 60: up is its inward normal */
+    struct vec3 plate_up = m3_mul_v(rot, v3(0, 0, 1));
+    T_TRUE(angle_deg(r.best.up, plate_up) < 1);
+    T_EQ_DBL(r.best.m.volume_mm3, 0, 1e-9);
+    mesh_release(&m);
+}
+
+T_CASE(tiny_hull_face_is_not_a_base)
+{
+    /* a frustum: 40 x 40 base, 1 x 1 top, sides lean 18 degrees: supportless
+       either way up, but it must not be balanced on the 1 mm2 top */
+    struct mesh m;
+    struct sf_err err;
+    struct orient_result r;
+    mesh_init(&m);
+    double x[4] = { -20, 20, 0.5, -0.5 }, z[4] = { 0, 0, 60, 60 };
+    T_OK(shape_extrude_xz(&m, x, z, 4, 40, &err), &err); /* a wedge in x; now taper y */
+    for (uint32_t i = 0; i < m.n_verts; i++) {
+        double f = 1 - m.v[i].z / 60 * (39.0 / 40);
+        m.v[i].y = 20 + (m.v[i].y - 20) * f;
+    }
+    mesh_transform(&m, m3_axis_angle(v3(1, 0, 0), M_PI), v3(0, 0, 0)); /* on its tip */
+    /* no stability weight: only the standing rule keeps it off the tip, where
+       it needs no support either (and the input orientation comes first) */
+    T_OK(find_w(&m, 0, &r, &err), &err);
+    orient_apply(&m, r.best.up, 0, 0);
+    /* what touches the bed spans at least 40 mm (a real face, not the tip) */
+    struct vec3 lo = v3(INFINITY, INFINITY, 0), hi = v3(-INFINITY, -INFINITY, 0);
+    for (uint32_t i = 0; i < m.n_verts; i++)
+        if (m.v[i].z < 1e-6) {
+            lo = v3_min(lo, m.v[i]);
+            hi = v3_max(hi, m.v[i]);
+        }
+    T_TRUE(fmax(hi.x - lo.x, hi.y - lo.y) >= 40 - 1e-6);
+    T_EQ_DBL(r.best.m.volume_mm3, 0, 1e-9);
+    mesh_release(&m);
+}
+
+T_CASE(leaning_tower_is_not_left_to_tip_over)
+{
+    /* leaning 40 degrees on a 10 mm foot: no support needed, but it would
+       topple while printing; the search must stand it on a real base */
+    double off = 60 * tan(40 * M_PI / 180);
+    double x[] = { 0, 10, 10 + off, off }, z[] = { 0, 0, 60, 60 };
+    struct mesh m;
+    struct sf_err err;
+    struct orient_result r;
+    mesh_init(&m);
+    T_OK(shape_extrude_xz(&m, x, z, 4, 20, &err), &err);
+    /* no stability weight: the input, first and supportless, would win a tie */
+    T_OK(find_w(&m, 0, &r, &err), &err);
+    T_TRUE(r.input.m.base_margin_mm < 0);
+    T_TRUE(r.best.m.base_margin_mm > 0);
+    T_TRUE(angle_deg(r.best.up, v3(0, 0, 1)) > 10);
+    mesh_release(&m);
+}
