@@ -77,7 +77,8 @@ struct sim_marlin {
 
     /* wire */
     double bps_ms;       /* bytes per millisecond at the baud rate */
-    double rx_tokens, tx_tokens;
+    double rx_tokens, tx_tokens; /* bytes the wire may carry now, each way */
+    bool rx_idle;        /* the last read drained the pty: no bytes were waiting */
     char *rx;            /* RX buffer, rx_len of rx_size bytes */
     int rx_len;
     bool rx_line_hit;    /* corruption already hit this line (one per line) */
@@ -841,6 +842,8 @@ read_input(struct sim_marlin *s)
     if (want > (int)sizeof(tmp))
         want = (int)sizeof(tmp);
     ssize_t n = read(s->fd, tmp, (size_t)want);
+    if (n < want)
+        s->rx_idle = true; /* drained: the line went quiet */
     if (n == 0 || (n < 0 && errno != EAGAIN && errno != EINTR)) {
         /* TCP host went away (a pty master never sees this: we hold the slave). */
         close_link(s);
@@ -963,9 +966,13 @@ step(struct sim_marlin *s)
     int64_t now = loop_now_ms(s->loop);
     int64_t dt_ms = now - s->last_ms;
     s->last_ms = now;
-    double burst = fmax(s->bps_ms * 4, 16);
-    s->rx_tokens = fmin(burst, s->rx_tokens + (double)dt_ms * s->bps_ms);
-    s->tx_tokens = fmin(burst, s->tx_tokens + (double)dt_ms * s->bps_ms);
+    /* A UART banks no time while the line is idle: bytes that show up after
+       a pause start arriving now, at the baud rate (the cap only lets a
+       late step catch up). */
+    double cap = fmax(s->bps_ms * 8, 16);
+    s->rx_tokens = s->rx_idle ? 0 : fmin(cap, s->rx_tokens + (double)dt_ms * s->bps_ms);
+    s->tx_tokens = s->tx.len == 0 ? 0 : fmin(cap, s->tx_tokens + (double)dt_ms * s->bps_ms);
+    s->rx_idle = false;
     double dt_s = (double)dt_ms / 1000.0 * s->cfg.speed;
     s->sim_s += dt_s;
 
@@ -1097,6 +1104,7 @@ sim_marlin_new(struct loop *l, const struct sim_marlin_config *c, struct sf_err 
             sf_err_sys(err, "sim: log '%s'", c->log_path);
             goto fail;
         }
+        setvbuf(s->log, NULL, _IOLBF, 0); /* readers see each command as it runs */
     }
     s->last_ms = loop_now_ms(l);
     firmware_reset(s, true);

@@ -48,7 +48,7 @@ for baud in 115200 250000; do
     win=0; [ "$mode" = ping-pong ] && win=1
     start_sim --advanced-ok --baud "$baud" --speed 1000
     "$cli" send "$work/dense.gcode" --port "pty:$port" --baud "$baud" --window "$win" \
-      > "$work/send.out" 2> /dev/null || echo "  (send failed)"
+      > "$work/send.out" 2> "$work/send.err" || echo "  (send failed: $(tail -n 1 "$work/send.err"))"
     stop_sim
     lps=$(field lines_per_s "$work/send.out"); bps=$(field bytes_per_s "$work/send.out")
     printf "%-8s %-13s %9s %9s %8.1f%%\n" "$baud" "$mode" "$lps" "$bps" \
@@ -64,7 +64,7 @@ for baud in 115200 250000; do
     win=0; [ "$mode" = ping-pong ] && win=1
     start_sim --advanced-ok --baud "$baud" --speed 1
     "$cli" send "$work/curved.gcode" --port "pty:$port" --baud "$baud" --window "$win" \
-      > "$work/send.out" 2> /dev/null || echo "  (send failed)"
+      > "$work/send.out" 2> "$work/send.err" || echo "  (send failed: $(tail -n 1 "$work/send.err"))"
     stop_sim
     printf "%-8s %-13s %9s %10s %9s\n" "$baud" "$mode" "$(field starved "$work/sim.err")" \
       "$(field starved_s "$work/sim.err")" "$(field seconds "$work/send.out")"
