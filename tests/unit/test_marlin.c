@@ -393,16 +393,21 @@ T_CASE(marlin_survives_corruption_over_tcp)
     struct sim_marlin_config sc;
     sim_marlin_config_init(&sc);
     sc.tcp_port = 0;
+    sc.advanced_ok = true; /* plain-ok recovery is covered over the pty */
     T_OK(faults_parse(&sc.faults, "corrupt=0.01", NULL), NULL);
+    T_OK(faults_parse(&sc.faults, "seed=5", NULL), NULL);
     stream_exact_frag(&sc, 0, 60000, 2);
 }
 
-T_CASE(marlin_reset_mid_print_fails_at_last_ack)
+static void
+reset_mid_print(bool tcp)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
     sim_marlin_config_init(&sc);
     sc.advanced_ok = true;
+    if (tcp)
+        sc.tcp_port = 0;
     T_OK(faults_parse(&sc.faults, "reset=1500", NULL), NULL);
     if (!setup(&r, &sc, 0)) {
         teardown(&r);
@@ -423,6 +428,16 @@ T_CASE(marlin_reset_mid_print_fails_at_last_ack)
     /* The driver reconnects on its own after the reboot banner. */
     T_TRUE(until(&r, is_idle, 5000));
     teardown(&r);
+}
+
+T_CASE(marlin_reset_mid_print_fails_at_last_ack)
+{
+    reset_mid_print(false);
+}
+
+T_CASE(marlin_reset_mid_print_over_tcp)
+{
+    reset_mid_print(true);
 }
 
 static bool
@@ -514,12 +529,15 @@ park_done(struct run *r)
     return r->drv->status.state == DRV_PAUSED && fabs(st.x) < 1e-9 && fabs(st.y) < 1e-9;
 }
 
-T_CASE(marlin_pause_parks_resume_restores)
+static void
+pause_resume(bool tcp)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
     sim_marlin_config_init(&sc);
     sc.advanced_ok = true;
+    if (tcp)
+        sc.tcp_port = 0;
     if (!setup(&r, &sc, 0)) {
         teardown(&r);
         return;
@@ -553,6 +571,16 @@ T_CASE(marlin_pause_parks_resume_restores)
     T_EQ_DBL(st.e, r.end_e, 1e-4);
     T_EQ_DBL(st.z, 0, 1e-9);
     teardown(&r);
+}
+
+T_CASE(marlin_pause_parks_resume_restores)
+{
+    pause_resume(false);
+}
+
+T_CASE(marlin_pause_resume_over_tcp)
+{
+    pause_resume(true);
 }
 
 T_CASE(marlin_host_action_pause_from_printer)
