@@ -41,6 +41,7 @@ enum drv_event {
     DRV_EV_TEMPS,      /* new temperature report */
     DRV_EV_JOB_DONE,   /* the job's last line was acknowledged and executed */
     DRV_EV_JOB_FAILED, /* the job stopped; status.message says why, lines_acked where */
+    DRV_EV_JOB_CANCELLED, /* cancel() finished: end sequence acknowledged (added for issue 6) */
 };
 
 struct drv_status {
@@ -70,6 +71,8 @@ struct drv_config {
     int baud;            /* serial baud rate (0: 115200) */
     const char *url;     /* network printers: base URL */
     const char *api_key; /* network printers: key or access code */
+    int timeout_ms;      /* marlin: silence before a probe (0: 10000) (added for issue 6) */
+    int buffer_lines;    /* marlin: lines in flight; 0 auto (ADVANCED_OK or 2), 1 ping-pong */
 };
 
 struct drv;
@@ -110,5 +113,11 @@ struct drv *drv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn o
 void drv_free(struct drv *d);
 
 const char *drv_state_name(enum drv_state s);
+
+/*
+ * Delay before reconnect attempt number `attempt` (0, 1, ...): 500 ms
+ * doubling up to 30 s, for owners that re-open() a driver gone OFFLINE.
+ */
+int drv_backoff_ms(int attempt);
 
 #endif

@@ -1,18 +1,20 @@
 /*
- * loop.c - PRIVATE STAND-IN for the event loop of loop.h, on branch farm
- * only.  The real loop.c is being written on another branch; when it
- * reaches main, `git merge main` replaces this file (delete this one on
- * the conflict) and nothing else changes, because the farm code uses only
- * loop.h.
+ * loop.c - the epoll event loop behind loop.h.
  *
- * What it does: epoll for fds; timers in a binary min-heap keyed by
- * deadline (cancel is a linear search, fine for the handful of timers the
- * daemon keeps); loop_post() appends to a mutex-protected FIFO and writes
- * an eventfd; signals come through one signalfd.  Time is CLOCK_MONOTONIC,
- * read once per iteration.
+ * Why: every printer link, socket, timer and signal of the daemon lives on
+ * one thread (STYLE.md, "Threads"), so printer state needs no locks and
+ * tests can step the loop with loop_run_once().
  *
- * Thread: the loop's thread, except loop_post() and loop_stop(), which any
- * thread may call (the mutex protects the post queue; stop is atomic).
+ * Design: fds are registered with a heap-allocated record whose pointer is
+ * the epoll cookie; loop_del_fd() only marks the record dead and parks it
+ * on a list freed after the current dispatch, so a callback may delete any
+ * fd (its own included) while events for it are still in the batch.  Timers
+ * sit in a binary min-heap ordered by (due time, id); cancelling searches
+ * the heap linearly, which is fine for the few dozen timers a farm has.
+ * loop_post() appends to a mutex-protected FIFO and writes an eventfd, the
+ * only cross-thread path.  Signals come through one signalfd.
+ *
+ * Thread: loop thread only, except loop_post() and loop_stop().
  */
 #include "loop.h"
 
@@ -20,6 +22,7 @@
 #include <pthread.h>
 #include <signal.h>
 #include <stdatomic.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/epoll.h>
 #include <sys/eventfd.h>
@@ -29,47 +32,52 @@
 
 #include "mem.h"
 
-#define LOOP_SIGNALS_MAX 16 /* SIGINT, SIGTERM, SIGHUP, SIGCHLD: a few suffice */
+#define LOOP_EVENTS_MAX 64
+#define LOOP_SIGNALS_MAX 8
 
-/* A watched fd; slot fds[fd] while watched. */
-struct watch {
-    loop_fd_fn fn; /* callback */
-    void *ud;      /* its argument */
+struct fd_reg {
+    int fd;             /* watched descriptor */
+    unsigned events;    /* LOOP_READ | LOOP_WRITE currently asked for */
+    loop_fd_fn fn;      /* callback */
+    void *ud;           /* its argument */
+    bool dead;          /* deleted; freed after the current dispatch */
+    struct fd_reg *next; /* in loop->regs (all live) or loop->graveyard */
 };
 
 struct timer {
-    int64_t when_ms;  /* deadline, loop time */
-    uint64_t id;      /* > 0 */
+    int64_t due_ms;   /* loop time it fires */
+    uint64_t id;      /* > 0, unique per loop */
     loop_timer_fn fn; /* callback */
     void *ud;         /* its argument */
 };
 
 struct post {
-    loop_post_fn fn;   /* to run on the loop thread */
+    loop_post_fn fn;   /* callback */
     void *ud;          /* its argument */
-    struct post *next; /* FIFO */
+    struct post *next; /* FIFO link */
+};
+
+struct sig_reg {
+    int signo;         /* signal number, 0 = slot free */
+    loop_signal_fn fn; /* callback */
+    void *ud;          /* its argument */
 };
 
 struct loop {
-    int ep;             /* epoll fd */
-    int wake;           /* eventfd: posts and stop */
-    int sig;            /* signalfd, -1 until a signal is added */
-    sigset_t sigmask;   /* signals delivered through sig */
-    struct watch **fds; /* indexed by fd; NULL if unwatched */
-    size_t n_fds;       /* size of fds */
-    struct timer *heap; /* min-heap on when_ms */
+    int epfd;                 /* the epoll instance */
+    int evfd;                 /* eventfd woken by loop_post() */
+    int sigfd;                /* signalfd, -1 until the first loop_add_signal() */
+    sigset_t sigmask;         /* signals routed to sigfd */
+    int64_t now_ms;           /* cached CLOCK_MONOTONIC of this iteration */
+    struct fd_reg *regs;      /* live registrations */
+    struct fd_reg *graveyard; /* deleted during dispatch, freed after it */
+    struct timer *heap;       /* min-heap of timers */
     size_t n_timers, cap_timers;
-    uint64_t next_id;         /* next timer id */
-    int64_t now_ms;           /* cached time of this iteration */
-    pthread_mutex_t mu;       /* protects head/tail */
-    struct post *head, *tail; /* posted work */
-    atomic_bool stop;         /* loop_run returns */
-    struct {
-        int signo;
-        loop_signal_fn fn;
-        void *ud;
-    } sigs[LOOP_SIGNALS_MAX]; /* signal callbacks */
-    int n_sigs;
+    uint64_t next_timer_id;   /* last id handed out */
+    pthread_mutex_t post_lock; /* protects post_head/post_tail */
+    struct post *post_head, *post_tail;
+    struct sig_reg sigs[LOOP_SIGNALS_MAX];
+    atomic_bool stop;         /* loop_run() should return */
 };
 
 static int64_t
@@ -80,6 +88,26 @@ mono_ms(void)
     return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
 }
 
+static void
+on_eventfd(struct loop *l, int fd, unsigned events, void *ud)
+{
+    (void)events;
+    (void)ud;
+    uint64_t v;
+    if (read(fd, &v, sizeof(v)) < 0 && errno != EAGAIN)
+        return;
+    pthread_mutex_lock(&l->post_lock);
+    struct post *p = l->post_head;
+    l->post_head = l->post_tail = NULL;
+    pthread_mutex_unlock(&l->post_lock);
+    while (p) {
+        struct post *next = p->next;
+        p->fn(l, p->ud);
+        free(p);
+        p = next;
+    }
+}
+
 struct loop *
 loop_new(struct sf_err *err)
 {
@@ -88,21 +116,41 @@ loop_new(struct sf_err *err)
         sf_err_set(err, SF_ENOMEM, "loop: out of memory");
         return NULL;
     }
-    l->sig = -1;
-    l->wake = -1;
-    sigemptyset(&l->sigmask);
-    pthread_mutex_init(&l->mu, NULL);
-    l->ep = epoll_create1(EPOLL_CLOEXEC);
-    l->wake = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
-    struct epoll_event ev = { .events = EPOLLIN, .data.fd = -1 };
-    if (l->ep < 0 || l->wake < 0 || epoll_ctl(l->ep, EPOLL_CTL_ADD, l->wake, &ev) != 0) {
-        sf_err_sys(err, "loop: epoll/eventfd");
-        loop_free(l);
-        return NULL;
+    l->sigfd = -1;
+    l->epfd = epoll_create1(EPOLL_CLOEXEC);
+    if (l->epfd < 0) {
+        sf_err_sys(err, "loop: epoll_create1");
+        goto free_loop;
     }
+    l->evfd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+    if (l->evfd < 0) {
+        sf_err_sys(err, "loop: eventfd");
+        goto close_ep;
+    }
+    pthread_mutex_init(&l->post_lock, NULL);
+    sigemptyset(&l->sigmask);
     l->now_ms = mono_ms();
-    l->next_id = 1;
+    if (loop_add_fd(l, l->evfd, LOOP_READ, on_eventfd, NULL, err) < 0)
+        goto close_ev;
     return l;
+close_ev:
+    close(l->evfd);
+    pthread_mutex_destroy(&l->post_lock);
+close_ep:
+    close(l->epfd);
+free_loop:
+    free(l);
+    return NULL;
+}
+
+static void
+free_regs(struct fd_reg *r)
+{
+    while (r) {
+        struct fd_reg *next = r->next;
+        free(r);
+        r = next;
+    }
 }
 
 void
@@ -110,113 +158,149 @@ loop_free(struct loop *l)
 {
     if (!l)
         return;
-    for (size_t i = 0; i < l->n_fds; i++)
-        free(l->fds[i]);
-    free(l->fds);
+    free_regs(l->regs);
+    free_regs(l->graveyard);
     free(l->heap);
-    for (struct post *p = l->head, *n; p; p = n) {
-        n = p->next;
+    struct post *p = l->post_head;
+    while (p) {
+        struct post *next = p->next;
         free(p);
+        p = next;
     }
-    if (l->ep >= 0)
-        close(l->ep);
-    if (l->wake >= 0)
-        close(l->wake);
-    if (l->sig >= 0) {
-        close(l->sig);
+    if (l->sigfd >= 0) {
+        close(l->sigfd);
         sigprocmask(SIG_UNBLOCK, &l->sigmask, NULL);
     }
-    pthread_mutex_destroy(&l->mu);
+    close(l->evfd);
+    close(l->epfd);
+    pthread_mutex_destroy(&l->post_lock);
     free(l);
 }
 
 static uint32_t
-ep_events(unsigned events)
+to_epoll(unsigned events)
 {
-    return (events & LOOP_READ ? EPOLLIN : 0) | (events & LOOP_WRITE ? EPOLLOUT : 0);
+    return (events & LOOP_READ ? EPOLLIN : 0u) | (events & LOOP_WRITE ? EPOLLOUT : 0u);
+}
+
+static struct fd_reg *
+find_reg(struct loop *l, int fd)
+{
+    for (struct fd_reg *r = l->regs; r; r = r->next)
+        if (r->fd == fd)
+            return r;
+    return NULL;
 }
 
 int
-loop_add_fd(struct loop *l, int fd, unsigned events, loop_fd_fn fn, void *ud, struct sf_err *err)
+loop_add_fd(struct loop *l, int fd, unsigned events, loop_fd_fn fn, void *ud,
+            struct sf_err *err)
 {
-    if (fd < 0)
-        return sf_err_set(err, SF_EINVAL, "loop: bad fd %d", fd);
-    if ((size_t)fd >= l->n_fds) {
-        size_t n = l->n_fds;
-        if (!mem_grow((void **)&l->fds, &n, (size_t)fd + 1, sizeof(*l->fds)))
-            return sf_err_set(err, SF_ENOMEM, "loop: out of memory");
-        memset(l->fds + l->n_fds, 0, (n - l->n_fds) * sizeof(*l->fds));
-        l->n_fds = n;
-    }
-    if (l->fds[fd])
+    if (fd < 0 || !fn)
+        return sf_err_set(err, SF_EINVAL, "loop: bad fd %d or no callback", fd);
+    if (find_reg(l, fd))
         return sf_err_set(err, SF_EINVAL, "loop: fd %d is already watched", fd);
-    struct watch *w = mem_calloc(1, sizeof(*w));
-    if (!w)
+    struct fd_reg *r = mem_calloc(1, sizeof(*r));
+    if (!r)
         return sf_err_set(err, SF_ENOMEM, "loop: out of memory");
-    *w = (struct watch){ fn, ud };
-    struct epoll_event ev = { .events = ep_events(events), .data.fd = fd };
-    if (epoll_ctl(l->ep, EPOLL_CTL_ADD, fd, &ev) != 0) {
-        free(w);
+    r->fd = fd;
+    r->events = events;
+    r->fn = fn;
+    r->ud = ud;
+    struct epoll_event ev = { .events = to_epoll(events), .data.ptr = r };
+    if (epoll_ctl(l->epfd, EPOLL_CTL_ADD, fd, &ev) < 0) {
+        free(r);
         return sf_err_sys(err, "loop: watch fd %d", fd);
     }
-    l->fds[fd] = w;
+    r->next = l->regs;
+    l->regs = r;
     return SF_OK;
 }
 
 int
 loop_mod_fd(struct loop *l, int fd, unsigned events, struct sf_err *err)
 {
-    struct epoll_event ev = { .events = ep_events(events), .data.fd = fd };
-    if (fd < 0 || (size_t)fd >= l->n_fds || !l->fds[fd])
-        return sf_err_set(err, SF_EINVAL, "loop: fd %d is not watched", fd);
-    if (epoll_ctl(l->ep, EPOLL_CTL_MOD, fd, &ev) != 0)
-        return sf_err_sys(err, "loop: modify fd %d", fd);
+    struct fd_reg *r = find_reg(l, fd);
+    if (!r)
+        return sf_err_set(err, SF_ENOTFOUND, "loop: fd %d is not watched", fd);
+    if (r->events == events)
+        return SF_OK;
+    struct epoll_event ev = { .events = to_epoll(events), .data.ptr = r };
+    if (epoll_ctl(l->epfd, EPOLL_CTL_MOD, fd, &ev) < 0)
+        return sf_err_sys(err, "loop: change events of fd %d", fd);
+    r->events = events;
     return SF_OK;
 }
 
 void
 loop_del_fd(struct loop *l, int fd)
 {
-    if (fd < 0 || (size_t)fd >= l->n_fds || !l->fds[fd])
+    for (struct fd_reg **pp = &l->regs; *pp; pp = &(*pp)->next) {
+        struct fd_reg *r = *pp;
+        if (r->fd != fd)
+            continue;
+        *pp = r->next;
+        /* The fd may already be closed by its owner; then epoll dropped it. */
+        epoll_ctl(l->epfd, EPOLL_CTL_DEL, fd, NULL);
+        r->dead = true;
+        r->next = l->graveyard;
+        l->graveyard = r;
         return;
-    epoll_ctl(l->ep, EPOLL_CTL_DEL, fd, NULL);
-    free(l->fds[fd]);
-    l->fds[fd] = NULL;
+    }
 }
 
+/* Heap order: earlier due first, then lower id (FIFO among equal times). */
 static bool
-earlier(const struct timer *a, const struct timer *b)
+timer_less(const struct timer *a, const struct timer *b)
 {
-    return a->when_ms < b->when_ms || (a->when_ms == b->when_ms && a->id < b->id);
+    return a->due_ms < b->due_ms || (a->due_ms == b->due_ms && a->id < b->id);
 }
 
 static void
-heap_up(struct timer *h, size_t i)
+heap_swap(struct loop *l, size_t a, size_t b)
 {
-    while (i > 0 && earlier(&h[i], &h[(i - 1) / 2])) {
-        struct timer t = h[i];
-        h[i] = h[(i - 1) / 2];
-        h[(i - 1) / 2] = t;
-        i = (i - 1) / 2;
+    struct timer t = l->heap[a];
+    l->heap[a] = l->heap[b];
+    l->heap[b] = t;
+}
+
+static void
+sift_up(struct loop *l, size_t i)
+{
+    while (i > 0) {
+        size_t parent = (i - 1) / 2;
+        if (!timer_less(&l->heap[i], &l->heap[parent]))
+            break;
+        heap_swap(l, i, parent);
+        i = parent;
     }
 }
 
 static void
-heap_down(struct timer *h, size_t n, size_t i)
+sift_down(struct loop *l, size_t i)
 {
     for (;;) {
-        size_t m = i, a = 2 * i + 1, b = a + 1;
-        if (a < n && earlier(&h[a], &h[m]))
-            m = a;
-        if (b < n && earlier(&h[b], &h[m]))
-            m = b;
-        if (m == i)
+        size_t left = 2 * i + 1, right = left + 1, best = i;
+        if (left < l->n_timers && timer_less(&l->heap[left], &l->heap[best]))
+            best = left;
+        if (right < l->n_timers && timer_less(&l->heap[right], &l->heap[best]))
+            best = right;
+        if (best == i)
             return;
-        struct timer t = h[i];
-        h[i] = h[m];
-        h[m] = t;
-        i = m;
+        heap_swap(l, i, best);
+        i = best;
     }
+}
+
+static void
+heap_remove(struct loop *l, size_t i)
+{
+    l->n_timers--;
+    if (i == l->n_timers)
+        return;
+    l->heap[i] = l->heap[l->n_timers];
+    sift_down(l, i);
+    sift_up(l, i);
 }
 
 uint64_t
@@ -224,30 +308,26 @@ loop_timer_add(struct loop *l, int64_t delay_ms, loop_timer_fn fn, void *ud)
 {
     if (!mem_grow((void **)&l->heap, &l->cap_timers, l->n_timers + 1, sizeof(*l->heap)))
         return 0;
+    if (delay_ms < 0)
+        delay_ms = 0;
     struct timer *t = &l->heap[l->n_timers];
-    *t = (struct timer){ l->now_ms + (delay_ms > 0 ? delay_ms : 0), l->next_id++, fn, ud };
-    heap_up(l->heap, l->n_timers++);
-    return l->next_id - 1;
-}
-
-static void
-heap_remove(struct loop *l, size_t i)
-{
-    l->heap[i] = l->heap[--l->n_timers];
-    if (i < l->n_timers) {
-        heap_down(l->heap, l->n_timers, i);
-        heap_up(l->heap, i);
-    }
+    t->due_ms = l->now_ms + delay_ms;
+    t->id = ++l->next_timer_id;
+    t->fn = fn;
+    t->ud = ud;
+    sift_up(l, l->n_timers++);
+    return l->next_timer_id;
 }
 
 void
 loop_timer_cancel(struct loop *l, uint64_t id)
 {
-    for (size_t i = 0; i < l->n_timers; i++)
+    for (size_t i = 0; i < l->n_timers; i++) {
         if (l->heap[i].id == id) {
             heap_remove(l, i);
             return;
         }
+    }
 }
 
 int64_t
@@ -262,139 +342,127 @@ loop_post(struct loop *l, loop_post_fn fn, void *ud)
     struct post *p = mem_alloc(sizeof(*p));
     if (!p)
         return SF_ENOMEM;
-    *p = (struct post){ fn, ud, NULL };
-    pthread_mutex_lock(&l->mu);
-    if (l->tail)
-        l->tail->next = p;
+    p->fn = fn;
+    p->ud = ud;
+    p->next = NULL;
+    pthread_mutex_lock(&l->post_lock);
+    if (l->post_tail)
+        l->post_tail->next = p;
     else
-        l->head = p;
-    l->tail = p;
-    pthread_mutex_unlock(&l->mu);
+        l->post_head = p;
+    l->post_tail = p;
+    pthread_mutex_unlock(&l->post_lock);
     uint64_t one = 1;
-    ssize_t w = write(l->wake, &one, sizeof(one));
-    (void)w; /* a full counter still wakes the loop */
+    if (write(l->evfd, &one, sizeof(one)) < 0 && errno != EAGAIN)
+        return SF_EIO;
     return SF_OK;
+}
+
+static void
+on_signalfd(struct loop *l, int fd, unsigned events, void *ud)
+{
+    (void)events;
+    (void)ud;
+    struct signalfd_siginfo si;
+    while (read(fd, &si, sizeof(si)) == (ssize_t)sizeof(si)) {
+        for (int i = 0; i < LOOP_SIGNALS_MAX; i++)
+            if (l->sigs[i].signo == (int)si.ssi_signo)
+                l->sigs[i].fn(l, (int)si.ssi_signo, l->sigs[i].ud);
+    }
 }
 
 int
 loop_add_signal(struct loop *l, int signo, loop_signal_fn fn, void *ud, struct sf_err *err)
 {
-    if (l->n_sigs == LOOP_SIGNALS_MAX)
-        return sf_err_set(err, SF_ENOMEM, "loop: too many signals");
-    sigaddset(&l->sigmask, signo);
-    if (sigprocmask(SIG_BLOCK, &l->sigmask, NULL) != 0)
+    int slot = -1;
+    for (int i = 0; i < LOOP_SIGNALS_MAX; i++) {
+        if (l->sigs[i].signo == signo)
+            return sf_err_set(err, SF_EINVAL, "loop: signal %d already handled", signo);
+        if (l->sigs[i].signo == 0 && slot < 0)
+            slot = i;
+    }
+    if (slot < 0)
+        return sf_err_set(err, SF_ENOMEM, "loop: more than %d signals", LOOP_SIGNALS_MAX);
+    sigset_t mask = l->sigmask;
+    if (sigaddset(&mask, signo) < 0)
+        return sf_err_set(err, SF_EINVAL, "loop: bad signal %d", signo);
+    if (sigprocmask(SIG_BLOCK, &mask, NULL) < 0)
         return sf_err_sys(err, "loop: block signal %d", signo);
-    int fd = signalfd(l->sig, &l->sigmask, SFD_NONBLOCK | SFD_CLOEXEC);
+    int fd = signalfd(l->sigfd, &mask, SFD_NONBLOCK | SFD_CLOEXEC);
     if (fd < 0)
         return sf_err_sys(err, "loop: signalfd");
-    if (l->sig < 0) {
-        struct epoll_event ev = { .events = EPOLLIN, .data.fd = -2 };
-        if (epoll_ctl(l->ep, EPOLL_CTL_ADD, fd, &ev) != 0) {
+    if (l->sigfd < 0) {
+        int rc = loop_add_fd(l, fd, LOOP_READ, on_signalfd, NULL, err);
+        if (rc < 0) {
             close(fd);
-            return sf_err_sys(err, "loop: watch signalfd");
+            return rc;
         }
-        l->sig = fd;
+        l->sigfd = fd;
     }
-    l->sigs[l->n_sigs].signo = signo;
-    l->sigs[l->n_sigs].fn = fn;
-    l->sigs[l->n_sigs].ud = ud;
-    l->n_sigs++;
+    l->sigmask = mask;
+    l->sigs[slot].signo = signo;
+    l->sigs[slot].fn = fn;
+    l->sigs[slot].ud = ud;
     return SF_OK;
 }
 
-static int
-run_posts(struct loop *l)
+static unsigned
+from_epoll(uint32_t ev)
 {
-    uint64_t v;
-    ssize_t r = read(l->wake, &v, sizeof(v));
-    (void)r;
-    pthread_mutex_lock(&l->mu);
-    struct post *p = l->head;
-    l->head = l->tail = NULL;
-    pthread_mutex_unlock(&l->mu);
-    int n = 0;
-    while (p) {
-        struct post *next = p->next;
-        p->fn(l, p->ud);
-        free(p);
-        p = next;
-        n++;
-    }
-    return n;
-}
-
-static int
-run_signals(struct loop *l)
-{
-    struct signalfd_siginfo si;
-    int n = 0;
-    while (read(l->sig, &si, sizeof(si)) == sizeof(si))
-        for (int i = 0; i < l->n_sigs; i++)
-            if ((int)si.ssi_signo == l->sigs[i].signo) {
-                l->sigs[i].fn(l, l->sigs[i].signo, l->sigs[i].ud);
-                n++;
-            }
-    return n;
+    return (ev & EPOLLIN ? LOOP_READ : 0u) | (ev & EPOLLOUT ? LOOP_WRITE : 0u) |
+           (ev & (EPOLLHUP | EPOLLRDHUP) ? LOOP_HUP : 0u) | (ev & EPOLLERR ? LOOP_ERROR : 0u);
 }
 
 int
 loop_run_once(struct loop *l, int timeout_ms)
 {
     l->now_ms = mono_ms();
-    int wait = timeout_ms;
-    if (l->n_timers) {
-        int64_t due = l->heap[0].when_ms - l->now_ms;
-        if (due < 0)
-            due = 0;
-        if (wait < 0 || due < wait)
-            wait = due > 1000000 ? 1000000 : (int)due;
+    if (l->n_timers > 0) {
+        int64_t wait = l->heap[0].due_ms - l->now_ms;
+        if (wait < 0)
+            wait = 0;
+        if (timeout_ms < 0 || wait < timeout_ms)
+            timeout_ms = (int)(wait > 1000000 ? 1000000 : wait);
     }
-    struct epoll_event ev[64];
-    int n = epoll_wait(l->ep, ev, 64, wait);
-    if (n < 0 && errno != EINTR)
+    struct epoll_event evs[LOOP_EVENTS_MAX];
+    int n = epoll_wait(l->epfd, evs, LOOP_EVENTS_MAX, timeout_ms);
+    if (n < 0) {
+        if (errno == EINTR)
+            return 0;
         return SF_EIO;
+    }
     l->now_ms = mono_ms();
     int ran = 0;
     for (int i = 0; i < n; i++) {
-        int fd = ev[i].data.fd;
-        if (fd == -1) {
-            ran += run_posts(l);
+        struct fd_reg *r = evs[i].data.ptr;
+        if (r->dead)
             continue;
-        }
-        if (fd == -2) {
-            ran += run_signals(l);
-            continue;
-        }
-        if ((size_t)fd >= l->n_fds || !l->fds[fd])
-            continue; /* removed by an earlier callback of this iteration */
-        unsigned e =
-            (ev[i].events & EPOLLIN ? LOOP_READ : 0) | (ev[i].events & EPOLLOUT ? LOOP_WRITE : 0) |
-            (ev[i].events & EPOLLHUP ? LOOP_HUP : 0) | (ev[i].events & EPOLLERR ? LOOP_ERROR : 0);
-        struct watch w = *l->fds[fd];
-        w.fn(l, fd, e, w.ud);
+        r->fn(l, r->fd, from_epoll(evs[i].events), r->ud);
         ran++;
     }
-    /* Timers armed by these callbacks wait for the next iteration, so a
-       timer re-arming itself with delay 0 cannot starve everything else. */
-    uint64_t first_new = l->next_id;
-    while (l->n_timers && l->heap[0].when_ms <= l->now_ms && l->heap[0].id < first_new) {
+    /* Timers due now; ones added by callbacks with delay 0 wait a round. */
+    int64_t now = l->now_ms;
+    uint64_t last_id = l->next_timer_id;
+    while (l->n_timers > 0 && l->heap[0].due_ms <= now && l->heap[0].id <= last_id) {
         struct timer t = l->heap[0];
         heap_remove(l, 0);
         t.fn(l, t.ud);
         ran++;
     }
+    free_regs(l->graveyard);
+    l->graveyard = NULL;
     return ran;
 }
 
 int
 loop_run(struct loop *l)
 {
+    atomic_store(&l->stop, false);
     while (!atomic_load(&l->stop)) {
         int rc = loop_run_once(l, -1);
         if (rc < 0)
             return rc;
     }
-    atomic_store(&l->stop, false);
     return SF_OK;
 }
 
@@ -403,6 +471,7 @@ loop_stop(struct loop *l)
 {
     atomic_store(&l->stop, true);
     uint64_t one = 1;
-    ssize_t w = write(l->wake, &one, sizeof(one));
-    (void)w;
+    /* Wake epoll_wait; a full eventfd counter means a wake-up is pending anyway. */
+    if (write(l->evfd, &one, sizeof(one)) < 0)
+        return;
 }

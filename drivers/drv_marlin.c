@@ -1,0 +1,1207 @@
+/*
+ * drv_marlin.c - the Marlin host protocol over a byte transport (drv.h).
+ *
+ * What: connects (M110 N0 + M115 handshake, capabilities), streams a G-code
+ * file as numbered, checksummed lines, keeps temperatures current (M155
+ * auto-report, else M105 polling), and pauses (park), resumes (restore
+ * position, temperatures, extrusion mode) and cancels (end sequence).
+ *
+ * Why this way: Marlin executes a numbered line only if it follows the
+ * last one and its checksum matches, so exact-once delivery rests on the
+ * printer; the host's job is to stay live.  Lines stream buffer-aware: as
+ * many in flight as the firmware's queue holds (learned from ADVANCED_OK's
+ * B field, else a conservative 2), with ping-pong (1) as the fallback once
+ * the window's accounting has proved unreliable (a stall without
+ * ADVANCED_OK).  linewin.c does the bookkeeping; this file reads replies
+ * (marlin_reply.c), feeds the window and the transport, and reports.
+ * A silent printer gets an unnumbered M105 probe; its answer means all
+ * earlier lines were handled, so the window resyncs and the last line goes
+ * again (Marlin rejects it with a Resend if it had it).  No answer after
+ * several probes fails the job.
+ *
+ * Thread: loop thread; never blocks (the job file is read a line at a
+ * time as the window opens).
+ */
+#include "drv_marlin.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../src/base/gcode.h"
+#include "../src/base/limits.h"
+#include "../src/base/log.h"
+#include "../src/base/mem.h"
+#include "linewin.h"
+#include "marlin_reply.h"
+#include "transport.h"
+
+#define RING_LINES      512  /* numbered lines kept for resends */
+#define WINDOW_MAX      32   /* most lines in flight however large B claims */
+#define WINDOW_DEFAULT  2    /* without ADVANCED_OK: safe for any BUFSIZE >= 2 */
+#define INJECT_MAX      32   /* host lines waiting (park, resume, end sequences) */
+#define HELLO_TRIES     5    /* handshake attempts before giving up */
+#define PROBES_MAX      5    /* unanswered probes before the job fails */
+#define POLL_MS         2000 /* M105 polling / M155 interval */
+#define PROGRESS_MS     250  /* progress events at most this often */
+#define PINGPONG_LINES  64   /* clean lines in ping-pong after a resend */
+#define TAG_HOST        (-1) /* a line the driver added */
+#define TAG_M105        (-2) /* a numbered M105 poll */
+#define PARK_X_MM       0.0  /* where a paused head waits */
+#define PARK_Y_MM       0.0
+#define PARK_LIFT_MM    10.0
+#define RETRACT_MM      2.0
+
+enum phase { PH_OFF, PH_HELLO, PH_READY };
+enum jobmode { J_NONE, J_RUN, J_PAUSED, J_CANCELLING };
+
+/* The machine state a job leaves, tracked from the lines pushed (for resume). */
+struct motion {
+    bool rel_xyz, rel_e; /* G91 / M83 */
+    double pos[4];       /* X Y Z E, mm */
+    double feed_mm_min;  /* last F */
+    double noz_c, bed_c; /* last targets */
+    double fan;          /* M106 S, 0 off */
+};
+
+struct marlin {
+    struct drv base;          /* first: drv.h casts */
+    char port[256];           /* transport spec */
+    int baud;
+    int timeout_ms;           /* silence before a probe */
+    int cfg_window;           /* 0 auto */
+    struct transport *t;      /* NULL when offline */
+    struct transport *t_dead; /* closed inside its callback; freed on the next tick */
+    uint64_t timer;           /* periodic housekeeping */
+    enum phase phase;
+    int hello_tries, hello_oks;
+    int64_t hello_ms;         /* last hello sent */
+    char rx[SF_PRINTER_LINE_MAX + 1]; /* partial reply line */
+    size_t rx_len;
+    bool rx_skip;             /* dropping an over-long line */
+    struct linewin win;
+    int max_b;                /* largest ADVANCED_OK B seen */
+    int full_window;          /* window when the link is clean */
+    int pingpong_left;        /* acknowledged lines to go before the full window returns */
+    bool settling;            /* after a Resend: wait for the stale replies to stop */
+    int settle_ms;            /* quiet time that ends settling (3 line times) */
+    int64_t last_reply_ms;    /* last complete reply line */
+    uint64_t settle_timer;    /* pending settle check */
+    uint64_t line_timer;      /* pending check of a reply line without its newline */
+    int64_t progress_ms;      /* last protocol progress (ok, resend, busy...) */
+    int64_t last_rx_ms;       /* last byte of any kind */
+    int probes;               /* unanswered probes in a row */
+    bool probe_out;           /* an unnumbered M105 probe awaits its ok */
+    bool probe_garbled;       /* it came back as an unknown command: its ok is next */
+    int64_t poll_ms;          /* next M105 poll (no auto-report) */
+    long bad_resend;          /* resend target out of range */
+    int bad_resend_count;     /* times in a row it was asked for */
+    char inject[INJECT_MAX][LINEWIN_LINE_MAX];
+    int inj_head, inj_len;
+    /* job */
+    enum jobmode mode;
+    FILE *job;
+    char job_path[256];
+    long job_index;           /* next job line (0-based command index) to push */
+    bool job_eof;
+    bool final_pushed;        /* M400 after the last line */
+    long last_tag;            /* highest job index acknowledged + 1 */
+    int64_t progress_ev_ms;   /* last DRV_EV_PROGRESS */
+    struct motion mo, saved;
+    struct drv_marlin_stats st;
+};
+
+static const struct drv_ops marlin_ops;
+
+static struct marlin *
+M(struct drv *d)
+{
+    return (struct marlin *)d;
+}
+
+static void
+emit_event(struct marlin *m, enum drv_event ev)
+{
+    if (m->base.on_event)
+        m->base.on_event(&m->base, ev, m->base.ud);
+}
+
+static void
+set_state(struct marlin *m, enum drv_state s)
+{
+    if (m->base.status.state == s)
+        return;
+    log_printer(LOG_INFO, m->base.name, "%s -> %s", drv_state_name(m->base.status.state),
+                drv_state_name(s));
+    m->base.status.state = s;
+    emit_event(m, DRV_EV_STATE);
+}
+
+static void
+message(struct marlin *m, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+static void
+message(struct marlin *m, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(m->base.status.message, sizeof(m->base.status.message), fmt, ap);
+    va_end(ap);
+}
+
+static void
+job_close(struct marlin *m)
+{
+    if (m->job)
+        fclose(m->job);
+    m->job = NULL;
+    m->mode = J_NONE;
+    m->inj_len = 0;
+}
+
+/* End the job with ev (DONE, FAILED, CANCELLED); the state is the caller's. */
+static void
+job_end(struct marlin *m, enum drv_event ev)
+{
+    if (m->mode == J_NONE)
+        return;
+    job_close(m);
+    m->base.status.progress = m->base.status.lines_total
+                                  ? (double)m->base.status.lines_acked /
+                                        (double)m->base.status.lines_total
+                                  : 1.0;
+    emit_event(m, ev);
+}
+
+static void
+job_fail(struct marlin *m, enum drv_state next, const char *why)
+{
+    message(m, "%s at line %llu of %llu", why, (unsigned long long)m->base.status.lines_acked,
+            (unsigned long long)m->base.status.lines_total);
+    log_printer(LOG_WARN, m->base.name, "job failed: %s", m->base.status.message);
+    if (m->mode != J_NONE) {
+        set_state(m, next);
+        job_end(m, DRV_EV_JOB_FAILED);
+    } else {
+        set_state(m, next);
+    }
+}
+
+/* ---- writing ------------------------------------------------------------ */
+
+static int
+send_raw(struct marlin *m, const char *text)
+{
+    if (!m->t)
+        return SF_EIO;
+    size_t n = strlen(text);
+    m->st.bytes_sent += n;
+    return transport_write(m->t, text, n);
+}
+
+static bool
+inject(struct marlin *m, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+static bool
+inject(struct marlin *m, const char *fmt, ...)
+{
+    if (m->inj_len == INJECT_MAX)
+        return false;
+    char *slot = m->inject[(m->inj_head + m->inj_len) % INJECT_MAX];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(slot, LINEWIN_LINE_MAX, fmt, ap);
+    va_end(ap);
+    m->inj_len++;
+    return true;
+}
+
+/* Follow the state a job line leaves behind, so resume can restore it. */
+static void
+track(struct motion *mo, const char *cmd, size_t len)
+{
+    struct gcode_line g;
+    if (gcode_parse(cmd, len, &g, NULL) < 0)
+        return;
+    static const char axes[4] = { 'X', 'Y', 'Z', 'E' };
+    double v;
+    if (g.letter == 'G' && g.code <= 3) {
+        for (int a = 0; a < 4; a++)
+            if (gcode_get(&g, axes[a], &v) && !isnan(v))
+                mo->pos[a] = (a < 3 ? mo->rel_xyz : mo->rel_e) ? mo->pos[a] + v : v;
+        if (gcode_get(&g, 'F', &v) && v > 0)
+            mo->feed_mm_min = v;
+    } else if (gcode_is(&g, 'G', 90) || gcode_is(&g, 'G', 91)) {
+        mo->rel_xyz = mo->rel_e = g.code == 91;
+    } else if (gcode_is(&g, 'M', 82) || gcode_is(&g, 'M', 83)) {
+        mo->rel_e = g.code == 83;
+    } else if (gcode_is(&g, 'G', 92)) {
+        for (int a = 0; a < 4; a++)
+            if (gcode_get(&g, axes[a], &v))
+                mo->pos[a] = isnan(v) ? 0 : v;
+    } else if (gcode_is(&g, 'G', 28)) {
+        bool any = false;
+        for (int a = 0; a < 3; a++)
+            any |= gcode_get(&g, axes[a], NULL);
+        for (int a = 0; a < 3; a++)
+            if (!any || gcode_get(&g, axes[a], NULL))
+                mo->pos[a] = 0;
+    } else if ((gcode_is(&g, 'M', 104) || gcode_is(&g, 'M', 109)) && gcode_get(&g, 'S', &v) &&
+               !isnan(v)) {
+        mo->noz_c = v;
+    } else if ((gcode_is(&g, 'M', 140) || gcode_is(&g, 'M', 190)) && gcode_get(&g, 'S', &v) &&
+               !isnan(v)) {
+        mo->bed_c = v;
+    } else if (gcode_is(&g, 'M', 106)) {
+        mo->fan = gcode_get(&g, 'S', &v) && !isnan(v) ? v : 255;
+    } else if (gcode_is(&g, 'M', 107)) {
+        mo->fan = 0;
+    }
+}
+
+/*
+ * Read the next command of the job file into out.  1: got one, 0: end of
+ * file, <0: a bad line (message set).
+ */
+static int
+next_job_command(struct marlin *m, char *out, size_t cap)
+{
+    char raw[SF_GCODE_LINE_MAX + 2];
+    while (fgets(raw, sizeof(raw), m->job)) {
+        size_t len = strlen(raw);
+        if (len == sizeof(raw) - 1 && raw[len - 1] != '\n') {
+            message(m, "job '%s': a line is longer than %d bytes", m->job_path,
+                    SF_GCODE_LINE_MAX);
+            return SF_EINVAL;
+        }
+        bool too_long;
+        size_t n = gcode_strip(raw, len, out, cap, &too_long);
+        if (too_long) {
+            message(m, "job '%s': command %ld is too long for Marlin", m->job_path,
+                    m->job_index + 1);
+            return SF_EINVAL;
+        }
+        if (n > 0)
+            return 1;
+    }
+    if (ferror(m->job)) {
+        message(m, "job '%s': read error", m->job_path);
+        return SF_EIO;
+    }
+    return 0;
+}
+
+/* Lines that may go out now: resends first, then host lines, then the job. */
+static void
+pump(struct marlin *m)
+{
+    if (m->phase != PH_READY || m->probe_out || m->settling)
+        return;
+    for (int guard = 0; guard < 256 && m->t; guard++) {
+        const struct linewin_entry *e = linewin_peek(&m->win);
+        if (e) {
+            /* With one line in flight nothing follows to end a line whose
+               newline was garbled; "\r\n" ends it twice (Marlin skips the
+               empty line).  Streaming, the next line does that job. */
+            char line[LINEWIN_LINE_MAX + 2];
+            memcpy(line, e->text, e->len);
+            size_t k = e->len;
+            if (m->win.window == 1)
+                line[k++] = '\r';
+            line[k++] = '\n';
+            line[k] = '\0';
+            linewin_sent(&m->win);
+            m->st.lines_sent++;
+            if (send_raw(m, line) < 0)
+                return;
+            continue;
+        }
+        if (m->win.in_flight >= m->win.window || m->win.next <= m->win.high)
+            return;
+        struct sf_err err;
+        if (m->inj_len > 0) {
+            const char *cmd = m->inject[m->inj_head];
+            long tag = strcmp(cmd, "M105") == 0 ? TAG_M105 : TAG_HOST;
+            long rc = linewin_push(&m->win, cmd, tag, &err);
+            if (rc == SF_EAGAIN)
+                return;
+            if (rc < 0)
+                log_printer(LOG_WARN, m->base.name, "dropping host line: %s", err.msg);
+            else
+                m->st.host_lines++;
+            m->inj_head = (m->inj_head + 1) % INJECT_MAX;
+            m->inj_len--;
+            continue;
+        }
+        if (m->mode != J_RUN || m->base.status.state != DRV_PRINTING)
+            return;
+        if (m->job_eof) {
+            if (!m->final_pushed) {
+                m->final_pushed = true;
+                inject(m, "M400"); /* done means executed, not just queued */
+                continue;
+            }
+            return;
+        }
+        char cmd[LINEWIN_LINE_MAX];
+        /* Leave room for "N<number> " and "*<checksum>". */
+        int rc = next_job_command(m, cmd, LINEWIN_LINE_MAX - 18);
+        if (rc < 0) {
+            job_fail(m, DRV_IDLE, "bad G-code");
+            return;
+        }
+        if (rc == 0) {
+            m->job_eof = true;
+            continue;
+        }
+        track(&m->mo, cmd, strlen(cmd));
+        long n = linewin_push(&m->win, cmd, m->job_index, &err);
+        if (n < 0) {
+            message(m, "job '%s': %s", m->job_path, err.msg);
+            job_fail(m, DRV_IDLE, "bad G-code");
+            return;
+        }
+        m->job_index++;
+    }
+}
+
+/* ---- replies ------------------------------------------------------------ */
+
+static void
+credit(struct marlin *m, long from, long to)
+{
+    if (to > from && m->pingpong_left > 0) {
+        m->pingpong_left -= (int)(to - from);
+        if (m->pingpong_left <= 0) {
+            m->pingpong_left = 0;
+            m->win.window = m->full_window;
+        }
+    }
+    for (long n = from + 1; n <= to; n++) {
+        long tag = linewin_tag(&m->win, n);
+        if (tag >= 0 && (uint64_t)(tag + 1) > m->base.status.lines_acked)
+            m->base.status.lines_acked = (uint64_t)(tag + 1);
+    }
+}
+
+static void
+check_job_progress(struct marlin *m)
+{
+    struct drv_status *st = &m->base.status;
+    if (st->lines_total)
+        st->progress = (double)st->lines_acked / (double)st->lines_total;
+    int64_t now = loop_now_ms(m->base.loop);
+    if (m->mode != J_NONE && now - m->progress_ev_ms >= PROGRESS_MS) {
+        m->progress_ev_ms = now;
+        emit_event(m, DRV_EV_PROGRESS);
+    }
+    if (m->inj_len > 0 || !linewin_idle(&m->win))
+        return;
+    if (m->mode == J_RUN && m->job_eof && m->final_pushed) {
+        st->lines_acked = st->lines_total;
+        message(m, "done: %llu lines", (unsigned long long)st->lines_total);
+        set_state(m, DRV_IDLE);
+        job_end(m, DRV_EV_JOB_DONE);
+    } else if (m->mode == J_CANCELLING) {
+        message(m, "cancelled at line %llu of %llu", (unsigned long long)st->lines_acked,
+                (unsigned long long)st->lines_total);
+        set_state(m, DRV_IDLE);
+        job_end(m, DRV_EV_JOB_CANCELLED);
+    }
+}
+
+static void
+learn_window(struct marlin *m, int b)
+{
+    if (!m->win.advanced) {
+        m->win.advanced = true;
+        log_printer(LOG_INFO, m->base.name, "ADVANCED_OK: streaming buffer-aware");
+    }
+    if (b > m->max_b)
+        m->max_b = b;
+    if (m->cfg_window == 0) {
+        int w = m->max_b + 1;
+        m->full_window = w < 1 ? 1 : w > WINDOW_MAX ? WINDOW_MAX : w;
+        if (m->pingpong_left == 0)
+            m->win.window = m->full_window;
+    }
+}
+
+static void pump(struct marlin *m);
+
+/*
+ * Settling ends when no reply came for settle_ms: every line that was in
+ * flight behind the bad one has been answered or eaten by Marlin's RX
+ * flush.  Then the rewound line goes out, in ping-pong until the link has
+ * been clean for a while: with one line in flight an error leaves nothing
+ * behind it to be flushed or cut into fragments.
+ */
+static void
+on_settle(struct loop *l, void *ud)
+{
+    struct marlin *m = ud;
+    m->settle_timer = 0;
+    int64_t quiet = loop_now_ms(l) - m->last_reply_ms;
+    if (quiet < m->settle_ms) {
+        m->settle_timer = loop_timer_add(l, m->settle_ms - quiet, on_settle, m);
+        return;
+    }
+    m->settling = false;
+    m->win.stale = 0;
+    m->win.swallow_ok = false;
+    if (!m->win.advanced) {
+        /* Everything before the rewound line was taken; nothing else is in flight. */
+        m->win.acked = m->win.next - 1;
+        m->win.in_flight = 0;
+    }
+    m->pingpong_left = PINGPONG_LINES;
+    m->win.window = 1;
+    pump(m);
+}
+
+static void
+start_settling(struct marlin *m)
+{
+    if (m->settling)
+        return;
+    m->settling = true;
+    m->settle_timer = loop_timer_add(m->base.loop, m->settle_ms, on_settle, m);
+}
+
+static void hello(struct marlin *m);
+static void do_pause(struct marlin *m);
+static void do_resume(struct marlin *m);
+static void do_cancel(struct marlin *m);
+
+/*
+ * Ask the printer to show where it is: an unnumbered M105 answers "ok T:"
+ * only after every line before it was handled.  Used after a silence and
+ * at once when a reply looks garbled (a lost ok or Resend would otherwise
+ * cost a whole timeout).
+ */
+static void
+probe(struct marlin *m)
+{
+    if (m->probe_out || !m->t)
+        return;
+    m->probes++;
+    m->st.probes++;
+    m->probe_out = true;
+    m->probe_garbled = false;
+    m->progress_ms = loop_now_ms(m->base.loop);
+    send_raw(m, "M105\r\n");
+}
+
+static bool
+streaming(const struct marlin *m)
+{
+    return m->win.in_flight > 0 || m->win.next <= m->win.high;
+}
+
+static void
+handshake_done(struct marlin *m)
+{
+    m->phase = PH_READY;
+    m->hello_tries = 0;
+    linewin_reset(&m->win, 0);
+    if (m->settle_timer)
+        loop_timer_cancel(m->base.loop, m->settle_timer);
+    m->settle_timer = 0;
+    m->settling = false;
+    m->pingpong_left = 0;
+    m->win.window = m->full_window;
+    m->probe_out = false;
+    m->probes = 0;
+    m->bad_resend = 0;
+    m->inj_len = 0;
+    if (m->base.caps.autoreport_temp)
+        inject(m, "M155 S%d", POLL_MS / 1000);
+    log_printer(LOG_INFO, m->base.name, "connected: %s, window %d",
+                m->base.caps.firmware[0] ? m->base.caps.firmware : "unknown firmware",
+                m->win.window);
+    set_state(m, DRV_IDLE);
+}
+
+/* An M105's "ok T:": the oldest numbered M105 in flight, else the probe. */
+static void
+on_temp_ok(struct marlin *m, const struct mreply *r)
+{
+    for (long n = m->win.acked + 1; n < m->win.next; n++) {
+        if (linewin_tag(&m->win, n) == TAG_M105) {
+            long before = m->win.acked;
+            if (m->win.advanced)
+                linewin_on_ok(&m->win, true, n);
+            else
+                linewin_on_ok(&m->win, r->has_n, r->n);
+            credit(m, before, m->win.acked);
+            return;
+        }
+    }
+    if (m->probe_out) {
+        /* Everything sent before the probe has been handled: resync. */
+        m->probe_out = false;
+        m->probes = 0;
+        linewin_resync(&m->win);
+        if (!m->win.advanced && m->cfg_window == 0 && m->win.window > 1) {
+            m->win.window = 1;
+            log_printer(LOG_WARN, m->base.name, "replies went missing: falling back to ping-pong");
+        }
+        return;
+    }
+    long before = m->win.acked;
+    linewin_on_ok(&m->win, r->has_n, r->n);
+    credit(m, before, m->win.acked);
+}
+
+static void
+on_resend(struct marlin *m, long k)
+{
+    int rc = linewin_on_resend(&m->win, k);
+    if (rc == SF_OK) {
+        m->st.rewinds++;
+        m->bad_resend = 0;
+        m->bad_resend_count = 0;
+        if (m->win.stale > 0 || m->win.window > 1)
+            start_settling(m);
+        return;
+    }
+    if (rc == 2 && !m->settling)
+        probe(m); /* garbled, or the printer is ahead: ask where it is */
+    if (rc == SF_ENOTFOUND || k > m->win.high + 1) {
+        /* The same impossible request three times running (a garbled number
+           does not repeat): the printer's counter is not ours. */
+        if (m->bad_resend == k && ++m->bad_resend_count >= 3) {
+            log_printer(LOG_WARN, m->base.name, "printer asks for line %ld; we hold %ld-%ld", k,
+                        m->win.high - m->win.cap + 1, m->win.high);
+            m->bad_resend = 0;
+            job_fail(m, DRV_CONNECTING, "printer lost its line count (reset?)");
+            hello(m);
+        } else if (m->bad_resend != k) {
+            m->bad_resend = k;
+            m->bad_resend_count = 1;
+        }
+    }
+}
+
+static void
+on_temps(struct marlin *m, const struct mreply *r)
+{
+    struct drv_status *st = &m->base.status;
+    st->nozzle_c = r->t;
+    st->nozzle_target_c = r->t_target;
+    if (r->has_bed) {
+        st->bed_c = r->bed;
+        st->bed_target_c = r->bed_target;
+    }
+    emit_event(m, DRV_EV_TEMPS);
+}
+
+static void
+on_line(struct marlin *m, const char *line, size_t len)
+{
+    struct mreply r;
+    mreply_parse(line, len, &r);
+    int64_t now = loop_now_ms(m->base.loop);
+    m->last_reply_ms = now;
+    if (r.kind != MR_TEMP && r.kind != MR_OTHER)
+        m->progress_ms = now;
+    if (r.has_temps)
+        on_temps(m, &r);
+
+    if (m->phase == PH_HELLO) {
+        switch (r.kind) {
+        case MR_OK:
+            if (r.b >= 0)
+                learn_window(m, r.b);
+            if (++m->hello_oks >= 2)
+                handshake_done(m);
+            break;
+        case MR_FIRMWARE:
+            snprintf(m->base.caps.firmware, sizeof(m->base.caps.firmware), "%s", r.name);
+            break;
+        case MR_CAP:
+            if (strcmp(r.name, "AUTOREPORT_TEMP") == 0)
+                m->base.caps.autoreport_temp = r.cap_value;
+            else if (strcmp(r.name, "HOST_ACTION_COMMANDS") == 0)
+                m->base.caps.host_actions = r.cap_value;
+            else if (strcmp(r.name, "ADVANCED_OK") == 0)
+                m->base.caps.advanced_ok = r.cap_value;
+            break;
+        case MR_START:
+        case MR_RESEND:
+            hello(m); /* rebooted, or the M110 was garbled: start over */
+            break;
+        default:
+            break;
+        }
+        return;
+    }
+    if (m->phase != PH_READY)
+        return;
+
+    switch (r.kind) {
+    case MR_OK: {
+        /* Only a whole ADVANCED_OK reply teaches the window: a garbled
+           temperature line must not. */
+        if (r.has_n && r.p >= 0 && r.b >= 0 && !r.has_temps)
+            learn_window(m, r.b);
+        if (r.has_temps && !r.has_n) {
+            on_temp_ok(m, &r);
+        } else if (!r.has_n && m->probe_out && !m->win.swallow_ok &&
+                   (m->win.advanced || m->win.in_flight == 0 || m->probe_garbled || len > 6)) {
+            /* The probe's answer with its "T:" garbled. */
+            on_temp_ok(m, &r);
+        } else if (!r.has_n && m->win.advanced && !m->win.swallow_ok) {
+            /* Every numbered line's ok carries N: this one lost it on the wire. */
+            if (streaming(m) && !m->settling)
+                probe(m);
+        } else {
+            long before = m->win.acked;
+            if (linewin_on_ok(&m->win, r.has_n, r.n) < 0 && !m->settling)
+                probe(m);
+            credit(m, before, m->win.acked);
+        }
+        if (!m->probe_out)
+            m->probes = 0;
+        break;
+    }
+    case MR_OTHER:
+        /* Not a Marlin line: likely a garbled ok or Resend.  If an ok was
+           due after a Resend, this was it; if it ends like a temperature
+           report while a probe is out, it is the probe's damaged answer. */
+        m->win.swallow_ok = false;
+        if (m->probe_out && line[0] != ' ' && memmem(line, len, "@:", 2)) {
+            on_temp_ok(m, &r);
+            break;
+        }
+        if (streaming(m) && !m->settling)
+            probe(m);
+        break;
+    case MR_RESEND:
+        on_resend(m, r.resend);
+        if (r.tail)
+            m->win.swallow_ok = false; /* its ok was merged into this line */
+        break;
+    case MR_ECHO:
+        /* A garbled probe comes back as an unknown command, then its ok. */
+        if (m->probe_out && strstr(r.name, "Unknown command"))
+            m->probe_garbled = true;
+        break;
+    case MR_ERROR:
+        if (r.err == MR_ERR_FATAL) {
+            if (m->base.status.state != DRV_ERROR) {
+                char why[120];
+                snprintf(why, sizeof(why), "printer halted: %.80s", r.name);
+                job_fail(m, DRV_ERROR, why);
+            }
+        } else if (r.err == MR_ERR_LINE && !r.resend_follows) {
+            /* Our line lost its N on the wire (Marlin drops it without a
+               Resend), or the error text itself is garbled: ask. */
+            if (!m->settling && streaming(m))
+                probe(m);
+        } else if (r.err == MR_ERR_OTHER) {
+            log_printer(LOG_WARN, m->base.name, "printer error: %s", r.name);
+        }
+        break;
+    case MR_START:
+        if (m->mode != J_NONE)
+            job_fail(m, DRV_CONNECTING, "printer reset");
+        else
+            set_state(m, DRV_CONNECTING);
+        hello(m);
+        return;
+    case MR_WAIT:
+        /* Marlin's queue is empty and nothing is arriving: whatever we think
+           is in flight was handled or lost. */
+        if (m->win.in_flight > 0 && !m->probe_out)
+            linewin_resync(&m->win);
+        break;
+    case MR_ACTION:
+        log_printer(LOG_INFO, m->base.name, "host action: %s", r.name);
+        if (strcmp(r.name, "pause") == 0 || strcmp(r.name, "paused") == 0) {
+            if (m->base.status.state == DRV_PRINTING)
+                do_pause(m);
+        } else if (strcmp(r.name, "resume") == 0 || strcmp(r.name, "resumed") == 0) {
+            if (m->base.status.state == DRV_PAUSED)
+                do_resume(m);
+        } else if (strcmp(r.name, "cancel") == 0) {
+            if (m->mode == J_RUN || m->mode == J_PAUSED)
+                do_cancel(m);
+        }
+        break;
+    default:
+        break;
+    }
+    check_job_progress(m);
+}
+
+/*
+ * A reply line that stopped short for settle_ms lost its newline on the
+ * wire (replies carry no checksum): take it as it is rather than wait for
+ * a line that may never come.
+ */
+static void
+on_line_idle(struct loop *l, void *ud)
+{
+    struct marlin *m = ud;
+    m->line_timer = 0;
+    if (!m->t || m->rx_len == 0 || m->rx_skip)
+        return;
+    if (loop_now_ms(l) - m->last_rx_ms < m->settle_ms) {
+        m->line_timer = loop_timer_add(l, m->settle_ms, on_line_idle, m);
+        return;
+    }
+    size_t len = m->rx_len;
+    m->rx_len = 0;
+    on_line(m, m->rx, len);
+    pump(m);
+}
+
+static void
+on_data(void *ud, const char *data, size_t n)
+{
+    struct marlin *m = ud;
+    m->last_rx_ms = loop_now_ms(m->base.loop);
+    for (size_t i = 0; i < n && m->t; i++) {
+        char c = data[i];
+        if (c == '\n' || c == '\r') {
+            if (!m->rx_skip && m->rx_len > 0)
+                on_line(m, m->rx, m->rx_len);
+            m->rx_len = 0;
+            m->rx_skip = false;
+            continue;
+        }
+        if (m->rx_len == SF_PRINTER_LINE_MAX) {
+            m->rx_skip = true; /* garbage without newlines: drop, never grow */
+            m->rx_len = 0;
+        }
+        if (!m->rx_skip)
+            m->rx[m->rx_len++] = c;
+    }
+    if (m->t && m->rx_len > 0 && !m->line_timer)
+        m->line_timer = loop_timer_add(m->base.loop, m->settle_ms, on_line_idle, m);
+    pump(m);
+}
+
+static void
+drop_link(struct marlin *m, const char *why)
+{
+    if (m->t) {
+        m->t_dead = m->t;
+        m->t = NULL;
+    }
+    m->phase = PH_OFF;
+    m->probe_out = false;
+    char msg[120];
+    snprintf(msg, sizeof(msg), "link lost (%.80s)", why);
+    if (m->mode != J_NONE)
+        job_fail(m, DRV_OFFLINE, msg);
+    else {
+        message(m, "%s", msg);
+        set_state(m, DRV_OFFLINE);
+    }
+}
+
+static void
+on_close(void *ud, const char *why)
+{
+    drop_link(ud, why);
+}
+
+/* ---- timers --------------------------------------------------------------- */
+
+static void
+hello(struct marlin *m)
+{
+    char m110[32];
+    gcode_number_line(0, "M110 N0", m110, sizeof(m110));
+    m->phase = PH_HELLO;
+    m->hello_oks = 0;
+    m->hello_tries++;
+    m->hello_ms = loop_now_ms(m->base.loop);
+    char text[64];
+    snprintf(text, sizeof(text), "%s\nM115\n", m110);
+    send_raw(m, text);
+}
+
+static void
+on_timer(struct loop *l, void *ud)
+{
+    struct marlin *m = ud;
+    int64_t now = loop_now_ms(l);
+    int period = m->timeout_ms / 4 < 250 ? m->timeout_ms / 4 : 250;
+    m->timer = loop_timer_add(l, period > 10 ? period : 10, on_timer, m);
+    if (m->t_dead) {
+        transport_free(m->t_dead);
+        m->t_dead = NULL;
+    }
+    if (!m->t)
+        return;
+    if (m->phase == PH_HELLO) {
+        int interval = m->timeout_ms < 2000 ? m->timeout_ms : 2000;
+        if (now - m->hello_ms >= interval) {
+            if (m->hello_tries >= HELLO_TRIES) {
+                message(m, "no reply from '%s' (is it a Marlin printer at %d baud?)", m->port,
+                        m->baud);
+                m->t_dead = m->t;
+                m->t = NULL;
+                m->phase = PH_OFF;
+                set_state(m, DRV_OFFLINE);
+                return;
+            }
+            hello(m);
+        }
+        return;
+    }
+    if (m->phase != PH_READY)
+        return;
+    if (!m->base.caps.autoreport_temp && now >= m->poll_ms && m->inj_len == 0) {
+        inject(m, "M105");
+        m->poll_ms = now + POLL_MS;
+    }
+    bool waiting = m->win.in_flight > 0 || m->probe_out || m->inj_len > 0 ||
+                   m->win.next <= m->win.high;
+    if (waiting && now - m->progress_ms >= m->timeout_ms &&
+        (m->win.in_flight > 0 || m->probe_out)) {
+        if (m->probes >= PROBES_MAX) {
+            job_fail(m, now - m->last_rx_ms >= m->timeout_ms ? DRV_OFFLINE : DRV_ERROR,
+                     "printer stopped answering");
+            if (now - m->last_rx_ms >= m->timeout_ms) {
+                m->t_dead = m->t;
+                m->t = NULL;
+                m->phase = PH_OFF;
+            }
+            m->probes = 0;
+            m->probe_out = false;
+            return;
+        }
+        log_printer(LOG_WARN, m->base.name, "no reply for %d ms: probing with M105",
+                    m->timeout_ms);
+        m->probe_out = false; /* an unanswered probe is sent again */
+        probe(m);
+    }
+    pump(m);
+    check_job_progress(m);
+}
+
+/* ---- operations ----------------------------------------------------------- */
+
+static int
+m_open(struct drv *d, struct sf_err *err)
+{
+    struct marlin *m = M(d);
+    if (m->t)
+        return sf_err_set(err, SF_EINVAL, "printer '%s': already open", d->name);
+    m->t = transport_open(d->loop, m->port, m->baud, on_data, on_close, m, err);
+    if (!m->t) {
+        message(m, "%s", err ? err->msg : "cannot open port");
+        return err ? err->code : SF_EIO;
+    }
+    transport_flush_input(m->t);
+    m->rx_len = 0;
+    m->rx_skip = false;
+    m->max_b = 0;
+    m->win.advanced = false;
+    m->full_window = m->cfg_window ? m->cfg_window : WINDOW_DEFAULT;
+    m->win.window = m->full_window;
+    m->pingpong_left = 0;
+    m->settling = false;
+    memset(&d->caps, 0, sizeof(d->caps));
+    d->status.message[0] = '\0';
+    m->hello_tries = 0;
+    m->progress_ms = m->last_rx_ms = loop_now_ms(d->loop);
+    set_state(m, DRV_CONNECTING);
+    hello(m);
+    if (!m->timer)
+        m->timer = loop_timer_add(d->loop, 10, on_timer, m);
+    return SF_OK;
+}
+
+static int
+m_start_job(struct drv *d, const char *path, struct sf_err *err)
+{
+    struct marlin *m = M(d);
+    if (d->status.state != DRV_IDLE)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is %s, not idle", d->name,
+                          drv_state_name(d->status.state));
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return sf_err_sys(err, "job '%s'", path);
+    /* Count and check every command first: a job must not fail half-way on a bad line. */
+    char raw[SF_GCODE_LINE_MAX + 2], cmd[LINEWIN_LINE_MAX];
+    uint64_t total = 0;
+    long lineno = 0;
+    while (fgets(raw, sizeof(raw), f)) {
+        size_t len = strlen(raw);
+        lineno++;
+        bool too_long;
+        if (len == sizeof(raw) - 1 && raw[len - 1] != '\n') {
+            fclose(f);
+            return sf_err_set(err, SF_EINVAL, "job '%s':%ld: line longer than %d bytes", path,
+                              lineno, SF_GCODE_LINE_MAX);
+        }
+        if (gcode_strip(raw, len, cmd, LINEWIN_LINE_MAX - 18, &too_long) > 0)
+            total++;
+        if (too_long) {
+            fclose(f);
+            return sf_err_set(err, SF_EINVAL, "job '%s':%ld: command too long for Marlin (%d bytes)",
+                              path, lineno, LINEWIN_LINE_MAX - 19);
+        }
+    }
+    if (ferror(f) || fseek(f, 0, SEEK_SET) != 0) {
+        fclose(f);
+        return sf_err_sys(err, "job '%s': read", path);
+    }
+    m->job = f;
+    snprintf(m->job_path, sizeof(m->job_path), "%s", path);
+    m->job_index = 0;
+    m->job_eof = false;
+    m->final_pushed = false;
+    memset(&m->mo, 0, sizeof(m->mo));
+    m->mo.feed_mm_min = 1500;
+    d->status.lines_total = total;
+    d->status.lines_acked = 0;
+    d->status.progress = 0;
+    d->status.job_started_ms = loop_now_ms(d->loop);
+    message(m, "printing '%s'", path);
+    m->mode = J_RUN;
+    set_state(m, DRV_PRINTING);
+    pump(m);
+    return SF_OK;
+}
+
+static void
+do_pause(struct marlin *m)
+{
+    m->saved = m->mo;
+    m->mode = J_PAUSED;
+    inject(m, "M400");
+    inject(m, "M83");
+    inject(m, "G1 E-%.2f F2400", RETRACT_MM);
+    inject(m, "G91");
+    inject(m, "G1 Z%.2f F600", PARK_LIFT_MM);
+    inject(m, "G90");
+    inject(m, "G1 X%.2f Y%.2f F6000", PARK_X_MM, PARK_Y_MM);
+    message(m, "paused at line %llu", (unsigned long long)m->base.status.lines_acked);
+    set_state(m, DRV_PAUSED);
+    pump(m);
+}
+
+static void
+do_resume(struct marlin *m)
+{
+    const struct motion *s = &m->saved;
+    if (s->bed_c > 0)
+        inject(m, "M190 S%.0f", s->bed_c);
+    if (s->noz_c > 0)
+        inject(m, "M109 S%.0f", s->noz_c);
+    inject(m, "G90");
+    inject(m, "G1 X%.3f Y%.3f F6000", s->pos[0], s->pos[1]);
+    inject(m, "G1 Z%.3f F600", s->pos[2]);
+    inject(m, "M83");
+    inject(m, "G1 E%.2f F2400", RETRACT_MM);
+    inject(m, "%s", s->rel_e ? "M83" : "M82");
+    if (!s->rel_e)
+        inject(m, "G92 E%.5f", s->pos[3]);
+    inject(m, "%s", s->rel_xyz ? "G91" : "G90");
+    inject(m, "G1 F%.0f", s->feed_mm_min);
+    if (s->fan > 0)
+        inject(m, "M106 S%.0f", s->fan);
+    m->mo = m->saved;
+    m->mode = J_RUN;
+    message(m, "resumed");
+    set_state(m, DRV_PRINTING);
+    pump(m);
+}
+
+static void
+do_cancel(struct marlin *m)
+{
+    bool was_paused = m->mode == J_PAUSED;
+    m->mode = J_CANCELLING;
+    m->inj_len = 0;
+    send_raw(m, "M108\n"); /* break an M109/M190 wait at once (emergency parser) */
+    inject(m, "M104 S0");
+    inject(m, "M140 S0");
+    inject(m, "M107");
+    if (!was_paused) {
+        inject(m, "M83");
+        inject(m, "G1 E-%.2f F2400", RETRACT_MM);
+        inject(m, "G91");
+        inject(m, "G1 Z%.2f F600", PARK_LIFT_MM);
+        inject(m, "G90");
+    }
+    inject(m, "M84");
+    set_state(m, DRV_PRINTING); /* until the end sequence is acknowledged */
+    pump(m);
+}
+
+static int
+m_pause(struct drv *d, struct sf_err *err)
+{
+    struct marlin *m = M(d);
+    if (d->status.state != DRV_PRINTING || m->mode != J_RUN)
+        return sf_err_set(err, SF_EINVAL, "printer '%s' is %s: nothing to pause", d->name,
+                          drv_state_name(d->status.state));
+    do_pause(m);
+    return SF_OK;
+}
+
+static int
+m_resume(struct drv *d, struct sf_err *err)
+{
+    struct marlin *m = M(d);
+    if (d->status.state != DRV_PAUSED || m->mode != J_PAUSED)
+        return sf_err_set(err, SF_EINVAL, "printer '%s' is %s: nothing to resume", d->name,
+                          drv_state_name(d->status.state));
+    do_resume(m);
+    return SF_OK;
+}
+
+static int
+m_cancel(struct drv *d, struct sf_err *err)
+{
+    struct marlin *m = M(d);
+    if (m->mode != J_RUN && m->mode != J_PAUSED)
+        return sf_err_set(err, SF_EINVAL, "printer '%s': no job to cancel", d->name);
+    do_cancel(m);
+    return SF_OK;
+}
+
+static int
+m_command(struct drv *d, const char *line, struct sf_err *err)
+{
+    struct marlin *m = M(d);
+    char cmd[LINEWIN_LINE_MAX];
+    bool too_long;
+    size_t n = gcode_strip(line, strlen(line), cmd, LINEWIN_LINE_MAX - 18, &too_long);
+    if (too_long)
+        return sf_err_set(err, SF_EINVAL, "command too long for Marlin");
+    if (n == 0)
+        return sf_err_set(err, SF_EINVAL, "empty command");
+    if (m->phase != PH_READY)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is %s", d->name,
+                          drv_state_name(d->status.state));
+    if (strncmp(cmd, "M112", 4) == 0 && (cmd[4] == '\0' || cmd[4] == ' ')) {
+        /* Emergency stop: straight to the wire, past the queue. */
+        send_raw(m, "M112\n");
+        job_fail(m, DRV_ERROR, "emergency stop (M112)");
+        return SF_OK;
+    }
+    if (d->status.state == DRV_PRINTING)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is printing", d->name);
+    if (!inject(m, "%s", cmd))
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': command queue full", d->name);
+    pump(m);
+    return SF_OK;
+}
+
+static void
+m_close(struct drv *d)
+{
+    struct marlin *m = M(d);
+    if (m->mode != J_NONE)
+        job_fail(m, DRV_OFFLINE, "disconnected by host");
+    transport_free(m->t);
+    m->t = NULL;
+    transport_free(m->t_dead);
+    m->t_dead = NULL;
+    m->phase = PH_OFF;
+    if (m->timer)
+        loop_timer_cancel(d->loop, m->timer);
+    m->timer = 0;
+    if (m->settle_timer)
+        loop_timer_cancel(d->loop, m->settle_timer);
+    m->settle_timer = 0;
+    if (m->line_timer)
+        loop_timer_cancel(d->loop, m->line_timer);
+    m->line_timer = 0;
+    m->settling = false;
+    set_state(m, DRV_OFFLINE);
+}
+
+static void
+m_destroy(struct drv *d)
+{
+    struct marlin *m = M(d);
+    job_close(m);
+    linewin_release(&m->win);
+    free(m);
+}
+
+static const struct drv_ops marlin_ops = {
+    .version = DRV_OPS_VERSION,
+    .kind = "marlin",
+    .open = m_open,
+    .start_job = m_start_job,
+    .pause = m_pause,
+    .resume = m_resume,
+    .cancel = m_cancel,
+    .command = m_command,
+    .close = m_close,
+    .destroy = m_destroy,
+};
+
+struct drv *
+drv_marlin_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
+               struct sf_err *err)
+{
+    const char *name = cfg->name ? cfg->name : "marlin";
+    if (!cfg->port || !*cfg->port) {
+        sf_err_set(err, SF_EINVAL, "printer '%s': no port given", name);
+        return NULL;
+    }
+    if (strlen(cfg->port) >= sizeof(((struct marlin *)0)->port)) {
+        sf_err_set(err, SF_EINVAL, "printer '%s': port name too long", name);
+        return NULL;
+    }
+    if (cfg->baud != 0 && (cfg->baud < 300 || cfg->baud > 4000000)) {
+        sf_err_set(err, SF_EINVAL, "printer '%s': baud %d out of range 300-4000000", name,
+                   cfg->baud);
+        return NULL;
+    }
+    if (cfg->timeout_ms < 0 || cfg->timeout_ms > 600000) {
+        sf_err_set(err, SF_EINVAL, "printer '%s': timeout %d ms out of range 0-600000", name,
+                   cfg->timeout_ms);
+        return NULL;
+    }
+    if (cfg->buffer_lines < 0 || cfg->buffer_lines > WINDOW_MAX) {
+        sf_err_set(err, SF_EINVAL, "printer '%s': buffer_lines %d out of range 0-%d", name,
+                   cfg->buffer_lines, WINDOW_MAX);
+        return NULL;
+    }
+    struct marlin *m = mem_calloc(1, sizeof(*m));
+    if (!m || linewin_init(&m->win, RING_LINES, WINDOW_DEFAULT) < 0) {
+        free(m);
+        sf_err_set(err, SF_ENOMEM, "printer '%s': out of memory", name);
+        return NULL;
+    }
+    m->base.ops = &marlin_ops;
+    m->base.loop = l;
+    snprintf(m->base.name, sizeof(m->base.name), "%s", name);
+    m->base.on_event = on_event;
+    m->base.ud = ud;
+    snprintf(m->port, sizeof(m->port), "%s", cfg->port);
+    m->baud = cfg->baud ? cfg->baud : 115200;
+    m->timeout_ms = cfg->timeout_ms ? cfg->timeout_ms : 10000;
+    m->cfg_window = cfg->buffer_lines;
+    /* Three of Marlin's longest lines on the wire, at least 5 ms. */
+    m->settle_ms = 3 * LINEWIN_LINE_MAX * 10 * 1000 / m->baud;
+    if (m->settle_ms < 5)
+        m->settle_ms = 5;
+    return &m->base;
+}
+
+bool
+drv_marlin_stats(const struct drv *d, struct drv_marlin_stats *out)
+{
+    if (!d || d->ops != &marlin_ops)
+        return false;
+    const struct marlin *m = (const struct marlin *)d;
+    *out = m->st;
+    out->rewinds = m->win.rewinds;
+    out->window = m->win.window;
+    return true;
+}

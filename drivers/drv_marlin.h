@@ -1,0 +1,31 @@
+/*
+ * drv_marlin.h - the Marlin USB-serial driver (behind drv.h).
+ *
+ * Most callers use drv_new() with kind "marlin"; this header adds the
+ * constructor drv.c calls and counters for tests and benchmarks.
+ *
+ * Thread: loop thread.
+ */
+#ifndef SF_DRIVERS_DRV_MARLIN_H
+#define SF_DRIVERS_DRV_MARLIN_H
+
+#include <stdint.h>
+
+#include "drv.h"
+
+struct drv_marlin_stats {
+    uint64_t lines_sent;    /* numbered lines written, resends included */
+    uint64_t bytes_sent;    /* bytes written */
+    uint64_t rewinds;       /* Resend requests acted on */
+    uint64_t probes;        /* M105 probes after a silent printer */
+    uint64_t host_lines;    /* numbered lines the driver added (park, resume, end, M400, M105) */
+    int window;             /* lines in flight now allowed */
+};
+
+struct drv *drv_marlin_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event,
+                           void *ud, struct sf_err *err);
+
+/* Counters; false if d is not a Marlin driver. */
+bool drv_marlin_stats(const struct drv *d, struct drv_marlin_stats *out);
+
+#endif

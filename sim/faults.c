@@ -1,0 +1,125 @@
+/*
+ * faults.c - parsing fault specs and rolling the fault dice (faults.h).
+ *
+ * Why: every simulated printer injects the same kinds of trouble, and the
+ * integration tests must be reproducible, so the dice are a seeded
+ * xorshift64 rather than rand() or /dev/urandom.  Values are parsed with
+ * strtod/strtol and fully checked: a typo in a test's fault list is an
+ * error, not a silently fault-free run.
+ *
+ * Thread: whoever owns the struct.
+ */
+#include "faults.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+void
+faults_init(struct faults *f)
+{
+    memset(f, 0, sizeof(*f));
+    f->rng = 1;
+}
+
+static int
+parse_rate(const char *spec, const char *v, double *out, struct sf_err *err)
+{
+    char *end;
+    errno = 0;
+    double d = strtod(v, &end);
+    if (errno || end == v || *end || !isfinite(d) || d < 0 || d > 1)
+        return sf_err_set(err, SF_EINVAL, "fault '%s': rate must be a number from 0 to 1", spec);
+    *out = d;
+    return SF_OK;
+}
+
+static int
+parse_count(const char *spec, const char *v, long max, long *out, struct sf_err *err)
+{
+    char *end;
+    errno = 0;
+    long n = strtol(v, &end, 10);
+    if (errno || end == v || *end || n < 0 || n > max)
+        return sf_err_set(err, SF_EINVAL, "fault '%s': expected a whole number from 0 to %ld",
+                          spec, max);
+    *out = n;
+    return SF_OK;
+}
+
+int
+faults_parse(struct faults *f, const char *spec, struct sf_err *err)
+{
+    const char *eq = strchr(spec, '=');
+    if (!eq)
+        return sf_err_set(err, SF_EINVAL, "fault '%s': expected name=value", spec);
+    size_t n = (size_t)(eq - spec);
+    const char *v = eq + 1;
+    long c;
+    int rc;
+#define NAME_IS(s) (n == strlen(s) && strncmp(spec, s, n) == 0)
+    if (NAME_IS("corrupt")) {
+        rc = parse_rate(spec, v, &f->corrupt_rx, err);
+        f->corrupt_tx = f->corrupt_rx;
+        return rc;
+    }
+    if (NAME_IS("corrupt-rx"))
+        return parse_rate(spec, v, &f->corrupt_rx, err);
+    if (NAME_IS("corrupt-tx"))
+        return parse_rate(spec, v, &f->corrupt_tx, err);
+    if (NAME_IS("drop-ok"))
+        return parse_rate(spec, v, &f->drop_ok, err);
+    if (NAME_IS("garbage"))
+        return parse_rate(spec, v, &f->garbage, err);
+    if (NAME_IS("slow")) {
+        rc = parse_count(spec, v, 60000, &c, err);
+        f->slow_ms = (int)c;
+        return rc;
+    }
+    if (NAME_IS("reset"))
+        return parse_count(spec, v, 1L << 40, &f->reset_after, err);
+    if (NAME_IS("disconnect"))
+        return parse_count(spec, v, 1L << 40, &f->disconnect_after, err);
+    if (NAME_IS("runaway"))
+        return parse_count(spec, v, 1L << 40, &f->runaway_after, err);
+    if (NAME_IS("seed")) {
+        rc = parse_count(spec, v, 1L << 40, &c, err);
+        f->rng = (uint64_t)c * 0x9E3779B97F4A7C15ull + 1;
+        return rc;
+    }
+#undef NAME_IS
+    return sf_err_set(err, SF_EINVAL,
+                      "fault '%s': unknown; expected corrupt, corrupt-rx, corrupt-tx, drop-ok, "
+                      "garbage, slow, reset, disconnect, runaway or seed",
+                      spec);
+}
+
+static uint64_t
+next(struct faults *f)
+{
+    uint64_t x = f->rng;
+    x ^= x << 13;
+    x ^= x >> 7;
+    x ^= x << 17;
+    f->rng = x;
+    return x;
+}
+
+bool
+faults_roll(struct faults *f, double p)
+{
+    if (p <= 0)
+        return false;
+    return (double)(next(f) >> 11) * (1.0 / 9007199254740992.0) < p;
+}
+
+uint8_t
+faults_byte(struct faults *f, uint8_t not)
+{
+    uint8_t b;
+    do
+        b = (uint8_t)(next(f) >> 32);
+    while (b == not);
+    return b;
+}

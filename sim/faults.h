@@ -1,0 +1,54 @@
+/*
+ * faults.h - the fault model of the simulated printers: what goes wrong on
+ * the wire and in the firmware, each fault settable on its own.
+ *
+ * A spec is "name=value"; several specs may be given (--fault ... --fault):
+ *   corrupt=RATE      each byte, both directions, replaced with probability RATE
+ *   corrupt-rx=RATE   only bytes host -> printer
+ *   corrupt-tx=RATE   only bytes printer -> host
+ *   drop-ok=RATE      an "ok" reply is not sent, with probability RATE
+ *   garbage=RATE      after a reply line, a line of random bytes, with probability RATE
+ *   slow=MS           every reply line leaves MS milliseconds late
+ *   reset=N           the firmware resets after executing N commands
+ *   disconnect=N      the link drops after executing N commands
+ *   runaway=N         thermal runaway (Error:Thermal Runaway, then halt) after N commands
+ *   seed=N            seed of the fault dice (default 1): runs are reproducible
+ * Corruption hits at most one byte per line: Marlin's XOR checksum catches
+ * every single-byte error but not two that cancel, and a test that lets
+ * those through would test the checksum's weakness, not the host.
+ *
+ * Pure data and a small PRNG; thread-safe on distinct structs.
+ */
+#ifndef SF_SIM_FAULTS_H
+#define SF_SIM_FAULTS_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "../src/base/err.h"
+
+struct faults {
+    double corrupt_rx;   /* byte corruption rate host -> printer, 0..1 */
+    double corrupt_tx;   /* byte corruption rate printer -> host, 0..1 */
+    double drop_ok;      /* probability an ok is swallowed */
+    double garbage;      /* probability of a garbage line after a reply */
+    int slow_ms;         /* delay added before each reply line */
+    long reset_after;    /* commands executed before a firmware reset; 0 = never */
+    long disconnect_after; /* commands executed before the link drops; 0 = never */
+    long runaway_after;  /* commands executed before thermal runaway; 0 = never */
+    uint64_t rng;        /* xorshift state; never 0 */
+};
+
+/* No faults, seed 1. */
+void faults_init(struct faults *f);
+
+/* Apply one "name=value" spec; SF_EINVAL naming the spec when bad. */
+int faults_parse(struct faults *f, const char *spec, struct sf_err *err);
+
+/* True with probability p (0..1), from the fault dice. */
+bool faults_roll(struct faults *f, double p);
+
+/* A random byte other than `not`. */
+uint8_t faults_byte(struct faults *f, uint8_t not);
+
+#endif

@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# bench_marlin.sh BUILD - the Marlin driver against slimfarm-sim.
+#
+# 1. Link use: `slimfarm send` streams a dense job (short G1 moves) with the
+#    printer sped up 1000x so only the link limits; prints lines/s, bytes/s
+#    and bytes/s as a fraction of the link's byte rate (baud / 10, 8N1),
+#    buffer-aware (ADVANCED_OK window) and ping-pong (--window 1), at 115200
+#    and 250000 baud.  Bytes are what the host wrote (line numbers and
+#    checksums included: they cross the wire too).
+# 2. Planner starvation: a dense curved part (concentric circles of 0.25 mm
+#    segments at 50 mm/s, 5 ms a move) printed in real time (speed 1); the
+#    simulator counts the times its planner ran dry between moves.
+# BENCH_LINES=N sets the job size of part 1 (default 2000).
+set -u
+build=${1:-build/rel}
+sim="$build/bin/slimfarm-sim"
+cli="$build/bin/slimfarm"
+[ -x "$sim" ] && [ -x "$cli" ] || { echo "bench_marlin: $build not built"; exit 1; }
+lines=${BENCH_LINES:-2000}
+work=$(mktemp -d); pid=
+trap '[ -n "$pid" ] && kill "$pid" 2>/dev/null; rm -rf "$work"' EXIT
+
+awk -v n="$lines" 'BEGIN { print "G90"; print "M82"; print "G92 E0"; e = 0
+  for (i = 0; i < n; i++) { e += 0.0213; a = i * 0.05
+    printf "G1 X%.3f Y%.3f E%.5f F%d\n", 100 + 40 * cos(a), 100 + 40 * sin(a), e, 3000 } }' \
+  > "$work/dense.gcode"
+# Dense curved part: circles from r = 20 mm inwards, 0.25 mm chords, 0.2 mm layers.
+awk 'BEGIN { print "G90"; print "M82"; print "G92 E0"; e = 0; z = 0.2; n = 0
+  printf "G1 Z%.2f F600\n", z
+  for (r = 20; r > 2 && n < 2400; r -= 0.45) {
+    k = int(2 * 3.14159265 * r / 0.25)
+    for (i = 0; i <= k && n < 2400; i++) { a = 2 * 3.14159265 * i / k; e += 0.0083; n++
+      printf "G1 X%.3f Y%.3f E%.5f F3000\n", 100 + r * cos(a), 100 + r * sin(a), e } } }' \
+  > "$work/curved.gcode"
+
+start_sim() { # args... -> $port
+  "$sim" marlin "$@" > "$work/sim.out" 2> "$work/sim.err" & pid=$!
+  for _ in $(seq 50); do [ -s "$work/sim.out" ] && break; sleep 0.05; done
+  port=$(head -n 1 "$work/sim.out")
+}
+stop_sim() { kill "$pid"; wait "$pid" 2>/dev/null; pid=; }
+field() { sed -n "s/.*$1=\([^ ]*\).*/\1/p" "$2" | head -n 1; }
+
+echo "link use: $lines-line dense job, printer sped up 1000x"
+printf "%-8s %-13s %9s %9s %9s\n" baud mode lines/s bytes/s "of link"
+for baud in 115200 250000; do
+  for mode in buffer-aware ping-pong; do
+    win=0; [ "$mode" = ping-pong ] && win=1
+    start_sim --advanced-ok --baud "$baud" --speed 1000
+    "$cli" send "$work/dense.gcode" --port "pty:$port" --baud "$baud" --window "$win" \
+      > "$work/send.out" 2> "$work/send.err" || echo "  (send failed: $(tail -n 1 "$work/send.err"))"
+    stop_sim
+    lps=$(field lines_per_s "$work/send.out"); bps=$(field bytes_per_s "$work/send.out")
+    printf "%-8s %-13s %9s %9s %8.1f%%\n" "$baud" "$mode" "$lps" "$bps" \
+      "$(awk -v b="$bps" -v r="$baud" 'BEGIN { print 100 * b / (r / 10) }')"
+  done
+done
+
+moves=$(grep -c '^G1 X' "$work/curved.gcode")
+echo "planner starvation: dense curved part, $moves moves of 5 ms, real time"
+printf "%-8s %-13s %9s %10s %9s\n" baud mode starved "dry (s)" "wall (s)"
+for baud in 115200 250000; do
+  for mode in buffer-aware ping-pong; do
+    win=0; [ "$mode" = ping-pong ] && win=1
+    start_sim --advanced-ok --baud "$baud" --speed 1
+    "$cli" send "$work/curved.gcode" --port "pty:$port" --baud "$baud" --window "$win" \
+      > "$work/send.out" 2> "$work/send.err" || echo "  (send failed: $(tail -n 1 "$work/send.err"))"
+    stop_sim
+    printf "%-8s %-13s %9s %10s %9s\n" "$baud" "$mode" "$(field starved "$work/sim.err")" \
+      "$(field starved_s "$work/sim.err")" "$(field seconds "$work/send.out")"
+  done
+done

@@ -1,0 +1,47 @@
+# tests/integ/lib/marlin.sh - helpers for the Marlin integration tests:
+# make a job, start and stop a simulator, compare its log with the job.
+# Sourced, not run.  Needs $BUILD; sets $TMP (removed on exit).
+set -u
+TMP=$(mktemp -d "${TMPDIR:-/tmp}/sfinteg.XXXXXX")
+SIM_PID=
+cleanup() { [ -n "$SIM_PID" ] && kill "$SIM_PID" 2>/dev/null; rm -rf "$TMP"; }
+trap cleanup EXIT
+
+# make_job FILE N: N moves around a circle, with comments and blank lines.
+make_job() {
+  awk -v n="$2" 'BEGIN {
+    print "; job for the Marlin integration tests"; print "G28 ; home"; print "G90"; print "M82"
+    print "M104 S200"; print "M109 S200"; print "G92 E0"; e = 0
+    for (i = 0; i < n; i++) {
+      e += 0.0213; a = i * 0.05
+      if (i % 100 == 0) { printf ";LAYER:%d\n\n", i / 100 }
+      printf "G1 X%.3f Y%.3f E%.5f F%d\n", 100 + 40 * cos(a), 100 + 40 * sin(a), e, 1800 + (i % 5) * 300
+    } }' > "$1"
+}
+
+# commands FILE: the commands of a G-code file as a printer logs them.
+commands() { sed -e 's/;.*//' -e 's/[[:space:]]*$//' -e 's/^[[:space:]]*//' "$1" | grep -v '^$'; }
+
+# start_sim ARGS...: run slimfarm-sim marlin ARGS in the background; sets $PORT.
+start_sim() {
+  "$BUILD/bin/slimfarm-sim" marlin "$@" > "$TMP/sim.out" 2> "$TMP/sim.err" &
+  SIM_PID=$!
+  for _ in $(seq 50); do [ -s "$TMP/sim.out" ] && break; sleep 0.05; done
+  PORT=$(head -n 1 "$TMP/sim.out")
+  [ -n "$PORT" ] || { echo "simulator did not start: $(cat "$TMP/sim.err")"; return 1; }
+}
+
+# stop_sim: SIGTERM, wait (the log is flushed on exit).
+stop_sim() { kill "$SIM_PID"; wait "$SIM_PID" 2>/dev/null; SIM_PID=; }
+
+# check_log JOB: the sim log, less the host's own queries, equals the job's
+# commands.  (A probe garbled on the wire may still run as M105: "M105k".)
+check_log() {
+  commands "$1" > "$TMP/want"
+  grep -v -E '^(M105([^0-9].*)?|M110( N-?[0-9]+)?|M115|M155 S[0-9]+|M400)$' "$TMP/log" > "$TMP/got"
+  if ! cmp -s "$TMP/want" "$TMP/got"; then
+    echo "executed log differs from the job ($(wc -l < "$TMP/want") wanted, $(wc -l < "$TMP/got") ran):"
+    diff "$TMP/want" "$TMP/got" | head -10
+    return 1
+  fi
+}
