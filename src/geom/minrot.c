@@ -30,9 +30,15 @@ any_perpendicular(struct vec3 u)
 
 /* Nearest point to d on the circle {x on the sphere : n . x = -tau} (Hu 2015, eq. 9). */
 static struct vec3
-project_circle(struct vec3 n, struct vec3 d, double tau)
+project_circle(struct vec3 n, struct vec3 d, double tau, struct vec3 hint)
 {
     struct vec3 t = v3_sub(d, v3_scale(n, v3_dot(d, n)));
+    double tl = v3_len(t);
+    if (tl < MINROT_HINT_WEIGHT) { /* fades out: exact once d is 14 degrees off -n */
+        struct vec3 h = v3_sub(hint, v3_scale(n, v3_dot(hint, n)));
+        double f = 1 - tl / MINROT_HINT_WEIGHT;
+        t = v3_add(t, v3_scale(v3_normalize(h), MINROT_HINT_WEIGHT * f * f));
+    }
     double len = v3_len(t);
     t = len > 1e-12 ? v3_scale(t, 1 / len) : any_perpendicular(n); /* d = -n: any way out */
     return v3_add(v3_scale(n, -tau), v3_scale(t, sqrt(1 - tau * tau)));
@@ -74,7 +80,8 @@ arc(struct vec3 a, struct vec3 b)
 }
 
 void
-minrot_solve(const struct vec3 *n, int k, struct vec3 d, double tau, struct minrot *out)
+minrot_solve(const struct vec3 *n, int k, struct vec3 d, double tau, struct vec3 hint,
+             struct minrot *out)
 {
     out->axis = v3(0, 0, 1);
     out->angle = 0;
@@ -88,7 +95,7 @@ minrot_solve(const struct vec3 *n, int k, struct vec3 d, double tau, struct minr
     if (k == 2 && v3_dot(n[0], n[1]) > 1 - 1e-12)
         k = 1, cfg = MINROT_PARALLEL;
     for (int i = 0; i < k; i++) {
-        struct vec3 p = project_circle(n[i], d, tau);
+        struct vec3 p = project_circle(n[i], d, tau, hint);
         double a = arc(d, p);
         if (feasible(n, k, p, tau) && a < best_arc) {
             best = p, best_arc = a;

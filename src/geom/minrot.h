@@ -43,8 +43,19 @@ struct minrot {
 /*
  * The minimal rotation for k = 1 or 2 unit normals n (current, rotated
  * frame), unit print direction d and tau = sin(alpha) in [0, 1).
+ *
+ * hint (any length, or zero for none) settles the one degenerate case:
+ * a face pointing straight down (n = -d) can turn any way, and the exact
+ * answer then depends on noise.  Its part perpendicular to n is added to
+ * the direction in which d' leaves d, with a weight fading from
+ * MINROT_HINT_WEIGHT at n = -d to 0 when d is asin(MINROT_HINT_WEIGHT)
+ * (14 degrees) off -n, so near-flat downward faces turn toward the hint
+ * (arap.c passes "away from the fixed base": overhangs rise) and every
+ * other face gets the exact minimal rotation.
  */
-void minrot_solve(const struct vec3 *n, int k, struct vec3 d, double tau, struct minrot *out);
+#define MINROT_HINT_WEIGHT 0.25
+void minrot_solve(const struct vec3 *n, int k, struct vec3 d, double tau, struct vec3 hint,
+                  struct minrot *out);
 
 /* The rotation matrix of out with its angle reduced by beta (Hu 2015:
    theta' = max(theta - beta, 0)). */

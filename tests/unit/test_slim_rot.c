@@ -153,7 +153,7 @@ T_CASE(minrot_makes_every_face_safe)
         double tau = sin(urand() * 80 * M_PI / 180);
         int k = 1 + (i & 1);
         struct minrot r;
-        minrot_solve(nrm, k, up, tau, &r);
+        minrot_solve(nrm, k, up, tau, v3(0, 0, 0), &r);
         T_TRUE(all_safe(nrm, k, minrot_matrix(&r, 0), tau));
         T_TRUE(r.angle >= 0 && r.angle <= M_PI);
         T_EQ_DBL(v3_len(r.axis), 1, 1e-12);
@@ -210,7 +210,7 @@ T_CASE(minrot_no_smaller_safe_rotation_by_brute_force)
         double tau = sin(urand() * 70 * M_PI / 180);
         int k = 1 + (i % 2);
         struct minrot r;
-        minrot_solve(nrm, k, up, tau, &r);
+        minrot_solve(nrm, k, up, tau, v3(0, 0, 0), &r);
         counts[r.config]++;
         double brute = brute_min_angle(nrm, k, tau);
         if (r.angle > brute + 1e-6 || brute > r.angle + 1e-3)
@@ -242,7 +242,7 @@ T_CASE(minrot_case2_regions_are_continuous)
             struct mat3 q = m3_rotate_onto(d, up);
             struct vec3 nn[2] = { m3_mul_v(q, n[0]), m3_mul_v(q, n[1]) };
             struct minrot r;
-            minrot_solve(nn, 2, up, tau, &r);
+            minrot_solve(nn, 2, up, tau, v3(0, 0, 0), &r);
             seen[r.config]++;
             if (r.config == MINROT_CORNER) {
                 T_EQ_DBL(v3_dot(nn[0], r.dprime), -tau, 1e-9);
@@ -265,7 +265,7 @@ T_CASE(minrot_case1_is_the_projection_and_beta_reduces_it)
     struct vec3 n = v3(sin(M_PI / 6), 0, -cos(M_PI / 6));
     double tau = sin(M_PI / 4);
     struct minrot r;
-    minrot_solve(&n, 1, up, tau, &r);
+    minrot_solve(&n, 1, up, tau, v3(0, 0, 0), &r);
     T_EQ_INT(r.config, MINROT_FACE1);
     /* the normal is 150 deg from up; safe at 135 deg: 15 degrees to go */
     T_EQ_DBL(r.angle, M_PI / 12, 1e-12);
@@ -276,7 +276,7 @@ T_CASE(minrot_case1_is_the_projection_and_beta_reduces_it)
     T_EQ_DBL(m3_dist(minrot_matrix(&r, 1), m3_identity()), 0, 0);
     /* coincident faces: config IV */
     struct vec3 two[2] = { n, n };
-    minrot_solve(two, 2, up, tau, &r);
+    minrot_solve(two, 2, up, tau, v3(0, 0, 0), &r);
     T_EQ_INT(r.config, MINROT_PARALLEL);
     T_EQ_DBL(r.angle, M_PI / 12, 1e-12);
 }
