@@ -36,7 +36,7 @@
 #include "arap.h"
 #include "selfx.h"
 
-#define KEEP_BEST 6 /* candidate iterates kept per direction */
+#define KEEP_BEST 10 /* candidate iterates kept per direction */
 
 void
 slim_params_default(struct slim_params *p)
@@ -112,7 +112,8 @@ struct dir {
     struct deviation dev;
     uint32_t curve[SLIM_CURVE_MAX];
     int n_curve, best_iter, n_runs, selfx_in, selfx_out;
-    uint32_t n_rejected;
+    uint32_t n_rejected, n_inverted;
+    struct slim_timing timing;
     double beta_deg;
     int rc;
     struct sf_err err;
@@ -296,11 +297,15 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
     for (int it = 1; it <= p->max_iters; it++) {
         if (p->cancel && atomic_load(p->cancel))
             return sf_err_set(err, SF_ECANCELED, "slim: cancelled");
+        double t0 = now_s();
         uint32_t n_drv = compute_drives(w, tau_aim, zlo, sp.min_gap_mm);
+        w->d->timing.part_s += now_s() - t0;
         arap_local(a, w->x, v3(0, 0, 1), tau_aim, beta, w->drv, n_drv, NULL);
         int rc = arap_global(a, w->x, err);
         if (rc)
             return rc;
+        w->d->timing.iterations++;
+        t0 = now_s();
         uint32_t inverted = count_inverted(&w->tm, w->x);
         map_part(w, w->x);
         struct support_metrics sm;
@@ -308,6 +313,7 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
         measure_proxy(&w->cur, v3(0, 0, 1), &sp, &sm);
         measure_deviation(&w->d->in, &w->cur, &dv, NULL);
         double sev = severity(&w->cur, tau, zlo, sp.min_gap_mm);
+        w->d->timing.part_s += now_s() - t0;
         if (*n_curve < SLIM_CURVE_MAX)
             curve[(*n_curve)++] = sm.n_risky;
         *within = dv.mndr <= p->max_mndr && dv.andr <= p->max_andr && inverted == 0;
@@ -368,28 +374,67 @@ setup_fixed(struct work *w)
     return SF_OK;
 }
 
+/* Ray-cast support volume of m printed along +z. */
+static int
+support_volume(const struct mesh *m, double angle_deg, double *vol, struct sf_err *err)
+{
+    struct support_params sp;
+    struct support_metrics sm;
+    support_params_default(&sp);
+    sp.angle_deg = angle_deg;
+    struct raycast *rc = raycast_new(m, err);
+    if (!rc)
+        return err ? err->code : SF_ENOMEM;
+    int r = measure_support(m, rc, v3(0, 0, 1), &sp, &sm, err);
+    raycast_free(rc);
+    *vol = sm.volume_mm3;
+    return r;
+}
+
+/*
+ * The best listed iterate that is clean: no inverted tet, no more
+ * self-intersecting edges than the input, and no more ray-cast support
+ * volume than the input (fewer risky faces can still mean taller columns:
+ * a tee's arms half raised).  The input itself ends the list.
+ */
 static int
 choose(struct work *w, struct sf_err *err)
 {
     struct dir *d = w->d;
+    double vol_in;
     d->selfx_in = selfx_count(&d->in, err);
     if (d->selfx_in < 0)
         return d->selfx_in;
+    int rc = support_volume(&d->in, w->cx->p->angle_deg, &vol_in, err);
+    if (rc)
+        return rc;
     for (int i = 0; i < w->n_list; i++) {
         struct cand *c = &w->list[i];
         if (!c->x)
             break; /* the input: always acceptable */
+        if (count_inverted(&w->tm, c->x)) {
+            d->n_rejected++;
+            continue;
+        }
         map_part(w, c->x);
+        double vol;
         int sx = selfx_count(&w->cur, err);
         if (sx < 0)
             return sx;
-        if (sx > d->selfx_in || count_inverted(&w->tm, c->x)) {
+        if (sx > d->selfx_in) {
+            d->n_rejected++;
+            continue;
+        }
+        if ((rc = support_volume(&w->cur, w->cx->p->angle_deg, &vol, err)))
+            return rc;
+        if (vol > vol_in) {
             d->n_rejected++;
             continue;
         }
         d->selfx_out = sx;
         d->best_iter = c->iter;
         d->beta_deg = c->beta_deg;
+        d->n_inverted = count_inverted(&w->tm, c->x);
         return mesh_copy(&d->out, &w->cur, err);
     }
     d->selfx_out = d->selfx_in;
@@ -438,7 +483,9 @@ run_dir(const struct ctx *cx, struct dir *d, struct sf_err *err)
     for (uint32_t v = 0; v < cx->tm->n_verts; v++)
         w.tm.x[v] = v3_add(m3_mul_v(d->rot, cx->tm->x[v]), shift);
     setup_fixed(&w);
+    double t0 = now_s();
     a = arap_new(&w.tm, w.fixed, err);
+    d->timing.factor_s = now_s() - t0;
     if (!a) {
         rc = err ? err->code : SF_EINVAL;
         goto done;
@@ -477,7 +524,14 @@ run_dir(const struct ctx *cx, struct dir *d, struct sf_err *err)
             break;
         beta += p->beta_step_deg;
     }
+    const struct arap_timing *at = arap_timing(a);
+    d->timing.local_s = at->local_s;
+    d->timing.minrot_s = at->minrot_s;
+    d->timing.rhs_s = at->rhs_s;
+    d->timing.solve_s = at->solve_s;
+    t0 = now_s();
     rc = choose(&w, err);
+    d->timing.choose_s = now_s() - t0;
 done:
     arap_free(a);
     for (int i = 0; i < w.n_list; i++)
@@ -736,9 +790,20 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
         res->selfx_input = d->selfx_in;
         res->selfx_out = d->selfx_out;
         res->n_rejected = d->n_rejected;
-        res->n_inverted = 0;
+        res->n_inverted = d->n_inverted;
     }
     res->n_dirs = cx.n_dirs;
+    for (int i = 0; i < cx.n_dirs; i++) {
+        const struct slim_timing *t = &cx.dirs[i].timing;
+        res->timing.iterations += t->iterations;
+        res->timing.factor_s += t->factor_s;
+        res->timing.local_s += t->local_s;
+        res->timing.minrot_s += t->minrot_s;
+        res->timing.rhs_s += t->rhs_s;
+        res->timing.solve_s += t->solve_s;
+        res->timing.part_s += t->part_s;
+        res->timing.choose_s += t->choose_s;
+    }
     res->tet_verts = tm.n_verts;
     res->tet_tets = tm.n_tets;
     res->tet_outside = tm.n_outside;

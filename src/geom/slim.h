@@ -86,12 +86,23 @@ struct slim_result {
     int n_runs;                 /* beta rounds run for the chosen direction */
     double beta_deg;            /* penalty angle of the returned iterate */
     int n_dirs;                 /* directions optimized */
-    uint32_t n_inverted;        /* inverted tets in the returned result (always 0) */
+    uint32_t n_inverted;        /* inverted tets in the returned result (0 by construction) */
     int selfx_input, selfx_out; /* self-intersecting edges before and after */
-    uint32_t n_rejected;        /* better iterates rejected for self-intersections */
+    uint32_t n_rejected;        /* better iterates rejected: inverted tets, new
+                                   self-intersections or more support volume */
     /* tet mesh and timing */
     uint32_t tet_verts, tet_tets, tet_surface, tet_outside;
-    double setup_s, total_s;
+    double setup_s, total_s; /* tet mesh and face hosts; everything */
+    struct slim_timing {
+        int iterations;    /* local/global iterations run, all rounds and directions */
+        double factor_s;   /* assembling and factorizing L (once per direction) */
+        double local_s;    /* deformation gradients and nearest rotations */
+        double minrot_s;   /* minimal rotations */
+        double rhs_s;      /* right-hand sides */
+        double solve_s;    /* back-substitutions */
+        double part_s;     /* mapping the part, measuring it, finding the drives */
+        double choose_s;   /* checking the kept iterates (self-intersection, ray cast) */
+    } timing;
 };
 
 /*
