@@ -43,4 +43,13 @@
    Guards memory when a caller passes a tiny pitch. */
 #define SF_GRID_CELLS_MAX 4000000u
 
+/* Longest line of an INI profile: Debian's libinih reads lines into a
+   200-byte stack buffer (INI_MAX_LINE), so longer lines would be split
+   silently; we reject them with the line number instead.  Long G-code
+   goes on indented continuation lines. */
+#define SF_INI_LINE_MAX 196
+
+/* Most layers in one print: 1 m of height at 0.05 mm. */
+#define SF_SLICE_LAYERS_MAX 20000u
+
 #endif

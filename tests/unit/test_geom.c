@@ -6,6 +6,7 @@
 #include <stdlib.h>
 
 #include "../../src/geom/measure.h"
+#include "../../src/geom/proxy.h"
 #include "../../src/geom/raycast.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
@@ -188,24 +189,88 @@ T_CASE(deviation_and_hausdorff)
     mesh_release(&b);
 }
 
-T_CASE(cached_proxy_agrees_with_the_direct_one)
+T_CASE(binned_proxy_agrees_with_the_face_by_face_one)
 {
+    int (*makers[])(struct mesh *, struct sf_err *) = { shape_sphere_on_stem, shape_tee,
+                                                        shape_arch };
+    for (int s = 0; s < 4; s++) {
+        struct mesh m;
+        struct sf_err err;
+        mesh_init(&m);
+        if (s < 3)
+            T_OK(makers[s](&m, &err), &err);
+        else
+            T_OK(shape_torus(&m, 30, 10, 120, 60, &err), &err);
+        struct proxy_cache pc;
+        T_OK(proxy_cache_init(&pc, &m, NULL, 0, &err), &err);
+        struct support_params p;
+        support_params_default(&p);
+        /* the axes (faces exactly on the bed) and 300 scattered directions */
+        for (int i = 0; i < 306; i++) {
+            struct vec3 axes[6] = { { 0, 0, 1 }, { 0, 0, -1 }, { 1, 0, 0 },
+                                    { -1, 0, 0 }, { 0, 1, 0 }, { 0, -1, 0 } };
+            struct vec3 up = i < 6 ? axes[i]
+                                   : v3_normalize(v3(sin(i * 1.3), cos(i * 0.7), sin(i * 0.4 + 1)));
+            p.angle_deg = 30 + (i % 4) * 10;
+            struct support_metrics a, b;
+            measure_proxy(&m, up, &p, &a);
+            proxy_eval(&pc, up, &p, &b);
+            /* float vs double rounding may flip a face that sits on the limit */
+            T_TRUE(abs((int)a.n_risky - (int)b.n_risky) <= 2);
+            T_EQ_DBL(b.risky_area_mm2, a.risky_area_mm2, 0.002 * a.risky_area_mm2 + 1e-3);
+            T_EQ_DBL(b.proxy_mm3, a.proxy_mm3, 0.002 * a.proxy_mm3 + 1e-2);
+            T_EQ_DBL(b.build_height_mm, a.build_height_mm, 1e-3);
+        }
+        proxy_cache_release(&pc);
+        mesh_release(&m);
+    }
+}
+
+T_CASE(growth_finds_an_island_no_face_marks)
+{
+    /* a bridge on two piers whose underside has a steep downward V ridge:
+       its faces lean 30 degrees, not risky at 45, yet the ridge starts in
+       mid-air at z = 10 and must be held */
+    double t30 = tan(30 * M_PI / 180);
+    double x[] = { -30, -20, -20, -10 * t30, 0, 10 * t30, 20, 20, 30, 30, -30 };
+    double z[] = { 0, 0, 20, 20, 10, 20, 20, 0, 0, 30, 30 };
     struct mesh m;
     struct sf_err err;
+    struct support_metrics s;
     mesh_init(&m);
-    T_OK(shape_sphere_on_stem(&m, &err), &err);
-    struct proxy_cache pc;
-    T_OK(proxy_cache_init(&pc, &m, &err), &err);
-    struct support_params p;
-    support_params_default(&p);
-    for (int i = 0; i < 20; i++) {
-        struct vec3 up = v3_normalize(v3(sin(i * 1.3), cos(i * 0.7), sin(i * 0.4 + 1)));
-        struct support_metrics a, b;
-        measure_proxy(&m, up, &p, &a);
-        measure_proxy_cached(&pc, up, &p, &b);
-        T_TRUE(abs((int)a.n_risky - (int)b.n_risky) <= 2); /* float rounding at the threshold */
-        T_EQ_DBL(b.proxy_mm3, a.proxy_mm3, 0.01 * a.proxy_mm3 + 1e-3);
-    }
-    proxy_cache_release(&pc);
+    T_OK(shape_extrude_xz(&m, x, z, 11, 20, &err), &err);
+    T_OK(metrics(&m, v3(0, 0, 1), 45, 1, &s, &err), &err);
+    T_EQ_INT(s.n_islands, 1);
+    /* about a 1-2 mm wide strip, 20 mm long, 10-12 mm above the bed */
+    T_TRUE(s.island_volume_mm3 > 100 && s.island_volume_mm3 < 600);
+    T_TRUE(s.base_margin_mm > 0);
+    /* the same bridge without the ridge has no island */
+    double x2[] = { -30, -20, -20, 20, 20, 30, 30, -30 };
+    double z2[] = { 0, 0, 20, 20, 0, 0, 30, 30 };
+    T_OK(shape_extrude_xz(&m, x2, z2, 8, 20, &err), &err);
+    T_OK(metrics(&m, v3(0, 0, 1), 45, 1, &s, &err), &err);
+    T_EQ_INT(s.n_islands, 0);
+    mesh_release(&m);
+}
+
+T_CASE(growth_sees_a_leaning_tower_tip_over)
+{
+    /* a 60 mm prism leaning 40 degrees on a 10 mm foot: no face is risky,
+       but its centre of mass ends up 20 mm beyond the foot */
+    double off = 60 * tan(40 * M_PI / 180);
+    double x[] = { 0, 10, 10 + off, off }, z[] = { 0, 0, 60, 60 };
+    struct mesh m;
+    struct sf_err err;
+    struct support_metrics s;
+    mesh_init(&m);
+    T_OK(shape_extrude_xz(&m, x, z, 4, 20, &err), &err);
+    T_OK(metrics(&m, v3(0, 0, 1), 45, 1, &s, &err), &err);
+    T_EQ_INT(s.n_risky, 0);
+    T_TRUE(s.base_margin_mm < -10);
+    /* upright it stands */
+    double xs[] = { 0, 10, 10, 0 };
+    T_OK(shape_extrude_xz(&m, xs, z, 4, 20, &err), &err);
+    T_OK(metrics(&m, v3(0, 0, 1), 45, 1, &s, &err), &err);
+    T_TRUE(s.base_margin_mm > 4);
     mesh_release(&m);
 }

@@ -44,7 +44,10 @@ T_CASE(hull_bases_of_a_box)
     uint32_t n;
     struct vec3 com;
     mesh_volume(&m, &com);
-    T_OK(hull_bases(&m, com, &b, &n, &err), &err);
+    uint32_t *hv, n_hv;
+    T_OK(hull_bases(&m, com, &b, &n, &hv, &n_hv, &err), &err);
+    T_EQ_INT(n_hv, 8);
+    free(hv);
     T_EQ_INT(n, 6); /* coplanar triangles merged into faces */
     T_EQ_DBL(b[0].area_mm2, 600, 1e-6);
     T_EQ_DBL(b[0].margin_mm, 10, 1e-6); /* com 10 mm from the long edges of the 20 x 30 face */
@@ -61,8 +64,8 @@ T_CASE(tee_upside_down_and_tilted_comes_back)
     mesh_init(&m);
     T_OK(shape_tee(&m, &err), &err);
     /* upside down, then tilted 20 degrees about x */
-    struct mat3 rot = m3_mul(m3_axis_angle(v3(1, 0, 0), 20 * M_PI / 180),
-                             m3_axis_angle(v3(0, 1, 0), M_PI));
+    struct mat3 rot =
+        m3_mul(m3_axis_angle(v3(1, 0, 0), 20 * M_PI / 180), m3_axis_angle(v3(0, 1, 0), M_PI));
     mesh_transform(&m, rot, v3(0, 0, 0));
     T_OK(find(&m, &r, &err), &err);
     /* Two orientations need no support: on the bar's top (stem up) and lying
@@ -142,5 +145,24 @@ T_CASE(tiny_hull_face_is_not_a_base)
         }
     T_TRUE(fmax(hi.x - lo.x, hi.y - lo.y) >= 40 - 1e-6);
     T_EQ_DBL(r.best.m.volume_mm3, 0, 1e-9);
+    mesh_release(&m);
+}
+
+T_CASE(leaning_tower_is_not_left_to_tip_over)
+{
+    /* leaning 40 degrees on a 10 mm foot: no support needed, but it would
+       topple while printing; the search must stand it on a real base */
+    double off = 60 * tan(40 * M_PI / 180);
+    double x[] = { 0, 10, 10 + off, off }, z[] = { 0, 0, 60, 60 };
+    struct mesh m;
+    struct sf_err err;
+    struct orient_result r;
+    mesh_init(&m);
+    T_OK(shape_extrude_xz(&m, x, z, 4, 20, &err), &err);
+    /* no stability weight: the input, first and supportless, would win a tie */
+    T_OK(find_w(&m, 0, &r, &err), &err);
+    T_TRUE(r.input.m.base_margin_mm < 0);
+    T_TRUE(r.best.m.base_margin_mm > 0);
+    T_TRUE(angle_deg(r.best.up, v3(0, 0, 1)) > 10);
     mesh_release(&m);
 }

@@ -1,0 +1,321 @@
+/*
+ * estimate.c - G-code interpreter and trapezoidal planner (see estimate.h).
+ *
+ * Blocks are kept for the whole file in one compact array (5 floats each:
+ * a 2M-move print costs 40 MB) so the backward and forward passes see the
+ * complete sequence, as a firmware with an endless lookahead would.
+ * Junction speeds follow Marlin 2's planner.cpp (classic jerk and
+ * junction deviation), re-derived, not copied.
+ *
+ * Thread: reentrant.
+ */
+#include "estimate.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "../src/base/gcode.h"
+#include "../src/base/limits.h"
+#include "../src/base/mem.h"
+
+/* Beyond these a file is broken (1 km of axis travel, 1000 km of filament),
+   and the planner's floats would overflow. */
+#define EST_COORD_MAX 1e6
+#define EST_E_MAX     1e9
+
+struct block {
+    float len;      /* mm (XYZ, or |E| for E-only moves) */
+    float v_nom;    /* nominal speed, mm/s */
+    float accel;    /* mm/s^2 */
+    float v_max_in; /* junction limit, mm/s */
+    float v_safe;   /* jerk-limited speed from / to rest */
+};
+
+struct plan {
+    struct block *b;
+    size_t n, cap;
+    double prev_v[4]; /* axis velocities of the previous block at its nominal speed */
+    double prev_unit[4];
+    double prev_nom, prev_safe;
+    bool have_prev;
+};
+
+static int
+plan_add(struct plan *pl, const struct est_limits *lim, const double d[4], double f_mm_s)
+{
+    double lxyz = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    bool e_only = lxyz < 1e-9;
+    double len = e_only ? fabs(d[3]) : lxyz;
+    if (len < 1e-9)
+        return SF_OK;
+    /* nominal speed: F capped so no axis exceeds its max feed */
+    double v = f_mm_s;
+    for (int a = 0; a < 4; a++) {
+        double c = fabs(d[a]) / len * v;
+        if (c > lim->max_feed_mm_s[a] && lim->max_feed_mm_s[a] > 0)
+            v *= lim->max_feed_mm_s[a] / c;
+    }
+    double acc = e_only ? lim->accel_retract_mm_s2
+                        : (d[3] > 0 ? lim->accel_extrude_mm_s2 : lim->accel_travel_mm_s2);
+    double vel[4], unit[4];
+    for (int a = 0; a < 4; a++) {
+        unit[a] = d[a] / len;
+        vel[a] = unit[a] * v;
+    }
+    /* safe speed: the most this block may start or stop at, from rest */
+    double safe = v;
+    for (int a = 0; a < 4; a++) {
+        double j = fabs(vel[a]);
+        if (j > lim->jerk_mm_s[a] && j * safe / v > lim->jerk_mm_s[a])
+            safe = fmin(safe, lim->jerk_mm_s[a] * v / j);
+    }
+    double vj = safe;
+    if (pl->have_prev) {
+        if (lim->junction_dev_mm > 0) {
+            /* junction deviation: the speed at which a circle of that
+               deviation, tangent to both moves, takes acc centripetally */
+            double cos_t = 0;
+            for (int a = 0; a < 3; a++)
+                cos_t -= pl->prev_unit[a] * unit[a];
+            if (e_only)
+                cos_t = 0;
+            vj = fmin(v, pl->prev_nom);
+            if (cos_t < 0.999999) {
+                if (cos_t <= -0.999999) {
+                    vj = fmin(vj, 1e9);
+                } else {
+                    double sin_half = sqrt(0.5 * (1 - cos_t));
+                    double r = lim->junction_dev_mm * sin_half / (1 - sin_half);
+                    vj = fmin(vj, sqrt(acc * r));
+                }
+            } else {
+                vj = fmin(vj, safe); /* a full reversal */
+            }
+        } else {
+            /* classic jerk: scale the junction until each axis' change fits */
+            vj = fmin(v, pl->prev_nom);
+            double smaller = vj / pl->prev_nom, factor = 1;
+            for (int a = 0; a < 4; a++) {
+                double v_exit = pl->prev_v[a] * smaller * factor, v_entry = unit[a] * vj * factor;
+                double jerk;
+                if (v_exit > v_entry)
+                    jerk = (v_entry > 0 || v_exit < 0) ? v_exit - v_entry : fmax(v_exit, -v_entry);
+                else
+                    jerk = (v_entry < 0 || v_exit > 0) ? v_entry - v_exit : fmax(-v_exit, v_entry);
+                if (jerk > lim->jerk_mm_s[a])
+                    factor *= lim->jerk_mm_s[a] / jerk;
+            }
+            vj *= factor;
+            double th = 0.99 * fmin(v, pl->prev_nom);
+            if (pl->prev_safe > th && safe > th)
+                vj = fmax(vj, fmin(safe, pl->prev_safe));
+        }
+    }
+    if (!mem_grow((void **)&pl->b, &pl->cap, pl->n + 1, sizeof(*pl->b)))
+        return SF_ENOMEM;
+    struct block *b = &pl->b[pl->n++];
+    b->len = (float)len;
+    b->v_nom = (float)v;
+    b->accel = (float)acc;
+    b->v_max_in = (float)vj;
+    b->v_safe = (float)safe;
+    memcpy(pl->prev_v, vel, sizeof(vel));
+    memcpy(pl->prev_unit, unit, sizeof(unit));
+    pl->prev_nom = v;
+    pl->prev_safe = safe;
+    pl->have_prev = true;
+    return SF_OK;
+}
+
+static double
+trapezoid_s(double len, double v0, double v1, double vn, double a)
+{
+    double d_acc = (vn * vn - v0 * v0) / (2 * a), d_dec = (vn * vn - v1 * v1) / (2 * a);
+    if (d_acc + d_dec <= len)
+        return (vn - v0) / a + (vn - v1) / a + (len - d_acc - d_dec) / vn;
+    double vp = sqrt(fmax(0, (2 * a * len + v0 * v0 + v1 * v1) / 2));
+    return (vp - v0) / a + (vp - v1) / a;
+}
+
+/* Entry speeds (in place into v_max_in), then time of blocks [0, n); cum[i] = time before block i.
+ */
+static double
+plan_time(struct plan *pl, double *cum)
+{
+    size_t n = pl->n;
+    if (!n)
+        return 0;
+    struct block *b = pl->b;
+    b[0].v_max_in = fminf(b[0].v_max_in, b[0].v_safe);
+    /* backward: each block must be able to slow to the next one's entry */
+    double next = b[n - 1].v_safe; /* exit of the last block */
+    for (size_t i = n; i-- > 0;) {
+        double lim = sqrt(next * next + 2.0 * b[i].accel * b[i].len);
+        if (b[i].v_max_in > lim)
+            b[i].v_max_in = (float)lim;
+        next = b[i].v_max_in;
+    }
+    /* forward: and reach it from the previous one's entry */
+    for (size_t i = 0; i + 1 < n; i++) {
+        double lim = sqrt((double)b[i].v_max_in * b[i].v_max_in + 2.0 * b[i].accel * b[i].len);
+        if (b[i + 1].v_max_in > lim)
+            b[i + 1].v_max_in = (float)lim;
+    }
+    double t = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (cum)
+            cum[i] = t;
+        double v1 = i + 1 < n ? b[i + 1].v_max_in : fminf(b[i].v_safe, b[i].v_nom);
+        double v0 = b[i].v_max_in;
+        t += trapezoid_s(b[i].len, v0, fmin(v1, b[i].v_nom), b[i].v_nom, b[i].accel);
+    }
+    return t;
+}
+
+static bool
+has_prefix(const char *s, size_t len, const char *p)
+{
+    size_t n = strlen(p);
+    return len >= n && memcmp(s, p, n) == 0;
+}
+
+int
+estimate_gcode(const char *text, size_t len, const char *name, const struct est_limits *lim,
+               est_move_fn on_move, void *ud, struct estimate *out, struct sf_err *err)
+{
+    memset(out, 0, sizeof(*out));
+    struct plan pl = { 0 };
+    size_t *layer_block = NULL, cap_layers = 0;
+    double pos[4] = { 0 }, f = 25, dwell = 0;
+    bool rel_xyz = false, rel_e = false, support = false;
+    const char *type = NULL;
+    size_t type_len = 0;
+    uint32_t lineno = 0;
+    int rc = SF_OK;
+    struct gcode_line gl;
+    for (size_t i = 0; i < len;) {
+        const char *s = text + i;
+        const char *nl = memchr(s, '\n', len - i);
+        size_t l = nl ? (size_t)(nl - s) : len - i;
+        i += l + 1;
+        lineno++;
+        if (l && s[l - 1] == '\r')
+            l--;
+        if (l > SF_GCODE_LINE_MAX) {
+            rc = sf_err_set(err, SF_EINVAL, "%s:%u: line longer than %d bytes", name, lineno,
+                            SF_GCODE_LINE_MAX);
+            goto fail;
+        }
+        if (l && s[0] == ';') {
+            if (has_prefix(s, l, ";LAYER_CHANGE")) {
+                if (!mem_grow((void **)&layer_block, &cap_layers, out->n_layers + 1,
+                              sizeof(*layer_block))) {
+                    rc = sf_err_set(err, SF_ENOMEM, "%s: out of memory", name);
+                    goto fail;
+                }
+                layer_block[out->n_layers++] = pl.n;
+            } else if (has_prefix(s, l, ";TYPE:")) {
+                support = has_prefix(s, l, ";TYPE:Support material");
+                type = s + 6;
+                type_len = l - 6;
+            }
+            continue;
+        }
+        if (gcode_parse(s, l, &gl, err) < 0) {
+            rc = sf_err_prefix(err, "%s:%u", name, lineno);
+            goto fail;
+        }
+        if (gl.letter == 'G' && gl.code >= 0 && gl.code <= 3) {
+            double v, tgt[4], d[4];
+            bool xy = false;
+            static const char ax[4] = { 'X', 'Y', 'Z', 'E' };
+            for (int a = 0; a < 4; a++) {
+                bool rel = a == 3 ? rel_e : rel_xyz;
+                tgt[a] = pos[a];
+                if (gcode_get(&gl, ax[a], &v) && !isnan(v)) {
+                    tgt[a] = rel ? pos[a] + v : v;
+                    if (!isfinite(tgt[a]) || fabs(tgt[a]) > (a == 3 ? EST_E_MAX : EST_COORD_MAX)) {
+                        rc = sf_err_set(err, SF_EINVAL, "%s:%u: %c%g is out of range", name, lineno,
+                                        ax[a], v);
+                        goto fail;
+                    }
+                    if (a < 2 && tgt[a] != pos[a])
+                        xy = true;
+                }
+                d[a] = tgt[a] - pos[a];
+            }
+            if (gcode_get(&gl, 'F', &v) && isfinite(v) && v > 0)
+                f = fmin(v, EST_COORD_MAX) / 60;
+            if ((rc = plan_add(&pl, lim, d, f)) < 0) {
+                sf_err_set(err, rc, "%s: out of memory", name);
+                goto fail;
+            }
+            if (xy && d[3] > 0) {
+                out->filament_mm += d[3];
+                if (support)
+                    out->support_mm += d[3];
+            }
+            memcpy(pos, tgt, sizeof(pos));
+            out->n_moves++;
+            if (on_move) {
+                struct est_move mv = {
+                    pos[0], pos[1],  pos[2], pos[3],   d[3],
+                    f,      support, type,   type_len, out->n_layers ? out->n_layers - 1 : 0,
+                    lineno
+                };
+                if ((rc = on_move(ud, &mv)) < 0)
+                    goto fail;
+            }
+        } else if (gcode_is(&gl, 'G', 90)) {
+            rel_xyz = false;
+        } else if (gcode_is(&gl, 'G', 91)) {
+            rel_xyz = true;
+        } else if (gcode_is(&gl, 'M', 82)) {
+            rel_e = false;
+        } else if (gcode_is(&gl, 'M', 83)) {
+            rel_e = true;
+        } else if (gcode_is(&gl, 'G', 92)) {
+            static const char ax[4] = { 'X', 'Y', 'Z', 'E' };
+            double v;
+            for (int a = 0; a < 4; a++)
+                if (gcode_get(&gl, ax[a], &v) && isfinite(v) &&
+                    fabs(v) <= (a == 3 ? EST_E_MAX : EST_COORD_MAX))
+                    pos[a] = v;
+        } else if (gcode_is(&gl, 'G', 28)) {
+            pos[0] = pos[1] = pos[2] = 0;
+        } else if (gcode_is(&gl, 'G', 4)) {
+            double v;
+            if (gcode_get(&gl, 'S', &v) && isfinite(v) && v > 0)
+                dwell += fmin(v, EST_COORD_MAX);
+            else if (gcode_get(&gl, 'P', &v) && isfinite(v) && v > 0)
+                dwell += fmin(v / 1000, EST_COORD_MAX);
+        }
+    }
+    double *cum = mem_array(pl.n + 1, sizeof(*cum));
+    out->layer_start_s = mem_calloc(out->n_layers + 1, sizeof(double));
+    if (!cum || !out->layer_start_s) {
+        free(cum);
+        rc = sf_err_set(err, SF_ENOMEM, "%s: out of memory", name);
+        goto fail;
+    }
+    out->time_s = plan_time(&pl, cum) + dwell;
+    cum[pl.n] = out->time_s - dwell;
+    for (uint32_t k = 0; k < out->n_layers; k++)
+        out->layer_start_s[k] = cum[layer_block[k]];
+    free(cum);
+    free(pl.b);
+    free(layer_block);
+    return SF_OK;
+fail:
+    free(pl.b);
+    free(layer_block);
+    estimate_release(out);
+    return rc < 0 ? rc : SF_EBUG;
+}
+
+void
+estimate_release(struct estimate *e)
+{
+    free(e->layer_start_s);
+    e->layer_start_s = NULL;
+}

@@ -1,0 +1,74 @@
+/*
+ * estimate.h - read Marlin G-code back: every move, print time by a
+ * trapezoidal planner like the firmware's, filament per role.
+ *
+ * The interpreter follows G0/G1 (G2/G3 arcs are counted as chords), G90/
+ * G91, M82/M83, G92, G4 dwell and G28 (to the origin), and the comments
+ * the slicer writes: ;LAYER_CHANGE starts a layer, ;TYPE: sets the role
+ * (support when it names "Support material...").  Filament is summed the
+ * way shared/peers does: positive E on moves with X or Y motion.
+ *
+ * The planner: each move is a block with a nominal speed (F, capped per
+ * axis by max feed rates), an acceleration (printing, travel, or retract
+ * for E-only moves) and a maximum entry speed from the junction with the
+ * previous block, by Marlin's classic jerk rule (per-axis velocity change
+ * at most the axis jerk; a reversal counts as the larger of the two
+ * speeds) or, if junction_dev_mm > 0, by Marlin's junction deviation.
+ * The print starts and ends at the jerk-limited "safe" speed of its first
+ * and last block.  A backward then a forward pass make every block's entry
+ * reachable, and each block takes the time of its trapezoid (or triangle).
+ * Heating waits (M109/M190) cost nothing, as in PrusaSlicer's estimate.
+ *
+ * Thread: reentrant.
+ */
+#ifndef SF_SLICER_ESTIMATE_H
+#define SF_SLICER_ESTIMATE_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../src/base/err.h"
+
+struct est_limits {
+    double max_feed_mm_s[4]; /* X Y Z E */
+    double accel_extrude_mm_s2, accel_travel_mm_s2, accel_retract_mm_s2;
+    double jerk_mm_s[4];    /* X Y Z E */
+    double junction_dev_mm; /* > 0: use it instead of jerk */
+};
+
+/* One move as read back. */
+struct est_move {
+    double x, y, z, e; /* position after the move (E absolute, machine sense) */
+    double de;         /* E change of this move */
+    double f_mm_s;     /* requested feed rate */
+    bool support;      /* under a support role tag */
+    const char *type;  /* text after the last ;TYPE: (into the input), or NULL */
+    size_t type_len;
+    uint32_t layer; /* layer number (0 before the first ;LAYER_CHANGE) */
+    uint32_t line;  /* 1-based line in the text */
+};
+
+/* Called for every move; return < 0 to stop with that status. */
+typedef int (*est_move_fn)(void *ud, const struct est_move *mv);
+
+struct estimate {
+    double time_s;      /* whole print */
+    double filament_mm; /* positive E with XY motion */
+    double support_mm;  /* of which under support tags */
+    uint32_t n_moves;
+    uint32_t n_layers;     /* ;LAYER_CHANGE count */
+    double *layer_start_s; /* n_layers entries: time when each layer starts (free()) */
+};
+
+/*
+ * Interpret len bytes of G-code (name for messages).  on_move may be NULL.
+ * SF_EINVAL naming the line on a malformed line; SF_ENOMEM.  Release out
+ * with estimate_release.
+ */
+int estimate_gcode(const char *text, size_t len, const char *name, const struct est_limits *lim,
+                   est_move_fn on_move, void *ud, struct estimate *out, struct sf_err *err);
+
+void estimate_release(struct estimate *e);
+
+#endif

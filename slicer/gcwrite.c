@@ -1,0 +1,358 @@
+/*
+ * gcwrite.c - the G-code body writer (see gcwrite.h).
+ *
+ * Positions are rounded to the 3 decimals written before E is computed
+ * from them, so reading the file back gives exactly the lengths the
+ * extrusion was computed for.  Numbers go through a small fixed-point
+ * formatter (no printf on the hot path: a big part writes millions of
+ * numbers).  Path order is a greedy nearest-neighbour walk per run of
+ * same-role paths; runs longer than ORDER_MAX keep their order, bounding
+ * the quadratic cost.
+ *
+ * Thread: reentrant.
+ */
+#include "gcwrite.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../src/base/mem.h"
+
+#define ORDER_MAX 4000
+
+int
+gcw_fmt(char *buf, double v, int dec)
+{
+    static const double pow10[] = { 1, 10, 100, 1000, 10000, 100000, 1000000 };
+    char *p = buf;
+    long long m = llround(v * pow10[dec]);
+    if (m < 0) {
+        *p++ = '-';
+        m = -m;
+    }
+    long long ip = m / (long long)pow10[dec], fp = m % (long long)pow10[dec];
+    char tmp[24];
+    int n = 0;
+    do {
+        tmp[n++] = (char)('0' + ip % 10);
+        ip /= 10;
+    } while (ip);
+    while (n)
+        *p++ = tmp[--n];
+    if (fp) {
+        *p++ = '.';
+        for (int d = dec - 1; d >= 0 && fp; d--) {
+            long long q = (long long)pow10[d];
+            *p++ = (char)('0' + fp / q);
+            fp %= q;
+        }
+    }
+    *p = '\0';
+    if (p - buf == 2 && buf[0] == '-' && buf[1] == '0') { /* "-0" */
+        buf[0] = '0';
+        buf[1] = '\0';
+        return 1;
+    }
+    return (int)(p - buf);
+}
+
+double
+gcw_e_per_mm(const struct slice_profile *p, double w_mm, double h_mm)
+{
+    double fil = M_PI * p->filament_mm * p->filament_mm / 4;
+    return h_mm * tp_spacing(w_mm, h_mm) / fil * p->flow;
+}
+
+struct wr {
+    struct buf *out;
+    const struct slice_profile *p;
+    struct gcw_stats *st;
+    double x, y, z, e; /* position as written */
+    double f;          /* last F written, mm/min */
+    bool retracted;
+    int role;                  /* last ;TYPE: written, -1 none */
+    struct paths_index inside; /* this layer's region, for retract_only_crossing */
+    float width;
+    int rc;
+};
+
+/* Append "G1" + words; letters with NAN are skipped. */
+static void
+emit(struct wr *w, double x, double y, double z, double e, double f_mm_min)
+{
+    char line[160], num[32];
+    size_t n = 0;
+    memcpy(line, "G1", 2);
+    n = 2;
+    const char letters[4] = { 'X', 'Y', 'Z', 'E' };
+    double vals[4] = { x, y, z, e };
+    int decs[4] = { 3, 3, 3, 5 };
+    for (int i = 0; i < 4; i++) {
+        if (isnan(vals[i]))
+            continue;
+        line[n++] = ' ';
+        line[n++] = letters[i];
+        int l = gcw_fmt(num, vals[i], decs[i]);
+        memcpy(line + n, num, (size_t)l);
+        n += (size_t)l;
+    }
+    if (!isnan(f_mm_min) && fabs(f_mm_min - w->f) > 1e-9) {
+        line[n++] = ' ';
+        line[n++] = 'F';
+        int l = gcw_fmt(num, f_mm_min, 0);
+        memcpy(line + n, num, (size_t)l);
+        n += (size_t)l;
+        w->f = f_mm_min;
+    }
+    line[n++] = '\n';
+    if (w->rc == SF_OK && buf_append(w->out, line, n) < 0)
+        w->rc = SF_ENOMEM;
+    w->st->n_moves++;
+}
+
+static void __attribute__((format(printf, 2, 3))) put(struct wr *w, const char *fmt, ...)
+{
+    char line[256];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(line, sizeof(line), fmt, ap);
+    va_end(ap);
+    if (n < 0 || (size_t)n >= sizeof(line))
+        n = 0;
+    if (w->rc == SF_OK && buf_append(w->out, line, (size_t)n) < 0)
+        w->rc = SF_ENOMEM;
+}
+
+static double
+r3(double v)
+{
+    return round(v * 1000) / 1000;
+}
+
+/* Move E by de (negative retracts); returns the E word to write. */
+static double
+e_word(struct wr *w, double de)
+{
+    w->e += de;
+    return w->p->e_relative ? de : w->e;
+}
+
+static void
+retract(struct wr *w)
+{
+    const struct slice_profile *p = w->p;
+    if (w->retracted || p->retract_mm <= 0)
+        return;
+    emit(w, NAN, NAN, NAN, e_word(w, -p->retract_mm), p->retract_mm_s * 60);
+    if (p->retract_lift_mm > 0)
+        emit(w, NAN, NAN, r3(w->z + p->retract_lift_mm), NAN, p->max_feed_z_mm_s * 60);
+    w->retracted = true;
+    w->st->n_retracts++;
+}
+
+static void
+unretract(struct wr *w)
+{
+    const struct slice_profile *p = w->p;
+    if (!w->retracted)
+        return;
+    if (p->retract_lift_mm > 0)
+        emit(w, NAN, NAN, w->z, NAN, p->max_feed_z_mm_s * 60);
+    emit(w, NAN, NAN, NAN, e_word(w, p->retract_mm), p->retract_mm_s * 60);
+    w->retracted = false;
+}
+
+static void
+travel(struct wr *w, double x, double y)
+{
+    x = r3(x);
+    y = r3(y);
+    double d = hypot(x - w->x, y - w->y);
+    if (d < 1e-9)
+        return;
+    if (d > w->p->retract_min_travel_mm &&
+        (!w->p->retract_only_crossing || !w->inside.first ||
+         paths_index_crosses(&w->inside, (struct ipt){ poly_i(w->x), poly_i(w->y) },
+                             (struct ipt){ poly_i(x), poly_i(y) })))
+        retract(w);
+    emit(w, x, y, NAN, NAN, w->p->travel_mm_s * 60);
+    w->st->travel_mm += d;
+    w->x = x;
+    w->y = y;
+}
+
+static void
+extrude_to(struct wr *w, double x, double y, double e_per_mm, double f, int role)
+{
+    x = r3(x);
+    y = r3(y);
+    double d = hypot(x - w->x, y - w->y);
+    if (d < 1e-9)
+        return;
+    double de = d * e_per_mm;
+    emit(w, x, y, NAN, e_word(w, de), f);
+    w->st->e_mm[role] += de;
+    w->x = x;
+    w->y = y;
+}
+
+static double
+role_speed(const struct slice_profile *p, int role, bool first)
+{
+    double v;
+    switch (role) {
+    case ROLE_EXT_PERIMETER:
+        v = p->ext_perimeter_mm_s;
+        break;
+    case ROLE_PERIMETER:
+        v = p->perimeter_mm_s;
+        break;
+    case ROLE_INFILL:
+        v = p->infill_mm_s;
+        break;
+    case ROLE_SOLID:
+        v = p->solid_mm_s;
+        break;
+    case ROLE_TOP:
+        v = p->top_mm_s;
+        break;
+    case ROLE_BRIDGE:
+        v = p->bridge_mm_s;
+        break;
+    default:
+        v = p->support_mm_s;
+        break;
+    }
+    return first && p->first_layer_mm_s < v ? p->first_layer_mm_s : v;
+}
+
+static double
+dist2(struct ipt a, double x, double y)
+{
+    double dx = poly_mm(a.x) - x, dy = poly_mm(a.y) - y;
+    return dx * dx + dy * dy;
+}
+
+/* Print path k starting at vertex `at` (reversed for open paths if rev). */
+static void
+print_path(struct wr *w, const struct layer_paths *lp, uint32_t k, uint32_t at, bool rev, double h,
+           bool first)
+{
+    const struct tp_info *in = &lp->info[k];
+    const struct ipt *q = lp->p.pts + lp->p.start[k];
+    uint32_t n = paths_len(&lp->p, k);
+    if (in->role != w->role || in->width_mm != w->width) {
+        if (in->role != w->role)
+            put(w, ";TYPE:%s\n", tp_role_name(in->role));
+        put(w, ";WIDTH:%g\n", in->width_mm);
+        w->role = in->role;
+        w->width = in->width_mm;
+    }
+    uint32_t i0 = in->closed ? at : (rev ? n - 1 : 0);
+    travel(w, poly_mm(q[i0].x), poly_mm(q[i0].y));
+    unretract(w);
+    double epm = gcw_e_per_mm(w->p, in->width_mm, h);
+    if (in->role == ROLE_BRIDGE) /* a round thread of nozzle width, hanging in air */
+        epm = in->width_mm * in->width_mm / (w->p->filament_mm * w->p->filament_mm) * w->p->flow;
+    double f = role_speed(w->p, in->role, first) * 60;
+    if (in->closed) {
+        for (uint32_t s = 1; s <= n; s++) {
+            uint32_t i = (at + s) % n;
+            extrude_to(w, poly_mm(q[i].x), poly_mm(q[i].y), epm, f, in->role);
+        }
+    } else {
+        for (uint32_t s = 1; s < n; s++) {
+            uint32_t i = rev ? n - 1 - s : s;
+            extrude_to(w, poly_mm(q[i].x), poly_mm(q[i].y), epm, f, in->role);
+        }
+    }
+}
+
+/* Visit paths [a, b) of one role nearest-first. */
+static int
+print_run(struct wr *w, const struct layer_paths *lp, uint32_t a, uint32_t b, double h, bool first)
+{
+    uint32_t n = b - a;
+    if (n > ORDER_MAX) {
+        for (uint32_t k = a; k < b; k++)
+            print_path(w, lp, k, 0, false, h, first);
+        return SF_OK;
+    }
+    uint8_t *done = mem_calloc(n, 1);
+    if (!done)
+        return SF_ENOMEM;
+    for (uint32_t c = 0; c < n; c++) {
+        double best = INFINITY;
+        uint32_t bk = a, bat = 0;
+        bool brev = false;
+        for (uint32_t k = a; k < b; k++) {
+            if (done[k - a])
+                continue;
+            const struct ipt *q = lp->p.pts + lp->p.start[k];
+            uint32_t m = paths_len(&lp->p, k);
+            if (lp->info[k].closed) {
+                for (uint32_t i = 0; i < m; i++) {
+                    double d = dist2(q[i], w->x, w->y);
+                    if (d < best)
+                        best = d, bk = k, bat = i, brev = false;
+                }
+            } else {
+                double d0 = dist2(q[0], w->x, w->y), d1 = dist2(q[m - 1], w->x, w->y);
+                if (d0 < best)
+                    best = d0, bk = k, bat = 0, brev = false;
+                if (d1 < best)
+                    best = d1, bk = k, bat = 0, brev = true;
+            }
+        }
+        done[bk - a] = 1;
+        print_path(w, lp, bk, bat, brev, h, first);
+    }
+    free(done);
+    return SF_OK;
+}
+
+int
+gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct slice_profile *p,
+         struct buf *out, struct gcw_stats *st, struct sf_err *err)
+{
+    memset(st, 0, sizeof(*st));
+    struct wr w = { .out = out, .p = p, .st = st, .f = -1, .role = -1, .rc = SF_OK };
+    put(&w, "G21\nG90\n%s\nG92 E0\n", p->e_relative ? "M83" : "M82");
+    for (uint32_t k = 0; k < s->n && w.rc == SF_OK; k++) {
+        const struct layer *L = &s->l[k];
+        double z = r3(L->z_mm);
+        put(&w, ";LAYER_CHANGE\n;Z:%g\n;HEIGHT:%g\n", z, L->h_mm);
+        if (k == 1) {
+            put(&w, "M104 S%g\nM140 S%g\n", p->nozzle_c, p->bed_c);
+            if (p->fan_pct > 0)
+                put(&w, "M106 S%d\n", (int)lround(p->fan_pct * 2.55));
+        }
+        if (!p->e_relative) {
+            put(&w, "G92 E0\n");
+            w.e = 0;
+        }
+        retract(&w);
+        emit(&w, NAN, NAN, z, NAN, p->max_feed_z_mm_s * 60);
+        w.z = z;
+        paths_index_release(&w.inside);
+        if (p->retract_only_crossing && !paths_index_init(&w.inside, &L->region))
+            w.rc = SF_ENOMEM;
+        const struct layer_paths *l = &lp[k];
+        for (uint32_t a = 0; a < l->p.n && w.rc == SF_OK;) {
+            uint32_t b = a + 1;
+            while (b < l->p.n && l->info[b].role == l->info[a].role)
+                b++;
+            if (print_run(&w, l, a, b, L->h_mm, k == 0) < 0)
+                w.rc = SF_ENOMEM;
+            a = b;
+        }
+    }
+    paths_index_release(&w.inside);
+    retract(&w);
+    if (w.rc < 0)
+        return sf_err_set(err, SF_ENOMEM, "gcode: output larger than the cap of %zu bytes",
+                          out->max);
+    return SF_OK;
+}

@@ -1,0 +1,48 @@
+/*
+ * gcwrite.h - toolpaths to Marlin G-code text (the body of the file).
+ *
+ * Absolute XYZ (G90), E absolute (M82, reset with G92 E0 at each layer)
+ * or relative (M83) per profile.  Each layer starts with PrusaSlicer's
+ * comments (;LAYER_CHANGE, ;Z:, ;HEIGHT:) so viewers and our estimator
+ * find it; roles are tagged ;TYPE:<PrusaSlicer name> and ;WIDTH:.  Paths of
+ * one role are visited nearest-first (loops start at their vertex nearest
+ * the nozzle); a travel longer than retract_min_travel retracts (and
+ * lifts, if set).  The first layer runs at first_layer_speed and the
+ * first-layer temperatures; layer 1 switches to the normal ones and turns
+ * the fan on.  The header, start/end G-code and M73 progress are added by
+ * slice.c around this body.
+ *
+ * Thread: reentrant; writes only into the caller's buffer.
+ */
+#ifndef SF_SLICER_GCWRITE_H
+#define SF_SLICER_GCWRITE_H
+
+#include "../src/base/buf.h"
+#include "layers.h"
+#include "profile.h"
+#include "toolpath.h"
+
+/* What the writer extruded, for cross-checks. */
+struct gcw_stats {
+    double e_mm[ROLE_N]; /* filament per role, mm */
+    double travel_mm;    /* XY travel */
+    uint32_t n_retracts;
+    uint32_t n_moves; /* G1 lines written */
+};
+
+/*
+ * Append the G-code of every layer's paths (lp[k] for layer k of s) to
+ * out.  SF_ENOMEM when out's cap is hit.
+ */
+int gcw_body(const struct layer_stack *s, const struct layer_paths *lp,
+             const struct slice_profile *p, struct buf *out, struct gcw_stats *st,
+             struct sf_err *err);
+
+/* Filament mm per mm of a line of width w on layer h (flow model, flow). */
+double gcw_e_per_mm(const struct slice_profile *p, double w_mm, double h_mm);
+
+/* Fixed-point decimal of v with up to dec decimals, trailing zeros cut
+   ("12.3", "-0.05", "7"); returns the length.  buf holds 32 bytes. */
+int gcw_fmt(char *buf, double v, int dec);
+
+#endif

@@ -1,0 +1,394 @@
+/*
+ * layers.c - mesh to per-layer polygons (see layers.h for the method).
+ *
+ * Triangles are bucketed by the layers they cross (a counting sort into
+ * one CSR array, so each layer reads a contiguous list), then each layer
+ * cuts its triangles into segments, chains them with a small open-
+ * addressing hash keyed by the crossed edge, and unites the loops with
+ * Clipper.  Layers are independent, so two worker threads take them
+ * from an atomic counter (the machine has two cores).
+ *
+ * Thread: internal workers only; the call itself is reentrant.
+ */
+#include "layers.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <string.h>
+
+#include "../src/base/limits.h"
+#include "../src/base/mem.h"
+#include "clip_shim.h"
+
+#define LAYERS_SIMPLIFY_MM 0.01
+
+struct seg {
+    struct ipt a, b;  /* from the above->below crossing to the below->above one */
+    int64_t ka0, ka1; /* edge of a (vertex indices, sorted) */
+    int64_t kb0, kb1; /* edge of b */
+};
+
+/* Open-addressing map from a pair of int64 to a segment index. */
+struct map {
+    int64_t (*k)[2];
+    uint32_t *v; /* UINT32_MAX: empty */
+    size_t mask;
+};
+
+static bool
+map_init(struct map *m, size_t n)
+{
+    size_t cap = 16;
+    while (cap < 2 * n)
+        cap *= 2;
+    m->k = mem_array(cap, sizeof(*m->k));
+    m->v = mem_array(cap, sizeof(*m->v));
+    m->mask = cap - 1;
+    if (!m->k || !m->v)
+        return false;
+    memset(m->v, 0xff, cap * sizeof(*m->v));
+    return true;
+}
+
+static void
+map_release(struct map *m)
+{
+    free(m->k);
+    free(m->v);
+}
+
+static size_t
+hash2(int64_t a, int64_t b)
+{
+    uint64_t h = (uint64_t)a * 0x9E3779B97F4A7C15ull ^ ((uint64_t)b + 0x632BE59BD9B4E019ull);
+    h ^= h >> 29;
+    h *= 0xBF58476D1CE4E5B9ull;
+    return (size_t)(h ^ (h >> 32));
+}
+
+/* Insert unless present; a duplicate key keeps the first value. */
+static void
+map_put(struct map *m, int64_t a, int64_t b, uint32_t v)
+{
+    for (size_t i = hash2(a, b) & m->mask;; i = (i + 1) & m->mask) {
+        if (m->v[i] == UINT32_MAX) {
+            m->k[i][0] = a;
+            m->k[i][1] = b;
+            m->v[i] = v;
+            return;
+        }
+        if (m->k[i][0] == a && m->k[i][1] == b)
+            return;
+    }
+}
+
+static uint32_t
+map_get(const struct map *m, int64_t a, int64_t b)
+{
+    for (size_t i = hash2(a, b) & m->mask;; i = (i + 1) & m->mask) {
+        if (m->v[i] == UINT32_MAX)
+            return UINT32_MAX;
+        if (m->k[i][0] == a && m->k[i][1] == b)
+            return m->v[i];
+    }
+}
+
+struct job {
+    const struct mesh *m;
+    struct layer_stack *out;
+    const uint32_t *first, *tris; /* CSR: triangles of layer k */
+    double zmin;
+    atomic_uint next;
+    atomic_int rc;
+    atomic_uint n_open;
+};
+
+/* Crossing of edge (u, v) with plane p, computed from the below end. */
+static struct ipt
+cross_pt(const struct mesh *m, uint32_t u, uint32_t v, double p, double dx, double dy)
+{
+    struct vec3 a = m->v[u], b = m->v[v];
+    if (a.z > b.z) {
+        struct vec3 t = a;
+        a = b;
+        b = t;
+    }
+    double t = (p - a.z) / (b.z - a.z);
+    struct ipt q = { poly_i(a.x + t * (b.x - a.x) + dx), poly_i(a.y + t * (b.y - a.y) + dy) };
+    return q;
+}
+
+static int
+slice_one(struct job *j, uint32_t k, struct seg **segs, size_t *cap)
+{
+    const struct mesh *m = j->m;
+    struct layer *L = &j->out->l[k];
+    double p = j->zmin + L->z_mm - L->h_mm / 2;
+    uint32_t n = j->first[k + 1] - j->first[k];
+    const uint32_t *tri = j->tris + j->first[k];
+    if (!mem_grow((void **)segs, cap, n ? n : 1, sizeof(struct seg)))
+        return SF_ENOMEM;
+    struct seg *s = *segs;
+    uint32_t ns = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        const uint32_t *t = m->t[tri[i]];
+        bool up[3];
+        for (int c = 0; c < 3; c++)
+            up[c] = m->v[t[c]].z >= p;
+        int e_ab = -1, e_ba = -1; /* edge going above->below, below->above */
+        for (int c = 0; c < 3; c++) {
+            int d = (c + 1) % 3;
+            if (up[c] && !up[d])
+                e_ab = c;
+            else if (!up[c] && up[d])
+                e_ba = c;
+        }
+        if (e_ab < 0 || e_ba < 0)
+            continue;
+        uint32_t a0 = t[e_ab], a1 = t[(e_ab + 1) % 3], b0 = t[e_ba], b1 = t[(e_ba + 1) % 3];
+        struct seg *g = &s[ns++];
+        g->a = cross_pt(m, a0, a1, p, j->out->dx, j->out->dy);
+        g->b = cross_pt(m, b0, b1, p, j->out->dx, j->out->dy);
+        g->ka0 = a0 < a1 ? a0 : a1;
+        g->ka1 = a0 < a1 ? a1 : a0;
+        g->kb0 = b0 < b1 ? b0 : b1;
+        g->kb1 = b0 < b1 ? b1 : b0;
+    }
+    int rc = SF_ENOMEM;
+    struct map by_edge = { 0 }, by_pt = { 0 };
+    uint32_t *next = mem_array(ns ? ns : 1, sizeof(*next));
+    uint8_t *has_prev = mem_calloc(ns ? ns : 1, 1);
+    uint8_t *used = mem_calloc(ns ? ns : 1, 1);
+    struct paths loops;
+    paths_init(&loops);
+    if (!next || !has_prev || !used || !map_init(&by_edge, ns) || !map_init(&by_pt, ns))
+        goto out;
+    for (uint32_t i = 0; i < ns; i++)
+        map_put(&by_edge, s[i].ka0, s[i].ka1, i);
+    for (uint32_t i = 0; i < ns; i++) {
+        next[i] = map_get(&by_edge, s[i].kb0, s[i].kb1);
+        if (next[i] != UINT32_MAX) {
+            if (has_prev[next[i]])
+                next[i] = UINT32_MAX; /* non-manifold edge: leave for the point pass */
+            else
+                has_prev[next[i]] = 1;
+        }
+    }
+    /* Point pass: join loose ends at exactly equal points. */
+    for (uint32_t i = 0; i < ns; i++)
+        if (!has_prev[i])
+            map_put(&by_pt, s[i].a.x, s[i].a.y, i);
+    for (uint32_t i = 0; i < ns; i++) {
+        if (next[i] != UINT32_MAX)
+            continue;
+        uint32_t t = map_get(&by_pt, s[i].b.x, s[i].b.y);
+        if (t != UINT32_MAX && !has_prev[t]) {
+            next[i] = t;
+            has_prev[t] = 1;
+        }
+    }
+    uint32_t n_open = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t i = 0; i < ns; i++) {
+            if (used[i] || (pass == 0 && has_prev[i]))
+                continue;
+            if (!paths_begin(&loops))
+                goto out;
+            uint32_t c = i, len = 0;
+            bool closed = false;
+            while (c != UINT32_MAX && !used[c]) {
+                used[c] = 1;
+                if (!paths_push(&loops, s[c].a))
+                    goto out;
+                len++;
+                if (next[c] == i)
+                    closed = true;
+                if (next[c] == UINT32_MAX && !paths_push(&loops, s[c].b))
+                    goto out;
+                c = next[c];
+            }
+            if (!closed && pass == 0)
+                n_open++;
+            if (len < 2)
+                loops.n--; /* a lone segment encloses nothing */
+        }
+    }
+    atomic_fetch_add(&j->n_open, n_open);
+    rc = clip_bool(CLIP_UNION, &loops, NULL, CLIP_NONZERO, &L->region);
+    /* 10 um: far below what a 0.4 mm nozzle draws, and dense meshes give
+       loops with 0.05 mm segments that would slow every later stage */
+    if (rc == SF_OK && !paths_simplify(&L->region, LAYERS_SIMPLIFY_MM))
+        rc = SF_ENOMEM;
+out:
+    paths_release(&loops);
+    map_release(&by_edge);
+    map_release(&by_pt);
+    free(next);
+    free(has_prev);
+    free(used);
+    return rc;
+}
+
+static void *
+worker(void *arg)
+{
+    struct job *j = arg;
+    struct seg *segs = NULL;
+    size_t cap = 0;
+    for (;;) {
+        uint32_t k = atomic_fetch_add(&j->next, 1);
+        if (k >= j->out->n || atomic_load(&j->rc) < 0)
+            break;
+        int rc = slice_one(j, k, &segs, &cap);
+        if (rc < 0)
+            atomic_store(&j->rc, rc);
+    }
+    free(segs);
+    return NULL;
+}
+
+/* Plane height of layer k above the bed. */
+static double
+plane_of(const struct layer_stack *s, uint32_t k)
+{
+    return s->l[k].z_mm - s->l[k].h_mm / 2;
+}
+
+int
+layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, double cy,
+             struct layer_stack *out, struct sf_err *err)
+{
+    memset(out, 0, sizeof(*out));
+    if (!m->n_tris)
+        return sf_err_set(err, SF_EINVAL, "slice: the mesh has no triangles");
+    struct vec3 lo = m->v[m->t[0][0]], hi = lo;
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        for (int c = 0; c < 3; c++) {
+            struct vec3 p = m->v[m->t[i][c]];
+            if (!v3_isfinite(p))
+                return sf_err_set(err, SF_EINVAL, "slice: triangle %u has a non-finite vertex", i);
+            lo = v3_min(lo, p);
+            hi = v3_max(hi, p);
+        }
+    double height = hi.z - lo.z;
+    if (height <= 0)
+        return sf_err_set(err, SF_EINVAL, "slice: the mesh is flat (height 0)");
+    double nl = ceil((height - first_mm / 2) / layer_mm + 0.5);
+    if (nl < 1)
+        nl = 1;
+    if (nl > SF_SLICE_LAYERS_MAX)
+        return sf_err_set(err, SF_EINVAL, "slice: %.0f layers exceed the cap of %u", nl,
+                          SF_SLICE_LAYERS_MAX);
+    uint32_t n = (uint32_t)nl;
+    /* drop layers whose plane is at or above the top */
+    out->l = mem_calloc(n, sizeof(*out->l));
+    if (!out->l)
+        return sf_err_set(err, SF_ENOMEM, "slice: out of memory");
+    out->dx = cx - (lo.x + hi.x) / 2;
+    out->dy = cy - (lo.y + hi.y) / 2;
+    out->dz = -lo.z;
+    uint32_t k = 0;
+    for (; k < n; k++) {
+        out->l[k].h_mm = k ? layer_mm : first_mm;
+        out->l[k].z_mm = first_mm + k * layer_mm;
+        paths_init(&out->l[k].region);
+        paths_init(&out->l[k].inner);
+        paths_init(&out->l[k].skin);
+        if (plane_of(out, k) >= height)
+            break;
+    }
+    out->n = k ? k : 1;
+
+    /* Bucket triangles by the layers whose plane p satisfies zmin < p <= zmax. */
+    int rc = SF_ENOMEM;
+    uint32_t *first = mem_calloc((size_t)out->n + 1, sizeof(*first));
+    uint32_t *tris = NULL;
+    uint32_t(*range)[2] = mem_array(m->n_tris, sizeof(*range));
+    if (!first || !range)
+        goto fail;
+    size_t total = 0;
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        double z0 = m->v[m->t[i][0]].z, z1 = z0;
+        for (int c = 1; c < 3; c++) {
+            z0 = fmin(z0, m->v[m->t[i][c]].z);
+            z1 = fmax(z1, m->v[m->t[i][c]].z);
+        }
+        z0 -= lo.z;
+        z1 -= lo.z;
+        /* first k with plane > z0, last k with plane <= z1 */
+        double f = (z0 - first_mm) / layer_mm + 0.5;
+        long a = z0 < first_mm / 2 ? 0 : (long)floor(f) + 1;
+        if (a < 0)
+            a = 0;
+        while (a > 0 && plane_of(out, (uint32_t)a - 1) > z0)
+            a--;
+        while ((uint32_t)a < out->n && plane_of(out, (uint32_t)a) <= z0)
+            a++;
+        long b = a;
+        double g = (z1 - first_mm) / layer_mm + 0.5;
+        if (z1 >= first_mm / 2 && (long)floor(g) + 1 > b)
+            b = (long)floor(g) + 1;
+        if (b > (long)out->n)
+            b = out->n;
+        while (b > a && plane_of(out, (uint32_t)b - 1) > z1)
+            b--;
+        while ((uint32_t)b < out->n && plane_of(out, (uint32_t)b) <= z1)
+            b++;
+        range[i][0] = (uint32_t)a;
+        range[i][1] = (uint32_t)b; /* exclusive */
+        for (uint32_t q = range[i][0]; q < range[i][1]; q++)
+            first[q + 1]++;
+        total += range[i][1] - range[i][0];
+    }
+    for (uint32_t q = 0; q < out->n; q++)
+        first[q + 1] += first[q];
+    tris = mem_array(total ? total : 1, sizeof(*tris));
+    uint32_t *fill = mem_array(out->n, sizeof(*fill));
+    if (!tris || !fill) {
+        free(fill);
+        goto fail;
+    }
+    memcpy(fill, first, out->n * sizeof(*fill));
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        for (uint32_t q = range[i][0]; q < range[i][1]; q++)
+            tris[fill[q]++] = i;
+    free(fill);
+
+    struct job j = { .m = m, .out = out, .first = first, .tris = tris, .zmin = lo.z };
+    atomic_init(&j.next, 0);
+    atomic_init(&j.rc, SF_OK);
+    atomic_init(&j.n_open, 0);
+    pthread_t th;
+    bool threaded = out->n > 8 && pthread_create(&th, NULL, worker, &j) == 0;
+    worker(&j);
+    if (threaded)
+        pthread_join(th, NULL);
+    rc = atomic_load(&j.rc);
+    out->n_open = atomic_load(&j.n_open);
+    if (rc < 0)
+        goto fail;
+    free(first);
+    free(tris);
+    free(range);
+    return SF_OK;
+fail:
+    free(first);
+    free(tris);
+    free(range);
+    layer_stack_release(out);
+    return sf_err_set(err, rc == SF_EBUG ? SF_EBUG : SF_ENOMEM, "slice: %s",
+                      rc == SF_EBUG ? "polygon clipping failed" : "out of memory");
+}
+
+void
+layer_stack_release(struct layer_stack *s)
+{
+    for (uint32_t k = 0; s->l && k < s->n; k++) {
+        paths_release(&s->l[k].region);
+        paths_release(&s->l[k].inner);
+        paths_release(&s->l[k].skin);
+    }
+    free(s->l);
+    memset(s, 0, sizeof(*s));
+}

@@ -1,0 +1,54 @@
+/*
+ * layers.h - cut a mesh into per-layer cross-sections.
+ *
+ * The part is placed on the bed first: its lowest point goes to z = 0 and
+ * its bounding box is centred at (cx, cy).  Layer 0 is first_mm thick,
+ * the rest layer_mm; each layer is cut by the plane through its middle
+ * (as PrusaSlicer does), so a 20 mm cube at 0.2 mm gives 100 layers.
+ * The cross-section is a polygon set with holes in tree order (poly.h).
+ *
+ * Robustness: a vertex lying exactly on a cutting plane counts as above it
+ * (symbolic perturbation), so every cut triangle has exactly two crossing
+ * edges and every crossing point is computed from its edge alone, the same
+ * way for both triangles that share it.  Segments are chained through the
+ * edges they cross (topology, no epsilon), then, for unwelded or open
+ * meshes, through exactly equal points; what stays open is closed
+ * straight and the loops are united with the nonzero rule.
+ *
+ * Thread: layers_slice may run concurrently on different outputs.
+ */
+#ifndef SF_SLICER_LAYERS_H
+#define SF_SLICER_LAYERS_H
+
+#include <stdint.h>
+
+#include "../src/base/err.h"
+#include "../src/mesh/mesh.h"
+#include "poly.h"
+
+struct layer {
+    double z_mm;         /* top of the layer above the bed */
+    double h_mm;         /* its thickness */
+    struct paths region; /* part cross-section at z_mm - h_mm / 2 */
+    struct paths inner;  /* inside the perimeters: filled by toolpath_areas() */
+    struct paths skin;   /* inner not covered above or below, grown: toolpath_areas() */
+};
+
+struct layer_stack {
+    struct layer *l;
+    uint32_t n;
+    double dx, dy, dz; /* translation applied to the mesh to place it */
+    uint32_t n_open;   /* open chains closed by force (an open mesh) */
+};
+
+/*
+ * Slice m.  out is filled (layer_stack_release frees it).  SF_EINVAL for
+ * an empty or non-finite mesh or one taller than SF_SLICE_LAYERS_MAX
+ * layers; SF_ENOMEM.
+ */
+int layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, double cy,
+                 struct layer_stack *out, struct sf_err *err);
+
+void layer_stack_release(struct layer_stack *s);
+
+#endif

@@ -1,0 +1,42 @@
+/*
+ * preview.h - pictures a person can check by eye, as PNG (cairo): a part
+ * with its risky faces coloured and its support columns, or one layer of
+ * a G-code file with its extrusion roles in PrusaSlicer's colours.
+ *
+ * The part view is an orthographic three-quarter view from the front,
+ * flat-shaded, faces sorted back to front (painter's algorithm); faces
+ * that need support at the given angle are red, the columns from the ray
+ * grid blue and translucent.  The layer view is from the top, scaled to
+ * the layer's extent, with travel moves as thin grey lines.
+ *
+ * Thread: reentrant (each call has its own cairo surface).
+ */
+#ifndef SF_SLICER_PREVIEW_H
+#define SF_SLICER_PREVIEW_H
+
+#include <stddef.h>
+
+#include "../src/base/err.h"
+#include "../src/mesh/mesh.h"
+
+struct preview_opts {
+    int width_px, height_px; /* image size (default 800 x 600) */
+    double angle_deg;        /* overhang angle from vertical (default 45) */
+    double pitch_mm;         /* column grid pitch (default 1) */
+    int layer;               /* G-code layer to draw, -1: the middle one */
+};
+
+void preview_opts_default(struct preview_opts *o);
+
+/* Draw m and its support columns into png_path.  SF_EIO, SF_ENOMEM. */
+int preview_part(const struct mesh *m, const struct preview_opts *o, const char *png_path,
+                 struct sf_err *err);
+
+/*
+ * Draw one layer of the G-code text (name for messages) into png_path.
+ * SF_EINVAL for a malformed file or a layer it does not have.
+ */
+int preview_gcode(const char *text, size_t len, const char *name, const struct preview_opts *o,
+                  const char *png_path, struct sf_err *err);
+
+#endif

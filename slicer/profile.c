@@ -1,0 +1,385 @@
+/*
+ * profile.c - printer, print and material profiles (see profile.h).
+ *
+ * One table lists every option once: its section, key, type, field,
+ * range and help.  Defaults, INI loading, --set overrides, validation
+ * messages and the G-code header dump all read the same table, so an
+ * option cannot be half-added.  Defaults follow PrusaSlicer 2.5's stock
+ * 0.2 mm settings as used by shared/peers (0.45 mm lines, 2 perimeters,
+ * 4 top / 3 bottom, 15 % grid, Marlin 2 machine limits), for fair
+ * comparisons.
+ *
+ * Thread: none; a profile is loaded on one thread and read-only after.
+ */
+#include "profile.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../src/base/ini.h"
+
+#define OFF(f) offsetof(struct slice_profile, f)
+#define R(sec, k, f, lo, hi, h)                                                                    \
+    {                                                                                              \
+        sec,                                                                                       \
+        {                                                                                          \
+#k, INI_REAL, OFF(f), lo, hi, h                                                        \
+        }                                                                                          \
+    }
+#define I(sec, k, f, lo, hi, h)                                                                    \
+    {                                                                                              \
+        sec,                                                                                       \
+        {                                                                                          \
+#k, INI_INT, OFF(f), lo, hi, h                                                         \
+        }                                                                                          \
+    }
+#define B(sec, k, f, h)                                                                            \
+    {                                                                                              \
+        sec,                                                                                       \
+        {                                                                                          \
+#k, INI_BOOL, OFF(f), 0, 0, h                                                          \
+        }                                                                                          \
+    }
+#define S(sec, k, f, h)                                                                            \
+    {                                                                                              \
+        sec,                                                                                       \
+        {                                                                                          \
+#k, INI_STR, OFF(f), 0, 0, h                                                           \
+        }                                                                                          \
+    }
+#define X(sec, k, f, h)                                                                            \
+    {                                                                                              \
+        sec,                                                                                       \
+        {                                                                                          \
+#k, INI_TEXT, OFF(f), 0, 0, h                                                          \
+        }                                                                                          \
+    }
+
+struct popt {
+    const char *section;
+    struct ini_opt o;
+};
+
+static const struct popt popts[] = {
+    S("printer", name, printer_name, "printer name"),
+    R("printer", bed_x, bed_x_mm, 10, 2000, "bed width, mm"),
+    R("printer", bed_y, bed_y_mm, 10, 2000, "bed depth, mm"),
+    R("printer", max_z, max_z_mm, 10, 2000, "build height, mm"),
+    R("printer", nozzle, nozzle_mm, 0.1, 2, "nozzle diameter, mm"),
+    R("printer", max_overhang, max_overhang_deg, 0, 89,
+      "largest unsupported angle from vertical, deg"),
+    R("printer", max_feed_xy, max_feed_xy_mm_s, 1, 2000, "max XY feed rate, mm/s"),
+    R("printer", max_feed_z, max_feed_z_mm_s, 0.1, 500, "max Z feed rate, mm/s"),
+    R("printer", max_feed_e, max_feed_e_mm_s, 1, 500, "max E feed rate, mm/s"),
+    R("printer", accel_extrude, accel_extrude_mm_s2, 10, 100000,
+      "acceleration when printing, mm/s2"),
+    R("printer", accel_travel, accel_travel_mm_s2, 10, 100000, "acceleration on travel, mm/s2"),
+    R("printer", accel_retract, accel_retract_mm_s2, 10, 100000,
+      "acceleration of retractions, mm/s2"),
+    R("printer", jerk_xy, jerk_xy_mm_s, 0, 100, "XY jerk, mm/s"),
+    R("printer", jerk_z, jerk_z_mm_s, 0, 100, "Z jerk, mm/s"),
+    R("printer", jerk_e, jerk_e_mm_s, 0, 100, "E jerk, mm/s"),
+    R("printer", junction_deviation, junction_dev_mm, 0, 1, "junction deviation, mm (0: use jerk)"),
+    R("printer", travel_speed, travel_mm_s, 1, 2000, "travel speed, mm/s"),
+    R("printer", retract_length, retract_mm, 0, 20, "retraction, mm of filament"),
+    R("printer", retract_speed, retract_mm_s, 1, 200, "retraction speed, mm/s"),
+    R("printer", retract_lift, retract_lift_mm, 0, 5, "Z hop on retraction, mm"),
+    R("printer", retract_min_travel, retract_min_travel_mm, 0, 100,
+      "retract only for travel longer than this, mm"),
+    B("printer", e_relative, e_relative, "relative E (M83) instead of absolute (M82)"),
+    B("printer", retract_only_crossing, retract_only_crossing,
+      "retract only when a travel leaves the part"),
+    X("printer", start_gcode, start_gcode, "start G-code; {placeholders}"),
+    X("printer", end_gcode, end_gcode, "end G-code; {placeholders}"),
+    R("print", layer_height, layer_mm, 0.02, 1, "layer height, mm"),
+    R("print", first_layer_height, first_layer_mm, 0.02, 1, "first layer height, mm"),
+    I("print", perimeters, perimeters, 0, 50, "perimeter loops"),
+    I("print", top_layers, top_layers, 0, 100, "top solid layers"),
+    I("print", bottom_layers, bottom_layers, 0, 100, "bottom solid layers"),
+    R("print", skin_margin, skin_margin_mm, 0, 20,
+      "solid skins reach this far into the infill, mm"),
+    R("print", infill_density, infill_density, 0, 1, "sparse infill density, 0..1"),
+    S("print", infill_pattern, infill_pattern, "grid or rectilinear"),
+    R("print", infill_anchor, infill_anchor_mm, 0, 50,
+      "sparse lines follow the boundary this far, mm"),
+    R("print", line_width, width_mm, 0.1, 3, "perimeter and infill line width, mm"),
+    R("print", solid_line_width, solid_width_mm, 0.1, 3, "solid, top and support line width, mm"),
+    R("print", perimeter_speed, perimeter_mm_s, 1, 1000, "inner perimeters, mm/s"),
+    R("print", external_perimeter_speed, ext_perimeter_mm_s, 1, 1000, "outer perimeter, mm/s"),
+    R("print", infill_speed, infill_mm_s, 1, 1000, "sparse infill, mm/s"),
+    R("print", solid_infill_speed, solid_mm_s, 1, 1000, "solid infill, mm/s"),
+    R("print", top_solid_infill_speed, top_mm_s, 1, 1000, "top solid infill, mm/s"),
+    R("print", support_speed, support_mm_s, 1, 1000, "support, mm/s"),
+    R("print", first_layer_speed, first_layer_mm_s, 1, 1000, "every move of the first layer, mm/s"),
+    R("print", bridge_speed, bridge_mm_s, 0, 1000, "solid over air, mm/s (0: print it as solid)"),
+    B("print", support, support, "generate column supports"),
+    R("print", support_angle, support_angle_deg, 0, 89,
+      "overhang angle from vertical, deg (0: printer's)"),
+    R("print", support_pitch, support_pitch_mm, 0.2, 10, "support column grid pitch, mm"),
+    R("print", support_z_gap, support_z_gap_mm, 0, 2, "gap between support top and part, mm"),
+    R("print", support_xy_gap, support_xy_gap_mm, 0, 5, "gap between support and part walls, mm"),
+    I("print", support_interface_layers, support_interface_layers, 0, 20,
+      "dense layers under the part"),
+    R("print", support_spacing, support_spacing_mm, 0.5, 20, "support line spacing, mm"),
+    S("material", name, material_name, "material name"),
+    R("material", diameter, filament_mm, 0.5, 5, "filament diameter, mm"),
+    R("material", density, density_g_cm3, 0.1, 20, "density, g/cm3"),
+    R("material", nozzle_temp, nozzle_c, 0, 500, "nozzle temperature, C"),
+    R("material", first_layer_nozzle_temp, first_layer_nozzle_c, 0, 500,
+      "first layer nozzle temperature, C"),
+    R("material", bed_temp, bed_c, 0, 150, "bed temperature, C"),
+    R("material", first_layer_bed_temp, first_layer_bed_c, 0, 150,
+      "first layer bed temperature, C"),
+    R("material", fan, fan_pct, 0, 100, "part cooling fan, percent"),
+    R("material", flow, flow, 0.5, 2, "extrusion multiplier"),
+};
+#define N_POPTS (sizeof(popts) / sizeof(popts[0]))
+
+static const char default_start[] = "M140 S{first_layer_bed_temp}\n"
+                                    "M104 S{first_layer_nozzle_temp}\n"
+                                    "G28\n"
+                                    "M190 S{first_layer_bed_temp}\n"
+                                    "M109 S{first_layer_nozzle_temp}\n"
+                                    "G1 Z5 F3000";
+static const char default_end[] = "M104 S0\n"
+                                  "M140 S0\n"
+                                  "M107\n"
+                                  "G91\n"
+                                  "G1 Z10 F600\n"
+                                  "G90\n"
+                                  "G1 X0 Y{bed_y} F3000\n"
+                                  "M84";
+
+int
+slice_profile_default(struct slice_profile *p)
+{
+    struct slice_profile d = {
+        .printer_name = (char *)"generic-marlin",
+        .bed_x_mm = 250,
+        .bed_y_mm = 210,
+        .max_z_mm = 210,
+        .nozzle_mm = 0.4,
+        .max_overhang_deg = 45,
+        .max_feed_xy_mm_s = 500,
+        .max_feed_z_mm_s = 12,
+        .max_feed_e_mm_s = 120,
+        .accel_extrude_mm_s2 = 1500,
+        .accel_travel_mm_s2 = 1250,
+        .accel_retract_mm_s2 = 1500,
+        .jerk_xy_mm_s = 10,
+        .jerk_z_mm_s = 0.2,
+        .jerk_e_mm_s = 2.5,
+        .junction_dev_mm = 0,
+        .travel_mm_s = 130,
+        .retract_mm = 2,
+        .retract_mm_s = 40,
+        .retract_lift_mm = 0,
+        .retract_min_travel_mm = 2,
+        .e_relative = false,
+        .start_gcode = (char *)default_start,
+        .end_gcode = (char *)default_end,
+        .layer_mm = 0.2,
+        .first_layer_mm = 0.2,
+        .perimeters = 2,
+        .top_layers = 4,
+        .bottom_layers = 3,
+        .skin_margin_mm = 3,
+        .infill_density = 0.15,
+        .infill_pattern = (char *)"grid",
+        .infill_anchor_mm = 2.7,
+        .width_mm = 0.45,
+        .solid_width_mm = 0.45,
+        .perimeter_mm_s = 60,
+        .ext_perimeter_mm_s = 30,
+        .infill_mm_s = 80,
+        .solid_mm_s = 20,
+        .top_mm_s = 15,
+        .support_mm_s = 60,
+        .first_layer_mm_s = 30,
+        .bridge_mm_s = 60,
+        .retract_only_crossing = true,
+        .support = true,
+        .support_angle_deg = 0,
+        .support_pitch_mm = 1,
+        .support_z_gap_mm = 0.2,
+        .support_xy_gap_mm = 0.3,
+        .support_interface_layers = 2,
+        .support_spacing_mm = 2.5,
+        .material_name = (char *)"generic-pla",
+        .filament_mm = 1.75,
+        .density_g_cm3 = 1.24,
+        .nozzle_c = 210,
+        .first_layer_nozzle_c = 215,
+        .bed_c = 60,
+        .first_layer_bed_c = 60,
+        .fan_pct = 100,
+        .flow = 1,
+    };
+    *p = d;
+    for (size_t i = 0; i < N_POPTS; i++) {
+        if (ini_opts_dup(&popts[i].o, 1, p) < 0) {
+            /* free the ones already duplicated, null the rest */
+            for (size_t j = i + 1; j < N_POPTS; j++)
+                if (popts[j].o.type == INI_STR || popts[j].o.type == INI_TEXT) {
+                    char *nul = NULL;
+                    memcpy((char *)p + popts[j].o.offset, &nul, sizeof(nul));
+                }
+            slice_profile_release(p);
+            return SF_ENOMEM;
+        }
+    }
+    return SF_OK;
+}
+
+void
+slice_profile_release(struct slice_profile *p)
+{
+    for (size_t i = 0; i < N_POPTS; i++)
+        ini_opts_release(&popts[i].o, 1, p);
+}
+
+struct pctx {
+    struct slice_profile *p;
+    const char *set; /* "printer" or "material" */
+};
+
+static bool
+section_ok(const char *set, const char *section)
+{
+    if (strcmp(set, "material") == 0)
+        return strcmp(section, "material") == 0;
+    return strcmp(section, "printer") == 0 || strcmp(section, "print") == 0;
+}
+
+static int
+on_key(void *ud, const char *section, const char *key, const char *value, bool cont,
+       struct sf_err *err)
+{
+    struct pctx *c = ud;
+    if (!section_ok(c->set, section))
+        return sf_err_set(err, SF_EINVAL, "section '%s' is not valid in a %s profile", section,
+                          c->set);
+    for (size_t i = 0; i < N_POPTS; i++) {
+        if (strcmp(popts[i].section, section) != 0 || strcmp(popts[i].o.key, key) != 0)
+            continue;
+        if (cont && popts[i].o.type != INI_TEXT)
+            return sf_err_set(err, SF_EINVAL, "option '%s' takes one line", key);
+        return ini_opt_set(&popts[i].o, c->p, value, cont, err);
+    }
+    return sf_err_set(err, SF_EINVAL, "option '%s' is not valid in section '%s'", key, section);
+}
+
+int
+slice_profile_parse(struct slice_profile *p, const char *text, size_t len, const char *name,
+                    const char *section_set, struct sf_err *err)
+{
+    struct pctx c = { p, section_set };
+    return ini_parse_mem(text, len, name, on_key, &c, err);
+}
+
+static int
+load_one(struct slice_profile *p, const char *path, const char *set, struct sf_err *err)
+{
+    struct pctx c = { p, set };
+    return ini_load(path, on_key, &c, err);
+}
+
+int
+slice_profile_load(const char *printer_cfg, const char *material_cfg, struct slice_profile *p,
+                   struct sf_err *err)
+{
+    if (slice_profile_default(p) < 0)
+        return sf_err_set(err, SF_ENOMEM, "profile: out of memory");
+    int rc = SF_OK;
+    if (printer_cfg)
+        rc = load_one(p, printer_cfg, "printer", err);
+    if (rc == SF_OK && material_cfg)
+        rc = load_one(p, material_cfg, "material", err);
+    if (rc == SF_OK)
+        rc = slice_profile_check(p, err);
+    if (rc < 0)
+        slice_profile_release(p);
+    return rc;
+}
+
+int
+slice_profile_set(struct slice_profile *p, const char *kv, struct sf_err *err)
+{
+    const char *eq = strchr(kv, '=');
+    if (!eq || eq == kv)
+        return sf_err_set(err, SF_EINVAL, "--set '%s': expected key=value", kv);
+    /* "section.key" picks a section ("material.name"); a bare key takes the first match */
+    const char *dot = memchr(kv, '.', (size_t)(eq - kv));
+    const char *key = dot ? dot + 1 : kv;
+    size_t kl = (size_t)(eq - key), sl = dot ? (size_t)(dot - kv) : 0;
+    for (size_t i = 0; i < N_POPTS; i++) {
+        const struct ini_opt *o = &popts[i].o;
+        if (strlen(o->key) != kl || strncmp(o->key, key, kl) != 0)
+            continue;
+        if (dot && (strlen(popts[i].section) != sl || strncmp(popts[i].section, kv, sl) != 0))
+            continue;
+        return ini_opt_set(o, p, eq + 1, false, err);
+    }
+    return sf_err_set(err, SF_EINVAL, "--set: no option '%.*s'", (int)(eq - kv), kv);
+}
+
+int
+slice_profile_check(const struct slice_profile *p, struct sf_err *err)
+{
+    if (strcmp(p->infill_pattern, "grid") != 0 && strcmp(p->infill_pattern, "rectilinear") != 0)
+        return sf_err_set(err, SF_EINVAL,
+                          "option 'infill_pattern': '%s' is not grid or rectilinear",
+                          p->infill_pattern);
+    if (p->layer_mm > 0.8 * p->nozzle_mm || p->first_layer_mm > 0.9 * p->nozzle_mm)
+        return sf_err_set(err, SF_EINVAL,
+                          "layer height %g / first layer %g too thick for a %g mm nozzle",
+                          p->layer_mm, p->first_layer_mm, p->nozzle_mm);
+    if (p->width_mm < p->layer_mm || p->solid_width_mm < p->layer_mm)
+        return sf_err_set(err, SF_EINVAL, "line width below the layer height");
+    if (p->support_pitch_mm < p->solid_width_mm)
+        return sf_err_set(err, SF_EINVAL, "support_pitch %g is below the line width",
+                          p->support_pitch_mm);
+    return SF_OK;
+}
+
+double
+slice_profile_angle(const struct slice_profile *p)
+{
+    return p->support_angle_deg > 0 ? p->support_angle_deg : p->max_overhang_deg;
+}
+
+void
+slice_profile_dump(const struct slice_profile *p, void *file)
+{
+    FILE *f = file;
+    for (size_t i = 0; i < N_POPTS; i++) {
+        const struct ini_opt *o = &popts[i].o;
+        const char *base = (const char *)p + o->offset;
+        fprintf(f, "; %s.%s = ", popts[i].section, o->key);
+        double d;
+        int n;
+        bool b;
+        const char *s;
+        switch (o->type) {
+        case INI_REAL:
+            memcpy(&d, base, sizeof(d));
+            fprintf(f, "%g\n", d);
+            break;
+        case INI_INT:
+            memcpy(&n, base, sizeof(n));
+            fprintf(f, "%d\n", n);
+            break;
+        case INI_BOOL:
+            memcpy(&b, base, sizeof(b));
+            fprintf(f, "%s\n", b ? "yes" : "no");
+            break;
+        default:
+            memcpy(&s, base, sizeof(s));
+            for (; s && *s; s++) {
+                fputc(*s == '\n' ? '|' : *s, f);
+            }
+            fputc('\n', f);
+        }
+    }
+}

@@ -1,0 +1,242 @@
+/*
+ * support.c - columns to per-layer support regions (see support.h).
+ *
+ * Columns are sorted by cell once; per layer, one pass picks the active
+ * ones, merges runs of neighbouring cells in a row into rectangles and
+ * hands them to one Clipper union, then subtracts the grown part.
+ * Islands are found by intersecting each new piece of a layer with the
+ * layer below; their columns reach down to the highest layer below whose
+ * cross-section covers the cell centre, or to the bed.
+ *
+ * Thread: reentrant.
+ */
+#include "support.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../src/base/mem.h"
+#include "clip_shim.h"
+
+#define EPS 1e-4
+
+static int
+cmp_col(const void *a, const void *b)
+{
+    const struct sup_col *x = a, *y = b;
+    if (x->j != y->j)
+        return x->j < y->j ? -1 : 1;
+    if (x->i != y->i)
+        return x->i < y->i ? -1 : 1;
+    return x->lo < y->lo ? -1 : x->lo > y->lo;
+}
+
+static bool
+push_col(struct sup_col **cols, size_t *n, size_t *cap, struct sup_col c)
+{
+    if (!mem_grow((void **)cols, cap, *n + 1, sizeof(**cols)))
+        return false;
+    (*cols)[(*n)++] = c;
+    return true;
+}
+
+/* Is there already a column in cell (i, j) ending within 1 mm of z? */
+static bool
+has_column_near(const struct sup_col *cols, size_t n, uint32_t i, uint32_t j, double z)
+{
+    for (size_t k = 0; k < n; k++)
+        if (cols[k].i == i && cols[k].j == j && fabs(cols[k].hi - z) < 1)
+            return true;
+    return false;
+}
+
+static int
+island_columns(const struct layer_stack *s, uint32_t k, const struct paths *isl,
+               const struct sup_grid *g, struct sup_col **cols, size_t *n, size_t *cap,
+               size_t n_ray)
+{
+    struct ipt lo, hi;
+    if (!paths_bbox(isl, &lo, &hi))
+        return SF_OK;
+    double zb = s->l[k].z_mm - s->l[k].h_mm;
+    long i0 = (long)ceil((poly_mm(lo.x) - g->x0) / g->pitch);
+    long i1 = (long)floor((poly_mm(hi.x) - g->x0) / g->pitch);
+    long j0 = (long)ceil((poly_mm(lo.y) - g->y0) / g->pitch);
+    long j1 = (long)floor((poly_mm(hi.y) - g->y0) / g->pitch);
+    bool any = false;
+    for (int pass = 0; pass < 2 && !any; pass++) {
+        if (pass == 1) { /* too small to hold a cell centre: the nearest cell */
+            i0 = i1 = lround((poly_mm(lo.x + (hi.x - lo.x) / 2) - g->x0) / g->pitch);
+            j0 = j1 = lround((poly_mm(lo.y + (hi.y - lo.y) / 2) - g->y0) / g->pitch);
+        }
+        for (long j = j0; j <= j1; j++) {
+            for (long i = i0; i <= i1; i++) {
+                if (i < 0 || j < 0 || i >= (long)g->nu || j >= (long)g->nw)
+                    continue;
+                struct ipt c = { poly_i(g->x0 + i * g->pitch), poly_i(g->y0 + j * g->pitch) };
+                if (pass == 0 && !paths_contains(isl, c))
+                    continue;
+                any = true;
+                if (has_column_near(*cols, n_ray, (uint32_t)i, (uint32_t)j, zb))
+                    continue;
+                double floor_z = 0;
+                for (long q = (long)k - 1; q >= 0; q--) {
+                    if (paths_contains(&s->l[q].region, c)) {
+                        floor_z = s->l[q].z_mm;
+                        break;
+                    }
+                }
+                struct sup_col col = { (uint32_t)i, (uint32_t)j, (float)floor_z, (float)zb };
+                if (zb > floor_z && !push_col(cols, n, cap, col))
+                    return SF_ENOMEM;
+            }
+        }
+    }
+    return SF_OK;
+}
+
+int
+support_islands(const struct layer_stack *s, const struct sup_grid *g, struct sup_col **cols,
+                size_t *n, size_t *cap)
+{
+    size_t n_ray = *n;
+    struct paths isl, both;
+    paths_init(&isl);
+    paths_init(&both);
+    int rc = SF_OK;
+    for (uint32_t k = 1; k < s->n && rc == SF_OK; k++) {
+        const struct paths *r = &s->l[k].region;
+        for (uint32_t a = 0; a < r->n && rc == SF_OK;) {
+            uint32_t b = a + 1; /* an island: outer a and its holes up to the next outer */
+            while (b < r->n && paths_area_k(r, b) < 0)
+                b++;
+            paths_reset(&isl);
+            for (uint32_t q = a; q < b; q++)
+                if (!paths_add(&isl, r->pts + r->start[q], paths_len(r, q)))
+                    rc = SF_ENOMEM;
+            a = b;
+            if (rc < 0)
+                break;
+            rc = clip_bool(CLIP_INTERSECTION, &isl, &s->l[k - 1].region, CLIP_NONZERO, &both);
+            if (rc == SF_OK && paths_area(&both) < 1e-3)
+                rc = island_columns(s, k, &isl, g, cols, n, cap, n_ray);
+        }
+    }
+    paths_release(&isl);
+    paths_release(&both);
+    return rc;
+}
+
+void
+support_layer_release(struct support_layer *l)
+{
+    paths_release(&l->body);
+    paths_release(&l->iface);
+}
+
+/* Add one rectangle per run of active neighbouring cells in a row. */
+static bool
+add_runs(struct paths *rects, const struct sup_grid *g, const struct sup_col *cols,
+         const uint8_t *on, size_t n)
+{
+    double hp = g->pitch / 2;
+    for (size_t a = 0; a < n;) {
+        if (!on[a]) {
+            a++;
+            continue;
+        }
+        size_t b = a + 1, last = a;
+        while (b < n && (!on[b] || (cols[b].j == cols[a].j && cols[b].i <= cols[last].i + 1))) {
+            if (on[b])
+                last = b;
+            b++;
+        }
+        b = last + 1;
+        double x0 = g->x0 + cols[a].i * g->pitch - hp, x1 = g->x0 + cols[last].i * g->pitch + hp;
+        double y = g->y0 + cols[a].j * g->pitch;
+        /* 1 um overlap so neighbouring rows merge in the union */
+        struct ipt r[4] = { { poly_i(x0 - 1e-3), poly_i(y - hp - 1e-3) },
+                            { poly_i(x1 + 1e-3), poly_i(y - hp - 1e-3) },
+                            { poly_i(x1 + 1e-3), poly_i(y + hp + 1e-3) },
+                            { poly_i(x0 - 1e-3), poly_i(y + hp + 1e-3) } };
+        if (!paths_add(rects, r, 4))
+            return false;
+        a = b;
+    }
+    return true;
+}
+
+int
+support_layers(const struct layer_stack *s, const struct sup_grid *g, struct sup_col *cols,
+               size_t n, const struct slice_profile *p, struct support_layer *out,
+               struct sf_err *err)
+{
+    for (uint32_t k = 0; k < s->n; k++) {
+        paths_init(&out[k].body);
+        paths_init(&out[k].iface);
+    }
+    if (n)
+        qsort(cols, n, sizeof(*cols), cmp_col);
+    uint8_t *on = mem_calloc(n ? n : 1, 1), *top = mem_calloc(n ? n : 1, 1);
+    struct paths rects, all, grown, tmp;
+    paths_init(&rects);
+    paths_init(&all);
+    paths_init(&grown);
+    paths_init(&tmp);
+    int rc = on && top ? SF_OK : SF_ENOMEM;
+    double gap = p->support_z_gap_mm, if_h = p->support_interface_layers * p->layer_mm;
+    for (uint32_t k = 0; k < s->n && rc == SF_OK; k++) {
+        double zt = s->l[k].z_mm, zb = zt - s->l[k].h_mm;
+        size_t n_on = 0, n_top = 0;
+        for (size_t c = 0; c < n; c++) {
+            double floor_z = cols[c].lo > EPS ? cols[c].lo + gap : 0;
+            on[c] = zb >= floor_z - EPS && zt <= cols[c].hi - gap + EPS;
+            top[c] = on[c] && zt > cols[c].hi - gap - if_h + EPS;
+            n_on += on[c];
+            n_top += top[c];
+        }
+        if (!n_on)
+            continue;
+        rc = clip_offset(&s->l[k].region, p->support_xy_gap_mm, CLIP_JOIN_MITER, &grown);
+        for (int pass = 0; pass < 2 && rc == SF_OK; pass++) {
+            if (pass == 1 && !n_top)
+                break;
+            paths_reset(&rects);
+            if (!add_runs(&rects, g, cols, pass ? top : on, n)) {
+                rc = SF_ENOMEM;
+                break;
+            }
+            rc = clip_bool(CLIP_UNION, &rects, NULL, CLIP_NONZERO, &all);
+            if (rc == SF_OK)
+                rc = clip_bool(CLIP_DIFFERENCE, &all, &grown, CLIP_NONZERO,
+                               pass ? &out[k].iface : &out[k].body);
+        }
+        if (rc == SF_OK && out[k].iface.n) {
+            rc = clip_bool(CLIP_DIFFERENCE, &out[k].body, &out[k].iface, CLIP_NONZERO, &tmp);
+            paths_move(&out[k].body, &tmp);
+        }
+    }
+    free(on);
+    free(top);
+    paths_release(&rects);
+    paths_release(&all);
+    paths_release(&grown);
+    paths_release(&tmp);
+    if (rc < 0) {
+        for (uint32_t k = 0; k < s->n; k++)
+            support_layer_release(&out[k]);
+        return sf_err_set(err, rc, "support: %s",
+                          rc == SF_ENOMEM ? "out of memory" : "polygon clipping failed");
+    }
+    return SF_OK;
+}
+
+double
+support_volume(const struct layer_stack *s, const struct support_layer *sup)
+{
+    double v = 0;
+    for (uint32_t k = 0; k < s->n; k++)
+        v += (paths_area(&sup[k].body) + paths_area(&sup[k].iface)) * s->l[k].h_mm;
+    return v;
+}

@@ -1,0 +1,651 @@
+/*
+ * toolpath.c - perimeters, skins and infill of one layer (see toolpath.h).
+ *
+ * Everything is Clipper offsets and booleans on the layer's region and its
+ * neighbours' (read-only), so layers can be built in any order and on any
+ * thread.  Infill lines come from tp_fill_lines: a family of parallel
+ * lines over the region's bounding box, clipped as open paths.
+ *
+ * Thread: reentrant; no state outside the arguments.
+ */
+#include "toolpath.h"
+
+#include <math.h>
+#include <string.h>
+
+#include "../src/base/err.h"
+#include "../src/base/mem.h"
+#include "clip_shim.h"
+
+const char *
+tp_role_name(enum tp_role r)
+{
+    static const char *const names[ROLE_N] = {
+        "Support material", "Support material interface", "Perimeter",       "External perimeter",
+        "Solid infill",     "Top solid infill",           "Internal infill", "Bridge infill",
+    };
+    return (unsigned)r < ROLE_N ? names[r] : "Custom";
+}
+
+void
+layer_paths_init(struct layer_paths *lp)
+{
+    paths_init(&lp->p);
+    lp->info = NULL;
+    lp->cap_info = 0;
+}
+
+void
+layer_paths_release(struct layer_paths *lp)
+{
+    paths_release(&lp->p);
+    free(lp->info);
+    layer_paths_init(lp);
+}
+
+double
+tp_spacing(double w_mm, double h_mm)
+{
+    return w_mm - h_mm * (1 - M_PI / 4);
+}
+
+/* Append every path of src with the same role. */
+static int
+add(struct layer_paths *lp, const struct paths *src, enum tp_role role, bool closed, double w)
+{
+    for (uint32_t k = 0; k < src->n; k++) {
+        uint32_t n = paths_len(src, k);
+        if (n < (closed ? 3u : 2u))
+            continue;
+        if (lp->p.n + 1 > lp->cap_info) {
+            size_t cap = lp->cap_info;
+            if (!mem_grow((void **)&lp->info, &cap, lp->p.n + 1, sizeof(*lp->info)))
+                return SF_ENOMEM;
+            lp->cap_info = (uint32_t)cap;
+        }
+        if (!paths_add(&lp->p, src->pts + src->start[k], n))
+            return SF_ENOMEM;
+        struct tp_info *i = &lp->info[lp->p.n - 1];
+        i->role = (uint8_t)role;
+        i->closed = closed;
+        i->width_mm = (float)w;
+    }
+    return SF_OK;
+}
+
+/* Lines of one island (or any set) over its bounding box, clipped. */
+static int
+fill_set(const struct paths *region, double angle_deg, double spacing_mm, struct paths *out)
+{
+    struct ipt lo, hi;
+    if (!paths_bbox(region, &lo, &hi) || spacing_mm <= 0)
+        return SF_OK;
+    double a = angle_deg * M_PI / 180, dx = cos(a), dy = sin(a);
+    double nx = -dy, ny = dx; /* line normal */
+    double x[2] = { poly_mm(lo.x), poly_mm(hi.x) }, y[2] = { poly_mm(lo.y), poly_mm(hi.y) };
+    double t0 = INFINITY, t1 = -INFINITY, o0 = INFINITY, o1 = -INFINITY;
+    for (int i = 0; i < 4; i++) {
+        double px = x[i & 1], py = y[i >> 1];
+        double t = px * dx + py * dy, o = px * nx + py * ny;
+        t0 = fmin(t0, t);
+        t1 = fmax(t1, t);
+        o0 = fmin(o0, o);
+        o1 = fmax(o1, o);
+    }
+    t0 -= 1;
+    t1 += 1;
+    struct paths lines, clipped;
+    paths_init(&lines);
+    paths_init(&clipped);
+    int rc = SF_OK;
+    for (double o = ceil(o0 / spacing_mm) * spacing_mm; o <= o1 && rc == SF_OK; o += spacing_mm) {
+        struct ipt seg[2] = { { poly_i(o * nx + t0 * dx), poly_i(o * ny + t0 * dy) },
+                              { poly_i(o * nx + t1 * dx), poly_i(o * ny + t1 * dy) } };
+        if (!paths_add(&lines, seg, 2))
+            rc = SF_ENOMEM;
+    }
+    if (rc == SF_OK && lines.n)
+        rc = clip_lines(&lines, region, &clipped);
+    if (rc == SF_OK && !paths_append(out, &clipped))
+        rc = SF_ENOMEM;
+    paths_release(&lines);
+    paths_release(&clipped);
+    return rc;
+}
+
+int
+tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, struct paths *out)
+{
+    /* island by island: lines cover only their own island's box, so
+       Clipper does not intersect every line with every sliver of a layer */
+    struct paths isl;
+    paths_init(&isl);
+    int rc = SF_OK;
+    for (uint32_t a = 0; a < region->n && rc == SF_OK;) {
+        uint32_t b = a + 1;
+        while (b < region->n && paths_area_k(region, b) < 0)
+            b++;
+        paths_reset(&isl);
+        for (uint32_t k = a; k < b && rc == SF_OK; k++)
+            if (!paths_add(&isl, region->pts + region->start[k], paths_len(region, k)))
+                rc = SF_ENOMEM;
+        if (rc == SF_OK)
+            rc = fill_set(&isl, angle_deg, spacing_mm, out);
+        a = b;
+    }
+    paths_release(&isl);
+    return rc;
+}
+
+/* Squared distance between two points, in units^2. */
+static double
+d2(struct ipt a, struct ipt b)
+{
+    double dx = (double)(a.x - b.x), dy = (double)(a.y - b.y);
+    return dx * dx + dy * dy;
+}
+
+static bool
+link_inside(const struct paths_index *g, struct ipt a, struct ipt b)
+{
+    for (int i = 1; i <= 3; i++) {
+        struct ipt q = { a.x + (b.x - a.x) * i / 4, a.y + (b.y - a.y) * i / 4 };
+        if (!paths_index_contains(g, q))
+            return false;
+    }
+    return true;
+}
+
+/* Endpoints of a line set bucketed in square cells (CSR), for near-end queries. */
+struct ends {
+    int64_t x0, y0, cell;
+    uint32_t nx, ny;
+    uint32_t *first; /* nx*ny + 1 offsets into ids */
+    uint32_t *ids;   /* 2 * line + (0: start, 1: end) */
+};
+
+static int
+ends_build(struct ends *e, const struct paths *lines, double cell_mm)
+{
+    struct ipt lo, hi;
+    memset(e, 0, sizeof(*e));
+    if (!paths_bbox(lines, &lo, &hi))
+        return SF_OK;
+    e->cell = poly_i(cell_mm) > 0 ? poly_i(cell_mm) : 1;
+    e->x0 = lo.x;
+    e->y0 = lo.y;
+    uint64_t nx = (uint64_t)((hi.x - lo.x) / e->cell) + 1,
+             ny = (uint64_t)((hi.y - lo.y) / e->cell) + 1;
+    while (nx * ny > 4u * lines->n + 64) { /* keep the table small: coarser cells */
+        e->cell *= 2;
+        nx = (uint64_t)((hi.x - lo.x) / e->cell) + 1;
+        ny = (uint64_t)((hi.y - lo.y) / e->cell) + 1;
+    }
+    e->nx = (uint32_t)nx;
+    e->ny = (uint32_t)ny;
+    e->first = mem_calloc(nx * ny + 1, sizeof(*e->first));
+    e->ids = mem_array(2 * (size_t)lines->n, sizeof(*e->ids));
+    uint32_t *fill = mem_array(nx * ny, sizeof(*fill));
+    if (!e->first || !e->ids || !fill) {
+        free(fill);
+        return SF_ENOMEM;
+    }
+    for (int pass = 0; pass < 2; pass++) {
+        for (uint32_t k = 0; k < 2 * lines->n; k++) {
+            uint32_t l = k / 2;
+            struct ipt q = lines->pts[k % 2 ? lines->start[l + 1] - 1 : lines->start[l]];
+            size_t c =
+                (size_t)((q.y - e->y0) / e->cell) * e->nx + (size_t)((q.x - e->x0) / e->cell);
+            if (pass == 0)
+                e->first[c + 1]++;
+            else
+                e->ids[fill[c]++] = k;
+        }
+        if (pass == 0) {
+            for (size_t c = 0; c < nx * ny; c++)
+                e->first[c + 1] += e->first[c];
+            memcpy(fill, e->first, nx * ny * sizeof(*fill));
+        }
+    }
+    free(fill);
+    return SF_OK;
+}
+
+static void
+ends_release(struct ends *e)
+{
+    free(e->first);
+    free(e->ids);
+}
+
+int
+tp_link(struct paths *lines, const struct paths *region, double link_max_mm, double grow_mm)
+{
+    uint32_t n = lines->n;
+    if (n < 2)
+        return SF_OK;
+    struct paths g, out;
+    struct ends e = { 0 };
+    paths_init(&g);
+    paths_init(&out);
+    uint8_t *used = mem_calloc(n, 1);
+    int rc = used ? ends_build(&e, lines, link_max_mm) : SF_ENOMEM;
+    if (rc == SF_OK)
+        rc = clip_offset(region, grow_mm, CLIP_JOIN_MITER, &g);
+    struct paths_index gi = { 0 };
+    if (rc == SF_OK && !paths_index_init(&gi, &g))
+        rc = SF_ENOMEM;
+    double lim2 = link_max_mm * POLY_SCALE * link_max_mm * POLY_SCALE;
+    for (uint32_t s0 = 0; s0 < n && rc == SF_OK; s0++) {
+        if (used[s0])
+            continue;
+        used[s0] = 1;
+        const struct ipt *q = lines->pts + lines->start[s0];
+        uint32_t m = paths_len(lines, s0);
+        if (!paths_begin(&out)) {
+            rc = SF_ENOMEM;
+            break;
+        }
+        for (uint32_t i = 0; i < m && rc == SF_OK; i++)
+            if (!paths_push(&out, q[i]))
+                rc = SF_ENOMEM;
+        struct ipt end = q[m - 1];
+        for (;;) {
+            /* the nearest free line end, if close enough and the link stays inside */
+            double best = lim2;
+            uint32_t bk = UINT32_MAX;
+            bool brev = false;
+            long cx = (long)((end.x - e.x0) / e.cell), cy = (long)((end.y - e.y0) / e.cell);
+            for (long y = cy - 1; y <= cy + 1; y++) {
+                for (long x = cx - 1; x <= cx + 1; x++) {
+                    if (x < 0 || y < 0 || x >= (long)e.nx || y >= (long)e.ny)
+                        continue;
+                    size_t c = (size_t)y * e.nx + (size_t)x;
+                    for (uint32_t i = e.first[c]; i < e.first[c + 1]; i++) {
+                        uint32_t id = e.ids[i], k = id / 2;
+                        if (used[k])
+                            continue;
+                        struct ipt r =
+                            lines->pts[id % 2 ? lines->start[k + 1] - 1 : lines->start[k]];
+                        double d = d2(end, r);
+                        if (d < best || (d == best && k < bk))
+                            best = d, bk = k, brev = id % 2;
+                    }
+                }
+            }
+            if (bk == UINT32_MAX)
+                break;
+            const struct ipt *r = lines->pts + lines->start[bk];
+            uint32_t rm = paths_len(lines, bk);
+            if (!link_inside(&gi, end, brev ? r[rm - 1] : r[0]))
+                break;
+            used[bk] = 1;
+            for (uint32_t i = 0; i < rm && rc == SF_OK; i++)
+                if (!paths_push(&out, brev ? r[rm - 1 - i] : r[i]))
+                    rc = SF_ENOMEM;
+            end = brev ? r[0] : r[rm - 1];
+        }
+    }
+    if (rc == SF_OK)
+        paths_move(lines, &out);
+    free(used);
+    paths_index_release(&gi);
+    ends_release(&e);
+    paths_release(&g);
+    paths_release(&out);
+    return rc;
+}
+
+/* Where a line end sits on the region's boundary. */
+struct bpos {
+    uint32_t line, end;  /* end 0: first point, 1: last */
+    uint32_t path, a, b; /* boundary path and the edge's point indices (global) */
+    double s;            /* arc length from the path's first point, mm */
+    double stub;         /* anchor length, mm */
+};
+
+static int
+cmp_bpos(const void *x, const void *y)
+{
+    const struct bpos *p = x, *q = y;
+    if (p->path != q->path)
+        return p->path < q->path ? -1 : 1;
+    return p->s < q->s ? -1 : p->s > q->s;
+}
+
+static double
+dist_mm(struct ipt a, struct ipt b)
+{
+    return hypot((double)(a.x - b.x), (double)(a.y - b.y)) / POLY_SCALE;
+}
+
+/* Points of the walk forward along the boundary from pos for len mm (excluding the start). */
+static bool
+walk(const struct paths *r, const struct bpos *pos, struct ipt from, double len, struct paths *out)
+{
+    uint32_t s0 = r->start[pos->path], n = paths_len(r, pos->path);
+    uint32_t b = pos->b;
+    struct ipt cur = from;
+    for (uint32_t steps = 0; steps < n && len > 1e-6; steps++) {
+        struct ipt nx = r->pts[b];
+        double d = dist_mm(cur, nx);
+        if (d >= len) {
+            double t = len / d;
+            struct ipt q = { cur.x + (int64_t)llround((double)(nx.x - cur.x) * t),
+                             cur.y + (int64_t)llround((double)(nx.y - cur.y) * t) };
+            return paths_push(out, q);
+        }
+        if (!paths_push(out, nx))
+            return false;
+        len -= d;
+        cur = nx;
+        b = s0 + (b - s0 + 1) % n;
+    }
+    return true;
+}
+
+int
+tp_anchor(struct paths *lines, const struct paths *region, double len_mm)
+{
+    uint32_t n = lines->n;
+    if (!n || !region->n || len_mm <= 0)
+        return SF_OK;
+    struct paths_index ix = { 0 };
+    struct paths out, stub;
+    paths_init(&out);
+    paths_init(&stub);
+    size_t np = region->start[region->n];
+    double *cum = mem_array(np + 1, sizeof(*cum));
+    uint32_t *path_of = mem_array(np + 1, sizeof(*path_of));
+    struct bpos *bp = mem_array(2 * (size_t)n, sizeof(*bp));
+    int32_t *slot = mem_array(2 * (size_t)n, sizeof(*slot)); /* (line, end) -> index in bp or -1 */
+    int rc = cum && path_of && bp && slot && paths_index_init(&ix, region) ? SF_OK : SF_ENOMEM;
+    if (rc < 0)
+        goto out;
+    for (uint32_t k = 0; k < region->n; k++) {
+        double c = 0;
+        for (uint32_t i = region->start[k]; i < region->start[k + 1]; i++) {
+            cum[i] = c;
+            path_of[i] = k;
+            uint32_t j = i + 1 < region->start[k + 1] ? i + 1 : region->start[k];
+            c += dist_mm(region->pts[i], region->pts[j]);
+        }
+    }
+    /* locate every line end on its boundary edge */
+    size_t nb = 0;
+    for (uint32_t l = 0; l < n; l++) {
+        for (uint32_t e = 0; e < 2; e++) {
+            slot[2 * l + e] = -1;
+            struct ipt q = lines->pts[e ? lines->start[l + 1] - 1 : lines->start[l]];
+            uint32_t band = band_of_index(&ix, q.y);
+            double best = 4.0; /* units^2: Clipper rounds intersections to the unit */
+            uint32_t ba = 0, bb = 0;
+            bool found = false;
+            for (uint32_t i = ix.first[band]; i < ix.first[band + 1]; i++) {
+                struct ipt a = ix.pts[ix.edges[i][0]], b = ix.pts[ix.edges[i][1]];
+                double dx = (double)(b.x - a.x), dy = (double)(b.y - a.y);
+                double px = (double)(q.x - a.x), py = (double)(q.y - a.y);
+                double l2 = dx * dx + dy * dy, t = l2 > 0 ? (px * dx + py * dy) / l2 : 0;
+                t = t < 0 ? 0 : t > 1 ? 1 : t;
+                double ex = px - t * dx, ey = py - t * dy, d = ex * ex + ey * ey;
+                if (d <= best) {
+                    best = d;
+                    ba = ix.edges[i][0];
+                    bb = ix.edges[i][1];
+                    found = true;
+                }
+            }
+            if (!found)
+                continue;
+            struct bpos *p = &bp[nb];
+            p->line = l;
+            p->end = e;
+            p->path = path_of[ba];
+            p->a = ba;
+            p->b = bb;
+            p->s = cum[ba] + dist_mm(region->pts[ba], q);
+            nb++;
+        }
+    }
+    qsort(bp, nb, sizeof(*bp), cmp_bpos);
+    for (size_t i = 0; i < nb; i++) {
+        uint32_t k = bp[i].path;
+        uint32_t last = region->start[k + 1] - 1;
+        double per = cum[last] + dist_mm(region->pts[last], region->pts[region->start[k]]);
+        size_t j = i + 1 < nb && bp[i + 1].path == k ? i + 1 : i;
+        if (j == i) /* wrap to the first end on this path */
+            while (j > 0 && bp[j - 1].path == k)
+                j--;
+        double gap = j == i ? per : bp[j].s - bp[i].s;
+        if (gap <= 0)
+            gap += per;
+        bp[i].stub = fmin(len_mm, 0.45 * gap);
+        slot[2 * bp[i].line + bp[i].end] = (int32_t)i;
+    }
+    for (uint32_t l = 0; l < n && rc == SF_OK; l++) {
+        const struct ipt *q = lines->pts + lines->start[l];
+        uint32_t m = paths_len(lines, l);
+        if (!paths_begin(&out)) {
+            rc = SF_ENOMEM;
+            break;
+        }
+        if (slot[2 * l] >= 0) { /* the start's stub, walked out then reversed */
+            paths_reset(&stub);
+            if (!paths_begin(&stub) ||
+                !walk(region, &bp[slot[2 * l]], q[0], bp[slot[2 * l]].stub, &stub))
+                rc = SF_ENOMEM;
+            for (uint32_t i = rc == SF_OK ? paths_len(&stub, 0) : 0; i-- > 0;)
+                if (!paths_push(&out, stub.pts[i]))
+                    rc = SF_ENOMEM;
+        }
+        for (uint32_t i = 0; i < m && rc == SF_OK; i++)
+            if (!paths_push(&out, q[i]))
+                rc = SF_ENOMEM;
+        if (rc == SF_OK && slot[2 * l + 1] >= 0)
+            if (!walk(region, &bp[slot[2 * l + 1]], q[m - 1], bp[slot[2 * l + 1]].stub, &out))
+                rc = SF_ENOMEM;
+    }
+    if (rc == SF_OK)
+        paths_move(lines, &out);
+out:
+    paths_index_release(&ix);
+    paths_release(&out);
+    paths_release(&stub);
+    free(cum);
+    free(path_of);
+    free(bp);
+    free(slot);
+    return rc;
+}
+
+/* out = intersection of the inner areas of layers [a, b); empty if the
+   range leaves the stack (a surface is within reach). */
+static int
+intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
+{
+    paths_reset(out);
+    if (a < 0 || b > (long)s->n)
+        return SF_OK;
+    struct paths tmp;
+    paths_init(&tmp);
+    if (!paths_append(out, &s->l[a].inner)) {
+        paths_release(&tmp);
+        return SF_ENOMEM;
+    }
+    int rc = SF_OK;
+    for (long j = a + 1; j < b && rc == SF_OK && out->n; j++) {
+        rc = clip_bool(CLIP_INTERSECTION, out, &s->l[j].inner, CLIP_NONZERO, &tmp);
+        paths_move(out, &tmp);
+    }
+    paths_release(&tmp);
+    return rc;
+}
+
+int
+toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
+{
+    struct layer *L = &s->l[k];
+    double sp = tp_spacing(p->width_mm, L->h_mm);
+    paths_reset(&L->inner);
+    paths_reset(&L->skin);
+    int rc;
+    if (p->perimeters > 0)
+        rc = clip_offset(&L->region, -(p->width_mm / 2 + (p->perimeters - 1) * sp + sp / 2),
+                         CLIP_JOIN_MITER, &L->inner);
+    else
+        rc = paths_append(&L->inner, &L->region) ? SF_OK : SF_ENOMEM;
+    if (rc < 0 || !L->inner.n || p->skin_margin_mm <= 0)
+        return rc;
+    /* the seed of the skins: inner area open to the air above or below */
+    struct paths a, b, c;
+    paths_init(&a);
+    paths_init(&b);
+    paths_init(&c);
+    if (k + 1 < s->n)
+        rc = clip_bool(CLIP_DIFFERENCE, &L->inner, &s->l[k + 1].region, CLIP_NONZERO, &a);
+    else if (!paths_append(&a, &L->inner))
+        rc = SF_ENOMEM;
+    if (rc == SF_OK && k > 0)
+        rc = clip_bool(CLIP_DIFFERENCE, &L->inner, &s->l[k - 1].region, CLIP_NONZERO, &b);
+    else if (rc == SF_OK && !paths_append(&b, &L->inner))
+        rc = SF_ENOMEM;
+    if (rc == SF_OK && !paths_append(&a, &b))
+        rc = SF_ENOMEM;
+    /* slivers thinner than a line are the shell's business, not a surface */
+    if (rc == SF_OK)
+        rc = clip_offset(&a, -p->solid_width_mm / 2, CLIP_JOIN_MITER, &b);
+    if (rc == SF_OK && b.n)
+        rc = clip_offset(&b, p->solid_width_mm / 2 + p->skin_margin_mm, CLIP_JOIN_SQUARE, &c);
+    if (rc == SF_OK && c.n)
+        rc = clip_bool(CLIP_INTERSECTION, &c, &L->inner, CLIP_NONZERO, &L->skin);
+    paths_release(&a);
+    paths_release(&b);
+    paths_release(&c);
+    return rc;
+}
+
+enum { T_AREA, T_TMP, T_TOPI, T_BOTI, T_KEEP, T_SOLID, T_TOP, T_SPARSE, T_LINES, T_N };
+
+int
+toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+               const struct support_layer *sup, struct layer_paths *out)
+{
+    const struct layer *L = &s->l[k];
+    double h = L->h_mm, w = p->width_mm, sw = p->solid_width_mm;
+    double sp = tp_spacing(w, h), ssp = tp_spacing(sw, h);
+    struct paths t[T_N];
+    for (int i = 0; i < T_N; i++)
+        paths_init(&t[i]);
+    int rc = SF_OK;
+#define TRY(x)                                                                                     \
+    do {                                                                                           \
+        if ((rc = (x)) < 0)                                                                        \
+            goto out;                                                                              \
+    } while (0)
+
+    /* support first: it is printed before the part it holds */
+    if (sup && sup->body.n) {
+        TRY(clip_offset(&sup->body, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
+        TRY(add(out, &t[T_TMP], ROLE_SUPPORT, true, sw));
+        paths_reset(&t[T_LINES]);
+        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, p->support_spacing_mm, &t[T_LINES]));
+        TRY(tp_link(&t[T_LINES], &t[T_TMP], 1.5 * p->support_spacing_mm, sw / 2));
+        TRY(add(out, &t[T_LINES], ROLE_SUPPORT, false, sw));
+    }
+    if (sup && sup->iface.n) {
+        paths_reset(&t[T_LINES]);
+        TRY(clip_offset(&sup->iface, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
+        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, ssp, &t[T_LINES]));
+        TRY(tp_link(&t[T_LINES], &t[T_TMP], 2 * ssp, sw / 2));
+        TRY(add(out, &t[T_LINES], ROLE_INTERFACE, false, sw));
+    }
+
+    /* perimeters, inner loops first, external last */
+    for (int i = p->perimeters - 1; i >= 0; i--) {
+        TRY(clip_offset(&L->region, -(w / 2 + i * sp), CLIP_JOIN_MITER, &t[T_TMP]));
+        TRY(add(out, &t[T_TMP], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w));
+    }
+    if (!paths_append(&t[T_AREA], &L->inner))
+        TRY(SF_ENOMEM);
+    if (!t[T_AREA].n)
+        goto out;
+
+    /* skins: solid where a top or bottom surface is within reach */
+    TRY(intersect_range(s, (long)k + 1, (long)k + 1 + p->top_layers, &t[T_TOPI]));
+    if (p->top_layers == 0 && !paths_append(&t[T_TOPI], &t[T_AREA]))
+        TRY(SF_ENOMEM);
+    TRY(intersect_range(s, (long)k - p->bottom_layers, (long)k, &t[T_BOTI]));
+    if (p->bottom_layers == 0 && !paths_append(&t[T_BOTI], &t[T_AREA]))
+        TRY(SF_ENOMEM);
+    TRY(clip_bool(CLIP_INTERSECTION, &t[T_TOPI], &t[T_BOTI], CLIP_NONZERO, &t[T_KEEP]));
+    TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_KEEP], CLIP_NONZERO, &t[T_SOLID]));
+    if (p->skin_margin_mm > 0) {
+        /* surfaces within reach above and below, grown into the infill
+           (PrusaSlicer 2.5 anchors them 3 mm: EXTERNAL_INFILL_MARGIN) */
+        paths_reset(&t[T_LINES]);
+        for (long j = (long)k - p->bottom_layers + 1; j < (long)k + p->top_layers; j++)
+            if (j >= 0 && j < (long)s->n && !paths_append(&t[T_LINES], &s->l[j].skin))
+                TRY(SF_ENOMEM);
+        if (t[T_LINES].n) {
+            if (!paths_append(&t[T_LINES], &t[T_SOLID]))
+                TRY(SF_ENOMEM);
+            TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_TMP]));
+            TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+        }
+    }
+    TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
+    if (p->top_layers > 0) {
+        /* the part of the solid the next layer does not cover is the top surface */
+        if (k + 1 < s->n) {
+            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
+                          &t[T_TOP]));
+            TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
+                          &t[T_TMP]));
+            paths_move(&t[T_SOLID], &t[T_TMP]);
+        } else {
+            paths_move(&t[T_TOP], &t[T_SOLID]);
+        }
+    }
+    double ang = k % 2 ? 135 : 45;
+    if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0) {
+        /* solid over air is a bridge; slivers narrower than the nozzle are not */
+        double nz = p->nozzle_mm;
+        TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &s->l[k - 1].region, CLIP_NONZERO, &t[T_TMP]));
+        TRY(clip_offset(&t[T_TMP], -nz / 2, CLIP_JOIN_MITER, &t[T_KEEP]));
+        TRY(clip_offset(&t[T_KEEP], nz / 2, CLIP_JOIN_MITER, &t[T_TMP]));
+        if (t[T_TMP].n) {
+            TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_SOLID], CLIP_NONZERO, &t[T_KEEP]));
+            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
+            paths_move(&t[T_SOLID], &t[T_TMP]);
+            paths_reset(&t[T_LINES]);
+            TRY(tp_fill_lines(&t[T_KEEP], ang, nz + 0.05, &t[T_LINES]));
+            TRY(tp_link(&t[T_LINES], &t[T_KEEP], 2 * (nz + 0.05), nz / 2));
+            TRY(add(out, &t[T_LINES], ROLE_BRIDGE, false, nz));
+        }
+    }
+    paths_reset(&t[T_LINES]);
+    TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, &t[T_LINES]));
+    TRY(tp_link(&t[T_LINES], &t[T_SOLID], 2 * ssp, sw / 2));
+    TRY(add(out, &t[T_LINES], ROLE_SOLID, false, sw));
+    paths_reset(&t[T_LINES]);
+    TRY(tp_fill_lines(&t[T_TOP], ang, ssp, &t[T_LINES]));
+    TRY(tp_link(&t[T_LINES], &t[T_TOP], 2 * ssp, sw / 2));
+    TRY(add(out, &t[T_LINES], ROLE_TOP, false, sw));
+    if (p->infill_density > 0 && t[T_SPARSE].n) {
+        paths_reset(&t[T_LINES]);
+        if (strcmp(p->infill_pattern, "grid") == 0) {
+            double gsp = 2 * sp / p->infill_density;
+            TRY(tp_fill_lines(&t[T_SPARSE], 45, gsp, &t[T_LINES]));
+            TRY(tp_fill_lines(&t[T_SPARSE], 135, gsp, &t[T_LINES]));
+        } else {
+            TRY(tp_fill_lines(&t[T_SPARSE], ang, sp / p->infill_density, &t[T_LINES]));
+        }
+        TRY(tp_anchor(&t[T_LINES], &t[T_SPARSE], p->infill_anchor_mm));
+        TRY(add(out, &t[T_LINES], ROLE_INFILL, false, w));
+    }
+#undef TRY
+out:
+    for (int i = 0; i < T_N; i++)
+        paths_release(&t[i]);
+    return rc;
+}

@@ -1,0 +1,112 @@
+/*
+ * toolpath.h - what the nozzle draws on each layer: perimeters, solid and
+ * sparse infill, support, each path tagged with its role and line width.
+ *
+ * Per layer, from the cross-sections (layers.h) and the support regions
+ * (support.h): perimeter loops by inward offsets of the region (outermost
+ * is the external perimeter); the rest is the infill area, split into
+ * top solid (not covered by the layer above), other solid (wherever the
+ * areas inside the perimeters of the top_layers above and bottom_layers
+ * below do not all cover it: this keeps the shell thick on slopes too,
+ * like PrusaSlicer's "ensure vertical shell thickness") and sparse infill (grid or
+ * rectilinear lines at a spacing set by the density).  Paths come in
+ * print order of roles: support, interface, perimeters (inner first,
+ * external last), solid, top, sparse.
+ *
+ * Line geometry follows PrusaSlicer's flow model: a line of width w on
+ * layer h has cross-section h (w - h (1 - pi/4)), which is also the
+ * spacing between neighbouring lines, so length x spacing x h is the
+ * volume laid down.
+ *
+ * Thread: toolpath_layer on distinct outputs is reentrant.
+ */
+#ifndef SF_SLICER_TOOLPATH_H
+#define SF_SLICER_TOOLPATH_H
+
+#include <stdint.h>
+
+#include "layers.h"
+#include "poly.h"
+#include "profile.h"
+
+enum tp_role {
+    ROLE_SUPPORT,
+    ROLE_INTERFACE,
+    ROLE_PERIMETER,
+    ROLE_EXT_PERIMETER,
+    ROLE_SOLID,
+    ROLE_TOP,
+    ROLE_INFILL,
+    ROLE_BRIDGE, /* solid over air: round lines of nozzle width, bridge speed */
+    ROLE_N
+};
+
+/* PrusaSlicer's ;TYPE: name of a role ("External perimeter"). */
+const char *tp_role_name(enum tp_role r);
+/* True for the two support roles. */
+static inline int
+tp_role_is_support(int r)
+{
+    return r == ROLE_SUPPORT || r == ROLE_INTERFACE;
+}
+
+struct tp_info {
+    uint8_t role;   /* enum tp_role */
+    uint8_t closed; /* a loop: the writer returns to its first point */
+    float width_mm;
+};
+
+/* The paths of one layer; info[k] describes path k of p. */
+struct layer_paths {
+    struct paths p;
+    struct tp_info *info;
+    uint32_t cap_info;
+};
+
+void layer_paths_init(struct layer_paths *lp);
+void layer_paths_release(struct layer_paths *lp);
+
+/* Spacing of lines of width w on layer height h (the flow model). */
+double tp_spacing(double w_mm, double h_mm);
+
+/* Support regions of one layer: the body and its dense interface. */
+struct support_layer {
+    struct paths body, iface;
+};
+
+/*
+ * Compute s->l[k].inner, the area inside layer k's perimeters.  Every
+ * layer's inner must exist before toolpath_layer runs on any layer.
+ */
+int toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p);
+
+/*
+ * Build the paths of layer k of s (after toolpath_areas on all layers).  sup (may be NULL) is that
+ * layer's support.  SF_ENOMEM / SF_EBUG (Clipper).
+ */
+int toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                   const struct support_layer *sup, struct layer_paths *out);
+
+/*
+ * Parallel lines at angle_deg, spacing_mm apart (aligned to the bed origin
+ * so layers line up), clipped to region, appended to out as open paths.
+ */
+int tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm,
+                  struct paths *out);
+
+/*
+ * Join lines end to end into zig-zag polylines: from each line's end to
+ * the nearest free line end within link_max_mm, if the link stays inside
+ * region grown by grow_mm (sampled at 3 points).  Replaces lines.
+ */
+int tp_link(struct paths *lines, const struct paths *region, double link_max_mm, double grow_mm);
+
+/*
+ * Anchor open lines clipped to region: each end gets a stub that follows
+ * the region's boundary forward for up to len_mm, and never more than
+ * 0.45 of the way to the next line end on that boundary (PrusaSlicer's
+ * infill anchors, 600 % of the line width by default).  Replaces lines.
+ */
+int tp_anchor(struct paths *lines, const struct paths *region, double len_mm);
+
+#endif

@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# bench_slice.sh BUILD - our slicer against PrusaSlicer 2.5 (shared/peers)
+# on the shared meshes, supports off and on, same settings (0.2 mm, 2
+# perimeters, 4/3 solid, 15 % grid, 0.45 mm lines, PrusaSlicer's stock
+# speeds and machine limits, which are our defaults).  Prints one table
+# row per mesh: filament (g) and estimated time (min) of both slicers with
+# the ratio, support grams, and slicing wall time (best of 3 for ours, one
+# run for PrusaSlicer, startup included in both).
+# BENCH_MESHES="a.stl b.stl" picks meshes; BENCH_PEERS=0 skips PrusaSlicer.
+set -u
+build=${1:-build/rel}
+shared=${SLIMFARM_SHARED:-../shared}
+bin="$build/bin/slimfarm"
+[ -x "$bin" ] || { echo "bench_slice: $bin not built"; exit 1; }
+if [ -n "${BENCH_MESHES:-}" ]; then meshes=($BENCH_MESHES)
+elif [ -d "$shared/meshes" ]; then meshes=("$shared"/meshes/*.stl)
+else echo "bench_slice: no $shared/meshes, nothing to compare"; exit 0; fi
+peers=${BENCH_PEERS:-1}
+if [ "$peers" = 1 ] && ! command -v prusa-slicer >/dev/null; then
+  echo "bench_slice: prusa-slicer missing (make bench installs it); ours only"; peers=0
+fi
+work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
+
+# ours: best-of-3 wall time and the figures printed by `slimfarm slice`
+ours() { # mesh support(on|off) -> "g min support_g wall_s layers"
+  local best=999999 line flag=""
+  [ "$2" = off ] && flag=--no-support
+  for _ in 1 2 3; do
+    local t0 t1
+    t0=$(date +%s.%N)
+    line=$("$bin" slice "$1" -o "$work/o.gcode" $flag 2>/dev/null) || { echo "0 0 0 0 0"; return; }
+    t1=$(date +%s.%N)
+    best=$(awk -v a="$best" -v b="$(echo "$t1 - $t0" | bc)" 'BEGIN { print (b < a ? b : a) }')
+  done
+  local g sg layers secs
+  g=$(sed -n 's/.*filament [0-9]* mm \([0-9.]*\) g.*/\1/p' <<<"$line")
+  sg=$(sed -n 's/.*(support \([0-9.]*\) g).*/\1/p' <<<"$line")
+  layers=$(sed -n 's/.*: \([0-9]*\) layers.*/\1/p' <<<"$line")
+  secs=$(sed -n 's/^; estimated printing time \[s\] = //p' "$work/o.gcode")
+  echo "$g $(awk -v s="$secs" 'BEGIN { printf "%.1f", s / 60 }') $sg $best $layers"
+}
+peer() { # mesh support -> "g min support_g wall_s layers"
+  local row
+  row=$(PEER_RUNS="prusaslicer:$2" bash "$shared/peers/slice-peers.sh" "$1" --format csv 2>/dev/null | tail -n 1)
+  python3 - "$row" <<'PY'
+import sys, csv
+r = next(csv.reader([sys.argv[1]]))
+try:
+    h = "mesh,triangles,manifold,slicer,version,support,angle_deg,rc,wall_s,max_rss_mb,filament_mm,filament_g,support_mm,support_g,est_time_s,layers,slicer_filament_mm".split(",")
+    d = dict(zip(h, r))
+    print(d["filament_g"], "%.1f" % (float(d["est_time_s"]) / 60), d["support_g"], d["wall_s"], d["layers"])
+except Exception:
+    print("0 0 0 0 0")
+PY
+}
+printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | ours support g | PS support g | ours wall s | PS wall s | wall ratio |\n'
+printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+for m in "${meshes[@]}"; do
+  for sup in off on; do
+    read -r og omin osg ow ol <<<"$(ours "$m" "$sup")"
+    if [ "$peers" = 1 ]; then read -r pg pmin psg pw pl <<<"$(peer "$m" "$sup")"
+    else pg=0 pmin=0 psg=0 pw=0; fi
+    awk -v m="$(basename "$m")" -v s="$sup" -v og="$og" -v pg="$pg" -v omin="$omin" -v pmin="$pmin" \
+        -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
+      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.2f | %.2f | %.2f | %.2f | %s |\n",
+              m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), osg, psg, ow, pw, r(ow, pw) }'
+  done
+done

@@ -1,0 +1,148 @@
+/*
+ * test_slice_estimate.c - the planner against hand computations on short
+ * move sequences, and the interpreter's modes (relative E, G92, roles).
+ */
+#include <math.h>
+#include <string.h>
+
+#include "../../slicer/estimate.h"
+#include "../t.h"
+
+static void
+limits(struct est_limits *l, double accel, double jerk)
+{
+    memset(l, 0, sizeof(*l));
+    for (int a = 0; a < 4; a++) {
+        l->max_feed_mm_s[a] = 1000;
+        l->jerk_mm_s[a] = jerk;
+    }
+    l->accel_extrude_mm_s2 = l->accel_travel_mm_s2 = l->accel_retract_mm_s2 = accel;
+}
+
+static double
+est(const char *g, const struct est_limits *l, struct estimate *e)
+{
+    struct sf_err err;
+    if (estimate_gcode(g, strlen(g), "t", l, NULL, NULL, e, &err) < 0)
+        return -1;
+    double t = e->time_s;
+    return t;
+}
+
+T_CASE(estimate_single_move_triangle_profile)
+{
+    /* 10 mm at 100 mm/s, 1000 mm/s^2, no jerk: accelerates 5 mm, brakes
+       5 mm, never cruises: t = 2 sqrt(L / a) = 0.2 s */
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 0);
+    T_EQ_DBL(est("G1 X10 F6000\n", &l, &e), 0.2, 1e-6);
+    estimate_release(&e);
+}
+
+T_CASE(estimate_single_move_with_jerk)
+{
+    /* jerk 10: starts and ends at 10 mm/s; 4.95 mm up, 4.95 mm down,
+       0.1 mm at 100 mm/s: 0.09 + 0.09 + 0.001 = 0.181 s */
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 10);
+    T_EQ_DBL(est("G1 X10 F6000\n", &l, &e), 0.181, 1e-6);
+    estimate_release(&e);
+    /* split in two collinear halves: the junction runs at full speed */
+    T_EQ_DBL(est("G1 X5 F6000\nG1 X10\n", &l, &e), 0.181, 1e-6);
+    estimate_release(&e);
+}
+
+T_CASE(estimate_right_angle_corner)
+{
+    /* X then Y at 100 mm/s, jerk 10: the corner is taken at 10 mm/s (the
+       X axis may drop by at most 10), so each leg is the 0.181 s above */
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 10);
+    T_EQ_DBL(est("G1 X10 F6000\nG1 Y10\n", &l, &e), 0.362, 1e-6);
+    estimate_release(&e);
+    /* a reversal: the same, by Marlin's rule (max of the two speeds) */
+    T_EQ_DBL(est("G1 X10 F6000\nG1 X0\n", &l, &e), 0.362, 1e-6);
+    estimate_release(&e);
+}
+
+T_CASE(estimate_cruise_and_feed_cap)
+{
+    /* 100 mm at F6000 but X capped at 50 mm/s: 50 mm/s cruise,
+       accel 0.025 s over 0.625 mm at each end: 0.05 + 98.75 / 50 = 2.025 s */
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 2000, 0);
+    l.max_feed_mm_s[0] = 50;
+    T_EQ_DBL(est("G1 X100 F6000\n", &l, &e), 2.025, 1e-6);
+    estimate_release(&e);
+}
+
+T_CASE(estimate_filament_modes_and_roles)
+{
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 10);
+    const char *abs_e = "M82\nG92 E0\n;LAYER_CHANGE\nG1 X10 E1 F1200\nG1 E0.2\n"
+                        ";TYPE:Support material\nG1 X20 E1.7\nG92 E0\n;LAYER_CHANGE\n"
+                        ";TYPE:Perimeter\nG1 Y10 E0.5\nG4 S2\n";
+    T_TRUE(est(abs_e, &l, &e) > 2);
+    T_EQ_DBL(e.filament_mm, 1 + 1.5 + 0.5, 1e-9);
+    T_EQ_DBL(e.support_mm, 1.5, 1e-9);
+    T_EQ_INT(e.n_layers, 2);
+    T_TRUE(e.layer_start_s[1] > e.layer_start_s[0]);
+    estimate_release(&e);
+    const char *rel_e = "M83\nG1 X10 E1 F1200\nG1 E-0.8\nG1 E0.8\nG91\nG1 X10 E1\n";
+    T_TRUE(est(rel_e, &l, &e) > 0);
+    T_EQ_DBL(e.filament_mm, 2, 1e-9);
+    T_EQ_INT(e.n_moves, 4);
+    estimate_release(&e);
+}
+
+T_CASE(estimate_bad_line_names_it)
+{
+    struct est_limits l;
+    struct estimate e;
+    struct sf_err err;
+    limits(&l, 1000, 10);
+    const char *g = "G1 X1\nG1 X\xff"
+                    "5\n";
+    int rc = estimate_gcode(g, strlen(g), "part.gcode", &l, NULL, NULL, &e, &err);
+    T_TRUE(rc == SF_OK || (rc == SF_EINVAL && strstr(err.msg, "part.gcode:2") != NULL));
+}
+
+T_CASE(estimate_rejects_absurd_coordinates)
+{
+    struct est_limits l;
+    struct estimate e;
+    struct sf_err err;
+    limits(&l, 1000, 10);
+    const char *g = "G1 X10\nG1 X2000000\n";
+    T_ERR(estimate_gcode(g, strlen(g), "big.gcode", &l, NULL, NULL, &e, &err), SF_EINVAL, &err,
+          "big.gcode:2: X2e+06 is out of range");
+}
+
+T_CASE(estimate_junction_deviation_corner)
+{
+    /* JD 0.05 mm, 1000 mm/s^2, 100 mm/s, no jerk (start and end at rest):
+       a 90 degree corner allows v = sqrt(a * jd * s / (1 - s)), s = sin 45;
+       each 10 mm leg: up from 0 to 100, cruise, down to v (or the mirror) */
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 0);
+    l.junction_dev_mm = 0.05;
+    double a = 1000, vn = 100, len = 10, s = sqrt(0.5);
+    double v = sqrt(a * 0.05 * s / (1 - s));
+    double d_up = vn * vn / (2 * a), d_down = (vn * vn - v * v) / (2 * a);
+    double leg = vn / a + (vn - v) / a + (len - d_up - d_down) / vn;
+    T_EQ_DBL(est("G1 X10 F6000\nG1 Y10\n", &l, &e), 2 * leg, 1e-6);
+    estimate_release(&e);
+    /* straight on: no limit at the junction */
+    double two = est("G1 X10 F6000\nG1 X20\n", &l, &e);
+    estimate_release(&e);
+    double one = est("G1 X20 F6000\n", &l, &e);
+    estimate_release(&e);
+    T_EQ_DBL(two, one, 1e-9);
+}

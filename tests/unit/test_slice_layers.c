@@ -1,0 +1,245 @@
+/*
+ * test_slice_layers.c - cross-sections of analytic shapes: exact areas per
+ * layer, holes, vertices lying exactly on a cutting plane, sliver
+ * triangles, an open mesh.
+ */
+#include <math.h>
+
+#include "../../slicer/clip_shim.h"
+#include "../../slicer/layers.h"
+#include "../../slicer/toolpath.h"
+#include "../t.h"
+#include "slice_shapes.h"
+
+T_CASE(slice_cube_layers_and_area)
+{
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_box(&m, 0, 0, 0, 20, 20, 20) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 100, 100, &s, &err), &err);
+    T_EQ_INT(s.n, 100);
+    for (uint32_t k = 0; k < s.n; k++) {
+        T_EQ_DBL(paths_area(&s.l[k].region), 400.0, 1e-6);
+        T_EQ_INT(s.l[k].region.n, 1);
+    }
+    T_EQ_DBL(s.l[99].z_mm, 20.0, 1e-9);
+    struct ipt lo, hi;
+    T_TRUE(paths_bbox(&s.l[0].region, &lo, &hi));
+    T_EQ_DBL(poly_mm(lo.x), 90, 1e-9);
+    T_EQ_DBL(poly_mm(hi.y), 110, 1e-9);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+T_CASE(slice_pyramid_area_follows_formula)
+{
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_pyramid(&m, 30, 15) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.3, 0.2, 0, 0, &s, &err), &err);
+    for (uint32_t k = 0; k < s.n; k++) {
+        double z = s.l[k].z_mm - s.l[k].h_mm / 2;
+        double side = 30 * (1 - z / 15);
+        T_EQ_DBL(paths_area(&s.l[k].region), side * side, 1e-3);
+    }
+    T_EQ_INT(s.n, 74); /* planes 0.15, then 0.4 ... 14.8 */
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+T_CASE(slice_vertices_on_plane)
+{
+    /* equator at z = 10.1: exactly the plane of layer 50 (0.2 mm layers) */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_octahedron(&m, 10, 10.1) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
+    T_EQ_INT(s.n, 101);
+    for (uint32_t k = 0; k < s.n; k++) {
+        double z = s.l[k].z_mm - s.l[k].h_mm / 2;
+        double r = 10 * (1 - fabs(z - 10.1) / 10.1);
+        T_EQ_DBL(paths_area(&s.l[k].region), 2 * r * r, 1e-3);
+        T_EQ_INT(s.l[k].region.n, 1);
+    }
+    T_EQ_INT(s.n_open, 0);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+T_CASE(slice_box_with_hole)
+{
+    /* a 30 mm frame with a 10 mm square hole: four boxes sharing faces */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_box(&m, 0, 0, 0, 30, 10, 5) == 0);
+    T_TRUE(ts_box(&m, 0, 20, 0, 30, 30, 5) == 0);
+    T_TRUE(ts_box(&m, 0, 10, 0, 10, 20, 5) == 0);
+    T_TRUE(ts_box(&m, 20, 10, 0, 30, 20, 5) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 15, 15, &s, &err), &err);
+    T_EQ_INT(s.n, 25);
+    T_EQ_DBL(paths_area(&s.l[3].region), 800, 1e-6);
+    T_EQ_INT(s.l[3].region.n, 2); /* outer + hole */
+    T_TRUE(paths_area_k(&s.l[3].region, 0) > 0);
+    T_TRUE(paths_area_k(&s.l[3].region, 1) < 0);
+    T_TRUE(!paths_contains(&s.l[3].region, (struct ipt){ poly_i(15), poly_i(15) }));
+    T_TRUE(paths_contains(&s.l[3].region, (struct ipt){ poly_i(5), poly_i(15) }));
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+T_CASE(slice_sliver_triangles)
+{
+    /* a cube whose front face is split through a point 1e-9 off its diagonal */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_box(&m, 0, 0, 0, 10, 10, 10) == 0);
+    /* replace front face (tris 4,5: y = 0) by four triangles around p */
+    struct vec3 p = v3(5 + 1e-9, 0, 5);
+    struct vec3 *nv = mem_realloc_array(m.v, 9, sizeof(*nv));
+    T_TRUE(nv != NULL);
+    m.v = nv;
+    m.v[8] = p;
+    m.n_verts = 9;
+    uint32_t(*nt)[3] = mem_realloc_array(m.t, 14, sizeof(*nt));
+    T_TRUE(nt != NULL);
+    m.t = nt;
+    /* front face corners 0 (0,0,0) 1 (10,0,0) 5 (10,0,10) 4 (0,0,10) */
+    uint32_t f[4][3] = { { 0, 1, 8 }, { 1, 5, 8 }, { 5, 4, 8 }, { 4, 0, 8 } };
+    for (int c = 0; c < 3; c++) {
+        m.t[4][c] = f[0][c];
+        m.t[5][c] = f[1][c];
+        m.t[12][c] = f[2][c];
+        m.t[13][c] = f[3][c];
+    }
+    m.n_tris = 14;
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 5, 5, &s, &err), &err);
+    for (uint32_t k = 0; k < s.n; k++)
+        T_EQ_DBL(paths_area(&s.l[k].region), 100, 1e-6);
+    T_EQ_INT(s.n_open, 0);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+T_CASE(slice_open_mesh_still_closes)
+{
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_box(&m, 0, 0, 0, 10, 10, 10) == 0);
+    m.t[4][0] = m.t[11][0]; /* drop the front face: overwrite two triangles */
+    m.t[4][1] = m.t[11][1];
+    m.t[4][2] = m.t[11][2];
+    m.t[5][0] = m.t[10][0];
+    m.t[5][1] = m.t[10][1];
+    m.t[5][2] = m.t[10][2];
+    m.n_tris = 10;
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 5, 5, &s, &err), &err);
+    T_TRUE(s.n_open > 0);
+    T_EQ_DBL(paths_area(&s.l[10].region), 100, 1e-6);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+T_CASE(clip_offset_and_difference)
+{
+    struct paths a, b, c;
+    paths_init(&a);
+    paths_init(&b);
+    paths_init(&c);
+    struct ipt sq[4] = {
+        { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) }
+    };
+    T_TRUE(paths_add(&a, sq, 4));
+    T_OK(clip_offset(&a, -1, CLIP_JOIN_MITER, &b), NULL);
+    T_EQ_DBL(paths_area(&b), 64, 1e-6);
+    T_OK(clip_bool(CLIP_DIFFERENCE, &a, &b, CLIP_NONZERO, &c), NULL);
+    T_EQ_DBL(paths_area(&c), 36, 1e-6);
+    T_EQ_INT(c.n, 2);
+    paths_release(&a);
+    paths_release(&b);
+    paths_release(&c);
+}
+
+T_CASE(poly_simplify_and_index)
+{
+    /* a 1000-gon circle of radius 10: 10 um tolerance keeps its area */
+    struct paths c;
+    paths_init(&c);
+    T_TRUE(paths_begin(&c));
+    for (int i = 0; i < 1000; i++) {
+        double a = 2 * M_PI * i / 1000;
+        T_TRUE(paths_push(&c, (struct ipt){ poly_i(10 * cos(a)), poly_i(10 * sin(a)) }));
+    }
+    struct ipt sq[4] = { { poly_i(-2), poly_i(-2) },
+                         { poly_i(-2), poly_i(2) },
+                         { poly_i(2), poly_i(2) },
+                         { poly_i(2), poly_i(-2) } }; /* a hole, CW */
+    T_TRUE(paths_add(&c, sq, 4));
+    double area = paths_area(&c);
+    T_TRUE(paths_simplify(&c, 0.01));
+    T_EQ_INT(c.n, 2);
+    T_TRUE(paths_len(&c, 0) < 300 && paths_len(&c, 0) > 50);
+    T_EQ_DBL(paths_area(&c), area, 0.001 * area);
+    /* the banded index answers as the plain winding test */
+    struct paths_index ix;
+    T_TRUE(paths_index_init(&ix, &c));
+    for (int i = 0; i < 400; i++) {
+        struct ipt q = { poly_i(-12 + 0.06 * i), poly_i(-11 + 0.055 * i) };
+        T_EQ_INT(paths_index_contains(&ix, q), paths_contains(&c, q));
+    }
+    T_TRUE(!paths_index_contains(&ix, (struct ipt){ 0, 0 }));
+    T_TRUE(paths_index_contains(&ix, (struct ipt){ poly_i(5), 0 }));
+    paths_index_release(&ix);
+    paths_release(&c);
+}
+
+T_CASE(poly_index_crossing)
+{
+    struct paths c;
+    paths_init(&c);
+    struct ipt sq[4] = {
+        { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) }
+    };
+    T_TRUE(paths_add(&c, sq, 4));
+    struct paths_index ix;
+    T_TRUE(paths_index_init(&ix, &c));
+    struct ipt in1 = { poly_i(1), poly_i(1) }, in2 = { poly_i(9), poly_i(8) };
+    struct ipt out = { poly_i(12), poly_i(5) };
+    T_TRUE(!paths_index_crosses(&ix, in1, in2));
+    T_TRUE(paths_index_crosses(&ix, in1, out));
+    T_TRUE(paths_index_crosses(&ix, (struct ipt){ poly_i(-1), poly_i(-1) },
+                               (struct ipt){ poly_i(11), poly_i(11) }));
+    paths_index_release(&ix);
+    paths_release(&c);
+}
+
+T_CASE(infill_anchors_follow_the_boundary)
+{
+    /* two vertical lines across a 10 x 10 square, 4 mm apart: each end
+       gets a stub along the boundary of min(2.7, 0.45 * gap) mm */
+    struct paths sq, lines;
+    paths_init(&sq);
+    paths_init(&lines);
+    struct ipt s[4] = {
+        { 0, 0 }, { poly_i(10), 0 }, { poly_i(10), poly_i(10) }, { 0, poly_i(10) }
+    };
+    T_TRUE(paths_add(&sq, s, 4));
+    struct ipt l1[2] = { { poly_i(3), 0 }, { poly_i(3), poly_i(10) } };
+    struct ipt l2[2] = { { poly_i(7), poly_i(10) }, { poly_i(7), 0 } };
+    T_TRUE(paths_add(&lines, l1, 2));
+    T_TRUE(paths_add(&lines, l2, 2));
+    T_OK(tp_anchor(&lines, &sq, 2.7), NULL);
+    T_EQ_INT(lines.n, 2);
+    /* gaps along the boundary: bottom 3->7 is 4 mm (stub 1.8), 7 -> 3 the
+       long way round is 16 (2.7); top 7 -> 3 is 4 (1.8), 3 -> 7 round 16 */
+    double total = paths_length_k(&lines, 0, false) + paths_length_k(&lines, 1, false);
+    T_EQ_DBL(total, 20 + 2 * 1.8 + 2 * 2.7, 1e-3);
+    T_TRUE(paths_len(&lines, 0) > 2);
+    paths_release(&sq);
+    paths_release(&lines);
+}
