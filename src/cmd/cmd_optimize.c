@@ -40,8 +40,8 @@ parse_num(const char *opt, const char *arg, double lo, double hi, double *out)
     if (*end == '%')
         end++;
     if (end == arg || *end || !(v >= lo && v <= hi)) {
-        fprintf(stderr, "slimfarm optimize: %s wants a number in [%g, %g], got '%s'\n", opt, lo,
-                hi, arg);
+        fprintf(stderr, "slimfarm optimize: %s wants a number in [%g, %g], got '%s'\n", opt, lo, hi,
+                arg);
         return false;
     }
     *out = v;
@@ -110,8 +110,8 @@ report_text(const char *in, const char *out, const struct slim_result *r)
            r->setup_s);
     print_metrics("before", &r->before);
     print_metrics("after", &r->after);
-    printf("  deviation MNDR %.2f %% ANDR %.2f %% (max %.2f mm, mean %.2f mm)\n",
-           100 * r->dev.mndr, 100 * r->dev.andr, r->dev.max_mm, r->dev.mean_mm);
+    printf("  deviation MNDR %.2f %% ANDR %.2f %% (max %.2f mm, mean %.2f mm)\n", 100 * r->dev.mndr,
+           100 * r->dev.andr, r->dev.max_mm, r->dev.mean_mm);
     printf("  kept iteration %d (beta %.0f deg, %d round%s); rejected %u; inverted tets %u; "
            "self-intersecting edges %d -> %d\n",
            r->best_iter, r->beta_deg, r->n_runs, r->n_runs == 1 ? "" : "s", r->n_rejected,
@@ -123,23 +123,26 @@ report_text(const char *in, const char *out, const struct slim_result *r)
     if (r->n_dirs > 1)
         printf("  rotation [%.3f %.3f %.3f; %.3f %.3f %.3f; %.3f %.3f %.3f]\n", r->rotation.m[0][0],
                r->rotation.m[0][1], r->rotation.m[0][2], r->rotation.m[1][0], r->rotation.m[1][1],
-               r->rotation.m[1][2], r->rotation.m[2][0], r->rotation.m[2][1],
-               r->rotation.m[2][2]);
+               r->rotation.m[1][2], r->rotation.m[2][0], r->rotation.m[2][1], r->rotation.m[2][2]);
 }
 
 static int
 run(int argc, char **argv)
 {
-    static const struct option opts[] = {
-        { "output", required_argument, NULL, 'o' },     { "method", required_argument, NULL, 'm' },
-        { "angle", required_argument, NULL, 'a' },      { "beta", required_argument, NULL, 'b' },
-        { "max-mndr", required_argument, NULL, 'M' },   { "max-andr", required_argument, NULL, 'A' },
-        { "fix-bottom", required_argument, NULL, 'f' }, { "fix-box", required_argument, NULL, 'x' },
-        { "max-tet-verts", required_argument, NULL, 'v' },
-        { "iterations", required_argument, NULL, 'i' },
-        { "search-direction", no_argument, NULL, 's' }, { "json", no_argument, NULL, 'j' },
-        { "help", no_argument, NULL, 'h' },             { NULL, 0, NULL, 0 }
-    };
+    static const struct option opts[] = { { "output", required_argument, NULL, 'o' },
+                                          { "method", required_argument, NULL, 'm' },
+                                          { "angle", required_argument, NULL, 'a' },
+                                          { "beta", required_argument, NULL, 'b' },
+                                          { "max-mndr", required_argument, NULL, 'M' },
+                                          { "max-andr", required_argument, NULL, 'A' },
+                                          { "fix-bottom", required_argument, NULL, 'f' },
+                                          { "fix-box", required_argument, NULL, 'x' },
+                                          { "max-tet-verts", required_argument, NULL, 'v' },
+                                          { "iterations", required_argument, NULL, 'i' },
+                                          { "search-direction", no_argument, NULL, 's' },
+                                          { "json", no_argument, NULL, 'j' },
+                                          { "help", no_argument, NULL, 'h' },
+                                          { NULL, 0, NULL, 0 } };
     struct slim_params p;
     slim_params_default(&p);
     struct slim_box boxes[MAX_BOXES];

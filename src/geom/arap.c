@@ -29,17 +29,17 @@
 #define W POLAR_W
 
 struct block {
-    uint32_t idx[4][W];  /* vertex indices per lane */
-    double dinv[9][W];   /* D^-1 row-major: row i is the gradient g_(i+1) */
-    double vol[W];       /* rest volume (0 on padding lanes) */
-    double rot[9][W];    /* target rotation, row-major */
+    uint32_t idx[4][W]; /* vertex indices per lane */
+    double dinv[9][W];  /* D^-1 row-major: row i is the gradient g_(i+1) */
+    double vol[W];      /* rest volume (0 on padding lanes) */
+    double rot[9][W];   /* target rotation, row-major */
 };
 
 struct arap {
     uint32_t n_verts, n_tets, n_blocks, n_free;
     struct block *blocks;
-    int32_t *free_index;  /* per vertex: row in L_ff, or -1 when fixed */
-    uint32_t *free_vert;  /* per free row: its vertex */
+    int32_t *free_index; /* per vertex: row in L_ff, or -1 when fixed */
+    uint32_t *free_vert; /* per free row: its vertex */
     /* L_fc in CSR over free rows: columns are (fixed) vertex indices */
     uint32_t *fc_start, *fc_col;
     double *fc_val;
@@ -155,7 +155,8 @@ setup_matrix(struct arap *a, const struct tetmesh *tm, const uint8_t *fixed, str
             a->free_vert[a->n_free++] = v;
     }
     if (a->n_free == tm->n_verts)
-        return sf_err_set(err, SF_EINVAL, "arap: no fixed vertex (the system has no unique solution)");
+        return sf_err_set(err, SF_EINVAL,
+                          "arap: no fixed vertex (the system has no unique solution)");
     if (a->n_free == 0)
         return sf_err_set(err, SF_EINVAL, "arap: every vertex is fixed");
     size_t n16 = (size_t)tm->n_tets * 16;

@@ -8,11 +8,10 @@
  * (polar.h), then for tets with surface faces R_T <- Q_T R_T with Q_T the
  * minimal rotation that makes the faces safe (minrot.h, angle reduced by
  * the penalty beta).  Which tets and which normals is the caller's choice
- * (slim.c drives the tets that hold the part's overhanging faces).  Global step: dE/dx = 0 is L x = b(R) with
- * L_ij = sum_T V_T g_i . g_j (g_i the gradients of the barycentric
- * coordinates), the same matrix every iteration: factorized once
- * (sparse.h), back-substituted for x, y and z each iteration.  Fixed
- * vertices are Dirichlet conditions: they keep the positions given.
+ * (slim.c drives the tets that hold the part's overhanging faces).  Global step: dE/dx = 0 is L x =
+ * b(R) with L_ij = sum_T V_T g_i . g_j (g_i the gradients of the barycentric coordinates), the same
+ * matrix every iteration: factorized once (sparse.h), back-substituted for x, y and z each
+ * iteration.  Fixed vertices are Dirichlet conditions: they keep the positions given.
  *
  * Thread-safety: one struct arap per thread.
  */
@@ -38,7 +37,7 @@ struct arap_timing {
 
 /* What the last local step did. */
 struct arap_local_stats {
-    uint32_t n_rotated;   /* surface tets given a non-zero minimal rotation */
+    uint32_t n_rotated;    /* surface tets given a non-zero minimal rotation */
     uint32_t n_slow_polar; /* tets that needed the scalar polar path */
 };
 

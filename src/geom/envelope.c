@@ -221,8 +221,8 @@ envelope_build(const struct mesh *part, double h, double offset, struct mesh *ou
         l.n[a] = npts <= ENVELOPE_POINTS_MAX ? (uint32_t)n : 0;
     }
     if (npts > ENVELOPE_POINTS_MAX)
-        return sf_err_set(err, SF_ENOMEM, "envelope: a %g mm lattice needs %.0f points (cap %u)",
-                          h, npts, ENVELOPE_POINTS_MAX);
+        return sf_err_set(err, SF_ENOMEM, "envelope: a %g mm lattice needs %.0f points (cap %u)", h,
+                          npts, ENVELOPE_POINTS_MAX);
     size_t np = (size_t)npts;
     l.f = mem_array(np, sizeof(float));
     l.edge_vert = mem_array(np, 7 * sizeof(int32_t));

@@ -26,18 +26,18 @@
 #include "../mesh/vec.h"
 
 enum minrot_config {
-    MINROT_SAFE = 0,  /* d already satisfies every face: no rotation */
-    MINROT_FACE1,     /* case I, or case II config I: projection onto face 1's circle */
-    MINROT_FACE2,     /* case II config II: projection onto face 2's circle */
-    MINROT_CORNER,    /* case II config III: a point on both circles */
-    MINROT_PARALLEL,  /* case II config IV: the two normals coincide, solved as case I */
+    MINROT_SAFE = 0, /* d already satisfies every face: no rotation */
+    MINROT_FACE1,    /* case I, or case II config I: projection onto face 1's circle */
+    MINROT_FACE2,    /* case II config II: projection onto face 2's circle */
+    MINROT_CORNER,   /* case II config III: a point on both circles */
+    MINROT_PARALLEL, /* case II config IV: the two normals coincide, solved as case I */
 };
 
 struct minrot {
-    struct vec3 axis;           /* unit rotation axis (world frame), +z when angle is 0 */
-    double angle;               /* radians, >= 0 */
-    struct vec3 dprime;         /* the safe direction d' (Q d' = d) */
-    enum minrot_config config;  /* which configuration gave the answer */
+    struct vec3 axis;          /* unit rotation axis (world frame), +z when angle is 0 */
+    double angle;              /* radians, >= 0 */
+    struct vec3 dprime;        /* the safe direction d' (Q d' = d) */
+    enum minrot_config config; /* which configuration gave the answer */
 };
 
 /*

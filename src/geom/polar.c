@@ -144,7 +144,7 @@ polar_block(const double a[9][W], double r[9][W])
             double c8 = x[0][l] * x[4][l] - x[1][l] * x[3][l];
             double det = x[0][l] * c0 + x[1][l] * c1 + x[2][l] * c2;
             double fx = 0, fc = c0 * c0 + c1 * c1 + c2 * c2 + c3 * c3 + c4 * c4 + c5 * c5 +
-                            c6 * c6 + c7 * c7 + c8 * c8;
+                                c6 * c6 + c7 * c7 + c8 * c8;
             for (int c = 0; c < 9; c++)
                 fx += x[c][l] * x[c][l];
             /* |X^-1|_F = |cof X|_F / |det X|; a bad lane (det <= 0) is redone below */

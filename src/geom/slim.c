@@ -105,9 +105,9 @@ struct ctx {
 /* One print direction's work and result. */
 struct dir {
     int index;
-    struct mat3 rot;   /* input frame -> print frame */
-    struct mesh in;    /* the input rotated and resting on z = 0 */
-    struct mesh out;   /* the chosen result */
+    struct mat3 rot; /* input frame -> print frame */
+    struct mesh in;  /* the input rotated and resting on z = 0 */
+    struct mesh out; /* the chosen result */
     struct support_metrics before, after;
     struct deviation dev;
     uint32_t curve[SLIM_CURVE_MAX];
@@ -153,11 +153,11 @@ offer(struct cand *list, int *n, struct cand c)
 struct work {
     const struct ctx *cx;
     struct dir *d;
-    struct tetmesh tm;      /* shallow copy of the shared mesh with rotated positions */
-    uint8_t *fixed;         /* per tet vertex */
-    uint8_t *part_fixed;    /* per part vertex: its host tet is all fixed */
-    struct vec3 *x;         /* current tet positions */
-    struct mesh cur;        /* the mapped part (triangles borrowed from d->in) */
+    struct tetmesh tm;   /* shallow copy of the shared mesh with rotated positions */
+    uint8_t *fixed;      /* per tet vertex */
+    uint8_t *part_fixed; /* per part vertex: its host tet is all fixed */
+    struct vec3 *x;      /* current tet positions */
+    struct mesh cur;     /* the mapped part (triangles borrowed from d->in) */
     struct cand list[KEEP_BEST];
     int n_list;
     struct arap_drive *drv; /* fh.n slots */
@@ -275,8 +275,8 @@ compute_drives(struct work *w, double tau_aim, double zlo, double gap)
 
 /* One round at penalty beta; *within says whether its last iterate held the limits. */
 static int
-run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *curve,
-          int *n_curve, bool *within, struct sf_err *err)
+run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *curve, int *n_curve,
+          bool *within, struct sf_err *err)
 {
     const struct slim_params *p = w->cx->p;
     double tau = sin(p->angle_deg * M_PI / 180), beta = beta_deg * M_PI / 180;
@@ -321,15 +321,16 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
             log_debug("slim", "round %d it %d: mndr %.4f andr %.4f inverted %u", round, it, dv.mndr,
                       dv.andr, inverted);
         if (*within) {
-            struct cand c = { mem_array(w->tm.n_verts, sizeof(struct vec3)), sm.n_risky, sev, it,
-                              round, beta_deg };
+            struct cand c = {
+                mem_array(w->tm.n_verts, sizeof(struct vec3)), sm.n_risky, sev, it, round, beta_deg
+            };
             if (!c.x)
                 return sf_err_set(err, SF_ENOMEM, "slim: out of memory");
             memcpy(c.x, w->x, sizeof(struct vec3) * w->tm.n_verts);
             offer(w->list, &w->n_list, c);
         }
-        struct slim_progress pr = { w->d->index, w->cx->n_dirs, round, beta_deg, it,
-                                    p->max_iters, sm.n_risky, dv.mndr, dv.andr };
+        struct slim_progress pr = { w->d->index,  w->cx->n_dirs, round,   beta_deg, it,
+                                    p->max_iters, sm.n_risky,    dv.mndr, dv.andr };
         report(w, &pr);
         /* "dropped": fewer risky faces, or as many leaning 0.5 % less */
         if (sm.n_risky < best_seen || (sm.n_risky == best_seen && sev < 0.995 * best_sev)) {

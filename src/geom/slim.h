@@ -47,25 +47,25 @@ struct slim_progress {
 };
 
 struct slim_params {
-    double angle_deg;       /* alpha: self-supporting angle from vertical (45) */
-    double margin_deg;      /* the minimal rotation aims this far past alpha (5): the global
-                               step realises only part of each target, so aiming at the
-                               threshold itself stalls just short of it */
-    double beta_deg;        /* starting penalty angle (0) */
-    double beta_step_deg;   /* raise per round when the deviation limits fail (5) */
-    double beta_max_deg;    /* give up raising past this (45) */
-    double max_mndr;        /* limit on max displacement / bbox diagonal (0.15) */
-    double max_andr;        /* limit on mean displacement / bbox diagonal (0.05) */
-    double fix_bottom_mm;   /* everything this close to the bed stays fixed (2) */
+    double angle_deg;     /* alpha: self-supporting angle from vertical (45) */
+    double margin_deg;    /* the minimal rotation aims this far past alpha (5): the global
+                             step realises only part of each target, so aiming at the
+                             threshold itself stalls just short of it */
+    double beta_deg;      /* starting penalty angle (0) */
+    double beta_step_deg; /* raise per round when the deviation limits fail (5) */
+    double beta_max_deg;  /* give up raising past this (45) */
+    double max_mndr;      /* limit on max displacement / bbox diagonal (0.15) */
+    double max_andr;      /* limit on mean displacement / bbox diagonal (0.05) */
+    double fix_bottom_mm; /* everything this close to the bed stays fixed (2) */
     const struct slim_box *fix_boxes; /* more fixed regions (may be NULL) */
     int n_fix_boxes;
-    int max_iters;          /* per round (100) */
-    int patience;           /* stop when the risky count has not dropped for this many (5) */
+    int max_iters;             /* per round (100) */
+    int patience;              /* stop when the risky count has not dropped for this many (5) */
     struct tetmesh_params tet; /* enclosing tet mesh */
-    bool search_direction;  /* also try rotations about x and y (false) */
-    double search_step_deg; /* grid step of the search (15) */
-    double search_max_deg;  /* largest tilt about each axis (30) */
-    int threads;            /* workers for the search (0: one per core) */
+    bool search_direction;     /* also try rotations about x and y (false) */
+    double search_step_deg;    /* grid step of the search (15) */
+    double search_max_deg;     /* largest tilt about each axis (30) */
+    int threads;               /* workers for the search (0: one per core) */
     void (*progress)(void *ud, const struct slim_progress *pr); /* optional */
     void *progress_ud;
     const atomic_bool *cancel; /* optional: set to stop with SF_ECANCELED */
@@ -76,10 +76,10 @@ void slim_params_default(struct slim_params *p);
 #define SLIM_CURVE_MAX 1024 /* risky-face counts kept per result */
 
 struct slim_result {
-    struct mesh out;            /* the slimmed part in the print orientation (mesh_release) */
-    struct mat3 rotation;       /* applied to the input first (identity unless searched) */
+    struct mesh out;      /* the slimmed part in the print orientation (mesh_release) */
+    struct mat3 rotation; /* applied to the input first (identity unless searched) */
     struct support_metrics before, after; /* ray-cast metrics, input (rotated) vs output */
-    struct deviation dev;       /* MNDR / ANDR of out against the rotated input */
+    struct deviation dev;                 /* MNDR / ANDR of out against the rotated input */
     uint32_t curve[SLIM_CURVE_MAX]; /* risky faces per iteration of the chosen round; [0] = input */
     int n_curve;
     int best_iter;              /* iteration returned (0: the input itself) */
@@ -94,14 +94,14 @@ struct slim_result {
     uint32_t tet_verts, tet_tets, tet_surface, tet_outside;
     double setup_s, total_s; /* tet mesh and face hosts; everything */
     struct slim_timing {
-        int iterations;    /* local/global iterations run, all rounds and directions */
-        double factor_s;   /* assembling and factorizing L (once per direction) */
-        double local_s;    /* deformation gradients and nearest rotations */
-        double minrot_s;   /* minimal rotations */
-        double rhs_s;      /* right-hand sides */
-        double solve_s;    /* back-substitutions */
-        double part_s;     /* mapping the part, measuring it, finding the drives */
-        double choose_s;   /* checking the kept iterates (self-intersection, ray cast) */
+        int iterations;  /* local/global iterations run, all rounds and directions */
+        double factor_s; /* assembling and factorizing L (once per direction) */
+        double local_s;  /* deformation gradients and nearest rotations */
+        double minrot_s; /* minimal rotations */
+        double rhs_s;    /* right-hand sides */
+        double solve_s;  /* back-substitutions */
+        double part_s;   /* mapping the part, measuring it, finding the drives */
+        double choose_s; /* checking the kept iterates (self-intersection, ray cast) */
     } timing;
 };
 

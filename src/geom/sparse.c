@@ -17,10 +17,10 @@
 #include "../base/mem.h"
 
 struct sparse_chol {
-    cholmod_common c;  /* CHOLMOD's settings and statistics for this object */
-    cholmod_sparse *a; /* the matrix (upper triangle) */
-    cholmod_factor *l; /* its LDL' factor */
-    cholmod_dense *b;  /* right-hand side wrapper, n x k */
+    cholmod_common c;         /* CHOLMOD's settings and statistics for this object */
+    cholmod_sparse *a;        /* the matrix (upper triangle) */
+    cholmod_factor *l;        /* its LDL' factor */
+    cholmod_dense *b;         /* right-hand side wrapper, n x k */
     cholmod_dense *x, *y, *e; /* cholmod_solve2's reusable solution and workspaces */
     uint32_t n;
     int k; /* columns b is sized for */
@@ -62,7 +62,8 @@ sparse_chol_new(uint32_t n, const uint32_t *row, const uint32_t *col, const doub
             continue;
         if (row[k] >= n || col[k] >= n) {
             cholmod_free_triplet(&t, &s->c);
-            sf_err_set(err, SF_EBUG, "sparse: entry (%u, %u) outside %u x %u", row[k], col[k], n, n);
+            sf_err_set(err, SF_EBUG, "sparse: entry (%u, %u) outside %u x %u", row[k], col[k], n,
+                       n);
             goto fail;
         }
         ti[m] = (int)row[k];

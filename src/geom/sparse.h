@@ -41,7 +41,6 @@ size_t sparse_chol_factor_nnz(const struct sparse_chol *s);
  * Solve A X = B for k right-hand sides, column-major n x k (B and X may
  * not alias).  Allocates only on the first call or when k grows.
  */
-int sparse_chol_solve(struct sparse_chol *s, const double *b, double *x, int k,
-                      struct sf_err *err);
+int sparse_chol_solve(struct sparse_chol *s, const double *b, double *x, int k, struct sf_err *err);
 
 #endif

@@ -46,9 +46,8 @@ tetgen_reason(int code)
 }
 
 extern "C" int
-tet_shim_tetrahedralize(const double *xyz, uint32_t n_points, const uint32_t *tris,
-                        uint32_t n_tris, const char *switches, struct tet_shim_out *out,
-                        struct sf_err *err)
+tet_shim_tetrahedralize(const double *xyz, uint32_t n_points, const uint32_t *tris, uint32_t n_tris,
+                        const char *switches, struct tet_shim_out *out, struct sf_err *err)
 {
     std::memset(out, 0, sizeof(*out));
     if (n_points < 4 || n_tris < 4)
@@ -74,8 +73,7 @@ tet_shim_tetrahedralize(const double *xyz, uint32_t n_points, const uint32_t *tr
         }
         std::string sw = std::string(switches ? switches : "p") + "zQ";
         tetrahedralize(&sw[0], &in, &res);
-        if (res.numberofpoints <= 0 || res.numberoftetrahedra <= 0 ||
-            res.numberofcorners != 4)
+        if (res.numberofpoints <= 0 || res.numberoftetrahedra <= 0 || res.numberofcorners != 4)
             return sf_err_set(err, SF_EINVAL, "tetgen: no tetrahedra produced");
         out->xyz = (double *)mem_array((size_t)res.numberofpoints, 3 * sizeof(double));
         out->tets = (uint32_t *)mem_array((size_t)res.numberoftetrahedra, 4 * sizeof(uint32_t));

@@ -21,8 +21,8 @@ struct sf_err;
 
 /* A tetrahedral mesh as TetGen returns it. */
 struct tet_shim_out {
-    double *xyz;       /* 3 * n_points coordinates: the input points first, then Steiner points */
-    uint32_t *tets;    /* 4 * n_tets vertex indices, positively oriented */
+    double *xyz;    /* 3 * n_points coordinates: the input points first, then Steiner points */
+    uint32_t *tets; /* 4 * n_tets vertex indices, positively oriented */
     uint32_t n_points;
     uint32_t n_tets;
 };

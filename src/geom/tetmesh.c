@@ -313,8 +313,8 @@ build_once(const struct mesh *part, const struct tetmesh_params *p, double pitch
         return sf_err_set(err, SF_ENOMEM, "tetmesh: out of memory");
     }
     memcpy(xyz, env.v, sizeof(double) * 3 * env.n_verts);
-    rc = tet_shim_tetrahedralize(xyz, env.n_verts, &env.t[0][0], env.n_tris, p->switches, &out,
-                                 err);
+    rc =
+        tet_shim_tetrahedralize(xyz, env.n_verts, &env.t[0][0], env.n_tris, p->switches, &out, err);
     free(xyz);
     tm->n_env_tris = env.n_tris;
     mesh_release(&env);
@@ -372,7 +372,8 @@ tetmesh_build(const struct mesh *part, const struct tetmesh_params *p, struct te
         tetmesh_release(tm);
         return rc;
     }
-    log_debug("slim", "tet mesh: pitch %.2f mm, %u envelope triangles, %u vertices, %u tets, "
+    log_debug("slim",
+              "tet mesh: pitch %.2f mm, %u envelope triangles, %u vertices, %u tets, "
               "%u split, %u part vertices outside",
               tm->pitch_mm, tm->n_env_tris, tm->n_verts, tm->n_tets, tm->n_split, tm->n_outside);
     return SF_OK;

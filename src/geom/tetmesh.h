@@ -20,27 +20,27 @@
 #include "../mesh/mesh.h"
 
 struct tetmesh_params {
-    uint32_t max_verts;  /* target: at most this many tet vertices (5000) */
-    int cells;           /* first try: lattice cells along the longest side (16) */
-    double offset_cells; /* envelope offset in lattice pitches (1.2) */
+    uint32_t max_verts;   /* target: at most this many tet vertices (5000) */
+    int cells;            /* first try: lattice cells along the longest side (16) */
+    double offset_cells;  /* envelope offset in lattice pitches (1.2) */
     const char *switches; /* TetGen quality switches ("pq2.0Y": radius-edge <= 2, boundary kept) */
 };
 
 void tetmesh_params_default(struct tetmesh_params *p);
 
 struct tetmesh {
-    struct vec3 *x;        /* n_verts rest positions, mm */
-    uint32_t (*tet)[4];    /* n_tets vertex indices, positive volume */
-    uint8_t *surf;         /* per tet: bit f set when face f (opposite vertex f) is on the surface */
+    struct vec3 *x;     /* n_verts rest positions, mm */
+    uint32_t (*tet)[4]; /* n_tets vertex indices, positive volume */
+    uint8_t *surf;      /* per tet: bit f set when face f (opposite vertex f) is on the surface */
     uint32_t n_verts, n_tets;
-    uint32_t n_split;      /* tets split at their centroid (3+ surface faces) */
-    double pitch_mm;       /* lattice pitch used for the envelope */
-    uint32_t n_env_tris;   /* envelope triangles */
+    uint32_t n_split;    /* tets split at their centroid (3+ surface faces) */
+    double pitch_mm;     /* lattice pitch used for the envelope */
+    uint32_t n_env_tris; /* envelope triangles */
     /* embedding of the part */
-    uint32_t n_part;       /* part vertices */
-    uint32_t *host;        /* per part vertex: its tet */
-    double (*bary)[4];     /* per part vertex: barycentric coordinates in host */
-    uint32_t n_outside;    /* part vertices in no tet (embedded in the nearest, extrapolated) */
+    uint32_t n_part;    /* part vertices */
+    uint32_t *host;     /* per part vertex: its tet */
+    double (*bary)[4];  /* per part vertex: barycentric coordinates in host */
+    uint32_t n_outside; /* part vertices in no tet (embedded in the nearest, extrapolated) */
 };
 
 /* Vertex indices of face f of a tet (opposite vertex f), outward for positive tets. */
@@ -62,8 +62,8 @@ void tetmesh_release(struct tetmesh *tm);
  * whose smallest coordinate is largest (extrapolated) and is counted in
  * *n_outside (may be NULL).  SF_ENOMEM on failure.
  */
-int tetmesh_locate(const struct tetmesh *tm, const struct vec3 *pts, uint32_t n_pts,
-                   uint32_t *host, double (*bary)[4], uint32_t *n_outside, struct sf_err *err);
+int tetmesh_locate(const struct tetmesh *tm, const struct vec3 *pts, uint32_t n_pts, uint32_t *host,
+                   double (*bary)[4], uint32_t *n_outside, struct sf_err *err);
 
 /* Signed volume of tet t for positions x (positive when not inverted). */
 double tetmesh_volume(const struct tetmesh *tm, const struct vec3 *x, uint32_t t);

@@ -66,8 +66,8 @@ main(int argc, char **argv)
         }
         const struct slim_timing *s = &r.timing;
         double loop = s->local_s + s->minrot_s + s->rhs_s + s->solve_s;
-        double v[8] = { r.setup_s, s->factor_s, loop, s->local_s, s->minrot_s, s->rhs_s,
-                        s->solve_s, s->part_s };
+        double v[8] = { r.setup_s,   s->factor_s, loop,       s->local_s,
+                        s->minrot_s, s->rhs_s,    s->solve_s, s->part_s };
         for (int k = 0; k < 8; k++)
             t[k][run] = v[k];
         if (run + 1 < RUNS)
@@ -76,11 +76,12 @@ main(int argc, char **argv)
     printf("slim %s: %u triangles; tet mesh %u vertices, %u tets; %d iterations; risky %u -> %u\n",
            name, m.n_tris, r.tet_verts, r.tet_tets, r.timing.iterations, r.curve[0],
            r.curve[r.n_curve - 1]);
-    static const char *label[8] = { "setup: tet mesh + face hosts", "setup: factorization",
-                                    "100 iterations: ARAP total", "  nearest rotations",
-                                    "  minimal rotations", "  right-hand side",
-                                    "  solve (back-substitution)",
-                                    "per-iteration part bookkeeping" };
+    static const char *label[8] = {
+        "setup: tet mesh + face hosts", "setup: factorization",
+        "100 iterations: ARAP total",   "  nearest rotations",
+        "  minimal rotations",          "  right-hand side",
+        "  solve (back-substitution)",  "per-iteration part bookkeeping"
+    };
     for (int k = 0; k < 8; k++)
         printf("  %-32s %8.4f s\n", label[k], median(t[k]));
     slim_result_release(&r);

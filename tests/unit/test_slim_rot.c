@@ -237,7 +237,8 @@ T_CASE(minrot_case2_regions_are_continuous)
         struct minrot prev;
         struct vec3 dprev = a;
         for (int s = 0; s <= 400; s++) {
-            struct vec3 d = v3_normalize(v3_add(v3_scale(a, 1 - s / 400.0), v3_scale(b, s / 400.0)));
+            struct vec3 d =
+                v3_normalize(v3_add(v3_scale(a, 1 - s / 400.0), v3_scale(b, s / 400.0)));
             /* express d as the print direction: rotate the normals instead */
             struct mat3 q = m3_rotate_onto(d, up);
             struct vec3 nn[2] = { m3_mul_v(q, n[0]), m3_mul_v(q, n[1]) };
