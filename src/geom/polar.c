@@ -5,7 +5,8 @@
  * factor, X <- (g X + X^-T / g) / 2 with Higham's scaling
  * g = sqrt(|X^-1|_F / |X|_F) (Higham, "Computing the polar decomposition
  * - with applications", 1986), written with X^-T = cof(X) / det(X) so each
- * step is straight-line code over POLAR_W lanes.  It converges
+ * step is straight-line code over POLAR_W lanes (the first two steps scaled,
+ * the rest plain: by then the singular values are near 1).  It converges
  * quadratically to the polar factor, which is the nearest rotation when
  * det(A) > 0.  The loop stops when every lane has settled (ARAP matrices
  * are near rotations after the first iterations, so 2-4 steps is typical).
@@ -24,6 +25,7 @@
 
 #include <float.h>
 #include <math.h>
+#include <stdbool.h>
 
 /* Eigen-decomposition of symmetric s by cyclic Jacobi: s becomes diagonal,
    v's columns are the eigenvectors. */
@@ -114,6 +116,44 @@ polar_rotation(struct mat3 a)
 
 #define W POLAR_W
 
+/* One Newton step on every lane; scaled or plain (the flag is a constant
+   at each call, so each inlined copy is branch-free and vectorizes). */
+static inline __attribute__((always_inline)) void
+newton_step(double x[9][W], double delta[W], const bool scaled)
+{
+    for (int l = 0; l < W; l++) {
+        double c0 = x[4][l] * x[8][l] - x[5][l] * x[7][l];
+        double c1 = x[5][l] * x[6][l] - x[3][l] * x[8][l];
+        double c2 = x[3][l] * x[7][l] - x[4][l] * x[6][l];
+        double c3 = x[2][l] * x[7][l] - x[1][l] * x[8][l];
+        double c4 = x[0][l] * x[8][l] - x[2][l] * x[6][l];
+        double c5 = x[1][l] * x[6][l] - x[0][l] * x[7][l];
+        double c6 = x[1][l] * x[5][l] - x[2][l] * x[4][l];
+        double c7 = x[2][l] * x[3][l] - x[0][l] * x[5][l];
+        double c8 = x[0][l] * x[4][l] - x[1][l] * x[3][l];
+        double det = x[0][l] * c0 + x[1][l] * c1 + x[2][l] * c2;
+        double g = 1;
+        if (scaled) { /* scaled steps; near convergence g -> 1 and is dropped */
+            double fx = 0, fc = c0 * c0 + c1 * c1 + c2 * c2 + c3 * c3 + c4 * c4 + c5 * c5 +
+                                c6 * c6 + c7 * c7 + c8 * c8;
+            for (int c = 0; c < 9; c++)
+                fx += x[c][l] * x[c][l];
+            /* |X^-1|_F = |cof X|_F / |det X|; a bad lane (det <= 0) is redone below */
+            double adet = fabs(det) > DBL_MIN ? fabs(det) : DBL_MIN;
+            g = sqrt(sqrt(fc / (fx * adet * adet)));
+        }
+        double ga = 0.5 * g, gb = 0.5 / (g * (det != 0 ? det : DBL_MIN));
+        double cof[9] = { c0, c1, c2, c3, c4, c5, c6, c7, c8 };
+        double d = 0;
+        for (int c = 0; c < 9; c++) {
+            double nx = ga * x[c][l] + gb * cof[c];
+            d += (nx - x[c][l]) * (nx - x[c][l]);
+            x[c][l] = nx;
+        }
+        delta[l] = d;
+    }
+}
+
 int
 polar_block(const double a[9][W], double r[9][W])
 {
@@ -132,43 +172,19 @@ polar_block(const double a[9][W], double r[9][W])
     }
     double delta[W];
     for (int it = 0; it < 10; it++) {
-        for (int l = 0; l < W; l++) {
-            double c0 = x[4][l] * x[8][l] - x[5][l] * x[7][l];
-            double c1 = x[5][l] * x[6][l] - x[3][l] * x[8][l];
-            double c2 = x[3][l] * x[7][l] - x[4][l] * x[6][l];
-            double c3 = x[2][l] * x[7][l] - x[1][l] * x[8][l];
-            double c4 = x[0][l] * x[8][l] - x[2][l] * x[6][l];
-            double c5 = x[1][l] * x[6][l] - x[0][l] * x[7][l];
-            double c6 = x[1][l] * x[5][l] - x[2][l] * x[4][l];
-            double c7 = x[2][l] * x[3][l] - x[0][l] * x[5][l];
-            double c8 = x[0][l] * x[4][l] - x[1][l] * x[3][l];
-            double det = x[0][l] * c0 + x[1][l] * c1 + x[2][l] * c2;
-            double fx = 0, fc = c0 * c0 + c1 * c1 + c2 * c2 + c3 * c3 + c4 * c4 + c5 * c5 +
-                                c6 * c6 + c7 * c7 + c8 * c8;
-            for (int c = 0; c < 9; c++)
-                fx += x[c][l] * x[c][l];
-            /* |X^-1|_F = |cof X|_F / |det X|; a bad lane (det <= 0) is redone below */
-            double adet = fabs(det) > DBL_MIN ? fabs(det) : DBL_MIN;
-            double g = sqrt(sqrt(fc / (fx * adet * adet)));
-            double ga = 0.5 * g, gb = 0.5 / (g * (det != 0 ? det : DBL_MIN));
-            double cof[9] = { c0, c1, c2, c3, c4, c5, c6, c7, c8 };
-            double d = 0;
-            for (int c = 0; c < 9; c++) {
-                double nx = ga * x[c][l] + gb * cof[c];
-                d += (nx - x[c][l]) * (nx - x[c][l]);
-                x[c][l] = nx;
-            }
-            delta[l] = d;
-        }
+        if (it < 2)
+            newton_step(x, delta, true);
+        else
+            newton_step(x, delta, false);
         double worst = 0;
         for (int l = 0; l < W; l++)
             worst = worst > delta[l] ? worst : delta[l];
-        if (worst < 1e-18) /* quadratic convergence: the next step is at rounding level */
+        if (worst < 1e-14) /* quadratic: a step of 1e-7 leaves an error near 1e-14 */
             break;
     }
     int slow = 0;
     for (int l = 0; l < W; l++) {
-        if (det0[l] > 1e-6 && delta[l] < 1e-18 && isfinite(delta[l])) {
+        if (det0[l] > 1e-6 && delta[l] < 1e-14 && isfinite(delta[l])) {
             for (int c = 0; c < 9; c++)
                 r[c][l] = x[c][l];
             continue;

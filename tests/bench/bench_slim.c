@@ -51,7 +51,7 @@ main(int argc, char **argv)
     struct slim_params p;
     slim_params_default(&p);
     p.tet.max_verts = argc > 2 ? (uint32_t)strtoul(argv[2], NULL, 10) : 2400;
-    p.tet.cells = 16;
+    p.tet.cells = 10; /* coarse from the start: no rebuilds at this target */
     p.max_iters = 100;
     p.patience = 1000; /* exactly 100 iterations */
     p.beta_step_deg = 0;
