@@ -151,7 +151,7 @@ offer(struct cand *list, int *n, struct cand c)
 }
 
 struct work {
-    const struct ctx *cx;
+    struct ctx *cx;
     struct dir *d;
     struct tetmesh tm;   /* shallow copy of the shared mesh with rotated positions */
     uint8_t *fixed;      /* per tet vertex */
@@ -212,9 +212,9 @@ report(struct work *w, const struct slim_progress *pr)
     const struct slim_params *p = w->cx->p;
     if (!p->progress)
         return;
-    pthread_mutex_lock((pthread_mutex_t *)&w->cx->lock);
+    pthread_mutex_lock(&w->cx->lock);
     p->progress(p->progress_ud, pr);
-    pthread_mutex_unlock((pthread_mutex_t *)&w->cx->lock);
+    pthread_mutex_unlock(&w->cx->lock);
 }
 
 /*
@@ -444,7 +444,7 @@ choose(struct work *w, struct sf_err *err)
 }
 
 static int
-run_dir(const struct ctx *cx, struct dir *d, struct sf_err *err)
+run_dir(struct ctx *cx, struct dir *d, struct sf_err *err)
 {
     const struct slim_params *p = cx->p;
     struct work w;

@@ -4,9 +4,9 @@
  * Armadillo has 2,373 vertices and 8,189 tets), split into nearest
  * rotations, minimal rotations, right-hand side and solve, plus the one-off
  * setup (tet mesh, factorization) and the per-iteration bookkeeping on the
- * part (mapping, measuring, drives).  Median of RUNS runs; one thread.
+ * part (mapping, measuring, drives).  Median of the runs; one thread.
  *
- *   bench_slim [PART.stl] [MAX_TET_VERTS]   (default: a generated torus, 2400)
+ *   bench_slim [PART.stl] [MAX_TET_VERTS] [RUNS]   (default: a generated torus, 2400, 3)
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -15,7 +15,9 @@
 #include "../../src/geom/slim.h"
 #include "../../src/mesh/shapes.h"
 
-#define RUNS 3
+#define RUNS_MAX 9
+
+static int runs = 3;
 
 static int
 cmp_d(const void *a, const void *b)
@@ -27,8 +29,8 @@ cmp_d(const void *a, const void *b)
 static double
 median(double *v)
 {
-    qsort(v, RUNS, sizeof(double), cmp_d);
-    return v[RUNS / 2];
+    qsort(v, (size_t)runs, sizeof(double), cmp_d);
+    return v[runs / 2];
 }
 
 int
@@ -50,16 +52,20 @@ main(int argc, char **argv)
     }
     struct slim_params p;
     slim_params_default(&p);
-    p.tet.max_verts = argc > 2 ? (uint32_t)strtoul(argv[2], NULL, 10) : 2400;
+    p.tet.max_verts = argc > 2 && argv[2][0] ? (uint32_t)strtoul(argv[2], NULL, 10) : 2400;
+    if (argc > 3)
+        runs = (int)strtol(argv[3], NULL, 10);
+    if (runs < 1 || runs > RUNS_MAX)
+        runs = 3;
     p.tet.cells = 10; /* coarse from the start: no rebuilds at this target */
     p.max_iters = 100;
     p.patience = 1000; /* exactly 100 iterations */
     p.beta_step_deg = 0;
     p.max_mndr = p.max_andr = 1;
     p.threads = 1;
-    double t[8][RUNS];
+    double t[8][RUNS_MAX];
     struct slim_result r;
-    for (int run = 0; run < RUNS; run++) {
+    for (int run = 0; run < runs; run++) {
         if (slim_optimize(&m, &p, &r, &err)) {
             fprintf(stderr, "bench_slim: %s\n", err.msg);
             return 1;
@@ -70,7 +76,7 @@ main(int argc, char **argv)
                         s->minrot_s, s->rhs_s,    s->solve_s, s->part_s };
         for (int k = 0; k < 8; k++)
             t[k][run] = v[k];
-        if (run + 1 < RUNS)
+        if (run + 1 < runs)
             slim_result_release(&r);
     }
     printf("slim %s: %u triangles; tet mesh %u vertices, %u tets; %d iterations; risky %u -> %u\n",

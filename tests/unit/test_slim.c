@@ -106,7 +106,7 @@ T_CASE(tetmesh_respects_the_vertex_target)
     mesh_init(&m);
     T_OK(shape_tee(&m, &err), &err);
     tetmesh_params_default(&tp);
-    tp.cells = 24;
+    tp.cells = 16;
     tp.max_verts = 800;
     T_OK(tetmesh_build(&m, &tp, &tm, &err), &err);
     T_TRUE(tm.n_verts <= 800);
@@ -250,6 +250,7 @@ T_CASE(tee_at_45_degrees_stays_within_the_limits)
     mesh_init(&m);
     T_OK(shape_tee(&m, &err), &err);
     quick_params(&p);
+    p.beta_step_deg = 15; /* fewer rounds: the sanitizer build is slow */
     T_OK(slim_optimize(&m, &p, &r, &err), &err);
     T_TRUE(r.dev.mndr <= p.max_mndr && r.dev.andr <= p.max_andr);
     T_TRUE(r.after.volume_mm3 <= r.before.volume_mm3);
@@ -358,7 +359,7 @@ T_CASE(direction_search_tries_the_grid)
     T_OK(shape_tee(&m, &err), &err);
     quick_params(&p);
     p.tet.cells = 8;
-    p.max_iters = 20;
+    p.max_iters = 10;
     T_OK(slim_optimize(&m, &p, &plain, &err), &err);
     p.search_direction = true;
     p.search_step_deg = 30;
