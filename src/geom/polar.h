@@ -18,7 +18,7 @@
 #include "../mesh/vec.h"
 
 /* Lanes per block. */
-#define POLAR_W 8
+#define POLAR_W 4
 
 /* Nearest proper rotation to a (robust for any a; identity for a = 0). */
 struct mat3 polar_rotation(struct mat3 a);

@@ -300,7 +300,10 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
         double t0 = now_s();
         uint32_t n_drv = compute_drives(w, tau_aim, zlo, sp.min_gap_mm);
         w->d->timing.part_s += now_s() - t0;
-        arap_local(a, w->x, v3(0, 0, 1), tau_aim, beta, w->drv, n_drv, NULL);
+        struct arap_local_stats ls;
+        arap_local(a, w->x, v3(0, 0, 1), tau_aim, beta, w->drv, n_drv, &ls);
+        w->d->timing.slow_polar += ls.n_slow_polar;
+        w->d->timing.rotated += ls.n_rotated;
         int rc = arap_global(a, w->x, err);
         if (rc)
             return rc;
@@ -797,6 +800,8 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
     for (int i = 0; i < cx.n_dirs; i++) {
         const struct slim_timing *t = &cx.dirs[i].timing;
         res->timing.iterations += t->iterations;
+        res->timing.slow_polar += t->slow_polar;
+        res->timing.rotated += t->rotated;
         res->timing.factor_s += t->factor_s;
         res->timing.local_s += t->local_s;
         res->timing.minrot_s += t->minrot_s;

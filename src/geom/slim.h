@@ -94,14 +94,16 @@ struct slim_result {
     uint32_t tet_verts, tet_tets, tet_surface, tet_outside;
     double setup_s, total_s; /* tet mesh and face hosts; everything */
     struct slim_timing {
-        int iterations;  /* local/global iterations run, all rounds and directions */
-        double factor_s; /* assembling and factorizing L (once per direction) */
-        double local_s;  /* deformation gradients and nearest rotations */
-        double minrot_s; /* minimal rotations */
-        double rhs_s;    /* right-hand sides */
-        double solve_s;  /* back-substitutions */
-        double part_s;   /* mapping the part, measuring it, finding the drives */
-        double choose_s; /* checking the kept iterates (self-intersection, ray cast) */
+        int iterations;      /* local/global iterations run, all rounds and directions */
+        uint64_t rotated;    /* minimal rotations applied, summed over iterations */
+        uint64_t slow_polar; /* nearest rotations that took the scalar path */
+        double factor_s;     /* assembling and factorizing L (once per direction) */
+        double local_s;      /* deformation gradients and nearest rotations */
+        double minrot_s;     /* minimal rotations */
+        double rhs_s;        /* right-hand sides */
+        double solve_s;      /* back-substitutions */
+        double part_s;       /* mapping the part, measuring it, finding the drives */
+        double choose_s;     /* checking the kept iterates (self-intersection, ray cast) */
     } timing;
 };
 

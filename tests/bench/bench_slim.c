@@ -82,6 +82,8 @@ main(int argc, char **argv)
     printf("slim %s: %u triangles; tet mesh %u vertices, %u tets; %d iterations; risky %u -> %u\n",
            name, m.n_tris, r.tet_verts, r.tet_tets, r.timing.iterations, r.curve[0],
            r.curve[r.n_curve - 1]);
+    printf("  minimal rotations applied %llu, nearest rotations on the scalar path %llu\n",
+           (unsigned long long)r.timing.rotated, (unsigned long long)r.timing.slow_polar);
     static const char *label[8] = {
         "setup: tet mesh + face hosts", "setup: factorization",
         "100 iterations: ARAP total",   "  nearest rotations",
