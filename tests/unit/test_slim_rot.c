@@ -195,6 +195,40 @@ brute_min_angle(const struct vec3 *n, int k, double tau)
                     best = ang, bx = x;
             }
     }
+    /* the optimum of a thin feasible sliver lies on a boundary circle, where a
+       grid rarely lands: also sample each circle n . x = -tau, then refine
+       along it */
+    for (int j = 0; j < k; j++) {
+        struct vec3 e1 =
+            v3_normalize(v3_cross(n[j], fabs(n[j].x) < 0.6 ? v3(1, 0, 0) : v3(0, 1, 0)));
+        struct vec3 e2 = v3_cross(n[j], e1), c = v3_scale(n[j], -tau);
+        double rad = sqrt(1 - tau * tau), bt = 0, bt_best = INFINITY;
+        for (int i = 0; i < 4096; i++) {
+            double t = 2 * M_PI * i / 4096;
+            struct vec3 x =
+                v3_add(c, v3_add(v3_scale(e1, rad * cos(t)), v3_scale(e2, rad * sin(t))));
+            int ok = 1;
+            for (int q = 0; q < k; q++)
+                ok &= q == j || v3_dot(n[q], x) >= -tau;
+            double ang = acos(fmax(-1, fmin(1, x.z)));
+            if (ok && ang < bt_best)
+                bt_best = ang, bt = t;
+        }
+        for (double half = 2 * M_PI / 4096; half > 1e-12 && bt_best < INFINITY; half /= 2) {
+            for (int i = -20; i <= 20; i++) {
+                double t = bt + half * i / 20;
+                struct vec3 x =
+                    v3_add(c, v3_add(v3_scale(e1, rad * cos(t)), v3_scale(e2, rad * sin(t))));
+                int ok = 1;
+                for (int q = 0; q < k; q++)
+                    ok &= q == j || v3_dot(n[q], x) >= -tau;
+                double ang = acos(fmax(-1, fmin(1, x.z)));
+                if (ok && ang < bt_best)
+                    bt_best = ang, bt = t;
+            }
+        }
+        best = fmin(best, bt_best);
+    }
     return best;
 }
 
