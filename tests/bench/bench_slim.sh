@@ -12,7 +12,9 @@ if command -v valgrind >/dev/null; then
   out=$(mktemp)
   valgrind --tool=callgrind --callgrind-out-file="$out" "$build/bench/bench_slim" "$mesh" "" 1 >/dev/null 2>&1
   echo "callgrind, one run (setup + 100 iterations), instructions by phase:"
-  callgrind_annotate --inclusive=yes "$out" 2>/dev/null | grep -E "PROGRAM TOTALS|polar_block|arap_local|arap_global|sparse_chol_solve|minrot_solve|run_round|tetmesh_build" | sed 's/^/  /'
+  callgrind_annotate --inclusive=yes "$out" 2>/dev/null |
+    grep -E "PROGRAM TOTALS|:(polar_block|arap_local|arap_global|sparse_chol_solve|minrot_solve|tetmesh_build) \[" |
+    sed 's/^/  /'
   rm -f "$out"
 fi
 peers=../shared/peers/slice-peers.sh
