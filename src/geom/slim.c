@@ -518,8 +518,9 @@ run_dir(struct ctx *cx, struct dir *d, struct sf_err *err)
         if (rc)
             goto done;
         d->n_runs = round + 1;
-        /* keep the curve of the round that holds the best iterate so far */
-        if (w.n_list && w.list[0].round == round && w.list[0].x) {
+        /* keep the curve of the round that holds the best iterate so far (the
+           first round's when the input stays best) */
+        if (round == 0 || (w.n_list && w.list[0].round == round && w.list[0].x)) {
             memcpy(d->curve, curve, sizeof(uint32_t) * (size_t)n_curve);
             d->n_curve = n_curve;
         }
