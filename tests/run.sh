@@ -49,7 +49,8 @@ for script in tests/integ/*.sh; do
   name=$(basename "$script" .sh)
   [ -n "$filter" ] && [[ "$name" != *"$filter"* ]] && continue
   echo "== integ $name"
-  if BUILD="$build" bash "$script"; then pass=$((pass + 1)); else fail=$((fail + 1)); failed_progs+=("integ/$name"); fi
+  # a hung scenario fails instead of hanging the run (CI has 90 minutes in all)
+  if BUILD="$build" timeout 600 bash "$script"; then pass=$((pass + 1)); else fail=$((fail + 1)); failed_progs+=("integ/$name"); fi
 done
 [ ${#failed_progs[@]} -gt 0 ] && echo "failed: ${failed_progs[*]}"
 echo "total: $pass passed, $fail failed, $skip skipped"

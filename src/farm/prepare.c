@@ -6,8 +6,9 @@
  * (src/mesh, src/geom, slicer/), with plain data in and out, so it runs on
  * a pool worker.  Design: load (a broken part fails its job with the
  * loader's message naming the uploaded file), orient with the job's angle
- * or the printer's, reshape when the method asks and the stage exists
- * (otherwise SF_EUNSUPP naming it: never fake output), then slice with the
+ * or the printer's, slim it (Hu 2015) within the job's deviation budget
+ * when the method is 'slim' (a method not in the build is SF_EUNSUPP
+ * naming it: never fake output), then slice with the
  * printer's profile, overridden by the farm config's view of the hardware
  * (nozzle, bed, overhang angle) so one file is the truth about machines.
  * The cancel flag is checked between stages and inside the slicer.
@@ -27,6 +28,7 @@
 #include "../base/buf.h"
 #include "../base/limits.h"
 #include "../geom/orient.h"
+#include "../geom/slim.h"
 #include "../mesh/mesh.h"
 
 static int
@@ -81,6 +83,38 @@ load_profile(const struct prepare_req *req, struct slice_profile *p, struct sf_e
     return rc;
 }
 
+/*
+ * Support slimming (Hu 2015) of the oriented part within the job's
+ * deviation budget: the largest vertex displacement may not pass
+ * deviation_mm (nor the method's own 15 % of the diagonal).  On success m
+ * holds the slimmed part, back on the bed centre.
+ */
+static int
+slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_profile *prof,
+          const atomic_bool *cancel, struct sf_err *err)
+{
+    struct slim_params sp;
+    slim_params_default(&sp);
+    sp.angle_deg = prof->max_overhang_deg;
+    sp.threads = 1; /* the pool already runs one task per core */
+    sp.cancel = cancel;
+    double diag = mesh_diag(m);
+    if (diag > 0 && req->opts.deviation_mm / diag < sp.max_mndr)
+        sp.max_mndr = req->opts.deviation_mm / diag;
+    if (sp.max_andr > sp.max_mndr)
+        sp.max_andr = sp.max_mndr;
+    struct slim_result sr;
+    int rc = slim_optimize(m, &sp, &sr, err);
+    if (rc)
+        return rc;
+    mesh_release(m);
+    *m = sr.out; /* take the slimmed part */
+    mesh_init(&sr.out);
+    slim_result_release(&sr);
+    mesh_place_on_bed(m, prof->bed_x_mm / 2, prof->bed_y_mm / 2);
+    return SF_OK;
+}
+
 int
 prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
              struct sf_err *err)
@@ -98,19 +132,19 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     buf_release(&data);
     if (rc)
         goto out;
-    if (strcmp(method, "slim") == 0 || strcmp(method, "surface") == 0) {
-        /* TODO(#7): call src/geom's slimming (Hu 2015) / surface
-           optimization (Jayakody) within req->opts.deviation_mm. */
+    if (strcmp(method, "surface") == 0) {
+        /* the surface optimization (Jayakody) is an open issue of its own */
         rc = sf_err_set(err, SF_EUNSUPP,
-                        "prepare: method '%s' is not available in this build (its src/geom "
-                        "stage is not merged yet); use 'orient' or 'none'",
+                        "prepare: method '%s' is not available in this build; use 'slim', "
+                        "'orient' or 'none'",
                         method);
         goto out;
     }
     struct slice_profile prof;
     if ((rc = load_profile(req, &prof, err)))
         goto out;
-    if (strcmp(method, "orient") == 0) {
+    bool slim = strcmp(method, "slim") == 0;
+    if (strcmp(method, "orient") == 0 || slim) {
         if (atomic_load(cancel)) {
             rc = cancelled(req, err);
             goto release;
@@ -124,6 +158,8 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
             goto release;
         orient_apply(&m, res.best.up, prof.bed_x_mm / 2, prof.bed_y_mm / 2);
     }
+    if (slim && (rc = slim_part(&m, req, &prof, cancel, err)))
+        goto release;
     if (atomic_load(cancel)) {
         rc = cancelled(req, err);
         goto release;

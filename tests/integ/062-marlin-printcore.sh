@@ -34,7 +34,7 @@ check_log "$TMP/job.gcode" || exit 1
 # A bare host: plain lines, no numbers, one "ok" at a time.
 start_sim --baud 1000000 --speed 2000 --log "$TMP/log" || exit 1
 /usr/bin/python3 - "$PORT" "$TMP/job.gcode" <<'PY' || exit 1
-import os, sys, termios, tty, time
+import os, select, sys, termios, tty, time
 fd = os.open(sys.argv[1], os.O_RDWR | os.O_NOCTTY)
 tty.setraw(fd)
 buf = b""
@@ -46,8 +46,19 @@ def wait_ok():
             line, buf = buf.split(b"\n", 1)
             if line.startswith(b"ok"):
                 return
+        # never block past the deadline: a silent printer fails the test
+        if select.select([fd], [], [], max(0, end - time.time()))[0]:
+            buf += os.read(fd, 4096)
+    sys.exit("bare host: no ok within 5 s")
+# Like any simple host, wait for the firmware's "start" after the reset that
+# opening the port causes: what is sent while it boots is lost, as on Marlin.
+end = time.time() + 5
+while b"start\n" not in buf and time.time() < end:
+    if select.select([fd], [], [], max(0, end - time.time()))[0]:
         buf += os.read(fd, 4096)
-    sys.exit("bare host: no ok")
+if b"start\n" not in buf:
+    sys.exit("bare host: no 'start' from the printer")
+buf = buf.split(b"start\n", 1)[1]
 for raw in open(sys.argv[2]):
     cmd = raw.split(";")[0].strip()
     if cmd:

@@ -424,10 +424,12 @@ T_CASE(farm_default_prepare_slices_and_defers_missing_stages)
     farm_printer_info(fx.f, 0, &info);
     T_EQ_INT(info.state, PRINTER_OFFLINE);
     T_TRUE(strstr(info.message, "no 'marlin' driver in this build") != NULL);
-    int64_t ok = add(tetra_stl, "PLA", 1), slim = add_m(tetra_stl, "PLA", 1, "slim"),
-            junk = add("this is no mesh", "", 1), abs = add_m(tetra_stl, "", 1, "none");
+    int64_t ok = add(tetra_stl, "PLA", 1), surf = add_m(tetra_stl, "PLA", 1, "surface"),
+            junk = add("this is no mesh", "", 1), abs = add_m(tetra_stl, "", 1, "none"),
+            slimmed = add_m(tetra_stl, "PLA", 1, "slim");
     T_TRUE(wait_job(junk, JOB_FAILED));
     T_TRUE(wait_job(ok, JOB_READY));
+    T_TRUE(wait_job(slimmed, JOB_READY)); /* oriented, slimmed (Hu 2015) and sliced */
     for (int i = 0; i < 20; i++)
         loop_run_once(fx.l, 10);
     struct job_row j;
@@ -444,9 +446,9 @@ T_CASE(farm_default_prepare_slices_and_defers_missing_stages)
     T_TRUE(strstr(g.data, "G1 ") != NULL);
     buf_release(&g);
     /* a method whose stage is missing waits, saying so */
-    T_OK(store_job_get(fx.s, slim, &j, &err), &err);
+    T_OK(store_job_get(fx.s, surf, &j, &err), &err);
     T_EQ_INT(j.state, JOB_QUEUED);
-    T_TRUE(strstr(j.reason, "method 'slim' is not available in this build") != NULL);
+    T_TRUE(strstr(j.reason, "method 'surface' is not available in this build") != NULL);
     /* a broken part fails at once, naming the uploaded file */
     T_OK(store_job_get(fx.s, junk, &j, &err), &err);
     T_TRUE(strstr(j.reason, "'part.stl': not a mesh file") != NULL);
