@@ -593,6 +593,16 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
             TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
         }
     }
+    if (t[T_SOLID].n && t[T_KEEP].n) {
+        /* solid narrower than a line is a sliver along a slope, not a
+           skin: drop it and grow the rest a little, as PrusaSlicer 2.5
+           regularizes its vertical shells: offset2(-0.5 s, +0.8 s) with
+           s = 0.8 x the solid line spacing (INSET_OVERLAP_TOLERANCE) */
+        double ms = 0.8 * ssp;
+        TRY(clip_offset(&t[T_SOLID], -0.5 * ms, CLIP_JOIN_SQUARE, &t[T_TMP]));
+        TRY(clip_offset(&t[T_TMP], 0.8 * ms, CLIP_JOIN_SQUARE, &t[T_LINES]));
+        TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+    }
     TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
     if (p->top_layers > 0) {
         /* the part of the solid the next layer does not cover is the top surface */
