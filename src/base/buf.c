@@ -136,14 +136,12 @@ buf_read_file(struct buf *b, const char *path, struct sf_err *err)
             if (n == 0)
                 return SF_OK;
             buf_reset(b);
-            return sf_err_set(err, SF_ENOMEM, "'%s' is over the limit of %zu bytes", path,
-                              b->max);
+            return sf_err_set(err, SF_ENOMEM, "'%s' is over the limit of %zu bytes", path, b->max);
         }
         if (b->cap - b->len <= 1 &&
             buf_reserve(b, want < b->max - b->len ? want : b->max - b->len) != SF_OK) {
             close(fd);
-            return sf_err_set(err, SF_ENOMEM, "'%s' is over the limit of %zu bytes", path,
-                              b->max);
+            return sf_err_set(err, SF_ENOMEM, "'%s' is over the limit of %zu bytes", path, b->max);
         }
         size_t room = b->cap - b->len - 1;
         if (room > b->max - b->len)

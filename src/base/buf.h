@@ -18,10 +18,10 @@
 #include "err.h"
 
 struct buf {
-    char *data;  /* len bytes plus a NUL; NULL until first growth */
-    size_t len;  /* bytes held */
-    size_t cap;  /* bytes allocated (including the NUL) */
-    size_t max;  /* hard cap on len; 0 = SIZE_MAX */
+    char *data; /* len bytes plus a NUL; NULL until first growth */
+    size_t len; /* bytes held */
+    size_t cap; /* bytes allocated (including the NUL) */
+    size_t max; /* hard cap on len; 0 = SIZE_MAX */
 };
 
 /* Initialise an empty buffer that may hold at most max bytes (0: no cap). */

@@ -18,15 +18,15 @@
 
 enum sf_status {
     SF_OK = 0,
-    SF_EINVAL = -1,     /* bad input from outside (file, request, reply) */
-    SF_EIO = -2,        /* OS or device failure; sys_errno holds errno */
-    SF_ENOMEM = -3,     /* allocation failed or a size cap was hit */
-    SF_EUNSUPP = -4,    /* valid but not supported */
-    SF_EAGAIN = -5,     /* try again later (would block, busy) */
-    SF_ETIMEDOUT = -6,  /* a deadline passed */
-    SF_ECANCELED = -7,  /* cancelled by request */
-    SF_EBUG = -8,       /* a broken internal invariant */
-    SF_ENOTFOUND = -9,  /* a named thing does not exist */
+    SF_EINVAL = -1,    /* bad input from outside (file, request, reply) */
+    SF_EIO = -2,       /* OS or device failure; sys_errno holds errno */
+    SF_ENOMEM = -3,    /* allocation failed or a size cap was hit */
+    SF_EUNSUPP = -4,   /* valid but not supported */
+    SF_EAGAIN = -5,    /* try again later (would block, busy) */
+    SF_ETIMEDOUT = -6, /* a deadline passed */
+    SF_ECANCELED = -7, /* cancelled by request */
+    SF_EBUG = -8,      /* a broken internal invariant */
+    SF_ENOTFOUND = -9, /* a named thing does not exist */
 };
 
 #define SF_ERR_MSG_MAX 256

@@ -158,8 +158,8 @@ gcode_parse(const char *s, size_t len, struct gcode_line *out, struct sf_err *er
     if (takes_text(out->letter, out->code)) {
         i = skip_blanks(s, end, i);
         size_t e = end;
-        while (e > i && (s[e - 1] == ' ' || s[e - 1] == '\t' || s[e - 1] == '\r' ||
-                         s[e - 1] == '\n'))
+        while (e > i &&
+               (s[e - 1] == ' ' || s[e - 1] == '\t' || s[e - 1] == '\r' || s[e - 1] == '\n'))
             e--;
         out->text = s + i;
         out->text_len = e - i;
@@ -188,8 +188,8 @@ gcode_parse(const char *s, size_t len, struct gcode_line *out, struct sf_err *er
             /* A bare letter ("G28 X") is legal; anything else glued on is not. */
             if (p < end && s[p] != ' ' && s[p] != '\t' && s[p] != '\r' && s[p] != '\n' &&
                 s[p] != '(')
-                return sf_err_set(err, SF_EINVAL, "column %zu: number expected after '%c'",
-                                  p + 1, w);
+                return sf_err_set(err, SF_EINVAL, "column %zu: number expected after '%c'", p + 1,
+                                  w);
             word->value = NAN;
         }
         i = p;

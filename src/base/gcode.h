@@ -29,18 +29,18 @@ struct gcode_word {
 };
 
 struct gcode_line {
-    bool has_line_no;     /* N<number> present */
-    long line_no;         /* its value */
-    bool has_checksum;    /* *<number> present */
-    unsigned checksum;    /* the value given */
-    bool checksum_ok;     /* given checksum equals the computed one */
-    char letter;          /* 'G', 'M', 'T' ...; 0 for an empty line */
-    int code;             /* command number (1 in G1) */
-    int subcode;          /* after a dot (G29.1); -1 if none */
-    int n_words;          /* parameter words in words[] */
+    bool has_line_no;  /* N<number> present */
+    long line_no;      /* its value */
+    bool has_checksum; /* *<number> present */
+    unsigned checksum; /* the value given */
+    bool checksum_ok;  /* given checksum equals the computed one */
+    char letter;       /* 'G', 'M', 'T' ...; 0 for an empty line */
+    int code;          /* command number (1 in G1) */
+    int subcode;       /* after a dot (G29.1); -1 if none */
+    int n_words;       /* parameter words in words[] */
     struct gcode_word words[GCODE_WORDS_MAX];
-    const char *text;     /* free-text argument (M117 msg) into the input, or NULL */
-    size_t text_len;      /* its length */
+    const char *text; /* free-text argument (M117 msg) into the input, or NULL */
+    size_t text_len;  /* its length */
 };
 
 /*

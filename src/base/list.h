@@ -51,10 +51,10 @@ list_remove(struct list *node)
     node->prev = node->next = node;
 }
 
-#define list_entry(ptr, type, member) ((type *)((char *)(ptr) - offsetof(type, member)))
+#define list_entry(ptr, type, member) ((type *)((char *)(ptr)-offsetof(type, member)))
 
 /* Iterate safely against removal of the current node. */
-#define list_for_each_safe(it, tmp, head)                                                     \
+#define list_for_each_safe(it, tmp, head)                                                          \
     for ((it) = (head)->next, (tmp) = (it)->next; (it) != (head); (it) = (tmp), (tmp) = (it)->next)
 
 #endif

@@ -20,8 +20,8 @@
 enum log_level { LOG_ERROR = 0, LOG_WARN, LOG_INFO, LOG_DEBUG };
 
 /* Receives every line that passes the level threshold (without newline). */
-typedef void (*log_sink_fn)(void *ud, enum log_level level, const char *subsys,
-                            const char *printer, const char *msg);
+typedef void (*log_sink_fn)(void *ud, enum log_level level, const char *subsys, const char *printer,
+                            const char *msg);
 
 void log_set_level(enum log_level level);
 enum log_level log_get_level(void);

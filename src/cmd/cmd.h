@@ -23,11 +23,11 @@ struct cmd {
 
 void cmd_register(const struct cmd *c);
 
-#define CMD_REGISTER(ident, name_, usage_, summary_, fn_)                                     \
-    static const struct cmd cmd_def_##ident = { name_, usage_, summary_, fn_ };               \
-    __attribute__((constructor)) static void cmd_reg_##ident(void)                            \
-    {                                                                                         \
-        cmd_register(&cmd_def_##ident);                                                       \
+#define CMD_REGISTER(ident, name_, usage_, summary_, fn_)                                          \
+    static const struct cmd cmd_def_##ident = { name_, usage_, summary_, fn_ };                    \
+    __attribute__((constructor)) static void cmd_reg_##ident(void)                                 \
+    {                                                                                              \
+        cmd_register(&cmd_def_##ident);                                                            \
     }
 
 /* True when stdout is a terminal and NO_COLOR-style progress is wanted. */

@@ -50,12 +50,11 @@ parse_num(const char *s, double lo, double hi, double *out)
 static int
 run(int argc, char **argv)
 {
-    static const struct option opts[] = { { "up", required_argument, NULL, 'u' },
-                                          { "angle", required_argument, NULL, 'a' },
-                                          { "grid", required_argument, NULL, 'g' },
-                                          { "json", no_argument, NULL, 'j' },
-                                          { "help", no_argument, NULL, 'h' },
-                                          { NULL, 0, NULL, 0 } };
+    static const struct option opts[] = {
+        { "up", required_argument, NULL, 'u' },   { "angle", required_argument, NULL, 'a' },
+        { "grid", required_argument, NULL, 'g' }, { "json", no_argument, NULL, 'j' },
+        { "help", no_argument, NULL, 'h' },       { NULL, 0, NULL, 0 }
+    };
     struct vec3 up = v3(0, 0, 1);
     struct support_params sp;
     support_params_default(&sp);
@@ -134,23 +133,21 @@ run(int argc, char **argv)
             (json_int_t)info.n_merged, "degenerate", (json_int_t)info.n_degenerate, "flipped",
             (json_int_t)info.n_flipped, "bbox_min", lo.x, lo.y, lo.z, "bbox_max", hi.x, hi.y, hi.z,
             "volume_mm3", closed ? vol : 0.0, "area_mm2", mesh_area(&m), "closed", closed,
-            "topology", "components", (json_int_t)topo.n_comps, "edges",
-            (json_int_t)topo.n_edges, "boundary_edges", (json_int_t)topo.n_boundary,
-            "nonmanifold_edges", (json_int_t)topo.n_nonmanifold, "misoriented_edges",
-            (json_int_t)topo.n_misoriented);
-        json_t *s = json_pack("{s:[fff], s:f, s:f, s:i, s:f, s:f, s:f, s:f, s:i, s:i, s:f, s:f}",
-                              "up", up.x, up.y, up.z, "angle_deg", sp.angle_deg, "grid_mm",
-                              sp.pitch_mm, "risky_faces", (json_int_t)sm.n_risky,
-                              "risky_area_mm2", sm.risky_area_mm2, "proxy_mm3", sm.proxy_mm3,
-                              "support_volume_mm3", sm.volume_mm3, "contact_area_mm2",
-                              sm.contact_area_mm2, "columns", (json_int_t)sm.n_columns, "anchors",
-                              (json_int_t)sm.n_anchors, "com_height_mm", sm.com_height_mm,
-                              "build_height_mm", sm.build_height_mm);
+            "topology", "components", (json_int_t)topo.n_comps, "edges", (json_int_t)topo.n_edges,
+            "boundary_edges", (json_int_t)topo.n_boundary, "nonmanifold_edges",
+            (json_int_t)topo.n_nonmanifold, "misoriented_edges", (json_int_t)topo.n_misoriented);
+        json_t *s = json_pack(
+            "{s:[fff], s:f, s:f, s:i, s:f, s:f, s:f, s:f, s:i, s:i, s:f, s:f}", "up", up.x, up.y,
+            up.z, "angle_deg", sp.angle_deg, "grid_mm", sp.pitch_mm, "risky_faces",
+            (json_int_t)sm.n_risky, "risky_area_mm2", sm.risky_area_mm2, "proxy_mm3", sm.proxy_mm3,
+            "support_volume_mm3", sm.volume_mm3, "contact_area_mm2", sm.contact_area_mm2, "columns",
+            (json_int_t)sm.n_columns, "anchors", (json_int_t)sm.n_anchors, "com_height_mm",
+            sm.com_height_mm, "build_height_mm", sm.build_height_mm);
         if (s)
-            json_object_update_new(s, json_pack("{s:i, s:f, s:f}", "islands",
-                                                (json_int_t)sm.n_islands, "island_volume_mm3",
-                                                sm.island_volume_mm3, "base_margin_mm",
-                                                sm.base_margin_mm));
+            json_object_update_new(s,
+                                   json_pack("{s:i, s:f, s:f}", "islands", (json_int_t)sm.n_islands,
+                                             "island_volume_mm3", sm.island_volume_mm3,
+                                             "base_margin_mm", sm.base_margin_mm));
         if (!o || !s || json_object_set_new(o, "support", s) != 0) {
             fprintf(stderr, "slimfarm inspect: out of memory\n");
             json_decref(o);
@@ -163,15 +160,15 @@ run(int argc, char **argv)
         puts(text);
         free(text);
     } else {
-        printf("%s: %s, %u triangles, %u vertices\n", path, mesh_format_name(info.format),
-               m.n_tris, m.n_verts);
+        printf("%s: %s, %u triangles, %u vertices\n", path, mesh_format_name(info.format), m.n_tris,
+               m.n_verts);
         printf("  repaired:   %u vertices merged, %u degenerate triangles dropped, %u flipped\n",
                info.n_merged, info.n_degenerate, info.n_flipped);
         printf("  size:       %.2f x %.2f x %.2f mm (min %.2f, %.2f, %.2f)\n", hi.x - lo.x,
                hi.y - lo.y, hi.z - lo.z, lo.x, lo.y, lo.z);
         printf("  topology:   %s, %u component%s, %u edges, %u boundary, %u non-manifold\n",
-               closed ? "closed" : "open", topo.n_comps, topo.n_comps == 1 ? "" : "s",
-               topo.n_edges, topo.n_boundary, topo.n_nonmanifold);
+               closed ? "closed" : "open", topo.n_comps, topo.n_comps == 1 ? "" : "s", topo.n_edges,
+               topo.n_boundary, topo.n_nonmanifold);
         if (closed)
             printf("  volume:     %.1f mm3, area %.1f mm2\n", vol, mesh_area(&m));
         else
@@ -188,6 +185,10 @@ run(int argc, char **argv)
                "%s the base\n",
                sm.n_islands, sm.n_islands == 1 ? "" : "s", sm.island_volume_mm3,
                fabs(sm.base_margin_mm), sm.base_margin_mm >= 0 ? "inside" : "OUTSIDE");
+        if (sm.n_rays_open)
+            printf("  warning: %u of %u rays meet surfaces that do not pair up (not a closed "
+                   "solid): the support figures are estimates\n",
+                   sm.n_rays_open, sm.n_rays);
     }
     rc = 0;
 out:

@@ -13,8 +13,8 @@
 #include "../geom/orient.h"
 #include "cmd.h"
 
-static const char usage_line[] =
-    "orient PART -o OUT [--angle DEG] [--samples N] [--grid MM] [--bed X,Y] [--json]";
+static const char usage_line[] = "orient PART -o OUT [--angle DEG] [--margin DEG] [--samples N] "
+                                 "[--grid MM] [--bed X,Y] [--json]";
 
 static void
 progress(void *ud, double done, double total)
@@ -47,12 +47,15 @@ print_cand(const char *label, const struct orient_candidate *c)
 static int
 run(int argc, char **argv)
 {
-    static const struct option opts[] = {
-        { "output", required_argument, NULL, 'o' }, { "angle", required_argument, NULL, 'a' },
-        { "samples", required_argument, NULL, 's' }, { "grid", required_argument, NULL, 'g' },
-        { "bed", required_argument, NULL, 'b' },     { "json", no_argument, NULL, 'j' },
-        { "help", no_argument, NULL, 'h' },          { NULL, 0, NULL, 0 }
-    };
+    static const struct option opts[] = { { "output", required_argument, NULL, 'o' },
+                                          { "angle", required_argument, NULL, 'a' },
+                                          { "samples", required_argument, NULL, 's' },
+                                          { "grid", required_argument, NULL, 'g' },
+                                          { "bed", required_argument, NULL, 'b' },
+                                          { "json", no_argument, NULL, 'j' },
+                                          { "margin", required_argument, NULL, 'm' },
+                                          { "help", no_argument, NULL, 'h' },
+                                          { NULL, 0, NULL, 0 } };
     struct orient_params p;
     orient_params_default(&p);
     const char *out = NULL;
@@ -70,6 +73,14 @@ run(int argc, char **argv)
             p.angle_deg = strtod(optarg, &end);
             if (*end || !(p.angle_deg >= 0 && p.angle_deg < 90)) {
                 fprintf(stderr, "slimfarm orient: --angle wants degrees in [0, 90), got '%s'\n",
+                        optarg);
+                return 2;
+            }
+            break;
+        case 'm':
+            p.margin_deg = strtod(optarg, &end);
+            if (*end || !(p.margin_deg >= 0 && p.margin_deg < 45)) {
+                fprintf(stderr, "slimfarm orient: --margin wants degrees in [0, 45), got '%s'\n",
                         optarg);
                 return 2;
             }
@@ -127,6 +138,12 @@ run(int argc, char **argv)
         mesh_release(&m);
         return 1;
     }
+    if (r.not_solid)
+        fprintf(stderr,
+                "slimfarm orient: %s: warning: not a closed solid (%u of %u rays meet unpaired "
+                "surfaces), so its support figures are guesses; orientation kept. Repair the "
+                "mesh to orient it.\n",
+                argv[optind], r.input.m.n_rays_open, r.input.m.n_rays);
     orient_apply(&m, r.best.up, bed_x, bed_y);
     int rc = mesh_save(&m, out, &err);
     mesh_release(&m);
@@ -135,11 +152,11 @@ run(int argc, char **argv)
         return 1;
     }
     if (json) {
-        json_t *o = json_pack("{s:s, s:s, s:o, s:o, s:[], s:i, s:i, s:f}", "file", argv[optind],
-                              "output", out, "best", cand_json(&r.best), "input",
-                              cand_json(&r.input), "runners_up", "candidates",
-                              (json_int_t)r.n_candidates, "scored_exactly", (json_int_t)r.n_exact,
-                              "seconds", r.seconds);
+        json_t *o =
+            json_pack("{s:s, s:s, s:o, s:o, s:[], s:i, s:i, s:f}", "file", argv[optind], "output",
+                      out, "best", cand_json(&r.best), "input", cand_json(&r.input), "runners_up",
+                      "candidates", (json_int_t)r.n_candidates, "scored_exactly",
+                      (json_int_t)r.n_exact, "seconds", r.seconds);
         for (int i = 0; o && i < r.n_runners; i++)
             json_array_append_new(json_object_get(o, "runners_up"), cand_json(&r.runners[i]));
         char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(8)) : NULL;
@@ -152,8 +169,10 @@ run(int argc, char **argv)
         free(text);
         return 0;
     }
-    printf("%s -> %s: %u directions, %u ray-cast, %.2f s\n", argv[optind], out, r.n_candidates,
-           r.n_exact, r.seconds);
+    printf("%s -> %s: %u directions, %u ray-cast, %.3f s (setup %.3f, proxy %.3f, ray cast "
+           "%.3f)\n",
+           argv[optind], out, r.n_candidates, r.n_exact, r.seconds, r.seconds_setup,
+           r.seconds_proxy, r.seconds_exact);
     print_cand("best", &r.best);
     print_cand("input", &r.input);
     for (int i = 0; i < r.n_runners; i++)

@@ -26,8 +26,9 @@ static const struct {
     const char *name;
     int (*make)(struct mesh *, struct sf_err *);
 } parts[] = {
-    { "tee", shape_tee },     { "arch", shape_arch },   { "lbracket", shape_lbracket },
-    { "mushroom", shape_sphere_on_stem }, { "frame", shape_frame }, { "torus", torus },
+    { "tee", shape_tee },           { "arch", shape_arch },
+    { "lbracket", shape_lbracket }, { "mushroom", shape_sphere_on_stem },
+    { "frame", shape_frame },       { "torus", torus },
 };
 
 static int

@@ -25,11 +25,11 @@
 struct support_column; /* measure.h */
 
 struct growth_report {
-    uint32_t n_islands;        /* regions that start in mid-air with no column under them */
-    double island_volume_mm3;  /* columns needed from the bed or the part below up to them */
-    double min_margin_mm;      /* least distance of the partial centre of mass inside the
-                                  extended base over all layers; negative: it tips */
-    int unstable_layer;        /* first layer where the margin is negative, or -1 */
+    uint32_t n_islands;       /* regions that start in mid-air with no column under them */
+    double island_volume_mm3; /* columns needed from the bed or the part below up to them */
+    double min_margin_mm;     /* least distance of the partial centre of mass inside the
+                                 extended base over all layers; negative: it tips */
+    int unstable_layer;       /* first layer where the margin is negative, or -1 */
     uint32_t n_layers;
 };
 

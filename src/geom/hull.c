@@ -50,10 +50,14 @@ inside_margin(const struct angle_pt *pts, int n, double px, double py)
 
 int
 hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **out, uint32_t *n_out,
-           struct sf_err *err)
+           uint32_t **verts, uint32_t *n_verts, struct sf_err *err)
 {
     *out = NULL;
     *n_out = 0;
+    if (verts) {
+        *verts = NULL;
+        *n_verts = 0;
+    }
     if (m->n_verts < 4)
         return sf_err_set(err, SF_EINVAL, "convex hull needs 4 or more vertices");
     coordT *pts = mem_array((size_t)m->n_verts * 3, sizeof(coordT));
@@ -74,8 +78,8 @@ hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **out, uint32
     struct angle_pt *poly = NULL;
     uint32_t n = 0, cap = 0;
     if (exitcode) {
-        rc = sf_err_set(err, SF_EINVAL, "convex hull failed (qhull exit %d): flat or degenerate part",
-                        exitcode);
+        rc = sf_err_set(err, SF_EINVAL,
+                        "convex hull failed (qhull exit %d): flat or degenerate part", exitcode);
         goto out;
     }
     facetT *facet;
@@ -132,6 +136,18 @@ hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **out, uint32
         poly = NULL;
     }
     qsort(bases, n, sizeof(*bases), cmp_base);
+    if (verts) {
+        uint32_t *ids = mem_array((size_t)qh->num_vertices + 1, sizeof(uint32_t));
+        if (!ids) {
+            rc = sf_err_set(err, SF_ENOMEM, "out of memory for the hull");
+            goto out;
+        }
+        uint32_t k = 0;
+        vertexT *vertex;
+        FORALLvertices ids[k++] = (uint32_t)qh_pointid(qh, vertex->point);
+        *verts = ids;
+        *n_verts = k;
+    }
 out:
     free(poly);
     qh_freeqhull(qh, !qh_ALL);

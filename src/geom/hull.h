@@ -23,9 +23,11 @@ struct hull_base {
 
 /*
  * All hull facets of m, largest first.  com is the part's centre of mass.
- * *bases is allocated (free()).
+ * *bases is allocated (free()).  If verts is not NULL, *verts receives the
+ * indices of the hull's vertices (allocated, free()) and *n_verts their
+ * count: the only vertices that can be a part's lowest or highest point.
  */
 int hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **bases, uint32_t *n,
-               struct sf_err *err);
+               uint32_t **verts, uint32_t *n_verts, struct sf_err *err);
 
 #endif

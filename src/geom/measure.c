@@ -5,7 +5,9 @@
  * Support columns follow the rays structure of Allen & Dutta: walking up a
  * ray, the last surface below is the bed or the part's last exit (an
  * up-facing hit); a down-facing hit on a risky face higher than min_gap
- * above it needs a column from there.  Volume is exact for the grid: each
+ * above it needs a column from there.  The ray counts the shells it is in,
+ * so a down-facing face met from inside (overlapping shells, or an open mesh
+ * missing its top) never gets a column through material.  Volume is exact for the grid: each
  * column contributes length * pitch^2.  Anchor points are clusters of
  * supported hits on neighbouring rays at similar heights (union-find), the
  * "contact clusters" of the support-slimming paper's direction search.
@@ -74,76 +76,6 @@ measure_proxy(const struct mesh *m, struct vec3 up, const struct support_params 
 }
 
 int
-proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *err)
-{
-    memset(pc, 0, sizeof(*pc));
-    size_t n = m->n_tris ? m->n_tris : 1;
-    float *block = mem_array(n, 7 * sizeof(float));
-    if (!block)
-        return sf_err_set(err, SF_ENOMEM, "proxy: out of memory for %u triangles", m->n_tris);
-    pc->nx = block;
-    pc->ny = block + n;
-    pc->nz = block + 2 * n;
-    pc->area = block + 3 * n;
-    pc->cx = block + 4 * n;
-    pc->cy = block + 5 * n;
-    pc->cz = block + 6 * n;
-    pc->n_tris = m->n_tris;
-    pc->n_verts = m->n_verts;
-    pc->m = m;
-    for (uint32_t i = 0; i < m->n_tris; i++) {
-        struct vec3 c = mesh_tri_cross(m, i), g = mesh_tri_centroid(m, i);
-        double len = v3_len(c);
-        struct vec3 nrm = len > 0 ? v3_scale(c, 1 / len) : v3(0, 0, 0);
-        pc->nx[i] = (float)nrm.x;
-        pc->ny[i] = (float)nrm.y;
-        pc->nz[i] = (float)nrm.z;
-        pc->area[i] = (float)(0.5 * len);
-        pc->cx[i] = (float)g.x;
-        pc->cy[i] = (float)g.y;
-        pc->cz[i] = (float)g.z;
-    }
-    return SF_OK;
-}
-
-void
-proxy_cache_release(struct proxy_cache *pc)
-{
-    free(pc->nx);
-    memset(pc, 0, sizeof(*pc));
-}
-
-void
-measure_proxy_cached(const struct proxy_cache *pc, struct vec3 up, const struct support_params *p,
-                     struct support_metrics *out)
-{
-    memset(out, 0, sizeof(*out));
-    up = v3_normalize(up);
-    double lo, hi;
-    height_range(pc->m, up, &lo, &hi);
-    float ux = (float)up.x, uy = (float)up.y, uz = (float)up.z;
-    float tau = (float)sin(p->angle_deg * M_PI / 180), flo = (float)lo;
-    float gap = (float)p->min_gap_mm;
-    double area = 0, proxy = 0;
-    uint32_t n = 0;
-    for (uint32_t i = 0; i < pc->n_tris; i++) {
-        float cosd = pc->nx[i] * ux + pc->ny[i] * uy + pc->nz[i] * uz;
-        if (cosd >= -tau)
-            continue;
-        float h = pc->cx[i] * ux + pc->cy[i] * uy + pc->cz[i] * uz - flo;
-        if (h < gap || pc->area[i] <= 0)
-            continue;
-        n++;
-        area += pc->area[i];
-        proxy += (double)(pc->area[i] * -cosd * h);
-    }
-    out->n_risky = n;
-    out->risky_area_mm2 = area;
-    out->proxy_mm3 = proxy;
-    out->build_height_mm = hi - lo;
-}
-
-int
 measure_columns(const struct ray_grid *g, const struct support_params *p,
                 struct support_column **cols, size_t *n_cols, struct sf_err *err)
 {
@@ -154,13 +86,25 @@ measure_columns(const struct ray_grid *g, const struct support_params *p,
     size_t cells = (size_t)g->nu * g->nw;
     for (size_t c = 0; c < cells; c++) {
         float below = 0; /* the bed */
+        int depth = 0;   /* shells the ray is inside */
         for (uint32_t k = g->first[c]; k < g->first[c + 1]; k++) {
             const struct ray_hit *h = &g->hits[k];
             if (h->cos_up > 0) {
-                below = h->h; /* leaving the part: its top surface is the new floor */
+                /* leaving the part: its top surface is the new floor.  An exit
+                   with no entry (a hole in an open mesh) still is a floor. */
+                if (depth > 0)
+                    depth--;
+                if (depth == 0)
+                    below = h->h;
                 continue;
             }
-            if (h->cos_up < -tau && h->h - below > gap) {
+            if (h->cos_up == 0)
+                continue;
+            /* entering: only a face met from outside can need a column; inside
+               a shell (a missing top face, overlapping shells) it is material */
+            bool outside = depth == 0;
+            depth++;
+            if (outside && h->cos_up < -tau && h->h - below > gap) {
                 void *o = out;
                 if (!mem_grow(&o, &cap, n + 1, sizeof(*out))) {
                     free(out);
@@ -245,8 +189,19 @@ int
 measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
                 const struct support_params *p, struct support_metrics *out, struct sf_err *err)
 {
+    return measure_support_cached(m, rc, NULL, up, p, out, err);
+}
+
+int
+measure_support_cached(const struct mesh *m, struct raycast *rc, const struct proxy_cache *pc,
+                       struct vec3 up, const struct support_params *p,
+                       struct support_metrics *out, struct sf_err *err)
+{
     up = v3_normalize(up);
-    measure_proxy(m, up, p, out);
+    if (pc)
+        proxy_eval(pc, up, p, out);
+    else
+        measure_proxy(m, up, p, out);
     struct ray_grid g;
     int rcode = raycast_grid(rc, up, p->pitch_mm, &g, err);
     if (rcode)
@@ -263,18 +218,21 @@ measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
         out->contact_area_mm2 = (double)n * cell;
         out->n_columns = (uint32_t)n;
         out->n_anchors = count_anchors(&g, cols, n);
-        struct vec3 com;
-        double vol = mesh_volume(m, &com);
-        if (!(fabs(vol) > 1e-9)) { /* open soup: fall back to the surface centroid */
-            double area = 0;
-            com = v3(0, 0, 0);
-            for (uint32_t i = 0; i < m->n_tris; i++) {
-                double a = mesh_tri_area(m, i);
-                com = v3_add(com, v3_scale(mesh_tri_centroid(m, i), a));
-                area += a;
+        for (size_t c = 0; c < (size_t)g.nu * g.nw; c++) {
+            if (g.first[c] == g.first[c + 1])
+                continue;
+            int depth = 0;
+            bool unmatched = false;
+            for (uint32_t k = g.first[c]; k < g.first[c + 1]; k++) {
+                if (g.hits[k].cos_up < 0)
+                    depth++;
+                else if (g.hits[k].cos_up > 0 && depth-- == 0)
+                    unmatched = true, depth = 0;
             }
-            com = area > 0 ? v3_scale(com, 1 / area) : com;
+            out->n_rays++;
+            out->n_rays_open += unmatched || depth != 0;
         }
+        struct vec3 com = raycast_com(rc);
         out->com_height_mm = v3_dot(com, up) - g.base;
         struct growth_report gr;
         rcode = growth_simulate(&g, cols, n, p->pitch_mm, &gr, err);
@@ -296,9 +254,10 @@ measure_deviation(const struct mesh *a, const struct mesh *b, struct deviation *
 {
     memset(out, 0, sizeof(*out));
     if (a->n_verts != b->n_verts || a->n_tris != b->n_tris)
-        return sf_err_set(err, SF_EINVAL,
-                          "deviation needs the same connectivity (%u/%u vs %u/%u vertices/triangles)",
-                          a->n_verts, a->n_tris, b->n_verts, b->n_tris);
+        return sf_err_set(
+            err, SF_EINVAL,
+            "deviation needs the same connectivity (%u/%u vs %u/%u vertices/triangles)", a->n_verts,
+            a->n_tris, b->n_verts, b->n_tris);
     double sum = 0;
     for (uint32_t i = 0; i < a->n_verts; i++) {
         double d = v3_len(v3_sub(a->v[i], b->v[i]));

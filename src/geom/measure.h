@@ -19,11 +19,12 @@
 
 #include "../base/err.h"
 #include "../mesh/mesh.h"
+#include "proxy.h"
 #include "raycast.h"
 
 struct support_params {
-    double angle_deg; /* alpha, largest self-supporting angle from vertical (default 45) */
-    double pitch_mm;  /* ray grid pitch (default 1) */
+    double angle_deg;  /* alpha, largest self-supporting angle from vertical (default 45) */
+    double pitch_mm;   /* ray grid pitch (default 1) */
     double min_gap_mm; /* a risky hit closer than this above the surface below needs no
                           column (it rests on it); default 0.05 */
 };
@@ -40,20 +41,24 @@ struct support_column {
 };
 
 struct support_metrics {
-    uint32_t n_risky;          /* faces with n . d < -sin(alpha) (bed contact excluded) */
-    double risky_area_mm2;     /* their area */
-    double proxy_mm3;          /* sum over risky faces: projected area * centroid height */
-    double volume_mm3;         /* ray-cast column volume: sum of column length * pitch^2 */
-    double contact_area_mm2;   /* columns * pitch^2: part surface touched by support */
-    uint32_t n_columns;        /* support columns on the grid */
-    uint32_t n_anchors;        /* clusters of adjacent supported grid points */
-    double com_height_mm;      /* centre of mass height above the bed */
-    double build_height_mm;    /* part height along d */
+    uint32_t n_risky;        /* faces with n . d < -sin(alpha) (bed contact excluded) */
+    double risky_area_mm2;   /* their area */
+    double proxy_mm3;        /* sum over risky faces: projected area * centroid height */
+    double volume_mm3;       /* ray-cast column volume: sum of column length * pitch^2 */
+    double contact_area_mm2; /* columns * pitch^2: part surface touched by support */
+    uint32_t n_columns;      /* support columns on the grid */
+    uint32_t n_anchors;      /* clusters of adjacent supported grid points */
+    double com_height_mm;    /* centre of mass height above the bed */
+    double build_height_mm;  /* part height along d */
     /* growth simulation (growth.h), filled by measure_support */
-    uint32_t n_islands;        /* regions starting in mid-air with no column under them */
-    double island_volume_mm3;  /* support they need, included in volume_mm3 */
-    double base_margin_mm;     /* least margin of the growing part's centre of mass inside
-                                  its extended base; negative: it would tip over */
+    uint32_t n_islands;       /* regions starting in mid-air with no column under them */
+    double island_volume_mm3; /* support they need, included in volume_mm3 */
+    double base_margin_mm;    /* least margin of the growing part's centre of mass inside
+                                 its extended base; negative: it would tip over */
+    /* trust: on a closed solid every ray leaves as often as it enters */
+    uint32_t n_rays;      /* grid rays that hit the part */
+    uint32_t n_rays_open; /* of those, rays whose entries and exits do not pair up: the part
+                             is not a closed solid there and the figures above are estimates */
 };
 
 /*
@@ -63,24 +68,6 @@ struct support_metrics {
  */
 void measure_proxy(const struct mesh *m, struct vec3 up, const struct support_params *p,
                    struct support_metrics *out);
-
-/*
- * The same proxy for many directions of one mesh: per-triangle normals,
- * areas and centroids computed once (structure of arrays), so each
- * direction costs a few multiply-adds per triangle.
- */
-struct proxy_cache {
-    uint32_t n_tris, n_verts;
-    float *nx, *ny, *nz;  /* unit normals */
-    float *area;          /* mm2 */
-    float *cx, *cy, *cz;  /* centroids */
-    const struct mesh *m; /* for the vertex heights */
-};
-int proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, struct sf_err *err);
-void proxy_cache_release(struct proxy_cache *pc);
-/* As measure_proxy (same numbers up to float rounding). */
-void measure_proxy_cached(const struct proxy_cache *pc, struct vec3 up,
-                          const struct support_params *p, struct support_metrics *out);
 
 /*
  * Support columns on a cast grid: walking up each ray, a hit on a risky
@@ -94,6 +81,12 @@ int measure_columns(const struct ray_grid *g, const struct support_params *p,
 int measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
                     const struct support_params *p, struct support_metrics *out,
                     struct sf_err *err);
+
+/* The same, taking the risky-face figures from a proxy cache of m (for
+   callers that score many directions of one part). */
+int measure_support_cached(const struct mesh *m, struct raycast *rc, const struct proxy_cache *pc,
+                           struct vec3 up, const struct support_params *p,
+                           struct support_metrics *out, struct sf_err *err);
 
 /* Shape deviation between two meshes with the same connectivity (a deformed copy). */
 struct deviation {

@@ -28,11 +28,14 @@ orient_params_default(struct orient_params *p)
 {
     memset(p, 0, sizeof(*p));
     p->angle_deg = 45;
+    p->margin_deg = 5;
     p->pitch_mm = 1;
     p->samples = 1000;
     p->exact_top = 48;
     p->w_contact_mm = 1;
     p->w_stability_mm2 = 0.5;
+    p->min_gain = 0.05;
+    p->max_open_rays = 0.01;
     p->min_base_mm2 = 25;
     p->min_margin_mm = 1;
 }
@@ -46,47 +49,61 @@ orient_source_name(enum orient_source s)
 
 struct cand {
     struct orient_candidate c;
-    double proxy_cost; /* for pruning */
-    bool exact;        /* chosen for the ray cast */
-    bool dropped;      /* would stand on a point */
+    double key;   /* sort key of the current stage */
+    int stage;    /* 0: proxy only, 1: coarse ray cast, 2: full ray cast */
+    bool dropped; /* would stand on a point or tip over */
 };
 
+/* A batch of candidates scored on a pool of threads (one stage). */
 struct job {
     const struct mesh *m;
     const struct orient_params *p;
-    struct raycast *rc;
+    const struct proxy_cache *pc; /* proxy stage */
+    struct raycast *rc;           /* ray-cast stages */
     struct support_params sp;
     struct cand *cands;
-    uint32_t *todo; /* indices of candidates to score */
+    const uint32_t *todo; /* indices of candidates to score */
     uint32_t n_todo;
+    int stage;
     atomic_uint next;
-    atomic_uint done;
     atomic_int failed; /* first error code, 0 if none */
-    uint32_t progress_base, progress_total;
+    atomic_uint *done; /* progress across stages */
+    uint32_t progress_total;
 };
-
-/* Area of faces lying on the bed (within 0.1 mm of the lowest point, facing down). */
-static double
-bed_contact_area(const struct mesh *m, struct vec3 up)
-{
-    double lo = INFINITY;
-    for (uint32_t i = 0; i < m->n_verts; i++)
-        lo = fmin(lo, v3_dot(m->v[i], up));
-    double area = 0;
-    for (uint32_t i = 0; i < m->n_tris; i++) {
-        const uint32_t *t = m->t[i];
-        if (v3_dot(m->v[t[0]], up) - lo < 0.1 && v3_dot(m->v[t[1]], up) - lo < 0.1 &&
-            v3_dot(m->v[t[2]], up) - lo < 0.1)
-            area += mesh_tri_area(m, i);
-    }
-    return area;
-}
 
 static double
 cost_of(const struct orient_params *p, const struct support_metrics *s)
 {
     return s->volume_mm3 + p->w_contact_mm * s->contact_area_mm2 +
            p->w_stability_mm2 * s->com_height_mm;
+}
+
+static int
+score_one(struct job *j, struct cand *c, struct sf_err *err)
+{
+    if (j->stage == 0) {
+        struct support_metrics s;
+        proxy_eval(j->pc, c->c.up, &j->sp, &s);
+        c->key = s.proxy_mm3 + j->p->w_contact_mm * s.risky_area_mm2;
+        return SF_OK;
+    }
+    struct support_params sp = j->sp;
+    if (j->stage == 1)
+        sp.pitch_mm *= 2; /* coarse: a quarter of the rays, for ranking */
+    int rc = measure_support_cached(j->m, j->rc, j->pc, c->c.up, &sp, &c->c.m, err);
+    if (rc)
+        return rc;
+    c->c.cost = c->key = cost_of(j->p, &c->c.m);
+    c->stage = j->stage;
+    c->dropped = false;
+    /* Standing on a point with no support column from the bed: it would topple. */
+    if (c->c.source != ORIENT_HULL && c->c.m.n_columns == 0 &&
+        proxy_bed_contact(j->pc, c->c.up) < j->p->min_base_mm2)
+        c->dropped = true;
+    /* Growth simulation: the part built so far would tip off its base. */
+    if (c->c.m.base_margin_mm < 0)
+        c->dropped = true;
+    return SF_OK;
 }
 
 static void *
@@ -97,62 +114,53 @@ worker(void *arg)
         uint32_t k = atomic_fetch_add(&j->next, 1);
         if (k >= j->n_todo || atomic_load(&j->failed))
             break;
-        struct cand *c = &j->cands[j->todo[k]];
         struct sf_err err;
-        if (measure_support(j->m, j->rc, c->c.up, &j->sp, &c->c.m, &err) != SF_OK) {
+        if (score_one(j, &j->cands[j->todo[k]], &err) != SF_OK) {
             int zero = 0;
             atomic_compare_exchange_strong(&j->failed, &zero, err.code ? err.code : SF_EBUG);
             break;
         }
-        c->c.cost = cost_of(j->p, &c->c.m);
-        /* Standing on a point with no support column from the bed: it would topple. */
-        if (c->c.source != ORIENT_HULL &&
-            bed_contact_area(j->m, c->c.up) < j->p->min_base_mm2 && c->c.m.n_columns == 0)
-            c->dropped = true;
-        /* Growth simulation: the part built so far would tip off its base. */
-        if (c->c.m.base_margin_mm < 0)
-            c->dropped = true;
-        unsigned d = atomic_fetch_add(&j->done, 1) + 1;
-        if (j->p->progress)
-            j->p->progress(j->p->progress_ud, j->progress_base + d, j->progress_total);
+        if (j->stage > 0) {
+            unsigned d = atomic_fetch_add(j->done, 1) + 1;
+            if (j->p->progress)
+                j->p->progress(j->p->progress_ud, d, j->progress_total);
+        }
     }
     return NULL;
 }
 
 static int
-score_exact(struct job *j, uint32_t *todo, uint32_t n, struct sf_err *err)
+run_stage(struct job *j, int stage, const uint32_t *todo, uint32_t n, struct sf_err *err)
 {
+    j->stage = stage;
     j->todo = todo;
     j->n_todo = n;
     atomic_store(&j->next, 0);
-    atomic_store(&j->done, 0);
     atomic_store(&j->failed, 0);
     int threads = j->p->threads > 0 ? j->p->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
-    if (threads < 1)
-        threads = 1;
-    if (threads > 64)
-        threads = 64;
+    threads = threads < 1 ? 1 : threads > 64 ? 64 : threads;
     pthread_t tid[64];
     int started = 0;
-    for (int i = 1; i < threads; i++)
+    for (int i = 1; i < threads && (uint32_t)i < n; i++)
         if (pthread_create(&tid[started], NULL, worker, j) == 0)
             started++;
     worker(j);
     for (int i = 0; i < started; i++)
         pthread_join(tid[i], NULL);
-    j->progress_base += n;
     int f = atomic_load(&j->failed);
     if (f)
         return sf_err_set(err, f, "orientation: scoring a direction failed");
     return SF_OK;
 }
 
+/* Order: not dropped before dropped, then by key. */
 static int
-cmp_proxy(const void *a, const void *b, void *ud)
+cmp_key(const void *a, const void *b, void *ud)
 {
-    const struct cand *c = ud;
-    double x = c[*(const uint32_t *)a].proxy_cost, y = c[*(const uint32_t *)b].proxy_cost;
-    return (x > y) - (x < y);
+    const struct cand *c = ud, *x = &c[*(const uint32_t *)a], *y = &c[*(const uint32_t *)b];
+    if (x->dropped != y->dropped)
+        return x->dropped ? 1 : -1;
+    return (x->key > y->key) - (x->key < y->key);
 }
 
 static int
@@ -179,32 +187,56 @@ fibonacci(int i, int n)
     return v3(r * cos(golden * i), r * sin(golden * i), z);
 }
 
-static bool
-better(const struct cand *a, const struct cand *b)
+static double
+elapsed(const struct timespec *a)
 {
-    if (a->dropped != b->dropped)
-        return !a->dropped;
-    return a->c.cost < b->c.cost;
+    struct timespec b;
+    clock_gettime(CLOCK_MONOTONIC, &b);
+    return (b.tv_sec - a->tv_sec) + (b.tv_nsec - a->tv_nsec) * 1e-9;
+}
+
+/*
+ * Pick up to max indices from sorted order[] whose directions are at least
+ * min_deg apart (and from the ones in keep[0..n_keep)); returns the count.
+ */
+static uint32_t
+pick_distinct(const struct cand *c, const uint32_t *order, uint32_t n, uint32_t max, double min_deg,
+              uint32_t *out)
+{
+    double min_cos = cos(min_deg * M_PI / 180);
+    uint32_t k = 0;
+    for (uint32_t i = 0; i < n && k < max; i++) {
+        bool distinct = true;
+        for (uint32_t q = 0; q < k && distinct; q++)
+            distinct = v3_dot(c[order[i]].c.up, c[out[q]].c.up) < min_cos;
+        if (distinct)
+            out[k++] = order[i];
+    }
+    return k;
 }
 
 int
 orient_find(const struct mesh *m, const struct orient_params *p, struct orient_result *res,
             struct sf_err *err)
 {
+    enum { REFINE_PER = 16, FINAL = 6 };
     memset(res, 0, sizeof(*res));
-    struct timespec t0, t1;
+    struct timespec t0;
     clock_gettime(CLOCK_MONOTONIC, &t0);
     struct cand *cands = NULL;
-    uint32_t n = 0, *todo = NULL;
+    uint32_t n = 0, *order = NULL;
     size_t cap = 0;
     struct hull_base *bases = NULL;
     uint32_t n_bases = 0;
     struct raycast *rc = NULL;
+    struct proxy_cache pc = { 0 };
+    atomic_uint done = 0;
     int rcode = SF_OK;
 
     struct vec3 com;
     mesh_volume(m, &com);
-    if ((rcode = hull_bases(m, com, &bases, &n_bases, err)))
+    uint32_t *hull_verts = NULL, n_hull_verts = 0;
+    if ((rcode = hull_bases(m, com, &bases, &n_bases, &hull_verts, &n_hull_verts, err)))
         return rcode;
     if ((rcode = push(&cands, &n, &cap, v3(0, 0, 1), ORIENT_INPUT)))
         goto oom;
@@ -215,124 +247,113 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     for (int i = 0; i < p->samples; i++)
         if ((rcode = push(&cands, &n, &cap, fibonacci(i, p->samples), ORIENT_SPHERE)))
             goto oom;
+    uint32_t n_first = n;
+    /* room for the refinement samples, so cands never moves under the workers */
+    void *grow = cands;
+    if (!mem_grow(&grow, &cap, n + 3 * REFINE_PER, sizeof(struct cand)))
+        goto oom;
+    cands = grow;
+    order = mem_array(n + 3 * REFINE_PER, sizeof(uint32_t));
+    if (!order)
+        goto oom;
+    if ((rcode = proxy_cache_init(&pc, m, hull_verts, n_hull_verts, err)) ||
+        !(rc = raycast_new(m, err))) {
+        rcode = rcode ? rcode : (err ? err->code : SF_ENOMEM);
+        goto out;
+    }
+    res->seconds_setup = elapsed(&t0);
 
-    struct job j = { .m = m, .p = p };
+    struct job j = { .m = m, .p = p, .pc = &pc, .rc = rc, .cands = cands, .done = &done };
     support_params_default(&j.sp);
-    j.sp.angle_deg = p->angle_deg;
+    j.sp.angle_deg = fmax(0, p->angle_deg - p->margin_deg);
     j.sp.pitch_mm = p->pitch_mm;
-    struct proxy_cache pc;
-    if ((rcode = proxy_cache_init(&pc, m, err)))
-        goto out;
-    for (uint32_t i = 0; i < n; i++) {
-        struct support_metrics s;
-        measure_proxy_cached(&pc, cands[i].c.up, &j.sp, &s);
-        cands[i].proxy_cost = s.proxy_mm3 + p->w_contact_mm * s.risky_area_mm2;
-    }
-    proxy_cache_release(&pc);
-    todo = mem_array(n + 64, sizeof(uint32_t));
-    if (!todo)
-        goto oom;
-    for (uint32_t i = 0; i < n; i++)
-        todo[i] = i;
-    qsort_r(todo, n, sizeof(uint32_t), cmp_proxy, cands);
-    uint32_t n_exact = 0;
-    for (uint32_t k = 0; k < n; k++) {
-        struct cand *c = &cands[todo[k]];
-        if ((int)k < p->exact_top || c->c.source != ORIENT_SPHERE)
-            c->exact = true;
-    }
-    for (uint32_t i = 0; i < n; i++)
-        if (cands[i].exact)
-            todo[n_exact++] = i;
-    if (!(rc = raycast_new(m, err))) {
-        rcode = err ? err->code : SF_ENOMEM;
-        goto out;
-    }
-    j.rc = rc;
-    j.cands = cands;
-    j.progress_total = n_exact + 3 * 24;
-    if ((rcode = score_exact(&j, todo, n_exact, err)))
-        goto out;
 
-    /* refine around the three best: 24 directions within 8 degrees of each */
-    uint32_t best3[3] = { UINT32_MAX, UINT32_MAX, UINT32_MAX };
-    for (uint32_t i = 0; i < n; i++) {
-        if (!cands[i].exact)
-            continue;
-        for (int b = 0; b < 3; b++) {
-            if (best3[b] == UINT32_MAX || better(&cands[i], &cands[best3[b]])) {
-                for (int s = 2; s > b; s--)
-                    best3[s] = best3[s - 1];
-                best3[b] = i;
-                break;
-            }
-        }
-    }
-    uint32_t first_refine = n;
-    for (int b = 0; b < 3; b++) {
-        if (best3[b] == UINT32_MAX)
-            continue;
-        struct vec3 up = cands[best3[b]].c.up;
-        struct mat3 to = m3_rotate_onto(v3(0, 0, 1), up);
-        for (int k = 0; k < 24; k++) {
-            double ring = (k < 8 ? 3.0 : 8.0) * M_PI / 180, az = 2 * M_PI * (k % 8) / 8 +
-                                                              (k >= 16 ? M_PI / 8 : 0);
-            if (k >= 16)
-                ring = 5.5 * M_PI / 180;
+    /* stage 0: proxy for every direction */
+    for (uint32_t i = 0; i < n; i++)
+        order[i] = i;
+    if ((rcode = run_stage(&j, 0, order, n, err)))
+        goto out;
+    res->seconds_proxy = elapsed(&t0) - res->seconds_setup;
+    qsort_r(order, n, sizeof(uint32_t), cmp_key, cands);
+
+    /* stage 1: coarse ray cast of the proxy's best, every hull base and the input */
+    uint32_t n_coarse = 0;
+    for (uint32_t k = 0; k < n; k++)
+        if ((int)k < p->exact_top || cands[order[k]].c.source != ORIENT_SPHERE)
+            order[n_coarse++] = order[k];
+    j.progress_total = n_coarse + 3 * REFINE_PER + FINAL + 1;
+    if ((rcode = run_stage(&j, 1, order, n_coarse, err)))
+        goto out;
+    qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
+
+    /* refine around the three best distinct directions, still coarse */
+    uint32_t seeds[3], n_seeds = pick_distinct(cands, order, n_coarse, 3, 10, seeds);
+    for (uint32_t b = 0; b < n_seeds; b++) {
+        struct mat3 to = m3_rotate_onto(v3(0, 0, 1), cands[seeds[b]].c.up);
+        for (int k = 0; k < REFINE_PER; k++) {
+            double ring = (k < 8 ? 3.0 : 7.0) * M_PI / 180;
+            double az = 2 * M_PI * (k % 8) / 8 + (k < 8 ? 0 : M_PI / 8);
             struct vec3 local = v3(sin(ring) * cos(az), sin(ring) * sin(az), cos(ring));
-            if ((rcode = push(&cands, &n, &cap, m3_mul_v(to, local), ORIENT_REFINE)))
-                goto oom;
+            push(&cands, &n, &cap, m3_mul_v(to, local), ORIENT_REFINE); /* room reserved */
+            order[n_coarse++] = n - 1;
         }
     }
-    uint32_t *t2 = mem_realloc_array(todo, n, sizeof(uint32_t));
-    if (!t2)
-        goto oom;
-    todo = t2;
-    uint32_t n_ref = 0;
-    for (uint32_t i = first_refine; i < n; i++) {
-        cands[i].exact = true;
-        todo[n_ref++] = i;
-    }
-    j.cands = cands; /* push may have moved the array */
-    if ((rcode = score_exact(&j, todo, n_ref, err)))
+    if ((rcode =
+             run_stage(&j, 1, order + n_coarse - n_seeds * REFINE_PER, n_seeds * REFINE_PER, err)))
         goto out;
+    qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
 
-    /* pick */
-    uint32_t best = 0;
-    for (uint32_t i = 1; i < n; i++)
-        if (cands[i].exact && better(&cands[i], &cands[best]))
-            best = i;
+    /* stage 2: the best few distinct directions and the input at the full pitch */
+    uint32_t final[FINAL + 1];
+    uint32_t n_final = pick_distinct(cands, order, n_coarse, FINAL, 3, final);
+    bool has_input = false;
+    for (uint32_t i = 0; i < n_final; i++)
+        has_input |= final[i] == 0;
+    if (!has_input)
+        final[n_final++] = 0;
+    if ((rcode = run_stage(&j, 2, final, n_final, err)))
+        goto out;
+    qsort_r(final, n_final, sizeof(uint32_t), cmp_key, cands);
+
+    uint32_t best = final[0];
+    if (!cands[0].dropped && cands[best].c.cost > (1 - p->min_gain) * cands[0].c.cost)
+        best = 0; /* not worth turning the part */
+    const struct support_metrics *in = &cands[0].c.m;
+    if (in->n_rays && in->n_rays_open > p->max_open_rays * in->n_rays) {
+        best = 0; /* rays cannot tell inside from outside: no figure to trust */
+        res->not_solid = true;
+    }
     res->best = cands[best].c;
     res->input = cands[0].c;
+    /* report at the operator's angle: the margin only steers the choice */
+    struct support_params at = j.sp;
+    at.angle_deg = p->angle_deg;
+    if ((rcode = measure_support_cached(m, rc, &pc, res->best.up, &at, &res->best.m, err)) ||
+        (rcode = measure_support_cached(m, rc, &pc, res->input.up, &at, &res->input.m, err)))
+        goto out;
     res->n_candidates = n;
-    res->n_exact = n_exact + n_ref;
-    /* runners-up: the cheapest others, each 10+ degrees from the best and each other */
-    uint32_t n_ok = 0;
-    for (uint32_t i = 0; i < n; i++)
-        if (cands[i].exact && !cands[i].dropped && i != best)
-            todo[n_ok++] = i;
-    for (uint32_t i = 0; i < n_ok; i++)
-        cands[todo[i]].proxy_cost = cands[todo[i]].c.cost; /* sort key */
-    qsort_r(todo, n_ok, sizeof(uint32_t), cmp_proxy, cands);
-    double min_cos = cos(10 * M_PI / 180);
-    for (uint32_t k = 0; k < n_ok && res->n_runners < 4; k++) {
-        const struct orient_candidate *c = &cands[todo[k]].c;
-        bool distinct = v3_dot(c->up, res->best.up) < min_cos;
-        for (int r = 0; r < res->n_runners && distinct; r++)
-            distinct = v3_dot(c->up, res->runners[r].up) < min_cos;
-        if (distinct)
-            res->runners[res->n_runners++] = *c;
+    res->n_exact = n_coarse + n_final;
+    (void)n_first;
+    for (uint32_t i = 0; i < n_final && res->n_runners < 4; i++) {
+        if (final[i] == best || cands[final[i]].dropped)
+            continue;
+        struct orient_candidate *r = &res->runners[res->n_runners++];
+        *r = cands[final[i]].c;
+        if ((rcode = measure_support_cached(m, rc, &pc, r->up, &at, &r->m, err)))
+            goto out;
     }
-    clock_gettime(CLOCK_MONOTONIC, &t1);
-    res->seconds = (t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9;
+    res->seconds = elapsed(&t0);
+    res->seconds_exact = res->seconds - res->seconds_setup - res->seconds_proxy;
     goto out;
 oom:
     rcode = sf_err_set(err, SF_ENOMEM, "orientation: out of memory");
 out:
+    proxy_cache_release(&pc);
     raycast_free(rc);
-    free(todo);
+    free(order);
     free(cands);
     free(bases);
+    free(hull_verts);
     return rcode;
 }
 

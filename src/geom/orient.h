@@ -22,15 +22,24 @@
 #include "measure.h"
 
 struct orient_params {
-    double angle_deg;     /* self-supporting angle from vertical (45) */
-    double pitch_mm;      /* ray grid pitch for scoring (1) */
-    int samples;          /* Fibonacci-sphere directions (1000) */
-    int exact_top;        /* candidates kept after the proxy for exact scoring (48) */
-    double w_contact_mm;  /* cost per mm2 of contact area, in mm3 (1: one interface layer) */
+    double angle_deg;       /* self-supporting angle from vertical (45) */
+    double margin_deg;      /* score as if the angle were this much smaller (5): slicers work
+                               in layers and count faces at the limit as overhangs, so a face
+                               left exactly at the limit gets support after all */
+    double pitch_mm;        /* ray grid pitch for scoring (1) */
+    int samples;            /* Fibonacci-sphere directions (1000) */
+    int exact_top;          /* candidates kept after the proxy for exact scoring (48) */
+    double w_contact_mm;    /* cost per mm2 of contact area, in mm3 (1: one interface layer) */
     double w_stability_mm2; /* cost per mm of centre-of-mass height, in mm3 (0.5) */
-    double min_base_mm2;  /* smallest hull face the part may rest on (25) */
-    double min_margin_mm; /* centre of mass must project this far inside a base (1) */
-    int threads;          /* worker threads (0: one per core) */
+    double min_gain;        /* keep the input orientation unless the best costs at least this
+                               fraction less (0.05): operators do not want parts turned for
+                               nothing, and the peers' layer rules blur small differences */
+    double max_open_rays;   /* if more than this fraction of the input's rays meet unpaired
+                               surfaces (0.01), the part is no closed solid, its support
+                               figures are guesses, and the input orientation is kept */
+    double min_base_mm2;    /* smallest hull face the part may rest on (25) */
+    double min_margin_mm;   /* centre of mass must project this far inside a base (1) */
+    int threads;            /* worker threads (0: one per core) */
     void (*progress)(void *ud, double done, double total); /* optional, any thread */
     void *progress_ud;
 };
@@ -42,18 +51,22 @@ enum orient_source { ORIENT_INPUT, ORIENT_HULL, ORIENT_SPHERE, ORIENT_REFINE };
 struct orient_candidate {
     struct vec3 up;            /* unit up-direction in the input frame */
     enum orient_source source; /* where it came from */
-    struct support_metrics m;  /* exact metrics */
-    double cost;               /* lower is better */
+    struct support_metrics m;  /* exact metrics at angle_deg (what the operator asked) */
+    double cost;               /* lower is better; scored at angle_deg - margin_deg */
 };
 
 struct orient_result {
     struct orient_candidate best;
-    struct orient_candidate input;     /* the input orientation, for comparison */
+    struct orient_candidate input;      /* the input orientation, for comparison */
     struct orient_candidate runners[4]; /* next best, distinct directions */
     int n_runners;
-    uint32_t n_candidates;      /* directions considered */
-    uint32_t n_exact;           /* scored with the ray cast */
-    double seconds;
+    bool not_solid;        /* input kept: the part is not a closed solid (max_open_rays) */
+    uint32_t n_candidates; /* directions considered */
+    uint32_t n_exact;      /* scored with the ray cast */
+    double seconds;        /* wall time in total */
+    double seconds_setup;  /* hull, proxy cache, Embree scene */
+    double seconds_proxy;  /* proxy over every candidate */
+    double seconds_exact;  /* ray-cast scoring, refinement included */
 };
 
 /* Find the best up-direction for m.  res->best.up is what to rotate onto +z. */

@@ -49,6 +49,10 @@ struct ray_grid {
 struct raycast *raycast_new(const struct mesh *m, struct sf_err *err);
 void raycast_free(struct raycast *rc);
 
+/* The part's centre of mass (solid for a closed mesh, surface centroid for an
+   open one), computed once with the scene: it does not depend on direction. */
+struct vec3 raycast_com(const struct raycast *rc);
+
 /*
  * Cast the grid for unit vector up with the given pitch (mm) over the
  * part's shadow.  g is filled (release with ray_grid_release).  SF_ENOMEM

@@ -27,16 +27,21 @@ struct mesh {
     uint32_t n_tris;
 };
 
-enum mesh_format { MESH_FMT_UNKNOWN = 0, MESH_FMT_STL_BINARY, MESH_FMT_STL_ASCII, MESH_FMT_OBJ,
-                   MESH_FMT_3MF };
+enum mesh_format {
+    MESH_FMT_UNKNOWN = 0,
+    MESH_FMT_STL_BINARY,
+    MESH_FMT_STL_ASCII,
+    MESH_FMT_OBJ,
+    MESH_FMT_3MF
+};
 
 /* What mesh_load found and repaired, for reports. */
 struct mesh_load_info {
     enum mesh_format format;
-    uint32_t n_input_tris;  /* triangles in the file */
-    uint32_t n_merged;      /* vertices merged by welding */
-    uint32_t n_degenerate;  /* zero-area or repeated-index triangles dropped */
-    uint32_t n_flipped;     /* triangles re-oriented for consistency */
+    uint32_t n_input_tris; /* triangles in the file */
+    uint32_t n_merged;     /* vertices merged by welding */
+    uint32_t n_degenerate; /* zero-area or repeated-index triangles dropped */
+    uint32_t n_flipped;    /* triangles re-oriented for consistency */
 };
 
 /* Empty mesh. */
@@ -63,7 +68,8 @@ int mesh_load_mem(const void *data, size_t len, const char *name, struct mesh *m
                   struct mesh_load_info *info, struct sf_err *err);
 
 /*
- * Raw parsers: bytes to an unwelded (STL) or indexed (OBJ, 3MF) mesh with
+ * Raw parsers: bytes to an indexed mesh (binary STL merges bit-identical
+ * corners as it reads; ASCII STL is a soup until mesh_load welds it) with
  * every coordinate checked finite and inside SF_MESH_COORD_MAX and every
  * index in range.  Used by mesh_load_mem and the fuzz targets.
  */
@@ -118,10 +124,10 @@ struct mesh_topo {
     uint32_t (*adj)[3];
     uint32_t *comp;
     uint32_t n_comps;
-    uint32_t n_edges;        /* distinct undirected edges */
-    uint32_t n_boundary;     /* edges used by one triangle */
-    uint32_t n_nonmanifold;  /* edges used by three or more */
-    uint32_t n_misoriented;  /* manifold edges whose two triangles disagree on direction */
+    uint32_t n_edges;       /* distinct undirected edges */
+    uint32_t n_boundary;    /* edges used by one triangle */
+    uint32_t n_nonmanifold; /* edges used by three or more */
+    uint32_t n_misoriented; /* manifold edges whose two triangles disagree on direction */
 };
 
 int mesh_topo_build(const struct mesh *m, struct mesh_topo *topo, struct sf_err *err);

@@ -21,8 +21,8 @@ struct obj_state {
     const char *name;
     struct vec3 *v;
     size_t n_v, cap_v;
-    int64_t (*f)[3]; /* raw indices (1-based or negative, resolved later) */
-    uint32_t *f_line;   /* source line of each triangle, for messages */
+    int64_t (*f)[3];  /* raw indices (1-based or negative, resolved later) */
+    uint32_t *f_line; /* source line of each triangle, for messages */
     size_t n_f, cap_f;
 };
 
@@ -142,14 +142,15 @@ obj_parse(const void *data, size_t len, const char *name, struct mesh *m, struct
             q += 1;
             for (int k = 0; k < 3; k++) {
                 if (!parse_double(&q, eol, &c[k])) {
-                    rc = sf_err_set(err, SF_EINVAL, "obj '%s': line %u: vertex needs x y z",
-                                    name, line);
+                    rc = sf_err_set(err, SF_EINVAL, "obj '%s': line %u: vertex needs x y z", name,
+                                    line);
                     goto fail;
                 }
                 if (!isfinite(c[k]) || fabs(c[k]) > SF_MESH_COORD_MAX) {
-                    rc = sf_err_set(err, SF_EINVAL,
-                                    "obj '%s': line %u: coordinate %g is not finite or beyond %g mm",
-                                    name, line, c[k], SF_MESH_COORD_MAX);
+                    rc =
+                        sf_err_set(err, SF_EINVAL,
+                                   "obj '%s': line %u: coordinate %g is not finite or beyond %g mm",
+                                   name, line, c[k], SF_MESH_COORD_MAX);
                     goto fail;
                 }
             }
@@ -174,8 +175,8 @@ obj_parse(const void *data, size_t len, const char *name, struct mesh *m, struct
                 if (q >= eol)
                     break;
                 if (!parse_index(&q, eol, &idx)) {
-                    rc = sf_err_set(err, SF_EINVAL, "obj '%s': line %u: bad face index", name,
-                                    line);
+                    rc =
+                        sf_err_set(err, SF_EINVAL, "obj '%s': line %u: bad face index", name, line);
                     goto fail;
                 }
                 /* negative indices are relative to the vertices read so far */
@@ -195,8 +196,8 @@ obj_parse(const void *data, size_t len, const char *name, struct mesh *m, struct
                 n++;
             }
             if (n < 3) {
-                rc = sf_err_set(err, SF_EINVAL, "obj '%s': line %u: a face needs 3 or more vertices",
-                                name, line);
+                rc = sf_err_set(err, SF_EINVAL,
+                                "obj '%s': line %u: a face needs 3 or more vertices", name, line);
                 goto fail;
             }
         }

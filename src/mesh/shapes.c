@@ -145,8 +145,7 @@ out:
 }
 
 int
-shape_revolve(struct mesh *m, const double *r, const double *z, int n, int seg,
-              struct sf_err *err)
+shape_revolve(struct mesh *m, const double *r, const double *z, int n, int seg, struct sf_err *err)
 {
     if (n < 3 || seg < 3 || r[0] != 0 || r[n - 1] != 0)
         return sf_err_set(err, SF_EINVAL, "profile must run from the axis to the axis");
@@ -321,10 +320,10 @@ shape_frame(struct mesh *m, struct sf_err *err)
     for (uint32_t i = 0; i < 4; i++) {
         uint32_t j = (i + 1) % 4;
         uint32_t quads[4][4] = {
-            { i, j, 4 + j, 4 + i },             /* bottom ring */
-            { 8 + i, 12 + i, 12 + j, 8 + j },   /* top ring */
-            { i, 8 + i, 8 + j, j },             /* outer wall */
-            { 4 + i, 4 + j, 12 + j, 12 + i },   /* inner wall */
+            { i, j, 4 + j, 4 + i },           /* bottom ring */
+            { 8 + i, 12 + i, 12 + j, 8 + j }, /* top ring */
+            { i, 8 + i, 8 + j, j },           /* outer wall */
+            { 4 + i, 4 + j, 12 + j, 12 + i }, /* inner wall */
         };
         for (int q = 0; q < 4; q++) {
             m->t[t][0] = quads[q][0];

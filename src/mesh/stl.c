@@ -2,9 +2,10 @@
  * stl.c - binary and ASCII STL to a triangle soup (welded later by
  * mesh_load).
  *
- * Binary STL is read in one pass over the mapped bytes: its size must
- * match the triangle count in the header (a count larger than the file is
- * the classic corrupt-file case and is reported as such, never allocated).
+ * Binary STL is read in one pass: its size must match the triangle count
+ * in the header (a count larger than the file is the classic corrupt-file
+ * case and is reported as such, never allocated), and bit-identical corners
+ * are merged on the fly.
  * ASCII STL is scanned by keyword; the facet normal is ignored because
  * many exporters write zeros there, and the winding defines the normal.
  * Every coordinate must be finite and within SF_MESH_COORD_MAX.
@@ -23,13 +24,61 @@ static int
 check_coord(double x, const char *name, const char *where, uint32_t facet, struct sf_err *err)
 {
     if (!isfinite(x))
-        return sf_err_set(err, SF_EINVAL, "stl '%s': %s %u: coordinate is %s", name, where,
-                          facet, isnan(x) ? "NaN" : "infinite");
+        return sf_err_set(err, SF_EINVAL, "stl '%s': %s %u: coordinate is %s", name, where, facet,
+                          isnan(x) ? "NaN" : "infinite");
     if (fabs(x) > SF_MESH_COORD_MAX)
         return sf_err_set(err, SF_EINVAL,
                           "stl '%s': %s %u: coordinate %g is beyond %g mm (wrong unit or corrupt)",
                           name, where, facet, x, SF_MESH_COORD_MAX);
     return SF_OK;
+}
+
+/*
+ * Binary STL is parsed straight into an indexed mesh: each corner's three
+ * floats are hashed by their bits and looked up in an open-addressing table
+ * of vertex indices, so the 3n-corner soup is never materialised (a soup of
+ * doubles is 72 bytes a triangle; a closed mesh has about n/2 vertices).
+ * Bit-identical corners become one vertex; the tolerance weld in mesh_load
+ * then only sees the unique ones.  -0.0 is folded into 0.0 first.
+ */
+struct corner_table {
+    uint32_t *slot; /* vertex index or UINT32_MAX */
+    uint64_t mask;
+    uint32_t used;
+};
+
+static uint64_t
+corner_hash(const uint32_t b[3])
+{
+    uint64_t h =
+        b[0] * 0x9E3779B97F4A7C15ULL ^ b[1] * 0xC2B2AE3D27D4EB4FULL ^ b[2] * 0x165667B19E3779F9ULL;
+    return h ^ (h >> 29);
+}
+
+static bool
+corner_table_grow(struct corner_table *ct, const struct vec3 *v)
+{
+    uint64_t size = (ct->mask + 1) * 2;
+    uint32_t *slot = mem_array(size, sizeof(uint32_t));
+    if (!slot)
+        return false;
+    memset(slot, 0xff, size * sizeof(uint32_t));
+    for (uint64_t i = 0; i <= ct->mask; i++) {
+        uint32_t r = ct->slot[i];
+        if (r == UINT32_MAX)
+            continue;
+        float f[3] = { (float)v[r].x, (float)v[r].y, (float)v[r].z };
+        uint32_t bits[3];
+        memcpy(bits, f, sizeof(bits));
+        uint64_t s = corner_hash(bits) & (size - 1);
+        while (slot[s] != UINT32_MAX)
+            s = (s + 1) & (size - 1);
+        slot[s] = r;
+    }
+    free(ct->slot);
+    ct->slot = slot;
+    ct->mask = size - 1;
+    return true;
 }
 
 static int
@@ -48,28 +97,73 @@ parse_binary(const unsigned char *p, size_t len, const char *name, struct mesh *
                           "only %zu bytes",
                           name, n, (unsigned long long)need, len);
     if (n > SF_MESH_TRIS_MAX)
-        return sf_err_set(err, SF_EINVAL, "stl '%s': %u triangles is over the limit of %u", name,
-                          n, SF_MESH_TRIS_MAX);
-    int rc = mesh_alloc(m, 3 * n, n, err);
-    if (rc)
-        return rc;
+        return sf_err_set(err, SF_EINVAL, "stl '%s': %u triangles is over the limit of %u", name, n,
+                          SF_MESH_TRIS_MAX);
+    mesh_release(m);
+    struct corner_table ct = { NULL, 0, 0 };
+    size_t cap_v = (size_t)n / 2 + 16;
+    m->t = mem_array(n ? n : 1, sizeof(*m->t));
+    m->v = mem_array(cap_v, sizeof(*m->v));
+    uint64_t size = 64;
+    while (size < 2 * cap_v)
+        size <<= 1;
+    ct.slot = mem_array(size, sizeof(uint32_t));
+    ct.mask = size - 1;
+    int rc = SF_OK;
+    if (!m->t || !m->v || !ct.slot) {
+        rc = sf_err_set(err, SF_ENOMEM, "stl '%s': out of memory for %u triangles", name, n);
+        goto fail;
+    }
+    memset(ct.slot, 0xff, size * sizeof(uint32_t));
     const unsigned char *rec = p + 84;
     for (uint32_t i = 0; i < n; i++, rec += 50) {
         float f[9];
         memcpy(f, rec + 12, sizeof(f));
         for (int k = 0; k < 3; k++) {
-            struct vec3 v = v3(f[3 * k], f[3 * k + 1], f[3 * k + 2]);
-            if ((rc = check_coord(v.x, name, "facet", i + 1, err)) ||
-                (rc = check_coord(v.y, name, "facet", i + 1, err)) ||
-                (rc = check_coord(v.z, name, "facet", i + 1, err))) {
-                mesh_release(m);
-                return rc;
+            float *c = f + 3 * k;
+            for (int a = 0; a < 3; a++) {
+                if ((rc = check_coord(c[a], name, "facet", i + 1, err)))
+                    goto fail;
+                c[a] += 0.0f; /* -0.0 -> 0.0, so equal coordinates hash alike */
             }
-            m->v[3 * i + (uint32_t)k] = v;
-            m->t[i][k] = 3 * i + (uint32_t)k;
+            uint32_t bits[3];
+            memcpy(bits, c, sizeof(bits));
+            uint64_t s = corner_hash(bits) & ct.mask;
+            uint32_t r;
+            for (;;) {
+                r = ct.slot[s];
+                if (r == UINT32_MAX ||
+                    (m->v[r].x == c[0] && m->v[r].y == c[1] && m->v[r].z == c[2]))
+                    break;
+                s = (s + 1) & ct.mask;
+            }
+            if (r == UINT32_MAX) {
+                if (m->n_verts == cap_v) {
+                    void *vp = m->v;
+                    if (!mem_grow(&vp, &cap_v, cap_v + 1, sizeof(*m->v))) {
+                        rc = sf_err_set(err, SF_ENOMEM, "stl '%s': out of memory", name);
+                        goto fail;
+                    }
+                    m->v = vp;
+                }
+                r = m->n_verts++;
+                m->v[r] = v3(c[0], c[1], c[2]);
+                ct.slot[s] = r;
+                if (++ct.used * 2 > ct.mask + 1 && !corner_table_grow(&ct, m->v)) {
+                    rc = sf_err_set(err, SF_ENOMEM, "stl '%s': out of memory", name);
+                    goto fail;
+                }
+            }
+            m->t[i][k] = r;
         }
     }
+    m->n_tris = n;
+    free(ct.slot);
     return SF_OK;
+fail:
+    free(ct.slot);
+    mesh_release(m);
+    return rc;
 }
 
 struct scanner {
@@ -133,8 +227,8 @@ parse_ascii(const char *data, size_t len, const char *name, struct mesh *m, stru
     mesh_release(m);
     for (;;) {
         if (!next_token(&s, &tok, &tl)) {
-            rc = sf_err_set(err, SF_EINVAL, "stl '%s': line %u: file ends before 'endsolid'",
-                            name, s.line);
+            rc = sf_err_set(err, SF_EINVAL, "stl '%s': line %u: file ends before 'endsolid'", name,
+                            s.line);
             goto fail;
         }
         if (tok_is(tok, tl, "endsolid"))
@@ -157,16 +251,16 @@ parse_ascii(const char *data, size_t len, const char *name, struct mesh *m, stru
             if (!tok_is(tok, tl, "normal") && !tok_is(tok, tl, "outer")) {
                 double dummy;
                 if (!tok_number(tok, tl, &dummy)) {
-                    rc = sf_err_set(err, SF_EINVAL,
-                                    "stl '%s': line %u: facet %u: unexpected '%.*s'", name,
-                                    s.line, facet, (int)(tl > 32 ? 32 : tl), tok);
+                    rc =
+                        sf_err_set(err, SF_EINVAL, "stl '%s': line %u: facet %u: unexpected '%.*s'",
+                                   name, s.line, facet, (int)(tl > 32 ? 32 : tl), tok);
                     goto fail;
                 }
             }
         }
         if (facet > SF_MESH_TRIS_MAX) {
-            rc = sf_err_set(err, SF_EINVAL, "stl '%s': more than %u facets", name,
-                            SF_MESH_TRIS_MAX);
+            rc =
+                sf_err_set(err, SF_EINVAL, "stl '%s': more than %u facets", name, SF_MESH_TRIS_MAX);
             goto fail;
         }
         if (m->n_verts + 3 > cap_v) {
@@ -199,8 +293,8 @@ parse_ascii(const char *data, size_t len, const char *name, struct mesh *m, stru
             for (int a = 0; a < 3; a++) {
                 if (!next_token(&s, &tok, &tl) || !tok_number(tok, tl, &c[a])) {
                     rc = sf_err_set(err, SF_EINVAL,
-                                    "stl '%s': line %u: facet %u: vertex coordinate expected",
-                                    name, s.line, facet);
+                                    "stl '%s': line %u: facet %u: vertex coordinate expected", name,
+                                    s.line, facet);
                     goto fail;
                 }
                 if ((rc = check_coord(c[a], name, "facet", facet, err)))

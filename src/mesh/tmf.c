@@ -179,7 +179,7 @@ on_start(void *ud, const char *el, const char **atts)
             const char *name;
             double mm;
         } units[] = { { "micron", 0.001 }, { "millimeter", 1 }, { "centimeter", 10 },
-                      { "inch", 25.4 },    { "foot", 304.8 }, { "meter", 1000 } };
+                      { "inch", 25.4 },    { "foot", 304.8 },   { "meter", 1000 } };
         if (u) {
             p->unit_mm = 0;
             for (size_t i = 0; i < sizeof(units) / sizeof(units[0]); i++)
@@ -189,12 +189,16 @@ on_start(void *ud, const char *el, const char **atts)
                 fail(p, SF_EINVAL, "unknown unit");
         }
     } else if (is(el, "object")) {
-        if (p->n_objs >= TMF_OBJECTS_MAX)
-            { fail(p, SF_EINVAL, "too many objects"); return; }
+        if (p->n_objs >= TMF_OBJECTS_MAX) {
+            fail(p, SF_EINVAL, "too many objects");
+            return;
+        }
         void *o = p->objs;
         size_t cap = p->cap_objs;
-        if (!mem_grow(&o, &cap, p->n_objs + 1, sizeof(*p->objs)))
-            { fail(p, SF_ENOMEM, "out of memory"); return; }
+        if (!mem_grow(&o, &cap, p->n_objs + 1, sizeof(*p->objs))) {
+            fail(p, SF_ENOMEM, "out of memory");
+            return;
+        }
         p->objs = o;
         p->cap_objs = (uint32_t)cap;
         p->cur = &p->objs[p->n_objs++];
@@ -203,34 +207,52 @@ on_start(void *ud, const char *el, const char **atts)
             fail(p, SF_EINVAL, "object without a valid id");
     } else if (is(el, "vertex")) {
         double c[3];
-        if (!p->cur)
-            { fail(p, SF_EINVAL, "vertex outside an object"); return; }
+        if (!p->cur) {
+            fail(p, SF_EINVAL, "vertex outside an object");
+            return;
+        }
         if (!num_attr(atts, "x", &c[0]) || !num_attr(atts, "y", &c[1]) ||
-            !num_attr(atts, "z", &c[2]))
-            { fail(p, SF_EINVAL, "vertex needs finite x, y and z"); return; }
-        if (p->cur->n_v >= SF_MESH_VERTS_MAX)
-            { fail(p, SF_EINVAL, "too many vertices"); return; }
+            !num_attr(atts, "z", &c[2])) {
+            fail(p, SF_EINVAL, "vertex needs finite x, y and z");
+            return;
+        }
+        if (p->cur->n_v >= SF_MESH_VERTS_MAX) {
+            fail(p, SF_EINVAL, "too many vertices");
+            return;
+        }
         void *v = p->cur->v;
         size_t cap = p->cur->cap_v;
-        if (!mem_grow(&v, &cap, p->cur->n_v + 1, sizeof(struct vec3)))
-            { fail(p, SF_ENOMEM, "out of memory"); return; }
+        if (!mem_grow(&v, &cap, p->cur->n_v + 1, sizeof(struct vec3))) {
+            fail(p, SF_ENOMEM, "out of memory");
+            return;
+        }
         p->cur->v = v;
         p->cur->cap_v = (uint32_t)cap;
         p->cur->v[p->cur->n_v++] = v3(c[0], c[1], c[2]);
     } else if (is(el, "triangle")) {
         uint32_t a, b, c;
-        if (!p->cur)
-            { fail(p, SF_EINVAL, "triangle outside an object"); return; }
-        if (!id_attr(atts, "v1", &a) || !id_attr(atts, "v2", &b) || !id_attr(atts, "v3", &c))
-            { fail(p, SF_EINVAL, "triangle needs indices v1, v2 and v3"); return; }
-        if (a >= p->cur->n_v || b >= p->cur->n_v || c >= p->cur->n_v)
-            { fail(p, SF_EINVAL, "triangle index out of range"); return; }
-        if (++p->n_tris_total > SF_MESH_TRIS_MAX)
-            { fail(p, SF_EINVAL, "too many triangles"); return; }
+        if (!p->cur) {
+            fail(p, SF_EINVAL, "triangle outside an object");
+            return;
+        }
+        if (!id_attr(atts, "v1", &a) || !id_attr(atts, "v2", &b) || !id_attr(atts, "v3", &c)) {
+            fail(p, SF_EINVAL, "triangle needs indices v1, v2 and v3");
+            return;
+        }
+        if (a >= p->cur->n_v || b >= p->cur->n_v || c >= p->cur->n_v) {
+            fail(p, SF_EINVAL, "triangle index out of range");
+            return;
+        }
+        if (++p->n_tris_total > SF_MESH_TRIS_MAX) {
+            fail(p, SF_EINVAL, "too many triangles");
+            return;
+        }
         void *t = p->cur->t;
         size_t cap = p->cur->cap_t;
-        if (!mem_grow(&t, &cap, p->cur->n_t + 1, sizeof(*p->cur->t)))
-            { fail(p, SF_ENOMEM, "out of memory"); return; }
+        if (!mem_grow(&t, &cap, p->cur->n_t + 1, sizeof(*p->cur->t))) {
+            fail(p, SF_ENOMEM, "out of memory");
+            return;
+        }
         p->cur->t = t;
         p->cur->cap_t = (uint32_t)cap;
         uint32_t *tri = p->cur->t[p->cur->n_t++];
@@ -240,21 +262,31 @@ on_start(void *ud, const char *el, const char **atts)
     } else if (is(el, "component") || is(el, "item")) {
         bool item = is(el, "item");
         struct tmf_ref ref;
-        if (!item && !p->cur)
-            { fail(p, SF_EINVAL, "component outside an object"); return; }
-        if (!id_attr(atts, "objectid", &ref.object_id))
-            { fail(p, SF_EINVAL, "missing objectid"); return; }
-        if (!parse_xform(attr(atts, "transform"), &ref.xf))
-            { fail(p, SF_EINVAL, "transform needs 12 numbers"); return; }
+        if (!item && !p->cur) {
+            fail(p, SF_EINVAL, "component outside an object");
+            return;
+        }
+        if (!id_attr(atts, "objectid", &ref.object_id)) {
+            fail(p, SF_EINVAL, "missing objectid");
+            return;
+        }
+        if (!parse_xform(attr(atts, "transform"), &ref.xf)) {
+            fail(p, SF_EINVAL, "transform needs 12 numbers");
+            return;
+        }
         struct tmf_ref **arr = item ? &p->items : &p->cur->comps;
         uint32_t *n = item ? &p->n_items : &p->cur->n_comps;
         uint32_t *capp = item ? &p->cap_items : &p->cur->cap_comps;
-        if (*n >= TMF_ITEMS_MAX)
-            { fail(p, SF_EINVAL, "too many items or components"); return; }
+        if (*n >= TMF_ITEMS_MAX) {
+            fail(p, SF_EINVAL, "too many items or components");
+            return;
+        }
         void *a = *arr;
         size_t cap = *capp;
-        if (!mem_grow(&a, &cap, *n + 1, sizeof(struct tmf_ref)))
-            { fail(p, SF_ENOMEM, "out of memory"); return; }
+        if (!mem_grow(&a, &cap, *n + 1, sizeof(struct tmf_ref))) {
+            fail(p, SF_ENOMEM, "out of memory");
+            return;
+        }
         *arr = a;
         *capp = (uint32_t)cap;
         (*arr)[(*n)++] = ref;
@@ -288,8 +320,9 @@ flatten(struct tmf_parse *p, uint32_t id, const struct tmf_xform *xf, int depth,
         return sf_err_set(p->err, SF_EINVAL, "3mf '%s': reference to missing object %u", p->name,
                           id);
     if (depth > TMF_DEPTH_MAX)
-        return sf_err_set(p->err, SF_EINVAL, "3mf '%s': components nested deeper than %d (a cycle?)",
-                          p->name, TMF_DEPTH_MAX);
+        return sf_err_set(p->err, SF_EINVAL,
+                          "3mf '%s': components nested deeper than %d (a cycle?)", p->name,
+                          TMF_DEPTH_MAX);
     if ((uint64_t)m->n_tris + o->n_t > SF_MESH_TRIS_MAX ||
         (uint64_t)m->n_verts + o->n_v > SF_MESH_VERTS_MAX)
         return sf_err_set(p->err, SF_EINVAL, "3mf '%s': the build is over %u triangles", p->name,
@@ -309,9 +342,8 @@ flatten(struct tmf_parse *p, uint32_t id, const struct tmf_xform *xf, int depth,
         struct vec3 q = v3_scale(xf_apply(xf, o->v[i]), p->unit_mm);
         if (!v3_isfinite(q) || fabs(q.x) > SF_MESH_COORD_MAX || fabs(q.y) > SF_MESH_COORD_MAX ||
             fabs(q.z) > SF_MESH_COORD_MAX)
-            return sf_err_set(p->err, SF_EINVAL,
-                              "3mf '%s': object %u: vertex %u lies beyond %g mm", p->name, id, i,
-                              SF_MESH_COORD_MAX);
+            return sf_err_set(p->err, SF_EINVAL, "3mf '%s': object %u: vertex %u lies beyond %g mm",
+                              p->name, id, i, SF_MESH_COORD_MAX);
         m->v[m->n_verts++] = q;
     }
     for (uint32_t i = 0; i < o->n_t; i++) {
@@ -361,8 +393,12 @@ read_entry(zip_t *z, const char *entry, struct buf *out, const char *name, struc
     int rc = SF_OK;
     while ((n = zip_fread(f, chunk, sizeof(chunk))) > 0) {
         if (buf_append(out, chunk, (size_t)n) != SF_OK) {
-            rc = sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' unpacks to more than %zu bytes",
-                            name, entry, out->max);
+            if ((size_t)n > out->max - out->len)
+                rc = sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' unpacks to more than %zu bytes",
+                                name, entry, out->max);
+            else
+                rc =
+                    sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory reading '%s'", name, entry);
             break;
         }
     }
@@ -398,7 +434,12 @@ tmf_parse(const void *data, size_t len, const char *name, struct mesh *m, struct
     int rc = SF_OK;
 
     /* The relationships part says where the model is; fall back to the usual name. */
-    if (read_entry(z, "_rels/.rels", &xml, name, NULL) == SF_OK) {
+    int rels = read_entry(z, "_rels/.rels", &xml, name, NULL);
+    if (rels == SF_ENOMEM) {
+        rc = sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory", name);
+        goto out;
+    }
+    if (rels == SF_OK) {
         XML_Parser rp = XML_ParserCreate(NULL);
         if (rp) {
             XML_SetUserData(rp, model_path);

@@ -117,7 +117,8 @@ T_CASE(gcode_line_number_and_checksum)
     T_TRUE(!l.checksum_ok);
     /* The classic documented example: "N1 M110 N0*125"? compute by hand. */
     const char *m110 = "N0 M110 N0";
-    T_EQ_INT(gcode_checksum(m110, strlen(m110)), 'N' ^ '0' ^ ' ' ^ 'M' ^ '1' ^ '1' ^ '0' ^ ' ' ^ 'N' ^ '0');
+    T_EQ_INT(gcode_checksum(m110, strlen(m110)),
+             'N' ^ '0' ^ ' ' ^ 'M' ^ '1' ^ '1' ^ '0' ^ ' ' ^ 'N' ^ '0');
 }
 
 T_CASE(gcode_text_argument)

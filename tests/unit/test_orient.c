@@ -44,7 +44,10 @@ T_CASE(hull_bases_of_a_box)
     uint32_t n;
     struct vec3 com;
     mesh_volume(&m, &com);
-    T_OK(hull_bases(&m, com, &b, &n, &err), &err);
+    uint32_t *hv, n_hv;
+    T_OK(hull_bases(&m, com, &b, &n, &hv, &n_hv, &err), &err);
+    T_EQ_INT(n_hv, 8);
+    free(hv);
     T_EQ_INT(n, 6); /* coplanar triangles merged into faces */
     T_EQ_DBL(b[0].area_mm2, 600, 1e-6);
     T_EQ_DBL(b[0].margin_mm, 10, 1e-6); /* com 10 mm from the long edges of the 20 x 30 face */
@@ -61,8 +64,8 @@ T_CASE(tee_upside_down_and_tilted_comes_back)
     mesh_init(&m);
     T_OK(shape_tee(&m, &err), &err);
     /* upside down, then tilted 20 degrees about x */
-    struct mat3 rot = m3_mul(m3_axis_angle(v3(1, 0, 0), 20 * M_PI / 180),
-                             m3_axis_angle(v3(0, 1, 0), M_PI));
+    struct mat3 rot =
+        m3_mul(m3_axis_angle(v3(1, 0, 0), 20 * M_PI / 180), m3_axis_angle(v3(0, 1, 0), M_PI));
     mesh_transform(&m, rot, v3(0, 0, 0));
     T_OK(find(&m, &r, &err), &err);
     /* Two orientations need no support: on the bar's top (stem up) and lying
@@ -161,5 +164,29 @@ T_CASE(leaning_tower_is_not_left_to_tip_over)
     T_TRUE(r.input.m.base_margin_mm < 0);
     T_TRUE(r.best.m.base_margin_mm > 0);
     T_TRUE(angle_deg(r.best.up, v3(0, 0, 1)) > 10);
+    mesh_release(&m);
+}
+
+T_CASE(an_open_shell_is_left_as_it_is)
+{
+    /* a tee with its whole top face missing: rays cannot tell inside from
+       outside, so no support figure can be trusted and nothing is turned */
+    struct mesh m;
+    struct sf_err err;
+    struct orient_result r;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    uint32_t kept = 0;
+    for (uint32_t i = 0; i < m.n_tris; i++) {
+        struct vec3 n = mesh_tri_normal(&m, i), c = mesh_tri_centroid(&m, i);
+        if (!(n.z > 0.99 && c.z > 34.9))
+            memcpy(m.t[kept++], m.t[i], sizeof(m.t[0]));
+    }
+    T_EQ_INT(m.n_tris - kept, 2);
+    m.n_tris = kept;
+    T_OK(find(&m, &r, &err), &err);
+    T_TRUE(r.not_solid);
+    T_TRUE(r.input.m.n_rays_open > 0);
+    T_EQ_DBL(r.best.up.z, 1, 1e-12);
     mesh_release(&m);
 }
