@@ -42,10 +42,18 @@ run(int argc, char **argv)
     optind = 1;
     while ((c = getopt_long(argc, argv, "", opts, NULL)) != -1) {
         switch (c) {
-        case 'p': printer = optarg; break;
-        case 'm': material = optarg; break;
-        case 'h': printf("usage: slimfarm %s\n", usage_line); return 0;
-        default: fprintf(stderr, "usage: slimfarm %s\n", usage_line); return 2;
+        case 'p':
+            printer = optarg;
+            break;
+        case 'm':
+            material = optarg;
+            break;
+        case 'h':
+            printf("usage: slimfarm %s\n", usage_line);
+            return 0;
+        default:
+            fprintf(stderr, "usage: slimfarm %s\n", usage_line);
+            return 2;
         }
     }
     if (optind != argc - 1) {

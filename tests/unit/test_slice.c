@@ -405,3 +405,46 @@ T_CASE(slice_m73_progress_is_monotone)
     slice_profile_release(&p);
     mesh_release(&m);
 }
+
+T_CASE(slice_prints_island_by_island)
+{
+    /* two separate posts: each layer prints one post completely (its
+       perimeters and infill), then the other */
+    struct mesh m, b;
+    struct sf_err err;
+    mesh_init(&m);
+    mesh_init(&b);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 5), &err), &err);
+    T_OK(shape_box(&b, v3(30, 0, 0), v3(40, 10, 5), &err), &err);
+    T_OK(merge(&m, &b), NULL);
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    char path[512];
+    struct slice_result r;
+    T_OK(slice_to(&m, &p, "posts", &r, path, sizeof(path), &err), &err);
+    FILE *f = fopen(path, "r");
+    T_TRUE(f != NULL);
+    char line[512];
+    int layer = -1, ext = 0, switches = 0, side = -1;
+    while (fgets(line, sizeof(line), f)) {
+        if (strncmp(line, ";LAYER_CHANGE", 13) == 0) {
+            layer++;
+            side = -1;
+        }
+        if (layer == 12 && strncmp(line, ";TYPE:External perimeter", 24) == 0)
+            ext++;
+        double x;
+        if (layer == 12 && sscanf(line, "G1 X%lf", &x) == 1 && strstr(line, " E")) {
+            int s = x > 125;
+            if (side >= 0 && s != side)
+                switches++;
+            side = s;
+        }
+    }
+    fclose(f);
+    T_EQ_INT(ext, 2);
+    T_EQ_INT(switches, 1); /* extrusion moves change posts once per layer */
+    slice_profile_release(&p);
+    mesh_release(&m);
+    mesh_release(&b);
+}
