@@ -200,10 +200,27 @@ T_CASE(slice_island_gets_support)
     mesh_release(&b);
 }
 
+struct written {
+    double (*mv)[4]; /* x y z e of every move the writer wrote */
+    size_t n, cap;
+};
+
+static void
+on_write(void *ud, double x, double y, double z, double e)
+{
+    struct written *w = ud;
+    if (mem_grow((void **)&w->mv, &w->cap, w->n + 1, sizeof(*w->mv))) {
+        w->mv[w->n][0] = x;
+        w->mv[w->n][1] = y;
+        w->mv[w->n][2] = z;
+        w->mv[w->n][3] = e;
+        w->n++;
+    }
+}
+
 struct readback {
-    uint32_t n;
-    double e[ROLE_N + 1];
-    int role;
+    uint32_t n, n_differ;
+    const struct written *w;
     double zmin, zmax;
 };
 
@@ -211,6 +228,14 @@ static int
 on_move(void *ud, const struct est_move *mv)
 {
     struct readback *rb = ud;
+    /* the same move the writer meant: positions to the 3 decimals written,
+       E (absolute sense) to the 5 decimals written */
+    if (rb->n < rb->w->n) {
+        const double *m = rb->w->mv[rb->n];
+        if (fabs(m[0] - mv->x) > 1e-9 || fabs(m[1] - mv->y) > 1e-9 || fabs(m[2] - mv->z) > 1e-9 ||
+            fabs(m[3] - mv->e) > 6e-6)
+            rb->n_differ++;
+    }
     rb->n++;
     if (mv->de <= 0)
         return SF_OK;
@@ -242,13 +267,17 @@ T_CASE(gcode_reads_back_into_the_same_moves)
         struct buf b;
         buf_init(&b, 0);
         struct gcw_stats st;
-        T_OK(gcw_body(&s, lp, &p, &b, &st, &err), &err);
+        struct written wr = { 0 };
+        T_OK(gcw_body(&s, lp, &p, &b, &st, on_write, &wr, &err), &err);
         struct est_limits lim;
         slice_limits(&p, &lim);
-        struct readback rb = { .zmin = 1e9, .zmax = -1e9 };
+        struct readback rb = { .w = &wr, .zmin = 1e9, .zmax = -1e9 };
         struct estimate e;
         T_OK(estimate_gcode(b.data, b.len, "body", &lim, on_move, &rb, &e, &err), &err);
         T_EQ_INT(rb.n, st.n_moves);
+        T_EQ_INT(wr.n, st.n_moves);
+        T_EQ_INT(rb.n_differ, 0);
+        free(wr.mv);
         double sum = 0;
         for (int r = 0; r < ROLE_N; r++)
             sum += st.e_mm[r];
