@@ -74,6 +74,8 @@ struct wr {
     bool retracted;
     int role;                  /* last ;TYPE: written, -1 none */
     struct paths_index inside; /* this layer's region, for retract_only_crossing */
+    gcw_move_fn on_move;
+    void *ud;
     float width;
     int rc;
 };
@@ -110,6 +112,8 @@ emit(struct wr *w, double x, double y, double z, double e, double f_mm_min)
     if (w->rc == SF_OK && buf_append(w->out, line, n) < 0)
         w->rc = SF_ENOMEM;
     w->st->n_moves++;
+    if (w->on_move)
+        w->on_move(w->ud, isnan(x) ? w->x : x, isnan(y) ? w->y : y, isnan(z) ? w->z : z, w->e);
 }
 
 static void __attribute__((format(printf, 2, 3))) put(struct wr *w, const char *fmt, ...)
@@ -131,12 +135,21 @@ r3(double v)
     return round(v * 1000) / 1000;
 }
 
-/* Move E by de (negative retracts); returns the E word to write. */
+static double
+r5(double v)
+{
+    return round(v * 100000) / 100000;
+}
+
+/* Move E by de (negative retracts); returns the E word to write.  In
+   relative mode the word is the difference of the rounded absolute
+   positions, so the rounding of the 5 decimals written never adds up. */
 static double
 e_word(struct wr *w, double de)
 {
+    double before = w->e;
     w->e += de;
-    return w->p->e_relative ? de : w->e;
+    return w->p->e_relative ? r5(w->e) - r5(before) : w->e;
 }
 
 static void
@@ -315,10 +328,12 @@ print_run(struct wr *w, const struct layer_paths *lp, uint32_t a, uint32_t b, do
 
 int
 gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct slice_profile *p,
-         struct buf *out, struct gcw_stats *st, struct sf_err *err)
+         struct buf *out, struct gcw_stats *st, gcw_move_fn on_move, void *ud, struct sf_err *err)
 {
     memset(st, 0, sizeof(*st));
-    struct wr w = { .out = out, .p = p, .st = st, .f = -1, .role = -1, .rc = SF_OK };
+    struct wr w = {
+        .out = out, .p = p, .st = st, .f = -1, .role = -1, .rc = SF_OK, .on_move = on_move, .ud = ud
+    };
     put(&w, "G21\nG90\n%s\nG92 E0\n", p->e_relative ? "M83" : "M82");
     for (uint32_t k = 0; k < s->n && w.rc == SF_OK; k++) {
         const struct layer *L = &s->l[k];

@@ -30,13 +30,18 @@ struct gcw_stats {
     uint32_t n_moves; /* G1 lines written */
 };
 
+/* Called after each G1 written, with the machine position it moves to
+   (E in the absolute sense, as estimate.h reports it). */
+typedef void (*gcw_move_fn)(void *ud, double x, double y, double z, double e);
+
 /*
  * Append the G-code of every layer's paths (lp[k] for layer k of s) to
- * out.  SF_ENOMEM when out's cap is hit.
+ * out.  on_move (may be NULL) sees every move as written.  SF_ENOMEM when
+ * out's cap is hit.
  */
 int gcw_body(const struct layer_stack *s, const struct layer_paths *lp,
              const struct slice_profile *p, struct buf *out, struct gcw_stats *st,
-             struct sf_err *err);
+             gcw_move_fn on_move, void *ud, struct sf_err *err);
 
 /* Filament mm per mm of a line of width w on layer h (flow model, flow). */
 double gcw_e_per_mm(const struct slice_profile *p, double w_mm, double h_mm);

@@ -381,7 +381,7 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
 
     STAGE("gcode");
     struct gcw_stats st;
-    if ((rc = gcw_body(&s, lp, p, &body, &st, err)) < 0)
+    if ((rc = gcw_body(&s, lp, p, &body, &st, NULL, NULL, err)) < 0)
         goto out;
     STAGE("estimate");
     struct est_limits lim;

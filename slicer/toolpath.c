@@ -524,6 +524,110 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
     return rc;
 }
 
+/* Islands beyond this print role by role across the layer (the grouping is
+   islands x paths point-in-polygon tests). */
+#define ISLANDS_MAX 64
+
+/*
+ * Reorder the part's paths island by island (support stays first), keeping
+ * the role order within an island, so the nozzle finishes one island
+ * before travelling to the next instead of visiting every island once per
+ * role.  Islands are visited nearest-first from the first one.
+ */
+static int
+group_by_island(const struct paths *region, struct layer_paths *lp)
+{
+    uint32_t outers[ISLANDS_MAX], n_isl = 0;
+    for (uint32_t k = 0; k < region->n; k++) {
+        if (paths_area_k(region, k) <= 0)
+            continue;
+        if (n_isl == ISLANDS_MAX)
+            return SF_OK;
+        outers[n_isl++] = k;
+    }
+    if (n_isl < 2 || lp->p.n < 2)
+        return SF_OK;
+    int rc = SF_ENOMEM;
+    uint8_t *isl = mem_array(lp->p.n, 1);
+    struct paths outline[ISLANDS_MAX];
+    struct paths_index ix[ISLANDS_MAX];
+    double area[ISLANDS_MAX], cx[ISLANDS_MAX], cy[ISLANDS_MAX];
+    uint32_t n_ix = 0;
+    struct layer_paths out;
+    layer_paths_init(&out);
+    for (uint32_t i = 0; i < n_isl; i++)
+        paths_init(&outline[i]);
+    if (!isl)
+        goto fail;
+    for (; n_ix < n_isl; n_ix++) {
+        uint32_t k = outers[n_ix];
+        struct ipt lo, hi;
+        if (!paths_add(&outline[n_ix], region->pts + region->start[k], paths_len(region, k)) ||
+            !paths_index_init(&ix[n_ix], &outline[n_ix]))
+            goto fail;
+        paths_bbox(&outline[n_ix], &lo, &hi);
+        cx[n_ix] = poly_mm(lo.x / 2 + hi.x / 2);
+        cy[n_ix] = poly_mm(lo.y / 2 + hi.y / 2);
+        area[n_ix] = paths_area_k(region, k);
+    }
+    /* each part path belongs to the smallest island outline containing its first point */
+    for (uint32_t k = 0; k < lp->p.n; k++) {
+        isl[k] = 0xff;
+        if (tp_role_is_support(lp->info[k].role))
+            continue;
+        struct ipt q = lp->p.pts[lp->p.start[k]];
+        double best = INFINITY;
+        for (uint32_t i = 0; i < n_isl; i++)
+            if (area[i] < best && paths_index_contains(&ix[i], q))
+                best = area[i], isl[k] = (uint8_t)i;
+        if (isl[k] == 0xff)
+            isl[k] = 0; /* on an outline exactly: any island will do */
+    }
+    /* support first, then islands nearest-first */
+    bool done[ISLANDS_MAX] = { false };
+    double x = cx[0], y = cy[0];
+    for (int pass = -1; pass < (int)n_isl; pass++) {
+        uint32_t pick = 0xff;
+        if (pass >= 0) {
+            double bd = INFINITY;
+            for (uint32_t i = 0; i < n_isl; i++) {
+                double d = hypot(cx[i] - x, cy[i] - y);
+                if (!done[i] && d < bd)
+                    bd = d, pick = i;
+            }
+            done[pick] = true;
+            x = cx[pick];
+            y = cy[pick];
+        }
+        for (uint32_t k = 0; k < lp->p.n; k++) {
+            bool sup = tp_role_is_support(lp->info[k].role);
+            if (pass < 0 ? !sup : (sup || isl[k] != pick))
+                continue;
+            if (out.p.n + 1 > out.cap_info) {
+                size_t cap = out.cap_info;
+                if (!mem_grow((void **)&out.info, &cap, out.p.n + 1, sizeof(*out.info)))
+                    goto fail;
+                out.cap_info = (uint32_t)cap;
+            }
+            if (!paths_add(&out.p, lp->p.pts + lp->p.start[k], paths_len(&lp->p, k)))
+                goto fail;
+            out.info[out.p.n - 1] = lp->info[k];
+        }
+    }
+    layer_paths_release(lp);
+    *lp = out;
+    layer_paths_init(&out);
+    rc = SF_OK;
+fail:
+    for (uint32_t i = 0; i < n_ix; i++)
+        paths_index_release(&ix[i]);
+    for (uint32_t i = 0; i < n_isl; i++)
+        paths_release(&outline[i]);
+    layer_paths_release(&out);
+    free(isl);
+    return rc;
+}
+
 enum { T_AREA, T_TMP, T_TOPI, T_BOTI, T_KEEP, T_SOLID, T_TOP, T_SPARSE, T_LINES, T_N };
 
 int
@@ -593,6 +697,16 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
             TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
         }
     }
+    if (t[T_SOLID].n && t[T_KEEP].n) {
+        /* solid narrower than a line is a sliver along a slope, not a
+           skin: drop it and grow the rest a little, as PrusaSlicer 2.5
+           regularizes its vertical shells: offset2(-0.5 s, +0.8 s) with
+           s = 0.8 x the solid line spacing (INSET_OVERLAP_TOLERANCE) */
+        double ms = 0.8 * ssp;
+        TRY(clip_offset(&t[T_SOLID], -0.5 * ms, CLIP_JOIN_SQUARE, &t[T_TMP]));
+        TRY(clip_offset(&t[T_TMP], 0.8 * ms, CLIP_JOIN_SQUARE, &t[T_LINES]));
+        TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+    }
     TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
     if (p->top_layers > 0) {
         /* the part of the solid the next layer does not cover is the top surface */
@@ -643,6 +757,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         TRY(tp_anchor(&t[T_LINES], &t[T_SPARSE], p->infill_anchor_mm));
         TRY(add(out, &t[T_LINES], ROLE_INFILL, false, w));
     }
+    TRY(group_by_island(&L->region, out));
 #undef TRY
 out:
     for (int i = 0; i < T_N; i++)

@@ -5,7 +5,9 @@
 # speeds and machine limits, which are our defaults).  Prints one table
 # row per mesh: filament (g) and estimated time (min) of both slicers with
 # the ratio, support grams, and slicing wall time (best of 3 for ours, one
-# run for PrusaSlicer, startup included in both).
+# run for PrusaSlicer, startup included in both), and our planner's
+# estimate of PrusaSlicer's own G-code ("planner" column: it isolates the
+# estimator from the differences between the two slicers' toolpaths).
 # BENCH_MESHES="a.stl b.stl" picks meshes; BENCH_PEERS=0 skips PrusaSlicer.
 set -u
 build=${1:-build/rel}
@@ -39,30 +41,33 @@ ours() { # mesh support(on|off) -> "g min support_g wall_s layers"
   secs=$(sed -n 's/^; estimated printing time \[s\] = //p' "$work/o.gcode")
   echo "$g $(awk -v s="$secs" 'BEGIN { printf "%.1f", s / 60 }') $sg $best $layers"
 }
-peer() { # mesh support -> "g min support_g wall_s layers"
-  local row
-  row=$(PEER_RUNS="prusaslicer:$2" bash "$shared/peers/slice-peers.sh" "$1" --format csv 2>/dev/null | tail -n 1)
-  python3 - "$row" <<'PY'
+peer() { # mesh support -> "g min support_g wall_s layers planner_min"
+  local row est
+  rm -rf "$work/peer"
+  row=$(PEER_RUNS="prusaslicer:$2" bash "$shared/peers/slice-peers.sh" "$1" --format csv --keep "$work/peer" 2>/dev/null | tail -n 1)
+  est=$("$bin" estimate "$work"/peer/*.gcode 2>/dev/null | sed -n 's/.*(\([0-9]*\) s)$/\1/p')
+  python3 - "$row" "${est:-0}" <<'PY'
 import sys, csv
 r = next(csv.reader([sys.argv[1]]))
 try:
     h = "mesh,triangles,manifold,slicer,version,support,angle_deg,rc,wall_s,max_rss_mb,filament_mm,filament_g,support_mm,support_g,est_time_s,layers,slicer_filament_mm".split(",")
     d = dict(zip(h, r))
-    print(d["filament_g"], "%.1f" % (float(d["est_time_s"]) / 60), d["support_g"], d["wall_s"], d["layers"])
+    print(d["filament_g"], "%.1f" % (float(d["est_time_s"]) / 60), d["support_g"], d["wall_s"], d["layers"],
+          "%.1f" % (float(sys.argv[2]) / 60))
 except Exception:
-    print("0 0 0 0 0")
+    print("0 0 0 0 0 0")
 PY
 }
-printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | ours support g | PS support g | ours wall s | PS wall s | wall ratio |\n'
-printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio |\n'
+printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
 for m in "${meshes[@]}"; do
   for sup in off on; do
     read -r og omin osg ow ol <<<"$(ours "$m" "$sup")"
-    if [ "$peers" = 1 ]; then read -r pg pmin psg pw pl <<<"$(peer "$m" "$sup")"
-    else pg=0 pmin=0 psg=0 pw=0; fi
+    if [ "$peers" = 1 ]; then read -r pg pmin psg pw pl pest <<<"$(peer "$m" "$sup")"
+    else pg=0 pmin=0 psg=0 pw=0 pest=0; fi
     awk -v m="$(basename "$m")" -v s="$sup" -v og="$og" -v pg="$pg" -v omin="$omin" -v pmin="$pmin" \
-        -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
-      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.2f | %.2f | %.2f | %.2f | %s |\n",
-              m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), osg, psg, ow, pw, r(ow, pw) }'
+        -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" -v pest="$pest" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
+      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s |\n",
+              m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), pest, r(pest, pmin), osg, psg, ow, pw, r(ow, pw) }'
   done
 done

@@ -200,10 +200,27 @@ T_CASE(slice_island_gets_support)
     mesh_release(&b);
 }
 
+struct written {
+    double (*mv)[4]; /* x y z e of every move the writer wrote */
+    size_t n, cap;
+};
+
+static void
+on_write(void *ud, double x, double y, double z, double e)
+{
+    struct written *w = ud;
+    if (mem_grow((void **)&w->mv, &w->cap, w->n + 1, sizeof(*w->mv))) {
+        w->mv[w->n][0] = x;
+        w->mv[w->n][1] = y;
+        w->mv[w->n][2] = z;
+        w->mv[w->n][3] = e;
+        w->n++;
+    }
+}
+
 struct readback {
-    uint32_t n;
-    double e[ROLE_N + 1];
-    int role;
+    uint32_t n, n_differ;
+    const struct written *w;
     double zmin, zmax;
 };
 
@@ -211,6 +228,14 @@ static int
 on_move(void *ud, const struct est_move *mv)
 {
     struct readback *rb = ud;
+    /* the same move the writer meant: positions to the 3 decimals written,
+       E (absolute sense) to the 5 decimals written */
+    if (rb->n < rb->w->n) {
+        const double *m = rb->w->mv[rb->n];
+        if (fabs(m[0] - mv->x) > 1e-9 || fabs(m[1] - mv->y) > 1e-9 || fabs(m[2] - mv->z) > 1e-9 ||
+            fabs(m[3] - mv->e) > 6e-6)
+            rb->n_differ++;
+    }
     rb->n++;
     if (mv->de <= 0)
         return SF_OK;
@@ -242,13 +267,17 @@ T_CASE(gcode_reads_back_into_the_same_moves)
         struct buf b;
         buf_init(&b, 0);
         struct gcw_stats st;
-        T_OK(gcw_body(&s, lp, &p, &b, &st, &err), &err);
+        struct written wr = { 0 };
+        T_OK(gcw_body(&s, lp, &p, &b, &st, on_write, &wr, &err), &err);
         struct est_limits lim;
         slice_limits(&p, &lim);
-        struct readback rb = { .zmin = 1e9, .zmax = -1e9 };
+        struct readback rb = { .w = &wr, .zmin = 1e9, .zmax = -1e9 };
         struct estimate e;
         T_OK(estimate_gcode(b.data, b.len, "body", &lim, on_move, &rb, &e, &err), &err);
         T_EQ_INT(rb.n, st.n_moves);
+        T_EQ_INT(wr.n, st.n_moves);
+        T_EQ_INT(rb.n_differ, 0);
+        free(wr.mv);
         double sum = 0;
         for (int r = 0; r < ROLE_N; r++)
             sum += st.e_mm[r];
@@ -404,4 +433,47 @@ T_CASE(slice_m73_progress_is_monotone)
     T_EQ_INT(layers, r.n_layers);
     slice_profile_release(&p);
     mesh_release(&m);
+}
+
+T_CASE(slice_prints_island_by_island)
+{
+    /* two separate posts: each layer prints one post completely (its
+       perimeters and infill), then the other */
+    struct mesh m, b;
+    struct sf_err err;
+    mesh_init(&m);
+    mesh_init(&b);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 5), &err), &err);
+    T_OK(shape_box(&b, v3(30, 0, 0), v3(40, 10, 5), &err), &err);
+    T_OK(merge(&m, &b), NULL);
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    char path[512];
+    struct slice_result r;
+    T_OK(slice_to(&m, &p, "posts", &r, path, sizeof(path), &err), &err);
+    FILE *f = fopen(path, "r");
+    T_TRUE(f != NULL);
+    char line[512];
+    int layer = -1, ext = 0, switches = 0, side = -1;
+    while (fgets(line, sizeof(line), f)) {
+        if (strncmp(line, ";LAYER_CHANGE", 13) == 0) {
+            layer++;
+            side = -1;
+        }
+        if (layer == 12 && strncmp(line, ";TYPE:External perimeter", 24) == 0)
+            ext++;
+        double x;
+        if (layer == 12 && sscanf(line, "G1 X%lf", &x) == 1 && strstr(line, " E")) {
+            int s = x > 125;
+            if (side >= 0 && s != side)
+                switches++;
+            side = s;
+        }
+    }
+    fclose(f);
+    T_EQ_INT(ext, 2);
+    T_EQ_INT(switches, 1); /* extrusion moves change posts once per layer */
+    slice_profile_release(&p);
+    mesh_release(&m);
+    mesh_release(&b);
 }

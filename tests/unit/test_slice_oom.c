@@ -19,6 +19,24 @@ T_CASE(slice_survives_every_failed_allocation)
     T_OK(shape_tee(&m, &err), &err);
     for (uint32_t i = 0; i < m.n_verts; i++) /* a quarter-size tee: 30 layers */
         m.v[i] = v3_scale(m.v[i], 0.25);
+    /* and a post beside it, so layers have two islands */
+    struct mesh b;
+    mesh_init(&b);
+    T_OK(shape_box(&b, v3(10, -2, 0), v3(14, 2, 6), &err), &err);
+    struct vec3 *nv = mem_realloc_array(m.v, m.n_verts + b.n_verts, sizeof(*nv));
+    T_TRUE(nv != NULL);
+    m.v = nv;
+    uint32_t(*nt)[3] = mem_realloc_array(m.t, m.n_tris + b.n_tris, sizeof(*nt));
+    T_TRUE(nt != NULL);
+    m.t = nt;
+    for (uint32_t i = 0; i < b.n_verts; i++)
+        m.v[m.n_verts + i] = b.v[i];
+    for (uint32_t i = 0; i < b.n_tris; i++)
+        for (int c = 0; c < 3; c++)
+            m.t[m.n_tris + i][c] = b.t[i][c] + m.n_verts;
+    m.n_verts += b.n_verts;
+    m.n_tris += b.n_tris;
+    mesh_release(&b);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
     p.layer_mm = p.first_layer_mm = 0.3; /* fewer layers: a faster loop */
