@@ -120,8 +120,10 @@ linewin_on_ok(struct linewin *w, bool has_n, long n)
         w->acked = n;
         if (n > w->recv)
             w->recv = n;
+        /* After a resync more than a window may be unanswered: what is in
+           flight is what the window allows, never more. */
         long f = w->next - 1 - w->recv;
-        w->in_flight = f < 0 ? 0 : (int)f;
+        w->in_flight = f < 0 ? 0 : f > w->window ? w->window : (int)f;
         if (n >= w->rewound_to)
             w->stale = 0;
     } else {

@@ -12,7 +12,8 @@ for faults in "" "--fault corrupt=0.01 --fault seed=21"; do
   stop_sim
   want=$(commands "$TMP/job.gcode" | wc -l)
   grep -q "lines=$want acked=$want " "$TMP/send.out" || { echo "send summary: $(cat "$TMP/send.out")"; exit 1; }
-  check_log "$TMP/job.gcode" || { echo "faults: ${faults:-none}"; exit 1; }
+  heads=0; [ -n "$faults" ] && heads=2
+  check_log "$TMP/job.gcode" "$heads" || { echo "faults: ${faults:-none}"; exit 1; }
 done
 # A bad port is a clear error, not a hang.
 "$BUILD/bin/slimfarm" send "$TMP/job.gcode" --port pty:/nonexistent 2> "$TMP/err" && exit 1

@@ -10,7 +10,8 @@ for faults in "" "--fault corrupt=0.01 --fault seed=4"; do
   "$BUILD/bin/slimfarm" send "$TMP/job.gcode" --port "$PORT" --timeout-ms 250 \
     > "$TMP/send.out" 2> "$TMP/send.err" || { echo "send failed ($faults):"; tail -3 "$TMP/send.err"; exit 1; }
   stop_sim
-  check_log "$TMP/job.gcode" || { echo "faults: ${faults:-none}"; exit 1; }
+  heads=0; [ -n "$faults" ] && heads=2
+  check_log "$TMP/job.gcode" "$heads" || { echo "faults: ${faults:-none}"; exit 1; }
 done
 start_sim --tcp 0 --baud 1000000 --speed 2000 --fault disconnect=500 || exit 1
 "$BUILD/bin/slimfarm" send "$TMP/job.gcode" --port "$PORT" --timeout-ms 250 > /dev/null 2> "$TMP/send.err" && exit 1

@@ -50,15 +50,14 @@ def wait_ok():
         if select.select([fd], [], [], max(0, end - time.time()))[0]:
             buf += os.read(fd, 4096)
     sys.exit("bare host: no ok within 5 s")
-# Like any simple host, wait for the firmware's "start" after the reset that
-# opening the port causes: what is sent while it boots is lost, as on Marlin.
-end = time.time() + 5
+# Like any simple host, let the firmware boot first: what is sent while it
+# boots is lost, as on Marlin.  Wait for its "start", or 2 s if its banner
+# went out before the port was opened.
+end = time.time() + 2
 while b"start\n" not in buf and time.time() < end:
     if select.select([fd], [], [], max(0, end - time.time()))[0]:
         buf += os.read(fd, 4096)
-if b"start\n" not in buf:
-    sys.exit("bare host: no 'start' from the printer")
-buf = buf.split(b"start\n", 1)[1]
+buf = buf.split(b"start\n", 1)[-1]
 for raw in open(sys.argv[2]):
     cmd = raw.split(";")[0].strip()
     if cmd:
