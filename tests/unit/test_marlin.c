@@ -31,8 +31,8 @@ struct run {
     int done, failed, cancelled;
     int states[16];
     int n_states;
-    int64_t pause_at;   /* pause once lines_acked reaches this (0: never) */
-    int64_t cancel_at;  /* cancel once lines_acked reaches this */
+    int64_t pause_at;  /* pause once lines_acked reaches this (0: never) */
+    int64_t cancel_at; /* cancel once lines_acked reaches this */
     bool paused_once;
     int64_t acked_at_cancel; /* lines_acked when cancel() was called */
     char log_path[512];
@@ -232,8 +232,12 @@ setup(struct run *r, struct sim_marlin_config *sc, int buffer_lines)
         t_fail(__FILE__, __LINE__, "sim: %s", err.msg);
         return false;
     }
-    struct drv_config dc = { .name = "t", .kind = "marlin", .port = sim_marlin_path(r->sim),
-                             .baud = 115200, .timeout_ms = 250, .buffer_lines = buffer_lines };
+    struct drv_config dc = { .name = "t",
+                             .kind = "marlin",
+                             .port = sim_marlin_path(r->sim),
+                             .baud = 115200,
+                             .timeout_ms = 250,
+                             .buffer_lines = buffer_lines };
     r->drv = drv_new(r->loop, &dc, on_event, r, &err);
     if (!r->drv || r->drv->ops->open(r->drv, &err) < 0) {
         t_fail(__FILE__, __LINE__, "driver: %s", err.msg);
