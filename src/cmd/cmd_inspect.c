@@ -185,6 +185,10 @@ run(int argc, char **argv)
                "%s the base\n",
                sm.n_islands, sm.n_islands == 1 ? "" : "s", sm.island_volume_mm3,
                fabs(sm.base_margin_mm), sm.base_margin_mm >= 0 ? "inside" : "OUTSIDE");
+        if (sm.n_rays_open)
+            printf("  warning: %u of %u rays meet surfaces that do not pair up (not a closed "
+                   "solid): the support figures are estimates\n",
+                   sm.n_rays_open, sm.n_rays);
     }
     rc = 0;
 out:

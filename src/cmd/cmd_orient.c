@@ -138,6 +138,12 @@ run(int argc, char **argv)
         mesh_release(&m);
         return 1;
     }
+    if (r.not_solid)
+        fprintf(stderr,
+                "slimfarm orient: %s: warning: not a closed solid (%u of %u rays meet unpaired "
+                "surfaces), so its support figures are guesses; orientation kept. Repair the "
+                "mesh to orient it.\n",
+                argv[optind], r.input.m.n_rays_open, r.input.m.n_rays);
     orient_apply(&m, r.best.up, bed_x, bed_y);
     int rc = mesh_save(&m, out, &err);
     mesh_release(&m);

@@ -102,10 +102,11 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
     uint32_t *cursor = mem_array(cells, sizeof(uint32_t)); /* next hit index per cell */
     float *col_top = mem_array(cells, sizeof(float));      /* highest column top per cell */
     float *floor_h = mem_array(cells, sizeof(float));      /* last exit below, per cell */
+    uint16_t *depth = mem_calloc(cells, sizeof(uint16_t));  /* shells each ray is inside */
     struct pt *base = mem_array(cells + n_cols + 1, sizeof(struct pt));
     struct pt *hull = mem_array(cells + n_cols + 2, sizeof(struct pt));
     int rc = SF_OK;
-    if (!prev || !cur || !stack || !cursor || !col_top || !floor_h || !base || !hull) {
+    if (!prev || !cur || !stack || !cursor || !col_top || !floor_h || !depth || !base || !hull) {
         rc = sf_err_set(err, SF_ENOMEM, "growth: out of memory for %zu cells", cells);
         goto out;
     }
@@ -128,16 +129,22 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
     float half = (float)(0.5 * layer_mm);
     for (uint32_t k = 0; k < layers; k++) {
         float z = (float)((k + 0.5) * layer_mm);
-        /* solid voxels of this layer: advance each ray's hit cursor to z */
+        /* solid voxels of this layer: advance each ray's hit cursor to z,
+           counting shells as measure_columns does */
         for (size_t c = 0; c < cells; c++) {
             uint32_t e = g->first[c + 1];
             while (cursor[c] < e && g->hits[cursor[c]].h <= z) {
-                if (g->hits[cursor[c]].cos_up > 0)
-                    floor_h[c] = g->hits[cursor[c]].h;
+                const struct ray_hit *h = &g->hits[cursor[c]];
+                if (h->cos_up > 0) {
+                    depth[c] -= depth[c] > 0;
+                    if (depth[c] == 0)
+                        floor_h[c] = h->h;
+                } else if (h->cos_up < 0) {
+                    depth[c]++;
+                }
                 cursor[c]++;
             }
-            /* inside when the last hit passed was an entry */
-            cur[c] = cursor[c] > g->first[c] && g->hits[cursor[c] - 1].cos_up < 0;
+            cur[c] = depth[c] > 0;
             if (cur[c]) {
                 sx += g->u0 + (c % g->nu) * g->pitch;
                 sy += g->w0 + (c / g->nu) * g->pitch;
@@ -201,6 +208,7 @@ out:
     free(cursor);
     free(col_top);
     free(floor_h);
+    free(depth);
     free(base);
     free(hull);
     return rc;

@@ -5,7 +5,9 @@
  * Support columns follow the rays structure of Allen & Dutta: walking up a
  * ray, the last surface below is the bed or the part's last exit (an
  * up-facing hit); a down-facing hit on a risky face higher than min_gap
- * above it needs a column from there.  Volume is exact for the grid: each
+ * above it needs a column from there.  The ray counts the shells it is in,
+ * so a down-facing face met from inside (overlapping shells, or an open mesh
+ * missing its top) never gets a column through material.  Volume is exact for the grid: each
  * column contributes length * pitch^2.  Anchor points are clusters of
  * supported hits on neighbouring rays at similar heights (union-find), the
  * "contact clusters" of the support-slimming paper's direction search.
@@ -84,13 +86,25 @@ measure_columns(const struct ray_grid *g, const struct support_params *p,
     size_t cells = (size_t)g->nu * g->nw;
     for (size_t c = 0; c < cells; c++) {
         float below = 0; /* the bed */
+        int depth = 0;   /* shells the ray is inside */
         for (uint32_t k = g->first[c]; k < g->first[c + 1]; k++) {
             const struct ray_hit *h = &g->hits[k];
             if (h->cos_up > 0) {
-                below = h->h; /* leaving the part: its top surface is the new floor */
+                /* leaving the part: its top surface is the new floor.  An exit
+                   with no entry (a hole in an open mesh) still is a floor. */
+                if (depth > 0)
+                    depth--;
+                if (depth == 0)
+                    below = h->h;
                 continue;
             }
-            if (h->cos_up < -tau && h->h - below > gap) {
+            if (h->cos_up == 0)
+                continue;
+            /* entering: only a face met from outside can need a column; inside
+               a shell (a missing top face, overlapping shells) it is material */
+            bool outside = depth == 0;
+            depth++;
+            if (outside && h->cos_up < -tau && h->h - below > gap) {
                 void *o = out;
                 if (!mem_grow(&o, &cap, n + 1, sizeof(*out))) {
                     free(out);
@@ -204,6 +218,20 @@ measure_support_cached(const struct mesh *m, struct raycast *rc, const struct pr
         out->contact_area_mm2 = (double)n * cell;
         out->n_columns = (uint32_t)n;
         out->n_anchors = count_anchors(&g, cols, n);
+        for (size_t c = 0; c < (size_t)g.nu * g.nw; c++) {
+            if (g.first[c] == g.first[c + 1])
+                continue;
+            int depth = 0;
+            bool unmatched = false;
+            for (uint32_t k = g.first[c]; k < g.first[c + 1]; k++) {
+                if (g.hits[k].cos_up < 0)
+                    depth++;
+                else if (g.hits[k].cos_up > 0 && depth-- == 0)
+                    unmatched = true, depth = 0;
+            }
+            out->n_rays++;
+            out->n_rays_open += unmatched || depth != 0;
+        }
         struct vec3 com = raycast_com(rc);
         out->com_height_mm = v3_dot(com, up) - g.base;
         struct growth_report gr;

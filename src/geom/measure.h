@@ -55,6 +55,10 @@ struct support_metrics {
     double island_volume_mm3; /* support they need, included in volume_mm3 */
     double base_margin_mm;    /* least margin of the growing part's centre of mass inside
                                  its extended base; negative: it would tip over */
+    /* trust: on a closed solid every ray leaves as often as it enters */
+    uint32_t n_rays;      /* grid rays that hit the part */
+    uint32_t n_rays_open; /* of those, rays whose entries and exits do not pair up: the part
+                             is not a closed solid there and the figures above are estimates */
 };
 
 /*

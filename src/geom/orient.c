@@ -35,6 +35,7 @@ orient_params_default(struct orient_params *p)
     p->w_contact_mm = 1;
     p->w_stability_mm2 = 0.5;
     p->min_gain = 0.05;
+    p->max_open_rays = 0.01;
     p->min_base_mm2 = 25;
     p->min_margin_mm = 1;
 }
@@ -317,6 +318,11 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     uint32_t best = final[0];
     if (!cands[0].dropped && cands[best].c.cost > (1 - p->min_gain) * cands[0].c.cost)
         best = 0; /* not worth turning the part */
+    const struct support_metrics *in = &cands[0].c.m;
+    if (in->n_rays && in->n_rays_open > p->max_open_rays * in->n_rays) {
+        best = 0; /* rays cannot tell inside from outside: no figure to trust */
+        res->not_solid = true;
+    }
     res->best = cands[best].c;
     res->input = cands[0].c;
     /* report at the operator's angle: the margin only steers the choice */

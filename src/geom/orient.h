@@ -34,6 +34,9 @@ struct orient_params {
     double min_gain;        /* keep the input orientation unless the best costs at least this
                                fraction less (0.05): operators do not want parts turned for
                                nothing, and the peers' layer rules blur small differences */
+    double max_open_rays;   /* if more than this fraction of the input's rays meet unpaired
+                               surfaces (0.01), the part is no closed solid, its support
+                               figures are guesses, and the input orientation is kept */
     double min_base_mm2;    /* smallest hull face the part may rest on (25) */
     double min_margin_mm;   /* centre of mass must project this far inside a base (1) */
     int threads;            /* worker threads (0: one per core) */
@@ -57,6 +60,7 @@ struct orient_result {
     struct orient_candidate input;      /* the input orientation, for comparison */
     struct orient_candidate runners[4]; /* next best, distinct directions */
     int n_runners;
+    bool not_solid;        /* input kept: the part is not a closed solid (max_open_rays) */
     uint32_t n_candidates; /* directions considered */
     uint32_t n_exact;      /* scored with the ray cast */
     double seconds;        /* wall time in total */

@@ -166,3 +166,27 @@ T_CASE(leaning_tower_is_not_left_to_tip_over)
     T_TRUE(angle_deg(r.best.up, v3(0, 0, 1)) > 10);
     mesh_release(&m);
 }
+
+T_CASE(an_open_shell_is_left_as_it_is)
+{
+    /* a tee with its whole top face missing: rays cannot tell inside from
+       outside, so no support figure can be trusted and nothing is turned */
+    struct mesh m;
+    struct sf_err err;
+    struct orient_result r;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    uint32_t kept = 0;
+    for (uint32_t i = 0; i < m.n_tris; i++) {
+        struct vec3 n = mesh_tri_normal(&m, i), c = mesh_tri_centroid(&m, i);
+        if (!(n.z > 0.99 && c.z > 34.9))
+            memcpy(m.t[kept++], m.t[i], sizeof(m.t[0]));
+    }
+    T_EQ_INT(m.n_tris - kept, 2);
+    m.n_tris = kept;
+    T_OK(find(&m, &r, &err), &err);
+    T_TRUE(r.not_solid);
+    T_TRUE(r.input.m.n_rays_open > 0);
+    T_EQ_DBL(r.best.up.z, 1, 1e-12);
+    mesh_release(&m);
+}

@@ -1,0 +1,637 @@
+/*
+ * api.c - the REST routes: jobs from the store, printers through the
+ * owner's registry, the event log as Server-Sent Events.
+ *
+ * Why this split: http.c knows HTTP (keys, caps, multipart, streams) and
+ * nothing of jobs; api_json.c knows JSON shapes; this file only maps URLs
+ * to store calls and printer actions, so each route is a few lines.
+ * Uploads stream straight into the store's content-addressed files (never
+ * whole in memory) and the job row is added only when the file is
+ * committed, so a broken upload leaves no job.  A client file name is
+ * only ever a label: it must be a plain name (job_name_valid) and a part
+ * format we load, and it never becomes a path.
+ *
+ * Thread: the loop thread, like the store it uses.
+ */
+#include "api.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <string.h>
+#include <strings.h>
+
+#include "../base/buf.h"
+#include "../base/log.h"
+#include "../base/mem.h"
+#include "api_json.h"
+
+#define SSE_BATCH 64 /* events read from the store per stream refill */
+
+struct api {
+    struct api_config cfg; /* as given */
+    struct http *http;     /* the server */
+    unsigned tick;         /* api_tick() count: streams send progress when it moves */
+};
+
+/* An upload in progress: the store's writer, then the committed hash. */
+struct upload {
+    struct store_file *f;    /* NULL once committed */
+    char sha[STORE_SHA_HEX]; /* set by finish */
+};
+
+/* One event stream client. */
+struct sse {
+    struct api *a;      /* owner */
+    int64_t last_id;    /* last event id sent */
+    unsigned tick_seen; /* last api tick answered with progress or a keepalive */
+    struct buf out;     /* formatted, not yet sent */
+};
+
+/* ---- upload sink ---- */
+
+static bool
+part_ext_ok(const char *name)
+{
+    const char *dot = strrchr(name, '.');
+    return dot && (strcasecmp(dot, ".stl") == 0 || strcasecmp(dot, ".obj") == 0 ||
+                   strcasecmp(dot, ".3mf") == 0);
+}
+
+static void *
+up_begin(void *ud, const char *filename, struct sf_err *err)
+{
+    struct api *a = ud;
+    if (!job_name_valid(filename)) {
+        sf_err_set(err, SF_EINVAL,
+                   "file name '%.80s' is not a plain file name (no paths, '..' or control "
+                   "characters)",
+                   filename);
+        return NULL;
+    }
+    if (!part_ext_ok(filename)) {
+        sf_err_set(err, SF_EINVAL, "file name '%.80s' does not end in .stl, .obj or .3mf",
+                   filename);
+        return NULL;
+    }
+    struct upload *u = mem_calloc(1, sizeof(*u));
+    if (!u) {
+        sf_err_set(err, SF_ENOMEM, "out of memory");
+        return NULL;
+    }
+    u->f = store_file_begin(a->cfg.store, err);
+    if (!u->f) {
+        free(u);
+        return NULL;
+    }
+    return u;
+}
+
+static int
+up_write(void *ctx, const char *data, size_t len, struct sf_err *err)
+{
+    struct upload *u = ctx;
+    return store_file_write(u->f, data, len, err);
+}
+
+static int
+up_finish(void *ctx, struct sf_err *err)
+{
+    struct upload *u = ctx;
+    int rc = store_file_commit(u->f, u->sha, err);
+    u->f = NULL; /* commit frees the writer either way */
+    return rc;
+}
+
+static void
+up_discard(void *ctx)
+{
+    struct upload *u = ctx;
+    store_file_abort(u->f);
+    free(u);
+}
+
+static const struct http_upload_sink sink = { up_begin, up_write, up_finish, up_discard };
+
+/* ---- helpers ---- */
+
+static int
+status_of(int rc)
+{
+    switch (rc) {
+    case SF_EINVAL:
+        return 409;
+    case SF_ENOTFOUND:
+        return 404;
+    case SF_EUNSUPP:
+        return 501;
+    default:
+        return 500;
+    }
+}
+
+/* Parse a decimal number >= 0 that is the whole segment [s, s+n). */
+static bool
+parse_num(const char *s, size_t n, int64_t *out)
+{
+    if (n == 0 || n > 18)
+        return false;
+    int64_t v = 0;
+    for (size_t i = 0; i < n; i++) {
+        if (s[i] < '0' || s[i] > '9')
+            return false;
+        v = v * 10 + (s[i] - '0');
+    }
+    *out = v;
+    return true;
+}
+
+/* Parse a job id (> 0). */
+static bool
+parse_id(const char *s, size_t n, int64_t *id)
+{
+    return parse_num(s, n, id) && *id > 0;
+}
+
+static const char *
+field(const struct http_req *req, const char *name)
+{
+    for (size_t i = 0; i < req->n_fields; i++)
+        if (strcmp(req->field_name[i], name) == 0)
+            return req->field_value[i];
+    return NULL;
+}
+
+static void
+changed(struct api *a)
+{
+    http_wake_streams(a->http);
+    if (a->cfg.on_change)
+        a->cfg.on_change(a->cfg.ud);
+}
+
+/* ---- jobs ---- */
+
+static void
+jobs_list(struct api *a, struct http_resp *resp)
+{
+    struct job_row *rows;
+    size_t n;
+    struct sf_err err;
+    if (store_job_list(a->cfg.store, &rows, &n, &err)) {
+        http_error(resp, 500, "%s", err.msg);
+        return;
+    }
+    json_t *arr = json_array();
+    for (size_t i = 0; arr && i < n; i++)
+        json_array_append_new(arr, api_job_json(&rows[i]));
+    free(rows);
+    resp->json = json_pack("{so}", "jobs", arr);
+}
+
+static void
+jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
+{
+    struct sf_err err;
+    if (!req->upload_name || !req->upload) {
+        http_error(resp, 400, "multipart field 'file' (the part) is required");
+        return;
+    }
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "%s", req->upload_name);
+    const char *opts = field(req, "options");
+    for (size_t i = 0; i < req->n_fields; i++)
+        if (strcmp(req->field_name[i], "options") != 0) {
+            http_error(resp, 400, "unknown form field '%.64s' (expected 'file' and 'options')",
+                       req->field_name[i]);
+            return;
+        }
+    if (api_opts_parse(opts ? opts : "", opts ? strlen(opts) : 0, &o, &err)) {
+        http_error(resp, 400, "%s", err.msg);
+        return;
+    }
+    const struct upload *u = req->upload;
+    int64_t id;
+    if (store_job_add(a->cfg.store, &o, u->sha, &id, &err)) {
+        http_error(resp, err.code == SF_EINVAL ? 400 : 500, "%s", err.msg);
+        return;
+    }
+    struct job_row j;
+    if (store_job_get(a->cfg.store, id, &j, &err)) {
+        http_error(resp, 500, "%s", err.msg);
+        return;
+    }
+    log_info("api", "job %lld: '%s' submitted, %d copies", (long long)id, o.name, o.copies);
+    resp->status = 201;
+    resp->json = json_pack("{so}", "job", api_job_json(&j));
+    changed(a);
+}
+
+static void
+job_get(struct api *a, int64_t id, struct http_resp *resp)
+{
+    struct sf_err err;
+    struct job_row j;
+    int rc = store_job_get(a->cfg.store, id, &j, &err);
+    if (rc) {
+        http_error(resp, rc == SF_ENOTFOUND ? 404 : 500, "%s", err.msg);
+        return;
+    }
+    struct print_row *p;
+    size_t n;
+    if (store_prints(a->cfg.store, id, &p, &n, &err)) {
+        http_error(resp, 500, "%s", err.msg);
+        return;
+    }
+    json_t *prints = json_array();
+    for (size_t i = 0; prints && i < n; i++)
+        json_array_append_new(prints, api_print_json(&p[i]));
+    free(p);
+    resp->json = json_pack("{soso}", "job", api_job_json(&j), "prints", prints);
+}
+
+static void
+job_patch(struct api *a, int64_t id, const struct http_req *req, struct http_resp *resp)
+{
+    struct sf_err err;
+    int prio;
+    if (api_priority_parse(req->body, req->body_len, &prio, &err)) {
+        http_error(resp, 400, "%s", err.msg);
+        return;
+    }
+    int rc = store_job_set_priority(a->cfg.store, id, prio, &err);
+    if (rc) {
+        http_error(resp, rc == SF_ENOTFOUND ? 404 : 500, "%s", err.msg);
+        return;
+    }
+    job_get(a, id, resp);
+    changed(a);
+}
+
+static void
+job_cancel(struct api *a, int64_t id, struct http_resp *resp)
+{
+    struct sf_err err;
+    struct job_row j;
+    int rc = store_job_get(a->cfg.store, id, &j, &err);
+    if (rc == SF_OK && job_state_on_printer(j.state)) {
+        /* The printer must stop first; its registry records the cancel. */
+        rc = a->cfg.printers->action(a->cfg.printers_ud, j.printer, "cancel", &err);
+    } else if (rc == SF_OK) {
+        struct job_event_args args = { .reason = "cancelled by an operator" };
+        rc = store_job_event(a->cfg.store, id, JOB_EV_CANCEL, &args, NULL, &err);
+    }
+    if (rc) {
+        http_error(resp, status_of(rc), "%s", err.msg);
+        return;
+    }
+    job_get(a, id, resp);
+    changed(a);
+}
+
+/* The operator prints an interrupted job's copy again from the start. */
+static void
+job_restart(struct api *a, int64_t id, struct http_resp *resp)
+{
+    struct sf_err err;
+    int rc = store_job_event(a->cfg.store, id, JOB_EV_RESTART, NULL, NULL, &err);
+    if (rc) {
+        http_error(resp, status_of(rc), "%s", err.msg);
+        return;
+    }
+    job_get(a, id, resp);
+    changed(a);
+}
+
+/* ---- printers ---- */
+
+static json_t *
+printer_json(const struct api_printer_info *p)
+{
+    return json_pack("{ss ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf ss}", "name", p->name, "state",
+                     printer_state_name(p->state), "enabled", p->enabled, "material",
+                     p->material ? p->material : "", "nozzle_mm", p->nozzle_mm, "bed_mm",
+                     p->bed_mm[0], p->bed_mm[1], p->bed_mm[2], "group", p->group ? p->group : "",
+                     "temps", "nozzle_c", p->nozzle_c, "nozzle_target_c", p->nozzle_target_c,
+                     "bed_c", p->bed_c, "bed_target_c", p->bed_target_c, "job_id",
+                     (json_int_t)p->job_id, "progress", p->progress, "message",
+                     p->message ? p->message : "");
+}
+
+static void
+printers_list(struct api *a, const char *name, struct http_resp *resp)
+{
+    const struct api_printer_ops *ops = a->cfg.printers;
+    json_t *arr = json_array();
+    size_t n = ops ? ops->count(a->cfg.printers_ud) : 0;
+    for (size_t i = 0; arr && i < n; i++) {
+        struct api_printer_info p;
+        memset(&p, 0, sizeof(p));
+        ops->get(a->cfg.printers_ud, i, &p);
+        if (!name) {
+            json_array_append_new(arr, printer_json(&p));
+        } else if (strcmp(p.name, name) == 0) {
+            json_decref(arr);
+            resp->json = json_pack("{so}", "printer", printer_json(&p));
+            return;
+        }
+    }
+    if (name) {
+        json_decref(arr);
+        http_error(resp, 404, "no printer '%.64s'", name);
+        return;
+    }
+    resp->json = json_pack("{so}", "printers", arr);
+}
+
+static void
+printer_action(struct api *a, const char *name, const char *action, struct http_resp *resp)
+{
+    static const char *const actions[] = { "pause", "resume", "cancel", "cleared" };
+    bool known = false;
+    for (size_t i = 0; i < 4; i++)
+        known |= strcmp(action, actions[i]) == 0;
+    if (!known) {
+        http_error(resp, 404, "no printer action '%.32s' (pause, resume, cancel, cleared)", action);
+        return;
+    }
+    struct sf_err err;
+    sf_err_clear(&err);
+    int rc = a->cfg.printers ? a->cfg.printers->action(a->cfg.printers_ud, name, action, &err)
+                             : sf_err_set(&err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    if (rc) {
+        http_error(resp, status_of(rc), "%s", err.msg);
+        return;
+    }
+    printers_list(a, name, resp);
+    changed(a);
+}
+
+/* ---- events ---- */
+
+/*
+ * On each tick: the progress of every printer with a job, as an event
+ * without id (a snapshot, not part of the log), or a comment line that
+ * keeps proxies from closing a quiet stream.
+ */
+static void
+sse_progress(struct sse *s)
+{
+    const struct api_printer_ops *ops = s->a->cfg.printers;
+    size_t n = ops ? ops->count(s->a->cfg.printers_ud) : 0;
+    json_t *arr = json_array();
+    for (size_t i = 0; arr && i < n; i++) {
+        struct api_printer_info p;
+        memset(&p, 0, sizeof(p));
+        ops->get(s->a->cfg.printers_ud, i, &p);
+        if (p.job_id)
+            json_array_append_new(
+                arr, json_pack("{ss sI ss sf}", "printer", p.name, "job_id", (json_int_t)p.job_id,
+                               "state", printer_state_name(p.state), "progress", p.progress));
+    }
+    char *text = json_array_size(arr) ? json_dumps(arr, JSON_COMPACT) : NULL;
+    json_decref(arr);
+    if (text)
+        buf_printf(&s->out, "event: progress\ndata: %s\n\n", text);
+    else
+        buf_printf(&s->out, ": keepalive\n\n");
+    free(text);
+}
+
+static ssize_t
+sse_read(void *ud, char *buf, size_t max)
+{
+    struct sse *s = ud;
+    if (s->out.len == 0) {
+        struct event_row *ev;
+        size_t n;
+        if (store_events(s->a->cfg.store, s->last_id, SSE_BATCH, &ev, &n, NULL))
+            return -1;
+        for (size_t i = 0; i < n; i++) {
+            json_t *j = api_event_json(&ev[i]);
+            char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
+            json_decref(j);
+            if (!text || buf_printf(&s->out, "id: %lld\nevent: %s\ndata: %s\n\n",
+                                    (long long)ev[i].id, ev[i].kind, text)) {
+                free(text);
+                break;
+            }
+            free(text);
+            s->last_id = ev[i].id;
+        }
+        free(ev);
+    }
+    if (s->out.len == 0 && s->tick_seen != s->a->tick) {
+        s->tick_seen = s->a->tick;
+        sse_progress(s);
+    }
+    size_t n = s->out.len < max ? s->out.len : max;
+    if (n == 0)
+        return 0; /* nothing new: http.c suspends the stream until woken */
+    memcpy(buf, s->out.data, n);
+    buf_consume(&s->out, n);
+    return (ssize_t)n;
+}
+
+static void
+sse_free(void *ud)
+{
+    struct sse *s = ud;
+    buf_release(&s->out);
+    free(s);
+}
+
+static void
+events_stream(struct api *a, const struct http_req *req, struct http_resp *resp)
+{
+    struct sse *s = mem_calloc(1, sizeof(*s));
+    if (!s) {
+        http_error(resp, 500, "out of memory");
+        return;
+    }
+    s->a = a;
+    buf_init(&s->out, 1 << 20);
+    int64_t id;
+    /* Resume after the client's last event, or start live. */
+    if (req->last_event_id && parse_num(req->last_event_id, strlen(req->last_event_id), &id))
+        s->last_id = id;
+    else
+        s->last_id = store_event_last(a->cfg.store);
+    s->tick_seen = a->tick;
+    resp->stream = sse_read;
+    resp->stream_ud = s;
+    resp->stream_free = sse_free;
+}
+
+/* ---- dispatch ---- */
+
+/* Segment i of path ("/api/jobs/12" -> "api", "jobs", "12") as [*s, *s + *n). */
+static size_t
+split(const char *path, const char **seg, size_t *len, size_t max)
+{
+    size_t n = 0;
+    const char *p = path;
+    while (*p) {
+        while (*p == '/')
+            p++;
+        if (!*p)
+            break;
+        const char *e = strchr(p, '/');
+        size_t l = e ? (size_t)(e - p) : strlen(p);
+        if (n == max)
+            return max + 1;
+        seg[n] = p;
+        len[n++] = l;
+        p += l;
+    }
+    return n;
+}
+
+static bool
+seg_is(const char *s, size_t n, const char *word)
+{
+    return strlen(word) == n && memcmp(s, word, n) == 0;
+}
+
+static void
+route(void *ud, const struct http_req *req, struct http_resp *resp)
+{
+    struct api *a = ud;
+    const char *seg[5];
+    size_t len[5];
+    size_t n = split(req->path, seg, len, 4);
+    bool get = strcmp(req->method, "GET") == 0, post = strcmp(req->method, "POST") == 0;
+    int64_t id;
+    char name[64], action[16];
+    if (n < 2 || n > 4 || !seg_is(seg[0], len[0], "api"))
+        goto not_found;
+    if (seg_is(seg[1], len[1], "jobs")) {
+        if (n == 2 && get) {
+            jobs_list(a, resp);
+            return;
+        }
+        if (n == 2 && post) {
+            jobs_submit(a, req, resp);
+            return;
+        }
+        if (n == 2)
+            goto bad_method;
+        if (!parse_id(seg[2], len[2], &id))
+            goto not_found;
+        if (n == 3 && get) {
+            job_get(a, id, resp);
+            return;
+        }
+        if (n == 3 && strcmp(req->method, "PATCH") == 0) {
+            job_patch(a, id, req, resp);
+            return;
+        }
+        if (n == 3)
+            goto bad_method;
+        bool cancel = seg_is(seg[3], len[3], "cancel");
+        if (!cancel && !seg_is(seg[3], len[3], "restart"))
+            goto not_found;
+        if (!post)
+            goto bad_method;
+        if (cancel)
+            job_cancel(a, id, resp);
+        else
+            job_restart(a, id, resp);
+        return;
+    }
+    if (seg_is(seg[1], len[1], "printers")) {
+        if (n == 2) {
+            if (get)
+                printers_list(a, NULL, resp);
+            else
+                http_error(resp, 405, "use GET");
+            return;
+        }
+        if (len[2] >= sizeof(name) || (n == 4 && len[3] >= sizeof(action)))
+            goto not_found;
+        memcpy(name, seg[2], len[2]);
+        name[len[2]] = '\0';
+        if (n == 3) {
+            if (get)
+                printers_list(a, name, resp);
+            else
+                http_error(resp, 405, "use GET");
+            return;
+        }
+        if (!post)
+            goto bad_method;
+        memcpy(action, seg[3], len[3]);
+        action[len[3]] = '\0';
+        {
+            printer_action(a, name, action, resp);
+            return;
+        }
+    }
+    if (n == 2 && seg_is(seg[1], len[1], "events")) {
+        if (!get)
+            goto bad_method;
+        {
+            events_stream(a, req, resp);
+            return;
+        }
+    }
+not_found:
+    http_error(resp, 404, "no such resource: %.100s", req->path);
+    return;
+bad_method:
+    http_error(resp, 405, "method %s is not allowed on %.100s", req->method, req->path);
+}
+
+struct api *
+api_new(const struct api_config *cfg, struct sf_err *err)
+{
+    struct api *a = mem_calloc(1, sizeof(*a));
+    if (!a) {
+        sf_err_set(err, SF_ENOMEM, "api: out of memory");
+        return NULL;
+    }
+    a->cfg = *cfg;
+    struct http_config hc = { .host = cfg->host,
+                              .port = cfg->port,
+                              .keys = cfg->keys,
+                              .n_keys = cfg->n_keys,
+                              .body_max = API_BODY_MAX,
+                              .upload_max = cfg->upload_max,
+                              .route = route,
+                              .ud = a,
+                              .sink = &sink };
+    a->http = http_new(&hc, err);
+    if (!a->http) {
+        free(a);
+        return NULL;
+    }
+    return a;
+}
+
+void
+api_free(struct api *a)
+{
+    if (!a)
+        return;
+    http_free(a->http);
+    free(a);
+}
+
+struct http *
+api_http(struct api *a)
+{
+    return a->http;
+}
+
+void
+api_notify(struct api *a)
+{
+    http_wake_streams(a->http);
+}
+
+void
+api_tick(struct api *a)
+{
+    a->tick++;
+    http_wake_streams(a->http);
+}

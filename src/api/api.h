@@ -1,0 +1,101 @@
+/*
+ * api.h - the REST API of slimfarmd (routes over http.h, data from the
+ * store, printer actions through the owner's printer registry).
+ *
+ *   GET    /api/jobs                      list jobs
+ *   POST   /api/jobs                      multipart: "file" (the part) and
+ *                                         optional "options" (JSON) -> 201
+ *   GET    /api/jobs/ID                   one job with its print history
+ *   PATCH  /api/jobs/ID                   {"priority": N}
+ *   POST   /api/jobs/ID/cancel            cancel (through the printer if printing)
+ *   POST   /api/jobs/ID/restart           interrupted job: print its copy again from the start
+ *   GET    /api/printers                  list printers with state, temperatures
+ *   GET    /api/printers/NAME             one printer
+ *   POST   /api/printers/NAME/ACTION      pause | resume | cancel | cleared
+ *   GET    /api/events                    Server-Sent Events: the event log (id: N,
+ *                                         event: KIND; Last-Event-ID resumes) and
+ *                                         every API_TICK_MS a "progress" snapshot
+ *
+ * Errors are {"error": "message"}: 400 bad input, 401/403 keys, 404
+ * unknown, 405 wrong method, 409 not legal in the current state, 413 too
+ * large, 500 server trouble.
+ *
+ * Thread: the loop thread (the one driving api_http()).
+ */
+#ifndef SF_API_API_H
+#define SF_API_API_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "../farm/farmcfg.h"
+#include "../farm/job.h"
+#include "../farm/store.h"
+#include "http.h"
+
+#define API_BODY_MAX (64 << 10) /* JSON bodies: a priority or options object */
+
+/* A printer as the API shows it (filled by the owner's registry). */
+struct api_printer_info {
+    const char *name;                 /* unique */
+    enum printer_state state;         /* current state */
+    bool enabled;                     /* schedulable */
+    const char *material;             /* loaded */
+    double nozzle_mm;                 /* nozzle */
+    double bed_mm[3];                 /* build volume */
+    const char *group;                /* "" for none */
+    double nozzle_c, nozzle_target_c; /* temperatures, deg C */
+    double bed_c, bed_target_c;
+    int64_t job_id;      /* job printing, 0 if none */
+    double progress;     /* 0..1 of the running job */
+    const char *message; /* why offline / in error; "" or NULL if nothing */
+};
+
+/* The owner's printer registry, as the API needs it. */
+struct api_printer_ops {
+    size_t (*count)(void *ud);
+    /* Printer i (0..count-1) into out; strings stay valid until the next call. */
+    void (*get)(void *ud, size_t i, struct api_printer_info *out);
+    /*
+     * Act on a printer: "pause", "resume", "cancel", "cleared".  SF_ENOTFOUND
+     * for no such printer (404), SF_EINVAL when not legal now (409), others
+     * 500; err says why.
+     */
+    int (*action)(void *ud, const char *name, const char *action, struct sf_err *err);
+};
+
+struct api_config {
+    struct store *store;                    /* jobs and events (not owned) */
+    const struct api_printer_ops *printers; /* printer registry */
+    void *printers_ud;                      /* its argument */
+    const char *host;                       /* listen address */
+    int port;                               /* 0: any free port */
+    const struct farmcfg_key *keys;         /* API keys (copied) */
+    size_t n_keys;
+    size_t upload_max;           /* largest upload, bytes */
+    void (*on_change)(void *ud); /* a job was added or changed (run the scheduler) */
+    void *ud;                    /* its argument */
+};
+
+struct api;
+
+/* Listen; NULL with err set. */
+struct api *api_new(const struct api_config *cfg, struct sf_err *err);
+void api_free(struct api *a);
+
+/* The server, to drive (http_fd / http_run) and to reload keys. */
+struct http *api_http(struct api *a);
+
+/* The event log grew: wake the event streams. */
+void api_notify(struct api *a);
+
+/*
+ * Call every API_TICK_MS: each event stream then sends a "progress" event
+ * (printers with a job: name, job_id, state, progress) or a keepalive.
+ */
+#define API_TICK_MS 5000
+void api_tick(struct api *a);
+
+#endif

@@ -1,0 +1,176 @@
+/*
+ * api_json.c - strict JSON in, plain JSON out, for the REST API.
+ *
+ * Why a module of its own: it is the part of the API that takes arbitrary
+ * bytes from clients, so it is small, pure and fuzzed on its own
+ * (tests/fuzz/fuzz_apijson.c).  Design: a table of option fields (name,
+ * type, where it goes) drives parsing, so an unknown field, a wrong type
+ * and an out-of-range value each get one clear message; range checks are
+ * job_opts_validate()'s, shared with the store.  jansson is told to refuse
+ * duplicate keys and stray bytes after the object.
+ *
+ * Thread: any; no state.
+ */
+#include "api_json.h"
+
+#include <math.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+enum ftype { F_STR, F_DBL, F_INT };
+
+/* One accepted option field. */
+struct field {
+    const char *name; /* JSON key */
+    enum ftype type;  /* expected JSON type */
+    size_t off;       /* offset in struct job_opts */
+    size_t size;      /* F_STR: buffer size */
+};
+
+#define O(f) offsetof(struct job_opts, f), sizeof(((struct job_opts *)0)->f)
+
+static const struct field fields[] = {
+    { "method", F_STR, O(method) },
+    { "deviation_mm", F_DBL, O(deviation_mm) },
+    { "overhang_deg", F_DBL, O(overhang_deg) },
+    { "copies", F_INT, O(copies) },
+    { "max_retries", F_INT, O(max_retries) },
+    { "material", F_STR, O(material) },
+    { "printer", F_STR, O(printer) },
+    { "group", F_STR, O(group) },
+    { "priority", F_INT, O(priority) },
+};
+
+static json_t *
+load_object(const char *text, size_t len, const char *what, struct sf_err *err)
+{
+    json_error_t je;
+    json_t *root = json_loadb(text, len, JSON_REJECT_DUPLICATES, &je);
+    if (!root) {
+        sf_err_set(err, SF_EINVAL, "%s: malformed JSON at line %d column %d: %s", what, je.line,
+                   je.column, je.text);
+        return NULL;
+    }
+    if (!json_is_object(root)) {
+        json_decref(root);
+        sf_err_set(err, SF_EINVAL, "%s: expected a JSON object", what);
+        return NULL;
+    }
+    return root;
+}
+
+int
+api_opts_parse(const char *text, size_t len, struct job_opts *o, struct sf_err *err)
+{
+    if (len == 0)
+        return job_opts_validate(o, err);
+    json_t *root = load_object(text, len, "options", err);
+    if (!root)
+        return SF_EINVAL;
+    int rc = SF_OK;
+    const char *key;
+    json_t *v;
+    json_object_foreach(root, key, v)
+    {
+        const struct field *f = NULL;
+        for (size_t i = 0; i < sizeof(fields) / sizeof(fields[0]); i++)
+            if (strcmp(fields[i].name, key) == 0)
+                f = &fields[i];
+        if (!f) {
+            rc = sf_err_set(err, SF_EINVAL, "options: unknown field '%.64s'", key);
+            goto out;
+        }
+        char *dst = (char *)o + f->off;
+        if (f->type == F_STR) {
+            if (!json_is_string(v)) {
+                rc = sf_err_set(err, SF_EINVAL, "options: field '%s': expected a string", key);
+                goto out;
+            }
+            if (json_string_length(v) >= f->size ||
+                strlen(json_string_value(v)) != json_string_length(v)) {
+                rc = sf_err_set(err, SF_EINVAL,
+                                "options: field '%s': longer than %zu bytes or holds NUL", key,
+                                f->size - 1);
+                goto out;
+            }
+            snprintf(dst, f->size, "%s", json_string_value(v));
+        } else if (f->type == F_DBL) {
+            if (!json_is_number(v)) {
+                rc = sf_err_set(err, SF_EINVAL, "options: field '%s': expected a number", key);
+                goto out;
+            }
+            *(double *)dst = json_number_value(v);
+        } else {
+            json_int_t n = json_is_integer(v) ? json_integer_value(v) : 0;
+            if (!json_is_integer(v) || n < INT32_MIN || n > INT32_MAX) {
+                rc = sf_err_set(err, SF_EINVAL, "options: field '%s': expected an integer", key);
+                goto out;
+            }
+            *(int *)dst = (int)n;
+        }
+    }
+    rc = job_opts_validate(o, err);
+    if (rc)
+        sf_err_prefix(err, "options");
+out:
+    json_decref(root);
+    return rc;
+}
+
+int
+api_priority_parse(const char *text, size_t len, int *priority, struct sf_err *err)
+{
+    json_t *root = load_object(text, len, "body", err);
+    if (!root)
+        return SF_EINVAL;
+    int rc = SF_OK;
+    json_t *p = json_object_get(root, "priority");
+    if (json_object_size(root) != 1 || !json_is_integer(p)) {
+        rc = sf_err_set(err, SF_EINVAL, "body: expected {\"priority\": INTEGER} and nothing else");
+    } else {
+        json_int_t n = json_integer_value(p);
+        if (n < -JOB_PRIORITY_MAX || n > JOB_PRIORITY_MAX)
+            rc = sf_err_set(err, SF_EINVAL, "priority: %lld is not in -%d..%d", (long long)n,
+                            JOB_PRIORITY_MAX, JOB_PRIORITY_MAX);
+        else
+            *priority = (int)n;
+    }
+    json_decref(root);
+    return rc;
+}
+
+json_t *
+api_job_json(const struct job_row *j)
+{
+    return json_pack(
+        "{sI ss ss ss sf sf si si si si ss ss ss si ss sI ss ss ss s[fff] sI sI}", "id",
+        (json_int_t)j->id, "name", j->opts.name, "state", job_state_name(j->state), "method",
+        j->opts.method, "deviation_mm", j->opts.deviation_mm, "overhang_deg", j->opts.overhang_deg,
+        "copies", j->counts.copies, "copies_done", j->counts.copies_done, "failures",
+        j->counts.failures, "max_retries", j->counts.max_retries, "material", j->opts.material,
+        "target_printer", j->opts.printer, "target_group", j->opts.group, "priority",
+        j->opts.priority, "printer", j->printer, "lines_acked", (json_int_t)j->lines_acked,
+        "reason", j->reason, "file_sha", j->file_sha, "gcode_sha", j->gcode_sha, "size_mm",
+        j->size_mm[0], j->size_mm[1], j->size_mm[2], "created_ms", (json_int_t)j->created_ms,
+        "updated_ms", (json_int_t)j->updated_ms);
+}
+
+json_t *
+api_print_json(const struct print_row *p)
+{
+    return json_pack("{sI si ss ss sI sI sf sI sI ss}", "id", (json_int_t)p->id, "copy", p->copy,
+                     "printer", p->printer, "material", p->material, "start_line",
+                     (json_int_t)p->start_line, "lines_acked", (json_int_t)p->lines_acked,
+                     "filament_mm", p->filament_mm, "started_ms", (json_int_t)p->started_ms,
+                     "ended_ms", (json_int_t)p->ended_ms, "outcome", p->outcome);
+}
+
+json_t *
+api_event_json(const struct event_row *e)
+{
+    return json_pack("{sI sI sI ss ss ss}", "id", (json_int_t)e->id, "at_ms", (json_int_t)e->at_ms,
+                     "job_id", (json_int_t)e->job_id, "printer", e->printer, "kind", e->kind,
+                     "detail", e->detail);
+}

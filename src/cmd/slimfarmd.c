@@ -1,0 +1,275 @@
+/*
+ * slimfarmd.c - the farm daemon: config, job store, event loop, worker
+ * pool, printers, REST API, signals.
+ *
+ *     slimfarmd [-c CONFIG] [--check | --fsck]
+ *
+ * Why it is small: every part is a module (farmcfg, store, farm, api,
+ * loop, pool); main() only builds them in dependency order, wires the
+ * callbacks between them and tears them down in reverse.  Signals arrive
+ * on the loop (signalfd): SIGINT/SIGTERM stop it; SIGHUP re-reads the
+ * config and applies it (keys, printers) without disturbing running
+ * prints, keeping the old config if the new one is invalid.
+ *
+ * Thread: main is the loop thread; the pool's workers run prepare work.
+ */
+#include <signal.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../api/api.h"
+#include "../api/http_loop.h"
+#include "../base/log.h"
+#include "../base/loop.h"
+#include "../base/pool.h"
+#include "../farm/farm.h"
+#include "../farm/farmcfg.h"
+#include "../farm/prepare.h"
+#include "../farm/store.h"
+
+/* Everything the daemon runs, for the callbacks. */
+struct daemon {
+    const char *config_path; /* -c */
+    struct farmcfg cfg;      /* the config in force */
+    struct loop *l;          /* the loop */
+    struct store *s;         /* the job store */
+    struct pool *pool;       /* prepare workers */
+    struct farm *farm;       /* printers, scheduling */
+    struct api *api;         /* REST API */
+    struct http_loop *hl;    /* the API on the loop */
+    uint64_t wake;           /* pending event-stream wake timer */
+    uint64_t tick;           /* API_TICK_MS timer: progress for event streams */
+};
+
+/* ---- the API's view of the farm's printers ---- */
+
+static size_t
+ops_count(void *ud)
+{
+    struct daemon *d = ud;
+    return farm_printer_count(d->farm);
+}
+
+static void
+ops_get(void *ud, size_t i, struct api_printer_info *out)
+{
+    struct daemon *d = ud;
+    struct farm_printer_info fi;
+    farm_printer_info(d->farm, i, &fi);
+    *out = (struct api_printer_info){ .name = fi.cfg->name,
+                                      .state = fi.state,
+                                      .enabled = fi.cfg->enabled,
+                                      .material = fi.cfg->material,
+                                      .nozzle_mm = fi.cfg->nozzle_mm,
+                                      .group = fi.cfg->group,
+                                      .nozzle_c = fi.nozzle_c,
+                                      .nozzle_target_c = fi.nozzle_target_c,
+                                      .bed_c = fi.bed_c,
+                                      .bed_target_c = fi.bed_target_c,
+                                      .job_id = fi.job_id,
+                                      .progress = fi.progress,
+                                      .message = fi.message };
+    memcpy(out->bed_mm, fi.cfg->bed_mm, sizeof(out->bed_mm));
+}
+
+static int
+ops_action(void *ud, const char *name, const char *action, struct sf_err *err)
+{
+    struct daemon *d = ud;
+    return farm_printer_action(d->farm, name, action, err);
+}
+
+static const struct api_printer_ops printer_ops = { ops_count, ops_get, ops_action };
+
+/* ---- wiring ---- */
+
+static void
+wake_streams(struct loop *l, void *ud)
+{
+    (void)l;
+    struct daemon *d = ud;
+    d->wake = 0;
+    api_notify(d->api);
+    http_loop_kick(d->hl); /* MHD must run after resuming connections */
+}
+
+/* The farm logged events: wake the event streams on the next turn (never
+   from inside an HTTP callback, which may be what caused the event). */
+static void
+on_farm_event(void *ud)
+{
+    struct daemon *d = ud;
+    if (d->api && d->hl && !d->wake)
+        d->wake = loop_timer_add(d->l, 0, wake_streams, d);
+}
+
+static void
+on_tick(struct loop *l, void *ud)
+{
+    struct daemon *d = ud;
+    api_tick(d->api);
+    http_loop_kick(d->hl);
+    d->tick = loop_timer_add(l, API_TICK_MS, on_tick, d);
+}
+
+static void
+on_api_change(void *ud)
+{
+    struct daemon *d = ud;
+    farm_kick(d->farm);
+}
+
+static void
+on_stop(struct loop *l, int signo, void *ud)
+{
+    (void)ud;
+    log_info("slimfarmd", "signal %d: stopping", signo);
+    loop_stop(l);
+}
+
+static void
+on_reload(struct loop *l, int signo, void *ud)
+{
+    (void)l, (void)signo;
+    struct daemon *d = ud;
+    struct farmcfg next;
+    struct sf_err err;
+    farmcfg_init(&next);
+    if (farmcfg_load(&next, d->config_path, &err)) {
+        log_error("slimfarmd", "reload: %s; keeping the running config", err.msg);
+        return;
+    }
+    if (strcmp(next.data_dir, d->cfg.data_dir) != 0 ||
+        strcmp(next.listen_host, d->cfg.listen_host) || next.listen_port != d->cfg.listen_port)
+        log_warn("slimfarmd", "reload: listen and data_dir changes need a restart");
+    if (http_set_keys(api_http(d->api), next.keys, next.n_keys) ||
+        farm_reload(d->farm, &next, &err)) {
+        log_error("slimfarmd", "reload: %s", err.msg);
+        farmcfg_release(&next);
+        return;
+    }
+    farmcfg_release(&d->cfg);
+    d->cfg = next;
+    log_info("slimfarmd", "reloaded %s: %zu printers, %zu API keys", d->config_path,
+             d->cfg.n_printers, d->cfg.n_keys);
+}
+
+/* --fsck: crash recovery plus every store check; prints a summary. */
+static int
+run_fsck(struct farmcfg *cfg)
+{
+    struct sf_err err;
+    struct store_recovery rec;
+    struct store *s = store_open(cfg->data_dir, &rec, &err);
+    int status = 1;
+    struct job_row *jobs = NULL;
+    size_t n = 0;
+    if (s && store_check(s, &err) == SF_OK && store_job_list(s, &jobs, &n, &err) == SF_OK) {
+        printf("store %s: ok, %zu jobs, %d interrupted and %d requeued by recovery\n",
+               cfg->data_dir, n, rec.interrupted, rec.requeued);
+        status = 0;
+    } else {
+        fprintf(stderr, "slimfarmd: store %s: %s\n", cfg->data_dir, err.msg);
+    }
+    free(jobs);
+    store_close(s);
+    farmcfg_release(cfg);
+    return status;
+}
+
+static int
+usage(void)
+{
+    fprintf(stderr, "usage: slimfarmd [-c CONFIG] [--check | --fsck]\n"
+                    "  -c CONFIG  farm config (default config/farm.ini)\n"
+                    "  --check    validate the config and exit\n"
+                    "  --fsck     recover and check the job store, then exit\n");
+    return 2;
+}
+
+int
+main(int argc, char **argv)
+{
+    struct daemon d = { .config_path = "config/farm.ini" };
+    bool check = false, fsck = false;
+    for (int i = 1; i < argc; i++) {
+        if (strcmp(argv[i], "-c") == 0 && i + 1 < argc)
+            d.config_path = argv[++i];
+        else if (strcmp(argv[i], "--check") == 0)
+            check = true;
+        else if (strcmp(argv[i], "--fsck") == 0)
+            fsck = true;
+        else
+            return usage();
+    }
+    struct sf_err err;
+    int status = 1;
+    farmcfg_init(&d.cfg);
+    if (farmcfg_load(&d.cfg, d.config_path, &err)) {
+        fprintf(stderr, "slimfarmd: %s\n", err.msg);
+        return 1;
+    }
+    if (check) {
+        printf("%s: ok, %zu printers, %zu API keys\n", d.config_path, d.cfg.n_printers,
+               d.cfg.n_keys);
+        farmcfg_release(&d.cfg);
+        return 0;
+    }
+    if (fsck)
+        return run_fsck(&d.cfg);
+    if (d.cfg.n_keys == 0)
+        log_warn("slimfarmd", "%s has no api_keys: every API request will get 401", d.config_path);
+    struct store_recovery rec;
+    if (!(d.l = loop_new(&err)) || !(d.s = store_open(d.cfg.data_dir, &rec, &err)) ||
+        !(d.pool = pool_new(d.l, 0, &err)))
+        goto out;
+    if (rec.interrupted || rec.requeued)
+        log_warn("slimfarmd",
+                 "recovered from a crash: %d jobs interrupted (waiting for an operator), %d "
+                 "back in the queue",
+                 rec.interrupted, rec.requeued);
+    /* TODO(#7): hand drv_new in as hooks.driver once drivers/ is merged. */
+    struct farm_hooks hooks = {
+        .driver = NULL, .prepare = prepare_part, .notify = on_farm_event, .notify_ud = &d
+    };
+    if (!(d.farm = farm_new(d.l, d.s, d.pool, &d.cfg, &hooks, &err)))
+        goto out;
+    struct api_config ac = { .store = d.s,
+                             .printers = &printer_ops,
+                             .printers_ud = &d,
+                             .host = d.cfg.listen_host,
+                             .port = d.cfg.listen_port,
+                             .keys = d.cfg.keys,
+                             .n_keys = d.cfg.n_keys,
+                             .upload_max = d.cfg.upload_max_bytes,
+                             .on_change = on_api_change,
+                             .ud = &d };
+    if (!(d.api = api_new(&ac, &err)) || !(d.hl = http_loop_attach(d.l, api_http(d.api), &err)))
+        goto out;
+    d.tick = loop_timer_add(d.l, API_TICK_MS, on_tick, &d);
+    if (loop_add_signal(d.l, SIGINT, on_stop, &d, &err) ||
+        loop_add_signal(d.l, SIGTERM, on_stop, &d, &err) ||
+        loop_add_signal(d.l, SIGHUP, on_reload, &d, &err))
+        goto out;
+    signal(SIGPIPE, SIG_IGN);
+    log_info("slimfarmd", "listening on %s:%d, data in %s, %zu printers", d.cfg.listen_host,
+             http_port(api_http(d.api)), d.cfg.data_dir, d.cfg.n_printers);
+    if (loop_run(d.l) == SF_OK)
+        status = 0;
+    else
+        sf_err_set(&err, SF_EIO, "event loop failed");
+out:
+    if (status)
+        fprintf(stderr, "slimfarmd: %s\n", err.msg);
+    http_loop_detach(d.hl);
+    api_free(d.api);
+    if (d.pool) {
+        pool_free(d.pool);
+        loop_run_once(d.l, 0); /* deliver cancelled prepares */
+    }
+    farm_free(d.farm);
+    store_close(d.s);
+    loop_free(d.l);
+    farmcfg_release(&d.cfg);
+    return status;
+}

@@ -1,0 +1,526 @@
+/*
+ * farmcfg.c - the farm config parser, over libinih.
+ *
+ * Why libinih: a well-kept INI parser already in Debian; we add only what
+ * the farm needs on top.  Design: inih's handler does not learn line
+ * numbers in Debian's build, so we feed inih through our own line reader
+ * (ini_parse_stream), which (1) counts lines, so every handler call knows
+ * its file:line, (2) sees every section header, even an empty one, so
+ * unknown or duplicate sections are caught, (3) strips leading blanks, so
+ * inih never takes a line for a multi-line continuation, and (4) cuts
+ * inline '#'/';' comments (after a blank), Klipper style.  The first error
+ * stops the reader; its message wins.  Each option is a row of a table
+ * (name, section kind, parser, offset, range), so the set of options, their
+ * checks and config/farm.ini stay in step.
+ *
+ * Thread: any; no global state is touched (inih's global switches are left
+ * at their defaults).
+ */
+#include "farmcfg.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <ini.h>
+#include <math.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../base/buf.h"
+#include "../base/limits.h"
+#include "../base/mem.h"
+
+enum kind { K_STR, K_IDENT, K_INT, K_DBL, K_BOOL, K_TRIPLE, K_LISTEN, K_KEYS, K_MIB };
+
+/* One option: where it lives and how it is checked. */
+struct option {
+    const char *name; /* key in the file */
+    bool printer;     /* in [printer NAME] (else [farm]) */
+    enum kind kind;   /* value parser */
+    size_t off;       /* offset in struct farmcfg or struct farmcfg_printer */
+    size_t size;      /* K_STR/K_IDENT: buffer size */
+    double lo, hi;    /* K_INT/K_DBL/K_TRIPLE/K_MIB: inclusive range */
+};
+
+#define F(field) offsetof(struct farmcfg, field), sizeof(((struct farmcfg *)0)->field)
+#define P(field)                                                                                   \
+    offsetof(struct farmcfg_printer, field), sizeof(((struct farmcfg_printer *)0)->field)
+
+static const struct option options[] = {
+    { "listen", false, K_LISTEN, 0, 0, 0, 0 },
+    { "data_dir", false, K_STR, F(data_dir), 0, 0 },
+    { "profiles_dir", false, K_STR, F(profiles_dir), 0, 0 },
+    { "api_keys", false, K_KEYS, 0, 0, 0, 0 },
+    { "api_keys_readonly", false, K_KEYS, 1, 0, 0, 0 },
+    { "upload_max_mb", false, K_MIB, 0, 0, 1, 4096 },
+    { "driver", true, K_IDENT, P(driver), 0, 0 },
+    { "port", true, K_STR, P(port), 0, 0 },
+    { "baud", true, K_INT, P(baud), 1200, 4000000 },
+    { "url", true, K_STR, P(url), 0, 0 },
+    { "api_key", true, K_STR, P(api_key), 0, 0 },
+    { "profile", true, K_IDENT, P(profile), 0, 0 },
+    { "material", true, K_IDENT, P(material), 0, 0 },
+    { "nozzle_mm", true, K_DBL, P(nozzle_mm), 0.1, 2.0 },
+    { "bed_size", true, K_TRIPLE, P(bed_mm), 10, 2000 },
+    { "overhang_deg", true, K_DBL, P(overhang_deg), 1, 89 },
+    { "enabled", true, K_BOOL, P(enabled), 0, 0 },
+    { "auto_eject", true, K_BOOL, P(auto_eject), 0, 0 },
+    { "group", true, K_IDENT, P(group), 0, 0 },
+};
+#define N_OPTIONS (sizeof(options) / sizeof(options[0]))
+
+static const char *const drivers[] = { "marlin", "octoprint", "moonraker", "bambu" };
+
+/* Parser state shared by the reader and the handler. */
+struct parse {
+    struct farmcfg *cfg;  /* being filled */
+    const char *name;     /* file name for messages */
+    const char *p, *end;  /* unread text */
+    int line;             /* line last handed to inih */
+    bool failed;          /* an error was recorded; stop */
+    struct sf_err *err;   /* where it went */
+    int section;          /* -2 none yet, -1 [farm], else printer index */
+    bool farm_seen;       /* [farm] appeared */
+    bool seen[N_OPTIONS]; /* options given in the current section */
+};
+
+static int fail(struct parse *ps, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+static int
+fail(struct parse *ps, const char *fmt, ...)
+{
+    if (ps->failed)
+        return 0;
+    ps->failed = true;
+    char msg[SF_ERR_MSG_MAX];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(msg, sizeof(msg), fmt, ap);
+    va_end(ap);
+    sf_err_set(ps->err, SF_EINVAL, "%s:%d: %s", ps->name, ps->line, msg);
+    return 0;
+}
+
+static bool
+ident_ok(const char *s)
+{
+    if (!*s)
+        return false;
+    for (; *s; s++)
+        if (!((*s >= 'a' && *s <= 'z') || (*s >= 'A' && *s <= 'Z') || (*s >= '0' && *s <= '9') ||
+              *s == '-' || *s == '_' || *s == '.'))
+            return false;
+    return true;
+}
+
+static void
+printer_defaults(struct farmcfg_printer *p)
+{
+    memset(p, 0, sizeof(*p));
+    p->baud = 115200;
+    snprintf(p->profile, sizeof(p->profile), "generic-marlin");
+    snprintf(p->material, sizeof(p->material), "PLA");
+    p->nozzle_mm = 0.4;
+    p->bed_mm[0] = p->bed_mm[1] = 220;
+    p->bed_mm[2] = 250;
+    p->overhang_deg = 45;
+    p->enabled = true;
+}
+
+/* A section header "[...]" on the current line: open the section. */
+static void
+open_section(struct parse *ps, const char *hdr, size_t len)
+{
+    char sec[128];
+    if (len >= sizeof(sec)) {
+        fail(ps, "section name is too long");
+        return;
+    }
+    memcpy(sec, hdr, len);
+    sec[len] = '\0';
+    memset(ps->seen, 0, sizeof(ps->seen));
+    if (strcmp(sec, "farm") == 0) {
+        if (ps->farm_seen) {
+            fail(ps, "section 'farm' appears twice");
+            return;
+        }
+        ps->farm_seen = true;
+        ps->section = -1;
+        return;
+    }
+    if (strncmp(sec, "printer ", 8) != 0) {
+        fail(ps, "section '%s' is not valid (expected 'farm' or 'printer NAME')", sec);
+        return;
+    }
+    const char *name = sec + 8;
+    while (*name == ' ')
+        name++;
+    if (!ident_ok(name) || strlen(name) >= sizeof(ps->cfg->printers[0].name)) {
+        fail(ps, "section '%s': printer name must be 1..63 letters, digits, '-', '_', '.'", sec);
+        return;
+    }
+    if (farmcfg_printer(ps->cfg, name)) {
+        fail(ps, "section 'printer %s' appears twice", name);
+        return;
+    }
+    struct farmcfg *c = ps->cfg;
+    if (c->n_printers == FARMCFG_PRINTERS_MAX) {
+        fail(ps, "more than %d printers", FARMCFG_PRINTERS_MAX);
+        return;
+    }
+    size_t cap = c->n_printers;
+    if (!mem_grow((void **)&c->printers, &cap, c->n_printers + 1, sizeof(*c->printers))) {
+        fail(ps, "out of memory");
+        return;
+    }
+    struct farmcfg_printer *p = &c->printers[c->n_printers];
+    printer_defaults(p);
+    snprintf(p->name, sizeof(p->name), "%s", name);
+    p->line = ps->line;
+    ps->section = (int)c->n_printers++;
+}
+
+/*
+ * fgets-style reader handed to inih: one line per call, see the top of the
+ * file for what it does on the way.
+ */
+static char *
+read_line(char *str, int num, void *stream)
+{
+    struct parse *ps = stream;
+    if (ps->failed || ps->p >= ps->end)
+        return NULL;
+    const char *nl = memchr(ps->p, '\n', (size_t)(ps->end - ps->p));
+    const char *eol = nl ? nl : ps->end;
+    ps->line++;
+    const char *s = ps->p;
+    ps->p = nl ? nl + 1 : ps->end;
+    while (s < eol && (*s == ' ' || *s == '\t'))
+        s++;
+    size_t len = (size_t)(eol - s);
+    if (len > 0 && s[len - 1] == '\r')
+        len--;
+    if (len + 2 > (size_t)num) {
+        fail(ps, "line is longer than %d bytes", num - 3);
+        return NULL;
+    }
+    if (memchr(s, '\0', len)) {
+        fail(ps, "line holds a NUL byte");
+        return NULL;
+    }
+    memcpy(str, s, len);
+    str[len] = '\0';
+    /* Inline comments start with '#' or ';' after a blank. */
+    for (size_t i = 1; i < len; i++)
+        if ((str[i] == '#' || str[i] == ';') && (str[i - 1] == ' ' || str[i - 1] == '\t')) {
+            str[i] = '\0';
+            len = i;
+            break;
+        }
+    if (str[0] == '[') {
+        char *close = strchr(str, ']');
+        if (!close) {
+            fail(ps, "section header lacks ']'");
+            return NULL;
+        }
+        open_section(ps, str + 1, (size_t)(close - str - 1));
+        if (ps->failed)
+            return NULL;
+    }
+    /* inih wants the line end to find the line; give it one. */
+    str[len] = '\n';
+    str[len + 1] = '\0';
+    return str;
+}
+
+static bool
+parse_double(const char *v, double *out)
+{
+    char *end;
+    errno = 0;
+    double d = strtod(v, &end);
+    while (*end == ' ')
+        end++;
+    if (end == v || *end || errno || !isfinite(d))
+        return false;
+    *out = d;
+    return true;
+}
+
+static int
+parse_keys(struct parse *ps, const char *opt, const char *sec, const char *v, bool ro)
+{
+    struct farmcfg *c = ps->cfg;
+    const char *p = v;
+    while (*p) {
+        while (*p == ' ' || *p == ',')
+            p++;
+        if (!*p)
+            break;
+        size_t n = strcspn(p, " ,");
+        char key[FARMCFG_KEY_MAX + 1];
+        if (n < FARMCFG_KEY_MIN || n > FARMCFG_KEY_MAX)
+            return fail(ps, "option '%s' in section '%s': each key must be %d..%d characters", opt,
+                        sec, FARMCFG_KEY_MIN, FARMCFG_KEY_MAX);
+        memcpy(key, p, n);
+        key[n] = '\0';
+        for (size_t i = 0; i < n; i++)
+            if (!((key[i] >= 'a' && key[i] <= 'z') || (key[i] >= 'A' && key[i] <= 'Z') ||
+                  (key[i] >= '0' && key[i] <= '9') || key[i] == '-' || key[i] == '_'))
+                return fail(ps,
+                            "option '%s' in section '%s': keys may hold only letters, "
+                            "digits, '-' and '_'",
+                            opt, sec);
+        if (farmcfg_key(c, key))
+            return fail(ps, "option '%s' in section '%s': key given twice", opt, sec);
+        if (c->n_keys == FARMCFG_KEYS_MAX)
+            return fail(ps, "option '%s' in section '%s': more than %d keys", opt, sec,
+                        FARMCFG_KEYS_MAX);
+        size_t cap = c->n_keys;
+        if (!mem_grow((void **)&c->keys, &cap, c->n_keys + 1, sizeof(*c->keys)))
+            return fail(ps, "out of memory");
+        snprintf(c->keys[c->n_keys].key, sizeof(c->keys[0].key), "%s", key);
+        c->keys[c->n_keys].read_only = ro;
+        c->n_keys++;
+        p += n;
+    }
+    return 1;
+}
+
+static int
+parse_listen(struct parse *ps, const char *sec, const char *v)
+{
+    const char *colon = strrchr(v, ':');
+    char host[64];
+    if (!colon || (size_t)(colon - v) >= sizeof(host))
+        return fail(ps, "option 'listen' in section '%s': '%s' is not ADDRESS:PORT", sec, v);
+    memcpy(host, v, (size_t)(colon - v));
+    host[colon - v] = '\0';
+    char *end;
+    errno = 0;
+    long port = strtol(colon + 1, &end, 10);
+    if (end == colon + 1 || *end || errno || port < 1 || port > 65535)
+        return fail(ps, "option 'listen' in section '%s': port '%s' is not in 1..65535", sec,
+                    colon + 1);
+    struct in_addr a4;
+    if (strcmp(host, "*") != 0 && inet_pton(AF_INET, host, &a4) != 1)
+        return fail(ps, "option 'listen' in section '%s': '%s' is not an IPv4 address or '*'", sec,
+                    host);
+    snprintf(ps->cfg->listen_host, sizeof(ps->cfg->listen_host), "%s", host);
+    ps->cfg->listen_port = (int)port;
+    return 1;
+}
+
+static int
+handler(void *user, const char *section, const char *name, const char *value)
+{
+    struct parse *ps = user;
+    if (ps->failed)
+        return 0;
+    if (ps->section == -2)
+        return fail(ps, "option '%s' comes before any section", name);
+    const struct option *o = NULL;
+    bool in_printer = ps->section >= 0;
+    for (size_t i = 0; i < N_OPTIONS; i++)
+        if (strcmp(options[i].name, name) == 0 && options[i].printer == in_printer)
+            o = &options[i];
+    if (!o)
+        return fail(ps, "option '%s' is not valid in section '%s'", name, section);
+    if (ps->seen[o - options])
+        return fail(ps, "option '%s' in section '%s' is given twice", name, section);
+    ps->seen[o - options] = true;
+    char *base = in_printer ? (char *)&ps->cfg->printers[ps->section] : (char *)ps->cfg;
+    void *field = base + o->off;
+    double d;
+    switch (o->kind) {
+    case K_STR:
+    case K_IDENT:
+        if (!value[0] && strcmp(name, "profiles_dir") == 0)
+            return 1; /* empty: keep the default, the config file's directory */
+        if (strlen(value) >= o->size)
+            return fail(ps, "option '%s' in section '%s': value is longer than %zu bytes", name,
+                        section, o->size - 1);
+        if (o->kind == K_IDENT && value[0] && !ident_ok(value))
+            return fail(ps,
+                        "option '%s' in section '%s': '%s' may hold only letters, digits, "
+                        "'-', '_', '.'",
+                        name, section, value);
+        snprintf(field, o->size, "%s", value);
+        return 1;
+    case K_INT:
+    case K_DBL:
+    case K_MIB:
+        if (!parse_double(value, &d) || d < o->lo || d > o->hi ||
+            (o->kind != K_DBL && d != floor(d)))
+            return fail(ps, "option '%s' in section '%s': '%s' is not a %s in %g..%g", name,
+                        section, value, o->kind == K_DBL ? "number" : "whole number", o->lo, o->hi);
+        if (o->kind == K_INT)
+            *(int *)field = (int)d;
+        else if (o->kind == K_DBL)
+            *(double *)field = d;
+        else
+            ps->cfg->upload_max_bytes = (size_t)d << 20;
+        return 1;
+    case K_BOOL:
+        if (strcmp(value, "true") == 0 || strcmp(value, "yes") == 0 || strcmp(value, "1") == 0)
+            *(bool *)field = true;
+        else if (strcmp(value, "false") == 0 || strcmp(value, "no") == 0 || strcmp(value, "0") == 0)
+            *(bool *)field = false;
+        else
+            return fail(ps, "option '%s' in section '%s': '%s' is not true or false", name, section,
+                        value);
+        return 1;
+    case K_TRIPLE: {
+        double v[3];
+        char tmp[128];
+        snprintf(tmp, sizeof(tmp), "%s", value);
+        char *save = NULL, *tok = strtok_r(tmp, ",", &save);
+        int n = 0;
+        for (; tok && n < 3; tok = strtok_r(NULL, ",", &save)) {
+            while (*tok == ' ')
+                tok++;
+            if (!parse_double(tok, &v[n]) || v[n] < o->lo || v[n] > o->hi)
+                break;
+            n++;
+        }
+        if (n != 3 || tok)
+            return fail(ps,
+                        "option '%s' in section '%s': '%s' is not X, Y, Z with each in "
+                        "%g..%g mm",
+                        name, section, value, o->lo, o->hi);
+        memcpy(field, v, sizeof(v));
+        return 1;
+    }
+    case K_LISTEN:
+        return parse_listen(ps, section, value);
+    case K_KEYS:
+        return parse_keys(ps, name, section, value, o->off == 1);
+    }
+    return fail(ps, "option '%s': internal error", name);
+}
+
+/* Checks that need a whole section: required options, driver-specific ones. */
+static int
+check_printers(struct parse *ps)
+{
+    for (size_t i = 0; i < ps->cfg->n_printers; i++) {
+        struct farmcfg_printer *p = &ps->cfg->printers[i];
+        ps->line = p->line;
+        if (!p->driver[0])
+            return fail(ps, "section 'printer %s': option 'driver' is required", p->name);
+        bool known = false;
+        for (size_t d = 0; d < sizeof(drivers) / sizeof(drivers[0]); d++)
+            known |= strcmp(p->driver, drivers[d]) == 0;
+        if (!known)
+            return fail(ps,
+                        "section 'printer %s': option 'driver': '%s' is not one of marlin, "
+                        "octoprint, moonraker, bambu",
+                        p->name, p->driver);
+        bool serial = strcmp(p->driver, "marlin") == 0;
+        if (serial && !p->port[0])
+            return fail(ps, "section 'printer %s': option 'port' is required by driver marlin",
+                        p->name);
+        if (!serial && !p->url[0])
+            return fail(ps, "section 'printer %s': option 'url' is required by driver %s", p->name,
+                        p->driver);
+    }
+    return 1;
+}
+
+void
+farmcfg_init(struct farmcfg *c)
+{
+    memset(c, 0, sizeof(*c));
+    snprintf(c->listen_host, sizeof(c->listen_host), "127.0.0.1");
+    c->listen_port = 7420;
+    snprintf(c->data_dir, sizeof(c->data_dir), "/var/lib/slimfarm");
+    snprintf(c->profiles_dir, sizeof(c->profiles_dir), "config");
+    c->upload_max_bytes = (size_t)256 << 20;
+}
+
+void
+farmcfg_release(struct farmcfg *c)
+{
+    free(c->keys);
+    free(c->printers);
+    farmcfg_init(c);
+}
+
+int
+farmcfg_parse(struct farmcfg *c, const char *text, size_t len, const char *name, struct sf_err *err)
+{
+    struct parse ps = {
+        .cfg = c, .name = name, .p = text, .end = text + len, .err = err, .section = -2
+    };
+    int rc = ini_parse_stream(read_line, &ps, handler, &ps);
+    if (!ps.failed && rc > 0) {
+        ps.line = rc;
+        fail(&ps, "syntax error (expected 'key: value', '[section]' or a comment)");
+    } else if (!ps.failed && rc < 0) {
+        fail(&ps, "out of memory");
+    }
+    if (!ps.failed)
+        check_printers(&ps);
+    if (ps.failed) {
+        farmcfg_release(c);
+        return SF_EINVAL;
+    }
+    return SF_OK;
+}
+
+int
+farmcfg_load(struct farmcfg *c, const char *path, struct sf_err *err)
+{
+    struct buf b;
+    buf_init(&b, SF_CONFIG_FILE_MAX);
+    int rc = buf_read_file(&b, path, err);
+    if (rc == SF_OK) {
+        /* Profiles sit beside the config unless it says otherwise. */
+        const char *slash = strrchr(path, '/');
+        if (slash)
+            snprintf(c->profiles_dir, sizeof(c->profiles_dir), "%.*s", (int)(slash - path), path);
+        else
+            snprintf(c->profiles_dir, sizeof(c->profiles_dir), ".");
+        rc = farmcfg_parse(c, b.data ? b.data : "", b.len, path, err);
+    }
+    buf_release(&b);
+    return rc;
+}
+
+const char *
+farmcfg_option_name(size_t i, bool *printer)
+{
+    if (i >= N_OPTIONS)
+        return NULL;
+    if (printer)
+        *printer = options[i].printer;
+    return options[i].name;
+}
+
+const struct farmcfg_printer *
+farmcfg_printer(const struct farmcfg *c, const char *name)
+{
+    for (size_t i = 0; i < c->n_printers; i++)
+        if (strcmp(c->printers[i].name, name) == 0)
+            return &c->printers[i];
+    return NULL;
+}
+
+const struct farmcfg_key *
+farmcfg_key(const struct farmcfg *c, const char *key)
+{
+    const struct farmcfg_key *found = NULL;
+    size_t klen = strlen(key);
+    for (size_t i = 0; i < c->n_keys; i++) {
+        /* Compare every byte of every key so timing says nothing about where
+           a guess went wrong. */
+        const char *k = c->keys[i].key;
+        size_t n = strlen(k);
+        unsigned char diff = (unsigned char)(n != klen);
+        for (size_t j = 0; j < n; j++)
+            diff |= (unsigned char)(k[j] ^ (j < klen ? key[j] : 0));
+        if (!diff)
+            found = &c->keys[i];
+    }
+    return found;
+}

@@ -1,0 +1,91 @@
+/*
+ * farmcfg.h - the farm configuration (config/farm.ini): one [farm] section
+ * and one [printer NAME] section per printer, Klipper style ("key: value",
+ * '#' or ';' comments).  config/farm.ini documents every option and its
+ * default.
+ *
+ * Parsing is strict: an unknown section or option, an option given twice, a
+ * value out of range or a missing required option is an error naming
+ * file:line, the option and the section, e.g.
+ *     farm.ini:14: option 'baud_rate' is not valid in section 'printer mk3'
+ *
+ * Thread: any; a parsed struct farm_cfg is plain data owned by the caller.
+ */
+#ifndef SF_FARM_FARMCFG_H
+#define SF_FARM_FARMCFG_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "../base/err.h"
+
+#define FARMCFG_KEY_MIN      16   /* shorter API keys are guessable */
+#define FARMCFG_KEY_MAX      128  /* longer ones are a paste error */
+#define FARMCFG_KEYS_MAX     64   /* API keys per farm */
+#define FARMCFG_PRINTERS_MAX 1000 /* printers per farm */
+
+/* One API key. */
+struct farmcfg_key {
+    char key[FARMCFG_KEY_MAX + 1]; /* [A-Za-z0-9_-], FARMCFG_KEY_MIN.. bytes */
+    bool read_only;                /* may only GET */
+};
+
+/* One [printer NAME] section. */
+struct farmcfg_printer {
+    char name[64];       /* NAME: letters, digits, -_. */
+    int line;            /* line of the section header, for later messages */
+    char driver[16];     /* marlin | octoprint | moonraker | bambu (required) */
+    char port[256];      /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
+    int baud;            /* marlin serial speed (default 115200) */
+    char url[256];       /* network drivers: base URL */
+    char api_key[128];   /* network drivers: key or access code */
+    char profile[64];    /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */
+    char material[32];   /* loaded material (default "PLA") */
+    double nozzle_mm;    /* nozzle diameter (default 0.4) */
+    double bed_mm[3];    /* build volume x, y, z (default 220, 220, 250) */
+    double overhang_deg; /* overhang threshold for this printer (default 45) */
+    bool enabled;        /* schedule jobs on it (default true) */
+    bool auto_eject;     /* clears its own bed: skip the bed-clear gate (default false) */
+    char group[64];      /* group name jobs may target; "" for none (default) */
+};
+
+struct farmcfg {
+    char listen_host[64];     /* address to listen on (default 127.0.0.1) */
+    int listen_port;          /* port (default 7420) */
+    char data_dir[512];       /* database and files (default /var/lib/slimfarm) */
+    char profiles_dir[512];   /* printers/NAME.cfg, materials/NAME.cfg live here (default: the
+                                 config file's directory; "config" before a file is loaded) */
+    size_t upload_max_bytes;  /* largest part upload (default 256 MiB) */
+    struct farmcfg_key *keys; /* n_keys API keys; free with farmcfg_release */
+    size_t n_keys;
+    struct farmcfg_printer *printers; /* n_printers, in file order */
+    size_t n_printers;
+};
+
+/* Set every option to its default (no keys, no printers). */
+void farmcfg_init(struct farmcfg *c);
+
+/* Free what the parser allocated and reset c to defaults. */
+void farmcfg_release(struct farmcfg *c);
+
+/*
+ * Parse the text of a config file (name is used in messages) into c, which
+ * must have been farmcfg_init()ed.  SF_EINVAL with "name:line: ..." on the
+ * first error; c is released on error.
+ */
+int farmcfg_parse(struct farmcfg *c, const char *text, size_t len, const char *name,
+                  struct sf_err *err);
+
+/* Read and parse a file (capped at SF_CONFIG_FILE_MAX). */
+int farmcfg_load(struct farmcfg *c, const char *path, struct sf_err *err);
+
+/* Name of option i (NULL past the last); *printer says which section kind. */
+const char *farmcfg_option_name(size_t i, bool *printer);
+
+/* The printer called name, or NULL. */
+const struct farmcfg_printer *farmcfg_printer(const struct farmcfg *c, const char *name);
+
+/* The key record matching key (constant-time compare), or NULL. */
+const struct farmcfg_key *farmcfg_key(const struct farmcfg *c, const char *key);
+
+#endif

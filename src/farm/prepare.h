@@ -1,0 +1,57 @@
+/*
+ * prepare.h - the boundary between the farm and the part pipeline: turn a
+ * stored part into G-code for one target printer (orient, then shape
+ * optimization, then slice; DESIGN.md "Data flow").
+ *
+ * The farm runs a prepare function on the worker pool (pool.h) with plain
+ * data copied in struct prepare_req, so it touches nothing shared.  The
+ * stages live in src/mesh (load), src/geom (orient; shape optimization
+ * when it lands) and slicer/ (slice).  A method whose stage is not in this
+ * build returns SF_EUNSUPP naming it, and the farm keeps the job queued
+ * with that reason (never lost; prepared once the stage lands).
+ *
+ * Thread: a pool worker; must check *cancel between stages.
+ */
+#ifndef SF_FARM_PREPARE_H
+#define SF_FARM_PREPARE_H
+
+#include <stdatomic.h>
+
+#include "../base/err.h"
+#include "farmcfg.h"
+#include "job.h"
+
+#define PREPARE_PATH_MAX 1100 /* data dir paths (store.c caps the dir at 1024) */
+
+/* Everything a preparation needs, copied for the worker. */
+struct prepare_req {
+    int64_t job_id;                      /* for messages */
+    char part_path[PREPARE_PATH_MAX];    /* stored part file (read only) */
+    char part_name[JOB_NAME_MAX];        /* the uploaded name; its extension tells the format */
+    struct job_opts opts;                /* method, deviation budget, overhang angle ... */
+    struct farmcfg_printer printer;      /* target printer: profile, nozzle, bed, overhang */
+    char profiles_dir[PREPARE_PATH_MAX]; /* printers/PROFILE.cfg, materials/MATERIAL.cfg */
+    char out_path[PREPARE_PATH_MAX];     /* write the G-code here */
+};
+
+/* What a successful preparation reports. */
+struct prepare_out {
+    double size_mm[3]; /* bounding box of the part as it will print */
+    double nozzle_mm;  /* nozzle the G-code was sliced for */
+};
+
+typedef int (*prepare_fn)(const struct prepare_req *req, struct prepare_out *out,
+                          const atomic_bool *cancel, struct sf_err *err);
+
+/*
+ * The pipeline: load the part, orient it (methods orient, slim, surface)
+ * for the job's overhang angle or else the printer's, reshape it (slim,
+ * surface: SF_EUNSUPP until src/geom has them), slice it with the
+ * printer's profile and the job's material, the farm config's nozzle, bed
+ * and angle overriding the profile's.  SF_EINVAL for a bad part or
+ * profile (the message names the file), SF_ECANCELED if cancelled.
+ */
+int prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
+                 struct sf_err *err);
+
+#endif

@@ -1,0 +1,86 @@
+/*
+ * sched.h - the scheduler: which ready job goes to which idle printer.
+ *
+ * Pure logic over caller arrays (no store, no loop), so every rule is unit
+ * tested and the daemon calls it whenever a job becomes ready or a printer
+ * idle.  Rules, in order:
+ *  - only enabled, idle printers take jobs (a printer awaiting bed clear is
+ *    not idle: the operator, or auto-eject, must free it first);
+ *  - ready jobs go by priority (higher first), then FIFO (lower id first);
+ *  - a job goes only to a printer it targets (by name or group), whose
+ *    loaded material matches the job's (if it names one), whose nozzle
+ *    matches the one the job was sliced for (if sliced), and whose bed
+ *    holds the part (x/y may swap: the part can turn 90 degrees on the bed);
+ *  - among the printers that qualify, the smallest bed wins (best fit keeps
+ *    big printers free for big parts), then the order given;
+ *  - retry policy: a printer that just failed the job is avoided while
+ *    another qualifying printer exists;
+ *  - copies print one after another (job.h), so a job takes one printer.
+ * A job that no enabled printer could ever take gets a reason saying why
+ * for each printer; one that only waits for a busy printer says so too.
+ *
+ * Thread: any; no state.
+ */
+#ifndef SF_FARM_SCHED_H
+#define SF_FARM_SCHED_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "job.h"
+
+#define SCHED_REASON_MAX 256 /* one reason line; longer lists end in "..." */
+
+/* A printer as the scheduler sees it. */
+struct sched_printer {
+    const char *name;         /* unique */
+    enum printer_state state; /* only PRINTER_IDLE takes jobs */
+    bool enabled;             /* false: never scheduled */
+    const char *material;     /* loaded material, e.g. "PLA" */
+    double nozzle_mm;         /* nozzle diameter */
+    double bed_mm[3];         /* build volume x, y, z */
+    const char *group;        /* group name, "" for none */
+};
+
+/* A job as the scheduler sees it. */
+struct sched_job {
+    int64_t id;           /* FIFO order: lower first */
+    enum job_state state; /* only JOB_READY is placed; others only get reasons */
+    int priority;         /* higher first */
+    const char *material; /* "" = any */
+    const char *printer;  /* target printer, "" = any */
+    const char *group;    /* target group, "" = any */
+    double nozzle_mm;     /* nozzle it was sliced for; 0 = not sliced yet */
+    double size_mm[3];    /* part bounding box as it will print; 0s = not known yet */
+    const char *avoid;    /* printer that failed it last, "" or NULL for none */
+};
+
+/* One decision: jobs[job] starts on printers[printer]. */
+struct sched_assign {
+    size_t job;     /* index into the jobs array */
+    size_t printer; /* index into the printers array */
+};
+
+/*
+ * Plan: fill out (room for min(n_jobs, n_printers) entries) with the
+ * assignments to make now, in priority order, and return how many.  If
+ * reasons is not NULL it has n_jobs entries; each job not assigned gets a
+ * line saying why (empty for assigned jobs and for jobs not queued or
+ * ready): "fits no printer: mk3-a: material PETG not loaded (has PLA); ..."
+ * or "waits for a printer: mk3-a is printing".
+ */
+size_t sched_plan(const struct sched_job *jobs, size_t n_jobs, const struct sched_printer *printers,
+                  size_t n_printers, struct sched_assign *out, char (*reasons)[SCHED_REASON_MAX]);
+
+/*
+ * Could printer p ever take job j (ignoring its state)?  If not and why is
+ * not NULL, write the reason ("material PETG not loaded (has PLA)").
+ */
+bool sched_compatible(const struct sched_job *j, const struct sched_printer *p, char *why,
+                      size_t why_cap);
+
+/* True when a part of size s fits a bed b, turning it 90 degrees if needed. */
+bool sched_fits_bed(const double s[3], const double b[3]);
+
+#endif

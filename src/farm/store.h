@@ -1,0 +1,166 @@
+/*
+ * store.h - the farm's durable memory: jobs, their files, printers, an
+ * event log and print history, in one SQLite database plus a
+ * content-addressed file directory under the data dir.
+ *
+ *     DATA_DIR/slimfarm.db            SQLite, WAL, foreign keys, user_version
+ *     DATA_DIR/files/ab/abcdef...     part and G-code files by SHA-256
+ *
+ * Every state change is one committed transaction that also appends to the
+ * event log, so a daemon killed at any moment restarts with every job where
+ * it was.  store_open() then runs crash recovery: jobs that were printing
+ * (or paused) become interrupted, keeping their last acknowledged line, and
+ * wait for an operator; jobs that were preparing go back to queued;
+ * printers go offline until their drivers reconnect.
+ *
+ * Thread: one store per thread (the loop thread in the daemon); the
+ * connection is not shared.  Workers hand results back to the loop, which
+ * writes them.
+ */
+#ifndef SF_FARM_STORE_H
+#define SF_FARM_STORE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "job.h"
+
+struct store;
+
+/* SHA-256 as lowercase hex plus NUL. */
+#define STORE_SHA_HEX 65
+
+/* What crash recovery did in store_open(). */
+struct store_recovery {
+    int interrupted; /* jobs printing/paused at the crash, now interrupted */
+    int requeued;    /* jobs preparing at the crash, now queued */
+};
+
+/* A job as stored (plain data). */
+struct job_row {
+    int64_t id;                    /* > 0, assigned by store_job_add */
+    struct job_opts opts;          /* as submitted; opts.priority may change later */
+    enum job_state state;          /* current state */
+    struct job_counts counts;      /* copies, copies_done, failures, max_retries */
+    char file_sha[STORE_SHA_HEX];  /* the part file */
+    char gcode_sha[STORE_SHA_HEX]; /* the sliced G-code; "" until prepared */
+    double size_mm[3];             /* prepared part's bounding box x, y, z; 0 until prepared */
+    double nozzle_mm;              /* nozzle the G-code was sliced for; 0 until prepared */
+    char printer[64];              /* printer of the current copy; "" when not on one */
+    int64_t lines_acked;           /* last acknowledged line of the current copy */
+    char reason[160];              /* why it waits or failed; "" if none */
+    int64_t created_ms;            /* wall clock, ms since the epoch */
+    int64_t updated_ms;            /* last change, same clock */
+};
+
+/* Extra data some events carry (zero-initialise; unused fields ignored). */
+struct job_event_args {
+    const char *printer;   /* START: the printer it goes to (required) */
+    const char *gcode_sha; /* PREPARED: stored G-code (required) */
+    double size_mm[3];     /* PREPARED: part bounding box */
+    double nozzle_mm;      /* PREPARED: nozzle it was sliced for */
+    int64_t lines_acked;   /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to */
+    double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */
+    const char *reason;    /* PREPARE_FAILED/PRINT_FAILED/CANCEL: why, for operators */
+};
+
+/* One row of print history. */
+struct print_row {
+    int64_t id;          /* > 0 */
+    int64_t job_id;      /* the job */
+    int copy;            /* 1-based copy number */
+    char printer[64];    /* where it ran */
+    char material[32];   /* material the job asked for ("" = printer's loaded one) */
+    int64_t start_line;  /* first line streamed (> 0 when resumed after interrupt) */
+    int64_t lines_acked; /* last acknowledged line */
+    double filament_mm;  /* filament used */
+    int64_t started_ms;  /* wall clock */
+    int64_t ended_ms;    /* 0 while running */
+    char outcome[16];    /* "" running, "done", "failed", "cancelled", "interrupted" */
+};
+
+/* One entry of the event log. */
+struct event_row {
+    int64_t id;       /* increasing; SSE uses it as the event id */
+    int64_t at_ms;    /* wall clock */
+    int64_t job_id;   /* 0 if not about a job */
+    char printer[64]; /* "" if not about a printer */
+    char kind[24];    /* "job-start", "printer-state", ... */
+    char detail[192]; /* human-readable */
+};
+
+/*
+ * Open (creating if needed) the store in data_dir, migrate the schema and
+ * run crash recovery (rec may be NULL).  NULL with err set on failure
+ * (SF_EIO for the file system or SQLite, SF_EUNSUPP for a schema newer than
+ * this program).  Free with store_close().
+ */
+struct store *store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err);
+void store_close(struct store *s);
+
+/* The schema version this program writes. */
+int store_schema_version(void);
+
+/*
+ * Files.  A writer streams a file into the store: it hashes as it writes a
+ * temporary file, and commit moves it to its content address (a file that
+ * is already there is kept) and records it.  store_file_put() does all
+ * three for bytes in memory.  The writer is freed by commit or abort.
+ */
+struct store_file;
+struct store_file *store_file_begin(struct store *s, struct sf_err *err);
+int store_file_write(struct store_file *f, const void *data, size_t len, struct sf_err *err);
+int store_file_commit(struct store_file *f, char sha[STORE_SHA_HEX], struct sf_err *err);
+void store_file_abort(struct store_file *f);
+int store_file_put(struct store *s, const void *data, size_t len, char sha[STORE_SHA_HEX],
+                   struct sf_err *err);
+/* Path of a stored file into path; SF_ENOTFOUND if unknown, SF_EINVAL if sha is not hex. */
+int store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct sf_err *err);
+
+/* Add a queued job for a stored part file; o is validated (SF_EINVAL). */
+int store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, int64_t *id,
+                  struct sf_err *err);
+/* SF_ENOTFOUND if no such job. */
+int store_job_get(struct store *s, int64_t id, struct job_row *out, struct sf_err *err);
+/* Every job, oldest first, into *rows (free() it); *n its count. */
+int store_job_list(struct store *s, struct job_row **rows, size_t *n, struct sf_err *err);
+/*
+ * Apply ev to job id (job.h rules) in one transaction: the job row, print
+ * history and the event log change together.  *to (may be NULL) receives
+ * the new state.  SF_EINVAL if ev is not legal now (message from job_next),
+ * SF_ENOTFOUND for no such job.
+ */
+int store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job_event_args *a,
+                    enum job_state *to, struct sf_err *err);
+/* Record how far the printing copy got (called on a timer, not per line). */
+int store_job_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_err *err);
+int store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err *err);
+/* Set why a job waits (scheduler); writes only when it changed. */
+int store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_err *err);
+
+/* Record a printer's state (creating the row on first sight) and log the change. */
+int store_printer_set(struct store *s, const char *name, enum printer_state st, struct sf_err *err);
+/* SF_ENOTFOUND if never recorded. */
+int store_printer_get(struct store *s, const char *name, enum printer_state *st,
+                      struct sf_err *err);
+
+/* Print history of one job, oldest first, into *rows (free() it). */
+int store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
+                 struct sf_err *err);
+/* Up to max events with id > after_id, oldest first, into *rows (free() it). */
+int store_events(struct store *s, int64_t after_id, size_t max, struct event_row **rows, size_t *n,
+                 struct sf_err *err);
+
+/* Id of the newest event (0 if none): where a live event stream starts. */
+int64_t store_event_last(struct store *s);
+
+/*
+ * Check the database: SQLite's integrity and foreign-key checks plus the
+ * store's own invariants (states are known, a job on a printer names it and
+ * has one open print, no open print for a job that is not on a printer).
+ * SF_EBUG with the first violation.
+ */
+int store_check(struct store *s, struct sf_err *err);
+
+#endif

@@ -1,0 +1,531 @@
+/*
+ * test_farm.c - the farm glue on a real loop, pool and store: prepare on
+ * the pool, scheduling, starts, copies, the bed-clear gate, auto-eject,
+ * pause/resume, a dropped printer failing its print into a retry, a job
+ * that fits no printer, the missing-slicer path, and reload.
+ *
+ * Printers here are "tdrv", a small in-test driver behind drv.h standing
+ * in for sim/ (being written on another branch): it records what it was
+ * told and reports the events the test asks for, through the loop, as a
+ * real driver would.  The prepare hook writes a tiny real G-code file.
+ */
+#include <stdatomic.h>
+
+#include "../../src/base/buf.h"
+#include "../../src/base/log.h"
+#include "../../src/base/mem.h"
+#include "../../src/farm/farm.h"
+#include "../t.h"
+
+/* ---- tdrv ---- */
+
+struct tdrv {
+    struct drv base; /* first: drv.h's rule */
+    char path[1200]; /* last job started */
+    int starts, pauses, resumes, cancels, opens;
+    enum drv_event pending; /* event to deliver on the next loop turn */
+    bool has_pending;
+};
+
+static void
+deliver(struct loop *l, void *ud)
+{
+    (void)l;
+    struct tdrv *t = ud;
+    if (t->has_pending) {
+        t->has_pending = false;
+        t->base.on_event(&t->base, t->pending, t->base.ud);
+    }
+}
+
+/* Report ev (after setting state) on the next loop turn. */
+static void
+report(struct tdrv *t, enum drv_state st, enum drv_event ev)
+{
+    t->base.status.state = st;
+    t->pending = ev;
+    t->has_pending = true;
+    loop_timer_add(t->base.loop, 0, deliver, t);
+}
+
+static int
+t_open(struct drv *d, struct sf_err *err)
+{
+    (void)err;
+    struct tdrv *t = (struct tdrv *)d;
+    t->opens++;
+    report(t, DRV_IDLE, DRV_EV_STATE);
+    return SF_OK;
+}
+
+static int
+t_start(struct drv *d, const char *path, struct sf_err *err)
+{
+    (void)err;
+    struct tdrv *t = (struct tdrv *)d;
+    snprintf(t->path, sizeof(t->path), "%s", path);
+    t->starts++;
+    t->base.status.lines_acked = 0;
+    t->base.status.lines_total = 2;
+    report(t, DRV_PRINTING, DRV_EV_STATE);
+    return SF_OK;
+}
+
+static int
+t_pause(struct drv *d, struct sf_err *err)
+{
+    (void)err;
+    ((struct tdrv *)d)->pauses++;
+    d->status.state = DRV_PAUSED;
+    return SF_OK;
+}
+
+static int
+t_resume(struct drv *d, struct sf_err *err)
+{
+    (void)err;
+    ((struct tdrv *)d)->resumes++;
+    d->status.state = DRV_PRINTING;
+    return SF_OK;
+}
+
+static int
+t_cancel(struct drv *d, struct sf_err *err)
+{
+    (void)err;
+    ((struct tdrv *)d)->cancels++;
+    d->status.state = DRV_IDLE;
+    return SF_OK;
+}
+
+static int
+t_command(struct drv *d, const char *line, struct sf_err *err)
+{
+    (void)d, (void)line;
+    return sf_err_set(err, SF_EUNSUPP, "tdrv: no console");
+}
+
+static void
+t_close(struct drv *d)
+{
+    (void)d;
+}
+
+static struct tdrv *tdrvs[8];
+static int n_tdrvs;
+
+static void
+t_destroy(struct drv *d)
+{
+    for (int i = 0; i < n_tdrvs; i++)
+        if (tdrvs[i] == (struct tdrv *)d)
+            tdrvs[i] = NULL;
+    free(d);
+}
+
+static const struct drv_ops tdrv_ops = { DRV_OPS_VERSION, "tdrv",   t_open,    t_start, t_pause,
+                                         t_resume,        t_cancel, t_command, t_close, t_destroy };
+
+static struct drv *
+tdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
+         struct sf_err *err)
+{
+    struct tdrv *t = mem_calloc(1, sizeof(*t));
+    if (!t) {
+        sf_err_set(err, SF_ENOMEM, "tdrv: out of memory");
+        return NULL;
+    }
+    t->base.ops = &tdrv_ops;
+    t->base.loop = l;
+    snprintf(t->base.name, sizeof(t->base.name), "%s", cfg->name);
+    t->base.on_event = on_event;
+    t->base.ud = ud;
+    if (n_tdrvs < 8)
+        tdrvs[n_tdrvs++] = t;
+    return &t->base;
+}
+
+static struct tdrv *
+tdrv_named(const char *name)
+{
+    for (int i = n_tdrvs - 1; i >= 0; i--)
+        if (tdrvs[i] && strcmp(tdrvs[i]->base.name, name) == 0)
+            return tdrvs[i];
+    return NULL;
+}
+
+/* ---- prepare hook: a real (tiny) G-code file, size from the part text ---- */
+
+static atomic_int prepares;
+
+static int
+test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
+             struct sf_err *err)
+{
+    (void)cancel;
+    atomic_fetch_add(&prepares, 1);
+    struct buf part;
+    buf_init(&part, 1 << 20);
+    int rc = buf_read_file(&part, req->part_path, err);
+    if (rc)
+        return rc;
+    double x = 0, y = 0, z = 0;
+    int n = sscanf(part.data ? part.data : "", "size %lf %lf %lf", &x, &y, &z);
+    buf_release(&part);
+    if (n != 3)
+        return sf_err_set(err, SF_EINVAL, "test part: no size line");
+    FILE *f = fopen(req->out_path, "w");
+    if (!f)
+        return sf_err_sys(err, "cannot write '%s'", req->out_path);
+    fprintf(f, "; for %s\nG28\nG1 X%g Y%g Z%g\n", req->printer.name, x, y, z);
+    fclose(f);
+    out->size_mm[0] = x;
+    out->size_mm[1] = y;
+    out->size_mm[2] = z;
+    out->nozzle_mm = req->printer.nozzle_mm;
+    return SF_OK;
+}
+
+/* ---- fixture ---- */
+
+static struct {
+    struct loop *l;
+    struct store *s;
+    struct pool *pool;
+    struct farm *f;
+    struct farmcfg cfg;
+} fx;
+
+static const char farm_ini[] = "[printer a]\ndriver: marlin\nport: pty:/dev/null\n"
+                               "material: PLA\nbed_size: 200, 200, 200\n"
+                               "[printer b]\ndriver: marlin\nport: pty:/dev/null\n"
+                               "material: PETG\nbed_size: 300, 300, 300\nauto_eject: true\n";
+
+static int
+setup(const char *name, const char *ini, farm_driver_fn driver, prepare_fn prep, struct sf_err *err)
+{
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/%s", t_tmpdir(), name);
+    memset(&fx, 0, sizeof(fx));
+    memset(tdrvs, 0, sizeof(tdrvs));
+    n_tdrvs = 0;
+    log_set_level(LOG_ERROR);
+    farmcfg_init(&fx.cfg);
+    int rc = farmcfg_parse(&fx.cfg, ini, strlen(ini), "test.ini", err);
+    if (rc)
+        return rc;
+    if (!(fx.l = loop_new(err)) || !(fx.s = store_open(dir, NULL, err)) ||
+        !(fx.pool = pool_new(fx.l, 2, err)))
+        return SF_EIO;
+    struct farm_hooks hooks = { .driver = driver, .prepare = prep, .progress_ms = 50 };
+    fx.f = farm_new(fx.l, fx.s, fx.pool, &fx.cfg, &hooks, err);
+    return fx.f ? SF_OK : SF_EIO;
+}
+
+static void
+teardown(void)
+{
+    pool_free(fx.pool);
+    loop_run_once(fx.l, 0); /* deliver completions of cancelled work */
+    farm_free(fx.f);
+    store_close(fx.s);
+    loop_free(fx.l);
+    farmcfg_release(&fx.cfg);
+}
+
+static int64_t
+add_m(const char *part, const char *material, int copies, const char *method)
+{
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.method, sizeof(o.method), "%s", method);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    snprintf(o.material, sizeof(o.material), "%s", material);
+    o.copies = copies;
+    char sha[STORE_SHA_HEX];
+    int64_t id = 0;
+    if (store_file_put(fx.s, part, strlen(part), sha, NULL) ||
+        store_job_add(fx.s, &o, sha, &id, NULL))
+        return 0;
+    farm_kick(fx.f);
+    return id;
+}
+
+static int64_t
+add(const char *part, const char *material, int copies)
+{
+    return add_m(part, material, copies, "orient");
+}
+
+static enum job_state
+state_of(int64_t id)
+{
+    struct job_row j;
+    return store_job_get(fx.s, id, &j, NULL) ? (enum job_state) - 1 : j.state;
+}
+
+static enum printer_state
+pstate(size_t i)
+{
+    struct farm_printer_info info;
+    farm_printer_info(fx.f, i, &info);
+    return info.state;
+}
+
+/* Turn the loop until job id is in state want (or 3 s pass). */
+static bool
+wait_job(int64_t id, enum job_state want)
+{
+    for (int i = 0; i < 300; i++) {
+        if (state_of(id) == want)
+            return true;
+        loop_run_once(fx.l, 10);
+    }
+    return state_of(id) == want;
+}
+
+static bool
+wait_printer(size_t i, enum printer_state want, int ms)
+{
+    for (int k = 0; k < ms / 10; k++) {
+        if (pstate(i) == want)
+            return true;
+        loop_run_once(fx.l, 10);
+    }
+    return pstate(i) == want;
+}
+
+T_CASE(farm_prints_copies_with_bed_clear_gate_and_auto_eject)
+{
+    struct sf_err err;
+    T_OK(setup("flow", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE, 1000) && wait_printer(1, PRINTER_IDLE, 1000));
+    int64_t j1 = add("size 50 50 50", "PLA", 2), j2 = add("size 250 250 10", "PETG", 1);
+    int64_t j3 = add("size 10 10 10", "ABS", 1);
+    T_TRUE(wait_job(j1, JOB_PRINTING));
+    T_TRUE(wait_job(j2, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a"), *b = tdrv_named("b");
+    T_EQ_INT(a->starts, 1);
+    T_EQ_INT(b->starts, 1);
+    /* the printer got the job's real G-code */
+    struct buf g;
+    buf_init(&g, 4096);
+    T_OK(buf_read_file(&g, a->path, &err), &err);
+    T_EQ_STR(g.data, "; for a\nG28\nG1 X50 Y50 Z50\n");
+    buf_release(&g);
+    /* a job nobody can print stays queued, saying why */
+    loop_run_once(fx.l, 10);
+    struct job_row j;
+    T_OK(store_job_get(fx.s, j3, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_QUEUED);
+    T_EQ_STR(j.reason, "fits no printer: a: material ABS not loaded (has PLA); b: material ABS "
+                       "not loaded (has PETG)");
+
+    /* copy 1 done: a waits for its bed; the job waits for a */
+    a->base.status.lines_acked = 2;
+    report(a, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(j1, JOB_READY));
+    T_TRUE(wait_printer(0, PRINTER_AWAITING_CLEAR, 100));
+    for (int i = 0; i < 5; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 1);
+    T_OK(store_job_get(fx.s, j1, &j, &err), &err);
+    T_EQ_STR(j.reason, "waits for a printer: a is awaiting-clear");
+    T_OK(farm_printer_action(fx.f, "a", "cleared", &err), &err);
+    T_TRUE(wait_job(j1, JOB_PRINTING));
+    T_EQ_INT(a->starts, 2);
+
+    /* pause and resume through the farm */
+    T_OK(farm_printer_action(fx.f, "a", "pause", &err), &err);
+    T_EQ_INT(state_of(j1), JOB_PAUSED);
+    T_EQ_INT(a->pauses, 1);
+    T_ERR(farm_printer_action(fx.f, "a", "pause", &err), SF_EINVAL, &err,
+          "cannot pause a printer that is paused");
+    T_OK(farm_printer_action(fx.f, "a", "resume", &err), &err);
+    T_EQ_INT(state_of(j1), JOB_PRINTING);
+    T_EQ_INT(farm_printer_action(fx.f, "zz", "pause", &err), SF_ENOTFOUND);
+
+    /* b has an ejector: done means idle at once */
+    report(b, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(j2, JOB_DONE));
+    T_TRUE(wait_printer(1, PRINTER_IDLE, 100));
+
+    /* copy 2 done too */
+    report(a, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(j1, JOB_DONE));
+    struct print_row *p;
+    size_t n;
+    T_OK(store_prints(fx.s, j1, &p, &n, &err), &err);
+    T_EQ_INT(n, 2);
+    T_EQ_STR(p[0].outcome, "done");
+    T_EQ_STR(p[1].outcome, "done");
+    free(p);
+    T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+T_CASE(farm_dropped_printer_fails_print_into_retry_and_reconnects)
+{
+    struct sf_err err;
+    T_OK(setup("drop", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE, 1000));
+    int64_t id = add("size 20 20 20", "PLA", 1); /* max_retries defaults to 1 */
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    a->base.status.lines_acked = 1;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    loop_run_once(fx.l, 10);
+    snprintf(a->base.status.message, sizeof(a->base.status.message), "USB cable pulled");
+    report(a, DRV_OFFLINE, DRV_EV_STATE);
+    T_TRUE(wait_printer(0, PRINTER_OFFLINE, 200));
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_READY); /* retry */
+    T_EQ_INT(j.counts.failures, 1);
+    struct print_row *p;
+    size_t n;
+    T_OK(store_prints(fx.s, id, &p, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_EQ_STR(p[0].outcome, "failed");
+    T_EQ_INT(p[0].lines_acked, 1);
+    free(p);
+    /* reconnected after the backoff, the retry starts */
+    T_TRUE(wait_printer(0, PRINTER_PRINTING, 3000));
+    T_EQ_INT(a->opens, 2);
+    T_EQ_INT(state_of(id), JOB_PRINTING);
+    /* the operator cancels: the printer keeps the bed gate */
+    T_OK(farm_printer_action(fx.f, "a", "cancel", &err), &err);
+    T_EQ_INT(state_of(id), JOB_CANCELLED);
+    T_EQ_INT(pstate(0), PRINTER_AWAITING_CLEAR);
+    T_EQ_INT(a->cancels, 1);
+    T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+/* A closed tetrahedron, 10 mm on each axis. */
+static const char tetra_stl[] = "solid t\n"
+                                "facet normal 0 0 -1\nouter loop\nvertex 0 0 0\nvertex 0 10 0\n"
+                                "vertex 10 0 0\nendloop\nendfacet\n"
+                                "facet normal 0 -1 0\nouter loop\nvertex 0 0 0\nvertex 10 0 0\n"
+                                "vertex 0 0 10\nendloop\nendfacet\n"
+                                "facet normal -1 0 0\nouter loop\nvertex 0 0 0\nvertex 0 0 10\n"
+                                "vertex 0 10 0\nendloop\nendfacet\n"
+                                "facet normal 1 1 1\nouter loop\nvertex 10 0 0\nvertex 0 10 0\n"
+                                "vertex 0 0 10\nendloop\nendfacet\n"
+                                "endsolid t\n";
+
+T_CASE(farm_default_prepare_slices_and_defers_missing_stages)
+{
+    /* the real pipeline: src/mesh, src/geom orient, slicer/ with
+       config/printers and config/materials (tests run from the top) */
+    struct sf_err err;
+    T_OK(setup("pipeline", farm_ini, NULL, prepare_part, &err), &err);
+    struct farm_printer_info info;
+    farm_printer_info(fx.f, 0, &info);
+    T_EQ_INT(info.state, PRINTER_OFFLINE);
+    T_TRUE(strstr(info.message, "no 'marlin' driver in this build") != NULL);
+    int64_t ok = add(tetra_stl, "PLA", 1), slim = add_m(tetra_stl, "PLA", 1, "slim"),
+            junk = add("this is no mesh", "", 1), abs = add_m(tetra_stl, "", 1, "none");
+    T_TRUE(wait_job(junk, JOB_FAILED));
+    T_TRUE(wait_job(ok, JOB_READY));
+    for (int i = 0; i < 20; i++)
+        loop_run_once(fx.l, 10);
+    struct job_row j;
+    /* oriented and sliced for printer a (PLA, 0.4 mm), waiting for it */
+    T_OK(store_job_get(fx.s, ok, &j, &err), &err);
+    T_EQ_DBL(j.nozzle_mm, 0.4, 1e-9);
+    T_TRUE(j.size_mm[2] > 0 && j.size_mm[2] <= 10.0 * 1.7321 + 1e-6);
+    T_EQ_STR(j.reason, "waits for a printer: a is offline");
+    char path[1200];
+    T_OK(store_file_path(fx.s, j.gcode_sha, path, sizeof(path), &err), &err);
+    struct buf g;
+    buf_init(&g, 64 << 20);
+    T_OK(buf_read_file(&g, path, &err), &err);
+    T_TRUE(strstr(g.data, "G1 ") != NULL);
+    buf_release(&g);
+    /* a method whose stage is missing waits, saying so */
+    T_OK(store_job_get(fx.s, slim, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_QUEUED);
+    T_TRUE(strstr(j.reason, "method 'slim' is not available in this build") != NULL);
+    /* a broken part fails at once, naming the uploaded file */
+    T_OK(store_job_get(fx.s, junk, &j, &err), &err);
+    T_TRUE(strstr(j.reason, "'part.stl': not a mesh file") != NULL);
+    /* method none: sliced as uploaded */
+    T_TRUE(wait_job(abs, JOB_READY));
+    T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+T_CASE(farm_missing_profile_fails_the_job_naming_the_file)
+{
+    struct sf_err err;
+    static const char ini[] = "[printer a]\ndriver: marlin\nport: x\nprofile: nosuch\n";
+    T_OK(setup("profile", ini, NULL, prepare_part, &err), &err);
+    int64_t id = add(tetra_stl, "", 1);
+    T_TRUE(wait_job(id, JOB_FAILED));
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_TRUE(strstr(j.reason, "profile 'nosuch' not found (config/printers/nosuch.cfg)") != NULL);
+    teardown();
+}
+
+T_CASE(farm_progress_is_persisted_and_survives_a_crash)
+{
+    struct sf_err err;
+    T_OK(setup("crash", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE, 1000));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    a->base.status.lines_acked = 1234;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    for (int i = 0; i < 20; i++)
+        loop_run_once(fx.l, 10); /* a few progress periods */
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 1234);
+    /* the daemon dies here: the store is reopened as on restart */
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/crash", t_tmpdir());
+    teardown();
+    struct store_recovery rec;
+    struct store *s = store_open(dir, &rec, &err);
+    T_TRUE(s != NULL);
+    T_EQ_INT(rec.interrupted, 1);
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    T_EQ_INT(j.lines_acked, 1234);
+    T_EQ_STR(j.printer, "a");
+    T_OK(store_check(s, &err), &err);
+    store_close(s);
+}
+
+T_CASE(farm_reload_adds_and_removes_printers)
+{
+    struct sf_err err;
+    T_OK(setup("reload", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE, 1000));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    /* a (printing) leaves the config, c arrives, b changes material */
+    static const char next[] = "[printer b]\ndriver: marlin\nport: pty:/dev/null\n"
+                               "material: ABS\nbed_size: 300, 300, 300\n"
+                               "[printer c]\ndriver: marlin\nport: pty:/dev/null\n";
+    struct farmcfg c2;
+    farmcfg_init(&c2);
+    T_OK(farmcfg_parse(&c2, next, strlen(next), "next.ini", &err), &err);
+    T_OK(farm_reload(fx.f, &c2, &err), &err);
+    T_EQ_INT(farm_printer_count(fx.f), 3); /* a stays until its print ends */
+    struct farm_printer_info info;
+    farm_printer_info(fx.f, 1, &info);
+    T_EQ_STR(info.cfg->material, "ABS");
+    T_EQ_INT(state_of(id), JOB_PRINTING); /* undisturbed */
+    report(tdrv_named("a"), DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(id, JOB_DONE));
+    T_OK(farm_reload(fx.f, &c2, &err), &err);
+    T_EQ_INT(farm_printer_count(fx.f), 2);
+    farm_printer_info(fx.f, 0, &info);
+    T_EQ_STR(info.cfg->name, "b");
+    farmcfg_release(&c2);
+    teardown();
+}

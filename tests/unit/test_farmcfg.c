@@ -1,0 +1,197 @@
+/*
+ * test_farmcfg.c - the farm config parser: defaults, every option kind,
+ * strict errors naming file:line, option and section, and config/farm.ini
+ * kept in step with the parser (uncommented, it must parse, and it must
+ * document every option).
+ */
+#include "../../src/base/buf.h"
+#include "../../src/farm/farmcfg.h"
+#include "../t.h"
+
+static int
+parse(struct farmcfg *c, const char *text, struct sf_err *err)
+{
+    farmcfg_init(c);
+    return farmcfg_parse(c, text, strlen(text), "farm.ini", err);
+}
+
+T_CASE(farmcfg_full_example)
+{
+    struct farmcfg c;
+    struct sf_err err;
+    const char *text = "# a farm\n"
+                       "[farm]\n"
+                       "listen: 0.0.0.0:8080\n"
+                       "data_dir = /srv/farm   # inline comment\n"
+                       "api_keys: aaaaaaaaaaaaaaaa, bbbbbbbbbbbbbbbb\n"
+                       "api_keys_readonly: rrrrrrrrrrrrrrrr\n"
+                       "upload_max_mb: 8\n"
+                       "\n"
+                       "[printer mk3-a]\n"
+                       "  driver: marlin\n"
+                       "  port: pty:/dev/pts/7\n"
+                       "  material: PETG ; inline\n"
+                       "  nozzle_mm: 0.6\n"
+                       "  bed_size: 250, 210, 200\n"
+                       "  auto_eject: yes\n"
+                       "  group: big\n"
+                       "[printer voron]\r\n"
+                       "driver: moonraker\r\n"
+                       "url: http://10.0.0.5:7125\r\n"
+                       "enabled: false\r\n";
+    T_OK(parse(&c, text, &err), &err);
+    T_EQ_STR(c.listen_host, "0.0.0.0");
+    T_EQ_INT(c.listen_port, 8080);
+    T_EQ_STR(c.data_dir, "/srv/farm");
+    T_EQ_INT(c.upload_max_bytes, 8 << 20);
+    T_EQ_INT(c.n_keys, 3);
+    T_TRUE(farmcfg_key(&c, "bbbbbbbbbbbbbbbb") && !farmcfg_key(&c, "bbbbbbbbbbbbbbbb")->read_only);
+    T_TRUE(farmcfg_key(&c, "rrrrrrrrrrrrrrrr")->read_only);
+    T_TRUE(farmcfg_key(&c, "rrrrrrrrrrrrrrr") == NULL);
+    T_TRUE(farmcfg_key(&c, "rrrrrrrrrrrrrrrrr") == NULL);
+    T_TRUE(farmcfg_key(&c, "") == NULL);
+    T_EQ_INT(c.n_printers, 2);
+    const struct farmcfg_printer *p = farmcfg_printer(&c, "mk3-a");
+    T_TRUE(p != NULL);
+    T_EQ_STR(p->driver, "marlin");
+    T_EQ_STR(p->port, "pty:/dev/pts/7");
+    T_EQ_STR(p->material, "PETG");
+    T_EQ_DBL(p->nozzle_mm, 0.6, 0);
+    T_EQ_DBL(p->bed_mm[0], 250, 0);
+    T_EQ_DBL(p->bed_mm[2], 200, 0);
+    T_TRUE(p->auto_eject && p->enabled);
+    T_EQ_INT(p->baud, 115200);
+    T_EQ_DBL(p->overhang_deg, 45, 0);
+    T_EQ_STR(p->group, "big");
+    p = farmcfg_printer(&c, "voron");
+    T_EQ_STR(p->url, "http://10.0.0.5:7125");
+    T_TRUE(!p->enabled);
+    T_EQ_STR(p->material, "PLA");
+    T_EQ_INT(p->line, 17);
+    farmcfg_release(&c);
+    T_EQ_INT(c.n_printers, 0);
+}
+
+T_CASE(farmcfg_errors_name_file_line_option_section)
+{
+    struct farmcfg c;
+    struct sf_err err;
+    static const struct {
+        const char *text, *msg;
+    } bad[] = {
+        { "[farm]\nlisten: 1.2.3.4:80\n[printer mk3]\ndriver: marlin\nbaud_rate: 9600\n",
+          "farm.ini:5: option 'baud_rate' is not valid in section 'printer mk3'" },
+        { "[farm]\nport: 3\n", "farm.ini:2: option 'port' is not valid in section 'farm'" },
+        { "[farms]\n", "farm.ini:1: section 'farms' is not valid" },
+        { "\n\n[printer]\n", "farm.ini:3: section 'printer' is not valid" },
+        { "[printer a/b]\ndriver: marlin\n", "farm.ini:1: section 'printer a/b': printer name" },
+        { "[printer a]\ndriver: marlin\nport: x\n[printer a]\n",
+          "farm.ini:4: section 'printer a' appears twice" },
+        { "[farm]\n[farm]\n", "farm.ini:2: section 'farm' appears twice" },
+        { "listen: 1.2.3.4:5\n", "farm.ini:1: option 'listen' comes before any section" },
+        { "[printer a]\ndriver: marlin\nport: x\nnozzle_mm: 0.4\nnozzle_mm: 0.6\n",
+          "farm.ini:5: option 'nozzle_mm' in section 'printer a' is given twice" },
+        { "[printer a]\ndriver: marlin\nport: x\nnozzle_mm: wide\n",
+          "farm.ini:4: option 'nozzle_mm' in section 'printer a': 'wide' is not a number" },
+        { "[printer a]\ndriver: marlin\nport: x\nnozzle_mm: 5\n", "in 0.1..2" },
+        { "[printer a]\ndriver: marlin\nport: x\nbaud: 9600.5\n", "not a whole number" },
+        { "[printer a]\ndriver: marlin\nport: x\nbed_size: 200, 200\n",
+          "option 'bed_size' in section 'printer a': '200, 200' is not X, Y, Z" },
+        { "[printer a]\ndriver: marlin\nport: x\nbed_size: 200, 200, 200, 5\n", "not X, Y, Z" },
+        { "[printer a]\ndriver: marlin\nport: x\nenabled: maybe\n",
+          "'maybe' is not true or false" },
+        { "[printer a]\nport: x\n",
+          "farm.ini:1: section 'printer a': option 'driver' is required" },
+        { "[printer a]\ndriver: marlin\n", "option 'port' is required by driver marlin" },
+        { "[printer a]\ndriver: bambu\n", "option 'url' is required by driver bambu" },
+        { "[printer a]\ndriver: klipper\n", "'klipper' is not one of marlin" },
+        { "[printer a]\ndriver: marlin\nport: x\nmaterial: P L A\n", "may hold only letters" },
+        { "[farm]\nlisten: localhost\n", "'localhost' is not ADDRESS:PORT" },
+        { "[farm]\nlisten: 1.2.3.4:99999\n", "port '99999' is not in 1..65535" },
+        { "[farm]\nlisten: example.com:80\n", "is not an IPv4 address" },
+        { "[farm]\napi_keys: short\n", "each key must be 16..128 characters" },
+        { "[farm]\napi_keys: aaaaaaaaaaaaaaaa\napi_keys_readonly: aaaaaaaaaaaaaaaa\n",
+          "farm.ini:3: option 'api_keys_readonly' in section 'farm': key given twice" },
+        { "[farm]\napi_keys: aaaaaaaaaaaaaaa$\n", "keys may hold only" },
+        { "[farm]\nupload_max_mb: 0\n", "upload_max_mb" },
+        { "[farm]\njust words\n", "farm.ini:2: syntax error" },
+        { "[farm\n", "farm.ini:1: section header lacks ']'" },
+        { "[farm]\ndata_dir: /x\0y\n", "" /* NUL handled: text is cut at strlen */ },
+    };
+    for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
+        int rc = parse(&c, bad[i].text, &err);
+        if (!bad[i].msg[0]) {
+            farmcfg_release(&c);
+            continue;
+        }
+        if (rc != SF_EINVAL || !strstr(err.msg, bad[i].msg)) {
+            t_fail(__FILE__, __LINE__, "case %zu: rc %d, message \"%s\" lacks \"%s\"", i, rc,
+                   err.msg, bad[i].msg);
+            return;
+        }
+        T_EQ_INT(c.n_printers, 0); /* released on error */
+    }
+}
+
+T_CASE(farmcfg_long_lines_and_binary_refused)
+{
+    struct farmcfg c;
+    struct sf_err err;
+    char text[600];
+    memset(text, 'x', sizeof(text));
+    memcpy(text, "[farm]\ndata_dir: ", 17);
+    text[sizeof(text) - 1] = '\0';
+    T_ERR(parse(&c, text, &err), SF_EINVAL, &err, "farm.ini:2: line is longer than");
+    const char bin[] = "[farm]\nlisten: 1.2.3.4:5\0junk\n";
+    farmcfg_init(&c);
+    T_ERR(farmcfg_parse(&c, bin, sizeof(bin) - 1, "farm.ini", &err), SF_EINVAL, &err,
+          "farm.ini:2: line holds a NUL byte");
+    farmcfg_init(&c);
+    T_ERR(farmcfg_load(&c, "/nonexistent/farm.ini", &err), SF_EIO, &err, "farm.ini");
+}
+
+T_CASE(farmcfg_documented_file_parses_and_documents_everything)
+{
+    struct buf b;
+    struct sf_err err;
+    buf_init(&b, 1 << 20);
+    T_OK(buf_read_file(&b, "config/farm.ini", &err), &err);
+    struct farmcfg c;
+    farmcfg_init(&c);
+    T_OK(farmcfg_parse(&c, b.data, b.len, "config/farm.ini", &err), &err);
+    T_EQ_INT(c.n_printers, 0);
+    T_EQ_INT(c.listen_port, 7420);
+    farmcfg_release(&c);
+    /* Uncomment every "#key: value" and "#[section]" line: still valid. */
+    struct buf u;
+    buf_init(&u, 0);
+    const char *p = b.data;
+    while (*p) {
+        const char *nl = strchr(p, '\n');
+        size_t n = nl ? (size_t)(nl - p + 1) : strlen(p);
+        bool opt = p[0] == '#' && (p[1] == '[' || (p[1] >= 'a' && p[1] <= 'z'));
+        const char *colon = memchr(p, ':', n);
+        if (opt && p[1] != '[' && (!colon || memchr(p, ' ', (size_t)(colon - p))))
+            opt = false; /* prose, not "#key:" */
+        buf_append(&u, opt ? p + 1 : p, opt ? n - 1 : n);
+        p += n;
+    }
+    farmcfg_init(&c);
+    T_OK(farmcfg_parse(&c, u.data, u.len, "farm.ini (uncommented)", &err), &err);
+    T_EQ_INT(c.n_printers, 1);
+    T_EQ_STR(c.printers[0].port, "/dev/ttyUSB0");
+    farmcfg_release(&c);
+    /* every option the parser knows is documented */
+    bool printer;
+    const char *name;
+    for (size_t i = 0; (name = farmcfg_option_name(i, &printer)); i++) {
+        char needle[64];
+        snprintf(needle, sizeof(needle), "\n#%s:", name);
+        if (!strstr(b.data, needle)) {
+            t_fail(__FILE__, __LINE__, "option '%s' is not documented in config/farm.ini", name);
+            break;
+        }
+    }
+    buf_release(&u);
+    buf_release(&b);
+}
