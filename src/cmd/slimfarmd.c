@@ -17,6 +17,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../../drivers/drv.h"
 #include "../api/api.h"
 #include "../api/http_loop.h"
 #include "../base/log.h"
@@ -228,9 +229,8 @@ main(int argc, char **argv)
                  "recovered from a crash: %d jobs interrupted (waiting for an operator), %d "
                  "back in the queue",
                  rec.interrupted, rec.requeued);
-    /* TODO(#7): hand drv_new in as hooks.driver once drivers/ is merged. */
     struct farm_hooks hooks = {
-        .driver = NULL, .prepare = prepare_part, .notify = on_farm_event, .notify_ud = &d
+        .driver = drv_new, .prepare = prepare_part, .notify = on_farm_event, .notify_ud = &d
     };
     if (!(d.farm = farm_new(d.l, d.s, d.pool, &d.cfg, &hooks, &err)))
         goto out;

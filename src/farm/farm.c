@@ -209,6 +209,8 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
         move(p, PRINTER_EV_FINISHED);
         break;
     }
+    case DRV_EV_JOB_CANCELLED:
+        break; /* the farm recorded the cancel and moved the printer when it asked */
     case DRV_EV_JOB_FAILED:
         p->lines_acked = (int64_t)st->lines_acked;
         fail_job(p, st->message[0] ? st->message : "the print stopped");

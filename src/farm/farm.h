@@ -11,8 +11,8 @@
  * others, because nothing here waits: drivers and the pool report back
  * through the loop.
  *
- * Drivers come in through hooks.driver (drv_new from drivers/, once it is
- * merged); with none, printers stay offline saying so.  farm_reload()
+ * Drivers come in through hooks.driver (slimfarmd passes drv_new from
+ * drivers/); with none, printers stay offline saying so.  farm_reload()
  * applies a new config (SIGHUP) without disturbing running prints.
  *
  * Thread: the loop thread.  The pool must be drained (pool_free, then one
@@ -38,7 +38,7 @@
 #define FARM_BACKOFF_MAX_MS 60000 /* never wait longer than a minute */
 #define FARM_PROGRESS_MS    5000  /* persist lines acknowledged this often */
 
-/* drv_new's shape, so slimfarmd can hand it in once drivers/ is merged. */
+/* drv_new's shape: slimfarmd hands drv_new in; tests may hand in their own. */
 typedef struct drv *(*farm_driver_fn)(struct loop *l, const struct drv_config *cfg,
                                       drv_event_fn on_event, void *ud, struct sf_err *err);
 

@@ -410,3 +410,52 @@ measure_hausdorff(const struct mesh *a, const struct mesh *b, double *one, doubl
         rtcReleaseDevice(dev);
     return rc;
 }
+
+/* ---- distance queries ---------------------------------------------------- */
+
+struct surface_dist {
+    RTCDevice dev;
+    RTCScene scene;
+    const struct mesh *m;
+};
+
+struct surface_dist *
+surface_dist_new(const struct mesh *m, struct sf_err *err)
+{
+    if (!m->n_tris) {
+        sf_err_set(err, SF_EINVAL, "distance to an empty mesh");
+        return NULL;
+    }
+    struct surface_dist *d = mem_calloc(1, sizeof(*d));
+    if (!d) {
+        sf_err_set(err, SF_ENOMEM, "distance: out of memory");
+        return NULL;
+    }
+    d->m = m;
+    d->dev = rtcNewDevice("threads=1");
+    d->scene = d->dev ? point_scene(d->dev, m) : NULL;
+    if (!d->scene) {
+        surface_dist_free(d);
+        sf_err_set(err, SF_ENOMEM, "embree: cannot build a point-query scene");
+        return NULL;
+    }
+    return d;
+}
+
+double
+surface_dist_query(const struct surface_dist *d, struct vec3 p)
+{
+    return dist_to(d->scene, d->m, p);
+}
+
+void
+surface_dist_free(struct surface_dist *d)
+{
+    if (!d)
+        return;
+    if (d->scene)
+        rtcReleaseScene(d->scene);
+    if (d->dev)
+        rtcReleaseDevice(d->dev);
+    free(d);
+}

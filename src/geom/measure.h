@@ -103,4 +103,14 @@ int measure_deviation(const struct mesh *a, const struct mesh *b, struct deviati
 int measure_hausdorff(const struct mesh *a, const struct mesh *b, double *one_sided_mm,
                       double *symmetric_mm, struct sf_err *err);
 
+/*
+ * Unsigned distance from points to the surface of m (Embree point queries,
+ * exact closest point on triangle).  m must outlive d.  Queries on one d
+ * may run from several threads.  NULL with err set on failure.
+ */
+struct surface_dist;
+struct surface_dist *surface_dist_new(const struct mesh *m, struct sf_err *err);
+double surface_dist_query(const struct surface_dist *d, struct vec3 p);
+void surface_dist_free(struct surface_dist *d);
+
 #endif

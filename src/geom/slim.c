@@ -1,0 +1,828 @@
+/*
+ * slim.c - support slimming: the iteration control around the ARAP solver
+ * (see slim.h; Hu, Jin & Wang 2015, sec. 4-5).
+ *
+ * Per print direction: rotate the part and its tet mesh so the direction
+ * is +z (the tet mesh is built once, in the input frame; barycentric
+ * coordinates do not change under rotation), fix the tet vertices near the
+ * bed (and in user boxes, and every vertex of a tet hosting a fixed part
+ * vertex, so fixed part vertices stay exactly), factorize, then run rounds
+ * of at most max_iters local/global iterations.  After each iteration the
+ * part is mapped through the barycentric coordinates and measured: risky
+ * faces (measure_proxy), MNDR and ANDR (measure_deviation), inverted tets.
+ * Clean iterates within the deviation limits are offered to a short list
+ * of the best (fewest risky faces, then smallest MNDR).  A round stops when
+ * the risky count has not dropped for `patience` iterations; if its last
+ * iterate breaks the limits, beta is raised and a new round starts (Hu
+ * 2015, sec. 5.1).  The best listed iterate with no new self-intersection
+ * (selfx.h) is the answer; the input itself is always on the list.
+ *
+ * Direction search: a grid of rotations about x and y, one job per
+ * direction on a few pthreads, scored by ray-cast support volume (then
+ * anchors).  Each job owns its solver and buffers; the tet mesh and the
+ * input are shared read-only.
+ */
+#include "slim.h"
+
+#include <math.h>
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../base/log.h"
+#include "../base/mem.h"
+#include "arap.h"
+#include "selfx.h"
+
+#define KEEP_BEST 10 /* candidate iterates kept per direction */
+
+void
+slim_params_default(struct slim_params *p)
+{
+    memset(p, 0, sizeof(*p));
+    p->angle_deg = 45;
+    p->margin_deg = 5;
+    p->beta_deg = 0;
+    p->beta_step_deg = 5;
+    p->beta_max_deg = 45;
+    p->max_mndr = 0.15;
+    p->max_andr = 0.05;
+    p->fix_bottom_mm = 2;
+    p->max_iters = 100;
+    p->patience = 5;
+    tetmesh_params_default(&p->tet);
+    p->search_step_deg = 15;
+    p->search_max_deg = 30;
+}
+
+void
+slim_result_release(struct slim_result *res)
+{
+    mesh_release(&res->out);
+}
+
+static double
+now_s(void)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+struct cand {
+    struct vec3 *x; /* tet positions (NULL: the rest positions, i.e. the input) */
+    uint32_t risky;
+    double severity; /* overhang severity, the tie-break (see severity()) */
+    int iter, round;
+    double beta_deg;
+};
+
+/*
+ * Which part faces lie in which tet: a face is sampled at its vertices, its
+ * centroid and a barycentric grid finer than half the lattice pitch, and
+ * belongs to every tet a sample falls in.  CSR over the tets that hold any.
+ */
+struct face_hosts {
+    uint32_t n;      /* tets holding part faces */
+    uint32_t *tet;   /* n tet indices */
+    uint32_t *start; /* n + 1 offsets into face */
+    uint32_t *face;  /* part triangle indices */
+};
+
+/* Shared by the direction workers. */
+struct ctx {
+    const struct mesh *m;
+    const struct slim_params *p;
+    const struct tetmesh *tm;
+    struct face_hosts fh;
+    pthread_mutex_t lock; /* protects the progress callback and next */
+    int next, n_dirs;
+    struct dir *dirs;
+};
+
+/* One print direction's work and result. */
+struct dir {
+    int index;
+    struct mat3 rot; /* input frame -> print frame */
+    struct mesh in;  /* the input rotated and resting on z = 0 */
+    struct mesh out; /* the chosen result */
+    struct support_metrics before, after;
+    struct deviation dev;
+    uint32_t curve[SLIM_CURVE_MAX];
+    int n_curve, best_iter, n_runs, selfx_in, selfx_out;
+    uint32_t n_rejected, n_inverted;
+    struct slim_timing timing;
+    double beta_deg;
+    int rc;
+    struct sf_err err;
+};
+
+static bool
+in_box(const struct slim_params *p, struct vec3 v)
+{
+    for (int i = 0; i < p->n_fix_boxes; i++) {
+        const struct slim_box *b = &p->fix_boxes[i];
+        if (v.x >= b->lo.x && v.x <= b->hi.x && v.y >= b->lo.y && v.y <= b->hi.y &&
+            v.z >= b->lo.z && v.z <= b->hi.z)
+            return true;
+    }
+    return false;
+}
+
+/* Insert c into the sorted short list; takes c.x (freed if not kept). */
+static void
+offer(struct cand *list, int *n, struct cand c)
+{
+    int pos = *n;
+    while (pos > 0 && (list[pos - 1].risky > c.risky ||
+                       (list[pos - 1].risky == c.risky && list[pos - 1].severity > c.severity)))
+        pos--;
+    if (pos >= KEEP_BEST) {
+        free(c.x);
+        return;
+    }
+    if (*n == KEEP_BEST)
+        free(list[--*n].x);
+    memmove(&list[pos + 1], &list[pos], sizeof(*list) * (size_t)(*n - pos));
+    list[pos] = c;
+    ++*n;
+}
+
+struct work {
+    struct ctx *cx;
+    struct dir *d;
+    struct tetmesh tm;   /* shallow copy of the shared mesh with rotated positions */
+    uint8_t *fixed;      /* per tet vertex */
+    uint8_t *part_fixed; /* per part vertex: its host tet is all fixed */
+    struct vec3 *x;      /* current tet positions */
+    struct mesh cur;     /* the mapped part (triangles borrowed from d->in) */
+    struct cand list[KEEP_BEST];
+    int n_list;
+    struct arap_drive *drv; /* fh.n slots */
+    struct vec3 *fa;        /* per part face: area vector at the current iterate */
+    struct vec3 base;       /* centroid of the fixed tet vertices */
+};
+
+static void
+map_part(struct work *w, const struct vec3 *x)
+{
+    tetmesh_map(&w->tm, x, w->cur.v);
+    for (uint32_t v = 0; v < w->cur.n_verts; v++)
+        if (w->part_fixed[v])
+            w->cur.v[v] = w->d->in.v[v]; /* exactly, not up to rounding */
+}
+
+/*
+ * Overhang severity: sum over risky faces of area * (sin(alpha) - n . z),
+ * how far past the threshold they lean.  A low-poly part (a tee has four
+ * risky triangles) keeps the same risky count for many iterations while
+ * its faces turn; the severity still falls, so it breaks the count's ties
+ * in the stop test and in the choice of the best iterate.
+ */
+static double
+severity(const struct mesh *m, double tau, double zlo, double gap)
+{
+    double s = 0;
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        struct vec3 c = mesh_tri_cross(m, i);
+        double len = v3_len(c);
+        if (!(len > 0) || c.z / len >= -tau)
+            continue;
+        if (mesh_tri_centroid(m, i).z - zlo < gap)
+            continue; /* on the bed, as in measure_proxy */
+        s += 0.5 * (-c.z - tau * len);
+    }
+    return s;
+}
+
+static uint32_t
+count_inverted(const struct tetmesh *tm, const struct vec3 *x)
+{
+    uint32_t n = 0;
+    for (uint32_t t = 0; t < tm->n_tets; t++)
+        n += !(tetmesh_volume(tm, x, t) > 0);
+    return n;
+}
+
+static void
+report(struct work *w, const struct slim_progress *pr)
+{
+    const struct slim_params *p = w->cx->p;
+    if (!p->progress)
+        return;
+    pthread_mutex_lock(&w->cx->lock);
+    p->progress(p->progress_ud, pr);
+    pthread_mutex_unlock(&w->cx->lock);
+}
+
+/*
+ * The minimal-rotation drive of each tet holding part faces: its risky
+ * faces (past the aim tau_aim, not on the bed, not pinned), as the
+ * area-weighted mean normal - the "surface face" the tet must make safe -
+ * and, when the worst single face leans more than 10 degrees away from
+ * that mean, the worst face as a second one (minimal rotation case II).
+ */
+static uint32_t
+compute_drives(struct work *w, double tau_aim, double zlo, double gap)
+{
+    const struct face_hosts *fh = &w->cx->fh;
+    const struct mesh *m = &w->cur;
+    for (uint32_t f = 0; f < m->n_tris; f++)
+        w->fa[f] = mesh_tri_cross(m, f);
+    uint32_t n = 0;
+    for (uint32_t s = 0; s < fh->n; s++) {
+        struct vec3 sum = v3(0, 0, 0), worst = v3(0, 0, 0);
+        double worst_c = INFINITY;
+        for (uint32_t i = fh->start[s]; i < fh->start[s + 1]; i++) {
+            uint32_t f = fh->face[i];
+            double len = v3_len(w->fa[f]);
+            if (!(len > 0) || w->fa[f].z / len >= -tau_aim)
+                continue;
+            const uint32_t *t = m->t[f];
+            if (w->part_fixed[t[0]] && w->part_fixed[t[1]] && w->part_fixed[t[2]])
+                continue;
+            if ((m->v[t[0]].z + m->v[t[1]].z + m->v[t[2]].z) / 3 - zlo < gap)
+                continue; /* on the bed */
+            sum = v3_add(sum, w->fa[f]);
+            if (w->fa[f].z / len < worst_c) {
+                worst_c = w->fa[f].z / len;
+                worst = v3_scale(w->fa[f], 1 / len);
+            }
+        }
+        if (!(worst_c < INFINITY))
+            continue;
+        struct arap_drive *d = &w->drv[n++];
+        uint32_t tet = fh->tet[s];
+        const uint32_t *q = w->tm.tet[tet];
+        d->tet = tet;
+        d->k = 1;
+        d->n[0] = v3_normalize(sum);
+        if (d->n[0].z >= -tau_aim) {
+            d->n[0] = worst; /* the risky faces cancel out: the worst alone */
+        } else if (v3_dot(d->n[0], worst) < cos(10 * M_PI / 180)) {
+            d->k = 2;
+            d->n[1] = worst;
+        }
+        struct vec3 c = v3_scale(
+            v3_add(v3_add(w->tm.x[q[0]], w->tm.x[q[1]]), v3_add(w->tm.x[q[2]], w->tm.x[q[3]])),
+            0.25);
+        d->hint = v3_sub(c, w->base);
+    }
+    return n;
+}
+
+/* One round at penalty beta; *within says whether its last iterate held the limits. */
+static int
+run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *curve, int *n_curve,
+          bool *within, struct sf_err *err)
+{
+    const struct slim_params *p = w->cx->p;
+    double tau = sin(p->angle_deg * M_PI / 180), beta = beta_deg * M_PI / 180;
+    double tau_aim = sin(fmin(p->angle_deg - p->margin_deg, 89.9) * M_PI / 180);
+    struct support_params sp;
+    support_params_default(&sp);
+    sp.angle_deg = p->angle_deg;
+    memcpy(w->x, w->tm.x, sizeof(*w->x) * w->tm.n_verts);
+    memcpy(w->cur.v, w->d->in.v, sizeof(*w->cur.v) * w->cur.n_verts);
+    uint32_t best_seen = curve[0];
+    double zlo = INFINITY;
+    for (uint32_t v = 0; v < w->d->in.n_verts; v++)
+        zlo = fmin(zlo, w->d->in.v[v].z);
+    double best_sev = severity(&w->d->in, tau, zlo, sp.min_gap_mm);
+    int stall = 0;
+    *n_curve = 1;
+    *within = true;
+    for (int it = 1; it <= p->max_iters; it++) {
+        if (p->cancel && atomic_load(p->cancel))
+            return sf_err_set(err, SF_ECANCELED, "slim: cancelled");
+        double t0 = now_s();
+        uint32_t n_drv = compute_drives(w, tau_aim, zlo, sp.min_gap_mm);
+        w->d->timing.part_s += now_s() - t0;
+        struct arap_local_stats ls;
+        arap_local(a, w->x, v3(0, 0, 1), tau_aim, beta, w->drv, n_drv, &ls);
+        w->d->timing.slow_polar += ls.n_slow_polar;
+        w->d->timing.rotated += ls.n_rotated;
+        int rc = arap_global(a, w->x, err);
+        if (rc)
+            return rc;
+        w->d->timing.iterations++;
+        t0 = now_s();
+        uint32_t inverted = count_inverted(&w->tm, w->x);
+        map_part(w, w->x);
+        struct support_metrics sm;
+        struct deviation dv;
+        measure_proxy(&w->cur, v3(0, 0, 1), &sp, &sm);
+        measure_deviation(&w->d->in, &w->cur, &dv, NULL);
+        double sev = severity(&w->cur, tau, zlo, sp.min_gap_mm);
+        w->d->timing.part_s += now_s() - t0;
+        if (*n_curve < SLIM_CURVE_MAX)
+            curve[(*n_curve)++] = sm.n_risky;
+        *within = dv.mndr <= p->max_mndr && dv.andr <= p->max_andr && inverted == 0;
+        if (!*within)
+            log_debug("slim", "round %d it %d: mndr %.4f andr %.4f inverted %u", round, it, dv.mndr,
+                      dv.andr, inverted);
+        if (*within) {
+            struct cand c = {
+                mem_array(w->tm.n_verts, sizeof(struct vec3)), sm.n_risky, sev, it, round, beta_deg
+            };
+            if (!c.x)
+                return sf_err_set(err, SF_ENOMEM, "slim: out of memory");
+            memcpy(c.x, w->x, sizeof(struct vec3) * w->tm.n_verts);
+            offer(w->list, &w->n_list, c);
+        }
+        struct slim_progress pr = { w->d->index,  w->cx->n_dirs, round,   beta_deg, it,
+                                    p->max_iters, sm.n_risky,    dv.mndr, dv.andr };
+        report(w, &pr);
+        /* "dropped": fewer risky faces, or as many leaning 0.5 % less */
+        if (sm.n_risky < best_seen || (sm.n_risky == best_seen && sev < 0.995 * best_sev)) {
+            best_seen = sm.n_risky;
+            best_sev = sev;
+            stall = 0;
+        } else if (++stall >= p->patience) {
+            break;
+        }
+    }
+    return SF_OK;
+}
+
+static int
+setup_fixed(struct work *w)
+{
+    const struct slim_params *p = w->cx->p;
+    const struct tetmesh *src = w->cx->tm;
+    double zlo = INFINITY;
+    for (uint32_t v = 0; v < w->d->in.n_verts; v++)
+        zlo = fmin(zlo, w->d->in.v[v].z);
+    double zfix = zlo + p->fix_bottom_mm;
+    for (uint32_t v = 0; v < w->tm.n_verts; v++)
+        w->fixed[v] = w->tm.x[v].z <= zfix || in_box(p, src->x[v]);
+    /* part vertices in a fixed region pin their whole host tet */
+    for (uint32_t v = 0; v < src->n_part; v++) {
+        if (!(w->d->in.v[v].z <= zfix || in_box(p, w->cx->m->v[v])))
+            continue;
+        for (int k = 0; k < 4; k++)
+            w->fixed[src->tet[src->host[v]][k]] = 1;
+    }
+    for (uint32_t v = 0; v < src->n_part; v++) {
+        const uint32_t *q = src->tet[src->host[v]];
+        w->part_fixed[v] = w->fixed[q[0]] && w->fixed[q[1]] && w->fixed[q[2]] && w->fixed[q[3]];
+    }
+    uint32_t nf = 0;
+    w->base = v3(0, 0, 0);
+    for (uint32_t v = 0; v < w->tm.n_verts; v++)
+        if (w->fixed[v])
+            w->base = v3_add(w->base, w->tm.x[v]), nf++;
+    w->base = nf ? v3_scale(w->base, 1.0 / nf) : w->base;
+    return SF_OK;
+}
+
+/* Ray-cast support volume of m printed along +z. */
+static int
+support_volume(const struct mesh *m, double angle_deg, double *vol, struct sf_err *err)
+{
+    struct support_params sp;
+    struct support_metrics sm;
+    support_params_default(&sp);
+    sp.angle_deg = angle_deg;
+    struct raycast *rc = raycast_new(m, err);
+    if (!rc)
+        return err ? err->code : SF_ENOMEM;
+    int r = measure_support(m, rc, v3(0, 0, 1), &sp, &sm, err);
+    raycast_free(rc);
+    *vol = sm.volume_mm3;
+    return r;
+}
+
+/*
+ * The best listed iterate that is clean: no inverted tet, no more
+ * self-intersecting edges than the input, and no more ray-cast support
+ * volume than the input (fewer risky faces can still mean taller columns:
+ * a tee's arms half raised).  The input itself ends the list.
+ */
+static int
+choose(struct work *w, struct sf_err *err)
+{
+    struct dir *d = w->d;
+    double vol_in;
+    d->selfx_in = selfx_count(&d->in, err);
+    if (d->selfx_in < 0)
+        return d->selfx_in;
+    int rc = support_volume(&d->in, w->cx->p->angle_deg, &vol_in, err);
+    if (rc)
+        return rc;
+    for (int i = 0; i < w->n_list; i++) {
+        struct cand *c = &w->list[i];
+        if (!c->x)
+            break; /* the input: always acceptable */
+        if (count_inverted(&w->tm, c->x)) {
+            d->n_rejected++;
+            continue;
+        }
+        map_part(w, c->x);
+        double vol;
+        int sx = selfx_count(&w->cur, err);
+        if (sx < 0)
+            return sx;
+        if (sx > d->selfx_in) {
+            d->n_rejected++;
+            continue;
+        }
+        if ((rc = support_volume(&w->cur, w->cx->p->angle_deg, &vol, err)))
+            return rc;
+        if (vol > vol_in) {
+            d->n_rejected++;
+            continue;
+        }
+        d->selfx_out = sx;
+        d->best_iter = c->iter;
+        d->beta_deg = c->beta_deg;
+        d->n_inverted = count_inverted(&w->tm, c->x);
+        return mesh_copy(&d->out, &w->cur, err);
+    }
+    d->selfx_out = d->selfx_in;
+    d->best_iter = 0;
+    return mesh_copy(&d->out, &d->in, err);
+}
+
+static int
+run_dir(struct ctx *cx, struct dir *d, struct sf_err *err)
+{
+    const struct slim_params *p = cx->p;
+    struct work w;
+    memset(&w, 0, sizeof(w));
+    w.cx = cx;
+    w.d = d;
+    w.tm = *cx->tm;
+    int rc = mesh_copy(&d->in, cx->m, err);
+    if (rc)
+        return rc;
+    bool identity = memcmp(&d->rot, &(struct mat3){ { { 1, 0, 0 }, { 0, 1, 0 }, { 0, 0, 1 } } },
+                           sizeof(d->rot)) == 0;
+    struct vec3 shift = v3(0, 0, 0);
+    if (!identity) {
+        mesh_transform(&d->in, d->rot, v3(0, 0, 0));
+        struct vec3 lo, hi;
+        mesh_bbox(&d->in, &lo, &hi);
+        shift = v3(0, 0, -lo.z);
+        mesh_translate(&d->in, shift);
+    }
+    struct arap *a = NULL;
+    mesh_init(&w.cur);
+    w.tm.x = mem_array(cx->tm->n_verts, sizeof(struct vec3));
+    w.x = mem_array(cx->tm->n_verts, sizeof(struct vec3));
+    w.fixed = mem_calloc(cx->tm->n_verts, 1);
+    w.part_fixed = mem_calloc(d->in.n_verts ? d->in.n_verts : 1, 1);
+    w.cur.v = mem_array(d->in.n_verts ? d->in.n_verts : 1, sizeof(struct vec3));
+    w.drv = mem_array(cx->fh.n ? cx->fh.n : 1, sizeof(*w.drv));
+    w.fa = mem_array(d->in.n_tris ? d->in.n_tris : 1, sizeof(*w.fa));
+    if (!w.tm.x || !w.x || !w.fixed || !w.part_fixed || !w.cur.v || !w.drv || !w.fa) {
+        rc = sf_err_set(err, SF_ENOMEM, "slim: out of memory");
+        goto done;
+    }
+    w.cur.t = d->in.t; /* borrowed */
+    w.cur.n_verts = d->in.n_verts;
+    w.cur.n_tris = d->in.n_tris;
+    for (uint32_t v = 0; v < cx->tm->n_verts; v++)
+        w.tm.x[v] = v3_add(m3_mul_v(d->rot, cx->tm->x[v]), shift);
+    setup_fixed(&w);
+    double t0 = now_s();
+    a = arap_new(&w.tm, w.fixed, err);
+    d->timing.factor_s = now_s() - t0;
+    if (!a) {
+        rc = err ? err->code : SF_EINVAL;
+        goto done;
+    }
+    struct support_params sp;
+    support_params_default(&sp);
+    sp.angle_deg = p->angle_deg;
+    struct support_metrics sm0;
+    measure_proxy(&d->in, v3(0, 0, 1), &sp, &sm0);
+    double zlo0 = INFINITY;
+    for (uint32_t v = 0; v < d->in.n_verts; v++)
+        zlo0 = fmin(zlo0, d->in.v[v].z);
+    offer(w.list, &w.n_list,
+          (struct cand){ NULL, sm0.n_risky,
+                         severity(&d->in, sin(p->angle_deg * M_PI / 180), zlo0, sp.min_gap_mm), 0,
+                         0, 0 });
+    uint32_t curve[SLIM_CURVE_MAX];
+    curve[0] = sm0.n_risky;
+    d->curve[0] = sm0.n_risky;
+    d->n_curve = 1;
+    double beta = p->beta_deg;
+    for (int round = 0;; round++) {
+        bool within;
+        int n_curve;
+        rc = run_round(&w, a, round, beta, curve, &n_curve, &within, err);
+        if (rc)
+            goto done;
+        d->n_runs = round + 1;
+        /* keep the curve of the round that holds the best iterate so far (the
+           first round's when the input stays best) */
+        if (round == 0 || (w.n_list && w.list[0].round == round && w.list[0].x)) {
+            memcpy(d->curve, curve, sizeof(uint32_t) * (size_t)n_curve);
+            d->n_curve = n_curve;
+        }
+        if (within || w.list[0].risky == 0 || beta + p->beta_step_deg > p->beta_max_deg ||
+            !(p->beta_step_deg > 0))
+            break;
+        beta += p->beta_step_deg;
+    }
+    const struct arap_timing *at = arap_timing(a);
+    d->timing.local_s = at->local_s;
+    d->timing.minrot_s = at->minrot_s;
+    d->timing.rhs_s = at->rhs_s;
+    d->timing.solve_s = at->solve_s;
+    t0 = now_s();
+    rc = choose(&w, err);
+    d->timing.choose_s = now_s() - t0;
+done:
+    arap_free(a);
+    for (int i = 0; i < w.n_list; i++)
+        free(w.list[i].x);
+    free(w.tm.x);
+    free(w.x);
+    free(w.fixed);
+    free(w.part_fixed);
+    free(w.cur.v);
+    free(w.drv);
+    free(w.fa);
+    return rc;
+}
+
+/* Ray-cast support of the input and the result of one direction. */
+static int
+score_dir(const struct slim_params *p, struct dir *d, struct sf_err *err)
+{
+    struct support_params sp;
+    support_params_default(&sp);
+    sp.angle_deg = p->angle_deg;
+    const struct mesh *ms[2] = { &d->in, &d->out };
+    struct support_metrics *out[2] = { &d->before, &d->after };
+    for (int i = 0; i < 2; i++) {
+        struct raycast *rc = raycast_new(ms[i], err);
+        if (!rc)
+            return err ? err->code : SF_ENOMEM;
+        int r = measure_support(ms[i], rc, v3(0, 0, 1), &sp, out[i], err);
+        raycast_free(rc);
+        if (r)
+            return r;
+    }
+    return measure_deviation(&d->in, &d->out, &d->dev, err);
+}
+
+static void *
+worker(void *arg)
+{
+    struct ctx *cx = arg;
+    for (;;) {
+        pthread_mutex_lock(&cx->lock);
+        int i = cx->next++;
+        pthread_mutex_unlock(&cx->lock);
+        if (i >= cx->n_dirs)
+            return NULL;
+        struct dir *d = &cx->dirs[i];
+        sf_err_clear(&d->err);
+        d->rc = run_dir(cx, d, &d->err);
+        if (d->rc == SF_OK)
+            d->rc = score_dir(cx->p, d, &d->err);
+        if (d->rc == SF_ECANCELED) { /* stop the others early */
+            pthread_mutex_lock(&cx->lock);
+            cx->next = cx->n_dirs;
+            pthread_mutex_unlock(&cx->lock);
+        }
+    }
+}
+
+static int
+pair_cmp(const void *pa, const void *pb)
+{
+    const uint32_t *a = pa, *b = pb;
+    if (a[0] != b[0])
+        return a[0] < b[0] ? -1 : 1;
+    return a[1] < b[1] ? -1 : a[1] > b[1];
+}
+
+static int
+build_face_hosts(const struct mesh *m, const struct tetmesh *tm, struct face_hosts *fh,
+                 struct sf_err *err)
+{
+    memset(fh, 0, sizeof(*fh));
+    double step = tm->pitch_mm / 2;
+    size_t n_pts = 0, cap = 0;
+    struct vec3 *pts = NULL;
+    uint32_t *owner = NULL;
+    size_t cap_o = 0;
+    for (uint32_t f = 0; f < m->n_tris; f++) {
+        struct vec3 a = m->v[m->t[f][0]], b = m->v[m->t[f][1]], c = m->v[m->t[f][2]];
+        double e = fmax(v3_len(v3_sub(b, a)), fmax(v3_len(v3_sub(c, b)), v3_len(v3_sub(a, c))));
+        int ns = (int)fmin(ceil(e / step), 24); /* interior grid; vertices use their hosts */
+        for (int i = 0; i <= ns; i++)
+            for (int j = 0; i + j <= ns; j++) {
+                int k = ns - i - j;
+                if ((i == ns || j == ns || k == ns) && ns > 0)
+                    continue;
+                if (!mem_grow((void **)&pts, &cap, n_pts + 2, sizeof(*pts)) ||
+                    !mem_grow((void **)&owner, &cap_o, n_pts + 2, sizeof(*owner))) {
+                    free(pts);
+                    free(owner);
+                    return sf_err_set(err, SF_ENOMEM, "slim: out of memory sampling faces");
+                }
+                double u = ns ? (double)i / ns : 1.0 / 3, v = ns ? (double)j / ns : 1.0 / 3;
+                pts[n_pts] = v3_add(v3_add(v3_scale(a, u), v3_scale(b, v)), v3_scale(c, 1 - u - v));
+                owner[n_pts++] = f;
+            }
+    }
+    uint32_t *host = mem_array(n_pts ? n_pts : 1, sizeof(uint32_t));
+    size_t n_pairs = n_pts + 3 * (size_t)m->n_tris;
+    uint32_t(*pairs)[2] = mem_array(n_pairs, sizeof(*pairs));
+    int rc = host && pairs ? tetmesh_locate(tm, pts, (uint32_t)n_pts, host, NULL, NULL, err)
+                           : sf_err_set(err, SF_ENOMEM, "slim: out of memory sampling faces");
+    if (rc == SF_OK) {
+        size_t k = 0;
+        for (size_t i = 0; i < n_pts; i++)
+            pairs[k][0] = host[i], pairs[k++][1] = owner[i];
+        for (uint32_t f = 0; f < m->n_tris; f++)
+            for (int c = 0; c < 3; c++)
+                pairs[k][0] = tm->host[m->t[f][c]], pairs[k++][1] = f;
+        qsort(pairs, k, sizeof(*pairs), pair_cmp);
+        size_t u = 0;
+        for (size_t i = 0; i < k; i++)
+            if (i == 0 || pair_cmp(pairs[i], pairs[u - 1]) != 0)
+                memcpy(pairs[u++], pairs[i], sizeof(*pairs));
+        uint32_t nt = 0;
+        for (size_t i = 0; i < u; i++)
+            nt += i == 0 || pairs[i][0] != pairs[i - 1][0];
+        fh->tet = mem_array(nt ? nt : 1, sizeof(uint32_t));
+        fh->start = mem_array((size_t)nt + 1, sizeof(uint32_t));
+        fh->face = mem_array(u ? u : 1, sizeof(uint32_t));
+        if (!fh->tet || !fh->start || !fh->face) {
+            rc = sf_err_set(err, SF_ENOMEM, "slim: out of memory for face hosts");
+        } else {
+            for (size_t i = 0; i < u; i++) {
+                if (i == 0 || pairs[i][0] != pairs[i - 1][0]) {
+                    fh->tet[fh->n] = pairs[i][0];
+                    fh->start[fh->n++] = (uint32_t)i;
+                }
+                fh->face[i] = pairs[i][1];
+            }
+            fh->start[fh->n] = (uint32_t)u;
+        }
+    }
+    free(pts);
+    free(owner);
+    free(host);
+    free(pairs);
+    return rc;
+}
+
+static void
+face_hosts_release(struct face_hosts *fh)
+{
+    free(fh->tet);
+    free(fh->start);
+    free(fh->face);
+    memset(fh, 0, sizeof(*fh));
+}
+
+static int
+check_params(const struct slim_params *p, struct sf_err *err)
+{
+    if (!(p->angle_deg >= 0 && p->angle_deg < 90))
+        return sf_err_set(err, SF_EINVAL, "slim: angle %g is not in [0, 90) degrees", p->angle_deg);
+    if (!(p->margin_deg >= 0 && p->margin_deg <= p->angle_deg))
+        return sf_err_set(err, SF_EINVAL, "slim: margin %g must be in [0, angle] degrees",
+                          p->margin_deg);
+    if (!(p->beta_deg >= 0 && p->beta_deg <= 90) || !(p->beta_step_deg >= 0))
+        return sf_err_set(err, SF_EINVAL, "slim: beta %g / step %g degrees is not valid",
+                          p->beta_deg, p->beta_step_deg);
+    if (!(p->max_mndr > 0) || !(p->max_andr > 0))
+        return sf_err_set(err, SF_EINVAL, "slim: deviation limits must be positive");
+    if (!(p->fix_bottom_mm >= 0) || !isfinite(p->fix_bottom_mm))
+        return sf_err_set(err, SF_EINVAL, "slim: fixed height %g mm is not valid",
+                          p->fix_bottom_mm);
+    if (p->max_iters < 1 || p->max_iters >= SLIM_CURVE_MAX || p->patience < 1)
+        return sf_err_set(err, SF_EINVAL, "slim: iterations must be in 1..%d, patience >= 1",
+                          SLIM_CURVE_MAX - 1);
+    if (p->search_direction && !(p->search_step_deg > 0 && p->search_max_deg >= 0 &&
+                                 p->search_max_deg / p->search_step_deg <= 12))
+        return sf_err_set(err, SF_EINVAL, "slim: search grid %g/%g degrees is not valid",
+                          p->search_step_deg, p->search_max_deg);
+    return SF_OK;
+}
+
+int
+slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_result *res,
+              struct sf_err *err)
+{
+    memset(res, 0, sizeof(*res));
+    mesh_init(&res->out);
+    int rc = check_params(p, err);
+    if (rc)
+        return rc;
+    if (m->n_tris == 0)
+        return sf_err_set(err, SF_EINVAL, "slim: the part has no triangles");
+    double t0 = now_s();
+    struct tetmesh tm;
+    rc = tetmesh_build(m, &p->tet, &tm, err);
+    if (rc)
+        return rc;
+    struct ctx cx = { m, p, &tm, { 0 }, PTHREAD_MUTEX_INITIALIZER, 0, 1, NULL };
+    rc = build_face_hosts(m, &tm, &cx.fh, err);
+    if (rc) {
+        tetmesh_release(&tm);
+        return rc;
+    }
+    res->setup_s = now_s() - t0;
+    int steps = p->search_direction ? (int)floor(p->search_max_deg / p->search_step_deg + 1e-9) : 0;
+    cx.n_dirs = (2 * steps + 1) * (2 * steps + 1);
+    cx.dirs = mem_calloc((size_t)cx.n_dirs, sizeof(*cx.dirs));
+    if (!cx.dirs) {
+        face_hosts_release(&cx.fh);
+        tetmesh_release(&tm);
+        return sf_err_set(err, SF_ENOMEM, "slim: out of memory");
+    }
+    for (int i = 0; i < cx.n_dirs; i++) {
+        int ix = i % (2 * steps + 1) - steps, iy = i / (2 * steps + 1) - steps;
+        double ax = ix * p->search_step_deg * M_PI / 180, ay = iy * p->search_step_deg * M_PI / 180;
+        cx.dirs[i].index = i;
+        cx.dirs[i].rot = m3_mul(m3_axis_angle(v3(0, 1, 0), ay), m3_axis_angle(v3(1, 0, 0), ax));
+        if (ix == 0 && iy == 0)
+            cx.dirs[i].rot = m3_identity();
+        mesh_init(&cx.dirs[i].in);
+        mesh_init(&cx.dirs[i].out);
+    }
+    long cores = sysconf(_SC_NPROCESSORS_ONLN);
+    int nt = p->threads > 0 ? p->threads : (int)(cores > 0 ? cores : 1);
+    nt = nt < cx.n_dirs ? nt : cx.n_dirs;
+    pthread_t th[64];
+    int started = 0;
+    for (int i = 1; i < nt && i < 64; i++)
+        started += pthread_create(&th[started], NULL, worker, &cx) == 0;
+    worker(&cx);
+    for (int i = 0; i < started; i++)
+        pthread_join(th[i], NULL);
+    /* pick: least support volume, then fewest anchors; errors win over results */
+    int best = -1;
+    for (int i = 0; i < cx.n_dirs; i++) {
+        struct dir *d = &cx.dirs[i];
+        if (d->rc) {
+            rc = d->rc;
+            if (err)
+                *err = d->err;
+            best = -1;
+            break;
+        }
+        if (best < 0 || d->after.volume_mm3 < cx.dirs[best].after.volume_mm3 - 1e-9 ||
+            (fabs(d->after.volume_mm3 - cx.dirs[best].after.volume_mm3) <= 1e-9 &&
+             d->after.n_anchors < cx.dirs[best].after.n_anchors))
+            best = i;
+    }
+    if (best >= 0) {
+        struct dir *d = &cx.dirs[best];
+        res->out = d->out;
+        mesh_init(&d->out);
+        res->rotation = d->rot;
+        res->before = d->before;
+        res->after = d->after;
+        res->dev = d->dev;
+        memcpy(res->curve, d->curve, sizeof(res->curve));
+        res->n_curve = d->n_curve;
+        res->best_iter = d->best_iter;
+        res->n_runs = d->n_runs;
+        res->beta_deg = d->beta_deg;
+        res->selfx_input = d->selfx_in;
+        res->selfx_out = d->selfx_out;
+        res->n_rejected = d->n_rejected;
+        res->n_inverted = d->n_inverted;
+    }
+    res->n_dirs = cx.n_dirs;
+    for (int i = 0; i < cx.n_dirs; i++) {
+        const struct slim_timing *t = &cx.dirs[i].timing;
+        res->timing.iterations += t->iterations;
+        res->timing.slow_polar += t->slow_polar;
+        res->timing.rotated += t->rotated;
+        res->timing.factor_s += t->factor_s;
+        res->timing.local_s += t->local_s;
+        res->timing.minrot_s += t->minrot_s;
+        res->timing.rhs_s += t->rhs_s;
+        res->timing.solve_s += t->solve_s;
+        res->timing.part_s += t->part_s;
+        res->timing.choose_s += t->choose_s;
+    }
+    res->tet_verts = tm.n_verts;
+    res->tet_tets = tm.n_tets;
+    res->tet_outside = tm.n_outside;
+    for (uint32_t t = 0; t < tm.n_tets; t++)
+        res->tet_surface += tm.surf[t] != 0;
+    for (int i = 0; i < cx.n_dirs; i++) {
+        mesh_release(&cx.dirs[i].in);
+        mesh_release(&cx.dirs[i].out);
+    }
+    free(cx.dirs);
+    face_hosts_release(&cx.fh);
+    tetmesh_release(&tm);
+    res->total_s = now_s() - t0;
+    return rc;
+}

@@ -1,0 +1,119 @@
+/*
+ * slim.h - support slimming by volumetric as-rigid-as-possible
+ * deformation (Hu, Jin & Wang, "Support slimming for single material based
+ * additive manufacturing", CAD 2015; DESIGN.md method 2).
+ *
+ * The part is embedded in a coarse enclosing tet mesh (tetmesh.h); a
+ * local/global ARAP loop (arap.h) rotates the tets whose surface faces
+ * overhang toward safe orientations by the minimal rotation, keeping the
+ * bottom fixed; the part follows through barycentric coordinates.  The
+ * iterate with the fewest risky faces is kept; if the deviation limits
+ * (MNDR, ANDR) fail, the penalty angle beta is raised and the loop runs
+ * again.  Optionally, print directions on a grid of rotations about x and
+ * y are each optimized (in parallel) and the one needing the least support
+ * volume wins (the paper's extension).  A result never has inverted tets
+ * or new self-intersections: it falls back to the best clean iterate, and
+ * at worst to the input.
+ *
+ * Thread-safety: slim_optimize may run on any thread; it starts its own
+ * workers for the direction search.  The progress callback may be called
+ * from those workers (serialized: never two at once).
+ */
+#ifndef SF_GEOM_SLIM_H
+#define SF_GEOM_SLIM_H
+
+#include <stdatomic.h>
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "../mesh/mesh.h"
+#include "measure.h"
+#include "tetmesh.h"
+
+/* An axis-aligned box of the input frame whose part stays where it is. */
+struct slim_box {
+    struct vec3 lo, hi; /* mm */
+};
+
+/* What the progress callback sees after each iteration. */
+struct slim_progress {
+    int dir, n_dirs;     /* direction being optimized (search), 0 and 1 otherwise */
+    int run;             /* beta round, from 0 */
+    double beta_deg;     /* penalty angle of this round */
+    int iter, max_iters; /* iteration just done, from 1 */
+    uint32_t n_risky;    /* risky faces of the part now */
+    double mndr, andr;   /* deviation now */
+};
+
+struct slim_params {
+    double angle_deg;     /* alpha: self-supporting angle from vertical (45) */
+    double margin_deg;    /* the minimal rotation aims this far past alpha (5): the global
+                             step realises only part of each target, so aiming at the
+                             threshold itself stalls just short of it */
+    double beta_deg;      /* starting penalty angle (0) */
+    double beta_step_deg; /* raise per round when the deviation limits fail (5) */
+    double beta_max_deg;  /* give up raising past this (45) */
+    double max_mndr;      /* limit on max displacement / bbox diagonal (0.15) */
+    double max_andr;      /* limit on mean displacement / bbox diagonal (0.05) */
+    double fix_bottom_mm; /* everything this close to the bed stays fixed (2) */
+    const struct slim_box *fix_boxes; /* more fixed regions (may be NULL) */
+    int n_fix_boxes;
+    int max_iters;             /* per round (100) */
+    int patience;              /* stop when the risky count has not dropped for this many (5) */
+    struct tetmesh_params tet; /* enclosing tet mesh */
+    bool search_direction;     /* also try rotations about x and y (false) */
+    double search_step_deg;    /* grid step of the search (15) */
+    double search_max_deg;     /* largest tilt about each axis (30) */
+    int threads;               /* workers for the search (0: one per core) */
+    void (*progress)(void *ud, const struct slim_progress *pr); /* optional */
+    void *progress_ud;
+    const atomic_bool *cancel; /* optional: set to stop with SF_ECANCELED */
+};
+
+void slim_params_default(struct slim_params *p);
+
+#define SLIM_CURVE_MAX 1024 /* risky-face counts kept per result */
+
+struct slim_result {
+    struct mesh out;      /* the slimmed part in the print orientation (mesh_release) */
+    struct mat3 rotation; /* applied to the input first (identity unless searched) */
+    struct support_metrics before, after; /* ray-cast metrics, input (rotated) vs output */
+    struct deviation dev;                 /* MNDR / ANDR of out against the rotated input */
+    uint32_t curve[SLIM_CURVE_MAX]; /* risky faces per iteration of the chosen round; [0] = input */
+    int n_curve;
+    int best_iter;              /* iteration returned (0: the input itself) */
+    int n_runs;                 /* beta rounds run for the chosen direction */
+    double beta_deg;            /* penalty angle of the returned iterate */
+    int n_dirs;                 /* directions optimized */
+    uint32_t n_inverted;        /* inverted tets in the returned result (0 by construction) */
+    int selfx_input, selfx_out; /* self-intersecting edges before and after */
+    uint32_t n_rejected;        /* better iterates rejected: inverted tets, new
+                                   self-intersections or more support volume */
+    /* tet mesh and timing */
+    uint32_t tet_verts, tet_tets, tet_surface, tet_outside;
+    double setup_s, total_s; /* tet mesh and face hosts; everything */
+    struct slim_timing {
+        int iterations;      /* local/global iterations run, all rounds and directions */
+        uint64_t rotated;    /* minimal rotations applied, summed over iterations */
+        uint64_t slow_polar; /* nearest rotations that took the scalar path */
+        double factor_s;     /* assembling and factorizing L (once per direction) */
+        double local_s;      /* deformation gradients and nearest rotations */
+        double minrot_s;     /* minimal rotations */
+        double rhs_s;        /* right-hand sides */
+        double solve_s;      /* back-substitutions */
+        double part_s;       /* mapping the part, measuring it, finding the drives */
+        double choose_s;     /* checking the kept iterates (self-intersection, ray cast) */
+    } timing;
+};
+
+/*
+ * Slim part m.  res is filled (release with slim_result_release).  Errors:
+ * SF_EINVAL (bad parameters or a part TetGen cannot enclose), SF_ENOMEM,
+ * SF_ECANCELED.
+ */
+int slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_result *res,
+                  struct sf_err *err);
+void slim_result_release(struct slim_result *res);
+
+#endif

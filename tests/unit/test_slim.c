@@ -1,0 +1,396 @@
+/*
+ * test_slim.c - support slimming on generated parts: the tet mesh and its
+ * embedding, the ARAP global step, self-intersection, and the behaviour
+ * of the whole loop (Hu 2015): a tee's arms rise, a cube stays, fixed
+ * vertices stay, limits hold.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../src/base/mem.h"
+#include "../../src/geom/arap.h"
+#include "../../src/geom/selfx.h"
+#include "../../src/geom/slim.h"
+#include "../../src/geom/tetmesh.h"
+#include "../../src/mesh/shapes.h"
+#include "../t.h"
+
+/* Coarser than the defaults so the sanitizer build stays quick. */
+static void
+quick_params(struct slim_params *p)
+{
+    slim_params_default(p);
+    p->tet.cells = 12;
+    p->threads = 1;
+}
+
+/* a and b side by side (b moved by off) as one mesh */
+static int
+concat(struct mesh *out, const struct mesh *a, const struct mesh *b, struct vec3 off,
+       struct sf_err *err)
+{
+    int rc = mesh_alloc(out, a->n_verts + b->n_verts, a->n_tris + b->n_tris, err);
+    if (rc)
+        return rc;
+    memcpy(out->v, a->v, sizeof(*a->v) * a->n_verts);
+    for (uint32_t i = 0; i < b->n_verts; i++)
+        out->v[a->n_verts + i] = v3_add(b->v[i], off);
+    memcpy(out->t, a->t, sizeof(*a->t) * a->n_tris);
+    for (uint32_t i = 0; i < b->n_tris; i++)
+        for (int k = 0; k < 3; k++)
+            out->t[a->n_tris + i][k] = b->t[i][k] + a->n_verts;
+    return SF_OK;
+}
+
+static int
+check_embedding(const struct mesh *m, struct sf_err *err)
+{
+    struct tetmesh_params tp;
+    struct tetmesh tm;
+    tetmesh_params_default(&tp);
+    tp.cells = 12;
+    int rc = tetmesh_build(m, &tp, &tm, err);
+    if (rc)
+        return rc;
+    int ok = tm.n_outside == 0 && tm.n_part == m->n_verts;
+    for (uint32_t t = 0; t < tm.n_tets; t++) {
+        ok &= tetmesh_volume(&tm, tm.x, t) > 0;
+        int ns = 0;
+        for (int f = 0; f < 4; f++)
+            ns += tm.surf[t] >> f & 1;
+        ok &= ns <= 2; /* 3+ were split */
+    }
+    struct vec3 *back = mem_array(m->n_verts, sizeof(*back));
+    tetmesh_map(&tm, tm.x, back);
+    for (uint32_t v = 0; back && v < m->n_verts; v++) {
+        ok &= v3_len(v3_sub(back[v], m->v[v])) < 1e-9;
+        for (int k = 0; k < 4; k++)
+            ok &= tm.bary[v][k] >= -1e-9;
+    }
+    if (!ok)
+        fprintf(stderr, "  embedding: %u outside, %u verts, %u tets\n", tm.n_outside, tm.n_verts,
+                tm.n_tets);
+    free(back);
+    tetmesh_release(&tm);
+    return ok ? SF_OK : SF_EBUG;
+}
+
+T_CASE(tetmesh_encloses_any_genus_and_several_shells)
+{
+    struct mesh torus, box, two, sos;
+    struct sf_err err;
+    mesh_init(&torus);
+    mesh_init(&box);
+    mesh_init(&two);
+    mesh_init(&sos);
+    T_OK(shape_torus(&torus, 20, 6, 32, 16, &err), &err);
+    T_OK(check_embedding(&torus, &err), &err); /* genus 1 */
+    T_OK(shape_box(&box, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
+    T_OK(concat(&two, &box, &box, v3(25, 0, 0), &err), &err);
+    T_OK(check_embedding(&two, &err), &err); /* two shells */
+    T_OK(shape_sphere_on_stem(&sos, &err), &err);
+    T_OK(check_embedding(&sos, &err), &err);
+    mesh_release(&torus);
+    mesh_release(&box);
+    mesh_release(&two);
+    mesh_release(&sos);
+}
+
+T_CASE(tetmesh_respects_the_vertex_target)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct tetmesh_params tp;
+    struct tetmesh tm;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    tetmesh_params_default(&tp);
+    tp.cells = 16;
+    tp.max_verts = 800;
+    T_OK(tetmesh_build(&m, &tp, &tm, &err), &err);
+    T_TRUE(tm.n_verts <= 800);
+    T_EQ_INT(tm.n_outside, 0);
+    tetmesh_release(&tm);
+    mesh_release(&m);
+}
+
+T_CASE(global_step_reproduces_a_rigid_motion)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct tetmesh_params tp;
+    struct tetmesh tm;
+    mesh_init(&m);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    tetmesh_params_default(&tp);
+    tp.cells = 10;
+    T_OK(tetmesh_build(&m, &tp, &tm, &err), &err);
+    uint8_t *fixed = mem_calloc(tm.n_verts, 1);
+    struct vec3 *x = mem_array(tm.n_verts, sizeof(*x));
+    T_TRUE(fixed && x);
+    struct mat3 r = m3_axis_angle(v3_normalize(v3(1, 2, 3)), 0.7);
+    struct vec3 t = v3(5, -3, 11);
+    for (uint32_t v = 0; v < tm.n_verts; v++) {
+        fixed[v] = tm.x[v].z < 3;
+        /* fixed vertices carry the motion; free ones start anywhere */
+        x[v] = fixed[v] ? v3_add(m3_mul_v(r, tm.x[v]), t) : v3(0, 0, 0);
+    }
+    struct arap *a = arap_new(&tm, fixed, &err);
+    T_TRUE(a != NULL);
+    arap_set_rotation(a, r);
+    T_OK(arap_global(a, x, &err), &err);
+    double worst = 0;
+    for (uint32_t v = 0; v < tm.n_verts; v++)
+        worst = fmax(worst, v3_len(v3_sub(x[v], v3_add(m3_mul_v(r, tm.x[v]), t))));
+    T_EQ_DBL(worst, 0, 1e-9);
+    /* and the local step finds the same rotation everywhere */
+    arap_local(a, x, v3(0, 0, 1), 0.7, 0, NULL, 0, NULL);
+    T_OK(arap_global(a, x, &err), &err);
+    worst = 0;
+    for (uint32_t v = 0; v < tm.n_verts; v++)
+        worst = fmax(worst, v3_len(v3_sub(x[v], v3_add(m3_mul_v(r, tm.x[v]), t))));
+    T_EQ_DBL(worst, 0, 1e-9);
+    arap_free(a);
+    /* nothing fixed: no unique solution, a clear error */
+    memset(fixed, 0, tm.n_verts);
+    T_TRUE(arap_new(&tm, fixed, &err) == NULL);
+    T_ERR(err.code, SF_EINVAL, &err, "no fixed vertex");
+    free(fixed);
+    free(x);
+    tetmesh_release(&tm);
+    mesh_release(&m);
+}
+
+T_CASE(selfx_sees_crossing_shells_only)
+{
+    struct mesh a, two, apart;
+    struct sf_err err;
+    mesh_init(&a);
+    mesh_init(&two);
+    mesh_init(&apart);
+    T_OK(shape_box(&a, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
+    T_EQ_INT(selfx_count(&a, &err), 0);
+    T_OK(concat(&two, &a, &a, v3(5, 3, 2), &err), &err);
+    T_TRUE(selfx_count(&two, &err) > 0);
+    T_OK(concat(&apart, &a, &a, v3(12, 0, 0), &err), &err);
+    T_EQ_INT(selfx_count(&apart, &err), 0);
+    mesh_release(&a);
+    mesh_release(&two);
+    mesh_release(&apart);
+}
+
+T_CASE(cube_is_unchanged)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result r;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(20, 20, 20), &err), &err);
+    quick_params(&p);
+    p.tet.cells = 8;
+    T_OK(slim_optimize(&m, &p, &r, &err), &err);
+    T_EQ_INT(r.best_iter, 0);
+    T_EQ_INT(r.out.n_verts, m.n_verts);
+    T_TRUE(memcmp(r.out.v, m.v, sizeof(*m.v) * m.n_verts) == 0);
+    T_EQ_INT(r.after.n_risky, 0);
+    T_EQ_DBL(r.dev.mndr, 0, 0);
+    slim_result_release(&r);
+    mesh_release(&m);
+}
+
+/* Lowest z of the tee's arm-tip vertices (|x| = 25 in the input) per side. */
+static void
+tip_heights(const struct mesh *in, const struct mesh *out, double *left, double *right)
+{
+    *left = *right = INFINITY;
+    for (uint32_t v = 0; v < in->n_verts; v++) {
+        if (in->v[v].x < -24.9)
+            *left = fmin(*left, out->v[v].z);
+        if (in->v[v].x > 24.9)
+            *right = fmin(*right, out->v[v].z);
+    }
+}
+
+T_CASE(tee_arms_rise_until_safe)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result r;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    slim_params_default(&p);
+    /* the tee's arms are flat: at alpha = 75 they are safe once tilted 15 degrees,
+       a deformation past the default deviation limits */
+    p.angle_deg = 75;
+    p.max_mndr = 0.5;
+    p.max_andr = 0.5;
+    T_OK(slim_optimize(&m, &p, &r, &err), &err);
+    T_EQ_INT(r.before.n_risky, 4);
+    T_EQ_INT(r.after.n_risky, 0);
+    T_EQ_DBL(r.after.volume_mm3, 0, 1e-9);
+    T_TRUE(r.before.volume_mm3 > 1000);
+    double left, right;
+    tip_heights(&m, &r.out, &left, &right);
+    T_TRUE(left > 31 && right > 31); /* both rose from z = 30 */
+    T_EQ_INT(r.n_inverted, 0);
+    T_TRUE(r.curve[r.n_curve - 1] <= r.curve[0]);
+    slim_result_release(&r);
+    mesh_release(&m);
+}
+
+T_CASE(tee_at_45_degrees_stays_within_the_limits)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result r;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    quick_params(&p);
+    p.beta_step_deg = 15; /* fewer rounds: the sanitizer build is slow */
+    T_OK(slim_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(r.dev.mndr <= p.max_mndr && r.dev.andr <= p.max_andr);
+    T_TRUE(r.after.volume_mm3 <= r.before.volume_mm3);
+    T_TRUE(r.after.n_risky <= r.before.n_risky);
+    double left, right;
+    tip_heights(&m, &r.out, &left, &right);
+    T_TRUE(left >= 30 - 1e-9 && right >= 30 - 1e-9); /* nothing sagged */
+    T_TRUE(r.selfx_out <= r.selfx_input);
+    slim_result_release(&r);
+    mesh_release(&m);
+}
+
+T_CASE(fixed_vertices_never_move)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result r;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    quick_params(&p);
+    p.angle_deg = 75;
+    p.max_mndr = 0.5;
+    p.max_andr = 0.5;
+    struct slim_box box = { v3(-30, -1, 28), v3(-6, 21, 36) }; /* the left arm */
+    p.fix_boxes = &box;
+    p.n_fix_boxes = 1;
+    p.fix_bottom_mm = 3;
+    T_OK(slim_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(r.best_iter > 0); /* it did deform */
+    int n_fixed = 0, n_moved = 0;
+    for (uint32_t v = 0; v < m.n_verts; v++) {
+        struct vec3 a = m.v[v];
+        bool in_box = a.x >= box.lo.x && a.x <= box.hi.x && a.z >= box.lo.z && a.z <= box.hi.z;
+        if (a.z <= 3 || in_box) {
+            n_fixed++;
+            n_moved += memcmp(&r.out.v[v], &a, sizeof(a)) != 0;
+        }
+    }
+    T_TRUE(n_fixed >= 8);
+    T_EQ_INT(n_moved, 0);
+    double left, right;
+    tip_heights(&m, &r.out, &left, &right);
+    T_EQ_DBL(left, 30, 0);
+    T_TRUE(right > 31); /* the free arm still rose */
+    slim_result_release(&r);
+    mesh_release(&m);
+}
+
+T_CASE(bad_parameters_are_rejected)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result r;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
+    quick_params(&p);
+    p.angle_deg = 95;
+    T_ERR(slim_optimize(&m, &p, &r, &err), SF_EINVAL, &err, "angle 95");
+    quick_params(&p);
+    p.max_mndr = 0;
+    T_ERR(slim_optimize(&m, &p, &r, &err), SF_EINVAL, &err, "deviation limits");
+    quick_params(&p);
+    p.max_iters = 0;
+    T_ERR(slim_optimize(&m, &p, &r, &err), SF_EINVAL, &err, "iterations");
+    struct mesh empty;
+    mesh_init(&empty);
+    quick_params(&p);
+    T_ERR(slim_optimize(&empty, &p, &r, &err), SF_EINVAL, &err, "no triangles");
+    mesh_release(&m);
+}
+
+static void
+cancel_at_third(void *ud, const struct slim_progress *pr)
+{
+    if (pr->iter == 3)
+        atomic_store((atomic_bool *)ud, true);
+}
+
+T_CASE(cancel_stops_with_ecanceled)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result r;
+    atomic_bool cancel = false;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    quick_params(&p);
+    p.cancel = &cancel;
+    p.progress = cancel_at_third;
+    p.progress_ud = &cancel;
+    T_ERR(slim_optimize(&m, &p, &r, &err), SF_ECANCELED, &err, "cancel");
+    slim_result_release(&r);
+    mesh_release(&m);
+}
+
+T_CASE(direction_search_tries_the_grid)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result r, plain;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    quick_params(&p);
+    p.tet.cells = 8;
+    p.max_iters = 10;
+    T_OK(slim_optimize(&m, &p, &plain, &err), &err);
+    p.search_direction = true;
+    p.search_step_deg = 30;
+    p.search_max_deg = 30;
+    p.threads = 2;
+    T_OK(slim_optimize(&m, &p, &r, &err), &err);
+    T_EQ_INT(r.n_dirs, 9);
+    T_EQ_DBL(m3_det(r.rotation), 1, 1e-12);
+    /* the untilted direction is on the grid, so the search is never worse */
+    T_TRUE(r.after.volume_mm3 <= plain.after.volume_mm3 + 1e-6);
+    slim_result_release(&r);
+    slim_result_release(&plain);
+    mesh_release(&m);
+}
+
+T_CASE(shared_mesh_support_drops_within_limits)
+{
+    const char *path = t_shared_mesh("anchor.stl");
+    T_SKIP_UNLESS(path, "../shared/meshes is absent");
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result r;
+    mesh_init(&m);
+    T_OK(mesh_load(path, &m, NULL, &err), &err);
+    quick_params(&p);
+    T_OK(slim_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(r.dev.mndr <= 0.15 && r.dev.andr <= 0.05);
+    T_TRUE(r.after.n_risky <= r.before.n_risky);
+    T_TRUE(r.after.volume_mm3 <= r.before.volume_mm3);
+    T_TRUE(r.selfx_out <= r.selfx_input);
+    slim_result_release(&r);
+    mesh_release(&m);
+}
