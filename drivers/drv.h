@@ -41,6 +41,7 @@ enum drv_event {
     DRV_EV_TEMPS,         /* new temperature report */
     DRV_EV_JOB_DONE,      /* the job's last line was acknowledged and executed */
     DRV_EV_JOB_FAILED,    /* the job stopped; status.message says why, lines_acked where */
+    DRV_EV_JOB_CANCELLED, /* cancel() finished: end sequence acknowledged (added for issue 6) */
 };
 
 struct drv_status {
@@ -52,8 +53,6 @@ struct drv_status {
     double progress;        /* 0..1 */
     int64_t job_started_ms; /* loop time the job started */
     char message[160];      /* last error or notice, for operators */
-    bool cancelled;         /* the job ended by cancel(): DRV_EV_JOB_FAILED after the
-                               end sequence, message "cancelled ..." (added for issue 6) */
 };
 
 struct drv_caps {

@@ -160,7 +160,7 @@ job_close(struct marlin *m)
     m->inj_len = 0;
 }
 
-/* End the job with ev (DONE or FAILED); the state is the caller's. */
+/* End the job with ev (DONE, FAILED, CANCELLED); the state is the caller's. */
 static void
 job_end(struct marlin *m, enum drv_event ev)
 {
@@ -403,9 +403,8 @@ check_job_progress(struct marlin *m)
     } else if (m->mode == J_CANCELLING) {
         message(m, "cancelled at line %llu of %llu", (unsigned long long)st->lines_acked,
                 (unsigned long long)st->lines_total);
-        st->cancelled = true;
         set_state(m, DRV_IDLE);
-        job_end(m, DRV_EV_JOB_FAILED);
+        job_end(m, DRV_EV_JOB_CANCELLED);
     }
 }
 
@@ -962,7 +961,6 @@ m_start_job(struct drv *d, const char *path, struct sf_err *err)
     d->status.lines_acked = 0;
     d->status.progress = 0;
     d->status.job_started_ms = loop_now_ms(d->loop);
-    d->status.cancelled = false;
     message(m, "printing '%s'", path);
     m->mode = J_RUN;
     set_state(m, DRV_PRINTING);

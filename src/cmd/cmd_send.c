@@ -90,6 +90,7 @@ on_event(struct drv *d, enum drv_event ev, void *ud)
         loop_stop(c->loop);
         break;
     case DRV_EV_JOB_FAILED:
+    case DRV_EV_JOB_CANCELLED:
         draw(c, true);
         fprintf(stderr, "slimfarm send: %s\n", d->status.message);
         c->result = 1;

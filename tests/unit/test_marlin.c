@@ -47,10 +47,10 @@ on_event(struct drv *d, enum drv_event ev, void *ud)
     struct run *r = ud;
     if (ev == DRV_EV_JOB_DONE)
         r->done++;
-    else if (ev == DRV_EV_JOB_FAILED && d->status.cancelled)
-        r->cancelled++;
     else if (ev == DRV_EV_JOB_FAILED)
         r->failed++;
+    else if (ev == DRV_EV_JOB_CANCELLED)
+        r->cancelled++;
     else if (ev == DRV_EV_STATE && r->n_states < 16)
         r->states[r->n_states++] = d->status.state;
     else if (ev == DRV_EV_PROGRESS) {
