@@ -157,8 +157,7 @@ match_log(struct run *r, size_t *extra, bool *dup_or_reorder)
         }
         if (host_line(got[i]))
             continue;
-        if (getenv("T_VERBOSE"))
-            printf("    extra: %s\n", got[i]);
+
         /* a job line out of place (a duplicate or a skip) */
         bool fragment = false;
         for (size_t k = 0; k < n_want; k++) {
@@ -167,6 +166,15 @@ match_log(struct run *r, size_t *extra, bool *dup_or_reorder)
             if (strncmp(got[i], want[k], strlen(got[i])) == 0 && strlen(got[i]) < strlen(want[k]))
                 fragment = true;
         }
+        /* The driver's unnumbered M105 probe with one byte garbled may run as
+           another command (drivers/README.md, "Known limits"). */
+        size_t diff = 0;
+        for (size_t k = 0; strlen(got[i]) == 4 && k < 4; k++)
+            diff += got[i][k] != "M105"[k];
+        if (strlen(got[i]) == 4 && diff == 1)
+            fragment = true;
+        if (getenv("T_VERBOSE") || (fragment && r->fragments))
+            printf("    %s: %s\n", fragment ? "garbled" : "extra", got[i]);
         if (fragment && r->fragments)
             (*r->fragments)++;
         else
