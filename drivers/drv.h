@@ -36,11 +36,11 @@ enum drv_state {
 };
 
 enum drv_event {
-    DRV_EV_STATE,      /* status.state changed */
-    DRV_EV_PROGRESS,   /* lines acknowledged moved on (rate-limited by the driver) */
-    DRV_EV_TEMPS,      /* new temperature report */
-    DRV_EV_JOB_DONE,   /* the job's last line was acknowledged and executed */
-    DRV_EV_JOB_FAILED, /* the job stopped; status.message says why, lines_acked where */
+    DRV_EV_STATE,         /* status.state changed */
+    DRV_EV_PROGRESS,      /* lines acknowledged moved on (rate-limited by the driver) */
+    DRV_EV_TEMPS,         /* new temperature report */
+    DRV_EV_JOB_DONE,      /* the job's last line was acknowledged and executed */
+    DRV_EV_JOB_FAILED,    /* the job stopped; status.message says why, lines_acked where */
     DRV_EV_JOB_CANCELLED, /* cancel() finished: end sequence acknowledged (added for issue 6) */
 };
 
@@ -56,11 +56,11 @@ struct drv_status {
 };
 
 struct drv_caps {
-    char firmware[64];   /* FIRMWARE_NAME from M115, or the server's name */
-    bool advanced_ok;    /* replies carry ok N P B */
+    char firmware[64];    /* FIRMWARE_NAME from M115, or the server's name */
+    bool advanced_ok;     /* replies carry ok N P B */
     bool autoreport_temp; /* M155 supported */
-    bool host_actions;   /* // action: commands understood */
-    int buffer_lines;    /* command lines the firmware can queue (BUFSIZE) */
+    bool host_actions;    /* // action: commands understood */
+    int buffer_lines;     /* command lines the firmware can queue (BUFSIZE) */
 };
 
 /* How to reach a printer (from the farm config). */
@@ -96,9 +96,9 @@ struct drv_ops {
 struct drv {
     const struct drv_ops *ops;
     struct loop *loop;
-    char name[64];          /* printer name, for logs */
-    drv_event_fn on_event;  /* owner's callback (loop thread) */
-    void *ud;               /* its argument */
+    char name[64];         /* printer name, for logs */
+    drv_event_fn on_event; /* owner's callback (loop thread) */
+    void *ud;              /* its argument */
     struct drv_status status;
     struct drv_caps caps;
 };
@@ -107,8 +107,8 @@ struct drv {
  * Create the driver for cfg->kind on loop l.  Nothing is opened yet.
  * SF_EINVAL / SF_EUNSUPP with a message for a bad or unknown config.
  */
-struct drv *drv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event,
-                    void *ud, struct sf_err *err);
+struct drv *drv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
+                    struct sf_err *err);
 /* close() if open, then destroy.  NULL is fine. */
 void drv_free(struct drv *d);
 

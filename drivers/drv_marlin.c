@@ -38,21 +38,21 @@
 #include "marlin_reply.h"
 #include "transport.h"
 
-#define RING_LINES      512  /* numbered lines kept for resends */
-#define WINDOW_MAX      32   /* most lines in flight however large B claims */
-#define WINDOW_DEFAULT  2    /* without ADVANCED_OK: safe for any BUFSIZE >= 2 */
-#define INJECT_MAX      32   /* host lines waiting (park, resume, end sequences) */
-#define HELLO_TRIES     5    /* handshake attempts before giving up */
-#define PROBES_MAX      5    /* unanswered probes before the job fails */
-#define POLL_MS         2000 /* M105 polling / M155 interval */
-#define PROGRESS_MS     250  /* progress events at most this often */
-#define PINGPONG_LINES  64   /* clean lines in ping-pong after a resend */
-#define TAG_HOST        (-1) /* a line the driver added */
-#define TAG_M105        (-2) /* a numbered M105 poll */
-#define PARK_X_MM       0.0  /* where a paused head waits */
-#define PARK_Y_MM       0.0
-#define PARK_LIFT_MM    10.0
-#define RETRACT_MM      2.0
+#define RING_LINES     512  /* numbered lines kept for resends */
+#define WINDOW_MAX     32   /* most lines in flight however large B claims */
+#define WINDOW_DEFAULT 2    /* without ADVANCED_OK: safe for any BUFSIZE >= 2 */
+#define INJECT_MAX     32   /* host lines waiting (park, resume, end sequences) */
+#define HELLO_TRIES    5    /* handshake attempts before giving up */
+#define PROBES_MAX     5    /* unanswered probes before the job fails */
+#define POLL_MS        2000 /* M105 polling / M155 interval */
+#define PROGRESS_MS    250  /* progress events at most this often */
+#define PINGPONG_LINES 64   /* clean lines in ping-pong after a resend */
+#define TAG_HOST       (-1) /* a line the driver added */
+#define TAG_M105       (-2) /* a numbered M105 poll */
+#define PARK_X_MM      0.0  /* where a paused head waits */
+#define PARK_Y_MM      0.0
+#define PARK_LIFT_MM   10.0
+#define RETRACT_MM     2.0
 
 enum phase { PH_OFF, PH_HELLO, PH_READY };
 enum jobmode { J_NONE, J_RUN, J_PAUSED, J_CANCELLING };
@@ -67,8 +67,8 @@ struct motion {
 };
 
 struct marlin {
-    struct drv base;          /* first: drv.h casts */
-    char port[256];           /* transport spec */
+    struct drv base; /* first: drv.h casts */
+    char port[256];  /* transport spec */
     int baud;
     int timeout_ms;           /* silence before a probe */
     int cfg_window;           /* 0 auto */
@@ -77,38 +77,38 @@ struct marlin {
     uint64_t timer;           /* periodic housekeeping */
     enum phase phase;
     int hello_tries, hello_oks;
-    int64_t hello_ms;         /* last hello sent */
+    int64_t hello_ms;                 /* last hello sent */
     char rx[SF_PRINTER_LINE_MAX + 1]; /* partial reply line */
     size_t rx_len;
-    bool rx_skip;             /* dropping an over-long line */
+    bool rx_skip; /* dropping an over-long line */
     struct linewin win;
-    int max_b;                /* largest ADVANCED_OK B seen */
-    int full_window;          /* window when the link is clean */
-    int pingpong_left;        /* acknowledged lines to go before the full window returns */
-    bool settling;            /* after a Resend: wait for the stale replies to stop */
-    int settle_ms;            /* quiet time that ends settling (3 line times) */
-    int64_t last_reply_ms;    /* last complete reply line */
-    uint64_t settle_timer;    /* pending settle check */
-    uint64_t line_timer;      /* pending check of a reply line without its newline */
-    int64_t progress_ms;      /* last protocol progress (ok, resend, busy...) */
-    int64_t last_rx_ms;       /* last byte of any kind */
-    int probes;               /* unanswered probes in a row */
-    bool probe_out;           /* an unnumbered M105 probe awaits its ok */
-    bool probe_garbled;       /* it came back as an unknown command: its ok is next */
-    int64_t poll_ms;          /* next M105 poll (no auto-report) */
-    long bad_resend;          /* resend target out of range */
-    int bad_resend_count;     /* times in a row it was asked for */
+    int max_b;             /* largest ADVANCED_OK B seen */
+    int full_window;       /* window when the link is clean */
+    int pingpong_left;     /* acknowledged lines to go before the full window returns */
+    bool settling;         /* after a Resend: wait for the stale replies to stop */
+    int settle_ms;         /* quiet time that ends settling (3 line times) */
+    int64_t last_reply_ms; /* last complete reply line */
+    uint64_t settle_timer; /* pending settle check */
+    uint64_t line_timer;   /* pending check of a reply line without its newline */
+    int64_t progress_ms;   /* last protocol progress (ok, resend, busy...) */
+    int64_t last_rx_ms;    /* last byte of any kind */
+    int probes;            /* unanswered probes in a row */
+    bool probe_out;        /* an unnumbered M105 probe awaits its ok */
+    bool probe_garbled;    /* it came back as an unknown command: its ok is next */
+    int64_t poll_ms;       /* next M105 poll (no auto-report) */
+    long bad_resend;       /* resend target out of range */
+    int bad_resend_count;  /* times in a row it was asked for */
     char inject[INJECT_MAX][LINEWIN_LINE_MAX];
     int inj_head, inj_len;
     /* job */
     enum jobmode mode;
     FILE *job;
     char job_path[256];
-    long job_index;           /* next job line (0-based command index) to push */
+    long job_index; /* next job line (0-based command index) to push */
     bool job_eof;
-    bool final_pushed;        /* M400 after the last line */
-    long last_tag;            /* highest job index acknowledged + 1 */
-    int64_t progress_ev_ms;   /* last DRV_EV_PROGRESS */
+    bool final_pushed;      /* M400 after the last line */
+    long last_tag;          /* highest job index acknowledged + 1 */
+    int64_t progress_ev_ms; /* last DRV_EV_PROGRESS */
     struct motion mo, saved;
     struct drv_marlin_stats st;
 };
@@ -139,8 +139,7 @@ set_state(struct marlin *m, enum drv_state s)
     emit_event(m, DRV_EV_STATE);
 }
 
-static void
-message(struct marlin *m, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void message(struct marlin *m, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 static void
 message(struct marlin *m, const char *fmt, ...)
@@ -168,10 +167,9 @@ job_end(struct marlin *m, enum drv_event ev)
     if (m->mode == J_NONE)
         return;
     job_close(m);
-    m->base.status.progress = m->base.status.lines_total
-                                  ? (double)m->base.status.lines_acked /
-                                        (double)m->base.status.lines_total
-                                  : 1.0;
+    m->base.status.progress = m->base.status.lines_total ? (double)m->base.status.lines_acked /
+                                                               (double)m->base.status.lines_total
+                                                         : 1.0;
     emit_event(m, ev);
 }
 
@@ -201,8 +199,7 @@ send_raw(struct marlin *m, const char *text)
     return transport_write(m->t, text, n);
 }
 
-static bool
-inject(struct marlin *m, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static bool inject(struct marlin *m, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 static bool
 inject(struct marlin *m, const char *fmt, ...)
@@ -272,8 +269,7 @@ next_job_command(struct marlin *m, char *out, size_t cap)
     while (fgets(raw, sizeof(raw), m->job)) {
         size_t len = strlen(raw);
         if (len == sizeof(raw) - 1 && raw[len - 1] != '\n') {
-            message(m, "job '%s': a line is longer than %d bytes", m->job_path,
-                    SF_GCODE_LINE_MAX);
+            message(m, "job '%s': a line is longer than %d bytes", m->job_path, SF_GCODE_LINE_MAX);
             return SF_EINVAL;
         }
         bool too_long;
@@ -861,8 +857,8 @@ on_timer(struct loop *l, void *ud)
         inject(m, "M105");
         m->poll_ms = now + POLL_MS;
     }
-    bool waiting = m->win.in_flight > 0 || m->probe_out || m->inj_len > 0 ||
-                   m->win.next <= m->win.high;
+    bool waiting =
+        m->win.in_flight > 0 || m->probe_out || m->inj_len > 0 || m->win.next <= m->win.high;
     if (waiting && now - m->progress_ms >= m->timeout_ms &&
         (m->win.in_flight > 0 || m->probe_out)) {
         if (m->probes >= PROBES_MAX) {
@@ -877,8 +873,7 @@ on_timer(struct loop *l, void *ud)
             m->probe_out = false;
             return;
         }
-        log_printer(LOG_WARN, m->base.name, "no reply for %d ms: probing with M105",
-                    m->timeout_ms);
+        log_printer(LOG_WARN, m->base.name, "no reply for %d ms: probing with M105", m->timeout_ms);
         m->probe_out = false; /* an unanswered probe is sent again */
         probe(m);
     }
@@ -946,8 +941,9 @@ m_start_job(struct drv *d, const char *path, struct sf_err *err)
             total++;
         if (too_long) {
             fclose(f);
-            return sf_err_set(err, SF_EINVAL, "job '%s':%ld: command too long for Marlin (%d bytes)",
-                              path, lineno, LINEWIN_LINE_MAX - 19);
+            return sf_err_set(err, SF_EINVAL,
+                              "job '%s':%ld: command too long for Marlin (%d bytes)", path, lineno,
+                              LINEWIN_LINE_MAX - 19);
         }
     }
     if (ferror(f) || fseek(f, 0, SEEK_SET) != 0) {

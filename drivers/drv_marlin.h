@@ -14,12 +14,12 @@
 #include "drv.h"
 
 struct drv_marlin_stats {
-    uint64_t lines_sent;    /* numbered lines written, resends included */
-    uint64_t bytes_sent;    /* bytes written */
-    uint64_t rewinds;       /* Resend requests acted on */
-    uint64_t probes;        /* M105 probes after a silent printer */
-    uint64_t host_lines;    /* numbered lines the driver added (park, resume, end, M400, M105) */
-    int window;             /* lines in flight now allowed */
+    uint64_t lines_sent; /* numbered lines written, resends included */
+    uint64_t bytes_sent; /* bytes written */
+    uint64_t rewinds;    /* Resend requests acted on */
+    uint64_t probes;     /* M105 probes after a silent printer */
+    uint64_t host_lines; /* numbered lines the driver added (park, resume, end, M400, M105) */
+    int window;          /* lines in flight now allowed */
 };
 
 struct drv *drv_marlin_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event,

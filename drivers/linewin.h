@@ -37,19 +37,19 @@ struct linewin_entry {
 
 struct linewin {
     struct linewin_entry *ring; /* line n lives at ring[n % cap] */
-    long cap;        /* ring size, lines */
-    long high;       /* last number pushed */
-    long next;       /* number the next send carries (<= high + 1) */
-    long acked;      /* last line known processed by the printer */
-    long recv;       /* last line known received (queued or done) by the printer */
-    bool synced;     /* a probe was answered: everything received is processed */
-    int in_flight;   /* lines sent whose reply is outstanding */
-    int window;      /* most lines allowed in flight (>= 1) */
-    bool advanced;   /* replies carry ADVANCED_OK's N */
-    bool swallow_ok; /* the ok after a Resend belongs to the rejected line */
-    long rewound_to; /* line of the last rewind */
-    long stale;      /* repeats of that Resend still expected from older lines */
-    uint64_t rewinds; /* times the window went back */
+    long cap;                   /* ring size, lines */
+    long high;                  /* last number pushed */
+    long next;                  /* number the next send carries (<= high + 1) */
+    long acked;                 /* last line known processed by the printer */
+    long recv;                  /* last line known received (queued or done) by the printer */
+    bool synced;                /* a probe was answered: everything received is processed */
+    int in_flight;              /* lines sent whose reply is outstanding */
+    int window;                 /* most lines allowed in flight (>= 1) */
+    bool advanced;              /* replies carry ADVANCED_OK's N */
+    bool swallow_ok;            /* the ok after a Resend belongs to the rejected line */
+    long rewound_to;            /* line of the last rewind */
+    long stale;                 /* repeats of that Resend still expected from older lines */
+    uint64_t rewinds;           /* times the window went back */
 };
 
 /* Ring of cap lines (cap > window).  SF_ENOMEM. */

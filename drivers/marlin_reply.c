@@ -169,12 +169,11 @@ mreply_parse(const char *line, size_t len, struct mreply *r)
         if (strstr(p, "checksum") || strstr(p, "Checksum") || strstr(p, "Line Number") ||
             strstr(p, "Last Line")) {
             r->err = MR_ERR_LINE;
-            r->resend_follows = strstr(p, "mismatch") || strstr(p, "not Last") ||
-                                strstr(p, "No Checksum");
-        }
-        else if (strstr(p, "halted") || strstr(p, "kill()") || strstr(p, "Thermal Runaway") ||
-                 strstr(p, "MAXTEMP") || strstr(p, "MINTEMP") || strstr(p, "stopped") ||
-                 strstr(p, "Heating failed") || strncmp(p, "!!", 2) == 0)
+            r->resend_follows =
+                strstr(p, "mismatch") || strstr(p, "not Last") || strstr(p, "No Checksum");
+        } else if (strstr(p, "halted") || strstr(p, "kill()") || strstr(p, "Thermal Runaway") ||
+                   strstr(p, "MAXTEMP") || strstr(p, "MINTEMP") || strstr(p, "stopped") ||
+                   strstr(p, "Heating failed") || strncmp(p, "!!", 2) == 0)
             r->err = MR_ERR_FATAL;
         else
             r->err = MR_ERR_OTHER;

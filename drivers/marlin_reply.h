@@ -41,21 +41,21 @@ enum mreply_error {
 
 struct mreply {
     enum mreply_kind kind;
-    bool has_n;             /* ok N<line> */
+    bool has_n; /* ok N<line> */
     long n;
-    int p, b;               /* ok P<planner free> B<queue free>; -1 if absent */
-    long resend;            /* MR_RESEND: line wanted */
-    bool tail;              /* MR_RESEND: junk after the number (the next line merged in) */
-    enum mreply_error err;  /* MR_ERROR: class */
-    long last_line;         /* "Last Line: N" in an error, else -1 */
-    bool resend_follows;    /* MR_ERR_LINE that Marlin follows with Resend (not "No Line Number") */
-    bool garbled;           /* MR_OK recognised despite a damaged "ok" */
-    bool has_temps;         /* T: present (MR_OK or MR_TEMP) */
-    bool has_bed;           /* B: present */
-    bool temp_wait;         /* W: present: an M109/M190 wait report */
+    int p, b;              /* ok P<planner free> B<queue free>; -1 if absent */
+    long resend;           /* MR_RESEND: line wanted */
+    bool tail;             /* MR_RESEND: junk after the number (the next line merged in) */
+    enum mreply_error err; /* MR_ERROR: class */
+    long last_line;        /* "Last Line: N" in an error, else -1 */
+    bool resend_follows;   /* MR_ERR_LINE that Marlin follows with Resend (not "No Line Number") */
+    bool garbled;          /* MR_OK recognised despite a damaged "ok" */
+    bool has_temps;        /* T: present (MR_OK or MR_TEMP) */
+    bool has_bed;          /* B: present */
+    bool temp_wait;        /* W: present: an M109/M190 wait report */
     double t, t_target, bed, bed_target; /* deg C */
-    char name[64];          /* action name, capability name or firmware name */
-    int cap_value;          /* MR_CAP: 0 or 1 */
+    char name[64];                       /* action name, capability name or firmware name */
+    int cap_value;                       /* MR_CAP: 0 or 1 */
 };
 
 /* Classify line (len bytes, no newline needed; long lines are cut at 1 KiB). */

@@ -42,16 +42,16 @@ enum tkind { T_SERIAL, T_PTY, T_TCP };
 struct transport {
     struct loop *loop;
     enum tkind kind;
-    int fd;                 /* watched fd (the port handle for serial) */
-    struct sp_port *port;   /* serial only */
-    bool connecting;        /* TCP connect in progress */
-    bool closed;            /* on_close was called; inert */
-    unsigned events;        /* current loop interest */
-    struct buf out;         /* bytes waiting for the OS */
+    int fd;               /* watched fd (the port handle for serial) */
+    struct sp_port *port; /* serial only */
+    bool connecting;      /* TCP connect in progress */
+    bool closed;          /* on_close was called; inert */
+    unsigned events;      /* current loop interest */
+    struct buf out;       /* bytes waiting for the OS */
     transport_data_fn on_data;
     transport_close_fn on_close;
     void *ud;
-    char spec[160];         /* for messages */
+    char spec[160]; /* for messages */
 };
 
 static void on_io(struct loop *l, int fd, unsigned events, void *ud);
@@ -288,8 +288,7 @@ transport_open(struct loop *l, const char *spec, int baud, transport_data_fn on_
     } else {
         const char *path = strncmp(spec, "pty:", 4) == 0 ? spec + 4 : spec;
         char real[256];
-        bool pty = path != spec ||
-                   (realpath(path, real) && strncmp(real, "/dev/pts/", 9) == 0);
+        bool pty = path != spec || (realpath(path, real) && strncmp(real, "/dev/pts/", 9) == 0);
         t->kind = pty ? T_PTY : T_SERIAL;
         rc = pty ? open_fd_tty(t, path, err) : open_serial(t, path, baud, err);
     }

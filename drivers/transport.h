@@ -33,8 +33,8 @@ typedef void (*transport_close_fn)(void *ud, const char *why);
  * SF_EINVAL for a bad spec or baud, SF_EIO when the device cannot be opened.
  */
 struct transport *transport_open(struct loop *l, const char *spec, int baud,
-                                 transport_data_fn on_data, transport_close_fn on_close,
-                                 void *ud, struct sf_err *err);
+                                 transport_data_fn on_data, transport_close_fn on_close, void *ud,
+                                 struct sf_err *err);
 
 /* Queue n bytes.  SF_ENOMEM when the write queue cap is hit, SF_EIO when closed. */
 int transport_write(struct transport *t, const void *data, size_t n);

@@ -42,8 +42,8 @@ parse_count(const char *spec, const char *v, long max, long *out, struct sf_err 
     errno = 0;
     long n = strtol(v, &end, 10);
     if (errno || end == v || *end || n < 0 || n > max)
-        return sf_err_set(err, SF_EINVAL, "fault '%s': expected a whole number from 0 to %ld",
-                          spec, max);
+        return sf_err_set(err, SF_EINVAL, "fault '%s': expected a whole number from 0 to %ld", spec,
+                          max);
     *out = n;
     return SF_OK;
 }
@@ -115,11 +115,11 @@ faults_roll(struct faults *f, double p)
 }
 
 uint8_t
-faults_byte(struct faults *f, uint8_t not)
+faults_byte(struct faults *f, uint8_t not )
 {
     uint8_t b;
     do
         b = (uint8_t)(next(f) >> 32);
-    while (b == not);
+    while (b == not );
     return b;
 }

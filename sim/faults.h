@@ -28,15 +28,15 @@
 #include "../src/base/err.h"
 
 struct faults {
-    double corrupt_rx;   /* byte corruption rate host -> printer, 0..1 */
-    double corrupt_tx;   /* byte corruption rate printer -> host, 0..1 */
-    double drop_ok;      /* probability an ok is swallowed */
-    double garbage;      /* probability of a garbage line after a reply */
-    int slow_ms;         /* delay added before each reply line */
-    long reset_after;    /* commands executed before a firmware reset; 0 = never */
+    double corrupt_rx;     /* byte corruption rate host -> printer, 0..1 */
+    double corrupt_tx;     /* byte corruption rate printer -> host, 0..1 */
+    double drop_ok;        /* probability an ok is swallowed */
+    double garbage;        /* probability of a garbage line after a reply */
+    int slow_ms;           /* delay added before each reply line */
+    long reset_after;      /* commands executed before a firmware reset; 0 = never */
     long disconnect_after; /* commands executed before the link drops; 0 = never */
-    long runaway_after;  /* commands executed before thermal runaway; 0 = never */
-    uint64_t rng;        /* xorshift state; never 0 */
+    long runaway_after;    /* commands executed before thermal runaway; 0 = never */
+    uint64_t rng;          /* xorshift state; never 0 */
 };
 
 /* No faults, seed 1. */
@@ -49,6 +49,6 @@ int faults_parse(struct faults *f, const char *spec, struct sf_err *err);
 bool faults_roll(struct faults *f, double p);
 
 /* A random byte other than `not`. */
-uint8_t faults_byte(struct faults *f, uint8_t not);
+uint8_t faults_byte(struct faults *f, uint8_t not );
 
 #endif

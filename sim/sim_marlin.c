@@ -25,9 +25,9 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
-#include <stdarg.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -40,12 +40,12 @@
 #include "../src/base/log.h"
 #include "../src/base/mem.h"
 
-#define MAX_CMD_SIZE    96   /* Marlin's line buffer */
-#define TX_MAX          (1 << 20) /* reply bytes waiting for the wire */
-#define KEEPALIVE_MS    2000 /* Marlin's DEFAULT_KEEPALIVE_INTERVAL */
-#define WAIT_REPORT_MS  1000 /* M109/M190 print temperatures every second */
-#define BOOT_MS         100  /* bootloader: input ignored, then "start" */
-#define AMBIENT_C       22.0
+#define MAX_CMD_SIZE   96        /* Marlin's line buffer */
+#define TX_MAX         (1 << 20) /* reply bytes waiting for the wire */
+#define KEEPALIVE_MS   2000      /* Marlin's DEFAULT_KEEPALIVE_INTERVAL */
+#define WAIT_REPORT_MS 1000      /* M109/M190 print temperatures every second */
+#define BOOT_MS        100       /* bootloader: input ignored, then "start" */
+#define AMBIENT_C      22.0
 
 enum link_kind { LINK_PTY, LINK_TCP };
 
@@ -53,7 +53,7 @@ struct outline {
     int64_t due_ms;       /* when it may go on the wire (slow replies) */
     struct outline *next; /* FIFO */
     size_t len;
-    char text[];          /* line with its '\n' */
+    char text[]; /* line with its '\n' */
 };
 
 struct block {
@@ -65,28 +65,28 @@ struct sim_marlin {
     struct sim_marlin_config cfg;
     struct faults faults;
     enum link_kind kind;
-    char path[256];      /* what hosts open */
-    char link[256];      /* symlink to keep current, or "" */
-    int fd;              /* pty master or connected TCP client; -1 none */
-    int keep_fd;         /* pty slave we hold open so the master never sees HUP */
-    int listen_fd;       /* TCP listener or -1 */
-    unsigned fd_events;  /* events asked of the loop for fd */
-    uint64_t tick;       /* pending step timer id */
-    int64_t last_ms;     /* time of the previous step */
-    FILE *log;           /* executed commands */
+    char path[256];     /* what hosts open */
+    char link[256];     /* symlink to keep current, or "" */
+    int fd;             /* pty master or connected TCP client; -1 none */
+    int keep_fd;        /* pty slave we hold open so the master never sees HUP */
+    int listen_fd;      /* TCP listener or -1 */
+    unsigned fd_events; /* events asked of the loop for fd */
+    uint64_t tick;      /* pending step timer id */
+    int64_t last_ms;    /* time of the previous step */
+    FILE *log;          /* executed commands */
 
     /* wire */
-    double bps_ms;       /* bytes per millisecond at the baud rate */
+    double bps_ms;               /* bytes per millisecond at the baud rate */
     double rx_tokens, tx_tokens; /* bytes the wire may carry now, each way */
-    bool rx_idle;        /* the last read drained the pty: no bytes were waiting */
-    char *rx;            /* RX buffer, rx_len of rx_size bytes */
+    bool rx_idle;                /* the last read drained the pty: no bytes were waiting */
+    char *rx;                    /* RX buffer, rx_len of rx_size bytes */
     int rx_len;
-    bool rx_line_hit;    /* corruption already hit this line (one per line) */
+    bool rx_line_hit; /* corruption already hit this line (one per line) */
     bool tx_line_hit;
-    char emerg[24];      /* start of the incoming line, for the emergency parser */
+    char emerg[24]; /* start of the incoming line, for the emergency parser */
     int emerg_len;
     struct outline *out_head, *out_tail;
-    struct buf tx;       /* bytes on their way out */
+    struct buf tx; /* bytes on their way out */
 
     /* firmware */
     int64_t boot_until_ms; /* > now: booting, input dropped */
@@ -94,7 +94,7 @@ struct sim_marlin {
     long last_n;           /* last good line number */
     char line[MAX_CMD_SIZE];
     int line_len;
-    bool line_eol;         /* in a ';' comment or overflowed: skip to EOL */
+    bool line_eol; /* in a ';' comment or overflowed: skip to EOL */
     char (*queue)[MAX_CMD_SIZE];
     int q_head, q_len;
     bool head_started;     /* queue head logged and being processed */
@@ -108,12 +108,12 @@ struct sim_marlin {
     double starve_since_s; /* when it ran dry (simulated) */
     double sim_s;          /* simulated clock, s */
     bool rel_xyz, rel_e;
-    double pos[4];         /* X Y Z E */
+    double pos[4]; /* X Y Z E */
     double feed_mm_s;
     double t_noz, t_noz_target, t_bed, t_bed_target;
     bool wait_heat_interrupted; /* M108 */
-    int autoreport_s;      /* M155 S; 0 off */
-    int64_t autoreport_ms; /* next auto-report */
+    int autoreport_s;           /* M155 S; 0 off */
+    int64_t autoreport_ms;      /* next auto-report */
     struct sim_marlin_stats st;
 };
 
@@ -135,8 +135,7 @@ sim_marlin_config_init(struct sim_marlin_config *c)
 
 /* ---- output ------------------------------------------------------------ */
 
-static void
-emit(struct sim_marlin *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void emit(struct sim_marlin *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 static void
 emit(struct sim_marlin *s, const char *fmt, ...)
@@ -203,8 +202,8 @@ emit_temps(struct sim_marlin *s, const char *prefix, bool with_wait)
     char w[16] = "";
     if (with_wait)
         snprintf(w, sizeof(w), " W:?");
-    emit(s, "%sT:%.2f /%.2f B:%.2f /%.2f @:%d B@:%d%s", prefix, s->t_noz, s->t_noz_target,
-         s->t_bed, s->t_bed_target, s->t_noz < s->t_noz_target ? 127 : 0,
+    emit(s, "%sT:%.2f /%.2f B:%.2f /%.2f @:%d B@:%d%s", prefix, s->t_noz, s->t_noz_target, s->t_bed,
+         s->t_bed_target, s->t_noz < s->t_noz_target ? 127 : 0,
          s->t_bed < s->t_bed_target ? 127 : 0, w);
 }
 
@@ -1011,8 +1010,8 @@ step(struct sim_marlin *s)
         if (ev != s->fd_events && loop_mod_fd(s->loop, s->fd, ev, NULL) == 0)
             s->fd_events = ev;
     }
-    bool busy = s->q_len > 0 || s->pl_len > 0 || s->tx.len > 0 || s->out_head ||
-                s->rx_len > 0 || (s->fd >= 0 && s->fd_events == 0) || s->boot_until_ms ||
+    bool busy = s->q_len > 0 || s->pl_len > 0 || s->tx.len > 0 || s->out_head || s->rx_len > 0 ||
+                (s->fd >= 0 && s->fd_events == 0) || s->boot_until_ms ||
                 fabs(s->t_noz - fmax(s->t_noz_target, AMBIENT_C)) > 0.5 ||
                 fabs(s->t_bed - fmax(s->t_bed_target, AMBIENT_C)) > 0.5;
     if (s->halted)
@@ -1055,11 +1054,12 @@ firmware_reset(struct sim_marlin *s, bool banner)
 struct sim_marlin *
 sim_marlin_new(struct loop *l, const struct sim_marlin_config *c, struct sf_err *err)
 {
-    if (c->baud < 0 || c->baud > 4000000 || !(c->speed >= 0) || c->speed > 1e6 ||
-        c->bufsize < 0 || c->bufsize > 64 || c->planner_blocks < 0 || c->planner_blocks > 256 ||
-        c->rx_size < 0 || c->rx_size > 65536 || c->tcp_port > 65535) {
-        sf_err_set(err, SF_EINVAL, "sim: config out of range (baud %d, speed %g, bufsize %d, "
-                                   "planner %d, rx %d, port %d)",
+    if (c->baud < 0 || c->baud > 4000000 || !(c->speed >= 0) || c->speed > 1e6 || c->bufsize < 0 ||
+        c->bufsize > 64 || c->planner_blocks < 0 || c->planner_blocks > 256 || c->rx_size < 0 ||
+        c->rx_size > 65536 || c->tcp_port > 65535) {
+        sf_err_set(err, SF_EINVAL,
+                   "sim: config out of range (baud %d, speed %g, bufsize %d, "
+                   "planner %d, rx %d, port %d)",
                    c->baud, c->speed, c->bufsize, c->planner_blocks, c->rx_size, c->tcp_port);
         return NULL;
     }

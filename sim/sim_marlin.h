@@ -25,27 +25,27 @@
 #include "faults.h"
 
 struct sim_marlin_config {
-    int baud;            /* link rate for pacing, bits/s (10 bits a byte); 0: 115200 */
-    double speed;        /* simulated time runs this much faster; 0: 1 */
-    int bufsize;         /* BUFSIZE command queue slots; 0: 4 */
-    int planner_blocks;  /* BLOCK_BUFFER_SIZE; 0: 16 */
-    int rx_size;         /* RX_BUFFER_SIZE bytes; 0: 128 */
-    bool advanced_ok;    /* reply "ok N<line> P<planner free> B<queue free>" */
-    int tcp_port;        /* -1: pty; 0: any free loopback port; >0: that port */
-    const char *link;    /* pty mode: keep this symlink pointing at the current pty, or NULL */
+    int baud;             /* link rate for pacing, bits/s (10 bits a byte); 0: 115200 */
+    double speed;         /* simulated time runs this much faster; 0: 1 */
+    int bufsize;          /* BUFSIZE command queue slots; 0: 4 */
+    int planner_blocks;   /* BLOCK_BUFFER_SIZE; 0: 16 */
+    int rx_size;          /* RX_BUFFER_SIZE bytes; 0: 128 */
+    bool advanced_ok;     /* reply "ok N<line> P<planner free> B<queue free>" */
+    int tcp_port;         /* -1: pty; 0: any free loopback port; >0: that port */
+    const char *link;     /* pty mode: keep this symlink pointing at the current pty, or NULL */
     const char *log_path; /* every executed command, one per line, or NULL */
     struct faults faults; /* faults_init() for none */
 };
 
 struct sim_marlin_stats {
-    uint64_t executed;      /* commands executed (what the log holds) */
-    uint64_t resends;       /* Resend requests sent */
-    uint64_t starved;       /* times the planner ran dry between streamed moves */
-    double starved_s;       /* simulated seconds it stood dry in those gaps */
+    uint64_t executed;           /* commands executed (what the log holds) */
+    uint64_t resends;            /* Resend requests sent */
+    uint64_t starved;            /* times the planner ran dry between streamed moves */
+    double starved_s;            /* simulated seconds it stood dry in those gaps */
     uint64_t rx_bytes, tx_bytes; /* bytes over the link */
-    uint64_t connects;      /* host connections (TCP) or pty openings */
-    bool halted;            /* killed (M112, thermal runaway); needs a reset */
-    double x, y, z, e;      /* current logical position, mm */
+    uint64_t connects;           /* host connections (TCP) or pty openings */
+    bool halted;                 /* killed (M112, thermal runaway); needs a reset */
+    double x, y, z, e;           /* current logical position, mm */
     double nozzle_c, nozzle_target_c, bed_c, bed_target_c;
 };
 

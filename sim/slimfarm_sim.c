@@ -40,8 +40,7 @@ parse_long(const char *opt, const char *v, long lo, long hi, long *out)
     errno = 0;
     long n = v ? strtol(v, &end, 10) : 0;
     if (!v || errno || end == v || *end || n < lo || n > hi) {
-        fprintf(stderr, "slimfarm-sim: %s expects a whole number from %ld to %ld\n", opt, lo,
-                hi);
+        fprintf(stderr, "slimfarm-sim: %s expects a whole number from %ld to %ld\n", opt, lo, hi);
         return -1;
     }
     *out = n;
@@ -145,8 +144,8 @@ main(int argc, char **argv)
             "tx_bytes=%llu connects=%llu halted=%d x=%.3f y=%.3f z=%.3f e=%.5f\n",
             (unsigned long long)st.executed, (unsigned long long)st.resends,
             (unsigned long long)st.starved, st.starved_s, (unsigned long long)st.rx_bytes,
-            (unsigned long long)st.tx_bytes, (unsigned long long)st.connects, st.halted, st.x,
-            st.y, st.z, st.e);
+            (unsigned long long)st.tx_bytes, (unsigned long long)st.connects, st.halted, st.x, st.y,
+            st.z, st.e);
     sim_marlin_free(s);
     loop_free(l);
     return rc < 0 ? 1 : 0;

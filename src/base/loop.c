@@ -32,15 +32,15 @@
 
 #include "mem.h"
 
-#define LOOP_EVENTS_MAX 64
+#define LOOP_EVENTS_MAX  64
 #define LOOP_SIGNALS_MAX 8
 
 struct fd_reg {
-    int fd;             /* watched descriptor */
-    unsigned events;    /* LOOP_READ | LOOP_WRITE currently asked for */
-    loop_fd_fn fn;      /* callback */
-    void *ud;           /* its argument */
-    bool dead;          /* deleted; freed after the current dispatch */
+    int fd;              /* watched descriptor */
+    unsigned events;     /* LOOP_READ | LOOP_WRITE currently asked for */
+    loop_fd_fn fn;       /* callback */
+    void *ud;            /* its argument */
+    bool dead;           /* deleted; freed after the current dispatch */
     struct fd_reg *next; /* in loop->regs (all live) or loop->graveyard */
 };
 
@@ -73,11 +73,11 @@ struct loop {
     struct fd_reg *graveyard; /* deleted during dispatch, freed after it */
     struct timer *heap;       /* min-heap of timers */
     size_t n_timers, cap_timers;
-    uint64_t next_timer_id;   /* last id handed out */
+    uint64_t next_timer_id;    /* last id handed out */
     pthread_mutex_t post_lock; /* protects post_head/post_tail */
     struct post *post_head, *post_tail;
     struct sig_reg sigs[LOOP_SIGNALS_MAX];
-    atomic_bool stop;         /* loop_run() should return */
+    atomic_bool stop; /* loop_run() should return */
 };
 
 static int64_t
@@ -193,8 +193,7 @@ find_reg(struct loop *l, int fd)
 }
 
 int
-loop_add_fd(struct loop *l, int fd, unsigned events, loop_fd_fn fn, void *ud,
-            struct sf_err *err)
+loop_add_fd(struct loop *l, int fd, unsigned events, loop_fd_fn fn, void *ud, struct sf_err *err)
 {
     if (fd < 0 || !fn)
         return sf_err_set(err, SF_EINVAL, "loop: bad fd %d or no callback", fd);

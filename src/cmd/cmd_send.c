@@ -30,9 +30,9 @@ struct send_ctx {
     struct drv *drv;
     const char *file;
     bool started;
-    int result;       /* -1 running, 0 done, 1 failed/cancelled */
-    int last_decile;  /* non-tty progress */
-    int64_t t0_ms;    /* job start */
+    int result;      /* -1 running, 0 done, 1 failed/cancelled */
+    int last_decile; /* non-tty progress */
+    int64_t t0_ms;   /* job start */
     bool interrupted;
 };
 
@@ -45,8 +45,8 @@ draw(struct send_ctx *c, bool final)
     if (isatty(STDERR_FILENO)) {
         fprintf(stderr, "\r%llu/%llu lines %5.1f%%  T:%.1f/%.0f B:%.1f/%.0f  ETA %02d:%02d%s",
                 (unsigned long long)st->lines_acked, (unsigned long long)st->lines_total,
-                st->progress * 100, st->nozzle_c, st->nozzle_target_c, st->bed_c,
-                st->bed_target_c, (int)eta / 60, (int)eta % 60, final ? "\n" : "  ");
+                st->progress * 100, st->nozzle_c, st->nozzle_target_c, st->bed_c, st->bed_target_c,
+                (int)eta / 60, (int)eta % 60, final ? "\n" : "  ");
         return;
     }
     int decile = (int)(st->progress * 10);
@@ -135,8 +135,8 @@ run_send(int argc, char **argv)
             long lo = strcmp(o, "--baud") == 0 ? 300 : 0;
             long hi = strcmp(o, "--baud") == 0 ? 4000000 : strcmp(o, "--window") == 0 ? 32 : 600000;
             if (errno || end == v || *end || n < lo || n > hi) {
-                fprintf(stderr, "slimfarm send: %s expects a whole number from %ld to %ld\n", o,
-                        lo, hi);
+                fprintf(stderr, "slimfarm send: %s expects a whole number from %ld to %ld\n", o, lo,
+                        hi);
                 return 2;
             }
             if (strcmp(o, "--baud") == 0)
@@ -167,8 +167,12 @@ run_send(int argc, char **argv)
         fprintf(stderr, "slimfarm send: %s\n", err.msg);
         return 1;
     }
-    struct drv_config dc = { .name = "send", .kind = "marlin", .port = port, .baud = (int)baud,
-                             .timeout_ms = (int)timeout_ms, .buffer_lines = (int)window };
+    struct drv_config dc = { .name = "send",
+                             .kind = "marlin",
+                             .port = port,
+                             .baud = (int)baud,
+                             .timeout_ms = (int)timeout_ms,
+                             .buffer_lines = (int)window };
     c.drv = drv_new(c.loop, &dc, on_event, &c, &err);
     if (!c.drv || loop_add_signal(c.loop, SIGINT, on_sigint, &c, &err) < 0 ||
         c.drv->ops->open(c.drv, &err) < 0) {

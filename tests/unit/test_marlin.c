@@ -31,8 +31,8 @@ struct run {
     int done, failed, cancelled;
     int states[16];
     int n_states;
-    int64_t pause_at;   /* pause once lines_acked reaches this (0: never) */
-    int64_t cancel_at;  /* cancel once lines_acked reaches this */
+    int64_t pause_at;  /* pause once lines_acked reaches this (0: never) */
+    int64_t cancel_at; /* cancel once lines_acked reaches this */
     bool paused_once;
     int64_t acked_at_cancel; /* lines_acked when cancel() was called */
     char log_path[512];
@@ -157,8 +157,7 @@ match_log(struct run *r, size_t *extra, bool *dup_or_reorder)
         }
         if (host_line(got[i]))
             continue;
-        if (getenv("T_VERBOSE"))
-            printf("    extra: %s\n", got[i]);
+
         /* a job line out of place (a duplicate or a skip) */
         bool fragment = false;
         for (size_t k = 0; k < n_want; k++) {
@@ -167,6 +166,15 @@ match_log(struct run *r, size_t *extra, bool *dup_or_reorder)
             if (strncmp(got[i], want[k], strlen(got[i])) == 0 && strlen(got[i]) < strlen(want[k]))
                 fragment = true;
         }
+        /* The driver's unnumbered M105 probe with one byte garbled may run as
+           another command (drivers/README.md, "Known limits"). */
+        size_t diff = 0;
+        for (size_t k = 0; strlen(got[i]) == 4 && k < 4; k++)
+            diff += got[i][k] != "M105"[k];
+        if (strlen(got[i]) == 4 && diff == 1)
+            fragment = true;
+        if (getenv("T_VERBOSE") || (fragment && r->fragments))
+            printf("    %s: %s\n", fragment ? "garbled" : "extra", got[i]);
         if (fragment && r->fragments)
             (*r->fragments)++;
         else
@@ -232,8 +240,12 @@ setup(struct run *r, struct sim_marlin_config *sc, int buffer_lines)
         t_fail(__FILE__, __LINE__, "sim: %s", err.msg);
         return false;
     }
-    struct drv_config dc = { .name = "t", .kind = "marlin", .port = sim_marlin_path(r->sim),
-                             .baud = 115200, .timeout_ms = 250, .buffer_lines = buffer_lines };
+    struct drv_config dc = { .name = "t",
+                             .kind = "marlin",
+                             .port = sim_marlin_path(r->sim),
+                             .baud = 115200,
+                             .timeout_ms = 250,
+                             .buffer_lines = buffer_lines };
     r->drv = drv_new(r->loop, &dc, on_event, r, &err);
     if (!r->drv || r->drv->ops->open(r->drv, &err) < 0) {
         t_fail(__FILE__, __LINE__, "driver: %s", err.msg);
