@@ -232,7 +232,8 @@ open_tcp(struct transport *t, const char *hostport, struct sf_err *err)
     if (errno || *end || port < 1 || port > 65535)
         return sf_err_set(err, SF_EINVAL, "'%s': port must be 1-65535", t->spec);
     struct addrinfo hints = { .ai_socktype = SOCK_STREAM }, *ai;
-    /* Numeric addresses never block; a name lookup may (TODO #6: resolve off the loop). */
+    /* Numeric addresses never block; a name lookup may (TODO #7: resolve host names
+       on the pool before the daemon opens a tcp:// printer). */
     int rc = getaddrinfo(host, colon + 1, &hints, &ai);
     if (rc != 0)
         return sf_err_set(err, SF_EINVAL, "'%s': %s", t->spec, gai_strerror(rc));

@@ -19,17 +19,22 @@ trap cleanup EXIT INT TERM
 
 bin/slimfarm shapes "$data/parts" > /dev/null
 # simulated printers: fast (speed x500), 1 Mbaud, one on TCP like a ser2net bridge
-start_sim() { # NAME ARGS...
+start_sim() { # NAME ARGS...: started here, not in a subshell, so cleanup can stop it
   local name=$1; shift
   bin/slimfarm-sim marlin --baud 1000000 --speed 500 --advanced-ok "$@" \
     > "$data/sim/$name.out" 2> "$data/sim/$name.err" &
   pids+=($!)
-  for _ in $(seq 100); do [ -s "$data/sim/$name.out" ] && break; sleep 0.05; done
-  head -n 1 "$data/sim/$name.out"
 }
-mk3=$(start_sim mk3)
-ender=$(start_sim ender)
-voron=$(start_sim voron --tcp 0)
+addr() { # NAME: the simulator's pty path or tcp:// address (its first line)
+  for _ in $(seq 100); do [ -s "$data/sim/$1.out" ] && break; sleep 0.05; done
+  head -n 1 "$data/sim/$1.out"
+}
+start_sim mk3
+start_sim ender
+start_sim voron --tcp 0
+mk3=$(addr mk3)
+ender=$(addr ender)
+voron=$(addr voron)
 case "$mk3" in /dev/*) mk3="pty:$mk3" ;; esac
 case "$ender" in /dev/*) ender="pty:$ender" ;; esac
 cp -r config/printers config/materials "$data/"

@@ -16,7 +16,7 @@ for prog in "$build"/tests/test_*; do
   [ -f "$src" ] || continue
   [ -n "$filter" ] && [[ "$name" != *"$filter"* ]] && continue
   echo "== $name"
-  out=$("$prog" 2>&1); rc=$?
+  out=$(timeout 600 "$prog" 2>&1); rc=$?  # a hung program fails, never hangs the run
   printf '%s\n' "$out" | grep -v '^ok ' || true
   last=$(printf '%s\n' "$out" | tail -n 1)
   if [[ "$last" =~ ^([0-9]+)\ passed,\ ([0-9]+)\ failed,\ ([0-9]+)\ skipped$ ]]; then

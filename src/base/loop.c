@@ -456,12 +456,14 @@ loop_run_once(struct loop *l, int timeout_ms)
 int
 loop_run(struct loop *l)
 {
-    atomic_store(&l->stop, false);
+    /* A stop asked for before run started still counts (a thread may call
+       loop_stop first): clear it on the way out, never on the way in. */
     while (!atomic_load(&l->stop)) {
         int rc = loop_run_once(l, -1);
         if (rc < 0)
             return rc;
     }
+    atomic_store(&l->stop, false);
     return SF_OK;
 }
 
