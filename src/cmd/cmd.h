@@ -30,6 +30,15 @@ void cmd_register(const struct cmd *c);
         cmd_register(&cmd_def_##ident);                                                            \
     }
 
+/*
+ * Parse an option's value: a finite number in [lo, hi], or three finite
+ * numbers "x,y,z" not all zero.  On failure print "slimfarm CMD: --OPT
+ * wants WANT, got 'TEXT'" on stderr and return false.
+ */
+bool cmd_parse_num(const char *cmd, const char *opt, const char *text, double lo, double hi,
+                   const char *want, double *out);
+bool cmd_parse_vec3(const char *cmd, const char *opt, const char *text, double out[3]);
+
 /* True when stdout is a terminal and NO_COLOR-style progress is wanted. */
 bool cmd_stdout_is_tty(void);
 

@@ -16,37 +16,6 @@
 
 static const char usage_line[] = "inspect PART [--up x,y,z] [--angle DEG] [--grid MM] [--json]";
 
-static bool
-parse_vec(const char *s, struct vec3 *out)
-{
-    char *end;
-    double c[3];
-    for (int i = 0; i < 3; i++) {
-        c[i] = strtod(s, &end);
-        if (end == s || !isfinite(c[i]))
-            return false;
-        s = end;
-        if (i < 2) {
-            if (*s != ',')
-                return false;
-            s++;
-        }
-    }
-    *out = v3(c[0], c[1], c[2]);
-    return *s == '\0' && v3_len(*out) > 0;
-}
-
-static bool
-parse_num(const char *s, double lo, double hi, double *out)
-{
-    char *end;
-    double v = strtod(s, &end);
-    if (end == s || *end || !(v >= lo && v <= hi))
-        return false;
-    *out = v;
-    return true;
-}
-
 static int
 run(int argc, char **argv)
 {
@@ -63,26 +32,22 @@ run(int argc, char **argv)
     optind = 1;
     while ((c = getopt_long(argc, argv, "", opts, NULL)) != -1) {
         switch (c) {
-        case 'u':
-            if (!parse_vec(optarg, &up)) {
-                fprintf(stderr, "slimfarm inspect: --up wants x,y,z (not all zero), got '%s'\n",
-                        optarg);
+        case 'u': {
+            double v[3];
+            if (!cmd_parse_vec3("inspect", "up", optarg, v))
                 return 2;
-            }
+            up = v3(v[0], v[1], v[2]);
             break;
+        }
         case 'a':
-            if (!parse_num(optarg, 0, 89.9, &sp.angle_deg)) {
-                fprintf(stderr, "slimfarm inspect: --angle wants degrees in [0, 90), got '%s'\n",
-                        optarg);
+            if (!cmd_parse_num("inspect", "angle", optarg, 0, 89.9, "degrees in [0, 90)",
+                               &sp.angle_deg))
                 return 2;
-            }
             break;
         case 'g':
-            if (!parse_num(optarg, 0.05, 50, &sp.pitch_mm)) {
-                fprintf(stderr, "slimfarm inspect: --grid wants mm in [0.05, 50], got '%s'\n",
-                        optarg);
+            if (!cmd_parse_num("inspect", "grid", optarg, 0.05, 50, "mm in [0.05, 50]",
+                               &sp.pitch_mm))
                 return 2;
-            }
             break;
         case 'j':
             json = true;

@@ -70,20 +70,14 @@ run(int argc, char **argv)
             out = optarg;
             break;
         case 'a':
-            p.angle_deg = strtod(optarg, &end);
-            if (*end || !(p.angle_deg >= 0 && p.angle_deg < 90)) {
-                fprintf(stderr, "slimfarm orient: --angle wants degrees in [0, 90), got '%s'\n",
-                        optarg);
+            if (!cmd_parse_num("orient", "angle", optarg, 0, 89.9, "degrees in [0, 90)",
+                               &p.angle_deg))
                 return 2;
-            }
             break;
         case 'm':
-            p.margin_deg = strtod(optarg, &end);
-            if (*end || !(p.margin_deg >= 0 && p.margin_deg < 45)) {
-                fprintf(stderr, "slimfarm orient: --margin wants degrees in [0, 45), got '%s'\n",
-                        optarg);
+            if (!cmd_parse_num("orient", "margin", optarg, 0, 44.9, "degrees in [0, 45)",
+                               &p.margin_deg))
                 return 2;
-            }
             break;
         case 's': {
             long n = strtol(optarg, &end, 10);
@@ -95,12 +89,9 @@ run(int argc, char **argv)
             break;
         }
         case 'g':
-            p.pitch_mm = strtod(optarg, &end);
-            if (*end || !(p.pitch_mm >= 0.05 && p.pitch_mm <= 50)) {
-                fprintf(stderr, "slimfarm orient: --grid wants mm in [0.05, 50], got '%s'\n",
-                        optarg);
+            if (!cmd_parse_num("orient", "grid", optarg, 0.05, 50, "mm in [0.05, 50]",
+                               &p.pitch_mm))
                 return 2;
-            }
             break;
         case 'b':
             if (sscanf(optarg, "%lf,%lf", &bed_x, &bed_y) != 2 || !isfinite(bed_x) ||

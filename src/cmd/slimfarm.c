@@ -6,6 +6,7 @@
  */
 #include "cmd.h"
 
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 #include <unistd.h>
@@ -20,6 +21,38 @@ cmd_register(const struct cmd *c)
 {
     if (n_cmds < CMD_MAX)
         cmds[n_cmds++] = c;
+}
+
+bool
+cmd_parse_num(const char *cmd, const char *opt, const char *text, double lo, double hi,
+              const char *want, double *out)
+{
+    char *end;
+    double v = strtod(text, &end);
+    if (end == text || *end || !isfinite(v) || v < lo || v > hi) {
+        fprintf(stderr, "slimfarm %s: --%s wants %s, got '%s'\n", cmd, opt, want, text);
+        return false;
+    }
+    *out = v;
+    return true;
+}
+
+bool
+cmd_parse_vec3(const char *cmd, const char *opt, const char *text, double out[3])
+{
+    const char *s = text;
+    char *end;
+    for (int i = 0; i < 3; i++) {
+        out[i] = strtod(s, &end);
+        if (end == s || !isfinite(out[i]) || (i < 2 && *end != ','))
+            goto bad;
+        s = end + (i < 2);
+    }
+    if (*end == '\0' && (out[0] != 0 || out[1] != 0 || out[2] != 0))
+        return true;
+bad:
+    fprintf(stderr, "slimfarm %s: --%s wants x,y,z (not all zero), got '%s'\n", cmd, opt, text);
+    return false;
 }
 
 bool
