@@ -83,6 +83,12 @@ skip_blanks(const char *s, size_t len, size_t i)
     return i;
 }
 
+static bool
+is_blank(char c)
+{
+    return c == ' ' || c == '\t' || c == '\r' || c == '\n';
+}
+
 /* Skip a ( ... ) comment starting at s[i] == '('. */
 static size_t
 skip_paren(const char *s, size_t len, size_t i)
@@ -184,15 +190,41 @@ gcode_parse(const char *s, size_t len, struct gcode_line *out, struct sf_err *er
         struct gcode_word *word = &out->words[out->n_words++];
         word->letter = w;
         p = i + 1;
-        if (!scan_number(s, end, &p, &word->value)) {
-            /* A bare letter ("G28 X") is legal; anything else glued on is not. */
-            if (p < end && s[p] != ' ' && s[p] != '\t' && s[p] != '\r' && s[p] != '\n' &&
-                s[p] != '(')
+        size_t quote = skip_blanks(s, end, p); /* P "MK3S": blanks may come first */
+        if (quote < end && s[quote] == '"') {
+            p = quote;
+            /* A quoted string value (Prusa's M862.3 P "MK3S", Marlin's
+             * GCODE_QUOTED_STRINGS): the word has no number; the first
+             * string is kept as the line's text. */
+            size_t q = p + 1;
+            while (q < end && s[q] != '"')
+                q++;
+            if (q >= end)
+                return sf_err_set(err, SF_EINVAL, "column %zu: unterminated string after '%c'",
+                                  p + 1, w);
+            word->value = NAN;
+            if (!out->text) {
+                out->text = s + p + 1;
+                out->text_len = q - p - 1;
+            }
+            i = q + 1;
+            continue;
+        }
+        bool num_ok = scan_number(s, end, &p, &word->value);
+        size_t stop = p;
+        while (stop < end && !is_blank(s[stop]) && s[stop] != '(')
+            stop++;
+        if (!num_ok || stop != p) {
+            /* A bare letter ("G28 X") is legal.  So is any other value of an
+             * M command's word (Prusa's M115 U3.13.0 firmware version):
+             * firmware-specific settings, kept as no number.  A move's
+             * words must be numbers. */
+            if (stop != p && out->letter != 'M')
                 return sf_err_set(err, SF_EINVAL, "column %zu: number expected after '%c'", p + 1,
                                   w);
             word->value = NAN;
         }
-        i = p;
+        i = stop;
     }
     return SF_OK;
 }
@@ -243,6 +275,26 @@ gcode_strip(const char *s, size_t len, char *out, size_t cap, bool *too_long)
         }
         if (c == '*')
             break;
+        if (c == '"') {
+            /* a quoted string is copied as it is: blanks and '(' included */
+            size_t q = i + 1;
+            while (q < end && s[q] != '"')
+                q++;
+            size_t n = (q < end ? q + 1 : q) - i;
+            if (pending_space) {
+                if (o + 1 >= cap)
+                    goto overflow;
+                out[o++] = ' ';
+                pending_space = false;
+            }
+            if (o + n >= cap)
+                goto overflow;
+            memcpy(out + o, s + i, n);
+            o += n;
+            i += n;
+            first_word = false;
+            continue;
+        }
         if (c == ' ' || c == '\t') {
             pending_space = o > 0;
             i++;

@@ -6,8 +6,9 @@
  * A line is: [N<number>] <command> <words...> [*<checksum>] [; comment]
  * with ( ... ) comments allowed too.  The command is a letter and a number
  * (G1, M105, T0, G29.1 is command 29 with subcode 1).  Words are a letter and
- * a number each.  Commands that take free text (M23 file name, M117 and M118
- * messages, M28/M30 file names) keep their argument as text.
+ * a number each, a bare letter, or a letter and a "quoted string".  Commands
+ * that take free text (M23 file name, M117 and M118 messages, M28/M30 file
+ * names) keep their argument as text.
  *
  * Pure functions on caller memory, thread-safe, fuzzed (tests/fuzz).
  */
@@ -39,7 +40,9 @@ struct gcode_line {
     int subcode;       /* after a dot (G29.1); -1 if none */
     int n_words;       /* parameter words in words[] */
     struct gcode_word words[GCODE_WORDS_MAX];
-    const char *text; /* free-text argument (M117 msg) into the input, or NULL */
+    /* free-text argument (M117 msg) or the first quoted string value
+     * (P "MK3S", without the quotes) into the input, or NULL */
+    const char *text;
     size_t text_len;  /* its length */
 };
 

@@ -11,6 +11,7 @@
 #define SF_CMD_CMD_H
 
 #include <stdbool.h>
+#include <stddef.h>
 
 typedef int (*cmd_fn)(int argc, char **argv);
 
@@ -38,6 +39,14 @@ void cmd_register(const struct cmd *c);
 bool cmd_parse_num(const char *cmd, const char *opt, const char *text, double lo, double hi,
                    const char *want, double *out);
 bool cmd_parse_vec3(const char *cmd, const char *opt, const char *text, double out[3]);
+
+/*
+ * Resolve a profile NAME of KIND ("printers", "materials") to a readable
+ * file: NAME itself when it holds a '/' or ends in ".cfg", else
+ * KIND/NAME.cfg under $SLIMFARM_CONFIG, ./config, then the installed
+ * share/slimfarm/config folders.  NULL (nothing written) when none exists.
+ */
+const char *cmd_find_profile(const char *kind, const char *name, char *buf, size_t cap);
 
 /* True when stdout is a terminal and NO_COLOR-style progress is wanted. */
 bool cmd_stdout_is_tty(void);

@@ -18,18 +18,6 @@
 
 static const char usage_line[] = "estimate FILE.gcode [--printer NAME|PATH] [--material NAME|PATH]";
 
-static const char *
-profile_path(const char *kind, const char *name, char *buf, size_t cap)
-{
-    if (strchr(name, '/') || strstr(name, ".cfg")) {
-        snprintf(buf, cap, "%s", name);
-        return buf;
-    }
-    const char *env = getenv("SLIMFARM_CONFIG");
-    snprintf(buf, cap, "%s/%s/%s.cfg", env ? env : "config", kind, name);
-    return buf;
-}
-
 static int
 run(int argc, char **argv)
 {
@@ -61,11 +49,18 @@ run(int argc, char **argv)
         return 2;
     }
     char pb[1024], mb[1024];
+    const char *pcfg = NULL, *mcfg = NULL;
+    if (printer && !(pcfg = cmd_find_profile("printers", printer, pb, sizeof(pb)))) {
+        fprintf(stderr, "slimfarm estimate: no printer profile '%s'\n", printer);
+        return 1;
+    }
+    if (material && !(mcfg = cmd_find_profile("materials", material, mb, sizeof(mb)))) {
+        fprintf(stderr, "slimfarm estimate: no material profile '%s'\n", material);
+        return 1;
+    }
     struct sf_err err;
     struct slice_profile p;
-    if (slice_profile_load(printer ? profile_path("printers", printer, pb, sizeof(pb)) : NULL,
-                           material ? profile_path("materials", material, mb, sizeof(mb)) : NULL,
-                           &p, &err) < 0) {
+    if (slice_profile_load(pcfg, mcfg, &p, &err) < 0) {
         fprintf(stderr, "slimfarm estimate: %s\n", err.msg);
         return 1;
     }

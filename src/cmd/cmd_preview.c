@@ -26,17 +26,6 @@ is_gcode(const char *path)
                    strcasecmp(dot, ".g") == 0);
 }
 
-static bool
-num(const char *s, double lo, double hi, double *out)
-{
-    char *end;
-    double v = strtod(s, &end);
-    if (end == s || *end || !(v >= lo && v <= hi))
-        return false;
-    *out = v;
-    return true;
-}
-
 static int
 run(int argc, char **argv)
 {
@@ -59,26 +48,18 @@ run(int argc, char **argv)
             out = optarg;
             break;
         case 'l':
-            if (!num(optarg, 0, 1e6, &v)) {
-                fprintf(stderr, "slimfarm preview: --layer wants a layer number, got '%s'\n",
-                        optarg);
+            if (!cmd_parse_num("preview", "layer", optarg, 0, 1e6, "a layer number", &v))
                 return 2;
-            }
             po.layer = (int)v;
             break;
         case 'a':
-            if (!num(optarg, 0, 89.9, &po.angle_deg)) {
-                fprintf(stderr, "slimfarm preview: --angle wants degrees in [0, 90), got '%s'\n",
-                        optarg);
+            if (!cmd_parse_num("preview", "angle", optarg, 0, 89.9, "degrees in [0, 90)",
+                               &po.angle_deg))
                 return 2;
-            }
             break;
         case 'g':
-            if (!num(optarg, 0.1, 20, &po.pitch_mm)) {
-                fprintf(stderr, "slimfarm preview: --grid wants mm in [0.1, 20], got '%s'\n",
-                        optarg);
+            if (!cmd_parse_num("preview", "grid", optarg, 0.1, 20, "mm in [0.1, 20]", &po.pitch_mm))
                 return 2;
-            }
             break;
         case 's':
             if (sscanf(optarg, "%dx%d", &w, &h) != 2 || w < 16 || h < 16 || w > 8192 || h > 8192) {

@@ -23,27 +23,6 @@ static const char usage_line[] = "slice PART -o OUT.gcode [--printer NAME] [--ma
 
 #define SET_MAX 64
 
-/* Resolve a profile name to a readable file, or NULL. */
-static const char *
-find_profile(const char *kind, const char *name, char *buf, size_t cap)
-{
-    if (strchr(name, '/') || strstr(name, ".cfg")) {
-        snprintf(buf, cap, "%s", name);
-        return access(buf, R_OK) == 0 ? buf : NULL;
-    }
-    const char *env = getenv("SLIMFARM_CONFIG");
-    const char *roots[] = { env, "config", "/usr/local/share/slimfarm/config",
-                            "/usr/share/slimfarm/config" };
-    for (size_t i = 0; i < sizeof(roots) / sizeof(roots[0]); i++) {
-        if (!roots[i])
-            continue;
-        snprintf(buf, cap, "%s/%s/%s.cfg", roots[i], kind, name);
-        if (access(buf, R_OK) == 0)
-            return buf;
-    }
-    return NULL;
-}
-
 static int
 on_progress(void *ud, const char *stage, double done)
 {
@@ -107,11 +86,11 @@ run(int argc, char **argv)
     const char *part = argv[optind];
     char pbuf[1024], mbuf[1024];
     const char *pcfg = NULL, *mcfg = NULL;
-    if (printer && !(pcfg = find_profile("printers", printer, pbuf, sizeof(pbuf)))) {
+    if (printer && !(pcfg = cmd_find_profile("printers", printer, pbuf, sizeof(pbuf)))) {
         fprintf(stderr, "slimfarm slice: no printer profile '%s'\n", printer);
         return 1;
     }
-    if (material && !(mcfg = find_profile("materials", material, mbuf, sizeof(mbuf)))) {
+    if (material && !(mcfg = cmd_find_profile("materials", material, mbuf, sizeof(mbuf)))) {
         fprintf(stderr, "slimfarm slice: no material profile '%s'\n", material);
         return 1;
     }

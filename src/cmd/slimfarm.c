@@ -8,6 +8,7 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
@@ -53,6 +54,25 @@ cmd_parse_vec3(const char *cmd, const char *opt, const char *text, double out[3]
 bad:
     fprintf(stderr, "slimfarm %s: --%s wants x,y,z (not all zero), got '%s'\n", cmd, opt, text);
     return false;
+}
+
+const char *
+cmd_find_profile(const char *kind, const char *name, char *buf, size_t cap)
+{
+    if (strchr(name, '/') || strstr(name, ".cfg")) {
+        snprintf(buf, cap, "%s", name);
+        return access(buf, R_OK) == 0 ? buf : NULL;
+    }
+    const char *roots[] = { getenv("SLIMFARM_CONFIG"), "config", "/usr/local/share/slimfarm/config",
+                            "/usr/share/slimfarm/config" };
+    for (size_t i = 0; i < sizeof(roots) / sizeof(roots[0]); i++) {
+        if (!roots[i] || !roots[i][0])
+            continue;
+        snprintf(buf, cap, "%s/%s/%s.cfg", roots[i], kind, name);
+        if (access(buf, R_OK) == 0)
+            return buf;
+    }
+    return NULL;
 }
 
 bool

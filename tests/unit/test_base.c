@@ -132,6 +132,31 @@ T_CASE(gcode_text_argument)
     T_TRUE(memcmp(l.text, "Printing part 3 of 7", l.text_len) == 0);
 }
 
+T_CASE(gcode_quoted_string_value)
+{
+    /* Prusa start G-code: M862.3 P "MK3S" checks the printer model */
+    struct gcode_line l;
+    struct sf_err err;
+    const char *s = "M862.3 P \"MK3S (x)\" Q1";
+    T_OK(gcode_parse(s, strlen(s), &l, &err), &err);
+    T_TRUE(gcode_is(&l, 'M', 862) && l.subcode == 3);
+    double v;
+    T_TRUE(gcode_get(&l, 'P', &v) && isnan(v));
+    T_TRUE(gcode_get(&l, 'Q', &v) && v == 1);
+    T_EQ_INT(l.text_len, strlen("MK3S (x)"));
+    T_TRUE(memcmp(l.text, "MK3S (x)", l.text_len) == 0);
+    s = "M115 U3.13.0"; /* Prusa: warn when the firmware is older */
+    T_OK(gcode_parse(s, strlen(s), &l, &err), &err);
+    T_TRUE(gcode_get(&l, 'U', &v) && isnan(v));
+    T_ERR(gcode_parse("G1 X3.13.0", 10, &l, &err), SF_EINVAL, &err, "number expected after 'X'");
+    T_ERR(gcode_parse("M862.3 P \"MK3S", 14, &l, &err), SF_EINVAL, &err,
+          "unterminated string after 'P'");
+    char out[64];
+    T_EQ_INT(gcode_strip("N7 M862.3  P\"MK3S  (x)\" ; c", 27, out, sizeof(out), NULL), 19);
+    T_EQ_STR(out, "M862.3 P\"MK3S  (x)\"");
+    T_EQ_INT(gcode_strip("M862.3 P\"MK3S\"", 14, out, 10, NULL), 0);
+}
+
 T_CASE(gcode_rejects_garbage)
 {
     struct gcode_line l;
