@@ -48,6 +48,9 @@ bool cmd_parse_vec3(const char *cmd, const char *opt, const char *text, double o
  */
 const char *cmd_find_profile(const char *kind, const char *name, char *buf, size_t cap);
 
+/* `optimize --method surface` (cmd_optimize_surface.c), reached from cmd_optimize.c. */
+int cmd_optimize_surface(int argc, char **argv);
+
 /* True when stdout is a terminal and NO_COLOR-style progress is wanted. */
 bool cmd_stdout_is_tty(void);
 

@@ -1,5 +1,6 @@
 /*
- * cmd_optimize.c - `slimfarm optimize PART -o OUT --method volumetric`:
+ * cmd_optimize.c - `slimfarm optimize PART -o OUT --method volumetric`
+ * (`--method surface` is cmd_optimize_surface.c):
  * slim a part's support by volumetric ARAP deformation (Hu 2015, see
  * src/geom/slim.h), write the result and report the risky faces per
  * iteration, the deviation (MNDR, ANDR) and the support metrics before and
@@ -16,7 +17,7 @@
 #include "cmd.h"
 
 static const char usage_line[] =
-    "optimize PART -o OUT --method volumetric [--angle DEG] [--beta DEG] [--max-mndr P] "
+    "optimize PART -o OUT --method volumetric|surface [--angle DEG] [--beta DEG] [--max-mndr P] "
     "[--max-andr P] [--fix-bottom MM] [--fix-box X0,Y0,Z0,X1,Y1,Z1] [--max-tet-verts N] "
     "[--iterations N] [--search-direction] [--json]";
 
@@ -143,6 +144,12 @@ run(int argc, char **argv)
                                           { "json", no_argument, NULL, 'j' },
                                           { "help", no_argument, NULL, 'h' },
                                           { NULL, 0, NULL, 0 } };
+    for (int i = 1; i < argc; i++) {
+        if ((strcmp(argv[i], "--method") == 0 && i + 1 < argc &&
+             strcmp(argv[i + 1], "surface") == 0) ||
+            strcmp(argv[i], "--method=surface") == 0)
+            return cmd_optimize_surface(argc, argv); /* its own options */
+    }
     struct slim_params p;
     slim_params_default(&p);
     struct slim_box boxes[MAX_BOXES];
@@ -229,7 +236,8 @@ run(int argc, char **argv)
         return 2;
     }
     if (strcmp(method, "volumetric") != 0) {
-        fprintf(stderr, "slimfarm optimize: method '%s' is not supported (volumetric)\n", method);
+        fprintf(stderr, "slimfarm optimize: method '%s' is not supported (volumetric, surface)\n",
+                method);
         return 2;
     }
     p.fix_boxes = n_boxes ? boxes : NULL;

@@ -29,6 +29,7 @@
 #include "../base/limits.h"
 #include "../geom/orient.h"
 #include "../geom/slim.h"
+#include "../geom/surfopt.h"
 #include "../mesh/mesh.h"
 
 static int
@@ -115,6 +116,39 @@ slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_prof
     return SF_OK;
 }
 
+/*
+ * Orientation-fused surface optimization (Jayakody; src/geom/surfopt.h):
+ * the part is turned and reshaped in alternating rounds within the same
+ * deviation budget as slimming.  On success m holds the result, back on
+ * the bed centre.
+ */
+static int
+surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_profile *prof,
+             const atomic_bool *cancel, struct sf_err *err)
+{
+    struct surfopt_params sp;
+    surfopt_params_default(&sp);
+    sp.angle_deg = prof->max_overhang_deg;
+    sp.margin_deg = sp.margin_deg < sp.angle_deg ? sp.margin_deg : sp.angle_deg;
+    sp.op.threads = 1; /* the pool already runs one task per core */
+    sp.cancel = cancel;
+    double diag = mesh_diag(m);
+    if (diag > 0 && req->opts.deviation_mm / diag < sp.max_mndr)
+        sp.max_mndr = req->opts.deviation_mm / diag;
+    if (sp.max_andr > sp.max_mndr)
+        sp.max_andr = sp.max_mndr;
+    struct surfopt_result sr;
+    int rc = surfopt_optimize(m, &sp, &sr, err);
+    if (rc)
+        return rc;
+    mesh_release(m);
+    *m = sr.out;
+    mesh_init(&sr.out);
+    surfopt_result_release(&sr);
+    mesh_place_on_bed(m, prof->bed_x_mm / 2, prof->bed_y_mm / 2);
+    return SF_OK;
+}
+
 int
 prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
              struct sf_err *err)
@@ -132,14 +166,6 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     buf_release(&data);
     if (rc)
         goto out;
-    if (strcmp(method, "surface") == 0) {
-        /* the surface optimization (Jayakody) is an open issue of its own */
-        rc = sf_err_set(err, SF_EUNSUPP,
-                        "prepare: method '%s' is not available in this build; use 'slim', "
-                        "'orient' or 'none'",
-                        method);
-        goto out;
-    }
     struct slice_profile prof;
     if ((rc = load_profile(req, &prof, err)))
         goto out;
@@ -159,6 +185,8 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
         orient_apply(&m, res.best.up, prof.bed_x_mm / 2, prof.bed_y_mm / 2);
     }
     if (slim && (rc = slim_part(&m, req, &prof, cancel, err)))
+        goto release;
+    if (strcmp(method, "surface") == 0 && (rc = surface_part(&m, req, &prof, cancel, err)))
         goto release;
     if (atomic_load(cancel)) {
         rc = cancelled(req, err);

@@ -78,7 +78,7 @@ endloop
 endfacet
 endsolid t
 STL
-out=$("$C" submit "$tmp/bracket.stl" --copies 2 --material PLA --method surface --priority 3) || fail "submit: $out"
+out=$("$C" submit "$tmp/bracket.stl" --copies 2 --material NYLON --method surface --priority 3) || fail "submit: $out"
 [ "$out" = "job 1 queued: bracket.stl x2" ] || fail "submit said: $out"
 out=$("$C" submit "$tmp/bracket.stl" --copies 0 2>&1) && fail "copies 0 accepted"
 [[ "$out" == *"400: options: copies: 0 is not in 1..1000"* ]] || fail "copies 0: $out"
@@ -94,7 +94,7 @@ out=$("$C" submit "$tmp/huge.stl" 2>&1) && fail "oversized upload accepted"
 
 sleep 0.3
 out=$("$C" jobs --key $RO) || fail "jobs"
-echo "$out" | grep -qE "^1 +queued +0/2 +3 .*bracket.stl .*method 'surface' is not available" || fail "jobs: $out"
+echo "$out" | grep -qE "^1 +queued +0/2 +3 .*bracket.stl +fits no printer: mk3: material NYLON not loaded \(has PLA\)" || fail "jobs: $out"
 out=$("$C" printers) || fail "printers"
 echo "$out" | grep -qE "^mk3 +offline .*'/dev/null' is not a terminal" || fail "printers: $out"
 

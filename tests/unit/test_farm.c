@@ -414,7 +414,7 @@ static const char tetra_stl[] = "solid t\n"
                                 "vertex 0 0 10\nendloop\nendfacet\n"
                                 "endsolid t\n";
 
-T_CASE(farm_default_prepare_slices_and_defers_missing_stages)
+T_CASE(farm_default_prepare_runs_every_method)
 {
     /* the real pipeline: src/mesh, src/geom orient, slicer/ with
        config/printers and config/materials (tests run from the top) */
@@ -430,6 +430,7 @@ T_CASE(farm_default_prepare_slices_and_defers_missing_stages)
     T_TRUE(wait_job(junk, JOB_FAILED));
     T_TRUE(wait_job(ok, JOB_READY));
     T_TRUE(wait_job(slimmed, JOB_READY)); /* oriented, slimmed (Hu 2015) and sliced */
+    T_TRUE(wait_job(surf, JOB_READY));    /* turned and reshaped (Jayakody) and sliced */
     for (int i = 0; i < 20; i++)
         loop_run_once(fx.l, 10);
     struct job_row j;
@@ -445,10 +446,8 @@ T_CASE(farm_default_prepare_slices_and_defers_missing_stages)
     T_OK(buf_read_file(&g, path, &err), &err);
     T_TRUE(strstr(g.data, "G1 ") != NULL);
     buf_release(&g);
-    /* a method whose stage is missing waits, saying so */
     T_OK(store_job_get(fx.s, surf, &j, &err), &err);
-    T_EQ_INT(j.state, JOB_QUEUED);
-    T_TRUE(strstr(j.reason, "method 'surface' is not available in this build") != NULL);
+    T_EQ_STR(j.reason, "waits for a printer: a is offline");
     /* a broken part fails at once, naming the uploaded file */
     T_OK(store_job_get(fx.s, junk, &j, &err), &err);
     T_TRUE(strstr(j.reason, "'part.stl': not a mesh file") != NULL);

@@ -1,0 +1,226 @@
+/*
+ * cmd_optimize_surface.c - `slimfarm optimize PART -o OUT --method surface`:
+ * orientation-fused surface shape optimization (Jayakody et al., see
+ * src/geom/surfopt.h).  cmd_optimize.c hands `--method surface` here; the
+ * report has the support metrics as given, after the orientation step
+ * alone and after the shape step, the deviation and the risky faces per
+ * iteration.
+ */
+#include <getopt.h>
+#include <jansson.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../geom/surfopt.h"
+#include "cmd.h"
+
+const char cmd_optimize_surface_usage[] =
+    "optimize PART -o OUT --method surface [--angle DEG] [--margin DEG] [--max-mndr P] "
+    "[--max-andr P] [--fix-bottom MM] [--iterations N] [--rounds N] [--saliency S] "
+    "[--detail W] [--no-orient] [--json]";
+
+static void
+progress(void *ud, const struct surfopt_progress *pr)
+{
+    (void)ud;
+    cmd_progress("surface", (double)pr->round * pr->max_iters + pr->iter,
+                 (double)pr->n_rounds * pr->max_iters);
+}
+
+static json_t *
+metrics_json(const struct support_metrics *m)
+{
+    return json_pack("{s:i, s:f, s:f, s:f, s:i, s:f}", "risky_faces", (json_int_t)m->n_risky,
+                     "risky_area_mm2", m->risky_area_mm2, "support_volume_mm3", m->volume_mm3,
+                     "contact_area_mm2", m->contact_area_mm2, "anchors", (json_int_t)m->n_anchors,
+                     "build_height_mm", m->build_height_mm);
+}
+
+static int
+report_json(const char *in, const char *out, const struct surfopt_params *p,
+            const struct surfopt_result *r)
+{
+    json_t *curve = json_array();
+    for (int i = 0; curve && i < r->n_curve; i++)
+        json_array_append_new(curve, json_integer(r->curve[i]));
+    json_t *o = json_pack(
+        "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:b, s:i, s:i, s:i, "
+        "s:{s:i, s:i}, s:{s:f, s:f, s:f, s:f, s:f, s:f}}",
+        "file", in, "output", out, "method", "surface", "angle_deg", p->angle_deg, "input",
+        metrics_json(&r->input), "oriented", metrics_json(&r->oriented), "after",
+        metrics_json(&r->after), "risky_per_iteration", curve, "deviation", "mndr", r->dev.mndr,
+        "andr", r->dev.andr, "max_mm", r->dev.max_mm, "mean_mm", r->dev.mean_mm, "shape_changed",
+        r->shape_changed, "rounds", (json_int_t)r->n_rounds, "iterations", (json_int_t)r->n_iters,
+        "rejected", (json_int_t)r->n_rejected, "self_intersections", "input",
+        (json_int_t)r->selfx_input, "output", (json_int_t)r->selfx_out, "seconds", "saliency",
+        r->saliency_s, "orient", r->orient_s, "factor", r->factor_s, "iterate", r->iterate_s,
+        "check", r->check_s, "total", r->total_s);
+    char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(8)) : NULL;
+    json_decref(o);
+    if (!text) {
+        fprintf(stderr, "slimfarm optimize: out of memory\n");
+        return 1;
+    }
+    puts(text);
+    free(text);
+    return 0;
+}
+
+static void
+print_metrics(const char *label, const struct support_metrics *m)
+{
+    printf("  %-8s risky faces %7u (%8.0f mm2), support %9.0f mm3, contact %7.0f mm2, "
+           "%u anchors, height %.1f mm\n",
+           label, m->n_risky, m->risky_area_mm2, m->volume_mm3, m->contact_area_mm2, m->n_anchors,
+           m->build_height_mm);
+}
+
+static void
+report_text(const char *in, const char *out, const struct surfopt_result *r)
+{
+    printf("%s -> %s: surface optimization, %d round%s, %d iterations, %.2f s (saliency %.2f, "
+           "orientation %.2f, factor %.2f, iterations %.2f, checks %.2f)\n",
+           in, out, r->n_rounds, r->n_rounds == 1 ? "" : "s", r->n_iters, r->total_s, r->saliency_s,
+           r->orient_s, r->factor_s, r->iterate_s, r->check_s);
+    print_metrics("as given", &r->input);
+    print_metrics("oriented", &r->oriented);
+    print_metrics("after", &r->after);
+    if (r->shape_changed)
+        printf("  deviation MNDR %.2f %% ANDR %.2f %% (max %.2f mm, mean %.2f mm)\n",
+               100 * r->dev.mndr, 100 * r->dev.andr, r->dev.max_mm, r->dev.mean_mm);
+    else
+        printf("  shape kept: no iterate within the limits needed less support\n");
+    printf("  rejected %u; self-intersecting edges %d -> %d\n", r->n_rejected, r->selfx_input,
+           r->selfx_out);
+    printf("  risky faces per iteration:");
+    for (int i = 0; i < r->n_curve; i++)
+        printf("%s%u", i % 16 ? " " : "\n   ", r->curve[i]);
+    printf("\n");
+}
+
+int
+cmd_optimize_surface(int argc, char **argv)
+{
+    static const struct option opts[] = { { "output", required_argument, NULL, 'o' },
+                                          { "method", required_argument, NULL, 'm' },
+                                          { "angle", required_argument, NULL, 'a' },
+                                          { "margin", required_argument, NULL, 'g' },
+                                          { "max-mndr", required_argument, NULL, 'M' },
+                                          { "max-andr", required_argument, NULL, 'A' },
+                                          { "fix-bottom", required_argument, NULL, 'f' },
+                                          { "iterations", required_argument, NULL, 'i' },
+                                          { "rounds", required_argument, NULL, 'r' },
+                                          { "saliency", required_argument, NULL, 's' },
+                                          { "detail", required_argument, NULL, 'd' },
+                                          { "no-orient", no_argument, NULL, 'n' },
+                                          { "json", no_argument, NULL, 'j' },
+                                          { "help", no_argument, NULL, 'h' },
+                                          { NULL, 0, NULL, 0 } };
+    struct surfopt_params p;
+    surfopt_params_default(&p);
+    const char *out = NULL;
+    bool json = false;
+    double v;
+    int c;
+    optind = 1;
+    while ((c = getopt_long(argc, argv, "o:", opts, NULL)) != -1) {
+        switch (c) {
+        case 'o':
+            out = optarg;
+            break;
+        case 'm':
+            break; /* "surface": how we got here */
+        case 'a':
+            if (!cmd_parse_num("optimize", "angle", optarg, 0, 89, "degrees in [0, 89]",
+                               &p.angle_deg))
+                return 2;
+            break;
+        case 'g':
+            if (!cmd_parse_num("optimize", "margin", optarg, 0, 45, "degrees in [0, 45]",
+                               &p.margin_deg))
+                return 2;
+            break;
+        case 'M':
+            if (!cmd_parse_num("optimize", "max-mndr", optarg, 0.01, 100, "a percentage", &v))
+                return 2;
+            p.max_mndr = v / 100;
+            break;
+        case 'A':
+            if (!cmd_parse_num("optimize", "max-andr", optarg, 0.01, 100, "a percentage", &v))
+                return 2;
+            p.max_andr = v / 100;
+            break;
+        case 'f':
+            if (!cmd_parse_num("optimize", "fix-bottom", optarg, 0, 1e4, "mm", &p.fix_bottom_mm))
+                return 2;
+            break;
+        case 'i':
+            if (!cmd_parse_num("optimize", "iterations", optarg, 1, SURFOPT_CURVE_MAX - 2,
+                               "a count", &v))
+                return 2;
+            p.max_iters = (int)v;
+            break;
+        case 'r':
+            if (!cmd_parse_num("optimize", "rounds", optarg, 1, 16, "a count in [1, 16]", &v))
+                return 2;
+            p.rounds = (int)v;
+            break;
+        case 's':
+            if (!cmd_parse_num("optimize", "saliency", optarg, 0, 1, "a share in [0, 1]",
+                               &p.saliency))
+                return 2;
+            break;
+        case 'd':
+            if (!cmd_parse_num("optimize", "detail", optarg, 0, 1e3, "a weight in [0, 1000]",
+                               &p.beta))
+                return 2;
+            break;
+        case 'n':
+            p.orient = false;
+            break;
+        case 'j':
+            json = true;
+            break;
+        case 'h':
+            printf("usage: slimfarm %s\n", cmd_optimize_surface_usage);
+            return 0;
+        default:
+            fprintf(stderr, "usage: slimfarm %s\n", cmd_optimize_surface_usage);
+            return 2;
+        }
+    }
+    if (optind != argc - 1 || !out) {
+        fprintf(stderr, "usage: slimfarm %s\n", cmd_optimize_surface_usage);
+        return 2;
+    }
+    if (p.margin_deg > p.angle_deg)
+        p.margin_deg = p.angle_deg;
+    p.progress = progress;
+    struct mesh m;
+    struct sf_err err;
+    struct surfopt_result r;
+    mesh_init(&m);
+    if (mesh_load(argv[optind], &m, NULL, &err) != SF_OK) {
+        fprintf(stderr, "slimfarm optimize: %s\n", err.msg);
+        return 1;
+    }
+    int rc = surfopt_optimize(&m, &p, &r, &err);
+    mesh_release(&m);
+    if (rc != SF_OK) {
+        fprintf(stderr, "slimfarm optimize: %s: %s\n", argv[optind], err.msg);
+        return 1;
+    }
+    if (mesh_save(&r.out, out, &err) != SF_OK) {
+        fprintf(stderr, "slimfarm optimize: %s\n", err.msg);
+        surfopt_result_release(&r);
+        return 1;
+    }
+    int status = 0;
+    if (json)
+        status = report_json(argv[optind], out, &p, &r);
+    else
+        report_text(argv[optind], out, &r);
+    surfopt_result_release(&r);
+    return status;
+}

@@ -1,0 +1,632 @@
+/*
+ * surfopt.c - orientation-fused surface shape optimization (method 3);
+ * the method and its one departure are described in surfopt.h.
+ */
+#include "surfopt.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "../base/mem.h"
+#include "../mesh/subdiv.h"
+#include "saliency.h"
+#include "selfx.h"
+#include "sparse.h"
+
+#define KEEP_MAX 8 /* improving iterates of the last round kept as fallbacks */
+
+void
+surfopt_params_default(struct surfopt_params *p)
+{
+    memset(p, 0, sizeof(*p));
+    p->angle_deg = 45;
+    p->margin_deg = 5;
+    p->gamma = 1;
+    p->beta = 0;
+    p->saliency = 0.8;
+    p->max_mndr = 0.15;
+    p->max_andr = 0.05;
+    p->fix_bottom_mm = 2;
+    p->max_iters = 100;
+    p->patience = 5;
+    p->rounds = 2;
+    p->refine_tris = 10000;
+    p->orient = true;
+    orient_params_default(&p->op);
+}
+
+void
+surfopt_result_release(struct surfopt_result *res)
+{
+    mesh_release(&res->out);
+}
+
+static double
+now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
+}
+
+static int
+check_params(const struct surfopt_params *p, struct sf_err *err)
+{
+    if (!(p->angle_deg >= 0 && p->angle_deg < 90))
+        return sf_err_set(err, SF_EINVAL, "angle %g: want degrees in [0, 90)", p->angle_deg);
+    if (!(p->margin_deg >= 0 && p->margin_deg <= p->angle_deg))
+        return sf_err_set(err, SF_EINVAL, "margin %g: want degrees in [0, angle]", p->margin_deg);
+    if (!(p->gamma > 0 && p->beta >= 0 && isfinite(p->gamma) && isfinite(p->beta)))
+        return sf_err_set(err, SF_EINVAL, "weights gamma %g, beta %g: want gamma > 0, beta >= 0",
+                          p->gamma, p->beta);
+    if (!(p->saliency >= 0 && p->saliency <= 1))
+        return sf_err_set(err, SF_EINVAL, "saliency %g: want a share in [0, 1]", p->saliency);
+    if (!(p->max_mndr > 0 && p->max_andr > 0))
+        return sf_err_set(err, SF_EINVAL, "deviation limits must be positive");
+    if (!(p->fix_bottom_mm >= 0))
+        return sf_err_set(err, SF_EINVAL, "fix-bottom %g: want mm >= 0", p->fix_bottom_mm);
+    if (p->max_iters < 1 || p->max_iters >= SURFOPT_CURVE_MAX || p->patience < 1 || p->rounds < 1 ||
+        p->rounds > 16)
+        return sf_err_set(err, SF_EINVAL, "iterations %d, patience %d, rounds %d out of range",
+                          p->max_iters, p->patience, p->rounds);
+    return SF_OK;
+}
+
+/* Ray-cast support metrics of m with +z up. */
+static int
+ray_metrics(const struct mesh *m, double angle_deg, struct support_metrics *out, struct sf_err *err)
+{
+    struct support_params sp;
+    support_params_default(&sp);
+    sp.angle_deg = angle_deg;
+    struct raycast *rc = raycast_new(m, err);
+    if (!rc)
+        return err->code;
+    int r = measure_support(m, rc, v3(0, 0, 1), &sp, out, err);
+    raycast_free(rc);
+    return r;
+}
+
+/* ---- the constant system gamma I + beta L'L, fixed rows as identity ---- */
+
+struct system {
+    uint32_t n;
+    uint32_t *nb_start, *nb; /* neighbour lists (CSR) */
+    struct sparse_chol *chol;
+    double *b0;  /* 3n, column-major: constant part of the right-hand side */
+    double *rhs; /* 3n */
+    double *x;   /* 3n */
+    bool *fixed;
+    double *w_face; /* per face: its input area over the mean (constant) */
+};
+
+/* A light pull toward the current shape: keeps the system definite when
+ * nothing is fixed, too weak to hold any face back. */
+#define MU 1e-4
+
+static int
+cmp_pair(const void *a, const void *b)
+{
+    const uint32_t *p = a, *q = b;
+    return p[0] != q[0] ? (p[0] < q[0] ? -1 : 1) : p[1] != q[1] ? (p[1] < q[1] ? -1 : 1) : 0;
+}
+
+/* Neighbour lists from the triangles' edges (both directions, unique). */
+static int
+build_neighbours(const struct mesh *m, struct system *s, struct sf_err *err)
+{
+    size_t np = (size_t)m->n_tris * 6;
+    uint32_t(*pairs)[2] = mem_array(np ? np : 1, sizeof(*pairs));
+    s->nb_start = mem_calloc((size_t)m->n_verts + 1, sizeof(uint32_t));
+    s->nb = mem_array(np ? np : 1, sizeof(uint32_t));
+    if (!pairs || !s->nb_start || !s->nb) {
+        free(pairs);
+        return sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for the edges");
+    }
+    size_t k = 0;
+    for (uint32_t f = 0; f < m->n_tris; f++) {
+        for (int e = 0; e < 3; e++) {
+            uint32_t a = m->t[f][e], b = m->t[f][(e + 1) % 3];
+            pairs[k][0] = a, pairs[k][1] = b, k++;
+            pairs[k][0] = b, pairs[k][1] = a, k++;
+        }
+    }
+    qsort(pairs, np, sizeof(*pairs), cmp_pair);
+    uint32_t n_nb = 0;
+    for (size_t i = 0; i < np; i++) {
+        if (i > 0 && pairs[i][0] == pairs[i - 1][0] && pairs[i][1] == pairs[i - 1][1])
+            continue;
+        s->nb[n_nb++] = pairs[i][1];
+        s->nb_start[pairs[i][0] + 1]++;
+    }
+    for (uint32_t v = 0; v < m->n_verts; v++)
+        s->nb_start[v + 1] += s->nb_start[v];
+    free(pairs);
+    return SF_OK;
+}
+
+/* Free the factor and its vectors (the neighbour lists stay). */
+static void
+system_free_factor(struct system *s)
+{
+    sparse_chol_free(s->chol);
+    free(s->b0);
+    free(s->rhs);
+    free(s->x);
+    free(s->fixed);
+    s->chol = NULL;
+    s->b0 = s->rhs = s->x = NULL;
+    s->fixed = NULL;
+}
+
+static void
+system_free(struct system *s)
+{
+    system_free_factor(s);
+    free(s->w_face);
+    free(s->nb_start);
+    free(s->nb);
+    memset(s, 0, sizeof(*s));
+}
+
+/*
+ * Assemble and factorize gamma I + beta L'L for the current round (beta
+ * is the adaptive detail weight): rows of
+ * vertices within fix_bottom_mm of the bed become identity rows holding
+ * their place; the input's Laplacian detail (beta L'L V0) and the fixed
+ * vertices' pull on their neighbours go into b0.
+ */
+static int
+system_build(struct system *s, const struct mesh *cur, const struct mesh *ref,
+             const struct surfopt_params *p, double beta, struct sf_err *err)
+{
+    uint32_t n = cur->n_verts;
+    s->n = n;
+    size_t n_trip = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        size_t d = s->nb_start[i + 1] - s->nb_start[i] + 1;
+        n_trip += d * d;
+    }
+    n_trip += n + 12 * (size_t)cur->n_tris;
+    uint32_t *row = mem_array(n_trip, sizeof(uint32_t));
+    uint32_t *col = mem_array(n_trip, sizeof(uint32_t));
+    double *val = mem_array(n_trip, sizeof(double));
+    double *lv0 = mem_calloc((size_t)n * 3, sizeof(double));
+    s->b0 = mem_calloc((size_t)n * 3, sizeof(double));
+    s->rhs = mem_calloc((size_t)n * 3, sizeof(double));
+    s->x = mem_calloc((size_t)n * 3, sizeof(double));
+    s->fixed = mem_calloc(n, sizeof(bool));
+    int rc = SF_ENOMEM;
+    if (!row || !col || !val || !lv0 || !s->b0 || !s->rhs || !s->x || !s->fixed) {
+        rc = sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
+        goto out;
+    }
+    struct vec3 lo, hi;
+    mesh_bbox(cur, &lo, &hi);
+    for (uint32_t i = 0; i < n; i++)
+        s->fixed[i] = cur->v[i].z <= lo.z + p->fix_bottom_mm;
+
+    /* L V0 row by row (uniform Laplacian: v - mean of neighbours) */
+    for (uint32_t i = 0; i < n; i++) {
+        uint32_t a = s->nb_start[i], b = s->nb_start[i + 1];
+        struct vec3 mean = v3(0, 0, 0);
+        for (uint32_t k = a; k < b; k++)
+            mean = v3_add(mean, ref->v[s->nb[k]]);
+        struct vec3 l = b > a ? v3_sub(ref->v[i], v3_scale(mean, 1.0 / (b - a))) : v3(0, 0, 0);
+        lv0[i] = l.x, lv0[n + i] = l.y, lv0[2 * (size_t)n + i] = l.z;
+    }
+    /* beta L'(L V0) into b0, and beta L'L plus gamma I as triplets */
+    size_t t = 0;
+    for (uint32_t i = 0; i < n; i++) {
+        uint32_t a = s->nb_start[i], b = s->nb_start[i + 1];
+        double c_nb = b > a ? -1.0 / (b - a) : 0;
+        for (uint32_t j = a; j <= b && beta > 0; j++) {
+            uint32_t vj = j == b ? i : s->nb[j];
+            double cj = j == b ? 1 : c_nb;
+            for (int d = 0; d < 3; d++)
+                s->b0[(size_t)d * n + vj] += beta * cj * lv0[(size_t)d * n + i];
+            for (uint32_t k = a; k <= b; k++) {
+                uint32_t vk = k == b ? i : s->nb[k];
+                double ck = k == b ? 1 : c_nb;
+                row[t] = vj, col[t] = vk, val[t] = beta * cj * ck, t++;
+            }
+        }
+        row[t] = i, col[t] = i, val[t] = MU, t++;
+    }
+    /* gamma sum_f w_f sum_(a,b) in f |v_a - v_b - d_ab|^2: an edge Laplacian */
+    for (uint32_t f = 0; f < cur->n_tris; f++) {
+        double g = p->gamma * s->w_face[f];
+        for (int e = 0; e < 3; e++) {
+            uint32_t a = cur->t[f][e], b = cur->t[f][(e + 1) % 3];
+            row[t] = a, col[t] = a, val[t] = g, t++;
+            row[t] = b, col[t] = b, val[t] = g, t++;
+            row[t] = a, col[t] = b, val[t] = -g, t++;
+            row[t] = b, col[t] = a, val[t] = -g, t++;
+        }
+    }
+    /* Dirichlet rows: a fixed row becomes an identity row (added below);
+     * a free row's entries in fixed columns move to the right-hand side */
+    size_t w = 0;
+    for (size_t k = 0; k < t; k++) {
+        if (s->fixed[row[k]])
+            continue;
+        if (s->fixed[col[k]]) {
+            struct vec3 xc = cur->v[col[k]];
+            s->b0[row[k]] -= val[k] * xc.x;
+            s->b0[n + row[k]] -= val[k] * xc.y;
+            s->b0[2 * (size_t)n + row[k]] -= val[k] * xc.z;
+            continue;
+        }
+        row[w] = row[k], col[w] = col[k], val[w] = val[k], w++;
+    }
+    for (uint32_t i = 0; i < n; i++) {
+        if (!s->fixed[i])
+            continue;
+        row[w] = i, col[w] = i, val[w] = 1, w++;
+        s->b0[i] = cur->v[i].x;
+        s->b0[n + i] = cur->v[i].y;
+        s->b0[2 * (size_t)n + i] = cur->v[i].z;
+    }
+    s->chol = sparse_chol_new(n, row, col, val, w, err);
+    rc = s->chol ? SF_OK : err->code;
+out:
+    free(row);
+    free(col);
+    free(val);
+    free(lv0);
+    return rc;
+}
+
+/* ---- one geometry iteration ---------------------------------------------- */
+
+/*
+ * The edge targets' share of the right-hand side.  Every risky face (not
+ * on the bed) wants its edges turned rigidly so its normal lies aim_rad
+ * from the vertical on the safe side, by the share its vertices' saliency
+ * allows; every other face wants its edges as they are.  acc (3n,
+ * column-major) receives gamma w_f sum (e_a - e_b) d_ab.
+ */
+static void
+edge_rhs(const struct mesh *cur, const struct system *s, const double *share, double sin_a,
+         double aim_rad, struct vec3 centre, double gamma, double *acc)
+{
+    uint32_t n = cur->n_verts;
+    memset(acc, 0, 3 * (size_t)n * sizeof(double));
+    struct vec3 lo, hi;
+    mesh_bbox(cur, &lo, &hi);
+    for (uint32_t f = 0; f < cur->n_tris; f++) {
+        const uint32_t *t = cur->t[f];
+        struct vec3 p[3] = { cur->v[t[0]], cur->v[t[1]], cur->v[t[2]] };
+        struct vec3 cr = v3_cross(v3_sub(p[1], p[0]), v3_sub(p[2], p[0]));
+        double len = v3_len(cr);
+        struct mat3 r = m3_identity();
+        struct vec3 nrm = len > 0 ? v3_scale(cr, 1 / len) : v3(0, 0, 1);
+        struct vec3 c = v3_scale(v3_add(v3_add(p[0], p[1]), p[2]), 1.0 / 3);
+        if (nrm.z < -sin_a && c.z > lo.z + 0.05) { /* risky, and not resting on the bed */
+            struct vec3 h = v3(nrm.x, nrm.y, 0);
+            if (v3_len(h) < 1e-6)
+                h = v3(c.x - centre.x, c.y - centre.y, 0); /* flat: lean away from the middle */
+            if (v3_len(h) < 1e-9)
+                h = v3(1, 0, 0);
+            h = v3_normalize(h);
+            struct vec3 want = v3(h.x * cos(aim_rad), h.y * cos(aim_rad), -sin(aim_rad));
+            double k = (share[t[0]] + share[t[1]] + share[t[2]]) / 3;
+            struct vec3 axis = v3_cross(nrm, want);
+            double sn = v3_len(axis), cs = v3_dot(nrm, want);
+            if (sn > 1e-12)
+                r = m3_axis_angle(v3_scale(axis, 1 / sn), k * atan2(sn, cs));
+        }
+        double g = gamma * s->w_face[f];
+        for (int e = 0; e < 3; e++) {
+            uint32_t a = t[e], b = t[(e + 1) % 3];
+            struct vec3 d = v3_scale(m3_mul_v(r, v3_sub(p[e], p[(e + 1) % 3])), g);
+            acc[a] += d.x, acc[n + a] += d.y, acc[2 * (size_t)n + a] += d.z;
+            acc[b] -= d.x, acc[n + b] -= d.y, acc[2 * (size_t)n + b] -= d.z;
+        }
+    }
+}
+
+struct snapshot {
+    struct vec3 *v;
+    double proxy;
+};
+
+/* One geometry round in the current frame.  cur ends as the round's best. */
+static int
+geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
+               const struct surfopt_params *p, int round, struct surfopt_result *res,
+               struct snapshot *keep, int *n_keep, int *n_improved, struct sf_err *err)
+{
+    uint32_t n = cur->n_verts;
+    struct system s = { 0 };
+    double *acc = mem_array(3 * (size_t)n, sizeof(double));
+    struct vec3 *best = mem_array(n, sizeof(*best));
+    s.w_face = mem_array(cur->n_tris, sizeof(double));
+    int rc = SF_ENOMEM;
+    if (!acc || !best || !s.w_face) {
+        rc = sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
+        goto out;
+    }
+    double area_sum = 0;
+    for (uint32_t f = 0; f < cur->n_tris; f++)
+        area_sum += (s.w_face[f] = mesh_tri_area(ref, f));
+    double mean_area = cur->n_tris ? area_sum / cur->n_tris : 1;
+    for (uint32_t f = 0; f < cur->n_tris; f++)
+        s.w_face[f] = mean_area > 0 ? s.w_face[f] / mean_area : 1;
+    double t0 = now_s();
+    double beta = p->beta;
+    if ((rc = build_neighbours(cur, &s, err)) < 0 ||
+        (rc = system_build(&s, cur, ref, p, beta, err)) < 0)
+        goto out;
+    res->factor_s += now_s() - t0;
+    t0 = now_s();
+
+    struct support_params sp;
+    support_params_default(&sp);
+    sp.angle_deg = p->angle_deg;
+    struct support_metrics sm;
+    measure_proxy(cur, v3(0, 0, 1), &sp, &sm);
+    double best_proxy = sm.proxy_mm3;
+    memcpy(best, cur->v, (size_t)n * sizeof(*best));
+    *n_improved = 0;
+    struct vec3 centre;
+    mesh_volume(cur, &centre);
+    double sin_a = sin(p->angle_deg * M_PI / 180);
+    double aim = (p->angle_deg - p->margin_deg) * M_PI / 180;
+    int since_best = 0;
+    bool stiffened = false; /* the limits were hit: never loosen again */
+    for (int it = 1; it <= p->max_iters; it++) {
+        if (p->cancel && atomic_load(p->cancel)) {
+            rc = sf_err_set(err, SF_ECANCELED, "surface optimization cancelled");
+            goto out;
+        }
+        edge_rhs(cur, &s, share, sin_a, aim, centre, p->gamma, acc);
+        for (uint32_t v = 0; v < n; v++) {
+            for (int d = 0; d < 3; d++) {
+                size_t k = (size_t)d * n + v;
+                double x = d == 0 ? cur->v[v].x : d == 1 ? cur->v[v].y : cur->v[v].z;
+                s.rhs[k] = s.fixed[v] ? s.b0[k] : s.b0[k] + acc[k] + MU * x;
+            }
+        }
+        if ((rc = sparse_chol_solve(s.chol, s.rhs, s.x, 3, err)) < 0)
+            goto out;
+        for (uint32_t v = 0; v < n; v++)
+            cur->v[v] = v3(s.x[v], s.x[n + v], s.x[2 * (size_t)n + v]);
+        res->n_iters++;
+        measure_proxy(cur, v3(0, 0, 1), &sp, &sm);
+        struct deviation dev;
+        measure_deviation(ref, cur, &dev, NULL);
+        if (res->n_curve < SURFOPT_CURVE_MAX)
+            res->curve[res->n_curve++] = sm.n_risky;
+        if (p->progress) {
+            struct surfopt_progress pr = { round,      p->rounds, it,      p->max_iters,
+                                           sm.n_risky, dev.mndr,  dev.andr };
+            p->progress(p->progress_ud, &pr);
+        }
+        if (dev.mndr > p->max_mndr || dev.andr > p->max_andr) {
+            /* Past the deviation limits: the steps are too bold for this
+             * part (few, large faces).  Stiffen the detail term and go on
+             * from the best shape; once stiff enough, the round is done. */
+            if (beta >= p->beta * 64)
+                break;
+            beta = (beta < p->beta ? p->beta : beta) * 4;
+            stiffened = true;
+            memcpy(cur->v, best, (size_t)n * sizeof(*best));
+            double tf = now_s();
+            system_free_factor(&s);
+            if ((rc = system_build(&s, cur, ref, p, beta, err)) < 0)
+                goto out;
+            res->factor_s += now_s() - tf;
+            since_best = 0;
+            continue;
+        }
+        if (sm.proxy_mm3 < best_proxy * (1 - 1e-6)) {
+            best_proxy = sm.proxy_mm3;
+            memcpy(best, cur->v, (size_t)n * sizeof(*best));
+            since_best = 0;
+            (*n_improved)++;
+            /* keep it as a fallback, dropping the oldest when full */
+            if (*n_keep == KEEP_MAX) {
+                struct vec3 *old = keep[0].v;
+                memmove(keep, keep + 1, (KEEP_MAX - 1) * sizeof(*keep));
+                keep[KEEP_MAX - 1].v = old;
+                (*n_keep)--;
+            }
+            memcpy(keep[*n_keep].v, cur->v, (size_t)n * sizeof(*best));
+            keep[*n_keep].proxy = best_proxy;
+            (*n_keep)++;
+        } else if (++since_best >= p->patience) {
+            /* Adaptive weight: stalled well inside the deviation budget,
+             * the input's detail is holding the faces back; loosen it and
+             * go on from the best shape.  Otherwise the round is done. */
+            if (stiffened || beta <= p->beta / 64 || dev.mndr > p->max_mndr / 2 ||
+                dev.andr > p->max_andr / 2)
+                break;
+            beta /= 4;
+            memcpy(cur->v, best, (size_t)n * sizeof(*best));
+            double tf = now_s();
+            system_free_factor(&s);
+            if ((rc = system_build(&s, cur, ref, p, beta, err)) < 0)
+                goto out;
+            res->factor_s += now_s() - tf;
+            since_best = 0;
+        }
+    }
+    memcpy(cur->v, best, (size_t)n * sizeof(*best));
+    res->iterate_s += now_s() - t0;
+    rc = SF_OK;
+out:
+    system_free(&s);
+    free(acc);
+    free(best);
+    return rc;
+}
+
+/* Turn an array of n positions like mesh_rotate_up, then move it by t. */
+static void
+move_positions(struct vec3 *v, uint32_t n, const struct vec3 *up, struct vec3 t)
+{
+    struct mesh view = { .v = v, .n_verts = n };
+    if (up)
+        mesh_rotate_up(&view, *up);
+    mesh_translate(&view, t);
+}
+
+/*
+ * Orientation step: turn cur onto the orienter's best up, then rest it on
+ * the bed; ref and the kept iterates move the same way, so deviations and
+ * fallbacks stay comparable.
+ */
+static int
+orientation_step(struct mesh *cur, struct mesh *ref, struct snapshot *keep, int n_keep,
+                 const struct surfopt_params *p, struct sf_err *err)
+{
+    struct vec3 up = v3(0, 0, 1);
+    if (p->orient) {
+        struct orient_params op = p->op;
+        op.angle_deg = p->angle_deg;
+        struct orient_result or ;
+        int rc = orient_find(cur, &op, & or, err);
+        if (rc < 0)
+            return rc;
+        up = or.best.up;
+    }
+    bool turn = v3_dot(up, v3(0, 0, 1)) < cos(0.1 * M_PI / 180);
+    const struct vec3 *r = turn ? &up : NULL;
+    move_positions(cur->v, cur->n_verts, r, v3(0, 0, 0));
+    struct vec3 lo, hi;
+    mesh_bbox(cur, &lo, &hi);
+    struct vec3 t = v3(-(lo.x + hi.x) / 2, -(lo.y + hi.y) / 2, -lo.z);
+    mesh_translate(cur, t);
+    move_positions(ref->v, ref->n_verts, r, t);
+    for (int k = 0; k < n_keep; k++)
+        move_positions(keep[k].v, cur->n_verts, r, t);
+    return SF_OK;
+}
+
+int
+surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct surfopt_result *res,
+                 struct sf_err *err)
+{
+    memset(res, 0, sizeof(*res));
+    mesh_init(&res->out);
+    int rc = check_params(p, err);
+    if (rc < 0)
+        return rc;
+    if (m->n_verts < 4 || m->n_tris < 4)
+        return sf_err_set(err, SF_EINVAL, "part has %u triangles: nothing to optimize", m->n_tris);
+    double t_start = now_s();
+    struct mesh cur, ref, oriented;
+    mesh_init(&cur);
+    mesh_init(&ref);
+    mesh_init(&oriented);
+    if ((rc = mesh_copy(&ref, m, err)) < 0 ||
+        (rc = mesh_refine(&ref, p->refine_tris, 0.01 * mesh_diag(m), 4 * p->refine_tris, err)) <
+            0 ||
+        (rc = mesh_copy(&cur, &ref, err)) < 0) {
+        mesh_release(&ref);
+        mesh_release(&cur);
+        return rc;
+    }
+    uint32_t n = cur.n_verts;
+    struct snapshot keep[KEEP_MAX] = { 0 };
+    int n_keep = 0;
+    double *sal = mem_array(n, sizeof(double));
+    if (!sal) {
+        rc = sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
+        goto out;
+    }
+    for (int k = 0; k < KEEP_MAX; k++) {
+        if (!(keep[k].v = mem_array(n, sizeof(struct vec3)))) {
+            rc = sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
+            goto out;
+        }
+    }
+    if ((rc = ray_metrics(m, p->angle_deg, &res->input, err)) < 0)
+        goto out;
+    double t0 = now_s();
+    if ((rc = mesh_saliency(&ref, sal, err)) < 0)
+        goto out;
+    for (uint32_t v = 0; v < n; v++)
+        sal[v] = 1 - p->saliency * sal[v]; /* the share of its target a vertex moves */
+    res->saliency_s = now_s() - t0;
+    if ((rc = selfx_count(&ref, err)) < 0)
+        goto out;
+    res->selfx_input = rc;
+
+    for (int round = 0; round < p->rounds; round++) {
+        t0 = now_s();
+        if ((rc = orientation_step(&cur, &ref, keep, n_keep, p, err)) < 0)
+            goto out;
+        res->orient_s += now_s() - t0;
+        if (round == 0) {
+            if ((rc = mesh_copy(&oriented, &cur, err)) < 0 ||
+                (rc = ray_metrics(&oriented, p->angle_deg, &res->oriented, err)) < 0)
+                goto out;
+            struct support_params sp;
+            support_params_default(&sp);
+            sp.angle_deg = p->angle_deg;
+            struct support_metrics sm0;
+            measure_proxy(&cur, v3(0, 0, 1), &sp, &sm0);
+            res->curve[res->n_curve++] = sm0.n_risky;
+        }
+        int n_improved = 0;
+        if ((rc = geometry_round(&cur, &ref, sal, p, round, res, keep, &n_keep, &n_improved, err)) <
+            0)
+            goto out;
+        res->n_rounds++;
+        if (n_improved == 0 || !p->orient)
+            break; /* another orientation step would see the same shape */
+    }
+
+    /* The result: the latest kept shape that adds no self-intersection and
+     * needs less support than the orientation alone; else the orientation
+     * alone. */
+    t0 = now_s();
+    struct support_metrics sm;
+    for (int k = n_keep - 1; k >= 0; k--) {
+        memcpy(cur.v, keep[k].v, (size_t)n * sizeof(struct vec3));
+        if ((rc = selfx_count(&cur, err)) < 0)
+            goto out;
+        int sx = rc;
+        if ((rc = ray_metrics(&cur, p->angle_deg, &sm, err)) < 0)
+            goto out;
+        if (sx <= res->selfx_input && sm.volume_mm3 < res->oriented.volume_mm3) {
+            res->shape_changed = true;
+            res->selfx_out = sx;
+            break;
+        }
+        res->n_rejected++;
+    }
+    res->check_s = now_s() - t0;
+    if (res->shape_changed) {
+        res->out = cur;
+        mesh_init(&cur);
+        res->after = sm;
+        struct vec3 lo, hi;
+        mesh_bbox(&res->out, &lo, &hi);
+        struct vec3 t = v3(-(lo.x + hi.x) / 2, -(lo.y + hi.y) / 2, -lo.z);
+        mesh_translate(&res->out, t);
+        mesh_translate(&ref, t);
+        measure_deviation(&ref, &res->out, &res->dev, NULL);
+    } else {
+        res->out = oriented;
+        mesh_init(&oriented);
+        res->after = res->oriented;
+        res->selfx_out = res->selfx_input;
+    }
+    rc = SF_OK;
+out:
+    res->total_s = now_s() - t_start;
+    for (int k = 0; k < KEEP_MAX; k++)
+        free(keep[k].v);
+    free(sal);
+    mesh_release(&cur);
+    mesh_release(&ref);
+    mesh_release(&oriented);
+    if (rc < 0)
+        mesh_release(&res->out);
+    return rc;
+}

@@ -1,0 +1,193 @@
+/*
+ * test_surfopt.c - the surface shape optimizer (method 3) and its pieces:
+ * midpoint subdivision keeps the surface, mesh saliency finds a feature,
+ * and the optimizer lowers support within the deviation limits, keeps the
+ * bed region fixed, never returns more support or more self-intersection
+ * than it was given, and rejects bad parameters.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../src/geom/measure.h"
+#include "../../src/geom/saliency.h"
+#include "../../src/geom/selfx.h"
+#include "../../src/geom/surfopt.h"
+#include "../../src/mesh/shapes.h"
+#include "../../src/mesh/subdiv.h"
+#include "../t.h"
+
+static double
+support_volume(const struct mesh *m)
+{
+    struct support_params sp;
+    support_params_default(&sp);
+    struct raycast *rc = raycast_new(m, NULL);
+    struct support_metrics sm;
+    memset(&sm, 0, sizeof(sm));
+    if (rc)
+        measure_support(m, rc, v3(0, 0, 1), &sp, &sm, NULL);
+    raycast_free(rc);
+    return sm.volume_mm3;
+}
+
+T_CASE(subdivide_keeps_the_surface)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_torus(&m, 20, 6, 24, 12, &err), &err);
+    double area = mesh_area(&m), vol = mesh_volume(&m, NULL);
+    uint32_t nv = m.n_verts, nt = m.n_tris;
+    T_OK(mesh_subdivide(&m, &err), &err);
+    T_EQ_INT(m.n_tris, 4 * nt);
+    T_EQ_INT(m.n_verts, nv + nt * 3 / 2); /* one new vertex per edge of a closed mesh */
+    T_EQ_DBL(mesh_area(&m), area, 1e-9 * area);
+    T_EQ_DBL(mesh_volume(&m, NULL), vol, 1e-9 * vol);
+    struct mesh_topo topo;
+    T_OK(mesh_topo_build(&m, &topo, &err), &err);
+    T_TRUE(mesh_topo_closed(&topo));
+    T_EQ_INT(topo.n_comps, 1);
+    mesh_topo_release(&topo);
+    /* refine stops at the triangle count asked for */
+    int rounds = mesh_refine(&m, 20000, 0, 1u << 20, &err);
+    T_TRUE(rounds == 2 && m.n_tris >= 20000);
+    mesh_release(&m);
+}
+
+T_CASE(saliency_marks_the_feature)
+{
+    /* A sphere on a stem: the most salient vertices are where the
+     * curvature changes (the neck and the stem's rim), not on the smooth
+     * middle of the sphere. */
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    T_OK(mesh_subdivide(&m, &err), &err);
+    double *s = malloc(m.n_verts * sizeof(double));
+    T_TRUE(s != NULL);
+    T_OK(mesh_saliency(&m, s, &err), &err);
+    double lo = 1, hi = 0;
+    struct vec3 at = v3(0, 0, 0);
+    for (uint32_t v = 0; v < m.n_verts; v++) {
+        T_TRUE(s[v] >= 0 && s[v] <= 1);
+        lo = fmin(lo, s[v]);
+        if (s[v] > hi) {
+            hi = s[v];
+            at = m.v[v];
+        }
+    }
+    T_EQ_DBL(hi, 1, 1e-12);
+    T_TRUE(lo < 0.5);
+    /* the sphere's centre and radius: the peak is not on its smooth cap */
+    struct vec3 blo, bhi;
+    mesh_bbox(&m, &blo, &bhi);
+    T_TRUE(at.z < bhi.z - 0.25 * (bhi.z - blo.z));
+    free(s);
+    mesh_release(&m);
+}
+
+T_CASE(mushroom_upright_loses_support_within_limits)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    struct surfopt_params p;
+    surfopt_params_default(&p);
+    p.orient = false; /* the shape step alone */
+    p.refine_tris = 4000;
+    struct surfopt_result r;
+    T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(r.shape_changed);
+    T_TRUE(r.after.volume_mm3 < 0.5 * r.input.volume_mm3);
+    T_TRUE(r.after.n_risky < r.oriented.n_risky);
+    T_TRUE(r.dev.mndr <= p.max_mndr && r.dev.andr <= p.max_andr && r.dev.max_mm > 0);
+    T_TRUE(r.selfx_out <= r.selfx_input);
+    T_EQ_INT(r.curve[0], r.oriented.n_risky);
+    /* the figures describe the returned mesh */
+    T_EQ_DBL(support_volume(&r.out), r.after.volume_mm3, 1e-6);
+    /* it rests on the bed and the bed region kept its shape: the lowest
+     * vertices of input and output have the same footprint */
+    struct vec3 lo, hi, ilo, ihi;
+    mesh_bbox(&r.out, &lo, &hi);
+    mesh_bbox(&m, &ilo, &ihi);
+    T_EQ_DBL(lo.z, 0, 1e-9);
+    double in_r = 0, out_r = 0;
+    for (uint32_t v = 0; v < m.n_verts; v++)
+        if (m.v[v].z < ilo.z + 1e-9)
+            in_r =
+                fmax(in_r, hypot(m.v[v].x - (ilo.x + ihi.x) / 2, m.v[v].y - (ilo.y + ihi.y) / 2));
+    for (uint32_t v = 0; v < r.out.n_verts; v++)
+        if (r.out.v[v].z < 1e-9)
+            out_r = fmax(out_r,
+                         hypot(r.out.v[v].x - (lo.x + hi.x) / 2, r.out.v[v].y - (lo.y + hi.y) / 2));
+    T_EQ_DBL(out_r, in_r, 1e-6 * in_r);
+    surfopt_result_release(&r);
+    mesh_release(&m);
+}
+
+T_CASE(tight_limits_keep_the_shape)
+{
+    /* A tee's flat arms cannot turn safe within 0.5 % of the diagonal:
+     * the input comes back unchanged rather than a worse shape. */
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    struct surfopt_params p;
+    surfopt_params_default(&p);
+    p.orient = false;
+    p.refine_tris = 2000;
+    p.max_mndr = 0.005;
+    p.max_andr = 0.005;
+    struct surfopt_result r;
+    T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(!r.shape_changed);
+    T_EQ_DBL(r.after.volume_mm3, r.input.volume_mm3, 1e-6);
+    T_EQ_DBL(mesh_volume(&r.out, NULL), mesh_volume(&m, NULL), 1e-6);
+    surfopt_result_release(&r);
+    mesh_release(&m);
+}
+
+T_CASE(orientation_step_turns_the_tee)
+{
+    /* The generated tee stands on its stem, arms out: the orientation step
+     * finds a direction that needs no support at all. */
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    struct surfopt_params p;
+    surfopt_params_default(&p);
+    p.refine_tris = 2000;
+    p.op.samples = 200;
+    struct surfopt_result r;
+    T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(r.input.volume_mm3 > 1000);
+    T_EQ_DBL(r.oriented.volume_mm3, 0, 1e-9);
+    T_EQ_DBL(r.after.volume_mm3, 0, 1e-9);
+    surfopt_result_release(&r);
+    mesh_release(&m);
+}
+
+T_CASE(bad_parameters_are_refused)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
+    struct surfopt_params p;
+    struct surfopt_result r;
+    surfopt_params_default(&p);
+    p.angle_deg = 90;
+    T_ERR(surfopt_optimize(&m, &p, &r, &err), SF_EINVAL, &err, "angle 90");
+    surfopt_params_default(&p);
+    p.saliency = 1.5;
+    T_ERR(surfopt_optimize(&m, &p, &r, &err), SF_EINVAL, &err, "saliency 1.5");
+    surfopt_params_default(&p);
+    p.rounds = 0;
+    T_ERR(surfopt_optimize(&m, &p, &r, &err), SF_EINVAL, &err, "rounds 0");
+    mesh_release(&m);
+}
