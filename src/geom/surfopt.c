@@ -15,7 +15,7 @@
 #include "selfx.h"
 #include "sparse.h"
 
-#define KEEP_MAX 8 /* improving iterates of the last round kept as fallbacks */
+#define KEEP_MAX 8 /* improving iterates kept as fallbacks (keep_push) */
 
 void
 surfopt_params_default(struct surfopt_params *p)
@@ -285,12 +285,12 @@ out:
  * The edge targets' share of the right-hand side.  Every risky face (not
  * on the bed) wants its edges turned rigidly so its normal lies aim_rad
  * from the vertical on the safe side, by the share its vertices' saliency
- * allows; every other face wants its edges as they are.  acc (3n,
+ * allows times step; every other face wants its edges as they are.  acc (3n,
  * column-major) receives gamma w_f sum (e_a - e_b) d_ab.
  */
 static void
-edge_rhs(const struct mesh *cur, const struct system *s, const double *share, double sin_a,
-         double aim_rad, struct vec3 centre, double gamma, double *acc)
+edge_rhs(const struct mesh *cur, const struct system *s, const double *share, double step,
+         double sin_a, double aim_rad, struct vec3 centre, double gamma, double *acc)
 {
     uint32_t n = cur->n_verts;
     memset(acc, 0, 3 * (size_t)n * sizeof(double));
@@ -312,7 +312,7 @@ edge_rhs(const struct mesh *cur, const struct system *s, const double *share, do
                 h = v3(1, 0, 0);
             h = v3_normalize(h);
             struct vec3 want = v3(h.x * cos(aim_rad), h.y * cos(aim_rad), -sin(aim_rad));
-            double k = (share[t[0]] + share[t[1]] + share[t[2]]) / 3;
+            double k = step * (share[t[0]] + share[t[1]] + share[t[2]]) / 3;
             struct vec3 axis = v3_cross(nrm, want);
             double sn = v3_len(axis), cs = v3_dot(nrm, want);
             if (sn > 1e-12)
@@ -332,6 +332,32 @@ struct snapshot {
     struct vec3 *v;
     double proxy;
 };
+
+/*
+ * Keep an improving iterate as a fallback for the final checks.  The
+ * latest is always kept; older ones only where the proxy fell by 15 %
+ * since the one before, and when the slots fill up every other one goes,
+ * so the kept iterates spread over the whole run (a late iterate may
+ * intersect itself where an earlier one did not).
+ */
+static void
+keep_push(struct snapshot *keep, int *n_keep, const struct vec3 *v, uint32_t n, double proxy)
+{
+    int k = *n_keep;
+    if (k >= 2 && keep[k - 1].proxy > 0.85 * keep[k - 2].proxy) {
+        k--; /* the latest was only provisional: replace it */
+    } else if (k == KEEP_MAX) {
+        for (int i = 1; i < KEEP_MAX / 2; i++) {
+            struct snapshot t = keep[i];
+            keep[i] = keep[2 * i];
+            keep[2 * i] = t;
+        }
+        k = KEEP_MAX / 2;
+    }
+    memcpy(keep[k].v, v, (size_t)n * sizeof(*v));
+    keep[k].proxy = proxy;
+    *n_keep = k + 1;
+}
 
 /* One geometry round in the current frame.  cur ends as the round's best. */
 static int
@@ -376,13 +402,13 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
     double sin_a = sin(p->angle_deg * M_PI / 180);
     double aim = (p->angle_deg - p->margin_deg) * M_PI / 180;
     int since_best = 0;
-    bool stiffened = false; /* the limits were hit: never loosen again */
+    double step = 1; /* share of each face's turn asked for; halved past the limits */
     for (int it = 1; it <= p->max_iters; it++) {
         if (p->cancel && atomic_load(p->cancel)) {
             rc = sf_err_set(err, SF_ECANCELED, "surface optimization cancelled");
             goto out;
         }
-        edge_rhs(cur, &s, share, sin_a, aim, centre, p->gamma, acc);
+        edge_rhs(cur, &s, share, step, sin_a, aim, centre, p->gamma, acc);
         for (uint32_t v = 0; v < n; v++) {
             for (int d = 0; d < 3; d++) {
                 size_t k = (size_t)d * n + v;
@@ -406,19 +432,13 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
             p->progress(p->progress_ud, &pr);
         }
         if (dev.mndr > p->max_mndr || dev.andr > p->max_andr) {
-            /* Past the deviation limits: the steps are too bold for this
-             * part (few, large faces).  Stiffen the detail term and go on
-             * from the best shape; once stiff enough, the round is done. */
-            if (beta >= p->beta * 64)
+            /* Past the deviation limits: the turns are too bold for this
+             * part (few, large faces).  Halve them and go on from the best
+             * shape; once they are small, the round is done. */
+            if (step <= 1.0 / 16)
                 break;
-            beta = (beta < p->beta ? p->beta : beta) * 4;
-            stiffened = true;
+            step /= 2;
             memcpy(cur->v, best, (size_t)n * sizeof(*best));
-            double tf = now_s();
-            system_free_factor(&s);
-            if ((rc = system_build(&s, cur, ref, p, beta, err)) < 0)
-                goto out;
-            res->factor_s += now_s() - tf;
             since_best = 0;
             continue;
         }
@@ -427,21 +447,12 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
             memcpy(best, cur->v, (size_t)n * sizeof(*best));
             since_best = 0;
             (*n_improved)++;
-            /* keep it as a fallback, dropping the oldest when full */
-            if (*n_keep == KEEP_MAX) {
-                struct vec3 *old = keep[0].v;
-                memmove(keep, keep + 1, (KEEP_MAX - 1) * sizeof(*keep));
-                keep[KEEP_MAX - 1].v = old;
-                (*n_keep)--;
-            }
-            memcpy(keep[*n_keep].v, cur->v, (size_t)n * sizeof(*best));
-            keep[*n_keep].proxy = best_proxy;
-            (*n_keep)++;
+            keep_push(keep, n_keep, cur->v, n, best_proxy);
         } else if (++since_best >= p->patience) {
             /* Adaptive weight: stalled well inside the deviation budget,
              * the input's detail is holding the faces back; loosen it and
              * go on from the best shape.  Otherwise the round is done. */
-            if (stiffened || beta <= p->beta / 64 || dev.mndr > p->max_mndr / 2 ||
+            if (step < 1 || beta <= p->beta / 64 || dev.mndr > p->max_mndr / 2 ||
                 dev.andr > p->max_andr / 2)
                 break;
             beta /= 4;

@@ -23,8 +23,8 @@
  *    factorized once (CHOLMOD) and each iteration is a back-substitution.
  * A round stops after max_iters, when the support proxy has not dropped
  * for `patience` iterations, or when the deviation from the input passes
- * max_mndr / max_andr (first the steps are made stiffer: beta x4, up to
- * 64x); the best iterate within the limits is kept.  The result never has
+ * max_mndr / max_andr (first the face turns asked for are halved, down to
+ * 1/16); the best iterate within the limits is kept.  The result never has
  * more self-intersecting edges or more ray-cast support volume than the
  * oriented input (it falls back through the kept iterates to the
  * orientation alone).
