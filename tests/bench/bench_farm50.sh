@@ -22,7 +22,8 @@
 #  - REST latency: GET /api/printers with curl every 0.2 s, p50/p99/max.
 # The peer prints the very G-code files the daemon printed (same printer,
 # same job).  BENCH_PRINTERS (50), BENCH_SECS (60), BENCH_WARMUP (10),
-# BENCH_BAUD (115200), BENCH_PEER=0 skips printcore.
+# BENCH_BAUD (115200), BENCH_PEER=0 skips printcore, BENCH_SIM_PROCS=1 runs
+# one simulator process per printer instead.
 set -u
 build=${1:-build/rel}
 n=${BENCH_PRINTERS:-50}
@@ -30,6 +31,7 @@ secs=${BENCH_SECS:-60}
 warm=${BENCH_WARMUP:-10}
 baud=${BENCH_BAUD:-115200}
 peer=${BENCH_PEER:-1}
+procs=${BENCH_SIM_PROCS:-0}
 D=$build/bin/slimfarmd
 C=$build/bin/slimfarm
 S=$build/bin/slimfarm-sim
@@ -64,19 +66,47 @@ rss_kb() {
   echo "$t"
 }
 
-# sim_start NAME: one process serving $n printers; their addresses in $work/NAME.out
+# sim_start NAME: the $n printers, their addresses in order in $work/NAME.out;
+# one `--count $n` process, or with BENCH_SIM_PROCS=1 one process each (to
+# see what 50 simulator processes cost).
 sim_start() {
-  "$S" marlin --count "$n" --baud "$baud" --speed 1 --advanced-ok \
-    > "$work/$1.out" 2> "$work/$1.err" &
-  sim_pid=$!
-  pids+=("$sim_pid")
+  local i
+  sim_pids=()
+  if [ "$procs" = 1 ]; then
+    for ((i = 0; i < n; i++)); do
+      "$S" marlin --baud "$baud" --speed 1 --advanced-ok > "$work/$1.out.$i" 2> "$work/$1.err.$i" &
+      sim_pids+=($!); pids+=($!)
+    done
+    for ((i = 0; i < n; i++)); do
+      for _ in $(seq 100); do [ -s "$work/$1.out.$i" ] && break; sleep 0.05; done
+      head -n 1 "$work/$1.out.$i"
+    done > "$work/$1.out"
+  else
+    "$S" marlin --count "$n" --baud "$baud" --speed 1 --advanced-ok \
+      > "$work/$1.out" 2> "$work/$1.err" &
+    sim_pids+=($!); pids+=($!)
+  fi
   for _ in $(seq 100); do [ "$(wc -l < "$work/$1.out")" -ge "$n" ] && return 0; sleep 0.05; done
-  echo "bench_farm50: the simulator did not start: $(head -c 300 "$work/$1.err")"; exit 1
+  echo "bench_farm50: the simulator did not start: $(head -c 300 "$work/$1.err"*)"; exit 1
 }
-# snapshot NAME TAG: ask the simulator for its stats lines (appended to NAME.err)
+# snapshot NAME TAG: ask the simulators for their stats lines -> $work/NAME.TAG, one per printer
 snapshot() {
+  local i f
+  if [ "$procs" = 1 ]; then
+    for ((i = 0; i < n; i++)); do
+      f="$work/$1.err.$i"
+      echo $(( $(grep -c '^stats:' "$f") + 1 )) > "$f.want"
+    done
+    kill -USR1 "${sim_pids[@]}"
+    for ((i = 0; i < n; i++)); do
+      f="$work/$1.err.$i"
+      for _ in $(seq 100); do [ "$(grep -c '^stats:' "$f")" -ge "$(cat "$f.want")" ] && break; sleep 0.02; done
+      grep '^stats:' "$f" | tail -n 1
+    done > "$work/$1.$2"
+    return
+  fi
   local before; before=$(grep -c '^stats:' "$work/$1.err")
-  kill -USR1 "$sim_pid"
+  kill -USR1 "${sim_pids[@]}"
   for _ in $(seq 100); do
     [ "$(grep -c '^stats:' "$work/$1.err")" -ge $((before + n)) ] && break; sleep 0.02
   done
@@ -135,7 +165,7 @@ got=$(printing)
 echo "all $n printers printing $(awk -v a="$t_sub" -v b="$(now)" 'BEGIN { printf "%.0f", b - a }') s after submit (slicing on the daemon's pool); warm-up ${warm} s, window ${secs} s"
 sleep "$warm"
 load0=$(cut -d ' ' -f 1-3 /proc/loadavg)
-c0=$(cpu_ticks "$dpid"); s0=$(cpu_ticks "$sim_pid"); t0=$(now)
+c0=$(cpu_ticks "$dpid"); s0=$(cpu_ticks "${sim_pids[@]}"); t0=$(now)
 snapshot ours a
 : > "$work/lat"
 end=$(awk -v t="$t0" -v s="$secs" 'BEGIN { printf "%.3f", t + s }')
@@ -144,7 +174,7 @@ while awk -v e="$end" -v t="$(now)" 'BEGIN { exit !(t < e) }'; do
   sleep 0.2
 done
 snapshot ours b
-t1=$(now); c1=$(cpu_ticks "$dpid"); s1=$(cpu_ticks "$sim_pid")
+t1=$(now); c1=$(cpu_ticks "$dpid"); s1=$(cpu_ticks "${sim_pids[@]}")
 load1=$(cut -d ' ' -f 1-3 /proc/loadavg)
 wall=$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }')
 ours_cpu=$(awk -v c=$((c1 - c0)) -v h="$hz" -v w="$wall" 'BEGIN { printf "%.1f", 100 * c / h / w }')
@@ -163,7 +193,7 @@ while read -r p sha; do
   f=$(find "$work/data" -type f -name "$sha*" | head -n 1)
   [ -n "$f" ] && cp "$f" "$work/gcode/$p.gcode"
 done
-kill "$dpid" "$sim_pid"; wait "$dpid" "$sim_pid" 2>/dev/null
+kill "$dpid" "${sim_pids[@]}"; wait "$dpid" "${sim_pids[@]}" 2>/dev/null
 echo "slimfarmd: window ${wall%.*} s, load $load0 -> $load1, $still of $n still printing at the end"
 
 # ---- peer: printcore x N ----
@@ -199,11 +229,11 @@ PY
   if [ "$up" -ge "$n" ]; then
     sleep "$warm"
     load0=$(cut -d ' ' -f 1-3 /proc/loadavg)
-    c0=$(cpu_ticks "${pc[@]}"); s0=$(cpu_ticks "$sim_pid"); t0=$(now)
+    c0=$(cpu_ticks "${pc[@]}"); s0=$(cpu_ticks "${sim_pids[@]}"); t0=$(now)
     snapshot peer a
     sleep "$secs"
     snapshot peer b
-    t1=$(now); c1=$(cpu_ticks "${pc[@]}"); s1=$(cpu_ticks "$sim_pid")
+    t1=$(now); c1=$(cpu_ticks "${pc[@]}"); s1=$(cpu_ticks "${sim_pids[@]}")
     load1=$(cut -d ' ' -f 1-3 /proc/loadavg)
     wall=$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }')
     alive=0; for p in "${pc[@]}"; do kill -0 "$p" 2>/dev/null && alive=$((alive + 1)); done
@@ -217,12 +247,12 @@ PY
   else
     peer_row="printcore x$n: only $up of $n came online ($(tail -n 1 "$work/pc0.err"))"
   fi
-  kill "${pc[@]}" "$sim_pid" 2>/dev/null; wait "${pc[@]}" "$sim_pid" 2>/dev/null
+  kill "${pc[@]}" "${sim_pids[@]}" 2>/dev/null; wait "${pc[@]}" "${sim_pids[@]}" 2>/dev/null
 else
   peer_row="printcore: skipped (BENCH_PEER=0 or printrun-common not installed)"
 fi
 
-echo "$n printers, $baud baud, real time (speed 1); CPU in % of one core over the window"
+echo "$n printers, $baud baud, real time (speed 1), $([ "$procs" = 1 ] && echo "$n simulator processes" || echo "one simulator process"); CPU in % of one core over the window"
 printf '%-20s %7s %8s %6s %18s %9s %9s %8s %s\n' host "CPU %" "sim CPU%" "RSS MB" \
   "lines/s min/avg/max" starved "printers" "dry s" "GET /api/printers p50/p99/max"
 printf '%-20s %7s %8s %6s %18s %9s %9s %8s %s\n' "slimfarmd (1 proc)" "$ours_cpu" "$ours_sim" \
