@@ -13,7 +13,22 @@
  * OS takes them, the rest waits in a capped buffer with write interest on.
  * Errors and hang-ups close the transport once and report why.
  *
- * Thread: loop thread.
+ * Host names: a numeric address connects at once; a name is looked up on a
+ * thread of its own (getaddrinfo may wait out a dead nameserver for tens of
+ * seconds, which on the loop thread would stall every printer).  The thread
+ * signals an eventfd the transport watches, never the loop itself, so
+ * closing the transport cancels the lookup synchronously (loop_del_fd, then
+ * the abandoned request is freed by whichever side finishes last) and the
+ * loop may even be freed while a lookup still hangs.  Not getaddrinfo_a():
+ * gai_cancel() cannot stop a lookup in progress either (EAI_NOTCANCELED),
+ * so the same hand-over would be needed on top of glibc's own thread pool,
+ * and a test could not inject a resolver that never answers.  Not
+ * loop_post(): a post cannot be taken back, and loop_free() drops pending
+ * posts unrun, so a result posted just before shutdown would leak.  One
+ * thread per lookup, so one dead name never delays another; lookups happen
+ * on (re)connect only, and SF_RESOLVER_THREADS_MAX caps them.
+ *
+ * Thread: loop thread; the lookup threads touch only their struct lookup.
  */
 #include "transport.h"
 
@@ -23,14 +38,20 @@
 #include <netdb.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <pthread.h>
+#include <signal.h>
+#include <stdatomic.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/eventfd.h>
 #include <sys/socket.h>
 #include <termios.h>
 #include <unistd.h>
 
 #include "../src/base/buf.h"
+#include "../src/base/limits.h"
 #include "../src/base/log.h"
 #include "../src/base/mem.h"
 
@@ -39,15 +60,39 @@
 
 enum tkind { T_SERIAL, T_PTY, T_TCP };
 
+/*
+ * One host name lookup, shared by a transport (loop thread) and the thread
+ * that runs it.  `lock` protects done, abandoned and the results; the side
+ * that finds the other one gone frees the request (lookup_destroy).
+ */
+struct lookup {
+    pthread_mutex_t lock;
+    int efd;                      /* eventfd the thread signals when done */
+    transport_resolve_fn resolve; /* getaddrinfo unless a test injected one */
+    char host[128];               /* name to resolve */
+    char port[8];                 /* decimal port */
+    bool done;                    /* the thread finished; rc, sys_errno, ai are set */
+    bool abandoned;               /* the transport was freed first; the thread frees */
+    int rc;                       /* resolve()'s return, 0 = resolved */
+    int sys_errno;                /* errno after resolve() (for EAI_SYSTEM) */
+    struct addrinfo *ai;          /* result (freeaddrinfo) until taken */
+};
+
+/* The resolver lookups use; set by tests before transports open. */
+static _Atomic(transport_resolve_fn) resolver = getaddrinfo;
+/* Lookup threads alive (capped by SF_RESOLVER_THREADS_MAX). */
+static atomic_int lookups_alive;
+
 struct transport {
     struct loop *loop;
     enum tkind kind;
-    int fd;               /* watched fd (the port handle for serial) */
-    struct sp_port *port; /* serial only */
-    bool connecting;      /* TCP connect in progress */
-    bool closed;          /* on_close was called; inert */
-    unsigned events;      /* current loop interest */
-    struct buf out;       /* bytes waiting for the OS */
+    int fd;                /* watched fd (the port handle for serial) */
+    struct sp_port *port;  /* serial only */
+    bool connecting;       /* TCP name lookup or connect in progress */
+    struct lookup *lookup; /* TCP host name lookup in flight, or NULL */
+    bool closed;           /* on_close was called; inert */
+    unsigned events;       /* current loop interest */
+    struct buf out;        /* bytes waiting for the OS */
     transport_data_fn on_data;
     transport_close_fn on_close;
     void *ud;
@@ -217,6 +262,173 @@ open_serial(struct transport *t, const char *path, int baud, struct sf_err *err)
     return SF_OK;
 }
 
+/* Connect to ai in the background; on_io sees the outcome. */
+static int
+connect_tcp(struct transport *t, const struct addrinfo *ai, struct sf_err *err)
+{
+    int fd = socket(ai->ai_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+    if (fd < 0)
+        return sf_err_sys(err, "'%s': socket", t->spec);
+    int one = 1;
+    setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
+    int rc = connect(fd, ai->ai_addr, ai->ai_addrlen);
+    if (rc < 0 && errno != EINPROGRESS) {
+        int r = sf_err_sys(err, "connect '%s'", t->spec);
+        close(fd);
+        return r;
+    }
+    t->connecting = rc < 0;
+    t->fd = fd;
+    return SF_OK;
+}
+
+static void
+lookup_destroy(struct lookup *lk)
+{
+    if (lk->ai)
+        freeaddrinfo(lk->ai);
+    close(lk->efd);
+    pthread_mutex_destroy(&lk->lock);
+    free(lk);
+}
+
+static void *
+lookup_run(void *arg)
+{
+    struct lookup *lk = arg;
+    struct addrinfo hints = { .ai_socktype = SOCK_STREAM, .ai_flags = AI_NUMERICSERV };
+    struct addrinfo *ai = NULL;
+    errno = 0;
+    int rc = lk->resolve(lk->host, lk->port, &hints, &ai);
+    int e = errno;
+    pthread_mutex_lock(&lk->lock);
+    lk->rc = rc;
+    lk->sys_errno = e;
+    lk->ai = rc == 0 ? ai : NULL;
+    lk->done = true;
+    bool abandoned = lk->abandoned;
+    if (!abandoned) {
+        uint64_t one = 1;
+        /* An eventfd write only fails on counter overflow, which one write cannot cause. */
+        if (write(lk->efd, &one, sizeof(one)) < 0)
+            lk->sys_errno = errno;
+    }
+    pthread_mutex_unlock(&lk->lock);
+    if (abandoned)
+        lookup_destroy(lk);
+    atomic_fetch_sub(&lookups_alive, 1);
+    return NULL;
+}
+
+/* Loop thread: the lookup finished; connect, or close with the reason. */
+static void
+on_lookup(struct loop *l, int fd, unsigned events, void *ud)
+{
+    (void)fd;
+    (void)events;
+    struct transport *t = ud;
+    struct lookup *lk = t->lookup;
+    pthread_mutex_lock(&lk->lock);
+    bool done = lk->done;
+    pthread_mutex_unlock(&lk->lock);
+    if (!done)
+        return; /* cannot happen: the thread signals after setting done */
+    loop_del_fd(l, lk->efd);
+    t->lookup = NULL;
+    char why[256];
+    struct sf_err err;
+    int rc = lk->rc;
+    if (rc != 0) {
+        const char *what = rc == EAI_SYSTEM ? strerror(lk->sys_errno) : gai_strerror(rc);
+        /* Short: drivers quote at most 80 bytes of it ("link lost (...)"). */
+        snprintf(why, sizeof(why), "cannot resolve host '%s': %s", lk->host, what);
+    } else if (connect_tcp(t, lk->ai, &err) < 0) {
+        snprintf(why, sizeof(why), "%s", err.msg);
+        rc = -1;
+    } else {
+        t->events = LOOP_READ | LOOP_WRITE; /* writable = connected; queued bytes go then */
+        if (loop_add_fd(l, t->fd, t->events, on_io, t, &err) < 0) {
+            snprintf(why, sizeof(why), "%s", err.msg);
+            rc = -1;
+        }
+    }
+    lookup_destroy(lk);
+    if (rc != 0 && !t->closed) {
+        t->closed = true;
+        t->on_close(t->ud, why);
+    }
+}
+
+/* Start a background lookup of host; on_lookup finishes the open. */
+static int
+start_lookup(struct transport *t, const char *host, const char *port, struct sf_err *err)
+{
+    if (atomic_fetch_add(&lookups_alive, 1) >= SF_RESOLVER_THREADS_MAX) {
+        atomic_fetch_sub(&lookups_alive, 1);
+        return sf_err_set(err, SF_EAGAIN, "'%s': %d host name lookups already in progress", t->spec,
+                          SF_RESOLVER_THREADS_MAX);
+    }
+    struct lookup *lk = mem_calloc(1, sizeof(*lk));
+    if (!lk) {
+        atomic_fetch_sub(&lookups_alive, 1);
+        return sf_err_set(err, SF_ENOMEM, "out of memory");
+    }
+    snprintf(lk->host, sizeof(lk->host), "%s", host);
+    snprintf(lk->port, sizeof(lk->port), "%s", port);
+    lk->resolve = atomic_load(&resolver);
+    lk->efd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
+    if (lk->efd < 0) {
+        int r = sf_err_sys(err, "'%s': eventfd", t->spec);
+        free(lk);
+        atomic_fetch_sub(&lookups_alive, 1);
+        return r;
+    }
+    pthread_mutex_init(&lk->lock, NULL);
+    if (loop_add_fd(t->loop, lk->efd, LOOP_READ, on_lookup, t, err) < 0) {
+        lookup_destroy(lk);
+        atomic_fetch_sub(&lookups_alive, 1);
+        return err ? err->code : SF_EIO;
+    }
+    /* The thread must not take the signals the loop reads through signalfd. */
+    sigset_t all, old;
+    sigfillset(&all);
+    pthread_attr_t attr;
+    pthread_attr_init(&attr);
+    pthread_attr_setdetachstate(&attr, PTHREAD_CREATE_DETACHED);
+    pthread_t th;
+    pthread_sigmask(SIG_BLOCK, &all, &old);
+    int rc = pthread_create(&th, &attr, lookup_run, lk);
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
+    pthread_attr_destroy(&attr);
+    if (rc != 0) {
+        loop_del_fd(t->loop, lk->efd);
+        lookup_destroy(lk);
+        atomic_fetch_sub(&lookups_alive, 1);
+        errno = rc;
+        return sf_err_sys(err, "'%s': cannot start a host name lookup", t->spec);
+    }
+    t->lookup = lk;
+    t->connecting = true;
+    return SF_OK;
+}
+
+/* Loop thread: forget a lookup in flight; the thread frees it if still running. */
+static void
+cancel_lookup(struct transport *t)
+{
+    struct lookup *lk = t->lookup;
+    if (!lk)
+        return;
+    t->lookup = NULL;
+    loop_del_fd(t->loop, lk->efd);
+    pthread_mutex_lock(&lk->lock);
+    bool done = lk->done;
+    lk->abandoned = true;
+    pthread_mutex_unlock(&lk->lock);
+    if (done)
+        lookup_destroy(lk);
+}
+
 static int
 open_tcp(struct transport *t, const char *hostport, struct sf_err *err)
 {
@@ -231,29 +443,20 @@ open_tcp(struct transport *t, const char *hostport, struct sf_err *err)
     long port = strtol(colon + 1, &end, 10);
     if (errno || *end || port < 1 || port > 65535)
         return sf_err_set(err, SF_EINVAL, "'%s': port must be 1-65535", t->spec);
-    struct addrinfo hints = { .ai_socktype = SOCK_STREAM }, *ai;
-    /* Numeric addresses never block; a name lookup may (TODO #7: resolve host names
-       on the pool before the daemon opens a tcp:// printer). */
-    int rc = getaddrinfo(host, colon + 1, &hints, &ai);
+    char port_s[8];
+    snprintf(port_s, sizeof(port_s), "%ld", port);
+    /* A numeric address never blocks: connect now.  A name goes to a lookup thread. */
+    struct addrinfo hints = { .ai_socktype = SOCK_STREAM,
+                              .ai_flags = AI_NUMERICHOST | AI_NUMERICSERV },
+                    *ai;
+    int rc = getaddrinfo(host, port_s, &hints, &ai);
+    if (rc == EAI_NONAME)
+        return start_lookup(t, host, port_s, err);
     if (rc != 0)
         return sf_err_set(err, SF_EINVAL, "'%s': %s", t->spec, gai_strerror(rc));
-    int fd = socket(ai->ai_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-    if (fd < 0) {
-        freeaddrinfo(ai);
-        return sf_err_sys(err, "'%s': socket", t->spec);
-    }
-    int one = 1;
-    setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof(one));
-    rc = connect(fd, ai->ai_addr, ai->ai_addrlen);
+    rc = connect_tcp(t, ai, err);
     freeaddrinfo(ai);
-    if (rc < 0 && errno != EINPROGRESS) {
-        int r = sf_err_sys(err, "connect '%s'", t->spec);
-        close(fd);
-        return r;
-    }
-    t->connecting = rc < 0;
-    t->fd = fd;
-    return SF_OK;
+    return rc;
 }
 
 struct transport *
@@ -295,6 +498,8 @@ transport_open(struct loop *l, const char *spec, int baud, transport_data_fn on_
     }
     if (rc < 0)
         goto fail;
+    if (t->lookup)
+        return t; /* on_lookup watches the fd once there is one */
     t->events = LOOP_READ | (t->connecting ? LOOP_WRITE : 0);
     if (loop_add_fd(l, t->fd, t->events, on_io, t, err) < 0)
         goto fail;
@@ -343,7 +548,8 @@ transport_free(struct transport *t)
 {
     if (!t)
         return;
-    if (!t->closed)
+    cancel_lookup(t);
+    if (!t->closed && t->fd >= 0)
         loop_del_fd(t->loop, t->fd);
     if (t->port) {
         sp_close(t->port);
@@ -353,6 +559,18 @@ transport_free(struct transport *t)
     }
     buf_release(&t->out);
     free(t);
+}
+
+void
+transport_set_resolver(transport_resolve_fn fn)
+{
+    atomic_store(&resolver, fn ? fn : getaddrinfo);
+}
+
+int
+transport_lookups_alive(void)
+{
+    return atomic_load(&lookups_alive);
 }
 
 int

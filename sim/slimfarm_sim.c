@@ -7,21 +7,33 @@
  * its log and prints one "stats:" line on stderr (executed commands,
  * resends, planner starvation, bytes), which the benchmarks read.
  *
+ * --count N runs N printers in this one process, for farm benchmarks where
+ * 50 simulator processes would cost more CPU (and scheduler noise) than the
+ * daemon they measure.  Each is a full sim_marlin of its own (own pty or
+ * port, queue, planner, pacing, faults, log); they only share the loop.
+ * Output is then one address line per printer, in order, and one
+ * "stats: printer=I ..." line each; --log FILE and --link PATH get a ".I"
+ * suffix, and a fixed --tcp PORT becomes PORT+I.  SIGUSR1 prints the
+ * stats lines without stopping, so a benchmark can take the difference
+ * over a window.
+ *
  * Thread: main thread, one event loop.
  */
 #include <errno.h>
 #include <signal.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "../src/base/loop.h"
+#include "../src/base/mem.h"
 #include "sim_marlin.h"
 
 static const char usage_text[] =
     "usage: slimfarm-sim marlin [--tcp PORT] [--link PATH] [--baud N] [--speed X]\n"
     "                           [--bufsize N] [--planner N] [--rx-size N] [--advanced-ok]\n"
-    "                           [--log FILE] [--fault SPEC]...\n"
+    "                           [--log FILE] [--fault SPEC]... [--count N]\n"
     "faults: corrupt=RATE corrupt-rx=RATE corrupt-tx=RATE drop-ok=RATE garbage=RATE\n"
     "        slow=MS reset=N disconnect=N runaway=N seed=N\n";
 
@@ -47,6 +59,95 @@ parse_long(const char *opt, const char *v, long lo, long hi, long *out)
     return 0;
 }
 
+/* Printers one process may serve: each holds a pty or socket and a log file. */
+#define SIM_COUNT_MAX 256
+
+static void
+print_stats(const struct sim_marlin *s, int index, bool tagged)
+{
+    struct sim_marlin_stats st;
+    sim_marlin_stats(s, &st);
+    char tag[32] = "";
+    if (tagged)
+        snprintf(tag, sizeof(tag), "printer=%d ", index);
+    fprintf(stderr,
+            "stats: %sexecuted=%llu resends=%llu starved=%llu starved_s=%.3f rx_bytes=%llu "
+            "tx_bytes=%llu connects=%llu halted=%d x=%.3f y=%.3f z=%.3f e=%.5f\n",
+            tag, (unsigned long long)st.executed, (unsigned long long)st.resends,
+            (unsigned long long)st.starved, st.starved_s, (unsigned long long)st.rx_bytes,
+            (unsigned long long)st.tx_bytes, (unsigned long long)st.connects, st.halted, st.x, st.y,
+            st.z, st.e);
+}
+
+struct farm_of_sims {
+    struct sim_marlin **sims; /* count printers */
+    int count;
+};
+
+static void
+on_usr1(struct loop *l, int signo, void *ud)
+{
+    (void)l;
+    (void)signo;
+    struct farm_of_sims *f = ud;
+    for (int i = 0; i < f->count; i++)
+        print_stats(f->sims[i], i, f->count > 1);
+    fflush(stderr);
+}
+
+/* Start count printers on l, print their addresses, run until a signal, print stats. */
+static int
+serve(struct loop *l, const struct sim_marlin_config *base, int count)
+{
+    struct sim_marlin **sims = mem_calloc((size_t)count, sizeof(*sims));
+    if (!sims) {
+        fprintf(stderr, "slimfarm-sim: out of memory\n");
+        return 1;
+    }
+    int rc = 1;
+    struct farm_of_sims farm = { sims, count };
+    struct sf_err serr;
+    if (loop_add_signal(l, SIGUSR1, on_usr1, &farm, &serr) < 0) {
+        fprintf(stderr, "slimfarm-sim: %s\n", serr.msg);
+        goto out;
+    }
+    for (int i = 0; i < count; i++) {
+        struct sim_marlin_config c = *base;
+        char log_path[512], link[512];
+        if (count > 1 && base->log_path) {
+            snprintf(log_path, sizeof(log_path), "%s.%d", base->log_path, i);
+            c.log_path = log_path;
+        }
+        if (count > 1 && base->link) {
+            snprintf(link, sizeof(link), "%s.%d", base->link, i);
+            c.link = link;
+        }
+        if (base->tcp_port > 0 && base->tcp_port + i > 65535) {
+            fprintf(stderr, "slimfarm-sim: --tcp %d + %d printers passes port 65535\n",
+                    base->tcp_port, count);
+            goto out;
+        }
+        if (base->tcp_port > 0)
+            c.tcp_port = base->tcp_port + i;
+        struct sf_err err;
+        sims[i] = sim_marlin_new(l, &c, &err);
+        if (!sims[i]) {
+            fprintf(stderr, "slimfarm-sim: printer %d: %s\n", i, err.msg);
+            goto out;
+        }
+        printf("%s\n", sim_marlin_path(sims[i]));
+    }
+    fflush(stdout);
+    rc = loop_run(l) < 0 ? 1 : 0;
+    for (int i = 0; i < count; i++)
+        print_stats(sims[i], i, count > 1);
+out:
+    for (int i = 0; i < count; i++)
+        sim_marlin_free(sims[i]);
+    free(sims);
+    return rc;
+}
+
 int
 main(int argc, char **argv)
 {
@@ -57,6 +158,7 @@ main(int argc, char **argv)
     struct sim_marlin_config c;
     sim_marlin_config_init(&c);
     struct sf_err err;
+    long count = 1;
     for (int i = 2; i < argc; i++) {
         const char *o = argv[i];
         const char *v = i + 1 < argc ? argv[i + 1] : NULL;
@@ -74,7 +176,11 @@ main(int argc, char **argv)
             return 2;
         }
         i++;
-        if (strcmp(o, "--tcp") == 0) {
+        if (strcmp(o, "--count") == 0) {
+            if (parse_long(o, v, 1, SIM_COUNT_MAX, &n) < 0)
+                return 2;
+            count = n;
+        } else if (strcmp(o, "--tcp") == 0) {
             if (parse_long(o, v, 0, 65535, &n) < 0)
                 return 2;
             c.tcp_port = (int)n;
@@ -128,25 +234,7 @@ main(int argc, char **argv)
         return 1;
     }
     signal(SIGPIPE, SIG_IGN);
-    struct sim_marlin *s = sim_marlin_new(l, &c, &err);
-    if (!s) {
-        fprintf(stderr, "slimfarm-sim: %s\n", err.msg);
-        loop_free(l);
-        return 1;
-    }
-    printf("%s\n", sim_marlin_path(s));
-    fflush(stdout);
-    int rc = loop_run(l);
-    struct sim_marlin_stats st;
-    sim_marlin_stats(s, &st);
-    fprintf(stderr,
-            "stats: executed=%llu resends=%llu starved=%llu starved_s=%.3f rx_bytes=%llu "
-            "tx_bytes=%llu connects=%llu halted=%d x=%.3f y=%.3f z=%.3f e=%.5f\n",
-            (unsigned long long)st.executed, (unsigned long long)st.resends,
-            (unsigned long long)st.starved, st.starved_s, (unsigned long long)st.rx_bytes,
-            (unsigned long long)st.tx_bytes, (unsigned long long)st.connects, st.halted, st.x, st.y,
-            st.z, st.e);
-    sim_marlin_free(s);
+    int rc = serve(l, &c, (int)count);
     loop_free(l);
-    return rc < 0 ? 1 : 0;
+    return rc;
 }

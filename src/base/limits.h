@@ -52,4 +52,10 @@
 /* Most layers in one print: 1 m of height at 0.05 mm. */
 #define SF_SLICE_LAYERS_MAX 20000u
 
+/* Host name lookups in flight at once, each a thread that a dead nameserver
+   can hold for 30 s and more (5 s timeout x 2 attempts x 3 nameservers):
+   a farm of TCP printers reconnecting while DNS is down must not grow
+   threads without bound. */
+#define SF_RESOLVER_THREADS_MAX 64
+
 #endif

@@ -496,12 +496,23 @@ static void
 on_progress(struct loop *l, void *ud)
 {
     struct farm *f = ud;
-    for (size_t i = 0; i < f->n_printers; i++) {
+    /* One transaction for every printer: one fsync a tick on the loop thread, not one per
+       printer (50 printers stalled the loop ~0.2 s every tick, bench_farm50). */
+    struct store_progress *batch = f->n_printers ? mem_array(f->n_printers, sizeof(*batch)) : NULL;
+    size_t n = 0;
+    for (size_t i = 0; batch && i < f->n_printers; i++) {
         struct printer *p = f->printers[i];
-        if (p->job_id && p->lines_acked != p->lines_saved &&
-            store_job_progress(f->s, p->job_id, p->lines_acked, NULL) == SF_OK)
-            p->lines_saved = p->lines_acked;
+        if (p->job_id && p->lines_acked != p->lines_saved)
+            batch[n++] = (struct store_progress){ p->job_id, p->lines_acked, false };
     }
+    if (n && store_jobs_progress(f->s, batch, n, NULL) > 0) {
+        for (size_t i = 0, k = 0; i < f->n_printers && k < n; i++) {
+            struct printer *p = f->printers[i];
+            if (p->job_id && p->lines_acked != p->lines_saved && batch[k++].saved)
+                p->lines_saved = p->lines_acked;
+        }
+    }
+    free(batch);
     f->progress = loop_timer_add(l, f->hooks.progress_ms, on_progress, f);
 }
 

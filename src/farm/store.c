@@ -874,6 +874,34 @@ store_job_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_e
 }
 
 int
+store_jobs_progress(struct store *s, struct store_progress *p, size_t n, struct sf_err *err)
+{
+    int rc = begin(s, err);
+    if (rc)
+        return rc;
+    int saved = 0;
+    for (size_t i = 0; i < n; i++) {
+        rc = update_job_field(s, p[i].job_id,
+                              "UPDATE jobs SET lines_acked = max(lines_acked, ?), updated_ms = ?"
+                              " WHERE id = ? AND state IN ('printing', 'paused')",
+                              p[i].lines_acked, NULL, err);
+        if (rc && rc != SF_ENOTFOUND) {
+            rollback(s);
+            return rc;
+        }
+        p[i].saved = rc == SF_OK;
+        saved += p[i].saved;
+    }
+    if ((rc = commit(s, err))) {
+        rollback(s);
+        for (size_t i = 0; i < n; i++)
+            p[i].saved = false;
+        return rc;
+    }
+    return saved;
+}
+
+int
 store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err *err)
 {
     if (priority < -JOB_PRIORITY_MAX || priority > JOB_PRIORITY_MAX)

@@ -20,6 +20,7 @@
 #ifndef SF_FARM_STORE_H
 #define SF_FARM_STORE_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -135,6 +136,19 @@ int store_job_event(struct store *s, int64_t id, enum job_event ev, const struct
                     enum job_state *to, struct sf_err *err);
 /* Record how far the printing copy got (called on a timer, not per line). */
 int store_job_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_err *err);
+/* One printing job's progress for store_jobs_progress(). */
+struct store_progress {
+    int64_t job_id;      /* in */
+    int64_t lines_acked; /* in */
+    bool saved;          /* out: written (false: the job is no longer printing or paused) */
+};
+/*
+ * Record the progress of many jobs in one transaction: with synchronous=FULL
+ * every commit is an fsync, and the daemon's progress timer must not stall
+ * the loop with one per printer.  Jobs no longer printing are skipped.
+ * Returns how many were saved, or an error (then none was).
+ */
+int store_jobs_progress(struct store *s, struct store_progress *p, size_t n, struct sf_err *err);
 int store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err *err);
 /* Set why a job waits (scheduler); writes only when it changed. */
 int store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_err *err);

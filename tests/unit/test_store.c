@@ -400,3 +400,38 @@ T_CASE(store_survives_allocation_failures)
     T_OK(store_check(s, &err), &err);
     store_close(s);
 }
+
+T_CASE(store_jobs_progress_saves_printing_jobs_in_one_go)
+{
+    struct sf_err err;
+    struct store *s = store_open(fresh_dir("progress"), NULL, &err);
+    T_TRUE(s != NULL);
+    int64_t a = add_job(s, "a", 1, &err), b = add_job(s, "b", 1, &err),
+            idle = add_job(s, "c", 1, &err);
+    T_TRUE(a && b && idle);
+    struct job_event_args start = { .printer = "mk3-a" };
+    T_OK(make_ready(s, a, &err), &err);
+    T_OK(store_job_event(s, a, JOB_EV_START, &start, NULL, &err), &err);
+    start.printer = "mk3-b";
+    T_OK(make_ready(s, b, &err), &err);
+    T_OK(store_job_event(s, b, JOB_EV_START, &start, NULL, &err), &err);
+    T_OK(store_job_event(s, b, JOB_EV_PAUSE, NULL, NULL, &err), &err);
+    T_OK(make_ready(s, idle, &err), &err);
+    struct store_progress p[] = { { a, 120, false }, { idle, 7, true }, { b, 45, false } };
+    T_EQ_INT(store_jobs_progress(s, p, 3, &err), 2);
+    T_TRUE(p[0].saved && !p[1].saved && p[2].saved);
+    struct job_row j;
+    T_OK(store_job_get(s, a, &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 120);
+    T_OK(store_job_get(s, b, &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 45);
+    T_OK(store_job_get(s, idle, &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 0);
+    /* Progress never goes backwards. */
+    p[0].lines_acked = 100;
+    T_EQ_INT(store_jobs_progress(s, p, 1, &err), 1);
+    T_OK(store_job_get(s, a, &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 120);
+    T_OK(store_check(s, &err), &err);
+    store_close(s);
+}
