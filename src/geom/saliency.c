@@ -15,10 +15,23 @@ static const double sigma_eps[N_SIGMA] = { 2, 3, 4, 5, 6, 8, 10, 12 };
 static const int pair_lo[5] = { 0, 1, 2, 3, 4 }; /* 2 3 4 5 6 */
 static const int pair_hi[5] = { 2, 4, 5, 6, 7 }; /* 4 6 8 10 12 */
 
-/* Neighbours averaged per vertex are capped by taking every k-th vertex of
- * a large mesh: the Gaussian average of a dense sample is the same to
- * within noise, and the cost stays near-linear. */
-#define SAMPLE_VERTS 20000
+/* The wider scales average over every k-th vertex only (k grows with the
+ * scale's area, picked by a hash of the index so it does not follow the
+ * file's order): each scale then sees about as many neighbours as the
+ * finest, and the cost stays linear in the vertices.  The Gaussian mean of
+ * a dense sample is the same to within noise. */
+static uint32_t
+scale_stride(int k)
+{
+    double r = sigma_eps[k] / sigma_eps[0];
+    return r * r / 2 > 1 ? (uint32_t)(r * r / 2) : 1;
+}
+
+static bool
+sampled(uint32_t v, uint32_t stride)
+{
+    return stride == 1 || ((v * 2654435761u) >> 8) % stride == 0;
+}
 
 /* Mean curvature per vertex from the cotangent Laplacian: H = -(Lx . n) / (4 A). */
 static void
@@ -70,17 +83,23 @@ grid_build(struct grid *g, const struct mesh *m, uint32_t stride, double cell, s
 {
     struct vec3 hi;
     mesh_bbox(m, &g->lo, &hi);
-    g->cell = cell;
-    g->nx = (int)fmin(256, (hi.x - g->lo.x) / cell + 1);
-    g->ny = (int)fmin(256, (hi.y - g->lo.y) / cell + 1);
-    g->nz = (int)fmin(256, (hi.z - g->lo.z) / cell + 1);
+    /* at most 256 cells an axis (a sliver of a part with a tiny scale) */
+    double ext = fmax(hi.x - g->lo.x, fmax(hi.y - g->lo.y, hi.z - g->lo.z));
+    g->cell = fmax(cell, ext / 255);
+    g->nx = (int)((hi.x - g->lo.x) / g->cell) + 1;
+    g->ny = (int)((hi.y - g->lo.y) / g->cell) + 1;
+    g->nz = (int)((hi.z - g->lo.z) / g->cell) + 1;
     size_t n_cells = (size_t)g->nx * g->ny * g->nz;
-    uint32_t n = (m->n_verts + stride - 1) / stride;
+    uint32_t n = 0;
+    for (uint32_t v = 0; v < m->n_verts; v++)
+        n += sampled(v, stride);
     g->start = mem_calloc(n_cells + 1, sizeof(uint32_t));
     g->order = mem_calloc(n ? n : 1, sizeof(uint32_t));
     if (!g->start || !g->order)
         return sf_err_set(err, SF_ENOMEM, "saliency: out of memory for the vertex grid");
-    for (uint32_t v = 0; v < m->n_verts; v += stride) {
+    for (uint32_t v = 0; v < m->n_verts; v++) {
+        if (!sampled(v, stride))
+            continue;
         struct vec3 p = m->v[v];
         g->start[((size_t)cell_of(g, p, 2) * g->ny + cell_of(g, p, 1)) * g->nx + cell_of(g, p, 0) +
                  1]++;
@@ -90,7 +109,9 @@ grid_build(struct grid *g, const struct mesh *m, uint32_t stride, double cell, s
     uint32_t *fill = mem_calloc(n_cells, sizeof(uint32_t));
     if (!fill)
         return sf_err_set(err, SF_ENOMEM, "saliency: out of memory for the vertex grid");
-    for (uint32_t v = 0; v < m->n_verts; v += stride) {
+    for (uint32_t v = 0; v < m->n_verts; v++) {
+        if (!sampled(v, stride))
+            continue;
         struct vec3 p = m->v[v];
         size_t c = ((size_t)cell_of(g, p, 2) * g->ny + cell_of(g, p, 1)) * g->nx + cell_of(g, p, 0);
         g->order[g->start[c] + fill[c]++] = v;
@@ -99,20 +120,16 @@ grid_build(struct grid *g, const struct mesh *m, uint32_t stride, double cell, s
     return SF_OK;
 }
 
-/* Gaussian-weighted averages of h around every vertex at every scale. */
+/* Gaussian-weighted average of h around every vertex at scale k, over the
+ * vertices of grid g (cells 2 sigma wide: the filter reaches 2 sigma). */
 static void
-gaussian_averages(const struct mesh *m, const struct grid *g, const double *h, double eps,
-                  double (*avg)[N_SIGMA])
+gaussian_average(const struct mesh *m, const struct grid *g, const double *h, double sigma,
+                 double (*avg)[N_SIGMA], int k)
 {
-    double cut2[N_SIGMA], inv2s2[N_SIGMA];
-    for (int k = 0; k < N_SIGMA; k++) {
-        double s = sigma_eps[k] * eps;
-        cut2[k] = 4 * s * s; /* the filter reaches 2 sigma */
-        inv2s2[k] = 1 / (2 * s * s);
-    }
+    double cut2 = 4 * sigma * sigma, inv2s2 = 1 / (2 * sigma * sigma);
     for (uint32_t v = 0; v < m->n_verts; v++) {
         struct vec3 p = m->v[v];
-        double num[N_SIGMA] = { 0 }, den[N_SIGMA] = { 0 };
+        double num = 0, den = 0;
         int cx = cell_of(g, p, 0), cy = cell_of(g, p, 1), cz = cell_of(g, p, 2);
         for (int z = cz - 1; z <= cz + 1; z++) {
             if (z < 0 || z >= g->nz)
@@ -124,26 +141,20 @@ gaussian_averages(const struct mesh *m, const struct grid *g, const double *h, d
                     if (x < 0 || x >= g->nx)
                         continue;
                     size_t c = ((size_t)z * g->ny + y) * g->nx + x;
-                    for (uint32_t k = g->start[c]; k < g->start[c + 1]; k++) {
-                        uint32_t u = g->order[k];
+                    for (uint32_t i = g->start[c]; i < g->start[c + 1]; i++) {
+                        uint32_t u = g->order[i];
                         struct vec3 d = v3_sub(m->v[u], p);
                         double d2 = v3_dot(d, d);
-                        if (d2 > cut2[N_SIGMA - 1])
+                        if (d2 > cut2)
                             continue;
-                        int s = 0;
-                        while (d2 > cut2[s])
-                            s++;
-                        for (; s < N_SIGMA; s++) {
-                            double w = exp(-d2 * inv2s2[s]);
-                            num[s] += w * h[u];
-                            den[s] += w;
-                        }
+                        double w = exp(-d2 * inv2s2);
+                        num += w * h[u];
+                        den += w;
                     }
                 }
             }
         }
-        for (int s = 0; s < N_SIGMA; s++)
-            avg[v][s] = den[s] > 0 ? num[s] / den[s] : h[v];
+        avg[v][k] = den > 0 ? num / den : h[v];
     }
 }
 
@@ -205,10 +216,15 @@ mesh_saliency(const struct mesh *m, double *out, struct sf_err *err)
         goto out;
     }
     mean_curvature(m, lap, nrm, area, h);
-    uint32_t stride = n > SAMPLE_VERTS ? n / SAMPLE_VERTS : 1;
-    if ((rc = grid_build(&g, m, stride, 2 * sigma_eps[N_SIGMA - 1] * eps, err)) < 0)
-        goto out;
-    gaussian_averages(m, &g, h, eps, avg);
+    for (int k = 0; k < N_SIGMA; k++) {
+        double sigma = sigma_eps[k] * eps;
+        if ((rc = grid_build(&g, m, scale_stride(k), 2 * sigma, err)) < 0)
+            goto out;
+        gaussian_average(m, &g, h, sigma, avg, k);
+        free(g.start);
+        free(g.order);
+        g.start = g.order = NULL;
+    }
     for (int i = 0; i < 5; i++) {
         for (uint32_t v = 0; v < n; v++)
             map[v] = fabs(avg[v][pair_lo[i]] - avg[v][pair_hi[i]]);
