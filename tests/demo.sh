@@ -2,7 +2,8 @@
 # tests/demo.sh [--once] - the main job on embedded defaults: a farm of three
 # simulated Marlin printers (two on ptys, one behind a TCP serial bridge),
 # slimfarmd on a fresh SQLite data dir, and the generated demo parts queued
-# on it.  Each part is oriented (the mushroom is also slimmed), sliced for
+# on it.  Each part is oriented (the mushroom is also slimmed, the torus
+# reshaped by the surface method), sliced for
 # its printer, and printed at simulation speed; the run ends with a summary
 # table.  With --once it exits there; otherwise the farm keeps running
 # (http://127.0.0.1:$PORT, key below) until Ctrl-C.
@@ -70,9 +71,10 @@ pids+=($!)
 export SLIMFARM_URL=http://127.0.0.1:$port SLIMFARM_API_KEY=$key
 for _ in $(seq 100); do bin/slimfarm printers > /dev/null 2>&1 && break; sleep 0.1; done
 echo "slimfarmd on $SLIMFARM_URL (key $key); printers: mk3 ($mk3), ender ($ender), voron ($voron)"
-for part in tee arch lbracket torus frame; do
+for part in tee arch lbracket frame; do
   bin/slimfarm submit "$data/parts/$part.stl" --material PLA > /dev/null
 done
+bin/slimfarm submit "$data/parts/torus.stl" --material PLA --method surface --deviation 3 > /dev/null
 bin/slimfarm submit "$data/parts/mushroom.stl" --material PLA --method slim --deviation 3 > /dev/null
 
 # wait for every job to end, showing the farm as it goes
