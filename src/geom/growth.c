@@ -81,6 +81,35 @@ margin_in(const struct pt *h, size_t n, struct pt p)
     return m;
 }
 
+/*
+ * The extended base's hull from its grid cells: the hull of the points on
+ * one grid row is that of the row's two ends, so only those are sorted.
+ * row_lo/row_hi hold the least and greatest cell column per row (row_lo >
+ * row_hi: an empty row).
+ */
+static size_t
+base_hull(const struct ray_grid *g, const uint32_t *row_lo, const uint32_t *row_hi, struct pt *pts,
+          struct pt *hull)
+{
+    size_t n = 0;
+    for (uint32_t j = 0; j < g->nw; j++) {
+        if (row_lo[j] > row_hi[j])
+            continue;
+        double w = g->w0 + j * g->pitch;
+        pts[n++] = (struct pt){ g->u0 + row_lo[j] * g->pitch, w };
+        if (row_hi[j] != row_lo[j])
+            pts[n++] = (struct pt){ g->u0 + row_hi[j] * g->pitch, w };
+    }
+    return convex_hull(pts, n, hull);
+}
+
+static void
+base_add(uint32_t *row_lo, uint32_t *row_hi, uint32_t i, uint32_t j)
+{
+    row_lo[j] = i < row_lo[j] ? i : row_lo[j];
+    row_hi[j] = i > row_hi[j] ? i : row_hi[j];
+}
+
 int
 growth_simulate(const struct ray_grid *g, const struct support_column *cols, size_t n_cols,
                 double layer_mm, struct growth_report *out, struct sf_err *err)
@@ -91,7 +120,7 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
     size_t cells = (size_t)g->nu * g->nw;
     float top = 0;
     for (size_t i = 0; i < g->n_hits; i++)
-        top = fmaxf(top, g->hits[i].h);
+        top = g->hits[i].h > top ? g->hits[i].h : top;
     uint32_t layers = (uint32_t)ceil(top / layer_mm);
     if (layers == 0 || cells == 0)
         return SF_OK;
@@ -99,40 +128,48 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
 
     uint8_t *prev = mem_calloc(cells, 1), *cur = mem_calloc(cells, 1);
     uint32_t *stack = mem_array(cells, sizeof(uint32_t));
+    uint32_t *active = mem_array(cells, sizeof(uint32_t)); /* cells the part is still ahead of */
     uint32_t *cursor = mem_array(cells, sizeof(uint32_t)); /* next hit index per cell */
     float *col_top = mem_array(cells, sizeof(float));      /* highest column top per cell */
     float *floor_h = mem_array(cells, sizeof(float));      /* last exit below, per cell */
-    uint16_t *depth = mem_calloc(cells, sizeof(uint16_t));  /* shells each ray is inside */
-    struct pt *base = mem_array(cells + n_cols + 1, sizeof(struct pt));
-    struct pt *hull = mem_array(cells + n_cols + 2, sizeof(struct pt));
+    uint16_t *depth = mem_calloc(cells, sizeof(uint16_t)); /* shells each ray is inside */
+    uint32_t *row_lo = mem_array(2 * (size_t)g->nw, sizeof(uint32_t)), *row_hi = row_lo + g->nw;
+    struct pt *base = mem_array(2 * (size_t)g->nw + 1, sizeof(struct pt));
+    struct pt *hull = mem_array(2 * (size_t)g->nw + 2, sizeof(struct pt));
     int rc = SF_OK;
-    if (!prev || !cur || !stack || !cursor || !col_top || !floor_h || !depth || !base || !hull) {
+    if (!prev || !cur || !stack || !active || !cursor || !col_top || !floor_h || !depth ||
+        !row_lo || !base || !hull) {
         rc = sf_err_set(err, SF_ENOMEM, "growth: out of memory for %zu cells", cells);
         goto out;
     }
+    /* only cells with hits can ever be solid; a cell leaves the active list
+       once the part is wholly below the layer (every hit passed, outside) */
+    size_t n_active = 0;
     for (size_t c = 0; c < cells; c++) {
         cursor[c] = g->first[c];
         col_top[c] = -1;
         floor_h[c] = 0;
+        if (g->first[c] < g->first[c + 1])
+            active[n_active++] = (uint32_t)c;
     }
-    size_t n_base = 0;
+    for (uint32_t j = 0; j < g->nw; j++)
+        row_lo[j] = UINT32_MAX, row_hi[j] = 0;
     for (size_t i = 0; i < n_cols; i++) {
-        col_top[cols[i].cell] = fmaxf(col_top[cols[i].cell], cols[i].hi);
-        if (cols[i].lo < layer_mm) {
-            uint32_t c = cols[i].cell;
-            base[n_base++] =
-                (struct pt){ g->u0 + (c % g->nu) * g->pitch, g->w0 + (c / g->nu) * g->pitch };
-        }
+        uint32_t c = cols[i].cell;
+        col_top[c] = cols[i].hi > col_top[c] ? cols[i].hi : col_top[c];
+        if (cols[i].lo < layer_mm)
+            base_add(row_lo, row_hi, c % g->nu, c / g->nu);
     }
-    double sx = 0, sy = 0, count = 0;
+    uint64_t si = 0, sj = 0, count = 0; /* voxel column and row sums so far */
     size_t hull_n = 0;
     float half = (float)(0.5 * layer_mm);
     for (uint32_t k = 0; k < layers; k++) {
         float z = (float)((k + 0.5) * layer_mm);
         /* solid voxels of this layer: advance each ray's hit cursor to z,
            counting shells as measure_columns does */
-        for (size_t c = 0; c < cells; c++) {
-            uint32_t e = g->first[c + 1];
+        size_t kept = 0;
+        for (size_t a = 0; a < n_active; a++) {
+            uint32_t c = active[a], e = g->first[c + 1];
             while (cursor[c] < e && g->hits[cursor[c]].h <= z) {
                 const struct ray_hit *h = &g->hits[cursor[c]];
                 if (h->cos_up > 0) {
@@ -146,26 +183,31 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
             }
             cur[c] = depth[c] > 0;
             if (cur[c]) {
-                sx += g->u0 + (c % g->nu) * g->pitch;
-                sy += g->w0 + (c / g->nu) * g->pitch;
+                si += c % g->nu;
+                sj += c / g->nu;
                 count++;
             }
+            if (cursor[c] < e || depth[c] > 0)
+                active[kept++] = c;
+            else
+                cur[c] = prev[c] = 0; /* never read again: no solid voxel reaches it */
         }
+        n_active = kept;
         if (k == 0) {
-            for (size_t c = 0; c < cells; c++)
-                if (cur[c])
-                    base[n_base++] = (struct pt){ g->u0 + (c % g->nu) * g->pitch,
-                                                  g->w0 + (c / g->nu) * g->pitch };
-            hull_n = convex_hull(base, n_base, hull);
+            for (size_t a = 0; a < n_active; a++)
+                if (cur[active[a]])
+                    base_add(row_lo, row_hi, active[a] % g->nu, active[a] / g->nu);
+            hull_n = base_hull(g, row_lo, row_hi, base, hull);
         }
         /* label regions; a region held by nothing is an island */
-        for (size_t seed = 0; seed < cells; seed++) {
+        for (size_t a = 0; a < n_active; a++) {
+            uint32_t seed = active[a];
             if (cur[seed] != 1)
                 continue;
             size_t sp = 0, first = 0;
             bool held = k == 0;
             double island_vol = 0;
-            stack[sp++] = (uint32_t)seed;
+            stack[sp++] = seed;
             cur[seed] = 2;
             while (sp > first) {
                 uint32_t c = stack[first++];
@@ -189,26 +231,29 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
         }
         /* what is built so far must stand on the extended base */
         if (count > 0) {
-            double m = margin_in(hull, hull_n, (struct pt){ sx / count, sy / count });
+            struct pt com = { g->u0 + g->pitch * ((double)si / (double)count),
+                              g->w0 + g->pitch * ((double)sj / (double)count) };
+            double m = margin_in(hull, hull_n, com);
             if (m < out->min_margin_mm)
                 out->min_margin_mm = m;
             if (m < 0 && out->unstable_layer < 0)
                 out->unstable_layer = (int)k;
         }
+        /* solid voxels of this layer (1 or 2) hold the next one */
         uint8_t *t = prev;
         prev = cur;
         cur = t;
-        for (size_t c = 0; c < cells; c++)
-            prev[c] = prev[c] != 0;
     }
 out:
     free(prev);
     free(cur);
     free(stack);
+    free(active);
     free(cursor);
     free(col_top);
     free(floor_h);
     free(depth);
+    free(row_lo);
     free(base);
     free(hull);
     return rc;

@@ -49,9 +49,10 @@ orient_source_name(enum orient_source s)
 
 struct cand {
     struct orient_candidate c;
-    double key;   /* sort key of the current stage */
-    int stage;    /* 0: proxy only, 1: coarse ray cast, 2: full ray cast */
-    bool dropped; /* would stand on a point or tip over */
+    double key;                /* sort key of the current stage */
+    int stage;                 /* 0: proxy only, 1: coarse ray cast, 2: full ray cast */
+    struct support_metrics at; /* stage 2: the metrics at the operator's angle */
+    bool dropped;              /* would stand on a point or tip over */
 };
 
 /* A batch of candidates scored on a pool of threads (one stage). */
@@ -60,7 +61,8 @@ struct job {
     const struct orient_params *p;
     const struct proxy_cache *pc; /* proxy stage */
     struct raycast *rc;           /* ray-cast stages */
-    struct support_params sp;
+    struct support_params sp;     /* scoring: the angle less the margin */
+    struct support_params at;     /* reporting: the operator's angle */
     struct cand *cands;
     const uint32_t *todo; /* indices of candidates to score */
     uint32_t n_todo;
@@ -87,10 +89,19 @@ score_one(struct job *j, struct cand *c, struct sf_err *err)
         c->key = s.proxy_mm3 + j->p->w_contact_mm * s.risky_area_mm2;
         return SF_OK;
     }
-    struct support_params sp = j->sp;
-    if (j->stage == 1)
+    int rc;
+    if (j->stage == 1) {
+        struct support_params sp = j->sp;
         sp.pitch_mm *= 2; /* coarse: a quarter of the rays, for ranking */
-    int rc = measure_support_cached(j->m, j->rc, j->pc, c->c.up, &sp, &c->c.m, err);
+        rc = measure_support_cached(j->m, j->rc, j->pc, c->c.up, &sp, &c->c.m, err);
+    } else {
+        /* finalists: the report's figures come from the same cast */
+        struct support_params sp[2] = { j->sp, j->at };
+        struct support_metrics out[2];
+        rc = measure_support_angles(j->m, j->rc, j->pc, c->c.up, sp, 2, out, err);
+        c->c.m = out[0];
+        c->at = out[1];
+    }
     if (rc)
         return rc;
     c->c.cost = c->key = cost_of(j->p, &c->c.m);
@@ -257,7 +268,8 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     if (!order)
         goto oom;
     if ((rcode = proxy_cache_init(&pc, m, hull_verts, n_hull_verts, err)) ||
-        !(rc = raycast_new(m, err))) {
+        !(rc = raycast_new(m, err)) ||
+        (rcode = raycast_set_extreme(rc, hull_verts, n_hull_verts, err))) {
         rcode = rcode ? rcode : (err ? err->code : SF_ENOMEM);
         goto out;
     }
@@ -267,6 +279,9 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     support_params_default(&j.sp);
     j.sp.angle_deg = fmax(0, p->angle_deg - p->margin_deg);
     j.sp.pitch_mm = p->pitch_mm;
+    /* report at the operator's angle: the margin only steers the choice */
+    j.at = j.sp;
+    j.at.angle_deg = p->angle_deg;
 
     /* stage 0: proxy for every direction */
     for (uint32_t i = 0; i < n; i++)
@@ -324,13 +339,9 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
         res->not_solid = true;
     }
     res->best = cands[best].c;
+    res->best.m = cands[best].at;
     res->input = cands[0].c;
-    /* report at the operator's angle: the margin only steers the choice */
-    struct support_params at = j.sp;
-    at.angle_deg = p->angle_deg;
-    if ((rcode = measure_support_cached(m, rc, &pc, res->best.up, &at, &res->best.m, err)) ||
-        (rcode = measure_support_cached(m, rc, &pc, res->input.up, &at, &res->input.m, err)))
-        goto out;
+    res->input.m = cands[0].at;
     res->n_candidates = n;
     res->n_exact = n_coarse + n_final;
     (void)n_first;
@@ -339,8 +350,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
             continue;
         struct orient_candidate *r = &res->runners[res->n_runners++];
         *r = cands[final[i]].c;
-        if ((rcode = measure_support_cached(m, rc, &pc, r->up, &at, &r->m, err)))
-            goto out;
+        r->m = cands[final[i]].at;
     }
     res->seconds = elapsed(&t0);
     res->seconds_exact = res->seconds - res->seconds_setup - res->seconds_proxy;

@@ -182,7 +182,8 @@ proxy_eval(const struct proxy_cache *pc, struct vec3 up, const struct support_pa
             continue; /* every member safe (cos(t + r) is the least n.d unless the cone
                          wraps past -d) */
         /* lowest member centroid can be no lower than the box's support point */
-        float box_lo = (ux > 0 ? pb->lo[0] : pb->hi[0]) * ux + (uy > 0 ? pb->lo[1] : pb->hi[1]) * uy +
+        float box_lo = (ux > 0 ? pb->lo[0] : pb->hi[0]) * ux +
+                       (uy > 0 ? pb->lo[1] : pb->hi[1]) * uy +
                        (uz > 0 ? pb->lo[2] : pb->hi[2]) * uz;
         if (cos_minus < -tau && !holds_down && box_lo >= floor_h + 1e-3f) {
             /* every member risky: the closed form (proxy.h) */
