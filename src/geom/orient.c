@@ -4,7 +4,7 @@
  * Pipeline: candidates -> proxy score for all (O(tris) each, cheap) ->
  * the exact_top best by proxy plus every stable hull base and the input ->
  * exact ray-cast metrics on a pool of threads sharing one Embree scene ->
- * a cap of refinement samples around the three best -> pick.
+ * a cap of refinement samples around the two best -> pick.
  * Rays are rotated, never the mesh.  Hull bases that are too small or on
  * which the centre of mass falls outside (margin) are rejected; other
  * directions are kept only if the part either rests on a real face or is
@@ -31,7 +31,7 @@ orient_params_default(struct orient_params *p)
     p->margin_deg = 5;
     p->pitch_mm = 1;
     p->samples = 1000;
-    p->exact_top = 48;
+    p->exact_top = 24;
     p->w_contact_mm = 1;
     p->w_stability_mm2 = 0.5;
     p->min_gain = 0.05;
@@ -230,7 +230,9 @@ int
 orient_find(const struct mesh *m, const struct orient_params *p, struct orient_result *res,
             struct sf_err *err)
 {
-    enum { REFINE_PER = 16, FINAL = 6 };
+    /* refinement: REFINE_PER samples (two rings, 3 and 7 degrees out) around each of the
+       REFINE_SEEDS best distinct directions */
+    enum { REFINE_SEEDS = 2, REFINE_PER = 8, FINAL = 6 };
     memset(res, 0, sizeof(*res));
     struct timespec t0;
     clock_gettime(CLOCK_MONOTONIC, &t0);
@@ -261,10 +263,10 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     uint32_t n_first = n;
     /* room for the refinement samples, so cands never moves under the workers */
     void *grow = cands;
-    if (!mem_grow(&grow, &cap, n + 3 * REFINE_PER, sizeof(struct cand)))
+    if (!mem_grow(&grow, &cap, n + REFINE_SEEDS * REFINE_PER, sizeof(struct cand)))
         goto oom;
     cands = grow;
-    order = mem_array(n + 3 * REFINE_PER, sizeof(uint32_t));
+    order = mem_array(n + REFINE_SEEDS * REFINE_PER, sizeof(uint32_t));
     if (!order)
         goto oom;
     if ((rcode = proxy_cache_init(&pc, m, hull_verts, n_hull_verts, err)) ||
@@ -296,18 +298,20 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     for (uint32_t k = 0; k < n; k++)
         if ((int)k < p->exact_top || cands[order[k]].c.source != ORIENT_SPHERE)
             order[n_coarse++] = order[k];
-    j.progress_total = n_coarse + 3 * REFINE_PER + FINAL + 1;
+    j.progress_total = n_coarse + REFINE_SEEDS * REFINE_PER + FINAL + 1;
     if ((rcode = run_stage(&j, 1, order, n_coarse, err)))
         goto out;
     qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
 
-    /* refine around the three best distinct directions, still coarse */
-    uint32_t seeds[3], n_seeds = pick_distinct(cands, order, n_coarse, 3, 10, seeds);
+    /* refine around the best distinct directions, still coarse */
+    uint32_t seeds[REFINE_SEEDS],
+        n_seeds = pick_distinct(cands, order, n_coarse, REFINE_SEEDS, 10, seeds);
     for (uint32_t b = 0; b < n_seeds; b++) {
         struct mat3 to = m3_rotate_onto(v3(0, 0, 1), cands[seeds[b]].c.up);
         for (int k = 0; k < REFINE_PER; k++) {
-            double ring = (k < 8 ? 3.0 : 7.0) * M_PI / 180;
-            double az = 2 * M_PI * (k % 8) / 8 + (k < 8 ? 0 : M_PI / 8);
+            const int h = REFINE_PER / 2; /* per ring, the outer one turned half a step */
+            double ring = (k < h ? 3.0 : 7.0) * M_PI / 180;
+            double az = 2 * M_PI * (k % h) / h + (k < h ? 0 : M_PI / h);
             struct vec3 local = v3(sin(ring) * cos(az), sin(ring) * sin(az), cos(ring));
             push(&cands, &n, &cap, m3_mul_v(to, local), ORIENT_REFINE); /* room reserved */
             order[n_coarse++] = n - 1;

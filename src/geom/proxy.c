@@ -174,7 +174,8 @@ proxy_eval(const struct proxy_cache *pc, struct vec3 up, const struct support_pa
         if (!pb->n)
             continue;
         float ct = pb->cx * ux + pb->cy * uy + pb->cz * uz; /* cos t */
-        float st = sqrtf(fmaxf(0, 1 - ct * ct));
+        float st2 = 1 - ct * ct;
+        float st = sqrtf(st2 > 0 ? st2 : 0);                         /* not fmaxf: a libm call */
         float cos_plus = ct * pb->cos_radius - st * pb->sin_radius;  /* cos(t + r) */
         float cos_minus = ct * pb->cos_radius + st * pb->sin_radius; /* cos(t - r) */
         bool holds_down = -ct >= pb->cos_radius; /* -d inside the cone: bed faces */
