@@ -89,8 +89,7 @@ run(int argc, char **argv)
             break;
         }
         case 'g':
-            if (!cmd_parse_num("orient", "grid", optarg, 0.05, 50, "mm in [0.05, 50]",
-                               &p.pitch_mm))
+            if (!cmd_parse_num("orient", "grid", optarg, 0.05, 50, "mm in [0.05, 50]", &p.pitch_mm))
                 return 2;
             break;
         case 'b':

@@ -81,6 +81,59 @@ margin_in(const struct pt *h, size_t n, struct pt p)
     return m;
 }
 
+/*
+ * The extended base's hull from its grid cells: the hull of the points on
+ * one grid row is that of the row's two ends, so only those are sorted.
+ * row_lo/row_hi hold the least and greatest cell column per row (row_lo >
+ * row_hi: an empty row).
+ */
+static size_t
+base_hull(const struct ray_grid *g, const uint32_t *row_lo, const uint32_t *row_hi, struct pt *pts,
+          struct pt *hull)
+{
+    size_t n = 0;
+    for (uint32_t j = 0; j < g->nw; j++) {
+        if (row_lo[j] > row_hi[j])
+            continue;
+        double w = g->w0 + j * g->pitch;
+        pts[n++] = (struct pt){ g->u0 + row_lo[j] * g->pitch, w };
+        if (row_hi[j] != row_lo[j])
+            pts[n++] = (struct pt){ g->u0 + row_hi[j] * g->pitch, w };
+    }
+    return convex_hull(pts, n, hull);
+}
+
+static void
+base_add(uint32_t *row_lo, uint32_t *row_hi, uint32_t i, uint32_t j)
+{
+    row_lo[j] = i < row_lo[j] ? i : row_lo[j];
+    row_hi[j] = i > row_hi[j] ? i : row_hi[j];
+}
+
+/* The first layer whose mid-height z_k = (k + 0.5) * layer lies at or above h
+   (the layer in which the hit takes effect), computed as the layer loop's
+   float z is, so a hit on the boundary falls where a per-layer scan puts it. */
+static uint32_t
+layer_of(float h, double layer_mm)
+{
+    double k = ceil(h / layer_mm - 0.5);
+    uint32_t l = k > 0 ? (uint32_t)k : 0;
+    while (l > 0 && h <= (float)((l - 0.5) * layer_mm))
+        l--;
+    while (h > (float)((l + 0.5) * layer_mm))
+        l++;
+    return l;
+}
+
+/*
+ * Event-driven: a cell's solidity changes only at its hits, so the hits are
+ * bucketed by the layer in which they take effect and each layer touches only
+ * the cells that change in it.  Only a region holding a voxel that is new in
+ * this layer (solid now, not below) can be an island, so the regions are
+ * searched from the new voxels, and a search stops as soon as it meets a voxel
+ * that is held, or one an earlier search of this layer met (that one stopped
+ * held too: a search that finds no hold visits its whole region).
+ */
 int
 growth_simulate(const struct ray_grid *g, const struct support_column *cols, size_t n_cols,
                 double layer_mm, struct growth_report *out, struct sf_err *err)
@@ -91,96 +144,146 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
     size_t cells = (size_t)g->nu * g->nw;
     float top = 0;
     for (size_t i = 0; i < g->n_hits; i++)
-        top = fmaxf(top, g->hits[i].h);
+        top = g->hits[i].h > top ? g->hits[i].h : top;
     uint32_t layers = (uint32_t)ceil(top / layer_mm);
     if (layers == 0 || cells == 0)
         return SF_OK;
     out->n_layers = layers;
 
-    uint8_t *prev = mem_calloc(cells, 1), *cur = mem_calloc(cells, 1);
+    size_t nh = g->n_hits ? g->n_hits : 1;
+    uint8_t *solid = mem_calloc(cells, 1), *was = mem_calloc(cells, 1);
+    uint32_t *changed_at = mem_array(cells, sizeof(uint32_t)); /* layer + 1 of the last change */
+    uint32_t *visit = mem_calloc(cells, sizeof(uint32_t));     /* id of the search that met it */
     uint32_t *stack = mem_array(cells, sizeof(uint32_t));
-    uint32_t *cursor = mem_array(cells, sizeof(uint32_t)); /* next hit index per cell */
+    uint32_t *changed = mem_array(cells, sizeof(uint32_t));
+    uint32_t *ev_first = mem_calloc((size_t)layers + 2, sizeof(uint32_t));
+    uint32_t *ev_hit = mem_array(nh, sizeof(uint32_t)), *ev_cell = mem_array(nh, sizeof(uint32_t));
+    uint32_t *ev_layer = mem_array(nh, sizeof(uint32_t));  /* layer of each hit */
     float *col_top = mem_array(cells, sizeof(float));      /* highest column top per cell */
     float *floor_h = mem_array(cells, sizeof(float));      /* last exit below, per cell */
-    uint16_t *depth = mem_calloc(cells, sizeof(uint16_t));  /* shells each ray is inside */
-    struct pt *base = mem_array(cells + n_cols + 1, sizeof(struct pt));
-    struct pt *hull = mem_array(cells + n_cols + 2, sizeof(struct pt));
+    uint16_t *depth = mem_calloc(cells, sizeof(uint16_t)); /* shells each ray is inside */
+    uint32_t *row_lo = mem_array(2 * (size_t)g->nw, sizeof(uint32_t)), *row_hi = row_lo + g->nw;
+    struct pt *base = mem_array(2 * (size_t)g->nw + 1, sizeof(struct pt));
+    struct pt *hull = mem_array(2 * (size_t)g->nw + 2, sizeof(struct pt));
     int rc = SF_OK;
-    if (!prev || !cur || !stack || !cursor || !col_top || !floor_h || !depth || !base || !hull) {
+    if (!solid || !was || !changed_at || !visit || !stack || !changed || !ev_first || !ev_hit ||
+        !ev_cell || !ev_layer || !col_top || !floor_h || !depth || !row_lo || !base || !hull) {
         rc = sf_err_set(err, SF_ENOMEM, "growth: out of memory for %zu cells", cells);
         goto out;
     }
     for (size_t c = 0; c < cells; c++) {
-        cursor[c] = g->first[c];
+        changed_at[c] = 0;
         col_top[c] = -1;
         floor_h[c] = 0;
     }
-    size_t n_base = 0;
-    for (size_t i = 0; i < n_cols; i++) {
-        col_top[cols[i].cell] = fmaxf(col_top[cols[i].cell], cols[i].hi);
-        if (cols[i].lo < layer_mm) {
-            uint32_t c = cols[i].cell;
-            base[n_base++] =
-                (struct pt){ g->u0 + (c % g->nu) * g->pitch, g->w0 + (c / g->nu) * g->pitch };
-        }
+    /* counting sort of the hits by layer, stable: each cell's hits stay in height order */
+    for (size_t k = 0; k < g->n_hits; k++) {
+        ev_layer[k] = layer_of(g->hits[k].h, layer_mm);
+        if (ev_layer[k] < layers)
+            ev_first[ev_layer[k] + 1]++;
     }
-    double sx = 0, sy = 0, count = 0;
+    for (uint32_t l = 0; l < layers; l++)
+        ev_first[l + 1] += ev_first[l];
+    for (size_t c = 0; c < cells; c++)
+        for (uint32_t k = g->first[c]; k < g->first[c + 1]; k++)
+            if (ev_layer[k] < layers) {
+                uint32_t e = ev_first[ev_layer[k]]++;
+                ev_hit[e] = k;
+                ev_cell[e] = (uint32_t)c;
+            }
+    for (uint32_t l = layers; l > 0; l--) /* back to bucket starts */
+        ev_first[l] = ev_first[l - 1];
+    ev_first[0] = 0;
+
+    for (uint32_t j = 0; j < g->nw; j++)
+        row_lo[j] = UINT32_MAX, row_hi[j] = 0;
+    for (size_t i = 0; i < n_cols; i++) {
+        uint32_t c = cols[i].cell;
+        col_top[c] = cols[i].hi > col_top[c] ? cols[i].hi : col_top[c];
+        if (cols[i].lo < layer_mm)
+            base_add(row_lo, row_hi, c % g->nu, c / g->nu);
+    }
+    uint64_t li = 0, lj = 0, ln = 0;    /* column and row sums and count of this layer's voxels */
+    uint64_t si = 0, sj = 0, count = 0; /* the same over every layer so far */
+    uint32_t search = 0;
     size_t hull_n = 0;
     float half = (float)(0.5 * layer_mm);
     for (uint32_t k = 0; k < layers; k++) {
         float z = (float)((k + 0.5) * layer_mm);
-        /* solid voxels of this layer: advance each ray's hit cursor to z,
-           counting shells as measure_columns does */
-        for (size_t c = 0; c < cells; c++) {
-            uint32_t e = g->first[c + 1];
-            while (cursor[c] < e && g->hits[cursor[c]].h <= z) {
-                const struct ray_hit *h = &g->hits[cursor[c]];
-                if (h->cos_up > 0) {
-                    depth[c] -= depth[c] > 0;
-                    if (depth[c] == 0)
-                        floor_h[c] = h->h;
-                } else if (h->cos_up < 0) {
-                    depth[c]++;
-                }
-                cursor[c]++;
+        /* apply this layer's hits, counting shells as measure_columns does */
+        size_t n_changed = 0;
+        for (uint32_t e = ev_first[k]; e < ev_first[k + 1]; e++) {
+            uint32_t c = ev_cell[e];
+            const struct ray_hit *h = &g->hits[ev_hit[e]];
+            if (changed_at[c] != k + 1) {
+                changed_at[c] = k + 1;
+                was[c] = solid[c];
+                changed[n_changed++] = c;
             }
-            cur[c] = depth[c] > 0;
-            if (cur[c]) {
-                sx += g->u0 + (c % g->nu) * g->pitch;
-                sy += g->w0 + (c / g->nu) * g->pitch;
-                count++;
+            if (h->cos_up > 0) {
+                depth[c] -= depth[c] > 0;
+                if (depth[c] == 0)
+                    floor_h[c] = h->h;
+            } else if (h->cos_up < 0) {
+                depth[c]++;
             }
         }
+        /* new voxels go to the front of changed[], as seeds */
+        size_t n_new = 0;
+        for (size_t q = 0; q < n_changed; q++) {
+            uint32_t c = changed[q];
+            uint8_t now = depth[c] > 0;
+            if (now != solid[c]) {
+                int64_t sign = now ? 1 : -1;
+                li += (uint64_t)(sign * (int64_t)(c % g->nu));
+                lj += (uint64_t)(sign * (int64_t)(c / g->nu));
+                ln += (uint64_t)sign;
+                solid[c] = now;
+            }
+            if (now && !was[c])
+                changed[n_new++] = c;
+        }
+        si += li, sj += lj, count += ln;
         if (k == 0) {
-            for (size_t c = 0; c < cells; c++)
-                if (cur[c])
-                    base[n_base++] = (struct pt){ g->u0 + (c % g->nu) * g->pitch,
-                                                  g->w0 + (c / g->nu) * g->pitch };
-            hull_n = convex_hull(base, n_base, hull);
+            for (size_t q = 0; q < n_new; q++)
+                base_add(row_lo, row_hi, changed[q] % g->nu, changed[q] / g->nu);
+            hull_n = base_hull(g, row_lo, row_hi, base, hull);
         }
-        /* label regions; a region held by nothing is an island */
-        for (size_t seed = 0; seed < cells; seed++) {
-            if (cur[seed] != 1)
-                continue;
+        /* regions with a new voxel: held by the layer below, a column or (layer 0) the bed? */
+        uint32_t layer_first = search + 1;
+        for (size_t q = 0; q < n_new && k > 0; q++) {
+            uint32_t seed = changed[q];
+            if (visit[seed] >= layer_first)
+                continue; /* in a region searched already */
             size_t sp = 0, first = 0;
-            bool held = k == 0;
+            bool held = false;
             double island_vol = 0;
-            stack[sp++] = (uint32_t)seed;
-            cur[seed] = 2;
-            while (sp > first) {
+            uint32_t id = ++search;
+            stack[sp++] = seed;
+            visit[seed] = id;
+            while (sp > first && !held) {
                 uint32_t c = stack[first++];
-                if (prev[c] || (col_top[c] >= z - 3 * half && col_top[c] <= z + half))
+                bool below = changed_at[c] == k + 1 ? was[c] : solid[c];
+                if (below || (col_top[c] >= z - 3 * half && col_top[c] <= z + half)) {
                     held = true;
+                    break;
+                }
                 island_vol += (z - half - floor_h[c]) * g->pitch * g->pitch;
                 uint32_t ci = c % g->nu, cj = c / g->nu;
                 uint32_t nb[4] = { ci > 0 ? c - 1 : UINT32_MAX, ci + 1 < g->nu ? c + 1 : UINT32_MAX,
                                    cj > 0 ? c - g->nu : UINT32_MAX,
                                    cj + 1 < g->nw ? c + g->nu : UINT32_MAX };
-                for (int q = 0; q < 4; q++)
-                    if (nb[q] != UINT32_MAX && cur[nb[q]] == 1) {
-                        cur[nb[q]] = 2;
-                        stack[sp++] = nb[q];
+                for (int d = 0; d < 4; d++) {
+                    uint32_t n = nb[d];
+                    if (n == UINT32_MAX || !solid[n] || visit[n] == id)
+                        continue;
+                    if (visit[n] >= layer_first) {
+                        held = true; /* an earlier search of this layer stopped there, held */
+                        break;
                     }
+                    visit[n] = id;
+                    stack[sp++] = n;
+                }
             }
             if (!held) {
                 out->n_islands++;
@@ -189,26 +292,30 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
         }
         /* what is built so far must stand on the extended base */
         if (count > 0) {
-            double m = margin_in(hull, hull_n, (struct pt){ sx / count, sy / count });
+            struct pt com = { g->u0 + g->pitch * ((double)si / (double)count),
+                              g->w0 + g->pitch * ((double)sj / (double)count) };
+            double m = margin_in(hull, hull_n, com);
             if (m < out->min_margin_mm)
                 out->min_margin_mm = m;
             if (m < 0 && out->unstable_layer < 0)
                 out->unstable_layer = (int)k;
         }
-        uint8_t *t = prev;
-        prev = cur;
-        cur = t;
-        for (size_t c = 0; c < cells; c++)
-            prev[c] = prev[c] != 0;
     }
 out:
-    free(prev);
-    free(cur);
+    free(solid);
+    free(was);
+    free(changed_at);
+    free(visit);
     free(stack);
-    free(cursor);
+    free(changed);
+    free(ev_first);
+    free(ev_hit);
+    free(ev_cell);
+    free(ev_layer);
     free(col_top);
     free(floor_h);
     free(depth);
+    free(row_lo);
     free(base);
     free(hull);
     return rc;

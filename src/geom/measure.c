@@ -194,56 +194,78 @@ measure_support(const struct mesh *m, struct raycast *rc, struct vec3 up,
 
 int
 measure_support_cached(const struct mesh *m, struct raycast *rc, const struct proxy_cache *pc,
-                       struct vec3 up, const struct support_params *p,
+                       struct vec3 up, const struct support_params *p, struct support_metrics *out,
+                       struct sf_err *err)
+{
+    return measure_support_angles(m, rc, pc, up, p, 1, out, err);
+}
+
+/* Everything but the risky-face figures, from a cast grid at p's angle. */
+static int
+metrics_on_grid(const struct ray_grid *g, struct raycast *rc, struct vec3 up,
+                const struct support_params *p, struct support_metrics *out, struct sf_err *err)
+{
+    struct support_column *cols = NULL;
+    size_t n = 0;
+    int rcode = measure_columns(g, p, &cols, &n, err);
+    if (rcode)
+        return rcode;
+    double cell = g->pitch * g->pitch;
+    double len = 0;
+    for (size_t i = 0; i < n; i++)
+        len += cols[i].hi - cols[i].lo;
+    out->volume_mm3 = len * cell;
+    out->contact_area_mm2 = (double)n * cell;
+    out->n_columns = (uint32_t)n;
+    out->n_anchors = count_anchors(g, cols, n);
+    out->n_rays = out->n_rays_open = 0;
+    for (size_t c = 0; c < (size_t)g->nu * g->nw; c++) {
+        if (g->first[c] == g->first[c + 1])
+            continue;
+        int depth = 0;
+        bool unmatched = false;
+        for (uint32_t k = g->first[c]; k < g->first[c + 1]; k++) {
+            if (g->hits[k].cos_up < 0)
+                depth++;
+            else if (g->hits[k].cos_up > 0 && depth-- == 0)
+                unmatched = true, depth = 0;
+        }
+        out->n_rays++;
+        out->n_rays_open += unmatched || depth != 0;
+    }
+    struct vec3 com = raycast_com(rc);
+    out->com_height_mm = v3_dot(com, up) - g->base;
+    struct growth_report gr;
+    rcode = growth_simulate(g, cols, n, g->pitch, &gr, err);
+    if (rcode == SF_OK) {
+        out->n_islands = gr.n_islands;
+        out->island_volume_mm3 = gr.island_volume_mm3;
+        out->volume_mm3 += gr.island_volume_mm3;
+        out->base_margin_mm = gr.min_margin_mm;
+    }
+    free(cols);
+    return rcode;
+}
+
+int
+measure_support_angles(const struct mesh *m, struct raycast *rc, const struct proxy_cache *pc,
+                       struct vec3 up, const struct support_params *p, int n_p,
                        struct support_metrics *out, struct sf_err *err)
 {
     up = v3_normalize(up);
-    if (pc)
-        proxy_eval(pc, up, p, out);
-    else
-        measure_proxy(m, up, p, out);
-    struct ray_grid g;
-    int rcode = raycast_grid(rc, up, p->pitch_mm, &g, err);
-    if (rcode)
-        return rcode;
-    struct support_column *cols = NULL;
-    size_t n = 0;
-    rcode = measure_columns(&g, p, &cols, &n, err);
-    if (rcode == SF_OK) {
-        double cell = p->pitch_mm * p->pitch_mm;
-        double len = 0;
-        for (size_t i = 0; i < n; i++)
-            len += cols[i].hi - cols[i].lo;
-        out->volume_mm3 = len * cell;
-        out->contact_area_mm2 = (double)n * cell;
-        out->n_columns = (uint32_t)n;
-        out->n_anchors = count_anchors(&g, cols, n);
-        for (size_t c = 0; c < (size_t)g.nu * g.nw; c++) {
-            if (g.first[c] == g.first[c + 1])
-                continue;
-            int depth = 0;
-            bool unmatched = false;
-            for (uint32_t k = g.first[c]; k < g.first[c + 1]; k++) {
-                if (g.hits[k].cos_up < 0)
-                    depth++;
-                else if (g.hits[k].cos_up > 0 && depth-- == 0)
-                    unmatched = true, depth = 0;
-            }
-            out->n_rays++;
-            out->n_rays_open += unmatched || depth != 0;
-        }
-        struct vec3 com = raycast_com(rc);
-        out->com_height_mm = v3_dot(com, up) - g.base;
-        struct growth_report gr;
-        rcode = growth_simulate(&g, cols, n, p->pitch_mm, &gr, err);
-        if (rcode == SF_OK) {
-            out->n_islands = gr.n_islands;
-            out->island_volume_mm3 = gr.island_volume_mm3;
-            out->volume_mm3 += gr.island_volume_mm3;
-            out->base_margin_mm = gr.min_margin_mm;
-        }
+    for (int i = 1; i < n_p; i++)
+        if (p[i].pitch_mm != p[0].pitch_mm)
+            return sf_err_set(err, SF_EINVAL, "support metrics: one pitch for every angle");
+    for (int i = 0; i < n_p; i++) {
+        if (pc)
+            proxy_eval(pc, up, &p[i], &out[i]);
+        else
+            measure_proxy(m, up, &p[i], &out[i]);
     }
-    free(cols);
+    struct ray_grid g;
+    int rcode = raycast_grid(rc, up, p[0].pitch_mm, &g, err);
+    for (int i = 0; i < n_p && rcode == SF_OK; i++)
+        rcode = metrics_on_grid(&g, rc, up, &p[i], &out[i], err);
     ray_grid_release(&g);
     return rcode;
 }

@@ -88,6 +88,14 @@ int measure_support_cached(const struct mesh *m, struct raycast *rc, const struc
                            struct vec3 up, const struct support_params *p,
                            struct support_metrics *out, struct sf_err *err);
 
+/*
+ * The same for n_p parameter sets that differ only in angle (or min_gap),
+ * from one ray cast: out[i] is for p[i].  Every p[i] must have p[0]'s pitch.
+ */
+int measure_support_angles(const struct mesh *m, struct raycast *rc, const struct proxy_cache *pc,
+                           struct vec3 up, const struct support_params *p, int n_p,
+                           struct support_metrics *out, struct sf_err *err);
+
 /* Shape deviation between two meshes with the same connectivity (a deformed copy). */
 struct deviation {
     double max_mm, mean_mm; /* vertex displacement */

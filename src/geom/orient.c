@@ -4,7 +4,7 @@
  * Pipeline: candidates -> proxy score for all (O(tris) each, cheap) ->
  * the exact_top best by proxy plus every stable hull base and the input ->
  * exact ray-cast metrics on a pool of threads sharing one Embree scene ->
- * a cap of refinement samples around the three best -> pick.
+ * a cap of refinement samples around the two best -> pick.
  * Rays are rotated, never the mesh.  Hull bases that are too small or on
  * which the centre of mass falls outside (margin) are rejected; other
  * directions are kept only if the part either rests on a real face or is
@@ -31,7 +31,7 @@ orient_params_default(struct orient_params *p)
     p->margin_deg = 5;
     p->pitch_mm = 1;
     p->samples = 1000;
-    p->exact_top = 48;
+    p->exact_top = 24;
     p->w_contact_mm = 1;
     p->w_stability_mm2 = 0.5;
     p->min_gain = 0.05;
@@ -49,9 +49,10 @@ orient_source_name(enum orient_source s)
 
 struct cand {
     struct orient_candidate c;
-    double key;   /* sort key of the current stage */
-    int stage;    /* 0: proxy only, 1: coarse ray cast, 2: full ray cast */
-    bool dropped; /* would stand on a point or tip over */
+    double key;                /* sort key of the current stage */
+    int stage;                 /* 0: proxy only, 1: coarse ray cast, 2: full ray cast */
+    struct support_metrics at; /* stage 2: the metrics at the operator's angle */
+    bool dropped;              /* would stand on a point or tip over */
 };
 
 /* A batch of candidates scored on a pool of threads (one stage). */
@@ -60,7 +61,8 @@ struct job {
     const struct orient_params *p;
     const struct proxy_cache *pc; /* proxy stage */
     struct raycast *rc;           /* ray-cast stages */
-    struct support_params sp;
+    struct support_params sp;     /* scoring: the angle less the margin */
+    struct support_params at;     /* reporting: the operator's angle */
     struct cand *cands;
     const uint32_t *todo; /* indices of candidates to score */
     uint32_t n_todo;
@@ -87,10 +89,19 @@ score_one(struct job *j, struct cand *c, struct sf_err *err)
         c->key = s.proxy_mm3 + j->p->w_contact_mm * s.risky_area_mm2;
         return SF_OK;
     }
-    struct support_params sp = j->sp;
-    if (j->stage == 1)
+    int rc;
+    if (j->stage == 1) {
+        struct support_params sp = j->sp;
         sp.pitch_mm *= 2; /* coarse: a quarter of the rays, for ranking */
-    int rc = measure_support_cached(j->m, j->rc, j->pc, c->c.up, &sp, &c->c.m, err);
+        rc = measure_support_cached(j->m, j->rc, j->pc, c->c.up, &sp, &c->c.m, err);
+    } else {
+        /* finalists: the report's figures come from the same cast */
+        struct support_params sp[2] = { j->sp, j->at };
+        struct support_metrics out[2];
+        rc = measure_support_angles(j->m, j->rc, j->pc, c->c.up, sp, 2, out, err);
+        c->c.m = out[0];
+        c->at = out[1];
+    }
     if (rc)
         return rc;
     c->c.cost = c->key = cost_of(j->p, &c->c.m);
@@ -219,7 +230,9 @@ int
 orient_find(const struct mesh *m, const struct orient_params *p, struct orient_result *res,
             struct sf_err *err)
 {
-    enum { REFINE_PER = 16, FINAL = 6 };
+    /* refinement: REFINE_PER samples (two rings, 3 and 7 degrees out) around each of the
+       REFINE_SEEDS best distinct directions */
+    enum { REFINE_SEEDS = 2, REFINE_PER = 8, FINAL = 6 };
     memset(res, 0, sizeof(*res));
     struct timespec t0;
     clock_gettime(CLOCK_MONOTONIC, &t0);
@@ -250,14 +263,15 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     uint32_t n_first = n;
     /* room for the refinement samples, so cands never moves under the workers */
     void *grow = cands;
-    if (!mem_grow(&grow, &cap, n + 3 * REFINE_PER, sizeof(struct cand)))
+    if (!mem_grow(&grow, &cap, n + REFINE_SEEDS * REFINE_PER, sizeof(struct cand)))
         goto oom;
     cands = grow;
-    order = mem_array(n + 3 * REFINE_PER, sizeof(uint32_t));
+    order = mem_array(n + REFINE_SEEDS * REFINE_PER, sizeof(uint32_t));
     if (!order)
         goto oom;
     if ((rcode = proxy_cache_init(&pc, m, hull_verts, n_hull_verts, err)) ||
-        !(rc = raycast_new(m, err))) {
+        !(rc = raycast_new(m, err)) ||
+        (rcode = raycast_set_extreme(rc, hull_verts, n_hull_verts, err))) {
         rcode = rcode ? rcode : (err ? err->code : SF_ENOMEM);
         goto out;
     }
@@ -267,6 +281,9 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     support_params_default(&j.sp);
     j.sp.angle_deg = fmax(0, p->angle_deg - p->margin_deg);
     j.sp.pitch_mm = p->pitch_mm;
+    /* report at the operator's angle: the margin only steers the choice */
+    j.at = j.sp;
+    j.at.angle_deg = p->angle_deg;
 
     /* stage 0: proxy for every direction */
     for (uint32_t i = 0; i < n; i++)
@@ -281,18 +298,20 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     for (uint32_t k = 0; k < n; k++)
         if ((int)k < p->exact_top || cands[order[k]].c.source != ORIENT_SPHERE)
             order[n_coarse++] = order[k];
-    j.progress_total = n_coarse + 3 * REFINE_PER + FINAL + 1;
+    j.progress_total = n_coarse + REFINE_SEEDS * REFINE_PER + FINAL + 1;
     if ((rcode = run_stage(&j, 1, order, n_coarse, err)))
         goto out;
     qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
 
-    /* refine around the three best distinct directions, still coarse */
-    uint32_t seeds[3], n_seeds = pick_distinct(cands, order, n_coarse, 3, 10, seeds);
+    /* refine around the best distinct directions, still coarse */
+    uint32_t seeds[REFINE_SEEDS],
+        n_seeds = pick_distinct(cands, order, n_coarse, REFINE_SEEDS, 10, seeds);
     for (uint32_t b = 0; b < n_seeds; b++) {
         struct mat3 to = m3_rotate_onto(v3(0, 0, 1), cands[seeds[b]].c.up);
         for (int k = 0; k < REFINE_PER; k++) {
-            double ring = (k < 8 ? 3.0 : 7.0) * M_PI / 180;
-            double az = 2 * M_PI * (k % 8) / 8 + (k < 8 ? 0 : M_PI / 8);
+            const int h = REFINE_PER / 2; /* per ring, the outer one turned half a step */
+            double ring = (k < h ? 3.0 : 7.0) * M_PI / 180;
+            double az = 2 * M_PI * (k % h) / h + (k < h ? 0 : M_PI / h);
             struct vec3 local = v3(sin(ring) * cos(az), sin(ring) * sin(az), cos(ring));
             push(&cands, &n, &cap, m3_mul_v(to, local), ORIENT_REFINE); /* room reserved */
             order[n_coarse++] = n - 1;
@@ -324,13 +343,9 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
         res->not_solid = true;
     }
     res->best = cands[best].c;
+    res->best.m = cands[best].at;
     res->input = cands[0].c;
-    /* report at the operator's angle: the margin only steers the choice */
-    struct support_params at = j.sp;
-    at.angle_deg = p->angle_deg;
-    if ((rcode = measure_support_cached(m, rc, &pc, res->best.up, &at, &res->best.m, err)) ||
-        (rcode = measure_support_cached(m, rc, &pc, res->input.up, &at, &res->input.m, err)))
-        goto out;
+    res->input.m = cands[0].at;
     res->n_candidates = n;
     res->n_exact = n_coarse + n_final;
     (void)n_first;
@@ -339,8 +354,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
             continue;
         struct orient_candidate *r = &res->runners[res->n_runners++];
         *r = cands[final[i]].c;
-        if ((rcode = measure_support_cached(m, rc, &pc, r->up, &at, &r->m, err)))
-            goto out;
+        r->m = cands[final[i]].at;
     }
     res->seconds = elapsed(&t0);
     res->seconds_exact = res->seconds - res->seconds_setup - res->seconds_proxy;

@@ -28,7 +28,7 @@ struct orient_params {
                                left exactly at the limit gets support after all */
     double pitch_mm;        /* ray grid pitch for scoring (1) */
     int samples;            /* Fibonacci-sphere directions (1000) */
-    int exact_top;          /* candidates kept after the proxy for exact scoring (48) */
+    int exact_top;          /* sphere samples kept after the proxy for exact scoring (24) */
     double w_contact_mm;    /* cost per mm2 of contact area, in mm3 (1: one interface layer) */
     double w_stability_mm2; /* cost per mm of centre-of-mass height, in mm3 (0.5) */
     double min_gain;        /* keep the input orientation unless the best costs at least this

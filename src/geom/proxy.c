@@ -174,7 +174,8 @@ proxy_eval(const struct proxy_cache *pc, struct vec3 up, const struct support_pa
         if (!pb->n)
             continue;
         float ct = pb->cx * ux + pb->cy * uy + pb->cz * uz; /* cos t */
-        float st = sqrtf(fmaxf(0, 1 - ct * ct));
+        float st2 = 1 - ct * ct;
+        float st = sqrtf(st2 > 0 ? st2 : 0);                         /* not fmaxf: a libm call */
         float cos_plus = ct * pb->cos_radius - st * pb->sin_radius;  /* cos(t + r) */
         float cos_minus = ct * pb->cos_radius + st * pb->sin_radius; /* cos(t - r) */
         bool holds_down = -ct >= pb->cos_radius; /* -d inside the cone: bed faces */
@@ -182,7 +183,8 @@ proxy_eval(const struct proxy_cache *pc, struct vec3 up, const struct support_pa
             continue; /* every member safe (cos(t + r) is the least n.d unless the cone
                          wraps past -d) */
         /* lowest member centroid can be no lower than the box's support point */
-        float box_lo = (ux > 0 ? pb->lo[0] : pb->hi[0]) * ux + (uy > 0 ? pb->lo[1] : pb->hi[1]) * uy +
+        float box_lo = (ux > 0 ? pb->lo[0] : pb->hi[0]) * ux +
+                       (uy > 0 ? pb->lo[1] : pb->hi[1]) * uy +
                        (uz > 0 ? pb->lo[2] : pb->hi[2]) * uz;
         if (cos_minus < -tau && !holds_down && box_lo >= floor_h + 1e-3f) {
             /* every member risky: the closed form (proxy.h) */

@@ -27,8 +27,8 @@ struct support_params;
 struct support_metrics;
 
 struct proxy_bin {
-    float cx, cy, cz;   /* unit centre of the bin's normals */
-    float cos_radius;   /* cosine of the widest angle from the centre to a member normal */
+    float cx, cy, cz; /* unit centre of the bin's normals */
+    float cos_radius; /* cosine of the widest angle from the centre to a member normal */
     float sin_radius;
     float lo[3], hi[3]; /* bounding box of the members' centroids */
     uint32_t first, n;  /* members: faces [first, first + n) of the arrays below */
@@ -38,12 +38,12 @@ struct proxy_bin {
 };
 
 struct proxy_cache {
-    uint32_t n_tris;        /* faces kept (zero-area faces are left out) */
-    float *nx, *ny, *nz;    /* unit normals, grouped by bin */
-    float *area;            /* mm2 */
-    float *gx, *gy, *gz;    /* centroids */
-    uint32_t n_verts;       /* entries of vx, vy, vz */
-    float *vx, *vy, *vz;    /* candidates for the lowest and highest point */
+    uint32_t n_tris;     /* faces kept (zero-area faces are left out) */
+    float *nx, *ny, *nz; /* unit normals, grouped by bin */
+    float *area;         /* mm2 */
+    float *gx, *gy, *gz; /* centroids */
+    uint32_t n_verts;    /* entries of vx, vy, vz */
+    float *vx, *vy, *vz; /* candidates for the lowest and highest point */
     struct proxy_bin *bins;
     uint32_t n_bins;
 };

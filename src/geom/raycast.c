@@ -28,9 +28,34 @@
 struct raycast {
     RTCScene scene;
     const struct mesh *mesh;
-    float *normal;   /* 3 per triangle: unit outward normals */
-    struct vec3 com; /* centre of mass (raycast_com) */
+    float *normal;     /* 3 per triangle: unit outward normals */
+    struct vec3 com;   /* centre of mass (raycast_com) */
+    uint32_t *extreme; /* hull vertices (raycast_set_extreme), or NULL: every vertex */
+    uint32_t n_extreme;
 };
+
+int
+raycast_set_extreme(struct raycast *rc, const uint32_t *verts, uint32_t n, struct sf_err *err)
+{
+    free(rc->extreme);
+    rc->extreme = NULL;
+    rc->n_extreme = 0;
+    if (!verts || !n)
+        return SF_OK;
+    rc->extreme = mem_array(n, sizeof(uint32_t));
+    if (!rc->extreme)
+        return sf_err_set(err, SF_ENOMEM, "ray grid: out of memory");
+    for (uint32_t k = 0; k < n; k++)
+        if (verts[k] >= rc->mesh->n_verts) {
+            free(rc->extreme);
+            rc->extreme = NULL;
+            return sf_err_set(err, SF_EINVAL, "ray grid: extreme vertex %u of %u", verts[k],
+                              rc->mesh->n_verts);
+        }
+    memcpy(rc->extreme, verts, n * sizeof(uint32_t));
+    rc->n_extreme = n;
+    return SF_OK;
+}
 
 /* Solid centre of mass, or the area-weighted surface centroid for a soup. */
 static struct vec3
@@ -215,6 +240,7 @@ raycast_free(struct raycast *rc)
     if (rc->scene)
         rtcReleaseScene(rc->scene);
     free(rc->normal);
+    free(rc->extreme);
     free(rc);
 }
 
@@ -236,11 +262,20 @@ perpendicular(struct vec3 d)
     return v3_normalize(v3_sub(a, v3_scale(d, v3_dot(a, d))));
 }
 
-static int
-cmp_hit(const void *a, const void *b)
+/* Sort one ray's hits by height: a handful each, so insertion sort (qsort's
+   merge sort with its indirect calls cost more than the sorting). */
+static void
+sort_hits(struct ray_hit *b, size_t n)
 {
-    float x = ((const struct ray_hit *)a)->h, y = ((const struct ray_hit *)b)->h;
-    return (x > y) - (x < y);
+    for (size_t i = 1; i < n; i++) {
+        struct ray_hit x = b[i];
+        size_t k = i;
+        while (k > 0 && b[k - 1].h > x.h) {
+            b[k] = b[k - 1];
+            k--;
+        }
+        b[k] = x;
+    }
 }
 
 int
@@ -258,11 +293,14 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
     g->pitch = pitch;
     double ulo = INFINITY, uhi = -INFINITY, wlo = INFINITY, whi = -INFINITY;
     double dlo = INFINITY, dhi = -INFINITY;
-    for (uint32_t i = 0; i < m->n_verts; i++) {
-        double u = v3_dot(m->v[i], g->u), w = v3_dot(m->v[i], g->w), d = v3_dot(m->v[i], g->up);
-        ulo = fmin(ulo, u), uhi = fmax(uhi, u);
-        wlo = fmin(wlo, w), whi = fmax(whi, w);
-        dlo = fmin(dlo, d), dhi = fmax(dhi, d);
+    /* the extremes along any direction lie on the hull's vertices, if known */
+    uint32_t n_ext = rc->extreme ? rc->n_extreme : m->n_verts;
+    for (uint32_t k = 0; k < n_ext; k++) {
+        struct vec3 v = m->v[rc->extreme ? rc->extreme[k] : k];
+        double u = v3_dot(v, g->u), w = v3_dot(v, g->w), d = v3_dot(v, g->up);
+        ulo = u < ulo ? u : ulo, uhi = u > uhi ? u : uhi; /* not fmin: a libm call at -O2 */
+        wlo = w < wlo ? w : wlo, whi = w > whi ? w : whi;
+        dlo = d < dlo ? d : dlo, dhi = d > dhi ? d : dhi;
     }
     double nu = ceil((uhi - ulo) / pitch), nw = ceil((whi - wlo) / pitch);
     if (nu < 1)
@@ -347,8 +385,7 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
             size_t bend = count[i];
             struct ray_hit *b = row + bstart;
             size_t bn = bend - bstart;
-            if (bn > 1)
-                qsort(b, bn, sizeof(*b), cmp_hit);
+            sort_hits(b, bn);
             float eps = (float)(1e-5 * (dhi - dlo + 1));
             for (size_t k = 0; k < bn; k++) {
                 struct ray_hit h = b[k];

@@ -49,6 +49,13 @@ struct ray_grid {
 struct raycast *raycast_new(const struct mesh *m, struct sf_err *err);
 void raycast_free(struct raycast *rc);
 
+/*
+ * Optional: the indices of vertices that include every extreme point of the
+ * mesh along any direction (the convex hull's vertices), so each grid finds
+ * the part's extent from them instead of from every vertex.  Copied.
+ */
+int raycast_set_extreme(struct raycast *rc, const uint32_t *verts, uint32_t n, struct sf_err *err);
+
 /* The part's centre of mass (solid for a closed mesh, surface centroid for an
    open one), computed once with the scene: it does not depend on direction. */
 struct vec3 raycast_com(const struct raycast *rc);

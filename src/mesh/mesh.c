@@ -413,6 +413,7 @@ mesh_compact(struct mesh *m)
 struct vert_he {
     uint32_t *start;
     uint32_t *he;
+    uint32_t *dst; /* destination vertex of he[s] (saves he_dst's divisions in the scans) */
 };
 
 static int
@@ -420,7 +421,8 @@ vert_he_build(const struct mesh *m, struct vert_he *vh)
 {
     vh->start = mem_calloc((size_t)m->n_verts + 1, sizeof(uint32_t));
     vh->he = mem_array((size_t)m->n_tris * 3 + 1, sizeof(uint32_t));
-    if (!vh->start || !vh->he)
+    vh->dst = mem_array((size_t)m->n_tris * 3 + 1, sizeof(uint32_t));
+    if (!vh->start || !vh->he || !vh->dst)
         return SF_ENOMEM;
     for (uint32_t i = 0; i < m->n_tris; i++)
         for (int k = 0; k < 3; k++)
@@ -432,8 +434,11 @@ vert_he_build(const struct mesh *m, struct vert_he *vh)
         return SF_ENOMEM;
     memcpy(fill, vh->start, sizeof(uint32_t) * m->n_verts);
     for (uint32_t i = 0; i < m->n_tris; i++)
-        for (int k = 0; k < 3; k++)
-            vh->he[fill[m->t[i][k]]++] = i * 3 + (uint32_t)k;
+        for (int k = 0; k < 3; k++) {
+            uint32_t s = fill[m->t[i][k]]++;
+            vh->he[s] = i * 3 + (uint32_t)k;
+            vh->dst[s] = m->t[i][(k + 1) % 3];
+        }
     free(fill);
     return SF_OK;
 }
@@ -443,6 +448,7 @@ vert_he_release(struct vert_he *vh)
 {
     free(vh->start);
     free(vh->he);
+    free(vh->dst);
 }
 
 static inline uint32_t
@@ -474,7 +480,7 @@ mesh_topo_build(const struct mesh *m, struct mesh_topo *topo, struct sf_err *err
             bool same_dir = false;
             for (uint32_t s = vh.start[a]; s < vh.start[a + 1]; s++) {
                 uint32_t h = vh.he[s];
-                if (h != he && he_dst(m, h) == b) {
+                if (h != he && vh.dst[s] == b) {
                     users++;
                     other = h / 3;
                     same_dir = true;
@@ -483,7 +489,7 @@ mesh_topo_build(const struct mesh *m, struct mesh_topo *topo, struct sf_err *err
             }
             for (uint32_t s = vh.start[b]; s < vh.start[b + 1]; s++) {
                 uint32_t h = vh.he[s];
-                if (he_dst(m, h) == a) {
+                if (vh.dst[s] == a) {
                     users++;
                     other = h / 3;
                     lowest = h < lowest ? h : lowest;

@@ -207,10 +207,10 @@ T_CASE(binned_proxy_agrees_with_the_face_by_face_one)
         support_params_default(&p);
         /* the axes (faces exactly on the bed) and 300 scattered directions */
         for (int i = 0; i < 306; i++) {
-            struct vec3 axes[6] = { { 0, 0, 1 }, { 0, 0, -1 }, { 1, 0, 0 },
-                                    { -1, 0, 0 }, { 0, 1, 0 }, { 0, -1, 0 } };
-            struct vec3 up = i < 6 ? axes[i]
-                                   : v3_normalize(v3(sin(i * 1.3), cos(i * 0.7), sin(i * 0.4 + 1)));
+            struct vec3 axes[6] = { { 0, 0, 1 },  { 0, 0, -1 }, { 1, 0, 0 },
+                                    { -1, 0, 0 }, { 0, 1, 0 },  { 0, -1, 0 } };
+            struct vec3 up =
+                i < 6 ? axes[i] : v3_normalize(v3(sin(i * 1.3), cos(i * 0.7), sin(i * 0.4 + 1)));
             p.angle_deg = 30 + (i % 4) * 10;
             struct support_metrics a, b;
             measure_proxy(&m, up, &p, &a);
