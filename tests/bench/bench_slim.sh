@@ -11,9 +11,10 @@ mesh=""
 if command -v valgrind >/dev/null; then
   out=$(mktemp)
   valgrind --tool=callgrind --callgrind-out-file="$out" "$build/bench/bench_slim" "$mesh" "" 1 >/dev/null 2>&1
-  echo "callgrind, one run (setup + 100 iterations), instructions by phase:"
+  echo "callgrind, one run (setup + 100 iterations), instructions by phase (valgrind runs the"
+  echo "  AVX2 clone: it does not emulate AVX-512; local_pass = gradients + nearest rotations + RHS):"
   callgrind_annotate --inclusive=yes "$out" 2>/dev/null |
-    grep -E "PROGRAM TOTALS|:(polar_block|arap_local|arap_global|sparse_chol_solve|minrot_solve|tetmesh_build) \[" |
+    grep -E "PROGRAM TOTALS|:(polar_block[.a-z0-9_]*|local_pass[.a-z0-9_]*|arap_local|arap_global|sparse_chol_solve|minrot_solve|tetmesh_build) \[" |
     sed 's/^/  /'
   rm -f "$out"
 fi
