@@ -7,10 +7,15 @@
  * the nearest rotations of a block are straight-line loops the compiler
  * vectorizes; the tail block is padded with zero-volume copies of tet 0.
  * The minimal rotation touches only the tets the caller lists (struct
- * arap_drive), with the normals the caller measured.  The right-hand side is
- * b_i = sum_T V_T R_T g_i, scattered per tet (g_0 = -(g_1 + g_2 + g_3)).
- * The Dirichlet part L_fc x_c is a small CSR product done every solve, so
- * fixed vertices may be anywhere the caller puts them.
+ * arap_drive), with the normals the caller measured; it does not depend on
+ * the nearest rotation, so the local step solves those first and then
+ * makes one pass over the blocks: gather the corners, J = E D^-1, nearest
+ * rotation, R <- Q R where a minimal rotation is pending, and the tet's
+ * share of the right-hand side b_i = sum_T V_T R_T g_i
+ * (g_0 = -(g_1 + g_2 + g_3)) scattered while R is still in registers.
+ * The global step only adds the Dirichlet part L_fc x_c (a small CSR
+ * product, so fixed vertices may be anywhere the caller puts them) and
+ * back-substitutes; after arap_set_rotation it assembles b itself.
  *
  * Thread: one object per thread.
  */
@@ -44,9 +49,13 @@ struct arap {
     uint32_t *fc_start, *fc_col;
     double *fc_val;
     struct sparse_chol *chol;
-    double *b;   /* 3 * n_verts: assembled right-hand side, x y z interleaved */
-    double *rhs; /* 3 * n_free column-major */
-    double *sol; /* 3 * n_free column-major */
+    double *b;        /* 3 * n_verts: assembled right-hand side, x y z interleaved */
+    double *rhs;      /* 3 * n_free column-major */
+    double *sol;      /* 3 * n_free column-major */
+    bool b_fresh;     /* b matches the rotations (set by the fused local pass) */
+    int32_t *pending; /* per tet: its slot in q, or -1 */
+    double (*q)[9];   /* minimal rotations of this local step, row-major */
+    uint32_t q_cap;
     struct arap_timing timing;
 };
 
@@ -95,6 +104,8 @@ arap_free(struct arap *a)
     free(a->b);
     free(a->rhs);
     free(a->sol);
+    free(a->pending);
+    free(a->q);
     free(a);
 }
 
@@ -246,14 +257,102 @@ arap_new(const struct tetmesh *tm, const uint8_t *fixed, struct sf_err *err)
     a->b = mem_array(tm->n_verts, 3 * sizeof(double));
     a->rhs = mem_array(a->n_free, 3 * sizeof(double));
     a->sol = mem_array(a->n_free, 3 * sizeof(double));
-    if (!a->b || !a->rhs || !a->sol) {
+    a->pending = mem_array(tm->n_tets, sizeof(int32_t));
+    if (!a->b || !a->rhs || !a->sol || !a->pending) {
         sf_err_set(err, SF_ENOMEM, "arap: out of memory");
         goto fail;
     }
+    for (uint32_t t = 0; t < tm->n_tets; t++)
+        a->pending[t] = -1;
     return a;
 fail:
     arap_free(a);
     return NULL;
+}
+
+/* Lane l's share of the right-hand side: V R g_i to b_i, i = 0..3 (Hu 2015, eq. 8). */
+static inline __attribute__((always_inline)) void
+scatter_rhs(const struct block *bl, int l, double *b)
+{
+    double v = bl->vol[l];
+    double s0x = 0, s0y = 0, s0z = 0;
+    for (int i = 0; i < 3; i++) {
+        /* g_(i+1) = row i of D^-1 */
+        double gx = bl->dinv[3 * i][l] * v, gy = bl->dinv[3 * i + 1][l] * v,
+               gz = bl->dinv[3 * i + 2][l] * v;
+        double wx = bl->rot[0][l] * gx + bl->rot[1][l] * gy + bl->rot[2][l] * gz;
+        double wy = bl->rot[3][l] * gx + bl->rot[4][l] * gy + bl->rot[5][l] * gz;
+        double wz = bl->rot[6][l] * gx + bl->rot[7][l] * gy + bl->rot[8][l] * gz;
+        double *bi = b + 3 * (size_t)bl->idx[i + 1][l];
+        bi[0] += wx, bi[1] += wy, bi[2] += wz;
+        s0x += wx, s0y += wy, s0z += wz;
+    }
+    double *b0 = b + 3 * (size_t)bl->idx[0][l];
+    b0[0] -= s0x, b0[1] -= s0y, b0[2] -= s0z;
+}
+
+/* b from the stored rotations (after arap_set_rotation). */
+static void
+assemble_rhs(struct arap *a)
+{
+    memset(a->b, 0, sizeof(double) * 3 * a->n_verts);
+    for (uint32_t k = 0; k < a->n_blocks; k++)
+        for (int l = 0; l < W; l++)
+            scatter_rhs(&a->blocks[k], l, a->b);
+}
+
+/* J = E D^-1 of every lane (E's columns the current edges). */
+static inline __attribute__((always_inline)) void
+block_gradients(const struct block *bl, const struct vec3 *x, double j[9][W])
+{
+    double e[9][W];
+    for (int l = 0; l < W; l++) {
+        struct vec3 p0 = x[bl->idx[0][l]];
+        for (int i = 0; i < 3; i++) {
+            struct vec3 pi = x[bl->idx[i + 1][l]];
+            e[3 * i][l] = pi.x - p0.x; /* edge i, components x y z */
+            e[3 * i + 1][l] = pi.y - p0.y;
+            e[3 * i + 2][l] = pi.z - p0.z;
+        }
+    }
+    /* J[r][c] = sum_i e_i[r] dinv[i][c] */
+    for (int r = 0; r < 3; r++)
+        for (int c = 0; c < 3; c++)
+            for (int l = 0; l < W; l++)
+                j[3 * r + c][l] = e[r][l] * bl->dinv[c][l] + e[3 + r][l] * bl->dinv[3 + c][l] +
+                                  e[6 + r][l] * bl->dinv[6 + c][l];
+}
+
+/* The fused pass (see the top comment); returns the lanes on polar's scalar path. */
+static POLAR_CLONES uint32_t
+local_pass(struct arap *a, const struct vec3 *x)
+{
+    uint32_t slow = 0;
+    double *b = a->b;
+    memset(b, 0, sizeof(double) * 3 * a->n_verts);
+    for (uint32_t k = 0; k < a->n_blocks; k++) {
+        struct block *bl = &a->blocks[k];
+        double j[9][W];
+        block_gradients(bl, x, j);
+        slow += (uint32_t)polar_block((const double(*)[W])j, bl->rot);
+        for (int l = 0; l < W; l++) {
+            uint32_t t = k * W + (uint32_t)l;
+            int32_t s = t < a->n_tets ? a->pending[t] : -1;
+            if (s >= 0) { /* R <- Q R */
+                const double *q = a->q[s];
+                double r[9];
+                for (int c = 0; c < 9; c++)
+                    r[c] = bl->rot[c][l];
+                for (int row = 0; row < 3; row++)
+                    for (int c = 0; c < 3; c++)
+                        bl->rot[3 * row + c][l] = q[3 * row] * r[c] + q[3 * row + 1] * r[3 + c] +
+                                                  q[3 * row + 2] * r[6 + c];
+                a->pending[t] = -1;
+            }
+            scatter_rhs(bl, l, b);
+        }
+    }
+    return slow;
 }
 
 void
@@ -261,48 +360,41 @@ arap_local(struct arap *a, const struct vec3 *x, struct vec3 d, double tau, doub
            const struct arap_drive *drv, uint32_t n_drv, struct arap_local_stats *stats)
 {
     double t0 = now_s();
-    uint32_t slow = 0, rotated = 0;
-    for (uint32_t b = 0; b < a->n_blocks; b++) {
-        struct block *bl = &a->blocks[b];
-        double e[9][W], j[9][W];
-        for (int l = 0; l < W; l++) {
-            struct vec3 p0 = x[bl->idx[0][l]];
-            for (int i = 0; i < 3; i++) {
-                struct vec3 pi = x[bl->idx[i + 1][l]];
-                e[3 * i][l] = pi.x - p0.x; /* edge i, components x y z */
-                e[3 * i + 1][l] = pi.y - p0.y;
-                e[3 * i + 2][l] = pi.z - p0.z;
-            }
-        }
-        /* J = E D^-1 with E's columns the edges: J[r][c] = sum_i e_i[r] dinv[i][c] */
-        for (int r = 0; r < 3; r++)
-            for (int c = 0; c < 3; c++)
-                for (int l = 0; l < W; l++)
-                    j[3 * r + c][l] = e[r][l] * bl->dinv[c][l] + e[3 + r][l] * bl->dinv[3 + c][l] +
-                                      e[6 + r][l] * bl->dinv[6 + c][l];
-        slow += (uint32_t)polar_block((const double(*)[W])j, bl->rot);
+    uint32_t rotated = 0;
+    if (n_drv > a->q_cap) {
+        free(a->q);
+        a->q_cap = 0;
+        a->q = mem_array(n_drv, sizeof(*a->q));
+        if (a->q)
+            a->q_cap = n_drv;
     }
-    double t1 = now_s();
-    for (uint32_t i = 0; i < n_drv; i++) {
+    for (uint32_t i = 0; i < n_drv && i < a->q_cap; i++) {
         const struct arap_drive *dv = &drv[i];
         if (dv->tet >= a->n_tets || dv->k < 1 || dv->k > 2)
             continue;
-        struct block *bl = &a->blocks[dv->tet / W];
-        uint32_t lane = dv->tet % W;
         struct minrot mr;
         minrot_solve(dv->n, dv->k, d, tau, dv->hint, &mr); /* Hu 2015, sec. 4.2 */
         if (!(mr.angle > beta))
             continue;
-        struct mat3 r, q = minrot_matrix(&mr, beta);
+        struct mat3 q = minrot_matrix(&mr, beta);
+        int32_t s = a->pending[dv->tet];
+        if (s >= 0) { /* listed twice: compose, as applying both in turn would */
+            struct mat3 p;
+            for (int c = 0; c < 9; c++)
+                p.m[c / 3][c % 3] = a->q[s][c];
+            q = m3_mul(q, p);
+        } else {
+            s = (int32_t)rotated++;
+            a->pending[dv->tet] = s;
+        }
         for (int c = 0; c < 9; c++)
-            r.m[c / 3][c % 3] = bl->rot[c][lane];
-        r = m3_mul(q, r);
-        for (int c = 0; c < 9; c++)
-            bl->rot[c][lane] = r.m[c / 3][c % 3];
-        rotated++;
+            a->q[s][c] = q.m[c / 3][c % 3];
     }
-    a->timing.local_s += t1 - t0;
-    a->timing.minrot_s += now_s() - t1;
+    double t1 = now_s();
+    uint32_t slow = local_pass(a, x);
+    a->b_fresh = true;
+    a->timing.minrot_s += t1 - t0;
+    a->timing.local_s += now_s() - t1;
     if (stats) {
         stats->n_rotated = rotated;
         stats->n_slow_polar = slow;
@@ -316,35 +408,17 @@ arap_set_rotation(struct arap *a, struct mat3 r)
         for (int c = 0; c < 9; c++)
             for (int l = 0; l < W; l++)
                 a->blocks[b].rot[c][l] = r.m[c / 3][c % 3];
+    a->b_fresh = false;
 }
 
 int
 arap_global(struct arap *a, struct vec3 *x, struct sf_err *err)
 {
     double t0 = now_s();
-    double *b = a->b;
-    memset(b, 0, sizeof(double) * 3 * a->n_verts);
-    for (uint32_t k = 0; k < a->n_blocks; k++) {
-        const struct block *bl = &a->blocks[k];
-        for (int l = 0; l < W; l++) {
-            double v = bl->vol[l];
-            double s0x = 0, s0y = 0, s0z = 0;
-            for (int i = 0; i < 3; i++) {
-                /* V R g_(i+1), g_(i+1) = row i of D^-1 (Hu 2015, eq. 8) */
-                double gx = bl->dinv[3 * i][l] * v, gy = bl->dinv[3 * i + 1][l] * v,
-                       gz = bl->dinv[3 * i + 2][l] * v;
-                double wx = bl->rot[0][l] * gx + bl->rot[1][l] * gy + bl->rot[2][l] * gz;
-                double wy = bl->rot[3][l] * gx + bl->rot[4][l] * gy + bl->rot[5][l] * gz;
-                double wz = bl->rot[6][l] * gx + bl->rot[7][l] * gy + bl->rot[8][l] * gz;
-                double *bi = b + 3 * (size_t)bl->idx[i + 1][l];
-                bi[0] += wx, bi[1] += wy, bi[2] += wz;
-                s0x += wx, s0y += wy, s0z += wz;
-            }
-            double *b0 = b + 3 * (size_t)bl->idx[0][l];
-            b0[0] -= s0x, b0[1] -= s0y, b0[2] -= s0z;
-        }
-    }
-    double t1 = now_s();
+    const double *b = a->b;
+    if (!a->b_fresh)
+        assemble_rhs(a);
+    a->b_fresh = true; /* b depends on the rotations only */
     uint32_t nf = a->n_free;
     for (uint32_t r = 0; r < nf; r++) {
         const double *br = b + 3 * (size_t)a->free_vert[r];
@@ -357,6 +431,7 @@ arap_global(struct arap *a, struct vec3 *x, struct sf_err *err)
         a->rhs[nf + r] = br[1] - cy;
         a->rhs[2 * (size_t)nf + r] = br[2] - cz;
     }
+    double t1 = now_s();
     int rc = sparse_chol_solve(a->chol, a->rhs, a->sol, 3, err);
     if (rc == SF_OK)
         for (uint32_t r = 0; r < nf; r++)

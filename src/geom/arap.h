@@ -29,10 +29,10 @@ struct arap;
 
 /* Seconds spent in each phase, accumulated over calls. */
 struct arap_timing {
-    double local_s;  /* deformation gradients and nearest rotations */
+    double local_s;  /* one pass: deformation gradients, nearest rotations, right-hand side */
     double minrot_s; /* minimal rotations of the surface tets */
-    double rhs_s;    /* right-hand side assembly */
-    double solve_s;  /* Dirichlet terms and back-substitution */
+    double rhs_s;    /* Dirichlet terms of the right-hand side */
+    double solve_s;  /* back-substitution */
 };
 
 /* What the last local step did. */
@@ -62,7 +62,8 @@ struct arap_drive {
  * Local step for the current positions x (n_verts): the nearest rotation
  * of every tet's deformation gradient, then for each listed tet R <- Q R
  * with Q the minimal rotation making its normals safe for print direction
- * d (unit), tau = sin(alpha), angle reduced by the penalty beta_rad.
+ * d (unit), tau = sin(alpha), angle reduced by the penalty beta_rad.  The
+ * same pass assembles the right-hand side for the next arap_global.
  */
 void arap_local(struct arap *a, const struct vec3 *x, struct vec3 d, double tau, double beta_rad,
                 const struct arap_drive *drv, uint32_t n_drv, struct arap_local_stats *stats);

@@ -17,8 +17,20 @@
 
 #include "../mesh/vec.h"
 
-/* Lanes per block. */
-#define POLAR_W 4
+/* Lanes per block: 8 doubles fill one AVX-512 register or two AVX2 ones. */
+#define POLAR_W 8
+
+/*
+ * The block kernels are built for plain x86-64 and, next to it, for
+ * x86-64-v3 (AVX2 + FMA) and x86-64-v4 (AVX-512); the loader picks the
+ * best one this CPU runs (GNU ifunc), so the binary stays portable
+ * without -march=native.  Other compilers and targets get the plain build.
+ */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && defined(__linux__)
+#define POLAR_CLONES __attribute__((target_clones("default", "arch=x86-64-v3", "arch=x86-64-v4")))
+#else
+#define POLAR_CLONES
+#endif
 
 /* Nearest proper rotation to a (robust for any a; identity for a = 0). */
 struct mat3 polar_rotation(struct mat3 a);

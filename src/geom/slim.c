@@ -400,6 +400,16 @@ support_volume(const struct mesh *m, double angle_deg, double *vol, struct sf_er
  * self-intersecting edges than the input, and no more ray-cast support
  * volume than the input (fewer risky faces can still mean taller columns:
  * a tee's arms half raised).  The input itself ends the list.
+ *
+ * The ray-cast volume prices columns that follow the overhang's outline,
+ * as our slicer, CuraEngine and PrusaSlicer's "snug" style build them.
+ * PrusaSlicer's "grid" style (the peers' setting) closes and grid-snaps
+ * each layer's support footprint, so shrinking and splitting overhangs
+ * saves it little while a taller part still costs: on dino at 0 degrees
+ * and elephant at 45 its support rose (21.38 -> 21.46 g, 13.59 -> 13.82 g)
+ * where snug fell 8.5 % and 1.4 % and CuraEngine 8 % and 4 %.  Ranking
+ * the list by the height-weighted proxy instead, or refusing any taller
+ * result, was measured and not kept: each gave up the rows that improve.
  */
 static int
 choose(struct work *w, struct sf_err *err)

@@ -86,8 +86,8 @@ main(int argc, char **argv)
            (unsigned long long)r.timing.rotated, (unsigned long long)r.timing.slow_polar);
     static const char *label[8] = {
         "setup: tet mesh + face hosts", "setup: factorization",
-        "100 iterations: ARAP total",   "  nearest rotations",
-        "  minimal rotations",          "  right-hand side",
+        "100 iterations: ARAP total",   "  J, nearest rotation, RHS pass",
+        "  minimal rotations",          "  RHS Dirichlet terms",
         "  solve (back-substitution)",  "per-iteration part bookkeeping"
     };
     for (int k = 0; k < 8; k++)
