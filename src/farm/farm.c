@@ -22,6 +22,8 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "../base/gcode.h"
+#include "../base/limits.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "sched.h"
@@ -414,7 +416,7 @@ start(struct farm *f, const struct job_row *j, struct printer *p)
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
     move(p, PRINTER_EV_START);
-    if (p->drv->ops->start_job(p->drv, path, &err)) {
+    if (p->drv->ops->start_job(p->drv, path, 0, &err)) {
         log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)j->id, err.msg);
         fail_job(p, err.msg);
         move(p, PRINTER_EV_FINISHED);
@@ -458,6 +460,12 @@ run(struct loop *l, void *ud)
                                         .nozzle_mm = p->cfg.nozzle_mm,
                                         .group = p->cfg.group };
         memcpy(sp[i].bed_mm, p->cfg.bed_mm, sizeof(sp[i].bed_mm));
+        /* An interrupted part is still on this bed, waiting to be resumed:
+           nothing else may start on top of it. */
+        for (size_t k = 0; k < n; k++)
+            if (jobs[k].state == JOB_INTERRUPTED && strcmp(jobs[k].printer, p->cfg.name) == 0 &&
+                sp[i].state == PRINTER_IDLE)
+                sp[i].state = PRINTER_AWAITING_CLEAR;
     }
     for (size_t i = 0; i < n; i++)
         sched_view(&jobs[i], &sj[i]);
@@ -692,6 +700,79 @@ farm_printer_action(struct farm *f, const char *name, const char *action, struct
             p->job_id = 0;
     }
     move(p, ev);
+    farm_kick(f);
+    return SF_OK;
+}
+
+/* Command lines in a G-code file (what drivers number), or <0 with err. */
+static int
+count_commands(const char *path, uint64_t *out, struct sf_err *err)
+{
+    FILE *fp = fopen(path, "r");
+    if (!fp)
+        return sf_err_sys(err, "job G-code '%s'", path);
+    char raw[SF_GCODE_LINE_MAX + 2], cmd[SF_GCODE_LINE_MAX + 2];
+    uint64_t n = 0;
+    while (fgets(raw, sizeof(raw), fp))
+        if (gcode_strip(raw, strlen(raw), cmd, sizeof(cmd), NULL) > 0)
+            n++;
+    int bad = ferror(fp);
+    fclose(fp);
+    if (bad)
+        return sf_err_set(err, SF_EIO, "job G-code '%s': read error", path);
+    *out = n;
+    return SF_OK;
+}
+
+int
+farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
+{
+    struct job_row j;
+    int rc = store_job_get(f->s, id, &j, err);
+    if (rc)
+        return rc;
+    if (j.state != JOB_INTERRUPTED)
+        return sf_err_set(err, SF_EINVAL, "job %lld is %s: only an interrupted job can be resumed",
+                          (long long)id, job_state_name(j.state));
+    struct printer *p = find(f, j.printer);
+    if (!p || p->removed)
+        return sf_err_set(err, SF_EINVAL,
+                          "job %lld: its part is on printer '%s', which is no longer configured",
+                          (long long)id, j.printer);
+    if (p->state != PRINTER_IDLE || !p->drv || p->job_id)
+        return sf_err_set(err, SF_EINVAL, "job %lld: printer %s is %s; resume when it is idle",
+                          (long long)id, p->cfg.name, printer_state_name(p->state));
+    if (line < 0)
+        line = j.lines_acked;
+    char path[1200];
+    uint64_t total = 0;
+    if ((rc = store_file_path(f->s, j.gcode_sha, path, sizeof(path), err)) ||
+        (rc = count_commands(path, &total, err)))
+        return rc;
+    /* Line 0 would run the job's own start: its G28 homes Z into the part. */
+    if (line < 1 || (uint64_t)line >= total)
+        return sf_err_set(err, SF_EINVAL,
+                          "job %lld: line %lld is out of range: resume from 1..%llu (the job has "
+                          "%llu command lines; to print from line 0, clear the bed and restart)",
+                          (long long)id, (long long)line,
+                          (unsigned long long)(total > 1 ? total - 1 : 1),
+                          (unsigned long long)total);
+    /* Commit first (farm.c's rule): a crash from here on leaves it interrupted again. */
+    struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line };
+    if ((rc = store_job_event(f->s, id, JOB_EV_RESUME, &a, NULL, err)))
+        return rc;
+    notify(f);
+    p->job_id = id;
+    p->lines_acked = p->lines_saved = line;
+    move(p, PRINTER_EV_START);
+    struct sf_err derr;
+    if (p->drv->ops->start_job(p->drv, path, (uint64_t)line, &derr)) {
+        log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)id, derr.msg);
+        fail_job(p, derr.msg);
+        move(p, PRINTER_EV_FINISHED);
+    }
+    log_printer(LOG_INFO, p->cfg.name, "job %lld: resumed at line %lld of %llu", (long long)id,
+                (long long)line, (unsigned long long)total);
     farm_kick(f);
     return SF_OK;
 }

@@ -77,7 +77,7 @@ reg_action(void *ud, const char *name, const char *action, struct sf_err *err)
     return sf_err_set(err, SF_ENOTFOUND, "no printer '%s'", name);
 }
 
-static const struct api_printer_ops reg_ops = { reg_count, reg_get, reg_action };
+static const struct api_printer_ops reg_ops = { reg_count, reg_get, reg_action, NULL };
 
 /* The server side: api + its thread. */
 static struct {
