@@ -40,6 +40,8 @@ struct printer {
     uint64_t reconnect;         /* reconnect timer id, 0 if none */
     int64_t backoff_ms;         /* next reconnect delay */
     bool removed;               /* dropped from the config; freed when idle */
+    bool cancelling;            /* job cancelled; the driver is still running its end
+                                   sequence, so the printer is not free yet */
 };
 
 struct farm {
@@ -180,6 +182,7 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
             p->message[0] = '\0';
             move(p, PRINTER_EV_CONNECTED);
         } else if (st->state == DRV_OFFLINE && p->state != PRINTER_OFFLINE) {
+            p->cancelling = false;
             fail_job(p, "printer went offline");
             snprintf(p->message, sizeof(p->message), "%s", st->message);
             move(p, PRINTER_EV_DISCONNECTED);
@@ -212,8 +215,15 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
         break;
     }
     case DRV_EV_JOB_CANCELLED:
-        break; /* the farm recorded the cancel and moved the printer when it asked */
+        /* The farm recorded the cancel when it asked; the printer is free
+           only now that the end sequence has run. */
+        if (p->cancelling) {
+            p->cancelling = false;
+            move(p, PRINTER_EV_FINISHED);
+        }
+        break;
     case DRV_EV_JOB_FAILED:
+        p->cancelling = false;
         p->lines_acked = (int64_t)st->lines_acked;
         fail_job(p, st->message[0] ? st->message : "the print stopped");
         move(p, st->state == DRV_ERROR ? PRINTER_EV_FAULT : PRINTER_EV_FINISHED);
@@ -688,6 +698,13 @@ farm_printer_action(struct farm *f, const char *name, const char *action, struct
         rc = p->drv->ops->cancel(p->drv, err);
     if (rc)
         return rc;
+    /* A driver that reports its new state at once (Marlin's pause and
+       resume do) has already moved the job and printer through
+       on_drv_event: do not apply the move twice. */
+    if (ev != PRINTER_EV_FINISHED && ev != PRINTER_EV_CLEARED && p->state == to) {
+        farm_kick(f);
+        return SF_OK;
+    }
     if (p->job_id) {
         struct job_event_args a = { .lines_acked = p->lines_acked,
                                     .reason = "cancelled by an operator" };
@@ -696,8 +713,15 @@ farm_printer_action(struct farm *f, const char *name, const char *action, struct
                                                        : JOB_EV_CANCEL;
         if ((rc = store_job_event(f->s, p->job_id, jev, &a, NULL, err)))
             return rc;
-        if (jev == JOB_EV_CANCEL)
+        if (jev == JOB_EV_CANCEL) {
             p->job_id = 0;
+            if (p->drv->status.state == DRV_PRINTING) {
+                /* still running the end sequence: free on DRV_EV_JOB_CANCELLED */
+                p->cancelling = true;
+                notify(f);
+                return SF_OK;
+            }
+        }
     }
     move(p, ev);
     farm_kick(f);
