@@ -989,11 +989,7 @@ host_left(struct sim_marlin *s)
 {
     loop_del_fd(s->loop, s->fd);
     s->host_gone = true;
-    s->rx_len = 0;
-    s->line_len = 0;
-    s->line_eol = false;
-    s->emerg_len = 0;
-    buf_reset(&s->tx);
+    buf_reset(&s->tx); /* what it had received still runs; only replies are lost */
     free_out(s);
 }
 

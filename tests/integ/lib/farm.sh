@@ -133,6 +133,11 @@ for name in printers:
         # lines every print ran: all of a finished one, the acknowledged ones otherwise
         need = len(want) if outcome in ("done", "") else acked - start
         w = 0
+        if start > 0:
+            # a resumed print opens with the driver's resume preamble
+            while i < len(got) and driver.match(got[i]) and got[i] != want[0]:
+                i += 1
+                extra += 1
         while w < need and i < len(got):
             if got[i] == want[w]:
                 w += 1
