@@ -72,6 +72,10 @@ for round in $(seq 10); do
     pr=$(api "/api/jobs/$id" | json 'd["job"]["printer"]')
     wait_for 20 sh -c "'$C' printers | grep -qE '^$pr +idle'" || fail "round $round: $pr not back: $("$C" printers)"
     lines=$(grep "^$id " "$tmp/after" | cut -d' ' -f3)
+    if [ "$round" = 1 ]; then # a line past the job's end is refused, saying the range
+      out=$("$C" resume-job "$id" --line 99999999 2>&1) && fail "resumed past the end"
+      [[ "$out" == *"409: job $id: line 99999999 is out of range: resume from 1.."* ]] || fail "range: $out"
+    fi
     if out=$("$C" resume-job "$id" 2>&1); then
       [ "$out" = "job $id: printing on $pr from line $lines" ] || fail "round $round: resume-job said: $out"
       resumed=$((resumed + 1))
