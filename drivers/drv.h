@@ -82,8 +82,17 @@ struct drv_ops {
     int version;      /* DRV_OPS_VERSION */
     const char *kind; /* "marlin" */
     int (*open)(struct drv *d, struct sf_err *err);
-    /* Stream gcode_path; first_line > 0 skips lines already printed (resume after interrupt). */
-    int (*start_job)(struct drv *d, const char *gcode_path, struct sf_err *err);
+    /*
+     * Stream gcode_path from its command first_line (0-based, comments and
+     * blank lines not counted).  first_line > 0 resumes a job the printer
+     * lost (daemon or printer restarted): the driver first brings the
+     * machine back to the state the job's earlier lines left (heat, home
+     * X/Y only, Z set where those lines left it, E, fan, feed) and reports
+     * lines_acked = first_line.  SF_EINVAL when first_line is not below the
+     * job's command count; SF_EAGAIN when the printer is not idle.
+     */
+    int (*start_job)(struct drv *d, const char *gcode_path, uint64_t first_line,
+                     struct sf_err *err);
     int (*pause)(struct drv *d, struct sf_err *err);
     int (*resume)(struct drv *d, struct sf_err *err);
     int (*cancel)(struct drv *d, struct sf_err *err);

@@ -38,21 +38,23 @@
 #include "marlin_reply.h"
 #include "transport.h"
 
-#define RING_LINES     512  /* numbered lines kept for resends */
-#define WINDOW_MAX     32   /* most lines in flight however large B claims */
-#define WINDOW_DEFAULT 2    /* without ADVANCED_OK: safe for any BUFSIZE >= 2 */
-#define INJECT_MAX     32   /* host lines waiting (park, resume, end sequences) */
-#define HELLO_TRIES    5    /* handshake attempts before giving up */
-#define PROBES_MAX     5    /* unanswered probes before the job fails */
-#define POLL_MS        2000 /* M105 polling / M155 interval */
-#define PROGRESS_MS    250  /* progress events at most this often */
-#define PINGPONG_LINES 64   /* clean lines in ping-pong after a resend */
-#define TAG_HOST       (-1) /* a line the driver added */
-#define TAG_M105       (-2) /* a numbered M105 poll */
-#define PARK_X_MM      0.0  /* where a paused head waits */
-#define PARK_Y_MM      0.0
-#define PARK_LIFT_MM   10.0
-#define RETRACT_MM     2.0
+#define RING_LINES      512  /* numbered lines kept for resends */
+#define WINDOW_MAX      32   /* most lines in flight however large B claims */
+#define WINDOW_DEFAULT  2    /* without ADVANCED_OK: safe for any BUFSIZE >= 2 */
+#define INJECT_MAX      32   /* host lines waiting (park, resume, end sequences) */
+#define HELLO_TRIES     5    /* handshake attempts before giving up */
+#define PROBES_MAX      5    /* unanswered probes before the job fails */
+#define POLL_MS         2000 /* M105 polling / M155 interval */
+#define PROGRESS_MS     250  /* progress events at most this often */
+#define PINGPONG_LINES  64   /* clean lines in ping-pong after a resend */
+#define TAG_HOST        (-1) /* a line the driver added */
+#define TAG_M105        (-2) /* a numbered M105 poll */
+#define PARK_X_MM       0.0  /* where a paused head waits */
+#define PARK_Y_MM       0.0
+#define PARK_LIFT_MM    10.0
+#define RETRACT_MM      2.0
+#define RESUME_LIFT_MM  2.0 /* Marlin's POWER_LOSS_ZRAISE: off the part before homing X/Y */
+#define RESUME_PRIME_MM 2.0 /* refill what the nozzle oozed while it cooled and reheated */
 
 enum phase { PH_OFF, PH_HELLO, PH_READY };
 enum jobmode { J_NONE, J_RUN, J_PAUSED, J_CANCELLING };
@@ -914,8 +916,69 @@ m_open(struct drv *d, struct sf_err *err)
     return SF_OK;
 }
 
+/*
+ * Bring a printer that lost the job back to where the job's lines before
+ * first_line left it, then stream on from first_line.  Modelled on Marlin
+ * 2.1's power-loss recovery (powerloss.cpp, PrintJobRecovery::resume):
+ * the printer was reset (a USB Marlin resets when the port is reopened),
+ * so heaters are off and no axis is homed, but the nozzle still stands
+ * where the last executed move left it, on or just above the part.
+ *   1. start bed and nozzle heating; wait for the bed (a cold nozzle sits
+ *      on the part: heating it there would melt a mark into the top layer);
+ *   2. G92 Z = the Z the job's earlier lines commanded (trust the nozzle
+ *      stayed put, as powerloss.cpp's G92.9 does), lift RESUME_LIFT_MM off
+ *      the part, home X and Y only: homing Z would drive the nozzle down
+ *      into the part;
+ *   3. wait for the nozzle, prime what the cooling nozzle oozed, travel
+ *      back over the point where line first_line starts, lower to Z;
+ *   4. restore E mode and position, positioning mode, feedrate and fan;
+ *   5. continue with line first_line: its move starts where line
+ *      first_line - 1 ended, which is exactly where step 3 put the head,
+ *      so the line runs whole, as sliced.
+ * Why first_line is the first line *not acknowledged*: Marlin acknowledges
+ * a line once it is parsed and planned, so every acknowledged line was
+ * printed (the planner drains on its own); an unacknowledged line may or
+ * may not have run, and running it twice costs a blob at worst, where
+ * skipping it leaves a gap.  The owner may hold an older count than the
+ * printer reached (progress is persisted periodically): the lines in
+ * between are printed again over themselves, within the same layer when
+ * the period is short.
+ */
+static void
+inject_resume(struct marlin *m, const struct motion *s)
+{
+    if (s->bed_c > 0)
+        inject(m, "M140 S%.0f", s->bed_c);
+    if (s->noz_c > 0)
+        inject(m, "M104 S%.0f", s->noz_c);
+    if (s->bed_c > 0)
+        inject(m, "M190 S%.0f", s->bed_c);
+    inject(m, "G92 Z%.3f", s->pos[2]);
+    inject(m, "G91");
+    inject(m, "G1 Z%.2f F600", RESUME_LIFT_MM);
+    inject(m, "G90");
+    inject(m, "G28 X Y");
+    if (s->noz_c > 0)
+        inject(m, "M109 S%.0f", s->noz_c);
+    inject(m, "M83");
+    inject(m, "G1 E%.2f F300", RESUME_PRIME_MM);
+    inject(m, "G1 X%.3f Y%.3f F6000", s->pos[0], s->pos[1]);
+    inject(m, "G1 Z%.3f F600", s->pos[2]);
+    if (!s->rel_e) {
+        inject(m, "M82");
+        inject(m, "G92 E%.5f", s->pos[3]);
+    }
+    if (s->rel_xyz)
+        inject(m, "G91");
+    inject(m, "G1 F%.0f", s->feed_mm_min);
+    if (s->fan > 0)
+        inject(m, "M106 S%.0f", s->fan);
+    else
+        inject(m, "M107");
+}
+
 static int
-m_start_job(struct drv *d, const char *path, struct sf_err *err)
+m_start_job(struct drv *d, const char *path, uint64_t first_line, struct sf_err *err)
 {
     struct marlin *m = M(d);
     if (d->status.state != DRV_IDLE)
@@ -924,12 +987,17 @@ m_start_job(struct drv *d, const char *path, struct sf_err *err)
     FILE *f = fopen(path, "r");
     if (!f)
         return sf_err_sys(err, "job '%s'", path);
-    /* Count and check every command first: a job must not fail half-way on a bad line. */
+    /* Count and check every command first: a job must not fail half-way on
+       a bad line.  A resume also follows the machine state up to first_line
+       and notes where that line starts in the file. */
     char raw[SF_GCODE_LINE_MAX + 2], cmd[LINEWIN_LINE_MAX];
     uint64_t total = 0;
-    long lineno = 0;
+    long lineno = 0, resume_at = 0, offset = 0;
+    struct motion mo = { .feed_mm_min = 1500 };
     while (fgets(raw, sizeof(raw), f)) {
         size_t len = strlen(raw);
+        long at = offset;
+        offset += (long)len;
         lineno++;
         bool too_long;
         if (len == sizeof(raw) - 1 && raw[len - 1] != '\n') {
@@ -937,31 +1005,54 @@ m_start_job(struct drv *d, const char *path, struct sf_err *err)
             return sf_err_set(err, SF_EINVAL, "job '%s':%ld: line longer than %d bytes", path,
                               lineno, SF_GCODE_LINE_MAX);
         }
-        if (gcode_strip(raw, len, cmd, LINEWIN_LINE_MAX - 18, &too_long) > 0)
-            total++;
+        size_t n = gcode_strip(raw, len, cmd, LINEWIN_LINE_MAX - 18, &too_long);
         if (too_long) {
             fclose(f);
             return sf_err_set(err, SF_EINVAL,
                               "job '%s':%ld: command too long for Marlin (%d bytes)", path, lineno,
                               LINEWIN_LINE_MAX - 19);
         }
+        if (n == 0)
+            continue;
+        if (first_line > 0 && total == first_line)
+            resume_at = at;
+        if (total < first_line)
+            track(&mo, cmd, n);
+        total++;
     }
-    if (ferror(f) || fseek(f, 0, SEEK_SET) != 0) {
+    if (ferror(f)) {
         fclose(f);
         return sf_err_sys(err, "job '%s': read", path);
     }
+    if (first_line > 0 && first_line >= total) {
+        fclose(f);
+        return sf_err_set(err, SF_EINVAL,
+                          "job '%s': cannot resume from line %llu: the job has %llu command "
+                          "lines (0..%llu)",
+                          path, (unsigned long long)first_line, (unsigned long long)total,
+                          (unsigned long long)(total ? total - 1 : 0));
+    }
+    if (fseek(f, resume_at, SEEK_SET) != 0) {
+        fclose(f);
+        return sf_err_sys(err, "job '%s': seek", path);
+    }
     m->job = f;
     snprintf(m->job_path, sizeof(m->job_path), "%s", path);
-    m->job_index = 0;
+    m->job_index = (long)first_line;
     m->job_eof = false;
     m->final_pushed = false;
-    memset(&m->mo, 0, sizeof(m->mo));
-    m->mo.feed_mm_min = 1500;
+    m->mo = mo;
     d->status.lines_total = total;
-    d->status.lines_acked = 0;
-    d->status.progress = 0;
+    d->status.lines_acked = first_line;
+    d->status.progress = total ? (double)first_line / (double)total : 0;
     d->status.job_started_ms = loop_now_ms(d->loop);
-    message(m, "printing '%s'", path);
+    if (first_line > 0) {
+        inject_resume(m, &mo);
+        message(m, "resuming '%s' at line %llu of %llu", path, (unsigned long long)first_line,
+                (unsigned long long)total);
+    } else {
+        message(m, "printing '%s'", path);
+    }
     m->mode = J_RUN;
     set_state(m, DRV_PRINTING);
     pump(m);

@@ -27,6 +27,7 @@
 #include <math.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <poll.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -68,7 +69,9 @@ struct sim_marlin {
     char path[256];     /* what hosts open */
     char link[256];     /* symlink to keep current, or "" */
     int fd;             /* pty master or connected TCP client; -1 none */
-    int keep_fd;        /* pty slave we hold open so the master never sees HUP */
+    int keep_fd;        /* pty slave we hold until a host has it open, so the master
+                           sees no HUP before; then closed, so the host leaving shows */
+    bool host_gone;     /* pty: the host closed the port; fd is out of the loop */
     int listen_fd;      /* TCP listener or -1 */
     unsigned fd_events; /* events asked of the loop for fd */
     uint64_t tick;      /* pending step timer id */
@@ -119,6 +122,13 @@ struct sim_marlin {
 
 static void step(struct sim_marlin *s);
 static void firmware_reset(struct sim_marlin *s, bool banner);
+
+/* A host is connected: bytes can flow. */
+static bool
+linked(const struct sim_marlin *s)
+{
+    return s->fd >= 0 && !s->host_gone;
+}
 
 void
 sim_marlin_config_init(struct sim_marlin_config *c)
@@ -239,15 +249,18 @@ send_ok(struct sim_marlin *s, const char *line)
 /* ---- link -------------------------------------------------------------- */
 
 static void on_fd(struct loop *l, int fd, unsigned events, void *ud);
+static void host_left(struct sim_marlin *s);
 
 static void
 close_link(struct sim_marlin *s)
 {
     if (s->fd >= 0) {
-        loop_del_fd(s->loop, s->fd);
+        if (!s->host_gone)
+            loop_del_fd(s->loop, s->fd);
         close(s->fd);
         s->fd = -1;
     }
+    s->host_gone = false;
     if (s->keep_fd >= 0) {
         close(s->keep_fd);
         s->keep_fd = -1;
@@ -513,8 +526,14 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
                 return false;
             }
             s->dwell_s = -1;
-            if (g->code == 28)
-                s->pos[0] = s->pos[1] = s->pos[2] = 0;
+            if (g->code == 28) {
+                /* G28 X Y homes those axes only (a resume must not home Z into the part) */
+                bool any =
+                    gcode_get(g, 'X', NULL) || gcode_get(g, 'Y', NULL) || gcode_get(g, 'Z', NULL);
+                for (int a = 0; a < 3; a++)
+                    if (!any || gcode_get(g, "XYZ"[a], NULL))
+                        s->pos[a] = 0;
+            }
             break;
         case 90:
             s->rel_xyz = s->rel_e = false;
@@ -835,7 +854,7 @@ read_input(struct sim_marlin *s)
     int want = (int)s->rx_tokens;
     if (want > room)
         want = room;
-    if (want <= 0 || s->fd < 0)
+    if (want <= 0 || !linked(s))
         return;
     char tmp[4096];
     if (want > (int)sizeof(tmp))
@@ -843,13 +862,22 @@ read_input(struct sim_marlin *s)
     ssize_t n = read(s->fd, tmp, (size_t)want);
     if (n < want)
         s->rx_idle = true; /* drained: the line went quiet */
+    if (n < 0 && errno == EIO && s->kind == LINK_PTY) {
+        host_left(s); /* the slave was closed: no host on the port */
+        return;
+    }
     if (n == 0 || (n < 0 && errno != EAGAIN && errno != EINTR)) {
-        /* TCP host went away (a pty master never sees this: we hold the slave). */
+        /* TCP host went away: the bridge's listener waits for the next. */
         close_link(s);
         return;
     }
     if (n < 0)
         return;
+    if (s->keep_fd >= 0 && s->kind == LINK_PTY) {
+        /* A host has the port open: from now on its leaving shows as HUP. */
+        close(s->keep_fd);
+        s->keep_fd = -1;
+    }
     s->rx_tokens -= (double)n;
     s->st.rx_bytes += (uint64_t)n;
     int64_t now = loop_now_ms(s->loop);
@@ -922,7 +950,7 @@ write_output(struct sim_marlin *s)
             s->out_tail = NULL;
         free(o);
     }
-    if (s->fd < 0) {
+    if (!linked(s)) {
         buf_reset(&s->tx);
         return;
     }
@@ -950,13 +978,47 @@ on_tick(struct loop *l, void *ud)
     step(s);
 }
 
+/*
+ * The host closed the pty (or died).  A USB Marlin keeps running what it
+ * already received (its replies go nowhere), heaters on, until the port is
+ * opened again: that asserts DTR, which resets the board (see host_back).
+ * The master stays open, out of the loop (it would report HUP forever).
+ */
+static void
+host_left(struct sim_marlin *s)
+{
+    loop_del_fd(s->loop, s->fd);
+    s->host_gone = true;
+    buf_reset(&s->tx); /* what it had received still runs; only replies are lost */
+    free_out(s);
+}
+
+/* Polled each step while the host is gone: the slave opened again means a reset. */
+static void
+host_back(struct sim_marlin *s)
+{
+    struct pollfd p = { .fd = s->fd, .events = POLLIN };
+    if (poll(&p, 1, 0) < 0 || (p.revents & POLLHUP))
+        return;
+    if (loop_add_fd(s->loop, s->fd, LOOP_READ, on_fd, s, NULL) < 0)
+        return;
+    s->fd_events = LOOP_READ;
+    s->host_gone = false;
+    s->st.connects++;
+    firmware_reset(s, true); /* DTR: the bootloader runs, then "start" */
+}
+
 static void
 on_fd(struct loop *l, int fd, unsigned events, void *ud)
 {
     (void)l;
     (void)fd;
-    (void)events;
-    step(ud);
+    struct sim_marlin *s = ud;
+    if ((events & LOOP_HUP) && s->kind == LINK_PTY && s->keep_fd < 0 && !s->host_gone) {
+        host_left(s);
+        return;
+    }
+    step(s);
 }
 
 static void
@@ -1005,13 +1067,15 @@ step(struct sim_marlin *s)
     write_output(s);
 
     /* Ask for input only when it can be taken, or epoll would spin. */
-    if (s->fd >= 0) {
+    if (s->host_gone)
+        host_back(s);
+    if (linked(s)) {
         unsigned ev = (s->rx_tokens >= 1 && s->rx_len < s->cfg.rx_size) ? LOOP_READ : 0;
         if (ev != s->fd_events && loop_mod_fd(s->loop, s->fd, ev, NULL) == 0)
             s->fd_events = ev;
     }
     bool busy = s->q_len > 0 || s->pl_len > 0 || s->tx.len > 0 || s->out_head || s->rx_len > 0 ||
-                (s->fd >= 0 && s->fd_events == 0) || s->boot_until_ms ||
+                (linked(s) && s->fd_events == 0) || s->boot_until_ms ||
                 fabs(s->t_noz - fmax(s->t_noz_target, AMBIENT_C)) > 0.5 ||
                 fabs(s->t_bed - fmax(s->t_bed_target, AMBIENT_C)) > 0.5;
     if (s->halted)

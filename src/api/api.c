@@ -303,6 +303,27 @@ job_restart(struct api *a, int64_t id, struct http_resp *resp)
     changed(a);
 }
 
+/* The operator continues an interrupted job where its printer stopped. */
+static void
+job_resume(struct api *a, int64_t id, const struct http_req *req, struct http_resp *resp)
+{
+    struct sf_err err;
+    int64_t line;
+    if (api_resume_parse(req->body, req->body_len, &line, &err)) {
+        http_error(resp, 400, "%s", err.msg);
+        return;
+    }
+    int rc = a->cfg.printers->resume_job
+                 ? a->cfg.printers->resume_job(a->cfg.printers_ud, id, line, &err)
+                 : sf_err_set(&err, SF_EINVAL, "resuming jobs is not available here");
+    if (rc) {
+        http_error(resp, status_of(rc), "%s", err.msg);
+        return;
+    }
+    job_get(a, id, resp);
+    changed(a);
+}
+
 /* ---- printers ---- */
 
 static json_t *
@@ -529,12 +550,15 @@ route(void *ud, const struct http_req *req, struct http_resp *resp)
         if (n == 3)
             goto bad_method;
         bool cancel = seg_is(seg[3], len[3], "cancel");
-        if (!cancel && !seg_is(seg[3], len[3], "restart"))
+        bool resume = seg_is(seg[3], len[3], "resume");
+        if (!cancel && !resume && !seg_is(seg[3], len[3], "restart"))
             goto not_found;
         if (!post)
             goto bad_method;
         if (cancel)
             job_cancel(a, id, resp);
+        else if (resume)
+            job_resume(a, id, req, resp);
         else
             job_restart(a, id, resp);
         return;

@@ -9,6 +9,8 @@
  *   PATCH  /api/jobs/ID                   {"priority": N}
  *   POST   /api/jobs/ID/cancel            cancel (through the printer if printing)
  *   POST   /api/jobs/ID/restart           interrupted job: print its copy again from the start
+ *   POST   /api/jobs/ID/resume            interrupted job: continue on its printer from the
+ *                                         last acknowledged line, or {"line": N}
  *   GET    /api/printers                  list printers with state, temperatures
  *   GET    /api/printers/NAME             one printer
  *   POST   /api/printers/NAME/ACTION      pause | resume | cancel | cleared
@@ -64,6 +66,12 @@ struct api_printer_ops {
      * 500; err says why.
      */
     int (*action)(void *ud, const char *name, const char *action, struct sf_err *err);
+    /*
+     * Resume interrupted job id from command line `line` (-1: the stored
+     * last acknowledged line) on the printer holding its part.  NULL: not
+     * offered (409).  Errors as for action.
+     */
+    int (*resume_job)(void *ud, int64_t id, int64_t line, struct sf_err *err);
 };
 
 struct api_config {

@@ -141,6 +141,27 @@ api_priority_parse(const char *text, size_t len, int *priority, struct sf_err *e
     return rc;
 }
 
+int
+api_resume_parse(const char *text, size_t len, int64_t *line, struct sf_err *err)
+{
+    *line = -1;
+    if (len == 0)
+        return SF_OK; /* no body: the last acknowledged line */
+    json_t *root = load_object(text, len, "body", err);
+    if (!root)
+        return SF_EINVAL;
+    int rc = SF_OK;
+    json_t *l = json_object_get(root, "line");
+    if (json_object_size(root) != 1 || !json_is_integer(l))
+        rc = sf_err_set(err, SF_EINVAL, "body: expected {\"line\": INTEGER} and nothing else");
+    else if (json_integer_value(l) < 0)
+        rc = sf_err_set(err, SF_EINVAL, "line: %lld is negative", (long long)json_integer_value(l));
+    else
+        *line = json_integer_value(l);
+    json_decref(root);
+    return rc;
+}
+
 json_t *
 api_job_json(const struct job_row *j)
 {

@@ -31,6 +31,9 @@ int api_opts_parse(const char *text, size_t len, struct job_opts *o, struct sf_e
 /* Parse {"priority": N}. */
 int api_priority_parse(const char *text, size_t len, int *priority, struct sf_err *err);
 
+/* POST .../resume's body: empty (*line = -1, the stored line) or {"line": N >= 0}. */
+int api_resume_parse(const char *text, size_t len, int64_t *line, struct sf_err *err);
+
 json_t *api_job_json(const struct job_row *j);
 json_t *api_print_json(const struct print_row *p);
 json_t *api_event_json(const struct event_row *e);

@@ -379,6 +379,39 @@ run_cleared(int argc, char **argv)
     return action("cleared", argc, argv);
 }
 
+/* resume-job JOB_ID [--line N]: continue an interrupted job on its printer. */
+static int
+run_resume_job(int argc, char **argv)
+{
+    struct client c;
+    argc = client_init(&c, "resume-job", argc, argv);
+    long id = 0, line = -1;
+    bool ok = argc >= 2 && parse_long(argv[1], 1, 999999999999L, &id);
+    for (int i = 2; ok && i < argc; i += 2)
+        ok = strcmp(argv[i], "--line") == 0 && i + 1 < argc &&
+             parse_long(argv[i + 1], 0, 999999999999L, &line);
+    if (!ok) {
+        fprintf(stderr, "usage: slimfarm resume-job JOB_ID [--line N]\n");
+        return 2;
+    }
+    char path[64], body[64] = "";
+    snprintf(path, sizeof(path), "/api/jobs/%ld/resume", id);
+    if (line >= 0)
+        snprintf(body, sizeof(body), "{\"line\": %ld}", line);
+    json_t *r = request(&c, "POST", path, line >= 0 ? body : NULL, NULL);
+    if (!r)
+        return 1;
+    json_t *o = json_object_get(r, "job");
+    printf("job %lld: %s on %s from line %lld\n", num(o, "id"), str(o, "state"), str(o, "printer"),
+           num(o, "lines_acked"));
+    json_decref(r);
+    return 0;
+}
+
+CMD_REGISTER(resume_job, "resume-job", "resume-job JOB_ID [--line N]",
+             "continue an interrupted job on its printer from its last acknowledged line "
+             "(or command line N)",
+             run_resume_job)
 CMD_REGISTER(cancel, "cancel", "cancel JOB_ID|PRINTER", "cancel a job, or the job on a printer",
              run_cancel)
 CMD_REGISTER(restart, "restart", "restart JOB_ID",

@@ -80,7 +80,15 @@ ops_action(void *ud, const char *name, const char *action, struct sf_err *err)
     return farm_printer_action(d->farm, name, action, err);
 }
 
-static const struct api_printer_ops printer_ops = { ops_count, ops_get, ops_action };
+static int
+ops_resume_job(void *ud, int64_t id, int64_t line, struct sf_err *err)
+{
+    struct daemon *d = ud;
+    return farm_job_resume(d->farm, id, line, err);
+}
+
+static const struct api_printer_ops printer_ops = { ops_count, ops_get, ops_action,
+                                                    ops_resume_job };
 
 /* ---- wiring ---- */
 

@@ -22,6 +22,8 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "../base/gcode.h"
+#include "../base/limits.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "sched.h"
@@ -38,6 +40,8 @@ struct printer {
     uint64_t reconnect;         /* reconnect timer id, 0 if none */
     int64_t backoff_ms;         /* next reconnect delay */
     bool removed;               /* dropped from the config; freed when idle */
+    bool cancelling;            /* job cancelled; the driver is still running its end
+                                   sequence, so the printer is not free yet */
 };
 
 struct farm {
@@ -178,6 +182,7 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
             p->message[0] = '\0';
             move(p, PRINTER_EV_CONNECTED);
         } else if (st->state == DRV_OFFLINE && p->state != PRINTER_OFFLINE) {
+            p->cancelling = false;
             fail_job(p, "printer went offline");
             snprintf(p->message, sizeof(p->message), "%s", st->message);
             move(p, PRINTER_EV_DISCONNECTED);
@@ -210,8 +215,15 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
         break;
     }
     case DRV_EV_JOB_CANCELLED:
-        break; /* the farm recorded the cancel and moved the printer when it asked */
+        /* The farm recorded the cancel when it asked; the printer is free
+           only now that the end sequence has run. */
+        if (p->cancelling) {
+            p->cancelling = false;
+            move(p, PRINTER_EV_FINISHED);
+        }
+        break;
     case DRV_EV_JOB_FAILED:
+        p->cancelling = false;
         p->lines_acked = (int64_t)st->lines_acked;
         fail_job(p, st->message[0] ? st->message : "the print stopped");
         move(p, st->state == DRV_ERROR ? PRINTER_EV_FAULT : PRINTER_EV_FINISHED);
@@ -414,7 +426,7 @@ start(struct farm *f, const struct job_row *j, struct printer *p)
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
     move(p, PRINTER_EV_START);
-    if (p->drv->ops->start_job(p->drv, path, &err)) {
+    if (p->drv->ops->start_job(p->drv, path, 0, &err)) {
         log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)j->id, err.msg);
         fail_job(p, err.msg);
         move(p, PRINTER_EV_FINISHED);
@@ -458,6 +470,12 @@ run(struct loop *l, void *ud)
                                         .nozzle_mm = p->cfg.nozzle_mm,
                                         .group = p->cfg.group };
         memcpy(sp[i].bed_mm, p->cfg.bed_mm, sizeof(sp[i].bed_mm));
+        /* An interrupted part is still on this bed, waiting to be resumed:
+           nothing else may start on top of it. */
+        for (size_t k = 0; k < n; k++)
+            if (jobs[k].state == JOB_INTERRUPTED && strcmp(jobs[k].printer, p->cfg.name) == 0 &&
+                sp[i].state == PRINTER_IDLE)
+                sp[i].state = PRINTER_AWAITING_CLEAR;
     }
     for (size_t i = 0; i < n; i++)
         sched_view(&jobs[i], &sj[i]);
@@ -691,6 +709,13 @@ farm_printer_action(struct farm *f, const char *name, const char *action, struct
         rc = p->drv->ops->cancel(p->drv, err);
     if (rc)
         return rc;
+    /* A driver that reports its new state at once (Marlin's pause and
+       resume do) has already moved the job and printer through
+       on_drv_event: do not apply the move twice. */
+    if (ev != PRINTER_EV_FINISHED && ev != PRINTER_EV_CLEARED && p->state == to) {
+        farm_kick(f);
+        return SF_OK;
+    }
     if (p->job_id) {
         struct job_event_args a = { .lines_acked = p->lines_acked,
                                     .reason = "cancelled by an operator" };
@@ -699,10 +724,90 @@ farm_printer_action(struct farm *f, const char *name, const char *action, struct
                                                        : JOB_EV_CANCEL;
         if ((rc = store_job_event(f->s, p->job_id, jev, &a, NULL, err)))
             return rc;
-        if (jev == JOB_EV_CANCEL)
+        if (jev == JOB_EV_CANCEL) {
             p->job_id = 0;
+            if (p->drv->status.state == DRV_PRINTING) {
+                /* still running the end sequence: free on DRV_EV_JOB_CANCELLED */
+                p->cancelling = true;
+                notify(f);
+                return SF_OK;
+            }
+        }
     }
     move(p, ev);
+    farm_kick(f);
+    return SF_OK;
+}
+
+/* Command lines in a G-code file (what drivers number), or <0 with err. */
+static int
+count_commands(const char *path, uint64_t *out, struct sf_err *err)
+{
+    FILE *fp = fopen(path, "r");
+    if (!fp)
+        return sf_err_sys(err, "job G-code '%s'", path);
+    char raw[SF_GCODE_LINE_MAX + 2], cmd[SF_GCODE_LINE_MAX + 2];
+    uint64_t n = 0;
+    while (fgets(raw, sizeof(raw), fp))
+        if (gcode_strip(raw, strlen(raw), cmd, sizeof(cmd), NULL) > 0)
+            n++;
+    int bad = ferror(fp);
+    fclose(fp);
+    if (bad)
+        return sf_err_set(err, SF_EIO, "job G-code '%s': read error", path);
+    *out = n;
+    return SF_OK;
+}
+
+int
+farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
+{
+    struct job_row j;
+    int rc = store_job_get(f->s, id, &j, err);
+    if (rc)
+        return rc;
+    if (j.state != JOB_INTERRUPTED)
+        return sf_err_set(err, SF_EINVAL, "job %lld is %s: only an interrupted job can be resumed",
+                          (long long)id, job_state_name(j.state));
+    struct printer *p = find(f, j.printer);
+    if (!p || p->removed)
+        return sf_err_set(err, SF_EINVAL,
+                          "job %lld: its part is on printer '%s', which is no longer configured",
+                          (long long)id, j.printer);
+    if (p->state != PRINTER_IDLE || !p->drv || p->job_id)
+        return sf_err_set(err, SF_EINVAL, "job %lld: printer %s is %s; resume when it is idle",
+                          (long long)id, p->cfg.name, printer_state_name(p->state));
+    if (line < 0)
+        line = j.lines_acked;
+    char path[1200];
+    uint64_t total = 0;
+    if ((rc = store_file_path(f->s, j.gcode_sha, path, sizeof(path), err)) ||
+        (rc = count_commands(path, &total, err)))
+        return rc;
+    /* Line 0 would run the job's own start: its G28 homes Z into the part. */
+    if (line < 1 || (uint64_t)line >= total)
+        return sf_err_set(err, SF_EINVAL,
+                          "job %lld: line %lld is out of range: resume from 1..%llu (the job has "
+                          "%llu command lines; to print from line 0, clear the bed and restart)",
+                          (long long)id, (long long)line,
+                          (unsigned long long)(total > 1 ? total - 1 : 1),
+                          (unsigned long long)total);
+    /* Commit first (farm.c's rule): a crash from here on leaves it interrupted again. */
+    struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line };
+    if ((rc = store_job_event(f->s, id, JOB_EV_RESUME, &a, NULL, err)))
+        return rc;
+    notify(f);
+    p->job_id = id;
+    p->lines_acked = p->lines_saved = line;
+    move(p, PRINTER_EV_START);
+    struct sf_err derr;
+    if (p->drv->ops->start_job(p->drv, path, (uint64_t)line, &derr)) {
+        log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)id, derr.msg);
+        fail_job(p, derr.msg);
+        move(p, PRINTER_EV_FINISHED);
+    }
+    log_printer(LOG_INFO, p->cfg.name, "job %lld: resumed at line %lld of %llu", (long long)id,
+                (long long)line, (unsigned long long)total);
     farm_kick(f);
     return SF_OK;
 }

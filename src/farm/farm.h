@@ -36,7 +36,10 @@
 
 #define FARM_BACKOFF_MIN_MS 1000  /* first reconnect attempt after a drop */
 #define FARM_BACKOFF_MAX_MS 60000 /* never wait longer than a minute */
-#define FARM_PROGRESS_MS    5000  /* persist lines acknowledged this often */
+#define FARM_PROGRESS_MS                                                                           \
+    1000 /* persist lines acknowledged this often: what a resume                                   \
+            after a crash may print twice (one UPDATE per                                          \
+            printing printer per second) */
 
 /* drv_new's shape: slimfarmd hands drv_new in; tests may hand in their own. */
 typedef struct drv *(*farm_driver_fn)(struct loop *l, const struct drv_config *cfg,
@@ -81,5 +84,14 @@ void farm_printer_info(const struct farm *f, size_t i, struct farm_printer_info 
  * action; err says why.
  */
 int farm_printer_action(struct farm *f, const char *name, const char *action, struct sf_err *err);
+
+/*
+ * Resume interrupted job id on the printer its part is on, from command
+ * line `line` (0-based; -1: the last acknowledged line the store holds).
+ * The printer must be idle.  SF_ENOTFOUND no such job; SF_EINVAL not
+ * interrupted, printer not idle, or line outside 1..lines-1 (err says
+ * which and the range).
+ */
+int farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err);
 
 #endif

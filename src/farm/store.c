@@ -734,6 +734,8 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
                               job_event_name(ev));
         if (ev == JOB_EV_START)
             j->lines_acked = 0;
+        else if (a->lines_acked > 0)
+            j->lines_acked = a->lines_acked; /* the operator chose where to resume */
         rc = open_print(s, j, printer, j->lines_acked, err);
         snprintf(j->printer, sizeof(j->printer), "%s", printer);
         j->reason[0] = '\0';

@@ -61,7 +61,8 @@ struct job_event_args {
     const char *gcode_sha; /* PREPARED: stored G-code (required) */
     double size_mm[3];     /* PREPARED: part bounding box */
     double nozzle_mm;      /* PREPARED: nozzle it was sliced for */
-    int64_t lines_acked;   /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to */
+    int64_t lines_acked;   /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to;
+                              RESUME of an interrupted job: line to resume from (0: stored) */
     double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */
     const char *reason;    /* PREPARE_FAILED/PRINT_FAILED/CANCEL: why, for operators */
 };

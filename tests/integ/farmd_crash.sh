@@ -3,7 +3,7 @@
 # random moments while clients submit and cancel jobs; after each kill the
 # store must recover and pass every check (slimfarmd --fsck), and every
 # submission the daemon acknowledged must still be there, exactly once.
-# (Killing while printing needs the drivers and simulator, not merged yet.)
+# (Killing while printing: farmd_crash_print.sh.)
 set -u
 BUILD=${BUILD:-build/san}
 D=$BUILD/bin/slimfarmd

@@ -77,7 +77,22 @@ reg_action(void *ud, const char *name, const char *action, struct sf_err *err)
     return sf_err_set(err, SF_ENOTFOUND, "no printer '%s'", name);
 }
 
-static const struct api_printer_ops reg_ops = { reg_count, reg_get, reg_action };
+/* resume_job: record what the API passed on (the farm's rules are test_farm's and integ's). */
+static int64_t resumed_id, resumed_line;
+
+static int
+reg_resume_job(void *ud, int64_t id, int64_t line, struct sf_err *err)
+{
+    (void)ud;
+    if (id == 2)
+        return sf_err_set(err, SF_EINVAL,
+                          "job 2 is queued: only an interrupted job can be resumed");
+    resumed_id = id;
+    resumed_line = line;
+    return SF_OK;
+}
+
+static const struct api_printer_ops reg_ops = { reg_count, reg_get, reg_action, reg_resume_job };
 
 /* The server side: api + its thread. */
 static struct {
@@ -526,6 +541,34 @@ T_CASE(api_restart_interrupted_job)
     T_EQ_STR(jstr(&b, "job", "state"), "ready");
     T_EQ_INT(call("POST", "/api/jobs/1/explode", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 404);
     T_EQ_INT(call("GET", "/api/jobs/1/restart", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 405);
+    buf_release(&b);
+    stop();
+}
+
+/* POST /api/jobs/ID/resume: an optional {"line": N}, checked; refusals are 409. */
+T_CASE(api_resume_job_body_and_refusal)
+{
+    struct sf_err err;
+    T_OK(start("resume", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    T_EQ_INT(call("POST", "/api/jobs/1/resume", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 200);
+    T_EQ_INT(resumed_id, 1);
+    T_EQ_INT(resumed_line, -1); /* no body: the stored line */
+    T_EQ_INT(
+        call("POST", "/api/jobs/1/resume", KEY_RW, "{\"line\": 1234}", NULL, NULL, 0, NULL, &b),
+        200);
+    T_EQ_INT(resumed_line, 1234);
+    T_EQ_INT(call("POST", "/api/jobs/1/resume", KEY_RW, "{\"line\": -3}", NULL, NULL, 0, NULL, &b),
+             400);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "line: -3 is negative") != NULL);
+    T_EQ_INT(
+        call("POST", "/api/jobs/1/resume", KEY_RW, "{\"line\": \"x\"}", NULL, NULL, 0, NULL, &b),
+        400);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "expected {\"line\": INTEGER}") != NULL);
+    T_EQ_INT(call("POST", "/api/jobs/2/resume", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 409);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "only an interrupted job") != NULL);
+    T_EQ_INT(call("POST", "/api/jobs/1/resume", KEY_RO, NULL, NULL, NULL, 0, NULL, &b), 403);
     buf_release(&b);
     stop();
 }

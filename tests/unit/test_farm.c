@@ -23,6 +23,7 @@ struct tdrv {
     struct drv base; /* first: drv.h's rule */
     char path[1200]; /* last job started */
     int starts, pauses, resumes, cancels, opens;
+    uint64_t first_line;    /* of the last start */
     enum drv_event pending; /* event to deliver on the next loop turn */
     bool has_pending;
 };
@@ -59,13 +60,14 @@ t_open(struct drv *d, struct sf_err *err)
 }
 
 static int
-t_start(struct drv *d, const char *path, struct sf_err *err)
+t_start(struct drv *d, const char *path, uint64_t first_line, struct sf_err *err)
 {
     (void)err;
     struct tdrv *t = (struct tdrv *)d;
     snprintf(t->path, sizeof(t->path), "%s", path);
     t->starts++;
-    t->base.status.lines_acked = 0;
+    t->first_line = first_line;
+    t->base.status.lines_acked = first_line;
     t->base.status.lines_total = 2;
     report(t, DRV_PRINTING, DRV_EV_STATE);
     return SF_OK;

@@ -287,7 +287,7 @@ stream_exact_frag(struct sim_marlin_config *sc, int buffer_lines, int max_ms, si
     }
     write_job(&r, JOB_LINES, NULL);
     struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, &err), &err);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, &err), &err);
     T_EQ_INT(r.drv->status.state, DRV_PRINTING);
     bool over = until(&r, job_over, max_ms);
     struct sim_marlin_stats st;
@@ -426,7 +426,7 @@ reset_mid_print(bool tcp)
         return;
     }
     write_job(&r, JOB_LINES, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
     T_EQ_INT(r.failed, 1);
     T_TRUE(strstr(r.drv->status.message, "reset") != NULL);
@@ -473,7 +473,7 @@ T_CASE(marlin_disconnect_then_reconnect_with_backoff)
         return;
     }
     write_job(&r, JOB_LINES, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
     T_EQ_INT(r.failed, 1);
     T_TRUE(until(&r, is_offline, 2000));
@@ -496,7 +496,7 @@ T_CASE(marlin_disconnect_then_reconnect_with_backoff)
     /* The fresh link prints a whole job. */
     r.done = r.failed = 0;
     write_job(&r, 500, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, &err), &err);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, &err), &err);
     T_TRUE(until(&r, job_over, 20000));
     T_EQ_INT(r.done, 1);
     teardown(&r);
@@ -514,7 +514,7 @@ T_CASE(marlin_thermal_runaway_stops_stream)
         return;
     }
     write_job(&r, JOB_LINES, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
     T_EQ_INT(r.failed, 1);
     T_EQ_INT(r.drv->status.state, DRV_ERROR);
@@ -556,7 +556,7 @@ pause_resume(bool tcp)
     }
     write_job(&r, JOB_LINES, NULL);
     r.pause_at = 1000;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
     T_TRUE(until(&r, park_done, 20000));
     struct sim_marlin_stats st;
     sim_marlin_stats(r.sim, &st);
@@ -607,7 +607,7 @@ T_CASE(marlin_host_action_pause_from_printer)
     }
     /* M118 A1 makes Marlin print "//action:pause", as a runout sensor would. */
     write_job(&r, 1000, "M118 A1 action:pause");
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
     T_TRUE(until(&r, park_done, 20000));
     T_OK(r.drv->ops->resume(r.drv, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
@@ -626,7 +626,7 @@ T_CASE(marlin_cancel_runs_end_sequence)
     }
     write_job(&r, JOB_LINES, NULL);
     r.cancel_at = 1000;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
     T_EQ_INT(r.cancelled, 1);
     T_EQ_INT(r.drv->status.state, DRV_IDLE);
@@ -654,7 +654,7 @@ T_CASE(marlin_emergency_stop)
         return;
     }
     write_job(&r, JOB_LINES, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
     for (int i = 0; i < 5; i++)
         loop_run_once(r.loop, 20);
     struct sf_err err;
@@ -690,10 +690,106 @@ T_CASE(marlin_config_errors_are_clear)
     T_TRUE(d != NULL);
     T_TRUE(d->ops->open(d, &err) < 0);
     T_TRUE(strstr(err.msg, "null-nope") != NULL);
-    T_ERR(d->ops->start_job(d, "/nonexistent.gcode", &err), SF_EAGAIN, &err, "not idle");
+    T_ERR(d->ops->start_job(d, "/nonexistent.gcode", 0, &err), SF_EAGAIN, &err, "not idle");
     drv_free(d);
     T_EQ_STR(drv_state_name(DRV_PAUSED), "paused");
     T_EQ_INT(drv_backoff_ms(0), 500);
     T_EQ_INT(drv_backoff_ms(20), 30000);
     loop_free(l);
+}
+
+/*
+ * A layered job as the slicer writes it: temperatures in the header,
+ * ;LAYER_CHANGE/;Z: comments, relative E, the fan from layer 2 on.
+ */
+static void
+write_layered_job(struct run *r, int layers, int per_layer)
+{
+    snprintf(r->gcode_path, sizeof(r->gcode_path), "%s/layered.gcode", t_tmpdir());
+    FILE *f = fopen(r->gcode_path, "w");
+    fprintf(f, "; layered job\nM140 S65\nM104 S215\nM190 S65\nM109 S215\nG28\nG90\nM83\n"
+               "G92 E0\nM107\n");
+    for (int k = 0; k < layers; k++) {
+        double z = 0.2 * (k + 1);
+        fprintf(f, ";LAYER_CHANGE\n;Z:%g\nG1 Z%.3f F720\n", z, z);
+        if (k == 1)
+            fprintf(f, "M106 S191\n");
+        for (int i = 0; i < per_layer; i++) {
+            double a = i * 0.07;
+            r->end_x = 100 + 30 * cos(a);
+            r->end_y = 100 + 30 * sin(a);
+            fprintf(f, "G1 X%.3f Y%.3f E0.0213 F%d\n", r->end_x, r->end_y, 1500 + (i % 4) * 300);
+        }
+    }
+    fclose(f);
+}
+
+/*
+ * Resume from line N on a printer that lost the job (fresh, unhomed, cold):
+ * the simulator's log is the resume preamble, then exactly the job's lines
+ * from N on; the preamble heats to the job's temperatures, sets Z where the
+ * lines before N left it, homes X and Y only, and restores E mode, fan and
+ * feedrate.  A line past the end is refused.
+ */
+T_CASE(marlin_resume_from_line_restores_state)
+{
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.advanced_ok = true;
+    if (!setup(&r, &sc, 0)) {
+        teardown(&r);
+        return;
+    }
+    write_layered_job(&r, 3, 400);
+    size_t n_want;
+    char **want = file_commands(r.gcode_path, &n_want);
+    struct sf_err err;
+    T_ERR(r.drv->ops->start_job(r.drv, r.gcode_path, n_want, &err), SF_EINVAL, &err,
+          "cannot resume from line");
+    T_TRUE(strstr(err.msg, "0..") != NULL);
+    T_EQ_INT(r.drv->status.state, DRV_IDLE);
+    /* Line N: in the second layer, after the fan came on. */
+    size_t first = 9 + 401 + 2 + 150;
+    char xy[64], feed[16], x[16], y[16];
+    int f;
+    T_EQ_INT(sscanf(want[first - 1], "G1 X%15s Y%15s E0.0213 F%d", x, y, &f), 3);
+    snprintf(xy, sizeof(xy), "G1 X%s Y%s F6000", x, y);
+    snprintf(feed, sizeof(feed), "G1 F%d", f);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, first, &err), &err);
+    T_EQ_INT(r.drv->status.lines_acked, first);
+    T_TRUE(until(&r, job_over, 30000));
+    T_EQ_INT(r.done, 1);
+    T_EQ_INT(r.drv->status.lines_acked, n_want);
+    /* The log as it should be: preamble, then want[first..]. */
+    const char *pre[] = {
+        "M140 S65",      "M104 S215", "M190 S65",       "G92 Z0.400", "G91",
+        "G1 Z2.00 F600", "G90",       "G28 X Y",        "M109 S215",  "M83",
+        "G1 E2.00 F300", xy,          "G1 Z0.400 F600", feed,         "M106 S191"
+    };
+    size_t n_pre = sizeof(pre) / sizeof(pre[0]), n_got, w = 0;
+    char **got = file_commands(r.log_path, &n_got);
+    bool same = true;
+    for (size_t i = 0; i < n_got && same; i++) {
+        if (host_line(got[i]))
+            continue;
+        const char *expect = w < n_pre                    ? pre[w]
+                             : w - n_pre + first < n_want ? want[w - n_pre + first]
+                                                          : "(end)";
+        if (strcmp(got[i], expect) != 0) {
+            t_fail(__FILE__, __LINE__, "log line %zu: '%s', wanted '%s'", i, got[i], expect);
+            same = false;
+        }
+        w++;
+    }
+    T_TRUE(same);
+    T_EQ_INT(w, n_pre + n_want - first);
+    struct sim_marlin_stats st;
+    sim_marlin_stats(r.sim, &st);
+    T_EQ_DBL(st.x, r.end_x, 1e-3);
+    T_EQ_DBL(st.z, 0.6, 1e-9);
+    T_EQ_DBL(st.nozzle_target_c, 215, 0);
+    free_lines(want, n_want);
+    free_lines(got, n_got);
+    teardown(&r);
 }

@@ -1,0 +1,182 @@
+# tests/integ/lib/farm.sh - helpers for the farm scenarios that print on
+# simulated printers: start sims and the daemon, make parts, talk to the
+# API, and check each printer's executed log against the stored G-code of
+# the prints it ran (check_farm_logs).  Sourced, not run.  Needs $BUILD;
+# sets $tmp (removed on exit), $port, $RW, SLIMFARM_URL, SLIMFARM_API_KEY.
+set -u
+D=$BUILD/bin/slimfarmd
+C=$BUILD/bin/slimfarm
+S=$BUILD/bin/slimfarm-sim
+tmp=$(mktemp -d)
+pid=
+sims=()
+cleanup() {
+  [ -n "$pid" ] && kill -9 "$pid" 2>/dev/null
+  for p in "${sims[@]}"; do kill "$p" 2>/dev/null; done
+  wait 2>/dev/null
+  rm -rf "$tmp"
+}
+trap cleanup EXIT
+fail() { echo "FAIL: $*"; echo "--- daemon log (tail)"; tail -30 "$tmp/log" 2>/dev/null; exit 1; }
+
+port=$((20000 + RANDOM % 20000))
+RW=rw-key-0123456789abcdef
+export SLIMFARM_URL=http://127.0.0.1:$port SLIMFARM_API_KEY=$RW
+
+# start_sim NAME ARGS...: a fast simulated Marlin logging to $tmp/NAME.log; its
+# address (pty:PATH or tcp://...) lands in $tmp/NAME.addr.
+start_sim() {
+  local name=$1; shift
+  "$S" marlin --baud 1000000 --advanced-ok --log "$tmp/$name.log" "$@" \
+    > "$tmp/$name.out" 2> "$tmp/$name.err" &
+  sims+=($!)
+  eval "sim_$name=$!"
+  for _ in $(seq 100); do [ -s "$tmp/$name.out" ] && break; sleep 0.05; done
+  local a; a=$(head -n 1 "$tmp/$name.out")
+  [ -n "$a" ] || fail "sim $name did not start: $(cat "$tmp/$name.err")"
+  case "$a" in /dev/*) a="pty:$a" ;; esac
+  echo "$a" > "$tmp/$name.addr"
+}
+
+# stop_sims: SIGTERM every simulator and wait (their logs are flushed on exit).
+stop_sims() {
+  for p in "${sims[@]}"; do kill "$p" 2>/dev/null; wait "$p" 2>/dev/null; done
+  sims=()
+}
+
+start_daemon() {
+  "$D" -c "$tmp/farm.ini" >>"$tmp/log" 2>&1 &
+  pid=$!
+  for _ in $(seq 200); do "$C" jobs >/dev/null 2>&1 && return 0; sleep 0.05; done
+  fail "daemon did not come up"
+}
+
+# tetra FILE SIZE: a right tetrahedron with legs of SIZE mm (a small, quick part).
+tetra() {
+  local s=$2
+  printf 'solid t\nfacet normal 0 0 -1\nouter loop\nvertex 0 0 0\nvertex 0 %s 0\nvertex %s 0 0\nendloop\nendfacet\nfacet normal 0 -1 0\nouter loop\nvertex 0 0 0\nvertex %s 0 0\nvertex 0 0 %s\nendloop\nendfacet\nfacet normal -1 0 0\nouter loop\nvertex 0 0 0\nvertex 0 0 %s\nvertex 0 %s 0\nendloop\nendfacet\nfacet normal 1 1 1\nouter loop\nvertex %s 0 0\nvertex 0 %s 0\nvertex 0 0 %s\nendloop\nendfacet\nendsolid t\n' \
+    "$s" "$s" "$s" "$s" "$s" "$s" "$s" "$s" "$s" > "$1"
+}
+
+api() { curl -sf -H "X-Api-Key: $RW" "$SLIMFARM_URL$1"; }
+
+# jq-free JSON field access: json EXPR reads the API reply on stdin.
+json() { /usr/bin/python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
+
+# submit ARGS...: submit a part, print its job id.
+submit() {
+  local out
+  out=$("$C" submit "$@") || fail "submit $*: $out"
+  echo "$out" | sed -n 's/^job \([0-9]*\) queued.*/\1/p'
+}
+
+job_state() { api "/api/jobs/$1" | json 'd["job"]["state"]'; }
+
+# wait_for SECS CMD...: poll CMD until it succeeds.
+wait_for() {
+  local end=$((SECONDS + $1)); shift
+  while [ $SECONDS -lt $end ]; do "$@" && return 0; sleep 0.1; done
+  return 1
+}
+
+# check_farm_logs PRINTER...: each printer's executed log equals, in order,
+# the commands of the stored G-code of every print it ran (from the API's
+# print history).  Besides the driver's own queries, the only other lines
+# allowed are the driver's documented sequences, each where it belongs:
+# park/restore at a pause inside a print, the end sequence after a
+# cancelled print's prefix, the resume preamble before a resumed print
+# (started at its start_line).  A job line lost, repeated or reordered fails.
+check_farm_logs() {
+  api /api/jobs > "$tmp/jobs.json"
+  for j in $(json '" ".join(str(x["id"]) for x in d["jobs"])' < "$tmp/jobs.json"); do
+    api "/api/jobs/$j" > "$tmp/job-$j.json"
+  done
+  /usr/bin/python3 - "$tmp" "$@" <<'PY'
+import glob, json, os, re, sys
+tmp, printers = sys.argv[1], sys.argv[2:]
+def commands(path):
+    out = []
+    for line in open(path, errors="replace"):
+        c = re.sub(r";.*", "", line).strip()
+        c = re.sub(r"\s+", " ", c)
+        if c:
+            out.append(c)
+    return out
+host = re.compile(r"^(M105|M110( N-?\d+)?|M115|M155 S\d+|M400)$")
+# the driver's park/restore, end and resume sequences (drv_marlin.c)
+driver = re.compile(r"^(M108|M83|M82|G90|G91|M84|M107|M104 S\d+|M140 S\d+|M109 S\d+|M190 S\d+|"
+                    r"M106 S\d+|G28 X Y|G1 E-?2\.00 F(2400|300)|G1 Z-?[\d.]+ F600|"
+                    r"G1 X-?[\d.]+ Y-?[\d.]+ F6000|G92 [EZ]-?[\d.]+|G1 F\d+)$")
+prints = []
+for f in glob.glob(os.path.join(tmp, "job-*.json")):
+    d = json.load(open(f))
+    for p in d["prints"]:
+        prints.append((p["started_ms"], p["id"], p["printer"], p["outcome"], p["start_line"],
+                       p["lines_acked"], d["job"]["gcode_sha"], d["job"]["id"]))
+prints.sort()
+bad = 0
+for name in printers:
+    mine = [p for p in prints if p[2] == name]
+    got = [c for c in commands(os.path.join(tmp, name + ".log")) if not host.match(c)]
+    i, extra = 0, 0
+    def fail(pid, job, what, w, want, start):
+        global bad
+        print("%s: print %d (job %d): %s at log line %d %r (job line %d of %d: %r)" %
+              (name, pid, job, what, i + 1, got[i] if i < len(got) else None, start + w,
+               start + len(want), want[w] if w < len(want) else None))
+        bad += 1
+    for started, pid, _, outcome, start, acked, sha, job in mine:
+        if bad:
+            break
+        files = glob.glob(os.path.join(tmp, "data", "**", sha + "*"), recursive=True)
+        want = [c for c in commands(files[0]) if not host.match(c)][start:]
+        # lines every print ran: all of a finished one, the acknowledged ones otherwise
+        need = len(want) if outcome in ("done", "") else acked - start
+        w = 0
+        if start > 0:
+            # a resumed print opens with the driver's resume preamble
+            while i < len(got) and driver.match(got[i]) and got[i] != want[0]:
+                i += 1
+                extra += 1
+        while w < need and i < len(got):
+            if got[i] == want[w]:
+                w += 1
+            elif driver.match(got[i]):
+                extra += 1  # resume preamble, park/restore around a pause
+            else:
+                break
+            i += 1
+        if w != need:
+            fail(pid, job, "log differs", w, want, start)
+            break
+        if outcome in ("done", ""):
+            continue
+        # lines in flight when it stopped ran too (at most a window), in order
+        while i < len(got) and w < len(want) and got[i] == want[w]:
+            i += 1
+            w += 1
+        if outcome == "cancelled":
+            # M108 (sent past the queue to break a heat wait), then the end
+            # sequence: heaters off ... motors off
+            while i < len(got) and got[i] == "M108":
+                i += 1
+                extra += 1
+            if i >= len(got) or got[i] != "M104 S0":
+                fail(pid, job, "no end sequence after cancel", w, want, start)
+                break
+            while i < len(got) and got[i] != "M84" and driver.match(got[i]):
+                i += 1
+                extra += 1
+            i += 1
+            extra += 1
+    while not bad and i < len(got) and driver.match(got[i]):
+        i += 1
+        extra += 1
+    if i < len(got) and not bad:
+        print("%s: %d log lines after the last print: %r" % (name, len(got) - i, got[i:i + 3]))
+        bad += 1
+    print("  %s: %d prints, %d log lines, %d from the driver's own sequences" %
+          (name, len(mine), len(got), extra))
+sys.exit(1 if bad else 0)
+PY
+}
