@@ -158,7 +158,7 @@ FUZZ_RUNS ?= 3000
 check: deps
 	$(MAKE) --no-print-directory SAN=1 tests
 	$(MAKE) --no-print-directory fuzzers
-	$(MAKE) --no-print-directory check-layers
+	$(MAKE) --no-print-directory check-layers check-format check-headers
 	FUZZ_RUNS=$(FUZZ_RUNS) tests/run.sh build/san $(T)
 
 T ?=
@@ -195,7 +195,7 @@ SRC_ALL = $(shell git ls-files '*.c' '*.h' '*.cpp' 2>/dev/null)
 format:
 	clang-format -i $(SRC_ALL)
 check-format:
-	clang-format --dry-run --Werror $(SRC_ALL)
+	@clang-format --dry-run --Werror $(SRC_ALL) && echo "every source is clang-formatted (make format)"
 check-headers:
 	@for h in $(filter %.h,$(SRC_ALL)); do \
 		echo '#include "'$$h'"' | $(CC) -std=c11 -D_GNU_SOURCE -I. $(EXT_CFLAGS) -fsyntax-only -x c - || exit 1; \

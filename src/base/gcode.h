@@ -43,7 +43,7 @@ struct gcode_line {
     /* free-text argument (M117 msg) or the first quoted string value
      * (P "MK3S", without the quotes) into the input, or NULL */
     const char *text;
-    size_t text_len;  /* its length */
+    size_t text_len; /* its length */
 };
 
 /*
