@@ -23,7 +23,7 @@ PREFIX ?= /usr/local
 DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev libsqlite3-dev \
 	libmicrohttpd-dev libmosquitto-dev libinih-dev libqhull-dev libpolyclipping-dev \
 	libjansson-dev libzip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
-	libsuitesparse-dev clang-14 libclang-rt-14-dev python3 procps libssl-dev \
+	libsuitesparse-dev clang-14 clang-format libclang-rt-14-dev python3 procps libssl-dev \
 	printrun-common
 # Only for `make bench`: the independent peers and their helpers.
 BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy bc
