@@ -90,6 +90,10 @@ request(const struct client *c, const char *method, const char *path, const char
     curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, on_body);
     curl_easy_setopt(h, CURLOPT_WRITEDATA, &reply);
     curl_easy_setopt(h, CURLOPT_CONNECTTIMEOUT, 10L);
+    /* slimfarmd refuses an unwanted upload (401/403/413) before "100
+     * Continue": wait for that answer rather than curl's default 1 s,
+     * after which the body goes out and races the refusal on a busy host */
+    curl_easy_setopt(h, CURLOPT_EXPECT_100_TIMEOUT_MS, 10000L);
     if (mime)
         curl_easy_setopt(h, CURLOPT_MIMEPOST, mime);
     else if (body || strcmp(method, "POST") == 0)

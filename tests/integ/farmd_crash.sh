@@ -43,8 +43,12 @@ for round in $(seq 10); do
   "$D" -c "$tmp/farm.ini" >>"$tmp/log" 2>&1 &
   pid=$!
   for _ in $(seq 100); do "$C" jobs >/dev/null 2>&1 && break; sleep 0.05; done
+  before=$(wc -l < "$tmp/acked")
   client & lpid=$!
-  sleep "0.$((3 + RANDOM % 7))"
+  # kill at a random moment once the clients are under way (a loaded host
+  # may take seconds to answer the first submission of a sanitizer build)
+  for _ in $(seq 200); do [ "$(wc -l < "$tmp/acked")" -gt "$before" ] && break; sleep 0.05; done
+  sleep "0.$((RANDOM % 7))"
   kill -9 $pid; wait $pid 2>/dev/null; pid=
   kill $lpid; wait $lpid 2>/dev/null; lpid=
   out=$("$D" -c "$tmp/farm.ini" --fsck 2>&1) || fail "round $round: fsck: $out"

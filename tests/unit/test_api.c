@@ -124,11 +124,15 @@ serve(void *arg)
 static int start_api(struct sf_err *err);
 
 /* Open a store with one printing job (on printer "a") and start the API. */
+static void stop(void);
+
 static int
 start(const char *name, struct sf_err *err)
 {
     char dir[512];
     snprintf(dir, sizeof(dir), "%s/%s", t_tmpdir(), name);
+    if (srv.api)
+        stop(); /* a failed case returned early: its server must not run on */
     memset(&srv, 0, sizeof(srv));
     log_set_level(LOG_WARN);
     struct farm *f = &srv.farm;
@@ -197,6 +201,8 @@ stop(void)
     pthread_join(srv.thread, NULL);
     api_free(srv.api);
     store_close(srv.farm.store);
+    srv.api = NULL;
+    srv.farm.store = NULL;
 }
 
 static size_t
@@ -244,6 +250,7 @@ call(const char *method, const char *path, const char *key, const char *body, co
     curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, on_body);
     curl_easy_setopt(c, CURLOPT_WRITEDATA, out);
     curl_easy_setopt(c, CURLOPT_TIMEOUT, 10L);
+    curl_easy_setopt(c, CURLOPT_EXPECT_100_TIMEOUT_MS, 10000L); /* as the CLI does */
     buf_reset(out);
     long status = 0;
     CURLcode rc = curl_easy_perform(c);
