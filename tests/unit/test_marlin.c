@@ -163,8 +163,16 @@ match_log(struct run *r, size_t *extra, bool *dup_or_reorder)
         for (size_t k = 0; k < n_want; k++) {
             if (strcmp(got[i], want[k]) == 0 && strncmp(got[i], "G1 X", 4) == 0)
                 *dup_or_reorder = true;
-            if (strncmp(got[i], want[k], strlen(got[i])) == 0 && strlen(got[i]) < strlen(want[k]))
-                fragment = true;
+            /* the head of a job line, cut by Marlin's RX flush, with at
+               most one byte garbled on the wire (drivers/README.md, "Known
+               limits": the byte that ended it may be the garbled one) */
+            size_t len = strlen(got[i]), bad = 0;
+            if (len <= strlen(want[k])) {
+                for (size_t c = 0; c < len && bad < 2; c++)
+                    bad += got[i][c] != want[k][c];
+                if (bad <= 1 && (bad == 1 || len < strlen(want[k])))
+                    fragment = true;
+            }
         }
         /* The driver's unnumbered M105 probe with one byte garbled may run as
            another command (drivers/README.md, "Known limits"). */
