@@ -145,6 +145,59 @@ T_CASE(slice_open_mesh_still_closes)
     ts_free(&m);
 }
 
+/*
+ * The side of a 48-gon prism (radius 10, 5 tall) in three unwelded
+ * patches, each moved a few micrometres from its neighbours (cracks like
+ * the shared pig's), patch 1 with its facets turned inside out.
+ */
+static int
+cracked_prism(struct mesh *m)
+{
+    enum { N = 48, PATCH = N / 3 };
+    for (int pa = 0; pa < 3; pa++) {
+        struct vec3 v[2 * (PATCH + 1)];
+        uint32_t t[2 * PATCH][3];
+        for (int i = 0; i <= PATCH; i++) {
+            double a = 2 * M_PI * (pa * PATCH + i) / N;
+            double x = 10 * cos(a) + 0.013 * pa, y = 10 * sin(a) - 0.007 * pa;
+            v[2 * i] = v3(x, y, 0);
+            v[2 * i + 1] = v3(x, y, 5);
+        }
+        for (uint32_t i = 0; i < PATCH; i++) {
+            uint32_t b0 = 2 * i, t0 = b0 + 1, b1 = b0 + 2, t1 = b0 + 3;
+            uint32_t f[2][3] = { { b0, b1, t1 }, { b0, t1, t0 } };
+            for (int q = 0; q < 2; q++) {
+                t[2 * i + q][0] = f[q][0];
+                t[2 * i + q][1] = pa == 1 ? f[q][2] : f[q][1];
+                t[2 * i + q][2] = pa == 1 ? f[q][1] : f[q][2];
+            }
+        }
+        if (ts_add(m, v, 2 * (PATCH + 1), t, 2 * PATCH))
+            return -1;
+    }
+    return 0;
+}
+
+T_CASE(slice_closes_cracks_between_patches)
+{
+    /* closing each patch's chain straight would cut the inscribed
+       triangle of the three crack points (130 mm2) out of every layer */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(cracked_prism(&m) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
+    T_EQ_INT(s.n, 25);
+    T_EQ_INT(s.n_open, 0);
+    double ngon = 0.5 * 48 * 100 * sin(2 * M_PI / 48);
+    for (uint32_t k = 0; k < s.n; k++) {
+        T_EQ_DBL(paths_area(&s.l[k].region), ngon, 0.002 * ngon);
+        T_EQ_INT(s.l[k].region.n, 1);
+    }
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
 T_CASE(clip_offset_and_difference)
 {
     struct paths a, b, c;
