@@ -33,7 +33,8 @@ struct layer {
     double h_mm;         /* its thickness */
     struct paths region; /* part cross-section at z_mm - h_mm / 2 */
     struct paths inner;  /* inside the perimeters: filled by toolpath_areas() */
-    struct paths skin;   /* inner not covered above or below, grown: toolpath_areas() */
+    struct paths skin;   /* surfaces open above or below, and their part in inner grown
+                            skin_margin: toolpath_areas() */
 };
 
 struct layer_stack {

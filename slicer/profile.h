@@ -41,6 +41,8 @@ struct slice_profile {
     double layer_mm, first_layer_mm;
     int perimeters, top_layers, bottom_layers;
     double skin_margin_mm;   /* solid skins grow this far into the infill */
+    bool vertical_shells;    /* solid wherever the neighbours' inner areas differ */
+    double solid_below_mm2;  /* sparse islands smaller than this print solid */
     double infill_density;   /* 0..1 */
     char *infill_pattern;    /* "grid" or "rectilinear" */
     double infill_anchor_mm; /* sparse lines hook along the boundary this far */
