@@ -31,6 +31,7 @@ struct slice_profile {
     double max_overhang_deg; /* largest self-supporting angle from vertical */
     double max_feed_xy_mm_s, max_feed_z_mm_s, max_feed_e_mm_s;
     double accel_extrude_mm_s2, accel_travel_mm_s2, accel_retract_mm_s2;
+    double max_accel_xy_mm_s2, max_accel_z_mm_s2, max_accel_e_mm_s2; /* M201; 0: none */
     double jerk_xy_mm_s, jerk_z_mm_s, jerk_e_mm_s;
     double junction_dev_mm; /* > 0: Marlin junction deviation instead of jerk */
     double travel_mm_s;
