@@ -61,6 +61,9 @@ plan_add(struct plan *pl, const struct est_limits *lim, const double d[4], doubl
     for (int a = 0; a < 4; a++) {
         unit[a] = d[a] / len;
         vel[a] = unit[a] * v;
+        /* no axis beyond its own maximum acceleration (Marlin's M201) */
+        if (lim->max_accel_mm_s2[a] > 0 && fabs(unit[a]) * acc > lim->max_accel_mm_s2[a])
+            acc = lim->max_accel_mm_s2[a] / fabs(unit[a]);
     }
     /* safe speed: the most this block may start or stop at, from rest */
     double safe = v;
@@ -179,11 +182,54 @@ has_prefix(const char *s, size_t len, const char *p)
     return len >= n && memcmp(s, p, n) == 0;
 }
 
+/* Set v from word c of l when it is a sane limit: finite, under 1e6, and
+   positive (or, if zero_ok, zero: jerk 0 and J0 mean "none"). */
+static void
+take(const struct gcode_line *l, char c, double *v, bool zero_ok)
+{
+    double x;
+    if (gcode_get(l, c, &x) && isfinite(x) && x < EST_COORD_MAX && (x > 0 || (zero_ok && x == 0)))
+        *v = x;
+}
+
+/* Marlin's limit commands: M201 axis accelerations, M203 axis feed rates
+   (mm/s), M204 accelerations by kind, M205 jerk and junction deviation. */
+static void
+firmware_limits(const struct gcode_line *l, struct est_limits *lim)
+{
+    static const char ax[4] = { 'X', 'Y', 'Z', 'E' };
+    switch (l->code) {
+    case 201:
+        for (int a = 0; a < 4; a++)
+            take(l, ax[a], &lim->max_accel_mm_s2[a], false);
+        break;
+    case 203:
+        for (int a = 0; a < 4; a++)
+            take(l, ax[a], &lim->max_feed_mm_s[a], false);
+        break;
+    case 204:
+        take(l, 'S', &lim->accel_extrude_mm_s2, false);
+        take(l, 'S', &lim->accel_travel_mm_s2, false);
+        take(l, 'P', &lim->accel_extrude_mm_s2, false);
+        take(l, 'T', &lim->accel_travel_mm_s2, false);
+        take(l, 'R', &lim->accel_retract_mm_s2, false);
+        break;
+    case 205:
+        for (int a = 0; a < 4; a++)
+            take(l, ax[a], &lim->jerk_mm_s[a], true);
+        take(l, 'J', &lim->junction_dev_mm, true);
+        break;
+    default:
+        break;
+    }
+}
+
 int
 estimate_gcode(const char *text, size_t len, const char *name, const struct est_limits *lim,
                est_move_fn on_move, void *ud, struct estimate *out, struct sf_err *err)
 {
     memset(out, 0, sizeof(*out));
+    struct est_limits cur = *lim; /* as changed by the file's M201-M205 */
     struct plan pl = { 0 };
     size_t *layer_block = NULL, cap_layers = 0;
     double pos[4] = { 0 }, f = 25, dwell = 0;
@@ -246,7 +292,7 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
             }
             if (gcode_get(&gl, 'F', &v) && isfinite(v) && v > 0)
                 f = fmin(v, EST_COORD_MAX) / 60;
-            if ((rc = plan_add(&pl, lim, d, f)) < 0) {
+            if ((rc = plan_add(&pl, &cur, d, f)) < 0) {
                 sf_err_set(err, rc, "%s: out of memory", name);
                 goto fail;
             }
@@ -281,6 +327,8 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
                 if (gcode_get(&gl, ax[a], &v) && isfinite(v) &&
                     fabs(v) <= (a == 3 ? EST_E_MAX : EST_COORD_MAX))
                     pos[a] = v;
+        } else if (gl.letter == 'M' && gl.code >= 201 && gl.code <= 205) {
+            firmware_limits(&gl, &cur);
         } else if (gcode_is(&gl, 'G', 28)) {
             pos[0] = pos[1] = pos[2] = 0;
         } else if (gcode_is(&gl, 'G', 4)) {

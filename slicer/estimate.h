@@ -17,6 +17,11 @@
  * The print starts and ends at the jerk-limited "safe" speed of its first
  * and last block.  A backward then a forward pass make every block's entry
  * reachable, and each block takes the time of its trapezoid (or triangle).
+ * A block's acceleration is also capped so no axis exceeds its own
+ * maximum (M201), as Marlin does.  Limits start from the caller's and
+ * follow the file's M201 (X Y Z E), M203 (X Y Z E, mm/s), M204 (P print,
+ * T travel, R retract, S both print and travel) and M205 (X Y Z E jerk,
+ * J junction deviation) from where they appear, as the firmware would.
  * Heating waits (M109/M190) cost nothing, as in PrusaSlicer's estimate.
  *
  * Thread: reentrant.
@@ -31,9 +36,10 @@
 #include "../src/base/err.h"
 
 struct est_limits {
-    double max_feed_mm_s[4]; /* X Y Z E */
-    double accel_extrude_mm_s2, accel_travel_mm_s2, accel_retract_mm_s2;
-    double jerk_mm_s[4];    /* X Y Z E */
+    double max_feed_mm_s[4];   /* X Y Z E (M203) */
+    double max_accel_mm_s2[4]; /* X Y Z E (M201); 0: no per-axis cap */
+    double accel_extrude_mm_s2, accel_travel_mm_s2, accel_retract_mm_s2; /* M204 P T R */
+    double jerk_mm_s[4];                                                 /* X Y Z E */
     double junction_dev_mm; /* > 0: use it instead of jerk */
 };
 

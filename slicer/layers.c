@@ -22,6 +22,10 @@
 #include "clip_shim.h"
 
 #define LAYERS_SIMPLIFY_MM 0.01
+/* Widest crack between open chains that is bridged (PrusaSlicer's max_gap,
+   TriangleMeshSlicer.cpp): meshes made of unwelded patches leave cracks of
+   micrometres to tenths of a millimetre between their chains. */
+#define LAYERS_GAP_MAX_MM 2.0
 
 struct seg {
     struct ipt a, b;  /* from the above->below crossing to the below->above one */
@@ -119,6 +123,139 @@ cross_pt(const struct mesh *m, uint32_t u, uint32_t v, double p, double dx, doub
     return q;
 }
 
+/* Squared distance, units^2. */
+static double
+d2(struct ipt a, struct ipt b)
+{
+    double dx = (double)(a.x - b.x), dy = (double)(a.y - b.y);
+    return dx * dx + dy * dy;
+}
+
+/* Chains of pieces of open: pieces link head to tail, each maybe walked backwards. */
+struct chains {
+    const struct paths *open;
+    uint32_t *nxt;  /* next piece of the chain, UINT32_MAX after the tail */
+    uint32_t *tail; /* of a head: the chain's last piece */
+    uint8_t *rev;   /* piece walked last point first */
+    uint8_t *head;  /* 1: the piece starts a live (still open) chain */
+};
+
+static struct ipt
+piece_end(const struct chains *c, uint32_t k, bool last)
+{
+    const struct paths *o = c->open;
+    return last != (bool)c->rev[k] ? o->pts[o->start[k + 1] - 1] : o->pts[o->start[k]];
+}
+
+/* Append chain h to out as one path (dropped if it has under 3 points). */
+static bool
+emit_chain(const struct chains *c, uint32_t h, struct paths *out)
+{
+    if (!paths_begin(out))
+        return false;
+    for (uint32_t k = h; k != UINT32_MAX; k = c->nxt[k]) {
+        const struct ipt *q = c->open->pts + c->open->start[k];
+        uint32_t m = paths_len(c->open, k);
+        for (uint32_t i = 0; i < m; i++) {
+            struct ipt p = q[c->rev[k] ? m - 1 - i : i];
+            uint32_t at = out->start[out->n]; /* points so far, all paths */
+            if (at > out->start[out->n - 1] && out->pts[at - 1].x == p.x &&
+                out->pts[at - 1].y == p.y)
+                continue; /* pieces that meet exactly share the point */
+            if (!paths_push(out, p))
+                return false;
+        }
+    }
+    if (out->start[out->n] - out->start[out->n - 1] < 3)
+        out->n--;
+    return true;
+}
+
+/*
+ * Join open chains across cracks up to max_mm and append the loops to
+ * loops, as PrusaSlicer does: each chain's end goes to the nearest chain
+ * start (its own start closes it), first keeping directions (the facets of
+ * a consistently oriented surface), then also reversing a chain.  Straight
+ * closing instead would add a chord per chain, and the chords of a loop
+ * cut into several chains enclose a polygon that the nonzero union
+ * removes from the part.  Chains that reach nothing are closed straight
+ * and counted in *n_left.  false when memory runs out.
+ */
+static bool
+close_gaps(const struct paths *open, double max_mm, struct paths *loops, uint32_t *n_left)
+{
+    uint32_t n = open->n;
+    struct chains c = { .open = open,
+                        .nxt = mem_array(n, sizeof(uint32_t)),
+                        .tail = mem_array(n, sizeof(uint32_t)),
+                        .rev = mem_calloc(n, 1),
+                        .head = mem_array(n, 1) };
+    bool ok = c.nxt && c.tail && c.rev && c.head;
+    for (uint32_t k = 0; ok && k < n; k++) {
+        c.nxt[k] = UINT32_MAX;
+        c.tail[k] = k;
+        c.head[k] = paths_len(open, k) >= 2;
+    }
+    double lim = max_mm * POLY_SCALE * max_mm * POLY_SCALE;
+    for (int round = 0; ok && round < 2; round++) {
+        for (uint32_t h = 0; ok && h < n; h++) {
+            while (c.head[h]) {
+                struct ipt e = piece_end(&c, c.tail[h], true);
+                double best = lim * (1 + 1e-12);
+                uint32_t pick = UINT32_MAX;
+                bool flip = false;
+                for (uint32_t g = 0; g < n; g++) {
+                    if (!c.head[g])
+                        continue;
+                    double d = d2(e, piece_end(&c, g, false));
+                    if (d < best)
+                        best = d, pick = g, flip = false;
+                    if (round == 1 && g != h) {
+                        d = d2(e, piece_end(&c, c.tail[g], true));
+                        if (d < best)
+                            best = d, pick = g, flip = true;
+                    }
+                }
+                if (pick == UINT32_MAX)
+                    break;
+                if (pick == h) { /* back at its own start: a loop */
+                    c.head[h] = 0;
+                    ok = emit_chain(&c, h, loops);
+                    break;
+                }
+                if (flip) { /* reverse chain pick: its tail becomes its head */
+                    uint32_t prev = UINT32_MAX, t = c.tail[pick];
+                    for (uint32_t k = pick; k != UINT32_MAX;) {
+                        uint32_t nx = c.nxt[k];
+                        c.nxt[k] = prev;
+                        c.rev[k] ^= 1;
+                        prev = k;
+                        k = nx;
+                    }
+                    c.head[pick] = 0;
+                    c.head[t] = 1;
+                    c.tail[t] = pick;
+                    pick = t;
+                }
+                c.nxt[c.tail[h]] = pick;
+                c.tail[h] = c.tail[pick];
+                c.head[pick] = 0;
+            }
+        }
+    }
+    for (uint32_t h = 0; ok && h < n; h++) {
+        if (c.head[h]) {
+            (*n_left)++;
+            ok = emit_chain(&c, h, loops);
+        }
+    }
+    free(c.nxt);
+    free(c.tail);
+    free(c.rev);
+    free(c.head);
+    return ok;
+}
+
 static int
 slice_one(struct job *j, uint32_t k, struct seg **segs, size_t *cap)
 {
@@ -160,8 +297,9 @@ slice_one(struct job *j, uint32_t k, struct seg **segs, size_t *cap)
     uint32_t *next = mem_array(ns ? ns : 1, sizeof(*next));
     uint8_t *has_prev = mem_calloc(ns ? ns : 1, 1);
     uint8_t *used = mem_calloc(ns ? ns : 1, 1);
-    struct paths loops;
+    struct paths loops, open;
     paths_init(&loops);
+    paths_init(&open);
     if (!next || !has_prev || !used || !map_init(&by_edge, ns) || !map_init(&by_pt, ns))
         goto out;
     for (uint32_t i = 0; i < ns; i++)
@@ -188,32 +326,35 @@ slice_one(struct job *j, uint32_t k, struct seg **segs, size_t *cap)
             has_prev[t] = 1;
         }
     }
-    uint32_t n_open = 0;
     for (int pass = 0; pass < 2; pass++) {
         for (uint32_t i = 0; i < ns; i++) {
             if (used[i] || (pass == 0 && has_prev[i]))
                 continue;
-            if (!paths_begin(&loops))
-                goto out;
-            uint32_t c = i, len = 0;
+            uint32_t c = i;
             bool closed = false;
+            struct paths *dst = &loops;
+            if (pass == 0) { /* a chain with a loose start: open */
+                dst = &open;
+            } else { /* in a cycle: closed */
+                closed = true;
+            }
+            if (!paths_begin(dst))
+                goto out;
             while (c != UINT32_MAX && !used[c]) {
                 used[c] = 1;
-                if (!paths_push(&loops, s[c].a))
+                if (!paths_push(dst, s[c].a))
                     goto out;
-                len++;
-                if (next[c] == i)
-                    closed = true;
-                if (next[c] == UINT32_MAX && !paths_push(&loops, s[c].b))
+                if (next[c] == UINT32_MAX && !paths_push(dst, s[c].b))
                     goto out;
                 c = next[c];
             }
-            if (!closed && pass == 0)
-                n_open++;
-            if (len < 2)
-                loops.n--; /* a lone segment encloses nothing */
+            if (closed && paths_len(dst, dst->n - 1) < 3)
+                dst->n--; /* a lone segment encloses nothing */
         }
     }
+    uint32_t n_open = 0;
+    if (open.n && !close_gaps(&open, LAYERS_GAP_MAX_MM, &loops, &n_open))
+        goto out;
     atomic_fetch_add(&j->n_open, n_open);
     rc = clip_bool(CLIP_UNION, &loops, NULL, CLIP_NONZERO, &L->region);
     /* 10 um: far below what a 0.4 mm nozzle draws, and dense meshes give
@@ -222,6 +363,7 @@ slice_one(struct job *j, uint32_t k, struct seg **segs, size_t *cap)
         rc = SF_ENOMEM;
 out:
     paths_release(&loops);
+    paths_release(&open);
     map_release(&by_edge);
     map_release(&by_pt);
     free(next);

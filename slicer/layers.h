@@ -12,8 +12,10 @@
  * edges and every crossing point is computed from its edge alone, the same
  * way for both triangles that share it.  Segments are chained through the
  * edges they cross (topology, no epsilon), then, for unwelded or open
- * meshes, through exactly equal points; what stays open is closed
- * straight and the loops are united with the nonzero rule.
+ * meshes, through exactly equal points, then across cracks of up to 2 mm
+ * from a chain's end to the nearest chain start (PrusaSlicer's gap
+ * closing); what stays open is closed straight and the loops are united
+ * with the nonzero rule.
  *
  * Thread: layers_slice may run concurrently on different outputs.
  */
@@ -31,14 +33,15 @@ struct layer {
     double h_mm;         /* its thickness */
     struct paths region; /* part cross-section at z_mm - h_mm / 2 */
     struct paths inner;  /* inside the perimeters: filled by toolpath_areas() */
-    struct paths skin;   /* inner not covered above or below, grown: toolpath_areas() */
+    struct paths skin;   /* surfaces open above or below, and their part in inner grown
+                            skin_margin: toolpath_areas() */
 };
 
 struct layer_stack {
     struct layer *l;
     uint32_t n;
     double dx, dy, dz; /* translation applied to the mesh to place it */
-    uint32_t n_open;   /* open chains closed by force (an open mesh) */
+    uint32_t n_open;   /* open chains closed straight (holes over 2 mm) */
 };
 
 /*

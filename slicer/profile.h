@@ -31,6 +31,7 @@ struct slice_profile {
     double max_overhang_deg; /* largest self-supporting angle from vertical */
     double max_feed_xy_mm_s, max_feed_z_mm_s, max_feed_e_mm_s;
     double accel_extrude_mm_s2, accel_travel_mm_s2, accel_retract_mm_s2;
+    double max_accel_xy_mm_s2, max_accel_z_mm_s2, max_accel_e_mm_s2; /* M201; 0: none */
     double jerk_xy_mm_s, jerk_z_mm_s, jerk_e_mm_s;
     double junction_dev_mm; /* > 0: Marlin junction deviation instead of jerk */
     double travel_mm_s;
@@ -41,6 +42,8 @@ struct slice_profile {
     double layer_mm, first_layer_mm;
     int perimeters, top_layers, bottom_layers;
     double skin_margin_mm;   /* solid skins grow this far into the infill */
+    bool vertical_shells;    /* solid wherever the neighbours' inner areas differ */
+    double solid_below_mm2;  /* sparse islands smaller than this print solid */
     double infill_density;   /* 0..1 */
     char *infill_pattern;    /* "grid" or "rectilinear" */
     double infill_anchor_mm; /* sparse lines hook along the boundary this far */

@@ -52,6 +52,9 @@ slice_limits(const struct slice_profile *p, struct est_limits *lim)
     lim->accel_extrude_mm_s2 = p->accel_extrude_mm_s2;
     lim->accel_travel_mm_s2 = p->accel_travel_mm_s2;
     lim->accel_retract_mm_s2 = p->accel_retract_mm_s2;
+    lim->max_accel_mm_s2[0] = lim->max_accel_mm_s2[1] = p->max_accel_xy_mm_s2;
+    lim->max_accel_mm_s2[2] = p->max_accel_z_mm_s2;
+    lim->max_accel_mm_s2[3] = p->max_accel_e_mm_s2;
     lim->jerk_mm_s[0] = lim->jerk_mm_s[1] = p->jerk_xy_mm_s;
     lim->jerk_mm_s[2] = p->jerk_z_mm_s;
     lim->jerk_mm_s[3] = p->jerk_e_mm_s;

@@ -494,30 +494,48 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
                          CLIP_JOIN_MITER, &L->inner);
     else
         rc = paths_append(&L->inner, &L->region) ? SF_OK : SF_ENOMEM;
-    if (rc < 0 || !L->inner.n || p->skin_margin_mm <= 0)
+    if (rc < 0 || !L->inner.n)
         return rc;
-    /* the seed of the skins: inner area open to the air above or below */
+    /* the seed of the skins: the cross-section open to the air above or
+       below, without slivers under a tenth of a line wide, as PrusaSlicer
+       2.5 finds top and bottom surfaces (detect_surfaces_type: opening by
+       the external perimeter width / 10), then kept where it reaches the
+       inner area, grown skin_margin into it */
     struct paths a, b, c;
     paths_init(&a);
     paths_init(&b);
     paths_init(&c);
     if (k + 1 < s->n)
-        rc = clip_bool(CLIP_DIFFERENCE, &L->inner, &s->l[k + 1].region, CLIP_NONZERO, &a);
-    else if (!paths_append(&a, &L->inner))
+        rc = clip_bool(CLIP_DIFFERENCE, &L->region, &s->l[k + 1].region, CLIP_NONZERO, &a);
+    else if (!paths_append(&a, &L->region))
         rc = SF_ENOMEM;
     if (rc == SF_OK && k > 0)
-        rc = clip_bool(CLIP_DIFFERENCE, &L->inner, &s->l[k - 1].region, CLIP_NONZERO, &b);
-    else if (rc == SF_OK && !paths_append(&b, &L->inner))
+        rc = clip_bool(CLIP_DIFFERENCE, &L->region, &s->l[k - 1].region, CLIP_NONZERO, &b);
+    else if (rc == SF_OK && !paths_append(&b, &L->region))
         rc = SF_ENOMEM;
     if (rc == SF_OK && !paths_append(&a, &b))
         rc = SF_ENOMEM;
-    /* slivers thinner than a line are the shell's business, not a surface */
+    double open = p->width_mm / 20;
     if (rc == SF_OK)
-        rc = clip_offset(&a, -p->solid_width_mm / 2, CLIP_JOIN_MITER, &b);
+        rc = clip_offset(&a, -open, CLIP_JOIN_MITER, &b);
     if (rc == SF_OK && b.n)
-        rc = clip_offset(&b, p->solid_width_mm / 2 + p->skin_margin_mm, CLIP_JOIN_SQUARE, &c);
+        rc = clip_offset(&b, open, CLIP_JOIN_MITER, &a);
+    if (rc == SF_OK && b.n)
+        rc = clip_bool(CLIP_INTERSECTION, &a, &L->inner, CLIP_NONZERO, &b);
+    else
+        paths_reset(&a), paths_reset(&b);
+    if (rc == SF_OK && b.n)
+        rc = clip_offset(&b, p->skin_margin_mm, CLIP_JOIN_SQUARE, &c);
     if (rc == SF_OK && c.n)
-        rc = clip_bool(CLIP_INTERSECTION, &c, &L->inner, CLIP_NONZERO, &L->skin);
+        rc = clip_bool(CLIP_INTERSECTION, &c, &L->inner, CLIP_NONZERO, &b);
+    /* the skin is that grown part and the surface itself, perimeter zone
+       included: projected onto the layers within reach, a sloping
+       surface's band lands inside their inner areas (PrusaSlicer's
+       discover_horizontal_shells projects the slices' surfaces so) */
+    if (rc == SF_OK && !paths_append(&b, &a))
+        rc = SF_ENOMEM;
+    if (rc == SF_OK && b.n)
+        rc = clip_bool(CLIP_UNION, &b, NULL, CLIP_NONZERO, &L->skin);
     paths_release(&a);
     paths_release(&b);
     paths_release(&c);
@@ -631,6 +649,133 @@ fail:
 enum { T_AREA, T_TMP, T_TOPI, T_BOTI, T_KEEP, T_SOLID, T_TOP, T_SPARSE, T_LINES, T_N };
 
 int
+toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                 struct paths *solid, struct paths *top, struct paths *sparse)
+{
+    const struct layer *L = &s->l[k];
+    double ssp = tp_spacing(p->solid_width_mm, L->h_mm);
+    struct paths t[T_N];
+    for (int i = 0; i < T_N; i++)
+        paths_init(&t[i]);
+    paths_reset(solid);
+    paths_reset(top);
+    paths_reset(sparse);
+    int rc = SF_OK;
+#define TRY(x)                                                                                     \
+    do {                                                                                           \
+        if ((rc = (x)) < 0)                                                                        \
+            goto out;                                                                              \
+    } while (0)
+    if (!paths_append(&t[T_AREA], &L->inner))
+        TRY(SF_ENOMEM);
+    if (!t[T_AREA].n)
+        goto out;
+    if (p->vertical_shells) {
+        /* solid wherever the inner areas of the top_layers above and the
+           bottom_layers below do not all cover it: keeps the shell thick
+           on slopes (PrusaSlicer's ensure_vertical_shell_thickness, off by
+           default and in the peers' runs) */
+        TRY(intersect_range(s, (long)k + 1, (long)k + 1 + p->top_layers, &t[T_TOPI]));
+        if (p->top_layers == 0 && !paths_append(&t[T_TOPI], &t[T_AREA]))
+            TRY(SF_ENOMEM);
+        TRY(intersect_range(s, (long)k - p->bottom_layers, (long)k, &t[T_BOTI]));
+        if (p->bottom_layers == 0 && !paths_append(&t[T_BOTI], &t[T_AREA]))
+            TRY(SF_ENOMEM);
+        TRY(clip_bool(CLIP_INTERSECTION, &t[T_TOPI], &t[T_BOTI], CLIP_NONZERO, &t[T_KEEP]));
+        TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_KEEP], CLIP_NONZERO, &t[T_SOLID]));
+    }
+    {
+        /* the top and bottom surfaces of the layers within reach (top_layers
+           - 1 above, bottom_layers - 1 below, and this one), grown
+           skin_margin into the infill: PrusaSlicer 2.5 grows them 3 mm
+           (EXTERNAL_INFILL_MARGIN) and projects them so
+           (discover_horizontal_shells) */
+        paths_reset(&t[T_LINES]);
+        for (long j = (long)k - p->bottom_layers + 1; j < (long)k + p->top_layers; j++)
+            if (j >= 0 && j < (long)s->n && !paths_append(&t[T_LINES], &s->l[j].skin))
+                TRY(SF_ENOMEM);
+        if (t[T_LINES].n) {
+            if (!paths_append(&t[T_LINES], &t[T_SOLID]))
+                TRY(SF_ENOMEM);
+            TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_TMP]));
+            TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+        }
+        if (!p->vertical_shells && t[T_SOLID].n) {
+            /* bands narrower than 3 solid lines grow 3 lines wider, so
+               the solid can be filled and holds (PrusaSlicer's "too
+               narrow" regularization in discover_horizontal_shells) */
+            double mg = 3 * p->solid_width_mm;
+            TRY(clip_offset(&t[T_SOLID], -mg, CLIP_JOIN_MITER, &t[T_TMP]));
+            TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_KEEP]));
+            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
+            if (t[T_TMP].n) {
+                TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_LINES]));
+                if (!paths_append(&t[T_LINES], &t[T_SOLID]))
+                    TRY(SF_ENOMEM);
+                TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_TMP]));
+                TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+            }
+            paths_reset(&t[T_KEEP]);
+        }
+    }
+    if (t[T_SOLID].n && t[T_KEEP].n) {
+        /* solid narrower than a line is a sliver along a slope, not a
+           skin: drop it and grow the rest a little, as PrusaSlicer 2.5
+           regularizes its vertical shells: offset2(-0.5 s, +0.8 s) with
+           s = 1.05 x the solid line spacing (min_perimeter_infill_spacing
+           in PrintObject::discover_vertical_shells) */
+        double ms = 1.05 * ssp;
+        TRY(clip_offset(&t[T_SOLID], -0.5 * ms, CLIP_JOIN_SQUARE, &t[T_TMP]));
+        TRY(clip_offset(&t[T_TMP], 0.8 * ms, CLIP_JOIN_SQUARE, &t[T_LINES]));
+        TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+    }
+    TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
+    if (p->solid_below_mm2 > 0 && p->infill_density > 0 && t[T_SPARSE].n) {
+        /* sparse islands too small for the grid to hold anything print
+           solid (PrusaSlicer's solid_infill_below_area, 70 mm2): thin
+           limbs, ears and tails */
+        paths_reset(&t[T_TMP]);
+        paths_reset(&t[T_LINES]);
+        const struct paths *sp_ = &t[T_SPARSE];
+        for (uint32_t a = 0, b; a < sp_->n; a = b) {
+            double area = paths_area_k(sp_, a);
+            for (b = a + 1; b < sp_->n && paths_area_k(sp_, b) < 0; b++)
+                area += paths_area_k(sp_, b);
+            struct paths *dst = area <= p->solid_below_mm2 ? &t[T_LINES] : &t[T_TMP];
+            for (uint32_t j = a; j < b; j++)
+                if (!paths_add(dst, sp_->pts + sp_->start[j], paths_len(sp_, j)))
+                    TRY(SF_ENOMEM);
+        }
+        if (t[T_LINES].n) {
+            if (!paths_append(&t[T_LINES], &t[T_SOLID]))
+                TRY(SF_ENOMEM);
+            TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_SOLID]));
+            paths_move(&t[T_SPARSE], &t[T_TMP]);
+        }
+    }
+    if (p->top_layers > 0) {
+        /* the part of the solid the next layer does not cover is the top surface */
+        if (k + 1 < s->n) {
+            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
+                          &t[T_TOP]));
+            TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
+                          &t[T_TMP]));
+            paths_move(&t[T_SOLID], &t[T_TMP]);
+        } else {
+            paths_move(&t[T_TOP], &t[T_SOLID]);
+        }
+    }
+    paths_move(solid, &t[T_SOLID]);
+    paths_move(top, &t[T_TOP]);
+    paths_move(sparse, &t[T_SPARSE]);
+#undef TRY
+out:
+    for (int i = 0; i < T_N; i++)
+        paths_release(&t[i]);
+    return rc;
+}
+
+int
 toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
                const struct support_layer *sup, struct layer_paths *out)
 {
@@ -669,57 +814,9 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         TRY(clip_offset(&L->region, -(w / 2 + i * sp), CLIP_JOIN_MITER, &t[T_TMP]));
         TRY(add(out, &t[T_TMP], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w));
     }
-    if (!paths_append(&t[T_AREA], &L->inner))
-        TRY(SF_ENOMEM);
-    if (!t[T_AREA].n)
+    if (!L->inner.n)
         goto out;
-
-    /* skins: solid where a top or bottom surface is within reach */
-    TRY(intersect_range(s, (long)k + 1, (long)k + 1 + p->top_layers, &t[T_TOPI]));
-    if (p->top_layers == 0 && !paths_append(&t[T_TOPI], &t[T_AREA]))
-        TRY(SF_ENOMEM);
-    TRY(intersect_range(s, (long)k - p->bottom_layers, (long)k, &t[T_BOTI]));
-    if (p->bottom_layers == 0 && !paths_append(&t[T_BOTI], &t[T_AREA]))
-        TRY(SF_ENOMEM);
-    TRY(clip_bool(CLIP_INTERSECTION, &t[T_TOPI], &t[T_BOTI], CLIP_NONZERO, &t[T_KEEP]));
-    TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_KEEP], CLIP_NONZERO, &t[T_SOLID]));
-    if (p->skin_margin_mm > 0) {
-        /* surfaces within reach above and below, grown into the infill
-           (PrusaSlicer 2.5 anchors them 3 mm: EXTERNAL_INFILL_MARGIN) */
-        paths_reset(&t[T_LINES]);
-        for (long j = (long)k - p->bottom_layers + 1; j < (long)k + p->top_layers; j++)
-            if (j >= 0 && j < (long)s->n && !paths_append(&t[T_LINES], &s->l[j].skin))
-                TRY(SF_ENOMEM);
-        if (t[T_LINES].n) {
-            if (!paths_append(&t[T_LINES], &t[T_SOLID]))
-                TRY(SF_ENOMEM);
-            TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_TMP]));
-            TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
-        }
-    }
-    if (t[T_SOLID].n && t[T_KEEP].n) {
-        /* solid narrower than a line is a sliver along a slope, not a
-           skin: drop it and grow the rest a little, as PrusaSlicer 2.5
-           regularizes its vertical shells: offset2(-0.5 s, +0.8 s) with
-           s = 0.8 x the solid line spacing (INSET_OVERLAP_TOLERANCE) */
-        double ms = 0.8 * ssp;
-        TRY(clip_offset(&t[T_SOLID], -0.5 * ms, CLIP_JOIN_SQUARE, &t[T_TMP]));
-        TRY(clip_offset(&t[T_TMP], 0.8 * ms, CLIP_JOIN_SQUARE, &t[T_LINES]));
-        TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
-    }
-    TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
-    if (p->top_layers > 0) {
-        /* the part of the solid the next layer does not cover is the top surface */
-        if (k + 1 < s->n) {
-            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
-                          &t[T_TOP]));
-            TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
-                          &t[T_TMP]));
-            paths_move(&t[T_SOLID], &t[T_TMP]);
-        } else {
-            paths_move(&t[T_TOP], &t[T_SOLID]);
-        }
-    }
+    TRY(toolpath_regions(s, k, p, &t[T_SOLID], &t[T_TOP], &t[T_SPARSE]));
     double ang = k % 2 ? 135 : 45;
     if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0) {
         /* solid over air is a bridge; slivers narrower than the nozzle are not */

@@ -5,11 +5,14 @@
  * Per layer, from the cross-sections (layers.h) and the support regions
  * (support.h): perimeter loops by inward offsets of the region (outermost
  * is the external perimeter); the rest is the infill area, split into
- * top solid (not covered by the layer above), other solid (wherever the
- * areas inside the perimeters of the top_layers above and bottom_layers
- * below do not all cover it: this keeps the shell thick on slopes too,
- * like PrusaSlicer's "ensure vertical shell thickness") and sparse infill (grid or
- * rectilinear lines at a spacing set by the density).  Paths come in
+ * top solid (not covered by the layer above), other solid (the top and
+ * bottom surfaces of the layers within reach, grown skin_margin and
+ * projected onto this one, as PrusaSlicer's discover_horizontal_shells;
+ * or, with vertical_shells, wherever the areas inside the perimeters of
+ * the top_layers above and bottom_layers below do not all cover it, like
+ * its "ensure vertical shell thickness"; plus sparse islands smaller
+ * than solid_below_mm2) and sparse infill (grid or rectilinear lines at a
+ * spacing set by the density).  Paths come in
  * print order of roles: support, interface, perimeters (inner first,
  * external last), solid, top, sparse.
  *
@@ -79,6 +82,15 @@ struct support_layer {
  * layer's inner must exist before toolpath_layer runs on any layer.
  */
 int toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p);
+
+/*
+ * The infill area of layer k (its inner area) split into solid, top solid
+ * and sparse regions (after toolpath_areas on all layers; bridges are
+ * split off the solid later, by toolpath_layer).  The outputs are reset
+ * first.  SF_ENOMEM / SF_EBUG.
+ */
+int toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                     struct paths *solid, struct paths *top, struct paths *sparse);
 
 /*
  * Build the paths of layer k of s (after toolpath_areas on all layers).  sup (may be NULL) is that

@@ -8,7 +8,10 @@
 # run for PrusaSlicer, startup included in both), and our planner's
 # estimate of PrusaSlicer's own G-code ("planner" column: it isolates the
 # estimator from the differences between the two slicers' toolpaths).
-# BENCH_MESHES="a.stl b.stl" picks meshes; BENCH_PEERS=0 skips PrusaSlicer.
+# CuraEngine's filament, estimate and wall time (its stock 0.4 mm lines
+# and speeds, so a second opinion, not a like-for-like) close each row.
+# BENCH_MESHES="a.stl b.stl" picks meshes; BENCH_PEERS=0 skips the peers;
+# BENCH_SUPPORT="off" runs only supports off (default "off on").
 set -u
 build=${1:-build/rel}
 shared=${SLIMFARM_SHARED:-../shared}
@@ -41,10 +44,10 @@ ours() { # mesh support(on|off) -> "g min support_g wall_s layers"
   secs=$(sed -n 's/^; estimated printing time \[s\] = //p' "$work/o.gcode")
   echo "$g $(awk -v s="$secs" 'BEGIN { printf "%.1f", s / 60 }') $sg $best $layers"
 }
-peer() { # mesh support -> "g min support_g wall_s layers planner_min"
+peer() { # mesh support [slicer] -> "g min support_g wall_s layers planner_min"
   local row est
   rm -rf "$work/peer"
-  row=$(PEER_RUNS="prusaslicer:$2" bash "$shared/peers/slice-peers.sh" "$1" --format csv --keep "$work/peer" 2>/dev/null | tail -n 1)
+  row=$(PEER_RUNS="${3:-prusaslicer}:$2" bash "$shared/peers/slice-peers.sh" "$1" --format csv --keep "$work/peer" 2>/dev/null | tail -n 1)
   est=$("$bin" estimate "$work"/peer/*.gcode 2>/dev/null | sed -n 's/.*(\([0-9]*\) s)$/\1/p')
   python3 - "$row" "${est:-0}" <<'PY'
 import sys, csv
@@ -58,16 +61,21 @@ except Exception:
     print("0 0 0 0 0 0")
 PY
 }
-printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio |\n'
-printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s |\n'
+printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
 for m in "${meshes[@]}"; do
-  for sup in off on; do
+  for sup in ${BENCH_SUPPORT:-off on}; do
     read -r og omin osg ow ol <<<"$(ours "$m" "$sup")"
     if [ "$peers" = 1 ]; then read -r pg pmin psg pw pl pest <<<"$(peer "$m" "$sup")"
     else pg=0 pmin=0 psg=0 pw=0 pest=0; fi
+    if [ "$peers" = 1 ] && command -v CuraEngine >/dev/null; then
+      read -r cg cmin csg cw cl cest <<<"$(peer "$m" "$sup" curaengine)"
+    else cg=0 cmin=0 cw=0; fi
     awk -v m="$(basename "$m")" -v s="$sup" -v og="$og" -v pg="$pg" -v omin="$omin" -v pmin="$pmin" \
-        -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" -v pest="$pest" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
-      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s |\n",
-              m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), pest, r(pest, pmin), osg, psg, ow, pw, r(ow, pw) }'
+        -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" -v pest="$pest" \
+        -v cg="$cg" -v cmin="$cmin" -v cw="$cw" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
+      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s | %.2f | %.1f | %.2f |\n",
+              m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), pest, r(pest, pmin), osg, psg, ow, pw, r(ow, pw),
+              cg, cmin, cw }'
   done
 done

@@ -146,3 +146,40 @@ T_CASE(estimate_junction_deviation_corner)
     estimate_release(&e);
     T_EQ_DBL(two, one, 1e-9);
 }
+
+T_CASE(estimate_follows_firmware_limits_in_the_file)
+{
+    /* the file's M201-M205 replace the caller's limits from that line on */
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 0);
+    /* M204 P500: an extruding 10 mm triangle at 500 mm/s2: 2 sqrt(10 / 500) */
+    T_EQ_DBL(est("M204 P500\nG1 X10 E1 F6000\n", &l, &e), 2 * sqrt(10.0 / 500), 1e-6);
+    estimate_release(&e);
+    /* ... but travel keeps 1000 (0.2 s); M204 T250 makes it 0.4 s */
+    T_EQ_DBL(est("M204 P500\nG1 X10 F6000\n", &l, &e), 0.2, 1e-6);
+    estimate_release(&e);
+    T_EQ_DBL(est("M204 T250\nG1 X10 F6000\n", &l, &e), 0.4, 1e-6);
+    estimate_release(&e);
+    /* M204 S sets print and travel */
+    T_EQ_DBL(est("M204 S250\nG1 X10 F6000\nG1 X20 E1\n", &l, &e), 0.8, 1e-6);
+    estimate_release(&e);
+    /* M201 X250 Y1000 on a 45 degree move of 14.14 mm: X takes 250 at
+       cos 45, so the move gets 353.6 mm/s2: 2 sqrt(14.142 / 353.55) = 0.4 s */
+    T_EQ_DBL(est("M201 X250 Y1000\nG1 X10 Y10 F6000\n", &l, &e), 0.4, 1e-6);
+    estimate_release(&e);
+    /* M203 X50 (mm/s): the feed-cap case, 2.025 s at 2000 mm/s2 */
+    limits(&l, 2000, 0);
+    T_EQ_DBL(est("M203 X50\nG1 X100 F6000\n", &l, &e), 2.025, 1e-6);
+    estimate_release(&e);
+    /* M205 X10 Y10: the jerk case, 0.181 s */
+    limits(&l, 1000, 0);
+    T_EQ_DBL(est("M205 X10 Y10\nG1 X10 F6000\n", &l, &e), 0.181, 1e-6);
+    estimate_release(&e);
+    /* limits apply from their line on: the first move keeps 1000 */
+    T_EQ_DBL(est("G1 X10 F6000\nM204 T250\nG1 X0\n", &l, &e), 0.2 + 0.4, 1e-6);
+    estimate_release(&e);
+    /* nonsense values are ignored */
+    T_EQ_DBL(est("M204 T-5 S0\nM201 X0\nM203 X-1\nG1 X10 F6000\n", &l, &e), 0.2, 1e-6);
+    estimate_release(&e);
+}

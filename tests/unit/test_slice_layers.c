@@ -145,6 +145,138 @@ T_CASE(slice_open_mesh_still_closes)
     ts_free(&m);
 }
 
+/*
+ * The side of a 48-gon prism (radius 10, 5 tall) in three unwelded
+ * patches, each moved a few micrometres from its neighbours (cracks like
+ * the shared pig's), patch 1 with its facets turned inside out.
+ */
+static int
+cracked_prism(struct mesh *m)
+{
+    enum { N = 48, PATCH = N / 3 };
+    for (int pa = 0; pa < 3; pa++) {
+        struct vec3 v[2 * (PATCH + 1)];
+        uint32_t t[2 * PATCH][3];
+        for (int i = 0; i <= PATCH; i++) {
+            double a = 2 * M_PI * (pa * PATCH + i) / N;
+            double x = 10 * cos(a) + 0.013 * pa, y = 10 * sin(a) - 0.007 * pa;
+            v[2 * i] = v3(x, y, 0);
+            v[2 * i + 1] = v3(x, y, 5);
+        }
+        for (uint32_t i = 0; i < PATCH; i++) {
+            uint32_t b0 = 2 * i, t0 = b0 + 1, b1 = b0 + 2, t1 = b0 + 3;
+            uint32_t f[2][3] = { { b0, b1, t1 }, { b0, t1, t0 } };
+            for (int q = 0; q < 2; q++) {
+                t[2 * i + q][0] = f[q][0];
+                t[2 * i + q][1] = pa == 1 ? f[q][2] : f[q][1];
+                t[2 * i + q][2] = pa == 1 ? f[q][1] : f[q][2];
+            }
+        }
+        if (ts_add(m, v, 2 * (PATCH + 1), t, 2 * PATCH))
+            return -1;
+    }
+    return 0;
+}
+
+T_CASE(slice_closes_cracks_between_patches)
+{
+    /* closing each patch's chain straight would cut the inscribed
+       triangle of the three crack points (130 mm2) out of every layer */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(cracked_prism(&m) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
+    T_EQ_INT(s.n, 25);
+    T_EQ_INT(s.n_open, 0);
+    double ngon = 0.5 * 48 * 100 * sin(2 * M_PI / 48);
+    for (uint32_t k = 0; k < s.n; k++) {
+        T_EQ_DBL(paths_area(&s.l[k].region), ngon, 0.002 * ngon);
+        T_EQ_INT(s.l[k].region.n, 1);
+    }
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+/* Solid (with top) and sparse area of layer k. */
+static int
+region_areas(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+             double *solid_mm2, double *sparse_mm2)
+{
+    struct paths solid, top, sparse;
+    paths_init(&solid);
+    paths_init(&top);
+    paths_init(&sparse);
+    int rc = toolpath_regions(s, k, p, &solid, &top, &sparse);
+    *solid_mm2 = paths_area(&solid) + paths_area(&top);
+    *sparse_mm2 = paths_area(&sparse);
+    paths_release(&solid);
+    paths_release(&top);
+    paths_release(&sparse);
+    return rc;
+}
+
+T_CASE(slope_gets_projected_top_surfaces)
+{
+    /* a pyramid 50 wide, 10 tall: its faces move 0.5 mm in per 0.2 mm
+       layer.  The top surfaces of this layer and the 3 above (each a
+       0.5 mm band at its own outline) land 0..2 mm inside this layer's
+       outline; past the 0.84 mm of perimeters that is a band too narrow
+       for 3 solid lines, so it grows 3 lines (PrusaSlicer's
+       discover_horizontal_shells, the peers' setting).  The vertical-shell
+       rule this replaces gave 2.1 mm. */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_pyramid(&m, 50, 10) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    for (uint32_t k = 0; k < s.n; k++)
+        T_OK(toolpath_areas(&s, k, &p), NULL);
+    uint32_t k = 25; /* plane at z 5.1: side 24.5 */
+    double inset = p.width_mm / 2 + 1.5 * tp_spacing(p.width_mm, 0.2);
+    double inner = 24.5 - 2 * inset;
+    double band = p.top_layers * 0.5 - inset + 3 * p.solid_width_mm;
+    double want = inner * inner - (inner - 2 * band) * (inner - 2 * band);
+    double solid, sparse;
+    T_OK(region_areas(&s, k, &p, &solid, &sparse), NULL);
+    T_EQ_DBL(solid + sparse, inner * inner, 0.01 * inner * inner);
+    T_EQ_DBL(solid, want, 0.03 * want);
+    slice_profile_release(&p);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+T_CASE(small_islands_print_solid)
+{
+    /* PrusaSlicer's solid_infill_below_area: a 7 mm tower's infill
+       (about 28 mm2) is solid, a 20 mm tower's (335 mm2) sparse */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_box(&m, 0, 0, 0, 7, 7, 10) == 0);
+    T_TRUE(ts_box(&m, 20, 0, 0, 40, 20, 10) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    for (uint32_t k = 0; k < s.n; k++)
+        T_OK(toolpath_areas(&s, k, &p), NULL);
+    double inset = p.width_mm / 2 + 1.5 * tp_spacing(p.width_mm, 0.2);
+    double small = (7 - 2 * inset) * (7 - 2 * inset), big = (20 - 2 * inset) * (20 - 2 * inset);
+    double solid, sparse;
+    T_OK(region_areas(&s, 25, &p, &solid, &sparse), NULL);
+    T_EQ_DBL(solid, small, 0.01 * small);
+    T_EQ_DBL(sparse, big, 0.01 * big);
+    p.solid_below_mm2 = 0;
+    T_OK(region_areas(&s, 25, &p, &solid, &sparse), NULL);
+    T_EQ_DBL(solid, 0, 1e-9);
+    T_EQ_DBL(sparse, small + big, 0.01 * big);
+    slice_profile_release(&p);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
 T_CASE(clip_offset_and_difference)
 {
     struct paths a, b, c;
