@@ -498,11 +498,11 @@ orientation_step(struct mesh *cur, struct mesh *ref, struct snapshot *keep, int 
     if (p->orient) {
         struct orient_params op = p->op;
         op.angle_deg = p->angle_deg;
-        struct orient_result or ;
-        int rc = orient_find(cur, &op, & or, err);
+        struct orient_result found;
+        int rc = orient_find(cur, &op, &found, err);
         if (rc < 0)
             return rc;
-        up = or.best.up;
+        up = found.best.up;
     }
     bool turn = v3_dot(up, v3(0, 0, 1)) < cos(0.1 * M_PI / 180);
     const struct vec3 *r = turn ? &up : NULL;
