@@ -10,8 +10,13 @@
 #ifndef SF_CMD_CMD_H
 #define SF_CMD_CMD_H
 
+#include <jansson.h>
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
+
+#include "../../slicer/profile.h"
+#include "../geom/measure.h"
 
 typedef int (*cmd_fn)(int argc, char **argv);
 
@@ -41,12 +46,25 @@ bool cmd_parse_num(const char *cmd, const char *opt, const char *text, double lo
 bool cmd_parse_vec3(const char *cmd, const char *opt, const char *text, double out[3]);
 
 /*
- * Resolve a profile NAME of KIND ("printers", "materials") to a readable
- * file: NAME itself when it holds a '/' or ends in ".cfg", else
- * KIND/NAME.cfg under $SLIMFARM_CONFIG, ./config, then the installed
- * share/slimfarm/config folders.  NULL (nothing written) when none exists.
+ * Load the slicing profile from a printer and a material (either NULL for
+ * the defaults).  Each NAME is a path when it holds a '/' or ends in
+ * ".cfg", else KIND/NAME.cfg under $SLIMFARM_CONFIG, ./config, then the
+ * installed share/slimfarm/config folders.  On failure print "slimfarm
+ * CMD: no printer profile 'NAME'" or the loader's error and return false.
  */
-const char *cmd_find_profile(const char *kind, const char *name, char *buf, size_t cap);
+bool cmd_load_profile(const char *cmd, const char *printer, const char *material,
+                      struct slice_profile *p);
+
+/* The support figures the optimizers report, as JSON and as one text line
+ * ("  LABEL    risky faces ..."), and a risky-faces-per-iteration curve. */
+json_t *cmd_metrics_json(const struct support_metrics *m);
+void cmd_print_metrics(const char *label, const struct support_metrics *m);
+void cmd_print_curve(const uint32_t *curve, int n);
+json_t *cmd_curve_json(const uint32_t *curve, int n);
+
+/* Print o (taking its reference; NULL means it could not be built) as
+ * indented JSON on stdout: 0, or 1 with "slimfarm CMD: out of memory". */
+int cmd_put_json(const char *cmd, json_t *o);
 
 /* `optimize --method surface` (cmd_optimize_surface.c), reached from cmd_optimize.c. */
 int cmd_optimize_surface(int argc, char **argv);

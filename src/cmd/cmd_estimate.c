@@ -48,22 +48,10 @@ run(int argc, char **argv)
         fprintf(stderr, "usage: slimfarm %s\n", usage_line);
         return 2;
     }
-    char pb[1024], mb[1024];
-    const char *pcfg = NULL, *mcfg = NULL;
-    if (printer && !(pcfg = cmd_find_profile("printers", printer, pb, sizeof(pb)))) {
-        fprintf(stderr, "slimfarm estimate: no printer profile '%s'\n", printer);
-        return 1;
-    }
-    if (material && !(mcfg = cmd_find_profile("materials", material, mb, sizeof(mb)))) {
-        fprintf(stderr, "slimfarm estimate: no material profile '%s'\n", material);
-        return 1;
-    }
-    struct sf_err err;
     struct slice_profile p;
-    if (slice_profile_load(pcfg, mcfg, &p, &err) < 0) {
-        fprintf(stderr, "slimfarm estimate: %s\n", err.msg);
+    if (!cmd_load_profile("estimate", printer, material, &p))
         return 1;
-    }
+    struct sf_err err;
     struct est_limits lim;
     slice_limits(&p, &lim);
     double g_per_mm = M_PI * p.filament_mm * p.filament_mm / 4 * p.density_g_cm3 / 1000;

@@ -49,22 +49,10 @@ parse_num(const char *opt, const char *arg, double lo, double hi, double *out)
     return true;
 }
 
-static json_t *
-metrics_json(const struct support_metrics *m)
-{
-    return json_pack("{s:i, s:f, s:f, s:f, s:i, s:f}", "risky_faces", (json_int_t)m->n_risky,
-                     "risky_area_mm2", m->risky_area_mm2, "support_volume_mm3", m->volume_mm3,
-                     "contact_area_mm2", m->contact_area_mm2, "anchors", (json_int_t)m->n_anchors,
-                     "build_height_mm", m->build_height_mm);
-}
-
 static int
 report_json(const char *in, const char *out, const struct slim_params *p,
             const struct slim_result *r)
 {
-    json_t *curve = json_array();
-    for (int i = 0; curve && i < r->n_curve; i++)
-        json_array_append_new(curve, json_integer(r->curve[i]));
     json_t *rot = json_pack("[[fff][fff][fff]]", r->rotation.m[0][0], r->rotation.m[0][1],
                             r->rotation.m[0][2], r->rotation.m[1][0], r->rotation.m[1][1],
                             r->rotation.m[1][2], r->rotation.m[2][0], r->rotation.m[2][1],
@@ -73,33 +61,16 @@ report_json(const char *in, const char *out, const struct slim_params *p,
         "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:i, s:i, s:f, s:i, s:o, "
         "s:{s:i, s:i, s:i}, s:{s:i, s:i, s:i}, s:f, s:f}",
         "file", in, "output", out, "method", "volumetric", "angle_deg", p->angle_deg, "before",
-        metrics_json(&r->before), "after", metrics_json(&r->after), "risky_per_iteration", curve,
-        "deviation", "mndr", r->dev.mndr, "andr", r->dev.andr, "max_mm", r->dev.max_mm, "mean_mm",
-        r->dev.mean_mm, "best_iteration", (json_int_t)r->best_iter, "beta_rounds",
-        (json_int_t)r->n_runs, "beta_deg", r->beta_deg, "directions", (json_int_t)r->n_dirs,
-        "rotation", rot, "tet_mesh", "vertices", (json_int_t)r->tet_verts, "tets",
-        (json_int_t)r->tet_tets, "part_vertices_outside", (json_int_t)r->tet_outside, "checks",
-        "inverted_tets", (json_int_t)r->n_inverted, "self_intersections_input",
-        (json_int_t)r->selfx_input, "self_intersections_output", (json_int_t)r->selfx_out,
-        "setup_s", r->setup_s, "seconds", r->total_s);
-    char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(8)) : NULL;
-    json_decref(o);
-    if (!text) {
-        fprintf(stderr, "slimfarm optimize: out of memory\n");
-        return 1;
-    }
-    puts(text);
-    free(text);
-    return 0;
-}
-
-static void
-print_metrics(const char *label, const struct support_metrics *m)
-{
-    printf("  %-7s risky faces %7u (%8.0f mm2), support %9.0f mm3, contact %7.0f mm2, "
-           "%u anchors, height %.1f mm\n",
-           label, m->n_risky, m->risky_area_mm2, m->volume_mm3, m->contact_area_mm2, m->n_anchors,
-           m->build_height_mm);
+        cmd_metrics_json(&r->before), "after", cmd_metrics_json(&r->after), "risky_per_iteration",
+        cmd_curve_json(r->curve, r->n_curve), "deviation", "mndr", r->dev.mndr, "andr", r->dev.andr,
+        "max_mm", r->dev.max_mm, "mean_mm", r->dev.mean_mm, "best_iteration",
+        (json_int_t)r->best_iter, "beta_rounds", (json_int_t)r->n_runs, "beta_deg", r->beta_deg,
+        "directions", (json_int_t)r->n_dirs, "rotation", rot, "tet_mesh", "vertices",
+        (json_int_t)r->tet_verts, "tets", (json_int_t)r->tet_tets, "part_vertices_outside",
+        (json_int_t)r->tet_outside, "checks", "inverted_tets", (json_int_t)r->n_inverted,
+        "self_intersections_input", (json_int_t)r->selfx_input, "self_intersections_output",
+        (json_int_t)r->selfx_out, "setup_s", r->setup_s, "seconds", r->total_s);
+    return cmd_put_json("optimize", o);
 }
 
 static void
@@ -109,18 +80,15 @@ report_text(const char *in, const char *out, const struct slim_result *r)
            "(setup %.2f s)\n",
            in, out, r->tet_verts, r->tet_tets, r->n_dirs, r->n_dirs == 1 ? "" : "s", r->total_s,
            r->setup_s);
-    print_metrics("before", &r->before);
-    print_metrics("after", &r->after);
+    cmd_print_metrics("before", &r->before);
+    cmd_print_metrics("after", &r->after);
     printf("  deviation MNDR %.2f %% ANDR %.2f %% (max %.2f mm, mean %.2f mm)\n", 100 * r->dev.mndr,
            100 * r->dev.andr, r->dev.max_mm, r->dev.mean_mm);
     printf("  kept iteration %d (beta %.0f deg, %d round%s); rejected %u; inverted tets %u; "
            "self-intersecting edges %d -> %d\n",
            r->best_iter, r->beta_deg, r->n_runs, r->n_runs == 1 ? "" : "s", r->n_rejected,
            r->n_inverted, r->selfx_input, r->selfx_out);
-    printf("  risky faces per iteration:");
-    for (int i = 0; i < r->n_curve; i++)
-        printf("%s%u", i % 16 ? " " : "\n   ", r->curve[i]);
-    printf("\n");
+    cmd_print_curve(r->curve, r->n_curve);
     if (r->n_dirs > 1)
         printf("  rotation [%.3f %.3f %.3f; %.3f %.3f %.3f; %.3f %.3f %.3f]\n", r->rotation.m[0][0],
                r->rotation.m[0][1], r->rotation.m[0][2], r->rotation.m[1][0], r->rotation.m[1][1],

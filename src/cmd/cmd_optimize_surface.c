@@ -28,52 +28,23 @@ progress(void *ud, const struct surfopt_progress *pr)
                  (double)pr->n_rounds * pr->max_iters);
 }
 
-static json_t *
-metrics_json(const struct support_metrics *m)
-{
-    return json_pack("{s:i, s:f, s:f, s:f, s:i, s:f}", "risky_faces", (json_int_t)m->n_risky,
-                     "risky_area_mm2", m->risky_area_mm2, "support_volume_mm3", m->volume_mm3,
-                     "contact_area_mm2", m->contact_area_mm2, "anchors", (json_int_t)m->n_anchors,
-                     "build_height_mm", m->build_height_mm);
-}
-
 static int
 report_json(const char *in, const char *out, const struct surfopt_params *p,
             const struct surfopt_result *r)
 {
-    json_t *curve = json_array();
-    for (int i = 0; curve && i < r->n_curve; i++)
-        json_array_append_new(curve, json_integer(r->curve[i]));
     json_t *o = json_pack(
         "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:b, s:i, s:i, s:i, "
         "s:{s:i, s:i}, s:{s:f, s:f, s:f, s:f, s:f, s:f}}",
         "file", in, "output", out, "method", "surface", "angle_deg", p->angle_deg, "input",
-        metrics_json(&r->input), "oriented", metrics_json(&r->oriented), "after",
-        metrics_json(&r->after), "risky_per_iteration", curve, "deviation", "mndr", r->dev.mndr,
-        "andr", r->dev.andr, "max_mm", r->dev.max_mm, "mean_mm", r->dev.mean_mm, "shape_changed",
-        r->shape_changed, "rounds", (json_int_t)r->n_rounds, "iterations", (json_int_t)r->n_iters,
-        "rejected", (json_int_t)r->n_rejected, "self_intersections", "input",
-        (json_int_t)r->selfx_input, "output", (json_int_t)r->selfx_out, "seconds", "saliency",
-        r->saliency_s, "orient", r->orient_s, "factor", r->factor_s, "iterate", r->iterate_s,
-        "check", r->check_s, "total", r->total_s);
-    char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(8)) : NULL;
-    json_decref(o);
-    if (!text) {
-        fprintf(stderr, "slimfarm optimize: out of memory\n");
-        return 1;
-    }
-    puts(text);
-    free(text);
-    return 0;
-}
-
-static void
-print_metrics(const char *label, const struct support_metrics *m)
-{
-    printf("  %-8s risky faces %7u (%8.0f mm2), support %9.0f mm3, contact %7.0f mm2, "
-           "%u anchors, height %.1f mm\n",
-           label, m->n_risky, m->risky_area_mm2, m->volume_mm3, m->contact_area_mm2, m->n_anchors,
-           m->build_height_mm);
+        cmd_metrics_json(&r->input), "oriented", cmd_metrics_json(&r->oriented), "after",
+        cmd_metrics_json(&r->after), "risky_per_iteration", cmd_curve_json(r->curve, r->n_curve),
+        "deviation", "mndr", r->dev.mndr, "andr", r->dev.andr, "max_mm", r->dev.max_mm, "mean_mm",
+        r->dev.mean_mm, "shape_changed", r->shape_changed, "rounds", (json_int_t)r->n_rounds,
+        "iterations", (json_int_t)r->n_iters, "rejected", (json_int_t)r->n_rejected,
+        "self_intersections", "input", (json_int_t)r->selfx_input, "output",
+        (json_int_t)r->selfx_out, "seconds", "saliency", r->saliency_s, "orient", r->orient_s,
+        "factor", r->factor_s, "iterate", r->iterate_s, "check", r->check_s, "total", r->total_s);
+    return cmd_put_json("optimize", o);
 }
 
 static void
@@ -83,9 +54,9 @@ report_text(const char *in, const char *out, const struct surfopt_result *r)
            "orientation %.2f, factor %.2f, iterations %.2f, checks %.2f)\n",
            in, out, r->n_rounds, r->n_rounds == 1 ? "" : "s", r->n_iters, r->total_s, r->saliency_s,
            r->orient_s, r->factor_s, r->iterate_s, r->check_s);
-    print_metrics("as given", &r->input);
-    print_metrics("oriented", &r->oriented);
-    print_metrics("after", &r->after);
+    cmd_print_metrics("as given", &r->input);
+    cmd_print_metrics("oriented", &r->oriented);
+    cmd_print_metrics("after", &r->after);
     if (r->shape_changed)
         printf("  deviation MNDR %.2f %% ANDR %.2f %% (max %.2f mm, mean %.2f mm)\n",
                100 * r->dev.mndr, 100 * r->dev.andr, r->dev.max_mm, r->dev.mean_mm);
@@ -93,10 +64,7 @@ report_text(const char *in, const char *out, const struct surfopt_result *r)
         printf("  shape kept: no iterate within the limits needed less support\n");
     printf("  rejected %u; self-intersecting edges %d -> %d\n", r->n_rejected, r->selfx_input,
            r->selfx_out);
-    printf("  risky faces per iteration:");
-    for (int i = 0; i < r->n_curve; i++)
-        printf("%s%u", i % 16 ? " " : "\n   ", r->curve[i]);
-    printf("\n");
+    cmd_print_curve(r->curve, r->n_curve);
 }
 
 int

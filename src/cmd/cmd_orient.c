@@ -149,15 +149,7 @@ run(int argc, char **argv)
                       (json_int_t)r.n_exact, "seconds", r.seconds);
         for (int i = 0; o && i < r.n_runners; i++)
             json_array_append_new(json_object_get(o, "runners_up"), cand_json(&r.runners[i]));
-        char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(8)) : NULL;
-        json_decref(o);
-        if (!text) {
-            fprintf(stderr, "slimfarm orient: out of memory\n");
-            return 1;
-        }
-        puts(text);
-        free(text);
-        return 0;
+        return cmd_put_json("orient", o);
     }
     printf("%s -> %s: %u directions, %u ray-cast, %.3f s (setup %.3f, proxy %.3f, ray cast "
            "%.3f)\n",

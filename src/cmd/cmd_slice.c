@@ -84,22 +84,10 @@ run(int argc, char **argv)
         return 2;
     }
     const char *part = argv[optind];
-    char pbuf[1024], mbuf[1024];
-    const char *pcfg = NULL, *mcfg = NULL;
-    if (printer && !(pcfg = cmd_find_profile("printers", printer, pbuf, sizeof(pbuf)))) {
-        fprintf(stderr, "slimfarm slice: no printer profile '%s'\n", printer);
-        return 1;
-    }
-    if (material && !(mcfg = cmd_find_profile("materials", material, mbuf, sizeof(mbuf)))) {
-        fprintf(stderr, "slimfarm slice: no material profile '%s'\n", material);
-        return 1;
-    }
-    struct sf_err err;
     struct slice_profile prof;
-    if (slice_profile_load(pcfg, mcfg, &prof, &err) < 0) {
-        fprintf(stderr, "slimfarm slice: %s\n", err.msg);
+    if (!cmd_load_profile("slice", printer, material, &prof))
         return 1;
-    }
+    struct sf_err err;
     int status = 1;
     struct mesh m;
     mesh_init(&m);

@@ -85,10 +85,33 @@ load_profile(const struct prepare_req *req, struct slice_profile *p, struct sf_e
 }
 
 /*
+ * The job's deviation budget for a shape optimizer: the largest vertex
+ * displacement may not pass deviation_mm, nor the method's own limit
+ * (max_mndr, a share of the diagonal); the mean not more than the max.
+ */
+static void
+cap_deviation(const struct mesh *m, double deviation_mm, double *max_mndr, double *max_andr)
+{
+    double diag = mesh_diag(m);
+    if (diag > 0 && deviation_mm / diag < *max_mndr)
+        *max_mndr = deviation_mm / diag;
+    if (*max_andr > *max_mndr)
+        *max_andr = *max_mndr;
+}
+
+/* m becomes the optimizer's result (taken from out), back on the bed centre. */
+static void
+take_part(struct mesh *m, struct mesh *out, const struct slice_profile *prof)
+{
+    mesh_release(m);
+    *m = *out;
+    mesh_init(out);
+    mesh_place_on_bed(m, prof->bed_x_mm / 2, prof->bed_y_mm / 2);
+}
+
+/*
  * Support slimming (Hu 2015) of the oriented part within the job's
- * deviation budget: the largest vertex displacement may not pass
- * deviation_mm (nor the method's own 15 % of the diagonal).  On success m
- * holds the slimmed part, back on the bed centre.
+ * deviation budget.  On success m holds the slimmed part, on the bed centre.
  */
 static int
 slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_profile *prof,
@@ -99,20 +122,13 @@ slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_prof
     sp.angle_deg = prof->max_overhang_deg;
     sp.threads = 1; /* the pool already runs one task per core */
     sp.cancel = cancel;
-    double diag = mesh_diag(m);
-    if (diag > 0 && req->opts.deviation_mm / diag < sp.max_mndr)
-        sp.max_mndr = req->opts.deviation_mm / diag;
-    if (sp.max_andr > sp.max_mndr)
-        sp.max_andr = sp.max_mndr;
+    cap_deviation(m, req->opts.deviation_mm, &sp.max_mndr, &sp.max_andr);
     struct slim_result sr;
     int rc = slim_optimize(m, &sp, &sr, err);
     if (rc)
         return rc;
-    mesh_release(m);
-    *m = sr.out; /* take the slimmed part */
-    mesh_init(&sr.out);
+    take_part(m, &sr.out, prof);
     slim_result_release(&sr);
-    mesh_place_on_bed(m, prof->bed_x_mm / 2, prof->bed_y_mm / 2);
     return SF_OK;
 }
 
@@ -132,20 +148,13 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     sp.margin_deg = sp.margin_deg < sp.angle_deg ? sp.margin_deg : sp.angle_deg;
     sp.op.threads = 1; /* the pool already runs one task per core */
     sp.cancel = cancel;
-    double diag = mesh_diag(m);
-    if (diag > 0 && req->opts.deviation_mm / diag < sp.max_mndr)
-        sp.max_mndr = req->opts.deviation_mm / diag;
-    if (sp.max_andr > sp.max_mndr)
-        sp.max_andr = sp.max_mndr;
+    cap_deviation(m, req->opts.deviation_mm, &sp.max_mndr, &sp.max_andr);
     struct surfopt_result sr;
     int rc = surfopt_optimize(m, &sp, &sr, err);
     if (rc)
         return rc;
-    mesh_release(m);
-    *m = sr.out;
-    mesh_init(&sr.out);
+    take_part(m, &sr.out, prof);
     surfopt_result_release(&sr);
-    mesh_place_on_bed(m, prof->bed_x_mm / 2, prof->bed_y_mm / 2);
     return SF_OK;
 }
 

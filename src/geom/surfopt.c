@@ -74,13 +74,29 @@ check_params(const struct surfopt_params *p, struct sf_err *err)
     return SF_OK;
 }
 
-/* Ray-cast support metrics of m with +z up. */
-static int
-ray_metrics(const struct mesh *m, double angle_deg, struct support_metrics *out, struct sf_err *err)
+static struct support_params
+support_at(double angle_deg)
 {
     struct support_params sp;
     support_params_default(&sp);
     sp.angle_deg = angle_deg;
+    return sp;
+}
+
+/* The move that rests m on z = 0 with its bbox centred on x = y = 0. */
+static struct vec3
+rest_offset(const struct mesh *m)
+{
+    struct vec3 lo, hi;
+    mesh_bbox(m, &lo, &hi);
+    return v3(-(lo.x + hi.x) / 2, -(lo.y + hi.y) / 2, -lo.z);
+}
+
+/* Ray-cast support metrics of m with +z up. */
+static int
+ray_metrics(const struct mesh *m, double angle_deg, struct support_metrics *out, struct sf_err *err)
+{
+    struct support_params sp = support_at(angle_deg);
     struct raycast *rc = raycast_new(m, err);
     if (!rc)
         return err->code;
@@ -89,10 +105,9 @@ ray_metrics(const struct mesh *m, double angle_deg, struct support_metrics *out,
     return r;
 }
 
-/* ---- the constant system gamma I + beta L'L, fixed rows as identity ---- */
+/* ---- the round's constant system, fixed rows as identity ---- */
 
 struct system {
-    uint32_t n;
     uint32_t *nb_start, *nb; /* neighbour lists (CSR) */
     struct sparse_chol *chol;
     double *b0;  /* 3n, column-major: constant part of the right-hand side */
@@ -172,42 +187,15 @@ system_free(struct system *s)
 }
 
 /*
- * Assemble and factorize gamma I + beta L'L for the current round (beta
- * is the adaptive detail weight): rows of
- * vertices within fix_bottom_mm of the bed become identity rows holding
- * their place; the input's Laplacian detail (beta L'L V0) and the fixed
- * vertices' pull on their neighbours go into b0.
+ * The detail term beta |L (V - V0)|^2 (L the uniform Laplacian, V0 = ref):
+ * beta L'L as triplets from row[0] on (returns how many), beta L'L V0 into
+ * s->b0; lv0 is 3n of workspace.
  */
-static int
-system_build(struct system *s, const struct mesh *cur, const struct mesh *ref,
-             const struct surfopt_params *p, double beta, struct sf_err *err)
+static size_t
+detail_term(struct system *s, const struct mesh *ref, double beta, double *lv0, uint32_t *row,
+            uint32_t *col, double *val)
 {
-    uint32_t n = cur->n_verts;
-    s->n = n;
-    size_t n_trip = 0;
-    for (uint32_t i = 0; i < n; i++) {
-        size_t d = s->nb_start[i + 1] - s->nb_start[i] + 1;
-        n_trip += d * d;
-    }
-    n_trip += n + 12 * (size_t)cur->n_tris;
-    uint32_t *row = mem_array(n_trip, sizeof(uint32_t));
-    uint32_t *col = mem_array(n_trip, sizeof(uint32_t));
-    double *val = mem_array(n_trip, sizeof(double));
-    double *lv0 = mem_calloc((size_t)n * 3, sizeof(double));
-    s->b0 = mem_calloc((size_t)n * 3, sizeof(double));
-    s->rhs = mem_calloc((size_t)n * 3, sizeof(double));
-    s->x = mem_calloc((size_t)n * 3, sizeof(double));
-    s->fixed = mem_calloc(n, sizeof(bool));
-    int rc = SF_ENOMEM;
-    if (!row || !col || !val || !lv0 || !s->b0 || !s->rhs || !s->x || !s->fixed) {
-        rc = sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
-        goto out;
-    }
-    struct vec3 lo, hi;
-    mesh_bbox(cur, &lo, &hi);
-    for (uint32_t i = 0; i < n; i++)
-        s->fixed[i] = cur->v[i].z <= lo.z + p->fix_bottom_mm;
-
+    uint32_t n = ref->n_verts;
     /* L V0 row by row (uniform Laplacian: v - mean of neighbours) */
     for (uint32_t i = 0; i < n; i++) {
         uint32_t a = s->nb_start[i], b = s->nb_start[i + 1];
@@ -217,12 +205,12 @@ system_build(struct system *s, const struct mesh *cur, const struct mesh *ref,
         struct vec3 l = b > a ? v3_sub(ref->v[i], v3_scale(mean, 1.0 / (b - a))) : v3(0, 0, 0);
         lv0[i] = l.x, lv0[n + i] = l.y, lv0[2 * (size_t)n + i] = l.z;
     }
-    /* beta L'(L V0) into b0, and beta L'L plus gamma I as triplets */
+    /* beta L'(L V0) into b0, beta L'L as triplets */
     size_t t = 0;
     for (uint32_t i = 0; i < n; i++) {
         uint32_t a = s->nb_start[i], b = s->nb_start[i + 1];
         double c_nb = b > a ? -1.0 / (b - a) : 0;
-        for (uint32_t j = a; j <= b && beta > 0; j++) {
+        for (uint32_t j = a; j <= b; j++) {
             uint32_t vj = j == b ? i : s->nb[j];
             double cj = j == b ? 1 : c_nb;
             for (int d = 0; d < 3; d++)
@@ -233,8 +221,51 @@ system_build(struct system *s, const struct mesh *cur, const struct mesh *ref,
                 row[t] = vj, col[t] = vk, val[t] = beta * cj * ck, t++;
             }
         }
-        row[t] = i, col[t] = i, val[t] = MU, t++;
     }
+    return t;
+}
+
+/*
+ * Assemble and factorize the round's matrix: gamma's edge Laplacian (each
+ * face weighted by its share of the area), beta L'L when the detail term
+ * is on (beta is the adaptive detail weight) and MU I.  Rows of vertices
+ * within fix_bottom_mm of the bed become identity rows holding their
+ * place; the detail term's beta L'L V0 and the fixed vertices' pull on
+ * their neighbours go into b0.
+ */
+static int
+system_build(struct system *s, const struct mesh *cur, const struct mesh *ref,
+             const struct surfopt_params *p, double beta, struct sf_err *err)
+{
+    uint32_t n = cur->n_verts;
+    size_t n_trip = n + 12 * (size_t)cur->n_tris;
+    for (uint32_t i = 0; beta > 0 && i < n; i++) {
+        size_t d = s->nb_start[i + 1] - s->nb_start[i] + 1;
+        n_trip += d * d;
+    }
+    uint32_t *row = mem_array(n_trip, sizeof(uint32_t));
+    uint32_t *col = mem_array(n_trip, sizeof(uint32_t));
+    double *val = mem_array(n_trip, sizeof(double));
+    double *lv0 = beta > 0 ? mem_calloc((size_t)n * 3, sizeof(double)) : NULL;
+    s->b0 = mem_calloc((size_t)n * 3, sizeof(double));
+    s->rhs = mem_calloc((size_t)n * 3, sizeof(double));
+    s->x = mem_calloc((size_t)n * 3, sizeof(double));
+    s->fixed = mem_calloc(n, sizeof(bool));
+    int rc = SF_ENOMEM;
+    if (!row || !col || !val || (beta > 0 && !lv0) || !s->b0 || !s->rhs || !s->x || !s->fixed) {
+        rc = sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
+        goto out;
+    }
+    struct vec3 lo, hi;
+    mesh_bbox(cur, &lo, &hi);
+    for (uint32_t i = 0; i < n; i++)
+        s->fixed[i] = cur->v[i].z <= lo.z + p->fix_bottom_mm;
+
+    size_t t = 0;
+    if (beta > 0)
+        t = detail_term(s, ref, beta, lv0, row, col, val);
+    for (uint32_t i = 0; i < n; i++)
+        row[t] = i, col[t] = i, val[t] = MU, t++;
     /* gamma sum_f w_f sum_(a,b) in f |v_a - v_b - d_ab|^2: an edge Laplacian */
     for (uint32_t f = 0; f < cur->n_tris; f++) {
         double g = p->gamma * s->w_face[f];
@@ -383,18 +414,18 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
         s.w_face[f] = mean_area > 0 ? s.w_face[f] / mean_area : 1;
     double t0 = now_s();
     double beta = p->beta;
-    if ((rc = build_neighbours(cur, &s, err)) < 0 ||
+    if ((beta > 0 && (rc = build_neighbours(cur, &s, err)) < 0) ||
         (rc = system_build(&s, cur, ref, p, beta, err)) < 0)
         goto out;
     res->factor_s += now_s() - t0;
     t0 = now_s();
 
-    struct support_params sp;
-    support_params_default(&sp);
-    sp.angle_deg = p->angle_deg;
+    struct support_params sp = support_at(p->angle_deg);
     struct support_metrics sm;
     measure_proxy(cur, v3(0, 0, 1), &sp, &sm);
     double best_proxy = sm.proxy_mm3;
+    if (res->n_curve == 0)
+        res->curve[res->n_curve++] = sm.n_risky; /* the oriented input */
     memcpy(best, cur->v, (size_t)n * sizeof(*best));
     *n_improved = 0;
     struct vec3 centre;
@@ -507,9 +538,7 @@ orientation_step(struct mesh *cur, struct mesh *ref, struct snapshot *keep, int 
     bool turn = v3_dot(up, v3(0, 0, 1)) < cos(0.1 * M_PI / 180);
     const struct vec3 *r = turn ? &up : NULL;
     move_positions(cur->v, cur->n_verts, r, v3(0, 0, 0));
-    struct vec3 lo, hi;
-    mesh_bbox(cur, &lo, &hi);
-    struct vec3 t = v3(-(lo.x + hi.x) / 2, -(lo.y + hi.y) / 2, -lo.z);
+    struct vec3 t = rest_offset(cur);
     mesh_translate(cur, t);
     move_positions(ref->v, ref->n_verts, r, t);
     for (int k = 0; k < n_keep; k++)
@@ -576,12 +605,6 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
             if ((rc = mesh_copy(&oriented, &cur, err)) < 0 ||
                 (rc = ray_metrics(&oriented, p->angle_deg, &res->oriented, err)) < 0)
                 goto out;
-            struct support_params sp;
-            support_params_default(&sp);
-            sp.angle_deg = p->angle_deg;
-            struct support_metrics sm0;
-            measure_proxy(&cur, v3(0, 0, 1), &sp, &sm0);
-            res->curve[res->n_curve++] = sm0.n_risky;
         }
         int n_improved = 0;
         if ((rc = geometry_round(&cur, &ref, sal, p, round, res, keep, &n_keep, &n_improved, err)) <
@@ -616,9 +639,7 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
         res->out = cur;
         mesh_init(&cur);
         res->after = sm;
-        struct vec3 lo, hi;
-        mesh_bbox(&res->out, &lo, &hi);
-        struct vec3 t = v3(-(lo.x + hi.x) / 2, -(lo.y + hi.y) / 2, -lo.z);
+        struct vec3 t = rest_offset(&res->out);
         mesh_translate(&res->out, t);
         mesh_translate(&ref, t);
         measure_deviation(&ref, &res->out, &res->dev, NULL);
