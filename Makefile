@@ -69,7 +69,13 @@ LIB_DIRS := src/base src/mesh src/geom slicer drivers src/farm src/api
 LIB_C := $(wildcard $(addsuffix /*.c,$(LIB_DIRS)))
 LIB_CXX := $(wildcard $(addsuffix /*.cpp,$(LIB_DIRS)))
 SIM_C := $(filter-out sim/slimfarm_sim.c,$(wildcard sim/*.c))
-CLI_C := src/cmd/slimfarm.c $(wildcard src/cmd/cmd_*.c)
+# The CLI: bin/slimfarm (src/cmd/slimfarm.c, no libraries) execs
+# libexec/slimfarm/slimfarm-MODULE, one program per src/cmd/cmd_MODULE.c (with
+# its parts cmd_MODULE_*.c and the shared cmd.c), each linked --as-needed so
+# it loads only the libraries its commands use.
+CMD_MODULES := $(sort $(foreach f,$(wildcard src/cmd/cmd_*.c),\
+	$(firstword $(subst _, ,$(patsubst src/cmd/cmd_%.c,%,$(f))))))
+CMD_PROGS := $(CMD_MODULES:%=$(BUILD)/libexec/slimfarm/slimfarm-%)
 TEST_C := $(wildcard tests/unit/test_*.c)
 FUZZ_C := $(wildcard tests/fuzz/fuzz_*.c)
 BENCH_C := $(wildcard tests/bench/bench_*.c)
@@ -113,9 +119,24 @@ $(SIMLIB): $(call obj,$(SIM_C))
 	@mkdir -p $(dir $@)
 	rm -f $@ && ar rcs $@ $^ $(if $^,,)
 
-$(BUILD)/bin/slimfarm: $(call obj,$(CLI_C)) $(LIB)
+.SECONDEXPANSION:
+.SECONDARY: $(call obj,$(wildcard src/cmd/cmd*.c))
+$(BUILD)/libexec/slimfarm/slimfarm-%: $(call obj,src/cmd/cmd.c) $(BUILD)/obj/src/cmd/cmd_%.o \
+		$$(call obj,$$(wildcard src/cmd/cmd_$$*_*.c)) $(LIB)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $^ $(EXT_LIBS)
+	$(CC) $(LDFLAGS) -o $@ $^ -Wl,--as-needed $(EXT_LIBS)
+
+# The front door's command table, from the programs themselves (cmd.c --describe).
+$(BUILD)/gen/commands.inc: $(CMD_PROGS)
+	@mkdir -p $(dir $@)
+	$(Q)for m in $(CMD_MODULES); do $(BUILD)/libexec/slimfarm/slimfarm-$$m --describe $$m || exit 1; \
+		done | LC_ALL=C sort > $@.tmp && mv $@.tmp $@
+$(BUILD)/obj/src/cmd/slimfarm.o: $(BUILD)/gen/commands.inc
+$(BUILD)/obj/src/cmd/slimfarm.o: CFLAGS += -I$(BUILD)/gen
+
+$(BUILD)/bin/slimfarm: $(call obj,src/cmd/slimfarm.c)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^
 
 $(BUILD)/bin/slimfarmd: $(call obj,src/cmd/slimfarmd.c) $(LIB)
 	@mkdir -p $(dir $@)
@@ -187,8 +208,10 @@ deps:
 	fi
 
 install: all
-	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/share/slimfarm
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)$(PREFIX)/libexec/slimfarm \
+		$(DESTDIR)$(PREFIX)/share/slimfarm
 	install -m 755 $(PROGS) $(DESTDIR)$(PREFIX)/bin/
+	install -m 755 $(CMD_PROGS) $(DESTDIR)$(PREFIX)/libexec/slimfarm/
 	cp -r config $(DESTDIR)$(PREFIX)/share/slimfarm/
 
 SRC_ALL = $(shell git ls-files '*.c' '*.h' '*.cpp' 2>/dev/null)

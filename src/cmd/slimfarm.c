@@ -1,194 +1,74 @@
 /*
- * slimfarm.c - the command-line tool: runs any pipeline stage alone
- * (inspect, orient, optimize, slice, send ...) or talks to a running
- * slimfarmd.  Subcommands register themselves (cmd.h); this file only
- * dispatches and prints help.
+ * slimfarm.c - the command-line tool's front door: runs any pipeline stage
+ * alone (inspect, orient, optimize, slice, send ...) or talks to a running
+ * slimfarmd.
+ *
+ * Each src/cmd/cmd_MODULE.c is its own program, libexec/slimfarm/
+ * slimfarm-MODULE, linked with only the libraries its commands use; this
+ * one links none, finds the command in the table the build generates from
+ * those programs (`slimfarm-MODULE --describe MODULE`, see the Makefile)
+ * and execs it.  Why: one program holding every command loaded 74 shared
+ * libraries on each start (curl's TLS stack, cairo's X11, CHOLMOD's BLAS),
+ * 25-30 ms before main() on this machine class, more than `slimfarm
+ * orient` spends turning a small part; it now loads 16.
  */
-#include "cmd.h"
-
-#include <math.h>
+#include <errno.h>
+#include <limits.h>
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
 #include <unistd.h>
 
-#define CMD_MAX 64
+struct entry {
+    const char *name, *module, *usage, *summary;
+};
 
-static const struct cmd *cmds[CMD_MAX];
-static int n_cmds;
+static const struct entry commands[] = {
+#include "commands.inc"
+};
+enum { N_COMMANDS = sizeof(commands) / sizeof(commands[0]) };
 
-void
-cmd_register(const struct cmd *c)
+static const struct entry *
+lookup(const char *name)
 {
-    if (n_cmds < CMD_MAX)
-        cmds[n_cmds++] = c;
-}
-
-bool
-cmd_parse_num(const char *cmd, const char *opt, const char *text, double lo, double hi,
-              const char *want, double *out)
-{
-    char *end;
-    double v = strtod(text, &end);
-    if (end == text || *end || !isfinite(v) || v < lo || v > hi) {
-        fprintf(stderr, "slimfarm %s: --%s wants %s, got '%s'\n", cmd, opt, want, text);
-        return false;
-    }
-    *out = v;
-    return true;
-}
-
-bool
-cmd_parse_vec3(const char *cmd, const char *opt, const char *text, double out[3])
-{
-    const char *s = text;
-    char *end;
-    for (int i = 0; i < 3; i++) {
-        out[i] = strtod(s, &end);
-        if (end == s || !isfinite(out[i]) || (i < 2 && *end != ','))
-            goto bad;
-        s = end + (i < 2);
-    }
-    if (*end == '\0' && (out[0] != 0 || out[1] != 0 || out[2] != 0))
-        return true;
-bad:
-    fprintf(stderr, "slimfarm %s: --%s wants x,y,z (not all zero), got '%s'\n", cmd, opt, text);
-    return false;
-}
-
-static const char *
-find_profile(const char *kind, const char *name, char *buf, size_t cap)
-{
-    if (strchr(name, '/') || strstr(name, ".cfg")) {
-        snprintf(buf, cap, "%s", name);
-        return access(buf, R_OK) == 0 ? buf : NULL;
-    }
-    const char *roots[] = { getenv("SLIMFARM_CONFIG"), "config", "/usr/local/share/slimfarm/config",
-                            "/usr/share/slimfarm/config" };
-    for (size_t i = 0; i < sizeof(roots) / sizeof(roots[0]); i++) {
-        if (!roots[i] || !roots[i][0])
-            continue;
-        snprintf(buf, cap, "%s/%s/%s.cfg", roots[i], kind, name);
-        if (access(buf, R_OK) == 0)
-            return buf;
-    }
+    for (int i = 0; i < N_COMMANDS; i++)
+        if (strcmp(commands[i].name, name) == 0)
+            return &commands[i];
     return NULL;
-}
-
-bool
-cmd_load_profile(const char *cmd, const char *printer, const char *material,
-                 struct slice_profile *p)
-{
-    char pbuf[1024], mbuf[1024];
-    const char *pcfg = NULL, *mcfg = NULL;
-    if (printer && !(pcfg = find_profile("printers", printer, pbuf, sizeof(pbuf)))) {
-        fprintf(stderr, "slimfarm %s: no printer profile '%s'\n", cmd, printer);
-        return false;
-    }
-    if (material && !(mcfg = find_profile("materials", material, mbuf, sizeof(mbuf)))) {
-        fprintf(stderr, "slimfarm %s: no material profile '%s'\n", cmd, material);
-        return false;
-    }
-    struct sf_err err;
-    if (slice_profile_load(pcfg, mcfg, p, &err) < 0) {
-        fprintf(stderr, "slimfarm %s: %s\n", cmd, err.msg);
-        return false;
-    }
-    return true;
-}
-
-json_t *
-cmd_metrics_json(const struct support_metrics *m)
-{
-    return json_pack("{s:i, s:f, s:f, s:f, s:i, s:f}", "risky_faces", (json_int_t)m->n_risky,
-                     "risky_area_mm2", m->risky_area_mm2, "support_volume_mm3", m->volume_mm3,
-                     "contact_area_mm2", m->contact_area_mm2, "anchors", (json_int_t)m->n_anchors,
-                     "build_height_mm", m->build_height_mm);
-}
-
-void
-cmd_print_metrics(const char *label, const struct support_metrics *m)
-{
-    printf("  %-8s risky faces %7u (%8.0f mm2), support %9.0f mm3, contact %7.0f mm2, "
-           "%u anchors, height %.1f mm\n",
-           label, m->n_risky, m->risky_area_mm2, m->volume_mm3, m->contact_area_mm2, m->n_anchors,
-           m->build_height_mm);
-}
-
-void
-cmd_print_curve(const uint32_t *curve, int n)
-{
-    printf("  risky faces per iteration:");
-    for (int i = 0; i < n; i++)
-        printf("%s%u", i % 16 ? " " : "\n   ", curve[i]);
-    printf("\n");
-}
-
-json_t *
-cmd_curve_json(const uint32_t *curve, int n)
-{
-    json_t *a = json_array();
-    for (int i = 0; a && i < n; i++)
-        json_array_append_new(a, json_integer(curve[i]));
-    return a;
-}
-
-int
-cmd_put_json(const char *cmd, json_t *o)
-{
-    char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(8)) : NULL;
-    json_decref(o);
-    if (!text) {
-        fprintf(stderr, "slimfarm %s: out of memory\n", cmd);
-        return 1;
-    }
-    puts(text);
-    free(text);
-    return 0;
-}
-
-bool
-cmd_stdout_is_tty(void)
-{
-    return isatty(STDOUT_FILENO);
-}
-
-void
-cmd_progress(const char *label, double done, double total)
-{
-    if (!isatty(STDERR_FILENO) || total <= 0)
-        return;
-    double f = done / total;
-    if (f > 1)
-        f = 1;
-    char bar[31];
-    int fill = (int)(f * 30);
-    for (int i = 0; i < 30; i++)
-        bar[i] = i < fill ? '#' : '.';
-    bar[30] = '\0';
-    fprintf(stderr, "\r%-12s [%s] %3d%%%s", label, bar, (int)(f * 100), f >= 1 ? "\n" : "");
-    fflush(stderr);
-}
-
-static int
-cmp_cmd(const void *a, const void *b)
-{
-    return strcmp((*(const struct cmd *const *)a)->name, (*(const struct cmd *const *)b)->name);
 }
 
 static void
 usage(FILE *f)
 {
     fprintf(f, "usage: slimfarm COMMAND [ARGS]\n\ncommands:\n");
-    for (int i = 0; i < n_cmds; i++)
-        fprintf(f, "  %-10s %s\n", cmds[i]->name, cmds[i]->summary);
+    for (int i = 0; i < N_COMMANDS; i++)
+        fprintf(f, "  %-10s %s\n", commands[i].name, commands[i].summary);
     fprintf(f, "\n'slimfarm help COMMAND' shows a command's usage.\n");
+}
+
+/* Run libexec/slimfarm/slimfarm-MODULE beside our bin/ with argv[1..]; returns only on failure. */
+static int
+run(const struct entry *e, char **argv)
+{
+    char self[PATH_MAX], path[PATH_MAX + 64], name[64];
+    ssize_t n = readlink("/proc/self/exe", self, sizeof(self) - 1);
+    char *slash = n > 0 ? memrchr(self, '/', (size_t)n) : NULL;
+    if (!slash) {
+        fprintf(stderr, "slimfarm: cannot find where this program is installed: %s\n",
+                n < 0 ? strerror(errno) : "no directory in /proc/self/exe");
+        return 1;
+    }
+    *slash = '\0';
+    snprintf(name, sizeof(name), "slimfarm-%s", e->module);
+    snprintf(path, sizeof(path), "%s/../libexec/slimfarm/%s", self, name);
+    argv[0] = name;
+    execv(path, argv);
+    fprintf(stderr, "slimfarm %s: cannot run %s: %s\n", e->name, path, strerror(errno));
+    return 1;
 }
 
 int
 main(int argc, char **argv)
 {
-    qsort(cmds, (size_t)n_cmds, sizeof(cmds[0]), cmp_cmd);
     if (argc < 2 || strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0) {
         usage(argc < 2 ? stderr : stdout);
         return argc < 2 ? 2 : 0;
@@ -198,20 +78,19 @@ main(int argc, char **argv)
             usage(stdout);
             return 0;
         }
-        for (int i = 0; i < n_cmds; i++) {
-            if (strcmp(cmds[i]->name, argv[2]) == 0) {
-                printf("usage: slimfarm %s\n%s\n", cmds[i]->usage, cmds[i]->summary);
-                return 0;
-            }
+        const struct entry *e = lookup(argv[2]);
+        if (!e) {
+            fprintf(stderr, "slimfarm: unknown command '%s'\n", argv[2]);
+            return 2;
         }
-        fprintf(stderr, "slimfarm: unknown command '%s'\n", argv[2]);
+        printf("usage: slimfarm %s\n%s\n", e->usage, e->summary);
+        return 0;
+    }
+    const struct entry *e = lookup(argv[1]);
+    if (!e) {
+        fprintf(stderr, "slimfarm: unknown command '%s'\n", argv[1]);
+        usage(stderr);
         return 2;
     }
-    for (int i = 0; i < n_cmds; i++) {
-        if (strcmp(cmds[i]->name, argv[1]) == 0)
-            return cmds[i]->run(argc - 1, argv + 1);
-    }
-    fprintf(stderr, "slimfarm: unknown command '%s'\n", argv[1]);
-    usage(stderr);
-    return 2;
+    return run(e, argv);
 }

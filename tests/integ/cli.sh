@@ -37,5 +37,22 @@ grep -q "M104 S2[0-9][0-9]" "$work/t.gcode" 2>/dev/null || { echo "   FAIL: no n
 out=$(cd "$work" && SLIMFARM_CONFIG="$repo/config" "$bin" estimate t.gcode --printer prusa-mk3s --material petg 2>&1) ||
   { echo "   FAIL: estimate by profile name: $out"; fails=$((fails + 1)); }
 grep -qE "^t.gcode: [0-9]+ layers" <<<"$out" || { echo "   FAIL: estimate output: $out"; fails=$((fails + 1)); }
+# the front door: help comes from every command program's table; each program
+# is found beside bin/ wherever the pair is installed, and loads only its own
+# libraries (the reason for the split: start-up time)
+out=$("$bin" help 2>&1)
+for c in orient optimize slice submit watch ports preview; do
+  grep -qE "^  $c +[a-z]" <<<"$out" || { echo "   FAIL: 'slimfarm help' lacks $c"; fails=$((fails + 1)); }
+done
+"$bin" help submit | grep -q "^usage: slimfarm submit PART" || { echo "   FAIL: help submit"; fails=$((fails + 1)); }
+mkdir -p "$work/prefix/bin" "$work/prefix/libexec/slimfarm"
+cp "$bin" "$work/prefix/bin/"
+cp "$(dirname "$bin")/../libexec/slimfarm/slimfarm-shapes" "$work/prefix/libexec/slimfarm/"
+"$work/prefix/bin/slimfarm" shapes "$work/moved" >/dev/null && [ -s "$work/moved/tee.stl" ] ||
+  { echo "   FAIL: shapes through a moved install"; fails=$((fails + 1)); }
+expect 1 "slimfarm orient: cannot run .*/libexec/slimfarm/slimfarm-orient" "$work/prefix/bin/slimfarm" orient "$tee" -o "$work/o.stl"
+libs=$(ldd "$bin"; ldd "$(dirname "$bin")/../libexec/slimfarm/slimfarm-orient")
+grep -qE "libcurl|libcairo|libcholmod|libsqlite" <<<"$libs" &&
+  { echo "   FAIL: slimfarm or slimfarm-orient loads libraries orient does not use"; fails=$((fails + 1)); }
 [ "$fails" -eq 0 ] && echo "   CLI errors and profile lookup as documented"
 [ "$fails" -eq 0 ]
