@@ -797,6 +797,8 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
         res->before = d->before;
         res->after = d->after;
         res->dev = d->dev;
+        res->part_volume_in_mm3 = mesh_volume(&d->in, NULL);
+        res->part_volume_out_mm3 = mesh_volume(&res->out, NULL);
         memcpy(res->curve, d->curve, sizeof(res->curve));
         res->n_curve = d->n_curve;
         res->best_iter = d->best_iter;
