@@ -68,14 +68,15 @@ grams() {
 ours() { "$build/bin/slimfarm" slice "$1" -o "$work/ours.gcode" --set max_overhang="$2" 2>&1 |
   sed -n 's/.*(support \([0-9.]*\) g).*/\1/p'; }
 echo "peer yaws: $yaws"
-echo "| mesh | alpha | risky before -> after | MNDR % | ANDR % | support mm3 before -> after | PS support g before -> after | CE support g before -> after | ours support g before -> after | s |"
-echo "|---|---|---|---|---|---|---|---|---|---|"
+echo "| mesh | alpha | risky before -> after | MNDR % | ANDR % | part volume % | support mm3 before -> after | PS support g before -> after | CE support g before -> after | ours support g before -> after | s |"
+echo "|---|---|---|---|---|---|---|---|---|---|---|"
 for name in ${SLIM_MESHES:-dino cow elephant}; do
   for angle in 0 45; do
     in=../shared/meshes/$name.stl out="$work/$name-$angle.stl"
     js=$("$build/bin/slimfarm" optimize "$in" -o "$out" --method volumetric --angle "$angle" --json) || { echo "| $name | $angle | failed |"; continue; }
     row=$(python3 -c 'import json,sys; j=json.loads(sys.argv[1]); b,a,d=j["before"],j["after"],j["deviation"]
-print("%d -> %d | %.1f | %.1f | %.0f -> %.0f | %.1f" % (b["risky_faces"], a["risky_faces"], 100*d["mndr"], 100*d["andr"], b["support_volume_mm3"], a["support_volume_mm3"], j["seconds"]))' "$js")
+v=j["part_volume_mm3"]
+print("%d -> %d | %.1f | %.1f | %+.1f | %.0f -> %.0f | %.1f" % (b["risky_faces"], a["risky_faces"], 100*d["mndr"], 100*d["andr"], 100*(v["after"]/v["before"]-1), b["support_volume_mm3"], a["support_volume_mm3"], j["seconds"]))' "$js")
     g0=$(grams "$in" "$angle" prusaslicer) g1=$(grams "$out" "$angle" prusaslicer)
     c0=$(grams "$in" "$angle" curaengine) c1=$(grams "$out" "$angle" curaengine)
     o0=$(ours "$in" "$angle") o1=$(ours "$out" "$angle")
