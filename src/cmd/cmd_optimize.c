@@ -58,12 +58,14 @@ report_json(const char *in, const char *out, const struct slim_params *p,
                             r->rotation.m[1][2], r->rotation.m[2][0], r->rotation.m[2][1],
                             r->rotation.m[2][2]);
     json_t *o = json_pack(
-        "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:i, s:i, s:f, s:i, s:o, "
+        "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:{s:f, s:f}, s:i, s:i, s:f, "
+        "s:i, s:o, "
         "s:{s:i, s:i, s:i}, s:{s:i, s:i, s:i}, s:f, s:f}",
         "file", in, "output", out, "method", "volumetric", "angle_deg", p->angle_deg, "before",
         cmd_metrics_json(&r->before), "after", cmd_metrics_json(&r->after), "risky_per_iteration",
         cmd_curve_json(r->curve, r->n_curve), "deviation", "mndr", r->dev.mndr, "andr", r->dev.andr,
-        "max_mm", r->dev.max_mm, "mean_mm", r->dev.mean_mm, "best_iteration",
+        "max_mm", r->dev.max_mm, "mean_mm", r->dev.mean_mm, "part_volume_mm3", "before",
+        r->part_volume_in_mm3, "after", r->part_volume_out_mm3, "best_iteration",
         (json_int_t)r->best_iter, "beta_rounds", (json_int_t)r->n_runs, "beta_deg", r->beta_deg,
         "directions", (json_int_t)r->n_dirs, "rotation", rot, "tet_mesh", "vertices",
         (json_int_t)r->tet_verts, "tets", (json_int_t)r->tet_tets, "part_vertices_outside",
@@ -84,6 +86,10 @@ report_text(const char *in, const char *out, const struct slim_result *r)
     cmd_print_metrics("after", &r->after);
     printf("  deviation MNDR %.2f %% ANDR %.2f %% (max %.2f mm, mean %.2f mm)\n", 100 * r->dev.mndr,
            100 * r->dev.andr, r->dev.max_mm, r->dev.mean_mm);
+    printf("  part volume %.0f -> %.0f mm3 (%+.1f %%)\n", r->part_volume_in_mm3,
+           r->part_volume_out_mm3,
+           r->part_volume_in_mm3 > 0 ? 100 * (r->part_volume_out_mm3 / r->part_volume_in_mm3 - 1)
+                                     : 0.0);
     printf("  kept iteration %d (beta %.0f deg, %d round%s); rejected %u; inverted tets %u; "
            "self-intersecting edges %d -> %d\n",
            r->best_iter, r->beta_deg, r->n_runs, r->n_runs == 1 ? "" : "s", r->n_rejected,

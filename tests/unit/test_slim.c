@@ -207,6 +207,8 @@ T_CASE(cube_is_unchanged)
     T_TRUE(memcmp(r.out.v, m.v, sizeof(*m.v) * m.n_verts) == 0);
     T_EQ_INT(r.after.n_risky, 0);
     T_EQ_DBL(r.dev.mndr, 0, 0);
+    T_EQ_DBL(r.part_volume_in_mm3, 8000, 1e-6);
+    T_EQ_DBL(r.part_volume_out_mm3, 8000, 1e-6);
     slim_result_release(&r);
     mesh_release(&m);
 }
@@ -270,6 +272,11 @@ T_CASE(tee_at_45_degrees_stays_within_the_limits)
     tip_heights(&m, &r.out, &left, &right);
     T_TRUE(left >= 30 - 1e-9 && right >= 30 - 1e-9); /* nothing sagged */
     T_TRUE(r.selfx_out <= r.selfx_input);
+    /* the volumes reported are the input's and the result's; ARAP does not keep it */
+    T_TRUE(r.best_iter > 0);
+    T_EQ_DBL(r.part_volume_in_mm3, mesh_volume(&m, NULL), 1e-6);
+    T_EQ_DBL(r.part_volume_out_mm3, mesh_volume(&r.out, NULL), 1e-6);
+    T_TRUE(fabs(r.part_volume_out_mm3 - r.part_volume_in_mm3) > 1e-3 * r.part_volume_in_mm3);
     slim_result_release(&r);
     mesh_release(&m);
 }
