@@ -110,8 +110,6 @@ struct collector {
 struct hit_context {
     struct RTCIntersectContext ctx; /* must be first: Embree hands us this pointer */
     struct collector *col;
-    const struct raycast *rc;
-    struct vec3 up;
 };
 
 /* Embree's RTCRayN/RTCHitN accessors are C++-only; these follow its SOA layout
@@ -159,12 +157,11 @@ collect_filter(const struct RTCFilterFunctionNArguments *args)
             c->ray = r;
             c->cap = cap;
         }
-        uint32_t prim = hitn_prim(args->hit, args->N, i);
-        const float *n = hc->rc->normal + 3 * (size_t)prim;
+        /* cos_up is filled in when the row is bucketed: the normal's load missed
+           the cache here, inside the traversal (perf: 83 % of this filter) */
         struct ray_hit *h = &c->hits[c->n];
         h->h = rayn_tfar(args->ray, args->N, i);
-        h->tri = prim;
-        h->cos_up = (float)(n[0] * hc->up.x + n[1] * hc->up.y + n[2] * hc->up.z);
+        h->tri = hitn_prim(args->hit, args->N, i);
         c->ray[c->n] = rayn_id(args->ray, args->N, i);
         c->n++;
     }
@@ -335,8 +332,6 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
     rtcInitIntersectContext(&hc.ctx);
     hc.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
     hc.col = &col;
-    hc.rc = rc;
-    hc.up = g->up;
     g->first[0] = 0;
     for (uint32_t j = 0; j < g->nw; j++) {
         double wc = g->w0 + j * pitch;
@@ -377,8 +372,12 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
         }
         g->hits = hp;
         struct ray_hit *row = g->hits + base;
-        for (size_t k = 0; k < col.n; k++)
-            row[count[col.ray[k]]++] = col.hits[k];
+        for (size_t k = 0; k < col.n; k++) {
+            struct ray_hit h = col.hits[k];
+            const float *n = rc->normal + 3 * (size_t)h.tri;
+            h.cos_up = (float)(n[0] * g->up.x + n[1] * g->up.y + n[2] * g->up.z);
+            row[count[col.ray[k]]++] = h;
+        }
         /* count[i] is now the end of bucket i; walk buckets in order */
         size_t out_n = base, bstart = 0;
         for (uint32_t i = 0; i < g->nu; i++) {
