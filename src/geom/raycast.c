@@ -318,8 +318,13 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
 
     size_t cells = (size_t)g->nu * g->nw;
     g->first = mem_array(cells + 1, sizeof(uint32_t));
-    struct RTCRayHit *rays = mem_array(g->nu, sizeof(struct RTCRayHit));
-    uint32_t *count = mem_array((size_t)g->nu + 1, sizeof(uint32_t));
+    /* Rays go to Embree BAND rows at a time, in TILE x BAND tiles: Embree cuts a
+       coherent stream into packets of consecutive rays, and a square packet's
+       frustum is tighter than a line's (callgrind: see the commit). */
+    enum { BAND = 4, TILE = 4 };
+    size_t band_rays = (size_t)g->nu * BAND;
+    struct RTCRayHit *rays = mem_array(band_rays, sizeof(struct RTCRayHit));
+    uint32_t *count = mem_array(band_rays + 1, sizeof(uint32_t));
     struct collector col = { 0 };
     size_t cap_hits = 0;
     int rc_out = SF_OK;
@@ -328,41 +333,47 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
         goto out;
     }
     double start = dlo - 1.0; /* rays start 1 mm below the part */
+    float eps = (float)(1e-5 * (dhi - dlo + 1));
     struct hit_context hc;
     rtcInitIntersectContext(&hc.ctx);
     hc.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
     hc.col = &col;
     g->first[0] = 0;
-    for (uint32_t j = 0; j < g->nw; j++) {
-        double wc = g->w0 + j * pitch;
-        for (uint32_t i = 0; i < g->nu; i++) {
-            struct vec3 o = v3_add(v3_add(v3_scale(g->u, g->u0 + i * pitch), v3_scale(g->w, wc)),
-                                   v3_scale(g->up, start));
-            struct RTCRayHit *r = &rays[i];
-            memset(r, 0, sizeof(*r));
-            r->ray.org_x = (float)o.x;
-            r->ray.org_y = (float)o.y;
-            r->ray.org_z = (float)o.z;
-            r->ray.dir_x = (float)g->up.x;
-            r->ray.dir_y = (float)g->up.y;
-            r->ray.dir_z = (float)g->up.z;
-            r->ray.tnear = 0;
-            r->ray.tfar = INFINITY;
-            r->ray.mask = UINT32_MAX;
-            r->ray.id = i;
-            r->hit.geomID = RTC_INVALID_GEOMETRY_ID;
-        }
+    for (uint32_t j0 = 0; j0 < g->nw; j0 += BAND) {
+        uint32_t rows = g->nw - j0 < BAND ? g->nw - j0 : BAND;
+        size_t n_rays = 0;
+        for (uint32_t i0 = 0; i0 < g->nu; i0 += TILE)
+            for (uint32_t r = 0; r < rows; r++)
+                for (uint32_t i = i0; i < i0 + TILE && i < g->nu; i++) {
+                    double wc = g->w0 + (j0 + r) * pitch;
+                    struct vec3 o =
+                        v3_add(v3_add(v3_scale(g->u, g->u0 + i * pitch), v3_scale(g->w, wc)),
+                               v3_scale(g->up, start));
+                    struct RTCRayHit *ray = &rays[n_rays++];
+                    memset(ray, 0, sizeof(*ray));
+                    ray->ray.org_x = (float)o.x;
+                    ray->ray.org_y = (float)o.y;
+                    ray->ray.org_z = (float)o.z;
+                    ray->ray.dir_x = (float)g->up.x;
+                    ray->ray.dir_y = (float)g->up.y;
+                    ray->ray.dir_z = (float)g->up.z;
+                    ray->ray.tnear = 0;
+                    ray->ray.tfar = INFINITY;
+                    ray->ray.mask = UINT32_MAX;
+                    ray->ray.id = r * g->nu + i; /* the cell, counted from the band's first */
+                    ray->hit.geomID = RTC_INVALID_GEOMETRY_ID;
+                }
         col.n = 0;
-        rtcIntersect1M(rc->scene, &hc.ctx, rays, g->nu, sizeof(struct RTCRayHit));
+        rtcIntersect1M(rc->scene, &hc.ctx, rays, (unsigned)n_rays, sizeof(struct RTCRayHit));
         if (col.oom) {
             rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
             goto out;
         }
-        /* bucket the row's hits by cell, then sort and dedupe each bucket */
-        memset(count, 0, sizeof(uint32_t) * (g->nu + 1));
+        /* bucket the band's hits by cell, then sort and dedupe each bucket */
+        memset(count, 0, sizeof(uint32_t) * (n_rays + 1));
         for (size_t k = 0; k < col.n; k++)
             count[col.ray[k] + 1]++;
-        for (uint32_t i = 0; i < g->nu; i++)
+        for (size_t i = 0; i < n_rays; i++)
             count[i + 1] += count[i];
         size_t base = g->n_hits;
         void *hp = g->hits;
@@ -371,36 +382,32 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
             goto out;
         }
         g->hits = hp;
-        struct ray_hit *row = g->hits + base;
+        struct ray_hit *band = g->hits + base;
         for (size_t k = 0; k < col.n; k++) {
             struct ray_hit h = col.hits[k];
             const float *n = rc->normal + 3 * (size_t)h.tri;
             h.cos_up = (float)(n[0] * g->up.x + n[1] * g->up.y + n[2] * g->up.z);
-            row[count[col.ray[k]]++] = h;
+            band[count[col.ray[k]]++] = h;
         }
-        /* count[i] is now the end of bucket i; walk buckets in order */
-        size_t out_n = base, bstart = 0;
-        for (uint32_t i = 0; i < g->nu; i++) {
-            size_t bend = count[i];
-            struct ray_hit *b = row + bstart;
+        /* count[c] is now the end of bucket c; walk the cells in grid order */
+        size_t out_n = base, bstart = 0, cell0 = (size_t)j0 * g->nu;
+        for (size_t c = 0; c < n_rays; c++) {
+            size_t bend = count[c];
+            struct ray_hit *b = band + bstart;
             size_t bn = bend - bstart;
             sort_hits(b, bn);
-            float eps = (float)(1e-5 * (dhi - dlo + 1));
             for (size_t k = 0; k < bn; k++) {
                 struct ray_hit h = b[k];
                 h.h = (float)(h.h - 1.0); /* from the ray start to the bed */
-                if (out_n > g->first[ray_grid_cell(g, i, j)] &&
-                    fabsf(g->hits[out_n - 1].h - h.h) < eps &&
+                if (out_n > g->first[cell0 + c] && fabsf(g->hits[out_n - 1].h - h.h) < eps &&
                     (g->hits[out_n - 1].cos_up < 0) == (h.cos_up < 0))
                     continue; /* the same crossing seen through a shared edge */
                 g->hits[out_n++] = h;
             }
-            g->first[ray_grid_cell(g, i, j) + 1] = (uint32_t)out_n;
+            g->first[cell0 + c + 1] = (uint32_t)out_n;
             bstart = bend;
         }
         g->n_hits = out_n;
-        if (j + 1 < g->nw)
-            g->first[ray_grid_cell(g, 0, j + 1)] = (uint32_t)out_n;
     }
 out:
     free(rays);
