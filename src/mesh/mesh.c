@@ -270,8 +270,10 @@ weld_exact(struct mesh *m, uint32_t *remap)
     return SF_OK;
 }
 
-int
-mesh_weld(struct mesh *m, double tol, struct sf_err *err)
+/* mesh_weld; distinct says no two vertices are bit-identical already (the
+   binary STL parser merged them), so the exact pass is skipped. */
+static int
+weld(struct mesh *m, double tol, bool distinct, struct sf_err *err)
 {
     if (m->n_verts == 0)
         return 0;
@@ -279,7 +281,10 @@ mesh_weld(struct mesh *m, double tol, struct sf_err *err)
         tol = 1e-9;
     uint32_t n_in = m->n_verts;
     uint32_t *exact = mem_array(n_in, sizeof(uint32_t));
-    if (!exact || weld_exact(m, exact) != SF_OK) {
+    if (exact && distinct) {
+        for (uint32_t i = 0; i < n_in; i++)
+            exact[i] = i;
+    } else if (!exact || weld_exact(m, exact) != SF_OK) {
         free(exact);
         return sf_err_set(err, SF_ENOMEM, "out of memory welding %u vertices", n_in);
     }
@@ -362,6 +367,12 @@ out_free:
     return rc;
 }
 
+int
+mesh_weld(struct mesh *m, double tol, struct sf_err *err)
+{
+    return weld(m, tol, false, err);
+}
+
 uint32_t
 mesh_drop_degenerate(struct mesh *m)
 {
@@ -380,9 +391,27 @@ mesh_drop_degenerate(struct mesh *m)
     return dropped;
 }
 
+/* Are the vertices already numbered in order of first use, every one used?
+   (Then mesh_compact has nothing to do: the STL loader numbers them so.) */
+static bool
+compact_already(const struct mesh *m)
+{
+    uint32_t next = 0; /* vertices met so far */
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        for (int k = 0; k < 3; k++) {
+            uint32_t v = m->t[i][k];
+            if (v > next)
+                return false;
+            next += v == next;
+        }
+    return next == m->n_verts;
+}
+
 void
 mesh_compact(struct mesh *m)
 {
+    if (compact_already(m))
+        return;
     uint32_t *map = mem_array(m->n_verts ? m->n_verts : 1, sizeof(uint32_t));
     struct vec3 *v = mem_array(m->n_verts ? m->n_verts : 1, sizeof(struct vec3));
     if (!map || !v) {
@@ -734,7 +763,7 @@ mesh_load_mem(const void *data, size_t len, const char *name, struct mesh *m,
         return sf_err_set(err, SF_EINVAL, "'%s': no triangles", name);
     }
     double tol = 1e-6 * mesh_diag(m);
-    rc = mesh_weld(m, tol, err);
+    rc = weld(m, tol, info->format == MESH_FMT_STL_BINARY, err);
     if (rc < 0)
         goto fail;
     info->n_merged = parse_merged + (uint32_t)rc;

@@ -431,6 +431,37 @@ T_CASE(two_shells_are_two_components)
     mesh_release(&m);
 }
 
+/* Edges met from both directions and by three triangles: one scan of the
+   smaller vertex's list must see every user, whichever way it runs. */
+T_CASE(topology_counts_every_user_of_an_edge)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    /* 0-1 is shared by three triangles (two one way, one the other); 1-2 by
+       two running the same way (misoriented); 3 is repeated in the last */
+    static const uint32_t tris[][3] = {
+        { 0, 1, 2 }, { 1, 0, 3 }, { 0, 1, 4 }, { 1, 2, 5 }, { 3, 3, 5 }
+    };
+    T_OK(mesh_alloc(&m, 6, 5, &err), &err);
+    for (uint32_t i = 0; i < 6; i++)
+        m.v[i] = v3(i, i * i, 1);
+    memcpy(m.t, tris, sizeof(tris));
+    struct mesh_topo topo;
+    T_OK(mesh_topo_build(&m, &topo, &err), &err);
+    T_EQ_INT(topo.n_edges, 11);
+    T_EQ_INT(topo.n_nonmanifold, 1);       /* 0-1 */
+    T_EQ_INT(topo.n_misoriented, 1);       /* 1-2 */
+    T_EQ_INT(topo.n_boundary, 7);          /* 2-0 0-3 3-1 1-4 4-0 2-5 5-1; 3-5 and 5-3 pair */
+    T_EQ_INT(topo.adj[0][0], MESH_NO_TRI); /* 0-1: three users */
+    T_EQ_INT(topo.adj[0][1], 3);           /* 1-2, with triangle 3 */
+    T_EQ_INT(topo.adj[3][0], 0);
+    T_EQ_INT(topo.adj[4][1], 4); /* 3-5 meets 5-3 of the same triangle */
+    T_EQ_INT(topo.adj[4][2], 4);
+    mesh_topo_release(&topo);
+    mesh_release(&m);
+}
+
 T_CASE(shared_meshes_load)
 {
     static const char *names[] = { "anchor.stl",  "armadillo.stl",        "bull.stl",
