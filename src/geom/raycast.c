@@ -259,15 +259,18 @@ perpendicular(struct vec3 d)
     return v3_normalize(v3_sub(a, v3_scale(d, v3_dot(a, d))));
 }
 
-/* Sort one ray's hits by height: a handful each, so insertion sort (qsort's
-   merge sort with its indirect calls cost more than the sorting). */
+/* Sort one ray's hits by height, equal heights by triangle, so the order
+   (and which of two hits through a shared edge the dedupe keeps) does not
+   depend on the order Embree reported them in: a handful each, so insertion
+   sort (qsort's merge sort with its indirect calls cost more than the
+   sorting). */
 static void
 sort_hits(struct ray_hit *b, size_t n)
 {
     for (size_t i = 1; i < n; i++) {
         struct ray_hit x = b[i];
         size_t k = i;
-        while (k > 0 && b[k - 1].h > x.h) {
+        while (k > 0 && (b[k - 1].h > x.h || (b[k - 1].h == x.h && b[k - 1].tri > x.tri))) {
             b[k] = b[k - 1];
             k--;
         }
