@@ -7,10 +7,13 @@
  */
 #include "mem.h"
 
+#include <malloc.h>
 #include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
+#include <unistd.h>
 
 static atomic_long fail_at = -1; /* -1: env not read yet; 0: off */
 static atomic_long alloc_count;
@@ -117,4 +120,24 @@ long
 mem_alloc_count(void)
 {
     return atomic_exchange(&alloc_count, 0);
+}
+
+void
+mem_batch_mode(size_t heap_mb)
+{
+    const uintptr_t huge = 2u << 20;
+    size_t pad = heap_mb << 20;
+    mallopt(M_MMAP_THRESHOLD, 256 << 20); /* glibc's largest; blocks above it are mmapped */
+    mallopt(M_TRIM_THRESHOLD, INT32_MAX);
+    mallopt(M_TOP_PAD, pad > INT32_MAX ? INT32_MAX : (int)pad);
+    mallopt(M_ARENA_MAX, 1); /* threads' arenas would be fresh, unadvised mappings */
+    /* Grow the heap now, by the pad, and advise the whole of it.  (The heap is
+       one mapping grown by brk; a later growth would not inherit the advice.) */
+    char *lo = sbrk(0);
+    void *volatile probe = malloc(1 << 20); /* volatile: the pair is not optimised out */
+    free(probe);
+    char *hi = sbrk(0);
+    uintptr_t start = ((uintptr_t)lo + huge - 1) & ~(huge - 1);
+    if (lo != (char *)-1 && hi != (char *)-1 && (uintptr_t)hi > start + huge)
+        madvise((void *)start, (uintptr_t)hi - start, MADV_HUGEPAGE);
 }

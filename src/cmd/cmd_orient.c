@@ -10,6 +10,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "../base/mem.h"
 #include "../geom/orient.h"
 #include "cmd.h"
 
@@ -114,6 +115,9 @@ run(int argc, char **argv)
         fprintf(stderr, "usage: slimfarm %s\n", usage_line);
         return 2;
     }
+    /* A short-lived process: reuse freed memory, back the heap with huge pages
+       (each 4 KB first touch is a page fault of 14-24 us on the farm's VMs) */
+    mem_batch_mode(64);
     struct mesh m;
     struct sf_err err;
     struct orient_result r;

@@ -140,24 +140,137 @@ worker(void *arg)
     return NULL;
 }
 
+/*
+ * The helper threads live for the whole search: the first builds the Embree
+ * scene while the caller computes the hull, the proxy cache and the proxy
+ * stage (which need no scene), then every helper joins each stage the caller
+ * posts.  Creating threads per stage cost a stack's page faults each time,
+ * and building the scene first left the other core idle.
+ */
+struct pool {
+    pthread_mutex_t lock;
+    pthread_cond_t posted; /* a stage was posted, or the pool is closing */
+    pthread_cond_t idle;   /* a helper left a stage, or the scene is built */
+    struct job *j;
+    unsigned gen;    /* number of the stage posted last */
+    bool open;       /* helpers may still join stage gen */
+    unsigned active; /* helpers working on stage gen */
+    bool quit;
+    pthread_t tid[64];
+    int n_tid;
+    /* the scene, built by the first helper */
+    const struct mesh *m;
+    struct raycast *rc;
+    bool scene_done;
+    struct sf_err scene_err;
+};
+
+static void *
+helper(void *arg)
+{
+    struct pool *pl = arg;
+    pthread_mutex_lock(&pl->lock);
+    if (!pl->scene_done && pl->n_tid > 0 && pthread_equal(pl->tid[0], pthread_self())) {
+        pthread_mutex_unlock(&pl->lock);
+        struct raycast *rc = raycast_new(pl->m, &pl->scene_err);
+        pthread_mutex_lock(&pl->lock);
+        pl->rc = rc;
+        pl->scene_done = true;
+        pthread_cond_broadcast(&pl->idle);
+    }
+    unsigned seen = 0; /* join any stage still open, even one posted during the build */
+    for (;;) {
+        while (!pl->quit && (pl->gen == seen || !pl->open))
+            pthread_cond_wait(&pl->posted, &pl->lock);
+        if (pl->quit)
+            break;
+        seen = pl->gen;
+        pl->active++;
+        struct job *j = pl->j;
+        pthread_mutex_unlock(&pl->lock);
+        worker(j);
+        pthread_mutex_lock(&pl->lock);
+        pl->active--;
+        pthread_cond_broadcast(&pl->idle);
+    }
+    pthread_mutex_unlock(&pl->lock);
+    return NULL;
+}
+
+/* Start threads - 1 helpers; with none (one thread, or none could start) the
+   caller builds the scene itself in pool_scene. */
+static void
+pool_start(struct pool *pl, const struct mesh *m, int threads)
+{
+    memset(pl, 0, sizeof(*pl));
+    pthread_mutex_init(&pl->lock, NULL);
+    pthread_cond_init(&pl->posted, NULL);
+    pthread_cond_init(&pl->idle, NULL);
+    pl->m = m;
+    pthread_mutex_lock(&pl->lock); /* helpers read n_tid and tid[0] under the lock */
+    for (int i = 1; i < threads && i < 64; i++)
+        if (pthread_create(&pl->tid[pl->n_tid], NULL, helper, pl) == 0)
+            pl->n_tid++;
+    pthread_mutex_unlock(&pl->lock);
+}
+
+/* The scene, once built (by the first helper, or here if there is none). */
+static struct raycast *
+pool_scene(struct pool *pl, struct sf_err *err)
+{
+    pthread_mutex_lock(&pl->lock);
+    if (pl->n_tid == 0 && !pl->scene_done) {
+        pthread_mutex_unlock(&pl->lock);
+        pl->rc = raycast_new(pl->m, &pl->scene_err);
+        pthread_mutex_lock(&pl->lock);
+        pl->scene_done = true;
+    }
+    while (!pl->scene_done)
+        pthread_cond_wait(&pl->idle, &pl->lock);
+    pthread_mutex_unlock(&pl->lock);
+    if (!pl->rc && err)
+        *err = pl->scene_err;
+    return pl->rc;
+}
+
+/* Stop the helpers (waiting for the scene build to end) and free the scene. */
+static void
+pool_finish(struct pool *pl)
+{
+    pthread_mutex_lock(&pl->lock);
+    pl->quit = true;
+    pthread_cond_broadcast(&pl->posted);
+    pthread_mutex_unlock(&pl->lock);
+    for (int i = 0; i < pl->n_tid; i++)
+        pthread_join(pl->tid[i], NULL);
+    raycast_free(pl->rc);
+    pthread_mutex_destroy(&pl->lock);
+    pthread_cond_destroy(&pl->posted);
+    pthread_cond_destroy(&pl->idle);
+}
+
 static int
-run_stage(struct job *j, int stage, const uint32_t *todo, uint32_t n, struct sf_err *err)
+run_stage(struct pool *pl, struct job *j, int stage, const uint32_t *todo, uint32_t n,
+          struct sf_err *err)
 {
     j->stage = stage;
     j->todo = todo;
     j->n_todo = n;
     atomic_store(&j->next, 0);
     atomic_store(&j->failed, 0);
-    int threads = j->p->threads > 0 ? j->p->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
-    threads = threads < 1 ? 1 : threads > 64 ? 64 : threads;
-    pthread_t tid[64];
-    int started = 0;
-    for (int i = 1; i < threads && (uint32_t)i < n; i++)
-        if (pthread_create(&tid[started], NULL, worker, j) == 0)
-            started++;
+    pthread_mutex_lock(&pl->lock);
+    pl->j = j;
+    pl->gen++;
+    pl->open = true;
+    pthread_cond_broadcast(&pl->posted);
+    pthread_mutex_unlock(&pl->lock);
     worker(j);
-    for (int i = 0; i < started; i++)
-        pthread_join(tid[i], NULL);
+    /* no helper may join once the caller is done; wait for those that did */
+    pthread_mutex_lock(&pl->lock);
+    pl->open = false;
+    while (pl->active > 0)
+        pthread_cond_wait(&pl->idle, &pl->lock);
+    pthread_mutex_unlock(&pl->lock);
     int f = atomic_load(&j->failed);
     if (f)
         return sf_err_set(err, f, "orientation: scoring a direction failed");
@@ -243,14 +356,17 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     uint32_t n_bases = 0;
     struct raycast *rc = NULL;
     struct proxy_cache pc = { 0 };
+    struct pool pl;
     atomic_uint done = 0;
     int rcode = SF_OK;
 
+    int threads = p->threads > 0 ? p->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
+    pool_start(&pl, m, threads < 1 ? 1 : threads);
     struct vec3 com;
     mesh_volume(m, &com);
     uint32_t *hull_verts = NULL, n_hull_verts = 0;
     if ((rcode = hull_bases(m, com, &bases, &n_bases, &hull_verts, &n_hull_verts, err)))
-        return rcode;
+        goto out;
     if ((rcode = push(&cands, &n, &cap, v3(0, 0, 1), ORIENT_INPUT)))
         goto oom;
     for (uint32_t i = 0; i < n_bases; i++)
@@ -269,15 +385,11 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     order = mem_array(n + REFINE_SEEDS * REFINE_PER, sizeof(uint32_t));
     if (!order)
         goto oom;
-    if ((rcode = proxy_cache_init(&pc, m, hull_verts, n_hull_verts, err)) ||
-        !(rc = raycast_new(m, err)) ||
-        (rcode = raycast_set_extreme(rc, hull_verts, n_hull_verts, err))) {
-        rcode = rcode ? rcode : (err ? err->code : SF_ENOMEM);
+    if ((rcode = proxy_cache_init(&pc, m, hull_verts, n_hull_verts, err)))
         goto out;
-    }
     res->seconds_setup = elapsed(&t0);
 
-    struct job j = { .m = m, .p = p, .pc = &pc, .rc = rc, .cands = cands, .done = &done };
+    struct job j = { .m = m, .p = p, .pc = &pc, .cands = cands, .done = &done };
     support_params_default(&j.sp);
     j.sp.angle_deg = fmax(0, p->angle_deg - p->margin_deg);
     j.sp.pitch_mm = p->pitch_mm;
@@ -288,10 +400,16 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     /* stage 0: proxy for every direction */
     for (uint32_t i = 0; i < n; i++)
         order[i] = i;
-    if ((rcode = run_stage(&j, 0, order, n, err)))
+    if ((rcode = run_stage(&pl, &j, 0, order, n, err)))
         goto out;
     res->seconds_proxy = elapsed(&t0) - res->seconds_setup;
     qsort_r(order, n, sizeof(uint32_t), cmp_key, cands);
+    if (!(rc = pool_scene(&pl, err)) ||
+        (rcode = raycast_set_extreme(rc, hull_verts, n_hull_verts, err))) {
+        rcode = rcode ? rcode : (err ? err->code : SF_ENOMEM);
+        goto out;
+    }
+    j.rc = rc;
 
     /* stage 1: coarse ray cast of the proxy's best, every hull base and the input */
     uint32_t n_coarse = 0;
@@ -299,7 +417,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
         if ((int)k < p->exact_top || cands[order[k]].c.source != ORIENT_SPHERE)
             order[n_coarse++] = order[k];
     j.progress_total = n_coarse + REFINE_SEEDS * REFINE_PER + FINAL + 1;
-    if ((rcode = run_stage(&j, 1, order, n_coarse, err)))
+    if ((rcode = run_stage(&pl, &j, 1, order, n_coarse, err)))
         goto out;
     qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
 
@@ -317,8 +435,8 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
             order[n_coarse++] = n - 1;
         }
     }
-    if ((rcode =
-             run_stage(&j, 1, order + n_coarse - n_seeds * REFINE_PER, n_seeds * REFINE_PER, err)))
+    if ((rcode = run_stage(&pl, &j, 1, order + n_coarse - n_seeds * REFINE_PER,
+                           n_seeds * REFINE_PER, err)))
         goto out;
     qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
 
@@ -330,7 +448,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
         has_input |= final[i] == 0;
     if (!has_input)
         final[n_final++] = 0;
-    if ((rcode = run_stage(&j, 2, final, n_final, err)))
+    if ((rcode = run_stage(&pl, &j, 2, final, n_final, err)))
         goto out;
     qsort_r(final, n_final, sizeof(uint32_t), cmp_key, cands);
 
@@ -362,8 +480,8 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
 oom:
     rcode = sf_err_set(err, SF_ENOMEM, "orientation: out of memory");
 out:
+    pool_finish(&pl); /* frees the scene */
     proxy_cache_release(&pc);
-    raycast_free(rc);
     free(order);
     free(cands);
     free(bases);

@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <unistd.h>
 #include <zip.h>
 
 #include "../../src/base/buf.h"
@@ -114,6 +115,42 @@ T_CASE(stl_binary_roundtrip_welds)
     T_EQ_INT(back.n_verts, m.n_verts); /* the soup welded back to shared vertices */
     T_EQ_INT(info.n_merged, 3 * m.n_tris - m.n_verts);
     T_EQ_DBL(mesh_volume(&back, NULL), mesh_volume(&m, NULL), 1e-3);
+    mesh_release(&m);
+    mesh_release(&back);
+}
+
+/* Parts are written in chunks: a mesh whose files span many chunks comes back
+   whole, byte-sized as the format says, with no temporary left behind. */
+T_CASE(save_spans_chunks)
+{
+    struct mesh m, back;
+    struct sf_err err;
+    mesh_init(&m);
+    mesh_init(&back);
+    T_OK(shape_torus(&m, 40, 10, 120, 60, &err), &err); /* 14,400 triangles: 720 KB of STL */
+    T_OK(mesh_save_stl(&m, tmp_path("torus.stl"), &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    T_OK(buf_read_file(&b, tmp_path("torus.stl"), &err), &err);
+    T_EQ_INT(b.len, 84 + 50 * (size_t)m.n_tris);
+    buf_release(&b);
+    T_TRUE(access(tmp_path("torus.stl.tmp"), F_OK) != 0);
+    T_OK(mesh_load(tmp_path("torus.stl"), &back, NULL, &err), &err);
+    T_EQ_INT(back.n_tris, m.n_tris);
+    T_EQ_INT(back.n_verts, m.n_verts);
+    T_EQ_DBL(mesh_volume(&back, NULL), mesh_volume(&m, NULL), 1e-3 * mesh_volume(&m, NULL));
+    T_OK(mesh_save_obj(&m, tmp_path("torus.obj"), &err), &err);
+    T_OK(mesh_load(tmp_path("torus.obj"), &back, NULL, &err), &err);
+    T_EQ_INT(back.n_tris, m.n_tris);
+    T_EQ_INT(back.n_verts, m.n_verts);
+    double worst = 0; /* %.9g keeps every corner to a nanometre */
+    for (uint32_t i = 0; i < m.n_tris; i++)
+        for (int k = 0; k < 3; k++)
+            worst = fmax(worst, v3_len(v3_sub(back.v[back.t[i][k]], m.v[m.t[i][k]])));
+    T_TRUE(worst < 1e-6);
+    T_TRUE(access(tmp_path("torus.obj.tmp"), F_OK) != 0);
+    /* a directory that does not exist: an error naming the file, nothing written */
+    T_ERR(mesh_save_stl(&m, tmp_path("no/such/dir.stl"), &err), SF_EIO, &err, "dir.stl.tmp");
     mesh_release(&m);
     mesh_release(&back);
 }
@@ -391,6 +428,37 @@ T_CASE(two_shells_are_two_components)
     mesh_topo_release(&topo);
     mesh_release(&a);
     mesh_release(&b);
+    mesh_release(&m);
+}
+
+/* Edges met from both directions and by three triangles: one scan of the
+   smaller vertex's list must see every user, whichever way it runs. */
+T_CASE(topology_counts_every_user_of_an_edge)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    /* 0-1 is shared by three triangles (two one way, one the other); 1-2 by
+       two running the same way (misoriented); 3 is repeated in the last */
+    static const uint32_t tris[][3] = {
+        { 0, 1, 2 }, { 1, 0, 3 }, { 0, 1, 4 }, { 1, 2, 5 }, { 3, 3, 5 }
+    };
+    T_OK(mesh_alloc(&m, 6, 5, &err), &err);
+    for (uint32_t i = 0; i < 6; i++)
+        m.v[i] = v3(i, i * i, 1);
+    memcpy(m.t, tris, sizeof(tris));
+    struct mesh_topo topo;
+    T_OK(mesh_topo_build(&m, &topo, &err), &err);
+    T_EQ_INT(topo.n_edges, 11);
+    T_EQ_INT(topo.n_nonmanifold, 1);       /* 0-1 */
+    T_EQ_INT(topo.n_misoriented, 1);       /* 1-2 */
+    T_EQ_INT(topo.n_boundary, 7);          /* 2-0 0-3 3-1 1-4 4-0 2-5 5-1; 3-5 and 5-3 pair */
+    T_EQ_INT(topo.adj[0][0], MESH_NO_TRI); /* 0-1: three users */
+    T_EQ_INT(topo.adj[0][1], 3);           /* 1-2, with triangle 3 */
+    T_EQ_INT(topo.adj[3][0], 0);
+    T_EQ_INT(topo.adj[4][1], 4); /* 3-5 meets 5-3 of the same triangle */
+    T_EQ_INT(topo.adj[4][2], 4);
+    mesh_topo_release(&topo);
     mesh_release(&m);
 }
 

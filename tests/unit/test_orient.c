@@ -4,6 +4,7 @@
  */
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../../src/geom/hull.h"
 #include "../../src/geom/orient.h"
@@ -188,5 +189,47 @@ T_CASE(an_open_shell_is_left_as_it_is)
     T_TRUE(r.not_solid);
     T_TRUE(r.input.m.n_rays_open > 0);
     T_EQ_DBL(r.best.up.z, 1, 1e-12);
+    mesh_release(&m);
+}
+
+/* The helper threads (one builds the scene while the caller runs the proxy
+   stage) change who scores what, never the answer: 1, 2 and 5 threads agree
+   to the bit.  A part with no hull fails cleanly with the helpers started. */
+T_CASE(same_answer_on_any_thread_count)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    mesh_transform(&m, m3_rotate_onto(v3(0, 0, 1), v3_normalize(v3(0.3, -0.2, -1))), v3(0, 0, 0));
+    struct orient_result r[3];
+    int threads[3] = { 1, 2, 5 };
+    for (int i = 0; i < 3; i++) {
+        struct orient_params p;
+        orient_params_default(&p);
+        p.samples = 200;
+        p.threads = threads[i];
+        T_OK(orient_find(&m, &p, &r[i], &err), &err);
+    }
+    for (int i = 1; i < 3; i++) {
+        T_TRUE(memcmp(&r[i].best.up, &r[0].best.up, sizeof(r[0].best.up)) == 0);
+        T_TRUE(r[i].best.cost == r[0].best.cost);
+        T_TRUE(r[i].best.m.volume_mm3 == r[0].best.m.volume_mm3);
+        T_TRUE(r[i].input.cost == r[0].input.cost);
+        T_EQ_INT(r[i].n_exact, r[0].n_exact);
+        T_EQ_INT(r[i].n_runners, r[0].n_runners);
+        for (int k = 0; k < r[0].n_runners; k++)
+            T_TRUE(r[i].runners[k].cost == r[0].runners[k].cost);
+    }
+    mesh_release(&m);
+
+    /* flat: qhull refuses it */
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
+    for (uint32_t i = 0; i < m.n_verts; i++)
+        m.v[i].z = 0;
+    struct orient_params p;
+    orient_params_default(&p);
+    p.threads = 2;
+    T_ERR(orient_find(&m, &p, &r[0], &err), SF_EINVAL, &err, "convex hull");
     mesh_release(&m);
 }
