@@ -2,7 +2,8 @@
  * drv.c - the driver factory and shared helpers of drv.h.
  *
  * Why: the daemon names a printer kind in its config and gets a struct drv
- * back; only this file knows which kinds exist.  Thread: loop thread.
+ * back; only this file knows which kinds exist.  Thread: loop thread,
+ * except drv_job_scan (any thread).
  */
 #include "drv.h"
 
@@ -53,6 +54,14 @@ drv_state_name(enum drv_state s)
         return "error";
     }
     return "?";
+}
+
+int
+drv_job_scan(const char *path, struct drv_job_scan *out, struct sf_err *err)
+{
+    /* Marlin is the only kind today, and its limits are the tightest a
+       driver will have (a numbered, checksummed line in a 96-byte buffer). */
+    return drv_marlin_scan(path, out, err);
 }
 
 int

@@ -20,7 +20,8 @@
  * several probes fails the job.
  *
  * Thread: loop thread; never blocks (the job file is read a line at a
- * time as the window opens).
+ * time as the window opens; start_job reads it whole only when the owner
+ * brings no drv_job_scan).  drv_marlin_scan: any thread.
  */
 #include "drv_marlin.h"
 
@@ -347,7 +348,10 @@ pump(struct marlin *m)
         /* Leave room for "N<number> " and "*<checksum>". */
         int rc = next_job_command(m, cmd, LINEWIN_LINE_MAX - 18);
         if (rc < 0) {
-            job_fail(m, DRV_IDLE, "bad G-code");
+            /* Only a file that changed after its scan gets here; say what was wrong. */
+            char why[sizeof(m->base.status.message)];
+            snprintf(why, sizeof(why), "%s", m->base.status.message);
+            job_fail(m, DRV_IDLE, why);
             return;
         }
         if (rc == 0) {
@@ -977,8 +981,76 @@ inject_resume(struct marlin *m, const struct motion *s)
         inject(m, "M107");
 }
 
+/* What reading a job file from its start found (scan_job). */
+struct scan {
+    uint64_t lines;   /* command lines read (all of them unless stopped at first_line) */
+    long resume_at;   /* byte offset of command first_line (0 when first_line is 0) */
+    struct motion mo; /* the machine state the commands before first_line leave */
+};
+
+/*
+ * Read f from its start: count the commands and refuse a bad line (a job
+ * must not fail half-way on one).  For first_line > 0 also follow the
+ * machine state up to first_line and note where that command starts; with
+ * stop_at_first (the count is already known) reading ends there.  Pure:
+ * touches only f and out, so drv_marlin_scan may run it on any thread.
+ */
 static int
-m_start_job(struct drv *d, const char *path, uint64_t first_line, struct sf_err *err)
+scan_job(FILE *f, const char *path, uint64_t first_line, bool stop_at_first, struct scan *out,
+         struct sf_err *err)
+{
+    char raw[SF_GCODE_LINE_MAX + 2], cmd[LINEWIN_LINE_MAX];
+    uint64_t total = 0;
+    long lineno = 0, offset = 0;
+    *out = (struct scan){ .mo = { .feed_mm_min = 1500 } };
+    while (fgets(raw, sizeof(raw), f)) {
+        size_t len = strlen(raw);
+        long at = offset;
+        offset += (long)len;
+        lineno++;
+        bool too_long;
+        if (len == sizeof(raw) - 1 && raw[len - 1] != '\n')
+            return sf_err_set(err, SF_EINVAL, "job '%s':%ld: line longer than %d bytes", path,
+                              lineno, SF_GCODE_LINE_MAX);
+        size_t n = gcode_strip(raw, len, cmd, LINEWIN_LINE_MAX - 18, &too_long);
+        if (too_long)
+            return sf_err_set(err, SF_EINVAL,
+                              "job '%s':%ld: command too long for Marlin (%d bytes)", path, lineno,
+                              LINEWIN_LINE_MAX - 19);
+        if (n == 0)
+            continue;
+        if (first_line > 0 && total == first_line) {
+            out->resume_at = at;
+            if (stop_at_first)
+                break;
+        }
+        if (total < first_line)
+            track(&out->mo, cmd, n);
+        total++;
+    }
+    if (ferror(f))
+        return sf_err_sys(err, "job '%s': read", path);
+    out->lines = total;
+    return SF_OK;
+}
+
+int
+drv_marlin_scan(const char *path, struct drv_job_scan *out, struct sf_err *err)
+{
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return sf_err_sys(err, "job '%s'", path);
+    struct scan sc;
+    int rc = scan_job(f, path, 0, false, &sc, err);
+    fclose(f);
+    if (rc == SF_OK)
+        out->lines_total = sc.lines;
+    return rc;
+}
+
+static int
+m_start_job(struct drv *d, const char *path, uint64_t first_line, const struct drv_job_scan *scan,
+            struct sf_err *err)
 {
     struct marlin *m = M(d);
     if (d->status.state != DRV_IDLE)
@@ -987,44 +1059,23 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, struct sf_err 
     FILE *f = fopen(path, "r");
     if (!f)
         return sf_err_sys(err, "job '%s'", path);
-    /* Count and check every command first: a job must not fail half-way on
-       a bad line.  A resume also follows the machine state up to first_line
-       and notes where that line starts in the file. */
-    char raw[SF_GCODE_LINE_MAX + 2], cmd[LINEWIN_LINE_MAX];
-    uint64_t total = 0;
-    long lineno = 0, resume_at = 0, offset = 0;
-    struct motion mo = { .feed_mm_min = 1500 };
-    while (fgets(raw, sizeof(raw), f)) {
-        size_t len = strlen(raw);
-        long at = offset;
-        offset += (long)len;
-        lineno++;
-        bool too_long;
-        if (len == sizeof(raw) - 1 && raw[len - 1] != '\n') {
+    /* With the owner's scan a start reads nothing here and a resume reads
+       only up to first_line; without one, the whole file is read now. */
+    struct scan sc = { .mo = { .feed_mm_min = 1500 } };
+    uint64_t total = scan ? scan->lines_total : 0;
+    bool resume_ok = !scan || first_line < total;
+    if (resume_ok && (!scan || first_line > 0)) {
+        int rc = scan_job(f, path, first_line, scan != NULL, &sc, err);
+        if (rc) {
             fclose(f);
-            return sf_err_set(err, SF_EINVAL, "job '%s':%ld: line longer than %d bytes", path,
-                              lineno, SF_GCODE_LINE_MAX);
+            return rc;
         }
-        size_t n = gcode_strip(raw, len, cmd, LINEWIN_LINE_MAX - 18, &too_long);
-        if (too_long) {
-            fclose(f);
-            return sf_err_set(err, SF_EINVAL,
-                              "job '%s':%ld: command too long for Marlin (%d bytes)", path, lineno,
-                              LINEWIN_LINE_MAX - 19);
-        }
-        if (n == 0)
-            continue;
-        if (first_line > 0 && total == first_line)
-            resume_at = at;
-        if (total < first_line)
-            track(&mo, cmd, n);
-        total++;
+        if (!scan)
+            total = sc.lines;
+        /* a file shorter than its scan said stops before first_line */
+        resume_ok = scan ? sc.lines == first_line : first_line < total;
     }
-    if (ferror(f)) {
-        fclose(f);
-        return sf_err_sys(err, "job '%s': read", path);
-    }
-    if (first_line > 0 && first_line >= total) {
+    if (first_line > 0 && !resume_ok) {
         fclose(f);
         return sf_err_set(err, SF_EINVAL,
                           "job '%s': cannot resume from line %llu: the job has %llu command "
@@ -1032,7 +1083,7 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, struct sf_err 
                           path, (unsigned long long)first_line, (unsigned long long)total,
                           (unsigned long long)(total ? total - 1 : 0));
     }
-    if (fseek(f, resume_at, SEEK_SET) != 0) {
+    if (fseek(f, sc.resume_at, SEEK_SET) != 0) {
         fclose(f);
         return sf_err_sys(err, "job '%s': seek", path);
     }
@@ -1041,13 +1092,13 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, struct sf_err 
     m->job_index = (long)first_line;
     m->job_eof = false;
     m->final_pushed = false;
-    m->mo = mo;
+    m->mo = sc.mo;
     d->status.lines_total = total;
     d->status.lines_acked = first_line;
     d->status.progress = total ? (double)first_line / (double)total : 0;
     d->status.job_started_ms = loop_now_ms(d->loop);
     if (first_line > 0) {
-        inject_resume(m, &mo);
+        inject_resume(m, &sc.mo);
         message(m, "resuming '%s' at line %llu of %llu", path, (unsigned long long)first_line,
                 (unsigned long long)total);
     } else {

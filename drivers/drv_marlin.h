@@ -4,7 +4,7 @@
  * Most callers use drv_new() with kind "marlin"; this header adds the
  * constructor drv.c calls and counters for tests and benchmarks.
  *
- * Thread: loop thread.
+ * Thread: loop thread, except drv_marlin_scan (any thread).
  */
 #ifndef SF_DRIVERS_DRV_MARLIN_H
 #define SF_DRIVERS_DRV_MARLIN_H
@@ -24,6 +24,13 @@ struct drv_marlin_stats {
 
 struct drv *drv_marlin_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event,
                            void *ud, struct sf_err *err);
+
+/*
+ * drv_job_scan() for Marlin: count the command lines of the job file at
+ * path and check each fits a numbered, checksummed Marlin line.  SF_EINVAL
+ * naming 'path':line, SF_EIO.  Pure, any thread.
+ */
+int drv_marlin_scan(const char *path, struct drv_job_scan *out, struct sf_err *err);
 
 /* Counters; false if d is not a Marlin driver. */
 bool drv_marlin_stats(const struct drv *d, struct drv_marlin_stats *out);

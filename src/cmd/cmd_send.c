@@ -68,7 +68,7 @@ on_event(struct drv *d, enum drv_event ev, void *ud)
         if (d->status.state == DRV_IDLE && !c->started) {
             c->started = true;
             c->t0_ms = loop_now_ms(c->loop);
-            if (d->ops->start_job(d, c->file, 0, &err) < 0) {
+            if (d->ops->start_job(d, c->file, 0, NULL, &err) < 0) {
                 fprintf(stderr, "slimfarm send: %s\n", err.msg);
                 c->result = 1;
                 loop_stop(c->loop);

@@ -107,6 +107,10 @@ static const char *const migrations[] = {
     "  printer TEXT NOT NULL DEFAULT '',"
     "  kind TEXT NOT NULL,"
     "  detail TEXT NOT NULL);",
+    /* 2: the G-code's command line count, scanned once when it is prepared
+       (drv_job_scan), so starting a job need not read the file; 0 for
+       G-code prepared before (the driver then counts it itself) */
+    "ALTER TABLE jobs ADD COLUMN gcode_lines INTEGER NOT NULL DEFAULT 0 CHECK(gcode_lines >= 0);",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 
@@ -114,7 +118,7 @@ static const char JOB_COLS[] =
     "id, name, file_sha, coalesce(gcode_sha, ''), state, method, deviation_mm, overhang_deg,"
     " copies, copies_done, failures, max_retries, material, target_printer, target_group,"
     " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"
-    " nozzle_mm";
+    " nozzle_mm, gcode_lines";
 
 int
 store_schema_version(void)
@@ -562,6 +566,7 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     j->created_ms = sqlite3_column_int64(st, 22);
     j->updated_ms = sqlite3_column_int64(st, 23);
     j->nozzle_mm = sqlite3_column_double(st, 24);
+    j->gcode_lines = sqlite3_column_int64(st, 25);
 }
 
 int
@@ -723,6 +728,7 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
         for (int i = 0; i < 3; i++)
             j->size_mm[i] = a->size_mm[i];
         j->nozzle_mm = a->nozzle_mm;
+        j->gcode_lines = a->gcode_lines > 0 ? a->gcode_lines : 0;
         j->reason[0] = '\0';
         break;
     case JOB_EV_START:
@@ -806,7 +812,7 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     if ((rc = prepare(s, &st,
                       "UPDATE jobs SET state = ?, copies_done = ?, failures = ?, gcode_sha = ?,"
                       " size_x = ?, size_y = ?, size_z = ?, printer = ?, lines_acked = ?,"
-                      " reason = ?, updated_ms = ?, nozzle_mm = ? WHERE id = ?",
+                      " reason = ?, updated_ms = ?, nozzle_mm = ?, gcode_lines = ? WHERE id = ?",
                       err)))
         goto fail;
     sqlite3_bind_text(st, 1, job_state_name(j.state), -1, SQLITE_STATIC);
@@ -823,7 +829,8 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     sqlite3_bind_text(st, 10, j.reason, -1, SQLITE_TRANSIENT);
     sqlite3_bind_int64(st, 11, now_ms());
     sqlite3_bind_double(st, 12, j.nozzle_mm);
-    sqlite3_bind_int64(st, 13, id);
+    sqlite3_bind_int64(st, 13, j.gcode_lines);
+    sqlite3_bind_int64(st, 14, id);
     if ((rc = step_done(s, st, err, "update job")))
         goto fail;
     char kind[24], detail[192];

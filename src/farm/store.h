@@ -48,6 +48,7 @@ struct job_row {
     char gcode_sha[STORE_SHA_HEX]; /* the sliced G-code; "" until prepared */
     double size_mm[3];             /* prepared part's bounding box x, y, z; 0 until prepared */
     double nozzle_mm;              /* nozzle the G-code was sliced for; 0 until prepared */
+    int64_t gcode_lines;           /* its command lines (drv_job_scan); 0 if not known */
     char printer[64];              /* printer of the current copy; "" when not on one */
     int64_t lines_acked;           /* last acknowledged line of the current copy */
     char reason[160];              /* why it waits or failed; "" if none */
@@ -61,6 +62,7 @@ struct job_event_args {
     const char *gcode_sha; /* PREPARED: stored G-code (required) */
     double size_mm[3];     /* PREPARED: part bounding box */
     double nozzle_mm;      /* PREPARED: nozzle it was sliced for */
+    int64_t gcode_lines;   /* PREPARED: its command lines, as drv_job_scan counted them */
     int64_t lines_acked;   /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to;
                               RESUME of an interrupted job: line to resume from (0: stored) */
     double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */

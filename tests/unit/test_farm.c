@@ -12,6 +12,7 @@
 #include <stdatomic.h>
 
 #include "../../src/base/buf.h"
+#include "../../src/base/gcode.h"
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
 #include "../../src/farm/farm.h"
@@ -24,6 +25,7 @@ struct tdrv {
     char path[1200]; /* last job started */
     int starts, pauses, resumes, cancels, opens;
     uint64_t first_line;    /* of the last start */
+    int64_t scan_lines;     /* the scan the last start came with; -1: none */
     enum drv_event pending; /* event to deliver on the next loop turn */
     bool has_pending;
 };
@@ -60,15 +62,17 @@ t_open(struct drv *d, struct sf_err *err)
 }
 
 static int
-t_start(struct drv *d, const char *path, uint64_t first_line, struct sf_err *err)
+t_start(struct drv *d, const char *path, uint64_t first_line, const struct drv_job_scan *scan,
+        struct sf_err *err)
 {
     (void)err;
     struct tdrv *t = (struct tdrv *)d;
     snprintf(t->path, sizeof(t->path), "%s", path);
     t->starts++;
     t->first_line = first_line;
+    t->scan_lines = scan ? (int64_t)scan->lines_total : -1;
     t->base.status.lines_acked = first_line;
-    t->base.status.lines_total = 2;
+    t->base.status.lines_total = scan ? scan->lines_total : 2;
     report(t, DRV_PRINTING, DRV_EV_STATE);
     return SF_OK;
 }
@@ -173,6 +177,7 @@ test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomi
         return rc;
     double x = 0, y = 0, z = 0;
     int n = sscanf(part.data ? part.data : "", "size %lf %lf %lf", &x, &y, &z);
+    bool long_cmd = part.data && strstr(part.data, "long command");
     buf_release(&part);
     if (n != 3)
         return sf_err_set(err, SF_EINVAL, "test part: no size line");
@@ -180,6 +185,8 @@ test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomi
     if (!f)
         return sf_err_sys(err, "cannot write '%s'", req->out_path);
     fprintf(f, "; for %s\nG28\nG1 X%g Y%g Z%g\n", req->printer.name, x, y, z);
+    if (long_cmd) /* fits the G-code limit, not a numbered Marlin line */
+        fprintf(f, "M117 %0120d\nG1 X0\n", 0);
     fclose(f);
     out->size_mm[0] = x;
     out->size_mm[1] = y;
@@ -315,9 +322,14 @@ T_CASE(farm_prints_copies_with_bed_clear_gate_and_auto_eject)
     T_OK(buf_read_file(&g, a->path, &err), &err);
     T_EQ_STR(g.data, "; for a\nG28\nG1 X50 Y50 Z50\n");
     buf_release(&g);
+    /* with its command count, scanned on the prepare worker and kept with
+       the job: start_job had no file to read on the loop thread */
+    T_EQ_INT(a->scan_lines, 2);
+    struct job_row j;
+    T_OK(store_job_get(fx.s, j1, &j, &err), &err);
+    T_EQ_INT(j.gcode_lines, 2);
     /* a job nobody can print stays queued, saying why */
     loop_run_once(fx.l, 10);
-    struct job_row j;
     T_OK(store_job_get(fx.s, j3, &j, &err), &err);
     T_EQ_INT(j.state, JOB_QUEUED);
     T_EQ_STR(j.reason, "fits no printer: a: material ABS not loaded (has PLA); b: material ABS "
@@ -404,6 +416,33 @@ T_CASE(farm_dropped_printer_fails_print_into_retry_and_reconnects)
     teardown();
 }
 
+/*
+ * A job whose G-code holds a command no printer can take fails when it is
+ * prepared, naming the file and line, and never reaches a printer: the
+ * check that used to run in start_job on the loop thread now runs on the
+ * prepare worker, and it still keeps a job from failing half-way.
+ */
+T_CASE(farm_bad_gcode_line_fails_at_prepare_naming_file_and_line)
+{
+    struct sf_err err;
+    T_OK(setup("badline", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE, 1000));
+    int64_t bad = add("size 20 20 20 long command", "PLA", 1);
+    T_TRUE(wait_job(bad, JOB_FAILED));
+    struct job_row j;
+    T_OK(store_job_get(fx.s, bad, &j, &err), &err);
+    char want[64];
+    snprintf(want, sizeof(want), "job-%lld.gcode':4: command too long", (long long)bad);
+    T_TRUE(strstr(j.reason, want) != NULL);
+    T_EQ_STR(j.gcode_sha, "");
+    T_EQ_INT(tdrv_named("a")->starts, 0);
+    /* a good job after it prints */
+    int64_t good = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(good, JOB_PRINTING));
+    T_EQ_INT(tdrv_named("a")->scan_lines, 2);
+    teardown();
+}
+
 /* A closed tetrahedron, 10 mm on each axis. */
 static const char tetra_stl[] = "solid t\n"
                                 "facet normal 0 0 -1\nouter loop\nvertex 0 0 0\nvertex 0 10 0\n"
@@ -447,6 +486,16 @@ T_CASE(farm_default_prepare_runs_every_method)
     buf_init(&g, 64 << 20);
     T_OK(buf_read_file(&g, path, &err), &err);
     T_TRUE(strstr(g.data, "G1 ") != NULL);
+    /* its command count, as a driver numbers them, kept with the job */
+    int64_t cmds = 0;
+    for (char *line = g.data, *nl; line && *line; line = nl ? nl + 1 : NULL) {
+        nl = strchr(line, '\n');
+        char cmd[256];
+        size_t len = nl ? (size_t)(nl - line) : strlen(line);
+        cmds += gcode_strip(line, len, cmd, sizeof(cmd), NULL) > 0;
+    }
+    T_TRUE(cmds > 100);
+    T_EQ_INT(j.gcode_lines, cmds);
     buf_release(&g);
     T_OK(store_job_get(fx.s, surf, &j, &err), &err);
     T_EQ_STR(j.reason, "waits for a printer: a is offline");

@@ -18,6 +18,7 @@
 #include "../../sim/sim_marlin.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
+#include "../../src/base/limits.h"
 #include "../../src/base/log.h"
 #include "../t.h"
 
@@ -295,7 +296,7 @@ stream_exact_frag(struct sim_marlin_config *sc, int buffer_lines, int max_ms, si
     }
     write_job(&r, JOB_LINES, NULL);
     struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, &err), &err);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
     T_EQ_INT(r.drv->status.state, DRV_PRINTING);
     bool over = until(&r, job_over, max_ms);
     struct sim_marlin_stats st;
@@ -434,7 +435,7 @@ reset_mid_print(bool tcp)
         return;
     }
     write_job(&r, JOB_LINES, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
     T_EQ_INT(r.failed, 1);
     T_TRUE(strstr(r.drv->status.message, "reset") != NULL);
@@ -481,7 +482,7 @@ T_CASE(marlin_disconnect_then_reconnect_with_backoff)
         return;
     }
     write_job(&r, JOB_LINES, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
     T_EQ_INT(r.failed, 1);
     T_TRUE(until(&r, is_offline, 2000));
@@ -504,7 +505,7 @@ T_CASE(marlin_disconnect_then_reconnect_with_backoff)
     /* The fresh link prints a whole job. */
     r.done = r.failed = 0;
     write_job(&r, 500, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, &err), &err);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
     T_TRUE(until(&r, job_over, 20000));
     T_EQ_INT(r.done, 1);
     teardown(&r);
@@ -522,7 +523,7 @@ T_CASE(marlin_thermal_runaway_stops_stream)
         return;
     }
     write_job(&r, JOB_LINES, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
     T_EQ_INT(r.failed, 1);
     T_EQ_INT(r.drv->status.state, DRV_ERROR);
@@ -564,7 +565,7 @@ pause_resume(bool tcp)
     }
     write_job(&r, JOB_LINES, NULL);
     r.pause_at = 1000;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     T_TRUE(until(&r, park_done, 20000));
     struct sim_marlin_stats st;
     sim_marlin_stats(r.sim, &st);
@@ -615,7 +616,7 @@ T_CASE(marlin_host_action_pause_from_printer)
     }
     /* M118 A1 makes Marlin print "//action:pause", as a runout sensor would. */
     write_job(&r, 1000, "M118 A1 action:pause");
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     T_TRUE(until(&r, park_done, 20000));
     T_OK(r.drv->ops->resume(r.drv, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
@@ -634,7 +635,7 @@ T_CASE(marlin_cancel_runs_end_sequence)
     }
     write_job(&r, JOB_LINES, NULL);
     r.cancel_at = 1000;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     T_TRUE(until(&r, job_over, 30000));
     T_EQ_INT(r.cancelled, 1);
     T_EQ_INT(r.drv->status.state, DRV_IDLE);
@@ -662,7 +663,7 @@ T_CASE(marlin_emergency_stop)
         return;
     }
     write_job(&r, JOB_LINES, NULL);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL), NULL);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     for (int i = 0; i < 5; i++)
         loop_run_once(r.loop, 20);
     struct sf_err err;
@@ -698,7 +699,7 @@ T_CASE(marlin_config_errors_are_clear)
     T_TRUE(d != NULL);
     T_TRUE(d->ops->open(d, &err) < 0);
     T_TRUE(strstr(err.msg, "null-nope") != NULL);
-    T_ERR(d->ops->start_job(d, "/nonexistent.gcode", 0, &err), SF_EAGAIN, &err, "not idle");
+    T_ERR(d->ops->start_job(d, "/nonexistent.gcode", 0, NULL, &err), SF_EAGAIN, &err, "not idle");
     drv_free(d);
     T_EQ_STR(drv_state_name(DRV_PAUSED), "paused");
     T_EQ_INT(drv_backoff_ms(0), 500);
@@ -739,7 +740,8 @@ write_layered_job(struct run *r, int layers, int per_layer)
  * lines before N left it, homes X and Y only, and restores E mode, fan and
  * feedrate.  A line past the end is refused.
  */
-T_CASE(marlin_resume_from_line_restores_state)
+static void
+resume_from_line(bool with_scan)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
@@ -753,7 +755,10 @@ T_CASE(marlin_resume_from_line_restores_state)
     size_t n_want;
     char **want = file_commands(r.gcode_path, &n_want);
     struct sf_err err;
-    T_ERR(r.drv->ops->start_job(r.drv, r.gcode_path, n_want, &err), SF_EINVAL, &err,
+    struct drv_job_scan scan, *given = with_scan ? &scan : NULL;
+    T_OK(drv_job_scan(r.gcode_path, &scan, &err), &err);
+    T_EQ_INT(scan.lines_total, n_want);
+    T_ERR(r.drv->ops->start_job(r.drv, r.gcode_path, n_want, given, &err), SF_EINVAL, &err,
           "cannot resume from line");
     T_TRUE(strstr(err.msg, "0..") != NULL);
     T_EQ_INT(r.drv->status.state, DRV_IDLE);
@@ -764,8 +769,9 @@ T_CASE(marlin_resume_from_line_restores_state)
     T_EQ_INT(sscanf(want[first - 1], "G1 X%15s Y%15s E0.0213 F%d", x, y, &f), 3);
     snprintf(xy, sizeof(xy), "G1 X%s Y%s F6000", x, y);
     snprintf(feed, sizeof(feed), "G1 F%d", f);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, first, &err), &err);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, first, given, &err), &err);
     T_EQ_INT(r.drv->status.lines_acked, first);
+    T_EQ_INT(r.drv->status.lines_total, n_want);
     T_TRUE(until(&r, job_over, 30000));
     T_EQ_INT(r.done, 1);
     T_EQ_INT(r.drv->status.lines_acked, n_want);
@@ -799,5 +805,98 @@ T_CASE(marlin_resume_from_line_restores_state)
     T_EQ_DBL(st.nozzle_target_c, 215, 0);
     free_lines(want, n_want);
     free_lines(got, n_got);
+    teardown(&r);
+}
+
+T_CASE(marlin_resume_from_line_restores_state)
+{
+    resume_from_line(false);
+}
+
+/* The same with the owner's scan: the file is read only up to the line. */
+T_CASE(marlin_resume_from_line_with_scan_restores_state)
+{
+    resume_from_line(true);
+}
+
+/* Line number (1-based) of the first line of path containing text. */
+static long
+line_of(const char *path, const char *text)
+{
+    FILE *f = fopen(path, "r");
+    char raw[8192];
+    long n = 0;
+    while (f && fgets(raw, sizeof(raw), f)) {
+        n++;
+        if (strstr(raw, text)) {
+            fclose(f);
+            return n;
+        }
+    }
+    if (f)
+        fclose(f);
+    return -1;
+}
+
+/*
+ * drv_job_scan counts what the driver numbers and refuses, naming file and
+ * line, what it could not send: a command too long for a numbered Marlin
+ * line, a line past the G-code limit.  No printer needed: it is pure.
+ */
+T_CASE(marlin_scan_counts_commands_and_names_a_bad_line)
+{
+    struct run r = { 0 };
+    struct drv_job_scan scan = { 0 };
+    struct sf_err err;
+    write_job(&r, 500, NULL);
+    T_OK(drv_job_scan(r.gcode_path, &scan, &err), &err);
+    T_EQ_INT(scan.lines_total, count_commands(r.gcode_path));
+    char bad[160], msg[600];
+    snprintf(bad, sizeof(bad), "M117 %0100d", 7);
+    write_job(&r, 500, bad);
+    T_ERR(drv_job_scan(r.gcode_path, &scan, &err), SF_EINVAL, &err, "command too long for Marlin");
+    snprintf(msg, sizeof(msg), "job '%s':%ld: ", r.gcode_path, line_of(r.gcode_path, "M117"));
+    T_TRUE(strstr(err.msg, msg) != NULL);
+    char *huge = malloc(SF_GCODE_LINE_MAX + 16);
+    memset(huge, ';', SF_GCODE_LINE_MAX + 8);
+    huge[SF_GCODE_LINE_MAX + 8] = '\0';
+    write_job(&r, 500, huge);
+    free(huge);
+    T_ERR(drv_job_scan(r.gcode_path, &scan, &err), SF_EINVAL, &err, "line longer than 4096 bytes");
+    T_ERR(drv_job_scan("/nonexistent/job.gcode", &scan, &err), SF_EIO, &err, "nonexistent");
+}
+
+/*
+ * start_job with the owner's scan trusts it and reads nothing ahead: a bad
+ * command half-way through is not seen at the start (without a scan it is
+ * refused there, naming file:line), and lines_total is the scan's.  The
+ * streaming still stops at the bad command rather than send it.  This is
+ * why the farm scans every job when it prepares it.
+ */
+T_CASE(marlin_start_job_with_scan_reads_no_further)
+{
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.advanced_ok = true;
+    if (!setup(&r, &sc, 0)) {
+        teardown(&r);
+        return;
+    }
+    char bad[160];
+    snprintf(bad, sizeof(bad), "M117 %0100d", 7);
+    write_job(&r, JOB_LINES, bad);
+    struct sf_err err;
+    T_ERR(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), SF_EINVAL, &err,
+          "command too long for Marlin");
+    T_EQ_INT(r.drv->status.state, DRV_IDLE);
+    struct drv_job_scan scan = { .lines_total = 123456 };
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, &scan, &err), &err);
+    T_EQ_INT(r.drv->status.state, DRV_PRINTING);
+    T_EQ_INT(r.drv->status.lines_total, 123456);
+    T_TRUE(until(&r, job_over, 30000));
+    T_EQ_INT(r.failed, 1);
+    T_TRUE(strstr(r.drv->status.message, "too long for Marlin") != NULL);
+    T_TRUE(r.drv->status.lines_acked < (uint64_t)JOB_LINES);
     teardown(&r);
 }

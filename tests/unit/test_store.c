@@ -89,6 +89,62 @@ T_CASE(store_open_creates_schema_in_wal_mode)
     T_TRUE(strstr(err.msg, "schema 99 is newer") != NULL);
 }
 
+/*
+ * Schema 2 keeps the G-code's command count with the job.  A schema-1
+ * store (made here by dropping the column again) upgrades in place: its
+ * ready job keeps everything, with the count 0 ("not known"), and the
+ * next preparation stores one.
+ */
+T_CASE(store_migrates_schema_1_to_gcode_lines)
+{
+    struct sf_err err;
+    const char *dir = fresh_dir("migrate1");
+    struct store *s = store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    int64_t id = add_job(s, "part", 1, &err);
+    T_TRUE(id > 0);
+    char sha[STORE_SHA_HEX];
+    T_OK(store_job_event(s, id, JOB_EV_PREPARE, NULL, NULL, &err), &err);
+    T_OK(store_file_put(s, "G28\nG1 X1\n", 10, sha, &err), &err);
+    struct job_event_args a = { .gcode_sha = sha, .size_mm = { 20, 30, 40 }, .gcode_lines = 2 };
+    T_OK(store_job_event(s, id, JOB_EV_PREPARED, &a, NULL, &err), &err);
+    struct job_row j;
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    T_EQ_INT(j.gcode_lines, 2);
+    store_close(s);
+    /* back to schema 1 */
+    char path[600];
+    snprintf(path, sizeof(path), "%s/slimfarm.db", dir);
+    sqlite3 *db;
+    T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
+    T_EQ_INT(sqlite3_exec(db, "ALTER TABLE jobs DROP COLUMN gcode_lines; PRAGMA user_version = 1",
+                          NULL, NULL, NULL),
+             SQLITE_OK);
+    sqlite3_close(db);
+    T_TRUE((s = store_open(dir, NULL, &err)) != NULL);
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_READY);
+    T_EQ_STR(j.gcode_sha, sha);
+    T_EQ_DBL(j.size_mm[1], 30, 0);
+    T_EQ_INT(j.gcode_lines, 0);
+    T_OK(store_check(s, &err), &err);
+    /* prepared again (a new job here): the count is stored */
+    int64_t id2 = add_job(s, "part 2", 1, &err);
+    T_OK(store_job_event(s, id2, JOB_EV_PREPARE, NULL, NULL, &err), &err);
+    a.gcode_lines = 7;
+    T_OK(store_job_event(s, id2, JOB_EV_PREPARED, &a, NULL, &err), &err);
+    T_OK(store_job_get(s, id2, &j, &err), &err);
+    T_EQ_INT(j.gcode_lines, 7);
+    store_close(s);
+    T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
+    sqlite3_stmt *st;
+    sqlite3_prepare_v2(db, "PRAGMA user_version", -1, &st, NULL);
+    T_EQ_INT(sqlite3_step(st), SQLITE_ROW);
+    T_EQ_INT(sqlite3_column_int(st, 0), 2);
+    sqlite3_finalize(st);
+    sqlite3_close(db);
+}
+
 T_CASE(store_files_are_content_addressed)
 {
     struct sf_err err;
