@@ -127,7 +127,9 @@ mem_batch_mode(size_t heap_mb)
 {
     const uintptr_t huge = 2u << 20;
     size_t pad = heap_mb << 20;
-    mallopt(M_MMAP_THRESHOLD, 256 << 20); /* glibc's largest; blocks above it are mmapped */
+    /* blocks up to 256 MB come from the heap (glibc maps anything over 128 KB afresh
+       by default, and unmaps it on free) */
+    mallopt(M_MMAP_THRESHOLD, 256 << 20);
     mallopt(M_TRIM_THRESHOLD, INT32_MAX);
     mallopt(M_TOP_PAD, pad > INT32_MAX ? INT32_MAX : (int)pad);
     mallopt(M_ARENA_MAX, 1); /* threads' arenas would be fresh, unadvised mappings */

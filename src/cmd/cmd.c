@@ -171,12 +171,6 @@ cmd_progress(const char *label, double done, double total)
     fflush(stderr);
 }
 
-static int
-cmp_cmd(const void *a, const void *b)
-{
-    return strcmp((*(const struct cmd *const *)a)->name, (*(const struct cmd *const *)b)->name);
-}
-
 /* A C string literal of s (the build compiles --describe's output). */
 static void
 put_c_string(const char *s)
@@ -203,46 +197,19 @@ describe(const char *module)
     }
 }
 
-static void
-usage(FILE *f)
-{
-    fprintf(f, "usage: slimfarm COMMAND [ARGS]\n\ncommands:\n");
-    for (int i = 0; i < n_cmds; i++)
-        fprintf(f, "  %-10s %s\n", cmds[i]->name, cmds[i]->summary);
-    fprintf(f, "\n'slimfarm help COMMAND' shows a command's usage.\n");
-}
-
+/* Help, usage and unknown names are the front door's (slimfarm.c): it execs
+   this program only with one of the names --describe listed. */
 int
 main(int argc, char **argv)
 {
-    qsort(cmds, (size_t)n_cmds, sizeof(cmds[0]), cmp_cmd);
     if (argc == 3 && strcmp(argv[1], "--describe") == 0) {
         describe(argv[2]);
         return 0;
     }
-    if (argc < 2 || strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0) {
-        usage(argc < 2 ? stderr : stdout);
-        return argc < 2 ? 2 : 0;
-    }
-    if (strcmp(argv[1], "help") == 0) {
-        if (argc < 3) {
-            usage(stdout);
-            return 0;
-        }
-        for (int i = 0; i < n_cmds; i++) {
-            if (strcmp(cmds[i]->name, argv[2]) == 0) {
-                printf("usage: slimfarm %s\n%s\n", cmds[i]->usage, cmds[i]->summary);
-                return 0;
-            }
-        }
-        fprintf(stderr, "slimfarm: unknown command '%s'\n", argv[2]);
-        return 2;
-    }
-    for (int i = 0; i < n_cmds; i++) {
+    for (int i = 0; argc >= 2 && i < n_cmds; i++)
         if (strcmp(cmds[i]->name, argv[1]) == 0)
             return cmds[i]->run(argc - 1, argv + 1);
-    }
-    fprintf(stderr, "slimfarm: unknown command '%s'\n", argv[1]);
-    usage(stderr);
+    fprintf(stderr, "%s: run it as 'slimfarm COMMAND'; 'slimfarm help' lists the commands\n",
+            argv[0]);
     return 2;
 }

@@ -64,8 +64,8 @@ struct job {
     struct support_params sp;     /* scoring: the angle less the margin */
     struct support_params at;     /* reporting: the operator's angle */
     struct cand *cands;
-    const uint32_t *todo; /* indices of candidates to score */
-    uint32_t n_todo;
+    const uint32_t *batch; /* indices of candidates to score */
+    uint32_t n_batch;
     int stage;
     atomic_uint next;
     atomic_int failed; /* first error code, 0 if none */
@@ -123,10 +123,10 @@ worker(void *arg)
     struct job *j = arg;
     for (;;) {
         uint32_t k = atomic_fetch_add(&j->next, 1);
-        if (k >= j->n_todo || atomic_load(&j->failed))
+        if (k >= j->n_batch || atomic_load(&j->failed))
             break;
         struct sf_err err;
-        if (score_one(j, &j->cands[j->todo[k]], &err) != SF_OK) {
+        if (score_one(j, &j->cands[j->batch[k]], &err) != SF_OK) {
             int zero = 0;
             atomic_compare_exchange_strong(&j->failed, &zero, err.code ? err.code : SF_EBUG);
             break;
@@ -250,12 +250,12 @@ pool_finish(struct pool *pl)
 }
 
 static int
-run_stage(struct pool *pl, struct job *j, int stage, const uint32_t *todo, uint32_t n,
+run_stage(struct pool *pl, struct job *j, int stage, const uint32_t *batch, uint32_t n,
           struct sf_err *err)
 {
     j->stage = stage;
-    j->todo = todo;
-    j->n_todo = n;
+    j->batch = batch;
+    j->n_batch = n;
     atomic_store(&j->next, 0);
     atomic_store(&j->failed, 0);
     pthread_mutex_lock(&pl->lock);
