@@ -62,11 +62,14 @@ struct farm {
 
 /* A prepare task: plain data copied for the worker. */
 struct prep {
-    struct farm *f;           /* owner (used only on the loop thread) */
-    struct prepare_req req;   /* input */
-    struct prepare_out out;   /* output */
-    struct drv_job_scan scan; /* the G-code's scan, made on the worker too */
-    struct sf_err err;        /* why it failed */
+    struct farm *f;                /* owner (used only on the loop thread) */
+    struct prepare_req req;        /* input */
+    struct prepare_out out;        /* output */
+    struct drv_job_scan scan;      /* the G-code's scan, made on the worker too */
+    const struct store *store;     /* for store_file_adopt on the worker */
+    char gcode_sha[STORE_SHA_HEX]; /* the G-code, adopted into the store by the worker */
+    int64_t gcode_size;
+    struct sf_err err; /* why it failed */
 };
 
 static void run(struct loop *l, void *ud);
@@ -297,35 +300,12 @@ prep_work(void *ud, const atomic_bool *cancel)
     /* Count and check the G-code here, off the loop: a bad line fails the
        job now, not half-way through a print, and start_job need not read
        the file on the loop thread (a 150 MB job stalled every printer's
-       stream ~2.5 s). */
-    if (rc == SF_OK && (rc = drv_job_scan(t->req.out_path, &t->scan, &t->err)))
+       stream ~2.5 s).  Hashing it into the store is the other long read. */
+    if (rc == SF_OK &&
+        ((rc = drv_job_scan(t->req.out_path, &t->scan, &t->err)) ||
+         (rc = store_file_adopt(t->store, t->req.out_path, t->gcode_sha, &t->gcode_size, &t->err))))
         sf_err_prefix(&t->err, "job %lld", (long long)t->req.job_id);
     return rc;
-}
-
-/* Stream the produced G-code into the store. */
-static int
-store_gcode(struct farm *f, const char *path, char sha[STORE_SHA_HEX], struct sf_err *err)
-{
-    int fd = open(path, O_RDONLY | O_CLOEXEC);
-    if (fd < 0)
-        return sf_err_sys(err, "prepare: cannot read '%s'", path);
-    struct store_file *w = store_file_begin(f->s, err);
-    int rc = w ? SF_OK : err->code;
-    char buf[1 << 16];
-    ssize_t n;
-    while (rc == SF_OK && (n = read(fd, buf, sizeof(buf))) != 0) {
-        if (n < 0 && errno == EINTR)
-            continue;
-        rc = n < 0 ? sf_err_sys(err, "prepare: reading '%s'", path)
-                   : store_file_write(w, buf, (size_t)n, err);
-    }
-    close(fd);
-    if (rc) {
-        store_file_abort(w);
-        return rc;
-    }
-    return store_file_commit(w, sha, err);
 }
 
 static void
@@ -337,10 +317,9 @@ prep_done(struct loop *l, void *ud, int rc)
     int64_t id = t->req.job_id;
     f->preparing--;
     if (rc == SF_OK) {
-        char sha[STORE_SHA_HEX];
         struct sf_err err;
-        if (store_gcode(f, t->req.out_path, sha, &err) == SF_OK) {
-            struct job_event_args a = { .gcode_sha = sha,
+        if (store_file_record(f->s, t->gcode_sha, t->gcode_size, &err) == SF_OK) {
+            struct job_event_args a = { .gcode_sha = t->gcode_sha,
                                         .nozzle_mm = t->out.nozzle_mm,
                                         .gcode_lines = (int64_t)t->scan.lines_total };
             memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
@@ -362,7 +341,7 @@ prep_done(struct loop *l, void *ud, int rc)
         struct job_event_args a = { .reason = t->err.msg[0] ? t->err.msg : sf_status_name(rc) };
         job_event(f, id, JOB_EV_PREPARE_FAILED, &a);
     }
-    unlink(t->req.out_path);
+    unlink(t->req.out_path); /* gone when adopted */
     free(t);
     farm_kick(f);
 }
@@ -376,6 +355,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p)
     if (!t)
         return; /* retried on the next kick */
     t->f = f;
+    t->store = f->s;
     t->req.job_id = j->id;
     t->req.opts = j->opts;
     t->req.printer = p->cfg;

@@ -450,47 +450,94 @@ fsync_dir(const char *path)
     }
 }
 
-int
-store_file_commit(struct store_file *f, char sha[STORE_SHA_HEX], struct sf_err *err)
+/* The hex digest of md into sha. */
+static int
+sha_hex(EVP_MD_CTX *md, char sha[STORE_SHA_HEX], struct sf_err *err)
 {
-    struct store *s = f->s;
-    unsigned char md[EVP_MAX_MD_SIZE];
-    unsigned int md_len = 0;
-    int rc;
-    if (EVP_DigestFinal_ex(f->md, md, &md_len) != 1 || md_len != 32) {
-        rc = sf_err_set(err, SF_EBUG, "store: SHA-256 final failed");
-        goto out;
-    }
+    unsigned char d[EVP_MAX_MD_SIZE];
+    unsigned int n = 0;
+    if (EVP_DigestFinal_ex(md, d, &n) != 1 || n != 32)
+        return sf_err_set(err, SF_EBUG, "store: SHA-256 final failed");
     for (int i = 0; i < 32; i++)
-        snprintf(sha + 2 * i, 3, "%02x", md[i]);
-    if (fsync(f->fd) != 0) {
-        rc = sf_err_sys(err, "store: fsync '%s'", f->tmp);
-        goto out;
-    }
+        snprintf(sha + 2 * i, 3, "%02x", d[i]);
+    return SF_OK;
+}
+
+/* Make the file at from (open as fd) durable and move it to sha's address.  Touches the file
+   system only: s->dir is fixed at open, so this may run on any thread. */
+static int
+place_file(const struct store *s, int fd, const char *from, const char *sha, struct sf_err *err)
+{
+    if (fsync(fd) != 0)
+        return sf_err_sys(err, "store: fsync '%s'", from);
     char dir[STORE_PATH_MAX + 16], path[STORE_PATH_MAX + 96];
     snprintf(dir, sizeof(dir), "%s/files/%.2s", s->dir, sha);
     snprintf(path, sizeof(path), "%s/%s", dir, sha);
-    if (mkdir(dir, 0755) != 0 && errno != EEXIST) {
-        rc = sf_err_sys(err, "store: cannot create '%s'", dir);
-        goto out;
-    }
-    if (rename(f->tmp, path) != 0) {
-        rc = sf_err_sys(err, "store: cannot move '%s' to '%s'", f->tmp, path);
-        goto out;
-    }
-    close(f->fd);
-    f->fd = -1;
+    if (mkdir(dir, 0755) != 0 && errno != EEXIST)
+        return sf_err_sys(err, "store: cannot create '%s'", dir);
+    if (rename(from, path) != 0)
+        return sf_err_sys(err, "store: cannot move '%s' to '%s'", from, path);
     fsync_dir(dir);
+    return SF_OK;
+}
+
+int
+store_file_record(struct store *s, const char *sha, int64_t size, struct sf_err *err)
+{
+    if (!sha_valid(sha))
+        return sf_err_set(err, SF_EINVAL, "store: '%.80s' is not a SHA-256 in hex", sha);
     sqlite3_stmt *st;
-    if ((rc = prepare(s, &st, "INSERT OR IGNORE INTO files(sha256, size, created_ms) VALUES(?,?,?)",
-                      err)))
-        goto out;
+    int rc =
+        prepare(s, &st, "INSERT OR IGNORE INTO files(sha256, size, created_ms) VALUES(?,?,?)", err);
+    if (rc)
+        return rc;
     sqlite3_bind_text(st, 1, sha, 64, SQLITE_TRANSIENT);
-    sqlite3_bind_int64(st, 2, f->size);
+    sqlite3_bind_int64(st, 2, size);
     sqlite3_bind_int64(st, 3, now_ms());
-    rc = step_done(s, st, err, "record file");
-out:
+    return step_done(s, st, err, "record file");
+}
+
+int
+store_file_commit(struct store_file *f, char sha[STORE_SHA_HEX], struct sf_err *err)
+{
+    int rc = sha_hex(f->md, sha, err);
+    if (rc == SF_OK && (rc = place_file(f->s, f->fd, f->tmp, sha, err)) == SF_OK) {
+        close(f->fd);
+        f->fd = -1;
+        rc = store_file_record(f->s, sha, f->size, err);
+    }
     store_file_abort(f);
+    return rc;
+}
+
+int
+store_file_adopt(const struct store *s, const char *path, char sha[STORE_SHA_HEX], int64_t *size,
+                 struct sf_err *err)
+{
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0)
+        return sf_err_sys(err, "store: cannot read '%s'", path);
+    EVP_MD_CTX *md = EVP_MD_CTX_new();
+    int rc = md && EVP_DigestInit_ex(md, EVP_sha256(), NULL) == 1
+                 ? SF_OK
+                 : sf_err_set(err, SF_ENOMEM, "store: cannot start SHA-256");
+    char buf[1 << 16];
+    ssize_t n;
+    *size = 0;
+    while (rc == SF_OK && (n = read(fd, buf, sizeof(buf))) != 0) {
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n < 0)
+            rc = sf_err_sys(err, "store: reading '%s'", path);
+        else if (EVP_DigestUpdate(md, buf, (size_t)n) != 1)
+            rc = sf_err_set(err, SF_EBUG, "store: SHA-256 update failed");
+        else
+            *size += n;
+    }
+    if (rc == SF_OK && (rc = sha_hex(md, sha, err)) == SF_OK)
+        rc = place_file(s, fd, path, sha, err);
+    EVP_MD_CTX_free(md);
+    close(fd);
     return rc;
 }
 

@@ -12,15 +12,22 @@
  *   resume at 2/3, ...   the same for a resume (with a scan the driver
  *                        reads only up to the line).
  * drv_job_scan itself is timed too: what the prepare worker now spends.
+ * With DATA_DIR, putting the job into a store there is timed both ways:
+ * streamed through a store writer (the loop's work before the prepare
+ * worker adopted the file) and adopted on the worker then recorded on the
+ * loop.
  * Wall times on a shared machine: give the load average next to them.
  */
+#include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "../../drivers/drv.h"
 #include "../../sim/sim_marlin.h"
 #include "../../src/base/log.h"
+#include "../../src/farm/store.h"
 
 static double
 now_ms(void)
@@ -62,13 +69,59 @@ timed_start(struct loop *l, struct drv *d, const char *label, const char *path, 
     return SF_OK;
 }
 
+/* Put path into a store in dir both ways and time each half. */
+static int
+time_store(const char *path, const char *dir)
+{
+    struct sf_err err;
+    struct store *s = store_open(dir, NULL, &err);
+    if (!s) {
+        fprintf(stderr, "bench_jobstart: %s\n", err.msg);
+        return 1;
+    }
+    char sha[STORE_SHA_HEX], made[1024];
+    int64_t size = 0;
+    double t0 = now_ms();
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    struct store_file *w = fd >= 0 ? store_file_begin(s, &err) : NULL;
+    int rc = w ? SF_OK : SF_EIO;
+    static char buf[1 << 16];
+    ssize_t n;
+    while (rc == SF_OK && (n = read(fd, buf, sizeof(buf))) > 0)
+        rc = store_file_write(w, buf, (size_t)n, &err);
+    rc = rc ? rc : store_file_commit(w, sha, &err);
+    if (fd >= 0)
+        close(fd);
+    double t1 = now_ms();
+    /* the job file as the prepare worker leaves it: a name beside the store's files */
+    snprintf(made, sizeof(made), "%s/files/job-1.gcode", dir);
+    if (rc == SF_OK && link(path, made) != 0)
+        rc = sf_err_sys(&err, "link '%s'", made);
+    double t2 = now_ms();
+    rc = rc ? rc : store_file_adopt(s, made, sha, &size, &err);
+    double t3 = now_ms();
+    rc = rc ? rc : store_file_record(s, sha, size, &err);
+    double t4 = now_ms();
+    store_close(s);
+    if (rc) {
+        fprintf(stderr, "bench_jobstart: store: %s\n", err.msg);
+        return 1;
+    }
+    printf("  %-28s %9.1f ms on the loop thread (before)\n", "store: stream a copy", t1 - t0);
+    printf("  %-28s %9.1f ms on a prepare worker\n", "store: adopt", t3 - t2);
+    printf("  %-28s %9.1f ms on the loop thread\n", "store: record", t4 - t3);
+    return 0;
+}
+
 int
 main(int argc, char **argv)
 {
-    if (argc != 2) {
-        fprintf(stderr, "usage: bench_jobstart FILE.gcode\n");
+    if (argc != 2 && argc != 3) {
+        fprintf(stderr, "usage: bench_jobstart FILE.gcode [DATA_DIR]\n");
         return 2;
     }
+    if (argc == 3 && time_store(argv[1], argv[2]))
+        return 1;
     const char *path = argv[1];
     log_set_level(LOG_ERROR);
     struct sf_err err;

@@ -3,7 +3,8 @@
 # large job, with and without the scan the farm makes when it prepares the
 # job (bench_jobstart.c).  The job: the torus sliced by our slicer, repeated
 # 26 times (~116 MB, ~3.9 M command lines; start/end sequences repeat, which
-# does not matter for reading time).
+# does not matter for reading time).  Also: putting it into the store, by a
+# copy on the loop (before) or adopted on the prepare worker (now).
 set -u
 build=${1:-build/rel}
 cli="$build/bin/slimfarm"
@@ -14,4 +15,4 @@ trap 'rm -rf "$work"' EXIT
   { echo "bench_jobstart: cannot slice the torus"; exit 1; }
 for _ in $(seq 26); do cat "$work/t.gcode"; done > "$work/big.gcode"
 echo "job: $(du -m "$work/big.gcode" | cut -f1) MB, $(wc -l < "$work/big.gcode") lines; $(uptime | sed 's/.*load/load/')"
-"$build/bench/bench_jobstart" "$work/big.gcode"
+"$build/bench/bench_jobstart" "$work/big.gcode" "$work/data"

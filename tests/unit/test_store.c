@@ -181,6 +181,44 @@ T_CASE(store_files_are_content_addressed)
     store_close(s);
 }
 
+/* A file made beside the store is adopted off the store's thread (moved, hashed, not copied) and
+   recorded on it; until recorded it has no path. */
+T_CASE(store_adopts_a_file_then_records_it)
+{
+    struct sf_err err;
+    const char *dir = fresh_dir("adopt");
+    struct store *s = store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    char made[600], sha[STORE_SHA_HEX], path[1200];
+    snprintf(made, sizeof(made), "%s/files/job-1.gcode", dir);
+    FILE *fp = fopen(made, "w");
+    T_TRUE(fp != NULL);
+    for (int i = 0; i < 20000; i++) /* several read chunks */
+        fprintf(fp, "G1 X%d Y%d\n", i % 200, i / 200);
+    fclose(fp);
+    struct stat st;
+    T_TRUE(stat(made, &st) == 0);
+    int64_t size = -1;
+    T_OK(store_file_adopt(s, made, sha, &size, &err), &err);
+    T_EQ_INT(size, st.st_size);
+    T_TRUE(access(made, F_OK) != 0); /* moved, not copied */
+    T_ERR(store_file_path(s, sha, path, sizeof(path), &err), SF_ENOTFOUND, &err, "no file");
+    T_OK(store_file_record(s, sha, size, &err), &err);
+    T_OK(store_file_path(s, sha, path, sizeof(path), &err), &err);
+    /* the same address the streaming writer gives the same bytes */
+    struct buf buf;
+    buf_init(&buf, 0);
+    T_OK(buf_read_file(&buf, path, &err), &err);
+    T_EQ_INT(buf.len, (size_t)size);
+    char put[STORE_SHA_HEX];
+    T_OK(store_file_put(s, buf.data, buf.len, put, &err), &err);
+    T_EQ_STR(put, sha);
+    buf_release(&buf);
+    T_ERR(store_file_adopt(s, made, sha, &size, &err), SF_EIO, &err, "cannot read");
+    T_ERR(store_file_record(s, "zz", 2, &err), SF_EINVAL, &err, "not a SHA-256");
+    store_close(s);
+}
+
 T_CASE(store_job_lifecycle_with_copies_and_history)
 {
     struct sf_err err;
