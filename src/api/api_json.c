@@ -166,16 +166,16 @@ json_t *
 api_job_json(const struct job_row *j)
 {
     return json_pack(
-        "{sI ss ss ss sf sf si si si si ss ss ss si ss sI ss ss ss s[fff] sI sI}", "id",
+        "{sI ss ss ss sf sf si si si si ss ss ss si ss sI sI ss ss ss s[fff] sI sI}", "id",
         (json_int_t)j->id, "name", j->opts.name, "state", job_state_name(j->state), "method",
         j->opts.method, "deviation_mm", j->opts.deviation_mm, "overhang_deg", j->opts.overhang_deg,
         "copies", j->counts.copies, "copies_done", j->counts.copies_done, "failures",
         j->counts.failures, "max_retries", j->counts.max_retries, "material", j->opts.material,
         "target_printer", j->opts.printer, "target_group", j->opts.group, "priority",
         j->opts.priority, "printer", j->printer, "lines_acked", (json_int_t)j->lines_acked,
-        "reason", j->reason, "file_sha", j->file_sha, "gcode_sha", j->gcode_sha, "size_mm",
-        j->size_mm[0], j->size_mm[1], j->size_mm[2], "created_ms", (json_int_t)j->created_ms,
-        "updated_ms", (json_int_t)j->updated_ms);
+        "gcode_lines", (json_int_t)j->gcode_lines, "reason", j->reason, "file_sha", j->file_sha,
+        "gcode_sha", j->gcode_sha, "size_mm", j->size_mm[0], j->size_mm[1], j->size_mm[2],
+        "created_ms", (json_int_t)j->created_ms, "updated_ms", (json_int_t)j->updated_ms);
 }
 
 json_t *

@@ -163,7 +163,7 @@ start(const char *name, struct sf_err *err)
         (rc = store_job_event(f->store, id, JOB_EV_PREPARE, NULL, NULL, err)) ||
         (rc = store_file_put(f->store, "G28\n", 4, gsha, err)))
         return rc;
-    struct job_event_args prep = { .gcode_sha = gsha }, go = { .printer = "a" };
+    struct job_event_args prep = { .gcode_sha = gsha, .gcode_lines = 1 }, go = { .printer = "a" };
     if ((rc = store_job_event(f->store, id, JOB_EV_PREPARED, &prep, NULL, err)) ||
         (rc = store_job_event(f->store, id, JOB_EV_START, &go, NULL, err)))
         return rc;
@@ -544,6 +544,7 @@ T_CASE(api_restart_interrupted_job)
     T_EQ_INT(get("/api/jobs/1", KEY_RW, &b), 200);
     T_EQ_STR(jstr(&b, "job", "state"), "interrupted");
     T_EQ_STR(jstr(&b, "job", "printer"), "a");
+    T_EQ_STR(jstr(&b, "job", "gcode_lines"), "1"); /* the resume range's end */
     T_EQ_INT(call("POST", "/api/jobs/1/restart", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 200);
     T_EQ_STR(jstr(&b, "job", "state"), "ready");
     T_EQ_INT(call("POST", "/api/jobs/1/explode", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 404);
