@@ -10,7 +10,9 @@
 
 #include <libqhull_r/qhull_ra.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../base/mem.h"
 
@@ -68,18 +70,29 @@ hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **out, uint32
         pts[3 * i + 1] = m->v[i].y;
         pts[3 * i + 2] = m->v[i].z;
     }
+    /* qhull reports into a FILE: keep its page-long report off the user's terminal and quote
+       its first line in the error */
+    char *qmsg = NULL;
+    size_t qmsg_len = 0;
+    FILE *qerr = open_memstream(&qmsg, &qmsg_len);
+    if (!qerr) {
+        free(pts);
+        return sf_err_set(err, SF_ENOMEM, "out of memory for the hull");
+    }
     qhT qh_qh;
     qhT *qh = &qh_qh;
-    qh_zero(qh, stderr);
-    char opts[] = "qhull Pp"; /* Pp: no precision warnings on stderr */
-    int exitcode = qh_new_qhull(qh, 3, (int)m->n_verts, pts, False, opts, NULL, stderr);
+    qh_zero(qh, qerr);
+    char opts[] = "qhull Pp"; /* Pp: no precision warnings */
+    int exitcode = qh_new_qhull(qh, 3, (int)m->n_verts, pts, False, opts, NULL, qerr);
     int rc = SF_OK;
     struct hull_base *bases = NULL;
     struct angle_pt *poly = NULL;
     uint32_t n = 0, cap = 0;
     if (exitcode) {
-        rc = sf_err_set(err, SF_EINVAL,
-                        "convex hull failed (qhull exit %d): flat or degenerate part", exitcode);
+        fflush(qerr);
+        size_t first = qmsg ? strcspn(qmsg, "\n") : 0;
+        rc = sf_err_set(err, SF_EINVAL, "convex hull failed: flat or degenerate part (%.*s)",
+                        (int)(first < 160 ? first : 160), qmsg ? qmsg : "");
         goto out;
     }
     facetT *facet;
@@ -153,6 +166,8 @@ out:
     qh_freeqhull(qh, !qh_ALL);
     int curlong, totlong;
     qh_memfreeshort(qh, &curlong, &totlong);
+    fclose(qerr);
+    free(qmsg);
     free(pts);
     if (rc) {
         free(bases);

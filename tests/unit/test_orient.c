@@ -2,9 +2,12 @@
  * test_orient.c - the hull bases and the orientation search on generated
  * parts with known best orientations.
  */
+#include <fcntl.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "../../src/geom/hull.h"
 #include "../../src/geom/orient.h"
@@ -230,6 +233,21 @@ T_CASE(same_answer_on_any_thread_count)
     struct orient_params p;
     orient_params_default(&p);
     p.threads = 2;
-    T_ERR(orient_find(&m, &p, &r[0], &err), SF_EINVAL, &err, "convex hull");
+    /* ... saying why in the error, with nothing of qhull's page-long report on stderr */
+    char errpath[512];
+    snprintf(errpath, sizeof(errpath), "%s/flat-stderr", t_tmpdir());
+    fflush(stderr);
+    int saved = dup(2), fd = open(errpath, O_WRONLY | O_CREAT | O_TRUNC, 0600);
+    T_TRUE(saved >= 0 && fd >= 0);
+    dup2(fd, 2);
+    close(fd);
+    int rc = orient_find(&m, &p, &r[0], &err);
+    fflush(stderr);
+    dup2(saved, 2);
+    close(saved);
+    T_ERR(rc, SF_EINVAL, &err, "convex hull failed: flat or degenerate part (QH");
+    struct stat st;
+    T_TRUE(stat(errpath, &st) == 0);
+    T_EQ_INT(st.st_size, 0);
     mesh_release(&m);
 }
