@@ -260,15 +260,20 @@ run_jobs(int argc, char **argv)
     json_t *r = request(&c, "GET", "/api/jobs", NULL, NULL);
     if (!r)
         return 1;
-    printf("%-5s %-11s %-6s %-4s %-12s %-24s %s\n", "ID", "STATE", "COPIES", "PRIO", "PRINTER",
-           "NAME", "REASON");
+    printf("%-5s %-11s %-6s %-17s %-4s %-12s %-24s %s\n", "ID", "STATE", "COPIES", "LINE", "PRIO",
+           "PRINTER", "NAME", "REASON");
     size_t i;
     json_t *j;
     json_array_foreach(json_object_get(r, "jobs"), i, j)
     {
-        char copies[32];
+        char copies[32], line[48] = "-";
         snprintf(copies, sizeof(copies), "%lld/%lld", num(j, "copies_done"), num(j, "copies"));
-        printf("%-5lld %-11s %-6s %-4lld %-12s %-24s %s\n", num(j, "id"), str(j, "state"), copies,
+        /* where a print stands, or where a resume would start */
+        const char *state = str(j, "state");
+        if (num(j, "gcode_lines") > 0 && (!strcmp(state, "printing") || !strcmp(state, "paused") ||
+                                          !strcmp(state, "interrupted")))
+            snprintf(line, sizeof(line), "%lld/%lld", num(j, "lines_acked"), num(j, "gcode_lines"));
+        printf("%-5lld %-11s %-6s %-17s %-4lld %-12s %-24s %s\n", num(j, "id"), state, copies, line,
                num(j, "priority"), str(j, "printer")[0] ? str(j, "printer") : "-", str(j, "name"),
                str(j, "reason"));
     }

@@ -71,6 +71,8 @@ for round in $(seq 10); do
         [ "$now" = interrupted ] || fail "round $round: job $id was $state, now $now"
         [ "$lines" -ge "$acked" ] || fail "round $round: job $id came back at line $lines, the API showed $acked"
         last=$(api "/api/jobs/$id" | json 'd["prints"][-1]["outcome"] + " " + str(d["prints"][-1]["lines_acked"])')
+        "$C" jobs | grep -qE "^$id +interrupted +[0-9]+/[0-9]+ +$lines/[0-9]+ " ||
+          fail "round $round: jobs does not show job $id's line $lines: $("$C" jobs)"
         [ "$last" = "interrupted $lines" ] || fail "round $round: job $id's last print: $last (job says $lines)"
         interrupted=$((interrupted + 1))
         ;;
