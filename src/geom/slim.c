@@ -401,10 +401,42 @@ support_volume(const struct mesh *m, double angle_deg, double *vol, struct sf_er
 }
 
 /*
+ * Scale the mapped part w->cur uniformly about its bed contact (the mean of
+ * its vertices within gap_mm of its lowest point, at that height) so that
+ * its enclosed volume is vol_mm3; returns the scale, 1 when it cannot
+ * (no volume).  The deformation shrinks parts (arap.h, "Volume"); a uniform
+ * scale keeps every face's angle, so what is safe stays safe, and the part
+ * keeps resting on the bed.
+ */
+static double
+restore_volume(struct mesh *m, double vol_mm3, double gap_mm)
+{
+    double vol = mesh_volume(m, NULL);
+    if (!(vol > 0) || !(vol_mm3 > 0))
+        return 1;
+    double zlo = INFINITY;
+    for (uint32_t v = 0; v < m->n_verts; v++)
+        zlo = fmin(zlo, m->v[v].z);
+    struct vec3 c = v3(0, 0, 0);
+    uint32_t n = 0;
+    for (uint32_t v = 0; v < m->n_verts; v++)
+        if (m->v[v].z <= zlo + gap_mm)
+            c = v3_add(c, m->v[v]), n++;
+    c = v3_scale(c, 1.0 / n); /* n >= 1: the lowest vertex */
+    c.z = zlo;
+    double s = cbrt(vol_mm3 / vol);
+    for (uint32_t v = 0; v < m->n_verts; v++)
+        m->v[v] = v3_add(c, v3_scale(v3_sub(m->v[v], c), s));
+    return s;
+}
+
+/*
  * The best listed iterate that is clean: no inverted tet, no more
  * self-intersecting edges than the input, and no more ray-cast support
  * volume than the input (fewer risky faces can still mean taller columns:
- * a tee's arms half raised).  The input itself ends the list.
+ * a tee's arms half raised).  The input itself ends the list.  With
+ * keep_volume each is first scaled back to the input's volume
+ * (restore_volume) and must still be within the deviation limits.
  *
  * The ray-cast volume prices columns that follow the overhang's outline,
  * as our slicer, CuraEngine and PrusaSlicer's "snug" style build them.
@@ -443,36 +475,6 @@ support_volume(const struct mesh *m, double angle_deg, double *vol, struct sf_er
  * does ranking the list by the rescaled candidates' ray-cast volume
  * instead of the risky count help: at most 0.3 % on any row.
  */
-/*
- * Scale the mapped part w->cur uniformly about its bed contact (the mean of
- * its vertices within gap_mm of its lowest point, at that height) so that
- * its enclosed volume is vol_mm3; returns the scale, 1 when it cannot
- * (no volume).  The deformation shrinks parts (arap.h, "Volume"); a uniform
- * scale keeps every face's angle, so what is safe stays safe, and the part
- * keeps resting on the bed.
- */
-static double
-restore_volume(struct mesh *m, double vol_mm3, double gap_mm)
-{
-    double vol = mesh_volume(m, NULL);
-    if (!(vol > 0) || !(vol_mm3 > 0))
-        return 1;
-    double zlo = INFINITY;
-    for (uint32_t v = 0; v < m->n_verts; v++)
-        zlo = fmin(zlo, m->v[v].z);
-    struct vec3 c = v3(0, 0, 0);
-    uint32_t n = 0;
-    for (uint32_t v = 0; v < m->n_verts; v++)
-        if (m->v[v].z <= zlo + gap_mm)
-            c = v3_add(c, m->v[v]), n++;
-    c = v3_scale(c, 1.0 / n); /* n >= 1: the lowest vertex */
-    c.z = zlo;
-    double s = cbrt(vol_mm3 / vol);
-    for (uint32_t v = 0; v < m->n_verts; v++)
-        m->v[v] = v3_add(c, v3_scale(v3_sub(m->v[v], c), s));
-    return s;
-}
-
 static int
 choose(struct work *w, struct sf_err *err)
 {

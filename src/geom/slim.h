@@ -110,7 +110,8 @@ struct slim_result {
     uint32_t n_inverted;        /* inverted tets in the returned result (0 by construction) */
     int selfx_input, selfx_out; /* self-intersecting edges before and after */
     uint32_t n_rejected;        /* better iterates rejected: inverted tets, new
-                                   self-intersections or more support volume */
+                                   self-intersections, more support volume or,
+                                   once rescaled, deviation past the limits */
     /* tet mesh and timing */
     uint32_t tet_verts, tet_tets, tet_surface, tet_outside;
     double setup_s, total_s; /* tet mesh and face hosts; everything */
