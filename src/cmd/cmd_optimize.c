@@ -20,7 +20,7 @@
 static const char usage_line[] =
     "optimize PART -o OUT --method volumetric|surface [--angle DEG] [--beta DEG] [--max-mndr P] "
     "[--max-andr P] [--fix-bottom MM] [--fix-box X0,Y0,Z0,X1,Y1,Z1] [--max-tet-verts N] "
-    "[--iterations N] [--search-direction] [--json]";
+    "[--iterations N] [--search-direction] [--no-keep-volume] [--json]";
 
 #define MAX_BOXES 16
 
@@ -59,20 +59,22 @@ report_json(const char *in, const char *out, const struct slim_params *p,
                             r->rotation.m[1][2], r->rotation.m[2][0], r->rotation.m[2][1],
                             r->rotation.m[2][2]);
     json_t *o = json_pack(
-        "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:{s:f, s:f}, s:i, s:i, s:f, "
+        "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:{s:f, s:f}, s:f, s:i, s:i, "
+        "s:f, "
         "s:i, s:o, "
         "s:{s:i, s:i, s:i}, s:{s:i, s:i, s:i}, s:f, s:f}",
         "file", in, "output", out, "method", "volumetric", "angle_deg", p->angle_deg, "before",
         cmd_metrics_json(&r->before), "after", cmd_metrics_json(&r->after), "risky_per_iteration",
         cmd_curve_json(r->curve, r->n_curve), "deviation", "mndr", r->dev.mndr, "andr", r->dev.andr,
         "max_mm", r->dev.max_mm, "mean_mm", r->dev.mean_mm, "part_volume_mm3", "before",
-        r->part_volume_in_mm3, "after", r->part_volume_out_mm3, "best_iteration",
-        (json_int_t)r->best_iter, "beta_rounds", (json_int_t)r->n_runs, "beta_deg", r->beta_deg,
-        "directions", (json_int_t)r->n_dirs, "rotation", rot, "tet_mesh", "vertices",
-        (json_int_t)r->tet_verts, "tets", (json_int_t)r->tet_tets, "part_vertices_outside",
-        (json_int_t)r->tet_outside, "checks", "inverted_tets", (json_int_t)r->n_inverted,
-        "self_intersections_input", (json_int_t)r->selfx_input, "self_intersections_output",
-        (json_int_t)r->selfx_out, "setup_s", r->setup_s, "seconds", r->total_s);
+        r->part_volume_in_mm3, "after", r->part_volume_out_mm3, "volume_scale", r->volume_scale,
+        "best_iteration", (json_int_t)r->best_iter, "beta_rounds", (json_int_t)r->n_runs,
+        "beta_deg", r->beta_deg, "directions", (json_int_t)r->n_dirs, "rotation", rot, "tet_mesh",
+        "vertices", (json_int_t)r->tet_verts, "tets", (json_int_t)r->tet_tets,
+        "part_vertices_outside", (json_int_t)r->tet_outside, "checks", "inverted_tets",
+        (json_int_t)r->n_inverted, "self_intersections_input", (json_int_t)r->selfx_input,
+        "self_intersections_output", (json_int_t)r->selfx_out, "setup_s", r->setup_s, "seconds",
+        r->total_s);
     return cmd_put_json("optimize", o);
 }
 
@@ -87,10 +89,11 @@ report_text(const char *in, const char *out, const struct slim_result *r)
     cmd_print_metrics("after", &r->after);
     printf("  deviation MNDR %.2f %% ANDR %.2f %% (max %.2f mm, mean %.2f mm)\n", 100 * r->dev.mndr,
            100 * r->dev.andr, r->dev.max_mm, r->dev.mean_mm);
-    printf("  part volume %.0f -> %.0f mm3 (%+.1f %%)\n", r->part_volume_in_mm3,
+    printf("  part volume %.0f -> %.0f mm3 (%+.1f %%; uniform scale %.4f)\n", r->part_volume_in_mm3,
            r->part_volume_out_mm3,
            r->part_volume_in_mm3 > 0 ? 100 * (r->part_volume_out_mm3 / r->part_volume_in_mm3 - 1)
-                                     : 0.0);
+                                     : 0.0,
+           r->volume_scale);
     printf("  kept iteration %d (beta %.0f deg, %d round%s); rejected %u; inverted tets %u; "
            "self-intersecting edges %d -> %d\n",
            r->best_iter, r->beta_deg, r->n_runs, r->n_runs == 1 ? "" : "s", r->n_rejected,
@@ -116,6 +119,7 @@ run(int argc, char **argv)
                                           { "max-tet-verts", required_argument, NULL, 'v' },
                                           { "iterations", required_argument, NULL, 'i' },
                                           { "search-direction", no_argument, NULL, 's' },
+                                          { "no-keep-volume", no_argument, NULL, 'k' },
                                           { "json", no_argument, NULL, 'j' },
                                           { "help", no_argument, NULL, 'h' },
                                           { NULL, 0, NULL, 0 } };
@@ -194,6 +198,9 @@ run(int argc, char **argv)
             break;
         case 's':
             p.search_direction = true;
+            break;
+        case 'k':
+            p.keep_volume = false;
             break;
         case 'j':
             json = true;

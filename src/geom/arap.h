@@ -29,8 +29,19 @@
  * kept: equal instead of volume weights (cow 0: part -6.6 %, support -9.9 % instead of -22 %), a
  * per-iteration cap on the minimal rotation (10/20/30 degrees: -4.4/-10/-17 %; at 10 the
  * generated torus at 45 degrees, which loses 1.2 %, saves 6.6 % of its support, not 21 %), targets
- * scaled by det(J)^(-1/3) (-12.9 %), a fixed or no tie-break hint (-19/-16 %).  Keeping the volume
- * needs a volume term in E, a different method; slim.h reports the part's volume before and after.
+ * scaled by det(J)^(-1/3) (-12.9 %), a fixed or no tie-break hint (-19/-16 %).
+ * Tried next (cow / elephant at 0 degrees, part volume): a projective-dynamics volume term
+ * (Bouaziz 2014) - each tet's target (1 - w) R + w J det(J)^(-1/3), the isochoric part of J,
+ * which keeps L - gives -14.3/-13.4/-14.6/-14.9 % on cow at w = 0.25/0.5/0.75/0.9 and nothing on
+ * elephant, whose kept iterate is the first: from rest J = I, so that target is R and the first
+ * step's squash (-16.6 %) is already done; an isotropic squash is invisible to it too.  A per-tet
+ * integral feedback (target scale s_T *= det(J_T)^(-1/3) every iteration, clamped) keeps the
+ * parts within 1 % (cow 0: -6.8 %) and the fixed regions exact, but stiffens the deformation: at
+ * equal volume it saves less ray-cast support than the plain result scaled back up (bunny00 45:
+ * -18.8 % against -28.7 %, armadillo 45 -4.9 against -7.6, dino 45 -15.7 against -16.7; cow 45
+ * -9.4 against -7.2 the exception).  So slim.c keeps this energy and scales each candidate
+ * uniformly back to the input's volume (slim.h, keep_volume); support per part volume is the
+ * figure that energy change had to beat.
  *
  * Thread-safety: one struct arap per thread.
  */

@@ -15,6 +15,17 @@
  * or new self-intersections: it falls back to the best clean iterate, and
  * at worst to the input.
  *
+ * Volume: the deformation shrinks the part (arap.h, "Volume"), and a
+ * smaller part needs less support for that reason alone.  So by default
+ * (keep_volume) each kept iterate is scaled uniformly about its bed contact
+ * back to the input's volume before it is checked (deviation limits, self-
+ * intersections, ray-cast support no more than the input's): a uniform
+ * scale turns no face, so the risky faces stay as they were, and the part
+ * keeps resting on the bed.  The fixed bottom then scales with the part
+ * (it stays on the bed; its outline grows by the scale, 1-7 % on the
+ * shared meshes); fix_boxes turn the rescale off, as they promise their
+ * region stays exactly.
+ *
  * Thread-safety: slim_optimize may run on any thread; it starts its own
  * workers for the direction search.  The progress callback may be called
  * from those workers (serialized: never two at once).
@@ -66,6 +77,9 @@ struct slim_params {
     double search_step_deg;    /* grid step of the search (15) */
     double search_max_deg;     /* largest tilt about each axis (30) */
     int threads;               /* workers for the search (0: one per core) */
+    bool keep_volume;          /* scale the result uniformly about its bed contact so its volume
+                                  is the input's (true); skipped when fix_boxes are given, which
+                                  must stay exactly where they are (see "Volume" above) */
     void (*progress)(void *ud, const struct slim_progress *pr); /* optional */
     void *progress_ud;
     const atomic_bool *cancel; /* optional: set to stop with SF_ECANCELED */
@@ -80,11 +94,13 @@ struct slim_result {
     struct mat3 rotation; /* applied to the input first (identity unless searched) */
     struct support_metrics before, after; /* ray-cast metrics, input (rotated) vs output */
     struct deviation dev;                 /* MNDR / ANDR of out against the rotated input */
-    /* enclosed volume of the rotated input and of out (mesh_volume).  The deformation does not
-       keep it (arap.h, "Volume": disagreeing target rotations compress the tets) and MNDR / ANDR
-       do not see a spread-out squash.  A part with few vertices follows only them: the tee's 16
-       vertices give +20 % while its tet mesh loses 4 % */
+    /* enclosed volume of the rotated input and of out (mesh_volume): equal up to rounding with
+       keep_volume.  Without it the deformation does not keep it (arap.h, "Volume": disagreeing
+       target rotations compress the tets) and MNDR / ANDR do not see a spread-out squash.  A
+       part with few vertices follows only them: the tee's 16 vertices give +20 % while its tet
+       mesh loses 4 % */
     double part_volume_in_mm3, part_volume_out_mm3;
+    double volume_scale;            /* the uniform scale keep_volume applied (1: none) */
     uint32_t curve[SLIM_CURVE_MAX]; /* risky faces per iteration of the chosen round; [0] = input */
     int n_curve;
     int best_iter;              /* iteration returned (0: the input itself) */
@@ -94,7 +110,8 @@ struct slim_result {
     uint32_t n_inverted;        /* inverted tets in the returned result (0 by construction) */
     int selfx_input, selfx_out; /* self-intersecting edges before and after */
     uint32_t n_rejected;        /* better iterates rejected: inverted tets, new
-                                   self-intersections or more support volume */
+                                   self-intersections, more support volume or,
+                                   once rescaled, deviation past the limits */
     /* tet mesh and timing */
     uint32_t tet_verts, tet_tets, tet_surface, tet_outside;
     double setup_s, total_s; /* tet mesh and face hosts; everything */

@@ -37,6 +37,13 @@ grep -q "M104 S2[0-9][0-9]" "$work/t.gcode" 2>/dev/null || { echo "   FAIL: no n
 out=$(cd "$work" && SLIMFARM_CONFIG="$repo/config" "$bin" estimate t.gcode --printer prusa-mk3s --material petg 2>&1) ||
   { echo "   FAIL: estimate by profile name: $out"; fails=$((fails + 1)); }
 grep -qE "^t.gcode: [0-9]+ layers" <<<"$out" || { echo "   FAIL: estimate output: $out"; fails=$((fails + 1)); }
+# optimize --json reports the volume and the scale that kept it (a format slip crashed it once)
+js=$("$bin" optimize "$tee" -o "$work/s.stl" --method volumetric --iterations 5 --json 2>/dev/null) &&
+  grep -qE '"volume_scale": *[0-9.]+' <<<"$js" ||
+  { echo "   FAIL: optimize --json: $js"; fails=$((fails + 1)); }
+js=$("$bin" optimize "$tee" -o "$work/s.stl" --method volumetric --iterations 5 --no-keep-volume --json 2>/dev/null) &&
+  grep -qE '"volume_scale": *1(\.0*)?[,}]' <<<"$js" ||
+  { echo "   FAIL: optimize --no-keep-volume --json: $js"; fails=$((fails + 1)); }
 # the front door: help comes from every command program's table; each program
 # is found beside bin/ wherever the pair is installed, and loads only its own
 # libraries (the reason for the split: start-up time)
