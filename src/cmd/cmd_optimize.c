@@ -20,7 +20,7 @@
 static const char usage_line[] =
     "optimize PART -o OUT --method volumetric|surface [--angle DEG] [--beta DEG] [--max-mndr P] "
     "[--max-andr P] [--fix-bottom MM] [--fix-box X0,Y0,Z0,X1,Y1,Z1] [--max-tet-verts N] "
-    "[--iterations N] [--search-direction] [--no-keep-volume] [--json]";
+    "[--iterations N] [--search-direction] [--no-keep-volume] [--min-gain P] [--json]";
 
 #define MAX_BOXES 16
 
@@ -120,6 +120,7 @@ run(int argc, char **argv)
                                           { "iterations", required_argument, NULL, 'i' },
                                           { "search-direction", no_argument, NULL, 's' },
                                           { "no-keep-volume", no_argument, NULL, 'k' },
+                                          { "min-gain", required_argument, NULL, 'g' },
                                           { "json", no_argument, NULL, 'j' },
                                           { "help", no_argument, NULL, 'h' },
                                           { NULL, 0, NULL, 0 } };
@@ -201,6 +202,11 @@ run(int argc, char **argv)
             break;
         case 'k':
             p.keep_volume = false;
+            break;
+        case 'g':
+            if (!parse_num("--min-gain", optarg, 0, 99, &v))
+                return 2;
+            p.min_gain = v / 100;
             break;
         case 'j':
             json = true;

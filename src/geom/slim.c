@@ -59,6 +59,7 @@ slim_params_default(struct slim_params *p)
     p->search_step_deg = 15;
     p->search_max_deg = 30;
     p->keep_volume = true;
+    p->min_gain = 0.05;
 }
 
 void
@@ -519,7 +520,7 @@ choose(struct work *w, struct sf_err *err)
         }
         if ((rc = support_volume(&w->cur, w->cx->p->angle_deg, &vol, err)))
             return rc;
-        if (vol > vol_in) {
+        if (vol > vol_in * (1 - p->min_gain) || (p->min_gain > 0 && !(vol < vol_in))) {
             d->n_rejected++;
             continue;
         }
@@ -787,6 +788,8 @@ check_params(const struct slim_params *p, struct sf_err *err)
     if (!(p->beta_deg >= 0 && p->beta_deg <= 90) || !(p->beta_step_deg >= 0))
         return sf_err_set(err, SF_EINVAL, "slim: beta %g / step %g degrees is not valid",
                           p->beta_deg, p->beta_step_deg);
+    if (!(p->min_gain >= 0 && p->min_gain < 1))
+        return sf_err_set(err, SF_EINVAL, "slim: min_gain %g is outside [0, 1)", p->min_gain);
     if (!(p->max_mndr > 0) || !(p->max_andr > 0))
         return sf_err_set(err, SF_EINVAL, "slim: deviation limits must be positive");
     if (!(p->fix_bottom_mm >= 0) || !isfinite(p->fix_bottom_mm))

@@ -77,6 +77,10 @@ struct slim_params {
     double search_step_deg;    /* grid step of the search (15) */
     double search_max_deg;     /* largest tilt about each axis (30) */
     int threads;               /* workers for the search (0: one per core) */
+    double min_gain;           /* keep the input unless the result needs at least this fraction
+                                  less ray-cast support (0.05): a part's shape is not changed
+                                  for a saving the slicers' own rules blur (orient.h keeps its
+                                  input orientation by the same rule) */
     bool keep_volume;          /* scale the result uniformly about its bed contact so its volume
                                   is the input's (true); skipped when fix_boxes are given, which
                                   must stay exactly where they are (see "Volume" above) */

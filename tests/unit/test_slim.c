@@ -283,6 +283,38 @@ T_CASE(tee_at_45_degrees_stays_within_the_limits)
     mesh_release(&m);
 }
 
+/* A result must save at least min_gain of the input's ray-cast support; else the input is kept. */
+T_CASE(a_small_saving_keeps_the_input)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result any, dflt, none;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    quick_params(&p);
+    p.beta_step_deg = 15;
+    p.min_gain = 0;
+    T_OK(slim_optimize(&m, &p, &any, &err), &err);
+    T_TRUE(any.best_iter > 0 && any.after.volume_mm3 < any.before.volume_mm3);
+    p.min_gain = 0.05; /* the default */
+    T_OK(slim_optimize(&m, &p, &dflt, &err), &err);
+    T_TRUE(dflt.best_iter == 0 || dflt.after.volume_mm3 <= 0.95 * dflt.before.volume_mm3);
+    /* nothing saves 99 %: the input comes back as it was */
+    p.min_gain = 0.99;
+    T_OK(slim_optimize(&m, &p, &none, &err), &err);
+    T_EQ_INT(none.best_iter, 0);
+    T_EQ_INT(none.out.n_verts, m.n_verts);
+    T_TRUE(memcmp(none.out.v, m.v, sizeof(*m.v) * m.n_verts) == 0);
+    p.min_gain = 1;
+    struct slim_result bad;
+    T_ERR(slim_optimize(&m, &p, &bad, &err), SF_EINVAL, &err, "min_gain");
+    slim_result_release(&any);
+    slim_result_release(&dflt);
+    slim_result_release(&none);
+    mesh_release(&m);
+}
+
 static double
 lowest_z(const struct mesh *m)
 {
