@@ -22,7 +22,7 @@ PREFIX ?= /usr/local
 # Debian 12 packages the project needs; `make deps` installs what is missing.
 DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev libsqlite3-dev \
 	libmicrohttpd-dev libmosquitto-dev libinih-dev libqhull-dev libpolyclipping-dev \
-	libjansson-dev libzip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
+	libjansson-dev libminizip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
 	libsuitesparse-dev clang-14 clang-format libclang-rt-14-dev python3 procps libssl-dev \
 	printrun-common
 # Only for `make bench`: the independent peers and their helpers.
@@ -30,7 +30,7 @@ BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-nump
 
 # Libraries with a pkg-config file; the rest get fixed flags (Debian ships no .pc).
 PKGS := libserialport libcurl sqlite3 libmicrohttpd libmosquitto inih qhull_r polyclipping \
-	jansson libzip expat cairo libcrypto
+	jansson minizip expat cairo libcrypto
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS = $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 EXT_CFLAGS = $(PKG_CFLAGS) -I/usr/include/suitesparse
