@@ -132,11 +132,19 @@ $(BUILD)/gen/commands.inc: $(CMD_PROGS)
 	$(Q)for m in $(CMD_MODULES); do $(BUILD)/libexec/slimfarm/slimfarm-$$m --describe $$m || exit 1; \
 		done | LC_ALL=C sort > $@.tmp && mv $@.tmp $@
 $(BUILD)/obj/src/cmd/slimfarm.o: $(BUILD)/gen/commands.inc
-$(BUILD)/obj/src/cmd/slimfarm.o: CFLAGS += -I$(BUILD)/gen
+$(BUILD)/obj/src/cmd/slimfarm.o: CFLAGS := $(filter-out -fsanitize=% -fno-sanitize-recover=%,\
+	$(CFLAGS)) -I$(BUILD)/gen
 
+# The front door is linked statically (position-independent, so ASLR stays):
+# every `slimfarm CMD` pays its start-up before the command program's own,
+# and without the dynamic loader it halves (perf stat, `slimfarm help
+# orient`: 56 -> 26 page faults, 3.3 -> 1.6 ms task-clock).  It calls only
+# libc and no NSS function, so static glibc is safe.  Never sanitized, in
+# any build: ASan cannot link statically, and the tests should run the form
+# that ships (100 lines of argv handling).
 $(BUILD)/bin/slimfarm: $(call obj,src/cmd/slimfarm.c)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $^
+	$(CC) -static-pie -o $@ $^
 
 $(BUILD)/bin/slimfarmd: $(call obj,src/cmd/slimfarmd.c) $(LIB)
 	@mkdir -p $(dir $@)
