@@ -164,3 +164,108 @@ T_CASE(a_slab_beside_its_pier_is_one_island)
     mesh_release(&pier);
     mesh_release(&both);
 }
+
+/* Every crossing of the ray through cell c of g, by brute force in double
+   (Moller-Trumbore against every triangle), heights above g->base, sorted. */
+static size_t
+brute_hits(const struct mesh *m, const struct ray_grid *g, size_t c, double *h, size_t cap)
+{
+    uint32_t i = (uint32_t)(c % g->nu), j = (uint32_t)(c / g->nu);
+    struct vec3 o =
+        v3_add(v3_add(v3_scale(g->u, g->u0 + i * g->pitch), v3_scale(g->w, g->w0 + j * g->pitch)),
+               v3_scale(g->up, g->base - 1));
+    size_t n = 0;
+    for (uint32_t t = 0; t < m->n_tris && n < cap; t++) {
+        struct vec3 a = m->v[m->t[t][0]], b = m->v[m->t[t][1]], cc = m->v[m->t[t][2]];
+        struct vec3 e1 = v3_sub(b, a), e2 = v3_sub(cc, a), pv = v3_cross(g->up, e2);
+        double det = v3_dot(e1, pv);
+        if (fabs(det) < 1e-12)
+            continue;
+        struct vec3 tv = v3_sub(o, a), qv = v3_cross(tv, e1);
+        double bu = v3_dot(tv, pv) / det, bv = v3_dot(g->up, qv) / det;
+        if (bu < 0 || bv < 0 || bu + bv > 1)
+            continue;
+        h[n++] = v3_dot(e2, qv) / det - 1;
+    }
+    for (size_t x = 1; x < n; x++) /* insertion sort */
+        for (size_t y = x; y > 0 && h[y - 1] > h[y]; y--) {
+            double s = h[y];
+            h[y] = h[y - 1];
+            h[y - 1] = s;
+        }
+    return n;
+}
+
+T_CASE(grid_holds_every_crossing_of_every_ray)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_torus(&m, 20, 7, 48, 24, &err), &err);
+    struct raycast *rc = raycast_new(&m, &err);
+    T_TRUE(rc != NULL);
+    struct vec3 dirs[] = { v3(0, 0, 1), v3(1, 2, -0.5), v3(-0.3, 0.1, -1), v3(1, 0, 0) };
+    double h[64];
+    size_t checked = 0;
+    for (int d = 0; d < 4; d++) {
+        struct ray_grid g;
+        T_OK(raycast_grid(rc, v3_normalize(dirs[d]), 1.5, &g, &err), &err);
+        for (size_t c = 0; c < (size_t)g.nu * g.nw; c++) {
+            size_t n = brute_hits(&m, &g, c, h, 64);
+            T_EQ_INT(g.first[c + 1] - g.first[c], n);
+            for (size_t k = 0; k < n; k++)
+                T_EQ_DBL(g.hits[g.first[c] + k].h, h[k], 1e-4);
+            checked += n;
+        }
+        ray_grid_release(&g);
+    }
+    T_TRUE(checked > 1000);
+    raycast_free(rc);
+    mesh_release(&m);
+}
+
+T_CASE(a_ray_through_shared_vertices_crosses_once)
+{
+    /* a 10 x 8 x 5 box whose top and bottom are fans around a vertex placed on
+       a ray of the +z grid: that ray meets four triangles at one point, each
+       time, and must still cross the part once (in at 0, out at 5) */
+    struct mesh box, m;
+    struct sf_err err;
+    mesh_init(&box);
+    mesh_init(&m);
+    T_OK(shape_box(&box, v3(0, 0, 0), v3(10, 8, 5), &err), &err);
+    struct raycast *rc = raycast_new(&box, &err);
+    struct ray_grid g;
+    T_OK(raycast_grid(rc, v3(0, 0, 1), 1, &g, &err), &err);
+    raycast_free(rc);
+    double fx = g.u0 + 4 * g.pitch, fy = g.w0 + 3 * g.pitch;
+    ray_grid_release(&g);
+    T_OK(mesh_alloc(&m, 10, 16, &err), &err);
+    for (int k = 0; k < 8; k++) /* corners: bit 0 x, bit 1 y, bit 2 z */
+        m.v[k] = v3(k & 1 ? 10 : 0, k & 2 ? 8 : 0, k & 4 ? 5 : 0);
+    m.v[8] = v3(fx, fy, 0);
+    m.v[9] = v3(fx, fy, 5);
+    const uint32_t ring[4] = { 0, 1, 3, 2 }; /* counter-clockwise seen from above */
+    uint32_t t = 0;
+    for (int k = 0; k < 4; k++) {
+        uint32_t a = ring[k], b = ring[(k + 1) % 4];
+        uint32_t tris[4][3] = {
+            { b, a, 8 }, { a + 4, b + 4, 9 }, { a, b, b + 4 }, { a, b + 4, a + 4 }
+        };
+        for (int q = 0; q < 4; q++, t++)
+            for (int r = 0; r < 3; r++)
+                m.t[t][r] = tris[q][r];
+    }
+    T_EQ_DBL(mesh_volume(&m, NULL), 400, 1e-9); /* closed and outward */
+    rc = raycast_new(&m, &err);
+    T_OK(raycast_grid(rc, v3(0, 0, 1), 1, &g, &err), &err);
+    for (size_t c = 0; c < (size_t)g.nu * g.nw; c++) {
+        T_EQ_INT(g.first[c + 1] - g.first[c], 2);
+        T_TRUE(g.hits[g.first[c]].cos_up < 0 && g.hits[g.first[c] + 1].cos_up > 0);
+        T_EQ_DBL(g.hits[g.first[c] + 1].h, 5, 1e-6);
+    }
+    ray_grid_release(&g);
+    raycast_free(rc);
+    mesh_release(&box);
+    mesh_release(&m);
+}
