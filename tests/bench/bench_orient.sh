@@ -71,7 +71,7 @@ for f in "$(cd "$shared" && pwd)"/meshes/*.stl; do
   if [ -n "$base" ]; then
     base_s=$(cut -d' ' -f1 "$work/base.t" | median)
     base_col=$(awk -v b="$base_s" -v o="$ours_s" -v t="${tw_s:-0}" \
-      'BEGIN {printf " | %6.3f %9.2fx %11s", b, b / o, t > 0 ? sprintf("%.1fx", t / b) : "-"}')
+      'BEGIN {printf " | %6.3f %9.2fx %11s", b, b / o, (t > 0 ? sprintf("%.1fx", t / b) : "-")}')
   fi
   printf '%-17s %14s %8.0f %14s %7s %7s | %7s %7s %8s | %7s %7s %8s%s\n' "$name" \
     "$(printf '%.3f (%.2f)' "$ours_s" "$ours_c")" "$(awk -v c="$cands" -v s="$ours_s" 'BEGIN {print c / s}')" \
