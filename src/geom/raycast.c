@@ -203,21 +203,6 @@ edge(double ax, double ay, double bx, double by, double px, double py)
     return -((ax - bx) * (py - by) - (ay - by) * (px - bx));
 }
 
-/* integer min and max of three lattice lines */
-static inline int32_t
-min3i(int32_t a, int32_t b, int32_t c)
-{
-    int32_t m = a < b ? a : b;
-    return m < c ? m : c;
-}
-
-static inline int32_t
-max3i(int32_t a, int32_t b, int32_t c)
-{
-    int32_t m = a > b ? a : b;
-    return m > c ? m : c;
-}
-
 /* Top-left rule: a point exactly on edge a -> b of a counter-clockwise
    triangle is inside only if the edge goes up, or left along a row; of the
    two triangles sharing an edge (traversing it in opposite senses) exactly
@@ -226,6 +211,21 @@ static inline bool
 owns_edge(double ax, double ay, double bx, double by)
 {
     return by > ay || (by == ay && bx < ax);
+}
+
+/* not fmin/fmax: a libm call each at -O2 */
+static inline double
+min3(double a, double b, double c)
+{
+    double m = a < b ? a : b;
+    return m < c ? m : c;
+}
+
+static inline double
+max3(double a, double b, double c)
+{
+    double m = a > b ? a : b;
+    return m > c ? m : c;
 }
 
 /* floor and ceil for the grid's small coordinates (the libm calls cost more
@@ -301,38 +301,21 @@ scan_triangles(const struct raycast *rc, const struct ray_grid *g, double dlo,
     const double inv = 1 / g->pitch;
     /* every vertex projected once: (u, w) in cell units and height */
     double *p = mem_array((size_t)m->n_verts * 3 + 3, sizeof(double));
-    /* and the lattice lines around it: ceil and floor of x, then of y.  Most
-       triangles of a large part hold no cell centre; telling so from four
-       integer min/max (ceil and floor are monotonic) halves their cost */
-    int32_t *lat = mem_array((size_t)m->n_verts * 4 + 4, sizeof(int32_t));
-    if (!p || !lat) {
-        free(p);
-        free(lat);
+    if (!p)
         return SF_ENOMEM;
-    }
     for (uint32_t v = 0; v < m->n_verts; v++) {
         struct vec3 q = m->v[v];
-        double x = (v3_dot(q, g->u) - g->u0) * inv, y = (v3_dot(q, g->w) - g->w0) * inv;
-        p[3 * v] = x;
-        p[3 * v + 1] = y;
+        p[3 * v] = (v3_dot(q, g->u) - g->u0) * inv;
+        p[3 * v + 1] = (v3_dot(q, g->w) - g->w0) * inv;
         p[3 * v + 2] = v3_dot(q, g->up) - dlo;
-        /* the grid covers the part's shadow, so these are small */
-        lat[4 * v] = (int32_t)ceil_l(x), lat[4 * v + 1] = (int32_t)floor_l(x);
-        lat[4 * v + 2] = (int32_t)ceil_l(y), lat[4 * v + 3] = (int32_t)floor_l(y);
     }
     const long max_i = (long)g->nu - 1, max_j = (long)g->nw - 1;
     int rcode = SF_OK;
     for (uint32_t t = 0; t < m->n_tris && rcode == SF_OK; t++) {
-        const int32_t *l0 = lat + 4 * (size_t)m->t[t][0], *l1 = lat + 4 * (size_t)m->t[t][1],
-                      *l2 = lat + 4 * (size_t)m->t[t][2];
-        long i0 = min3i(l0[0], l1[0], l2[0]), i1 = max3i(l0[1], l1[1], l2[1]);
-        if (i0 > i1)
-            continue; /* no lattice column in its shadow */
-        long j0 = min3i(l0[2], l1[2], l2[2]), j1 = max3i(l0[3], l1[3], l2[3]);
-        if (j0 > j1)
-            continue;
         const double *v0 = p + 3 * (size_t)m->t[t][0], *v1 = p + 3 * (size_t)m->t[t][1],
                      *v2 = p + 3 * (size_t)m->t[t][2];
+        long i0 = ceil_l(min3(v0[0], v1[0], v2[0])), i1 = floor_l(max3(v0[0], v1[0], v2[0]));
+        long j0 = ceil_l(min3(v0[1], v1[1], v2[1])), j1 = floor_l(max3(v0[1], v1[1], v2[1]));
         i0 = i0 < 0 ? 0 : i0, j0 = j0 < 0 ? 0 : j0;
         i1 = i1 > max_i ? max_i : i1, j1 = j1 > max_j ? max_j : j1;
         if (i0 > i1 || j0 > j1)
@@ -379,7 +362,6 @@ scan_triangles(const struct raycast *rc, const struct ray_grid *g, double dlo,
         }
     }
     free(p);
-    free(lat);
     return rcode;
 }
 
