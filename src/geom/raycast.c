@@ -1,41 +1,33 @@
 /*
- * raycast.c - the rays structure (see raycast.h), by scan conversion.
+ * raycast.c - the rays structure on Embree 3 (see raycast.h).
  *
- * Every ray of a grid is parallel to up and starts on a regular lattice, so
- * "every hit along every ray" is the set of lattice points inside each
- * triangle's projection onto the grid plane, each at the height the
- * triangle's plane has there: a layered depth image.  Each triangle is
- * projected once, the lattice points in its bounding box are tested
- * against its three edges, and each inside point yields one hit.  The hits
- * are bucketed by cell (counting sort), each bucket sorted by height (ties
- * by triangle), and coincident crossings of the same sense merged.
+ * One process-wide Embree device (created once; its thread pool is shared)
+ * and one scene per part.  A grid is cast in bands of four rows, as
+ * rtcIntersect16 packets of 4 x 4 rays; an intersection filter on the
+ * geometry records every hit (ray id, distance, triangle) into the band's
+ * collector and rejects it, so one traversal per ray yields all hits, in no
+ * particular order.  The band's hits are then bucketed by cell (counting
+ * sort), each bucket sorted by height (ties by triangle), and duplicates
+ * removed: a ray through an edge shared by two triangles facing the same
+ * way reports the crossing twice.
  *
- * Why not a ray tracer: this was an Embree scene with an intersection filter
- * that recorded each hit and rejected it so traversal went on.  For a grid
- * of parallel rays that does a BVH walk per ray to find what scan
- * conversion finds directly; per cast it cost 2M instructions on a
- * 1,050-triangle part (now ~0.2M) and 5.3M on 52,000 triangles, plus the
- * scene build (120M instructions on 52,000 triangles) and loading libembree3
- * and libtbb (~8 ms) in every program that measures support.
- *
- * Watertight: edge functions are evaluated from the lexicographically
- * smaller endpoint, so two triangles sharing an edge compute exactly
- * opposite values, and a lattice point exactly on a shared edge belongs to
- * one of them (the top-left rule); none is lost or counted twice.
- *
- * Thread-safe: a struct raycast is read-only after raycast_new; each call
- * fills its own struct ray_grid.
+ * The collector rides in an extended RTCIntersectContext (Embree passes the
+ * context to filters), so concurrent grids on one scene never share state.
  */
 #include "raycast.h"
 
+#include <embree3/rtcore.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "../base/limits.h"
+#include "../base/log.h"
 #include "../base/mem.h"
 
 struct raycast {
+    RTCScene scene;
     const struct mesh *mesh;
     float *normal;     /* 3 per triangle: unit outward normals */
     struct vec3 com;   /* centre of mass (raycast_com) */
@@ -90,36 +82,101 @@ raycast_com(const struct raycast *rc)
     return rc->com;
 }
 
-/* Hits of one grid in the order they were found. */
+static pthread_once_t device_once = PTHREAD_ONCE_INIT;
+static RTCDevice device;
+
+static void
+embree_error(void *ud, enum RTCError code, const char *str)
+{
+    (void)ud;
+    log_error("embree", "error %d: %s", (int)code, str ? str : "");
+}
+
+static void
+device_init(void)
+{
+    device = rtcNewDevice(NULL);
+    if (device)
+        rtcSetDeviceErrorFunction(device, embree_error, NULL);
+}
+
+/* Hits collected for one band of rays. */
 struct collector {
     struct ray_hit *hits;
-    uint32_t *cell; /* cell of each hit */
+    uint32_t *ray; /* ray (cell within the row) of each hit */
     size_t n, cap;
+    bool oom; /* a growth failed: the row is incomplete */
 };
 
-static bool
-collect(struct collector *c, uint32_t cell, float h, float cos_up, uint32_t tri)
+struct hit_context {
+    struct RTCIntersectContext ctx; /* must be first: Embree hands us this pointer */
+    struct collector *col;
+};
+
+/* Embree's RTCRayN/RTCHitN accessors are C++-only; these follow its SOA layout
+   (rtcore_ray.h: tfar is the 9th float field, id the 11th, primID the 6th). */
+static inline float
+rayn_tfar(const struct RTCRayN *ray, unsigned n, unsigned i)
 {
-    if (c->n == c->cap) {
-        size_t cap = c->cap;
-        void *hp = c->hits, *cp = c->cell;
-        if (!mem_grow(&hp, &cap, c->n + 1, sizeof(*c->hits)))
-            return false;
-        c->hits = hp;
-        cap = c->cap;
-        if (!mem_grow(&cp, &cap, c->n + 1, sizeof(*c->cell)))
-            return false;
-        c->cell = cp;
-        c->cap = cap;
+    return ((const float *)ray)[8 * n + i];
+}
+
+static inline unsigned
+rayn_id(const struct RTCRayN *ray, unsigned n, unsigned i)
+{
+    return ((const unsigned *)ray)[10 * n + i];
+}
+
+static inline unsigned
+hitn_prim(const struct RTCHitN *hit, unsigned n, unsigned i)
+{
+    return ((const unsigned *)hit)[5 * n + i];
+}
+
+static void
+collect_filter(const struct RTCFilterFunctionNArguments *args)
+{
+    struct hit_context *hc = (struct hit_context *)args->context;
+    struct collector *c = hc->col;
+    for (unsigned i = 0; i < args->N; i++) {
+        if (!args->valid[i])
+            continue;
+        args->valid[i] = 0; /* reject: traversal goes on to the next hit */
+        if (c->n == c->cap) {
+            size_t cap = c->cap;
+            void *h = c->hits, *r = c->ray;
+            if (!mem_grow(&h, &cap, c->n + 1, sizeof(*c->hits))) {
+                c->oom = true;
+                continue;
+            }
+            c->hits = h;
+            cap = c->cap;
+            if (!mem_grow(&r, &cap, c->n + 1, sizeof(*c->ray))) {
+                c->oom = true;
+                continue;
+            }
+            c->ray = r;
+            c->cap = cap;
+        }
+        /* cos_up is filled in when the row is bucketed: the normal's load missed
+           the cache here, inside the traversal (perf: 83 % of this filter) */
+        struct ray_hit *h = &c->hits[c->n];
+        h->h = rayn_tfar(args->ray, args->N, i);
+        h->tri = hitn_prim(args->hit, args->N, i);
+        c->ray[c->n] = rayn_id(args->ray, args->N, i);
+        c->n++;
     }
-    c->hits[c->n] = (struct ray_hit){ .h = h, .cos_up = cos_up, .tri = tri };
-    c->cell[c->n++] = cell;
-    return true;
 }
 
 struct raycast *
 raycast_new(const struct mesh *m, struct sf_err *err)
 {
+    pthread_once(&device_once, device_init);
+    if (!device) {
+        sf_err_set(err, SF_EIO, "embree: cannot create a device (error %d)",
+                   (int)rtcGetDeviceError(NULL));
+        return NULL;
+    }
     struct raycast *rc = mem_calloc(1, sizeof(*rc));
     if (!rc) {
         sf_err_set(err, SF_ENOMEM, "out of memory");
@@ -128,17 +185,48 @@ raycast_new(const struct mesh *m, struct sf_err *err)
     rc->mesh = m;
     rc->com = centre_of_mass(m);
     rc->normal = mem_array((size_t)m->n_tris * 3 + 3, sizeof(float));
-    if (!rc->normal) {
+    RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    float *vb = geom ? rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                               3 * sizeof(float), m->n_verts + 1)
+                     : NULL;
+    unsigned *ib = geom ? rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                  3 * sizeof(unsigned), m->n_tris ? m->n_tris : 1)
+                        : NULL;
+    if (!rc->normal || !vb || !ib) {
+        if (geom)
+            rtcReleaseGeometry(geom);
         raycast_free(rc);
-        sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for %u triangles", m->n_tris);
+        sf_err_set(err, SF_ENOMEM, "embree: out of memory for %u triangles", m->n_tris);
         return NULL;
     }
+    for (uint32_t i = 0; i < m->n_verts; i++) {
+        vb[3 * i] = (float)m->v[i].x;
+        vb[3 * i + 1] = (float)m->v[i].y;
+        vb[3 * i + 2] = (float)m->v[i].z;
+    }
     for (uint32_t i = 0; i < m->n_tris; i++) {
+        memcpy(ib + 3 * (size_t)i, m->t[i], 3 * sizeof(unsigned));
         struct vec3 n = mesh_tri_normal(m, i);
         rc->normal[3 * i] = (float)n.x;
         rc->normal[3 * i + 1] = (float)n.y;
         rc->normal[3 * i + 2] = (float)n.z;
     }
+    rtcSetGeometryIntersectFilterFunction(geom, collect_filter);
+    rtcCommitGeometry(geom);
+    rc->scene = rtcNewScene(device);
+    if (!rc->scene) {
+        rtcReleaseGeometry(geom);
+        raycast_free(rc);
+        sf_err_set(err, SF_ENOMEM, "embree: cannot create a scene");
+        return NULL;
+    }
+    rtcSetSceneFlags(rc->scene, RTC_SCENE_FLAG_ROBUST);
+    /* medium: a high-quality BVH took 1.3 s to build for 1M facets, more than
+       all the casts it speeds up */
+    rtcSetSceneBuildQuality(rc->scene, RTC_BUILD_QUALITY_MEDIUM);
+    rtcAttachGeometry(rc->scene, geom);
+    rtcReleaseGeometry(geom);
+    rtcCommitScene(rc->scene);
     return rc;
 }
 
@@ -147,6 +235,8 @@ raycast_free(struct raycast *rc)
 {
     if (!rc)
         return;
+    if (rc->scene)
+        rtcReleaseScene(rc->scene);
     free(rc->normal);
     free(rc->extreme);
     free(rc);
@@ -172,7 +262,7 @@ perpendicular(struct vec3 d)
 
 /* Sort one ray's hits by height, equal heights by triangle, so the order
    (and which of two hits through a shared edge the dedupe keeps) does not
-   depend on the order the triangles were scanned in: a handful each, so insertion
+   depend on the order Embree reported them in: a handful each, so insertion
    sort (qsort's merge sort with its indirect calls cost more than the
    sorting). */
 static void
@@ -187,182 +277,6 @@ sort_hits(struct ray_hit *b, size_t n)
         }
         b[k] = x;
     }
-}
-
-/*
- * Edge function of a -> b at p (twice the signed area of a, b, p; > 0 when
- * p is left of the edge), computed from the lexicographically smaller
- * endpoint so that edge(a, b, p) == -edge(b, a, p) exactly: the two
- * triangles sharing an edge agree on which side of it each point lies.
- */
-static inline double
-edge(double ax, double ay, double bx, double by, double px, double py)
-{
-    if (ax < bx || (ax == bx && ay < by))
-        return (bx - ax) * (py - ay) - (by - ay) * (px - ax);
-    return -((ax - bx) * (py - by) - (ay - by) * (px - bx));
-}
-
-/* Top-left rule: a point exactly on edge a -> b of a counter-clockwise
-   triangle is inside only if the edge goes up, or left along a row; of the
-   two triangles sharing an edge (traversing it in opposite senses) exactly
-   one owns it. */
-static inline bool
-owns_edge(double ax, double ay, double bx, double by)
-{
-    return by > ay || (by == ay && bx < ax);
-}
-
-/* not fmin/fmax: a libm call each at -O2 */
-static inline double
-min3(double a, double b, double c)
-{
-    double m = a < b ? a : b;
-    return m < c ? m : c;
-}
-
-static inline double
-max3(double a, double b, double c)
-{
-    double m = a > b ? a : b;
-    return m > c ? m : c;
-}
-
-/* floor and ceil for the grid's small coordinates (the libm calls cost more
-   than the rest of rejecting a triangle whose shadow holds no cell centre) */
-static inline long
-floor_l(double x)
-{
-    long i = (long)x;
-    return i - (x < (double)i);
-}
-
-static inline long
-ceil_l(double x)
-{
-    long i = (long)x;
-    return i + (x > (double)i);
-}
-
-/* One edge a -> b of a counter-clockwise triangle in the grid plane. */
-struct edge_fn {
-    double ox, oy, dx, dy;        /* edge() from its smaller endpoint o, direction d */
-    double sign;                  /* -1 if o is b */
-    bool owns;                    /* owns_edge(a, b) */
-    double ay, by, ax, inv_slope; /* row spans: x at height y */
-};
-
-static void
-edge_init(struct edge_fn *e, double ax, double ay, double bx, double by)
-{
-    bool a_first = ax < bx || (ax == bx && ay < by);
-    e->ox = a_first ? ax : bx, e->oy = a_first ? ay : by;
-    e->dx = a_first ? bx - ax : ax - bx, e->dy = a_first ? by - ay : ay - by;
-    e->sign = a_first ? 1 : -1;
-    e->owns = owns_edge(ax, ay, bx, by);
-    e->ax = ax, e->ay = ay, e->by = by;
-    e->inv_slope = by != ay ? (bx - ax) / (by - ay) : 0;
-}
-
-/* The same value as edge(a, b, p), bit for bit. */
-static inline double
-edge_at(const struct edge_fn *e, double px, double py)
-{
-    return e->sign * (e->dx * (py - e->oy) - e->dy * (px - e->ox));
-}
-
-/* Widen [*lo, *hi] to where the edge crosses row y, if it does. */
-static inline void
-edge_span(const struct edge_fn *e, double y, double *lo, double *hi)
-{
-    if ((y < e->ay && y < e->by) || (y > e->ay && y > e->by))
-        return;
-    double x = e->ay != e->by ? e->ax + (y - e->ay) * e->inv_slope : e->ax;
-    *lo = x < *lo ? x : *lo;
-    *hi = x > *hi ? x : *hi;
-    if (e->ay == e->by) { /* along the row: both ends */
-        double x2 = e->ax + e->dx * e->sign;
-        *lo = x2 < *lo ? x2 : *lo;
-        *hi = x2 > *hi ? x2 : *hi;
-    }
-}
-
-/*
- * Every hit of grid g: each triangle's projection, in cell units, against
- * the cell centres it may cover, row by row (a row's span from the edges,
- * widened to whole cells, then the exact test).  SF_ENOMEM if the
- * collector cannot grow.
- */
-static int
-scan_triangles(const struct raycast *rc, const struct ray_grid *g, double dlo,
-               struct collector *col)
-{
-    const struct mesh *m = rc->mesh;
-    const double inv = 1 / g->pitch;
-    /* every vertex projected once: (u, w) in cell units and height */
-    double *p = mem_array((size_t)m->n_verts * 3 + 3, sizeof(double));
-    if (!p)
-        return SF_ENOMEM;
-    for (uint32_t v = 0; v < m->n_verts; v++) {
-        struct vec3 q = m->v[v];
-        p[3 * v] = (v3_dot(q, g->u) - g->u0) * inv;
-        p[3 * v + 1] = (v3_dot(q, g->w) - g->w0) * inv;
-        p[3 * v + 2] = v3_dot(q, g->up) - dlo;
-    }
-    const long max_i = (long)g->nu - 1, max_j = (long)g->nw - 1;
-    int rcode = SF_OK;
-    for (uint32_t t = 0; t < m->n_tris && rcode == SF_OK; t++) {
-        const double *v0 = p + 3 * (size_t)m->t[t][0], *v1 = p + 3 * (size_t)m->t[t][1],
-                     *v2 = p + 3 * (size_t)m->t[t][2];
-        long i0 = ceil_l(min3(v0[0], v1[0], v2[0])), i1 = floor_l(max3(v0[0], v1[0], v2[0]));
-        long j0 = ceil_l(min3(v0[1], v1[1], v2[1])), j1 = floor_l(max3(v0[1], v1[1], v2[1]));
-        i0 = i0 < 0 ? 0 : i0, j0 = j0 < 0 ? 0 : j0;
-        i1 = i1 > max_i ? max_i : i1, j1 = j1 > max_j ? max_j : j1;
-        if (i0 > i1 || j0 > j1)
-            continue; /* no cell centre in its shadow */
-        double area = edge(v0[0], v0[1], v1[0], v1[1], v2[0], v2[1]);
-        if (area == 0)
-            continue;   /* edge-on: parallel to the rays */
-        if (area < 0) { /* counter-clockwise in the grid plane */
-            const double *sw = v1;
-            v1 = v2, v2 = sw;
-        }
-        /* e[k] is the edge opposite vertex k */
-        struct edge_fn e[3];
-        edge_init(&e[0], v1[0], v1[1], v2[0], v2[1]);
-        edge_init(&e[1], v2[0], v2[1], v0[0], v0[1]);
-        edge_init(&e[2], v0[0], v0[1], v1[0], v1[1]);
-        const float *n = rc->normal + 3 * (size_t)t;
-        float cos_up = (float)(n[0] * g->up.x + n[1] * g->up.y + n[2] * g->up.z);
-        for (long j = j0; j <= j1; j++) {
-            double y = (double)j, lo = INFINITY, hi = -INFINITY;
-            for (int k = 0; k < 3; k++)
-                edge_span(&e[k], y, &lo, &hi);
-            long a = floor_l(lo), b = ceil_l(hi);
-            a = a < i0 ? i0 : a, b = b > i1 ? i1 : b;
-            for (long i = a; i <= b; i++) {
-                double x = (double)i, ea = edge_at(&e[0], x, y), eb, ec;
-                if (!(ea > 0 || (ea == 0 && e[0].owns)))
-                    continue;
-                eb = edge_at(&e[1], x, y);
-                if (!(eb > 0 || (eb == 0 && e[1].owns)))
-                    continue;
-                ec = edge_at(&e[2], x, y);
-                if (!(ec > 0 || (ec == 0 && e[2].owns)))
-                    continue;
-                double sum = ea + eb + ec;
-                if (!(sum > 0))
-                    continue;
-                double h = (ea * v0[2] + eb * v1[2] + ec * v2[2]) / sum;
-                if (!collect(col, (uint32_t)(j * (long)g->nu + i), (float)h, cos_up, t)) {
-                    rcode = SF_ENOMEM;
-                    break;
-                }
-            }
-        }
-    }
-    free(p);
-    return rcode;
 }
 
 int
@@ -408,54 +322,107 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
 
     size_t cells = (size_t)g->nu * g->nw;
     g->first = mem_array(cells + 1, sizeof(uint32_t));
-    uint32_t *count = mem_array(cells + 1, sizeof(uint32_t));
+    /* Rays go to Embree as packets of 16, each a 4 x 4 tile of the grid:
+       a square packet's frustum is tighter than a line's (a row-by-row
+       stream: native thread CPU, armadillo, 20 pitch-1 grids 51 -> 39 ms),
+       and packets skip Embree's stream-to-packet copy.  BAND rows of tiles
+       are collected, bucketed by cell and walked in grid order. */
+    enum { BAND = 4, TILE = 4 };
+    size_t band_rays = (size_t)g->nu * BAND;
+    uint32_t *count = mem_array(band_rays + 1, sizeof(uint32_t));
     struct collector col = { 0 };
+    size_t cap_hits = 0;
     int rc_out = SF_OK;
     if (!g->first || !count) {
         rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory");
         goto out;
     }
-    if (scan_triangles(rc, g, dlo, &col) != SF_OK) {
-        rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
-        goto out;
-    }
-    /* bucket the hits by cell, then sort and merge each bucket */
-    memset(count, 0, sizeof(uint32_t) * (cells + 1));
-    for (size_t k = 0; k < col.n; k++)
-        count[col.cell[k] + 1]++;
-    for (size_t c = 0; c < cells; c++)
-        count[c + 1] += count[c];
-    g->hits = mem_array(col.n + 1, sizeof(struct ray_hit));
-    if (!g->hits) {
-        rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
-        goto out;
-    }
-    for (size_t k = 0; k < col.n; k++)
-        g->hits[count[col.cell[k]]++] = col.hits[k];
-    /* count[c] is now the end of bucket c; compact in place, in grid order */
+    double start = dlo - 1.0; /* rays start 1 mm below the part */
     float eps = (float)(1e-5 * (dhi - dlo + 1));
-    size_t out_n = 0, bstart = 0;
+    struct hit_context hc;
+    rtcInitIntersectContext(&hc.ctx);
+    hc.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+    hc.col = &col;
     g->first[0] = 0;
-    for (size_t c = 0; c < cells; c++) {
-        size_t bend = count[c];
-        struct ray_hit *b = g->hits + bstart;
-        size_t bn = bend - bstart;
-        sort_hits(b, bn);
-        for (size_t k = 0; k < bn; k++) {
-            struct ray_hit h = b[k];
-            if (out_n > g->first[c] && fabsf(g->hits[out_n - 1].h - h.h) < eps &&
-                (g->hits[out_n - 1].cos_up < 0) == (h.cos_up < 0))
-                continue; /* one crossing, twice: coincident faces of the same sense */
-            g->hits[out_n++] = h;
+    /* Embree reads both with aligned 64-byte loads */
+    _Alignas(64) struct RTCRayHit16 pk;
+    _Alignas(64) int valid[16];
+    for (uint32_t j0 = 0; j0 < g->nw; j0 += BAND) {
+        uint32_t rows = g->nw - j0 < BAND ? g->nw - j0 : BAND;
+        size_t n_rays = (size_t)rows * g->nu;
+        col.n = 0;
+        for (uint32_t i0 = 0; i0 < g->nu; i0 += TILE) {
+            for (int q = 0; q < 16; q++) {
+                uint32_t r = (uint32_t)q / TILE, i = i0 + (uint32_t)q % TILE;
+                valid[q] = r < rows && i < g->nu ? -1 : 0;
+                double wc = g->w0 + (j0 + r) * pitch;
+                struct vec3 o =
+                    v3_add(v3_add(v3_scale(g->u, g->u0 + i * pitch), v3_scale(g->w, wc)),
+                           v3_scale(g->up, start));
+                pk.ray.org_x[q] = (float)o.x;
+                pk.ray.org_y[q] = (float)o.y;
+                pk.ray.org_z[q] = (float)o.z;
+                pk.ray.dir_x[q] = (float)g->up.x;
+                pk.ray.dir_y[q] = (float)g->up.y;
+                pk.ray.dir_z[q] = (float)g->up.z;
+                pk.ray.tnear[q] = 0;
+                pk.ray.time[q] = 0;
+                pk.ray.tfar[q] = INFINITY;
+                pk.ray.mask[q] = UINT32_MAX;
+                pk.ray.id[q] = r * g->nu + i; /* the cell, counted from the band's first */
+                pk.ray.flags[q] = 0;
+                pk.hit.geomID[q] = RTC_INVALID_GEOMETRY_ID;
+            }
+            rtcIntersect16(valid, rc->scene, &hc.ctx, &pk);
         }
-        g->first[c + 1] = (uint32_t)out_n;
-        bstart = bend;
+        if (col.oom) {
+            rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
+            goto out;
+        }
+        /* bucket the band's hits by cell, then sort and dedupe each bucket */
+        memset(count, 0, sizeof(uint32_t) * (n_rays + 1));
+        for (size_t k = 0; k < col.n; k++)
+            count[col.ray[k] + 1]++;
+        for (size_t i = 0; i < n_rays; i++)
+            count[i + 1] += count[i];
+        size_t base = g->n_hits;
+        void *hp = g->hits;
+        if (!mem_grow(&hp, &cap_hits, base + col.n + 1, sizeof(struct ray_hit))) {
+            rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
+            goto out;
+        }
+        g->hits = hp;
+        struct ray_hit *band = g->hits + base;
+        for (size_t k = 0; k < col.n; k++) {
+            struct ray_hit h = col.hits[k];
+            const float *n = rc->normal + 3 * (size_t)h.tri;
+            h.cos_up = (float)(n[0] * g->up.x + n[1] * g->up.y + n[2] * g->up.z);
+            band[count[col.ray[k]]++] = h;
+        }
+        /* count[c] is now the end of bucket c; walk the cells in grid order */
+        size_t out_n = base, bstart = 0, cell0 = (size_t)j0 * g->nu;
+        for (size_t c = 0; c < n_rays; c++) {
+            size_t bend = count[c];
+            struct ray_hit *b = band + bstart;
+            size_t bn = bend - bstart;
+            sort_hits(b, bn);
+            for (size_t k = 0; k < bn; k++) {
+                struct ray_hit h = b[k];
+                h.h = (float)(h.h - 1.0); /* from the ray start to the bed */
+                if (out_n > g->first[cell0 + c] && fabsf(g->hits[out_n - 1].h - h.h) < eps &&
+                    (g->hits[out_n - 1].cos_up < 0) == (h.cos_up < 0))
+                    continue; /* the same crossing seen through a shared edge */
+                g->hits[out_n++] = h;
+            }
+            g->first[cell0 + c + 1] = (uint32_t)out_n;
+            bstart = bend;
+        }
+        g->n_hits = out_n;
     }
-    g->n_hits = out_n;
 out:
     free(count);
     free(col.hits);
-    free(col.cell);
+    free(col.ray);
     if (rc_out)
         ray_grid_release(g);
     return rc_out;

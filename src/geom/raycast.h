@@ -1,15 +1,15 @@
 /*
  * raycast.h - the "rays structure" of the orientation paper (Allen & Dutta):
- * a grid of parallel rays along an up-direction, every hit along each ray.
+ * a grid of parallel rays along an up-direction, every hit along each ray,
+ * from one Embree scene of the part.
  *
- * Rays are rotated, never the mesh: one struct raycast serves every
- * candidate direction.  The hits are found by scan conversion (each
- * triangle's projection against the grid's cell centres, raycast.c says
- * why), then sorted per ray.
+ * Rays are rotated, never the mesh: one scene serves every candidate
+ * direction.  Hits are found with Embree's stream queries and an
+ * intersection filter that records every hit, then sorted per ray.
  *
  * Thread-safety: a struct raycast may be queried from several threads at
- * once (it is read-only after raycast_new); each call fills its own struct
- * ray_grid.  Create and free on one thread.
+ * once (Embree scenes are read-only after commit); each call fills its own
+ * struct ray_grid.  Create and free on one thread.
  */
 #ifndef SF_GEOM_RAYCAST_H
 #define SF_GEOM_RAYCAST_H
@@ -45,7 +45,7 @@ struct ray_grid {
     size_t n_hits;
 };
 
-/* Prepare m for grids (m must outlive rc). NULL with err set on failure. */
+/* Build the Embree scene of m (m must outlive rc). NULL with err set on failure. */
 struct raycast *raycast_new(const struct mesh *m, struct sf_err *err);
 void raycast_free(struct raycast *rc);
 
