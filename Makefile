@@ -22,7 +22,7 @@ PREFIX ?= /usr/local
 # Debian 12 packages the project needs; `make deps` installs what is missing.
 DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev libsqlite3-dev \
 	libmicrohttpd-dev libmosquitto-dev libinih-dev libqhull-dev libpolyclipping-dev \
-	libjansson-dev libzip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
+	libjansson-dev libminizip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
 	libsuitesparse-dev clang-14 clang-format libclang-rt-14-dev python3 procps libssl-dev \
 	printrun-common
 # Only for `make bench`: the independent peers and their helpers.
@@ -30,7 +30,7 @@ BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-nump
 
 # Libraries with a pkg-config file; the rest get fixed flags (Debian ships no .pc).
 PKGS := libserialport libcurl sqlite3 libmicrohttpd libmosquitto inih qhull_r polyclipping \
-	jansson libzip expat cairo libcrypto
+	jansson minizip expat cairo libcrypto
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS = $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 EXT_CFLAGS = $(PKG_CFLAGS) -I/usr/include/suitesparse
@@ -132,11 +132,19 @@ $(BUILD)/gen/commands.inc: $(CMD_PROGS)
 	$(Q)for m in $(CMD_MODULES); do $(BUILD)/libexec/slimfarm/slimfarm-$$m --describe $$m || exit 1; \
 		done | LC_ALL=C sort > $@.tmp && mv $@.tmp $@
 $(BUILD)/obj/src/cmd/slimfarm.o: $(BUILD)/gen/commands.inc
-$(BUILD)/obj/src/cmd/slimfarm.o: CFLAGS += -I$(BUILD)/gen
+$(BUILD)/obj/src/cmd/slimfarm.o: CFLAGS := $(filter-out -fsanitize=% -fno-sanitize-recover=%,\
+	$(CFLAGS)) -I$(BUILD)/gen
 
+# The front door is linked statically (position-independent, so ASLR stays):
+# every `slimfarm CMD` pays its start-up before the command program's own,
+# and without the dynamic loader it halves (perf stat, `slimfarm help
+# orient`: 56 -> 26 page faults, 3.3 -> 1.6 ms task-clock).  It calls only
+# libc and no NSS function, so static glibc is safe.  Never sanitized, in
+# any build: ASan cannot link statically, and the tests should run the form
+# that ships (100 lines of argv handling).
 $(BUILD)/bin/slimfarm: $(call obj,src/cmd/slimfarm.c)
 	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) -o $@ $^
+	$(CC) -static-pie -o $@ $^
 
 $(BUILD)/bin/slimfarmd: $(call obj,src/cmd/slimfarmd.c) $(LIB)
 	@mkdir -p $(dir $@)

@@ -17,6 +17,9 @@
 
 static const struct cmd *cmds[CMD_MAX];
 static int n_cmds;
+/* isatty(stderr), asked once in main: progress is drawn from worker threads
+   once per scored item (orient: 50+ ioctl calls a run otherwise) */
+static bool stderr_tty;
 
 void
 cmd_register(const struct cmd *c)
@@ -157,7 +160,7 @@ cmd_stdout_is_tty(void)
 void
 cmd_progress(const char *label, double done, double total)
 {
-    if (!isatty(STDERR_FILENO) || total <= 0)
+    if (!stderr_tty || total <= 0)
         return;
     double f = done / total;
     if (f > 1)
@@ -206,6 +209,7 @@ main(int argc, char **argv)
         describe(argv[2]);
         return 0;
     }
+    stderr_tty = isatty(STDERR_FILENO);
     for (int i = 0; argc >= 2 && i < n_cmds; i++)
         if (strcmp(cmds[i]->name, argv[1]) == 0)
             return cmds[i]->run(argc - 1, argv + 1);

@@ -131,6 +131,15 @@ proxy_cache_init(struct proxy_cache *pc, const struct mesh *m, const uint32_t *e
         pb->cos_radius = (float)cos(r);
         pb->sin_radius = (float)sin(r);
     }
+    /* Keep only the bins that hold faces, in order: every evaluation walks the
+       bins, and most of the 1,536 are empty on a part of few face directions
+       (anchor: 11 of 23 M proxy instructions went to skipping empty bins).
+       The sums see the same bins in the same order, so nothing changes. */
+    uint32_t kept = 0;
+    for (uint32_t b = 0; b < n_bins; b++)
+        if (pc->bins[b].n)
+            pc->bins[kept++] = pc->bins[b];
+    pc->n_bins = kept;
     free(bin);
     free(fill);
     return SF_OK;

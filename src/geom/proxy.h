@@ -38,13 +38,13 @@ struct proxy_bin {
 };
 
 struct proxy_cache {
-    uint32_t n_tris;     /* faces kept (zero-area faces are left out) */
-    float *nx, *ny, *nz; /* unit normals, grouped by bin */
-    float *area;         /* mm2 */
-    float *gx, *gy, *gz; /* centroids */
-    uint32_t n_verts;    /* entries of vx, vy, vz */
-    float *vx, *vy, *vz; /* candidates for the lowest and highest point */
-    struct proxy_bin *bins;
+    uint32_t n_tris;        /* faces kept (zero-area faces are left out) */
+    float *nx, *ny, *nz;    /* unit normals, grouped by bin */
+    float *area;            /* mm2 */
+    float *gx, *gy, *gz;    /* centroids */
+    uint32_t n_verts;       /* entries of vx, vy, vz */
+    float *vx, *vy, *vz;    /* candidates for the lowest and highest point */
+    struct proxy_bin *bins; /* the bins that hold faces */
     uint32_t n_bins;
 };
 

@@ -59,7 +59,10 @@ cp "$(dirname "$bin")/../libexec/slimfarm/slimfarm-shapes" "$work/prefix/libexec
   { echo "   FAIL: shapes through a moved install"; fails=$((fails + 1)); }
 expect 1 "slimfarm orient: cannot run .*/libexec/slimfarm/slimfarm-orient" "$work/prefix/bin/slimfarm" orient "$tee" -o "$work/o.stl"
 libs=$(ldd "$bin"; ldd "$(dirname "$bin")/../libexec/slimfarm/slimfarm-orient")
-grep -qE "libcurl|libcairo|libcholmod|libsqlite" <<<"$libs" &&
+grep -qE "libcurl|libcairo|libcholmod|libsqlite|libzip|libcrypto|libbz2" <<<"$libs" &&
   { echo "   FAIL: slimfarm or slimfarm-orient loads libraries orient does not use"; fails=$((fails + 1)); }
+# the front door runs before every command: static, no dynamic loader to start
+readelf -l "$bin" | grep -q "program interpreter" &&
+  { echo "   FAIL: bin/slimfarm is dynamically linked"; fails=$((fails + 1)); }
 [ "$fails" -eq 0 ] && echo "   CLI errors and profile lookup as documented"
 [ "$fails" -eq 0 ]

@@ -4,10 +4,11 @@
  * shared mesh when ../shared is present.
  */
 #include <math.h>
+#include <minizip/zip.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 #include <unistd.h>
-#include <zip.h>
 
 #include "../../src/base/buf.h"
 #include "../../src/base/mem.h"
@@ -205,24 +206,40 @@ T_CASE(stl_ascii_parses_and_orients)
     mesh_release(&m);
 }
 
-/* Write a 3MF package holding `model` as 3D/3dmodel.model. */
+/* Add one entry to zf, deflated or (level 0) stored. */
 static int
-write_3mf(const char *path, const char *model)
+add_entry(zipFile zf, const char *name, const char *text, int level)
 {
-    int ze;
-    zip_t *z = zip_open(path, ZIP_CREATE | ZIP_TRUNCATE, &ze);
-    if (!z)
+    zip_fileinfo zi = { 0 };
+    if (zipOpenNewFileInZip(zf, name, &zi, NULL, 0, NULL, 0, NULL, level ? Z_DEFLATED : 0, level) !=
+        ZIP_OK)
+        return -1;
+    int rc = zipWriteInFileInZip(zf, text, (unsigned)strlen(text));
+    return zipCloseFileInZip(zf) == ZIP_OK && rc == ZIP_OK ? 0 : -1;
+}
+
+/* Write a 3MF package holding `model` as 3D/3dmodel.model (deflated, or stored with level 0). */
+static int
+write_3mf_level(const char *path, const char *model, int level)
+{
+    zipFile zf = zipOpen(path, APPEND_STATUS_CREATE);
+    if (!zf)
         return -1;
     const char *rels =
         "<?xml version=\"1.0\"?><Relationships xmlns=\"http://schemas.openxmlformats"
         ".org/package/2006/relationships\"><Relationship Target=\"/3D/3dmodel.model\""
         " Id=\"rel0\" Type=\"http://schemas.microsoft.com/3dmanufacturing/2013/01/"
         "3dmodel\"/></Relationships>";
-    zip_source_t *s1 = zip_source_buffer(z, rels, strlen(rels), 0);
-    zip_source_t *s2 = zip_source_buffer(z, model, strlen(model), 0);
-    if (zip_file_add(z, "_rels/.rels", s1, 0) < 0 || zip_file_add(z, "3D/3dmodel.model", s2, 0) < 0)
-        return -1;
-    return zip_close(z);
+    int rc = add_entry(zf, "_rels/.rels", rels, level);
+    if (rc == 0)
+        rc = add_entry(zf, "3D/3dmodel.model", model, level);
+    return zipClose(zf, NULL) == ZIP_OK ? rc : -1;
+}
+
+static int
+write_3mf(const char *path, const char *model)
+{
+    return write_3mf_level(path, model, Z_DEFAULT_COMPRESSION);
 }
 
 T_CASE(tmf_items_components_units)
@@ -270,6 +287,53 @@ T_CASE(tmf_items_components_units)
     T_TRUE(write_3mf(tmp_path("b.3mf"), bad) == 0);
     T_ERR(mesh_load(tmp_path("b.3mf"), &m, NULL, &err), SF_EINVAL, &err,
           "3mf 'b.3mf': model line 1: triangle index out of range");
+}
+
+/* Where the central directory header of each entry keeps its compression method. */
+static void
+set_central_method(unsigned char *zip, size_t len, uint16_t method)
+{
+    for (size_t i = 0; i + 46 <= len; i++)
+        if (memcmp(zip + i, "PK\x01\x02", 4) == 0)
+            memcpy(zip + i + 10, &method, 2); /* little-endian host */
+}
+
+T_CASE(tmf_stored_corrupt_and_unsupported_packages)
+{
+    const char *model =
+        "<model><resources><object id=\"1\"><mesh><vertices><vertex x=\"0\" y=\"0\" z=\"0\"/>"
+        "<vertex x=\"9\" y=\"0\" z=\"0\"/><vertex x=\"0\" y=\"9\" z=\"0\"/><vertex x=\"0\" "
+        "y=\"0\" z=\"9\"/></vertices><triangles><triangle v1=\"0\" v2=\"2\" v3=\"1\"/><triangle "
+        "v1=\"0\" v2=\"1\" v3=\"3\"/><triangle v1=\"0\" v2=\"3\" v3=\"2\"/><triangle v1=\"1\" "
+        "v2=\"2\" v3=\"3\"/></triangles></mesh></object></resources><build><item objectid=\"1\"/>"
+        "</build></model>";
+    struct mesh m;
+    struct sf_err err;
+    struct buf b;
+    mesh_init(&m);
+    buf_init(&b, 0);
+    /* stored (uncompressed) parts load as deflated ones do */
+    T_TRUE(write_3mf_level(tmp_path("s.3mf"), model, 0) == 0);
+    T_OK(buf_read_file(&b, tmp_path("s.3mf"), &err), &err);
+    T_OK(mesh_load_mem(b.data, b.len, "s.3mf", &m, NULL, &err), &err);
+    T_EQ_INT(m.n_tris, 4);
+    mesh_release(&m);
+    /* a changed byte in a stored part: its CRC no longer matches */
+    char *digit = memmem(b.data, b.len, "x=\"9\"", 5);
+    T_TRUE(digit != NULL);
+    digit[3] = '8';
+    T_ERR(mesh_load_mem(b.data, b.len, "s.3mf", &m, NULL, &err), SF_EINVAL, &err,
+          "3mf 's.3mf': '3D/3dmodel.model' is corrupt: CRC mismatch");
+    digit[3] = '9';
+    /* bzip2 (method 12) is zip but not 3MF */
+    set_central_method((unsigned char *)b.data, b.len, 12);
+    T_ERR(mesh_load_mem(b.data, b.len, "s.3mf", &m, NULL, &err), SF_EINVAL, &err,
+          "uses compression method 12");
+    /* a package cut short has no central directory */
+    T_ERR(mesh_load_mem(b.data, b.len / 2, "s.3mf", &m, NULL, &err), SF_EINVAL, &err,
+          "3mf 's.3mf': not a valid zip package");
+    buf_release(&b);
+    mesh_release(&m);
 }
 
 T_CASE(bad_inputs_give_clear_errors)
