@@ -94,7 +94,7 @@ out=$("$C" submit "$tmp/huge.stl" 2>&1) && fail "oversized upload accepted"
 
 sleep 0.3
 out=$("$C" jobs --key $RO) || fail "jobs"
-echo "$out" | grep -qE "^1 +queued +0/2 +3 .*bracket.stl +fits no printer: mk3: material NYLON not loaded \(has PLA\)" || fail "jobs: $out"
+echo "$out" | grep -qE "^1 +queued +0/2 +- +3 .*bracket.stl +fits no printer: mk3: material NYLON not loaded \(has PLA\)" || fail "jobs: $out"
 out=$("$C" printers) || fail "printers"
 echo "$out" | grep -qE "^mk3 +offline .*'/dev/null' is not a terminal" || fail "printers: $out"
 
