@@ -3,7 +3,7 @@
  *
  * Why: the daemon names a printer kind in its config and gets a struct drv
  * back; only this file knows which kinds exist.  Thread: loop thread,
- * except drv_job_scan (any thread).
+ * except drv_job_scan and drv_job_scan_to (any thread).
  */
 #include "drv.h"
 
@@ -57,11 +57,18 @@ drv_state_name(enum drv_state s)
 }
 
 int
-drv_job_scan(const char *path, struct drv_job_scan *out, struct sf_err *err)
+drv_job_scan(const char *path, struct drv_job_scan *scan, struct sf_err *err)
 {
     /* Marlin is the only kind today, and its limits are the tightest a
        driver will have (a numbered, checksummed line in a 96-byte buffer). */
-    return drv_marlin_scan(path, out, err);
+    return drv_marlin_scan(path, scan, err);
+}
+
+int
+drv_job_scan_to(const char *path, uint64_t first_line, struct drv_job_scan *scan,
+                struct sf_err *err)
+{
+    return drv_marlin_scan_to(path, first_line, scan, err);
 }
 
 int

@@ -21,7 +21,8 @@
  *
  * Thread: loop thread; never blocks (the job file is read a line at a
  * time as the window opens; start_job reads it whole only when the owner
- * brings no drv_job_scan).  drv_marlin_scan: any thread.
+ * brings no drv_job_scan).  drv_marlin_scan and drv_marlin_scan_to: any
+ * thread.
  */
 #include "drv_marlin.h"
 
@@ -59,15 +60,6 @@
 
 enum phase { PH_OFF, PH_HELLO, PH_READY };
 enum jobmode { J_NONE, J_RUN, J_PAUSED, J_CANCELLING };
-
-/* The machine state a job leaves, tracked from the lines pushed (for resume). */
-struct motion {
-    bool rel_xyz, rel_e; /* G91 / M83 */
-    double pos[4];       /* X Y Z E, mm */
-    double feed_mm_min;  /* last F */
-    double noz_c, bed_c; /* last targets */
-    double fan;          /* M106 S, 0 off */
-};
 
 struct marlin {
     struct drv base; /* first: drv.h casts */
@@ -109,10 +101,10 @@ struct marlin {
     char job_path[256];
     long job_index; /* next job line (0-based command index) to push */
     bool job_eof;
-    bool final_pushed;      /* M400 after the last line */
-    long last_tag;          /* highest job index acknowledged + 1 */
-    int64_t progress_ev_ms; /* last DRV_EV_PROGRESS */
-    struct motion mo, saved;
+    bool final_pushed;            /* M400 after the last line */
+    long last_tag;                /* highest job index acknowledged + 1 */
+    int64_t progress_ev_ms;       /* last DRV_EV_PROGRESS */
+    struct drv_machine mo, saved; /* tracked from the lines pushed (for pause and resume) */
     struct drv_marlin_stats st;
 };
 
@@ -220,7 +212,7 @@ inject(struct marlin *m, const char *fmt, ...)
 
 /* Follow the state a job line leaves behind, so resume can restore it. */
 static void
-track(struct motion *mo, const char *cmd, size_t len)
+track(struct drv_machine *mo, const char *cmd, size_t len)
 {
     struct gcode_line g;
     if (gcode_parse(cmd, len, &g, NULL) < 0)
@@ -949,7 +941,7 @@ m_open(struct drv *d, struct sf_err *err)
  * the period is short.
  */
 static void
-inject_resume(struct marlin *m, const struct motion *s)
+inject_resume(struct marlin *m, const struct drv_machine *s)
 {
     if (s->bed_c > 0)
         inject(m, "M140 S%.0f", s->bed_c);
@@ -983,9 +975,9 @@ inject_resume(struct marlin *m, const struct motion *s)
 
 /* What reading a job file from its start found (scan_job). */
 struct scan {
-    uint64_t lines;   /* command lines read (all of them unless stopped at first_line) */
-    long resume_at;   /* byte offset of command first_line (0 when first_line is 0) */
-    struct motion mo; /* the machine state the commands before first_line leave */
+    uint64_t lines;        /* command lines read (all of them unless stopped at first_line) */
+    long resume_at;        /* byte offset of command first_line (0 when first_line is 0) */
+    struct drv_machine mo; /* the machine state the commands before first_line leave */
 };
 
 /*
@@ -1048,6 +1040,27 @@ drv_marlin_scan(const char *path, struct drv_job_scan *out, struct sf_err *err)
     return rc;
 }
 
+int
+drv_marlin_scan_to(const char *path, uint64_t first_line, struct drv_job_scan *scan,
+                   struct sf_err *err)
+{
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return sf_err_sys(err, "job '%s'", path);
+    struct scan sc;
+    int rc = first_line > 0 ? scan_job(f, path, first_line, true, &sc, err) : SF_OK;
+    fclose(f);
+    if (rc)
+        return rc;
+    if (first_line == 0 || sc.lines != first_line || sc.resume_at <= 0) /* no such command */
+        return sf_err_set(err, SF_EINVAL, "job '%s': no command line %llu to resume from", path,
+                          (unsigned long long)first_line);
+    scan->resume_line = first_line;
+    scan->resume_at = sc.resume_at;
+    scan->machine = sc.mo;
+    return SF_OK;
+}
+
 static int
 m_start_job(struct drv *d, const char *path, uint64_t first_line, const struct drv_job_scan *scan,
             struct sf_err *err)
@@ -1060,11 +1073,15 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, const struct d
     if (!f)
         return sf_err_sys(err, "job '%s'", path);
     /* With the owner's scan a start reads nothing here and a resume reads
-       only up to first_line; without one, the whole file is read now. */
+       only up to first_line (nothing if the scan has its resume point);
+       without one, the whole file is read now. */
     struct scan sc = { .mo = { .feed_mm_min = 1500 } };
     uint64_t total = scan ? scan->lines_total : 0;
     bool resume_ok = !scan || first_line < total;
-    if (resume_ok && (!scan || first_line > 0)) {
+    if (resume_ok && scan && first_line > 0 && scan->resume_line == first_line) {
+        sc.resume_at = (long)scan->resume_at;
+        sc.mo = scan->machine;
+    } else if (resume_ok && (!scan || first_line > 0)) {
         int rc = scan_job(f, path, first_line, scan != NULL, &sc, err);
         if (rc) {
             fclose(f);
@@ -1073,7 +1090,7 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, const struct d
         if (!scan)
             total = sc.lines;
         /* a file shorter than its scan said stops before first_line */
-        resume_ok = scan ? sc.lines == first_line : first_line < total;
+        resume_ok = scan ? sc.lines == first_line && sc.resume_at > 0 : first_line < total;
     }
     if (first_line > 0 && !resume_ok) {
         fclose(f);
@@ -1130,7 +1147,7 @@ do_pause(struct marlin *m)
 static void
 do_resume(struct marlin *m)
 {
-    const struct motion *s = &m->saved;
+    const struct drv_machine *s = &m->saved;
     if (s->bed_c > 0)
         inject(m, "M190 S%.0f", s->bed_c);
     if (s->noz_c > 0)

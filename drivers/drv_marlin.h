@@ -31,6 +31,9 @@ struct drv *drv_marlin_new(struct loop *l, const struct drv_config *cfg, drv_eve
  * naming 'path':line, SF_EIO.  Pure, any thread.
  */
 int drv_marlin_scan(const char *path, struct drv_job_scan *out, struct sf_err *err);
+/* drv_job_scan_to() for Marlin.  Pure, any thread. */
+int drv_marlin_scan_to(const char *path, uint64_t first_line, struct drv_job_scan *scan,
+                       struct sf_err *err);
 
 /* Counters; false if d is not a Marlin driver. */
 bool drv_marlin_stats(const struct drv *d, struct drv_marlin_stats *out);

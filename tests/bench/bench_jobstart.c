@@ -10,7 +10,8 @@
  *                        jobs when preparing them);
  *   start, with scan     the farm's path: the scan was made off the loop;
  *   resume at 2/3, ...   the same for a resume (with a scan the driver
- *                        reads only up to the line).
+ *                        reads only up to the line; with the line's resume
+ *                        point, drv_job_scan_to, nothing).
  * drv_job_scan itself is timed too: what the prepare worker now spends.
  * With DATA_DIR, putting the job into a store there is timed both ways:
  * streamed through a store writer (the loop's work before the prepare
@@ -152,6 +153,14 @@ main(int argc, char **argv)
              timed_start(l, d, "start, with scan", path, 0, &scan) ||
              timed_start(l, d, "resume at 2/3, no scan", path, resume, NULL) ||
              timed_start(l, d, "resume at 2/3, with scan", path, resume, &scan);
+    /* what the farm does now: the resume point read on its io thread */
+    t0 = now_ms();
+    if (rc == SF_OK && (rc = drv_job_scan_to(path, resume, &scan, &err)))
+        fprintf(stderr, "bench_jobstart: %s\n", err.msg);
+    if (rc == SF_OK) {
+        printf("  %-28s %9.1f ms on the farm's io thread\n", "drv_job_scan_to 2/3", now_ms() - t0);
+        rc = timed_start(l, d, "resume at 2/3, resume point", path, resume, &scan);
+    }
     drv_free(d);
     sim_marlin_free(sim);
     loop_free(l);

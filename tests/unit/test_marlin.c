@@ -738,11 +738,37 @@ write_layered_job(struct run *r, int layers, int per_layer)
  * the simulator's log is the resume preamble, then exactly the job's lines
  * from N on; the preamble heats to the job's temperatures, sets Z where the
  * lines before N left it, homes X and Y only, and restores E mode, fan and
- * feedrate.  A line past the end is refused.
+ * feedrate.  A line past the end is refused.  Three ways: the driver reads
+ * the whole file, reads it up to N (the owner's scan), or reads none of it
+ * before streaming (the scan holds N's resume point, drv_job_scan_to): then
+ * the file's lines before N are blanked out first, and the preamble must
+ * still be the same.
  */
+enum resume_way { READ_ALL, READ_TO_LINE, READ_NOTHING };
+
+/* Overwrite path's first n bytes with ';' (a comment), keeping the newlines. */
 static void
-resume_from_line(bool with_scan)
+blank_head(const char *path, int64_t n)
 {
+    FILE *f = fopen(path, "r+");
+    T_TRUE(f != NULL);
+    if (!f)
+        return;
+    for (int64_t i = 0; i < n; i++) {
+        int c = fgetc(f);
+        if (c != '\n') {
+            fseek(f, -1, SEEK_CUR);
+            fputc(';', f);
+            fseek(f, 0, SEEK_CUR);
+        }
+    }
+    fclose(f);
+}
+
+static void
+resume_from_line(enum resume_way way)
+{
+    bool with_scan = way != READ_ALL;
     struct run r = { 0 };
     struct sim_marlin_config sc;
     sim_marlin_config_init(&sc);
@@ -769,6 +795,13 @@ resume_from_line(bool with_scan)
     T_EQ_INT(sscanf(want[first - 1], "G1 X%15s Y%15s E0.0213 F%d", x, y, &f), 3);
     snprintf(xy, sizeof(xy), "G1 X%s Y%s F6000", x, y);
     snprintf(feed, sizeof(feed), "G1 F%d", f);
+    if (way == READ_NOTHING) {
+        T_ERR(drv_job_scan_to(r.gcode_path, n_want, &scan, &err), SF_EINVAL, &err,
+              "no command line");
+        T_OK(drv_job_scan_to(r.gcode_path, first, &scan, &err), &err);
+        T_EQ_INT(scan.resume_line, first);
+        blank_head(r.gcode_path, scan.resume_at);
+    }
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, first, given, &err), &err);
     T_EQ_INT(r.drv->status.lines_acked, first);
     T_EQ_INT(r.drv->status.lines_total, n_want);
@@ -810,13 +843,19 @@ resume_from_line(bool with_scan)
 
 T_CASE(marlin_resume_from_line_restores_state)
 {
-    resume_from_line(false);
+    resume_from_line(READ_ALL);
 }
 
 /* The same with the owner's scan: the file is read only up to the line. */
 T_CASE(marlin_resume_from_line_with_scan_restores_state)
 {
-    resume_from_line(true);
+    resume_from_line(READ_TO_LINE);
+}
+
+/* The same with the line's resume point in the scan: nothing is read before it. */
+T_CASE(marlin_resume_from_a_resume_point_reads_nothing_before_it)
+{
+    resume_from_line(READ_NOTHING);
 }
 
 /* Line number (1-based) of the first line of path containing text. */
