@@ -973,28 +973,23 @@ inject_resume(struct marlin *m, const struct drv_machine *s)
         inject(m, "M107");
 }
 
-/* What reading a job file from its start found (scan_job). */
-struct scan {
-    uint64_t lines;        /* command lines read (all of them unless stopped at first_line) */
-    long resume_at;        /* byte offset of command first_line (0 when first_line is 0) */
-    struct drv_machine mo; /* the machine state the commands before first_line leave */
-};
-
 /*
- * Read f from its start: count the commands and refuse a bad line (a job
- * must not fail half-way on one).  For first_line > 0 also follow the
- * machine state up to first_line and note where that command starts; with
- * stop_at_first (the count is already known) reading ends there.  Pure:
- * touches only f and out, so drv_marlin_scan may run it on any thread.
+ * Read f from its start: count the commands (lines_total) and refuse a bad
+ * line (a job must not fail half-way on one).  For first_line > 0 also
+ * follow the machine state up to first_line and, if the file has that
+ * command, set its resume point (resume_line = first_line, resume_at,
+ * machine); with stop_at_first (the count is already known) reading ends
+ * there, and lines_total counts only the commands before it.  Pure:
+ * touches only f and out, so it may run on any thread.
  */
 static int
-scan_job(FILE *f, const char *path, uint64_t first_line, bool stop_at_first, struct scan *out,
-         struct sf_err *err)
+scan_job(FILE *f, const char *path, uint64_t first_line, bool stop_at_first,
+         struct drv_job_scan *out, struct sf_err *err)
 {
     char raw[SF_GCODE_LINE_MAX + 2], cmd[LINEWIN_LINE_MAX];
     uint64_t total = 0;
     long lineno = 0, offset = 0;
-    *out = (struct scan){ .mo = { .feed_mm_min = 1500 } };
+    *out = (struct drv_job_scan){ .machine = { .feed_mm_min = 1500 } };
     while (fgets(raw, sizeof(raw), f)) {
         size_t len = strlen(raw);
         long at = offset;
@@ -1012,17 +1007,18 @@ scan_job(FILE *f, const char *path, uint64_t first_line, bool stop_at_first, str
         if (n == 0)
             continue;
         if (first_line > 0 && total == first_line) {
+            out->resume_line = first_line;
             out->resume_at = at;
             if (stop_at_first)
                 break;
         }
         if (total < first_line)
-            track(&out->mo, cmd, n);
+            track(&out->machine, cmd, n);
         total++;
     }
     if (ferror(f))
         return sf_err_sys(err, "job '%s': read", path);
-    out->lines = total;
+    out->lines_total = total;
     return SF_OK;
 }
 
@@ -1032,11 +1028,11 @@ drv_marlin_scan(const char *path, struct drv_job_scan *out, struct sf_err *err)
     FILE *f = fopen(path, "r");
     if (!f)
         return sf_err_sys(err, "job '%s'", path);
-    struct scan sc;
+    struct drv_job_scan sc;
     int rc = scan_job(f, path, 0, false, &sc, err);
     fclose(f);
     if (rc == SF_OK)
-        out->lines_total = sc.lines;
+        *out = sc;
     return rc;
 }
 
@@ -1044,20 +1040,22 @@ int
 drv_marlin_scan_to(const char *path, uint64_t first_line, struct drv_job_scan *scan,
                    struct sf_err *err)
 {
+    if (first_line == 0)
+        return sf_err_set(err, SF_EINVAL, "job '%s': a resume starts at line 1 or later", path);
     FILE *f = fopen(path, "r");
     if (!f)
         return sf_err_sys(err, "job '%s'", path);
-    struct scan sc;
-    int rc = first_line > 0 ? scan_job(f, path, first_line, true, &sc, err) : SF_OK;
+    struct drv_job_scan sc;
+    int rc = scan_job(f, path, first_line, true, &sc, err);
     fclose(f);
     if (rc)
         return rc;
-    if (first_line == 0 || sc.lines != first_line || sc.resume_at <= 0) /* no such command */
+    if (sc.resume_line != first_line)
         return sf_err_set(err, SF_EINVAL, "job '%s': no command line %llu to resume from", path,
                           (unsigned long long)first_line);
-    scan->resume_line = first_line;
+    scan->resume_line = sc.resume_line;
     scan->resume_at = sc.resume_at;
-    scan->machine = sc.mo;
+    scan->machine = sc.machine;
     return SF_OK;
 }
 
@@ -1075,12 +1073,11 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, const struct d
     /* With the owner's scan a start reads nothing here and a resume reads
        only up to first_line (nothing if the scan has its resume point);
        without one, the whole file is read now. */
-    struct scan sc = { .mo = { .feed_mm_min = 1500 } };
+    struct drv_job_scan sc = { .machine = { .feed_mm_min = 1500 } };
     uint64_t total = scan ? scan->lines_total : 0;
     bool resume_ok = !scan || first_line < total;
     if (resume_ok && scan && first_line > 0 && scan->resume_line == first_line) {
-        sc.resume_at = (long)scan->resume_at;
-        sc.mo = scan->machine;
+        sc = *scan;
     } else if (resume_ok && (!scan || first_line > 0)) {
         int rc = scan_job(f, path, first_line, scan != NULL, &sc, err);
         if (rc) {
@@ -1088,9 +1085,9 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, const struct d
             return rc;
         }
         if (!scan)
-            total = sc.lines;
-        /* a file shorter than its scan said stops before first_line */
-        resume_ok = scan ? sc.lines == first_line && sc.resume_at > 0 : first_line < total;
+            total = sc.lines_total;
+        /* no such command: past the end, or a file shorter than its scan said */
+        resume_ok = first_line == 0 || sc.resume_line == first_line;
     }
     if (first_line > 0 && !resume_ok) {
         fclose(f);
@@ -1100,7 +1097,7 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, const struct d
                           path, (unsigned long long)first_line, (unsigned long long)total,
                           (unsigned long long)(total ? total - 1 : 0));
     }
-    if (fseek(f, sc.resume_at, SEEK_SET) != 0) {
+    if (fseek(f, (long)sc.resume_at, SEEK_SET) != 0) {
         fclose(f);
         return sf_err_sys(err, "job '%s': seek", path);
     }
@@ -1109,13 +1106,13 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, const struct d
     m->job_index = (long)first_line;
     m->job_eof = false;
     m->final_pushed = false;
-    m->mo = sc.mo;
+    m->mo = sc.machine;
     d->status.lines_total = total;
     d->status.lines_acked = first_line;
     d->status.progress = total ? (double)first_line / (double)total : 0;
     d->status.job_started_ms = loop_now_ms(d->loop);
     if (first_line > 0) {
-        inject_resume(m, &sc.mo);
+        inject_resume(m, &sc.machine);
         message(m, "resuming '%s' at line %llu of %llu", path, (unsigned long long)first_line,
                 (unsigned long long)total);
     } else {

@@ -12,18 +12,15 @@
  * (farm_kick), so bursts of events coalesce into one scheduling pass.
  * Printers are heap-allocated so drivers can keep a stable pointer.
  *
- * Thread: the loop thread; prepare work runs on pool workers with copies.
+ * Thread: the loop thread; prepare work runs on pool workers with copies,
+ * resume reads on the farm's own io thread.
  */
 #include "farm.h"
 
-#include <errno.h>
-#include <fcntl.h>
 #include <stdio.h>
 #include <string.h>
 #include <unistd.h>
 
-#include "../base/gcode.h"
-#include "../base/limits.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "sched.h"
@@ -798,27 +795,6 @@ resume_done(struct loop *l, void *ud, int rc)
     free(r);
 }
 
-/* Command lines in a G-code file (what drivers number), or <0 with err.
-   Only for G-code prepared before its count was stored with the job. */
-static int
-count_commands(const char *path, uint64_t *out, struct sf_err *err)
-{
-    FILE *fp = fopen(path, "r");
-    if (!fp)
-        return sf_err_sys(err, "job G-code '%s'", path);
-    char raw[SF_GCODE_LINE_MAX + 2], cmd[SF_GCODE_LINE_MAX + 2];
-    uint64_t n = 0;
-    while (fgets(raw, sizeof(raw), fp))
-        if (gcode_strip(raw, strlen(raw), cmd, sizeof(cmd), NULL) > 0)
-            n++;
-    int bad = ferror(fp);
-    fclose(fp);
-    if (bad)
-        return sf_err_set(err, SF_EIO, "job G-code '%s': read error", path);
-    *out = n;
-    return SF_OK;
-}
-
 int
 farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
 {
@@ -840,9 +816,10 @@ farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
     if (line < 0)
         line = j.lines_acked;
     char path[1200];
+    /* G-code prepared before its count was kept (gcode_lines 0) is scanned here */
     struct drv_job_scan scan = { .lines_total = (uint64_t)j.gcode_lines };
     if ((rc = store_file_path(f->s, j.gcode_sha, path, sizeof(path), err)) ||
-        (j.gcode_lines == 0 && (rc = count_commands(path, &scan.lines_total, err))))
+        (j.gcode_lines == 0 && (rc = drv_job_scan(path, &scan, err))))
         return rc;
     uint64_t total = scan.lines_total;
     /* Line 0 would run the job's own start: its G28 homes Z into the part. */

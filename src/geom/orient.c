@@ -145,11 +145,12 @@ worker(void *arg)
  * scene while the caller computes the hull, the proxy cache and the proxy
  * stage (which need no scene), then every helper joins each stage the caller
  * posts.  Creating threads per stage cost a stack's page faults each time,
- * and building the scene first left the other core idle.
+ * and building the scene first left the other core idle.  (Not base/pool.h:
+ * that hands results to an event loop; these stages are fork-join.)
  */
-struct pool {
+struct crew {
     pthread_mutex_t lock;
-    pthread_cond_t posted; /* a stage was posted, or the pool is closing */
+    pthread_cond_t posted; /* a stage was posted, or the crew is closing */
     pthread_cond_t idle;   /* a helper left a stage, or the scene is built */
     struct job *j;
     unsigned gen;    /* number of the stage posted last */
@@ -168,7 +169,7 @@ struct pool {
 static void *
 helper(void *arg)
 {
-    struct pool *pl = arg;
+    struct crew *pl = arg;
     pthread_mutex_lock(&pl->lock);
     if (!pl->scene_done && pl->n_tid > 0 && pthread_equal(pl->tid[0], pthread_self())) {
         pthread_mutex_unlock(&pl->lock);
@@ -198,9 +199,9 @@ helper(void *arg)
 }
 
 /* Start threads - 1 helpers; with none (one thread, or none could start) the
-   caller builds the scene itself in pool_scene. */
+   caller builds the scene itself in crew_scene. */
 static void
-pool_start(struct pool *pl, const struct mesh *m, int threads)
+crew_start(struct crew *pl, const struct mesh *m, int threads)
 {
     memset(pl, 0, sizeof(*pl));
     pthread_mutex_init(&pl->lock, NULL);
@@ -216,7 +217,7 @@ pool_start(struct pool *pl, const struct mesh *m, int threads)
 
 /* The scene, once built (by the first helper, or here if there is none). */
 static struct raycast *
-pool_scene(struct pool *pl, struct sf_err *err)
+crew_scene(struct crew *pl, struct sf_err *err)
 {
     pthread_mutex_lock(&pl->lock);
     if (pl->n_tid == 0 && !pl->scene_done) {
@@ -235,7 +236,7 @@ pool_scene(struct pool *pl, struct sf_err *err)
 
 /* Stop the helpers (waiting for the scene build to end) and free the scene. */
 static void
-pool_finish(struct pool *pl)
+crew_finish(struct crew *pl)
 {
     pthread_mutex_lock(&pl->lock);
     pl->quit = true;
@@ -250,7 +251,7 @@ pool_finish(struct pool *pl)
 }
 
 static int
-run_stage(struct pool *pl, struct job *j, int stage, const uint32_t *batch, uint32_t n,
+run_stage(struct crew *pl, struct job *j, int stage, const uint32_t *batch, uint32_t n,
           struct sf_err *err)
 {
     j->stage = stage;
@@ -356,12 +357,12 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     uint32_t n_bases = 0;
     struct raycast *rc = NULL;
     struct proxy_cache pc = { 0 };
-    struct pool pl;
+    struct crew pl;
     atomic_uint done = 0;
     int rcode = SF_OK;
 
     int threads = p->threads > 0 ? p->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
-    pool_start(&pl, m, threads < 1 ? 1 : threads);
+    crew_start(&pl, m, threads < 1 ? 1 : threads);
     struct vec3 com;
     mesh_volume(m, &com);
     uint32_t *hull_verts = NULL, n_hull_verts = 0;
@@ -404,7 +405,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
         goto out;
     res->seconds_proxy = elapsed(&t0) - res->seconds_setup;
     qsort_r(order, n, sizeof(uint32_t), cmp_key, cands);
-    if (!(rc = pool_scene(&pl, err)) ||
+    if (!(rc = crew_scene(&pl, err)) ||
         (rcode = raycast_set_extreme(rc, hull_verts, n_hull_verts, err))) {
         rcode = rcode ? rcode : (err ? err->code : SF_ENOMEM);
         goto out;
@@ -480,7 +481,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
 oom:
     rcode = sf_err_set(err, SF_ENOMEM, "orientation: out of memory");
 out:
-    pool_finish(&pl); /* frees the scene */
+    crew_finish(&pl); /* frees the scene */
     proxy_cache_release(&pc);
     free(order);
     free(cands);

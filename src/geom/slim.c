@@ -38,8 +38,6 @@
 #include "selfx.h"
 
 #define KEEP_BEST 10 /* candidate iterates kept per direction */
-/* vertices this close above the lowest one are the bed contact (measure.h's min_gap_mm) */
-#define SLIM_CONTACT_GAP_MM 0.05
 
 void
 slim_params_default(struct slim_params *p)
@@ -476,6 +474,16 @@ restore_volume(struct mesh *m, double vol_mm3, double gap_mm)
  * does ranking the list by the rescaled candidates' ray-cast volume
  * instead of the risky count help: at most 0.3 % on any row.
  */
+/* Support volume vol saves at least min_gain of vol_in (with min_gain > 0, a part that
+   needs none is never changed; with 0, no more than the input is enough). */
+static bool
+saves_enough(double vol, double vol_in, double min_gain)
+{
+    if (min_gain > 0 && !(vol < vol_in))
+        return false;
+    return vol <= vol_in * (1 - min_gain);
+}
+
 static int
 choose(struct work *w, struct sf_err *err)
 {
@@ -483,6 +491,8 @@ choose(struct work *w, struct sf_err *err)
     const struct slim_params *p = w->cx->p;
     bool rescale = p->keep_volume && p->n_fix_boxes == 0;
     double part_vol_in = rescale ? mesh_volume(&d->in, NULL) : 0;
+    struct support_params sp; /* its min_gap_mm: what rests on the bed */
+    support_params_default(&sp);
     double vol_in;
     d->selfx_in = selfx_count(&d->in, err);
     if (d->selfx_in < 0)
@@ -502,7 +512,7 @@ choose(struct work *w, struct sf_err *err)
         double scale = 1;
         if (rescale) {
             struct deviation dv;
-            scale = restore_volume(&w->cur, part_vol_in, SLIM_CONTACT_GAP_MM);
+            scale = restore_volume(&w->cur, part_vol_in, sp.min_gap_mm);
             if ((rc = measure_deviation(&d->in, &w->cur, &dv, err)))
                 return rc;
             if (dv.mndr > p->max_mndr || dv.andr > p->max_andr) {
@@ -520,7 +530,7 @@ choose(struct work *w, struct sf_err *err)
         }
         if ((rc = support_volume(&w->cur, w->cx->p->angle_deg, &vol, err)))
             return rc;
-        if (vol > vol_in * (1 - p->min_gain) || (p->min_gain > 0 && !(vol < vol_in))) {
+        if (!saves_enough(vol, vol_in, p->min_gain)) {
             d->n_rejected++;
             continue;
         }

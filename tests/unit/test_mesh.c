@@ -298,22 +298,24 @@ set_central_method(unsigned char *zip, size_t len, uint16_t method)
             memcpy(zip + i + 10, &method, 2); /* little-endian host */
 }
 
+/* A 3MF model of one tetrahedron with 9 mm legs. */
+static const char tetra_model[] =
+    "<model><resources><object id=\"1\"><mesh><vertices><vertex x=\"0\" y=\"0\" z=\"0\"/>"
+    "<vertex x=\"9\" y=\"0\" z=\"0\"/><vertex x=\"0\" y=\"9\" z=\"0\"/><vertex x=\"0\" "
+    "y=\"0\" z=\"9\"/></vertices><triangles><triangle v1=\"0\" v2=\"2\" v3=\"1\"/><triangle "
+    "v1=\"0\" v2=\"1\" v3=\"3\"/><triangle v1=\"0\" v2=\"3\" v3=\"2\"/><triangle v1=\"1\" "
+    "v2=\"2\" v3=\"3\"/></triangles></mesh></object></resources><build><item objectid=\"1\"/>"
+    "</build></model>";
+
 T_CASE(tmf_stored_corrupt_and_unsupported_packages)
 {
-    const char *model =
-        "<model><resources><object id=\"1\"><mesh><vertices><vertex x=\"0\" y=\"0\" z=\"0\"/>"
-        "<vertex x=\"9\" y=\"0\" z=\"0\"/><vertex x=\"0\" y=\"9\" z=\"0\"/><vertex x=\"0\" "
-        "y=\"0\" z=\"9\"/></vertices><triangles><triangle v1=\"0\" v2=\"2\" v3=\"1\"/><triangle "
-        "v1=\"0\" v2=\"1\" v3=\"3\"/><triangle v1=\"0\" v2=\"3\" v3=\"2\"/><triangle v1=\"1\" "
-        "v2=\"2\" v3=\"3\"/></triangles></mesh></object></resources><build><item objectid=\"1\"/>"
-        "</build></model>";
     struct mesh m;
     struct sf_err err;
     struct buf b;
     mesh_init(&m);
     buf_init(&b, 0);
     /* stored (uncompressed) parts load as deflated ones do */
-    T_TRUE(write_3mf_level(tmp_path("s.3mf"), model, 0) == 0);
+    T_TRUE(write_3mf_level(tmp_path("s.3mf"), tetra_model, 0) == 0);
     T_OK(buf_read_file(&b, tmp_path("s.3mf"), &err), &err);
     T_OK(mesh_load_mem(b.data, b.len, "s.3mf", &m, NULL, &err), &err);
     T_EQ_INT(m.n_tris, 4);
@@ -392,14 +394,7 @@ T_CASE(loaders_survive_allocation_failures)
     T_OK(shape_tee(&src, &err), &err);
     T_OK(mesh_save_stl(&src, tmp_path("oom.stl"), &err), &err);
     T_OK(mesh_save_obj(&src, tmp_path("oom.obj"), &err), &err);
-    const char *model =
-        "<model><resources><object id=\"1\"><mesh><vertices><vertex x=\"0\" y=\"0\" z=\"0\"/>"
-        "<vertex x=\"9\" y=\"0\" z=\"0\"/><vertex x=\"0\" y=\"9\" z=\"0\"/><vertex x=\"0\" "
-        "y=\"0\" z=\"9\"/></vertices><triangles><triangle v1=\"0\" v2=\"2\" v3=\"1\"/><triangle "
-        "v1=\"0\" v2=\"1\" v3=\"3\"/><triangle v1=\"0\" v2=\"3\" v3=\"2\"/><triangle v1=\"1\" "
-        "v2=\"2\" v3=\"3\"/></triangles></mesh></object></resources><build><item objectid=\"1\"/>"
-        "</build></model>";
-    T_TRUE(write_3mf(tmp_path("oom.3mf"), model) == 0);
+    T_TRUE(write_3mf(tmp_path("oom.3mf"), tetra_model) == 0);
     const char *files[] = { "oom.stl", "oom.obj", "oom.3mf" };
     uint32_t tris[] = { src.n_tris, src.n_tris, 4 };
     for (int f = 0; f < 3; f++) {
