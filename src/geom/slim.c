@@ -382,20 +382,18 @@ setup_fixed(struct work *w)
     return SF_OK;
 }
 
-/* Ray-cast support volume of m printed along +z. */
+/* Ray-cast support metrics of m printed along +z (the report's before and after). */
 static int
-support_volume(const struct mesh *m, double angle_deg, double *vol, struct sf_err *err)
+support_of(const struct mesh *m, double angle_deg, struct support_metrics *sm, struct sf_err *err)
 {
     struct support_params sp;
-    struct support_metrics sm;
     support_params_default(&sp);
     sp.angle_deg = angle_deg;
     struct raycast *rc = raycast_new(m, err);
     if (!rc)
         return err ? err->code : SF_ENOMEM;
-    int r = measure_support(m, rc, v3(0, 0, 1), &sp, &sm, err);
+    int r = measure_support(m, rc, v3(0, 0, 1), &sp, sm, err);
     raycast_free(rc);
-    *vol = sm.volume_mm3;
     return r;
 }
 
@@ -493,11 +491,10 @@ choose(struct work *w, struct sf_err *err)
     double part_vol_in = rescale ? mesh_volume(&d->in, NULL) : 0;
     struct support_params sp; /* its min_gap_mm: what rests on the bed */
     support_params_default(&sp);
-    double vol_in;
     d->selfx_in = selfx_count(&d->in, err);
     if (d->selfx_in < 0)
         return d->selfx_in;
-    int rc = support_volume(&d->in, w->cx->p->angle_deg, &vol_in, err);
+    int rc = support_of(&d->in, p->angle_deg, &d->before, err);
     if (rc)
         return rc;
     for (int i = 0; i < w->n_list; i++) {
@@ -520,7 +517,7 @@ choose(struct work *w, struct sf_err *err)
                 continue;
             }
         }
-        double vol;
+        struct support_metrics sm;
         int sx = selfx_count(&w->cur, err);
         if (sx < 0)
             return sx;
@@ -528,12 +525,13 @@ choose(struct work *w, struct sf_err *err)
             d->n_rejected++;
             continue;
         }
-        if ((rc = support_volume(&w->cur, w->cx->p->angle_deg, &vol, err)))
+        if ((rc = support_of(&w->cur, p->angle_deg, &sm, err)))
             return rc;
-        if (!saves_enough(vol, vol_in, p->min_gain)) {
+        if (!saves_enough(sm.volume_mm3, d->before.volume_mm3, p->min_gain)) {
             d->n_rejected++;
             continue;
         }
+        d->after = sm;
         d->selfx_out = sx;
         d->volume_scale = scale;
         d->best_iter = c->iter;
@@ -541,6 +539,7 @@ choose(struct work *w, struct sf_err *err)
         d->n_inverted = count_inverted(&w->tm, c->x);
         return mesh_copy(&d->out, &w->cur, err);
     }
+    d->after = d->before;
     d->selfx_out = d->selfx_in;
     d->volume_scale = 1;
     d->best_iter = 0;
@@ -652,27 +651,6 @@ done:
     return rc;
 }
 
-/* Ray-cast support of the input and the result of one direction. */
-static int
-score_dir(const struct slim_params *p, struct dir *d, struct sf_err *err)
-{
-    struct support_params sp;
-    support_params_default(&sp);
-    sp.angle_deg = p->angle_deg;
-    const struct mesh *ms[2] = { &d->in, &d->out };
-    struct support_metrics *out[2] = { &d->before, &d->after };
-    for (int i = 0; i < 2; i++) {
-        struct raycast *rc = raycast_new(ms[i], err);
-        if (!rc)
-            return err ? err->code : SF_ENOMEM;
-        int r = measure_support(ms[i], rc, v3(0, 0, 1), &sp, out[i], err);
-        raycast_free(rc);
-        if (r)
-            return r;
-    }
-    return measure_deviation(&d->in, &d->out, &d->dev, err);
-}
-
 static void *
 worker(void *arg)
 {
@@ -686,8 +664,8 @@ worker(void *arg)
         struct dir *d = &cx->dirs[i];
         sf_err_clear(&d->err);
         d->rc = run_dir(cx, d, &d->err);
-        if (d->rc == SF_OK)
-            d->rc = score_dir(cx->p, d, &d->err);
+        if (d->rc == SF_OK) /* choose() measured the support before and after */
+            d->rc = measure_deviation(&d->in, &d->out, &d->dev, &d->err);
         if (d->rc == SF_ECANCELED) { /* stop the others early */
             pthread_mutex_lock(&cx->lock);
             cx->next = cx->n_dirs;

@@ -11,6 +11,9 @@
 # grid-style support snaps each layer's support to an axis-aligned grid, so
 # its grams move by several percent with the part's yaw alone (dino at 0
 # degrees: 21.38-22.93 g over seven yaws); one yaw is one sample of that.
+# SLIM_ITERS (e.g. "3 8"): also the iterate at these iteration caps, each
+# returned whatever it saves (--iterations N --min-gain 0), at alpha 45 only:
+# do the peers see a saving part-way through that the last iterate loses?
 set -u
 build=${1:-build/rel}
 mesh=""
@@ -71,16 +74,20 @@ echo "peer yaws: $yaws"
 echo "| mesh | alpha | risky before -> after | MNDR % | ANDR % | part volume % | support mm3 before -> after | PS support g before -> after | CE support g before -> after | ours support g before -> after | s |"
 echo "|---|---|---|---|---|---|---|---|---|---|---|"
 for name in ${SLIM_MESHES:-dino cow elephant}; do
-  for angle in 0 45; do
+  for run in 0 45 ${SLIM_ITERS:+$(printf '45@%s ' $SLIM_ITERS)}; do
+    angle=${run%@*} label=$run cap=()
+    [ "$run" != "$angle" ] && cap=(--iterations "${run#*@}" --min-gain 0) label="$angle (${run#*@} iterations)"
     in=../shared/meshes/$name.stl out="$work/$name-$angle.stl"
-    js=$("$build/bin/slimfarm" optimize "$in" -o "$out" --method volumetric --angle "$angle" --json) || { echo "| $name | $angle | failed |"; continue; }
+    js=$("$build/bin/slimfarm" optimize "$in" -o "$out" --method volumetric --angle "$angle" "${cap[@]}" --json) || { echo "| $name | $label | failed |"; continue; }
     row=$(python3 -c 'import json,sys; j=json.loads(sys.argv[1]); b,a,d=j["before"],j["after"],j["deviation"]
 v=j["part_volume_mm3"]
 print("%d -> %d | %.1f | %.1f | %+.1f | %.0f -> %.0f | %.1f" % (b["risky_faces"], a["risky_faces"], 100*d["mndr"], 100*d["andr"], 100*(v["after"]/v["before"]-1), b["support_volume_mm3"], a["support_volume_mm3"], j["seconds"]))' "$js")
-    g0=$(grams "$in" "$angle" prusaslicer) g1=$(grams "$out" "$angle" prusaslicer)
-    c0=$(grams "$in" "$angle" curaengine) c1=$(grams "$out" "$angle" curaengine)
-    o0=$(ours "$in" "$angle") o1=$(ours "$out" "$angle")
+    if [ "$name $angle" != "${sliced_in:-}" ]; then # the input's grams, once per mesh and angle
+      g0=$(grams "$in" "$angle" prusaslicer) c0=$(grams "$in" "$angle" curaengine) o0=$(ours "$in" "$angle")
+      sliced_in="$name $angle"
+    fi
+    g1=$(grams "$out" "$angle" prusaslicer) c1=$(grams "$out" "$angle" curaengine) o1=$(ours "$out" "$angle")
     secs=${row##*| }; row=${row% | *}
-    echo "| $name | $angle | $row | $g0 -> $g1 | $c0 -> $c1 | $o0 -> $o1 | $secs |"
+    echo "| $name | $label | $row | $g0 -> $g1 | $c0 -> $c1 | $o0 -> $o1 | $secs |"
   done
 done
