@@ -41,8 +41,8 @@ height_range(const struct mesh *m, struct vec3 up, double *lo, double *hi)
     double a = INFINITY, b = -INFINITY;
     for (uint32_t i = 0; i < m->n_verts; i++) {
         double d = v3_dot(m->v[i], up);
-        a = fmin(a, d);
-        b = fmax(b, d);
+        a = min_d(a, d);
+        b = max_d(b, d);
     }
     *lo = a;
     *hi = b;
@@ -283,7 +283,7 @@ measure_deviation(const struct mesh *a, const struct mesh *b, struct deviation *
     double sum = 0;
     for (uint32_t i = 0; i < a->n_verts; i++) {
         double d = v3_len(v3_sub(a->v[i], b->v[i]));
-        out->max_mm = fmax(out->max_mm, d);
+        out->max_mm = max_d(out->max_mm, d);
         sum += d;
     }
     out->mean_mm = a->n_verts ? sum / a->n_verts : 0;

@@ -201,6 +201,59 @@ severity(const struct mesh *m, double tau, double zlo, double gap)
     return s;
 }
 
+/* What the loop watches after each iteration. */
+struct part_figures {
+    uint32_t n_risky;  /* risky faces, as measure_proxy counts them */
+    double severity;   /* severity() */
+    double mndr, andr; /* as measure_deviation gives them, against the input */
+};
+
+/*
+ * The figures of the mapped part w->cur in one pass over its vertices and
+ * one over its faces (armadillo has 26k and 52k, several times its tets),
+ * bit for bit those of measure_proxy (risky: centroid at least gap above
+ * the part's own lowest point), severity() (above the input's lowest point
+ * zlo) and measure_deviation (the input's diagonal diag, measured once);
+ * each of them was a pass of its own.  The faces' area vectors go to w->fa,
+ * where the next iteration's drives read them.
+ */
+static void
+measure_part(struct work *w, double tau, double zlo, double gap, double diag,
+             struct part_figures *pf)
+{
+    const struct mesh *m = &w->cur;
+    const struct vec3 *in = w->d->in.v;
+    double lo = INFINITY, dmax = 0, dsum = 0;
+    for (uint32_t v = 0; v < m->n_verts; v++) {
+        lo = min_d(lo, m->v[v].z);
+        double d = v3_len(v3_sub(in[v], m->v[v]));
+        dmax = max_d(dmax, d);
+        dsum += d;
+    }
+    double dmean = m->n_verts ? dsum / m->n_verts : 0;
+    pf->mndr = diag > 0 ? dmax / diag : 0;
+    pf->andr = diag > 0 ? dmean / diag : 0;
+    uint32_t n = 0;
+    double s = 0;
+    for (uint32_t f = 0; f < m->n_tris; f++) {
+        const uint32_t *t = m->t[f];
+        struct vec3 a = m->v[t[0]], b = m->v[t[1]], c = m->v[t[2]];
+        struct vec3 x = v3_cross(v3_sub(b, a), v3_sub(c, a));
+        w->fa[f] = x;
+        if (!(x.z < 0))
+            continue; /* faces up or sideways: the test below would skip it too (tau >= 0) */
+        double len = v3_len(x);
+        if (!(len > 0) || x.z / len >= -tau)
+            continue;
+        double cz = (a.z + b.z + c.z) * (1.0 / 3.0);
+        n += cz - lo >= gap;
+        if (cz - zlo >= gap)
+            s += 0.5 * (-x.z - tau * len);
+    }
+    pf->n_risky = n;
+    pf->severity = s;
+}
+
 static uint32_t
 count_inverted(const struct tetmesh *tm, const struct vec3 *x)
 {
@@ -222,7 +275,8 @@ report(struct work *w, const struct slim_progress *pr)
 }
 
 /*
- * The minimal-rotation drive of each tet holding part faces: its risky
+ * The minimal-rotation drive of each tet holding part faces (from the area
+ * vectors measure_part left in w->fa): its risky
  * faces (past the aim tau_aim, not on the bed, not pinned), as the
  * area-weighted mean normal - the "surface face" the tet must make safe -
  * and, when the worst single face leans more than 10 degrees away from
@@ -233,8 +287,6 @@ compute_drives(struct work *w, double tau_aim, double zlo, double gap)
 {
     const struct face_hosts *fh = &w->cx->fh;
     const struct mesh *m = &w->cur;
-    for (uint32_t f = 0; f < m->n_tris; f++)
-        w->fa[f] = mesh_tri_cross(m, f);
     uint32_t n = 0;
     for (uint32_t s = 0; s < fh->n; s++) {
         struct vec3 sum = v3(0, 0, 0), worst = v3(0, 0, 0);
@@ -294,7 +346,10 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
     double zlo = INFINITY;
     for (uint32_t v = 0; v < w->d->in.n_verts; v++)
         zlo = fmin(zlo, w->d->in.v[v].z);
-    double best_sev = severity(&w->d->in, tau, zlo, sp.min_gap_mm);
+    double diag = mesh_diag(&w->d->in);
+    struct part_figures pf;
+    measure_part(w, tau, zlo, sp.min_gap_mm, diag, &pf); /* the input: w->fa for the first drives */
+    double best_sev = pf.severity;
     int stall = 0;
     *n_curve = 1;
     *within = true;
@@ -315,21 +370,19 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
         t0 = now_s();
         uint32_t inverted = count_inverted(&w->tm, w->x);
         map_part(w, w->x);
-        struct support_metrics sm;
-        struct deviation dv;
-        measure_proxy(&w->cur, v3(0, 0, 1), &sp, &sm);
-        measure_deviation(&w->d->in, &w->cur, &dv, NULL);
-        double sev = severity(&w->cur, tau, zlo, sp.min_gap_mm);
+        measure_part(w, tau, zlo, sp.min_gap_mm, diag, &pf);
+        uint32_t n_risky = pf.n_risky;
+        double sev = pf.severity;
         w->d->timing.part_s += now_s() - t0;
         if (*n_curve < SLIM_CURVE_MAX)
-            curve[(*n_curve)++] = sm.n_risky;
-        *within = dv.mndr <= p->max_mndr && dv.andr <= p->max_andr && inverted == 0;
+            curve[(*n_curve)++] = n_risky;
+        *within = pf.mndr <= p->max_mndr && pf.andr <= p->max_andr && inverted == 0;
         if (!*within)
-            log_debug("slim", "round %d it %d: mndr %.4f andr %.4f inverted %u", round, it, dv.mndr,
-                      dv.andr, inverted);
+            log_debug("slim", "round %d it %d: mndr %.4f andr %.4f inverted %u", round, it, pf.mndr,
+                      pf.andr, inverted);
         if (*within) {
             struct cand c = {
-                mem_array(w->tm.n_verts, sizeof(struct vec3)), sm.n_risky, sev, it, round, beta_deg
+                mem_array(w->tm.n_verts, sizeof(struct vec3)), n_risky, sev, it, round, beta_deg
             };
             if (!c.x)
                 return sf_err_set(err, SF_ENOMEM, "slim: out of memory");
@@ -337,11 +390,11 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
             offer(w->list, &w->n_list, c);
         }
         struct slim_progress pr = { w->d->index,  w->cx->n_dirs, round,   beta_deg, it,
-                                    p->max_iters, sm.n_risky,    dv.mndr, dv.andr };
+                                    p->max_iters, n_risky,       pf.mndr, pf.andr };
         report(w, &pr);
         /* "dropped": fewer risky faces, or as many leaning 0.5 % less */
-        if (sm.n_risky < best_seen || (sm.n_risky == best_seen && sev < 0.995 * best_sev)) {
-            best_seen = sm.n_risky;
+        if (n_risky < best_seen || (n_risky == best_seen && sev < 0.995 * best_sev)) {
+            best_seen = n_risky;
             best_sev = sev;
             stall = 0;
         } else if (++stall >= p->patience) {

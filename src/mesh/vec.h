@@ -69,16 +69,31 @@ v3_normalize(struct vec3 a)
     return l > 0 ? v3_scale(a, 1.0 / l) : v3(0, 0, 0);
 }
 
+/* fmin / fmax to the bit (a NaN loses; of two equal values, zeros of either
+   sign included, the first wins, as glibc's), inline: at -O2 gcc calls the
+   library for them, and bounding boxes call them per vertex. */
+static inline double
+min_d(double a, double b)
+{
+    return b < a || a != a ? b : a;
+}
+
+static inline double
+max_d(double a, double b)
+{
+    return b > a || a != a ? b : a;
+}
+
 static inline struct vec3
 v3_min(struct vec3 a, struct vec3 b)
 {
-    return v3(fmin(a.x, b.x), fmin(a.y, b.y), fmin(a.z, b.z));
+    return v3(min_d(a.x, b.x), min_d(a.y, b.y), min_d(a.z, b.z));
 }
 
 static inline struct vec3
 v3_max(struct vec3 a, struct vec3 b)
 {
-    return v3(fmax(a.x, b.x), fmax(a.y, b.y), fmax(a.z, b.z));
+    return v3(max_d(a.x, b.x), max_d(a.y, b.y), max_d(a.z, b.z));
 }
 
 static inline int
