@@ -8,7 +8,8 @@
  * loader's message naming the uploaded file), orient with the job's angle
  * or the printer's, slim it (Hu 2015) within the job's deviation budget
  * when the method is 'slim' (a method not in the build is SF_EUNSUPP
- * naming it: never fake output), then slice with the
+ * naming it: never fake output), keeping the slimmed shape only if our
+ * slicer prints it with less support (prepare_slice_better), then slice with the
  * printer's profile, overridden by the farm config's view of the hardware
  * (nozzle, bed, overhang angle) so one file is the truth about machines.
  * The cancel flag is checked between stages and inside the slicer.
@@ -27,6 +28,7 @@
 #include "../../slicer/slice.h"
 #include "../base/buf.h"
 #include "../base/limits.h"
+#include "../base/log.h"
 #include "../geom/orient.h"
 #include "../geom/slim.h"
 #include "../geom/surfopt.h"
@@ -111,11 +113,12 @@ take_part(struct mesh *m, struct mesh *out, const struct slice_profile *prof)
 
 /*
  * Support slimming (Hu 2015) of the oriented part within the job's
- * deviation budget.  On success m holds the slimmed part, on the bed centre.
+ * deviation budget.  On success m holds the slimmed part, on the bed centre,
+ * and *changed says whether it is not the part it was given.
  */
 static int
 slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_profile *prof,
-          const atomic_bool *cancel, struct sf_err *err)
+          const atomic_bool *cancel, bool *changed, struct sf_err *err)
 {
     struct slim_params sp;
     slim_params_default(&sp);
@@ -127,9 +130,42 @@ slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_prof
     int rc = slim_optimize(m, &sp, &sr, err);
     if (rc)
         return rc;
+    *changed = sr.best_iter > 0;
     take_part(m, &sr.out, prof);
     slim_result_release(&sr);
     return SF_OK;
+}
+
+int
+prepare_slice_better(const struct mesh *start, const struct mesh *shaped,
+                     const struct slice_profile *prof, const char *out_path,
+                     const atomic_bool *cancel, struct prepare_choice *ch, struct sf_err *err)
+{
+    memset(ch, 0, sizeof(*ch));
+    char other[PREPARE_PATH_MAX + 16];
+    if (snprintf(other, sizeof(other), "%s.start", out_path) >= (int)sizeof(other))
+        return sf_err_set(err, SF_EINVAL, "prepare: path too long: '%s'", out_path);
+    struct slice_result rs, r0;
+    int rc = slice_mesh(shaped, prof, out_path, &rs, on_slice_progress, (void *)cancel, err);
+    if (rc == SF_OK)
+        rc = slice_mesh(start, prof, other, &r0, on_slice_progress, (void *)cancel, err);
+    if (rc) {
+        unlink(out_path);
+        return rc;
+    }
+    ch->support_g_shaped = rs.support_g;
+    ch->support_g_start = r0.support_g;
+    ch->took_shaped = rs.support_g < r0.support_g;
+    if (ch->took_shaped) {
+        unlink(other);
+        return SF_OK;
+    }
+    if (rename(other, out_path) != 0) {
+        rc = sf_err_sys(err, "prepare: cannot rename '%s' to '%s'", other, out_path);
+        unlink(other);
+        unlink(out_path);
+    }
+    return rc;
 }
 
 /*
@@ -176,6 +212,8 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     if (rc)
         goto out;
     struct slice_profile prof;
+    struct mesh start; /* the part before slimming, when slimming changed it */
+    mesh_init(&start);
     if ((rc = load_profile(req, &prof, err)))
         goto out;
     bool slim = strcmp(method, "slim") == 0;
@@ -193,7 +231,9 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
             goto release;
         orient_apply(&m, res.best.up, prof.bed_x_mm / 2, prof.bed_y_mm / 2);
     }
-    if (slim && (rc = slim_part(&m, req, &prof, cancel, err)))
+    bool slimmed = false;
+    if (slim && ((rc = mesh_copy(&start, &m, err)) ||
+                 (rc = slim_part(&m, req, &prof, cancel, &slimmed, err))))
         goto release;
     if (strcmp(method, "surface") == 0 && (rc = surface_part(&m, req, &prof, cancel, err)))
         goto release;
@@ -201,9 +241,22 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
         rc = cancelled(req, err);
         goto release;
     }
+    const struct mesh *printed = &m;
+    if (slimmed) {
+        struct prepare_choice ch;
+        rc = prepare_slice_better(&start, &m, &prof, req->out_path, cancel, &ch, err);
+        if (rc == SF_OK && !ch.took_shaped) {
+            printed = &start;
+            log_info("prepare",
+                     "job %lld: the slimmed part needs %.2f g of support, the part as oriented "
+                     "%.2f g: printing it as oriented",
+                     (long long)req->job_id, ch.support_g_shaped, ch.support_g_start);
+        }
+    } else {
+        rc = slice_mesh(&m, &prof, req->out_path, NULL, on_slice_progress, (void *)cancel, err);
+    }
     struct vec3 lo, hi;
-    mesh_bbox(&m, &lo, &hi);
-    rc = slice_mesh(&m, &prof, req->out_path, NULL, on_slice_progress, (void *)cancel, err);
+    mesh_bbox(printed, &lo, &hi);
     if (rc == SF_OK) {
         out->size_mm[0] = hi.x - lo.x;
         out->size_mm[1] = hi.y - lo.y;
@@ -213,6 +266,7 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
 release:
     slice_profile_release(&prof);
 out:
+    mesh_release(&start);
     mesh_release(&m);
     if (rc && rc != SF_EUNSUPP && rc != SF_ECANCELED)
         sf_err_prefix(err, "job %lld", (long long)req->job_id);

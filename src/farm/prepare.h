@@ -5,10 +5,10 @@
  *
  * The farm runs a prepare function on the worker pool (pool.h) with plain
  * data copied in struct prepare_req, so it touches nothing shared.  The
- * stages live in src/mesh (load), src/geom (orient; shape optimization
- * when it lands) and slicer/ (slice).  A method whose stage is not in this
- * build returns SF_EUNSUPP naming it, and the farm keeps the job queued
- * with that reason (never lost; prepared once the stage lands).
+ * stages live in src/mesh (load), src/geom (orient, slimming, surface
+ * optimization) and slicer/ (slice).  A prepare function that returns
+ * SF_EUNSUPP (a stage missing from a build) leaves its job queued with that
+ * reason: never lost, prepared once the stage is there.
  *
  * Thread: a pool worker; must check *cancel between stages.
  */
@@ -16,6 +16,7 @@
 #define SF_FARM_PREPARE_H
 
 #include <stdatomic.h>
+#include <stdbool.h>
 
 #include "../base/err.h"
 #include "farmcfg.h"
@@ -46,12 +47,37 @@ typedef int (*prepare_fn)(const struct prepare_req *req, struct prepare_out *out
 /*
  * The pipeline: load the part, orient it (methods orient, slim, surface)
  * for the job's overhang angle or else the printer's, reshape it (slim,
- * surface: SF_EUNSUPP until src/geom has them), slice it with the
+ * surface; a slimmed shape only if it prints with less support, see
+ * prepare_slice_better), slice it with the
  * printer's profile and the job's material, the farm config's nozzle, bed
  * and angle overriding the profile's.  SF_EINVAL for a bad part or
  * profile (the message names the file), SF_ECANCELED if cancelled.
  */
 int prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
                  struct sf_err *err);
+
+/* Which of two slicings prepare_slice_better kept. */
+struct prepare_choice {
+    bool took_shaped;        /* the reshaped part needs less support: its G-code was kept */
+    double support_g_shaped; /* support grams of each, as this slicer prints them */
+    double support_g_start;
+};
+
+/*
+ * Slice a shape optimizer's result (shaped) and the part it started from
+ * (start, the same part oriented) with prof, and leave at out_path the
+ * G-code of the one needing fewer support grams; a tie goes to start, the
+ * unchanged shape.  Why: slimming steers by the ray-cast column volume,
+ * which the printed support follows only roughly: the slicer leaves a gap
+ * around the part and merges columns (tests/bench/bench_slim.sh, armadillo
+ * at 45 degrees: ray-cast -7.6 %, this slicer's grams +3.3 %), so what the
+ * farm prints is judged by the slicer that prints it.  Errors as
+ * slice_mesh's; no file is left at out_path on an error.
+ */
+struct mesh;
+struct slice_profile;
+int prepare_slice_better(const struct mesh *start, const struct mesh *shaped,
+                         const struct slice_profile *prof, const char *out_path,
+                         const atomic_bool *cancel, struct prepare_choice *ch, struct sf_err *err);
 
 #endif

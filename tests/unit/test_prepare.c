@@ -1,0 +1,91 @@
+/*
+ * test_prepare.c - the prepare stage's choice between a reshaped part and
+ * the part it came from: the G-code left is the one with less support in
+ * our slicer (the farm's whole pipeline is in test_farm.c).
+ */
+#include <stdio.h>
+#include <unistd.h>
+
+#include "../../slicer/profile.h"
+#include "../../slicer/slice.h"
+#include "../../src/base/buf.h"
+#include "../../src/farm/prepare.h"
+#include "../../src/mesh/mesh.h"
+#include "../../src/mesh/shapes.h"
+#include "../t.h"
+
+/* The support grams a G-code file's header reports (-1 if it has none). */
+static double
+support_g_in(const char *path)
+{
+    struct buf g;
+    struct sf_err err;
+    buf_init(&g, 64 << 20);
+    double grams = -1;
+    if (buf_read_file(&g, path, &err) == SF_OK && g.data) {
+        const char *s = strstr(g.data, "; support material used [g] = ");
+        if (s)
+            sscanf(s + strlen("; support material used [g] = "), "%lf", &grams);
+    }
+    buf_release(&g);
+    return grams;
+}
+
+/* The tee standing on its stem (its arms overhang) and turned upside down (flat top down). */
+static void
+tees(struct mesh *standing, struct mesh *flipped, const struct slice_profile *p)
+{
+    struct sf_err err;
+    mesh_init(standing);
+    mesh_init(flipped);
+    T_OK(shape_tee(standing, &err), &err);
+    T_OK(mesh_copy(flipped, standing, &err), &err);
+    mesh_rotate_up(flipped, v3(0, 0, -1));
+    mesh_place_on_bed(standing, p->bed_x_mm / 2, p->bed_y_mm / 2);
+    mesh_place_on_bed(flipped, p->bed_x_mm / 2, p->bed_y_mm / 2);
+}
+
+T_CASE(prepare_keeps_the_slicing_with_less_support)
+{
+    struct sf_err err;
+    struct slice_profile p;
+    T_OK(slice_profile_load("config/printers/generic-marlin.cfg", "config/materials/pla.cfg", &p,
+                            &err),
+         &err);
+    struct mesh standing, flipped;
+    tees(&standing, &flipped, &p);
+    char out[512], other[600];
+    snprintf(out, sizeof(out), "%s/part.gcode", t_tmpdir());
+    snprintf(other, sizeof(other), "%s.start", out);
+    atomic_bool cancel = false;
+    struct prepare_choice ch;
+
+    /* the reshaped part needs less: its G-code stays */
+    T_OK(prepare_slice_better(&standing, &flipped, &p, out, &cancel, &ch, &err), &err);
+    T_TRUE(ch.took_shaped);
+    T_TRUE(ch.support_g_start > 1); /* the arms need columns */
+    T_EQ_DBL(ch.support_g_shaped, 0, 1e-9);
+    T_EQ_DBL(support_g_in(out), 0, 1e-9);
+    T_TRUE(access(other, F_OK) != 0);
+
+    /* the reshaped part needs more: the start's G-code is left at out */
+    T_OK(prepare_slice_better(&flipped, &standing, &p, out, &cancel, &ch, &err), &err);
+    T_TRUE(!ch.took_shaped);
+    T_EQ_DBL(support_g_in(out), ch.support_g_start, 0.005);
+    T_EQ_DBL(ch.support_g_start, 0, 1e-9);
+    T_TRUE(ch.support_g_shaped > 1);
+    T_TRUE(access(other, F_OK) != 0);
+
+    /* a tie goes to the unchanged part */
+    T_OK(prepare_slice_better(&standing, &standing, &p, out, &cancel, &ch, &err), &err);
+    T_TRUE(!ch.took_shaped);
+    T_EQ_DBL(support_g_in(out), ch.support_g_start, 0.005);
+
+    /* a cancelled slicing leaves no file behind */
+    atomic_store(&cancel, true);
+    T_EQ_INT(prepare_slice_better(&standing, &flipped, &p, out, &cancel, &ch, &err), SF_ECANCELED);
+    T_TRUE(access(out, F_OK) != 0 && access(other, F_OK) != 0);
+    mesh_release(&standing);
+    mesh_release(&flipped);
+    slice_profile_release(&p);
+}
