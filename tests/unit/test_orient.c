@@ -214,8 +214,8 @@ T_CASE(many_hull_bases_are_pruned_by_the_proxy)
     T_OK(orient_find(&m, &p, &pruned, &err), &err);
     p.exact_hull = 1000;
     T_OK(orient_find(&m, &p, &all, &err), &err);
-    /* at most 23 casts past the first stage: 16 refinement samples and 7 finalists */
-    T_TRUE(pruned.n_exact <= (uint32_t)(p.exact_top + 12 + 1 + 23));
+    /* at most 21 casts past the first stage: 16 refinement samples and 5 finalists */
+    T_TRUE(pruned.n_exact <= (uint32_t)(p.exact_top + 12 + 1 + 21));
     T_TRUE(all.n_exact >= pruned.n_exact + 42 - 12);
     for (int i = 0; i < 2; i++) {
         const struct orient_result *res = i ? &all : &pruned;
