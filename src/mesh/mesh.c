@@ -507,22 +507,22 @@ mesh_topo_build(const struct mesh *m, struct mesh_topo *topo, struct sf_err *err
             uint32_t a = m->t[i][k], b = he_dst(m, he);
             uint32_t users = 0, other = MESH_NO_TRI, lowest = he;
             bool same_dir = false;
+            /* Branch-free scans: a match is one neighbour in six, so a branch on it
+               mispredicted often (perf: most of this function's time on bunny00) */
             for (uint32_t s = vh.start[a]; s < vh.start[a + 1]; s++) {
                 uint32_t h = vh.he[s];
-                if (h != he && vh.dst[s] == b) {
-                    users++;
-                    other = h / 3;
-                    same_dir = true;
-                    lowest = h < lowest ? h : lowest;
-                }
+                bool match = (h != he) & (vh.dst[s] == b);
+                users += match;
+                other = match ? h / 3 : other;
+                same_dir |= match;
+                lowest = match && h < lowest ? h : lowest;
             }
             for (uint32_t s = vh.start[b]; s < vh.start[b + 1]; s++) {
                 uint32_t h = vh.he[s];
-                if (vh.dst[s] == a) {
-                    users++;
-                    other = h / 3;
-                    lowest = h < lowest ? h : lowest;
-                }
+                bool match = vh.dst[s] == a;
+                users += match;
+                other = match ? h / 3 : other;
+                lowest = match && h < lowest ? h : lowest;
             }
             topo->adj[i][k] = users == 1 ? other : MESH_NO_TRI;
             if (lowest == he) { /* count each undirected edge once */

@@ -195,6 +195,38 @@ T_CASE(an_open_shell_is_left_as_it_is)
     mesh_release(&m);
 }
 
+/* A 40-sided prism has 42 stable hull bases (40 sides of 94 mm2, the centre
+   of mass 1.2 mm inside each, and two caps); only the exact_hull best by
+   proxy are ray-cast, and the search still stands it on a cap. */
+T_CASE(many_hull_bases_are_pruned_by_the_proxy)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    double r[4] = { 0, 15, 15, 0 }, z[4] = { 0, 0, 40, 40 };
+    T_OK(shape_revolve(&m, r, z, 4, 40, &err), &err);
+    /* tilted, so the input is not already the answer */
+    mesh_transform(&m, m3_rotate_onto(v3(0, 0, 1), v3_normalize(v3(1, 0.2, 0.3))), v3(0, 0, 0));
+    struct orient_result pruned, all;
+    struct orient_params p;
+    orient_params_default(&p);
+    p.samples = 200;
+    T_OK(orient_find(&m, &p, &pruned, &err), &err);
+    p.exact_hull = 1000;
+    T_OK(orient_find(&m, &p, &all, &err), &err);
+    /* at most 21 casts past the first stage: 16 refinement samples and 5 finalists */
+    T_TRUE(pruned.n_exact <= (uint32_t)(p.exact_top + 12 + 1 + 21));
+    T_TRUE(all.n_exact >= pruned.n_exact + 42 - 12);
+    for (int i = 0; i < 2; i++) {
+        const struct orient_result *res = i ? &all : &pruned;
+        struct vec3 axis = v3_normalize(v3(1, 0.2, 0.3)); /* the caps' normals, turned */
+        T_TRUE(fmin(angle_deg(res->best.up, axis), angle_deg(res->best.up, v3_scale(axis, -1))) <
+               1e-6);
+        T_EQ_DBL(res->best.m.volume_mm3, 0, 1e-9);
+    }
+    mesh_release(&m);
+}
+
 /* The helper threads (one builds the scene while the caller runs the proxy
    stage) change who scores what, never the answer: 1, 2 and 5 threads agree
    to the bit.  A part with no hull fails cleanly with the helpers started. */
