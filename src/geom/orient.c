@@ -417,7 +417,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     }
     j.rc = rc;
 
-    /* stage 1: coarse ray cast of the proxy's best, every hull base and the input */
+    /* stage 1: coarse ray cast of the proxy's best sphere samples and hull bases, and the input */
     uint32_t n_coarse = 0;
     int n_hull = 0;
     for (uint32_t k = 0; k < n; k++) {

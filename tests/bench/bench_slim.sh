@@ -14,6 +14,9 @@
 # SLIM_ITERS (e.g. "3 8"): also the iterate at these iteration caps, each
 # returned whatever it saves (--iterations N --min-gain 0), at alpha 45 only:
 # do the peers see a saving part-way through that the last iterate loses?
+# SLIM_ORIENTED=1: each mesh is first oriented for the angle (slimfarm orient
+# --angle A), as the farm's --method slim does, and the oriented part is the
+# input of the row.
 set -u
 build=${1:-build/rel}
 mesh=""
@@ -78,6 +81,11 @@ for name in ${SLIM_MESHES:-dino cow elephant}; do
     angle=${run%@*} label=$run cap=()
     [ "$run" != "$angle" ] && cap=(--iterations "${run#*@}" --min-gain 0) label="$angle (${run#*@} iterations)"
     in=../shared/meshes/$name.stl out="$work/$name-$angle.stl"
+    if [ "${SLIM_ORIENTED:-0}" = 1 ]; then
+      "$build/bin/slimfarm" orient "$in" -o "$work/$name-oriented-$angle.stl" --angle "$angle" >/dev/null ||
+        { echo "| $name | $label | orient failed |"; continue; }
+      in="$work/$name-oriented-$angle.stl"
+    fi
     js=$("$build/bin/slimfarm" optimize "$in" -o "$out" --method volumetric --angle "$angle" "${cap[@]}" --json) || { echo "| $name | $label | failed |"; continue; }
     row=$(python3 -c 'import json,sys; j=json.loads(sys.argv[1]); b,a,d=j["before"],j["after"],j["deviation"]
 v=j["part_volume_mm3"]
