@@ -202,9 +202,10 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     if (atomic_load(cancel))
         return cancelled(req, err);
     struct buf data;
-    struct mesh m;
+    struct mesh m, start; /* start: a slim job's part before slimming */
     buf_init(&data, SF_MESH_FILE_MAX);
     mesh_init(&m);
+    mesh_init(&start);
     int rc = buf_read_file(&data, req->part_path, err);
     if (rc == SF_OK)
         rc = mesh_load_mem(data.data ? data.data : "", data.len, req->part_name, &m, NULL, err);
@@ -212,8 +213,6 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     if (rc)
         goto out;
     struct slice_profile prof;
-    struct mesh start; /* the part before slimming, when slimming changed it */
-    mesh_init(&start);
     if ((rc = load_profile(req, &prof, err)))
         goto out;
     bool slim = strcmp(method, "slim") == 0;
