@@ -280,6 +280,15 @@ measure_deviation(const struct mesh *a, const struct mesh *b, struct deviation *
             err, SF_EINVAL,
             "deviation needs the same connectivity (%u/%u vs %u/%u vertices/triangles)", a->n_verts,
             a->n_tris, b->n_verts, b->n_tris);
+    measure_deviation_diag(a, b, mesh_diag(a), out);
+    return SF_OK;
+}
+
+void
+measure_deviation_diag(const struct mesh *a, const struct mesh *b, double diag,
+                       struct deviation *out)
+{
+    memset(out, 0, sizeof(*out));
     double sum = 0;
     for (uint32_t i = 0; i < a->n_verts; i++) {
         double d = v3_len(v3_sub(a->v[i], b->v[i]));
@@ -287,12 +296,10 @@ measure_deviation(const struct mesh *a, const struct mesh *b, struct deviation *
         sum += d;
     }
     out->mean_mm = a->n_verts ? sum / a->n_verts : 0;
-    double diag = mesh_diag(a);
     if (diag > 0) {
         out->mndr = out->max_mm / diag;
         out->andr = out->mean_mm / diag;
     }
-    return SF_OK;
 }
 
 /* ---- Hausdorff ----------------------------------------------------------- */

@@ -103,6 +103,10 @@ struct deviation {
 };
 int measure_deviation(const struct mesh *a, const struct mesh *b, struct deviation *out,
                       struct sf_err *err);
+/* The same with a's bounding-box diagonal given (a loop comparing many b with one a measures
+   it once); a and b must have the same vertex count. */
+void measure_deviation_diag(const struct mesh *a, const struct mesh *b, double diag,
+                            struct deviation *out);
 
 /*
  * One-sided Hausdorff distance from a to b (max over a's vertices and

@@ -77,7 +77,7 @@ now_s(void)
 struct cand {
     struct vec3 *x; /* tet positions (NULL: the rest positions, i.e. the input) */
     uint32_t risky;
-    double severity; /* overhang severity, the tie-break (see severity()) */
+    double severity; /* overhang severity, the tie-break (see measure_part) */
     int iter, round;
     double beta_deg;
 };
@@ -167,6 +167,8 @@ struct work {
     struct arap_drive *drv; /* fh.n slots */
     struct vec3 *fa;        /* per part face: area vector at the current iterate */
     struct vec3 base;       /* centroid of the fixed tet vertices */
+    double zlo, diag;       /* the input's lowest z and bounding-box diagonal */
+    double gap;             /* what lies this close above the bed rests on it (min_gap_mm) */
 };
 
 static void
@@ -178,61 +180,33 @@ map_part(struct work *w, const struct vec3 *x)
             w->cur.v[v] = w->d->in.v[v]; /* exactly, not up to rounding */
 }
 
-/*
- * Overhang severity: sum over risky faces of area * (sin(alpha) - n . z),
- * how far past the threshold they lean.  A low-poly part (a tee has four
- * risky triangles) keeps the same risky count for many iterations while
- * its faces turn; the severity still falls, so it breaks the count's ties
- * in the stop test and in the choice of the best iterate.
- */
-static double
-severity(const struct mesh *m, double tau, double zlo, double gap)
-{
-    double s = 0;
-    for (uint32_t i = 0; i < m->n_tris; i++) {
-        struct vec3 c = mesh_tri_cross(m, i);
-        double len = v3_len(c);
-        if (!(len > 0) || c.z / len >= -tau)
-            continue;
-        if (mesh_tri_centroid(m, i).z - zlo < gap)
-            continue; /* on the bed, as in measure_proxy */
-        s += 0.5 * (-c.z - tau * len);
-    }
-    return s;
-}
-
 /* What the loop watches after each iteration. */
 struct part_figures {
-    uint32_t n_risky;  /* risky faces, as measure_proxy counts them */
-    double severity;   /* severity() */
-    double mndr, andr; /* as measure_deviation gives them, against the input */
+    uint32_t n_risky;    /* risky faces, as measure_proxy counts them */
+    double severity;     /* see measure_part */
+    struct deviation dv; /* against the input */
 };
 
 /*
- * The figures of the mapped part w->cur in one pass over its vertices and
- * one over its faces (armadillo has 26k and 52k, several times its tets),
- * bit for bit those of measure_proxy (risky: centroid at least gap above
- * the part's own lowest point), severity() (above the input's lowest point
- * zlo) and measure_deviation (the input's diagonal diag, measured once);
- * each of them was a pass of its own.  The faces' area vectors go to w->fa,
- * where the next iteration's drives read them.
+ * The figures of the mapped part w->cur, with one pass over its faces
+ * (armadillo has 52k, several times its tets): the risky count as
+ * measure_proxy gives it (centroid at least w->gap above the part's own
+ * lowest point), and the overhang severity, the sum over risky faces of
+ * area * (sin(alpha) - n . z) above the input's lowest point: how far past
+ * the threshold they lean.  A low-poly part (a tee has four risky
+ * triangles) keeps the same risky count for many iterations while its
+ * faces turn; the severity still falls, so it breaks the count's ties in
+ * the stop test and in the choice of the best iterate.  The faces' area
+ * vectors go to w->fa, where the next iteration's drives read them.
  */
 static void
-measure_part(struct work *w, double tau, double zlo, double gap, double diag,
-             struct part_figures *pf)
+measure_part(struct work *w, double tau, struct part_figures *pf)
 {
     const struct mesh *m = &w->cur;
-    const struct vec3 *in = w->d->in.v;
-    double lo = INFINITY, dmax = 0, dsum = 0;
-    for (uint32_t v = 0; v < m->n_verts; v++) {
+    double lo = INFINITY;
+    for (uint32_t v = 0; v < m->n_verts; v++)
         lo = min_d(lo, m->v[v].z);
-        double d = v3_len(v3_sub(in[v], m->v[v]));
-        dmax = max_d(dmax, d);
-        dsum += d;
-    }
-    double dmean = m->n_verts ? dsum / m->n_verts : 0;
-    pf->mndr = diag > 0 ? dmax / diag : 0;
-    pf->andr = diag > 0 ? dmean / diag : 0;
+    measure_deviation_diag(&w->d->in, m, w->diag, &pf->dv);
     uint32_t n = 0;
     double s = 0;
     for (uint32_t f = 0; f < m->n_tris; f++) {
@@ -246,8 +220,8 @@ measure_part(struct work *w, double tau, double zlo, double gap, double diag,
         if (!(len > 0) || x.z / len >= -tau)
             continue;
         double cz = (a.z + b.z + c.z) * (1.0 / 3.0);
-        n += cz - lo >= gap;
-        if (cz - zlo >= gap)
+        n += cz - lo >= w->gap;
+        if (cz - w->zlo >= w->gap)
             s += 0.5 * (-x.z - tau * len);
     }
     pf->n_risky = n;
@@ -283,7 +257,7 @@ report(struct work *w, const struct slim_progress *pr)
  * that mean, the worst face as a second one (minimal rotation case II).
  */
 static uint32_t
-compute_drives(struct work *w, double tau_aim, double zlo, double gap)
+compute_drives(struct work *w, double tau_aim)
 {
     const struct face_hosts *fh = &w->cx->fh;
     const struct mesh *m = &w->cur;
@@ -299,7 +273,7 @@ compute_drives(struct work *w, double tau_aim, double zlo, double gap)
             const uint32_t *t = m->t[f];
             if (w->part_fixed[t[0]] && w->part_fixed[t[1]] && w->part_fixed[t[2]])
                 continue;
-            if ((m->v[t[0]].z + m->v[t[1]].z + m->v[t[2]].z) / 3 - zlo < gap)
+            if ((m->v[t[0]].z + m->v[t[1]].z + m->v[t[2]].z) / 3 - w->zlo < w->gap)
                 continue; /* on the bed */
             sum = v3_add(sum, w->fa[f]);
             if (w->fa[f].z / len < worst_c) {
@@ -337,18 +311,11 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
     const struct slim_params *p = w->cx->p;
     double tau = sin(p->angle_deg * M_PI / 180), beta = beta_deg * M_PI / 180;
     double tau_aim = sin(fmin(p->angle_deg - p->margin_deg, 89.9) * M_PI / 180);
-    struct support_params sp;
-    support_params_default(&sp);
-    sp.angle_deg = p->angle_deg;
     memcpy(w->x, w->tm.x, sizeof(*w->x) * w->tm.n_verts);
     memcpy(w->cur.v, w->d->in.v, sizeof(*w->cur.v) * w->cur.n_verts);
     uint32_t best_seen = curve[0];
-    double zlo = INFINITY;
-    for (uint32_t v = 0; v < w->d->in.n_verts; v++)
-        zlo = fmin(zlo, w->d->in.v[v].z);
-    double diag = mesh_diag(&w->d->in);
     struct part_figures pf;
-    measure_part(w, tau, zlo, sp.min_gap_mm, diag, &pf); /* the input: w->fa for the first drives */
+    measure_part(w, tau, &pf); /* the input: w->fa for the first drives */
     double best_sev = pf.severity;
     int stall = 0;
     *n_curve = 1;
@@ -357,7 +324,7 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
         if (p->cancel && atomic_load(p->cancel))
             return sf_err_set(err, SF_ECANCELED, "slim: cancelled");
         double t0 = now_s();
-        uint32_t n_drv = compute_drives(w, tau_aim, zlo, sp.min_gap_mm);
+        uint32_t n_drv = compute_drives(w, tau_aim);
         w->d->timing.part_s += now_s() - t0;
         struct arap_local_stats ls;
         arap_local(a, w->x, v3(0, 0, 1), tau_aim, beta, w->drv, n_drv, &ls);
@@ -370,16 +337,16 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
         t0 = now_s();
         uint32_t inverted = count_inverted(&w->tm, w->x);
         map_part(w, w->x);
-        measure_part(w, tau, zlo, sp.min_gap_mm, diag, &pf);
+        measure_part(w, tau, &pf);
         uint32_t n_risky = pf.n_risky;
         double sev = pf.severity;
         w->d->timing.part_s += now_s() - t0;
         if (*n_curve < SLIM_CURVE_MAX)
             curve[(*n_curve)++] = n_risky;
-        *within = pf.mndr <= p->max_mndr && pf.andr <= p->max_andr && inverted == 0;
+        *within = pf.dv.mndr <= p->max_mndr && pf.dv.andr <= p->max_andr && inverted == 0;
         if (!*within)
-            log_debug("slim", "round %d it %d: mndr %.4f andr %.4f inverted %u", round, it, pf.mndr,
-                      pf.andr, inverted);
+            log_debug("slim", "round %d it %d: mndr %.4f andr %.4f inverted %u", round, it,
+                      pf.dv.mndr, pf.dv.andr, inverted);
         if (*within) {
             struct cand c = {
                 mem_array(w->tm.n_verts, sizeof(struct vec3)), n_risky, sev, it, round, beta_deg
@@ -389,8 +356,8 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
             memcpy(c.x, w->x, sizeof(struct vec3) * w->tm.n_verts);
             offer(w->list, &w->n_list, c);
         }
-        struct slim_progress pr = { w->d->index,  w->cx->n_dirs, round,   beta_deg, it,
-                                    p->max_iters, n_risky,       pf.mndr, pf.andr };
+        struct slim_progress pr = { w->d->index,  w->cx->n_dirs, round,      beta_deg,  it,
+                                    p->max_iters, n_risky,       pf.dv.mndr, pf.dv.andr };
         report(w, &pr);
         /* "dropped": fewer risky faces, or as many leaning 0.5 % less */
         if (n_risky < best_seen || (n_risky == best_seen && sev < 0.995 * best_sev)) {
@@ -409,10 +376,7 @@ setup_fixed(struct work *w)
 {
     const struct slim_params *p = w->cx->p;
     const struct tetmesh *src = w->cx->tm;
-    double zlo = INFINITY;
-    for (uint32_t v = 0; v < w->d->in.n_verts; v++)
-        zlo = fmin(zlo, w->d->in.v[v].z);
-    double zfix = zlo + p->fix_bottom_mm;
+    double zfix = w->zlo + p->fix_bottom_mm;
     for (uint32_t v = 0; v < w->tm.n_verts; v++)
         w->fixed[v] = w->tm.x[v].z <= zfix || in_box(p, src->x[v]);
     /* part vertices in a fixed region pin their whole host tet */
@@ -542,8 +506,6 @@ choose(struct work *w, struct sf_err *err)
     const struct slim_params *p = w->cx->p;
     bool rescale = p->keep_volume && p->n_fix_boxes == 0;
     double part_vol_in = rescale ? mesh_volume(&d->in, NULL) : 0;
-    struct support_params sp; /* its min_gap_mm: what rests on the bed */
-    support_params_default(&sp);
     d->selfx_in = selfx_count(&d->in, err);
     if (d->selfx_in < 0)
         return d->selfx_in;
@@ -562,7 +524,7 @@ choose(struct work *w, struct sf_err *err)
         double scale = 1;
         if (rescale) {
             struct deviation dv;
-            scale = restore_volume(&w->cur, part_vol_in, sp.min_gap_mm);
+            scale = restore_volume(&w->cur, part_vol_in, w->gap);
             if ((rc = measure_deviation(&d->in, &w->cur, &dv, err)))
                 return rc;
             if (dv.mndr > p->max_mndr || dv.andr > p->max_andr) {
@@ -639,6 +601,13 @@ run_dir(struct ctx *cx, struct dir *d, struct sf_err *err)
     w.cur.n_tris = d->in.n_tris;
     for (uint32_t v = 0; v < cx->tm->n_verts; v++)
         w.tm.x[v] = v3_add(m3_mul_v(d->rot, cx->tm->x[v]), shift);
+    struct support_params sp; /* its min_gap_mm: what rests on the bed */
+    support_params_default(&sp);
+    w.gap = sp.min_gap_mm;
+    w.zlo = INFINITY;
+    for (uint32_t v = 0; v < d->in.n_verts; v++)
+        w.zlo = fmin(w.zlo, d->in.v[v].z);
+    w.diag = mesh_diag(&d->in);
     setup_fixed(&w);
     double t0 = now_s();
     a = arap_new(&w.tm, w.fixed, err);
@@ -647,21 +616,13 @@ run_dir(struct ctx *cx, struct dir *d, struct sf_err *err)
         rc = err ? err->code : SF_EINVAL;
         goto done;
     }
-    struct support_params sp;
-    support_params_default(&sp);
-    sp.angle_deg = p->angle_deg;
-    struct support_metrics sm0;
-    measure_proxy(&d->in, v3(0, 0, 1), &sp, &sm0);
-    double zlo0 = INFINITY;
-    for (uint32_t v = 0; v < d->in.n_verts; v++)
-        zlo0 = fmin(zlo0, d->in.v[v].z);
-    offer(w.list, &w.n_list,
-          (struct cand){ NULL, sm0.n_risky,
-                         severity(&d->in, sin(p->angle_deg * M_PI / 180), zlo0, sp.min_gap_mm), 0,
-                         0, 0 });
+    struct part_figures pf0; /* the input */
+    memcpy(w.cur.v, d->in.v, sizeof(*w.cur.v) * w.cur.n_verts);
+    measure_part(&w, sin(p->angle_deg * M_PI / 180), &pf0);
+    offer(w.list, &w.n_list, (struct cand){ NULL, pf0.n_risky, pf0.severity, 0, 0, 0 });
     uint32_t curve[SLIM_CURVE_MAX];
-    curve[0] = sm0.n_risky;
-    d->curve[0] = sm0.n_risky;
+    curve[0] = pf0.n_risky;
+    d->curve[0] = pf0.n_risky;
     d->n_curve = 1;
     double beta = p->beta_deg;
     for (int round = 0;; round++) {
