@@ -50,23 +50,35 @@ struct farm {
     char profiles_dir[512];    /* slicing profiles (farmcfg profiles_dir) */
     struct printer **printers; /* n_printers, config order */
     size_t n_printers;
-    uint64_t kick;     /* pending run() timer, 0 if none */
-    uint64_t progress; /* progress timer */
-    int preparing;     /* prepare tasks in flight */
-    int64_t *deferred; /* jobs whose prepare hit a missing stage: not retried */
-    size_t n_deferred; /* until reload or restart */
-    size_t cap_deferred;
+    uint64_t kick;         /* pending run() timer, 0 if none */
+    uint64_t progress;     /* progress timer */
+    int preparing;         /* prepare tasks in flight */
+    struct prep *reslices; /* re-slices in flight (their jobs stay ready), linked by next */
+    struct noreslice *no;  /* re-slices that failed: not tried again until a reload */
+    size_t n_no, cap_no;
+};
+
+/* A job that could not be prepared for a printer's key (its profile is broken). */
+struct noreslice {
+    int64_t job_id;
+    char key[SCHED_KEY_MAX];
 };
 
 /* A prepare task: plain data copied for the worker. */
 struct prep {
     struct farm *f;                /* owner (used only on the loop thread) */
+    struct prep *next;             /* in f->reslices (re-slices only) */
+    bool reslice;                  /* the job is ready and stays so: this is another printer's */
+    char key[SCHED_KEY_MAX];       /* sched_key of the printer it is prepared for */
+    double angle_deg;              /* the overhang angle it is prepared with */
     struct prepare_req req;        /* input */
     struct prepare_out out;        /* output */
     struct drv_job_scan scan;      /* the G-code's scan, made on the worker too */
     const struct store *store;     /* for store_file_adopt on the worker */
     char gcode_sha[STORE_SHA_HEX]; /* the G-code, adopted into the store by the worker */
     int64_t gcode_size;
+    char mesh_sha[STORE_SHA_HEX]; /* the optimized part, adopted by the worker; "" if none */
+    int64_t mesh_size;
     struct sf_err err; /* why it failed */
 };
 
@@ -301,9 +313,40 @@ prep_work(void *ud, const atomic_bool *cancel)
        stream ~2.5 s).  Hashing it into the store is the other long read. */
     if (rc == SF_OK &&
         ((rc = drv_job_scan(t->req.out_path, &t->scan, &t->err)) ||
-         (rc = store_file_adopt(t->store, t->req.out_path, t->gcode_sha, &t->gcode_size, &t->err))))
+         (rc =
+              store_file_adopt(t->store, t->req.out_path, t->gcode_sha, &t->gcode_size, &t->err)) ||
+         (t->out.mesh_saved &&
+          (rc = store_file_adopt(t->store, t->req.mesh_out, t->mesh_sha, &t->mesh_size, &t->err)))))
         sf_err_prefix(&t->err, "job %lld", (long long)t->req.job_id);
     return rc;
+}
+
+static void
+unlink_reslice(struct farm *f, struct prep *t)
+{
+    for (struct prep **pp = &f->reslices; *pp; pp = &(*pp)->next)
+        if (*pp == t) {
+            *pp = t->next;
+            return;
+        }
+}
+
+static bool
+reslicing(const struct farm *f, int64_t id)
+{
+    for (const struct prep *t = f->reslices; t; t = t->next)
+        if (t->req.job_id == id)
+            return true;
+    return false;
+}
+
+static bool
+reslice_failed(const struct farm *f, int64_t id, const char *key)
+{
+    for (size_t i = 0; i < f->n_no; i++)
+        if (f->no[i].job_id == id && strcmp(f->no[i].key, key) == 0)
+            return true;
+    return false;
 }
 
 static void
@@ -313,72 +356,126 @@ prep_done(struct loop *l, void *ud, int rc)
     struct prep *t = ud;
     struct farm *f = t->f;
     int64_t id = t->req.job_id;
+    struct sf_err err;
     f->preparing--;
-    if (rc == SF_OK) {
-        struct sf_err err;
-        if (store_file_record(f->s, t->gcode_sha, t->gcode_size, &err) == SF_OK) {
-            struct job_event_args a = { .gcode_sha = t->gcode_sha,
-                                        .nozzle_mm = t->out.nozzle_mm,
-                                        .gcode_lines = (int64_t)t->scan.lines_total };
-            memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
-            job_event(f, id, JOB_EV_PREPARED, &a);
+    if (t->reslice)
+        unlink_reslice(f, t);
+    if (rc == SF_OK && (rc = store_file_record(f->s, t->gcode_sha, t->gcode_size, &err)) == SF_OK &&
+        (!t->mesh_sha[0] ||
+         (rc = store_file_record(f->s, t->mesh_sha, t->mesh_size, &err)) == SF_OK)) {
+        struct job_event_args a = { .gcode_sha = t->gcode_sha,
+                                    .nozzle_mm = t->out.nozzle_mm,
+                                    .gcode_lines = (int64_t)t->scan.lines_total,
+                                    .prep_key = t->key,
+                                    .mesh_sha = t->mesh_sha,
+                                    .mesh_angle_deg = t->angle_deg };
+        memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
+        /* A re-slice whose job started meanwhile on a printer of its old key
+           (or was cancelled) is refused here and dropped: nothing changed. */
+        if (store_job_event(f->s, id, JOB_EV_PREPARED, &a, NULL, &err) == SF_OK)
+            log_info("farm", "job %lld: %s for %s", (long long)id,
+                     t->reslice ? "prepared again" : "prepared", t->key);
+        else
+            log_info("farm", "job %lld: %s", (long long)id, err.msg);
+        notify(f);
+    } else if (rc != SF_OK && rc != SF_ECANCELED) {
+        const char *why = t->err.msg[0] ? t->err.msg : err.msg;
+        if (t->reslice) {
+            /* The job keeps the G-code it has; this printer's key is not tried again. */
+            log_warn("farm", "job %lld: cannot prepare it for %s: %s", (long long)id, t->key, why);
+            if (mem_grow((void **)&f->no, &f->cap_no, f->n_no + 1, sizeof(*f->no))) {
+                f->no[f->n_no].job_id = id;
+                snprintf(f->no[f->n_no++].key, SCHED_KEY_MAX, "%s", t->key);
+            }
         } else {
-            struct job_event_args a = { .reason = err.msg };
+            struct job_event_args a = { .reason = why };
             job_event(f, id, JOB_EV_PREPARE_FAILED, &a);
         }
-    } else if (rc == SF_EUNSUPP) {
-        /* A missing stage is the build's fault, not the job's: keep it. */
-        struct job_event_args a = { .reason = t->err.msg };
-        job_event(f, id, JOB_EV_DEFER, &a);
-        if (f->n_deferred == 0)
-            log_warn("farm", "%s; such jobs stay queued", t->err.msg);
-        if (mem_grow((void **)&f->deferred, &f->cap_deferred, f->n_deferred + 1,
-                     sizeof(*f->deferred)))
-            f->deferred[f->n_deferred++] = id;
-    } else if (rc != SF_ECANCELED) {
-        struct job_event_args a = { .reason = t->err.msg[0] ? t->err.msg : sf_status_name(rc) };
-        job_event(f, id, JOB_EV_PREPARE_FAILED, &a);
     }
     unlink(t->req.out_path); /* gone when adopted */
+    if (t->req.mesh_out[0])
+        unlink(t->req.mesh_out);
     free(t);
     farm_kick(f);
 }
 
-/* Start preparing job j for printer p. */
+/* The printer as the scheduler sees it; its strings live in p. */
 static void
-prepare(struct farm *f, const struct job_row *j, const struct printer *p)
+printer_view(const struct printer *p, struct sched_printer *out)
+{
+    *out = (struct sched_printer){ .name = p->cfg.name,
+                                   .state = p->state,
+                                   .enabled = p->cfg.enabled && !p->removed,
+                                   .material = p->cfg.material,
+                                   .nozzle_mm = p->cfg.nozzle_mm,
+                                   .group = p->cfg.group,
+                                   .profile = p->cfg.profile,
+                                   .overhang_deg = p->cfg.overhang_deg };
+    memcpy(out->bed_mm, p->cfg.bed_mm, sizeof(out->bed_mm));
+}
+
+/*
+ * Start preparing job j for printer p.  A queued job goes to preparing; a
+ * ready one (reslice) stays ready with the G-code it has until the new one
+ * is stored.  The part as optimized for this angle is reused when the job
+ * has one: only the slicing is repeated.
+ */
+static void
+prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice)
 {
     struct sf_err err;
     struct prep *t = mem_calloc(1, sizeof(*t));
     if (!t)
         return; /* retried on the next kick */
+    struct sched_printer view;
+    printer_view(p, &view);
     t->f = f;
     t->store = f->s;
+    t->reslice = reslice;
+    t->angle_deg = j->opts.overhang_deg > 0 ? j->opts.overhang_deg : p->cfg.overhang_deg;
+    sched_key(&view, j->opts.overhang_deg, t->key);
     t->req.job_id = j->id;
     t->req.opts = j->opts;
     t->req.printer = p->cfg;
     snprintf(t->req.profiles_dir, sizeof(t->req.profiles_dir), "%s", f->profiles_dir);
     snprintf(t->req.part_name, sizeof(t->req.part_name), "%s", j->opts.name);
+    bool reuse = j->mesh_sha[0] && j->mesh_angle_deg == t->angle_deg;
     if (store_file_path(f->s, j->file_sha, t->req.part_path, sizeof(t->req.part_path), &err) ||
-        store_file_path(f->s, j->file_sha, t->req.out_path, sizeof(t->req.out_path) - 16, &err)) {
+        store_file_path(f->s, j->file_sha, t->req.out_path, sizeof(t->req.out_path) - 32, &err) ||
+        (reuse &&
+         store_file_path(f->s, j->mesh_sha, t->req.mesh_in, sizeof(t->req.mesh_in), &err))) {
+        free(t);
+        if (reslice) {
+            log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
+            return;
+        }
         struct job_event_args a = { .reason = err.msg };
         job_event(f, j->id, JOB_EV_PREPARE, NULL);
         job_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
-        free(t);
         return;
     }
-    /* out: beside the stored files, named for the job */
+    /* out: beside the stored files, named for the job and the task */
     char *slash = strrchr(t->req.out_path, '/');
-    snprintf(slash + 1, 32, "job-%lld.gcode", (long long)j->id);
-    if (job_event(f, j->id, JOB_EV_PREPARE, NULL)) {
+    snprintf(slash + 1, 32, "job-%lld%s.gcode", (long long)j->id, reslice ? "-re" : "");
+    if (!reuse)
+        snprintf(t->req.mesh_out, sizeof(t->req.mesh_out), "%s.stl", t->req.out_path);
+    if (!reslice && job_event(f, j->id, JOB_EV_PREPARE, NULL)) {
         free(t);
         return;
     }
     if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
-        struct job_event_args a = { .reason = err.msg };
-        job_event(f, j->id, JOB_EV_DEFER, &a);
+        if (!reslice) {
+            struct job_event_args a = { .reason = err.msg };
+            job_event(f, j->id, JOB_EV_DEFER, &a);
+        }
         free(t);
         return;
+    }
+    if (reslice) {
+        log_info("farm", "job %lld: preparing it again for %s (%s)%s", (long long)j->id,
+                 p->cfg.name, t->key, reuse ? ", reusing the optimized part" : "");
+        t->next = f->reslices;
+        f->reslices = t;
     }
     f->preparing++;
 }
@@ -394,7 +491,8 @@ sched_view(const struct job_row *j, struct sched_job *out)
                                .material = j->opts.material,
                                .printer = j->opts.printer,
                                .group = j->opts.group,
-                               .nozzle_mm = j->nozzle_mm };
+                               .key = j->prep_key,
+                               .overhang_deg = j->opts.overhang_deg };
     memcpy(out->size_mm, j->size_mm, sizeof(out->size_mm));
 }
 
@@ -424,15 +522,6 @@ start(struct farm *f, const struct job_row *j, struct printer *p)
     }
 }
 
-static bool
-deferred(const struct farm *f, int64_t id)
-{
-    for (size_t i = 0; i < f->n_deferred; i++)
-        if (f->deferred[i] == id)
-            return true;
-    return false;
-}
-
 static void
 run(struct loop *l, void *ud)
 {
@@ -454,13 +543,7 @@ run(struct loop *l, void *ud)
         goto out; /* the next kick tries again */
     for (size_t i = 0; i < f->n_printers; i++) {
         const struct printer *p = f->printers[i];
-        sp[i] = (struct sched_printer){ .name = p->cfg.name,
-                                        .state = p->state,
-                                        .enabled = p->cfg.enabled && !p->removed,
-                                        .material = p->cfg.material,
-                                        .nozzle_mm = p->cfg.nozzle_mm,
-                                        .group = p->cfg.group };
-        memcpy(sp[i].bed_mm, p->cfg.bed_mm, sizeof(sp[i].bed_mm));
+        printer_view(p, &sp[i]);
         /* An interrupted part is still on this bed, waiting to be resumed:
            nothing else may start on top of it. */
         for (size_t k = 0; k < n; k++)
@@ -471,24 +554,36 @@ run(struct loop *l, void *ud)
     for (size_t i = 0; i < n; i++)
         sched_view(&jobs[i], &sj[i]);
     size_t n_out = sched_plan(sj, n, sp, f->n_printers, out, why);
-    for (size_t k = 0; k < n_out; k++)
-        start(f, &jobs[out[k].job], f->printers[out[k].printer]);
-    /* Prepare queued jobs for the first printer that could take them. */
+    for (size_t k = 0; k < n_out; k++) {
+        const struct job_row *j = &jobs[out[k].job];
+        struct printer *p = f->printers[out[k].printer];
+        if (!out[k].reslice) {
+            start(f, j, p);
+            continue;
+        }
+        /* Waiting for a busy printer of its key while p idles: slice it for p. */
+        char key[SCHED_KEY_MAX];
+        sched_key(&sp[out[k].printer], j->opts.overhang_deg, key);
+        if (!reslicing(f, j->id) && !reslice_failed(f, j->id, key) &&
+            f->preparing < pool_size(f->pool))
+            prepare(f, j, p, true);
+    }
+    /* Prepare queued jobs for a printer that could take them, an idle one first. */
     for (size_t i = 0; i < n; i++) {
         if (jobs[i].state != JOB_QUEUED)
             continue;
-        const char *reason = why[i];
-        if (!reason[0] && deferred(f, jobs[i].id))
-            continue; /* keeps the reason its prepare gave */
-        if (!reason[0] && f->preparing < pool_size(f->pool)) {
-            for (size_t p = 0; p < f->n_printers; p++)
-                if (sched_compatible(&sj[i], &sp[p], NULL, 0)) {
-                    prepare(f, &jobs[i], f->printers[p]);
-                    break;
-                }
+        if (why[i][0] || f->preparing >= pool_size(f->pool)) {
+            store_job_set_reason(f->s, jobs[i].id, why[i], NULL);
             continue;
         }
-        store_job_set_reason(f->s, jobs[i].id, reason, NULL);
+        size_t best = f->n_printers;
+        for (size_t p = 0; p < f->n_printers; p++)
+            if (sched_compatible(&sj[i], &sp[p], NULL, 0) &&
+                (best == f->n_printers ||
+                 (sp[p].state == PRINTER_IDLE && sp[best].state != PRINTER_IDLE)))
+                best = p;
+        if (best < f->n_printers)
+            prepare(f, &jobs[i], f->printers[best], false);
     }
     for (size_t i = 0; i < n; i++)
         if (jobs[i].state == JOB_READY && why[i][0])
@@ -583,7 +678,7 @@ farm_free(struct farm *f)
     for (size_t i = 0; i < f->n_printers; i++)
         printer_free(f->printers[i]);
     free(f->printers);
-    free(f->deferred);
+    free(f->no);
     free(f);
 }
 
@@ -646,7 +741,7 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
         f->printers[w++] = p;
     }
     f->n_printers = w;
-    f->n_deferred = 0; /* a reload may bring what was missing */
+    f->n_no = 0; /* a reload may have mended a profile */
     snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
     farm_kick(f);
     return SF_OK;

@@ -35,7 +35,8 @@ struct move {
 /* Per event, its legal moves (at most 6), ended by from = -1. */
 static const struct move job_moves[JOB_EVENT_COUNT][7] = {
     [JOB_EV_PREPARE] = { { JOB_QUEUED, JOB_PREPARING }, { -1, 0 } },
-    [JOB_EV_PREPARED] = { { JOB_PREPARING, JOB_READY }, { -1, 0 } },
+    /* ready -> ready: prepared again for a printer of another key (farm.c) */
+    [JOB_EV_PREPARED] = { { JOB_PREPARING, JOB_READY }, { JOB_READY, JOB_READY }, { -1, 0 } },
     [JOB_EV_PREPARE_FAILED] = { { JOB_PREPARING, JOB_FAILED }, { -1, 0 } },
     [JOB_EV_START] = { { JOB_READY, JOB_PRINTING }, { -1, 0 } },
     [JOB_EV_PAUSE] = { { JOB_PRINTING, JOB_PAUSED }, { -1, 0 } },

@@ -42,7 +42,8 @@ enum job_state {
 
 enum job_event {
     JOB_EV_PREPARE = 0,    /* queued -> preparing: a worker picked it up */
-    JOB_EV_PREPARED,       /* preparing -> ready: G-code stored */
+    JOB_EV_PREPARED,       /* preparing -> ready: G-code stored; ready -> ready: G-code
+                              prepared again for a printer of another key */
     JOB_EV_PREPARE_FAILED, /* preparing -> failed */
     JOB_EV_START,          /* ready -> printing: sent to a printer */
     JOB_EV_PAUSE,          /* printing -> paused */

@@ -12,6 +12,8 @@
  * slicer prints it with less support (prepare_slice_better), then slice with the
  * printer's profile, overridden by the farm config's view of the hardware
  * (nozzle, bed, overhang angle) so one file is the truth about machines.
+ * The part as it prints is saved for a later re-slice for another printer
+ * (mesh_out), which then skips straight to slicing (mesh_in).
  * The cancel flag is checked between stages and inside the slicer.
  *
  * Thread: a pool worker; reads only its request and the profile files.
@@ -68,17 +70,15 @@ load_profile(const struct prepare_req *req, struct slice_profile *p, struct sf_e
     int rc = slice_profile_load(printer, material, p, err);
     if (rc)
         return rc;
-    double angle = req->opts.overhang_deg > 0 ? req->opts.overhang_deg : req->printer.overhang_deg;
-    char kv[5][64];
-    snprintf(kv[0], sizeof(kv[0]), "nozzle=%g", req->printer.nozzle_mm);
-    snprintf(kv[1], sizeof(kv[1]), "bed_x=%g", req->printer.bed_mm[0]);
-    snprintf(kv[2], sizeof(kv[2]), "bed_y=%g", req->printer.bed_mm[1]);
-    snprintf(kv[3], sizeof(kv[3]), "max_z=%g", req->printer.bed_mm[2]);
-    snprintf(kv[4], sizeof(kv[4]), "max_overhang=%g", angle);
-    for (int k = 0; k < 5 && rc == SF_OK; k++)
-        rc = slice_profile_set(p, kv[k], err);
-    if (rc == SF_OK)
-        rc = slice_profile_check(p, err);
+    /* The farm config is the truth about the machine; the profile's own
+       figures are only its defaults. */
+    p->nozzle_mm = req->printer.nozzle_mm;
+    p->bed_x_mm = req->printer.bed_mm[0];
+    p->bed_y_mm = req->printer.bed_mm[1];
+    p->max_z_mm = req->printer.bed_mm[2];
+    p->max_overhang_deg =
+        req->opts.overhang_deg > 0 ? req->opts.overhang_deg : req->printer.overhang_deg;
+    rc = slice_profile_check(p, err);
     if (rc) {
         sf_err_prefix(err, "printer %s", req->printer.name);
         slice_profile_release(p);
@@ -206,7 +206,8 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     buf_init(&data, SF_MESH_FILE_MAX);
     mesh_init(&m);
     mesh_init(&start);
-    int rc = buf_read_file(&data, req->part_path, err);
+    bool reuse = req->mesh_in[0] != '\0';
+    int rc = buf_read_file(&data, reuse ? req->mesh_in : req->part_path, err);
     if (rc == SF_OK)
         rc = mesh_load_mem(data.data ? data.data : "", data.len, req->part_name, &m, NULL, err);
     buf_release(&data);
@@ -215,6 +216,8 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     struct slice_profile prof;
     if ((rc = load_profile(req, &prof, err)))
         goto out;
+    if (reuse)
+        method = "none"; /* oriented and shaped already: the slicer centres it on this bed */
     bool slim = strcmp(method, "slim") == 0;
     if (strcmp(method, "orient") == 0 || slim) {
         if (atomic_load(cancel)) {
@@ -256,6 +259,11 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     }
     struct vec3 lo, hi;
     mesh_bbox(printed, &lo, &hi);
+    if (rc == SF_OK && req->mesh_out[0] && !reuse && strcmp(method, "none") != 0) {
+        if ((rc = mesh_save_stl(printed, req->mesh_out, err)))
+            unlink(req->out_path);
+        out->mesh_saved = rc == SF_OK;
+    }
     if (rc == SF_OK) {
         out->size_mm[0] = hi.x - lo.x;
         out->size_mm[1] = hi.y - lo.y;

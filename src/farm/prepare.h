@@ -6,9 +6,9 @@
  * The farm runs a prepare function on the worker pool (pool.h) with plain
  * data copied in struct prepare_req, so it touches nothing shared.  The
  * stages live in src/mesh (load), src/geom (orient, slimming, surface
- * optimization) and slicer/ (slice).  A prepare function that returns
- * SF_EUNSUPP (a stage missing from a build) leaves its job queued with that
- * reason: never lost, prepared once the stage is there.
+ * optimization) and slicer/ (slice).  The optimized part is saved
+ * (mesh_out) so that a job prepared again for a printer of another
+ * profile with the same overhang angle is only sliced again (mesh_in).
  *
  * Thread: a pool worker; must check *cancel between stages.
  */
@@ -33,19 +33,26 @@ struct prepare_req {
     struct farmcfg_printer printer;      /* target printer: profile, nozzle, bed, overhang */
     char profiles_dir[PREPARE_PATH_MAX]; /* printers/PROFILE.cfg, materials/MATERIAL.cfg */
     char out_path[PREPARE_PATH_MAX];     /* write the G-code here */
+    char mesh_in[PREPARE_PATH_MAX];      /* "" or the part already oriented and shaped for
+                                            this overhang angle (a mesh_out of an earlier
+                                            prepare): slice it, skipping the optimization */
+    char mesh_out[PREPARE_PATH_MAX];     /* "" or where to save the part as it prints (binary
+                                            STL), when a method turned or shaped it */
 };
 
 /* What a successful preparation reports. */
 struct prepare_out {
     double size_mm[3]; /* bounding box of the part as it will print */
     double nozzle_mm;  /* nozzle the G-code was sliced for */
+    bool mesh_saved;   /* the part as it prints was written to req->mesh_out */
 };
 
 typedef int (*prepare_fn)(const struct prepare_req *req, struct prepare_out *out,
                           const atomic_bool *cancel, struct sf_err *err);
 
 /*
- * The pipeline: load the part, orient it (methods orient, slim, surface)
+ * The pipeline: load the part (or req->mesh_in, then straight to slicing),
+ * orient it (methods orient, slim, surface)
  * for the job's overhang angle or else the printer's, reshape it (slim,
  * surface; a slimmed shape only if it prints with less support, see
  * prepare_slice_better), slice it with the

@@ -21,9 +21,6 @@
 
 #include "../base/mem.h"
 
-/* Nozzle diameters are config decimals: equal within a micron. */
-#define NOZZLE_EPS_MM 0.001
-
 static bool
 empty(const char *s)
 {
@@ -72,16 +69,31 @@ sched_compatible(const struct sched_job *j, const struct sched_printer *p, char 
             empty(p->material) ? "none" : p->material);
         return false;
     }
-    if (j->nozzle_mm > 0 && fabs(j->nozzle_mm - p->nozzle_mm) > NOZZLE_EPS_MM) {
-        say(why, why_cap, "nozzle %g mm, sliced for %g mm", p->nozzle_mm, j->nozzle_mm);
-        return false;
-    }
     if (!sched_fits_bed(j->size_mm, p->bed_mm)) {
         say(why, why_cap, "part %gx%gx%g mm does not fit bed %gx%gx%g mm", j->size_mm[0],
             j->size_mm[1], j->size_mm[2], p->bed_mm[0], p->bed_mm[1], p->bed_mm[2]);
         return false;
     }
     return true;
+}
+
+void
+sched_key(const struct sched_printer *p, double angle_deg, char key[SCHED_KEY_MAX])
+{
+    /* %g prints config decimals exactly enough: 0.4 and 0.40 are one key */
+    snprintf(key, SCHED_KEY_MAX, "%s/%s/n%g/bed%gx%gx%g/a%g", p->profile ? p->profile : "",
+             p->material ? p->material : "", p->nozzle_mm, p->bed_mm[0], p->bed_mm[1], p->bed_mm[2],
+             angle_deg > 0 ? angle_deg : p->overhang_deg);
+}
+
+bool
+sched_runs_on(const struct sched_job *j, const struct sched_printer *p)
+{
+    if (empty(j->key))
+        return false;
+    char key[SCHED_KEY_MAX];
+    sched_key(p, j->overhang_deg, key);
+    return strcmp(key, j->key) == 0;
 }
 
 static void
@@ -159,40 +171,47 @@ sched_plan(const struct sched_job *jobs, size_t n_jobs, const struct sched_print
         if (jobs[i].state == JOB_READY)
             order[n_ready++] = i;
     qsort_r(order, n_ready, sizeof(*order), cmp_jobs, (void *)jobs);
-    for (size_t k = 0; k < n_ready; k++) {
-        const struct sched_job *j = &jobs[order[k]];
-        size_t best = n_printers;
-        bool best_avoided = false;
-        for (size_t p = 0; p < n_printers; p++) {
-            const struct sched_printer *pr = &printers[p];
-            if (taken[p] || pr->state != PRINTER_IDLE || !sched_compatible(j, pr, NULL, 0))
+    /* Pass 0 starts jobs on printers of their key; pass 1 gives each job
+       still waiting an idle printer left over, to be prepared again for. */
+    for (int pass = 0; pass < 2; pass++)
+        for (size_t k = 0; k < n_ready; k++) {
+            const struct sched_job *j = &jobs[order[k]];
+            if (placed[order[k]])
                 continue;
-            bool avoided = !empty(j->avoid) && strcmp(j->avoid, pr->name) == 0;
-            double area = pr->bed_mm[0] * pr->bed_mm[1];
-            if (best == n_printers || (best_avoided && !avoided) ||
-                (avoided == best_avoided &&
-                 area < printers[best].bed_mm[0] * printers[best].bed_mm[1])) {
-                best = p;
-                best_avoided = avoided;
+            size_t best = n_printers;
+            bool best_avoided = false;
+            for (size_t p = 0; p < n_printers; p++) {
+                const struct sched_printer *pr = &printers[p];
+                if (taken[p] || pr->state != PRINTER_IDLE || !sched_compatible(j, pr, NULL, 0) ||
+                    (pass == 0 && !sched_runs_on(j, pr)))
+                    continue;
+                bool avoided = !empty(j->avoid) && strcmp(j->avoid, pr->name) == 0;
+                double area = pr->bed_mm[0] * pr->bed_mm[1];
+                if (best == n_printers || (best_avoided && !avoided) ||
+                    (avoided == best_avoided &&
+                     area < printers[best].bed_mm[0] * printers[best].bed_mm[1])) {
+                    best = p;
+                    best_avoided = avoided;
+                }
             }
-        }
-        if (best == n_printers)
-            continue;
-        /* The avoided printer is used only if no other qualifying printer
-           exists at all (busy ones count: better to wait for them). */
-        if (best_avoided) {
-            bool other = false;
-            for (size_t p = 0; p < n_printers && !other; p++)
-                other = p != best && sched_compatible(j, &printers[p], NULL, 0);
-            if (other)
+            if (best == n_printers)
                 continue;
+            /* The avoided printer is used only if no other qualifying printer
+               exists at all (busy ones count: better to wait for them). */
+            if (best_avoided) {
+                bool other = false;
+                for (size_t p = 0; p < n_printers && !other; p++)
+                    other = p != best && sched_compatible(j, &printers[p], NULL, 0);
+                if (other)
+                    continue;
+            }
+            taken[best] = true;
+            placed[order[k]] = true;
+            out[n_out].job = order[k];
+            out[n_out].printer = best;
+            out[n_out].reslice = pass == 1;
+            n_out++;
         }
-        taken[best] = true;
-        placed[order[k]] = true;
-        out[n_out].job = order[k];
-        out[n_out].printer = best;
-        n_out++;
-    }
     for (size_t i = 0; reasons && i < n_jobs; i++) {
         reasons[i][0] = '\0';
         if (!placed[i] && (jobs[i].state == JOB_READY || jobs[i].state == JOB_QUEUED))

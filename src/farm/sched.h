@@ -8,9 +8,15 @@
  *    not idle: the operator, or auto-eject, must free it first);
  *  - ready jobs go by priority (higher first), then FIFO (lower id first);
  *  - a job goes only to a printer it targets (by name or group), whose
- *    loaded material matches the job's (if it names one), whose nozzle
- *    matches the one the job was sliced for (if sliced), and whose bed
+ *    loaded material matches the job's (if it names one), and whose bed
  *    holds the part (x/y may swap: the part can turn 90 degrees on the bed);
+ *  - a ready job's G-code starts only on a printer with the key it was
+ *    prepared for (sched_key: profile, material, nozzle, bed, overhang
+ *    angle), so a part centred for one bed, or one machine's start G-code,
+ *    never runs on another;
+ *  - a ready job left waiting while an idle printer of another key could
+ *    take it is assigned to that printer with `reslice` set: the caller
+ *    prepares it again for that printer (the printer counts as taken);
  *  - among the printers that qualify, the smallest bed wins (best fit keeps
  *    big printers free for big parts), then the order given;
  *  - retry policy: a printer that just failed the job is avoided while
@@ -41,6 +47,8 @@ struct sched_printer {
     double nozzle_mm;         /* nozzle diameter */
     double bed_mm[3];         /* build volume x, y, z */
     const char *group;        /* group name, "" for none */
+    const char *profile;      /* slicing profile name */
+    double overhang_deg;      /* the printer's overhang angle */
 };
 
 /* A job as the scheduler sees it. */
@@ -51,15 +59,17 @@ struct sched_job {
     const char *material; /* "" = any */
     const char *printer;  /* target printer, "" = any */
     const char *group;    /* target group, "" = any */
-    double nozzle_mm;     /* nozzle it was sliced for; 0 = not sliced yet */
+    const char *key;      /* sched_key it was prepared for; "" or NULL = not prepared */
     double size_mm[3];    /* part bounding box as it will print; 0s = not known yet */
     const char *avoid;    /* printer that failed it last, "" or NULL for none */
+    double overhang_deg;  /* the job's overhang angle; 0 = the printer's */
 };
 
 /* One decision: jobs[job] starts on printers[printer]. */
 struct sched_assign {
     size_t job;     /* index into the jobs array */
     size_t printer; /* index into the printers array */
+    bool reslice;   /* prepare the job again for this printer before it can start */
 };
 
 /*
@@ -79,6 +89,19 @@ size_t sched_plan(const struct sched_job *jobs, size_t n_jobs, const struct sche
  */
 bool sched_compatible(const struct sched_job *j, const struct sched_printer *p, char *why,
                       size_t why_cap);
+
+#define SCHED_KEY_MAX 192 /* a key: profile and material names are at most 63 bytes */
+
+/*
+ * The key of G-code prepared for printer p with overhang angle angle_deg
+ * (the job's; 0: the printer's): everything that shapes the G-code a
+ * printer may run, "PROFILE/MATERIAL/n0.4/bed250x210x210/a45".  Two
+ * printers with equal keys can run each other's G-code.
+ */
+void sched_key(const struct sched_printer *p, double angle_deg, char key[SCHED_KEY_MAX]);
+
+/* True when ready job j may start on printer p now that it is idle: same key. */
+bool sched_runs_on(const struct sched_job *j, const struct sched_printer *p);
 
 /* True when a part of size s fits a bed b, turning it 90 degrees if needed. */
 bool sched_fits_bed(const double s[3], const double b[3]);

@@ -111,6 +111,13 @@ static const char *const migrations[] = {
        (drv_job_scan), so starting a job need not read the file; 0 for
        G-code prepared before (the driver then counts it itself) */
     "ALTER TABLE jobs ADD COLUMN gcode_lines INTEGER NOT NULL DEFAULT 0 CHECK(gcode_lines >= 0);",
+    /* 3: what the G-code was prepared for (sched_key), so it starts only on
+       printers of that key; and the optimized part, so preparing it again
+       for another printer does not repeat the optimization.  G-code
+       prepared before has no key and is prepared again before it prints. */
+    "ALTER TABLE jobs ADD COLUMN prep_key TEXT NOT NULL DEFAULT '';"
+    "ALTER TABLE jobs ADD COLUMN mesh_sha TEXT NOT NULL DEFAULT '';"
+    "ALTER TABLE jobs ADD COLUMN mesh_angle_deg REAL NOT NULL DEFAULT 0;",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 
@@ -118,7 +125,7 @@ static const char JOB_COLS[] =
     "id, name, file_sha, coalesce(gcode_sha, ''), state, method, deviation_mm, overhang_deg,"
     " copies, copies_done, failures, max_retries, material, target_printer, target_group,"
     " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"
-    " nozzle_mm, gcode_lines";
+    " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg";
 
 int
 store_schema_version(void)
@@ -614,6 +621,9 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     j->updated_ms = sqlite3_column_int64(st, 23);
     j->nozzle_mm = sqlite3_column_double(st, 24);
     j->gcode_lines = sqlite3_column_int64(st, 25);
+    copy_text(j->prep_key, sizeof(j->prep_key), st, 26);
+    copy_text(j->mesh_sha, sizeof(j->mesh_sha), st, 27);
+    j->mesh_angle_deg = sqlite3_column_double(st, 28);
 }
 
 int
@@ -776,6 +786,14 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
             j->size_mm[i] = a->size_mm[i];
         j->nozzle_mm = a->nozzle_mm;
         j->gcode_lines = a->gcode_lines > 0 ? a->gcode_lines : 0;
+        snprintf(j->prep_key, sizeof(j->prep_key), "%s", a->prep_key ? a->prep_key : "");
+        if (a->mesh_sha && a->mesh_sha[0]) {
+            if (!sha_valid(a->mesh_sha) || !file_known(s, a->mesh_sha))
+                return sf_err_set(err, SF_EINVAL, "job %lld: optimized part is not stored",
+                                  (long long)j->id);
+            snprintf(j->mesh_sha, sizeof(j->mesh_sha), "%s", a->mesh_sha);
+            j->mesh_angle_deg = a->mesh_angle_deg;
+        }
         j->reason[0] = '\0';
         break;
     case JOB_EV_START:
@@ -859,7 +877,8 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     if ((rc = prepare(s, &st,
                       "UPDATE jobs SET state = ?, copies_done = ?, failures = ?, gcode_sha = ?,"
                       " size_x = ?, size_y = ?, size_z = ?, printer = ?, lines_acked = ?,"
-                      " reason = ?, updated_ms = ?, nozzle_mm = ?, gcode_lines = ? WHERE id = ?",
+                      " reason = ?, updated_ms = ?, nozzle_mm = ?, gcode_lines = ?, prep_key = ?,"
+                      " mesh_sha = ?, mesh_angle_deg = ? WHERE id = ?",
                       err)))
         goto fail;
     sqlite3_bind_text(st, 1, job_state_name(j.state), -1, SQLITE_STATIC);
@@ -877,7 +896,10 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     sqlite3_bind_int64(st, 11, now_ms());
     sqlite3_bind_double(st, 12, j.nozzle_mm);
     sqlite3_bind_int64(st, 13, j.gcode_lines);
-    sqlite3_bind_int64(st, 14, id);
+    sqlite3_bind_text(st, 14, j.prep_key, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 15, j.mesh_sha, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_double(st, 16, j.mesh_angle_deg);
+    sqlite3_bind_int64(st, 17, id);
     if ((rc = step_done(s, st, err, "update job")))
         goto fail;
     char kind[24], detail[192];

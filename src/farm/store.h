@@ -49,6 +49,10 @@ struct job_row {
     double size_mm[3];             /* prepared part's bounding box x, y, z; 0 until prepared */
     double nozzle_mm;              /* nozzle the G-code was sliced for; 0 until prepared */
     int64_t gcode_lines;           /* its command lines (drv_job_scan); 0 if not known */
+    char prep_key[192];            /* sched_key of the printers the G-code is for; "" if none */
+    char mesh_sha[STORE_SHA_HEX];  /* the part as oriented and shaped, reused when it is
+                                      prepared again for the same angle; "" if none */
+    double mesh_angle_deg;         /* the overhang angle mesh_sha was optimized for */
     char printer[64];              /* printer of the current copy; "" when not on one */
     int64_t lines_acked;           /* last acknowledged line of the current copy */
     char reason[160];              /* why it waits or failed; "" if none */
@@ -63,6 +67,11 @@ struct job_event_args {
     double size_mm[3];     /* PREPARED: part bounding box */
     double nozzle_mm;      /* PREPARED: nozzle it was sliced for */
     int64_t gcode_lines;   /* PREPARED: its command lines, as drv_job_scan counted them */
+    const char *prep_key;  /* PREPARED: sched_key of the printers it is for; NULL or "":
+                              none (the farm prepares it again before it prints) */
+    const char *mesh_sha;  /* PREPARED: stored optimized part, NULL or "" to keep the one
+                              recorded (a re-slice that reused it) */
+    double mesh_angle_deg; /* PREPARED: the angle mesh_sha was optimized for */
     int64_t lines_acked;   /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to;
                               RESUME of an interrupted job: line to resume from (0: stored) */
     double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */

@@ -9,7 +9,10 @@
  * told and reports the events the test asks for, through the loop, as a
  * real driver would.  The prepare hook writes a tiny real G-code file.
  */
+#include <errno.h>
 #include <stdatomic.h>
+#include <stdlib.h>
+#include <sys/stat.h>
 
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
@@ -51,13 +54,16 @@ report(struct tdrv *t, enum drv_state st, enum drv_event ev)
     loop_timer_add(t->base.loop, 0, deliver, t);
 }
 
+static const char *held; /* printer whose link stays down until the test connects it */
+
 static int
 t_open(struct drv *d, struct sf_err *err)
 {
     (void)err;
     struct tdrv *t = (struct tdrv *)d;
     t->opens++;
-    report(t, DRV_IDLE, DRV_EV_STATE);
+    if (!held || strcmp(held, d->name) != 0)
+        report(t, DRV_IDLE, DRV_EV_STATE);
     return SF_OK;
 }
 
@@ -210,6 +216,8 @@ static const char farm_ini[] = "[printer a]\ndriver: marlin\nport: pty:/dev/null
                                "[printer b]\ndriver: marlin\nport: pty:/dev/null\n"
                                "material: PETG\nbed_size: 300, 300, 300\nauto_eject: true\n";
 
+static const char *setup_held; /* held while the farm opens its printers */
+
 static int
 setup(const char *name, const char *ini, farm_driver_fn driver, prepare_fn prep, struct sf_err *err)
 {
@@ -218,6 +226,8 @@ setup(const char *name, const char *ini, farm_driver_fn driver, prepare_fn prep,
     memset(&fx, 0, sizeof(fx));
     memset(tdrvs, 0, sizeof(tdrvs));
     n_tdrvs = 0;
+    held = setup_held;
+    setup_held = NULL;
     log_set_level(LOG_ERROR);
     farmcfg_init(&fx.cfg);
     int rc = farmcfg_parse(&fx.cfg, ini, strlen(ini), "test.ini", err);
@@ -579,5 +589,225 @@ T_CASE(farm_reload_adds_and_removes_printers)
     farm_printer_info(fx.f, 0, &info);
     T_EQ_STR(info.cfg->name, "b");
     farmcfg_release(&c2);
+    teardown();
+}
+
+/* ---- a job's G-code runs only on a printer it was prepared for ---- */
+
+/* prepare_part, counting the preparations that reused an optimized part */
+static atomic_int reused;
+
+static int
+counting_prepare(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
+                 struct sf_err *err)
+{
+    atomic_fetch_add(&prepares, 1);
+    if (req->mesh_in[0])
+        atomic_fetch_add(&reused, 1);
+    return prepare_part(req, out, cancel, err);
+}
+
+/* An 80 x 80 x 4 mm plate (ASCII STL, 12 facets). */
+static void
+plate_stl(char *buf, size_t cap)
+{
+    static const double v[8][3] = { { 0, 0, 0 }, { 80, 0, 0 }, { 80, 80, 0 }, { 0, 80, 0 },
+                                    { 0, 0, 4 }, { 80, 0, 4 }, { 80, 80, 4 }, { 0, 80, 4 } };
+    static const int f[12][3] = { { 0, 2, 1 }, { 0, 3, 2 }, { 4, 5, 6 }, { 4, 6, 7 },
+                                  { 0, 1, 5 }, { 0, 5, 4 }, { 1, 2, 6 }, { 1, 6, 5 },
+                                  { 2, 3, 7 }, { 2, 7, 6 }, { 3, 0, 4 }, { 3, 4, 7 } };
+    size_t n = (size_t)snprintf(buf, cap, "solid plate\n");
+    for (int i = 0; i < 12; i++) {
+        n += (size_t)snprintf(buf + n, cap - n, "facet normal 0 0 0\nouter loop\n");
+        for (int k = 0; k < 3; k++)
+            n += (size_t)snprintf(buf + n, cap - n, "vertex %g %g %g\n", v[f[i][k]][0],
+                                  v[f[i][k]][1], v[f[i][k]][2]);
+        n += (size_t)snprintf(buf + n, cap - n, "endloop\nendfacet\n");
+    }
+    snprintf(buf + n, cap - n, "endsolid plate\n");
+}
+
+/* Copy a file, replacing the first `from` with `to` (NULL: a plain copy). */
+static int
+copy_with(const char *src, const char *dst, const char *from, const char *to, struct sf_err *err)
+{
+    struct buf b;
+    buf_init(&b, 1 << 20);
+    int rc = buf_read_file(&b, src, err);
+    if (rc)
+        return rc;
+    FILE *f = fopen(dst, "w");
+    if (!f) {
+        buf_release(&b);
+        return sf_err_sys(err, "cannot write '%s'", dst);
+    }
+    const char *at = from ? strstr(b.data, from) : NULL;
+    if (at)
+        fprintf(f, "%.*s%s%s", (int)(at - b.data), b.data, to, at + strlen(from));
+    else
+        fputs(b.data, f);
+    fclose(f);
+    buf_release(&b);
+    return from && !at ? sf_err_set(err, SF_EINVAL, "'%s' has no '%s'", src, from) : SF_OK;
+}
+
+/*
+ * Two printer profiles made from config/'s generic one, each with its own
+ * start G-code line ("M117 start NAME"), and a farm of two printers of
+ * equal nozzle and material: big (300x300 bed) and small (180x180).
+ */
+static int
+mixed_setup(const char *name, const char *hold, struct sf_err *err)
+{
+    char dir[600], path[700], ini[2048];
+    snprintf(dir, sizeof(dir), "%s/%s-profiles", t_tmpdir(), name);
+    const char *sub[] = { "", "/printers", "/materials" };
+    for (int i = 0; i < 3; i++) {
+        snprintf(path, sizeof(path), "%s%s", dir, sub[i]);
+        if (mkdir(path, 0700) && errno != EEXIST)
+            return sf_err_sys(err, "mkdir '%s'", path);
+    }
+    const char *names[] = { "wide", "narrow" };
+    for (int i = 0; i < 2; i++) {
+        char to[128];
+        snprintf(path, sizeof(path), "%s/printers/%s.cfg", dir, names[i]);
+        snprintf(to, sizeof(to), "G1 Z5 F3000\n    M117 start %s", names[i]);
+        int rc = copy_with("config/printers/generic-marlin.cfg", path, "G1 Z5 F3000", to, err);
+        if (rc)
+            return rc;
+    }
+    snprintf(path, sizeof(path), "%s/materials/pla.cfg", dir);
+    int rc = copy_with("config/materials/pla.cfg", path, NULL, NULL, err);
+    if (rc)
+        return rc;
+    snprintf(ini, sizeof(ini),
+             "[farm]\nprofiles_dir: %s\n"
+             "[printer big]\ndriver: marlin\nport: pty:/dev/null\nprofile: wide\n"
+             "bed_size: 300, 300, 250\n"
+             "[printer small]\ndriver: marlin\nport: pty:/dev/null\nprofile: narrow\n"
+             "bed_size: 180, 180, 180\n",
+             dir);
+    atomic_store(&prepares, 0);
+    atomic_store(&reused, 0);
+    setup_held = hold;
+    return setup(name, ini, tdrv_new, counting_prepare, err);
+}
+
+/*
+ * The G-code file a printer was given runs on it: every X/Y it moves to
+ * lies on its bed, and its start G-code is the one of its profile.
+ */
+static bool
+printed_for(const char *printer, const char *profile, double bed_x, double bed_y)
+{
+    struct tdrv *t = tdrv_named(printer);
+    struct buf g;
+    buf_init(&g, 64 << 20);
+    struct sf_err err;
+    if (!t || !t->starts || buf_read_file(&g, t->path, &err)) {
+        t_fail(__FILE__, __LINE__, "%s printed nothing", printer);
+        return false;
+    }
+    char marker[64];
+    snprintf(marker, sizeof(marker), "M117 start %s\n", profile);
+    bool ok = strstr(g.data, marker) != NULL;
+    double lo[2] = { 1e9, 1e9 }, hi[2] = { -1e9, -1e9 };
+    for (char *line = g.data, *nl; line && *line; line = nl ? nl + 1 : NULL) {
+        nl = strchr(line, '\n');
+        if (strncmp(line, "G0 ", 3) != 0 && strncmp(line, "G1 ", 3) != 0)
+            continue;
+        for (char *w = line; w && w < (nl ? nl : line + strlen(line)); w = strchr(w + 1, ' ')) {
+            char axis = w[0] == ' ' ? w[1] : w[0];
+            if (axis != 'X' && axis != 'Y')
+                continue;
+            double v = strtod(w + (w[0] == ' ' ? 2 : 1), NULL);
+            int a = axis == 'Y';
+            lo[a] = v < lo[a] ? v : lo[a];
+            hi[a] = v > hi[a] ? v : hi[a];
+        }
+    }
+    buf_release(&g);
+    if (!ok || lo[0] < 0 || lo[1] < 0 || hi[0] > bed_x || hi[1] > bed_y) {
+        t_fail(__FILE__, __LINE__,
+               "%s (bed %gx%g, profile %s) got G-code %s its start, moving over X %g..%g, "
+               "Y %g..%g",
+               printer, bed_x, bed_y, profile, ok ? "with" : "without", lo[0], hi[0], lo[1], hi[1]);
+        return false;
+    }
+    return true;
+}
+
+static int64_t
+add_plate(void)
+{
+    static char plate[4096];
+    plate_stl(plate, sizeof(plate));
+    return add(plate, "", 1);
+}
+
+/*
+ * Issue 15's bug: a job prepared for one printer was started on another
+ * with the same nozzle whose bed was large enough (an 80 mm plate centred
+ * for a 300 mm bed printed on a 180 mm one, moving to X/Y 190).  Each file
+ * must print where it was sliced for, and both printers get work.
+ */
+T_CASE(farm_mixed_profiles_print_each_file_inside_its_printers_bed)
+{
+    struct sf_err err;
+    T_OK(mixed_setup("mixed", NULL, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE, 1000) && wait_printer(1, PRINTER_IDLE, 1000));
+    int64_t j1 = add_plate(), j2 = add_plate();
+    T_TRUE(wait_job(j1, JOB_PRINTING));
+    for (int i = 0; i < 3000 && state_of(j2) != JOB_PRINTING; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(state_of(j2), JOB_PRINTING);
+    T_EQ_INT(tdrv_named("big")->starts, 1);
+    T_EQ_INT(tdrv_named("small")->starts, 1);
+    T_TRUE(printed_for("big", "wide", 300, 300));
+    T_TRUE(printed_for("small", "narrow", 180, 180));
+    T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+/*
+ * A job prepared for a busy printer moves to an idle printer of another
+ * profile by being sliced again for it; the part keeps the orientation it
+ * was given (the optimized mesh is reused, not computed again).
+ */
+T_CASE(farm_job_waiting_for_a_busy_printer_is_resliced_for_an_idle_one)
+{
+    struct sf_err err;
+    T_OK(mixed_setup("reslice", "small", &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE, 1000));
+    int64_t j1 = add_plate();
+    T_TRUE(wait_job(j1, JOB_PRINTING)); /* big is busy from now on */
+    int64_t j2 = add_plate();
+    T_TRUE(wait_job(j2, JOB_READY));
+    struct job_row before, after;
+    T_OK(store_job_get(fx.s, j2, &before, &err), &err);
+    T_TRUE(strncmp(before.prep_key, "wide/", 5) == 0);
+    T_TRUE(before.mesh_sha[0] != '\0');
+    for (int i = 0; i < 5; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(state_of(j2), JOB_READY); /* waits for big: small is offline */
+    T_EQ_INT(atomic_load(&prepares), 2);
+    /* small comes up */
+    struct tdrv *small = tdrv_named("small");
+    report(small, DRV_IDLE, DRV_EV_STATE);
+    for (int i = 0; i < 3000 && state_of(j2) != JOB_PRINTING; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(state_of(j2), JOB_PRINTING);
+    T_EQ_INT(small->starts, 1);
+    T_TRUE(printed_for("small", "narrow", 180, 180));
+    T_OK(store_job_get(fx.s, j2, &after, &err), &err);
+    T_TRUE(strncmp(after.prep_key, "narrow/", 7) == 0);
+    T_EQ_STR(after.printer, "small");
+    T_TRUE(strcmp(after.gcode_sha, before.gcode_sha) != 0);
+    /* sliced again from the part as oriented for big: no second optimization */
+    T_EQ_INT(atomic_load(&prepares), 3);
+    T_EQ_INT(atomic_load(&reused), 1);
+    T_EQ_STR(after.mesh_sha, before.mesh_sha);
+    T_TRUE(printed_for("big", "wide", 300, 300));
+    T_OK(store_check(fx.s, &err), &err);
     teardown();
 }

@@ -1,8 +1,8 @@
 /*
  * test_sched.c - the scheduler's rules one by one: priority then FIFO,
- * idle only, bed-clear gate, material/nozzle/bed/target/group matching,
- * best fit, retry avoidance, reasons for jobs left waiting, and a
- * randomized check that no plan ever breaks a rule.
+ * idle only, bed-clear gate, material/bed/target/group matching, the prepared-for key and
+ * re-slicing, best fit, retry avoidance, reasons for jobs left waiting, and a randomized check that
+ * no plan ever breaks a rule.
  */
 #include <stdlib.h>
 
@@ -12,15 +12,27 @@
 static struct sched_printer
 printer(const char *name, const char *material, double nozzle, double x, double y, double z)
 {
-    struct sched_printer p = { name, PRINTER_IDLE, true, material, nozzle, { x, y, z }, "" };
+    struct sched_printer p = { name,        PRINTER_IDLE, true,  material, nozzle,
+                               { x, y, z }, "",           "gen", 45 };
     return p;
 }
 
 static struct sched_job
 job(int64_t id, int prio, const char *material, double x, double y, double z)
 {
-    struct sched_job j = { id, JOB_READY, prio, material, "", "", 0.4, { x, y, z }, NULL };
+    struct sched_job j = { id, JOB_READY, prio, material, "", "", NULL, { x, y, z }, NULL, 0 };
     return j;
+}
+
+/* Keys for the printers of a test, and a job prepared for one of them. */
+static char keys[8][SCHED_KEY_MAX];
+
+static void
+prepared_for(struct sched_job *j, const struct sched_printer *p, size_t n, size_t which)
+{
+    for (size_t i = 0; i < n; i++)
+        sched_key(&p[i], j->overhang_deg, keys[i]);
+    j->key = keys[which];
 }
 
 T_CASE(sched_priority_then_fifo)
@@ -61,7 +73,7 @@ T_CASE(sched_only_idle_enabled_printers)
     T_EQ_INT(out[0].printer, 1);
 }
 
-T_CASE(sched_material_nozzle_bed_must_match)
+T_CASE(sched_material_bed_must_match)
 {
     struct sched_printer p[] = { printer("pla", "PLA", 0.4, 200, 200, 200),
                                  printer("petg06", "PETG", 0.6, 200, 200, 200),
@@ -69,19 +81,74 @@ T_CASE(sched_material_nozzle_bed_must_match)
     struct sched_job j[] = { job(1, 0, "PETG", 150, 50, 50) };
     struct sched_assign out[1];
     char why[1][SCHED_REASON_MAX];
+    p[1].state = PRINTER_PRINTING;
     T_EQ_INT(sched_plan(j, 1, p, 3, out, why), 0);
-    T_EQ_STR(why[0], "fits no printer: pla: material PETG not loaded (has PLA); petg06: nozzle "
-                     "0.6 mm, sliced for 0.4 mm; small: part 150x50x50 mm does not fit bed "
-                     "100x100x100 mm");
-    j[0].nozzle_mm = 0.6;
+    T_EQ_STR(why[0], "waits for a printer: petg06 is printing");
+    p[1].state = PRINTER_OFFLINE;
+    p[1].enabled = false;
+    T_EQ_INT(sched_plan(j, 1, p, 3, out, why), 0);
+    T_EQ_STR(why[0], "fits no printer: pla: material PETG not loaded (has PLA); petg06: disabled; "
+                     "small: part 150x50x50 mm does not fit bed 100x100x100 mm");
+    p[1].state = PRINTER_IDLE;
+    p[1].enabled = true;
+    prepared_for(&j[0], p, 3, 1);
     T_EQ_INT(sched_plan(j, 1, p, 3, out, why), 1);
     T_EQ_INT(out[0].printer, 1);
-    /* not sliced yet: any nozzle; no material asked: any material */
-    j[0].nozzle_mm = 0;
+    T_TRUE(!out[0].reslice);
+    /* no material asked: any material; best fit among the printers of its key */
     j[0].material = "";
     j[0].size_mm[0] = 50;
+    prepared_for(&j[0], p, 3, 2);
     T_EQ_INT(sched_plan(j, 1, p, 3, out, why), 1);
-    T_EQ_INT(out[0].printer, 2); /* best fit: the smallest bed that holds it */
+    T_EQ_INT(out[0].printer, 2); /* the smallest bed that holds it */
+    T_TRUE(!out[0].reslice);
+}
+
+/*
+ * The farm's bug (issue 15): G-code sliced for a 300x300 bed started on an
+ * idle 180x180 printer with the same nozzle.  A ready job runs only on a
+ * printer of its key; one that waits for a busy printer of its key while
+ * another printer idles is given that printer to be sliced again for.
+ */
+T_CASE(sched_ready_job_runs_only_on_its_key_else_is_resliced)
+{
+    struct sched_printer p[] = { printer("wide", "PLA", 0.4, 300, 300, 250),
+                                 printer("small", "PLA", 0.4, 180, 180, 180) };
+    p[1].profile = "other";
+    struct sched_job j[] = { job(1, 0, "", 80, 80, 5), job(2, 0, "", 80, 80, 5) };
+    prepared_for(&j[0], p, 2, 0);
+    prepared_for(&j[1], p, 2, 0);
+    T_TRUE(!sched_runs_on(&j[0], &p[1])); /* not its key, though the nozzle and bed fit */
+    T_TRUE(sched_runs_on(&j[0], &p[0]));
+    struct sched_assign out[2];
+    char why[2][SCHED_REASON_MAX];
+    /* both idle: job 1 starts on wide (its key, though small is the better fit);
+       job 2 waits for wide, so it is sliced again for small */
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 2);
+    T_EQ_INT(out[0].job, 0);
+    T_EQ_INT(out[0].printer, 0);
+    T_TRUE(!out[0].reslice);
+    T_EQ_INT(out[1].job, 1);
+    T_EQ_INT(out[1].printer, 1);
+    T_TRUE(out[1].reslice);
+    /* wide busy: the only job goes to small to be sliced again */
+    p[0].state = PRINTER_PRINTING;
+    T_EQ_INT(sched_plan(j, 1, p, 2, out, why), 1);
+    T_EQ_INT(out[0].printer, 1);
+    T_TRUE(out[0].reslice);
+    /* sliced for small now: it starts there */
+    prepared_for(&j[0], p, 2, 1);
+    T_EQ_INT(sched_plan(j, 1, p, 2, out, why), 1);
+    T_TRUE(!out[0].reslice);
+    /* the job's own angle is part of the key */
+    j[0].overhang_deg = 60;
+    T_TRUE(!sched_runs_on(&j[0], &p[1]));
+    prepared_for(&j[0], p, 2, 1);
+    T_TRUE(sched_runs_on(&j[0], &p[1]));
+    /* not prepared (no key): never started, only sliced */
+    j[0].key = NULL;
+    T_EQ_INT(sched_plan(j, 1, p, 2, out, why), 1);
+    T_TRUE(out[0].reslice);
 }
 
 T_CASE(sched_bed_fit_turns_part)
@@ -178,18 +245,21 @@ T_CASE(sched_random_plans_keep_every_rule)
     for (int round = 0; round < 2000; round++) {
         struct sched_printer p[6];
         struct sched_job j[12];
+        char pkeys[6][SCHED_KEY_MAX];
         size_t np = (size_t)(rand() % 7), nj = (size_t)(rand() % 13);
         for (size_t i = 0; i < np; i++) {
             p[i] = printer(names[i], mats[rand() % 2], rand() % 2 ? 0.4 : 0.6, 100 + rand() % 200,
                            100 + rand() % 200, 100 + rand() % 200);
             p[i].state = (enum printer_state)(rand() % PRINTER_STATE_COUNT);
             p[i].enabled = rand() % 5 != 0;
+            p[i].profile = rand() % 2 ? "gen" : "mk3";
+            sched_key(&p[i], 0, pkeys[i]);
         }
         for (size_t i = 0; i < nj; i++) {
             j[i] = job((int64_t)i + 1, rand() % 3, mats[rand() % 3], rand() % 300, rand() % 300,
                        rand() % 300);
             j[i].state = (enum job_state)(rand() % JOB_STATE_COUNT);
-            j[i].nozzle_mm = rand() % 2 ? 0.4 : 0.6;
+            j[i].key = np && rand() % 4 ? pkeys[rand() % np] : NULL;
         }
         struct sched_assign out[12];
         char why[12][SCHED_REASON_MAX];
@@ -203,6 +273,8 @@ T_CASE(sched_random_plans_keep_every_rule)
             T_EQ_INT(a->state, JOB_READY);
             T_EQ_INT(b->state, PRINTER_IDLE);
             T_TRUE(sched_compatible(a, b, NULL, 0));
+            /* G-code starts only where its key says; a re-slice only elsewhere */
+            T_EQ_INT(sched_runs_on(a, b), !out[k].reslice);
             T_EQ_STR(why[out[k].job], "");
         }
         /* maximality in priority order: an unplaced ready job has no free
@@ -224,7 +296,9 @@ T_CASE(sched_random_plans_keep_every_rule)
                 const struct sched_job *a = &j[out[k].job];
                 bool before = j[i].priority > a->priority ||
                               (j[i].priority == a->priority && j[i].id < a->id);
-                T_TRUE(!(before && sched_compatible(&j[i], &p[out[k].printer], NULL, 0)));
+                const struct sched_printer *q = &p[out[k].printer];
+                T_TRUE(!(before && sched_compatible(&j[i], q, NULL, 0) &&
+                         (out[k].reslice || sched_runs_on(&j[i], q))));
             }
     }
 }

@@ -117,7 +117,10 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     snprintf(path, sizeof(path), "%s/slimfarm.db", dir);
     sqlite3 *db;
     T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
-    T_EQ_INT(sqlite3_exec(db, "ALTER TABLE jobs DROP COLUMN gcode_lines; PRAGMA user_version = 1",
+    T_EQ_INT(sqlite3_exec(db,
+                          "ALTER TABLE jobs DROP COLUMN prep_key; ALTER TABLE jobs DROP COLUMN "
+                          "mesh_sha; ALTER TABLE jobs DROP COLUMN mesh_angle_deg;"
+                          "ALTER TABLE jobs DROP COLUMN gcode_lines; PRAGMA user_version = 1",
                           NULL, NULL, NULL),
              SQLITE_OK);
     sqlite3_close(db);
@@ -140,7 +143,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     sqlite3_stmt *st;
     sqlite3_prepare_v2(db, "PRAGMA user_version", -1, &st, NULL);
     T_EQ_INT(sqlite3_step(st), SQLITE_ROW);
-    T_EQ_INT(sqlite3_column_int(st, 0), 2);
+    T_EQ_INT(sqlite3_column_int(st, 0), store_schema_version());
     sqlite3_finalize(st);
     sqlite3_close(db);
 }
