@@ -2,14 +2,37 @@
  * drv.c - the driver factory and shared helpers of drv.h.
  *
  * Why: the daemon names a printer kind in its config and gets a struct drv
- * back; only this file knows which kinds exist.  Thread: loop thread,
+ * back; only this file knows which kinds exist (the registry below, which
+ * the config parser asks too).  Thread: loop thread,
  * except drv_job_scan and drv_job_scan_to (any thread).
  */
 #include "drv.h"
 
+#include <stdio.h>
 #include <string.h>
 
 #include "drv_marlin.h"
+
+/* Every kind this build has; a new driver is one row here. */
+static const struct drv_kind kinds[] = {
+    { "marlin", false, drv_marlin_new },
+};
+#define N_KINDS (sizeof(kinds) / sizeof(kinds[0]))
+
+const struct drv_kind *
+drv_kind_find(const char *name)
+{
+    for (size_t i = 0; name && i < N_KINDS; i++)
+        if (strcmp(kinds[i].name, name) == 0)
+            return &kinds[i];
+    return NULL;
+}
+
+const struct drv_kind *
+drv_kind_at(size_t i)
+{
+    return i < N_KINDS ? &kinds[i] : NULL;
+}
 
 struct drv *
 drv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
@@ -20,10 +43,15 @@ drv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, voi
                    cfg && cfg->name ? cfg->name : "?");
         return NULL;
     }
-    if (strcmp(cfg->kind, "marlin") == 0)
-        return drv_marlin_new(l, cfg, on_event, ud, err);
-    sf_err_set(err, SF_EUNSUPP, "printer '%s': kind '%s' is not supported (known: marlin)",
-               cfg->name ? cfg->name : "?", cfg->kind);
+    const struct drv_kind *k = drv_kind_find(cfg->kind);
+    if (k)
+        return k->create(l, cfg, on_event, ud, err);
+    char known[128] = "";
+    for (size_t i = 0, n = 0; i < N_KINDS; i++)
+        n += (size_t)snprintf(known + n, n < sizeof(known) ? sizeof(known) - n : 0, "%s%s",
+                              i ? ", " : "", kinds[i].name);
+    sf_err_set(err, SF_EUNSUPP, "printer '%s': kind '%s' is not supported (known: %s)",
+               cfg->name ? cfg->name : "?", cfg->kind, known);
     return NULL;
 }
 

@@ -19,6 +19,7 @@
 #define SF_DRIVERS_DRV_H
 
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
 
 #include "../src/base/err.h"
@@ -141,6 +142,19 @@ struct drv {
     struct drv_caps caps;
 };
 
+/* One kind of printer driver: a row of drv.c's registry, the one list of kinds. */
+struct drv_kind {
+    const char *name; /* the config's "driver:" value, e.g. "marlin" */
+    bool url;         /* reached by URL (network) rather than by port (serial, pty, TCP) */
+    struct drv *(*create)(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event,
+                          void *ud, struct sf_err *err);
+};
+
+/* The kind called name, or NULL. */
+const struct drv_kind *drv_kind_find(const char *name);
+/* Kind i (0, 1, ...), NULL past the last: for listing them in messages. */
+const struct drv_kind *drv_kind_at(size_t i);
+
 /*
  * Create the driver for cfg->kind on loop l.  Nothing is opened yet.
  * SF_EINVAL / SF_EUNSUPP with a message for a bad or unknown config.
@@ -176,7 +190,8 @@ int drv_job_scan_to(const char *path, uint64_t first_line, struct drv_job_scan *
 
 /*
  * Delay before reconnect attempt number `attempt` (0, 1, ...): 500 ms
- * doubling up to 30 s, for owners that re-open() a driver gone OFFLINE.
+ * doubling up to 30 s.  The one reconnect policy: the farm re-open()s a
+ * driver gone OFFLINE after this long.
  */
 int drv_backoff_ms(int attempt);
 

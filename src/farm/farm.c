@@ -35,7 +35,7 @@ struct printer {
     int64_t lines_saved;        /* last value written to the store */
     char message[160];          /* why offline / error */
     uint64_t reconnect;         /* reconnect timer id, 0 if none */
-    int64_t backoff_ms;         /* next reconnect delay */
+    int attempts;               /* reconnects since the link was last up (drv_backoff_ms) */
     bool removed;               /* dropped from the config; freed when idle */
     bool cancelling;            /* job cancelled; the driver is still running its end
                                    sequence, so the printer is not free yet */
@@ -156,9 +156,7 @@ schedule_reconnect(struct printer *p)
 {
     if (p->reconnect || !p->drv || !p->cfg.enabled)
         return;
-    p->reconnect = loop_timer_add(p->f->l, p->backoff_ms, on_reconnect, p);
-    p->backoff_ms =
-        p->backoff_ms * 2 > FARM_BACKOFF_MAX_MS ? FARM_BACKOFF_MAX_MS : p->backoff_ms * 2;
+    p->reconnect = loop_timer_add(p->f->l, drv_backoff_ms(p->attempts++), on_reconnect, p);
 }
 
 static void
@@ -192,7 +190,7 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
     switch (ev) {
     case DRV_EV_STATE:
         if (st->state == DRV_IDLE && p->state == PRINTER_OFFLINE) {
-            p->backoff_ms = FARM_BACKOFF_MIN_MS;
+            p->attempts = 0;
             p->message[0] = '\0';
             move(p, PRINTER_EV_CONNECTED);
         } else if (st->state == DRV_OFFLINE && p->state != PRINTER_OFFLINE) {
@@ -270,7 +268,6 @@ printer_new(struct farm *f, const struct farmcfg_printer *cfg)
     p->f = f;
     p->cfg = *cfg;
     p->state = PRINTER_OFFLINE;
-    p->backoff_ms = FARM_BACKOFF_MIN_MS;
     struct sf_err err;
     if (store_printer_set(f->s, cfg->name, PRINTER_OFFLINE, &err))
         log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
@@ -279,9 +276,7 @@ printer_new(struct farm *f, const struct farmcfg_printer *cfg)
         return p;
     }
     if (!f->hooks.driver) {
-        snprintf(p->message, sizeof(p->message),
-                 "no '%s' driver in this build (drivers/ not merged yet)", cfg->driver);
-        log_printer(LOG_WARN, cfg->name, "%s", p->message);
+        snprintf(p->message, sizeof(p->message), "not connected: the farm runs without drivers");
         return p;
     }
     struct drv_config dc = { .name = cfg->name,

@@ -7,12 +7,13 @@
  * on; a ready job goes to an idle printer chosen by sched.h; driver events
  * move jobs and printers (job.h) with every change committed to the store
  * (store.h).  A printer whose link drops goes offline and is reconnected
- * with exponential backoff; one slow or dead printer never blocks the
+ * with drv_backoff_ms's exponential backoff; one slow or dead printer never blocks the
  * others, because nothing here waits: drivers and the pool report back
  * through the loop.
  *
  * Drivers come in through hooks.driver (slimfarmd passes drv_new from
- * drivers/); with none, printers stay offline saying so.  farm_reload()
+ * drivers/, tests their own); with none, printers stay offline (tests of
+ * the prepare stage alone).  farm_reload()
  * applies a new config (SIGHUP) without disturbing running prints.
  *
  * Thread: the loop thread.  The pool must be drained (pool_free, then one
@@ -34,8 +35,6 @@
 #include "prepare.h"
 #include "store.h"
 
-#define FARM_BACKOFF_MIN_MS 1000  /* first reconnect attempt after a drop */
-#define FARM_BACKOFF_MAX_MS 60000 /* never wait longer than a minute */
 #define FARM_PROGRESS_MS                                                                           \
     1000 /* persist lines acknowledged this often: what a resume                                   \
             after a crash may print twice (one UPDATE per                                          \
@@ -46,7 +45,7 @@ typedef struct drv *(*farm_driver_fn)(struct loop *l, const struct drv_config *c
                                       drv_event_fn on_event, void *ud, struct sf_err *err);
 
 struct farm_hooks {
-    farm_driver_fn driver;    /* NULL: no drivers in this build */
+    farm_driver_fn driver;    /* drv_new, a test's, or NULL: printers stay offline */
     prepare_fn prepare;       /* prepare_part, or a test's */
     void (*notify)(void *ud); /* the event log grew (wake event streams) */
     int64_t progress_ms;      /* persist progress this often (0: FARM_PROGRESS_MS) */

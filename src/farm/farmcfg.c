@@ -26,6 +26,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../../drivers/drv.h"
 #include "../base/buf.h"
 #include "../base/limits.h"
 #include "../base/mem.h"
@@ -68,8 +69,6 @@ static const struct option options[] = {
     { "group", true, K_IDENT, P(group), 0, 0 },
 };
 #define N_OPTIONS (sizeof(options) / sizeof(options[0]))
-
-static const char *const drivers[] = { "marlin", "octoprint", "moonraker", "bambu" };
 
 /* Parser state shared by the reader and the handler. */
 struct parse {
@@ -408,19 +407,19 @@ check_printers(struct parse *ps)
         ps->line = p->line;
         if (!p->driver[0])
             return fail(ps, "section 'printer %s': option 'driver' is required", p->name);
-        bool known = false;
-        for (size_t d = 0; d < sizeof(drivers) / sizeof(drivers[0]); d++)
-            known |= strcmp(p->driver, drivers[d]) == 0;
-        if (!known)
-            return fail(ps,
-                        "section 'printer %s': option 'driver': '%s' is not one of marlin, "
-                        "octoprint, moonraker, bambu",
-                        p->name, p->driver);
-        bool serial = strcmp(p->driver, "marlin") == 0;
-        if (serial && !p->port[0])
-            return fail(ps, "section 'printer %s': option 'port' is required by driver marlin",
-                        p->name);
-        if (!serial && !p->url[0])
+        const struct drv_kind *k = drv_kind_find(p->driver);
+        if (!k) {
+            char known[128] = "";
+            for (size_t d = 0, n = 0; drv_kind_at(d); d++)
+                n += (size_t)snprintf(known + n, n < sizeof(known) ? sizeof(known) - n : 0, "%s%s",
+                                      d ? ", " : "", drv_kind_at(d)->name);
+            return fail(ps, "section 'printer %s': option 'driver': '%s' is not one of %s", p->name,
+                        p->driver, known);
+        }
+        if (!k->url && !p->port[0])
+            return fail(ps, "section 'printer %s': option 'port' is required by driver %s", p->name,
+                        p->driver);
+        if (k->url && !p->url[0])
             return fail(ps, "section 'printer %s': option 'url' is required by driver %s", p->name,
                         p->driver);
     }

@@ -34,7 +34,7 @@ struct farmcfg_key {
 struct farmcfg_printer {
     char name[64];       /* NAME: letters, digits, -_. */
     int line;            /* line of the section header, for later messages */
-    char driver[16];     /* marlin | octoprint | moonraker | bambu (required) */
+    char driver[16];     /* a kind of drivers/drv.c's registry, e.g. marlin (required) */
     char port[256];      /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
     int baud;            /* marlin serial speed (default 115200) */
     char url[256];       /* network drivers: base URL */

@@ -1,7 +1,7 @@
 /*
  * prepare.h - the boundary between the farm and the part pipeline: turn a
  * stored part into G-code for one target printer (orient, then shape
- * optimization, then slice; DESIGN.md "Data flow").
+ * optimization, then slice).
  *
  * The farm runs a prepare function on the worker pool (pool.h) with plain
  * data copied in struct prepare_req, so it touches nothing shared.  The

@@ -133,7 +133,7 @@ printf '[printer y]\ncolour: red\n' >> "$tmp/farm.ini"
 kill -HUP $pid; sleep 0.3
 grep -q "reload: .*farm.ini:12: option 'colour' is not valid in section 'printer y'; keeping" "$tmp/log" || fail "bad reload not reported"
 cp "$tmp/good.ini" "$tmp/farm.ini"
-printf '[printer voron]\ndriver: moonraker\nurl: http://127.0.0.1:1\nmaterial: PETG\n' >> "$tmp/farm.ini"
+printf '[printer voron]\ndriver: marlin\nport: tcp://127.0.0.1:1\nmaterial: PETG\n' >> "$tmp/farm.ini"
 kill -HUP $pid; sleep 0.3
 "$C" printers | grep -q "^voron " || fail "reload did not add voron: $("$C" printers)"
 

@@ -36,8 +36,8 @@ T_CASE(farmcfg_full_example)
                        "  auto_eject: yes\n"
                        "  group: big\n"
                        "[printer voron]\r\n"
-                       "driver: moonraker\r\n"
-                       "url: http://10.0.0.5:7125\r\n"
+                       "driver: marlin\r\n"
+                       "port: tcp://10.0.0.5:7125\r\n"
                        "enabled: false\r\n";
     T_OK(parse(&c, text, &err), &err);
     T_EQ_STR(c.listen_host, "0.0.0.0");
@@ -64,7 +64,7 @@ T_CASE(farmcfg_full_example)
     T_EQ_DBL(p->overhang_deg, 45, 0);
     T_EQ_STR(p->group, "big");
     p = farmcfg_printer(&c, "voron");
-    T_EQ_STR(p->url, "http://10.0.0.5:7125");
+    T_EQ_STR(p->port, "tcp://10.0.0.5:7125");
     T_TRUE(!p->enabled);
     T_EQ_STR(p->material, "PLA");
     T_EQ_INT(p->line, 17);
@@ -103,7 +103,7 @@ T_CASE(farmcfg_errors_name_file_line_option_section)
         { "[printer a]\nport: x\n",
           "farm.ini:1: section 'printer a': option 'driver' is required" },
         { "[printer a]\ndriver: marlin\n", "option 'port' is required by driver marlin" },
-        { "[printer a]\ndriver: bambu\n", "option 'url' is required by driver bambu" },
+        { "[printer a]\ndriver: bambu\n", "'bambu' is not one of marlin" },
         { "[printer a]\ndriver: klipper\n", "'klipper' is not one of marlin" },
         { "[printer a]\ndriver: marlin\nport: x\nmaterial: P L A\n", "may hold only letters" },
         { "[farm]\nlisten: localhost\n", "'localhost' is not ADDRESS:PORT" },
