@@ -10,7 +10,7 @@
 #
 # Sources are found by wildcard: a new .c file in a library folder joins the
 # library, tests/unit/test_NAME.c becomes a test program, tests/fuzz/fuzz_NAME.c
-# a fuzz target.  Folders, in dependency order (scripts/check-layers.sh):
+# a fuzz target.  Folders, in dependency order (tests/check-layers.sh):
 # src/base src/mesh src/geom slicer drivers src/farm src/api src/cmd; sim uses base.
 
 SHELL := /bin/bash
