@@ -37,6 +37,8 @@ struct printer {
     uint64_t reconnect;         /* reconnect timer id, 0 if none */
     int attempts;               /* reconnects since the link was last up (drv_backoff_ms) */
     bool removed;               /* dropped from the config; freed when idle */
+    bool bed_full;              /* the bed holds a part (store_printer_bed_get): a printer
+                                   that connects goes to awaiting-clear, not idle */
     bool cancelling;            /* job cancelled; the driver is still running its end
                                    sequence, so the printer is not free yet */
 };
@@ -52,6 +54,7 @@ struct farm {
     size_t n_printers;
     uint64_t kick;         /* pending run() timer, 0 if none */
     uint64_t progress;     /* progress timer */
+    bool stopping;         /* farm_free: what drivers report while closing goes unheard */
     int preparing;         /* prepare tasks in flight */
     struct prep *reslices; /* re-slices in flight (their jobs stay ready), linked by next */
     struct noreslice *no;  /* re-slices that failed: not tried again until a reload */
@@ -107,7 +110,24 @@ find(const struct farm *f, const char *name)
     return NULL;
 }
 
-/* Move printer p by ev; log refusals (they mean a driver said something odd). */
+/* Record whether p's bed holds a part; a crash after this keeps the bed gate. */
+static void
+set_bed(struct printer *p, bool full)
+{
+    struct sf_err err;
+    if (p->bed_full == full)
+        return;
+    p->bed_full = full;
+    if (store_printer_bed_set(p->f->s, p->cfg.name, full, &err))
+        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+}
+
+/*
+ * Move printer p by ev; log refusals (they mean a driver said something
+ * odd).  The bed is recorded here, before the caller records the job: a
+ * printer whose bed holds a part comes back from any restart or
+ * reconnect awaiting clear.
+ */
 static bool
 move(struct printer *p, enum printer_event ev)
 {
@@ -117,6 +137,12 @@ move(struct printer *p, enum printer_event ev)
         log_printer(LOG_WARN, p->cfg.name, "%s", err.msg);
         return false;
     }
+    if (ev == PRINTER_EV_CONNECTED && to == PRINTER_IDLE && p->bed_full)
+        to = PRINTER_AWAITING_CLEAR;
+    if (to == PRINTER_AWAITING_CLEAR)
+        set_bed(p, true);
+    else if (ev == PRINTER_EV_CLEARED)
+        set_bed(p, false);
     if (to != p->state) {
         p->state = to;
         if (store_printer_set(p->f->s, p->cfg.name, to, &err))
@@ -187,6 +213,8 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
     struct printer *p = ud;
     struct farm *f = p->f;
     const struct drv_status *st = &d->status;
+    if (f->stopping)
+        return; /* farm_free left its jobs interrupted, as a crash would */
     switch (ev) {
     case DRV_EV_STATE:
         if (st->state == DRV_IDLE && p->state == PRINTER_OFFLINE) {
@@ -219,11 +247,13 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
     case DRV_EV_TEMPS:
         break; /* read from d->status when asked */
     case DRV_EV_JOB_DONE: {
+        /* the bed first: a crash between the two leaves the job interrupted */
         struct job_event_args a = { .lines_acked = (int64_t)st->lines_acked };
-        if (p->job_id)
-            job_event(f, p->job_id, JOB_EV_PRINT_DONE, &a);
+        int64_t id = p->job_id;
         p->job_id = 0;
         move(p, PRINTER_EV_FINISHED);
+        if (id)
+            job_event(f, id, JOB_EV_PRINT_DONE, &a);
         break;
     }
     case DRV_EV_JOB_CANCELLED:
@@ -244,6 +274,13 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
     farm_kick(f);
 }
 
+/* What a driver being closed for good reports goes nowhere. */
+static void
+ignore_event(struct drv *d, enum drv_event ev, void *ud)
+{
+    (void)d, (void)ev, (void)ud;
+}
+
 static void
 printer_free(struct printer *p)
 {
@@ -252,6 +289,9 @@ printer_free(struct printer *p)
     if (p->reconnect)
         loop_timer_cancel(p->f->l, p->reconnect);
     if (p->drv) {
+        /* close() reports OFFLINE at once; heard, it would fail the job and
+           arm a reconnect timer for a printer freed below */
+        p->drv->on_event = ignore_event;
         /* drv_free() lives with the drivers; the vtable is all we rely on. */
         p->drv->ops->close(p->drv);
         p->drv->ops->destroy(p->drv);
@@ -269,8 +309,11 @@ printer_new(struct farm *f, const struct farmcfg_printer *cfg)
     p->cfg = *cfg;
     p->state = PRINTER_OFFLINE;
     struct sf_err err;
-    if (store_printer_set(f->s, cfg->name, PRINTER_OFFLINE, &err))
+    if (store_printer_set(f->s, cfg->name, PRINTER_OFFLINE, &err) ||
+        store_printer_bed_get(f->s, cfg->name, &p->bed_full, &err))
         log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
+    if (p->bed_full)
+        log_printer(LOG_INFO, cfg->name, "its bed holds a part: clear it before the next job");
     if (!cfg->enabled) {
         snprintf(p->message, sizeof(p->message), "disabled in the config");
         return p;
@@ -670,6 +713,18 @@ farm_free(struct farm *f)
         loop_timer_cancel(f->l, f->kick);
     if (f->progress)
         loop_timer_cancel(f->l, f->progress);
+    /* A stop leaves each print interrupted at its last acknowledged line,
+       as a crash does (the operator resumes or restarts it): no retry spent,
+       nothing requeued from line 0.  The drivers' goodbyes are not heard. */
+    f->stopping = true;
+    for (size_t i = 0; i < f->n_printers; i++) {
+        struct printer *p = f->printers[i];
+        struct sf_err err;
+        struct job_event_args a = { .reason = "the daemon stopped while this job was printing" };
+        if (p->job_id && (store_job_progress(f->s, p->job_id, p->lines_acked, &err) ||
+                          store_job_event(f->s, p->job_id, JOB_EV_CRASHED, &a, NULL, &err)))
+            log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    }
     for (size_t i = 0; i < f->n_printers; i++)
         printer_free(f->printers[i]);
     free(f->printers);
@@ -811,6 +866,8 @@ farm_printer_action(struct farm *f, const char *name, const char *action, struct
         enum job_event jev = ev == PRINTER_EV_PAUSE    ? JOB_EV_PAUSE
                              : ev == PRINTER_EV_RESUME ? JOB_EV_RESUME
                                                        : JOB_EV_CANCEL;
+        if (jev == JOB_EV_CANCEL && !p->cfg.auto_eject)
+            set_bed(p, true); /* the cancelled part stays on the bed */
         if ((rc = store_job_event(f->s, p->job_id, jev, &a, NULL, err)))
             return rc;
         if (jev == JOB_EV_CANCEL) {

@@ -51,7 +51,8 @@ enum job_event {
     JOB_EV_PRINT_DONE,     /* printing -> ready (copies left) | done */
     JOB_EV_PRINT_FAILED,   /* printing|paused -> ready (retry left) | failed */
     JOB_EV_CANCEL,         /* any live state -> cancelled */
-    JOB_EV_CRASHED,        /* on restart: printing|paused -> interrupted, preparing -> queued */
+    JOB_EV_CRASHED,        /* on restart or stop: printing|paused -> interrupted,
+                              preparing -> queued */
     JOB_EV_RESTART,        /* interrupted -> ready: print the copy again from the start */
     JOB_EV_DEFER,          /* preparing -> queued: a stage is unavailable now; try later */
 };

@@ -117,7 +117,9 @@ static const char *const migrations[] = {
        prepared before has no key and is prepared again before it prints. */
     "ALTER TABLE jobs ADD COLUMN prep_key TEXT NOT NULL DEFAULT '';"
     "ALTER TABLE jobs ADD COLUMN mesh_sha TEXT NOT NULL DEFAULT '';"
-    "ALTER TABLE jobs ADD COLUMN mesh_angle_deg REAL NOT NULL DEFAULT 0;",
+    "ALTER TABLE jobs ADD COLUMN mesh_angle_deg REAL NOT NULL DEFAULT 0;"
+    /* and whether a printer's bed holds a part, which no restart forgets */
+    "ALTER TABLE printers ADD COLUMN bed_full INTEGER NOT NULL DEFAULT 0;",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 
@@ -1054,6 +1056,48 @@ store_printer_get(struct store *s, const char *name, enum printer_state *state, 
     if (rc == SQLITE_DONE)
         return sf_err_set(err, SF_ENOTFOUND, "printer '%s': never seen", name);
     return db_fail(s, err, "get printer");
+}
+
+int
+store_printer_bed_set(struct store *s, const char *name, bool full, struct sf_err *err)
+{
+    int rc = begin(s, err);
+    if (rc)
+        return rc;
+    sqlite3_stmt *st;
+    if ((rc =
+             prepare(s, &st,
+                     "INSERT INTO printers(name, state, updated_ms, bed_full) VALUES(?1, 'offline',"
+                     " ?2, ?3) ON CONFLICT(name) DO UPDATE SET bed_full = ?3, updated_ms = ?2",
+                     err)))
+        goto fail;
+    sqlite3_bind_text(st, 1, name, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_int64(st, 2, now_ms());
+    sqlite3_bind_int(st, 3, full);
+    if ((rc = step_done(s, st, err, "set printer bed")) ||
+        (rc = log_event(s, 0, name, "printer-bed", full ? "holds a part" : "cleared", err)) ||
+        (rc = commit(s, err)))
+        goto fail;
+    return SF_OK;
+fail:
+    rollback(s);
+    return rc;
+}
+
+int
+store_printer_bed_get(struct store *s, const char *name, bool *full, struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc = prepare(s, &st, "SELECT bed_full FROM printers WHERE name = ?", err);
+    if (rc)
+        return rc;
+    sqlite3_bind_text(st, 1, name, -1, SQLITE_TRANSIENT);
+    rc = sqlite3_step(st);
+    *full = rc == SQLITE_ROW && sqlite3_column_int(st, 0) != 0;
+    sqlite3_finalize(st);
+    if (rc == SQLITE_ROW || rc == SQLITE_DONE)
+        return SF_OK;
+    return db_fail(s, err, "get printer bed");
 }
 
 /* ---- history, events, checks ---- */

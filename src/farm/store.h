@@ -11,7 +11,8 @@
  * it was.  store_open() then runs crash recovery: jobs that were printing
  * (or paused) become interrupted, keeping their last acknowledged line, and
  * wait for an operator; jobs that were preparing go back to queued;
- * printers go offline until their drivers reconnect.
+ * printers go offline until their drivers reconnect (a bed that holds a
+ * part still does: store_printer_bed_get).
  *
  * Thread: one store per thread (the loop thread in the daemon); the
  * connection is not shared.  Workers hand results back to the loop, which
@@ -183,6 +184,15 @@ int store_printer_set(struct store *s, const char *name, enum printer_state st, 
 /* SF_ENOTFOUND if never recorded. */
 int store_printer_get(struct store *s, const char *name, enum printer_state *st,
                       struct sf_err *err);
+
+/*
+ * Whether printer name's bed holds a part (a finished or cancelled print
+ * waiting for an operator): recorded before the job's own change, kept
+ * through crash recovery and restarts, cleared by "cleared".  A printer
+ * never recorded has a clear bed.
+ */
+int store_printer_bed_set(struct store *s, const char *name, bool full, struct sf_err *err);
+int store_printer_bed_get(struct store *s, const char *name, bool *full, struct sf_err *err);
 
 /* Print history of one job, oldest first, into *rows (free() it). */
 int store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,

@@ -10,9 +10,12 @@
  * real driver would.  The prepare hook writes a tiny real G-code file.
  */
 #include <errno.h>
+#include <signal.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
@@ -117,10 +120,14 @@ t_command(struct drv *d, const char *line, struct sf_err *err)
     return sf_err_set(err, SF_EUNSUPP, "tdrv: no console");
 }
 
+/* As Marlin's: closing reports OFFLINE at once, to whoever still listens. */
 static void
 t_close(struct drv *d)
 {
-    (void)d;
+    if (d->status.state == DRV_OFFLINE)
+        return;
+    d->status.state = DRV_OFFLINE;
+    d->on_event(d, DRV_EV_STATE, d->ud);
 }
 
 static struct tdrv *tdrvs[8];
@@ -543,14 +550,14 @@ T_CASE(farm_progress_is_persisted_and_survives_a_crash)
     struct job_row j;
     T_OK(store_job_get(fx.s, id, &j, &err), &err);
     T_EQ_INT(j.lines_acked, 1234);
-    /* the daemon dies here: the store is reopened as on restart */
+    /* the daemon stops here (a kill -9 is farm_bed_gate_survives_stop_and_kill's):
+       the store is reopened as on restart */
     char dir[512];
     snprintf(dir, sizeof(dir), "%s/crash", t_tmpdir());
     teardown();
     struct store_recovery rec;
     struct store *s = store_open(dir, &rec, &err);
     T_TRUE(s != NULL);
-    T_EQ_INT(rec.interrupted, 1);
     T_OK(store_job_get(s, id, &j, &err), &err);
     T_EQ_INT(j.state, JOB_INTERRUPTED);
     T_EQ_INT(j.lines_acked, 1234);
@@ -806,5 +813,108 @@ T_CASE(farm_job_waiting_for_a_busy_printer_is_resliced_for_an_idle_one)
     T_EQ_STR(after.mesh_sha, before.mesh_sha);
     T_TRUE(printed_for("big", "wide", 300, 300));
     T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+/* ---- stops and restarts (issue 16) ---- */
+
+/*
+ * SIGTERM mid-print: the job is left interrupted at its last acknowledged
+ * line, exactly as after a crash, with no retry spent and no requeue from
+ * line 0 (it used to be "printer went offline": failed into a retry).
+ */
+T_CASE(farm_stop_mid_print_leaves_the_job_interrupted_at_its_line)
+{
+    struct sf_err err;
+    T_OK(setup("stop", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE, 1000));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    a->base.status.lines_acked = 777;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    while (a->has_pending)
+        loop_run_once(fx.l, 10);
+    teardown(); /* the daemon's stop: farm_free closes the drivers */
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/stop", t_tmpdir());
+    struct store_recovery rec;
+    struct store *s = store_open(dir, &rec, &err);
+    T_TRUE(s != NULL);
+    T_EQ_INT(rec.interrupted, 0); /* the stop did it already */
+    struct job_row j;
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    T_EQ_INT(j.lines_acked, 777);
+    T_EQ_INT(j.counts.failures, 0);
+    T_EQ_STR(j.printer, "a");
+    struct print_row *p;
+    size_t n;
+    T_OK(store_prints(s, id, &p, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_EQ_STR(p[0].outcome, "interrupted");
+    T_EQ_INT(p[0].lines_acked, 777);
+    free(p);
+    T_OK(store_check(s, &err), &err);
+    store_close(s);
+}
+
+/* Print one job to the end on printer a (no ejector): its bed holds the part. */
+static bool
+finish_one_on_a(void)
+{
+    if (!wait_printer(0, PRINTER_IDLE, 1000))
+        return false;
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    if (!wait_job(id, JOB_PRINTING))
+        return false;
+    report(tdrv_named("a"), DRV_IDLE, DRV_EV_JOB_DONE);
+    return wait_job(id, JOB_DONE) && wait_printer(0, PRINTER_AWAITING_CLEAR, 1000);
+}
+
+/* After a restart: a stays awaiting clear and starts nothing until cleared. */
+static void
+check_bed_gate_kept(void)
+{
+    T_TRUE(wait_printer(0, PRINTER_AWAITING_CLEAR, 1000));
+    int64_t next = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(next, JOB_READY));
+    for (int i = 0; i < 10; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(tdrv_named("a")->starts, 0);
+    T_EQ_INT(state_of(next), JOB_READY);
+    struct sf_err err;
+    T_OK(farm_printer_action(fx.f, "a", "cleared", &err), &err);
+    T_TRUE(wait_job(next, JOB_PRINTING));
+}
+
+/*
+ * A printer awaiting bed clear comes back from a stop (SIGTERM) and from a
+ * kill -9 awaiting clear: the finished part is still on the bed.  It used
+ * to come back offline -> idle and start the next job on top of it.
+ */
+T_CASE(farm_bed_gate_survives_stop_and_kill)
+{
+    struct sf_err err;
+    T_OK(setup("bedstop", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(finish_one_on_a());
+    teardown();
+    T_OK(setup("bedstop", farm_ini, tdrv_new, test_prepare, &err), &err);
+    check_bed_gate_kept();
+    teardown();
+
+    pid_t pid = fork();
+    T_TRUE(pid >= 0);
+    if (pid == 0) {
+        if (setup("bedkill", farm_ini, tdrv_new, test_prepare, &err) || !finish_one_on_a())
+            _exit(1);
+        raise(SIGKILL);
+        _exit(2);
+    }
+    int status;
+    T_EQ_INT(waitpid(pid, &status, 0), pid);
+    T_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
+    T_OK(setup("bedkill", farm_ini, tdrv_new, test_prepare, &err), &err);
+    check_bed_gate_kept();
     teardown();
 }

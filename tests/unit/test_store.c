@@ -120,6 +120,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     T_EQ_INT(sqlite3_exec(db,
                           "ALTER TABLE jobs DROP COLUMN prep_key; ALTER TABLE jobs DROP COLUMN "
                           "mesh_sha; ALTER TABLE jobs DROP COLUMN mesh_angle_deg;"
+                          "ALTER TABLE printers DROP COLUMN bed_full;"
                           "ALTER TABLE jobs DROP COLUMN gcode_lines; PRAGMA user_version = 1",
                           NULL, NULL, NULL),
              SQLITE_OK);
