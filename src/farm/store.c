@@ -28,6 +28,7 @@
 #include <sqlite3.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -39,7 +40,42 @@
 struct store {
     sqlite3 *db;              /* the connection, WAL mode, foreign keys on */
     char dir[STORE_PATH_MAX]; /* data directory */
+    int lock_fd;              /* DATA_DIR/lock, flock()ed exclusively; -1 if not open */
 };
+
+/*
+ * One process per data dir: crash recovery run beside a live daemon (its
+ * --fsck, or a second daemon) turned a printing job interrupted under a
+ * printer still printing it.  An flock, not a pid file: the kernel drops it
+ * when the holder dies, even by kill -9.  The file holds the holder's pid
+ * for the message.
+ */
+static int
+lock_dir(struct store *s, struct sf_err *err)
+{
+    char path[STORE_PATH_MAX + 16];
+    snprintf(path, sizeof(path), "%s/lock", s->dir);
+    s->lock_fd = open(path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+    if (s->lock_fd < 0)
+        return sf_err_sys(err, "store: cannot open '%s'", path);
+    if (flock(s->lock_fd, LOCK_EX | LOCK_NB) != 0) {
+        if (errno != EWOULDBLOCK)
+            return sf_err_sys(err, "store: cannot lock '%s'", path);
+        char pid[24] = "";
+        ssize_t n = pread(s->lock_fd, pid, sizeof(pid) - 1, 0);
+        pid[n > 0 ? n : 0] = '\0';
+        pid[strcspn(pid, "\n")] = '\0';
+        return sf_err_set(err, SF_EAGAIN,
+                          "store: data dir '%s' is in use by another process (pid %s): stop it "
+                          "first, or give this one another data_dir",
+                          s->dir, pid[0] ? pid : "unknown");
+    }
+    char pid[24];
+    int len = snprintf(pid, sizeof(pid), "%ld\n", (long)getpid());
+    if (ftruncate(s->lock_fd, 0) != 0 || pwrite(s->lock_fd, pid, (size_t)len, 0) != len)
+        return sf_err_sys(err, "store: cannot write '%s'", path);
+    return SF_OK;
+}
 
 struct store_file {
     struct store *s;               /* owner */
@@ -339,9 +375,10 @@ store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
         return NULL;
     }
     snprintf(s->dir, sizeof(s->dir), "%s", data_dir);
+    s->lock_fd = -1;
     char path[STORE_PATH_MAX + 32];
     snprintf(path, sizeof(path), "%s/files", data_dir);
-    if (mkdir_p(path, err))
+    if (mkdir_p(path, err) || lock_dir(s, err))
         goto fail;
     snprintf(path, sizeof(path), "%s/slimfarm.db", data_dir);
     if (sqlite3_open_v2(path, &s->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, NULL) !=
@@ -376,6 +413,8 @@ store_close(struct store *s)
     if (!s)
         return;
     sqlite3_close(s->db);
+    if (s->lock_fd >= 0)
+        close(s->lock_fd); /* releases the flock */
     free(s);
 }
 

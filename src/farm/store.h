@@ -105,10 +105,13 @@ struct event_row {
 };
 
 /*
- * Open (creating if needed) the store in data_dir, migrate the schema and
- * run crash recovery (rec may be NULL).  NULL with err set on failure
- * (SF_EIO for the file system or SQLite, SF_EUNSUPP for a schema newer than
- * this program).  Free with store_close().
+ * Open (creating if needed) the store in data_dir, lock it (an exclusive
+ * flock on DATA_DIR/lock, held until store_close, so one process at a time
+ * runs on a data dir), migrate the schema and run crash recovery (rec may
+ * be NULL).  NULL with err set on failure (SF_EAGAIN when another process
+ * holds the data dir, the message naming it and the holder's pid; SF_EIO
+ * for the file system or SQLite, SF_EUNSUPP for a schema newer than this
+ * program).  Free with store_close().
  */
 struct store *store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err);
 void store_close(struct store *s);

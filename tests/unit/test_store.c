@@ -533,3 +533,26 @@ T_CASE(store_jobs_progress_saves_printing_jobs_in_one_go)
     T_OK(store_check(s, &err), &err);
     store_close(s);
 }
+
+/*
+ * One process per data dir (issue 16): crash recovery from `slimfarmd
+ * --fsck`, or a second daemon, beside a live one turned its printing job
+ * interrupted under the printer still printing it.  The second open is
+ * refused naming the dir and the holder's pid; the lock goes with the store.
+ */
+T_CASE(store_open_refuses_a_data_dir_in_use)
+{
+    struct sf_err err;
+    const char *dir = fresh_dir("locked");
+    struct store *s = store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    T_TRUE(store_open(dir, NULL, &err) == NULL);
+    T_EQ_INT(err.code, SF_EAGAIN);
+    char want[700];
+    snprintf(want, sizeof(want), "store: data dir '%s' is in use by another process (pid %ld)", dir,
+             (long)getpid());
+    T_TRUE(strstr(err.msg, want) != NULL);
+    store_close(s);
+    T_TRUE((s = store_open(dir, NULL, &err)) != NULL);
+    store_close(s);
+}
