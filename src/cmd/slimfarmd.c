@@ -269,8 +269,20 @@ main(int argc, char **argv)
 out:
     if (status)
         fprintf(stderr, "slimfarmd: %s\n", err.msg);
+    /* Drop the loop work that touches the API before freeing it: the loop
+       turns below (draining the pool) would run a pending wake and kick
+       the stopped server (a use-after-free in MHD_run when printers dropped
+       as the daemon stopped).  With d.api NULL the farm's events post no
+       new wake. */
+    if (d.wake)
+        loop_timer_cancel(d.l, d.wake);
+    if (d.tick)
+        loop_timer_cancel(d.l, d.tick);
+    d.wake = d.tick = 0;
     http_loop_detach(d.hl);
+    d.hl = NULL;
     api_free(d.api);
+    d.api = NULL;
     if (d.pool) {
         pool_free(d.pool);
         loop_run_once(d.l, 0); /* deliver cancelled prepares */
