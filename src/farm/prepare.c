@@ -131,6 +131,11 @@ slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_prof
     if (rc)
         return rc;
     *changed = sr.best_iter > 0;
+    log_info("prepare",
+             "job %lld: slimmed (Hu 2015): iteration %d of %d kept, risky faces %u -> %u, "
+             "support %.1f -> %.1f mm3, largest move %.3f mm",
+             (long long)req->job_id, sr.best_iter, sr.n_curve - 1, sr.before.n_risky,
+             sr.after.n_risky, sr.before.volume_mm3, sr.after.volume_mm3, sr.dev.max_mm);
     take_part(m, &sr.out, prof);
     slim_result_release(&sr);
     return SF_OK;
@@ -189,6 +194,12 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     int rc = surfopt_optimize(m, &sp, &sr, err);
     if (rc)
         return rc;
+    log_info("prepare",
+             "job %lld: surface (Jayakody 2025): %d rounds, risky faces %u -> %u, support "
+             "%.1f -> %.1f mm3, shape %s, largest move %.3f mm",
+             (long long)req->job_id, sr.n_rounds, sr.input.n_risky, sr.after.n_risky,
+             sr.input.volume_mm3, sr.after.volume_mm3, sr.shape_changed ? "changed" : "kept",
+             sr.dev.max_mm);
     take_part(m, &sr.out, prof);
     surfopt_result_release(&sr);
     return SF_OK;

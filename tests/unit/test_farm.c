@@ -472,12 +472,41 @@ static const char tetra_stl[] = "solid t\n"
                                 "vertex 0 0 10\nendloop\nendfacet\n"
                                 "endsolid t\n";
 
+/* What prepare logged (its figures per method), for the pipeline test. */
+static char prep_log[16384];
+static size_t prep_log_len;
+
+static void
+prep_sink(void *ud, enum log_level level, const char *subsys, const char *printer, const char *msg)
+{
+    (void)ud, (void)level, (void)printer;
+    if (strcmp(subsys, "prepare") == 0 && prep_log_len < sizeof(prep_log))
+        prep_log_len +=
+            (size_t)snprintf(prep_log + prep_log_len, sizeof(prep_log) - prep_log_len, "%s\n", msg);
+}
+
+/* True when prepare logged a line starting "job ID: what". */
+static bool
+logged(int64_t id, const char *what)
+{
+    char want[128];
+    snprintf(want, sizeof(want), "job %lld: %s", (long long)id, what);
+    for (const char *l = prep_log; l && *l; l = strchr(l, '\n') ? strchr(l, '\n') + 1 : NULL)
+        if (strncmp(l, want, strlen(want)) == 0)
+            return true;
+    return false;
+}
+
 T_CASE(farm_default_prepare_runs_every_method)
 {
     /* the real pipeline: src/mesh, src/geom orient, slicer/ with
        config/printers and config/materials (tests run from the top) */
     struct sf_err err;
     T_OK(setup("pipeline", farm_ini, NULL, prepare_part, &err), &err);
+    prep_log_len = 0;
+    prep_log[0] = '\0';
+    log_set_level(LOG_INFO);
+    log_set_sink(prep_sink, NULL);
     T_EQ_INT(pstate(0), PRINTER_OFFLINE);
     int64_t ok = add(tetra_stl, "PLA", 1), surf = add_m(tetra_stl, "PLA", 1, "surface"),
             junk = add("this is no mesh", "", 1), abs = add_m(tetra_stl, "", 1, "none"),
@@ -518,6 +547,20 @@ T_CASE(farm_default_prepare_runs_every_method)
     T_TRUE(strstr(j.reason, "'part.stl': not a mesh file") != NULL);
     /* method none: sliced as uploaded */
     T_TRUE(wait_job(abs, JOB_READY));
+    log_set_sink(NULL, NULL);
+    log_set_level(LOG_ERROR);
+    /* each method did its own work, with its figures: slimming ran on the
+       oriented part; the surface method turned and reshaped it its own way,
+       so the part it prints is not the one orientation alone chose */
+    T_TRUE(logged(slimmed, "slimmed (Hu 2015): iteration "));
+    T_TRUE(logged(surf, "surface (Jayakody 2025): "));
+    T_TRUE(!logged(ok, "slimmed") && !logged(ok, "surface"));
+    struct job_row o, sf;
+    T_OK(store_job_get(fx.s, ok, &o, &err), &err);
+    T_OK(store_job_get(fx.s, surf, &sf, &err), &err);
+    T_TRUE(o.mesh_sha[0] && sf.mesh_sha[0]);
+    T_TRUE(strcmp(o.mesh_sha, sf.mesh_sha) != 0);
+    T_TRUE(strcmp(o.gcode_sha, sf.gcode_sha) != 0);
     T_OK(store_check(fx.s, &err), &err);
     teardown();
 }
