@@ -1,6 +1,6 @@
 /*
- * api.c - the REST routes: jobs from the store, printers through the
- * owner's registry, the event log as Server-Sent Events.
+ * api.c - the REST routes: jobs from the store, printers through farm.h,
+ * the event log as Server-Sent Events.
  *
  * Why this split: http.c knows HTTP (keys, caps, multipart, streams) and
  * nothing of jobs; api_json.c knows JSON shapes; this file only maps URLs
@@ -276,7 +276,9 @@ job_cancel(struct api *a, int64_t id, struct http_resp *resp)
     int rc = store_job_get(a->cfg.store, id, &j, &err);
     if (rc == SF_OK && job_state_on_printer(j.state)) {
         /* The printer must stop first; its registry records the cancel. */
-        rc = a->cfg.printers->action(a->cfg.printers_ud, j.printer, "cancel", &err);
+        rc = a->cfg.farm ? farm_printer_action(a->cfg.farm, j.printer, PRINTER_ACT_CANCEL, &err)
+                         : sf_err_set(&err, SF_EINVAL, "job %lld: no farm to stop its printer",
+                                      (long long)id);
     } else if (rc == SF_OK) {
         struct job_event_args args = { .reason = "cancelled by an operator" };
         rc = store_job_event(a->cfg.store, id, JOB_EV_CANCEL, &args, NULL, &err);
@@ -313,9 +315,8 @@ job_resume(struct api *a, int64_t id, const struct http_req *req, struct http_re
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    int rc = a->cfg.printers->resume_job
-                 ? a->cfg.printers->resume_job(a->cfg.printers_ud, id, line, &err)
-                 : sf_err_set(&err, SF_EINVAL, "resuming jobs is not available here");
+    int rc = a->cfg.farm ? farm_job_resume(a->cfg.farm, id, line, &err)
+                         : sf_err_set(&err, SF_EINVAL, "resuming jobs is not available here");
     if (rc) {
         http_error(resp, status_of(rc), "%s", err.msg);
         return;
@@ -327,31 +328,29 @@ job_resume(struct api *a, int64_t id, const struct http_req *req, struct http_re
 /* ---- printers ---- */
 
 static json_t *
-printer_json(const struct api_printer_info *p)
+printer_json(const struct printer_info *p)
 {
-    return json_pack("{ss ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf ss}", "name", p->name, "state",
-                     printer_state_name(p->state), "enabled", p->enabled, "material",
-                     p->material ? p->material : "", "nozzle_mm", p->nozzle_mm, "bed_mm",
-                     p->bed_mm[0], p->bed_mm[1], p->bed_mm[2], "group", p->group ? p->group : "",
-                     "temps", "nozzle_c", p->nozzle_c, "nozzle_target_c", p->nozzle_target_c,
-                     "bed_c", p->bed_c, "bed_target_c", p->bed_target_c, "job_id",
-                     (json_int_t)p->job_id, "progress", p->progress, "message",
+    const struct farmcfg_printer *c = p->cfg;
+    return json_pack("{ss ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf ss}", "name", c->name, "state",
+                     printer_state_name(p->state), "enabled", c->enabled, "material", c->material,
+                     "nozzle_mm", c->nozzle_mm, "bed_mm", c->bed_mm[0], c->bed_mm[1], c->bed_mm[2],
+                     "group", c->group, "temps", "nozzle_c", p->nozzle_c, "nozzle_target_c",
+                     p->nozzle_target_c, "bed_c", p->bed_c, "bed_target_c", p->bed_target_c,
+                     "job_id", (json_int_t)p->job_id, "progress", p->progress, "message",
                      p->message ? p->message : "");
 }
 
 static void
 printers_list(struct api *a, const char *name, struct http_resp *resp)
 {
-    const struct api_printer_ops *ops = a->cfg.printers;
     json_t *arr = json_array();
-    size_t n = ops ? ops->count(a->cfg.printers_ud) : 0;
+    size_t n = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
     for (size_t i = 0; arr && i < n; i++) {
-        struct api_printer_info p;
-        memset(&p, 0, sizeof(p));
-        ops->get(a->cfg.printers_ud, i, &p);
+        struct printer_info p;
+        farm_printer_info(a->cfg.farm, i, &p);
         if (!name) {
             json_array_append_new(arr, printer_json(&p));
-        } else if (strcmp(p.name, name) == 0) {
+        } else if (strcmp(p.cfg->name, name) == 0) {
             json_decref(arr);
             resp->json = json_pack("{so}", "printer", printer_json(&p));
             return;
@@ -366,20 +365,17 @@ printers_list(struct api *a, const char *name, struct http_resp *resp)
 }
 
 static void
-printer_action(struct api *a, const char *name, const char *action, struct http_resp *resp)
+printer_act(struct api *a, const char *name, const char *action, struct http_resp *resp)
 {
-    static const char *const actions[] = { "pause", "resume", "cancel", "cleared" };
-    bool known = false;
-    for (size_t i = 0; i < 4; i++)
-        known |= strcmp(action, actions[i]) == 0;
-    if (!known) {
+    enum printer_action act;
+    if (!printer_action_parse(action, &act)) {
         http_error(resp, 404, "no printer action '%.32s' (pause, resume, cancel, cleared)", action);
         return;
     }
     struct sf_err err;
     sf_err_clear(&err);
-    int rc = a->cfg.printers ? a->cfg.printers->action(a->cfg.printers_ud, name, action, &err)
-                             : sf_err_set(&err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    int rc = a->cfg.farm ? farm_printer_action(a->cfg.farm, name, act, &err)
+                         : sf_err_set(&err, SF_ENOTFOUND, "no printer '%.64s'", name);
     if (rc) {
         http_error(resp, status_of(rc), "%s", err.msg);
         return;
@@ -398,17 +394,17 @@ printer_action(struct api *a, const char *name, const char *action, struct http_
 static void
 sse_progress(struct sse *s)
 {
-    const struct api_printer_ops *ops = s->a->cfg.printers;
-    size_t n = ops ? ops->count(s->a->cfg.printers_ud) : 0;
+    struct farm *f = s->a->cfg.farm;
+    size_t n = f ? farm_printer_count(f) : 0;
     json_t *arr = json_array();
     for (size_t i = 0; arr && i < n; i++) {
-        struct api_printer_info p;
-        memset(&p, 0, sizeof(p));
-        ops->get(s->a->cfg.printers_ud, i, &p);
+        struct printer_info p;
+        farm_printer_info(f, i, &p);
         if (p.job_id)
-            json_array_append_new(
-                arr, json_pack("{ss sI ss sf}", "printer", p.name, "job_id", (json_int_t)p.job_id,
-                               "state", printer_state_name(p.state), "progress", p.progress));
+            json_array_append_new(arr,
+                                  json_pack("{ss sI ss sf}", "printer", p.cfg->name, "job_id",
+                                            (json_int_t)p.job_id, "state",
+                                            printer_state_name(p.state), "progress", p.progress));
     }
     char *text = json_array_size(arr) ? json_dumps(arr, JSON_COMPACT) : NULL;
     json_decref(arr);
@@ -587,7 +583,7 @@ route(void *ud, const struct http_req *req, struct http_resp *resp)
         memcpy(action, seg[3], len[3]);
         action[len[3]] = '\0';
         {
-            printer_action(a, name, action, resp);
+            printer_act(a, name, action, resp);
             return;
         }
     }

@@ -1,6 +1,6 @@
 /*
  * api.h - the REST API of slimfarmd (routes over http.h, data from the
- * store, printer actions through the owner's printer registry).
+ * store, printers, their actions and resumes through farm.h).
  *
  *   GET    /api/jobs                      list jobs
  *   POST   /api/jobs                      multipart: "file" (the part) and
@@ -32,6 +32,7 @@
 #include <stdint.h>
 
 #include "../base/err.h"
+#include "../farm/farm.h"
 #include "../farm/farmcfg.h"
 #include "../farm/job.h"
 #include "../farm/store.h"
@@ -39,48 +40,12 @@
 
 #define API_BODY_MAX (64 << 10) /* JSON bodies: a priority or options object */
 
-/* A printer as the API shows it (filled by the owner's registry). */
-struct api_printer_info {
-    const char *name;                 /* unique */
-    enum printer_state state;         /* current state */
-    bool enabled;                     /* schedulable */
-    const char *material;             /* loaded */
-    double nozzle_mm;                 /* nozzle */
-    double bed_mm[3];                 /* build volume */
-    const char *group;                /* "" for none */
-    double nozzle_c, nozzle_target_c; /* temperatures, deg C */
-    double bed_c, bed_target_c;
-    int64_t job_id;      /* job printing, 0 if none */
-    double progress;     /* 0..1 of the running job */
-    const char *message; /* why offline / in error; "" or NULL if nothing */
-};
-
-/* The owner's printer registry, as the API needs it. */
-struct api_printer_ops {
-    size_t (*count)(void *ud);
-    /* Printer i (0..count-1) into out; strings stay valid until the next call. */
-    void (*get)(void *ud, size_t i, struct api_printer_info *out);
-    /*
-     * Act on a printer: "pause", "resume", "cancel", "cleared".  SF_ENOTFOUND
-     * for no such printer (404), SF_EINVAL when not legal now (409), others
-     * 500; err says why.
-     */
-    int (*action)(void *ud, const char *name, const char *action, struct sf_err *err);
-    /*
-     * Resume interrupted job id from command line `line` (-1: the stored
-     * last acknowledged line) on the printer holding its part.  NULL: not
-     * offered (409).  Errors as for action.
-     */
-    int (*resume_job)(void *ud, int64_t id, int64_t line, struct sf_err *err);
-};
-
 struct api_config {
-    struct store *store;                    /* jobs and events (not owned) */
-    const struct api_printer_ops *printers; /* printer registry */
-    void *printers_ud;                      /* its argument */
-    const char *host;                       /* listen address */
-    int port;                               /* 0: any free port */
-    const struct farmcfg_key *keys;         /* API keys (copied) */
+    struct store *store;            /* jobs and events (not owned) */
+    struct farm *farm;              /* printers and resumes (not owned); NULL: none */
+    const char *host;               /* listen address */
+    int port;                       /* 0: any free port */
+    const struct farmcfg_key *keys; /* API keys (copied) */
     size_t n_keys;
     size_t upload_max;           /* largest upload, bytes */
     void (*on_change)(void *ud); /* a job was added or changed (run the scheduler) */

@@ -42,54 +42,6 @@ struct daemon {
     uint64_t tick;           /* API_TICK_MS timer: progress for event streams */
 };
 
-/* ---- the API's view of the farm's printers ---- */
-
-static size_t
-ops_count(void *ud)
-{
-    struct daemon *d = ud;
-    return farm_printer_count(d->farm);
-}
-
-static void
-ops_get(void *ud, size_t i, struct api_printer_info *out)
-{
-    struct daemon *d = ud;
-    struct farm_printer_info fi;
-    farm_printer_info(d->farm, i, &fi);
-    *out = (struct api_printer_info){ .name = fi.cfg->name,
-                                      .state = fi.state,
-                                      .enabled = fi.cfg->enabled,
-                                      .material = fi.cfg->material,
-                                      .nozzle_mm = fi.cfg->nozzle_mm,
-                                      .group = fi.cfg->group,
-                                      .nozzle_c = fi.nozzle_c,
-                                      .nozzle_target_c = fi.nozzle_target_c,
-                                      .bed_c = fi.bed_c,
-                                      .bed_target_c = fi.bed_target_c,
-                                      .job_id = fi.job_id,
-                                      .progress = fi.progress,
-                                      .message = fi.message };
-    memcpy(out->bed_mm, fi.cfg->bed_mm, sizeof(out->bed_mm));
-}
-
-static int
-ops_action(void *ud, const char *name, const char *action, struct sf_err *err)
-{
-    struct daemon *d = ud;
-    return farm_printer_action(d->farm, name, action, err);
-}
-
-static int
-ops_resume_job(void *ud, int64_t id, int64_t line, struct sf_err *err)
-{
-    struct daemon *d = ud;
-    return farm_job_resume(d->farm, id, line, err);
-}
-
-static const struct api_printer_ops printer_ops = { ops_count, ops_get, ops_action,
-                                                    ops_resume_job };
-
 /* ---- wiring ---- */
 
 static void
@@ -243,8 +195,7 @@ main(int argc, char **argv)
     if (!(d.farm = farm_new(d.l, d.s, d.pool, &d.cfg, &hooks, &err)))
         goto out;
     struct api_config ac = { .store = d.s,
-                             .printers = &printer_ops,
-                             .printers_ud = &d,
+                             .farm = d.farm,
                              .host = d.cfg.listen_host,
                              .port = d.cfg.listen_port,
                              .keys = d.cfg.keys,

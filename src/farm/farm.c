@@ -1,16 +1,16 @@
 /*
- * farm.c - printers, the prepare stage and the scheduler, tied together
- * on the event loop over the job store (see farm.h).
+ * farm.c - the printers (printer.h), the prepare stage and the scheduler,
+ * tied together on the event loop over the job store (see farm.h).
  *
- * Why one module: each piece below is pure or thin (job.h rules, sched.h
- * matching, store.h transactions, drv.h drivers, pool.h workers); what is
- * left is the glue that reacts to events, and glue reads best in one place.
- * Design: every reaction is "apply the rule, commit to the store, then act
- * on the device", so a crash between the two leaves the store ahead of the
- * printer, which recovery turns into "interrupted" for the operator, never
- * into a silently repeated print.  Work is triggered by a zero-delay timer
- * (farm_kick), so bursts of events coalesce into one scheduling pass.
- * Printers are heap-allocated so drivers can keep a stable pointer.
+ * Why one module: each piece is pure or owns its own state (job.h rules,
+ * sched.h matching, store.h transactions, printer.h printers, pool.h
+ * workers); what is left is the glue that decides what to prepare, for
+ * which printer, and what to start where.  Design: every reaction is
+ * "commit to the store, then act on the device", so a crash between the
+ * two leaves the store ahead of the printer, which recovery turns into
+ * "interrupted" for the operator, never into a silently repeated print.
+ * Work is triggered by a zero-delay timer (farm_kick), so bursts of
+ * printer and job events coalesce into one scheduling pass.
  *
  * Thread: the loop thread; prepare work runs on pool workers with copies,
  * resume reads on the farm's own io thread.
@@ -24,24 +24,6 @@
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "sched.h"
-
-struct printer {
-    struct farm *f;             /* owner */
-    struct farmcfg_printer cfg; /* its config section */
-    enum printer_state state;   /* job.h printer state */
-    struct drv *drv;            /* its driver; NULL if none in this build */
-    int64_t job_id;             /* job on it, 0 if none */
-    int64_t lines_acked;        /* latest from the driver */
-    int64_t lines_saved;        /* last value written to the store */
-    char message[160];          /* why offline / error */
-    uint64_t reconnect;         /* reconnect timer id, 0 if none */
-    int attempts;               /* reconnects since the link was last up (drv_backoff_ms) */
-    bool removed;               /* dropped from the config; freed when idle */
-    bool bed_full;              /* the bed holds a part (store_printer_bed_get): a printer
-                                   that connects goes to awaiting-clear, not idle */
-    bool cancelling;            /* job cancelled; the driver is still running its end
-                                   sequence, so the printer is not free yet */
-};
 
 struct farm {
     struct loop *l;            /* the loop */
@@ -105,51 +87,27 @@ static struct printer *
 find(const struct farm *f, const char *name)
 {
     for (size_t i = 0; i < f->n_printers; i++)
-        if (strcmp(f->printers[i]->cfg.name, name) == 0)
+        if (strcmp(printer_cfg(f->printers[i])->name, name) == 0)
             return f->printers[i];
     return NULL;
 }
 
-/* Record whether p's bed holds a part; a crash after this keeps the bed gate. */
+/* A printer moved or a job on it did: wake event streams, schedule. */
 static void
-set_bed(struct printer *p, bool full)
+on_printer_changed(void *ud)
 {
-    struct sf_err err;
-    if (p->bed_full == full)
-        return;
-    p->bed_full = full;
-    if (store_printer_bed_set(p->f->s, p->cfg.name, full, &err))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    struct farm *f = ud;
+    notify(f);
+    farm_kick(f);
 }
 
-/*
- * Move printer p by ev; log refusals (they mean a driver said something
- * odd).  The bed is recorded here, before the caller records the job: a
- * printer whose bed holds a part comes back from any restart or
- * reconnect awaiting clear.
- */
-static bool
-move(struct printer *p, enum printer_event ev)
+static struct printer *
+add_printer_new(struct farm *f, const struct farmcfg_printer *cfg)
 {
-    struct sf_err err;
-    enum printer_state to;
-    if (printer_next(p->state, ev, p->cfg.auto_eject, &to, &err)) {
-        log_printer(LOG_WARN, p->cfg.name, "%s", err.msg);
-        return false;
-    }
-    if (ev == PRINTER_EV_CONNECTED && to == PRINTER_IDLE && p->bed_full)
-        to = PRINTER_AWAITING_CLEAR;
-    if (to == PRINTER_AWAITING_CLEAR)
-        set_bed(p, true);
-    else if (ev == PRINTER_EV_CLEARED)
-        set_bed(p, false);
-    if (to != p->state) {
-        p->state = to;
-        if (store_printer_set(p->f->s, p->cfg.name, to, &err))
-            log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
-        notify(p->f);
-    }
-    return true;
+    struct printer_env env = {
+        .l = f->l, .s = f->s, .driver = f->hooks.driver, .changed = on_printer_changed, .ud = f
+    };
+    return printer_new(&env, cfg);
 }
 
 /* Apply a job event in the store, logging failures (the job fails alone). */
@@ -162,180 +120,6 @@ job_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_
         log_warn("farm", "%s", err.msg);
     notify(f);
     return rc;
-}
-
-/* ---- drivers ---- */
-
-static void connect_printer(struct printer *p);
-
-static void
-on_reconnect(struct loop *l, void *ud)
-{
-    (void)l;
-    struct printer *p = ud;
-    p->reconnect = 0;
-    connect_printer(p);
-}
-
-static void
-schedule_reconnect(struct printer *p)
-{
-    if (p->reconnect || !p->drv || !p->cfg.enabled)
-        return;
-    p->reconnect = loop_timer_add(p->f->l, drv_backoff_ms(p->attempts++), on_reconnect, p);
-}
-
-static void
-connect_printer(struct printer *p)
-{
-    struct sf_err err;
-    if (p->drv->ops->open(p->drv, &err)) {
-        snprintf(p->message, sizeof(p->message), "%s", err.msg);
-        log_printer(LOG_WARN, p->cfg.name, "connect: %s", err.msg);
-        schedule_reconnect(p);
-    }
-}
-
-/* The job on p ended badly (drop, fault): fail it, keep the retry policy. */
-static void
-fail_job(struct printer *p, const char *why)
-{
-    if (!p->job_id)
-        return;
-    struct job_event_args a = { .lines_acked = p->lines_acked, .reason = why };
-    job_event(p->f, p->job_id, JOB_EV_PRINT_FAILED, &a);
-    p->job_id = 0;
-}
-
-static void
-on_drv_event(struct drv *d, enum drv_event ev, void *ud)
-{
-    struct printer *p = ud;
-    struct farm *f = p->f;
-    const struct drv_status *st = &d->status;
-    if (f->stopping)
-        return; /* farm_free left its jobs interrupted, as a crash would */
-    switch (ev) {
-    case DRV_EV_STATE:
-        if (st->state == DRV_IDLE && p->state == PRINTER_OFFLINE) {
-            p->attempts = 0;
-            p->message[0] = '\0';
-            move(p, PRINTER_EV_CONNECTED);
-        } else if (st->state == DRV_OFFLINE && p->state != PRINTER_OFFLINE) {
-            p->cancelling = false;
-            fail_job(p, "printer went offline");
-            snprintf(p->message, sizeof(p->message), "%s", st->message);
-            move(p, PRINTER_EV_DISCONNECTED);
-            schedule_reconnect(p);
-        } else if (st->state == DRV_ERROR && p->state != PRINTER_ERROR) {
-            fail_job(p, st->message[0] ? st->message : "printer reported an error");
-            snprintf(p->message, sizeof(p->message), "%s", st->message);
-            move(p, PRINTER_EV_FAULT);
-        } else if (st->state == DRV_PAUSED && p->state == PRINTER_PRINTING) {
-            /* paused by the printer itself (filament runout, M600) */
-            struct job_event_args a = { .lines_acked = p->lines_acked };
-            job_event(f, p->job_id, JOB_EV_PAUSE, &a);
-            move(p, PRINTER_EV_PAUSE);
-        } else if (st->state == DRV_PRINTING && p->state == PRINTER_PAUSED) {
-            job_event(f, p->job_id, JOB_EV_RESUME, NULL);
-            move(p, PRINTER_EV_RESUME);
-        }
-        break;
-    case DRV_EV_PROGRESS:
-        p->lines_acked = (int64_t)st->lines_acked;
-        break;
-    case DRV_EV_TEMPS:
-        break; /* read from d->status when asked */
-    case DRV_EV_JOB_DONE: {
-        /* the bed first: a crash between the two leaves the job interrupted */
-        struct job_event_args a = { .lines_acked = (int64_t)st->lines_acked };
-        int64_t id = p->job_id;
-        p->job_id = 0;
-        move(p, PRINTER_EV_FINISHED);
-        if (id)
-            job_event(f, id, JOB_EV_PRINT_DONE, &a);
-        break;
-    }
-    case DRV_EV_JOB_CANCELLED:
-        /* The farm recorded the cancel when it asked; the printer is free
-           only now that the end sequence has run. */
-        if (p->cancelling) {
-            p->cancelling = false;
-            move(p, PRINTER_EV_FINISHED);
-        }
-        break;
-    case DRV_EV_JOB_FAILED:
-        p->cancelling = false;
-        p->lines_acked = (int64_t)st->lines_acked;
-        fail_job(p, st->message[0] ? st->message : "the print stopped");
-        move(p, st->state == DRV_ERROR ? PRINTER_EV_FAULT : PRINTER_EV_FINISHED);
-        break;
-    }
-    farm_kick(f);
-}
-
-/* What a driver being closed for good reports goes nowhere. */
-static void
-ignore_event(struct drv *d, enum drv_event ev, void *ud)
-{
-    (void)d, (void)ev, (void)ud;
-}
-
-static void
-printer_free(struct printer *p)
-{
-    if (!p)
-        return;
-    if (p->reconnect)
-        loop_timer_cancel(p->f->l, p->reconnect);
-    if (p->drv) {
-        /* close() reports OFFLINE at once; heard, it would fail the job and
-           arm a reconnect timer for a printer freed below */
-        p->drv->on_event = ignore_event;
-        /* drv_free() lives with the drivers; the vtable is all we rely on. */
-        p->drv->ops->close(p->drv);
-        p->drv->ops->destroy(p->drv);
-    }
-    free(p);
-}
-
-static struct printer *
-printer_new(struct farm *f, const struct farmcfg_printer *cfg)
-{
-    struct printer *p = mem_calloc(1, sizeof(*p));
-    if (!p)
-        return NULL;
-    p->f = f;
-    p->cfg = *cfg;
-    p->state = PRINTER_OFFLINE;
-    struct sf_err err;
-    if (store_printer_set(f->s, cfg->name, PRINTER_OFFLINE, &err) ||
-        store_printer_bed_get(f->s, cfg->name, &p->bed_full, &err))
-        log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
-    if (p->bed_full)
-        log_printer(LOG_INFO, cfg->name, "its bed holds a part: clear it before the next job");
-    if (!cfg->enabled) {
-        snprintf(p->message, sizeof(p->message), "disabled in the config");
-        return p;
-    }
-    if (!f->hooks.driver) {
-        snprintf(p->message, sizeof(p->message), "not connected: the farm runs without drivers");
-        return p;
-    }
-    struct drv_config dc = { .name = cfg->name,
-                             .kind = cfg->driver,
-                             .port = cfg->port,
-                             .baud = cfg->baud,
-                             .url = cfg->url,
-                             .api_key = cfg->api_key };
-    p->drv = f->hooks.driver(f->l, &dc, on_drv_event, p, &err);
-    if (!p->drv) {
-        snprintf(p->message, sizeof(p->message), "%s", err.msg);
-        log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
-        return p;
-    }
-    connect_printer(p);
-    return p;
 }
 
 /* ---- prepare ---- */
@@ -441,15 +225,16 @@ prep_done(struct loop *l, void *ud, int rc)
 static void
 printer_view(const struct printer *p, struct sched_printer *out)
 {
-    *out = (struct sched_printer){ .name = p->cfg.name,
-                                   .state = p->state,
-                                   .enabled = p->cfg.enabled && !p->removed,
-                                   .material = p->cfg.material,
-                                   .nozzle_mm = p->cfg.nozzle_mm,
-                                   .group = p->cfg.group,
-                                   .profile = p->cfg.profile,
-                                   .overhang_deg = p->cfg.overhang_deg };
-    memcpy(out->bed_mm, p->cfg.bed_mm, sizeof(out->bed_mm));
+    const struct farmcfg_printer *c = printer_cfg(p);
+    *out = (struct sched_printer){ .name = c->name,
+                                   .state = printer_state(p),
+                                   .enabled = c->enabled && !printer_removed(p),
+                                   .material = c->material,
+                                   .nozzle_mm = c->nozzle_mm,
+                                   .group = c->group,
+                                   .profile = c->profile,
+                                   .overhang_deg = c->overhang_deg };
+    memcpy(out->bed_mm, c->bed_mm, sizeof(out->bed_mm));
 }
 
 /*
@@ -470,11 +255,11 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     t->f = f;
     t->store = f->s;
     t->reslice = reslice;
-    t->angle_deg = j->opts.overhang_deg > 0 ? j->opts.overhang_deg : p->cfg.overhang_deg;
+    t->angle_deg = j->opts.overhang_deg > 0 ? j->opts.overhang_deg : printer_cfg(p)->overhang_deg;
     sched_key(&view, j->opts.overhang_deg, t->key);
     t->req.job_id = j->id;
     t->req.opts = j->opts;
-    t->req.printer = p->cfg;
+    t->req.printer = *printer_cfg(p);
     snprintf(t->req.profiles_dir, sizeof(t->req.profiles_dir), "%s", f->profiles_dir);
     snprintf(t->req.part_name, sizeof(t->req.part_name), "%s", j->opts.name);
     bool reuse = j->mesh_sha[0] && j->mesh_angle_deg == t->angle_deg;
@@ -511,7 +296,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     }
     if (reslice) {
         log_info("farm", "job %lld: preparing it again for %s (%s)%s", (long long)j->id,
-                 p->cfg.name, t->key, reuse ? ", reusing the optimized part" : "");
+                 printer_cfg(p)->name, t->key, reuse ? ", reusing the optimized part" : "");
         t->next = f->reslices;
         f->reslices = t;
     }
@@ -539,25 +324,11 @@ start(struct farm *f, const struct job_row *j, struct printer *p)
 {
     struct sf_err err;
     char path[1200];
-    struct job_event_args a = { .printer = p->cfg.name };
     if (store_file_path(f->s, j->gcode_sha, path, sizeof(path), &err)) {
         log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
         return;
     }
-    /* Commit first: a crash from here on leaves the job interrupted. */
-    if (job_event(f, j->id, JOB_EV_START, &a))
-        return;
-    p->job_id = j->id;
-    p->lines_acked = p->lines_saved = 0;
-    move(p, PRINTER_EV_START);
-    /* The scan prepare made; G-code prepared before the count was stored
-       (gcode_lines 0) is read by the driver itself, once. */
-    struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
-    if (p->drv->ops->start_job(p->drv, path, 0, j->gcode_lines > 0 ? &scan : NULL, &err)) {
-        log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)j->id, err.msg);
-        fail_job(p, err.msg);
-        move(p, PRINTER_EV_FINISHED);
-    }
+    printer_start(p, j, path);
 }
 
 static void
@@ -585,7 +356,7 @@ run(struct loop *l, void *ud)
         /* An interrupted part is still on this bed, waiting to be resumed:
            nothing else may start on top of it. */
         for (size_t k = 0; k < n; k++)
-            if (jobs[k].state == JOB_INTERRUPTED && strcmp(jobs[k].printer, p->cfg.name) == 0 &&
+            if (jobs[k].state == JOB_INTERRUPTED && strcmp(jobs[k].printer, sp[i].name) == 0 &&
                 sp[i].state == PRINTER_IDLE)
                 sp[i].state = PRINTER_AWAITING_CLEAR;
     }
@@ -643,15 +414,15 @@ on_progress(struct loop *l, void *ud)
     struct store_progress *batch = f->n_printers ? mem_array(f->n_printers, sizeof(*batch)) : NULL;
     size_t n = 0;
     for (size_t i = 0; batch && i < f->n_printers; i++) {
-        struct printer *p = f->printers[i];
-        if (p->job_id && p->lines_acked != p->lines_saved)
-            batch[n++] = (struct store_progress){ p->job_id, p->lines_acked, false };
+        int64_t id, lines;
+        if (printer_progress(f->printers[i], &id, &lines))
+            batch[n++] = (struct store_progress){ id, lines, false };
     }
     if (n && store_jobs_progress(f->s, batch, n, NULL) > 0) {
         for (size_t i = 0, k = 0; i < f->n_printers && k < n; i++) {
-            struct printer *p = f->printers[i];
-            if (p->job_id && p->lines_acked != p->lines_saved && batch[k++].saved)
-                p->lines_saved = p->lines_acked;
+            int64_t id, lines;
+            if (printer_progress(f->printers[i], &id, &lines) && batch[k++].saved)
+                printer_progress_saved(f->printers[i], lines);
         }
     }
     free(batch);
@@ -666,7 +437,7 @@ add_printer(struct farm *f, const struct farmcfg_printer *cfg, struct sf_err *er
     size_t cap = f->n_printers;
     if (!mem_grow((void **)&f->printers, &cap, f->n_printers + 1, sizeof(*f->printers)))
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
-    struct printer *p = printer_new(f, cfg);
+    struct printer *p = add_printer_new(f, cfg);
     if (!p)
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
     f->printers[f->n_printers++] = p;
@@ -717,14 +488,8 @@ farm_free(struct farm *f)
        as a crash does (the operator resumes or restarts it): no retry spent,
        nothing requeued from line 0.  The drivers' goodbyes are not heard. */
     f->stopping = true;
-    for (size_t i = 0; i < f->n_printers; i++) {
-        struct printer *p = f->printers[i];
-        struct sf_err err;
-        struct job_event_args a = { .reason = "the daemon stopped while this job was printing" };
-        if (p->job_id && (store_job_progress(f->s, p->job_id, p->lines_acked, &err) ||
-                          store_job_event(f->s, p->job_id, JOB_EV_CRASHED, &a, NULL, &err)))
-            log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
-    }
+    for (size_t i = 0; i < f->n_printers; i++)
+        printer_stop(f->printers[i]);
     for (size_t i = 0; i < f->n_printers; i++)
         printer_free(f->printers[i]);
     free(f->printers);
@@ -746,7 +511,7 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     /* Printers that left the config: free when not printing, else after. */
     for (size_t i = 0; i < f->n_printers; i++) {
         struct printer *p = f->printers[i];
-        p->removed = !farmcfg_printer(cfg, p->cfg.name);
+        printer_set_removed(p, !farmcfg_printer(cfg, printer_cfg(p)->name));
     }
     for (size_t i = 0; i < cfg->n_printers; i++) {
         const struct farmcfg_printer *c = &cfg->printers[i];
@@ -756,24 +521,24 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
                 return err ? err->code : SF_ENOMEM;
             continue;
         }
-        if (same_link(&p->cfg, c) || p->job_id) {
+        const struct farmcfg_printer *old = printer_cfg(p);
+        if (same_link(old, c) || printer_job(p)) {
             /* Same link, or busy: change what the scheduler reads only. */
-            if (!same_link(&p->cfg, c))
+            struct farmcfg_printer next = *c;
+            if (!same_link(old, c)) {
                 log_printer(LOG_WARN, c->name, "link change waits for the print to end");
-            struct farmcfg_printer keep = p->cfg;
-            p->cfg = *c;
-            if (!same_link(&keep, c)) {
-                memcpy(p->cfg.driver, keep.driver, sizeof(keep.driver));
-                memcpy(p->cfg.port, keep.port, sizeof(keep.port));
-                memcpy(p->cfg.url, keep.url, sizeof(keep.url));
-                memcpy(p->cfg.api_key, keep.api_key, sizeof(keep.api_key));
-                p->cfg.baud = keep.baud;
-                p->cfg.enabled = keep.enabled;
+                memcpy(next.driver, old->driver, sizeof(next.driver));
+                memcpy(next.port, old->port, sizeof(next.port));
+                memcpy(next.url, old->url, sizeof(next.url));
+                memcpy(next.api_key, old->api_key, sizeof(next.api_key));
+                next.baud = old->baud;
+                next.enabled = old->enabled;
             }
+            printer_set_cfg(p, &next);
             continue;
         }
         /* New link and idle: replace the printer. */
-        struct printer *fresh = printer_new(f, c);
+        struct printer *fresh = add_printer_new(f, c);
         if (!fresh)
             return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
         for (size_t k = 0; k < f->n_printers; k++)
@@ -784,7 +549,7 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     size_t w = 0;
     for (size_t i = 0; i < f->n_printers; i++) {
         struct printer *p = f->printers[i];
-        if (p->removed && !p->job_id) {
+        if (printer_removed(p) && !printer_job(p)) {
             printer_free(p);
             continue;
         }
@@ -804,85 +569,18 @@ farm_printer_count(const struct farm *f)
 }
 
 void
-farm_printer_info(const struct farm *f, size_t i, struct farm_printer_info *out)
+farm_printer_info(const struct farm *f, size_t i, struct printer_info *out)
 {
-    const struct printer *p = f->printers[i];
-    memset(out, 0, sizeof(*out));
-    out->cfg = &p->cfg;
-    out->state = p->state;
-    out->job_id = p->job_id;
-    out->message = p->message;
-    if (p->drv) {
-        const struct drv_status *st = &p->drv->status;
-        out->progress = st->progress;
-        out->nozzle_c = st->nozzle_c;
-        out->nozzle_target_c = st->nozzle_target_c;
-        out->bed_c = st->bed_c;
-        out->bed_target_c = st->bed_target_c;
-    }
+    printer_info(f->printers[i], out);
 }
 
 int
-farm_printer_action(struct farm *f, const char *name, const char *action, struct sf_err *err)
+farm_printer_action(struct farm *f, const char *name, enum printer_action act, struct sf_err *err)
 {
     struct printer *p = find(f, name);
     if (!p)
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
-    enum printer_event ev;
-    if (strcmp(action, "pause") == 0)
-        ev = PRINTER_EV_PAUSE;
-    else if (strcmp(action, "resume") == 0)
-        ev = PRINTER_EV_RESUME;
-    else if (strcmp(action, "cancel") == 0)
-        ev = PRINTER_EV_FINISHED;
-    else if (strcmp(action, "cleared") == 0)
-        ev = PRINTER_EV_CLEARED;
-    else
-        return sf_err_set(err, SF_EUNSUPP, "no printer action '%.32s'", action);
-    enum printer_state to;
-    int rc = printer_next(p->state, ev, p->cfg.auto_eject, &to, err);
-    if (rc)
-        return sf_err_prefix(err, "printer %s", name);
-    if (ev != PRINTER_EV_CLEARED && (!p->drv || !p->job_id))
-        return sf_err_set(err, SF_EINVAL, "printer %s has no job to %s", name, action);
-    if (ev == PRINTER_EV_PAUSE)
-        rc = p->drv->ops->pause(p->drv, err);
-    else if (ev == PRINTER_EV_RESUME)
-        rc = p->drv->ops->resume(p->drv, err);
-    else if (ev == PRINTER_EV_FINISHED)
-        rc = p->drv->ops->cancel(p->drv, err);
-    if (rc)
-        return rc;
-    /* A driver that reports its new state at once (Marlin's pause and
-       resume do) has already moved the job and printer through
-       on_drv_event: do not apply the move twice. */
-    if (ev != PRINTER_EV_FINISHED && ev != PRINTER_EV_CLEARED && p->state == to) {
-        farm_kick(f);
-        return SF_OK;
-    }
-    if (p->job_id) {
-        struct job_event_args a = { .lines_acked = p->lines_acked,
-                                    .reason = "cancelled by an operator" };
-        enum job_event jev = ev == PRINTER_EV_PAUSE    ? JOB_EV_PAUSE
-                             : ev == PRINTER_EV_RESUME ? JOB_EV_RESUME
-                                                       : JOB_EV_CANCEL;
-        if (jev == JOB_EV_CANCEL && !p->cfg.auto_eject)
-            set_bed(p, true); /* the cancelled part stays on the bed */
-        if ((rc = store_job_event(f->s, p->job_id, jev, &a, NULL, err)))
-            return rc;
-        if (jev == JOB_EV_CANCEL) {
-            p->job_id = 0;
-            if (p->drv->status.state == DRV_PRINTING) {
-                /* still running the end sequence: free on DRV_EV_JOB_CANCELLED */
-                p->cancelling = true;
-                notify(f);
-                return SF_OK;
-            }
-        }
-    }
-    move(p, ev);
-    farm_kick(f);
-    return SF_OK;
+    return printer_action(p, act, err);
 }
 
 /* A resume waiting for its read (drv_job_scan_to) on the io thread. */
@@ -904,41 +602,15 @@ resume_work(void *ud, const atomic_bool *cancel)
     return drv_job_scan_to(r->path, r->line, &r->scan, &r->err);
 }
 
-/* Start the job on its printer, or fail it; the printer is already printing it in the store. */
-static void
-resume_start(struct printer *p, const char *path, uint64_t line, const struct drv_job_scan *scan)
-{
-    struct sf_err err;
-    if (p->drv->ops->start_job(p->drv, path, line, scan, &err)) {
-        log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)p->job_id, err.msg);
-        fail_job(p, err.msg);
-        move(p, PRINTER_EV_FINISHED);
-    }
-}
-
 static void
 resume_done(struct loop *l, void *ud, int rc)
 {
     (void)l;
     struct resume *r = ud;
+    /* Shutting down (SF_ECANCELED) leaves it for printer_stop. */
     struct printer *p = rc == SF_ECANCELED ? NULL : find(r->f, r->printer);
-    /* Meanwhile the job may have been cancelled or its printer lost (the
-       job moved on with it); shutting down leaves it printing in the store,
-       which the next start's recovery makes interrupted. */
-    if (p && p->job_id == r->job_id) {
-        if (rc == SF_OK &&
-            (p->state != PRINTER_PRINTING || !p->drv || p->drv->status.state != DRV_IDLE))
-            rc = sf_err_set(&r->err, SF_EAGAIN, "printer %s is %s: the resume cannot start",
-                            p->cfg.name, printer_state_name(p->state));
-        if (rc) {
-            log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)r->job_id, r->err.msg);
-            fail_job(p, r->err.msg);
-            move(p, PRINTER_EV_FINISHED);
-        } else {
-            resume_start(p, r->path, r->line, &r->scan);
-        }
-        farm_kick(r->f);
-    }
+    if (p)
+        printer_resume_go(p, r->job_id, r->path, r->line, &r->scan, rc, r->err.msg);
     free(r);
 }
 
@@ -953,13 +625,13 @@ farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL, "job %lld is %s: only an interrupted job can be resumed",
                           (long long)id, job_state_name(j.state));
     struct printer *p = find(f, j.printer);
-    if (!p || p->removed)
+    if (!p || printer_removed(p))
         return sf_err_set(err, SF_EINVAL,
                           "job %lld: its part is on printer '%s', which is no longer configured",
                           (long long)id, j.printer);
-    if (p->state != PRINTER_IDLE || !p->drv || p->job_id)
+    if (printer_state(p) != PRINTER_IDLE || !printer_connected(p) || printer_job(p))
         return sf_err_set(err, SF_EINVAL, "job %lld: printer %s is %s; resume when it is idle",
-                          (long long)id, p->cfg.name, printer_state_name(p->state));
+                          (long long)id, j.printer, printer_state_name(printer_state(p)));
     if (line < 0)
         line = j.lines_acked;
     char path[1200];
@@ -977,29 +649,23 @@ farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
                           (long long)id, (long long)line,
                           (unsigned long long)(total > 1 ? total - 1 : 1),
                           (unsigned long long)total);
-    /* Commit first (farm.c's rule): a crash from here on leaves it interrupted again. */
-    struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line };
-    if ((rc = store_job_event(f->s, id, JOB_EV_RESUME, &a, NULL, err)))
+    if ((rc = printer_resume_commit(p, id, line, err)))
         return rc;
-    notify(f);
-    p->job_id = id;
-    p->lines_acked = p->lines_saved = line;
-    move(p, PRINTER_EV_START);
     /* The machine state at `line` comes from reading the file up to it
        (0.5 s for 2/3 of a 112 MB job): on the io thread, so the other
        printers' streams do not wait; the driver starts when it is read. */
-    log_printer(LOG_INFO, p->cfg.name, "job %lld: resumed at line %lld of %llu", (long long)id,
+    log_printer(LOG_INFO, j.printer, "job %lld: resumed at line %lld of %llu", (long long)id,
                 (long long)line, (unsigned long long)total);
     struct resume *r = mem_calloc(1, sizeof(*r));
     struct sf_err perr;
     if (r) {
         *r = (struct resume){ .f = f, .job_id = id, .line = (uint64_t)line, .scan = scan };
-        snprintf(r->printer, sizeof(r->printer), "%s", p->cfg.name);
+        snprintf(r->printer, sizeof(r->printer), "%s", j.printer);
         snprintf(r->path, sizeof(r->path), "%s", path);
     }
     if (!r || !pool_submit(f->io, resume_work, resume_done, r, &perr)) {
         free(r);
-        resume_start(p, path, (uint64_t)line, &scan); /* reads on this thread */
+        printer_resume_go(p, id, path, (uint64_t)line, &scan, SF_OK, ""); /* reads here */
     }
     farm_kick(f);
     return SF_OK;

@@ -226,7 +226,8 @@ static const char farm_ini[] = "[printer a]\ndriver: marlin\nport: pty:/dev/null
 static const char *setup_held; /* held while the farm opens its printers */
 
 static int
-setup(const char *name, const char *ini, farm_driver_fn driver, prepare_fn prep, struct sf_err *err)
+setup(const char *name, const char *ini, printer_driver_fn driver, prepare_fn prep,
+      struct sf_err *err)
 {
     char dir[512];
     snprintf(dir, sizeof(dir), "%s/%s", t_tmpdir(), name);
@@ -293,7 +294,7 @@ state_of(int64_t id)
 static enum printer_state
 pstate(size_t i)
 {
-    struct farm_printer_info info;
+    struct printer_info info;
     farm_printer_info(fx.f, i, &info);
     return info.state;
 }
@@ -362,19 +363,19 @@ T_CASE(farm_prints_copies_with_bed_clear_gate_and_auto_eject)
     T_EQ_INT(a->starts, 1);
     T_OK(store_job_get(fx.s, j1, &j, &err), &err);
     T_EQ_STR(j.reason, "waits for a printer: a is awaiting-clear");
-    T_OK(farm_printer_action(fx.f, "a", "cleared", &err), &err);
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
     T_TRUE(wait_job(j1, JOB_PRINTING));
     T_EQ_INT(a->starts, 2);
 
     /* pause and resume through the farm */
-    T_OK(farm_printer_action(fx.f, "a", "pause", &err), &err);
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_PAUSE, &err), &err);
     T_EQ_INT(state_of(j1), JOB_PAUSED);
     T_EQ_INT(a->pauses, 1);
-    T_ERR(farm_printer_action(fx.f, "a", "pause", &err), SF_EINVAL, &err,
+    T_ERR(farm_printer_action(fx.f, "a", PRINTER_ACT_PAUSE, &err), SF_EINVAL, &err,
           "cannot pause a printer that is paused");
-    T_OK(farm_printer_action(fx.f, "a", "resume", &err), &err);
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_RESUME, &err), &err);
     T_EQ_INT(state_of(j1), JOB_PRINTING);
-    T_EQ_INT(farm_printer_action(fx.f, "zz", "pause", &err), SF_ENOTFOUND);
+    T_EQ_INT(farm_printer_action(fx.f, "zz", PRINTER_ACT_PAUSE, &err), SF_ENOTFOUND);
 
     /* b has an ejector: done means idle at once */
     report(b, DRV_IDLE, DRV_EV_JOB_DONE);
@@ -425,7 +426,7 @@ T_CASE(farm_dropped_printer_fails_print_into_retry_and_reconnects)
     T_EQ_INT(a->opens, 2);
     T_EQ_INT(state_of(id), JOB_PRINTING);
     /* the operator cancels: the printer keeps the bed gate */
-    T_OK(farm_printer_action(fx.f, "a", "cancel", &err), &err);
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CANCEL, &err), &err);
     T_EQ_INT(state_of(id), JOB_CANCELLED);
     T_EQ_INT(pstate(0), PRINTER_AWAITING_CLEAR);
     T_EQ_INT(a->cancels, 1);
@@ -625,7 +626,7 @@ T_CASE(farm_reload_adds_and_removes_printers)
     T_OK(farmcfg_parse(&c2, next, strlen(next), "next.ini", &err), &err);
     T_OK(farm_reload(fx.f, &c2, &err), &err);
     T_EQ_INT(farm_printer_count(fx.f), 3); /* a stays until its print ends */
-    struct farm_printer_info info;
+    struct printer_info info;
     farm_printer_info(fx.f, 1, &info);
     T_EQ_STR(info.cfg->material, "ABS");
     T_EQ_INT(state_of(id), JOB_PRINTING); /* undisturbed */
@@ -927,7 +928,7 @@ check_bed_gate_kept(void)
     T_EQ_INT(tdrv_named("a")->starts, 0);
     T_EQ_INT(state_of(next), JOB_READY);
     struct sf_err err;
-    T_OK(farm_printer_action(fx.f, "a", "cleared", &err), &err);
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
     T_TRUE(wait_job(next, JOB_PRINTING));
 }
 

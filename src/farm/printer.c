@@ -1,0 +1,534 @@
+/*
+ * printer.c - one printer: its state machine, its driver, the job on it and
+ * its bed gate (printer.h).
+ *
+ * Why its own module: the printer's state used to live in three places (the
+ * driver's status, the farm's struct printer, a shadow "cancelling" flag)
+ * and driver events came back as calls into whoever had just called the
+ * driver, so the farm carried guards against applying a move twice.  Here
+ * the printer state is job.h's machine alone, fed by one queue of driver
+ * events, and every other module sees the printer only through printer.h.
+ *
+ * Design: the driver callback copies (event, status) into p->queue and arms
+ * a zero-delay timer; the timer applies the queue in order.  A timer, not
+ * loop_post(): a posted callback cannot be withdrawn, and a printer freed
+ * on reload with events queued must take them with it.  A cancel whose end
+ * sequence still runs is a printing printer with no job, freed by
+ * DRV_EV_JOB_CANCELLED.
+ *
+ * Thread: the loop thread.
+ */
+#include "printer.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "../base/log.h"
+#include "../base/mem.h"
+
+/* One driver event as it happened. */
+struct queued {
+    enum drv_event ev;    /* what */
+    struct drv_status st; /* the driver's status at that moment */
+};
+
+struct printer {
+    struct printer_env env;     /* owner, store, loop */
+    struct farmcfg_printer cfg; /* its config section */
+    enum printer_state state;   /* job.h printer state: the one truth */
+    struct drv *drv;            /* its driver; NULL without one */
+    int64_t job_id;             /* job on it, 0 if none */
+    int64_t lines_acked;        /* latest from the driver */
+    int64_t lines_saved;        /* last value written to the store */
+    char message[160];          /* why offline / error */
+    uint64_t reconnect;         /* reconnect timer id, 0 if none */
+    int attempts;               /* reconnects since the link was last up (drv_backoff_ms) */
+    bool removed;               /* dropped from the config */
+    bool bed_full;              /* the bed holds a part (store_printer_bed_get) */
+    bool deaf;                  /* printer_stop: driver events are dropped */
+    struct queued *queue;       /* driver events not applied yet, n_queue of cap_queue */
+    size_t n_queue, cap_queue;
+    uint64_t deliver; /* timer applying the queue, 0 if none */
+};
+
+static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
+                                                                "cleared" };
+
+bool
+printer_action_parse(const char *s, enum printer_action *out)
+{
+    for (int i = 0; i < PRINTER_ACTION_COUNT; i++)
+        if (strcmp(s, action_names[i]) == 0) {
+            *out = (enum printer_action)i;
+            return true;
+        }
+    return false;
+}
+
+const char *
+printer_action_name(enum printer_action a)
+{
+    return (unsigned)a < PRINTER_ACTION_COUNT ? action_names[a] : "?";
+}
+
+static void
+changed(struct printer *p)
+{
+    if (p->env.changed)
+        p->env.changed(p->env.ud);
+}
+
+/* Record whether p's bed holds a part; a crash after this keeps the bed gate. */
+static void
+set_bed(struct printer *p, bool full)
+{
+    struct sf_err err;
+    if (p->bed_full == full)
+        return;
+    p->bed_full = full;
+    if (store_printer_bed_set(p->env.s, p->cfg.name, full, &err))
+        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+}
+
+/*
+ * Move p by ev; log refusals (they mean a driver said something odd).  The
+ * bed is recorded here, before the caller records the job: a printer whose
+ * bed holds a part comes back from any restart or reconnect awaiting clear.
+ */
+static bool
+move(struct printer *p, enum printer_event ev)
+{
+    struct sf_err err;
+    enum printer_state to;
+    if (printer_next(p->state, ev, p->cfg.auto_eject, &to, &err)) {
+        log_printer(LOG_WARN, p->cfg.name, "%s", err.msg);
+        return false;
+    }
+    if (ev == PRINTER_EV_CONNECTED && to == PRINTER_IDLE && p->bed_full)
+        to = PRINTER_AWAITING_CLEAR;
+    if (to == PRINTER_AWAITING_CLEAR)
+        set_bed(p, true);
+    else if (ev == PRINTER_EV_CLEARED)
+        set_bed(p, false);
+    if (to != p->state) {
+        p->state = to;
+        if (store_printer_set(p->env.s, p->cfg.name, to, &err))
+            log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    }
+    changed(p);
+    return true;
+}
+
+/* Apply a job event in the store, logging failures (the job fails alone). */
+static int
+job_event(struct printer *p, int64_t id, enum job_event ev, const struct job_event_args *a)
+{
+    struct sf_err err;
+    int rc = store_job_event(p->env.s, id, ev, a, NULL, &err);
+    if (rc)
+        log_printer(LOG_WARN, p->cfg.name, "%s", err.msg);
+    changed(p);
+    return rc;
+}
+
+/* The job on p ended badly (drop, fault): fail it, keep the retry policy. */
+static void
+fail_job(struct printer *p, const char *why)
+{
+    if (!p->job_id)
+        return;
+    struct job_event_args a = { .lines_acked = p->lines_acked, .reason = why };
+    int64_t id = p->job_id;
+    p->job_id = 0;
+    job_event(p, id, JOB_EV_PRINT_FAILED, &a);
+}
+
+/* ---- link ---- */
+
+static void connect_printer(struct printer *p);
+
+static void
+on_reconnect(struct loop *l, void *ud)
+{
+    (void)l;
+    struct printer *p = ud;
+    p->reconnect = 0;
+    connect_printer(p);
+}
+
+static void
+schedule_reconnect(struct printer *p)
+{
+    if (p->reconnect || !p->drv || !p->cfg.enabled)
+        return;
+    p->reconnect = loop_timer_add(p->env.l, drv_backoff_ms(p->attempts++), on_reconnect, p);
+}
+
+static void
+connect_printer(struct printer *p)
+{
+    struct sf_err err;
+    if (p->drv->ops->open(p->drv, &err)) {
+        snprintf(p->message, sizeof(p->message), "%s", err.msg);
+        log_printer(LOG_WARN, p->cfg.name, "connect: %s", err.msg);
+        schedule_reconnect(p);
+    }
+}
+
+/* ---- driver events, applied on a later loop turn ---- */
+
+static void
+apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
+{
+    switch (ev) {
+    case DRV_EV_STATE:
+        if (st->state == DRV_IDLE && p->state == PRINTER_OFFLINE) {
+            p->attempts = 0;
+            p->message[0] = '\0';
+            move(p, PRINTER_EV_CONNECTED);
+        } else if (st->state == DRV_OFFLINE && p->state != PRINTER_OFFLINE) {
+            fail_job(p, "printer went offline");
+            snprintf(p->message, sizeof(p->message), "%s", st->message);
+            move(p, PRINTER_EV_DISCONNECTED);
+            schedule_reconnect(p);
+        } else if (st->state == DRV_ERROR && p->state != PRINTER_ERROR) {
+            fail_job(p, st->message[0] ? st->message : "printer reported an error");
+            snprintf(p->message, sizeof(p->message), "%s", st->message);
+            move(p, PRINTER_EV_FAULT);
+        } else if (st->state == DRV_PAUSED && p->state == PRINTER_PRINTING && p->job_id) {
+            /* paused by the printer itself (filament runout, M600) */
+            struct job_event_args a = { .lines_acked = p->lines_acked };
+            job_event(p, p->job_id, JOB_EV_PAUSE, &a);
+            move(p, PRINTER_EV_PAUSE);
+        } else if (st->state == DRV_PRINTING && p->state == PRINTER_PAUSED && p->job_id) {
+            job_event(p, p->job_id, JOB_EV_RESUME, NULL);
+            move(p, PRINTER_EV_RESUME);
+        }
+        break;
+    case DRV_EV_PROGRESS:
+        p->lines_acked = (int64_t)st->lines_acked;
+        break;
+    case DRV_EV_TEMPS:
+        break; /* read from the driver's status when asked */
+    case DRV_EV_JOB_DONE: {
+        /* the bed first: a crash between the two leaves the job interrupted */
+        struct job_event_args a = { .lines_acked = (int64_t)st->lines_acked };
+        int64_t id = p->job_id;
+        p->job_id = 0;
+        move(p, PRINTER_EV_FINISHED);
+        if (id)
+            job_event(p, id, JOB_EV_PRINT_DONE, &a);
+        break;
+    }
+    case DRV_EV_JOB_CANCELLED:
+        /* The cancel was recorded when it was asked; a printer still
+           printing with no job ran the end sequence, and is free now. */
+        if (p->state == PRINTER_PRINTING && !p->job_id)
+            move(p, PRINTER_EV_FINISHED);
+        break;
+    case DRV_EV_JOB_FAILED:
+        p->lines_acked = (int64_t)st->lines_acked;
+        fail_job(p, st->message[0] ? st->message : "the print stopped");
+        if (p->state == PRINTER_PRINTING || p->state == PRINTER_PAUSED)
+            move(p, st->state == DRV_ERROR ? PRINTER_EV_FAULT : PRINTER_EV_FINISHED);
+        break;
+    }
+}
+
+static void
+deliver(struct loop *l, void *ud)
+{
+    (void)l;
+    struct printer *p = ud;
+    p->deliver = 0;
+    /* apply() never calls the driver back into this queue synchronously,
+       but a reconnect's open() may queue more: those wait for the next timer */
+    size_t n = p->n_queue;
+    struct queued *q = p->queue;
+    p->queue = NULL;
+    p->n_queue = p->cap_queue = 0;
+    for (size_t i = 0; i < n && !p->deaf; i++)
+        apply(p, q[i].ev, &q[i].st);
+    free(q);
+}
+
+static void
+on_drv_event(struct drv *d, enum drv_event ev, void *ud)
+{
+    struct printer *p = ud;
+    if (p->deaf)
+        return;
+    if (!mem_grow((void **)&p->queue, &p->cap_queue, p->n_queue + 1, sizeof(*p->queue))) {
+        log_printer(LOG_ERROR, p->cfg.name, "out of memory: driver event %d lost", (int)ev);
+        return;
+    }
+    p->queue[p->n_queue++] = (struct queued){ ev, d->status };
+    if (!p->deliver)
+        p->deliver = loop_timer_add(p->env.l, 0, deliver, p);
+}
+
+/* ---- lifecycle ---- */
+
+struct printer *
+printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
+{
+    struct printer *p = mem_calloc(1, sizeof(*p));
+    if (!p)
+        return NULL;
+    p->env = *env;
+    p->cfg = *cfg;
+    p->state = PRINTER_OFFLINE;
+    struct sf_err err;
+    if (store_printer_set(env->s, cfg->name, PRINTER_OFFLINE, &err) ||
+        store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err))
+        log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
+    if (p->bed_full)
+        log_printer(LOG_INFO, cfg->name, "its bed holds a part: clear it before the next job");
+    if (!cfg->enabled) {
+        snprintf(p->message, sizeof(p->message), "disabled in the config");
+        return p;
+    }
+    if (!env->driver) {
+        snprintf(p->message, sizeof(p->message), "not connected: the farm runs without drivers");
+        return p;
+    }
+    struct drv_config dc = { .name = cfg->name,
+                             .kind = cfg->driver,
+                             .port = cfg->port,
+                             .baud = cfg->baud,
+                             .url = cfg->url,
+                             .api_key = cfg->api_key };
+    p->drv = env->driver(env->l, &dc, on_drv_event, p, &err);
+    if (!p->drv) {
+        snprintf(p->message, sizeof(p->message), "%s", err.msg);
+        log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
+        return p;
+    }
+    connect_printer(p);
+    return p;
+}
+
+void
+printer_stop(struct printer *p)
+{
+    struct sf_err err;
+    struct job_event_args a = { .reason = "the daemon stopped while this job was printing" };
+    p->deaf = true;
+    if (p->job_id && (store_job_progress(p->env.s, p->job_id, p->lines_acked, &err) ||
+                      store_job_event(p->env.s, p->job_id, JOB_EV_CRASHED, &a, NULL, &err)))
+        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+}
+
+void
+printer_free(struct printer *p)
+{
+    if (!p)
+        return;
+    p->deaf = true; /* close() reports OFFLINE at once */
+    if (p->reconnect)
+        loop_timer_cancel(p->env.l, p->reconnect);
+    if (p->deliver)
+        loop_timer_cancel(p->env.l, p->deliver);
+    if (p->drv) {
+        /* drv_free() lives with the drivers; the vtable is all we rely on. */
+        p->drv->ops->close(p->drv);
+        p->drv->ops->destroy(p->drv);
+    }
+    free(p->queue);
+    free(p);
+}
+
+/* ---- queries ---- */
+
+const struct farmcfg_printer *
+printer_cfg(const struct printer *p)
+{
+    return &p->cfg;
+}
+
+void
+printer_set_cfg(struct printer *p, const struct farmcfg_printer *cfg)
+{
+    p->cfg = *cfg;
+}
+
+enum printer_state
+printer_state(const struct printer *p)
+{
+    return p->state;
+}
+
+int64_t
+printer_job(const struct printer *p)
+{
+    return p->job_id;
+}
+
+bool
+printer_connected(const struct printer *p)
+{
+    return p->drv && p->drv->status.state == DRV_IDLE;
+}
+
+void
+printer_set_removed(struct printer *p, bool removed)
+{
+    p->removed = removed;
+}
+
+bool
+printer_removed(const struct printer *p)
+{
+    return p->removed;
+}
+
+void
+printer_info(const struct printer *p, struct printer_info *out)
+{
+    memset(out, 0, sizeof(*out));
+    out->cfg = &p->cfg;
+    out->state = p->state;
+    out->job_id = p->job_id;
+    out->message = p->message;
+    if (p->drv) {
+        const struct drv_status *st = &p->drv->status;
+        out->progress = st->progress;
+        out->nozzle_c = st->nozzle_c;
+        out->nozzle_target_c = st->nozzle_target_c;
+        out->bed_c = st->bed_c;
+        out->bed_target_c = st->bed_target_c;
+    }
+}
+
+bool
+printer_progress(const struct printer *p, int64_t *job_id, int64_t *lines)
+{
+    if (!p->job_id || p->lines_acked == p->lines_saved)
+        return false;
+    *job_id = p->job_id;
+    *lines = p->lines_acked;
+    return true;
+}
+
+void
+printer_progress_saved(struct printer *p, int64_t lines)
+{
+    p->lines_saved = lines;
+}
+
+/* ---- jobs ---- */
+
+/* Hand the job to the driver; a refusal fails the print. */
+static void
+drive(struct printer *p, const char *path, uint64_t line, const struct drv_job_scan *scan)
+{
+    struct sf_err err;
+    if (p->drv->ops->start_job(p->drv, path, line, scan, &err)) {
+        log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)p->job_id, err.msg);
+        fail_job(p, err.msg);
+        move(p, PRINTER_EV_FINISHED);
+    }
+}
+
+void
+printer_start(struct printer *p, const struct job_row *j, const char *path)
+{
+    struct job_event_args a = { .printer = p->cfg.name };
+    /* Commit first: a crash from here on leaves the job interrupted. */
+    if (job_event(p, j->id, JOB_EV_START, &a))
+        return;
+    p->job_id = j->id;
+    p->lines_acked = p->lines_saved = 0;
+    move(p, PRINTER_EV_START);
+    /* The scan prepare made; G-code prepared before the count was stored
+       (gcode_lines 0) is read by the driver itself, once. */
+    struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
+    drive(p, path, 0, j->gcode_lines > 0 ? &scan : NULL);
+}
+
+int
+printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err *err)
+{
+    /* Commit first (the farm's rule): a crash from here on leaves it interrupted again. */
+    struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line };
+    int rc = store_job_event(p->env.s, id, JOB_EV_RESUME, &a, NULL, err);
+    if (rc)
+        return rc;
+    p->job_id = id;
+    p->lines_acked = p->lines_saved = line;
+    move(p, PRINTER_EV_START);
+    return SF_OK;
+}
+
+void
+printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
+                  const struct drv_job_scan *scan, int rc, const char *why)
+{
+    /* Meanwhile the job may have been cancelled or its printer lost (the
+       job moved on with it). */
+    if (p->job_id != id)
+        return;
+    char msg[SF_ERR_MSG_MAX];
+    if (rc == SF_OK && (p->state != PRINTER_PRINTING || !printer_connected(p))) {
+        rc = SF_EAGAIN;
+        snprintf(msg, sizeof(msg), "printer %s is %s: the resume cannot start", p->cfg.name,
+                 printer_state_name(p->state));
+        why = msg;
+    }
+    if (rc) {
+        log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)id, why);
+        fail_job(p, why);
+        move(p, PRINTER_EV_FINISHED);
+        return;
+    }
+    drive(p, path, line, scan);
+}
+
+int
+printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
+{
+    static const enum printer_event evs[PRINTER_ACTION_COUNT] = {
+        PRINTER_EV_PAUSE, PRINTER_EV_RESUME, PRINTER_EV_FINISHED, PRINTER_EV_CLEARED
+    };
+    if ((unsigned)act >= PRINTER_ACTION_COUNT)
+        return sf_err_set(err, SF_EINVAL, "printer %s: no action %d", p->cfg.name, (int)act);
+    enum printer_event ev = evs[act];
+    enum printer_state to;
+    int rc = printer_next(p->state, ev, p->cfg.auto_eject, &to, err);
+    if (rc)
+        return sf_err_prefix(err, "printer %s", p->cfg.name);
+    if (act == PRINTER_ACT_CLEARED) {
+        move(p, ev);
+        return SF_OK;
+    }
+    if (!p->drv || !p->job_id)
+        return sf_err_set(err, SF_EINVAL, "printer %s has no job to %s", p->cfg.name,
+                          action_names[act]);
+    /* The driver's own report of this comes on a later loop turn and finds
+       the printer moved already. */
+    rc = act == PRINTER_ACT_PAUSE    ? p->drv->ops->pause(p->drv, err)
+         : act == PRINTER_ACT_RESUME ? p->drv->ops->resume(p->drv, err)
+                                     : p->drv->ops->cancel(p->drv, err);
+    if (rc)
+        return rc;
+    struct job_event_args a = { .lines_acked = p->lines_acked,
+                                .reason = "cancelled by an operator" };
+    enum job_event jev = act == PRINTER_ACT_PAUSE    ? JOB_EV_PAUSE
+                         : act == PRINTER_ACT_RESUME ? JOB_EV_RESUME
+                                                     : JOB_EV_CANCEL;
+    if (jev == JOB_EV_CANCEL && !p->cfg.auto_eject)
+        set_bed(p, true); /* the cancelled part stays on the bed */
+    if ((rc = store_job_event(p->env.s, p->job_id, jev, &a, NULL, err)))
+        return rc;
+    if (jev == JOB_EV_CANCEL) {
+        p->job_id = 0;
+        if (p->drv->status.state == DRV_PRINTING) {
+            /* still running the end sequence: printing with no job until
+               DRV_EV_JOB_CANCELLED */
+            changed(p);
+            return SF_OK;
+        }
+    }
+    move(p, ev);
+    return SF_OK;
+}

@@ -1,0 +1,126 @@
+/*
+ * printer.h - one printer of the farm, its one owner: the printer state
+ * machine (job.h rules), its driver (no other module calls drv.h for it),
+ * the job printing on it, the bed gate (kept in the store across restarts)
+ * and reconnects with drv_backoff_ms.
+ *
+ * Driver events arrive through the loop: the driver's callback only queues
+ * the event with a copy of the driver's status, and a zero-delay timer
+ * applies the queue on a later loop turn.  So nothing here runs inside a
+ * call into the driver (printer_action -> pause -> event -> printer), and
+ * an action's own move is applied once, by the action.
+ *
+ * Every change follows the farm's rule: commit to the store, then act on
+ * the device; the bed is recorded before the job that leaves a part on it.
+ * The owner (farm.c) is told after each change (env.changed) to schedule
+ * and to wake event streams.
+ *
+ * Thread: the loop thread.
+ */
+#ifndef SF_FARM_PRINTER_H
+#define SF_FARM_PRINTER_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "../../drivers/drv.h"
+#include "../base/err.h"
+#include "../base/loop.h"
+#include "farmcfg.h"
+#include "job.h"
+#include "store.h"
+
+/* drv_new's shape: slimfarmd hands drv_new in; tests may hand in their own. */
+typedef struct drv *(*printer_driver_fn)(struct loop *l, const struct drv_config *cfg,
+                                         drv_event_fn on_event, void *ud, struct sf_err *err);
+
+/* What a printer needs from its owner; copied by printer_new. */
+struct printer_env {
+    struct loop *l;            /* the loop */
+    struct store *s;           /* the job store */
+    printer_driver_fn driver;  /* NULL: the printer stays offline (prepare-only tests) */
+    void (*changed)(void *ud); /* a job or the printer moved: schedule, wake streams */
+    void *ud;                  /* its argument */
+};
+
+/* What an operator may ask of a printer (the API's ACTION). */
+enum printer_action {
+    PRINTER_ACT_PAUSE = 0, /* pause the job on it */
+    PRINTER_ACT_RESUME,    /* resume it */
+    PRINTER_ACT_CANCEL,    /* cancel it (the part stays on the bed) */
+    PRINTER_ACT_CLEARED,   /* the bed is clear (or the error acknowledged) */
+};
+#define PRINTER_ACTION_COUNT 4
+
+/* "pause", "resume", "cancel", "cleared"; false if s is none of them. */
+bool printer_action_parse(const char *s, enum printer_action *out);
+const char *printer_action_name(enum printer_action a);
+
+/* A printer as the API shows it (valid until the loop turns or the config reloads). */
+struct printer_info {
+    const struct farmcfg_printer *cfg;                     /* its config */
+    enum printer_state state;                              /* current state */
+    int64_t job_id;                                        /* job on it, 0 if none */
+    double progress;                                       /* 0..1 */
+    double nozzle_c, nozzle_target_c, bed_c, bed_target_c; /* deg C, 0 if unknown */
+    const char *message; /* why offline/error, "" if nothing to say */
+};
+
+struct printer;
+
+/* Create the printer and start connecting; NULL only when out of memory. */
+struct printer *printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg);
+/* Disconnect and free; what the driver says while closing is not heard. */
+void printer_free(struct printer *p);
+/*
+ * The daemon stops: the job on p (if any) is left interrupted at its last
+ * acknowledged line, exactly as crash recovery would leave it, and p hears
+ * its driver no more (printer_free follows).
+ */
+void printer_stop(struct printer *p);
+
+const struct farmcfg_printer *printer_cfg(const struct printer *p);
+/* Take a new config whose link (driver, port, url, key, enabled) is p's own. */
+void printer_set_cfg(struct printer *p, const struct farmcfg_printer *cfg);
+enum printer_state printer_state(const struct printer *p);
+int64_t printer_job(const struct printer *p);
+bool printer_connected(const struct printer *p); /* has a driver that is up and idle */
+void printer_info(const struct printer *p, struct printer_info *out);
+
+/* Dropped from the config: not scheduled, freed by the farm once idle. */
+void printer_set_removed(struct printer *p, bool removed);
+bool printer_removed(const struct printer *p);
+
+/*
+ * Start job j (ready; its G-code at path) from line 0: the start is
+ * committed, then the driver streams.  A driver refusing fails the print
+ * (the retry policy applies).
+ */
+void printer_start(struct printer *p, const struct job_row *j, const char *path);
+
+/*
+ * Resume interrupted job id on p (idle, connected) from command `line`:
+ * printer_resume_commit records it (SF_EINVAL and friends from the store);
+ * printer_resume_go starts the driver once the resume point is read
+ * (scan), unless the job left p meanwhile; rc != SF_OK (the read failed)
+ * fails the print with why.
+ */
+int printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err *err);
+void printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
+                       const struct drv_job_scan *scan, int rc, const char *why);
+
+/*
+ * Act on p.  SF_EINVAL when not legal now ("cannot pause a printer that is
+ * idle", "printer a has no job to cancel"); driver errors as they come.
+ */
+int printer_action(struct printer *p, enum printer_action a, struct sf_err *err);
+
+/*
+ * Progress persistence, batched by the owner: printer_progress gives the
+ * job on p and its last acknowledged line when that is not saved yet
+ * (false otherwise); printer_progress_saved records that it was.
+ */
+bool printer_progress(const struct printer *p, int64_t *job_id, int64_t *lines);
+void printer_progress_saved(struct printer *p, int64_t lines);
+
+#endif
