@@ -299,11 +299,12 @@ pstate(size_t i)
     return info.state;
 }
 
-/* Turn the loop until job id is in state want (or 3 s pass). */
+/* Turn the loop until job id is in state want (or 30 s pass: a real prepare
+   on a loaded machine under the sanitizers takes seconds). */
 static bool
 wait_job(int64_t id, enum job_state want)
 {
-    for (int i = 0; i < 300; i++) {
+    for (int i = 0; i < 3000; i++) {
         if (state_of(id) == want)
             return true;
         loop_run_once(fx.l, 10);
