@@ -355,6 +355,9 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
         atomic_init(&j.done, 0);
         rc = par_for(s.n, 1, 0, tp_layers, &j);
     }
+    /* the stage's last report, also when other threads built the last layers */
+    if (rc == SF_OK && cancelled(progress, ud, "toolpaths", 1))
+        rc = SF_ECANCELED;
     if (rc < 0) {
         sf_err_set(err, rc, "toolpaths: %s",
                    rc == SF_ECANCELED ? "cancelled"

@@ -487,3 +487,46 @@ T_CASE(slice_same_gcode_on_one_thread_and_four)
         mesh_release(&m);
     }
 }
+
+/*
+ * Cancelling between layers: the slicer asks on the calling thread.  Here
+ * the caller dawdles in its first question (as on a loaded machine) while
+ * the other thread builds the remaining layers; the answer "cancel" must
+ * still be heard, at the stage's end if not before.
+ */
+struct dawdle {
+    int toolpath_calls;
+};
+
+static int
+dawdle_then_cancel(void *ud, const char *stage, double done)
+{
+    struct dawdle *d = ud;
+    if (strcmp(stage, "toolpaths") != 0)
+        return 0;
+    if (++d->toolpath_calls == 2) { /* the first from inside the loop */
+        struct timespec ts = { 0, 500000000 };
+        nanosleep(&ts, NULL);
+    }
+    return done > 0.2;
+}
+
+T_CASE(slice_cancel_heard_when_other_threads_built_the_layers)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 2), &err), &err); /* 10 quick layers */
+    mesh_place_on_bed(&m, 100, 100);
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    char path[512];
+    snprintf(path, sizeof(path), "%s/dawdle.gcode", t_tmpdir());
+    par_set_threads(2, 1);
+    struct dawdle d = { 0 };
+    int rc = slice_mesh(&m, &p, path, NULL, dawdle_then_cancel, &d, &err);
+    par_set_threads(0, 1);
+    slice_profile_release(&p);
+    mesh_release(&m);
+    T_ERR(rc, SF_ECANCELED, &err, "cancel");
+}
