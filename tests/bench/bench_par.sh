@@ -16,8 +16,9 @@
 #    first submit until both are ready are timed, ours and base alternating.
 #
 # PAR_MESHES (default "anchor elephant armadillo"), PAR_RUNS (3),
-# PAR_CMDS (default "orient volumetric surface slice"), PAR_DAEMON=0 skips
-# part 2, PAR_METHODS (default "orient slim"), PAR_DAEMON_MESH (dino).
+# PAR_CMDS (default "orient volumetric surface slice"), PAR_CMDS=none or
+# PAR_DAEMON=0 skips part 1 or 2, PAR_METHODS (default "orient slim"),
+# PAR_DAEMON_MESH (dino).
 # Figures only: it never fails on time.
 set -u
 build=${1:-build/rel}
@@ -61,6 +62,7 @@ variants="ours one"
 echo "bench_par: $(nproc) cores; load average at start $(cut -d' ' -f1-3 /proc/loadavg); $runs runs each, ${variants// /, } alternating"
 echo "median wall s (median CPU s); ours = default budget (every core), one = SLIMFARM_THREADS=1"
 printf '%-10s %-10s %15s %15s %15s %9s %9s %s\n' mesh command base ours one ours/base one/ours same
+[ "${PAR_CMDS:-}" = none ] && PAR_MESHES=" "
 for name in ${PAR_MESHES:-anchor elephant armadillo}; do
   mesh=$shared/meshes/$name.stl
   [ -f "$mesh" ] || { echo "bench_par: no $mesh"; continue; }
@@ -94,7 +96,8 @@ key=bench-key-0123456789abcdef
 cp -r config/printers config/materials "$work/" 2>/dev/null ||
   { echo "bench_par: run from the repository root (config/)"; exit 0; }
 # prepare_pair TREE METHOD: start a daemon from TREE, submit two jobs at
-# once, print the seconds until both are ready (or "fail")
+# once, print the seconds until both are ready and the daemon's CPU
+# seconds (user + sys) by then (or "fail")
 prepare_pair() {
   local tree=$1 method=$2 port=$((20000 + RANDOM % 20000)) d=$work/d.$RANDOM
   mkdir -p "$d"
@@ -115,20 +118,23 @@ prepare_pair() {
     sleep 0.05
   done
   local t1=$EPOCHREALTIME
+  local cpu; cpu=$(awk -v hz="$(getconf CLK_TCK)" '{ sub(/.*\) /, ""); printf "%.2f", ($12 + $13) / hz }' "/proc/$dpid/stat")
   kill "$dpid"; wait "$dpid" 2>/dev/null; dpid=
-  [ "$ok" = 1 ] && awk -v a="$t0" -v b="$t1" 'BEGIN { printf "%.2f\n", b - a }' || echo fail
+  [ "$ok" = 1 ] && awk -v a="$t0" -v b="$t1" -v c="$cpu" 'BEGIN { printf "%.2f %s\n", b - a, c }' || echo fail
 }
 trees="$build"
 [ -n "$base" ] && trees="$base $build"
-echo "daemon: two jobs submitted at once ($(basename "$dmesh")), seconds until both are ready (polled every 0.05 s), median of $runs, alternating; load $(cut -d' ' -f1-3 /proc/loadavg)"
-printf '%-8s %10s %10s %s\n' method base ours runs_base/runs_ours
+echo "daemon: two jobs submitted at once ($(basename "$dmesh")), seconds until both are ready (polled every 0.05 s) (daemon CPU s), median of $runs, alternating; load $(cut -d' ' -f1-3 /proc/loadavg)"
+printf '%-8s %15s %15s %s\n' method base ours "wall s of each run, base / ours"
 for method in ${PAR_METHODS:-orient slim}; do
   : > "$work/pb"; : > "$work/po"
   for ((r = 0; r < runs; r++)); do
     [ -n "$base" ] && prepare_pair "$(cd "$base" && pwd)" "$method" >> "$work/pb"
     prepare_pair "$(cd "$build" && pwd)" "$method" >> "$work/po"
   done
-  mb=$(grep -v fail "$work/pb" | median); mo=$(grep -v fail "$work/po" | median)
-  printf '%-8s %10s %10s %s / %s\n' "$method" "${mb:--}" "$mo" "$(tr '\n' ' ' < "$work/pb")" "$(tr '\n' ' ' < "$work/po")"
+  med() { grep -v fail "$1" | cut -d' ' -f"$2" | median; }
+  cellp() { [ -s "$1" ] && printf '%s (%s)' "$(med "$1" 1)" "$(med "$1" 2)" || echo -; }
+  printf '%-8s %15s %15s %s / %s\n' "$method" "$(cellp "$work/pb")" "$(cellp "$work/po")" \
+    "$(cut -d' ' -f1 "$work/pb" | tr '\n' ' ')" "$(cut -d' ' -f1 "$work/po" | tr '\n' ' ')"
 done
 echo "load average at the end: $(cut -d' ' -f1-3 /proc/loadavg)"
