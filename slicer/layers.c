@@ -5,20 +5,20 @@
  * one CSR array, so each layer reads a contiguous list), then each layer
  * cuts its triangles into segments, chains them with a small open-
  * addressing hash keyed by the crossed edge, and unites the loops with
- * Clipper.  Layers are independent, so two worker threads take them
- * from an atomic counter (the machine has two cores).
+ * Clipper.  Layers are independent, so par_for (src/base/par.h) spreads
+ * them over the process's thread budget, each into its own slot.
  *
- * Thread: internal workers only; the call itself is reentrant.
+ * Thread: runs on par_for's threads; the call itself is reentrant.
  */
 #include "layers.h"
 
 #include <math.h>
-#include <pthread.h>
 #include <stdatomic.h>
 #include <string.h>
 
 #include "../src/base/limits.h"
 #include "../src/base/mem.h"
+#include "../src/base/par.h"
 #include "clip_shim.h"
 
 #define LAYERS_SIMPLIFY_MM 0.01
@@ -98,14 +98,19 @@ map_get(const struct map *m, int64_t a, int64_t b)
     }
 }
 
+/* A worker's segment buffer, grown as needed and kept across its layers. */
+struct scratch {
+    struct seg *segs;
+    size_t cap;
+};
+
 struct job {
     const struct mesh *m;
     struct layer_stack *out;
     const uint32_t *first, *tris; /* CSR: triangles of layer k */
     double zmin;
-    atomic_uint next;
-    atomic_int rc;
-    atomic_uint n_open;
+    struct scratch *scratch; /* one per par_for worker */
+    atomic_uint n_open;      /* a sum of counts: the same in any order */
 };
 
 /* Crossing of edge (u, v) with plane p, computed from the below end. */
@@ -372,22 +377,18 @@ out:
     return rc;
 }
 
-static void *
-worker(void *arg)
+/* par_for body: layers [begin, end), with the worker's segment buffer. */
+static int
+slice_layers(void *ud, uint32_t begin, uint32_t end, int worker)
 {
-    struct job *j = arg;
-    struct seg *segs = NULL;
-    size_t cap = 0;
-    for (;;) {
-        uint32_t k = atomic_fetch_add(&j->next, 1);
-        if (k >= j->out->n || atomic_load(&j->rc) < 0)
-            break;
-        int rc = slice_one(j, k, &segs, &cap);
+    struct job *j = ud;
+    struct scratch *w = &j->scratch[worker];
+    for (uint32_t k = begin; k < end; k++) {
+        int rc = slice_one(j, k, &w->segs, &w->cap);
         if (rc < 0)
-            atomic_store(&j->rc, rc);
+            return rc;
     }
-    free(segs);
-    return NULL;
+    return SF_OK;
 }
 
 /* Plane height of layer k above the bed. */
@@ -497,16 +498,16 @@ layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, 
             tris[fill[q]++] = i;
     free(fill);
 
+    int n_work = par_threads();
     struct job j = { .m = m, .out = out, .first = first, .tris = tris, .zmin = lo.z };
-    atomic_init(&j.next, 0);
-    atomic_init(&j.rc, SF_OK);
+    j.scratch = mem_calloc((size_t)n_work, sizeof(*j.scratch));
+    if (!j.scratch)
+        goto fail;
     atomic_init(&j.n_open, 0);
-    pthread_t th;
-    bool threaded = out->n > 8 && pthread_create(&th, NULL, worker, &j) == 0;
-    worker(&j);
-    if (threaded)
-        pthread_join(th, NULL);
-    rc = atomic_load(&j.rc);
+    rc = par_for(out->n, 1, 0, slice_layers, &j);
+    for (int w = 0; w < n_work; w++)
+        free(j.scratch[w].segs);
+    free(j.scratch);
     out->n_open = atomic_load(&j.n_open);
     if (rc < 0)
         goto fail;

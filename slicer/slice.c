@@ -2,8 +2,9 @@
  * slice.c - the slicer pipeline and the G-code file (see slice.h).
  *
  * Stages run one after the other on plain arrays; the per-layer stages
- * (cutting, toolpaths) use two threads taking layers from an atomic
- * counter.  The body is written to memory first so the estimator can
+ * (cutting, toolpaths) spread the layers over par_for (src/base/par.h),
+ * each layer into its own slot, so the G-code is the same on any number
+ * of threads.  The body is written to memory first so the estimator can
  * read it back (the same interpreter the tests use), then the file is
  * assembled: header with the estimates, start G-code, the body with an
  * M73 line at each layer change, end G-code, and PrusaSlicer-style
@@ -14,7 +15,6 @@
 #include "slice.h"
 
 #include <math.h>
-#include <pthread.h>
 #include <stdatomic.h>
 #include <stdio.h>
 #include <string.h>
@@ -23,6 +23,7 @@
 
 #include "../src/base/buf.h"
 #include "../src/base/mem.h"
+#include "../src/base/par.h"
 #include "../src/geom/measure.h"
 #include "../src/geom/raycast.h"
 #include "estimate.h"
@@ -166,26 +167,10 @@ struct tp_job {
     const struct slice_profile *p;
     const struct support_layer *sup;
     struct layer_paths *lp;
-    atomic_uint next, done;
-    atomic_int rc;
+    slice_progress_fn progress; /* phase 1: asked on the calling thread between layers */
+    void *ud;
+    atomic_uint done; /* layers finished in this phase */
 };
-
-static void *
-tp_worker(void *arg)
-{
-    struct tp_job *j = arg;
-    for (;;) {
-        uint32_t k = atomic_fetch_add(&j->next, 1);
-        if (k >= j->s->n || atomic_load(&j->rc) < 0)
-            break;
-        int rc = j->phase ? toolpath_layer(j->s, k, j->p, j->sup ? &j->sup[k] : NULL, &j->lp[k])
-                          : toolpath_areas(j->s, k, j->p);
-        if (rc < 0)
-            atomic_store(&j->rc, rc);
-        atomic_fetch_add(&j->done, 1);
-    }
-    return NULL;
-}
 
 static void
 fmt_hms(char *out, size_t cap, double s)
@@ -272,6 +257,25 @@ cancelled(slice_progress_fn fn, void *ud, const char *stage, double done)
         }                                                                                          \
     } while (0)
 
+/* par_for body: phase j->phase of layers [begin, end), each into its own slot. */
+static int
+tp_layers(void *ud, uint32_t begin, uint32_t end, int worker)
+{
+    struct tp_job *j = ud;
+    for (uint32_t k = begin; k < end; k++) {
+        /* the calling thread (worker 0) reports between the layers it builds */
+        if (j->phase == 1 && worker == 0 &&
+            cancelled(j->progress, j->ud, "toolpaths", (double)atomic_load(&j->done) / j->s->n))
+            return SF_ECANCELED;
+        int rc = j->phase ? toolpath_layer(j->s, k, j->p, j->sup ? &j->sup[k] : NULL, &j->lp[k])
+                          : toolpath_areas(j->s, k, j->p);
+        if (rc < 0)
+            return rc;
+        atomic_fetch_add(&j->done, 1);
+    }
+    return SF_OK;
+}
+
 int
 slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcode_path,
            struct slice_result *res, slice_progress_fn progress, void *ud, struct sf_err *err)
@@ -345,35 +349,15 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
         rc = sf_err_set(err, SF_ENOMEM, "toolpaths: out of memory");
         goto out;
     }
-    struct tp_job j = { .s = &s, .p = p, .sup = sup, .lp = lp };
-    atomic_init(&j.rc, SF_OK);
-    for (j.phase = 0; j.phase < 2 && atomic_load(&j.rc) == SF_OK; j.phase++) {
-        atomic_init(&j.next, 0);
+    struct tp_job j = { .s = &s, .p = p, .sup = sup, .lp = lp, .progress = progress, .ud = ud };
+    rc = SF_OK;
+    for (j.phase = 0; j.phase < 2 && rc == SF_OK; j.phase++) {
         atomic_init(&j.done, 0);
-        pthread_t th;
-        bool threaded = s.n > 4 && pthread_create(&th, NULL, tp_worker, &j) == 0;
-        if (progress && threaded && j.phase == 1) {
-            /* this thread reports between layers it builds itself */
-            while (atomic_load(&j.rc) == SF_OK) {
-                if (cancelled(progress, ud, "toolpaths", (double)atomic_load(&j.done) / s.n)) {
-                    atomic_store(&j.rc, SF_ECANCELED);
-                    break;
-                }
-                uint32_t k = atomic_fetch_add(&j.next, 1);
-                if (k >= s.n)
-                    break;
-                int r = toolpath_layer(&s, k, p, sup ? &sup[k] : NULL, &lp[k]);
-                if (r < 0)
-                    atomic_store(&j.rc, r);
-                atomic_fetch_add(&j.done, 1);
-            }
-        } else {
-            tp_worker(&j);
-        }
-        if (threaded)
-            pthread_join(th, NULL);
+        rc = par_for(s.n, 1, 0, tp_layers, &j);
     }
-    rc = atomic_load(&j.rc);
+    /* the stage's last report, also when other threads built the last layers */
+    if (rc == SF_OK && cancelled(progress, ud, "toolpaths", 1))
+        rc = SF_ECANCELED;
     if (rc < 0) {
         sf_err_set(err, rc, "toolpaths: %s",
                    rc == SF_ECANCELED ? "cancelled"

@@ -17,7 +17,7 @@
  * estimates, start G-code, body with M73 progress, end G-code.
  *
  * Thread: slice_mesh may run on a worker thread, several at once on
- * different meshes; it starts one helper thread of its own per stage.
+ * different meshes; its per-layer stages run on par_for (base/par.h).
  * progress is called on the calling thread.
  */
 #ifndef SF_SLICER_SLICE_H

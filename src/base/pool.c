@@ -17,9 +17,9 @@
 #include <signal.h>
 #include <string.h>
 #include <time.h>
-#include <unistd.h>
 
 #include "mem.h"
+#include "par.h"
 
 struct task {
     uint64_t id;        /* > 0 */
@@ -97,10 +97,8 @@ worker(void *arg)
 struct pool *
 pool_new(struct loop *l, int n_threads, struct sf_err *err)
 {
-    if (n_threads <= 0) {
-        long cores = sysconf(_SC_NPROCESSORS_ONLN);
-        n_threads = cores > 0 ? (int)cores : 1;
-    }
+    if (n_threads <= 0)
+        n_threads = par_cores();
     if (n_threads > POOL_THREADS_MAX)
         n_threads = POOL_THREADS_MAX;
     struct pool *p = mem_calloc(1, sizeof(*p));

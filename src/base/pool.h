@@ -31,7 +31,7 @@ typedef int (*pool_work_fn)(void *ud, const atomic_bool *cancel);
 /* Runs on the loop thread with work()'s result (or SF_ECANCELED if it never ran). */
 typedef void (*pool_done_fn)(struct loop *l, void *ud, int rc);
 
-/* n_threads workers (0: one per online core, at most POOL_THREADS_MAX). */
+/* n_threads workers (0: one per core, par_cores(); at most POOL_THREADS_MAX). */
 struct pool *pool_new(struct loop *l, int n_threads, struct sf_err *err);
 
 /*

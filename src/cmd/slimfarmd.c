@@ -22,6 +22,7 @@
 #include "../api/http_loop.h"
 #include "../base/log.h"
 #include "../base/loop.h"
+#include "../base/par.h"
 #include "../base/pool.h"
 #include "../farm/farm.h"
 #include "../farm/farmcfg.h"
@@ -184,6 +185,7 @@ main(int argc, char **argv)
     if (!(d.l = loop_new(&err)) || !(d.s = store_open(d.cfg.data_dir, &rec, &err)) ||
         !(d.pool = pool_new(d.l, 0, &err)))
         goto out;
+    par_share(pool_size(d.pool)); /* the prepare workers divide the cores (base/par.h) */
     if (rec.interrupted || rec.requeued)
         log_warn("slimfarmd",
                  "recovered from a crash: %d jobs interrupted (waiting for an operator), %d "

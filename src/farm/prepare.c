@@ -123,7 +123,6 @@ slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_prof
     struct slim_params sp;
     slim_params_default(&sp);
     sp.angle_deg = prof->max_overhang_deg;
-    sp.threads = 1; /* the pool already runs one task per core */
     sp.cancel = cancel;
     cap_deviation(m, req->opts.deviation_mm, &sp.max_mndr, &sp.max_andr);
     struct slim_result sr;
@@ -187,7 +186,6 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     surfopt_params_default(&sp);
     sp.angle_deg = prof->max_overhang_deg;
     sp.margin_deg = sp.margin_deg < sp.angle_deg ? sp.margin_deg : sp.angle_deg;
-    sp.op.threads = 1; /* the pool already runs one task per core */
     sp.cancel = cancel;
     cap_deviation(m, req->opts.deviation_mm, &sp.max_mndr, &sp.max_andr);
     struct surfopt_result sr;
@@ -239,7 +237,6 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
         struct orient_result res;
         orient_params_default(&op);
         op.angle_deg = prof.max_overhang_deg;
-        op.threads = 1;
         if ((rc = orient_find(&m, &op, &res, err)))
             goto release;
         orient_apply(&m, res.best.up, prof.bed_x_mm / 2, prof.bed_y_mm / 2);

@@ -4,7 +4,8 @@
  * Pipeline: candidates -> proxy score for all (O(tris) each, cheap) ->
  * the exact_top best by proxy, the exact_hull best stable hull bases by
  * proxy and the input ->
- * exact ray-cast metrics on a pool of threads sharing one Embree scene ->
+ * exact ray-cast metrics on par_for's threads (base/par.h) sharing one
+ * Embree scene, built while the proxy stage runs ->
  * a cap of refinement samples around the two best -> pick.
  * Rays are rotated, never the mesh.  Hull bases that are too small or on
  * which the centre of mass falls outside (margin) are rejected; other
@@ -14,14 +15,13 @@
 #include "orient.h"
 
 #include <math.h>
-#include <pthread.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-#include <unistd.h>
 
 #include "../base/mem.h"
+#include "../base/par.h"
 #include "hull.h"
 
 void
@@ -57,7 +57,7 @@ struct cand {
     bool dropped;              /* would stand on a point or tip over */
 };
 
-/* A batch of candidates scored on a pool of threads (one stage). */
+/* A batch of candidates scored by par_for (one stage). */
 struct job {
     const struct mesh *m;
     const struct orient_params *p;
@@ -67,11 +67,8 @@ struct job {
     struct support_params at;     /* reporting: the operator's angle */
     struct cand *cands;
     const uint32_t *batch; /* indices of candidates to score */
-    uint32_t n_batch;
     int stage;
-    atomic_uint next;
-    atomic_int failed; /* first error code, 0 if none */
-    atomic_uint *done; /* progress across stages */
+    atomic_uint done; /* progress across stages */
     uint32_t progress_total;
 };
 
@@ -119,162 +116,32 @@ score_one(struct job *j, struct cand *c, struct sf_err *err)
     return SF_OK;
 }
 
-static void *
-worker(void *arg)
+/* par_for body: score batch[begin..end), each into its own candidate. */
+static int
+score_chunk(void *ud, uint32_t begin, uint32_t end, int worker)
 {
-    struct job *j = arg;
-    for (;;) {
-        uint32_t k = atomic_fetch_add(&j->next, 1);
-        if (k >= j->n_batch || atomic_load(&j->failed))
-            break;
+    struct job *j = ud;
+    (void)worker;
+    for (uint32_t k = begin; k < end; k++) {
         struct sf_err err;
-        if (score_one(j, &j->cands[j->batch[k]], &err) != SF_OK) {
-            int zero = 0;
-            atomic_compare_exchange_strong(&j->failed, &zero, err.code ? err.code : SF_EBUG);
-            break;
-        }
+        sf_err_clear(&err);
+        if (score_one(j, &j->cands[j->batch[k]], &err) != SF_OK)
+            return err.code ? err.code : SF_EBUG;
         if (j->stage > 0) {
-            unsigned d = atomic_fetch_add(j->done, 1) + 1;
+            unsigned d = atomic_fetch_add(&j->done, 1) + 1;
             if (j->p->progress)
                 j->p->progress(j->p->progress_ud, d, j->progress_total);
         }
     }
-    return NULL;
-}
-
-/*
- * The helper threads live for the whole search: the first builds the Embree
- * scene while the caller computes the hull, the proxy cache and the proxy
- * stage (which need no scene), then every helper joins each stage the caller
- * posts.  Creating threads per stage cost a stack's page faults each time,
- * and building the scene first left the other core idle.  (Not base/pool.h:
- * that hands results to an event loop; these stages are fork-join.)
- */
-struct crew {
-    pthread_mutex_t lock;
-    pthread_cond_t posted; /* a stage was posted, or the crew is closing */
-    pthread_cond_t idle;   /* a helper left a stage, or the scene is built */
-    struct job *j;
-    unsigned gen;    /* number of the stage posted last */
-    bool open;       /* helpers may still join stage gen */
-    unsigned active; /* helpers working on stage gen */
-    bool quit;
-    pthread_t tid[64];
-    int n_tid;
-    /* the scene, built by the first helper */
-    const struct mesh *m;
-    struct raycast *rc;
-    bool scene_done;
-    struct sf_err scene_err;
-};
-
-static void *
-helper(void *arg)
-{
-    struct crew *pl = arg;
-    pthread_mutex_lock(&pl->lock);
-    if (!pl->scene_done && pl->n_tid > 0 && pthread_equal(pl->tid[0], pthread_self())) {
-        pthread_mutex_unlock(&pl->lock);
-        struct raycast *rc = raycast_new(pl->m, &pl->scene_err);
-        pthread_mutex_lock(&pl->lock);
-        pl->rc = rc;
-        pl->scene_done = true;
-        pthread_cond_broadcast(&pl->idle);
-    }
-    unsigned seen = 0; /* join any stage still open, even one posted during the build */
-    for (;;) {
-        while (!pl->quit && (pl->gen == seen || !pl->open))
-            pthread_cond_wait(&pl->posted, &pl->lock);
-        if (pl->quit)
-            break;
-        seen = pl->gen;
-        pl->active++;
-        struct job *j = pl->j;
-        pthread_mutex_unlock(&pl->lock);
-        worker(j);
-        pthread_mutex_lock(&pl->lock);
-        pl->active--;
-        pthread_cond_broadcast(&pl->idle);
-    }
-    pthread_mutex_unlock(&pl->lock);
-    return NULL;
-}
-
-/* Start threads - 1 helpers; with none (one thread, or none could start) the
-   caller builds the scene itself in crew_scene. */
-static void
-crew_start(struct crew *pl, const struct mesh *m, int threads)
-{
-    memset(pl, 0, sizeof(*pl));
-    pthread_mutex_init(&pl->lock, NULL);
-    pthread_cond_init(&pl->posted, NULL);
-    pthread_cond_init(&pl->idle, NULL);
-    pl->m = m;
-    pthread_mutex_lock(&pl->lock); /* helpers read n_tid and tid[0] under the lock */
-    for (int i = 1; i < threads && i < 64; i++)
-        if (pthread_create(&pl->tid[pl->n_tid], NULL, helper, pl) == 0)
-            pl->n_tid++;
-    pthread_mutex_unlock(&pl->lock);
-}
-
-/* The scene, once built (by the first helper, or here if there is none). */
-static struct raycast *
-crew_scene(struct crew *pl, struct sf_err *err)
-{
-    pthread_mutex_lock(&pl->lock);
-    if (pl->n_tid == 0 && !pl->scene_done) {
-        pthread_mutex_unlock(&pl->lock);
-        pl->rc = raycast_new(pl->m, &pl->scene_err);
-        pthread_mutex_lock(&pl->lock);
-        pl->scene_done = true;
-    }
-    while (!pl->scene_done)
-        pthread_cond_wait(&pl->idle, &pl->lock);
-    pthread_mutex_unlock(&pl->lock);
-    if (!pl->rc && err)
-        *err = pl->scene_err;
-    return pl->rc;
-}
-
-/* Stop the helpers (waiting for the scene build to end) and free the scene. */
-static void
-crew_finish(struct crew *pl)
-{
-    pthread_mutex_lock(&pl->lock);
-    pl->quit = true;
-    pthread_cond_broadcast(&pl->posted);
-    pthread_mutex_unlock(&pl->lock);
-    for (int i = 0; i < pl->n_tid; i++)
-        pthread_join(pl->tid[i], NULL);
-    raycast_free(pl->rc);
-    pthread_mutex_destroy(&pl->lock);
-    pthread_cond_destroy(&pl->posted);
-    pthread_cond_destroy(&pl->idle);
+    return SF_OK;
 }
 
 static int
-run_stage(struct crew *pl, struct job *j, int stage, const uint32_t *batch, uint32_t n,
-          struct sf_err *err)
+run_stage(struct job *j, int stage, const uint32_t *batch, uint32_t n, struct sf_err *err)
 {
     j->stage = stage;
     j->batch = batch;
-    j->n_batch = n;
-    atomic_store(&j->next, 0);
-    atomic_store(&j->failed, 0);
-    pthread_mutex_lock(&pl->lock);
-    pl->j = j;
-    pl->gen++;
-    pl->open = true;
-    pthread_cond_broadcast(&pl->posted);
-    pthread_mutex_unlock(&pl->lock);
-    worker(j);
-    /* no helper may join once the caller is done; wait for those that did */
-    pthread_mutex_lock(&pl->lock);
-    pl->open = false;
-    while (pl->active > 0)
-        pthread_cond_wait(&pl->idle, &pl->lock);
-    pthread_mutex_unlock(&pl->lock);
-    int f = atomic_load(&j->failed);
+    int f = par_for(n, 1, j->p->threads, score_chunk, j);
     if (f)
         return sf_err_set(err, f, "orientation: scoring a direction failed");
     return SF_OK;
@@ -342,16 +209,108 @@ pick_distinct(const struct cand *c, const uint32_t *order, uint32_t n, uint32_t 
     return k;
 }
 
+/*
+ * refinement: REFINE_PER samples (two rings, 3 and 7 degrees out) around each of the
+ * REFINE_SEEDS best distinct directions; the FINAL best distinct directions and the input
+ * are cast again at the full pitch, which fills the report's 4 runners-up.  (6 finalists
+ * cost 37 % of anchor's instructions; on the 12 shared meshes the pick was always among
+ * the coarse stage's 3 best, so 4 cut that share with no pick changed)
+ */
+enum { REFINE_SEEDS = 2, REFINE_PER = 8, FINAL = 4 };
+
+/*
+ * The search's opening, two tasks of one par_for: the candidates, the proxy
+ * cache and the proxy stage (task 0, its stage a loop nested in it), and
+ * the Embree scene (task 1), which needs none of them.  With two threads
+ * one builds the scene while the other scores proxies, and the first done
+ * helps with the other's loop.  Task 0 fills orient_find's variables
+ * through the pointers.
+ */
+struct opening {
+    const struct mesh *m;
+    const struct orient_params *p;
+    struct orient_result *res;
+    const struct timespec *t0;
+    struct job *j;
+    struct cand **cands;
+    uint32_t *n, **order;
+    size_t *cap;
+    struct hull_base **bases;
+    uint32_t *n_bases, **hull_verts, *n_hull_verts;
+    struct proxy_cache *pc;
+    struct raycast *rc;   /* task 1's scene */
+    struct sf_err err[2]; /* each task's error */
+};
+
+static int
+open_candidates(struct opening *o, struct sf_err *err)
+{
+    const struct orient_params *p = o->p;
+    struct vec3 com;
+    mesh_volume(o->m, &com);
+    int rcode = hull_bases(o->m, com, o->bases, o->n_bases, o->hull_verts, o->n_hull_verts, err);
+    if (rcode)
+        return rcode;
+    struct hull_base *bases = *o->bases;
+    if (push(o->cands, o->n, o->cap, v3(0, 0, 1), ORIENT_INPUT))
+        goto oom;
+    for (uint32_t i = 0; i < *o->n_bases; i++)
+        if (bases[i].area_mm2 >= p->min_base_mm2 && bases[i].margin_mm >= p->min_margin_mm)
+            if (push(o->cands, o->n, o->cap, v3_scale(bases[i].normal, -1), ORIENT_HULL))
+                goto oom;
+    for (int i = 0; i < p->samples; i++)
+        if (push(o->cands, o->n, o->cap, fibonacci(i, p->samples), ORIENT_SPHERE))
+            goto oom;
+    uint32_t n = *o->n;
+    /* room for the refinement samples, so cands never moves under the workers */
+    void *grow = *o->cands;
+    if (!mem_grow(&grow, o->cap, n + REFINE_SEEDS * REFINE_PER, sizeof(struct cand)))
+        goto oom;
+    *o->cands = grow;
+    uint32_t *order = *o->order = mem_array(n + REFINE_SEEDS * REFINE_PER, sizeof(uint32_t));
+    if (!order)
+        goto oom;
+    if ((rcode = proxy_cache_init(o->pc, o->m, *o->hull_verts, *o->n_hull_verts, err)))
+        return rcode;
+    o->res->seconds_setup = elapsed(o->t0);
+
+    /* stage 0: proxy for every direction */
+    o->j->cands = *o->cands;
+    for (uint32_t i = 0; i < n; i++)
+        order[i] = i;
+    if ((rcode = run_stage(o->j, 0, order, n, err)))
+        return rcode;
+    o->res->seconds_proxy = elapsed(o->t0) - o->res->seconds_setup;
+    qsort_r(order, n, sizeof(uint32_t), cmp_key, *o->cands);
+    return SF_OK;
+oom:
+    return sf_err_set(err, SF_ENOMEM, "orientation: out of memory");
+}
+
+/* par_for body: the opening's tasks. */
+static int
+open_task(void *ud, uint32_t begin, uint32_t end, int worker)
+{
+    struct opening *o = ud;
+    (void)worker;
+    for (uint32_t i = begin; i < end; i++) {
+        int rc;
+        if (i == 0) {
+            rc = open_candidates(o, &o->err[0]);
+        } else {
+            o->rc = raycast_new(o->m, &o->err[1]);
+            rc = o->rc ? SF_OK : o->err[1].code ? o->err[1].code : SF_ENOMEM;
+        }
+        if (rc)
+            return rc;
+    }
+    return SF_OK;
+}
+
 int
 orient_find(const struct mesh *m, const struct orient_params *p, struct orient_result *res,
             struct sf_err *err)
 {
-    /* refinement: REFINE_PER samples (two rings, 3 and 7 degrees out) around each of the
-       REFINE_SEEDS best distinct directions; the FINAL best distinct directions and the input
-       are cast again at the full pitch, which fills the report's 4 runners-up.  (6 finalists
-       cost 37 % of anchor's instructions; on the 12 shared meshes the pick was always among
-       the coarse stage's 3 best, so 4 cut that share with no pick changed) */
-    enum { REFINE_SEEDS = 2, REFINE_PER = 8, FINAL = 4 };
     memset(res, 0, sizeof(*res));
     struct timespec t0;
     clock_gettime(CLOCK_MONOTONIC, &t0);
@@ -362,40 +321,11 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     uint32_t n_bases = 0;
     struct raycast *rc = NULL;
     struct proxy_cache pc = { 0 };
-    struct crew pl;
-    atomic_uint done = 0;
+    uint32_t *hull_verts = NULL, n_hull_verts = 0;
     int rcode = SF_OK;
 
-    int threads = p->threads > 0 ? p->threads : (int)sysconf(_SC_NPROCESSORS_ONLN);
-    crew_start(&pl, m, threads < 1 ? 1 : threads);
-    struct vec3 com;
-    mesh_volume(m, &com);
-    uint32_t *hull_verts = NULL, n_hull_verts = 0;
-    if ((rcode = hull_bases(m, com, &bases, &n_bases, &hull_verts, &n_hull_verts, err)))
-        goto out;
-    if ((rcode = push(&cands, &n, &cap, v3(0, 0, 1), ORIENT_INPUT)))
-        goto oom;
-    for (uint32_t i = 0; i < n_bases; i++)
-        if (bases[i].area_mm2 >= p->min_base_mm2 && bases[i].margin_mm >= p->min_margin_mm)
-            if ((rcode = push(&cands, &n, &cap, v3_scale(bases[i].normal, -1), ORIENT_HULL)))
-                goto oom;
-    for (int i = 0; i < p->samples; i++)
-        if ((rcode = push(&cands, &n, &cap, fibonacci(i, p->samples), ORIENT_SPHERE)))
-            goto oom;
-    uint32_t n_first = n;
-    /* room for the refinement samples, so cands never moves under the workers */
-    void *grow = cands;
-    if (!mem_grow(&grow, &cap, n + REFINE_SEEDS * REFINE_PER, sizeof(struct cand)))
-        goto oom;
-    cands = grow;
-    order = mem_array(n + REFINE_SEEDS * REFINE_PER, sizeof(uint32_t));
-    if (!order)
-        goto oom;
-    if ((rcode = proxy_cache_init(&pc, m, hull_verts, n_hull_verts, err)))
-        goto out;
-    res->seconds_setup = elapsed(&t0);
-
-    struct job j = { .m = m, .p = p, .pc = &pc, .cands = cands, .done = &done };
+    struct job j = { .m = m, .p = p, .pc = &pc };
+    atomic_init(&j.done, 0);
     support_params_default(&j.sp);
     j.sp.angle_deg = fmax(0, p->angle_deg - p->margin_deg);
     j.sp.pitch_mm = p->pitch_mm;
@@ -403,18 +333,31 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     j.at = j.sp;
     j.at.angle_deg = p->angle_deg;
 
-    /* stage 0: proxy for every direction */
-    for (uint32_t i = 0; i < n; i++)
-        order[i] = i;
-    if ((rcode = run_stage(&pl, &j, 0, order, n, err)))
-        goto out;
-    res->seconds_proxy = elapsed(&t0) - res->seconds_setup;
-    qsort_r(order, n, sizeof(uint32_t), cmp_key, cands);
-    if (!(rc = crew_scene(&pl, err)) ||
-        (rcode = raycast_set_extreme(rc, hull_verts, n_hull_verts, err))) {
-        rcode = rcode ? rcode : (err ? err->code : SF_ENOMEM);
+    struct opening o = { .m = m,
+                         .p = p,
+                         .res = res,
+                         .t0 = &t0,
+                         .j = &j,
+                         .cands = &cands,
+                         .n = &n,
+                         .order = &order,
+                         .cap = &cap,
+                         .bases = &bases,
+                         .n_bases = &n_bases,
+                         .hull_verts = &hull_verts,
+                         .n_hull_verts = &n_hull_verts,
+                         .pc = &pc };
+    sf_err_clear(&o.err[0]);
+    sf_err_clear(&o.err[1]);
+    rcode = par_for(2, 1, p->threads, open_task, &o);
+    rc = o.rc;
+    if (rcode) {
+        if (err) /* the lowest failing task's error, as par_for's code */
+            *err = o.err[0].code ? o.err[0] : o.err[1];
         goto out;
     }
+    if ((rcode = raycast_set_extreme(rc, hull_verts, n_hull_verts, err)))
+        goto out;
     j.rc = rc;
 
     /* stage 1: coarse ray cast of the proxy's best sphere samples and hull bases, and the input */
@@ -428,7 +371,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
             order[n_coarse++] = order[k];
     }
     j.progress_total = n_coarse + REFINE_SEEDS * REFINE_PER + FINAL + 1;
-    if ((rcode = run_stage(&pl, &j, 1, order, n_coarse, err)))
+    if ((rcode = run_stage(&j, 1, order, n_coarse, err)))
         goto out;
     qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
 
@@ -446,8 +389,8 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
             order[n_coarse++] = n - 1;
         }
     }
-    if ((rcode = run_stage(&pl, &j, 1, order + n_coarse - n_seeds * REFINE_PER,
-                           n_seeds * REFINE_PER, err)))
+    if ((rcode =
+             run_stage(&j, 1, order + n_coarse - n_seeds * REFINE_PER, n_seeds * REFINE_PER, err)))
         goto out;
     qsort_r(order, n_coarse, sizeof(uint32_t), cmp_key, cands);
 
@@ -459,7 +402,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
         has_input |= final[i] == 0;
     if (!has_input)
         final[n_final++] = 0;
-    if ((rcode = run_stage(&pl, &j, 2, final, n_final, err)))
+    if ((rcode = run_stage(&j, 2, final, n_final, err)))
         goto out;
     qsort_r(final, n_final, sizeof(uint32_t), cmp_key, cands);
 
@@ -477,7 +420,6 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     res->input.m = cands[0].at;
     res->n_candidates = n;
     res->n_exact = n_coarse + n_final;
-    (void)n_first;
     for (uint32_t i = 0; i < n_final && res->n_runners < 4; i++) {
         if (final[i] == best || cands[final[i]].dropped)
             continue;
@@ -487,11 +429,8 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     }
     res->seconds = elapsed(&t0);
     res->seconds_exact = res->seconds - res->seconds_setup - res->seconds_proxy;
-    goto out;
-oom:
-    rcode = sf_err_set(err, SF_ENOMEM, "orientation: out of memory");
 out:
-    crew_finish(&pl); /* frees the scene */
+    raycast_free(rc);
     proxy_cache_release(&pc);
     free(order);
     free(cands);

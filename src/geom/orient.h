@@ -10,7 +10,8 @@
  * simulation's islands need; a direction on which the part would stand on a
  * point with nothing holding it, or would tip over while it grows, is dropped.
  *
- * Thread-safe: each call is independent; it starts its own worker threads.
+ * Thread-safe: each call is independent; it runs on par_for (base/par.h),
+ * within the process's thread budget.
  */
 #ifndef SF_GEOM_ORIENT_H
 #define SF_GEOM_ORIENT_H
@@ -43,7 +44,7 @@ struct orient_params {
                                figures are guesses, and the input orientation is kept */
     double min_base_mm2;    /* smallest hull face the part may rest on (25) */
     double min_margin_mm;   /* centre of mass must project this far inside a base (1) */
-    int threads;            /* worker threads (0: one per core) */
+    int threads;            /* at most this many threads (0: par.h's budget) */
     void (*progress)(void *ud, double done, double total); /* optional, any thread */
     void *progress_ud;
 };

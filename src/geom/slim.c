@@ -19,7 +19,7 @@
  * it is checked (keep_volume, slim.h); the input itself is always on the list.
  *
  * Direction search: a grid of rotations about x and y, one job per
- * direction on a few pthreads, scored by ray-cast support volume (then
+ * direction on par_for (base/par.h), scored by ray-cast support volume (then
  * anchors).  Each job owns its solver and buffers; the tet mesh and the
  * input are shared read-only.
  */
@@ -30,10 +30,10 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
-#include <unistd.h>
 
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "../base/par.h"
 #include "arap.h"
 #include "selfx.h"
 
@@ -100,8 +100,8 @@ struct ctx {
     const struct slim_params *p;
     const struct tetmesh *tm;
     struct face_hosts fh;
-    pthread_mutex_t lock; /* protects the progress callback and next */
-    int next, n_dirs;
+    pthread_mutex_t lock; /* protects the progress callback */
+    int n_dirs;
     struct dir *dirs;
 };
 
@@ -665,27 +665,22 @@ done:
     return rc;
 }
 
-static void *
-worker(void *arg)
+/* par_for body: the directions [begin, end), each into its own struct dir. */
+static int
+run_dirs(void *ud, uint32_t begin, uint32_t end, int worker)
 {
-    struct ctx *cx = arg;
-    for (;;) {
-        pthread_mutex_lock(&cx->lock);
-        int i = cx->next++;
-        pthread_mutex_unlock(&cx->lock);
-        if (i >= cx->n_dirs)
-            return NULL;
+    struct ctx *cx = ud;
+    (void)worker;
+    for (uint32_t i = begin; i < end; i++) {
         struct dir *d = &cx->dirs[i];
         sf_err_clear(&d->err);
         d->rc = run_dir(cx, d, &d->err);
         if (d->rc == SF_OK) /* choose() measured the support before and after */
             d->rc = measure_deviation(&d->in, &d->out, &d->dev, &d->err);
-        if (d->rc == SF_ECANCELED) { /* stop the others early */
-            pthread_mutex_lock(&cx->lock);
-            cx->next = cx->n_dirs;
-            pthread_mutex_unlock(&cx->lock);
-        }
+        if (d->rc == SF_ECANCELED) /* stop the others early */
+            return SF_ECANCELED;
     }
+    return SF_OK;
 }
 
 static int
@@ -823,7 +818,7 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
     rc = tetmesh_build(m, &p->tet, &tm, err);
     if (rc)
         return rc;
-    struct ctx cx = { m, p, &tm, { 0 }, PTHREAD_MUTEX_INITIALIZER, 0, 1, NULL };
+    struct ctx cx = { m, p, &tm, { 0 }, PTHREAD_MUTEX_INITIALIZER, 1, NULL };
     rc = build_face_hosts(m, &tm, &cx.fh, err);
     if (rc) {
         tetmesh_release(&tm);
@@ -848,16 +843,8 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
         mesh_init(&cx.dirs[i].in);
         mesh_init(&cx.dirs[i].out);
     }
-    long cores = sysconf(_SC_NPROCESSORS_ONLN);
-    int nt = p->threads > 0 ? p->threads : (int)(cores > 0 ? cores : 1);
-    nt = nt < cx.n_dirs ? nt : cx.n_dirs;
-    pthread_t th[64];
-    int started = 0;
-    for (int i = 1; i < nt && i < 64; i++)
-        started += pthread_create(&th[started], NULL, worker, &cx) == 0;
-    worker(&cx);
-    for (int i = 0; i < started; i++)
-        pthread_join(th[i], NULL);
+    /* a direction's failure is in its dir, found by the pick below */
+    (void)par_for((uint32_t)cx.n_dirs, 1, p->threads, run_dirs, &cx);
     /* pick: least support volume, then fewest anchors; errors win over results */
     int best = -1;
     for (int i = 0; i < cx.n_dirs; i++) {

@@ -76,7 +76,7 @@ struct slim_params {
     bool search_direction;     /* also try rotations about x and y (false) */
     double search_step_deg;    /* grid step of the search (15) */
     double search_max_deg;     /* largest tilt about each axis (30) */
-    int threads;               /* workers for the search (0: one per core) */
+    int threads;               /* threads for the search, at most (0: par.h's budget) */
     double min_gain;           /* keep the input unless the result needs at least this fraction
                                   less ray-cast support (0.05): a part's shape is not changed
                                   for a saving the slicers' own rules blur (orient.h keeps its
