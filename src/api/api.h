@@ -93,7 +93,17 @@ struct api;
 struct api *api_new(const struct api_config *cfg, struct sf_err *err);
 void api_free(struct api *a);
 
-/* The server, to drive (http_fd / http_run) and to reload keys. */
+/*
+ * SIGHUP: apply what the API reads from the farm config.  API keys are
+ * replaced (event streams opened with a key that is gone end), upload_max
+ * applies to requests that start after this; listen_host/port need a
+ * restart (logged as a warning when they differ from old, which may be
+ * NULL).  SF_ENOMEM leaves everything as it was.
+ */
+int api_reload(struct api *a, const struct farmcfg *old, const struct farmcfg *next,
+               struct sf_err *err);
+
+/* The server, to drive (http_fd / http_run). */
 struct http *api_http(struct api *a);
 
 /* The event log grew: wake the event streams. */
