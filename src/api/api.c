@@ -689,6 +689,7 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                               .n_keys = cfg->n_keys,
                               .body_max = API_BODY_MAX,
                               .upload_max = cfg->upload_max,
+                              .header_timeout_ms = cfg->header_timeout_ms,
                               .route = route,
                               .body_kind = body_kind,
                               .ud = a,

@@ -83,6 +83,7 @@ struct api_config {
     const struct farmcfg_key *keys;         /* API keys (copied) */
     size_t n_keys;
     size_t upload_max;           /* largest upload, bytes */
+    unsigned header_timeout_ms;  /* 0: HTTP_HEADER_TIMEOUT_MS (tests shorten it) */
     void (*on_change)(void *ud); /* a job was added or changed (run the scheduler) */
     void *ud;                    /* its argument */
 };

@@ -382,6 +382,16 @@ conn_free(struct http *h, struct conn *c)
     free(c);
 }
 
+/* Discard the upload's temporary file now, not when MHD ends the request
+   (after the response went out): a client that heard "400" finds nothing. */
+static void
+drop_upload(struct conn *c)
+{
+    if (c->upload)
+        c->h->cfg.sink->discard(c->upload);
+    c->upload = NULL;
+}
+
 static void
 on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
              enum MHD_RequestTerminationCode toe)
@@ -632,8 +642,10 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     if (!c->status && c->upload && h->cfg.sink->finish(c->upload, &err))
         fail(c, err.code == SF_EINVAL ? MHD_HTTP_BAD_REQUEST : MHD_HTTP_INTERNAL_SERVER_ERROR, "%s",
              err.msg);
-    if (c->status)
+    if (c->status) {
+        drop_upload(c); /* before the client hears of it */
         return send_error(conn, c->status, c->msg);
+    }
 
     struct http_req req = { .method = method,
                             .path = url,
@@ -650,6 +662,7 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     }
     struct http_resp resp = { .status = MHD_HTTP_OK };
     h->cfg.route(h->cfg.ud, &req, &resp);
+    drop_upload(c); /* the route committed it, or it goes before the answer does */
     if (resp.stream)
         return send_stream(h, conn, c->key, &resp);
     if (!resp.json)

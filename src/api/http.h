@@ -103,7 +103,7 @@ struct http_upload_sink {
     int (*write)(void *ctx, const char *data, size_t len, struct sf_err *err);
     /* The whole body arrived intact; SF_EINVAL (-> 400) to refuse the file
        (empty, say).  ctx stays valid for the route, which decides whether
-       to keep the file. */
+       to keep the file; discard follows the route at once. */
     int (*finish)(void *ctx, struct sf_err *err);
     /* Free ctx, finished or not. */
     void (*discard)(void *ctx);
