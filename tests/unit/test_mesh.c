@@ -546,3 +546,59 @@ T_CASE(shared_meshes_load)
         mesh_release(&m);
     }
 }
+
+/* Issue 16 item 7: copies of one face are dropped on load (10^5 of them in
+   an 800 KB OBJ took minutes in topology, 10^7 never ended). */
+T_CASE(mesh_load_drops_duplicate_faces)
+{
+    enum { N = 200000 };
+    struct buf obj;
+    buf_init(&obj, 0);
+    T_OK(buf_printf(&obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\n"), NULL);
+    for (int i = 0; i < N; i++)
+        T_OK(buf_printf(&obj, i % 2 ? "f 1 2 3\n" : "f 3 2 1\n"), NULL);
+    T_OK(buf_printf(&obj, "f 1 2 4\nf 2 3 4\nf 3 1 4\n"), NULL);
+    struct mesh m;
+    struct mesh_load_info info;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(mesh_load_mem(obj.data, obj.len, "dups.obj", &m, &info, &err), &err);
+    T_EQ_INT(info.n_input_tris, N + 3);
+    T_EQ_INT(info.n_duplicate, N - 1); /* 1 2 3 in either winding, but the first */
+    T_EQ_INT(m.n_tris, 4);             /* a closed tetrahedron */
+    struct mesh_topo topo;
+    T_OK(mesh_topo_build(&m, &topo, &err), &err);
+    T_TRUE(mesh_topo_closed(&topo));
+    mesh_topo_release(&topo);
+    mesh_release(&m);
+    buf_release(&obj);
+}
+
+/* Issue 16 item 7: topology is linear however many faces share one edge
+   (distinct faces: the repair keeps them all).  The per-vertex scan it
+   replaces did 3 * N * N steps here, hours at N = 200000. */
+T_CASE(topology_of_many_faces_on_one_edge)
+{
+    enum { N = 200000 };
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(mesh_alloc(&m, N + 2, N, &err), &err);
+    m.v[0] = v3(0, 0, 0);
+    m.v[1] = v3(1, 0, 0);
+    for (uint32_t i = 0; i < N; i++) {
+        m.v[i + 2] = v3(0.5, cos(i * 1e-4), sin(i * 1e-4));
+        m.t[i][0] = 0;
+        m.t[i][1] = 1;
+        m.t[i][2] = i + 2;
+    }
+    struct mesh_topo topo;
+    T_OK(mesh_topo_build(&m, &topo, &err), &err);
+    T_EQ_INT(topo.n_edges, 2 * N + 1);
+    T_EQ_INT(topo.n_nonmanifold, 1);
+    T_EQ_INT(topo.n_boundary, 2 * N);
+    T_EQ_INT(topo.n_comps, N); /* a non-manifold edge joins nothing */
+    T_EQ_INT(topo.adj[0][0], MESH_NO_TRI);
+    mesh_topo_release(&topo);
+    mesh_release(&m);
+}
