@@ -352,17 +352,21 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
         atomic_init(&j.done, 0);
         pthread_t th;
         bool threaded = s.n > 4 && pthread_create(&th, NULL, tp_worker, &j) == 0;
-        if (progress && threaded && j.phase == 1) {
-            /* this thread reports between layers it builds itself */
+        if (progress) {
+            /* this thread reports between layers it builds itself, and a
+               cancel stops both phases there (issue 16: a cancelled job's
+               worker must stop) */
             while (atomic_load(&j.rc) == SF_OK) {
-                if (cancelled(progress, ud, "toolpaths", (double)atomic_load(&j.done) / s.n)) {
+                double frac = 0.5 * j.phase + 0.5 * atomic_load(&j.done) / s.n;
+                if (cancelled(progress, ud, "toolpaths", frac)) {
                     atomic_store(&j.rc, SF_ECANCELED);
                     break;
                 }
                 uint32_t k = atomic_fetch_add(&j.next, 1);
                 if (k >= s.n)
                     break;
-                int r = toolpath_layer(&s, k, p, sup ? &sup[k] : NULL, &lp[k]);
+                int r = j.phase ? toolpath_layer(&s, k, p, sup ? &sup[k] : NULL, &lp[k])
+                                : toolpath_areas(&s, k, p);
                 if (r < 0)
                     atomic_store(&j.rc, r);
                 atomic_fetch_add(&j.done, 1);

@@ -127,6 +127,11 @@ worker(void *arg)
         uint32_t k = atomic_fetch_add(&j->next, 1);
         if (k >= j->n_batch || atomic_load(&j->failed))
             break;
+        if (j->p->cancel && atomic_load(j->p->cancel)) {
+            int zero = 0;
+            atomic_compare_exchange_strong(&j->failed, &zero, SF_ECANCELED);
+            break;
+        }
         struct sf_err err;
         if (score_one(j, &j->cands[j->batch[k]], &err) != SF_OK) {
             int zero = 0;
@@ -275,6 +280,8 @@ run_stage(struct crew *pl, struct job *j, int stage, const uint32_t *batch, uint
         pthread_cond_wait(&pl->idle, &pl->lock);
     pthread_mutex_unlock(&pl->lock);
     int f = atomic_load(&j->failed);
+    if (f == SF_ECANCELED)
+        return sf_err_set(err, f, "orientation: cancelled");
     if (f)
         return sf_err_set(err, f, "orientation: scoring a direction failed");
     return SF_OK;

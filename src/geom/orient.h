@@ -15,6 +15,7 @@
 #ifndef SF_GEOM_ORIENT_H
 #define SF_GEOM_ORIENT_H
 
+#include <stdatomic.h>
 #include <stdint.h>
 
 #include "../base/err.h"
@@ -46,6 +47,8 @@ struct orient_params {
     int threads;            /* worker threads (0: one per core) */
     void (*progress)(void *ud, double done, double total); /* optional, any thread */
     void *progress_ud;
+    const atomic_bool *cancel; /* optional: checked before each direction is scored;
+                                  set, orient_find returns SF_ECANCELED */
 };
 
 void orient_params_default(struct orient_params *p);
