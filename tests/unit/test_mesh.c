@@ -8,6 +8,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "../../src/base/buf.h"
@@ -600,5 +601,75 @@ T_CASE(topology_of_many_faces_on_one_edge)
     T_EQ_INT(topo.n_comps, N); /* a non-manifold edge joins nothing */
     T_EQ_INT(topo.adj[0][0], MESH_NO_TRI);
     mesh_topo_release(&topo);
+    mesh_release(&m);
+}
+
+/* Peak resident memory of this process (VmHWM), in KiB; -1 if unknown. */
+static long
+peak_rss_kib(void)
+{
+    FILE *f = fopen("/proc/self/status", "r");
+    char line[256];
+    long kib = -1;
+    while (f && fgets(line, sizeof(line), f))
+        if (strncmp(line, "VmHWM:", 6) == 0)
+            kib = strtol(line + 6, NULL, 10);
+    if (f)
+        fclose(f);
+    return kib;
+}
+
+/* Reset the peak to the current resident size (Linux clear_refs 5). */
+static bool
+peak_rss_reset(void)
+{
+    FILE *f = fopen("/proc/self/clear_refs", "w");
+    if (!f)
+        return false;
+    bool ok = fputs("5", f) >= 0;
+    return fclose(f) == 0 && ok;
+}
+
+/* Issue 16 item 9: a 3MF zip bomb (200 MB of XML whitespace in a ~200 KB
+   package) is refused while it streams, and loading it never holds the
+   text: the peak resident size grows by far less than the text. */
+T_CASE(tmf_zip_bomb_is_refused_in_bounded_memory)
+{
+    const char *path = tmp_path("bomb.3mf");
+    zipFile zf = zipOpen(path, APPEND_STATUS_CREATE);
+    T_TRUE(zf != NULL);
+    zip_fileinfo zi = { 0 };
+    T_TRUE(zipOpenNewFileInZip(zf, "3D/3dmodel.model", &zi, NULL, 0, NULL, 0, NULL, Z_DEFLATED,
+                               Z_BEST_COMPRESSION) == ZIP_OK);
+    const char *head = "<?xml version=\"1.0\"?><model unit=\"millimeter\" xmlns=\"http://"
+                       "schemas.microsoft.com/3dmanufacturing/core/2015/02\"><resources>"
+                       "<object id=\"1\" type=\"model\"><mesh><vertices>";
+    const char *tail = "<vertex x=\"0\" y=\"0\" z=\"0\"/><vertex x=\"1\" y=\"0\" z=\"0\"/>"
+                       "<vertex x=\"0\" y=\"1\" z=\"0\"/></vertices><triangles><triangle v1=\"0\" "
+                       "v2=\"1\" v3=\"2\"/></triangles></mesh></object></resources><build>"
+                       "<item objectid=\"1\"/></build></model>";
+    T_TRUE(zipWriteInFileInZip(zf, head, (unsigned)strlen(head)) == ZIP_OK);
+    static char spaces[1 << 20];
+    memset(spaces, ' ', sizeof(spaces));
+    for (int i = 0; i < 200; i++)
+        T_TRUE(zipWriteInFileInZip(zf, spaces, sizeof(spaces)) == ZIP_OK);
+    T_TRUE(zipWriteInFileInZip(zf, tail, (unsigned)strlen(tail)) == ZIP_OK);
+    T_TRUE(zipCloseFileInZip(zf) == ZIP_OK);
+    T_TRUE(zipClose(zf, NULL) == ZIP_OK);
+    struct stat st;
+    T_TRUE(stat(path, &st) == 0);
+    T_TRUE(st.st_size < (1 << 20)); /* a bomb: ~1000 times smaller than its text */
+
+    bool have_peak = peak_rss_reset();
+    long before = peak_rss_kib();
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_ERR(mesh_load(path, &m, NULL, &err), SF_EINVAL, &err, "unpacks to more than");
+    long grown = peak_rss_kib() - before;
+    if (have_peak && before > 0)
+        T_TRUE(grown < 64 << 10); /* the old loader held the text: >= 200 MiB */
+    else
+        printf("    (no /proc/self/clear_refs: peak memory not checked)\n");
     mesh_release(&m);
 }
