@@ -86,6 +86,8 @@ struct conn {
     char msg[SF_ERR_MSG_MAX];     /* its message */
     bool read_only;               /* authenticated with a read-only key */
     bool multipart;               /* multipart/form-data body */
+    bool has_body;                /* the head announces a body (length > 0 or chunked) */
+    bool expect;                  /* the client waits for 100 Continue before its body */
     size_t received;              /* body bytes so far */
     struct MHD_PostProcessor *pp; /* multipart parser */
     struct buf body;              /* non-multipart body */
@@ -310,6 +312,10 @@ on_post(void *cls, enum MHD_ValueKind kind, const char *key, const char *filenam
     struct sf_err err;
     if (c->status)
         return MHD_NO;
+    if (!key) { /* a part without a name (MHD passes NULL): found by fuzz_http */
+        fail(c, MHD_HTTP_BAD_REQUEST, "a multipart/form-data part has no name");
+        return MHD_NO;
+    }
     if (strcmp(key, "file") == 0) {
         if (!filename) {
             fail(c, MHD_HTTP_BAD_REQUEST, "field 'file' must be a file upload");
@@ -520,6 +526,18 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
         fail(c, MHD_HTTP_BAD_REQUEST, "conflicting Content-Length headers");
         return;
     }
+    const char *cl = sc.first;
+    unsigned long long n = 0;
+    bool cl_ok = false;
+    if (cl) {
+        char *end;
+        n = strtoull(cl, &end, 10);
+        cl_ok = end != cl && !*end;
+    }
+    bool chunked = MHD_lookup_connection_value(conn, MHD_HEADER_KIND,
+                                               MHD_HTTP_HEADER_TRANSFER_ENCODING) != NULL;
+    c->has_body = chunked || (cl && (!cl_ok || n > 0));
+    c->expect = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_EXPECT) != NULL;
     const char *key = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "X-Api-Key");
     const struct farmcfg_key *k = key ? find_key(h, key) : NULL;
     if (!key) {
@@ -536,18 +554,7 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
         fail(c, MHD_HTTP_FORBIDDEN, "read-only API key: %s is not allowed", method);
         return;
     }
-    const char *cl = sc.first;
-    unsigned long long n = 0;
-    bool cl_ok = false;
-    if (cl) {
-        char *end;
-        n = strtoull(cl, &end, 10);
-        cl_ok = end != cl && !*end;
-    }
-    bool chunked = MHD_lookup_connection_value(conn, MHD_HEADER_KIND,
-                                               MHD_HTTP_HEADER_TRANSFER_ENCODING) != NULL;
-    bool has_body = chunked || (cl && (!cl_ok || n > 0));
-    if (k->read_only && has_body) {
+    if (k->read_only && c->has_body) {
         fail(c, MHD_HTTP_FORBIDDEN, "read-only API key: a request body is not allowed");
         return;
     }
@@ -604,9 +611,14 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     if (!c->started) {
         c->started = true;
         on_headers(h, c, conn, url, method);
-        /* Refuse now: the client (curl waits on Expect: 100-continue) never
-           sends a body nobody wants, and nothing of it is stored. */
-        if (c->status)
+        /* Refuse now when the client sent no body or waits for 100
+           Continue before it (curl does for large ones), when it has no
+           key, or announced too much.  A client already sending its body
+           would lose the answer to the reset of a socket closed on unread
+           bytes: its body is read and dropped (never stored), and the
+           answer comes at its end. */
+        if (c->status && (!c->has_body || c->expect || c->status == MHD_HTTP_UNAUTHORIZED ||
+                          c->status == MHD_HTTP_CONTENT_TOO_LARGE))
             return send_error(conn, c->status, c->msg);
         return MHD_YES;
     }
@@ -614,7 +626,7 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
         size_t n = *upload_data_size;
         *upload_data_size = 0;
         if (c->status)
-            return MHD_YES; /* drain; answered at the end */
+            return MHD_YES; /* drain (nothing is kept); answered at the end */
         c->received += n;
         size_t max = c->max;
         if (c->received > max)

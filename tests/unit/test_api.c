@@ -1192,3 +1192,25 @@ T_CASE(api_header_deadline_closes_a_trickling_client)
     buf_release(&b);
     stop();
 }
+
+/* Found by fuzz_http: a multipart part without a name reached strcmp(NULL). */
+T_CASE(api_multipart_part_without_name_is_400)
+{
+    struct sf_err err;
+    T_OK(start("noname", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    const char body[] = "--XyZ\r\nContent-Disposition: form-data; filename=\"a.stl\"\r\n\r\n"
+                        "solid a\r\n--XyZ--\r\n";
+    char req[1024];
+    int n = snprintf(req, sizeof(req),
+                     "POST /api/jobs HTTP/1.1\r\nHost: x\r\nX-Api-Key: " KEY_RW
+                     "\r\nContent-Type: multipart/form-data; boundary=XyZ\r\n"
+                     "Content-Length: %zu\r\n\r\n%s",
+                     sizeof(body) - 1, body);
+    T_EQ_INT(raw(req, (size_t)n, &b), 400);
+    T_TRUE(strstr(raw_error(&b), "has no name") != NULL);
+    T_EQ_INT(n_jobs(), 1);
+    buf_release(&b);
+    stop();
+}
