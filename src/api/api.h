@@ -18,9 +18,11 @@
  *                                         event: KIND; Last-Event-ID resumes) and
  *                                         every API_TICK_MS a "progress" snapshot
  *
- * Errors are {"error": "message"}: 400 bad input, 401/403 keys, 404
+ * Errors are {"error": "message"}: 400 bad input (a multipart upload
+ * anywhere but POST /api/jobs, a body cut before its closing boundary, an
+ * empty file), 401/403 keys (a read-only key may send no body), 404
  * unknown, 405 wrong method, 409 not legal in the current state, 413 too
- * large, 500 server trouble.
+ * large, 500 server trouble.  Text a client sent is echoed as valid UTF-8.
  *
  * Thread: the loop thread (the one driving api_http()).
  */
