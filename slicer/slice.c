@@ -263,9 +263,11 @@ tp_layers(void *ud, uint32_t begin, uint32_t end, int worker)
 {
     struct tp_job *j = ud;
     for (uint32_t k = begin; k < end; k++) {
-        /* the calling thread (worker 0) reports between the layers it builds */
-        if (j->phase == 1 && worker == 0 &&
-            cancelled(j->progress, j->ud, "toolpaths", (double)atomic_load(&j->done) / j->s->n))
+        /* the calling thread (worker 0) reports between the layers it builds,
+           and a cancel stops either phase there (issue 16: a cancelled job's
+           worker must stop) */
+        if (worker == 0 && cancelled(j->progress, j->ud, "toolpaths",
+                                     0.5 * j->phase + 0.5 * atomic_load(&j->done) / j->s->n))
             return SF_ECANCELED;
         int rc = j->phase ? toolpath_layer(j->s, k, j->p, j->sup ? &j->sup[k] : NULL, &j->lp[k])
                           : toolpath_areas(j->s, k, j->p);

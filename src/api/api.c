@@ -5,11 +5,13 @@
  * Why this split: http.c knows HTTP (keys, caps, multipart, streams) and
  * nothing of jobs; api_json.c knows JSON shapes; this file only maps URLs
  * to store calls and printer actions, so each route is a few lines.
- * Uploads stream straight into the store's content-addressed files (never
- * whole in memory) and the job row is added only when the file is
- * committed, so a broken upload leaves no job.  A client file name is
+ * Uploads stream straight into a temporary file of the store (never whole
+ * in memory); the route commits it to its content address only once the
+ * options are valid, and the job row is added right after, so a refused
+ * or broken upload leaves neither a file nor a job.  A client file name is
  * only ever a label: it must be a plain name (job_name_valid) and a part
- * format we load, and it never becomes a path.
+ * format we load, and it never becomes a path; text a client sent is
+ * echoed in errors cut on a character boundary (clip()).
  *
  * Thread: the loop thread, like the store it uses.
  */
@@ -33,10 +35,11 @@ struct api {
     unsigned tick;         /* api_tick() count: streams send progress when it moves */
 };
 
-/* An upload in progress: the store's writer, then the committed hash. */
+/* An upload in progress: the store's writer, until the route commits it. */
 struct upload {
-    struct store_file *f;    /* NULL once committed */
-    char sha[STORE_SHA_HEX]; /* set by finish */
+    struct store_file *f; /* NULL once committed */
+    size_t size;          /* bytes written */
+    char name[64];        /* the file name, clipped, for messages */
 };
 
 /* One event stream client. */
@@ -46,6 +49,22 @@ struct sse {
     unsigned tick_seen; /* last api tick answered with progress or a keepalive */
     struct buf out;     /* formatted, not yet sent */
 };
+
+/* s cut to fit out (cap bytes with the NUL) between UTF-8 characters: a
+   message quoting it stays valid text (http.c replaces what is invalid). */
+static const char *
+clip(char *out, size_t cap, const char *s)
+{
+    size_t n = strlen(s);
+    if (n >= cap) {
+        n = cap - 1;
+        while (n > 0 && ((unsigned char)s[n] & 0xc0) == 0x80)
+            n--; /* s[n] continues a character: cut before its lead byte */
+    }
+    memcpy(out, s, n);
+    out[n] = '\0';
+    return out;
+}
 
 /* ---- upload sink ---- */
 
@@ -61,16 +80,17 @@ static void *
 up_begin(void *ud, const char *filename, struct sf_err *err)
 {
     struct api *a = ud;
+    char name[81];
+    clip(name, sizeof(name), filename);
     if (!job_name_valid(filename)) {
         sf_err_set(err, SF_EINVAL,
-                   "file name '%.80s' is not a plain file name (no paths, '..' or control "
-                   "characters)",
-                   filename);
+                   "file name '%s' is not a plain file name (valid UTF-8; no paths, '..' or "
+                   "control characters)",
+                   name);
         return NULL;
     }
     if (!part_ext_ok(filename)) {
-        sf_err_set(err, SF_EINVAL, "file name '%.80s' does not end in .stl, .obj or .3mf",
-                   filename);
+        sf_err_set(err, SF_EINVAL, "file name '%s' does not end in .stl, .obj or .3mf", name);
         return NULL;
     }
     struct upload *u = mem_calloc(1, sizeof(*u));
@@ -78,6 +98,7 @@ up_begin(void *ud, const char *filename, struct sf_err *err)
         sf_err_set(err, SF_ENOMEM, "out of memory");
         return NULL;
     }
+    clip(u->name, sizeof(u->name), filename);
     u->f = store_file_begin(a->cfg.store, err);
     if (!u->f) {
         free(u);
@@ -90,16 +111,18 @@ static int
 up_write(void *ctx, const char *data, size_t len, struct sf_err *err)
 {
     struct upload *u = ctx;
+    u->size += len;
     return store_file_write(u->f, data, len, err);
 }
 
+/* The body is complete: refuse an empty part now rather than at prepare. */
 static int
 up_finish(void *ctx, struct sf_err *err)
 {
     struct upload *u = ctx;
-    int rc = store_file_commit(u->f, u->sha, err);
-    u->f = NULL; /* commit frees the writer either way */
-    return rc;
+    if (u->size == 0)
+        return sf_err_set(err, SF_EINVAL, "file '%s' is empty", u->name);
+    return SF_OK;
 }
 
 static void
@@ -200,19 +223,30 @@ jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
     job_opts_init(&o);
     snprintf(o.name, sizeof(o.name), "%s", req->upload_name);
     const char *opts = field(req, "options");
+    char clipped[65];
     for (size_t i = 0; i < req->n_fields; i++)
         if (strcmp(req->field_name[i], "options") != 0) {
-            http_error(resp, 400, "unknown form field '%.64s' (expected 'file' and 'options')",
-                       req->field_name[i]);
+            http_error(resp, 400, "unknown form field '%s' (expected 'file' and 'options')",
+                       clip(clipped, sizeof(clipped), req->field_name[i]));
             return;
         }
-    if (api_opts_parse(opts ? opts : "", opts ? strlen(opts) : 0, &o, &err)) {
+    if (api_opts_parse(opts ? opts : "", opts ? strlen(opts) : 0, &o, &err) ||
+        job_opts_validate(&o, &err)) {
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    const struct upload *u = req->upload;
+    /* Options are good: only now does the file reach its content address
+       (on a refusal above, http.c discards the temporary file). */
+    struct upload *u = req->upload;
+    char sha[STORE_SHA_HEX];
+    int rc = store_file_commit(u->f, sha, &err);
+    u->f = NULL; /* commit frees the writer either way */
+    if (rc) {
+        http_error(resp, 500, "%s", err.msg);
+        return;
+    }
     int64_t id;
-    if (store_job_add(a->cfg.store, &o, u->sha, &id, &err)) {
+    if (store_job_add(a->cfg.store, &o, sha, &id, &err)) {
         http_error(resp, err.code == SF_EINVAL ? 400 : 500, "%s", err.msg);
         return;
     }
@@ -468,12 +502,23 @@ events_stream(struct api *a, const struct http_req *req, struct http_resp *resp)
     }
     s->a = a;
     buf_init(&s->out, 1 << 20);
-    int64_t id;
-    /* Resume after the client's last event, or start live. */
-    if (req->last_event_id && parse_num(req->last_event_id, strlen(req->last_event_id), &id))
+    int64_t id, newest = store_event_last(a->cfg.store);
+    /* Resume after the client's last event, or start live.  An id above the
+       newest is from another (restored or reset) event log: the client is
+       told so and gets this log from its start, rather than silence until
+       the log catches up with a number that means nothing here. */
+    if (req->last_event_id && parse_num(req->last_event_id, strlen(req->last_event_id), &id)) {
         s->last_id = id;
-    else
-        s->last_id = store_event_last(a->cfg.store);
+        if (id > newest) {
+            s->last_id = 0;
+            buf_printf(&s->out,
+                       "event: reset\ndata: {\"last_event_id\":%lld,\"newest\":%lld,"
+                       "\"reason\":\"the event log was reset; replaying it from the start\"}\n\n",
+                       (long long)id, (long long)newest);
+        }
+    } else {
+        s->last_id = newest;
+    }
     s->tick_seen = a->tick;
     resp->stream = sse_read;
     resp->stream_ud = s;
@@ -595,11 +640,34 @@ route(void *ud, const struct http_req *req, struct http_resp *resp)
             return;
         }
     }
+    char clipped[101];
 not_found:
-    http_error(resp, 404, "no such resource: %.100s", req->path);
+    http_error(resp, 404, "no such resource: %s", clip(clipped, sizeof(clipped), req->path));
     return;
 bad_method:
-    http_error(resp, 405, "method %s is not allowed on %.100s", req->method, req->path);
+    http_error(resp, 405, "method %s is not allowed on %s", req->method,
+               clip(clipped, sizeof(clipped), req->path));
+}
+
+/* Which body a request may carry, from its head (http.c refuses a
+   multipart upload anywhere else before reading a byte of it). */
+static enum http_body
+body_kind(void *ud, const char *method, const char *path)
+{
+    (void)ud;
+    const char *seg[5];
+    size_t len[5];
+    size_t n = split(path, seg, len, 4);
+    if (n < 2 || n > 4 || !seg_is(seg[0], len[0], "api") || !seg_is(seg[1], len[1], "jobs"))
+        return HTTP_BODY_NONE;
+    bool post = strcmp(method, "POST") == 0;
+    if (n == 2 && post)
+        return HTTP_BODY_UPLOAD;
+    if (n == 3 && strcmp(method, "PATCH") == 0)
+        return HTTP_BODY_JSON;
+    if (n == 4 && post && seg_is(seg[3], len[3], "resume"))
+        return HTTP_BODY_JSON;
+    return HTTP_BODY_NONE;
 }
 
 struct api *
@@ -617,7 +685,9 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                               .n_keys = cfg->n_keys,
                               .body_max = API_BODY_MAX,
                               .upload_max = cfg->upload_max,
+                              .header_timeout_ms = cfg->header_timeout_ms,
                               .route = route,
+                              .body_kind = body_kind,
                               .ud = a,
                               .sink = &sink };
     a->http = http_new(&hc, err);
@@ -635,6 +705,27 @@ api_free(struct api *a)
         return;
     http_free(a->http);
     free(a);
+}
+
+int
+api_reload(struct api *a, const struct farmcfg *old, const struct farmcfg *next, struct sf_err *err)
+{
+    size_t closed = 0;
+    if (http_set_keys(a->http, next->keys, next->n_keys, &closed))
+        return sf_err_set(err, SF_ENOMEM, "api: out of memory for %zu API keys", next->n_keys);
+    if (closed)
+        log_info("api", "reload: closed %zu event streams of revoked API keys", closed);
+    if (next->upload_max_bytes != a->cfg.upload_max) {
+        log_info("api", "reload: upload_max %zu -> %zu bytes", a->cfg.upload_max,
+                 next->upload_max_bytes);
+        a->cfg.upload_max = next->upload_max_bytes;
+        http_set_upload_max(a->http, next->upload_max_bytes);
+    }
+    if (old &&
+        (strcmp(old->listen_host, next->listen_host) != 0 || old->listen_port != next->listen_port))
+        log_warn("api", "reload: listen %s:%d -> %s:%d needs a restart (still on the old one)",
+                 old->listen_host, old->listen_port, next->listen_host, next->listen_port);
+    return SF_OK;
 }
 
 struct http *

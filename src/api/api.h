@@ -18,9 +18,11 @@
  *                                         event: KIND; Last-Event-ID resumes) and
  *                                         every API_TICK_MS a "progress" snapshot
  *
- * Errors are {"error": "message"}: 400 bad input, 401/403 keys, 404
+ * Errors are {"error": "message"}: 400 bad input (a multipart upload
+ * anywhere but POST /api/jobs, a body cut before its closing boundary, an
+ * empty file), 401/403 keys (a read-only key may send no body), 404
  * unknown, 405 wrong method, 409 not legal in the current state, 413 too
- * large, 500 server trouble.
+ * large, 500 server trouble.  Text a client sent is echoed as valid UTF-8.
  *
  * Thread: the loop thread (the one driving api_http()).
  */
@@ -48,6 +50,7 @@ struct api_config {
     const struct farmcfg_key *keys; /* API keys (copied) */
     size_t n_keys;
     size_t upload_max;           /* largest upload, bytes */
+    unsigned header_timeout_ms;  /* 0: HTTP_HEADER_TIMEOUT_MS (tests shorten it) */
     void (*on_change)(void *ud); /* a job was added or changed (run the scheduler) */
     void *ud;                    /* its argument */
 };
@@ -58,7 +61,17 @@ struct api;
 struct api *api_new(const struct api_config *cfg, struct sf_err *err);
 void api_free(struct api *a);
 
-/* The server, to drive (http_fd / http_run) and to reload keys. */
+/*
+ * SIGHUP: apply what the API reads from the farm config.  API keys are
+ * replaced (event streams opened with a key that is gone end), upload_max
+ * applies to requests that start after this; listen_host/port need a
+ * restart (logged as a warning when they differ from old, which may be
+ * NULL).  SF_ENOMEM leaves everything as it was.
+ */
+int api_reload(struct api *a, const struct farmcfg *old, const struct farmcfg *next,
+               struct sf_err *err);
+
+/* The server, to drive (http_fd / http_run). */
 struct http *api_http(struct api *a);
 
 /* The event log grew: wake the event streams. */

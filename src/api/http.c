@@ -8,14 +8,25 @@
  * are not locked.  MHD exposes one epoll fd; readable means "call MHD_run".
  *
  * Design: MHD calls on_request() several times per request: first with
- * headers only (we authenticate and check Content-Length, and refuse early
- * with 401/403/413 so an unwanted body is never read), then once per body
+ * headers only (we authenticate, ask the routes which body the method and
+ * path take, check Content-Length, and refuse early with 400/401/403/413
+ * so an unwanted body is never read, let alone stored), then once per body
  * chunk (appended to a capped buffer, or fed to MHD's multipart post
  * processor, whose iterator streams the "file" part into the upload sink),
  * and a last time with no data, when the route runs.  Errors found while
- * the body streams are remembered and answered at that last call.  A
- * stream response (SSE) that has nothing to send suspends its connection;
- * http_wake_streams() resumes every suspended one.
+ * the body streams are remembered and answered at that last call; a
+ * multipart body is complete only if the post processor ends in its final
+ * state (the closing boundary seen).  A stream response (SSE) that has
+ * nothing to send suspends its connection; http_wake_streams() resumes
+ * every suspended one.
+ *
+ * Slow clients: MHD's own timeout is an idle timeout, which a client that
+ * sends a header line every few seconds never trips.  So every connection
+ * is tracked from accept (MHD's connection notifier) until its request
+ * head is complete: past the header deadline, or when more than
+ * HTTP_PREAUTH_MAX are waiting (the oldest goes), its socket is shut down
+ * and MHD closes it.  Error text is made valid UTF-8 before it is put in
+ * JSON (jansson refuses anything else, which used to turn a 400 into 500).
  *
  * Thread: whichever thread calls http_run(), the loop thread in the daemon.
  */
@@ -28,6 +39,8 @@
 #include <stdio.h>
 #include <string.h>
 #include <strings.h>
+#include <sys/socket.h>
+#include <time.h>
 
 #include "../base/buf.h"
 #include "../base/log.h"
@@ -35,40 +48,115 @@
 
 /* A streamed response; lives from the route's answer until MHD frees it. */
 struct stream {
-    struct http *h;              /* owner */
-    struct MHD_Connection *conn; /* its connection */
-    http_stream_fn fn;           /* produces the body */
-    void *ud;                    /* fn's argument */
-    void (*free_fn)(void *ud);   /* frees ud */
-    bool suspended;              /* waiting for http_wake_streams */
-    struct stream *next;         /* in h->streams */
+    struct http *h;                /* owner */
+    struct MHD_Connection *conn;   /* its connection */
+    http_stream_fn fn;             /* produces the body */
+    void *ud;                      /* fn's argument */
+    void (*free_fn)(void *ud);     /* frees ud */
+    bool suspended;                /* waiting for http_wake_streams */
+    bool revoked;                  /* its key is gone: end it */
+    char key[FARMCFG_KEY_MAX + 1]; /* the API key it was opened with */
+    struct stream *next;           /* in h->streams */
+};
+
+/* A connection that has not yet sent a complete request head. */
+struct pending {
+    int fd;               /* its socket, shut down to drop it */
+    int64_t deadline_ms;  /* monotonic time its head must be in by */
+    bool dropped;         /* shut down already; MHD closes it */
+    struct pending *prev; /* in h->pending, oldest first */
+    struct pending *next;
 };
 
 struct http {
-    struct MHD_Daemon *d;     /* the MHD daemon, external epoll mode */
-    struct http_config cfg;   /* as given; keys point at our copy */
-    struct farmcfg_key *keys; /* copy of the API keys */
-    int port;                 /* bound port */
-    struct stream *streams;   /* live streams */
+    struct MHD_Daemon *d;                        /* the MHD daemon, external epoll mode */
+    struct http_config cfg;                      /* as given; keys point at our copy */
+    struct farmcfg_key *keys;                    /* copy of the API keys */
+    int port;                                    /* bound port, -1 if none */
+    struct stream *streams;                      /* live streams */
+    struct pending *pending_head, *pending_tail; /* connections without a request head yet */
+    size_t n_pending;                            /* their count */
 };
 
-/* Per-request state, MHD's *con_cls. */
+/* Per-request state, MHD's *con_cls (made by the URI logger, before the headers). */
 struct conn {
+    bool started;                 /* on_request has seen the headers */
+    bool nul_in_url;              /* the raw URL has %00 */
     int status;                   /* early error to answer with, 0 if none */
     char msg[SF_ERR_MSG_MAX];     /* its message */
     bool read_only;               /* authenticated with a read-only key */
     bool multipart;               /* multipart/form-data body */
+    bool has_body;                /* the head announces a body (length > 0 or chunked) */
+    bool expect;                  /* the client waits for 100 Continue before its body */
     size_t received;              /* body bytes so far */
     struct MHD_PostProcessor *pp; /* multipart parser */
     struct buf body;              /* non-multipart body */
     size_t n_fields;              /* multipart fields */
     char *field_name[HTTP_FIELDS_MAX];
     struct buf field_value[HTTP_FIELDS_MAX];
-    char upload_name[256]; /* the file part's filename */
-    void *upload;          /* sink context */
-    bool upload_seen;      /* a file part started */
-    struct http *h;        /* owner */
+    char upload_name[256];         /* the file part's filename */
+    void *upload;                  /* sink context */
+    bool upload_seen;              /* a file part started */
+    char key[FARMCFG_KEY_MAX + 1]; /* the API key it came with */
+    size_t max;                    /* body limit in force when its head arrived */
+    struct http *h;                /* owner */
 };
+
+static int64_t
+now_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
+
+/* ---- UTF-8 ---- */
+
+/* Length of the valid UTF-8 sequence at p (1..4); 0 if invalid; -1 if p
+   holds a valid beginning cut by the end of the string. */
+static int
+utf8_seq(const unsigned char *p)
+{
+    if (p[0] < 0x80)
+        return 1;
+    int n = p[0] >= 0xf0 ? 4 : p[0] >= 0xe0 ? 3 : p[0] >= 0xc2 ? 2 : 0;
+    if (n == 0 || p[0] > 0xf4)
+        return 0;
+    for (int i = 1; i < n; i++) {
+        if (p[i] == 0)
+            return -1;
+        if ((p[i] & 0xc0) != 0x80)
+            return 0;
+        /* overlong 3/4-byte forms, surrogates, > U+10FFFF */
+        if (i == 1 && ((p[0] == 0xe0 && p[1] < 0xa0) || (p[0] == 0xed && p[1] >= 0xa0) ||
+                       (p[0] == 0xf0 && p[1] < 0x90) || (p[0] == 0xf4 && p[1] >= 0x90)))
+            return 0;
+    }
+    return n;
+}
+
+char *
+http_text_clean(char *out, size_t cap, const char *s)
+{
+    static const char repl[] = "\xef\xbf\xbd"; /* U+FFFD */
+    size_t o = 0;
+    const unsigned char *p = (const unsigned char *)s;
+    while (*p) {
+        int n = utf8_seq(p);
+        if (n < 0)
+            break; /* a character cut by whoever cut the text: drop it */
+        const char *src = n ? (const char *)p : repl;
+        size_t len = n ? (size_t)n : 3;
+        if (o + len >= cap)
+            break;
+        memcpy(out + o, src, len);
+        o += len;
+        p += n ? n : 1;
+    }
+    if (cap)
+        out[o] = '\0';
+    return out;
+}
 
 static void fail(struct conn *c, int status, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
@@ -79,27 +167,30 @@ fail(struct conn *c, int status, const char *fmt, ...)
     if (c->status)
         return; /* the first error is the one to report */
     c->status = status;
+    char raw[SF_ERR_MSG_MAX];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(c->msg, sizeof(c->msg), fmt, ap);
+    vsnprintf(raw, sizeof(raw), fmt, ap);
     va_end(ap);
+    http_text_clean(c->msg, sizeof(c->msg), raw);
 }
 
 void
 http_error(struct http_resp *resp, int status, const char *fmt, ...)
 {
-    char msg[SF_ERR_MSG_MAX];
+    char raw[SF_ERR_MSG_MAX], msg[SF_ERR_MSG_MAX];
     va_list ap;
     va_start(ap, fmt);
-    vsnprintf(msg, sizeof(msg), fmt, ap);
+    vsnprintf(raw, sizeof(raw), fmt, ap);
     va_end(ap);
+    http_text_clean(msg, sizeof(msg), raw);
     resp->status = status;
     json_decref(resp->json);
     resp->json = json_pack("{s:s}", "error", msg);
 }
 
 static enum MHD_Result
-send_json(struct MHD_Connection *conn, int status, json_t *j)
+send_json(struct MHD_Connection *conn, int status, json_t *j, bool close)
 {
     char *s = j ? json_dumps(j, JSON_COMPACT) : NULL;
     json_decref(j);
@@ -116,15 +207,20 @@ send_json(struct MHD_Connection *conn, int status, json_t *j)
         return MHD_NO;
     }
     MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, "application/json");
+    if (close) /* MHD closes the connection after a response saying so */
+        MHD_add_response_header(r, MHD_HTTP_HEADER_CONNECTION, "close");
     enum MHD_Result rc = MHD_queue_response(conn, (unsigned)status, r);
     MHD_destroy_response(r);
     return rc;
 }
 
+/* An error; a client without a valid key, or one sent a bad request
+   head, is not served again on this connection. */
 static enum MHD_Result
 send_error(struct MHD_Connection *conn, int status, const char *msg)
 {
-    return send_json(conn, status, json_pack("{s:s}", "error", msg));
+    return send_json(conn, status, json_pack("{s:s}", "error", msg),
+                     status == MHD_HTTP_UNAUTHORIZED || status == MHD_HTTP_BAD_REQUEST);
 }
 
 /* ---- streams ---- */
@@ -134,6 +230,8 @@ stream_read(void *cls, uint64_t pos, char *buf, size_t max)
 {
     (void)pos;
     struct stream *st = cls;
+    if (st->revoked)
+        return MHD_CONTENT_READER_END_OF_STREAM;
     ssize_t n = st->fn(st->ud, buf, max);
     if (n < 0)
         return MHD_CONTENT_READER_END_OF_STREAM;
@@ -169,7 +267,7 @@ http_wake_streams(struct http *h)
 }
 
 static enum MHD_Result
-send_stream(struct http *h, struct MHD_Connection *conn, struct http_resp *resp)
+send_stream(struct http *h, struct MHD_Connection *conn, const char *key, struct http_resp *resp)
 {
     struct stream *st = mem_calloc(1, sizeof(*st));
     struct MHD_Response *r = NULL;
@@ -181,8 +279,13 @@ send_stream(struct http *h, struct MHD_Connection *conn, struct http_resp *resp)
         free(st);
         return send_error(conn, MHD_HTTP_INTERNAL_SERVER_ERROR, "out of memory");
     }
-    *st = (struct stream){ h,     conn,      resp->stream, resp->stream_ud, resp->stream_free,
-                           false, h->streams };
+    *st = (struct stream){ .h = h,
+                           .conn = conn,
+                           .fn = resp->stream,
+                           .ud = resp->stream_ud,
+                           .free_fn = resp->stream_free,
+                           .next = h->streams };
+    snprintf(st->key, sizeof(st->key), "%s", key);
     h->streams = st;
     MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
     MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
@@ -190,8 +293,6 @@ send_stream(struct http *h, struct MHD_Connection *conn, struct http_resp *resp)
     MHD_destroy_response(r);
     return rc;
 }
-
-/* ---- requests ---- */
 
 static const struct farmcfg_key *
 find_key(const struct http *h, const char *key)
@@ -211,6 +312,10 @@ on_post(void *cls, enum MHD_ValueKind kind, const char *key, const char *filenam
     struct sf_err err;
     if (c->status)
         return MHD_NO;
+    if (!key) { /* a part without a name (MHD passes NULL): found by fuzz_http */
+        fail(c, MHD_HTTP_BAD_REQUEST, "a multipart/form-data part has no name");
+        return MHD_NO;
+    }
     if (strcmp(key, "file") == 0) {
         if (!filename) {
             fail(c, MHD_HTTP_BAD_REQUEST, "field 'file' must be a file upload");
@@ -283,6 +388,16 @@ conn_free(struct http *h, struct conn *c)
     free(c);
 }
 
+/* Discard the upload's temporary file now, not when MHD ends the request
+   (after the response went out): a client that heard "400" finds nothing. */
+static void
+drop_upload(struct conn *c)
+{
+    if (c->upload)
+        c->h->cfg.sink->discard(c->upload);
+    c->upload = NULL;
+}
+
 static void
 on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
              enum MHD_RequestTerminationCode toe)
@@ -292,10 +407,137 @@ on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     *con_cls = NULL;
 }
 
-/* First call: headers only.  Returns an early status (0 = go on). */
+/* ---- connections not yet past their request head ---- */
+
 static void
-on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const char *method)
+pending_unlink(struct http *h, struct pending *pd)
 {
+    if (pd->prev)
+        pd->prev->next = pd->next;
+    else
+        h->pending_head = pd->next;
+    if (pd->next)
+        pd->next->prev = pd->prev;
+    else
+        h->pending_tail = pd->prev;
+    pd->prev = pd->next = NULL;
+    h->n_pending--;
+}
+
+/* Shut the socket down: MHD sees the end of the stream and closes it. */
+static void
+pending_drop(struct http *h, struct pending *pd, const char *why)
+{
+    log_info("http", "closing a connection that sent no complete request head: %s", why);
+    shutdown(pd->fd, SHUT_RDWR);
+    pd->dropped = true;
+    pending_unlink(h, pd);
+}
+
+static void
+on_connection(void *cls, struct MHD_Connection *conn, void **socket_context,
+              enum MHD_ConnectionNotificationCode toe)
+{
+    struct http *h = cls;
+    struct pending *pd = *socket_context;
+    if (toe == MHD_CONNECTION_NOTIFY_CLOSED) {
+        if (pd && (pd->prev || pd->next || h->pending_head == pd))
+            pending_unlink(h, pd);
+        free(pd);
+        *socket_context = NULL;
+        return;
+    }
+    const union MHD_ConnectionInfo *info =
+        MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CONNECTION_FD);
+    pd = mem_calloc(1, sizeof(*pd));
+    if (!pd || !info) {
+        free(pd);
+        return; /* untracked: MHD's idle timeout still applies */
+    }
+    unsigned ms = h->cfg.header_timeout_ms ? h->cfg.header_timeout_ms : HTTP_HEADER_TIMEOUT_MS;
+    *pd = (struct pending){ .fd = info->connect_fd, .deadline_ms = now_ms() + ms };
+    pd->prev = h->pending_tail;
+    if (h->pending_tail)
+        h->pending_tail->next = pd;
+    else
+        h->pending_head = pd;
+    h->pending_tail = pd;
+    h->n_pending++;
+    *socket_context = pd;
+    if (h->n_pending > HTTP_PREAUTH_MAX)
+        pending_drop(h, h->pending_head, "too many connections waiting for theirs");
+}
+
+/* The request head is complete: the connection no longer counts as pending. */
+static void
+head_arrived(struct http *h, struct MHD_Connection *conn)
+{
+    const union MHD_ConnectionInfo *info =
+        MHD_get_connection_info(conn, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
+    struct pending *pd = info ? info->socket_context : NULL;
+    if (pd && (pd->prev || pd->next || h->pending_head == pd))
+        pending_unlink(h, pd);
+}
+
+static void
+drop_late(struct http *h)
+{
+    int64_t now = now_ms();
+    while (h->pending_head && h->pending_head->deadline_ms <= now)
+        pending_drop(h, h->pending_head, "header deadline passed");
+}
+
+/* ---- requests ---- */
+
+/* Every Content-Length header must agree (a proxy may frame by another). */
+struct cl_scan {
+    const char *first; /* the first value */
+    bool conflict;     /* another value differs */
+};
+
+static enum MHD_Result
+scan_cl(void *cls, enum MHD_ValueKind kind, const char *key, const char *value)
+{
+    (void)kind;
+    struct cl_scan *sc = cls;
+    if (strcasecmp(key, MHD_HTTP_HEADER_CONTENT_LENGTH) == 0 && value) {
+        if (!sc->first)
+            sc->first = value;
+        else if (strcmp(sc->first, value) != 0)
+            sc->conflict = true;
+    }
+    return MHD_YES;
+}
+
+/* First call: the request head.  Decides everything that can be decided
+   before a body byte is read; sets c->status to refuse. */
+static void
+on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const char *url,
+           const char *method)
+{
+    head_arrived(h, conn);
+    if (c->nul_in_url) {
+        fail(c, MHD_HTTP_BAD_REQUEST, "the URL holds an encoded NUL (%%00)");
+        return;
+    }
+    struct cl_scan sc = { 0 };
+    MHD_get_connection_values(conn, MHD_HEADER_KIND, scan_cl, &sc);
+    if (sc.conflict) {
+        fail(c, MHD_HTTP_BAD_REQUEST, "conflicting Content-Length headers");
+        return;
+    }
+    const char *cl = sc.first;
+    unsigned long long n = 0;
+    bool cl_ok = false;
+    if (cl) {
+        char *end;
+        n = strtoull(cl, &end, 10);
+        cl_ok = end != cl && !*end;
+    }
+    bool chunked = MHD_lookup_connection_value(conn, MHD_HEADER_KIND,
+                                               MHD_HTTP_HEADER_TRANSFER_ENCODING) != NULL;
+    c->has_body = chunked || (cl && (!cl_ok || n > 0));
+    c->expect = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_EXPECT) != NULL;
     const char *key = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "X-Api-Key");
     const struct farmcfg_key *k = key ? find_key(h, key) : NULL;
     if (!key) {
@@ -306,29 +548,55 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
         fail(c, MHD_HTTP_UNAUTHORIZED, "unknown API key");
         return;
     }
+    snprintf(c->key, sizeof(c->key), "%s", k->key);
     c->read_only = k->read_only;
     if (k->read_only && strcmp(method, "GET") != 0 && strcmp(method, "HEAD") != 0) {
         fail(c, MHD_HTTP_FORBIDDEN, "read-only API key: %s is not allowed", method);
         return;
     }
+    if (k->read_only && c->has_body) {
+        fail(c, MHD_HTTP_FORBIDDEN, "read-only API key: a request body is not allowed");
+        return;
+    }
     const char *ct = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "Content-Type");
     c->multipart = ct && strncasecmp(ct, "multipart/form-data", 19) == 0;
-    size_t max = c->multipart ? h->cfg.upload_max : h->cfg.body_max;
-    const char *cl = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "Content-Length");
-    if (cl) {
-        char *end;
-        unsigned long long n = strtoull(cl, &end, 10);
-        if (end != cl && !*end && n > max) {
-            fail(c, MHD_HTTP_CONTENT_TOO_LARGE,
-                 "request body of %llu bytes is over the limit of %zu", n, max);
-            return;
-        }
+    enum http_body kind = h->cfg.body_kind ? h->cfg.body_kind(h->cfg.ud, method, url)
+                                           : (c->multipart ? HTTP_BODY_UPLOAD : HTTP_BODY_JSON);
+    if (c->multipart && kind != HTTP_BODY_UPLOAD) {
+        fail(c, MHD_HTTP_BAD_REQUEST, "%s %.100s takes no multipart/form-data upload", method, url);
+        return;
+    }
+    c->max = c->multipart ? h->cfg.upload_max : h->cfg.body_max;
+    if (cl_ok && n > c->max) {
+        fail(c, MHD_HTTP_CONTENT_TOO_LARGE, "request body of %llu bytes is over the limit of %zu",
+             n, c->max);
+        return;
     }
     if (c->multipart) {
         c->pp = MHD_create_post_processor(conn, 64 << 10, on_post, c);
         if (!c->pp)
             fail(c, MHD_HTTP_BAD_REQUEST, "malformed multipart/form-data header");
     }
+}
+
+/* The raw URL, before MHD decodes it (MHD's URI logger): its return value
+   becomes the request's *con_cls. */
+static void *
+on_uri(void *cls, const char *uri, struct MHD_Connection *conn)
+{
+    (void)conn;
+    struct http *h = cls;
+    struct conn *c = mem_calloc(1, sizeof(*c));
+    if (!c)
+        return NULL;
+    c->h = h;
+    buf_init(&c->body, h->cfg.body_max);
+    const char *q = strchr(uri, '?');
+    size_t n = q ? (size_t)(q - uri) : strlen(uri);
+    for (size_t i = 0; i + 2 < n; i++)
+        if (uri[i] == '%' && uri[i + 1] == '0' && uri[i + 2] == '0')
+            c->nul_in_url = true;
+    return c;
 }
 
 static enum MHD_Result
@@ -338,17 +606,19 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     (void)version;
     struct http *h = cls;
     struct conn *c = *con_cls;
-    if (!c) {
-        c = mem_calloc(1, sizeof(*c));
-        if (!c)
-            return MHD_NO;
-        c->h = h;
-        buf_init(&c->body, h->cfg.body_max);
-        *con_cls = c;
-        on_headers(h, c, conn, method);
-        /* Refuse now: the client (curl waits on Expect: 100-continue) never
-           sends a body nobody wants. */
-        if (c->status)
+    if (!c) /* the URI logger ran out of memory */
+        return MHD_NO;
+    if (!c->started) {
+        c->started = true;
+        on_headers(h, c, conn, url, method);
+        /* Refuse now when the client sent no body or waits for 100
+           Continue before it (curl does for large ones), when it has no
+           key, or announced too much.  A client already sending its body
+           would lose the answer to the reset of a socket closed on unread
+           bytes: its body is read and dropped (never stored), and the
+           answer comes at its end. */
+        if (c->status && (!c->has_body || c->expect || c->status == MHD_HTTP_UNAUTHORIZED ||
+                          c->status == MHD_HTTP_CONTENT_TOO_LARGE))
             return send_error(conn, c->status, c->msg);
         return MHD_YES;
     }
@@ -356,9 +626,9 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
         size_t n = *upload_data_size;
         *upload_data_size = 0;
         if (c->status)
-            return MHD_YES; /* drain; answered at the end */
+            return MHD_YES; /* drain (nothing is kept); answered at the end */
         c->received += n;
-        size_t max = c->multipart ? h->cfg.upload_max : h->cfg.body_max;
+        size_t max = c->max;
         if (c->received > max)
             fail(c, MHD_HTTP_CONTENT_TOO_LARGE, "request body is over the limit of %zu bytes", max);
         else if (c->multipart) {
@@ -370,15 +640,24 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
         return MHD_YES;
     }
     if (c->pp) {
-        /* flushes the last part */
-        MHD_destroy_post_processor(c->pp);
+        /* Flushes the last part; MHD_NO unless the body ended in the post
+           processor's final state: a body cut before its closing boundary
+           is refused, whatever was streamed into the sink is discarded. */
+        enum MHD_Result whole = MHD_destroy_post_processor(c->pp);
         c->pp = NULL;
+        if (whole != MHD_YES)
+            fail(c, MHD_HTTP_BAD_REQUEST,
+                 "multipart/form-data body is incomplete (no closing boundary)");
     }
     struct sf_err err;
+    sf_err_clear(&err);
     if (!c->status && c->upload && h->cfg.sink->finish(c->upload, &err))
-        fail(c, MHD_HTTP_INTERNAL_SERVER_ERROR, "%s", err.msg);
-    if (c->status)
+        fail(c, err.code == SF_EINVAL ? MHD_HTTP_BAD_REQUEST : MHD_HTTP_INTERNAL_SERVER_ERROR, "%s",
+             err.msg);
+    if (c->status) {
+        drop_upload(c); /* before the client hears of it */
         return send_error(conn, c->status, c->msg);
+    }
 
     struct http_req req = { .method = method,
                             .path = url,
@@ -395,11 +674,12 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     }
     struct http_resp resp = { .status = MHD_HTTP_OK };
     h->cfg.route(h->cfg.ud, &req, &resp);
+    drop_upload(c); /* the route committed it, or it goes before the answer does */
     if (resp.stream)
-        return send_stream(h, conn, &resp);
+        return send_stream(h, conn, c->key, &resp);
     if (!resp.json)
         resp.json = json_object();
-    return send_json(conn, resp.status, resp.json);
+    return send_json(conn, resp.status, resp.json, false);
 }
 
 static void
@@ -417,8 +697,10 @@ mhd_log(void *cls, const char *fmt, va_list ap)
 }
 
 int
-http_set_keys(struct http *h, const struct farmcfg_key *keys, size_t n_keys)
+http_set_keys(struct http *h, const struct farmcfg_key *keys, size_t n_keys, size_t *n_closed)
 {
+    if (n_closed)
+        *n_closed = 0;
     struct farmcfg_key *copy = mem_array(n_keys ? n_keys : 1, sizeof(*copy));
     if (!copy)
         return SF_ENOMEM;
@@ -428,13 +710,41 @@ http_set_keys(struct http *h, const struct farmcfg_key *keys, size_t n_keys)
     h->keys = copy;
     h->cfg.keys = copy;
     h->cfg.n_keys = n_keys;
+    /* A revoked key's streams end; a stream's key may not be read-only now
+       only if it is gone (streams are GETs, which read-only keys may make). */
+    for (struct stream *st = h->streams; st; st = st->next)
+        if (!st->revoked && !find_key(h, st->key)) {
+            st->revoked = true;
+            if (n_closed)
+                (*n_closed)++;
+            if (st->suspended) {
+                st->suspended = false;
+                MHD_resume_connection(st->conn);
+            }
+        }
     return SF_OK;
+}
+
+void
+http_set_upload_max(struct http *h, size_t upload_max)
+{
+    h->cfg.upload_max = upload_max;
+}
+
+int
+http_add_connection(struct http *h, int fd)
+{
+    struct sockaddr_in sa = { .sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
+    return MHD_add_connection(h->d, fd, (const struct sockaddr *)&sa, sizeof(sa)) == MHD_YES
+               ? SF_OK
+               : SF_EIO;
 }
 
 struct http *
 http_new(const struct http_config *cfg, struct sf_err *err)
 {
-    struct sockaddr_in sa = { .sin_family = AF_INET, .sin_port = htons((uint16_t)cfg->port) };
+    struct sockaddr_in sa = { .sin_family = AF_INET,
+                              .sin_port = htons(cfg->port < 0 ? 0 : (uint16_t)cfg->port) };
     if (strcmp(cfg->host, "*") == 0)
         sa.sin_addr.s_addr = htonl(INADDR_ANY);
     else if (inet_pton(AF_INET, cfg->host, &sa.sin_addr) != 1) {
@@ -442,7 +752,7 @@ http_new(const struct http_config *cfg, struct sf_err *err)
         return NULL;
     }
     struct http *h = mem_calloc(1, sizeof(*h));
-    if (!h || http_set_keys(h, cfg->keys, cfg->n_keys)) {
+    if (!h || http_set_keys(h, cfg->keys, cfg->n_keys, NULL)) {
         free(h);
         sf_err_set(err, SF_ENOMEM, "http: out of memory");
         return NULL;
@@ -450,12 +760,17 @@ http_new(const struct http_config *cfg, struct sf_err *err)
     struct farmcfg_key *keys = h->keys;
     h->cfg = *cfg;
     h->cfg.keys = keys;
-    h->d =
-        MHD_start_daemon(MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME | MHD_USE_ERROR_LOG, 0, NULL,
-                         NULL, on_request, h, MHD_OPTION_EXTERNAL_LOGGER, mhd_log, NULL,
-                         MHD_OPTION_SOCK_ADDR, &sa, MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
-                         MHD_OPTION_CONNECTION_LIMIT, (unsigned)HTTP_CONNECTIONS_MAX,
-                         MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)HTTP_TIMEOUT_S, MHD_OPTION_END);
+    unsigned flags = MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME | MHD_USE_ERROR_LOG;
+    if (cfg->port < 0)
+        flags |= MHD_USE_NO_LISTEN_SOCKET;
+    h->d = MHD_start_daemon(flags, cfg->port < 0 ? 0 : (uint16_t)cfg->port, NULL, NULL, on_request,
+                            h, MHD_OPTION_EXTERNAL_LOGGER, mhd_log, NULL, MHD_OPTION_SOCK_ADDR,
+                            cfg->port < 0 ? NULL : &sa, MHD_OPTION_NOTIFY_COMPLETED, on_completed,
+                            h, MHD_OPTION_NOTIFY_CONNECTION, on_connection, h,
+                            MHD_OPTION_URI_LOG_CALLBACK, on_uri, h, MHD_OPTION_CONNECTION_LIMIT,
+                            (unsigned)HTTP_CONNECTIONS_MAX, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
+                            (unsigned)HTTP_PER_IP_MAX, MHD_OPTION_CONNECTION_TIMEOUT,
+                            (unsigned)HTTP_TIMEOUT_S, MHD_OPTION_END);
     if (!h->d) {
         sf_err_set(err, SF_EIO, "http: cannot listen on %s:%d (in use, or not allowed)", cfg->host,
                    cfg->port);
@@ -463,7 +778,8 @@ http_new(const struct http_config *cfg, struct sf_err *err)
         free(h);
         return NULL;
     }
-    const union MHD_DaemonInfo *info = MHD_get_daemon_info(h->d, MHD_DAEMON_INFO_BIND_PORT);
+    const union MHD_DaemonInfo *info =
+        cfg->port < 0 ? NULL : MHD_get_daemon_info(h->d, MHD_DAEMON_INFO_BIND_PORT);
     h->port = info ? info->port : cfg->port;
     return h;
 }
@@ -497,13 +813,23 @@ int64_t
 http_timeout_ms(struct http *h)
 {
     MHD_UNSIGNED_LONG_LONG ms;
-    if (MHD_get_timeout(h->d, &ms) != MHD_YES)
-        return -1;
-    return ms > INT64_MAX ? INT64_MAX : (int64_t)ms;
+    int64_t t = -1;
+    if (MHD_get_timeout(h->d, &ms) == MHD_YES)
+        t = ms > INT64_MAX ? INT64_MAX : (int64_t)ms;
+    if (h->pending_head) {
+        int64_t left = h->pending_head->deadline_ms - now_ms();
+        if (left < 0)
+            left = 0;
+        if (t < 0 || left < t)
+            t = left;
+    }
+    return t;
 }
 
 int
 http_run(struct http *h)
 {
-    return MHD_run(h->d) == MHD_YES ? SF_OK : SF_EIO;
+    int rc = MHD_run(h->d) == MHD_YES ? SF_OK : SF_EIO;
+    drop_late(h);
+    return rc;
 }

@@ -4,11 +4,21 @@
  *
  * It owns what every route needs and no route should repeat: API keys on
  * every request (X-Api-Key; missing or unknown -> 401, read-only key on
- * anything but GET/HEAD -> 403), capped bodies (JSON body over body_max or
- * upload over upload_max -> 413, refused from Content-Length before any
- * byte is read when the client announces it), multipart/form-data parsing
- * (MHD's post processor) streaming the "file" part into an upload sink, and
- * JSON replies.  Routes see a struct http_req and fill a struct http_resp.
+ * anything but GET/HEAD or with a request body -> 403), which body a route
+ * takes (a multipart upload only where body_kind says so), all of it
+ * decided from the headers before a single body byte is read; capped
+ * bodies (JSON body over body_max or upload over upload_max -> 413,
+ * refused from Content-Length when the client announces it), multipart/
+ * form-data parsing (MHD's post processor) streaming the "file" part into
+ * an upload sink (a body that ends before its closing boundary -> 400),
+ * and JSON replies whose text is valid UTF-8 whatever a client sent.
+ * Routes see a struct http_req and fill a struct http_resp.
+ *
+ * Connections: at most HTTP_CONNECTIONS_MAX, HTTP_PER_IP_MAX per client
+ * address; a connection that has not sent a complete request head within
+ * header_timeout_ms, or is the oldest of more than HTTP_PREAUTH_MAX such
+ * connections, is closed, so clients with no key cannot hold the server;
+ * a request without a valid key is answered 401 and its connection closed.
  *
  * Driving it: the owner watches http_fd() for reading and calls http_run()
  * when it is readable or when http_timeout_ms() passes (http_loop.c does
@@ -34,6 +44,14 @@
 #define HTTP_FIELD_MAX       (64 << 10) /* bytes per field: options JSON is far smaller */
 #define HTTP_CONNECTIONS_MAX 256        /* concurrent clients: a farm has few operators */
 #define HTTP_TIMEOUT_S       60         /* idle connection timeout */
+/* Connections from one address: an operator's browser opens 6, a script a few more. */
+#define HTTP_PER_IP_MAX 32
+/* Connections still sending their request head; past this the oldest is
+   closed, so slow clients never hold more than a quarter of the slots. */
+#define HTTP_PREAUTH_MAX 64
+/* A request head must arrive within this (a client trickling header lines
+   is never idle, so the idle timeout alone does not end it). */
+#define HTTP_HEADER_TIMEOUT_MS 10000
 
 struct http;
 
@@ -70,12 +88,22 @@ struct http_resp {
 
 typedef void (*http_route_fn)(void *ud, const struct http_req *req, struct http_resp *resp);
 
+/* The body a route takes, asked with the request head only. */
+enum http_body {
+    HTTP_BODY_NONE,   /* none (a small JSON body is read and ignored) */
+    HTTP_BODY_JSON,   /* a JSON body up to body_max */
+    HTTP_BODY_UPLOAD, /* multipart/form-data with a "file" part, up to upload_max */
+};
+typedef enum http_body (*http_body_fn)(void *ud, const char *method, const char *path);
+
 /* Where the multipart "file" part goes, chunk by chunk. */
 struct http_upload_sink {
     /* Start a file; NULL with err set (SF_EINVAL -> 400) to refuse it. */
     void *(*begin)(void *ud, const char *filename, struct sf_err *err);
     int (*write)(void *ctx, const char *data, size_t len, struct sf_err *err);
-    /* The last chunk arrived; ctx stays valid for the route. */
+    /* The whole body arrived intact; SF_EINVAL (-> 400) to refuse the file
+       (empty, say).  ctx stays valid for the route, which decides whether
+       to keep the file; discard follows the route at once. */
     int (*finish)(void *ctx, struct sf_err *err);
     /* Free ctx, finished or not. */
     void (*discard)(void *ctx);
@@ -88,18 +116,32 @@ struct http_config {
     size_t n_keys;
     size_t body_max;                     /* largest non-multipart body */
     size_t upload_max;                   /* largest multipart request */
+    unsigned header_timeout_ms;          /* 0: HTTP_HEADER_TIMEOUT_MS */
     http_route_fn route;                 /* every authenticated request */
+    http_body_fn body_kind;              /* NULL: every route takes any body */
     void *ud;                            /* route's and sink's argument */
     const struct http_upload_sink *sink; /* NULL: multipart files are refused */
 };
 
-/* Start listening; NULL with err set (SF_EIO: address in use ...). */
+/*
+ * Start listening; NULL with err set (SF_EIO: address in use ...).  A port
+ * of -1 listens nowhere: connections come only through http_add_connection.
+ */
 struct http *http_new(const struct http_config *cfg, struct sf_err *err);
 /* Resume and close every stream, stop listening, free. */
 void http_free(struct http *h);
 
-/* Replace the API keys (SIGHUP reload); SF_ENOMEM on failure (old keys kept). */
-int http_set_keys(struct http *h, const struct farmcfg_key *keys, size_t n_keys);
+/*
+ * Replace the API keys (SIGHUP reload); SF_ENOMEM on failure (old keys
+ * kept).  Streams opened with a key that is gone end (after what they have
+ * already produced); returns how many through *n_closed (NULL allowed).
+ */
+int http_set_keys(struct http *h, const struct farmcfg_key *keys, size_t n_keys, size_t *n_closed);
+/* Replace the upload limit (SIGHUP reload); requests already reading keep theirs. */
+void http_set_upload_max(struct http *h, size_t upload_max);
+
+/* Serve a connected socket (the fuzz target's socketpair); SF_EIO if refused. */
+int http_add_connection(struct http *h, int fd);
 
 int http_port(const struct http *h);
 /* The fd to watch for reading. */
@@ -111,7 +153,14 @@ int http_run(struct http *h);
 /* Resume suspended streams (there is news for them). */
 void http_wake_streams(struct http *h);
 
-/* Helpers for routes: status with {"error": msg} body. */
+/*
+ * Copy s into out (cap bytes with the NUL) as valid UTF-8: each byte that
+ * starts no valid sequence becomes U+FFFD, and the text is cut only
+ * between characters.  Returns out.
+ */
+char *http_text_clean(char *out, size_t cap, const char *s);
+
+/* Helpers for routes: status with {"error": msg} body (msg made valid UTF-8). */
 void http_error(struct http_resp *resp, int status, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 

@@ -28,6 +28,15 @@
 /* Largest uncompressed 3MF model part: same budget as a mesh file. */
 #define SF_3MF_MODEL_MAX ((size_t)1 << 30)
 
+/* What a 3MF package may unpack to, all its entries together: this many
+   times its own size (but at least SF_3MF_UNPACK_MIN, at most
+   SF_3MF_MODEL_MAX).  Mesh XML deflates 3-8x in practice, so 64x is far past
+   any real file, while deflate's own limit (~1000x) lets a 1 MB zip bomb
+   claim a gigabyte; and the file itself is capped by the daemon's
+   upload_max, so the unpacked text is too. */
+#define SF_3MF_UNPACK_RATIO 64
+#define SF_3MF_UNPACK_MIN   ((size_t)16 << 20)
+
 /* Longest G-code line we accept: Marlin's MAX_CMD_SIZE is 96; slicers emit
    long comments, which we strip, so allow 4 KiB of raw line. */
 #define SF_GCODE_LINE_MAX 4096

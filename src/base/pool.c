@@ -9,7 +9,15 @@
  * deliver() calls done() and frees it.  The running list lets
  * pool_cancel() reach tasks already picked up.
  *
- * Thread: see pool.h.  `mu` protects queue, running and quit.
+ * Stopping is bounded: pool_free cancels every task and waits at most
+ * POOL_STOP_WAIT_MS for the workers.  A worker stuck in a step that cannot
+ * look at its cancel flag (a library call on a huge part) is abandoned:
+ * its thread is detached, its done() never runs, and the last abandoned
+ * worker to finish frees the pool (so pool_free touches nothing of it
+ * after it returns and the loop may be freed).
+ *
+ * Thread: see pool.h.  `mu` protects queue, running, quit, abandoned,
+ * n_exited and posting.
  */
 #include "pool.h"
 
@@ -18,6 +26,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "log.h"
 #include "mem.h"
 #include "par.h"
 
@@ -41,7 +50,21 @@ struct pool {
     struct task *running;     /* picked up by a worker */
     bool quit;                /* workers exit */
     uint64_t next_id;         /* next task id */
+    pthread_cond_t exited_cv; /* a worker exited or finished posting */
+    int n_exited;             /* workers that have left their loop */
+    int posting;              /* workers inside post_back (the loop must live) */
+    bool abandoned;           /* pool_free gave up waiting: workers own the pool */
 };
+
+static void
+pool_destroy(struct pool *p)
+{
+    pthread_cond_destroy(&p->exited_cv);
+    pthread_cond_destroy(&p->cv);
+    pthread_mutex_destroy(&p->mu);
+    free(p->threads);
+    free(p);
+}
 
 static void
 deliver(struct loop *l, void *ud)
@@ -86,11 +109,22 @@ worker(void *arg)
                 *pp = t->next;
                 break;
             }
+        if (p->abandoned) {
+            free(t); /* nobody is left to deliver to */
+            break;
+        }
+        p->posting++;
         pthread_mutex_unlock(&p->mu);
         post_back(p, t);
         pthread_mutex_lock(&p->mu);
+        p->posting--;
+        pthread_cond_broadcast(&p->exited_cv);
     }
+    bool last = ++p->n_exited == p->n && p->abandoned;
+    pthread_cond_broadcast(&p->exited_cv);
     pthread_mutex_unlock(&p->mu);
+    if (last)
+        pool_destroy(p);
     return NULL;
 }
 
@@ -114,6 +148,11 @@ pool_new(struct loop *l, int n_threads, struct sf_err *err)
     p->next_id = 1;
     pthread_mutex_init(&p->mu, NULL);
     pthread_cond_init(&p->cv, NULL);
+    pthread_condattr_t ca;
+    pthread_condattr_init(&ca);
+    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+    pthread_cond_init(&p->exited_cv, &ca);
+    pthread_condattr_destroy(&ca);
     /* Workers inherit this thread's signal mask: block everything so
        signals reach the loop thread (signalfd), never a worker. */
     sigset_t all, old;
@@ -144,19 +183,43 @@ pool_free(struct pool *p)
     for (struct task *t = p->running; t; t = t->next)
         atomic_store(&t->cancel, true);
     pthread_cond_broadcast(&p->cv);
+    struct timespec until;
+    clock_gettime(CLOCK_MONOTONIC, &until);
+    until.tv_sec += POOL_STOP_WAIT_MS / 1000;
+    until.tv_nsec += (long)(POOL_STOP_WAIT_MS % 1000) * 1000000;
+    if (until.tv_nsec >= 1000000000) {
+        until.tv_sec++;
+        until.tv_nsec -= 1000000000;
+    }
+    while (p->n_exited < p->n)
+        if (pthread_cond_timedwait(&p->exited_cv, &p->mu, &until) != 0)
+            break;
+    bool abandon = p->n_exited < p->n;
+    int stuck = p->n - p->n_exited;
+    if (abandon) {
+        /* Completions being posted now still need the loop: let them land. */
+        while (p->posting > 0)
+            pthread_cond_wait(&p->exited_cv, &p->mu);
+        for (int i = 0; i < p->n; i++)
+            pthread_detach(p->threads[i]);
+        p->abandoned = true; /* from here on the stuck workers own p */
+    }
+    struct loop *l = p->l;
     pthread_mutex_unlock(&p->mu);
-    for (int i = 0; i < p->n; i++)
-        pthread_join(p->threads[i], NULL);
+    if (abandon)
+        log_warn("pool", "%d worker%s still busy %d ms after cancel: left to finish on %s own",
+                 stuck, stuck == 1 ? "" : "s", POOL_STOP_WAIT_MS, stuck == 1 ? "its" : "their");
+    else
+        for (int i = 0; i < p->n; i++)
+            pthread_join(p->threads[i], NULL);
     while (queued) {
         struct task *next = queued->next;
-        queued->done(p->l, queued->ud, SF_ECANCELED);
+        queued->done(l, queued->ud, SF_ECANCELED);
         free(queued);
         queued = next;
     }
-    pthread_cond_destroy(&p->cv);
-    pthread_mutex_destroy(&p->mu);
-    free(p->threads);
-    free(p);
+    if (!abandon)
+        pool_destroy(p);
 }
 
 uint64_t

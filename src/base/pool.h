@@ -34,11 +34,17 @@ typedef void (*pool_done_fn)(struct loop *l, void *ud, int rc);
 /* n_threads workers (0: one per core, par_cores(); at most POOL_THREADS_MAX). */
 struct pool *pool_new(struct loop *l, int n_threads, struct sf_err *err);
 
+/* How long pool_free waits for running tasks to see their cancel flag. */
+#define POOL_STOP_WAIT_MS 3000
+
 /*
  * Cancel everything, wait for the workers to stop and free the pool.
  * Queued tasks get done(SF_ECANCELED) before this returns; running tasks'
  * done() calls are posted to the loop: run the loop once more to deliver
- * them.
+ * them.  A task still running POOL_STOP_WAIT_MS after its cancel is
+ * abandoned (logged): its done() never runs, its ud is never handed back
+ * (so it must not point at anything the caller frees after this), and the
+ * pool is freed by the last such worker when its work() returns.
  */
 void pool_free(struct pool *p);
 

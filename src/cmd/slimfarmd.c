@@ -104,8 +104,7 @@ on_reload(struct loop *l, int signo, void *ud)
     if (strcmp(next.data_dir, d->cfg.data_dir) != 0 ||
         strcmp(next.listen_host, d->cfg.listen_host) || next.listen_port != d->cfg.listen_port)
         log_warn("slimfarmd", "reload: listen and data_dir changes need a restart");
-    if (http_set_keys(api_http(d->api), next.keys, next.n_keys) ||
-        farm_reload(d->farm, &next, &err)) {
+    if (api_reload(d->api, &d->cfg, &next, &err) || farm_reload(d->farm, &next, &err)) {
         log_error("slimfarmd", "reload: %s", err.msg);
         farmcfg_release(&next);
         return;

@@ -237,6 +237,7 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
         struct orient_result res;
         orient_params_default(&op);
         op.angle_deg = prof.max_overhang_deg;
+        op.cancel = cancel;
         if ((rc = orient_find(&m, &op, &res, err)))
             goto release;
         orient_apply(&m, res.best.up, prof.bed_x_mm / 2, prof.bed_y_mm / 2);

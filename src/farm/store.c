@@ -21,6 +21,7 @@
  */
 #include "store.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <limits.h>
@@ -33,6 +34,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../base/log.h"
 #include "../base/mem.h"
 
 #define STORE_PATH_MAX 1024 /* data dir paths; deeper trees are a config error */
@@ -360,6 +362,28 @@ mkdir_p(const char *path, struct sf_err *err)
     return SF_OK;
 }
 
+/* Remove the temporaries of uploads a killed daemon never finished (the
+   caller holds the data dir: no writer of this process is open yet). */
+static void
+sweep_tmp(const char *files_dir)
+{
+    DIR *d = opendir(files_dir);
+    if (!d)
+        return;
+    struct dirent *e;
+    char path[STORE_PATH_MAX + 320];
+    int n = 0;
+    while ((e = readdir(d)))
+        if (strncmp(e->d_name, "tmp-", 4) == 0) {
+            snprintf(path, sizeof(path), "%s/%s", files_dir, e->d_name);
+            n += unlink(path) == 0;
+        }
+    closedir(d);
+    if (n)
+        log_info("store", "removed %d unfinished upload%s from '%s'", n, n == 1 ? "" : "s",
+                 files_dir);
+}
+
 struct store *
 store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
 {
@@ -380,6 +404,7 @@ store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
     snprintf(path, sizeof(path), "%s/files", data_dir);
     if (mkdir_p(path, err) || lock_dir(s, err))
         goto fail;
+    sweep_tmp(path);
     snprintf(path, sizeof(path), "%s/slimfarm.db", data_dir);
     if (sqlite3_open_v2(path, &s->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, NULL) !=
         SQLITE_OK) {

@@ -123,6 +123,8 @@ score_chunk(void *ud, uint32_t begin, uint32_t end, int worker)
     struct job *j = ud;
     (void)worker;
     for (uint32_t k = begin; k < end; k++) {
+        if (j->p->cancel && atomic_load(j->p->cancel))
+            return SF_ECANCELED;
         struct sf_err err;
         sf_err_clear(&err);
         if (score_one(j, &j->cands[j->batch[k]], &err) != SF_OK)
@@ -142,6 +144,8 @@ run_stage(struct job *j, int stage, const uint32_t *batch, uint32_t n, struct sf
     j->stage = stage;
     j->batch = batch;
     int f = par_for(n, 1, j->p->threads, score_chunk, j);
+    if (f == SF_ECANCELED)
+        return sf_err_set(err, f, "orientation: cancelled");
     if (f)
         return sf_err_set(err, f, "orientation: scoring a direction failed");
     return SF_OK;

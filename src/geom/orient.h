@@ -16,6 +16,7 @@
 #ifndef SF_GEOM_ORIENT_H
 #define SF_GEOM_ORIENT_H
 
+#include <stdatomic.h>
 #include <stdint.h>
 
 #include "../base/err.h"
@@ -47,6 +48,8 @@ struct orient_params {
     int threads;            /* at most this many threads (0: par.h's budget) */
     void (*progress)(void *ud, double done, double total); /* optional, any thread */
     void *progress_ud;
+    const atomic_bool *cancel; /* optional: checked before each direction is scored;
+                                  set, orient_find returns SF_ECANCELED */
 };
 
 void orient_params_default(struct orient_params *p);

@@ -41,6 +41,7 @@ struct mesh_load_info {
     uint32_t n_input_tris; /* triangles in the file */
     uint32_t n_merged;     /* vertices merged by welding */
     uint32_t n_degenerate; /* zero-area or repeated-index triangles dropped */
+    uint32_t n_duplicate;  /* copies of an earlier triangle (same vertices) dropped */
     uint32_t n_flipped;    /* triangles re-oriented for consistency */
 };
 
@@ -87,6 +88,12 @@ int mesh_save(const struct mesh *m, const char *path, struct sf_err *err);
 int mesh_weld(struct mesh *m, double tol, struct sf_err *err);
 /* Drop triangles with a repeated index or zero area; returns how many. */
 uint32_t mesh_drop_degenerate(struct mesh *m);
+/*
+ * Drop every triangle whose three vertices (in any order or winding) an
+ * earlier one already has; keeps order.  Returns how many (>= 0), or
+ * SF_ENOMEM.  Linear time (hashing).
+ */
+int mesh_drop_duplicates(struct mesh *m, struct sf_err *err);
 /* Remove vertices no triangle uses, renumbering. */
 void mesh_compact(struct mesh *m);
 

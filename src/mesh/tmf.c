@@ -26,7 +26,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../base/buf.h"
 #include "../base/limits.h"
 #include "../base/mem.h"
 #include "mesh.h"
@@ -464,16 +463,28 @@ unz_strerror(int rc)
     }
 }
 
+/*
+ * Stream entry through XML parser xp, chunk by chunk: the unpacked text is
+ * never held whole (a 1 MB zip bomb used to cost 2-3.6 GB, its buffer
+ * doubling as it grew).  *budget is what the package may still unpack (its
+ * entries share one, so many small bombs add up); past it the entry is
+ * refused.  SF_OK, SF_EINVAL (bad zip, over budget), or what stopped the
+ * parser (*xml_rc, set by the element handlers) when the caller's handlers
+ * failed, or SF_EINVAL with the XML error when the text is malformed.
+ */
 static int
-read_entry(unzFile z, const char *entry, struct buf *out, const char *name, struct sf_err *err)
+read_entry(unzFile z, const char *entry, XML_Parser xp, const int *xml_rc, size_t *budget,
+           size_t pkg_len, size_t limit, const char *name, struct sf_err *err)
 {
     unz_file_info64 st;
     if (unzLocateFile(z, entry, 1) != UNZ_OK ||
         unzGetCurrentFileInfo64(z, &st, NULL, 0, NULL, 0, NULL, 0) != UNZ_OK)
         return sf_err_set(err, SF_EINVAL, "3mf '%s': package has no '%s'", name, entry);
-    if (st.uncompressed_size > SF_3MF_MODEL_MAX)
-        return sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' unpacks to more than %zu bytes", name,
-                          entry, SF_3MF_MODEL_MAX);
+    if (st.uncompressed_size > *budget)
+        return sf_err_set(err, SF_EINVAL,
+                          "3mf '%s': '%s' unpacks to more than %zu bytes (a package of %zu "
+                          "bytes may unpack to %zu in all)",
+                          name, entry, *budget, pkg_len, limit);
     if (st.flag & 1)
         return sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' is encrypted", name, entry);
     if (st.compression_method != 0 && st.compression_method != Z_DEFLATED)
@@ -487,20 +498,34 @@ read_entry(unzFile z, const char *entry, struct buf *out, const char *name, stru
                           unz_strerror(n));
     char chunk[65536];
     int rc = SF_OK;
-    while ((n = unzReadCurrentFile(z, chunk, sizeof(chunk))) > 0) {
-        if (buf_append(out, chunk, (size_t)n) != SF_OK) {
-            if ((size_t)n > out->max - out->len)
-                rc = sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' unpacks to more than %zu bytes",
-                                name, entry, out->max);
+    bool parsed_all = false;
+    while ((n = unzReadCurrentFile(z, chunk, sizeof(chunk))) >= 0) {
+        if ((size_t)n > *budget) {
+            /* the header lied about the size: the actual bytes decide */
+            rc = sf_err_set(err, SF_EINVAL,
+                            "3mf '%s': '%s' unpacks to more than %zu bytes (a package of %zu "
+                            "bytes may unpack to %zu in all)",
+                            name, entry, *budget, pkg_len, limit);
+            break;
+        }
+        *budget -= (size_t)n;
+        if (XML_Parse(xp, chunk, n, n == 0) == XML_STATUS_ERROR) {
+            if (xml_rc && *xml_rc)
+                rc = *xml_rc;
             else
-                rc =
-                    sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory reading '%s'", name, entry);
+                rc = sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' line %lu: %s", name, entry,
+                                (unsigned long)XML_GetCurrentLineNumber(xp),
+                                XML_ErrorString(XML_GetErrorCode(xp)));
+            break;
+        }
+        if (n == 0) {
+            parsed_all = true;
             break;
         }
     }
     /* the CRC is checked on closing an entry read to its end */
     int closed = unzCloseCurrentFile(z);
-    if (rc == SF_OK && (n < 0 || closed != UNZ_OK))
+    if (rc == SF_OK && (n < 0 || closed != UNZ_OK || !parsed_all))
         rc = sf_err_set(err, SF_EINVAL, "3mf '%s': '%s' is corrupt: %s", name, entry,
                         unz_strerror(n < 0 ? n : closed));
     return rc;
@@ -524,36 +549,36 @@ tmf_parse(const void *data, size_t len, const char *name, struct mesh *m, struct
                           "3mf '%s': not a valid zip package (no readable central directory)",
                           name);
 
-    struct buf xml;
-    buf_init(&xml, SF_3MF_MODEL_MAX);
+    /* What the package may unpack to, all entries together: a multiple of
+       its own size (limits.h), so the upload limit bounds it too. */
+    size_t limit = SF_3MF_UNPACK_MIN;
+    if (len <= SF_3MF_MODEL_MAX / SF_3MF_UNPACK_RATIO && len * SF_3MF_UNPACK_RATIO > limit)
+        limit = len * SF_3MF_UNPACK_RATIO;
+    else if (len > SF_3MF_MODEL_MAX / SF_3MF_UNPACK_RATIO)
+        limit = SF_3MF_MODEL_MAX;
+    size_t budget = limit;
     char model_path[512] = "";
     struct tmf_parse p = { .name = name, .err = err, .unit_mm = 1 };
     int rc = SF_OK;
 
     /* The relationships part says where the model is; fall back to the usual name. */
-    int rels = read_entry(z, "_rels/.rels", &xml, name, NULL);
+    XML_Parser rp = XML_ParserCreate(NULL);
+    if (!rp) {
+        rc = sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory", name);
+        goto out;
+    }
+    XML_SetUserData(rp, model_path);
+    XML_SetStartElementHandler(rp, on_rel);
+    int rels = read_entry(z, "_rels/.rels", rp, NULL, &budget, len, limit, name, NULL);
+    XML_ParserFree(rp);
     if (rels == SF_ENOMEM) {
         rc = sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory", name);
         goto out;
     }
-    if (rels == SF_OK) {
-        XML_Parser rp = XML_ParserCreate(NULL);
-        if (rp) {
-            XML_SetUserData(rp, model_path);
-            XML_SetStartElementHandler(rp, on_rel);
-            XML_Parse(rp, xml.data, (int)xml.len, XML_TRUE);
-            XML_ParserFree(rp);
-        }
-        buf_reset(&xml);
-    }
+    if (rels != SF_OK)
+        model_path[0] = '\0'; /* unreadable relationships: the usual name */
     if (!model_path[0])
         snprintf(model_path, sizeof(model_path), "3D/3dmodel.model");
-    if ((rc = read_entry(z, model_path, &xml, name, err)))
-        goto out;
-    if (xml.len > INT32_MAX) {
-        rc = sf_err_set(err, SF_EINVAL, "3mf '%s': model part too large", name);
-        goto out;
-    }
     p.xp = XML_ParserCreate(NULL);
     if (!p.xp) {
         rc = sf_err_set(err, SF_ENOMEM, "3mf '%s': out of memory", name);
@@ -561,10 +586,8 @@ tmf_parse(const void *data, size_t len, const char *name, struct mesh *m, struct
     }
     XML_SetUserData(p.xp, &p);
     XML_SetElementHandler(p.xp, on_start, on_end);
-    if (XML_Parse(p.xp, xml.data, (int)xml.len, XML_TRUE) == XML_STATUS_ERROR && !p.rc)
-        p.rc = sf_err_set(err, SF_EINVAL, "3mf '%s': model line %lu: %s", name,
-                          (unsigned long)XML_GetCurrentLineNumber(p.xp),
-                          XML_ErrorString(XML_GetErrorCode(p.xp)));
+    if ((rc = read_entry(z, model_path, p.xp, &p.rc, &budget, len, limit, name, err)))
+        goto out;
     if ((rc = p.rc))
         goto out;
 
@@ -590,7 +613,6 @@ out:
     }
     free(p.objs);
     free(p.items);
-    buf_release(&xml);
     unzClose(z);
     return rc;
 }

@@ -9,16 +9,24 @@
  * printer actions and the bed-clear gate, and Server-Sent Events (backlog
  * and live).
  */
+#include <arpa/inet.h>
 #include <curl/curl.h>
+#include <dirent.h>
+#include <fcntl.h>
+#include <ftw.h>
+#include <netinet/in.h>
 #include <poll.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdlib.h>
+#include <sys/socket.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "../../src/api/api.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/log.h"
+#include "../../src/base/mem.h"
 #include "../../src/farm/farm.h"
 #include "../../src/farm/store.h"
 #include "../t.h"
@@ -155,6 +163,15 @@ static struct {
     char base[64];
 } srv;
 
+/* A function to run on the server thread (the API is loop-thread only). */
+static struct {
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+    void (*fn)(void *arg);
+    void *arg;
+    bool done;
+} oncall = { PTHREAD_MUTEX_INITIALIZER, PTHREAD_COND_INITIALIZER, NULL, NULL, false };
+
 static void *
 serve(void *arg)
 {
@@ -170,6 +187,14 @@ serve(void *arg)
         poll(&pfd, 1, t < 0 || t > 5 ? 5 : (int)t);
         http_run(h);
         loop_run_once(srv.l, 0); /* the farm: its timers, printers, prepares */
+        pthread_mutex_lock(&oncall.mu);
+        if (oncall.fn) {
+            oncall.fn(oncall.arg);
+            oncall.fn = NULL;
+            oncall.done = true;
+            pthread_cond_broadcast(&oncall.cv);
+        }
+        pthread_mutex_unlock(&oncall.mu);
     }
     return NULL;
 }
@@ -214,7 +239,7 @@ wait_state(int64_t id, enum job_state state)
     return false;
 }
 
-static int start_api(struct sf_err *err);
+static int start_api(unsigned header_ms, struct sf_err *err);
 
 /* A store with one job printing on printer "a", the farm and the API. */
 static int
@@ -238,12 +263,13 @@ start(const char *name, struct sf_err *err)
     farm_kick(srv.farm);
     if (!wait_state(id, JOB_PRINTING))
         return sf_err_set(err, SF_ETIMEDOUT, "job %lld never printed", (long long)id);
-    return start_api(err);
+    return start_api(0, err);
 }
 
-/* Start the API over srv's store and farm, on the server thread. */
+/* Start the API over srv's store and farm, on the server thread; a
+   header deadline of header_ms if non-zero. */
 static int
-start_api(struct sf_err *err)
+start_api(unsigned header_ms, struct sf_err *err)
 {
     atomic_store(&srv.stop, false);
     struct farmcfg_key keys[2] = { { KEY_RW, false }, { KEY_RO, true } };
@@ -253,7 +279,8 @@ start_api(struct sf_err *err)
                               .port = 0,
                               .keys = keys,
                               .n_keys = 2,
-                              .upload_max = UPLOAD_MAX };
+                              .upload_max = UPLOAD_MAX,
+                              .header_timeout_ms = header_ms };
     srv.api = api_new(&cfg, err);
     if (!srv.api)
         return err->code;
@@ -610,7 +637,7 @@ T_CASE(api_restart_interrupted_job)
     /* the daemon stops while job 1 prints; on restart it is interrupted */
     stop();
     T_OK(open_farm("restart", &err), &err);
-    T_OK(start_api(&err), &err);
+    T_OK(start_api(0, &err), &err);
     T_EQ_INT(get("/api/jobs/1", KEY_RW, &b), 200);
     T_EQ_STR(jstr(&b, "job", "state"), "interrupted");
     T_EQ_STR(jstr(&b, "job", "printer"), "a");
@@ -636,7 +663,7 @@ T_CASE(api_resume_job_body_and_refusal)
     /* stopped mid-print and restarted: interrupted at line 0 */
     stop();
     T_OK(open_farm("resume", &err), &err);
-    T_OK(start_api(&err), &err);
+    T_OK(start_api(0, &err), &err);
     /* no body: the stored line, 0, which would run the job's own start */
     T_EQ_INT(call("POST", "/api/jobs/1/resume", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 409);
     T_TRUE(strstr(jstr(&b, NULL, "error"), "line 0 is out of range: resume from 1..1999") != NULL);
@@ -739,5 +766,501 @@ T_CASE(api_events_stream_backlog_and_live)
     /* only live events: the backlog was not replayed */
     T_TRUE(strstr(s.got.data, "event: job-add") == NULL);
     buf_release(&s.got);
+    stop();
+}
+
+/* ---- hardening (issue 16): a server whose loop thread runs test code too ---- */
+
+/* Run fn(arg) on the server thread and wait for it. */
+static void
+on_server(void (*fn)(void *), void *arg)
+{
+    pthread_mutex_lock(&oncall.mu);
+    oncall.fn = fn;
+    oncall.arg = arg;
+    oncall.done = false;
+    while (!oncall.done)
+        pthread_cond_wait(&oncall.cv, &oncall.mu);
+    pthread_mutex_unlock(&oncall.mu);
+}
+
+/* start() with the seed job, and if non-zero a header deadline of header_ms. */
+static int
+start_calls(const char *name, unsigned header_ms, struct sf_err *err)
+{
+    int rc = start(name, err);
+    if (rc)
+        return rc;
+    /* replace the API start() made with one configured here */
+    atomic_store(&srv.stop, true);
+    pthread_join(srv.thread, NULL);
+    api_free(srv.api);
+    srv.api = NULL;
+    return start_api(header_ms, err);
+}
+
+/* Files (stored, temporary) under the store's files/ dir. */
+static int n_files_seen;
+
+static int
+count_one(const char *path, const struct stat *st, int flag, struct FTW *ftw)
+{
+    (void)path, (void)st, (void)ftw;
+    n_files_seen += flag == FTW_F;
+    return 0;
+}
+
+static int
+store_files(const char *name)
+{
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/%s/files", t_tmpdir(), name);
+    n_files_seen = 0;
+    nftw(dir, count_one, 16, FTW_PHYS);
+    return n_files_seen;
+}
+
+static int
+n_jobs(void)
+{
+    struct buf b;
+    buf_init(&b, 0);
+    int n = -1;
+    if (get("/api/jobs", KEY_RW, &b) == 200) {
+        json_t *root = json_loads(b.data, 0, NULL);
+        n = (int)json_array_size(json_object_get(root, "jobs"));
+        json_decref(root);
+    }
+    buf_release(&b);
+    return n;
+}
+
+static int
+srv_port(void)
+{
+    return http_port(api_http(srv.api));
+}
+
+/* A socket connected to the server from local address `from` (127.x.y.z; NULL: any). */
+static int
+connect_from(const char *from)
+{
+    int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+    if (fd < 0)
+        return -1;
+    if (from) {
+        struct sockaddr_in me = { .sin_family = AF_INET };
+        inet_pton(AF_INET, from, &me.sin_addr);
+        if (bind(fd, (struct sockaddr *)&me, sizeof(me)) != 0) {
+            close(fd);
+            return -1;
+        }
+    }
+    struct sockaddr_in sa = { .sin_family = AF_INET, .sin_port = htons((uint16_t)srv_port()) };
+    inet_pton(AF_INET, "127.0.0.1", &sa.sin_addr);
+    if (connect(fd, (struct sockaddr *)&sa, sizeof(sa)) != 0) {
+        close(fd);
+        return -1;
+    }
+    return fd;
+}
+
+/* Send a raw request and read the answer until the server closes or 10 s
+   pass; returns the status (0: none) and the reply in out. */
+static long
+raw(const char *req, size_t len, struct buf *out)
+{
+    buf_reset(out);
+    int fd = connect_from(NULL);
+    if (fd < 0)
+        return 0;
+    for (size_t off = 0; off < len;) {
+        ssize_t w = send(fd, req + off, len - off, MSG_NOSIGNAL);
+        if (w <= 0)
+            break;
+        off += (size_t)w;
+    }
+    struct pollfd p = { .fd = fd, .events = POLLIN };
+    char chunk[4096];
+    while (poll(&p, 1, 10000) == 1) {
+        ssize_t r = recv(fd, chunk, sizeof(chunk), 0);
+        if (r <= 0)
+            break;
+        buf_append(out, chunk, (size_t)r);
+        const char *end = strstr(out->data, "\r\n\r\n");
+        const char *cl = strcasestr(out->data, "content-length: ");
+        if (end && cl && cl < end &&
+            out->len >= (size_t)(end + 4 - out->data) + strtoul(cl + 16, NULL, 10))
+            break; /* the whole reply */
+    }
+    close(fd);
+    long status = 0;
+    if (out->data && strncmp(out->data, "HTTP/1.1 ", 9) == 0)
+        status = strtol(out->data + 9, NULL, 10);
+    return status;
+}
+
+/* The JSON body of a raw reply's "error", or "(none)". */
+static const char *
+raw_error(struct buf *b)
+{
+    const char *body = b->data ? strstr(b->data, "\r\n\r\n") : NULL;
+    static char val[512];
+    snprintf(val, sizeof(val), "(none)");
+    json_t *root = body ? json_loads(body + 4, 0, NULL) : NULL;
+    if (json_is_string(json_object_get(root, "error")))
+        snprintf(val, sizeof(val), "%s", json_string_value(json_object_get(root, "error")));
+    json_decref(root);
+    return val;
+}
+
+/* Item 5: authorisation (key, method, route) comes before the body. */
+T_CASE(api_read_only_key_multipart_stores_nothing)
+{
+    struct sf_err err;
+    T_OK(start("robody", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    int before = store_files("robody");
+    static char part[32 << 10];
+    memset(part, 'x', sizeof(part));
+    T_EQ_INT(call("GET", "/api/jobs", KEY_RO, NULL, "big.stl", part, sizeof(part), NULL, &b), 403);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "read-only API key") != NULL);
+    T_EQ_INT(call("GET", "/api/nothing", KEY_RO, NULL, "big.stl", part, sizeof(part), NULL, &b),
+             403);
+    /* a read-write key's upload goes only where a route takes one */
+    T_EQ_INT(call("GET", "/api/jobs", KEY_RW, NULL, "big.stl", part, sizeof(part), NULL, &b), 400);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "takes no multipart") != NULL);
+    T_EQ_INT(
+        call("POST", "/api/jobs/1/cancel", KEY_RW, NULL, "big.stl", part, sizeof(part), NULL, &b),
+        400);
+    T_EQ_INT(call("PATCH", "/api/jobs/1", KEY_RW, NULL, "big.stl", part, sizeof(part), NULL, &b),
+             400);
+    T_EQ_INT(store_files("robody"), before);
+    T_EQ_INT(n_jobs(), 1);
+    T_EQ_INT(get("/api/jobs/1", KEY_RW, &b), 200);
+    T_EQ_STR(jstr(&b, "job", "state"), "printing"); /* the cancel never ran */
+    buf_release(&b);
+    stop();
+}
+
+/* A multipart body for POST /api/jobs: the file, then `tail` (closing
+   boundary or not). */
+static size_t
+multipart(char *out, size_t cap, const char *file, const char *tail)
+{
+    char body[4096];
+    int n = snprintf(body, sizeof(body),
+                     "--XyZ\r\nContent-Disposition: form-data; name=\"file\"; "
+                     "filename=\"two.obj\"\r\nContent-Type: application/octet-stream\r\n\r\n"
+                     "%s%s",
+                     file, tail);
+    return (size_t)snprintf(out, cap,
+                            "POST /api/jobs HTTP/1.1\r\nHost: x\r\nX-Api-Key: " KEY_RW
+                            "\r\nContent-Type: multipart/form-data; boundary=XyZ\r\n"
+                            "Content-Length: %d\r\nConnection: close\r\n\r\n%s",
+                            n, body);
+}
+
+/* Item 8: a body without its closing boundary is refused, nothing stored. */
+T_CASE(api_truncated_multipart_is_400)
+{
+    struct sf_err err;
+    T_OK(start("trunc", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    int before = store_files("trunc");
+    const char *cube = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+    char req[8192];
+    size_t n = multipart(req, sizeof(req), cube, "");
+    T_EQ_INT(raw(req, n, &b), 400);
+    T_TRUE(strstr(raw_error(&b), "incomplete") != NULL);
+    n = multipart(req, sizeof(req), cube, "\r\n--XyZ\r\nContent-Disposition: form-da");
+    T_EQ_INT(raw(req, n, &b), 400);
+    T_EQ_INT(store_files("trunc"), before);
+    T_EQ_INT(n_jobs(), 1);
+    /* the same body with its closing boundary is taken */
+    n = multipart(req, sizeof(req), cube, "\r\n--XyZ--\r\n");
+    T_EQ_INT(raw(req, n, &b), 201);
+    T_EQ_INT(n_jobs(), 2);
+    buf_release(&b);
+    stop();
+}
+
+/* Item 10: a refused submission leaves no file and no row; temporaries of
+   a killed daemon are removed when the store opens. */
+T_CASE(api_refused_options_leave_no_file)
+{
+    struct sf_err err;
+    T_OK(start("refused", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    int before = store_files("refused");
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "a.stl", "solid a", 7, "{\"copies\": 0}", &b),
+             400);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "a.stl", "solid b", 7, "{\"copies\": 2,", &b),
+             400);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "a.stl", "solid c", 7,
+                  "{\"material\": \"no such!\"}", &b),
+             400);
+    T_EQ_INT(store_files("refused"), before);
+    T_EQ_INT(n_jobs(), 1);
+    stop();
+    /* a temporary left by a kill -9 mid-upload */
+    char tmp[600];
+    snprintf(tmp, sizeof(tmp), "%s/refused/files/tmp-AbC123", t_tmpdir());
+    int fd = open(tmp, O_CREAT | O_WRONLY, 0644);
+    T_TRUE(fd >= 0);
+    T_TRUE(write(fd, "half a part", 11) == 11);
+    close(fd);
+    T_EQ_INT(store_files("refused"), before + 1);
+    char dir[600];
+    snprintf(dir, sizeof(dir), "%s/refused", t_tmpdir());
+    struct store *s = store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    store_close(s);
+    T_EQ_INT(store_files("refused"), before);
+    T_TRUE(access(tmp, F_OK) != 0);
+    buf_release(&b);
+}
+
+/* Item 11: echoed client text never breaks the JSON of an error. */
+T_CASE(api_invalid_utf8_in_echoed_text)
+{
+    struct sf_err err;
+    T_OK(start("utf8", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "bad\xff\xfe name.stl", "x", 1, NULL, &b),
+             400);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "is not a plain file name") != NULL);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "\xef\xbf\xbd") != NULL); /* U+FFFD */
+    /* 2-byte characters across the 80-byte cut of the message */
+    char name[200] = "a";
+    for (int i = 0; i < 60; i++)
+        memcpy(name + 1 + 2 * i, "\xc3\xa9", 2);
+    memcpy(name + 121, ".txt", 5);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, name, "x", 1, NULL, &b), 400);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "does not end in .stl") != NULL);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "\xef\xbf\xbd") == NULL); /* cut between characters */
+    /* a URL path with invalid UTF-8, echoed by the 404 */
+    T_EQ_INT(get("/api/%FF%FEx", KEY_RW, &b), 404);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "no such resource") != NULL);
+    char path[400] = "/api/";
+    for (int i = 0; i < 60; i++)
+        memcpy(path + 5 + 6 * i, "%C3%A9", 7);
+    T_EQ_INT(get(path, KEY_RW, &b), 404);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "no such resource") != NULL);
+    buf_release(&b);
+    stop();
+}
+
+/* Item 12: a Last-Event-ID above the newest event (another log) replays this one. */
+T_CASE(api_events_last_id_above_newest_replays)
+{
+    struct sf_err err;
+    T_OK(start("evreset", &err), &err);
+    char url[128];
+    snprintf(url, sizeof(url), "%s/api/events", srv.base);
+    struct curl_slist *h =
+        curl_slist_append(curl_slist_append(NULL, "X-Api-Key: " KEY_RO), "Last-Event-ID: 999999");
+    struct sse_client s = { .want = "event: job-start" };
+    buf_init(&s.got, 0);
+    CURL *c = curl_easy_init();
+    curl_easy_setopt(c, CURLOPT_URL, url);
+    curl_easy_setopt(c, CURLOPT_HTTPHEADER, h);
+    curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, on_sse);
+    curl_easy_setopt(c, CURLOPT_WRITEDATA, &s);
+    curl_easy_setopt(c, CURLOPT_TIMEOUT, 5L);
+    curl_easy_perform(c);
+    curl_easy_cleanup(c);
+    curl_slist_free_all(h);
+    T_TRUE(s.got.data != NULL);
+    T_TRUE(strstr(s.got.data, "event: reset\ndata: {") != NULL);
+    /* the whole log from its first event, the job's among them */
+    T_TRUE(strstr(s.got.data, "id: 1\nevent: ") != NULL);
+    T_TRUE(strstr(s.got.data, "event: job-add\ndata: {") != NULL);
+    buf_release(&s.got);
+    stop();
+}
+
+/* Item 13: reload applies upload_max and closes the streams of revoked keys. */
+static void
+reload_keys_rw_only(void *arg)
+{
+    (void)arg;
+    struct farmcfg next;
+    farmcfg_init(&next);
+    next.keys = mem_calloc(1, sizeof(*next.keys));
+    snprintf(next.keys[0].key, sizeof(next.keys[0].key), "%s", KEY_RW);
+    next.n_keys = 1;
+    next.upload_max_bytes = 1024;
+    struct sf_err err;
+    api_reload(srv.api, NULL, &next, &err);
+    farmcfg_release(&next);
+}
+
+T_CASE(api_reload_applies_upload_max_and_revokes_streams)
+{
+    struct sf_err err;
+    T_OK(start_calls("reload", 0, &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    char url[128];
+    snprintf(url, sizeof(url), "%s/api/events", srv.base);
+    struct curl_slist *h =
+        curl_slist_append(curl_slist_append(NULL, "X-Api-Key: " KEY_RO), "Last-Event-ID: 0");
+    struct sse_client s = { .want = "never sent" };
+    buf_init(&s.got, 0);
+    CURLM *m = curl_multi_init();
+    CURL *c = curl_easy_init();
+    curl_easy_setopt(c, CURLOPT_URL, url);
+    curl_easy_setopt(c, CURLOPT_HTTPHEADER, h);
+    curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, on_sse);
+    curl_easy_setopt(c, CURLOPT_WRITEDATA, &s);
+    curl_easy_setopt(c, CURLOPT_TIMEOUT, 20L);
+    curl_multi_add_handle(m, c);
+    int running = 1;
+    bool reloaded = false;
+    while (running) {
+        curl_multi_perform(m, &running);
+        curl_multi_poll(m, NULL, 0, 20, NULL);
+        if (!reloaded && s.got.data && strstr(s.got.data, "event: job-start")) {
+            on_server(reload_keys_rw_only, NULL); /* the stream has its backlog: revoke */
+            reloaded = true;
+        }
+    }
+    CURLMsg *msg;
+    int left;
+    CURLcode done = CURLE_RECV_ERROR; /* unless curl reports */
+    while ((msg = curl_multi_info_read(m, &left)))
+        if (msg->msg == CURLMSG_DONE)
+            done = msg->data.result;
+    curl_multi_remove_handle(m, c);
+    curl_easy_cleanup(c);
+    curl_multi_cleanup(m);
+    curl_slist_free_all(h);
+    buf_release(&s.got);
+    T_TRUE(reloaded);
+    T_EQ_INT(done, CURLE_OK); /* the server ended it, well before the 20 s timeout */
+    T_EQ_INT(get("/api/jobs", KEY_RO, &b), 401);
+    static char part[4096];
+    memset(part, 'x', sizeof(part));
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "big.stl", part, sizeof(part), NULL, &b), 413);
+    buf_release(&b);
+    stop();
+}
+
+/* Minor: %00 in a URL, conflicting Content-Length, an empty file part. */
+T_CASE(api_nul_in_url_double_length_empty_file)
+{
+    struct sf_err err;
+    T_OK(start("minor", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    const char nul[] = "GET /api/jobs%00/1 HTTP/1.1\r\nHost: x\r\nX-Api-Key: " KEY_RW "\r\n\r\n";
+    T_EQ_INT(raw(nul, sizeof(nul) - 1, &b), 400);
+    T_TRUE(strstr(raw_error(&b), "%00") != NULL);
+    const char twocl[] = "PATCH /api/jobs/1 HTTP/1.1\r\nHost: x\r\nX-Api-Key: " KEY_RW
+                         "\r\nContent-Type: application/json\r\nContent-Length: 15\r\n"
+                         "Content-Length: 16\r\n\r\n{\"priority\": 3}";
+    T_EQ_INT(raw(twocl, sizeof(twocl) - 1, &b), 400);
+    T_TRUE(strstr(raw_error(&b), "Content-Length") != NULL);
+    int before = store_files("minor");
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "empty.stl", "", 0, NULL, &b), 400);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "'empty.stl' is empty") != NULL);
+    T_EQ_INT(store_files("minor"), before);
+    T_EQ_INT(n_jobs(), 1);
+    buf_release(&b);
+    stop();
+}
+
+/* Item 6: 300 clients with no key that never finish their request head
+   (from ten loopback addresses, 30 each) do not keep an authenticated
+   client out.  Asserts that its requests are answered, not how fast. */
+T_CASE(api_slow_clients_do_not_lock_out_a_key)
+{
+    struct sf_err err;
+    T_OK(start("slow", &err), &err);
+    enum { N_SLOW = 300 };
+    int fds[N_SLOW];
+    int n = 0;
+    for (int i = 0; i < N_SLOW; i++) {
+        char from[32];
+        snprintf(from, sizeof(from), "127.0.0.%d", 2 + i % 10);
+        int fd = connect_from(from);
+        if (fd < 0)
+            break;
+        const char head[] = "GET /api/jobs HTTP/1.1\r\nHost: x\r\n";
+        if (send(fd, head, sizeof(head) - 1, MSG_NOSIGNAL) < 0) {
+            close(fd);
+            break;
+        }
+        fds[n++] = fd;
+    }
+    T_EQ_INT(n, N_SLOW);
+    /* one more header line each: they are not idle */
+    for (int i = 0; i < n; i++)
+        send(fds[i], "X-Slow: 1\r\n", 11, MSG_NOSIGNAL);
+    struct buf b;
+    buf_init(&b, 0);
+    int answered = 0;
+    for (int i = 0; i < 5; i++)
+        answered += get("/api/jobs", KEY_RW, &b) == 200; /* curl's 10 s timeout each */
+    for (int i = 0; i < n; i++)
+        close(fds[i]);
+    buf_release(&b);
+    T_EQ_INT(answered, 5);
+    stop();
+}
+
+/* Item 6: a client trickling header lines is cut at the header deadline
+   (it never goes idle, so the idle timeout alone would keep it). */
+T_CASE(api_header_deadline_closes_a_trickling_client)
+{
+    struct sf_err err;
+    T_OK(start_calls("trickle", 300, &err), &err);
+    int fd = connect_from(NULL);
+    T_TRUE(fd >= 0);
+    send(fd, "GET /api/jobs HTTP/1.1\r\n", 24, MSG_NOSIGNAL);
+    bool closed = false;
+    /* up to 30 s of a line every 100 ms; the deadline is 0.3 s */
+    for (int i = 0; i < 300 && !closed; i++) {
+        struct pollfd p = { .fd = fd, .events = POLLIN };
+        if (poll(&p, 1, 100) == 1) {
+            char c[256];
+            closed = recv(fd, c, sizeof(c), 0) <= 0;
+        }
+        if (!closed && send(fd, "X-Slow: 1\r\n", 11, MSG_NOSIGNAL) < 0)
+            closed = true;
+    }
+    close(fd);
+    T_TRUE(closed);
+    struct buf b;
+    buf_init(&b, 0);
+    T_EQ_INT(get("/api/jobs", KEY_RW, &b), 200);
+    buf_release(&b);
+    stop();
+}
+
+/* Found by fuzz_http: a multipart part without a name reached strcmp(NULL). */
+T_CASE(api_multipart_part_without_name_is_400)
+{
+    struct sf_err err;
+    T_OK(start("noname", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    const char body[] = "--XyZ\r\nContent-Disposition: form-data; filename=\"a.stl\"\r\n\r\n"
+                        "solid a\r\n--XyZ--\r\n";
+    char req[1024];
+    int n = snprintf(req, sizeof(req),
+                     "POST /api/jobs HTTP/1.1\r\nHost: x\r\nX-Api-Key: " KEY_RW
+                     "\r\nContent-Type: multipart/form-data; boundary=XyZ\r\n"
+                     "Content-Length: %zu\r\n\r\n%s",
+                     sizeof(body) - 1, body);
+    T_EQ_INT(raw(req, (size_t)n, &b), 400);
+    T_TRUE(strstr(raw_error(&b), "has no name") != NULL);
+    T_EQ_INT(n_jobs(), 1);
+    buf_release(&b);
     stop();
 }
