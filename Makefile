@@ -72,10 +72,13 @@ SIM_C := $(filter-out sim/slimfarm_sim.c,$(wildcard sim/*.c))
 # The CLI: bin/slimfarm (src/cmd/slimfarm.c, no libraries) execs
 # libexec/slimfarm/slimfarm-MODULE, one program per src/cmd/cmd_MODULE.c (with
 # its parts cmd_MODULE_*.c and the shared cmd.c), each linked --as-needed so
-# it loads only the libraries its commands use.
+# it loads only the libraries its commands use.  The helpers that need a
+# library (cmdprofile.c: the INI parser; cmdreport.c: jansson) sit in an
+# archive, so a program links one only when it calls it.
 CMD_MODULES := $(sort $(foreach f,$(wildcard src/cmd/cmd_*.c),\
 	$(firstword $(subst _, ,$(patsubst src/cmd/cmd_%.c,%,$(f))))))
 CMD_PROGS := $(CMD_MODULES:%=$(BUILD)/libexec/slimfarm/slimfarm-%)
+CMD_HELPERS := $(filter-out src/cmd/cmd.c,$(wildcard src/cmd/cmd[a-z]*.c))
 TEST_C := $(wildcard tests/unit/test_*.c)
 FUZZ_C := $(wildcard tests/fuzz/fuzz_*.c)
 BENCH_C := $(wildcard tests/bench/bench_*.c)
@@ -121,8 +124,10 @@ $(SIMLIB): $(call obj,$(SIM_C))
 
 .SECONDEXPANSION:
 .SECONDARY: $(call obj,$(wildcard src/cmd/cmd*.c))
+$(BUILD)/libcmd.a: $(call obj,$(CMD_HELPERS))
+	rm -f $@ && ar rcs $@ $^
 $(BUILD)/libexec/slimfarm/slimfarm-%: $(call obj,src/cmd/cmd.c) $(BUILD)/obj/src/cmd/cmd_%.o \
-		$$(call obj,$$(wildcard src/cmd/cmd_$$*_*.c)) $(LIB)
+		$$(call obj,$$(wildcard src/cmd/cmd_$$*_*.c)) $(BUILD)/libcmd.a $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $^ -Wl,--as-needed $(EXT_LIBS)
 

@@ -34,6 +34,7 @@ static const char usage_text[] =
     "usage: slimfarm-sim marlin [--tcp PORT] [--link PATH] [--baud N] [--speed X]\n"
     "                           [--bufsize N] [--planner N] [--rx-size N] [--advanced-ok]\n"
     "                           [--log FILE] [--fault SPEC]... [--count N]\n"
+    "       slimfarm-sim -h|--help\n"
     "faults: corrupt=RATE corrupt-rx=RATE corrupt-tx=RATE drop-ok=RATE garbage=RATE\n"
     "        slow=MS reset=N disconnect=N runaway=N seed=N\n";
 
@@ -151,6 +152,10 @@ out:
 int
 main(int argc, char **argv)
 {
+    if (argc == 2 && (strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0)) {
+        fputs(usage_text, stdout);
+        return 0;
+    }
     if (argc < 2 || strcmp(argv[1], "marlin") != 0) {
         fputs(usage_text, stderr);
         return 2;

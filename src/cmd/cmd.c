@@ -3,7 +3,9 @@
  * main() of libexec/slimfarm/slimfarm-MODULE, which runs one of the
  * commands its cmd_MODULE.c registered (argv[1] names it).  Users reach it
  * through bin/slimfarm (slimfarm.c); `--describe MODULE` prints the rows of
- * that program's command table.
+ * that program's command table.  -h/--help is answered here for every
+ * command, from the same table `slimfarm help` reads.  What needs a library
+ * lives in cmdprofile.c and cmdreport.c (see cmd.h).
  */
 #include "cmd.h"
 
@@ -60,103 +62,6 @@ bad:
     return false;
 }
 
-static const char *
-find_profile(const char *kind, const char *name, char *buf, size_t cap)
-{
-    if (strchr(name, '/') || strstr(name, ".cfg")) {
-        snprintf(buf, cap, "%s", name);
-        return access(buf, R_OK) == 0 ? buf : NULL;
-    }
-    const char *roots[] = { getenv("SLIMFARM_CONFIG"), "config", "/usr/local/share/slimfarm/config",
-                            "/usr/share/slimfarm/config" };
-    for (size_t i = 0; i < sizeof(roots) / sizeof(roots[0]); i++) {
-        if (!roots[i] || !roots[i][0])
-            continue;
-        snprintf(buf, cap, "%s/%s/%s.cfg", roots[i], kind, name);
-        if (access(buf, R_OK) == 0)
-            return buf;
-    }
-    return NULL;
-}
-
-bool
-cmd_load_profile(const char *cmd, const char *printer, const char *material,
-                 struct slice_profile *p)
-{
-    char pbuf[1024], mbuf[1024];
-    const char *pcfg = NULL, *mcfg = NULL;
-    if (printer && !(pcfg = find_profile("printers", printer, pbuf, sizeof(pbuf)))) {
-        fprintf(stderr, "slimfarm %s: no printer profile '%s'\n", cmd, printer);
-        return false;
-    }
-    if (material && !(mcfg = find_profile("materials", material, mbuf, sizeof(mbuf)))) {
-        fprintf(stderr, "slimfarm %s: no material profile '%s'\n", cmd, material);
-        return false;
-    }
-    struct sf_err err;
-    if (slice_profile_load(pcfg, mcfg, p, &err) < 0) {
-        fprintf(stderr, "slimfarm %s: %s\n", cmd, err.msg);
-        return false;
-    }
-    return true;
-}
-
-json_t *
-cmd_metrics_json(const struct support_metrics *m)
-{
-    return json_pack("{s:i, s:f, s:f, s:f, s:i, s:f}", "risky_faces", (json_int_t)m->n_risky,
-                     "risky_area_mm2", m->risky_area_mm2, "support_volume_mm3", m->volume_mm3,
-                     "contact_area_mm2", m->contact_area_mm2, "anchors", (json_int_t)m->n_anchors,
-                     "build_height_mm", m->build_height_mm);
-}
-
-void
-cmd_print_metrics(const char *label, const struct support_metrics *m)
-{
-    printf("  %-8s risky faces %7u (%8.0f mm2), support %9.0f mm3, contact %7.0f mm2, "
-           "%u anchors, height %.1f mm\n",
-           label, m->n_risky, m->risky_area_mm2, m->volume_mm3, m->contact_area_mm2, m->n_anchors,
-           m->build_height_mm);
-}
-
-void
-cmd_print_curve(const uint32_t *curve, int n)
-{
-    printf("  risky faces per iteration:");
-    for (int i = 0; i < n; i++)
-        printf("%s%u", i % 16 ? " " : "\n   ", curve[i]);
-    printf("\n");
-}
-
-json_t *
-cmd_curve_json(const uint32_t *curve, int n)
-{
-    json_t *a = json_array();
-    for (int i = 0; a && i < n; i++)
-        json_array_append_new(a, json_integer(curve[i]));
-    return a;
-}
-
-int
-cmd_put_json(const char *cmd, json_t *o)
-{
-    char *text = o ? json_dumps(o, JSON_INDENT(2) | JSON_REAL_PRECISION(8)) : NULL;
-    json_decref(o);
-    if (!text) {
-        fprintf(stderr, "slimfarm %s: out of memory\n", cmd);
-        return 1;
-    }
-    puts(text);
-    free(text);
-    return 0;
-}
-
-bool
-cmd_stdout_is_tty(void)
-{
-    return isatty(STDOUT_FILENO);
-}
-
 void
 cmd_progress(const char *label, double done, double total)
 {
@@ -180,6 +85,10 @@ put_c_string(const char *s)
 {
     putchar('"');
     for (; *s; s++) {
+        if (*s == '\n') {
+            fputs("\\n", stdout);
+            continue;
+        }
         if (*s == '"' || *s == '\\')
             putchar('\\');
         putchar(*s);
@@ -200,8 +109,19 @@ describe(const char *module)
     }
 }
 
-/* Help, usage and unknown names are the front door's (slimfarm.c): it execs
-   this program only with one of the names --describe listed. */
+/* -h or --help among the arguments, before any "--" (after it they are operands). */
+static bool
+wants_help(int argc, char **argv)
+{
+    for (int i = 1; i < argc && strcmp(argv[i], "--") != 0; i++)
+        if (strcmp(argv[i], "-h") == 0 || strcmp(argv[i], "--help") == 0)
+            return true;
+    return false;
+}
+
+/* The program's list, help and unknown names are the front door's
+   (slimfarm.c): it execs this program only with one of the names --describe
+   listed. */
 int
 main(int argc, char **argv)
 {
@@ -210,9 +130,15 @@ main(int argc, char **argv)
         return 0;
     }
     stderr_tty = isatty(STDERR_FILENO);
-    for (int i = 0; argc >= 2 && i < n_cmds; i++)
-        if (strcmp(cmds[i]->name, argv[1]) == 0)
-            return cmds[i]->run(argc - 1, argv + 1);
+    for (int i = 0; argc >= 2 && i < n_cmds; i++) {
+        if (strcmp(cmds[i]->name, argv[1]) != 0)
+            continue;
+        if (wants_help(argc - 1, argv + 1)) {
+            printf("usage: slimfarm %s\n%s\n", cmds[i]->usage, cmds[i]->summary);
+            return 0;
+        }
+        return cmds[i]->run(argc - 1, argv + 1);
+    }
     fprintf(stderr, "%s: run it as 'slimfarm COMMAND'; 'slimfarm help' lists the commands\n",
             argv[0]);
     return 2;

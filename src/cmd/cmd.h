@@ -5,24 +5,24 @@
  * with CMD_REGISTER, so adding one touches no shared table.  A command gets
  * argv with argv[0] = its own name, returns the process exit status (0 ok,
  * 1 failure, 2 usage error) and prints its own errors as
- * "slimfarm NAME: message".
+ * "slimfarm NAME: message".  -h or --help anywhere before "--" never reaches
+ * it: cmd.c prints the usage and summary on stdout and exits 0.
+ *
+ * The helpers here link into every command program; those that pull in a
+ * library live apart so only their users load it: cmdprofile.h (slicing
+ * profiles: the INI parser) and cmdreport.h (support figures, JSON).
  */
 #ifndef SF_CMD_CMD_H
 #define SF_CMD_CMD_H
 
-#include <jansson.h>
 #include <stdbool.h>
-#include <stddef.h>
-#include <stdint.h>
-
-#include "../../slicer/profile.h"
-#include "../geom/measure.h"
 
 typedef int (*cmd_fn)(int argc, char **argv);
 
 struct cmd {
     const char *name;    /* "inspect" */
-    const char *usage;   /* one line: "inspect PART [--up x,y,z] ..." */
+    const char *usage;   /* "inspect PART [--up x,y,z] ...": one line per form, each
+                            after the first starting "slimfarm " */
     const char *summary; /* one line: what it does */
     cmd_fn run;
 };
@@ -45,32 +45,13 @@ bool cmd_parse_num(const char *cmd, const char *opt, const char *text, double lo
                    const char *want, double *out);
 bool cmd_parse_vec3(const char *cmd, const char *opt, const char *text, double out[3]);
 
-/*
- * Load the slicing profile from a printer and a material (either NULL for
- * the defaults).  Each NAME is a path when it holds a '/' or ends in
- * ".cfg", else KIND/NAME.cfg under $SLIMFARM_CONFIG, ./config, then the
- * installed share/slimfarm/config folders.  On failure print "slimfarm
- * CMD: no printer profile 'NAME'" or the loader's error and return false.
- */
-bool cmd_load_profile(const char *cmd, const char *printer, const char *material,
-                      struct slice_profile *p);
-
-/* The support figures the optimizers report, as JSON and as one text line
- * ("  LABEL    risky faces ..."), and a risky-faces-per-iteration curve. */
-json_t *cmd_metrics_json(const struct support_metrics *m);
-void cmd_print_metrics(const char *label, const struct support_metrics *m);
-void cmd_print_curve(const uint32_t *curve, int n);
-json_t *cmd_curve_json(const uint32_t *curve, int n);
-
-/* Print o (taking its reference; NULL means it could not be built) as
- * indented JSON on stdout: 0, or 1 with "slimfarm CMD: out of memory". */
-int cmd_put_json(const char *cmd, json_t *o);
-
-/* `optimize --method surface` (cmd_optimize_surface.c), reached from cmd_optimize.c. */
+/* `optimize --method surface` (cmd_optimize_surface.c), reached from cmd_optimize.c,
+   whose usage shows this form second. */
 int cmd_optimize_surface(int argc, char **argv);
-
-/* True when stdout is a terminal and NO_COLOR-style progress is wanted. */
-bool cmd_stdout_is_tty(void);
+#define CMD_OPTIMIZE_SURFACE_USAGE                                                                 \
+    "optimize PART -o OUT --method surface [--angle DEG] [--margin DEG] [--max-mndr P] "           \
+    "[--max-andr P] [--fix-bottom MM] [--iterations N] [--rounds N] [--saliency S] "               \
+    "[--detail W] [--no-orient] [--json]"
 
 /*
  * Draw "label [#####.....] 42%" on stderr when it is a terminal; a no-op

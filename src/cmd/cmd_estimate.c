@@ -15,6 +15,7 @@
 #include "../../slicer/slice.h"
 #include "../base/buf.h"
 #include "cmd.h"
+#include "cmdprofile.h"
 
 static const char usage_line[] = "estimate FILE.gcode [--printer NAME|PATH] [--material NAME|PATH]";
 
@@ -23,7 +24,6 @@ run(int argc, char **argv)
 {
     static const struct option opts[] = { { "printer", required_argument, NULL, 'p' },
                                           { "material", required_argument, NULL, 'm' },
-                                          { "help", no_argument, NULL, 'h' },
                                           { NULL, 0, NULL, 0 } };
     const char *printer = NULL, *material = NULL;
     int c;
@@ -36,9 +36,6 @@ run(int argc, char **argv)
         case 'm':
             material = optarg;
             break;
-        case 'h':
-            printf("usage: slimfarm %s\n", usage_line);
-            return 0;
         default:
             fprintf(stderr, "usage: slimfarm %s\n", usage_line);
             return 2;

@@ -82,6 +82,11 @@ request(const struct client *c, const char *method, const char *path, const char
     struct curl_slist *hs = curl_slist_append(NULL, hdr);
     if (body)
         hs = curl_slist_append(hs, "Content-Type: application/json");
+    /* ask for "100 Continue" whatever the body's size (curl asks only above 1 MiB): a
+       smaller body sent at once races slimfarmd's early refusal, which closes the
+       connection, and curl then reports a send error instead of the answer */
+    if (body || mime)
+        hs = curl_slist_append(hs, "Expect: 100-continue");
     struct buf reply;
     buf_init(&reply, REPLY_MAX);
     curl_easy_setopt(h, CURLOPT_URL, url);

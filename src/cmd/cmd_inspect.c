@@ -19,11 +19,11 @@ static const char usage_line[] = "inspect PART [--up x,y,z] [--angle DEG] [--gri
 static int
 run(int argc, char **argv)
 {
-    static const struct option opts[] = {
-        { "up", required_argument, NULL, 'u' },   { "angle", required_argument, NULL, 'a' },
-        { "grid", required_argument, NULL, 'g' }, { "json", no_argument, NULL, 'j' },
-        { "help", no_argument, NULL, 'h' },       { NULL, 0, NULL, 0 }
-    };
+    static const struct option opts[] = { { "up", required_argument, NULL, 'u' },
+                                          { "angle", required_argument, NULL, 'a' },
+                                          { "grid", required_argument, NULL, 'g' },
+                                          { "json", no_argument, NULL, 'j' },
+                                          { NULL, 0, NULL, 0 } };
     struct vec3 up = v3(0, 0, 1);
     struct support_params sp;
     support_params_default(&sp);
@@ -52,9 +52,6 @@ run(int argc, char **argv)
         case 'j':
             json = true;
             break;
-        case 'h':
-            printf("usage: slimfarm %s\n", usage_line);
-            return 0;
         default:
             fprintf(stderr, "usage: slimfarm %s\n", usage_line);
             return 2;

@@ -16,11 +16,13 @@
 #include "../base/mem.h"
 #include "../geom/slim.h"
 #include "cmd.h"
+#include "cmdreport.h"
 
 static const char usage_line[] =
-    "optimize PART -o OUT --method volumetric|surface [--angle DEG] [--beta DEG] [--max-mndr P] "
+    "optimize PART -o OUT --method volumetric [--angle DEG] [--beta DEG] [--max-mndr P] "
     "[--max-andr P] [--fix-bottom MM] [--fix-box X0,Y0,Z0,X1,Y1,Z1] [--max-tet-verts N] "
-    "[--iterations N] [--search-direction] [--no-keep-volume] [--min-gain P] [--json]";
+    "[--iterations N] [--search-direction] [--no-keep-volume] [--min-gain P] [--json]\n"
+    "       slimfarm " CMD_OPTIMIZE_SURFACE_USAGE;
 
 #define MAX_BOXES 16
 
@@ -122,7 +124,6 @@ run(int argc, char **argv)
                                           { "no-keep-volume", no_argument, NULL, 'k' },
                                           { "min-gain", required_argument, NULL, 'g' },
                                           { "json", no_argument, NULL, 'j' },
-                                          { "help", no_argument, NULL, 'h' },
                                           { NULL, 0, NULL, 0 } };
     for (int i = 1; i < argc; i++) {
         if ((strcmp(argv[i], "--method") == 0 && i + 1 < argc &&
@@ -211,9 +212,6 @@ run(int argc, char **argv)
         case 'j':
             json = true;
             break;
-        case 'h':
-            printf("usage: slimfarm %s\n", usage_line);
-            return 0;
         default:
             fprintf(stderr, "usage: slimfarm %s\n", usage_line);
             return 2;

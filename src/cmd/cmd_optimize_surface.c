@@ -14,11 +14,7 @@
 
 #include "../geom/surfopt.h"
 #include "cmd.h"
-
-const char cmd_optimize_surface_usage[] =
-    "optimize PART -o OUT --method surface [--angle DEG] [--margin DEG] [--max-mndr P] "
-    "[--max-andr P] [--fix-bottom MM] [--iterations N] [--rounds N] [--saliency S] "
-    "[--detail W] [--no-orient] [--json]";
+#include "cmdreport.h"
 
 static void
 progress(void *ud, const struct surfopt_progress *pr)
@@ -83,7 +79,6 @@ cmd_optimize_surface(int argc, char **argv)
                                           { "detail", required_argument, NULL, 'd' },
                                           { "no-orient", no_argument, NULL, 'n' },
                                           { "json", no_argument, NULL, 'j' },
-                                          { "help", no_argument, NULL, 'h' },
                                           { NULL, 0, NULL, 0 } };
     struct surfopt_params p;
     surfopt_params_default(&p);
@@ -150,16 +145,13 @@ cmd_optimize_surface(int argc, char **argv)
         case 'j':
             json = true;
             break;
-        case 'h':
-            printf("usage: slimfarm %s\n", cmd_optimize_surface_usage);
-            return 0;
         default:
-            fprintf(stderr, "usage: slimfarm %s\n", cmd_optimize_surface_usage);
+            fprintf(stderr, "usage: slimfarm %s\n", CMD_OPTIMIZE_SURFACE_USAGE);
             return 2;
         }
     }
     if (optind != argc - 1 || !out) {
-        fprintf(stderr, "usage: slimfarm %s\n", cmd_optimize_surface_usage);
+        fprintf(stderr, "usage: slimfarm %s\n", CMD_OPTIMIZE_SURFACE_USAGE);
         return 2;
     }
     if (p.margin_deg > p.angle_deg)

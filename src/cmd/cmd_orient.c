@@ -13,6 +13,7 @@
 #include "../base/mem.h"
 #include "../geom/orient.h"
 #include "cmd.h"
+#include "cmdreport.h"
 
 static const char usage_line[] = "orient PART -o OUT [--angle DEG] [--margin DEG] [--samples N] "
                                  "[--grid MM] [--bed X,Y] [--json]";
@@ -48,15 +49,12 @@ print_cand(const char *label, const struct orient_candidate *c)
 static int
 run(int argc, char **argv)
 {
-    static const struct option opts[] = { { "output", required_argument, NULL, 'o' },
-                                          { "angle", required_argument, NULL, 'a' },
-                                          { "samples", required_argument, NULL, 's' },
-                                          { "grid", required_argument, NULL, 'g' },
-                                          { "bed", required_argument, NULL, 'b' },
-                                          { "json", no_argument, NULL, 'j' },
-                                          { "margin", required_argument, NULL, 'm' },
-                                          { "help", no_argument, NULL, 'h' },
-                                          { NULL, 0, NULL, 0 } };
+    static const struct option opts[] = {
+        { "output", required_argument, NULL, 'o' },  { "angle", required_argument, NULL, 'a' },
+        { "samples", required_argument, NULL, 's' }, { "grid", required_argument, NULL, 'g' },
+        { "bed", required_argument, NULL, 'b' },     { "json", no_argument, NULL, 'j' },
+        { "margin", required_argument, NULL, 'm' },  { NULL, 0, NULL, 0 }
+    };
     struct orient_params p;
     orient_params_default(&p);
     const char *out = NULL;
@@ -103,9 +101,6 @@ run(int argc, char **argv)
         case 'j':
             json = true;
             break;
-        case 'h':
-            printf("usage: slimfarm %s\n", usage_line);
-            return 0;
         default:
             fprintf(stderr, "usage: slimfarm %s\n", usage_line);
             return 2;

@@ -29,13 +29,11 @@ is_gcode(const char *path)
 static int
 run(int argc, char **argv)
 {
-    static const struct option opts[] = { { "output", required_argument, NULL, 'o' },
-                                          { "layer", required_argument, NULL, 'l' },
-                                          { "angle", required_argument, NULL, 'a' },
-                                          { "grid", required_argument, NULL, 'g' },
-                                          { "size", required_argument, NULL, 's' },
-                                          { "help", no_argument, NULL, 'h' },
-                                          { NULL, 0, NULL, 0 } };
+    static const struct option opts[] = {
+        { "output", required_argument, NULL, 'o' }, { "layer", required_argument, NULL, 'l' },
+        { "angle", required_argument, NULL, 'a' },  { "grid", required_argument, NULL, 'g' },
+        { "size", required_argument, NULL, 's' },   { NULL, 0, NULL, 0 }
+    };
     struct preview_opts po;
     preview_opts_default(&po);
     const char *out = NULL;
@@ -70,9 +68,6 @@ run(int argc, char **argv)
             po.width_px = w;
             po.height_px = h;
             break;
-        case 'h':
-            printf("usage: slimfarm %s\n", usage_line);
-            return 0;
         default:
             fprintf(stderr, "usage: slimfarm %s\n", usage_line);
             return 2;

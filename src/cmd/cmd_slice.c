@@ -17,6 +17,7 @@
 #include "../../slicer/slice.h"
 #include "../mesh/mesh.h"
 #include "cmd.h"
+#include "cmdprofile.h"
 
 static const char usage_line[] = "slice PART -o OUT.gcode [--printer NAME] [--material NAME] "
                                  "[--no-support] [--set key=value]...";
@@ -39,13 +40,11 @@ on_progress(void *ud, const char *stage, double done)
 static int
 run(int argc, char **argv)
 {
-    static const struct option opts[] = { { "output", required_argument, NULL, 'o' },
-                                          { "printer", required_argument, NULL, 'p' },
-                                          { "material", required_argument, NULL, 'm' },
-                                          { "no-support", no_argument, NULL, 'n' },
-                                          { "set", required_argument, NULL, 's' },
-                                          { "help", no_argument, NULL, 'h' },
-                                          { NULL, 0, NULL, 0 } };
+    static const struct option opts[] = {
+        { "output", required_argument, NULL, 'o' },   { "printer", required_argument, NULL, 'p' },
+        { "material", required_argument, NULL, 'm' }, { "no-support", no_argument, NULL, 'n' },
+        { "set", required_argument, NULL, 's' },      { NULL, 0, NULL, 0 }
+    };
     const char *out = NULL, *printer = NULL, *material = NULL, *sets[SET_MAX];
     int n_sets = 0, c;
     bool no_support = false;
@@ -71,9 +70,6 @@ run(int argc, char **argv)
             }
             sets[n_sets++] = optarg;
             break;
-        case 'h':
-            printf("usage: slimfarm %s\n", usage_line);
-            return 0;
         default:
             fprintf(stderr, "usage: slimfarm %s\n", usage_line);
             return 2;

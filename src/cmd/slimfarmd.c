@@ -138,14 +138,16 @@ run_fsck(struct farmcfg *cfg)
     return status;
 }
 
+/* The usage on f; 0 when asked for (stdout), 2 after a usage error (stderr). */
 static int
-usage(void)
+usage(FILE *f)
 {
-    fprintf(stderr, "usage: slimfarmd [-c CONFIG] [--check | --fsck]\n"
-                    "  -c CONFIG  farm config (default config/farm.ini)\n"
-                    "  --check    validate the config and exit\n"
-                    "  --fsck     recover and check the job store, then exit\n");
-    return 2;
+    fprintf(f, "usage: slimfarmd [-c CONFIG] [--check | --fsck]\n"
+               "  -c CONFIG  farm config (default config/farm.ini)\n"
+               "  --check    validate the config and exit\n"
+               "  --fsck     recover and check the job store, then exit\n"
+               "  -h, --help show this and exit\n");
+    return f == stdout ? 0 : 2;
 }
 
 int
@@ -160,8 +162,10 @@ main(int argc, char **argv)
             check = true;
         else if (strcmp(argv[i], "--fsck") == 0)
             fsck = true;
+        else if (strcmp(argv[i], "-h") == 0 || strcmp(argv[i], "--help") == 0)
+            return usage(stdout);
         else
-            return usage();
+            return usage(stderr);
     }
     struct sf_err err;
     int status = 1;

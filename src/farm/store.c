@@ -245,6 +245,43 @@ copy_text(char *dst, size_t cap, sqlite3_stmt *st, int col)
     snprintf(dst, cap, "%s", t ? (const char *)t : "");
 }
 
+/* Fill one element of a result array from the statement's current row. */
+typedef void (*row_fn)(sqlite3_stmt *st, void *row);
+
+/*
+ * Step st to its end, appending one element of elem_size bytes per row to
+ * *rows (filled by read), then finalize st.  A step that ends in anything
+ * but SQLITE_DONE (busy, I/O error, corruption) is an error and nothing is
+ * returned: a caller never takes part of a result for all of it.  *rows is
+ * freed by the caller (NULL when there are no rows or on error).
+ */
+static int
+read_rows(struct store *s, sqlite3_stmt *st, size_t elem_size, row_fn read, void **rows, size_t *n,
+          const char *what, struct sf_err *err)
+{
+    size_t cap = 0;
+    int step, rc = SF_OK;
+    *rows = NULL;
+    *n = 0;
+    while ((step = sqlite3_step(st)) == SQLITE_ROW) {
+        if (!mem_grow(rows, &cap, *n + 1, elem_size)) {
+            rc = sf_err_set(err, SF_ENOMEM, "store: %s: out of memory", what);
+            break;
+        }
+        read(st, (char *)*rows + *n * elem_size);
+        (*n)++;
+    }
+    if (rc == SF_OK && step != SQLITE_DONE)
+        rc = db_fail(s, err, what);
+    sqlite3_finalize(st);
+    if (rc != SF_OK) {
+        free(*rows);
+        *rows = NULL;
+        *n = 0;
+    }
+    return rc;
+}
+
 static int
 log_event(struct store *s, int64_t job_id, const char *printer, const char *kind,
           const char *detail, struct sf_err *err)
@@ -297,6 +334,12 @@ migrate(struct store *s, struct sf_err *err)
     return SF_OK;
 }
 
+static void
+read_id(sqlite3_stmt *st, void *row)
+{
+    *(int64_t *)row = sqlite3_column_int64(st, 0);
+}
+
 /*
  * Crash recovery (see the header).  Each job moves in its own transaction
  * through store_job_event, so a crash during recovery leaves every job
@@ -307,23 +350,18 @@ recover(struct store *s, struct store_recovery *rec, struct sf_err *err)
 {
     struct store_recovery r = { 0, 0 };
     sqlite3_stmt *st;
-    int64_t *ids = NULL;
-    size_t n = 0, cap = 0;
+    int64_t *ids;
+    size_t n;
     int rc = prepare(s, &st,
                      "SELECT id FROM jobs WHERE state IN ('printing','paused','preparing')"
                      " ORDER BY id",
                      err);
     if (rc)
         return rc;
-    while (sqlite3_step(st) == SQLITE_ROW) {
-        if (!mem_grow((void **)&ids, &cap, n + 1, sizeof(*ids))) {
-            sqlite3_finalize(st);
-            rc = sf_err_set(err, SF_ENOMEM, "store: recovery: out of memory");
-            goto out;
-        }
-        ids[n++] = sqlite3_column_int64(st, 0);
-    }
-    sqlite3_finalize(st);
+    /* a failed read must fail the open: jobs it missed would stay "printing" for ever */
+    if ((rc = read_rows(s, st, sizeof(*ids), read_id, (void **)&ids, &n, "recovery: list jobs",
+                        err)))
+        return rc;
     for (size_t i = 0; i < n; i++) {
         enum job_state to;
         struct job_event_args a = { .reason = "the daemon stopped while this job was active" };
@@ -692,6 +730,12 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     j->mesh_angle_deg = sqlite3_column_double(st, 28);
 }
 
+static void
+read_job_row(sqlite3_stmt *st, void *row)
+{
+    read_job(st, row);
+}
+
 int
 store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, int64_t *id,
               struct sf_err *err)
@@ -771,25 +815,7 @@ store_job_list(struct store *s, struct job_row **rows, size_t *n, struct sf_err 
     int rc = prepare(s, &st, sql, err);
     if (rc)
         return rc;
-    size_t cap = 0;
-    while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
-        if (!mem_grow((void **)rows, &cap, *n + 1, sizeof(**rows))) {
-            sqlite3_finalize(st);
-            free(*rows);
-            *rows = NULL;
-            *n = 0;
-            return sf_err_set(err, SF_ENOMEM, "store: out of memory listing jobs");
-        }
-        read_job(st, &(*rows)[(*n)++]);
-    }
-    sqlite3_finalize(st);
-    if (rc != SQLITE_DONE) {
-        free(*rows);
-        *rows = NULL;
-        *n = 0;
-        return db_fail(s, err, "list jobs");
-    }
-    return SF_OK;
+    return read_rows(s, st, sizeof(**rows), read_job_row, (void **)rows, n, "list jobs", err);
 }
 
 /* Close the job's open print with an outcome. */
@@ -1166,6 +1192,23 @@ store_printer_bed_get(struct store *s, const char *name, bool *full, struct sf_e
 
 /* ---- history, events, checks ---- */
 
+static void
+read_print(sqlite3_stmt *st, void *row)
+{
+    struct print_row *p = row;
+    p->id = sqlite3_column_int64(st, 0);
+    p->job_id = sqlite3_column_int64(st, 1);
+    p->copy = sqlite3_column_int(st, 2);
+    copy_text(p->printer, sizeof(p->printer), st, 3);
+    copy_text(p->material, sizeof(p->material), st, 4);
+    p->start_line = sqlite3_column_int64(st, 5);
+    p->lines_acked = sqlite3_column_int64(st, 6);
+    p->filament_mm = sqlite3_column_double(st, 7);
+    p->started_ms = sqlite3_column_int64(st, 8);
+    p->ended_ms = sqlite3_column_int64(st, 9);
+    copy_text(p->outcome, sizeof(p->outcome), st, 10);
+}
+
 int
 store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
              struct sf_err *err)
@@ -1181,30 +1224,19 @@ store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n
     if (rc)
         return rc;
     sqlite3_bind_int64(st, 1, job_id);
-    size_t cap = 0;
-    while (sqlite3_step(st) == SQLITE_ROW) {
-        if (!mem_grow((void **)rows, &cap, *n + 1, sizeof(**rows))) {
-            sqlite3_finalize(st);
-            free(*rows);
-            *rows = NULL;
-            *n = 0;
-            return sf_err_set(err, SF_ENOMEM, "store: out of memory");
-        }
-        struct print_row *p = &(*rows)[(*n)++];
-        p->id = sqlite3_column_int64(st, 0);
-        p->job_id = sqlite3_column_int64(st, 1);
-        p->copy = sqlite3_column_int(st, 2);
-        copy_text(p->printer, sizeof(p->printer), st, 3);
-        copy_text(p->material, sizeof(p->material), st, 4);
-        p->start_line = sqlite3_column_int64(st, 5);
-        p->lines_acked = sqlite3_column_int64(st, 6);
-        p->filament_mm = sqlite3_column_double(st, 7);
-        p->started_ms = sqlite3_column_int64(st, 8);
-        p->ended_ms = sqlite3_column_int64(st, 9);
-        copy_text(p->outcome, sizeof(p->outcome), st, 10);
-    }
-    sqlite3_finalize(st);
-    return SF_OK;
+    return read_rows(s, st, sizeof(**rows), read_print, (void **)rows, n, "list prints", err);
+}
+
+static void
+read_event(sqlite3_stmt *st, void *row)
+{
+    struct event_row *e = row;
+    e->id = sqlite3_column_int64(st, 0);
+    e->at_ms = sqlite3_column_int64(st, 1);
+    e->job_id = sqlite3_column_int64(st, 2);
+    copy_text(e->printer, sizeof(e->printer), st, 3);
+    copy_text(e->kind, sizeof(e->kind), st, 4);
+    copy_text(e->detail, sizeof(e->detail), st, 5);
 }
 
 int
@@ -1222,25 +1254,7 @@ store_events(struct store *s, int64_t after_id, size_t max, struct event_row **r
         return rc;
     sqlite3_bind_int64(st, 1, after_id);
     sqlite3_bind_int64(st, 2, (sqlite3_int64)(max > INT64_MAX ? INT64_MAX : max));
-    size_t cap = 0;
-    while (sqlite3_step(st) == SQLITE_ROW) {
-        if (!mem_grow((void **)rows, &cap, *n + 1, sizeof(**rows))) {
-            sqlite3_finalize(st);
-            free(*rows);
-            *rows = NULL;
-            *n = 0;
-            return sf_err_set(err, SF_ENOMEM, "store: out of memory");
-        }
-        struct event_row *e = &(*rows)[(*n)++];
-        e->id = sqlite3_column_int64(st, 0);
-        e->at_ms = sqlite3_column_int64(st, 1);
-        e->job_id = sqlite3_column_int64(st, 2);
-        copy_text(e->printer, sizeof(e->printer), st, 3);
-        copy_text(e->kind, sizeof(e->kind), st, 4);
-        copy_text(e->detail, sizeof(e->detail), st, 5);
-    }
-    sqlite3_finalize(st);
-    return SF_OK;
+    return read_rows(s, st, sizeof(**rows), read_event, (void **)rows, n, "list events", err);
 }
 
 int64_t

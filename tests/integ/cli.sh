@@ -2,7 +2,9 @@
 # cli.sh - the CLI's contract: bad option values are usage errors (exit 2)
 # that name the command, the option and the value; unknown profiles are
 # failures (exit 1) that name the profile; a profile is found by name from
-# any working directory through $SLIMFARM_CONFIG.  Env: BUILD.
+# any working directory through $SLIMFARM_CONFIG; every program and command
+# answers -h/--help with its usage on stdout and exit 0; each command program
+# links only the libraries its commands use.  Env: BUILD.
 set -u
 build=${BUILD:-build/rel}
 bin=$(realpath "$build/bin/slimfarm")
@@ -58,9 +60,59 @@ cp "$(dirname "$bin")/../libexec/slimfarm/slimfarm-shapes" "$work/prefix/libexec
 "$work/prefix/bin/slimfarm" shapes "$work/moved" >/dev/null && [ -s "$work/moved/tee.stl" ] ||
   { echo "   FAIL: shapes through a moved install"; fails=$((fails + 1)); }
 expect 1 "slimfarm orient: cannot run .*/libexec/slimfarm/slimfarm-orient" "$work/prefix/bin/slimfarm" orient "$tee" -o "$work/o.stl"
-libs=$(ldd "$bin"; ldd "$(dirname "$bin")/../libexec/slimfarm/slimfarm-orient")
-grep -qE "libcurl|libcairo|libcholmod|libsqlite|libzip|libcrypto|libbz2" <<<"$libs" &&
-  { echo "   FAIL: slimfarm or slimfarm-orient loads libraries orient does not use"; fails=$((fails + 1)); }
+# -h and --help: the usage on stdout, nothing on stderr, exit 0, for the front
+# door, every command (the list 'slimfarm help' prints), the daemon and the
+# simulator
+help_ok() { # CMD...: its stdout starts with $want
+  local out err rc
+  out=$("$@" 2>"$work/help.err"); rc=$?; err=$(cat "$work/help.err")
+  if [ "$rc" != 0 ] || [ -n "$err" ] || [ "${out#"$want"}" = "$out" ]; then
+    echo "   FAIL: $* -> exit $rc, stdout '${out%%$'\n'*}', stderr '$err' (want '$want...')"; fails=$((fails + 1))
+  fi
+}
+cmds=$("$bin" help | sed -n 's/^  \([a-z][a-z-]*\) .*/\1/p')
+[ "$(wc -w <<<"$cmds")" -ge 15 ] || { echo "   FAIL: 'slimfarm help' lists only: $cmds"; fails=$((fails + 1)); }
+for h in -h --help; do
+  want="usage: slimfarm COMMAND"; help_ok "$bin" $h
+  for c in $cmds; do
+    want="usage: slimfarm $c"; help_ok "$bin" "$c" $h
+  done
+  want="usage: slimfarm send"; help_ok "$bin" send "$work/t.gcode" --port pty:/nonexistent $h
+  want="usage: slimfarmd"; help_ok "$(dirname "$bin")/slimfarmd" $h
+  want="usage: slimfarm-sim"; help_ok "$(dirname "$bin")/slimfarm-sim" $h
+  want="usage: slimfarm-sim"; help_ok "$(dirname "$bin")/slimfarm-sim" marlin $h
+done
+"$bin" optimize --help | grep -q "^       slimfarm optimize PART -o OUT --method surface" ||
+  { echo "   FAIL: optimize --help lacks the surface form"; fails=$((fails + 1)); }
+# after "--" it is an operand, not a request for help
+expect 1 "slimfarm inspect: .*--help" "$bin" inspect -- --help
+# Each command program links (DT_NEEDED) only the libraries its commands use:
+# a helper that needs a library lives apart (cmdprofile.c, cmdreport.c), so
+# e.g. JSON or the INI parser never ride along into shapes, send or ports.
+# Base libraries (libc, libm, libstdc++, libgcc_s, sanitizer runtimes) aside.
+declare -A may=(
+  [estimate]="inih polyclipping minizip expat embree3"
+  [farm]="curl jansson"
+  [inspect]="jansson minizip expat embree3"
+  [optimize]="qhull_r jansson minizip expat embree3 tet cholmod"
+  [orient]="qhull_r jansson minizip expat embree3"
+  [ports]="serialport"
+  [preview]="minizip expat cairo embree3"
+  [send]="serialport"
+  [shapes]="minizip expat"
+  [slice]="inih polyclipping minizip expat embree3"
+)
+for prog in "$(dirname "$bin")"/../libexec/slimfarm/slimfarm-*; do
+  m=${prog##*/slimfarm-}
+  [ -n "${may[$m]+x}" ] || { echo "   FAIL: no library list for slimfarm-$m in cli.sh"; fails=$((fails + 1)); continue; }
+  for lib in $(readelf -d "$prog" | sed -n 's/.*Shared library: \[lib\([^].]*\)\..*/\1/p'); do
+    case " c m stdc++ gcc_s pthread asan ubsan tsan ${may[$m]} " in
+    *" $lib "*) ;;
+    *) echo "   FAIL: slimfarm-$m links lib$lib, which its commands do not use"; fails=$((fails + 1)) ;;
+    esac
+  done
+done
+ldd "$bin" | grep -q "=>" && { echo "   FAIL: bin/slimfarm loads shared libraries"; fails=$((fails + 1)); }
 # the front door runs before every command: static, no dynamic loader to start
 readelf -l "$bin" | grep -q "program interpreter" &&
   { echo "   FAIL: bin/slimfarm is dynamically linked"; fails=$((fails + 1)); }

@@ -1,15 +1,36 @@
 /*
  * test_slice_oom.c - every allocation of a small slice failing in turn
- * (mem.h's injection): slice_mesh must return SF_ENOMEM (or succeed when
- * the failed allocation was optional), never crash or leak; the sanitizer
- * build checks the leaks.
+ * (mem.h's injection): slice_mesh must return SF_ENOMEM and leave no
+ * G-code behind, or succeed only when the failed allocation was optional,
+ * and then write exactly the G-code of a clean run; never crash or leak
+ * (the sanitizer build checks the leaks).
  */
 #include <stdio.h>
+#include <unistd.h>
 
 #include "../../slicer/slice.h"
+#include "../../src/base/buf.h"
 #include "../../src/base/mem.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
+
+/* The whole of file path into b (buf_release). */
+static int
+read_file(const char *path, struct buf *b)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return SF_EIO;
+    char chunk[1 << 14];
+    size_t n;
+    int rc = SF_OK;
+    while (rc == SF_OK && (n = fread(chunk, 1, sizeof(chunk), f)) > 0)
+        rc = buf_append(b, chunk, n);
+    if (ferror(f))
+        rc = SF_EIO;
+    fclose(f);
+    return rc;
+}
 
 T_CASE(slice_survives_every_failed_allocation)
 {
@@ -49,22 +70,51 @@ T_CASE(slice_survives_every_failed_allocation)
     T_OK(slice_mesh(&m, &p, path, NULL, NULL, NULL, &err), &err);
     long total = mem_alloc_count();
     T_TRUE(total > 100);
+    struct buf clean;
+    buf_init(&clean, 0);
+    T_OK(read_file(path, &clean), NULL);
+    T_TRUE(clean.len > 1000);
     int n_fail = 0, n_ok = 0;
-    /* every allocation of the first 120, then about 120 more spread over the rest */
-    for (long n = 1; n <= total; n += n < 120 ? 1 : total / 120 + 1) {
+    /* every allocation of the first 120 and of the last 40 (writing the file), then about
+       120 more spread over the rest */
+    for (long n = 1; n <= total; n += n < 120 || n >= total - 40 ? 1 : total / 120 + 1) {
+        unlink(path);
         mem_fail_after(n);
         int rc = slice_mesh(&m, &p, path, NULL, NULL, NULL, &err);
+        long tried = mem_alloc_count();
         mem_fail_after(0);
-        if (rc == SF_OK)
-            n_ok++;
-        else if (rc == SF_ENOMEM)
+        if (rc == SF_ENOMEM) {
             n_fail++;
-        else
+            /* a failed slice leaves no G-code a caller could take for the part's */
+            if (access(path, F_OK) == 0)
+                t_fail(__FILE__, __LINE__, "allocation %ld failed, yet %s was written", n, path);
+            continue;
+        }
+        if (rc != SF_OK) {
             t_fail(__FILE__, __LINE__, "allocation %ld failed: %s (%s)", n, sf_status_name(rc),
                    err.msg);
+            continue;
+        }
+        /* Success is right only if the failure never fired (this run allocated less), or
+           if what failed was optional: then the G-code must be the clean run's, byte for
+           byte, not a silently degraded part. */
+        n_ok++;
+        struct buf got;
+        buf_init(&got, 0);
+        int same = read_file(path, &got) == SF_OK && got.len == clean.len &&
+                   memcmp(got.data, clean.data, clean.len) == 0;
+        buf_release(&got);
+        if (!same)
+            t_fail(__FILE__, __LINE__,
+                   "allocation %ld of %ld failed (%s), slice_mesh said SF_OK, and its G-code "
+                   "differs from the clean run's",
+                   n, tried, tried >= n ? "fired" : "never reached");
     }
+    printf("    %ld allocations: %d failed runs said SF_ENOMEM, %d succeeded with the clean "
+           "G-code\n",
+           total, n_fail, n_ok);
     T_TRUE(n_fail > 150);
-    (void)n_ok;
+    buf_release(&clean);
     slice_profile_release(&p);
     mesh_release(&m);
 }

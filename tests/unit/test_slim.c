@@ -477,9 +477,17 @@ T_CASE(direction_search_tries_the_grid)
     mesh_release(&m);
 }
 
+/*
+ * A real part whose support slimming does reduce (bunny00: about 28 % with
+ * these parameters).  Falling back to the input is a failure here: the
+ * result must be a deformed iterate that saves at least min_gain of the
+ * support volume within the deviation limits.  anchor.stl, the part this
+ * test used before, comes back unchanged (its risky faces rise from the
+ * first iteration), so the test passed on the fallback alone.
+ */
 T_CASE(shared_mesh_support_drops_within_limits)
 {
-    const char *path = t_shared_mesh("anchor.stl");
+    const char *path = t_shared_mesh("bunny00.stl");
     T_SKIP_UNLESS(path, "../shared/meshes is absent");
     struct mesh m;
     struct sf_err err;
@@ -489,9 +497,13 @@ T_CASE(shared_mesh_support_drops_within_limits)
     T_OK(mesh_load(path, &m, NULL, &err), &err);
     quick_params(&p);
     T_OK(slim_optimize(&m, &p, &r, &err), &err);
-    T_TRUE(r.dev.mndr <= 0.15 && r.dev.andr <= 0.05);
-    T_TRUE(r.after.n_risky <= r.before.n_risky);
-    T_TRUE(r.after.volume_mm3 <= r.before.volume_mm3);
+    printf("    best_iter %d, support %.0f -> %.0f mm3, risky %u -> %u, mndr %.3f andr %.3f\n",
+           r.best_iter, r.before.volume_mm3, r.after.volume_mm3, r.before.n_risky, r.after.n_risky,
+           r.dev.mndr, r.dev.andr);
+    T_TRUE(r.best_iter > 0); /* not the input handed back */
+    T_TRUE(r.after.volume_mm3 <= (1 - p.min_gain) * r.before.volume_mm3);
+    T_TRUE(r.after.n_risky < r.before.n_risky);
+    T_TRUE(r.dev.mndr > 0 && r.dev.mndr <= p.max_mndr && r.dev.andr <= p.max_andr);
     T_TRUE(r.selfx_out <= r.selfx_input);
     slim_result_release(&r);
     mesh_release(&m);

@@ -3,7 +3,10 @@
  * content-addressed files, every job event with its history and log, crash
  * recovery, and a kill -9 test: a child process hammering the store is
  * SIGKILLed mid-transaction again and again, and each reopen must find a
- * consistent store with every acknowledged job present.
+ * consistent store with every acknowledged job present.  I/O faults come
+ * from a VFS that fails the Nth read (Debian's SQLite has no
+ * sqlite3_test_control fault hooks): recovery and every listing must fail
+ * or return all their rows, never part of them as success.
  */
 #include <signal.h>
 #include <sqlite3.h>
@@ -379,9 +382,19 @@ T_CASE(store_reopen_recovers_interrupted_and_preparing)
     store_close(s);
 }
 
+/* The child's way out when a store call fails: the parent sees an exit, not its SIGKILL. */
+static void
+hammer_fail(int status, const char *what, const struct sf_err *err)
+{
+    fprintf(stderr, "    child: %s: %s\n", what, err->msg);
+    _exit(status);
+}
+
 /*
  * The child: add jobs and drive them through their lives forever, writing
- * each job id to fd after the transaction that created it committed.
+ * each job id to fd after the transaction that created it committed.  Every
+ * call must succeed: a failure ends the child with its own status, which
+ * fails the test.
  */
 static void
 hammer(const char *dir, int fd, unsigned seed)
@@ -389,25 +402,30 @@ hammer(const char *dir, int fd, unsigned seed)
     struct sf_err err;
     struct store *s = store_open(dir, NULL, &err);
     if (!s)
-        _exit(3);
+        hammer_fail(3, "open", &err);
     for (unsigned i = 0;; i++) {
         char part[64];
         snprintf(part, sizeof(part), "part %u/%u", seed, i);
         int64_t id = add_job(s, part, 1 + (int)(i % 2), &err);
         if (!id)
-            _exit(4);
+            hammer_fail(4, "add job", &err);
         if (write(fd, &id, sizeof(id)) != sizeof(id))
             _exit(5);
         if (make_ready(s, id, &err))
-            _exit(6);
+            hammer_fail(6, "prepare", &err);
         struct job_event_args start = { .printer = (i % 3) ? "a" : "b" };
-        store_job_event(s, id, JOB_EV_START, &start, NULL, &err);
-        store_job_progress(s, id, i, &err);
-        store_printer_set(s, start.printer, PRINTER_PRINTING, &err);
+        if (store_job_event(s, id, JOB_EV_START, &start, NULL, &err))
+            hammer_fail(7, "start", &err);
+        if (store_job_progress(s, id, i, &err))
+            hammer_fail(8, "progress", &err);
+        if (store_printer_set(s, start.printer, PRINTER_PRINTING, &err))
+            hammer_fail(9, "printer state", &err);
         if (i % 4 == 0)
             continue; /* leave it printing: the next crash interrupts it */
         struct job_event_args done = { .lines_acked = 10 };
-        store_job_event(s, id, i % 5 ? JOB_EV_PRINT_DONE : JOB_EV_PRINT_FAILED, &done, NULL, &err);
+        if (store_job_event(s, id, i % 5 ? JOB_EV_PRINT_DONE : JOB_EV_PRINT_FAILED, &done, NULL,
+                            &err))
+            hammer_fail(10, "end of print", &err);
     }
 }
 
@@ -416,9 +434,8 @@ T_CASE(store_survives_sigkill_mid_transaction)
     const char *dir = fresh_dir("crash");
     int64_t acked[4096];
     size_t n_acked = 0;
-    struct timespec seed;
-    clock_gettime(CLOCK_REALTIME, &seed);
-    srand((unsigned)seed.tv_nsec);
+    /* A fixed seed: a failure replays with the same kill delays. */
+    unsigned delay_seed = 20261201;
     for (int round = 0; round < 8; round++) {
         int pfd[2];
         T_TRUE(pipe(pfd) == 0);
@@ -430,21 +447,29 @@ T_CASE(store_survives_sigkill_mid_transaction)
         }
         close(pfd[1]);
         /* Let the child acknowledge two jobs (so it is surely working, however
-           loaded the machine), then kill it a random 0..40 ms later: usually
+           loaded the machine), then kill it 0..39 ms later: usually
            mid-transaction. */
         int64_t id;
-        for (int k = 0; k < 2 && read(pfd[0], &id, sizeof(id)) == sizeof(id) && n_acked < 4096; k++)
+        for (int k = 0; k < 2 && n_acked < 4096; k++) {
+            T_EQ_INT(read(pfd[0], &id, sizeof(id)), sizeof(id));
             acked[n_acked++] = id;
-        struct timespec ts = { 0, (rand() % 40) * 1000000L };
+        }
+        delay_seed = delay_seed * 1103515245u + 12345u;
+        struct timespec ts = { 0, (long)(delay_seed >> 16) % 40 * 1000000L };
         nanosleep(&ts, NULL);
-        kill(pid, SIGKILL);
+        T_EQ_INT(kill(pid, SIGKILL), 0);
         int status;
-        waitpid(pid, &status, 0);
-        T_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
-        while (read(pfd[0], &id, sizeof(id)) == sizeof(id) && n_acked < 4096)
+        T_EQ_INT(waitpid(pid, &status, 0), pid);
+        if (!WIFSIGNALED(status) || WTERMSIG(status) != SIGKILL)
+            t_fail(__FILE__, __LINE__, "round %d: the child ended by itself (status %d)", round,
+                   WIFEXITED(status) ? WEXITSTATUS(status) : -1);
+        ssize_t got;
+        while ((got = read(pfd[0], &id, sizeof(id))) == sizeof(id) && n_acked < 4096)
             acked[n_acked++] = id;
+        T_EQ_INT(got, 0); /* the pipe's end, never half an id */
         close(pfd[0]);
-        printf("    round %d: %zu jobs acknowledged so far\n", round, n_acked);
+        printf("    round %d (kill after %ld ms): %zu jobs acknowledged so far\n", round,
+               ts.tv_nsec / 1000000L, n_acked);
 
         struct sf_err err;
         struct store_recovery rec;
@@ -469,6 +494,363 @@ T_CASE(store_survives_sigkill_mid_transaction)
         store_close(s);
     }
     T_TRUE(n_acked >= 16); /* the child got real work done */
+}
+
+/*
+ * A VFS that fails reads on demand: it passes every call to the default VFS,
+ * except that the read after fault_after more reads returns
+ * SQLITE_IOERR_READ, once (a flaky disk, or the I/O error SQLite's own test
+ * VFS injects).  iVersion 2: the WAL index needs the shm methods, and
+ * without xFetch SQLite reads every page through xRead, never by mmap.
+ */
+struct fault_file {
+    sqlite3_file base;  /* pMethods = &fault_io */
+    sqlite3_file *real; /* the default VFS's file, right after this struct */
+};
+
+static sqlite3_vfs *real_vfs, fault_vfs;
+static long fault_after = -1; /* reads to pass before the failing one; -1: none fails */
+static long fault_fired;      /* reads failed so far */
+
+static sqlite3_file *
+real_file(sqlite3_file *f)
+{
+    return ((struct fault_file *)f)->real;
+}
+
+static int
+ff_close(sqlite3_file *f)
+{
+    return real_file(f)->pMethods->xClose(real_file(f));
+}
+
+static int
+ff_read(sqlite3_file *f, void *buf, int amt, sqlite3_int64 off)
+{
+    if (fault_after == 0) {
+        fault_after = -1;
+        fault_fired++;
+        return SQLITE_IOERR_READ;
+    }
+    if (fault_after > 0)
+        fault_after--;
+    return real_file(f)->pMethods->xRead(real_file(f), buf, amt, off);
+}
+
+static int
+ff_write(sqlite3_file *f, const void *buf, int amt, sqlite3_int64 off)
+{
+    return real_file(f)->pMethods->xWrite(real_file(f), buf, amt, off);
+}
+
+static int
+ff_truncate(sqlite3_file *f, sqlite3_int64 size)
+{
+    return real_file(f)->pMethods->xTruncate(real_file(f), size);
+}
+
+static int
+ff_sync(sqlite3_file *f, int flags)
+{
+    return real_file(f)->pMethods->xSync(real_file(f), flags);
+}
+
+static int
+ff_file_size(sqlite3_file *f, sqlite3_int64 *size)
+{
+    return real_file(f)->pMethods->xFileSize(real_file(f), size);
+}
+
+static int
+ff_lock(sqlite3_file *f, int level)
+{
+    return real_file(f)->pMethods->xLock(real_file(f), level);
+}
+
+static int
+ff_unlock(sqlite3_file *f, int level)
+{
+    return real_file(f)->pMethods->xUnlock(real_file(f), level);
+}
+
+static int
+ff_check_reserved(sqlite3_file *f, int *out)
+{
+    return real_file(f)->pMethods->xCheckReservedLock(real_file(f), out);
+}
+
+static int
+ff_file_control(sqlite3_file *f, int op, void *arg)
+{
+    return real_file(f)->pMethods->xFileControl(real_file(f), op, arg);
+}
+
+static int
+ff_sector_size(sqlite3_file *f)
+{
+    return real_file(f)->pMethods->xSectorSize(real_file(f));
+}
+
+static int
+ff_device_chars(sqlite3_file *f)
+{
+    return real_file(f)->pMethods->xDeviceCharacteristics(real_file(f));
+}
+
+static int
+ff_shm_map(sqlite3_file *f, int region, int size, int extend, void volatile **p)
+{
+    return real_file(f)->pMethods->xShmMap(real_file(f), region, size, extend, p);
+}
+
+static int
+ff_shm_lock(sqlite3_file *f, int offset, int n, int flags)
+{
+    return real_file(f)->pMethods->xShmLock(real_file(f), offset, n, flags);
+}
+
+static void
+ff_shm_barrier(sqlite3_file *f)
+{
+    real_file(f)->pMethods->xShmBarrier(real_file(f));
+}
+
+static int
+ff_shm_unmap(sqlite3_file *f, int delete_flag)
+{
+    return real_file(f)->pMethods->xShmUnmap(real_file(f), delete_flag);
+}
+
+static const sqlite3_io_methods fault_io = {
+    2,
+    ff_close,
+    ff_read,
+    ff_write,
+    ff_truncate,
+    ff_sync,
+    ff_file_size,
+    ff_lock,
+    ff_unlock,
+    ff_check_reserved,
+    ff_file_control,
+    ff_sector_size,
+    ff_device_chars,
+    ff_shm_map,
+    ff_shm_lock,
+    ff_shm_barrier,
+    ff_shm_unmap,
+    NULL,
+    NULL,
+};
+
+static int
+fault_open(sqlite3_vfs *vfs, const char *name, sqlite3_file *f, int flags, int *out_flags)
+{
+    (void)vfs;
+    struct fault_file *ff = (struct fault_file *)f;
+    ff->real = (sqlite3_file *)(ff + 1);
+    int rc = real_vfs->xOpen(real_vfs, name, ff->real, flags, out_flags);
+    /* SQLite calls xClose only when pMethods is set, so mirror the real open */
+    f->pMethods = ff->real->pMethods ? &fault_io : NULL;
+    return rc;
+}
+
+/* Make the fault VFS the default for connections opened from now on. */
+static bool
+fault_vfs_install(void)
+{
+    if (!real_vfs) {
+        real_vfs = sqlite3_vfs_find(NULL);
+        if (!real_vfs)
+            return false;
+        fault_vfs = *real_vfs; /* its other methods serve us unchanged */
+        fault_vfs.zName = "slimfarm-test-fault";
+        fault_vfs.szOsFile = (int)sizeof(struct fault_file) + real_vfs->szOsFile;
+        fault_vfs.xOpen = fault_open;
+    }
+    fault_after = -1;
+    return sqlite3_vfs_register(&fault_vfs, 1) == SQLITE_OK;
+}
+
+static void
+fault_vfs_remove(void)
+{
+    fault_after = -1;
+    sqlite3_vfs_unregister(&fault_vfs);
+}
+
+static int
+copy_file(const char *from, const char *to)
+{
+    FILE *in = fopen(from, "rb"), *out = fopen(to, "wb");
+    char buf[1 << 14];
+    size_t n;
+    int rc = in && out ? 0 : -1;
+    while (rc == 0 && (n = fread(buf, 1, sizeof(buf), in)) > 0)
+        if (fwrite(buf, 1, n, out) != n)
+            rc = -1;
+    if (in && ferror(in))
+        rc = -1;
+    if (in)
+        fclose(in);
+    if (out && fclose(out) != 0)
+        rc = -1;
+    return rc;
+}
+
+/* Count the jobs in a state that crash recovery must leave no job in. */
+static int
+count_active(struct store *s, struct sf_err *err)
+{
+    struct job_row *rows;
+    size_t n;
+    if (store_job_list(s, &rows, &n, err))
+        return -1;
+    int active = 0;
+    for (size_t i = 0; i < n; i++)
+        active += rows[i].state == JOB_PRINTING || rows[i].state == JOB_PAUSED ||
+                  rows[i].state == JOB_PREPARING;
+    free(rows);
+    return active;
+}
+
+/*
+ * Crash recovery with each read of the open failing in turn.  The open either
+ * fails with SF_EIO, and a clean open afterwards finishes the recovery, or
+ * it succeeds having recovered every job: never success after a partial
+ * read that left jobs "printing" for ever.
+ */
+T_CASE(store_recovery_never_succeeds_on_a_failed_read)
+{
+    struct sf_err err;
+    const char *dir = fresh_dir("recover-io");
+    struct store *s = store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    enum { N_PRINTING = 4, N_PREPARING = 2 };
+    for (int i = 0; i < N_PRINTING + N_PREPARING + 2; i++) {
+        char part[32];
+        snprintf(part, sizeof(part), "part %d", i);
+        int64_t id = add_job(s, part, 1, &err);
+        T_TRUE(id > 0);
+        if (i < N_PRINTING) {
+            struct job_event_args start = { .printer = i % 2 ? "a" : "b" };
+            T_OK(make_ready(s, id, &err), &err);
+            T_OK(store_job_event(s, id, JOB_EV_START, &start, NULL, &err), &err);
+        } else if (i < N_PRINTING + N_PREPARING) {
+            T_OK(store_job_event(s, id, JOB_EV_PREPARE, NULL, NULL, &err), &err);
+        }
+    }
+    store_close(s); /* the last connection checkpoints: the database is one file */
+    char db[600], saved[600], wal[600];
+    snprintf(db, sizeof(db), "%s/slimfarm.db", dir);
+    snprintf(saved, sizeof(saved), "%s/crashed.db", t_tmpdir());
+    snprintf(wal, sizeof(wal), "%s-wal", db);
+    T_TRUE(access(wal, F_OK) != 0);
+    T_TRUE(copy_file(db, saved) == 0);
+    T_TRUE(fault_vfs_install());
+    int failed = 0;
+    long k;
+    for (k = 0; k < 2000; k++) {
+        T_TRUE(copy_file(saved, db) == 0);
+        long fired = fault_fired;
+        fault_after = k;
+        struct store_recovery rec = { -1, -1 };
+        s = store_open(dir, &rec, &err);
+        fault_after = -1;
+        if (!s) {
+            T_EQ_INT(err.code, SF_EIO);
+            failed++;
+            s = store_open(dir, &rec, &err); /* the next start finishes the work */
+            T_TRUE(s != NULL);
+        } else if (fault_fired == fired) {
+            T_EQ_INT(rec.interrupted, N_PRINTING);
+            T_EQ_INT(rec.requeued, N_PREPARING);
+            T_EQ_INT(count_active(s, &err), 0);
+            store_close(s);
+            break; /* every read of the open has failed once */
+        } else {
+            if (rec.interrupted != N_PRINTING || rec.requeued != N_PREPARING)
+                t_fail(__FILE__, __LINE__,
+                       "read %ld failed, yet the open succeeded having recovered %d + %d jobs, "
+                       "not %d + %d",
+                       k, rec.interrupted, rec.requeued, N_PRINTING, N_PREPARING);
+        }
+        T_EQ_INT(count_active(s, &err), 0);
+        T_OK(store_check(s, &err), &err);
+        store_close(s);
+    }
+    fault_vfs_remove();
+    printf("    %ld reads, %d opens failed\n", k, failed);
+    T_TRUE(k < 2000);
+    T_TRUE(failed > 0); /* the fault did reach the store */
+}
+
+/* Each listing with each of its reads failing in turn: an error, or every row. */
+T_CASE(store_listings_report_a_failed_read)
+{
+    struct sf_err err;
+    const char *dir = fresh_dir("list-io");
+    struct store *s = store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    int64_t id = add_job(s, "part", 3, &err);
+    T_TRUE(id > 0);
+    T_OK(make_ready(s, id, &err), &err);
+    for (int c = 0; c < 3; c++) {
+        struct job_event_args start = { .printer = "a" }, done = { .lines_acked = 2 };
+        T_OK(store_job_event(s, id, JOB_EV_START, &start, NULL, &err), &err);
+        T_OK(store_job_event(s, id, JOB_EV_PRINT_DONE, &done, NULL, &err), &err);
+    }
+    for (int i = 0; i < 40; i++) /* enough jobs and events to fill several pages */
+        T_TRUE(add_job(s, "another part with a name long enough to fill pages", 1, &err) > 0);
+    struct event_row *ev;
+    size_t n_events;
+    T_OK(store_events(s, 0, 100000, &ev, &n_events, &err), &err);
+    free(ev);
+    T_TRUE(n_events > 40);
+    store_close(s);
+    T_TRUE(fault_vfs_install());
+    for (int which = 0; which < 3; which++) {
+        static const char *const names[] = { "store_prints", "store_events", "store_job_list" };
+        int failed = 0;
+        long k;
+        for (k = 0; k < 2000; k++) {
+            s = store_open(dir, NULL, &err);
+            T_TRUE(s != NULL);
+            long fired = fault_fired;
+            fault_after = k;
+            void *rows = NULL;
+            size_t n = 99, want = 0;
+            int rc;
+            if (which == 0) {
+                rc = store_prints(s, id, (struct print_row **)&rows, &n, &err);
+                want = 3;
+            } else if (which == 1) {
+                rc = store_events(s, 0, 100000, (struct event_row **)&rows, &n, &err);
+                want = n_events;
+            } else {
+                rc = store_job_list(s, (struct job_row **)&rows, &n, &err);
+                want = 41;
+            }
+            fault_after = -1;
+            store_close(s);
+            if (rc == SF_OK && n != want)
+                t_fail(__FILE__, __LINE__, "%s: read %ld failed, yet it returned %zu of %zu rows",
+                       names[which], k, n, want);
+            free(rows);
+            if (rc != SF_OK) {
+                T_EQ_INT(rc, SF_EIO);
+                T_TRUE(rows == NULL && n == 0);
+                T_TRUE(strstr(err.msg, "I/O error") != NULL);
+                failed++;
+            } else if (fault_fired == fired) {
+                break;
+            }
+        }
+        printf("    %s: %ld reads, %d failed\n", names[which], k, failed);
+        T_TRUE(k < 2000);
+        T_TRUE(failed > 0);
+    }
+    fault_vfs_remove();
 }
 
 T_CASE(store_survives_allocation_failures)
