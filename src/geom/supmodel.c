@@ -395,8 +395,8 @@ supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
             const struct run *ra = runs + bfirst[b];
             size_t na = bfirst[b + 1] - bfirst[b];
             if (bi + 1 < nbu)
-                outline += (double)xor_len(ra, na, runs + bfirst[b + 1],
-                                           bfirst[b + 2] - bfirst[b + 1]);
+                outline +=
+                    (double)xor_len(ra, na, runs + bfirst[b + 1], bfirst[b + 2] - bfirst[b + 1]);
             else
                 outline += (double)xor_len(ra, na, NULL, 0);
             if (bi == 0)
@@ -443,5 +443,18 @@ supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *
         return r;
     r = supmodel_eval_grid(&g, p, out, err);
     ray_grid_release(&g);
+    return r;
+}
+
+int
+supmodel_of_mesh(const struct mesh *m, struct vec3 up, const struct supmodel_params *p,
+                 struct supmodel_result *out, struct sf_err *err)
+{
+    memset(out, 0, sizeof(*out));
+    struct raycast *rc = raycast_new(m, err);
+    if (!rc)
+        return err && err->code ? err->code : SF_ENOMEM;
+    int r = supmodel_eval(rc, up, p, out, err);
+    raycast_free(rc);
     return r;
 }

@@ -81,6 +81,11 @@ int supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p
 int supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *p,
                   struct supmodel_result *out, struct sf_err *err);
 
+/* The same for a mesh alone: builds and frees its own ray scene (one part, one
+   direction; callers scoring many directions keep a raycast and use the above). */
+int supmodel_of_mesh(const struct mesh *m, struct vec3 up, const struct supmodel_params *p,
+                     struct supmodel_result *out, struct sf_err *err);
+
 /*
  * The contacts themselves, for a slicer that prints what the model
  * predicts: for every raster cell (g's cell order) the height of the

@@ -94,9 +94,8 @@ T_CASE(supmodel_faces_one_degree_either_side_of_the_angle)
         double lean_deg;
         bool supported;
     } cases[] = {
-        { SUPMODEL_PRUSA, 43, false }, { SUPMODEL_PRUSA, 44, false },
-        { SUPMODEL_PRUSA, 45, true },  { SUPMODEL_CURA, 44, false },
-        { SUPMODEL_CURA, 46, true },
+        { SUPMODEL_PRUSA, 43, false }, { SUPMODEL_PRUSA, 44, false }, { SUPMODEL_PRUSA, 45, true },
+        { SUPMODEL_CURA, 44, false },  { SUPMODEL_CURA, 46, true },
     };
     for (size_t k = 0; k < sizeof(cases) / sizeof(cases[0]); k++) {
         struct mesh m;
