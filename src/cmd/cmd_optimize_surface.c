@@ -34,7 +34,7 @@ report_json(const char *in, const char *out, const struct surfopt_params *p,
 {
     json_t *o = json_pack(
         "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:b, s:i, s:i, s:i, "
-        "s:{s:i, s:i}, s:{s:f, s:f, s:f, s:f, s:f, s:f}}",
+        "s:{s:i, s:i}, s:{s:f, s:f, s:f, s:f, s:f, s:f}, s:{s:f, s:f}}",
         "file", in, "output", out, "method", "surface", "angle_deg", p->angle_deg, "input",
         cmd_metrics_json(&r->input), "oriented", cmd_metrics_json(&r->oriented), "after",
         cmd_metrics_json(&r->after), "risky_per_iteration", cmd_curve_json(r->curve, r->n_curve),
@@ -43,7 +43,8 @@ report_json(const char *in, const char *out, const struct surfopt_params *p,
         "iterations", (json_int_t)r->n_iters, "rejected", (json_int_t)r->n_rejected,
         "self_intersections", "input", (json_int_t)r->selfx_input, "output",
         (json_int_t)r->selfx_out, "seconds", "saliency", r->saliency_s, "orient", r->orient_s,
-        "factor", r->factor_s, "iterate", r->iterate_s, "check", r->check_s, "total", r->total_s);
+        "factor", r->factor_s, "iterate", r->iterate_s, "check", r->check_s, "total", r->total_s,
+        "model_support_g", "oriented", r->model_oriented_g, "after", r->model_after_g);
     return cmd_put_json("optimize", o);
 }
 

@@ -37,6 +37,10 @@ supmodel_params_default(struct supmodel_params *p, enum supmodel_slicer s)
         p->base_density = 0.118;
         p->first_density = 0.9;
         p->sheath_mm = 0.336;
+        /* dont_support_bridges is on in the peers' runs, but this raster test of it
+           ranked anchor's 21 cached directions worse (Spearman 0.949 against 0.958
+           without): off until it follows BridgeDetector more closely */
+        p->bridges = false;
     } else {
         /* zigzag at 2.667 mm line distance: 0.4 / 2.667; join distance 2 mm */
         p->gap_xy_mm = 0.7;
@@ -177,6 +181,50 @@ overhangs(const struct ray_grid *g, const struct cols *cs, uint32_t i, uint32_t 
     return true;
 }
 
+/* Bottom of the interval of cell c that holds height z, or NAN. */
+static float
+bottom_at(const struct cols *cs, size_t c, float z)
+{
+    for (uint32_t k = cs->first[c]; k < cs->first[c + 1]; k++)
+        if (cs->iv[k].lo <= z && z <= cs->iv[k].hi && cs->iv[k].hi > cs->iv[k].lo)
+            return cs->iv[k].lo;
+    return NAN;
+}
+
+/* Walking from (i, j) along (di, dj) over the same flat bottom (within a layer
+   of lo): does it end on material of the layer below (an anchor) rather than
+   at a free edge? */
+static bool
+anchored(const struct ray_grid *g, const struct cols *cs, uint32_t i, uint32_t j, int di, int dj,
+         float lo, float h)
+{
+    long x = i, y = j;
+    for (;;) {
+        x += di, y += dj;
+        if (x < 0 || y < 0 || x >= (long)g->nu || y >= (long)g->nw)
+            return false;
+        size_t c = (size_t)y * g->nu + (size_t)x;
+        if (solid_at(cs, c, lo - 0.5f * h))
+            return true;
+        float b = bottom_at(cs, c, lo + 0.5f * h);
+        if (isnan(b) || fabsf(b - lo) > h)
+            return false;
+    }
+}
+
+/* PrusaSlicer's dont_support_bridges: a flat bottom that some straight line
+   through it crosses from material below to material below is bridged. */
+static bool
+bridged(const struct ray_grid *g, const struct cols *cs, uint32_t i, uint32_t j, float lo, float h)
+{
+    static const int axes[4][2] = { { 1, 0 }, { 0, 1 }, { 1, 1 }, { 1, -1 } };
+    for (int a = 0; a < 4; a++)
+        if (anchored(g, cs, i, j, axes[a][0], axes[a][1], lo, h) &&
+            anchored(g, cs, i, j, -axes[a][0], -axes[a][1], lo, h))
+            return true;
+    return false;
+}
+
 /* A column of support in layer indices [k0, k1) of snap cell blk. */
 struct run {
     uint32_t blk;
@@ -221,6 +269,8 @@ find_contacts(const struct ray_grid *g, const struct cols *cs, const struct supm
                 if (iv.lo - p->gap_z_mm < h || room < h)
                     continue;
                 if (!overhangs(g, cs, i, j, iv.lo, slope))
+                    continue;
+                if (p->bridges && bridged(g, cs, i, j, iv.lo, (float)h))
                     continue;
                 void *o = v;
                 if (!mem_grow(&o, &cap, n + 1, sizeof(*v))) {

@@ -22,7 +22,10 @@
  *   connectors = outline * h * line_width * connector_factor (CuraEngine zigzag)
  *   interface = (contacts + landings on the part) * interface_layers * h
  *   first layer = filled cells at the bed * h * (first_density - base_density)
- * PrusaSlicer's bridge exemption is not modelled (noted in the result).
+ * PrusaSlicer's bridge exemption (dont_support_bridges, on in the peers'
+ * runs): a flat bottom that a straight raster line crosses from material
+ * below to material below gets no support (its 1.5 mm bands at free edges
+ * are not modelled).  CuraEngine supports bridges.
  *
  * Pure functions: thread-safe on distinct outputs; the raycast may be shared.
  */
@@ -53,6 +56,9 @@ struct supmodel_params {
     double line_width_mm;        /* support line width (0.4) */
     double speed_mm_s;           /* support print speed for the time estimate (60) */
     double density_g_cm3;        /* filament density (1.24) */
+    bool bridges;                /* flat bottoms anchored on two opposite sides need no
+                                    support, as PrusaSlicer's dont_support_bridges (off by
+                                    default: see supmodel_params_default) */
 };
 
 /* The defaults of ../shared/peers/slice-peers.sh for slicer s at 45 degrees. */
