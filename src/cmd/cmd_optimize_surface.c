@@ -12,13 +12,14 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../geom/dirsearch.h"
 #include "../geom/surfopt.h"
 #include "cmd.h"
 
 const char cmd_optimize_surface_usage[] =
     "optimize PART -o OUT --method surface [--angle DEG] [--margin DEG] [--max-mndr P] "
     "[--max-andr P] [--fix-bottom MM] [--iterations N] [--rounds N] [--saliency S] "
-    "[--detail W] [--no-orient] [--json]";
+    "[--detail W] [--no-orient] [--search-direction K] [--json]";
 
 static void
 progress(void *ud, const struct surfopt_progress *pr)
@@ -83,6 +84,7 @@ cmd_optimize_surface(int argc, char **argv)
                                           { "saliency", required_argument, NULL, 's' },
                                           { "detail", required_argument, NULL, 'd' },
                                           { "no-orient", no_argument, NULL, 'n' },
+                                          { "search-direction", required_argument, NULL, 'S' },
                                           { "json", no_argument, NULL, 'j' },
                                           { "help", no_argument, NULL, 'h' },
                                           { NULL, 0, NULL, 0 } };
@@ -90,6 +92,7 @@ cmd_optimize_surface(int argc, char **argv)
     surfopt_params_default(&p);
     const char *out = NULL;
     bool json = false;
+    int search_k = 0; /* > 0: shape inside the direction search (dirsearch.h) */
     double v;
     int c;
     optind = 1;
@@ -148,6 +151,12 @@ cmd_optimize_surface(int argc, char **argv)
         case 'n':
             p.orient = false;
             break;
+        case 'S':
+            if (!cmd_parse_num("optimize", "search-direction", optarg, 1, DIRSEARCH_K_MAX,
+                               "a count of directions in [1, 5]", &v))
+                return 2;
+            search_k = (int)v;
+            break;
         case 'j':
             json = true;
             break;
@@ -174,7 +183,25 @@ cmd_optimize_surface(int argc, char **argv)
         fprintf(stderr, "slimfarm optimize: %s\n", err.msg);
         return 1;
     }
-    int rc = surfopt_optimize(&m, &p, &r, &err);
+    int rc;
+    struct dirsearch_result ds;
+    if (search_k > 0) {
+        struct dirsearch_params dp;
+        dirsearch_params_default(&dp);
+        dp.k = search_k;
+        dp.sp = p;
+        rc = dirsearch_surface(&m, &dp, &ds, &err);
+        if (rc == SF_OK) {
+            r = ds.best; /* taken over: released with r */
+            if (!json)
+                printf("direction search: %d directions reshaped, model grams as given %.2f, "
+                       "best %.2f%s\n",
+                       ds.n_tried, ds.model_input_g, r.model_after_g,
+                       ds.kept_input ? " (input kept: under min_gain)" : "");
+        }
+    } else {
+        rc = surfopt_optimize(&m, &p, &r, &err);
+    }
     mesh_release(&m);
     if (rc != SF_OK) {
         fprintf(stderr, "slimfarm optimize: %s: %s\n", argv[optind], err.msg);

@@ -3,7 +3,8 @@
 # shared mesh, the part as given, oriented (slimfarm orient), surface
 # optimized (optimize --method surface) and oriented then volumetrically
 # slimmed (orient + optimize --method volumetric, as the farm's --method slim
-# does), each sliced by PrusaSlicer and CuraEngine (../shared/peers, 45 deg,
+# does) and the direction search with surface optimization inside
+# (optimize --method surface --search-direction 4; its seconds are wall time), each sliced by PrusaSlicer and CuraEngine (../shared/peers, 45 deg,
 # supports on): support grams and their print-time estimate, with the layer-
 # based model's grams (supmodel.h), our optimizers' seconds and MNDR/ANDR,
 # and our own slicer's support grams.  Peer rows are cached by the STL's md5
@@ -18,7 +19,7 @@ peers="$(cd "$shared" && pwd)/peers/slice-peers.sh"
 cache=${PEER_CACHE:-build/peercache}
 mkdir -p "$cache/stl" "$cache/variants"
 sf="$build/bin/slimfarm"
-variants=${SUPGRAMS_VARIANTS:-given orient surface slim}
+variants=${SUPGRAMS_VARIANTS:-given orient surface slim search}
 slicers=${SUPGRAMS_PEERS:-prusaslicer curaengine}
 py=/usr/bin/python3
 jget() { "$py" -c 'import json,sys
@@ -52,6 +53,9 @@ for f in $(ls -S -r "$shared"/meshes/*.stl); do
             [ -s "$o" ] || nice "$sf" orient "$f" -o "$o" --json > "$cache/variants/$name-orient.json" || continue
             [ -s "$js" ] || nice "$sf" optimize "$o" -o "$out" --method volumetric --json > "$js" || continue
             secs=$(jget "$js" seconds) mndr=$(jget "$js" deviation.mndr) andr=$(jget "$js" deviation.andr) ;;
+      search) [ -s "$js" ] || { /usr/bin/time -f %e -o "$js.time" nice "$sf" optimize "$f" -o "$out" --method surface \
+                 --search-direction 4 --json > "$js" || continue; }
+              secs=$(cat "$js.time" 2>/dev/null || echo -) mndr=$(jget "$js" deviation.mndr) andr=$(jget "$js" deviation.andr) ;;
     esac
     [ -s "$out" ] || continue
     read -r mps mce _ < <("$build/bench/bench_supmodel" "$out" "$one_dir" | awk 'NR == 1 { print $2, $3 }')

@@ -6,6 +6,7 @@
 #include <math.h>
 #include <stdlib.h>
 
+#include "../../src/geom/dirsearch.h"
 #include "../../src/geom/measure.h"
 #include "../../src/geom/supmodel.h"
 #include "../../src/mesh/shapes.h"
@@ -146,4 +147,34 @@ T_CASE(supmodel_rejects_bad_params)
     supmodel_params_default(&p, SUPMODEL_CURA);
     p.angle_deg = 90;
     T_ERR(supmodel_params_check(&p, &err), SF_EINVAL, &err, "angle_deg");
+}
+
+T_CASE(dirsearch_keeps_a_box_and_turns_the_tee)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct dirsearch_params p;
+    struct dirsearch_result r;
+    dirsearch_params_default(&p);
+    p.k = 2;
+    p.op.samples = 200;
+    p.sp.max_iters = 20;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(20, 20, 20), &err), &err);
+    T_OK(dirsearch_surface(&m, &p, &r, &err), &err);
+    /* nothing to save: the input as it was */
+    T_TRUE(r.kept_input);
+    T_EQ_DBL(r.model_input_g, 0, 1e-9);
+    T_EQ_INT(r.best.out.n_verts, m.n_verts);
+    dirsearch_result_release(&r);
+    mesh_release(&m);
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    T_OK(dirsearch_surface(&m, &p, &r, &err), &err);
+    T_TRUE(!r.kept_input);
+    T_TRUE(r.n_tried == 2);
+    T_TRUE(r.model_input_g > 5);
+    T_TRUE(r.best.model_after_g < 0.5 * r.model_input_g);
+    dirsearch_result_release(&r);
+    mesh_release(&m);
 }
