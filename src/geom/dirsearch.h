@@ -21,19 +21,19 @@
 #define DIRSEARCH_K_MAX 5
 
 struct dirsearch_params {
-    int k;                     /* directions reshaped (4; at most DIRSEARCH_K_MAX) */
-    double min_gain;           /* keep the input unless the model saves this share (0.05) */
-    struct orient_params op;   /* the direction search (angle taken from sp.angle_deg) */
-    struct surfopt_params sp;  /* the shape step (its own orientation step is turned off) */
+    int k;                    /* directions reshaped (4; at most DIRSEARCH_K_MAX) */
+    double min_gain;          /* keep the input unless the model saves this share (0.05) */
+    struct orient_params op;  /* the direction search (angle taken from sp.angle_deg) */
+    struct surfopt_params sp; /* the shape step (its own orientation step is turned off) */
 };
 
 void dirsearch_params_default(struct dirsearch_params *p);
 
 struct dirsearch_result {
-    struct surfopt_result best;  /* the winner (best.out on z = 0); the input when kept */
-    struct vec3 up;              /* its up-direction in the input frame */
-    bool kept_input;             /* no direction saved min_gain by the model */
-    double model_input_g;        /* the model's grams for the input as given */
+    struct surfopt_result best; /* the winner (best.out on z = 0); the input when kept */
+    struct vec3 up;             /* its up-direction in the input frame */
+    bool kept_input;            /* no direction saved min_gain by the model */
+    double model_input_g;       /* the model's grams for the input as given */
     int n_tried;
     struct vec3 ups[DIRSEARCH_K_MAX];
     double model_g[DIRSEARCH_K_MAX]; /* each direction's result, by the model */

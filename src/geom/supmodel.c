@@ -316,6 +316,35 @@ supmodel_contacts(const struct ray_grid *g, const struct supmodel_params *p, flo
     return rc;
 }
 
+int
+supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
+                 struct support_column **cols, size_t *n_cols, struct sf_err *err)
+{
+    *cols = NULL;
+    *n_cols = 0;
+    int rc = supmodel_params_check(p, err);
+    if (rc)
+        return rc;
+    struct cols cs;
+    if ((rc = cols_build(g, &cs, err)))
+        return rc;
+    struct contact *ct = NULL;
+    size_t n = 0;
+    rc = find_contacts(g, &cs, p, &ct, &n, err);
+    struct support_column *out = rc ? NULL : mem_array(n ? n : 1, sizeof(*out));
+    if (!rc && !out)
+        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
+    if (out) {
+        for (size_t k = 0; k < n; k++)
+            out[k] = (struct support_column){ ct[k].cell, ct[k].floor, ct[k].top, 0 };
+        *cols = out;
+        *n_cols = n;
+    }
+    free(ct);
+    cols_release(&cs);
+    return rc;
+}
+
 /* Layers of [lo, hi] whose middle (k + 0.5) h lies inside, clipped to [k0, k1). */
 static int32_t
 solid_layers(struct ival iv, double h, int32_t k0, int32_t k1)

@@ -36,6 +36,7 @@
 
 #include "../base/err.h"
 #include "../mesh/mesh.h"
+#include "measure.h"
 #include "raycast.h"
 
 enum supmodel_slicer { SUPMODEL_PRUSA, SUPMODEL_CURA };
@@ -91,6 +92,14 @@ int supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_para
    direction; callers scoring many directions keep a raycast and use the above). */
 int supmodel_of_mesh(const struct mesh *m, struct vec3 up, const struct supmodel_params *p,
                      struct supmodel_result *out, struct sf_err *err);
+
+/*
+ * The model's columns in measure_columns' form (measure.h: lo is the bed or
+ * the top of the part below, hi the overhanging bottom, tri 0), for a
+ * slicer that prints what the model predicts.  *cols is allocated (free()).
+ */
+int supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
+                     struct support_column **cols, size_t *n_cols, struct sf_err *err);
 
 /*
  * The contacts themselves, for a slicer that prints what the model
