@@ -46,6 +46,8 @@ report_json(const char *in, const char *out, const struct surfopt_params *p,
         (json_int_t)r->selfx_out, "seconds", "saliency", r->saliency_s, "orient", r->orient_s,
         "factor", r->factor_s, "iterate", r->iterate_s, "check", r->check_s, "total", r->total_s,
         "model_support_g", "oriented", r->model_oriented_g, "after", r->model_after_g);
+    if (o && r->unchanged_why)
+        json_object_set_new(o, "unchanged_why", json_string(r->unchanged_why));
     return cmd_put_json("optimize", o);
 }
 
@@ -63,7 +65,7 @@ report_text(const char *in, const char *out, const struct surfopt_result *r)
         printf("  deviation MNDR %.2f %% ANDR %.2f %% (max %.2f mm, mean %.2f mm)\n",
                100 * r->dev.mndr, 100 * r->dev.andr, r->dev.max_mm, r->dev.mean_mm);
     else
-        printf("  shape kept: no iterate within the limits needed less support\n");
+        printf("  shape kept: %s\n", r->unchanged_why ? r->unchanged_why : "?");
     printf("  rejected %u; self-intersecting edges %d -> %d\n", r->n_rejected, r->selfx_input,
            r->selfx_out);
     cmd_print_curve(r->curve, r->n_curve);

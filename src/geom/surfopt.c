@@ -630,7 +630,7 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
     if ((rc = supmodel_of_mesh(&oriented, v3(0, 0, 1), &mp, &mr, err)) < 0)
         goto out;
     res->model_oriented_g = mr.grams;
-    int best_k = -1;
+    int best_k = -1, n_selfx = 0;
     double best_g = mr.grams;
     for (int k = n_keep - 1; k >= 0; k--) {
         memcpy(cur.v, keep[k].v, (size_t)n * sizeof(struct vec3));
@@ -638,6 +638,7 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
             goto out;
         if (rc > res->selfx_input) {
             res->n_rejected++;
+            n_selfx++;
             continue;
         }
         if ((rc = supmodel_of_mesh(&cur, v3(0, 0, 1), &mp, &mr, err)) < 0)
@@ -660,6 +661,13 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
         res->model_after_g = best_g;
     } else {
         res->model_after_g = res->model_oriented_g;
+        res->unchanged_why = n_keep == 0
+                                 ? "no iterate lowered the risky faces within the deviation "
+                                   "limits"
+                             : n_selfx == n_keep ? "every kept shape adds self-intersections"
+                             : res->model_oriented_g <= 0
+                                 ? "the oriented part needs no support by the model"
+                                 : "no kept shape needs fewer model grams than the oriented part";
     }
     res->check_s = now_s() - t0;
     if (res->shape_changed) {
