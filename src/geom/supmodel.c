@@ -152,6 +152,8 @@ slope_limit(const struct supmodel_params *p)
         double t = floor(90 - p->angle_deg + 0.5);
         if (t < 1)
             t = 1;
+        if (t + 1 >= 90)
+            return 1e6; /* alpha 0: every bottom that is not a vertical wall overhangs */
         return tan((t + 1) * M_PI / 180);
     }
     /* d = h (tan A - 0.01); a face at phi steps h / tan(phi) */

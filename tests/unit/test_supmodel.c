@@ -136,6 +136,27 @@ T_CASE(supmodel_box_needs_nothing_upright_and_its_top_when_flipped)
     mesh_release(&m);
 }
 
+T_CASE(supmodel_at_zero_degrees_supports_any_slope)
+{
+    /* alpha 0 (issue 9's line): a face leaning 30 degrees from vertical needs
+       support all the way up (a 60 mm tall wedge) */
+    for (int s = 0; s < 2; s++) {
+        struct mesh m;
+        struct sf_err err;
+        struct supmodel_params p;
+        struct supmodel_result r;
+        supmodel_params_default(&p, s ? SUPMODEL_CURA : SUPMODEL_PRUSA);
+        p.angle_deg = 0;
+        mesh_init(&m);
+        double off = 60 * tan(30 * M_PI / 180);
+        double x[4] = { 0, 20, 20 + off, 0 }, z[4] = { 0, 0, 60, 60 };
+        T_OK(shape_extrude_xz(&m, x, z, 4, 20, &err), &err);
+        T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+        T_TRUE(r.contact_area_mm2 > 0.9 * 20 * off);
+        mesh_release(&m);
+    }
+}
+
 T_CASE(supmodel_rejects_bad_params)
 {
     struct supmodel_params p;
