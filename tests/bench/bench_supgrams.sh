@@ -10,7 +10,8 @@
 # and our own slicer's support grams.  Peer rows are cached by the STL's md5
 # under build/peercache/stl (peers run under nice -n 19: a shared machine).
 # SUPGRAMS_MESHES="anchor dino" limits the meshes; SUPGRAMS_VARIANTS (default
-# "given orient surface slim"); SUPGRAMS_PEERS (default "prusaslicer curaengine").
+# "given orient surface slim search"); SUPGRAMS_PEERS (default "prusaslicer curaengine");
+# SUPGRAMS_CACHED_ONLY=1 reports cached peer rows only (a dash where none is).
 set -u
 build=${1:-build/rel}
 shared=${SLIMFARM_SHARED:-../shared}
@@ -29,7 +30,7 @@ print(d)' "$1" "$2" 2>/dev/null || echo -; }
 # peer FILE SLICER -> "support_g est_time_s" (cached by content)
 peer() {
   local sum row; sum=$(md5sum < "$1" | cut -c1-32); row="$cache/stl/$sum.$2.csv"
-  if [ ! -s "$row" ]; then
+  if [ ! -s "$row" ] && [ -z "${SUPGRAMS_CACHED_ONLY:-}" ]; then
     PEER_RUNS=$2:on PEER_TIMEOUT=${PEER_TIMEOUT:-900} nice -n 19 "$peers" "$1" --format csv > "$row.tmp" 2>/dev/null && mv "$row.tmp" "$row"
   fi
   awk -F, 'NR == 2 { print ($8 == 0 ? $14 " " $15 : "fail -") }' "$row" 2>/dev/null || echo "- -"
