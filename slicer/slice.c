@@ -26,6 +26,7 @@
 #include "../src/base/par.h"
 #include "../src/geom/measure.h"
 #include "../src/geom/raycast.h"
+#include "../src/geom/supmodel.h"
 #include "estimate.h"
 #include "gcwrite.h"
 #include "layers.h"
@@ -131,11 +132,14 @@ ray_columns(const struct mesh *m, const struct slice_profile *p, const struct la
     struct support_column *sc = NULL;
     size_t nsc = 0;
     if (st == SF_OK) {
-        struct support_params sp;
-        support_params_default(&sp);
-        sp.angle_deg = slice_profile_angle(p);
-        sp.pitch_mm = p->support_pitch_mm;
-        st = measure_columns(&rg, &sp, &sc, &nsc, err);
+        /* the same detection the optimizers were steered by (supmodel.h): a
+           bottom needs a column where a slicer's layer rule says it overhangs */
+        struct supmodel_params mp;
+        supmodel_params_default(&mp, SUPMODEL_PRUSA);
+        mp.angle_deg = slice_profile_angle(p);
+        mp.layer_mm = p->layer_mm;
+        mp.pitch_mm = p->support_pitch_mm;
+        st = supmodel_columns(&rg, &mp, &sc, &nsc, err);
     }
     if (st == SF_OK) {
         g->x0 = rg.u0 + s->dx;

@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "../geom/measure.h"
+#include "../geom/supmodel.h"
 #include "../mesh/mesh.h"
 #include "cmd.h"
 
@@ -82,6 +83,17 @@ run(int argc, char **argv)
         fprintf(stderr, "slimfarm inspect: %s: %s\n", path, err.msg);
         goto out;
     }
+    /* the layer-based support model, imitating each peer slicer (supmodel.h) */
+    struct supmodel_result mod[2];
+    for (int k = 0; k < 2; k++) {
+        struct supmodel_params mp;
+        supmodel_params_default(&mp, k ? SUPMODEL_CURA : SUPMODEL_PRUSA);
+        mp.angle_deg = sp.angle_deg;
+        if (supmodel_eval(ray, up, &mp, &mod[k], &err) != SF_OK) {
+            fprintf(stderr, "slimfarm inspect: %s: %s\n", path, err.msg);
+            goto out;
+        }
+    }
     struct vec3 lo, hi, com;
     mesh_bbox(&m, &lo, &hi);
     double vol = mesh_volume(&m, &com);
@@ -110,6 +122,13 @@ run(int argc, char **argv)
                                    json_pack("{s:i, s:f, s:f}", "islands", (json_int_t)sm.n_islands,
                                              "island_volume_mm3", sm.island_volume_mm3,
                                              "base_margin_mm", sm.base_margin_mm));
+        if (s)
+            json_object_set_new(s, "model",
+                                json_pack("{s:{s:f, s:f, s:f}, s:{s:f, s:f, s:f}}", "prusaslicer",
+                                          "support_g", mod[0].grams, "support_s", mod[0].time_s,
+                                          "contact_area_mm2", mod[0].contact_area_mm2, "curaengine",
+                                          "support_g", mod[1].grams, "support_s", mod[1].time_s,
+                                          "contact_area_mm2", mod[1].contact_area_mm2));
         if (!o || !s || json_object_set_new(o, "support", s) != 0) {
             fprintf(stderr, "slimfarm inspect: out of memory\n");
             json_decref(o);
@@ -143,6 +162,8 @@ run(int argc, char **argv)
                sm.volume_mm3, sm.n_columns, sm.contact_area_mm2, sm.n_anchors);
         printf("  height %.1f mm, centre of mass at %.1f mm\n", sm.build_height_mm,
                sm.com_height_mm);
+        printf("  support model: PrusaSlicer %.2f g (%.0f min), CuraEngine %.2f g (%.0f min)\n",
+               mod[0].grams, mod[0].time_s / 60, mod[1].grams, mod[1].time_s / 60);
         printf("  growth: %u island%s needing %.0f mm3 (included above), centre of mass %.1f mm "
                "%s the base\n",
                sm.n_islands, sm.n_islands == 1 ? "" : "s", sm.island_volume_mm3,

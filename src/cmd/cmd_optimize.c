@@ -64,7 +64,7 @@ report_json(const char *in, const char *out, const struct slim_params *p,
         "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:{s:f, s:f}, s:f, s:i, s:i, "
         "s:f, "
         "s:i, s:o, "
-        "s:{s:i, s:i, s:i}, s:{s:i, s:i, s:i}, s:f, s:f}",
+        "s:{s:i, s:i, s:i}, s:{s:i, s:i, s:i}, s:f, s:f, s:{s:f, s:f}}",
         "file", in, "output", out, "method", "volumetric", "angle_deg", p->angle_deg, "before",
         cmd_metrics_json(&r->before), "after", cmd_metrics_json(&r->after), "risky_per_iteration",
         cmd_curve_json(r->curve, r->n_curve), "deviation", "mndr", r->dev.mndr, "andr", r->dev.andr,
@@ -76,7 +76,7 @@ report_json(const char *in, const char *out, const struct slim_params *p,
         "part_vertices_outside", (json_int_t)r->tet_outside, "checks", "inverted_tets",
         (json_int_t)r->n_inverted, "self_intersections_input", (json_int_t)r->selfx_input,
         "self_intersections_output", (json_int_t)r->selfx_out, "setup_s", r->setup_s, "seconds",
-        r->total_s);
+        r->total_s, "model_support_g", "before", r->model_before_g, "after", r->model_after_g);
     return cmd_put_json("optimize", o);
 }
 

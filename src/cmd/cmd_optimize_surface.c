@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../geom/dirsearch.h"
 #include "../geom/surfopt.h"
 #include "cmd.h"
 #include "cmdreport.h"
@@ -30,7 +31,7 @@ report_json(const char *in, const char *out, const struct surfopt_params *p,
 {
     json_t *o = json_pack(
         "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:b, s:i, s:i, s:i, "
-        "s:{s:i, s:i}, s:{s:f, s:f, s:f, s:f, s:f, s:f}}",
+        "s:{s:i, s:i}, s:{s:f, s:f, s:f, s:f, s:f, s:f}, s:{s:f, s:f}}",
         "file", in, "output", out, "method", "surface", "angle_deg", p->angle_deg, "input",
         cmd_metrics_json(&r->input), "oriented", cmd_metrics_json(&r->oriented), "after",
         cmd_metrics_json(&r->after), "risky_per_iteration", cmd_curve_json(r->curve, r->n_curve),
@@ -39,7 +40,10 @@ report_json(const char *in, const char *out, const struct surfopt_params *p,
         "iterations", (json_int_t)r->n_iters, "rejected", (json_int_t)r->n_rejected,
         "self_intersections", "input", (json_int_t)r->selfx_input, "output",
         (json_int_t)r->selfx_out, "seconds", "saliency", r->saliency_s, "orient", r->orient_s,
-        "factor", r->factor_s, "iterate", r->iterate_s, "check", r->check_s, "total", r->total_s);
+        "factor", r->factor_s, "iterate", r->iterate_s, "check", r->check_s, "total", r->total_s,
+        "model_support_g", "oriented", r->model_oriented_g, "after", r->model_after_g);
+    if (o && r->unchanged_why)
+        json_object_set_new(o, "unchanged_why", json_string(r->unchanged_why));
     return cmd_put_json("optimize", o);
 }
 
@@ -57,7 +61,7 @@ report_text(const char *in, const char *out, const struct surfopt_result *r)
         printf("  deviation MNDR %.2f %% ANDR %.2f %% (max %.2f mm, mean %.2f mm)\n",
                100 * r->dev.mndr, 100 * r->dev.andr, r->dev.max_mm, r->dev.mean_mm);
     else
-        printf("  shape kept: no iterate within the limits needed less support\n");
+        printf("  shape kept: %s\n", r->unchanged_why ? r->unchanged_why : "?");
     printf("  rejected %u; self-intersecting edges %d -> %d\n", r->n_rejected, r->selfx_input,
            r->selfx_out);
     cmd_print_curve(r->curve, r->n_curve);
@@ -78,12 +82,14 @@ cmd_optimize_surface(int argc, char **argv)
                                           { "saliency", required_argument, NULL, 's' },
                                           { "detail", required_argument, NULL, 'd' },
                                           { "no-orient", no_argument, NULL, 'n' },
+                                          { "search-direction", required_argument, NULL, 'S' },
                                           { "json", no_argument, NULL, 'j' },
                                           { NULL, 0, NULL, 0 } };
     struct surfopt_params p;
     surfopt_params_default(&p);
     const char *out = NULL;
     bool json = false;
+    int search_k = 0; /* > 0: shape inside the direction search (dirsearch.h) */
     double v;
     int c;
     optind = 1;
@@ -142,6 +148,12 @@ cmd_optimize_surface(int argc, char **argv)
         case 'n':
             p.orient = false;
             break;
+        case 'S':
+            if (!cmd_parse_num("optimize", "search-direction", optarg, 1, DIRSEARCH_K_MAX,
+                               "a count of directions in [1, 5]", &v))
+                return 2;
+            search_k = (int)v;
+            break;
         case 'j':
             json = true;
             break;
@@ -165,7 +177,25 @@ cmd_optimize_surface(int argc, char **argv)
         fprintf(stderr, "slimfarm optimize: %s\n", err.msg);
         return 1;
     }
-    int rc = surfopt_optimize(&m, &p, &r, &err);
+    int rc;
+    struct dirsearch_result ds;
+    if (search_k > 0) {
+        struct dirsearch_params dp;
+        dirsearch_params_default(&dp);
+        dp.k = search_k;
+        dp.sp = p;
+        rc = dirsearch_surface(&m, &dp, &ds, &err);
+        if (rc == SF_OK) {
+            r = ds.best; /* taken over: released with r */
+            if (!json)
+                printf("direction search: %d directions reshaped, model grams as given %.2f, "
+                       "best %.2f%s\n",
+                       ds.n_tried, ds.model_input_g, r.model_after_g,
+                       ds.kept_input ? " (input kept: under min_gain)" : "");
+        }
+    } else {
+        rc = surfopt_optimize(&m, &p, &r, &err);
+    }
     mesh_release(&m);
     if (rc != SF_OK) {
         fprintf(stderr, "slimfarm optimize: %s: %s\n", argv[optind], err.msg);

@@ -28,13 +28,13 @@ progress(void *ud, double done, double total)
 static json_t *
 cand_json(const struct orient_candidate *c)
 {
-    return json_pack("{s:[fff], s:s, s:f, s:f, s:f, s:i, s:i, s:f, s:f, s:f, s:f}", "up", c->up.x,
-                     c->up.y, c->up.z, "source", orient_source_name(c->source),
-                     "support_volume_mm3", c->m.volume_mm3, "contact_area_mm2",
-                     c->m.contact_area_mm2, "risky_area_mm2", c->m.risky_area_mm2, "anchors",
-                     (json_int_t)c->m.n_anchors, "islands", (json_int_t)c->m.n_islands,
-                     "base_margin_mm", c->m.base_margin_mm, "com_height_mm", c->m.com_height_mm,
-                     "build_height_mm", c->m.build_height_mm, "cost", c->cost);
+    return json_pack(
+        "{s:[fff], s:s, s:f, s:f, s:f, s:i, s:i, s:f, s:f, s:f, s:f, s:f}", "up", c->up.x, c->up.y,
+        c->up.z, "source", orient_source_name(c->source), "support_volume_mm3", c->m.volume_mm3,
+        "contact_area_mm2", c->m.contact_area_mm2, "risky_area_mm2", c->m.risky_area_mm2, "anchors",
+        (json_int_t)c->m.n_anchors, "islands", (json_int_t)c->m.n_islands, "base_margin_mm",
+        c->m.base_margin_mm, "com_height_mm", c->m.com_height_mm, "build_height_mm",
+        c->m.build_height_mm, "cost", c->cost, "model_support_g", c->support_g);
 }
 
 static void

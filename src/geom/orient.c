@@ -23,6 +23,7 @@
 #include "../base/mem.h"
 #include "../base/par.h"
 #include "hull.h"
+#include "supmodel.h"
 
 void
 orient_params_default(struct orient_params *p)
@@ -54,6 +55,7 @@ struct cand {
     double key;                /* sort key of the current stage */
     int stage;                 /* 0: proxy only, 1: coarse ray cast, 2: full ray cast */
     struct support_metrics at; /* stage 2: the metrics at the operator's angle */
+    double model_g;            /* stage 2: the layer-based model's support grams */
     bool dropped;              /* would stand on a point or tip over */
 };
 
@@ -65,6 +67,7 @@ struct job {
     struct raycast *rc;           /* ray-cast stages */
     struct support_params sp;     /* scoring: the angle less the margin */
     struct support_params at;     /* reporting: the operator's angle */
+    struct supmodel_params mp;    /* finalists: the layer-based model (PrusaSlicer's rules) */
     struct cand *cands;
     const uint32_t *batch; /* indices of candidates to score */
     int stage;
@@ -100,10 +103,19 @@ score_one(struct job *j, struct cand *c, struct sf_err *err)
         rc = measure_support_angles(j->m, j->rc, j->pc, c->c.up, sp, 2, out, err);
         c->c.m = out[0];
         c->at = out[1];
+        struct supmodel_result mr;
+        if (rc == SF_OK && (rc = supmodel_eval(j->rc, c->c.up, &j->mp, &mr, err)) == SF_OK)
+            c->model_g = mr.grams;
     }
     if (rc)
         return rc;
     c->c.cost = c->key = cost_of(j->p, &c->c.m);
+    if (j->stage == 2) {
+        /* finalists are ranked by the model's grams, the ray-cast cost breaking ties
+           (it adds at most a milligram) */
+        c->c.support_g = c->model_g;
+        c->key = c->model_g + 1e-9 * c->c.cost;
+    }
     c->stage = j->stage;
     c->dropped = false;
     /* Standing on a point with no support column from the bed: it would topple. */
@@ -218,9 +230,11 @@ pick_distinct(const struct cand *c, const uint32_t *order, uint32_t n, uint32_t 
  * REFINE_SEEDS best distinct directions; the FINAL best distinct directions and the input
  * are cast again at the full pitch, which fills the report's 4 runners-up.  (6 finalists
  * cost 37 % of anchor's instructions; on the 12 shared meshes the pick was always among
- * the coarse stage's 3 best, so 4 cut that share with no pick changed)
+ * the coarse stage's 3 best, so 4 cut that share with no pick changed; the
+ * support model now ranks the finalists, and it reorders the ray cast's best, so
+ * 8 are cast and weighed by it)
  */
-enum { REFINE_SEEDS = 2, REFINE_PER = 8, FINAL = 4 };
+enum { REFINE_SEEDS = 2, REFINE_PER = 8, FINAL = 8 };
 
 /*
  * The search's opening, two tasks of one par_for: the candidates, the proxy
@@ -336,6 +350,8 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     /* report at the operator's angle: the margin only steers the choice */
     j.at = j.sp;
     j.at.angle_deg = p->angle_deg;
+    supmodel_params_default(&j.mp, SUPMODEL_PRUSA);
+    j.mp.angle_deg = p->angle_deg;
 
     struct opening o = { .m = m,
                          .p = p,
@@ -411,8 +427,13 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     qsort_r(final, n_final, sizeof(uint32_t), cmp_key, cands);
 
     uint32_t best = final[0];
-    if (!cands[0].dropped && cands[best].c.cost > (1 - p->min_gain) * cands[0].c.cost)
-        best = 0; /* not worth turning the part */
+    /* Not worth turning the part unless the model's grams fall by min_gain; where
+       neither needs support (under a hundredth of a gram) the ray-cast cost, whose
+       centre-of-mass term prefers the lower pose, decides as it did before */
+    bool none = cands[0].model_g < 0.01 && cands[best].model_g < 0.01;
+    if (!cands[0].dropped && (none ? cands[best].c.cost > (1 - p->min_gain) * cands[0].c.cost
+                                   : !(cands[best].model_g < (1 - p->min_gain) * cands[0].model_g)))
+        best = 0;
     const struct support_metrics *in = &cands[0].c.m;
     if (in->n_rays && in->n_rays_open > p->max_open_rays * in->n_rays) {
         best = 0; /* rays cannot tell inside from outside: no figure to trust */

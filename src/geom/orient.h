@@ -60,7 +60,9 @@ struct orient_candidate {
     struct vec3 up;            /* unit up-direction in the input frame */
     enum orient_source source; /* where it came from */
     struct support_metrics m;  /* exact metrics at angle_deg (what the operator asked) */
-    double cost;               /* lower is better; scored at angle_deg - margin_deg */
+    double cost;               /* ray-cast cost, scored at angle_deg - margin_deg */
+    double support_g;          /* finalists: the layer-based model's grams (supmodel.h,
+                                  PrusaSlicer's rules at angle_deg), which ranks them */
 };
 
 struct orient_result {

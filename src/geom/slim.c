@@ -36,6 +36,7 @@
 #include "../base/par.h"
 #include "arap.h"
 #include "selfx.h"
+#include "supmodel.h"
 
 #define KEEP_BEST 10 /* candidate iterates kept per direction */
 
@@ -112,6 +113,7 @@ struct dir {
     struct mesh in;  /* the input rotated and resting on z = 0 */
     struct mesh out; /* the chosen result */
     struct support_metrics before, after;
+    double model_before_g, model_after_g; /* supmodel.h grams of in and out */
     struct deviation dev;
     uint32_t curve[SLIM_CURVE_MAX];
     int n_curve, best_iter, n_runs, selfx_in, selfx_out;
@@ -399,9 +401,11 @@ setup_fixed(struct work *w)
     return SF_OK;
 }
 
-/* Ray-cast support metrics of m printed along +z (the report's before and after). */
+/* Ray-cast support metrics of m printed along +z (the report's before and after) and the
+   layer-based model's grams (supmodel.h, PrusaSlicer's rules), from one scene. */
 static int
-support_of(const struct mesh *m, double angle_deg, struct support_metrics *sm, struct sf_err *err)
+support_of(const struct mesh *m, double angle_deg, struct support_metrics *sm, double *model_g,
+           struct sf_err *err)
 {
     struct support_params sp;
     support_params_default(&sp);
@@ -410,6 +414,13 @@ support_of(const struct mesh *m, double angle_deg, struct support_metrics *sm, s
     if (!rc)
         return err ? err->code : SF_ENOMEM;
     int r = measure_support(m, rc, v3(0, 0, 1), &sp, sm, err);
+    struct supmodel_params mp;
+    supmodel_params_default(&mp, SUPMODEL_PRUSA);
+    mp.angle_deg = angle_deg;
+    struct supmodel_result mr;
+    if (r == SF_OK)
+        r = supmodel_eval(rc, v3(0, 0, 1), &mp, &mr, err);
+    *model_g = r == SF_OK ? mr.grams : 0;
     raycast_free(rc);
     return r;
 }
@@ -489,6 +500,9 @@ restore_volume(struct mesh *m, double vol_mm3, double gap_mm)
  * does ranking the list by the rescaled candidates' ray-cast volume
  * instead of the risky count help: at most 0.3 % on any row.
  */
+/* (Since issue 21 the kept iterates are weighed by the layer-based model of
+   supmodel.h, which snaps footprints to PrusaSlicer's grid and prices its
+   interfaces and sheath, instead of the ray-cast volume above.) */
 /* Support volume vol saves at least min_gain of vol_in (with min_gain > 0, a part that
    needs none is never changed; with 0, no more than the input is enough). */
 static bool
@@ -509,13 +523,19 @@ choose(struct work *w, struct sf_err *err)
     d->selfx_in = selfx_count(&d->in, err);
     if (d->selfx_in < 0)
         return d->selfx_in;
-    int rc = support_of(&d->in, p->angle_deg, &d->before, err);
+    int rc = support_of(&d->in, p->angle_deg, &d->before, &d->model_before_g, err);
     if (rc)
         return rc;
+    /* every feasible kept iterate is weighed by the layer-based model; the one
+       it gives the fewest grams wins if that saves min_gain of the input's */
+    int best = -1;
+    double best_g = 0, best_scale = 1;
+    struct support_metrics best_sm;
+    int best_sx = 0;
     for (int i = 0; i < w->n_list; i++) {
         struct cand *c = &w->list[i];
         if (!c->x)
-            break; /* the input: always acceptable */
+            continue; /* the input: the fallback */
         if (count_inverted(&w->tm, c->x)) {
             d->n_rejected++;
             continue;
@@ -540,21 +560,31 @@ choose(struct work *w, struct sf_err *err)
             d->n_rejected++;
             continue;
         }
-        if ((rc = support_of(&w->cur, p->angle_deg, &sm, err)))
+        double g;
+        if ((rc = support_of(&w->cur, p->angle_deg, &sm, &g, err)))
             return rc;
-        if (!saves_enough(sm.volume_mm3, d->before.volume_mm3, p->min_gain)) {
+        if (!saves_enough(g, d->model_before_g, p->min_gain) || (best >= 0 && g >= best_g)) {
             d->n_rejected++;
             continue;
         }
-        d->after = sm;
-        d->selfx_out = sx;
-        d->volume_scale = scale;
+        best = i, best_g = g, best_scale = scale, best_sm = sm, best_sx = sx;
+    }
+    if (best >= 0) {
+        struct cand *c = &w->list[best];
+        map_part(w, c->x);
+        if (rescale)
+            restore_volume(&w->cur, part_vol_in, w->gap);
+        d->after = best_sm;
+        d->model_after_g = best_g;
+        d->selfx_out = best_sx;
+        d->volume_scale = best_scale;
         d->best_iter = c->iter;
         d->beta_deg = c->beta_deg;
         d->n_inverted = count_inverted(&w->tm, c->x);
         return mesh_copy(&d->out, &w->cur, err);
     }
     d->after = d->before;
+    d->model_after_g = d->model_before_g;
     d->selfx_out = d->selfx_in;
     d->volume_scale = 1;
     d->best_iter = 0;
@@ -845,7 +875,7 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
     }
     /* a direction's failure is in its dir, found by the pick below */
     (void)par_for((uint32_t)cx.n_dirs, 1, p->threads, run_dirs, &cx);
-    /* pick: least support volume, then fewest anchors; errors win over results */
+    /* pick: fewest model grams, then least support volume; errors win over results */
     int best = -1;
     for (int i = 0; i < cx.n_dirs; i++) {
         struct dir *d = &cx.dirs[i];
@@ -856,9 +886,9 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
             best = -1;
             break;
         }
-        if (best < 0 || d->after.volume_mm3 < cx.dirs[best].after.volume_mm3 - 1e-9 ||
-            (fabs(d->after.volume_mm3 - cx.dirs[best].after.volume_mm3) <= 1e-9 &&
-             d->after.n_anchors < cx.dirs[best].after.n_anchors))
+        if (best < 0 || d->model_after_g < cx.dirs[best].model_after_g - 1e-9 ||
+            (fabs(d->model_after_g - cx.dirs[best].model_after_g) <= 1e-9 &&
+             d->after.volume_mm3 < cx.dirs[best].after.volume_mm3))
             best = i;
     }
     if (best >= 0) {
@@ -868,6 +898,8 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
         res->rotation = d->rot;
         res->before = d->before;
         res->after = d->after;
+        res->model_before_g = d->model_before_g;
+        res->model_after_g = d->model_after_g;
         res->dev = d->dev;
         res->part_volume_in_mm3 = mesh_volume(&d->in, NULL);
         res->part_volume_out_mm3 = mesh_volume(&res->out, NULL);

@@ -97,7 +97,10 @@ struct slim_result {
     struct mesh out;      /* the slimmed part in the print orientation (mesh_release) */
     struct mat3 rotation; /* applied to the input first (identity unless searched) */
     struct support_metrics before, after; /* ray-cast metrics, input (rotated) vs output */
-    struct deviation dev;                 /* MNDR / ANDR of out against the rotated input */
+    /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams: it picks the
+       iterate and the direction, and a result must save min_gain of the input's */
+    double model_before_g, model_after_g;
+    struct deviation dev; /* MNDR / ANDR of out against the rotated input */
     /* enclosed volume of the rotated input and of out (mesh_volume): equal up to rounding with
        keep_volume.  Without it the deformation does not keep it (arap.h, "Volume": disagreeing
        target rotations compress the tets) and MNDR / ANDR do not see a spread-out squash.  A

@@ -14,6 +14,7 @@
 #include "saliency.h"
 #include "selfx.h"
 #include "sparse.h"
+#include "supmodel.h"
 
 #define KEEP_MAX 8 /* improving iterates kept as fallbacks (keep_push) */
 
@@ -615,24 +616,58 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
             break; /* another orientation step would see the same shape */
     }
 
-    /* The result: the latest kept shape that adds no self-intersection and
-     * needs less support than the orientation alone; else the orientation
-     * alone. */
+    /* The result: of the kept shapes that add no self-intersection, the one
+     * the layer-based support model (supmodel.h, PrusaSlicer's rules) gives
+     * the fewest grams, if that is fewer than the orientation alone needs;
+     * else the orientation alone.  The ray-cast volume steered the
+     * iterations; the model, which follows what a slicer prints, decides. */
     t0 = now_s();
     struct support_metrics sm;
+    struct supmodel_params mp;
+    supmodel_params_default(&mp, SUPMODEL_PRUSA);
+    mp.angle_deg = p->angle_deg;
+    struct supmodel_result mr;
+    if ((rc = supmodel_of_mesh(&oriented, v3(0, 0, 1), &mp, &mr, err)) < 0)
+        goto out;
+    res->model_oriented_g = mr.grams;
+    int best_k = -1, n_selfx = 0;
+    double best_g = mr.grams;
     for (int k = n_keep - 1; k >= 0; k--) {
         memcpy(cur.v, keep[k].v, (size_t)n * sizeof(struct vec3));
         if ((rc = selfx_count(&cur, err)) < 0)
             goto out;
-        int sx = rc;
+        if (rc > res->selfx_input) {
+            res->n_rejected++;
+            n_selfx++;
+            continue;
+        }
+        if ((rc = supmodel_of_mesh(&cur, v3(0, 0, 1), &mp, &mr, err)) < 0)
+            goto out;
+        if (mr.grams < best_g) {
+            best_g = mr.grams;
+            best_k = k;
+        } else {
+            res->n_rejected++;
+        }
+    }
+    if (best_k >= 0) {
+        memcpy(cur.v, keep[best_k].v, (size_t)n * sizeof(struct vec3));
+        if ((rc = selfx_count(&cur, err)) < 0)
+            goto out;
+        res->selfx_out = rc;
         if ((rc = ray_metrics(&cur, p->angle_deg, &sm, err)) < 0)
             goto out;
-        if (sx <= res->selfx_input && sm.volume_mm3 < res->oriented.volume_mm3) {
-            res->shape_changed = true;
-            res->selfx_out = sx;
-            break;
-        }
-        res->n_rejected++;
+        res->shape_changed = true;
+        res->model_after_g = best_g;
+    } else {
+        res->model_after_g = res->model_oriented_g;
+        res->unchanged_why = n_keep == 0
+                                 ? "no iterate lowered the risky faces within the deviation "
+                                   "limits"
+                             : n_selfx == n_keep ? "every kept shape adds self-intersections"
+                             : res->model_oriented_g <= 0
+                                 ? "the oriented part needs no support by the model"
+                                 : "no kept shape needs fewer model grams than the oriented part";
     }
     res->check_s = now_s() - t0;
     if (res->shape_changed) {

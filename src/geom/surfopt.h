@@ -105,6 +105,10 @@ struct surfopt_result {
     int selfx_input, selfx_out;
     uint32_t n_rejected; /* kept iterates refused: self-intersections or more support */
     bool shape_changed;  /* false: only the orientation step's result is returned */
+    /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams: it picks the
+       result among the kept shapes, which must need fewer than the oriented part */
+    double model_oriented_g, model_after_g;
+    const char *unchanged_why; /* shape kept: why, in words (static); NULL when changed */
     double saliency_s, factor_s, iterate_s, orient_s, check_s, total_s;
 };
 

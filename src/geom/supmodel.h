@@ -1,0 +1,113 @@
+/*
+ * supmodel.h - a layer-based model of the support an outside slicer prints:
+ * what PrusaSlicer 2.5 (grid style) or CuraEngine 4.13 (normal supports)
+ * decide layer by layer, in grams and print seconds, for one up-direction.
+ *
+ * The part is a raster of vertical columns (the ray grid of raycast.h at
+ * pitch_mm), each holding the solid intervals along up.  A column's bottom
+ * (a solid interval starting above the bed) overhangs when the layer below
+ * does not come within the slicer's allowed step of it: PrusaSlicer's
+ * d = h / tan(T + 1 deg), CuraEngine's d = h (tan A - 0.01).  A planar face
+ * steps h / tan(phi) a layer, so over a raster step r the test is whether a
+ * neighbouring column is solid r / (d / h) below the bottom: the slicers'
+ * per-layer rule, applied over r instead of h, which ignores facet noise
+ * finer than the raster as the slicers ignore it finer than a layer.
+ * Contacts sit gap_z_mm below the bottom and project down to the bed or to
+ * the first solid below (plus the bottom gap); PrusaSlicer snaps support to
+ * a grid of snap_mm cells (every touched cell is filled where the part is
+ * not), CuraEngine closes gaps under 2 * join (modelled as the same snap).
+ * Volumes (../shared/SUPPORT-DETECTION.md (5) and (6)):
+ *   base      = filled cells * h * base_density
+ *   sheath    = outline of the filled cells * h * sheath_mm (PrusaSlicer)
+ *   connectors = outline * h * line_width * connector_factor (CuraEngine zigzag)
+ *   interface = (contacts + landings on the part) * interface_layers * h
+ *   first layer = filled cells at the bed * h * (first_density - base_density)
+ * PrusaSlicer's bridge exemption (dont_support_bridges, on in the peers'
+ * runs): a flat bottom that a straight raster line crosses from material
+ * below to material below gets no support (its 1.5 mm bands at free edges
+ * are not modelled).  CuraEngine supports bridges.
+ *
+ * Pure functions: thread-safe on distinct outputs; the raycast may be shared.
+ */
+#ifndef SF_GEOM_SUPMODEL_H
+#define SF_GEOM_SUPMODEL_H
+
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "../mesh/mesh.h"
+#include "measure.h"
+#include "raycast.h"
+
+enum supmodel_slicer { SUPMODEL_PRUSA, SUPMODEL_CURA };
+
+struct supmodel_params {
+    enum supmodel_slicer slicer; /* whose rules: PrusaSlicer 2.5 or CuraEngine 4.13 */
+    double angle_deg;            /* alpha, largest self-supporting angle from vertical (45) */
+    double layer_mm;             /* layer height (0.2, as ../shared/peers sets) */
+    double pitch_mm;             /* raster pitch (0.5) */
+    double gap_z_mm;             /* contact distance above and below support (0.2) */
+    double gap_xy_mm;            /* support kept this far from the part (0.225 / 0.7) */
+    double snap_mm;              /* support footprint cell (PrusaSlicer 2.84, CuraEngine 2) */
+    int interface_layers;        /* dense layers at contacts and landings (3 / 0) */
+    double base_density;         /* sparse support fill (0.118 / 0.15) */
+    double first_density;        /* fill of the bed layer (0.9 / 0.15) */
+    double sheath_mm;            /* extrusion spacing of the loop around support (0.336 / 0) */
+    double connector_factor;     /* zigzag connector path per mm of outline (0 / 0.6) */
+    double line_width_mm;        /* support line width (0.4) */
+    double speed_mm_s;           /* support print speed for the time estimate (60) */
+    double density_g_cm3;        /* filament density (1.24) */
+    bool bridges;                /* flat bottoms anchored on two opposite sides need no
+                                    support, as PrusaSlicer's dont_support_bridges (off by
+                                    default: see supmodel_params_default) */
+};
+
+/* The defaults of ../shared/peers/slice-peers.sh for slicer s at 45 degrees. */
+void supmodel_params_default(struct supmodel_params *p, enum supmodel_slicer s);
+
+struct supmodel_result {
+    double grams;            /* all support extrusion */
+    double time_s;           /* support path length / speed */
+    double base_mm3;         /* sparse fill, first layer included */
+    double interface_mm3;    /* dense contact and landing layers */
+    double outline_mm3;      /* sheath or zigzag connectors */
+    double contact_area_mm2; /* part surface that support touches from below */
+    double shadow_mm3;       /* contact area times column length (the classic volume) */
+    uint32_t n_contacts;     /* raster columns with a contact */
+    uint32_t n_layers;       /* layers of the part */
+};
+
+/* Validate p: SF_EINVAL naming the field when a value is out of range. */
+int supmodel_params_check(const struct supmodel_params *p, struct sf_err *err);
+
+/* The model on a cast grid (g's pitch is the raster; p->pitch_mm is ignored). */
+int supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
+                       struct supmodel_result *out, struct sf_err *err);
+
+/* Cast the grid for up at p->pitch_mm and evaluate. */
+int supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *p,
+                  struct supmodel_result *out, struct sf_err *err);
+
+/* The same for a mesh alone: builds and frees its own ray scene (one part, one
+   direction; callers scoring many directions keep a raycast and use the above). */
+int supmodel_of_mesh(const struct mesh *m, struct vec3 up, const struct supmodel_params *p,
+                     struct supmodel_result *out, struct sf_err *err);
+
+/*
+ * The model's columns in measure_columns' form (measure.h: lo is the bed or
+ * the top of the part below, hi the overhanging bottom, tri 0), for a
+ * slicer that prints what the model predicts.  *cols is allocated (free()).
+ */
+int supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
+                     struct support_column **cols, size_t *n_cols, struct sf_err *err);
+
+/*
+ * The contacts themselves, for a slicer that prints what the model
+ * predicts: for every raster cell (g's cell order) the height of the
+ * highest overhanging bottom (mm above the bed), or -1 where the column
+ * needs no support.  *top_mm is allocated (free()).
+ */
+int supmodel_contacts(const struct ray_grid *g, const struct supmodel_params *p, float **top_mm,
+                      struct sf_err *err);
+
+#endif

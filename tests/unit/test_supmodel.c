@@ -1,0 +1,201 @@
+/*
+ * test_supmodel.c - the layer-based support model on generated parts with
+ * known answers: the tee's arms, a sphere's cap, faces and staircases one
+ * degree either side of the overhang angle, and parts that need nothing.
+ */
+#include <math.h>
+#include <stdlib.h>
+
+#include "../../src/geom/dirsearch.h"
+#include "../../src/geom/measure.h"
+#include "../../src/geom/supmodel.h"
+#include "../../src/mesh/shapes.h"
+#include "../t.h"
+
+static int
+model_at(const struct mesh *m, struct vec3 up, const struct supmodel_params *p,
+         struct supmodel_result *out, struct sf_err *err)
+{
+    struct raycast *rc = raycast_new(m, err);
+    if (!rc)
+        return err->code;
+    int r = supmodel_eval(rc, up, p, out, err);
+    raycast_free(rc);
+    return r;
+}
+
+T_CASE(supmodel_tee_arms_are_supported_from_the_bed)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    for (int s = 0; s < 2; s++) {
+        struct supmodel_params p;
+        supmodel_params_default(&p, s ? SUPMODEL_CURA : SUPMODEL_PRUSA);
+        struct supmodel_result r;
+        T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+        /* two 20 x 20 arms; the raster loses at most a cell's strip along the stem */
+        T_TRUE(r.contact_area_mm2 > 760 && r.contact_area_mm2 <= 800);
+        /* columns from the arms' underside (z 30) less the gap down to the bed */
+        T_EQ_DBL(r.shadow_mm3 / r.contact_area_mm2, 30 - p.gap_z_mm, 0.3);
+        T_TRUE(r.grams > 0 && r.time_s > 0);
+    }
+    mesh_release(&m);
+}
+
+T_CASE(supmodel_tee_grams_near_the_peers_measured_grams)
+{
+    /* ../shared/peers/README.md: the tee needs 6.17 g in PrusaSlicer and
+       5.89 g in CuraEngine at these settings; the model is within 25 % */
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    struct supmodel_params p;
+    struct supmodel_result r;
+    supmodel_params_default(&p, SUPMODEL_PRUSA);
+    T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+    T_EQ_DBL(r.grams, 6.17, 6.17 * 0.25);
+    supmodel_params_default(&p, SUPMODEL_CURA);
+    T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+    T_EQ_DBL(r.grams, 5.89, 5.89 * 0.25);
+    mesh_release(&m);
+}
+
+T_CASE(supmodel_sphere_cap_is_the_ring_flatter_than_the_limit)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    const double rad = 10;
+    T_OK(shape_sphere(&m, rad, 96, &err), &err);
+    struct supmodel_params p;
+    supmodel_params_default(&p, SUPMODEL_PRUSA);
+    struct supmodel_result r;
+    T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+    /* supported where the surface is flatter than T + 1 = 46 degrees from the
+       horizontal and the contact clears the first layer (z >= h + gap) */
+    double outer = rad * sin(46 * M_PI / 180);
+    double inner = rad * sin(acos(1 - (p.layer_mm + p.gap_z_mm) / rad));
+    double want = M_PI * (outer * outer - inner * inner);
+    T_EQ_DBL(r.contact_area_mm2, want, want * 0.15);
+    mesh_release(&m);
+}
+
+T_CASE(supmodel_faces_one_degree_either_side_of_the_angle)
+{
+    /* At 45 degrees PrusaSlicer's threshold is T = 45 from the horizontal,
+       tested as T + 1 and inclusive: a face leaning 44 degrees from vertical
+       is at the limit and gets nothing, 43 nothing, 45 support (the peers'
+       README measured wedge44 unsupported).  CuraEngine's limit is
+       atan(tan 45 - 0.01) = 44.7 degrees: 44 nothing, 46 support. */
+    static const struct {
+        enum supmodel_slicer s;
+        double lean_deg;
+        bool supported;
+    } cases[] = {
+        { SUPMODEL_PRUSA, 43, false }, { SUPMODEL_PRUSA, 44, false }, { SUPMODEL_PRUSA, 45, true },
+        { SUPMODEL_CURA, 44, false },  { SUPMODEL_CURA, 46, true },
+    };
+    for (size_t k = 0; k < sizeof(cases) / sizeof(cases[0]); k++) {
+        struct mesh m;
+        struct sf_err err;
+        struct supmodel_params p;
+        struct supmodel_result r;
+        supmodel_params_default(&p, cases[k].s);
+        mesh_init(&m);
+        T_OK(shape_wedge(&m, cases[k].lean_deg, &err), &err);
+        T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+        mesh_release(&m);
+        if (!cases[k].supported) {
+            T_EQ_DBL(r.grams, 0, 1e-9);
+            continue;
+        }
+        /* the face's shadow: 20 deep, 20 tan(lean) wide, bar the strip by the bed */
+        double shadow = 20 * 20 * tan(cases[k].lean_deg * M_PI / 180);
+        T_TRUE(r.contact_area_mm2 > 0.9 * shadow && r.contact_area_mm2 < 1.02 * shadow);
+        T_TRUE(r.grams > 0.5);
+    }
+}
+
+T_CASE(supmodel_box_needs_nothing_upright_and_its_top_when_flipped)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(20, 20, 20), &err), &err);
+    struct supmodel_params p;
+    supmodel_params_default(&p, SUPMODEL_PRUSA);
+    struct supmodel_result r;
+    T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+    T_EQ_DBL(r.grams, 0, 1e-9);
+    T_EQ_INT(r.n_contacts, 0);
+    T_OK(model_at(&m, v3(1, 0, 0), &p, &r, &err), &err);
+    T_EQ_DBL(r.grams, 0, 1e-9);
+    mesh_release(&m);
+}
+
+T_CASE(supmodel_at_zero_degrees_supports_any_slope)
+{
+    /* alpha 0 (issue 9's line): a face leaning 30 degrees from vertical needs
+       support all the way up (a 60 mm tall wedge) */
+    for (int s = 0; s < 2; s++) {
+        struct mesh m;
+        struct sf_err err;
+        struct supmodel_params p;
+        struct supmodel_result r;
+        supmodel_params_default(&p, s ? SUPMODEL_CURA : SUPMODEL_PRUSA);
+        p.angle_deg = 0;
+        mesh_init(&m);
+        double off = 60 * tan(30 * M_PI / 180);
+        double x[4] = { 0, 20, 20 + off, 0 }, z[4] = { 0, 0, 60, 60 };
+        T_OK(shape_extrude_xz(&m, x, z, 4, 20, &err), &err);
+        T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+        T_TRUE(r.contact_area_mm2 > 0.9 * 20 * off);
+        mesh_release(&m);
+    }
+}
+
+T_CASE(supmodel_rejects_bad_params)
+{
+    struct supmodel_params p;
+    struct sf_err err;
+    supmodel_params_default(&p, SUPMODEL_PRUSA);
+    T_OK(supmodel_params_check(&p, &err), &err);
+    p.layer_mm = 0;
+    T_ERR(supmodel_params_check(&p, &err), SF_EINVAL, &err, "layer_mm");
+    supmodel_params_default(&p, SUPMODEL_CURA);
+    p.angle_deg = 90;
+    T_ERR(supmodel_params_check(&p, &err), SF_EINVAL, &err, "angle_deg");
+}
+
+T_CASE(dirsearch_keeps_a_box_and_turns_the_tee)
+{
+    struct mesh m;
+    struct sf_err err;
+    struct dirsearch_params p;
+    struct dirsearch_result r;
+    dirsearch_params_default(&p);
+    p.k = 2;
+    p.op.samples = 200;
+    p.sp.max_iters = 20;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(20, 20, 20), &err), &err);
+    T_OK(dirsearch_surface(&m, &p, &r, &err), &err);
+    /* nothing to save: the input as it was */
+    T_TRUE(r.kept_input);
+    T_EQ_DBL(r.model_input_g, 0, 1e-9);
+    T_EQ_INT(r.best.out.n_verts, m.n_verts);
+    dirsearch_result_release(&r);
+    mesh_release(&m);
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    T_OK(dirsearch_surface(&m, &p, &r, &err), &err);
+    T_TRUE(!r.kept_input);
+    T_TRUE(r.n_tried == 2);
+    T_TRUE(r.model_input_g > 5);
+    T_TRUE(r.best.model_after_g < 0.5 * r.model_input_g);
+    dirsearch_result_release(&r);
+    mesh_release(&m);
+}
