@@ -31,6 +31,7 @@
 #include "../base/buf.h"
 #include "../base/limits.h"
 #include "../base/log.h"
+#include "../geom/dirsearch.h"
 #include "../geom/orient.h"
 #include "../geom/slim.h"
 #include "../geom/surfopt.h"
@@ -188,18 +189,33 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     sp.margin_deg = sp.margin_deg < sp.angle_deg ? sp.margin_deg : sp.angle_deg;
     sp.cancel = cancel;
     cap_deviation(m, req->opts.deviation_mm, &sp.max_mndr, &sp.max_andr);
-    struct surfopt_result sr;
-    int rc = surfopt_optimize(m, &sp, &sr, err);
+    /* shape inside the direction search: the best few directions are each
+       reshaped and the support model picks (dirsearch.h, issue 21) */
+    struct dirsearch_params dp;
+    dirsearch_params_default(&dp);
+    dp.sp = sp;
+    dp.op.cancel = cancel;
+    struct dirsearch_result dr;
+    int rc = dirsearch_surface(m, &dp, &dr, err);
     if (rc)
         return rc;
-    log_info("prepare",
-             "job %lld: surface (Jayakody 2025): %d rounds, risky faces %u -> %u, support "
-             "%.1f -> %.1f mm3, shape %s, largest move %.3f mm",
-             (long long)req->job_id, sr.n_rounds, sr.input.n_risky, sr.after.n_risky,
-             sr.input.volume_mm3, sr.after.volume_mm3, sr.shape_changed ? "changed" : "kept",
-             sr.dev.max_mm);
-    take_part(m, &sr.out, prof);
-    surfopt_result_release(&sr);
+    const struct surfopt_result *sr = &dr.best;
+    if (dr.kept_input)
+        log_info("prepare",
+                 "job %lld: surface (Jayakody 2025) in the direction search: none of %d "
+                 "directions saves %.0f %% of the model's %.2f g of support: printed as given",
+                 (long long)req->job_id, dr.n_tried, 100 * dp.min_gain, dr.model_input_g);
+    else
+        log_info("prepare",
+                 "job %lld: surface (Jayakody 2025) in the direction search: %d directions, "
+                 "model support %.2f -> %.2f g, risky faces %u -> %u, shape %s%s%s, largest "
+                 "move %.3f mm",
+                 (long long)req->job_id, dr.n_tried, dr.model_input_g, sr->model_after_g,
+                 sr->input.n_risky, sr->after.n_risky, sr->shape_changed ? "changed" : "kept",
+                 sr->unchanged_why ? ": " : "", sr->unchanged_why ? sr->unchanged_why : "",
+                 sr->dev.max_mm);
+    take_part(m, &dr.best.out, prof);
+    dirsearch_result_release(&dr);
     return SF_OK;
 }
 

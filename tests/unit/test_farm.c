@@ -555,7 +555,7 @@ T_CASE(farm_default_prepare_runs_every_method)
        oriented part; the surface method turned and reshaped it its own way,
        so the part it prints is not the one orientation alone chose */
     T_TRUE(logged(slimmed, "slimmed (Hu 2015): iteration "));
-    T_TRUE(logged(surf, "surface (Jayakody 2025): "));
+    T_TRUE(logged(surf, "surface (Jayakody 2025) in the direction search: "));
     T_TRUE(!logged(ok, "slimmed") && !logged(ok, "surface"));
     struct job_row o, sf;
     T_OK(store_job_get(fx.s, ok, &o, &err), &err);
