@@ -8,16 +8,16 @@
  *
  * Why this way: Marlin executes a numbered line only if it follows the
  * last one and its checksum matches, so exact-once delivery rests on the
- * printer; the host's job is to stay live.  Lines stream buffer-aware: as
- * many in flight as the firmware's queue holds (learned from ADVANCED_OK's
- * B field, else a conservative 2), with ping-pong (1) as the fallback once
- * the window's accounting has proved unreliable (a stall without
- * ADVANCED_OK).  linewin.c does the bookkeeping; this file reads replies
- * (marlin_reply.c), feeds the window and the transport, and reports.
- * A silent printer gets an unnumbered M105 probe; its answer means all
- * earlier lines were handled, so the window resyncs and the last line goes
- * again (Marlin rejects it with a Resend if it had it).  No answer after
- * several probes fails the job.
+ * printer; the host's job is to stay live.  Lines stream in a window of
+ * the firmware's BUFSIZE lines whose bytes behind the oldest fit its RX
+ * ring, dropping to ping-pong after a Resend and climbing back.  linewin.c does the bookkeeping;
+ * this file reads replies (marlin_reply.c), feeds the window and the transport, and reports.
+ * Replies carry no checksum: an unreadable reply, or one that cannot be
+ * right, sends a numbered M105 probe, whose answer is a barrier (every line
+ * before it was handled) and which Marlin refuses, never misreads, when it
+ * is garbled.  A reply overdue by more than the execution time of what is
+ * in flight plus a margin sends one too; the job fails only when the
+ * printer stays silent (drivers/README.md has the whole protocol).
  *
  * Thread: loop thread; never blocks (the job file is read a line at a
  * time as the window opens; start_job reads it whole only when the owner
@@ -40,25 +40,25 @@
 #include "marlin_reply.h"
 #include "transport.h"
 
-#define RING_LINES      512   /* numbered lines kept for resends */
-#define WINDOW_MAX      32    /* most lines in flight however large B claims */
-#define BUFSIZE_DEFAULT 4     /* Marlin's BUFSIZE in its default configuration */
-#define RX_DEFAULT      128   /* Marlin's RX_BUFFER_SIZE in its default configuration */
-#define INJECT_MAX      32    /* host lines waiting (park, resume, end sequences) */
-#define HELLO_TRIES     5     /* handshake attempts before giving up */
-#define PROBES_MAX      5     /* deadlines in a row without a reply before the job may fail */
-#define SILENCE_MS      30000 /* ... and no byte at all for this long */
-#define GARBLED_MAX     40    /* deadlines in a row with only unreadable replies: fail */
-#define MARGIN_MS       1000  /* default margin beyond the expected execution time */
-#define PLANNER_BLOCKS  16    /* Marlin's BLOCK_BUFFER_SIZE: moves acknowledged, not yet run */
-#define ACCEL_MM_S2     500.0 /* a low acceleration: execution time bounds from above */
-#define KEEPALIVE_MS    3000  /* busy/wait reports come at least this often once seen */
-#define POLL_MS         2000  /* M105 polling / M155 interval */
-#define PROGRESS_MS     250   /* progress events at most this often */
-#define CLIMB_LINES     16    /* clean lines per step back up after a rewind */
-#define TAG_HOST        (-1)  /* a line the driver added */
-#define TAG_M105        (-2)  /* a numbered M105 (poll or probe): its answer is a barrier */
-#define PARK_X_MM       0.0   /* where a paused head waits */
+#define RING_LINES      512    /* numbered lines kept for resends */
+#define WINDOW_MAX      32     /* most lines in flight however large B claims */
+#define BUFSIZE_DEFAULT 4      /* Marlin's BUFSIZE in its default configuration */
+#define RX_DEFAULT      128    /* Marlin's RX_BUFFER_SIZE in its default configuration */
+#define INJECT_MAX      32     /* host lines waiting (park, resume, end sequences) */
+#define HELLO_TRIES     5      /* handshake attempts before giving up */
+#define PROBES_MAX      5      /* deadlines in a row without a reply before the job may fail */
+#define SILENCE_MS      30000  /* ... and no byte at all for this long */
+#define GARBLED_MAX     40     /* deadlines in a row with only unreadable replies: fail */
+#define MARGIN_MS       1000   /* default margin beyond the expected execution time */
+#define PLANNER_BLOCKS  16     /* Marlin's BLOCK_BUFFER_SIZE: moves acknowledged, not yet run */
+#define ACCEL_MM_S2     1500.0 /* execution time bounds: below most printers' print accel */
+#define KEEPALIVE_MS    3000   /* busy/wait reports come at least this often once seen */
+#define POLL_MS         2000   /* M105 polling / M155 interval */
+#define PROGRESS_MS     250    /* progress events at most this often */
+#define CLIMB_LINES     16     /* clean lines per step back up after a rewind */
+#define TAG_HOST        (-1)   /* a line the driver added */
+#define TAG_M105        (-2)   /* a numbered M105 (poll or probe): its answer is a barrier */
+#define PARK_X_MM       0.0    /* where a paused head waits */
 #define PARK_Y_MM       0.0
 #define PARK_LIFT_MM    10.0
 #define RETRACT_MM      2.0
@@ -102,6 +102,7 @@ struct marlin {
     bool keepalive_seen;        /* the firmware sends busy / wait reports while it blocks */
     int64_t busy_until_ms;      /* when the moves acknowledged so far end at the latest */
     int64_t poll_ms;            /* next M105 poll (no auto-report) */
+    long error_wants;           /* "Error:... Last Line: L" just came: L + 1, until its Resend */
     long bad_resend;            /* resend target out of range */
     int bad_resend_count;       /* times in a row it was asked for */
     char inject[INJECT_MAX][LINEWIN_LINE_MAX];
@@ -629,6 +630,7 @@ on_settle(struct loop *l, void *ud)
     }
     m->settling = false;
     m->win.stale = 0;
+    m->win.swallow = 0; /* a rejection's ok follows its Resend at once, or was lost */
     pump(m);
 }
 
@@ -700,11 +702,12 @@ on_resend(struct marlin *m, long k)
         return;
     }
     (void)before;
-    if (rc == 2)
+    if (rc == 2 || (rc == SF_ENOTFOUND && k != 1))
         want_probe(m); /* garbled, or the printer is ahead: ask where it is */
-    if (rc == SF_ENOTFOUND || k > m->win.high + 1) {
-        /* The same impossible request three times running (a garbled number
-           does not repeat): the printer's counter is not ours. */
+    if (rc == SF_ENOTFOUND && k == 1) {
+        /* A printer that reset without our seeing its banner counts from 0
+           again and asks for line 1 after every line; three such requests
+           running (a garbled number does not repeat) end the job. */
         if (m->bad_resend == k && ++m->bad_resend_count >= 3) {
             log_printer(LOG_WARN, m->base.name, "printer asks for line %ld; we hold %ld-%ld", k,
                         m->win.high - m->win.cap + 1, m->win.high);
@@ -817,6 +820,29 @@ on_reply(struct marlin *m, const char *line, size_t len)
     if (m->phase != PH_READY)
         return;
 
+    /* Marlin follows a line error with "Resend: L+1" and "ok" at once.  If
+       what comes next is not that Resend (garbled, or lost), the error's
+       own "Last Line: L" says what the printer wants. */
+    long wants = m->error_wants;
+    m->error_wants = 0;
+    if (wants > 0 && r.kind != MR_RESEND) {
+        on_resend(m, wants);
+        if ((r.kind == MR_OK && !r.has_temps && !r.has_n) || r.kind == MR_OTHER) {
+            /* the rejection's ok, or the garbled Resend (its ok still to come) */
+            if (r.kind == MR_OK && m->win.swallow > 0)
+                m->win.swallow--;
+            check_job_progress(m);
+            return;
+        }
+    }
+    if (wants > 0 && r.kind == MR_RESEND && r.resend != wants) {
+        /* One of the two numbers is garbled: the one in the window wins. */
+        bool k_ok = r.resend > m->win.acked && r.resend <= m->win.next;
+        bool w_ok = wants > m->win.acked && wants <= m->win.next;
+        if (w_ok && !k_ok)
+            r.resend = wants;
+    }
+
     switch (r.kind) {
     case MR_OK: {
         /* Only a whole ADVANCED_OK reply teaches the window. */
@@ -833,9 +859,12 @@ on_reply(struct marlin *m, const char *line, size_t len)
         break;
     }
     case MR_OTHER:
-        /* Not a Marlin line: a garbled ok, Resend or error.  The window may
-           be off by that reply; a barrier puts it right. */
-        if (m->win.in_flight > 0)
+        /* Not a Marlin line: a garbled ok, Resend or error.  Right after a
+           Resend it was the rejection's ok; otherwise the window may be off
+           by that reply, and a barrier puts it right. */
+        if (m->win.swallow > 0)
+            m->win.swallow--;
+        else if (m->win.in_flight > 0)
             want_probe(m);
         break;
     case MR_RESEND:
@@ -850,10 +879,17 @@ on_reply(struct marlin *m, const char *line, size_t len)
                 snprintf(why, sizeof(why), "printer halted: %.80s", r.name);
                 job_fail(m, DRV_ERROR, why);
             }
+        } else if (r.err == MR_ERR_LINE && !r.resend_follows && r.last_line >= 0 &&
+                   strstr(r.name, "No Line Number")) {
+            /* Our line lost its N on the wire: Marlin 1.1 drops it, saying
+               where it is, with no Resend and no ok (2.x runs it instead). */
+            on_resend(m, r.last_line + 1);
+            if (m->win.swallow > 0)
+                m->win.swallow--;
+        } else if (r.err == MR_ERR_LINE && r.resend_follows && r.last_line >= 0) {
+            m->error_wants = r.last_line + 1;
         } else if (r.err == MR_ERR_LINE && !r.resend_follows) {
-            /* Our line lost its N on the wire (Marlin drops it without a
-               Resend), or the error text itself is garbled: ask. */
-            want_probe(m);
+            want_probe(m); /* the error text itself is garbled: ask */
         } else if (r.err == MR_ERR_OTHER) {
             log_printer(LOG_WARN, m->base.name, "printer error: %s", r.name);
         }

@@ -878,7 +878,10 @@ read_input(struct sim_marlin *s)
 {
     int room = s->cfg.rx_size - s->rx_len;
     int want = (int)s->rx_tokens;
-    if (want > room && !s->cfg.uart)
+    /* A UART board loses what reaches a full ring, but only while Marlin is
+       not reading: between commands it drains the ring as bytes come (the
+       step's granularity must not turn a late step into a burst). */
+    if (want > room && !(s->cfg.uart && s->head_started))
         want = room;
     if (want <= 0 || !linked(s))
         return;
@@ -1066,7 +1069,9 @@ step(struct sim_marlin *s)
        late step catch up). */
     double cap = fmax(s->bps_ms * 8, 16);
     s->rx_tokens = s->rx_idle ? 0 : fmin(cap, s->rx_tokens + (double)dt_ms * s->bps_ms);
-    s->tx_tokens = s->tx.len == 0 ? 0 : fmin(cap, s->tx_tokens + (double)dt_ms * s->bps_ms);
+    /* An idle transmitter starts at once: a reply made in this step may use
+       this step's millisecond of wire. */
+    s->tx_tokens = s->tx.len == 0 ? s->bps_ms : fmin(cap, s->tx_tokens + (double)dt_ms * s->bps_ms);
     s->rx_idle = false;
     double dt_s = (double)dt_ms / 1000.0 * s->cfg.speed;
     s->sim_s += dt_s;

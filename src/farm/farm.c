@@ -276,6 +276,8 @@ printer_new(struct farm *f, const struct farmcfg_printer *cfg)
                              .kind = cfg->driver,
                              .port = cfg->port,
                              .baud = cfg->baud,
+                             .buffer_lines = cfg->buffer_lines,
+                             .rx_buffer = cfg->rx_buffer,
                              .url = cfg->url,
                              .api_key = cfg->api_key };
     p->drv = f->hooks.driver(f->l, &dc, on_drv_event, p, &err);
