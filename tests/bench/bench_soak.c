@@ -36,13 +36,12 @@
 #include "../../src/base/log.h"
 
 struct print_result {
-    bool done;          /* the job ended done */
+    bool done;           /* the job ended done */
     long lost, repeated; /* file commands missing from / run twice in the log */
-    long fragments;     /* log lines that are no file command (cut lines the printer ran) */
-    double secs;        /* simulated seconds from start_job to the end */
+    long fragments;      /* log lines that are no file command (cut lines the printer ran) */
+    double secs;         /* simulated seconds from start_job to the end */
     uint64_t rewinds, probes, deadlines, resends;
 };
-
 
 static void
 on_event(struct drv *d, enum drv_event ev, void *ud)
@@ -125,8 +124,8 @@ judge(const char *gcode, const char *log, struct print_result *res)
 }
 
 static int
-one_print(const char *gcode, const char *log, const struct sim_marlin_config *base,
-          bool faults_on, struct print_result *res)
+one_print(const char *gcode, const char *log, const struct sim_marlin_config *base, bool faults_on,
+          struct print_result *res)
 {
     memset(res, 0, sizeof(*res));
     struct sf_err err;
@@ -291,8 +290,8 @@ main(int argc, char **argv)
     }
     printf("soak: %ld prints of %ld lines, stock Marlin (%s, BUFSIZE 4, RX 128 UART) at %ld baud, "
            "%.2f %% of bytes garbled each way, %.2f %% of oks lost; clean print %.1f s\n",
-           prints, lines, advanced ? "ADVANCED_OK" : "plain ok", baud, corrupt * 100,
-           drop_ok * 100, clean.secs);
+           prints, lines, advanced ? "ADVANCED_OK" : "plain ok", baud, corrupt * 100, drop_ok * 100,
+           clean.secs);
     long failed = 0, lost = 0, repeated = 0, fragments = 0;
     double lost_s = 0, worst_s = 0;
     uint64_t rewinds = 0, deadlines = 0, probes = 0;

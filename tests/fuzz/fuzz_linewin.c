@@ -44,7 +44,7 @@ LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
         else if (r.kind == MR_OTHER)
             linewin_force(&w);
         /* Whatever the replies said, the window stays in range. */
-        if (w.in_flight < 0 || w.in_flight > w.window + 1 || w.next < 1 || w.next > w.high + 1 ||
+        if (w.in_flight < 0 || w.in_flight > w.cap || w.next < 1 || w.next > w.high + 1 ||
             w.acked > w.next - 1 || w.stale < 0 || w.swallow < 0)
             abort();
         p = nl ? nl + 1 : end;
