@@ -93,7 +93,7 @@ TESTS := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(TEST_C)) \
 BENCHES := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(BENCH_C))
 FUZZERS := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(FUZZ_C))
 
-.PHONY: all check tests demo bench fuzz fuzzers deps install clean format check-format \
+.PHONY: all check tests demo bench soak fuzz fuzzers deps install clean format check-format \
 	check-headers check-layers
 .DEFAULT_GOAL := all
 
@@ -210,6 +210,10 @@ bench: deps all $(BENCHES)
 	@missing=$$(for p in $(BENCH_PKGS); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done); \
 	if [ -n "$$missing" ]; then apt-get install -y -q $$missing >/dev/null; fi
 	tests/bench/run.sh $(BUILD)
+
+# Long runs on simulated time and many daemon kills (tests/bench/soak.sh); minutes, not in check.
+soak: deps all $(BUILD)/bench/bench_soak
+	tests/bench/soak.sh $(BUILD)
 
 deps:
 	@missing=$$(for p in $(DEB_PKGS); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done); \

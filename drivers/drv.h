@@ -72,8 +72,11 @@ struct drv_config {
     int baud;            /* serial baud rate (0: 115200) */
     const char *url;     /* network printers: base URL */
     const char *api_key; /* network printers: key or access code */
-    int timeout_ms;      /* marlin: silence before a probe (0: 10000) (added for issue 6) */
-    int buffer_lines;    /* marlin: lines in flight; 0 auto (ADVANCED_OK or 2), 1 ping-pong */
+    int timeout_ms;      /* marlin: margin past the expected execution time of the lines in
+                            flight before a probe (0: 1000) */
+    int buffer_lines;    /* marlin: the firmware's BUFSIZE, most lines in flight (0: 4;
+                            ADVANCED_OK's B when it says more; 1: ping-pong) */
+    int rx_buffer;       /* marlin: the firmware's RX ring, bytes (0: 128) */
 };
 
 /* The machine state a job's commands leave behind: what a resume restores. */

@@ -8,16 +8,16 @@
  *
  * Why this way: Marlin executes a numbered line only if it follows the
  * last one and its checksum matches, so exact-once delivery rests on the
- * printer; the host's job is to stay live.  Lines stream buffer-aware: as
- * many in flight as the firmware's queue holds (learned from ADVANCED_OK's
- * B field, else a conservative 2), with ping-pong (1) as the fallback once
- * the window's accounting has proved unreliable (a stall without
- * ADVANCED_OK).  linewin.c does the bookkeeping; this file reads replies
- * (marlin_reply.c), feeds the window and the transport, and reports.
- * A silent printer gets an unnumbered M105 probe; its answer means all
- * earlier lines were handled, so the window resyncs and the last line goes
- * again (Marlin rejects it with a Resend if it had it).  No answer after
- * several probes fails the job.
+ * printer; the host's job is to stay live.  Lines stream in a window of
+ * the firmware's BUFSIZE lines whose bytes behind the oldest fit its RX
+ * ring, dropping to ping-pong after a Resend and climbing back.  linewin.c does the bookkeeping;
+ * this file reads replies (marlin_reply.c), feeds the window and the transport, and reports.
+ * Replies carry no checksum: an unreadable reply, or one that cannot be
+ * right, sends a numbered M105 probe, whose answer is a barrier (every line
+ * before it was handled) and which Marlin refuses, never misreads, when it
+ * is garbled.  A reply overdue by more than the execution time of what is
+ * in flight plus a margin sends one too; the job fails only when the
+ * printer stays silent (drivers/README.md has the whole protocol).
  *
  * Thread: loop thread; never blocks (the job file is read a line at a
  * time as the window opens; start_job reads it whole only when the owner
@@ -40,18 +40,25 @@
 #include "marlin_reply.h"
 #include "transport.h"
 
-#define RING_LINES      512  /* numbered lines kept for resends */
-#define WINDOW_MAX      32   /* most lines in flight however large B claims */
-#define WINDOW_DEFAULT  2    /* without ADVANCED_OK: safe for any BUFSIZE >= 2 */
-#define INJECT_MAX      32   /* host lines waiting (park, resume, end sequences) */
-#define HELLO_TRIES     5    /* handshake attempts before giving up */
-#define PROBES_MAX      5    /* unanswered probes before the job fails */
-#define POLL_MS         2000 /* M105 polling / M155 interval */
-#define PROGRESS_MS     250  /* progress events at most this often */
-#define PINGPONG_LINES  64   /* clean lines in ping-pong after a resend */
-#define TAG_HOST        (-1) /* a line the driver added */
-#define TAG_M105        (-2) /* a numbered M105 poll */
-#define PARK_X_MM       0.0  /* where a paused head waits */
+#define RING_LINES      512    /* numbered lines kept for resends */
+#define WINDOW_MAX      32     /* most lines in flight however large B claims */
+#define BUFSIZE_DEFAULT 4      /* Marlin's BUFSIZE in its default configuration */
+#define RX_DEFAULT      128    /* Marlin's RX_BUFFER_SIZE in its default configuration */
+#define INJECT_MAX      32     /* host lines waiting (park, resume, end sequences) */
+#define HELLO_TRIES     5      /* handshake attempts before giving up */
+#define PROBES_MAX      5      /* deadlines in a row without a reply before the job may fail */
+#define SILENCE_MS      30000  /* ... and no byte at all for this long */
+#define GARBLED_MAX     40     /* deadlines in a row with only unreadable replies: fail */
+#define MARGIN_MS       1000   /* default margin beyond the expected execution time */
+#define PLANNER_BLOCKS  16     /* Marlin's BLOCK_BUFFER_SIZE: moves acknowledged, not yet run */
+#define ACCEL_MM_S2     1500.0 /* execution time bounds: below most printers' print accel */
+#define KEEPALIVE_MS    3000   /* busy/wait reports come at least this often once seen */
+#define POLL_MS         2000   /* M105 polling / M155 interval */
+#define PROGRESS_MS     250    /* progress events at most this often */
+#define CLIMB_LINES     16     /* clean lines per step back up after a rewind */
+#define TAG_HOST        (-1)   /* a line the driver added */
+#define TAG_M105        (-2)   /* a numbered M105 (poll or probe): its answer is a barrier */
+#define PARK_X_MM       0.0    /* where a paused head waits */
 #define PARK_Y_MM       0.0
 #define PARK_LIFT_MM    10.0
 #define RETRACT_MM      2.0
@@ -65,8 +72,9 @@ struct marlin {
     struct drv base; /* first: drv.h casts */
     char port[256];  /* transport spec */
     int baud;
-    int timeout_ms;           /* silence before a probe */
-    int cfg_window;           /* 0 auto */
+    int margin_ms;            /* beyond the expected execution time before a probe */
+    int cfg_lines;            /* the firmware's BUFSIZE (lines in flight at most) */
+    int cfg_rx;               /* the firmware's RX ring, bytes (0: no byte limit) */
     struct transport *t;      /* NULL when offline */
     struct transport *t_dead; /* closed inside its callback; freed on the next tick */
     uint64_t timer;           /* periodic housekeeping */
@@ -77,22 +85,26 @@ struct marlin {
     size_t rx_len;
     bool rx_skip; /* dropping an over-long line */
     struct linewin win;
-    int max_b;             /* largest ADVANCED_OK B seen */
-    int full_window;       /* window when the link is clean */
-    int pingpong_left;     /* acknowledged lines to go before the full window returns */
-    bool settling;         /* after a Resend: wait for the stale replies to stop */
-    int settle_ms;         /* quiet time that ends settling (3 line times) */
-    int64_t last_reply_ms; /* last complete reply line */
-    uint64_t settle_timer; /* pending settle check */
-    uint64_t line_timer;   /* pending check of a reply line without its newline */
-    int64_t progress_ms;   /* last protocol progress (ok, resend, busy...) */
-    int64_t last_rx_ms;    /* last byte of any kind */
-    int probes;            /* unanswered probes in a row */
-    bool probe_out;        /* an unnumbered M105 probe awaits its ok */
-    bool probe_garbled;    /* it came back as an unknown command: its ok is next */
-    int64_t poll_ms;       /* next M105 poll (no auto-report) */
-    long bad_resend;       /* resend target out of range */
-    int bad_resend_count;  /* times in a row it was asked for */
+    int max_b;                  /* largest ADVANCED_OK B seen twice */
+    int b_seen[WINDOW_MAX + 1]; /* how often each B value was seen */
+    int max_p;                  /* largest ADVANCED_OK P seen: the planner's depth */
+    int full_window;            /* window when the link is clean */
+    int clean;                  /* lines acknowledged since the last rewind */
+    bool settling;              /* after a Resend: wait for the stale replies to stop */
+    int settle_ms;              /* quiet time that ends settling (3 line times) */
+    int64_t last_reply_ms;      /* last complete reply line */
+    uint64_t settle_timer;      /* pending settle check */
+    uint64_t line_timer;        /* pending check of a reply line without its newline */
+    int64_t progress_ms;        /* last protocol progress (ok, resend, busy...) */
+    int64_t last_rx_ms;         /* last byte of any kind */
+    int probes;                 /* deadlines in a row with no protocol reply */
+    bool probe_wanted;          /* a probe waits in the inject queue */
+    bool keepalive_seen;        /* the firmware sends busy / wait reports while it blocks */
+    int64_t busy_until_ms;      /* when the moves acknowledged so far end at the latest */
+    int64_t poll_ms;            /* next M105 poll (no auto-report) */
+    long error_wants;           /* "Error:... Last Line: L" just came: L + 1, until its Resend */
+    long bad_resend;            /* resend target out of range */
+    int bad_resend_count;       /* times in a row it was asked for */
     char inject[INJECT_MAX][LINEWIN_LINE_MAX];
     int inj_head, inj_len;
     /* job */
@@ -105,6 +117,7 @@ struct marlin {
     long last_tag;                /* highest job index acknowledged + 1 */
     int64_t progress_ev_ms;       /* last DRV_EV_PROGRESS */
     struct drv_machine mo, saved; /* tracked from the lines pushed (for pause and resume) */
+    struct drv_machine est;       /* position for execution time bounds (all lines pushed) */
     struct drv_marlin_stats st;
 };
 
@@ -284,11 +297,146 @@ next_job_command(struct marlin *m, char *out, size_t cap)
     return 0;
 }
 
+/* ---- execution time bounds ---------------------------------------------- */
+
+/*
+ * An upper bound on how long the printer takes to run cmd, ms, from the
+ * machine state before it (advanced past it).  Moves: the trapezoid the
+ * estimator's planner uses for a block (slicer/estimate.c), started and
+ * ended at rest, at a low acceleration, so never less than the firmware
+ * needs.  Commands that block (homing, probing, heating, dwell) get their
+ * own allowances; heating and homing keep the host informed with busy and
+ * temperature lines, which count as replies (see expect_ms).
+ */
+static int32_t
+exec_ms(struct drv_machine *mo, const char *cmd)
+{
+    struct gcode_line g;
+    if (gcode_parse(cmd, strlen(cmd), &g, NULL) < 0)
+        return 0;
+    double v;
+    if (g.letter == 'G' && g.code <= 3) {
+        static const char axes[4] = { 'X', 'Y', 'Z', 'E' };
+        double d2 = 0, de = 0;
+        for (int a = 0; a < 4; a++) {
+            if (!gcode_get(&g, axes[a], &v) || isnan(v))
+                continue;
+            double to = (a < 3 ? mo->rel_xyz : mo->rel_e) ? mo->pos[a] + v : v;
+            double dd = to - mo->pos[a];
+            if (a < 3)
+                d2 += dd * dd;
+            else
+                de = fabs(dd);
+        }
+        double d = d2 > 0 ? sqrt(d2) : de;
+        if (g.code >= 2 && d > 0)
+            d *= 3.2; /* an arc may sweep up to a full turn around its chord */
+        double f = mo->feed_mm_min;
+        if (gcode_get(&g, 'F', &v) && v > 0)
+            f = v;
+        track(mo, cmd, strlen(cmd));
+        double vs = f / 60.0 < 0.5 ? 0.5 : f / 60.0;
+        double t =
+            d >= vs * vs / ACCEL_MM_S2 ? d / vs + vs / ACCEL_MM_S2 : 2 * sqrt(d / ACCEL_MM_S2);
+        return t * 1000 > 600000 ? 600000 : (int32_t)(t * 1000) + 1;
+    }
+    track(mo, cmd, strlen(cmd));
+    if (gcode_is(&g, 'G', 4)) {
+        double ms = 0;
+        if (gcode_get(&g, 'P', &v) && !isnan(v))
+            ms = v;
+        else if (gcode_get(&g, 'S', &v) && !isnan(v))
+            ms = v * 1000;
+        return ms < 0 ? 0 : ms > 3600000 ? 3600000 : (int32_t)ms;
+    }
+    if (gcode_is(&g, 'G', 28))
+        return 60000;
+    if (gcode_is(&g, 'G', 29) || gcode_is(&g, 'G', 34) || gcode_is(&g, 'M', 48))
+        return 600000;
+    if (gcode_is(&g, 'M', 109) || gcode_is(&g, 'M', 190) || gcode_is(&g, 'M', 191) ||
+        gcode_is(&g, 'M', 303) || gcode_is(&g, 'M', 0) || gcode_is(&g, 'M', 1) ||
+        gcode_is(&g, 'M', 600))
+        return 1800000;
+    return 0;
+}
+
+/*
+ * When the printer's next reply is overdue, ms: after the last reply, or
+ * the end of the moves it has planned, the lines in flight and the margin.
+ * How long the printer may legitimately take:
+ * the lines in flight, and the moves acknowledged before them that may
+ * still wait in the planner (an ok leaves once a move is planned, and the
+ * next line waits for a free block): busy_until_ms follows them, each
+ * acknowledged move starting when the one before it ends at the latest.  A firmware that has shown
+ * it reports while it blocks (busy, M109's temperatures) gets only the report interval for a
+ * blocking command: those reports count as replies.
+ */
+static int64_t
+deadline_ms(const struct marlin *m)
+{
+    int32_t cap = m->keepalive_seen ? KEEPALIVE_MS : INT32_MAX;
+    int64_t from = m->busy_until_ms > m->progress_ms ? m->busy_until_ms : m->progress_ms;
+    return from + linewin_cost(&m->win, m->win.acked + 1, m->win.next - 1, cap) + m->margin_ms;
+}
+
+/* ---- writing the window ------------------------------------------------- */
+
+static bool
+m105_in_flight(const struct marlin *m)
+{
+    for (long n = m->win.acked + 1; n < m->win.next; n++)
+        if (linewin_tag(&m->win, n) == TAG_M105)
+            return true;
+    return false;
+}
+
+/* Host line at the head of the inject queue (it goes next). */
+static void
+inject_front(struct marlin *m, const char *cmd)
+{
+    if (m->inj_len == INJECT_MAX)
+        return;
+    m->inj_head = (m->inj_head + INJECT_MAX - 1) % INJECT_MAX;
+    snprintf(m->inject[m->inj_head], LINEWIN_LINE_MAX, "%s", cmd);
+    m->inj_len++;
+}
+
+static void pump(struct marlin *m);
+
+/*
+ * Something did not add up (an unreadable reply, an ok for a line that
+ * cannot be, an error without its Resend): ask for a barrier.  The probe is
+ * a numbered M105 in the stream, inside the window like any line: Marlin
+ * checks its number and checksum, so garbled on the wire it is refused
+ * (Resend), never run as another command; M105 runs in order and answers
+ * "ok T:..." itself, so its answer means every line before it was handled.
+ */
+static void
+want_probe(struct marlin *m)
+{
+    if (m->probe_wanted || m105_in_flight(m) || m->phase != PH_READY)
+        return;
+    m->st.probes++;
+    if (m->win.window == 1 && m->win.in_flight > 0 && m->win.next > m->win.high) {
+        /* In ping-pong the garbled reply was the one line's: nothing else
+           will come, so the probe goes now, past the window. */
+        struct sf_err err;
+        if (linewin_push(&m->win, "M105", TAG_M105, &err) > 0) {
+            m->st.host_lines++;
+            linewin_force(&m->win);
+            pump(m);
+        }
+        return;
+    }
+    m->probe_wanted = true;
+    inject_front(m, "M105");
+}
+
 /* Lines that may go out now: resends first, then host lines, then the job. */
 static void
 pump(struct marlin *m)
 {
-    if (m->phase != PH_READY || m->probe_out || m->settling)
+    if (m->phase != PH_READY || m->settling)
         return;
     for (int guard = 0; guard < 256 && m->t; guard++) {
         const struct linewin_entry *e = linewin_peek(&m->win);
@@ -303,13 +451,17 @@ pump(struct marlin *m)
                 line[k++] = '\r';
             line[k++] = '\n';
             line[k] = '\0';
+            if (m->win.in_flight == 0)
+                m->progress_ms = loop_now_ms(m->base.loop); /* the clock starts now */
             linewin_sent(&m->win);
             m->st.lines_sent++;
             if (send_raw(m, line) < 0)
                 return;
             continue;
         }
-        if (m->win.in_flight >= m->win.window || m->win.next <= m->win.high)
+        if (m->win.next <= m->win.high)
+            return; /* the window is full */
+        if (m->win.in_flight >= m->win.window)
             return;
         struct sf_err err;
         if (m->inj_len > 0) {
@@ -318,10 +470,14 @@ pump(struct marlin *m)
             long rc = linewin_push(&m->win, cmd, tag, &err);
             if (rc == SF_EAGAIN)
                 return;
-            if (rc < 0)
+            if (rc < 0) {
                 log_printer(LOG_WARN, m->base.name, "dropping host line: %s", err.msg);
-            else
+            } else {
                 m->st.host_lines++;
+                linewin_set_cost(&m->win, rc, exec_ms(&m->est, cmd));
+            }
+            if (tag == TAG_M105)
+                m->probe_wanted = false;
             m->inj_head = (m->inj_head + 1) % INJECT_MAX;
             m->inj_len--;
             continue;
@@ -330,8 +486,12 @@ pump(struct marlin *m)
             return;
         if (m->job_eof) {
             if (!m->final_pushed) {
+                /* Done means executed: M400 waits for the last move, and the
+                   M105 after it answers only then, whatever became of the
+                   plain oks on the way. */
                 m->final_pushed = true;
-                inject(m, "M400"); /* done means executed, not just queued */
+                inject(m, "M400");
+                inject(m, "M105");
                 continue;
             }
             return;
@@ -357,6 +517,7 @@ pump(struct marlin *m)
             job_fail(m, DRV_IDLE, "bad G-code");
             return;
         }
+        linewin_set_cost(&m->win, n, exec_ms(&m->est, cmd));
         m->job_index++;
     }
 }
@@ -366,12 +527,25 @@ pump(struct marlin *m)
 static void
 credit(struct marlin *m, long from, long to)
 {
-    if (to > from && m->pingpong_left > 0) {
-        m->pingpong_left -= (int)(to - from);
-        if (m->pingpong_left <= 0) {
-            m->pingpong_left = 0;
-            m->win.window = m->full_window;
+    if (to > from && m->win.window < m->full_window) {
+        /* Climb back from ping-pong one line per CLIMB_LINES clean lines. */
+        m->clean += (int)(to - from);
+        while (m->clean >= CLIMB_LINES && m->win.window < m->full_window) {
+            m->clean -= CLIMB_LINES;
+            m->win.window++;
         }
+    }
+    int64_t now = loop_now_ms(m->base.loop);
+    if (to > from) {
+        /* The planner holds PLANNER_BLOCKS moves at most: the bound never
+           runs further ahead than the last ones acknowledged. */
+        int planner = m->max_p + 1 > PLANNER_BLOCKS ? m->max_p + 1 : PLANNER_BLOCKS;
+        if (m->busy_until_ms < now)
+            m->busy_until_ms = now;
+        m->busy_until_ms += linewin_cost(&m->win, from + 1, to, INT32_MAX);
+        int64_t cap = now + linewin_cost(&m->win, to - planner + 1, to, INT32_MAX);
+        if (m->busy_until_ms > cap)
+            m->busy_until_ms = cap;
     }
     for (long n = from + 1; n <= to; n++) {
         long tag = linewin_tag(&m->win, n);
@@ -406,31 +580,43 @@ check_job_progress(struct marlin *m)
     }
 }
 
+/* The window for this firmware: BUFSIZE lines (ADVANCED_OK's B + 1 once seen twice). */
 static void
-learn_window(struct marlin *m, int b)
+set_full_window(struct marlin *m)
+{
+    int w = m->cfg_lines;
+    if (m->win.advanced && m->max_b > 0)
+        w = m->max_b + 1;
+    m->full_window = w < 1 ? 1 : w > WINDOW_MAX ? WINDOW_MAX : w;
+    if (m->win.window > m->full_window || m->clean == 0)
+        m->win.window = m->full_window;
+}
+
+static void
+learn_window(struct marlin *m, int b, int p)
 {
     if (!m->win.advanced) {
         m->win.advanced = true;
-        log_printer(LOG_INFO, m->base.name, "ADVANCED_OK: streaming buffer-aware");
+        log_printer(LOG_INFO, m->base.name, "ADVANCED_OK: acknowledgements by line number");
     }
-    if (b > m->max_b)
+    if (p > m->max_p && p < 1024)
+        m->max_p = p;
+    /* One garbled digit must not widen the window: a value counts once seen twice. */
+    if (b < 0 || b > WINDOW_MAX - 1 || m->cfg_lines == 1)
+        return;
+    if (++m->b_seen[b] >= 2 && b > m->max_b) {
         m->max_b = b;
-    if (m->cfg_window == 0) {
-        int w = m->max_b + 1;
-        m->full_window = w < 1 ? 1 : w > WINDOW_MAX ? WINDOW_MAX : w;
-        if (m->pingpong_left == 0)
-            m->win.window = m->full_window;
+        set_full_window(m);
     }
 }
-
-static void pump(struct marlin *m);
 
 /*
  * Settling ends when no reply came for settle_ms: every line that was in
  * flight behind the bad one has been answered or eaten by Marlin's RX
- * flush.  Then the rewound line goes out, in ping-pong until the link has
- * been clean for a while: with one line in flight an error leaves nothing
- * behind it to be flushed or cut into fragments.
+ * flush, so the rewound line cannot be flushed with them.  Then it goes
+ * out in ping-pong, and the window climbs back as lines pass clean: with
+ * one line in flight an error leaves nothing behind it to be flushed or
+ * cut into fragments.
  */
 static void
 on_settle(struct loop *l, void *ud)
@@ -438,26 +624,21 @@ on_settle(struct loop *l, void *ud)
     struct marlin *m = ud;
     m->settle_timer = 0;
     int64_t quiet = loop_now_ms(l) - m->last_reply_ms;
-    if (quiet < m->settle_ms) {
+    if (quiet < m->settle_ms && m->win.stale > 0) {
         m->settle_timer = loop_timer_add(l, m->settle_ms - quiet, on_settle, m);
         return;
     }
     m->settling = false;
     m->win.stale = 0;
-    m->win.swallow_ok = false;
-    if (!m->win.advanced) {
-        /* Everything before the rewound line was taken; nothing else is in flight. */
-        m->win.acked = m->win.next - 1;
-        m->win.in_flight = 0;
-    }
-    m->pingpong_left = PINGPONG_LINES;
-    m->win.window = 1;
+    m->win.swallow = 0; /* a rejection's ok follows its Resend at once, or was lost */
     pump(m);
 }
 
 static void
 start_settling(struct marlin *m)
 {
+    m->win.window = 1;
+    m->clean = 0;
     if (m->settling)
         return;
     m->settling = true;
@@ -469,31 +650,6 @@ static void do_pause(struct marlin *m);
 static void do_resume(struct marlin *m);
 static void do_cancel(struct marlin *m);
 
-/*
- * Ask the printer to show where it is: an unnumbered M105 answers "ok T:"
- * only after every line before it was handled.  Used after a silence and
- * at once when a reply looks garbled (a lost ok or Resend would otherwise
- * cost a whole timeout).
- */
-static void
-probe(struct marlin *m)
-{
-    if (m->probe_out || !m->t)
-        return;
-    m->probes++;
-    m->st.probes++;
-    m->probe_out = true;
-    m->probe_garbled = false;
-    m->progress_ms = loop_now_ms(m->base.loop);
-    send_raw(m, "M105\r\n");
-}
-
-static bool
-streaming(const struct marlin *m)
-{
-    return m->win.in_flight > 0 || m->win.next <= m->win.high;
-}
-
 static void
 handshake_done(struct marlin *m)
 {
@@ -504,68 +660,54 @@ handshake_done(struct marlin *m)
         loop_timer_cancel(m->base.loop, m->settle_timer);
     m->settle_timer = 0;
     m->settling = false;
-    m->pingpong_left = 0;
+    m->clean = 0;
+    set_full_window(m);
     m->win.window = m->full_window;
-    m->probe_out = false;
+    m->probe_wanted = false;
     m->probes = 0;
     m->bad_resend = 0;
     m->inj_len = 0;
     if (m->base.caps.autoreport_temp)
         inject(m, "M155 S%d", POLL_MS / 1000);
-    log_printer(LOG_INFO, m->base.name, "connected: %s, window %d",
+    log_printer(LOG_INFO, m->base.name, "connected: %s, window %d lines, %d bytes",
                 m->base.caps.firmware[0] ? m->base.caps.firmware : "unknown firmware",
-                m->win.window);
+                m->win.window, m->win.rx_bytes);
     set_state(m, DRV_IDLE);
 }
 
-/* An M105's "ok T:": the oldest numbered M105 in flight, else the probe. */
+/* An M105's "ok T:": a barrier at the oldest numbered M105 in flight. */
 static void
-on_temp_ok(struct marlin *m, const struct mreply *r)
+on_m105_answer(struct marlin *m)
 {
     for (long n = m->win.acked + 1; n < m->win.next; n++) {
         if (linewin_tag(&m->win, n) == TAG_M105) {
             long before = m->win.acked;
-            if (m->win.advanced)
-                linewin_on_ok(&m->win, true, n);
-            else
-                linewin_on_ok(&m->win, r->has_n, r->n);
+            linewin_barrier(&m->win, n);
             credit(m, before, m->win.acked);
             return;
         }
     }
-    if (m->probe_out) {
-        /* Everything sent before the probe has been handled: resync. */
-        m->probe_out = false;
-        m->probes = 0;
-        linewin_resync(&m->win);
-        if (!m->win.advanced && m->cfg_window == 0 && m->win.window > 1) {
-            m->win.window = 1;
-            log_printer(LOG_WARN, m->base.name, "replies went missing: falling back to ping-pong");
-        }
-        return;
-    }
-    long before = m->win.acked;
-    linewin_on_ok(&m->win, r->has_n, r->n);
-    credit(m, before, m->win.acked);
 }
 
 static void
 on_resend(struct marlin *m, long k)
 {
+    long before = m->win.acked;
     int rc = linewin_on_resend(&m->win, k);
     if (rc == SF_OK) {
         m->st.rewinds++;
         m->bad_resend = 0;
         m->bad_resend_count = 0;
-        if (m->win.stale > 0 || m->win.window > 1)
-            start_settling(m);
+        start_settling(m);
         return;
     }
-    if (rc == 2 && !m->settling)
-        probe(m); /* garbled, or the printer is ahead: ask where it is */
-    if (rc == SF_ENOTFOUND || k > m->win.high + 1) {
-        /* The same impossible request three times running (a garbled number
-           does not repeat): the printer's counter is not ours. */
+    (void)before;
+    if (rc == 2 || (rc == SF_ENOTFOUND && k != 1))
+        want_probe(m); /* garbled, or the printer is ahead: ask where it is */
+    if (rc == SF_ENOTFOUND && k == 1) {
+        /* A printer that reset without our seeing its banner counts from 0
+           again and asks for line 1 after every line; three such requests
+           running (a garbled number does not repeat) end the job. */
         if (m->bad_resend == k && ++m->bad_resend_count >= 3) {
             log_printer(LOG_WARN, m->base.name, "printer asks for line %ld; we hold %ld-%ld", k,
                         m->win.high - m->win.cap + 1, m->win.high);
@@ -592,23 +734,66 @@ on_temps(struct marlin *m, const struct mreply *r)
     emit_event(m, DRV_EV_TEMPS);
 }
 
+/* An N-less ok that reads like a temperature report whose "T:" was garbled. */
+static bool
+looks_like_m105(const char *line, size_t len)
+{
+    return memmem(line, len, "@:", 2) != NULL || memmem(line, len, " /", 2) != NULL;
+}
+
+/* Where a second reply starts inside line (its newline was garbled), or 0. */
+static size_t
+merged_at(const char *line, size_t len)
+{
+    static const char *const starts[] = { "ok T:", "ok N", "Resend:", "Error:", "echo:" };
+    for (size_t i = 1; i + 4 <= len; i++)
+        for (size_t k = 0; k < sizeof(starts) / sizeof(starts[0]); k++) {
+            size_t n = strlen(starts[k]);
+            if (i + n <= len && memcmp(line + i, starts[k], n) == 0)
+                return i;
+        }
+    return 0;
+}
+
+static void on_reply(struct marlin *m, const char *line, size_t len);
+
+/* One reply line; two if a garbled newline merged them. */
 static void
 on_line(struct marlin *m, const char *line, size_t len)
+{
+    size_t at = merged_at(line, len);
+    if (at > 0) {
+        on_reply(m, line, at);
+        if (m->t && m->phase == PH_READY)
+            on_reply(m, line + at, len - at);
+        return;
+    }
+    on_reply(m, line, len);
+}
+
+static void
+on_reply(struct marlin *m, const char *line, size_t len)
 {
     struct mreply r;
     mreply_parse(line, len, &r);
     int64_t now = loop_now_ms(m->base.loop);
     m->last_reply_ms = now;
-    if (r.kind != MR_TEMP && r.kind != MR_OTHER)
+    bool protocol = r.kind == MR_OK || r.kind == MR_RESEND || r.kind == MR_BUSY ||
+                    r.kind == MR_ERROR || (r.kind == MR_TEMP && r.temp_wait);
+    if (protocol) {
         m->progress_ms = now;
+        m->probes = 0;
+    }
+    if (r.kind == MR_BUSY || (r.kind == MR_TEMP && r.temp_wait))
+        m->keepalive_seen = true;
     if (r.has_temps)
         on_temps(m, &r);
 
     if (m->phase == PH_HELLO) {
         switch (r.kind) {
         case MR_OK:
-            if (r.b >= 0)
-                learn_window(m, r.b);
+            if (r.has_n && r.b >= 0)
+                learn_window(m, r.b, r.p);
             if (++m->hello_oks >= 2)
                 handshake_done(m);
             break;
@@ -635,53 +820,57 @@ on_line(struct marlin *m, const char *line, size_t len)
     if (m->phase != PH_READY)
         return;
 
+    /* Marlin follows a line error with "Resend: L+1" and "ok" at once.  If
+       what comes next is not that Resend (garbled, or lost), the error's
+       own "Last Line: L" says what the printer wants. */
+    long wants = m->error_wants;
+    m->error_wants = 0;
+    if (wants > 0 && r.kind != MR_RESEND) {
+        on_resend(m, wants);
+        if ((r.kind == MR_OK && !r.has_temps && !r.has_n) || r.kind == MR_OTHER) {
+            /* the rejection's ok, or the garbled Resend (its ok still to come) */
+            if (r.kind == MR_OK && m->win.swallow > 0)
+                m->win.swallow--;
+            check_job_progress(m);
+            return;
+        }
+    }
+    if (wants > 0 && r.kind == MR_RESEND && r.resend != wants) {
+        /* One of the two numbers is garbled: the one in the window wins. */
+        bool k_ok = r.resend > m->win.acked && r.resend <= m->win.next;
+        bool w_ok = wants > m->win.acked && wants <= m->win.next;
+        if (w_ok && !k_ok)
+            r.resend = wants;
+    }
+
     switch (r.kind) {
     case MR_OK: {
-        /* Only a whole ADVANCED_OK reply teaches the window: a garbled
-           temperature line must not. */
+        /* Only a whole ADVANCED_OK reply teaches the window. */
         if (r.has_n && r.p >= 0 && r.b >= 0 && !r.has_temps)
-            learn_window(m, r.b);
-        if (r.has_temps && !r.has_n) {
-            on_temp_ok(m, &r);
-        } else if (!r.has_n && m->probe_out && !m->win.swallow_ok &&
-                   (m->win.advanced || m->win.in_flight == 0 || m->probe_garbled || len > 6)) {
-            /* The probe's answer with its "T:" garbled. */
-            on_temp_ok(m, &r);
-        } else if (!r.has_n && m->win.advanced && !m->win.swallow_ok) {
-            /* Every numbered line's ok carries N: this one lost it on the wire. */
-            if (streaming(m) && !m->settling)
-                probe(m);
+            learn_window(m, r.b, r.p);
+        if (!r.has_n && (r.has_temps || (len > 6 && looks_like_m105(line, len)))) {
+            on_m105_answer(m);
         } else {
             long before = m->win.acked;
-            if (linewin_on_ok(&m->win, r.has_n, r.n) < 0 && !m->settling)
-                probe(m);
+            if (linewin_on_ok(&m->win, r.has_n, r.n, TAG_M105) < 0)
+                want_probe(m);
             credit(m, before, m->win.acked);
         }
-        if (!m->probe_out)
-            m->probes = 0;
         break;
     }
     case MR_OTHER:
-        /* Not a Marlin line: likely a garbled ok or Resend.  If an ok was
-           due after a Resend, this was it; if it ends like a temperature
-           report while a probe is out, it is the probe's damaged answer. */
-        m->win.swallow_ok = false;
-        if (m->probe_out && line[0] != ' ' && memmem(line, len, "@:", 2)) {
-            on_temp_ok(m, &r);
-            break;
-        }
-        if (streaming(m) && !m->settling)
-            probe(m);
+        /* Not a Marlin line: a garbled ok, Resend or error.  Right after a
+           Resend it was the rejection's ok; otherwise the window may be off
+           by that reply, and a barrier puts it right. */
+        if (m->win.swallow > 0)
+            m->win.swallow--;
+        else if (m->win.in_flight > 0)
+            want_probe(m);
         break;
     case MR_RESEND:
         on_resend(m, r.resend);
-        if (r.tail)
-            m->win.swallow_ok = false; /* its ok was merged into this line */
-        break;
-    case MR_ECHO:
-        /* A garbled probe comes back as an unknown command, then its ok. */
-        if (m->probe_out && strstr(r.name, "Unknown command"))
-            m->probe_garbled = true;
+        if (r.tail && m->win.swallow > 0)
+            m->win.swallow--; /* its ok was merged into this line */
         break;
     case MR_ERROR:
         if (r.err == MR_ERR_FATAL) {
@@ -690,11 +879,17 @@ on_line(struct marlin *m, const char *line, size_t len)
                 snprintf(why, sizeof(why), "printer halted: %.80s", r.name);
                 job_fail(m, DRV_ERROR, why);
             }
+        } else if (r.err == MR_ERR_LINE && !r.resend_follows && r.last_line >= 0 &&
+                   strstr(r.name, "No Line Number")) {
+            /* Our line lost its N on the wire: Marlin 1.1 drops it, saying
+               where it is, with no Resend and no ok (2.x runs it instead). */
+            on_resend(m, r.last_line + 1);
+            if (m->win.swallow > 0)
+                m->win.swallow--;
+        } else if (r.err == MR_ERR_LINE && r.resend_follows && r.last_line >= 0) {
+            m->error_wants = r.last_line + 1;
         } else if (r.err == MR_ERR_LINE && !r.resend_follows) {
-            /* Our line lost its N on the wire (Marlin drops it without a
-               Resend), or the error text itself is garbled: ask. */
-            if (!m->settling && streaming(m))
-                probe(m);
+            want_probe(m); /* the error text itself is garbled: ask */
         } else if (r.err == MR_ERR_OTHER) {
             log_printer(LOG_WARN, m->base.name, "printer error: %s", r.name);
         }
@@ -709,8 +904,8 @@ on_line(struct marlin *m, const char *line, size_t len)
     case MR_WAIT:
         /* Marlin's queue is empty and nothing is arriving: whatever we think
            is in flight was handled or lost. */
-        if (m->win.in_flight > 0 && !m->probe_out)
-            linewin_resync(&m->win);
+        if (m->win.in_flight > 0)
+            want_probe(m);
         break;
     case MR_ACTION:
         log_printer(LOG_INFO, m->base.name, "host action: %s", r.name);
@@ -787,7 +982,6 @@ drop_link(struct marlin *m, const char *why)
         m->t = NULL;
     }
     m->phase = PH_OFF;
-    m->probe_out = false;
     char msg[120];
     snprintf(msg, sizeof(msg), "link lost (%.80s)", why);
     if (m->mode != J_NONE)
@@ -820,13 +1014,71 @@ hello(struct marlin *m)
     send_raw(m, text);
 }
 
+/*
+ * Nothing came back for longer than what is in flight can take, plus the
+ * margin: an ok or a Resend was lost.  With lines still to send (after a
+ * rewind) the quiet says the printer handled what it had, so the window
+ * resyncs and the next line tells (Marlin refuses a line it had with a
+ * Resend for the one it wants).  Otherwise a numbered M105 goes out past
+ * the full window: refused with a Resend if the printer misses a line,
+ * else answered after everything before it.  The job fails only when the
+ * printer truly says nothing: PROBES_MAX deadlines in a row and no byte at
+ * all for SILENCE_MS, or only unreadable bytes for GARBLED_MAX deadlines.
+ */
+static void
+deadline(struct marlin *m, int64_t now)
+{
+    m->probes++;
+    bool silent = now - m->last_rx_ms >= SILENCE_MS;
+    if ((m->probes >= PROBES_MAX && silent) || m->probes >= GARBLED_MAX) {
+        job_fail(m, silent ? DRV_OFFLINE : DRV_ERROR, "printer stopped answering");
+        if (silent) {
+            m->t_dead = m->t;
+            m->t = NULL;
+            m->phase = PH_OFF;
+        }
+        m->probes = 0;
+        return;
+    }
+    log_printer(LOG_INFO, m->base.name,
+                "no reply for %lld ms (lines %ld-%ld in flight, window %d, high %ld, tag %ld, "
+                "swallow %d stale %ld settling %d): probing",
+                (long long)(now - m->progress_ms), m->win.acked + 1, m->win.next - 1, m->win.window,
+                m->win.high, linewin_tag(&m->win, m->win.acked + 1), m->win.swallow, m->win.stale,
+                m->settling);
+    m->st.deadlines++;
+    m->st.lost_ms += m->margin_ms; /* what the wait cost past the printer's own time */
+    m->progress_ms = now;
+    m->st.probes++;
+    m->win.stale = 0;
+    m->win.swallow = 0;
+    /* An M105 whose answer is overdue lost it (or was refused, and the
+       Resend was lost): the next probe's answer stands for it too, and must
+       not be taken for its, or each probe would only answer the one before. */
+    if (linewin_tag(&m->win, m->win.acked + 1) == TAG_M105)
+        linewin_set_tag(&m->win, m->win.acked + 1, TAG_HOST);
+    if (m->win.next <= m->win.high) {
+        long before = m->win.acked;
+        linewin_resync(&m->win);
+        credit(m, before, m->win.acked);
+    } else {
+        struct sf_err err;
+        long n = linewin_push(&m->win, "M105", TAG_M105, &err);
+        if (n > 0) {
+            m->st.host_lines++;
+            linewin_force(&m->win);
+        }
+    }
+    pump(m);
+}
+
 static void
 on_timer(struct loop *l, void *ud)
 {
     struct marlin *m = ud;
     int64_t now = loop_now_ms(l);
-    int period = m->timeout_ms / 4 < 250 ? m->timeout_ms / 4 : 250;
-    m->timer = loop_timer_add(l, period > 10 ? period : 10, on_timer, m);
+    int period = m->margin_ms / 4 < 100 ? m->margin_ms / 4 : 100;
+    m->timer = loop_timer_add(l, period > 5 ? period : 5, on_timer, m);
     if (m->t_dead) {
         transport_free(m->t_dead);
         m->t_dead = NULL;
@@ -834,7 +1086,7 @@ on_timer(struct loop *l, void *ud)
     if (!m->t)
         return;
     if (m->phase == PH_HELLO) {
-        int interval = m->timeout_ms < 2000 ? m->timeout_ms : 2000;
+        int interval = m->margin_ms * 2 < 2000 ? m->margin_ms * 2 : 2000;
         if (now - m->hello_ms >= interval) {
             if (m->hello_tries >= HELLO_TRIES) {
                 message(m, "no reply from '%s' (is it a Marlin printer at %d baud?)", m->port,
@@ -855,26 +1107,10 @@ on_timer(struct loop *l, void *ud)
         inject(m, "M105");
         m->poll_ms = now + POLL_MS;
     }
-    bool waiting =
-        m->win.in_flight > 0 || m->probe_out || m->inj_len > 0 || m->win.next <= m->win.high;
-    if (waiting && now - m->progress_ms >= m->timeout_ms &&
-        (m->win.in_flight > 0 || m->probe_out)) {
-        if (m->probes >= PROBES_MAX) {
-            job_fail(m, now - m->last_rx_ms >= m->timeout_ms ? DRV_OFFLINE : DRV_ERROR,
-                     "printer stopped answering");
-            if (now - m->last_rx_ms >= m->timeout_ms) {
-                m->t_dead = m->t;
-                m->t = NULL;
-                m->phase = PH_OFF;
-            }
-            m->probes = 0;
-            m->probe_out = false;
-            return;
-        }
-        log_printer(LOG_WARN, m->base.name, "no reply for %d ms: probing with M105", m->timeout_ms);
-        m->probe_out = false; /* an unanswered probe is sent again */
-        probe(m);
-    }
+    if (m->win.in_flight > 0 && !m->settling && now >= deadline_ms(m))
+        deadline(m, now);
+    if (!m->t)
+        return;
     pump(m);
     check_job_progress(m);
 }
@@ -895,11 +1131,14 @@ m_open(struct drv *d, struct sf_err *err)
     transport_flush_input(m->t);
     m->rx_len = 0;
     m->rx_skip = false;
-    m->max_b = 0;
+    m->max_b = m->max_p = 0;
+    memset(m->b_seen, 0, sizeof(m->b_seen));
+    m->keepalive_seen = false;
     m->win.advanced = false;
-    m->full_window = m->cfg_window ? m->cfg_window : WINDOW_DEFAULT;
+    m->clean = 0;
+    set_full_window(m);
     m->win.window = m->full_window;
-    m->pingpong_left = 0;
+    m->win.rx_bytes = m->cfg_rx;
     m->settling = false;
     memset(&d->caps, 0, sizeof(d->caps));
     d->status.message[0] = '\0';
@@ -1314,6 +1553,12 @@ drv_marlin_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_eve
                    cfg->baud);
         return NULL;
     }
+    if (cfg->rx_buffer < 0 || (cfg->rx_buffer > 0 && cfg->rx_buffer < 64) ||
+        cfg->rx_buffer > 65536) {
+        sf_err_set(err, SF_EINVAL, "printer '%s': rx_buffer %d out of range 64-65536", name,
+                   cfg->rx_buffer);
+        return NULL;
+    }
     if (cfg->timeout_ms < 0 || cfg->timeout_ms > 600000) {
         sf_err_set(err, SF_EINVAL, "printer '%s': timeout %d ms out of range 0-600000", name,
                    cfg->timeout_ms);
@@ -1325,7 +1570,7 @@ drv_marlin_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_eve
         return NULL;
     }
     struct marlin *m = mem_calloc(1, sizeof(*m));
-    if (!m || linewin_init(&m->win, RING_LINES, WINDOW_DEFAULT) < 0) {
+    if (!m || linewin_init(&m->win, RING_LINES, BUFSIZE_DEFAULT) < 0) {
         free(m);
         sf_err_set(err, SF_ENOMEM, "printer '%s': out of memory", name);
         return NULL;
@@ -1337,8 +1582,9 @@ drv_marlin_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_eve
     m->base.ud = ud;
     snprintf(m->port, sizeof(m->port), "%s", cfg->port);
     m->baud = cfg->baud ? cfg->baud : 115200;
-    m->timeout_ms = cfg->timeout_ms ? cfg->timeout_ms : 10000;
-    m->cfg_window = cfg->buffer_lines;
+    m->margin_ms = cfg->timeout_ms ? cfg->timeout_ms : MARGIN_MS;
+    m->cfg_lines = cfg->buffer_lines ? cfg->buffer_lines : BUFSIZE_DEFAULT;
+    m->cfg_rx = cfg->rx_buffer ? cfg->rx_buffer : RX_DEFAULT;
     /* Three of Marlin's longest lines on the wire, at least 5 ms. */
     m->settle_ms = 3 * LINEWIN_LINE_MAX * 10 * 1000 / m->baud;
     if (m->settle_ms < 5)

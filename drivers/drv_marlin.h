@@ -17,7 +17,9 @@ struct drv_marlin_stats {
     uint64_t lines_sent; /* numbered lines written, resends included */
     uint64_t bytes_sent; /* bytes written */
     uint64_t rewinds;    /* Resend requests acted on */
-    uint64_t probes;     /* M105 probes after a silent printer */
+    uint64_t probes;     /* numbered M105 probes (after a garbled reply or a silence) */
+    uint64_t deadlines;  /* silences longer than what was in flight could take */
+    int64_t lost_ms;     /* time spent waiting out those silences */
     uint64_t host_lines; /* numbered lines the driver added (park, resume, end, M400, M105) */
     int window;          /* lines in flight now allowed */
 };

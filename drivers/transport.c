@@ -459,6 +459,24 @@ open_tcp(struct transport *t, const char *hostport, struct sf_err *err)
     return rc;
 }
 
+/* "fd:N": a copy of the caller's connected stream fd N (a socketpair end). */
+static int
+adopt_fd(struct transport *t, const char *num, struct sf_err *err)
+{
+    char *end;
+    errno = 0;
+    long fd = strtol(num, &end, 10);
+    if (errno || end == num || *end || fd < 0 || fd > 65535)
+        return sf_err_set(err, SF_EINVAL, "'%s': expected fd:N", t->spec);
+    t->fd = fcntl((int)fd, F_DUPFD_CLOEXEC, 3);
+    if (t->fd < 0)
+        return sf_err_sys(err, "'%s'", t->spec);
+    int fl = fcntl(t->fd, F_GETFL);
+    if (fl < 0 || fcntl(t->fd, F_SETFL, fl | O_NONBLOCK) < 0)
+        return sf_err_sys(err, "'%s': non-blocking", t->spec);
+    return SF_OK;
+}
+
 struct transport *
 transport_open(struct loop *l, const char *spec, int baud, transport_data_fn on_data,
                transport_close_fn on_close, void *ud, struct sf_err *err)
@@ -489,6 +507,9 @@ transport_open(struct loop *l, const char *spec, int baud, transport_data_fn on_
     if (strncmp(spec, "tcp://", 6) == 0) {
         t->kind = T_TCP;
         rc = open_tcp(t, spec + 6, err);
+    } else if (strncmp(spec, "fd:", 3) == 0) {
+        t->kind = T_TCP; /* a connected stream socket: plain reads and writes */
+        rc = adopt_fd(t, spec + 3, err);
     } else {
         const char *path = strncmp(spec, "pty:", 4) == 0 ? spec + 4 : spec;
         char real[256];

@@ -4,7 +4,9 @@
  * libserialport cannot open), and TCP for serial bridges (ser2net, ESP3D).
  *
  * Spec strings: "/dev/ttyUSB0" (serial; a path resolving into /dev/pts is
- * opened as a pty), "pty:/dev/pts/3", "tcp://host:port".  A TCP host name
+ * opened as a pty), "pty:/dev/pts/3", "tcp://host:port", "fd:N" (a copy of
+ * the caller's connected stream socket N, e.g. a socketpair end to a
+ * simulator on the same loop: simulated-time runs, sim/ and tests).  A TCP host name
  * is resolved on a lookup thread, never on the loop; closing the transport
  * cancels the lookup.  Everything is
  * non-blocking and on the loop: received bytes go to on_data as they come;

@@ -48,6 +48,64 @@ parse_count(const char *spec, const char *v, long max, long *out, struct sf_err 
     return SF_OK;
 }
 
+static const char *const hit_names[] = {
+    "", "ok", "okn", "okt", "resend", "error", "busy", "temp"
+};
+
+int
+faults_hit_kind(const char *line)
+{
+    if (strcmp(line, "ok") == 0)
+        return FAULT_HIT_OK;
+    if (strncmp(line, "ok N", 4) == 0)
+        return FAULT_HIT_OKN;
+    if (strncmp(line, "ok T:", 5) == 0)
+        return FAULT_HIT_OKT;
+    if (strncmp(line, "Resend:", 7) == 0)
+        return FAULT_HIT_RESEND;
+    if (strncmp(line, "Error:", 6) == 0)
+        return FAULT_HIT_ERROR;
+    if (strncmp(line, "echo:busy", 9) == 0)
+        return FAULT_HIT_BUSY;
+    if (strncmp(line, " T:", 3) == 0 && strstr(line, " W:"))
+        return FAULT_HIT_TEMP;
+    return FAULT_HIT_NONE;
+}
+
+/* "KIND:LINE:POS:BYTE" */
+static int
+parse_hit(struct faults *f, const char *spec, const char *v, struct sf_err *err)
+{
+    const char *c = strchr(v, ':');
+    int kind = 0;
+    for (int i = 1; c && i < (int)(sizeof(hit_names) / sizeof(hit_names[0])); i++)
+        if ((size_t)(c - v) == strlen(hit_names[i]) &&
+            strncmp(v, hit_names[i], (size_t)(c - v)) == 0)
+            kind = i;
+    long n[3];
+    const char *p = c ? c + 1 : NULL;
+    for (int i = 0; i < 3 && p; i++) {
+        char *end;
+        errno = 0;
+        n[i] = strtol(p, &end, 10);
+        if (errno || end == p || (i < 2 ? *end != ':' : *end != '\0'))
+            p = NULL;
+        else
+            p = end + 1;
+    }
+    if (!kind || !p || n[0] < 0 || n[1] < 0 || n[1] > 511 || n[2] < 0 || n[2] > 256)
+        return sf_err_set(
+            err, SF_EINVAL,
+            "fault '%s': expected hit=KIND:LINE:POS:BYTE, KIND ok, okn, okt, "
+            "resend, error, busy or temp, POS 0-511, BYTE 0-255 (256: flip its low bit)",
+            spec);
+    f->hit_kind = kind;
+    f->hit_line = n[0];
+    f->hit_pos = (int)n[1];
+    f->hit_byte = (int)n[2];
+    return SF_OK;
+}
+
 int
 faults_parse(struct faults *f, const char *spec, struct sf_err *err)
 {
@@ -83,6 +141,14 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
         return parse_count(spec, v, 1L << 40, &f->disconnect_after, err);
     if (NAME_IS("runaway"))
         return parse_count(spec, v, 1L << 40, &f->runaway_after, err);
+    if (NAME_IS("dup"))
+        return parse_rate(spec, v, &f->dup, err);
+    if (NAME_IS("merge"))
+        return parse_rate(spec, v, &f->merge, err);
+    if (NAME_IS("bad-line"))
+        return parse_count(spec, v, 1L << 40, &f->bad_line, err);
+    if (NAME_IS("hit"))
+        return parse_hit(f, spec, v, err);
     if (NAME_IS("seed")) {
         rc = parse_count(spec, v, 1L << 40, &c, err);
         f->rng = (uint64_t)c * 0x9E3779B97F4A7C15ull + 1;
@@ -91,7 +157,8 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
 #undef NAME_IS
     return sf_err_set(err, SF_EINVAL,
                       "fault '%s': unknown; expected corrupt, corrupt-rx, corrupt-tx, drop-ok, "
-                      "garbage, slow, reset, disconnect, runaway or seed",
+                      "garbage, dup, merge, bad-line, hit, slow, reset, disconnect, runaway or "
+                      "seed",
                       spec);
 }
 

@@ -12,10 +12,16 @@
  *   reset=N           the firmware resets after executing N commands
  *   disconnect=N      the link drops after executing N commands
  *   runaway=N         thermal runaway (Error:Thermal Runaway, then halt) after N commands
- *   seed=N            seed of the fault dice (default 1): runs are reproducible
- * Corruption hits at most one byte per line: Marlin's XOR checksum catches
- * every single-byte error but not two that cancel, and a test that lets
- * those through would test the checksum's weakness, not the host.
+ *   dup=RATE          a reply line is sent twice, with probability RATE
+ *   merge=RATE        a reply line loses its newline (runs into the next), with probability RATE
+ *   bad-line=N        line N is taken as garbled once (checksum mismatch): Error, Resend, ok
+ *   hit=KIND:LINE:POS:BYTE  once, the first reply of KIND after line LINE was received has
+ *                     its byte POS (0-based; its length is the newline) replaced by BYTE
+ *                     (0-255; 256 flips its low bit); KIND is ok (a plain "ok"), okn ("ok N.."),
+ * okt (M105's "ok T:.."), resend, error, busy or temp (an M109/M190 wait report) seed=N seed of the
+ * fault dice (default 1): runs are reproducible Corruption hits at most one byte per line: Marlin's
+ * XOR checksum catches every single-byte error but not two that cancel, and a test that lets those
+ * through would test the checksum's weakness, not the host.
  *
  * Pure data and a small PRNG; thread-safe on distinct structs.
  */
@@ -36,8 +42,29 @@ struct faults {
     long reset_after;      /* commands executed before a firmware reset; 0 = never */
     long disconnect_after; /* commands executed before the link drops; 0 = never */
     long runaway_after;    /* commands executed before thermal runaway; 0 = never */
+    double dup;            /* probability a reply line is sent twice */
+    double merge;          /* probability a reply line loses its newline */
+    long bad_line;         /* line taken as garbled once; 0 = none */
+    int hit_kind;          /* FAULT_HIT_*: reply kind to corrupt once; 0 = none */
+    long hit_line;         /* ... the first one after this line number was received */
+    int hit_pos;           /* byte position in the reply line (its newline included) */
+    int hit_byte;          /* the byte written there (256: its low bit flipped) */
     uint64_t rng;          /* xorshift state; never 0 */
 };
+
+enum {
+    FAULT_HIT_NONE,
+    FAULT_HIT_OK,     /* "ok" alone (no ADVANCED_OK) */
+    FAULT_HIT_OKN,    /* "ok N<line> P<n> B<n>" */
+    FAULT_HIT_OKT,    /* M105's "ok T:..." */
+    FAULT_HIT_RESEND, /* "Resend: N" */
+    FAULT_HIT_ERROR,  /* "Error:..." */
+    FAULT_HIT_BUSY,   /* "echo:busy: processing" */
+    FAULT_HIT_TEMP,   /* " T:... W:?" while M109/M190 wait */
+};
+
+/* Which FAULT_HIT_* kind a reply line (without its newline) is, or FAULT_HIT_NONE. */
+int faults_hit_kind(const char *line);
 
 /* No faults, seed 1. */
 void faults_init(struct faults *f);

@@ -85,6 +85,8 @@ struct sim_marlin {
     char *rx;                    /* RX buffer, rx_len of rx_size bytes */
     int rx_len;
     bool rx_line_hit; /* corruption already hit this line (one per line) */
+    bool hit_done;    /* the targeted reply corruption (faults.hit_*) happened */
+    bool bad_done;    /* the line faults.bad_line was rejected once */
     bool tx_line_hit;
     char emerg[24]; /* start of the incoming line, for the emergency parser */
     int emerg_len;
@@ -140,12 +142,14 @@ sim_marlin_config_init(struct sim_marlin_config *c)
     c->planner_blocks = 16;
     c->rx_size = 128;
     c->tcp_port = -1;
+    c->fd = -1;
     faults_init(&c->faults);
 }
 
 /* ---- output ------------------------------------------------------------ */
 
 static void emit(struct sim_marlin *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void emit_raw(struct sim_marlin *s, const char *text, size_t n);
 
 static void
 emit(struct sim_marlin *s, const char *fmt, ...)
@@ -161,14 +165,34 @@ emit(struct sim_marlin *s, const char *fmt, ...)
         n = (int)sizeof(text) - 2;
     if (strncmp(text, "ok", 2) == 0 && faults_roll(&s->faults, s->faults.drop_ok))
         return;
+    int kind = s->faults.hit_kind && !s->hit_done && s->last_n >= s->faults.hit_line
+                   ? faults_hit_kind(text)
+                   : FAULT_HIT_NONE;
     text[n++] = '\n';
-    struct outline *o = mem_alloc(sizeof(*o) + (size_t)n);
+    if (kind && kind == s->faults.hit_kind && s->faults.hit_pos < n) {
+        int b = s->faults.hit_byte;
+        text[s->faults.hit_pos] = (char)(b > 255 ? text[s->faults.hit_pos] ^ 1 : b);
+        s->hit_done = true;
+        s->st.hits++;
+    }
+    if (faults_roll(&s->faults, s->faults.merge))
+        n--; /* its newline lost: it runs into the next line */
+    int copies = faults_roll(&s->faults, s->faults.dup) ? 2 : 1;
+    for (int c = 0; c < copies; c++)
+        emit_raw(s, text, (size_t)n);
+}
+
+/* Queue n bytes of reply, maybe followed by a garbage line (faults.garbage). */
+static void
+emit_raw(struct sim_marlin *s, const char *text, size_t n)
+{
+    struct outline *o = mem_alloc(sizeof(*o) + n);
     if (!o)
         return;
     o->due_ms = loop_now_ms(s->loop) + s->faults.slow_ms;
     o->next = NULL;
-    o->len = (size_t)n;
-    memcpy(o->text, text, (size_t)n);
+    o->len = n;
+    memcpy(o->text, text, n);
     if (s->out_tail)
         s->out_tail->next = o;
     else
@@ -799,7 +823,9 @@ line_done(struct sim_marlin *s)
             return;
         }
         uint8_t cs = gcode_checksum(cmd, (size_t)(star - cmd));
-        if (strtol(star + 1, NULL, 10) != cs) {
+        bool bad = n == s->faults.bad_line && !m110 && !s->bad_done;
+        s->bad_done |= bad;
+        if (strtol(star + 1, NULL, 10) != cs || bad) {
             line_error(s, "checksum mismatch, Last Line: ");
             return;
         }
@@ -852,7 +878,10 @@ read_input(struct sim_marlin *s)
 {
     int room = s->cfg.rx_size - s->rx_len;
     int want = (int)s->rx_tokens;
-    if (want > room)
+    /* A UART board loses what reaches a full ring, but only while Marlin is
+       not reading: between commands it drains the ring as bytes come (the
+       step's granularity must not turn a late step into a burst). */
+    if (want > room && !(s->cfg.uart && s->head_started))
         want = room;
     if (want <= 0 || !linked(s))
         return;
@@ -893,6 +922,10 @@ read_input(struct sim_marlin *s)
         if (now < s->boot_until_ms || s->halted)
             continue;
         emergency_byte(s, c);
+        if (s->rx_len == s->cfg.rx_size) {
+            s->st.rx_dropped++; /* a UART's ring overflows */
+            continue;
+        }
         s->rx[s->rx_len++] = c;
     }
 }
@@ -901,6 +934,10 @@ read_input(struct sim_marlin *s)
 static void
 assemble_lines(struct sim_marlin *s)
 {
+    /* Marlin reads serial only between commands: a command that blocks
+       (planner full, heating, homing, dwell) leaves bytes in the RX buffer. */
+    if (s->head_started)
+        return;
     int i = 0;
     while (i < s->rx_len && s->q_len < s->cfg.bufsize) {
         char c = s->rx[i++];
@@ -1032,7 +1069,9 @@ step(struct sim_marlin *s)
        late step catch up). */
     double cap = fmax(s->bps_ms * 8, 16);
     s->rx_tokens = s->rx_idle ? 0 : fmin(cap, s->rx_tokens + (double)dt_ms * s->bps_ms);
-    s->tx_tokens = s->tx.len == 0 ? 0 : fmin(cap, s->tx_tokens + (double)dt_ms * s->bps_ms);
+    /* An idle transmitter starts at once: a reply made in this step may use
+       this step's millisecond of wire. */
+    s->tx_tokens = s->tx.len == 0 ? s->bps_ms : fmin(cap, s->tx_tokens + (double)dt_ms * s->bps_ms);
     s->rx_idle = false;
     double dt_s = (double)dt_ms / 1000.0 * s->cfg.speed;
     s->sim_s += dt_s;
@@ -1070,7 +1109,8 @@ step(struct sim_marlin *s)
     if (s->host_gone)
         host_back(s);
     if (linked(s)) {
-        unsigned ev = (s->rx_tokens >= 1 && s->rx_len < s->cfg.rx_size) ? LOOP_READ : 0;
+        unsigned ev =
+            (s->rx_tokens >= 1 && (s->cfg.uart || s->rx_len < s->cfg.rx_size)) ? LOOP_READ : 0;
         if (ev != s->fd_events && loop_mod_fd(s->loop, s->fd, ev, NULL) == 0)
             s->fd_events = ev;
     }
@@ -1172,9 +1212,26 @@ sim_marlin_new(struct loop *l, const struct sim_marlin_config *c, struct sf_err 
     }
     s->last_ms = loop_now_ms(l);
     firmware_reset(s, true);
-    s->kind = c->tcp_port >= 0 ? LINK_TCP : LINK_PTY;
-    if ((s->kind == LINK_TCP ? open_tcp(s, err) : open_pty(s, err)) < 0)
+    s->kind = c->tcp_port >= 0 || c->fd >= 0 ? LINK_TCP : LINK_PTY;
+    if (c->fd >= 0) {
+        /* A host on the other end already: a bridge whose one client never leaves. */
+        s->fd = c->fd;
+        int fl = fcntl(s->fd, F_GETFL);
+        if (fl < 0 || fcntl(s->fd, F_SETFL, fl | O_NONBLOCK) < 0) {
+            sf_err_sys(err, "sim: fd %d", c->fd);
+            s->fd = -1;
+            goto fail;
+        }
+        s->fd_events = LOOP_READ;
+        snprintf(s->path, sizeof(s->path), "fd:%d", c->fd);
+        if (loop_add_fd(l, s->fd, LOOP_READ, on_fd, s, err) < 0) {
+            s->fd = -1;
+            goto fail;
+        }
+        s->st.connects++;
+    } else if ((s->kind == LINK_TCP ? open_tcp(s, err) : open_pty(s, err)) < 0) {
         goto fail;
+    }
     step(s);
     return s;
 fail:

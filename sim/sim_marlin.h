@@ -31,7 +31,11 @@ struct sim_marlin_config {
     int planner_blocks;   /* BLOCK_BUFFER_SIZE; 0: 16 */
     int rx_size;          /* RX_BUFFER_SIZE bytes; 0: 128 */
     bool advanced_ok;     /* reply "ok N<line> P<planner free> B<queue free>" */
+    bool uart;            /* bytes arriving at a full RX buffer are lost (a UART board);
+                             false: the host waits (native USB flow control) */
     int tcp_port;         /* -1: pty; 0: any free loopback port; >0: that port */
+    int fd;               /* >= 0: serve this connected stream fd (a socketpair end, for
+                             simulated-time runs: loop_set_virtual); the sim owns it */
     const char *link;     /* pty mode: keep this symlink pointing at the current pty, or NULL */
     const char *log_path; /* every executed command, one per line, or NULL */
     struct faults faults; /* faults_init() for none */
@@ -44,6 +48,8 @@ struct sim_marlin_stats {
     double starved_s;            /* simulated seconds it stood dry in those gaps */
     uint64_t rx_bytes, tx_bytes; /* bytes over the link */
     uint64_t connects;           /* host connections (TCP) or pty openings */
+    uint64_t rx_dropped;         /* bytes lost to a full RX buffer (uart) */
+    uint64_t hits;               /* targeted reply corruptions made (faults.hit_*) */
     bool halted;                 /* killed (M112, thermal runaway); needs a reset */
     double x, y, z, e;           /* current logical position, mm */
     double nozzle_c, nozzle_target_c, bed_c, bed_target_c;

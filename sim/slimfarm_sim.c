@@ -33,10 +33,13 @@
 static const char usage_text[] =
     "usage: slimfarm-sim marlin [--tcp PORT] [--link PATH] [--baud N] [--speed X]\n"
     "                           [--bufsize N] [--planner N] [--rx-size N] [--advanced-ok]\n"
-    "                           [--log FILE] [--fault SPEC]... [--count N]\n"
+    "                           [--uart] [--log FILE] [--fault SPEC]... [--count N]\n"
     "       slimfarm-sim -h|--help\n"
+    "  --uart  bytes reaching a full RX buffer are lost (else the host waits, as on USB)\n"
     "faults: corrupt=RATE corrupt-rx=RATE corrupt-tx=RATE drop-ok=RATE garbage=RATE\n"
-    "        slow=MS reset=N disconnect=N runaway=N seed=N\n";
+    "        dup=RATE merge=RATE bad-line=N hit=KIND:LINE:POS:BYTE\n"
+    "        slow=MS reset=N disconnect=N runaway=N seed=N\n"
+    "        (hit KIND: ok okn okt resend error busy temp; see sim/faults.h)\n";
 
 static void
 on_signal(struct loop *l, int signo, void *ud)
@@ -73,11 +76,12 @@ print_stats(const struct sim_marlin *s, int index, bool tagged)
         snprintf(tag, sizeof(tag), "printer=%d ", index);
     fprintf(stderr,
             "stats: %sexecuted=%llu resends=%llu starved=%llu starved_s=%.3f rx_bytes=%llu "
-            "tx_bytes=%llu connects=%llu halted=%d x=%.3f y=%.3f z=%.3f e=%.5f\n",
+            "tx_bytes=%llu rx_dropped=%llu connects=%llu halted=%d x=%.3f y=%.3f z=%.3f "
+            "e=%.5f\n",
             tag, (unsigned long long)st.executed, (unsigned long long)st.resends,
             (unsigned long long)st.starved, st.starved_s, (unsigned long long)st.rx_bytes,
-            (unsigned long long)st.tx_bytes, (unsigned long long)st.connects, st.halted, st.x, st.y,
-            st.z, st.e);
+            (unsigned long long)st.tx_bytes, (unsigned long long)st.rx_dropped,
+            (unsigned long long)st.connects, st.halted, st.x, st.y, st.z, st.e);
 }
 
 struct farm_of_sims {
@@ -152,7 +156,7 @@ out:
 int
 main(int argc, char **argv)
 {
-    if (argc == 2 && (strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0)) {
+    if (argc >= 2 && (strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0)) {
         fputs(usage_text, stdout);
         return 0;
     }
@@ -170,6 +174,10 @@ main(int argc, char **argv)
         long n;
         if (strcmp(o, "--advanced-ok") == 0) {
             c.advanced_ok = true;
+            continue;
+        }
+        if (strcmp(o, "--uart") == 0) {
+            c.uart = true;
             continue;
         }
         if (strcmp(o, "-h") == 0 || strcmp(o, "--help") == 0) {

@@ -77,7 +77,8 @@ struct loop {
     pthread_mutex_t post_lock; /* protects post_head/post_tail */
     struct post *post_head, *post_tail;
     struct sig_reg sigs[LOOP_SIGNALS_MAX];
-    atomic_bool stop; /* loop_run() should return */
+    atomic_bool stop;  /* loop_run() should return */
+    bool virtual_time; /* loop_set_virtual(): now_ms moves only to the next due timer */
 };
 
 static int64_t
@@ -412,9 +413,31 @@ from_epoll(uint32_t ev)
            (ev & (EPOLLHUP | EPOLLRDHUP) ? LOOP_HUP : 0u) | (ev & EPOLLERR ? LOOP_ERROR : 0u);
 }
 
+void
+loop_set_virtual(struct loop *l)
+{
+    l->virtual_time = true;
+}
+
+/* Simulated time: wait for nothing; when nothing is ready, time jumps to the next timer. */
+static int
+run_once_virtual(struct loop *l, struct epoll_event *evs)
+{
+    int n = epoll_wait(l->epfd, evs, LOOP_EVENTS_MAX, 0);
+    if (n == 0 && l->n_timers > 0 && l->heap[0].due_ms > l->now_ms)
+        l->now_ms = l->heap[0].due_ms;
+    return n;
+}
+
 int
 loop_run_once(struct loop *l, int timeout_ms)
 {
+    struct epoll_event evs[LOOP_EVENTS_MAX];
+    int n;
+    if (l->virtual_time) {
+        n = run_once_virtual(l, evs);
+        goto dispatch;
+    }
     l->now_ms = mono_ms();
     if (l->n_timers > 0) {
         int64_t wait = l->heap[0].due_ms - l->now_ms;
@@ -423,14 +446,14 @@ loop_run_once(struct loop *l, int timeout_ms)
         if (timeout_ms < 0 || wait < timeout_ms)
             timeout_ms = (int)(wait > 1000000 ? 1000000 : wait);
     }
-    struct epoll_event evs[LOOP_EVENTS_MAX];
-    int n = epoll_wait(l->epfd, evs, LOOP_EVENTS_MAX, timeout_ms);
+    n = epoll_wait(l->epfd, evs, LOOP_EVENTS_MAX, timeout_ms);
+    l->now_ms = mono_ms();
+dispatch:
     if (n < 0) {
         if (errno == EINTR)
             return 0;
         return SF_EIO;
     }
-    l->now_ms = mono_ms();
     int ran = 0;
     for (int i = 0; i < n; i++) {
         struct fd_reg *r = evs[i].data.ptr;

@@ -53,6 +53,14 @@ void loop_timer_cancel(struct loop *l, uint64_t id);
 /* Cached monotonic time of this iteration, ms. */
 int64_t loop_now_ms(struct loop *l);
 
+/*
+ * Simulated time, for soaks and tests of timers over links that deliver at
+ * once (socketpairs): loop_run_once never sleeps, and when no fd is ready
+ * the clock jumps to the next due timer.  Hours of printer time run as
+ * fast as the CPU allows.  Call before adding timers; there is no way back.
+ */
+void loop_set_virtual(struct loop *l);
+
 /* Thread-safe: run fn(ud) on the loop thread soon.  SF_ENOMEM on failure. */
 int loop_post(struct loop *l, loop_post_fn fn, void *ud);
 

@@ -57,6 +57,8 @@ static const struct option options[] = {
     { "driver", true, K_IDENT, P(driver), 0, 0 },
     { "port", true, K_STR, P(port), 0, 0 },
     { "baud", true, K_INT, P(baud), 1200, 4000000 },
+    { "buffer_lines", true, K_INT, P(buffer_lines), 1, 32 },
+    { "rx_buffer", true, K_INT, P(rx_buffer), 64, 65536 },
     { "url", true, K_STR, P(url), 0, 0 },
     { "api_key", true, K_STR, P(api_key), 0, 0 },
     { "profile", true, K_IDENT, P(profile), 0, 0 },
@@ -117,6 +119,8 @@ printer_defaults(struct farmcfg_printer *p)
 {
     memset(p, 0, sizeof(*p));
     p->baud = 115200;
+    p->buffer_lines = 4;
+    p->rx_buffer = 128;
     snprintf(p->profile, sizeof(p->profile), "generic-marlin");
     snprintf(p->material, sizeof(p->material), "PLA");
     p->nozzle_mm = 0.4;

@@ -37,6 +37,8 @@ struct farmcfg_printer {
     char driver[16];     /* a kind of drivers/drv.c's registry, e.g. marlin (required) */
     char port[256];      /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
     int baud;            /* marlin serial speed (default 115200) */
+    int buffer_lines;    /* marlin: the firmware's BUFSIZE, lines in flight (default 4) */
+    int rx_buffer;       /* marlin: the firmware's RX ring, bytes in flight (default 128) */
     char url[256];       /* network drivers: base URL */
     char api_key[128];   /* network drivers: key or access code */
     char profile[64];    /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */

@@ -296,6 +296,8 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
                              .kind = cfg->driver,
                              .port = cfg->port,
                              .baud = cfg->baud,
+                             .buffer_lines = cfg->buffer_lines,
+                             .rx_buffer = cfg->rx_buffer,
                              .url = cfg->url,
                              .api_key = cfg->api_key };
     p->drv = env->driver(env->l, &dc, on_drv_event, p, &err);

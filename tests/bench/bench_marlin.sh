@@ -56,6 +56,55 @@ for baud in 115200 250000; do
   done
 done
 
+# 1b. Stock Marlin: no ADVANCED_OK, BUFSIZE 4, a 128-byte RX ring on a UART
+# (--uart: bytes that reach a full ring are lost).  Ours with the byte-counted
+# window (buffer_lines 4, rx_buffer 128), ours with the window of 2 lines it
+# kept before (--window 2), and Printrun's printcore (ping-pong), side by side.
+# printcore's rate is the simulator's received bytes over its print time.
+echo "link use on stock Marlin (plain ok, BUFSIZE 4, RX 128 on a UART): $lines-line dense job"
+printf "%-8s %-22s %9s %9s %9s %8s\n" baud host lines/s bytes/s "of link" dropped
+pc_py='import sys, time
+from printrun.printcore import printcore
+from printrun import gcoder
+p = printcore(sys.argv[1], int(sys.argv[3]))
+t0 = time.time()
+while not p.online and time.time() - t0 < 10:
+    time.sleep(0.01)
+lines = [l.rstrip("\n") for l in open(sys.argv[2])]
+p.startprint(gcoder.LightGCode(lines))
+t0 = time.time()
+while p.printing and time.time() - t0 < 600:
+    time.sleep(0.002)
+dt = time.time() - t0
+p.disconnect()
+print("seconds=%.3f lines_per_s=%.0f" % (dt, len(lines) / dt))'
+for baud in 115200 250000; do
+  for host in "slimfarm bytes+lines" "slimfarm window 2" printcore; do
+    start_sim --baud "$baud" --speed 1000 --uart
+    if [ "$host" = printcore ]; then
+      if ! /usr/bin/python3 -c 'import printrun.printcore' 2>/dev/null; then
+        echo "  (printrun not installed)"; stop_sim; continue
+      fi
+      /usr/bin/python3 -c "$pc_py" "$port" "$work/dense.gcode" "$baud" > "$work/send.out" 2> "$work/send.err" ||
+        echo "  (printcore failed: $(tail -n 1 "$work/send.err"))"
+    else
+      win=0; [ "$host" = "slimfarm window 2" ] && win=2
+      "$cli" send "$work/dense.gcode" --port "pty:$port" --baud "$baud" --window "$win" \
+        > "$work/send.out" 2> "$work/send.err" || echo "  (send failed: $(tail -n 1 "$work/send.err"))"
+    fi
+    stop_sim
+    secs=$(field seconds "$work/send.out"); lps=$(field lines_per_s "$work/send.out")
+    rx=$(field rx_bytes "$work/sim.err"); dropped=$(field rx_dropped "$work/sim.err")
+    if [ "$host" = printcore ]; then
+      bps=$(awk -v b="$rx" -v s="$secs" 'BEGIN { printf "%.0f", b / s }')
+    else
+      bps=$(field bytes_per_s "$work/send.out")
+    fi
+    printf "%-8s %-22s %9s %9s %8.1f%% %8s\n" "$baud" "$host" "$lps" "$bps" \
+      "$(awk -v b="$bps" -v r="$baud" 'BEGIN { print 100 * b / (r / 10) }')" "$dropped"
+  done
+done
+
 moves=$(grep -c '^G1 X' "$work/curved.gcode")
 echo "planner starvation: dense curved part, $moves moves of 5 ms, real time"
 printf "%-8s %-13s %9s %10s %9s\n" baud mode starved "dry (s)" "wall (s)"

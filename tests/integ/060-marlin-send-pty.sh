@@ -1,10 +1,14 @@
 #!/usr/bin/env bash
 # 060-marlin-send-pty: `slimfarm send` streams 3000 lines to slimfarm-sim over
-# a pty, on a clean link and with 1% of bytes corrupted both ways; the
+# a pty, on a clean link and with 1% of bytes corrupted on the way in; the
 # simulator's executed log must equal the job's commands exactly.
 . "$(dirname "$0")/lib/marlin.sh"
 make_job "$TMP/job.gcode" 3000
-for faults in "" "--fault corrupt=0.01 --fault seed=21"; do
+# Faulted: 1 % of bytes garbled on the way in, and the R of one Resend on the
+# way back (issue 17's reply).  Reply corruption at rates waits out execution
+# times the driver computes for a printer at speed 1, so it runs on simulated
+# time (test_marlin, make soak) rather than here at --speed 2000.
+for faults in "" "--fault corrupt-rx=0.01 --fault seed=21 --fault bad-line=1200 --fault hit=resend:1199:0:118"; do
   # shellcheck disable=SC2086
   start_sim --advanced-ok --baud 1000000 --speed 2000 --log "$TMP/log" $faults || exit 1
   "$BUILD/bin/slimfarm" send "$TMP/job.gcode" --port "pty:$PORT" --baud 1000000 --timeout-ms 250 \

@@ -13,30 +13,38 @@
 # and each printer's executed log is consistent: an interrupted print's
 # lines up to (at least) its acknowledged line, then the resume preamble
 # and the job's lines from there (lib/farm.sh check_farm_logs).
+# ROUNDS (default 10) and PRINTERS (2 or 4: a second pair, default 2) let
+# `make soak` (tests/bench/soak.sh) run the same test at length.
 set -u
 BUILD=${BUILD:-build/san}
+ROUNDS=${ROUNDS:-10}
+names="usb net"
+[ "${PRINTERS:-2}" = 4 ] && names="usb net usb2 net2"
 . "$(dirname "$0")/lib/farm.sh"
 t0=$(date +%s)
 
 # 250 kbaud: a few thousand lines a second, so prints last long enough to kill.
-start_sim usb --baud 250000 --speed 2000
-start_sim net --baud 250000 --speed 2000 --tcp 0
+for p in $names; do
+  case $p in usb*) start_sim "$p" --baud 250000 --speed 2000 ;; *) start_sim "$p" --baud 250000 --speed 2000 --tcp 0 ;; esac
+done
 cp -r config/printers config/materials "$tmp/"
 {
   printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
-  for p in usb net; do
+  for p in $names; do
     printf '[printer %s]\ndriver: marlin\nport: %s\nbaud: 250000\nmaterial: PLA\nauto_eject: true\n' \
       "$p" "$(cat "$tmp/$p.addr")"
   done
 } > "$tmp/farm.ini"
 start_daemon
-wait_for 20 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq 2 ]" || fail "printers: $("$C" printers)"
+wait_for 20 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq $(echo $names | wc -w) ]" || fail "printers: $("$C" printers)"
 "$C" shapes "$tmp" > /dev/null || fail "shapes"
 tetra "$tmp/t12.stl" 12
 tetra "$tmp/t15.stl" 15
 ids=
-for part in lbracket tee t12 t15; do
-  ids="$ids $(submit "$tmp/$part.stl" --material PLA --method none)"
+for _ in $(seq $(( (ROUNDS + 9) / 10 ))); do # enough jobs that every kill finds prints
+  for part in lbracket tee t12 t15; do
+    ids="$ids $(submit "$tmp/$part.stl" --material PLA --method none)"
+  done
 done
 n_jobs=$(echo $ids | wc -w)
 
@@ -44,7 +52,7 @@ snapshot() { # id state lines_acked, one job a line
   api /api/jobs | json '"\n".join("%d %s %d" % (j["id"], j["state"], j["lines_acked"]) for j in d["jobs"])'
 }
 resumed=0 restarted=0 interrupted=0 finished=0
-for round in $(seq 10); do
+for round in $(seq "$ROUNDS"); do
   wait_for 60 sh -c "'$C' jobs | grep -q ' printing '" || break # all printed already
   sleep "$((RANDOM % 2)).$((RANDOM % 10))"
   logpos=$(stat -c %s "$tmp/log")
@@ -108,6 +116,6 @@ wait_for 240 all_done || fail "not all done: $("$C" jobs)"
 out=$("$C" resume-job 1 2>&1) && fail "resumed a done job"
 [[ "$out" == *"409: job 1 is done: only an interrupted job can be resumed"* ]] || fail "resume done: $out"
 stop_sims
-check_farm_logs usb net || fail "executed logs are not consistent with the jobs"
+check_farm_logs $names || fail "executed logs are not consistent with the jobs"
 kill -TERM $pid; wait $pid; pid=
-echo "farmd_crash_print: ok (10 kills, $interrupted prints interrupted, $resumed resumed, $restarted restarted, $finished finished just before a kill, $(( $(date +%s) - t0 )) s)"
+echo "farmd_crash_print: ok ($ROUNDS kills, $(echo $names | wc -w) printers, $interrupted prints interrupted, $resumed resumed, $restarted restarted, $finished finished just before a kill, $(( $(date +%s) - t0 )) s)"

@@ -35,6 +35,8 @@ T_CASE(farmcfg_full_example)
                        "  bed_size: 250, 210, 200\n"
                        "  auto_eject: yes\n"
                        "  group: big\n"
+                       "  buffer_lines: 8\n"
+                       "  rx_buffer: 256\n"
                        "[printer voron]\r\n"
                        "driver: marlin\r\n"
                        "port: tcp://10.0.0.5:7125\r\n"
@@ -63,11 +65,15 @@ T_CASE(farmcfg_full_example)
     T_EQ_INT(p->baud, 115200);
     T_EQ_DBL(p->overhang_deg, 45, 0);
     T_EQ_STR(p->group, "big");
+    T_EQ_INT(p->buffer_lines, 8);
+    T_EQ_INT(p->rx_buffer, 256);
     p = farmcfg_printer(&c, "voron");
     T_EQ_STR(p->port, "tcp://10.0.0.5:7125");
     T_TRUE(!p->enabled);
     T_EQ_STR(p->material, "PLA");
-    T_EQ_INT(p->line, 17);
+    T_EQ_INT(p->buffer_lines, 4);
+    T_EQ_INT(p->rx_buffer, 128);
+    T_EQ_INT(p->line, 19);
     farmcfg_release(&c);
     T_EQ_INT(c.n_printers, 0);
 }

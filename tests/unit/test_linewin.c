@@ -8,6 +8,8 @@
 #include "../../src/base/gcode.h"
 #include "../t.h"
 
+#define BARRIER (-2) /* the tag of a numbered M105 */
+
 static const char *
 peek_text(struct linewin *w)
 {
@@ -58,7 +60,7 @@ T_CASE(linewin_window_limits_lines_in_flight)
         linewin_sent(&w);
     }
     T_TRUE(linewin_peek(&w) == NULL); /* window full */
-    T_EQ_INT(linewin_on_ok(&w, false, 0), 1);
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 1);
     T_TRUE(linewin_peek(&w) != NULL);
     T_EQ_INT(w.acked, 1);
     linewin_release(&w);
@@ -82,16 +84,16 @@ T_CASE(linewin_resend_rewinds_once_despite_repeats)
     for (int i = 0; i < 4; i++)
         linewin_sent(&w); /* 1..4 in flight */
     /* Line 2 was bad: Marlin answers ok(1), then Resend 2 for 2, 3 and 4. */
-    T_EQ_INT(linewin_on_ok(&w, false, 0), 1);
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 1);
     T_EQ_INT(linewin_on_resend(&w, 2), SF_OK);
-    T_EQ_INT(linewin_on_ok(&w, false, 0), 0); /* the rejected line's ok */
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 0); /* the rejected line's ok */
     T_EQ_INT(w.next, 2);
     T_EQ_STR(peek_text(&w), "N2 G1 X1*99");
     linewin_sent(&w);
     T_EQ_INT(linewin_on_resend(&w, 2), 1); /* repeat from line 3 */
-    T_EQ_INT(linewin_on_ok(&w, false, 0), 0);
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 0);
     T_EQ_INT(linewin_on_resend(&w, 2), 1); /* repeat from line 4 */
-    T_EQ_INT(linewin_on_ok(&w, false, 0), 0);
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 0);
     T_EQ_INT(w.next, 3); /* not rewound again */
     T_EQ_INT(w.rewinds, 1);
     linewin_release(&w);
@@ -105,16 +107,16 @@ T_CASE(linewin_advanced_ok_acknowledges_by_number)
     push_n(&w, 10);
     for (int i = 0; i < 4; i++)
         linewin_sent(&w);
-    T_EQ_INT(linewin_on_ok(&w, true, 3), 3); /* oks for 1 and 2 were lost */
+    T_EQ_INT(linewin_on_ok(&w, true, 3, BARRIER), 3); /* oks for 1 and 2 were lost */
     T_EQ_INT(w.in_flight, 1);
-    T_EQ_INT(linewin_on_ok(&w, false, 0), 0);  /* M105's ok: no line */
-    T_EQ_INT(linewin_on_ok(&w, true, 99), -1); /* garbled: never sent */
-    T_EQ_INT(linewin_on_ok(&w, true, 4), 1);
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 0);  /* M105's ok: no line */
+    T_EQ_INT(linewin_on_ok(&w, true, 99, BARRIER), -1); /* garbled: never sent */
+    T_EQ_INT(linewin_on_ok(&w, true, 4, BARRIER), 1);
     T_TRUE(!linewin_idle(&w));
     linewin_release(&w);
 }
 
-T_CASE(linewin_resync_after_probe)
+T_CASE(linewin_resync_after_silence)
 {
     struct linewin w;
     T_OK(linewin_init(&w, 64, 2), NULL);
@@ -122,18 +124,76 @@ T_CASE(linewin_resync_after_probe)
     push_n(&w, 3);
     linewin_sent(&w);
     linewin_sent(&w);
-    linewin_on_ok(&w, true, 1); /* ok N2 lost */
-    T_TRUE(linewin_peek(&w) == NULL || w.in_flight == 1);
-    linewin_resync(&w);
-    T_EQ_INT(w.next, 2); /* send line 2 again */
-    linewin_sent(&w);
-    /* The printer had it: it asks for 3, and after the probe that means 2 ran. */
-    T_EQ_INT(linewin_on_resend(&w, 3), SF_OK);
+    linewin_on_ok(&w, true, 1, BARRIER); /* ok N2 lost */
+    T_EQ_INT(w.in_flight, 1);
+    linewin_resync(&w); /* silence past what line 2 can take: it ran */
     T_EQ_INT(w.acked, 2);
     T_EQ_INT(w.next, 3);
     T_EQ_INT(linewin_tag(&w, 2), 1);
     T_EQ_INT(linewin_on_resend(&w, 0), 2);    /* garbled */
     T_EQ_INT(linewin_on_resend(&w, 4000), 2); /* never pushed */
+    linewin_release(&w);
+}
+
+T_CASE(linewin_barrier_acknowledges_everything_before_it)
+{
+    struct linewin w;
+    T_OK(linewin_init(&w, 64, 4), NULL);
+    push_n(&w, 2);
+    T_EQ_INT(linewin_push(&w, "M105", BARRIER, NULL), 3);
+    push_n(&w, 2);
+    for (int i = 0; i < 4; i++)
+        linewin_sent(&w);                              /* 1..4 in flight, plain oks */
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 1); /* line 1; line 2's ok is lost */
+    /* The next plain ok cannot be the probe's: its answer is "ok T:". */
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 1);
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), -1);
+    T_EQ_INT(linewin_barrier(&w, 3), 1);
+    T_EQ_INT(w.acked, 3);
+    T_EQ_INT(w.in_flight, 1);
+    T_EQ_INT(linewin_barrier(&w, 9), 0); /* never sent */
+    linewin_release(&w);
+}
+
+T_CASE(linewin_resend_keeps_queued_lines_in_flight)
+{
+    struct linewin w;
+    T_OK(linewin_init(&w, 64, 4), NULL);
+    push_n(&w, 10);
+    for (int i = 0; i < 4; i++)
+        linewin_sent(&w);
+    /* Line 3 was bad; 1 and 2 sit in the printer's queue, their oks to come. */
+    T_EQ_INT(linewin_on_resend(&w, 3), SF_OK);
+    T_EQ_INT(w.in_flight, 2);
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 0); /* the rejection's */
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 1);
+    T_EQ_INT(linewin_on_ok(&w, false, 0, BARRIER), 1);
+    T_EQ_INT(w.acked, 2);
+    /* The printer asks for the line after the last one sent: a copy it had. */
+    linewin_sent(&w);
+    T_EQ_INT(linewin_on_resend(&w, 4), 1);
+    T_EQ_INT(w.next, 4);
+    linewin_release(&w);
+}
+
+T_CASE(linewin_counts_bytes_behind_the_oldest_line)
+{
+    struct linewin w;
+    T_OK(linewin_init(&w, 64, 4), NULL);
+    w.rx_bytes = 128;
+    for (int i = 0; i < 8; i++)
+        linewin_push(&w, "G1 X100.123 Y99.456 Z0.2 E12.34567 F2100", i, NULL); /* 46 B */
+    int sent = 0;
+    while (linewin_peek(&w)) {
+        linewin_sent(&w);
+        sent++;
+    }
+    /* The oldest runs; two more (92 bytes with newlines) fit 127, a third does not. */
+    T_EQ_INT(sent, 3);
+    linewin_force(&w);
+    T_TRUE(linewin_peek(&w) != NULL); /* a probe may pass */
+    linewin_sent(&w);
+    T_TRUE(linewin_peek(&w) == NULL);
     linewin_release(&w);
 }
 
@@ -144,7 +204,7 @@ T_CASE(linewin_resend_older_than_ring_is_reset)
     for (int i = 0; i < 20; i++) {
         linewin_push(&w, "G1 X1", i, NULL);
         linewin_sent(&w);
-        linewin_on_ok(&w, false, 0);
+        linewin_on_ok(&w, false, 0, BARRIER);
     }
     T_EQ_INT(linewin_on_resend(&w, 1), SF_ENOTFOUND);
     linewin_release(&w);
