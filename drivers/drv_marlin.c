@@ -80,7 +80,9 @@ struct marlin {
     uint64_t timer;           /* periodic housekeeping */
     enum phase phase;
     int hello_tries, hello_oks;
+    int hello_out;                    /* hellos sent in this handshake (2 oks each) */
     int64_t hello_ms;                 /* last hello sent */
+    int64_t hello_ok_ms;              /* last ok of the handshake */
     char rx[SF_PRINTER_LINE_MAX + 1]; /* partial reply line */
     size_t rx_len;
     bool rx_skip; /* dropping an over-long line */
@@ -794,7 +796,13 @@ on_reply(struct marlin *m, const char *line, size_t len)
         case MR_OK:
             if (r.has_n && r.b >= 0)
                 learn_window(m, r.b, r.p);
-            if (++m->hello_oks >= 2)
+            /* Done when every hello sent has its two oks: a hello the
+               printer had taken before its "start" (or before a retry)
+               runs after the others, and its M110 N0 would reset the
+               count under the job's first lines (the printer then asks
+               for line 1 again).  A hello lost whole is the timer's. */
+            m->hello_ok_ms = loop_now_ms(m->base.loop);
+            if (++m->hello_oks >= 2 * m->hello_out)
                 handshake_done(m);
             break;
         case MR_FIRMWARE:
@@ -1005,8 +1013,12 @@ hello(struct marlin *m)
 {
     char m110[32];
     gcode_number_line(0, "M110 N0", m110, sizeof(m110));
+    if (m->phase != PH_HELLO) {
+        m->hello_out = 0;
+        m->hello_oks = 0;
+    }
     m->phase = PH_HELLO;
-    m->hello_oks = 0;
+    m->hello_out++;
     m->hello_tries++;
     m->hello_ms = loop_now_ms(m->base.loop);
     char text[64];
@@ -1087,7 +1099,15 @@ on_timer(struct loop *l, void *ud)
         return;
     if (m->phase == PH_HELLO) {
         int interval = m->margin_ms * 2 < 2000 ? m->margin_ms * 2 : 2000;
-        if (now - m->hello_ms >= interval) {
+        int64_t since = m->hello_ok_ms > m->hello_ms ? m->hello_ok_ms : m->hello_ms;
+        if (now - since >= interval) {
+            /* Quiet: what the printer took it has answered.  Two oks or
+               more: the hellos still owed were lost (sent into the
+               bootloader); none: ask again. */
+            if (m->hello_oks >= 2) {
+                handshake_done(m);
+                return;
+            }
             if (m->hello_tries >= HELLO_TRIES) {
                 message(m, "no reply from '%s' (is it a Marlin printer at %d baud?)", m->port,
                         m->baud);

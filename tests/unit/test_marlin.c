@@ -368,17 +368,25 @@ stream_exact(struct sim_marlin_config *sc, int buffer_lines, int max_ms)
 
 T_CASE(marlin_streams_exactly_advanced_ok)
 {
+    /* Simulated time: the printer at speed 1, and a budget that no load
+       can exhaust (the pty and TCP links are covered by the cases below). */
+    sim_time = true;
     struct sim_marlin_config sc;
     sim_marlin_config_init(&sc);
     sc.advanced_ok = true;
     stream_exact(&sc, 0, 30000);
+    sim_time = false;
 }
 
 T_CASE(marlin_streams_exactly_plain_ok)
 {
+    /* Simulated time: the printer at speed 1, and a budget that no load
+       can exhaust (the pty and TCP links are covered by the cases below). */
+    sim_time = true;
     struct sim_marlin_config sc;
     sim_marlin_config_init(&sc);
     stream_exact(&sc, 0, 30000);
+    sim_time = false;
 }
 
 T_CASE(marlin_streams_exactly_ping_pong)
@@ -709,6 +717,9 @@ T_CASE(marlin_disconnect_then_reconnect_with_backoff)
 
 T_CASE(marlin_thermal_runaway_stops_stream)
 {
+    /* Simulated time: 800 commands before the runaway took more than a
+       30 s real-time budget on a loaded machine. */
+    sim_time = true;
     struct run r = { 0 };
     struct sim_marlin_config sc;
     sim_marlin_config_init(&sc);
@@ -716,11 +727,12 @@ T_CASE(marlin_thermal_runaway_stops_stream)
     T_OK(faults_parse(&sc.faults, "runaway=800", NULL), NULL);
     if (!setup(&r, &sc, 0)) {
         teardown(&r);
+        sim_time = false;
         return;
     }
     write_job(&r, JOB_LINES, NULL);
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.failed, 1);
     T_EQ_INT(r.drv->status.state, DRV_ERROR);
     T_TRUE(strstr(r.drv->status.message, "Thermal Runaway") != NULL);
@@ -736,6 +748,7 @@ T_CASE(marlin_thermal_runaway_stops_stream)
     drv_marlin_stats(r.drv, &ds);
     T_EQ_INT(ds.lines_sent, sent); /* the stream stopped */
     teardown(&r);
+    sim_time = false;
 }
 
 static bool
