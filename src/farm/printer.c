@@ -65,12 +65,6 @@ printer_action_parse(const char *s, enum printer_action *out)
     return false;
 }
 
-const char *
-printer_action_name(enum printer_action a)
-{
-    return (unsigned)a < PRINTER_ACTION_COUNT ? action_names[a] : "?";
-}
-
 static void
 changed(struct printer *p)
 {

@@ -289,9 +289,10 @@ find_contacts(const struct ray_grid *g, const struct cols *cs, const struct supm
     return SF_OK;
 }
 
-int
-supmodel_contacts(const struct ray_grid *g, const struct supmodel_params *p, float **top_mm,
-                  struct sf_err *err)
+/* The contacts of grid g under p's rules (*ct freed by the caller, also on error). */
+static int
+grid_contacts(const struct ray_grid *g, const struct supmodel_params *p, struct contact **ct,
+              size_t *n, struct sf_err *err)
 {
     int rc = supmodel_params_check(p, err);
     if (rc)
@@ -299,22 +300,8 @@ supmodel_contacts(const struct ray_grid *g, const struct supmodel_params *p, flo
     struct cols cs;
     if ((rc = cols_build(g, &cs, err)))
         return rc;
-    struct contact *ct = NULL;
-    size_t n = 0;
-    rc = find_contacts(g, &cs, p, &ct, &n, err);
-    size_t cells = (size_t)g->nu * g->nw;
-    float *t = rc ? NULL : mem_array(cells ? cells : 1, sizeof(float));
-    if (!rc && !t)
-        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
-    if (t) {
-        for (size_t c = 0; c < cells; c++)
-            t[c] = -1;
-        for (size_t k = 0; k < n; k++)
-            t[ct[k].cell] = max_d(t[ct[k].cell], ct[k].top);
-    }
-    free(ct);
+    rc = find_contacts(g, &cs, p, ct, n, err);
     cols_release(&cs);
-    *top_mm = t;
     return rc;
 }
 
@@ -324,15 +311,9 @@ supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
 {
     *cols = NULL;
     *n_cols = 0;
-    int rc = supmodel_params_check(p, err);
-    if (rc)
-        return rc;
-    struct cols cs;
-    if ((rc = cols_build(g, &cs, err)))
-        return rc;
     struct contact *ct = NULL;
     size_t n = 0;
-    rc = find_contacts(g, &cs, p, &ct, &n, err);
+    int rc = grid_contacts(g, p, &ct, &n, err);
     struct support_column *out = rc ? NULL : mem_array(n ? n : 1, sizeof(*out));
     if (!rc && !out)
         rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
@@ -343,7 +324,6 @@ supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
         *n_cols = n;
     }
     free(ct);
-    cols_release(&cs);
     return rc;
 }
 

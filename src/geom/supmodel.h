@@ -101,13 +101,4 @@ int supmodel_of_mesh(const struct mesh *m, struct vec3 up, const struct supmodel
 int supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
                      struct support_column **cols, size_t *n_cols, struct sf_err *err);
 
-/*
- * The contacts themselves, for a slicer that prints what the model
- * predicts: for every raster cell (g's cell order) the height of the
- * highest overhanging bottom (mm above the bed), or -1 where the column
- * needs no support.  *top_mm is allocated (free()).
- */
-int supmodel_contacts(const struct ray_grid *g, const struct supmodel_params *p, float **top_mm,
-                      struct sf_err *err);
-
 #endif

@@ -4,18 +4,9 @@
 # dir refuse, naming the dir and the running daemon's pid, and touch
 # nothing (--fsck used to run crash recovery on the live database); once
 # the daemon stops, --fsck runs.
-set -u
 BUILD=${BUILD:-build/san}
-D=$BUILD/bin/slimfarmd
-C=$BUILD/bin/slimfarm
-tmp=$(mktemp -d)
-pid=
-cleanup() { [ -n "$pid" ] && kill -9 "$pid" 2>/dev/null; rm -rf "$tmp"; }
-trap cleanup EXIT
-fail() { echo "FAIL: $*"; echo "--- daemon log"; cat "$tmp/log" 2>/dev/null; exit 1; }
+. "$(dirname "$0")/lib/farm.sh"
 
-port=$((20000 + RANDOM % 20000))
-RW=rw-key-0123456789abcdef
 cat > "$tmp/farm.ini" <<INI
 [farm]
 listen: 127.0.0.1:$port
@@ -25,12 +16,7 @@ api_keys: $RW
 driver: marlin
 port: pty:/dev/null
 INI
-export SLIMFARM_URL=http://127.0.0.1:$port SLIMFARM_API_KEY=$RW
-"$D" -c "$tmp/farm.ini" >>"$tmp/log" 2>&1 &
-pid=$!
-up=
-for _ in $(seq 200); do "$C" jobs >/dev/null 2>&1 && { up=1; break; }; sleep 0.05; done
-[ -n "$up" ] || fail "daemon did not come up"
+start_daemon
 
 want="data dir '$tmp/data' is in use by another process (pid $pid)"
 out=$("$D" -c "$tmp/farm.ini" 2>&1) && fail "a second daemon started"

@@ -9,14 +9,14 @@
 #include "../../src/base/pool.h"
 #include "../t.h"
 
-static atomic_bool release; /* set by the test: the stubborn task may end */
-static atomic_bool running; /* the stubborn task is inside work() */
+static atomic_bool release; /* set by the test: the stuck task may end */
+static atomic_bool running; /* the stuck task is inside work() */
 static atomic_bool ended;   /* it returned */
 static int n_done;
 
 /* Ignores cancel; ends when released, or after 60 s at the latest. */
 static int
-work_stubborn(void *ud, const atomic_bool *cancel)
+work_stuck(void *ud, const atomic_bool *cancel)
 {
     (void)ud, (void)cancel;
     atomic_store(&running, true);
@@ -44,7 +44,7 @@ T_CASE(pool_free_does_not_wait_for_a_stuck_task)
     struct pool *p = pool_new(l, 1, &err);
     T_TRUE(p != NULL);
     static int ud;
-    pool_submit(p, work_stubborn, done_count, &ud, &err);
+    pool_submit(p, work_stuck, done_count, &ud, &err);
     while (!atomic_load(&running)) {
         struct timespec ts = { 0, 1000000 };
         nanosleep(&ts, NULL);
