@@ -15,6 +15,9 @@ pid=
 cleanup() { [ -n "$pid" ] && kill -9 "$pid" 2>/dev/null; rm -rf "$tmp"; }
 trap cleanup EXIT
 fail() { echo "FAIL: $*"; echo "--- daemon log"; cat "$tmp/log" 2>/dev/null; exit 1; }
+# Run "$@" until it succeeds, for up to 20 s: states are waited for, never slept for.
+eventually() { for _ in $(seq 400); do "$@" && return 0; sleep 0.05; done; return 1; }
+jobs_match() { "$C" jobs "${@:2}" 2>/dev/null | grep -qE "$1"; }
 
 port=$((20000 + RANDOM % 20000))
 RW=rw-key-0123456789abcdef
@@ -92,7 +95,7 @@ head -c 2000000 /dev/zero > "$tmp/huge.stl"
 out=$("$C" submit "$tmp/huge.stl" 2>&1) && fail "oversized upload accepted"
 [[ "$out" == *"413: "* ]] || fail "oversized: $out"
 
-sleep 0.3
+eventually jobs_match "^1 +queued .*fits no printer" --key $RO
 out=$("$C" jobs --key $RO) || fail "jobs"
 echo "$out" | grep -qE "^1 +queued +0/2 +- +3 .*bracket.stl +fits no printer: mk3: material NYLON not loaded \(has PLA\)" || fail "jobs: $out"
 out=$("$C" printers) || fail "printers"
@@ -101,23 +104,27 @@ echo "$out" | grep -qE "^mk3 +offline .*'/dev/null' is not a terminal" || fail "
 # orient + slice for real (config/printers, config/materials); waits for mk3
 cp -r config/printers config/materials "$tmp/"
 out=$("$C" submit "$tmp/bracket.stl" --method orient) || fail "submit orient: $out"
-for _ in $(seq 100); do "$C" jobs | grep -qE '^2 +ready' && break; sleep 0.1; done
+eventually jobs_match '^2 +ready'
 "$C" jobs | grep -qE '^2 +ready .*waits for a printer: mk3 is offline' || fail "orient job: $("$C" jobs)"
 
 # a part that is no mesh fails at once, saying why
 echo "not a mesh" > "$tmp/junk.stl"
 "$C" submit "$tmp/junk.stl" >/dev/null || fail "submit junk"
-sleep 0.3
-"$C" jobs | grep -qE "^3 +failed .*junk.stl .*not a mesh file" || fail "junk part: $("$C" jobs)"
+eventually jobs_match "^3 +failed .*junk.stl .*not a mesh file" || fail "junk part: $("$C" jobs)"
 
-# live events: the watcher sees a submission and a cancel made after it started
-"$C" watch --count 2 > "$tmp/watch" 2>&1 &
+# live events: the watcher sees a submission and a cancel made after it
+# started.  It resumes after the newest event so far (which an event id past
+# the log's end makes the daemon name in its reset event), so it cannot miss
+# them however late it connects.
+newest=$(curl -sN --max-time 20 -H "X-Api-Key: $RW" -H "Last-Event-ID: 999999999" "$SLIMFARM_URL/api/events" |
+  sed -n 's/^data: {"last_event_id":999999999,"newest":\([0-9]*\),.*/\1/p;T;q')
+[ -n "$newest" ] || fail "no newest event id from the reset event"
+"$C" watch --count 2 --since "$newest" > "$tmp/watch" 2>&1 &
 wpid=$!
-sleep 0.3
 "$C" submit "$tmp/bracket.stl" >/dev/null || fail "second submit"
 out=$("$C" cancel 4) || fail "cancel: $out"
 [ "$out" = "job 4: cancelled" ] || fail "cancel said: $out"
-for _ in $(seq 50); do kill -0 $wpid 2>/dev/null || break; sleep 0.1; done
+eventually eval '! kill -0 $wpid 2>/dev/null'
 kill $wpid 2>/dev/null && fail "watch did not end after 2 events"
 grep -q "job-add" "$tmp/watch" || fail "watch: $(cat "$tmp/watch")"
 out=$("$C" cancel 4 2>&1) && fail "cancelled twice"
@@ -130,11 +137,13 @@ out=$("$C" cleared nosuch 2>&1) && fail "unknown printer"
 # SIGHUP: a broken config is refused and the old one kept; a good one applies
 cp "$tmp/farm.ini" "$tmp/good.ini"
 printf '[printer y]\ncolour: red\n' >> "$tmp/farm.ini"
-kill -HUP $pid; sleep 0.3
+kill -HUP $pid
+eventually grep -q "reload: " "$tmp/log"
 grep -q "reload: .*farm.ini:12: option 'colour' is not valid in section 'printer y'; keeping" "$tmp/log" || fail "bad reload not reported"
 cp "$tmp/good.ini" "$tmp/farm.ini"
 printf '[printer voron]\ndriver: marlin\nport: tcp://127.0.0.1:1\nmaterial: PETG\n' >> "$tmp/farm.ini"
-kill -HUP $pid; sleep 0.3
+kill -HUP $pid
+eventually grep -q "reloaded " "$tmp/log"
 "$C" printers | grep -q "^voron " || fail "reload did not add voron: $("$C" printers)"
 
 # kill -9 and restart: every job where it was
