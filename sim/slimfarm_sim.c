@@ -31,6 +31,7 @@
 #include "../src/base/loop.h"
 #include "../src/base/mem.h"
 #include "sim_marlin.h"
+#include "sim_octoprint.h"
 
 static const char usage_text[] =
     "usage: slimfarm-sim marlin [--tcp PORT] [--link PATH] [--baud N] [--speed X]\n"
@@ -253,6 +254,7 @@ static const struct {
     int (*main)(int argc, char **argv); /* argv[1] is the kind */
 } sims[] = {
     { "marlin", marlin_main },
+    { "octoprint", sim_octoprint_main },
 };
 
 int
