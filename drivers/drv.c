@@ -12,10 +12,14 @@
 #include <string.h>
 
 #include "drv_marlin.h"
+#include "drv_moonraker.h"
+#include "drv_prusalink.h"
 
 /* Every kind this build has; a new driver is one row here. */
 static const struct drv_kind kinds[] = {
     { "marlin", false, drv_marlin_new },
+    { "moonraker", true, drv_moonraker_new },
+    { "prusalink", true, drv_prusalink_new },
 };
 #define N_KINDS (sizeof(kinds) / sizeof(kinds[0]))
 

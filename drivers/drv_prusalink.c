@@ -13,7 +13,13 @@
 
 #include <jansson.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+
+#include "../src/base/log.h"
+#include "../src/base/mem.h"
+#include "httpc.h"
 
 /* ---- JSON helpers: field access that names what is wrong ---- */
 
@@ -245,4 +251,670 @@ drv_prusalink_observe(const struct prusalink_status *st, int64_t job_id, struct 
     o->ours = job_id > 0 &&
               ((st->has_job && st->job_id == job_id) ||
                (!st->has_job && (o->remote == NETJOB_R_DONE || o->remote == NETJOB_R_CANCELLED)));
+}
+
+/* ---- the driver ---- */
+
+/*
+ * How it talks: as drv_moonraker.c (one request at a time, polls on a
+ * timer that actions pre-empt, a job kept through lost contact), over
+ * PrusaLink's v1 API: GET /api/v1/status every PL_POLL_MS (Prusa Connect
+ * and PrusaSlicer poll the printer at about this rate), PUT
+ * /api/v1/files/{storage}/{name} with Print-After-Upload: ?1 and
+ * Overwrite: ?1 (the body streamed from disk), then GET /api/v1/job once to
+ * learn the job's id by its file name and size; pause and resume are PUT
+ * /api/v1/job/{id}/pause|resume, cancel is DELETE /api/v1/job/{id}.
+ * Every request says Accept: application/json, so errors come as the
+ * spec's Error object and 409's reason reaches the operator.  Auth is
+ * X-Api-Key (older firmware) or user/password by HTTP Digest (current).
+ * PrusaLink v1 has no endpoint for a console command.
+ */
+#define PL_POLL_MS         1000
+#define PL_TIMEOUT_MS      10000
+#define PL_UPLOAD_STALL_MS 30000
+#define PL_UPLOAD_TRIES    4
+
+enum rq { RQ_NONE, RQ_POLL, RQ_JOB, RQ_UPLOAD, RQ_PAUSE, RQ_RESUME, RQ_CANCEL };
+
+struct prusalink {
+    struct drv base;
+    struct httpc *http;    /* the loop's shared client (httpc_get) */
+    char url[256];         /* base URL, no trailing '/' */
+    char key_hdr[160];     /* "X-Api-Key: ..." */
+    const char *hdrs[3];   /* the key (if any), Accept, NULL */
+    char user[64];         /* digest user, "" for none */
+    char password[128];    /* its password */
+    bool open;             /* open() and not closed or gone offline */
+    bool seen;             /* a status came since open() */
+    struct httpc_req *req; /* the request in flight, or NULL */
+    enum rq rq;            /* its kind */
+    uint64_t timer;        /* the next poll, 0 if none */
+    int fails;             /* contacts failed in a row */
+    struct netjob job;     /* the job on the printer */
+    int64_t job_id;        /* its id on the printer, 0 until learnt */
+    char path[1024];       /* its file on disk */
+    char storage[32];      /* the printer's storage ("usb", "local") */
+    int uploads;           /* upload attempts for the job */
+    bool verify;           /* the upload's fate is unknown: the next poll settles it */
+    char upload_err[128];  /* why it is unknown */
+    enum rq want;          /* RQ_PAUSE/RESUME/CANCEL to send when the slot frees */
+};
+
+static struct prusalink *
+PL(struct drv *d)
+{
+    return (struct prusalink *)d;
+}
+
+static void kick(struct prusalink *p);
+static void schedule(struct prusalink *p, int64_t ms);
+static bool start_req(struct prusalink *p, enum rq kind);
+
+static const char *
+rq_name(enum rq r)
+{
+    static const char *const n[] = { "none",  "status poll", "job query", "upload",
+                                     "pause", "resume",      "cancel" };
+    return n[r];
+}
+
+static void
+end_job(struct prusalink *p, enum drv_state st, enum drv_event ev, const char *msg)
+{
+    struct netjob_verdict v = { .state = st, .ends = true, .ev = ev };
+    snprintf(v.message, sizeof(v.message), "%s", msg);
+    p->verify = false;
+    p->want = RQ_NONE;
+    p->job_id = 0;
+    netjob_report(&p->base, &p->job, &v, p->base.status.progress);
+}
+
+static void
+quiet(struct prusalink *p)
+{
+    if (p->req)
+        httpc_cancel(p->req);
+    p->req = NULL;
+    p->rq = RQ_NONE;
+    if (p->timer)
+        loop_timer_cancel(p->base.loop, p->timer);
+    p->timer = 0;
+}
+
+static void
+contact_lost(struct prusalink *p, const char *why)
+{
+    p->fails++;
+    if (p->job.phase == NETJOB_NONE) {
+        quiet(p);
+        p->open = false;
+        netjob_state(&p->base, DRV_OFFLINE, "%s", why);
+        return;
+    }
+    int ms = drv_backoff_ms(p->fails - 1);
+    log_printer(LOG_WARN, p->base.name, "%s; the job stays on the printer, asking again in %d ms",
+                why, ms);
+    snprintf(p->base.status.message, sizeof(p->base.status.message),
+             "unreachable: %s (job kept; retrying)", why);
+    schedule(p, ms);
+}
+
+enum outcome { O_OK, O_DOWN, O_AUTH, O_REFUSED };
+
+static enum outcome
+judge_reply(const struct httpc_result *res, char *why, size_t n)
+{
+    char text[128];
+    if (res->code != SF_OK) {
+        snprintf(why, n, "%s", res->err.msg);
+        return O_DOWN;
+    }
+    if (res->status >= 200 && res->status < 300)
+        return O_OK;
+    drv_prusalink_error_text(res->body, res->body_len, text, sizeof(text));
+    if (res->status == 401 || res->status == 403) {
+        snprintf(why, n, "authentication failed (check api_key, or user and password): HTTP %ld",
+                 res->status);
+        return O_AUTH;
+    }
+    snprintf(why, n, "HTTP %ld%s%s", res->status, text[0] ? ": " : "", text);
+    return res->status >= 500 ? O_DOWN : O_REFUSED;
+}
+
+static void
+on_status(struct prusalink *p, const struct httpc_result *res)
+{
+    char why[200];
+    if (judge_reply(res, why, sizeof(why)) != O_OK) {
+        contact_lost(p, why);
+        return;
+    }
+    struct prusalink_status st;
+    struct sf_err err;
+    if (drv_prusalink_parse_status(res->body, res->body_len, &st, &err)) {
+        contact_lost(p, err.msg);
+        return;
+    }
+    p->fails = 0;
+    p->seen = true;
+    if (st.storage[0] && !st.read_only)
+        snprintf(p->storage, sizeof(p->storage), "%s", st.storage);
+    netjob_temps(&p->base, st.nozzle_c, st.nozzle_target_c, st.bed_c, st.bed_target_c);
+    /* a job whose id we do not know yet: ask /api/v1/job whose it is */
+    if (p->job.phase != NETJOB_NONE && p->job_id == 0 && st.has_job) {
+        if (start_req(p, RQ_JOB))
+            return;
+    }
+    struct netjob_obs ob;
+    drv_prusalink_observe(&st, p->job_id, &ob);
+    if (p->job.phase != NETJOB_NONE && p->job_id == 0)
+        ob.ours = false; /* a finished or stopped job without an id is not known ours */
+    if (p->verify) {
+        bool free_now = ob.remote == NETJOB_R_IDLE || ob.remote == NETJOB_R_DONE ||
+                        ob.remote == NETJOB_R_CANCELLED;
+        if (ob.ours) {
+            p->verify = false;
+        } else if (free_now && !st.has_job) {
+            if (p->uploads < PL_UPLOAD_TRIES) {
+                p->verify = false;
+                if (start_req(p, RQ_UPLOAD)) {
+                    netjob_state(&p->base, DRV_PRINTING, "uploading again (%s)", p->upload_err);
+                    return;
+                }
+            }
+            end_job(p, DRV_IDLE, DRV_EV_JOB_FAILED, p->upload_err);
+            schedule(p, PL_POLL_MS);
+            return;
+        }
+    }
+    if (p->job.phase != NETJOB_NONE && p->job_id == 0 && !p->verify &&
+        (ob.remote == NETJOB_R_IDLE || ob.remote == NETJOB_R_BUSY) &&
+        p->base.status.lines_acked == 0 && p->uploads > 0 &&
+        loop_now_ms(p->base.loop) - p->base.status.job_started_ms < 2 * PL_POLL_MS) {
+        /* just uploaded: the printer takes a moment to start the file */
+        schedule(p, PL_POLL_MS);
+        return;
+    }
+    struct netjob_verdict v;
+    netjob_judge(p->job.phase, &ob, &v);
+    if (p->job.phase != NETJOB_NONE && !v.ends && p->verify)
+        snprintf(v.message, sizeof(v.message), "%s", p->upload_err);
+    if (v.ends) {
+        p->verify = false;
+        p->job_id = 0;
+    }
+    netjob_report(&p->base, &p->job, &v, st.has_job ? st.progress : p->base.status.progress);
+    schedule(p, PL_POLL_MS);
+}
+
+static void
+on_job(struct prusalink *p, const struct httpc_result *res)
+{
+    char why[200];
+    if (judge_reply(res, why, sizeof(why)) != O_OK) {
+        contact_lost(p, why);
+        return;
+    }
+    if (res->status == 204) { /* no job after all */
+        schedule(p, 0);
+        return;
+    }
+    struct prusalink_job job;
+    struct sf_err err;
+    if (drv_prusalink_parse_job(res->body, res->body_len, &job, &err)) {
+        contact_lost(p, err.msg);
+        return;
+    }
+    if (p->job.phase != NETJOB_NONE && strcmp(job.name, p->job.name) == 0 &&
+        (job.size == 0 || job.size == p->job.size)) {
+        p->job_id = job.id;
+        log_printer(LOG_INFO, p->base.name, "job '%s' is job %lld on the printer", p->job.name,
+                    (long long)job.id);
+        schedule(p, 0);
+        return;
+    }
+    /* another file: judge the status as not ours */
+    struct netjob_obs ob = { .remote = strcmp(job.state, "PAUSED") == 0 ? NETJOB_R_PAUSED
+                                                                        : NETJOB_R_PRINTING,
+                             .ours = false,
+                             .file = job.name };
+    if (p->verify && p->uploads < PL_UPLOAD_TRIES) {
+        schedule(p, PL_POLL_MS); /* our upload waits for the printer to be free */
+        return;
+    }
+    struct netjob_verdict v;
+    netjob_judge(p->job.phase, &ob, &v);
+    if (v.ends) {
+        p->verify = false;
+        p->job_id = 0;
+    }
+    netjob_report(&p->base, &p->job, &v, p->base.status.progress);
+    schedule(p, PL_POLL_MS);
+}
+
+static void
+on_upload(struct prusalink *p, const struct httpc_result *res)
+{
+    char why[200];
+    enum outcome o = judge_reply(res, why, sizeof(why));
+    if (p->job.phase != NETJOB_RUNNING)
+        return;
+    if (o == O_AUTH) {
+        end_job(p, DRV_IDLE, DRV_EV_JOB_FAILED, why);
+        contact_lost(p, why);
+        return;
+    }
+    if (o == O_REFUSED) { /* 409: the printer's reason ("Printer is busy") */
+        end_job(p, DRV_IDLE, DRV_EV_JOB_FAILED, why);
+        schedule(p, 0);
+        return;
+    }
+    if (o == O_DOWN) {
+        snprintf(p->upload_err, sizeof(p->upload_err), "upload failed: %s", why);
+        p->verify = true;
+        p->fails++;
+        schedule(p, drv_backoff_ms(p->fails - 1));
+        return;
+    }
+    p->fails = 0;
+    p->base.status.message[0] = '\0';
+    p->base.status.job_started_ms = loop_now_ms(p->base.loop);
+    schedule(p, 0);
+}
+
+static void
+on_action(struct prusalink *p, enum rq kind, const struct httpc_result *res)
+{
+    char why[200];
+    enum outcome o = judge_reply(res, why, sizeof(why));
+    if (o == O_OK) {
+        p->fails = 0;
+        schedule(p, 0);
+        return;
+    }
+    log_printer(LOG_WARN, p->base.name, "%s: %s", rq_name(kind), why);
+    snprintf(p->base.status.message, sizeof(p->base.status.message), "%s refused: %s",
+             rq_name(kind), why);
+    if (o == O_DOWN || o == O_AUTH)
+        contact_lost(p, why);
+    else
+        schedule(p, 0);
+}
+
+static void
+on_done(struct httpc_req *r, const struct httpc_result *res, void *ud)
+{
+    (void)r;
+    struct prusalink *p = ud;
+    enum rq kind = p->rq;
+    p->req = NULL;
+    p->rq = RQ_NONE;
+    switch (kind) {
+    case RQ_POLL:
+        on_status(p, res);
+        break;
+    case RQ_JOB:
+        on_job(p, res);
+        break;
+    case RQ_UPLOAD:
+        on_upload(p, res);
+        break;
+    default:
+        on_action(p, kind, res);
+        break;
+    }
+    kick(p);
+}
+
+static void
+on_progress(struct httpc_req *r, uint64_t sent, uint64_t total, void *ud)
+{
+    (void)r;
+    struct prusalink *p = ud;
+    if (total > 0)
+        snprintf(p->base.status.message, sizeof(p->base.status.message), "uploading %u%%",
+                 (unsigned)(sent * 100 / total));
+}
+
+/* Percent-encode one path segment (RFC 3986 unreserved bytes stay). */
+static bool
+escape(const char *s, char *out, size_t n)
+{
+    static const char hex[] = "0123456789ABCDEF";
+    size_t k = 0;
+    for (; *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        bool plain = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                     c == '-' || c == '.' || c == '_' || c == '~';
+        if (k + (plain ? 1 : 3) >= n)
+            return false;
+        if (plain) {
+            out[k++] = (char)c;
+        } else {
+            out[k++] = '%';
+            out[k++] = hex[c >> 4];
+            out[k++] = hex[c & 15];
+        }
+    }
+    out[k] = '\0';
+    return true;
+}
+
+static bool
+start_req(struct prusalink *p, enum rq kind)
+{
+    char url[768], name[400];
+    const char *method = "GET";
+    const char *up_hdrs[6];
+    struct httpc_opts o = { .headers = p->hdrs,
+                            .timeout_ms = PL_TIMEOUT_MS,
+                            .done = on_done,
+                            .ud = p,
+                            .user = p->user[0] ? p->user : NULL,
+                            .password = p->password,
+                            .digest = p->user[0] != '\0' };
+    switch (kind) {
+    case RQ_POLL:
+        snprintf(url, sizeof(url), "%s/api/v1/status", p->url);
+        break;
+    case RQ_JOB:
+        snprintf(url, sizeof(url), "%s/api/v1/job", p->url);
+        break;
+    case RQ_UPLOAD: {
+        if (!escape(p->job.name, name, sizeof(name)))
+            return false;
+        snprintf(url, sizeof(url), "%s/api/v1/files/%s/%s", p->url,
+                 p->storage[0] ? p->storage : "usb", name);
+        method = "PUT";
+        size_t h = 0;
+        for (size_t i = 0; p->hdrs[i]; i++)
+            up_hdrs[h++] = p->hdrs[i];
+        up_hdrs[h++] = "Content-Type: application/octet-stream";
+        up_hdrs[h++] = "Print-After-Upload: ?1";
+        up_hdrs[h++] = "Overwrite: ?1";
+        up_hdrs[h] = NULL;
+        o.headers = up_hdrs;
+        o.body_path = p->path;
+        o.timeout_ms = -1;
+        o.stall_ms = PL_UPLOAD_STALL_MS;
+        o.progress = on_progress;
+        p->uploads++;
+        break;
+    }
+    case RQ_PAUSE:
+    case RQ_RESUME:
+        snprintf(url, sizeof(url), "%s/api/v1/job/%lld/%s", p->url, (long long)p->job_id,
+                 kind == RQ_PAUSE ? "pause" : "resume");
+        method = "PUT";
+        break;
+    case RQ_CANCEL:
+        snprintf(url, sizeof(url), "%s/api/v1/job/%lld", p->url, (long long)p->job_id);
+        method = "DELETE";
+        break;
+    default:
+        return false;
+    }
+    o.method = method;
+    o.url = url;
+    struct sf_err err;
+    p->req = httpc_start(p->http, &o, &err);
+    if (!p->req) {
+        log_printer(LOG_ERROR, p->base.name, "%s: %s", rq_name(kind), err.msg);
+        return false;
+    }
+    p->rq = kind;
+    return true;
+}
+
+static void
+kick(struct prusalink *p)
+{
+    if (!p->open || p->req || p->want == RQ_NONE)
+        return;
+    if (p->job_id == 0) { /* learn the id first */
+        if (p->job.phase != NETJOB_NONE)
+            start_req(p, RQ_JOB);
+        return;
+    }
+    enum rq w = p->want;
+    p->want = RQ_NONE;
+    start_req(p, w);
+}
+
+static void
+on_timer(struct loop *l, void *ud)
+{
+    (void)l;
+    struct prusalink *p = ud;
+    p->timer = 0;
+    if (!p->open)
+        return;
+    if (p->req || !start_req(p, RQ_POLL))
+        schedule(p, PL_POLL_MS);
+}
+
+static void
+schedule(struct prusalink *p, int64_t ms)
+{
+    if (!p->open)
+        return;
+    if (p->timer)
+        loop_timer_cancel(p->base.loop, p->timer);
+    p->timer = loop_timer_add(p->base.loop, ms, on_timer, p);
+}
+
+static void
+preempt_poll(struct prusalink *p)
+{
+    if (p->req && p->rq == RQ_POLL) {
+        httpc_cancel(p->req);
+        p->req = NULL;
+        p->rq = RQ_NONE;
+        schedule(p, PL_POLL_MS);
+    }
+}
+
+/* ---- drv_ops ---- */
+
+static int
+pl_open(struct drv *d, struct sf_err *err)
+{
+    (void)err;
+    struct prusalink *p = PL(d);
+    if (p->open)
+        return SF_OK;
+    p->open = true;
+    p->seen = false;
+    if (p->job.phase == NETJOB_NONE)
+        netjob_state(d, DRV_CONNECTING, "%s", "");
+    snprintf(d->caps.firmware, sizeof(d->caps.firmware), "PrusaLink");
+    schedule(p, 0);
+    return SF_OK;
+}
+
+static int
+pl_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
+             const struct drv_job_scan *scan, struct sf_err *err)
+{
+    struct prusalink *p = PL(d);
+    if (first_line > 0)
+        return sf_err_set(err, SF_EUNSUPP,
+                          "printer '%s': a PrusaLink printer runs a job from its start only (it "
+                          "reads the file itself)",
+                          d->name);
+    if (!p->open || d->status.state != DRV_IDLE || p->job.phase != NETJOB_NONE)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is %s", d->name,
+                          drv_state_name(d->status.state));
+    struct netjob j = { .phase = NETJOB_RUNNING };
+    struct drv_job_scan own;
+    int rc = netjob_name(gcode_path, j.name, sizeof(j.name), err);
+    if (rc)
+        return rc;
+    if (!scan) {
+        if ((rc = drv_job_scan(gcode_path, &own, err)))
+            return rc;
+        scan = &own;
+    }
+    struct stat sb;
+    if (stat(gcode_path, &sb) != 0)
+        return sf_err_sys(err, "job file '%s'", gcode_path);
+    j.size = (int64_t)sb.st_size;
+    if ((size_t)snprintf(p->path, sizeof(p->path), "%s", gcode_path) >= sizeof(p->path))
+        return sf_err_set(err, SF_EINVAL, "job file '%s': path too long", gcode_path);
+    j.lines_total = scan->lines_total;
+    p->job = j;
+    p->job_id = 0;
+    p->uploads = 0;
+    p->verify = false;
+    p->want = RQ_NONE;
+    d->status.lines_total = j.lines_total;
+    d->status.lines_acked = 0;
+    d->status.progress = 0;
+    d->status.job_started_ms = loop_now_ms(d->loop);
+    preempt_poll(p);
+    if (p->req || !start_req(p, RQ_UPLOAD)) {
+        p->job.phase = NETJOB_NONE;
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': the upload could not start", d->name);
+    }
+    netjob_state(d, DRV_PRINTING, "uploading");
+    return SF_OK;
+}
+
+static int
+want(struct prusalink *p, enum rq w)
+{
+    p->want = w;
+    preempt_poll(p);
+    kick(p);
+    return SF_OK;
+}
+
+static int
+pl_pause(struct drv *d, struct sf_err *err)
+{
+    struct prusalink *p = PL(d);
+    if (p->job.phase != NETJOB_RUNNING || d->status.state != DRV_PRINTING || p->rq == RQ_UPLOAD ||
+        p->verify)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': nothing to pause", d->name);
+    d->status.state = DRV_PAUSED;
+    return want(p, RQ_PAUSE);
+}
+
+static int
+pl_resume(struct drv *d, struct sf_err *err)
+{
+    struct prusalink *p = PL(d);
+    if (p->job.phase != NETJOB_RUNNING || d->status.state != DRV_PAUSED)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': nothing to resume", d->name);
+    d->status.state = DRV_PRINTING;
+    return want(p, RQ_RESUME);
+}
+
+static int
+pl_cancel(struct drv *d, struct sf_err *err)
+{
+    struct prusalink *p = PL(d);
+    if (p->job.phase == NETJOB_NONE)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': no job to cancel", d->name);
+    if (p->rq == RQ_UPLOAD || p->verify) {
+        if (p->rq == RQ_UPLOAD) {
+            httpc_cancel(p->req);
+            p->req = NULL;
+            p->rq = RQ_NONE;
+        }
+        end_job(p, DRV_IDLE, DRV_EV_JOB_CANCELLED, "");
+        schedule(p, 0);
+        return SF_OK;
+    }
+    p->job.phase = NETJOB_CANCELLING;
+    return want(p, RQ_CANCEL);
+}
+
+static int
+pl_command(struct drv *d, const char *line, struct sf_err *err)
+{
+    (void)line;
+    return sf_err_set(err, SF_EUNSUPP,
+                      "printer '%s': PrusaLink has no endpoint for a console command", d->name);
+}
+
+static void
+pl_close(struct drv *d)
+{
+    struct prusalink *p = PL(d);
+    quiet(p);
+    p->open = false;
+    p->want = RQ_NONE;
+    netjob_state(d, DRV_OFFLINE, NULL);
+}
+
+static void
+pl_destroy(struct drv *d)
+{
+    struct prusalink *p = PL(d);
+    quiet(p);
+    httpc_put(p->http);
+    free(p);
+}
+
+static const struct drv_ops prusalink_ops = {
+    .version = DRV_OPS_VERSION,
+    .kind = "prusalink",
+    .open = pl_open,
+    .start_job = pl_start_job,
+    .pause = pl_pause,
+    .resume = pl_resume,
+    .cancel = pl_cancel,
+    .command = pl_command,
+    .close = pl_close,
+    .destroy = pl_destroy,
+};
+
+struct drv *
+drv_prusalink_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
+                  struct sf_err *err)
+{
+    const char *url = cfg->url;
+    if (!url || !url[0]) {
+        sf_err_set(err, SF_EINVAL, "printer '%s': driver prusalink needs a url", cfg->name);
+        return NULL;
+    }
+    if (strncmp(url, "http://", 7) != 0 && strncmp(url, "https://", 8) != 0) {
+        sf_err_set(err, SF_EINVAL, "printer '%s': url '%s' is not http:// or https://", cfg->name,
+                   url);
+        return NULL;
+    }
+    struct prusalink *p = mem_calloc(1, sizeof(*p));
+    if (!p) {
+        sf_err_set(err, SF_ENOMEM, "printer '%s': out of memory", cfg->name);
+        return NULL;
+    }
+    size_t n = strlen(url);
+    while (n > 0 && url[n - 1] == '/')
+        n--;
+    if (n >= sizeof(p->url)) {
+        free(p);
+        sf_err_set(err, SF_EINVAL, "printer '%s': url too long", cfg->name);
+        return NULL;
+    }
+    memcpy(p->url, url, n);
+    p->url[n] = '\0';
+    size_t h = 0;
+    if (cfg->api_key && cfg->api_key[0]) {
+        snprintf(p->key_hdr, sizeof(p->key_hdr), "X-Api-Key: %s", cfg->api_key);
+        p->hdrs[h++] = p->key_hdr;
+    }
+    p->hdrs[h] = "Accept: application/json";
+    p->http = httpc_get(l, err);
+    if (!p->http) {
+        free(p);
+        return NULL;
+    }
+    p->base.ops = &prusalink_ops;
+    p->base.loop = l;
+    snprintf(p->base.name, sizeof(p->base.name), "%s", cfg->name ? cfg->name : "?");
+    p->base.on_event = on_event;
+    p->base.ud = ud;
+    p->base.status.state = DRV_OFFLINE;
+    return &p->base;
 }

@@ -12,8 +12,11 @@
  */
 #include "netjob.h"
 
+#include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
+
+#include "../src/base/log.h"
 
 static const char *
 said(const struct netjob_obs *o, const char *fallback)
@@ -182,4 +185,99 @@ netjob_remote_name(enum netjob_remote r)
     static const char *const names[] = { "idle",      "busy",   "printing", "paused", "done",
                                          "cancelled", "failed", "starting", "halted" };
     return (unsigned)r < sizeof(names) / sizeof(names[0]) ? names[r] : "?";
+}
+
+int
+netjob_name(const char *gcode_path, char *out, size_t n, struct sf_err *err)
+{
+    const char *base = strrchr(gcode_path, '/');
+    base = base ? base + 1 : gcode_path;
+    size_t len = strlen(base);
+    bool has_ext = len > 6 && strcmp(base + len - 6, ".gcode") == 0;
+    if (len == 0 || base[0] == '.')
+        return sf_err_set(err, SF_EINVAL, "job file '%s': no usable file name", gcode_path);
+    if ((size_t)snprintf(out, n, "%s%s", base, has_ext ? "" : ".gcode") >= n)
+        return sf_err_set(err, SF_EINVAL, "job file '%s': name too long for the printer",
+                          gcode_path);
+    return SF_OK;
+}
+
+static void
+emit(struct drv *d, enum drv_event ev)
+{
+    if (d->on_event)
+        d->on_event(d, ev, d->ud);
+}
+
+void
+netjob_state(struct drv *d, enum drv_state s, const char *fmt, ...)
+{
+    if (fmt) {
+        va_list ap;
+        va_start(ap, fmt);
+        vsnprintf(d->status.message, sizeof(d->status.message), fmt, ap);
+        va_end(ap);
+    }
+    if (d->status.state == s)
+        return;
+    log_printer(LOG_INFO, d->name, "%s -> %s%s%s", drv_state_name(d->status.state),
+                drv_state_name(s), d->status.message[0] ? ": " : "", d->status.message);
+    d->status.state = s;
+    emit(d, DRV_EV_STATE);
+}
+
+void
+netjob_report(struct drv *d, struct netjob *j, const struct netjob_verdict *v, double progress)
+{
+    struct drv_status *st = &d->status;
+    enum drv_state was = st->state;
+    if (progress < 0)
+        progress = 0;
+    if (progress > 1)
+        progress = 1;
+    if (j->phase != NETJOB_NONE) {
+        if (v->ends && v->ev == DRV_EV_JOB_DONE)
+            progress = 1;
+        uint64_t lines = (uint64_t)(progress * (double)j->lines_total + 0.5);
+        if (lines > j->lines_total)
+            lines = j->lines_total;
+        st->progress = progress;
+        st->lines_total = j->lines_total;
+        if (lines != st->lines_acked) {
+            st->lines_acked = lines;
+            emit(d, DRV_EV_PROGRESS);
+        }
+    }
+    snprintf(st->message, sizeof(st->message), "%s", v->message);
+    st->state = v->state;
+    if (v->ends) {
+        log_printer(v->ev == DRV_EV_JOB_FAILED ? LOG_WARN : LOG_INFO, d->name, "job '%s': %s%s%s",
+                    j->name,
+                    v->ev == DRV_EV_JOB_DONE        ? "done"
+                    : v->ev == DRV_EV_JOB_CANCELLED ? "cancelled"
+                                                    : "failed",
+                    v->message[0] ? ": " : "", v->message);
+        j->phase = NETJOB_NONE;
+        emit(d, v->ev);
+    }
+    if (st->state != was) {
+        log_printer(LOG_INFO, d->name, "%s -> %s%s%s", drv_state_name(was),
+                    drv_state_name(st->state), st->message[0] ? ": " : "", st->message);
+        emit(d, DRV_EV_STATE);
+    }
+}
+
+void
+netjob_temps(struct drv *d, double nozzle_c, double nozzle_target_c, double bed_c,
+             double bed_target_c)
+{
+    struct drv_status *st = &d->status;
+    if (st->nozzle_c == nozzle_c && st->nozzle_target_c == nozzle_target_c && st->bed_c == bed_c &&
+        st->bed_target_c == bed_target_c)
+        return;
+    st->nozzle_c = nozzle_c;
+    st->nozzle_target_c = nozzle_target_c;
+    st->bed_c = bed_c;
+    st->bed_target_c = bed_target_c;
+    emit(d, DRV_EV_TEMPS);
 }

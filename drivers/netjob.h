@@ -17,6 +17,8 @@
 #define SF_DRIVERS_NETJOB_H
 
 #include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
 
 #include "drv.h"
 
@@ -75,6 +77,40 @@ struct netjob_verdict {
  *    with JOB_CANCELLED (halted: DRV_ERROR; starting: DRV_CONNECTING).
  */
 void netjob_judge(enum netjob_phase phase, const struct netjob_obs *o, struct netjob_verdict *v);
+
+/* The job a network driver holds. */
+struct netjob {
+    enum netjob_phase phase;
+    char name[160];       /* its file name on the printer (netjob_name) */
+    int64_t size;         /* its bytes */
+    uint64_t lines_total; /* its command lines (drv_job_scan), for lines_acked */
+};
+
+/*
+ * The file name a job goes by on the printer: gcode_path's base name, with
+ * ".gcode" added when it lacks it (the farm's files are named by their
+ * SHA-256, so equal names mean equal content).  SF_EINVAL if it is empty
+ * or does not fit n.
+ */
+int netjob_name(const char *gcode_path, char *out, size_t n, struct sf_err *err);
+
+/*
+ * Report verdict v on driver d, whose job is j: status.state, .message,
+ * .progress and .lines_acked (progress times j->lines_total), then the
+ * events in the order the farm needs them: DRV_EV_PROGRESS if lines_acked
+ * moved, the job's end if v->ends (j->phase becomes NETJOB_NONE), then
+ * DRV_EV_STATE if the state changed.  Loop thread.
+ */
+void netjob_report(struct drv *d, struct netjob *j, const struct netjob_verdict *v,
+                   double progress);
+
+/* Set d's state and message (printf-style, NULL keeps it), DRV_EV_STATE if the state changed. */
+void netjob_state(struct drv *d, enum drv_state s, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
+/* Record temperatures; DRV_EV_TEMPS when one changed. */
+void netjob_temps(struct drv *d, double nozzle_c, double nozzle_target_c, double bed_c,
+                  double bed_target_c);
 
 /* Short name of a remote state ("printing"), for logs and tests. */
 const char *netjob_remote_name(enum netjob_remote r);
