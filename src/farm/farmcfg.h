@@ -39,8 +39,12 @@ struct farmcfg_printer {
     int baud;            /* marlin serial speed (default 115200) */
     int buffer_lines;    /* marlin: the firmware's BUFSIZE, lines in flight (default 4) */
     int rx_buffer;       /* marlin: the firmware's RX ring, bytes in flight (default 128) */
-    char url[256];       /* network drivers: base URL */
+    char url[256];       /* network drivers: base URL, http://host[:port][/prefix] */
+    int url_line;        /* line of the url option, for later messages (0: none) */
     char api_key[128];   /* network drivers: key or access code */
+    char user[64];       /* network drivers: HTTP digest user (PrusaLink's "maker") */
+    char password[128];  /* its password */
+    int poll_ms;         /* network drivers: status poll period, ms (default 1000) */
     char profile[64];    /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */
     char material[32];   /* loaded material (default "PLA") */
     double nozzle_mm;    /* nozzle diameter (default 0.4) */

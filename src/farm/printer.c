@@ -293,7 +293,10 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
                              .buffer_lines = cfg->buffer_lines,
                              .rx_buffer = cfg->rx_buffer,
                              .url = cfg->url,
-                             .api_key = cfg->api_key };
+                             .api_key = cfg->api_key,
+                             .user = cfg->user[0] ? cfg->user : NULL,
+                             .password = cfg->password,
+                             .poll_ms = cfg->poll_ms };
     p->drv = env->driver(env->l, &dc, on_drv_event, p, &err);
     if (!p->drv) {
         snprintf(p->message, sizeof(p->message), "%s", err.msg);
