@@ -287,7 +287,7 @@ drv_moonraker_observe(const struct moonraker_status *st, const char *job_name, i
  * next poll: the printer runs our file, or the upload is sent again (at
  * most MR_UPLOAD_TRIES times), or the job fails with the reason.
  */
-#define MR_POLL_MS         1000
+#define MR_POLL_MS         1000  /* drv_config.poll_ms 0 */
 #define MR_STARTUP_MS      2000  /* docs: ask /server/info again after 2 s while Klippy starts */
 #define MR_TIMEOUT_MS      10000 /* a poll or an action */
 #define MR_UPLOAD_STALL_MS 30000 /* an upload that moves nothing for this long has failed */
@@ -308,24 +308,27 @@ enum rq {
 
 struct moonraker {
     struct drv base;
-    struct httpc *http;         /* the loop's shared client (httpc_get) */
-    char url[256];              /* base URL, no trailing '/' */
-    char key_hdr[160];          /* "X-Api-Key: ..." */
-    const char *hdrs[3];        /* the key (if any), NULL */
-    const char *json_hdrs[4];   /* the key, Content-Type: application/json, NULL */
-    bool open;                  /* open() and not closed or gone offline */
-    bool ready;                 /* Klippy answered /server/info: poll the objects */
-    struct httpc_req *req;      /* the request in flight, or NULL */
-    enum rq rq;                 /* its kind */
-    uint64_t timer;             /* the next poll (or info, or upload retry), 0 if none */
-    int fails;                  /* contacts failed in a row */
-    struct netjob job;          /* the job on the printer */
-    char path[1024];            /* its file on disk (for a second upload) */
-    int uploads;                /* upload attempts for it */
-    bool verify;                /* the upload's fate is unknown: the next poll settles it */
-    char upload_err[128];       /* why it is unknown */
-    enum rq want;               /* RQ_PAUSE/RESUME/CANCEL to send when the slot frees */
-    char script[MR_SCRIPT_MAX]; /* manual commands waiting, '\n'-separated */
+    struct httpc *http;           /* the loop's shared client (httpc_get) */
+    char url[256];                /* base URL, no trailing '/' */
+    char key_hdr[160];            /* "X-Api-Key: ..." */
+    const char *hdrs[3];          /* the key (if any), NULL */
+    const char *json_hdrs[4];     /* the key, Content-Type: application/json, NULL */
+    bool open;                    /* open() and not closed or gone offline */
+    bool ready;                   /* Klippy answered /server/info: poll the objects */
+    struct httpc_req *req;        /* the request in flight, or NULL */
+    enum rq rq;                   /* its kind */
+    uint64_t timer;               /* the next poll (or info, or upload retry), 0 if none */
+    int fails;                    /* contacts failed in a row */
+    struct netjob job;            /* the job on the printer */
+    char path[1024];              /* its file on disk (for a second upload) */
+    int uploads;                  /* upload attempts for it */
+    bool verify;                  /* the upload's fate is unknown: the next poll settles it */
+    char upload_err[128];         /* why it is unknown */
+    int poll_ms;                  /* the poll period */
+    struct moonraker_status last; /* the last poll's answer (attach reads it) */
+    bool have_last;               /* there is one since open() */
+    enum rq want;                 /* RQ_PAUSE/RESUME/CANCEL to send when the slot frees */
+    char script[MR_SCRIPT_MAX];   /* manual commands waiting, '\n'-separated */
     size_t script_len;
 };
 
@@ -438,6 +441,8 @@ on_poll(struct moonraker *m, const struct httpc_result *res)
         return;
     }
     m->fails = 0;
+    m->last = st;
+    m->have_last = true;
     netjob_temps(&m->base, st.nozzle_c, st.nozzle_target_c, st.bed_c, st.bed_target_c);
     struct netjob_obs ob;
     drv_moonraker_observe(&st, m->job.name, m->job.size, &ob);
@@ -456,7 +461,7 @@ on_poll(struct moonraker *m, const struct httpc_result *res)
                 }
             }
             end_job(m, DRV_IDLE, DRV_EV_JOB_FAILED, m->upload_err);
-            schedule(m, MR_POLL_MS);
+            schedule(m, m->poll_ms);
             return;
         }
         /* busy with something else, halted, restarting: the judge says */
@@ -473,7 +478,7 @@ on_poll(struct moonraker *m, const struct httpc_result *res)
         m->ready = false;
         schedule(m, MR_STARTUP_MS);
     } else {
-        schedule(m, MR_POLL_MS);
+        schedule(m, m->poll_ms);
     }
 }
 
@@ -715,7 +720,7 @@ on_timer(struct loop *l, void *ud)
     if (!m->open)
         return;
     if (m->req) { /* an action holds the slot: poll after it */
-        schedule(m, MR_POLL_MS);
+        schedule(m, m->poll_ms);
         return;
     }
     bool ok = m->ready ? start_req(m, RQ_POLL, "GET",
@@ -724,7 +729,7 @@ on_timer(struct loop *l, void *ud)
                                    NULL, NULL, 0)
                        : start_req(m, RQ_INFO, "GET", "/server/info", NULL, NULL, 0);
     if (!ok)
-        schedule(m, MR_POLL_MS);
+        schedule(m, m->poll_ms);
 }
 
 static void
@@ -745,7 +750,7 @@ preempt_poll(struct moonraker *m)
         httpc_cancel(m->req);
         m->req = NULL;
         m->rq = RQ_NONE;
-        schedule(m, MR_POLL_MS);
+        schedule(m, m->poll_ms);
     }
 }
 
@@ -760,6 +765,7 @@ mr_open(struct drv *d, struct sf_err *err)
         return SF_OK;
     m->open = true;
     m->ready = false;
+    m->have_last = false;
     if (m->job.phase == NETJOB_NONE)
         netjob_state(d, DRV_CONNECTING, "%s", "");
     schedule(m, 0);
@@ -779,25 +785,10 @@ mr_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
     if (!m->open || d->status.state != DRV_IDLE || m->job.phase != NETJOB_NONE)
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is %s", d->name,
                           drv_state_name(d->status.state));
-    struct netjob j = { .phase = NETJOB_RUNNING };
-    struct drv_job_scan own;
-    int rc = netjob_name(gcode_path, j.name, sizeof(j.name), err);
+    struct netjob j;
+    int rc = netjob_prepare(&j, gcode_path, scan, m->path, sizeof(m->path), err);
     if (rc)
         return rc;
-    if (!scan) {
-        if ((rc = drv_job_scan(gcode_path, &own, err)))
-            return rc;
-        scan = &own;
-    }
-    FILE *f = fopen(gcode_path, "rb");
-    if (!f)
-        return sf_err_sys(err, "job file '%s'", gcode_path);
-    fseeko(f, 0, SEEK_END);
-    j.size = (int64_t)ftello(f);
-    fclose(f);
-    if ((size_t)snprintf(m->path, sizeof(m->path), "%s", gcode_path) >= sizeof(m->path))
-        return sf_err_set(err, SF_EINVAL, "job file '%s': path too long", gcode_path);
-    j.lines_total = scan->lines_total;
     m->job = j;
     m->uploads = 0;
     m->verify = false;
@@ -812,6 +803,39 @@ mr_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
         return sf_err_set(err, SF_EAGAIN, "printer '%s': the upload could not start", d->name);
     }
     netjob_state(d, DRV_PRINTING, "uploading");
+    return SF_OK;
+}
+
+static int
+mr_attach(struct drv *d, const char *gcode_path, const struct drv_job_scan *scan,
+          struct sf_err *err)
+{
+    struct moonraker *m = MR(d);
+    if (!m->open || !m->have_last || d->status.state == DRV_OFFLINE ||
+        d->status.state == DRV_CONNECTING || m->job.phase != NETJOB_NONE)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is %s", d->name,
+                          drv_state_name(d->status.state));
+    struct netjob j;
+    int rc = netjob_prepare(&j, gcode_path, scan, m->path, sizeof(m->path), err);
+    if (rc)
+        return rc;
+    /* print_stats keeps the last job's file and end state until the next one */
+    struct netjob_obs ob;
+    drv_moonraker_observe(&m->last, j.name, j.size, &ob);
+    if (!ob.ours)
+        return sf_err_set(err, SF_ENOTFOUND, "printer '%s' has no job '%s' (print_stats: %s '%s')",
+                          d->name, j.name, m->last.state, m->last.filename);
+    log_printer(LOG_INFO, d->name, "re-attached to '%s', which the printer still knows (%s)",
+                j.name, m->last.state);
+    m->job = j;
+    m->uploads = MR_UPLOAD_TRIES; /* never sent again */
+    m->verify = false;
+    d->status.lines_total = j.lines_total;
+    d->status.lines_acked = 0;
+    d->status.job_started_ms = loop_now_ms(d->loop);
+    struct netjob_verdict v;
+    netjob_judge(NETJOB_RUNNING, &ob, &v);
+    netjob_report(d, &m->job, &v, m->last.progress);
     return SF_OK;
 }
 
@@ -922,6 +946,7 @@ static const struct drv_ops moonraker_ops = {
     .command = mr_command,
     .close = mr_close,
     .destroy = mr_destroy,
+    .attach = mr_attach,
 };
 
 struct drv *
@@ -970,6 +995,7 @@ drv_moonraker_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_
     snprintf(m->base.name, sizeof(m->base.name), "%s", cfg->name ? cfg->name : "?");
     m->base.on_event = on_event;
     m->base.ud = ud;
+    m->poll_ms = cfg->poll_ms > 0 ? cfg->poll_ms : MR_POLL_MS;
     m->base.status.state = DRV_OFFLINE;
     return &m->base;
 }

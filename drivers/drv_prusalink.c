@@ -15,7 +15,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 
 #include "../src/base/log.h"
 #include "../src/base/mem.h"
@@ -269,7 +268,7 @@ drv_prusalink_observe(const struct prusalink_status *st, int64_t job_id, struct 
  * X-Api-Key (older firmware) or user/password by HTTP Digest (current).
  * PrusaLink v1 has no endpoint for a console command.
  */
-#define PL_POLL_MS         1000
+#define PL_POLL_MS         1000 /* drv_config.poll_ms 0 */
 #define PL_TIMEOUT_MS      10000
 #define PL_UPLOAD_STALL_MS 30000
 #define PL_UPLOAD_TRIES    4
@@ -278,26 +277,31 @@ enum rq { RQ_NONE, RQ_POLL, RQ_JOB, RQ_UPLOAD, RQ_PAUSE, RQ_RESUME, RQ_CANCEL };
 
 struct prusalink {
     struct drv base;
-    struct httpc *http;    /* the loop's shared client (httpc_get) */
-    char url[256];         /* base URL, no trailing '/' */
-    char key_hdr[160];     /* "X-Api-Key: ..." */
-    const char *hdrs[3];   /* the key (if any), Accept, NULL */
-    char user[64];         /* digest user, "" for none */
-    char password[128];    /* its password */
-    bool open;             /* open() and not closed or gone offline */
-    bool seen;             /* a status came since open() */
-    struct httpc_req *req; /* the request in flight, or NULL */
-    enum rq rq;            /* its kind */
-    uint64_t timer;        /* the next poll, 0 if none */
-    int fails;             /* contacts failed in a row */
-    struct netjob job;     /* the job on the printer */
-    int64_t job_id;        /* its id on the printer, 0 until learnt */
-    char path[1024];       /* its file on disk */
-    char storage[32];      /* the printer's storage ("usb", "local") */
-    int uploads;           /* upload attempts for the job */
-    bool verify;           /* the upload's fate is unknown: the next poll settles it */
-    char upload_err[128];  /* why it is unknown */
-    enum rq want;          /* RQ_PAUSE/RESUME/CANCEL to send when the slot frees */
+    struct httpc *http;            /* the loop's shared client (httpc_get) */
+    char url[256];                 /* base URL, no trailing '/' */
+    char key_hdr[160];             /* "X-Api-Key: ..." */
+    const char *hdrs[3];           /* the key (if any), Accept, NULL */
+    char user[64];                 /* digest user, "" for none */
+    char password[128];            /* its password */
+    bool open;                     /* open() and not closed or gone offline */
+    int poll_ms;                   /* the poll period */
+    struct prusalink_status last;  /* the last status (attach reads it) */
+    bool have_last;                /* there is one since open() */
+    struct prusalink_job last_job; /* what /api/v1/job last said */
+    bool have_job;                 /* ... and it is still the printer's job */
+    int64_t asked_id;              /* the job id /api/v1/job was last asked about */
+    struct httpc_req *req;         /* the request in flight, or NULL */
+    enum rq rq;                    /* its kind */
+    uint64_t timer;                /* the next poll, 0 if none */
+    int fails;                     /* contacts failed in a row */
+    struct netjob job;             /* the job on the printer */
+    int64_t job_id;                /* its id on the printer, 0 until learnt */
+    char path[1024];               /* its file on disk */
+    char storage[32];              /* the printer's storage ("usb", "local") */
+    int uploads;                   /* upload attempts for the job */
+    bool verify;                   /* the upload's fate is unknown: the next poll settles it */
+    char upload_err[128];          /* why it is unknown */
+    enum rq want;                  /* RQ_PAUSE/RESUME/CANCEL to send when the slot frees */
 };
 
 static struct prusalink *
@@ -381,6 +385,13 @@ judge_reply(const struct httpc_result *res, char *why, size_t n)
     return res->status >= 500 ? O_DOWN : O_REFUSED;
 }
 
+/* The job the last status reports is the one /api/v1/job last described. */
+static bool
+job_known(const struct prusalink *p, const struct prusalink_status *st)
+{
+    return st->has_job && p->have_job && p->last_job.id == st->job_id;
+}
+
 static void
 on_status(struct prusalink *p, const struct httpc_result *res)
 {
@@ -396,25 +407,43 @@ on_status(struct prusalink *p, const struct httpc_result *res)
         return;
     }
     p->fails = 0;
-    p->seen = true;
+    p->last = st;
+    p->have_last = true;
     if (st.storage[0] && !st.read_only)
         snprintf(p->storage, sizeof(p->storage), "%s", st.storage);
     netjob_temps(&p->base, st.nozzle_c, st.nozzle_target_c, st.bed_c, st.bed_target_c);
-    /* a job whose id we do not know yet: ask /api/v1/job whose it is */
-    if (p->job.phase != NETJOB_NONE && p->job_id == 0 && st.has_job) {
+    /* A job we have not seen described: ask /api/v1/job for its file (once
+       per job id) before judging, so a restarted daemon can recognise its
+       print (attach) and a fresh upload is told from someone else's job. */
+    if (!st.has_job) {
+        p->have_job = false;
+        p->asked_id = 0;
+    } else if (!job_known(p, &st) && p->asked_id != st.job_id) {
+        p->asked_id = st.job_id;
         if (start_req(p, RQ_JOB))
             return;
     }
+    bool known = job_known(p, &st);
+    if (p->job.phase != NETJOB_NONE && p->job_id == 0 && known &&
+        strcmp(p->last_job.name, p->job.name) == 0 &&
+        (p->last_job.size == 0 || p->last_job.size == p->job.size)) {
+        p->job_id = st.job_id;
+        log_printer(LOG_INFO, p->base.name, "job '%s' is job %lld on the printer", p->job.name,
+                    (long long)p->job_id);
+    }
     struct netjob_obs ob;
     drv_prusalink_observe(&st, p->job_id, &ob);
+    if (known)
+        ob.file = p->last_job.name;
     if (p->job.phase != NETJOB_NONE && p->job_id == 0)
-        ob.ours = false; /* a finished or stopped job without an id is not known ours */
+        ob.ours = false; /* a job we could not name is not known ours */
     if (p->verify) {
         bool free_now = ob.remote == NETJOB_R_IDLE || ob.remote == NETJOB_R_DONE ||
                         ob.remote == NETJOB_R_CANCELLED;
         if (ob.ours) {
             p->verify = false;
-        } else if (free_now && !st.has_job) {
+        } else if (free_now) {
+            /* the printer is free and does not run our file: send it again */
             if (p->uploads < PL_UPLOAD_TRIES) {
                 p->verify = false;
                 if (start_req(p, RQ_UPLOAD)) {
@@ -423,16 +452,15 @@ on_status(struct prusalink *p, const struct httpc_result *res)
                 }
             }
             end_job(p, DRV_IDLE, DRV_EV_JOB_FAILED, p->upload_err);
-            schedule(p, PL_POLL_MS);
+            schedule(p, p->poll_ms);
             return;
         }
     }
     if (p->job.phase != NETJOB_NONE && p->job_id == 0 && !p->verify &&
-        (ob.remote == NETJOB_R_IDLE || ob.remote == NETJOB_R_BUSY) &&
-        p->base.status.lines_acked == 0 && p->uploads > 0 &&
-        loop_now_ms(p->base.loop) - p->base.status.job_started_ms < 2 * PL_POLL_MS) {
+        (ob.remote == NETJOB_R_IDLE || ob.remote == NETJOB_R_BUSY) && p->uploads > 0 &&
+        loop_now_ms(p->base.loop) - p->base.status.job_started_ms < 2 * p->poll_ms) {
         /* just uploaded: the printer takes a moment to start the file */
-        schedule(p, PL_POLL_MS);
+        schedule(p, p->poll_ms);
         return;
     }
     struct netjob_verdict v;
@@ -444,7 +472,7 @@ on_status(struct prusalink *p, const struct httpc_result *res)
         p->job_id = 0;
     }
     netjob_report(&p->base, &p->job, &v, st.has_job ? st.progress : p->base.status.progress);
-    schedule(p, PL_POLL_MS);
+    schedule(p, p->poll_ms);
 }
 
 static void
@@ -456,6 +484,7 @@ on_job(struct prusalink *p, const struct httpc_result *res)
         return;
     }
     if (res->status == 204) { /* no job after all */
+        p->have_job = false;
         schedule(p, 0);
         return;
     }
@@ -465,31 +494,9 @@ on_job(struct prusalink *p, const struct httpc_result *res)
         contact_lost(p, err.msg);
         return;
     }
-    if (p->job.phase != NETJOB_NONE && strcmp(job.name, p->job.name) == 0 &&
-        (job.size == 0 || job.size == p->job.size)) {
-        p->job_id = job.id;
-        log_printer(LOG_INFO, p->base.name, "job '%s' is job %lld on the printer", p->job.name,
-                    (long long)job.id);
-        schedule(p, 0);
-        return;
-    }
-    /* another file: judge the status as not ours */
-    struct netjob_obs ob = { .remote = strcmp(job.state, "PAUSED") == 0 ? NETJOB_R_PAUSED
-                                                                        : NETJOB_R_PRINTING,
-                             .ours = false,
-                             .file = job.name };
-    if (p->verify && p->uploads < PL_UPLOAD_TRIES) {
-        schedule(p, PL_POLL_MS); /* our upload waits for the printer to be free */
-        return;
-    }
-    struct netjob_verdict v;
-    netjob_judge(p->job.phase, &ob, &v);
-    if (v.ends) {
-        p->verify = false;
-        p->job_id = 0;
-    }
-    netjob_report(&p->base, &p->job, &v, p->base.status.progress);
-    schedule(p, PL_POLL_MS);
+    p->last_job = job;
+    p->have_job = true;
+    schedule(p, 0); /* the status again, now judged with the job's file */
 }
 
 static void
@@ -690,7 +697,7 @@ on_timer(struct loop *l, void *ud)
     if (!p->open)
         return;
     if (p->req || !start_req(p, RQ_POLL))
-        schedule(p, PL_POLL_MS);
+        schedule(p, p->poll_ms);
 }
 
 static void
@@ -710,7 +717,7 @@ preempt_poll(struct prusalink *p)
         httpc_cancel(p->req);
         p->req = NULL;
         p->rq = RQ_NONE;
-        schedule(p, PL_POLL_MS);
+        schedule(p, p->poll_ms);
     }
 }
 
@@ -724,7 +731,9 @@ pl_open(struct drv *d, struct sf_err *err)
     if (p->open)
         return SF_OK;
     p->open = true;
-    p->seen = false;
+    p->have_last = false;
+    p->have_job = false;
+    p->asked_id = 0;
     if (p->job.phase == NETJOB_NONE)
         netjob_state(d, DRV_CONNECTING, "%s", "");
     snprintf(d->caps.firmware, sizeof(d->caps.firmware), "PrusaLink");
@@ -745,23 +754,10 @@ pl_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
     if (!p->open || d->status.state != DRV_IDLE || p->job.phase != NETJOB_NONE)
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is %s", d->name,
                           drv_state_name(d->status.state));
-    struct netjob j = { .phase = NETJOB_RUNNING };
-    struct drv_job_scan own;
-    int rc = netjob_name(gcode_path, j.name, sizeof(j.name), err);
+    struct netjob j;
+    int rc = netjob_prepare(&j, gcode_path, scan, p->path, sizeof(p->path), err);
     if (rc)
         return rc;
-    if (!scan) {
-        if ((rc = drv_job_scan(gcode_path, &own, err)))
-            return rc;
-        scan = &own;
-    }
-    struct stat sb;
-    if (stat(gcode_path, &sb) != 0)
-        return sf_err_sys(err, "job file '%s'", gcode_path);
-    j.size = (int64_t)sb.st_size;
-    if ((size_t)snprintf(p->path, sizeof(p->path), "%s", gcode_path) >= sizeof(p->path))
-        return sf_err_set(err, SF_EINVAL, "job file '%s': path too long", gcode_path);
-    j.lines_total = scan->lines_total;
     p->job = j;
     p->job_id = 0;
     p->uploads = 0;
@@ -777,6 +773,47 @@ pl_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
         return sf_err_set(err, SF_EAGAIN, "printer '%s': the upload could not start", d->name);
     }
     netjob_state(d, DRV_PRINTING, "uploading");
+    return SF_OK;
+}
+
+static int
+pl_attach(struct drv *d, const char *gcode_path, const struct drv_job_scan *scan,
+          struct sf_err *err)
+{
+    struct prusalink *p = PL(d);
+    if (!p->open || !p->have_last || d->status.state == DRV_OFFLINE ||
+        d->status.state == DRV_CONNECTING || p->job.phase != NETJOB_NONE ||
+        (p->last.has_job && !job_known(p, &p->last)))
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is %s", d->name,
+                          drv_state_name(d->status.state));
+    struct netjob j;
+    int rc = netjob_prepare(&j, gcode_path, scan, p->path, sizeof(p->path), err);
+    if (rc)
+        return rc;
+    if (!p->last.has_job)
+        return sf_err_set(err, SF_ENOTFOUND, "printer '%s' has no job (it is %s)", d->name,
+                          p->last.state);
+    if (strcmp(p->last_job.name, j.name) != 0 ||
+        (p->last_job.size != 0 && p->last_job.size != j.size))
+        return sf_err_set(err, SF_ENOTFOUND, "printer '%s' has job %lld '%s', not '%s'", d->name,
+                          (long long)p->last_job.id, p->last_job.name, j.name);
+    log_printer(LOG_INFO, d->name, "re-attached to '%s', job %lld on the printer (%s)", j.name,
+                (long long)p->last_job.id, p->last.state);
+    p->job = j;
+    p->job_id = p->last_job.id;
+    p->uploads = PL_UPLOAD_TRIES; /* never sent again */
+    p->verify = false;
+    d->status.lines_total = j.lines_total;
+    d->status.lines_acked = 0;
+    d->status.job_started_ms = loop_now_ms(d->loop);
+    struct netjob_obs ob;
+    drv_prusalink_observe(&p->last, p->job_id, &ob);
+    ob.file = p->last_job.name;
+    struct netjob_verdict v;
+    netjob_judge(NETJOB_RUNNING, &ob, &v);
+    if (v.ends)
+        p->job_id = 0;
+    netjob_report(d, &p->job, &v, p->last.progress);
     return SF_OK;
 }
 
@@ -868,6 +905,7 @@ static const struct drv_ops prusalink_ops = {
     .command = pl_command,
     .close = pl_close,
     .destroy = pl_destroy,
+    .attach = pl_attach,
 };
 
 struct drv *
@@ -905,6 +943,11 @@ drv_prusalink_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_
         p->hdrs[h++] = p->key_hdr;
     }
     p->hdrs[h] = "Accept: application/json";
+    if (cfg->user && cfg->user[0]) {
+        snprintf(p->user, sizeof(p->user), "%s", cfg->user);
+        snprintf(p->password, sizeof(p->password), "%s", cfg->password ? cfg->password : "");
+    }
+    p->poll_ms = cfg->poll_ms > 0 ? cfg->poll_ms : PL_POLL_MS;
     p->http = httpc_get(l, err);
     if (!p->http) {
         free(p);

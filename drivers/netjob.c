@@ -15,6 +15,7 @@
 #include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
+#include <sys/stat.h>
 
 #include "../src/base/log.h"
 
@@ -188,17 +189,26 @@ netjob_remote_name(enum netjob_remote r)
 }
 
 int
-netjob_name(const char *gcode_path, char *out, size_t n, struct sf_err *err)
+netjob_prepare(struct netjob *j, const char *gcode_path, const struct drv_job_scan *scan,
+               char *path, size_t n, struct sf_err *err)
 {
-    const char *base = strrchr(gcode_path, '/');
-    base = base ? base + 1 : gcode_path;
-    size_t len = strlen(base);
-    bool has_ext = len > 6 && strcmp(base + len - 6, ".gcode") == 0;
-    if (len == 0 || base[0] == '.')
-        return sf_err_set(err, SF_EINVAL, "job file '%s': no usable file name", gcode_path);
-    if ((size_t)snprintf(out, n, "%s%s", base, has_ext ? "" : ".gcode") >= n)
-        return sf_err_set(err, SF_EINVAL, "job file '%s': name too long for the printer",
-                          gcode_path);
+    memset(j, 0, sizeof(*j));
+    struct stat sb;
+    if (stat(gcode_path, &sb) != 0)
+        return sf_err_sys(err, "job file '%s'", gcode_path);
+    if ((size_t)snprintf(path, n, "%s", gcode_path) >= n)
+        return sf_err_set(err, SF_EINVAL, "job file '%s': path too long", gcode_path);
+    struct drv_job_scan own;
+    if (!scan) {
+        int rc = drv_job_scan(gcode_path, &own, err);
+        if (rc)
+            return rc;
+        scan = &own;
+    }
+    j->phase = NETJOB_RUNNING;
+    drv_remote_name(gcode_path, j->name, sizeof(j->name));
+    j->size = (int64_t)sb.st_size;
+    j->lines_total = scan->lines_total;
     return SF_OK;
 }
 

@@ -87,12 +87,14 @@ struct netjob {
 };
 
 /*
- * The file name a job goes by on the printer: gcode_path's base name, with
- * ".gcode" added when it lacks it (the farm's files are named by their
- * SHA-256, so equal names mean equal content).  SF_EINVAL if it is empty
- * or does not fit n.
+ * Fill j for the job file gcode_path: phase NETJOB_RUNNING, the name it
+ * goes by on the printer (drv_remote_name, the same in every daemon run),
+ * its size and its command lines (scan's, or drv_job_scan's when scan is
+ * NULL), and copy the path into path (n bytes).  SF_EIO when the file
+ * cannot be read, SF_EINVAL for a path over n or a bad file.
  */
-int netjob_name(const char *gcode_path, char *out, size_t n, struct sf_err *err);
+int netjob_prepare(struct netjob *j, const char *gcode_path, const struct drv_job_scan *scan,
+                   char *path, size_t n, struct sf_err *err);
 
 /*
  * Report verdict v on driver d, whose job is j: status.state, .message,

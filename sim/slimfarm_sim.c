@@ -31,6 +31,8 @@
 #include "../src/base/loop.h"
 #include "../src/base/mem.h"
 #include "sim_marlin.h"
+#include "sim_moonraker.h"
+#include "sim_prusalink.h"
 
 static const char usage_text[] =
     "usage: slimfarm-sim marlin [--tcp PORT] [--link PATH] [--baud N] [--speed X]\n"
@@ -253,6 +255,8 @@ static const struct {
     int (*main)(int argc, char **argv); /* argv[1] is the kind */
 } sims[] = {
     { "marlin", marlin_main },
+    { "moonraker", sim_moonraker_main },
+    { "prusalink", sim_prusalink_main },
 };
 
 int
