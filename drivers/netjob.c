@@ -260,6 +260,13 @@ netjob_report(struct drv *d, struct netjob *j, const struct netjob_verdict *v, d
     }
     snprintf(st->message, sizeof(st->message), "%s", v->message);
     st->state = v->state;
+    /* the state first: the farm takes a printer's error (and its message)
+       from DRV_EV_STATE, and a job's end then finds it already moved */
+    if (st->state != was) {
+        log_printer(LOG_INFO, d->name, "%s -> %s%s%s", drv_state_name(was),
+                    drv_state_name(st->state), st->message[0] ? ": " : "", st->message);
+        emit(d, DRV_EV_STATE);
+    }
     if (v->ends) {
         log_printer(v->ev == DRV_EV_JOB_FAILED ? LOG_WARN : LOG_INFO, d->name, "job '%s': %s%s%s",
                     j->name,
@@ -269,11 +276,6 @@ netjob_report(struct drv *d, struct netjob *j, const struct netjob_verdict *v, d
                     v->message[0] ? ": " : "", v->message);
         j->phase = NETJOB_NONE;
         emit(d, v->ev);
-    }
-    if (st->state != was) {
-        log_printer(LOG_INFO, d->name, "%s -> %s%s%s", drv_state_name(was),
-                    drv_state_name(st->state), st->message[0] ? ": " : "", st->message);
-        emit(d, DRV_EV_STATE);
     }
 }
 

@@ -100,8 +100,9 @@ int netjob_prepare(struct netjob *j, const char *gcode_path, const struct drv_jo
  * Report verdict v on driver d, whose job is j: status.state, .message,
  * .progress and .lines_acked (progress times j->lines_total), then the
  * events in the order the farm needs them: DRV_EV_PROGRESS if lines_acked
- * moved, the job's end if v->ends (j->phase becomes NETJOB_NONE), then
- * DRV_EV_STATE if the state changed.  Loop thread.
+ * moved, DRV_EV_STATE if the state changed (a printer error reaches the
+ * farm with its message before the job's failure), then the job's end if
+ * v->ends (j->phase becomes NETJOB_NONE).  Loop thread.
  */
 void netjob_report(struct drv *d, struct netjob *j, const struct netjob_verdict *v,
                    double progress);

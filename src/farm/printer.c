@@ -185,6 +185,12 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
             snprintf(p->message, sizeof(p->message), "%s", st->message);
             move(p, PRINTER_EV_DISCONNECTED);
             schedule_reconnect(p);
+        } else if (st->state == DRV_OFFLINE) {
+            /* a connection that failed after open() returned (network
+               drivers learn it from a reply): say why, and try again */
+            snprintf(p->message, sizeof(p->message), "%s", st->message);
+            schedule_reconnect(p);
+            changed(p);
         } else if (st->state == DRV_ERROR && p->state != PRINTER_ERROR) {
             fail_job(p, st->message[0] ? st->message : "printer reported an error");
             snprintf(p->message, sizeof(p->message), "%s", st->message);
