@@ -31,6 +31,7 @@
 #include "../src/base/loop.h"
 #include "../src/base/mem.h"
 #include "sim_marlin.h"
+#include "sim_octoprint.h"
 #include "sim_moonraker.h"
 #include "sim_prusalink.h"
 
@@ -255,6 +256,7 @@ static const struct {
     int (*main)(int argc, char **argv); /* argv[1] is the kind */
 } sims[] = {
     { "marlin", marlin_main },
+    { "octoprint", sim_octoprint_main },
     { "moonraker", sim_moonraker_main },
     { "prusalink", sim_prusalink_main },
 };
