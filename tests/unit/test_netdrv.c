@@ -214,7 +214,7 @@ log_matches(const char *log_path, const char *gcode, bool whole, char *why, size
     }
     if (i >= 0 && !whole) {
         /* a cancelled job: after its prefix, the host's cancel script and nothing else */
-        static const char *const script[] = { "M84", "M104 S0", "M140 S0", "M107" };
+        static const char *const script[] = { "M104 S0", "M140 S0", "M107", "M84" };
         size_t k = 0;
         for (; j < ng; j++) {
             if (host_line(got[j]))
