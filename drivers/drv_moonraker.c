@@ -534,6 +534,8 @@ on_upload(struct moonraker *m, const struct httpc_result *res)
     if (o == O_DOWN) {
         /* sent in part, or whole with the answer lost: the printer knows */
         snprintf(m->upload_err, sizeof(m->upload_err), "upload failed: %s", why);
+        log_printer(LOG_WARN, m->base.name,
+                    "upload failed (%s); asking the printer whether it arrived", why);
         m->verify = true;
         m->fails++;
         m->ready = false;

@@ -518,6 +518,8 @@ on_upload(struct prusalink *p, const struct httpc_result *res)
     }
     if (o == O_DOWN) {
         snprintf(p->upload_err, sizeof(p->upload_err), "upload failed: %s", why);
+        log_printer(LOG_WARN, p->base.name,
+                    "upload failed (%s); asking the printer whether it arrived", why);
         p->verify = true;
         p->fails++;
         schedule(p, drv_backoff_ms(p->fails - 1));
