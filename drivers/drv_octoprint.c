@@ -500,9 +500,11 @@ update_progress(struct octo *o)
     struct drv_status *st = &o->base.status;
     const struct octo_job *j = &o->last;
     uint64_t before = st->lines_acked;
-    double p = j->completion >= 0               ? j->completion / 100.0
-               : j->filepos >= 0 && j->size > 0 ? (double)j->filepos / (double)j->size
-                                                : st->progress;
+    /* Bytes first: OctoPrint's own docs show "completion" both as a
+       percentage (the data model) and as a fraction (the GET /api/job example). */
+    double p = j->filepos >= 0 && j->size > 0 ? (double)j->filepos / (double)j->size
+               : j->completion >= 0           ? j->completion / 100.0
+                                              : st->progress;
     if (p > 1)
         p = 1;
     st->progress = p;
@@ -520,7 +522,7 @@ update_progress(struct octo *o)
 static bool
 finished(const struct octo_job *j)
 {
-    return j->completion >= 99.9999 || (j->filepos >= 0 && j->size > 0 && j->filepos >= j->size);
+    return (j->filepos >= 0 && j->size > 0 && j->filepos >= j->size) || j->completion >= 99.9999;
 }
 
 /* A whole poll cycle came back: what it means. */
