@@ -12,8 +12,8 @@
 #include <string.h>
 
 #include "drv_marlin.h"
-#include "drv_octoprint.h"
 #include "drv_moonraker.h"
+#include "drv_octoprint.h"
 #include "drv_prusalink.h"
 
 /* Every kind this build has; a new driver is one row here. */

@@ -279,19 +279,22 @@ drv_moonraker_observe(const struct moonraker_status *st, const char *job_name, i
  * simply the next poll (a subscription's missed delta is a wrong state
  * until the next full snapshot).
  *
- * Losing contact: without a job the printer goes DRV_OFFLINE with the
- * reason and the farm reconnects with its backoff.  With a job the driver
- * keeps it (the printer prints on without us) and polls with
- * drv_backoff_ms until the printer answers; then netjob_judge says what
- * became of the job.  An upload whose answer was lost is settled by the
- * next poll: the printer runs our file, or the upload is sent again (at
- * most MR_UPLOAD_TRIES times), or the job fails with the reason.
+ * Losing contact (5xx, timeout, refused): without a job the printer goes
+ * DRV_OFFLINE with the reason and the farm reconnects with its backoff.
+ * With a job the driver rides out MR_JOB_TRIES - 1 failed polls (backoff
+ * 0.5, 1, 2 s: the printer prints on without us); then it goes offline
+ * too and lets go of the job, which the farm marks interrupted and offers
+ * back through attach() when the printer answers.  An upload whose answer
+ * was lost is settled by the next poll: the printer runs our file, or it
+ * is sent again (at most MR_UPLOAD_TRIES times), or the job fails with the
+ * reason.
  */
 #define MR_POLL_MS         1000  /* drv_config.poll_ms 0 */
 #define MR_STARTUP_MS      2000  /* docs: ask /server/info again after 2 s while Klippy starts */
 #define MR_TIMEOUT_MS      10000 /* a poll or an action */
 #define MR_UPLOAD_STALL_MS 30000 /* an upload that moves nothing for this long has failed */
 #define MR_UPLOAD_TRIES    4
+#define MR_JOB_TRIES       4    /* failed contacts in a row a job rides out before going offline */
 #define MR_SCRIPT_MAX      4096 /* manual commands waiting to be sent */
 
 enum rq {
@@ -388,18 +391,28 @@ contact_lost(struct moonraker *m, const char *why)
 {
     m->fails++;
     m->ready = false;
-    if (m->job.phase == NETJOB_NONE) {
-        quiet(m);
-        m->open = false;
-        netjob_state(&m->base, DRV_OFFLINE, "%s", why);
+    if (m->job.phase != NETJOB_NONE && m->fails < MR_JOB_TRIES) {
+        /* a short outage: ride it out, the printer prints on */
+        int ms = drv_backoff_ms(m->fails - 1);
+        log_printer(LOG_WARN, m->base.name, "%s; asking again in %d ms", why, ms);
+        snprintf(m->base.status.message, sizeof(m->base.status.message),
+                 "unreachable: %s (retrying)", why);
+        schedule(m, ms);
         return;
     }
-    int ms = drv_backoff_ms(m->fails - 1);
-    log_printer(LOG_WARN, m->base.name, "%s; the job stays on the printer, asking again in %d ms",
-                why, ms);
-    snprintf(m->base.status.message, sizeof(m->base.status.message),
-             "unreachable: %s (job kept; retrying)", why);
-    schedule(m, ms);
+    if (m->job.phase != NETJOB_NONE) {
+        /* The printer prints on without us: the farm marks the job
+           interrupted and offers it back through attach() once the
+           printer answers again. */
+        log_printer(LOG_WARN, m->base.name, "offline with job '%s' on the printer: %s", m->job.name,
+                    why);
+        m->job.phase = NETJOB_NONE;
+        m->verify = false;
+        m->want = RQ_NONE;
+    }
+    quiet(m);
+    m->open = false;
+    netjob_state(&m->base, DRV_OFFLINE, "%s", why);
 }
 
 /* What a finished request amounts to. */

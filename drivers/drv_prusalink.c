@@ -256,7 +256,8 @@ drv_prusalink_observe(const struct prusalink_status *st, int64_t job_id, struct 
 
 /*
  * How it talks: as drv_moonraker.c (one request at a time, polls on a
- * timer that actions pre-empt, a job kept through lost contact), over
+ * timer that actions pre-empt, a short outage ridden out with a job on the
+ * printer, a longer one offline with the job left to attach()), over
  * PrusaLink's v1 API: GET /api/v1/status every PL_POLL_MS (Prusa Connect
  * and PrusaSlicer poll the printer at about this rate), PUT
  * /api/v1/files/{storage}/{name} with Print-After-Upload: ?1 and
@@ -272,6 +273,7 @@ drv_prusalink_observe(const struct prusalink_status *st, int64_t job_id, struct 
 #define PL_TIMEOUT_MS      10000
 #define PL_UPLOAD_STALL_MS 30000
 #define PL_UPLOAD_TRIES    4
+#define PL_JOB_TRIES       4 /* failed contacts in a row a job rides out before going offline */
 
 enum rq { RQ_NONE, RQ_POLL, RQ_JOB, RQ_UPLOAD, RQ_PAUSE, RQ_RESUME, RQ_CANCEL };
 
@@ -349,18 +351,28 @@ static void
 contact_lost(struct prusalink *p, const char *why)
 {
     p->fails++;
-    if (p->job.phase == NETJOB_NONE) {
-        quiet(p);
-        p->open = false;
-        netjob_state(&p->base, DRV_OFFLINE, "%s", why);
+    if (p->job.phase != NETJOB_NONE && p->fails < PL_JOB_TRIES) {
+        /* a short outage: ride it out, the printer prints on */
+        int ms = drv_backoff_ms(p->fails - 1);
+        log_printer(LOG_WARN, p->base.name, "%s; asking again in %d ms", why, ms);
+        snprintf(p->base.status.message, sizeof(p->base.status.message),
+                 "unreachable: %s (retrying)", why);
+        schedule(p, ms);
         return;
     }
-    int ms = drv_backoff_ms(p->fails - 1);
-    log_printer(LOG_WARN, p->base.name, "%s; the job stays on the printer, asking again in %d ms",
-                why, ms);
-    snprintf(p->base.status.message, sizeof(p->base.status.message),
-             "unreachable: %s (job kept; retrying)", why);
-    schedule(p, ms);
+    if (p->job.phase != NETJOB_NONE) {
+        /* The printer prints on without us: the farm marks the job
+           interrupted and offers it back through attach() once the
+           printer answers again. */
+        log_printer(LOG_WARN, p->base.name, "offline with job '%s' on the printer: %s", p->job.name,
+                    why);
+        p->job.phase = NETJOB_NONE;
+        p->verify = false;
+        p->want = RQ_NONE;
+    }
+    quiet(p);
+    p->open = false;
+    netjob_state(&p->base, DRV_OFFLINE, "%s", why);
 }
 
 enum outcome { O_OK, O_DOWN, O_AUTH, O_REFUSED };

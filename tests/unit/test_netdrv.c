@@ -736,3 +736,55 @@ T_CASE(prusalink_reattach_unknown_job)
 {
     reattach_gone(PRUSALINK);
 }
+
+static bool
+offline_or_ended(void *ud)
+{
+    struct fx *f = ud;
+    return f->d->status.state == DRV_OFFLINE || f->rec.done + f->rec.failed > 0;
+}
+
+static void
+outage_then_attach(enum kind kind)
+{
+    /* a long outage mid-job: the driver rides out three failed polls, then
+       goes offline and lets go of the job (the farm marks it interrupted);
+       once the printer answers, attach takes it back and it ends done */
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "5xx=8@5", NULL };
+    T_OK(fx_start(&f, kind, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    char job[512];
+    snprintf(job, sizeof(job), "%s", job_file("outage.gcode", 6000));
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(run_until(f.l, offline_or_ended, &f));
+    T_EQ_INT(f.d->status.state, DRV_OFFLINE);
+    T_EQ_INT(f.rec.done + f.rec.failed + f.rec.cancelled, 0); /* not ended: interrupted */
+    T_TRUE(strstr(f.d->status.message, "503") != NULL);
+    /* the farm's backoff re-opens it until it answers */
+    for (int i = 0; i < 20 && !left_connecting(&f); i++) {
+        T_OK(f.d->ops->open(f.d, &err), &err);
+        int64_t end = wall_ms() + 3000;
+        while (f.d->status.state == DRV_CONNECTING && wall_ms() < end)
+            loop_run_once(f.l, 50);
+    }
+    T_TRUE(left_connecting(&f));
+    T_OK(f.d->ops->attach(f.d, job, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    fx_stop(&f);
+    char why[300] = "";
+    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
+        t_fail(__FILE__, __LINE__, "%s", why);
+}
+
+T_CASE(moonraker_outage_then_attach)
+{
+    outage_then_attach(MOONRAKER);
+}
+
+T_CASE(prusalink_outage_then_attach)
+{
+    outage_then_attach(PRUSALINK);
+}
