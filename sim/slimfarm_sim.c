@@ -31,8 +31,8 @@
 #include "../src/base/loop.h"
 #include "../src/base/mem.h"
 #include "sim_marlin.h"
-#include "sim_octoprint.h"
 #include "sim_moonraker.h"
+#include "sim_octoprint.h"
 #include "sim_prusalink.h"
 
 static const char usage_text[] =
