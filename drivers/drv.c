@@ -12,12 +12,16 @@
 #include <string.h>
 
 #include "drv_marlin.h"
+#include "drv_moonraker.h"
 #include "drv_octoprint.h"
+#include "drv_prusalink.h"
 
 /* Every kind this build has; a new driver is one row here. */
 static const struct drv_kind kinds[] = {
     { "marlin", false, DRV_AUTH_NONE, NULL, drv_marlin_new },
     { "octoprint", true, DRV_AUTH_KEY, "http https", drv_octoprint_new },
+    { "moonraker", true, DRV_AUTH_KEY_OPTIONAL, "http https", drv_moonraker_new },
+    { "prusalink", true, DRV_AUTH_KEY_OR_DIGEST, "http https", drv_prusalink_new },
 };
 #define N_KINDS (sizeof(kinds) / sizeof(kinds[0]))
 

@@ -31,7 +31,9 @@
 #include "../src/base/loop.h"
 #include "../src/base/mem.h"
 #include "sim_marlin.h"
+#include "sim_moonraker.h"
 #include "sim_octoprint.h"
+#include "sim_prusalink.h"
 
 static const char usage_text[] =
     "usage: slimfarm-sim marlin [--tcp PORT] [--link PATH] [--baud N] [--speed X]\n"
@@ -255,6 +257,8 @@ static const struct {
 } sims[] = {
     { "marlin", marlin_main },
     { "octoprint", sim_octoprint_main },
+    { "moonraker", sim_moonraker_main },
+    { "prusalink", sim_prusalink_main },
 };
 
 int

@@ -1,0 +1,655 @@
+/*
+ * sim_moonraker.c - Moonraker's HTTP API over a simulated machine
+ * (sim_moonraker.h).
+ *
+ * Klippy's state (ready, startup, shutdown) lives here; the job lives in
+ * sim_netprinter and is reported in Klipper's words: print_stats.state
+ * standby, printing, paused, complete, cancelled or error, and the
+ * virtual_sdcard's file position.  A watch timer fires the line-triggered
+ * faults (shutdown, error, cancel at the printer) when the job gets there.
+ *
+ * Thread: the loop thread.
+ */
+#include "sim_moonraker.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "../src/base/mem.h"
+#include "sim_netcli.h"
+
+#define WATCH_MS   20  /* how often line-triggered faults are checked */
+#define RESTART_MS 300 /* a firmware_restart's "startup" phase */
+
+enum klippy { K_READY, K_STARTUP, K_SHUTDOWN };
+
+struct sim_moonraker {
+    struct loop *l;
+    char address[64]; /* "http://127.0.0.1:PORT" */
+    struct sim_moonraker_config cfg;
+    struct sim_netprinter *np;
+    struct sim_http *http;
+    enum klippy klippy;
+    char klippy_msg[512];                           /* webhooks.state_message */
+    int64_t ready_at_ms;                            /* startup ends at this loop time */
+    uint64_t watch;                                 /* watch timer */
+    bool fired_shutdown, fired_error, fired_cancel; /* each fault once a job */
+    char fired_for[SIM_NP_NAME_MAX + 1];            /* ... the job they fired for */
+    int64_t fired_started;                          /* its start (print_time_s of 0) */
+    double file_mtime;                              /* upload time of the current file */
+};
+
+static const char shutdown_text[] =
+    "MCU 'mcu' shutdown: Timer too close\nThis often indicates the host computer is "
+    "overloaded. Check\nfor other processes consuming excessive CPU time, high swap\nusage, "
+    "disk errors, overheating, unstable voltage, or\nsimilar system problems on the host "
+    "computer.\nOnce the underlying issue is corrected, use the\n\"FIRMWARE_RESTART\" command "
+    "to reset the firmware, reload the\nconfig, and restart the host software.\nPrinter is "
+    "shutdown";
+
+void
+sim_moonraker_config_init(struct sim_moonraker_config *c)
+{
+    memset(c, 0, sizeof(*c));
+    sim_netprinter_config_init(&c->machine);
+}
+
+static int
+parse_line(const char *spec, const char *v, long *out, struct sf_err *err)
+{
+    char *end;
+    errno = 0;
+    long n = strtol(v, &end, 10);
+    if (errno || end == v || *end || n < 1 || n > 1000000000L)
+        return sf_err_set(err, SF_EINVAL, "fault '%s': expected a whole number from 1", spec);
+    *out = n;
+    return SF_OK;
+}
+
+int
+sim_moonraker_fault_parse(struct sim_moonraker_config *c, const char *spec, struct sf_err *err)
+{
+    int rc = sim_http_fault_parse(&c->http, spec, err);
+    if (rc != SF_EUNSUPP)
+        return rc;
+    const char *eq = strchr(spec, '=');
+    const char *v = eq ? eq + 1 : "";
+    size_t n = eq ? (size_t)(eq - spec) : strlen(spec);
+    if (n == 8 && strncmp(spec, "shutdown", n) == 0)
+        return parse_line(spec, v, &c->shutdown_at, err);
+    if (n == 5 && strncmp(spec, "error", n) == 0)
+        return parse_line(spec, v, &c->error_at, err);
+    if (n == 6 && strncmp(spec, "cancel", n) == 0)
+        return parse_line(spec, v, &c->cancel_at, err);
+    if (n == 7 && strncmp(spec, "startup", n) == 0) {
+        long ms;
+        if ((rc = parse_line(spec, v, &ms, err)))
+            return rc;
+        c->startup_ms = (int)(ms > 3600000 ? 3600000 : ms);
+        return SF_OK;
+    }
+    return faults_parse(&c->machine.faults, spec, err);
+}
+
+/* ---- replies ---- */
+
+static void
+reply_result(struct sim_http_req *r, json_t *result)
+{
+    sim_http_reply_json(r, 200, json_pack("{s:o}", "result", result ? result : json_null()));
+}
+
+static void
+reply_ok(struct sim_http_req *r)
+{
+    reply_result(r, json_string("ok"));
+}
+
+static void
+reply_err(struct sim_http_req *r, unsigned status, const char *message)
+{
+    sim_http_reply_json(
+        r, status, json_pack("{s:{s:i,s:s}}", "error", "code", (int)status, "message", message));
+}
+
+static const char *
+klippy_name(enum klippy k)
+{
+    return k == K_READY ? "ready" : k == K_STARTUP ? "startup" : "shutdown";
+}
+
+/* Klippy must be ready for gcode and print requests; else the error Klipper gives. */
+static bool
+need_ready(struct sim_moonraker *s, struct sim_http_req *r)
+{
+    if (s->klippy == K_READY)
+        return true;
+    reply_err(r, s->klippy == K_STARTUP ? 503 : 400,
+              s->klippy == K_STARTUP ? "Klippy Host not connected" : "Printer is shutdown");
+    return false;
+}
+
+/* A request argument from the JSON body, else the query string; NULL if neither. */
+static const char *
+arg(struct sim_http_req *r, const char *name, json_t **hold)
+{
+    size_t len = 0;
+    sim_http_body(r, &len);
+    if (len > 0) {
+        json_t *b = sim_http_json(r, NULL);
+        json_t *v = b ? json_object_get(b, name) : NULL;
+        if (v && json_is_string(v)) {
+            *hold = b;
+            return json_string_value(v);
+        }
+        json_decref(b);
+    }
+    return sim_http_query(r, name);
+}
+
+/* ---- status in Klipper's words ---- */
+
+static const char *
+ps_state(const struct sim_np_status *st)
+{
+    switch (st->state) {
+    case SIM_NP_IDLE:
+        return "standby";
+    case SIM_NP_PRINTING:
+    case SIM_NP_CANCELLING:
+        return "printing";
+    case SIM_NP_PAUSING:
+    case SIM_NP_PAUSED:
+        return "paused";
+    case SIM_NP_CANCELLED:
+        return "cancelled";
+    case SIM_NP_COMPLETE:
+        return "complete";
+    case SIM_NP_ERROR:
+        return "error";
+    }
+    return "standby";
+}
+
+/* The object called name, or NULL if this printer has none. */
+static json_t *
+object(struct sim_moonraker *s, const char *name, const struct sim_np_status *st)
+{
+    bool loaded = st->state != SIM_NP_IDLE;
+    if (strcmp(name, "webhooks") == 0)
+        return json_pack("{s:s,s:s}", "state", klippy_name(s->klippy), "state_message",
+                         s->klippy_msg);
+    if (strcmp(name, "print_stats") == 0)
+        return json_pack("{s:s,s:f,s:f,s:f,s:s,s:s,s:{s:n,s:n}}", "filename",
+                         loaded ? st->file : "", "total_duration", st->print_time_s,
+                         "print_duration", st->print_time_s, "filament_used", 0.0, "state",
+                         ps_state(st), "message", st->state == SIM_NP_ERROR ? st->message : "",
+                         "info", "total_layer", "current_layer");
+    if (strcmp(name, "virtual_sdcard") == 0) {
+        char path[1024];
+        json_t *fp = json_null();
+        if (loaded && sim_netprinter_path(s->np, st->file, path, sizeof(path), NULL) == SF_OK)
+            fp = json_string(path);
+        return json_pack("{s:o,s:f,s:b,s:I,s:I}", "file_path", fp, "progress", st->progress,
+                         "is_active", st->state == SIM_NP_PRINTING, "file_position",
+                         (json_int_t)(loaded ? st->file_pos : 0), "file_size",
+                         (json_int_t)(loaded ? st->file_size : 0));
+    }
+    if (strcmp(name, "extruder") == 0)
+        return json_pack("{s:f,s:f,s:f,s:b,s:f,s:f,s:n}", "temperature", st->nozzle_c, "target",
+                         st->nozzle_target_c, "power", st->nozzle_target_c > 0 ? 0.4 : 0.0,
+                         "can_extrude", st->nozzle_c >= 170, "pressure_advance", 0.0, "smooth_time",
+                         0.04, "motion_queue");
+    if (strcmp(name, "heater_bed") == 0)
+        return json_pack("{s:f,s:f,s:f}", "temperature", st->bed_c, "target", st->bed_target_c,
+                         "power", st->bed_target_c > 0 ? 0.3 : 0.0);
+    if (strcmp(name, "display_status") == 0)
+        return json_pack("{s:s,s:f}", "message", "", "progress", st->progress);
+    return NULL;
+}
+
+static const char *const all_objects[] = { "webhooks", "print_stats", "virtual_sdcard",
+                                           "extruder", "heater_bed",  "display_status" };
+
+static void
+on_query(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    if (s->klippy == K_STARTUP) {
+        reply_err(r, 503, "Klippy Host not connected");
+        return;
+    }
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    json_t *status = json_object();
+    json_t *want = NULL;
+    size_t len = 0;
+    sim_http_body(r, &len);
+    if (strcmp(sim_http_method(r), "POST") == 0 && len > 0) {
+        struct sf_err err;
+        json_t *b = sim_http_json(r, &err);
+        want = b ? json_object_get(b, "objects") : NULL;
+        if (!want || !json_is_object(want)) {
+            json_decref(b);
+            json_decref(status);
+            reply_err(r, 400, "Invalid argument 'objects'");
+            return;
+        }
+        const char *name;
+        json_t *attrs;
+        json_object_foreach(want, name, attrs)
+        {
+            json_t *o = object(s, name, &st);
+            if (!o)
+                continue;               /* the docs: an object the printer lacks is left out */
+            if (json_is_array(attrs)) { /* keep only the attributes asked for */
+                json_t *pick = json_object();
+                size_t i;
+                json_t *a;
+                json_array_foreach(attrs, i, a)
+                {
+                    json_t *v = json_is_string(a) ? json_object_get(o, json_string_value(a)) : NULL;
+                    if (v)
+                        json_object_set(pick, json_string_value(a), v);
+                }
+                json_decref(o);
+                o = pick;
+            }
+            json_object_set_new(status, name, o);
+        }
+        json_decref(b);
+    } else {
+        /* GET ?webhooks&print_stats...: the sim answers with every object it has */
+        for (size_t i = 0; i < sizeof(all_objects) / sizeof(all_objects[0]); i++)
+            json_object_set_new(status, all_objects[i], object(s, all_objects[i], &st));
+    }
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    reply_result(r, json_pack("{s:f,s:o}", "eventtime",
+                              (double)ts.tv_sec + (double)ts.tv_nsec / 1e9, "status", status));
+}
+
+static void
+on_server_info(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    reply_result(r, json_pack("{s:b,s:s,s:[sssss],s:[],s:[ss],s:[],s:i,s:s,s:[iii],s:s}",
+                              "klippy_connected", 1, "klippy_state", klippy_name(s->klippy),
+                              "components", "database", "file_manager", "klippy_apis", "machine",
+                              "history", "failed_components", "registered_directories", "config",
+                              "gcodes", "warnings", "websocket_count", 0, "moonraker_version",
+                              "v0.10.0-slimfarm-sim", "api_version", 1, 5, 0, "api_version_string",
+                              "1.5.0"));
+}
+
+static void
+on_printer_info(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    if (s->klippy == K_STARTUP) {
+        reply_err(r, 503, "Klippy Host not connected");
+        return;
+    }
+    reply_result(r, json_pack("{s:s,s:s,s:s,s:s}", "state", klippy_name(s->klippy), "state_message",
+                              s->klippy_msg, "hostname", "slimfarm-sim", "software_version",
+                              "v0.12.0-slimfarm-sim"));
+}
+
+/* Start file name as SDCARD_PRINT_FILE would; replies on failure, true on success. */
+static bool
+start_print(struct sim_moonraker *s, struct sim_http_req *r, const char *name)
+{
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    if (st.state == SIM_NP_ERROR)
+        sim_netprinter_reset(s->np); /* an errored print is over; Klipper prints again */
+    struct sf_err err;
+    int rc = sim_netprinter_start(s->np, name, &err);
+    if (rc == SF_OK) {
+        s->fired_shutdown = s->fired_error = s->fired_cancel = false;
+        return true;
+    }
+    if (r)
+        reply_err(r, 400, rc == SF_EAGAIN ? "SD busy" : "Unable to open file");
+    return false;
+}
+
+static void
+on_upload(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    const struct sim_http_file *f = sim_http_upload(r);
+    if (!f || !f->filename[0]) {
+        reply_err(r, 400, "Multipart filename omitted");
+        return;
+    }
+    const char *root = sim_http_field(r, "root");
+    const char *sub = sim_http_field(r, "path");
+    const char *print = sim_http_field(r, "print");
+    if (root && strcmp(root, "gcodes") != 0) {
+        reply_err(r, 400, "Invalid root request"); /* config uploads: not a printer's job */
+        return;
+    }
+    if (sub && sub[0]) {
+        reply_err(r, 400, "slimfarm-sim: upload sub-folders are not simulated");
+        return;
+    }
+    char path[1024];
+    struct sf_err err;
+    if (sim_netprinter_path(s->np, f->filename, path, sizeof(path), &err)) {
+        reply_err(r, 400, err.msg);
+        return;
+    }
+    if (sim_netprinter_file_busy(s->np, f->filename)) {
+        reply_err(r, 403, "File is loaded, upload not permitted");
+        return;
+    }
+    if (sim_http_keep_upload(r, path, &err)) {
+        reply_err(r, 500, err.msg);
+        return;
+    }
+    bool started = false;
+    if (print && strcmp(print, "true") == 0 && s->klippy == K_READY)
+        started = start_print(s, NULL, f->filename);
+    char loc[1200];
+    snprintf(loc, sizeof(loc), "http://127.0.0.1:%d/server/files/gcodes/%s", sim_http_port(s->http),
+             f->filename);
+    sim_http_add_header(r, "Location", loc);
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    sim_http_reply_json(r, 201,
+                        json_pack("{s:{s:s,s:s,s:f,s:I,s:s},s:b,s:b,s:s}", "item", "path",
+                                  f->filename, "root", "gcodes", "modified",
+                                  (double)ts.tv_sec + (double)ts.tv_nsec / 1e9, "size",
+                                  (json_int_t)f->size, "permissions", "rw", "print_started",
+                                  started, "print_queued", 0, "action", "create_file"));
+}
+
+static void
+on_metadata(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    const char *name = sim_http_query(r, "filename");
+    int64_t size = name ? sim_netprinter_file_size(s->np, name) : -1;
+    if (size < 0) {
+        char msg[300];
+        snprintf(msg, sizeof(msg), "Metadata not available for <%s>", name ? name : "");
+        reply_err(r, 404, msg);
+        return;
+    }
+    reply_result(r, json_pack("{s:I,s:f,s:s,s:n}", "size", (json_int_t)size, "modified", 0.0,
+                              "filename", name, "job_id"));
+}
+
+static void
+on_print_start(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    json_t *hold = NULL;
+    const char *name = arg(r, "filename", &hold);
+    if (!name) {
+        reply_err(r, 400, "No data for argument: filename");
+    } else if (need_ready(s, r) && start_print(s, r, name)) {
+        reply_ok(r);
+    }
+    json_decref(hold);
+}
+
+static void
+on_pause(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    if (!need_ready(s, r))
+        return;
+    sim_netprinter_pause(s->np, NULL); /* "Print already paused" is not an error */
+    reply_ok(r);
+}
+
+static void
+on_resume(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    if (!need_ready(s, r))
+        return;
+    sim_netprinter_resume(s->np, NULL);
+    reply_ok(r);
+}
+
+static void
+on_cancel(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    if (!need_ready(s, r))
+        return;
+    sim_netprinter_cancel(s->np, NULL);
+    reply_ok(r);
+}
+
+static void
+on_script(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    json_t *hold = NULL;
+    const char *script = arg(r, "script", &hold);
+    if (!script) {
+        reply_err(r, 400, "No data for argument: script");
+    } else if (need_ready(s, r)) {
+        /* several commands separated by newlines, each queued in turn */
+        char line[256];
+        const char *p = script;
+        int rc = SF_OK;
+        struct sf_err err;
+        while (*p && rc == SF_OK) {
+            size_t n = strcspn(p, "\n");
+            if (n > 0 && n < sizeof(line)) {
+                memcpy(line, p, n);
+                line[n] = '\0';
+                rc = sim_netprinter_command(s->np, line, &err);
+            } else if (n >= sizeof(line)) {
+                rc = sf_err_set(&err, SF_EINVAL, "command too long");
+            }
+            p += n + (p[n] == '\n');
+        }
+        if (rc)
+            reply_err(r, 400, err.msg);
+        else
+            reply_ok(r);
+    }
+    json_decref(hold);
+}
+
+static void
+shut_down(struct sim_moonraker *s, const char *why)
+{
+    s->klippy = K_SHUTDOWN;
+    snprintf(s->klippy_msg, sizeof(s->klippy_msg), "%s", why);
+    sim_netprinter_fail(s->np, "Printer is shutdown");
+}
+
+static void
+on_estop(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    shut_down(s, "Shutdown due to webhooks request\nPrinter is shutdown");
+    reply_ok(r);
+}
+
+static void
+on_firmware_restart(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    sim_netprinter_reset(s->np);
+    s->klippy = K_STARTUP;
+    snprintf(s->klippy_msg, sizeof(s->klippy_msg), "Printer is not ready");
+    s->ready_at_ms = loop_now_ms(s->l) + RESTART_MS;
+    reply_ok(r);
+}
+
+static const struct sim_http_route routes[] = {
+    { "GET", "/server/info", SIM_HTTP_BODY_MEM, false, on_server_info },
+    { "GET", "/printer/info", SIM_HTTP_BODY_MEM, false, on_printer_info },
+    { "GET", "/printer/objects/query", SIM_HTTP_BODY_MEM, false, on_query },
+    { "POST", "/printer/objects/query", SIM_HTTP_BODY_MEM, false, on_query },
+    { "POST", "/server/files/upload", SIM_HTTP_BODY_FORM, false, on_upload },
+    { "GET", "/server/files/metadata", SIM_HTTP_BODY_MEM, false, on_metadata },
+    { "POST", "/printer/print/start", SIM_HTTP_BODY_MEM, false, on_print_start },
+    { "POST", "/printer/print/pause", SIM_HTTP_BODY_MEM, false, on_pause },
+    { "POST", "/printer/print/resume", SIM_HTTP_BODY_MEM, false, on_resume },
+    { "POST", "/printer/print/cancel", SIM_HTTP_BODY_MEM, false, on_cancel },
+    { "POST", "/printer/gcode/script", SIM_HTTP_BODY_MEM, false, on_script },
+    { "POST", "/printer/emergency_stop", SIM_HTTP_BODY_MEM, false, on_estop },
+    { "POST", "/printer/firmware_restart", SIM_HTTP_BODY_MEM, false, on_firmware_restart },
+};
+
+/* ---- faults on the job's way ---- */
+
+static void
+on_watch(struct loop *l, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    s->watch = loop_timer_add(l, WATCH_MS, on_watch, s);
+    if (s->klippy == K_STARTUP && loop_now_ms(l) >= s->ready_at_ms) {
+        s->klippy = K_READY;
+        snprintf(s->klippy_msg, sizeof(s->klippy_msg), "Printer is ready");
+    }
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    if (st.state != SIM_NP_PRINTING || s->klippy != K_READY)
+        return;
+    long done = (long)st.lines_done;
+    if (s->cfg.shutdown_at && !s->fired_shutdown && done >= s->cfg.shutdown_at) {
+        s->fired_shutdown = true;
+        shut_down(s, shutdown_text);
+    } else if (s->cfg.error_at && !s->fired_error && done >= s->cfg.error_at) {
+        s->fired_error = true;
+        sim_netprinter_fail(s->np, "Move out of range: 260.000 10.000 0.300 [1203.442]");
+    } else if (s->cfg.cancel_at && !s->fired_cancel && done >= s->cfg.cancel_at) {
+        s->fired_cancel = true;
+        sim_netprinter_cancel(s->np, NULL); /* someone pressed cancel on the printer */
+    }
+}
+
+/* ---- lifecycle ---- */
+
+struct sim_moonraker *
+sim_moonraker_new(struct loop *l, const struct sim_moonraker_config *c, struct sf_err *err)
+{
+    struct sim_moonraker *s = mem_calloc(1, sizeof(*s));
+    if (!s) {
+        sf_err_set(err, SF_ENOMEM, "moonraker sim: out of memory");
+        return NULL;
+    }
+    s->l = l;
+    s->cfg = *c;
+    s->np = sim_netprinter_new(l, &c->machine, err);
+    if (!s->np)
+        goto fail;
+    struct sim_http_config hc = {
+        .port = c->port,
+        .routes = routes,
+        .n_routes = sizeof(routes) / sizeof(routes[0]),
+        .ud = s,
+        .api_key = c->api_key && c->api_key[0] ? c->api_key : NULL,
+        .key_header = "X-Api-Key",
+        .auth_status = 401,
+        .auth_body = "{\"error\": {\"code\": 401, \"message\": \"Unauthorized\"}}",
+        .upload_dir = sim_netprinter_uploads(s->np),
+        .faults = c->http,
+    };
+    s->http = sim_http_new(l, &hc, err);
+    if (!s->http)
+        goto fail;
+    s->klippy = c->startup_ms > 0 ? K_STARTUP : K_READY;
+    snprintf(s->klippy_msg, sizeof(s->klippy_msg), "%s",
+             s->klippy == K_READY ? "Printer is ready" : "Printer is not ready");
+    s->ready_at_ms = loop_now_ms(l) + c->startup_ms;
+    s->watch = loop_timer_add(l, WATCH_MS, on_watch, s);
+    return s;
+fail:
+    sim_moonraker_free(s);
+    return NULL;
+}
+
+int
+sim_moonraker_port(const struct sim_moonraker *s)
+{
+    return sim_http_port(s->http);
+}
+
+void
+sim_moonraker_status(const struct sim_moonraker *s, struct sim_np_status *out)
+{
+    sim_netprinter_status(s->np, out);
+}
+
+void
+sim_moonraker_free(struct sim_moonraker *s)
+{
+    if (!s)
+        return;
+    if (s->watch)
+        loop_timer_cancel(s->l, s->watch);
+    sim_http_free(s->http);
+    sim_netprinter_free(s->np);
+    free(s);
+}
+
+/* ---- slimfarm-sim moonraker (sim_netcli.h) ---- */
+
+static void *
+face_new(struct loop *l, const struct sim_net_opts *o, int index, struct sf_err *err)
+{
+    (void)index;
+    struct sim_moonraker_config c;
+    sim_moonraker_config_init(&c);
+    c.port = o->port;
+    c.api_key = o->api_key;
+    c.machine.speed = o->speed;
+    c.machine.log_path = o->log_path;
+    c.machine.uploads_dir = o->uploads_dir;
+    for (int i = 0; i < o->n_faults; i++)
+        if (sim_moonraker_fault_parse(&c, o->faults[i], err))
+            return NULL;
+    struct sim_moonraker *s = sim_moonraker_new(l, &c, err);
+    if (s)
+        snprintf(s->address, sizeof(s->address), "http://127.0.0.1:%d", sim_http_port(s->http));
+    return s;
+}
+
+static const char *
+face_address(void *sim)
+{
+    return ((struct sim_moonraker *)sim)->address;
+}
+
+static void
+face_stats(void *sim, char *out, size_t n)
+{
+    struct sim_moonraker *s = sim;
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    snprintf(out, n, "state=%s file=%s lines_done=%llu requests=%llu", sim_np_state_name(st.state),
+             st.file, (unsigned long long)st.lines_done,
+             (unsigned long long)sim_http_served(s->http));
+}
+
+static void
+face_free(void *sim)
+{
+    sim_moonraker_free(sim);
+}
+
+int
+sim_moonraker_main(int argc, char **argv)
+{
+    static const struct sim_net_face face = { face_new, face_address, face_stats, face_free };
+    struct sim_net_opts o;
+    int rc = sim_net_parse(
+        argc, argv, &o,
+        "faults: shutdown=LINE error=LINE cancel=LINE startup=MS (Klipper), and the HTTP and\n"
+        "        firmware faults of every simulator\n");
+    return rc >= 0 ? rc : sim_net_serve(&o, &face);
+}

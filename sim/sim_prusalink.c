@@ -1,0 +1,494 @@
+/*
+ * sim_prusalink.c - PrusaLink's v1 HTTP API over a simulated machine
+ * (sim_prusalink.h).
+ *
+ * The job lives in sim_netprinter; this face numbers jobs (ids from 100,
+ * as a printer's counter would be past its first prints), names files as
+ * the USB stick holds them (a long display name and an 8.3 short one), and
+ * reports the machine's state in PrusaLink's words: IDLE, PRINTING,
+ * PAUSED, FINISHED, STOPPED, ERROR.  A watch timer fires the
+ * line-triggered faults.
+ *
+ * Thread: the loop thread.
+ */
+#include "sim_prusalink.h"
+
+#include <ctype.h>
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "../src/base/mem.h"
+#include "sim_netcli.h"
+
+#define WATCH_MS 20
+
+struct sim_prusalink {
+    struct loop *l;
+    char address[64]; /* "http://127.0.0.1:PORT" */
+    struct sim_prusalink_config cfg;
+    struct sim_netprinter *np;
+    struct sim_http *http;
+    uint64_t watch;                 /* watch timer */
+    int64_t job_id;                 /* id of the current (or last) job, 0 before the first */
+    int64_t next_id;                /* the next job's id */
+    long busy_left;                 /* uploads still to meet a busy printer */
+    bool fired_error, fired_cancel; /* each fault once a job */
+    int64_t m_timestamp;            /* upload time of the job's file, Unix seconds */
+};
+
+void
+sim_prusalink_config_init(struct sim_prusalink_config *c)
+{
+    memset(c, 0, sizeof(*c));
+    sim_netprinter_config_init(&c->machine);
+}
+
+static int
+parse_count(const char *spec, const char *v, long *out, struct sf_err *err)
+{
+    char *end;
+    errno = 0;
+    long n = strtol(v, &end, 10);
+    if (errno || end == v || *end || n < 1 || n > 1000000000L)
+        return sf_err_set(err, SF_EINVAL, "fault '%s': expected a whole number from 1", spec);
+    *out = n;
+    return SF_OK;
+}
+
+int
+sim_prusalink_fault_parse(struct sim_prusalink_config *c, const char *spec, struct sf_err *err)
+{
+    int rc = sim_http_fault_parse(&c->http, spec, err);
+    if (rc != SF_EUNSUPP)
+        return rc;
+    const char *eq = strchr(spec, '=');
+    const char *v = eq ? eq + 1 : "";
+    size_t n = eq ? (size_t)(eq - spec) : strlen(spec);
+    if (n == 4 && strncmp(spec, "busy", n) == 0)
+        return parse_count(spec, v, &c->busy_uploads, err);
+    if (n == 5 && strncmp(spec, "error", n) == 0)
+        return parse_count(spec, v, &c->error_at, err);
+    if (n == 6 && strncmp(spec, "cancel", n) == 0)
+        return parse_count(spec, v, &c->cancel_at, err);
+    return faults_parse(&c->machine.faults, spec, err);
+}
+
+/* ---- replies ---- */
+
+/* An error as the spec has it: the Error object if the client takes JSON, else plain text. */
+static void
+reply_err(struct sim_http_req *r, unsigned status, const char *title, const char *text)
+{
+    const char *accept = sim_http_header(r, "Accept");
+    if (accept && strstr(accept, "application/json")) {
+        char code[16];
+        snprintf(code, sizeof(code), "10%03u", status);
+        sim_http_reply_json(r, status,
+                            json_pack("{s:s,s:s,s:s}", "code", code, "title", title, "text", text));
+        return;
+    }
+    sim_http_reply(r, status, "text/plain", text, strlen(text));
+}
+
+static const char *
+pl_state(const struct sim_np_status *st)
+{
+    switch (st->state) {
+    case SIM_NP_IDLE:
+        return "IDLE";
+    case SIM_NP_PRINTING:
+    case SIM_NP_CANCELLING:
+        return "PRINTING";
+    case SIM_NP_PAUSING:
+    case SIM_NP_PAUSED:
+        return "PAUSED";
+    case SIM_NP_COMPLETE:
+        return "FINISHED";
+    case SIM_NP_CANCELLED:
+        return "STOPPED";
+    case SIM_NP_ERROR:
+        return "ERROR";
+    }
+    return "IDLE";
+}
+
+static bool
+running(const struct sim_np_status *st)
+{
+    return st->state == SIM_NP_PRINTING || st->state == SIM_NP_PAUSING ||
+           st->state == SIM_NP_PAUSED || st->state == SIM_NP_CANCELLING;
+}
+
+/* The 8.3 name a FAT stick shows for a long one: "SF-3F2~1.GCO". */
+static void
+short_name(const char *name, char *out, size_t n)
+{
+    char base[8] = "", ext[4] = "";
+    const char *dot = strrchr(name, '.');
+    size_t k = 0;
+    for (const char *c = name; *c && c != dot && k < 6; c++)
+        if (isalnum((unsigned char)*c) || *c == '-' || *c == '_')
+            base[k++] = (char)toupper((unsigned char)*c);
+    base[k] = '\0';
+    k = 0;
+    for (const char *c = dot ? dot + 1 : ""; *c && k < 3; c++)
+        ext[k++] = (char)toupper((unsigned char)*c);
+    ext[k] = '\0';
+    snprintf(out, n, "%s~1%s%s", base, ext[0] ? "." : "", ext);
+}
+
+static void
+on_version(struct sim_http_req *r, void *ud)
+{
+    (void)ud;
+    sim_http_reply_json(r, 200,
+                        json_pack("{s:s,s:s,s:s,s:s,s:s,s:s,s:{s:b}}", "api", "2.0.0", "version",
+                                  "2.1.2", "printer", "1.0.0", "text", "PrusaLink", "firmware",
+                                  "6.1.3+slimfarm-sim", "sdk", "0.7.0", "capabilities",
+                                  "upload-by-put", 1));
+}
+
+static void
+on_info(struct sim_http_req *r, void *ud)
+{
+    (void)ud;
+    sim_http_reply_json(r, 200,
+                        json_pack("{s:f,s:b,s:s,s:s,s:i}", "nozzle_diameter", 0.4, "mmu", 0,
+                                  "serial", "SIM-0000000001", "hostname", "slimfarm-sim",
+                                  "min_extrusion_temp", 170));
+}
+
+static void
+on_status(struct sim_http_req *r, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    bool err = st.state == SIM_NP_ERROR;
+    json_t *printer =
+        json_pack("{s:s,s:f,s:f,s:f,s:f,s:f,s:i,s:i,s:i,s:i,s:{s:b,s:s},s:{s:b,s:s}}", "state",
+                  pl_state(&st), "temp_nozzle", st.nozzle_c, "target_nozzle", st.nozzle_target_c,
+                  "temp_bed", st.bed_c, "target_bed", st.bed_target_c, "axis_z", 0.2, "flow", 100,
+                  "speed", 100, "fan_hotend", 0, "fan_print", 0, "status_printer", "ok", !err,
+                  "message", err ? st.message : "OK", "status_connect", "ok", 1, "message", "OK");
+    json_t *body =
+        json_pack("{s:o,s:{s:s,s:s,s:b,s:I}}", "printer", printer, "storage", "name", "usb", "path",
+                  "/usb/", "read_only", 0, "free_space", (json_int_t)4000000000LL);
+    if (st.state != SIM_NP_IDLE && s->job_id > 0) {
+        json_t *job = json_pack("{s:I,s:f,s:I}", "id", (json_int_t)s->job_id, "progress",
+                                st.progress * 100, "time_printing", (json_int_t)st.print_time_s);
+        if (st.time_left_s >= 0)
+            json_object_set_new(job, "time_remaining", json_integer((json_int_t)st.time_left_s));
+        json_object_set_new(body, "job", job);
+    }
+    sim_http_reply_json(r, 200, body);
+}
+
+static void
+on_job(struct sim_http_req *r, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    if (st.state == SIM_NP_IDLE || s->job_id == 0) {
+        sim_http_reply_empty(r, 204);
+        return;
+    }
+    char sn[16];
+    short_name(st.file, sn, sizeof(sn));
+    json_t *job = json_pack(
+        "{s:I,s:s,s:f,s:I,s:b,s:{s:s,s:s,s:s,s:s,s:I,s:I}}", "id", (json_int_t)s->job_id, "state",
+        strcmp(pl_state(&st), "ERROR") == 0 ? "ERROR" : pl_state(&st), "progress",
+        st.progress * 100, "time_printing", (json_int_t)st.print_time_s, "inaccurate_estimates", 0,
+        "file", "name", sn, "display_name", st.file, "path", "/usb", "display_path", "/usb", "size",
+        (json_int_t)st.file_size, "m_timestamp", (json_int_t)s->m_timestamp);
+    if (st.time_left_s >= 0)
+        json_object_set_new(job, "time_remaining", json_integer((json_int_t)st.time_left_s));
+    sim_http_reply_json(r, 200, job);
+}
+
+static bool
+flag(struct sim_http_req *r, const char *name)
+{
+    const char *v = sim_http_header(r, name);
+    return v && (strcmp(v, "?1") == 0 || strcmp(v, "1") == 0);
+}
+
+static int
+start(struct sim_prusalink *s, const char *name, struct sf_err *err)
+{
+    int rc = sim_netprinter_start(s->np, name, err);
+    if (rc == SF_OK) {
+        s->job_id = s->next_id++;
+        s->fired_error = s->fired_cancel = false;
+        s->m_timestamp = (int64_t)time(NULL);
+    }
+    return rc;
+}
+
+static void
+on_file_put(struct sim_http_req *r, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    const char *name = sim_http_rest(r);
+    char path[1024];
+    struct sf_err err;
+    if (sim_netprinter_path(s->np, name, path, sizeof(path), &err)) {
+        reply_err(r, 400, "BAD REQUEST", err.msg);
+        return;
+    }
+    if (!sim_http_upload(r)) {
+        reply_err(r, 400, "BAD REQUEST", "No file in the request body");
+        return;
+    }
+    bool print = flag(r, "Print-After-Upload");
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    if (s->busy_left > 0) {
+        s->busy_left--;
+        reply_err(r, 409, "CONFLICT", "Printer is busy");
+        return;
+    }
+    if (sim_netprinter_file_busy(s->np, name)) {
+        reply_err(r, 409, "CONFLICT", "File is currently being printed");
+        return;
+    }
+    if (sim_netprinter_file_size(s->np, name) >= 0 && !flag(r, "Overwrite")) {
+        reply_err(r, 409, "CONFLICT", "File already exists");
+        return;
+    }
+    if (print && (running(&st) || st.state == SIM_NP_ERROR)) {
+        reply_err(r, 409, "CONFLICT", "Printer is busy");
+        return;
+    }
+    if (sim_http_keep_upload(r, path, &err)) {
+        reply_err(r, 500, "INTERNAL SERVER ERROR", err.msg);
+        return;
+    }
+    if (print && start(s, name, &err)) {
+        reply_err(r, 409, "CONFLICT", err.msg);
+        return;
+    }
+    sim_http_reply_empty(r, 201);
+}
+
+static void
+on_file_other(struct sim_http_req *r, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    const char *name = sim_http_rest(r);
+    const char *m = sim_http_method(r);
+    struct sf_err err;
+    if (sim_netprinter_file_size(s->np, name) < 0) {
+        reply_err(r, 404, "NOT FOUND", "File not found");
+        return;
+    }
+    bool busy = sim_netprinter_file_busy(s->np, name);
+    if (strcmp(m, "HEAD") == 0) {
+        sim_http_add_header(r, "Read-Only", "?0");
+        sim_http_add_header(r, "Currently-Printed", busy ? "?1" : "?0");
+        sim_http_reply_empty(r, 200);
+    } else if (strcmp(m, "POST") == 0) { /* print it */
+        if (start(s, name, &err))
+            reply_err(r, 409, "CONFLICT", "Printer is busy");
+        else
+            sim_http_reply_empty(r, 204);
+    } else { /* DELETE */
+        char path[1024];
+        if (busy) {
+            reply_err(r, 409, "CONFLICT", "File is currently being printed");
+        } else if (sim_netprinter_path(s->np, name, path, sizeof(path), &err) == SF_OK &&
+                   remove(path) == 0) {
+            sim_http_reply_empty(r, 204);
+        } else {
+            reply_err(r, 500, "INTERNAL SERVER ERROR", "could not delete the file");
+        }
+    }
+}
+
+/* PUT /api/v1/job/{id}/pause|resume|continue, DELETE /api/v1/job/{id}. */
+static void
+on_job_action(struct sim_http_req *r, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    const char *rest = sim_http_rest(r);
+    char *end;
+    errno = 0;
+    long long id = strtoll(rest, &end, 10);
+    const char *what = *end == '/' ? end + 1 : end;
+    bool del = strcmp(sim_http_method(r), "DELETE") == 0;
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    if (errno || end == rest || id != s->job_id || s->job_id == 0 || st.state == SIM_NP_IDLE ||
+        (del ? *what != '\0' : (strcmp(what, "pause") && strcmp(what, "resume")))) {
+        reply_err(r, 404, "NOT FOUND", "Job not found");
+        return;
+    }
+    int rc = del                          ? sim_netprinter_cancel(s->np, NULL)
+             : strcmp(what, "pause") == 0 ? sim_netprinter_pause(s->np, NULL)
+                                          : sim_netprinter_resume(s->np, NULL);
+    if (rc) {
+        reply_err(r, 409, "CONFLICT", "Job is not in a state that allows this");
+        return;
+    }
+    sim_http_reply_empty(r, 204);
+}
+
+static const struct sim_http_route routes[] = {
+    { "GET", "/api/version", SIM_HTTP_BODY_MEM, false, on_version },
+    { "GET", "/api/v1/info", SIM_HTTP_BODY_MEM, false, on_info },
+    { "GET", "/api/v1/status", SIM_HTTP_BODY_MEM, false, on_status },
+    { "GET", "/api/v1/job", SIM_HTTP_BODY_MEM, false, on_job },
+    { "PUT", "/api/v1/files/usb/*", SIM_HTTP_BODY_FILE, false, on_file_put },
+    { "HEAD", "/api/v1/files/usb/*", SIM_HTTP_BODY_MEM, false, on_file_other },
+    { "POST", "/api/v1/files/usb/*", SIM_HTTP_BODY_MEM, false, on_file_other },
+    { "DELETE", "/api/v1/files/usb/*", SIM_HTTP_BODY_MEM, false, on_file_other },
+    { "PUT", "/api/v1/job/*", SIM_HTTP_BODY_MEM, false, on_job_action },
+    { "DELETE", "/api/v1/job/*", SIM_HTTP_BODY_MEM, false, on_job_action },
+};
+
+static void
+on_watch(struct loop *l, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    s->watch = loop_timer_add(l, WATCH_MS, on_watch, s);
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    if (st.state != SIM_NP_PRINTING)
+        return;
+    long done = (long)st.lines_done;
+    if (s->cfg.error_at && !s->fired_error && done >= s->cfg.error_at) {
+        s->fired_error = true;
+        sim_netprinter_fail(s->np, "Thermal runaway: heater nozzle");
+    } else if (s->cfg.cancel_at && !s->fired_cancel && done >= s->cfg.cancel_at) {
+        s->fired_cancel = true;
+        sim_netprinter_cancel(s->np, NULL); /* stopped on the printer's screen */
+    }
+}
+
+struct sim_prusalink *
+sim_prusalink_new(struct loop *l, const struct sim_prusalink_config *c, struct sf_err *err)
+{
+    struct sim_prusalink *s = mem_calloc(1, sizeof(*s));
+    if (!s) {
+        sf_err_set(err, SF_ENOMEM, "prusalink sim: out of memory");
+        return NULL;
+    }
+    s->l = l;
+    s->cfg = *c;
+    s->next_id = 100;
+    s->busy_left = c->busy_uploads;
+    s->np = sim_netprinter_new(l, &c->machine, err);
+    if (!s->np)
+        goto fail;
+    bool digest = c->user && c->user[0];
+    struct sim_http_config hc = {
+        .port = c->port,
+        .routes = routes,
+        .n_routes = sizeof(routes) / sizeof(routes[0]),
+        .ud = s,
+        .api_key = !digest && c->api_key && c->api_key[0] ? c->api_key : NULL,
+        .key_header = "X-Api-Key",
+        .auth_status = 401,
+        .auth_body = "{\"title\": \"Unauthorized\", \"text\": \"Invalid API key\"}",
+        .digest_user = digest ? c->user : NULL,
+        .digest_password = digest ? (c->password ? c->password : "") : NULL,
+        .realm = "Printer API",
+        .upload_dir = sim_netprinter_uploads(s->np),
+        .faults = c->http,
+    };
+    s->http = sim_http_new(l, &hc, err);
+    if (!s->http)
+        goto fail;
+    s->watch = loop_timer_add(l, WATCH_MS, on_watch, s);
+    return s;
+fail:
+    sim_prusalink_free(s);
+    return NULL;
+}
+
+int
+sim_prusalink_port(const struct sim_prusalink *s)
+{
+    return sim_http_port(s->http);
+}
+
+void
+sim_prusalink_status(const struct sim_prusalink *s, struct sim_np_status *out)
+{
+    sim_netprinter_status(s->np, out);
+}
+
+void
+sim_prusalink_free(struct sim_prusalink *s)
+{
+    if (!s)
+        return;
+    if (s->watch)
+        loop_timer_cancel(s->l, s->watch);
+    sim_http_free(s->http);
+    sim_netprinter_free(s->np);
+    free(s);
+}
+
+/* ---- slimfarm-sim prusalink (sim_netcli.h) ---- */
+
+static void *
+face_new(struct loop *l, const struct sim_net_opts *o, int index, struct sf_err *err)
+{
+    (void)index;
+    struct sim_prusalink_config c;
+    sim_prusalink_config_init(&c);
+    c.port = o->port;
+    c.api_key = o->api_key;
+    c.user = o->user;
+    c.password = o->password;
+    c.machine.speed = o->speed;
+    c.machine.log_path = o->log_path;
+    c.machine.uploads_dir = o->uploads_dir;
+    for (int i = 0; i < o->n_faults; i++)
+        if (sim_prusalink_fault_parse(&c, o->faults[i], err))
+            return NULL;
+    struct sim_prusalink *s = sim_prusalink_new(l, &c, err);
+    if (s)
+        snprintf(s->address, sizeof(s->address), "http://127.0.0.1:%d", sim_http_port(s->http));
+    return s;
+}
+
+static const char *
+face_address(void *sim)
+{
+    return ((struct sim_prusalink *)sim)->address;
+}
+
+static void
+face_stats(void *sim, char *out, size_t n)
+{
+    struct sim_prusalink *s = sim;
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    snprintf(out, n, "state=%s file=%s lines_done=%llu requests=%llu", sim_np_state_name(st.state),
+             st.file, (unsigned long long)st.lines_done,
+             (unsigned long long)sim_http_served(s->http));
+}
+
+static void
+face_free(void *sim)
+{
+    sim_prusalink_free(sim);
+}
+
+int
+sim_prusalink_main(int argc, char **argv)
+{
+    static const struct sim_net_face face = { face_new, face_address, face_stats, face_free };
+    struct sim_net_opts o;
+    int rc = sim_net_parse(
+        argc, argv, &o,
+        "faults: busy=N error=LINE cancel=LINE (the printer), and the HTTP and firmware\n"
+        "        faults of every simulator; --user/--password: HTTP Digest instead of the key\n");
+    return rc >= 0 ? rc : sim_net_serve(&o, &face);
+}

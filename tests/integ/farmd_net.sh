@@ -1,0 +1,116 @@
+#!/usr/bin/env bash
+# tests/integ/farmd_net.sh - slimfarmd driving Klipper (Moonraker) and Prusa
+# (PrusaLink) printers through their HTTP APIs, against the simulators, as
+# it would real ones.  On the way:
+#  - jobs on each leave the executed-command log of their G-code, once each,
+#    in order (the Marlin path's standard);
+#  - pause, resume and cancel through the daemon's REST API (the CLI);
+#  - a wrong API key: `slimfarm printers` says authentication failed;
+#  - Klipper shuts down mid-job: the printer is in error with Klipper's
+#    message, and the job is retried or waiting, never lost;
+#  - a PrusaLink printer on HTTP Digest that cuts the first upload half-way
+#    and answers 503s: the job still ends done;
+#  - kill -9 of slimfarmd mid-print, then a restart: the daemon finds the
+#    print still running on the printer (same file name and size), takes
+#    it back and the job ends done.
+# Every wait polls for its condition with a bound generous for a loaded machine.
+set -u
+BUILD=${BUILD:-build/san}
+. "$(dirname "$0")/lib/farm.sh"
+. "$(dirname "$0")/lib/netprint.sh"
+t0=$(date +%s)
+
+start_net voron moonraker --speed 2000 --api-key voron-key
+start_net mk4 prusalink --speed 2000 --api-key mk4-key
+start_net locked moonraker --speed 2000 --api-key the-right-key
+start_net shut moonraker --speed 2000 --fault shutdown=60
+start_net flaky prusalink --speed 2000 --user maker --password flaky-pw --fault drop-upload=1 --fault 5xx=3@6
+cp -r config/printers config/materials "$tmp/"
+printer() { # NAME DRIVER KEY|user:password
+  printf '[printer %s]\ndriver: %s\nurl: %s\n' "$1" "$2" "$(cat "$tmp/$1.addr")"
+  case "$3" in
+  "") ;;
+  *:*) printf 'user: %s\npassword: %s\n' "${3%%:*}" "${3#*:}" ;;
+  *) printf 'api_key: %s\n' "$3" ;;
+  esac
+  printf 'material: PLA\nnozzle_mm: 0.4\nbed_size: 250, 210, 220\nauto_eject: true\n'
+}
+write_config() {
+  {
+    printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
+    printer voron moonraker voron-key
+    printer mk4 prusalink mk4-key
+    printer locked moonraker a-wrong-key
+    printer shut moonraker ""
+    printer flaky prusalink maker:flaky-pw
+  } > "$tmp/farm.ini"
+}
+write_config
+start_daemon
+wait_for 60 sh -c "[ \$('$C' printers | grep -cE '^(voron|mk4|shut|flaky) +idle ') -eq 4 ]" ||
+  fail "printers: $("$C" printers)"
+
+# a wrong key is an authentication error, said plainly
+wait_for 30 sh -c "'$C' printers | grep -E '^locked ' | grep -q 'authentication failed (check api_key)'" ||
+  fail "locked: $("$C" printers)"
+
+for s in 10 12 14; do tetra "$tmp/t$s.stl" "$s"; done
+"$C" shapes "$tmp" > /dev/null || fail "shapes"
+j_v1=$(submit "$tmp/t10.stl" --material PLA --printer voron --method none)
+j_vlong=$(submit "$tmp/frame.stl" --material PLA --printer voron --method none)
+j_m1=$(submit "$tmp/t12.stl" --material PLA --printer mk4 --method none)
+j_mlong=$(submit "$tmp/lbracket.stl" --material PLA --printer mk4 --method none)
+j_shut=$(submit "$tmp/t14.stl" --material PLA --printer shut --method none)
+j_flaky=$(submit "$tmp/t12.stl" --material PLA --printer flaky --method none)
+
+# job_on PRINTER: the job printing (or paused) on PRINTER, if any.
+job_on() {
+  api /api/jobs | json "' '.join(str(j['id']) for j in d['jobs'] if j['printer'] == '$1' and j['state'] in ('printing', 'paused'))"
+}
+
+# pause whichever job voron prints once it is under way; nothing moves; resume
+wait_for 180 sh -c "'$C' printers | grep -qE '^voron +printing .* [1-9][0-9]?%'" || fail "voron never printed: $("$C" printers)"
+out=$("$C" pause voron) || fail "pause: $out"
+j_paused=$(job_on voron)
+[ "$(job_state "$j_paused")" = paused ] || fail "job $j_paused not paused"
+wait_for 20 sh -c "'$C' printers | grep -qE '^voron +paused'" || fail "voron: $("$C" printers)"
+sleep 1
+a1=$(api /api/printers/voron | json 'd["printer"]["progress"]')
+sleep 1
+a2=$(api /api/printers/voron | json 'd["printer"]["progress"]')
+[ "$a1" = "$a2" ] || fail "progress moved while paused: $a1 -> $a2"
+out=$("$C" resume voron) || fail "resume: $out"
+[ "$(job_state "$j_paused")" = printing ] || fail "job $j_paused not printing after resume"
+
+# cancel mk4's long job once it prints
+wait_for 180 sh -c "[ \"\$(curl -sf -H 'X-Api-Key: $RW' $SLIMFARM_URL/api/jobs/$j_mlong | /usr/bin/python3 -c 'import json,sys; j=json.load(sys.stdin)[\"job\"]; print(j[\"state\"])')\" = printing ]" ||
+  fail "job $j_mlong never printed: $("$C" jobs)"
+sleep 0.5
+out=$("$C" cancel "$j_mlong") || fail "cancel: $out"
+[ "$out" = "job $j_mlong: cancelled" ] || fail "cancel said: $out"
+
+# Klipper shut down mid-job: the printer is in error with Klipper's words,
+# and the job is retried or waits (never lost, never "done")
+wait_for 180 sh -c "'$C' printers | grep -E '^shut ' | grep -q 'error.*MCU .mcu. shutdown: Timer too close'" ||
+  fail "shut: $("$C" printers)"
+case "$(job_state "$j_shut")" in ready | queued | preparing | failed) ;; *) fail "job $j_shut: $(job_state "$j_shut")" ;; esac
+
+all_done() { for j in "$@"; do [ "$(job_state "$j")" = done ] || return 1; done; }
+wait_for 300 all_done $j_v1 $j_vlong $j_m1 $j_flaky || fail "not all done: $("$C" jobs)"
+[ "$(job_state "$j_mlong")" = cancelled ] || fail "cancelled job: $(job_state "$j_mlong")"
+grep -q 'printer\[flaky\]: upload failed' "$tmp/log" || fail "flaky's cut upload went unnoticed"
+
+# the daemon dies mid-print and comes back: the print is taken back
+j_kill=$(submit "$tmp/frame.stl" --material PLA --printer mk4 --method none)
+wait_for 180 sh -c "'$C' printers | grep -qE '^mk4 +printing .* [1-9][0-9]?%'" || fail "mk4 never printed: $("$C" printers)"
+kill -9 $pid; wait $pid 2>/dev/null; pid=
+start_daemon
+wait_for 300 all_done $j_kill || fail "job $j_kill after the restart: $(job_state "$j_kill"); $("$C" jobs)"
+grep -q "job $j_kill re-attached" "$tmp/log" || fail "job $j_kill was not re-attached"
+
+# each printer's log holds its prints' G-code, once each, in order
+sleep 0.5
+stop_sims
+check_net_logs voron mk4 flaky || fail "executed logs differ from the jobs' G-code"
+kill -TERM $pid; wait $pid; pid=
+echo "farmd_net: ok ($(( $(date +%s) - t0 )) s)"

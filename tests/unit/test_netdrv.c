@@ -1,0 +1,790 @@
+/*
+ * test_netdrv.c - the Moonraker and PrusaLink drivers against their
+ * simulators, in one process on one loop, through HTTP on loopback as with
+ * a real printer: a job's commands run once each and in order, pause,
+ * resume and cancel, authentication failures, Klipper's shutdown, a job
+ * cancelled or failed at the printer, 5xx bursts and an upload cut
+ * half-way (the job is retried, never lost), 409 from a busy printer, and
+ * HTTP Digest.
+ *
+ * Waits are bounded on the wall clock (WAIT_MS), never by loop turns: the
+ * machine may be loaded.
+ */
+#include <stdlib.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../../drivers/drv.h"
+#include "../../drivers/drv_moonraker.h"
+#include "../../drivers/drv_prusalink.h"
+#include "../../sim/sim_moonraker.h"
+#include "../../sim/sim_prusalink.h"
+#include "../../src/base/buf.h"
+#include "../../src/base/log.h"
+#include "../t.h"
+
+#define WAIT_MS    120000
+#define SPEED      2000.0
+#define MAX_EVENTS 4096
+
+/* What the driver reported, in order. */
+struct rec {
+    int n;
+    enum drv_event ev[MAX_EVENTS];
+    enum drv_state st[MAX_EVENTS];
+    char last_msg[160]; /* status.message at the last job end or state change */
+    int done, failed, cancelled;
+    char end_msg[160]; /* status.message at the job's end */
+};
+
+static void
+on_event(struct drv *d, enum drv_event ev, void *ud)
+{
+    struct rec *r = ud;
+    if (r->n < MAX_EVENTS) {
+        r->ev[r->n] = ev;
+        r->st[r->n] = d->status.state;
+        r->n++;
+    }
+    if (ev == DRV_EV_JOB_DONE)
+        r->done++;
+    if (ev == DRV_EV_JOB_FAILED)
+        r->failed++;
+    if (ev == DRV_EV_JOB_CANCELLED)
+        r->cancelled++;
+    if (ev == DRV_EV_JOB_DONE || ev == DRV_EV_JOB_FAILED || ev == DRV_EV_JOB_CANCELLED)
+        snprintf(r->end_msg, sizeof(r->end_msg), "%s", d->status.message);
+    if (ev == DRV_EV_STATE || ev == DRV_EV_JOB_FAILED)
+        snprintf(r->last_msg, sizeof(r->last_msg), "%s", d->status.message);
+}
+
+static int64_t
+wall_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
+
+/* Run l until cond(ud) holds or WAIT_MS pass; true if it held. */
+static bool
+run_until(struct loop *l, bool (*cond)(void *), void *ud)
+{
+    int64_t end = wall_ms() + WAIT_MS;
+    while (!cond(ud)) {
+        if (wall_ms() > end)
+            return false;
+        loop_run_once(l, 50);
+    }
+    return true;
+}
+
+struct waiter {
+    struct drv *d;
+    struct rec *r;
+    enum drv_state state;
+    int ends;
+};
+
+static bool
+is_state(void *ud)
+{
+    struct waiter *w = ud;
+    return w->d->status.state == w->state;
+}
+
+static bool
+job_ended(void *ud)
+{
+    struct waiter *w = ud;
+    return w->r->done + w->r->failed + w->r->cancelled >= w->ends;
+}
+
+static bool
+progressed(void *ud)
+{
+    struct waiter *w = ud;
+    return w->d->status.lines_acked > 40 && w->d->status.state == DRV_PRINTING;
+}
+
+/* A job of n_moves moves (and a few set-up commands) in the test's scratch dir. */
+static const char *
+job_file(const char *name, int n_moves)
+{
+    static char path[512];
+    snprintf(path, sizeof(path), "%s/%s", t_tmpdir(), name);
+    FILE *f = fopen(path, "w");
+    if (!f)
+        return NULL;
+    fprintf(f, "; a test job\nG28\nG90\nM82\nG92 E0\n");
+    for (int i = 0; i < n_moves; i++)
+        fprintf(f, "G1 X%d.%d Y%d E%d.%02d F1800 ; move %d\n", 10 + i % 50, i % 10, 20 + i % 40,
+                i / 10, i % 100, i);
+    fprintf(f, "G1 Z10 F600\nM84\n");
+    fclose(f);
+    return path;
+}
+
+/* The commands of a G-code file (comments and blanks dropped), or a log's lines. */
+static int
+commands(const char *path, char ***out, struct sf_err *err)
+{
+    struct buf b;
+    buf_init(&b, (size_t)64 << 20);
+    int rc = buf_read_file(&b, path, err);
+    if (rc) {
+        buf_release(&b);
+        return rc;
+    }
+    int n = 0, cap = 0;
+    char **v = NULL;
+    char *save = NULL;
+    for (char *line = strtok_r(b.data, "\n", &save); line; line = strtok_r(NULL, "\n", &save)) {
+        char *semi = strchr(line, ';');
+        if (semi)
+            *semi = '\0';
+        while (*line == ' ')
+            line++;
+        size_t k = strlen(line);
+        while (k > 0 && (line[k - 1] == ' ' || line[k - 1] == '\r'))
+            line[--k] = '\0';
+        if (!k)
+            continue;
+        if (n == cap) {
+            cap = cap ? cap * 2 : 256;
+            v = realloc(v, (size_t)cap * sizeof(*v));
+        }
+        v[n++] = strdup(line);
+    }
+    buf_release(&b);
+    *out = v;
+    return n;
+}
+
+static void
+free_commands(char **v, int n)
+{
+    for (int i = 0; i < n; i++)
+        free(v[i]);
+    free(v);
+}
+
+/* Lines the host in front of the firmware adds (handshake, M400 at the end). */
+static bool
+host_line(const char *s)
+{
+    return strncmp(s, "M110", 4) == 0 || strcmp(s, "M400") == 0 || strcmp(s, "M105") == 0 ||
+           strcmp(s, "M115") == 0 || strncmp(s, "M155", 4) == 0;
+}
+
+/*
+ * The executed log at log_path equals the file's commands, once each, in
+ * order (host lines aside), followed by at most `tail` lines (a cancel
+ * script).  Returns the number of the file's commands found, or -1.
+ */
+static int
+log_matches(const char *log_path, const char *gcode, bool whole, char *why, size_t n)
+{
+    struct sf_err err;
+    char **want, **got;
+    int nw = commands(gcode, &want, &err);
+    int ng = commands(log_path, &got, &err);
+    if (nw < 0 || ng < 0) {
+        snprintf(why, n, "%s", err.msg);
+        return -1;
+    }
+    int i = 0, j = 0;
+    for (; j < ng && i < nw; j++) {
+        if (host_line(got[j]))
+            continue;
+        if (strcmp(got[j], want[i]) != 0) {
+            if (!whole)
+                break; /* the prefix ends here: the rest is checked below */
+            snprintf(why, n, "log line %d '%s' where command %d '%s' was due", j + 1, got[j], i + 1,
+                     want[i]);
+            i = -1;
+            break;
+        }
+        i++;
+    }
+    if (i >= 0 && whole && i != nw) {
+        snprintf(why, n, "%d of the file's %d commands ran", i, nw);
+        i = -1;
+    }
+    if (i >= 0 && !whole) {
+        /* a cancelled job: after its prefix, the host's cancel script and nothing else */
+        static const char *const script[] = { "M104 S0", "M140 S0", "M107", "M84" };
+        size_t k = 0;
+        for (; j < ng; j++) {
+            if (host_line(got[j]))
+                continue;
+            if (k >= 4 || strcmp(got[j], script[k]) != 0) {
+                snprintf(why, n, "log line %d '%s' after the job's %d commands", j + 1, got[j], i);
+                i = -1;
+                break;
+            }
+            k++;
+        }
+        if (i >= 0 && k != 4) {
+            snprintf(why, n, "the cancel script is not whole (%zu of 4 lines)", k);
+            i = -1;
+        }
+    }
+    free_commands(want, nw);
+    free_commands(got, ng);
+    return i;
+}
+
+/* ---- a fixture: one simulator, one driver ---- */
+
+enum kind { MOONRAKER, PRUSALINK };
+
+struct fx {
+    struct loop *l;
+    enum kind kind;
+    struct sim_moonraker *mr;
+    struct sim_prusalink *pl;
+    struct drv *d;
+    struct rec rec;
+    char log[512];
+    char url[64];
+};
+
+/* Start a simulator of kind with faults (NULL-terminated) and a driver with key/user. */
+static int
+fx_start(struct fx *f, enum kind kind, const char *sim_key, const char *const *faults,
+         const char *drv_key, const char *user, const char *password, struct sf_err *err)
+{
+    memset(f, 0, sizeof(*f));
+    f->kind = kind;
+    static int seq;
+    snprintf(f->log, sizeof(f->log), "%s/exec-%d.log", t_tmpdir(), ++seq);
+    f->l = loop_new(err);
+    if (!f->l)
+        return SF_EIO;
+    int port;
+    if (kind == MOONRAKER) {
+        struct sim_moonraker_config c;
+        sim_moonraker_config_init(&c);
+        c.api_key = sim_key;
+        c.machine.speed = SPEED;
+        c.machine.log_path = f->log;
+        for (int i = 0; faults && faults[i]; i++)
+            if (sim_moonraker_fault_parse(&c, faults[i], err))
+                return SF_EINVAL;
+        f->mr = sim_moonraker_new(f->l, &c, err);
+        if (!f->mr)
+            return SF_EIO;
+        port = sim_moonraker_port(f->mr);
+    } else {
+        struct sim_prusalink_config c;
+        sim_prusalink_config_init(&c);
+        c.api_key = user ? NULL : sim_key;
+        c.user = user ? "maker" : NULL;
+        c.password = user ? sim_key : NULL;
+        c.machine.speed = SPEED;
+        c.machine.log_path = f->log;
+        for (int i = 0; faults && faults[i]; i++)
+            if (sim_prusalink_fault_parse(&c, faults[i], err))
+                return SF_EINVAL;
+        f->pl = sim_prusalink_new(f->l, &c, err);
+        if (!f->pl)
+            return SF_EIO;
+        port = sim_prusalink_port(f->pl);
+    }
+    snprintf(f->url, sizeof(f->url), "http://127.0.0.1:%d/", port);
+    struct drv_config dc = { .name = kind == MOONRAKER ? "voron" : "mk4",
+                             .kind = kind == MOONRAKER ? "moonraker" : "prusalink",
+                             .url = f->url,
+                             .api_key = drv_key };
+    (void)password;
+
+    dc.user = user;
+    dc.password = password;
+
+    f->d = drv_new(f->l, &dc, on_event, &f->rec, err);
+    if (!f->d)
+        return SF_EINVAL;
+    return f->d->ops->open(f->d, err);
+}
+
+/* Free the driver, then the simulator (its log is flushed). */
+static void
+fx_stop(struct fx *f)
+{
+    drv_free(f->d);
+    f->d = NULL;
+    sim_moonraker_free(f->mr);
+    sim_prusalink_free(f->pl);
+    f->mr = NULL;
+    f->pl = NULL;
+    loop_free(f->l);
+    f->l = NULL;
+}
+
+static bool
+fx_wait_state(struct fx *f, enum drv_state s)
+{
+    if (getenv("NETDRV_SETTLE"))
+        for (int i = 0; i < 20; i++)
+            loop_run_once(f->l, 50);
+    struct waiter w = { .d = f->d, .r = &f->rec, .state = s };
+    return run_until(f->l, is_state, &w);
+}
+
+static bool
+fx_wait_end(struct fx *f, int ends)
+{
+    struct waiter w = { .d = f->d, .r = &f->rec, .ends = ends };
+    return run_until(f->l, job_ended, &w);
+}
+
+static bool
+fx_wait_progress(struct fx *f)
+{
+    struct waiter w = { .d = f->d, .r = &f->rec };
+    return run_until(f->l, progressed, &w);
+}
+
+/* ---- the cases, each for both drivers ---- */
+
+static void
+job_runs_once_each(enum kind kind)
+{
+    struct fx f;
+    struct sf_err err;
+    T_OK(fx_start(&f, kind, "k3y", NULL, "k3y", NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("once.gcode", 300);
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    T_EQ_INT(f.d->status.state, DRV_IDLE);
+    T_EQ_INT(f.d->status.lines_acked, f.d->status.lines_total);
+    fx_stop(&f);
+    char why[300] = "";
+    int n = log_matches(f.log, job, true, why, sizeof(why));
+    if (n < 0)
+        t_fail(__FILE__, __LINE__, "%s", why);
+}
+
+T_CASE(moonraker_job_runs_once_each)
+{
+    job_runs_once_each(MOONRAKER);
+}
+
+T_CASE(prusalink_job_runs_once_each)
+{
+    job_runs_once_each(PRUSALINK);
+}
+
+static bool
+sim_paused(void *ud)
+{
+    struct fx *f = ud;
+    struct sim_np_status st;
+    f->mr ? sim_moonraker_status(f->mr, &st) : sim_prusalink_status(f->pl, &st);
+    return st.state == SIM_NP_PAUSED;
+}
+
+static void
+pause_resume_cancel(enum kind kind)
+{
+    struct fx f;
+    struct sf_err err;
+    T_OK(fx_start(&f, kind, "k3y", NULL, "k3y", NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("prc.gcode", 4000);
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_progress(&f));
+    T_OK(f.d->ops->pause(f.d, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_PAUSED));
+    /* nothing runs while paused: once the machine has stopped, its count stands still */
+    T_TRUE(run_until(f.l, sim_paused, &f));
+    struct sim_np_status a, b;
+    f.mr ? sim_moonraker_status(f.mr, &a) : sim_prusalink_status(f.pl, &a);
+    int64_t until = wall_ms() + 1000;
+    while (wall_ms() < until)
+        loop_run_once(f.l, 50);
+    f.mr ? sim_moonraker_status(f.mr, &b) : sim_prusalink_status(f.pl, &b);
+    T_EQ_INT(a.lines_done, b.lines_done);
+    T_OK(f.d->ops->resume(f.d, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_PRINTING));
+    T_OK(f.d->ops->cancel(f.d, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.cancelled, 1);
+    T_EQ_INT(f.rec.failed, 0);
+    T_EQ_INT(f.d->status.state, DRV_IDLE);
+    fx_stop(&f);
+    char why[300] = "";
+    int n = log_matches(f.log, job, false, why, sizeof(why));
+    if (n < 0)
+        t_fail(__FILE__, __LINE__, "%s", why);
+}
+
+T_CASE(moonraker_pause_resume_cancel)
+{
+    pause_resume_cancel(MOONRAKER);
+}
+
+T_CASE(prusalink_pause_resume_cancel)
+{
+    pause_resume_cancel(PRUSALINK);
+}
+
+static void
+wrong_key(enum kind kind)
+{
+    struct fx f;
+    struct sf_err err;
+    T_OK(fx_start(&f, kind, "right", NULL, "wrong", NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_OFFLINE));
+    T_TRUE(strstr(f.d->status.message, "authentication failed") != NULL);
+    fx_stop(&f);
+}
+
+T_CASE(moonraker_wrong_key)
+{
+    wrong_key(MOONRAKER);
+}
+
+T_CASE(prusalink_wrong_key)
+{
+    wrong_key(PRUSALINK);
+}
+
+T_CASE(moonraker_klippy_shutdown_is_an_error_with_its_message)
+{
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "shutdown=100", NULL };
+    T_OK(fx_start(&f, MOONRAKER, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    T_OK(f.d->ops->start_job(f.d, job_file("shut.gcode", 2000), 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.failed, 1);
+    T_EQ_INT(f.d->status.state, DRV_ERROR);
+    T_TRUE(strstr(f.rec.end_msg, "MCU 'mcu' shutdown: Timer too close") != NULL);
+    fx_stop(&f);
+}
+
+static void
+cancelled_at_printer(enum kind kind)
+{
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "cancel=50", NULL };
+    T_OK(fx_start(&f, kind, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    T_OK(f.d->ops->start_job(f.d, job_file("cap.gcode", 2000), 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.failed, 1);
+    T_EQ_STR(f.rec.end_msg, "cancelled at the printer");
+    T_EQ_INT(f.d->status.state, DRV_IDLE);
+    fx_stop(&f);
+}
+
+T_CASE(moonraker_cancelled_at_printer)
+{
+    cancelled_at_printer(MOONRAKER);
+}
+
+T_CASE(prusalink_cancelled_at_printer)
+{
+    cancelled_at_printer(PRUSALINK);
+}
+
+static void
+survives_5xx_and_cut_upload(enum kind kind)
+{
+    struct fx f;
+    struct sf_err err;
+    /* the first upload is cut half-way; later a burst of 503s hits the polls */
+    const char *faults[] = { "drop-upload=1", "5xx=3@8", NULL };
+    T_OK(fx_start(&f, kind, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("flaky.gcode", 3000); /* over 64 KiB: cut inside the body */
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    T_EQ_INT(f.rec.failed, 0);
+    fx_stop(&f);
+    char why[300] = "";
+    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
+        t_fail(__FILE__, __LINE__, "%s", why);
+}
+
+T_CASE(moonraker_survives_5xx_and_cut_upload)
+{
+    survives_5xx_and_cut_upload(MOONRAKER);
+}
+
+T_CASE(prusalink_survives_5xx_and_cut_upload)
+{
+    survives_5xx_and_cut_upload(PRUSALINK);
+}
+
+T_CASE(moonraker_offline_without_job_then_back)
+{
+    /* a printer that answers 503 (Klippy gone) without a job is offline with the reason */
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "5xx=3", NULL };
+    T_OK(fx_start(&f, MOONRAKER, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_OFFLINE));
+    T_TRUE(strstr(f.d->status.message, "HTTP 503") != NULL);
+    /* the farm's backoff would open() again: the printer is back */
+    for (int i = 0; i < 4 && f.d->status.state != DRV_IDLE; i++) {
+        T_OK(f.d->ops->open(f.d, &err), &err);
+        struct waiter w = { .d = f.d, .r = &f.rec, .state = DRV_IDLE };
+        int64_t end = wall_ms() + 5000;
+        while (!is_state(&w) && f.d->status.state != DRV_OFFLINE && wall_ms() < end)
+            loop_run_once(f.l, 50);
+        if (f.d->status.state == DRV_CONNECTING)
+            T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    }
+    T_EQ_INT(f.d->status.state, DRV_IDLE);
+    fx_stop(&f);
+}
+
+T_CASE(prusalink_busy_is_409_with_the_reason)
+{
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "busy=1", NULL };
+    T_OK(fx_start(&f, PRUSALINK, "k", faults, "k", NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("busy.gcode", 100);
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.failed, 1);
+    T_TRUE(strstr(f.rec.end_msg, "409") && strstr(f.rec.end_msg, "Printer is busy"));
+    /* the next one goes through */
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 2));
+    T_EQ_INT(f.rec.done, 1);
+    fx_stop(&f);
+}
+
+T_CASE(prusalink_printer_error)
+{
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "error=60", NULL };
+    T_OK(fx_start(&f, PRUSALINK, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    T_OK(f.d->ops->start_job(f.d, job_file("err.gcode", 2000), 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.failed, 1);
+    T_EQ_INT(f.d->status.state, DRV_ERROR);
+    T_TRUE(strstr(f.rec.end_msg, "Thermal runaway") != NULL);
+    fx_stop(&f);
+}
+
+T_CASE(moonraker_print_error_fails_the_job_only)
+{
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "error=60", NULL };
+    T_OK(fx_start(&f, MOONRAKER, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    T_OK(f.d->ops->start_job(f.d, job_file("merr.gcode", 2000), 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.failed, 1);
+    T_TRUE(strstr(f.rec.end_msg, "Move out of range") != NULL);
+    T_EQ_INT(f.d->status.state, DRV_IDLE); /* Klipper is ready: the next job may come */
+    fx_stop(&f);
+}
+
+static bool
+heating(void *ud)
+{
+    struct fx *f = ud;
+    return f->d->status.nozzle_target_c == 200;
+}
+
+T_CASE(moonraker_manual_command)
+{
+    struct fx f;
+    struct sf_err err;
+    T_OK(fx_start(&f, MOONRAKER, NULL, NULL, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    T_OK(f.d->ops->command(f.d, "G28", &err), &err);
+    T_OK(f.d->ops->command(f.d, "M104 S200", &err), &err);
+    /* the machine took them when a poll reports the new target */
+    T_TRUE(run_until(f.l, heating, &f));
+    fx_stop(&f);
+    char **got;
+    int n = commands(f.log, &got, &err);
+    T_OK(n, &err);
+    int seen = 0;
+    for (int i = 0; i < n; i++)
+        seen += strcmp(got[i], "G28") == 0 || strcmp(got[i], "M104 S200") == 0;
+    free_commands(got, n);
+    T_EQ_INT(seen, 2);
+}
+
+T_CASE(prusalink_digest_auth)
+{
+    struct fx f;
+    struct sf_err err;
+    /* current firmware: user "maker" and the password shown on the printer */
+    T_OK(fx_start(&f, PRUSALINK, "s3cret", NULL, NULL, "maker", "s3cret", &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("digest.gcode", 2500); /* streamed past one buffer */
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    fx_stop(&f);
+    char why[300] = "";
+    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
+        t_fail(__FILE__, __LINE__, "%s", why);
+    /* a wrong password is an authentication error, not "offline" for no reason */
+    T_OK(fx_start(&f, PRUSALINK, "s3cret", NULL, NULL, "maker", "guess", &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_OFFLINE));
+    T_TRUE(strstr(f.d->status.message, "authentication failed") != NULL);
+    fx_stop(&f);
+}
+
+static bool
+left_connecting(void *ud)
+{
+    struct fx *f = ud;
+    return f->d->status.state != DRV_CONNECTING && f->d->status.state != DRV_OFFLINE;
+}
+
+/* A second driver (a restarted daemon) on f's printer. */
+static struct drv *
+second_driver(struct fx *f, struct rec *r, struct sf_err *err)
+{
+    struct drv_config dc = { .name = "again",
+                             .kind = f->kind == MOONRAKER ? "moonraker" : "prusalink",
+                             .url = f->url };
+    struct drv *d = drv_new(f->l, &dc, on_event, r, err);
+    if (d && d->ops->open(d, err)) {
+        drv_free(d);
+        d = NULL;
+    }
+    return d;
+}
+
+static void
+reattach(enum kind kind)
+{
+    struct fx f;
+    struct sf_err err;
+    T_OK(fx_start(&f, kind, NULL, NULL, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    char job[512];
+    snprintf(job, sizeof(job), "%s", job_file("long.gcode", 3000));
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_progress(&f));
+    /* the daemon dies: its driver goes without a word to the printer */
+    drv_free(f.d);
+    struct rec r2;
+    memset(&r2, 0, sizeof(r2));
+    f.d = second_driver(&f, &r2, &err);
+    T_TRUE(f.d != NULL);
+    T_TRUE(run_until(f.l, left_connecting, &f));
+    T_EQ_INT(f.d->status.state, DRV_PRINTING); /* a job it did not send, so far */
+    T_TRUE(f.d->ops->attach != NULL);
+    /* another file is not taken for it */
+    T_ERR(f.d->ops->attach(f.d, job_file("other.gcode", 10), NULL, &err), SF_ENOTFOUND, &err,
+          "long.gcode");
+    T_OK(f.d->ops->attach(f.d, job, NULL, &err), &err);
+    struct waiter w = { .d = f.d, .r = &r2, .ends = 1 };
+    T_TRUE(run_until(f.l, job_ended, &w));
+    T_EQ_INT(r2.done, 1);
+    T_EQ_INT(f.d->status.lines_acked, f.d->status.lines_total);
+    fx_stop(&f);
+    char why[300] = "";
+    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
+        t_fail(__FILE__, __LINE__, "%s", why);
+}
+
+T_CASE(moonraker_reattach_after_restart)
+{
+    reattach(MOONRAKER);
+}
+
+T_CASE(prusalink_reattach_after_restart)
+{
+    reattach(PRUSALINK);
+}
+
+static void
+reattach_gone(enum kind kind)
+{
+    /* a printer that knows nothing of the job: SF_ENOTFOUND, the farm marks it interrupted */
+    struct fx f;
+    struct sf_err err;
+    T_OK(fx_start(&f, kind, NULL, NULL, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    T_ERR(f.d->ops->attach(f.d, job_file("never.gcode", 10), NULL, &err), SF_ENOTFOUND, &err,
+          "no job");
+    fx_stop(&f);
+}
+
+T_CASE(moonraker_reattach_unknown_job)
+{
+    reattach_gone(MOONRAKER);
+}
+
+T_CASE(prusalink_reattach_unknown_job)
+{
+    reattach_gone(PRUSALINK);
+}
+
+static bool
+offline_or_ended(void *ud)
+{
+    struct fx *f = ud;
+    return f->d->status.state == DRV_OFFLINE || f->rec.done + f->rec.failed > 0;
+}
+
+static void
+outage_then_attach(enum kind kind)
+{
+    /* a long outage mid-job: the driver rides out three failed polls, then
+       goes offline and lets go of the job (the farm marks it interrupted);
+       once the printer answers, attach takes it back and it ends done */
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "5xx=8@5", NULL };
+    T_OK(fx_start(&f, kind, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    char job[512];
+    snprintf(job, sizeof(job), "%s", job_file("outage.gcode", 6000));
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(run_until(f.l, offline_or_ended, &f));
+    T_EQ_INT(f.d->status.state, DRV_OFFLINE);
+    T_EQ_INT(f.rec.done + f.rec.failed + f.rec.cancelled, 0); /* not ended: interrupted */
+    T_TRUE(strstr(f.d->status.message, "503") != NULL);
+    /* the farm's backoff re-opens it until it answers */
+    for (int i = 0; i < 20 && !left_connecting(&f); i++) {
+        T_OK(f.d->ops->open(f.d, &err), &err);
+        int64_t end = wall_ms() + 3000;
+        while (f.d->status.state == DRV_CONNECTING && wall_ms() < end)
+            loop_run_once(f.l, 50);
+    }
+    T_TRUE(left_connecting(&f));
+    T_OK(f.d->ops->attach(f.d, job, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    fx_stop(&f);
+    char why[300] = "";
+    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
+        t_fail(__FILE__, __LINE__, "%s", why);
+}
+
+T_CASE(moonraker_outage_then_attach)
+{
+    outage_then_attach(MOONRAKER);
+}
+
+T_CASE(prusalink_outage_then_attach)
+{
+    outage_then_attach(PRUSALINK);
+}
