@@ -30,7 +30,7 @@ BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-nump
 
 # Libraries with a pkg-config file; the rest get fixed flags (Debian ships no .pc).
 PKGS := libserialport libcurl sqlite3 libmicrohttpd libmosquitto inih qhull_r polyclipping \
-	jansson minizip expat cairo libcrypto
+	jansson minizip expat cairo libcrypto libssl
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS = $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 EXT_CFLAGS = $(PKG_CFLAGS) -I/usr/include/suitesparse

@@ -11,11 +11,13 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "drv_bambu.h"
 #include "drv_marlin.h"
 
 /* Every kind this build has; a new driver is one row here. */
 static const struct drv_kind kinds[] = {
     { "marlin", false, drv_marlin_new },
+    { "bambu", true, drv_bambu_new },
 };
 #define N_KINDS (sizeof(kinds) / sizeof(kinds[0]))
 

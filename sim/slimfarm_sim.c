@@ -28,6 +28,7 @@
 
 #include "../src/base/loop.h"
 #include "../src/base/mem.h"
+#include "sim_bambu.h"
 #include "sim_marlin.h"
 
 static const char usage_text[] =
@@ -160,6 +161,8 @@ main(int argc, char **argv)
         fputs(usage_text, stdout);
         return 0;
     }
+    if (argc >= 2 && strcmp(argv[1], "bambu") == 0)
+        return sim_bambu_main(argc, argv);
     if (argc < 2 || strcmp(argv[1], "marlin") != 0) {
         fputs(usage_text, stderr);
         return 2;
