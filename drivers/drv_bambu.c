@@ -455,6 +455,13 @@ ftps_opts(CURL *e, void *ud)
     rc |= curl_easy_setopt(e, CURLOPT_USE_SSL, (long)CURLUSESSL_ALL);
     /* The data connection resumes the control connection's session (X1: 522 otherwise). */
     rc |= curl_easy_setopt(e, CURLOPT_SSL_SESSIONID_CACHE, 1L);
+    /* curl's TLS session cache belongs to the easy handle, its connection pool to the
+       multi: a control connection kept from an earlier upload (another easy handle) has
+       no session in this handle's cache, so the data connection would handshake afresh
+       and be refused (522; test_bambu's second job caught it).  One control connection
+       per upload, closed after it. */
+    rc |= curl_easy_setopt(e, CURLOPT_FRESH_CONNECT, 1L);
+    rc |= curl_easy_setopt(e, CURLOPT_FORBID_REUSE, 1L);
     /* TLS 1.2: X1C/H2D refuse others, and vsftpd's session reuse breaks on 1.3 (curl #4654). */
     rc |= curl_easy_setopt(e, CURLOPT_SSLVERSION,
                            (long)(CURL_SSLVERSION_TLSv1_2 | CURL_SSLVERSION_MAX_TLSv1_2));
@@ -496,14 +503,15 @@ upload_done(struct httpc_req *r, const struct httpc_result *res, void *ud)
     struct bambu *b = ud;
     b->upload = NULL;
     drop_package(b);
-    if (res->code != SF_OK || (res->status != 226 && res->status != 250)) {
+    /* curl itself requires the 226 after the data (else CURLE_UPLOAD_FAILED / PARTIAL_FILE);
+       status is the last reply, the QUIT's 221 on success. */
+    if (res->code != SF_OK) {
         char msg[300];
-        snprintf(msg, sizeof(msg), "upload failed: %s",
-                 res->code != SF_OK ? res->err.msg : "the printer did not confirm the file");
-        if (res->status == 552 || res->status == 553)
+        snprintf(msg, sizeof(msg), "upload failed: %s", res->err.msg);
+        if (res->status == 552 || res->status == 553 || strstr(res->err.msg, ": 552") ||
+            strstr(res->err.msg, ": 553"))
             snprintf(msg, sizeof(msg),
-                     "upload refused (FTP %ld): the printer's storage is full "
-                     "or missing",
+                     "upload refused (FTP %ld): the printer's storage is full or missing",
                      res->status);
         fail_start(b, msg);
         return;

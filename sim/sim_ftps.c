@@ -33,9 +33,11 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
+#include "../src/base/log.h"
 #include "../src/base/mem.h"
 
 #define LINE_MAX_FTP 512 /* a command line; longer ones are refused */
+#define FTPS_CLIENTS 8   /* control connections served at once (vsftpd forks per client) */
 
 struct sim_ftps {
     struct sim_ftps_config c;
@@ -48,11 +50,16 @@ struct sim_ftps {
     atomic_bool stop;
     pthread_mutex_t lock; /* guards stats and the live fds below */
     struct sim_ftps_stats stats;
-    int live_fd[3]; /* control, pasv listener, data: shut down on stop */
+    struct client {
+        pthread_t thread;
+        bool used, running;
+        int live_fd[3]; /* control, pasv listener, data: shut down on stop */
+    } clients[FTPS_CLIENTS];
 };
 
 struct session {
     struct sim_ftps *f;
+    struct client *cl;
     int fd;
     SSL *ssl;
     char in[LINE_MAX_FTP * 2];
@@ -62,11 +69,11 @@ struct session {
 };
 
 static void
-set_live(struct sim_ftps *f, int slot, int fd)
+set_live(struct session *s, int slot, int fd)
 {
-    pthread_mutex_lock(&f->lock);
-    f->live_fd[slot] = fd;
-    pthread_mutex_unlock(&f->lock);
+    pthread_mutex_lock(&s->f->lock);
+    s->cl->live_fd[slot] = fd;
+    pthread_mutex_unlock(&s->f->lock);
 }
 
 static void
@@ -128,7 +135,7 @@ static void
 close_pasv(struct session *s)
 {
     if (s->pasv_fd >= 0) {
-        set_live(s->f, 1, -1);
+        set_live(s, 1, -1);
         close(s->pasv_fd);
         s->pasv_fd = -1;
     }
@@ -148,7 +155,7 @@ open_pasv(struct session *s, bool epsv)
         return reply(s, "425 Can't open passive connection.");
     }
     s->pasv_fd = fd;
-    set_live(s->f, 1, fd);
+    set_live(s, 1, fd);
     int p = ntohs(a.sin_port);
     if (epsv)
         return reply(s, "229 Entering Extended Passive Mode (|||%d|)", p);
@@ -207,7 +214,7 @@ do_stor(struct session *s, const char *arg)
     close_pasv(s);
     if (dfd < 0)
         return reply(s, "425 Failed to establish connection.");
-    set_live(f, 2, dfd);
+    set_live(s, 2, dfd);
     int rc = 0;
     FILE *out = NULL;
     char part[1024], final[1024];
@@ -218,10 +225,15 @@ do_stor(struct session *s, const char *arg)
     }
     d = SSL_new(f->ctx);
     if (!d || SSL_set_fd(d, dfd) != 1 || SSL_accept(d) != 1) {
+        char e[160];
+        ERR_error_string_n(ERR_get_error(), e, sizeof(e));
+        log_info("sim-ftps", "data connection: TLS handshake failed: %s", e);
         rc = reply(s, "522 SSL connection failed; session reuse required?");
         goto done;
     }
     if (!f->c.no_reuse_check && !resumed_control(s->ssl, d)) {
+        log_info("sim-ftps", "data connection did not resume the control session (resumed: %d)",
+                 SSL_session_reused(d));
         count(f, &f->stats.refused_reuse);
         rc = reply(s, "522 SSL connection failed: session reuse required");
         goto done;
@@ -278,7 +290,7 @@ done:
         fclose(out);
     if (d)
         SSL_free(d);
-    set_live(f, 2, -1);
+    set_live(s, 2, -1);
     close(dfd);
     return rc;
 }
@@ -365,17 +377,25 @@ command(struct session *s, char *line)
     return reply(s, "502 Command not implemented.");
 }
 
-static void
-serve_client(struct sim_ftps *f, int fd)
+struct client_arg {
+    struct sim_ftps *f;
+    struct client *cl;
+    int fd;
+};
+
+static void *
+serve_client(void *arg)
 {
-    struct session s = { .f = f, .fd = fd, .pasv_fd = -1 };
-    s.ssl = SSL_new(f->ctx);
-    if (!s.ssl || SSL_set_fd(s.ssl, fd) != 1 || SSL_accept(s.ssl) != 1)
+    struct client_arg a = *(struct client_arg *)arg;
+    free(arg);
+    struct session s = { .f = a.f, .cl = a.cl, .fd = a.fd, .pasv_fd = -1 };
+    s.ssl = SSL_new(a.f->ctx);
+    if (!s.ssl || SSL_set_fd(s.ssl, a.fd) != 1 || SSL_accept(s.ssl) != 1)
         goto out; /* not TLS from the first byte: implicit FTPS drops it */
     if (reply(&s, "220 (vsFTPd 3.0.3)") < 0)
         goto out;
     char line[LINE_MAX_FTP];
-    while (!atomic_load(&f->stop) && read_line(&s, line, sizeof(line)) == 0)
+    while (!atomic_load(&a.f->stop) && read_line(&s, line, sizeof(line)) == 0)
         if (command(&s, line) < 0)
             break;
     SSL_shutdown(s.ssl);
@@ -383,6 +403,31 @@ out:
     close_pasv(&s);
     SSL_free(s.ssl);
     ERR_clear_error();
+    set_live(&s, 0, -1);
+    close(a.fd);
+    pthread_mutex_lock(&a.f->lock);
+    a.cl->running = false;
+    pthread_mutex_unlock(&a.f->lock);
+    return NULL;
+}
+
+/* A free client slot (its old thread joined), or NULL when all are busy. */
+static struct client *
+free_slot(struct sim_ftps *f)
+{
+    for (int i = 0; i < FTPS_CLIENTS; i++) {
+        struct client *c = &f->clients[i];
+        pthread_mutex_lock(&f->lock);
+        bool busy = c->running;
+        pthread_mutex_unlock(&f->lock);
+        if (busy)
+            continue;
+        if (c->used)
+            pthread_join(c->thread, NULL);
+        c->used = false;
+        return c;
+    }
+    return NULL;
 }
 
 static void *
@@ -396,12 +441,27 @@ server_main(void *arg)
                 continue;
             break; /* shut down */
         }
-        set_live(f, 0, fd);
+        struct client *cl = free_slot(f);
+        struct client_arg *a = cl ? malloc(sizeof(*a)) : NULL;
+        if (!a) {
+            close(fd); /* as vsftpd at max_clients */
+            continue;
+        }
         struct timeval tv = { .tv_sec = 30 };
         setsockopt(fd, SOL_SOCKET, SO_RCVTIMEO, &tv, sizeof(tv));
-        serve_client(f, fd);
-        set_live(f, 0, -1);
-        close(fd);
+        *a = (struct client_arg){ f, cl, fd };
+        pthread_mutex_lock(&f->lock);
+        cl->live_fd[0] = fd;
+        cl->live_fd[1] = cl->live_fd[2] = -1;
+        cl->running = true;
+        pthread_mutex_unlock(&f->lock);
+        if (pthread_create(&cl->thread, NULL, serve_client, a) != 0) {
+            cl->running = false;
+            close(fd);
+            free(a);
+            continue;
+        }
+        cl->used = true;
     }
     return NULL;
 }
@@ -416,7 +476,6 @@ sim_ftps_new(const struct sim_ftps_config *c, struct sf_err *err)
     }
     f->c = *c;
     f->listen_fd = -1;
-    f->live_fd[0] = f->live_fd[1] = f->live_fd[2] = -1;
     pthread_mutex_init(&f->lock, NULL);
     f->cert = mem_strdup(c->cert_file ? c->cert_file : "");
     f->key = mem_strdup(c->key_file ? c->key_file : "");
@@ -490,13 +549,17 @@ sim_ftps_free(struct sim_ftps *f)
     atomic_store(&f->stop, true);
     if (f->listen_fd >= 0)
         shutdown(f->listen_fd, SHUT_RDWR);
-    pthread_mutex_lock(&f->lock);
-    for (int i = 0; i < 3; i++)
-        if (f->live_fd[i] >= 0)
-            shutdown(f->live_fd[i], SHUT_RDWR);
-    pthread_mutex_unlock(&f->lock);
     if (f->started)
-        pthread_join(f->thread, NULL);
+        pthread_join(f->thread, NULL); /* no new clients after this */
+    pthread_mutex_lock(&f->lock);
+    for (int c = 0; c < FTPS_CLIENTS; c++)
+        for (int i = 0; i < 3; i++)
+            if (f->clients[c].running && f->clients[c].live_fd[i] >= 0)
+                shutdown(f->clients[c].live_fd[i], SHUT_RDWR);
+    pthread_mutex_unlock(&f->lock);
+    for (int c = 0; c < FTPS_CLIENTS; c++)
+        if (f->clients[c].used)
+            pthread_join(f->clients[c].thread, NULL);
     if (f->listen_fd >= 0)
         close(f->listen_fd);
     SSL_CTX_free(f->ctx);

@@ -53,7 +53,8 @@ struct mqttloop {
     bool lib_down;          /* libmosquitto's on_disconnect ran */
     char verify_err[160];   /* certificate verification failure, if any */
     char lib_err[160];      /* last error libmosquitto logged */
-    char fail_why[200];     /* message of a pending immediate failure */
+    int fail_rc;            /* libmosquitto code of a pending immediate failure */
+    int fail_errno;         /* its errno when that was MOSQ_ERR_ERRNO */
 };
 
 static pthread_once_t lib_once = PTHREAD_ONCE_INIT;
@@ -199,6 +200,32 @@ drop(struct mqttloop *m)
     sync_fd(m);
 }
 
+/* Why the connection ended (or never came up), from rc and what the callbacks saw. */
+static void
+describe(struct mqttloop *m, int rc, bool was_up, char *why, size_t n, bool *tls, int *connack)
+{
+    *tls = false;
+    *connack = 0;
+    if (m->got_connack && m->connack != 0) {
+        *connack = m->connack;
+        snprintf(why, n, "broker refused the connection: %s (CONNACK %d)",
+                 mosquitto_connack_string(m->connack), m->connack);
+    } else if (rc == MOSQ_ERR_TLS || m->verify_err[0]) {
+        *tls = true;
+        if (m->verify_err[0])
+            snprintf(why, n, "TLS: certificate rejected: %s", m->verify_err);
+        else
+            snprintf(why, n, "TLS handshake failed: %s",
+                     m->lib_err[0] ? m->lib_err : mosquitto_strerror(rc));
+    } else if (rc == MOSQ_ERR_ERRNO) {
+        snprintf(why, n, "cannot connect to %s:%d: %s", m->host, m->c.port,
+                 strerror(m->fail_errno ? m->fail_errno : errno));
+    } else {
+        snprintf(why, n, "%s%s", was_up ? "connection lost: " : "",
+                 rc ? mosquitto_strerror(rc) : "connection closed");
+    }
+}
+
 static void
 go_down(struct mqttloop *m, int rc, const char *why_override)
 {
@@ -207,25 +234,10 @@ go_down(struct mqttloop *m, int rc, const char *why_override)
     char why[300];
     bool tls = false;
     int connack = 0;
-    if (why_override) {
+    if (why_override)
         snprintf(why, sizeof(why), "%s", why_override);
-    } else if (m->got_connack && m->connack != 0) {
-        connack = m->connack;
-        snprintf(why, sizeof(why), "broker refused the connection: %s (CONNACK %d)",
-                 mosquitto_connack_string(m->connack), m->connack);
-    } else if (rc == MOSQ_ERR_TLS || m->verify_err[0]) {
-        tls = true;
-        if (m->verify_err[0])
-            snprintf(why, sizeof(why), "TLS: certificate rejected: %s", m->verify_err);
-        else
-            snprintf(why, sizeof(why), "TLS handshake failed: %s",
-                     m->lib_err[0] ? m->lib_err : mosquitto_strerror(rc));
-    } else if (rc == MOSQ_ERR_ERRNO) {
-        snprintf(why, sizeof(why), "%s", strerror(errno));
-    } else {
-        snprintf(why, sizeof(why), "%s%s", was_up ? "connection lost: " : "",
-                 rc ? mosquitto_strerror(rc) : "connection closed");
-    }
+    else
+        describe(m, rc, was_up, why, sizeof(why), &tls, &connack);
     if (m->c.on_down)
         m->c.on_down(m->c.ud, connack, tls, why);
 }
@@ -312,8 +324,12 @@ report_failure(struct loop *l, void *ud)
     (void)l;
     struct mqttloop *m = ud;
     m->fail_timer = 0;
+    char why[300];
+    bool tls;
+    int connack;
+    describe(m, m->fail_rc, false, why, sizeof(why), &tls, &connack);
     if (m->c.on_down)
-        m->c.on_down(m->c.ud, 0, false, m->fail_why);
+        m->c.on_down(m->c.ud, connack, tls, why);
 }
 
 static char *
@@ -393,14 +409,17 @@ mqttloop_connect(struct mqttloop *m, struct sf_err *err)
     m->connack = 0;
     m->lib_down = false;
     m->verify_err[0] = m->lib_err[0] = '\0';
+    m->fail_rc = m->fail_errno = 0;
     ERR_clear_error();
     m->state = M_CONNECTING;
     int rc = mosquitto_connect_async(m->mosq, m->host, m->c.port, m->c.keepalive_s);
     if (rc != MOSQ_ERR_SUCCESS) {
-        /* Refused at once (a loopback port with no listener does that):
-           report through on_down like every other failure, on the next turn. */
-        snprintf(m->fail_why, sizeof(m->fail_why), "cannot connect to %s:%d: %s", m->host,
-                 m->c.port, rc == MOSQ_ERR_ERRNO ? strerror(errno) : mosquitto_strerror(rc));
+        /* Refused at once (a loopback port with no listener, or a TLS handshake that
+           finished inside the call): reported through on_down like every other failure,
+           on the next turn. */
+        m->fail_rc = rc;
+        if (rc == MOSQ_ERR_ERRNO)
+            m->fail_errno = errno;
         drop(m);
         loop_timer_cancel(m->loop, m->fail_timer);
         m->fail_timer = loop_timer_add(m->loop, 0, report_failure, m);

@@ -61,6 +61,12 @@ static const struct option options[] = {
     { "rx_buffer", true, K_INT, P(rx_buffer), 64, 65536 },
     { "url", true, K_STR, P(url), 0, 0 },
     { "api_key", true, K_STR, P(api_key), 0, 0 },
+    { "host", true, K_STR, P(url), 0, 0 },           /* bambu: the printer's IP (= url) */
+    { "access_code", true, K_STR, P(api_key), 0, 0 }, /* bambu: LAN access code (= api_key) */
+    { "serial", true, K_IDENT, P(serial), 0, 0 },
+    { "ca_file", true, K_STR, P(ca_file), 0, 0 },
+    { "tls_insecure", true, K_BOOL, P(tls_insecure), 0, 0 },
+    { "ftps_port", true, K_INT, P(ftps_port), 1, 65535 },
     { "profile", true, K_IDENT, P(profile), 0, 0 },
     { "material", true, K_IDENT, P(material), 0, 0 },
     { "nozzle_mm", true, K_DBL, P(nozzle_mm), 0.1, 2.0 },
@@ -426,6 +432,12 @@ check_printers(struct parse *ps)
         if (k->url && !p->url[0])
             return fail(ps, "section 'printer %s': option 'url' is required by driver %s", p->name,
                         p->driver);
+        if (!strcmp(p->driver, "bambu") && (!p->serial[0] || !p->api_key[0]))
+            return fail(ps, "section 'printer %s': options 'serial' and 'access_code' are "
+                        "required by driver bambu", p->name);
+        if (!strcmp(p->driver, "bambu") && !p->ca_file[0] && !p->tls_insecure)
+            return fail(ps, "section 'printer %s': option 'ca_file' is required by driver bambu "
+                        "(or tls_insecure: true, which checks no certificate)", p->name);
     }
     return 1;
 }

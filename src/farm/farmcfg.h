@@ -41,6 +41,10 @@ struct farmcfg_printer {
     int rx_buffer;       /* marlin: the firmware's RX ring, bytes in flight (default 128) */
     char url[256];       /* network drivers: base URL */
     char api_key[128];   /* network drivers: key or access code */
+    char serial[48];     /* bambu: device id (MQTT topics, certificate CN) */
+    char ca_file[256];   /* bambu: CA the printer's certificate must chain to */
+    bool tls_insecure;   /* bambu: check no certificate (default false) */
+    int ftps_port;       /* bambu: FTPS port (default 990) */
     char profile[64];    /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */
     char material[32];   /* loaded material (default "PLA") */
     double nozzle_mm;    /* nozzle diameter (default 0.4) */

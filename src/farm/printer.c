@@ -293,7 +293,11 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
                              .buffer_lines = cfg->buffer_lines,
                              .rx_buffer = cfg->rx_buffer,
                              .url = cfg->url,
-                             .api_key = cfg->api_key };
+                             .api_key = cfg->api_key,
+                             .serial = cfg->serial,
+                             .ca_file = cfg->ca_file,
+                             .tls_insecure = cfg->tls_insecure,
+                             .ftps_port = cfg->ftps_port };
     p->drv = env->driver(env->l, &dc, on_drv_event, p, &err);
     if (!p->drv) {
         snprintf(p->message, sizeof(p->message), "%s", err.msg);
