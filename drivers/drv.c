@@ -16,8 +16,8 @@
 
 /* Every kind this build has; a new driver is one row here. */
 static const struct drv_kind kinds[] = {
-    { "marlin", false, drv_marlin_new },
-    { "bambu", true, drv_bambu_new },
+    { "marlin", false, DRV_AUTH_NONE, NULL, drv_marlin_new },
+    { "bambu", true, DRV_AUTH_NONE, "mqtts", drv_bambu_new },
 };
 #define N_KINDS (sizeof(kinds) / sizeof(kinds[0]))
 
@@ -99,6 +99,26 @@ drv_job_scan_to(const char *path, uint64_t first_line, struct drv_job_scan *scan
                 struct sf_err *err)
 {
     return drv_marlin_scan_to(path, first_line, scan, err);
+}
+
+void
+drv_remote_name(const char *gcode_path, char *out, size_t n)
+{
+    const char *base = strrchr(gcode_path, '/');
+    base = base ? base + 1 : gcode_path;
+    size_t len = strlen(base);
+    if (len > 6 && strcmp(base + len - 6, ".gcode") == 0)
+        len -= 6;
+    char clean[65];
+    size_t k = 0;
+    for (size_t i = 0; i < len && k < 64; i++) {
+        char c = base[i];
+        bool ok = (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') ||
+                  c == '-' || c == '_' || (c == '.' && k > 0);
+        clean[k++] = ok ? c : '_';
+    }
+    clean[k] = 0;
+    snprintf(out, n, "sf-%s.gcode", k ? clean : "job");
 }
 
 int

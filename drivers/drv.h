@@ -25,7 +25,8 @@
 #include "../src/base/err.h"
 #include "../src/base/loop.h"
 
-#define DRV_OPS_VERSION 1
+/* 2: attach (network printers re-attach after a daemon restart); drv_kind.auth, schemes. */
+#define DRV_OPS_VERSION 2
 
 enum drv_state {
     DRV_OFFLINE = 0, /* not connected */
@@ -66,21 +67,24 @@ struct drv_caps {
 
 /* How to reach a printer (from the farm config). */
 struct drv_config {
-    const char *name;    /* printer name, for logs */
-    const char *kind;    /* "marlin", "octoprint", "moonraker", "bambu" */
-    const char *port;    /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
-    int baud;            /* serial baud rate (0: 115200) */
-    const char *url;     /* network printers: base URL */
-    const char *api_key; /* network printers: key or access code */
-    int timeout_ms;      /* marlin: margin past the expected execution time of the lines in
-                            flight before a probe (0: 1000) */
-    int buffer_lines;    /* marlin: the firmware's BUFSIZE, most lines in flight (0: 4;
-                            ADVANCED_OK's B when it says more; 1: ping-pong) */
-    int rx_buffer;       /* marlin: the firmware's RX ring, bytes (0: 128) */
-    const char *serial;  /* bambu: the printer's serial, its device id and certificate CN */
-    const char *ca_file; /* bambu: CA bundle the printer's certificate must chain to */
-    bool tls_insecure;   /* bambu: no certificate check at all (operator's choice; warned) */
-    int ftps_port;       /* bambu: implicit FTPS port (0: 990) */
+    const char *name;     /* printer name, for logs */
+    const char *kind;     /* "marlin", "octoprint", "moonraker", "bambu" */
+    const char *port;     /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
+    int baud;             /* serial baud rate (0: 115200) */
+    const char *url;      /* network printers: base URL (http://host[:port][/prefix]) */
+    const char *api_key;  /* network printers: key or access code ("" or NULL: none) */
+    const char *user;     /* network printers: HTTP digest user (PrusaLink), or NULL */
+    const char *password; /* its password */
+    int poll_ms;          /* network printers: status poll period (0: 1000) */
+    int timeout_ms;       /* marlin: margin past the expected execution time of the lines in
+                             flight before a probe (0: 1000) */
+    int buffer_lines;     /* marlin: the firmware's BUFSIZE, most lines in flight (0: 4;
+                             ADVANCED_OK's B when it says more; 1: ping-pong) */
+    int rx_buffer;        /* marlin: the firmware's RX ring, bytes (0: 128) */
+    const char *serial;   /* bambu: the printer's serial, its device id and certificate CN */
+    const char *ca_file;  /* bambu: CA bundle the printer's certificate must chain to */
+    bool tls_insecure;    /* bambu: no certificate check at all (operator's choice; warned) */
+    int ftps_port;        /* bambu: implicit FTPS port (0: 990) */
 };
 
 /* The machine state a job's commands leave behind: what a resume restores. */
@@ -137,6 +141,23 @@ struct drv_ops {
     int (*command)(struct drv *d, const char *line, struct sf_err *err);
     void (*close)(struct drv *d);
     void (*destroy)(struct drv *d);
+    /* Version 2 on (appended, as SQLite's VFS grows): */
+    /*
+     * Re-attach (NULL for drivers whose job dies with the host, Marlin):
+     * a network printer keeps printing when the daemon dies.  After a
+     * restart, once the driver has connected (status.state left
+     * DRV_CONNECTING), the owner offers it the job it last gave this
+     * printer, gcode_path (scan as for start_job, or NULL).  If the
+     * printer is printing or paused on that job's upload (the name
+     * drv_remote_name() gives, with the file's size), or ended it since
+     * (complete or cancelled at the printer), the driver adopts it without
+     * sending anything and reports on it as on a job it started: progress,
+     * then DRV_EV_JOB_DONE / FAILED / CANCELLED (possibly at once).
+     * SF_ENOTFOUND when the printer knows nothing of it (the owner marks
+     * the job interrupted, as for Marlin); SF_EAGAIN while not connected.
+     */
+    int (*attach)(struct drv *d, const char *gcode_path, const struct drv_job_scan *scan,
+                  struct sf_err *err);
 };
 
 struct drv {
@@ -149,10 +170,20 @@ struct drv {
     struct drv_caps caps;
 };
 
+/* What a network kind needs to authenticate (farmcfg checks the config by it). */
+enum drv_auth {
+    DRV_AUTH_NONE = 0,      /* nothing (serial) */
+    DRV_AUTH_KEY,           /* api_key required (OctoPrint) */
+    DRV_AUTH_KEY_OPTIONAL,  /* api_key if the server asks for one (Moonraker) */
+    DRV_AUTH_KEY_OR_DIGEST, /* api_key, or user and password for HTTP digest (PrusaLink) */
+};
+
 /* One kind of printer driver: a row of drv.c's registry, the one list of kinds. */
 struct drv_kind {
-    const char *name; /* the config's "driver:" value, e.g. "marlin" */
-    bool url;         /* reached by URL (network) rather than by port (serial, pty, TCP) */
+    const char *name;    /* the config's "driver:" value, e.g. "marlin" */
+    bool url;            /* reached by URL (network) rather than by port (serial, pty, TCP) */
+    enum drv_auth auth;  /* url kinds: the credentials the config must give */
+    const char *schemes; /* url kinds: accepted URL schemes, space-separated ("http https") */
     struct drv *(*create)(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event,
                           void *ud, struct sf_err *err);
 };
@@ -172,6 +203,15 @@ struct drv *drv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn o
 void drv_free(struct drv *d);
 
 const char *drv_state_name(enum drv_state s);
+
+/*
+ * The name under which network drivers upload gcode_path, the same for
+ * every driver and every daemon run (so a restarted daemon recognises its
+ * job on the printer): "sf-" and the file's base name (the farm's files are
+ * named by their SHA-256, so the name says which content it holds), kept
+ * to [A-Za-z0-9._-] and 64 bytes, ending in ".gcode".  out holds n >= 72.
+ */
+void drv_remote_name(const char *gcode_path, char *out, size_t n);
 
 /*
  * Read and check a whole job file once, so that a job never fails half-way

@@ -1,6 +1,8 @@
 /*
- * slimfarm_sim.c - `slimfarm-sim marlin [options]`: run a simulated Marlin
- * printer for tests, benchmarks and demos.
+ * slimfarm_sim.c - `slimfarm-sim KIND [options]`: run simulated printers
+ * for tests, benchmarks and demos.  KIND is a row of the table at the end
+ * (marlin here; each network simulator's main lives in its own file and
+ * shares sim_netcli.h's options).  What follows is `slimfarm-sim marlin`.
  *
  * Prints where to connect on its first line of output (the pty path or
  * tcp://127.0.0.1:PORT), then serves until SIGINT/SIGTERM, when it flushes
@@ -30,11 +32,13 @@
 #include "../src/base/mem.h"
 #include "sim_bambu.h"
 #include "sim_marlin.h"
+#include "sim_octoprint.h"
 
 static const char usage_text[] =
     "usage: slimfarm-sim marlin [--tcp PORT] [--link PATH] [--baud N] [--speed X]\n"
     "                           [--bufsize N] [--planner N] [--rx-size N] [--advanced-ok]\n"
     "                           [--uart] [--log FILE] [--fault SPEC]... [--count N]\n"
+    "       slimfarm-sim octoprint --help   (and the other network printers)\n"
     "       slimfarm-sim -h|--help\n"
     "  --uart  bytes reaching a full RX buffer are lost (else the host waits, as on USB)\n"
     "faults: corrupt=RATE corrupt-rx=RATE corrupt-tx=RATE drop-ok=RATE garbage=RATE\n"
@@ -154,19 +158,9 @@ out:
     return rc;
 }
 
-int
-main(int argc, char **argv)
+static int
+marlin_main(int argc, char **argv)
 {
-    if (argc >= 2 && (strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0)) {
-        fputs(usage_text, stdout);
-        return 0;
-    }
-    if (argc >= 2 && strcmp(argv[1], "bambu") == 0)
-        return sim_bambu_main(argc, argv);
-    if (argc < 2 || strcmp(argv[1], "marlin") != 0) {
-        fputs(usage_text, stderr);
-        return 2;
-    }
     struct sim_marlin_config c;
     sim_marlin_config_init(&c);
     struct sf_err err;
@@ -253,4 +247,28 @@ main(int argc, char **argv)
     int rc = serve(l, &c, (int)count);
     loop_free(l);
     return rc;
+}
+
+/* Every simulator this program runs: a new one is one row. */
+static const struct {
+    const char *kind;
+    int (*main)(int argc, char **argv); /* argv[1] is the kind */
+} sims[] = {
+    { "marlin", marlin_main },
+    { "octoprint", sim_octoprint_main },
+    { "bambu", sim_bambu_main },
+};
+
+int
+main(int argc, char **argv)
+{
+    if (argc >= 2 && (strcmp(argv[1], "-h") == 0 || strcmp(argv[1], "--help") == 0)) {
+        fputs(usage_text, stdout);
+        return 0;
+    }
+    for (size_t i = 0; argc >= 2 && i < sizeof(sims) / sizeof(sims[0]); i++)
+        if (strcmp(argv[1], sims[i].kind) == 0)
+            return sims[i].main(argc, argv);
+    fputs(usage_text, stderr);
+    return 2;
 }

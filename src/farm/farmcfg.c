@@ -61,7 +61,10 @@ static const struct option options[] = {
     { "rx_buffer", true, K_INT, P(rx_buffer), 64, 65536 },
     { "url", true, K_STR, P(url), 0, 0 },
     { "api_key", true, K_STR, P(api_key), 0, 0 },
-    { "host", true, K_STR, P(url), 0, 0 },           /* bambu: the printer's IP (= url) */
+    { "user", true, K_STR, P(user), 0, 0 },
+    { "password", true, K_STR, P(password), 0, 0 },
+    { "poll_ms", true, K_INT, P(poll_ms), 200, 60000 },
+    { "host", true, K_STR, P(host), 0, 0 },           /* bambu: url = mqtts://HOST */
     { "access_code", true, K_STR, P(api_key), 0, 0 }, /* bambu: LAN access code (= api_key) */
     { "serial", true, K_IDENT, P(serial), 0, 0 },
     { "ca_file", true, K_STR, P(ca_file), 0, 0 },
@@ -127,6 +130,7 @@ printer_defaults(struct farmcfg_printer *p)
     p->baud = 115200;
     p->buffer_lines = 4;
     p->rx_buffer = 128;
+    p->poll_ms = 1000;
     snprintf(p->profile, sizeof(p->profile), "generic-marlin");
     snprintf(p->material, sizeof(p->material), "PLA");
     p->nozzle_mm = 0.4;
@@ -355,6 +359,8 @@ handler(void *user, const char *section, const char *name, const char *value)
                         "'-', '_', '.'",
                         name, section, value);
         snprintf(field, o->size, "%s", value);
+        if (in_printer && strcmp(name, "url") == 0)
+            ps->cfg->printers[ps->section].url_line = ps->line;
         return 1;
     case K_INT:
     case K_DBL:
@@ -408,6 +414,61 @@ handler(void *user, const char *section, const char *name, const char *value)
     return fail(ps, "option '%s': internal error", name);
 }
 
+/*
+ * A network printer's url: a scheme the driver takes, then a host, an
+ * optional port and path, nothing a request line could trip on.  The
+ * message names the url option's own line.
+ */
+static int
+check_url(struct parse *ps, const struct farmcfg_printer *p, const struct drv_kind *k)
+{
+    int line = ps->line;
+    if (p->url_line)
+        ps->line = p->url_line;
+    const char *sep = strstr(p->url, "://");
+    char scheme[16] = "";
+    if (sep && (size_t)(sep - p->url) < sizeof(scheme))
+        snprintf(scheme, sizeof(scheme), "%.*s", (int)(sep - p->url), p->url);
+    bool known = false;
+    const char *s = k->schemes ? k->schemes : "http https";
+    size_t sl = strlen(scheme);
+    while (sl && *s) {
+        size_t w = strcspn(s, " ");
+        if (w == sl && strncmp(s, scheme, w) == 0)
+            known = true;
+        s += w + (s[w] == ' ');
+    }
+    if (!known) {
+        fail(ps, "section 'printer %s': option 'url': '%s' does not start with %s://", p->name,
+             p->url, k->schemes ? k->schemes : "http");
+        return -1;
+    }
+    const char *host = sep + 3;
+    if (!*host || *host == '/' || *host == ':') {
+        fail(ps, "section 'printer %s': option 'url': '%s' has no host", p->name, p->url);
+        return -1;
+    }
+    for (const char *c = p->url; *c; c++)
+        if ((unsigned char)*c <= ' ' || *c == '"' || *c == '\\' || (unsigned char)*c >= 0x7f) {
+            fail(ps, "section 'printer %s': option 'url': '%s' holds a space or control byte",
+                 p->name, p->url);
+            return -1;
+        }
+    const char *colon = strchr(host, ':');
+    const char *slash = strchr(host, '/');
+    if (colon && (!slash || colon < slash)) {
+        char *end;
+        long port = strtol(colon + 1, &end, 10);
+        if (end == colon + 1 || (*end && *end != '/') || port < 1 || port > 65535) {
+            fail(ps, "section 'printer %s': option 'url': '%s' has no port in 1..65535", p->name,
+                 p->url);
+            return -1;
+        }
+    }
+    ps->line = line;
+    return 0;
+}
+
 /* Checks that need a whole section: required options, driver-specific ones. */
 static int
 check_printers(struct parse *ps)
@@ -429,8 +490,28 @@ check_printers(struct parse *ps)
         if (!k->url && !p->port[0])
             return fail(ps, "section 'printer %s': option 'port' is required by driver %s", p->name,
                         p->driver);
+        if (p->host[0] && !p->url[0]) /* bambu's host: IP */
+            snprintf(p->url, sizeof(p->url), "mqtts://%s", p->host);
         if (k->url && !p->url[0])
             return fail(ps, "section 'printer %s': option 'url' is required by driver %s", p->name,
+                        p->driver);
+        if (k->url && check_url(ps, p, k) < 0)
+            return 0;
+        if (k->auth == DRV_AUTH_KEY && !p->api_key[0])
+            return fail(ps,
+                        "section 'printer %s': option 'api_key' is required by driver %s "
+                        "(%s: Settings > Application Keys, or the global API key)",
+                        p->name, p->driver, p->driver);
+        if (k->auth == DRV_AUTH_KEY_OR_DIGEST && !p->api_key[0] && !(p->user[0] && p->password[0]))
+            return fail(ps,
+                        "section 'printer %s': driver %s needs option 'api_key', or 'user' "
+                        "and 'password'",
+                        p->name, p->driver);
+        if (k->url && (p->user[0] != 0) != (p->password[0] != 0))
+            return fail(ps, "section 'printer %s': options 'user' and 'password' go together",
+                        p->name);
+        if (k->url && p->user[0] && k->auth != DRV_AUTH_KEY_OR_DIGEST)
+            return fail(ps, "section 'printer %s': driver %s takes no 'user'/'password'", p->name,
                         p->driver);
         if (!strcmp(p->driver, "bambu") && (!p->serial[0] || !p->api_key[0]))
             return fail(ps, "section 'printer %s': options 'serial' and 'access_code' are "

@@ -39,8 +39,13 @@ struct farmcfg_printer {
     int baud;            /* marlin serial speed (default 115200) */
     int buffer_lines;    /* marlin: the firmware's BUFSIZE, lines in flight (default 4) */
     int rx_buffer;       /* marlin: the firmware's RX ring, bytes in flight (default 128) */
-    char url[256];       /* network drivers: base URL */
+    char url[256];       /* network drivers: base URL, http://host[:port][/prefix] */
+    int url_line;        /* line of the url option, for later messages (0: none) */
     char api_key[128];   /* network drivers: key or access code */
+    char user[64];       /* network drivers: HTTP digest user (PrusaLink's "maker") */
+    char password[128];  /* its password */
+    int poll_ms;         /* network drivers: status poll period, ms (default 1000) */
+    char host[128];      /* bambu: the printer's IP; url becomes mqtts://HOST */
     char serial[48];     /* bambu: device id (MQTT topics, certificate CN) */
     char ca_file[256];   /* bambu: CA the printer's certificate must chain to */
     bool tls_insecure;   /* bambu: check no certificate (default false) */

@@ -143,8 +143,9 @@ t_destroy(struct drv *d)
     free(d);
 }
 
-static const struct drv_ops tdrv_ops = { DRV_OPS_VERSION, "tdrv",   t_open,    t_start, t_pause,
-                                         t_resume,        t_cancel, t_command, t_close, t_destroy };
+static const struct drv_ops tdrv_ops = { DRV_OPS_VERSION, "tdrv",    t_open,   t_start,
+                                         t_pause,         t_resume,  t_cancel, t_command,
+                                         t_close,         t_destroy, NULL };
 
 static struct drv *
 tdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
