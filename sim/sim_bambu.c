@@ -11,7 +11,8 @@
  * every pushall) or as the fields that changed since the last report
  * (P1).  Requests are parsed with jansson; each command answers on the
  * report topic with the same top-level key, command and sequence_id, and a
- * result.  The job runs on the machine (machine_* below); its progress
+ * result.  The job runs on the machine, sim_netprinter (a sim_marlin and the
+ * host streaming the plate to it, as the printer's own firmware does); its progress
  * moves mc_percent, layer_num and mc_remaining_time.
  *
  * Thread: loop thread; sim_ftps runs its own.
@@ -34,15 +35,17 @@
 #include "../src/base/mem.h"
 #include "../src/base/mqttloop.h"
 #include "sim_ftps.h"
+#include "sim_netprinter.h"
 
-#define GCODE_MAX    ((size_t)1 << 30)  /* a plate's G-code, unpacked */
-#define REQUEST_MAX  (1 << 16)          /* a request message */
-#define HMS_VERIFY   "0500050000010007" /* "MQTT command verification failed" */
-#define ERR_CANCELED 0x0300400C         /* print_error "task canceled" */
-#define ERR_PARSE    0x05004003         /* 0500-4003 "unable to parse" (bad md5) */
-#define ERR_BUSY     0x05004004         /* 0500-4004 busy */
-#define ERR_VERIFY   0x05024007         /* err_code 84033543 on screen */
-#define ERR_NO_FILE  0x0500400E         /* file not found (as seen by clients) */
+#define GCODE_MAX    ((size_t)1 << 30)    /* a plate's G-code, unpacked */
+#define PLATE_NAME   "sf-sim-plate.gcode" /* the unpacked plate, in the uploads dir */
+#define REQUEST_MAX  (1 << 16)            /* a request message */
+#define HMS_VERIFY   "0500050000010007"   /* "MQTT command verification failed" */
+#define ERR_CANCELED 0x0300400C           /* print_error "task canceled" */
+#define ERR_PARSE    0x05004003           /* 0500-4003 "unable to parse" (bad md5) */
+#define ERR_BUSY     0x05004004           /* 0500-4004 busy */
+#define ERR_VERIFY   0x05024007           /* err_code 84033543 on screen */
+#define ERR_NO_FILE  0x0500400E           /* file not found (as seen by clients) */
 
 /* The report's print object: what the printer tells. */
 struct pstate {
@@ -64,8 +67,7 @@ struct sim_bambu {
     struct sim_bambu_config c;
     char serial[64], code[64];
     char topic_report[96], topic_request[96];
-    char storage[512];
-    bool own_storage;
+    char storage[512]; /* the machine's uploads directory: FTPS stores there */
     char ca[512], cert[512], key[512];
     struct mqttloop *mqtt;
     struct sim_ftps *ftps;
@@ -78,205 +80,10 @@ struct sim_bambu {
     char plate_path[600]; /* unpacked plate G-code */
     uint64_t *layer_at;   /* command index where layer i+1 starts */
     size_t n_layers;
-    struct machine *m;
+    struct sim_netprinter *np; /* the machine: firmware and the host streaming the plate */
     bool stop_fired, hms_fired;
-    bool we_paused; /* paused by command */
+    bool job_on; /* a job of ours runs on np */
 };
-
-/* ---- the machine: runs the plate's G-code ----
- * TODO(#22): placeholder until net's sim_netprinter lands; it executes the
- * plate's commands at a fixed rate and keeps the log, nothing more. */
-
-struct machine_status {
-    uint64_t executed;            /* commands executed (job and manual) */
-    uint64_t job_done, job_total; /* the job's commands: executed, in all */
-    bool job_finished;            /* the job's last command executed */
-    double remaining_s;           /* estimate, -1 unknown */
-    double nozzle_c, nozzle_target_c, bed_c, bed_target_c;
-};
-
-typedef void (*machine_fn)(void *ud);
-
-struct machine {
-    struct loop *loop;
-    double speed;
-    FILE *log;
-    FILE *job;
-    bool paused, running, finished;
-    uint64_t executed, done, total;
-    uint64_t timer;
-    struct machine_status st;
-    machine_fn on_change;
-    void *ud;
-};
-
-static void
-machine_exec(struct machine *m, const char *cmd)
-{
-    m->executed++;
-    if (m->log)
-        fprintf(m->log, "%s\n", cmd);
-    double v;
-    const char *sp = strstr(cmd, " S");
-    v = sp ? strtod(sp + 2, NULL) : 0;
-    if (!strncmp(cmd, "M104", 4) || !strncmp(cmd, "M109", 4))
-        m->st.nozzle_c = m->st.nozzle_target_c = v;
-    if (!strncmp(cmd, "M140", 4) || !strncmp(cmd, "M190", 4))
-        m->st.bed_c = m->st.bed_target_c = v;
-}
-
-/* The command of a line, comments and blanks stripped, in place; NULL if none. */
-static char *
-machine_cmd(char *line)
-{
-    char *c = strchr(line, ';');
-    if (c)
-        *c = '\0';
-    while (*line == ' ' || *line == '\t')
-        line++;
-    size_t n = strlen(line);
-    while (n && strchr(" \t\r\n", line[n - 1]))
-        line[--n] = '\0';
-    return n ? line : NULL;
-}
-
-static void
-machine_tick(struct loop *l, void *ud)
-{
-    struct machine *m = ud;
-    m->timer = 0;
-    if (!m->running || m->paused)
-        return;
-    int budget = (int)(50 * m->speed) + 1;
-    char line[4096];
-    while (budget > 0 && fgets(line, sizeof(line), m->job)) {
-        char *cmd = machine_cmd(line);
-        if (!cmd)
-            continue;
-        machine_exec(m, cmd);
-        m->done++;
-        budget--;
-    }
-    if (budget > 0) {
-        m->running = false;
-        m->finished = true;
-        if (m->log)
-            fflush(m->log);
-    } else {
-        m->timer = loop_timer_add(l, 10, machine_tick, m);
-    }
-    m->on_change(m->ud);
-}
-
-static struct machine *
-machine_new(struct loop *l, double speed, const char *log_path, machine_fn on_change, void *ud,
-            struct sf_err *err)
-{
-    struct machine *m = mem_calloc(1, sizeof(*m));
-    if (!m) {
-        sf_err_set(err, SF_ENOMEM, "sim: out of memory");
-        return NULL;
-    }
-    m->loop = l;
-    m->speed = speed;
-    m->on_change = on_change;
-    m->ud = ud;
-    m->st.nozzle_c = m->st.bed_c = 22;
-    if (log_path && !(m->log = fopen(log_path, "w"))) {
-        sf_err_sys(err, "sim: log '%s'", log_path);
-        free(m);
-        return NULL;
-    }
-    return m;
-}
-
-static int
-machine_start(struct machine *m, const char *path, struct sf_err *err)
-{
-    if (m->job)
-        fclose(m->job);
-    m->job = fopen(path, "r");
-    if (!m->job)
-        return sf_err_sys(err, "sim: cannot read '%s'", path);
-    char line[4096];
-    m->total = 0;
-    while (fgets(line, sizeof(line), m->job))
-        if (machine_cmd(line))
-            m->total++;
-    rewind(m->job);
-    m->done = 0;
-    m->running = true;
-    m->paused = m->finished = false;
-    loop_timer_cancel(m->loop, m->timer);
-    m->timer = loop_timer_add(m->loop, 10, machine_tick, m);
-    return SF_OK;
-}
-
-static void
-machine_pause(struct machine *m)
-{
-    m->paused = true;
-}
-
-static void
-machine_resume(struct machine *m)
-{
-    m->paused = false;
-    loop_timer_cancel(m->loop, m->timer);
-    m->timer = loop_timer_add(m->loop, 10, machine_tick, m);
-}
-
-static void
-machine_stop(struct machine *m)
-{
-    m->running = false;
-    loop_timer_cancel(m->loop, m->timer);
-    m->timer = 0;
-    if (m->log)
-        fflush(m->log);
-}
-
-static int
-machine_gcode(struct machine *m, const char *lines, struct sf_err *err)
-{
-    char *copy = mem_strdup(lines);
-    if (!copy)
-        return sf_err_set(err, SF_ENOMEM, "sim: out of memory");
-    char *save = NULL;
-    for (char *l = strtok_r(copy, "\n", &save); l; l = strtok_r(NULL, "\n", &save)) {
-        char *cmd = machine_cmd(l);
-        if (cmd)
-            machine_exec(m, cmd);
-    }
-    free(copy);
-    if (m->log)
-        fflush(m->log);
-    return SF_OK;
-}
-
-static void
-machine_status(const struct machine *m, struct machine_status *out)
-{
-    *out = m->st;
-    out->executed = m->executed;
-    out->job_done = m->done;
-    out->job_total = m->total;
-    out->job_finished = m->finished;
-    out->remaining_s = m->total > m->done ? (double)(m->total - m->done) / (5000 * m->speed) : 0;
-}
-
-static void
-machine_free(struct machine *m)
-{
-    if (!m)
-        return;
-    loop_timer_cancel(m->loop, m->timer);
-    if (m->job)
-        fclose(m->job);
-    if (m->log)
-        fclose(m->log);
-    free(m);
-}
 
 /* ---- reports ---- */
 
@@ -393,34 +200,62 @@ set_state(struct sim_bambu *s, const char *gs)
 static void
 follow_machine(struct sim_bambu *s)
 {
-    struct machine_status ms;
-    machine_status(s->m, &ms);
+    struct sim_np_status ms;
+    sim_netprinter_status(s->np, &ms);
     s->st.nozzle = ms.nozzle_c;
     s->st.nozzle_target = ms.nozzle_target_c;
     s->st.bed = ms.bed_c;
     s->st.bed_target = ms.bed_target_c;
-    s->stats.executed = ms.executed;
-    bool active =
-        strcmp(s->st.gcode_state, "RUNNING") == 0 || strcmp(s->st.gcode_state, "PAUSE") == 0;
-    if (!active)
+    if (!s->job_on)
         return;
-    double pct = ms.job_total ? 100.0 * (double)ms.job_done / (double)ms.job_total : 0;
+    s->stats.executed = ms.lines_done;
+    double pct = 100.0 * ms.progress;
     s->st.mc_percent = (int)pct;
     size_t layer = 0;
-    while (layer < s->n_layers && s->layer_at[layer] <= ms.job_done)
+    while (layer < s->n_layers && s->layer_at[layer] <= ms.lines_done)
         layer++;
     s->st.layer_num = (int)layer;
-    s->st.mc_remaining_time = ms.remaining_s >= 0 ? (int)((ms.remaining_s + 59) / 60) : 0;
-    if (s->c.faults.stop_at > 0 && !s->stop_fired && pct >= s->c.faults.stop_at) {
-        s->stop_fired = true;
-        machine_stop(s->m);
+    s->st.mc_remaining_time = ms.time_left_s >= 0 ? (int)((ms.time_left_s + 59) / 60) : 0;
+    switch (ms.state) {
+    case SIM_NP_COMPLETE:
+        s->job_on = false;
+        s->st.mc_percent = 100;
+        s->st.mc_remaining_time = 0;
+        s->st.layer_num = s->st.total_layer_num;
+        set_state(s, "FINISH");
+        return;
+    case SIM_NP_CANCELLED:
+        s->job_on = false;
         s->st.print_error = ERR_CANCELED;
         set_state(s, "FAILED");
+        return;
+    case SIM_NP_ERROR:
+        s->job_on = false;
+        if (!s->st.print_error)
+            s->st.print_error = 0x03008000; /* a machine fault with no HMS code of ours */
+        log_info("sim-bambu", "machine: %s", ms.message);
+        sim_netprinter_reset(s->np);
+        set_state(s, "FAILED");
+        return;
+    case SIM_NP_PAUSING:
+    case SIM_NP_PAUSED:
+        set_state(s, "PAUSE");
+        break;
+    case SIM_NP_PRINTING:
+        set_state(s, "RUNNING");
+        break;
+    default:
+        break;
+    }
+    if (ms.state != SIM_NP_PRINTING)
+        return;
+    if (s->c.faults.stop_at > 0 && !s->stop_fired && pct >= s->c.faults.stop_at) {
+        s->stop_fired = true; /* someone presses stop on the screen */
+        sim_netprinter_cancel(s->np, NULL);
         return;
     }
     if (s->c.faults.hms[0] && !s->hms_fired && pct >= s->c.faults.hms_at) {
         s->hms_fired = true;
-        machine_stop(s->m);
         snprintf(s->st.hms, sizeof(s->st.hms), "%s", s->c.faults.hms);
         char a[5], b[5];
         memcpy(a, s->c.faults.hms, 4);
@@ -428,22 +263,9 @@ follow_machine(struct sim_bambu *s)
         memcpy(b, s->c.faults.hms + 12, 4);
         b[4] = '\0';
         s->st.print_error = strtoll(a, NULL, 16) << 16 | strtoll(b, NULL, 16);
-        set_state(s, "FAILED");
-        return;
+        sim_netprinter_fail(s->np, "HMS fault injected");
+        follow_machine(s);
     }
-    if (ms.job_finished) {
-        s->st.mc_percent = 100;
-        s->st.mc_remaining_time = 0;
-        s->st.layer_num = s->st.total_layer_num;
-        set_state(s, "FINISH");
-    }
-}
-
-static void
-on_machine(void *ud)
-{
-    struct sim_bambu *s = ud;
-    follow_machine(s);
 }
 
 static void
@@ -634,11 +456,12 @@ do_project_file(struct sim_bambu *s, json_t *o, const char *seq)
         goto failed_parse;
     scan_layers(s);
     struct sf_err err;
-    if (machine_start(s->m, s->plate_path, &err) < 0) {
+    if (sim_netprinter_start(s->np, PLATE_NAME, &err) < 0) {
         snprintf(why, sizeof(why), "%s", err.msg);
         goto failed_parse;
     }
     s->stats.jobs_started++;
+    s->job_on = true;
     s->stop_fired = s->hms_fired = false;
     s->st.print_error = 0;
     s->st.hms[0] = '\0';
@@ -712,16 +535,14 @@ on_request(void *ud, const char *topic, const char *payload, size_t len)
         } else if (strcmp(key, "print") == 0 && strcmp(cmd, "project_file") == 0) {
             do_project_file(s, o, seq);
         } else if (strcmp(key, "print") == 0 && strcmp(cmd, "pause") == 0) {
-            bool ok = strcmp(s->st.gcode_state, "RUNNING") == 0;
-            if (ok)
-                machine_pause(s->m);
+            bool ok = strcmp(s->st.gcode_state, "RUNNING") == 0 &&
+                      sim_netprinter_pause(s->np, NULL) == SF_OK;
             answer(s, key, cmd, seq, ok, ok ? NULL : "not printing", NULL);
             if (ok)
                 set_state(s, "PAUSE");
         } else if (strcmp(key, "print") == 0 && strcmp(cmd, "resume") == 0) {
-            bool ok = strcmp(s->st.gcode_state, "PAUSE") == 0;
-            if (ok)
-                machine_resume(s->m);
+            bool ok = strcmp(s->st.gcode_state, "PAUSE") == 0 &&
+                      sim_netprinter_resume(s->np, NULL) == SF_OK;
             answer(s, key, cmd, seq, ok, ok ? NULL : "not paused", NULL);
             if (ok)
                 set_state(s, "RUNNING");
@@ -729,17 +550,33 @@ on_request(void *ud, const char *topic, const char *payload, size_t len)
             bool active = strcmp(s->st.gcode_state, "RUNNING") == 0 ||
                           strcmp(s->st.gcode_state, "PAUSE") == 0 ||
                           strcmp(s->st.gcode_state, "PREPARE") == 0;
-            if (active) {
-                machine_stop(s->m);
-                s->st.print_error = ERR_CANCELED;
-            }
+            /* FAILED (print_error "task canceled") once the machine has run its cancel
+               script; follow_machine sees it. */
+            if (active && s->job_on)
+                sim_netprinter_cancel(s->np, NULL);
             answer(s, key, cmd, seq, true, NULL, NULL);
-            if (active)
-                set_state(s, "FAILED");
         } else if (strcmp(key, "print") == 0 && strcmp(cmd, "gcode_line") == 0) {
             const char *param = json_string_value(json_object_get(o, "param"));
             struct sf_err err;
-            int rc = param ? machine_gcode(s->m, param, &err) : SF_EINVAL;
+            int rc = param ? SF_OK : SF_EINVAL;
+            /* "G28\nM104 S0\n": one manual command per line, between job lines */
+            for (const char *p = param; rc == SF_OK && p && *p;) {
+                size_t n = strcspn(p, "\n");
+                char line[256];
+                if (n >= sizeof(line)) {
+                    rc = SF_EINVAL;
+                    break;
+                }
+                memcpy(line, p, n);
+                line[n] = '\0';
+                while (n && (line[n - 1] == '\r' || line[n - 1] == ' '))
+                    line[--n] = '\0';
+                if (n)
+                    rc = sim_netprinter_command(s->np, line, &err);
+                p += strcspn(p, "\n");
+                if (*p)
+                    p++;
+            }
             answer(s, key, cmd, seq, rc == SF_OK, rc == SF_OK ? NULL : "bad gcode_line", NULL);
         } else {
             answer(s, key, cmd, seq, false, "unsupported command", NULL);
@@ -883,24 +720,18 @@ sim_bambu_new(struct loop *l, const struct sim_bambu_config *c, struct sf_err *e
     s->c.ca_dir = NULL;
     s->c.mqtt_host = NULL;
     s->c.storage_dir = NULL;
-    if (c->storage_dir) {
-        snprintf(s->storage, sizeof(s->storage), "%s", c->storage_dir);
-    } else {
-        const char *tmp = getenv("TMPDIR");
-        snprintf(s->storage, sizeof(s->storage), "%s/sfbambu-XXXXXX", tmp ? tmp : "/tmp");
-        if (!mkdtemp(s->storage)) {
-            sf_err_sys(err, "sim bambu: cannot make a storage directory");
-            free(s);
-            return NULL;
-        }
-        s->own_storage = true;
-    }
-    snprintf(s->plate_path, sizeof(s->plate_path), "%s/.plate.gcode", s->storage);
+    struct sim_netprinter_config nc;
+    sim_netprinter_config_init(&nc);
+    nc.speed = s->c.speed;
+    nc.log_path = c->log_path;
+    nc.uploads_dir = c->storage_dir;
+    s->np = sim_netprinter_new(l, &nc, err);
+    if (!s->np)
+        goto fail;
+    snprintf(s->storage, sizeof(s->storage), "%s", sim_netprinter_uploads(s->np));
+    snprintf(s->plate_path, sizeof(s->plate_path), "%s/" PLATE_NAME, s->storage);
     snprintf(s->st.gcode_state, sizeof(s->st.gcode_state), "IDLE");
     s->st.stg_cur = 255;
-    s->m = machine_new(l, s->c.speed, c->log_path, on_machine, s, err);
-    if (!s->m)
-        goto fail;
     struct sim_ftps_config fc = { .port = c->ftps_port,
                                   .cert_file = s->cert,
                                   .key_file = s->key,
@@ -957,18 +788,6 @@ sim_bambu_stats(const struct sim_bambu *s, struct sim_bambu_stats *out)
     snprintf(out->gcode_state, sizeof(out->gcode_state), "%s", s->st.gcode_state);
 }
 
-static void
-rm_storage(const char *dir)
-{
-    char cmd[600];
-    /* Only the directory we made ourselves (mkdtemp), with no quote in its name. */
-    if (strchr(dir, '\''))
-        return;
-    snprintf(cmd, sizeof(cmd), "rm -rf '%s'", dir);
-    if (system(cmd) != 0)
-        log_warn("sim-bambu", "could not remove '%s'", dir);
-}
-
 void
 sim_bambu_free(struct sim_bambu *s)
 {
@@ -978,9 +797,7 @@ sim_bambu_free(struct sim_bambu *s)
     loop_timer_cancel(s->loop, s->reconnect_timer);
     mqttloop_free(s->mqtt);
     sim_ftps_free(s->ftps);
-    machine_free(s->m);
+    sim_netprinter_free(s->np);
     free(s->layer_at);
-    if (s->own_storage)
-        rm_storage(s->storage);
     free(s);
 }

@@ -514,11 +514,15 @@ check_printers(struct parse *ps)
             return fail(ps, "section 'printer %s': driver %s takes no 'user'/'password'", p->name,
                         p->driver);
         if (!strcmp(p->driver, "bambu") && (!p->serial[0] || !p->api_key[0]))
-            return fail(ps, "section 'printer %s': options 'serial' and 'access_code' are "
-                        "required by driver bambu", p->name);
+            return fail(ps,
+                        "section 'printer %s': options 'serial' and 'access_code' are "
+                        "required by driver bambu",
+                        p->name);
         if (!strcmp(p->driver, "bambu") && !p->ca_file[0] && !p->tls_insecure)
-            return fail(ps, "section 'printer %s': option 'ca_file' is required by driver bambu "
-                        "(or tls_insecure: true, which checks no certificate)", p->name);
+            return fail(ps,
+                        "section 'printer %s': option 'ca_file' is required by driver bambu "
+                        "(or tls_insecure: true, which checks no certificate)",
+                        p->name);
     }
     return 1;
 }
