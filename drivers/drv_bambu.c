@@ -47,6 +47,7 @@
 #define REPORT_MAX        (256 * 1024)    /* one report (AMS and HMS lists included) */
 #define PACK_STEP         (1 << 20)       /* G-code bytes packed per loop turn */
 #define UPLOAD_STALL_MS   60000           /* an H2D can take 30 s before its 226 */
+#define UPLOAD_CONNECT_MS 20000           /* TCP + TLS on a busy printer (or test machine) */
 #define ERR_CANCELED      0x0300400C      /* print_error "task canceled" */
 #define HMS_VERIFY_ATTR   0x05000500      /* HMS 0500-0500-0001-0007 */
 #define HMS_VERIFY_CODE   0x00010007      /* "MQTT command verification failed" */
@@ -561,6 +562,7 @@ start_upload(struct bambu *b)
                             .url = url,
                             .body_path = b->pkg_path,
                             .timeout_ms = -1,
+                            .connect_timeout_ms = UPLOAD_CONNECT_MS,
                             .stall_ms = UPLOAD_STALL_MS,
                             .user = "bblp",
                             .password = b->code,
@@ -610,19 +612,21 @@ bambu_open(struct drv *d, struct sf_err *err)
     return mqttloop_connect(b->mqtt, err);
 }
 
-/* Job name on the printer: ASCII letters, digits, - and _ only (0500-400A otherwise). */
+/*
+ * The job's names on the printer, from drv_remote_name (content-addressed,
+ * [A-Za-z0-9._-]: 0500-400A refuses others): the package "sf-X.gcode.3mf",
+ * the subtask "sf-X".  The same file always gets the same names, which is
+ * how attach() finds a job after a daemon restart.
+ */
 static void
 job_names(struct bambu *b, const char *gcode_path)
 {
-    const char *base = strrchr(gcode_path, '/');
-    base = base ? base + 1 : gcode_path;
-    char stem[64];
-    size_t n = 0;
-    for (const char *p = base; *p && *p != '.' && n + 1 < sizeof(stem); p++)
-        stem[n++] = isalnum((unsigned char)*p) || *p == '-' ? *p : '_';
-    stem[n] = '\0';
-    snprintf(b->subtask, sizeof(b->subtask), "sf_%s_%u", n ? stem : "job",
-             (unsigned)(loop_now_ms(b->d.loop) % 100000));
+    char remote[96];
+    drv_remote_name(gcode_path, remote, sizeof(remote));
+    size_t n = strlen(remote);
+    if (n > 6 && !strcmp(remote + n - 6, ".gcode"))
+        n -= 6;
+    snprintf(b->subtask, sizeof(b->subtask), "%.*s", (int)n, remote);
     snprintf(b->file, sizeof(b->file), "%s.gcode.3mf", b->subtask);
 }
 
@@ -664,6 +668,43 @@ bambu_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
     d->status.job_started_ms = loop_now_ms(d->loop);
     b->pack_timer = loop_timer_add(d->loop, 0, pack_step, b);
     set_state(b, DRV_PRINTING, "packing");
+    return SF_OK;
+}
+
+/* drv.h: adopt the job the printer runs (or ended) under this file's names. */
+static int
+bambu_attach(struct drv *d, const char *gcode_path, const struct drv_job_scan *scan,
+             struct sf_err *err)
+{
+    struct bambu *b = B(d);
+    if (!mqttloop_is_up(b->mqtt) || !json_object_size(b->print))
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': not connected", d->name);
+    if (b->phase != J_NONE)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': a job is already running", d->name);
+    job_names(b, gcode_path);
+    const char *gs = str_field(b, "gcode_state");
+    bool ended = !strcmp(gs, "FINISH") || !strcmp(gs, "FAILED");
+    if (strcmp(str_field(b, "subtask_name"), b->subtask) != 0 || (!state_active(gs) && !ended)) {
+        b->subtask[0] = '\0';
+        return sf_err_set(err, SF_ENOTFOUND, "printer '%s': no job '%s' on the printer", d->name,
+                          gcode_path);
+    }
+    struct drv_job_scan own;
+    if (!scan) {
+        if (drv_job_scan(gcode_path, &own, err) < 0)
+            return err ? err->code : SF_EINVAL;
+        scan = &own;
+    }
+    d->status.lines_total = scan->lines_total;
+    d->status.lines_acked = 0;
+    d->status.progress = 0;
+    d->status.job_started_ms = loop_now_ms(d->loop);
+    b->phase = J_ACTIVE;
+    b->cancelling = false;
+    b->last_percent = -1;
+    log_printer(LOG_INFO, d->name, "re-attached to job '%s' (%s)", b->subtask, gs);
+    set_state(b, DRV_PRINTING, "");
+    follow(b); /* progress, and the end at once if it ended meanwhile */
     return SF_OK;
 }
 
@@ -770,6 +811,7 @@ static const struct drv_ops bambu_ops = {
     .command = bambu_command,
     .close = bambu_close,
     .destroy = bambu_destroy,
+    .attach = bambu_attach,
 };
 
 /* url: "IP", "IP:PORT", "mqtts://IP[:PORT]" -> host, port. */

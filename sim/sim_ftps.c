@@ -390,14 +390,20 @@ serve_client(void *arg)
     free(arg);
     struct session s = { .f = a.f, .cl = a.cl, .fd = a.fd, .pasv_fd = -1 };
     s.ssl = SSL_new(a.f->ctx);
-    if (!s.ssl || SSL_set_fd(s.ssl, a.fd) != 1 || SSL_accept(s.ssl) != 1)
+    log_debug("sim-ftps", "client %d: accepted", a.fd);
+    if (!s.ssl || SSL_set_fd(s.ssl, a.fd) != 1 || SSL_accept(s.ssl) != 1) {
+        log_debug("sim-ftps", "client %d: TLS accept failed", a.fd);
         goto out; /* not TLS from the first byte: implicit FTPS drops it */
+    }
     if (reply(&s, "220 (vsFTPd 3.0.3)") < 0)
         goto out;
     char line[LINE_MAX_FTP];
-    while (!atomic_load(&a.f->stop) && read_line(&s, line, sizeof(line)) == 0)
+    while (!atomic_load(&a.f->stop) && read_line(&s, line, sizeof(line)) == 0) {
+        log_debug("sim-ftps", "client %d: %.20s", a.fd, line);
         if (command(&s, line) < 0)
             break;
+    }
+    log_debug("sim-ftps", "client %d: done", a.fd);
     SSL_shutdown(s.ssl);
 out:
     close_pasv(&s);

@@ -622,3 +622,55 @@ T_CASE(bambu_broker_restart_offline_then_job_finishes)
     free(want);
     free(got);
 }
+
+/* The daemon dies mid-print (its driver goes away); the printer prints on; a new driver
+   re-attaches from the report and sees the job to its end. */
+T_CASE(bambu_reattach_after_restart)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .speed = 30, .p1 = true };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 10, 100);
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.progress >= 0.1));
+    drv_free(r.drv); /* the daemon is gone */
+    r.drv = NULL;
+    char url[64], ca[600];
+    snprintf(url, sizeof(url), "mqtts://127.0.0.1:%d", broker_port);
+    snprintf(ca, sizeof(ca), "%s/ca.pem", certs);
+    struct drv_config dc = { .name = "bambu1",
+                             .kind = "bambu",
+                             .url = url,
+                             .api_key = CODE,
+                             .serial = SERIAL,
+                             .ca_file = ca,
+                             .ftps_port = sim_bambu_ftps_port(r.sim) };
+    r.drv = drv_new(r.loop, &dc, on_event, &r, &err);
+    T_TRUE(r.drv != NULL);
+    T_OK(r.drv->ops->open(r.drv, &err), &err);
+    T_TRUE(
+        WAIT_FOR(&r, r.drv->status.state != DRV_CONNECTING && r.drv->status.state != DRV_OFFLINE));
+    T_EQ_INT(r.drv->status.state, DRV_PRINTING); /* a job it did not start, so far */
+    /* another file is not what the printer runs */
+    char other[600];
+    snprintf(other, sizeof(other), "%s/other.gcode", t_tmpdir());
+    FILE *f = fopen(other, "w");
+    fputs("G28\n", f);
+    fclose(f);
+    T_EQ_INT(r.drv->ops->attach(r.drv, other, NULL, &err), SF_ENOTFOUND);
+    T_OK(r.drv->ops->attach(r.drv, r.gcode_path, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.done || r.failed));
+    T_EQ_INT(r.done, 1);
+    T_EQ_INT(r.drv->status.state, DRV_IDLE);
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.jobs_started, 1);
+    teardown(&r);
+    char *want = commands_of(r.gcode_path), *got = slurp(r.log_path);
+    T_EQ_INT(strcmp(got, want), 0);
+    free(want);
+    free(got);
+}
