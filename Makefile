@@ -24,13 +24,13 @@ DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev li
 	libmicrohttpd-dev libmosquitto-dev libinih-dev libqhull-dev libpolyclipping-dev \
 	libjansson-dev libminizip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
 	libsuitesparse-dev clang-14 clang-format libclang-rt-14-dev python3 procps libssl-dev \
-	printrun-common
+	printrun-common mosquitto
 # Only for `make bench`: the independent peers and their helpers.
 BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy bc
 
 # Libraries with a pkg-config file; the rest get fixed flags (Debian ships no .pc).
 PKGS := libserialport libcurl sqlite3 libmicrohttpd libmosquitto inih qhull_r polyclipping \
-	jansson minizip expat cairo libcrypto
+	jansson minizip expat cairo libcrypto libssl
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS = $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 EXT_CFLAGS = $(PKG_CFLAGS) -I/usr/include/suitesparse

@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "drv_bambu.h"
 #include "drv_marlin.h"
 #include "drv_moonraker.h"
 #include "drv_octoprint.h"
@@ -22,6 +23,7 @@ static const struct drv_kind kinds[] = {
     { "octoprint", true, DRV_AUTH_KEY, "http https", drv_octoprint_new },
     { "moonraker", true, DRV_AUTH_KEY_OPTIONAL, "http https", drv_moonraker_new },
     { "prusalink", true, DRV_AUTH_KEY_OR_DIGEST, "http https", drv_prusalink_new },
+    { "bambu", true, DRV_AUTH_NONE, "mqtts", drv_bambu_new },
 };
 #define N_KINDS (sizeof(kinds) / sizeof(kinds[0]))
 

@@ -81,6 +81,10 @@ struct drv_config {
     int buffer_lines;     /* marlin: the firmware's BUFSIZE, most lines in flight (0: 4;
                              ADVANCED_OK's B when it says more; 1: ping-pong) */
     int rx_buffer;        /* marlin: the firmware's RX ring, bytes (0: 128) */
+    const char *serial;   /* bambu: the printer's serial, its device id and certificate CN */
+    const char *ca_file;  /* bambu: CA bundle the printer's certificate must chain to */
+    bool tls_insecure;    /* bambu: no certificate check at all (operator's choice; warned) */
+    int ftps_port;        /* bambu: implicit FTPS port (0: 990) */
 };
 
 /* The machine state a job's commands leave behind: what a resume restores. */

@@ -30,6 +30,7 @@
 
 #include "../src/base/loop.h"
 #include "../src/base/mem.h"
+#include "sim_bambu.h"
 #include "sim_marlin.h"
 #include "sim_moonraker.h"
 #include "sim_octoprint.h"
@@ -259,6 +260,7 @@ static const struct {
     { "octoprint", sim_octoprint_main },
     { "moonraker", sim_moonraker_main },
     { "prusalink", sim_prusalink_main },
+    { "bambu", sim_bambu_main },
 };
 
 int

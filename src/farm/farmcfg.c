@@ -64,6 +64,12 @@ static const struct option options[] = {
     { "user", true, K_STR, P(user), 0, 0 },
     { "password", true, K_STR, P(password), 0, 0 },
     { "poll_ms", true, K_INT, P(poll_ms), 200, 60000 },
+    { "host", true, K_STR, P(host), 0, 0 },           /* bambu: url = mqtts://HOST */
+    { "access_code", true, K_STR, P(api_key), 0, 0 }, /* bambu: LAN access code (= api_key) */
+    { "serial", true, K_IDENT, P(serial), 0, 0 },
+    { "ca_file", true, K_STR, P(ca_file), 0, 0 },
+    { "tls_insecure", true, K_BOOL, P(tls_insecure), 0, 0 },
+    { "ftps_port", true, K_INT, P(ftps_port), 1, 65535 },
     { "profile", true, K_IDENT, P(profile), 0, 0 },
     { "material", true, K_IDENT, P(material), 0, 0 },
     { "nozzle_mm", true, K_DBL, P(nozzle_mm), 0.1, 2.0 },
@@ -484,6 +490,8 @@ check_printers(struct parse *ps)
         if (!k->url && !p->port[0])
             return fail(ps, "section 'printer %s': option 'port' is required by driver %s", p->name,
                         p->driver);
+        if (p->host[0] && !p->url[0]) /* bambu's host: IP */
+            snprintf(p->url, sizeof(p->url), "mqtts://%s", p->host);
         if (k->url && !p->url[0])
             return fail(ps, "section 'printer %s': option 'url' is required by driver %s", p->name,
                         p->driver);
@@ -505,6 +513,16 @@ check_printers(struct parse *ps)
         if (k->url && p->user[0] && k->auth != DRV_AUTH_KEY_OR_DIGEST)
             return fail(ps, "section 'printer %s': driver %s takes no 'user'/'password'", p->name,
                         p->driver);
+        if (!strcmp(p->driver, "bambu") && (!p->serial[0] || !p->api_key[0]))
+            return fail(ps,
+                        "section 'printer %s': options 'serial' and 'access_code' are "
+                        "required by driver bambu",
+                        p->name);
+        if (!strcmp(p->driver, "bambu") && !p->ca_file[0] && !p->tls_insecure)
+            return fail(ps,
+                        "section 'printer %s': option 'ca_file' is required by driver bambu "
+                        "(or tls_insecure: true, which checks no certificate)",
+                        p->name);
     }
     return 1;
 }

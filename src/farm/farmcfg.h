@@ -45,6 +45,11 @@ struct farmcfg_printer {
     char user[64];       /* network drivers: HTTP digest user (PrusaLink's "maker") */
     char password[128];  /* its password */
     int poll_ms;         /* network drivers: status poll period, ms (default 1000) */
+    char host[128];      /* bambu: the printer's IP; url becomes mqtts://HOST */
+    char serial[48];     /* bambu: device id (MQTT topics, certificate CN) */
+    char ca_file[256];   /* bambu: CA the printer's certificate must chain to */
+    bool tls_insecure;   /* bambu: check no certificate (default false) */
+    int ftps_port;       /* bambu: FTPS port (default 990) */
     char profile[64];    /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */
     char material[32];   /* loaded material (default "PLA") */
     double nozzle_mm;    /* nozzle diameter (default 0.4) */

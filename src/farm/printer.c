@@ -385,7 +385,11 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
                              .api_key = cfg->api_key,
                              .user = cfg->user[0] ? cfg->user : NULL,
                              .password = cfg->password,
-                             .poll_ms = cfg->poll_ms };
+                             .poll_ms = cfg->poll_ms,
+                             .serial = cfg->serial,
+                             .ca_file = cfg->ca_file,
+                             .tls_insecure = cfg->tls_insecure,
+                             .ftps_port = cfg->ftps_port };
     p->drv = env->driver(env->l, &dc, on_drv_event, p, &err);
     if (!p->drv) {
         snprintf(p->message, sizeof(p->message), "%s", err.msg);

@@ -1,0 +1,676 @@
+/*
+ * test_bambu.c - the Bambu driver against the Bambu simulator, over the
+ * real components: Debian's mosquitto broker with a TLS listener and a
+ * password file, certificates made by openssl (a CA, the printer's with
+ * CN = serial), and the simulator's implicit FTPS with session reuse
+ * enforced.  Driver, simulator and its machine share one loop here; the
+ * broker is a separate process (tests/bambu/env.sh).
+ *
+ * The job cases compare the simulator's executed-command log with the
+ * commands of the G-code file: every command exactly once, in order.
+ * Waits are bounded by the wall clock and end on events, never on sleeps.
+ */
+#include <signal.h>
+#include <stdlib.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../../drivers/drv.h"
+#include "../../drivers/drv_bambu.h"
+#include "../../sim/sim_bambu.h"
+#include "../../src/base/log.h"
+#include "../t.h"
+
+#define SERIAL  "01S00A2B3C4D5E6"
+#define CODE    "31415926"
+#define ENV_SH  "tests/bambu/env.sh"
+#define WAIT_MS 120000
+
+static char certs[512];
+static int broker_port, broker_pid;
+static int env_state; /* 0 unknown, 1 ready, -1 unavailable */
+
+static int
+run(const char *cmd, char *out, size_t n)
+{
+    FILE *p = popen(cmd, "r");
+    if (!p)
+        return -1;
+    size_t got = out ? fread(out, 1, n - 1, p) : 0;
+    if (out)
+        out[got] = '\0';
+    int st = pclose(p);
+    return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+}
+
+static int
+start_broker(int port)
+{
+    char cmd[1024], out[64];
+    snprintf(cmd, sizeof(cmd), ENV_SH " broker %s %s %d", certs, CODE, port);
+    if (port == 0)
+        snprintf(cmd, sizeof(cmd), ENV_SH " broker %s %s", certs, CODE);
+    if (run(cmd, out, sizeof(out)) != 0 || sscanf(out, "%d %d", &broker_port, &broker_pid) != 2)
+        return -1;
+    return 0;
+}
+
+static void
+stop_broker(void)
+{
+    char cmd[128];
+    snprintf(cmd, sizeof(cmd), ENV_SH " stop %d", broker_pid);
+    run(cmd, NULL, 0);
+    broker_pid = 0;
+}
+
+static void
+at_exit_stop(void)
+{
+    if (broker_pid > 0)
+        stop_broker();
+}
+
+/* Certificates and a broker, once per program; false: skip (no mosquitto). */
+static bool
+env_ready(void)
+{
+    if (env_state)
+        return env_state > 0;
+    env_state = -1;
+    signal(SIGPIPE, SIG_IGN);
+    snprintf(certs, sizeof(certs), "%s/certs", t_tmpdir());
+    char cmd[1024];
+    snprintf(cmd, sizeof(cmd), ENV_SH " certs %s %s", certs, SERIAL);
+    int rc = run(cmd, NULL, 0);
+    if (rc == 77)
+        return false;
+    if (rc != 0 || start_broker(0) < 0) {
+        fprintf(stderr, "bambu test environment failed (%s)\n", cmd);
+        return false;
+    }
+    atexit(at_exit_stop);
+    env_state = 1;
+    return true;
+}
+
+struct run {
+    struct loop *loop;
+    struct sim_bambu *sim;
+    struct drv *drv;
+    int done, failed, cancelled, progress, temps;
+    double max_noz_target; /* highest nozzle target reported */
+    int states[64];
+    int n_states;
+    int pause_at;  /* pause once progress reaches this percent (0: never) */
+    int cancel_at; /* cancel at this percent */
+    bool paused_once, cancel_sent;
+    char log_path[512], gcode_path[512];
+    char failed_msg[200];
+};
+
+static void
+on_event(struct drv *d, enum drv_event ev, void *ud)
+{
+    struct run *r = ud;
+    if (ev == DRV_EV_JOB_DONE)
+        r->done++;
+    else if (ev == DRV_EV_JOB_FAILED) {
+        r->failed++;
+        snprintf(r->failed_msg, sizeof(r->failed_msg), "%s", d->status.message);
+    } else if (ev == DRV_EV_JOB_CANCELLED)
+        r->cancelled++;
+    else if (ev == DRV_EV_TEMPS) {
+        r->temps++;
+        if (d->status.nozzle_target_c > r->max_noz_target)
+            r->max_noz_target = d->status.nozzle_target_c;
+    } else if (ev == DRV_EV_STATE && r->n_states < 64)
+        r->states[r->n_states++] = d->status.state;
+    else if (ev == DRV_EV_PROGRESS) {
+        r->progress++;
+        int pct = (int)(d->status.progress * 100);
+        if (r->pause_at && !r->paused_once && pct >= r->pause_at) {
+            r->paused_once = true;
+            d->ops->pause(d, NULL);
+        }
+        if (r->cancel_at && !r->cancel_sent && pct >= r->cancel_at) {
+            r->cancel_sent = true;
+            d->ops->cancel(d, NULL);
+        }
+    }
+}
+
+static int64_t
+wall_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
+
+/* Run the loop until *flag becomes true or WAIT_MS pass; returns *flag. */
+#define WAIT_FOR(r, cond)                                                                          \
+    ({                                                                                             \
+        int64_t t_end_ = wall_ms() + WAIT_MS;                                                      \
+        while (!(cond) && wall_ms() < t_end_)                                                      \
+            loop_run_once((r)->loop, 50);                                                          \
+        (cond);                                                                                    \
+    })
+
+static void
+write_job(struct run *r, int layers, int per_layer)
+{
+    snprintf(r->gcode_path, sizeof(r->gcode_path), "%s/cube part.gcode", t_tmpdir());
+    FILE *f = fopen(r->gcode_path, "w");
+    fprintf(f, "; generated by test_bambu\nG28 ; home\nG90\nM83\nM104 S215\nM140 S60\n"
+               "M190 S60\nM109 S215\n\n");
+    for (int l = 0; l < layers; l++) {
+        fprintf(f, ";LAYER_CHANGE\n;Z:%.2f\nG1 Z%.2f F600\n", 0.2 * (l + 1), 0.2 * (l + 1));
+        for (int i = 0; i < per_layer; i++)
+            fprintf(f, "G1 X%d.%d Y%d E0.%03d F3000 ; move %d\n", 50 + i % 5, l % 10,
+                    50 + (i * 3) % 5, 10 + i % 90, i);
+    }
+    fprintf(f, "M104 S0\nM140 S0\nM84\n");
+    fclose(f);
+}
+
+/* The commands of a G-code file as the machine logs them. */
+static char *
+commands_of(const char *path)
+{
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return NULL;
+    size_t cap = 1 << 16, len = 0;
+    char *out = malloc(cap);
+    char line[4096];
+    while (fgets(line, sizeof(line), f)) {
+        char *c = strchr(line, ';');
+        if (c)
+            *c = '\0';
+        char *s = line;
+        while (*s == ' ' || *s == '\t')
+            s++;
+        size_t n = strlen(s);
+        while (n && strchr(" \t\r\n", s[n - 1]))
+            s[--n] = '\0';
+        if (!n)
+            continue;
+        if (len + n + 2 > cap)
+            out = realloc(out, cap *= 2);
+        memcpy(out + len, s, n);
+        len += n;
+        out[len++] = '\n';
+    }
+    out[len] = '\0';
+    fclose(f);
+    return out;
+}
+
+/* The machine's executed log, minus the host's own queries (M110 hello, M105, the M400
+   that ends a job: sim_netprinter.h). */
+static char *
+slurp(const char *path)
+{
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return NULL;
+    size_t cap = 1 << 16, len = 0;
+    char *out = malloc(cap);
+    char line[4096];
+    while (fgets(line, sizeof(line), f)) {
+        if (!strncmp(line, "M110", 4) || !strncmp(line, "M105", 4) || !strncmp(line, "M400", 4))
+            continue;
+        size_t n = strlen(line);
+        if (len + n + 1 > cap)
+            out = realloc(out, cap *= 2);
+        memcpy(out + len, line, n);
+        len += n;
+    }
+    out[len] = '\0';
+    fclose(f);
+    return out;
+}
+
+struct setup {
+    bool p1;
+    double speed;
+    const char *ca;   /* NULL: the right CA */
+    const char *code; /* NULL: the right access code */
+    bool insecure;
+    const char *fault; /* one --fault spec or NULL */
+    const char *fault2;
+    const char *serial; /* NULL: the printer's */
+};
+
+static int
+setup(struct run *r, const struct setup *s)
+{
+    memset(r, 0, sizeof(*r));
+    struct sf_err err;
+    r->loop = loop_new(&err);
+    if (!r->loop)
+        return -1;
+    struct sim_bambu_config c;
+    sim_bambu_config_init(&c);
+    c.serial = SERIAL;
+    c.access_code = CODE;
+    c.mqtt_port = broker_port;
+    c.ca_dir = certs;
+    c.p1 = s->p1;
+    c.speed = s->speed > 0 ? s->speed : 1;
+    c.report_ms = 50;
+    snprintf(r->log_path, sizeof(r->log_path), "%s/exec.log", t_tmpdir());
+    c.log_path = r->log_path;
+    if (s->fault && sim_bambu_fault_parse(&c.faults, s->fault, &err) < 0)
+        return -1;
+    if (s->fault2 && sim_bambu_fault_parse(&c.faults, s->fault2, &err) < 0)
+        return -1;
+    r->sim = sim_bambu_new(r->loop, &c, &err);
+    if (!r->sim) {
+        fprintf(stderr, "sim: %s\n", err.msg);
+        return -1;
+    }
+    char url[64], ca[600];
+    snprintf(url, sizeof(url), "mqtts://127.0.0.1:%d", broker_port);
+    snprintf(ca, sizeof(ca), "%s/%s", certs, s->ca ? s->ca : "ca.pem");
+    struct drv_config dc = { .name = "bambu1",
+                             .kind = "bambu",
+                             .url = url,
+                             .api_key = s->code ? s->code : CODE,
+                             .serial = s->serial ? s->serial : SERIAL,
+                             .ca_file = ca,
+                             .tls_insecure = s->insecure,
+                             .ftps_port = sim_bambu_ftps_port(r->sim) };
+    r->drv = drv_new(r->loop, &dc, on_event, r, &err);
+    if (!r->drv) {
+        fprintf(stderr, "drv: %s\n", err.msg);
+        return -1;
+    }
+    return r->drv->ops->open(r->drv, &err);
+}
+
+static void
+teardown(struct run *r)
+{
+    drv_free(r->drv);
+    sim_bambu_free(r->sim);
+    loop_free(r->loop);
+}
+
+static bool
+idle(struct run *r)
+{
+    return r->drv->status.state == DRV_IDLE;
+}
+
+/* A whole job; the log must be the file's commands. */
+static void
+job_case(bool p1)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .p1 = p1, .speed = 300 };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 20, 100);
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_EQ_INT(r.drv->status.state, DRV_PRINTING);
+    T_TRUE(WAIT_FOR(&r, r.done || r.failed));
+    T_EQ_INT(r.failed, 0);
+    T_EQ_INT(r.done, 1);
+    T_EQ_INT(r.drv->status.state, DRV_IDLE);
+    T_EQ_INT(r.drv->status.lines_acked, r.drv->status.lines_total);
+    T_TRUE(r.progress >= 2); /* it moved through the job, not just jumped to the end */
+    T_TRUE(r.temps >= 1);
+    struct drv_bambu_stats bs;
+    T_TRUE(drv_bambu_stats(r.drv, &bs));
+    T_EQ_STR(bs.gcode_state, "FINISH");
+    T_EQ_INT(bs.mc_percent, 100);
+    T_EQ_INT(bs.total_layer_num, 20); /* sent once in P1 style, kept by the merge */
+    T_EQ_INT(bs.layer_num, 20);
+    T_EQ_INT(bs.uploads, 1);
+    T_EQ_INT(bs.pushalls, 1);
+    T_EQ_DBL(r.max_noz_target, 215, 1e-9);            /* M104 S215 ran */
+    T_EQ_DBL(r.drv->status.nozzle_target_c, 0, 1e-9); /* and M104 S0 at the end */
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.jobs_finished, 1);
+    T_EQ_INT(ss.refused_reuse, 0);
+    /* A second job on the same printer: a new upload, the FTPS session reused again. */
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.done == 2 || r.failed));
+    T_EQ_INT(r.failed, 0);
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.jobs_finished, 2);
+    T_EQ_INT(ss.refused_reuse, 0);
+    teardown(&r);
+    char *want = commands_of(r.gcode_path), *got = slurp(r.log_path);
+    T_TRUE(want && got);
+    T_TRUE(strlen(want) > 10000);
+    T_EQ_INT(strlen(got), 2 * strlen(want));
+    T_EQ_INT(strncmp(got, want, strlen(want)), 0);
+    T_EQ_INT(strcmp(got + strlen(want), want), 0);
+    free(want);
+    free(got);
+}
+
+T_CASE(bambu_job_x1_full_reports)
+{
+    job_case(false);
+}
+
+T_CASE(bambu_job_p1_delta_reports)
+{
+    job_case(true);
+}
+
+T_CASE(bambu_pause_resume_then_done)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .speed = 30 };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 10, 100);
+    struct sf_err err;
+    r.pause_at = 20;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_PAUSED));
+    /* Paused at the printer: the machine runs nothing over many reports. */
+    struct sim_bambu_stats a, b;
+    sim_bambu_stats(r.sim, &a);
+    T_EQ_STR(a.gcode_state, "PAUSE");
+    struct drv_bambu_stats bs0, bs1;
+    drv_bambu_stats(r.drv, &bs0);
+    T_TRUE(WAIT_FOR(&r, (drv_bambu_stats(r.drv, &bs1), bs1.reports >= bs0.reports + 5)));
+    sim_bambu_stats(r.sim, &b);
+    T_EQ_INT(b.executed, a.executed);
+    T_TRUE(a.executed < 1000);
+    T_OK(r.drv->ops->resume(r.drv, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_PRINTING || r.done));
+    T_TRUE(WAIT_FOR(&r, r.done || r.failed));
+    T_EQ_INT(r.done, 1);
+    teardown(&r);
+    char *want = commands_of(r.gcode_path), *got = slurp(r.log_path);
+    T_EQ_INT(strcmp(got, want), 0);
+    free(want);
+    free(got);
+}
+
+T_CASE(bambu_stop_cancels)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .speed = 30 };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 10, 100);
+    struct sf_err err;
+    r.cancel_at = 10;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.cancelled || r.done || r.failed));
+    T_EQ_INT(r.cancelled, 1);
+    T_EQ_INT(r.done + r.failed, 0);
+    T_EQ_INT(r.drv->status.state, DRV_IDLE);
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_STR(ss.gcode_state, "FAILED");
+    T_TRUE(ss.executed < 1000 + 13);
+    teardown(&r);
+    /* What ran is a prefix of the file, each line once, then the machine's cancel script. */
+    char *want = commands_of(r.gcode_path), *got = slurp(r.log_path);
+    static const char script[] = "M84\nM104 S0\nM140 S0\nM107\n";
+    size_t gl = strlen(got), sl = strlen(script);
+    T_TRUE(gl > sl && strcmp(got + gl - sl, script) == 0);
+    T_TRUE(gl - sl < strlen(want) && strncmp(want, got, gl - sl) == 0);
+    T_TRUE(gl - sl > 200); /* it printed a while before the stop */
+    free(want);
+    free(got);
+}
+
+T_CASE(bambu_manual_command_runs)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { 0 };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    struct sf_err err;
+    T_OK(r.drv->ops->command(r.drv, "M104 S180", &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.nozzle_target_c == 180));
+    teardown(&r);
+    char *got = slurp(r.log_path);
+    T_EQ_STR(got, "M104 S180\n");
+    free(got);
+}
+
+T_CASE(bambu_wrong_access_code_is_an_auth_error)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .code = "00000000" };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_ERROR));
+    T_TRUE(strstr(r.drv->status.message, "authentication failed") != NULL);
+    T_TRUE(strstr(r.drv->status.message, "access_code") != NULL);
+    teardown(&r);
+}
+
+T_CASE(bambu_wrong_ca_is_a_tls_error_and_insecure_connects)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .ca = "other-ca.pem" };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_ERROR));
+    T_TRUE(strstr(r.drv->status.message, "TLS") != NULL);
+    T_TRUE(strstr(r.drv->status.message, "certificate") != NULL);
+    teardown(&r);
+    /* tls_insecure: the operator's override connects (and prints) */
+    struct setup s2 = { .ca = "other-ca.pem", .insecure = true, .speed = 300 };
+    T_EQ_INT(setup(&r, &s2), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 2, 20);
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.done || r.failed));
+    T_EQ_INT(r.done, 1);
+    teardown(&r);
+}
+
+T_CASE(bambu_certificate_of_another_serial_is_a_tls_error)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .serial = "01S00FFFFFFFFFF" };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_ERROR));
+    T_TRUE(strstr(r.drv->status.message, "TLS") != NULL);
+    T_TRUE(strstr(r.drv->status.message, "mismatch") != NULL);
+    teardown(&r);
+}
+
+T_CASE(bambu_unsigned_refusal_says_developer_mode)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .fault = "unsigned" };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r))); /* status works without Developer Mode */
+    write_job(&r, 2, 20);
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.failed));
+    T_EQ_INT(r.drv->status.state, DRV_ERROR);
+    T_TRUE(strstr(r.failed_msg, "Developer Mode") != NULL);
+    T_TRUE(strstr(r.drv->status.message, "LAN Only") != NULL);
+    teardown(&r);
+}
+
+T_CASE(bambu_hms_failure_and_stop_at_printer)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .fault = "hms=0300010000010007@30", .speed = 100 };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 10, 100);
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.failed || r.done));
+    T_EQ_INT(r.failed, 1);
+    T_TRUE(strstr(r.failed_msg, "HMS 0300-0100-0001-0007") != NULL);
+    T_EQ_INT(r.drv->status.state, DRV_IDLE);
+    teardown(&r);
+    struct setup s2 = { .fault = "stop-at=40", .speed = 100 };
+    T_EQ_INT(setup(&r, &s2), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 10, 100);
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.failed || r.done));
+    T_EQ_INT(r.failed, 1);
+    T_TRUE(strstr(r.failed_msg, "stopped at the printer") != NULL);
+    teardown(&r);
+}
+
+T_CASE(bambu_storage_full_fails_the_job)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .fault = "storage-full" };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 2, 20);
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.failed || r.done));
+    T_EQ_INT(r.failed, 1);
+    T_TRUE(strstr(r.failed_msg, "upload") != NULL);
+    T_EQ_INT(r.drv->status.state, DRV_IDLE);
+    teardown(&r);
+}
+
+T_CASE(bambu_ftps_refuses_data_without_session_reuse)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    T_SKIP_UNLESS(access("/usr/bin/curl", X_OK) == 0, "curl missing");
+    struct run r;
+    struct setup s = { 0 };
+    T_EQ_INT(setup(&r, &s), 0);
+    int port = sim_bambu_ftps_port(r.sim);
+    char file[600], cmd[2048];
+    snprintf(file, sizeof(file), "%s/probe.gcode", t_tmpdir());
+    FILE *f = fopen(file, "w");
+    fputs("G28\n", f);
+    fclose(f);
+    /* The FTPS server runs on its own thread, so curl can run while the loop waits. */
+    snprintf(cmd, sizeof(cmd),
+             "curl -sS --no-sessionid --cacert %s/ca.pem --resolve %s:%d:127.0.0.1 --ssl-reqd "
+             "-u bblp:%s -T %s ftps://%s:%d/probe.gcode 2>&1",
+             certs, SERIAL, port, CODE, file, SERIAL, port);
+    T_TRUE(run(cmd, NULL, 0) != 0);
+    /* the same with the session cache on succeeds */
+    snprintf(cmd, sizeof(cmd),
+             "curl -sS --cacert %s/ca.pem --resolve %s:%d:127.0.0.1 --ssl-reqd "
+             "-u bblp:%s -T %s ftps://%s:%d/probe.gcode 2>&1",
+             certs, SERIAL, port, CODE, file, SERIAL, port);
+    T_EQ_INT(run(cmd, NULL, 0), 0);
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.refused_reuse, 1);
+    T_EQ_INT(ss.uploads, 1);
+    teardown(&r);
+}
+
+T_CASE(bambu_broker_restart_offline_then_job_finishes)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .speed = 30, .p1 = true };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 10, 100);
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.progress >= 0.1));
+    int port = broker_port;
+    stop_broker();
+    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_OFFLINE));
+    T_EQ_INT(r.failed + r.done, 0);
+    T_EQ_INT(start_broker(port), 0);
+    /* the owner's reconnect (the farm's backoff) until the link is up again */
+    int attempt = 0;
+    int64_t end = wall_ms() + WAIT_MS;
+    while (r.drv->status.state == DRV_OFFLINE && wall_ms() < end) {
+        int64_t next = wall_ms() + drv_backoff_ms(attempt++);
+        r.drv->ops->open(r.drv, &err);
+        while (wall_ms() < next && r.drv->status.state != DRV_OFFLINE && !r.done)
+            loop_run_once(r.loop, 50);
+        while (wall_ms() < next && r.drv->status.state == DRV_OFFLINE)
+            loop_run_once(r.loop, 50);
+    }
+    T_TRUE(attempt >= 1);
+    T_TRUE(WAIT_FOR(&r, r.done || r.failed));
+    T_EQ_INT(r.failed, 0);
+    T_EQ_INT(r.done, 1);
+    teardown(&r);
+    char *want = commands_of(r.gcode_path), *got = slurp(r.log_path);
+    T_EQ_INT(strcmp(got, want), 0);
+    free(want);
+    free(got);
+}
+
+/* The daemon dies mid-print (its driver goes away); the printer prints on; a new driver
+   re-attaches from the report and sees the job to its end. */
+T_CASE(bambu_reattach_after_restart)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .speed = 30, .p1 = true };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 10, 100);
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.progress >= 0.1));
+    drv_free(r.drv); /* the daemon is gone */
+    r.drv = NULL;
+    char url[64], ca[600];
+    snprintf(url, sizeof(url), "mqtts://127.0.0.1:%d", broker_port);
+    snprintf(ca, sizeof(ca), "%s/ca.pem", certs);
+    struct drv_config dc = { .name = "bambu1",
+                             .kind = "bambu",
+                             .url = url,
+                             .api_key = CODE,
+                             .serial = SERIAL,
+                             .ca_file = ca,
+                             .ftps_port = sim_bambu_ftps_port(r.sim) };
+    r.drv = drv_new(r.loop, &dc, on_event, &r, &err);
+    T_TRUE(r.drv != NULL);
+    T_OK(r.drv->ops->open(r.drv, &err), &err);
+    T_TRUE(
+        WAIT_FOR(&r, r.drv->status.state != DRV_CONNECTING && r.drv->status.state != DRV_OFFLINE));
+    T_EQ_INT(r.drv->status.state, DRV_PRINTING); /* a job it did not start, so far */
+    /* another file is not what the printer runs */
+    char other[600];
+    snprintf(other, sizeof(other), "%s/other.gcode", t_tmpdir());
+    FILE *f = fopen(other, "w");
+    fputs("G28\n", f);
+    fclose(f);
+    T_EQ_INT(r.drv->ops->attach(r.drv, other, NULL, &err), SF_ENOTFOUND);
+    T_OK(r.drv->ops->attach(r.drv, r.gcode_path, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.done || r.failed));
+    T_EQ_INT(r.done, 1);
+    T_EQ_INT(r.drv->status.state, DRV_IDLE);
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.jobs_started, 1);
+    teardown(&r);
+    char *want = commands_of(r.gcode_path), *got = slurp(r.log_path);
+    T_EQ_INT(strcmp(got, want), 0);
+    free(want);
+    free(got);
+}
