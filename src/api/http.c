@@ -100,6 +100,7 @@ struct conn {
     char key[FARMCFG_KEY_MAX + 1]; /* the API key it came with */
     size_t max;                    /* body limit in force when its head arrived */
     struct http *h;                /* owner */
+    char query[256];               /* the raw query string, cut at 255 bytes */
 };
 
 static int64_t
@@ -210,6 +211,43 @@ send_json(struct MHD_Connection *conn, int status, json_t *j, bool close)
     if (close) /* MHD closes the connection after a response saying so */
         MHD_add_response_header(r, MHD_HTTP_HEADER_CONNECTION, "close");
     enum MHD_Result rc = MHD_queue_response(conn, (unsigned)status, r);
+    MHD_destroy_response(r);
+    return rc;
+}
+
+/* A JSON reply with a Location header (a 201's new resource). */
+static enum MHD_Result
+send_json_at(struct MHD_Connection *conn, int status, json_t *j, const char *location)
+{
+    char *s = json_dumps(j, JSON_COMPACT);
+    json_decref(j);
+    struct MHD_Response *r =
+        s ? MHD_create_response_from_buffer(strlen(s), s, MHD_RESPMEM_MUST_FREE) : NULL;
+    if (!r) {
+        free(s);
+        return MHD_NO;
+    }
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, "application/json");
+    MHD_add_response_header(r, MHD_HTTP_HEADER_LOCATION, location);
+    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)status, r);
+    MHD_destroy_response(r);
+    return rc;
+}
+
+/* A text reply (the metrics); the response takes resp->text. */
+static enum MHD_Result
+send_text(struct MHD_Connection *conn, struct http_resp *resp)
+{
+    json_decref(resp->json);
+    struct MHD_Response *r =
+        MHD_create_response_from_buffer(strlen(resp->text), resp->text, MHD_RESPMEM_MUST_FREE);
+    if (!r) {
+        free(resp->text);
+        return MHD_NO;
+    }
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE,
+                            resp->content_type ? resp->content_type : "text/plain; charset=utf-8");
+    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)resp->status, r);
     MHD_destroy_response(r);
     return rc;
 }
@@ -539,6 +577,9 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     c->has_body = chunked || (cl && (!cl_ok || n > 0));
     c->expect = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_EXPECT) != NULL;
     const char *key = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "X-Api-Key");
+    const char *bearer = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "Authorization");
+    if (!key && bearer && strncasecmp(bearer, "Bearer ", 7) == 0)
+        key = bearer + 7;
     const struct farmcfg_key *k = key ? find_key(h, key) : NULL;
     if (!key) {
         fail(c, MHD_HTTP_UNAUTHORIZED, "missing X-Api-Key header");
@@ -550,6 +591,10 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     }
     snprintf(c->key, sizeof(c->key), "%s", k->key);
     c->read_only = k->read_only;
+    if (k->metrics_only && (strcmp(method, "GET") != 0 || strcmp(url, "/metrics") != 0)) {
+        fail(c, MHD_HTTP_FORBIDDEN, "metrics key: only GET /metrics is allowed");
+        return;
+    }
     if (k->read_only && strcmp(method, "GET") != 0 && strcmp(method, "HEAD") != 0) {
         fail(c, MHD_HTTP_FORBIDDEN, "read-only API key: %s is not allowed", method);
         return;
@@ -596,6 +641,8 @@ on_uri(void *cls, const char *uri, struct MHD_Connection *conn)
     for (size_t i = 0; i + 2 < n; i++)
         if (uri[i] == '%' && uri[i + 1] == '0' && uri[i + 2] == '0')
             c->nul_in_url = true;
+    if (q)
+        snprintf(c->query, sizeof(c->query), "%s", q + 1);
     return c;
 }
 
@@ -667,6 +714,8 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
                             .upload_name = c->upload_seen ? c->upload_name : NULL,
                             .upload = c->upload };
     req.last_event_id = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "Last-Event-ID");
+    req.host = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_HOST);
+    req.query = c->query[0] ? c->query : NULL;
     req.n_fields = c->n_fields;
     for (size_t i = 0; i < c->n_fields; i++) {
         req.field_name[i] = c->field_name[i];
@@ -677,8 +726,12 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     drop_upload(c); /* the route committed it, or it goes before the answer does */
     if (resp.stream)
         return send_stream(h, conn, c->key, &resp);
+    if (resp.text)
+        return send_text(conn, &resp);
     if (!resp.json)
         resp.json = json_object();
+    if (resp.location[0])
+        return send_json_at(conn, resp.status, resp.json, resp.location);
     return send_json(conn, resp.status, resp.json, false);
 }
 
