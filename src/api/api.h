@@ -17,6 +17,10 @@
  *   GET    /api/events                    Server-Sent Events: the event log (id: N,
  *                                         event: KIND; Last-Event-ID resumes) and
  *                                         every API_TICK_MS a "progress" snapshot
+ *   GET    /metrics, OctoPrint and Moonraker upload routes: api_compat.h
+ *
+ * POST /api/jobs takes G-code too (.gcode, .gco, .g), queued as is
+ * (api_compat_submit).
  *
  * Errors are {"error": "message"}: 400 bad input (a multipart upload
  * anywhere but POST /api/jobs, a body cut before its closing boundary, an

@@ -199,10 +199,9 @@ moon_upload(const struct api_compat_env *env, const struct http_req *req, struct
     struct sf_err err;
     double modified = store_job_get(env->store, id, &j, &err) == SF_OK ? j.created_ms / 1000.0 : 0;
     resp->status = 201;
-    resp->json =
-        json_pack("{s{s{ss ss sf ss} sb sb ss}}", "result", "item", "path", item, "root", "gcodes",
-                  "modified", modified, "permissions", "rw", "print_started", 0, "print_queued", 1,
-                  "action", "create_file");
+    resp->json = json_pack("{s{s{ss ss sf ss} sb sb ss}}", "result", "item", "path", item, "root",
+                           "gcodes", "modified", modified, "permissions", "rw", "print_started", 0,
+                           "print_queued", 1, "action", "create_file");
 }
 
 /* "job-ID/..." (an upload's path, as its Location named it) -> ID. */
@@ -273,8 +272,7 @@ octo_state(void)
 {
     return json_pack("{ss s{sb sb sb sb sb sb sb sb sb sb}}", "text", "Operational", "flags",
                      "operational", 1, "ready", 1, "printing", 0, "paused", 0, "pausing", 0,
-                     "cancelling", 0, "error", 0, "closedOrError", 0, "sdReady", 0, "finishing",
-                     0);
+                     "cancelling", 0, "error", 0, "closedOrError", 0, "sdReady", 0, "finishing", 0);
 }
 
 static bool
@@ -290,12 +288,12 @@ octo_get(const char *path, struct http_resp *resp)
                                "gcodeAnalysis", "runAt", "never", "plugins", "webcam",
                                "webcamEnabled", 0, "appearance", "name", "slimfarm");
     else if (strcmp(path, "/api/printerprofiles") == 0)
-        resp->json = json_pack("{s{s{ss ss ss sb sb}}}", "profiles", "_default", "id", "_default",
-                               "name", "slimfarm", "model", "slimfarm print farm", "current", 1,
-                               "default", 1);
+        resp->json =
+            json_pack("{s{s{ss ss ss sb sb}}}", "profiles", "_default", "id", "_default", "name",
+                      "slimfarm", "model", "slimfarm print farm", "current", 1, "default", 1);
     else if (strcmp(path, "/api/printer") == 0)
-        resp->json = json_pack("{so s{} s{sb}}", "state", octo_state(), "temperature", "sd",
-                               "ready", 0);
+        resp->json =
+            json_pack("{so s{} s{sb}}", "state", octo_state(), "temperature", "sd", "ready", 0);
     else if (strcmp(path, "/api/job") == 0)
         resp->json = json_pack("{s{s{sn ss}} s{sn sn sn} ss}", "job", "file", "name", "origin",
                                "local", "progress", "completion", "printTime", "printTimeLeft",
@@ -312,11 +310,11 @@ static bool
 moon_get(const char *path, struct http_resp *resp)
 {
     if (strcmp(path, "/server/info") == 0)
-        resp->json = json_pack("{s{sb ss s[s] s[] s[s] s[] ss s[iii] ss}}", "result",
-                               "klippy_connected", 1, "klippy_state", "ready", "components",
-                               "file_manager", "failed_components", "registered_directories",
-                               "gcodes", "warnings", "moonraker_version", "slimfarm",
-                               "api_version", 1, 5, 0, "api_version_string", "1.5.0");
+        resp->json =
+            json_pack("{s{sb ss s[s] s[] s[s] s[] ss s[iii] ss}}", "result", "klippy_connected", 1,
+                      "klippy_state", "ready", "components", "file_manager", "failed_components",
+                      "registered_directories", "gcodes", "warnings", "moonraker_version",
+                      "slimfarm", "api_version", 1, 5, 0, "api_version_string", "1.5.0");
     else if (strcmp(path, "/server/files/roots") == 0)
         resp->json = json_pack("{s[{ss ss ss}]}", "result", "name", "gcodes", "path", "",
                                "permissions", "rw");

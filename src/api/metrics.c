@@ -22,7 +22,9 @@
 
 /* Bucket bounds (seconds) shared by every histogram: a slice of a second
    up to a day-long print or wait. */
-static const double bounds[] = { 1, 5, 10, 30, 60, 300, 600, 1800, 3600, 7200, 14400, 43200, 86400 };
+static const double bounds[] = {
+    1, 5, 10, 30, 60, 300, 600, 1800, 3600, 7200, 14400, 43200, 86400
+};
 #define N_BOUNDS (sizeof(bounds) / sizeof(bounds[0]))
 
 /* The text, and whether any append failed (then the scrape fails). */
@@ -84,8 +86,7 @@ family(struct out *b, const char *name, const char *type, const char *help)
 }
 
 static void
-hist_out(struct out *b, const char *name, const char *lname, const char *lval,
-         const struct hist *h)
+hist_out(struct out *b, const char *name, const char *lname, const char *lval, const struct hist *h)
 {
     for (size_t i = 0; i < N_BOUNDS; i++) {
         put(b, "%s_bucket{", name);
@@ -165,7 +166,7 @@ metrics_render(struct store *s, struct farm *f, struct sf_err *err)
     family(&b, "slimfarm_jobs", "gauge", "Jobs in the store by state.");
     for (int st = 0; st < JOB_STATE_COUNT; st++)
         put(&b, "slimfarm_jobs{state=\"%s\"} %llu\n", job_state_name((enum job_state)st),
-                   by_state[st]);
+            by_state[st]);
 
     unsigned long long pstate[PRINTER_STATE_COUNT] = { 0 };
     size_t n_printers = f ? farm_printer_count(f) : 0;
@@ -180,7 +181,7 @@ metrics_render(struct store *s, struct farm *f, struct sf_err *err)
     family(&b, "slimfarm_printers", "gauge", "Configured printers by state.");
     for (int st = 0; st < PRINTER_STATE_COUNT; st++)
         put(&b, "slimfarm_printers{state=\"%s\"} %llu\n",
-                   printer_state_name((enum printer_state)st), pstate[st]);
+            printer_state_name((enum printer_state)st), pstate[st]);
 
     for (size_t i = 0; i < n_prints; i++) {
         const struct print_stat *p = &prints[i];
@@ -229,8 +230,9 @@ metrics_render(struct store *s, struct farm *f, struct sf_err *err)
         label(&b, per[i].name);
         put(&b, "\"} %.3f\n", per[i].saved_g);
     }
-    family(&b, "slimfarm_stage_duration_seconds", "histogram",
-           "Wall time of a stage: prepare (orient to slice, each job's last), slice, print (done).");
+    family(
+        &b, "slimfarm_stage_duration_seconds", "histogram",
+        "Wall time of a stage: prepare (orient to slice, each job's last), slice, print (done).");
     hist_out(&b, "slimfarm_stage_duration_seconds", "stage", "prepare", &prep);
     hist_out(&b, "slimfarm_stage_duration_seconds", "stage", "slice", &slice);
     hist_out(&b, "slimfarm_stage_duration_seconds", "stage", "print", &print);

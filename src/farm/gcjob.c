@@ -257,8 +257,7 @@ gcjob_runs_on(const char *key, const char *gcode_models, double nozzle_mm, char 
     if (!model[0] && !listed(models, "*")) {
         if (why)
             snprintf(why, why_cap,
-                     "the G-code names no printer model and gcode_models is '%s', not '*'",
-                     models);
+                     "the G-code names no printer model and gcode_models is '%s', not '*'", models);
         return false;
     }
     if (model[0] && !listed(models, model)) {
