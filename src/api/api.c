@@ -260,14 +260,11 @@ jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    int64_t id;
-    if (api_compat_is_gcode(o.name)) { /* printed as is: checked, then stored */
-        int rc = api_compat_submit(&a->slicers, &o, req->upload, &id, &err);
-        if (rc) {
-            http_error(resp, rc == SF_EINVAL || rc == SF_ENOTFOUND ? 400 : 500, "%s", err.msg);
-            return;
-        }
-        goto added;
+    if (api_compat_is_gcode(o.name)) {
+        http_error(resp, 400,
+                   "'%s' is G-code: send it to POST /api/files/local, which prints it as is",
+                   o.name);
+        return;
     }
     /* Options are good: only now does the file reach its content address
        (on a refusal above, http.c discards the temporary file). */
@@ -279,11 +276,11 @@ jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
         http_error(resp, 500, "%s", err.msg);
         return;
     }
+    int64_t id;
     if (store_job_add(a->cfg.store, &o, sha, &id, &err)) {
         http_error(resp, err.code == SF_EINVAL ? 400 : 500, "%s", err.msg);
         return;
     }
-added:;
     struct job_row j;
     if (store_job_get(a->cfg.store, id, &j, &err)) {
         http_error(resp, 500, "%s", err.msg);

@@ -19,8 +19,8 @@
  *                                         every API_TICK_MS a "progress" snapshot
  *   GET    /metrics, OctoPrint and Moonraker upload routes: api_compat.h
  *
- * POST /api/jobs takes G-code too (.gcode, .gco, .g), queued as is
- * (api_compat_submit).
+ * G-code goes to POST /api/files/local (api_compat.h: printed as is);
+ * POST /api/jobs takes parts.
  *
  * Errors are {"error": "message"}: 400 bad input (a multipart upload
  * anywhere but POST /api/jobs, a body cut before its closing boundary, an

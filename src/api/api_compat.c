@@ -27,6 +27,7 @@
 #include <time.h>
 
 #include "../base/log.h"
+#include "../base/mem.h"
 #include "metrics.h"
 
 bool
@@ -59,32 +60,6 @@ boolean(const char *v, bool *out)
         return SF_OK;
     }
     return SF_EINVAL;
-}
-
-int
-api_compat_submit(const struct api_compat_env *env, const struct job_opts *o, void *upload,
-                  int64_t *id, struct sf_err *err)
-{
-    char sha[STORE_SHA_HEX];
-    int rc;
-    if (api_compat_is_gcode(o->name)) {
-        if (!env->farm)
-            return sf_err_set(err, SF_EINVAL, "'%s': this daemon runs no farm to print G-code",
-                              o->name);
-        /* checked before it is stored: a refused file leaves nothing */
-        struct farm_gcode g;
-        if ((rc = farm_gcode_check(env->farm, env->upload_path(upload), o, &g, err)) ||
-            (rc = env->upload_commit(upload, sha, err)))
-            return rc;
-        rc = farm_gcode_add(env->farm, o, sha, &g, id, err);
-    } else {
-        if ((rc = job_opts_validate(o, err)) || (rc = env->upload_commit(upload, sha, err)))
-            return rc;
-        rc = store_job_add(env->store, o, sha, id, err);
-    }
-    if (rc == SF_OK && env->changed)
-        env->changed(env->ud);
-    return rc;
 }
 
 /* ---- uploads ---- */
@@ -120,60 +95,143 @@ url_escape(const char *name, char *out, size_t cap)
     out[o] = '\0';
 }
 
-/* Common to both uploads: the file part, options, the job.  0 or an HTTP status. */
-static int
-upload(const struct api_compat_env *env, const struct http_req *req, struct http_resp *resp,
-       int64_t *id)
+enum flavor { OCTOPRINT, MOONRAKER };
+
+/* The answer to an upload that made job id. */
+static void
+answer(enum flavor fl, const char *base, const char *name, int64_t id, struct http_resp *resp,
+       struct store *s)
+{
+    char esc[3 * JOB_NAME_MAX + 1], shown[JOB_NAME_MAX + 32], clean[JOB_NAME_MAX + 4];
+    url_escape(name, esc, sizeof(esc));
+    snprintf(shown, sizeof(shown), "job-%lld/%s", (long long)id, name);
+    http_text_clean(shown, sizeof(shown), shown);
+    http_text_clean(clean, sizeof(clean), name);
+    resp->status = 201;
+    if (fl == MOONRAKER) {
+        snprintf(resp->location, sizeof(resp->location), "%s/server/files/gcodes/job-%lld/%s", base,
+                 (long long)id, esc);
+        struct job_row j;
+        double modified = store_job_get(s, id, &j, NULL) == SF_OK ? j.created_ms / 1000.0 : 0;
+        /* queued, never started at once: the farm starts it when a printer is free */
+        resp->json = json_pack("{s{s{ss ss sf ss} sb sb ss}}", "result", "item", "path", shown,
+                               "root", "gcodes", "modified", modified, "permissions", "rw",
+                               "print_started", 0, "print_queued", 1, "action", "create_file");
+        return;
+    }
+    snprintf(resp->location, sizeof(resp->location), "%s/api/files/local/job-%lld/%s", base,
+             (long long)id, esc);
+    char download[64 + 256];
+    snprintf(download, sizeof(download), "%s/api/jobs/%lld", base, (long long)id);
+    /* The farm queues every upload: it is selected and will print when a
+       printer can take it, so both flags are true whatever was asked. */
+    resp->json = json_pack("{s{s{ss ss ss s{ss ss}}} sb sb sb s{sI}}", "files", "local", "name",
+                           clean, "path", shown, "origin", "local", "refs", "resource",
+                           resp->location, "download", download, "done", 1, "effectiveSelect", 1,
+                           "effectivePrint", 1, "slimfarm", "job_id", (json_int_t)id);
+}
+
+/* An uploaded G-code file under check on the farm's io thread. */
+struct pending {
+    const struct api_compat_env *env; /* valid while d is alive (api_free ends both) */
+    struct http_defer *d;             /* the waiting request; NULL if deferring failed */
+    enum flavor fl;
+    struct job_opts o;
+    char base[256]; /* scheme and host for Location, "" for a relative one */
+};
+
+/* The check is done (loop thread): store the file and queue it, or refuse. */
+static void
+checked(void *ud, int rc, const struct farm_gcode *g, const char *msg)
+{
+    struct pending *p = ud;
+    struct http_defer *d = p->d;
+    struct http_resp resp = { .status = 200 };
+    if (!d || !http_defer_alive(d)) { /* the client left, or the server stopped */
+        if (d)
+            http_defer_answer(d, &resp);
+        free(p);
+        return;
+    }
+    const struct api_compat_env *env = p->env;
+    char sha[STORE_SHA_HEX];
+    struct sf_err err;
+    int64_t id;
+    if (rc)
+        http_error(&resp, rc == SF_EINVAL ? 400 : rc == SF_ECANCELED ? 503 : 500, "%s", msg);
+    else if ((rc = env->upload_commit(http_defer_upload(d), sha, &err)) ||
+             (rc = farm_gcode_add(env->farm, &p->o, sha, g, &id, &err)))
+        http_error(&resp, rc == SF_EINVAL ? 400 : 500, "%s", err.msg);
+    else {
+        log_info("api", "job %lld: '%s' uploaded through the %s API", (long long)id, p->o.name,
+                 p->fl == MOONRAKER ? "Moonraker" : "OctoPrint");
+        answer(p->fl, p->base, p->o.name, id, &resp, env->store);
+        if (env->changed)
+            env->changed(env->ud);
+    }
+    http_defer_answer(d, &resp);
+    free(p);
+}
+
+/* Both uploads: the file part, its fields, then the job (a part now, G-code
+   after its check). */
+static void
+upload(const struct api_compat_env *env, enum flavor fl, const struct http_req *req,
+       struct http_resp *resp)
 {
     struct sf_err err;
     if (!req->upload_name || !req->upload) {
         http_error(resp, 400, "multipart field 'file' (the G-code or part) is required");
-        return 400;
+        return;
     }
     bool b;
     const char *names[] = { "print", "select" };
     for (size_t i = 0; i < 2; i++)
         if (boolean(field(req, names[i]), &b)) {
             http_error(resp, 400, "form field '%s' must be true or false", names[i]);
-            return 400;
+            return;
         }
     struct job_opts o;
     job_opts_init(&o);
     snprintf(o.name, sizeof(o.name), "%s", req->upload_name);
-    int rc = api_compat_submit(env, &o, req->upload, id, &err);
-    if (rc) {
-        http_error(resp, rc == SF_EINVAL || rc == SF_ENOTFOUND ? 400 : 500, "%s", err.msg);
-        return resp->status;
-    }
-    log_info("api", "job %lld: '%s' uploaded through the slicer API", (long long)*id, o.name);
-    return 0;
-}
-
-static void
-octo_upload(const struct api_compat_env *env, const struct http_req *req, struct http_resp *resp)
-{
-    int64_t id;
-    if (upload(env, req, resp, &id))
-        return;
-    char base[256], esc[3 * JOB_NAME_MAX + 1], path[3 * JOB_NAME_MAX + 32];
+    char base[256];
     base_url(req, base, sizeof(base));
-    url_escape(req->upload_name, esc, sizeof(esc));
-    snprintf(path, sizeof(path), "job-%lld/%s", (long long)id, esc);
-    snprintf(resp->location, sizeof(resp->location), "%s/api/files/local/%s", base, path);
-    char download[sizeof(resp->location) + 32];
-    snprintf(download, sizeof(download), "%s/api/jobs/%lld", base, (long long)id);
-    char shown[JOB_NAME_MAX + 32];
-    snprintf(shown, sizeof(shown), "job-%lld/%s", (long long)id, req->upload_name);
-    char name[JOB_NAME_MAX + 4];
-    http_text_clean(name, sizeof(name), req->upload_name);
-    http_text_clean(shown, sizeof(shown), shown);
-    resp->status = 201;
-    /* The farm queues every upload: it is selected and will print when a
-       printer can take it, so both flags are true whatever was asked. */
-    resp->json = json_pack("{s{s{ss ss ss s{ss ss}}} sb sb sb s{sI}}", "files", "local", "name",
-                           name, "path", shown, "origin", "local", "refs", "resource",
-                           resp->location, "download", download, "done", 1, "effectiveSelect", 1,
-                           "effectivePrint", 1, "slimfarm", "job_id", (json_int_t)id);
+    if (api_compat_is_gcode(o.name)) {
+        if (!env->farm) {
+            http_error(resp, 400, "'%s': this daemon runs no farm to print G-code", o.name);
+            return;
+        }
+        struct pending *p = mem_calloc(1, sizeof(*p));
+        if (!p) {
+            http_error(resp, 500, "out of memory");
+            return;
+        }
+        *p = (struct pending){ .env = env, .fl = fl, .o = o };
+        snprintf(p->base, sizeof(p->base), "%s", base);
+        /* checked before it is stored: a refused file leaves nothing */
+        if (farm_gcode_check(env->farm, env->upload_path(req->upload), &o, checked, p, &err)) {
+            free(p);
+            http_error(resp, 500, "%s", err.msg);
+            return;
+        }
+        p->d = http_defer(resp);
+        if (!p->d)
+            http_error(resp, 500, "out of memory"); /* checked() then only frees p */
+        return;
+    }
+    char sha[STORE_SHA_HEX];
+    int64_t id;
+    int rc;
+    if ((rc = job_opts_validate(&o, &err)) || (rc = env->upload_commit(req->upload, sha, &err)) ||
+        (rc = store_job_add(env->store, &o, sha, &id, &err))) {
+        http_error(resp, rc == SF_EINVAL || rc == SF_ENOTFOUND ? 400 : 500, "%s", err.msg);
+        return;
+    }
+    log_info("api", "job %lld: '%s' uploaded through the %s API", (long long)id, o.name,
+             fl == MOONRAKER ? "Moonraker" : "OctoPrint");
+    answer(fl, base, o.name, id, resp, env->store);
+    if (env->changed)
+        env->changed(env->ud);
 }
 
 static void
@@ -184,24 +242,7 @@ moon_upload(const struct api_compat_env *env, const struct http_req *req, struct
         http_error(resp, 400, "root '%.32s': the farm takes uploads only to 'gcodes'", root);
         return;
     }
-    int64_t id;
-    if (upload(env, req, resp, &id))
-        return;
-    char base[256], esc[3 * JOB_NAME_MAX + 1];
-    base_url(req, base, sizeof(base));
-    url_escape(req->upload_name, esc, sizeof(esc));
-    snprintf(resp->location, sizeof(resp->location), "%s/server/files/gcodes/job-%lld/%s", base,
-             (long long)id, esc);
-    char item[JOB_NAME_MAX + 32];
-    snprintf(item, sizeof(item), "job-%lld/%s", (long long)id, req->upload_name);
-    http_text_clean(item, sizeof(item), item);
-    struct job_row j;
-    struct sf_err err;
-    double modified = store_job_get(env->store, id, &j, &err) == SF_OK ? j.created_ms / 1000.0 : 0;
-    resp->status = 201;
-    resp->json = json_pack("{s{s{ss ss sf ss} sb sb ss}}", "result", "item", "path", item, "root",
-                           "gcodes", "modified", modified, "permissions", "rw", "print_started", 0,
-                           "print_queued", 1, "action", "create_file");
+    upload(env, MOONRAKER, req, resp);
 }
 
 /* "job-ID/..." (an upload's path, as its Location named it) -> ID. */
@@ -390,7 +431,7 @@ api_compat_route(const struct api_compat_env *env, const struct http_req *req,
         if (!post)
             http_error(resp, 405, "use POST with a multipart/form-data upload");
         else if (path[1] == 'a')
-            octo_upload(env, req, resp);
+            upload(env, OCTOPRINT, req, resp);
         else
             moon_upload(env, req, resp);
         return true;

@@ -21,7 +21,8 @@
  *   GET  /metrics                Prometheus text format 0.0.4
  *
  * Every upload becomes a farm job whatever select/print say: G-code runs
- * as is on a printer that can take it (farm_gcode_check), a part (.stl,
+ * as is on a printer that can take it (checked by farm_gcode_check off the
+ * loop thread while the request waits, http_defer), a part (.stl,
  * .obj, .3mf) goes through the pipeline with the default options.  The
  * farm is a queue: a busy farm queues, never answers 409, and print=false
  * queues too (effectivePrint and print_queued say so).  A refused upload
@@ -60,14 +61,6 @@ bool api_compat_route(const struct api_compat_env *env, const struct http_req *r
 
 /* The body a request to our routes takes; false if the path is not ours. */
 bool api_compat_body(const char *method, const char *path, enum http_body *kind);
-
-/*
- * Queue the upload named o->name as a job with options o: G-code (.gcode,
- * .gco, .g) checked and queued as is, a part as a queued job.  SF_EINVAL
- * (-> 400) with a message for what the farm refuses.  *id the job.
- */
-int api_compat_submit(const struct api_compat_env *env, const struct job_opts *o, void *upload,
-                      int64_t *id, struct sf_err *err);
 
 /* True for a G-code file name (.gcode, .gco, .g). */
 bool api_compat_is_gcode(const char *name);

@@ -74,6 +74,7 @@ struct http {
     struct farmcfg_key *keys;                    /* copy of the API keys */
     int port;                                    /* bound port, -1 if none */
     struct stream *streams;                      /* live streams */
+    struct http_defer *defers;                   /* requests waiting for their answer */
     struct pending *pending_head, *pending_tail; /* connections without a request head yet */
     size_t n_pending;                            /* their count */
 };
@@ -101,7 +102,28 @@ struct conn {
     size_t max;                    /* body limit in force when its head arrived */
     struct http *h;                /* owner */
     char query[256];               /* the raw query string, cut at 255 bytes */
+    struct http_defer *defer;      /* its deferred answer, while the route works */
 };
+
+/* A route's answer to come (http.h); freed by http_defer_answer. */
+struct http_defer {
+    struct http *h;              /* owner, while the connection lives */
+    struct conn *c;              /* the request, NULL once the client is gone */
+    struct MHD_Connection *conn; /* its connection, suspended; NULL once gone */
+    bool ready;                  /* resp holds the answer; the connection was resumed */
+    struct http_resp resp;       /* the answer */
+    struct http_defer *next;     /* in h->defers */
+};
+
+static void
+defer_unlink(struct http *h, struct http_defer *d)
+{
+    for (struct http_defer **pp = &h->defers; *pp; pp = &(*pp)->next)
+        if (*pp == d) {
+            *pp = d->next;
+            return;
+        }
+}
 
 static int64_t
 now_ms(void)
@@ -414,6 +436,11 @@ conn_free(struct http *h, struct conn *c)
 {
     if (!c)
         return;
+    if (c->defer) { /* the client left before its answer: the route's answer only frees it */
+        defer_unlink(h, c->defer);
+        c->defer->c = NULL;
+        c->defer->conn = NULL;
+    }
     if (c->pp)
         MHD_destroy_post_processor(c->pp);
     if (c->upload)
@@ -646,6 +673,22 @@ on_uri(void *cls, const char *uri, struct MHD_Connection *conn)
     return c;
 }
 
+/* Send what a route answered. */
+static enum MHD_Result
+respond(struct http *h, struct conn *c, struct MHD_Connection *conn, struct http_resp *resp)
+{
+    drop_upload(c); /* the route committed it, or it goes before the answer does */
+    if (resp->stream)
+        return send_stream(h, conn, c->key, resp);
+    if (resp->text)
+        return send_text(conn, resp);
+    if (!resp->json)
+        resp->json = json_object();
+    if (resp->location[0])
+        return send_json_at(conn, resp->status, resp->json, resp->location);
+    return send_json(conn, resp->status, resp->json, false);
+}
+
 static enum MHD_Result
 on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *method,
            const char *version, const char *upload_data, size_t *upload_data_size, void **con_cls)
@@ -686,6 +729,16 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
         }
         return MHD_YES;
     }
+    if (c->defer) { /* resumed: the deferred answer is in */
+        struct http_defer *d = c->defer;
+        if (!d->ready)
+            return MHD_YES;
+        defer_unlink(h, d);
+        c->defer = NULL;
+        struct http_resp resp = d->resp;
+        free(d);
+        return respond(h, c, conn, &resp);
+    }
     if (c->pp) {
         /* Flushes the last part; MHD_NO unless the body ended in the post
            processor's final state: a body cut before its closing boundary
@@ -723,16 +776,55 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     }
     struct http_resp resp = { .status = MHD_HTTP_OK };
     h->cfg.route(h->cfg.ud, &req, &resp);
-    drop_upload(c); /* the route committed it, or it goes before the answer does */
-    if (resp.stream)
-        return send_stream(h, conn, c->key, &resp);
-    if (resp.text)
-        return send_text(conn, &resp);
-    if (!resp.json)
-        resp.json = json_object();
-    if (resp.location[0])
-        return send_json_at(conn, resp.status, resp.json, resp.location);
-    return send_json(conn, resp.status, resp.json, false);
+    if (resp.defer) {
+        /* The answer comes later (http_defer_answer): keep the upload and
+           wait, suspended, so other clients and printers go on. */
+        struct http_defer *d = resp.defer;
+        json_decref(resp.json);
+        free(resp.text);
+        d->h = h;
+        d->c = c;
+        d->conn = conn;
+        d->next = h->defers;
+        h->defers = d;
+        c->defer = d;
+        MHD_suspend_connection(conn);
+        return MHD_YES;
+    }
+    return respond(h, c, conn, &resp);
+}
+
+struct http_defer *
+http_defer(struct http_resp *resp)
+{
+    resp->defer = mem_calloc(1, sizeof(*resp->defer));
+    return resp->defer;
+}
+
+bool
+http_defer_alive(const struct http_defer *d)
+{
+    return d->conn != NULL;
+}
+
+void *
+http_defer_upload(struct http_defer *d)
+{
+    return d->c ? d->c->upload : NULL;
+}
+
+void
+http_defer_answer(struct http_defer *d, struct http_resp *resp)
+{
+    if (!d->conn) {
+        json_decref(resp->json);
+        free(resp->text);
+        free(d);
+        return;
+    }
+    d->resp = *resp;
+    d->ready = true;
+    MHD_resume_connection(d->conn); /* MHD calls on_request again: deferred_reply */
 }
 
 static void
@@ -842,8 +934,12 @@ http_free(struct http *h)
 {
     if (!h)
         return;
-    /* MHD requires every suspended connection resumed before stopping. */
+    /* MHD requires every suspended connection resumed before stopping;
+       a deferred answer still to come finds its client gone (conn_free). */
     http_wake_streams(h);
+    for (struct http_defer *d = h->defers; d; d = d->next)
+        if (!d->ready)
+            MHD_resume_connection(d->conn);
     MHD_stop_daemon(h->d);
     free(h->keys);
     free(h);

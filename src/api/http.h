@@ -91,6 +91,7 @@ struct http_resp {
     char *text;                    /* or a text body (the server frees it), instead of json */
     const char *content_type;      /* text's type; NULL: text/plain; charset=utf-8 */
     char location[512];            /* "" or a Location header (a 201's new resource) */
+    struct http_defer *defer;      /* set by http_defer(): the answer comes later */
 };
 
 typedef void (*http_route_fn)(void *ud, const struct http_req *req, struct http_resp *resp);
@@ -166,6 +167,23 @@ void http_wake_streams(struct http *h);
  * between characters.  Returns out.
  */
 char *http_text_clean(char *out, size_t cap, const char *s);
+
+/*
+ * A route that must wait for a worker (checking an uploaded file off the
+ * loop thread) defers its answer: it calls http_defer(resp) and returns;
+ * the connection waits, suspended, keeping its upload; later, on this
+ * thread, http_defer_answer() gives the answer (a struct http_resp filled
+ * as a route fills it) and frees the handle.  If the client leaves or the
+ * server is freed first, the handle stays until then and the answer is
+ * dropped (http_defer_alive() says so; the upload is gone).  NULL when out
+ * of memory: the route answers now.
+ */
+struct http_defer;
+struct http_defer *http_defer(struct http_resp *resp);
+bool http_defer_alive(const struct http_defer *d);
+/* The request's upload (the sink's context), NULL once the client is gone. */
+void *http_defer_upload(struct http_defer *d);
+void http_defer_answer(struct http_defer *d, struct http_resp *resp);
 
 /* Helpers for routes: status with {"error": msg} body (msg made valid UTF-8). */
 void http_error(struct http_resp *resp, int status, const char *fmt, ...)

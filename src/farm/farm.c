@@ -690,46 +690,107 @@ farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
     return SF_OK;
 }
 
-int
-farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, struct farm_gcode *g,
-                 struct sf_err *err)
+/* An uploaded G-code file being checked on the io thread. */
+struct gcheck {
+    struct farm *f;
+    char path[1200];
+    struct job_opts o;
+    struct farm_gcode g;
+    struct sf_err err;
+    farm_gcode_fn done;
+    void *ud;
+};
+
+/* The io thread: every line, and the slicer's comments (pure reads). */
+static int
+gcheck_work(void *ud, const atomic_bool *cancel)
 {
+    (void)cancel;
+    struct gcheck *t = ud;
     struct drv_job_scan scan;
     int rc;
-    memset(g, 0, sizeof(*g));
-    if ((rc = drv_job_scan(path, &scan, err)) || (rc = gcjob_read(path, &g->info, err))) {
+    if ((rc = drv_job_scan(t->path, &scan, &t->err)) ||
+        (rc = gcjob_read(t->path, &t->g.info, &t->err))) {
         /* the message names the temporary path: name the upload instead */
-        const char *at = err ? strstr(err->msg, path) : NULL;
+        const char *at = strstr(t->err.msg, t->path);
         if (at) {
             char rest[SF_ERR_MSG_MAX];
-            snprintf(rest, sizeof(rest), "%s", at + strlen(path) + (at[strlen(path)] == '\''));
-            sf_err_set(err, rc, "G-code '%s'%s", o->name, rest);
+            size_t n = strlen(t->path);
+            snprintf(rest, sizeof(rest), "%s", at + n + (at[n] == '\''));
+            sf_err_set(&t->err, rc, "G-code '%s'%s", t->o.name, rest);
         }
         return rc;
     }
     if (scan.lines_total == 0)
-        return sf_err_set(err, SF_EINVAL, "'%s' holds no G-code command", o->name);
-    g->lines = (int64_t)scan.lines_total;
-    gcjob_key(&g->info, g->key, sizeof(g->key));
-    /* Refuse now what no printer of the farm could ever run: a slicer user
-       hears it at once, not from a job that waits forever.  Material is not
-       asked: an operator loads another spool, not another printer. */
-    struct sched_job vj = {
-        .state = JOB_READY, .printer = o->printer, .group = o->group, .material = "", .key = g->key
-    };
-    char why[SCHED_REASON_MAX] = "", one[160];
-    for (size_t i = 0; i < f->n_printers; i++) {
-        struct sched_printer sp;
-        printer_view(f->printers[i], &sp);
-        if (sched_compatible(&vj, &sp, one, sizeof(one)))
-            return SF_OK;
-        size_t len = strlen(why);
-        snprintf(why + len, sizeof(why) - len, "%s%s: %s", i ? "; " : "", sp.name, one);
+        return sf_err_set(&t->err, SF_EINVAL, "G-code '%s' holds no command", t->o.name);
+    t->g.lines = (int64_t)scan.lines_total;
+    gcjob_key(&t->g.info, t->g.key, sizeof(t->g.key));
+    return SF_OK;
+}
+
+/* The loop thread: could some printer of the farm run it? */
+static void
+gcheck_done(struct loop *l, void *ud, int rc)
+{
+    (void)l;
+    struct gcheck *t = ud;
+    struct farm *f = t->f;
+    if (rc == SF_ECANCELED) {
+        sf_err_set(&t->err, rc, "the farm is stopping");
+    } else if (rc == SF_OK) {
+        /* Refuse now what no printer of the farm could ever run: a slicer
+           user hears it at once, not from a job that waits forever.
+           Material is not asked: an operator loads another spool, not
+           another printer. */
+        struct sched_job vj = { .state = JOB_READY,
+                                .printer = t->o.printer,
+                                .group = t->o.group,
+                                .material = "",
+                                .key = t->g.key };
+        char why[SCHED_REASON_MAX] = "", one[160];
+        bool any = false;
+        for (size_t i = 0; i < f->n_printers && !any; i++) {
+            struct sched_printer sp;
+            printer_view(f->printers[i], &sp);
+            any = sched_compatible(&vj, &sp, one, sizeof(one));
+            size_t len = strlen(why);
+            if (!any)
+                snprintf(why + len, sizeof(why) - len, "%s%s: %s", i ? "; " : "", sp.name, one);
+        }
+        const struct gcjob_info *g = &t->g.info;
+        if (!any)
+            rc = sf_err_set(&t->err, SF_EINVAL,
+                            "G-code '%s' (%s%s%s, nozzle %g mm): no printer could run it: %s",
+                            t->o.name,
+                            g->model[0] ? "for printer model '" : "names no printer model",
+                            g->model, g->model[0] ? "'" : "", g->nozzle_mm,
+                            f->n_printers ? why : "no printers configured");
     }
-    return sf_err_set(err, SF_EINVAL, "'%s' (%s%s%s, nozzle %g mm): no printer could run it: %s",
-                      o->name, g->info.model[0] ? "for printer model '" : "names no printer model",
-                      g->info.model, g->info.model[0] ? "'" : "", g->info.nozzle_mm,
-                      f->n_printers ? why : "no printers configured");
+    t->done(t->ud, rc, rc ? NULL : &t->g, t->err.msg);
+    free(t);
+}
+
+int
+farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, farm_gcode_fn done,
+                 void *ud, struct sf_err *err)
+{
+    struct gcheck *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
+    if (snprintf(t->path, sizeof(t->path), "%s", path) >= (int)sizeof(t->path)) {
+        free(t);
+        return sf_err_set(err, SF_EINVAL, "farm: path too long: '%.80s...'", path);
+    }
+    t->f = f;
+    t->o = *o;
+    t->done = done;
+    t->ud = ud;
+    /* on the io thread, beside resume reads: never queued behind slicing */
+    if (!pool_submit(f->io, gcheck_work, gcheck_done, t, err)) {
+        free(t);
+        return err ? err->code : SF_ENOMEM;
+    }
+    return SF_OK;
 }
 
 int

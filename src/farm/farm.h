@@ -92,17 +92,24 @@ struct farm_gcode {
     int64_t lines;           /* command lines (drv_job_scan) */
 };
 
+/* The end of a check: rc SF_OK with g, or an error with msg (g NULL). */
+typedef void (*farm_gcode_fn)(void *ud, int rc, const struct farm_gcode *g, const char *msg);
+
 /*
  * Check uploaded G-code at path (a temporary file, before it is stored)
- * for the job o describes: every line (drv_job_scan), what its slicer
- * wrote (gcjob_read), and that some configured printer could run it
- * (its target printer or group, gcode_models, nozzle; not its material,
- * which an operator may load).  Reads the whole file on the calling
- * (loop) thread.  SF_EINVAL naming o->name: a bad line, a foreign flavor,
- * no command at all, or no printer (each printer and why).
+ * for the job o describes, off the loop thread (the farm's io thread: a
+ * 50 MB file is ~1 s of reading, which must not stall the printers'
+ * streams): every line (drv_job_scan), what its slicer wrote
+ * (gcjob_read); then, on the loop thread, that some configured printer
+ * could run it (its target printer or group, gcode_models, nozzle; not
+ * its material, which an operator may load).  done(ud, ...) runs once on
+ * the loop thread, also when the farm is freed first (SF_ECANCELED).
+ * Errors to done: SF_EINVAL naming o->name (a bad line, a foreign flavor,
+ * no command at all, no printer: each printer and why), SF_EIO.  Returns
+ * SF_ENOMEM (done is then never called).
  */
-int farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o,
-                     struct farm_gcode *g, struct sf_err *err);
+int farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, farm_gcode_fn done,
+                     void *ud, struct sf_err *err);
 
 /*
  * Queue stored file sha, checked by farm_gcode_check into g, as a job

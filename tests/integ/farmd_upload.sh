@@ -32,7 +32,7 @@ start_daemon
 wait_for 60 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq 2 ]" || fail "printers: $("$C" printers)"
 
 PORT=$port RW=$RW RO=$RO MK=$MK TMP=$tmp $PY - "$(dirname "$0")/lib" <<'PY' || fail "slicer replays"
-import json, os, sys, time, glob
+import glob, hashlib, json, os, sys, time
 sys.path.insert(0, sys.argv[1])
 from slicers import *
 port, rw, ro, mk, tmp = int(os.environ["PORT"]), os.environ["RW"], os.environ["RO"], os.environ["MK"], os.environ["TMP"]
@@ -61,7 +61,9 @@ def api(path, key=rw):
     return json.loads(b)
 
 def files():
-    return sorted(glob.glob(os.path.join(tmp, "data", "files", "*", "*")))
+    """Stored files by name (their SHA-256) and temporaries, anywhere under files/."""
+    return [os.path.basename(f) for f in glob.glob(os.path.join(tmp, "data", "files", "**"), recursive=True)
+            if os.path.isfile(f)]
 
 def metrics(key=ro):
     st, h, b = curl_get(port, "/metrics", "Prometheus/2.45.0", key)
@@ -82,7 +84,8 @@ check(r["files"]["local"]["origin"] == "local" and r["done"] and r["effectivePri
 check("/api/files/local/job-" in h.get("location", ""), "Location %r" % h)
 jobs.append(r["slimfarm"]["job_id"])
 # OrcaSlicer with print=false: queued all the same (documented), both while mk3 is busy
-st, h, b = orcaslicer(port, rw, "cube.gcode", body(20, orca_tail), print_=False)
+cube = body(20, orca_tail)
+st, h, b = orcaslicer(port, rw, "cube.gcode", cube, print_=False)
 check(st == 201, "orca upload while busy: %d %s" % (st, b[:300]))
 jobs.append(json.loads(b)["slimfarm"]["job_id"])
 # Cura printing at once (select and print in the upload), and Cura selecting after Location
@@ -98,8 +101,6 @@ check(st == 201, "moonraker upload: %d %s" % (st, b[:300]))
 res = json.loads(b)["result"]
 check(res["print_queued"] and not res["print_started"] and res["item"]["root"] == "gcodes", "moonraker body %r" % res)
 jobs.append(int(res["item"]["path"].split("/")[0][4:]))
-st, h, b = curl_mime(port, "/printer/print/start?filename=" + res["item"]["path"], "OrcaSlicer/2.3.0", rw, [], None, b"")
-check(st in (200, 400), "print start: %d" % st)
 st, h, b = request(port, ("POST /printer/print/start?filename=%s HTTP/1.1\r\nHost: x\r\nX-Api-Key: %s\r\n"
                           "Content-Length: 0\r\n\r\n" % (res["item"]["path"], rw)).encode())
 check(st == 200 and json.loads(b)["result"] == "ok", "print start: %d %s" % (st, b))
@@ -116,8 +117,11 @@ check(by_id[jobs[0]]["material"] == "PLA", "material from filament_type")
 check(by_id[jobs[5]]["method"] != "gcode", "the mesh is prepared")
 
 # bad uploads: clear errors, nothing added
-n_jobs, n_files = len(by_id), len(files())
-def refused(res, code, words, what):
+n_jobs = len(by_id)
+sent = []  # every refused file's bytes: none may be stored
+def refused(res, code, words, what, data=None):
+    if data is not None:
+        sent.append(hashlib.sha256(data).hexdigest())
     st, h, b = res[:3]
     check(st == code, "%s: %d, want %d: %s" % (what, st, code, b[:300]))
     msg = json.loads(b)["error"]
@@ -125,16 +129,19 @@ def refused(res, code, words, what):
         check(w in msg, "%s: %r lacks %r" % (what, msg, w))
 refused(curl_mime(port, "/api/files/local", "PrusaSlicer/2.9.4", rw, [("print", "true"), ("path", "")], None, b""),
         400, ["'file'"], "no file part")
-refused(prusaslicer(port, rw, "bad.gcode", body(3) + b"G1 X" + b"1" * 300 + b"\n" + prusa_tail.encode()),
-        400, ["G-code 'bad.gcode':11: command too long"], "a bad G-code line")
-refused(prusaslicer(port, rw, "xl.gcode", body(3, prusa_tail.replace("MK3S", "XL").replace("= 0.4", "= 0.6"))),
-        400, ["'XL'", "no printer could run it", "mk3: G-code for 'XL'", "ender: G-code for a 0.6 mm nozzle"],
-        "G-code no printer can run")
+bad = body(3) + b"G1 X" + b"1" * 300 + b"\n" + prusa_tail.encode()
+refused(prusaslicer(port, rw, "bad.gcode", bad), 400, ["G-code 'bad.gcode':11: command too long"],
+        "a bad G-code line", bad)
+xl = body(3, prusa_tail.replace("MK3S", "XL").replace("= 0.4", "= 0.6"))
+refused(prusaslicer(port, rw, "xl.gcode", xl), 400,
+        ["'XL'", "no printer could run it", "mk3: G-code for 'XL'", "ender: G-code for a 0.6 mm nozzle"],
+        "G-code no printer can run", xl)
 refused(prusaslicer(port, rw, "big.gcode", body(3) + b"; " + b"x" * (1100 << 10) + b"\n"),
         413, ["limit"], "an upload over upload_max")
 refused(prusaslicer(port, "wrong-key-0123456789abcdef", "a.gcode", body(3, prusa_tail)), 401, ["key"], "wrong key")
-refused(curl_mime(port, "/api/files/local", "PrusaSlicer/2.9.4", ro, [("print", "true")], "a.gcode", body(3, prusa_tail)),
-        403, ["read-only"], "read-only key")
+ro_file = body(4, prusa_tail)
+refused(curl_mime(port, "/api/files/local", "PrusaSlicer/2.9.4", ro, [("print", "true")], "a.gcode", ro_file),
+        403, ["read-only"], "read-only key", ro_file)
 refused(curl_mime(port, "/api/files/local", "PrusaSlicer/2.9.4", mk, [("print", "true")], "a.gcode", body(3, prusa_tail)),
         403, ["metrics"], "metrics key uploading")
 refused(curl_get(port, "/api/jobs", "x", mk), 403, ["metrics"], "metrics key on the API")
@@ -142,7 +149,11 @@ st, h, b = curl_get(port, "/metrics", "Prometheus/2.45.0", "nope-0123456789abcde
 check(st == 401, "metrics without a valid key: %d" % st)
 st, h, b = request(port, ("GET /metrics HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer %s\r\n\r\n" % mk).encode())
 check(st == 200, "metrics key as a bearer token: %d" % st)
-check(len(api("/api/jobs")["jobs"]) == n_jobs and len(files()) == n_files, "a refused upload left something")
+stored = files()
+check(len(api("/api/jobs")["jobs"]) == n_jobs, "a refused upload added a job")
+check(not [f for f in stored if f.startswith("tmp-")], "a temporary file was left: %r" % stored)
+check(not [h for h in sent if h in stored], "a refused upload was stored")
+check(hashlib.sha256(cube).hexdigest() in stored, "the check sees stored uploads")
 st, h, b = request(port, ("POST /api/files/local/job-999/x.gcode HTTP/1.1\r\nHost: x\r\nX-Api-Key: %s\r\n"
                           "Content-Type: application/json\r\nContent-Length: 20\r\n\r\n{\"command\":\"select\"}" % rw).encode())
 check(st == 404, "select of an unknown upload: %d" % st)

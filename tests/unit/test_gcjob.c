@@ -101,7 +101,11 @@ T_CASE(sched_places_gcode_by_model_and_nozzle_only)
 {
     struct sched_printer p[] = { printer("none", 0.4, ""), printer("mk3", 0.4, "MK3S, mk3smmu2s"),
                                  printer("any6", 0.6, "*"), printer("any4", 0.4, "*") };
-    struct sched_job j = { .id = 1, .state = JOB_READY, .material = "", .printer = "", .group = "",
+    struct sched_job j = { .id = 1,
+                           .state = JOB_READY,
+                           .material = "",
+                           .printer = "",
+                           .group = "",
                            .key = "gcode/n0.4/mk3s" };
     char why[160];
     T_TRUE(!sched_compatible(&j, &p[0], why, sizeof(why)));
