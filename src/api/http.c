@@ -436,10 +436,17 @@ conn_free(struct http *h, struct conn *c)
 {
     if (!c)
         return;
-    if (c->defer) { /* the client left before its answer: the route's answer only frees it */
-        defer_unlink(h, c->defer);
-        c->defer->c = NULL;
-        c->defer->conn = NULL;
+    if (c->defer) {
+        struct http_defer *d = c->defer;
+        defer_unlink(h, d);
+        if (d->ready) { /* answered, never sent: the server stopped first */
+            json_decref(d->resp.json);
+            free(d->resp.text);
+            free(d);
+        } else { /* the answer to come only frees it */
+            d->c = NULL;
+            d->conn = NULL;
+        }
     }
     if (c->pp)
         MHD_destroy_post_processor(c->pp);
