@@ -180,4 +180,26 @@ print("uploads: %d jobs printed; metrics: %d prints, %.2f g" % (len(jobs), done,
 PY
 stop_sims
 check_farm_logs mk3 ender || fail "executed logs differ from the uploaded G-code"
+
+# A stop while an upload is being checked (or stored, or answered: whichever
+# the signal meets) ends cleanly: no crash, no leak (the sanitizers' exit
+# code), the upload dropped or queued, never half-stored.
+$PY -c "
+import sys
+sys.stdout.write(';FLAVOR:Marlin\n' + 'G1 X10.000 Y10.000 E0.01234\n' * 400000)" > "$tmp/stop.gcode"
+sed -i 's/^upload_max_mb: 1$/upload_max_mb: 64/' "$tmp/farm.ini"
+kill -HUP "$pid"
+wait_for 30 grep -q "upload_max 1048576 -> 67108864" "$tmp/log" || fail "reload of upload_max_mb"
+curl -s -o /dev/null -w '%{http_code}' -H "X-Api-Key: $RW" -F "file=@$tmp/stop.gcode" \
+  "$SLIMFARM_URL/api/files/local" > "$tmp/stop.code" &
+up=$!
+for _ in $(seq 100); do grep -q "stop.gcode\|POST" "$tmp/log" 2>/dev/null && break; sleep 0.02; done
+sleep 0.2
+kill -TERM "$pid"
+wait "$pid"; rc=$?
+pid=
+wait "$up"
+[ "$rc" -eq 0 ] || fail "daemon stopped mid-upload with rc $rc"
+grep -q "Sanitizer" "$tmp/log" && fail "sanitizer report on a stop mid-upload"
+echo "stop mid-upload: the upload was answered '$(cat "$tmp/stop.code")', the daemon exited 0"
 echo "farmd_upload: ok"

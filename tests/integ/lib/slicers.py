@@ -20,10 +20,21 @@ import base64, json, os, re, socket, sys
 HOST = "127.0.0.1"
 
 
-def request(port, raw, timeout=60):
+def request(port, raw, timeout=60, body=None):
+    """Send raw; with body, first wait for 100 Continue as curl does when it
+    sends Expect: 100-continue (a final answer instead ends the request)."""
     s = socket.create_connection((HOST, port), timeout=timeout)
     s.sendall(raw)
     data = b""
+    if body is not None:
+        while b"\r\n\r\n" not in data:
+            chunk = s.recv(65536)
+            if not chunk:
+                break
+            data += chunk
+        if data.startswith(b"HTTP/1.1 100"):
+            data = data.partition(b"\r\n\r\n")[2]
+            s.sendall(body)
     while True:
         chunk = s.recv(65536)
         if not chunk:
@@ -62,10 +73,14 @@ def curl_mime(port, path, ua, key, fields, filename, data):
                  "Content-Type: application/octet-stream\r\n\r\n" % (boundary, filename)).encode()
         body += data + b"\r\n"
     body += ("--%s--\r\n" % boundary).encode()
+    # curl asks for 100-continue before a body over 1 MiB (libcurl 8)
+    expect = "Expect: 100-continue\r\n" if len(body) > (1 << 20) else ""
     head = ("POST %s HTTP/1.1\r\nHost: %s:%d\r\nUser-Agent: %s\r\nAccept: */*\r\n"
             "X-Api-Key: %s\r\nContent-Length: %d\r\n"
-            "Content-Type: multipart/form-data; boundary=%s\r\n\r\n"
-            % (path, HOST, port, ua, key, len(body), boundary)).encode()
+            "Content-Type: multipart/form-data; boundary=%s\r\n%s\r\n"
+            % (path, HOST, port, ua, key, len(body), boundary, expect)).encode()
+    if expect:
+        return request(port, head, body=body)
     return request(port, head + body)
 
 
