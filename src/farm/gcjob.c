@@ -102,8 +102,11 @@ comment(const char *l, size_t len, struct gcjob_info *g, bool *have_g, bool *hav
         take(g->model, sizeof(g->model), v, n, "");
     else if ((v = value_of(l, len, "nozzle_diameter", &n)) ||
              (v = value_of(l, len, "EXTRUDER_TRAIN.0.NOZZLE.DIAMETER", &n))) {
+        size_t k = 0; /* the first element; v is not NUL-terminated */
+        while (k < n && v[k] != ',' && v[k] != ';')
+            k++;
         if (g->nozzle_mm == 0)
-            g->nozzle_mm = num(v, strcspn(v, ",;") < n ? strcspn(v, ",;") : n);
+            g->nozzle_mm = num(v, k);
     } else if ((v = value_of(l, len, "filament_type", &n)) ||
                (v = value_of(l, len, "material", &n)))
         take(g->material, sizeof(g->material), v, n, ";,");
