@@ -206,7 +206,7 @@ prep_done(struct loop *l, void *ud, int rc)
                                     .mesh_angle_deg = t->angle_deg,
                                     .filament_g = t->out.filament_g,
                                     .support_g = t->out.support_g,
-                                    .support_saved_g = t->out.support_saved_g,
+                                    .saved_g = t->out.support_saved_g,
                                     .prepare_ms = t->prepare_ms,
                                     .slice_ms = t->out.slice_ms };
         memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));

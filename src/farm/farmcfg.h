@@ -33,25 +33,26 @@ struct farmcfg_key {
 
 /* One [printer NAME] section. */
 struct farmcfg_printer {
-    char name[64];          /* NAME: letters, digits, -_. */
-    int line;               /* line of the section header, for later messages */
-    char driver[16];        /* a kind of drivers/drv.c's registry, e.g. marlin (required) */
-    char port[256];         /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
-    int baud;               /* marlin serial speed (default 115200) */
-    int buffer_lines;       /* marlin: the firmware's BUFSIZE, lines in flight (default 4) */
-    int rx_buffer;          /* marlin: the firmware's RX ring, bytes in flight (default 128) */
-    char url[256];          /* network drivers: base URL */
-    char api_key[128];      /* network drivers: key or access code */
-    char profile[64];       /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */
-    char material[32];      /* loaded material (default "PLA") */
-    double nozzle_mm;       /* nozzle diameter (default 0.4) */
-    double bed_mm[3];       /* build volume x, y, z (default 220, 220, 250) */
-    double overhang_deg;    /* overhang threshold for this printer (default 45) */
-    bool enabled;           /* schedule jobs on it (default true) */
-    bool auto_eject;        /* clears its own bed: skip the bed-clear gate (default false) */
-    char group[64];         /* group name jobs may target; "" for none (default) */
-    char gcode_models[256]; /* uploaded G-code it runs: slicer printer models, comma-separated;
-                               "*" any, "" none (default) */
+    char name[64];       /* NAME: letters, digits, -_. */
+    int line;            /* line of the section header, for later messages */
+    char driver[16];     /* a kind of drivers/drv.c's registry, e.g. marlin (required) */
+    char port[256];      /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
+    int baud;            /* marlin serial speed (default 115200) */
+    int buffer_lines;    /* marlin: the firmware's BUFSIZE, lines in flight (default 4) */
+    int rx_buffer;       /* marlin: the firmware's RX ring, bytes in flight (default 128) */
+    char url[256];       /* network drivers: base URL */
+    char api_key[128];   /* network drivers: key or access code */
+    char profile[64];    /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */
+    char material[32];   /* loaded material (default "PLA") */
+    double nozzle_mm;    /* nozzle diameter (default 0.4) */
+    double bed_mm[3];    /* build volume x, y, z (default 220, 220, 250) */
+    double overhang_deg; /* overhang threshold for this printer (default 45) */
+    bool enabled;        /* schedule jobs on it (default true) */
+    bool auto_eject;     /* clears its own bed: skip the bed-clear gate (default false) */
+    char group[64];      /* group name jobs may target; "" for none (default) */
+    /* uploaded G-code it runs (gcjob.h): slicer printer models, comma-separated;
+       "*" any, "" none (default) */
+    char gcode_models[256];
 };
 
 struct farmcfg {

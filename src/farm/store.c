@@ -1004,7 +1004,7 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
         }
         j->filament_g = a->filament_g;
         j->support_g = a->support_g;
-        j->support_saved_g = a->support_saved_g;
+        j->support_saved_g = a->saved_g;
         j->prepare_ms = a->prepare_ms;
         j->slice_ms = a->slice_ms;
         j->reason[0] = '\0';

@@ -80,15 +80,15 @@ struct job_event_args {
     const char *mesh_sha;  /* PREPARED: stored optimized part, NULL or "" to keep the one
                               recorded (a re-slice that reused it) */
     double mesh_angle_deg; /* PREPARED: the angle mesh_sha was optimized for */
-    double filament_g;     /* PREPARED: the G-code's estimates (grams per copy) */
-    double support_g;
-    double support_saved_g;
-    int64_t prepare_ms; /* PREPARED: how long preparing took, and slicing in it */
-    int64_t slice_ms;
-    int64_t lines_acked; /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to;
-                            RESUME of an interrupted job: line to resume from (0: stored) */
-    double filament_mm;  /* PRINT_DONE/FAILED/CANCEL: filament used by this print */
-    const char *reason;  /* PREPARE_FAILED/PRINT_FAILED/CANCEL: why, for operators */
+    double filament_g;     /* PREPARED: the G-code's filament estimate, grams per copy */
+    double support_g;      /* PREPARED: of which support */
+    double saved_g;        /* PREPARED: support the optimization saved (prepare.h) */
+    int64_t prepare_ms;    /* PREPARED: how long preparing took */
+    int64_t slice_ms;      /* PREPARED: of which slicing */
+    int64_t lines_acked;   /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to;
+                              RESUME of an interrupted job: line to resume from (0: stored) */
+    double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */
+    const char *reason;    /* PREPARE_FAILED/PRINT_FAILED/CANCEL: why, for operators */
 };
 
 /* One row of print history. */
