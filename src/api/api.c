@@ -25,14 +25,16 @@
 #include "../base/buf.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "api_compat.h"
 #include "api_json.h"
 
 #define SSE_BATCH 64 /* events read from the store per stream refill */
 
 struct api {
-    struct api_config cfg; /* as given */
-    struct http *http;     /* the server */
-    unsigned tick;         /* api_tick() count: streams send progress when it moves */
+    struct api_config cfg;         /* as given */
+    struct api_compat_env slicers; /* the slicer-upload routes' view (api_compat.h) */
+    struct http *http;             /* the server */
+    unsigned tick;                 /* api_tick() count: streams send progress when it moves */
 };
 
 /* An upload in progress: the store's writer, until the route commits it. */
@@ -72,8 +74,9 @@ static bool
 part_ext_ok(const char *name)
 {
     const char *dot = strrchr(name, '.');
-    return dot && (strcasecmp(dot, ".stl") == 0 || strcasecmp(dot, ".obj") == 0 ||
-                   strcasecmp(dot, ".3mf") == 0);
+    return (dot && (strcasecmp(dot, ".stl") == 0 || strcasecmp(dot, ".obj") == 0 ||
+                    strcasecmp(dot, ".3mf") == 0)) ||
+           api_compat_is_gcode(name);
 }
 
 static void *
@@ -90,7 +93,8 @@ up_begin(void *ud, const char *filename, struct sf_err *err)
         return NULL;
     }
     if (!part_ext_ok(filename)) {
-        sf_err_set(err, SF_EINVAL, "file name '%s' does not end in .stl, .obj or .3mf", name);
+        sf_err_set(err, SF_EINVAL, "file name '%s' does not end in .stl, .obj, .3mf or .gcode",
+                   name);
         return NULL;
     }
     struct upload *u = mem_calloc(1, sizeof(*u));
@@ -134,6 +138,21 @@ up_discard(void *ctx)
 }
 
 static const struct http_upload_sink sink = { up_begin, up_write, up_finish, up_discard };
+
+static const char *
+up_path(void *ctx)
+{
+    return store_file_tmp_path(((struct upload *)ctx)->f);
+}
+
+static int
+up_commit(void *ctx, char sha[STORE_SHA_HEX], struct sf_err *err)
+{
+    struct upload *u = ctx;
+    int rc = store_file_commit(u->f, sha, err);
+    u->f = NULL; /* commit frees the writer either way */
+    return rc;
+}
 
 /* ---- helpers ---- */
 
@@ -192,6 +211,12 @@ changed(struct api *a)
         a->cfg.on_change(a->cfg.ud);
 }
 
+static void
+compat_changed(void *ud)
+{
+    changed(ud);
+}
+
 /* ---- jobs ---- */
 
 static void
@@ -233,6 +258,12 @@ jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
     if (api_opts_parse(opts ? opts : "", opts ? strlen(opts) : 0, &o, &err) ||
         job_opts_validate(&o, &err)) {
         http_error(resp, 400, "%s", err.msg);
+        return;
+    }
+    if (api_compat_is_gcode(o.name)) {
+        http_error(resp, 400,
+                   "'%s' is G-code: send it to POST /api/files/local, which prints it as is",
+                   o.name);
         return;
     }
     /* Options are good: only now does the file reach its content address
@@ -565,6 +596,8 @@ route(void *ud, const struct http_req *req, struct http_resp *resp)
     bool get = strcmp(req->method, "GET") == 0, post = strcmp(req->method, "POST") == 0;
     int64_t id;
     char name[64], action[16];
+    if (api_compat_route(&a->slicers, req, resp))
+        return; /* /metrics, OctoPrint's and Moonraker's upload routes */
     if (n < 2 || n > 4 || !seg_is(seg[0], len[0], "api"))
         goto not_found;
     if (seg_is(seg[1], len[1], "jobs")) {
@@ -655,6 +688,9 @@ static enum http_body
 body_kind(void *ud, const char *method, const char *path)
 {
     (void)ud;
+    enum http_body compat;
+    if (api_compat_body(method, path, &compat))
+        return compat;
     const char *seg[5];
     size_t len[5];
     size_t n = split(path, seg, len, 4);
@@ -679,6 +715,12 @@ api_new(const struct api_config *cfg, struct sf_err *err)
         return NULL;
     }
     a->cfg = *cfg;
+    a->slicers = (struct api_compat_env){ .store = cfg->store,
+                                          .farm = cfg->farm,
+                                          .upload_path = up_path,
+                                          .upload_commit = up_commit,
+                                          .changed = compat_changed,
+                                          .ud = a };
     struct http_config hc = { .host = cfg->host,
                               .port = cfg->port,
                               .keys = cfg->keys,

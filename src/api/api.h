@@ -17,6 +17,10 @@
  *   GET    /api/events                    Server-Sent Events: the event log (id: N,
  *                                         event: KIND; Last-Event-ID resumes) and
  *                                         every API_TICK_MS a "progress" snapshot
+ *   GET    /metrics, OctoPrint and Moonraker upload routes: api_compat.h
+ *
+ * G-code goes to POST /api/files/local (api_compat.h: printed as is);
+ * POST /api/jobs takes parts.
  *
  * Errors are {"error": "message"}: 400 bad input (a multipart upload
  * anywhere but POST /api/jobs, a body cut before its closing boundary, an

@@ -74,6 +74,7 @@ struct http {
     struct farmcfg_key *keys;                    /* copy of the API keys */
     int port;                                    /* bound port, -1 if none */
     struct stream *streams;                      /* live streams */
+    struct http_defer *defers;                   /* requests waiting for their answer */
     struct pending *pending_head, *pending_tail; /* connections without a request head yet */
     size_t n_pending;                            /* their count */
 };
@@ -100,7 +101,29 @@ struct conn {
     char key[FARMCFG_KEY_MAX + 1]; /* the API key it came with */
     size_t max;                    /* body limit in force when its head arrived */
     struct http *h;                /* owner */
+    char query[256];               /* the raw query string, cut at 255 bytes */
+    struct http_defer *defer;      /* its deferred answer, while the route works */
 };
+
+/* A route's answer to come (http.h); freed by http_defer_answer. */
+struct http_defer {
+    struct http *h;              /* owner, while the connection lives */
+    struct conn *c;              /* the request, NULL once the client is gone */
+    struct MHD_Connection *conn; /* its connection, suspended; NULL once gone */
+    bool ready;                  /* resp holds the answer; the connection was resumed */
+    struct http_resp resp;       /* the answer */
+    struct http_defer *next;     /* in h->defers */
+};
+
+static void
+defer_unlink(struct http *h, struct http_defer *d)
+{
+    for (struct http_defer **pp = &h->defers; *pp; pp = &(*pp)->next)
+        if (*pp == d) {
+            *pp = d->next;
+            return;
+        }
+}
 
 static int64_t
 now_ms(void)
@@ -210,6 +233,43 @@ send_json(struct MHD_Connection *conn, int status, json_t *j, bool close)
     if (close) /* MHD closes the connection after a response saying so */
         MHD_add_response_header(r, MHD_HTTP_HEADER_CONNECTION, "close");
     enum MHD_Result rc = MHD_queue_response(conn, (unsigned)status, r);
+    MHD_destroy_response(r);
+    return rc;
+}
+
+/* A JSON reply with a Location header (a 201's new resource). */
+static enum MHD_Result
+send_json_at(struct MHD_Connection *conn, int status, json_t *j, const char *location)
+{
+    char *s = json_dumps(j, JSON_COMPACT);
+    json_decref(j);
+    struct MHD_Response *r =
+        s ? MHD_create_response_from_buffer(strlen(s), s, MHD_RESPMEM_MUST_FREE) : NULL;
+    if (!r) {
+        free(s);
+        return MHD_NO;
+    }
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, "application/json");
+    MHD_add_response_header(r, MHD_HTTP_HEADER_LOCATION, location);
+    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)status, r);
+    MHD_destroy_response(r);
+    return rc;
+}
+
+/* A text reply (the metrics); the response takes resp->text. */
+static enum MHD_Result
+send_text(struct MHD_Connection *conn, struct http_resp *resp)
+{
+    json_decref(resp->json);
+    struct MHD_Response *r =
+        MHD_create_response_from_buffer(strlen(resp->text), resp->text, MHD_RESPMEM_MUST_FREE);
+    if (!r) {
+        free(resp->text);
+        return MHD_NO;
+    }
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE,
+                            resp->content_type ? resp->content_type : "text/plain; charset=utf-8");
+    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)resp->status, r);
     MHD_destroy_response(r);
     return rc;
 }
@@ -376,6 +436,18 @@ conn_free(struct http *h, struct conn *c)
 {
     if (!c)
         return;
+    if (c->defer) {
+        struct http_defer *d = c->defer;
+        defer_unlink(h, d);
+        if (d->ready) { /* answered, never sent: the server stopped first */
+            json_decref(d->resp.json);
+            free(d->resp.text);
+            free(d);
+        } else { /* the answer to come only frees it */
+            d->c = NULL;
+            d->conn = NULL;
+        }
+    }
     if (c->pp)
         MHD_destroy_post_processor(c->pp);
     if (c->upload)
@@ -539,6 +611,9 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     c->has_body = chunked || (cl && (!cl_ok || n > 0));
     c->expect = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_EXPECT) != NULL;
     const char *key = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "X-Api-Key");
+    const char *bearer = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "Authorization");
+    if (!key && bearer && strncasecmp(bearer, "Bearer ", 7) == 0)
+        key = bearer + 7;
     const struct farmcfg_key *k = key ? find_key(h, key) : NULL;
     if (!key) {
         fail(c, MHD_HTTP_UNAUTHORIZED, "missing X-Api-Key header");
@@ -550,6 +625,10 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     }
     snprintf(c->key, sizeof(c->key), "%s", k->key);
     c->read_only = k->read_only;
+    if (k->metrics_only && (strcmp(method, "GET") != 0 || strcmp(url, "/metrics") != 0)) {
+        fail(c, MHD_HTTP_FORBIDDEN, "metrics key: only GET /metrics is allowed");
+        return;
+    }
     if (k->read_only && strcmp(method, "GET") != 0 && strcmp(method, "HEAD") != 0) {
         fail(c, MHD_HTTP_FORBIDDEN, "read-only API key: %s is not allowed", method);
         return;
@@ -596,7 +675,25 @@ on_uri(void *cls, const char *uri, struct MHD_Connection *conn)
     for (size_t i = 0; i + 2 < n; i++)
         if (uri[i] == '%' && uri[i + 1] == '0' && uri[i + 2] == '0')
             c->nul_in_url = true;
+    if (q)
+        snprintf(c->query, sizeof(c->query), "%s", q + 1);
     return c;
+}
+
+/* Send what a route answered. */
+static enum MHD_Result
+respond(struct http *h, struct conn *c, struct MHD_Connection *conn, struct http_resp *resp)
+{
+    drop_upload(c); /* the route committed it, or it goes before the answer does */
+    if (resp->stream)
+        return send_stream(h, conn, c->key, resp);
+    if (resp->text)
+        return send_text(conn, resp);
+    if (!resp->json)
+        resp->json = json_object();
+    if (resp->location[0])
+        return send_json_at(conn, resp->status, resp->json, resp->location);
+    return send_json(conn, resp->status, resp->json, false);
 }
 
 static enum MHD_Result
@@ -639,6 +736,16 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
         }
         return MHD_YES;
     }
+    if (c->defer) { /* resumed: the deferred answer is in */
+        struct http_defer *d = c->defer;
+        if (!d->ready)
+            return MHD_YES;
+        defer_unlink(h, d);
+        c->defer = NULL;
+        struct http_resp resp = d->resp;
+        free(d);
+        return respond(h, c, conn, &resp);
+    }
     if (c->pp) {
         /* Flushes the last part; MHD_NO unless the body ended in the post
            processor's final state: a body cut before its closing boundary
@@ -667,6 +774,8 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
                             .upload_name = c->upload_seen ? c->upload_name : NULL,
                             .upload = c->upload };
     req.last_event_id = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "Last-Event-ID");
+    req.host = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_HOST);
+    req.query = c->query[0] ? c->query : NULL;
     req.n_fields = c->n_fields;
     for (size_t i = 0; i < c->n_fields; i++) {
         req.field_name[i] = c->field_name[i];
@@ -674,12 +783,55 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     }
     struct http_resp resp = { .status = MHD_HTTP_OK };
     h->cfg.route(h->cfg.ud, &req, &resp);
-    drop_upload(c); /* the route committed it, or it goes before the answer does */
-    if (resp.stream)
-        return send_stream(h, conn, c->key, &resp);
-    if (!resp.json)
-        resp.json = json_object();
-    return send_json(conn, resp.status, resp.json, false);
+    if (resp.defer) {
+        /* The answer comes later (http_defer_answer): keep the upload and
+           wait, suspended, so other clients and printers go on. */
+        struct http_defer *d = resp.defer;
+        json_decref(resp.json);
+        free(resp.text);
+        d->h = h;
+        d->c = c;
+        d->conn = conn;
+        d->next = h->defers;
+        h->defers = d;
+        c->defer = d;
+        MHD_suspend_connection(conn);
+        return MHD_YES;
+    }
+    return respond(h, c, conn, &resp);
+}
+
+struct http_defer *
+http_defer(struct http_resp *resp)
+{
+    resp->defer = mem_calloc(1, sizeof(*resp->defer));
+    return resp->defer;
+}
+
+bool
+http_defer_alive(const struct http_defer *d)
+{
+    return d->conn != NULL;
+}
+
+void *
+http_defer_upload(struct http_defer *d)
+{
+    return d->c ? d->c->upload : NULL;
+}
+
+void
+http_defer_answer(struct http_defer *d, struct http_resp *resp)
+{
+    if (!d->conn) {
+        json_decref(resp->json);
+        free(resp->text);
+        free(d);
+        return;
+    }
+    d->resp = *resp;
+    d->ready = true;
+    MHD_resume_connection(d->conn); /* MHD calls on_request again: deferred_reply */
 }
 
 static void
@@ -789,8 +941,12 @@ http_free(struct http *h)
 {
     if (!h)
         return;
-    /* MHD requires every suspended connection resumed before stopping. */
+    /* MHD requires every suspended connection resumed before stopping;
+       a deferred answer still to come finds its client gone (conn_free). */
     http_wake_streams(h);
+    for (struct http_defer *d = h->defers; d; d = d->next)
+        if (!d->ready)
+            MHD_resume_connection(d->conn);
     MHD_stop_daemon(h->d);
     free(h->keys);
     free(h);

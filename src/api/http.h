@@ -3,8 +3,10 @@
  * epoll mode, so it runs on the daemon's loop with no thread of its own.
  *
  * It owns what every route needs and no route should repeat: API keys on
- * every request (X-Api-Key; missing or unknown -> 401, read-only key on
- * anything but GET/HEAD or with a request body -> 403), which body a route
+ * every request (X-Api-Key, or "Authorization: Bearer KEY" as Prometheus
+ * and OctoPrint clients send it; missing or unknown -> 401, read-only key
+ * on anything but GET/HEAD or with a request body -> 403, a metrics key on
+ * anything but GET /metrics -> 403), which body a route
  * takes (a multipart upload only where body_kind says so), all of it
  * decided from the headers before a single body byte is read; capped
  * bodies (JSON body over body_max or upload over upload_max -> 413,
@@ -63,6 +65,8 @@ struct http_req {
     const char *body;                         /* non-multipart body, NUL-terminated ("" if none) */
     size_t body_len;                          /* its length */
     const char *last_event_id;                /* Last-Event-ID header or NULL */
+    const char *host;                         /* Host header or NULL */
+    const char *query;                        /* raw query string after '?', or NULL */
     size_t n_fields;                          /* multipart fields other than the file */
     const char *field_name[HTTP_FIELDS_MAX];  /* their names */
     const char *field_value[HTTP_FIELDS_MAX]; /* their values, NUL-terminated */
@@ -84,6 +88,10 @@ struct http_resp {
     http_stream_fn stream;         /* or a streamed text/event-stream body */
     void *stream_ud;               /* its argument */
     void (*stream_free)(void *ud); /* called when the stream ends */
+    char *text;                    /* or a text body (the server frees it), instead of json */
+    const char *content_type;      /* text's type; NULL: text/plain; charset=utf-8 */
+    char location[512];            /* "" or a Location header (a 201's new resource) */
+    struct http_defer *defer;      /* set by http_defer(): the answer comes later */
 };
 
 typedef void (*http_route_fn)(void *ud, const struct http_req *req, struct http_resp *resp);
@@ -159,6 +167,23 @@ void http_wake_streams(struct http *h);
  * between characters.  Returns out.
  */
 char *http_text_clean(char *out, size_t cap, const char *s);
+
+/*
+ * A route that must wait for a worker (checking an uploaded file off the
+ * loop thread) defers its answer: it calls http_defer(resp) and returns;
+ * the connection waits, suspended, keeping its upload; later, on this
+ * thread, http_defer_answer() gives the answer (a struct http_resp filled
+ * as a route fills it) and frees the handle.  If the client leaves or the
+ * server is freed first, the handle stays until then and the answer is
+ * dropped (http_defer_alive() says so; the upload is gone).  NULL when out
+ * of memory: the route answers now.
+ */
+struct http_defer;
+struct http_defer *http_defer(struct http_resp *resp);
+bool http_defer_alive(const struct http_defer *d);
+/* The request's upload (the sink's context), NULL once the client is gone. */
+void *http_defer_upload(struct http_defer *d);
+void http_defer_answer(struct http_defer *d, struct http_resp *resp);
 
 /* Helpers for routes: status with {"error": msg} body (msg made valid UTF-8). */
 void http_error(struct http_resp *resp, int status, const char *fmt, ...)

@@ -19,10 +19,12 @@
 
 #include <stdio.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "gcjob.h"
 #include "sched.h"
 
 struct farm {
@@ -64,7 +66,8 @@ struct prep {
     int64_t gcode_size;
     char mesh_sha[STORE_SHA_HEX]; /* the optimized part, adopted by the worker; "" if none */
     int64_t mesh_size;
-    struct sf_err err; /* why it failed */
+    int64_t prepare_ms; /* the prepare function's wall time */
+    struct sf_err err;  /* why it failed */
 };
 
 static void run(struct loop *l, void *ud);
@@ -124,11 +127,21 @@ job_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_
 
 /* ---- prepare ---- */
 
+static int64_t
+mono_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
+
 static int
 prep_work(void *ud, const atomic_bool *cancel)
 {
     struct prep *t = ud;
+    int64_t t0 = mono_ms();
     int rc = t->f->hooks.prepare(&t->req, &t->out, cancel, &t->err);
+    t->prepare_ms = mono_ms() - t0;
     /* Count and check the G-code here, off the loop: a bad line fails the
        job now, not half-way through a print, and start_job need not read
        the file on the loop thread (a 150 MB job stalled every printer's
@@ -190,7 +203,12 @@ prep_done(struct loop *l, void *ud, int rc)
                                     .gcode_lines = (int64_t)t->scan.lines_total,
                                     .prep_key = t->key,
                                     .mesh_sha = t->mesh_sha,
-                                    .mesh_angle_deg = t->angle_deg };
+                                    .mesh_angle_deg = t->angle_deg,
+                                    .filament_g = t->out.filament_g,
+                                    .support_g = t->out.support_g,
+                                    .saved_g = t->out.support_saved_g,
+                                    .prepare_ms = t->prepare_ms,
+                                    .slice_ms = t->out.slice_ms };
         memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
         /* A re-slice whose job started meanwhile on a printer of its old key
            (or was cancelled) is refused here and dropped: nothing changed. */
@@ -233,7 +251,8 @@ printer_view(const struct printer *p, struct sched_printer *out)
                                    .nozzle_mm = c->nozzle_mm,
                                    .group = c->group,
                                    .profile = c->profile,
-                                   .overhang_deg = c->overhang_deg };
+                                   .overhang_deg = c->overhang_deg,
+                                   .gcode_models = c->gcode_models };
     memcpy(out->bed_mm, c->bed_mm, sizeof(out->bed_mm));
 }
 
@@ -667,6 +686,134 @@ farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
         free(r);
         printer_resume_go(p, id, path, (uint64_t)line, &scan, SF_OK, ""); /* reads here */
     }
+    farm_kick(f);
+    return SF_OK;
+}
+
+/* An uploaded G-code file being checked on the io thread. */
+struct gcheck {
+    struct farm *f;
+    char path[1200];
+    struct job_opts o;
+    struct farm_gcode g;
+    struct sf_err err;
+    farm_gcode_fn done;
+    void *ud;
+};
+
+/* The io thread: every line, and the slicer's comments (pure reads). */
+static int
+gcheck_work(void *ud, const atomic_bool *cancel)
+{
+    (void)cancel;
+    struct gcheck *t = ud;
+    struct drv_job_scan scan;
+    int rc;
+    if ((rc = drv_job_scan(t->path, &scan, &t->err)) ||
+        (rc = gcjob_read(t->path, &t->g.info, &t->err))) {
+        /* the message names the temporary path: name the upload instead */
+        const char *at = strstr(t->err.msg, t->path);
+        if (at) {
+            char rest[SF_ERR_MSG_MAX];
+            size_t n = strlen(t->path);
+            snprintf(rest, sizeof(rest), "%s", at + n + (at[n] == '\''));
+            sf_err_set(&t->err, rc, "G-code '%s'%s", t->o.name, rest);
+        }
+        return rc;
+    }
+    if (scan.lines_total == 0)
+        return sf_err_set(&t->err, SF_EINVAL, "G-code '%s' holds no command", t->o.name);
+    t->g.lines = (int64_t)scan.lines_total;
+    gcjob_key(&t->g.info, t->g.key, sizeof(t->g.key));
+    return SF_OK;
+}
+
+/* The loop thread: could some printer of the farm run it? */
+static void
+gcheck_done(struct loop *l, void *ud, int rc)
+{
+    (void)l;
+    struct gcheck *t = ud;
+    struct farm *f = t->f;
+    if (rc == SF_ECANCELED) {
+        sf_err_set(&t->err, rc, "the farm is stopping");
+    } else if (rc == SF_OK) {
+        /* Refuse now what no printer of the farm could ever run: a slicer
+           user hears it at once, not from a job that waits forever.
+           Material is not asked: an operator loads another spool, not
+           another printer. */
+        struct sched_job vj = { .state = JOB_READY,
+                                .printer = t->o.printer,
+                                .group = t->o.group,
+                                .material = "",
+                                .key = t->g.key };
+        char why[SCHED_REASON_MAX] = "", one[160];
+        bool any = false;
+        for (size_t i = 0; i < f->n_printers && !any; i++) {
+            struct sched_printer sp;
+            printer_view(f->printers[i], &sp);
+            any = sched_compatible(&vj, &sp, one, sizeof(one));
+            size_t len = strlen(why);
+            if (!any)
+                snprintf(why + len, sizeof(why) - len, "%s%s: %s", i ? "; " : "", sp.name, one);
+        }
+        const struct gcjob_info *g = &t->g.info;
+        if (!any)
+            rc = sf_err_set(&t->err, SF_EINVAL,
+                            "G-code '%s' (%s%s%s, nozzle %g mm): no printer could run it: %s",
+                            t->o.name,
+                            g->model[0] ? "for printer model '" : "names no printer model",
+                            g->model, g->model[0] ? "'" : "", g->nozzle_mm,
+                            f->n_printers ? why : "no printers configured");
+    }
+    t->done(t->ud, rc, rc ? NULL : &t->g, t->err.msg);
+    free(t);
+}
+
+int
+farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, farm_gcode_fn done,
+                 void *ud, struct sf_err *err)
+{
+    struct gcheck *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
+    if (snprintf(t->path, sizeof(t->path), "%s", path) >= (int)sizeof(t->path)) {
+        free(t);
+        return sf_err_set(err, SF_EINVAL, "farm: path too long: '%.80s...'", path);
+    }
+    t->f = f;
+    t->o = *o;
+    t->done = done;
+    t->ud = ud;
+    /* on the io thread, beside resume reads: never queued behind slicing */
+    if (!pool_submit(f->io, gcheck_work, gcheck_done, t, err)) {
+        free(t);
+        return err ? err->code : SF_ENOMEM;
+    }
+    return SF_OK;
+}
+
+int
+farm_gcode_add(struct farm *f, const struct job_opts *o, const char *sha,
+               const struct farm_gcode *g, int64_t *id, struct sf_err *err)
+{
+    struct job_opts jo = *o;
+    if (!jo.material[0] && g->info.material[0])
+        snprintf(jo.material, sizeof(jo.material), "%s", g->info.material);
+    struct job_event_args a = { .prep_key = g->key,
+                                .nozzle_mm = g->info.nozzle_mm,
+                                .gcode_lines = g->lines,
+                                .filament_g = g->info.filament_g,
+                                .support_g = g->info.support_g };
+    int64_t new_id;
+    int rc = store_job_add_gcode(f->s, &jo, sha, &a, &new_id, err);
+    if (rc)
+        return rc;
+    log_info("farm", "job %lld: G-code '%s' queued as is (%lld lines, %s)", (long long)new_id,
+             o->name, (long long)g->lines, g->key);
+    if (id)
+        *id = new_id;
+    notify(f);
     farm_kick(f);
     return SF_OK;
 }

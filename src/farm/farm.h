@@ -26,9 +26,11 @@
 #include "../base/loop.h"
 #include "../base/pool.h"
 #include "farmcfg.h"
+#include "gcjob.h"
 #include "job.h"
 #include "prepare.h"
 #include "printer.h"
+#include "sched.h"
 #include "store.h"
 
 /* Persist lines acknowledged this often: what a resume after a crash may
@@ -82,5 +84,39 @@ int farm_printer_action(struct farm *f, const char *name, enum printer_action ac
  * which and the range).
  */
 int farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err);
+
+/* What farm_gcode_check learnt of an uploaded G-code file. */
+struct farm_gcode {
+    struct gcjob_info info;  /* what its slicer wrote */
+    char key[SCHED_KEY_MAX]; /* gcjob_key */
+    int64_t lines;           /* command lines (drv_job_scan) */
+};
+
+/* The end of a check: rc SF_OK with g, or an error with msg (g NULL). */
+typedef void (*farm_gcode_fn)(void *ud, int rc, const struct farm_gcode *g, const char *msg);
+
+/*
+ * Check uploaded G-code at path (a temporary file, before it is stored)
+ * for the job o describes, off the loop thread (the farm's io thread: a
+ * 50 MB file is ~1 s of reading, which must not stall the printers'
+ * streams): every line (drv_job_scan), what its slicer wrote
+ * (gcjob_read); then, on the loop thread, that some configured printer
+ * could run it (its target printer or group, gcode_models, nozzle; not
+ * its material, which an operator may load).  done(ud, ...) runs once on
+ * the loop thread, also when the farm is freed first (SF_ECANCELED).
+ * Errors to done: SF_EINVAL naming o->name (a bad line, a foreign flavor,
+ * no command at all, no printer: each printer and why), SF_EIO.  Returns
+ * SF_ENOMEM (done is then never called).
+ */
+int farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, farm_gcode_fn done,
+                     void *ud, struct sf_err *err);
+
+/*
+ * Queue stored file sha, checked by farm_gcode_check into g, as a job
+ * printed as is (store_job_add_gcode): ready at once, its material the
+ * file's unless o names one.  *id (may be NULL) the new job.
+ */
+int farm_gcode_add(struct farm *f, const struct job_opts *o, const char *sha,
+                   const struct farm_gcode *g, int64_t *id, struct sf_err *err);
 
 #endif

@@ -53,6 +53,7 @@ static const struct option options[] = {
     { "profiles_dir", false, K_STR, F(profiles_dir), 0, 0 },
     { "api_keys", false, K_KEYS, 0, 0, 0, 0 },
     { "api_keys_readonly", false, K_KEYS, 1, 0, 0, 0 },
+    { "metrics_keys", false, K_KEYS, 2, 0, 0, 0 },
     { "upload_max_mb", false, K_MIB, 0, 0, 1, 4096 },
     { "driver", true, K_IDENT, P(driver), 0, 0 },
     { "port", true, K_STR, P(port), 0, 0 },
@@ -78,6 +79,7 @@ static const struct option options[] = {
     { "enabled", true, K_BOOL, P(enabled), 0, 0 },
     { "auto_eject", true, K_BOOL, P(auto_eject), 0, 0 },
     { "group", true, K_IDENT, P(group), 0, 0 },
+    { "gcode_models", true, K_STR, P(gcode_models), 0, 0 },
 };
 #define N_OPTIONS (sizeof(options) / sizeof(options[0]))
 
@@ -261,7 +263,7 @@ parse_double(const char *v, double *out)
 }
 
 static int
-parse_keys(struct parse *ps, const char *opt, const char *sec, const char *v, bool ro)
+parse_keys(struct parse *ps, const char *opt, const char *sec, const char *v, size_t kind)
 {
     struct farmcfg *c = ps->cfg;
     const char *p = v;
@@ -293,7 +295,8 @@ parse_keys(struct parse *ps, const char *opt, const char *sec, const char *v, bo
         if (!mem_grow((void **)&c->keys, &cap, c->n_keys + 1, sizeof(*c->keys)))
             return fail(ps, "out of memory");
         snprintf(c->keys[c->n_keys].key, sizeof(c->keys[0].key), "%s", key);
-        c->keys[c->n_keys].read_only = ro;
+        c->keys[c->n_keys].read_only = kind != 0;
+        c->keys[c->n_keys].metrics_only = kind == 2;
         c->n_keys++;
         p += n;
     }
@@ -409,7 +412,7 @@ handler(void *user, const char *section, const char *name, const char *value)
     case K_LISTEN:
         return parse_listen(ps, section, value);
     case K_KEYS:
-        return parse_keys(ps, name, section, value, o->off == 1);
+        return parse_keys(ps, name, section, value, o->off);
     }
     return fail(ps, "option '%s': internal error", name);
 }

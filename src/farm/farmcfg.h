@@ -28,6 +28,7 @@
 struct farmcfg_key {
     char key[FARMCFG_KEY_MAX + 1]; /* [A-Za-z0-9_-], FARMCFG_KEY_MIN.. bytes */
     bool read_only;                /* may only GET */
+    bool metrics_only;             /* may only GET /metrics (implies read_only) */
 };
 
 /* One [printer NAME] section. */
@@ -58,6 +59,9 @@ struct farmcfg_printer {
     bool enabled;        /* schedule jobs on it (default true) */
     bool auto_eject;     /* clears its own bed: skip the bed-clear gate (default false) */
     char group[64];      /* group name jobs may target; "" for none (default) */
+    /* uploaded G-code it runs (gcjob.h): slicer printer models, comma-separated;
+       "*" any, "" none (default) */
+    char gcode_models[256];
 };
 
 struct farmcfg {

@@ -24,6 +24,7 @@
 #include <ctype.h>
 #include <stdio.h>
 #include <string.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../../slicer/profile.h"
@@ -41,6 +42,14 @@ static int
 cancelled(const struct prepare_req *req, struct sf_err *err)
 {
     return sf_err_set(err, SF_ECANCELED, "job %lld: prepare cancelled", (long long)req->job_id);
+}
+
+static int64_t
+mono_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
 }
 
 static int
@@ -161,6 +170,7 @@ prepare_slice_better(const struct mesh *start, const struct mesh *shaped,
     ch->support_g_shaped = rs.support_g;
     ch->support_g_start = r0.support_g;
     ch->took_shaped = rs.support_g < r0.support_g;
+    ch->filament_g = ch->took_shaped ? rs.filament_g : r0.filament_g;
     if (ch->took_shaped) {
         unlink(other);
         return SF_OK;
@@ -181,7 +191,7 @@ prepare_slice_better(const struct mesh *start, const struct mesh *shaped,
  */
 static int
 surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_profile *prof,
-             const atomic_bool *cancel, struct sf_err *err)
+             const atomic_bool *cancel, double *saved_g, struct sf_err *err)
 {
     struct surfopt_params sp;
     surfopt_params_default(&sp);
@@ -200,6 +210,8 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     if (rc)
         return rc;
     const struct surfopt_result *sr = &dr.best;
+    if (!dr.kept_input && dr.model_input_g > sr->model_after_g)
+        *saved_g = dr.model_input_g - sr->model_after_g;
     if (dr.kept_input)
         log_info("prepare",
                  "job %lld: surface (Jayakody 2025) in the direction search: none of %d "
@@ -228,6 +240,7 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
         return cancelled(req, err);
     struct buf data;
     struct mesh m, start; /* start: a slim job's part before slimming */
+    double saved_g = 0;   /* support the optimization saved (prepare_out) */
     buf_init(&data, SF_MESH_FILE_MAX);
     mesh_init(&m);
     mesh_init(&start);
@@ -257,21 +270,34 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
         if ((rc = orient_find(&m, &op, &res, err)))
             goto release;
         orient_apply(&m, res.best.up, prof.bed_x_mm / 2, prof.bed_y_mm / 2);
+        /* the support model ranks only finalists: both grams are known only
+           when the input direction was one */
+        if (res.input.support_g > 0 && res.best.support_g > 0 &&
+            res.input.support_g > res.best.support_g)
+            saved_g = res.input.support_g - res.best.support_g;
     }
     bool slimmed = false;
     if (slim && ((rc = mesh_copy(&start, &m, err)) ||
                  (rc = slim_part(&m, req, &prof, cancel, &slimmed, err))))
         goto release;
-    if (strcmp(method, "surface") == 0 && (rc = surface_part(&m, req, &prof, cancel, err)))
+    if (strcmp(method, "surface") == 0 &&
+        (rc = surface_part(&m, req, &prof, cancel, &saved_g, err)))
         goto release;
     if (atomic_load(cancel)) {
         rc = cancelled(req, err);
         goto release;
     }
     const struct mesh *printed = &m;
+    struct slice_result sres = { 0 };
+    int64_t t0 = mono_ms();
     if (slimmed) {
         struct prepare_choice ch;
         rc = prepare_slice_better(&start, &m, &prof, req->out_path, cancel, &ch, err);
+        if (rc == SF_OK) {
+            sres.filament_g = ch.filament_g;
+            sres.support_g = ch.took_shaped ? ch.support_g_shaped : ch.support_g_start;
+            saved_g += ch.support_g_start - sres.support_g; /* sliced both: the slicer's grams */
+        }
         if (rc == SF_OK && !ch.took_shaped) {
             printed = &start;
             log_info("prepare",
@@ -280,8 +306,9 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
                      (long long)req->job_id, ch.support_g_shaped, ch.support_g_start);
         }
     } else {
-        rc = slice_mesh(&m, &prof, req->out_path, NULL, on_slice_progress, (void *)cancel, err);
+        rc = slice_mesh(&m, &prof, req->out_path, &sres, on_slice_progress, (void *)cancel, err);
     }
+    out->slice_ms = mono_ms() - t0;
     struct vec3 lo, hi;
     mesh_bbox(printed, &lo, &hi);
     if (rc == SF_OK && req->mesh_out[0] && !reuse && strcmp(method, "none") != 0) {
@@ -294,6 +321,9 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
         out->size_mm[1] = hi.y - lo.y;
         out->size_mm[2] = hi.z - lo.z;
         out->nozzle_mm = prof.nozzle_mm;
+        out->filament_g = sres.filament_g;
+        out->support_g = sres.support_g;
+        out->support_saved_g = saved_g;
     }
 release:
     slice_profile_release(&prof);

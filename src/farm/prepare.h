@@ -45,6 +45,13 @@ struct prepare_out {
     double size_mm[3]; /* bounding box of the part as it will print */
     double nozzle_mm;  /* nozzle the G-code was sliced for */
     bool mesh_saved;   /* the part as it prints was written to req->mesh_out */
+    double filament_g; /* the slicer's estimates for the G-code written (grams) */
+    double support_g;
+    double support_saved_g; /* support the optimization saved, grams: the slicer's own
+                               figures where it sliced both shapes (slim), else the
+                               support model's (orient: input vs chosen direction;
+                               surface: before vs after); 0 for method none */
+    int64_t slice_ms;       /* slicing's wall time */
 };
 
 typedef int (*prepare_fn)(const struct prepare_req *req, struct prepare_out *out,
@@ -68,6 +75,7 @@ struct prepare_choice {
     bool took_shaped;        /* the reshaped part needs less support: its G-code was kept */
     double support_g_shaped; /* support grams of each, as this slicer prints them */
     double support_g_start;
+    double filament_g; /* all filament of the G-code kept */
 };
 
 /*

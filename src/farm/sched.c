@@ -20,6 +20,7 @@
 #include <string.h>
 
 #include "../base/mem.h"
+#include "gcjob.h"
 
 static bool
 empty(const char *s)
@@ -69,6 +70,9 @@ sched_compatible(const struct sched_job *j, const struct sched_printer *p, char 
             empty(p->material) ? "none" : p->material);
         return false;
     }
+    if (gcjob_key_is(j->key) &&
+        !gcjob_runs_on(j->key, p->gcode_models, p->nozzle_mm, why, why ? why_cap : 0))
+        return false;
     if (!sched_fits_bed(j->size_mm, p->bed_mm)) {
         say(why, why_cap, "part %gx%gx%g mm does not fit bed %gx%gx%g mm", j->size_mm[0],
             j->size_mm[1], j->size_mm[2], p->bed_mm[0], p->bed_mm[1], p->bed_mm[2]);
@@ -91,6 +95,8 @@ sched_runs_on(const struct sched_job *j, const struct sched_printer *p)
 {
     if (empty(j->key))
         return false;
+    if (gcjob_key_is(j->key)) /* printed as is: sched_compatible checked its printer */
+        return true;
     char key[SCHED_KEY_MAX];
     sched_key(p, j->overhang_deg, key);
     return strcmp(key, j->key) == 0;
@@ -176,8 +182,8 @@ sched_plan(const struct sched_job *jobs, size_t n_jobs, const struct sched_print
     for (int pass = 0; pass < 2; pass++)
         for (size_t k = 0; k < n_ready; k++) {
             const struct sched_job *j = &jobs[order[k]];
-            if (placed[order[k]])
-                continue;
+            if (placed[order[k]] || (pass == 1 && gcjob_key_is(j->key)))
+                continue; /* uploaded G-code is never prepared again */
             size_t best = n_printers;
             bool best_avoided = false;
             for (size_t p = 0; p < n_printers; p++) {

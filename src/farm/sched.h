@@ -13,7 +13,9 @@
  *  - a ready job's G-code starts only on a printer with the key it was
  *    prepared for (sched_key: profile, material, nozzle, bed, overhang
  *    angle), so a part centred for one bed, or one machine's start G-code,
- *    never runs on another;
+ *    never runs on another; uploaded G-code (a gcjob.h key) only on a
+ *    printer whose gcode_models and nozzle take it, and it is never
+ *    prepared again;
  *  - a ready job left waiting while an idle printer of another key could
  *    take it is assigned to that printer with `reslice` set: the caller
  *    prepares it again for that printer (the printer counts as taken);
@@ -49,6 +51,7 @@ struct sched_printer {
     const char *group;        /* group name, "" for none */
     const char *profile;      /* slicing profile name */
     double overhang_deg;      /* the printer's overhang angle */
+    const char *gcode_models; /* uploaded G-code it runs (gcjob.h); NULL or "": none */
 };
 
 /* A job as the scheduler sees it. */
@@ -59,7 +62,8 @@ struct sched_job {
     const char *material; /* "" = any */
     const char *printer;  /* target printer, "" = any */
     const char *group;    /* target group, "" = any */
-    const char *key;      /* sched_key it was prepared for; "" or NULL = not prepared */
+    const char *key;      /* sched_key it was prepared for, or an uploaded G-code's
+                             gcjob_key; "" or NULL = not prepared */
     double size_mm[3];    /* part bounding box as it will print; 0s = not known yet */
     const char *avoid;    /* printer that failed it last, "" or NULL for none */
     double overhang_deg;  /* the job's overhang angle; 0 = the printer's */

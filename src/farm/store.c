@@ -158,6 +158,17 @@ static const char *const migrations[] = {
     "ALTER TABLE jobs ADD COLUMN mesh_angle_deg REAL NOT NULL DEFAULT 0;"
     /* and whether a printer's bed holds a part, which no restart forgets */
     "ALTER TABLE printers ADD COLUMN bed_full INTEGER NOT NULL DEFAULT 0;",
+    /* 4: the estimates of the G-code (filament, support, and the support
+       the optimization saved, grams), how long preparing and slicing took,
+       when the job last became ready, and each print's wait for a printer
+       since then: what /metrics reports.  0 for jobs and prints before. */
+    "ALTER TABLE jobs ADD COLUMN filament_g REAL NOT NULL DEFAULT 0;"
+    "ALTER TABLE jobs ADD COLUMN support_g REAL NOT NULL DEFAULT 0;"
+    "ALTER TABLE jobs ADD COLUMN support_saved_g REAL NOT NULL DEFAULT 0;"
+    "ALTER TABLE jobs ADD COLUMN prepare_ms INTEGER NOT NULL DEFAULT 0;"
+    "ALTER TABLE jobs ADD COLUMN slice_ms INTEGER NOT NULL DEFAULT 0;"
+    "ALTER TABLE jobs ADD COLUMN ready_ms INTEGER NOT NULL DEFAULT 0;"
+    "ALTER TABLE prints ADD COLUMN wait_ms INTEGER NOT NULL DEFAULT 0;",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 
@@ -165,7 +176,8 @@ static const char JOB_COLS[] =
     "id, name, file_sha, coalesce(gcode_sha, ''), state, method, deviation_mm, overhang_deg,"
     " copies, copies_done, failures, max_retries, material, target_printer, target_group,"
     " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"
-    " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg";
+    " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg, filament_g, support_g,"
+    " support_saved_g, prepare_ms, slice_ms, ready_ms";
 
 int
 store_schema_version(void)
@@ -728,12 +740,24 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     copy_text(j->prep_key, sizeof(j->prep_key), st, 26);
     copy_text(j->mesh_sha, sizeof(j->mesh_sha), st, 27);
     j->mesh_angle_deg = sqlite3_column_double(st, 28);
+    j->filament_g = sqlite3_column_double(st, 29);
+    j->support_g = sqlite3_column_double(st, 30);
+    j->support_saved_g = sqlite3_column_double(st, 31);
+    j->prepare_ms = sqlite3_column_int64(st, 32);
+    j->slice_ms = sqlite3_column_int64(st, 33);
+    j->ready_ms = sqlite3_column_int64(st, 34);
 }
 
 static void
 read_job_row(sqlite3_stmt *st, void *row)
 {
     read_job(st, row);
+}
+
+const char *
+store_file_tmp_path(const struct store_file *f)
+{
+    return f->tmp;
 }
 
 int
@@ -781,6 +805,94 @@ store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, i
 fail:
     rollback(s);
     return rc;
+}
+
+int
+store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
+                    const struct job_event_args *g, int64_t *id, struct sf_err *err)
+{
+    struct job_opts v = *o;
+    snprintf(v.method, sizeof(v.method), "none"); /* validate the rest as any job's */
+    int rc = job_opts_validate(&v, err);
+    if (rc)
+        return rc;
+    if (!sha_valid(sha) || !file_known(s, sha))
+        return sf_err_set(err, SF_ENOTFOUND, "store: G-code file '%.80s' is not stored", sha);
+    if (!g->prep_key || !g->prep_key[0])
+        return sf_err_set(err, SF_EINVAL, "store: G-code job '%s' has no key", o->name);
+    if ((rc = begin(s, err)))
+        return rc;
+    sqlite3_stmt *st;
+    if ((rc = prepare(s, &st,
+                      "INSERT INTO jobs(name, file_sha, gcode_sha, state, method, deviation_mm,"
+                      " overhang_deg, copies, max_retries, material, target_printer, target_group,"
+                      " priority, created_ms, updated_ms, nozzle_mm, gcode_lines, prep_key,"
+                      " filament_g, support_g, ready_ms)"
+                      " VALUES(?,?,?,'ready','gcode',0,0,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                      err)))
+        goto fail;
+    int64_t t = now_ms();
+    sqlite3_bind_text(st, 1, o->name, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 2, sha, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 3, sha, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_int(st, 4, o->copies);
+    sqlite3_bind_int(st, 5, o->max_retries);
+    sqlite3_bind_text(st, 6, o->material, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 7, o->printer, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 8, o->group, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_int(st, 9, o->priority);
+    sqlite3_bind_int64(st, 10, t);
+    sqlite3_bind_int64(st, 11, t);
+    sqlite3_bind_double(st, 12, g->nozzle_mm);
+    sqlite3_bind_int64(st, 13, g->gcode_lines > 0 ? g->gcode_lines : 0);
+    sqlite3_bind_text(st, 14, g->prep_key, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_double(st, 15, g->filament_g);
+    sqlite3_bind_double(st, 16, g->support_g);
+    sqlite3_bind_int64(st, 17, t);
+    if ((rc = step_done(s, st, err, "add G-code job")))
+        goto fail;
+    int64_t new_id = sqlite3_last_insert_rowid(s->db);
+    char detail[192];
+    snprintf(detail, sizeof(detail), "ready '%s' x%d (G-code as uploaded, for %s)", o->name,
+             o->copies, g->prep_key);
+    if ((rc = log_event(s, new_id, NULL, "job-add", detail, err)) || (rc = commit(s, err)))
+        goto fail;
+    if (id)
+        *id = new_id;
+    return SF_OK;
+fail:
+    rollback(s);
+    return rc;
+}
+
+static void
+read_print_stat(sqlite3_stmt *st, void *row)
+{
+    struct print_stat *p = row;
+    memset(p, 0, sizeof(*p));
+    copy_text(p->printer, sizeof(p->printer), st, 0);
+    copy_text(p->outcome, sizeof(p->outcome), st, 1);
+    p->started_ms = sqlite3_column_int64(st, 2);
+    p->ended_ms = sqlite3_column_int64(st, 3);
+    p->wait_ms = sqlite3_column_int64(st, 4);
+    p->filament_g = sqlite3_column_double(st, 5);
+    p->support_saved_g = sqlite3_column_double(st, 6);
+}
+
+int
+store_print_stats(struct store *s, struct print_stat **rows, size_t *n, struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    *rows = NULL;
+    *n = 0;
+    int rc = prepare(s, &st,
+                     "SELECT p.printer, p.outcome, p.started_ms, p.ended_ms, p.wait_ms,"
+                     " j.filament_g, j.support_saved_g FROM prints p JOIN jobs j ON j.id = p.job_id"
+                     " ORDER BY p.id",
+                     err);
+    if (rc)
+        return rc;
+    return read_rows(s, st, sizeof(**rows), read_print_stat, (void **)rows, n, "print stats", err);
 }
 
 int
@@ -845,7 +957,7 @@ open_print(struct store *s, const struct job_row *j, const char *printer, int64_
     sqlite3_stmt *st;
     int rc = prepare(s, &st,
                      "INSERT INTO prints(job_id, copy, printer, material, start_line,"
-                     " lines_acked, started_ms) VALUES(?,?,?,?,?,?,?)",
+                     " lines_acked, started_ms, wait_ms) VALUES(?,?,?,?,?,?,?,?)",
                      err);
     if (rc)
         return rc;
@@ -855,7 +967,11 @@ open_print(struct store *s, const struct job_row *j, const char *printer, int64_
     sqlite3_bind_text(st, 4, j->opts.material, -1, SQLITE_TRANSIENT);
     sqlite3_bind_int64(st, 5, start_line);
     sqlite3_bind_int64(st, 6, start_line);
-    sqlite3_bind_int64(st, 7, now_ms());
+    int64_t t = now_ms();
+    sqlite3_bind_int64(st, 7, t);
+    /* a resume of an interrupted print waited for the operator, not in the queue */
+    sqlite3_bind_int64(
+        st, 8, j->state == JOB_READY && j->ready_ms > 0 && t > j->ready_ms ? t - j->ready_ms : 0);
     return step_done(s, st, err, "open print");
 }
 
@@ -886,6 +1002,11 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
             snprintf(j->mesh_sha, sizeof(j->mesh_sha), "%s", a->mesh_sha);
             j->mesh_angle_deg = a->mesh_angle_deg;
         }
+        j->filament_g = a->filament_g;
+        j->support_g = a->support_g;
+        j->support_saved_g = a->saved_g;
+        j->prepare_ms = a->prepare_ms;
+        j->slice_ms = a->slice_ms;
         j->reason[0] = '\0';
         break;
     case JOB_EV_START:
@@ -939,6 +1060,8 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
     case JOB_EV_PREPARE:
         break;
     }
+    if (to == JOB_READY && from != JOB_READY)
+        j->ready_ms = now_ms(); /* a print's queue wait starts here */
     j->state = to;
     return rc;
 }
@@ -970,7 +1093,9 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
                       "UPDATE jobs SET state = ?, copies_done = ?, failures = ?, gcode_sha = ?,"
                       " size_x = ?, size_y = ?, size_z = ?, printer = ?, lines_acked = ?,"
                       " reason = ?, updated_ms = ?, nozzle_mm = ?, gcode_lines = ?, prep_key = ?,"
-                      " mesh_sha = ?, mesh_angle_deg = ? WHERE id = ?",
+                      " mesh_sha = ?, mesh_angle_deg = ?, filament_g = ?, support_g = ?,"
+                      " support_saved_g = ?, prepare_ms = ?, slice_ms = ?, ready_ms = ?"
+                      " WHERE id = ?",
                       err)))
         goto fail;
     sqlite3_bind_text(st, 1, job_state_name(j.state), -1, SQLITE_STATIC);
@@ -991,7 +1116,13 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     sqlite3_bind_text(st, 14, j.prep_key, -1, SQLITE_TRANSIENT);
     sqlite3_bind_text(st, 15, j.mesh_sha, -1, SQLITE_TRANSIENT);
     sqlite3_bind_double(st, 16, j.mesh_angle_deg);
-    sqlite3_bind_int64(st, 17, id);
+    sqlite3_bind_double(st, 17, j.filament_g);
+    sqlite3_bind_double(st, 18, j.support_g);
+    sqlite3_bind_double(st, 19, j.support_saved_g);
+    sqlite3_bind_int64(st, 20, j.prepare_ms);
+    sqlite3_bind_int64(st, 21, j.slice_ms);
+    sqlite3_bind_int64(st, 22, j.ready_ms);
+    sqlite3_bind_int64(st, 23, id);
     if ((rc = step_done(s, st, err, "update job")))
         goto fail;
     char kind[24], detail[192];

@@ -59,6 +59,13 @@ struct job_row {
     char reason[160];              /* why it waits or failed; "" if none */
     int64_t created_ms;            /* wall clock, ms since the epoch */
     int64_t updated_ms;            /* last change, same clock */
+    double filament_g;             /* the G-code's filament estimate per copy; 0 if unknown */
+    double support_g;              /* of which support; 0 if unknown */
+    double support_saved_g;        /* support the optimization saved per copy, as estimated
+                                      (prepare.h); 0 if none or not estimated */
+    int64_t prepare_ms;            /* last preparation's wall time (orient .. slice); 0 if none */
+    int64_t slice_ms;              /* of which slicing */
+    int64_t ready_ms;              /* when it last became ready (wall clock); 0 if never */
 };
 
 /* Extra data some events carry (zero-initialise; unused fields ignored). */
@@ -73,6 +80,11 @@ struct job_event_args {
     const char *mesh_sha;  /* PREPARED: stored optimized part, NULL or "" to keep the one
                               recorded (a re-slice that reused it) */
     double mesh_angle_deg; /* PREPARED: the angle mesh_sha was optimized for */
+    double filament_g;     /* PREPARED: the G-code's filament estimate, grams per copy */
+    double support_g;      /* PREPARED: of which support */
+    double saved_g;        /* PREPARED: support the optimization saved (prepare.h) */
+    int64_t prepare_ms;    /* PREPARED: how long preparing took */
+    int64_t slice_ms;      /* PREPARED: of which slicing */
     int64_t lines_acked;   /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to;
                               RESUME of an interrupted job: line to resume from (0: stored) */
     double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */
@@ -130,6 +142,8 @@ struct store_file *store_file_begin(struct store *s, struct sf_err *err);
 int store_file_write(struct store_file *f, const void *data, size_t len, struct sf_err *err);
 int store_file_commit(struct store_file *f, char sha[STORE_SHA_HEX], struct sf_err *err);
 void store_file_abort(struct store_file *f);
+/* The path the writer writes to, to check the file before it is committed. */
+const char *store_file_tmp_path(const struct store_file *f);
 int store_file_put(struct store *s, const void *data, size_t len, char sha[STORE_SHA_HEX],
                    struct sf_err *err);
 /*
@@ -151,6 +165,15 @@ int store_file_path(struct store *s, const char *sha, char *path, size_t cap, st
 /* Add a queued job for a stored part file; o is validated (SF_EINVAL). */
 int store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, int64_t *id,
                   struct sf_err *err);
+/*
+ * Add a job whose stored file sha is G-code to print as is (gcjob.h): it
+ * is ready at once, its G-code is the file itself.  g gives what a
+ * preparation would: prep_key (a gcjob_key, required), nozzle_mm,
+ * gcode_lines (drv_job_scan's count), filament_g, support_g.  o is
+ * validated as store_job_add's (its method is stored as "gcode").
+ */
+int store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
+                        const struct job_event_args *g, int64_t *id, struct sf_err *err);
 /* SF_ENOTFOUND if no such job. */
 int store_job_get(struct store *s, int64_t id, struct job_row *out, struct sf_err *err);
 /* Every job, oldest first, into *rows (free() it); *n its count. */
@@ -196,6 +219,20 @@ int store_printer_get(struct store *s, const char *name, enum printer_state *st,
  */
 int store_printer_bed_set(struct store *s, const char *name, bool full, struct sf_err *err);
 int store_printer_bed_get(struct store *s, const char *name, bool *full, struct sf_err *err);
+
+/* One print for the metrics, with its job's estimates. */
+struct print_stat {
+    char printer[64];
+    char outcome[16];       /* as print_row */
+    int64_t started_ms;     /* wall clock */
+    int64_t ended_ms;       /* 0 while running */
+    int64_t wait_ms;        /* from the job becoming ready to this print's start; 0 for a
+                               resume, or a print before schema 4 */
+    double filament_g;      /* its job's estimate per copy */
+    double support_saved_g; /* its job's estimate per copy */
+};
+/* Every print ever made, oldest first, into *rows (free() it). */
+int store_print_stats(struct store *s, struct print_stat **rows, size_t *n, struct sf_err *err);
 
 /* Print history of one job, oldest first, into *rows (free() it). */
 int store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,

@@ -92,7 +92,8 @@ server_get(void)
     if (server)
         return server;
     log_set_level(LOG_WARN); /* MHD's notes on every closed socket */
-    static const struct farmcfg_key keys[2] = { { FUZZ_KEY_RW, false }, { FUZZ_KEY_RO, true } };
+    static const struct farmcfg_key keys[2] = { { FUZZ_KEY_RW, false, false },
+                                                { FUZZ_KEY_RO, true, false } };
     struct http_config cfg = { .host = "127.0.0.1",
                                .port = -1,
                                .keys = keys,

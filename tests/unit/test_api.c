@@ -272,7 +272,7 @@ static int
 start_api(unsigned header_ms, struct sf_err *err)
 {
     atomic_store(&srv.stop, false);
-    struct farmcfg_key keys[2] = { { KEY_RW, false }, { KEY_RO, true } };
+    struct farmcfg_key keys[2] = { { KEY_RW, false, false }, { KEY_RO, true, false } };
     struct api_config cfg = { .store = srv.store,
                               .farm = srv.farm,
                               .host = "127.0.0.1",

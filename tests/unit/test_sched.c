@@ -13,7 +13,7 @@ static struct sched_printer
 printer(const char *name, const char *material, double nozzle, double x, double y, double z)
 {
     struct sched_printer p = { name,        PRINTER_IDLE, true,  material, nozzle,
-                               { x, y, z }, "",           "gen", 45 };
+                               { x, y, z }, "",           "gen", 45,       NULL };
     return p;
 }
 

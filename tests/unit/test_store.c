@@ -124,7 +124,12 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
                           "ALTER TABLE jobs DROP COLUMN prep_key; ALTER TABLE jobs DROP COLUMN "
                           "mesh_sha; ALTER TABLE jobs DROP COLUMN mesh_angle_deg;"
                           "ALTER TABLE printers DROP COLUMN bed_full;"
-                          "ALTER TABLE jobs DROP COLUMN gcode_lines; PRAGMA user_version = 1",
+                          "ALTER TABLE jobs DROP COLUMN gcode_lines;"
+                          "ALTER TABLE jobs DROP COLUMN filament_g; ALTER TABLE jobs DROP COLUMN "
+                          "support_g; ALTER TABLE jobs DROP COLUMN support_saved_g; ALTER TABLE "
+                          "jobs DROP COLUMN prepare_ms; ALTER TABLE jobs DROP COLUMN slice_ms;"
+                          "ALTER TABLE jobs DROP COLUMN ready_ms; ALTER TABLE prints DROP COLUMN "
+                          "wait_ms; PRAGMA user_version = 1",
                           NULL, NULL, NULL),
              SQLITE_OK);
     sqlite3_close(db);

@@ -1,0 +1,460 @@
+/*
+ * api_compat.c - OctoPrint- and Moonraker-compatible routes for slicer
+ * uploads, and /metrics (see api_compat.h).
+ *
+ * Why emulate and not ask slicers for a farm plugin: PrusaSlicer, Orca and
+ * Cura already ship OctoPrint clients, and what they call is small (their
+ * sources, read for this: PrusaSlicer and Orca src/slic3r/Utils/
+ * OctoPrint.cpp test GET api/version, whose "text" must start "OctoPrint"
+ * and which must hold "api", then POST api/files/local with fields print,
+ * path, file and look only at the status; Cura's OctoPrintOutputDevice.py
+ * reads api/settings, api/version, api/printerprofiles, polls api/printer
+ * and api/job, uploads path, file[, select, print] and, when it queues or
+ * waits, splits the 201's Location at "api/" and POSTs {"command":
+ * "select"} to it).  Design: each upload is one farm job, named in its
+ * Location as job-ID/NAME, so the select that follows finds it by id.
+ * What the farm is not (one printer with a temperature, an SD card) is
+ * answered with the neutral values those clients accept.
+ *
+ * Thread: the loop thread.
+ */
+#include "api_compat.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <time.h>
+
+#include "../base/log.h"
+#include "../base/mem.h"
+#include "metrics.h"
+
+bool
+api_compat_is_gcode(const char *name)
+{
+    const char *dot = strrchr(name, '.');
+    return dot && (strcasecmp(dot, ".gcode") == 0 || strcasecmp(dot, ".gco") == 0 ||
+                   strcasecmp(dot, ".g") == 0);
+}
+
+static const char *
+field(const struct http_req *req, const char *name)
+{
+    for (size_t i = 0; i < req->n_fields; i++)
+        if (strcmp(req->field_name[i], name) == 0)
+            return req->field_value[i];
+    return NULL;
+}
+
+/* OctoPrint's and Moonraker's booleans: "true"/"false" (any case), "1"/"0". */
+static int
+boolean(const char *v, bool *out)
+{
+    if (!v || !v[0] || strcasecmp(v, "false") == 0 || strcmp(v, "0") == 0) {
+        *out = false;
+        return SF_OK;
+    }
+    if (strcasecmp(v, "true") == 0 || strcmp(v, "1") == 0) {
+        *out = true;
+        return SF_OK;
+    }
+    return SF_EINVAL;
+}
+
+/* ---- uploads ---- */
+
+/* The scheme-and-host prefix of an absolute URL from the Host header, or
+   "" when it holds anything but a host name, address and port. */
+static void
+base_url(const struct http_req *req, char *out, size_t cap)
+{
+    out[0] = '\0';
+    const char *h = req->host;
+    if (!h || !h[0] || strlen(h) > 200)
+        return;
+    for (const char *p = h; *p; p++)
+        if (!((*p >= 'a' && *p <= 'z') || (*p >= 'A' && *p <= 'Z') || (*p >= '0' && *p <= '9') ||
+              strchr(".-:[]", *p)))
+            return;
+    snprintf(out, cap, "http://%s", h);
+}
+
+/* name percent-encoded for a URL path segment (RFC 3986 unreserved kept). */
+static void
+url_escape(const char *name, char *out, size_t cap)
+{
+    size_t o = 0;
+    for (const unsigned char *p = (const unsigned char *)name; *p && o + 4 < cap; p++) {
+        if ((*p >= 'a' && *p <= 'z') || (*p >= 'A' && *p <= 'Z') || (*p >= '0' && *p <= '9') ||
+            strchr("-._~", *p))
+            out[o++] = (char)*p;
+        else
+            o += (size_t)snprintf(out + o, cap - o, "%%%02X", *p);
+    }
+    out[o] = '\0';
+}
+
+enum flavor { OCTOPRINT, MOONRAKER };
+
+/* The answer to an upload that made job id. */
+static void
+answer(enum flavor fl, const char *base, const char *name, int64_t id, struct http_resp *resp,
+       struct store *s)
+{
+    char esc[3 * JOB_NAME_MAX + 1], shown[JOB_NAME_MAX + 32], clean[JOB_NAME_MAX + 4];
+    url_escape(name, esc, sizeof(esc));
+    snprintf(shown, sizeof(shown), "job-%lld/%s", (long long)id, name);
+    http_text_clean(shown, sizeof(shown), shown);
+    http_text_clean(clean, sizeof(clean), name);
+    resp->status = 201;
+    if (fl == MOONRAKER) {
+        snprintf(resp->location, sizeof(resp->location), "%s/server/files/gcodes/job-%lld/%s", base,
+                 (long long)id, esc);
+        struct job_row j;
+        double modified = store_job_get(s, id, &j, NULL) == SF_OK ? j.created_ms / 1000.0 : 0;
+        /* queued, never started at once: the farm starts it when a printer is free */
+        resp->json = json_pack("{s{s{ss ss sf ss} sb sb ss}}", "result", "item", "path", shown,
+                               "root", "gcodes", "modified", modified, "permissions", "rw",
+                               "print_started", 0, "print_queued", 1, "action", "create_file");
+        return;
+    }
+    snprintf(resp->location, sizeof(resp->location), "%s/api/files/local/job-%lld/%s", base,
+             (long long)id, esc);
+    char download[64 + 256];
+    snprintf(download, sizeof(download), "%s/api/jobs/%lld", base, (long long)id);
+    /* The farm queues every upload: it is selected and will print when a
+       printer can take it, so both flags are true whatever was asked. */
+    resp->json = json_pack("{s{s{ss ss ss s{ss ss}}} sb sb sb s{sI}}", "files", "local", "name",
+                           clean, "path", shown, "origin", "local", "refs", "resource",
+                           resp->location, "download", download, "done", 1, "effectiveSelect", 1,
+                           "effectivePrint", 1, "slimfarm", "job_id", (json_int_t)id);
+}
+
+/* An uploaded G-code file under check on the farm's io thread. */
+struct pending {
+    const struct api_compat_env *env; /* valid while d is alive (api_free ends both) */
+    struct http_defer *d;             /* the waiting request; NULL if deferring failed */
+    enum flavor fl;
+    struct job_opts o;
+    char base[256]; /* scheme and host for Location, "" for a relative one */
+};
+
+/* The check is done (loop thread): store the file and queue it, or refuse. */
+static void
+checked(void *ud, int rc, const struct farm_gcode *g, const char *msg)
+{
+    struct pending *p = ud;
+    struct http_defer *d = p->d;
+    struct http_resp resp = { .status = 200 };
+    if (!d || !http_defer_alive(d)) { /* the client left, or the server stopped */
+        if (d)
+            http_defer_answer(d, &resp);
+        free(p);
+        return;
+    }
+    const struct api_compat_env *env = p->env;
+    char sha[STORE_SHA_HEX];
+    struct sf_err err;
+    int64_t id;
+    if (rc)
+        http_error(&resp, rc == SF_EINVAL ? 400 : rc == SF_ECANCELED ? 503 : 500, "%s", msg);
+    else if ((rc = env->upload_commit(http_defer_upload(d), sha, &err)) ||
+             (rc = farm_gcode_add(env->farm, &p->o, sha, g, &id, &err)))
+        http_error(&resp, rc == SF_EINVAL ? 400 : 500, "%s", err.msg);
+    else {
+        log_info("api", "job %lld: '%s' uploaded through the %s API", (long long)id, p->o.name,
+                 p->fl == MOONRAKER ? "Moonraker" : "OctoPrint");
+        answer(p->fl, p->base, p->o.name, id, &resp, env->store);
+        if (env->changed)
+            env->changed(env->ud);
+    }
+    http_defer_answer(d, &resp);
+    free(p);
+}
+
+/* Both uploads: the file part, its fields, then the job (a part now, G-code
+   after its check). */
+static void
+upload(const struct api_compat_env *env, enum flavor fl, const struct http_req *req,
+       struct http_resp *resp)
+{
+    struct sf_err err;
+    if (!req->upload_name || !req->upload) {
+        http_error(resp, 400, "multipart field 'file' (the G-code or part) is required");
+        return;
+    }
+    bool b;
+    const char *names[] = { "print", "select" };
+    for (size_t i = 0; i < 2; i++)
+        if (boolean(field(req, names[i]), &b)) {
+            http_error(resp, 400, "form field '%s' must be true or false", names[i]);
+            return;
+        }
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "%s", req->upload_name);
+    char base[256];
+    base_url(req, base, sizeof(base));
+    if (api_compat_is_gcode(o.name)) {
+        if (!env->farm) {
+            http_error(resp, 400, "'%s': this daemon runs no farm to print G-code", o.name);
+            return;
+        }
+        struct pending *p = mem_calloc(1, sizeof(*p));
+        if (!p) {
+            http_error(resp, 500, "out of memory");
+            return;
+        }
+        *p = (struct pending){ .env = env, .fl = fl, .o = o };
+        snprintf(p->base, sizeof(p->base), "%s", base);
+        /* checked before it is stored: a refused file leaves nothing */
+        if (farm_gcode_check(env->farm, env->upload_path(req->upload), &o, checked, p, &err)) {
+            free(p);
+            http_error(resp, 500, "%s", err.msg);
+            return;
+        }
+        p->d = http_defer(resp);
+        if (!p->d)
+            http_error(resp, 500, "out of memory"); /* checked() then only frees p */
+        return;
+    }
+    char sha[STORE_SHA_HEX];
+    int64_t id;
+    int rc;
+    if ((rc = job_opts_validate(&o, &err)) || (rc = env->upload_commit(req->upload, sha, &err)) ||
+        (rc = store_job_add(env->store, &o, sha, &id, &err))) {
+        http_error(resp, rc == SF_EINVAL || rc == SF_ENOTFOUND ? 400 : 500, "%s", err.msg);
+        return;
+    }
+    log_info("api", "job %lld: '%s' uploaded through the %s API", (long long)id, o.name,
+             fl == MOONRAKER ? "Moonraker" : "OctoPrint");
+    answer(fl, base, o.name, id, resp, env->store);
+    if (env->changed)
+        env->changed(env->ud);
+}
+
+static void
+moon_upload(const struct api_compat_env *env, const struct http_req *req, struct http_resp *resp)
+{
+    const char *root = field(req, "root");
+    if (root && root[0] && strcmp(root, "gcodes") != 0) {
+        http_error(resp, 400, "root '%.32s': the farm takes uploads only to 'gcodes'", root);
+        return;
+    }
+    upload(env, MOONRAKER, req, resp);
+}
+
+/* "job-ID/..." (an upload's path, as its Location named it) -> ID. */
+static int64_t
+job_of(const char *p)
+{
+    while (*p == '/')
+        p++;
+    if (strncmp(p, "job-", 4) != 0)
+        return 0;
+    char *end;
+    long long id = strtoll(p + 4, &end, 10);
+    return end != p + 4 && (*end == '/' || !*end) && id > 0 ? id : 0;
+}
+
+/* The select (OctoPrint) or print start (Moonraker) of an uploaded job:
+   it is queued already; a job that can no longer print is 409. */
+static void
+select_job(const struct api_compat_env *env, int64_t id, struct http_resp *resp, bool moonraker)
+{
+    struct job_row j;
+    struct sf_err err;
+    int rc = id ? store_job_get(env->store, id, &j, &err) : SF_ENOTFOUND;
+    if (rc == SF_ENOTFOUND) {
+        http_error(resp, 404, "no uploaded file there (paths are job-ID/NAME, as uploads answer)");
+        return;
+    }
+    if (rc) {
+        http_error(resp, 500, "%s", err.msg);
+        return;
+    }
+    if (job_state_terminal(j.state)) {
+        http_error(resp, 409, "job %lld is %s; upload it again to print it again", (long long)id,
+                   job_state_name(j.state));
+        return;
+    }
+    if (moonraker)
+        resp->json = json_pack("{ss}", "result", "ok");
+    else
+        resp->status = 204;
+}
+
+static void
+octo_command(const struct api_compat_env *env, const struct http_req *req, const char *rest,
+             struct http_resp *resp)
+{
+    json_error_t je;
+    json_t *body = json_loadb(req->body, req->body_len, 0, &je);
+    const char *cmd = body ? json_string_value(json_object_get(body, "command")) : NULL;
+    if (!cmd) {
+        json_decref(body);
+        http_error(resp, 400, "body must be JSON with a \"command\"");
+        return;
+    }
+    if (strcmp(cmd, "select") != 0) {
+        http_error(resp, 400, "command '%.32s' is not supported here (only select)", cmd);
+        json_decref(body);
+        return;
+    }
+    json_decref(body);
+    select_job(env, job_of(rest), resp, false);
+}
+
+/* ---- read-only answers ---- */
+
+static json_t *
+octo_state(void)
+{
+    return json_pack("{ss s{sb sb sb sb sb sb sb sb sb sb}}", "text", "Operational", "flags",
+                     "operational", 1, "ready", 1, "printing", 0, "paused", 0, "pausing", 0,
+                     "cancelling", 0, "error", 0, "closedOrError", 0, "sdReady", 0, "finishing", 0);
+}
+
+static bool
+octo_get(const char *path, struct http_resp *resp)
+{
+    if (strcmp(path, "/api/version") == 0)
+        resp->json = json_pack("{ss ss ss}", "api", "0.1", "server", API_COMPAT_OCTOPRINT, "text",
+                               "OctoPrint " API_COMPAT_OCTOPRINT " (slimfarm)");
+    else if (strcmp(path, "/api/server") == 0)
+        resp->json = json_pack("{ss sn}", "version", API_COMPAT_OCTOPRINT, "safemode");
+    else if (strcmp(path, "/api/settings") == 0)
+        resp->json = json_pack("{s{sb} s{ss} s{} s{sb} s{ss}}", "feature", "sdSupport", 0,
+                               "gcodeAnalysis", "runAt", "never", "plugins", "webcam",
+                               "webcamEnabled", 0, "appearance", "name", "slimfarm");
+    else if (strcmp(path, "/api/printerprofiles") == 0)
+        resp->json =
+            json_pack("{s{s{ss ss ss sb sb}}}", "profiles", "_default", "id", "_default", "name",
+                      "slimfarm", "model", "slimfarm print farm", "current", 1, "default", 1);
+    else if (strcmp(path, "/api/printer") == 0)
+        resp->json =
+            json_pack("{so s{} s{sb}}", "state", octo_state(), "temperature", "sd", "ready", 0);
+    else if (strcmp(path, "/api/job") == 0)
+        resp->json = json_pack("{s{s{sn ss}} s{sn sn sn} ss}", "job", "file", "name", "origin",
+                               "local", "progress", "completion", "printTime", "printTimeLeft",
+                               "state", "Operational");
+    else if (strcmp(path, "/api/connection") == 0)
+        resp->json = json_pack("{s{ss ss sn}}", "current", "state", "Operational", "port",
+                               "slimfarm", "baudrate");
+    else
+        return false;
+    return true;
+}
+
+static bool
+moon_get(const char *path, struct http_resp *resp)
+{
+    if (strcmp(path, "/server/info") == 0)
+        resp->json =
+            json_pack("{s{sb ss s[s] s[] s[s] s[] ss s[iii] ss}}", "result", "klippy_connected", 1,
+                      "klippy_state", "ready", "components", "file_manager", "failed_components",
+                      "registered_directories", "gcodes", "warnings", "moonraker_version",
+                      "slimfarm", "api_version", 1, 5, 0, "api_version_string", "1.5.0");
+    else if (strcmp(path, "/server/files/roots") == 0)
+        resp->json = json_pack("{s[{ss ss ss}]}", "result", "name", "gcodes", "path", "",
+                               "permissions", "rw");
+    else if (strcmp(path, "/printer/info") == 0)
+        resp->json = json_pack("{s{ss ss ss ss}}", "result", "state", "ready", "state_message",
+                               "slimfarm: uploads join the farm queue", "hostname", "slimfarm",
+                               "software_version", "slimfarm");
+    else
+        return false;
+    return true;
+}
+
+/* Moonraker's print start names the file in the query or a JSON body. */
+static void
+moon_start(const struct api_compat_env *env, const struct http_req *req, struct http_resp *resp)
+{
+    char name[512] = "";
+    const char *q = req->query;
+    while (q && *q) {
+        size_t n = strcspn(q, "&");
+        if (n > 9 && strncmp(q, "filename=", 9) == 0 && n - 9 < sizeof(name)) {
+            memcpy(name, q + 9, n - 9);
+            name[n - 9] = '\0';
+        }
+        q += n + (q[n] == '&');
+    }
+    if (!name[0] && req->body_len) {
+        json_t *b = json_loadb(req->body, req->body_len, 0, NULL);
+        const char *f = b ? json_string_value(json_object_get(b, "filename")) : NULL;
+        if (f)
+            snprintf(name, sizeof(name), "%s", f);
+        json_decref(b);
+    }
+    if (!name[0]) {
+        http_error(resp, 400, "filename is required");
+        return;
+    }
+    select_job(env, job_of(name), resp, true);
+}
+
+bool
+api_compat_body(const char *method, const char *path, enum http_body *kind)
+{
+    bool post = strcmp(method, "POST") == 0;
+    if (strcmp(path, "/api/files/local") == 0 || strcmp(path, "/server/files/upload") == 0) {
+        *kind = post ? HTTP_BODY_UPLOAD : HTTP_BODY_NONE;
+        return true;
+    }
+    if (strncmp(path, "/api/files/local/", 17) == 0 || strcmp(path, "/printer/print/start") == 0) {
+        *kind = post ? HTTP_BODY_JSON : HTTP_BODY_NONE;
+        return true;
+    }
+    return false;
+}
+
+bool
+api_compat_route(const struct api_compat_env *env, const struct http_req *req,
+                 struct http_resp *resp)
+{
+    const char *path = req->path;
+    bool get = strcmp(req->method, "GET") == 0, post = strcmp(req->method, "POST") == 0;
+    if (strcmp(path, "/metrics") == 0) {
+        struct sf_err err;
+        if (!get)
+            http_error(resp, 405, "use GET");
+        else if (!(resp->text = metrics_render(env->store, env->farm, &err)))
+            http_error(resp, 500, "%s", err.msg);
+        else
+            resp->content_type = METRICS_CONTENT_TYPE;
+        return true;
+    }
+    if (strcmp(path, "/api/files/local") == 0 || strcmp(path, "/server/files/upload") == 0) {
+        if (!post)
+            http_error(resp, 405, "use POST with a multipart/form-data upload");
+        else if (path[1] == 'a')
+            upload(env, OCTOPRINT, req, resp);
+        else
+            moon_upload(env, req, resp);
+        return true;
+    }
+    if (strcmp(path, "/api/files/sdcard") == 0) {
+        http_error(resp, 400, "the farm has no SD card: upload to /api/files/local");
+        return true;
+    }
+    if (strncmp(path, "/api/files/local/", 17) == 0) {
+        if (post)
+            octo_command(env, req, path + 17, resp);
+        else
+            http_error(resp, 405, "use POST with {\"command\": \"select\"}");
+        return true;
+    }
+    if (strcmp(path, "/printer/print/start") == 0) {
+        if (post)
+            moon_start(env, req, resp);
+        else
+            http_error(resp, 405, "use POST");
+        return true;
+    }
+    if (get && (octo_get(path, resp) || moon_get(path, resp)))
+        return true;
+    return false;
+}

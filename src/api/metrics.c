@@ -1,0 +1,253 @@
+/*
+ * metrics.c - Prometheus text format from the store (see metrics.h).
+ *
+ * Why from the store at each scrape rather than counters in memory: the
+ * store already holds every print and job with its times and estimates,
+ * so a restart loses nothing and the numbers agree with /api/jobs.  A
+ * scrape reads every print row: a farm's few thousand a day take
+ * milliseconds; a retention window can come when a farm needs it.
+ *
+ * Thread: the loop thread.
+ */
+#include "metrics.h"
+
+#include <stdarg.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../base/buf.h"
+#include "../base/mem.h"
+
+#define METRICS_TEXT_MAX (16 << 20) /* 1000 printers x 6 series fit many times over */
+
+/* Bucket bounds (seconds) shared by every histogram: a slice of a second
+   up to a day-long print or wait. */
+static const double bounds[] = {
+    1, 5, 10, 30, 60, 300, 600, 1800, 3600, 7200, 14400, 43200, 86400
+};
+#define N_BOUNDS (sizeof(bounds) / sizeof(bounds[0]))
+
+/* The text, and whether any append failed (then the scrape fails). */
+struct out {
+    struct buf b;
+    int rc;
+};
+
+static void put(struct out *o, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+static void
+put(struct out *o, const char *fmt, ...)
+{
+    char line[512];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(line, sizeof(line), fmt, ap);
+    va_end(ap);
+    if (n < 0 || (size_t)n >= sizeof(line) || buf_append(&o->b, line, (size_t)n))
+        o->rc = SF_ENOMEM;
+}
+
+struct hist {
+    unsigned long long n[N_BOUNDS]; /* observations <= bounds[i] (cumulative at output) */
+    unsigned long long count;
+    double sum;
+};
+
+static void
+observe(struct hist *h, double v)
+{
+    for (size_t i = 0; i < N_BOUNDS; i++)
+        if (v <= bounds[i])
+            h->n[i]++;
+    h->count++;
+    h->sum += v;
+}
+
+/* A label value as the text format wants it: \ " and newline escaped. */
+static void
+label(struct out *b, const char *v)
+{
+    for (const char *p = v; *p; p++) {
+        if (*p == '\\')
+            put(b, "\\\\");
+        else if (*p == '"')
+            put(b, "\\\"");
+        else if (*p == '\n')
+            put(b, "\\n");
+        else
+            put(b, "%c", *p);
+    }
+}
+
+static void
+family(struct out *b, const char *name, const char *type, const char *help)
+{
+    put(b, "# HELP %s %s\n# TYPE %s %s\n", name, help, name, type);
+}
+
+static void
+hist_out(struct out *b, const char *name, const char *lname, const char *lval, const struct hist *h)
+{
+    for (size_t i = 0; i < N_BOUNDS; i++) {
+        put(b, "%s_bucket{", name);
+        if (lname) {
+            put(b, "%s=\"", lname);
+            label(b, lval);
+            put(b, "\",");
+        }
+        put(b, "le=\"%g\"} %llu\n", bounds[i], h->n[i]);
+    }
+    put(b, "%s_bucket{", name);
+    if (lname) {
+        put(b, "%s=\"", lname);
+        label(b, lval);
+        put(b, "\",");
+    }
+    put(b, "le=\"+Inf\"} %llu\n", h->count);
+    const char *kinds[] = { "sum", "count" };
+    for (int k = 0; k < 2; k++) {
+        put(b, "%s_%s", name, kinds[k]);
+        if (lname) {
+            put(b, "{%s=\"", lname);
+            label(b, lval);
+            put(b, "\"}");
+        }
+        if (k == 0)
+            put(b, " %.3f\n", h->sum);
+        else
+            put(b, " %llu\n", h->count);
+    }
+}
+
+/* Per printer: counts by outcome, grams. */
+struct per {
+    char name[64];
+    unsigned long long done, failed, cancelled, interrupted;
+    double filament_g, saved_g;
+};
+
+static struct per *
+per_find(struct per **arr, size_t *n, size_t *cap, const char *name)
+{
+    for (size_t i = 0; i < *n; i++)
+        if (strcmp((*arr)[i].name, name) == 0)
+            return &(*arr)[i];
+    if (!mem_grow((void **)arr, cap, *n + 1, sizeof(**arr)))
+        return NULL;
+    struct per *p = &(*arr)[(*n)++];
+    memset(p, 0, sizeof(*p));
+    snprintf(p->name, sizeof(p->name), "%s", name);
+    return p;
+}
+
+char *
+metrics_render(struct store *s, struct farm *f, struct sf_err *err)
+{
+    struct job_row *jobs = NULL;
+    struct print_stat *prints = NULL;
+    struct per *per = NULL;
+    size_t n_jobs = 0, n_prints = 0, n_per = 0, cap_per = 0;
+    struct out b = { .rc = SF_OK };
+    buf_init(&b.b, METRICS_TEXT_MAX);
+    char *out = NULL;
+    if (store_job_list(s, &jobs, &n_jobs, err) || store_print_stats(s, &prints, &n_prints, err))
+        goto done;
+
+    unsigned long long by_state[JOB_STATE_COUNT] = { 0 };
+    struct hist prep = { 0 }, slice = { 0 }, print = { 0 }, wait = { 0 };
+    for (size_t i = 0; i < n_jobs; i++) {
+        if ((unsigned)jobs[i].state < JOB_STATE_COUNT)
+            by_state[jobs[i].state]++;
+        if (jobs[i].prepare_ms > 0)
+            observe(&prep, jobs[i].prepare_ms / 1000.0);
+        if (jobs[i].slice_ms > 0)
+            observe(&slice, jobs[i].slice_ms / 1000.0);
+    }
+    family(&b, "slimfarm_jobs", "gauge", "Jobs in the store by state.");
+    for (int st = 0; st < JOB_STATE_COUNT; st++)
+        put(&b, "slimfarm_jobs{state=\"%s\"} %llu\n", job_state_name((enum job_state)st),
+            by_state[st]);
+
+    unsigned long long pstate[PRINTER_STATE_COUNT] = { 0 };
+    size_t n_printers = f ? farm_printer_count(f) : 0;
+    for (size_t i = 0; i < n_printers; i++) {
+        struct printer_info pi;
+        farm_printer_info(f, i, &pi);
+        if ((unsigned)pi.state < PRINTER_STATE_COUNT)
+            pstate[pi.state]++;
+        if (!per_find(&per, &n_per, &cap_per, pi.cfg->name))
+            goto oom;
+    }
+    family(&b, "slimfarm_printers", "gauge", "Configured printers by state.");
+    for (int st = 0; st < PRINTER_STATE_COUNT; st++)
+        put(&b, "slimfarm_printers{state=\"%s\"} %llu\n",
+            printer_state_name((enum printer_state)st), pstate[st]);
+
+    for (size_t i = 0; i < n_prints; i++) {
+        const struct print_stat *p = &prints[i];
+        if (!p->outcome[0])
+            continue; /* still running */
+        struct per *q = per_find(&per, &n_per, &cap_per, p->printer);
+        if (!q)
+            goto oom;
+        if (strcmp(p->outcome, "done") == 0) {
+            q->done++;
+            q->filament_g += p->filament_g;
+            q->saved_g += p->support_saved_g;
+            if (p->ended_ms >= p->started_ms)
+                observe(&print, (p->ended_ms - p->started_ms) / 1000.0);
+        } else if (strcmp(p->outcome, "failed") == 0)
+            q->failed++;
+        else if (strcmp(p->outcome, "cancelled") == 0)
+            q->cancelled++;
+        else
+            q->interrupted++;
+        if (p->wait_ms > 0)
+            observe(&wait, p->wait_ms / 1000.0);
+    }
+    family(&b, "slimfarm_prints_total", "counter", "Prints ended, by printer and outcome.");
+    for (size_t i = 0; i < n_per; i++) {
+        const char *oc[] = { "done", "failed", "cancelled", "interrupted" };
+        unsigned long long v[] = { per[i].done, per[i].failed, per[i].cancelled,
+                                   per[i].interrupted };
+        for (int k = 0; k < 4; k++) {
+            put(&b, "slimfarm_prints_total{printer=\"");
+            label(&b, per[i].name);
+            put(&b, "\",outcome=\"%s\"} %llu\n", oc[k], v[k]);
+        }
+    }
+    family(&b, "slimfarm_filament_used_grams_total", "counter",
+           "Filament of the prints done, grams, from their G-code's estimate.");
+    for (size_t i = 0; i < n_per; i++) {
+        put(&b, "slimfarm_filament_used_grams_total{printer=\"");
+        label(&b, per[i].name);
+        put(&b, "\"} %.3f\n", per[i].filament_g);
+    }
+    family(&b, "slimfarm_support_saved_grams_total", "counter",
+           "Support material the optimization saved on the prints done, grams, as estimated.");
+    for (size_t i = 0; i < n_per; i++) {
+        put(&b, "slimfarm_support_saved_grams_total{printer=\"");
+        label(&b, per[i].name);
+        put(&b, "\"} %.3f\n", per[i].saved_g);
+    }
+    family(
+        &b, "slimfarm_stage_duration_seconds", "histogram",
+        "Wall time of a stage: prepare (orient to slice, each job's last), slice, print (done).");
+    hist_out(&b, "slimfarm_stage_duration_seconds", "stage", "prepare", &prep);
+    hist_out(&b, "slimfarm_stage_duration_seconds", "stage", "slice", &slice);
+    hist_out(&b, "slimfarm_stage_duration_seconds", "stage", "print", &print);
+    family(&b, "slimfarm_queue_wait_seconds", "histogram",
+           "Wait of a print from its job becoming ready to its start on a printer.");
+    hist_out(&b, "slimfarm_queue_wait_seconds", NULL, NULL, &wait);
+    if (b.rc || !(out = buf_take(&b.b, NULL)))
+        goto oom;
+    goto done;
+oom:
+    sf_err_set(err, SF_ENOMEM, "metrics: out of memory");
+done:
+    buf_release(&b.b);
+    free(jobs);
+    free(prints);
+    free(per);
+    return out;
+}
