@@ -26,12 +26,14 @@
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "api_json.h"
+#include "web.h"
 
 #define SSE_BATCH 64 /* events read from the store per stream refill */
 
 struct api {
     struct api_config cfg; /* as given */
     struct http *http;     /* the server */
+    struct web *web;       /* the dashboard's files, sessions and pictures */
     unsigned tick;         /* api_tick() count: streams send progress when it moves */
 };
 
@@ -565,6 +567,8 @@ route(void *ud, const struct http_req *req, struct http_resp *resp)
     bool get = strcmp(req->method, "GET") == 0, post = strcmp(req->method, "POST") == 0;
     int64_t id;
     char name[64], action[16];
+    if (web_route(a->web, req, resp))
+        return;
     if (n < 2 || n > 4 || !seg_is(seg[0], len[0], "api"))
         goto not_found;
     if (seg_is(seg[1], len[1], "jobs")) {
@@ -670,6 +674,27 @@ body_kind(void *ud, const char *method, const char *path)
     return HTTP_BODY_NONE;
 }
 
+static bool
+is_public(void *ud, const char *path)
+{
+    (void)ud;
+    return web_is_public(path);
+}
+
+static const char *
+session_key(void *ud, const char *token)
+{
+    struct api *a = ud;
+    return web_session_key(a->web, token);
+}
+
+static void
+web_wake(void *ud)
+{
+    struct api *a = ud;
+    http_wake_streams(a->http);
+}
+
 struct api *
 api_new(const struct api_config *cfg, struct sf_err *err)
 {
@@ -689,9 +714,14 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                               .route = route,
                               .body_kind = body_kind,
                               .ud = a,
-                              .sink = &sink };
-    a->http = http_new(&hc, err);
+                              .sink = &sink,
+                              .is_public = is_public,
+                              .session_key = session_key };
+    struct web_config wc = { .store = cfg->store, .pool = cfg->pool, .wake = web_wake, .ud = a };
+    a->web = web_new(&wc, err);
+    a->http = a->web ? http_new(&hc, err) : NULL;
     if (!a->http) {
+        web_free(a->web);
         free(a);
         return NULL;
     }
@@ -703,7 +733,8 @@ api_free(struct api *a)
 {
     if (!a)
         return;
-    http_free(a->http);
+    http_free(a->http); /* ends the picture streams before the renders they wait for */
+    web_free(a->web);
     free(a);
 }
 
