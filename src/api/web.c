@@ -29,12 +29,13 @@
 #include "../base/buf.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "../geom/supmodel.h"
 #include "../mesh/mesh.h"
 
 /* The Content-Security-Policy of every static file: scripts and styles
    from this origin only, no inline script, nothing framed or embedded. */
 #define WEB_CSP                                                                                    \
-    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "            \
+    "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "              \
     "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
 
 enum render_state { R_FREE, R_PENDING, R_READY, R_FAILED };
@@ -42,11 +43,13 @@ enum render_state { R_FREE, R_PENDING, R_READY, R_FAILED };
 /* One picture, cached by what it shows. */
 struct render {
     enum render_state state;
-    char key[96];          /* "SHA@ANGLE" */
-    unsigned char *png;    /* R_READY */
+    char key[96];       /* "SHA@ANGLE" */
+    unsigned char *png; /* R_READY */
     size_t len;
-    uint64_t used;         /* LRU stamp */
+    uint64_t used;            /* LRU stamp */
     char why[SF_ERR_MSG_MAX]; /* R_FAILED */
+    double support_g;         /* R_READY: the support model's grams for it, -1 if it failed */
+    double support_s;         /* and seconds */
 };
 
 /* A render on the pool: its own copies of everything. */
@@ -57,6 +60,7 @@ struct task {
     double angle_deg;
     unsigned char *png;
     size_t len;
+    double support_g, support_s; /* supmodel_of_mesh, PrusaSlicer's rules; -1 if it failed */
     struct sf_err err;
     struct task *next; /* in w->tasks */
 };
@@ -251,6 +255,19 @@ render_work(void *ud, const atomic_bool *cancel)
     }
     if (png[0])
         unlink(png);
+    /* what this part needs in support, as it stands on the bed (+z): the
+       same model orientation and slimming rank by (supmodel.h) */
+    t->support_g = t->support_s = -1;
+    struct supmodel_params sp;
+    struct supmodel_result sr;
+    struct sf_err serr;
+    supmodel_params_default(&sp, SUPMODEL_PRUSA);
+    sp.angle_deg = t->angle_deg;
+    if (rc == SF_OK && !atomic_load(cancel) &&
+        supmodel_of_mesh(&m, (struct vec3){ 0, 0, 1 }, &sp, &sr, &serr) == SF_OK) {
+        t->support_g = sr.grams;
+        t->support_s = sr.time_s;
+    }
     mesh_release(&m);
     return rc;
 }
@@ -273,6 +290,8 @@ render_done(struct loop *l, void *ud, int rc)
                 r->state = R_READY;
                 r->png = t->png;
                 r->len = t->len;
+                r->support_g = t->support_g;
+                r->support_s = t->support_s;
                 t->png = NULL;
             } else {
                 r->state = R_FAILED;
@@ -286,6 +305,22 @@ render_done(struct loop *l, void *ud, int rc)
     }
     free(t->png);
     free(t);
+}
+
+static double
+render_angle(const struct job_row *j)
+{
+    return j->opts.overhang_deg > 0 ? j->opts.overhang_deg : 45;
+}
+
+/* The cache key of a job's picture: what it shows (after: the part as it
+   prints, oriented and shaped; a job that kept its part, or is not
+   prepared yet, shows the upload) and the angle its risky faces are for. */
+static void
+render_key(const struct job_row *j, bool after, char *key, size_t cap)
+{
+    const char *sha = after && j->mesh_sha[0] ? j->mesh_sha : j->file_sha;
+    snprintf(key, cap, "%.64s@%g", sha, render_angle(j));
 }
 
 static ssize_t
@@ -326,12 +361,10 @@ preview(struct web *w, const struct job_row *j, const struct http_req *req, stru
         http_error(resp, 400, "stage: '%.16s' is not 'before' or 'after'", stage);
         return;
     }
-    /* after: the part as it prints (oriented and shaped); a job that kept
-       its part, or is not prepared yet, shows the upload */
     const char *sha = after && j->mesh_sha[0] ? j->mesh_sha : j->file_sha;
-    double angle = j->opts.overhang_deg > 0 ? j->opts.overhang_deg : 45;
+    double angle = render_angle(j);
     char key[96], etag[112];
-    snprintf(key, sizeof(key), "%.64s@%g", sha, angle);
+    render_key(j, after, key, sizeof(key));
     snprintf(etag, sizeof(etag), "\"%.24s-%g\"", sha, angle);
     http_resp_header(resp, "ETag", "%s", etag);
     http_resp_header(resp, "Cache-Control", "private, no-cache");
@@ -451,14 +484,27 @@ head_num(const char *text, const char *name)
     return end == p + strlen(pat) ? -1 : v;
 }
 
+/* The support model's numbers for a stage, once its picture was rendered
+   (the render computes them); null before that. */
+static json_t *
+model_json(struct web *w, const struct job_row *j, bool after)
+{
+    char key[96];
+    render_key(j, after, key, sizeof(key));
+    struct render *r = render_find(w, key);
+    if (!r || r->state != R_READY || r->support_g < 0)
+        return json_null();
+    return json_pack("{sf sf}", "support_g", r->support_g, "support_s", r->support_s);
+}
+
 static void
 report(struct web *w, const struct job_row *j, struct http_resp *resp)
 {
     json_t *g = json_null();
     char path[1100], head[WEB_GCODE_HEAD_MAX + 1];
     struct sf_err err;
-    if (j->gcode_sha[0] && store_file_path(w->cfg.store, j->gcode_sha, path, sizeof(path), &err) ==
-                               SF_OK) {
+    if (j->gcode_sha[0] &&
+        store_file_path(w->cfg.store, j->gcode_sha, path, sizeof(path), &err) == SF_OK) {
         int fd = open(path, O_RDONLY | O_CLOEXEC);
         ssize_t n = fd >= 0 ? read(fd, head + 1, sizeof(head) - 2) : -1;
         if (fd >= 0)
@@ -466,15 +512,18 @@ report(struct web *w, const struct job_row *j, struct http_resp *resp)
         if (n > 0) {
             head[0] = '\n';
             head[n + 1] = '\0';
-            g = json_pack("{sf sf sf sf sf}", "time_s", head_num(head, "estimated printing time [s]"),
-                          "filament_g", head_num(head, "filament used [g]"), "support_g",
+            g = json_pack("{sf sf sf sf sf}", "time_s",
+                          head_num(head, "estimated printing time [s]"), "filament_g",
+                          head_num(head, "filament used [g]"), "support_g",
                           head_num(head, "support material used [g]"), "layers",
                           head_num(head, "total layers"), "filament_mm",
                           head_num(head, "filament used [mm]"));
         }
     }
-    resp->json = json_pack("{sI ss sb so}", "job_id", (json_int_t)j->id, "method", j->opts.method,
-                           "optimized", j->mesh_sha[0] != '\0', "gcode", g);
+    resp->json =
+        json_pack("{sI ss sb so so so}", "job_id", (json_int_t)j->id, "method", j->opts.method,
+                  "optimized", j->mesh_sha[0] != '\0', "gcode", g, "model_before",
+                  model_json(w, j, false), "model_after", model_json(w, j, true));
 }
 
 /* ---- dispatch ---- */

@@ -37,10 +37,10 @@
 #include "../farm/store.h"
 #include "http.h"
 
-#define WEB_SESSIONS_MAX  64 /* browser sessions: a farm has few operators */
-#define WEB_PREVIEWS_MAX  16 /* rendered pictures kept (about 100 kB each) */
-#define WEB_PREVIEW_W     640
-#define WEB_PREVIEW_H     480
+#define WEB_SESSIONS_MAX   64 /* browser sessions: a farm has few operators */
+#define WEB_PREVIEWS_MAX   16 /* rendered pictures kept (about 100 kB each) */
+#define WEB_PREVIEW_W      640
+#define WEB_PREVIEW_H      480
 #define WEB_GCODE_HEAD_MAX 4096 /* bytes of G-code header read for /report */
 
 /* One embedded static file (build/gen/web_assets.c, from src/api/web/). */
@@ -56,8 +56,8 @@ struct web_asset {
 const struct web_asset *web_assets(size_t *n);
 
 struct web_config {
-    struct store *store;  /* jobs and files (not owned) */
-    struct pool *pool;    /* renders (not owned); NULL: previews answer 503 */
+    struct store *store;    /* jobs and files (not owned) */
+    struct pool *pool;      /* renders (not owned); NULL: previews answer 503 */
     void (*wake)(void *ud); /* a render finished: wake the streams waiting for it */
     void *ud;
 };

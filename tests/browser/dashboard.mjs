@@ -176,7 +176,10 @@ async function run() {
     null, { timeout: LONG });
   const facts = await page.locator("#job-facts").innerText();
   check(/Printer\s+mk3/.test(facts), "job page does not name mk3: " + facts);
-  check(/Support material/.test(facts) && /Print time/.test(facts), "job page facts: " + facts);
+  check(/Support as sliced/.test(facts) && /Print time/.test(facts), "job page facts: " + facts);
+  // the support model's grams arrive with the pictures
+  await page.waitForFunction(() => !/computing/.test(document.querySelector("#job-facts").innerText),
+    null, { timeout: LONG });
   check((await page.locator("#job-prints tbody tr").first().innerText()).includes("done"), "print history");
   // the layer slider redraws the canvas
   const slider = page.getByLabel(/^Layer/);

@@ -477,6 +477,17 @@ function fact(k, v) {
   return el("tr", {}, el("th", { scope: "row", text: k }), el("td", { text: v }));
 }
 
+// The support model's estimate for a picture (computed when it is drawn).
+function model(m) {
+  return m ? `${m.support_g.toFixed(2)} g, ${fmtTime(m.support_s)} of support printing` : "computing with the picture…";
+}
+
+function saving(b, a) {
+  if (!b || !a || !(b.support_g > 0)) return "";
+  const pct = (100 * (b.support_g - a.support_g)) / b.support_g;
+  return ` (${pct >= 0 ? pct.toFixed(0) + " % less" : (-pct).toFixed(0) + " % more"})`;
+}
+
 function fmtMs(ms) {
   return ms ? new Date(ms).toLocaleString() : "";
 }
@@ -512,7 +523,9 @@ async function renderJob(id, fresh) {
     ["Size as printed", j.size_mm[2] ? j.size_mm.map((v) => v.toFixed(1)).join(" × ") + " mm" : "not prepared yet"],
     ["Print time (estimate)", g && g.time_s >= 0 ? fmtTime(g.time_s) : "not sliced yet"],
     ["Filament", g && g.filament_g >= 0 ? `${g.filament_g.toFixed(2)} g (${(g.filament_mm / 1000).toFixed(2)} m)` : ""],
-    ["Support material", g && g.support_g >= 0 ? `${g.support_g.toFixed(2)} g` : ""],
+    ["Support as sliced", g && g.support_g >= 0 ? `${g.support_g.toFixed(2)} g` : ""],
+    ["Support before (model)", model(r.model_before)],
+    ["Support after (model)", model(r.model_after) + saving(r.model_before, r.model_after)],
     ["Layers", g && g.layers >= 0 ? String(g.layers) : ""],
     ["Progress", j.gcode_lines ? `line ${j.lines_acked} of ${j.gcode_lines}` : ""],
   ];
@@ -667,6 +680,9 @@ document.addEventListener("DOMContentLoaded", () => {
   });
   $("#logout").addEventListener("click", () => logout(""));
   $("#layer").addEventListener("input", drawLayer);
+  // the support model's numbers come with the pictures
+  for (const img of ["#pic-before", "#pic-after"])
+    $(img).addEventListener("load", () => jobShown && renderJob(jobShown, false));
   window.addEventListener("hashchange", route);
   setupSubmit();
   if (st.key) login(st.key).catch(() => logout(""));
