@@ -615,8 +615,10 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
         key = h->cfg.session_key(h->cfg.ud, cookie);
     const struct farmcfg_key *k = key ? find_key(h, key) : NULL;
     if (!key) {
-        fail(c, MHD_HTTP_UNAUTHORIZED,
-             cookie ? "session expired: log in again" : "missing X-Api-Key header");
+        fail(c, MHD_HTTP_UNAUTHORIZED, "%s",
+             !cookie ? "missing X-Api-Key header"
+             : get   ? "session expired: log in again"
+                     : "missing X-Api-Key header (a session cookie serves GET only)");
         return;
     }
     if (!k) {

@@ -131,11 +131,25 @@ async function submitForm(page, opts) {
   return id;
 }
 
+// GET /api/jobs/ID from here (not the page).
+async function apiJob(id) {
+  const r = await fetch(`${URL}/api/jobs/${id}`, { headers: { "X-Api-Key": RW } });
+  if (!r.ok) throw new Error(`GET /api/jobs/${id}: ${r.status}`);
+  return r.json();
+}
+
 async function jobState(page, id) {
-  return page.evaluate(async ([u, k, i]) => {
-    const r = await fetch(`${u}/api/jobs/${i}`, { headers: { "X-Api-Key": k } });
-    return (await r.json()).job.state;
-  }, [URL, RW, id]);
+  return (await apiJob(id)).job.state;
+}
+
+// Poll cond (async) until it holds, within LONG.
+async function until(cond, what) {
+  const end = Date.now() + LONG;
+  while (Date.now() < end) {
+    if (await cond()) return;
+    await new Promise((w) => setTimeout(w, 200));
+  }
+  throw new Error(`${step}: timed out waiting for ${what}`);
 }
 
 async function run() {
@@ -191,6 +205,7 @@ async function run() {
   await page.waitForFunction(() => document.querySelector("#layer-out").textContent.startsWith("3 of"));
   await page.evaluate(() => window.scrollTo(0, 0));
   await page.screenshot({ path: `${SHOTS}/job-1280.png` });
+  await page.screenshot({ path: `${SHOTS}/job-full-1280.png`, fullPage: true });
   await page.locator("#layer-box").scrollIntoViewIfNeeded();
   await page.screenshot({ path: `${SHOTS}/job-layers-1280.png` });
   await checkNames(page, "job page");
@@ -272,18 +287,33 @@ async function run() {
   check((await ro.locator("button:visible").count()) === 1, "read-only job page has buttons");
   await ro.close();
 
-  log("the daemon stops: the page says the connection is lost, then recovers");
-  await page.bringToFront();
-  process.kill(Number(env("SF_PID")), "SIGTERM");
+  log("the daemon is killed mid-print: the page says the connection is lost, then recovers");
+  const j3 = await submitForm(page, { file: `${PARTS}/frame.stl`, method: "none", target: "printer:mini" });
+  await page.getByRole("link", { name: "back to the farm" }).click();
+  await until(async () => {
+    const j = await apiJob(j3);
+    return j.job.state === "printing" && j.job.lines_acked > 0;
+  }, `job ${j3} printing with lines acknowledged`);
+  process.kill(Number(env("SF_PID")), "SIGKILL");
   await page.waitForSelector("#banner:not([hidden])", { timeout: 60000 });
   check((await page.locator("#conn").innerText()) === "reconnecting", "badge does not say reconnecting");
   const out = fs.openSync(env("SF_LOG"), "a");
-  // the old daemon must have let go of its data dir: wait for its exit
   const d = await startDaemon(out);
   fs.writeFileSync(env("SF_PIDFILE"), String(d.pid));
   await page.waitForSelector("#banner[hidden]", { state: "attached", timeout: LONG });
   await page.waitForSelector("#conn.live", { timeout: LONG });
-  await page.waitForSelector(`#finished tr[data-job="${j2}"][data-state="done"]`, { state: "attached" });
+  check(await page.evaluate(() => window.__sentinel === "no reload"), "the page was reloaded");
+
+  log(`job ${j3} was interrupted: resume it from its line in the queue`);
+  await page.waitForSelector(`#queue tr[data-job="${j3}"][data-state="interrupted"]`, { timeout: LONG });
+  await waitCard(page, "mini", "idle");
+  const line = page.getByLabel(`Line to resume job ${j3} from`);
+  check(Number(await line.inputValue()) > 0, "no line to resume from");
+  await page.getByRole("button", { name: `Resume job ${j3} from the chosen line` }).click();
+  await page.waitForSelector(`#finished tr[data-job="${j3}"][data-state="done"]`, { state: "attached", timeout: LONG });
+  const prints = (await apiJob(j3)).prints.map((p) => [p.outcome, p.start_line]);
+  check(prints.length === 2 && prints[0][0] === "interrupted" && prints[1][0] === "done" && prints[1][1] > 0,
+    "print history after the resume: " + JSON.stringify(prints));
   check(await page.evaluate(() => window.__sentinel === "no reload"), "the page was reloaded");
 
   check(problems.length === 0, "browser reported: " + problems.join("; "));

@@ -3,9 +3,14 @@
 # with two simulated Marlin printers (mk3 waits for its bed to be cleared,
 # mini clears its own), Debian's chromium driven headless by playwright-core
 # (tests/browser/dashboard.mjs does the clicking; this script starts the
-# farm and hands it what it needs in the environment).  Screenshots land in
-# build/browser/.  Skips (passes, saying so) when chromium or node is absent:
-# `make check` installs both.
+# farm and hands it what it needs in the environment): log in, submit parts
+# through the form (file input and drag and drop), watch them print without
+# a reload, Bed cleared, reorder and cancel queued jobs, pause and resume a
+# print, accessible names, a read-only key without buttons, and the daemon
+# killed mid-print under the open page (banner, recovery, then resuming the
+# interrupted job from its line).  Screenshots land in build/browser/.
+# Skips (passes, saying so) when chromium or node is absent: `make check`
+# installs both.
 set -u
 BUILD=${BUILD:-build/san}
 here=$(cd "$(dirname "$0")" && pwd)
@@ -18,7 +23,7 @@ fi
 RO=ro-key-0123456789abcdef
 
 start_sim mk3 --speed 3000
-start_sim mini --speed 50
+start_sim mini --speed 100
 cp -r config/printers config/materials "$tmp/"
 {
   printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\napi_keys_readonly: %s\n' \
@@ -34,8 +39,9 @@ wait_for 60 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq 2 ]" || fail "prin
 
 shots=$(pwd)/build/browser
 mkdir -p "$shots"
-# the script restarts the daemon once (the lost-connection banner); it
-# writes the new pid to $tmp/daemon.pid so cleanup can stop it
+rm -f "$shots"/*.png
+# the script kills the daemon once and starts it again; it writes the new
+# pid to $tmp/daemon.pid so cleanup can stop it
 SF_URL=$SLIMFARM_URL SF_RW=$RW SF_RO=$RO SF_PARTS=$tmp/parts SF_SHOTS=$shots \
   SF_DAEMON="$D" SF_CONFIG="$tmp/farm.ini" SF_LOG="$tmp/log" SF_PID=$pid SF_PIDFILE=$tmp/daemon.pid \
   timeout 540 node "$here/dashboard.mjs" || {

@@ -26,6 +26,7 @@ const st = {
   es: null,
   retryMs: 1000,
   refreshTimer: 0,
+  tempTimer: 0,
   view: "",
 };
 
@@ -112,6 +113,7 @@ function logout(msg) {
   st.key = "";
   if (st.es) st.es.close();
   st.es = null;
+  clearInterval(st.tempTimer);
   $("#app").hidden = true;
   $("#logout").hidden = true;
   $("#login").hidden = false;
@@ -165,6 +167,12 @@ function connect() {
   };
   for (const k of EVENT_KINDS) es.addEventListener(k, () => scheduleRefresh(150));
   es.addEventListener("reset", () => refreshAll());
+  // temperatures move on idle printers too, where the stream is quiet:
+  // sample them while the stream is up and the tab is seen
+  clearInterval(st.tempTimer);
+  st.tempTimer = setInterval(() => {
+    if (st.es === es && es.readyState === EventSource.OPEN && !document.hidden) scheduleRefresh(0);
+  }, 5000);
   es.addEventListener("progress", (ev) => {
     try {
       for (const p of JSON.parse(ev.data)) {
@@ -387,8 +395,14 @@ function jobActions(j, above, below) {
   d.append(el("button", { type: "button", "aria-label": `Move job ${id} down`, disabled: !below,
     onclick: act(() => setPriority(j, Math.min(j.priority - 1, below.priority - 1))) }, "▼"));
   if (j.state === "interrupted") {
-    d.append(el("button", { type: "button", "aria-label": `Resume job ${id} from line ${j.lines_acked}`,
-      onclick: act(() => api(`/api/jobs/${id}/resume`, { method: "POST" })) }, `Resume from line ${j.lines_acked}`));
+    // the last acknowledged line by default; the operator may pick another
+    const line = el("input", { type: "number", min: "1", max: String(Math.max(1, j.gcode_lines - 1)),
+      value: String(j.lines_acked), class: "line", "aria-label": `Line to resume job ${id} from` });
+    d.append(line);
+    d.append(el("button", { type: "button", "aria-label": `Resume job ${id} from the chosen line`,
+      onclick: act(() => api(`/api/jobs/${id}/resume`, { method: "POST",
+        headers: { "Content-Type": "application/json" },
+        body: JSON.stringify({ line: Number(line.value) }) })) }, "Resume"));
     d.append(el("button", { type: "button", "aria-label": `Restart job ${id} from the start`,
       onclick: act(() => api(`/api/jobs/${id}/restart`, { method: "POST" })) }, "Restart"));
   }
@@ -545,7 +559,8 @@ async function renderJob(id, fresh) {
   const after = `/api/jobs/${j.id}/preview.png?stage=after&v=${r.optimized ? "opt" : "in"}`;
   if ($("#pic-before").getAttribute("src") !== before) $("#pic-before").src = before;
   if ($("#pic-after").getAttribute("src") !== after) $("#pic-after").src = after;
-  $("#after-cap").textContent = r.optimized ? "after: as it prints (oriented and shaped)" : "after: unchanged (the part prints as uploaded)";
+  $("#after-cap").textContent = !r.optimized ? "after: unchanged (the part prints as uploaded)"
+    : j.method === "orient" ? "after: as it prints (oriented)" : "after: as it prints (oriented and shaped)";
   if (fresh || (j.gcode_sha && (!layerData || layerData.sha !== j.gcode_sha))) loadLayers(j);
 }
 
