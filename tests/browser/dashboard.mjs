@@ -216,7 +216,7 @@ async function run() {
   await page.getByRole("button", { name: "Bed cleared on mk3" }).click();
   await waitCard(page, "mk3", "idle");
 
-  log("a job no printer can take waits, saying why; reorder and cancel from the queue");
+  log("a job no printer can take waits, saying why; reorder the queue");
   const q = await page.evaluate(async ([u, k]) => {
     const ids = [];
     for (let i = 0; i < 2; i++) {
@@ -240,10 +240,6 @@ async function run() {
     const ids = [...document.querySelectorAll("#queue tbody tr[data-job]")].map((t) => Number(t.dataset.job));
     return ids.indexOf(b) >= 0 && ids.indexOf(b) < ids.indexOf(a);
   }, q, { timeout: 60000 });
-  for (const id of q) {
-    await page.getByRole("button", { name: `Cancel job ${id}`, exact: true }).click();
-    await page.waitForSelector(`#queue tr[data-job="${id}"]`, { state: "detached", timeout: 60000 });
-  }
 
   log("submit a frame by drag and drop, to mini, two copies; pause and resume it");
   const j2 = await submitForm(page, { file: `${PARTS}/frame.stl`, method: "none", target: "printer:mini", drop: true, copies: 2 });
@@ -264,9 +260,15 @@ async function run() {
   await page.setViewportSize({ width: 390, height: 844 });
   const wide = await page.evaluate(() => document.documentElement.scrollWidth);
   check(wide <= 390, `the page is ${wide} px wide on a 390 px screen`);
-  await page.screenshot({ path: `${SHOTS}/grid-390.png` });
+  await page.screenshot({ path: `${SHOTS}/grid-390.png`, fullPage: true });
   await checkNames(page, "printer grid at 390 px");
   await page.setViewportSize({ width: 1280, height: 800 });
+
+  log("cancel the waiting jobs from the queue");
+  for (const id of q) {
+    await page.getByRole("button", { name: `Cancel job ${id}`, exact: true }).click();
+    await page.waitForSelector(`#queue tr[data-job="${id}"]`, { state: "detached", timeout: 60000 });
+  }
 
   log(`job ${j2}: both copies print; done without a reload`);
   await page.waitForSelector(`#finished tr[data-job="${j2}"][data-state="done"]`, { state: "attached", timeout: LONG });

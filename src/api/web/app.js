@@ -363,12 +363,15 @@ function renderQueue() {
   if (!active.length) tb.append(el("tr", {}, el("td", { colspan: "8", class: "muted", text: "The queue is empty." })));
   active.forEach((j, i) => {
     const link = el("a", { href: `#job/${j.id}` }, `#${j.id}`);
+    // data-label: the column's name, shown beside each cell on a phone
     const tr = el("tr", { "data-job": String(j.id), "data-state": j.state },
-      el("td", {}, link), el("td", { text: j.name }), el("td", { text: j.state }),
-      el("td", { text: String(j.copies - j.copies_done) }), el("td", { text: String(j.priority) }),
-      el("td", { text: j.printer || j.target_printer || j.target_group || "any" }),
-      el("td", { class: "muted", text: j.reason || "" }));
-    if (!st.readOnly) tr.append(el("td", {}, jobActions(j, active[i - 1], active[i + 1])));
+      el("td", { "data-label": "Job" }, link), el("td", { "data-label": "Part", text: j.name }),
+      el("td", { "data-label": "State", text: j.state }),
+      el("td", { "data-label": "Copies left", text: String(j.copies - j.copies_done) }),
+      el("td", { "data-label": "Priority", text: String(j.priority) }),
+      el("td", { "data-label": "Printer", text: j.printer || j.target_printer || j.target_group || "any" }),
+      el("td", { "data-label": "Why it waits", class: "muted", text: j.reason || "" }));
+    if (!st.readOnly) tr.append(el("td", { "data-label": "Actions" }, jobActions(j, active[i - 1], active[i + 1])));
     tb.append(tr);
   });
   const fb = $("#finished tbody");
@@ -541,7 +544,10 @@ async function renderJob(id, fresh) {
     ["Support before (model)", model(r.model_before)],
     ["Support after (model)", model(r.model_after) + saving(r.model_before, r.model_after)],
     ["Layers", g && g.layers >= 0 ? String(g.layers) : ""],
-    ["Progress", j.gcode_lines ? `line ${j.lines_acked} of ${j.gcode_lines}` : ""],
+    ...(j.method === "slim" || j.method === "surface"
+      ? [["Deviation (MNDR / ANDR)", "not recorded by the farm yet (slimfarm optimize reports it)"]] : []),
+    ["Progress", j.gcode_lines && ["printing", "paused", "interrupted"].includes(j.state)
+      ? `line ${j.lines_acked} of ${j.gcode_lines}` : j.gcode_lines ? `${j.gcode_lines} lines` : ""],
   ];
   const tb = $("#job-facts tbody");
   tb.textContent = "";
