@@ -58,9 +58,13 @@ static const char tetra[] = "solid t\n"
                             "facet normal 1 1 1\nouter loop\nvertex 20 0 0\nvertex 0 20 0\n"
                             "vertex 0 0 20\nendloop\nendfacet\nendsolid t\n";
 
+static void stop(void);
+
 static int
 start(const char *name, struct sf_err *err)
 {
+    if (srv.api)
+        stop(); /* a failed case returned early: its server must not run on */
     memset(&srv, 0, sizeof(srv));
     log_set_level(LOG_WARN);
     char dir[512];
