@@ -24,7 +24,7 @@ DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev li
 	libmicrohttpd-dev libmosquitto-dev libinih-dev libqhull-dev libpolyclipping-dev \
 	libjansson-dev libminizip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
 	libsuitesparse-dev clang-14 clang-format libclang-rt-14-dev python3 procps libssl-dev \
-	printrun-common mosquitto
+	printrun-common mosquitto chromium nodejs
 # Only for `make bench`: the independent peers and their helpers.
 BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy bc
 
@@ -94,7 +94,7 @@ BENCHES := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(BENCH_C))
 FUZZERS := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(FUZZ_C))
 
 .PHONY: all check tests demo bench soak fuzz fuzzers deps install clean format check-format \
-	check-headers check-layers
+	check-headers check-layers browser-deps
 .DEFAULT_GOAL := all
 
 all: $(PROGS)
@@ -114,7 +114,16 @@ $(BUILD)/obj/%.o: %.cpp
 	@$(if $(V),,echo "  CXX   $<")
 	$(Q)$(CXX) $(CXXFLAGS) $(EXT_CFLAGS) -c $< -o $@
 
-$(LIB): $(call obj,$(LIB_C) $(LIB_CXX))
+# The dashboard's static files (src/api/web/), embedded as C arrays (web.h).
+WEB_FILES := $(filter-out %.sh,$(wildcard src/api/web/*))
+build/gen/web_assets.c: $(WEB_FILES) src/api/web/embed.sh
+	@mkdir -p $(dir $@)
+	$(Q)src/api/web/embed.sh $(WEB_FILES) > $@.tmp && mv $@.tmp $@
+$(BUILD)/obj/gen/web_assets.o: build/gen/web_assets.c
+	@mkdir -p $(dir $@)
+	$(Q)$(CC) $(CFLAGS) -I. -c $< -o $@
+
+$(LIB): $(call obj,$(LIB_C) $(LIB_CXX)) $(BUILD)/obj/gen/web_assets.o
 	@mkdir -p $(dir $@)
 	rm -f $@ && ar rcs $@ $^
 
@@ -182,14 +191,31 @@ build/fuzz/obj/%.o: %.c
 build/fuzz/obj/%.o: %.cpp
 	@mkdir -p $(dir $@)
 	$(Q)clang++-14 -std=c++14 -D_GNU_SOURCE $(FUZZ_SAN) -fsanitize=fuzzer-no-link $(EXT_CFLAGS) -c $< -o $@
-build/fuzz/libslimfarm.a: $(patsubst %,build/fuzz/obj/%.o,$(basename $(LIB_C) $(LIB_CXX)))
+build/fuzz/obj/gen/web_assets.o: build/gen/web_assets.c
+	@mkdir -p $(dir $@)
+	$(Q)$(FUZZCC) -std=c11 -D_GNU_SOURCE $(FUZZ_SAN) -include src/base/compat.h -I. $(EXT_CFLAGS) \
+		-c $< -o $@
+build/fuzz/libslimfarm.a: $(patsubst %,build/fuzz/obj/%.o,$(basename $(LIB_C) $(LIB_CXX))) \
+		build/fuzz/obj/gen/web_assets.o
 	rm -f $@ && ar rcs $@ $^
 build/fuzz/fuzz_%: build/fuzz/obj/tests/fuzz/fuzz_%.o build/fuzz/libslimfarm.a
 	$(FUZZCC) $(FUZZ_SAN) -fsanitize=fuzzer -o $@ $^ $(EXT_LIBS)
 fuzzers: $(FUZZERS)
 
+# The dashboard's browser test drives Debian's chromium with playwright-core,
+# installed from the committed lock file only when missing (never a browser
+# download: PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD).  Debian's nodejs ships npm
+# apart.
+BROWSER_NODE := tests/browser/node_modules/playwright-core/package.json
+$(BROWSER_NODE): tests/browser/package.json tests/browser/package-lock.json
+	@command -v npm >/dev/null || DEBIAN_FRONTEND=noninteractive apt-get install -y -q npm >/dev/null
+	cd tests/browser && PLAYWRIGHT_SKIP_BROWSER_DOWNLOAD=1 npm ci --no-audit --no-fund --loglevel=error
+	@touch $@
+browser-deps: $(BROWSER_NODE)
+
 FUZZ_RUNS ?= 3000
 check: deps
+	$(MAKE) --no-print-directory browser-deps
 	$(MAKE) --no-print-directory SAN=1 tests
 	$(MAKE) --no-print-directory fuzzers
 	$(MAKE) --no-print-directory check-layers check-format check-headers

@@ -256,10 +256,8 @@ static const struct {
     const char *kind;
     int (*main)(int argc, char **argv); /* argv[1] is the kind */
 } sims[] = {
-    { "marlin", marlin_main },
-    { "octoprint", sim_octoprint_main },
-    { "moonraker", sim_moonraker_main },
-    { "prusalink", sim_prusalink_main },
+    { "marlin", marlin_main },           { "octoprint", sim_octoprint_main },
+    { "moonraker", sim_moonraker_main }, { "prusalink", sim_prusalink_main },
     { "bambu", sim_bambu_main },
 };
 

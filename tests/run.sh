@@ -44,7 +44,7 @@ for fz in build/fuzz/fuzz_*; do
   fi
   rm -rf "$work" "$work.log"
 done
-for script in tests/integ/*.sh; do
+for script in tests/integ/*.sh tests/browser/*.sh; do
   [ -f "$script" ] || continue
   name=$(basename "$script" .sh)
   [ -n "$filter" ] && [[ "$name" != *"$filter"* ]] && continue

@@ -27,6 +27,7 @@
 #include "../base/mem.h"
 #include "api_compat.h"
 #include "api_json.h"
+#include "web.h"
 
 #define SSE_BATCH 64 /* events read from the store per stream refill */
 
@@ -34,6 +35,7 @@ struct api {
     struct api_config cfg;         /* as given */
     struct api_compat_env slicers; /* the slicer-upload routes' view (api_compat.h) */
     struct http *http;             /* the server */
+    struct web *web;               /* the dashboard's files, sessions and pictures */
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
 };
 
@@ -598,6 +600,8 @@ route(void *ud, const struct http_req *req, struct http_resp *resp)
     char name[64], action[16];
     if (api_compat_route(&a->slicers, req, resp))
         return; /* /metrics, OctoPrint's and Moonraker's upload routes */
+    if (web_route(a->web, req, resp))
+        return; /* the dashboard */
     if (n < 2 || n > 4 || !seg_is(seg[0], len[0], "api"))
         goto not_found;
     if (seg_is(seg[1], len[1], "jobs")) {
@@ -706,6 +710,27 @@ body_kind(void *ud, const char *method, const char *path)
     return HTTP_BODY_NONE;
 }
 
+static bool
+is_public(void *ud, const char *path)
+{
+    (void)ud;
+    return web_is_public(path);
+}
+
+static const char *
+session_key(void *ud, const char *token)
+{
+    struct api *a = ud;
+    return web_session_key(a->web, token);
+}
+
+static void
+web_wake(void *ud)
+{
+    struct api *a = ud;
+    http_wake_streams(a->http);
+}
+
 struct api *
 api_new(const struct api_config *cfg, struct sf_err *err)
 {
@@ -731,9 +756,14 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                               .route = route,
                               .body_kind = body_kind,
                               .ud = a,
-                              .sink = &sink };
-    a->http = http_new(&hc, err);
+                              .sink = &sink,
+                              .is_public = is_public,
+                              .session_key = session_key };
+    struct web_config wc = { .store = cfg->store, .pool = cfg->pool, .wake = web_wake, .ud = a };
+    a->web = web_new(&wc, err);
+    a->http = a->web ? http_new(&hc, err) : NULL;
     if (!a->http) {
+        web_free(a->web);
         free(a);
         return NULL;
     }
@@ -745,7 +775,8 @@ api_free(struct api *a)
 {
     if (!a)
         return;
-    http_free(a->http);
+    http_free(a->http); /* ends the picture streams before the renders they wait for */
+    web_free(a->web);
     free(a);
 }
 

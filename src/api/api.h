@@ -22,6 +22,9 @@
  * G-code goes to POST /api/files/local (api_compat.h: printed as is);
  * POST /api/jobs takes parts.
  *
+ * and the dashboard's (web.h): GET / and its static files, /api/whoami
+ * (and the session cookie), /api/jobs/ID/preview.png, /gcode, /report.
+ *
  * Errors are {"error": "message"}: 400 bad input (a multipart upload
  * anywhere but POST /api/jobs, a body cut before its closing boundary, an
  * empty file), 401/403 keys (a read-only key may send no body), 404
@@ -38,6 +41,7 @@
 #include <stdint.h>
 
 #include "../base/err.h"
+#include "../base/pool.h"
 #include "../farm/farm.h"
 #include "../farm/farmcfg.h"
 #include "../farm/job.h"
@@ -55,6 +59,7 @@ struct api_config {
     size_t n_keys;
     size_t upload_max;           /* largest upload, bytes */
     unsigned header_timeout_ms;  /* 0: HTTP_HEADER_TIMEOUT_MS (tests shorten it) */
+    struct pool *pool;           /* renders the dashboard's pictures (not owned); NULL: none */
     void (*on_change)(void *ud); /* a job was added or changed (run the scheduler) */
     void *ud;                    /* its argument */
 };

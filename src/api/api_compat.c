@@ -109,8 +109,8 @@ answer(enum flavor fl, const char *base, const char *name, int64_t id, struct ht
     http_text_clean(clean, sizeof(clean), name);
     resp->status = 201;
     if (fl == MOONRAKER) {
-        snprintf(resp->location, sizeof(resp->location), "%s/server/files/gcodes/job-%lld/%s", base,
-                 (long long)id, esc);
+        http_resp_header(resp, "Location", "%s/server/files/gcodes/job-%lld/%s", base,
+                         (long long)id, esc);
         struct job_row j;
         double modified = store_job_get(s, id, &j, NULL) == SF_OK ? j.created_ms / 1000.0 : 0;
         /* queued, never started at once: the farm starts it when a printer is free */
@@ -119,16 +119,18 @@ answer(enum flavor fl, const char *base, const char *name, int64_t id, struct ht
                                "print_started", 0, "print_queued", 1, "action", "create_file");
         return;
     }
-    snprintf(resp->location, sizeof(resp->location), "%s/api/files/local/job-%lld/%s", base,
-             (long long)id, esc);
+    char location[512];
+    snprintf(location, sizeof(location), "%s/api/files/local/job-%lld/%s", base, (long long)id,
+             esc);
+    http_resp_header(resp, "Location", "%s", location);
     char download[64 + 256];
     snprintf(download, sizeof(download), "%s/api/jobs/%lld", base, (long long)id);
     /* The farm queues every upload: it is selected and will print when a
        printer can take it, so both flags are true whatever was asked. */
     resp->json = json_pack("{s{s{ss ss ss s{ss ss}}} sb sb sb s{sI}}", "files", "local", "name",
-                           clean, "path", shown, "origin", "local", "refs", "resource",
-                           resp->location, "download", download, "done", 1, "effectiveSelect", 1,
-                           "effectivePrint", 1, "slimfarm", "job_id", (json_int_t)id);
+                           clean, "path", shown, "origin", "local", "refs", "resource", location,
+                           "download", download, "done", 1, "effectiveSelect", 1, "effectivePrint",
+                           1, "slimfarm", "job_id", (json_int_t)id);
 }
 
 /* An uploaded G-code file under check on the farm's io thread. */
@@ -419,12 +421,17 @@ api_compat_route(const struct api_compat_env *env, const struct http_req *req,
     bool get = strcmp(req->method, "GET") == 0, post = strcmp(req->method, "POST") == 0;
     if (strcmp(path, "/metrics") == 0) {
         struct sf_err err;
+        char *text;
         if (!get)
             http_error(resp, 405, "use GET");
-        else if (!(resp->text = metrics_render(env->store, env->farm, &err)))
+        else if (!(text = metrics_render(env->store, env->farm, &err)))
             http_error(resp, 500, "%s", err.msg);
-        else
+        else {
+            resp->body = text;
+            resp->body_len = strlen(text);
+            resp->body_free = free;
             resp->content_type = METRICS_CONTENT_TYPE;
+        }
         return true;
     }
     if (strcmp(path, "/api/files/local") == 0 || strcmp(path, "/server/files/upload") == 0) {

@@ -41,6 +41,7 @@
 #include <strings.h>
 #include <sys/socket.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "../base/buf.h"
 #include "../base/log.h"
@@ -237,43 +238,6 @@ send_json(struct MHD_Connection *conn, int status, json_t *j, bool close)
     return rc;
 }
 
-/* A JSON reply with a Location header (a 201's new resource). */
-static enum MHD_Result
-send_json_at(struct MHD_Connection *conn, int status, json_t *j, const char *location)
-{
-    char *s = json_dumps(j, JSON_COMPACT);
-    json_decref(j);
-    struct MHD_Response *r =
-        s ? MHD_create_response_from_buffer(strlen(s), s, MHD_RESPMEM_MUST_FREE) : NULL;
-    if (!r) {
-        free(s);
-        return MHD_NO;
-    }
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, "application/json");
-    MHD_add_response_header(r, MHD_HTTP_HEADER_LOCATION, location);
-    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)status, r);
-    MHD_destroy_response(r);
-    return rc;
-}
-
-/* A text reply (the metrics); the response takes resp->text. */
-static enum MHD_Result
-send_text(struct MHD_Connection *conn, struct http_resp *resp)
-{
-    json_decref(resp->json);
-    struct MHD_Response *r =
-        MHD_create_response_from_buffer(strlen(resp->text), resp->text, MHD_RESPMEM_MUST_FREE);
-    if (!r) {
-        free(resp->text);
-        return MHD_NO;
-    }
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE,
-                            resp->content_type ? resp->content_type : "text/plain; charset=utf-8");
-    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)resp->status, r);
-    MHD_destroy_response(r);
-    return rc;
-}
-
 /* An error; a client without a valid key, or one sent a bad request
    head, is not served again on this connection. */
 static enum MHD_Result
@@ -281,6 +245,81 @@ send_error(struct MHD_Connection *conn, int status, const char *msg)
 {
     return send_json(conn, status, json_pack("{s:s}", "error", msg),
                      status == MHD_HTTP_UNAUTHORIZED || status == MHD_HTTP_BAD_REQUEST);
+}
+
+int
+http_resp_header(struct http_resp *resp, const char *name, const char *fmt, ...)
+{
+    if (resp->n_headers == HTTP_RESP_HEADERS_MAX || strlen(name) >= sizeof(resp->headers[0].name))
+        return SF_EINVAL;
+    struct http_header *hd = &resp->headers[resp->n_headers];
+    va_list ap;
+    va_start(ap, fmt);
+    int n = vsnprintf(hd->value, sizeof(hd->value), fmt, ap);
+    va_end(ap);
+    if (n < 0 || (size_t)n >= sizeof(hd->value))
+        return SF_EINVAL;
+    snprintf(hd->name, sizeof(hd->name), "%s", name);
+    resp->n_headers++;
+    return SF_OK;
+}
+
+static void
+add_headers(struct MHD_Response *r, const struct http_resp *resp)
+{
+    for (size_t i = 0; i < resp->n_headers; i++)
+        MHD_add_response_header(r, resp->headers[i].name, resp->headers[i].value);
+}
+
+/* Free what a route answered without sending it. */
+static void
+resp_discard(struct http_resp *resp)
+{
+    json_decref(resp->json);
+    if (resp->body && resp->body_free)
+        resp->body_free((void *)resp->body);
+    if (resp->fd > 0)
+        close(resp->fd);
+    if (resp->stream_free)
+        resp->stream_free(resp->stream_ud);
+}
+
+/* A raw body (static file, picture) or an open file. */
+static enum MHD_Result
+send_raw(struct MHD_Connection *conn, struct http_resp *resp)
+{
+    struct MHD_Response *r;
+    if (resp->fd > 0) {
+        r = MHD_create_response_from_fd(resp->fd_size, resp->fd);
+        if (!r)
+            close(resp->fd);
+    } else {
+        size_t len = resp->status == MHD_HTTP_NOT_MODIFIED ? 0 : resp->body_len;
+        r = MHD_create_response_from_buffer_with_free_callback(len, (void *)resp->body,
+                                                               resp->body_free);
+        if (!r && resp->body_free)
+            resp->body_free((void *)resp->body);
+    }
+    if (!r)
+        return send_error(conn, MHD_HTTP_INTERNAL_SERVER_ERROR, "out of memory");
+    if (resp->content_type)
+        MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, resp->content_type);
+    add_headers(r, resp);
+    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)resp->status, r);
+    MHD_destroy_response(r);
+    return rc;
+}
+
+const char *
+http_req_header(const struct http_req *req, const char *name)
+{
+    return MHD_lookup_connection_value(req->conn, MHD_HEADER_KIND, name);
+}
+
+const char *
+http_req_arg(const struct http_req *req, const char *name)
+{
+    return MHD_lookup_connection_value(req->conn, MHD_GET_ARGUMENT_KIND, name);
 }
 
 /* ---- streams ---- */
@@ -347,8 +386,11 @@ send_stream(struct http *h, struct MHD_Connection *conn, const char *key, struct
                            .next = h->streams };
     snprintf(st->key, sizeof(st->key), "%s", key);
     h->streams = st;
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, "text/event-stream");
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
+    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE,
+                            resp->content_type ? resp->content_type : "text/event-stream");
+    add_headers(r, resp);
+    if (!MHD_get_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL))
+        MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
     enum MHD_Result rc = MHD_queue_response(conn, (unsigned)resp->status, r);
     MHD_destroy_response(r);
     return rc;
@@ -440,8 +482,7 @@ conn_free(struct http *h, struct conn *c)
         struct http_defer *d = c->defer;
         defer_unlink(h, d);
         if (d->ready) { /* answered, never sent: the server stopped first */
-            json_decref(d->resp.json);
-            free(d->resp.text);
+            resp_discard(&d->resp);
             free(d);
         } else { /* the answer to come only frees it */
             d->c = NULL;
@@ -614,9 +655,20 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     const char *bearer = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "Authorization");
     if (!key && bearer && strncasecmp(bearer, "Bearer ", 7) == 0)
         key = bearer + 7;
+    bool get = strcmp(method, "GET") == 0 || strcmp(method, "HEAD") == 0;
+    if (!key && get && h->cfg.is_public && h->cfg.is_public(h->cfg.ud, url)) {
+        c->read_only = true; /* a static file: no key, no data */
+        return;
+    }
+    const char *cookie = MHD_lookup_connection_value(conn, MHD_COOKIE_KIND, HTTP_SESSION_COOKIE);
+    if (!key && get && cookie && h->cfg.session_key)
+        key = h->cfg.session_key(h->cfg.ud, cookie);
     const struct farmcfg_key *k = key ? find_key(h, key) : NULL;
     if (!key) {
-        fail(c, MHD_HTTP_UNAUTHORIZED, "missing X-Api-Key header");
+        fail(c, MHD_HTTP_UNAUTHORIZED, "%s",
+             !cookie ? "missing X-Api-Key header"
+             : get   ? "session expired: log in again"
+                     : "missing X-Api-Key header (a session cookie serves GET only)");
         return;
     }
     if (!k) {
@@ -687,12 +739,21 @@ respond(struct http *h, struct conn *c, struct MHD_Connection *conn, struct http
     drop_upload(c); /* the route committed it, or it goes before the answer does */
     if (resp->stream)
         return send_stream(h, conn, c->key, resp);
-    if (resp->text)
-        return send_text(conn, resp);
+    if (resp->body || resp->fd > 0 || resp->status == MHD_HTTP_NOT_MODIFIED) {
+        json_decref(resp->json);
+        return send_raw(conn, resp);
+    }
     if (!resp->json)
         resp->json = json_object();
-    if (resp->location[0])
-        return send_json_at(conn, resp->status, resp->json, resp->location);
+    if (resp->n_headers) { /* JSON with headers of the route's (Set-Cookie, Location) */
+        char *text = json_dumps(resp->json, JSON_COMPACT);
+        json_decref(resp->json);
+        if (!text)
+            return send_error(conn, MHD_HTTP_INTERNAL_SERVER_ERROR, "out of memory");
+        resp->body = text, resp->body_len = strlen(text), resp->body_free = free;
+        resp->content_type = "application/json";
+        return send_raw(conn, resp);
+    }
     return send_json(conn, resp->status, resp->json, false);
 }
 
@@ -769,10 +830,12 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     struct http_req req = { .method = method,
                             .path = url,
                             .read_only = c->read_only,
+                            .key = c->key,
                             .body = c->body.data ? c->body.data : "",
                             .body_len = c->body.len,
                             .upload_name = c->upload_seen ? c->upload_name : NULL,
-                            .upload = c->upload };
+                            .upload = c->upload,
+                            .conn = conn };
     req.last_event_id = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, "Last-Event-ID");
     req.host = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, MHD_HTTP_HEADER_HOST);
     req.query = c->query[0] ? c->query : NULL;
@@ -787,8 +850,7 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
         /* The answer comes later (http_defer_answer): keep the upload and
            wait, suspended, so other clients and printers go on. */
         struct http_defer *d = resp.defer;
-        json_decref(resp.json);
-        free(resp.text);
+        resp_discard(&resp); /* a deferring route answers nothing now */
         d->h = h;
         d->c = c;
         d->conn = conn;
@@ -824,8 +886,7 @@ void
 http_defer_answer(struct http_defer *d, struct http_resp *resp)
 {
     if (!d->conn) {
-        json_decref(resp->json);
-        free(resp->text);
+        resp_discard(resp);
         free(d);
         return;
     }

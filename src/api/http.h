@@ -16,6 +16,14 @@
  * and JSON replies whose text is valid UTF-8 whatever a client sent.
  * Routes see a struct http_req and fill a struct http_resp.
  *
+ * Two ways in without an X-Api-Key header, both decided by the owner's
+ * hooks: GET/HEAD of a public path (the dashboard's static files, which
+ * hold no data), and GET/HEAD with the session cookie HTTP_SESSION_COOKIE
+ * that session_key() maps to an API key (a browser's EventSource and <img>
+ * cannot send headers).  A cookie never authorizes another method, so a
+ * request that changes something always carries the key in a header,
+ * which no other site can make a browser send.
+ *
  * Connections: at most HTTP_CONNECTIONS_MAX, HTTP_PER_IP_MAX per client
  * address; a connection that has not sent a complete request head within
  * header_timeout_ms, or is the oldest of more than HTTP_PREAUTH_MAX such
@@ -54,16 +62,20 @@
 /* A request head must arrive within this (a client trickling header lines
    is never idle, so the idle timeout alone does not end it). */
 #define HTTP_HEADER_TIMEOUT_MS 10000
+/* Extra response headers a route may set (ETag, Cache-Control, CSP ...). */
+#define HTTP_RESP_HEADERS_MAX 8
+#define HTTP_SESSION_COOKIE   "sf_session" /* the dashboard's session cookie */
 
 struct http;
 
 /* A request as a route sees it. */
 struct http_req {
-    const char *method;                       /* "GET", "POST", ... */
-    const char *path;                         /* URL path without the query */
-    bool read_only;                           /* authenticated with a read-only key */
-    const char *body;                         /* non-multipart body, NUL-terminated ("" if none) */
-    size_t body_len;                          /* its length */
+    const char *method; /* "GET", "POST", ... */
+    const char *path;   /* URL path without the query */
+    bool read_only;     /* authenticated with a read-only key */
+    const char *key;    /* the API key it came with (header or session); "" for a public path */
+    const char *body;   /* non-multipart body, NUL-terminated ("" if none) */
+    size_t body_len;    /* its length */
     const char *last_event_id;                /* Last-Event-ID header or NULL */
     const char *host;                         /* Host header or NULL */
     const char *query;                        /* raw query string after '?', or NULL */
@@ -72,7 +84,13 @@ struct http_req {
     const char *field_value[HTTP_FIELDS_MAX]; /* their values, NUL-terminated */
     const char *upload_name; /* filename of the multipart "file" part, NULL if none */
     void *upload;            /* the sink's context for it, finished successfully */
+    void *conn;              /* the connection, for http_req_header/http_req_arg */
 };
+
+/* Request header name (case-insensitive) or NULL. */
+const char *http_req_header(const struct http_req *req, const char *name);
+/* Query argument name (URL-decoded) or NULL. */
+const char *http_req_arg(const struct http_req *req, const char *name);
 
 /*
  * Stream body: write up to max bytes to buf and return how many; 0 when
@@ -81,20 +99,37 @@ struct http_req {
  */
 typedef ssize_t (*http_stream_fn)(void *ud, char *buf, size_t max);
 
-/* What a route answers. */
+/* One extra response header. */
+struct http_header {
+    char name[32];
+    char value[512];
+};
+
+/* What a route answers: json, or a raw body (body, or fd), or a stream. */
 struct http_resp {
     int status;                    /* HTTP status */
     json_t *json;                  /* body (the server takes the reference) */
+    const char *content_type;      /* of body, fd or stream (static string); NULL: the
+                                      JSON or event-stream default */
+    const void *body;              /* a raw body instead of json, body_len bytes */
+    size_t body_len;               /* (status 304: none is sent) */
+    void (*body_free)(void *body); /* frees body after sending; NULL: static */
+    int fd;                        /* > 0: send fd_size bytes of this open file (closed
+                                      by the server); 0: none */
+    uint64_t fd_size;
+    size_t n_headers; /* headers added with http_resp_header */
+    struct http_header headers[HTTP_RESP_HEADERS_MAX];
     http_stream_fn stream;         /* or a streamed text/event-stream body */
     void *stream_ud;               /* its argument */
     void (*stream_free)(void *ud); /* called when the stream ends */
-    char *text;                    /* or a text body (the server frees it), instead of json */
-    const char *content_type;      /* text's type; NULL: text/plain; charset=utf-8 */
-    char location[512];            /* "" or a Location header (a 201's new resource) */
     struct http_defer *defer;      /* set by http_defer(): the answer comes later */
 };
 
 typedef void (*http_route_fn)(void *ud, const struct http_req *req, struct http_resp *resp);
+
+/* Add a response header; SF_EINVAL when full or too long (then not added). */
+int http_resp_header(struct http_resp *resp, const char *name, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 
 /* The body a route takes, asked with the request head only. */
 enum http_body {
@@ -129,6 +164,11 @@ struct http_config {
     http_body_fn body_kind;              /* NULL: every route takes any body */
     void *ud;                            /* route's and sink's argument */
     const struct http_upload_sink *sink; /* NULL: multipart files are refused */
+    /* NULL or: GET/HEAD of path needs no key (static files). */
+    bool (*is_public)(void *ud, const char *path);
+    /* NULL or: the API key a session cookie's value stands for, NULL if
+       none (then the request needs its header).  GET/HEAD only. */
+    const char *(*session_key)(void *ud, const char *token);
 };
 
 /*

@@ -1,0 +1,352 @@
+// tests/browser/dashboard.mjs - the dashboard in Debian's chromium, driven
+// by playwright-core; started by dashboard.sh, which runs the farm (two
+// simulated printers, mk3 without an ejector, mini with one) and passes
+// its address, keys, parts and daemon in SF_* variables.
+//
+// Every wait is for a state the page shows (generous bounds for a loaded
+// machine), never a fixed sleep.  The page is loaded once: a sentinel set
+// on window at the start must still be there at the end, so every update
+// came from the event stream, not a reload.
+import { spawn } from "node:child_process";
+import fs from "node:fs";
+import os from "node:os";
+import path from "node:path";
+import { chromium } from "playwright-core";
+
+const env = (k) => {
+  const v = process.env[k];
+  if (!v) throw new Error(`dashboard.mjs: ${k} is not set (run dashboard.sh)`);
+  return v;
+};
+const URL = env("SF_URL"), RW = env("SF_RW"), RO = env("SF_RO"), PARTS = env("SF_PARTS");
+const SHOTS = env("SF_SHOTS");
+const LONG = 300000; // ms: a slow sanitizer build on a loaded machine
+
+let step = "start";
+const log = (s) => {
+  step = s;
+  console.log("  " + s);
+};
+const problems = [];
+
+function check(cond, what) {
+  if (!cond) throw new Error(`${step}: ${what}`);
+}
+
+const userDir = fs.mkdtempSync(path.join(os.tmpdir(), "sfchromium-"));
+const ctx = await chromium.launchPersistentContext(userDir, {
+  executablePath: "/usr/bin/chromium",
+  headless: true,
+  viewport: { width: 1280, height: 800 },
+  args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync"],
+});
+let exitCode = 1;
+try {
+  await run();
+  exitCode = 0;
+} catch (e) {
+  console.log(`FAIL at "${step}": ${e.message}`);
+  for (const p of ctx.pages()) {
+    try {
+      await p.screenshot({ path: path.join(SHOTS, "failure.png"), fullPage: true });
+      console.log("  page text: " + (await p.locator("body").innerText()).slice(0, 1500).replace(/\n+/g, " | "));
+    } catch (e2) { /* the page is gone */ }
+  }
+} finally {
+  await ctx.close();
+  fs.rmSync(userDir, { recursive: true, force: true });
+}
+process.exit(exitCode);
+
+function watch(page) {
+  page.on("pageerror", (e) => problems.push("page error: " + e.message));
+  page.on("console", (m) => {
+    if (m.type() === "error" && !/status of 40[13]|ERR_CONNECTION_REFUSED|net::ERR/.test(m.text()))
+      problems.push("console error: " + m.text());
+    if (/Content Security Policy/i.test(m.text())) problems.push("CSP violation: " + m.text());
+  });
+}
+
+const card = (page, name) => page.locator(`article.printer[data-printer="${name}"]`);
+
+async function waitCard(page, name, state) {
+  await page.waitForSelector(`article.printer[data-printer="${name}"][data-state="${state}"]`,
+    { timeout: LONG });
+}
+
+async function login(page, key) {
+  await page.goto(URL + "/");
+  await page.getByLabel("API key").fill(key);
+  await page.getByRole("button", { name: "Log in" }).click();
+  await page.waitForSelector("#app:not([hidden]) article.printer", { timeout: 60000 });
+}
+
+// Every visible button and form control has a name a screen reader reads.
+async function checkNames(page, where) {
+  const bad = await page.evaluate(() => {
+    const out = [];
+    const visible = (e) => e.offsetParent !== null || e.getClientRects().length > 0;
+    for (const b of document.querySelectorAll("button")) {
+      if (!visible(b)) continue;
+      const name = (b.getAttribute("aria-label") || b.textContent || "").trim();
+      if (!name) out.push("button " + b.outerHTML.slice(0, 80));
+    }
+    for (const c of document.querySelectorAll("input, select")) {
+      if (!visible(c) && c.type !== "file") continue;
+      if (!(c.labels && c.labels.length) && !c.getAttribute("aria-label")) out.push("control " + c.id);
+    }
+    return out;
+  });
+  check(bad.length === 0, `${where}: without an accessible name: ${bad.join(", ")}`);
+  const n = await page.locator("button:visible").count();
+  log(`${where}: ${n} visible buttons, each with an accessible name`);
+}
+
+async function dropFile(page, file) {
+  const b64 = fs.readFileSync(file).toString("base64");
+  await page.evaluate(([name, data]) => {
+    const bytes = Uint8Array.from(atob(data), (c) => c.charCodeAt(0));
+    const dt = new DataTransfer();
+    dt.items.add(new File([bytes], name, { type: "model/stl" }));
+    const drop = document.querySelector("#drop");
+    drop.dispatchEvent(new DragEvent("dragover", { dataTransfer: dt, bubbles: true, cancelable: true }));
+    drop.dispatchEvent(new DragEvent("drop", { dataTransfer: dt, bubbles: true, cancelable: true }));
+  }, [path.basename(file), b64]);
+}
+
+async function submitForm(page, opts) {
+  await page.getByRole("link", { name: "Submit a part" }).click();
+  if (opts.drop) await dropFile(page, opts.file);
+  else await page.setInputFiles("#file", opts.file);
+  await page.waitForFunction((n) => document.querySelector("#file-name").textContent === n,
+    path.basename(opts.file));
+  await page.selectOption("#method", opts.method);
+  await page.selectOption("#target", opts.target);
+  await page.getByLabel("Copies").fill(String(opts.copies || 1));
+  await page.getByRole("button", { name: "Submit", exact: true }).click();
+  await page.waitForFunction(() => /^#job\/\d+$/.test(location.hash), null, { timeout: 60000 });
+  const id = Number((await page.evaluate(() => location.hash)).slice(5));
+  check(id > 0, "no job id after submitting");
+  return id;
+}
+
+// GET /api/jobs/ID from here (not the page).
+async function apiJob(id) {
+  const r = await fetch(`${URL}/api/jobs/${id}`, { headers: { "X-Api-Key": RW } });
+  if (!r.ok) throw new Error(`GET /api/jobs/${id}: ${r.status}`);
+  return r.json();
+}
+
+async function jobState(page, id) {
+  return (await apiJob(id)).job.state;
+}
+
+// Poll cond (async) until it holds, within LONG.
+async function until(cond, what) {
+  const end = Date.now() + LONG;
+  while (Date.now() < end) {
+    if (await cond()) return;
+    await new Promise((w) => setTimeout(w, 200));
+  }
+  throw new Error(`${step}: timed out waiting for ${what}`);
+}
+
+async function run() {
+  const page = await ctx.newPage();
+  watch(page);
+
+  log("the page and its headers");
+  const resp = await page.goto(URL + "/");
+  const csp = resp.headers()["content-security-policy"] || "";
+  check(/script-src 'self'/.test(csp) && !/unsafe-inline/.test(csp), "CSP: " + csp);
+  check(resp.headers()["etag"], "no ETag on /");
+  check(await page.getByLabel("API key").isVisible(), "no login form");
+
+  log("a wrong key is refused");
+  await page.getByLabel("API key").fill("not-a-key-0123456789");
+  await page.getByRole("button", { name: "Log in" }).click();
+  await page.waitForFunction(() => document.querySelector("#login-error").textContent !== "");
+
+  log("log in with the operator key");
+  await login(page, RW);
+  await waitCard(page, "mk3", "idle");
+  await waitCard(page, "mini", "idle");
+  check(!(await page.evaluate(() => location.href)).includes(RW), "the key is in the URL");
+  await page.evaluate(() => (window.__sentinel = "no reload"));
+  await page.waitForSelector("#conn.live", { timeout: 60000 });
+  await checkNames(page, "printer grid");
+
+  log("submit a tee through the form (file input), oriented, to mk3");
+  const j1 = await submitForm(page, { file: `${PARTS}/tee.stl`, method: "orient", target: "printer:mk3" });
+  await page.waitForSelector(`#view-job[data-job="${j1}"]`);
+  log(`job ${j1}: wait for it to print and be done, without reloading`);
+  await page.waitForSelector(`#view-job[data-job="${j1}"][data-state="done"]`, { timeout: LONG });
+  await page.waitForFunction(() => {
+    const ok = (i) => i.complete && i.naturalWidth > 0;
+    return ok(document.querySelector("#pic-before")) && ok(document.querySelector("#pic-after"));
+  }, null, { timeout: LONG });
+  await page.waitForFunction(() => /layers;/.test(document.querySelector("#layer-msg").textContent),
+    null, { timeout: LONG });
+  const facts = await page.locator("#job-facts").innerText();
+  check(/Printer\s+mk3/.test(facts), "job page does not name mk3: " + facts);
+  check(/Support as sliced/.test(facts) && /Print time/.test(facts), "job page facts: " + facts);
+  // the support model's grams arrive with the pictures
+  await page.waitForFunction(() => !/computing/.test(document.querySelector("#job-facts").innerText),
+    null, { timeout: LONG });
+  check((await page.locator("#job-prints tbody tr").first().innerText()).includes("done"), "print history");
+  // the layer slider redraws the canvas
+  const slider = page.getByLabel(/^Layer/);
+  await slider.focus();
+  await page.keyboard.press("Home");
+  await page.waitForFunction(() => document.querySelector("#layer-out").textContent.startsWith("1 of"));
+  await page.keyboard.press("ArrowRight");
+  await page.keyboard.press("ArrowRight");
+  await page.waitForFunction(() => document.querySelector("#layer-out").textContent.startsWith("3 of"));
+  await page.evaluate(() => window.scrollTo(0, 0));
+  await page.screenshot({ path: `${SHOTS}/job-1280.png` });
+  await page.screenshot({ path: `${SHOTS}/job-full-1280.png`, fullPage: true });
+  await page.locator("#layer-box").scrollIntoViewIfNeeded();
+  await page.screenshot({ path: `${SHOTS}/job-layers-1280.png` });
+  await checkNames(page, "job page");
+
+  log("mk3 waits for its bed to be cleared: press Bed cleared");
+  await page.getByRole("link", { name: "back to the farm" }).click();
+  await waitCard(page, "mk3", "awaiting-clear");
+  await page.getByRole("button", { name: "Bed cleared on mk3" }).click();
+  await waitCard(page, "mk3", "idle");
+
+  log("a job no printer can take waits, saying why; reorder the queue");
+  const q = await page.evaluate(async ([u, k]) => {
+    const ids = [];
+    for (let i = 0; i < 2; i++) {
+      const fd = new FormData();
+      fd.append("file", new File(["solid x\nendsolid x\n"], `tpu${i}.stl`));
+      fd.append("options", JSON.stringify({ material: "TPU", method: "none" }));
+      const r = await fetch(`${u}/api/jobs`, { method: "POST", headers: { "X-Api-Key": k }, body: fd });
+      ids.push((await r.json()).job.id);
+    }
+    return ids;
+  }, [URL, RW]);
+  await page.waitForFunction((id) => {
+    const tr = document.querySelector(`#queue tr[data-job="${id}"]`);
+    return tr && /TPU/.test(tr.innerText);
+  }, q[1], { timeout: LONG });
+  const order = () => page.evaluate(() => [...document.querySelectorAll("#queue tbody tr[data-job]")].map((t) => Number(t.dataset.job)));
+  let o = await order();
+  check(o.indexOf(q[0]) < o.indexOf(q[1]), "queue order " + o);
+  await page.getByRole("button", { name: `Move job ${q[1]} up` }).click();
+  await page.waitForFunction(([a, b]) => {
+    const ids = [...document.querySelectorAll("#queue tbody tr[data-job]")].map((t) => Number(t.dataset.job));
+    return ids.indexOf(b) >= 0 && ids.indexOf(b) < ids.indexOf(a);
+  }, q, { timeout: 60000 });
+
+  log("submit a frame by drag and drop, to mini, two copies; pause and resume it");
+  const j2 = await submitForm(page, { file: `${PARTS}/frame.stl`, method: "none", target: "printer:mini", drop: true, copies: 2 });
+  await page.getByRole("link", { name: "back to the farm" }).click();
+  await waitCard(page, "mini", "printing");
+  await page.getByRole("button", { name: "Pause mini" }).click();
+  await waitCard(page, "mini", "paused");
+  check((await jobState(page, j2)) === "paused", "job not paused");
+  await page.waitForSelector(`#queue tr[data-job="${j2}"][data-state="paused"]`, { timeout: 60000 });
+  await page.getByRole("button", { name: "Resume mini" }).click();
+  await waitCard(page, "mini", "printing");
+  log("printer grid screenshots while mini prints (1280x800, 390 px)");
+  await page.waitForFunction(() => {
+    const bar = document.querySelector('article.printer[data-printer="mini"] .bar');
+    return Number(bar.getAttribute("aria-valuenow")) > 0;
+  }, null, { timeout: LONG });
+  await page.screenshot({ path: `${SHOTS}/grid-1280.png` });
+  await page.setViewportSize({ width: 390, height: 844 });
+  const wide = await page.evaluate(() => document.documentElement.scrollWidth);
+  check(wide <= 390, `the page is ${wide} px wide on a 390 px screen`);
+  await page.screenshot({ path: `${SHOTS}/grid-390.png`, fullPage: true });
+  await checkNames(page, "printer grid at 390 px");
+  await page.setViewportSize({ width: 1280, height: 800 });
+
+  log("cancel the waiting jobs from the queue");
+  for (const id of q) {
+    await page.getByRole("button", { name: `Cancel job ${id}`, exact: true }).click();
+    await page.waitForSelector(`#queue tr[data-job="${id}"]`, { state: "detached", timeout: 60000 });
+  }
+
+  log(`job ${j2}: both copies print; done without a reload`);
+  await page.waitForSelector(`#finished tr[data-job="${j2}"][data-state="done"]`, { state: "attached", timeout: LONG });
+  check(await page.evaluate(() => window.__sentinel === "no reload"), "the page was reloaded");
+
+  log("a read-only key shows the dashboard without buttons");
+  const ro = await ctx.newPage();
+  watch(ro);
+  await login(ro, RO);
+  await ro.waitForSelector("#who", { state: "visible" });
+  check((await ro.locator("#who").innerText()) === "read-only key", "not shown as read-only");
+  await ro.waitForSelector(`#finished tr[data-job="${j2}"]`, { state: "attached", timeout: 60000 });
+  const roButtons = await ro.locator("button:visible").allInnerTexts();
+  check(roButtons.length === 1 && roButtons[0] === "Log out", "read-only page has buttons: " + roButtons);
+  check(!(await ro.getByRole("link", { name: "Submit a part" }).isVisible()), "read-only page offers submit");
+  await ro.goto(URL + `/#job/${j1}`);
+  await ro.waitForSelector(`#view-job[data-job="${j1}"][data-state="done"]`, { timeout: 60000 });
+  check((await ro.locator("button:visible").count()) === 1, "read-only job page has buttons");
+  await ro.close();
+
+  log("the daemon is killed mid-print: the page says the connection is lost, then recovers");
+  const j3 = await submitForm(page, { file: `${PARTS}/frame.stl`, method: "none", target: "printer:mini" });
+  await page.getByRole("link", { name: "back to the farm" }).click();
+  await until(async () => {
+    const j = await apiJob(j3);
+    return j.job.state === "printing" && j.job.lines_acked > 0;
+  }, `job ${j3} printing with lines acknowledged`);
+  process.kill(Number(env("SF_PID")), "SIGKILL");
+  await page.waitForSelector("#banner:not([hidden])", { timeout: 60000 });
+  check((await page.locator("#conn").innerText()) === "reconnecting", "badge does not say reconnecting");
+  const out = fs.openSync(env("SF_LOG"), "a");
+  const d = await startDaemon(out);
+  fs.writeFileSync(env("SF_PIDFILE"), String(d.pid));
+  await page.waitForSelector("#banner[hidden]", { state: "attached", timeout: LONG });
+  await page.waitForSelector("#conn.live", { timeout: LONG });
+  check(await page.evaluate(() => window.__sentinel === "no reload"), "the page was reloaded");
+
+  log(`job ${j3} was interrupted: resume it from its line in the queue`);
+  await page.waitForSelector(`#queue tr[data-job="${j3}"][data-state="interrupted"]`, { timeout: LONG });
+  await waitCard(page, "mini", "idle");
+  const line = page.getByLabel(`Line to resume job ${j3} from`);
+  check(Number(await line.inputValue()) > 0, "no line to resume from");
+  await page.getByRole("button", { name: `Resume job ${j3} from the chosen line` }).click();
+  await page.waitForSelector(`#finished tr[data-job="${j3}"][data-state="done"]`, { state: "attached", timeout: LONG });
+  const prints = (await apiJob(j3)).prints.map((p) => [p.outcome, p.start_line]);
+  check(prints.length === 2 && prints[0][0] === "interrupted" && prints[1][0] === "done" && prints[1][1] > 0,
+    "print history after the resume: " + JSON.stringify(prints));
+  check(await page.evaluate(() => window.__sentinel === "no reload"), "the page was reloaded");
+
+  check(problems.length === 0, "browser reported: " + problems.join("; "));
+  log("ok");
+}
+
+// Start slimfarmd again on the same config; it refuses to start while the
+// old one still holds the data dir's lock, so try until one stays up.
+async function startDaemon(out) {
+  for (let i = 0; i < 600; i++) {
+    const d = spawn(env("SF_DAEMON"), ["-c", env("SF_CONFIG")], { stdio: ["ignore", out, out], detached: true });
+    const exited = await new Promise((res) => {
+      d.on("exit", () => res(true));
+      d.on("spawn", async () => {
+        // up when the API answers
+        for (let k = 0; k < 100; k++) {
+          try {
+            const r = await fetch(URL + "/api/jobs", { headers: { "X-Api-Key": RW } });
+            if (r.ok) return res(false);
+          } catch (e) { /* not yet */ }
+          if (d.exitCode !== null) return res(true);
+          await new Promise((w) => setTimeout(w, 100));
+        }
+        res(d.exitCode !== null);
+      });
+    });
+    if (!exited) {
+      d.unref();
+      return d;
+    }
+    await new Promise((w) => setTimeout(w, 100));
+  }
+  throw new Error("slimfarmd did not start again");
+}
