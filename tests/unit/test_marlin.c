@@ -16,6 +16,7 @@
 
 #include "../../drivers/drv.h"
 #include "../../drivers/drv_marlin.h"
+#include "../../drivers/linewin.h"
 #include "../../sim/sim_marlin.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
@@ -519,6 +520,87 @@ T_CASE(marlin_garbled_resend_mid_job)
     }
     teardown(&r);
     sim_time = false;
+}
+
+/*
+ * Marlin's emergency parser acts on M108/M112/M410 after a line's N and
+ * digits, before any checksum: "N2112 G1..." is one garbled byte from
+ * "NM112 G1..." (kill).  A job long enough to pass such numbers (108, 112,
+ * 410, 1080-1089, 1120-1129, 2108, 2112, ...), whose own commands are none
+ * of the three nor one byte from them (no M104/M109): the simulator counts
+ * every line it receives that one replaced byte would make the parser act
+ * on, and none may be.
+ */
+static void
+write_ep_job(struct run *r, int n)
+{
+    snprintf(r->gcode_path, sizeof(r->gcode_path), "%s/ep.gcode", t_tmpdir());
+    FILE *f = fopen(r->gcode_path, "w");
+    fprintf(f, "G28\nG90\nM82\nM140 S60\nM190 S60\nG92 E0\n");
+    double e = 0;
+    for (int i = 0; i < n; i++) {
+        e += 0.02;
+        fprintf(f, "G1 X%.2f Y%.2f E%.4f F6000\n", 100 + 30 * cos(i * 0.05),
+                100 + 30 * sin(i * 0.05), e);
+    }
+    fclose(f);
+    r->end_e = e;
+}
+
+static void
+ep_stream(bool advanced, const char *fault)
+{
+    sim_time = true;
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.advanced_ok = advanced;
+    sc.uart = true;
+    if (fault)
+        T_OK(faults_parse(&sc.faults, fault, NULL), NULL);
+    if (setup(&r, &sc, 0)) {
+        write_ep_job(&r, JOB_LINES);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over, budget_ms(0)));
+        if (r.done != 1)
+            t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
+        struct sim_marlin_stats st;
+        sim_marlin_stats(r.sim, &st);
+        T_TRUE(!st.halted);
+        T_EQ_INT(st.ep_acted, 0);
+        T_EQ_INT(st.ep_near, 0);
+        T_EQ_INT(st.hits, 0); /* no line went out under the number aimed at */
+        size_t extra;
+        bool bad;
+        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
+        T_EQ_INT(extra, 0);
+        T_TRUE(!bad);
+        T_EQ_DBL(st.e, r.end_e, 1e-4);
+        struct drv_marlin_stats ds;
+        drv_marlin_stats(r.drv, &ds);
+        T_TRUE(ds.renumbers >= 10); /* the numbers were there to skip */
+    }
+    teardown(&r);
+    sim_time = false;
+}
+
+T_CASE(marlin_line_numbers_skip_emergency_commands_plain_ok)
+{
+    /* Line 2112's first digit garbled to 'M' as it arrives: on a driver
+       that numbers it so, the printer halts (M112). */
+    ep_stream(false, "hit-rx=2112:1:77");
+}
+
+T_CASE(marlin_line_numbers_skip_emergency_commands_advanced_ok)
+{
+    /* Line 1120's N garbled to 'M' ("M1120 ...": the parser acts on it). */
+    ep_stream(true, "hit-rx=1120:0:77");
+}
+
+/* The renumbering M110's ok lost, and its first copy refused: the job goes on. */
+T_CASE(marlin_renumbering_survives_lost_ok)
+{
+    ep_stream(false, "drop-ok=0.05");
 }
 
 /* A short job whose line 55 makes the printer send the reply kind under test. */
@@ -1147,4 +1229,38 @@ T_CASE(marlin_start_job_with_scan_reads_no_further)
     T_TRUE(strstr(r.drv->status.message, "too long for Marlin") != NULL);
     T_TRUE(r.drv->status.lines_acked < (uint64_t)JOB_LINES);
     teardown(&r);
+}
+
+/* The emergency parser's model, on lines as the driver writes them. */
+T_CASE(marlin_ep_hazard_model)
+{
+    char text[LINEWIN_LINE_MAX];
+    static const struct {
+        long n;
+        const char *cmd;
+        bool hazard;
+    } cases[] = {
+        { 2111, "G1 X1", false }, { 2112, "G1 X1", true },                         /* NM112 */
+        { 1120, "G1 X1", true },                                                   /* M1120: acts */
+        { 112, "G1 X1", true },                                                    /* M112 */
+        { 1108, "G1 X1", true },  { 3410, "G1 X1", true }, { 5, "M110 N7", true }, /* M112 */
+        { 5, "M0110 N7", false }, { 5, "M105", true },                             /* M108 */
+        { 5, "M00105", false },   { 5, "M400", true },                             /* M410 */
+        { 5, "M0400", false },    { 5, "M112", true },     { 5, "M0115", false },
+        { 7, "G28", false },
+    };
+    for (size_t i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
+        size_t len = gcode_number_line(cases[i].n, cases[i].cmd, text, sizeof(text));
+        if (linewin_ep_hazard(text, len) != cases[i].hazard)
+            t_fail(__FILE__, __LINE__, "'%s': hazard should be %d", text, cases[i].hazard);
+    }
+    T_TRUE(linewin_number_ok(1));
+    T_TRUE(!linewin_number_ok(112));
+    char out[LINEWIN_LINE_MAX];
+    T_TRUE(linewin_ep_safe_form(5, "M105", out, sizeof(out)));
+    T_EQ_STR(out, "M00105");
+    T_TRUE(!linewin_ep_safe_form(5, "M108", out, sizeof(out))); /* meant to act */
+    T_EQ_STR(out, "M108");
+    T_TRUE(linewin_ep_safe_form(5, "G1 X2", out, sizeof(out)));
+    T_EQ_STR(out, "G1 X2");
 }
