@@ -31,6 +31,7 @@
 #include "../../drivers/drv.h"
 #include "../../drivers/drv_marlin.h"
 #include "../../sim/sim_marlin.h"
+#include "../../sim/simlog.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
 #include "../../src/base/log.h"
@@ -41,6 +42,9 @@ struct print_result {
     long fragments;      /* log lines that are no file command (cut lines the printer ran) */
     double secs;         /* simulated seconds from start_job to the end */
     uint64_t rewinds, probes, deadlines, resends;
+    uint64_t renumbers; /* the driver's M110s past numbers near M108/M112/M410 */
+    uint64_t ep_near;   /* stream lines one garbled byte from the emergency parser acting */
+    uint64_t ep_acted;  /* lines it acted on (a garbled byte made one of them) */
 };
 
 static void
@@ -54,61 +58,20 @@ on_event(struct drv *d, enum drv_event ev, void *ud)
         *state = 2;
 }
 
-/* The commands of a G-code file (or log), one string each. */
-static char **
-commands(const char *path, long *n)
-{
-    struct buf b;
-    buf_init(&b, 0);
-    *n = 0;
-    if (buf_read_file(&b, path, NULL) < 0) {
-        buf_release(&b);
-        return NULL;
-    }
-    char **out = calloc(b.len / 2 + 2, sizeof(char *));
-    char *p = b.data;
-    while (p && *p) {
-        char *nl = strchr(p, '\n');
-        size_t len = nl ? (size_t)(nl - p) : strlen(p);
-        char cmd[256];
-        if (gcode_strip(p, len, cmd, sizeof(cmd), NULL) > 0)
-            out[(*n)++] = strdup(cmd);
-        p = nl ? nl + 1 : NULL;
-    }
-    buf_release(&b);
-    return out;
-}
-
-static void
-free_commands(char **v, long n)
-{
-    for (long i = 0; i < n; i++)
-        free(v[i]);
-    free(v);
-}
-
-/* The driver's own lines: handshake, auto-report, probes, the final M400. */
-static bool
-host_line(const char *s)
-{
-    return strcmp(s, "M105") == 0 || strcmp(s, "M110 N0") == 0 || strcmp(s, "M115") == 0 ||
-           strncmp(s, "M155", 4) == 0 || strcmp(s, "M400") == 0;
-}
-
 /* Judge the log: each file command once, in order.  Job lines all start "G1 X" and differ. */
 static void
 judge(const char *gcode, const char *log, struct print_result *res)
 {
-    long n_want, n_got;
-    char **want = commands(gcode, &n_want);
-    char **got = commands(log, &n_got);
+    size_t n_want, n_got;
+    char **want = simlog_commands(gcode, &n_want);
+    char **got = simlog_commands(log, &n_got);
     long w = 0;
-    for (long i = 0; i < n_got; i++) {
-        if (w < n_want && strcmp(got[i], want[w]) == 0) {
+    for (size_t i = 0; i < n_got; i++) {
+        if (w < (long)n_want && strcmp(got[i], want[w]) == 0) {
             w++;
             continue;
         }
-        if (host_line(got[i]))
+        if (simlog_host_line(got[i]))
             continue;
         bool earlier = false;
         for (long k = w - 1; k >= 0 && k >= w - 64 && !earlier; k--)
@@ -118,9 +81,9 @@ judge(const char *gcode, const char *log, struct print_result *res)
         else
             res->fragments++;
     }
-    res->lost = n_want - w;
-    free_commands(want, n_want);
-    free_commands(got, n_got);
+    res->lost = (long)n_want - w;
+    simlog_free(want, n_want);
+    simlog_free(got, n_got);
 }
 
 static int
@@ -182,6 +145,9 @@ one_print(const char *gcode, const char *log, const struct sim_marlin_config *ba
     res->probes = ds.probes;
     res->deadlines = ds.deadlines;
     res->resends = st.resends;
+    res->renumbers = ds.renumbers;
+    res->ep_near = st.ep_near;
+    res->ep_acted = st.ep_acted;
     if (!res->done)
         fprintf(stderr, "soak: job not done: %s\n", d->status.message);
     drv_free(d);
@@ -294,7 +260,7 @@ main(int argc, char **argv)
            clean.secs);
     long failed = 0, lost = 0, repeated = 0, fragments = 0;
     double lost_s = 0, worst_s = 0;
-    uint64_t rewinds = 0, deadlines = 0, probes = 0;
+    uint64_t rewinds = 0, deadlines = 0, probes = 0, renumbers = 0, ep_near = 0, ep_acted = 0;
     for (long p = 0; p < prints; p++) {
         struct sim_marlin_config sc = base;
         char spec[64];
@@ -316,16 +282,21 @@ main(int argc, char **argv)
         rewinds += r.rewinds;
         deadlines += r.deadlines;
         probes += r.probes;
+        renumbers += r.renumbers;
+        ep_near += r.ep_near;
+        ep_acted += r.ep_acted;
         if (!r.done || r.lost || r.repeated)
             printf("  print %ld: %s, %ld lost, %ld repeated (seed %s)\n", p,
                    r.done ? "done" : "FAILED", r.lost, r.repeated, spec);
         if ((p + 1) % 100 == 0 || p + 1 == prints) {
             printf("  %ld prints: %ld failed, %ld lines lost, %ld repeated, %ld cut lines run; "
                    "recovery %.1f s a print (worst %.1f s), %.1f rewinds, %.1f probes, "
-                   "%.2f time-outs a print\n",
+                   "%.2f time-outs a print; emergency parser: %llu lines one byte from "
+                   "acting, %llu acted on, %.1f renumberings a print\n",
                    p + 1, failed, lost, repeated, fragments, lost_s / (double)(p + 1), worst_s,
                    (double)rewinds / (double)(p + 1), (double)probes / (double)(p + 1),
-                   (double)deadlines / (double)(p + 1));
+                   (double)deadlines / (double)(p + 1), (unsigned long long)ep_near,
+                   (unsigned long long)ep_acted, (double)renumbers / (double)(p + 1));
             fflush(stdout);
         }
     }

@@ -18,6 +18,7 @@
 #include "../../drivers/drv_marlin.h"
 #include "../../drivers/linewin.h"
 #include "../../sim/sim_marlin.h"
+#include "../../sim/simlog.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
 #include "../../src/base/limits.h"
@@ -98,45 +99,23 @@ write_job(struct run *r, int n, const char *extra_at_half)
     r->end_e = e;
 }
 
-/* Commands of a G-code file as the printer should log them. */
+/* Commands of a G-code file as the printer should log them (sim/simlog.h). */
 static char **
 file_commands(const char *path, size_t *n)
 {
-    struct buf b;
-    buf_init(&b, 0);
-    buf_read_file(&b, path, NULL);
-    char **out = calloc(b.len / 2 + 2, sizeof(char *));
-    *n = 0;
-    char *p = b.data;
-    while (p && *p) {
-        char *nl = strchr(p, '\n');
-        size_t len = nl ? (size_t)(nl - p) : strlen(p);
-        char cmd[256];
-        if (gcode_strip(p, len, cmd, sizeof(cmd), NULL) > 0)
-            out[(*n)++] = strdup(cmd);
-        p = nl ? nl + 1 : NULL;
-    }
-    buf_release(&b);
-    return out;
+    return simlog_commands(path, n);
 }
 
 static void
 free_lines(char **v, size_t n)
 {
-    for (size_t i = 0; i < n; i++)
-        free(v[i]);
-    free(v);
+    simlog_free(v, n);
 }
 
-/* The driver's own handshake and housekeeping lines. */
 static bool
 host_line(const char *s)
 {
-    /* A probe garbled on the wire may still run as M105 ("M105g"): still a probe. */
-    struct gcode_line g;
-    if (gcode_parse(s, strlen(s), &g, NULL) < 0 || g.letter != 'M')
-        return false;
-    return g.code == 105 || g.code == 110 || g.code == 115 || g.code == 155 || g.code == 400;
+    return simlog_host_line(s);
 }
 
 /*
