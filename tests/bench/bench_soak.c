@@ -16,6 +16,13 @@
  *
  * usage: bench_soak [--prints N] [--lines N] [--corrupt RATE] [--drop-ok RATE]
  *                   [--baud N] [--advanced-ok] [--seed N] [--from N]
+ *                   [--speed N] [--window N] [--latency MS] [--link]
+ * (--link: only the clean print, reporting the link's use: bytes the host
+ * wrote over the print's simulated time against baud / 10; with --speed
+ * 1000 the printer's motion never sets the pace, the link does.  --window
+ * sets the driver's buffer_lines: 2 is the window it kept before issue 17,
+ * 1 ping-pong, printcore's scheme; --latency MS delays each reply line by
+ * MS, a USB-serial adapter's and the firmware's turnaround.)
  * (--from N starts at print N's seed: a failure reproduces alone.)
  * Prints one line per 100 prints and a summary; exit 1 if any print failed
  * or lost or repeated a line.
@@ -42,9 +49,10 @@ struct print_result {
     long fragments;      /* log lines that are no file command (cut lines the printer ran) */
     double secs;         /* simulated seconds from start_job to the end */
     uint64_t rewinds, probes, deadlines, resends;
-    uint64_t renumbers; /* the driver's M110s past numbers near M108/M112/M410 */
-    uint64_t ep_near;   /* stream lines one garbled byte from the emergency parser acting */
-    uint64_t ep_acted;  /* lines it acted on (a garbled byte made one of them) */
+    uint64_t renumbers;  /* the driver's M110s past numbers near M108/M112/M410 */
+    uint64_t bytes_sent; /* bytes the host wrote */
+    uint64_t ep_near;    /* stream lines one garbled byte from the emergency parser acting */
+    uint64_t ep_acted;   /* lines it acted on (a garbled byte made one of them) */
 };
 
 static void
@@ -86,6 +94,8 @@ judge(const char *gcode, const char *log, struct print_result *res)
     simlog_free(got, n_got);
 }
 
+static int window_lines; /* --window: the driver's buffer_lines (0: its default) */
+
 static int
 one_print(const char *gcode, const char *log, const struct sim_marlin_config *base, bool faults_on,
           struct print_result *res)
@@ -104,8 +114,10 @@ one_print(const char *gcode, const char *log, const struct sim_marlin_config *ba
     struct sim_marlin_config sc = *base;
     if (!faults_on) {
         uint64_t seed = sc.faults.rng;
+        int slow = sc.faults.slow_ms; /* the link's latency is no fault */
         faults_init(&sc.faults);
         sc.faults.rng = seed;
+        sc.faults.slow_ms = slow;
     }
     sc.fd = sv[0];
     sc.log_path = log;
@@ -113,7 +125,11 @@ one_print(const char *gcode, const char *log, const struct sim_marlin_config *ba
     char port[32];
     snprintf(port, sizeof(port), "fd:%d", sv[1]);
     int state = 0;
-    struct drv_config dc = { .name = "soak", .kind = "marlin", .port = port, .baud = sc.baud };
+    struct drv_config dc = { .name = "soak",
+                             .kind = "marlin",
+                             .port = port,
+                             .baud = sc.baud,
+                             .buffer_lines = window_lines };
     struct drv *d = sim ? drv_new(l, &dc, on_event, &state, &err) : NULL;
     int rc = d ? d->ops->open(d, &err) : -1;
     close(sv[1]);
@@ -146,6 +162,7 @@ one_print(const char *gcode, const char *log, const struct sim_marlin_config *ba
     res->deadlines = ds.deadlines;
     res->resends = st.resends;
     res->renumbers = ds.renumbers;
+    res->bytes_sent = ds.bytes_sent;
     res->ep_near = st.ep_near;
     res->ep_acted = st.ep_acted;
     if (!res->done)
@@ -188,14 +205,19 @@ arg_rate(const char *o, const char *v, double *out)
 int
 main(int argc, char **argv)
 {
-    long prints = 1000, lines = 3000, baud = 115200, seed = 1, from = 0;
+    long prints = 1000, lines = 3000, baud = 115200, seed = 1, from = 0, speed = 1, win = 0,
+         latency = 0;
     double corrupt = 0.01, drop_ok = 0.01;
-    bool advanced = false;
+    bool advanced = false, link = false;
     for (int i = 1; i < argc; i++) {
         const char *o = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         int rc = 0;
         if (strcmp(o, "--advanced-ok") == 0) {
             advanced = true;
+            continue;
+        }
+        if (strcmp(o, "--link") == 0) {
+            link = true;
             continue;
         }
         if (strcmp(o, "--prints") == 0)
@@ -212,9 +234,17 @@ main(int argc, char **argv)
             rc = arg_rate(o, v, &corrupt);
         else if (strcmp(o, "--drop-ok") == 0)
             rc = arg_rate(o, v, &drop_ok);
-        else {
+        else if (strcmp(o, "--latency") == 0)
+            rc = arg_long(o, v, 0, 1000, &latency);
+        else if (strcmp(o, "--speed") == 0)
+            rc = arg_long(o, v, 1, 100000, &speed);
+        else if (strcmp(o, "--window") == 0) {
+            rc = arg_long(o, v, 0, 32, &win);
+            window_lines = (int)win;
+        } else {
             fprintf(stderr, "usage: bench_soak [--prints N] [--lines N] [--corrupt RATE] "
-                            "[--drop-ok RATE] [--baud N] [--advanced-ok] [--seed N] [--from N]\n");
+                            "[--drop-ok RATE] [--baud N] [--advanced-ok] [--seed N] [--from N] "
+                            "[--speed N] [--window N] [--latency MS] [--link]\n");
             return 2;
         }
         if (rc < 0)
@@ -246,6 +276,8 @@ main(int argc, char **argv)
     struct sim_marlin_config base;
     sim_marlin_config_init(&base);
     base.baud = (int)baud;
+    base.speed = (double)speed;
+    base.faults.slow_ms = (int)latency;
     base.uart = true;
     base.advanced_ok = advanced;
     struct print_result clean;
@@ -253,6 +285,21 @@ main(int argc, char **argv)
         clean.repeated) {
         fprintf(stderr, "bench_soak: the clean print failed\n");
         return 1;
+    }
+    if (link) {
+        /* Link use: the bytes the host wrote over the clean print's time,
+           against the link's byte rate (baud / 10, 8N1). */
+        double bps = (double)clean.bytes_sent / clean.secs;
+        printf(
+            "link use: %ld lines, stock Marlin (%s, BUFSIZE 4, RX 128 UART), printer speed x%ld, "
+            "%ld baud, window %d, reply latency %ld ms: %.1f s, %.0f bytes/s, %.1f %% of the "
+            "link\n",
+            lines, advanced ? "ADVANCED_OK" : "plain ok", speed, baud, window_lines, latency,
+            clean.secs, bps, 100.0 * bps / ((double)baud / 10.0));
+        unlink(gcode);
+        unlink(log);
+        rmdir(dir);
+        return 0;
     }
     printf("soak: %ld prints of %ld lines, stock Marlin (%s, BUFSIZE 4, RX 128 UART) at %ld baud, "
            "%.2f %% of bytes garbled each way, %.2f %% of oks lost; clean print %.1f s\n",
