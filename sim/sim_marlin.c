@@ -89,6 +89,7 @@ struct sim_marlin {
     bool bad_done;    /* the line faults.bad_line was rejected once */
     bool tx_line_hit;
     char emerg[MAX_CMD_SIZE + 8]; /* the incoming line, for the emergency parser */
+    bool emerg_garbled;           /* a byte of it was garbled on the way (corrupt-rx) */
     bool hit_rx_done;             /* faults.hit_rx_line was garbled */
     bool hit_rx_bad;              /* ... and is to be refused by its checksum */
     int emerg_len;
@@ -938,6 +939,8 @@ emergency_line(struct sim_marlin *s)
 {
     int len = s->emerg_len;
     s->emerg_len = 0;
+    bool intact = !s->emerg_garbled;
+    s->emerg_garbled = false;
     const char *b = s->emerg;
     if (s->faults.hit_rx && !s->hit_rx_done && len > 1 && b[0] == 'N' &&
         strtol(b + 1, NULL, 10) == s->faults.hit_rx_line && s->faults.hit_rx_pos < len) {
@@ -945,9 +948,9 @@ emergency_line(struct sim_marlin *s)
         s->hit_rx_bad = true;
         s->emerg[s->faults.hit_rx_pos] = (char)s->faults.hit_rx_byte;
         s->st.hits++;
-    } else if (len > 1 && b[0] == 'N' && b[1] >= '1' && b[1] <= '9' &&
+    } else if (intact && len > 1 && b[0] == 'N' && b[1] >= '1' && b[1] <= '9' &&
                ep_line(EP_RESET, b, len) != EP_ACT && ep_one_byte_away(b, len)) {
-        s->st.ep_near++; /* the stream's lines (the handshake's are N0 or unnumbered) */
+        s->st.ep_near++; /* the stream's lines as sent (the handshake's are N0 or unnumbered) */
     }
     if (ep_line(EP_RESET, b, len) != EP_ACT)
         return;
@@ -1020,6 +1023,7 @@ read_input(struct sim_marlin *s)
         if (!s->rx_line_hit && faults_roll(&s->faults, s->faults.corrupt_rx)) {
             c = (char)faults_byte(&s->faults, (uint8_t)c);
             s->rx_line_hit = true;
+            s->emerg_garbled = true;
         }
         if (eol)
             s->rx_line_hit = false;

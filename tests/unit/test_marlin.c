@@ -529,7 +529,6 @@ write_ep_job(struct run *r, int n)
 static void
 ep_stream(bool advanced, const char *fault)
 {
-    sim_time = true;
     struct run r = { 0 };
     struct sim_marlin_config sc;
     sim_marlin_config_init(&sc);
@@ -560,26 +559,31 @@ ep_stream(bool advanced, const char *fault)
         T_TRUE(ds.renumbers >= 10); /* the numbers were there to skip */
     }
     teardown(&r);
-    sim_time = false;
 }
 
 T_CASE(marlin_line_numbers_skip_emergency_commands_plain_ok)
 {
     /* Line 2112's first digit garbled to 'M' as it arrives: on a driver
        that numbers it so, the printer halts (M112). */
+    sim_time = true;
     ep_stream(false, "hit-rx=2112:1:77");
+    sim_time = false;
 }
 
 T_CASE(marlin_line_numbers_skip_emergency_commands_advanced_ok)
 {
     /* Line 1120's N garbled to 'M' ("M1120 ...": the parser acts on it). */
+    sim_time = true;
     ep_stream(true, "hit-rx=1120:0:77");
+    sim_time = false;
 }
 
 /* The renumbering M110's ok lost, and its first copy refused: the job goes on. */
 T_CASE(marlin_renumbering_survives_lost_ok)
 {
+    sim_time = true;
     ep_stream(false, "drop-ok=0.05");
+    sim_time = false;
 }
 
 /* A short job whose line 55 makes the printer send the reply kind under test. */
@@ -701,7 +705,7 @@ reset_mid_print(bool tcp)
     }
     write_job(&r, JOB_LINES, NULL);
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.failed, 1);
     T_TRUE(strstr(r.drv->status.message, "reset") != NULL);
     size_t extra;
@@ -712,13 +716,15 @@ reset_mid_print(bool tcp)
     T_TRUE(r.drv->status.lines_acked + 5 >= executed);
     T_TRUE(executed < r.drv->status.lines_total);
     /* The driver reconnects on its own after the reboot banner. */
-    T_TRUE(until(&r, is_idle, 5000));
+    T_TRUE(until(&r, is_idle, budget_ms(5000)));
     teardown(&r);
 }
 
 T_CASE(marlin_reset_mid_print_fails_at_last_ack)
 {
+    sim_time = true; /* the firmware's reset, over a socketpair */
     reset_mid_print(false);
+    sim_time = false;
 }
 
 T_CASE(marlin_reset_mid_print_over_tcp)
@@ -836,7 +842,7 @@ pause_resume(bool tcp)
     write_job(&r, JOB_LINES, NULL);
     r.pause_at = 1000;
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, park_done, 20000));
+    T_TRUE(until(&r, park_done, budget_ms(20000)));
     struct sim_marlin_stats st;
     sim_marlin_stats(r.sim, &st);
     T_TRUE(st.z >= 10 - 1e-9); /* lifted */
@@ -847,7 +853,7 @@ pause_resume(bool tcp)
     struct sf_err err;
     T_ERR(r.drv->ops->pause(r.drv, &err), SF_EINVAL, &err, "nothing to pause");
     T_OK(r.drv->ops->resume(r.drv, &err), &err);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.done, 1);
     size_t extra;
     bool bad;
@@ -866,7 +872,9 @@ pause_resume(bool tcp)
 
 T_CASE(marlin_pause_parks_resume_restores)
 {
+    sim_time = true;
     pause_resume(false);
+    sim_time = false;
 }
 
 T_CASE(marlin_pause_resume_over_tcp)
@@ -874,7 +882,8 @@ T_CASE(marlin_pause_resume_over_tcp)
     pause_resume(true);
 }
 
-T_CASE(marlin_host_action_pause_from_printer)
+static void
+host_action_pause(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
@@ -887,14 +896,23 @@ T_CASE(marlin_host_action_pause_from_printer)
     /* M118 A1 makes Marlin print "//action:pause", as a runout sensor would. */
     write_job(&r, 1000, "M118 A1 action:pause");
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, park_done, 20000));
+    T_TRUE(until(&r, park_done, budget_ms(20000)));
     T_OK(r.drv->ops->resume(r.drv, NULL), NULL);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.done, 1);
     teardown(&r);
 }
 
-T_CASE(marlin_cancel_runs_end_sequence)
+T_CASE(marlin_host_action_pause_from_printer)
+{
+    /* Simulated time: no real-time budget to outrun on a loaded machine. */
+    sim_time = true;
+    host_action_pause();
+    sim_time = false;
+}
+
+static void
+cancel_end_sequence(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
@@ -906,7 +924,7 @@ T_CASE(marlin_cancel_runs_end_sequence)
     write_job(&r, JOB_LINES, NULL);
     r.cancel_at = 1000;
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.cancelled, 1);
     T_EQ_INT(r.drv->status.state, DRV_IDLE);
     struct sim_marlin_stats st;
@@ -923,7 +941,16 @@ T_CASE(marlin_cancel_runs_end_sequence)
     teardown(&r);
 }
 
-T_CASE(marlin_emergency_stop)
+T_CASE(marlin_cancel_runs_end_sequence)
+{
+    /* Simulated time: no real-time budget to outrun on a loaded machine. */
+    sim_time = true;
+    cancel_end_sequence();
+    sim_time = false;
+}
+
+static void
+emergency_stop(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
@@ -947,6 +974,14 @@ T_CASE(marlin_emergency_stop)
     sim_marlin_stats(r.sim, &st);
     T_TRUE(st.halted);
     teardown(&r);
+}
+
+T_CASE(marlin_emergency_stop)
+{
+    /* Simulated time: no real-time budget to outrun on a loaded machine. */
+    sim_time = true;
+    emergency_stop();
+    sim_time = false;
 }
 
 T_CASE(marlin_config_errors_are_clear)
@@ -1075,7 +1110,7 @@ resume_from_line(enum resume_way way)
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, first, given, &err), &err);
     T_EQ_INT(r.drv->status.lines_acked, first);
     T_EQ_INT(r.drv->status.lines_total, n_want);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.done, 1);
     T_EQ_INT(r.drv->status.lines_acked, n_want);
     /* The log as it should be: preamble, then want[first..]. */
@@ -1113,19 +1148,25 @@ resume_from_line(enum resume_way way)
 
 T_CASE(marlin_resume_from_line_restores_state)
 {
+    sim_time = true;
     resume_from_line(READ_ALL);
+    sim_time = false;
 }
 
 /* The same with the owner's scan: the file is read only up to the line. */
 T_CASE(marlin_resume_from_line_with_scan_restores_state)
 {
+    sim_time = true;
     resume_from_line(READ_TO_LINE);
+    sim_time = false;
 }
 
 /* The same with the line's resume point in the scan: nothing is read before it. */
 T_CASE(marlin_resume_from_a_resume_point_reads_nothing_before_it)
 {
+    sim_time = true;
     resume_from_line(READ_NOTHING);
+    sim_time = false;
 }
 
 /* Line number (1-based) of the first line of path containing text. */
@@ -1182,7 +1223,8 @@ T_CASE(marlin_scan_counts_commands_and_names_a_bad_line)
  * streaming still stops at the bad command rather than send it.  This is
  * why the farm scans every job when it prepares it.
  */
-T_CASE(marlin_start_job_with_scan_reads_no_further)
+static void
+start_job_with_scan(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
@@ -1203,11 +1245,19 @@ T_CASE(marlin_start_job_with_scan_reads_no_further)
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, &scan, &err), &err);
     T_EQ_INT(r.drv->status.state, DRV_PRINTING);
     T_EQ_INT(r.drv->status.lines_total, 123456);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.failed, 1);
     T_TRUE(strstr(r.drv->status.message, "too long for Marlin") != NULL);
     T_TRUE(r.drv->status.lines_acked < (uint64_t)JOB_LINES);
     teardown(&r);
+}
+
+T_CASE(marlin_start_job_with_scan_reads_no_further)
+{
+    /* Simulated time: no real-time budget to outrun on a loaded machine. */
+    sim_time = true;
+    start_job_with_scan();
+    sim_time = false;
 }
 
 /* The emergency parser's model, on lines as the driver writes them. */
