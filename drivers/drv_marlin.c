@@ -105,6 +105,8 @@ struct marlin {
     int64_t busy_until_ms;      /* when the moves acknowledged so far end at the latest */
     int64_t poll_ms;            /* next M105 poll (no auto-report) */
     long error_wants;           /* "Error:... Last Line: L" just came: L + 1, until its Resend */
+    long renumber_n;            /* the renumbering M110 in the window, its ok awaited (0: none) */
+    long renumber_to;           /* ... and the number it sets (the next line is one more) */
     long bad_resend;            /* resend target out of range */
     int bad_resend_count;       /* times in a row it was asked for */
     char inject[INJECT_MAX][LINEWIN_LINE_MAX];
@@ -406,6 +408,65 @@ inject_front(struct marlin *m, const char *cmd)
 static void pump(struct marlin *m);
 
 /*
+ * Line numbers near the emergency parser's commands.  Marlin's parser acts
+ * on M108/M112/M410 at a line's start or after its N and digits, before
+ * the checksum is checked, so "N2112 G1..." is one garbled byte from
+ * "NM112 G1..." (kill), and "N1120 G1..." from "M1120 G1...".  No line
+ * goes out under such a number: the line before one is
+ * "N<n> M0110 N<m>", which makes the next line m + 1, the first of two
+ * safe numbers.  "M0110", not "M110": the parser stops at the 0 where
+ * "M110" is one byte from "M112"; Marlin reads the code as 110 but, not
+ * finding "M110" in the text, checks its N like any line's (n is the one
+ * it expects).  It is a barrier: Marlin sets the count when it runs the
+ * line, so nothing follows it until its ok.  Host lines take the form of
+ * their command that no one garbled byte turns into one of the three
+ * (linewin_ep_safe_form: "M105" is one byte from "M108", "M00105" none).
+ * Returns true when a renumbering is in the window (nothing may be pushed).
+ */
+static bool
+renumber_pending(struct marlin *m)
+{
+    if (m->renumber_n)
+        return true;
+    long n = m->win.high + 1;
+    if (linewin_number_ok(n + 1))
+        return false;
+    long q = n + 2;
+    while (!linewin_number_ok(q) || !linewin_number_ok(q + 1))
+        q++;
+    char cmd[32], form[LINEWIN_LINE_MAX];
+    snprintf(cmd, sizeof(cmd), "M0110 N%ld", q - 1);
+    linewin_ep_safe_form(n, cmd, form, sizeof(form));
+    struct sf_err err;
+    if (linewin_push(&m->win, form, TAG_HOST, &err) != n)
+        return true; /* the ring is full: the caller waits */
+    m->renumber_n = n;
+    m->renumber_to = q - 1;
+    m->st.renumbers++;
+    m->st.host_lines++;
+    return true;
+}
+
+/* The renumbering M110 was handled: number on from its target. */
+static void
+renumber_check(struct marlin *m, bool took)
+{
+    if (!m->renumber_n || (!took && m->win.acked < m->renumber_n))
+        return;
+    linewin_reset(&m->win, m->renumber_to);
+    m->renumber_n = 0;
+}
+
+/* Push a host line (cmd as the driver wrote it) in its safe form. */
+static long
+push_host(struct marlin *m, const char *cmd, long tag, struct sf_err *err)
+{
+    char form[LINEWIN_LINE_MAX];
+    linewin_ep_safe_form(m->win.high + 1, cmd, form, sizeof(form));
+    return linewin_push(&m->win, form, tag, err);
+}
+
+/*
  * Something did not add up (an unreadable reply, an ok for a line that
  * cannot be, an error without its Resend): ask for a barrier.  The probe is
  * a numbered M105 in the stream, inside the window like any line: Marlin
@@ -419,11 +480,12 @@ want_probe(struct marlin *m)
     if (m->probe_wanted || m105_in_flight(m) || m->phase != PH_READY)
         return;
     m->st.probes++;
-    if (m->win.window == 1 && m->win.in_flight > 0 && m->win.next > m->win.high) {
+    if (m->win.window == 1 && m->win.in_flight > 0 && m->win.next > m->win.high &&
+        !renumber_pending(m)) {
         /* In ping-pong the garbled reply was the one line's: nothing else
            will come, so the probe goes now, past the window. */
         struct sf_err err;
-        if (linewin_push(&m->win, "M105", TAG_M105, &err) > 0) {
+        if (push_host(m, "M105", TAG_M105, &err) > 0) {
             m->st.host_lines++;
             linewin_force(&m->win);
             pump(m);
@@ -465,11 +527,15 @@ pump(struct marlin *m)
             return; /* the window is full */
         if (m->win.in_flight >= m->win.window)
             return;
+        if (m->renumber_n)
+            return; /* a barrier: nothing follows it until its ok */
+        if (renumber_pending(m))
+            continue;
         struct sf_err err;
         if (m->inj_len > 0) {
             const char *cmd = m->inject[m->inj_head];
             long tag = strcmp(cmd, "M105") == 0 ? TAG_M105 : TAG_HOST;
-            long rc = linewin_push(&m->win, cmd, tag, &err);
+            long rc = push_host(m, cmd, tag, &err);
             if (rc == SF_EAGAIN)
                 return;
             if (rc < 0) {
@@ -658,6 +724,7 @@ handshake_done(struct marlin *m)
     m->phase = PH_READY;
     m->hello_tries = 0;
     linewin_reset(&m->win, 0);
+    m->renumber_n = 0;
     if (m->settle_timer)
         loop_timer_cancel(m->base.loop, m->settle_timer);
     m->settle_timer = 0;
@@ -694,6 +761,13 @@ on_m105_answer(struct marlin *m)
 static void
 on_resend(struct marlin *m, long k)
 {
+    if (m->renumber_n && k == m->renumber_to + 1 && m->win.next > m->renumber_n) {
+        /* The printer counts from the renumbering: it ran it (its ok was
+           lost, or this refuses a copy of it sent after a silence). */
+        renumber_check(m, true);
+        m->win.swallow = 1; /* the refusal's ok */
+        return;
+    }
     long before = m->win.acked;
     int rc = linewin_on_resend(&m->win, k);
     if (rc == SF_OK) {
@@ -931,6 +1005,7 @@ on_reply(struct marlin *m, const char *line, size_t len)
     default:
         break;
     }
+    renumber_check(m, false);
     check_job_progress(m);
 }
 
@@ -1011,6 +1086,10 @@ on_close(void *ud, const char *why)
 static void
 hello(struct marlin *m)
 {
+    /* The one line left one garbled byte from an emergency command
+       ("M110" -> "M112"): Marlin takes an M110's number without the
+       sequence check only when its text holds "M110", and the count it
+       had is unknown here.  It goes before any job runs. */
     char m110[32];
     gcode_number_line(0, "M110 N0", m110, sizeof(m110));
     if (m->phase != PH_HELLO) {
@@ -1069,17 +1148,26 @@ deadline(struct marlin *m, int64_t now)
        not be taken for its, or each probe would only answer the one before. */
     if (linewin_tag(&m->win, m->win.acked + 1) == TAG_M105)
         linewin_set_tag(&m->win, m->win.acked + 1, TAG_HOST);
-    if (m->win.next <= m->win.high) {
+    if (m->renumber_n && m->win.next > m->renumber_n) {
+        /* The renumbering's ok is overdue: send it again.  Run already,
+           the copy is refused with "Resend: m + 1" (on_resend); lost, it
+           runs now. */
+        long before = m->win.acked;
+        linewin_rewind(&m->win, m->renumber_n);
+        credit(m, before, m->win.acked);
+    } else if (m->win.next <= m->win.high) {
         long before = m->win.acked;
         linewin_resync(&m->win);
         credit(m, before, m->win.acked);
-    } else {
+    } else if (!renumber_pending(m)) {
         struct sf_err err;
-        long n = linewin_push(&m->win, "M105", TAG_M105, &err);
+        long n = push_host(m, "M105", TAG_M105, &err);
         if (n > 0) {
             m->st.host_lines++;
             linewin_force(&m->win);
         }
+    } else {
+        linewin_force(&m->win); /* the renumbering goes out as the probe */
     }
     pump(m);
 }

@@ -21,6 +21,7 @@ struct drv_marlin_stats {
     uint64_t deadlines;  /* silences longer than what was in flight could take */
     int64_t lost_ms;     /* time spent waiting out those silences */
     uint64_t host_lines; /* numbered lines the driver added (park, resume, end, M400, M105) */
+    uint64_t renumbers;  /* M110s that skipped line numbers near M108/M112/M410 */
     int window;          /* lines in flight now allowed */
 };
 

@@ -12,6 +12,7 @@
  */
 #include "linewin.h"
 
+#include <stdio.h>
 #include <string.h>
 
 #include "../src/base/gcode.h"
@@ -265,4 +266,156 @@ bool
 linewin_idle(const struct linewin *w)
 {
     return w->acked >= w->high;
+}
+
+void
+linewin_rewind(struct linewin *w, long k)
+{
+    if (k < 1 || k > w->next)
+        return;
+    if (w->acked < k - 1)
+        w->acked = k - 1;
+    w->next = k;
+    w->swallow = 0;
+    w->stale = 0;
+    w->extra = 0;
+    settle_counts(w);
+}
+
+/* ---- Marlin's emergency parser ------------------------------------------ */
+
+/* Its states (e_parser.h), folded: ACT is any of M108/M112/M410 reached. */
+enum ep_state { EP_RESET, EP_N, EP_M, EP_M1, EP_M10, EP_M11, EP_M4, EP_M41, EP_ACT, EP_IGNORE };
+
+static bool
+ep_eol(unsigned char c)
+{
+    return c == '\n' || c == '\r';
+}
+
+/* One byte; *fired when it ends a line that acts. */
+static enum ep_state
+ep_step(enum ep_state s, unsigned char c, bool *fired)
+{
+    switch (s) {
+    case EP_RESET:
+        return c == ' ' || ep_eol(c) ? EP_RESET : c == 'N' ? EP_N : c == 'M' ? EP_M : EP_IGNORE;
+    case EP_N:
+        return (c >= '0' && c <= '9') || c == '-' || c == ' ' ? EP_N : c == 'M' ? EP_M : EP_IGNORE;
+    case EP_M:
+        return c == ' ' ? EP_M : c == '1' ? EP_M1 : c == '4' ? EP_M4 : EP_IGNORE;
+    case EP_M1:
+        return c == '0' ? EP_M10 : c == '1' ? EP_M11 : EP_IGNORE;
+    case EP_M10:
+        return c == '8' ? EP_ACT : EP_IGNORE;
+    case EP_M11:
+        return c == '2' ? EP_ACT : EP_IGNORE;
+    case EP_M4:
+        return c == '1' ? EP_M41 : EP_IGNORE;
+    case EP_M41:
+        return c == '0' ? EP_ACT : EP_IGNORE;
+    case EP_ACT:
+        if (!ep_eol(c))
+            return EP_ACT;
+        *fired = true;
+        return EP_RESET;
+    case EP_IGNORE:
+        return ep_eol(c) ? EP_RESET : EP_IGNORE;
+    }
+    return EP_IGNORE;
+}
+
+/* Run bytes from state s; true if a line among them acts.  Ends early once
+   the rest of a line is ignored and no line end follows. */
+static bool
+ep_run(enum ep_state s, const unsigned char *b, size_t len)
+{
+    bool fired = false;
+    size_t last_eol = 0; /* one past the last line end */
+    for (size_t i = len; i > 0 && !last_eol; i--)
+        if (ep_eol(b[i - 1]))
+            last_eol = i;
+    for (size_t i = 0; i < len && !fired; i++) {
+        if (s == EP_IGNORE && i >= last_eol)
+            return false;
+        s = ep_step(s, b[i], &fired);
+    }
+    return fired || s == EP_ACT; /* a line still open that acts when it ends */
+}
+
+/* True when line acts as written (it is M108, M112 or M410). */
+static bool
+ep_acts(const char *line, size_t len)
+{
+    unsigned char b[LINEWIN_LINE_MAX + 2];
+    if (len > LINEWIN_LINE_MAX)
+        return false;
+    memcpy(b, line, len);
+    b[len] = '\n';
+    return ep_run(EP_RESET, b, len + 1);
+}
+
+bool
+linewin_ep_hazard(const char *line, size_t len)
+{
+    unsigned char b[LINEWIN_LINE_MAX + 2];
+    if (len > LINEWIN_LINE_MAX)
+        return true; /* longer than we send: not vouched for */
+    if (ep_acts(line, len))
+        return true;
+    memcpy(b, line, len);
+    b[len] = '\n';
+    size_t n = len + 1;
+    /* Each byte replaced by each other value: the prefix's state, the new
+       byte, then the rest as written.  A line that came in ignored (the one
+       before it lost its newline) is ignored whatever its bytes. */
+    enum ep_state s = EP_RESET;
+    bool fired = false;
+    /* The parser tells apart only these bytes; X and Y stand for all others. */
+    static const char tell[] = " NM0123456789-\n\rXY";
+    for (size_t i = 0; i < n; i++) {
+        for (const char *pc = tell; *pc; pc++) {
+            unsigned char c = (unsigned char)*pc;
+            if (c == b[i])
+                continue;
+            if (s == EP_IGNORE && !ep_eol(c))
+                continue; /* ignored before and after: only a new line end matters */
+            bool f = false;
+            enum ep_state t = ep_step(s, c, &f);
+            if (f || ep_run(t, b + i + 1, n - i - 1))
+                return true;
+        }
+        s = ep_step(s, b[i], &fired);
+    }
+    return false;
+}
+
+bool
+linewin_number_ok(long n)
+{
+    char text[LINEWIN_LINE_MAX];
+    size_t len = gcode_number_line(n, "G0", text, sizeof(text));
+    return len > 0 && !linewin_ep_hazard(text, len);
+}
+
+bool
+linewin_ep_safe_form(long n, const char *cmd, char *out, size_t cap)
+{
+    char form[LINEWIN_LINE_MAX], text[LINEWIN_LINE_MAX];
+    for (int zeros = 0; zeros <= 2; zeros++) {
+        if (zeros > 0 && !(cmd[0] == 'M' && cmd[1] >= '0' && cmd[1] <= '9'))
+            break;
+        int k = snprintf(form, sizeof(form), "%c%.*s%s", cmd[0], zeros, "00", cmd + 1);
+        if (k < 0 || (size_t)k >= sizeof(form) || (size_t)k >= cap)
+            break;
+        size_t len = gcode_number_line(n, form, text, sizeof(text));
+        if (len > 0 && zeros == 0 && ep_acts(text, len))
+            break; /* M108, M112, M410 meant to act: as they are */
+        if (len > 0 && !linewin_ep_hazard(text, len)) {
+            memcpy(out, form, (size_t)k + 1);
+            return true;
+        }
+    }
+    snprintf(out, cap, "%s", cmd);
+    return false;
 }

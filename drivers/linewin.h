@@ -130,4 +130,34 @@ long linewin_tag(const struct linewin *w, long n);
 /* True when every pushed line is acknowledged. */
 bool linewin_idle(const struct linewin *w);
 
+/*
+ * The host sends again from line k, unasked (a renumbering M110 whose ok
+ * is overdue): lines before k count as handled, next = k.
+ */
+void linewin_rewind(struct linewin *w, long k);
+
+/*
+ * Marlin's EMERGENCY_PARSER (feature/e_parser.cpp) reads every byte as it
+ * arrives, before any checksum: at the start of a line, after spaces and
+ * "N" with digits, '-' and spaces, "M108", "M112" or "M410" followed by
+ * anything up to the end of the line acts at once (M112 kills the
+ * printer).  True when line (len bytes, without its newline) makes it act
+ * as written, or would after any one of its bytes, or its newline, is
+ * replaced by any other: "N2112 G1..." is one byte from "NM112 G1...",
+ * "N1120 G1..." from "M1120 G1...", "M110" from "M112".  Pure.
+ */
+bool linewin_ep_hazard(const char *line, size_t len);
+
+/* True when lines numbered n are no such hazard by their number. */
+bool linewin_number_ok(long n);
+
+/*
+ * cmd ("M<code>...") in a form the emergency parser cannot be one byte
+ * from acting on once numbered as line n, into out (cap bytes): cmd itself,
+ * or its code with one or two leading zeros ("M00105": Marlin reads the
+ * code as a number, the parser stops at the 0).  Returns false (out = cmd)
+ * when none is, or when cmd is M108, M112 or M410 itself (meant to act).
+ */
+bool linewin_ep_safe_form(long n, const char *cmd, char *out, size_t cap);
+
 #endif

@@ -149,17 +149,41 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
         return parse_count(spec, v, 1L << 40, &f->bad_line, err);
     if (NAME_IS("hit"))
         return parse_hit(f, spec, v, err);
+    if (NAME_IS("hit-rx")) {
+        long num[3];
+        const char *p = v;
+        for (int i = 0; i < 3 && p; i++) {
+            char *end;
+            errno = 0;
+            num[i] = strtol(p, &end, 10);
+            if (errno || end == p || (i < 2 ? *end != ':' : *end != '\0'))
+                p = NULL;
+            else
+                p = end + 1;
+        }
+        if (!p || num[0] < 0 || num[1] < 0 || num[1] > 95 || num[2] < 1 || num[2] > 255)
+            return sf_err_set(err, SF_EINVAL,
+                              "fault '%s': expected hit-rx=LINE:POS:BYTE, LINE >= 0, POS 0-95, "
+                              "BYTE 1-255",
+                              spec);
+        f->hit_rx = true;
+        f->hit_rx_line = num[0];
+        f->hit_rx_pos = (int)num[1];
+        f->hit_rx_byte = (int)num[2];
+        return SF_OK;
+    }
     if (NAME_IS("seed")) {
         rc = parse_count(spec, v, 1L << 40, &c, err);
         f->rng = (uint64_t)c * 0x9E3779B97F4A7C15ull + 1;
         return rc;
     }
 #undef NAME_IS
-    return sf_err_set(err, SF_EINVAL,
-                      "fault '%s': unknown; expected corrupt, corrupt-rx, corrupt-tx, drop-ok, "
-                      "garbage, dup, merge, bad-line, hit, slow, reset, disconnect, runaway or "
-                      "seed",
-                      spec);
+    return sf_err_set(
+        err, SF_EINVAL,
+        "fault '%s': unknown; expected corrupt, corrupt-rx, corrupt-tx, drop-ok, "
+        "garbage, dup, merge, bad-line, hit, hit-rx, slow, reset, disconnect, runaway or "
+        "seed",
+        spec);
 }
 
 static uint64_t

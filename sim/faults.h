@@ -18,7 +18,11 @@
  *   hit=KIND:LINE:POS:BYTE  once, the first reply of KIND after line LINE was received has
  *                     its byte POS (0-based; its length is the newline) replaced by BYTE
  *                     (0-255; 256 flips its low bit); KIND is ok (a plain "ok"), okn ("ok N.."),
- * okt (M105's "ok T:.."), resend, error, busy or temp (an M109/M190 wait report) seed=N seed of the
+ * okt (M105's "ok T:.."), resend, error, busy or temp (an M109/M190 wait report)
+ *   hit-rx=LINE:POS:BYTE  once, the first line the host sends numbered LINE has its byte POS
+ *                     (0-based, from its N) replaced by BYTE as it arrives: the emergency
+ *                     parser reads it so, and the checksum refuses it
+ * seed=N seed of the
  * fault dice (default 1): runs are reproducible Corruption hits at most one byte per line: Marlin's
  * XOR checksum catches every single-byte error but not two that cancel, and a test that lets those
  * through would test the checksum's weakness, not the host.
@@ -49,6 +53,10 @@ struct faults {
     long hit_line;         /* ... the first one after this line number was received */
     int hit_pos;           /* byte position in the reply line (its newline included) */
     int hit_byte;          /* the byte written there (256: its low bit flipped) */
+    bool hit_rx;           /* a host line is to be garbled once (hit-rx) */
+    long hit_rx_line;      /* ... its number */
+    int hit_rx_pos;        /* ... its byte position */
+    int hit_rx_byte;       /* ... the byte written there */
     uint64_t rng;          /* xorshift state; never 0 */
 };
 

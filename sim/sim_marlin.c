@@ -88,7 +88,10 @@ struct sim_marlin {
     bool hit_done;    /* the targeted reply corruption (faults.hit_*) happened */
     bool bad_done;    /* the line faults.bad_line was rejected once */
     bool tx_line_hit;
-    char emerg[24]; /* start of the incoming line, for the emergency parser */
+    char emerg[MAX_CMD_SIZE + 8]; /* the incoming line, for the emergency parser */
+    bool emerg_garbled;           /* a byte of it was garbled on the way (corrupt-rx) */
+    bool hit_rx_done;             /* faults.hit_rx_line was garbled */
+    bool hit_rx_bad;              /* ... and is to be refused by its checksum */
     int emerg_len;
     struct outline *out_head, *out_tail;
     struct buf tx; /* bytes on their way out */
@@ -763,8 +766,12 @@ run_queue(struct sim_marlin *s)
         } else {
             if (fresh && known(&g)) {
                 s->st.executed++;
+                /* the command as Marlin reads it: "M00105" runs as M105 */
+                size_t z = 1;
+                while (cmd[0] == 'M' && cmd[z] == '0' && cmd[z + 1] >= '0' && cmd[z + 1] <= '9')
+                    z++;
                 if (s->log && n > 0)
-                    fprintf(s->log, "%s\n", cmd);
+                    fprintf(s->log, "%c%s\n", cmd[0], cmd + z);
             }
             done = run_command(s, raw, cmd, &g);
         }
@@ -825,6 +832,10 @@ line_done(struct sim_marlin *s)
         uint8_t cs = gcode_checksum(cmd, (size_t)(star - cmd));
         bool bad = n == s->faults.bad_line && !m110 && !s->bad_done;
         s->bad_done |= bad;
+        if (s->hit_rx_bad && strtol(cmd + 1, NULL, 10) == s->faults.hit_rx_line) {
+            bad = true; /* garbled on the way in (hit-rx): one byte off, the checksum fails */
+            s->hit_rx_bad = false;
+        }
         if (strtol(star + 1, NULL, 10) != cs || bad) {
             line_error(s, "checksum mismatch, Last Line: ");
             return;
@@ -842,7 +853,122 @@ line_done(struct sim_marlin *s)
     s->q_len++;
 }
 
-/* Marlin's EMERGENCY_PARSER: M112, M108, M410 act as the bytes arrive. */
+/*
+ * Marlin's EMERGENCY_PARSER (feature/e_parser.cpp), which reads every byte
+ * before the RX ring and any checksum: at a line's start, after spaces
+ * and "N" with digits, '-' and spaces, "M" (spaces) "108", "112" or "410"
+ * followed by anything acts when the line ends.  Its states, folded (ACT:
+ * one of the three reached).
+ */
+enum ep_state { EP_RESET, EP_N, EP_M, EP_M1, EP_M10, EP_M11, EP_M4, EP_M41, EP_ACT, EP_IGNORE };
+
+static enum ep_state
+ep_step(enum ep_state st, unsigned char c)
+{
+    bool eol = c == '\n' || c == '\r';
+    switch (st) {
+    case EP_RESET:
+        return c == ' ' || eol ? EP_RESET : c == 'N' ? EP_N : c == 'M' ? EP_M : EP_IGNORE;
+    case EP_N:
+        return (c >= '0' && c <= '9') || c == '-' || c == ' ' ? EP_N : c == 'M' ? EP_M : EP_IGNORE;
+    case EP_M:
+        return c == ' ' ? EP_M : c == '1' ? EP_M1 : c == '4' ? EP_M4 : EP_IGNORE;
+    case EP_M1:
+        return c == '0' ? EP_M10 : c == '1' ? EP_M11 : EP_IGNORE;
+    case EP_M10:
+        return c == '8' ? EP_ACT : EP_IGNORE;
+    case EP_M11:
+        return c == '2' ? EP_ACT : EP_IGNORE;
+    case EP_M4:
+        return c == '1' ? EP_M41 : EP_IGNORE;
+    case EP_M41:
+        return c == '0' ? EP_ACT : EP_IGNORE;
+    case EP_ACT:
+        return EP_ACT;
+    case EP_IGNORE:
+        return EP_IGNORE;
+    }
+    return EP_IGNORE;
+}
+
+/* The state a line's bytes leave it in (its end not included). */
+static enum ep_state
+ep_line(enum ep_state st, const char *b, int len)
+{
+    for (int i = 0; i < len && st != EP_IGNORE && st != EP_ACT; i++)
+        st = ep_step(st, (unsigned char)b[i]);
+    return st;
+}
+
+/*
+ * Would one byte of this line, replaced by any other (a newline included:
+ * what follows it is a line of its own), make the parser act?  The judge
+ * of the driver's line numbers, written apart from the driver's own check.
+ */
+static bool
+ep_one_byte_away(const char *b, int len)
+{
+    enum ep_state pre = EP_RESET;
+    for (int i = 0; i < len; i++) {
+        for (int c = 1; c < 256; c++) {
+            /* the parser tells apart spaces, N, M, digits, '-' and line
+               ends; one other byte stands for the rest */
+            if (c == (unsigned char)b[i] ||
+                (c != 'X' && c != 'Y' && !strchr(" NM-\n\r", c) && !(c >= '0' && c <= '9')))
+                continue;
+            if (c == '\n' || c == '\r') {
+                if (pre == EP_ACT ||
+                    (pre == EP_RESET && ep_line(EP_RESET, b + i + 1, len - i - 1) == EP_ACT))
+                    return true;
+                continue;
+            }
+            if (pre == EP_IGNORE)
+                break;
+            if (ep_line(ep_step(pre, (unsigned char)c), b + i + 1, len - i - 1) == EP_ACT)
+                return true;
+        }
+        pre = ep_step(pre, (unsigned char)b[i]);
+    }
+    /* its newline garbled: the line runs on into the next */
+    return pre == EP_ACT;
+}
+
+/* A line ended: act as Marlin's emergency parser would on its bytes. */
+static void
+emergency_line(struct sim_marlin *s)
+{
+    int len = s->emerg_len;
+    s->emerg_len = 0;
+    bool intact = !s->emerg_garbled;
+    s->emerg_garbled = false;
+    const char *b = s->emerg;
+    if (s->faults.hit_rx && !s->hit_rx_done && len > 1 && b[0] == 'N' &&
+        strtol(b + 1, NULL, 10) == s->faults.hit_rx_line && s->faults.hit_rx_pos < len) {
+        s->hit_rx_done = true;
+        s->hit_rx_bad = true;
+        s->emerg[s->faults.hit_rx_pos] = (char)s->faults.hit_rx_byte;
+        s->st.hits++;
+    } else if (intact && len > 1 && b[0] == 'N' && b[1] >= '1' && b[1] <= '9' &&
+               ep_line(EP_RESET, b, len) != EP_ACT && ep_one_byte_away(b, len)) {
+        s->st.ep_near++; /* the stream's lines as sent (the handshake's are N0 or unnumbered) */
+    }
+    if (ep_line(EP_RESET, b, len) != EP_ACT)
+        return;
+    s->st.ep_acted++;
+    while (*b == ' ' || *b == 'N' || *b == '-' || (*b >= '0' && *b <= '9'))
+        b++;
+    while (*b == 'M' || *b == ' ')
+        b++;
+    if (b[0] == '1' && b[1] == '1') {
+        emit(s, "Error:Printer halted. kill() called!");
+        s->halted = true;
+    } else if (b[0] == '1') {
+        s->wait_heat_interrupted = true; /* M108 */
+    } else {
+        s->pl_len = 0; /* M410: quickstop */
+    }
+}
+
 static void
 emergency_byte(struct sim_marlin *s, char c)
 {
@@ -851,26 +977,7 @@ emergency_byte(struct sim_marlin *s, char c)
             s->emerg[s->emerg_len++] = c;
         return;
     }
-    s->emerg[s->emerg_len] = '\0';
-    s->emerg_len = 0;
-    const char *p = s->emerg;
-    while (*p == ' ')
-        p++;
-    if (*p == 'N') {
-        p++;
-        while (*p == '-' || (*p >= '0' && *p <= '9'))
-            p++;
-        while (*p == ' ')
-            p++;
-    }
-    if (strncmp(p, "M112", 4) == 0 && (p[4] < '0' || p[4] > '9')) {
-        emit(s, "Error:Printer halted. kill() called!");
-        s->halted = true;
-    } else if (strncmp(p, "M108", 4) == 0 && (p[4] < '0' || p[4] > '9')) {
-        s->wait_heat_interrupted = true;
-    } else if (strncmp(p, "M410", 4) == 0 && (p[4] < '0' || p[4] > '9')) {
-        s->pl_len = 0;
-    }
+    emergency_line(s);
 }
 
 static void
@@ -916,6 +1023,7 @@ read_input(struct sim_marlin *s)
         if (!s->rx_line_hit && faults_roll(&s->faults, s->faults.corrupt_rx)) {
             c = (char)faults_byte(&s->faults, (uint8_t)c);
             s->rx_line_hit = true;
+            s->emerg_garbled = true;
         }
         if (eol)
             s->rx_line_hit = false;

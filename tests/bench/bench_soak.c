@@ -16,6 +16,13 @@
  *
  * usage: bench_soak [--prints N] [--lines N] [--corrupt RATE] [--drop-ok RATE]
  *                   [--baud N] [--advanced-ok] [--seed N] [--from N]
+ *                   [--speed N] [--window N] [--latency MS] [--link]
+ * (--link: only the clean print, reporting the link's use: bytes the host
+ * wrote over the print's simulated time against baud / 10; with --speed
+ * 1000 the printer's motion never sets the pace, the link does.  --window
+ * sets the driver's buffer_lines: 2 is the window it kept before issue 17,
+ * 1 ping-pong, printcore's scheme; --latency MS delays each reply line by
+ * MS, a USB-serial adapter's and the firmware's turnaround.)
  * (--from N starts at print N's seed: a failure reproduces alone.)
  * Prints one line per 100 prints and a summary; exit 1 if any print failed
  * or lost or repeated a line.
@@ -31,6 +38,7 @@
 #include "../../drivers/drv.h"
 #include "../../drivers/drv_marlin.h"
 #include "../../sim/sim_marlin.h"
+#include "../../sim/simlog.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
 #include "../../src/base/log.h"
@@ -41,6 +49,10 @@ struct print_result {
     long fragments;      /* log lines that are no file command (cut lines the printer ran) */
     double secs;         /* simulated seconds from start_job to the end */
     uint64_t rewinds, probes, deadlines, resends;
+    uint64_t renumbers;  /* the driver's M110s past numbers near M108/M112/M410 */
+    uint64_t bytes_sent; /* bytes the host wrote */
+    uint64_t ep_near;    /* stream lines one garbled byte from the emergency parser acting */
+    uint64_t ep_acted;   /* lines it acted on (a garbled byte made one of them) */
 };
 
 static void
@@ -54,61 +66,20 @@ on_event(struct drv *d, enum drv_event ev, void *ud)
         *state = 2;
 }
 
-/* The commands of a G-code file (or log), one string each. */
-static char **
-commands(const char *path, long *n)
-{
-    struct buf b;
-    buf_init(&b, 0);
-    *n = 0;
-    if (buf_read_file(&b, path, NULL) < 0) {
-        buf_release(&b);
-        return NULL;
-    }
-    char **out = calloc(b.len / 2 + 2, sizeof(char *));
-    char *p = b.data;
-    while (p && *p) {
-        char *nl = strchr(p, '\n');
-        size_t len = nl ? (size_t)(nl - p) : strlen(p);
-        char cmd[256];
-        if (gcode_strip(p, len, cmd, sizeof(cmd), NULL) > 0)
-            out[(*n)++] = strdup(cmd);
-        p = nl ? nl + 1 : NULL;
-    }
-    buf_release(&b);
-    return out;
-}
-
-static void
-free_commands(char **v, long n)
-{
-    for (long i = 0; i < n; i++)
-        free(v[i]);
-    free(v);
-}
-
-/* The driver's own lines: handshake, auto-report, probes, the final M400. */
-static bool
-host_line(const char *s)
-{
-    return strcmp(s, "M105") == 0 || strcmp(s, "M110 N0") == 0 || strcmp(s, "M115") == 0 ||
-           strncmp(s, "M155", 4) == 0 || strcmp(s, "M400") == 0;
-}
-
 /* Judge the log: each file command once, in order.  Job lines all start "G1 X" and differ. */
 static void
 judge(const char *gcode, const char *log, struct print_result *res)
 {
-    long n_want, n_got;
-    char **want = commands(gcode, &n_want);
-    char **got = commands(log, &n_got);
+    size_t n_want, n_got;
+    char **want = simlog_commands(gcode, &n_want);
+    char **got = simlog_commands(log, &n_got);
     long w = 0;
-    for (long i = 0; i < n_got; i++) {
-        if (w < n_want && strcmp(got[i], want[w]) == 0) {
+    for (size_t i = 0; i < n_got; i++) {
+        if (w < (long)n_want && strcmp(got[i], want[w]) == 0) {
             w++;
             continue;
         }
-        if (host_line(got[i]))
+        if (simlog_host_line(got[i]))
             continue;
         bool earlier = false;
         for (long k = w - 1; k >= 0 && k >= w - 64 && !earlier; k--)
@@ -118,10 +89,12 @@ judge(const char *gcode, const char *log, struct print_result *res)
         else
             res->fragments++;
     }
-    res->lost = n_want - w;
-    free_commands(want, n_want);
-    free_commands(got, n_got);
+    res->lost = (long)n_want - w;
+    simlog_free(want, n_want);
+    simlog_free(got, n_got);
 }
+
+static int window_lines; /* --window: the driver's buffer_lines (0: its default) */
 
 static int
 one_print(const char *gcode, const char *log, const struct sim_marlin_config *base, bool faults_on,
@@ -141,8 +114,10 @@ one_print(const char *gcode, const char *log, const struct sim_marlin_config *ba
     struct sim_marlin_config sc = *base;
     if (!faults_on) {
         uint64_t seed = sc.faults.rng;
+        int slow = sc.faults.slow_ms; /* the link's latency is no fault */
         faults_init(&sc.faults);
         sc.faults.rng = seed;
+        sc.faults.slow_ms = slow;
     }
     sc.fd = sv[0];
     sc.log_path = log;
@@ -150,7 +125,11 @@ one_print(const char *gcode, const char *log, const struct sim_marlin_config *ba
     char port[32];
     snprintf(port, sizeof(port), "fd:%d", sv[1]);
     int state = 0;
-    struct drv_config dc = { .name = "soak", .kind = "marlin", .port = port, .baud = sc.baud };
+    struct drv_config dc = { .name = "soak",
+                             .kind = "marlin",
+                             .port = port,
+                             .baud = sc.baud,
+                             .buffer_lines = window_lines };
     struct drv *d = sim ? drv_new(l, &dc, on_event, &state, &err) : NULL;
     int rc = d ? d->ops->open(d, &err) : -1;
     close(sv[1]);
@@ -182,6 +161,10 @@ one_print(const char *gcode, const char *log, const struct sim_marlin_config *ba
     res->probes = ds.probes;
     res->deadlines = ds.deadlines;
     res->resends = st.resends;
+    res->renumbers = ds.renumbers;
+    res->bytes_sent = ds.bytes_sent;
+    res->ep_near = st.ep_near;
+    res->ep_acted = st.ep_acted;
     if (!res->done)
         fprintf(stderr, "soak: job not done: %s\n", d->status.message);
     drv_free(d);
@@ -222,14 +205,19 @@ arg_rate(const char *o, const char *v, double *out)
 int
 main(int argc, char **argv)
 {
-    long prints = 1000, lines = 3000, baud = 115200, seed = 1, from = 0;
+    long prints = 1000, lines = 3000, baud = 115200, seed = 1, from = 0, speed = 1, win = 0,
+         latency = 0;
     double corrupt = 0.01, drop_ok = 0.01;
-    bool advanced = false;
+    bool advanced = false, link = false;
     for (int i = 1; i < argc; i++) {
         const char *o = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         int rc = 0;
         if (strcmp(o, "--advanced-ok") == 0) {
             advanced = true;
+            continue;
+        }
+        if (strcmp(o, "--link") == 0) {
+            link = true;
             continue;
         }
         if (strcmp(o, "--prints") == 0)
@@ -246,9 +234,17 @@ main(int argc, char **argv)
             rc = arg_rate(o, v, &corrupt);
         else if (strcmp(o, "--drop-ok") == 0)
             rc = arg_rate(o, v, &drop_ok);
-        else {
+        else if (strcmp(o, "--latency") == 0)
+            rc = arg_long(o, v, 0, 1000, &latency);
+        else if (strcmp(o, "--speed") == 0)
+            rc = arg_long(o, v, 1, 100000, &speed);
+        else if (strcmp(o, "--window") == 0) {
+            rc = arg_long(o, v, 0, 32, &win);
+            window_lines = (int)win;
+        } else {
             fprintf(stderr, "usage: bench_soak [--prints N] [--lines N] [--corrupt RATE] "
-                            "[--drop-ok RATE] [--baud N] [--advanced-ok] [--seed N] [--from N]\n");
+                            "[--drop-ok RATE] [--baud N] [--advanced-ok] [--seed N] [--from N] "
+                            "[--speed N] [--window N] [--latency MS] [--link]\n");
             return 2;
         }
         if (rc < 0)
@@ -280,6 +276,8 @@ main(int argc, char **argv)
     struct sim_marlin_config base;
     sim_marlin_config_init(&base);
     base.baud = (int)baud;
+    base.speed = (double)speed;
+    base.faults.slow_ms = (int)latency;
     base.uart = true;
     base.advanced_ok = advanced;
     struct print_result clean;
@@ -288,13 +286,28 @@ main(int argc, char **argv)
         fprintf(stderr, "bench_soak: the clean print failed\n");
         return 1;
     }
+    if (link) {
+        /* Link use: the bytes the host wrote over the clean print's time,
+           against the link's byte rate (baud / 10, 8N1). */
+        double bps = (double)clean.bytes_sent / clean.secs;
+        printf(
+            "link use: %ld lines, stock Marlin (%s, BUFSIZE 4, RX 128 UART), printer speed x%ld, "
+            "%ld baud, window %d, reply latency %ld ms: %.1f s, %.0f bytes/s, %.1f %% of the "
+            "link\n",
+            lines, advanced ? "ADVANCED_OK" : "plain ok", speed, baud, window_lines, latency,
+            clean.secs, bps, 100.0 * bps / ((double)baud / 10.0));
+        unlink(gcode);
+        unlink(log);
+        rmdir(dir);
+        return 0;
+    }
     printf("soak: %ld prints of %ld lines, stock Marlin (%s, BUFSIZE 4, RX 128 UART) at %ld baud, "
            "%.2f %% of bytes garbled each way, %.2f %% of oks lost; clean print %.1f s\n",
            prints, lines, advanced ? "ADVANCED_OK" : "plain ok", baud, corrupt * 100, drop_ok * 100,
            clean.secs);
     long failed = 0, lost = 0, repeated = 0, fragments = 0;
     double lost_s = 0, worst_s = 0;
-    uint64_t rewinds = 0, deadlines = 0, probes = 0;
+    uint64_t rewinds = 0, deadlines = 0, probes = 0, renumbers = 0, ep_near = 0, ep_acted = 0;
     for (long p = 0; p < prints; p++) {
         struct sim_marlin_config sc = base;
         char spec[64];
@@ -316,16 +329,21 @@ main(int argc, char **argv)
         rewinds += r.rewinds;
         deadlines += r.deadlines;
         probes += r.probes;
+        renumbers += r.renumbers;
+        ep_near += r.ep_near;
+        ep_acted += r.ep_acted;
         if (!r.done || r.lost || r.repeated)
             printf("  print %ld: %s, %ld lost, %ld repeated (seed %s)\n", p,
                    r.done ? "done" : "FAILED", r.lost, r.repeated, spec);
         if ((p + 1) % 100 == 0 || p + 1 == prints) {
             printf("  %ld prints: %ld failed, %ld lines lost, %ld repeated, %ld cut lines run; "
                    "recovery %.1f s a print (worst %.1f s), %.1f rewinds, %.1f probes, "
-                   "%.2f time-outs a print\n",
+                   "%.2f time-outs a print; emergency parser: %llu lines one byte from "
+                   "acting, %llu acted on, %.1f renumberings a print\n",
                    p + 1, failed, lost, repeated, fragments, lost_s / (double)(p + 1), worst_s,
                    (double)rewinds / (double)(p + 1), (double)probes / (double)(p + 1),
-                   (double)deadlines / (double)(p + 1));
+                   (double)deadlines / (double)(p + 1), (unsigned long long)ep_near,
+                   (unsigned long long)ep_acted, (double)renumbers / (double)(p + 1));
             fflush(stdout);
         }
     }

@@ -16,7 +16,9 @@
 
 #include "../../drivers/drv.h"
 #include "../../drivers/drv_marlin.h"
+#include "../../drivers/linewin.h"
 #include "../../sim/sim_marlin.h"
+#include "../../sim/simlog.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
 #include "../../src/base/limits.h"
@@ -97,45 +99,23 @@ write_job(struct run *r, int n, const char *extra_at_half)
     r->end_e = e;
 }
 
-/* Commands of a G-code file as the printer should log them. */
+/* Commands of a G-code file as the printer should log them (sim/simlog.h). */
 static char **
 file_commands(const char *path, size_t *n)
 {
-    struct buf b;
-    buf_init(&b, 0);
-    buf_read_file(&b, path, NULL);
-    char **out = calloc(b.len / 2 + 2, sizeof(char *));
-    *n = 0;
-    char *p = b.data;
-    while (p && *p) {
-        char *nl = strchr(p, '\n');
-        size_t len = nl ? (size_t)(nl - p) : strlen(p);
-        char cmd[256];
-        if (gcode_strip(p, len, cmd, sizeof(cmd), NULL) > 0)
-            out[(*n)++] = strdup(cmd);
-        p = nl ? nl + 1 : NULL;
-    }
-    buf_release(&b);
-    return out;
+    return simlog_commands(path, n);
 }
 
 static void
 free_lines(char **v, size_t n)
 {
-    for (size_t i = 0; i < n; i++)
-        free(v[i]);
-    free(v);
+    simlog_free(v, n);
 }
 
-/* The driver's own handshake and housekeeping lines. */
 static bool
 host_line(const char *s)
 {
-    /* A probe garbled on the wire may still run as M105 ("M105g"): still a probe. */
-    struct gcode_line g;
-    if (gcode_parse(s, strlen(s), &g, NULL) < 0 || g.letter != 'M')
-        return false;
-    return g.code == 105 || g.code == 110 || g.code == 115 || g.code == 155 || g.code == 400;
+    return simlog_host_line(s);
 }
 
 /*
@@ -521,6 +501,91 @@ T_CASE(marlin_garbled_resend_mid_job)
     sim_time = false;
 }
 
+/*
+ * Marlin's emergency parser acts on M108/M112/M410 after a line's N and
+ * digits, before any checksum: "N2112 G1..." is one garbled byte from
+ * "NM112 G1..." (kill).  A job long enough to pass such numbers (108, 112,
+ * 410, 1080-1089, 1120-1129, 2108, 2112, ...), whose own commands are none
+ * of the three nor one byte from them (no M104/M109): the simulator counts
+ * every line it receives that one replaced byte would make the parser act
+ * on, and none may be.
+ */
+static void
+write_ep_job(struct run *r, int n)
+{
+    snprintf(r->gcode_path, sizeof(r->gcode_path), "%s/ep.gcode", t_tmpdir());
+    FILE *f = fopen(r->gcode_path, "w");
+    fprintf(f, "G28\nG90\nM82\nM140 S60\nM190 S60\nG92 E0\n");
+    double e = 0;
+    for (int i = 0; i < n; i++) {
+        e += 0.02;
+        fprintf(f, "G1 X%.2f Y%.2f E%.4f F6000\n", 100 + 30 * cos(i * 0.05),
+                100 + 30 * sin(i * 0.05), e);
+    }
+    fclose(f);
+    r->end_e = e;
+}
+
+static void
+ep_stream(bool advanced, const char *fault)
+{
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.advanced_ok = advanced;
+    sc.uart = true;
+    if (fault)
+        T_OK(faults_parse(&sc.faults, fault, NULL), NULL);
+    if (setup(&r, &sc, 0)) {
+        write_ep_job(&r, JOB_LINES);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over, budget_ms(0)));
+        if (r.done != 1)
+            t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
+        struct sim_marlin_stats st;
+        sim_marlin_stats(r.sim, &st);
+        T_TRUE(!st.halted);
+        T_EQ_INT(st.ep_acted, 0);
+        T_EQ_INT(st.ep_near, 0);
+        T_EQ_INT(st.hits, 0); /* no line went out under the number aimed at */
+        size_t extra;
+        bool bad;
+        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
+        T_EQ_INT(extra, 0);
+        T_TRUE(!bad);
+        T_EQ_DBL(st.e, r.end_e, 1e-4);
+        struct drv_marlin_stats ds;
+        drv_marlin_stats(r.drv, &ds);
+        T_TRUE(ds.renumbers >= 10); /* the numbers were there to skip */
+    }
+    teardown(&r);
+}
+
+T_CASE(marlin_line_numbers_skip_emergency_commands_plain_ok)
+{
+    /* Line 2112's first digit garbled to 'M' as it arrives: on a driver
+       that numbers it so, the printer halts (M112). */
+    sim_time = true;
+    ep_stream(false, "hit-rx=2112:1:77");
+    sim_time = false;
+}
+
+T_CASE(marlin_line_numbers_skip_emergency_commands_advanced_ok)
+{
+    /* Line 1120's N garbled to 'M' ("M1120 ...": the parser acts on it). */
+    sim_time = true;
+    ep_stream(true, "hit-rx=1120:0:77");
+    sim_time = false;
+}
+
+/* The renumbering M110's ok lost, and its first copy refused: the job goes on. */
+T_CASE(marlin_renumbering_survives_lost_ok)
+{
+    sim_time = true;
+    ep_stream(false, "drop-ok=0.05");
+    sim_time = false;
+}
+
 /* A short job whose line 55 makes the printer send the reply kind under test. */
 static void
 write_small_job(struct run *r, const char *at55)
@@ -640,7 +705,7 @@ reset_mid_print(bool tcp)
     }
     write_job(&r, JOB_LINES, NULL);
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.failed, 1);
     T_TRUE(strstr(r.drv->status.message, "reset") != NULL);
     size_t extra;
@@ -651,13 +716,15 @@ reset_mid_print(bool tcp)
     T_TRUE(r.drv->status.lines_acked + 5 >= executed);
     T_TRUE(executed < r.drv->status.lines_total);
     /* The driver reconnects on its own after the reboot banner. */
-    T_TRUE(until(&r, is_idle, 5000));
+    T_TRUE(until(&r, is_idle, budget_ms(5000)));
     teardown(&r);
 }
 
 T_CASE(marlin_reset_mid_print_fails_at_last_ack)
 {
+    sim_time = true; /* the firmware's reset, over a socketpair */
     reset_mid_print(false);
+    sim_time = false;
 }
 
 T_CASE(marlin_reset_mid_print_over_tcp)
@@ -775,7 +842,7 @@ pause_resume(bool tcp)
     write_job(&r, JOB_LINES, NULL);
     r.pause_at = 1000;
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, park_done, 20000));
+    T_TRUE(until(&r, park_done, budget_ms(20000)));
     struct sim_marlin_stats st;
     sim_marlin_stats(r.sim, &st);
     T_TRUE(st.z >= 10 - 1e-9); /* lifted */
@@ -786,7 +853,7 @@ pause_resume(bool tcp)
     struct sf_err err;
     T_ERR(r.drv->ops->pause(r.drv, &err), SF_EINVAL, &err, "nothing to pause");
     T_OK(r.drv->ops->resume(r.drv, &err), &err);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.done, 1);
     size_t extra;
     bool bad;
@@ -805,7 +872,9 @@ pause_resume(bool tcp)
 
 T_CASE(marlin_pause_parks_resume_restores)
 {
+    sim_time = true;
     pause_resume(false);
+    sim_time = false;
 }
 
 T_CASE(marlin_pause_resume_over_tcp)
@@ -813,7 +882,8 @@ T_CASE(marlin_pause_resume_over_tcp)
     pause_resume(true);
 }
 
-T_CASE(marlin_host_action_pause_from_printer)
+static void
+host_action_pause(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
@@ -826,14 +896,23 @@ T_CASE(marlin_host_action_pause_from_printer)
     /* M118 A1 makes Marlin print "//action:pause", as a runout sensor would. */
     write_job(&r, 1000, "M118 A1 action:pause");
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, park_done, 20000));
+    T_TRUE(until(&r, park_done, budget_ms(20000)));
     T_OK(r.drv->ops->resume(r.drv, NULL), NULL);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.done, 1);
     teardown(&r);
 }
 
-T_CASE(marlin_cancel_runs_end_sequence)
+T_CASE(marlin_host_action_pause_from_printer)
+{
+    /* Simulated time: no real-time budget to outrun on a loaded machine. */
+    sim_time = true;
+    host_action_pause();
+    sim_time = false;
+}
+
+static void
+cancel_end_sequence(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
@@ -845,7 +924,7 @@ T_CASE(marlin_cancel_runs_end_sequence)
     write_job(&r, JOB_LINES, NULL);
     r.cancel_at = 1000;
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.cancelled, 1);
     T_EQ_INT(r.drv->status.state, DRV_IDLE);
     struct sim_marlin_stats st;
@@ -862,7 +941,16 @@ T_CASE(marlin_cancel_runs_end_sequence)
     teardown(&r);
 }
 
-T_CASE(marlin_emergency_stop)
+T_CASE(marlin_cancel_runs_end_sequence)
+{
+    /* Simulated time: no real-time budget to outrun on a loaded machine. */
+    sim_time = true;
+    cancel_end_sequence();
+    sim_time = false;
+}
+
+static void
+emergency_stop(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
@@ -886,6 +974,14 @@ T_CASE(marlin_emergency_stop)
     sim_marlin_stats(r.sim, &st);
     T_TRUE(st.halted);
     teardown(&r);
+}
+
+T_CASE(marlin_emergency_stop)
+{
+    /* Simulated time: no real-time budget to outrun on a loaded machine. */
+    sim_time = true;
+    emergency_stop();
+    sim_time = false;
 }
 
 T_CASE(marlin_config_errors_are_clear)
@@ -1014,7 +1110,7 @@ resume_from_line(enum resume_way way)
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, first, given, &err), &err);
     T_EQ_INT(r.drv->status.lines_acked, first);
     T_EQ_INT(r.drv->status.lines_total, n_want);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.done, 1);
     T_EQ_INT(r.drv->status.lines_acked, n_want);
     /* The log as it should be: preamble, then want[first..]. */
@@ -1052,19 +1148,25 @@ resume_from_line(enum resume_way way)
 
 T_CASE(marlin_resume_from_line_restores_state)
 {
+    sim_time = true;
     resume_from_line(READ_ALL);
+    sim_time = false;
 }
 
 /* The same with the owner's scan: the file is read only up to the line. */
 T_CASE(marlin_resume_from_line_with_scan_restores_state)
 {
+    sim_time = true;
     resume_from_line(READ_TO_LINE);
+    sim_time = false;
 }
 
 /* The same with the line's resume point in the scan: nothing is read before it. */
 T_CASE(marlin_resume_from_a_resume_point_reads_nothing_before_it)
 {
+    sim_time = true;
     resume_from_line(READ_NOTHING);
+    sim_time = false;
 }
 
 /* Line number (1-based) of the first line of path containing text. */
@@ -1121,7 +1223,8 @@ T_CASE(marlin_scan_counts_commands_and_names_a_bad_line)
  * streaming still stops at the bad command rather than send it.  This is
  * why the farm scans every job when it prepares it.
  */
-T_CASE(marlin_start_job_with_scan_reads_no_further)
+static void
+start_job_with_scan(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
@@ -1142,9 +1245,51 @@ T_CASE(marlin_start_job_with_scan_reads_no_further)
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, &scan, &err), &err);
     T_EQ_INT(r.drv->status.state, DRV_PRINTING);
     T_EQ_INT(r.drv->status.lines_total, 123456);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.failed, 1);
     T_TRUE(strstr(r.drv->status.message, "too long for Marlin") != NULL);
     T_TRUE(r.drv->status.lines_acked < (uint64_t)JOB_LINES);
     teardown(&r);
+}
+
+T_CASE(marlin_start_job_with_scan_reads_no_further)
+{
+    /* Simulated time: no real-time budget to outrun on a loaded machine. */
+    sim_time = true;
+    start_job_with_scan();
+    sim_time = false;
+}
+
+/* The emergency parser's model, on lines as the driver writes them. */
+T_CASE(marlin_ep_hazard_model)
+{
+    char text[LINEWIN_LINE_MAX];
+    static const struct {
+        long n;
+        const char *cmd;
+        bool hazard;
+    } cases[] = {
+        { 2111, "G1 X1", false }, { 2112, "G1 X1", true },                         /* NM112 */
+        { 1120, "G1 X1", true },                                                   /* M1120: acts */
+        { 112, "G1 X1", true },                                                    /* M112 */
+        { 1108, "G1 X1", true },  { 3410, "G1 X1", true }, { 5, "M110 N7", true }, /* M112 */
+        { 5, "M0110 N7", false }, { 5, "M105", true },                             /* M108 */
+        { 5, "M00105", false },   { 5, "M400", true },                             /* M410 */
+        { 5, "M0400", false },    { 5, "M112", true },     { 5, "M0115", false },
+        { 7, "G28", false },
+    };
+    for (size_t i = 0; i < sizeof(cases) / sizeof(cases[0]); i++) {
+        size_t len = gcode_number_line(cases[i].n, cases[i].cmd, text, sizeof(text));
+        if (linewin_ep_hazard(text, len) != cases[i].hazard)
+            t_fail(__FILE__, __LINE__, "'%s': hazard should be %d", text, cases[i].hazard);
+    }
+    T_TRUE(linewin_number_ok(1));
+    T_TRUE(!linewin_number_ok(112));
+    char out[LINEWIN_LINE_MAX];
+    T_TRUE(linewin_ep_safe_form(5, "M105", out, sizeof(out)));
+    T_EQ_STR(out, "M00105");
+    T_TRUE(!linewin_ep_safe_form(5, "M108", out, sizeof(out))); /* meant to act */
+    T_EQ_STR(out, "M108");
+    T_TRUE(linewin_ep_safe_form(5, "G1 X2", out, sizeof(out)));
+    T_EQ_STR(out, "G1 X2");
 }
