@@ -65,6 +65,25 @@ gcw_e_per_mm(const struct slice_profile *p, double w_mm, double h_mm)
     return h_mm * tp_spacing(w_mm, h_mm) / fil * p->flow;
 }
 
+/* One path in print order: path k from vertex at (open paths reversed if rev). */
+struct step {
+    uint32_t k, at;
+    bool rev;
+};
+
+/* A layer's moves as cooling sees them (the dry pass): the extrusions it
+   may slow down and the time of everything else, at the programmed feeds. */
+struct cool_move {
+    double len_mm, f_mm_min;
+};
+struct cool {
+    struct cool_move *mv;
+    size_t n, cap;
+    double fixed_s;
+    struct step *steps;
+    size_t n_steps, cap_steps;
+};
+
 struct wr {
     struct buf *out;
     const struct slice_profile *p;
@@ -78,12 +97,47 @@ struct wr {
     void *ud;
     float width;
     int rc;
+    bool dry;          /* time the moves, write nothing (cooling's first pass) */
+    bool adj;          /* the move being emitted is an extrusion cooling may slow */
+    struct cool *cool; /* what the dry pass measured */
+    double f_cap;      /* extrusion feed cap of this layer, mm/min (INFINITY: none) */
+    int fan_pct;       /* fan as last written, percent; -1: not yet */
+    int layer_fan_pct, bridge_fan_pct;
 };
+
+/* Dry pass: account a move of d mm at feed f (mm/min). */
+static void
+dry_move(struct wr *w, double d, double f)
+{
+    struct cool *c = w->cool;
+    if (f <= 0 || d <= 0)
+        return;
+    if (!w->adj) {
+        c->fixed_s += d / f * 60;
+        return;
+    }
+    if (!mem_grow((void **)&c->mv, &c->cap, c->n + 1, sizeof(*c->mv))) {
+        w->rc = SF_ENOMEM;
+        return;
+    }
+    c->mv[c->n++] = (struct cool_move){ d, f };
+}
 
 /* Append "G1" + words; letters with NAN are skipped. */
 static void
 emit(struct wr *w, double x, double y, double z, double e, double f_mm_min)
 {
+    if (w->dry) {
+        double fe = isnan(f_mm_min) ? w->f : f_mm_min;
+        double dx = isnan(x) ? 0 : x - w->x, dy = isnan(y) ? 0 : y - w->y;
+        double dz = isnan(z) ? 0 : z - w->z;
+        double d = sqrt(dx * dx + dy * dy + dz * dz);
+        if (d < 1e-12 && !isnan(e))
+            d = w->p->retract_mm; /* the writer's only E-alone moves */
+        w->f = fe;
+        dry_move(w, d, fe);
+        return;
+    }
     char line[160], num[32];
     size_t n = 0;
     memcpy(line, "G1", 2);
@@ -119,6 +173,8 @@ emit(struct wr *w, double x, double y, double z, double e, double f_mm_min)
 static void __attribute__((format(printf, 2, 3))) put(struct wr *w, const char *fmt, ...)
 {
     char line[256];
+    if (w->dry)
+        return;
     va_list ap;
     va_start(ap, fmt);
     int n = vsnprintf(line, sizeof(line), fmt, ap);
@@ -205,7 +261,9 @@ extrude_to(struct wr *w, double x, double y, double e_per_mm, double f, int role
     if (d < 1e-9)
         return;
     double de = d * e_per_mm;
-    emit(w, x, y, NAN, e_word(w, de), f);
+    w->adj = true;
+    emit(w, x, y, NAN, e_word(w, de), f < w->f_cap ? f : w->f_cap);
+    w->adj = false;
     w->st->e_mm[role] += de;
     w->x = x;
     w->y = y;
@@ -283,20 +341,37 @@ print_path(struct wr *w, const struct layer_paths *lp, uint32_t k, uint32_t at, 
     }
 }
 
-/* Visit paths [a, b) of one role nearest-first. */
+static bool
+add_step(struct cool *c, uint32_t k, uint32_t at, bool rev)
+{
+    if (!mem_grow((void **)&c->steps, &c->cap_steps, c->n_steps + 1, sizeof(*c->steps)))
+        return false;
+    c->steps[c->n_steps++] = (struct step){ k, at, rev };
+    return true;
+}
+
+/* Order paths [a, b) of one role nearest-first from (*cx, *cy), appending
+   to c->steps and moving the cursor to where the last one ends. */
 static int
-print_run(struct wr *w, const struct layer_paths *lp, uint32_t a, uint32_t b, double h, bool first)
+order_run(struct cool *c, const struct layer_paths *lp, uint32_t a, uint32_t b, double *cx,
+          double *cy)
 {
     uint32_t n = b - a;
     if (n > ORDER_MAX) {
         for (uint32_t k = a; k < b; k++)
-            print_path(w, lp, k, 0, false, h, first);
+            if (!add_step(c, k, 0, false))
+                return SF_ENOMEM;
+        const struct ipt *q = lp->p.pts + lp->p.start[b - 1];
+        uint32_t m = paths_len(&lp->p, b - 1);
+        struct ipt e = lp->info[b - 1].closed ? q[0] : q[m - 1];
+        *cx = r3(poly_mm(e.x));
+        *cy = r3(poly_mm(e.y));
         return SF_OK;
     }
     uint8_t *done = mem_calloc(n, 1);
     if (!done)
         return SF_ENOMEM;
-    for (uint32_t c = 0; c < n; c++) {
+    for (uint32_t s = 0; s < n; s++) {
         double best = INFINITY;
         uint32_t bk = a, bat = 0;
         bool brev = false;
@@ -307,12 +382,12 @@ print_run(struct wr *w, const struct layer_paths *lp, uint32_t a, uint32_t b, do
             uint32_t m = paths_len(&lp->p, k);
             if (lp->info[k].closed) {
                 for (uint32_t i = 0; i < m; i++) {
-                    double d = dist2(q[i], w->x, w->y);
+                    double d = dist2(q[i], *cx, *cy);
                     if (d < best)
                         best = d, bk = k, bat = i, brev = false;
                 }
             } else {
-                double d0 = dist2(q[0], w->x, w->y), d1 = dist2(q[m - 1], w->x, w->y);
+                double d0 = dist2(q[0], *cx, *cy), d1 = dist2(q[m - 1], *cx, *cy);
                 if (d0 < best)
                     best = d0, bk = k, bat = 0, brev = false;
                 if (d1 < best)
@@ -320,10 +395,115 @@ print_run(struct wr *w, const struct layer_paths *lp, uint32_t a, uint32_t b, do
             }
         }
         done[bk - a] = 1;
-        print_path(w, lp, bk, bat, brev, h, first);
+        if (!add_step(c, bk, bat, brev)) {
+            free(done);
+            return SF_ENOMEM;
+        }
+        const struct ipt *q = lp->p.pts + lp->p.start[bk];
+        uint32_t m = paths_len(&lp->p, bk);
+        struct ipt e = lp->info[bk].closed ? q[bat] : q[brev ? 0 : m - 1];
+        *cx = r3(poly_mm(e.x));
+        *cy = r3(poly_mm(e.y));
     }
     free(done);
     return SF_OK;
+}
+
+static void
+set_fan(struct wr *w, int pct)
+{
+    if (pct == w->fan_pct)
+        return;
+    if (pct <= 0)
+        put(w, "M107\n");
+    else
+        put(w, "M106 S%ld\n", lround(pct * 2.55));
+    if (!w->dry)
+        w->fan_pct = pct;
+}
+
+/* Write (or, dry, time) the layer's steps. */
+static void
+write_steps(struct wr *w, const struct layer_paths *l, const struct cool *c, double h, bool first)
+{
+    for (size_t i = 0; i < c->n_steps && w->rc == SF_OK; i++) {
+        const struct step *st = &c->steps[i];
+        set_fan(w, l->info[st->k].role == ROLE_BRIDGE ? w->bridge_fan_pct : w->layer_fan_pct);
+        print_path(w, l, st->k, st->at, st->rev, h, first);
+    }
+}
+
+/* Layer time with extrusions capped at v mm/min (moves already slower keep their feed). */
+static double
+time_capped(const struct cool *c, double v)
+{
+    double t = c->fixed_s;
+    for (size_t i = 0; i < c->n; i++)
+        t += c->mv[i].len_mm / (c->mv[i].f_mm_min < v ? c->mv[i].f_mm_min : v) * 60;
+    return t;
+}
+
+/*
+ * PrusaSlicer's cooling slowdown (CoolingBuffer, non-proportional logic):
+ * a layer that takes less than slowdown_below_layer_time is stretched to
+ * it by capping the feed of its extrusions, fastest first, never below
+ * min_print_speed (nor slowing a move already slower than that).  The
+ * cap is found by bisection on the monotone layer time; it errs slow, so
+ * the layer never ends up shorter than the target.  No lift-and-wait.
+ */
+static double
+cool_cap(const struct slice_profile *p, const struct cool *c, double t_s)
+{
+    if (!p->cooling || t_s >= p->slowdown_below_s || c->n == 0)
+        return INFINITY;
+    double lo = p->min_print_mm_s * 60, hi = 0;
+    for (size_t i = 0; i < c->n; i++)
+        if (c->mv[i].f_mm_min > hi)
+            hi = c->mv[i].f_mm_min;
+    if (hi <= lo || time_capped(c, lo) <= p->slowdown_below_s)
+        return lo;
+    for (int it = 0; it < 60 && hi - lo > 1e-6; it++) {
+        double mid = 0.5 * (lo + hi);
+        if (time_capped(c, mid) >= p->slowdown_below_s)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    return lo;
+}
+
+int
+gcw_fan_pct(const struct slice_profile *p, uint32_t layer, double layer_time_s, bool bridge)
+{
+    int off = p->disable_fan_first_layers;
+    if (off <= 0 && p->full_fan_speed_layer > 0)
+        off = 1; /* a ramp starts from a layer with the fan off */
+    if ((long)layer < off)
+        return 0;
+    double fan = p->fan_always_on ? p->min_fan_pct : 0;
+    if (p->cooling) {
+        if (layer_time_s < p->slowdown_below_s) {
+            fan = p->max_fan_pct;
+        } else if (layer_time_s < p->fan_below_s) {
+            double t =
+                (layer_time_s - p->slowdown_below_s) / (p->fan_below_s - p->slowdown_below_s);
+            fan = floor(t * p->min_fan_pct + (1 - t) * p->max_fan_pct + 0.5);
+        }
+    }
+    if (bridge)
+        fan = p->bridge_fan_pct;
+    if ((long)layer + 1 < p->full_fan_speed_layer) {
+        double ramp = (double)((long)layer + 1 - off) / (p->full_fan_speed_layer - off);
+        fan = floor(fan * ramp + 0.5);
+    }
+    return (int)(fan < 0 ? 0 : fan > 100 ? 100 : fan);
+}
+
+void
+gcw_stats_release(struct gcw_stats *st)
+{
+    free(st->layer_time_s);
+    st->layer_time_s = NULL;
 }
 
 int
@@ -331,19 +511,29 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
          struct buf *out, struct gcw_stats *st, gcw_move_fn on_move, void *ud, struct sf_err *err)
 {
     memset(st, 0, sizeof(*st));
-    struct wr w = {
-        .out = out, .p = p, .st = st, .f = -1, .role = -1, .rc = SF_OK, .on_move = on_move, .ud = ud
-    };
+    struct cool c;
+    memset(&c, 0, sizeof(c));
+    struct wr w = { .out = out,
+                    .p = p,
+                    .st = st,
+                    .f = -1,
+                    .role = -1,
+                    .rc = SF_OK,
+                    .on_move = on_move,
+                    .ud = ud,
+                    .cool = &c,
+                    .f_cap = INFINITY,
+                    .fan_pct = -1 };
+    if (s->n && !(st->layer_time_s = mem_calloc(s->n, sizeof(double))))
+        return sf_err_set(err, SF_ENOMEM, "gcode: out of memory");
+    st->n_layers = s->n;
     put(&w, "G21\nG90\n%s\nG92 E0\n", p->e_relative ? "M83" : "M82");
     for (uint32_t k = 0; k < s->n && w.rc == SF_OK; k++) {
         const struct layer *L = &s->l[k];
         double z = r3(L->z_mm);
         put(&w, ";LAYER_CHANGE\n;Z:%g\n;HEIGHT:%g\n", z, L->h_mm);
-        if (k == 1) {
+        if (k == 1)
             put(&w, "M104 S%g\nM140 S%g\n", p->nozzle_c, p->bed_c);
-            if (p->fan_pct > 0)
-                put(&w, "M106 S%d\n", (int)lround(p->fan_pct * 2.55));
-        }
         if (!p->e_relative) {
             put(&w, "G92 E0\n");
             w.e = 0;
@@ -355,19 +545,47 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
         if (p->retract_only_crossing && !paths_index_init(&w.inside, &L->region))
             w.rc = SF_ENOMEM;
         const struct layer_paths *l = &lp[k];
+        c.n_steps = 0;
+        double cx = w.x, cy = w.y;
         for (uint32_t a = 0; a < l->p.n && w.rc == SF_OK;) {
             uint32_t b = a + 1;
             while (b < l->p.n && l->info[b].role == l->info[a].role)
                 b++;
-            if (print_run(&w, l, a, b, L->h_mm, k == 0) < 0)
+            if (order_run(&c, l, a, b, &cx, &cy) < 0)
                 w.rc = SF_ENOMEM;
             a = b;
         }
+        /* cooling: time the layer dry, then write it with the fan and the
+           feed cap that time calls for */
+        struct wr saved = w;
+        struct gcw_stats saved_st = *st;
+        c.n = 0;
+        c.fixed_s = 0;
+        w.dry = true;
+        write_steps(&w, l, &c, L->h_mm, k == 0);
+        double t_s = time_capped(&c, INFINITY);
+        int rc = w.rc;
+        w = saved;
+        *st = saved_st;
+        w.rc = rc;
+        st->layer_time_s[k] = t_s;
+        w.layer_fan_pct = gcw_fan_pct(p, k, t_s, false);
+        w.bridge_fan_pct = gcw_fan_pct(p, k, t_s, true);
+        w.f_cap = cool_cap(p, &c, t_s);
+        set_fan(&w, w.layer_fan_pct);
+        write_steps(&w, l, &c, L->h_mm, k == 0);
+        w.f_cap = INFINITY;
     }
     paths_index_release(&w.inside);
+    free(c.mv);
+    free(c.steps);
     retract(&w);
-    if (w.rc < 0)
+    if (w.rc < 0) {
+        gcw_stats_release(st);
+        if (out->len + 4096 < out->max)
+            return sf_err_set(err, SF_ENOMEM, "gcode: out of memory");
         return sf_err_set(err, SF_ENOMEM, "gcode: output larger than the cap of %zu bytes",
                           out->max);
+    }
     return SF_OK;
 }

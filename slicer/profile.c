@@ -141,8 +141,22 @@ static const struct popt popts[] = {
     R("material", bed_temp, bed_c, 0, 150, "bed temperature, C"),
     R("material", first_layer_bed_temp, first_layer_bed_c, 0, 150,
       "first layer bed temperature, C"),
-    R("material", fan, fan_pct, 0, 100, "part cooling fan, percent"),
     R("material", flow, flow, 0.5, 2, "extrusion multiplier"),
+    B("material", cooling, cooling, "slow short layers down and set the fan by layer time"),
+    B("material", fan_always_on, fan_always_on, "fan at min_fan_speed at least on long layers"),
+    R("material", min_fan_speed, min_fan_pct, 0, 100, "fan on long layers, percent"),
+    R("material", max_fan_speed, max_fan_pct, 0, 100, "fan on short layers, percent"),
+    R("material", bridge_fan_speed, bridge_fan_pct, 0, 100, "fan over bridges, percent"),
+    R("material", fan_below_layer_time, fan_below_s, 0, 3600,
+      "layers faster than this get more than min_fan_speed, s"),
+    R("material", slowdown_below_layer_time, slowdown_below_s, 0, 3600,
+      "minimum layer time: faster layers are slowed down to it, s"),
+    R("material", min_print_speed, min_print_mm_s, 1, 1000,
+      "the slowdown never goes below this, mm/s"),
+    I("material", disable_fan_first_layers, disable_fan_first_layers, 0, 1000,
+      "fan off on this many first layers"),
+    I("material", full_fan_speed_layer, full_fan_speed_layer, 0, 1000,
+      "fan ramps up to full until this layer (0: no ramp)"),
 };
 #define N_POPTS (sizeof(popts) / sizeof(popts[0]))
 
@@ -225,8 +239,18 @@ slice_profile_default(struct slice_profile *p)
         .first_layer_nozzle_c = 215,
         .bed_c = 60,
         .first_layer_bed_c = 60,
-        .fan_pct = 100,
         .flow = 1,
+        /* PrusaSlicer 2.5's built-in cooling defaults (the peers' settings) */
+        .cooling = true,
+        .fan_always_on = false,
+        .min_fan_pct = 35,
+        .max_fan_pct = 100,
+        .bridge_fan_pct = 100,
+        .fan_below_s = 60,
+        .slowdown_below_s = 5,
+        .min_print_mm_s = 10,
+        .disable_fan_first_layers = 3,
+        .full_fan_speed_layer = 0,
     };
     *p = d;
     for (size_t i = 0; i < N_POPTS; i++) {
@@ -349,6 +373,13 @@ slice_profile_check(const struct slice_profile *p, struct sf_err *err)
                           p->layer_mm, p->first_layer_mm, p->nozzle_mm);
     if (p->width_mm < p->layer_mm || p->solid_width_mm < p->layer_mm)
         return sf_err_set(err, SF_EINVAL, "line width below the layer height");
+    if (p->min_fan_pct > p->max_fan_pct)
+        return sf_err_set(err, SF_EINVAL, "min_fan_speed %g is above max_fan_speed %g",
+                          p->min_fan_pct, p->max_fan_pct);
+    if (p->cooling && p->fan_below_s < p->slowdown_below_s)
+        return sf_err_set(err, SF_EINVAL,
+                          "fan_below_layer_time %g is below slowdown_below_layer_time %g",
+                          p->fan_below_s, p->slowdown_below_s);
     if (p->support_pitch_mm < p->solid_width_mm)
         return sf_err_set(err, SF_EINVAL, "support_pitch %g is below the line width",
                           p->support_pitch_mm);

@@ -62,7 +62,15 @@ struct slice_profile {
     char *material_name;
     double filament_mm, density_g_cm3;
     double nozzle_c, first_layer_nozzle_c, bed_c, first_layer_bed_c;
-    double fan_pct, flow;
+    double flow;
+    /* cooling, PrusaSlicer's options of the same names */
+    bool cooling;       /* slow short layers down, fan by layer time */
+    bool fan_always_on; /* min_fan_pct at least, from disable_fan_first_layers */
+    double min_fan_pct, max_fan_pct, bridge_fan_pct;
+    double fan_below_s;      /* fan_below_layer_time */
+    double slowdown_below_s; /* slowdown_below_layer_time: the minimum layer time */
+    double min_print_mm_s;   /* slowdown never goes below this */
+    int disable_fan_first_layers, full_fan_speed_layer;
 };
 
 /* Fill p with the defaults (strings allocated).  SF_ENOMEM. */

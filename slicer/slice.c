@@ -374,7 +374,9 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
 
     STAGE("gcode");
     struct gcw_stats st;
-    if ((rc = gcw_body(&s, lp, p, &body, &st, NULL, NULL, err)) < 0)
+    rc = gcw_body(&s, lp, p, &body, &st, NULL, NULL, err);
+    gcw_stats_release(&st);
+    if (rc < 0)
         goto out;
     STAGE("estimate");
     struct est_limits lim;

@@ -283,6 +283,7 @@ T_CASE(gcode_reads_back_into_the_same_moves)
         T_EQ_INT(rb.n, st.n_moves);
         T_EQ_INT(wr.n, st.n_moves);
         T_EQ_INT(rb.n_differ, 0);
+        gcw_stats_release(&st);
         free(wr.mv);
         double sum = 0;
         for (int r = 0; r < ROLE_N; r++)
