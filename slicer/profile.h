@@ -58,6 +58,12 @@ struct slice_profile {
     double support_z_gap_mm, support_xy_gap_mm;
     int support_interface_layers;
     double support_spacing_mm; /* between support lines */
+    int skirts, skirt_height;  /* loops; layers */
+    double skirt_distance_mm;  /* from the part, its support and brim */
+    double brim_width_mm;      /* 0: none, unless brim_auto decides */
+    bool brim_auto;            /* brim for tall parts on small footprints */
+    double brim_auto_ratio;    /* height over first-layer hydraulic diameter */
+    double brim_auto_width_mm;
     /* [material] */
     char *material_name;
     double filament_mm, density_g_cm3;

@@ -40,6 +40,7 @@ T_CASE(slice_cube_extrudes_its_volume)
     T_OK(shape_box(&m, v3(0, 0, 0), v3(20, 20, 20), &err), &err);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
+    p.skirts = 0; /* the cube's volume alone */
     char path[512];
     struct slice_result r;
     /* solid: every mm^3 of the cube is extruded */

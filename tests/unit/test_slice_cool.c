@@ -56,7 +56,7 @@ slice_read(const struct mesh *m, const struct slice_profile *p, const char *name
 }
 
 struct layer_feeds {
-    double min_f[512]; /* slowest extrusion feed per layer, mm/s */
+    double min_f[512];    /* slowest extrusion feed per layer, mm/s */
     double cruise_s[512]; /* per layer: length / feed of every move */
     double last[4];
     uint32_t n_layers;
@@ -199,7 +199,7 @@ T_CASE(cool_slowdown_stops_at_min_print_speed)
 /* Walk the G-code text: the fan in effect (percent) on every extrusion,
    per layer and by whether it is a bridge. */
 struct fan_seen {
-    int fan_pct[512];  /* -1: no extrusion, -2: more than one value */
+    int fan_pct[512]; /* -1: no extrusion, -2: more than one value */
     int bridge_pct[512];
     uint32_t n_layers;
 };
