@@ -82,7 +82,67 @@ struct cool {
     double fixed_s;
     struct step *steps;
     size_t n_steps, cap_steps;
+    /* seams: kind, and the external perimeters' seams of the layer below
+       and of this one (aligned seams follow them up the part) */
+    int seam;
+    double align_mm;
+    struct ipt *seam_prev, *seam_cur;
+    size_t n_prev, n_cur, cap_prev, cap_cur;
 };
+
+enum { SEAM_NEAREST, SEAM_ALIGNED, SEAM_REAR };
+
+/* The rear-most vertex of loop q: largest y - x / 1000, so of two at
+   nearly the same depth (a round back) the left one wins on every layer,
+   and a flat back puts the seam in its left corner. */
+static uint32_t
+rear_vertex(const struct ipt *q, uint32_t n)
+{
+    uint32_t best = 0;
+    for (uint32_t i = 1; i < n; i++)
+        if (1000 * q[i].y - q[i].x > 1000 * q[best].y - q[best].x)
+            best = i;
+    return best;
+}
+
+static double
+d2i(struct ipt a, struct ipt b)
+{
+    double dx = (double)(a.x - b.x), dy = (double)(a.y - b.y);
+    return dx * dx + dy * dy;
+}
+
+/*
+ * Where a perimeter loop starts and ends.  rear: its rear-most vertex.
+ * aligned: the vertex nearest to the seam of the layer below closest to
+ * the loop's rear vertex, when one is within align_mm of it (a wall
+ * that moves a little between layers keeps its seam line), else rear.
+ */
+static uint32_t
+seam_vertex(const struct cool *c, const struct ipt *q, uint32_t n, double align_mm)
+{
+    uint32_t r = rear_vertex(q, n);
+    if (c->seam == SEAM_REAR || !c->n_prev)
+        return r;
+    double best = INFINITY;
+    struct ipt t = q[r];
+    for (size_t i = 0; i < c->n_prev; i++) {
+        double d = d2i(c->seam_prev[i], q[r]);
+        if (d < best)
+            best = d, t = c->seam_prev[i];
+    }
+    double lim = (double)poly_i(align_mm);
+    if (best > lim * lim)
+        return r;
+    uint32_t bi = r;
+    best = INFINITY;
+    for (uint32_t i = 0; i < n; i++) {
+        double d = d2i(q[i], t);
+        if (d < best)
+            best = d, bi = i;
+    }
+    return bi;
+}
 
 struct wr {
     struct buf *out;
@@ -383,7 +443,15 @@ order_run(struct cool *c, const struct layer_paths *lp, uint32_t a, uint32_t b, 
                 continue;
             const struct ipt *q = lp->p.pts + lp->p.start[k];
             uint32_t m = paths_len(&lp->p, k);
-            if (lp->info[k].closed) {
+            uint8_t role = lp->info[k].role;
+            if (lp->info[k].closed && c->seam != SEAM_NEAREST &&
+                (role == ROLE_PERIMETER || role == ROLE_EXT_PERIMETER)) {
+                /* the seam is fixed: the loop is as near as its seam */
+                uint32_t i = seam_vertex(c, q, m, c->align_mm);
+                double d = dist2(q[i], *cx, *cy);
+                if (d < best)
+                    best = d, bk = k, bat = i, brev = false;
+            } else if (lp->info[k].closed) {
                 for (uint32_t i = 0; i < m; i++) {
                     double d = dist2(q[i], *cx, *cy);
                     if (d < best)
@@ -405,6 +473,13 @@ order_run(struct cool *c, const struct layer_paths *lp, uint32_t a, uint32_t b, 
         const struct ipt *q = lp->p.pts + lp->p.start[bk];
         uint32_t m = paths_len(&lp->p, bk);
         struct ipt e = lp->info[bk].closed ? q[bat] : q[brev ? 0 : m - 1];
+        if (lp->info[bk].role == ROLE_EXT_PERIMETER && lp->info[bk].closed) {
+            if (!mem_grow((void **)&c->seam_cur, &c->cap_cur, c->n_cur + 1, sizeof(*c->seam_cur))) {
+                free(done);
+                return SF_ENOMEM;
+            }
+            c->seam_cur[c->n_cur++] = e;
+        }
         *cx = r3(poly_mm(e.x));
         *cy = r3(poly_mm(e.y));
     }
@@ -516,6 +591,10 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
     memset(st, 0, sizeof(*st));
     struct cool c;
     memset(&c, 0, sizeof(c));
+    c.seam = strcmp(p->seam_position, "rear") == 0      ? SEAM_REAR
+             : strcmp(p->seam_position, "aligned") == 0 ? SEAM_ALIGNED
+                                                        : SEAM_NEAREST;
+    c.align_mm = 4 * p->width_mm;
     struct wr w = { .out = out,
                     .p = p,
                     .st = st,
@@ -549,6 +628,7 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
             w.rc = SF_ENOMEM;
         const struct layer_paths *l = &lp[k];
         c.n_steps = 0;
+        c.n_cur = 0;
         double cx = w.x, cy = w.y;
         for (uint32_t a = 0; a < l->p.n && w.rc == SF_OK;) {
             uint32_t b = a + 1;
@@ -558,6 +638,14 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
                 w.rc = SF_ENOMEM;
             a = b;
         }
+        /* this layer's seams guide the next one's */
+        struct ipt *sw = c.seam_prev;
+        size_t cw = c.cap_prev;
+        c.seam_prev = c.seam_cur;
+        c.cap_prev = c.cap_cur;
+        c.n_prev = c.n_cur;
+        c.seam_cur = sw;
+        c.cap_cur = cw;
         /* cooling: time the layer dry, then write it with the fan and the
            feed cap that time calls for */
         struct wr saved = w;
@@ -582,6 +670,8 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
     paths_index_release(&w.inside);
     free(c.mv);
     free(c.steps);
+    free(c.seam_prev);
+    free(c.seam_cur);
     retract(&w);
     if (w.rc < 0) {
         gcw_stats_release(st);

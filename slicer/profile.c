@@ -103,6 +103,8 @@ static const struct popt popts[] = {
     I("print", perimeters, perimeters, 0, 50, "perimeter loops"),
     I("print", top_layers, top_layers, 0, 100, "top solid layers"),
     I("print", bottom_layers, bottom_layers, 0, 100, "bottom solid layers"),
+    S("print", seam_position, seam_position,
+      "where perimeter loops start: aligned (up the part from the rear), rear or nearest"),
     R("print", skin_margin, skin_margin_mm, 0, 20,
       "solid skins reach this far into the infill, mm"),
     B("print", ensure_vertical_shells, vertical_shells,
@@ -218,6 +220,7 @@ slice_profile_default(struct slice_profile *p)
         .perimeters = 2,
         .top_layers = 4,
         .bottom_layers = 3,
+        .seam_position = (char *)"aligned",
         .skin_margin_mm = 3,
         .vertical_shells = false,
         .solid_below_mm2 = 70,
@@ -384,6 +387,11 @@ slice_profile_check(const struct slice_profile *p, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL,
                           "option 'infill_pattern': '%s' is not grid or rectilinear",
                           p->infill_pattern);
+    if (strcmp(p->seam_position, "aligned") != 0 && strcmp(p->seam_position, "nearest") != 0 &&
+        strcmp(p->seam_position, "rear") != 0)
+        return sf_err_set(err, SF_EINVAL,
+                          "option 'seam_position': '%s' is not aligned, nearest or rear",
+                          p->seam_position);
     if (p->layer_mm > 0.8 * p->nozzle_mm || p->first_layer_mm > 0.9 * p->nozzle_mm)
         return sf_err_set(err, SF_EINVAL,
                           "layer height %g / first layer %g too thick for a %g mm nozzle",

@@ -41,6 +41,7 @@ struct slice_profile {
     /* [print] */
     double layer_mm, first_layer_mm;
     int perimeters, top_layers, bottom_layers;
+    char *seam_position;     /* "aligned", "nearest" or "rear" */
     double skin_margin_mm;   /* solid skins grow this far into the infill */
     bool vertical_shells;    /* solid wherever the neighbours' inner areas differ */
     double solid_below_mm2;  /* sparse islands smaller than this print solid */
