@@ -355,6 +355,9 @@ role_speed(const struct slice_profile *p, int role, bool first)
     case ROLE_SKIRT:
         v = p->perimeter_mm_s;
         break;
+    case ROLE_GAP_FILL:
+        v = p->gap_fill_mm_s;
+        break;
     default:
         v = p->support_mm_s;
         break;

@@ -51,7 +51,8 @@ struct slice_profile {
     double width_mm;         /* perimeters and sparse infill */
     double solid_width_mm;   /* solid, top and support lines */
     double perimeter_mm_s, ext_perimeter_mm_s, infill_mm_s, solid_mm_s, top_mm_s;
-    double support_mm_s, first_layer_mm_s, bridge_mm_s;
+    double support_mm_s, first_layer_mm_s, bridge_mm_s, gap_fill_mm_s;
+    bool gap_fill;              /* thin walls and gaps get one line of matching width */
     bool retract_only_crossing; /* no retraction for travel inside the part */
     bool support;
     double support_angle_deg; /* 0: the printer's max_overhang_deg */

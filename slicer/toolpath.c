@@ -22,9 +22,11 @@ const char *
 tp_role_name(enum tp_role r)
 {
     static const char *const names[ROLE_N] = {
-        "Support material", "Support material interface", "Perimeter",       "External perimeter",
-        "Solid infill",     "Top solid infill",           "Internal infill", "Bridge infill",
-        "Skirt/Brim",
+        "Support material", "Support material interface",
+        "Perimeter",        "External perimeter",
+        "Solid infill",     "Top solid infill",
+        "Internal infill",  "Bridge infill",
+        "Skirt/Brim",       "Gap fill",
     };
     return (unsigned)r < ROLE_N ? names[r] : "Custom";
 }
@@ -648,7 +650,143 @@ fail:
     return rc;
 }
 
-enum { T_AREA, T_TMP, T_TOPI, T_BOTI, T_KEEP, T_SOLID, T_TOP, T_SPARSE, T_LINES, T_N };
+enum {
+    T_AREA,
+    T_TMP,
+    T_TOPI,
+    T_BOTI,
+    T_KEEP,
+    T_SOLID,
+    T_TOP,
+    T_SPARSE,
+    T_LINES,
+    T_GAP,
+    T_S,
+    T_C,
+    T_N
+};
+
+/* Move the pieces (outer and holes) of set narrower than t_mm (2 area /
+   perimeter) to narrow; tmp is scratch. */
+static int
+split_narrow(struct paths *set, double t_mm, struct paths *narrow, struct paths *tmp)
+{
+    paths_reset(tmp);
+    bool moved = false;
+    for (uint32_t k = 0; k < set->n;) {
+        uint32_t e = k + 1;
+        while (e < set->n && paths_area_k(set, e) < 0)
+            e++;
+        double area = 0, per = 0;
+        for (uint32_t i = k; i < e; i++) {
+            area += paths_area_k(set, i);
+            per += paths_length_k(set, i, true);
+        }
+        bool thin = per > 0 && 2 * area / per < t_mm;
+        moved |= thin;
+        for (uint32_t i = k; i < e; i++)
+            if (!paths_add(thin ? narrow : tmp, set->pts + set->start[i], paths_len(set, i)))
+                return SF_ENOMEM;
+        k = e;
+    }
+    if (moved) {
+        paths_reset(set);
+        if (!paths_append(set, tmp))
+            return SF_ENOMEM;
+    }
+    return SF_OK;
+}
+
+/* The vertex of q farthest from q[from]. */
+static uint32_t
+farthest(const struct ipt *q, uint32_t n, uint32_t from)
+{
+    uint32_t best = from;
+    double bd = -1;
+    for (uint32_t i = 0; i < n; i++) {
+        double d = d2(q[i], q[from]);
+        if (d > bd)
+            bd = d, best = i;
+    }
+    return best;
+}
+
+/*
+ * Gap fill and thin walls: every piece of gap (a region no perimeter loop
+ * or infill reaches, narrower than two lines) gets one line along its
+ * middle instead of nothing.  The middle is found by shrinking the piece
+ * to a sliver by nearly half its mean width (2 area / perimeter); a sliver
+ * with a hole (a thin ring) prints its outer loop, an open one the side
+ * between its two far ends.  The line's width is set so the piece's area
+ * is laid down whole (length x spacing = area): a fixed width per piece,
+ * the classic generator's answer to what PrusaSlicer's Arachne does with
+ * widths varying along the line.
+ */
+static int
+gap_fill(const struct paths *gap, double h, double nozzle, double sp, struct layer_paths *out,
+         struct paths *piece, struct paths *sliver, struct paths *line)
+{
+    int rc = SF_OK;
+    for (uint32_t k = 0; k < gap->n && rc == SF_OK;) {
+        /* one outer and its holes (Clipper's tree order) */
+        uint32_t e = k + 1;
+        while (e < gap->n && paths_area_k(gap, e) < 0)
+            e++;
+        paths_reset(piece);
+        double area = 0, per = 0;
+        for (uint32_t i = k; i < e; i++) {
+            if (!paths_add(piece, gap->pts + gap->start[i], paths_len(gap, i)))
+                return SF_ENOMEM;
+            area += paths_area_k(gap, i);
+            per += paths_length_k(gap, i, true);
+        }
+        k = e;
+        if (area < 0.1 * nozzle * nozzle || per <= 0)
+            continue;
+        double t = 2 * area / per;
+        /* wider than 1.5 spacings: two lines, the loop a quarter width in */
+        bool two = t > 1.5 * sp;
+        paths_reset(sliver);
+        for (double f = two ? 0.25 : 0.45; f > 0.1 && !sliver->n && rc == SF_OK; f -= 0.15)
+            rc = clip_offset(piece, -f * t, CLIP_JOIN_MITER, sliver);
+        if (rc < 0 || !sliver->n)
+            continue;
+        paths_reset(line);
+        bool ring = two;
+        for (uint32_t i = 0; i < sliver->n; i++)
+            ring |= paths_area_k(sliver, i) < 0;
+        double len = 0;
+        for (uint32_t i = 0; i < sliver->n; i++) {
+            const struct ipt *q = sliver->pts + sliver->start[i];
+            uint32_t n = paths_len(sliver, i);
+            if (paths_area_k(sliver, i) < 0 && !two)
+                continue;
+            if (ring) {
+                if (!paths_add(line, q, n))
+                    return SF_ENOMEM;
+                len += paths_length_k(sliver, i, true);
+                continue;
+            }
+            uint32_t a = farthest(q, n, 0), b = farthest(q, n, a);
+            if (!paths_begin(line))
+                return SF_ENOMEM;
+            for (uint32_t j = a;; j = (j + 1) % n) {
+                if (!paths_push(line, q[j]))
+                    return SF_ENOMEM;
+                if (j == b)
+                    break;
+            }
+            len += paths_length_k(line, line->n - 1, false);
+        }
+        if (len < 1e-3)
+            continue;
+        double wl = area / len + h * (1 - M_PI / 4);
+        if (wl > 2.5 * nozzle)
+            wl = 2.5 * nozzle;
+        rc = add(out, line, ROLE_GAP_FILL, ring, wl);
+    }
+    return rc;
+}
 
 int
 toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
@@ -811,14 +949,64 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         TRY(add(out, &t[T_LINES], ROLE_INTERFACE, false, sw));
     }
 
-    /* perimeters, inner loops first, external last */
+    /*
+     * Perimeters, inner loops first, external last.  Loop i's centre line
+     * is opened by half a spacing (shrunk by that much more, grown back),
+     * so a loop never wraps a sliver it cannot fill (it would lay two lines
+     * where one fits), as PrusaSlicer's classic generator does.  What the
+     * loops leave between them, the part's edge and the infill goes to
+     * gap fill: S is the area inside loop i - 1 (the region for i = 0),
+     * and the gap is the part of it loop i does not reach.
+     */
+    struct paths *loops = p->perimeters ? mem_calloc((size_t)p->perimeters, sizeof(*loops)) : NULL;
+    if (p->perimeters && !loops)
+        TRY(SF_ENOMEM);
+    paths_reset(&t[T_GAP]);
+    for (int i = 0; i < p->perimeters && rc == SF_OK; i++) {
+        double d = w / 2 + i * sp;
+        const struct paths *prev = i ? &t[T_S] : &L->region;
+        paths_init(&loops[i]);
+        if ((rc = clip_offset(&L->region, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0 ||
+            (rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
+            break;
+        if (p->gap_fill) {
+            if ((rc = clip_offset(&loops[i], i ? sp / 2 : w / 2, CLIP_JOIN_MITER, &t[T_LINES])) <
+                    0 ||
+                (rc = clip_bool(CLIP_DIFFERENCE, prev, &t[T_LINES], CLIP_NONZERO, &t[T_KEEP])) < 0)
+                break;
+            if (!paths_append(&t[T_GAP], &t[T_KEEP]))
+                rc = SF_ENOMEM;
+        }
+        paths_move(&t[T_S], &t[T_TMP]);
+    }
     for (int i = p->perimeters - 1; i >= 0; i--) {
-        TRY(clip_offset(&L->region, -(w / 2 + i * sp), CLIP_JOIN_MITER, &t[T_TMP]));
-        TRY(add(out, &t[T_TMP], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w));
+        if (rc == SF_OK)
+            rc = add(out, &loops[i], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w);
+        paths_release(&loops[i]);
+    }
+    free(loops);
+    if (rc < 0)
+        goto out;
+    if (t[T_GAP].n) {
+        /* drop slivers under a quarter spacing wide (where the loops' bands
+           meet at corners), then fill */
+        TRY(clip_offset(&t[T_GAP], -sp / 8, CLIP_JOIN_MITER, &t[T_TMP]));
+        TRY(clip_offset(&t[T_TMP], sp / 8, CLIP_JOIN_MITER, &t[T_GAP]));
+        TRY(gap_fill(&t[T_GAP], h, p->nozzle_mm, sp, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
     }
     if (!L->inner.n)
         goto out;
     TRY(toolpath_regions(s, k, p, &t[T_SOLID], &t[T_TOP], &t[T_SPARSE]));
+    if (p->gap_fill) {
+        /* infill pieces under 3.5 spacings wide: zig-zag links would lay
+           more than their area there, so they are gap-filled instead */
+        paths_reset(&t[T_GAP]);
+        struct paths *sets[3] = { &t[T_SOLID], &t[T_TOP], &t[T_SPARSE] };
+        for (int i = 0; i < 3; i++)
+            TRY(split_narrow(sets[i], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
+        if (t[T_GAP].n)
+            TRY(gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
+    }
     double ang = k % 2 ? 135 : 45;
     if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0) {
         /* solid over air is a bridge; slivers narrower than the nozzle are not */

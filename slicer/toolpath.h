@@ -40,8 +40,9 @@ enum tp_role {
     ROLE_SOLID,
     ROLE_TOP,
     ROLE_INFILL,
-    ROLE_BRIDGE, /* solid over air: round lines of nozzle width, bridge speed */
-    ROLE_SKIRT,  /* skirt and brim */
+    ROLE_BRIDGE,   /* solid over air: round lines of nozzle width, bridge speed */
+    ROLE_SKIRT,    /* skirt and brim */
+    ROLE_GAP_FILL, /* one line along a gap or thin wall, its width set by the gap's area */
     ROLE_N
 };
 

@@ -97,8 +97,8 @@ T_CASE(seam_aligned_cylinder_in_one_line)
         /* at the rear: the cylinder stands centred on the bed at (125, 105) */
         for (uint32_t k = 0; k < s.n; k++)
             if (s.y[k] - 105 < 0.95 * (10 - p.width_mm / 2)) {
-                t_fail(__FILE__, __LINE__, "%s: layer %u seam at (%.2f, %.2f)", kinds[i], k,
-                       s.x[k], s.y[k]);
+                t_fail(__FILE__, __LINE__, "%s: layer %u seam at (%.2f, %.2f)", kinds[i], k, s.x[k],
+                       s.y[k]);
                 break;
             }
     }
