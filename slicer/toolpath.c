@@ -666,6 +666,77 @@ enum {
     T_N
 };
 
+/*
+ * The direction of a bridge over piece: PrusaSlicer's BridgeDetector
+ * idea.  Every 10 degrees, lines across the piece; the angle whose lines
+ * have the most length anchored at both ends (an end within a nozzle
+ * width of the layer below) wins, and of angles within 1 % of that, the
+ * one whose longest anchored line is shortest: the shortest span between
+ * anchors.
+ */
+static double
+bridge_angle(const struct paths *piece, const struct paths_index *below, double spacing,
+             struct paths *lines, int *rc)
+{
+    double best_cov = -1, best_max = INFINITY, best = 0;
+    double cov[18], mx[18];
+    for (int a = 0; a < 18; a++) {
+        paths_reset(lines);
+        cov[a] = 0;
+        mx[a] = 0;
+        if ((*rc = tp_fill_lines(piece, a * 10.0, spacing, lines)) < 0)
+            return 0;
+        for (uint32_t i = 0; i < lines->n; i++) {
+            uint32_t n = paths_len(lines, i);
+            const struct ipt *q = lines->pts + lines->start[i];
+            if (paths_index_contains(below, q[0]) && paths_index_contains(below, q[n - 1])) {
+                double l = paths_length_k(lines, i, false);
+                cov[a] += l;
+                mx[a] = fmax(mx[a], l);
+            }
+        }
+        best_cov = fmax(best_cov, cov[a]);
+    }
+    for (int a = 0; a < 18; a++)
+        if (cov[a] >= 0.99 * best_cov && mx[a] < best_max)
+            best_max = mx[a], best = a * 10.0;
+    return best;
+}
+
+/* Bridge lines over each piece of area (one outer and its holes), in
+   the piece's own direction (bridge_angle) over the layer below. */
+static int
+bridges(const struct paths *area, const struct paths *below, double nz, struct layer_paths *out,
+        struct paths *grown, struct paths *lines, struct paths *piece)
+{
+    struct paths_index ix;
+    int rc = clip_offset(below, nz, CLIP_JOIN_MITER, grown);
+    if (rc < 0)
+        return rc;
+    if (!paths_index_init(&ix, grown))
+        return SF_ENOMEM;
+    for (uint32_t k = 0; k < area->n && rc == SF_OK;) {
+        uint32_t e = k + 1;
+        while (e < area->n && paths_area_k(area, e) < 0)
+            e++;
+        paths_reset(piece);
+        for (uint32_t i = k; i < e; i++)
+            if (!paths_add(piece, area->pts + area->start[i], paths_len(area, i)))
+                rc = SF_ENOMEM;
+        k = e;
+        double ang = rc == SF_OK ? bridge_angle(piece, &ix, nz + 0.05, lines, &rc) : 0;
+        paths_reset(lines);
+        if (rc == SF_OK)
+            rc = tp_fill_lines(piece, ang, nz + 0.05, lines);
+        if (rc == SF_OK)
+            rc = tp_link(lines, piece, 2 * (nz + 0.05), nz / 2);
+        if (rc == SF_OK)
+            rc = add(out, lines, ROLE_BRIDGE, false, nz);
+    }
+    paths_index_release(&ix);
+    return rc;
+}
+
 /* Move the pieces (outer and holes) of set narrower than t_mm (2 area /
    perimeter) to narrow; tmp is scratch. */
 static int
@@ -1018,10 +1089,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
             TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_SOLID], CLIP_NONZERO, &t[T_KEEP]));
             TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
             paths_move(&t[T_SOLID], &t[T_TMP]);
-            paths_reset(&t[T_LINES]);
-            TRY(tp_fill_lines(&t[T_KEEP], ang, nz + 0.05, &t[T_LINES]));
-            TRY(tp_link(&t[T_LINES], &t[T_KEEP], 2 * (nz + 0.05), nz / 2));
-            TRY(add(out, &t[T_LINES], ROLE_BRIDGE, false, nz));
+            TRY(bridges(&t[T_KEEP], &s->l[k - 1].region, nz, out, &t[T_TMP], &t[T_LINES], &t[T_S]));
         }
     }
     paths_reset(&t[T_LINES]);
