@@ -86,6 +86,8 @@ struct cool {
        and of this one (aligned seams follow them up the part) */
     int seam;
     double align_mm;
+    double (*pt)[2]; /* scratch: the points of the path being written */
+    size_t cap_pt;
     struct ipt *seam_prev, *seam_cur;
     size_t n_prev, n_cur, cap_prev, cap_cur;
 };
@@ -372,6 +374,143 @@ dist2(struct ipt a, double x, double y)
     return dx * dx + dy * dy;
 }
 
+/* Append "G2"/"G3" to (x, y) around centre (cx, cy) over len mm of arc. */
+static void
+emit_arc(struct wr *w, bool cw, double x, double y, double cx, double cy, double len, double epm,
+         double f_mm_min, int role)
+{
+    double de = len * epm;
+    double e = e_word(w, de);
+    double f = f_mm_min < w->f_cap ? f_mm_min : w->f_cap;
+    w->st->e_mm[role] += de;
+    if (w->dry) {
+        w->adj = true;
+        dry_move(w, len, f);
+        w->adj = false;
+        w->f = f;
+        w->x = x;
+        w->y = y;
+        return;
+    }
+    char line[200], num[32];
+    size_t n = 0;
+    memcpy(line, cw ? "G2" : "G3", 2);
+    n = 2;
+    const char letters[5] = { 'X', 'Y', 'I', 'J', 'E' };
+    double vals[5] = { x, y, cx - w->x, cy - w->y, e };
+    int decs[5] = { 3, 3, 3, 3, 5 };
+    for (int i = 0; i < 5; i++) {
+        line[n++] = ' ';
+        line[n++] = letters[i];
+        int l = gcw_fmt(num, vals[i], decs[i]);
+        memcpy(line + n, num, (size_t)l);
+        n += (size_t)l;
+    }
+    if (fabs(f - w->f) > 1e-9) {
+        line[n++] = ' ';
+        line[n++] = 'F';
+        int l = gcw_fmt(num, f, 0);
+        memcpy(line + n, num, (size_t)l);
+        n += (size_t)l;
+        w->f = f;
+    }
+    line[n++] = '\n';
+    if (w->rc == SF_OK && buf_append(w->out, line, n) < 0)
+        w->rc = SF_ENOMEM;
+    w->st->n_moves++;
+    w->st->n_arcs++;
+    w->x = x;
+    w->y = y;
+    if (w->on_move)
+        w->on_move(w->ud, x, y, w->z, w->e);
+}
+
+/*
+ * Does one circle carry points pt[a..b] within tol?  The circle through
+ * pt[a], pt[(a + b) / 2] and pt[b]; the points turning one way by less
+ * than 90 degrees a step and under a turn in all, and along each chord
+ * the arc's bulge (r (1 - cos(step / 2))) plus the larger distance of the
+ * chord's ends from the circle at most tol, so the arc stays within tol
+ * of the polyline.
+ */
+static bool
+arc_fits(const double (*pt)[2], size_t a, size_t b, double tol, double *cx, double *cy, double *len,
+         bool *cw)
+{
+    size_t m = (a + b) / 2;
+    double ax = pt[a][0], ay = pt[a][1], bx = pt[m][0], by = pt[m][1], ex = pt[b][0], ey = pt[b][1];
+    double d = 2 * (ax * (by - ey) + bx * (ey - ay) + ex * (ay - by));
+    if (fabs(d) < 1e-9)
+        return false;
+    double a2 = ax * ax + ay * ay, b2 = bx * bx + by * by, e2 = ex * ex + ey * ey;
+    double ux = (a2 * (by - ey) + b2 * (ey - ay) + e2 * (ay - by)) / d;
+    double uy = (a2 * (ex - bx) + b2 * (ax - ex) + e2 * (bx - ax)) / d;
+    double r = hypot(ax - ux, ay - uy);
+    if (r < 0.5 || r > 1000)
+        return false;
+    double sweep = 0, dir = 0, prev_err = 0;
+    for (size_t i = a; i <= b; i++) {
+        double err = fabs(hypot(pt[i][0] - ux, pt[i][1] - uy) - r);
+        if (err > tol)
+            return false;
+        double ends = fmax(err, prev_err);
+        prev_err = err;
+        if (i == a)
+            continue;
+        double t =
+            atan2(pt[i][1] - uy, pt[i][0] - ux) - atan2(pt[i - 1][1] - uy, pt[i - 1][0] - ux);
+        t = remainder(t, 2 * M_PI);
+        if (fabs(t) < 1e-9 || fabs(t) > M_PI / 2 || (dir != 0 && (t > 0) != (dir > 0)))
+            return false;
+        dir = t;
+        if (ends + r * (1 - cos(t / 2)) > tol) /* the arc off the chord, both ends' errors in */
+            return false;
+        sweep += t;
+    }
+    if (fabs(sweep) > 2 * M_PI - 0.1)
+        return false;
+    *cx = ux;
+    *cy = uy;
+    *len = fabs(sweep) * r;
+    *cw = sweep < 0;
+    return true;
+}
+
+/* Extrude along pts[0..n) (pts[0] is where the nozzle is), fitting arcs. */
+static void
+extrude_arcs(struct wr *w, const double (*pt)[2], size_t n, double epm, double f, int role)
+{
+    double tol = w->p->arc_tolerance_mm;
+    for (size_t a = 0; a + 1 < n;) {
+        double cx, cy, len, bcx = 0, bcy = 0, blen = 0;
+        bool cw, bcw = false;
+        size_t best = a;
+        /* longest arc from a: doubling, then bisection (arcs of 3+ segments) */
+        size_t lo = a, hi = a + 3;
+        while (hi < n && hi - a <= 512 && arc_fits(pt, a, hi, tol, &cx, &cy, &len, &cw)) {
+            best = hi, bcx = cx, bcy = cy, blen = len, bcw = cw;
+            lo = hi;
+            hi = a + 2 * (hi - a);
+        }
+        if (best > a) {
+            if (hi > n - 1)
+                hi = n;
+            while (hi - lo > 1) {
+                size_t mid = (lo + hi) / 2;
+                if (arc_fits(pt, a, mid, tol, &cx, &cy, &len, &cw))
+                    lo = mid, best = mid, bcx = cx, bcy = cy, blen = len, bcw = cw;
+                else
+                    hi = mid;
+            }
+            emit_arc(w, bcw, pt[best][0], pt[best][1], bcx, bcy, blen, epm, f, role);
+            a = best;
+        } else {
+            extrude_to(w, pt[a + 1][0], pt[a + 1][1], epm, f, role);
+            a++;
+        }
+    }
+}
+
 /* Print path k starting at vertex `at` (reversed for open paths if rev). */
 static void
 print_path(struct wr *w, const struct layer_paths *lp, uint32_t k, uint32_t at, bool rev, double h,
@@ -394,6 +533,24 @@ print_path(struct wr *w, const struct layer_paths *lp, uint32_t k, uint32_t at, 
     if (in->role == ROLE_BRIDGE) /* a round thread of nozzle width, hanging in air */
         epm = in->width_mm * in->width_mm / (w->p->filament_mm * w->p->filament_mm) * w->p->flow;
     double f = role_speed(w->p, in->role, first) * 60;
+    struct cool *c = w->cool;
+    if (w->p->arc_fitting && n >= 4 &&
+        (in->role == ROLE_PERIMETER || in->role == ROLE_EXT_PERIMETER || in->role == ROLE_SKIRT) &&
+        mem_grow((void **)&c->pt, &c->cap_pt, n + 1, sizeof(*c->pt))) {
+        size_t m = 0;
+        c->pt[m][0] = w->x;
+        c->pt[m++][1] = w->y;
+        for (uint32_t s = 1; s < n + in->closed; s++) {
+            uint32_t i = in->closed ? (at + s) % n : rev ? n - 1 - s : s;
+            double x = r3(poly_mm(q[i].x)), y = r3(poly_mm(q[i].y));
+            if (x != c->pt[m - 1][0] || y != c->pt[m - 1][1]) {
+                c->pt[m][0] = x;
+                c->pt[m++][1] = y;
+            }
+        }
+        extrude_arcs(w, (const double(*)[2])c->pt, m, epm, f, in->role);
+        return;
+    }
     if (in->closed) {
         for (uint32_t s = 1; s <= n; s++) {
             uint32_t i = (at + s) % n;
@@ -675,6 +832,7 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
     free(c.steps);
     free(c.seam_prev);
     free(c.seam_cur);
+    free(c.pt);
     retract(&w);
     if (w.rc < 0) {
         gcw_stats_release(st);

@@ -35,7 +35,8 @@ struct gcw_stats {
     double e_mm[ROLE_N]; /* filament per role, mm */
     double travel_mm;    /* XY travel */
     uint32_t n_retracts;
-    uint32_t n_moves;     /* G1 lines written */
+    uint32_t n_moves;     /* G1, G2 and G3 lines written */
+    uint32_t n_arcs;      /* of which G2/G3 */
     double *layer_time_s; /* n_layers: each layer's time at the programmed feeds
                              before the cooling slowdown (what the fan follows) */
     uint32_t n_layers;

@@ -37,6 +37,8 @@ struct slice_profile {
     double travel_mm_s;
     double retract_mm, retract_mm_s, retract_lift_mm, retract_min_travel_mm;
     bool e_relative;               /* M83 instead of M82 */
+    bool arc_fitting;              /* the firmware takes G2/G3: fit arcs to curved perimeters */
+    double arc_tolerance_mm;       /* how far a fitted arc may stray from the polyline */
     char *start_gcode, *end_gcode; /* with {placeholders} */
     /* [print] */
     double layer_mm, first_layer_mm;

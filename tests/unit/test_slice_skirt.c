@@ -143,6 +143,7 @@ T_CASE(skirt_loops_at_the_distance)
     p.skirts = 2;
     p.skirt_distance_mm = 3;
     p.brim_auto = false;
+    p.arc_fitting = false; /* measured along the moves' end points */
     struct slice_result r;
     struct first_layer f;
     T_OK(slice_first_layer(&m, &p, "skirt", &r, &f, &err), &err);
@@ -190,6 +191,7 @@ T_CASE(brim_hugs_the_part_and_auto_brim_picks_tall_parts)
     p.support = false;
     p.skirts = 0;
     p.brim_width_mm = 4;
+    p.arc_fitting = false;
     struct slice_result r;
     struct first_layer f;
     T_OK(slice_first_layer(&m, &p, "brim", &r, &f, &err), &err);
@@ -248,6 +250,7 @@ T_CASE(skirt_and_brim_keep_clear_of_supports)
     T_OK(slice_profile_default(&p), NULL);
     p.brim_width_mm = 5;
     p.skirts = 1;
+    p.arc_fitting = false;
     p.skirt_distance_mm = 2;
     struct slice_result r;
     struct first_layer f;
