@@ -130,6 +130,45 @@ plan_add(struct plan *pl, const struct est_limits *lim, const double d[4], doubl
     return SF_OK;
 }
 
+/*
+ * An arc (G2 clockwise, G3 counter-clockwise around pos + (i, j)) as
+ * Marlin plans it with ARC_SUPPORT: straight segments of at most
+ * EST_ARC_SEGMENT_MM along the arc, Z and E shared out evenly.  Start
+ * and end at the same point sweep a full turn.  A radius of zero (no
+ * centre offset) is a straight move.
+ */
+#define EST_ARC_SEGMENT_MM 1.0
+static int
+plan_arc(struct plan *pl, const struct est_limits *lim, const double pos[4], const double d[4],
+         double i, double j, bool cw, double f_mm_s)
+{
+    double r = hypot(i, j);
+    if (r < 1e-9)
+        return plan_add(pl, lim, d, f_mm_s);
+    double cx = pos[0] + i, cy = pos[1] + j;
+    double a0 = atan2(-j, -i), a1 = atan2(pos[1] + d[1] - cy, pos[0] + d[0] - cx);
+    double sweep = cw ? a0 - a1 : a1 - a0;
+    while (sweep <= 1e-9)
+        sweep += 2 * M_PI;
+    double len = sweep * r;
+    int n = len / EST_ARC_SEGMENT_MM < 100000 ? (int)ceil(len / EST_ARC_SEGMENT_MM) : 100000;
+    if (n < 1)
+        n = 1;
+    double px = pos[0], py = pos[1];
+    for (int k = 1; k <= n; k++) {
+        double a = a0 + (cw ? -1 : 1) * sweep * k / n;
+        double x = k == n ? pos[0] + d[0] : cx + r * cos(a);
+        double y = k == n ? pos[1] + d[1] : cy + r * sin(a);
+        double s[4] = { x - px, y - py, d[2] / n, d[3] / n };
+        int rc = plan_add(pl, lim, s, f_mm_s);
+        if (rc < 0)
+            return rc;
+        px = x;
+        py = y;
+    }
+    return SF_OK;
+}
+
 static double
 trapezoid_s(double len, double v0, double v1, double vn, double a)
 {
@@ -292,7 +331,14 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
             }
             if (gcode_get(&gl, 'F', &v) && isfinite(v) && v > 0)
                 f = fmin(v, EST_COORD_MAX) / 60;
-            if ((rc = plan_add(&pl, &cur, d, f)) < 0) {
+            double ci = 0, cj = 0;
+            bool has_i = gcode_get(&gl, 'I', &ci) && isfinite(ci) && fabs(ci) < EST_COORD_MAX;
+            bool has_j = gcode_get(&gl, 'J', &cj) && isfinite(cj) && fabs(cj) < EST_COORD_MAX;
+            if (gl.code >= 2 && (has_i || has_j))
+                rc = plan_arc(&pl, &cur, pos, d, has_i ? ci : 0, has_j ? cj : 0, gl.code == 2, f);
+            else
+                rc = plan_add(&pl, &cur, d, f);
+            if (rc < 0) {
                 sf_err_set(err, rc, "%s: out of memory", name);
                 goto fail;
             }

@@ -2,7 +2,8 @@
  * estimate.h - read Marlin G-code back: every move, print time by a
  * trapezoidal planner like the firmware's, filament per role.
  *
- * The interpreter follows G0/G1 (G2/G3 arcs are counted as chords), G90/
+ * The interpreter follows G0/G1, G2/G3 arcs (I J centre offsets, split
+ * into segments of at most 1 mm as Marlin's ARC_SUPPORT does), G90/
  * G91, M82/M83, G92, G4 dwell and G28 (to the origin), and the comments
  * the slicer writes: ;LAYER_CHANGE starts a layer, ;TYPE: sets the role
  * (support when it names "Support material...").  Filament is summed the

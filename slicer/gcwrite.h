@@ -8,14 +8,22 @@
  * one role are visited nearest-first (loops start at their vertex nearest
  * the nozzle); a travel longer than retract_min_travel retracts (and
  * lifts, if set).  The first layer runs at first_layer_speed and the
- * first-layer temperatures; layer 1 switches to the normal ones and turns
- * the fan on.  The header, start/end G-code and M73 progress are added by
+ * first-layer temperatures; layer 1 switches to the normal ones.
+ *
+ * Cooling (PrusaSlicer's CoolingBuffer semantics): each layer is first
+ * timed dry at its programmed feeds; a layer faster than
+ * slowdown_below_layer_time has its extrusion feeds capped (fastest
+ * first, never below min_print_speed) until it lasts that long, and the
+ * fan follows the layer time between the two thresholds (gcw_fan_pct),
+ * with bridge_fan_speed over bridges.  The header, start/end G-code and M73 progress are added by
  * slice.c around this body.
  *
  * Thread: reentrant; writes only into the caller's buffer.
  */
 #ifndef SF_SLICER_GCWRITE_H
 #define SF_SLICER_GCWRITE_H
+
+#include <stdbool.h>
 
 #include "../src/base/buf.h"
 #include "layers.h"
@@ -27,8 +35,25 @@ struct gcw_stats {
     double e_mm[ROLE_N]; /* filament per role, mm */
     double travel_mm;    /* XY travel */
     uint32_t n_retracts;
-    uint32_t n_moves; /* G1 lines written */
+    uint32_t n_moves;     /* G1, G2 and G3 lines written */
+    uint32_t n_arcs;      /* of which G2/G3 */
+    double *layer_time_s; /* n_layers: each layer's time at the programmed feeds
+                             before the cooling slowdown (what the fan follows) */
+    uint32_t n_layers;
 };
+
+/* Free st->layer_time_s (gcw_body fills it, also on some failures). */
+void gcw_stats_release(struct gcw_stats *st);
+
+/*
+ * The fan, percent, for layer (0-based) of a layer time t_s, or for its
+ * bridges: PrusaSlicer's cooling rules.  Off below disable_fan_first_layers;
+ * then min_fan_speed if fan_always_on, else off; with cooling, max_fan_speed
+ * under slowdown_below_layer_time and a linear blend from max to min up to
+ * fan_below_layer_time; bridges take bridge_fan_speed; everything ramps
+ * up linearly until full_fan_speed_layer.
+ */
+int gcw_fan_pct(const struct slice_profile *p, uint32_t layer, double t_s, bool bridge);
 
 /* Called after each G1 written, with the machine position it moves to
    (E in the absolute sense, as estimate.h reports it). */
@@ -37,7 +62,7 @@ typedef void (*gcw_move_fn)(void *ud, double x, double y, double z, double e);
 /*
  * Append the G-code of every layer's paths (lp[k] for layer k of s) to
  * out.  on_move (may be NULL) sees every move as written.  SF_ENOMEM when
- * out's cap is hit.
+ * out's cap is hit.  Release st with gcw_stats_release, also on failure.
  */
 int gcw_body(const struct layer_stack *s, const struct layer_paths *lp,
              const struct slice_profile *p, struct buf *out, struct gcw_stats *st,

@@ -202,7 +202,8 @@ static const struct {
     { "Perimeter", 1.0, 0.9, 0.3 },        { "Internal infill", 0.69, 0.19, 0.16 },
     { "Solid infill", 0.59, 0.33, 0.8 },   { "Top solid infill", 0.94, 0.25, 0.25 },
     { "Bridge infill", 0.3, 0.5, 0.73 },   { "Support material interface", 0.0, 0.5, 0.25 },
-    { "Support material", 0.0, 1.0, 0.0 },
+    { "Support material", 0.0, 1.0, 0.0 }, { "Skirt/Brim", 0.0, 0.53, 0.53 },
+    { "Gap fill", 1.0, 1.0, 1.0 },
 };
 
 static uint8_t

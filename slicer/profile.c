@@ -94,6 +94,10 @@ static const struct popt popts[] = {
     R("printer", retract_min_travel, retract_min_travel_mm, 0, 100,
       "retract only for travel longer than this, mm"),
     B("printer", e_relative, e_relative, "relative E (M83) instead of absolute (M82)"),
+    B("printer", arc_fitting, arc_fitting,
+      "the firmware takes G2/G3 (Marlin 2 ARC_SUPPORT): curved perimeters become arcs"),
+    R("printer", arc_tolerance, arc_tolerance_mm, 0.001, 1,
+      "largest distance between a fitted arc and the polyline it replaces, mm"),
     B("printer", retract_only_crossing, retract_only_crossing,
       "retract only when a travel leaves the part"),
     X("printer", start_gcode, start_gcode, "start G-code; {placeholders}"),
@@ -103,6 +107,8 @@ static const struct popt popts[] = {
     I("print", perimeters, perimeters, 0, 50, "perimeter loops"),
     I("print", top_layers, top_layers, 0, 100, "top solid layers"),
     I("print", bottom_layers, bottom_layers, 0, 100, "bottom solid layers"),
+    S("print", seam_position, seam_position,
+      "where perimeter loops start: aligned (up the part from the rear), rear or nearest"),
     R("print", skin_margin, skin_margin_mm, 0, 20,
       "solid skins reach this far into the infill, mm"),
     B("print", ensure_vertical_shells, vertical_shells,
@@ -121,6 +127,9 @@ static const struct popt popts[] = {
     R("print", solid_infill_speed, solid_mm_s, 1, 1000, "solid infill, mm/s"),
     R("print", top_solid_infill_speed, top_mm_s, 1, 1000, "top solid infill, mm/s"),
     R("print", support_speed, support_mm_s, 1, 1000, "support, mm/s"),
+    R("print", gap_fill_speed, gap_fill_mm_s, 1, 1000, "gap fill and thin walls, mm/s"),
+    B("print", gap_fill, gap_fill,
+      "gaps and walls narrower than two lines get one line of matching width"),
     R("print", first_layer_speed, first_layer_mm_s, 1, 1000, "every move of the first layer, mm/s"),
     R("print", bridge_speed, bridge_mm_s, 0, 1000, "solid over air, mm/s (0: print it as solid)"),
     B("print", support, support, "generate column supports"),
@@ -132,6 +141,16 @@ static const struct popt popts[] = {
     I("print", support_interface_layers, support_interface_layers, 0, 20,
       "dense layers under the part"),
     R("print", support_spacing, support_spacing_mm, 0.5, 20, "support line spacing, mm"),
+    I("print", skirts, skirts, 0, 20, "skirt loops (0: none)"),
+    R("print", skirt_distance, skirt_distance_mm, 0, 100,
+      "gap between the skirt and the part, its brim and support, mm"),
+    I("print", skirt_height, skirt_height, 1, 1000, "skirt layers"),
+    R("print", brim_width, brim_width_mm, 0, 100, "brim width, mm (0: none, or automatic)"),
+    B("print", brim_auto, brim_auto,
+      "brim_auto_width of brim when height > brim_auto_ratio x first layer's 4 area / perimeter"),
+    R("print", brim_auto_ratio, brim_auto_ratio, 0.1, 1000,
+      "automatic brim above this height / first-layer width"),
+    R("print", brim_auto_width, brim_auto_width_mm, 0, 100, "automatic brim width, mm"),
     S("material", name, material_name, "material name"),
     R("material", diameter, filament_mm, 0.5, 5, "filament diameter, mm"),
     R("material", density, density_g_cm3, 0.1, 20, "density, g/cm3"),
@@ -141,8 +160,22 @@ static const struct popt popts[] = {
     R("material", bed_temp, bed_c, 0, 150, "bed temperature, C"),
     R("material", first_layer_bed_temp, first_layer_bed_c, 0, 150,
       "first layer bed temperature, C"),
-    R("material", fan, fan_pct, 0, 100, "part cooling fan, percent"),
     R("material", flow, flow, 0.5, 2, "extrusion multiplier"),
+    B("material", cooling, cooling, "slow short layers down and set the fan by layer time"),
+    B("material", fan_always_on, fan_always_on, "fan at min_fan_speed at least on long layers"),
+    R("material", min_fan_speed, min_fan_pct, 0, 100, "fan on long layers, percent"),
+    R("material", max_fan_speed, max_fan_pct, 0, 100, "fan on short layers, percent"),
+    R("material", bridge_fan_speed, bridge_fan_pct, 0, 100, "fan over bridges, percent"),
+    R("material", fan_below_layer_time, fan_below_s, 0, 3600,
+      "layers faster than this get more than min_fan_speed, s"),
+    R("material", slowdown_below_layer_time, slowdown_below_s, 0, 3600,
+      "minimum layer time: faster layers are slowed down to it, s"),
+    R("material", min_print_speed, min_print_mm_s, 1, 1000,
+      "the slowdown never goes below this, mm/s"),
+    I("material", disable_fan_first_layers, disable_fan_first_layers, 0, 1000,
+      "fan off on this many first layers"),
+    I("material", full_fan_speed_layer, full_fan_speed_layer, 0, 1000,
+      "fan ramps up to full until this layer (0: no ramp)"),
 };
 #define N_POPTS (sizeof(popts) / sizeof(popts[0]))
 
@@ -187,6 +220,8 @@ slice_profile_default(struct slice_profile *p)
         .retract_lift_mm = 0,
         .retract_min_travel_mm = 2,
         .e_relative = false,
+        .arc_fitting = true,
+        .arc_tolerance_mm = 0.02,
         .start_gcode = (char *)default_start,
         .end_gcode = (char *)default_end,
         .layer_mm = 0.2,
@@ -194,6 +229,7 @@ slice_profile_default(struct slice_profile *p)
         .perimeters = 2,
         .top_layers = 4,
         .bottom_layers = 3,
+        .seam_position = (char *)"aligned",
         .skin_margin_mm = 3,
         .vertical_shells = false,
         .solid_below_mm2 = 70,
@@ -210,6 +246,8 @@ slice_profile_default(struct slice_profile *p)
         .support_mm_s = 60,
         .first_layer_mm_s = 30,
         .bridge_mm_s = 60,
+        .gap_fill_mm_s = 20,
+        .gap_fill = true,
         .retract_only_crossing = true,
         .support = true,
         .support_angle_deg = 0,
@@ -218,6 +256,13 @@ slice_profile_default(struct slice_profile *p)
         .support_xy_gap_mm = 0.3,
         .support_interface_layers = 2,
         .support_spacing_mm = 2.5,
+        .skirts = 1,
+        .skirt_distance_mm = 6,
+        .skirt_height = 1,
+        .brim_width_mm = 0,
+        .brim_auto = true,
+        .brim_auto_ratio = 3,
+        .brim_auto_width_mm = 5,
         .material_name = (char *)"generic-pla",
         .filament_mm = 1.75,
         .density_g_cm3 = 1.24,
@@ -225,8 +270,18 @@ slice_profile_default(struct slice_profile *p)
         .first_layer_nozzle_c = 215,
         .bed_c = 60,
         .first_layer_bed_c = 60,
-        .fan_pct = 100,
         .flow = 1,
+        /* PrusaSlicer 2.5's built-in cooling defaults (the peers' settings) */
+        .cooling = true,
+        .fan_always_on = false,
+        .min_fan_pct = 35,
+        .max_fan_pct = 100,
+        .bridge_fan_pct = 100,
+        .fan_below_s = 60,
+        .slowdown_below_s = 5,
+        .min_print_mm_s = 10,
+        .disable_fan_first_layers = 3,
+        .full_fan_speed_layer = 0,
     };
     *p = d;
     for (size_t i = 0; i < N_POPTS; i++) {
@@ -343,12 +398,24 @@ slice_profile_check(const struct slice_profile *p, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL,
                           "option 'infill_pattern': '%s' is not grid or rectilinear",
                           p->infill_pattern);
+    if (strcmp(p->seam_position, "aligned") != 0 && strcmp(p->seam_position, "nearest") != 0 &&
+        strcmp(p->seam_position, "rear") != 0)
+        return sf_err_set(err, SF_EINVAL,
+                          "option 'seam_position': '%s' is not aligned, nearest or rear",
+                          p->seam_position);
     if (p->layer_mm > 0.8 * p->nozzle_mm || p->first_layer_mm > 0.9 * p->nozzle_mm)
         return sf_err_set(err, SF_EINVAL,
                           "layer height %g / first layer %g too thick for a %g mm nozzle",
                           p->layer_mm, p->first_layer_mm, p->nozzle_mm);
     if (p->width_mm < p->layer_mm || p->solid_width_mm < p->layer_mm)
         return sf_err_set(err, SF_EINVAL, "line width below the layer height");
+    if (p->min_fan_pct > p->max_fan_pct)
+        return sf_err_set(err, SF_EINVAL, "min_fan_speed %g is above max_fan_speed %g",
+                          p->min_fan_pct, p->max_fan_pct);
+    if (p->cooling && p->fan_below_s < p->slowdown_below_s)
+        return sf_err_set(err, SF_EINVAL,
+                          "fan_below_layer_time %g is below slowdown_below_layer_time %g",
+                          p->fan_below_s, p->slowdown_below_s);
     if (p->support_pitch_mm < p->solid_width_mm)
         return sf_err_set(err, SF_EINVAL, "support_pitch %g is below the line width",
                           p->support_pitch_mm);

@@ -37,10 +37,13 @@ struct slice_profile {
     double travel_mm_s;
     double retract_mm, retract_mm_s, retract_lift_mm, retract_min_travel_mm;
     bool e_relative;               /* M83 instead of M82 */
+    bool arc_fitting;              /* the firmware takes G2/G3: fit arcs to curved perimeters */
+    double arc_tolerance_mm;       /* how far a fitted arc may stray from the polyline */
     char *start_gcode, *end_gcode; /* with {placeholders} */
     /* [print] */
     double layer_mm, first_layer_mm;
     int perimeters, top_layers, bottom_layers;
+    char *seam_position;     /* "aligned", "nearest" or "rear" */
     double skin_margin_mm;   /* solid skins grow this far into the infill */
     bool vertical_shells;    /* solid wherever the neighbours' inner areas differ */
     double solid_below_mm2;  /* sparse islands smaller than this print solid */
@@ -50,7 +53,8 @@ struct slice_profile {
     double width_mm;         /* perimeters and sparse infill */
     double solid_width_mm;   /* solid, top and support lines */
     double perimeter_mm_s, ext_perimeter_mm_s, infill_mm_s, solid_mm_s, top_mm_s;
-    double support_mm_s, first_layer_mm_s, bridge_mm_s;
+    double support_mm_s, first_layer_mm_s, bridge_mm_s, gap_fill_mm_s;
+    bool gap_fill;              /* thin walls and gaps get one line of matching width */
     bool retract_only_crossing; /* no retraction for travel inside the part */
     bool support;
     double support_angle_deg; /* 0: the printer's max_overhang_deg */
@@ -58,11 +62,25 @@ struct slice_profile {
     double support_z_gap_mm, support_xy_gap_mm;
     int support_interface_layers;
     double support_spacing_mm; /* between support lines */
+    int skirts, skirt_height;  /* loops; layers */
+    double skirt_distance_mm;  /* from the part, its support and brim */
+    double brim_width_mm;      /* 0: none, unless brim_auto decides */
+    bool brim_auto;            /* brim for tall parts on small footprints */
+    double brim_auto_ratio;    /* height over first-layer hydraulic diameter */
+    double brim_auto_width_mm;
     /* [material] */
     char *material_name;
     double filament_mm, density_g_cm3;
     double nozzle_c, first_layer_nozzle_c, bed_c, first_layer_bed_c;
-    double fan_pct, flow;
+    double flow;
+    /* cooling, PrusaSlicer's options of the same names */
+    bool cooling;       /* slow short layers down, fan by layer time */
+    bool fan_always_on; /* min_fan_pct at least, from disable_fan_first_layers */
+    double min_fan_pct, max_fan_pct, bridge_fan_pct;
+    double fan_below_s;      /* fan_below_layer_time */
+    double slowdown_below_s; /* slowdown_below_layer_time: the minimum layer time */
+    double min_print_mm_s;   /* slowdown never goes below this */
+    int disable_fan_first_layers, full_fan_speed_layer;
 };
 
 /* Fill p with the defaults (strings allocated).  SF_ENOMEM. */

@@ -372,9 +372,19 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
         goto out;
     }
 
+    res->brim_mm = tp_brim_width(&s, p, res->height_mm);
+    for (uint32_t k = 0; k < s.n && rc == SF_OK && (k == 0 || (int)k < p->skirt_height); k++)
+        if ((rc = toolpath_skirt_brim(&s, k, p, sup, res->brim_mm, &lp[k])) < 0)
+            sf_err_set(err, rc, "skirt and brim: %s",
+                       rc == SF_ENOMEM ? "out of memory" : "clipping failed");
+    if (rc < 0)
+        goto out;
+
     STAGE("gcode");
     struct gcw_stats st;
-    if ((rc = gcw_body(&s, lp, p, &body, &st, NULL, NULL, err)) < 0)
+    rc = gcw_body(&s, lp, p, &body, &st, NULL, NULL, err);
+    gcw_stats_release(&st);
+    if (rc < 0)
         goto out;
     STAGE("estimate");
     struct est_limits lim;

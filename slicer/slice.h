@@ -43,6 +43,7 @@ struct slice_result {
     uint32_t n_columns;        /* ray-grid columns */
     uint32_t n_island_columns; /* extra columns under islands */
     uint32_t n_open_loops;     /* open slice chains closed by force (open mesh) */
+    double brim_mm;            /* brim printed, mm wide (brim_width or automatic) */
     double wall_s;             /* slicing wall time */
 };
 

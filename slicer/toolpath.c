@@ -11,6 +11,7 @@
 #include "toolpath.h"
 
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "../src/base/err.h"
@@ -21,8 +22,11 @@ const char *
 tp_role_name(enum tp_role r)
 {
     static const char *const names[ROLE_N] = {
-        "Support material", "Support material interface", "Perimeter",       "External perimeter",
-        "Solid infill",     "Top solid infill",           "Internal infill", "Bridge infill",
+        "Support material", "Support material interface",
+        "Perimeter",        "External perimeter",
+        "Solid infill",     "Top solid infill",
+        "Internal infill",  "Bridge infill",
+        "Skirt/Brim",       "Gap fill",
     };
     return (unsigned)r < ROLE_N ? names[r] : "Custom";
 }
@@ -646,7 +650,214 @@ fail:
     return rc;
 }
 
-enum { T_AREA, T_TMP, T_TOPI, T_BOTI, T_KEEP, T_SOLID, T_TOP, T_SPARSE, T_LINES, T_N };
+enum {
+    T_AREA,
+    T_TMP,
+    T_TOPI,
+    T_BOTI,
+    T_KEEP,
+    T_SOLID,
+    T_TOP,
+    T_SPARSE,
+    T_LINES,
+    T_GAP,
+    T_S,
+    T_C,
+    T_N
+};
+
+/*
+ * The direction of a bridge over piece: PrusaSlicer's BridgeDetector
+ * idea.  Every 10 degrees, lines across the piece; the angle whose lines
+ * have the most length anchored at both ends (an end within a nozzle
+ * width of the layer below) wins, and of angles within 1 % of that, the
+ * one whose longest anchored line is shortest: the shortest span between
+ * anchors.
+ */
+static double
+bridge_angle(const struct paths *piece, const struct paths_index *below, double spacing,
+             struct paths *lines, int *rc)
+{
+    double best_cov = -1, best_max = INFINITY, best = 0;
+    double cov[18], mx[18];
+    for (int a = 0; a < 18; a++) {
+        paths_reset(lines);
+        cov[a] = 0;
+        mx[a] = 0;
+        if ((*rc = tp_fill_lines(piece, a * 10.0, spacing, lines)) < 0)
+            return 0;
+        for (uint32_t i = 0; i < lines->n; i++) {
+            uint32_t n = paths_len(lines, i);
+            const struct ipt *q = lines->pts + lines->start[i];
+            if (paths_index_contains(below, q[0]) && paths_index_contains(below, q[n - 1])) {
+                double l = paths_length_k(lines, i, false);
+                cov[a] += l;
+                mx[a] = fmax(mx[a], l);
+            }
+        }
+        best_cov = fmax(best_cov, cov[a]);
+    }
+    for (int a = 0; a < 18; a++)
+        if (cov[a] >= 0.99 * best_cov && mx[a] < best_max)
+            best_max = mx[a], best = a * 10.0;
+    return best;
+}
+
+/* Bridge lines over each piece of area (one outer and its holes), in
+   the piece's own direction (bridge_angle) over the layer below. */
+static int
+bridges(const struct paths *area, const struct paths *below, double nz, struct layer_paths *out,
+        struct paths *grown, struct paths *lines, struct paths *piece)
+{
+    struct paths_index ix;
+    int rc = clip_offset(below, nz, CLIP_JOIN_MITER, grown);
+    if (rc < 0)
+        return rc;
+    if (!paths_index_init(&ix, grown))
+        return SF_ENOMEM;
+    for (uint32_t k = 0; k < area->n && rc == SF_OK;) {
+        uint32_t e = k + 1;
+        while (e < area->n && paths_area_k(area, e) < 0)
+            e++;
+        paths_reset(piece);
+        for (uint32_t i = k; i < e; i++)
+            if (!paths_add(piece, area->pts + area->start[i], paths_len(area, i)))
+                rc = SF_ENOMEM;
+        k = e;
+        double ang = rc == SF_OK ? bridge_angle(piece, &ix, nz + 0.05, lines, &rc) : 0;
+        paths_reset(lines);
+        if (rc == SF_OK)
+            rc = tp_fill_lines(piece, ang, nz + 0.05, lines);
+        if (rc == SF_OK)
+            rc = tp_link(lines, piece, 2 * (nz + 0.05), nz / 2);
+        if (rc == SF_OK)
+            rc = add(out, lines, ROLE_BRIDGE, false, nz);
+    }
+    paths_index_release(&ix);
+    return rc;
+}
+
+/* Move the pieces (outer and holes) of set narrower than t_mm (2 area /
+   perimeter) to narrow; tmp is scratch. */
+static int
+split_narrow(struct paths *set, double t_mm, struct paths *narrow, struct paths *tmp)
+{
+    paths_reset(tmp);
+    bool moved = false;
+    for (uint32_t k = 0; k < set->n;) {
+        uint32_t e = k + 1;
+        while (e < set->n && paths_area_k(set, e) < 0)
+            e++;
+        double area = 0, per = 0;
+        for (uint32_t i = k; i < e; i++) {
+            area += paths_area_k(set, i);
+            per += paths_length_k(set, i, true);
+        }
+        bool thin = per > 0 && 2 * area / per < t_mm;
+        moved |= thin;
+        for (uint32_t i = k; i < e; i++)
+            if (!paths_add(thin ? narrow : tmp, set->pts + set->start[i], paths_len(set, i)))
+                return SF_ENOMEM;
+        k = e;
+    }
+    if (moved) {
+        paths_reset(set);
+        if (!paths_append(set, tmp))
+            return SF_ENOMEM;
+    }
+    return SF_OK;
+}
+
+/* The vertex of q farthest from q[from]. */
+static uint32_t
+farthest(const struct ipt *q, uint32_t n, uint32_t from)
+{
+    uint32_t best = from;
+    double bd = -1;
+    for (uint32_t i = 0; i < n; i++) {
+        double d = d2(q[i], q[from]);
+        if (d > bd)
+            bd = d, best = i;
+    }
+    return best;
+}
+
+/*
+ * Gap fill and thin walls: every piece of gap (a region no perimeter loop
+ * or infill reaches, narrower than two lines) gets one line along its
+ * middle instead of nothing.  The middle is found by shrinking the piece
+ * to a sliver by nearly half its mean width (2 area / perimeter); a sliver
+ * with a hole (a thin ring) prints its outer loop, an open one the side
+ * between its two far ends.  The line's width is set so the piece's area
+ * is laid down whole (length x spacing = area): a fixed width per piece,
+ * the classic generator's answer to what PrusaSlicer's Arachne does with
+ * widths varying along the line.
+ */
+static int
+gap_fill(const struct paths *gap, double h, double nozzle, double sp, struct layer_paths *out,
+         struct paths *piece, struct paths *sliver, struct paths *line)
+{
+    int rc = SF_OK;
+    for (uint32_t k = 0; k < gap->n && rc == SF_OK;) {
+        /* one outer and its holes (Clipper's tree order) */
+        uint32_t e = k + 1;
+        while (e < gap->n && paths_area_k(gap, e) < 0)
+            e++;
+        paths_reset(piece);
+        double area = 0, per = 0;
+        for (uint32_t i = k; i < e; i++) {
+            if (!paths_add(piece, gap->pts + gap->start[i], paths_len(gap, i)))
+                return SF_ENOMEM;
+            area += paths_area_k(gap, i);
+            per += paths_length_k(gap, i, true);
+        }
+        k = e;
+        if (area < 0.1 * nozzle * nozzle || per <= 0)
+            continue;
+        double t = 2 * area / per;
+        /* wider than 1.5 spacings: two lines, the loop a quarter width in */
+        bool two = t > 1.5 * sp;
+        paths_reset(sliver);
+        for (double f = two ? 0.25 : 0.45; f > 0.1 && !sliver->n && rc == SF_OK; f -= 0.15)
+            rc = clip_offset(piece, -f * t, CLIP_JOIN_MITER, sliver);
+        if (rc < 0 || !sliver->n)
+            continue;
+        paths_reset(line);
+        bool ring = two;
+        for (uint32_t i = 0; i < sliver->n; i++)
+            ring |= paths_area_k(sliver, i) < 0;
+        double len = 0;
+        for (uint32_t i = 0; i < sliver->n; i++) {
+            const struct ipt *q = sliver->pts + sliver->start[i];
+            uint32_t n = paths_len(sliver, i);
+            if (paths_area_k(sliver, i) < 0 && !two)
+                continue;
+            if (ring) {
+                if (!paths_add(line, q, n))
+                    return SF_ENOMEM;
+                len += paths_length_k(sliver, i, true);
+                continue;
+            }
+            uint32_t a = farthest(q, n, 0), b = farthest(q, n, a);
+            if (!paths_begin(line))
+                return SF_ENOMEM;
+            for (uint32_t j = a;; j = (j + 1) % n) {
+                if (!paths_push(line, q[j]))
+                    return SF_ENOMEM;
+                if (j == b)
+                    break;
+            }
+            len += paths_length_k(line, line->n - 1, false);
+        }
+        if (len < 1e-3)
+            continue;
+        double wl = area / len + h * (1 - M_PI / 4);
+        if (wl > 2.5 * nozzle)
+            wl = 2.5 * nozzle;
+        rc = add(out, line, ROLE_GAP_FILL, ring, wl);
+    }
+    return rc;
+}
 
 int
 toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
@@ -809,14 +1020,64 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         TRY(add(out, &t[T_LINES], ROLE_INTERFACE, false, sw));
     }
 
-    /* perimeters, inner loops first, external last */
+    /*
+     * Perimeters, inner loops first, external last.  Loop i's centre line
+     * is opened by half a spacing (shrunk by that much more, grown back),
+     * so a loop never wraps a sliver it cannot fill (it would lay two lines
+     * where one fits), as PrusaSlicer's classic generator does.  What the
+     * loops leave between them, the part's edge and the infill goes to
+     * gap fill: S is the area inside loop i - 1 (the region for i = 0),
+     * and the gap is the part of it loop i does not reach.
+     */
+    struct paths *loops = p->perimeters ? mem_calloc((size_t)p->perimeters, sizeof(*loops)) : NULL;
+    if (p->perimeters && !loops)
+        TRY(SF_ENOMEM);
+    paths_reset(&t[T_GAP]);
+    for (int i = 0; i < p->perimeters && rc == SF_OK; i++) {
+        double d = w / 2 + i * sp;
+        const struct paths *prev = i ? &t[T_S] : &L->region;
+        paths_init(&loops[i]);
+        if ((rc = clip_offset(&L->region, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0 ||
+            (rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
+            break;
+        if (p->gap_fill) {
+            if ((rc = clip_offset(&loops[i], i ? sp / 2 : w / 2, CLIP_JOIN_MITER, &t[T_LINES])) <
+                    0 ||
+                (rc = clip_bool(CLIP_DIFFERENCE, prev, &t[T_LINES], CLIP_NONZERO, &t[T_KEEP])) < 0)
+                break;
+            if (!paths_append(&t[T_GAP], &t[T_KEEP]))
+                rc = SF_ENOMEM;
+        }
+        paths_move(&t[T_S], &t[T_TMP]);
+    }
     for (int i = p->perimeters - 1; i >= 0; i--) {
-        TRY(clip_offset(&L->region, -(w / 2 + i * sp), CLIP_JOIN_MITER, &t[T_TMP]));
-        TRY(add(out, &t[T_TMP], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w));
+        if (rc == SF_OK)
+            rc = add(out, &loops[i], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w);
+        paths_release(&loops[i]);
+    }
+    free(loops);
+    if (rc < 0)
+        goto out;
+    if (t[T_GAP].n) {
+        /* drop slivers under a quarter spacing wide (where the loops' bands
+           meet at corners), then fill */
+        TRY(clip_offset(&t[T_GAP], -sp / 8, CLIP_JOIN_MITER, &t[T_TMP]));
+        TRY(clip_offset(&t[T_TMP], sp / 8, CLIP_JOIN_MITER, &t[T_GAP]));
+        TRY(gap_fill(&t[T_GAP], h, p->nozzle_mm, sp, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
     }
     if (!L->inner.n)
         goto out;
     TRY(toolpath_regions(s, k, p, &t[T_SOLID], &t[T_TOP], &t[T_SPARSE]));
+    if (p->gap_fill) {
+        /* infill pieces under 3.5 spacings wide: zig-zag links would lay
+           more than their area there, so they are gap-filled instead */
+        paths_reset(&t[T_GAP]);
+        struct paths *sets[3] = { &t[T_SOLID], &t[T_TOP], &t[T_SPARSE] };
+        for (int i = 0; i < 3; i++)
+            TRY(split_narrow(sets[i], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
+        if (t[T_GAP].n)
+            TRY(gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
+    }
     double ang = k % 2 ? 135 : 45;
     if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0) {
         /* solid over air is a bridge; slivers narrower than the nozzle are not */
@@ -828,10 +1089,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
             TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_SOLID], CLIP_NONZERO, &t[T_KEEP]));
             TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
             paths_move(&t[T_SOLID], &t[T_TMP]);
-            paths_reset(&t[T_LINES]);
-            TRY(tp_fill_lines(&t[T_KEEP], ang, nz + 0.05, &t[T_LINES]));
-            TRY(tp_link(&t[T_LINES], &t[T_KEEP], 2 * (nz + 0.05), nz / 2));
-            TRY(add(out, &t[T_LINES], ROLE_BRIDGE, false, nz));
+            TRY(bridges(&t[T_KEEP], &s->l[k - 1].region, nz, out, &t[T_TMP], &t[T_LINES], &t[T_S]));
         }
     }
     paths_reset(&t[T_LINES]);
@@ -858,6 +1116,218 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
 #undef TRY
 out:
     for (int i = 0; i < T_N; i++)
+        paths_release(&t[i]);
+    return rc;
+}
+
+double
+tp_brim_width(const struct layer_stack *s, const struct slice_profile *p, double height_mm)
+{
+    if (p->brim_width_mm > 0)
+        return p->brim_width_mm;
+    if (!p->brim_auto || !s->n)
+        return 0;
+    const struct paths *r = &s->l[0].region;
+    double area = paths_area(r), per = 0;
+    for (uint32_t k = 0; k < r->n; k++)
+        per += paths_length_k(r, k, true);
+    if (area <= 0 || per <= 0)
+        return 0;
+    return height_mm > p->brim_auto_ratio * 4 * area / per ? p->brim_auto_width_mm : 0;
+}
+
+static int
+cmp_ipt(const void *a, const void *b)
+{
+    const struct ipt *p = a, *q = b;
+    if (p->x != q->x)
+        return p->x < q->x ? -1 : 1;
+    return (p->y > q->y) - (p->y < q->y);
+}
+
+/* Twice the signed area of o-a-b (coordinates within a bed fit int64 products). */
+static int64_t
+cross3(struct ipt o, struct ipt a, struct ipt b)
+{
+    return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+}
+
+/* Convex hull of every point of in (monotone chain), counter-clockwise, into out. */
+static int
+hull_of(const struct paths *in, struct paths *out)
+{
+    paths_reset(out);
+    size_t n = in->n ? in->start[in->n] : 0;
+    if (n < 3)
+        return SF_OK;
+    struct ipt *pt = mem_array(n, sizeof(*pt)), *h = mem_array(2 * n, sizeof(*h));
+    if (!pt || !h) {
+        free(pt);
+        free(h);
+        return SF_ENOMEM;
+    }
+    memcpy(pt, in->pts, n * sizeof(*pt));
+    qsort(pt, n, sizeof(*pt), cmp_ipt);
+    size_t m = 0;
+    for (size_t i = 0; i < n; i++) {
+        while (m >= 2 && cross3(h[m - 2], h[m - 1], pt[i]) <= 0)
+            m--;
+        h[m++] = pt[i];
+    }
+    for (size_t i = n - 1, t = m + 1; i-- > 0;) {
+        while (m >= t && cross3(h[m - 2], h[m - 1], pt[i]) <= 0)
+            m--;
+        h[m++] = pt[i];
+    }
+    int rc = m > 3 && !paths_add(out, h, (uint32_t)(m - 1)) ? SF_ENOMEM : SF_OK;
+    free(pt);
+    free(h);
+    return rc;
+}
+
+/* Loops of width w at offsets d0, d0 + sp, ... (n of them) outside region. */
+static int
+loops_around(const struct paths *region, double d0, double sp, int n, struct paths *out,
+             struct paths *tmp)
+{
+    paths_reset(out);
+    for (int i = 0; i < n; i++) {
+        int rc = clip_offset(region, d0 + i * sp, CLIP_JOIN_ROUND, tmp);
+        if (rc < 0)
+            return rc;
+        if (!paths_append(out, tmp))
+            return SF_ENOMEM;
+    }
+    return SF_OK;
+}
+
+/* Add closed loops to out as skirt/brim: whole, or when allowed is given,
+   cut open to the pieces inside it. */
+static int
+add_loops(struct layer_paths *out, const struct paths *loops, const struct paths *allowed, double w,
+          struct paths *tmp, struct paths *tmp2)
+{
+    if (!allowed)
+        return add(out, loops, ROLE_SKIRT, true, w);
+    paths_reset(tmp);
+    for (uint32_t i = 0; i < loops->n; i++) {
+        const struct ipt *q = loops->pts + loops->start[i];
+        uint32_t n = paths_len(loops, i);
+        if (!paths_begin(tmp))
+            return SF_ENOMEM;
+        for (uint32_t j = 0; j <= n; j++)
+            if (!paths_push(tmp, q[j % n]))
+                return SF_ENOMEM;
+    }
+    int rc = clip_lines(tmp, allowed, tmp2);
+    return rc < 0 ? rc : add(out, tmp2, ROLE_SKIRT, false, w);
+}
+
+/* True when every point of p lies on the bed. */
+static bool
+on_bed(const struct paths *p, const struct paths *bed)
+{
+    struct ipt lo, hi, blo, bhi;
+    if (!paths_bbox(p, &lo, &hi) || !paths_bbox(bed, &blo, &bhi))
+        return true;
+    return lo.x >= blo.x && lo.y >= blo.y && hi.x <= bhi.x && hi.y <= bhi.y;
+}
+
+int
+toolpath_skirt_brim(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                    const struct support_layer *sup0, double brim_mm, struct layer_paths *lp)
+{
+    bool skirt = p->skirts > 0 && (int)k < p->skirt_height;
+    if (!s->n || (!skirt && (k > 0 || brim_mm <= 0)))
+        return SF_OK;
+    double w = p->width_mm, h = s->l[0].h_mm, sp = tp_spacing(w, h);
+    enum { OUTER, ROUND, KEEP, BRIM, HULL, LOOPS, TMP, TMP2, BED, N };
+    struct paths t[N];
+    for (int i = 0; i < N; i++)
+        paths_init(&t[i]);
+    struct layer_paths out;
+    layer_paths_init(&out);
+    int rc = SF_OK;
+#define TRY(x)                                                                                     \
+    do {                                                                                           \
+        if ((rc = (x)) < 0)                                                                        \
+            goto done;                                                                             \
+    } while (0)
+    struct ipt bed[4] = { { 0, 0 },
+                          { poly_i(p->bed_x_mm), 0 },
+                          { poly_i(p->bed_x_mm), poly_i(p->bed_y_mm) },
+                          { 0, poly_i(p->bed_y_mm) } };
+    if (!paths_add(&t[BED], bed, 4))
+        TRY(SF_ENOMEM);
+    /* the part's outer contours (a brim stays out of holes, PrusaSlicer's outer_only) */
+    const struct paths *r = &s->l[0].region;
+    for (uint32_t i = 0; i < r->n; i++)
+        if (paths_area_k(r, i) > 0 && !paths_add(&t[TMP], r->pts + r->start[i], paths_len(r, i)))
+            TRY(SF_ENOMEM);
+    TRY(clip_bool(CLIP_UNION, &t[TMP], NULL, CLIP_NONZERO, &t[OUTER]));
+    /* ROUND: what the skirt goes around (part, support, brim); KEEP: the support */
+    paths_reset(&t[TMP]);
+    if (sup0 && (!paths_append(&t[TMP], &sup0->body) || !paths_append(&t[TMP], &sup0->iface)))
+        TRY(SF_ENOMEM);
+    TRY(clip_bool(CLIP_UNION, &t[TMP], NULL, CLIP_NONZERO, &t[KEEP]));
+    int n_brim = brim_mm > 0 ? (int)floor(brim_mm / sp + 1e-9) : 0;
+    if (n_brim > 0) {
+        /* loops from the part outwards, the first half a spacing out, as
+           PrusaSlicer's (it overlaps the external perimeter, to bond) */
+        TRY(loops_around(&t[OUTER], sp / 2, sp, n_brim, &t[BRIM], &t[TMP]));
+        TRY(clip_offset(&t[OUTER], n_brim * sp, CLIP_JOIN_ROUND, &t[ROUND]));
+    } else if (!paths_append(&t[ROUND], &t[OUTER])) {
+        TRY(SF_ENOMEM);
+    }
+    if (!paths_append(&t[ROUND], &t[KEEP]))
+        TRY(SF_ENOMEM);
+    if (skirt) {
+        TRY(hull_of(&t[ROUND], &t[HULL]));
+        TRY(loops_around(&t[HULL], p->skirt_distance_mm + w / 2, sp, p->skirts, &t[LOOPS],
+                         &t[TMP]));
+        /* outermost first: the nozzle primes far from the part */
+        paths_reset(&t[TMP2]);
+        for (uint32_t i = t[LOOPS].n; i-- > 0;)
+            if (!paths_add(&t[TMP2], t[LOOPS].pts + t[LOOPS].start[i], paths_len(&t[LOOPS], i)))
+                TRY(SF_ENOMEM);
+        paths_move(&t[LOOPS], &t[TMP2]);
+        TRY(add_loops(&out, &t[LOOPS], on_bed(&t[LOOPS], &t[BED]) ? NULL : &t[BED], w, &t[TMP],
+                      &t[TMP2]));
+    }
+    if (k == 0 && n_brim > 0) {
+        /* a line width clear of the support: the loops are cut open there */
+        bool clear = on_bed(&t[BRIM], &t[BED]);
+        if (t[KEEP].n) {
+            TRY(clip_offset(&t[KEEP], w, CLIP_JOIN_ROUND, &t[TMP]));
+            paths_move(&t[KEEP], &t[TMP]);
+            TRY(clip_bool(CLIP_INTERSECTION, &t[BRIM], &t[KEEP], CLIP_NONZERO, &t[TMP]));
+            clear = clear && t[TMP].n == 0;
+        }
+        if (!clear) {
+            TRY(clip_offset(&t[OUTER], n_brim * sp + w, CLIP_JOIN_ROUND, &t[TMP]));
+            TRY(clip_bool(CLIP_INTERSECTION, &t[TMP], &t[BED], CLIP_NONZERO, &t[TMP2]));
+            TRY(clip_bool(CLIP_DIFFERENCE, &t[TMP2], &t[KEEP], CLIP_NONZERO, &t[HULL]));
+        }
+        TRY(add_loops(&out, &t[BRIM], clear ? NULL : &t[HULL], w, &t[TMP], &t[TMP2]));
+    }
+    if (out.p.n) {
+        uint32_t n_own = out.p.n;
+        if (!paths_append(&out.p, &lp->p))
+            TRY(SF_ENOMEM);
+        size_t cap = out.cap_info;
+        if (!mem_grow((void **)&out.info, &cap, out.p.n, sizeof(*out.info)))
+            TRY(SF_ENOMEM);
+        out.cap_info = (uint32_t)cap;
+        if (lp->p.n)
+            memcpy(out.info + n_own, lp->info, lp->p.n * sizeof(*lp->info));
+        layer_paths_release(lp);
+        *lp = out;
+        layer_paths_init(&out);
+    }
+#undef TRY
+done:
+    layer_paths_release(&out);
+    for (int i = 0; i < N; i++)
         paths_release(&t[i]);
     return rc;
 }

@@ -40,7 +40,9 @@ enum tp_role {
     ROLE_SOLID,
     ROLE_TOP,
     ROLE_INFILL,
-    ROLE_BRIDGE, /* solid over air: round lines of nozzle width, bridge speed */
+    ROLE_BRIDGE,   /* solid over air: round lines of nozzle width, bridge speed */
+    ROLE_SKIRT,    /* skirt and brim */
+    ROLE_GAP_FILL, /* one line along a gap or thin wall, its width set by the gap's area */
     ROLE_N
 };
 
@@ -98,6 +100,26 @@ int toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice
  */
 int toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
                    const struct support_layer *sup, struct layer_paths *out);
+
+/*
+ * The brim width layer 0 gets: brim_width, or with brim_auto and no
+ * brim_width, brim_auto_width when the part stands tall on a small
+ * footprint: height_mm > brim_auto_ratio x the hydraulic diameter of the
+ * first layer (4 area / perimeter: the side of a square, the diameter of
+ * a disc, twice the width of a long strip).  0: no brim.
+ */
+double tp_brim_width(const struct layer_stack *s, const struct slice_profile *p, double height_mm);
+
+/*
+ * Put the skirt (layers below skirt_height) and the brim (layer 0, brim_mm
+ * wide, outside the part's outer contours only) in front of layer k's
+ * paths.  The brim keeps a line width clear of that layer's support
+ * (sup0: layer 0's support, may be NULL); the skirt loops run
+ * skirt_distance outside the convex hull of layer 0's part, support and
+ * brim, so they go around everything.  SF_ENOMEM / SF_EBUG.
+ */
+int toolpath_skirt_brim(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                        const struct support_layer *sup0, double brim_mm, struct layer_paths *lp);
 
 /*
  * Parallel lines at angle_deg, spacing_mm apart (aligned to the bed origin

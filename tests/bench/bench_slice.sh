@@ -30,6 +30,8 @@ work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
 ours() { # mesh support(on|off) -> "g min support_g wall_s layers"
   local best=999999 line flag=""
   [ "$2" = off ] && flag=--no-support
+  # like the peers: no skirt, no brim (slice-peers.sh passes --skirts 0 --brim-width 0)
+  flag="$flag --set skirts=0 --set brim_auto=no"
   for _ in 1 2 3; do
     local t0 t1
     t0=$(date +%s.%N)

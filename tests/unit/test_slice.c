@@ -40,6 +40,7 @@ T_CASE(slice_cube_extrudes_its_volume)
     T_OK(shape_box(&m, v3(0, 0, 0), v3(20, 20, 20), &err), &err);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
+    p.skirts = 0; /* the cube's volume alone */
     char path[512];
     struct slice_result r;
     /* solid: every mm^3 of the cube is extruded */
@@ -283,6 +284,7 @@ T_CASE(gcode_reads_back_into_the_same_moves)
         T_EQ_INT(rb.n, st.n_moves);
         T_EQ_INT(wr.n, st.n_moves);
         T_EQ_INT(rb.n_differ, 0);
+        gcw_stats_release(&st);
         free(wr.mv);
         double sum = 0;
         for (int r = 0; r < ROLE_N; r++)
