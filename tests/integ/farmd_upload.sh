@@ -14,6 +14,10 @@ set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
 PY=/usr/bin/python3
+# a port the kernel says is free now (lib/farm.sh's random one collided with
+# another session's daemon on a shared machine)
+port=$($PY -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+export SLIMFARM_URL=http://127.0.0.1:$port
 RO=ro-key-0123456789abcdef
 MK=metrics-key-0123456789ab
 
