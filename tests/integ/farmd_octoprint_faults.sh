@@ -34,7 +34,7 @@ cp -r config/printers config/materials "$tmp/"
 {
   printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
   for p in err stop busy; do
-    m=PLA; [ $p = stop ] && m=PETG; [ $p = busy ] && m=TPU
+    m=PLA; [ $p = stop ] && m=PETG
     printf '[printer %s]\ndriver: octoprint\nurl: %s\napi_key: %s\npoll_ms: 200\nmaterial: %s\nauto_eject: true\n' \
       "$p" "$(cat "$tmp/$p.addr")" "$KEY" "$m"
   done
@@ -48,7 +48,7 @@ wait_for 60 sh -c "'$C' printers | grep -E '^busy ' | grep -q 'OctoPrint is busy
 "$C" shapes "$tmp" > /dev/null || fail "shapes"
 j_err=$(submit "$tmp/lbracket.stl" --material PLA --printer err --method none --retries 2)
 j_stop=$(submit "$tmp/lbracket.stl" --material PETG --printer stop --method none --retries 2)
-j_busy=$(submit "$tmp/lbracket.stl" --material TPU --printer busy --method none)
+j_busy=$(submit "$tmp/lbracket.stl" --material PLA --printer busy --method none)
 
 # error-at: error state with the printer's message; the job waits for its retry
 wait_for 240 sh -c "'$C' printers | grep -qE '^err +error .*heater failure'" ||
@@ -71,7 +71,8 @@ wait_for 300 sh -c "[ \"\$(curl -sf -H 'X-Api-Key: $RW' $SLIMFARM_URL/api/jobs/$
   fail "job $j_stop: $(job_state "$j_stop")"
 api "/api/jobs/$j_stop" | json 'd["job"]["reason"]' | grep -q "stopped at the printer" ||
   fail "job $j_stop reason: $(api "/api/jobs/$j_stop" | json 'd["job"]["reason"]')"
-[ "$(api "/api/jobs/$j_stop" | json 'len(d["prints"])')" = 3 ] || fail "job $j_stop was not retried twice"
+[ "$(api "/api/jobs/$j_stop" | json 'len(d["prints"])')" = 3 ] ||
+  fail "job $j_stop was not retried twice: $(api "/api/jobs/$j_stop")"
 
 # busy: nothing started there
 st=$(job_state "$j_busy")
