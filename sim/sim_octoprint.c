@@ -32,7 +32,8 @@ struct octo_sim {
     long error_at;  /* fault: fail after this many job lines (0: never) */
     long cancel_at; /* fault: cancel at the printer after this many job lines */
     bool busy;      /* fault: the printer says it is busy */
-    bool fired;     /* error-at / cancel-at done for this job */
+    bool fired;     /* cancel-at done for this job */
+    bool err_fired; /* error-at done (once per run: the printer is fixed after) */
     uint64_t tick;  /* fault watch timer */
     uint64_t uploads, jobs;
 };
@@ -107,6 +108,27 @@ h_connection(struct sim_http_req *r, void *ud)
                   "_default", "options", "ports", "VIRTUAL", "baudrates", 250000, "printerProfiles",
                   "id", "_default", "name", "Default", "portPreference", "VIRTUAL",
                   "baudratePreference", 250000, "printerProfilePreference", "_default"));
+}
+
+/* POST /api/connection: "connect" brings a printer out of Error, as reconnecting does. */
+static void
+h_connect(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    struct sf_err err;
+    json_t *j = sim_http_json(r, &err);
+    if (!j) {
+        sim_http_reply_error(r, 400, err.msg);
+        return;
+    }
+    const char *cmd = json_string_value(json_object_get(j, "command"));
+    if (cmd && strcmp(cmd, "connect") == 0) {
+        sim_netprinter_reset(o->np);
+        sim_http_reply_empty(r, 204);
+    } else {
+        sim_http_reply_error(r, 400, "Unknown command");
+    }
+    json_decref(j);
 }
 
 static json_t *
@@ -399,6 +421,7 @@ static const struct sim_http_route routes[] = {
     { "GET", "/api/version", SIM_HTTP_BODY_MEM, false, h_version },
     { "GET", "/api/server", SIM_HTTP_BODY_MEM, false, h_server },
     { "GET", "/api/connection", SIM_HTTP_BODY_MEM, false, h_connection },
+    { "POST", "/api/connection", SIM_HTTP_BODY_MEM, false, h_connect },
     { "GET", "/api/job", SIM_HTTP_BODY_MEM, false, h_job },
     { "POST", "/api/job", SIM_HTTP_BODY_MEM, false, h_job_command },
     { "GET", "/api/printer", SIM_HTTP_BODY_MEM, false, h_printer },
@@ -418,8 +441,8 @@ on_tick(struct loop *l, void *ud)
     struct sim_np_status st;
     sim_netprinter_status(o->np, &st);
     if (!o->fired && (st.state == SIM_NP_PRINTING || st.state == SIM_NP_PAUSED)) {
-        if (o->error_at && st.lines_done >= (uint64_t)o->error_at) {
-            o->fired = true;
+        if (o->error_at && !o->err_fired && st.lines_done >= (uint64_t)o->error_at) {
+            o->err_fired = true;
             sim_netprinter_fail(o->np, "Printer halted: heater failure (simulated)");
         } else if (o->cancel_at && st.lines_done >= (uint64_t)o->cancel_at) {
             o->fired = true;

@@ -7,13 +7,14 @@
  * /api/printer, /api/files/local/NAME; POST /api/files/local (multipart
  * upload: file, select, print), /api/files/local/NAME (select [+print]),
  * /api/job (start, cancel, restart, pause with action pause/resume/toggle),
- * /api/printer/command; DELETE /api/files/local/NAME.  A missing or wrong
+ * /api/printer/command, /api/connection ("connect" leaves Error, as
+ * reconnecting OctoPrint to its printer does); DELETE /api/files/local/NAME.  A missing or wrong
  * X-Api-Key is a 403, as OctoPrint answers.  Conflicts are 409 with
  * {"error": reason}.
  *
  * Faults (--fault), besides sim_http's and the firmware's:
- *   error-at=N       the printer fails ("Error") after N job lines
- *   cancel-at=N      the print is cancelled at the printer after N job lines
+ *   error-at=N       the printer fails ("Error") after N lines of a job, once
+ *   cancel-at=N      every print is cancelled at the printer after N job lines
  *   busy=1           the printer reports itself busy: uploads do not start,
  *                    select+print and job start answer 409
  *

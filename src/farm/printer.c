@@ -311,6 +311,8 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
         break;
     case DRV_EV_JOB_FAILED:
         p->lines_acked = (int64_t)st->lines_acked;
+        if (st->state == DRV_ERROR && st->message[0])
+            snprintf(p->message, sizeof(p->message), "%s", st->message); /* why it halted */
         fail_job(p, st->message[0] ? st->message : "the print stopped");
         if (p->state == PRINTER_PRINTING || p->state == PRINTER_PAUSED)
             move(p, st->state == DRV_ERROR ? PRINTER_EV_FAULT : PRINTER_EV_FINISHED);
