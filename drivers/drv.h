@@ -205,7 +205,7 @@ const char *drv_state_name(enum drv_state s);
  * every driver and every daemon run (so a restarted daemon recognises its
  * job on the printer): "sf-" and the file's base name (the farm's files are
  * named by their SHA-256, so the name says which content it holds), kept
- * to [A-Za-z0-9._-] and 64 bytes, ending in ".gcode".  out holds n >= 72.
+ * to [A-Za-z0-9._-] and 64 bytes, ending in ".gcode".  out holds n >= 74.
  */
 void drv_remote_name(const char *gcode_path, char *out, size_t n);
 

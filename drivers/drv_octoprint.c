@@ -253,10 +253,11 @@ octo_reason(const char *body, size_t len, char *out, size_t n)
     if (e) {
         snprintf(out, n, "%s", e);
     } else if (body && !j) {
-        size_t k = strcspn(body, "\r\n");
-        if (k > len)
-            k = len;
-        snprintf(out, n, "%.*s", (int)k, body);
+        /* body need not be NUL-terminated: stop at len */
+        size_t k = 0;
+        while (k < len && body[k] && body[k] != '\r' && body[k] != '\n')
+            k++;
+        snprintf(out, n, "%.*s", (int)(k < n ? k : n - 1), body);
     }
     json_decref(j);
     /* A reason is one line of text for an operator. */

@@ -347,8 +347,6 @@ report(struct httpc_req *r)
     } else {
         res.code = sf_err_set(&res.err, SF_EIO, "%s %s: %s", r->method, r->url, detail);
     }
-    if (res.code != SF_OK)
-        res.status = res.status ? res.status : 0;
     r->in_done = true;
     r->h->n_active--;
     r->done_fn(r, &res, r->ud);

@@ -173,7 +173,8 @@ run_send(int argc, char **argv)
                              .baud = (int)baud,
                              .timeout_ms = (int)timeout_ms,
                              .buffer_lines = (int)window };
-    c.drv = drv_new(c.loop, &dc, on_event, &c, &err);
+    /* Marlin only: the driver itself, not the registry, which links every driver. */
+    c.drv = drv_marlin_new(c.loop, &dc, on_event, &c, &err);
     if (!c.drv || loop_add_signal(c.loop, SIGINT, on_sigint, &c, &err) < 0 ||
         c.drv->ops->open(c.drv, &err) < 0) {
         fprintf(stderr, "slimfarm send: %s\n", err.msg);

@@ -182,4 +182,8 @@ print("  op: re-attached jobs %s and %s: %d + %d commands, %s" %
       (ks, kk, len(ws), len(wk), "ok" if ok else "MISMATCH"))
 sys.exit(0 if ok else 1)
 PY
+# a clean stop: every driver, request and timer released (ASan checks leaks at exit)
+kill -TERM $pid; wait $pid; rc=$?; pid=
+[ $rc -eq 0 ] || fail "slimfarmd exited $rc on SIGTERM"
+grep -q "LeakSanitizer\|AddressSanitizer" "$tmp/log" && fail "sanitizer report in the daemon log"
 echo "farmd_octoprint: ok in $(( $(date +%s) - t0 )) s"
