@@ -457,9 +457,9 @@ arc_fits(const double (*pt)[2], size_t a, size_t b, double tol, double *cx, doub
         prev_err = err;
         if (i == a)
             continue;
-        double t =
-            atan2(pt[i][1] - uy, pt[i][0] - ux) - atan2(pt[i - 1][1] - uy, pt[i - 1][0] - ux);
-        t = remainder(t, 2 * M_PI);
+        double px = pt[i - 1][0] - ux, py = pt[i - 1][1] - uy, qx = pt[i][0] - ux,
+               qy = pt[i][1] - uy;
+        double t = atan2(px * qy - py * qx, px * qx + py * qy); /* the step's turn */
         if (fabs(t) < 1e-9 || fabs(t) > M_PI / 2 || (dir != 0 && (t > 0) != (dir > 0)))
             return false;
         dir = t;

@@ -192,6 +192,9 @@ struct collect {
     size_t n, cap;
     double x, y;
     bool have;
+    bool in_ext;       /* the last move extruded an external perimeter */
+    float (*seams)[3]; /* where external perimeters start: x, y, 1 on the layer shown */
+    size_t n_seams, cap_seams;
 };
 
 static const struct {
@@ -220,6 +223,16 @@ static int
 on_move(void *ud, const struct est_move *mv)
 {
     struct collect *c = ud;
+    bool ext = mv->type && mv->type_len == 18 && memcmp(mv->type, "External perimeter", 18) == 0 &&
+               mv->de > 0 && c->have && (mv->x != c->x || mv->y != c->y);
+    if (ext && !c->in_ext) {
+        if (!mem_grow((void **)&c->seams, &c->cap_seams, c->n_seams + 1, sizeof(*c->seams)))
+            return SF_ENOMEM;
+        c->seams[c->n_seams][0] = (float)c->x;
+        c->seams[c->n_seams][1] = (float)c->y;
+        c->seams[c->n_seams++][2] = (int)mv->layer == c->layer;
+    }
+    c->in_ext = ext;
     if ((int)mv->layer == c->layer && c->have && (mv->x != c->x || mv->y != c->y)) {
         if (!mem_grow((void **)&c->segs, &c->cap, c->n + 1, sizeof(*c->segs)))
             return SF_ENOMEM;
@@ -261,6 +274,7 @@ preview_gcode(const char *text, size_t len, const char *name, const struct previ
     estimate_release(&e);
     if (rc < 0) {
         free(c.segs);
+        free(c.seams);
         return rc == SF_ENOMEM ? sf_err_set(err, rc, "preview: out of memory") : rc;
     }
     double x0 = INFINITY, x1 = -INFINITY, y0 = INFINITY, y1 = -INFINITY;
@@ -297,7 +311,20 @@ preview_gcode(const char *text, size_t len, const char *name, const struct previ
             cairo_stroke(cr);
         }
     }
+    /* seams: every layer's as small grey dots (aligned seams make one line
+       of them up the part, seen from above a dot), this layer's white */
+    for (int pass = 0; pass < 2; pass++)
+        for (size_t i = 0; i < c.n_seams; i++) {
+            if ((c.seams[i][2] != 0) != (pass == 1))
+                continue;
+            double g = pass ? 1.0 : 0.55;
+            cairo_set_source_rgb(cr, g, g, g);
+            cairo_arc(cr, c.seams[i][0] * sc + ox, oy - c.seams[i][1] * sc, pass ? 3.5 : 1.5, 0,
+                      2 * M_PI);
+            cairo_fill(cr);
+        }
     free(c.segs);
+    free(c.seams);
     /* no text: cairo's toy font API pulls in fontconfig, whose caches
        live for the whole process (LeakSanitizer reports them) */
     return finish(s, cr, png_path, err);

@@ -33,8 +33,12 @@ int preview_part(const struct mesh *m, const struct preview_opts *o, const char 
                  struct sf_err *err);
 
 /*
- * Draw one layer of the G-code text (name for messages) into png_path.
- * SF_EINVAL for a malformed file or a layer it does not have.
+ * Draw one layer of the G-code text (name for messages) into png_path:
+ * extrusions in PrusaSlicer's role colours (skirt and brim teal, gap fill
+ * white), travel thin grey, and the seams: where this layer's external
+ * perimeters start as white dots, every layer's as small grey ones (an
+ * aligned seam's line up the part, seen from above).  SF_EINVAL for a
+ * malformed file or a layer it does not have.
  */
 int preview_gcode(const char *text, size_t len, const char *name, const struct preview_opts *o,
                   const char *png_path, struct sf_err *err);

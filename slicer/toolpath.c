@@ -805,6 +805,7 @@ gap_fill(const struct paths *gap, double h, double nozzle, double sp, struct lay
             e++;
         paths_reset(piece);
         double area = 0, per = 0;
+        uint32_t k_first = k;
         for (uint32_t i = k; i < e; i++) {
             if (!paths_add(piece, gap->pts + gap->start[i], paths_len(gap, i)))
                 return SF_ENOMEM;
@@ -817,6 +818,29 @@ gap_fill(const struct paths *gap, double h, double nozzle, double sp, struct lay
         double t = 2 * area / per;
         /* wider than 1.5 spacings: two lines, the loop a quarter width in */
         bool two = t > 1.5 * sp;
+        /* a short piece (a corner's gap, a stub of wall) is one straight
+           line between its far ends: no offsets for the many small ones */
+        const struct ipt *o = piece->pts;
+        uint32_t no = paths_len(piece, 0), fa = farthest(o, no, 0), fb = farthest(o, no, fa);
+        double dia = sqrt(d2(o[fa], o[fb])) / POLY_SCALE;
+        if (!two && e == k_first + 1 && dia < 3) {
+            struct ipt seg[2] = { o[fa], o[fb] };
+            /* the line's ends sit half a width in from the piece's ends */
+            double len = dia - t > 0.1 * dia ? dia - t : 0.1 * dia;
+            double dx = (double)(o[fb].x - o[fa].x) / (dia * POLY_SCALE),
+                   dy = (double)(o[fb].y - o[fa].y) / (dia * POLY_SCALE);
+            double cut = (dia - len) / 2 * POLY_SCALE;
+            seg[0].x += (int64_t)llround(dx * cut);
+            seg[0].y += (int64_t)llround(dy * cut);
+            seg[1].x -= (int64_t)llround(dx * cut);
+            seg[1].y -= (int64_t)llround(dy * cut);
+            paths_reset(line);
+            if (!paths_add(line, seg, 2))
+                return SF_ENOMEM;
+            double wl = area / len + h * (1 - M_PI / 4);
+            rc = add(out, line, ROLE_GAP_FILL, false, wl < 2.5 * nozzle ? wl : 2.5 * nozzle);
+            continue;
+        }
         paths_reset(sliver);
         for (double f = two ? 0.25 : 0.45; f > 0.1 && !sliver->n && rc == SF_OK; f -= 0.15)
             rc = clip_offset(piece, -f * t, CLIP_JOIN_MITER, sliver);
