@@ -13,10 +13,12 @@
 
 #include "drv_bambu.h"
 #include "drv_marlin.h"
+#include "drv_octoprint.h"
 
 /* Every kind this build has; a new driver is one row here. */
 static const struct drv_kind kinds[] = {
     { "marlin", false, DRV_AUTH_NONE, NULL, drv_marlin_new },
+    { "octoprint", true, DRV_AUTH_KEY, "http https", drv_octoprint_new },
     { "bambu", true, DRV_AUTH_NONE, "mqtts", drv_bambu_new },
 };
 #define N_KINDS (sizeof(kinds) / sizeof(kinds[0]))

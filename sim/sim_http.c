@@ -491,7 +491,7 @@ admit(struct sim_http_req *r)
     bool upload = r->route->body != SIM_HTTP_BODY_MEM;
     if (upload) {
         h->n_uploads++;
-        if (f->drop_upload && h->n_uploads == f->drop_upload) {
+        if (f->drop_upload && h->n_uploads <= f->drop_upload) {
             const char *cl = MHD_lookup_connection_value(r->c, MHD_HEADER_KIND, "Content-Length");
             uint64_t len = cl ? strtoull(cl, NULL, 10) : 0;
             r->drop_at = len && len / 2 < 65536 ? len / 2 : 65536;

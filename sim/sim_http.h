@@ -21,8 +21,11 @@
  *   5xx=N[@K]     after K requests (default 0), the next N answer 503
  *   slow=MS       every reply leaves MS milliseconds late (the connection is
  *                 suspended, the loop keeps serving others)
- *   drop-upload=N the Nth upload (1-based) loses its connection half-way
- *                 through its body (after 64 KiB, or half a smaller body)
+ *   drop-upload=N the first N uploads lose their connection half-way
+ *                 through the body (after 64 KiB, or half a smaller body).
+ *                 (libcurl re-sends a request whose reused connection died
+ *                 before any reply, up to 5 times, so a client may see fewer
+ *                 failures than cuts.)
  *   drop=N        the Nth request (1-based) loses its connection unanswered
  * Faults of the printer itself (error state, cancel at the printer, busy)
  * belong to the face.

@@ -41,7 +41,9 @@
 /* Longest numbered line: Marlin's MAX_CMD_SIZE is 96; slack for N and *. */
 #define LINE_MAX 128
 
-static const char *const cancel_script[] = { "M84", "M104 S0", "M140 S0", "M107" };
+/* Heaters off first, then the fan and the motors (OctoPrint's default script, reordered
+   so the hot end cools from the first line). */
+static const char *const cancel_script[] = { "M104 S0", "M140 S0", "M107", "M84" };
 #define CANCEL_LINES (sizeof(cancel_script) / sizeof(cancel_script[0]))
 
 enum sent_kind {

@@ -12,8 +12,8 @@
  * simulated printer's executed-command log holds every line of a finished
  * job).  A printer-side error ("Error:" other than line/checksum trouble, a
  * halt, a firmware reset mid-job) moves the job to SIM_NP_ERROR.  Cancel
- * stops streaming and sends the cancel script (M84, M104 S0, M140 S0,
- * M107), like OctoPrint's default afterPrintCancelled.
+ * stops streaming and sends the cancel script (M104 S0, M140 S0, M107,
+ * M84), OctoPrint's default afterPrintCancelled with the heaters first.
  *
  * Each API simulator (sim_octoprint.c, sim_moonraker.c, sim_prusalink.c,
  * sim_bambu.c) is a thin HTTP/MQTT face over this: it stores uploads in

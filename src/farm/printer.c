@@ -46,6 +46,7 @@ struct printer {
     bool removed;               /* dropped from the config */
     bool bed_full;              /* the bed holds a part (store_printer_bed_get) */
     bool deaf;                  /* printer_stop: driver events are dropped */
+    bool attach_tried;          /* this connection offered the driver its interrupted job */
     struct queued *queue;       /* driver events not applied yet, n_queue of cap_queue */
     size_t n_queue, cap_queue;
     uint64_t deliver; /* timer applying the queue, 0 if none */
@@ -137,6 +138,75 @@ fail_job(struct printer *p, const char *why)
     job_event(p, id, JOB_EV_PRINT_FAILED, &a);
 }
 
+/*
+ * A network printer went unreachable with a job on it: the printer prints
+ * on without us, so the job is interrupted (as by a daemon crash), not
+ * failed, and re-attached when the printer answers again.
+ */
+static void
+interrupt_job(struct printer *p, const char *why)
+{
+    struct sf_err err;
+    char reason[200];
+    snprintf(reason, sizeof(reason), "printer unreachable while printing: %s", why);
+    struct job_event_args a = { .reason = reason };
+    int64_t id = p->job_id;
+    p->job_id = 0;
+    if (store_job_progress(p->env.s, id, p->lines_acked, &err) ||
+        store_job_event(p->env.s, id, JOB_EV_CRASHED, &a, NULL, &err))
+        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    else
+        log_printer(LOG_WARN, p->cfg.name, "job %lld interrupted: %s", (long long)id, reason);
+    changed(p);
+}
+
+/*
+ * The driver of a network printer just connected: offer it the job the
+ * store holds as interrupted on this printer (a daemon restart, or the
+ * printer unreachable for a while).  If the printer still prints that
+ * file (or finished it meanwhile) the job is printing again and ends as
+ * the printer says; otherwise it stays interrupted, as it would on Marlin.
+ * True when the job was re-attached.
+ */
+static bool
+try_attach(struct printer *p)
+{
+    struct sf_err err;
+    struct job_row *jobs;
+    size_t n;
+    if (p->bed_full || store_job_list(p->env.s, &jobs, &n, &err))
+        return false;
+    const struct job_row *j = NULL;
+    for (size_t i = 0; i < n; i++)
+        if (jobs[i].state == JOB_INTERRUPTED && strcmp(jobs[i].printer, p->cfg.name) == 0 &&
+            jobs[i].gcode_sha[0] && (!j || jobs[i].updated_ms > j->updated_ms))
+            j = &jobs[i];
+    bool ok = false;
+    char path[1024];
+    if (j && store_file_path(p->env.s, j->gcode_sha, path, sizeof(path), &err) == SF_OK) {
+        struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
+        int rc = p->drv->ops->attach(p->drv, path, j->gcode_lines > 0 ? &scan : NULL, &err);
+        if (rc == SF_OK) {
+            p->attempts = 0;
+            p->message[0] = '\0';
+            move(p, PRINTER_EV_CONNECTED);
+            int64_t line = (int64_t)p->drv->status.lines_acked;
+            if (printer_resume_commit(p, j->id, line > 0 ? line : 0, &err) == SF_OK) {
+                log_printer(LOG_INFO, p->cfg.name, "job %lld re-attached: the printer still has it",
+                            (long long)j->id);
+                ok = true;
+            } else {
+                log_printer(LOG_ERROR, p->cfg.name, "job %lld: %s", (long long)j->id, err.msg);
+            }
+        } else {
+            log_printer(LOG_INFO, p->cfg.name, "job %lld stays interrupted: %s", (long long)j->id,
+                        err.msg);
+        }
+    }
+    free(jobs);
+    return ok;
+}
+
 /* ---- link ---- */
 
 static void connect_printer(struct printer *p);
@@ -176,12 +246,22 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
 {
     switch (ev) {
     case DRV_EV_STATE:
+        if (p->state == PRINTER_OFFLINE && p->drv->ops->attach && !p->attach_tried &&
+            (st->state == DRV_IDLE || st->state == DRV_PRINTING || st->state == DRV_PAUSED)) {
+            p->attach_tried = true;
+            if (try_attach(p))
+                break;
+        }
         if (st->state == DRV_IDLE && p->state == PRINTER_OFFLINE) {
             p->attempts = 0;
             p->message[0] = '\0';
             move(p, PRINTER_EV_CONNECTED);
         } else if (st->state == DRV_OFFLINE && p->state != PRINTER_OFFLINE) {
-            fail_job(p, "printer went offline");
+            if (p->job_id && p->drv->ops->attach)
+                interrupt_job(p, st->message);
+            else
+                fail_job(p, "printer went offline");
+            p->attach_tried = false;
             snprintf(p->message, sizeof(p->message), "%s", st->message);
             move(p, PRINTER_EV_DISCONNECTED);
             schedule_reconnect(p);
@@ -189,6 +269,15 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
             fail_job(p, st->message[0] ? st->message : "printer reported an error");
             snprintf(p->message, sizeof(p->message), "%s", st->message);
             move(p, PRINTER_EV_FAULT);
+        } else if (st->state == DRV_OFFLINE && p->drv->ops->attach) {
+            /* a network printer still offline (its connect failed): say why, try later */
+            p->attach_tried = false;
+            if (st->message[0])
+                snprintf(p->message, sizeof(p->message), "%s", st->message);
+            schedule_reconnect(p);
+        } else if (p->state == PRINTER_OFFLINE &&
+                   (st->state == DRV_PRINTING || st->state == DRV_PAUSED) && st->message[0]) {
+            snprintf(p->message, sizeof(p->message), "%s", st->message); /* busy, not ours */
         } else if (st->state == DRV_PAUSED && p->state == PRINTER_PRINTING && p->job_id) {
             /* paused by the printer itself (filament runout, M600) */
             struct job_event_args a = { .lines_acked = p->lines_acked };

@@ -78,6 +78,23 @@ T_CASE(farmcfg_full_example)
     T_EQ_INT(c.n_printers, 0);
 }
 
+T_CASE(farmcfg_octoprint_printer)
+{
+    struct farmcfg c;
+    struct sf_err err;
+    const char *text = "[printer octo]\ndriver: octoprint\nurl: https://pi.local:5000/octo/\n"
+                       "api_key: ABCDEF0123456789\npoll_ms: 2000\n"
+                       "[printer octo2]\ndriver: octoprint\nurl: http://10.0.0.9\napi_key: k\n";
+    T_OK(parse(&c, text, &err), &err);
+    const struct farmcfg_printer *p = farmcfg_printer(&c, "octo");
+    T_EQ_STR(p->url, "https://pi.local:5000/octo/");
+    T_EQ_STR(p->api_key, "ABCDEF0123456789");
+    T_EQ_INT(p->poll_ms, 2000);
+    T_EQ_INT(p->url_line, 3);
+    T_EQ_INT(farmcfg_printer(&c, "octo2")->poll_ms, 1000);
+    farmcfg_release(&c);
+}
+
 T_CASE(farmcfg_errors_name_file_line_option_section)
 {
     struct farmcfg c;
@@ -118,6 +135,22 @@ T_CASE(farmcfg_errors_name_file_line_option_section)
         { "[printer a]\ndriver: bambu\nhost: 10.0.0.5\nftps_port: 0\n", "in 1..65535" },
         { "[printer a]\ndriver: klipper\n", "'klipper' is not one of marlin" },
         { "[printer a]\ndriver: marlin\nport: x\nmaterial: P L A\n", "may hold only letters" },
+        { "[printer a]\ndriver: octoprint\napi_key: k\n",
+          "option 'url' is required by driver octoprint" },
+        { "[printer a]\ndriver: octoprint\napi_key: k\n\nurl: ftp://pi\n",
+          "farm.ini:5: section 'printer a': option 'url': 'ftp://pi' does not start with http" },
+        { "[printer a]\ndriver: octoprint\nurl: http://:80\napi_key: k\n", "has no host" },
+        { "[printer a]\ndriver: octoprint\nurl: http://pi:99999\napi_key: k\n",
+          "has no port in 1..65535" },
+        { "[printer a]\ndriver: octoprint\nurl: http://pi local\napi_key: k\n",
+          "holds a space or control byte" },
+        { "[printer a]\ndriver: octoprint\nurl: http://octopi.local\n",
+          "farm.ini:1: section 'printer a': option 'api_key' is required by driver octoprint" },
+        { "[printer a]\ndriver: octoprint\nurl: http://pi\napi_key: k\nuser: maker\n"
+          "password: x\n",
+          "driver octoprint takes no 'user'/'password'" },
+        { "[printer a]\ndriver: octoprint\nurl: http://pi\napi_key: k\npoll_ms: 10\n",
+          "option 'poll_ms' in section 'printer a': '10' is not a whole number in 200..60000" },
         { "[farm]\nlisten: localhost\n", "'localhost' is not ADDRESS:PORT" },
         { "[farm]\nlisten: 1.2.3.4:99999\n", "port '99999' is not in 1..65535" },
         { "[farm]\nlisten: example.com:80\n", "is not an IPv4 address" },

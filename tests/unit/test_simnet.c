@@ -184,7 +184,7 @@ T_CASE(pause_resume_cancel_and_commands)
     read_log(log, &got);
     T_TRUE(strstr(got.data, "M117 hello\n") != NULL);
     size_t n = strlen(got.data);
-    const char *tail = "M84\nM104 S0\nM140 S0\nM107\n";
+    const char *tail = "M104 S0\nM140 S0\nM107\nM84\n";
     T_TRUE(n > strlen(tail) && strcmp(got.data + n - strlen(tail), tail) == 0);
     buf_release(&got);
     loop_free(l);
@@ -429,7 +429,7 @@ T_CASE(http_faults)
     snprintf(kept, sizeof(kept), "%s/d.gcode", t_tmpdir());
     T_TRUE(access(kept, F_OK) != 0); /* nothing kept of a cut upload */
     g = call(l, h, (struct httpc_opts){ .url = u, .headers = key, .parts = parts, .n_parts = 1 });
-    T_EQ_INT(g.status, 201); /* the next upload goes through */
+    T_EQ_INT(g.status, 201); /* the next one goes through (a fresh connection: no re-send) */
     sim_http_free(sh);
     httpc_free(h);
     loop_free(l);
