@@ -237,7 +237,8 @@ follow_machine(struct sim_bambu *s)
         sim_netprinter_reset(s->np);
         set_state(s, "FAILED");
         return;
-    case SIM_NP_PAUSING:
+    case SIM_NP_PAUSING: /* still RUNNING: the line in flight finishes first */
+        break;
     case SIM_NP_PAUSED:
         set_state(s, "PAUSE");
         break;
@@ -537,9 +538,9 @@ on_request(void *ud, const char *topic, const char *payload, size_t len)
         } else if (strcmp(key, "print") == 0 && strcmp(cmd, "pause") == 0) {
             bool ok = strcmp(s->st.gcode_state, "RUNNING") == 0 &&
                       sim_netprinter_pause(s->np, NULL) == SF_OK;
+            /* PAUSE once the machine has stopped (follow_machine), as a
+               printer reports it after the move in progress ends */
             answer(s, key, cmd, seq, ok, ok ? NULL : "not printing", NULL);
-            if (ok)
-                set_state(s, "PAUSE");
         } else if (strcmp(key, "print") == 0 && strcmp(cmd, "resume") == 0) {
             bool ok = strcmp(s->st.gcode_state, "PAUSE") == 0 &&
                       sim_netprinter_resume(s->np, NULL) == SF_OK;
