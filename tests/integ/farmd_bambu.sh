@@ -103,7 +103,7 @@ host = re.compile(r"^(M105|M110( N-?\d+)?|M400)$")  # the machine's host queries
 def commands(path):
     return [c for c in (re.sub(r"\s+", " ", re.sub(r";.*", "", l)).strip() for l in open(path))
             if c and not host.match(c)]
-cancel_script = ["M84", "M104 S0", "M140 S0", "M107"]
+cancel_script = ["M104 S0", "M140 S0", "M107", "M84"]  # sim_netprinter.c's
 prints = []
 for f in glob.glob(os.path.join(tmp, "job-*.json")):
     d = json.load(open(f))

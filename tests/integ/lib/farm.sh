@@ -14,7 +14,7 @@ cleanup() {
   [ -n "$pid" ] && kill -9 "$pid" 2>/dev/null
   for p in "${sims[@]}"; do kill "$p" 2>/dev/null; done
   wait 2>/dev/null
-  rm -rf "$tmp"
+  [ -n "${KEEP_TMP:-}" ] && echo "kept $tmp" || rm -rf "$tmp"
 }
 trap cleanup EXIT
 fail() { echo "FAIL: $*"; echo "--- daemon log (tail)"; tail -30 "$tmp/log" 2>/dev/null; exit 1; }
@@ -154,15 +154,19 @@ for name in printers:
             break
         if outcome in ("done", ""):
             continue
-        # lines in flight when it stopped ran too (at most a window), in order;
-        # none when the next print starts right here (a network upload cut
-        # before its first line: then the same G-code follows in full)
+        # lines it ran past its last saved line, in order: a window in flight,
+        # or more when the daemon was killed before saving its progress
         nxt = expected(mine[k + 1])[:8] if k + 1 < len(mine) else None
-        if nxt and got[i:i + len(nxt)] == nxt:
-            continue
+        i0, w0 = i, w
         while i < len(got) and w < len(want) and got[i] == want[w]:
             i += 1
             w += 1
+        # ... unless what followed was the next print itself, whole: a
+        # network upload cut before its first line, the same G-code sent
+        # again (a Marlin print that ran every line would have ended done)
+        if w == len(want) and nxt and got[i0:i0 + len(nxt)] == nxt:
+            i, w = i0, w0
+            continue
         if outcome == "cancelled":
             # M108 (sent past the queue to break a heat wait), then the end
             # sequence: heaters off ... motors off
