@@ -847,7 +847,7 @@ octo_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
     if (o->link != L_UP || d->status.state != DRV_IDLE || o->job != J_NONE)
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is not idle (%s)", d->name,
                           drv_state_name(d->status.state));
-    int64_t size;
+    int64_t size = 0;
     if (file_size(gcode_path, &size, err) < 0)
         return err ? err->code : SF_EIO;
     struct drv_job_scan own;
@@ -1019,7 +1019,7 @@ octo_attach(struct drv *d, const char *gcode_path, const struct drv_job_scan *sc
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is not connected yet", d->name);
     if (o->job != J_NONE)
         return sf_err_set(err, SF_EAGAIN, "printer '%s' already has a job", d->name);
-    int64_t size;
+    int64_t size = 0;
     if (file_size(gcode_path, &size, err) < 0)
         return err ? err->code : SF_EIO;
     char remote[80];

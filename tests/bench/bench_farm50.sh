@@ -21,9 +21,19 @@
 #    while the host had lines to send) and the seconds it stood dry;
 #  - REST latency: GET /api/printers with curl every 0.2 s, p50/p99/max.
 # The peer prints the very G-code files the daemon printed (same printer,
-# same job).  BENCH_PRINTERS (50), BENCH_SECS (60), BENCH_WARMUP (10),
-# BENCH_BAUD (115200), BENCH_PEER=0 skips printcore, BENCH_SIM_PROCS=1 runs
-# one simulator process per printer instead.
+# same job).
+#
+# Then the network variant, printed beside it: a fresh slimfarmd with the
+# same $n jobs on $n `driver: octoprint` printers, one `slimfarm-sim
+# octoprint --count $n` process at --speed 1; the daemon uploads each job
+# and polls every printer (GET /api/job + /api/printer each poll_ms) while
+# the simulated OctoPrint streams.  Same window: the daemon's CPU and RSS,
+# the simulator's CPU, GET /api/printers p50/p99/max, and the ratios of
+# CPU and p99 against the Marlin row (serial streaming vs HTTP polling).
+#
+# BENCH_PRINTERS (50), BENCH_SECS (60), BENCH_WARMUP (10), BENCH_BAUD
+# (115200), BENCH_PEER=0 skips printcore, BENCH_NET=0 skips the network
+# variant, BENCH_SIM_PROCS=1 runs one Marlin simulator process per printer.
 set -u
 build=${1:-build/rel}
 n=${BENCH_PRINTERS:-50}
@@ -183,7 +193,8 @@ ours_rss=$(( $(rss_kb VmRSS "$dpid") / 1024 ))
 ours_hwm=$(( $(rss_kb VmHWM "$dpid") / 1024 ))
 read -r o_lo o_avg o_hi o_st o_hit o_dry < <(window_stats ours "$wall")
 sort -g "$work/lat" > "$work/lat.s"
-lat="$(pct "$work/lat.s" 50)/$(pct "$work/lat.s" 99)/$(pct "$work/lat.s" 100) ms ($(wc -l < "$work/lat") GETs)"
+o_p99=$(pct "$work/lat.s" 99)
+lat="$(pct "$work/lat.s" 50)/$o_p99/$(pct "$work/lat.s" 100) ms ($(wc -l < "$work/lat") GETs)"
 still=$(printing)
 # The G-code each printer got, for the peer.
 mkdir -p "$work/gcode"
@@ -195,6 +206,79 @@ while read -r p sha; do
 done
 kill "$dpid" "${sim_pids[@]}"; wait "$dpid" "${sim_pids[@]}" 2>/dev/null
 echo "slimfarmd: window ${wall%.*} s, load $load0 -> $load1, $still of $n still printing at the end"
+
+# ---- ours, network printers: slimfarmd polling $n OctoPrint simulators ----
+# The same parts and profile, the same daemon, but every printer is
+# `driver: octoprint` on one `slimfarm-sim octoprint --count $n` process
+# (--speed 1): the daemon uploads each job and then only polls (GET /api/job
+# and /api/printer every poll_ms, 1 s by default) while OctoPrint streams.
+net_row=
+if [ "${BENCH_NET:-1}" = 1 ]; then
+  nkey=octo-bench-key
+  nport=$((port + 1))
+  export SLIMFARM_URL=http://127.0.0.1:$nport
+  mkdir -p "$work/up"
+  "$S" octoprint --count "$n" --speed 1 --api-key "$nkey" --uploads "$work/up/p" \
+    > "$work/net.out" 2> "$work/net.err" &
+  npid=$!; pids+=($!); nt_start=$(now)
+  for _ in $(seq 100); do [ "$(wc -l < "$work/net.out")" -ge "$n" ] && break; sleep 0.05; done
+  [ "$(wc -l < "$work/net.out")" -ge "$n" ] ||
+    { echo "bench_farm50: the octoprint simulator did not start: $(head -c 300 "$work/net.err")"; exit 1; }
+  {
+    printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/ndata\napi_keys: %s\n' "$nport" "$work" "$key"
+    for ((i = 0; i < n; i++)); do
+      printf '[printer p%d]\ndriver: octoprint\nurl: %s\napi_key: %s\nprofile: bench-marlin\n' \
+        "$i" "$(sed -n "$((i + 1))p" "$work/net.out")" "$nkey"
+      printf 'material: PLA\nbed_size: 250, 210, 210\nauto_eject: true\n'
+    done
+  } > "$work/nfarm.ini"
+  "$D" -c "$work/nfarm.ini" > "$work/ndaemon.log" 2>&1 &
+  ndpid=$!; pids+=("$ndpid")
+  for _ in $(seq 100); do api /api/printers > /dev/null 2>&1 && break; sleep 0.1; done
+  for ((i = 0; i < n; i++)); do
+    "$C" submit "$work/parts/${parts[i % ${#parts[@]}]}.stl" --printer "p$i" --method none \
+      --material PLA > /dev/null || { echo "bench_farm50: octoprint submit $i failed"; exit 1; }
+  done
+  t_sub=$(now)
+  for _ in $(seq 600); do [ "$(printing)" -ge "$n" ] && break; sleep 0.5; done
+  got=$(printing)
+  if [ "$got" -ge "$n" ]; then
+    echo "octoprint: all $n printers printing $(awk -v a="$t_sub" -v b="$(now)" 'BEGIN { printf "%.0f", b - a }') s after submit"
+    sleep "$warm"
+    load0=$(cut -d ' ' -f 1-3 /proc/loadavg)
+    c0=$(cpu_ticks "$ndpid"); s0=$(cpu_ticks "$npid"); t0=$(now)
+    : > "$work/nlat"
+    end=$(awk -v t="$t0" -v s="$secs" 'BEGIN { printf "%.3f", t + s }')
+    while awk -v e="$end" -v t="$(now)" 'BEGIN { exit !(t < e) }'; do
+      curl -s -o /dev/null -w '%{time_total}\n' -H "X-Api-Key: $key" "$SLIMFARM_URL/api/printers" >> "$work/nlat"
+      sleep 0.2
+    done
+    t1=$(now); c1=$(cpu_ticks "$ndpid"); s1=$(cpu_ticks "$npid")
+    load1=$(cut -d ' ' -f 1-3 /proc/loadavg)
+    wall=$(awk -v a="$t0" -v b="$t1" 'BEGIN { print b - a }')
+    net_cpu=$(awk -v c=$((c1 - c0)) -v h="$hz" -v w="$wall" 'BEGIN { printf "%.1f", 100 * c / h / w }')
+    net_sim=$(awk -v c=$((s1 - s0)) -v h="$hz" -v w="$wall" 'BEGIN { printf "%.1f", 100 * c / h / w }')
+    net_rss=$(( $(rss_kb VmRSS "$ndpid") / 1024 ))
+    net_hwm=$(( $(rss_kb VmHWM "$ndpid") / 1024 ))
+    sort -g "$work/nlat" > "$work/nlat.s"
+    net_p99=$(pct "$work/nlat.s" 99)
+    nlat="$(pct "$work/nlat.s" 50)/$net_p99/$(pct "$work/nlat.s" 100) ms ($(wc -l < "$work/nlat") GETs)"
+    still=$(printing)
+    echo "octoprint: window ${wall%.*} s, load $load0 -> $load1, $still of $n still printing at the end"
+    kill "$ndpid" "$npid"; wait "$ndpid" "$npid" 2>/dev/null
+    nlife=$(awk -v a="$nt_start" -v b="$(now)" 'BEGIN { printf "%.0f", b - a }')
+    # The simulator's exit stats: requests served per printer over its whole life.
+    reqs=$(awk '/^stats: printer=/ { for (i = 1; i <= NF; i++) if ($i ~ /^requests=/) { split($i, kv, "="); s += kv[2] } }
+      END { print s + 0 }' "$work/net.err")
+    net_row=$(printf '%-20s %7s %8s %6s %18s %9s %9s %8s %s' "slimfarmd octoprint" "$net_cpu" "$net_sim" \
+      "$net_rss" "-" "-" "-" "-" "$nlat")
+    net_note="(octoprint: daemon peak RSS ${net_hwm} MB; the simulator served $reqs HTTP requests in its $nlife s ($(awk -v r="$reqs" -v s="$nlife" -v n="$n" 'BEGIN { if (s > 0) printf "%.2f", r / s / n; else print "-" }')/s per printer, uploads and polls); CPU ratio network/Marlin $(awk -v a="$net_cpu" -v b="$ours_cpu" 'BEGIN { if (b > 0) printf "%.2f", a / b; else print "-" }'), p99 ratio $(awk -v a="$net_p99" -v b="$o_p99" 'BEGIN { if (b > 0) printf "%.2f", a / b; else print "-" }'))"
+  else
+    net_row="slimfarmd octoprint: only $got of $n printers printing ($(tail -n 2 "$work/ndaemon.log" | tr '\n' ' '))"
+    kill "$ndpid" "$npid"; wait "$ndpid" "$npid" 2>/dev/null
+  fi
+  export SLIMFARM_URL=http://127.0.0.1:$port
+fi
 
 # ---- peer: printcore x N ----
 peer_row=
@@ -257,5 +341,7 @@ printf '%-20s %7s %8s %6s %18s %9s %9s %8s %s\n' host "CPU %" "sim CPU%" "RSS MB
   "lines/s min/avg/max" starved "printers" "dry s" "GET /api/printers p50/p99/max"
 printf '%-20s %7s %8s %6s %18s %9s %9s %8s %s\n' "slimfarmd (1 proc)" "$ours_cpu" "$ours_sim" \
   "$ours_rss" "$o_lo/$o_avg/$o_hi" "$o_st" "$o_hit/$n" "$o_dry" "$lat"
+[ -n "$net_row" ] && echo "$net_row"
 echo "$peer_row"
+[ -n "${net_note:-}" ] && echo "$net_note"
 echo "(slimfarmd peak RSS ${ours_hwm} MB; 'starved': times a planner ran dry while the host had lines, summed; 'printers': how many starved at least once)"
