@@ -165,7 +165,7 @@ api_resume_parse(const char *text, size_t len, int64_t *line, struct sf_err *err
 json_t *
 api_job_json(const struct job_row *j)
 {
-    return json_pack(
+    json_t *o = json_pack(
         "{sI ss ss ss sf sf si si si si ss ss ss si ss sI sI ss ss ss s[fff] sI sI}", "id",
         (json_int_t)j->id, "name", j->opts.name, "state", job_state_name(j->state), "method",
         j->opts.method, "deviation_mm", j->opts.deviation_mm, "overhang_deg", j->opts.overhang_deg,
@@ -176,6 +176,14 @@ api_job_json(const struct job_row *j)
         "gcode_lines", (json_int_t)j->gcode_lines, "reason", j->reason, "file_sha", j->file_sha,
         "gcode_sha", j->gcode_sha, "size_mm", j->size_mm[0], j->size_mm[1], j->size_mm[2],
         "created_ms", (json_int_t)j->created_ms, "updated_ms", (json_int_t)j->updated_ms);
+    /* MNDR / ANDR (fractions of the bounding-box diagonal): null when not measured */
+    if (o && (json_object_set_new(o, "mndr", j->dev_measured ? json_real(j->mndr) : json_null()) ||
+              json_object_set_new(o, "andr", j->dev_measured ? json_real(j->andr) : json_null()) ||
+              json_object_set_new(o, "shape_changed", json_boolean(j->shape_changed)))) {
+        json_decref(o);
+        o = NULL;
+    }
+    return o;
 }
 
 json_t *

@@ -521,9 +521,12 @@ report(struct web *w, const struct job_row *j, struct http_resp *resp)
         }
     }
     resp->json =
-        json_pack("{sI ss sb so so so}", "job_id", (json_int_t)j->id, "method", j->opts.method,
-                  "optimized", j->mesh_sha[0] != '\0', "gcode", g, "model_before",
-                  model_json(w, j, false), "model_after", model_json(w, j, true));
+        json_pack("{sI ss sb so so so so so sb sf}", "job_id", (json_int_t)j->id, "method",
+                  j->opts.method, "optimized", j->mesh_sha[0] != '\0', "gcode", g, "model_before",
+                  model_json(w, j, false), "model_after", model_json(w, j, true), "mndr",
+                  j->dev_measured ? json_real(j->mndr) : json_null(), "andr",
+                  j->dev_measured ? json_real(j->andr) : json_null(), "shape_changed",
+                  j->shape_changed, "deviation_mm", j->opts.deviation_mm);
 }
 
 /* ---- dispatch ---- */

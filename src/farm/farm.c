@@ -208,7 +208,11 @@ prep_done(struct loop *l, void *ud, int rc)
                                     .support_g = t->out.support_g,
                                     .saved_g = t->out.support_saved_g,
                                     .prepare_ms = t->prepare_ms,
-                                    .slice_ms = t->out.slice_ms };
+                                    .slice_ms = t->out.slice_ms,
+                                    .dev_measured = t->out.dev_measured,
+                                    .shape_changed = t->out.shape_changed,
+                                    .mndr = t->out.mndr,
+                                    .andr = t->out.andr };
         memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
         /* A re-slice whose job started meanwhile on a printer of its old key
            (or was cancelled) is refused here and dropped: nothing changed. */

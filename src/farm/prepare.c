@@ -124,11 +124,12 @@ take_part(struct mesh *m, struct mesh *out, const struct slice_profile *prof)
 /*
  * Support slimming (Hu 2015) of the oriented part within the job's
  * deviation budget.  On success m holds the slimmed part, on the bed centre,
- * and *changed says whether it is not the part it was given.
+ * *changed says whether it is not the part it was given and *dev how far
+ * it moved (MNDR / ANDR).
  */
 static int
 slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_profile *prof,
-          const atomic_bool *cancel, bool *changed, struct sf_err *err)
+          const atomic_bool *cancel, bool *changed, struct deviation *dev, struct sf_err *err)
 {
     struct slim_params sp;
     slim_params_default(&sp);
@@ -140,6 +141,7 @@ slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_prof
     if (rc)
         return rc;
     *changed = sr.best_iter > 0;
+    *dev = sr.dev;
     log_info("prepare",
              "job %lld: slimmed (Hu 2015): iteration %d of %d kept, risky faces %u -> %u, "
              "support %.1f -> %.1f mm3, largest move %.3f mm",
@@ -187,11 +189,12 @@ prepare_slice_better(const struct mesh *start, const struct mesh *shaped,
  * Orientation-fused surface optimization (Jayakody; src/geom/surfopt.h):
  * the part is turned and reshaped in alternating rounds within the same
  * deviation budget as slimming.  On success m holds the result, back on
- * the bed centre.
+ * the bed centre, and out's deviation fields say how far it moved.
  */
 static int
 surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_profile *prof,
-             const atomic_bool *cancel, double *saved_g, struct sf_err *err)
+             const atomic_bool *cancel, double *saved_g, struct prepare_out *out,
+             struct sf_err *err)
 {
     struct surfopt_params sp;
     surfopt_params_default(&sp);
@@ -210,6 +213,10 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     if (rc)
         return rc;
     const struct surfopt_result *sr = &dr.best;
+    out->dev_measured = true;
+    out->shape_changed = !dr.kept_input && sr->shape_changed;
+    out->mndr = out->shape_changed ? sr->dev.mndr : 0;
+    out->andr = out->shape_changed ? sr->dev.andr : 0;
     if (!dr.kept_input && dr.model_input_g > sr->model_after_g)
         *saved_g = dr.model_input_g - sr->model_after_g;
     if (dr.kept_input)
@@ -236,6 +243,8 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
              struct sf_err *err)
 {
     const char *method = req->opts.method;
+    out->dev_measured = out->shape_changed = false;
+    out->mndr = out->andr = 0;
     if (atomic_load(cancel))
         return cancelled(req, err);
     struct buf data;
@@ -277,11 +286,18 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
             saved_g = res.input.support_g - res.best.support_g;
     }
     bool slimmed = false;
+    struct deviation sdev = { 0 };
     if (slim && ((rc = mesh_copy(&start, &m, err)) ||
-                 (rc = slim_part(&m, req, &prof, cancel, &slimmed, err))))
+                 (rc = slim_part(&m, req, &prof, cancel, &slimmed, &sdev, err))))
         goto release;
+    if (slim) {
+        out->dev_measured = true;
+        out->shape_changed = slimmed;
+        out->mndr = slimmed ? sdev.mndr : 0;
+        out->andr = slimmed ? sdev.andr : 0;
+    }
     if (strcmp(method, "surface") == 0 &&
-        (rc = surface_part(&m, req, &prof, cancel, &saved_g, err)))
+        (rc = surface_part(&m, req, &prof, cancel, &saved_g, out, err)))
         goto release;
     if (atomic_load(cancel)) {
         rc = cancelled(req, err);
@@ -299,7 +315,9 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
             saved_g += ch.support_g_start - sres.support_g; /* sliced both: the slicer's grams */
         }
         if (rc == SF_OK && !ch.took_shaped) {
-            printed = &start;
+            printed = &start; /* as oriented: not moved */
+            out->shape_changed = false;
+            out->mndr = out->andr = 0;
             log_info("prepare",
                      "job %lld: the slimmed part needs %.2f g of support, the part as oriented "
                      "%.2f g: printing it as oriented",

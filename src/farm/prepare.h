@@ -52,6 +52,13 @@ struct prepare_out {
                                support model's (orient: input vs chosen direction;
                                surface: before vs after); 0 for method none */
     int64_t slice_ms;       /* slicing's wall time */
+    /* the shape deviation of the part as it prints from the part as uploaded (turned
+       the same way), measure.h's struct deviation: max / mean vertex displacement over
+       the bounding-box diagonal.  Measured by the shape methods (slim, surface) only;
+       0 with shape_changed false when the reshaped part was not kept */
+    bool dev_measured;  /* mndr, andr are set: method slim or surface ran */
+    bool shape_changed; /* the part prints reshaped, not only turned */
+    double mndr, andr;
 };
 
 typedef int (*prepare_fn)(const struct prepare_req *req, struct prepare_out *out,

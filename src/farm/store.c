@@ -169,6 +169,12 @@ static const char *const migrations[] = {
     "ALTER TABLE jobs ADD COLUMN slice_ms INTEGER NOT NULL DEFAULT 0;"
     "ALTER TABLE jobs ADD COLUMN ready_ms INTEGER NOT NULL DEFAULT 0;"
     "ALTER TABLE prints ADD COLUMN wait_ms INTEGER NOT NULL DEFAULT 0;",
+    /* 5: how far a shape method moved the part (MNDR / ANDR over the
+       bounding-box diagonal, measure.h) and whether it prints reshaped;
+       NULL when not measured (methods none, orient, and jobs before) */
+    "ALTER TABLE jobs ADD COLUMN mndr REAL CHECK(mndr IS NULL OR mndr >= 0);"
+    "ALTER TABLE jobs ADD COLUMN andr REAL CHECK(andr IS NULL OR andr >= 0);"
+    "ALTER TABLE jobs ADD COLUMN shape_changed INTEGER NOT NULL DEFAULT 0;",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 
@@ -177,7 +183,7 @@ static const char JOB_COLS[] =
     " copies, copies_done, failures, max_retries, material, target_printer, target_group,"
     " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"
     " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg, filament_g, support_g,"
-    " support_saved_g, prepare_ms, slice_ms, ready_ms";
+    " support_saved_g, prepare_ms, slice_ms, ready_ms, mndr, andr, shape_changed";
 
 int
 store_schema_version(void)
@@ -746,6 +752,10 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     j->prepare_ms = sqlite3_column_int64(st, 32);
     j->slice_ms = sqlite3_column_int64(st, 33);
     j->ready_ms = sqlite3_column_int64(st, 34);
+    j->dev_measured = sqlite3_column_type(st, 35) != SQLITE_NULL;
+    j->mndr = sqlite3_column_double(st, 35);
+    j->andr = sqlite3_column_double(st, 36);
+    j->shape_changed = sqlite3_column_int(st, 37) != 0;
 }
 
 static void
@@ -1007,6 +1017,12 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
         j->support_saved_g = a->saved_g;
         j->prepare_ms = a->prepare_ms;
         j->slice_ms = a->slice_ms;
+        if (a->dev_measured || (a->mesh_sha && a->mesh_sha[0])) {
+            j->dev_measured = a->dev_measured; /* a fresh preparation: measured or not */
+            j->shape_changed = a->dev_measured && a->shape_changed;
+            j->mndr = a->dev_measured && a->mndr > 0 ? a->mndr : 0;
+            j->andr = a->dev_measured && a->andr > 0 ? a->andr : 0;
+        }
         j->reason[0] = '\0';
         break;
     case JOB_EV_START:
@@ -1094,8 +1110,8 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
                       " size_x = ?, size_y = ?, size_z = ?, printer = ?, lines_acked = ?,"
                       " reason = ?, updated_ms = ?, nozzle_mm = ?, gcode_lines = ?, prep_key = ?,"
                       " mesh_sha = ?, mesh_angle_deg = ?, filament_g = ?, support_g = ?,"
-                      " support_saved_g = ?, prepare_ms = ?, slice_ms = ?, ready_ms = ?"
-                      " WHERE id = ?",
+                      " support_saved_g = ?, prepare_ms = ?, slice_ms = ?, ready_ms = ?,"
+                      " mndr = ?, andr = ?, shape_changed = ? WHERE id = ?",
                       err)))
         goto fail;
     sqlite3_bind_text(st, 1, job_state_name(j.state), -1, SQLITE_STATIC);
@@ -1122,7 +1138,15 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     sqlite3_bind_int64(st, 20, j.prepare_ms);
     sqlite3_bind_int64(st, 21, j.slice_ms);
     sqlite3_bind_int64(st, 22, j.ready_ms);
-    sqlite3_bind_int64(st, 23, id);
+    if (j.dev_measured) {
+        sqlite3_bind_double(st, 23, j.mndr);
+        sqlite3_bind_double(st, 24, j.andr);
+    } else {
+        sqlite3_bind_null(st, 23);
+        sqlite3_bind_null(st, 24);
+    }
+    sqlite3_bind_int(st, 25, j.shape_changed);
+    sqlite3_bind_int64(st, 26, id);
     if ((rc = step_done(s, st, err, "update job")))
         goto fail;
     char kind[24], detail[192];

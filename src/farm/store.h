@@ -66,6 +66,10 @@ struct job_row {
     int64_t prepare_ms;            /* last preparation's wall time (orient .. slice); 0 if none */
     int64_t slice_ms;              /* of which slicing */
     int64_t ready_ms;              /* when it last became ready (wall clock); 0 if never */
+    bool dev_measured;             /* mndr, andr are known: a slim or surface preparation */
+    bool shape_changed;            /* the part prints reshaped (prepare.h) */
+    double mndr, andr;             /* max / mean displacement of the part as it prints over
+                                      its bounding-box diagonal (measure.h); 0 if not known */
 };
 
 /* Extra data some events carry (zero-initialise; unused fields ignored). */
@@ -85,6 +89,11 @@ struct job_event_args {
     double saved_g;        /* PREPARED: support the optimization saved (prepare.h) */
     int64_t prepare_ms;    /* PREPARED: how long preparing took */
     int64_t slice_ms;      /* PREPARED: of which slicing */
+    bool dev_measured;     /* PREPARED: mndr, andr are known (prepare.h); with neither this
+                              nor mesh_sha (a re-slice of the saved part) the recorded
+                              deviation stays */
+    bool shape_changed;    /* PREPARED: the part prints reshaped */
+    double mndr, andr;     /* PREPARED: its deviation (prepare.h) */
     int64_t lines_acked;   /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to;
                               RESUME of an interrupted job: line to resume from (0: stored) */
     double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */

@@ -579,6 +579,16 @@ T_CASE(farm_default_prepare_runs_every_method)
     T_TRUE(o.mesh_sha[0] && sf.mesh_sha[0]);
     T_TRUE(strcmp(o.mesh_sha, sf.mesh_sha) != 0);
     T_TRUE(strcmp(o.gcode_sha, sf.gcode_sha) != 0);
+    /* the shape methods' deviation is recorded with the job, the others' is not */
+    T_TRUE(!o.dev_measured && !o.shape_changed);
+    T_TRUE(sf.dev_measured);
+    T_TRUE(sf.shape_changed ? sf.mndr > 0 && sf.andr > 0 : sf.mndr == 0);
+    T_TRUE(sf.andr <= sf.mndr);
+    struct job_row sl, no;
+    T_OK(store_job_get(fx.s, slimmed, &sl, &err), &err);
+    T_OK(store_job_get(fx.s, abs, &no, &err), &err);
+    T_TRUE(!no.dev_measured);
+    T_TRUE(sl.dev_measured);
     T_OK(store_check(fx.s, &err), &err);
     teardown();
 }

@@ -4,6 +4,7 @@
  * our slicer (the farm's whole pipeline is in test_farm.c).
  */
 #include <stdio.h>
+#include <string.h>
 #include <unistd.h>
 
 #include "../../slicer/profile.h"
@@ -88,4 +89,63 @@ T_CASE(prepare_keeps_the_slicing_with_less_support)
     mesh_release(&standing);
     mesh_release(&flipped);
     slice_profile_release(&p);
+}
+
+/* Prepare the part in part_path with method for a generic 220 mm Marlin printer. */
+static int
+prepare_with(const char *part_path, const char *method, struct prepare_out *out, struct sf_err *err)
+{
+    static struct prepare_req req;
+    memset(&req, 0, sizeof(req));
+    req.job_id = 1;
+    snprintf(req.part_path, sizeof(req.part_path), "%s", part_path);
+    snprintf(req.part_name, sizeof(req.part_name), "part.stl");
+    job_opts_init(&req.opts);
+    snprintf(req.opts.method, sizeof(req.opts.method), "%s", method);
+    req.opts.deviation_mm = 2;
+    snprintf(req.printer.name, sizeof(req.printer.name), "a");
+    snprintf(req.printer.profile, sizeof(req.printer.profile), "generic-marlin");
+    snprintf(req.printer.material, sizeof(req.printer.material), "PLA");
+    req.printer.nozzle_mm = 0.4;
+    req.printer.bed_mm[0] = req.printer.bed_mm[1] = 220;
+    req.printer.bed_mm[2] = 250;
+    req.printer.overhang_deg = 45;
+    snprintf(req.profiles_dir, sizeof(req.profiles_dir), "config");
+    snprintf(req.out_path, sizeof(req.out_path), "%s/prep-%s.gcode", t_tmpdir(), method);
+    atomic_bool cancel = false;
+    memset(out, 0, sizeof(*out));
+    return prepare_part(&req, out, &cancel, err);
+}
+
+/*
+ * The deviation a shape method leaves (MNDR / ANDR, measure.h) comes out of
+ * prepare_part for the farm to record: the surface method reshapes the
+ * sphere on its stem (its ball overhangs whichever way it stands) within
+ * the 2 mm budget; slimming measures too (after orientation it keeps the
+ * shape here: 0, not reshaped); orientation alone measures nothing.
+ */
+T_CASE(prepare_reports_the_deviation_of_a_reshaped_part)
+{
+    struct sf_err err;
+    struct mesh m;
+    mesh_init(&m);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    double diag = mesh_diag(&m);
+    char part[512];
+    snprintf(part, sizeof(part), "%s/part.stl", t_tmpdir());
+    T_OK(mesh_save_stl(&m, part, &err), &err);
+    mesh_release(&m);
+    struct prepare_out out;
+    T_OK(prepare_with(part, "orient", &out, &err), &err);
+    T_TRUE(!out.dev_measured && !out.shape_changed);
+    T_EQ_DBL(out.mndr, 0, 0);
+    T_OK(prepare_with(part, "surface", &out, &err), &err);
+    printf("    surface: changed %d, mndr %.4f andr %.4f (diagonal %.1f mm)\n", out.shape_changed,
+           out.mndr, out.andr, diag);
+    T_TRUE(out.dev_measured && out.shape_changed);
+    T_TRUE(out.mndr > 0 && out.andr > 0 && out.andr <= out.mndr);
+    T_TRUE(out.mndr * diag <= 2 + 1e-6); /* the job's deviation budget */
+    T_OK(prepare_with(part, "slim", &out, &err), &err);
+    T_TRUE(out.dev_measured);
+    T_TRUE(out.shape_changed ? out.mndr > 0 && out.andr > 0 : out.mndr == 0 && out.andr == 0);
 }

@@ -129,7 +129,9 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
                           "support_g; ALTER TABLE jobs DROP COLUMN support_saved_g; ALTER TABLE "
                           "jobs DROP COLUMN prepare_ms; ALTER TABLE jobs DROP COLUMN slice_ms;"
                           "ALTER TABLE jobs DROP COLUMN ready_ms; ALTER TABLE prints DROP COLUMN "
-                          "wait_ms; PRAGMA user_version = 1",
+                          "wait_ms; ALTER TABLE jobs DROP COLUMN mndr; ALTER TABLE jobs DROP "
+                          "COLUMN andr; ALTER TABLE jobs DROP COLUMN shape_changed;"
+                          "PRAGMA user_version = 1",
                           NULL, NULL, NULL),
              SQLITE_OK);
     sqlite3_close(db);
@@ -139,20 +141,85 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     T_EQ_STR(j.gcode_sha, sha);
     T_EQ_DBL(j.size_mm[1], 30, 0);
     T_EQ_INT(j.gcode_lines, 0);
+    T_TRUE(!j.dev_measured && !j.shape_changed); /* schema 5: not measured before */
     T_OK(store_check(s, &err), &err);
-    /* prepared again (a new job here): the count is stored */
+    /* prepared again (a new job here): the count and the deviation are stored */
     int64_t id2 = add_job(s, "part 2", 1, &err);
     T_OK(store_job_event(s, id2, JOB_EV_PREPARE, NULL, NULL, &err), &err);
     a.gcode_lines = 7;
+    a.dev_measured = a.shape_changed = true;
+    a.mndr = 0.02;
+    a.andr = 0.005;
     T_OK(store_job_event(s, id2, JOB_EV_PREPARED, &a, NULL, &err), &err);
     T_OK(store_job_get(s, id2, &j, &err), &err);
     T_EQ_INT(j.gcode_lines, 7);
+    T_TRUE(j.dev_measured && j.shape_changed);
+    T_EQ_DBL(j.mndr, 0.02, 0);
+    T_EQ_DBL(j.andr, 0.005, 0);
     store_close(s);
     T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
     sqlite3_stmt *st;
     sqlite3_prepare_v2(db, "PRAGMA user_version", -1, &st, NULL);
     T_EQ_INT(sqlite3_step(st), SQLITE_ROW);
     T_EQ_INT(sqlite3_column_int(st, 0), store_schema_version());
+    sqlite3_finalize(st);
+    sqlite3_close(db);
+}
+
+/*
+ * A shape method's deviation (MNDR / ANDR) is kept with the job: NULL in
+ * the table, not measured in the row, for methods that do not reshape; a
+ * re-slice of the saved part (no new mesh, nothing measured) keeps it.
+ */
+T_CASE(store_keeps_the_deviation_of_a_reshaped_part)
+{
+    struct sf_err err;
+    const char *dir = fresh_dir("deviation");
+    struct store *s = store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    char gc[STORE_SHA_HEX], mesh[STORE_SHA_HEX];
+    T_OK(store_file_put(s, "G28\n", 4, gc, &err), &err);
+    T_OK(store_file_put(s, "solid\n", 6, mesh, &err), &err);
+    int64_t orient = add_job(s, "oriented", 1, &err), slim = add_job(s, "slimmed", 1, &err);
+    /* orient: a new mesh, nothing measured */
+    struct job_event_args a = { .gcode_sha = gc, .size_mm = { 1, 1, 1 }, .mesh_sha = mesh };
+    T_OK(store_job_event(s, orient, JOB_EV_PREPARE, NULL, NULL, &err), &err);
+    T_OK(store_job_event(s, orient, JOB_EV_PREPARED, &a, NULL, &err), &err);
+    /* slim: measured */
+    a.dev_measured = a.shape_changed = true;
+    a.mndr = 0.031;
+    a.andr = 0.0042;
+    T_OK(store_job_event(s, slim, JOB_EV_PREPARE, NULL, NULL, &err), &err);
+    T_OK(store_job_event(s, slim, JOB_EV_PREPARED, &a, NULL, &err), &err);
+    struct job_row j;
+    T_OK(store_job_get(s, orient, &j, &err), &err);
+    T_TRUE(!j.dev_measured && !j.shape_changed);
+    T_EQ_DBL(j.mndr, 0, 0);
+    T_OK(store_job_get(s, slim, &j, &err), &err);
+    T_TRUE(j.dev_measured && j.shape_changed);
+    T_EQ_DBL(j.mndr, 0.031, 0);
+    T_EQ_DBL(j.andr, 0.0042, 0);
+    /* a re-slice of the saved part for another printer: kept */
+    struct job_event_args re = { .gcode_sha = gc, .size_mm = { 1, 1, 1 } };
+    T_OK(store_job_event(s, slim, JOB_EV_PREPARED, &re, NULL, &err), &err);
+    T_OK(store_job_get(s, slim, &j, &err), &err);
+    T_TRUE(j.dev_measured && j.shape_changed);
+    T_EQ_DBL(j.mndr, 0.031, 0);
+    /* on disk as NULL for the unmeasured job */
+    store_close(s);
+    char path[600];
+    snprintf(path, sizeof(path), "%s/slimfarm.db", dir);
+    sqlite3 *db;
+    sqlite3_stmt *st;
+    T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
+    sqlite3_prepare_v2(db, "SELECT mndr IS NULL, andr IS NULL, andr FROM jobs ORDER BY id", -1, &st,
+                       NULL);
+    T_EQ_INT(sqlite3_step(st), SQLITE_ROW);
+    T_EQ_INT(sqlite3_column_int(st, 0), 1);
+    T_EQ_INT(sqlite3_column_int(st, 1), 1);
+    T_EQ_INT(sqlite3_step(st), SQLITE_ROW);
+    T_EQ_INT(sqlite3_column_int(st, 0), 0);
+    T_EQ_DBL(sqlite3_column_double(st, 2), 0.0042, 0);
     sqlite3_finalize(st);
     sqlite3_close(db);
 }

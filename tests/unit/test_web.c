@@ -341,6 +341,38 @@ T_CASE(web_gcode_is_served_from_the_store)
     T_TRUE(strstr(b.data, "\"filament_g\":3.25") != NULL);
     T_TRUE(strstr(b.data, "\"support_g\":0.5") != NULL);
     T_TRUE(strstr(b.data, "\"layers\":12") != NULL);
+    /* an orient job's deviation is not measured: null, in the report and the job */
+    T_TRUE(strstr(b.data, "\"mndr\":null") != NULL && strstr(b.data, "\"andr\":null") != NULL);
+    snprintf(path, sizeof(path), "/api/jobs/%lld", (long long)srv.job);
+    T_EQ_INT(call("GET", path, KEY_RO, NULL, NULL, &b, &h), 200);
+    T_TRUE(strstr(b.data, "\"mndr\":null") != NULL && strstr(b.data, "\"andr\":null") != NULL);
+    /* a slim job's is: the fractions of the diagonal the farm recorded */
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "slim.stl");
+    snprintf(o.method, sizeof(o.method), "slim");
+    char part[STORE_SHA_HEX];
+    int64_t slim;
+    atomic_store(&srv.stop, true);
+    pthread_join(srv.thread, NULL);
+    T_OK(store_file_put(srv.store, tetra, sizeof(tetra) - 1, part, &err), &err);
+    T_OK(store_job_add(srv.store, &o, part, &slim, &err), &err);
+    a.dev_measured = a.shape_changed = true;
+    a.mndr = 0.0125;
+    a.andr = 0.0025;
+    T_OK(store_job_event(srv.store, slim, JOB_EV_PREPARE, NULL, NULL, &err), &err);
+    T_OK(store_job_event(srv.store, slim, JOB_EV_PREPARED, &a, NULL, &err), &err);
+    atomic_store(&srv.stop, false);
+    pthread_create(&srv.thread, NULL, serve, NULL);
+    snprintf(path, sizeof(path), "/api/jobs/%lld", (long long)slim);
+    T_EQ_INT(call("GET", path, KEY_RO, NULL, NULL, &b, &h), 200);
+    T_TRUE(strstr(b.data, "\"mndr\":0.0125") != NULL);
+    T_TRUE(strstr(b.data, "\"andr\":0.0025") != NULL);
+    T_TRUE(strstr(b.data, "\"shape_changed\":true") != NULL);
+    snprintf(path, sizeof(path), "/api/jobs/%lld/report", (long long)slim);
+    T_EQ_INT(call("GET", path, KEY_RO, NULL, NULL, &b, &h), 200);
+    T_TRUE(strstr(b.data, "\"mndr\":0.0125") != NULL);
+    T_TRUE(strstr(b.data, "\"andr\":0.0025") != NULL);
     buf_release(&b);
     buf_release(&h);
     stop();

@@ -505,6 +505,18 @@ function saving(b, a) {
   return ` (${pct >= 0 ? pct.toFixed(0) + " % less" : (-pct).toFixed(0) + " % more"})`;
 }
 
+// MNDR / ANDR: the largest and the mean vertex move over the part's bounding-box
+// diagonal (src/geom/measure.h), as percentages, against the job's budget in mm
+// (the move in mm is estimated from the diagonal of the part as it prints).
+function deviation(j) {
+  if (j.mndr === null || j.mndr === undefined) return j.size_mm[2] ? "not measured" : "not prepared yet";
+  const pct = (v) => `${(100 * v).toFixed(2)} %`;
+  const diag = Math.hypot(j.size_mm[0], j.size_mm[1], j.size_mm[2]);
+  const head = `MNDR ${pct(j.mndr)}, ANDR ${pct(j.andr)} of the bounding-box diagonal`;
+  if (!j.shape_changed) return `${head}: shape kept (reshaping did not save support)`;
+  return `${head} (largest move ≈ ${(j.mndr * diag).toFixed(2)} mm of the ${j.deviation_mm} mm budget)`;
+}
+
 function fmtMs(ms) {
   return ms ? new Date(ms).toLocaleString() : "";
 }
@@ -544,8 +556,7 @@ async function renderJob(id, fresh) {
     ["Support before (model)", model(r.model_before)],
     ["Support after (model)", model(r.model_after) + saving(r.model_before, r.model_after)],
     ["Layers", g && g.layers >= 0 ? String(g.layers) : ""],
-    ...(j.method === "slim" || j.method === "surface"
-      ? [["Deviation (MNDR / ANDR)", "not recorded by the farm yet (slimfarm optimize reports it)"]] : []),
+    ...(j.method === "slim" || j.method === "surface" ? [["Deviation (MNDR / ANDR)", deviation(j)]] : []),
     ["Progress", j.gcode_lines && ["printing", "paused", "interrupted"].includes(j.state)
       ? `line ${j.lines_acked} of ${j.gcode_lines}` : j.gcode_lines ? `${j.gcode_lines} lines` : ""],
   ];
