@@ -70,7 +70,7 @@ bin/slimfarmd -c "$data/farm.ini" > "$data/slimfarmd.log" 2>&1 &
 pids+=($!)
 export SLIMFARM_URL=http://127.0.0.1:$port SLIMFARM_API_KEY=$key
 for _ in $(seq 100); do bin/slimfarm printers > /dev/null 2>&1 && break; sleep 0.1; done
-echo "slimfarmd on $SLIMFARM_URL (key $key); printers: mk3 ($mk3), ender ($ender), voron ($voron)"
+echo "slimfarmd on $SLIMFARM_URL (open it in a browser for the dashboard; API key $key); printers: mk3 ($mk3), ender ($ender), voron ($voron)"
 for part in tee arch lbracket frame; do
   bin/slimfarm submit "$data/parts/$part.stl" --material PLA > /dev/null
 done
