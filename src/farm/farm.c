@@ -248,8 +248,13 @@ static void
 printer_view(const struct printer *p, struct sched_printer *out)
 {
     const struct farmcfg_printer *c = printer_cfg(p);
+    enum printer_state st = printer_state(p);
+    /* Idle here but not yet in its driver's eyes (its report is on the way):
+       a start now would be refused and fail the print. */
+    if (st == PRINTER_IDLE && !printer_connected(p))
+        st = PRINTER_OFFLINE;
     *out = (struct sched_printer){ .name = c->name,
-                                   .state = printer_state(p),
+                                   .state = st,
                                    .enabled = c->enabled && !printer_removed(p),
                                    .material = c->material,
                                    .nozzle_mm = c->nozzle_mm,

@@ -47,6 +47,8 @@ struct printer {
     bool bed_full;              /* the bed holds a part (store_printer_bed_get) */
     bool deaf;                  /* printer_stop: driver events are dropped */
     bool attach_tried;          /* this connection offered the driver its interrupted job */
+    bool error_cleared;         /* an operator cleared the error before the driver saw the
+                                   printer recover: leave it when the driver reports idle */
     struct queued *queue;       /* driver events not applied yet, n_queue of cap_queue */
     size_t n_queue, cap_queue;
     uint64_t deliver; /* timer applying the queue, 0 if none */
@@ -105,6 +107,8 @@ move(struct printer *p, enum printer_event ev)
         set_bed(p, true);
     else if (ev == PRINTER_EV_CLEARED)
         set_bed(p, false);
+    if (to != PRINTER_ERROR)
+        p->error_cleared = false;
     if (to != p->state) {
         p->state = to;
         if (store_printer_set(p->env.s, p->cfg.name, to, &err))
@@ -269,6 +273,18 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
             fail_job(p, st->message[0] ? st->message : "printer reported an error");
             snprintf(p->message, sizeof(p->message), "%s", st->message);
             move(p, PRINTER_EV_FAULT);
+        } else if (st->state == DRV_IDLE && p->state == PRINTER_ERROR && p->error_cleared) {
+            p->message[0] = '\0'; /* the printer recovered after the operator's clear */
+            move(p, PRINTER_EV_CLEARED);
+        } else if (p->state == PRINTER_IDLE && !p->job_id &&
+                   (st->state == DRV_PRINTING || st->state == DRV_PAUSED) &&
+                   (p->drv->status.state == DRV_PRINTING || p->drv->status.state == DRV_PAUSED)) {
+            /* someone started a print at the printer (the driver still says
+               so: not a report from before a cancel): it is not ours to use
+               until the driver sees it idle again */
+            snprintf(p->message, sizeof(p->message), "%s",
+                     st->message[0] ? st->message : "busy with a print the farm did not start");
+            move(p, PRINTER_EV_DISCONNECTED);
         } else if (st->state == DRV_OFFLINE && p->drv->ops->attach) {
             /* a network printer still offline (its connect failed): say why, try later */
             p->attach_tried = false;
@@ -592,6 +608,18 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
     if (rc)
         return sf_err_prefix(err, "printer %s", p->cfg.name);
     if (act == PRINTER_ACT_CLEARED) {
+        if (p->state == PRINTER_ERROR && p->drv && p->drv->status.state != DRV_IDLE) {
+            /* The driver has not seen the printer recover (its next poll
+               may): take the operator's word for the bed now and leave the
+               error when the driver reports idle, so no job goes to a
+               printer that would refuse it. */
+            set_bed(p, false);
+            p->error_cleared = true;
+            snprintf(p->message, sizeof(p->message),
+                     "cleared: waits for the printer to report ready");
+            changed(p);
+            return SF_OK;
+        }
         move(p, ev);
         return SF_OK;
     }

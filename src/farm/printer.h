@@ -48,7 +48,8 @@ enum printer_action {
     PRINTER_ACT_PAUSE = 0, /* pause the job on it */
     PRINTER_ACT_RESUME,    /* resume it */
     PRINTER_ACT_CANCEL,    /* cancel it (the part stays on the bed) */
-    PRINTER_ACT_CLEARED,   /* the bed is clear (or the error acknowledged) */
+    PRINTER_ACT_CLEARED,   /* the bed is clear (or the error acknowledged: the printer
+                              leaves the error when its driver reports it ready) */
 };
 #define PRINTER_ACTION_COUNT 4
 

@@ -46,7 +46,7 @@ wait_for 60 sh -c "'$C' printers | grep -E '^busy ' | grep -q 'OctoPrint is busy
   fail "busy does not say it is busy: $("$C" printers)"
 
 "$C" shapes "$tmp" > /dev/null || fail "shapes"
-j_err=$(submit "$tmp/lbracket.stl" --material PLA --printer err --method none --retries 3)  # 3: clearing while the driver still polls the error may waste one (issue 18 note)
+j_err=$(submit "$tmp/lbracket.stl" --material PLA --printer err --method none --retries 2)
 j_stop=$(submit "$tmp/lbracket.stl" --material PETG --printer stop --method none --retries 2)
 j_busy=$(submit "$tmp/lbracket.stl" --material PLA --printer busy --method none)
 

@@ -452,6 +452,65 @@ T_CASE(farm_dropped_printer_fails_print_into_retry_and_reconnects)
 }
 
 /*
+ * An operator clears a printer's error before its driver has seen the
+ * printer recover (a network driver polls): the printer stays in error,
+ * starts nothing, and leaves the error when the driver reports idle.  It
+ * used to go idle at once and hand the retry to a driver that refused it,
+ * failing the job (farmd_octoprint_faults, CI of stop 24).  And a print
+ * someone starts at an idle printer takes it out of the farm until the
+ * driver sees it idle again.
+ */
+T_CASE(farm_printer_takes_jobs_only_when_its_driver_is_idle)
+{
+    struct sf_err err;
+    T_OK(setup("clear", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PLA", 1); /* max_retries defaults to 1 */
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    snprintf(a->base.status.message, sizeof(a->base.status.message), "heater failure");
+    report(a, DRV_ERROR, DRV_EV_JOB_FAILED);
+    T_TRUE(wait_printer(0, PRINTER_ERROR));
+    T_EQ_INT(state_of(id), JOB_READY);
+    /* cleared while the driver still says error */
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
+    for (int i = 0; i < 10; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(pstate(0), PRINTER_ERROR);
+    T_EQ_INT(a->starts, 1);
+    T_EQ_INT(state_of(id), JOB_READY);
+    /* the printer recovers: the retry starts without another clear */
+    a->base.status.message[0] = '\0';
+    report(a, DRV_IDLE, DRV_EV_STATE);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_EQ_INT(a->starts, 2);
+    report(a, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(id, JOB_DONE));
+    T_TRUE(wait_printer(0, PRINTER_AWAITING_CLEAR));
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
+    T_EQ_INT(pstate(0), PRINTER_IDLE);
+
+    /* a print started at the printer: out of the farm, saying why */
+    snprintf(a->base.status.message, sizeof(a->base.status.message), "busy (Printing 'x')");
+    report(a, DRV_PRINTING, DRV_EV_STATE);
+    T_TRUE(wait_printer(0, PRINTER_OFFLINE));
+    struct printer_info info;
+    farm_printer_info(fx.f, 0, &info);
+    T_EQ_STR(info.message, "busy (Printing 'x')");
+    int64_t next = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(next, JOB_READY));
+    for (int i = 0; i < 10; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 2);
+    a->base.status.message[0] = '\0';
+    report(a, DRV_IDLE, DRV_EV_STATE);
+    T_TRUE(wait_job(next, JOB_PRINTING));
+    T_EQ_INT(a->starts, 3);
+    T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+/*
  * A job whose G-code holds a command no printer can take fails when it is
  * prepared, naming the file and line, and never reaches a printer: the
  * check that used to run in start_job on the loop thread now runs on the
