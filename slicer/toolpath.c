@@ -1201,8 +1201,17 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         double d = w / 2 + i * sp;
         const struct paths *prev = i ? &t[T_S] : &L->region;
         paths_init(&loops[i]);
-        if ((rc = clip_offset(&L->region, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0 ||
-            (rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
+        /* the innermost loop's shrink is the inner area toolpath_areas made */
+        if (i + 1 == p->perimeters) {
+            paths_reset(&t[T_TMP]);
+            if (!paths_append(&t[T_TMP], &L->inner)) {
+                rc = SF_ENOMEM;
+                break;
+            }
+        } else if ((rc = clip_offset(&L->region, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0) {
+            break;
+        }
+        if ((rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
             break;
         if (p->gap_fill) {
             if ((rc = clip_offset(&loops[i], i ? sp / 2 : w / 2, CLIP_JOIN_MITER, &t[T_LINES])) <

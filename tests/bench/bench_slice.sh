@@ -13,9 +13,11 @@
 # CPU seconds (user + system, from GNU time: the machine is shared, so wall
 # time says more about the load than about the slicer) are taken side by
 # side: ours and CuraEngine alternate, three runs each, best of each; the
-# "CPU ratio" column is ours / CuraEngine's.
+# "CPU ratio" column is ours / CuraEngine's.  The last column counts our
+# move commands (G1/G2/G3) with arcs and with arc_fitting = no.
 # BENCH_MESHES="a.stl b.stl" picks meshes; BENCH_PEERS=0 skips the peers;
-# BENCH_SUPPORT="off" runs only supports off (default "off on").
+# BENCH_SUPPORT="off" runs only supports off (default "off on"); BENCH_PS=0
+# leaves PrusaSlicer out (CuraEngine's CPU ratio only).
 set -u
 build=${1:-build/rel}
 shared=${SLIMFARM_SHARED:-../shared}
@@ -81,7 +83,13 @@ ours() { # mesh support(on|off)
   sg=$(sed -n 's/.*(support \([0-9.]*\) g).*/\1/p' <<<"$line")
   layers=$(sed -n 's/.*: \([0-9]*\) layers.*/\1/p' <<<"$line")
   secs=$(sed -n 's/^; estimated printing time \[s\] = //p' "$work/o.gcode")
-  echo "$g $(awk -v s="$secs" 'BEGIN { printf "%.1f", s / 60 }') $sg $best $layers $cpu $ccpu $cwall"
+  # move commands with arcs (this file) and without (arc_fitting = no)
+  local mv_arc mv_lin flag=""
+  mv_arc=$(grep -c '^G[123] ' "$work/o.gcode")
+  [ "$2" = off ] && flag=--no-support
+  "$bin" slice "$1" -o "$work/l.gcode" $flag --set skirts=0 --set brim_auto=no \
+    --set arc_fitting=no >/dev/null 2>&1 && mv_lin=$(grep -c '^G[123] ' "$work/l.gcode")
+  echo "$g $(awk -v s="$secs" 'BEGIN { printf "%.1f", s / 60 }') $sg $best $layers $cpu $ccpu $cwall $mv_arc ${mv_lin:-0}"
 }
 peer() { # mesh support [slicer] -> "g min support_g wall_s layers planner_min"
   local row est
@@ -100,21 +108,21 @@ except Exception:
     print("0 0 0 0 0 0")
 PY
 }
-printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s | ours CPU s | CE CPU s | CPU ratio vs CE |\n'
-printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s | ours CPU s | CE CPU s | CPU ratio vs CE | moves, arcs / no arcs |\n'
+printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
 for m in "${meshes[@]}"; do
   for sup in ${BENCH_SUPPORT:-off on}; do
-    read -r og omin osg ow ol ocpu ccpu ccw <<<"$(ours "$m" "$sup")"
-    if [ "$peers" = 1 ]; then read -r pg pmin psg pw pl pest <<<"$(peer "$m" "$sup")"
+    read -r og omin osg ow ol ocpu ccpu ccw marc mlin <<<"$(ours "$m" "$sup")"
+    if [ "$peers" = 1 ] && [ "${BENCH_PS:-1}" = 1 ]; then read -r pg pmin psg pw pl pest <<<"$(peer "$m" "$sup")"
     else pg=0 pmin=0 psg=0 pw=0 pest=0; fi
     if [ "$peers" = 1 ] && command -v CuraEngine >/dev/null; then
       read -r cg cmin csg cw cl cest <<<"$(peer "$m" "$sup" curaengine)"
     else cg=0 cmin=0 cw=0; fi
     awk -v m="$(basename "$m")" -v s="$sup" -v og="$og" -v pg="$pg" -v omin="$omin" -v pmin="$pmin" \
         -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" -v pest="$pest" \
-        -v cg="$cg" -v cmin="$cmin" -v cw="$cw" -v oc="$ocpu" -v cc="$ccpu" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
-      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s | %.2f | %.1f | %.2f | %.2f | %.2f | %s |\n",
+        -v cg="$cg" -v cmin="$cmin" -v cw="$cw" -v oc="$ocpu" -v cc="$ccpu" -v ma="$marc" -v ml="$mlin" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
+      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s | %.2f | %.1f | %.2f | %.2f | %.2f | %s | %d / %d (%sx fewer) |\n",
               m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), pest, r(pest, pmin), osg, psg, ow, pw, r(ow, pw),
-              cg, cmin, cw, oc, cc, r(oc, cc) }'
+              cg, cmin, cw, oc, cc, r(oc, cc), ma, ml, r(ml, ma) }'
   done
 done
