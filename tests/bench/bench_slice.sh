@@ -36,7 +36,7 @@ mkdir -p "$work/tbin"
 cat > "$work/tbin/time" <<'EOF2'
 #!/usr/bin/env bash
 out=""; a=("$@")
-for ((i = 0; i < ${#a[@]}; i++)); do [ "${a[i]}" = -o ] && out=${a[i + 1]}; done
+for ((i = 0; i < ${#a[@]}; i++)); do [ "${a[i]}" = -o ] && { out=${a[i + 1]}; break; }; done  # time's own -o
 /usr/bin/time "$@"; rc=$?
 [ -n "$out" ] && [ -n "${BENCH_TIME_COPY:-}" ] && cp "$out" "$BENCH_TIME_COPY"
 exit $rc
