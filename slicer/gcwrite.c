@@ -164,7 +164,7 @@ struct wr {
     struct cool *cool; /* what the dry pass measured */
     double f_cap;      /* extrusion feed cap of this layer, mm/min (INFINITY: none) */
     int fan_pct;       /* fan as last written, percent; -1: not yet */
-    int layer_fan_pct, bridge_fan_pct;
+    int layer_fan_pct, bridge_fan_pct, overhang_fan_pct;
 };
 
 /* Dry pass: account a move of d mm at feed f (mm/min). */
@@ -314,6 +314,14 @@ travel(struct wr *w, double x, double y)
     w->y = y;
 }
 
+/* Cooling slows every extrusion but bridges and overhangs: they keep
+   their speed (PrusaSlicer's CoolingBuffer leaves them out). */
+static bool
+slowable(int role)
+{
+    return role != ROLE_BRIDGE && role != ROLE_OVERHANG;
+}
+
 static void
 extrude_to(struct wr *w, double x, double y, double e_per_mm, double f, int role)
 {
@@ -323,8 +331,8 @@ extrude_to(struct wr *w, double x, double y, double e_per_mm, double f, int role
     if (d < 1e-9)
         return;
     double de = d * e_per_mm;
-    w->adj = true;
-    emit(w, x, y, NAN, e_word(w, de), f < w->f_cap ? f : w->f_cap);
+    w->adj = slowable(role);
+    emit(w, x, y, NAN, e_word(w, de), f < w->f_cap && w->adj ? f : w->adj ? w->f_cap : f);
     w->adj = false;
     w->st->e_mm[role] += de;
     w->x = x;
@@ -360,6 +368,9 @@ role_speed(const struct slice_profile *p, int role, bool first)
     case ROLE_GAP_FILL:
         v = p->gap_fill_mm_s;
         break;
+    case ROLE_OVERHANG:
+        v = p->bridge_mm_s > 0 ? p->bridge_mm_s : p->ext_perimeter_mm_s;
+        break;
     default:
         v = p->support_mm_s;
         break;
@@ -381,10 +392,10 @@ emit_arc(struct wr *w, bool cw, double x, double y, double cx, double cy, double
 {
     double de = len * epm;
     double e = e_word(w, de);
-    double f = f_mm_min < w->f_cap ? f_mm_min : w->f_cap;
+    double f = f_mm_min < w->f_cap || !slowable(role) ? f_mm_min : w->f_cap;
     w->st->e_mm[role] += de;
     if (w->dry) {
-        w->adj = true;
+        w->adj = slowable(role);
         dry_move(w, len, f);
         w->adj = false;
         w->f = f;
@@ -511,6 +522,83 @@ extrude_arcs(struct wr *w, const double (*pt)[2], size_t n, double epm, double f
     }
 }
 
+/* The fan of the moves being written: bridges and overhangs have theirs. */
+static void set_fan(struct wr *w, int pct);
+
+/* Write ;TYPE: and ;WIDTH: when they change. */
+static void
+tag(struct wr *w, int role, float width)
+{
+    if (role != w->role)
+        put(w, ";TYPE:%s\n", tp_role_name(role));
+    if (role != w->role || width != w->width)
+        put(w, ";WIDTH:%g\n", width);
+    w->role = role;
+    w->width = width;
+}
+
+/* Extrude pt[0..m) (pt[0]: the nozzle) as role, arcs where they fit. */
+static void
+extrude_run(struct wr *w, const double (*pt)[2], size_t m, double epm, double f, int role)
+{
+    if (w->p->arc_fitting && m >= 4) {
+        extrude_arcs(w, pt, m, epm, f, role);
+        return;
+    }
+    for (size_t i = 1; i < m; i++)
+        extrude_to(w, pt[i][0], pt[i][1], epm, f, role);
+}
+
+/*
+ * A perimeter loop with overhang segments (flags ov, from its vertex at):
+ * runs over the layer below print as the loop's role; runs over air as
+ * ROLE_OVERHANG, PrusaSlicer's overhang perimeters: a round thread of
+ * nozzle width (bridge flow) at bridge speed, with overhang_fan_speed.
+ */
+static void
+print_loop_overhangs(struct wr *w, const struct tp_info *in, const struct ipt *q, const uint8_t *ov,
+                     uint32_t n, uint32_t at, double h, double epm, double f)
+{
+    (void)h;
+    struct cool *c = w->cool;
+    const struct slice_profile *p = w->p;
+    double nz = p->nozzle_mm;
+    double epm_o = nz * nz / (p->filament_mm * p->filament_mm) * p->flow;
+    double f_o = role_speed(p, ROLE_OVERHANG, false) * 60;
+    if (!mem_grow((void **)&c->pt, &c->cap_pt, n + 1, sizeof(*c->pt))) {
+        w->rc = SF_ENOMEM;
+        return;
+    }
+    uint32_t s = 0;
+    while (s < n && w->rc == SF_OK) {
+        /* one run of equal flags: segments s.. from vertex (at + s) */
+        uint8_t o = ov[(at + s) % n];
+        size_t m = 0;
+        c->pt[m][0] = w->x;
+        c->pt[m++][1] = w->y;
+        for (; s < n && ov[(at + s) % n] == o; s++) {
+            uint32_t i = (at + s + 1) % n;
+            double x = r3(poly_mm(q[i].x)), y = r3(poly_mm(q[i].y));
+            if (x != c->pt[m - 1][0] || y != c->pt[m - 1][1]) {
+                c->pt[m][0] = x;
+                c->pt[m++][1] = y;
+            }
+        }
+        if (m < 2)
+            continue;
+        if (o) {
+            set_fan(w, w->overhang_fan_pct);
+            tag(w, ROLE_OVERHANG, (float)nz);
+            extrude_run(w, (const double(*)[2])c->pt, m, epm_o, f_o, ROLE_OVERHANG);
+        } else {
+            set_fan(w, w->layer_fan_pct);
+            tag(w, in->role, in->width_mm);
+            extrude_run(w, (const double(*)[2])c->pt, m, epm, f, in->role);
+        }
+    }
+    set_fan(w, w->layer_fan_pct);
+}
+
 /* Print path k starting at vertex `at` (reversed for open paths if rev). */
 static void
 print_path(struct wr *w, const struct layer_paths *lp, uint32_t k, uint32_t at, bool rev, double h,
@@ -534,6 +622,16 @@ print_path(struct wr *w, const struct layer_paths *lp, uint32_t k, uint32_t at, 
         epm = in->width_mm * in->width_mm / (w->p->filament_mm * w->p->filament_mm) * w->p->flow;
     double f = role_speed(w->p, in->role, first) * 60;
     struct cool *c = w->cool;
+    if (in->closed && lp->ovh && (in->role == ROLE_PERIMETER || in->role == ROLE_EXT_PERIMETER)) {
+        const uint8_t *ov = lp->ovh + lp->p.start[k];
+        bool any = false;
+        for (uint32_t i = 0; i < n && !any; i++)
+            any = ov[i];
+        if (any) {
+            print_loop_overhangs(w, in, q, ov, n, at, h, epm, f);
+            return;
+        }
+    }
     if (w->p->arc_fitting && n >= 4 &&
         (in->role == ROLE_PERIMETER || in->role == ROLE_EXT_PERIMETER || in->role == ROLE_SKIRT) &&
         mem_grow((void **)&c->pt, &c->cap_pt, n + 1, sizeof(*c->pt))) {
@@ -710,8 +808,24 @@ cool_cap(const struct slice_profile *p, const struct cool *c, double t_s)
     return lo;
 }
 
+static int fan_pct(const struct slice_profile *p, uint32_t layer, double layer_time_s,
+                   double special);
+
 int
 gcw_fan_pct(const struct slice_profile *p, uint32_t layer, double layer_time_s, bool bridge)
+{
+    return fan_pct(p, layer, layer_time_s, bridge ? p->bridge_fan_pct : -1);
+}
+
+int
+gcw_overhang_fan_pct(const struct slice_profile *p, uint32_t layer, double layer_time_s)
+{
+    return fan_pct(p, layer, layer_time_s, p->overhang_fan_pct);
+}
+
+/* The fan by PrusaSlicer's rules; special >= 0: a bridge's or overhang's own. */
+static int
+fan_pct(const struct slice_profile *p, uint32_t layer, double layer_time_s, double special)
 {
     int off = p->disable_fan_first_layers;
     if (off <= 0 && p->full_fan_speed_layer > 0)
@@ -728,8 +842,8 @@ gcw_fan_pct(const struct slice_profile *p, uint32_t layer, double layer_time_s, 
             fan = floor(t * p->min_fan_pct + (1 - t) * p->max_fan_pct + 0.5);
         }
     }
-    if (bridge)
-        fan = p->bridge_fan_pct;
+    if (special >= 0)
+        fan = special;
     if ((long)layer + 1 < p->full_fan_speed_layer) {
         double ramp = (double)((long)layer + 1 - off) / (p->full_fan_speed_layer - off);
         fan = floor(fan * ramp + 0.5);
@@ -822,6 +936,7 @@ gcw_body(const struct layer_stack *s, const struct layer_paths *lp, const struct
         st->layer_time_s[k] = t_s;
         w.layer_fan_pct = gcw_fan_pct(p, k, t_s, false);
         w.bridge_fan_pct = gcw_fan_pct(p, k, t_s, true);
+        w.overhang_fan_pct = gcw_overhang_fan_pct(p, k, t_s);
         w.f_cap = cool_cap(p, &c, t_s);
         set_fan(&w, w.layer_fan_pct);
         write_steps(&w, l, &c, L->h_mm, k == 0);

@@ -15,7 +15,10 @@
  * slowdown_below_layer_time has its extrusion feeds capped (fastest
  * first, never below min_print_speed) until it lasts that long, and the
  * fan follows the layer time between the two thresholds (gcw_fan_pct),
- * with bridge_fan_speed over bridges.  The header, start/end G-code and M73 progress are added by
+ * with bridge_fan_speed over bridges and overhang_fan_speed over
+ * overhanging perimeter runs (toolpath.h's ovh flags: they print as
+ * ;TYPE:Overhang perimeter with bridge flow and speed).  Bridges and
+ * overhangs are never slowed down.  The header, start/end G-code and M73 progress are added by
  * slice.c around this body.
  *
  * Thread: reentrant; writes only into the caller's buffer.
@@ -54,6 +57,10 @@ void gcw_stats_release(struct gcw_stats *st);
  * up linearly until full_fan_speed_layer.
  */
 int gcw_fan_pct(const struct slice_profile *p, uint32_t layer, double t_s, bool bridge);
+
+/* The same for overhang perimeters: overhang_fan_speed in place of the
+   layer's fan, within the same first-layers and ramp rules. */
+int gcw_overhang_fan_pct(const struct slice_profile *p, uint32_t layer, double t_s);
 
 /* Called after each G1 written, with the machine position it moves to
    (E in the absolute sense, as estimate.h reports it). */

@@ -206,7 +206,7 @@ static const struct {
     { "Solid infill", 0.59, 0.33, 0.8 },   { "Top solid infill", 0.94, 0.25, 0.25 },
     { "Bridge infill", 0.3, 0.5, 0.73 },   { "Support material interface", 0.0, 0.5, 0.25 },
     { "Support material", 0.0, 1.0, 0.0 }, { "Skirt/Brim", 0.0, 0.53, 0.53 },
-    { "Gap fill", 1.0, 1.0, 1.0 },
+    { "Gap fill", 1.0, 1.0, 1.0 },         { "Overhang perimeter", 0.0, 0.0, 1.0 },
 };
 
 static uint8_t
@@ -232,7 +232,9 @@ on_move(void *ud, const struct est_move *mv)
         c->seams[c->n_seams][1] = (float)c->y;
         c->seams[c->n_seams++][2] = (int)mv->layer == c->layer;
     }
-    c->in_ext = ext;
+    /* an overhang run inside an external loop does not start a new seam */
+    if (!(mv->type && mv->type_len == 18 && memcmp(mv->type, "Overhang perimeter", 18) == 0))
+        c->in_ext = ext;
     if ((int)mv->layer == c->layer && c->have && (mv->x != c->x || mv->y != c->y)) {
         if (!mem_grow((void **)&c->segs, &c->cap, c->n + 1, sizeof(*c->segs)))
             return SF_ENOMEM;

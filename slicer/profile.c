@@ -130,6 +130,14 @@ static const struct popt popts[] = {
     R("print", gap_fill_speed, gap_fill_mm_s, 1, 1000, "gap fill and thin walls, mm/s"),
     B("print", gap_fill, gap_fill,
       "gaps and walls narrower than two lines get one line of matching width"),
+    R("print", min_bead_width, min_bead, 0, 2,
+      "leftovers inside the perimeters narrower than this x the nozzle are gap fill, "
+      "wider ones infill"),
+    R("print", infill_overlap, infill_overlap, 0, 1,
+      "infill reaches this fraction of the perimeter line spacing into the perimeters"),
+    B("print", overhangs, overhangs,
+      "perimeters over air (a nozzle width out from the layer below) print with bridge flow, "
+      "speed and overhang_fan_speed"),
     R("print", first_layer_speed, first_layer_mm_s, 1, 1000, "every move of the first layer, mm/s"),
     R("print", bridge_speed, bridge_mm_s, 0, 1000, "solid over air, mm/s (0: print it as solid)"),
     B("print", support, support, "generate column supports"),
@@ -166,6 +174,8 @@ static const struct popt popts[] = {
     R("material", min_fan_speed, min_fan_pct, 0, 100, "fan on long layers, percent"),
     R("material", max_fan_speed, max_fan_pct, 0, 100, "fan on short layers, percent"),
     R("material", bridge_fan_speed, bridge_fan_pct, 0, 100, "fan over bridges, percent"),
+    R("material", overhang_fan_speed, overhang_fan_pct, 0, 100,
+      "fan over overhanging perimeters, percent"),
     R("material", fan_below_layer_time, fan_below_s, 0, 3600,
       "layers faster than this get more than min_fan_speed, s"),
     R("material", slowdown_below_layer_time, slowdown_below_s, 0, 3600,
@@ -248,6 +258,9 @@ slice_profile_default(struct slice_profile *p)
         .bridge_mm_s = 60,
         .gap_fill_mm_s = 20,
         .gap_fill = true,
+        .min_bead = 0.85,       /* PrusaSlicer 2.5: min_bead_width 85 % */
+        .infill_overlap = 0.25, /* PrusaSlicer 2.5: infill_overlap 25 % */
+        .overhangs = true,
         .retract_only_crossing = true,
         .support = true,
         .support_angle_deg = 0,
@@ -277,6 +290,7 @@ slice_profile_default(struct slice_profile *p)
         .min_fan_pct = 35,
         .max_fan_pct = 100,
         .bridge_fan_pct = 100,
+        .overhang_fan_pct = 100, /* PrusaSlicer 2.5 runs bridge_fan_speed there */
         .fan_below_s = 60,
         .slowdown_below_s = 5,
         .min_print_mm_s = 10,

@@ -55,6 +55,10 @@ struct slice_profile {
     double perimeter_mm_s, ext_perimeter_mm_s, infill_mm_s, solid_mm_s, top_mm_s;
     double support_mm_s, first_layer_mm_s, bridge_mm_s, gap_fill_mm_s;
     bool gap_fill;              /* thin walls and gaps get one line of matching width */
+    double min_bead;            /* leftovers inside the loops narrower than this x nozzle
+                                   are gap fill, wider ones infill */
+    double infill_overlap;      /* infill reaches this x the loop spacing into the loops */
+    bool overhangs;             /* perimeters over air: bridge flow, speed and fan */
     bool retract_only_crossing; /* no retraction for travel inside the part */
     bool support;
     double support_angle_deg; /* 0: the printer's max_overhang_deg */
@@ -76,7 +80,7 @@ struct slice_profile {
     /* cooling, PrusaSlicer's options of the same names */
     bool cooling;       /* slow short layers down, fan by layer time */
     bool fan_always_on; /* min_fan_pct at least, from disable_fan_first_layers */
-    double min_fan_pct, max_fan_pct, bridge_fan_pct;
+    double min_fan_pct, max_fan_pct, bridge_fan_pct, overhang_fan_pct;
     double fan_below_s;      /* fan_below_layer_time */
     double slowdown_below_s; /* slowdown_below_layer_time: the minimum layer time */
     double min_print_mm_s;   /* slowdown never goes below this */

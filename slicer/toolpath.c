@@ -22,11 +22,12 @@ const char *
 tp_role_name(enum tp_role r)
 {
     static const char *const names[ROLE_N] = {
-        "Support material", "Support material interface",
-        "Perimeter",        "External perimeter",
-        "Solid infill",     "Top solid infill",
-        "Internal infill",  "Bridge infill",
-        "Skirt/Brim",       "Gap fill",
+        "Support material",   "Support material interface",
+        "Perimeter",          "External perimeter",
+        "Solid infill",       "Top solid infill",
+        "Internal infill",    "Bridge infill",
+        "Skirt/Brim",         "Gap fill",
+        "Overhang perimeter",
     };
     return (unsigned)r < ROLE_N ? names[r] : "Custom";
 }
@@ -37,6 +38,8 @@ layer_paths_init(struct layer_paths *lp)
     paths_init(&lp->p);
     lp->info = NULL;
     lp->cap_info = 0;
+    lp->ovh = NULL;
+    lp->cap_ovh = 0;
 }
 
 void
@@ -44,7 +47,23 @@ layer_paths_release(struct layer_paths *lp)
 {
     paths_release(&lp->p);
     free(lp->info);
+    free(lp->ovh);
     layer_paths_init(lp);
+}
+
+/* Make lp->ovh cover every point of lp->p (new ones 0); copy from
+   src[0..n) at point `at` when src is given.  False on ENOMEM. */
+static bool
+ovh_fill(struct layer_paths *lp, size_t at, const uint8_t *src, size_t n)
+{
+    size_t np = lp->p.n ? lp->p.start[lp->p.n] : 0, old = lp->ovh ? lp->cap_ovh : 0;
+    if (!mem_grow((void **)&lp->ovh, &lp->cap_ovh, np, 1))
+        return false;
+    if (lp->cap_ovh > old)
+        memset(lp->ovh + old, 0, lp->cap_ovh - old);
+    if (src)
+        memcpy(lp->ovh + at, src, n);
+    return true;
 }
 
 double
@@ -68,6 +87,8 @@ add(struct layer_paths *lp, const struct paths *src, enum tp_role role, bool clo
             lp->cap_info = (uint32_t)cap;
         }
         if (!paths_add(&lp->p, src->pts + src->start[k], n))
+            return SF_ENOMEM;
+        if (lp->ovh && !ovh_fill(lp, 0, NULL, 0))
             return SF_ENOMEM;
         struct tp_info *i = &lp->info[lp->p.n - 1];
         i->role = (uint8_t)role;
@@ -633,6 +654,9 @@ group_by_island(const struct paths *region, struct layer_paths *lp)
             }
             if (!paths_add(&out.p, lp->p.pts + lp->p.start[k], paths_len(&lp->p, k)))
                 goto fail;
+            if (lp->ovh && !ovh_fill(&out, out.p.start[out.p.n - 1], lp->ovh + lp->p.start[k],
+                                     paths_len(&lp->p, k)))
+                goto fail;
             out.info[out.p.n - 1] = lp->info[k];
         }
     }
@@ -794,8 +818,9 @@ farthest(const struct ipt *q, uint32_t n, uint32_t from)
  * widths varying along the line.
  */
 static int
-gap_fill(const struct paths *gap, double h, double nozzle, double sp, struct layer_paths *out,
-         struct paths *piece, struct paths *sliver, struct paths *line)
+gap_fill(const struct paths *gap, double h, double nozzle, double sp, double overlap,
+         double min_bead, struct layer_paths *out, struct paths *piece, struct paths *sliver,
+         struct paths *line)
 {
     int rc = SF_OK;
     for (uint32_t k = 0; k < gap->n && rc == SF_OK;) {
@@ -816,6 +841,11 @@ gap_fill(const struct paths *gap, double h, double nozzle, double sp, struct lay
         if (area < 0.1 * nozzle * nozzle || per <= 0)
             continue;
         double t = 2 * area / per;
+        /* an infill piece at least min_bead_width wide is infill in
+           PrusaSlicer too, grown infill_overlap into the loops around it
+           (bonding): lay that band as well.  Narrower leftovers are what
+           Arachne's beads absorb, without overlap. */
+        double fill = overlap > 0 && t >= min_bead ? area + overlap * per : area;
         /* wider than 1.5 spacings: two lines, the loop a quarter width in */
         bool two = t > 1.5 * sp;
         /* a short piece (a corner's gap, a stub of wall) is one straight
@@ -837,7 +867,7 @@ gap_fill(const struct paths *gap, double h, double nozzle, double sp, struct lay
             paths_reset(line);
             if (!paths_add(line, seg, 2))
                 return SF_ENOMEM;
-            double wl = area / len + h * (1 - M_PI / 4);
+            double wl = fill / len + h * (1 - M_PI / 4);
             rc = add(out, line, ROLE_GAP_FILL, false, wl < 2.5 * nozzle ? wl : 2.5 * nozzle);
             continue;
         }
@@ -875,7 +905,7 @@ gap_fill(const struct paths *gap, double h, double nozzle, double sp, struct lay
         }
         if (len < 1e-3)
             continue;
-        double wl = area / len + h * (1 - M_PI / 4);
+        double wl = fill / len + h * (1 - M_PI / 4);
         if (wl > 2.5 * nozzle)
             wl = 2.5 * nozzle;
         rc = add(out, line, ROLE_GAP_FILL, ring, wl);
@@ -930,10 +960,13 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
             if (j >= 0 && j < (long)s->n && !paths_append(&t[T_LINES], &s->l[j].skin))
                 TRY(SF_ENOMEM);
         if (t[T_LINES].n) {
+            /* one pass: under the nonzero rule the overlapping skins are
+               their union, clipped to the area at once (a separate union
+               of the stacked skins first cost 41 % of knot1's
+               instructions, most of it joining their common edges) */
             if (!paths_append(&t[T_LINES], &t[T_SOLID]))
                 TRY(SF_ENOMEM);
-            TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_TMP]));
-            TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+            TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
         }
         if (!p->vertical_shells && t[T_SOLID].n) {
             /* bands narrower than 3 solid lines grow 3 lines wider, so
@@ -1010,6 +1043,113 @@ out:
     return rc;
 }
 
+/* Flags of q[a..b] (one segment, split to ~0.05 mm where it leaves
+   below): append the points after a and their segments' flags. */
+static bool
+ovh_segment(const struct paths_index *below, struct ipt a, struct ipt b, bool in_a, bool in_b,
+            struct paths *pts, uint8_t **fl, size_t *cap, size_t *n, int depth)
+{
+    if (in_a == in_b && !paths_index_crosses(below, a, b)) {
+        if (!mem_grow((void **)fl, cap, *n + 1, 1) || !paths_push(pts, b))
+            return false;
+        (*fl)[(*n)++] = !in_a; /* the flag of the segment ending at b */
+        return true;
+    }
+    if (depth == 0 || d2(a, b) < (double)poly_i(0.05) * (double)poly_i(0.05)) {
+        struct ipt m = { a.x / 2 + b.x / 2, a.y / 2 + b.y / 2 };
+        if (!mem_grow((void **)fl, cap, *n + 1, 1) || !paths_push(pts, b))
+            return false;
+        (*fl)[(*n)++] = !paths_index_contains(below, m);
+        return true;
+    }
+    struct ipt m = { a.x / 2 + b.x / 2, a.y / 2 + b.y / 2 };
+    bool in_m = paths_index_contains(below, m);
+    return ovh_segment(below, a, m, in_a, in_m, pts, fl, cap, n, depth - 1) &&
+           ovh_segment(below, m, b, in_m, in_b, pts, fl, cap, n, depth - 1);
+}
+
+/*
+ * Overhang perimeters (PrusaSlicer's "overhangs": bridge flow, bridge
+ * speed and fan): the segments of layer k's perimeter loops whose centre
+ * line lies outside the layer below grown by half a nozzle, i.e. where
+ * the whole nozzle width is over air.  Loops are rebuilt with a vertex
+ * where they leave and re-enter that area; out gets the flags.
+ */
+static int
+mark_overhangs(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+               struct layer_paths *out, struct paths *grown, struct paths *tmp)
+{
+    if (k == 0 || !p->overhangs || !out->p.n)
+        return SF_OK;
+    int rc = clip_offset(&s->l[k - 1].region, p->nozzle_mm / 2, CLIP_JOIN_MITER, grown);
+    if (rc < 0)
+        return rc;
+    struct paths_index below = { 0 };
+    if (!paths_index_init(&below, grown))
+        return SF_ENOMEM;
+    struct layer_paths lp;
+    layer_paths_init(&lp);
+    uint8_t *fl = NULL;
+    size_t cap = 0;
+    bool any = false;
+    rc = SF_OK;
+    for (uint32_t k2 = 0; k2 < out->p.n && rc == SF_OK; k2++) {
+        const struct tp_info *in = &out->info[k2];
+        const struct ipt *q = out->p.pts + out->p.start[k2];
+        uint32_t m = paths_len(&out->p, k2);
+        size_t nf = 0;
+        paths_reset(tmp);
+        bool is_loop = in->closed && (in->role == ROLE_PERIMETER || in->role == ROLE_EXT_PERIMETER);
+        bool hit = false;
+        if (is_loop) {
+            if (!paths_begin(tmp) || !paths_push(tmp, q[0]))
+                rc = SF_ENOMEM;
+            bool in0 = paths_index_contains(&below, q[0]), in_a = in0;
+            for (uint32_t i = 0; i < m && rc == SF_OK; i++) {
+                struct ipt b = q[(i + 1) % m];
+                bool in_b = i + 1 < m ? paths_index_contains(&below, b) : in0;
+                if (!ovh_segment(&below, q[i], b, in_a, in_b, tmp, &fl, &cap, &nf, 12))
+                    rc = SF_ENOMEM;
+                in_a = in_b;
+            }
+            for (size_t i = 0; i < nf; i++)
+                hit |= fl[i];
+        }
+        if (rc < 0)
+            break;
+        if (lp.p.n + 1 > lp.cap_info) {
+            size_t c = lp.cap_info;
+            if (!mem_grow((void **)&lp.info, &c, lp.p.n + 1, sizeof(*lp.info))) {
+                rc = SF_ENOMEM;
+                break;
+            }
+            lp.cap_info = (uint32_t)c;
+        }
+        if (hit) {
+            /* tmp holds q[0], the points after it and q[0] again: drop the
+               last (the loop closes itself); flag i is of the segment
+               from point i, so fl is already in place */
+            uint32_t nt = paths_len(tmp, 0) - 1;
+            if (!paths_add(&lp.p, tmp->pts, nt) || !ovh_fill(&lp, lp.p.start[lp.p.n - 1], fl, nt))
+                rc = SF_ENOMEM;
+            any = true;
+        } else if (!paths_add(&lp.p, q, m) || (lp.ovh && !ovh_fill(&lp, 0, NULL, 0))) {
+            rc = SF_ENOMEM;
+        }
+        if (rc == SF_OK)
+            lp.info[lp.p.n - 1] = *in;
+    }
+    if (rc == SF_OK && any) {
+        layer_paths_release(out);
+        *out = lp;
+        layer_paths_init(&lp);
+    }
+    free(fl);
+    layer_paths_release(&lp);
+    paths_index_release(&below);
+    return rc;
+}
+
 int
 toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
                const struct support_layer *sup, struct layer_paths *out)
@@ -1061,8 +1201,17 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         double d = w / 2 + i * sp;
         const struct paths *prev = i ? &t[T_S] : &L->region;
         paths_init(&loops[i]);
-        if ((rc = clip_offset(&L->region, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0 ||
-            (rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
+        /* the innermost loop's shrink is the inner area toolpath_areas made */
+        if (i + 1 == p->perimeters) {
+            paths_reset(&t[T_TMP]);
+            if (!paths_append(&t[T_TMP], &L->inner)) {
+                rc = SF_ENOMEM;
+                break;
+            }
+        } else if ((rc = clip_offset(&L->region, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0) {
+            break;
+        }
+        if ((rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
             break;
         if (p->gap_fill) {
             if ((rc = clip_offset(&loops[i], i ? sp / 2 : w / 2, CLIP_JOIN_MITER, &t[T_LINES])) <
@@ -1087,7 +1236,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
            meet at corners), then fill */
         TRY(clip_offset(&t[T_GAP], -sp / 8, CLIP_JOIN_MITER, &t[T_TMP]));
         TRY(clip_offset(&t[T_TMP], sp / 8, CLIP_JOIN_MITER, &t[T_GAP]));
-        TRY(gap_fill(&t[T_GAP], h, p->nozzle_mm, sp, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
+        TRY(gap_fill(&t[T_GAP], h, p->nozzle_mm, sp, 0, 0, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
     }
     if (!L->inner.n)
         goto out;
@@ -1100,7 +1249,8 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         for (int i = 0; i < 3; i++)
             TRY(split_narrow(sets[i], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
         if (t[T_GAP].n)
-            TRY(gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
+            TRY(gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, p->infill_overlap * sp,
+                         p->min_bead * p->nozzle_mm, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
     }
     double ang = k % 2 ? 135 : 45;
     if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0) {
@@ -1136,6 +1286,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         TRY(tp_anchor(&t[T_LINES], &t[T_SPARSE], p->infill_anchor_mm));
         TRY(add(out, &t[T_LINES], ROLE_INFILL, false, w));
     }
+    TRY(mark_overhangs(s, k, p, out, &t[T_TMP], &t[T_LINES]));
     TRY(group_by_island(&L->region, out));
 #undef TRY
 out:
@@ -1344,6 +1495,9 @@ toolpath_skirt_brim(const struct layer_stack *s, uint32_t k, const struct slice_
         out.cap_info = (uint32_t)cap;
         if (lp->p.n)
             memcpy(out.info + n_own, lp->info, lp->p.n * sizeof(*lp->info));
+        if (lp->ovh && lp->p.n &&
+            !ovh_fill(&out, out.p.start[n_own], lp->ovh, lp->p.start[lp->p.n]))
+            TRY(SF_ENOMEM);
         layer_paths_release(lp);
         *lp = out;
         layer_paths_init(&out);

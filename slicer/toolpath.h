@@ -43,6 +43,7 @@ enum tp_role {
     ROLE_BRIDGE,   /* solid over air: round lines of nozzle width, bridge speed */
     ROLE_SKIRT,    /* skirt and brim */
     ROLE_GAP_FILL, /* one line along a gap or thin wall, its width set by the gap's area */
+    ROLE_OVERHANG, /* the part of a perimeter loop over air (layer_paths.ovh): bridge flow */
     ROLE_N
 };
 
@@ -61,11 +62,19 @@ struct tp_info {
     float width_mm;
 };
 
-/* The paths of one layer; info[k] describes path k of p. */
+/*
+ * The paths of one layer; info[k] describes path k of p.  ovh, when not
+ * NULL, has one flag per point of p: 1 when the segment from that point
+ * to the next one of its path (a loop's last point: to its first) runs
+ * over air, a nozzle width out from the layer below (PrusaSlicer's
+ * overhang perimeters); only perimeter loops have such segments.
+ */
 struct layer_paths {
     struct paths p;
     struct tp_info *info;
     uint32_t cap_info;
+    uint8_t *ovh;
+    size_t cap_ovh;
 };
 
 void layer_paths_init(struct layer_paths *lp);

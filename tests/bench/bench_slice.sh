@@ -10,8 +10,14 @@
 # estimator from the differences between the two slicers' toolpaths).
 # CuraEngine's filament, estimate and wall time (its stock 0.4 mm lines
 # and speeds, so a second opinion, not a like-for-like) close each row.
+# CPU seconds (user + system, from GNU time: the machine is shared, so wall
+# time says more about the load than about the slicer) are taken side by
+# side: ours and CuraEngine alternate, three runs each, best of each; the
+# "CPU ratio" column is ours / CuraEngine's.  The last column counts our
+# move commands (G1/G2/G3) with arcs and with arc_fitting = no.
 # BENCH_MESHES="a.stl b.stl" picks meshes; BENCH_PEERS=0 skips the peers;
-# BENCH_SUPPORT="off" runs only supports off (default "off on").
+# BENCH_SUPPORT="off" runs only supports off (default "off on"); BENCH_PS=0
+# leaves PrusaSlicer out (CuraEngine's CPU ratio only).
 set -u
 build=${1:-build/rel}
 shared=${SLIMFARM_SHARED:-../shared}
@@ -25,26 +31,65 @@ if [ "$peers" = 1 ] && ! command -v prusa-slicer >/dev/null; then
   echo "bench_slice: prusa-slicer missing (make bench installs it); ours only"; peers=0
 fi
 work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
+# GNU time on PATH for the peers' script, keeping a copy of its report
+mkdir -p "$work/tbin"
+cat > "$work/tbin/time" <<'EOF2'
+#!/usr/bin/env bash
+out=""; a=("$@")
+for ((i = 0; i < ${#a[@]}; i++)); do [ "${a[i]}" = -o ] && { out=${a[i + 1]}; break; }; done  # time's own -o
+/usr/bin/time "$@"; rc=$?
+[ -n "$out" ] && [ -n "${BENCH_TIME_COPY:-}" ] && cp "$out" "$BENCH_TIME_COPY"
+exit $rc
+EOF2
+chmod +x "$work/tbin/time"
 
-# ours: best-of-3 wall time and the figures printed by `slimfarm slice`
-ours() { # mesh support(on|off) -> "g min support_g wall_s layers"
-  local best=999999 line flag=""
+# ours, once: "wall_s cpu_s", and the figures printed by `slimfarm slice` in $work/o.line
+ours_run() { # mesh support(on|off)
+  local flag=""
   [ "$2" = off ] && flag=--no-support
   # like the peers: no skirt, no brim (slice-peers.sh passes --skirts 0 --brim-width 0)
   flag="$flag --set skirts=0 --set brim_auto=no"
+  /usr/bin/time -f "%e %U %S" -o "$work/o.time" "$bin" slice "$1" -o "$work/o.gcode" $flag \
+    >"$work/o.line" 2>/dev/null || { echo "0 0"; return; }
+  awk '{ printf "%s %.2f\n", $1, $2 + $3 }' "$work/o.time"
+}
+# CuraEngine once through the peers' script: "wall_s cpu_s"
+ce_run() { # mesh support
+  rm -f "$work/ce.time"
+  PATH="$work/tbin:$PATH" BENCH_TIME_COPY="$work/ce.time" PEER_RUNS="curaengine:$2" \
+    bash "$shared/peers/slice-peers.sh" "$1" --format csv >/dev/null 2>&1
+  awk -F': ' '/Elapsed \(wall clock\)/ { n = split($2, t, ":"); w = 0; for (i = 1; i <= n; i++) w = w * 60 + t[i] }
+    /User time/ { u = $2 } /System time/ { s = $2 } END { printf "%.2f %.2f\n", w, u + s }' "$work/ce.time" 2>/dev/null
+}
+# ours and CuraEngine alternating, three runs each: "g min support_g wall_s layers cpu_s ce_cpu_s ce_wall_s"
+ours() { # mesh support(on|off)
+  local best=999999 cpu=999999 ccpu=999999 cwall=999999 w c
   for _ in 1 2 3; do
-    local t0 t1
-    t0=$(date +%s.%N)
-    line=$("$bin" slice "$1" -o "$work/o.gcode" $flag 2>/dev/null) || { echo "0 0 0 0 0"; return; }
-    t1=$(date +%s.%N)
-    best=$(awk -v a="$best" -v b="$(echo "$t1 - $t0" | bc)" 'BEGIN { print (b < a ? b : a) }')
+    read -r w c <<<"$(ours_run "$1" "$2")"
+    [ "$c" = 0 ] && { echo "0 0 0 0 0 0 0 0"; return; }
+    best=$(awk -v a="$best" -v b="$w" 'BEGIN { print (b < a ? b : a) }')
+    cpu=$(awk -v a="$cpu" -v b="$c" 'BEGIN { print (b < a ? b : a) }')
+    cp "$work/o.line" "$work/o.keep"
+    if [ "$peers" = 1 ] && command -v CuraEngine >/dev/null; then
+      read -r w c <<<"$(ce_run "$1" "$2")"
+      [ -n "$c" ] && ccpu=$(awk -v a="$ccpu" -v b="$c" 'BEGIN { print (b < a ? b : a) }')
+      [ -n "$w" ] && cwall=$(awk -v a="$cwall" -v b="$w" 'BEGIN { print (b < a ? b : a) }')
+    fi
   done
-  local g sg layers secs
+  [ "$ccpu" = 999999 ] && ccpu=0 cwall=0
+  local g sg layers secs line
+  line=$(cat "$work/o.keep")
   g=$(sed -n 's/.*filament [0-9]* mm \([0-9.]*\) g.*/\1/p' <<<"$line")
   sg=$(sed -n 's/.*(support \([0-9.]*\) g).*/\1/p' <<<"$line")
   layers=$(sed -n 's/.*: \([0-9]*\) layers.*/\1/p' <<<"$line")
   secs=$(sed -n 's/^; estimated printing time \[s\] = //p' "$work/o.gcode")
-  echo "$g $(awk -v s="$secs" 'BEGIN { printf "%.1f", s / 60 }') $sg $best $layers"
+  # move commands with arcs (this file) and without (arc_fitting = no)
+  local mv_arc mv_lin flag=""
+  mv_arc=$(grep -c '^G[123] ' "$work/o.gcode")
+  [ "$2" = off ] && flag=--no-support
+  "$bin" slice "$1" -o "$work/l.gcode" $flag --set skirts=0 --set brim_auto=no \
+    --set arc_fitting=no >/dev/null 2>&1 && mv_lin=$(grep -c '^G[123] ' "$work/l.gcode")
+  echo "$g $(awk -v s="$secs" 'BEGIN { printf "%.1f", s / 60 }') $sg $best $layers $cpu $ccpu $cwall $mv_arc ${mv_lin:-0}"
 }
 peer() { # mesh support [slicer] -> "g min support_g wall_s layers planner_min"
   local row est
@@ -63,21 +108,21 @@ except Exception:
     print("0 0 0 0 0 0")
 PY
 }
-printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s |\n'
-printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s | ours CPU s | CE CPU s | CPU ratio vs CE | moves, arcs / no arcs |\n'
+printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
 for m in "${meshes[@]}"; do
   for sup in ${BENCH_SUPPORT:-off on}; do
-    read -r og omin osg ow ol <<<"$(ours "$m" "$sup")"
-    if [ "$peers" = 1 ]; then read -r pg pmin psg pw pl pest <<<"$(peer "$m" "$sup")"
+    read -r og omin osg ow ol ocpu ccpu ccw marc mlin <<<"$(ours "$m" "$sup")"
+    if [ "$peers" = 1 ] && [ "${BENCH_PS:-1}" = 1 ]; then read -r pg pmin psg pw pl pest <<<"$(peer "$m" "$sup")"
     else pg=0 pmin=0 psg=0 pw=0 pest=0; fi
     if [ "$peers" = 1 ] && command -v CuraEngine >/dev/null; then
       read -r cg cmin csg cw cl cest <<<"$(peer "$m" "$sup" curaengine)"
     else cg=0 cmin=0 cw=0; fi
     awk -v m="$(basename "$m")" -v s="$sup" -v og="$og" -v pg="$pg" -v omin="$omin" -v pmin="$pmin" \
         -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" -v pest="$pest" \
-        -v cg="$cg" -v cmin="$cmin" -v cw="$cw" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
-      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s | %.2f | %.1f | %.2f |\n",
+        -v cg="$cg" -v cmin="$cmin" -v cw="$cw" -v oc="$ocpu" -v cc="$ccpu" -v ma="$marc" -v ml="$mlin" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
+      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s | %.2f | %.1f | %.2f | %.2f | %.2f | %s | %d / %d (%sx fewer) |\n",
               m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), pest, r(pest, pmin), osg, psg, ow, pw, r(ow, pw),
-              cg, cmin, cw }'
+              cg, cmin, cw, oc, cc, r(oc, cc), ma, ml, r(ml, ma) }'
   done
 done

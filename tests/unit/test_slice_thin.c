@@ -3,7 +3,9 @@
  * lines print (a 0.4 mm wall printed nothing before, a 0.6 mm one a loop
  * around a sliver, 1.3 x its volume), every one lays down its own volume
  * (the 2-3 mm ones 6-13 % more before, zig-zag links in narrow infill)
- * within a few percent, and a 0.6 mm wall is one line along its middle.
+ * within a few percent, plus PrusaSlicer's infill overlap where a strip
+ * inside the loops is wide enough to be infill, and a 0.6 mm wall is one
+ * line along its middle.
  */
 #include <math.h>
 #include <stdio.h>
@@ -90,10 +92,19 @@ T_CASE(thin_walls_print_their_volume)
     for (size_t i = 0; i < sizeof(walls) / sizeof(walls[0]); i++) {
         T_OK(slice_wall(walls[i], true, &r, &g, &err), &err);
         double v = r.filament_mm * fil, want = walls[i] * 20 * 10;
+        /* a strip inside the loops at least min_bead_width (0.34 mm) wide
+           is infill, grown infill_overlap (25 % of the 0.407 mm loop
+           spacing) into the loops on every side, as PrusaSlicer lays it
+           (2.5 / 3 mm walls: 527.6 / 628.6 mm3 in PrusaSlicer 2.5);
+           narrower leftovers print their own area */
+        double sp = 0.45 - 0.2 * (1 - M_PI / 4), d = 0.45 / 2 + 1.5 * sp;
+        double sw = walls[i] - 2 * d, sl = 20 - 2 * d;
+        if (sw >= 0.85 * 0.4)
+            want += 0.25 * sp * 2 * (sw + sl) * 10;
         /* the perimeter flow model leaves w - spacing (0.04 mm) at the edges */
         if (fabs(v - want) > 0.05 * want)
-            t_fail(__FILE__, __LINE__, "%.1f mm wall: %.1f mm3 extruded, its volume is %.1f",
-                   walls[i], v, want);
+            t_fail(__FILE__, __LINE__, "%.1f mm wall: %.1f mm3 extruded, want %.1f", walls[i], v,
+                   want);
     }
     /* a 0.6 mm wall (x 124.7..125.3 on the bed) is one line along its middle, each layer */
     T_OK(slice_wall(0.6, true, &r, &g, &err), &err);
@@ -127,10 +138,29 @@ T_CASE(thin_disk_on_edge_prints_its_volume)
     char path[512];
     snprintf(path, sizeof(path), "%s/disk.gcode", t_tmpdir());
     struct slice_result r;
+    /* without the infill overlap: the disc's own volume */
+    p.infill_overlap = 0;
     T_OK(slice_mesh(&m, &p, path, &r, NULL, NULL, &err), &err);
     double v = r.filament_mm * M_PI * 1.75 * 1.75 / 4;
     if (fabs(v - want) > 0.04 * want)
         t_fail(__FILE__, __LINE__, "disk: %.0f mm3 extruded, its volume is %.0f", v, want);
+    /* with it (PrusaSlicer's 25 %), the volume and the band the strip
+       inside the loops grows into them on every layer: PrusaSlicer 2.5
+       lays 5-6 % more than the volume on such discs (2.5 and 3 mm; our
+       -7 % / -6 % there came from leaving that band out) */
+    p.infill_overlap = 0.25;
+    T_OK(slice_mesh(&m, &p, path, &r, NULL, NULL, &err), &err);
+    double sp = 0.45 - 0.2 * (1 - M_PI / 4), d = 0.45 / 2 + 1.5 * sp, band = 0;
+    for (int k = 0; k < 200; k++) {
+        double zc = 0.2 * k + 0.1 - 20, chord = 2 * sqrt(fmax(0, 400 - zc * zc));
+        if (chord > 2 * d && 2.5 - 2 * d >= 0.85 * 0.4)
+            band += 0.25 * sp * 2 * (chord - 2 * d + 2.5 - 2 * d) * 0.2;
+    }
+    v = r.filament_mm * M_PI * 1.75 * 1.75 / 4;
+    if (fabs(v - (want + band)) > 0.04 * (want + band))
+        t_fail(__FILE__, __LINE__, "disk: %.0f mm3 extruded, want %.0f + %.0f (overlap)", v, want,
+               band);
+    T_TRUE(v > 1.03 * want);
     /* without gap fill the strips' zig-zag links overfill it */
     p.gap_fill = false;
     T_OK(slice_mesh(&m, &p, path, &r, NULL, NULL, &err), &err);
