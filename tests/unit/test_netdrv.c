@@ -875,3 +875,23 @@ T_CASE(prusalink_print_ends_unseen_then_dismissed_is_not_known)
     T_EQ_INT(f.rec.done + f.rec.failed + f.rec.cancelled, 0);
     fx_stop(&f);
 }
+
+T_CASE(prusalink_job_query_lost_is_asked_again)
+{
+    /* requests: 1 status, 2 the upload, 3 status (a job now), 4 GET
+       /api/v1/job, which answers 503 (5xx=1@3): the driver rides it out
+       and must ask about the job again, or it never learns that the job
+       the printer runs is ours (it once failed it: "the printer runs '?',
+       not this job") */
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "5xx=1@3", NULL };
+    T_OK(fx_start(&f, PRUSALINK, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("job-query.gcode", 300);
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    T_EQ_INT(f.rec.failed, 0);
+    fx_stop(&f);
+}
