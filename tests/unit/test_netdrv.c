@@ -362,6 +362,8 @@ job_runs_once_each(enum kind kind)
     T_EQ_INT(f.rec.done, 1);
     T_EQ_INT(f.d->status.state, DRV_IDLE);
     T_EQ_INT(f.d->status.lines_acked, f.d->status.lines_total);
+    /* the printer's temperatures reach the farm (the machine sits at room temperature) */
+    T_TRUE(f.d->status.nozzle_c > 10 && f.d->status.bed_c > 10);
     fx_stop(&f);
     char why[300] = "";
     int n = log_matches(f.log, job, true, why, sizeof(why));
