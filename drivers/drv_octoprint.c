@@ -341,6 +341,25 @@ judge(const struct httpc_result *res, const char *what, char *why, size_t n)
     return O_REFUSED;
 }
 
+/* The reply to the request held in *slot (which empties): what it amounts to. */
+static enum outcome
+answered(struct httpc_req **slot, const struct httpc_result *res, const char *what, char *why,
+         size_t n)
+{
+    *slot = NULL;
+    return judge(res, what, why, n);
+}
+
+/* A 2xx reply whose body the parser refused (rc < 0): refused, with the parser's reason. */
+static enum outcome
+parsed(int rc, const struct sf_err *err, char *why, size_t n)
+{
+    if (rc >= 0)
+        return O_OK;
+    snprintf(why, n, "%s", err->msg);
+    return O_REFUSED;
+}
+
 static struct httpc_req *
 request(struct octo *o, const char *method, const char *path, const char *json,
         const struct httpc_part *parts, size_t n_parts, httpc_done_fn done)
@@ -447,8 +466,9 @@ job_fail(struct octo *o, enum drv_state next, const char *fmt, ...)
 static void poll_start(struct octo *o);
 static void on_poll_timer(struct loop *l, void *ud);
 
+/* Cancel every request but the upload, and the poll timer: the link is down. */
 static void
-link_down(struct octo *o, const char *why)
+drop_requests(struct octo *o)
 {
     cancel_req(&o->req_version);
     cancel_req(&o->req_job);
@@ -462,6 +482,12 @@ link_down(struct octo *o, const char *why)
     o->poll_pending = 0;
     o->link = L_DOWN;
     o->polled = false;
+}
+
+static void
+link_down(struct octo *o, const char *why)
+{
+    drop_requests(o);
     log_printer(LOG_WARN, o->base.name, "%s", why);
     if (o->job == J_UPLOADING || o->job == J_SELECTING) {
         cancel_req(&o->req_upload);
@@ -629,14 +655,12 @@ on_job(struct httpc_req *r, const struct httpc_result *res, void *ud)
 {
     (void)r;
     struct octo *o = ud;
-    o->req_job = NULL;
     char why[SF_ERR_MSG_MAX];
-    enum outcome oc = judge(res, "GET /api/job", why, sizeof(why));
+    enum outcome oc = answered(&o->req_job, res, "GET /api/job", why, sizeof(why));
     struct sf_err err;
-    if (oc == O_OK && octo_parse_job(res->body, res->body_len, &o->last, &err) < 0) {
-        snprintf(why, sizeof(why), "%s", err.msg);
-        oc = O_REFUSED;
-    }
+    if (oc == O_OK)
+        oc = parsed(octo_parse_job(res->body, res->body_len, &o->last, &err), &err, why,
+                    sizeof(why));
     if (oc != O_OK) {
         link_down(o, why);
         return;
@@ -649,19 +673,16 @@ on_printer(struct httpc_req *r, const struct httpc_result *res, void *ud)
 {
     (void)r;
     struct octo *o = ud;
-    o->req_printer = NULL;
     char why[SF_ERR_MSG_MAX];
-    enum outcome oc = judge(res, "GET /api/printer", why, sizeof(why));
+    enum outcome oc = answered(&o->req_printer, res, "GET /api/printer", why, sizeof(why));
     if (oc == O_CONFLICT) {
         poll_done(o); /* 409: the printer is not operational; /api/job says how */
         return;
     }
     struct octo_printer p;
     struct sf_err err;
-    if (oc == O_OK && octo_parse_printer(res->body, res->body_len, &p, &err) < 0) {
-        snprintf(why, sizeof(why), "%s", err.msg);
-        oc = O_REFUSED;
-    }
+    if (oc == O_OK)
+        oc = parsed(octo_parse_printer(res->body, res->body_len, &p, &err), &err, why, sizeof(why));
     if (oc != O_OK) {
         link_down(o, why);
         return;
@@ -712,15 +733,13 @@ on_version(struct httpc_req *r, const struct httpc_result *res, void *ud)
 {
     (void)r;
     struct octo *o = ud;
-    o->req_version = NULL;
     char why[SF_ERR_MSG_MAX];
-    enum outcome oc = judge(res, "GET /api/version", why, sizeof(why));
+    enum outcome oc = answered(&o->req_version, res, "GET /api/version", why, sizeof(why));
     struct sf_err err;
     char text[64];
-    if (oc == O_OK && octo_parse_version(res->body, res->body_len, text, sizeof(text), &err) < 0) {
-        snprintf(why, sizeof(why), "%s", err.msg);
-        oc = O_REFUSED;
-    }
+    if (oc == O_OK)
+        oc = parsed(octo_parse_version(res->body, res->body_len, text, sizeof(text), &err), &err,
+                    why, sizeof(why));
     if (oc != O_OK) {
         link_down(o, why);
         return;
@@ -751,19 +770,25 @@ octo_open(struct drv *d, struct sf_err *err)
     return SF_OK;
 }
 
+/* OctoPrint took the job and prints it: the polls say how it goes. */
+static void
+print_started(struct octo *o)
+{
+    o->job = J_RUNNING;
+    o->missing_polls = 0;
+    o->base.status.message[0] = 0;
+    poll_soon(o, 0);
+}
+
 static void
 on_select(struct httpc_req *r, const struct httpc_result *res, void *ud)
 {
     (void)r;
     struct octo *o = ud;
-    o->req_select = NULL;
     char why[SF_ERR_MSG_MAX];
-    enum outcome oc = judge(res, "select+print", why, sizeof(why));
+    enum outcome oc = answered(&o->req_select, res, "select+print", why, sizeof(why));
     if (oc == O_OK) {
-        o->job = J_RUNNING;
-        o->missing_polls = 0;
-        o->base.status.message[0] = 0;
-        poll_soon(o, 0);
+        print_started(o);
     } else if (oc == O_DOWN || oc == O_AUTH) {
         link_down(o, why);
     } else {
@@ -777,17 +802,15 @@ on_upload(struct httpc_req *r, const struct httpc_result *res, void *ud)
 {
     (void)r;
     struct octo *o = ud;
-    o->req_upload = NULL;
     char why[SF_ERR_MSG_MAX];
-    enum outcome oc = judge(res, "upload", why, sizeof(why));
+    enum outcome oc = answered(&o->req_upload, res, "upload", why, sizeof(why));
     bool printing = false;
     char name[128];
     struct sf_err err;
-    if (oc == O_OK &&
-        octo_parse_upload(res->body, res->body_len, &printing, name, sizeof(name), &err) < 0) {
-        snprintf(why, sizeof(why), "%s", err.msg);
-        oc = O_REFUSED;
-    }
+    if (oc == O_OK)
+        oc =
+            parsed(octo_parse_upload(res->body, res->body_len, &printing, name, sizeof(name), &err),
+                   &err, why, sizeof(why));
     if (oc == O_DOWN || oc == O_AUTH) {
         link_down(o, why); /* fails the job, as an upload */
         return;
@@ -798,10 +821,7 @@ on_upload(struct httpc_req *r, const struct httpc_result *res, void *ud)
         return;
     }
     if (printing) {
-        o->job = J_RUNNING;
-        o->missing_polls = 0;
-        o->base.status.message[0] = 0;
-        poll_soon(o, 0);
+        print_started(o);
         return;
     }
     /* Stored, not started (OctoPrint drops print=true when it cannot start):
@@ -902,10 +922,9 @@ on_action(struct httpc_req *r, const struct httpc_result *res, void *ud)
 {
     (void)r;
     struct octo *o = ud;
-    o->req_action = NULL;
     o->act_epoch++;
     char why[SF_ERR_MSG_MAX];
-    enum outcome oc = judge(res, "POST /api/job", why, sizeof(why));
+    enum outcome oc = answered(&o->req_action, res, "POST /api/job", why, sizeof(why));
     if (oc == O_DOWN || oc == O_AUTH) {
         link_down(o, why);
         return;
@@ -929,28 +948,34 @@ action(struct octo *o, const char *body, struct sf_err *err)
     return SF_OK;
 }
 
+/* POST /api/job {"command": "pause", "action": pause or resume}, from state `from`. */
+static int
+pause_action(struct drv *d, bool pause, struct sf_err *err)
+{
+    struct octo *o = (struct octo *)d;
+    enum drv_state from = pause ? DRV_PRINTING : DRV_PAUSED;
+    if (o->job != J_RUNNING || d->status.state != from)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is not %s", d->name,
+                          pause ? "printing a job" : "paused");
+    int rc = action(o,
+                    pause ? "{\"command\":\"pause\",\"action\":\"pause\"}"
+                          : "{\"command\":\"pause\",\"action\":\"resume\"}",
+                    err);
+    if (rc == SF_OK)
+        set_state(o, pause ? DRV_PAUSED : DRV_PRINTING);
+    return rc;
+}
+
 static int
 octo_pause(struct drv *d, struct sf_err *err)
 {
-    struct octo *o = (struct octo *)d;
-    if (o->job != J_RUNNING || d->status.state != DRV_PRINTING)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s' is not printing a job", d->name);
-    int rc = action(o, "{\"command\":\"pause\",\"action\":\"pause\"}", err);
-    if (rc == SF_OK)
-        set_state(o, DRV_PAUSED);
-    return rc;
+    return pause_action(d, true, err);
 }
 
 static int
 octo_resume(struct drv *d, struct sf_err *err)
 {
-    struct octo *o = (struct octo *)d;
-    if (o->job != J_RUNNING || d->status.state != DRV_PAUSED)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s' is not paused", d->name);
-    int rc = action(o, "{\"command\":\"pause\",\"action\":\"resume\"}", err);
-    if (rc == SF_OK)
-        set_state(o, DRV_PRINTING);
-    return rc;
+    return pause_action(d, false, err);
 }
 
 static int
@@ -980,9 +1005,8 @@ on_command(struct httpc_req *r, const struct httpc_result *res, void *ud)
 {
     (void)r;
     struct octo *o = ud;
-    o->req_cmd = NULL;
     char why[SF_ERR_MSG_MAX];
-    enum outcome oc = judge(res, "POST /api/printer/command", why, sizeof(why));
+    enum outcome oc = answered(&o->req_cmd, res, "POST /api/printer/command", why, sizeof(why));
     if (oc == O_DOWN || oc == O_AUTH)
         link_down(o, why);
     else if (oc != O_OK)
@@ -1067,17 +1091,7 @@ octo_close(struct drv *d)
 {
     struct octo *o = (struct octo *)d;
     cancel_req(&o->req_upload);
-    cancel_req(&o->req_version);
-    cancel_req(&o->req_job);
-    cancel_req(&o->req_printer);
-    cancel_req(&o->req_select);
-    cancel_req(&o->req_action);
-    cancel_req(&o->req_cmd);
-    if (o->poll_timer)
-        loop_timer_cancel(d->loop, o->poll_timer);
-    o->poll_timer = 0;
-    o->poll_pending = 0;
-    o->link = L_DOWN;
+    drop_requests(o);
     o->job = J_NONE;
     cursor_close(o);
     set_state(o, DRV_OFFLINE);

@@ -45,6 +45,10 @@ struct sim_http {
     long n_uploads;  /* uploads begun */
     char digest_random[32];
     struct sim_http_req *slow; /* requests suspended by the slow fault */
+    bool outage_fired;         /* the outage fault began (once a run) */
+    bool down;                 /* ... and every request answers 503 */
+    bool outage_over;          /* ... and the job has ended since */
+    long outage_refused;       /* requests refused in the outage */
 };
 
 struct field {
@@ -123,8 +127,8 @@ sim_http_fault_parse(struct sim_http_faults *f, const char *spec, struct sf_err 
         f->err5xx_after = k;
         return SF_OK;
     }
-    const char *names[] = { "slow", "drop-upload", "drop" };
-    for (int i = 0; i < 3; i++) {
+    const char *names[] = { "slow", "drop-upload", "drop", "outage" };
+    for (int i = 0; i < 4; i++) {
         if (strlen(names[i]) != nl || strncmp(spec, names[i], nl) != 0)
             continue;
         if ((used = parse_num(v, 1, 1000000000, &n)) < 0 || v[used])
@@ -133,8 +137,10 @@ sim_http_fault_parse(struct sim_http_faults *f, const char *spec, struct sf_err 
             f->slow_ms = (int)(n > 600000 ? 600000 : n);
         else if (i == 1)
             f->drop_upload = n;
-        else
+        else if (i == 2)
             f->drop_request = n;
+        else
+            f->outage_line = n;
         return SF_OK;
     }
     return sf_err_set(err, SF_EUNSUPP, "fault '%s' is not an HTTP fault", spec);
@@ -447,6 +453,12 @@ admit(struct sim_http_req *r)
     struct sim_http *h = r->h;
     const struct sim_http_faults *f = &h->cfg.faults;
     long k = h->n_requests;
+    if (h->down) {
+        if (++h->outage_refused >= SIM_HTTP_OUTAGE_MIN && h->outage_over)
+            h->down = false;
+        sim_http_reply_error(r, 503, "Service Unavailable (simulated outage)");
+        return false;
+    }
     if (f->err5xx_count && k > f->err5xx_after && k <= f->err5xx_after + f->err5xx_count) {
         sim_http_reply_error(r, 503, "Service Unavailable (simulated fault)");
         return false;
@@ -685,6 +697,20 @@ sim_http_free(struct sim_http *h)
     MHD_run(h->d);
     MHD_stop_daemon(h->d); /* runs on_completed for every open request */
     free(h);
+}
+
+void
+sim_http_outage_watch(struct sim_http *h, bool running, uint64_t lines_done)
+{
+    if (!h->cfg.faults.outage_line)
+        return;
+    if (!h->outage_fired && running && lines_done >= (uint64_t)h->cfg.faults.outage_line) {
+        h->outage_fired = h->down = true;
+    } else if (h->down && !running) {
+        h->outage_over = true;
+        if (h->outage_refused >= SIM_HTTP_OUTAGE_MIN)
+            h->down = false;
+    }
 }
 
 int

@@ -27,6 +27,11 @@
  *                 before any reply, up to 5 times, so a client may see fewer
  *                 failures than cuts.)
  *   drop=N        the Nth request (1-based) loses its connection unanswered
+ *   outage=L      the printer is unreachable across its job's end: once a
+ *                 job has L lines done, every request answers 503 until the
+ *                 job has ended and at least SIM_HTTP_OUTAGE_MIN requests
+ *                 have been refused (once per run; the face reports its job
+ *                 through sim_http_outage_watch)
  * Faults of the printer itself (error state, cancel at the printer, busy)
  * belong to the face.
  *
@@ -74,7 +79,12 @@ struct sim_http_faults {
     int slow_ms;       /* every reply this late */
     long drop_upload;  /* the Nth upload is cut (0: none) */
     long drop_request; /* the Nth request is cut (0: none) */
+    long outage_line;  /* outage=L: L (0: none) */
 };
+
+/* Requests an outage refuses at the least: more than a driver's failed polls
+   in a row before it lets go of its job (4), so it always does. */
+#define SIM_HTTP_OUTAGE_MIN 6
 
 struct sim_http_config {
     int port;                            /* 0: any free loopback port */
@@ -113,6 +123,12 @@ void sim_http_free(struct sim_http *h);
 int sim_http_port(const struct sim_http *h);
 /* Requests answered so far (any status). */
 uint64_t sim_http_served(const struct sim_http *h);
+/*
+ * The outage fault's clock: the face calls it on each watch turn with
+ * whether its job runs (printing, paused) and its lines done.  Does nothing
+ * without the fault.
+ */
+void sim_http_outage_watch(struct sim_http *h, bool running, uint64_t lines_done);
 
 /* ---- inside a handler ---- */
 

@@ -517,6 +517,7 @@ on_watch(struct loop *l, void *ud)
     }
     struct sim_np_status st;
     sim_netprinter_status(s->np, &st);
+    sim_http_outage_watch(s->http, sim_np_running(&st), st.lines_done);
     if (st.state != SIM_NP_PRINTING || s->klippy != K_READY)
         return;
     long done = (long)st.lines_done;

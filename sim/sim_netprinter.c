@@ -102,6 +102,13 @@ sim_netprinter_config_init(struct sim_netprinter_config *c)
     faults_init(&c->faults);
 }
 
+bool
+sim_np_running(const struct sim_np_status *st)
+{
+    return st->state == SIM_NP_PRINTING || st->state == SIM_NP_PAUSING ||
+           st->state == SIM_NP_PAUSED || st->state == SIM_NP_CANCELLING;
+}
+
 const char *
 sim_np_state_name(enum sim_np_state s)
 {

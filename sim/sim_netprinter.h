@@ -127,5 +127,7 @@ void sim_netprinter_reset(struct sim_netprinter *np);
 void sim_netprinter_status(const struct sim_netprinter *np, struct sim_np_status *out);
 /* "idle", "printing", ..., never NULL. */
 const char *sim_np_state_name(enum sim_np_state s);
+/* A job is on the machine: printing, pausing, paused or cancelling. */
+bool sim_np_running(const struct sim_np_status *st);
 
 #endif

@@ -440,6 +440,7 @@ on_tick(struct loop *l, void *ud)
     struct octo_sim *o = ud;
     struct sim_np_status st;
     sim_netprinter_status(o->np, &st);
+    sim_http_outage_watch(o->http, sim_np_running(&st), st.lines_done);
     if (!o->fired && (st.state == SIM_NP_PRINTING || st.state == SIM_NP_PAUSED)) {
         if (o->error_at && !o->err_fired && st.lines_done >= (uint64_t)o->error_at) {
             o->err_fired = true;

@@ -73,6 +73,8 @@ sim_prusalink_fault_parse(struct sim_prusalink_config *c, const char *spec, stru
         return parse_count(spec, v, &c->error_at, err);
     if (n == 6 && strncmp(spec, "cancel", n) == 0)
         return parse_count(spec, v, &c->cancel_at, err);
+    if (n == 7 && strncmp(spec, "dismiss", n) == 0)
+        return parse_count(spec, v, &c->dismiss, err);
     return faults_parse(&c->machine.faults, spec, err);
 }
 
@@ -115,13 +117,6 @@ pl_state(const struct sim_np_status *st)
     return "IDLE";
 }
 
-static bool
-running(const struct sim_np_status *st)
-{
-    return st->state == SIM_NP_PRINTING || st->state == SIM_NP_PAUSING ||
-           st->state == SIM_NP_PAUSED || st->state == SIM_NP_CANCELLING;
-}
-
 /* The 8.3 name a FAT stick shows for a long one: "SF-3F2~1.GCO". */
 static void
 short_name(const char *name, char *out, size_t n)
@@ -161,12 +156,21 @@ on_info(struct sim_http_req *r, void *ud)
                                   "min_extrusion_temp", 170));
 }
 
+/* The machine's status as the printer shows it: with dismiss=1 an ended job is gone. */
+static void
+shown(const struct sim_prusalink *s, struct sim_np_status *st)
+{
+    sim_netprinter_status(s->np, st);
+    if (s->cfg.dismiss && (st->state == SIM_NP_COMPLETE || st->state == SIM_NP_CANCELLED))
+        st->state = SIM_NP_IDLE;
+}
+
 static void
 on_status(struct sim_http_req *r, void *ud)
 {
     struct sim_prusalink *s = ud;
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
+    shown(s, &st);
     bool err = st.state == SIM_NP_ERROR;
     json_t *printer =
         json_pack("{s:s,s:f,s:f,s:f,s:f,s:f,s:i,s:i,s:i,s:i,s:{s:b,s:s},s:{s:b,s:s}}", "state",
@@ -192,7 +196,7 @@ on_job(struct sim_http_req *r, void *ud)
 {
     struct sim_prusalink *s = ud;
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
+    shown(s, &st);
     if (st.state == SIM_NP_IDLE || s->job_id == 0) {
         sim_http_reply_empty(r, 204);
         return;
@@ -260,7 +264,7 @@ on_file_put(struct sim_http_req *r, void *ud)
         reply_err(r, 409, "CONFLICT", "File already exists");
         return;
     }
-    if (print && (running(&st) || st.state == SIM_NP_ERROR)) {
+    if (print && (sim_np_running(&st) || st.state == SIM_NP_ERROR)) {
         reply_err(r, 409, "CONFLICT", "Printer is busy");
         return;
     }
@@ -357,6 +361,7 @@ on_watch(struct loop *l, void *ud)
     s->watch = loop_timer_add(l, WATCH_MS, on_watch, s);
     struct sim_np_status st;
     sim_netprinter_status(s->np, &st);
+    sim_http_outage_watch(s->http, sim_np_running(&st), st.lines_done);
     if (st.state != SIM_NP_PRINTING)
         return;
     long done = (long)st.lines_done;

@@ -21,6 +21,9 @@
  *   busy=N        the next N uploads meet a busy printer: 409 "Printer is busy"
  *   error=L       the printer goes to ERROR at line L of a job
  *   cancel=L      the job is stopped at the printer at line L (STOPPED)
+ *   dismiss=1     an ended job's screen is dismissed at once: the printer is
+ *                 IDLE with no job as soon as a print ends (FINISHED and
+ *                 STOPPED are never shown; v1 keeps no record of the job)
  *
  * Thread: the loop thread.  Owns its HTTP server and machine.
  */
@@ -45,6 +48,7 @@ struct sim_prusalink_config {
     long busy_uploads;                    /* busy=N */
     long error_at;                        /* error=L (0: never) */
     long cancel_at;                       /* cancel=L (0: never) */
+    long dismiss;                         /* dismiss=1 */
 };
 
 /* Defaults: any port, no auth, sim_netprinter_config_init, no faults. */

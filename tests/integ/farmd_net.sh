@@ -8,10 +8,9 @@
 #  - a wrong API key: `slimfarm printers` says authentication failed;
 #  - Klipper shuts down mid-job: the printer is in error with Klipper's
 #    message, and the job is retried or waiting, never lost;
-#  - a PrusaLink printer on HTTP Digest that cuts the first upload half-way:
-#    the job still ends done (503s mid-print are left out: when the print
-#    ends while the printer is unreachable, PrusaLink's attach finds no job
-#    and the job stays interrupted for an operator; issue 18's note);
+#  - a PrusaLink printer on HTTP Digest that cuts the first upload half-way
+#    and answers 503s: the job still ends done (a print that ends while its
+#    printer is unreachable: farmd_sims.sh's outage fault);
 #  - kill -9 of slimfarmd mid-print, then a restart: the daemon finds the
 #    print still running on the printer (same file name and size), takes
 #    it back and the job ends done.
@@ -26,7 +25,7 @@ start_net voron moonraker --speed 2000 --api-key voron-key
 start_net mk4 prusalink --speed 2000 --api-key mk4-key
 start_net locked moonraker --speed 2000 --api-key the-right-key
 start_net shut moonraker --speed 2000 --fault shutdown=60
-start_net flaky prusalink --speed 2000 --user maker --password flaky-pw --fault drop-upload=1
+start_net flaky prusalink --speed 2000 --user maker --password flaky-pw --fault drop-upload=1 --fault 5xx=3@6
 cp -r config/printers config/materials "$tmp/"
 printer() { # NAME DRIVER KEY|user:password
   printf '[printer %s]\ndriver: %s\nurl: %s\n' "$1" "$2" "$(cat "$tmp/$1.addr")"

@@ -9,6 +9,11 @@
 # staying queued with the reason.  At the end each printer's executed log
 # must equal the stored G-code of the prints it ran, in order
 # (check_farm_logs for Marlin, check_net_logs for the network printers).
+# Each network printer is unreachable (503) across the end of the first job
+# that reaches line 100 (--fault outage=100): the daemon lets go of the job,
+# and when the printer answers again it learns from the printer that the
+# print completed (OctoPrint's /api/job, Klipper's print_stats, PrusaLink's
+# FINISHED job), re-attaches and the job ends done.
 #
 # Jobs are prepared in parallel and start in whatever order they become
 # ready, so no check assumes submission order: the paused job is whichever
@@ -27,9 +32,9 @@ start_sim mk3 --speed 3000 --tcp 0
 start_sim mini --speed 3000
 octo=
 "$S" octoprint --help > /dev/null 2>&1 && octo=octo
-[ -n "$octo" ] && start_net octo octoprint --speed 3000 --api-key octo-key
-start_net voron moonraker --speed 3000 --api-key voron-key
-start_net mk4 prusalink --speed 3000 --api-key mk4-key
+[ -n "$octo" ] && start_net octo octoprint --speed 3000 --api-key octo-key --fault outage=100
+start_net voron moonraker --speed 3000 --api-key voron-key --fault outage=100
+start_net mk4 prusalink --speed 3000 --api-key mk4-key --fault outage=100
 cp -r config/printers config/materials "$tmp/"
 printer() { # NAME MATERIAL NOZZLE BED AUTO_EJECT
   printf '[printer %s]\ndriver: marlin\nport: %s\nbaud: 1000000\nmaterial: %s\nnozzle_mm: %s\nbed_size: %s\nauto_eject: %s\n' \
@@ -137,6 +142,11 @@ wait_for 300 all_done || fail "not all done: $("$C" jobs)"
 "$C" jobs | grep -qE "^$j_nofit +queued .*fits no printer.*material TPU not loaded" ||
   fail "no-fit job: $("$C" jobs | grep "^$j_nofit ")"
 api "/api/jobs/$j_big" | json 'd["prints"][0]["printer"]' | grep -qx voron || fail "voron's job printed elsewhere"
+
+# each network printer's print that ended while it was unreachable was re-attached
+for p in voron mk4 $octo; do
+  grep -qE "printer\[$p\]: job [0-9]+ re-attached" "$tmp/log" || fail "$p: no job re-attached after its outage"
+done
 
 # each printer printed something, and its log is exactly its prints' G-code
 sleep 0.5

@@ -362,6 +362,8 @@ job_runs_once_each(enum kind kind)
     T_EQ_INT(f.rec.done, 1);
     T_EQ_INT(f.d->status.state, DRV_IDLE);
     T_EQ_INT(f.d->status.lines_acked, f.d->status.lines_total);
+    /* the printer's temperatures reach the farm (the machine sits at room temperature) */
+    T_TRUE(f.d->status.nozzle_c > 10 && f.d->status.bed_c > 10);
     fx_stop(&f);
     char why[300] = "";
     int n = log_matches(f.log, job, true, why, sizeof(why));
@@ -787,4 +789,111 @@ T_CASE(moonraker_outage_then_attach)
 T_CASE(prusalink_outage_then_attach)
 {
     outage_then_attach(PRUSALINK);
+}
+
+static bool
+sim_job_over(void *ud)
+{
+    struct fx *f = ud;
+    struct sim_np_status st;
+    if (f->mr)
+        sim_moonraker_status(f->mr, &st);
+    else
+        sim_prusalink_status(f->pl, &st);
+    return st.state == SIM_NP_COMPLETE;
+}
+
+static void
+ends_while_unreachable(enum kind kind)
+{
+    /* the printer answers 503 from line 100 of the job until after it has
+       finished it (outage=100): the driver lets go of the job, which the
+       farm marks interrupted; once the printer answers, attach learns from
+       the printer that the print completed, and the job ends done */
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "outage=100", NULL };
+    T_OK(fx_start(&f, kind, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    char job[512];
+    snprintf(job, sizeof(job), "%s", job_file("ends-unseen.gcode", 3000));
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(run_until(f.l, offline_or_ended, &f));
+    T_EQ_INT(f.d->status.state, DRV_OFFLINE);
+    T_EQ_INT(f.rec.done + f.rec.failed + f.rec.cancelled, 0); /* not ended: interrupted */
+    T_TRUE(run_until(f.l, sim_job_over, &f));
+    for (int i = 0; i < 20 && !left_connecting(&f); i++) {
+        T_OK(f.d->ops->open(f.d, &err), &err);
+        int64_t end = wall_ms() + 3000;
+        while (f.d->status.state == DRV_CONNECTING && wall_ms() < end)
+            loop_run_once(f.l, 50);
+    }
+    T_TRUE(left_connecting(&f));
+    T_OK(f.d->ops->attach(f.d, job, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    T_EQ_INT(f.d->status.lines_acked, f.d->status.lines_total);
+    fx_stop(&f);
+    char why[300] = "";
+    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
+        t_fail(__FILE__, __LINE__, "%s", why);
+}
+
+T_CASE(moonraker_print_ends_while_unreachable)
+{
+    ends_while_unreachable(MOONRAKER);
+}
+
+T_CASE(prusalink_print_ends_while_unreachable)
+{
+    ends_while_unreachable(PRUSALINK);
+}
+
+T_CASE(prusalink_print_ends_unseen_then_dismissed_is_not_known)
+{
+    /* as above, but the finished screen is dismissed at once (dismiss=1):
+       the printer is idle with no job and PrusaLink v1 keeps no record of
+       it, so attach cannot know how the print ended and says so (the farm
+       leaves the job interrupted for an operator) */
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "outage=100", "dismiss=1", NULL };
+    T_OK(fx_start(&f, PRUSALINK, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    char job[512];
+    snprintf(job, sizeof(job), "%s", job_file("ends-dismissed.gcode", 3000));
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(run_until(f.l, offline_or_ended, &f));
+    T_EQ_INT(f.d->status.state, DRV_OFFLINE);
+    T_TRUE(run_until(f.l, sim_job_over, &f));
+    for (int i = 0; i < 20 && !left_connecting(&f); i++) {
+        T_OK(f.d->ops->open(f.d, &err), &err);
+        int64_t end = wall_ms() + 3000;
+        while (f.d->status.state == DRV_CONNECTING && wall_ms() < end)
+            loop_run_once(f.l, 50);
+    }
+    T_TRUE(left_connecting(&f));
+    T_ERR(f.d->ops->attach(f.d, job, NULL, &err), SF_ENOTFOUND, &err, "is not known");
+    T_EQ_INT(f.rec.done + f.rec.failed + f.rec.cancelled, 0);
+    fx_stop(&f);
+}
+
+T_CASE(prusalink_job_query_lost_is_asked_again)
+{
+    /* requests: 1 status, 2 the upload, 3 status (a job now), 4 GET
+       /api/v1/job, which answers 503 (5xx=1@3): the driver rides it out
+       and must ask about the job again, or it never learns that the job
+       the printer runs is ours (it once failed it: "the printer runs '?',
+       not this job") */
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "5xx=1@3", NULL };
+    T_OK(fx_start(&f, PRUSALINK, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("job-query.gcode", 300);
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    T_EQ_INT(f.rec.failed, 0);
+    fx_stop(&f);
 }
