@@ -983,6 +983,8 @@ emergency_byte(struct sim_marlin *s, char c)
 static void
 read_input(struct sim_marlin *s)
 {
+    if (s->boot_until_ms && s->cfg.boot_hold)
+        return; /* held in the link until the banner is out */
     int room = s->cfg.rx_size - s->rx_len;
     int want = (int)s->rx_tokens;
     /* A UART board loses what reaches a full ring, but only while Marlin is
@@ -1217,8 +1219,10 @@ step(struct sim_marlin *s)
     if (s->host_gone)
         host_back(s);
     if (linked(s)) {
-        unsigned ev =
-            (s->rx_tokens >= 1 && (s->cfg.uart || s->rx_len < s->cfg.rx_size)) ? LOOP_READ : 0;
+        bool held = s->boot_until_ms && s->cfg.boot_hold;
+        unsigned ev = (!held && s->rx_tokens >= 1 && (s->cfg.uart || s->rx_len < s->cfg.rx_size))
+                          ? LOOP_READ
+                          : 0;
         if (ev != s->fd_events && loop_mod_fd(s->loop, s->fd, ev, NULL) == 0)
             s->fd_events = ev;
     }

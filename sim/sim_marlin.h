@@ -38,6 +38,9 @@ struct sim_marlin_config {
                              simulated-time runs: loop_set_virtual); the sim owns it */
     const char *link;     /* pty mode: keep this symlink pointing at the current pty, or NULL */
     const char *log_path; /* every executed command, one per line, or NULL */
+    bool boot_hold;       /* bytes the host sends while the firmware boots wait in the link
+                             and are read after "start" (a USB bridge that holds them while
+                             the board resets); false: the bootloader loses them */
     struct faults faults; /* faults_init() for none */
 };
 
