@@ -46,6 +46,7 @@
 #define KEEPALIVE_MS   2000      /* Marlin's DEFAULT_KEEPALIVE_INTERVAL */
 #define WAIT_REPORT_MS 1000      /* M109/M190 print temperatures every second */
 #define BOOT_MS        100       /* bootloader: input ignored, then "start" */
+#define G29_S          45.0      /* bed levelling: a 3x3 probe grid, simulated seconds */
 #define AMBIENT_C      22.0
 
 enum link_kind { LINK_PTY, LINK_TCP };
@@ -166,8 +167,10 @@ emit(struct sim_marlin *s, const char *fmt, ...)
         return;
     if ((size_t)n > sizeof(text) - 2)
         n = (int)sizeof(text) - 2;
-    if (strncmp(text, "ok", 2) == 0 && faults_roll(&s->faults, s->faults.drop_ok))
+    if (strncmp(text, "ok", 2) == 0 && faults_roll(&s->faults, s->faults.drop_ok)) {
+        s->st.oks_dropped++;
         return;
+    }
     int kind = s->faults.hit_kind && !s->hit_done && s->last_n >= s->faults.hit_line
                    ? faults_hit_kind(text)
                    : FAULT_HIT_NONE;
@@ -532,6 +535,7 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
         }
         case 4:
         case 28:
+        case 29:
             if (s->pl_len > 0)
                 return false;
             sync_planner(s);
@@ -539,6 +543,8 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
                 double secs = 0;
                 if (g->code == 28)
                     secs = 3.0;
+                else if (g->code == 29)
+                    secs = G29_S;
                 else if (gcode_get(g, 'P', &v) && !isnan(v))
                     secs = v / 1000.0;
                 else if (gcode_get(g, 'S', &v) && !isnan(v))
@@ -546,7 +552,7 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
                 s->dwell_s = s->sim_s + secs;
             }
             if (s->sim_s < s->dwell_s) {
-                if (g->code == 28 && now >= s->keepalive_ms) {
+                if (g->code >= 28 && !s->cfg.no_keepalive && now >= s->keepalive_ms) {
                     emit(s, "echo:busy: processing");
                     s->keepalive_ms = now + KEEPALIVE_MS;
                 }
@@ -577,7 +583,6 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
         }
         case 20:
         case 21:
-        case 29:
             break;
         default:
             goto unknown;

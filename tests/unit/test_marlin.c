@@ -43,6 +43,7 @@ struct run {
     char gcode_path[512];
     double end_x, end_y, end_e; /* where the file leaves the head */
     size_t *fragments;          /* if set: count line heads cut off by corruption here */
+    int min_window, max_window; /* the driver's window seen at progress events (0: none yet) */
 };
 
 static void
@@ -58,6 +59,13 @@ on_event(struct drv *d, enum drv_event ev, void *ud)
     else if (ev == DRV_EV_STATE && r->n_states < 16)
         r->states[r->n_states++] = d->status.state;
     else if (ev == DRV_EV_PROGRESS) {
+        struct drv_marlin_stats ds;
+        if (drv_marlin_stats(d, &ds)) {
+            if (!r->min_window || ds.window < r->min_window)
+                r->min_window = ds.window;
+            if (ds.window > r->max_window)
+                r->max_window = ds.window;
+        }
         if (r->pause_at && !r->paused_once && d->status.lines_acked >= (uint64_t)r->pause_at) {
             r->paused_once = true;
             d->ops->pause(d, NULL);
@@ -496,6 +504,11 @@ T_CASE(marlin_garbled_resend_mid_job)
         drv_marlin_stats(r.drv, &ds);
         /* Recovered by the next line's Resend or a probe, never a silence. */
         T_EQ_INT(ds.deadlines, 0);
+        /* Stock Marlin's byte-counted window (BUFSIZE 4): ping-pong after the
+           Resend, then back to the full window as clean lines pass. */
+        T_EQ_INT(r.max_window, 4);
+        T_EQ_INT(r.min_window, 1);
+        T_EQ_INT(ds.window, 4);
     }
     teardown(&r);
     sim_time = false;
@@ -554,6 +567,113 @@ T_CASE(marlin_hello_taken_after_start_banner)
         T_EQ_INT(ds.rewinds, 0);
         T_EQ_INT(ds.deadlines, 0);
         T_EQ_INT(count_in_log(r.log_path, "M110 N0"), 2); /* no third handshake */
+    }
+    teardown(&r);
+    sim_time = false;
+}
+
+/* Simulated ms a job takes on a stock Marlin (plain ok, UART) with fault (or none). */
+static void
+timed_job(const char *fault, int64_t *took, uint64_t *oks_dropped, struct drv_marlin_stats *ds)
+{
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.uart = true;
+    if (fault)
+        T_OK(faults_parse(&sc.faults, fault, NULL), NULL);
+    T_OK(faults_parse(&sc.faults, "seed=5", NULL), NULL);
+    *took = -1;
+    if (setup(&r, &sc, 0)) {
+        write_job(&r, JOB_LINES, NULL);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over, budget_ms(0)));
+        T_EQ_INT(r.done, 1);
+        *took = loop_now_ms(r.loop) - r.drv->status.job_started_ms;
+        size_t extra;
+        bool bad;
+        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
+        T_EQ_INT(extra, 0);
+        T_TRUE(!bad);
+        struct sim_marlin_stats st;
+        sim_marlin_stats(r.sim, &st);
+        *oks_dropped = st.oks_dropped;
+        drv_marlin_stats(r.drv, ds);
+    }
+    teardown(&r);
+}
+
+/*
+ * A lost ok costs about a second, not a fixed silence limit: the driver
+ * waits for what it has in flight to run, plus the margin (1 s), then
+ * probes.  The same job clean and with 1 % of oks lost, on simulated time
+ * (deterministic): the difference, shared among the oks lost, stays under
+ * 1.5 s each.  A fixed 10 s time-out costs several seconds each.
+ */
+T_CASE(marlin_lost_ok_costs_about_a_second)
+{
+    sim_time = true;
+    uint64_t lost_clean = 0, lost = 0;
+    struct drv_marlin_stats ds_clean, ds;
+    int64_t clean, faulty;
+    timed_job(NULL, &clean, &lost_clean, &ds_clean);
+    timed_job("drop-ok=0.01", &faulty, &lost, &ds);
+    T_EQ_INT(lost_clean, 0);
+    T_TRUE(lost >= 10);
+    T_TRUE(ds.deadlines >= 1 && ds.deadlines <= lost);
+    double per_ok = lost ? (double)(faulty - clean) / (double)lost : 0;
+    if (getenv("T_VERBOSE"))
+        printf("    clean %.1f s, %llu oks lost: %.1f s (%.2f s each, %llu deadlines)\n",
+               (double)clean / 1000, (unsigned long long)lost, (double)faulty / 1000, per_ok / 1000,
+               (unsigned long long)ds.deadlines);
+    if (per_ok > 1500)
+        t_fail(__FILE__, __LINE__, "a lost ok cost %.2f s (clean %.1f s, %llu lost: %.1f s)",
+               per_ok / 1000, (double)clean / 1000, (unsigned long long)lost,
+               (double)faulty / 1000);
+    sim_time = false;
+}
+
+/*
+ * Commands that block for long (homing, a 45 s G29, heating from cold, a
+ * 200 s move, a dwell) on a printer that sends no "busy" lines (host
+ * keepalive off): the driver's time-outs come from what is in flight, so
+ * none of them is taken for a lost reply (no probe, no deadline), and the
+ * job does not fail for silence.
+ */
+T_CASE(marlin_long_commands_without_keepalive_never_probe)
+{
+    sim_time = true;
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.uart = true;
+    sc.no_keepalive = true;
+    if (setup(&r, &sc, 0)) {
+        snprintf(r.gcode_path, sizeof(r.gcode_path), "%s/long.gcode", t_tmpdir());
+        FILE *f = fopen(r.gcode_path, "w");
+        fprintf(f, "G28\nG29\nM190 S60\nM109 S205\nG90\nM82\nG92 E0\n"
+                   "G1 X200 Y0 F60\nG4 S20\n");
+        for (int i = 0; i < 300; i++)
+            fprintf(f, "G1 X%.2f Y%.2f E%.4f F3000\n", 100 + 20 * cos(i * 0.1),
+                    100 + 20 * sin(i * 0.1), 0.02 * (i + 1));
+        fprintf(f, "G28 X Y\nG29\nG1 X5 Y5 F300\n");
+        fclose(f);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over, budget_ms(0)));
+        if (r.done != 1)
+            t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
+        T_EQ_INT(r.done, 1);
+        struct drv_marlin_stats ds;
+        drv_marlin_stats(r.drv, &ds);
+        T_EQ_INT(ds.deadlines, 0);
+        T_EQ_INT(ds.probes, 0);
+        size_t extra;
+        bool bad;
+        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
+        T_EQ_INT(extra, 0);
+        T_TRUE(!bad);
+        /* it took what the commands take: two G29s, the heat-up, 200 s of move */
+        T_TRUE(loop_now_ms(r.loop) - r.drv->status.job_started_ms > 300000);
     }
     teardown(&r);
     sim_time = false;
