@@ -99,6 +99,7 @@ struct sim_marlin {
 
     /* firmware */
     int64_t boot_until_ms; /* > now: booting, input dropped */
+    bool hung;             /* cfg.hang_after reached: silent for good */
     bool halted;           /* killed */
     long last_n;           /* last good line number */
     char line[MAX_CMD_SIZE];
@@ -744,12 +745,17 @@ check_fault_triggers(struct sim_marlin *s)
         firmware_reset(s, true);
     if (s->faults.disconnect_after && n == (uint64_t)s->faults.disconnect_after)
         drop_link(s);
+    if (s->cfg.hang_after && n == (uint64_t)s->cfg.hang_after) {
+        s->hung = true; /* what it was about to send is lost with it */
+        free_out(s);
+        buf_reset(&s->tx);
+    }
 }
 
 static void
 run_queue(struct sim_marlin *s)
 {
-    for (int guard = 0; guard < 64 && s->q_len > 0 && !s->halted; guard++) {
+    for (int guard = 0; guard < 64 && s->q_len > 0 && !s->halted && !s->hung; guard++) {
         const char *raw = s->queue[s->q_head];
         char cmd[MAX_CMD_SIZE];
         size_t n = gcode_strip(raw, strlen(raw), cmd, sizeof(cmd), NULL);
@@ -1166,6 +1172,10 @@ on_fd(struct loop *l, int fd, unsigned events, void *ud)
     (void)l;
     (void)fd;
     struct sim_marlin *s = ud;
+    if (s->hung && (events & (LOOP_HUP | LOOP_ERROR))) {
+        close_link(s); /* the host gave up on it */
+        return;
+    }
     if ((events & LOOP_HUP) && s->kind == LINK_PTY && s->keep_fd < 0 && !s->host_gone) {
         host_left(s);
         return;
@@ -1176,6 +1186,12 @@ on_fd(struct loop *l, int fd, unsigned events, void *ud)
 static void
 step(struct sim_marlin *s)
 {
+    if (s->hung) {
+        /* Nothing is read, run or sent any more; the link stays up. */
+        if (linked(s) && s->fd_events != 0 && loop_mod_fd(s->loop, s->fd, 0, NULL) == 0)
+            s->fd_events = 0;
+        return;
+    }
     int64_t now = loop_now_ms(s->loop);
     int64_t dt_ms = now - s->last_ms;
     s->last_ms = now;
@@ -1204,7 +1220,7 @@ step(struct sim_marlin *s)
     }
     read_input(s);
     if (!s->halted) {
-        for (int round = 0; round < 8; round++) {
+        for (int round = 0; round < 8 && !s->hung; round++) {
             int before = s->q_len;
             assemble_lines(s);
             run_queue(s);
@@ -1217,6 +1233,12 @@ step(struct sim_marlin *s)
         }
     } else {
         s->rx_len = 0;
+    }
+    if (s->hung) {
+        free_out(s);
+        buf_reset(&s->tx);
+        step(s); /* silent from here on */
+        return;
     }
     write_output(s);
 
@@ -1277,7 +1299,7 @@ sim_marlin_new(struct loop *l, const struct sim_marlin_config *c, struct sf_err 
 {
     if (c->baud < 0 || c->baud > 4000000 || !(c->speed >= 0) || c->speed > 1e6 || c->bufsize < 0 ||
         c->bufsize > 64 || c->planner_blocks < 0 || c->planner_blocks > 256 || c->rx_size < 0 ||
-        c->rx_size > 65536 || c->tcp_port > 65535) {
+        c->rx_size > 65536 || c->tcp_port > 65535 || c->hang_after < 0) {
         sf_err_set(err, SF_EINVAL,
                    "sim: config out of range (baud %d, speed %g, bufsize %d, "
                    "planner %d, rx %d, port %d)",

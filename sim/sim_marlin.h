@@ -38,6 +38,8 @@ struct sim_marlin_config {
                              simulated-time runs: loop_set_virtual); the sim owns it */
     const char *link;     /* pty mode: keep this symlink pointing at the current pty, or NULL */
     const char *log_path; /* every executed command, one per line, or NULL */
+    long hang_after;      /* the firmware hangs after executing this many commands: nothing
+                             more is read, run or sent, the link stays up; 0: never */
     bool no_keepalive;    /* HOST_KEEPALIVE_FEATURE off: no "busy" lines while G28/G29 run */
     bool boot_hold;       /* bytes the host sends while the firmware boots wait in the link
                              and are read after "start" (a USB bridge that holds them while

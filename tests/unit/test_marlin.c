@@ -687,6 +687,56 @@ T_CASE(marlin_long_commands_without_keepalive_never_probe)
     sim_time = false;
 }
 
+static int64_t last_progress_ms; /* loop time of the last DRV_EV_PROGRESS (hang test) */
+
+static bool
+job_over_noting_progress(struct run *r)
+{
+    static uint64_t acked;
+    if (r->drv->status.lines_acked != acked) {
+        acked = r->drv->status.lines_acked;
+        last_progress_ms = loop_now_ms(r->loop);
+    }
+    return job_over(r);
+}
+
+/*
+ * The other side of "a job fails only when the printer truly stops
+ * answering": a firmware that hangs mid-job (nothing read, run or sent;
+ * the link stays up) fails the job, after the driver's probes go
+ * unanswered for the silence limit (30 s), not sooner and not never.
+ */
+T_CASE(marlin_printer_that_stops_answering_fails_the_job)
+{
+    sim_time = true;
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.uart = true;
+    sc.hang_after = 1500;
+    if (setup(&r, &sc, 0)) {
+        write_job(&r, JOB_LINES, NULL);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over_noting_progress, budget_ms(0)));
+        T_EQ_INT(r.failed, 1);
+        T_TRUE(strstr(r.drv->status.message, "stopped answering") != NULL);
+        T_EQ_INT(r.drv->status.state, DRV_OFFLINE);
+        /* the printer ran 1500 commands: the file's first ones and the
+           driver's own (M155 or M105 polls); what it acknowledged ran */
+        T_TRUE(r.drv->status.lines_acked <= 1500);
+        T_TRUE(r.drv->status.lines_acked >= 1400);
+        struct drv_marlin_stats ds;
+        drv_marlin_stats(r.drv, &ds);
+        T_TRUE(ds.probes >= 5);
+        int64_t silent = loop_now_ms(r.loop) - last_progress_ms;
+        if (silent < 30000 || silent > 60000)
+            t_fail(__FILE__, __LINE__, "failed %.1f s after the last ok (30-60 s)",
+                   (double)silent / 1000);
+    }
+    teardown(&r);
+    sim_time = false;
+}
+
 /*
  * Marlin's emergency parser acts on M108/M112/M410 after a line's N and
  * digits, before any checksum: "N2112 G1..." is one garbled byte from
