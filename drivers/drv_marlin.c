@@ -92,6 +92,8 @@ struct marlin {
     int max_p;                  /* largest ADVANCED_OK P seen: the planner's depth */
     int full_window;            /* window when the link is clean */
     int clean;                  /* lines acknowledged since the last rewind */
+    long unconfirmed_from;      /* a silence counted lines after this one as handled, with no */
+    long unconfirmed_to;        /* reply, up to this one (0: none): not progress until one comes */
     bool settling;              /* after a Resend: wait for the stale replies to stop */
     int settle_ms;              /* quiet time that ends settling (3 line times) */
     int64_t last_reply_ms;      /* last complete reply line */
@@ -447,12 +449,18 @@ renumber_pending(struct marlin *m)
     return true;
 }
 
+static void report_acked(struct marlin *m, long from, long to);
+
 /* The renumbering M110 was handled: number on from its target. */
 static void
 renumber_check(struct marlin *m, bool took)
 {
     if (!m->renumber_n || (!took && m->win.acked < m->renumber_n))
         return;
+    if (m->unconfirmed_to) { /* it ran, so did every line before it */
+        report_acked(m, m->unconfirmed_from, m->unconfirmed_to);
+        m->unconfirmed_to = 0;
+    }
     linewin_reset(&m->win, m->renumber_to);
     m->renumber_n = 0;
 }
@@ -592,9 +600,44 @@ pump(struct marlin *m)
 
 /* ---- replies ------------------------------------------------------------ */
 
+/* The job lines among window lines from+1..to were run: lines_acked follows. */
+static void
+report_acked(struct marlin *m, long from, long to)
+{
+    for (long n = from + 1; n <= to; n++) {
+        long tag = linewin_tag(&m->win, n);
+        if (tag >= 0 && (uint64_t)(tag + 1) > m->base.status.lines_acked)
+            m->base.status.lines_acked = (uint64_t)(tag + 1);
+    }
+}
+
+/*
+ * A silence made the window count lines from+1..to as handled
+ * (linewin_resync, linewin_rewind): the stream goes on, and the printer
+ * refuses with a Resend what it did not have.  But nothing says they ran,
+ * so they are not progress (lines_acked, where a resume starts) until a
+ * reply acknowledges a line after them (credit), or a Resend says where
+ * the printer is.  A printer that hung stays at the last line it answered.
+ */
+static void
+provisional(struct marlin *m, long from, long to)
+{
+    if (to <= from)
+        return;
+    if (!m->unconfirmed_to)
+        m->unconfirmed_from = from;
+    if (to > m->unconfirmed_to)
+        m->unconfirmed_to = to;
+}
+
+/* A reply acknowledged window lines from+1..to (and so every line before them). */
 static void
 credit(struct marlin *m, long from, long to)
 {
+    if (to > from && m->unconfirmed_to) {
+        report_acked(m, m->unconfirmed_from, m->unconfirmed_to < to ? m->unconfirmed_to : to);
+        m->unconfirmed_to = 0;
+    }
     if (to > from && m->win.window < m->full_window) {
         /* Climb back from ping-pong one line per CLIMB_LINES clean lines. */
         m->clean += (int)(to - from);
@@ -615,11 +658,7 @@ credit(struct marlin *m, long from, long to)
         if (m->busy_until_ms > cap)
             m->busy_until_ms = cap;
     }
-    for (long n = from + 1; n <= to; n++) {
-        long tag = linewin_tag(&m->win, n);
-        if (tag >= 0 && (uint64_t)(tag + 1) > m->base.status.lines_acked)
-            m->base.status.lines_acked = (uint64_t)(tag + 1);
-    }
+    report_acked(m, from, to);
 }
 
 static void
@@ -724,6 +763,7 @@ handshake_done(struct marlin *m)
     m->phase = PH_READY;
     m->hello_tries = 0;
     linewin_reset(&m->win, 0);
+    m->unconfirmed_to = 0;
     m->renumber_n = 0;
     if (m->settle_timer)
         loop_timer_cancel(m->base.loop, m->settle_timer);
@@ -771,6 +811,9 @@ on_resend(struct marlin *m, long k)
     long before = m->win.acked;
     int rc = linewin_on_resend(&m->win, k);
     if (rc == SF_OK) {
+        /* It wants k: lines from k on were never run, whatever a silence said. */
+        if (m->unconfirmed_to > m->win.acked)
+            m->unconfirmed_to = m->win.acked > m->unconfirmed_from ? m->win.acked : 0;
         m->st.rewinds++;
         m->bad_resend = 0;
         m->bad_resend_count = 0;
@@ -1154,11 +1197,11 @@ deadline(struct marlin *m, int64_t now)
            runs now. */
         long before = m->win.acked;
         linewin_rewind(&m->win, m->renumber_n);
-        credit(m, before, m->win.acked);
+        provisional(m, before, m->win.acked);
     } else if (m->win.next <= m->win.high) {
         long before = m->win.acked;
         linewin_resync(&m->win);
-        credit(m, before, m->win.acked);
+        provisional(m, before, m->win.acked);
     } else if (!renumber_pending(m)) {
         struct sf_err err;
         long n = push_host(m, "M105", TAG_M105, &err);
@@ -1456,6 +1499,7 @@ m_start_job(struct drv *d, const char *path, uint64_t first_line, const struct d
     m->mo = sc.machine;
     d->status.lines_total = total;
     d->status.lines_acked = first_line;
+    m->unconfirmed_to = 0; /* a silence before this job says nothing of its lines */
     d->status.progress = total ? (double)first_line / (double)total : 0;
     d->status.job_started_ms = loop_now_ms(d->loop);
     if (first_line > 0) {

@@ -138,6 +138,14 @@ num_or(json_t *v, double dflt)
     return json_is_number(v) ? json_number_value(v) : dflt;
 }
 
+/* A byte count or offset: a number from 0 to 2^53 (exact in a double), else dflt. */
+static int64_t
+bytes_or(json_t *v, int64_t dflt)
+{
+    double d = num_or(v, -1);
+    return d >= 0 && d <= 9007199254740992.0 ? (int64_t)d : dflt;
+}
+
 int
 octo_parse_job(const char *body, size_t len, struct octo_job *out, struct sf_err *err)
 {
@@ -155,10 +163,10 @@ octo_parse_job(const char *body, size_t len, struct octo_job *out, struct sf_err
     copy_str(state, out->state, sizeof(out->state));
     json_t *file = json_object_get(json_object_get(j, "job"), "file");
     copy_str(json_object_get(file, "name"), out->file, sizeof(out->file));
-    out->size = (int64_t)num_or(json_object_get(file, "size"), -1);
+    out->size = bytes_or(json_object_get(file, "size"), -1);
     json_t *p = json_object_get(j, "progress");
     out->completion = num_or(json_object_get(p, "completion"), -1);
-    out->filepos = (int64_t)num_or(json_object_get(p, "filepos"), -1);
+    out->filepos = bytes_or(json_object_get(p, "filepos"), -1);
     out->print_time_s = num_or(json_object_get(p, "printTime"), -1);
     out->time_left_s = num_or(json_object_get(p, "printTimeLeft"), -1);
     copy_str(json_object_get(j, "error"), out->error, sizeof(out->error));

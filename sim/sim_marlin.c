@@ -46,6 +46,7 @@
 #define KEEPALIVE_MS   2000      /* Marlin's DEFAULT_KEEPALIVE_INTERVAL */
 #define WAIT_REPORT_MS 1000      /* M109/M190 print temperatures every second */
 #define BOOT_MS        100       /* bootloader: input ignored, then "start" */
+#define G29_S          45.0      /* bed levelling: a 3x3 probe grid, simulated seconds */
 #define AMBIENT_C      22.0
 
 enum link_kind { LINK_PTY, LINK_TCP };
@@ -98,6 +99,7 @@ struct sim_marlin {
 
     /* firmware */
     int64_t boot_until_ms; /* > now: booting, input dropped */
+    bool hung;             /* cfg.hang_after reached: silent for good */
     bool halted;           /* killed */
     long last_n;           /* last good line number */
     char line[MAX_CMD_SIZE];
@@ -166,8 +168,10 @@ emit(struct sim_marlin *s, const char *fmt, ...)
         return;
     if ((size_t)n > sizeof(text) - 2)
         n = (int)sizeof(text) - 2;
-    if (strncmp(text, "ok", 2) == 0 && faults_roll(&s->faults, s->faults.drop_ok))
+    if (strncmp(text, "ok", 2) == 0 && faults_roll(&s->faults, s->faults.drop_ok)) {
+        s->st.oks_dropped++;
         return;
+    }
     int kind = s->faults.hit_kind && !s->hit_done && s->last_n >= s->faults.hit_line
                    ? faults_hit_kind(text)
                    : FAULT_HIT_NONE;
@@ -532,6 +536,7 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
         }
         case 4:
         case 28:
+        case 29:
             if (s->pl_len > 0)
                 return false;
             sync_planner(s);
@@ -539,6 +544,8 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
                 double secs = 0;
                 if (g->code == 28)
                     secs = 3.0;
+                else if (g->code == 29)
+                    secs = G29_S;
                 else if (gcode_get(g, 'P', &v) && !isnan(v))
                     secs = v / 1000.0;
                 else if (gcode_get(g, 'S', &v) && !isnan(v))
@@ -546,7 +553,7 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
                 s->dwell_s = s->sim_s + secs;
             }
             if (s->sim_s < s->dwell_s) {
-                if (g->code == 28 && now >= s->keepalive_ms) {
+                if (g->code >= 28 && !s->cfg.no_keepalive && now >= s->keepalive_ms) {
                     emit(s, "echo:busy: processing");
                     s->keepalive_ms = now + KEEPALIVE_MS;
                 }
@@ -577,7 +584,6 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
         }
         case 20:
         case 21:
-        case 29:
             break;
         default:
             goto unknown;
@@ -739,12 +745,17 @@ check_fault_triggers(struct sim_marlin *s)
         firmware_reset(s, true);
     if (s->faults.disconnect_after && n == (uint64_t)s->faults.disconnect_after)
         drop_link(s);
+    if (s->cfg.hang_after && n == (uint64_t)s->cfg.hang_after) {
+        s->hung = true; /* what it was about to send is lost with it */
+        free_out(s);
+        buf_reset(&s->tx);
+    }
 }
 
 static void
 run_queue(struct sim_marlin *s)
 {
-    for (int guard = 0; guard < 64 && s->q_len > 0 && !s->halted; guard++) {
+    for (int guard = 0; guard < 64 && s->q_len > 0 && !s->halted && !s->hung; guard++) {
         const char *raw = s->queue[s->q_head];
         char cmd[MAX_CMD_SIZE];
         size_t n = gcode_strip(raw, strlen(raw), cmd, sizeof(cmd), NULL);
@@ -983,6 +994,8 @@ emergency_byte(struct sim_marlin *s, char c)
 static void
 read_input(struct sim_marlin *s)
 {
+    if (s->boot_until_ms && s->cfg.boot_hold)
+        return; /* held in the link until the banner is out */
     int room = s->cfg.rx_size - s->rx_len;
     int want = (int)s->rx_tokens;
     /* A UART board loses what reaches a full ring, but only while Marlin is
@@ -1159,6 +1172,10 @@ on_fd(struct loop *l, int fd, unsigned events, void *ud)
     (void)l;
     (void)fd;
     struct sim_marlin *s = ud;
+    if (s->hung && (events & (LOOP_HUP | LOOP_ERROR))) {
+        close_link(s); /* the host gave up on it */
+        return;
+    }
     if ((events & LOOP_HUP) && s->kind == LINK_PTY && s->keep_fd < 0 && !s->host_gone) {
         host_left(s);
         return;
@@ -1169,6 +1186,12 @@ on_fd(struct loop *l, int fd, unsigned events, void *ud)
 static void
 step(struct sim_marlin *s)
 {
+    if (s->hung) {
+        /* Nothing is read, run or sent any more; the link stays up. */
+        if (linked(s) && s->fd_events != 0 && loop_mod_fd(s->loop, s->fd, 0, NULL) == 0)
+            s->fd_events = 0;
+        return;
+    }
     int64_t now = loop_now_ms(s->loop);
     int64_t dt_ms = now - s->last_ms;
     s->last_ms = now;
@@ -1197,7 +1220,7 @@ step(struct sim_marlin *s)
     }
     read_input(s);
     if (!s->halted) {
-        for (int round = 0; round < 8; round++) {
+        for (int round = 0; round < 8 && !s->hung; round++) {
             int before = s->q_len;
             assemble_lines(s);
             run_queue(s);
@@ -1211,14 +1234,22 @@ step(struct sim_marlin *s)
     } else {
         s->rx_len = 0;
     }
+    if (s->hung) {
+        free_out(s);
+        buf_reset(&s->tx);
+        step(s); /* silent from here on */
+        return;
+    }
     write_output(s);
 
     /* Ask for input only when it can be taken, or epoll would spin. */
     if (s->host_gone)
         host_back(s);
     if (linked(s)) {
-        unsigned ev =
-            (s->rx_tokens >= 1 && (s->cfg.uart || s->rx_len < s->cfg.rx_size)) ? LOOP_READ : 0;
+        bool held = s->boot_until_ms && s->cfg.boot_hold;
+        unsigned ev = (!held && s->rx_tokens >= 1 && (s->cfg.uart || s->rx_len < s->cfg.rx_size))
+                          ? LOOP_READ
+                          : 0;
         if (ev != s->fd_events && loop_mod_fd(s->loop, s->fd, ev, NULL) == 0)
             s->fd_events = ev;
     }
@@ -1268,7 +1299,7 @@ sim_marlin_new(struct loop *l, const struct sim_marlin_config *c, struct sf_err 
 {
     if (c->baud < 0 || c->baud > 4000000 || !(c->speed >= 0) || c->speed > 1e6 || c->bufsize < 0 ||
         c->bufsize > 64 || c->planner_blocks < 0 || c->planner_blocks > 256 || c->rx_size < 0 ||
-        c->rx_size > 65536 || c->tcp_port > 65535) {
+        c->rx_size > 65536 || c->tcp_port > 65535 || c->hang_after < 0) {
         sf_err_set(err, SF_EINVAL,
                    "sim: config out of range (baud %d, speed %g, bufsize %d, "
                    "planner %d, rx %d, port %d)",

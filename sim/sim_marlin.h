@@ -38,6 +38,12 @@ struct sim_marlin_config {
                              simulated-time runs: loop_set_virtual); the sim owns it */
     const char *link;     /* pty mode: keep this symlink pointing at the current pty, or NULL */
     const char *log_path; /* every executed command, one per line, or NULL */
+    long hang_after;      /* the firmware hangs after executing this many commands: nothing
+                             more is read, run or sent, the link stays up; 0: never */
+    bool no_keepalive;    /* HOST_KEEPALIVE_FEATURE off: no "busy" lines while G28/G29 run */
+    bool boot_hold;       /* bytes the host sends while the firmware boots wait in the link
+                             and are read after "start" (a USB bridge that holds them while
+                             the board resets); false: the bootloader loses them */
     struct faults faults; /* faults_init() for none */
 };
 
@@ -50,6 +56,7 @@ struct sim_marlin_stats {
     uint64_t connects;           /* host connections (TCP) or pty openings */
     uint64_t rx_dropped;         /* bytes lost to a full RX buffer (uart) */
     uint64_t hits;               /* targeted reply corruptions made (faults.hit_*) */
+    uint64_t oks_dropped;        /* oks not sent (faults.drop_ok) */
     uint64_t ep_near;  /* lines numbered from 1 one byte from the emergency parser acting */
     uint64_t ep_acted; /* lines the emergency parser acted on (M108, M112, M410) */
     bool halted;       /* killed (M112, thermal runaway); needs a reset */

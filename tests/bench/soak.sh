@@ -17,5 +17,7 @@ echo "=== soak: prints"
 "$build/bench/bench_soak" --prints "${SOAK_PRINTS:-1000}" --lines 3000 --corrupt 0.01 \
   --drop-ok 0.01 || rc=1
 echo "=== soak: slimfarmd killed ${SOAK_KILLS:-100} times while 4 printers print"
-BUILD=$build ROUNDS=${SOAK_KILLS:-100} PRINTERS=4 bash tests/integ/farmd_crash_print.sh || rc=1
+kills=${SOAK_KILLS:-100}
+BUILD=$build ROUNDS=$kills PRINTERS=4 JOB_GROUPS=$(( (kills * 2 + 4) / 5 )) \
+  bash tests/integ/farmd_crash_print.sh || rc=1
 exit $rc

@@ -43,6 +43,7 @@ struct run {
     char gcode_path[512];
     double end_x, end_y, end_e; /* where the file leaves the head */
     size_t *fragments;          /* if set: count line heads cut off by corruption here */
+    int min_window, max_window; /* the driver's window seen at progress events (0: none yet) */
 };
 
 static void
@@ -58,6 +59,13 @@ on_event(struct drv *d, enum drv_event ev, void *ud)
     else if (ev == DRV_EV_STATE && r->n_states < 16)
         r->states[r->n_states++] = d->status.state;
     else if (ev == DRV_EV_PROGRESS) {
+        struct drv_marlin_stats ds;
+        if (drv_marlin_stats(d, &ds)) {
+            if (!r->min_window || ds.window < r->min_window)
+                r->min_window = ds.window;
+            if (ds.window > r->max_window)
+                r->max_window = ds.window;
+        }
         if (r->pause_at && !r->paused_once && d->status.lines_acked >= (uint64_t)r->pause_at) {
             r->paused_once = true;
             d->ops->pause(d, NULL);
@@ -214,11 +222,19 @@ quiet_logs(void)
  */
 static bool sim_time;
 
-/* Budgets of until(): simulated time is cheap, real time is not. */
+/*
+ * Budgets of until(): simulated time is cheap.  On real time (the pty and
+ * TCP cases: the kernel moves their bytes on its own schedule, a pty's
+ * through a work queue, loopback TCP's through softirqs that a busy
+ * machine defers, so a simulated clock would jump while bytes are still
+ * on their way), four times what a quiet machine needs: a passing case
+ * ends as soon as its condition holds, and only a failing one waits it
+ * out, so the budget is no measure of the machine's load.
+ */
 static int
 budget_ms(int real_ms)
 {
-    return sim_time ? 3600 * 1000 : real_ms;
+    return sim_time ? 3600 * 1000 : 4 * real_ms;
 }
 
 /* Start a sim with cfg tweaks and a connected driver; false on failure (reported). */
@@ -496,6 +512,226 @@ T_CASE(marlin_garbled_resend_mid_job)
         drv_marlin_stats(r.drv, &ds);
         /* Recovered by the next line's Resend or a probe, never a silence. */
         T_EQ_INT(ds.deadlines, 0);
+        /* Stock Marlin's byte-counted window (BUFSIZE 4): ping-pong after the
+           Resend, then back to the full window as clean lines pass. */
+        T_EQ_INT(r.max_window, 4);
+        T_EQ_INT(r.min_window, 1);
+        T_EQ_INT(ds.window, 4);
+    }
+    teardown(&r);
+    sim_time = false;
+}
+
+/* Commands in path equal to cmd, after gcode_strip. */
+static size_t
+count_in_log(const char *path, const char *cmd)
+{
+    size_t n, k = 0;
+    char **v = file_commands(path, &n);
+    for (size_t i = 0; i < n; i++)
+        k += strcmp(v[i], cmd) == 0;
+    free_lines(v, n);
+    return k;
+}
+
+/*
+ * The hello the driver sends as it opens the port reaches a printer still
+ * in its bootloader; a USB bridge holds the bytes and the firmware reads
+ * them after its "start" banner.  The driver, seeing "start", says hello
+ * again, so the printer answers two hellos: a driver that took the first
+ * hello's two oks as the handshake's end counted the second's as oks for
+ * its job's first lines, and kept two lines more in flight than the
+ * printer had room for (a UART loses them, then Resend and recovery).
+ * Stock Marlin on a UART; the job must stream as on a quiet link.
+ */
+T_CASE(marlin_hello_taken_after_start_banner)
+{
+    sim_time = true;
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.uart = true;
+    sc.boot_hold = true;
+    if (setup(&r, &sc, 0)) {
+        /* Both hellos ran: the first was held through the boot. */
+        T_EQ_INT(count_in_log(r.log_path, "M110 N0"), 2);
+        write_job(&r, JOB_LINES, NULL);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over, budget_ms(0)));
+        if (r.done != 1)
+            t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
+        T_EQ_INT(r.done, 1);
+        struct sim_marlin_stats st;
+        sim_marlin_stats(r.sim, &st);
+        T_EQ_INT(st.rx_dropped, 0);
+        T_EQ_INT(st.resends, 0);
+        size_t extra;
+        bool bad;
+        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
+        T_EQ_INT(extra, 0);
+        T_TRUE(!bad);
+        struct drv_marlin_stats ds;
+        drv_marlin_stats(r.drv, &ds);
+        T_EQ_INT(ds.rewinds, 0);
+        T_EQ_INT(ds.deadlines, 0);
+        T_EQ_INT(count_in_log(r.log_path, "M110 N0"), 2); /* no third handshake */
+    }
+    teardown(&r);
+    sim_time = false;
+}
+
+/* Simulated ms a job takes on a stock Marlin (plain ok, UART) with fault (or none). */
+static void
+timed_job(const char *fault, int64_t *took, uint64_t *oks_dropped, struct drv_marlin_stats *ds)
+{
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.uart = true;
+    if (fault)
+        T_OK(faults_parse(&sc.faults, fault, NULL), NULL);
+    T_OK(faults_parse(&sc.faults, "seed=5", NULL), NULL);
+    *took = -1;
+    if (setup(&r, &sc, 0)) {
+        write_job(&r, JOB_LINES, NULL);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over, budget_ms(0)));
+        T_EQ_INT(r.done, 1);
+        *took = loop_now_ms(r.loop) - r.drv->status.job_started_ms;
+        size_t extra;
+        bool bad;
+        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
+        T_EQ_INT(extra, 0);
+        T_TRUE(!bad);
+        struct sim_marlin_stats st;
+        sim_marlin_stats(r.sim, &st);
+        *oks_dropped = st.oks_dropped;
+        drv_marlin_stats(r.drv, ds);
+    }
+    teardown(&r);
+}
+
+/*
+ * A lost ok costs about a second, not a fixed silence limit: the driver
+ * waits for what it has in flight to run, plus the margin (1 s), then
+ * probes.  The same job clean and with 1 % of oks lost, on simulated time
+ * (deterministic): the difference, shared among the oks lost, stays under
+ * 1.5 s each.  A fixed 10 s time-out costs several seconds each.
+ */
+T_CASE(marlin_lost_ok_costs_about_a_second)
+{
+    sim_time = true;
+    uint64_t lost_clean = 0, lost = 0;
+    struct drv_marlin_stats ds_clean, ds;
+    int64_t clean, faulty;
+    timed_job(NULL, &clean, &lost_clean, &ds_clean);
+    timed_job("drop-ok=0.01", &faulty, &lost, &ds);
+    T_EQ_INT(lost_clean, 0);
+    T_TRUE(lost >= 10);
+    T_TRUE(ds.deadlines >= 1 && ds.deadlines <= lost);
+    double per_ok = lost ? (double)(faulty - clean) / (double)lost : 0;
+    if (getenv("T_VERBOSE"))
+        printf("    clean %.1f s, %llu oks lost: %.1f s (%.2f s each, %llu deadlines)\n",
+               (double)clean / 1000, (unsigned long long)lost, (double)faulty / 1000, per_ok / 1000,
+               (unsigned long long)ds.deadlines);
+    if (per_ok > 1500)
+        t_fail(__FILE__, __LINE__, "a lost ok cost %.2f s (clean %.1f s, %llu lost: %.1f s)",
+               per_ok / 1000, (double)clean / 1000, (unsigned long long)lost,
+               (double)faulty / 1000);
+    sim_time = false;
+}
+
+/*
+ * Commands that block for long (homing, a 45 s G29, heating from cold, a
+ * 200 s move, a dwell) on a printer that sends no "busy" lines (host
+ * keepalive off): the driver's time-outs come from what is in flight, so
+ * none of them is taken for a lost reply (no probe, no deadline), and the
+ * job does not fail for silence.
+ */
+T_CASE(marlin_long_commands_without_keepalive_never_probe)
+{
+    sim_time = true;
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.uart = true;
+    sc.no_keepalive = true;
+    if (setup(&r, &sc, 0)) {
+        snprintf(r.gcode_path, sizeof(r.gcode_path), "%s/long.gcode", t_tmpdir());
+        FILE *f = fopen(r.gcode_path, "w");
+        fprintf(f, "G28\nG29\nM190 S60\nM109 S205\nG90\nM82\nG92 E0\n"
+                   "G1 X200 Y0 F60\nG4 S20\n");
+        for (int i = 0; i < 300; i++)
+            fprintf(f, "G1 X%.2f Y%.2f E%.4f F3000\n", 100 + 20 * cos(i * 0.1),
+                    100 + 20 * sin(i * 0.1), 0.02 * (i + 1));
+        fprintf(f, "G28 X Y\nG29\nG1 X5 Y5 F300\n");
+        fclose(f);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over, budget_ms(0)));
+        if (r.done != 1)
+            t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
+        T_EQ_INT(r.done, 1);
+        struct drv_marlin_stats ds;
+        drv_marlin_stats(r.drv, &ds);
+        T_EQ_INT(ds.deadlines, 0);
+        T_EQ_INT(ds.probes, 0);
+        size_t extra;
+        bool bad;
+        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
+        T_EQ_INT(extra, 0);
+        T_TRUE(!bad);
+        /* it took what the commands take: two G29s, the heat-up, 200 s of move */
+        T_TRUE(loop_now_ms(r.loop) - r.drv->status.job_started_ms > 300000);
+    }
+    teardown(&r);
+    sim_time = false;
+}
+
+static int64_t last_progress_ms; /* loop time of the last DRV_EV_PROGRESS (hang test) */
+
+static bool
+job_over_noting_progress(struct run *r)
+{
+    static uint64_t acked;
+    if (r->drv->status.lines_acked != acked) {
+        acked = r->drv->status.lines_acked;
+        last_progress_ms = loop_now_ms(r->loop);
+    }
+    return job_over(r);
+}
+
+/*
+ * The other side of "a job fails only when the printer truly stops
+ * answering": a firmware that hangs mid-job (nothing read, run or sent;
+ * the link stays up) fails the job, after the driver's probes go
+ * unanswered for the silence limit (30 s), not sooner and not never.
+ */
+T_CASE(marlin_printer_that_stops_answering_fails_the_job)
+{
+    sim_time = true;
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_marlin_config_init(&sc);
+    sc.uart = true;
+    sc.hang_after = 1500;
+    if (setup(&r, &sc, 0)) {
+        write_job(&r, JOB_LINES, NULL);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over_noting_progress, budget_ms(0)));
+        T_EQ_INT(r.failed, 1);
+        T_TRUE(strstr(r.drv->status.message, "stopped answering") != NULL);
+        T_EQ_INT(r.drv->status.state, DRV_OFFLINE);
+        /* the printer ran 1500 commands: the file's first ones and the
+           driver's own (M155 or M105 polls); what it acknowledged ran */
+        T_TRUE(r.drv->status.lines_acked <= 1500);
+        T_TRUE(r.drv->status.lines_acked >= 1400);
+        struct drv_marlin_stats ds;
+        drv_marlin_stats(r.drv, &ds);
+        T_TRUE(ds.probes >= 5);
+        int64_t silent = loop_now_ms(r.loop) - last_progress_ms;
+        if (silent < 30000 || silent > 60000)
+            t_fail(__FILE__, __LINE__, "failed %.1f s after the last ok (30-60 s)",
+                   (double)silent / 1000);
     }
     teardown(&r);
     sim_time = false;
@@ -754,9 +990,9 @@ T_CASE(marlin_disconnect_then_reconnect_with_backoff)
     }
     write_job(&r, JOB_LINES, NULL);
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-    T_TRUE(until(&r, job_over, 30000));
+    T_TRUE(until(&r, job_over, budget_ms(30000)));
     T_EQ_INT(r.failed, 1);
-    T_TRUE(until(&r, is_offline, 2000));
+    T_TRUE(until(&r, is_offline, budget_ms(2000)));
     T_TRUE(strstr(r.drv->status.message, "link lost") != NULL);
     T_TRUE(r.drv->status.lines_acked > 1000 && r.drv->status.lines_acked < 1300);
     /* Reconnect as an owner would: back off, then open() again. */
@@ -769,7 +1005,7 @@ T_CASE(marlin_disconnect_then_reconnect_with_backoff)
             loop_run_once(r.loop, 20);
         if (r.drv->status.state == DRV_OFFLINE)
             r.drv->ops->open(r.drv, &err);
-        until(&r, is_idle, 2000);
+        until(&r, is_idle, budget_ms(2000));
     }
     T_EQ_INT(r.drv->status.state, DRV_IDLE);
     T_TRUE(loop_now_ms(r.loop) - t0 >= drv_backoff_ms(0));
@@ -777,7 +1013,7 @@ T_CASE(marlin_disconnect_then_reconnect_with_backoff)
     r.done = r.failed = 0;
     write_job(&r, 500, NULL);
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
-    T_TRUE(until(&r, job_over, 20000));
+    T_TRUE(until(&r, job_over, budget_ms(20000)));
     T_EQ_INT(r.done, 1);
     teardown(&r);
 }

@@ -88,6 +88,12 @@ T_CASE(parsers_read_the_documented_bodies)
     T_EQ_INT(j.size, -1);
     T_EQ_DBL(j.completion, -1, 0);
     T_EQ_STR(j.error, "SerialException");
+    /* A size or filepos no file has (fuzz_octoprint: 5.6e113 cast to int64) reads as unknown. */
+    const char *huge = "{\"job\":{\"file\":{\"size\":5.5e113}},\"progress\":{\"filepos\":-3},"
+                       "\"state\":\"Printing\"}";
+    T_OK(octo_parse_job(huge, strlen(huge), &j, &err), &err);
+    T_EQ_INT(j.size, -1);
+    T_EQ_INT(j.filepos, -1);
     T_ERR(octo_parse_job("{\"job\":{}}", 10, &j, &err), SF_EINVAL, &err, "no \"state\"");
     T_ERR(octo_parse_job("[1]", 3, &j, &err), SF_EINVAL, &err, "not a JSON object");
 

@@ -156,7 +156,9 @@ for name in printers:
             continue
         # lines it ran past its last saved line, in order: a window in flight,
         # or more when the daemon was killed before saving its progress
-        nxt = expected(mine[k + 1])[:8] if k + 1 < len(mine) else None
+        # (a resume, start > 0, opens with its preamble: never that case,
+        # though its first lines are the ones this print ran on into)
+        nxt = expected(mine[k + 1])[:8] if k + 1 < len(mine) and mine[k + 1][4] == 0 else None
         i0, w0 = i, w
         while i < len(got) and w < len(want) and got[i] == want[w]:
             i += 1
