@@ -6,10 +6,12 @@
 # prusalink, octoprint) logging to $tmp/NAME.log; its URL lands in $tmp/NAME.addr.
 start_net() {
   local name=$1 kind=$2; shift 2
+  rm -f "$tmp/$name.out" # a restarted sim must not be read from its last run's file
   "$S" "$kind" --log "$tmp/$name.log" "$@" > "$tmp/$name.out" 2> "$tmp/$name.err" &
   sims+=($!)
   eval "sim_$name=$!"
-  for _ in $(seq 100); do [ -s "$tmp/$name.out" ] && break; sleep 0.05; done
+  local end=$((SECONDS + 30))
+  while [ ! -s "$tmp/$name.out" ] && [ $SECONDS -lt $end ]; do sleep 0.05; done
   local a; a=$(head -n 1 "$tmp/$name.out")
   [ -n "$a" ] || fail "sim $name did not start: $(cat "$tmp/$name.err")"
   echo "$a" > "$tmp/$name.addr"
