@@ -9,16 +9,16 @@
 # Side by side: every test works in a directory of its own (mktemp), and
 # every daemon and simulator listens on a port the kernel picks
 # (tests/integ/lib/daemon.sh), so no two tests share a path or a port.  The
-# scenarios wait for states, never for a time, so a busy neighbour slows
-# them but cannot fail them.  JOBS (default: cores + 1) is how many run at
-# once: the scenarios spend most of their time waiting for simulated
+# scenarios wait for states with generous bounds, never for a time, so a
+# busy neighbour slows them.  JOBS (default: one per core) is how many run
+# at once: the scenarios spend most of their time waiting for simulated
 # printers, the unit tests computing.  Each test's output is printed whole
 # when it ends, with its wall-clock and CPU time; the slowest are listed
 # last.  JOBS=1 runs one at a time, in order.
 set -u
 build=${1:?usage: tests/run.sh BUILD_DIR [FILTER]}
 filter=${2:-}
-jobs=${JOBS:-$(($(nproc) + 1))}
+jobs=${JOBS:-$(nproc)}
 res=$(mktemp -d)
 trap 'rm -rf "$res"' EXIT
 t_all=$(date +%s%N)
