@@ -92,6 +92,15 @@ wait_for() {
   return 1
 }
 
+# fetch_jobs: every job with its print history from the API, into
+# $tmp/job-ID.json (the list in $tmp/jobs.json), for the log checks.
+fetch_jobs() {
+  api /api/jobs > "$tmp/jobs.json"
+  for j in $(json '" ".join(str(x["id"]) for x in d["jobs"])' < "$tmp/jobs.json"); do
+    api "/api/jobs/$j" > "$tmp/job-$j.json"
+  done
+}
+
 # check_farm_logs PRINTER...: each printer's executed log equals, in order,
 # the commands of the stored G-code of every print it ran (from the API's
 # print history).  Besides the driver's own queries, the only other lines
@@ -100,10 +109,7 @@ wait_for() {
 # cancelled print's prefix, the resume preamble before a resumed print
 # (started at its start_line).  A job line lost, repeated or reordered fails.
 check_farm_logs() {
-  api /api/jobs > "$tmp/jobs.json"
-  for j in $(json '" ".join(str(x["id"]) for x in d["jobs"])' < "$tmp/jobs.json"); do
-    api "/api/jobs/$j" > "$tmp/job-$j.json"
-  done
+  fetch_jobs
   /usr/bin/python3 - "$tmp" "$@" <<'PY'
 import glob, json, os, re, sys
 tmp, printers = sys.argv[1], sys.argv[2:]

@@ -26,10 +26,7 @@ start_net() {
 # host's M110 and M400 aside, nothing else: a job line lost, repeated or
 # reordered fails.
 check_net_logs() {
-  api /api/jobs > "$tmp/jobs.json"
-  for j in $(json '" ".join(str(x["id"]) for x in d["jobs"])' < "$tmp/jobs.json"); do
-    api "/api/jobs/$j" > "$tmp/job-$j.json"
-  done
+  fetch_jobs
   /usr/bin/python3 - "$tmp" "$@" <<'PY'
 import glob, json, os, re, sys
 tmp, printers = sys.argv[1], sys.argv[2:]
