@@ -214,12 +214,14 @@ $(BROWSER_NODE): tests/browser/package.json tests/browser/package-lock.json
 browser-deps: $(BROWSER_NODE)
 
 FUZZ_RUNS ?= 3000
+# Tests at once (tests/run.sh; empty: one per core); JOBS=1 runs them one by one.
+JOBS ?=
 check: deps
 	$(MAKE) --no-print-directory browser-deps
 	$(MAKE) --no-print-directory SAN=1 tests
 	$(MAKE) --no-print-directory fuzzers
 	$(MAKE) --no-print-directory check-layers check-format check-headers
-	FUZZ_RUNS=$(FUZZ_RUNS) tests/run.sh build/san $(T)
+	FUZZ_RUNS=$(FUZZ_RUNS) JOBS=$(JOBS) tests/run.sh build/san $(T)
 
 T ?=
 SECS ?= 60

@@ -40,7 +40,7 @@ static const char usage_text[] =
     "usage: slimfarm-sim marlin [--tcp PORT] [--link PATH] [--baud N] [--speed X]\n"
     "                           [--bufsize N] [--planner N] [--rx-size N] [--advanced-ok]\n"
     "                           [--uart] [--log FILE] [--fault SPEC]... [--count N]\n"
-    "       slimfarm-sim octoprint --help   (and the other network printers)\n"
+    "       slimfarm-sim octoprint|moonraker|prusalink|bambu ARGS   (each: --help)\n"
     "       slimfarm-sim -h|--help\n"
     "  --uart  bytes reaching a full RX buffer are lost (else the host waits, as on USB)\n"
     "faults: corrupt=RATE corrupt-rx=RATE corrupt-tx=RATE drop-ok=RATE garbage=RATE\n"

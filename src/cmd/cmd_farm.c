@@ -166,6 +166,11 @@ parse_double(const char *s, double *out)
 
 /* ---- submit ---- */
 
+static const char submit_usage[] =
+    "submit PART [--copies N] [--material M] [--printer P | --group G] "
+    "[--method none|orient|slim|surface] [--deviation MM] [--overhang DEG] [--priority N] "
+    "[--retries N]";
+
 static int
 run_submit(int argc, char **argv)
 {
@@ -243,14 +248,11 @@ run_submit(int argc, char **argv)
     return 0;
 usage:
     json_decref(opts);
-    fprintf(stderr, "usage: slimfarm submit PART [--copies N] [--material M] [--printer P | "
-                    "--group G] [--method none|orient|slim|surface] [--deviation MM] "
-                    "[--overhang DEG] [--priority N] [--retries N]\n");
+    fprintf(stderr, "usage: slimfarm %s\n", submit_usage);
     return 2;
 }
 
-CMD_REGISTER(submit, "submit", "submit PART [--copies N] [--material M] [--printer P] ...",
-             "queue a part on the farm (slimfarmd)", run_submit)
+CMD_REGISTER(submit, "submit", submit_usage, "queue a part on the farm (slimfarmd)", run_submit)
 
 /* ---- jobs, printers ---- */
 

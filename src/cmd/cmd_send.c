@@ -111,6 +111,9 @@ on_sigint(struct loop *l, int signo, void *ud)
     c->interrupted = true;
 }
 
+static const char usage_line[] = "send FILE.gcode --port DEVICE|pty:PATH|tcp://host:port "
+                                 "[--baud N] [--window N] [--timeout-ms N]";
+
 static int
 run_send(int argc, char **argv)
 {
@@ -156,8 +159,7 @@ run_send(int argc, char **argv)
         }
     }
     if (!file || !port) {
-        fprintf(stderr, "usage: slimfarm send FILE.gcode --port DEVICE|pty:PATH|tcp://host:port "
-                        "[--baud N] [--window N] [--timeout-ms N]\n");
+        fprintf(stderr, "usage: slimfarm %s\n", usage_line);
         return 2;
     }
     struct sf_err err;
@@ -199,5 +201,4 @@ run_send(int argc, char **argv)
     return rc;
 }
 
-CMD_REGISTER(send, "send", "send FILE.gcode --port DEVICE|pty:PATH|tcp://host:port [--baud N]",
-             "stream one G-code file to a Marlin printer", run_send)
+CMD_REGISTER(send, "send", usage_line, "stream one G-code file to a Marlin printer", run_send)

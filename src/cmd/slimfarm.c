@@ -44,7 +44,13 @@ usage(FILE *f)
     fprintf(f, "usage: slimfarm COMMAND [ARGS]\n\ncommands:\n");
     for (int i = 0; i < N_COMMANDS; i++)
         fprintf(f, "  %-10s %s\n", commands[i].name, commands[i].summary);
-    fprintf(f, "\n'slimfarm help COMMAND' shows a command's usage.\n");
+    fprintf(f, "\n'slimfarm help COMMAND' shows a command's usage.  The commands that talk to\n"
+               "slimfarmd take --url URL and --key KEY (or $SLIMFARM_URL, default\n"
+               "http://127.0.0.1:7420, and $SLIMFARM_API_KEY):");
+    for (int i = 0; i < N_COMMANDS; i++)
+        if (strcmp(commands[i].module, "farm") == 0)
+            fprintf(f, " %s", commands[i].name);
+    fprintf(f, ".\n");
 }
 
 /* Run libexec/slimfarm/slimfarm-MODULE beside our bin/ with argv[1..]; returns only on failure. */

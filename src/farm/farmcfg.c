@@ -315,8 +315,9 @@ parse_listen(struct parse *ps, const char *sec, const char *v)
     char *end;
     errno = 0;
     long port = strtol(colon + 1, &end, 10);
-    if (end == colon + 1 || *end || errno || port < 1 || port > 65535)
-        return fail(ps, "option 'listen' in section '%s': port '%s' is not in 1..65535", sec,
+    /* 0: a port the kernel picks, named in the "listening on" log line (tests) */
+    if (end == colon + 1 || *end || errno || port < 0 || port > 65535)
+        return fail(ps, "option 'listen' in section '%s': port '%s' is not in 0..65535", sec,
                     colon + 1);
     struct in_addr a4;
     if (strcmp(host, "*") != 0 && inet_pton(AF_INET, host, &a4) != 1)

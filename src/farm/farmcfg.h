@@ -66,7 +66,7 @@ struct farmcfg_printer {
 
 struct farmcfg {
     char listen_host[64];     /* address to listen on (default 127.0.0.1) */
-    int listen_port;          /* port (default 7420) */
+    int listen_port;          /* port (default 7420; 0: the kernel picks) */
     char data_dir[512];       /* database and files (default /var/lib/slimfarm) */
     char profiles_dir[512];   /* printers/NAME.cfg, materials/NAME.cfg live here (default: the
                                  config file's directory; "config" before a file is loaded) */

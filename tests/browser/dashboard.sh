@@ -34,6 +34,7 @@ cp -r config/printers config/materials "$tmp/"
     "$(cat "$tmp/mini.addr")"
 } > "$tmp/farm.ini"
 start_daemon
+pin_port # the script restarts the daemon under the open page: same URL
 wait_for 60 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq 2 ]" || fail "printers: $("$C" printers)"
 "$C" shapes "$tmp/parts" > /dev/null || fail "shapes"
 

@@ -54,6 +54,13 @@ for c in orient optimize slice submit watch ports preview; do
   grep -qE "^  $c +[a-z]" <<<"$out" || { echo "   FAIL: 'slimfarm help' lacks $c"; fails=$((fails + 1)); }
 done
 "$bin" help submit | grep -q "^usage: slimfarm submit PART" || { echo "   FAIL: help submit"; fails=$((fails + 1)); }
+# the help names every option a command takes (it once left out send's
+# --window and --timeout-ms, submit's all but three, the farm commands' --url)
+for w in "send:--window N" "send:--timeout-ms N" "submit:--method none|orient|slim|surface" \
+  "submit:--group G" "submit:--retries N" "preview:--size WxH"; do
+  "$bin" help "${w%%:*}" | grep -qF -- "${w#*:}" || { echo "   FAIL: help ${w%%:*} lacks ${w#*:}"; fails=$((fails + 1)); }
+done
+grep -qF -- "take --url URL and --key KEY" <<<"$out" || { echo "   FAIL: 'slimfarm help' does not say how to reach the daemon"; fails=$((fails + 1)); }
 mkdir -p "$work/prefix/bin" "$work/prefix/libexec/slimfarm"
 cp "$bin" "$work/prefix/bin/"
 cp "$(dirname "$bin")/../libexec/slimfarm/slimfarm-shapes" "$work/prefix/libexec/slimfarm/"

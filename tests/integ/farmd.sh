@@ -8,6 +8,7 @@
 # printers elsewhere).
 set -u
 BUILD=${BUILD:-build/san}
+. "$(dirname "$0")/lib/daemon.sh"
 D=$BUILD/bin/slimfarmd
 C=$BUILD/bin/slimfarm
 tmp=$(mktemp -d)
@@ -19,12 +20,11 @@ fail() { echo "FAIL: $*"; echo "--- daemon log"; cat "$tmp/log" 2>/dev/null; exi
 eventually() { for _ in $(seq 400); do "$@" && return 0; sleep 0.05; done; return 1; }
 jobs_match() { "$C" jobs "${@:2}" 2>/dev/null | grep -qE "$1"; }
 
-port=$((20000 + RANDOM % 20000))
 RW=rw-key-0123456789abcdef
 RO=ro-key-0123456789abcdef
 cat > "$tmp/farm.ini" <<INI
 [farm]
-listen: 127.0.0.1:$port
+listen: 127.0.0.1:0
 data_dir: $tmp/data
 api_keys: $RW
 api_keys_readonly: $RO
@@ -34,16 +34,15 @@ driver: marlin
 port: pty:/dev/null
 material: PLA
 INI
-export SLIMFARM_URL=http://127.0.0.1:$port SLIMFARM_API_KEY=$RW
+export SLIMFARM_API_KEY=$RW
 
 "$D" -c "$tmp/farm.ini" --check | grep -q "ok, 1 printers, 2 API keys" || fail "--check"
 printf '[printer x]\nbaud_rate: 1\n' > "$tmp/bad.ini"
 out=$("$D" -c "$tmp/bad.ini" 2>&1) && fail "bad config accepted"
 [[ "$out" == *"bad.ini:2: option 'baud_rate' is not valid in section 'printer x'"* ]] || fail "bad config message: $out"
 
-start() {
-  "$D" -c "$tmp/farm.ini" >>"$tmp/log" 2>&1 &
-  pid=$!
+start() { # a port the kernel picks, each start its own (lib/daemon.sh)
+  daemon_start "$tmp/farm.ini" "$tmp/log" || fail "daemon did not come up"
   for _ in $(seq 100); do "$C" jobs >/dev/null 2>&1 && return 0; sleep 0.05; done
   fail "daemon did not come up"
 }

@@ -6,26 +6,26 @@
 # (Killing while printing: farmd_crash_print.sh.)
 set -u
 BUILD=${BUILD:-build/san}
+. "$(dirname "$0")/lib/daemon.sh"
 D=$BUILD/bin/slimfarmd
 C=$BUILD/bin/slimfarm
 tmp=$(mktemp -d)
 pid= lpid=
-cleanup() { [ -n "$lpid" ] && kill "$lpid" 2>/dev/null; [ -n "$pid" ] && kill -9 "$pid" 2>/dev/null; rm -rf "$tmp"; }
+cleanup() { [ -n "$lpid" ] && kill "$lpid" 2>/dev/null; [ -n "$pid" ] && kill -9 "$pid" 2>/dev/null && wait "$pid" 2>/dev/null; rm -rf "$tmp"; }
 trap cleanup EXIT
 fail() { echo "FAIL: $*"; tail -20 "$tmp/log" 2>/dev/null; exit 1; }
 
-port=$((20000 + RANDOM % 20000))
 RW=rw-key-0123456789abcdef
 cat > "$tmp/farm.ini" <<INI
 [farm]
-listen: 127.0.0.1:$port
+listen: 127.0.0.1:0
 data_dir: $tmp/data
 api_keys: $RW
 [printer mk3]
 driver: marlin
 port: pty:/dev/null
 INI
-export SLIMFARM_URL=http://127.0.0.1:$port SLIMFARM_API_KEY=$RW
+export SLIMFARM_API_KEY=$RW
 printf 'solid t\nfacet normal 0 0 -1\nouter loop\nvertex 0 0 0\nvertex 0 10 0\nvertex 10 0 0\nendloop\nendfacet\nfacet normal 0 -1 0\nouter loop\nvertex 0 0 0\nvertex 10 0 0\nvertex 0 0 10\nendloop\nendfacet\nfacet normal -1 0 0\nouter loop\nvertex 0 0 0\nvertex 0 0 10\nvertex 0 10 0\nendloop\nendfacet\nfacet normal 1 1 1\nouter loop\nvertex 10 0 0\nvertex 0 10 0\nvertex 0 0 10\nendloop\nendfacet\nendsolid t\n' > "$tmp/p.stl"
 
 # Client loop: submit, and cancel every third job; record acknowledged ids.
@@ -40,8 +40,7 @@ client() {
 
 : > "$tmp/acked"
 for round in $(seq 10); do
-  "$D" -c "$tmp/farm.ini" >>"$tmp/log" 2>&1 &
-  pid=$!
+  daemon_start "$tmp/farm.ini" "$tmp/log" || fail "round $round: the daemon did not come up"
   for _ in $(seq 100); do "$C" jobs >/dev/null 2>&1 && break; sleep 0.05; done
   before=$(wc -l < "$tmp/acked")
   client & lpid=$!
@@ -62,8 +61,7 @@ for round in $(seq 10); do
 done
 [ "$(wc -l < "$tmp/acked")" -ge 2 ] || fail "clients got too little done: $(wc -l < "$tmp/acked")"
 # the daemon comes back a last time and lists them all
-"$D" -c "$tmp/farm.ini" >>"$tmp/log" 2>&1 &
-pid=$!
+daemon_start "$tmp/farm.ini" "$tmp/log" || fail "the daemon did not come back"
 for _ in $(seq 100); do "$C" jobs >/dev/null 2>&1 && break; sleep 0.05; done
 while read -r id; do
   "$C" jobs | grep -qE "^$id " || fail "acknowledged job $id missing"

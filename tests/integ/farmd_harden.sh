@@ -9,6 +9,7 @@
 # revoked key's stream, %00, two Content-Lengths, an empty file part.
 set -u
 BUILD=${BUILD:-build/san}
+. "$(dirname "$0")/lib/daemon.sh"
 D=$BUILD/bin/slimfarmd
 PY=/usr/bin/python3
 tmp=$(mktemp -d)
@@ -18,13 +19,12 @@ trap cleanup EXIT
 fail() { echo "FAIL: $*"; echo "--- daemon log (tail)"; tail -30 "$tmp/log" 2>/dev/null; exit 1; }
 row() { printf '%-5s | %-62s | %s\n' "$1" "$2" "$3"; }
 
-port=$((20000 + RANDOM % 20000))
+port= U= # the daemon's, once started (a port the kernel picks: lib/daemon.sh)
 RW=rw-key-0123456789abcdef
 RO=ro-key-0123456789abcdef
-U=http://127.0.0.1:$port
 config() { # config UPLOAD_MB WITH_RO
   {
-    printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
+    printf '[farm]\nlisten: 127.0.0.1:0\ndata_dir: %s/data\napi_keys: %s\n' "$tmp" "$RW"
     printf 'profiles_dir: %s/config\n' "$PWD"
     [ "$2" = 1 ] && printf 'api_keys_readonly: %s\n' "$RO"
     printf 'upload_max_mb: %s\n' "$1"
@@ -32,8 +32,8 @@ config() { # config UPLOAD_MB WITH_RO
   } > "$tmp/farm.ini"
 }
 start() {
-  "$D" -c "$tmp/farm.ini" >>"$tmp/log" 2>&1 &
-  pid=$!
+  daemon_start "$tmp/farm.ini" "$tmp/log" || fail "daemon did not come up"
+  port=$http_port U=$SLIMFARM_URL
   for _ in $(seq 200); do
     curl -s -o /dev/null -H "X-Api-Key: $RW" "$U/api/jobs" && return 0
     sleep 0.05

@@ -14,10 +14,6 @@ set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
 PY=/usr/bin/python3
-# a port the kernel says is free now (lib/farm.sh's random one collided with
-# another session's daemon on a shared machine)
-port=$($PY -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
-export SLIMFARM_URL=http://127.0.0.1:$port
 RO=ro-key-0123456789abcdef
 MK=metrics-key-0123456789ab
 
@@ -35,7 +31,7 @@ cp -r config/printers config/materials "$tmp/"
 start_daemon
 wait_for 60 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq 2 ]" || fail "printers: $("$C" printers)"
 
-PORT=$port RW=$RW RO=$RO MK=$MK TMP=$tmp $PY - "$(dirname "$0")/lib" <<'PY' || fail "slicer replays"
+PORT=$http_port RW=$RW RO=$RO MK=$MK TMP=$tmp $PY - "$(dirname "$0")/lib" <<'PY' || fail "slicer replays"
 import glob, hashlib, json, os, sys, time
 sys.path.insert(0, sys.argv[1])
 from slicers import *

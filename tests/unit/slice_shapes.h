@@ -44,6 +44,14 @@ ts_add(struct mesh *m, const struct vec3 *v, uint32_t nv, const uint32_t (*t)[3]
     return 0;
 }
 
+/* Append mesh b's triangles to m (a shell of its own); SF_ENOMEM on failure. */
+static inline int
+ts_merge(struct mesh *m, const struct mesh *b)
+{
+    return ts_add(m, b->v, b->n_verts, (const uint32_t(*)[3])b->t, b->n_tris) < 0 ? SF_ENOMEM
+                                                                                  : SF_OK;
+}
+
 /* Axis-aligned box, outward CCW triangles. */
 static inline int
 ts_box(struct mesh *m, double x0, double y0, double z0, double x1, double y1, double z1)

@@ -299,6 +299,27 @@ teardown(struct run *r)
     loop_free(r->loop);
 }
 
+/* Write a job of layers x per_layer moves and start it on r's printer. */
+static int
+start(struct run *r, int layers, int per_layer, struct sf_err *err)
+{
+    write_job(r, layers, per_layer);
+    return r->drv->ops->start_job(r->drv, r->gcode_path, 0, NULL, err);
+}
+
+/* A printer set up as s is refused: the driver ends in error, its message
+   naming what and what2. */
+static void
+refused(const struct setup *s, const char *what, const char *what2)
+{
+    struct run r;
+    T_EQ_INT(setup(&r, s), 0);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_ERROR));
+    T_TRUE(strstr(r.drv->status.message, what) != NULL);
+    T_TRUE(strstr(r.drv->status.message, what2) != NULL);
+    teardown(&r);
+}
+
 static bool
 idle(struct run *r)
 {
@@ -314,9 +335,8 @@ job_case(bool p1)
     struct setup s = { .p1 = p1, .speed = 300 };
     T_EQ_INT(setup(&r, &s), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
-    write_job(&r, 20, 100);
     struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 20, 100, &err), &err);
     T_EQ_INT(r.drv->status.state, DRV_PRINTING);
     T_TRUE(WAIT_FOR(&r, r.done || r.failed));
     T_EQ_INT(r.failed, 0);
@@ -374,10 +394,9 @@ T_CASE(bambu_pause_resume_then_done)
     struct setup s = { .speed = 30 };
     T_EQ_INT(setup(&r, &s), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
-    write_job(&r, 10, 100);
     struct sf_err err;
     r.pause_at = 20;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 10, 100, &err), &err);
     T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_PAUSED));
     /* Paused at the printer: the machine runs nothing over many reports. */
     struct sim_bambu_stats a, b;
@@ -407,10 +426,9 @@ T_CASE(bambu_stop_cancels)
     struct setup s = { .speed = 30 };
     T_EQ_INT(setup(&r, &s), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
-    write_job(&r, 10, 100);
     struct sf_err err;
     r.cancel_at = 10;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 10, 100, &err), &err);
     T_TRUE(WAIT_FOR(&r, r.cancelled || r.done || r.failed));
     T_EQ_INT(r.cancelled, 1);
     T_EQ_INT(r.done + r.failed, 0);
@@ -450,32 +468,20 @@ T_CASE(bambu_manual_command_runs)
 T_CASE(bambu_wrong_access_code_is_an_auth_error)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
-    struct run r;
-    struct setup s = { .code = "00000000" };
-    T_EQ_INT(setup(&r, &s), 0);
-    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_ERROR));
-    T_TRUE(strstr(r.drv->status.message, "authentication failed") != NULL);
-    T_TRUE(strstr(r.drv->status.message, "access_code") != NULL);
-    teardown(&r);
+    refused(&(struct setup){ .code = "00000000" }, "authentication failed", "access_code");
 }
 
 T_CASE(bambu_wrong_ca_is_a_tls_error_and_insecure_connects)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    refused(&(struct setup){ .ca = "other-ca.pem" }, "TLS", "certificate");
     struct run r;
-    struct setup s = { .ca = "other-ca.pem" };
-    T_EQ_INT(setup(&r, &s), 0);
-    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_ERROR));
-    T_TRUE(strstr(r.drv->status.message, "TLS") != NULL);
-    T_TRUE(strstr(r.drv->status.message, "certificate") != NULL);
-    teardown(&r);
     /* tls_insecure: the operator's override connects (and prints) */
     struct setup s2 = { .ca = "other-ca.pem", .insecure = true, .speed = 300 };
     T_EQ_INT(setup(&r, &s2), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
-    write_job(&r, 2, 20);
     struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 2, 20, &err), &err);
     T_TRUE(WAIT_FOR(&r, r.done || r.failed));
     T_EQ_INT(r.done, 1);
     teardown(&r);
@@ -484,13 +490,7 @@ T_CASE(bambu_wrong_ca_is_a_tls_error_and_insecure_connects)
 T_CASE(bambu_certificate_of_another_serial_is_a_tls_error)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
-    struct run r;
-    struct setup s = { .serial = "01S00FFFFFFFFFF" };
-    T_EQ_INT(setup(&r, &s), 0);
-    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_ERROR));
-    T_TRUE(strstr(r.drv->status.message, "TLS") != NULL);
-    T_TRUE(strstr(r.drv->status.message, "mismatch") != NULL);
-    teardown(&r);
+    refused(&(struct setup){ .serial = "01S00FFFFFFFFFF" }, "TLS", "mismatch");
 }
 
 T_CASE(bambu_unsigned_refusal_says_developer_mode)
@@ -500,9 +500,8 @@ T_CASE(bambu_unsigned_refusal_says_developer_mode)
     struct setup s = { .fault = "unsigned" };
     T_EQ_INT(setup(&r, &s), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r))); /* status works without Developer Mode */
-    write_job(&r, 2, 20);
     struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 2, 20, &err), &err);
     T_TRUE(WAIT_FOR(&r, r.failed));
     T_EQ_INT(r.drv->status.state, DRV_ERROR);
     T_TRUE(strstr(r.failed_msg, "Developer Mode") != NULL);
@@ -517,9 +516,8 @@ T_CASE(bambu_hms_failure_and_stop_at_printer)
     struct setup s = { .fault = "hms=0300010000010007@30", .speed = 100 };
     T_EQ_INT(setup(&r, &s), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
-    write_job(&r, 10, 100);
     struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 10, 100, &err), &err);
     T_TRUE(WAIT_FOR(&r, r.failed || r.done));
     T_EQ_INT(r.failed, 1);
     T_TRUE(strstr(r.failed_msg, "HMS 0300-0100-0001-0007") != NULL);
@@ -528,8 +526,7 @@ T_CASE(bambu_hms_failure_and_stop_at_printer)
     struct setup s2 = { .fault = "stop-at=40", .speed = 100 };
     T_EQ_INT(setup(&r, &s2), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
-    write_job(&r, 10, 100);
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 10, 100, &err), &err);
     T_TRUE(WAIT_FOR(&r, r.failed || r.done));
     T_EQ_INT(r.failed, 1);
     T_TRUE(strstr(r.failed_msg, "stopped at the printer") != NULL);
@@ -543,9 +540,8 @@ T_CASE(bambu_storage_full_fails_the_job)
     struct setup s = { .fault = "storage-full" };
     T_EQ_INT(setup(&r, &s), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
-    write_job(&r, 2, 20);
     struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 2, 20, &err), &err);
     T_TRUE(WAIT_FOR(&r, r.failed || r.done));
     T_EQ_INT(r.failed, 1);
     T_TRUE(strstr(r.failed_msg, "upload") != NULL);
@@ -592,9 +588,8 @@ T_CASE(bambu_broker_restart_offline_then_job_finishes)
     struct setup s = { .speed = 30, .p1 = true };
     T_EQ_INT(setup(&r, &s), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
-    write_job(&r, 10, 100);
     struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 10, 100, &err), &err);
     T_TRUE(WAIT_FOR(&r, r.drv->status.progress >= 0.1));
     int port = broker_port;
     stop_broker();
@@ -632,9 +627,8 @@ T_CASE(bambu_reattach_after_restart)
     struct setup s = { .speed = 30, .p1 = true };
     T_EQ_INT(setup(&r, &s), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
-    write_job(&r, 10, 100);
     struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_OK(start(&r, 10, 100, &err), &err);
     T_TRUE(WAIT_FOR(&r, r.drv->status.progress >= 0.1));
     drv_free(r.drv); /* the daemon is gone */
     r.drv = NULL;

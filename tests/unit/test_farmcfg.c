@@ -95,6 +95,17 @@ T_CASE(farmcfg_octoprint_printer)
     farmcfg_release(&c);
 }
 
+/* Port 0: the kernel picks a free one (the integration tests run side by side). */
+T_CASE(farmcfg_listen_port_zero)
+{
+    struct farmcfg c;
+    struct sf_err err;
+    T_OK(parse(&c, "[farm]\nlisten: 127.0.0.1:0\n", &err), &err);
+    T_EQ_STR(c.listen_host, "127.0.0.1");
+    T_EQ_INT(c.listen_port, 0);
+    farmcfg_release(&c);
+}
+
 T_CASE(farmcfg_errors_name_file_line_option_section)
 {
     struct farmcfg c;
@@ -152,7 +163,8 @@ T_CASE(farmcfg_errors_name_file_line_option_section)
         { "[printer a]\ndriver: octoprint\nurl: http://pi\napi_key: k\npoll_ms: 10\n",
           "option 'poll_ms' in section 'printer a': '10' is not a whole number in 200..60000" },
         { "[farm]\nlisten: localhost\n", "'localhost' is not ADDRESS:PORT" },
-        { "[farm]\nlisten: 1.2.3.4:99999\n", "port '99999' is not in 1..65535" },
+        { "[farm]\nlisten: 1.2.3.4:99999\n", "port '99999' is not in 0..65535" },
+        { "[farm]\nlisten: 1.2.3.4:-1\n", "port '-1' is not in 0..65535" },
         { "[farm]\nlisten: example.com:80\n", "is not an IPv4 address" },
         { "[farm]\napi_keys: short\n", "each key must be 16..128 characters" },
         { "[farm]\napi_keys: aaaaaaaaaaaaaaaa\napi_keys_readonly: aaaaaaaaaaaaaaaa\n",

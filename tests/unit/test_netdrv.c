@@ -323,6 +323,19 @@ fx_stop(struct fx *f)
     f->l = NULL;
 }
 
+/* Stop the printer, then check its executed log against the job file: the
+   whole file, or (a job cancelled) a prefix of it; a failure names the
+   case's line. */
+#define FX_STOP_CHECK(f, job, whole) fx_stop_check(f, job, whole, __LINE__)
+static void
+fx_stop_check(struct fx *f, const char *job, bool whole, int line)
+{
+    fx_stop(f);
+    char why[300] = "";
+    if (log_matches(f->log, job, whole, why, sizeof(why)) < 0)
+        t_fail(__FILE__, line, "%s", why);
+}
+
 static bool
 fx_wait_state(struct fx *f, enum drv_state s)
 {
@@ -364,11 +377,7 @@ job_runs_once_each(enum kind kind)
     T_EQ_INT(f.d->status.lines_acked, f.d->status.lines_total);
     /* the printer's temperatures reach the farm (the machine sits at room temperature) */
     T_TRUE(f.d->status.nozzle_c > 10 && f.d->status.bed_c > 10);
-    fx_stop(&f);
-    char why[300] = "";
-    int n = log_matches(f.log, job, true, why, sizeof(why));
-    if (n < 0)
-        t_fail(__FILE__, __LINE__, "%s", why);
+    FX_STOP_CHECK(&f, job, true);
 }
 
 T_CASE(moonraker_job_runs_once_each)
@@ -418,11 +427,7 @@ pause_resume_cancel(enum kind kind)
     T_EQ_INT(f.rec.cancelled, 1);
     T_EQ_INT(f.rec.failed, 0);
     T_EQ_INT(f.d->status.state, DRV_IDLE);
-    fx_stop(&f);
-    char why[300] = "";
-    int n = log_matches(f.log, job, false, why, sizeof(why));
-    if (n < 0)
-        t_fail(__FILE__, __LINE__, "%s", why);
+    FX_STOP_CHECK(&f, job, false);
 }
 
 T_CASE(moonraker_pause_resume_cancel)
@@ -511,10 +516,7 @@ survives_5xx_and_cut_upload(enum kind kind)
     T_TRUE(fx_wait_end(&f, 1));
     T_EQ_INT(f.rec.done, 1);
     T_EQ_INT(f.rec.failed, 0);
-    fx_stop(&f);
-    char why[300] = "";
-    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
-        t_fail(__FILE__, __LINE__, "%s", why);
+    FX_STOP_CHECK(&f, job, true);
 }
 
 T_CASE(moonraker_survives_5xx_and_cut_upload)
@@ -639,10 +641,7 @@ T_CASE(prusalink_digest_auth)
     T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
     T_TRUE(fx_wait_end(&f, 1));
     T_EQ_INT(f.rec.done, 1);
-    fx_stop(&f);
-    char why[300] = "";
-    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
-        t_fail(__FILE__, __LINE__, "%s", why);
+    FX_STOP_CHECK(&f, job, true);
     /* a wrong password is an authentication error, not "offline" for no reason */
     T_OK(fx_start(&f, PRUSALINK, "s3cret", NULL, NULL, "maker", "guess", &err), &err);
     T_TRUE(fx_wait_state(&f, DRV_OFFLINE));
@@ -700,10 +699,7 @@ reattach(enum kind kind)
     T_TRUE(run_until(f.l, job_ended, &w));
     T_EQ_INT(r2.done, 1);
     T_EQ_INT(f.d->status.lines_acked, f.d->status.lines_total);
-    fx_stop(&f);
-    char why[300] = "";
-    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
-        t_fail(__FILE__, __LINE__, "%s", why);
+    FX_STOP_CHECK(&f, job, true);
 }
 
 T_CASE(moonraker_reattach_after_restart)
@@ -775,10 +771,7 @@ outage_then_attach(enum kind kind)
     T_OK(f.d->ops->attach(f.d, job, NULL, &err), &err);
     T_TRUE(fx_wait_end(&f, 1));
     T_EQ_INT(f.rec.done, 1);
-    fx_stop(&f);
-    char why[300] = "";
-    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
-        t_fail(__FILE__, __LINE__, "%s", why);
+    FX_STOP_CHECK(&f, job, true);
 }
 
 T_CASE(moonraker_outage_then_attach)

@@ -17,19 +17,13 @@
 #include "../../src/geom/measure.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
+#include "slice_run.h"
+#include "slice_shapes.h"
 
 static double
 fil_area(const struct slice_profile *p)
 {
     return M_PI * p->filament_mm * p->filament_mm / 4;
-}
-
-static int
-slice_to(const struct mesh *m, const struct slice_profile *p, const char *name,
-         struct slice_result *r, char *path, size_t cap, struct sf_err *err)
-{
-    snprintf(path, cap, "%s/%s.gcode", t_tmpdir(), name);
-    return slice_mesh(m, p, path, r, NULL, NULL, err);
 }
 
 T_CASE(slice_cube_extrudes_its_volume)
@@ -46,7 +40,7 @@ T_CASE(slice_cube_extrudes_its_volume)
     /* solid: every mm^3 of the cube is extruded */
     p.infill_density = 1;
     T_TRUE(slice_profile_set(&p, "infill_pattern=rectilinear", &err) == SF_OK);
-    T_OK(slice_to(&m, &p, "cube_solid", &r, path, sizeof(path), &err), &err);
+    T_OK(ts_slice(&m, &p, "cube_solid", &r, path, sizeof(path), &err), &err);
     T_EQ_INT(r.n_layers, 100);
     double v = r.filament_mm * fil_area(&p);
     T_TRUE(fabs(v - 8000) < 0.03 * 8000);
@@ -55,7 +49,7 @@ T_CASE(slice_cube_extrudes_its_volume)
     p.infill_density = 0.15;
     p.infill_anchor_mm = 0;
     T_TRUE(slice_profile_set(&p, "infill_pattern=grid", &err) == SF_OK);
-    T_OK(slice_to(&m, &p, "cube_grid", &r, path, sizeof(path), &err), &err);
+    T_OK(ts_slice(&m, &p, "cube_grid", &r, path, sizeof(path), &err), &err);
     double sp = tp_spacing(p.width_mm, 0.2);
     double a = 20 - 2 * (p.width_mm / 2 + (p.perimeters - 1) * sp + sp / 2);
     int sparse_layers = 100 - p.top_layers - p.bottom_layers;
@@ -105,7 +99,7 @@ T_CASE(slice_tee_supports_arms_only)
     T_OK(slice_profile_default(&p), NULL);
     char path[512];
     struct slice_result r;
-    T_OK(slice_to(&m, &p, "tee", &r, path, sizeof(path), &err), &err);
+    T_OK(ts_slice(&m, &p, "tee", &r, path, sizeof(path), &err), &err);
     T_TRUE(r.n_columns > 0);
     T_EQ_INT(r.n_island_columns, 0);
     /* the regions printed agree with the metrics module's ray-cast volume */
@@ -142,32 +136,10 @@ T_CASE(slice_tee_supports_arms_only)
     estimate_release(&e);
     /* without support, no support at all */
     p.support = false;
-    T_OK(slice_to(&m, &p, "tee_off", &r, path, sizeof(path), &err), &err);
+    T_OK(ts_slice(&m, &p, "tee_off", &r, path, sizeof(path), &err), &err);
     T_EQ_DBL(r.support_mm, 0, 1e-12);
     slice_profile_release(&p);
     mesh_release(&m);
-}
-
-/* Append b's triangles to m. */
-static int
-merge(struct mesh *m, const struct mesh *b)
-{
-    struct vec3 *nv = mem_realloc_array(m->v, m->n_verts + b->n_verts, sizeof(*nv));
-    if (!nv)
-        return SF_ENOMEM;
-    m->v = nv;
-    uint32_t(*nt)[3] = mem_realloc_array(m->t, m->n_tris + b->n_tris, sizeof(*nt));
-    if (!nt)
-        return SF_ENOMEM;
-    m->t = nt;
-    for (uint32_t i = 0; i < b->n_verts; i++)
-        m->v[m->n_verts + i] = b->v[i];
-    for (uint32_t i = 0; i < b->n_tris; i++)
-        for (int k = 0; k < 3; k++)
-            m->t[m->n_tris + i][k] = b->t[i][k] + m->n_verts;
-    m->n_verts += b->n_verts;
-    m->n_tris += b->n_tris;
-    return SF_OK;
 }
 
 T_CASE(slice_island_gets_support)
@@ -182,12 +154,12 @@ T_CASE(slice_island_gets_support)
     double r[3] = { 0, 5, 0 }, z[3] = { 0, 10, 20 };
     T_OK(shape_revolve(&b, r, z, 3, 4, &err), &err);
     mesh_translate(&b, v3(0, 0, 7));
-    T_OK(merge(&m, &b), NULL);
+    T_OK(ts_merge(&m, &b), NULL);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
     char path[512];
     struct slice_result res;
-    T_OK(slice_to(&m, &p, "island", &res, path, sizeof(path), &err), &err);
+    T_OK(ts_slice(&m, &p, "island", &res, path, sizeof(path), &err), &err);
     /* the support model's layer rule finds the tip itself (no neighbouring
        column is solid below it), so the island pass has nothing left to add */
     if (res.n_columns + res.n_island_columns < 1 || res.n_columns + res.n_island_columns > 6)
@@ -200,7 +172,7 @@ T_CASE(slice_island_gets_support)
     T_TRUE(res.support_g > 0);
     /* with supports off nothing */
     p.support = false;
-    T_OK(slice_to(&m, &p, "island_off", &res, path, sizeof(path), &err), &err);
+    T_OK(ts_slice(&m, &p, "island_off", &res, path, sizeof(path), &err), &err);
     T_EQ_DBL(res.support_volume_mm3, 0, 1e-12);
     slice_profile_release(&p);
     mesh_release(&m);
@@ -331,7 +303,7 @@ T_CASE(slice_rejects_part_larger_than_bed)
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
     char path[512];
-    T_ERR(slice_to(&m, &p, "big", NULL, path, sizeof(path), &err), SF_EINVAL, &err, "does not fit");
+    T_ERR(ts_slice(&m, &p, "big", NULL, path, sizeof(path), &err), SF_EINVAL, &err, "does not fit");
     slice_profile_release(&p);
     mesh_release(&m);
 }
@@ -362,7 +334,7 @@ T_CASE(slice_shared_mesh_stays_on_bed)
     T_OK(slice_profile_default(&p), NULL);
     char out[512];
     struct slice_result r;
-    T_OK(slice_to(&m, &p, "anchor", &r, out, sizeof(out), &err), &err);
+    T_OK(ts_slice(&m, &p, "anchor", &r, out, sizeof(out), &err), &err);
     T_TRUE(r.n_layers > 100 && r.support_g > 0 && r.filament_g > r.support_g);
     struct buf b;
     buf_init(&b, 0);
@@ -417,7 +389,7 @@ T_CASE(slice_m73_progress_is_monotone)
     T_OK(slice_profile_default(&p), NULL);
     char path[512];
     struct slice_result r;
-    T_OK(slice_to(&m, &p, "arch", &r, path, sizeof(path), &err), &err);
+    T_OK(ts_slice(&m, &p, "arch", &r, path, sizeof(path), &err), &err);
     FILE *f = fopen(path, "r");
     T_TRUE(f != NULL);
     char line[512];
@@ -453,12 +425,12 @@ T_CASE(slice_prints_island_by_island)
     mesh_init(&b);
     T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 5), &err), &err);
     T_OK(shape_box(&b, v3(30, 0, 0), v3(40, 10, 5), &err), &err);
-    T_OK(merge(&m, &b), NULL);
+    T_OK(ts_merge(&m, &b), NULL);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
     char path[512];
     struct slice_result r;
-    T_OK(slice_to(&m, &p, "posts", &r, path, sizeof(path), &err), &err);
+    T_OK(ts_slice(&m, &p, "posts", &r, path, sizeof(path), &err), &err);
     FILE *f = fopen(path, "r");
     T_TRUE(f != NULL);
     char line[512];

@@ -17,6 +17,7 @@
 #include "../../src/base/mem.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
+#include "slice_run.h"
 
 struct seg {
     double x0, y0, x1, y1;
@@ -98,17 +99,6 @@ pt_seg(double px, double py, const struct seg *s)
     return hypot(s->x0 + t * dx - px, s->y0 + t * dy - py);
 }
 
-static int
-slice_text(const struct mesh *m, const struct slice_profile *p, const char *name, struct buf *b,
-           struct slice_result *r, struct sf_err *err)
-{
-    char path[512];
-    snprintf(path, sizeof(path), "%s/%s.gcode", t_tmpdir(), name);
-    int rc = slice_mesh(m, p, path, r, NULL, NULL, err);
-    buf_init(b, 0);
-    return rc < 0 ? rc : buf_read_file(b, path, err);
-}
-
 static void
 check_part(const struct mesh *m, const char *name, double min_ratio)
 {
@@ -120,10 +110,10 @@ check_part(const struct mesh *m, const char *name, double min_ratio)
     struct slice_result ra, rl;
     char nm[64];
     snprintf(nm, sizeof(nm), "%s_arcs", name);
-    T_OK(slice_text(m, &p, nm, &arcs, &ra, &err), &err);
+    T_OK(ts_slice_text(m, &p, nm, &arcs, &ra, &err), &err);
     p.arc_fitting = false;
     snprintf(nm, sizeof(nm), "%s_lines", name);
-    T_OK(slice_text(m, &p, nm, &lines, &rl, &err), &err);
+    T_OK(ts_slice_text(m, &p, nm, &lines, &rl, &err), &err);
     struct walk wa, wl;
     T_OK(walk_file(&arcs, &wa), NULL);
     T_OK(walk_file(&lines, &wl), NULL);

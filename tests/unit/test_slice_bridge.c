@@ -13,27 +13,8 @@
 #include "../../src/base/mem.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
-
-static int
-merge(struct mesh *m, const struct mesh *b)
-{
-    struct vec3 *nv = mem_realloc_array(m->v, m->n_verts + b->n_verts, sizeof(*nv));
-    if (!nv)
-        return SF_ENOMEM;
-    m->v = nv;
-    uint32_t(*nt)[3] = mem_realloc_array(m->t, m->n_tris + b->n_tris, sizeof(*nt));
-    if (!nt)
-        return SF_ENOMEM;
-    m->t = nt;
-    for (uint32_t i = 0; i < b->n_verts; i++)
-        m->v[m->n_verts + i] = b->v[i];
-    for (uint32_t i = 0; i < b->n_tris; i++)
-        for (int k = 0; k < 3; k++)
-            m->t[m->n_tris + i][k] = b->t[i][k] + m->n_verts;
-    m->n_verts += b->n_verts;
-    m->n_tris += b->n_tris;
-    return SF_OK;
-}
+#include "slice_run.h"
+#include "slice_shapes.h"
 
 struct dir {
     double along_x, along_y; /* bridge extrusion length by main direction */
@@ -71,33 +52,21 @@ bridge_dir(bool turn, struct dir *d, struct sf_err *err)
         rc = turn ? shape_box(&b, v3(0, L - 5, 0), v3(W, L, 6), err)
                   : shape_box(&b, v3(L - 5, 0, 0), v3(L, W, 6), err);
     if (rc == SF_OK)
-        rc = merge(&m, &b);
+        rc = ts_merge(&m, &b);
     mesh_release(&b);
     mesh_init(&b);
     if (rc == SF_OK)
         rc = turn ? shape_box(&b, v3(0, 0, 6), v3(W, L, 8), err)
                   : shape_box(&b, v3(0, 0, 6), v3(L, W, 8), err);
     if (rc == SF_OK)
-        rc = merge(&m, &b);
+        rc = ts_merge(&m, &b);
     struct slice_profile p;
     if (rc == SF_OK && (rc = slice_profile_default(&p)) == SF_OK) {
         p.support = false;
         p.skirts = 0;
         p.brim_auto = false;
-        char path[512];
-        snprintf(path, sizeof(path), "%s/bridge%d.gcode", t_tmpdir(), turn);
         memset(d, 0, sizeof(*d));
-        rc = slice_mesh(&m, &p, path, NULL, NULL, NULL, err);
-        struct buf t;
-        buf_init(&t, 0);
-        if (rc == SF_OK && (rc = buf_read_file(&t, path, err)) == SF_OK) {
-            struct est_limits lim;
-            slice_limits(&p, &lim);
-            struct estimate e;
-            rc = estimate_gcode(t.data, t.len, "bridge", &lim, on_move, d, &e, err);
-            estimate_release(&e);
-        }
-        buf_release(&t);
+        rc = ts_slice_walk(&m, &p, turn ? "bridge1" : "bridge0", NULL, on_move, d, err);
         slice_profile_release(&p);
     }
     mesh_release(&m);

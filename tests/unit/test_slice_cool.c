@@ -18,42 +18,8 @@
 #include "../../src/base/mem.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
-
-/* Append b's triangles to m. */
-static int
-merge(struct mesh *m, const struct mesh *b)
-{
-    struct vec3 *nv = mem_realloc_array(m->v, m->n_verts + b->n_verts, sizeof(*nv));
-    if (!nv)
-        return SF_ENOMEM;
-    m->v = nv;
-    uint32_t(*nt)[3] = mem_realloc_array(m->t, m->n_tris + b->n_tris, sizeof(*nt));
-    if (!nt)
-        return SF_ENOMEM;
-    m->t = nt;
-    for (uint32_t i = 0; i < b->n_verts; i++)
-        m->v[m->n_verts + i] = b->v[i];
-    for (uint32_t i = 0; i < b->n_tris; i++)
-        for (int k = 0; k < 3; k++)
-            m->t[m->n_tris + i][k] = b->t[i][k] + m->n_verts;
-    m->n_verts += b->n_verts;
-    m->n_tris += b->n_tris;
-    return SF_OK;
-}
-
-static int
-slice_read(const struct mesh *m, const struct slice_profile *p, const char *name, struct buf *text,
-           struct sf_err *err)
-{
-    char path[512];
-    snprintf(path, sizeof(path), "%s/%s.gcode", t_tmpdir(), name);
-    struct slice_result r;
-    int rc = slice_mesh(m, p, path, &r, NULL, NULL, err);
-    if (rc < 0)
-        return rc;
-    buf_init(text, 0);
-    return buf_read_file(text, path, err);
-}
+#include "slice_run.h"
+#include "slice_shapes.h"
 
 struct layer_feeds {
     double min_f[512];    /* slowest extrusion feed per layer, mm/s */
@@ -126,7 +92,7 @@ T_CASE(cool_cube_layers_last_the_minimum_layer_time)
     struct layer_feeds lf;
     /* without cooling most layers of a 10 mm cube are much shorter */
     p.cooling = false;
-    T_OK(slice_read(&m, &p, "cool_off", &text, &err), &err);
+    T_OK(ts_slice_text(&m, &p, "cool_off", &text, NULL, &err), &err);
     T_OK(estimate_text(&text, &p, &lf, &e, &err), &err);
     T_EQ_INT(e.n_layers, 50);
     uint32_t n_short = 0;
@@ -139,7 +105,7 @@ T_CASE(cool_cube_layers_last_the_minimum_layer_time)
     buf_release(&text);
     /* with it every layer lasts at least 15 s in the estimator */
     p.cooling = true;
-    T_OK(slice_read(&m, &p, "cool_on", &text, &err), &err);
+    T_OK(ts_slice_text(&m, &p, "cool_on", &text, NULL, &err), &err);
     T_OK(estimate_text(&text, &p, &lf, &e, &err), &err);
     T_EQ_INT(e.n_layers, 50);
     for (uint32_t k = 0; k < e.n_layers; k++) {
@@ -180,7 +146,7 @@ T_CASE(cool_slowdown_stops_at_min_print_speed)
     struct buf text;
     struct estimate e;
     struct layer_feeds lf;
-    T_OK(slice_read(&m, &p, "cool_floor", &text, &err), &err);
+    T_OK(ts_slice_text(&m, &p, "cool_floor", &text, NULL, &err), &err);
     T_OK(estimate_text(&text, &p, &lf, &e, &err), &err);
     for (uint32_t k = 0; k < lf.n_layers; k++) {
         /* every programmed speed is 15 mm/s or more, so none falls below the floor */
@@ -254,7 +220,7 @@ T_CASE(cool_fan_follows_layer_time)
     struct buf text;
     struct estimate e;
     struct layer_feeds lf;
-    T_OK(slice_read(&m, &p, "cool_fan", &text, &err), &err);
+    T_OK(ts_slice_text(&m, &p, "cool_fan", &text, NULL, &err), &err);
     T_OK(estimate_text(&text, &p, &lf, &e, &err), &err);
     struct fan_seen fs;
     scan_fans(&text, &fs);
@@ -317,17 +283,17 @@ T_CASE(cool_fan_ramps_and_bridges)
     mesh_init(&b);
     T_OK(shape_box(&m, v3(0, 0, 0), v3(5, 10, 6), &err), &err);
     T_OK(shape_box(&b, v3(15, 0, 0), v3(20, 10, 6), &err), &err);
-    T_OK(merge(&m, &b), NULL);
+    T_OK(ts_merge(&m, &b), NULL);
     mesh_release(&b);
     mesh_init(&b);
     T_OK(shape_box(&b, v3(0, 0, 6), v3(20, 10, 8), &err), &err);
-    T_OK(merge(&m, &b), NULL);
+    T_OK(ts_merge(&m, &b), NULL);
     p.support = false;
     p.fan_always_on = true;
     p.min_fan_pct = p.max_fan_pct = 30;
     p.overhangs = false; /* the loops over the gap: test_slice_overhang */
     struct buf text;
-    T_OK(slice_read(&m, &p, "cool_bridge", &text, &err), &err);
+    T_OK(ts_slice_text(&m, &p, "cool_bridge", &text, NULL, &err), &err);
     struct fan_seen fs;
     scan_fans(&text, &fs);
     int n_bridge = 0;

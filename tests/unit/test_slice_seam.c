@@ -13,6 +13,7 @@
 #include "../../src/base/buf.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
+#include "slice_run.h"
 
 struct seams {
     double x[1024], y[1024]; /* where each external perimeter starts */
@@ -41,23 +42,8 @@ static int
 seams_of(const struct mesh *m, const struct slice_profile *p, const char *name, struct seams *s,
          struct sf_err *err)
 {
-    char path[512];
-    snprintf(path, sizeof(path), "%s/%s.gcode", t_tmpdir(), name);
     memset(s, 0, sizeof(*s));
-    int rc = slice_mesh(m, p, path, NULL, NULL, NULL, err);
-    if (rc < 0)
-        return rc;
-    struct buf b;
-    buf_init(&b, 0);
-    if ((rc = buf_read_file(&b, path, err)) == SF_OK) {
-        struct est_limits lim;
-        slice_limits(p, &lim);
-        struct estimate e;
-        rc = estimate_gcode(b.data, b.len, name, &lim, on_move, s, &e, err);
-        estimate_release(&e);
-    }
-    buf_release(&b);
-    return rc;
+    return ts_slice_walk(m, p, name, NULL, on_move, s, err);
 }
 
 /* Largest distance between two seams. */

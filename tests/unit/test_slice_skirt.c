@@ -16,6 +16,7 @@
 #include "../../src/base/mem.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
+#include "slice_run.h"
 
 struct seg {
     double x0, y0, x1, y1;
@@ -75,23 +76,8 @@ static int
 slice_first_layer(const struct mesh *m, const struct slice_profile *p, const char *name,
                   struct slice_result *r, struct first_layer *f, struct sf_err *err)
 {
-    char path[512];
-    snprintf(path, sizeof(path), "%s/%s.gcode", t_tmpdir(), name);
     memset(f, 0, sizeof(*f));
-    int rc = slice_mesh(m, p, path, r, NULL, NULL, err);
-    if (rc < 0)
-        return rc;
-    struct buf b;
-    buf_init(&b, 0);
-    if ((rc = buf_read_file(&b, path, err)) == SF_OK) {
-        struct est_limits lim;
-        slice_limits(p, &lim);
-        struct estimate e;
-        rc = estimate_gcode(b.data, b.len, name, &lim, on_move, f, &e, err);
-        estimate_release(&e);
-    }
-    buf_release(&b);
-    return rc;
+    return ts_slice_walk(m, p, name, r, on_move, f, err);
 }
 
 /* Distance from (x, y) to the axis-aligned rectangle [x0,x1] x [y0,y1] (0 inside). */

@@ -16,6 +16,7 @@
 #include "../../src/base/buf.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
+#include "slice_run.h"
 
 struct gaps {
     double gap_mm;  /* filament of gap fill */
@@ -53,22 +54,12 @@ slice_wall(double wall_mm, bool gap_fill, struct slice_result *r, struct gaps *g
         p.skirts = 0;
         p.brim_auto = false;
         p.gap_fill = gap_fill;
-        char path[512];
-        snprintf(path, sizeof(path), "%s/wall%g%s.gcode", t_tmpdir(), wall_mm, gap_fill ? "" : "-");
-        rc = slice_mesh(&m, &p, path, r, NULL, NULL, err);
-        struct buf b;
-        buf_init(&b, 0);
+        char name[64];
+        snprintf(name, sizeof(name), "wall%g%s", wall_mm, gap_fill ? "" : "-");
         memset(g, 0, sizeof(*g));
         g->x0 = INFINITY;
         g->x1 = -INFINITY;
-        if (rc == SF_OK && (rc = buf_read_file(&b, path, err)) == SF_OK) {
-            struct est_limits lim;
-            slice_limits(&p, &lim);
-            struct estimate e;
-            rc = estimate_gcode(b.data, b.len, "wall", &lim, on_move, g, &e, err);
-            estimate_release(&e);
-        }
-        buf_release(&b);
+        rc = ts_slice_walk(&m, &p, name, r, on_move, g, err);
         slice_profile_release(&p);
     }
     mesh_release(&m);

@@ -2,8 +2,11 @@
 # simulated printers: start sims and the daemon, make parts, talk to the
 # API, and check each printer's executed log against the stored G-code of
 # the prints it ran (check_farm_logs).  Sourced, not run.  Needs $BUILD;
-# sets $tmp (removed on exit), $port, $RW, SLIMFARM_URL, SLIMFARM_API_KEY.
+# sets $tmp (removed on exit), $RW, SLIMFARM_API_KEY, and $port: 0, the
+# port a test's farm.ini listens on (the kernel picks one, lib/daemon.sh);
+# start_daemon sets $http_port and SLIMFARM_URL to the daemon's.
 set -u
+. "$(dirname "${BASH_SOURCE[0]}")/daemon.sh"
 D=$BUILD/bin/slimfarmd
 C=$BUILD/bin/slimfarm
 S=$BUILD/bin/slimfarm-sim
@@ -19,19 +22,22 @@ cleanup() {
 trap cleanup EXIT
 fail() { echo "FAIL: $*"; echo "--- daemon log (tail)"; tail -30 "$tmp/log" 2>/dev/null; exit 1; }
 
-port=$((20000 + RANDOM % 20000))
+port=0
+http_port=
 RW=rw-key-0123456789abcdef
-export SLIMFARM_URL=http://127.0.0.1:$port SLIMFARM_API_KEY=$RW
+export SLIMFARM_API_KEY=$RW
 
 # start_sim NAME ARGS...: a fast simulated Marlin logging to $tmp/NAME.log; its
 # address (pty:PATH or tcp://...) lands in $tmp/NAME.addr.
 start_sim() {
   local name=$1; shift
+  rm -f "$tmp/$name.out" # a restarted sim must not be read from its last run's file
   "$S" marlin --baud 1000000 --advanced-ok --log "$tmp/$name.log" "$@" \
     > "$tmp/$name.out" 2> "$tmp/$name.err" &
   sims+=($!)
   eval "sim_$name=$!"
-  for _ in $(seq 100); do [ -s "$tmp/$name.out" ] && break; sleep 0.05; done
+  local end=$((SECONDS + 30))
+  while [ ! -s "$tmp/$name.out" ] && [ $SECONDS -lt $end ]; do sleep 0.05; done
   local a; a=$(head -n 1 "$tmp/$name.out")
   [ -n "$a" ] || fail "sim $name did not start: $(cat "$tmp/$name.err")"
   case "$a" in /dev/*) a="pty:$a" ;; esac
@@ -44,11 +50,18 @@ stop_sims() {
   sims=()
 }
 
+# start_daemon: slimfarmd on $tmp/farm.ini, logging to $tmp/log; each start
+# (a restart too) listens on a port of its own, in $http_port and SLIMFARM_URL.
 start_daemon() {
-  "$D" -c "$tmp/farm.ini" >>"$tmp/log" 2>&1 &
-  pid=$!
+  daemon_start "$tmp/farm.ini" "$tmp/log" || fail "daemon did not come up"
   for _ in $(seq 200); do "$C" jobs >/dev/null 2>&1 && return 0; sleep 0.05; done
-  fail "daemon did not come up"
+  fail "daemon did not answer on $SLIMFARM_URL"
+}
+
+# pin_port: make the config listen on the running daemon's port, so a
+# restart by a program that keeps the URL (the browser test) comes back on it.
+pin_port() {
+  sed -i "s/^listen: \(.*\):0\$/listen: \1:$http_port/" "$tmp/farm.ini"
 }
 
 # tetra FILE SIZE: a right tetrahedron with legs of SIZE mm (a small, quick part).
@@ -79,6 +92,15 @@ wait_for() {
   return 1
 }
 
+# fetch_jobs: every job with its print history from the API, into
+# $tmp/job-ID.json (the list in $tmp/jobs.json), for the log checks.
+fetch_jobs() {
+  api /api/jobs > "$tmp/jobs.json"
+  for j in $(json '" ".join(str(x["id"]) for x in d["jobs"])' < "$tmp/jobs.json"); do
+    api "/api/jobs/$j" > "$tmp/job-$j.json"
+  done
+}
+
 # check_farm_logs PRINTER...: each printer's executed log equals, in order,
 # the commands of the stored G-code of every print it ran (from the API's
 # print history).  Besides the driver's own queries, the only other lines
@@ -87,10 +109,7 @@ wait_for() {
 # cancelled print's prefix, the resume preamble before a resumed print
 # (started at its start_line).  A job line lost, repeated or reordered fails.
 check_farm_logs() {
-  api /api/jobs > "$tmp/jobs.json"
-  for j in $(json '" ".join(str(x["id"]) for x in d["jobs"])' < "$tmp/jobs.json"); do
-    api "/api/jobs/$j" > "$tmp/job-$j.json"
-  done
+  fetch_jobs
   /usr/bin/python3 - "$tmp" "$@" <<'PY'
 import glob, json, os, re, sys
 tmp, printers = sys.argv[1], sys.argv[2:]

@@ -6,10 +6,12 @@
 # prusalink, octoprint) logging to $tmp/NAME.log; its URL lands in $tmp/NAME.addr.
 start_net() {
   local name=$1 kind=$2; shift 2
+  rm -f "$tmp/$name.out" # a restarted sim must not be read from its last run's file
   "$S" "$kind" --log "$tmp/$name.log" "$@" > "$tmp/$name.out" 2> "$tmp/$name.err" &
   sims+=($!)
   eval "sim_$name=$!"
-  for _ in $(seq 100); do [ -s "$tmp/$name.out" ] && break; sleep 0.05; done
+  local end=$((SECONDS + 30))
+  while [ ! -s "$tmp/$name.out" ] && [ $SECONDS -lt $end ]; do sleep 0.05; done
   local a; a=$(head -n 1 "$tmp/$name.out")
   [ -n "$a" ] || fail "sim $name did not start: $(cat "$tmp/$name.err")"
   echo "$a" > "$tmp/$name.addr"
@@ -24,10 +26,7 @@ start_net() {
 # host's M110 and M400 aside, nothing else: a job line lost, repeated or
 # reordered fails.
 check_net_logs() {
-  api /api/jobs > "$tmp/jobs.json"
-  for j in $(json '" ".join(str(x["id"]) for x in d["jobs"])' < "$tmp/jobs.json"); do
-    api "/api/jobs/$j" > "$tmp/job-$j.json"
-  done
+  fetch_jobs
   /usr/bin/python3 - "$tmp" "$@" <<'PY'
 import glob, json, os, re, sys
 tmp, printers = sys.argv[1], sys.argv[2:]
