@@ -39,6 +39,7 @@ struct httpc {
     uint64_t timer;            /* curl's timeout as a loop timer, 0 if none */
     uint64_t sweep;            /* pending sweep timer, 0 if none */
     int depth;                 /* > 0 while inside a curl_multi_* call */
+    bool nudging;              /* inside nudge(): its own REMOVEs ask for no other */
     struct httpc_req *reqs;    /* every live request (doubly linked) */
     struct httpc_req *done;    /* finished requests awaiting their callback (singly linked) */
     size_t n_active;           /* live requests not cancelled and not yet reported */
@@ -55,6 +56,7 @@ struct httpc_req {
     bool cancelled;                /* httpc_cancel called: never report */
     bool finished;                 /* curl is done with it; on the done list */
     bool in_done;                  /* its done callback is running */
+    bool nudge;                    /* curl dropped one of its sockets mid-transfer: see nudge() */
     CURLcode result;               /* curl's result once finished */
     struct curl_slist *hdrs;       /* request headers */
     curl_mime *mime;               /* multipart body, or NULL */
@@ -126,12 +128,18 @@ on_timeout(struct loop *l, void *ud)
 static int
 socket_cb(CURL *easy, curl_socket_t s, int what, void *userp, void *socketp)
 {
-    (void)easy;
     struct httpc *h = userp;
     if (what == CURL_POLL_REMOVE) {
         if (socketp)
             loop_del_fd(h->l, s);
         curl_multi_assign(h->multi, s, NULL);
+        struct httpc_req *r = NULL;
+        if (easy && !h->nudging &&
+            curl_easy_getinfo(easy, CURLINFO_PRIVATE, (char **)&r) == CURLE_OK && r &&
+            !r->finished && !r->cancelled) {
+            r->nudge = true; /* it may have nothing left to wait on: see nudge() */
+            sweep_soon(h);
+        }
         return 0;
     }
     unsigned ev = 0;
@@ -287,6 +295,33 @@ add_to_multi(struct httpc_req *r, struct sf_err *err)
     return SF_OK;
 }
 
+/*
+ * Make curl run r again.  libcurl before 8.4.0 (Debian 12 ships 7.88.1)
+ * can leave a transfer with nothing to wait on: when an FTP server answers
+ * PASV so fast that the DO phase ends within one call, the transfer moves
+ * to DOING_MORE and waits for "socket activity" on the data connection it
+ * has not opened yet (curl issue #12033, fixed by #12042).  With
+ * curl_multi_perform something else runs it soon; with multi_socket
+ * nothing does until its connect timeout: the FTPS upload stalled after
+ * PASV.  Pausing and unpausing is libcurl's public way to say "get this
+ * handle going again" (curl_easy_pause: Curl_expire(RUN_NOW) and a timer
+ * callback), and leaves the transfer's state as it was.  Asked for when
+ * curl drops a socket of a transfer that has not finished (socket_cb), so
+ * it costs one extra turn of that transfer at most per dropped socket.
+ */
+static void
+nudge(struct httpc_req *r)
+{
+    struct httpc *h = r->h;
+    r->nudge = false;
+    h->depth++;
+    h->nudging = true;
+    if (curl_easy_pause(r->easy, CURLPAUSE_ALL) == CURLE_OK)
+        curl_easy_pause(r->easy, CURLPAUSE_CONT);
+    h->nudging = false;
+    h->depth--;
+}
+
 static void
 on_sweep(struct loop *l, void *ud)
 {
@@ -300,6 +335,8 @@ on_sweep(struct loop *l, void *ud)
             continue;
         if (r->cancelled) {
             free_req(r);
+        } else if (r->nudge && r->added) {
+            nudge(r);
         } else if (!r->added) {
             struct sf_err err;
             if (add_to_multi(r, &err) < 0) {

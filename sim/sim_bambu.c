@@ -656,6 +656,8 @@ sim_bambu_fault_parse(struct sim_bambu_faults *f, const char *spec, struct sf_er
         f->storage_full = true;
     } else if (IS("no-reuse-check") && !eq) {
         f->no_reuse_check = true;
+    } else if (IS("pasv-early") && !eq) {
+        f->pasv_early = true;
     } else if (IS("ftps-drop") || IS("mqtt-drop")) {
         char *end;
         long long n = strtoll(v, &end, 10);
@@ -678,7 +680,7 @@ sim_bambu_fault_parse(struct sim_bambu_faults *f, const char *spec, struct sf_er
     } else {
         return sf_err_set(err, SF_EINVAL,
                           "unknown fault '%s' (unsigned, storage-full, ftps-drop=BYTES, "
-                          "no-reuse-check, hms=HEX16@PCT, stop-at=PCT, mqtt-drop=N)",
+                          "no-reuse-check, pasv-early, hms=HEX16@PCT, stop-at=PCT, mqtt-drop=N)",
                           spec);
     }
 #undef IS
@@ -742,7 +744,8 @@ sim_bambu_new(struct loop *l, const struct sim_bambu_config *c, struct sf_err *e
                                   .password = s->code,
                                   .storage_full = c->faults.storage_full,
                                   .drop_after = c->faults.ftps_drop,
-                                  .no_reuse_check = c->faults.no_reuse_check };
+                                  .no_reuse_check = c->faults.no_reuse_check,
+                                  .pasv_early = c->faults.pasv_early };
     s->ftps = sim_ftps_new(&fc, err);
     if (!s->ftps)
         goto fail;

@@ -553,6 +553,38 @@ T_CASE(bambu_storage_full_fails_the_job)
     teardown(&r);
 }
 
+/*
+ * The FTPS server's 227 is already there when the driver's PASV goes out
+ * (the simulator sends it with the PWD reply): libcurl 7.88 then ends its DO
+ * phase within one call and waits for a data socket it has not opened, so
+ * on the old httpc every such upload stalled until its connect timeout and
+ * the job failed ("1 upload in 6 stalls after PASV" in the daemon, where a
+ * loaded loop let the real answer arrive first).  httpc nudges the transfer
+ * (httpc.c, nudge()); both jobs upload and finish.
+ */
+T_CASE(bambu_upload_goes_on_when_the_pasv_answer_is_already_there)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .fault = "pasv-early", .speed = 300 };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 2, 20);
+    struct sf_err err;
+    for (int i = 1; i <= 2; i++) {
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+        T_TRUE(WAIT_FOR(&r, r.done == i || r.failed));
+        if (r.failed)
+            fprintf(stderr, "job %d failed: %s\n", i, r.failed_msg);
+        T_EQ_INT(r.failed, 0);
+    }
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.uploads, 2);
+    T_EQ_INT(ss.jobs_finished, 2);
+    teardown(&r);
+}
+
 T_CASE(bambu_ftps_refuses_data_without_session_reuse)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
