@@ -101,6 +101,8 @@ reply(struct session *s, const char *fmt, ...)
         n = (int)sizeof(line) - 3;
     line[n++] = '\r';
     line[n++] = '\n';
+    if (s->f->c.reply_delay_ms > 0) /* this client's own thread: sleeping blocks no one else */
+        poll(NULL, 0, s->f->c.reply_delay_ms);
     return SSL_write(s->ssl, line, n) == n ? 0 : -1;
 }
 
