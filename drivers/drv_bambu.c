@@ -158,8 +158,12 @@ pushall(struct bambu *b)
 {
     json_t *o = json_pack("{s:s,s:i,s:i}", "command", "pushall", "version", 1, "push_target", 1);
     if (request(b, "pushing", o, NULL, NULL) == SF_OK) {
+        int64_t now = loop_now_ms(b->d.loop);
+        if (b->stats.pushalls > 0 &&
+            (b->stats.pushall_gap_ms < 0 || now - b->last_pushall_ms < b->stats.pushall_gap_ms))
+            b->stats.pushall_gap_ms = now - b->last_pushall_ms;
         b->stats.pushalls++;
-        b->last_pushall_ms = loop_now_ms(b->d.loop);
+        b->last_pushall_ms = now;
     }
 }
 
@@ -476,6 +480,8 @@ ftps_opts(CURL *e, void *ud)
                            (long)(CURL_SSLVERSION_TLSv1_2 | CURL_SSLVERSION_MAX_TLSv1_2));
     rc |= curl_easy_setopt(e, CURLOPT_FTP_SKIP_PASV_IP, 1L);
     rc |= curl_easy_setopt(e, CURLOPT_FTP_USE_EPSV, 0L); /* EPSV is unverified on printers */
+    if (log_trace_enabled("ftps")) /* SLIMFARM_TRACE=ftps: curl's own account on stderr */
+        rc |= curl_easy_setopt(e, CURLOPT_VERBOSE, 1L);
     if (b->insecure) {
         rc |= curl_easy_setopt(e, CURLOPT_SSL_VERIFYPEER, 0L);
         rc |= curl_easy_setopt(e, CURLOPT_SSL_VERIFYHOST, 0L);
@@ -908,6 +914,7 @@ drv_bambu_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_even
     }
     b->d.ops = &bambu_ops;
     b->d.loop = l;
+    b->stats.pushall_gap_ms = -1;
     snprintf(b->d.name, sizeof(b->d.name), "%s", name);
     b->d.on_event = on_event;
     b->d.ud = ud;

@@ -25,14 +25,15 @@
 #include "drv.h"
 
 struct drv_bambu_stats {
-    uint64_t reports;     /* report messages merged */
-    uint64_t pushalls;    /* pushall requests sent */
-    uint64_t requests;    /* other requests sent */
-    uint64_t connects;    /* MQTT sessions that came up */
-    uint64_t uploads;     /* packages uploaded */
-    char gcode_state[16]; /* the printer's last gcode_state */
-    int mc_percent;       /* and progress */
-    int remaining_min;    /* mc_remaining_time */
+    uint64_t reports;       /* report messages merged */
+    uint64_t pushalls;      /* pushall requests sent */
+    int64_t pushall_gap_ms; /* shortest time between two of them (loop clock), -1 until two */
+    uint64_t requests;      /* other requests sent */
+    uint64_t connects;      /* MQTT sessions that came up */
+    uint64_t uploads;       /* packages uploaded */
+    char gcode_state[16];   /* the printer's last gcode_state */
+    int mc_percent;         /* and progress */
+    int remaining_min;      /* mc_remaining_time */
     int layer_num, total_layer_num;
 };
 

@@ -38,7 +38,9 @@ struct httpc {
     CURLM *multi;              /* the one multi handle */
     uint64_t timer;            /* curl's timeout as a loop timer, 0 if none */
     uint64_t sweep;            /* pending sweep timer, 0 if none */
+    uint64_t kick;             /* FTP set-up kick timer (kick()), 0 if none */
     int depth;                 /* > 0 while inside a curl_multi_* call */
+    bool nudging;              /* inside nudge(): its own REMOVEs ask for no other */
     struct httpc_req *reqs;    /* every live request (doubly linked) */
     struct httpc_req *done;    /* finished requests awaiting their callback (singly linked) */
     size_t n_active;           /* live requests not cancelled and not yet reported */
@@ -55,6 +57,9 @@ struct httpc_req {
     bool cancelled;                /* httpc_cancel called: never report */
     bool finished;                 /* curl is done with it; on the done list */
     bool in_done;                  /* its done callback is running */
+    bool nudge;                    /* curl dropped one of its sockets mid-transfer: see nudge() */
+    bool ftp;                      /* ftp:// or ftps:// (kick()) */
+    bool body_started;             /* read_cb has been asked for body bytes */
     CURLcode result;               /* curl's result once finished */
     struct curl_slist *hdrs;       /* request headers */
     curl_mime *mime;               /* multipart body, or NULL */
@@ -76,6 +81,9 @@ struct httpc_req {
     char errbuf[CURL_ERROR_SIZE];  /* curl's detail */
 };
 
+/* FTP set-up kick period (on_kick): a few round trips on a LAN, so a tenth of a second. */
+#define FTP_KICK_MS 100
+
 static pthread_once_t global_once = PTHREAD_ONCE_INIT;
 static CURLcode global_rc = CURLE_OK;
 static pthread_mutex_t shared_lock = PTHREAD_MUTEX_INITIALIZER;
@@ -89,6 +97,7 @@ global_init(void)
 
 static void sweep_soon(struct httpc *h);
 static void collect(struct httpc *h);
+static void on_kick(struct loop *l, void *ud);
 
 /* ---- curl -> loop ---- */
 
@@ -126,12 +135,18 @@ on_timeout(struct loop *l, void *ud)
 static int
 socket_cb(CURL *easy, curl_socket_t s, int what, void *userp, void *socketp)
 {
-    (void)easy;
     struct httpc *h = userp;
     if (what == CURL_POLL_REMOVE) {
         if (socketp)
             loop_del_fd(h->l, s);
         curl_multi_assign(h->multi, s, NULL);
+        struct httpc_req *r = NULL;
+        if (easy && !h->nudging &&
+            curl_easy_getinfo(easy, CURLINFO_PRIVATE, (char **)&r) == CURLE_OK && r &&
+            !r->finished && !r->cancelled) {
+            r->nudge = true; /* it may have nothing left to wait on: see nudge() */
+            sweep_soon(h);
+        }
         return 0;
     }
     unsigned ev = 0;
@@ -202,6 +217,7 @@ read_cb(char *ptr, size_t size, size_t nmemb, void *ud)
 {
     struct httpc_req *r = ud;
     size_t want = size * nmemb;
+    r->body_started = true;
     if (r->cancelled)
         return CURL_READFUNC_ABORT;
     if (r->fp) {
@@ -284,7 +300,64 @@ add_to_multi(struct httpc_req *r, struct sf_err *err)
     if (mc != CURLM_OK)
         return sf_err_set(err, SF_ENOMEM, "%s %s: %s", r->method, r->url, curl_multi_strerror(mc));
     r->added = true;
+    if (r->ftp && !h->kick)
+        h->kick = loop_timer_add(h->l, FTP_KICK_MS, on_kick, h);
     return SF_OK;
+}
+
+/*
+ * Make curl run r again.  libcurl before 8.4.0 (Debian 12 ships 7.88.1)
+ * can leave a transfer with nothing to wait on: when an FTP server answers
+ * PASV so fast that the DO phase ends within one call, the transfer moves
+ * to DOING_MORE and waits for "socket activity" on the data connection it
+ * has not opened yet (curl issue #12033, fixed by #12042).  With
+ * curl_multi_perform something else runs it soon; with multi_socket
+ * nothing does until its connect timeout: the FTPS upload stalled after
+ * PASV.  Pausing and unpausing is libcurl's public way to say "get this
+ * handle going again" (curl_easy_pause: Curl_expire(RUN_NOW) and a timer
+ * callback), and leaves the transfer's state as it was.  Asked for when
+ * curl drops a socket of a transfer that has not finished (socket_cb), so
+ * it costs one extra turn of that transfer at most per dropped socket.
+ */
+static void
+nudge(struct httpc_req *r)
+{
+    struct httpc *h = r->h;
+    r->nudge = false;
+    h->depth++;
+    h->nudging = true;
+    if (curl_easy_pause(r->easy, CURLPAUSE_ALL) == CURLE_OK)
+        curl_easy_pause(r->easy, CURLPAUSE_CONT);
+    h->nudging = false;
+    h->depth--;
+}
+
+/*
+ * Run every FTP transfer still setting up (its body not yet asked for)
+ * every FTP_KICK_MS.  libcurl 7.88 connects an FTPS data connection's TCP
+ * and TLS as one, and while the TLS is unfinished it polls only the data
+ * socket; vsftpd (and an X1) start that TLS only after STOR, and the
+ * replies to TYPE and STOR come on the control connection, which curl then
+ * reads only when it runs for some other reason: an upload whose TYPE I
+ * answer came a moment after curl looked waited for its connect timeout
+ * ("SSL connection timeout", farmd_bambu_crash's second job).  Each kick
+ * costs one non-blocking turn of the transfer; set-up lasts a few round
+ * trips.
+ */
+static void
+on_kick(struct loop *l, void *ud)
+{
+    struct httpc *h = ud;
+    h->kick = 0;
+    bool any = false;
+    for (struct httpc_req *r = h->reqs; r; r = r->next) {
+        if (r->ftp && r->added && !r->finished && !r->cancelled && !r->body_started) {
+            nudge(r);
+            any = true;
+        }
+    }
+    if (any)
+        h->kick = loop_timer_add(l, FTP_KICK_MS, on_kick, h);
 }
 
 static void
@@ -300,6 +373,8 @@ on_sweep(struct loop *l, void *ud)
             continue;
         if (r->cancelled) {
             free_req(r);
+        } else if (r->nudge && r->added) {
+            nudge(r);
         } else if (!r->added) {
             struct sf_err err;
             if (add_to_multi(r, &err) < 0) {
@@ -440,6 +515,8 @@ httpc_free(struct httpc *h)
         loop_timer_cancel(h->l, h->timer);
     if (h->sweep)
         loop_timer_cancel(h->l, h->sweep);
+    if (h->kick)
+        loop_timer_cancel(h->l, h->kick);
     curl_multi_cleanup(h->multi);
     free(h);
 }
@@ -564,6 +641,7 @@ httpc_start(struct httpc *h, const struct httpc_opts *o, struct sf_err *err)
     r->progress_fn = o->progress;
     r->ud = o->ud;
     r->url = mem_strdup(o->url);
+    r->ftp = strncmp(o->url, "ftp://", 6) == 0 || strncmp(o->url, "ftps://", 7) == 0;
     r->easy = curl_easy_init();
     /* Linked first, so that the failure path frees it like any request. */
     r->next = h->reqs;

@@ -76,6 +76,7 @@ struct sim_bambu {
     bool sent_valid;
     uint64_t report_timer, reconnect_timer;
     struct sim_bambu_stats stats;
+    int64_t last_pushall_ms; /* loop time of the last pushall received */
     /* the job */
     char plate_path[600]; /* unpacked plate G-code */
     uint64_t *layer_at;   /* command index where layer i+1 starts */
@@ -519,6 +520,13 @@ on_request(void *ud, const char *topic, const char *payload, size_t len)
         if (!seq)
             seq = "0";
         if (strcmp(key, "pushing") == 0 && strcmp(cmd, "pushall") == 0) {
+            /* A P1 dislikes them (OpenBambuAPI): the tests read how close they came. */
+            int64_t now = loop_now_ms(s->loop);
+            if (s->stats.pushalls > 0 &&
+                (s->stats.pushall_gap_ms < 0 || now - s->last_pushall_ms < s->stats.pushall_gap_ms))
+                s->stats.pushall_gap_ms = now - s->last_pushall_ms;
+            s->stats.pushalls++;
+            s->last_pushall_ms = now;
             follow_machine(s);
             report(s, true);
         } else if (strcmp(key, "info") == 0 && strcmp(cmd, "get_version") == 0) {
@@ -656,6 +664,15 @@ sim_bambu_fault_parse(struct sim_bambu_faults *f, const char *spec, struct sf_er
         f->storage_full = true;
     } else if (IS("no-reuse-check") && !eq) {
         f->no_reuse_check = true;
+    } else if (IS("pasv-early") && !eq) {
+        f->pasv_early = true;
+    } else if (IS("ftps-slow")) {
+        char *end;
+        long n = strtol(v, &end, 10);
+        if (end == v || *end || n <= 0 || n > 10000)
+            return sf_err_set(err, SF_EINVAL, "fault '%s': expects milliseconds from 1 to 10000",
+                              spec);
+        f->ftps_slow_ms = (int)n;
     } else if (IS("ftps-drop") || IS("mqtt-drop")) {
         char *end;
         long long n = strtoll(v, &end, 10);
@@ -678,7 +695,8 @@ sim_bambu_fault_parse(struct sim_bambu_faults *f, const char *spec, struct sf_er
     } else {
         return sf_err_set(err, SF_EINVAL,
                           "unknown fault '%s' (unsigned, storage-full, ftps-drop=BYTES, "
-                          "no-reuse-check, hms=HEX16@PCT, stop-at=PCT, mqtt-drop=N)",
+                          "no-reuse-check, pasv-early, ftps-slow=MS, hms=HEX16@PCT, stop-at=PCT, "
+                          "mqtt-drop=N)",
                           spec);
     }
 #undef IS
@@ -705,6 +723,7 @@ sim_bambu_new(struct loop *l, const struct sim_bambu_config *c, struct sf_err *e
         return NULL;
     }
     s->loop = l;
+    s->stats.pushall_gap_ms = -1;
     s->c = *c;
     if (s->c.report_ms <= 0)
         s->c.report_ms = 1000;
@@ -742,7 +761,9 @@ sim_bambu_new(struct loop *l, const struct sim_bambu_config *c, struct sf_err *e
                                   .password = s->code,
                                   .storage_full = c->faults.storage_full,
                                   .drop_after = c->faults.ftps_drop,
-                                  .no_reuse_check = c->faults.no_reuse_check };
+                                  .no_reuse_check = c->faults.no_reuse_check,
+                                  .pasv_early = c->faults.pasv_early,
+                                  .reply_delay_ms = c->faults.ftps_slow_ms };
     s->ftps = sim_ftps_new(&fc, err);
     if (!s->ftps)
         goto fail;

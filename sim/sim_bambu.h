@@ -22,6 +22,8 @@
  *   storage-full      FTPS STOR answers 552
  *   ftps-drop=BYTES   an upload's data connection dies after BYTES
  *   no-reuse-check    accept data connections that do not resume the TLS session
+ *   pasv-early        the FTPS server's 227 arrives with the reply before PASV (sim_ftps.h)
+ *   ftps-slow=MS      every FTPS control reply comes MS late (a busy printer)
  *   hms=HEX16@PCT     the print fails at PCT percent with that HMS code
  *   stop-at=PCT       someone presses stop on the printer's screen at PCT percent
  *   mqtt-drop=N       the printer drops its MQTT connection after N reports (and comes back)
@@ -44,6 +46,8 @@ struct sim_bambu_faults {
     bool storage_full;     /* FTPS 552 */
     int64_t ftps_drop;     /* > 0: upload dies after this many bytes */
     bool no_reuse_check;   /* lenient FTPS */
+    bool pasv_early;       /* FTPS answers PASV before it is asked */
+    int ftps_slow_ms;      /* FTPS control replies this late */
     char hms[17];          /* HMS code (16 hex digits) to fail with, "" none */
     double hms_at;         /* ... at this percent */
     double stop_at;        /* > 0: stopped at the screen at this percent */
@@ -75,6 +79,8 @@ struct sim_bambu_stats {
     uint64_t uploads;       /* complete FTPS uploads */
     uint64_t refused_reuse; /* FTPS data connections refused for no session reuse */
     uint64_t executed;      /* commands the machine executed */
+    uint64_t pushalls;      /* pushall requests received */
+    int64_t pushall_gap_ms; /* shortest time between two of them (loop clock), -1 until two */
     char gcode_state[16];   /* current gcode_state */
 };
 

@@ -4,15 +4,12 @@
  *
  * Thread: main thread, one event loop (plus the FTPS server's own).
  */
-#include <errno.h>
-#include <signal.h>
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
 
-#include "../src/base/log.h"
 #include "../src/base/loop.h"
 #include "sim_bambu.h"
+#include "simopt.h"
 
 static const char usage_text[] =
     "usage: slimfarm-sim bambu --serial S --access-code C --ca DIR\n"
@@ -20,30 +17,10 @@ static const char usage_text[] =
     "                          [--model x1|p1] [--speed X] [--log FILE] [--storage DIR]\n"
     "                          [--report-ms N] [--fault SPEC]...\n"
     "  --ca DIR  holds ca.pem, printer.pem and printer.key (CN = serial)\n"
-    "faults: unsigned storage-full ftps-drop=BYTES no-reuse-check hms=HEX16@PCT\n"
-    "        stop-at=PCT mqtt-drop=N\n";
+    "faults: unsigned storage-full ftps-drop=BYTES no-reuse-check pasv-early\n"
+    "        ftps-slow=MS hms=HEX16@PCT stop-at=PCT mqtt-drop=N\n";
 
-static void
-on_signal(struct loop *l, int signo, void *ud)
-{
-    (void)signo;
-    (void)ud;
-    loop_stop(l);
-}
-
-static int
-num(const char *opt, const char *v, double lo, double hi, double *out)
-{
-    char *end;
-    errno = 0;
-    double d = strtod(v, &end);
-    if (errno || end == v || *end || !(d >= lo && d <= hi)) {
-        fprintf(stderr, "slimfarm-sim bambu: %s expects a number from %g to %g\n", opt, lo, hi);
-        return -1;
-    }
-    *out = d;
-    return 0;
-}
+#define PROG "slimfarm-sim bambu"
 
 int
 sim_bambu_main(int argc, char **argv)
@@ -61,7 +38,7 @@ sim_bambu_main(int argc, char **argv)
         const char *v = i + 1 < argc ? argv[++i] : NULL;
         double d;
         if (!v) {
-            fprintf(stderr, "slimfarm-sim bambu: %s needs a value\n%s", o, usage_text);
+            fprintf(stderr, PROG ": %s needs a value\n%s", o, usage_text);
             return 2;
         }
         if (strcmp(o, "--serial") == 0) {
@@ -73,32 +50,32 @@ sim_bambu_main(int argc, char **argv)
         } else if (strcmp(o, "--mqtt") == 0) {
             const char *colon = strrchr(v, ':');
             if (!colon || colon == v || (size_t)(colon - v) >= sizeof(host) ||
-                num(o, colon + 1, 1, 65535, &d) < 0) {
-                fprintf(stderr, "slimfarm-sim bambu: --mqtt expects HOST:PORT\n");
+                simopt_num(PROG, o, colon + 1, 1, 65535, true, &d) < 0) {
+                fprintf(stderr, PROG ": --mqtt expects HOST:PORT\n");
                 return 2;
             }
             memcpy(host, v, (size_t)(colon - v));
             host[colon - v] = '\0';
             c.mqtt_port = (int)d;
         } else if (strcmp(o, "--mqtt-port") == 0) {
-            if (num(o, v, 1, 65535, &d) < 0)
+            if (simopt_num(PROG, o, v, 1, 65535, true, &d) < 0)
                 return 2;
             c.mqtt_port = (int)d;
         } else if (strcmp(o, "--ftps-port") == 0) {
-            if (num(o, v, 0, 65535, &d) < 0)
+            if (simopt_num(PROG, o, v, 0, 65535, true, &d) < 0)
                 return 2;
             c.ftps_port = (int)d;
         } else if (strcmp(o, "--model") == 0) {
             if (strcmp(v, "x1") != 0 && strcmp(v, "p1") != 0) {
-                fprintf(stderr, "slimfarm-sim bambu: --model is x1 or p1\n");
+                fprintf(stderr, PROG ": --model is x1 or p1\n");
                 return 2;
             }
             c.p1 = strcmp(v, "p1") == 0;
         } else if (strcmp(o, "--speed") == 0) {
-            if (num(o, v, 1e-3, 1e6, &c.speed) < 0)
+            if (simopt_num(PROG, o, v, 1e-3, 1e6, false, &c.speed) < 0)
                 return 2;
         } else if (strcmp(o, "--report-ms") == 0) {
-            if (num(o, v, 10, 600000, &d) < 0)
+            if (simopt_num(PROG, o, v, 10, 600000, true, &d) < 0)
                 return 2;
             c.report_ms = (int)d;
         } else if (strcmp(o, "--log") == 0) {
@@ -107,30 +84,21 @@ sim_bambu_main(int argc, char **argv)
             c.storage_dir = v;
         } else if (strcmp(o, "--fault") == 0) {
             if (sim_bambu_fault_parse(&c.faults, v, &err) < 0) {
-                fprintf(stderr, "slimfarm-sim bambu: %s\n", err.msg);
+                fprintf(stderr, PROG ": %s\n", err.msg);
                 return 2;
             }
         } else {
-            fprintf(stderr, "slimfarm-sim bambu: unknown option '%s'\n%s", o, usage_text);
+            fprintf(stderr, PROG ": unknown option '%s'\n%s", o, usage_text);
             return 2;
         }
     }
     c.mqtt_host = host;
-    struct loop *l = loop_new(&err);
-    if (!l) {
-        fprintf(stderr, "slimfarm-sim bambu: %s\n", err.msg);
+    struct loop *l = simopt_loop(PROG);
+    if (!l)
         return 1;
-    }
-    signal(SIGPIPE, SIG_IGN);
-    if (loop_add_signal(l, SIGINT, on_signal, NULL, &err) < 0 ||
-        loop_add_signal(l, SIGTERM, on_signal, NULL, &err) < 0) {
-        fprintf(stderr, "slimfarm-sim bambu: %s\n", err.msg);
-        loop_free(l);
-        return 1;
-    }
     struct sim_bambu *s = sim_bambu_new(l, &c, &err);
     if (!s) {
-        fprintf(stderr, "slimfarm-sim bambu: %s\n", err.msg);
+        fprintf(stderr, PROG ": %s\n", err.msg);
         loop_free(l);
         return 1;
     }

@@ -66,6 +66,7 @@ struct session {
     size_t in_len;
     bool user_ok, logged_in, prot_p, pbsz;
     int pasv_fd;
+    bool pasv_answered; /* pasv_early: the next PASV was answered already */
 };
 
 static void
@@ -100,6 +101,8 @@ reply(struct session *s, const char *fmt, ...)
         n = (int)sizeof(line) - 3;
     line[n++] = '\r';
     line[n++] = '\n';
+    if (s->f->c.reply_delay_ms > 0) /* this client's own thread: sleeping blocks no one else */
+        poll(NULL, 0, s->f->c.reply_delay_ms);
     return SSL_write(s->ssl, line, n) == n ? 0 : -1;
 }
 
@@ -348,12 +351,23 @@ command(struct session *s, char *line)
         return reply(s, "200 Switching to %s mode.", *arg == 'A' ? "ASCII" : "Binary");
     if (strcasecmp(cmd, "OPTS") == 0)
         return reply(s, "200 Always in UTF8 mode.");
-    if (strcasecmp(cmd, "PWD") == 0)
-        return reply(s, "257 \"/\" is the current directory");
+    if (strcasecmp(cmd, "PWD") == 0) {
+        if (reply(s, "257 \"/\" is the current directory") < 0)
+            return -1;
+        if (!f->c.pasv_early)
+            return 0;
+        s->pasv_answered = true;
+        return open_pasv(s, false);
+    }
     if (strcasecmp(cmd, "CWD") == 0)
         return reply(s, "250 Directory successfully changed.");
-    if (strcasecmp(cmd, "PASV") == 0)
+    if (strcasecmp(cmd, "PASV") == 0) {
+        if (s->pasv_answered && s->pasv_fd >= 0) {
+            s->pasv_answered = false;
+            return 0; /* pasv_early: its 227 went out with the PWD reply */
+        }
         return open_pasv(s, false);
+    }
     if (strcasecmp(cmd, "EPSV") == 0)
         return open_pasv(s, true);
     if (strcasecmp(cmd, "STOR") == 0)

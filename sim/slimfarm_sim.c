@@ -35,6 +35,7 @@
 #include "sim_moonraker.h"
 #include "sim_octoprint.h"
 #include "sim_prusalink.h"
+#include "simopt.h"
 
 static const char usage_text[] =
     "usage: slimfarm-sim marlin [--tcp PORT] [--link PATH] [--baud N] [--speed X]\n"
@@ -47,28 +48,6 @@ static const char usage_text[] =
     "        dup=RATE merge=RATE bad-line=N hit=KIND:LINE:POS:BYTE\n"
     "        slow=MS reset=N disconnect=N runaway=N seed=N\n"
     "        (hit KIND: ok okn okt resend error busy temp; see sim/faults.h)\n";
-
-static void
-on_signal(struct loop *l, int signo, void *ud)
-{
-    (void)signo;
-    (void)ud;
-    loop_stop(l);
-}
-
-static int
-parse_long(const char *opt, const char *v, long lo, long hi, long *out)
-{
-    char *end;
-    errno = 0;
-    long n = v ? strtol(v, &end, 10) : 0;
-    if (!v || errno || end == v || *end || n < lo || n > hi) {
-        fprintf(stderr, "slimfarm-sim: %s expects a whole number from %ld to %ld\n", opt, lo, hi);
-        return -1;
-    }
-    *out = n;
-    return 0;
-}
 
 /* Printers one process may serve: each holds a pty or socket and a log file. */
 #define SIM_COUNT_MAX 256
@@ -170,7 +149,7 @@ marlin_main(int argc, char **argv)
     for (int i = 2; i < argc; i++) {
         const char *o = argv[i];
         const char *v = i + 1 < argc ? argv[i + 1] : NULL;
-        long n;
+        double n;
         if (strcmp(o, "--advanced-ok") == 0) {
             c.advanced_ok = true;
             continue;
@@ -189,37 +168,32 @@ marlin_main(int argc, char **argv)
         }
         i++;
         if (strcmp(o, "--count") == 0) {
-            if (parse_long(o, v, 1, SIM_COUNT_MAX, &n) < 0)
+            if (simopt_num("slimfarm-sim", o, v, 1, SIM_COUNT_MAX, true, &n) < 0)
                 return 2;
-            count = n;
+            count = (long)n;
         } else if (strcmp(o, "--tcp") == 0) {
-            if (parse_long(o, v, 0, 65535, &n) < 0)
+            if (simopt_num("slimfarm-sim", o, v, 0, 65535, true, &n) < 0)
                 return 2;
             c.tcp_port = (int)n;
         } else if (strcmp(o, "--baud") == 0) {
-            if (parse_long(o, v, 300, 4000000, &n) < 0)
+            if (simopt_num("slimfarm-sim", o, v, 300, 4000000, true, &n) < 0)
                 return 2;
             c.baud = (int)n;
         } else if (strcmp(o, "--bufsize") == 0) {
-            if (parse_long(o, v, 1, 64, &n) < 0)
+            if (simopt_num("slimfarm-sim", o, v, 1, 64, true, &n) < 0)
                 return 2;
             c.bufsize = (int)n;
         } else if (strcmp(o, "--planner") == 0) {
-            if (parse_long(o, v, 1, 256, &n) < 0)
+            if (simopt_num("slimfarm-sim", o, v, 1, 256, true, &n) < 0)
                 return 2;
             c.planner_blocks = (int)n;
         } else if (strcmp(o, "--rx-size") == 0) {
-            if (parse_long(o, v, 96, 65536, &n) < 0)
+            if (simopt_num("slimfarm-sim", o, v, 96, 65536, true, &n) < 0)
                 return 2;
             c.rx_size = (int)n;
         } else if (strcmp(o, "--speed") == 0) {
-            char *end;
-            errno = 0;
-            c.speed = strtod(v, &end);
-            if (errno || end == v || *end || !(c.speed > 0) || c.speed > 1e6) {
-                fprintf(stderr, "slimfarm-sim: --speed expects a factor above 0, up to 1e6\n");
+            if (simopt_num("slimfarm-sim", o, v, 1e-6, 1e6, false, &c.speed) < 0)
                 return 2;
-            }
         } else if (strcmp(o, "--log") == 0) {
             c.log_path = v;
         } else if (strcmp(o, "--link") == 0) {
@@ -234,18 +208,9 @@ marlin_main(int argc, char **argv)
             return 2;
         }
     }
-    struct loop *l = loop_new(&err);
-    if (!l) {
-        fprintf(stderr, "slimfarm-sim: %s\n", err.msg);
+    struct loop *l = simopt_loop("slimfarm-sim");
+    if (!l)
         return 1;
-    }
-    if (loop_add_signal(l, SIGINT, on_signal, NULL, &err) < 0 ||
-        loop_add_signal(l, SIGTERM, on_signal, NULL, &err) < 0) {
-        fprintf(stderr, "slimfarm-sim: %s\n", err.msg);
-        loop_free(l);
-        return 1;
-    }
-    signal(SIGPIPE, SIG_IGN);
     int rc = serve(l, &c, (int)count);
     loop_free(l);
     return rc;

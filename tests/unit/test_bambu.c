@@ -471,14 +471,39 @@ T_CASE(bambu_wrong_access_code_is_an_auth_error)
     refused(&(struct setup){ .code = "00000000" }, "authentication failed", "access_code");
 }
 
+/* Warnings of printer bambu1, for the tls_insecure case. */
+struct warned {
+    int n;
+    char text[300];
+};
+
+static void
+catch_warning(void *ud, enum log_level level, const char *subsys, const char *printer,
+              const char *msg)
+{
+    (void)subsys;
+    struct warned *w = ud;
+    if (level == LOG_WARN && printer && strcmp(printer, "bambu1") == 0) {
+        w->n++;
+        snprintf(w->text, sizeof(w->text), "%s", msg);
+    }
+}
+
 T_CASE(bambu_wrong_ca_is_a_tls_error_and_insecure_connects)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
     refused(&(struct setup){ .ca = "other-ca.pem" }, "TLS", "certificate");
     struct run r;
-    /* tls_insecure: the operator's override connects (and prints) */
+    /* tls_insecure: the operator's override connects (and prints), with a warning */
     struct setup s2 = { .ca = "other-ca.pem", .insecure = true, .speed = 300 };
-    T_EQ_INT(setup(&r, &s2), 0);
+    struct warned w = { 0 };
+    log_set_sink(catch_warning, &w);
+    int rc = setup(&r, &s2);
+    log_set_sink(NULL, NULL);
+    T_EQ_INT(rc, 0);
+    T_EQ_INT(w.n, 1);
+    T_TRUE(strstr(w.text, "tls_insecure") != NULL);
+    T_TRUE(strstr(w.text, "not checked") != NULL);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
     struct sf_err err;
     T_OK(start(&r, 2, 20, &err), &err);
@@ -549,6 +574,91 @@ T_CASE(bambu_storage_full_fails_the_job)
     teardown(&r);
 }
 
+/*
+ * The FTPS server's 227 is already there when the driver's PASV goes out
+ * (the simulator sends it with the PWD reply): libcurl 7.88 then ends its DO
+ * phase within one call and waits for a data socket it has not opened, so
+ * on the old httpc every such upload stalled until its connect timeout and
+ * the job failed ("1 upload in 6 stalls after PASV" in the daemon, where a
+ * loaded loop let the real answer arrive first).  httpc nudges the transfer
+ * (httpc.c, nudge()); both jobs upload and finish.
+ */
+T_CASE(bambu_upload_goes_on_when_the_pasv_answer_is_already_there)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .fault = "pasv-early", .speed = 300 };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 2, 20);
+    struct sf_err err;
+    for (int i = 1; i <= 2; i++) {
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+        T_TRUE(WAIT_FOR(&r, r.done == i || r.failed));
+        if (r.failed)
+            fprintf(stderr, "job %d failed: %s\n", i, r.failed_msg);
+        T_EQ_INT(r.failed, 0);
+    }
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.uploads, 2);
+    T_EQ_INT(ss.jobs_finished, 2);
+    teardown(&r);
+}
+
+/*
+ * A printer slow to answer on the FTPS control connection: libcurl 7.88
+ * starts the data connection's TLS as soon as its TCP is up and then polls
+ * only that socket, while the server starts that TLS after STOR; the reply
+ * to TYPE I, a moment late, was never read and the upload failed with "SSL
+ * connection timeout" (farmd_bambu_crash's second job).  httpc kicks FTP
+ * transfers during set-up (httpc.c, on_kick()); the job prints.
+ */
+T_CASE(bambu_upload_to_a_printer_slow_to_answer)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .fault = "ftps-slow=200", .speed = 300 };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 2, 20);
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.done || r.failed));
+    if (r.failed)
+        fprintf(stderr, "job failed: %s\n", r.failed_msg);
+    T_EQ_INT(r.failed, 0);
+    T_EQ_INT(r.done, 1);
+    teardown(&r);
+}
+
+/* The TLS data connection dies mid-upload: the job fails with the upload's error (the farm
+   retries it), the printer is idle again, nothing was started or stored half. */
+T_CASE(bambu_upload_cut_midway_fails_the_job_cleanly)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .fault = "ftps-drop=1000", .speed = 300 };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    write_job(&r, 20, 100); /* packed, well over 1000 bytes */
+    struct sf_err err;
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.failed || r.done));
+    T_EQ_INT(r.failed, 1);
+    T_TRUE(strstr(r.failed_msg, "upload failed") != NULL);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.uploads, 0);
+    T_EQ_INT(ss.jobs_started, 0);
+    /* and the printer takes the next job (the same fault cuts it again) */
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.failed == 2 || r.done));
+    T_EQ_INT(r.failed, 2);
+    teardown(&r);
+}
+
 T_CASE(bambu_ftps_refuses_data_without_session_reuse)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
@@ -578,6 +688,44 @@ T_CASE(bambu_ftps_refuses_data_without_session_reuse)
     sim_bambu_stats(r.sim, &ss);
     T_EQ_INT(ss.refused_reuse, 1);
     T_EQ_INT(ss.uploads, 1);
+    teardown(&r);
+}
+
+/*
+ * pushall is rate-limited (P1 printers dislike it): once per connection,
+ * never twice within PUSHALL_RECONNECT_MS (10 s) on a flapping link.  The
+ * link is dropped and re-opened three times in a row (the farm's
+ * reconnect does close + open); the printer sees the first connection's
+ * pushall and one more, sent when the 10 s are up, whatever the machine's
+ * speed (the gap is taken on the loop's clock as they are sent).
+ */
+T_CASE(bambu_pushall_is_rate_limited_on_a_flapping_link)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .p1 = true };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    struct sf_err err;
+    struct drv_bambu_stats bs;
+    for (int i = 0; i < 3; i++) {
+        r.drv->ops->close(r.drv);
+        T_OK(r.drv->ops->open(r.drv, &err), &err);
+        T_TRUE(WAIT_FOR(&r, idle(&r)));
+    }
+    T_TRUE(drv_bambu_stats(r.drv, &bs));
+    T_EQ_INT(bs.connects, 4);
+    struct sim_bambu_stats ss;
+    T_TRUE(WAIT_FOR(&r, (sim_bambu_stats(r.sim, &ss), ss.pushalls >= 2)));
+    int64_t until = wall_ms() + 1000; /* nothing more follows */
+    while (wall_ms() < until)
+        loop_run_once(r.loop, 50);
+    sim_bambu_stats(r.sim, &ss);
+    T_TRUE(drv_bambu_stats(r.drv, &bs));
+    T_EQ_INT(ss.pushalls, 2);
+    T_EQ_INT(bs.pushalls, 2);
+    T_TRUE(bs.pushall_gap_ms >= 10000); /* as sent; the printer saw them 10 s apart give or
+                                           take the broker's delivery */
     teardown(&r);
 }
 
