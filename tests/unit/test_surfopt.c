@@ -6,6 +6,7 @@
  * than it was given, and rejects bad parameters.
  */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -201,5 +202,110 @@ T_CASE(bad_parameters_are_refused)
     surfopt_params_default(&p);
     p.rounds = 0;
     T_ERR(surfopt_optimize(&m, &p, &r, &err), SF_EINVAL, &err, "rounds 0");
+    mesh_release(&m);
+}
+
+/* ---- inputs that are not one clean closed shell (issue 21) ---- */
+
+/* Append b to a (vertices and triangles; no welding). */
+static int
+append_mesh(struct mesh *a, const struct mesh *b, struct vec3 shift, struct sf_err *err)
+{
+    struct mesh c;
+    mesh_init(&c);
+    int rc = mesh_alloc(&c, a->n_verts + b->n_verts, a->n_tris + b->n_tris, err);
+    if (rc < 0)
+        return rc;
+    memcpy(c.v, a->v, a->n_verts * sizeof(*c.v));
+    for (uint32_t i = 0; i < b->n_verts; i++)
+        c.v[a->n_verts + i] = v3_add(b->v[i], shift);
+    memcpy(c.t, a->t, a->n_tris * sizeof(*c.t));
+    for (uint32_t f = 0; f < b->n_tris; f++)
+        for (int k = 0; k < 3; k++)
+            c.t[a->n_tris + f][k] = b->t[f][k] + a->n_verts;
+    mesh_release(a);
+    *a = c;
+    return SF_OK;
+}
+
+/* The shape step alone on m: it must reshape it, lower the model's grams,
+   add no self-intersection, and keep within the deviation limits. */
+static void
+reshaped(const struct mesh *m, int selfx_in)
+{
+    struct sf_err err;
+    struct surfopt_params p;
+    surfopt_params_default(&p);
+    p.orient = false;
+    p.refine_tris = 4000;
+    struct surfopt_result r;
+    T_OK(surfopt_optimize(m, &p, &r, &err), &err);
+    T_EQ_INT(r.selfx_input >= selfx_in, 1);
+    if (!r.shape_changed)
+        fprintf(stderr, "    unchanged: %s\n", r.unchanged_why ? r.unchanged_why : "(no reason)");
+    T_TRUE(r.shape_changed);
+    T_TRUE(r.unchanged_why == NULL);
+    T_TRUE(r.model_after_g < r.model_oriented_g);
+    T_TRUE(r.dev.mndr <= p.max_mndr && r.dev.andr <= p.max_andr);
+    surfopt_result_release(&r);
+}
+
+T_CASE(overlapping_mushrooms_are_reshaped)
+{
+    /* Two mushrooms whose caps overlap: the input intersects itself. */
+    struct mesh m, b;
+    struct sf_err err;
+    mesh_init(&m);
+    mesh_init(&b);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    T_OK(shape_sphere_on_stem(&b, &err), &err);
+    struct vec3 lo, hi;
+    mesh_bbox(&m, &lo, &hi);
+    T_OK(append_mesh(&m, &b, v3(0.6 * (hi.x - lo.x), 0, 0), &err), &err);
+    int sx = selfx_count(&m, &err);
+    T_TRUE(sx > 0);
+    reshaped(&m, sx);
+    mesh_release(&b);
+    mesh_release(&m);
+}
+
+T_CASE(open_mushroom_is_reshaped)
+{
+    /* A mushroom whose top cap has a hole: an open shell. */
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    struct vec3 lo, hi;
+    mesh_bbox(&m, &lo, &hi);
+    uint32_t k = 0;
+    for (uint32_t f = 0; f < m.n_tris; f++) {
+        double z = fmin(fmin(m.v[m.t[f][0]].z, m.v[m.t[f][1]].z), m.v[m.t[f][2]].z);
+        if (z < hi.z - 0.05 * (hi.z - lo.z))
+            memcpy(m.t[k++], m.t[f], sizeof(m.t[f]));
+    }
+    T_TRUE(k < m.n_tris);
+    m.n_tris = k;
+    struct mesh_topo topo;
+    T_OK(mesh_topo_build(&m, &topo, &err), &err);
+    T_TRUE(!mesh_topo_closed(&topo));
+    mesh_topo_release(&topo);
+    reshaped(&m, 0);
+    mesh_release(&m);
+}
+
+T_CASE(two_separate_mushrooms_are_reshaped)
+{
+    struct mesh m, b;
+    struct sf_err err;
+    mesh_init(&m);
+    mesh_init(&b);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    T_OK(shape_sphere_on_stem(&b, &err), &err);
+    struct vec3 lo, hi;
+    mesh_bbox(&m, &lo, &hi);
+    T_OK(append_mesh(&m, &b, v3(1.5 * (hi.x - lo.x), 0, 0), &err), &err);
+    reshaped(&m, 0);
+    mesh_release(&b);
     mesh_release(&m);
 }
