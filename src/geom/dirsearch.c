@@ -106,6 +106,8 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
             return rc;
         orient_apply(&res->best.out, v3(0, 0, 1), 0, 0);
         res->best.model_oriented_g = res->best.model_after_g = res->model_input_g;
+        res->best.unchanged_why = "no direction's result saves min_gain of the model's "
+                                  "grams for the input as given";
         res->up = v3(0, 0, 1);
         res->kept_input = true;
     }

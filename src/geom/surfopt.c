@@ -17,6 +17,10 @@
 #include "supmodel.h"
 
 #define KEEP_MAX 8 /* improving iterates kept as fallbacks (keep_push) */
+/* Edges and triangles closer than this share of the diagonal in the input
+   already touched there (float noise, a soup's T-junctions): crossing them
+   is no new self-intersection (selfx_count_new). */
+#define SELFX_TOUCH 1e-6
 
 void
 surfopt_params_default(struct surfopt_params *p)
@@ -438,6 +442,7 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
     struct vec3 centre;
     mesh_volume(cur, &centre);
     double sin_a = sin((p->angle_deg - p->margin_deg) * M_PI / 180);
+    double touch = SELFX_TOUCH * mesh_diag(ref);
     double aim = (p->angle_deg - p->margin_deg) * M_PI / 180;
     int since_best = 0;
     double step = 1; /* share of each face's turn asked for; halved past the limits */
@@ -470,10 +475,20 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
                                            sm.n_risky, dev.mndr,  dev.andr };
             p->progress(p->progress_ud, &pr);
         }
-        if (dev.mndr > p->max_mndr || dev.andr > p->max_andr) {
-            /* Past the deviation limits: the turns are too bold for this
-             * part (few, large faces).  Halve them and go on from the best
-             * shape; once they are small, the round is done. */
+        bool improved = sm.proxy_mm3 < best_proxy * (1 - 1e-6);
+        int folds = 0; /* new self-intersections, checked only where the shape would be kept */
+        if (improved && dev.mndr <= p->max_mndr && dev.andr <= p->max_andr &&
+            (folds = selfx_count_new(ref, cur, touch, err)) < 0) {
+            rc = folds;
+            goto out;
+        }
+        if (folds > 0)
+            res->n_folded++;
+        if (dev.mndr > p->max_mndr || dev.andr > p->max_andr || folds > 0) {
+            /* Past the deviation limits, or folded onto itself: the turns
+             * are too bold for this part (few, large faces; thin features).
+             * Halve them and go on from the best shape; once they are
+             * small, the round is done. */
             if (step <= 1.0 / 16)
                 break;
             step /= 2;
@@ -481,7 +496,7 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
             since_best = 0;
             continue;
         }
-        if (sm.proxy_mm3 < best_proxy * (1 - 1e-6)) {
+        if (improved) {
             best_proxy = sm.proxy_mm3;
             memcpy(best, cur->v, (size_t)n * sizeof(*best));
             since_best = 0;
@@ -641,12 +656,15 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
         goto out;
     res->model_oriented_g = mr.grams;
     int best_k = -1, n_selfx = 0;
+    /* what already touched in the input is no new crossing: float noise on
+       the diagonal's scale (a soup's T-junctions, coincident faces) */
+    double touch = SELFX_TOUCH * mesh_diag(&ref);
     double best_g = mr.grams;
     for (int k = n_keep - 1; k >= 0; k--) {
         memcpy(cur.v, keep[k].v, (size_t)n * sizeof(struct vec3));
-        if ((rc = selfx_count(&cur, err)) < 0)
+        if ((rc = selfx_count_new(&ref, &cur, touch, err)) < 0)
             goto out;
-        if (rc > res->selfx_input) {
+        if (rc > 0) {
             res->n_rejected++;
             n_selfx++;
             continue;
@@ -671,7 +689,11 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
         res->model_after_g = best_g;
     } else {
         res->model_after_g = res->model_oriented_g;
-        res->unchanged_why = n_keep == 0
+        res->unchanged_why = n_keep == 0 && res->n_folded > 0
+                                 ? "every iterate that lowered the risky faces within the "
+                                   "deviation limits folded the surface onto itself (new "
+                                   "self-intersections)"
+                             : n_keep == 0
                                  ? "no iterate lowered the risky faces within the deviation "
                                    "limits"
                              : n_selfx == n_keep ? "every kept shape adds self-intersections"

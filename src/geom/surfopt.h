@@ -25,11 +25,15 @@
  * for `patience` iterations (while the deviation is under half its limits,
  * the anchor and detail weights are quartered first, down to 1/64: the
  * adaptive weights), or when the deviation from the input passes
- * max_mndr / max_andr (first the face turns asked for are halved, down to
- * 1/16); the best iterate within the limits is kept.  The result never has
- * more self-intersecting edges or more ray-cast support volume than the
- * oriented input (it falls back through the kept iterates to the
- * orientation alone).
+ * max_mndr / max_andr or an improving iterate folds the surface onto
+ * itself (first the face turns asked for are halved, down to 1/16); the
+ * best iterate within the limits is kept.  Any part is optimized: several
+ * shells, open shells, a self-intersecting input.  Only NEW
+ * self-intersections refuse a shape (selfx_count_new: an edge crossing a
+ * triangle it did not touch in the input), so a defective input is judged
+ * by what the deformation adds.  The result never needs more model grams
+ * than the oriented input (it falls back through the kept iterates to the
+ * orientation alone, and unchanged_why says why).
  *
  * Departures from the paper, measured on the generated mushroom and torus
  * (support mm3 after orientation -> after shape):
@@ -124,6 +128,7 @@ struct surfopt_result {
     int n_iters;  /* geometry iterations run, all rounds */
     int selfx_input, selfx_out;
     uint32_t n_rejected; /* kept iterates refused: self-intersections or more support */
+    uint32_t n_folded;   /* iterates refused during the rounds for new self-intersections */
     bool shape_changed;  /* false: only the orientation step's result is returned */
     /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams: it picks the
        result among the kept shapes, which must need fewer than the oriented part */
