@@ -13,8 +13,9 @@
 # "given orient surface slim search"); SUPGRAMS_PEERS (default "prusaslicer curaengine");
 # SUPGRAMS_CACHED_ONLY=1 reports cached peer rows only (a dash where none is).
 # The optimized variants depend on this tree's code: they are kept under
-# SUPGRAMS_OUT (default build/supgrams/ plus the first 8 hex of the slimfarm
-# binary's md5, so a rebuilt optimizer makes its own), while the peer rows,
+# SUPGRAMS_OUT (default build/supgrams/ plus the first 8 hex of the md5 of
+# the CLI and its libexec commands, so a rebuilt optimizer makes its own),
+# while the peer rows,
 # keyed by content, may be shared between trees (PEER_CACHE).
 set -u
 build=${1:-build/rel}
@@ -23,7 +24,8 @@ shared=${SLIMFARM_SHARED:-../shared}
 peers="$(cd "$shared" && pwd)/peers/slice-peers.sh"
 cache=${PEER_CACHE:-build/peercache}
 sf="$build/bin/slimfarm"
-vdir=${SUPGRAMS_OUT:-build/supgrams/$(md5sum < "$sf" | cut -c1-8)}
+# the CLI runs its commands from libexec: the key covers them all
+vdir=${SUPGRAMS_OUT:-build/supgrams/$(cat "$sf" "$build"/libexec/slimfarm/* 2>/dev/null | md5sum | cut -c1-8)}
 mkdir -p "$cache/stl" "$vdir"
 variants=${SUPGRAMS_VARIANTS:-given orient surface slim search}
 slicers=${SUPGRAMS_PEERS:-prusaslicer curaengine}
