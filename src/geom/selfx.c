@@ -212,14 +212,69 @@ seg_tri(struct vec3 p, struct vec3 q, struct vec3 a, struct vec3 b, struct vec3 
 struct new_ctx {
     const struct mesh *ref;
     double tol;
+    uint32_t *comp;       /* per vertex: its connected shell (a representative vertex) */
+    uint8_t *near;        /* per vertex: within two rings of a crossing the input has */
+    uint32_t (*pairs)[2]; /* shells that cross each other in the input */
+    size_t n_pairs, cap_pairs;
+    bool oom;
 };
 
+static uint32_t
+find(uint32_t *up, uint32_t v)
+{
+    while (up[v] != v)
+        v = up[v] = up[up[v]];
+    return v;
+}
+
+/* The input's crossings: mark the vertices and the pair of shells. */
+static bool
+note_input(void *ud, uint32_t a, uint32_t b, uint32_t tri)
+{
+    struct new_ctx *nc = ud;
+    const uint32_t *t = nc->ref->t[tri];
+    nc->near[a] = nc->near[b] = 1;
+    for (int k = 0; k < 3; k++)
+        nc->near[t[k]] = 1;
+    uint32_t ca = nc->comp[a], ct = nc->comp[t[0]];
+    if (ca != ct) {
+        uint32_t lo = ca < ct ? ca : ct, hi = ca < ct ? ct : ca;
+        for (size_t i = 0; i < nc->n_pairs; i++)
+            if (nc->pairs[i][0] == lo && nc->pairs[i][1] == hi)
+                return true;
+        if (nc->n_pairs == nc->cap_pairs) {
+            size_t cap = nc->cap_pairs ? 2 * nc->cap_pairs : 16;
+            void *np = realloc(nc->pairs, cap * sizeof(*nc->pairs));
+            if (!np) {
+                nc->oom = true;
+                return true;
+            }
+            nc->pairs = np;
+            nc->cap_pairs = cap;
+        }
+        nc->pairs[nc->n_pairs][0] = lo;
+        nc->pairs[nc->n_pairs++][1] = hi;
+    }
+    return true;
+}
+
+/* Is this crossing new: not between shells that crossed in the input, not in
+   the neighbourhood of a crossing the input had, and apart there? */
 static bool
 apart_in_ref(void *ud, uint32_t a, uint32_t b, uint32_t tri)
 {
     const struct new_ctx *nc = ud;
     const struct mesh *r = nc->ref;
     const uint32_t *t = r->t[tri];
+    if (nc->near[a] || nc->near[b] || nc->near[t[0]] || nc->near[t[1]] || nc->near[t[2]])
+        return false;
+    uint32_t ca = nc->comp[a], ct = nc->comp[t[0]];
+    if (ca != ct) {
+        uint32_t lo = ca < ct ? ca : ct, hi = ca < ct ? ct : ca;
+        for (size_t i = 0; i < nc->n_pairs; i++)
+            if (nc->pairs[i][0] == lo && nc->pairs[i][1] == hi)
+                return false;
+    }
     return seg_tri(r->v[a], r->v[b], r->v[t[0]], r->v[t[1]], r->v[t[2]]) > nc->tol;
 }
 
@@ -232,6 +287,47 @@ selfx_count_new(const struct mesh *ref, const struct mesh *m, double tol, struct
                           ref->n_verts, ref->n_tris, m->n_verts, m->n_tris);
     if (!(tol >= 0))
         return sf_err_set(err, SF_EINVAL, "selfx: tolerance %g: want >= 0", tol);
-    struct new_ctx nc = { ref, tol };
-    return edges_pierced(m, apart_in_ref, &nc, err);
+    struct new_ctx nc = { .ref = ref, .tol = tol };
+    nc.comp = mem_array(ref->n_verts ? ref->n_verts : 1, sizeof(uint32_t));
+    nc.near = mem_calloc(ref->n_verts ? ref->n_verts : 1, 1);
+    uint8_t *grow = mem_calloc(ref->n_verts ? ref->n_verts : 1, 1);
+    int rc;
+    if (!nc.comp || !nc.near || !grow) {
+        rc = sf_err_set(err, SF_ENOMEM, "selfx: out of memory for %u vertices", ref->n_verts);
+        goto out;
+    }
+    for (uint32_t v = 0; v < ref->n_verts; v++)
+        nc.comp[v] = v;
+    for (uint32_t f = 0; f < ref->n_tris; f++)
+        for (int k = 1; k < 3; k++) {
+            uint32_t x = find(nc.comp, ref->t[f][0]), y = find(nc.comp, ref->t[f][k]);
+            if (x != y)
+                nc.comp[x > y ? x : y] = x < y ? x : y;
+        }
+    for (uint32_t v = 0; v < ref->n_verts; v++)
+        nc.comp[v] = find(nc.comp, v);
+    if ((rc = edges_pierced(ref, note_input, &nc, err)) < 0)
+        goto out;
+    if (nc.oom) {
+        rc = sf_err_set(err, SF_ENOMEM, "selfx: out of memory for the crossing shells");
+        goto out;
+    }
+    /* two rings around the input's crossings: a deformation slides the
+       crossing curve over the triangles next to it */
+    for (int ring = 0; ring < 2; ring++) {
+        for (uint32_t f = 0; f < ref->n_tris; f++) {
+            const uint32_t *t = ref->t[f];
+            if (nc.near[t[0]] || nc.near[t[1]] || nc.near[t[2]])
+                grow[t[0]] = grow[t[1]] = grow[t[2]] = 1;
+        }
+        for (uint32_t v = 0; v < ref->n_verts; v++)
+            nc.near[v] |= grow[v];
+    }
+    rc = edges_pierced(m, apart_in_ref, &nc, err);
+out:
+    free(nc.comp);
+    free(nc.near);
+    free(grow);
+    free(nc.pairs);
+    return rc;
 }
