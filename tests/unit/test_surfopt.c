@@ -437,3 +437,28 @@ T_CASE(knot1_within_the_limits_by_default)
     surfopt_result_release(&r);
     mesh_release(&m);
 }
+
+T_CASE(bull_with_crossings_in_its_input_is_reshaped)
+{
+    /* bull.stl crosses itself twice as given; the old rule (no more crossing
+       edges than the input) refused every kept shape */
+    const char *path = t_shared_mesh("bull.stl");
+    T_SKIP_UNLESS(path, "../shared/meshes is absent");
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(mesh_load(path, &m, NULL, &err), &err);
+    T_TRUE(selfx_count(&m, &err) > 0);
+    struct surfopt_params p;
+    surfopt_params_default(&p);
+    p.orient = false; /* as given: the shape step alone */
+    struct surfopt_result r;
+    T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
+    if (!r.shape_changed)
+        printf("    unchanged: %s\n", r.unchanged_why ? r.unchanged_why : "(no reason)");
+    T_TRUE(r.shape_changed);
+    T_TRUE(r.model_after_g < r.model_oriented_g);
+    T_TRUE(r.dev.mndr <= p.max_mndr && r.dev.andr <= p.max_andr);
+    surfopt_result_release(&r);
+    mesh_release(&m);
+}
