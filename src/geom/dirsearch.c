@@ -65,16 +65,22 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
     for (int i = 0; i < found.n_runners && res->n_tried < p->k; i++)
         res->ups[res->n_tried++] = found.runners[i].up;
     struct surfopt_params sp = p->sp;
-    sp.orient = false; /* each start keeps its direction */
+    sp.keep_start_up = true; /* each start keeps its direction for its first round */
     int best = -1;
     for (int i = 0; i < res->n_tried; i++) {
         struct mesh turned;
         mesh_init(&turned);
         if ((rc = mesh_copy(&turned, m, err)) < 0)
             return rc;
-        orient_apply(&turned, res->ups[i], 0, 0);
         struct surfopt_result r;
-        rc = surfopt_optimize(&turned, &sp, &r, err);
+        if (i == 0) {
+            /* the best direction: the orientation-fused run itself (its first
+               orientation step finds this direction on the refined part) */
+            rc = surfopt_optimize(&turned, &p->sp, &r, err);
+        } else {
+            orient_apply(&turned, res->ups[i], 0, 0);
+            rc = surfopt_optimize(&turned, &sp, &r, err);
+        }
         mesh_release(&turned);
         if (rc < 0) {
             dirsearch_result_release(res);
@@ -100,6 +106,8 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
             return rc;
         orient_apply(&res->best.out, v3(0, 0, 1), 0, 0);
         res->best.model_oriented_g = res->best.model_after_g = res->model_input_g;
+        res->best.unchanged_why = "no direction's result saves min_gain of the model's "
+                                  "grams for the input as given";
         res->up = v3(0, 0, 1);
         res->kept_input = true;
     }

@@ -23,6 +23,9 @@ struct edge_ctx {
     struct RTCIntersectContext ctx; /* first: Embree hands the filter this pointer */
     const struct mesh *m;
     uint32_t a, b; /* the edge's vertices */
+    /* optional: a pierced triangle is judged here; true keeps it a hit */
+    bool (*judge)(void *ud, uint32_t a, uint32_t b, uint32_t tri);
+    void *ud;
 };
 
 static void
@@ -44,11 +47,14 @@ skip_touching(const struct RTCFilterFunctionNArguments *args)
         struct vec3 n = mesh_tri_cross(ec->m, prim);
         if (fabs(v3_dot(n, d)) <= 1e-6 * v3_len(n) * v3_len(d)) /* float-stored parts */
             args->valid[i] = 0;
+        if (args->valid[i] && ec->judge && !ec->judge(ec->ud, ec->a, ec->b, prim))
+            args->valid[i] = 0; /* not counted: the search goes on along the edge */
     }
 }
 
-int
-selfx_count(const struct mesh *m, struct sf_err *err)
+static int
+edges_pierced(const struct mesh *m, bool (*judge)(void *, uint32_t, uint32_t, uint32_t), void *ud,
+              struct sf_err *err)
 {
     if (!m->n_tris)
         return 0;
@@ -82,6 +88,8 @@ selfx_count(const struct mesh *m, struct sf_err *err)
     struct edge_ctx ec;
     rtcInitIntersectContext(&ec.ctx);
     ec.m = m;
+    ec.judge = judge;
+    ec.ud = ud;
     for (uint32_t i = 0; i < m->n_tris; i++) {
         for (int k = 0; k < 3; k++) {
             uint32_t a = m->t[i][k], b = m->t[i][(k + 1) % 3];
@@ -115,4 +123,211 @@ done:
     if (dev)
         rtcReleaseDevice(dev);
     return count;
+}
+
+int
+selfx_count(const struct mesh *m, struct sf_err *err)
+{
+    return edges_pierced(m, NULL, NULL, err);
+}
+
+/* ---- distances, for what was already touching in the reference ---- */
+
+static struct vec3
+closest_on_tri(struct vec3 p, struct vec3 a, struct vec3 b, struct vec3 c)
+{
+    /* Ericson, Real-Time Collision Detection 5.1.5 */
+    struct vec3 ab = v3_sub(b, a), ac = v3_sub(c, a), ap = v3_sub(p, a);
+    double d1 = v3_dot(ab, ap), d2 = v3_dot(ac, ap);
+    if (d1 <= 0 && d2 <= 0)
+        return a;
+    struct vec3 bp = v3_sub(p, b);
+    double d3 = v3_dot(ab, bp), d4 = v3_dot(ac, bp);
+    if (d3 >= 0 && d4 <= d3)
+        return b;
+    double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0)
+        return v3_add(a, v3_scale(ab, d1 / (d1 - d3)));
+    struct vec3 cp = v3_sub(p, c);
+    double d5 = v3_dot(ab, cp), d6 = v3_dot(ac, cp);
+    if (d6 >= 0 && d5 <= d6)
+        return c;
+    double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0)
+        return v3_add(a, v3_scale(ac, d2 / (d2 - d6)));
+    double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
+        return v3_add(b, v3_scale(v3_sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6))));
+    double den = 1 / (va + vb + vc);
+    return v3_add(a, v3_add(v3_scale(ab, vb * den), v3_scale(ac, vc * den)));
+}
+
+/* Distance between segments p0p1 and q0q1 (Ericson 5.1.9). */
+static double
+seg_seg(struct vec3 p0, struct vec3 p1, struct vec3 q0, struct vec3 q1)
+{
+    struct vec3 d1 = v3_sub(p1, p0), d2 = v3_sub(q1, q0), r = v3_sub(p0, q0);
+    double a = v3_dot(d1, d1), e = v3_dot(d2, d2), f = v3_dot(d2, r);
+    double s = 0, t = 0;
+    if (a <= 1e-300 && e <= 1e-300)
+        return v3_len(r);
+    if (a <= 1e-300) {
+        t = fmin(fmax(f / e, 0), 1);
+    } else {
+        double c = v3_dot(d1, r);
+        if (e <= 1e-300) {
+            s = fmin(fmax(-c / a, 0), 1);
+        } else {
+            double b = v3_dot(d1, d2), den = a * e - b * b;
+            s = den > 0 ? fmin(fmax((b * f - c * e) / den, 0), 1) : 0;
+            t = (b * s + f) / e;
+            if (t < 0)
+                t = 0, s = fmin(fmax(-c / a, 0), 1);
+            else if (t > 1)
+                t = 1, s = fmin(fmax((b - c) / a, 0), 1);
+        }
+    }
+    return v3_len(v3_sub(v3_add(p0, v3_scale(d1, s)), v3_add(q0, v3_scale(d2, t))));
+}
+
+/* Distance from segment pq to triangle abc (0 when it crosses it). */
+static double
+seg_tri(struct vec3 p, struct vec3 q, struct vec3 a, struct vec3 b, struct vec3 c)
+{
+    struct vec3 n = v3_cross(v3_sub(b, a), v3_sub(c, a));
+    double sp = v3_dot(n, v3_sub(p, a)), sq = v3_dot(n, v3_sub(q, a));
+    if ((sp <= 0 && sq >= 0) || (sp >= 0 && sq <= 0)) {
+        double den = sp - sq;
+        struct vec3 x = den != 0 ? v3_add(p, v3_scale(v3_sub(q, p), sp / den)) : p;
+        if (v3_len(v3_sub(closest_on_tri(x, a, b, c), x)) <= 1e-12 * (1 + v3_len(x)))
+            return 0;
+    }
+    double d = fmin(v3_len(v3_sub(closest_on_tri(p, a, b, c), p)),
+                    v3_len(v3_sub(closest_on_tri(q, a, b, c), q)));
+    d = fmin(d, seg_seg(p, q, a, b));
+    d = fmin(d, seg_seg(p, q, b, c));
+    return fmin(d, seg_seg(p, q, c, a));
+}
+
+struct new_ctx {
+    const struct mesh *ref;
+    double tol;
+    uint32_t *comp;       /* per vertex: its connected shell (a representative vertex) */
+    uint8_t *near;        /* per vertex: within two rings of a crossing the input has */
+    uint32_t (*pairs)[2]; /* shells that cross each other in the input */
+    size_t n_pairs, cap_pairs;
+    bool oom;
+};
+
+static uint32_t
+find(uint32_t *up, uint32_t v)
+{
+    while (up[v] != v)
+        v = up[v] = up[up[v]];
+    return v;
+}
+
+/* The input's crossings: mark the vertices and the pair of shells. */
+static bool
+note_input(void *ud, uint32_t a, uint32_t b, uint32_t tri)
+{
+    struct new_ctx *nc = ud;
+    const uint32_t *t = nc->ref->t[tri];
+    nc->near[a] = nc->near[b] = 1;
+    for (int k = 0; k < 3; k++)
+        nc->near[t[k]] = 1;
+    uint32_t ca = nc->comp[a], ct = nc->comp[t[0]];
+    if (ca != ct) {
+        uint32_t lo = ca < ct ? ca : ct, hi = ca < ct ? ct : ca;
+        for (size_t i = 0; i < nc->n_pairs; i++)
+            if (nc->pairs[i][0] == lo && nc->pairs[i][1] == hi)
+                return true;
+        if (nc->n_pairs == nc->cap_pairs) {
+            size_t cap = nc->cap_pairs ? 2 * nc->cap_pairs : 16;
+            void *np = realloc(nc->pairs, cap * sizeof(*nc->pairs));
+            if (!np) {
+                nc->oom = true;
+                return true;
+            }
+            nc->pairs = np;
+            nc->cap_pairs = cap;
+        }
+        nc->pairs[nc->n_pairs][0] = lo;
+        nc->pairs[nc->n_pairs++][1] = hi;
+    }
+    return true;
+}
+
+/* Is this crossing new: not between shells that crossed in the input, not in
+   the neighbourhood of a crossing the input had, and apart there? */
+static bool
+apart_in_ref(void *ud, uint32_t a, uint32_t b, uint32_t tri)
+{
+    const struct new_ctx *nc = ud;
+    const struct mesh *r = nc->ref;
+    const uint32_t *t = r->t[tri];
+    if (nc->near[a] || nc->near[b] || nc->near[t[0]] || nc->near[t[1]] || nc->near[t[2]])
+        return false;
+    uint32_t ca = nc->comp[a], ct = nc->comp[t[0]];
+    if (ca != ct) {
+        uint32_t lo = ca < ct ? ca : ct, hi = ca < ct ? ct : ca;
+        for (size_t i = 0; i < nc->n_pairs; i++)
+            if (nc->pairs[i][0] == lo && nc->pairs[i][1] == hi)
+                return false;
+    }
+    return seg_tri(r->v[a], r->v[b], r->v[t[0]], r->v[t[1]], r->v[t[2]]) > nc->tol;
+}
+
+int
+selfx_count_new(const struct mesh *ref, const struct mesh *m, double tol, struct sf_err *err)
+{
+    if (ref->n_verts != m->n_verts || ref->n_tris != m->n_tris)
+        return sf_err_set(err, SF_EINVAL,
+                          "selfx: the reference has %u/%u vertices/triangles, the mesh %u/%u",
+                          ref->n_verts, ref->n_tris, m->n_verts, m->n_tris);
+    if (!(tol >= 0))
+        return sf_err_set(err, SF_EINVAL, "selfx: tolerance %g: want >= 0", tol);
+    struct new_ctx nc = { .ref = ref, .tol = tol };
+    nc.comp = mem_array(ref->n_verts ? ref->n_verts : 1, sizeof(uint32_t));
+    nc.near = mem_calloc(ref->n_verts ? ref->n_verts : 1, 1);
+    uint8_t *grow = mem_calloc(ref->n_verts ? ref->n_verts : 1, 1);
+    int rc;
+    if (!nc.comp || !nc.near || !grow) {
+        rc = sf_err_set(err, SF_ENOMEM, "selfx: out of memory for %u vertices", ref->n_verts);
+        goto out;
+    }
+    for (uint32_t v = 0; v < ref->n_verts; v++)
+        nc.comp[v] = v;
+    for (uint32_t f = 0; f < ref->n_tris; f++)
+        for (int k = 1; k < 3; k++) {
+            uint32_t x = find(nc.comp, ref->t[f][0]), y = find(nc.comp, ref->t[f][k]);
+            if (x != y)
+                nc.comp[x > y ? x : y] = x < y ? x : y;
+        }
+    for (uint32_t v = 0; v < ref->n_verts; v++)
+        nc.comp[v] = find(nc.comp, v);
+    if ((rc = edges_pierced(ref, note_input, &nc, err)) < 0)
+        goto out;
+    if (nc.oom) {
+        rc = sf_err_set(err, SF_ENOMEM, "selfx: out of memory for the crossing shells");
+        goto out;
+    }
+    /* two rings around the input's crossings: a deformation slides the
+       crossing curve over the triangles next to it */
+    for (int ring = 0; ring < 2; ring++) {
+        for (uint32_t f = 0; f < ref->n_tris; f++) {
+            const uint32_t *t = ref->t[f];
+            if (nc.near[t[0]] || nc.near[t[1]] || nc.near[t[2]])
+                grow[t[0]] = grow[t[1]] = grow[t[2]] = 1;
+        }
+        for (uint32_t v = 0; v < ref->n_verts; v++)
+            nc.near[v] |= grow[v];
+    }
+    rc = edges_pierced(m, apart_in_ref, &nc, err);
+out:
+    free(nc.comp);
+    free(nc.near);
+    free(grow);
+    free(nc.pairs);
+    return rc;
 }

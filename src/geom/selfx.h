@@ -8,6 +8,7 @@
 #ifndef SF_GEOM_SELFX_H
 #define SF_GEOM_SELFX_H
 
+#include <stdbool.h>
 #include <stdint.h>
 
 #include "../base/err.h"
@@ -19,5 +20,17 @@
  * least one).  Returns the count (>= 0) or a negative sf_status.
  */
 int selfx_count(const struct mesh *m, struct sf_err *err);
+
+/*
+ * The new ones only: edges of m that pierce a triangle they were more than
+ * tol mm from in ref (the same connectivity, another shape: the input of a
+ * deformation), except between two shells that already cross in ref, and
+ * within two rings of a crossing ref has (a deformation slides the crossing
+ * curve over its neighbours).  Crossings and contacts the input already had
+ * (overlapping shells, a soup's T-junctions and coincident faces) are not
+ * counted, so a deformation of a defective part is judged by what it adds.  Returns the
+ * count or a negative sf_status (SF_EINVAL: connectivity differs, tol < 0).
+ */
+int selfx_count_new(const struct mesh *ref, const struct mesh *m, double tol, struct sf_err *err);
 
 #endif

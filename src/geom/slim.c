@@ -49,8 +49,8 @@ slim_params_default(struct slim_params *p)
     p->beta_deg = 0;
     p->beta_step_deg = 5;
     p->beta_max_deg = 45;
-    p->max_mndr = 0.15;
-    p->max_andr = 0.05;
+    p->max_mndr = 0.05;
+    p->max_andr = 0.015;
     p->fix_bottom_mm = 2;
     p->max_iters = 100;
     p->patience = 5;

@@ -65,8 +65,8 @@ struct slim_params {
     double beta_deg;      /* starting penalty angle (0) */
     double beta_step_deg; /* raise per round when the deviation limits fail (5) */
     double beta_max_deg;  /* give up raising past this (45) */
-    double max_mndr;      /* limit on max displacement / bbox diagonal (0.15) */
-    double max_andr;      /* limit on mean displacement / bbox diagonal (0.05) */
+    double max_mndr;      /* limit on max displacement / bbox diagonal (0.05) */
+    double max_andr;      /* limit on mean displacement / bbox diagonal (0.015) */
     double fix_bottom_mm; /* everything this close to the bed stays fixed (2) */
     const struct slim_box *fix_boxes; /* more fixed regions (may be NULL) */
     int n_fix_boxes;

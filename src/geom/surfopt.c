@@ -17,6 +17,10 @@
 #include "supmodel.h"
 
 #define KEEP_MAX 8 /* improving iterates kept as fallbacks (keep_push) */
+/* Edges and triangles closer than this share of the diagonal in the input
+   already touched there (float noise, a soup's T-junctions): crossing them
+   is no new self-intersection (selfx_count_new). */
+#define SELFX_TOUCH 1e-6
 
 void
 surfopt_params_default(struct surfopt_params *p)
@@ -27,14 +31,15 @@ surfopt_params_default(struct surfopt_params *p)
     p->gamma = 1;
     p->beta = 0;
     p->saliency = 0.8;
-    p->max_mndr = 0.15;
-    p->max_andr = 0.05;
+    p->max_mndr = 0.05;
+    p->max_andr = 0.015;
     p->fix_bottom_mm = 2;
     p->max_iters = 100;
     p->patience = 5;
     p->rounds = 2;
     p->refine_tris = 10000;
     p->orient = true;
+    p->anchor = 0.01;
     orient_params_default(&p->op);
 }
 
@@ -62,6 +67,8 @@ check_params(const struct surfopt_params *p, struct sf_err *err)
     if (!(p->gamma > 0 && p->beta >= 0 && isfinite(p->gamma) && isfinite(p->beta)))
         return sf_err_set(err, SF_EINVAL, "weights gamma %g, beta %g: want gamma > 0, beta >= 0",
                           p->gamma, p->beta);
+    if (!(p->anchor >= 0 && isfinite(p->anchor)))
+        return sf_err_set(err, SF_EINVAL, "anchor weight %g: want >= 0", p->anchor);
     if (!(p->saliency >= 0 && p->saliency <= 1))
         return sf_err_set(err, SF_EINVAL, "saliency %g: want a share in [0, 1]", p->saliency);
     if (!(p->max_mndr > 0 && p->max_andr > 0))
@@ -116,6 +123,7 @@ struct system {
     double *x;   /* 3n */
     bool *fixed;
     double *w_face; /* per face: its input area over the mean (constant) */
+    double anchor;  /* the pull toward the input's positions in this factor */
 };
 
 /* A light pull toward the current shape: keeps the system definite when
@@ -236,7 +244,7 @@ detail_term(struct system *s, const struct mesh *ref, double beta, double *lv0, 
  */
 static int
 system_build(struct system *s, const struct mesh *cur, const struct mesh *ref,
-             const struct surfopt_params *p, double beta, struct sf_err *err)
+             const struct surfopt_params *p, double beta, double anchor, struct sf_err *err)
 {
     uint32_t n = cur->n_verts;
     size_t n_trip = n + 12 * (size_t)cur->n_tris;
@@ -266,7 +274,7 @@ system_build(struct system *s, const struct mesh *cur, const struct mesh *ref,
     if (beta > 0)
         t = detail_term(s, ref, beta, lv0, row, col, val);
     for (uint32_t i = 0; i < n; i++)
-        row[t] = i, col[t] = i, val[t] = MU, t++;
+        row[t] = i, col[t] = i, val[t] = MU + anchor, t++;
     /* gamma sum_f w_f sum_(a,b) in f |v_a - v_b - d_ab|^2: an edge Laplacian */
     for (uint32_t f = 0; f < cur->n_tris; f++) {
         double g = p->gamma * s->w_face[f];
@@ -301,6 +309,7 @@ system_build(struct system *s, const struct mesh *cur, const struct mesh *ref,
         s->b0[n + i] = cur->v[i].y;
         s->b0[2 * (size_t)n + i] = cur->v[i].z;
     }
+    s->anchor = anchor;
     s->chol = sparse_chol_new(n, row, col, val, w, err);
     rc = s->chol ? SF_OK : err->code;
 out:
@@ -314,8 +323,9 @@ out:
 /* ---- one geometry iteration ---------------------------------------------- */
 
 /*
- * The edge targets' share of the right-hand side.  Every risky face (not
- * on the bed) wants its edges turned rigidly so its normal lies aim_rad
+ * The edge targets' share of the right-hand side.  Every face steeper than the
+ * aim (sin_a, the aim's sine; not on the bed)
+ * wants its edges turned rigidly so its normal lies aim_rad
  * from the vertical on the safe side, by the share its vertices' saliency
  * allows times step; every other face wants its edges as they are.  acc (3n,
  * column-major) receives gamma w_f sum (e_a - e_b) d_ab.
@@ -336,7 +346,7 @@ edge_rhs(const struct mesh *cur, const struct system *s, const double *share, do
         struct mat3 r = m3_identity();
         struct vec3 nrm = len > 0 ? v3_scale(cr, 1 / len) : v3(0, 0, 1);
         struct vec3 c = v3_scale(v3_add(v3_add(p[0], p[1]), p[2]), 1.0 / 3);
-        if (nrm.z < -sin_a && c.z > lo.z + 0.05) { /* risky, and not resting on the bed */
+        if (nrm.z < -sin_a && c.z > lo.z + 0.05) { /* past the aim, not resting on the bed */
             struct vec3 h = v3(nrm.x, nrm.y, 0);
             if (v3_len(h) < 1e-6)
                 h = v3(c.x - centre.x, c.y - centre.y, 0); /* flat: lean away from the middle */
@@ -414,9 +424,9 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
     for (uint32_t f = 0; f < cur->n_tris; f++)
         s.w_face[f] = mean_area > 0 ? s.w_face[f] / mean_area : 1;
     double t0 = now_s();
-    double beta = p->beta;
+    double beta = p->beta, anchor = p->anchor;
     if ((beta > 0 && (rc = build_neighbours(cur, &s, err)) < 0) ||
-        (rc = system_build(&s, cur, ref, p, beta, err)) < 0)
+        (rc = system_build(&s, cur, ref, p, beta, anchor, err)) < 0)
         goto out;
     res->factor_s += now_s() - t0;
     t0 = now_s();
@@ -431,7 +441,8 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
     *n_improved = 0;
     struct vec3 centre;
     mesh_volume(cur, &centre);
-    double sin_a = sin(p->angle_deg * M_PI / 180);
+    double sin_a = sin((p->angle_deg - p->margin_deg) * M_PI / 180);
+    double touch = SELFX_TOUCH * mesh_diag(ref);
     double aim = (p->angle_deg - p->margin_deg) * M_PI / 180;
     int since_best = 0;
     double step = 1; /* share of each face's turn asked for; halved past the limits */
@@ -445,7 +456,8 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
             for (int d = 0; d < 3; d++) {
                 size_t k = (size_t)d * n + v;
                 double x = d == 0 ? cur->v[v].x : d == 1 ? cur->v[v].y : cur->v[v].z;
-                s.rhs[k] = s.fixed[v] ? s.b0[k] : s.b0[k] + acc[k] + MU * x;
+                double x0 = d == 0 ? ref->v[v].x : d == 1 ? ref->v[v].y : ref->v[v].z;
+                s.rhs[k] = s.fixed[v] ? s.b0[k] : s.b0[k] + acc[k] + MU * x + s.anchor * x0;
             }
         }
         if ((rc = sparse_chol_solve(s.chol, s.rhs, s.x, 3, err)) < 0)
@@ -463,10 +475,20 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
                                            sm.n_risky, dev.mndr,  dev.andr };
             p->progress(p->progress_ud, &pr);
         }
-        if (dev.mndr > p->max_mndr || dev.andr > p->max_andr) {
-            /* Past the deviation limits: the turns are too bold for this
-             * part (few, large faces).  Halve them and go on from the best
-             * shape; once they are small, the round is done. */
+        bool improved = sm.proxy_mm3 < best_proxy * (1 - 1e-6);
+        int folds = 0; /* new self-intersections, checked only where the shape would be kept */
+        if (improved && dev.mndr <= p->max_mndr && dev.andr <= p->max_andr &&
+            (folds = selfx_count_new(ref, cur, touch, err)) < 0) {
+            rc = folds;
+            goto out;
+        }
+        if (folds > 0)
+            res->n_folded++;
+        if (dev.mndr > p->max_mndr || dev.andr > p->max_andr || folds > 0) {
+            /* Past the deviation limits, or folded onto itself: the turns
+             * are too bold for this part (few, large faces; thin features).
+             * Halve them and go on from the best shape; once they are
+             * small, the round is done. */
             if (step <= 1.0 / 16)
                 break;
             step /= 2;
@@ -474,7 +496,7 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
             since_best = 0;
             continue;
         }
-        if (sm.proxy_mm3 < best_proxy * (1 - 1e-6)) {
+        if (improved) {
             best_proxy = sm.proxy_mm3;
             memcpy(best, cur->v, (size_t)n * sizeof(*best));
             since_best = 0;
@@ -484,14 +506,16 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const double *share,
             /* Adaptive weight: stalled well inside the deviation budget,
              * the input's detail is holding the faces back; loosen it and
              * go on from the best shape.  Otherwise the round is done. */
-            if (step < 1 || beta <= p->beta / 64 || dev.mndr > p->max_mndr / 2 ||
-                dev.andr > p->max_andr / 2)
+            bool loosen =
+                (p->beta > 0 && beta > p->beta / 64) || (p->anchor > 0 && anchor > p->anchor / 64);
+            if (step < 1 || !loosen || dev.mndr > p->max_mndr / 2 || dev.andr > p->max_andr / 2)
                 break;
             beta /= 4;
+            anchor /= 4;
             memcpy(cur->v, best, (size_t)n * sizeof(*best));
             double tf = now_s();
             system_free_factor(&s);
-            if ((rc = system_build(&s, cur, ref, p, beta, err)) < 0)
+            if ((rc = system_build(&s, cur, ref, p, beta, anchor, err)) < 0)
                 goto out;
             res->factor_s += now_s() - tf;
             since_best = 0;
@@ -524,10 +548,10 @@ move_positions(struct vec3 *v, uint32_t n, const struct vec3 *up, struct vec3 t)
  */
 static int
 orientation_step(struct mesh *cur, struct mesh *ref, struct snapshot *keep, int n_keep,
-                 const struct surfopt_params *p, struct sf_err *err)
+                 const struct surfopt_params *p, bool search, struct sf_err *err)
 {
     struct vec3 up = v3(0, 0, 1);
-    if (p->orient) {
+    if (search) {
         struct orient_params op = p->op;
         op.angle_deg = p->angle_deg;
         struct orient_result found;
@@ -599,7 +623,8 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
 
     for (int round = 0; round < p->rounds; round++) {
         t0 = now_s();
-        if ((rc = orientation_step(&cur, &ref, keep, n_keep, p, err)) < 0)
+        bool search = p->orient && !(round == 0 && p->keep_start_up);
+        if ((rc = orientation_step(&cur, &ref, keep, n_keep, p, search, err)) < 0)
             goto out;
         res->orient_s += now_s() - t0;
         if (round == 0) {
@@ -631,12 +656,15 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
         goto out;
     res->model_oriented_g = mr.grams;
     int best_k = -1, n_selfx = 0;
+    /* what already touched in the input is no new crossing: float noise on
+       the diagonal's scale (a soup's T-junctions, coincident faces) */
+    double touch = SELFX_TOUCH * mesh_diag(&ref);
     double best_g = mr.grams;
     for (int k = n_keep - 1; k >= 0; k--) {
         memcpy(cur.v, keep[k].v, (size_t)n * sizeof(struct vec3));
-        if ((rc = selfx_count(&cur, err)) < 0)
+        if ((rc = selfx_count_new(&ref, &cur, touch, err)) < 0)
             goto out;
-        if (rc > res->selfx_input) {
+        if (rc > 0) {
             res->n_rejected++;
             n_selfx++;
             continue;
@@ -661,7 +689,11 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
         res->model_after_g = best_g;
     } else {
         res->model_after_g = res->model_oriented_g;
-        res->unchanged_why = n_keep == 0
+        res->unchanged_why = n_keep == 0 && res->n_folded > 0
+                                 ? "every iterate that lowered the risky faces within the "
+                                   "deviation limits folded the surface onto itself (new "
+                                   "self-intersections)"
+                             : n_keep == 0
                                  ? "no iterate lowered the risky faces within the deviation "
                                    "limits"
                              : n_selfx == n_keep ? "every kept shape adds self-intersections"

@@ -12,14 +12,21 @@
 # SUPGRAMS_MESHES="anchor dino" limits the meshes; SUPGRAMS_VARIANTS (default
 # "given orient surface slim search"); SUPGRAMS_PEERS (default "prusaslicer curaengine");
 # SUPGRAMS_CACHED_ONLY=1 reports cached peer rows only (a dash where none is).
+# The optimized variants depend on this tree's code: they are kept under
+# SUPGRAMS_OUT (default build/supgrams/ plus the first 8 hex of the md5 of
+# the CLI and its libexec commands, so a rebuilt optimizer makes its own),
+# while the peer rows,
+# keyed by content, may be shared between trees (PEER_CACHE).
 set -u
 build=${1:-build/rel}
 shared=${SLIMFARM_SHARED:-../shared}
 [ -d "$shared/meshes" ] || { echo "bench_supgrams: $shared/meshes absent, skipped"; exit 0; }
 peers="$(cd "$shared" && pwd)/peers/slice-peers.sh"
 cache=${PEER_CACHE:-build/peercache}
-mkdir -p "$cache/stl" "$cache/variants"
 sf="$build/bin/slimfarm"
+# the CLI runs its commands from libexec: the key covers them all
+vdir=${SUPGRAMS_OUT:-build/supgrams/$(cat "$sf" "$build"/libexec/slimfarm/* 2>/dev/null | md5sum | cut -c1-8)}
+mkdir -p "$cache/stl" "$vdir"
 variants=${SUPGRAMS_VARIANTS:-given orient surface slim search}
 slicers=${SUPGRAMS_PEERS:-prusaslicer curaengine}
 py=/usr/bin/python3
@@ -42,7 +49,7 @@ for f in $(ls -S -r "$shared"/meshes/*.stl); do
   name=$(basename "$f" .stl)
   [ -n "${SUPGRAMS_MESHES:-}" ] && [[ " $SUPGRAMS_MESHES " != *" $name "* ]] && continue
   for v in $variants; do
-    out="$cache/variants/$name-$v.stl" js="$cache/variants/$name-$v.json"
+    out="$vdir/$name-$v.stl" js="$vdir/$name-$v.json"
     mndr=- andr=- secs=-
     case $v in
       given) out=$f ;;
@@ -50,8 +57,8 @@ for f in $(ls -S -r "$shared"/meshes/*.stl); do
               secs=$(jget "$js" seconds) ;;
       surface) [ -s "$js" ] || nice "$sf" optimize "$f" -o "$out" --method surface --json > "$js" || continue
                secs=$(jget "$js" seconds.total) mndr=$(jget "$js" deviation.mndr) andr=$(jget "$js" deviation.andr) ;;
-      slim) o="$cache/variants/$name-orient.stl"
-            [ -s "$o" ] || nice "$sf" orient "$f" -o "$o" --json > "$cache/variants/$name-orient.json" || continue
+      slim) o="$vdir/$name-orient.stl"
+            [ -s "$o" ] || nice "$sf" orient "$f" -o "$o" --json > "$vdir/$name-orient.json" || continue
             [ -s "$js" ] || nice "$sf" optimize "$o" -o "$out" --method volumetric --json > "$js" || continue
             secs=$(jget "$js" seconds) mndr=$(jget "$js" deviation.mndr) andr=$(jget "$js" deviation.andr) ;;
       search) [ -s "$js" ] || { /usr/bin/time -f %e -o "$js.time" nice "$sf" optimize "$f" -o "$out" --method surface \
@@ -60,7 +67,7 @@ for f in $(ls -S -r "$shared"/meshes/*.stl); do
     esac
     [ -s "$out" ] || continue
     read -r mps mce _ < <("$build/bench/bench_supmodel" "$out" "$one_dir" | awk 'NR == 1 { print $2, $3 }')
-    ours=$(nice "$sf" slice "$out" -o "$cache/variants/$name-$v.gcode" 2>/dev/null |
+    ours=$(nice "$sf" slice "$out" -o "$vdir/$name-$v.gcode" 2>/dev/null |
       sed -n 's/.*(support \([0-9.]*\) g).*/\1/p')
     ours=${ours:--}
     row="$name $v"
