@@ -44,7 +44,8 @@ static const struct move job_moves[JOB_EVENT_COUNT][7] = {
                         { JOB_INTERRUPTED, JOB_PRINTING },
                         { -1, 0 } },
     /* `to` of the two below is the "more to go" outcome; job_next decides. */
-    [JOB_EV_PRINT_DONE] = { { JOB_PRINTING, JOB_READY }, { -1, 0 } },
+    /* paused -> done: a pause that reached the printer as the print ended */
+    [JOB_EV_PRINT_DONE] = { { JOB_PRINTING, JOB_READY }, { JOB_PAUSED, JOB_READY }, { -1, 0 } },
     [JOB_EV_PRINT_FAILED] = { { JOB_PRINTING, JOB_READY },
                               { JOB_PAUSED, JOB_READY },
                               { JOB_INTERRUPTED, JOB_READY },

@@ -69,10 +69,15 @@ job_on() {
   api /api/jobs | json "' '.join(str(j['id']) for j in d['jobs'] if j['printer'] == '$1' and j['state'] in ('printing', 'paused'))"
 }
 
-# pause whichever job voron prints once it is under way; nothing moves; resume
-wait_for 180 sh -c "'$C' printers | grep -qE '^voron +printing .* [1-9][0-9]?%'" || fail "voron never printed: $("$C" printers)"
+# pause voron's long job once it is under way (the short one may end as the
+# pause lands); nothing moves; resume
+vlong_printing() {
+  [ "$(api "/api/jobs/$j_vlong" | json '"%s %s" % (d["job"]["state"], d["job"]["lines_acked"] > 0)')" = "printing True" ]
+}
+wait_for 180 vlong_printing || fail "voron never printed job $j_vlong: $("$C" printers); $("$C" jobs)"
 out=$("$C" pause voron) || fail "pause: $out"
 j_paused=$(job_on voron)
+[ "$j_paused" = "$j_vlong" ] || fail "voron pauses job '$j_paused', wanted $j_vlong"
 [ "$(job_state "$j_paused")" = paused ] || fail "job $j_paused not paused"
 wait_for 20 sh -c "'$C' printers | grep -qE '^voron +paused'" || fail "voron: $("$C" printers)"
 sleep 1

@@ -40,6 +40,18 @@ T_CASE(job_copies_go_back_to_ready)
     T_EQ_INT(c.copies_done, 3);
 }
 
+/* A pause that reaches the printer as its print ends: the printer says
+   done and the job is done (farmd_net saw it stuck paused, "cannot
+   print-done a paused job", while its printer took the next job). */
+T_CASE(job_done_while_paused_is_done)
+{
+    struct job_counts c = { 1, 0, 0, 0 };
+    enum job_state to;
+    T_OK(job_next(JOB_PAUSED, JOB_EV_PRINT_DONE, &c, &to, NULL), NULL);
+    T_EQ_INT(to, JOB_DONE);
+    T_EQ_INT(c.copies_done, 1);
+}
+
 T_CASE(job_retries_then_fails)
 {
     struct job_counts c = { 2, 0, 0, 2 };
@@ -71,7 +83,8 @@ T_CASE(job_illegal_events_refused)
     T_ERR(job_next(JOB_DONE, JOB_EV_CANCEL, &c, &to, &err), SF_EINVAL, &err,
           "cannot cancel a done job");
     T_ERR(job_next(JOB_READY, JOB_EV_PAUSE, &c, &to, &err), SF_EINVAL, &err, "pause");
-    T_ERR(job_next(JOB_PAUSED, JOB_EV_PRINT_DONE, &c, &to, &err), SF_EINVAL, &err, "paused");
+    T_ERR(job_next(JOB_INTERRUPTED, JOB_EV_PRINT_DONE, &c, &to, &err), SF_EINVAL, &err,
+          "interrupted");
     T_EQ_INT(c.copies_done, 0);
     T_EQ_INT(job_next(JOB_QUEUED, (enum job_event)99, &c, &to, &err), SF_EBUG);
 }
