@@ -304,35 +304,6 @@ measure_deviation_diag(const struct mesh *a, const struct mesh *b, double diag,
 
 /* ---- Hausdorff ----------------------------------------------------------- */
 
-/* Closest point to p on triangle abc (Ericson 5.1.5). */
-static struct vec3
-closest_on_tri(struct vec3 p, struct vec3 a, struct vec3 b, struct vec3 c)
-{
-    struct vec3 ab = v3_sub(b, a), ac = v3_sub(c, a), ap = v3_sub(p, a);
-    double d1 = v3_dot(ab, ap), d2 = v3_dot(ac, ap);
-    if (d1 <= 0 && d2 <= 0)
-        return a;
-    struct vec3 bp = v3_sub(p, b);
-    double d3 = v3_dot(ab, bp), d4 = v3_dot(ac, bp);
-    if (d3 >= 0 && d4 <= d3)
-        return b;
-    double vc = d1 * d4 - d3 * d2;
-    if (vc <= 0 && d1 >= 0 && d3 <= 0)
-        return v3_add(a, v3_scale(ab, d1 / (d1 - d3)));
-    struct vec3 cp = v3_sub(p, c);
-    double d5 = v3_dot(ab, cp), d6 = v3_dot(ac, cp);
-    if (d6 >= 0 && d5 <= d6)
-        return c;
-    double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0)
-        return v3_add(a, v3_scale(ac, d2 / (d2 - d6)));
-    double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
-        return v3_add(b, v3_scale(v3_sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6))));
-    double denom = 1 / (va + vb + vc);
-    return v3_add(a, v3_add(v3_scale(ab, vb * denom), v3_scale(ac, vc * denom)));
-}
-
 struct closest {
     const struct mesh *m;
     struct vec3 p;
@@ -344,7 +315,7 @@ closest_fn(struct RTCPointQueryFunctionArguments *args)
 {
     struct closest *c = args->userPtr;
     const uint32_t *t = c->m->t[args->primID];
-    struct vec3 q = closest_on_tri(c->p, c->m->v[t[0]], c->m->v[t[1]], c->m->v[t[2]]);
+    struct vec3 q = v3_closest_on_tri(c->p, c->m->v[t[0]], c->m->v[t[1]], c->m->v[t[2]]);
     struct vec3 d = v3_sub(q, c->p);
     double d2 = v3_dot(d, d);
     if (d2 < c->best2) {

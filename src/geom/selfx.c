@@ -133,35 +133,6 @@ selfx_count(const struct mesh *m, struct sf_err *err)
 
 /* ---- distances, for what was already touching in the reference ---- */
 
-static struct vec3
-closest_on_tri(struct vec3 p, struct vec3 a, struct vec3 b, struct vec3 c)
-{
-    /* Ericson, Real-Time Collision Detection 5.1.5 */
-    struct vec3 ab = v3_sub(b, a), ac = v3_sub(c, a), ap = v3_sub(p, a);
-    double d1 = v3_dot(ab, ap), d2 = v3_dot(ac, ap);
-    if (d1 <= 0 && d2 <= 0)
-        return a;
-    struct vec3 bp = v3_sub(p, b);
-    double d3 = v3_dot(ab, bp), d4 = v3_dot(ac, bp);
-    if (d3 >= 0 && d4 <= d3)
-        return b;
-    double vc = d1 * d4 - d3 * d2;
-    if (vc <= 0 && d1 >= 0 && d3 <= 0)
-        return v3_add(a, v3_scale(ab, d1 / (d1 - d3)));
-    struct vec3 cp = v3_sub(p, c);
-    double d5 = v3_dot(ab, cp), d6 = v3_dot(ac, cp);
-    if (d6 >= 0 && d5 <= d6)
-        return c;
-    double vb = d5 * d2 - d1 * d6;
-    if (vb <= 0 && d2 >= 0 && d6 <= 0)
-        return v3_add(a, v3_scale(ac, d2 / (d2 - d6)));
-    double va = d3 * d6 - d5 * d4;
-    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0)
-        return v3_add(b, v3_scale(v3_sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6))));
-    double den = 1 / (va + vb + vc);
-    return v3_add(a, v3_add(v3_scale(ab, vb * den), v3_scale(ac, vc * den)));
-}
-
 /* Distance between segments p0p1 and q0q1 (Ericson 5.1.9). */
 static double
 seg_seg(struct vec3 p0, struct vec3 p1, struct vec3 q0, struct vec3 q1)
@@ -199,11 +170,11 @@ seg_tri(struct vec3 p, struct vec3 q, struct vec3 a, struct vec3 b, struct vec3 
     if ((sp <= 0 && sq >= 0) || (sp >= 0 && sq <= 0)) {
         double den = sp - sq;
         struct vec3 x = den != 0 ? v3_add(p, v3_scale(v3_sub(q, p), sp / den)) : p;
-        if (v3_len(v3_sub(closest_on_tri(x, a, b, c), x)) <= 1e-12 * (1 + v3_len(x)))
+        if (v3_len(v3_sub(v3_closest_on_tri(x, a, b, c), x)) <= 1e-12 * (1 + v3_len(x)))
             return 0;
     }
-    double d = fmin(v3_len(v3_sub(closest_on_tri(p, a, b, c), p)),
-                    v3_len(v3_sub(closest_on_tri(q, a, b, c), q)));
+    double d = fmin(v3_len(v3_sub(v3_closest_on_tri(p, a, b, c), p)),
+                    v3_len(v3_sub(v3_closest_on_tri(q, a, b, c), q)));
     d = fmin(d, seg_seg(p, q, a, b));
     d = fmin(d, seg_seg(p, q, b, c));
     return fmin(d, seg_seg(p, q, c, a));
