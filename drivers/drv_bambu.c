@@ -52,6 +52,7 @@
 #define PACK_STEP         (1 << 20)    /* G-code bytes packed per loop turn */
 #define UPLOAD_STALL_MS   60000        /* an H2D can take 30 s before its 226 */
 #define UPLOAD_CONNECT_MS 20000        /* TCP + TLS on a busy printer (or test machine) */
+#define TIME_LEFT_MAX_MIN 1e7          /* mc_remaining_time past this (19 years) is garbage */
 #define ERR_CANCELED      0x0300400C   /* print_error "task canceled" */
 #define HMS_VERIFY_ATTR   0x05000500   /* HMS 0500-0500-0001-0007 */
 #define HMS_VERIFY_CODE   0x00010007   /* "MQTT command verification failed" */
@@ -273,6 +274,11 @@ follow(struct bambu *b)
     b->stats.layer_num = (int)num_field(b, "layer_num", 0);
     b->stats.total_layer_num = (int)num_field(b, "total_layer_num", 0);
     struct drv_status *st = &b->d.status;
+    /* The printer's own estimate (minutes), while it prints: the cache keeps the last value a
+       P1 sent, as its deltas leave out what did not change. */
+    double left_min = num_field(b, "mc_remaining_time", -1);
+    st->has_time_left = state_active(gs) && left_min >= 0 && left_min < TIME_LEFT_MAX_MIN;
+    st->time_left_s = st->has_time_left ? (int64_t)left_min * 60 : 0;
     double noz = num_field(b, "nozzle_temper", st->nozzle_c);
     double bed = num_field(b, "bed_temper", st->bed_c);
     double nozt = num_field(b, "nozzle_target_temper", st->nozzle_target_c);

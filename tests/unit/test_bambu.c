@@ -20,6 +20,7 @@
 #include "../../drivers/drv_bambu.h"
 #include "../../sim/sim_bambu.h"
 #include "../../src/base/log.h"
+#include "../../src/base/mqttloop.h"
 #include "../t.h"
 
 #define SERIAL  "01S00A2B3C4D5E6"
@@ -101,6 +102,7 @@ struct run {
     struct drv *drv;
     int done, failed, cancelled, progress, temps;
     double max_noz_target; /* highest nozzle target reported */
+    int64_t max_time_left; /* highest printer estimate seen at a progress event, s */
     int states[64];
     int n_states;
     int pause_at;  /* pause once progress reaches this percent (0: never) */
@@ -129,6 +131,8 @@ on_event(struct drv *d, enum drv_event ev, void *ud)
         r->states[r->n_states++] = d->status.state;
     else if (ev == DRV_EV_PROGRESS) {
         r->progress++;
+        if (d->status.has_time_left && d->status.time_left_s > r->max_time_left)
+            r->max_time_left = d->status.time_left_s;
         int pct = (int)(d->status.progress * 100);
         if (r->pause_at && !r->paused_once && pct >= r->pause_at) {
             r->paused_once = true;
@@ -344,6 +348,10 @@ job_case(bool p1)
     T_EQ_INT(r.drv->status.state, DRV_IDLE);
     T_EQ_INT(r.drv->status.lines_acked, r.drv->status.lines_total);
     T_TRUE(r.progress >= 2); /* it moved through the job, not just jumped to the end */
+    /* the printer's estimate while it printed (whole minutes, at least 1), none once done */
+    T_TRUE(r.max_time_left >= 60);
+    T_EQ_INT(r.max_time_left % 60, 0);
+    T_TRUE(!r.drv->status.has_time_left);
     T_TRUE(r.temps >= 1);
     struct drv_bambu_stats bs;
     T_TRUE(drv_bambu_stats(r.drv, &bs));
@@ -385,6 +393,138 @@ T_CASE(bambu_job_x1_full_reports)
 T_CASE(bambu_job_p1_delta_reports)
 {
     job_case(true);
+}
+
+/* A printer played by the test: crafted reports on the broker, for the driver alone. */
+struct fake {
+    struct mqttloop *m;
+    bool up;
+};
+
+static void
+fake_up(void *ud)
+{
+    ((struct fake *)ud)->up = true;
+}
+
+static void
+fake_down(void *ud, int connack, bool tls, const char *why)
+{
+    (void)connack, (void)tls, (void)why;
+    ((struct fake *)ud)->up = false;
+}
+
+static void
+fake_msg(void *ud, const char *topic, const char *payload, size_t len)
+{
+    (void)ud, (void)topic, (void)payload, (void)len;
+}
+
+static uint64_t
+reports_of(struct drv *d)
+{
+    struct drv_bambu_stats bs;
+    drv_bambu_stats(d, &bs);
+    return bs.reports;
+}
+
+/* Publish one report and run the loop until the driver has merged it. */
+static bool
+fake_report(struct run *r, struct fake *f, const char *json)
+{
+    uint64_t n = reports_of(r->drv);
+    mqttloop_publish(f->m, "device/" SERIAL "/report", json, strlen(json), NULL);
+    return WAIT_FOR(r, reports_of(r->drv) > n);
+}
+
+/*
+ * mc_remaining_time (minutes) becomes status.time_left_s while the printer
+ * prints: from an X1's whole report, kept across a P1 delta that leaves it
+ * out, replaced by the next delta that has it (a number or, as some
+ * firmware sends it, a string), and gone once the print ended.
+ */
+T_CASE(bambu_time_left_from_full_and_delta_reports)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    memset(&r, 0, sizeof(r));
+    struct sf_err err;
+    r.loop = loop_new(&err);
+    T_TRUE(r.loop != NULL);
+    char url[64], ca[600];
+    snprintf(url, sizeof(url), "mqtts://127.0.0.1:%d", broker_port);
+    snprintf(ca, sizeof(ca), "%s/ca.pem", certs);
+    struct drv_config dc = { .name = "bambu1",
+                             .kind = "bambu",
+                             .url = url,
+                             .api_key = CODE,
+                             .serial = SERIAL,
+                             .ca_file = ca,
+                             .ftps_port = 1 };
+    r.drv = drv_new(r.loop, &dc, on_event, &r, &err);
+    T_TRUE(r.drv != NULL);
+    T_OK(r.drv->ops->open(r.drv, &err), &err);
+    struct fake f = { 0 };
+    struct mqttloop_config mc = { .host = "127.0.0.1",
+                                  .port = broker_port,
+                                  .client_id = "test-printer",
+                                  .user = "bblp",
+                                  .password = CODE,
+                                  .ca_file = ca,
+                                  .tls_name = SERIAL,
+                                  .on_up = fake_up,
+                                  .on_down = fake_down,
+                                  .on_message = fake_msg,
+                                  .ud = &f };
+    f.m = mqttloop_new(r.loop, &mc, &err);
+    T_TRUE(f.m != NULL);
+    T_OK(mqttloop_connect(f.m, &err), &err);
+    struct drv_bambu_stats bs;
+    T_TRUE(WAIT_FOR(&r, f.up && (drv_bambu_stats(r.drv, &bs), bs.connects == 1)));
+    /* The driver's subscription may reach the broker after a first report: send the
+       whole report until one is merged (the same one each time). */
+    static const char full[] =
+        "{\"print\":{\"command\":\"push_status\",\"msg\":0,\"gcode_state\":\"RUNNING\","
+        "\"mc_percent\":10,\"mc_remaining_time\":42,\"subtask_name\":\"elsewhere\"}}";
+    int64_t end = wall_ms() + WAIT_MS;
+    while (reports_of(r.drv) == 0 && wall_ms() < end) {
+        mqttloop_publish(f.m, "device/" SERIAL "/report", full, strlen(full), NULL);
+        for (int i = 0; i < 4 && reports_of(r.drv) == 0; i++)
+            loop_run_once(r.loop, 50);
+    }
+    T_TRUE(reports_of(r.drv) > 0);
+    T_TRUE(r.drv->status.has_time_left);
+    T_EQ_INT(r.drv->status.time_left_s, 42 * 60);
+    T_TRUE(fake_report(&r, &f,
+                       "{\"print\":{\"command\":\"push_status\",\"msg\":1,"
+                       "\"mc_percent\":20}}"));
+    T_TRUE(r.drv->status.has_time_left);
+    T_EQ_INT(r.drv->status.time_left_s, 42 * 60); /* kept */
+    T_TRUE(fake_report(&r, &f,
+                       "{\"print\":{\"command\":\"push_status\",\"msg\":1,"
+                       "\"mc_percent\":80,\"mc_remaining_time\":7}}"));
+    T_EQ_INT(r.drv->status.time_left_s, 7 * 60);
+    T_TRUE(fake_report(&r, &f,
+                       "{\"print\":{\"command\":\"push_status\",\"msg\":1,"
+                       "\"gcode_state\":\"PAUSE\",\"mc_remaining_time\":\"5\"}}"));
+    T_TRUE(r.drv->status.has_time_left);
+    T_EQ_INT(r.drv->status.time_left_s, 5 * 60);
+    T_TRUE(fake_report(&r, &f,
+                       "{\"print\":{\"command\":\"push_status\",\"msg\":1,"
+                       "\"mc_remaining_time\":-3}}"));
+    T_TRUE(!r.drv->status.has_time_left); /* nonsense is no estimate */
+    T_TRUE(fake_report(&r, &f,
+                       "{\"print\":{\"command\":\"push_status\",\"msg\":1,"
+                       "\"mc_remaining_time\":3}}"));
+    T_EQ_INT(r.drv->status.time_left_s, 3 * 60);
+    T_TRUE(fake_report(&r, &f,
+                       "{\"print\":{\"command\":\"push_status\",\"msg\":1,"
+                       "\"gcode_state\":\"FINISH\",\"mc_percent\":100,"
+                       "\"mc_remaining_time\":0}}"));
+    T_TRUE(!r.drv->status.has_time_left);
+    mqttloop_free(f.m);
+    drv_free(r.drv);
+    loop_free(r.loop);
 }
 
 T_CASE(bambu_pause_resume_then_done)
