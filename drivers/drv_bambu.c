@@ -300,8 +300,10 @@ follow(struct bambu *b)
         return; /* needs the operator */
     const char *sub = str_field(b, "subtask_name");
     bool ours = b->subtask[0] && strcmp(sub, b->subtask) == 0;
-    if (b->phase == J_SENT && ours && state_active(gs))
+    if (b->phase == J_SENT && ours && state_active(gs)) {
         b->phase = J_ACTIVE;
+        b->d.status.message[0] = '\0'; /* the upload's words are history */
+    }
     if (b->phase == J_ACTIVE) {
         if (pct != b->last_percent && pct >= 0 && pct <= 100) {
             b->last_percent = pct;
@@ -529,11 +531,14 @@ upload_done(struct httpc_req *r, const struct httpc_result *res, void *ud)
     if (res->code != SF_OK) {
         char msg[300];
         snprintf(msg, sizeof(msg), "upload failed: %s", res->err.msg);
-        if (res->status == 552 || res->status == 553 || strstr(res->err.msg, ": 552") ||
-            strstr(res->err.msg, ": 553"))
+        /* status is the last reply curl read, not always the refusal (a 227 when STOR's
+           552 ended it): the code is taken from curl's words when they carry it */
+        long code = strstr(res->err.msg, ": 552")   ? 552
+                    : strstr(res->err.msg, ": 553") ? 553
+                                                    : res->status;
+        if (code == 552 || code == 553)
             snprintf(msg, sizeof(msg),
-                     "upload refused (FTP %ld): the printer's storage is full or missing",
-                     res->status);
+                     "upload refused (FTP %ld): the printer's storage is full or missing", code);
         fail_start(b, msg);
         return;
     }
@@ -555,16 +560,26 @@ upload_done(struct httpc_req *r, const struct httpc_result *res, void *ud)
         return;
     }
     b->phase = J_SENT;
+    snprintf(b->d.status.message, sizeof(b->d.status.message), "uploaded; starting");
     log_printer(LOG_INFO, b->d.name, "job '%s' sent", b->subtask);
 }
 
+/* "uploading N %" in the printer's message, as the HTTP drivers show it; N only rises, and
+   100 only once every byte is sent (the printer's 226 and the start still follow). */
 static void
 upload_progress(struct httpc_req *r, uint64_t sent, uint64_t total, void *ud)
 {
     (void)r;
-    (void)sent;
-    (void)total;
-    (void)ud;
+    struct bambu *b = ud;
+    if (!total || b->phase != J_UPLOADING)
+        return;
+    int pct = sent >= total ? 100 : (int)((double)sent * 100.0 / (double)total);
+    if (pct <= b->stats.upload_pct)
+        return;
+    b->stats.upload_pct = pct;
+    if (pct > 0 && pct < 100)
+        b->stats.upload_steps++;
+    snprintf(b->d.status.message, sizeof(b->d.status.message), "uploading %d %%", pct);
 }
 
 static void
@@ -597,6 +612,7 @@ start_upload(struct bambu *b)
         return;
     }
     b->phase = J_UPLOADING;
+    b->stats.upload_pct = -1;
     snprintf(b->d.status.message, sizeof(b->d.status.message), "uploading");
 }
 
@@ -921,6 +937,7 @@ drv_bambu_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_even
     b->d.ops = &bambu_ops;
     b->d.loop = l;
     b->stats.pushall_gap_ms = -1;
+    b->stats.upload_pct = -1;
     snprintf(b->d.name, sizeof(b->d.name), "%s", name);
     b->d.on_event = on_event;
     b->d.ud = ud;

@@ -31,6 +31,8 @@ struct drv_bambu_stats {
     uint64_t requests;      /* other requests sent */
     uint64_t connects;      /* MQTT sessions that came up */
     uint64_t uploads;       /* packages uploaded */
+    int upload_pct;         /* the last upload's progress as shown ("uploading N %"), -1 none */
+    uint64_t upload_steps;  /* percentages shown strictly between 0 and 100, every upload */
     char gcode_state[16];   /* the printer's last gcode_state */
     int mc_percent;         /* and progress */
     int remaining_min;      /* mc_remaining_time */

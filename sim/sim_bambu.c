@@ -763,7 +763,9 @@ sim_bambu_new(struct loop *l, const struct sim_bambu_config *c, struct sf_err *e
                                   .drop_after = c->faults.ftps_drop,
                                   .no_reuse_check = c->faults.no_reuse_check,
                                   .pasv_early = c->faults.pasv_early,
-                                  .reply_delay_ms = c->faults.ftps_slow_ms };
+                                  .reply_delay_ms = c->faults.ftps_slow_ms,
+                                  /* 16 kB per MS/20: 200 ms -> 1.6 MB/s */
+                                  .read_delay_ms = (c->faults.ftps_slow_ms + 19) / 20 };
     s->ftps = sim_ftps_new(&fc, err);
     if (!s->ftps)
         goto fail;

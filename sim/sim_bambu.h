@@ -23,7 +23,8 @@
  *   ftps-drop=BYTES   an upload's data connection dies after BYTES
  *   no-reuse-check    accept data connections that do not resume the TLS session
  *   pasv-early        the FTPS server's 227 arrives with the reply before PASV (sim_ftps.h)
- *   ftps-slow=MS      every FTPS control reply comes MS late (a busy printer)
+ *   ftps-slow=MS      every FTPS control reply comes MS late (a busy printer), and an
+ *                     upload's data is taken in 16 kB per MS/20 ms (its SD card)
  *   hms=HEX16@PCT     the print fails at PCT percent with that HMS code
  *   stop-at=PCT       someone presses stop on the printer's screen at PCT percent
  *   mqtt-drop=N       the printer drops its MQTT connection after N reports (and comes back)

@@ -271,6 +271,8 @@ do_stor(struct session *s, const char *arg)
             break;
         }
         got += r;
+        if (f->c.read_delay_ms > 0) /* this client's own thread */
+            poll(NULL, 0, f->c.read_delay_ms);
     }
     if (fclose(out) != 0)
         clean = false;

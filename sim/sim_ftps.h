@@ -39,6 +39,8 @@ struct sim_ftps_config {
     int64_t drop_after;      /* > 0: an upload's data connection drops after this many bytes */
     bool no_reuse_check;     /* accept data connections that do not resume (lenient firmware) */
     int reply_delay_ms;      /* > 0: every control reply waits this long (a busy printer) */
+    int read_delay_ms;       /* > 0: each 16 kB block of an upload is taken in this late (its
+                                SD card writing slowly) */
     bool pasv_early;         /* answer PASV before it is asked: the 227 rides on the PWD reply
                                 (and the PASV that follows gets none), as a client sees a server
                                 that answers faster than it looks; a client must then start the
