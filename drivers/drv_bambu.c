@@ -433,6 +433,27 @@ on_up(void *ud)
         set_state(b, b->phase == J_NONE ? DRV_CONNECTING : DRV_PRINTING, NULL);
 }
 
+/*
+ * A certificate the driver cannot accept, on link (MQTT or FTPS): the
+ * operator's line, the expected name first (status.message is short), then
+ * what the printer showed.  curl's "certificate subject name 'X' does not
+ * match target host name 'Y'" becomes "it shows CN=X".
+ */
+static void
+tls_message(struct bambu *b, const char *link, const char *detail, char *out, size_t n)
+{
+    const char *subj = strstr(detail, "subject name '");
+    const char *end = subj ? strchr(subj + 14, '\'') : NULL;
+    if (subj && end)
+        snprintf(out, n,
+                 "TLS (%s): expected a certificate for CN=%s (the serial) from ca_file; "
+                 "it shows CN=%.*s",
+                 link, b->serial, (int)(end - subj - 14), subj + 14);
+    else
+        snprintf(out, n, "TLS (%s): expected a certificate for CN=%s (the serial) from ca_file; %s",
+                 link, b->serial, detail);
+}
+
 static void
 on_down(void *ud, int connack, bool tls, const char *why)
 {
@@ -449,11 +470,9 @@ on_down(void *ud, int connack, bool tls, const char *why)
         return;
     }
     if (tls) {
-        snprintf(msg, sizeof(msg), "%s", why);
-        log_printer(LOG_ERROR, b->d.name,
-                    "%s; ca_file '%s' must hold the CA of the printer's certificate (CN = "
-                    "serial %s)",
-                    why, b->ca_file, b->serial);
+        const char *p = strstr(why, "certificate rejected: ");
+        tls_message(b, "MQTT", p ? p + 22 : why, msg, sizeof(msg));
+        log_printer(LOG_ERROR, b->d.name, "%s; ca_file '%s', MQTT said: %s", msg, b->ca_file, why);
         set_state(b, DRV_ERROR, msg);
         return;
     }
@@ -528,6 +547,20 @@ upload_done(struct httpc_req *r, const struct httpc_result *res, void *ud)
     drop_package(b);
     /* curl itself requires the 226 after the data (else CURLE_UPLOAD_FAILED / PARTIAL_FILE);
        status is the last reply, the QUIT's 221 on success. */
+    if (res->code != SF_OK && res->tls_peer) {
+        /* not worth a retry: the printer waits for the operator, as for MQTT's */
+        char msg[300];
+        tls_message(b, "FTPS upload", res->detail, msg, sizeof(msg));
+        log_printer(LOG_ERROR, b->d.name, "%s; ca_file '%s', curl said: %s", msg, b->ca_file,
+                    res->err.msg);
+        b->phase = J_NONE;
+        b->cancelling = false;
+        snprintf(b->d.status.message, sizeof(b->d.status.message), "%s", msg);
+        b->d.status.state = DRV_ERROR;
+        emit(b, DRV_EV_JOB_FAILED);
+        emit(b, DRV_EV_STATE);
+        return;
+    }
     if (res->code != SF_OK) {
         char msg[300];
         snprintf(msg, sizeof(msg), "upload failed: %s", res->err.msg);

@@ -406,6 +406,8 @@ report(struct httpc_req *r)
     res.body_len = r->resp.len;
     res.headers = r->hdr.data ? r->hdr.data : "";
     const char *detail = r->errbuf[0] ? r->errbuf : curl_easy_strerror(r->result);
+    res.detail = r->result == CURLE_OK ? "" : detail;
+    res.tls_peer = r->result == CURLE_PEER_FAILED_VERIFICATION;
     if (r->result == CURLE_OK) {
         res.code = SF_OK;
     } else if (r->oversize) {

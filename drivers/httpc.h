@@ -65,6 +65,9 @@ struct httpc_result {
     size_t body_len;     /* its bytes */
     const char *headers; /* the final response's header block, "Name: value\r\n" lines */
     struct sf_err err;   /* code != SF_OK: what happened, naming the URL */
+    const char *detail;  /* code != SF_OK: libcurl's own words, without the URL ("" if none) */
+    bool tls_peer;       /* SF_EIO because the server's certificate failed verification (its
+                            chain, or the name: an operator's fix, not worth a retry) */
 };
 
 /* One multipart/form-data part: a value or a file streamed from disk. */

@@ -69,6 +69,7 @@ struct sim_bambu {
     char topic_report[96], topic_request[96];
     char storage[512]; /* the machine's uploads directory: FTPS stores there */
     char ca[512], cert[512], key[512];
+    char ftps_cert[512], ftps_key[512]; /* what FTPS presents: cert and key, or ftps-wrong-cert's */
     struct mqttloop *mqtt;
     struct sim_ftps *ftps;
     struct pstate st;   /* now */
@@ -666,6 +667,8 @@ sim_bambu_fault_parse(struct sim_bambu_faults *f, const char *spec, struct sf_er
         f->no_reuse_check = true;
     } else if (IS("pasv-early") && !eq) {
         f->pasv_early = true;
+    } else if (IS("ftps-wrong-cert") && !eq) {
+        f->ftps_wrong_cert = true;
     } else if (IS("ftps-slow")) {
         char *end;
         long n = strtol(v, &end, 10);
@@ -696,7 +699,7 @@ sim_bambu_fault_parse(struct sim_bambu_faults *f, const char *spec, struct sf_er
         return sf_err_set(err, SF_EINVAL,
                           "unknown fault '%s' (unsigned, storage-full, ftps-drop=BYTES, "
                           "no-reuse-check, pasv-early, ftps-slow=MS, hms=HEX16@PCT, stop-at=PCT, "
-                          "mqtt-drop=N)",
+                          "mqtt-drop=N, ftps-wrong-cert)",
                           spec);
     }
 #undef IS
@@ -736,6 +739,13 @@ sim_bambu_new(struct loop *l, const struct sim_bambu_config *c, struct sf_err *e
     snprintf(s->ca, sizeof(s->ca), "%s/ca.pem", c->ca_dir);
     snprintf(s->cert, sizeof(s->cert), "%s/printer.pem", c->ca_dir);
     snprintf(s->key, sizeof(s->key), "%s/printer.key", c->ca_dir);
+    if (c->faults.ftps_wrong_cert) {
+        snprintf(s->ftps_cert, sizeof(s->ftps_cert), "%s/other-printer.pem", c->ca_dir);
+        snprintf(s->ftps_key, sizeof(s->ftps_key), "%s/other-printer.key", c->ca_dir);
+    } else {
+        snprintf(s->ftps_cert, sizeof(s->ftps_cert), "%s", s->cert);
+        snprintf(s->ftps_key, sizeof(s->ftps_key), "%s", s->key);
+    }
     s->c.serial = s->serial;
     s->c.access_code = s->code;
     s->c.ca_dir = NULL;
@@ -754,8 +764,8 @@ sim_bambu_new(struct loop *l, const struct sim_bambu_config *c, struct sf_err *e
     snprintf(s->st.gcode_state, sizeof(s->st.gcode_state), "IDLE");
     s->st.stg_cur = 255;
     struct sim_ftps_config fc = { .port = c->ftps_port,
-                                  .cert_file = s->cert,
-                                  .key_file = s->key,
+                                  .cert_file = s->ftps_cert,
+                                  .key_file = s->ftps_key,
                                   .storage_dir = s->storage,
                                   .user = "bblp",
                                   .password = s->code,

@@ -28,6 +28,8 @@
  *   hms=HEX16@PCT     the print fails at PCT percent with that HMS code
  *   stop-at=PCT       someone presses stop on the printer's screen at PCT percent
  *   mqtt-drop=N       the printer drops its MQTT connection after N reports (and comes back)
+ *   ftps-wrong-cert   FTPS presents another printer's certificate (CN 01S00OTHER00000, the
+ *                     same CA: DIR/other-printer.pem), as an address that leads elsewhere
  *
  * Thread: loop thread (the FTPS server has its own thread, see sim_ftps.h).
  * Owns its MQTT client, FTPS server, storage directory (when it made it),
@@ -53,6 +55,7 @@ struct sim_bambu_faults {
     double hms_at;         /* ... at this percent */
     double stop_at;        /* > 0: stopped at the screen at this percent */
     long mqtt_drop;        /* > 0: drop MQTT after this many reports */
+    bool ftps_wrong_cert;  /* FTPS shows other-printer.pem */
 };
 
 struct sim_bambu_config {

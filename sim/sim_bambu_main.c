@@ -18,7 +18,7 @@ static const char usage_text[] =
     "                          [--report-ms N] [--fault SPEC]...\n"
     "  --ca DIR  holds ca.pem, printer.pem and printer.key (CN = serial)\n"
     "faults: unsigned storage-full ftps-drop=BYTES no-reuse-check pasv-early\n"
-    "        ftps-slow=MS hms=HEX16@PCT stop-at=PCT mqtt-drop=N\n";
+    "        ftps-slow=MS hms=HEX16@PCT stop-at=PCT mqtt-drop=N ftps-wrong-cert\n";
 
 #define PROG "slimfarm-sim bambu"
 

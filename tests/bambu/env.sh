@@ -4,7 +4,9 @@
 # Debian's mosquitto broker with a TLS listener and a password file.
 #
 #   env.sh certs DIR SERIAL      DIR/ca.pem ca.key printer.pem printer.key (CN=SERIAL, signed by
-#                                the CA, X.509 v1 with no SAN as on an X1) and DIR/other-ca.pem
+#                                the CA, X.509 v1 with no SAN as on an X1), DIR/other-ca.pem, and
+#                                DIR/other-printer.pem/.key (CN=01S00OTHER00000, the same CA:
+#                                another printer's, for the simulator's ftps-wrong-cert fault)
 #   env.sh broker DIR CODE [PORT] start mosquitto in the background: TLS 1.2 on 127.0.0.1:PORT
 #                                (a free one when not given) presenting printer.pem, user bblp
 #                                with password CODE; prints "PORT PID" once it listens
@@ -26,6 +28,10 @@ certs)
       -out "$dir/printer.pem" -days 30
   q openssl req -x509 -newkey rsa:2048 -nodes -keyout "$dir/other-ca.key" -out "$dir/other-ca.pem" -days 30 \
       -subj "/CN=Someone else's CA"
+  q openssl req -newkey rsa:2048 -nodes -keyout "$dir/other-printer.key" -out "$dir/other-printer.csr" \
+      -subj "/CN=01S00OTHER00000"
+  q openssl x509 -req -in "$dir/other-printer.csr" -CA "$dir/ca.pem" -CAkey "$dir/ca.key" -CAcreateserial \
+      -out "$dir/other-printer.pem" -days 30
   chmod 644 "$dir"/*.pem "$dir"/*.key
   ;;
 broker)

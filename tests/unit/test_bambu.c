@@ -672,7 +672,40 @@ T_CASE(bambu_wrong_ca_is_a_tls_error_and_insecure_connects)
 T_CASE(bambu_certificate_of_another_serial_is_a_tls_error)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
-    refused(&(struct setup){ .serial = "01S00FFFFFFFFFF" }, "TLS", "mismatch");
+    /* the message names the name it expected, and what the printer showed */
+    refused(&(struct setup){ .serial = "01S00FFFFFFFFFF" }, "TLS (MQTT)", "mismatch");
+    refused(&(struct setup){ .serial = "01S00FFFFFFFFFF" },
+            "expected a certificate for "
+            "CN=01S00FFFFFFFFFF",
+            "CN=" SERIAL);
+}
+
+/* The same for the upload: MQTT is the printer, FTPS shows another printer's certificate
+   (same CA, CN 01S00OTHER00000); the job fails, the printer waits in error for the operator
+   with the expected name in its message, and nothing reached the printer's storage. */
+T_CASE(bambu_ftps_certificate_of_another_serial_is_a_tls_error)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .fault = "ftps-wrong-cert" };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    struct sf_err err;
+    T_OK(start(&r, 2, 20, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.failed || r.done));
+    T_EQ_INT(r.failed, 1);
+    T_EQ_INT(r.drv->status.state, DRV_ERROR);
+    const char *m = r.drv->status.message;
+    fprintf(stderr, "message: %s\n", m);
+    T_TRUE(strstr(m, "TLS (FTPS upload)") != NULL);
+    T_TRUE(strstr(m, "expected a certificate for CN=" SERIAL) != NULL);
+    T_TRUE(strstr(m, "01S00OTHER00000") != NULL);
+    T_EQ_STR(r.failed_msg, m);
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.uploads, 0);
+    T_EQ_INT(ss.jobs_started, 0);
+    teardown(&r);
 }
 
 T_CASE(bambu_unsigned_refusal_says_developer_mode)
