@@ -34,6 +34,7 @@
 #include "../src/base/log.h"
 #include "../src/base/mem.h"
 #include "../src/base/mqttloop.h"
+#include "sim_bambu_relay.h"
 #include "sim_ftps.h"
 #include "sim_netprinter.h"
 
@@ -71,6 +72,8 @@ struct sim_bambu {
     char ca[512], cert[512], key[512];
     char ftps_cert[512], ftps_key[512]; /* what FTPS presents: cert and key, or ftps-wrong-cert's */
     struct mqttloop *mqtt;
+    struct sim_bambu_relay *relay; /* the printer's MQTT port, for clients (mqtt-drop cuts them) */
+    long printing_reports;         /* reports published while a job ran (mqtt-drop counts them) */
     struct sim_ftps *ftps;
     struct pstate st;   /* now */
     struct pstate sent; /* as last reported (P1 deltas) */
@@ -153,12 +156,20 @@ publish(struct sim_bambu *s, json_t *msg)
     if (mqttloop_publish(s->mqtt, s->topic_report, text, strlen(text), NULL) == SF_OK)
         s->stats.reports++;
     free(text);
-    if (s->c.faults.mqtt_drop > 0 && s->stats.reports >= (uint64_t)s->c.faults.mqtt_drop &&
+    if (s->job_on)
+        s->printing_reports++;
+    if (s->c.faults.mqtt_drop > 0 && s->printing_reports >= s->c.faults.mqtt_drop &&
         mqttloop_is_up(s->mqtt)) {
+        /* The printer's MQTT service goes away mid-print: its own link, and every client's
+           through its port, which refuses until the service is back. */
         s->c.faults.mqtt_drop = 0; /* once */
-        log_info("sim-bambu", "fault: dropping the MQTT connection");
+        s->stats.mqtt_drops++;
+        size_t cut = sim_bambu_relay_set_down(s->relay, true);
+        log_info("sim-bambu", "fault: dropping MQTT (%zu client connection%s cut)", cut,
+                 cut == 1 ? "" : "s");
         mqttloop_close(s->mqtt);
         s->sent_valid = false;
+        loop_timer_cancel(s->loop, s->reconnect_timer);
         s->reconnect_timer = loop_timer_add(s->loop, 500, reconnect, s);
     }
 }
@@ -616,6 +627,7 @@ reconnect(struct loop *l, void *ud)
     (void)l;
     struct sim_bambu *s = ud;
     s->reconnect_timer = 0;
+    sim_bambu_relay_set_down(s->relay, false);
     mqttloop_connect(s->mqtt, NULL);
 }
 
@@ -798,6 +810,9 @@ sim_bambu_new(struct loop *l, const struct sim_bambu_config *c, struct sf_err *e
     s->mqtt = mqttloop_new(l, &mc, err);
     if (!s->mqtt)
         goto fail;
+    s->relay = sim_bambu_relay_new(l, mc.host, c->mqtt_port, err);
+    if (!s->relay)
+        goto fail;
     mqttloop_connect(s->mqtt, NULL);
     s->report_timer = loop_timer_add(l, s->c.report_ms, report_tick, s);
     return s;
@@ -812,6 +827,12 @@ sim_bambu_ftps_port(const struct sim_bambu *s)
     return sim_ftps_port(s->ftps);
 }
 
+int
+sim_bambu_mqtt_port(const struct sim_bambu *s)
+{
+    return sim_bambu_relay_port(s->relay);
+}
+
 void
 sim_bambu_stats(const struct sim_bambu *s, struct sim_bambu_stats *out)
 {
@@ -820,6 +841,7 @@ sim_bambu_stats(const struct sim_bambu *s, struct sim_bambu_stats *out)
     sim_ftps_stats(s->ftps, &fs);
     out->uploads = fs.uploads;
     out->refused_reuse = fs.refused_reuse;
+    out->mqtt_clients = sim_bambu_relay_accepted(s->relay);
     snprintf(out->gcode_state, sizeof(out->gcode_state), "%s", s->st.gcode_state);
 }
 
@@ -831,6 +853,7 @@ sim_bambu_free(struct sim_bambu *s)
     loop_timer_cancel(s->loop, s->report_timer);
     loop_timer_cancel(s->loop, s->reconnect_timer);
     mqttloop_free(s->mqtt);
+    sim_bambu_relay_free(s->relay);
     sim_ftps_free(s->ftps);
     sim_netprinter_free(s->np);
     free(s->layer_at);

@@ -9,7 +9,9 @@
  * the full print object each time; P1 style: only the fields that changed,
  * the full object on pushall) and answers device/SERIAL/request: pushall,
  * get_version, project_file, pause, resume, stop, gcode_line.  It serves
- * implicit FTPS (sim_ftps.h) with TLS session reuse enforced.  A
+ * implicit FTPS (sim_ftps.h) with TLS session reuse enforced.  Clients
+ * reach the broker through the printer's own MQTT port (sim_bambu_relay.h),
+ * so that the printer's MQTT going away cuts them as on a printer.  A
  * project_file opens the uploaded .gcode.3mf, checks the package MD5 (when
  * the command gives one) and the plate_N.gcode.md5 sidecar, and runs the
  * G-code on the simulated machine, whose executed-command log is the
@@ -27,7 +29,9 @@
  *                     upload's data is taken in 16 kB per MS/20 ms (its SD card)
  *   hms=HEX16@PCT     the print fails at PCT percent with that HMS code
  *   stop-at=PCT       someone presses stop on the printer's screen at PCT percent
- *   mqtt-drop=N       the printer drops its MQTT connection after N reports (and comes back)
+ *   mqtt-drop=N       after N reports sent while a job prints, the printer's MQTT service
+ *                     goes away for 0.5 s: its own link, and every client's through its port
+ *                     (sim_bambu_mqtt_port), which refuses until it is back; once
  *   ftps-wrong-cert   FTPS presents another printer's certificate (CN 01S00OTHER00000, the
  *                     same CA: DIR/other-printer.pem), as an address that leads elsewhere
  *
@@ -54,7 +58,7 @@ struct sim_bambu_faults {
     char hms[17];          /* HMS code (16 hex digits) to fail with, "" none */
     double hms_at;         /* ... at this percent */
     double stop_at;        /* > 0: stopped at the screen at this percent */
-    long mqtt_drop;        /* > 0: drop MQTT after this many reports */
+    long mqtt_drop;        /* > 0: drop MQTT after this many reports sent while printing */
     bool ftps_wrong_cert;  /* FTPS shows other-printer.pem */
 };
 
@@ -84,6 +88,8 @@ struct sim_bambu_stats {
     uint64_t refused_reuse; /* FTPS data connections refused for no session reuse */
     uint64_t executed;      /* commands the machine executed */
     uint64_t pushalls;      /* pushall requests received */
+    uint64_t mqtt_drops;    /* times the mqtt-drop fault took MQTT away */
+    uint64_t mqtt_clients;  /* client connections through the printer's MQTT port */
     int64_t pushall_gap_ms; /* shortest time between two of them (loop clock), -1 until two */
     char gcode_state[16];   /* current gcode_state */
 };
@@ -96,14 +102,16 @@ int sim_bambu_fault_parse(struct sim_bambu_faults *f, const char *spec, struct s
 struct sim_bambu *sim_bambu_new(struct loop *l, const struct sim_bambu_config *c,
                                 struct sf_err *err);
 int sim_bambu_ftps_port(const struct sim_bambu *s);
+/* The printer's MQTT port: the broker, as a printer's clients reach it (TLS, CN = serial). */
+int sim_bambu_mqtt_port(const struct sim_bambu *s);
 void sim_bambu_stats(const struct sim_bambu *s, struct sim_bambu_stats *out);
 /* Stop everything and free.  NULL is fine. */
 void sim_bambu_free(struct sim_bambu *s);
 
 /*
  * `slimfarm-sim bambu ...` (argv[1] is "bambu"): prints "ftps://127.0.0.1:PORT"
- * on its first line, serves until SIGINT/SIGTERM, then prints one "stats:"
- * line on stderr.  Returns the exit status.
+ * on its first line, "mqtts://127.0.0.1:PORT" (the printer's MQTT port) on its second, serves until
+ * SIGINT/SIGTERM, then prints one "stats:" line on stderr.  Returns the exit status.
  */
 int sim_bambu_main(int argc, char **argv);
 

@@ -102,7 +102,8 @@ sim_bambu_main(int argc, char **argv)
         loop_free(l);
         return 1;
     }
-    printf("ftps://127.0.0.1:%d\n", sim_bambu_ftps_port(s));
+    printf("ftps://127.0.0.1:%d\nmqtts://127.0.0.1:%d\n", sim_bambu_ftps_port(s),
+           sim_bambu_mqtt_port(s));
     fflush(stdout);
     int rc = loop_run(l) < 0 ? 1 : 0;
     struct sim_bambu_stats st;

@@ -263,6 +263,7 @@ struct setup {
     const char *fault; /* one --fault spec or NULL */
     const char *fault2;
     const char *serial; /* NULL: the printer's */
+    bool via_printer;   /* reach the broker through the printer's own MQTT port (mqtt-drop) */
 };
 
 static int
@@ -294,7 +295,8 @@ setup(struct run *r, const struct setup *s)
         return -1;
     }
     char url[64], ca[600];
-    snprintf(url, sizeof(url), "mqtts://127.0.0.1:%d", broker_port);
+    snprintf(url, sizeof(url), "mqtts://127.0.0.1:%d",
+             s->via_printer ? sim_bambu_mqtt_port(r->sim) : broker_port);
     snprintf(ca, sizeof(ca), "%s/%s", certs, s->ca ? s->ca : "ca.pem");
     struct drv_config dc = { .name = "bambu1",
                              .kind = "bambu",
@@ -973,6 +975,68 @@ T_CASE(bambu_pushall_is_rate_limited_on_a_flapping_link)
     teardown(&r);
 }
 
+/* The owner's reconnect (the farm's backoff) until the link is up again; the attempts. */
+static int
+reconnect(struct run *r)
+{
+    int attempt = 0;
+    int64_t end = wall_ms() + WAIT_MS;
+    while (r->drv->status.state == DRV_OFFLINE && wall_ms() < end) {
+        int64_t next = wall_ms() + drv_backoff_ms(attempt++);
+        r->drv->ops->open(r->drv, NULL);
+        while (wall_ms() < next && r->drv->status.state != DRV_OFFLINE && !r->done)
+            loop_run_once(r->loop, 50);
+        while (wall_ms() < next && r->drv->status.state == DRV_OFFLINE)
+            loop_run_once(r->loop, 50);
+    }
+    return attempt;
+}
+
+/*
+ * The printer's MQTT goes away mid-print (fault mqtt-drop: after 20 reports
+ * sent while printing, its own link and the driver's, through the
+ * printer's port, are cut, and the port refuses for half a second).  The
+ * driver goes offline with the job kept, reconnects with the farm's
+ * backoff, picks the job up from the reports and sees it done; the
+ * machine ran the file once.
+ */
+T_CASE(bambu_mqtt_drop_mid_print_reconnects_and_job_ends_done)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    struct setup s = { .speed = 30, .fault = "mqtt-drop=20", .via_printer = true };
+    T_EQ_INT(setup(&r, &s), 0);
+    T_TRUE(WAIT_FOR(&r, idle(&r)));
+    struct sf_err err;
+    T_OK(start(&r, 10, 100, &err), &err);
+    T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_OFFLINE || r.done || r.failed));
+    T_EQ_INT(r.drv->status.state, DRV_OFFLINE);
+    T_EQ_INT(r.done + r.failed, 0);
+    T_TRUE(reconnect(&r) >= 1);
+    T_TRUE(WAIT_FOR(&r, r.done || r.failed));
+    if (r.failed)
+        fprintf(stderr, "job failed: %s\n", r.failed_msg);
+    T_EQ_INT(r.failed, 0);
+    T_EQ_INT(r.done, 1);
+    T_EQ_INT(r.drv->status.state, DRV_IDLE);
+    struct drv_bambu_stats bs;
+    T_TRUE(drv_bambu_stats(r.drv, &bs));
+    T_TRUE(bs.connects >= 2);
+    T_EQ_INT(bs.uploads, 1);
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.mqtt_drops, 1);
+    T_TRUE(ss.mqtt_connects >= 2);
+    T_TRUE(ss.mqtt_clients >= 2); /* the driver came back through the printer's port */
+    T_EQ_INT(ss.jobs_started, 1);
+    T_EQ_INT(ss.jobs_finished, 1);
+    teardown(&r);
+    char *want = commands_of(r.gcode_path), *got = slurp(r.log_path);
+    T_EQ_INT(strcmp(got, want), 0);
+    free(want);
+    free(got);
+}
+
 T_CASE(bambu_broker_restart_offline_then_job_finishes)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
@@ -988,18 +1052,7 @@ T_CASE(bambu_broker_restart_offline_then_job_finishes)
     T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_OFFLINE));
     T_EQ_INT(r.failed + r.done, 0);
     T_EQ_INT(start_broker(port), 0);
-    /* the owner's reconnect (the farm's backoff) until the link is up again */
-    int attempt = 0;
-    int64_t end = wall_ms() + WAIT_MS;
-    while (r.drv->status.state == DRV_OFFLINE && wall_ms() < end) {
-        int64_t next = wall_ms() + drv_backoff_ms(attempt++);
-        r.drv->ops->open(r.drv, &err);
-        while (wall_ms() < next && r.drv->status.state != DRV_OFFLINE && !r.done)
-            loop_run_once(r.loop, 50);
-        while (wall_ms() < next && r.drv->status.state == DRV_OFFLINE)
-            loop_run_once(r.loop, 50);
-    }
-    T_TRUE(attempt >= 1);
+    T_TRUE(reconnect(&r) >= 1);
     T_TRUE(WAIT_FOR(&r, r.done || r.failed));
     T_EQ_INT(r.failed, 0);
     T_EQ_INT(r.done, 1);
