@@ -22,7 +22,7 @@
  *                     (result "failed", reason "mqtt message verify failed", HMS
  *                     0500-0500-0001-0007); pushall and reports keep working
  *   storage-full      FTPS STOR answers 552
- *   ftps-drop=BYTES   an upload's data connection dies after BYTES
+ *   ftps-drop=BYTES   the first upload's data connection dies after BYTES (once)
  *   no-reuse-check    accept data connections that do not resume the TLS session
  *   pasv-early        the FTPS server's 227 arrives with the reply before PASV (sim_ftps.h)
  *   ftps-slow=MS      every FTPS control reply comes MS late (a busy printer), and an
@@ -51,7 +51,7 @@
 struct sim_bambu_faults {
     bool unsigned_refused; /* refuse control commands (no Developer Mode) */
     bool storage_full;     /* FTPS 552 */
-    int64_t ftps_drop;     /* > 0: upload dies after this many bytes */
+    int64_t ftps_drop;     /* > 0: the first upload dies after this many bytes */
     bool no_reuse_check;   /* lenient FTPS */
     bool pasv_early;       /* FTPS answers PASV before it is asked */
     int ftps_slow_ms;      /* FTPS control replies this late */

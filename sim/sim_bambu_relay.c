@@ -41,12 +41,12 @@ struct pair {
 
 struct sim_bambu_relay {
     struct loop *l;
-    int lfd;                 /* listening socket */
-    int port;                /* its port */
-    struct sockaddr_in up;   /* the broker */
-    bool down;               /* refusing: the printer's MQTT service is away */
-    size_t accepted;         /* connections relayed */
-    struct pair *pairs;      /* live ones */
+    int lfd;               /* listening socket */
+    int port;              /* its port */
+    struct sockaddr_in up; /* the broker */
+    bool down;             /* refusing: the printer's MQTT service is away */
+    size_t accepted;       /* connections relayed */
+    struct pair *pairs;    /* live ones */
 };
 
 static void

@@ -262,6 +262,7 @@ do_stor(struct session *s, const char *arg)
         }
         if (f->c.drop_after > 0 && got + r > f->c.drop_after) {
             fwrite(buf, 1, (size_t)(f->c.drop_after - got), out);
+            f->c.drop_after = 0; /* once: the next upload goes through (this thread's field) */
             clean = false;
             shutdown(dfd, SHUT_RDWR); /* the TLS stream dies mid-upload */
             break;

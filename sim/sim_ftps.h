@@ -36,7 +36,8 @@ struct sim_ftps_config {
     const char *user;        /* "bblp" */
     const char *password;    /* the access code */
     bool storage_full;       /* STOR answers 552 (storage exceeded) */
-    int64_t drop_after;      /* > 0: an upload's data connection drops after this many bytes */
+    int64_t drop_after;      /* > 0: the first upload's data connection drops after this many
+                                bytes (once; the uploads after it go through) */
     bool no_reuse_check;     /* accept data connections that do not resume (lenient firmware) */
     int reply_delay_ms;      /* > 0: every control reply waits this long (a busy printer) */
     int read_delay_ms;       /* > 0: each 16 kB block of an upload is taken in this late (its

@@ -1,0 +1,83 @@
+#!/usr/bin/env bash
+# tests/integ/farmd_bambu_upload.sh - an upload cut mid-transfer, at the
+# daemon's level: the simulated Bambu printer's FTPS data connection dies
+# after 4 kB of the first package (--fault ftps-drop=4096, once: TLS
+# dropped under the transfer).  slimfarmd's job fails that print with the
+# upload's error, retries it (the job's retry budget), the second upload
+# goes through and the job ends done.  Nothing lost or doubled: the
+# printer stored one package, started one job, and its executed log is the
+# job's G-code exactly once.
+# Skips (exit 0 with a note) when mosquitto or openssl is missing.
+set -u
+BUILD=${BUILD:-build/san}
+. "$(dirname "$0")/lib/farm.sh"
+t0=$(date +%s)
+ENV=tests/bambu/env.sh
+CODE=14142135
+SERIAL=01S00C0000000077
+broker=
+trap '[ -n "$broker" ] && $ENV stop "$broker"; cleanup' EXIT
+
+dir=$tmp/certs
+$ENV certs "$dir" "$SERIAL"; rc=$?
+[ $rc -eq 77 ] && { echo "farmd_bambu_upload: skipped (no mosquitto/openssl)"; exit 0; }
+[ $rc -eq 0 ] || fail "certificates"
+out=$($ENV broker "$dir" "$CODE") || fail "broker"
+broker=${out#* }
+"$S" bambu --serial "$SERIAL" --access-code "$CODE" --ca "$dir" --mqtt-port "${out% *}" --model x1 \
+  --speed 300 --report-ms 100 --log "$tmp/x1.log" --fault ftps-drop=4096 \
+  > "$tmp/x1.out" 2> "$tmp/x1.err" &
+sims+=($!)
+sim=$!
+for _ in $(seq 200); do [ "$(wc -l < "$tmp/x1.out")" -ge 2 ] && break; sleep 0.05; done
+ftps=$(sed -n 1p "$tmp/x1.out"); ftps=${ftps##*:}
+mqtt=$(sed -n 2p "$tmp/x1.out"); mqtt=${mqtt##*:}
+[ -n "$ftps" ] && [ -n "$mqtt" ] || fail "sim did not start: $(cat "$tmp/x1.err")"
+cp -r config/printers config/materials "$tmp/"
+{
+  printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
+  printf '[printer x1]\ndriver: bambu\nurl: mqtts://127.0.0.1:%s\nserial: %s\n' "$mqtt" "$SERIAL"
+  printf 'access_code: %s\nca_file: %s/ca.pem\nftps_port: %s\nauto_eject: true\n' "$CODE" "$dir" "$ftps"
+} > "$tmp/farm.ini"
+start_daemon
+wait_for 60 sh -c "'$C' printers | grep -qE '^x1 +idle'" || fail "x1: $("$C" printers)"
+
+tetra "$tmp/t14.stl" 14
+j=$(submit "$tmp/t14.stl" --material PLA --printer x1 --method none)
+is_done() { [ "$(job_state "$j")" = done ]; }
+wait_for 300 is_done || fail "job $j not done: $("$C" jobs); $("$C" printers)"
+api "/api/jobs/$j" > "$tmp/job.json"
+/usr/bin/python3 - "$tmp/job.json" <<'PY' || fail "job $j's prints: $(cat "$tmp/job.json")"
+import json, sys
+d = json.load(open(sys.argv[1]))
+prints = sorted(d["prints"], key=lambda p: p["started_ms"])
+outcomes = [p["outcome"] for p in prints]
+if outcomes != ["failed", "done"]:
+    sys.exit("prints %r, wanted a failed upload then done" % outcomes)
+print("  job %d: prints %s" % (d["job"]["id"], outcomes))
+PY
+grep -m 1 "upload failed" "$tmp/log" || fail "no upload failure in the daemon log"
+sleep 0.5
+kill "$sim"; wait "$sim" 2>/dev/null; sims=()
+grep -q "uploads=1 " "$tmp/x1.err" || fail "the printer stored other than one package: $(grep stats: "$tmp/x1.err")"
+grep -q "jobs_started=1 " "$tmp/x1.err" || fail "the printer started other than one job: $(grep stats: "$tmp/x1.err")"
+/usr/bin/python3 - "$tmp" <<'PY' || fail "x1's log is not the job's G-code exactly once"
+import glob, json, os, re, sys
+tmp = sys.argv[1]
+def commands(path):
+    out = []
+    for line in open(path, errors="replace"):
+        c = re.sub(r"\s+", " ", re.sub(r";.*", "", line).strip())
+        if c and not re.match(r"^(M105|M110( N-?\d+)?|M400)$", c):
+            out.append(c)
+    return out
+d = json.load(open(os.path.join(tmp, "job.json")))
+want = commands(glob.glob(os.path.join(tmp, "data", "**", d["job"]["gcode_sha"] + "*"), recursive=True)[0])
+got = commands(os.path.join(tmp, "x1.log"))
+if got != want:
+    print("log: %d lines, G-code: %d" % (len(got), len(want)))
+    sys.exit(1)
+print("  x1: %d log lines, the job once" % len(got))
+PY
+kill -TERM $pid; wait $pid; pid=
+echo "farmd_bambu_upload: ok (upload cut at 4 kB, retried, done, in $(( $(date +%s) - t0 )) s)"
