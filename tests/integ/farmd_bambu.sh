@@ -1,17 +1,24 @@
 #!/usr/bin/env bash
-# tests/integ/farmd_bambu.sh - a mixed farm: slimfarmd with two simulated
-# Marlin printers and two simulated Bambu printers (an X1 sending full
-# reports, a P1 sending deltas), each Bambu behind its own real mosquitto
-# broker with TLS (certificates from openssl, CN = serial), uploads over
-# the simulators' implicit FTPS.  12 jobs; on the way, through the REST
-# API, the X1 is paused and resumed mid-print and a job on the P1 is
-# stopped.  At the end every job but the stopped one is done, the Marlin
-# logs equal their prints' G-code (check_farm_logs), and each Bambu log is
-# its done prints' G-code in order, the stopped print a prefix of its own.
+# tests/integ/farmd_bambu.sh - the mixed farm, every kind of printer in
+# one run: slimfarmd with two simulated Marlin printers, an OctoPrint, a
+# Klipper behind Moonraker, a Prusa behind PrusaLink, and two simulated
+# Bambu printers (an X1 sending full reports, a P1 sending deltas), each
+# Bambu behind its own real mosquitto broker with TLS (certificates from
+# openssl, CN = serial), reached through the printer's own MQTT port, with
+# uploads over the simulators' implicit FTPS.  15 jobs done (14 without an
+# OctoPrint simulator in this build), one pinned to each network printer;
+# on the way, through the REST API, the X1 is paused and resumed mid-print
+# and one more job, on the P1, is stopped.  At the end every job but the
+# stopped one is done, the Marlin logs equal their prints' G-code
+# (check_farm_logs), the HTTP printers' logs theirs (check_net_logs), and
+# each Bambu log is its done prints' G-code in order, the stopped print a
+# prefix of its own.  Simulated machines run at --speed 40 to 3000: the
+# run takes a few minutes on a loaded machine.
 # Skips (exit 0 with a note) when mosquitto or openssl is missing.
 set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
+. "$(dirname "$0")/lib/netprint.sh"
 t0=$(date +%s)
 ENV=tests/bambu/env.sh
 CODE=27182818
@@ -32,15 +39,22 @@ bambu_printer() {
     --model "$model" --speed "$speed" --report-ms 100 --log "$tmp/$name.log" \
     > "$tmp/$name.out" 2> "$tmp/$name.err" &
   sims+=($!)
-  for _ in $(seq 100); do [ -s "$tmp/$name.out" ] && break; sleep 0.05; done
-  local a; a=$(head -n 1 "$tmp/$name.out")
-  [ -n "$a" ] || fail "sim $name did not start: $(cat "$tmp/$name.err")"
+  for _ in $(seq 200); do [ "$(wc -l < "$tmp/$name.out")" -ge 2 ] && break; sleep 0.05; done
+  local a b; a=$(sed -n 1p "$tmp/$name.out"); b=$(sed -n 2p "$tmp/$name.out")
+  [ -n "$a" ] && [ -n "$b" ] || fail "sim $name did not start: $(cat "$tmp/$name.err")"
   eval "ftps_$name=${a##*:}"
+  eval "mqtt_$name=${b##*:}" # the printer's own MQTT port, in front of its broker
 }
 bambu_printer x1 01S00X1000000001 x1 40
 bambu_printer p1 01P00P1000000002 p1 200
 start_sim mk3 --speed 3000
 start_sim mini --speed 3000 --tcp 0
+octo=
+"$S" octoprint --help > /dev/null 2>&1 && octo=octo
+[ -n "$octo" ] && start_net octo octoprint --speed 3000 --api-key octo-key
+start_net voron moonraker --speed 3000 --api-key voron-key
+start_net mk4 prusalink --speed 3000 --api-key mk4-key
+nets="voron mk4 $octo"
 cp -r config/printers config/materials "$tmp/"
 {
   printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
@@ -54,11 +68,17 @@ cp -r config/printers config/materials "$tmp/"
   printf '[printer p1]\ndriver: bambu\nurl: mqtts://127.0.0.1:%s\n' "$mqtt_p1"
   printf 'serial: 01P00P1000000002\naccess_code: %s\nca_file: %s/p1-certs/ca.pem\n' "$CODE" "$tmp"
   printf 'ftps_port: %s\nmaterial: PLA\nauto_eject: true\nbed_size: 256, 256, 256\n' "$ftps_p1"
+  for n in $nets; do
+    case $n in octo) d=octoprint ;; voron) d=moonraker ;; mk4) d=prusalink ;; esac
+    printf '[printer %s]\ndriver: %s\nurl: %s\napi_key: %s-key\nmaterial: PLA\nauto_eject: true\n' \
+      "$n" "$d" "$(cat "$tmp/$n.addr")" "$n"
+  done
 } > "$tmp/farm.ini"
 sed -i '/^host: /d' "$tmp/farm.ini"   # url given: host is its alias, once is enough
 "$D" --check -c "$tmp/farm.ini" >/dev/null 2>&1 || fail "--check: $("$D" --check -c "$tmp/farm.ini" 2>&1)"
 start_daemon
-wait_for 60 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq 4 ]" || fail "printers: $("$C" printers)"
+n_printers=$((4 + $(echo $nets | wc -w)))
+wait_for 60 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq $n_printers ]" || fail "printers: $("$C" printers)"
 
 for s in 8 10 12 14 16 18; do tetra "$tmp/t$s.stl" "$s"; done
 "$C" shapes "$tmp" > /dev/null || fail "shapes"
@@ -68,7 +88,9 @@ done_jobs="$j_x1"
 for s in 8 10 12 14 16 18; do done_jobs="$done_jobs $(submit "$tmp/t$s.stl" --material PLA --method none)"; done
 for s in 10 14; do done_jobs="$done_jobs $(submit "$tmp/t$s.stl" --material PLA --printer x1 --method none)"; done
 for s in 12 16 18; do done_jobs="$done_jobs $(submit "$tmp/t$s.stl" --material PLA --printer p1 --method none)"; done
-[ "$(echo $done_jobs $j_p1stop | wc -w)" -eq 13 ] || fail "13 jobs wanted"
+for n in $nets; do done_jobs="$done_jobs $(submit "$tmp/t12.stl" --material PLA --printer $n --method none)"; done
+n_done=$(echo $done_jobs | wc -w)
+[ "$n_done" -ge 14 ] || fail "14 jobs or more wanted: $done_jobs"
 
 post() { curl -sf -X POST -H "X-Api-Key: $RW" "$SLIMFARM_URL$1" >/dev/null; }
 printer_field() { api "/api/printers/$1" | json "d['printer']['$2']"; }
@@ -95,6 +117,7 @@ api "/api/jobs/$j_x1" | json 'd["prints"][0]["printer"]' | grep -qx x1 || fail "
 sleep 0.5
 stop_sims
 check_farm_logs mk3 mini || fail "Marlin logs differ from the jobs' G-code"
+check_net_logs $nets || fail "HTTP printers' logs differ from the jobs' G-code"
 # Bambu logs: done prints whole, in order; the stopped one a prefix.
 /usr/bin/python3 - "$tmp" x1 p1 <<'PY' || fail "Bambu logs differ from the jobs' G-code"
 import glob, json, os, re, sys
@@ -142,5 +165,6 @@ print(sum(1 for f in glob.glob('$tmp/job-*.json') for p in json.load(open(f))['p
           if p['printer'] == '$1' and p['outcome'] == 'done'))"; }
 n_x1=$(done_on x1); n_p1=$(done_on p1)
 [ "$n_x1" -ge 3 ] && [ "$n_p1" -ge 3 ] || fail "Bambu printers did too little: x1 $n_x1, p1 $n_p1 done"
+for n in $nets; do [ "$(done_on $n)" -ge 1 ] || fail "$n finished no print"; done
 kill -TERM $pid; wait $pid; pid=
-echo "farmd_bambu: ok (12 jobs done, 1 stopped, on 2 Marlin + 2 Bambu printers in $(( $(date +%s) - t0 )) s)"
+echo "farmd_bambu: ok ($n_done jobs done, 1 stopped, on 2 Marlin + $(echo $nets | wc -w) HTTP + 2 Bambu printers in $(( $(date +%s) - t0 )) s)"
