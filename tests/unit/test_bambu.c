@@ -1002,7 +1002,7 @@ reconnect(struct run *r)
 }
 
 /*
- * The printer's MQTT goes away mid-print (fault mqtt-drop: after 20 reports
+ * The printer's MQTT goes away mid-print (fault mqtt-drop: after 10 reports
  * sent while printing, its own link and the driver's, through the
  * printer's port, are cut, and the port refuses for half a second).  The
  * driver goes offline with the job kept, reconnects with the farm's
@@ -1013,11 +1013,11 @@ T_CASE(bambu_mqtt_drop_mid_print_reconnects_and_job_ends_done)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
     struct run r;
-    struct setup s = { .speed = 30, .fault = "mqtt-drop=20", .via_printer = true };
+    struct setup s = { .speed = 30, .fault = "mqtt-drop=10", .via_printer = true };
     T_EQ_INT(setup(&r, &s), 0);
     T_TRUE(WAIT_FOR(&r, idle(&r)));
     struct sf_err err;
-    T_OK(start(&r, 10, 100, &err), &err);
+    T_OK(start(&r, 20, 100, &err), &err); /* a few seconds: the drop comes early in it */
     T_TRUE(WAIT_FOR(&r, r.drv->status.state == DRV_OFFLINE || r.done || r.failed));
     T_EQ_INT(r.drv->status.state, DRV_OFFLINE);
     T_EQ_INT(r.done + r.failed, 0);
