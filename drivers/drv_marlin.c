@@ -54,7 +54,8 @@
 #define ACCEL_MM_S2     1500.0 /* execution time bounds: below most printers' print accel */
 #define KEEPALIVE_MS    3000   /* busy/wait reports come at least this often once seen */
 #define POLL_MS         2000   /* M105 polling / M155 interval */
-#define PROGRESS_MS     250    /* progress events at most this often */
+#define PROGRESS_MS     250    /* progress events at most this often, */
+#define PROGRESS_LINES  16     /* or once this many more lines are acknowledged */
 #define CLIMB_LINES     16     /* clean lines per step back up after a rewind */
 #define TAG_HOST        (-1)   /* a line the driver added */
 #define TAG_M105        (-2)   /* a numbered M105 (poll or probe): its answer is a barrier */
@@ -123,6 +124,7 @@ struct marlin {
     bool final_pushed;            /* M400 after the last line */
     long last_tag;                /* highest job index acknowledged + 1 */
     int64_t progress_ev_ms;       /* last DRV_EV_PROGRESS */
+    uint64_t progress_ev_lines;   /* lines_acked it reported */
     struct drv_machine mo, saved; /* tracked from the lines pushed (for pause and resume) */
     struct drv_machine est;       /* position for execution time bounds (all lines pushed) */
     struct drv_marlin_stats st;
@@ -691,8 +693,11 @@ check_job_progress(struct marlin *m)
     if (st->lines_total)
         st->progress = (double)st->lines_acked / (double)st->lines_total;
     int64_t now = loop_now_ms(m->base.loop);
-    if (m->mode != J_NONE && now - m->progress_ev_ms >= PROGRESS_MS) {
+    if (m->mode != J_NONE && (now - m->progress_ev_ms >= PROGRESS_MS ||
+                              st->lines_acked >= m->progress_ev_lines + PROGRESS_LINES ||
+                              st->lines_acked < m->progress_ev_lines)) {
         m->progress_ev_ms = now;
+        m->progress_ev_lines = st->lines_acked;
         emit_event(m, DRV_EV_PROGRESS);
     }
     if (m->inj_len > 0 || !linewin_idle(&m->win))
