@@ -54,7 +54,8 @@
 #define ACCEL_MM_S2     1500.0 /* execution time bounds: below most printers' print accel */
 #define KEEPALIVE_MS    3000   /* busy/wait reports come at least this often once seen */
 #define POLL_MS         2000   /* M105 polling / M155 interval */
-#define PROGRESS_MS     250    /* progress events at most this often */
+#define PROGRESS_MS     250    /* progress events at most this often, */
+#define PROGRESS_LINES  16     /* or once this many more lines are acknowledged */
 #define CLIMB_LINES     16     /* clean lines per step back up after a rewind */
 #define TAG_HOST        (-1)   /* a line the driver added */
 #define TAG_M105        (-2)   /* a numbered M105 (poll or probe): its answer is a barrier */
@@ -103,7 +104,8 @@ struct marlin {
     int64_t last_rx_ms;         /* last byte of any kind */
     int probes;                 /* deadlines in a row with no protocol reply */
     bool probe_wanted;          /* a probe waits in the inject queue */
-    bool keepalive_seen;        /* the firmware sends busy / wait reports while it blocks */
+    bool keepalive_seen;        /* the firmware sends "busy:" while any command blocks */
+    bool heat_reports_seen;     /* it reports temperatures while M109/M190 wait */
     int64_t busy_until_ms;      /* when the moves acknowledged so far end at the latest */
     int64_t poll_ms;            /* next M105 poll (no auto-report) */
     long error_wants;           /* "Error:... Last Line: L" just came: L + 1, until its Resend */
@@ -122,6 +124,7 @@ struct marlin {
     bool final_pushed;            /* M400 after the last line */
     long last_tag;                /* highest job index acknowledged + 1 */
     int64_t progress_ev_ms;       /* last DRV_EV_PROGRESS */
+    uint64_t progress_ev_lines;   /* lines_acked it reported */
     struct drv_machine mo, saved; /* tracked from the lines pushed (for pause and resume) */
     struct drv_machine est;       /* position for execution time bounds (all lines pushed) */
     struct drv_marlin_stats st;
@@ -366,6 +369,23 @@ exec_ms(struct drv_machine *mo, const char *cmd)
     return 0;
 }
 
+/* A move (G0-G3): planned, acknowledged, then run. */
+static bool
+is_move(const char *cmd)
+{
+    struct gcode_line g;
+    return gcode_parse(cmd, strlen(cmd), &g, NULL) == 0 && g.letter == 'G' && g.code <= 3;
+}
+
+/* A heat-up wait: Marlin reports temperatures while it runs. */
+static bool
+heats(const char *cmd)
+{
+    struct gcode_line g;
+    return gcode_parse(cmd, strlen(cmd), &g, NULL) == 0 &&
+           (gcode_is(&g, 'M', 109) || gcode_is(&g, 'M', 190) || gcode_is(&g, 'M', 191));
+}
+
 /*
  * When the printer's next reply is overdue, ms: after the last reply, or
  * the end of the moves it has planned, the lines in flight and the margin.
@@ -381,8 +401,10 @@ static int64_t
 deadline_ms(const struct marlin *m)
 {
     int32_t cap = m->keepalive_seen ? KEEPALIVE_MS : INT32_MAX;
+    int32_t heat_cap = m->keepalive_seen || m->heat_reports_seen ? KEEPALIVE_MS : INT32_MAX;
     int64_t from = m->busy_until_ms > m->progress_ms ? m->busy_until_ms : m->progress_ms;
-    return from + linewin_cost(&m->win, m->win.acked + 1, m->win.next - 1, cap) + m->margin_ms;
+    return from + linewin_cost(&m->win, m->win.acked + 1, m->win.next - 1, cap, heat_cap) +
+           m->margin_ms;
 }
 
 /* ---- writing the window ------------------------------------------------- */
@@ -550,7 +572,7 @@ pump(struct marlin *m)
                 log_printer(LOG_WARN, m->base.name, "dropping host line: %s", err.msg);
             } else {
                 m->st.host_lines++;
-                linewin_set_cost(&m->win, rc, exec_ms(&m->est, cmd));
+                linewin_set_cost(&m->win, rc, exec_ms(&m->est, cmd), is_move(cmd), heats(cmd));
             }
             if (tag == TAG_M105)
                 m->probe_wanted = false;
@@ -593,7 +615,7 @@ pump(struct marlin *m)
             job_fail(m, DRV_IDLE, "bad G-code");
             return;
         }
-        linewin_set_cost(&m->win, n, exec_ms(&m->est, cmd));
+        linewin_set_cost(&m->win, n, exec_ms(&m->est, cmd), is_move(cmd), heats(cmd));
         m->job_index++;
     }
 }
@@ -651,10 +673,13 @@ credit(struct marlin *m, long from, long to)
         /* The planner holds PLANNER_BLOCKS moves at most: the bound never
            runs further ahead than the last ones acknowledged. */
         int planner = m->max_p + 1 > PLANNER_BLOCKS ? m->max_p + 1 : PLANNER_BLOCKS;
+        /* Only moves run on after their ok: a wait's (M109, M190, G28, G4)
+           ends with it.  Counting a heat-up's half-hour bound here left a
+           line lost right after an M109 unprobed for that long. */
         if (m->busy_until_ms < now)
             m->busy_until_ms = now;
-        m->busy_until_ms += linewin_cost(&m->win, from + 1, to, INT32_MAX);
-        int64_t cap = now + linewin_cost(&m->win, to - planner + 1, to, INT32_MAX);
+        m->busy_until_ms += linewin_cost_after_ok(&m->win, from + 1, to, INT32_MAX);
+        int64_t cap = now + linewin_cost_after_ok(&m->win, to - planner + 1, to, INT32_MAX);
         if (m->busy_until_ms > cap)
             m->busy_until_ms = cap;
     }
@@ -668,8 +693,11 @@ check_job_progress(struct marlin *m)
     if (st->lines_total)
         st->progress = (double)st->lines_acked / (double)st->lines_total;
     int64_t now = loop_now_ms(m->base.loop);
-    if (m->mode != J_NONE && now - m->progress_ev_ms >= PROGRESS_MS) {
+    if (m->mode != J_NONE && (now - m->progress_ev_ms >= PROGRESS_MS ||
+                              st->lines_acked >= m->progress_ev_lines + PROGRESS_LINES ||
+                              st->lines_acked < m->progress_ev_lines)) {
         m->progress_ev_ms = now;
+        m->progress_ev_lines = st->lines_acked;
         emit_event(m, DRV_EV_PROGRESS);
     }
     if (m->inj_len > 0 || !linewin_idle(&m->win))
@@ -903,8 +931,12 @@ on_reply(struct marlin *m, const char *line, size_t len)
         m->progress_ms = now;
         m->probes = 0;
     }
-    if (r.kind == MR_BUSY || (r.kind == MR_TEMP && r.temp_wait))
+    /* M109's reports say nothing of a G4 or a G28 on a firmware with its
+       host keepalive off: they shorten only the heat-ups' allowance. */
+    if (r.kind == MR_BUSY)
         m->keepalive_seen = true;
+    if (r.kind == MR_TEMP && r.temp_wait)
+        m->heat_reports_seen = true;
     if (r.has_temps)
         on_temps(m, &r);
 
@@ -1285,6 +1317,7 @@ m_open(struct drv *d, struct sf_err *err)
     m->max_b = m->max_p = 0;
     memset(m->b_seen, 0, sizeof(m->b_seen));
     m->keepalive_seen = false;
+    m->heat_reports_seen = false;
     m->win.advanced = false;
     m->clean = 0;
     set_full_window(m);

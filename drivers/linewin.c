@@ -93,15 +93,20 @@ linewin_push(struct linewin *w, const char *cmd, long tag, struct sf_err *err)
     e->len = (uint8_t)len;
     e->tag = tag;
     e->exec_ms = 0;
+    e->after_ok = false;
+    e->heats = false;
     w->high = n;
     return n;
 }
 
 void
-linewin_set_cost(struct linewin *w, long n, int32_t exec_ms)
+linewin_set_cost(struct linewin *w, long n, int32_t exec_ms, bool after_ok, bool heats)
 {
-    if (held(w, n))
+    if (held(w, n)) {
         entry(w, n)->exec_ms = exec_ms < 0 ? 0 : exec_ms;
+        entry(w, n)->after_ok = after_ok;
+        entry(w, n)->heats = heats;
+    }
 }
 
 const struct linewin_entry *
@@ -240,11 +245,24 @@ linewin_resync(struct linewin *w)
 }
 
 int64_t
-linewin_cost(const struct linewin *w, long first, long last, int32_t cap_ms)
+linewin_cost(const struct linewin *w, long first, long last, int32_t cap_ms, int32_t heat_cap_ms)
+{
+    int64_t ms = 0;
+    for (long n = first < 1 ? 1 : first; n <= last; n++) {
+        if (!held(w, n))
+            continue;
+        int32_t cap = entry(w, n)->heats && heat_cap_ms < cap_ms ? heat_cap_ms : cap_ms;
+        ms += entry(w, n)->exec_ms < cap ? entry(w, n)->exec_ms : cap;
+    }
+    return ms;
+}
+
+int64_t
+linewin_cost_after_ok(const struct linewin *w, long first, long last, int32_t cap_ms)
 {
     int64_t ms = 0;
     for (long n = first < 1 ? 1 : first; n <= last; n++)
-        if (held(w, n))
+        if (held(w, n) && entry(w, n)->after_ok)
             ms += entry(w, n)->exec_ms < cap_ms ? entry(w, n)->exec_ms : cap_ms;
     return ms;
 }

@@ -40,6 +40,9 @@ struct linewin_entry {
     char text[LINEWIN_LINE_MAX]; /* "N<n> <cmd>*<cs>" */
     uint8_t len;                 /* its length */
     int32_t exec_ms;             /* the caller's bound on its execution time (linewin_set_cost) */
+    bool after_ok;               /* that time runs after its ok (a move, planned, then run);
+                                    else before it (M109, G28, G4: the ok ends the wait) */
+    bool heats;                  /* a heat-up wait (M109, M190, M191): reports temperatures */
     long tag;                    /* caller's tag (job line index, -1 for host commands) */
 };
 
@@ -75,8 +78,10 @@ void linewin_reset(struct linewin *w, long last);
  */
 long linewin_push(struct linewin *w, const char *cmd, long tag, struct sf_err *err);
 
-/* Record line n's execution time bound, ms (for the caller's time-outs). */
-void linewin_set_cost(struct linewin *w, long n, int32_t exec_ms);
+/* Record line n's execution time bound, ms (for the caller's time-outs),
+   whether that time runs after the line's ok (a planned move) or before it,
+   and whether it is a heat-up wait. */
+void linewin_set_cost(struct linewin *w, long n, int32_t exec_ms, bool after_ok, bool heats);
 
 /* The line to send now, or NULL (window full or nothing to send). */
 const struct linewin_entry *linewin_peek(const struct linewin *w);
@@ -118,8 +123,12 @@ long linewin_barrier(struct linewin *w, long n);
  */
 void linewin_resync(struct linewin *w);
 
-/* Execution time bound of lines first..last held in the ring, ms (capped per line at cap_ms). */
-int64_t linewin_cost(const struct linewin *w, long first, long last, int32_t cap_ms);
+/* Execution time bound of lines first..last held in the ring, ms (capped per
+   line at cap_ms, a heat-up's at heat_cap_ms). */
+int64_t linewin_cost(const struct linewin *w, long first, long last, int32_t cap_ms,
+                     int32_t heat_cap_ms);
+/* The part of it that can still run once the lines are acknowledged (moves). */
+int64_t linewin_cost_after_ok(const struct linewin *w, long first, long last, int32_t cap_ms);
 
 /* Retag line n (if held). */
 void linewin_set_tag(struct linewin *w, long n, long tag);

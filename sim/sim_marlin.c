@@ -8,15 +8,23 @@
  * for a move leaves only once the move is in the planner; M105 prints its
  * own "ok T:..."; M109/M190/G28 keep the host alive with "busy" lines.
  *
- * Design: one step() runs on every timer tick (1 ms while anything moves,
- * 50 ms when idle) and on readability: it refills the RX and TX token
- * buckets from the baud rate, reads at most that many bytes into the RX
- * buffer (RX_BUFFER_SIZE, with backpressure like a native-USB board),
+ * Design: the wire is timed to the microsecond, as a UART is: a byte
+ * takes 10 bits at the baud rate each way.  Bytes the host writes are taken
+ * from the link into a short "on the wire" stage as soon as they are there
+ * (readability), the first after an idle line starting at once; each
+ * reaches the RX ring (RX_BUFFER_SIZE) when its last bit would have, and
+ * reply bytes reach the host when theirs would have.  step() runs on
+ * readability, on a wake-up at the next line end either way (a timerfd in
+ * real time, so no millisecond step adds latency a UART does not have; a
+ * loop timer on simulated time), and on a firmware tick (1 ms while
+ * anything moves, 50 ms when idle) for the planner and heaters.  It
  * assembles lines into the queue as Marlin's get_serial_commands() does,
- * runs the queue head (a command may block: planner full, heating, dwell),
- * advances the planner and heaters in simulated time (real time x speed),
- * and paces reply bytes out.  Faults are applied where they happen on a
- * real link: bytes garbled on the wire, replies lost or late, resets.
+ * whenever the queue has room (Marlin calls it from idle(), so also while
+ * a command blocks), runs the queue head (a command may block: planner
+ * full, heating, dwell), advances the planner and heaters in simulated
+ * time (real time x speed), and paces reply bytes out.  Faults are applied
+ * where they happen on a real link: bytes garbled on the wire, replies
+ * lost or late, resets.
  *
  * Thread: loop thread only.
  */
@@ -33,7 +41,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <sys/timerfd.h>
 #include <termios.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../src/base/buf.h"
@@ -52,7 +62,7 @@
 enum link_kind { LINK_PTY, LINK_TCP };
 
 struct outline {
-    int64_t due_ms;       /* when it may go on the wire (slow replies) */
+    double due_us;        /* when it may go on the wire (slow replies), wire clock */
     struct outline *next; /* FIFO */
     size_t len;
     char text[]; /* line with its '\n' */
@@ -79,11 +89,21 @@ struct sim_marlin {
     int64_t last_ms;    /* time of the previous step */
     FILE *log;          /* executed commands */
 
-    /* wire */
-    double bps_ms;               /* bytes per millisecond at the baud rate */
-    double rx_tokens, tx_tokens; /* bytes the wire may carry now, each way */
-    bool rx_idle;                /* the last read drained the pty: no bytes were waiting */
-    char *rx;                    /* RX buffer, rx_len of rx_size bytes */
+    /* wire, timed in microseconds (wire_now_us) */
+    double byte_us;    /* one byte (10 bits) at the baud rate */
+    char *stage;       /* bytes taken from the link, still on the wire to the printer */
+    int stage_len;     /* of stage_cap */
+    int stage_cap;     /* about 4 ms of the wire: the host's side keeps the rest */
+    double stage_us;   /* when the first staged byte has arrived */
+    double rx_free_us; /* when the last byte taken in has arrived */
+    double tx_head_us; /* when the first byte in tx reaches the host (tx.len > 0) */
+    double tx_free_us; /* when the last byte written reached the host */
+    int wake_fd;       /* real time: a timerfd for the next wire event; -1 */
+    uint64_t wake;     /* simulated time: the loop timer for it */
+    double wake_at_us; /* when the armed wake-up fires; 0: none */
+    double event_us;   /* when what this step answers happened: the last line end
+                          delivered, else now; an idle transmitter starts then */
+    char *rx;          /* RX buffer, rx_len of rx_size bytes */
     int rx_len;
     bool rx_line_hit; /* corruption already hit this line (one per line) */
     bool hit_done;    /* the targeted reply corruption (faults.hit_*) happened */
@@ -128,6 +148,7 @@ struct sim_marlin {
 };
 
 static void step(struct sim_marlin *s);
+static void assemble_lines(struct sim_marlin *s);
 static void firmware_reset(struct sim_marlin *s, bool banner);
 
 /* A host is connected: bytes can flow. */
@@ -196,7 +217,7 @@ emit_raw(struct sim_marlin *s, const char *text, size_t n)
     struct outline *o = mem_alloc(sizeof(*o) + n);
     if (!o)
         return;
-    o->due_ms = loop_now_ms(s->loop) + s->faults.slow_ms;
+    o->due_us = s->event_us + s->faults.slow_ms * 1000.0;
     o->next = NULL;
     o->len = n;
     memcpy(o->text, text, n);
@@ -215,7 +236,7 @@ emit_raw(struct sim_marlin *s, const char *text, size_t n)
         junk[k] = '\0';
         struct outline *g = mem_alloc(sizeof(*g) + (size_t)k + 1);
         if (g) {
-            g->due_ms = o->due_ms;
+            g->due_us = o->due_us;
             g->next = NULL;
             g->len = (size_t)k + 1;
             memcpy(g->text, junk, (size_t)k);
@@ -297,6 +318,7 @@ close_link(struct sim_marlin *s)
         s->keep_fd = -1;
     }
     s->rx_len = 0;
+    s->stage_len = 0;
     s->line_len = 0;
     s->line_eol = false;
     s->emerg_len = 0;
@@ -991,26 +1013,39 @@ emergency_byte(struct sim_marlin *s, char c)
     emergency_line(s);
 }
 
+/* Now on the wire's clock, microseconds (on simulated time the loop's
+   whole milliseconds: wake-ups come at the first one at or after an
+   event, and what an event causes is timed from the event, not from the
+   wake-up, so the rounding does not add up along a round trip). */
+static double
+wire_now_us(const struct sim_marlin *s)
+{
+    if (s->cfg.virtual_time)
+        return (double)loop_now_ms(s->loop) * 1000.0;
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e6 + (double)ts.tv_nsec / 1e3;
+}
+
+/* Events up to this time count as now.  On simulated time a loop
+   millisecond stands for the events within half a millisecond of it, so
+   the rounding is as often early as late. */
+static double
+wire_horizon_us(const struct sim_marlin *s, double now)
+{
+    return s->cfg.virtual_time ? now + 500.0 : now;
+}
+
+/* Take what the host wrote off the link onto the wire (the stage). */
 static void
-read_input(struct sim_marlin *s)
+take_input(struct sim_marlin *s, double now)
 {
     if (s->boot_until_ms && s->cfg.boot_hold)
         return; /* held in the link until the banner is out */
-    int room = s->cfg.rx_size - s->rx_len;
-    int want = (int)s->rx_tokens;
-    /* A UART board loses what reaches a full ring, but only while Marlin is
-       not reading: between commands it drains the ring as bytes come (the
-       step's granularity must not turn a late step into a burst). */
-    if (want > room && !(s->cfg.uart && s->head_started))
-        want = room;
+    int want = s->stage_cap - s->stage_len;
     if (want <= 0 || !linked(s))
         return;
-    char tmp[4096];
-    if (want > (int)sizeof(tmp))
-        want = (int)sizeof(tmp);
-    ssize_t n = read(s->fd, tmp, (size_t)want);
-    if (n < want)
-        s->rx_idle = true; /* drained: the line went quiet */
+    ssize_t n = read(s->fd, s->stage + s->stage_len, (size_t)want);
     if (n < 0 && errno == EIO && s->kind == LINK_PTY) {
         host_left(s); /* the slave was closed: no host on the port */
         return;
@@ -1027,11 +1062,34 @@ read_input(struct sim_marlin *s)
         close(s->keep_fd);
         s->keep_fd = -1;
     }
-    s->rx_tokens -= (double)n;
+    if (s->stage_len == 0) /* an idle line: the first byte starts now */
+        s->stage_us = fmax(now, s->rx_free_us) + s->byte_us;
+    s->stage_len += (int)n;
+    s->rx_free_us = s->stage_us + (s->stage_len - 1) * s->byte_us;
     s->st.rx_bytes += (uint64_t)n;
-    int64_t now = loop_now_ms(s->loop);
-    for (ssize_t i = 0; i < n; i++) {
-        char c = tmp[i];
+}
+
+/*
+ * Staged bytes whose time has come reach the RX ring, one by one as the
+ * UART's interrupt stores them.  A full ring drains into the queue while
+ * the queue has room (idle() runs often enough on a real board); with the
+ * queue full too, a UART loses the byte and a native-USB board holds the
+ * host back.
+ */
+static void
+deliver_input(struct sim_marlin *s, double now)
+{
+    int64_t now_ms = loop_now_ms(s->loop);
+    double until = wire_horizon_us(s, now);
+    int i = 0;
+    for (; i < s->stage_len && s->stage_us + i * s->byte_us <= until; i++) {
+        bool live = now_ms >= s->boot_until_ms && !s->halted;
+        if (live && s->rx_len == s->cfg.rx_size) {
+            assemble_lines(s);
+            if (s->rx_len == s->cfg.rx_size && !s->cfg.uart)
+                break; /* native USB: nothing more until there is room */
+        }
+        char c = s->stage[i];
         bool eol = c == '\n' || c == '\r';
         if (!s->rx_line_hit && faults_roll(&s->faults, s->faults.corrupt_rx)) {
             c = (char)faults_byte(&s->faults, (uint8_t)c);
@@ -1040,8 +1098,10 @@ read_input(struct sim_marlin *s)
         }
         if (eol)
             s->rx_line_hit = false;
-        if (now < s->boot_until_ms || s->halted)
-            continue;
+        if (!live)
+            continue; /* the bootloader, or a killed printer, takes nothing */
+        if (eol)
+            s->event_us = s->stage_us + i * s->byte_us;
         emergency_byte(s, c);
         if (s->rx_len == s->cfg.rx_size) {
             s->st.rx_dropped++; /* a UART's ring overflows */
@@ -1049,16 +1109,27 @@ read_input(struct sim_marlin *s)
         }
         s->rx[s->rx_len++] = c;
     }
+    if (i == 0)
+        return;
+    memmove(s->stage, s->stage + i, (size_t)(s->stage_len - i));
+    s->stage_len -= i;
+    s->stage_us += i * s->byte_us;
+    if (s->stage_len > 0 && s->stage_us < now)
+        s->stage_us = now; /* held back (native USB): the rest follows once there is room */
+    if (s->stage_len > 0)
+        s->rx_free_us = s->stage_us + (s->stage_len - 1) * s->byte_us;
 }
 
-/* Move RX bytes into lines while the queue has room (get_serial_commands). */
+/*
+ * Move RX bytes into lines while the queue has room (get_serial_commands).
+ * Marlin 2 calls it from loop() and from idle() (manage_inactivity() calls
+ * queue.get_available_commands() first thing), and every blocking wait
+ * (planner full, M109/M190, G28/G29 moves, G4, M400) runs idle(): the ring
+ * drains into the queue while a command blocks, until the queue is full.
+ */
 static void
 assemble_lines(struct sim_marlin *s)
 {
-    /* Marlin reads serial only between commands: a command that blocks
-       (planner full, heating, homing, dwell) leaves bytes in the RX buffer. */
-    if (s->head_started)
-        return;
     int i = 0;
     while (i < s->rx_len && s->q_len < s->cfg.bufsize) {
         char c = s->rx[i++];
@@ -1088,11 +1159,12 @@ assemble_lines(struct sim_marlin *s)
 /* ---- output pacing ----------------------------------------------------- */
 
 static void
-write_output(struct sim_marlin *s)
+write_output(struct sim_marlin *s, double now)
 {
-    int64_t now = loop_now_ms(s->loop);
-    while (s->out_head && s->out_head->due_ms <= now && s->tx.len < TX_MAX) {
+    while (s->out_head && s->out_head->due_us <= wire_horizon_us(s, now) && s->tx.len < TX_MAX) {
         struct outline *o = s->out_head;
+        if (s->tx.len == 0) /* an idle transmitter starts at once */
+            s->tx_head_us = fmax(o->due_us, s->tx_free_us) + s->byte_us;
         for (size_t i = 0; i < o->len; i++) {
             char c = o->text[i];
             if (!s->tx_line_hit && faults_roll(&s->faults, s->faults.corrupt_tx)) {
@@ -1112,17 +1184,86 @@ write_output(struct sim_marlin *s)
         buf_reset(&s->tx);
         return;
     }
-    size_t want = (size_t)s->tx_tokens;
+    double until = wire_horizon_us(s, now);
+    if (s->tx.len == 0 || until < s->tx_head_us)
+        return;
+    /* the bytes whose last bit has reached the host by now */
+    size_t want = (size_t)((until - s->tx_head_us) / s->byte_us) + 1;
     if (want > s->tx.len)
         want = s->tx.len;
-    if (want == 0)
-        return;
     ssize_t n = write(s->fd, s->tx.data, want);
     if (n > 0) {
         buf_consume(&s->tx, (size_t)n);
-        s->tx_tokens -= (double)n;
+        s->tx_free_us = s->tx_head_us + (double)(n - 1) * s->byte_us;
+        s->tx_head_us += (double)n * s->byte_us;
+        if (s->tx.len > 0 && s->tx_head_us < now)
+            s->tx_head_us = now; /* the host was not reading: the rest follows as it does */
         s->st.tx_bytes += (uint64_t)n;
     }
+}
+
+/* When the next line end among len bytes at b (the first arriving at t0,
+   one every byte_us) has arrived; the last byte's time if none ends. */
+static double
+next_line_end_us(const char *b, size_t len, double t0, double byte_us)
+{
+    const char *nl = memchr(b, '\n', len);
+    const char *cr = memchr(b, '\r', len);
+    if (cr && (!nl || cr < nl))
+        nl = cr;
+    size_t i = nl ? (size_t)(nl - b) : len - 1;
+    return t0 + (double)i * byte_us;
+}
+
+static void on_wake(struct loop *l, int fd, unsigned events, void *ud);
+static void on_wake_timer(struct loop *l, void *ud);
+
+/* Arm the wake-up for the next event on the wire: a line end reaching the
+   printer or the host, a late reply falling due, or the stage half gone
+   while the host may have written more. */
+static void
+arm_wake(struct sim_marlin *s, double now)
+{
+    double at = 0;
+    if (s->stage_len > 0) {
+        at = next_line_end_us(s->stage, (size_t)s->stage_len, s->stage_us, s->byte_us);
+        double low = s->stage_us + (double)(s->stage_len / 2) * s->byte_us;
+        if (low < at)
+            at = low;
+    }
+    if (s->tx.len > 0 && linked(s)) {
+        double t = next_line_end_us(s->tx.data, s->tx.len, s->tx_head_us, s->byte_us);
+        if (at == 0 || t < at)
+            at = t;
+    }
+    if (s->out_head && s->tx.len < TX_MAX) {
+        double t = s->out_head->due_us;
+        if (at == 0 || t < at)
+            at = t;
+    }
+    if (at != 0)
+        at -= wire_horizon_us(s, now) - now;
+    if (at != 0 && at <= now)
+        at = now + 1000; /* the host reads nothing, or the ring is full (native USB): retry */
+    if (at == s->wake_at_us)
+        return;
+    s->wake_at_us = at;
+    if (s->cfg.virtual_time) {
+        if (s->wake)
+            loop_timer_cancel(s->loop, s->wake);
+        s->wake = 0;
+        if (at != 0)
+            s->wake = loop_timer_add(s->loop, (int64_t)ceil((at - now) / 1000.0), on_wake_timer, s);
+        return;
+    }
+    struct itimerspec its;
+    memset(&its, 0, sizeof(its));
+    if (at != 0) {
+        double t = at < 1 ? 1 : at; /* all zero disarms */
+        its.it_value.tv_sec = (time_t)(t / 1e6);
+        its.it_value.tv_nsec = (long)((t - (double)its.it_value.tv_sec * 1e6) * 1e3);
+    }
+    timerfd_settime(s->wake_fd, TFD_TIMER_ABSTIME, &its, NULL);
 }
 
 /* ---- the step ---------------------------------------------------------- */
@@ -1133,6 +1274,29 @@ on_tick(struct loop *l, void *ud)
     (void)l;
     struct sim_marlin *s = ud;
     s->tick = 0;
+    step(s);
+}
+
+static void
+on_wake(struct loop *l, int fd, unsigned events, void *ud)
+{
+    (void)l;
+    (void)events;
+    struct sim_marlin *s = ud;
+    uint64_t n;
+    if (read(fd, &n, sizeof(n)) < 0 && errno != EAGAIN)
+        log_warn("sim", "timerfd: %s", strerror(errno));
+    s->wake_at_us = 0;
+    step(s);
+}
+
+static void
+on_wake_timer(struct loop *l, void *ud)
+{
+    (void)l;
+    struct sim_marlin *s = ud;
+    s->wake = 0;
+    s->wake_at_us = 0;
     step(s);
 }
 
@@ -1193,17 +1357,10 @@ step(struct sim_marlin *s)
         return;
     }
     int64_t now = loop_now_ms(s->loop);
+    double now_us = wire_now_us(s);
+    s->event_us = now_us;
     int64_t dt_ms = now - s->last_ms;
     s->last_ms = now;
-    /* A UART banks no time while the line is idle: bytes that show up after
-       a pause start arriving now, at the baud rate (the cap only lets a
-       late step catch up). */
-    double cap = fmax(s->bps_ms * 8, 16);
-    s->rx_tokens = s->rx_idle ? 0 : fmin(cap, s->rx_tokens + (double)dt_ms * s->bps_ms);
-    /* An idle transmitter starts at once: a reply made in this step may use
-       this step's millisecond of wire. */
-    s->tx_tokens = s->tx.len == 0 ? s->bps_ms : fmin(cap, s->tx_tokens + (double)dt_ms * s->bps_ms);
-    s->rx_idle = false;
     double dt_s = (double)dt_ms / 1000.0 * s->cfg.speed;
     s->sim_s += dt_s;
 
@@ -1218,7 +1375,9 @@ step(struct sim_marlin *s)
         emit(s, "echo: Last Updated: 2023-08-06 | Author: (slimfarm-sim)");
         emit(s, "echo: Free Memory: 4096  PlannerBufferBytes: 1792");
     }
-    read_input(s);
+    take_input(s, now_us);
+    deliver_input(s, now_us);
+    take_input(s, now_us); /* the stage made room: keep the wire busy */
     if (!s->halted) {
         for (int round = 0; round < 8 && !s->hung; round++) {
             int before = s->q_len;
@@ -1240,25 +1399,23 @@ step(struct sim_marlin *s)
         step(s); /* silent from here on */
         return;
     }
-    write_output(s);
+    write_output(s, now_us);
 
-    /* Ask for input only when it can be taken, or epoll would spin. */
+    /* Ask for input only when the stage can take it, or epoll would spin. */
     if (s->host_gone)
         host_back(s);
     if (linked(s)) {
         bool held = s->boot_until_ms && s->cfg.boot_hold;
-        unsigned ev = (!held && s->rx_tokens >= 1 && (s->cfg.uart || s->rx_len < s->cfg.rx_size))
-                          ? LOOP_READ
-                          : 0;
+        unsigned ev = !held && s->stage_len < s->stage_cap ? LOOP_READ : 0;
         if (ev != s->fd_events && loop_mod_fd(s->loop, s->fd, ev, NULL) == 0)
             s->fd_events = ev;
     }
-    bool busy = s->q_len > 0 || s->pl_len > 0 || s->tx.len > 0 || s->out_head || s->rx_len > 0 ||
-                (linked(s) && s->fd_events == 0) || s->boot_until_ms ||
+    arm_wake(s, now_us);
+    bool busy = s->q_len > 0 || s->pl_len > 0 || s->rx_len > 0 || s->boot_until_ms ||
                 fabs(s->t_noz - fmax(s->t_noz_target, AMBIENT_C)) > 0.5 ||
                 fabs(s->t_bed - fmax(s->t_bed_target, AMBIENT_C)) > 0.5;
     if (s->halted)
-        busy = s->tx.len > 0 || s->out_head;
+        busy = false; /* its last words go out on the wire's wake-ups */
     if (s->tick)
         loop_timer_cancel(s->loop, s->tick);
     s->tick = loop_timer_add(s->loop, busy ? 1 : 50, on_tick, s);
@@ -1279,6 +1436,7 @@ firmware_reset(struct sim_marlin *s, bool banner)
     s->pl_head = 0;
     s->starve_armed = false;
     s->rx_len = 0;
+    s->stage_len = 0;
     s->line_len = 0;
     s->line_eol = false;
     s->emerg_len = 0;
@@ -1328,16 +1486,30 @@ sim_marlin_new(struct loop *l, const struct sim_marlin_config *c, struct sf_err 
     s->faults = c->faults;
     if (!s->faults.rng)
         s->faults.rng = 1;
-    s->fd = s->keep_fd = s->listen_fd = -1;
-    s->bps_ms = s->cfg.baud / 10.0 / 1000.0;
+    s->fd = s->keep_fd = s->listen_fd = s->wake_fd = -1;
+    s->byte_us = 10.0 * 1e6 / s->cfg.baud;
+    s->stage_cap = (int)fmax(64, 4000.0 / s->byte_us);
     s->t_noz = s->t_bed = AMBIENT_C;
     buf_init(&s->tx, TX_MAX);
     s->rx = mem_alloc((size_t)s->cfg.rx_size);
+    s->stage = mem_alloc((size_t)s->stage_cap);
     s->queue = mem_array((size_t)s->cfg.bufsize, sizeof(*s->queue));
     s->planner = mem_array((size_t)s->cfg.planner_blocks, sizeof(*s->planner));
-    if (!s->rx || !s->queue || !s->planner) {
+    if (!s->rx || !s->stage || !s->queue || !s->planner) {
         sf_err_set(err, SF_ENOMEM, "sim: out of memory");
         goto fail;
+    }
+    if (!s->cfg.virtual_time) {
+        s->wake_fd = timerfd_create(CLOCK_MONOTONIC, TFD_NONBLOCK | TFD_CLOEXEC);
+        if (s->wake_fd < 0) {
+            sf_err_sys(err, "sim: timerfd");
+            goto fail;
+        }
+        if (loop_add_fd(l, s->wake_fd, LOOP_READ, on_wake, s, err) < 0) {
+            close(s->wake_fd);
+            s->wake_fd = -1;
+            goto fail;
+        }
     }
     if (c->link)
         snprintf(s->link, sizeof(s->link), "%s", c->link);
@@ -1350,6 +1522,7 @@ sim_marlin_new(struct loop *l, const struct sim_marlin_config *c, struct sf_err 
         setvbuf(s->log, NULL, _IOLBF, 0); /* readers see each command as it runs */
     }
     s->last_ms = loop_now_ms(l);
+    s->event_us = wire_now_us(s);
     firmware_reset(s, true);
     s->kind = c->tcp_port >= 0 || c->fd >= 0 ? LINK_TCP : LINK_PTY;
     if (c->fd >= 0) {
@@ -1408,6 +1581,12 @@ sim_marlin_free(struct sim_marlin *s)
         return;
     if (s->tick)
         loop_timer_cancel(s->loop, s->tick);
+    if (s->wake)
+        loop_timer_cancel(s->loop, s->wake);
+    if (s->wake_fd >= 0) {
+        loop_del_fd(s->loop, s->wake_fd);
+        close(s->wake_fd);
+    }
     close_link(s);
     if (s->listen_fd >= 0) {
         loop_del_fd(s->loop, s->listen_fd);
@@ -1419,6 +1598,7 @@ sim_marlin_free(struct sim_marlin *s)
         fclose(s->log);
     buf_release(&s->tx);
     free(s->rx);
+    free(s->stage);
     free(s->queue);
     free(s->planner);
     free(s);

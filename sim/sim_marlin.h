@@ -44,6 +44,9 @@ struct sim_marlin_config {
     bool boot_hold;       /* bytes the host sends while the firmware boots wait in the link
                              and are read after "start" (a USB bridge that holds them while
                              the board resets); false: the bootloader loses them */
+    bool virtual_time;    /* the loop runs on simulated time (loop_set_virtual): the wire's
+                             events wake the printer on loop timers, to the millisecond;
+                             false: on a timerfd, to the microsecond */
     struct faults faults; /* faults_init() for none */
 };
 

@@ -26,6 +26,8 @@
 #include "../base/log.h"
 #include "../base/mem.h"
 
+#define PRINTER_SAVE_LINES 16 /* progress this far ahead of the store is saved at once */
+
 /* One driver event as it happened. */
 struct queued {
     enum drv_event ev;    /* what */
@@ -306,6 +308,14 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
         break;
     case DRV_EV_PROGRESS:
         p->lines_acked = (int64_t)st->lines_acked;
+        if (p->job_id && p->lines_acked >= p->lines_saved + PRINTER_SAVE_LINES) {
+            /* Saved at once, not on the farm's timer: a resume after a crash
+               re-runs at most these lines plus what the driver had not yet
+               reported (drivers report every 16 lines or 250 ms). */
+            struct store_progress sp = { p->job_id, p->lines_acked, false };
+            if (store_jobs_progress(p->env.s, &sp, 1, NULL) > 0)
+                p->lines_saved = p->lines_acked;
+        }
         break;
     case DRV_EV_TEMPS:
         break; /* read from the driver's status when asked */

@@ -1198,8 +1198,23 @@ store_job_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_e
     return rc;
 }
 
+static int store_jobs_progress_tx(struct store *s, struct store_progress *p, size_t n,
+                                  struct sf_err *err);
+
 int
 store_jobs_progress(struct store *s, struct store_progress *p, size_t n, struct sf_err *err)
+{
+    /* Progress commits do not fsync (WAL with synchronous=NORMAL: they
+       survive a kill -9, and the next state change's fsync carries them to
+       disk); state changes stay FULL. */
+    sqlite3_exec(s->db, "PRAGMA synchronous = NORMAL", NULL, NULL, NULL);
+    int rc = store_jobs_progress_tx(s, p, n, err);
+    sqlite3_exec(s->db, "PRAGMA synchronous = FULL", NULL, NULL, NULL);
+    return rc;
+}
+
+static int
+store_jobs_progress_tx(struct store *s, struct store_progress *p, size_t n, struct sf_err *err)
 {
     int rc = begin(s, err);
     if (rc)

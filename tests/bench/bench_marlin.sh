@@ -10,10 +10,16 @@
 # 2. Planner starvation: a dense curved part (concentric circles of 0.25 mm
 #    segments at 50 mm/s, 5 ms a move) printed in real time (speed 1); the
 #    simulator counts the times its planner ran dry between moves.
-# BENCH_LINES=N sets the job size of part 1 (default 2000).
+# BENCH_LINES=N sets the job size of part 1 (default 2000); BENCH_ONLY=stock runs
+# the stock-Marlin rows only; SIM=PATH runs another simulator (before/after);
+# BENCH_RT=1 runs the simulator and the hosts under SCHED_FIFO (chrt -f 10, root):
+# on a loaded machine the scheduler's wake-up latency, not the link, otherwise
+# sets the round trip (each process sleeps almost all the time; a few % CPU).
 set -u
 build=${1:-build/rel}
-sim="$build/bin/slimfarm-sim"
+sim=${SIM:-$build/bin/slimfarm-sim}
+only=${BENCH_ONLY:-}
+rt=; [ -n "${BENCH_RT:-}" ] && rt="chrt -f 10"
 cli="$build/bin/slimfarm"
 [ -x "$sim" ] && [ -x "$cli" ] || { echo "bench_marlin: $build not built"; exit 1; }
 lines=${BENCH_LINES:-2000}
@@ -34,16 +40,17 @@ awk 'BEGIN { print "G90"; print "M82"; print "G92 E0"; e = 0; z = 0.2; n = 0
   > "$work/curved.gcode"
 
 start_sim() { # args... -> $port
-  "$sim" marlin "$@" > "$work/sim.out" 2> "$work/sim.err" & pid=$!
+  $rt "$sim" marlin "$@" > "$work/sim.out" 2> "$work/sim.err" & pid=$!
   for _ in $(seq 50); do [ -s "$work/sim.out" ] && break; sleep 0.05; done
   port=$(head -n 1 "$work/sim.out")
 }
 stop_sim() { kill "$pid"; wait "$pid" 2>/dev/null; pid=; }
 field() { sed -n "s/.*$1=\([^ ]*\).*/\1/p" "$2" | head -n 1; }
 
-echo "link use: $lines-line dense job, printer sped up 1000x"
-printf "%-8s %-13s %9s %9s %9s\n" baud mode lines/s bytes/s "of link"
+[ -n "$only" ] || echo "link use: $lines-line dense job, printer sped up 1000x"
+[ -n "$only" ] || printf "%-8s %-13s %9s %9s %9s\n" baud mode lines/s bytes/s "of link"
 for baud in 115200 250000; do
+  [ -n "$only" ] && break
   for mode in buffer-aware ping-pong; do
     win=0; [ "$mode" = ping-pong ] && win=1
     start_sim --advanced-ok --baud "$baud" --speed 1000
@@ -85,11 +92,11 @@ for baud in 115200 250000; do
       if ! /usr/bin/python3 -c 'import printrun.printcore' 2>/dev/null; then
         echo "  (printrun not installed)"; stop_sim; continue
       fi
-      /usr/bin/python3 -c "$pc_py" "$port" "$work/dense.gcode" "$baud" > "$work/send.out" 2> "$work/send.err" ||
+      $rt /usr/bin/python3 -c "$pc_py" "$port" "$work/dense.gcode" "$baud" > "$work/send.out" 2> "$work/send.err" ||
         echo "  (printcore failed: $(tail -n 1 "$work/send.err"))"
     else
       win=0; [ "$host" = "slimfarm window 2" ] && win=2
-      "$cli" send "$work/dense.gcode" --port "pty:$port" --baud "$baud" --window "$win" \
+      $rt "$cli" send "$work/dense.gcode" --port "pty:$port" --baud "$baud" --window "$win" \
         > "$work/send.out" 2> "$work/send.err" || echo "  (send failed: $(tail -n 1 "$work/send.err"))"
     fi
     stop_sim
@@ -105,6 +112,7 @@ for baud in 115200 250000; do
   done
 done
 
+[ -n "$only" ] && exit 0
 moves=$(grep -c '^G1 X' "$work/curved.gcode")
 echo "planner starvation: dense curved part, $moves moves of 5 ms, real time"
 printf "%-8s %-13s %9s %10s %9s\n" baud mode starved "dry (s)" "wall (s)"

@@ -120,6 +120,7 @@ one_print(const char *gcode, const char *log, const struct sim_marlin_config *ba
         sc.faults.slow_ms = slow;
     }
     sc.fd = sv[0];
+    sc.virtual_time = true;
     sc.log_path = log;
     struct sim_marlin *sim = sim_marlin_new(l, &sc, &err);
     char port[32];

@@ -225,7 +225,8 @@ static const char farm_ini[] = "[printer a]\ndriver: marlin\nport: pty:/dev/null
                                "[printer b]\ndriver: marlin\nport: pty:/dev/null\n"
                                "material: PETG\nbed_size: 300, 300, 300\nauto_eject: true\n";
 
-static const char *setup_held; /* held while the farm opens its printers */
+static const char *setup_held;    /* held while the farm opens its printers */
+static int64_t setup_progress_ms; /* the farm's progress timer for the next setup; 0: 50 ms */
 
 static int
 setup(const char *name, const char *ini, printer_driver_fn driver, prepare_fn prep,
@@ -246,7 +247,10 @@ setup(const char *name, const char *ini, printer_driver_fn driver, prepare_fn pr
     if (!(fx.l = loop_new(err)) || !(fx.s = store_open(dir, NULL, err)) ||
         !(fx.pool = pool_new(fx.l, 2, err)))
         return SF_EIO;
-    struct farm_hooks hooks = { .driver = driver, .prepare = prep, .progress_ms = 50 };
+    struct farm_hooks hooks = { .driver = driver,
+                                .prepare = prep,
+                                .progress_ms = setup_progress_ms ? setup_progress_ms : 50 };
+    setup_progress_ms = 0;
     fx.f = farm_new(fx.l, fx.s, fx.pool, &fx.cfg, &hooks, err);
     return fx.f ? SF_OK : SF_EIO;
 }
@@ -694,6 +698,42 @@ T_CASE(farm_progress_is_persisted_and_survives_a_crash)
     T_EQ_STR(j.printer, "a");
     T_OK(store_check(s, &err), &err);
     store_close(s);
+}
+
+/*
+ * Progress 16 lines or more ahead of the store is saved when the driver
+ * reports it, not only on the farm's timer (1 s by default): a resume after
+ * a kill -9 re-ran up to a second of lines.  The timer here never fires.
+ */
+T_CASE(farm_progress_is_saved_within_16_lines)
+{
+    struct sf_err err;
+    setup_progress_ms = 3600 * 1000;
+    T_OK(setup("savelines", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    struct job_row j;
+    a->base.status.lines_acked = 15;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    for (int i = 0; i < 3; i++)
+        loop_run_once(fx.l, 10);
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 0); /* under 16 lines: the timer's */
+    a->base.status.lines_acked = 16;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    for (int i = 0; i < 3; i++)
+        loop_run_once(fx.l, 10);
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 16);
+    a->base.status.lines_acked = 40;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    for (int i = 0; i < 3; i++)
+        loop_run_once(fx.l, 10);
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 40);
+    teardown();
 }
 
 T_CASE(farm_reload_adds_and_removes_printers)

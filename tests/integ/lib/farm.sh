@@ -134,6 +134,7 @@ for f in glob.glob(os.path.join(tmp, "job-*.json")):
                        p["lines_acked"], d["job"]["gcode_sha"], d["job"]["id"]))
 prints.sort()
 bad = 0
+ran_on = []  # lines each interrupted print ran past its last saved line
 for name in printers:
     mine = [p for p in prints if p[2] == name]
     got = [c for c in commands(os.path.join(tmp, name + ".log")) if not host.match(c)]
@@ -188,6 +189,7 @@ for name in printers:
         if w == len(want) and nxt and got[i0:i0 + len(nxt)] == nxt:
             i, w = i0, w0
             continue
+        ran_on.append(w - w0)
         if outcome == "cancelled":
             # M108 (sent past the queue to break a heat wait), then the end
             # sequence: heaters off ... motors off
@@ -210,6 +212,9 @@ for name in printers:
         bad += 1
     print("  %s: %d prints, %d log lines, %d from the driver's own sequences" %
           (name, len(mine), len(got), extra))
+if ran_on:
+    print("  interrupted prints: %d; lines run past the saved line (re-run on resume): max %d, mean %.1f"
+          % (len(ran_on), max(ran_on), sum(ran_on) / len(ran_on)))
 sys.exit(1 if bad else 0)
 PY
 }
