@@ -22,8 +22,8 @@ static const char *const job_names[JOB_STATE_COUNT] = {
 };
 
 static const char *const job_event_names[JOB_EVENT_COUNT] = {
-    "prepare",    "prepared",     "prepare-failed", "start",   "pause",   "resume",
-    "print-done", "print-failed", "cancel",         "crashed", "restart", "defer",
+    "prepare",      "prepared", "prepare-failed", "start",   "pause", "resume",  "print-done",
+    "print-failed", "cancel",   "crashed",        "restart", "defer", "refused",
 };
 
 /* One legal move: in state `from`, the event leads to `to`. */
@@ -63,6 +63,8 @@ static const struct move job_moves[JOB_EVENT_COUNT][7] = {
                          { -1, 0 } },
     [JOB_EV_RESTART] = { { JOB_INTERRUPTED, JOB_READY }, { -1, 0 } },
     [JOB_EV_DEFER] = { { JOB_PREPARING, JOB_QUEUED }, { -1, 0 } },
+    /* no counter moves: the printer said "not now", the print never began */
+    [JOB_EV_REFUSED] = { { JOB_PRINTING, JOB_READY }, { -1, 0 } },
 };
 
 static int
@@ -158,7 +160,7 @@ static const char *const printer_names[PRINTER_STATE_COUNT] = {
 };
 
 static const char *const printer_event_names[PRINTER_EVENT_COUNT] = {
-    "connect", "disconnect", "start", "pause", "resume", "finish", "fault", "clear",
+    "connect", "disconnect", "start", "pause", "resume", "finish", "fault", "clear", "refuse",
 };
 
 /* DISCONNECTED and FAULT are legal from every state but their own target. */
@@ -187,6 +189,7 @@ static const struct move printer_moves[PRINTER_EVENT_COUNT][7] = {
     [PRINTER_EV_CLEARED] = { { PRINTER_AWAITING_CLEAR, PRINTER_IDLE },
                              { PRINTER_ERROR, PRINTER_IDLE },
                              { -1, 0 } },
+    [PRINTER_EV_REFUSED] = { { PRINTER_PRINTING, PRINTER_IDLE }, { -1, 0 } },
 };
 
 int

@@ -55,8 +55,10 @@ enum job_event {
                               preparing -> queued */
     JOB_EV_RESTART,        /* interrupted -> ready: print the copy again from the start */
     JOB_EV_DEFER,          /* preparing -> queued: a stage is unavailable now; try later */
+    JOB_EV_REFUSED,        /* printing -> ready: the printer refused the start ("not idle");
+                              nothing printed, so no retry is spent (the printer holds off) */
 };
-#define JOB_EVENT_COUNT 12
+#define JOB_EVENT_COUNT 13
 
 /* The counters a transition reads and updates. */
 struct job_counts {
@@ -143,8 +145,9 @@ enum printer_event {
     PRINTER_EV_FINISHED, /* job ended (done, failed or cancelled) with the part on the bed */
     PRINTER_EV_FAULT,    /* firmware halted or reported an error */
     PRINTER_EV_CLEARED,  /* operator confirmed the bed is clear (or error acknowledged) */
+    PRINTER_EV_REFUSED,  /* its driver refused the job just sent: idle again, bed untouched */
 };
-#define PRINTER_EVENT_COUNT 8
+#define PRINTER_EVENT_COUNT 9
 
 /*
  * Apply ev to a printer in state from; auto_eject makes FINISHED lead to

@@ -27,6 +27,9 @@
 #include "../base/mem.h"
 
 #define PRINTER_SAVE_LINES 16 /* progress this far ahead of the store is saved at once */
+/* attach() answers "not yet" taken on one connection before the job stays interrupted
+   (backoff 0.5, 1, 2, ... s: about two minutes in all) */
+#define PRINTER_ATTACH_WAITS 10
 
 /* One driver event as it happened. */
 struct queued {
@@ -53,7 +56,11 @@ struct printer {
                                    printer recover: leave it when the driver reports idle */
     struct queued *queue;       /* driver events not applied yet, n_queue of cap_queue */
     size_t n_queue, cap_queue;
-    uint64_t deliver; /* timer applying the queue, 0 if none */
+    uint64_t deliver;      /* timer applying the queue, 0 if none */
+    uint64_t hold;         /* after a refused start: timer until p takes jobs again, 0 if none */
+    int refusals;          /* starts refused in a row (drive) */
+    uint64_t attach_retry; /* timer offering the interrupted job again, 0 if none */
+    int attach_waits;      /* attach() answers "not yet" on this connection */
 };
 
 static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
@@ -172,22 +179,24 @@ interrupt_job(struct printer *p, const char *why)
  * printer unreachable for a while).  If the printer still prints that
  * file (or finished it meanwhile) the job is printing again and ends as
  * the printer says; otherwise it stays interrupted, as it would on Marlin.
- * True when the job was re-attached.
+ * SF_OK when the job was re-attached; SF_EAGAIN when the driver cannot tell
+ * yet (its first poll, PrusaLink's job details still on the way: ask again);
+ * SF_ENOTFOUND otherwise (no such job, or the printer does not know it).
  */
-static bool
+static int
 try_attach(struct printer *p)
 {
     struct sf_err err;
     struct job_row *jobs;
     size_t n;
     if (p->bed_full || store_job_list(p->env.s, &jobs, &n, &err))
-        return false;
+        return SF_ENOTFOUND;
     const struct job_row *j = NULL;
     for (size_t i = 0; i < n; i++)
         if (jobs[i].state == JOB_INTERRUPTED && strcmp(jobs[i].printer, p->cfg.name) == 0 &&
             jobs[i].gcode_sha[0] && (!j || jobs[i].updated_ms > j->updated_ms))
             j = &jobs[i];
-    bool ok = false;
+    int ok = SF_ENOTFOUND;
     char path[1024];
     if (j && store_file_path(p->env.s, j->gcode_sha, path, sizeof(path), &err) == SF_OK) {
         struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
@@ -200,10 +209,16 @@ try_attach(struct printer *p)
             if (printer_resume_commit(p, j->id, line > 0 ? line : 0, &err) == SF_OK) {
                 log_printer(LOG_INFO, p->cfg.name, "job %lld re-attached: the printer still has it",
                             (long long)j->id);
-                ok = true;
+                ok = SF_OK;
             } else {
                 log_printer(LOG_ERROR, p->cfg.name, "job %lld: %s", (long long)j->id, err.msg);
             }
+        } else if (rc == SF_EAGAIN && p->attach_waits < PRINTER_ATTACH_WAITS) {
+            log_printer(LOG_INFO, p->cfg.name, "job %lld: re-attach waits: %s", (long long)j->id,
+                        err.msg);
+            snprintf(p->message, sizeof(p->message), "re-attaching job %lld: %s", (long long)j->id,
+                     err.msg);
+            ok = SF_EAGAIN;
         } else {
             log_printer(LOG_INFO, p->cfg.name, "job %lld stays interrupted: %s", (long long)j->id,
                         err.msg);
@@ -247,6 +262,29 @@ connect_printer(struct printer *p)
 
 /* ---- driver events, applied on a later loop turn ---- */
 
+static void apply(struct printer *p, enum drv_event ev, const struct drv_status *st);
+
+/* The driver answered "not yet" to attach: offer the job again with its status now. */
+static void
+on_attach_retry(struct loop *l, void *ud)
+{
+    (void)l;
+    struct printer *p = ud;
+    p->attach_retry = 0;
+    enum drv_state ds = p->drv->status.state;
+    if (!p->deaf && p->state == PRINTER_OFFLINE && !p->attach_tried &&
+        (ds == DRV_IDLE || ds == DRV_PRINTING || ds == DRV_PAUSED))
+        apply(p, DRV_EV_STATE, &p->drv->status);
+}
+
+static void
+schedule_attach_retry(struct printer *p)
+{
+    if (!p->attach_retry)
+        p->attach_retry =
+            loop_timer_add(p->env.l, drv_backoff_ms(p->attach_waits++), on_attach_retry, p);
+}
+
 static void
 apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
 {
@@ -254,8 +292,16 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
     case DRV_EV_STATE:
         if (p->state == PRINTER_OFFLINE && p->drv->ops->attach && !p->attach_tried &&
             (st->state == DRV_IDLE || st->state == DRV_PRINTING || st->state == DRV_PAUSED)) {
+            /* tried only once the driver could answer: "not yet" (SF_EAGAIN)
+               keeps p offline and asks again, so the job is not left
+               interrupted until the next reconnect */
+            int rc = try_attach(p);
+            if (rc == SF_EAGAIN) {
+                schedule_attach_retry(p);
+                break;
+            }
             p->attach_tried = true;
-            if (try_attach(p))
+            if (rc == SF_OK)
                 break;
         }
         if (st->state == DRV_IDLE && p->state == PRINTER_OFFLINE) {
@@ -268,6 +314,7 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
             else
                 fail_job(p, "printer went offline");
             p->attach_tried = false;
+            p->attach_waits = 0;
             snprintf(p->message, sizeof(p->message), "%s", st->message);
             move(p, PRINTER_EV_DISCONNECTED);
             schedule_reconnect(p);
@@ -290,6 +337,7 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
         } else if (st->state == DRV_OFFLINE && p->drv->ops->attach) {
             /* a network printer still offline (its connect failed): say why, try later */
             p->attach_tried = false;
+            p->attach_waits = 0;
             if (st->message[0])
                 snprintf(p->message, sizeof(p->message), "%s", st->message);
             schedule_reconnect(p);
@@ -449,6 +497,10 @@ printer_free(struct printer *p)
         loop_timer_cancel(p->env.l, p->reconnect);
     if (p->deliver)
         loop_timer_cancel(p->env.l, p->deliver);
+    if (p->hold)
+        loop_timer_cancel(p->env.l, p->hold);
+    if (p->attach_retry)
+        loop_timer_cancel(p->env.l, p->attach_retry);
     if (p->drv) {
         /* drv_free() lives with the drivers; the vtable is all we rely on. */
         p->drv->ops->close(p->drv);
@@ -487,7 +539,7 @@ printer_job(const struct printer *p)
 bool
 printer_connected(const struct printer *p)
 {
-    return p->drv && p->drv->status.state == DRV_IDLE;
+    return p->drv && p->drv->status.state == DRV_IDLE && !p->hold;
 }
 
 void
@@ -538,16 +590,49 @@ printer_progress_saved(struct printer *p, int64_t lines)
 
 /* ---- jobs ---- */
 
-/* Hand the job to the driver; a refusal fails the print. */
+static void
+on_hold_end(struct loop *l, void *ud)
+{
+    (void)l;
+    struct printer *p = ud;
+    p->hold = 0;
+    if (strncmp(p->message, "refused a start", 15) == 0)
+        p->message[0] = '\0';
+    changed(p); /* the scheduler may use p again */
+}
+
+/*
+ * Hand the job to the driver.  "Not now" (SF_EAGAIN: the printer is not
+ * idle, an action is on its way) sends the job back to ready without
+ * spending a retry, and p takes no job for drv_backoff_ms(refusals) (0.5 s
+ * doubling to 30 s), so a printer that always refuses cannot spin; any
+ * other refusal (a bad file, a bad resume line) fails the print.
+ */
 static void
 drive(struct printer *p, const char *path, uint64_t line, const struct drv_job_scan *scan)
 {
     struct sf_err err;
-    if (p->drv->ops->start_job(p->drv, path, line, scan, &err)) {
-        log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)p->job_id, err.msg);
+    int rc = p->drv->ops->start_job(p->drv, path, line, scan, &err);
+    if (rc == SF_OK) {
+        p->refusals = 0;
+        return;
+    }
+    log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)p->job_id, err.msg);
+    if (rc != SF_EAGAIN) {
         fail_job(p, err.msg);
         move(p, PRINTER_EV_FINISHED);
+        return;
     }
+    int64_t id = p->job_id, wait_ms = drv_backoff_ms(p->refusals++);
+    struct job_event_args a = { .reason = err.msg };
+    p->job_id = 0;
+    if (p->hold)
+        loop_timer_cancel(p->env.l, p->hold);
+    p->hold = loop_timer_add(p->env.l, wait_ms, on_hold_end, p);
+    snprintf(p->message, sizeof(p->message), "refused a start (%s): takes no job for %lld ms",
+             err.msg, (long long)wait_ms);
+    move(p, PRINTER_EV_REFUSED);
+    job_event(p, id, JOB_EV_REFUSED, &a);
 }
 
 void

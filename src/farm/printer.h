@@ -84,7 +84,8 @@ const struct farmcfg_printer *printer_cfg(const struct printer *p);
 void printer_set_cfg(struct printer *p, const struct farmcfg_printer *cfg);
 enum printer_state printer_state(const struct printer *p);
 int64_t printer_job(const struct printer *p);
-bool printer_connected(const struct printer *p); /* has a driver that is up and idle */
+/* Has a driver that is up and idle, and is not holding off after a refused start. */
+bool printer_connected(const struct printer *p);
 void printer_info(const struct printer *p, struct printer_info *out);
 
 /* Dropped from the config: not scheduled, freed by the farm once idle. */
@@ -93,8 +94,10 @@ bool printer_removed(const struct printer *p);
 
 /*
  * Start job j (ready; its G-code at path) from line 0: the start is
- * committed, then the driver streams.  A driver refusing fails the print
- * (the retry policy applies).
+ * committed, then the driver streams.  A driver refusing with SF_EAGAIN
+ * (not idle: "not now") sends the job back to ready without spending a
+ * retry (JOB_EV_REFUSED) and p takes no job for drv_backoff_ms(refusals in
+ * a row); any other refusal fails the print (the retry policy applies).
  */
 void printer_start(struct printer *p, const struct job_row *j, const char *path);
 

@@ -1047,12 +1047,14 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
     case JOB_EV_PRINT_DONE:
     case JOB_EV_PRINT_FAILED:
     case JOB_EV_CANCEL:
+    case JOB_EV_REFUSED:
         if (a->lines_acked > j->lines_acked)
             j->lines_acked = a->lines_acked;
         if (job_state_on_printer(from))
             rc = close_print(s, j->id,
                              ev == JOB_EV_PRINT_DONE     ? "done"
                              : ev == JOB_EV_PRINT_FAILED ? "failed"
+                             : ev == JOB_EV_REFUSED      ? "refused"
                                                          : "cancelled",
                              j->lines_acked, a->filament_mm, err);
         j->printer[0] = '\0';

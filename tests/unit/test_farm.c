@@ -59,6 +59,10 @@ report(struct tdrv *t, enum drv_state st, enum drv_event ev)
 }
 
 static const char *held; /* printer whose link stays down until the test connects it */
+static enum drv_state open_state = DRV_IDLE; /* what a (re)connect finds the printer doing */
+static int refuse_starts; /* start_job answers "not idle" (SF_EAGAIN) this many times */
+static int attach_waits;  /* attach answers "not yet" (SF_EAGAIN) this many times */
+static int attaches;      /* attach calls */
 
 static int
 t_open(struct drv *d, struct sf_err *err)
@@ -67,7 +71,7 @@ t_open(struct drv *d, struct sf_err *err)
     struct tdrv *t = (struct tdrv *)d;
     t->opens++;
     if (!held || strcmp(held, d->name) != 0)
-        report(t, DRV_IDLE, DRV_EV_STATE);
+        report(t, open_state, DRV_EV_STATE);
     return SF_OK;
 }
 
@@ -75,10 +79,13 @@ static int
 t_start(struct drv *d, const char *path, uint64_t first_line, const struct drv_job_scan *scan,
         struct sf_err *err)
 {
-    (void)err;
     struct tdrv *t = (struct tdrv *)d;
     snprintf(t->path, sizeof(t->path), "%s", path);
     t->starts++;
+    if (refuse_starts > 0) {
+        refuse_starts--;
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is not idle", d->name);
+    }
     t->first_line = first_line;
     t->scan_lines = scan ? (int64_t)scan->lines_total : -1;
     t->base.status.lines_acked = first_line;
@@ -147,6 +154,27 @@ static const struct drv_ops tdrv_ops = { DRV_OPS_VERSION, "tdrv",    t_open,   t
                                          t_pause,         t_resume,  t_cancel, t_command,
                                          t_close,         t_destroy, NULL };
 
+/* A network printer's attach: "not yet" attach_waits times, then the job is still printing. */
+static int
+t_attach(struct drv *d, const char *path, const struct drv_job_scan *scan, struct sf_err *err)
+{
+    (void)scan;
+    struct tdrv *t = (struct tdrv *)d;
+    attaches++;
+    if (attach_waits > 0) {
+        attach_waits--;
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': its job is not described yet", d->name);
+    }
+    snprintf(t->path, sizeof(t->path), "%s", path);
+    report(t, DRV_PRINTING, DRV_EV_STATE);
+    return SF_OK;
+}
+
+/* tdrv for config kinds that re-attach (the network ones) */
+static const struct drv_ops tdrv_net_ops = { DRV_OPS_VERSION, "tdrv-net", t_open,   t_start,
+                                             t_pause,         t_resume,   t_cancel, t_command,
+                                             t_close,         t_destroy,  t_attach };
+
 static struct drv *
 tdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
          struct sf_err *err)
@@ -156,7 +184,7 @@ tdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, vo
         sf_err_set(err, SF_ENOMEM, "tdrv: out of memory");
         return NULL;
     }
-    t->base.ops = &tdrv_ops;
+    t->base.ops = strcmp(cfg->kind, "marlin") == 0 ? &tdrv_ops : &tdrv_net_ops;
     t->base.loop = l;
     snprintf(t->base.name, sizeof(t->base.name), "%s", cfg->name);
     t->base.on_event = on_event;
@@ -239,6 +267,8 @@ setup(const char *name, const char *ini, printer_driver_fn driver, prepare_fn pr
     n_tdrvs = 0;
     held = setup_held;
     setup_held = NULL;
+    open_state = DRV_IDLE;
+    refuse_starts = attach_waits = attaches = 0;
     log_set_level(LOG_ERROR);
     farmcfg_init(&fx.cfg);
     int rc = farmcfg_parse(&fx.cfg, ini, strlen(ini), "test.ini", err);
@@ -451,6 +481,73 @@ T_CASE(farm_dropped_printer_fails_print_into_retry_and_reconnects)
     T_EQ_INT(state_of(id), JOB_CANCELLED);
     T_EQ_INT(pstate(0), PRINTER_AWAITING_CLEAR);
     T_EQ_INT(a->cancels, 1);
+    T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+/*
+ * A start the printer refuses with "not now" (SF_EAGAIN: not idle) puts
+ * the job back to ready without spending a retry, leaves the bed as it was,
+ * and the printer holds off (0.5, 1, 2 s) before it takes a job again.  It
+ * used to count as a failed print: with max_retries 1 the second refusal
+ * failed the job, and the first left the printer awaiting a bed clear.
+ */
+T_CASE(farm_refused_start_waits_without_spending_a_retry)
+{
+    struct sf_err err;
+    T_OK(setup("refuse", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    refuse_starts = 3;
+    int64_t id = add("size 20 20 20", "PLA", 1); /* max_retries defaults to 1 */
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    T_EQ_INT(a->starts, 4);
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_EQ_INT(j.counts.failures, 0);
+    struct print_row *p;
+    size_t n;
+    T_OK(store_prints(fx.s, id, &p, &n, &err), &err);
+    T_EQ_INT(n, 4);
+    for (size_t i = 0; i < 3; i++)
+        T_EQ_STR(p[i].outcome, "refused");
+    T_EQ_STR(p[3].outcome, "");
+    free(p);
+    report(a, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(id, JOB_DONE));
+    T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+/*
+ * A network printer comes back while its job is interrupted, and its
+ * driver cannot tell yet whether the printer still runs it (SF_EAGAIN:
+ * PrusaLink's job details are still on their way): the farm asks again and
+ * re-attaches.  It used to mark the attach tried before asking, so the job
+ * stayed interrupted until the printer's next reconnect.
+ */
+T_CASE(farm_attach_not_yet_is_asked_again)
+{
+    static const char ini[] = "[printer n]\ndriver: octoprint\nurl: http://127.0.0.1:9\n"
+                              "api_key: k\nmaterial: PLA\nbed_size: 200, 200, 200\n";
+    struct sf_err err;
+    T_OK(setup("attach", ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *t = tdrv_named("n");
+    /* contact lost while printing: interrupted, re-offered on reconnect */
+    open_state = DRV_PRINTING;
+    attach_waits = 2;
+    snprintf(t->base.status.message, sizeof(t->base.status.message), "timed out");
+    report(t, DRV_OFFLINE, DRV_EV_STATE);
+    T_TRUE(wait_job(id, JOB_INTERRUPTED));
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_EQ_INT(attaches, 3);
+    T_EQ_INT(t->opens, 2);
+    T_EQ_INT(pstate(0), PRINTER_PRINTING);
+    report(t, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(id, JOB_DONE));
     T_OK(store_check(fx.s, &err), &err);
     teardown();
 }

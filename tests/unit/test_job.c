@@ -73,6 +73,23 @@ T_CASE(job_retries_then_fails)
     T_EQ_INT(to, JOB_FAILED);
 }
 
+/* A start the printer refused ("not idle") waits again without spending a retry. */
+T_CASE(job_refused_start_spends_no_retry)
+{
+    struct job_counts c = { 1, 0, 0, 0 };
+    enum job_state to;
+    for (int i = 0; i < 3; i++) {
+        T_OK(job_next(JOB_PRINTING, JOB_EV_REFUSED, &c, &to, NULL), NULL);
+        T_EQ_INT(to, JOB_READY);
+    }
+    T_EQ_INT(c.failures, 0);
+    T_EQ_INT(c.copies_done, 0);
+    T_EQ_INT(job_next(JOB_PAUSED, JOB_EV_REFUSED, &c, &to, NULL), SF_EINVAL);
+    enum printer_state ps;
+    T_OK(printer_next(PRINTER_PRINTING, PRINTER_EV_REFUSED, false, &ps, NULL), NULL);
+    T_EQ_INT(ps, PRINTER_IDLE);
+}
+
 T_CASE(job_illegal_events_refused)
 {
     struct job_counts c = { 1, 0, 0, 0 };
