@@ -545,8 +545,6 @@ upload_done(struct httpc_req *r, const struct httpc_result *res, void *ud)
     struct bambu *b = ud;
     b->upload = NULL;
     drop_package(b);
-    /* curl itself requires the 226 after the data (else CURLE_UPLOAD_FAILED / PARTIAL_FILE);
-       status is the last reply, the QUIT's 221 on success. */
     if (res->code != SF_OK && res->tls_peer) {
         /* not worth a retry: the printer waits for the operator, as for MQTT's */
         char msg[300];
@@ -561,6 +559,8 @@ upload_done(struct httpc_req *r, const struct httpc_result *res, void *ud)
         emit(b, DRV_EV_STATE);
         return;
     }
+    /* curl itself requires the 226 after the data (else CURLE_UPLOAD_FAILED / PARTIAL_FILE);
+       status is the last reply, the QUIT's 221 on success. */
     if (res->code != SF_OK) {
         char msg[300];
         snprintf(msg, sizeof(msg), "upload failed: %s", res->err.msg);

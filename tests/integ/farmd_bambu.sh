@@ -45,7 +45,7 @@ bambu_printer() {
   eval "ftps_$name=${a##*:}"
   eval "mqtt_$name=${b##*:}" # the printer's own MQTT port, in front of its broker
 }
-bambu_printer x1 01S00X1000000001 x1 40
+bambu_printer x1 01S00X1000000001 x1 80
 bambu_printer p1 01P00P1000000002 p1 200
 start_sim mk3 --speed 3000
 start_sim mini --speed 3000 --tcp 0
