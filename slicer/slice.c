@@ -139,6 +139,11 @@ ray_columns(const struct mesh *m, const struct slice_profile *p, const struct la
         mp.angle_deg = slice_profile_angle(p);
         mp.layer_mm = p->layer_mm;
         mp.pitch_mm = p->support_pitch_mm;
+        /* PrusaSlicer leaves bridges it can anchor unsupported and prints them
+           with bridge infill along the anchored direction; our bridge infill
+           does not follow that direction yet, so our slicer still holds them
+           up (more support than PrusaSlicer, never less) */
+        mp.bridges = false;
         st = supmodel_columns(&rg, &mp, &sc, &nsc, err);
     }
     if (st == SF_OK) {

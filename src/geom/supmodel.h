@@ -23,9 +23,12 @@
  *   interface = (contacts + landings on the part) * interface_layers * h
  *   first layer = filled cells at the bed * h * (first_density - base_density)
  * PrusaSlicer's bridge exemption (dont_support_bridges, on in the peers'
- * runs): a flat bottom that a straight raster line crosses from material
- * below to material below gets no support (its 1.5 mm bands at free edges
- * are not modelled).  CuraEngine supports bridges.
+ * runs and in its CLI): a layer's new area, less its perimeters, is a
+ * bridge when a straight line crosses it from the layer below to the layer
+ * below; then only 1.5 mm bands along its free edges not parallel to the
+ * bridge keep support, and perimeters keep it unless a straight line of the
+ * bridge's direction anchors them at both ends (supmodel.c says how the
+ * raster follows BridgeDetector).  CuraEngine supports bridges.
  *
  * Pure functions: thread-safe on distinct outputs; the raycast may be shared.
  */
@@ -50,6 +53,8 @@ struct supmodel_params {
     double gap_xy_mm;            /* support kept this far from the part (0.225 / 0.7) */
     double snap_mm;              /* support footprint cell (PrusaSlicer 2.84, CuraEngine 2) */
     int interface_layers;        /* dense layers at contacts and landings (3 / 0) */
+    double interface_step_mm;    /* dense only where a layer overhangs the one below by
+                                    more than this (0.27 / 0: everywhere) */
     double base_density;         /* sparse support fill (0.118 / 0.15) */
     double first_density;        /* fill of the bed layer (0.9 / 0.15) */
     double sheath_mm;            /* extrusion spacing of the loop around support (0.336 / 0) */
@@ -57,9 +62,10 @@ struct supmodel_params {
     double line_width_mm;        /* support line width (0.4) */
     double speed_mm_s;           /* support print speed for the time estimate (60) */
     double density_g_cm3;        /* filament density (1.24) */
-    bool bridges;                /* flat bottoms anchored on two opposite sides need no
-                                    support, as PrusaSlicer's dont_support_bridges (off by
-                                    default: see supmodel_params_default) */
+    bool bridges;                /* PrusaSlicer's dont_support_bridges: bottoms its bridge
+                                    detector anchors need no support (on / off) */
+    double bridge_band_mm;       /* perimeters' width inside a layer's outline: bottom
+                                    there is perimeter, not bridge fill (0.8) */
 };
 
 /* The defaults of ../shared/peers/slice-peers.sh for slicer s at 45 degrees. */

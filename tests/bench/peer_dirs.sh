@@ -4,7 +4,7 @@
 # curaengine, supports on, 45 deg) and cache each run's CSV row under
 # build/peercache/dirsN/MESH/I.SLICER.csv, with the turned part as I.stl and
 # the directions as dirs.txt (one "i ux uy uz" a line).  A cached row is never
-# recomputed, so the run can be stopped and resumed.  The peers run under
+# recomputed (bar a timed-out one), so the run can be stopped and resumed.  The peers run under
 # nice -n 19: the machine is shared.  Read by bench_supmodel.sh.
 # PEER_MESHES="anchor dino" limits the meshes (default: all, smallest first).
 # The directions go in bit-reversed order, a quarter of them for every mesh
@@ -69,7 +69,8 @@ for ((q = 0; q < 4; q++)); do
     d="$cache/$name"
     for i in $part; do
       row="$d/$i.$slicer.csv"
-      [ -s "$row" ] && continue
+      # a row is kept unless the run timed out (rc 124: a loaded machine, try again)
+      [ -s "$row" ] && awk -F, 'NR == 2 { exit $8 == 124 }' "$row" && continue
       PEER_RUNS=$slicer:on PEER_TIMEOUT=${PEER_TIMEOUT:-900} nice -n 19 "$peers" "$d/$i.stl" --format csv > "$row.tmp" 2>/dev/null &&
         mv "$row.tmp" "$row"
     done
