@@ -9,7 +9,8 @@
 # PEER_MESHES="anchor dino" limits the meshes (default: all, smallest first).
 # The directions go in bit-reversed order, a quarter of them for every mesh
 # before the next quarter, so a run stopped early still has well-spread
-# directions on every mesh.
+# directions on every mesh.  PEER_LIMIT=K stops after the first K directions
+# of that order on every mesh (default: all n).
 set -u
 slicer=${1:?usage: peer_dirs.sh prusaslicer|curaengine [N]}
 n=${2:-64}
@@ -60,6 +61,7 @@ done
 # bit-reversed order of 0..n-1 (n a power of two; other n: plain order)
 order=$(awk -v n="$n" 'BEGIN { b = 0; while (2 ^ b < n) b++; if (2 ^ b != n) { for (i = 0; i < n; i++) print i; exit }
   for (i = 0; i < n; i++) { r = 0; x = i; for (k = 0; k < b; k++) { r = r * 2 + x % 2; x = int(x / 2) } print r } }')
+[ -n "${PEER_LIMIT:-}" ] && order=$(echo "$order" | head -n "$PEER_LIMIT")
 quarter=$(( (n + 3) / 4 ))
 for ((q = 0; q < 4; q++)); do
   part=$(echo "$order" | sed -n "$((q * quarter + 1)),$(((q + 1) * quarter))p")
