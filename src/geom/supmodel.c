@@ -230,12 +230,16 @@ struct bridge_ctx {
     const struct ray_grid *g;
     const struct cols *cs;
     double h;
-    uint32_t *tag;    /* cells: tag of the layer whose new area holds it */
-    uint32_t *rtag;   /* cells: tag of the region being processed */
-    uint8_t *kind;    /* cells: 1 perimeter, 2 fill, |4 bridged, |8 unsupported edge */
-    uint32_t *queue;  /* region cells */
-    uint32_t *rimtag; /* cells: tag of the region whose fill this cell of layer L-1 borders */
-    uint32_t *rim;    /* those cells */
+    int32_t k;         /* the layer being processed */
+    uint32_t ltag;     /* its tag */
+    uint32_t *mtag[2]; /* cells: ltag when mval[0] (layer k) / mval[1] (k - 1) is known */
+    uint8_t *mval[2];  /* cells: solid at the middle of that layer */
+    uint32_t *tag;     /* cells: tag of the layer whose new area holds it */
+    uint32_t *rtag;    /* cells: tag of the region being processed */
+    uint8_t *kind;     /* cells: 1 perimeter, 2 fill, |4 bridged, |8 unsupported edge */
+    uint32_t *queue;   /* region cells */
+    uint32_t *rimtag;  /* cells: tag of the region whose fill this cell of layer L-1 borders */
+    uint32_t *rim;     /* those cells */
 };
 
 static bool
@@ -244,13 +248,24 @@ in_grid(const struct ray_grid *g, long i, long j)
     return i >= 0 && j >= 0 && i < (long)g->nu && j < (long)g->nw;
 }
 
-/* Is cell (i, j) solid at the middle of layer k? (outside the grid: no) */
+/* Is cell (i, j) solid at the middle of layer k? (outside the grid: no)  The
+   layer being processed and the one below are asked of the same cells many
+   times (perimeter windows, line ends): their answers are kept per cell. */
 static bool
 solid_layer(const struct bridge_ctx *b, long i, long j, int32_t k)
 {
     if (!in_grid(b->g, i, j))
         return false;
-    return solid_at(b->cs, (size_t)j * b->g->nu + (size_t)i, (float)((k + 0.5) * b->h));
+    size_t c = (size_t)j * b->g->nu + (size_t)i;
+    int s = k == b->k ? 0 : k == b->k - 1 ? 1 : -1;
+    if (s >= 0 && b->mtag[s][c] == b->ltag)
+        return b->mval[s][c];
+    bool v = solid_at(b->cs, c, (float)((k + 0.5) * b->h));
+    if (s >= 0) {
+        b->mtag[s][c] = b->ltag;
+        b->mval[s][c] = v;
+    }
+    return v;
 }
 
 /* Mark the region's cells perimeter or fill. */
@@ -441,21 +456,57 @@ bridge_region(struct bridge_ctx *b, const uint32_t *cells, size_t n, uint32_t rt
     }
 }
 
-struct bottom {
-    int32_t k;
-    uint32_t cell;
+/*
+ * Cells grouped by a layer index: items[first[k] .. first[k + 1]) are layer
+ * k's, in the order given (a counting sort: layers are few, items many).
+ */
+struct by_layer {
+    uint32_t *first; /* n_layers + 1 */
+    uint32_t *items;
+    int32_t n_layers;
 };
 
-static int
-bottom_cmp(const void *a, const void *b)
+static void
+by_layer_release(struct by_layer *bl)
 {
-    const struct bottom *x = a, *y = b;
-    if (x->k != y->k)
-        return x->k < y->k ? -1 : 1;
-    return (x->cell > y->cell) - (x->cell < y->cell);
+    free(bl->first);
+    free(bl->items);
 }
 
-/* Drop the contacts that PrusaSlicer's bridge detection leaves unsupported. */
+/* Group n items (item i in layer k[i], -1: left out) by layer. */
+static bool
+by_layer_build(struct by_layer *bl, const int32_t *k, const uint32_t *item, size_t n)
+{
+    int32_t kmax = -1;
+    for (size_t i = 0; i < n; i++)
+        kmax = k[i] > kmax ? k[i] : kmax;
+    bl->n_layers = kmax + 1;
+    bl->first = mem_calloc((size_t)bl->n_layers + 1, sizeof(uint32_t));
+    bl->items = mem_array(n ? n : 1, sizeof(uint32_t));
+    if (!bl->first || !bl->items)
+        return false;
+    for (size_t i = 0; i < n; i++)
+        if (k[i] >= 0)
+            bl->first[k[i] + 1]++;
+    for (int32_t l = 0; l < bl->n_layers; l++)
+        bl->first[l + 1] += bl->first[l];
+    uint32_t *at = mem_array((size_t)bl->n_layers + 1, sizeof(uint32_t));
+    if (!at)
+        return false;
+    memcpy(at, bl->first, ((size_t)bl->n_layers + 1) * sizeof(uint32_t));
+    for (size_t i = 0; i < n; i++)
+        if (k[i] >= 0)
+            bl->items[at[k[i]]++] = item[i];
+    free(at);
+    return true;
+}
+
+/*
+ * Drop the contacts that PrusaSlicer's bridge detection leaves unsupported.
+ * Only the layers that have contacts, and of those only the regions that
+ * hold a contact, are looked at: a region's verdict matters to its own
+ * contacts alone.
+ */
 static int
 remove_bridges(const struct ray_grid *g, const struct cols *cs, const struct supmodel_params *p,
                struct contact *ct, size_t *n_ct, struct sf_err *err)
@@ -464,52 +515,69 @@ remove_bridges(const struct ray_grid *g, const struct cols *cs, const struct sup
     for (size_t c = 0; c < cells; c++)
         for (uint32_t q = cs->first[c]; q < cs->first[c + 1]; q++)
             n_b += cs->iv[q].hi > cs->iv[q].lo && cs->iv[q].lo > 0;
-    struct bridge_ctx b = { g, cs, p->layer_mm, NULL, NULL, NULL, NULL, NULL, NULL };
-    struct bottom *bt = mem_array(n_b ? n_b : 1, sizeof(*bt));
+    struct bridge_ctx b = { .g = g, .cs = cs, .h = p->layer_mm };
+    struct by_layer bot = { 0 }, con = { 0 };
+    size_t n_k = n_b > *n_ct ? n_b : *n_ct;
+    int32_t *kk = mem_array(n_k ? n_k : 1, sizeof(*kk));
+    uint32_t *it = mem_array(n_k ? n_k : 1, sizeof(*it));
     b.tag = mem_calloc(cells, sizeof(uint32_t));
     b.rtag = mem_calloc(cells, sizeof(uint32_t));
     b.kind = mem_calloc(cells, 1);
     b.queue = mem_array(cells, sizeof(uint32_t));
     b.rimtag = mem_calloc(cells, sizeof(uint32_t));
     b.rim = mem_array(cells, sizeof(uint32_t));
+    for (int s = 0; s < 2; s++) {
+        b.mtag[s] = mem_calloc(cells, sizeof(uint32_t));
+        b.mval[s] = mem_array(cells, 1);
+    }
     uint8_t *gone = mem_calloc(*n_ct ? *n_ct : 1, 1);
-    struct bottom *ck = mem_array(*n_ct ? *n_ct : 1, sizeof(*ck));
     int rc = SF_OK;
-    if (!bt || !b.tag || !b.rtag || !b.kind || !b.queue || !b.rimtag || !b.rim || !gone || !ck) {
+    if (!kk || !it || !b.tag || !b.rtag || !b.kind || !b.queue || !b.rimtag || !b.rim ||
+        !b.mtag[0] || !b.mtag[1] || !b.mval[0] || !b.mval[1] || !gone) {
         rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bridges)");
         goto done;
     }
+    /* every layer's new area (the cells whose solid starts in it), and the contacts */
     n_b = 0;
     for (size_t c = 0; c < cells; c++)
         for (uint32_t q = cs->first[c]; q < cs->first[c + 1]; q++)
-            if (cs->iv[q].hi > cs->iv[q].lo && cs->iv[q].lo > 0)
-                bt[n_b++] = (struct bottom){ bottom_layer(cs->iv[q].lo, p->layer_mm), (uint32_t)c };
-    qsort(bt, n_b, sizeof(*bt), bottom_cmp);
-    /* the contacts by layer, to look their bridged flags up layer by layer */
-    for (size_t q = 0; q < *n_ct; q++)
-        ck[q] = (struct bottom){ bottom_layer(ct[q].top, p->layer_mm), (uint32_t)q };
-    qsort(ck, *n_ct, sizeof(*ck), bottom_cmp);
+            if (cs->iv[q].hi > cs->iv[q].lo && cs->iv[q].lo > 0) {
+                kk[n_b] = bottom_layer(cs->iv[q].lo, p->layer_mm);
+                it[n_b++] = (uint32_t)c;
+            }
+    if (!by_layer_build(&bot, kk, it, n_b)) {
+        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bridges)");
+        goto done;
+    }
+    for (size_t q = 0; q < *n_ct; q++) {
+        kk[q] = bottom_layer(ct[q].top, p->layer_mm);
+        kk[q] = kk[q] < bot.n_layers ? kk[q] : -1; /* (a contact is a bottom) */
+        it[q] = (uint32_t)q;
+    }
+    if (!by_layer_build(&con, kk, it, *n_ct)) {
+        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bridges)");
+        goto done;
+    }
     uint32_t ltag = 0, rt = 0;
-    size_t qc = 0;
-    for (size_t a = 0; a < n_b;) {
-        size_t e = a;
-        while (e < n_b && bt[e].k == bt[a].k)
-            e++;
-        int32_t k = bt[a].k;
+    for (int32_t k = 0; k < con.n_layers; k++) {
+        uint32_t c0 = con.first[k], c1 = con.first[k + 1];
+        if (c0 == c1)
+            continue;
         uint32_t rt0 = rt;
-        ltag++;
-        for (size_t q = a; q < e; q++)
-            b.tag[bt[q].cell] = ltag;
-        for (size_t q = a; q < e; q++) {
-            uint32_t s = bt[q].cell;
-            if (b.rtag[s] > rt0)
-                continue; /* already in a region of this layer */
+        b.k = k;
+        b.ltag = ++ltag;
+        for (uint32_t q = bot.first[k]; q < bot.first[k + 1]; q++)
+            b.tag[bot.items[q]] = ltag;
+        for (uint32_t q = c0; q < c1; q++) {
+            uint32_t s = ct[con.items[q]].cell;
+            if (b.tag[s] != ltag || b.rtag[s] > rt0)
+                continue; /* not new area (cannot be), or already in a region of this layer */
             /* flood the 8-connected region of s */
             size_t n = 0;
             b.queue[n++] = s;
             b.rtag[s] = ++rt;
-            for (size_t h = 0; h < n; h++) {
-                long ci = b.queue[h] % g->nu, cj = b.queue[h] / g->nu;
+            for (size_t hq = 0; hq < n; hq++) {
+                long ci = b.queue[hq] % g->nu, cj = b.queue[hq] / g->nu;
                 for (int dj = -1; dj <= 1; dj++)
                     for (int di = -1; di <= 1; di++) {
                         long x = ci + di, y = cj + dj;
@@ -527,16 +595,13 @@ remove_bridges(const struct ray_grid *g, const struct cols *cs, const struct sup
                 b.kind[b.queue[q2]] &= 4;
         }
         /* drop this layer's bridged contacts */
-        while (qc < *n_ct && ck[qc].k < k)
-            qc++;
-        for (; qc < *n_ct && ck[qc].k == k; qc++) {
-            uint32_t c = ct[ck[qc].cell].cell;
+        for (uint32_t q = c0; q < c1; q++) {
+            uint32_t c = ct[con.items[q]].cell;
             if (b.tag[c] == ltag && (b.kind[c] & 4))
-                gone[ck[qc].cell] = 1;
+                gone[con.items[q]] = 1;
         }
-        for (size_t q = a; q < e; q++)
-            b.kind[bt[q].cell] = 0;
-        a = e;
+        for (uint32_t q = bot.first[k]; q < bot.first[k + 1]; q++)
+            b.kind[bot.items[q]] = 0;
     }
     size_t m = 0;
     for (size_t q = 0; q < *n_ct; q++)
@@ -544,15 +609,21 @@ remove_bridges(const struct ray_grid *g, const struct cols *cs, const struct sup
             ct[m++] = ct[q];
     *n_ct = m;
 done:
-    free(bt);
+    by_layer_release(&bot);
+    by_layer_release(&con);
+    free(kk);
+    free(it);
     free(b.tag);
     free(b.rtag);
     free(b.kind);
     free(b.queue);
     free(b.rimtag);
     free(b.rim);
+    for (int s = 0; s < 2; s++) {
+        free(b.mtag[s]);
+        free(b.mval[s]);
+    }
     free(gone);
-    free(ck);
     return rc;
 }
 
@@ -743,19 +814,43 @@ supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
     return rc;
 }
 
-/* Sort runs and merge each snap cell's overlapping ones; returns how many are left. */
+/* Sort runs by snap cell and k0 (a counting sort by cell, then each cell's
+   few runs by k0) and merge each snap cell's overlapping ones into runs;
+   returns how many are left.  cnt holds n_blk + 1 counters, tmp n runs. */
 static size_t
-merge_runs(struct run *runs, size_t n)
+merge_runs(struct run *runs, size_t n, size_t n_blk, uint32_t *cnt, struct run *tmp)
 {
-    qsort(runs, n, sizeof(*runs), run_cmp);
+    memset(cnt, 0, (n_blk + 1) * sizeof(*cnt));
+    for (size_t k = 0; k < n; k++)
+        cnt[runs[k].blk + 1]++;
+    for (size_t b = 0; b < n_blk; b++)
+        cnt[b + 1] += cnt[b];
+    for (size_t k = 0; k < n; k++)
+        tmp[cnt[runs[k].blk]++] = runs[k];
+    /* cnt[b] is now the end of cell b's runs */
     size_t m = 0;
-    for (size_t k = 0; k < n; k++) {
-        if (m > 0 && runs[m - 1].blk == runs[k].blk && runs[k].k0 <= runs[m - 1].k1) {
-            if (runs[k].k1 > runs[m - 1].k1)
-                runs[m - 1].k1 = runs[k].k1;
+    for (size_t b = 0, a = 0; b < n_blk; b++) {
+        size_t e = cnt[b];
+        if (e - a > 32) {
+            qsort(tmp + a, e - a, sizeof(*tmp), run_cmp);
         } else {
-            runs[m++] = runs[k];
+            for (size_t i = a + 1; i < e; i++) { /* insertion sort by k0 */
+                struct run r = tmp[i];
+                size_t j = i;
+                for (; j > a && tmp[j - 1].k0 > r.k0; j--)
+                    tmp[j] = tmp[j - 1];
+                tmp[j] = r;
+            }
         }
+        for (size_t k = a; k < e; k++) {
+            if (m > 0 && runs[m - 1].blk == tmp[k].blk && tmp[k].k0 <= runs[m - 1].k1) {
+                if (tmp[k].k1 > runs[m - 1].k1)
+                    runs[m - 1].k1 = tmp[k].k1;
+            } else {
+                runs[m++] = tmp[k];
+            }
+        }
+        a = e;
     }
     return m;
 }
@@ -819,7 +914,8 @@ supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
     struct run *runs = mem_array(n_ct ? n_ct : 1, sizeof(*runs));
     struct run *iruns = mem_array(n_ct ? n_ct : 1, sizeof(*iruns));
     uint32_t *bfirst = mem_array(n_blk + 1, sizeof(uint32_t));
-    if (!runs || !iruns || !bfirst) {
+    struct run *tmp = mem_array(n_ct ? n_ct : 1, sizeof(*tmp));
+    if (!runs || !iruns || !bfirst || !tmp) {
         rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
         goto done;
     }
@@ -843,8 +939,8 @@ supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
         runs[n_runs++] = (struct run){ blk, k0, k1 };
     }
     /* merge each snap cell's columns (and interfaces) into disjoint layer ranges */
-    n_iruns = merge_runs(iruns, n_iruns);
-    n_runs = merge_runs(runs, n_runs);
+    n_iruns = merge_runs(iruns, n_iruns, n_blk, bfirst, tmp);
+    n_runs = merge_runs(runs, n_runs, n_blk, bfirst, tmp);
     for (size_t b = 0, k = 0; b <= n_blk; b++) {
         while (k < n_runs && runs[k].blk < b)
             k++;
@@ -947,6 +1043,7 @@ done:
     free(runs);
     free(iruns);
     free(bfirst);
+    free(tmp);
     free(ct);
     cols_release(&cs);
     return rc;
