@@ -1049,6 +1049,14 @@ done:
     return rc;
 }
 
+double
+supmodel_raster_pitch(const struct supmodel_params *p)
+{
+    if (!(p->snap_mm > p->pitch_mm))
+        return p->pitch_mm;
+    return p->snap_mm / ceil(p->snap_mm / p->pitch_mm - 1e-9);
+}
+
 int
 supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *p,
               struct supmodel_result *out, struct sf_err *err)
@@ -1058,7 +1066,7 @@ supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *
     if (r)
         return r;
     struct ray_grid g;
-    if ((r = raycast_grid(rc, v3_normalize(up), p->pitch_mm, &g, err)))
+    if ((r = raycast_grid(rc, v3_normalize(up), supmodel_raster_pitch(p), &g, err)))
         return r;
     r = supmodel_eval_grid(&g, p, out, err);
     ray_grid_release(&g);

@@ -48,7 +48,7 @@ struct supmodel_params {
     enum supmodel_slicer slicer; /* whose rules: PrusaSlicer 2.5 or CuraEngine 4.13 */
     double angle_deg;            /* alpha, largest self-supporting angle from vertical (45) */
     double layer_mm;             /* layer height (0.2, as ../shared/peers sets) */
-    double pitch_mm;             /* raster pitch (0.5) */
+    double pitch_mm;             /* raster pitch, at most (0.5; see supmodel_raster_pitch) */
     double gap_z_mm;             /* contact distance above and below support (0.2) */
     double gap_xy_mm;            /* support kept this far from the part (0.225 / 0.7) */
     double snap_mm;              /* support footprint cell (PrusaSlicer 2.84, CuraEngine 2) */
@@ -90,7 +90,16 @@ int supmodel_params_check(const struct supmodel_params *p, struct sf_err *err);
 int supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
                        struct supmodel_result *out, struct sf_err *err);
 
-/* Cast the grid for up at p->pitch_mm and evaluate. */
+/*
+ * The raster pitch the model casts at: p->pitch_mm, made finer where needed
+ * so that a snap cell is a whole number of raster cells (PrusaSlicer's
+ * 2.836 mm cell is 6 cells of 0.473 mm, not 6 of 0.5 = 3 mm: footprints
+ * rounded up to 3 mm cells ranked the pig's directions worse, Spearman
+ * with PrusaSlicer 0.882 against 0.915 on 16 directions).
+ */
+double supmodel_raster_pitch(const struct supmodel_params *p);
+
+/* Cast the grid for up at supmodel_raster_pitch(p) and evaluate. */
 int supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *p,
                   struct supmodel_result *out, struct sf_err *err);
 

@@ -395,6 +395,10 @@ T_CASE(result_keeps_the_part_volume)
     p.angle_deg = 0; /* every downward face: the most shrink (5 % at this tet mesh) */
     p.margin_deg = 0;
     p.max_iters = 30;
+    /* what this case checks is the volume: the support model's saving on the
+       rescaled torus is small (8.80 -> 8.47 g, under the default 5 %), so any
+       saving is taken */
+    p.min_gain = 0;
     p.keep_volume = false;
     T_OK(slim_optimize(&m, &p, &shrunk, &err), &err);
     p.keep_volume = true;
