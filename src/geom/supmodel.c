@@ -780,12 +780,101 @@ snap_columns(const struct ray_grid *g, const struct cols *cs, const struct conta
     return SF_OK;
 }
 
+/*
+ * The dense-interface bands of the snapped columns: under every dense
+ * contact, its snap cell's columns print interface_layers dense layers
+ * (PrusaSlicer's fill_contact_layer fills the whole cell), in the layers the
+ * columns occupy (the gaps applied: piece [lo, hi] occupies lo + gap_z when
+ * lo is on the part, up to hi - gap_z).
+ */
+static int
+snap_bands(const struct ray_grid *g, const struct supmodel_params *p, const struct contact *ct,
+           size_t n, uint32_t bs, const struct support_column *cols, size_t n_cols,
+           struct support_column **bands, size_t *n_bands, struct sf_err *err)
+{
+    size_t cells = (size_t)g->nu * g->nw;
+    uint32_t nbu = (g->nu + bs - 1) / bs;
+    double gap = p->gap_z_mm, dh = p->interface_layers * p->layer_mm;
+    struct frun *r = mem_array(n ? n : 1, sizeof(*r));
+    uint32_t *cfirst = mem_calloc(cells + 1, sizeof(uint32_t));
+    uint32_t *cidx = mem_array(n_cols ? n_cols : 1, sizeof(uint32_t));
+    struct support_column *v = NULL;
+    size_t nv = 0, cap = 0, m = 0;
+    int rc = SF_OK;
+    if (!r || !cfirst || !cidx) {
+        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bands)");
+        goto done;
+    }
+    for (size_t k = 0; k < n; k++) {
+        if (!ct[k].dense || dh <= 0)
+            continue;
+        uint32_t c = ct[k].cell, i = c % g->nu, j = c / g->nu;
+        r[m++] = (struct frun){ (j / bs) * nbu + i / bs, (float)(ct[k].top - gap - dh),
+                                (float)(ct[k].top - gap) };
+    }
+    qsort(r, m, sizeof(*r), frun_cmp);
+    size_t mm = 0;
+    for (size_t k = 0; k < m; k++) {
+        if (mm > 0 && r[mm - 1].blk == r[k].blk && r[k].lo <= r[mm - 1].hi) {
+            if (r[k].hi > r[mm - 1].hi)
+                r[mm - 1].hi = r[k].hi;
+        } else {
+            r[mm++] = r[k];
+        }
+    }
+    /* the column pieces by cell */
+    for (size_t q = 0; q < n_cols; q++)
+        cfirst[cols[q].cell + 1]++;
+    for (size_t c = 0; c < cells; c++)
+        cfirst[c + 1] += cfirst[c];
+    for (size_t q = 0; q < n_cols; q++)
+        cidx[cfirst[cols[q].cell]++] = (uint32_t)q;
+    for (size_t c = cells; c > 0; c--) /* back to the starts */
+        cfirst[c] = cfirst[c - 1];
+    cfirst[0] = 0;
+    for (size_t k = 0; k < mm && rc == SF_OK; k++) {
+        uint32_t bi = r[k].blk % nbu, bj = r[k].blk / nbu;
+        for (uint32_t j = bj * bs; j < (bj + 1) * bs && j < g->nw && rc == SF_OK; j++) {
+            for (uint32_t i = bi * bs; i < (bi + 1) * bs && i < g->nu && rc == SF_OK; i++) {
+                uint32_t c = j * g->nu + i;
+                for (uint32_t q = cfirst[c]; q < cfirst[c + 1] && rc == SF_OK; q++) {
+                    const struct support_column *pc = &cols[cidx[q]];
+                    double lo = pc->lo > 0 ? pc->lo + gap : 0, hi = pc->hi - gap;
+                    lo = lo > r[k].lo ? lo : r[k].lo;
+                    hi = hi < r[k].hi ? hi : r[k].hi;
+                    if (hi - lo < 0.5 * p->layer_mm)
+                        continue;
+                    struct support_column b = { c, (float)lo, (float)hi, 0 };
+                    if (!push_column(&v, &nv, &cap, b))
+                        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bands)");
+                }
+            }
+        }
+    }
+done:
+    free(r);
+    free(cfirst);
+    free(cidx);
+    if (rc) {
+        free(v);
+        return rc;
+    }
+    *bands = v;
+    *n_bands = nv;
+    return SF_OK;
+}
+
 int
 supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
-                 struct support_column **cols, size_t *n_cols, struct sf_err *err)
+                 struct support_column **cols, size_t *n_cols, struct support_column **bands,
+                 size_t *n_bands, struct sf_err *err)
 {
     *cols = NULL;
     *n_cols = 0;
+    if (bands) {
+        *bands = NULL;
+        *n_bands = 0;
+    }
     int rc = supmodel_params_check(p, err);
     if (rc)
         return rc;
@@ -798,6 +887,13 @@ supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
     uint32_t bs = p->snap_mm > g->pitch ? (uint32_t)lround(p->snap_mm / g->pitch) : 1;
     if (!rc && bs > 1) {
         rc = snap_columns(g, &cs, ct, n, bs, cols, n_cols, err);
+        if (!rc && bands)
+            rc = snap_bands(g, p, ct, n, bs, *cols, *n_cols, bands, n_bands, err);
+        if (rc) {
+            free(*cols);
+            *cols = NULL;
+            *n_cols = 0;
+        }
     } else if (!rc) {
         struct support_column *out = mem_array(n ? n : 1, sizeof(*out));
         if (!out) {

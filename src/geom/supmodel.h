@@ -112,8 +112,13 @@ int supmodel_of_mesh(const struct mesh *m, struct vec3 up, const struct supmodel
  * The model's columns in measure_columns' form (measure.h: lo is the bed or
  * the top of the part below, hi the overhanging bottom, tri 0), for a
  * slicer that prints what the model predicts.  *cols is allocated (free()).
+ * With bands non-NULL (snapped columns only, else none), also the dense
+ * interface: cell, and the heights lo..hi (gaps applied: layers wholly
+ * inside print dense) under every contact the model gives a dense
+ * interface, over its whole snap cell, interface_layers deep.
  */
 int supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
-                     struct support_column **cols, size_t *n_cols, struct sf_err *err);
+                     struct support_column **cols, size_t *n_cols, struct support_column **bands,
+                     size_t *n_bands, struct sf_err *err);
 
 #endif
