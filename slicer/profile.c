@@ -264,10 +264,10 @@ slice_profile_default(struct slice_profile *p)
         .retract_only_crossing = true,
         .support = true,
         .support_angle_deg = 0,
-        .support_pitch_mm = 1,
+        .support_pitch_mm = 0.5, /* the support model's raster (supmodel.h) */
         .support_z_gap_mm = 0.2,
         .support_xy_gap_mm = 0.3,
-        .support_interface_layers = 2,
+        .support_interface_layers = 3, /* PrusaSlicer 2.5: 3 top, as many bottom */
         .support_spacing_mm = 2.5,
         .skirts = 1,
         .skirt_distance_mm = 6,

@@ -126,20 +126,28 @@ ray_columns(const struct mesh *m, const struct slice_profile *p, const struct la
     struct raycast *rc = raycast_new(m, err);
     if (!rc)
         return err ? err->code : SF_ENOMEM;
+    /* the same detection the optimizers were steered by (supmodel.h): a
+       bottom needs a column where a slicer's layer rule says it overhangs */
+    struct supmodel_params mp;
+    supmodel_params_default(&mp, SUPMODEL_PRUSA);
+    mp.angle_deg = slice_profile_angle(p);
+    mp.layer_mm = p->layer_mm;
+    mp.pitch_mm = p->support_pitch_mm;
+    /* PrusaSlicer leaves bridges it can anchor unsupported and prints them
+       with bridge infill along the anchored direction; our bridge infill
+       does not follow that direction yet, so our slicer still holds them
+       up (more support than PrusaSlicer, never less) */
+    mp.bridges = false;
+    mp.gap_z_mm = p->support_z_gap_mm;
+    mp.interface_layers = p->support_interface_layers;
     struct ray_grid rg;
     memset(&rg, 0, sizeof(rg));
-    int st = raycast_grid(rc, v3(0, 0, 1), p->support_pitch_mm, &rg, err);
-    struct support_column *sc = NULL;
-    size_t nsc = 0;
+    /* at the model's raster: its snap cells are whole numbers of columns */
+    int st = raycast_grid(rc, v3(0, 0, 1), supmodel_raster_pitch(&mp), &rg, err);
+    struct support_column *sc = NULL, *bands = NULL;
+    size_t nsc = 0, nb = 0;
     if (st == SF_OK) {
-        /* the same detection the optimizers were steered by (supmodel.h): a
-           bottom needs a column where a slicer's layer rule says it overhangs */
-        struct supmodel_params mp;
-        supmodel_params_default(&mp, SUPMODEL_PRUSA);
-        mp.angle_deg = slice_profile_angle(p);
-        mp.layer_mm = p->layer_mm;
-        mp.pitch_mm = p->support_pitch_mm;
-        st = supmodel_columns(&rg, &mp, &sc, &nsc, err);
+        st = supmodel_columns(&rg, &mp, &sc, &nsc, &bands, &nb, err);
     }
     if (st == SF_OK) {
         g->x0 = rg.u0 + s->dx;
@@ -149,7 +157,8 @@ ray_columns(const struct mesh *m, const struct slice_profile *p, const struct la
         g->nw = rg.nw;
         double vol = 0;
         for (size_t i = 0; i < nsc && st == SF_OK; i++) {
-            struct sup_col c = { sc[i].cell % rg.nu, sc[i].cell / rg.nu, sc[i].lo, sc[i].hi };
+            struct sup_col c = { sc[i].cell % rg.nu, sc[i].cell / rg.nu, sc[i].lo, sc[i].hi,
+                                 false };
             vol += (double)(sc[i].hi - sc[i].lo) * rg.pitch * rg.pitch;
             if (!mem_grow((void **)cols, cap, *n + 1, sizeof(**cols)))
                 st = sf_err_set(err, SF_ENOMEM, "support: out of memory");
@@ -158,8 +167,18 @@ ray_columns(const struct mesh *m, const struct slice_profile *p, const struct la
         }
         res->ray_volume_mm3 = vol;
         res->n_columns = (uint32_t)nsc;
+        /* the model's dense-interface bands (whole snap cells under contacts) */
+        for (size_t i = 0; i < nb && st == SF_OK; i++) {
+            struct sup_col c = { bands[i].cell % rg.nu, bands[i].cell / rg.nu, bands[i].lo,
+                                 bands[i].hi, true };
+            if (!mem_grow((void **)cols, cap, *n + 1, sizeof(**cols)))
+                st = sf_err_set(err, SF_ENOMEM, "support: out of memory");
+            else
+                (*cols)[(*n)++] = c;
+        }
     }
     free(sc);
+    free(bands);
     ray_grid_release(&rg);
     raycast_free(rc);
     return st;

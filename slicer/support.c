@@ -46,7 +46,7 @@ static bool
 has_column_near(const struct sup_col *cols, size_t n, uint32_t i, uint32_t j, double z)
 {
     for (size_t k = 0; k < n; k++)
-        if (cols[k].i == i && cols[k].j == j && fabs(cols[k].hi - z) < 1)
+        if (!cols[k].iface && cols[k].i == i && cols[k].j == j && fabs(cols[k].hi - z) < 1)
             return true;
     return false;
 }
@@ -87,7 +87,7 @@ island_columns(const struct layer_stack *s, uint32_t k, const struct paths *isl,
                         break;
                     }
                 }
-                struct sup_col col = { (uint32_t)i, (uint32_t)j, (float)floor_z, (float)zb };
+                struct sup_col col = { (uint32_t)i, (uint32_t)j, (float)floor_z, (float)zb, false };
                 if (zb > floor_z && !push_col(cols, n, cap, col))
                     return SF_ENOMEM;
             }
@@ -190,9 +190,18 @@ support_layers(const struct layer_stack *s, const struct sup_grid *g, struct sup
         double zt = s->l[k].z_mm, zb = zt - s->l[k].h_mm;
         size_t n_on = 0, n_top = 0;
         for (size_t c = 0; c < n; c++) {
+            if (cols[c].iface) { /* a dense band (supmodel.h): inside a column */
+                on[c] = 0;
+                top[c] = zb >= cols[c].lo - EPS && zt <= cols[c].hi + EPS;
+                n_top += top[c];
+                continue;
+            }
             double floor_z = cols[c].lo > EPS ? cols[c].lo + gap : 0;
             on[c] = zb >= floor_z - EPS && zt <= cols[c].hi - gap + EPS;
-            top[c] = on[c] && zt > cols[c].hi - gap - if_h + EPS;
+            /* dense under the part it holds up, and where it lands on the part
+               (PrusaSlicer: as many bottom interface layers as top ones) */
+            top[c] = on[c] && (zt > cols[c].hi - gap - if_h + EPS ||
+                               (cols[c].lo > EPS && zb < floor_z + if_h - EPS));
             n_on += on[c];
             n_top += top[c];
         }

@@ -20,6 +20,7 @@
 #ifndef SF_SLICER_SUPPORT_H
 #define SF_SLICER_SUPPORT_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -34,10 +35,13 @@ struct sup_grid {
     uint32_t nu, nw;
 };
 
-/* A column: cell (i, j) from z lo to z hi (mm above the bed). */
+/* A column: cell (i, j) from z lo to z hi (mm above the bed).  With iface
+   set, not a column but a dense-interface band of one: the layers of cell
+   (i, j) wholly inside lo..hi print dense (gaps already applied). */
 struct sup_col {
     uint32_t i, j;
     float lo, hi;
+    bool iface;
 };
 
 /*

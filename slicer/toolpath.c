@@ -1172,8 +1172,10 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         TRY(clip_offset(&sup->body, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
         TRY(add(out, &t[T_TMP], ROLE_SUPPORT, true, sw));
         paths_reset(&t[T_LINES]);
-        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, p->support_spacing_mm, &t[T_LINES]));
-        TRY(tp_link(&t[T_LINES], &t[T_TMP], 1.5 * p->support_spacing_mm, sw / 2));
+        /* the bed layer holds the columns down: 90 % dense, as PrusaSlicer prints it */
+        double bsp = k == 0 ? ssp / 0.9 : p->support_spacing_mm;
+        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, bsp, &t[T_LINES]));
+        TRY(tp_link(&t[T_LINES], &t[T_TMP], 1.5 * bsp, sw / 2));
         TRY(add(out, &t[T_LINES], ROLE_SUPPORT, false, sw));
     }
     if (sup && sup->iface.n) {

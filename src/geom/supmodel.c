@@ -37,10 +37,11 @@ supmodel_params_default(struct supmodel_params *p, enum supmodel_slicer s)
         p->base_density = 0.118;
         p->first_density = 0.9;
         p->sheath_mm = 0.336;
-        /* dont_support_bridges is on in the peers' runs, but this raster test of it
-           ranked anchor's 21 cached directions worse (Spearman 0.949 against 0.958
-           without): off until it follows BridgeDetector more closely */
-        p->bridges = false;
+        p->interface_step_mm = 0.27; /* 0.6 x 0.45 */
+        /* dont_support_bridges is on in the peers' runs (and the CLI's default) */
+        p->bridges = true;
+        /* two perimeters of 0.45 mm, less the infill's overlap with them */
+        p->bridge_band_mm = 0.8;
     } else {
         /* zigzag at 2.667 mm line distance: 0.4 / 2.667; join distance 2 mm */
         p->gap_xy_mm = 0.7;
@@ -65,6 +66,11 @@ supmodel_params_check(const struct supmodel_params *p, struct sf_err *err)
                           p->pitch_mm);
     if (!(p->gap_z_mm >= 0 && p->gap_z_mm <= 5) || !(p->gap_xy_mm >= 0 && p->gap_xy_mm <= 5))
         return sf_err_set(err, SF_EINVAL, "support model: gap_z_mm/gap_xy_mm outside [0, 5]");
+    if (!(p->interface_step_mm >= 0 && p->interface_step_mm <= 5) ||
+        !(p->bridge_band_mm >= 0 && p->bridge_band_mm <= 10))
+        return sf_err_set(err, SF_EINVAL,
+                          "support model: interface_step_mm outside [0, 5] or bridge_band_mm "
+                          "outside [0, 10]");
     if (!(p->snap_mm >= 0 && p->snap_mm <= 50))
         return sf_err_set(err, SF_EINVAL, "support model: snap_mm %g outside [0, 50]", p->snap_mm);
     if (p->interface_layers < 0 || p->interface_layers > 50)
@@ -183,48 +189,442 @@ overhangs(const struct ray_grid *g, const struct cols *cs, uint32_t i, uint32_t 
     return true;
 }
 
-/* Bottom of the interval of cell c that holds height z, or NAN. */
-static float
-bottom_at(const struct cols *cs, size_t c, float z)
+/* A bottom that needs a column: (cell, bottom, floor). */
+struct contact {
+    uint32_t cell;
+    float top;   /* the overhanging bottom, mm */
+    float floor; /* top of the solid below, 0 for the bed */
+    bool dense;  /* overhangs by more than interface_step_mm a layer: dense interface */
+};
+
+/*
+ * PrusaSlicer's dont_support_bridges (SupportMaterial.cpp
+ * remove_bridges_from_contacts, LayerRegion.cpp process_external_surfaces,
+ * BridgeDetector.cpp), on the raster.  The new area of layer L (cells whose
+ * solid interval starts in L) falls into 8-connected regions.  Cells within
+ * the perimeters' width of the layer's outline are perimeters; the rest is
+ * the bottom fill.  A region is a bridge when some straight line across its
+ * fill runs from material of layer L-1 to material of layer L-1 (the
+ * detector's anchored lines; 8 lattice directions instead of its 5-degree
+ * steps).  The direction with the most anchored fill wins.  Then the fill is
+ * not supported, bar a 1.5 mm band along the edges where lines of that
+ * direction end in the air (its unsupported edges; edges parallel to the
+ * direction are free), and perimeter cells are not supported where a line of
+ * that direction through the region is anchored at both ends (a straight
+ * bridging perimeter).  Regions with no anchored line keep all their support.
+ */
+
+#define BRIDGE_DIRS 8
+static const int bridge_dir[BRIDGE_DIRS][2] = { { 1, 0 }, { 2, 1 },  { 1, 1 },  { 1, 2 },
+                                                { 0, 1 }, { -1, 2 }, { -1, 1 }, { -2, 1 } };
+
+/* Layer index whose slice (at its middle height) first holds a bottom at lo. */
+static int32_t
+bottom_layer(float lo, double h)
 {
-    for (uint32_t k = cs->first[c]; k < cs->first[c + 1]; k++)
-        if (cs->iv[k].lo <= z && z <= cs->iv[k].hi && cs->iv[k].hi > cs->iv[k].lo)
-            return cs->iv[k].lo;
-    return NAN;
+    return (int32_t)ceil(lo / h - 0.5);
 }
 
-/* Walking from (i, j) along (di, dj) over the same flat bottom (within a layer
-   of lo): does it end on material of the layer below (an anchor) rather than
-   at a free edge? */
+/* Scratch for one layer's regions: member marks are stamped with a layer tag. */
+struct bridge_ctx {
+    const struct ray_grid *g;
+    const struct cols *cs;
+    double h;
+    int32_t k;         /* the layer being processed */
+    uint32_t ltag;     /* its tag */
+    uint32_t *mtag[2]; /* cells: ltag when mval[0] (layer k) / mval[1] (k - 1) is known */
+    uint8_t *mval[2];  /* cells: solid at the middle of that layer */
+    uint32_t *tag;     /* cells: tag of the layer whose new area holds it */
+    uint32_t *rtag;    /* cells: tag of the region being processed */
+    uint8_t *kind;     /* cells: 1 perimeter, 2 fill, |4 bridged, |8 unsupported edge */
+    uint32_t *queue;   /* region cells */
+    uint32_t *rimtag;  /* cells: tag of the region whose fill this cell of layer L-1 borders */
+    uint32_t *rim;     /* those cells */
+};
+
 static bool
-anchored(const struct ray_grid *g, const struct cols *cs, uint32_t i, uint32_t j, int di, int dj,
-         float lo, float h)
+in_grid(const struct ray_grid *g, long i, long j)
 {
-    long x = i, y = j;
-    for (;;) {
-        x += di, y += dj;
-        if (x < 0 || y < 0 || x >= (long)g->nu || y >= (long)g->nw)
-            return false;
-        size_t c = (size_t)y * g->nu + (size_t)x;
-        if (solid_at(cs, c, lo - 0.5f * h))
-            return true;
-        float b = bottom_at(cs, c, lo + 0.5f * h);
-        if (isnan(b) || fabsf(b - lo) > h)
-            return false;
+    return i >= 0 && j >= 0 && i < (long)g->nu && j < (long)g->nw;
+}
+
+/* Is cell (i, j) solid at the middle of layer k? (outside the grid: no)  The
+   layer being processed and the one below are asked of the same cells many
+   times (perimeter windows, line ends): their answers are kept per cell. */
+static bool
+solid_layer(const struct bridge_ctx *b, long i, long j, int32_t k)
+{
+    if (!in_grid(b->g, i, j))
+        return false;
+    size_t c = (size_t)j * b->g->nu + (size_t)i;
+    int s = k == b->k ? 0 : k == b->k - 1 ? 1 : -1;
+    if (s >= 0 && b->mtag[s][c] == b->ltag)
+        return b->mval[s][c];
+    bool v = solid_at(b->cs, c, (float)((k + 0.5) * b->h));
+    if (s >= 0) {
+        b->mtag[s][c] = b->ltag;
+        b->mval[s][c] = v;
+    }
+    return v;
+}
+
+/* Mark the region's cells perimeter or fill. */
+static void
+bridge_classify(struct bridge_ctx *b, const uint32_t *cells, size_t n, int32_t k, double band_mm)
+{
+    const struct ray_grid *g = b->g;
+    /* a cell is under the perimeters when the outline is nearer than band_mm:
+       a cell D centres from one outside the slice is (D - 1/2) pitches from it */
+    double rmax = band_mm / g->pitch + 0.5;
+    int r = (int)ceil(rmax);
+    for (size_t q = 0; q < n; q++) {
+        long ci = cells[q] % g->nu, cj = cells[q] / g->nu;
+        bool perim = false;
+        for (int dj = -r; dj <= r && !perim; dj++)
+            for (int di = -r; di <= r && !perim; di++)
+                if ((di || dj) && di * di + dj * dj < rmax * rmax &&
+                    !solid_layer(b, ci + di, cj + dj, k))
+                    perim = true;
+        b->kind[cells[q]] = perim ? 1 : 2;
     }
 }
 
-/* PrusaSlicer's dont_support_bridges: a flat bottom that some straight line
-   through it crosses from material below to material below is bridged. */
+/* Does the walk leave the region (kinds in mask) at (i, j) onto material of layer k - 1? */
 static bool
-bridged(const struct ray_grid *g, const struct cols *cs, uint32_t i, uint32_t j, float lo, float h)
+bridge_anchor(const struct bridge_ctx *b, long i, long j, int32_t k)
 {
-    static const int axes[4][2] = { { 1, 0 }, { 0, 1 }, { 1, 1 }, { 1, -1 } };
-    for (int a = 0; a < 4; a++)
-        if (anchored(g, cs, i, j, axes[a][0], axes[a][1], lo, h) &&
-            anchored(g, cs, i, j, -axes[a][0], -axes[a][1], lo, h))
-            return true;
-    return false;
+    return solid_layer(b, i, j, k - 1);
+}
+
+/*
+ * Lines of direction d over the region's cells of a kind in mask, taken
+ * run by run.  *cov sums the cells of runs anchored at both ends
+ * (*longest the longest).  With mark set, the cells of kind mark_kind on
+ * runs anchored at both ends get bit 4; with mark_kind 0, a run's free ends
+ * get bit 8 instead.
+ */
+static void
+bridge_lines(struct bridge_ctx *b, const uint32_t *cells, size_t n, uint32_t rt, int32_t k,
+             const int d[2], uint8_t mask, bool mark, uint8_t mark_kind, size_t *cov,
+             size_t *longest)
+{
+    const struct ray_grid *g = b->g;
+#define MEMBER(ii, jj)                                                                             \
+    (in_grid(g, ii, jj) && b->rtag[(size_t)(jj)*g->nu + (size_t)(ii)] == rt &&                     \
+     (b->kind[(size_t)(jj)*g->nu + (size_t)(ii)] & mask))
+    *cov = 0;
+    *longest = 0;
+    for (size_t q = 0; q < n; q++) {
+        long i0 = cells[q] % g->nu, j0 = cells[q] / g->nu;
+        if (!MEMBER(i0, j0) || MEMBER(i0 - d[0], j0 - d[1]))
+            continue; /* not the start of a run */
+        long i = i0, j = j0;
+        size_t len = 0;
+        while (MEMBER(i + d[0], j + d[1])) {
+            i += d[0], j += d[1];
+            len++;
+        }
+        len++;
+        bool a0 = bridge_anchor(b, i0 - d[0], j0 - d[1], k);
+        bool a1 = bridge_anchor(b, i + d[0], j + d[1], k);
+        if (a0 && a1) {
+            *cov += len;
+            if (len > *longest)
+                *longest = len;
+        }
+        if (!mark)
+            continue;
+        if (a0 && a1) {
+            for (long x = i0, y = j0, s = 0; s < (long)len; s++, x += d[0], y += d[1])
+                if (b->kind[(size_t)y * g->nu + (size_t)x] & mark_kind)
+                    b->kind[(size_t)y * g->nu + (size_t)x] |= 4;
+        } else {
+            if (!a0 && !mark_kind)
+                b->kind[(size_t)j0 * g->nu + (size_t)i0] |= 8;
+            if (!a1 && !mark_kind)
+                b->kind[(size_t)j * g->nu + (size_t)i] |= 8;
+        }
+    }
+#undef MEMBER
+}
+
+/*
+ * Lines of direction d along the rim (cells of layer L-1 beside the fill,
+ * across d): the detector's lines that run along the fill's edge over the
+ * layer below, as along the wall a shelf hangs from.  A run is anchored when
+ * the layer below goes on past both its ends (past the fill, which stops
+ * short of the outline by the perimeters).  Axis and diagonal directions
+ * only.  *cov sums the anchored runs' cells.
+ */
+static void
+rim_lines(const struct bridge_ctx *b, size_t n_rim, uint32_t rt, int32_t k, const int d[2],
+          size_t *cov, size_t *longest)
+{
+    const struct ray_grid *g = b->g;
+    if (abs(d[0]) > 1 || abs(d[1]) > 1)
+        return;
+    int px = -d[1], py = d[0];
+#define FILL(ii, jj)                                                                               \
+    (in_grid(g, ii, jj) && b->rtag[(size_t)(jj)*g->nu + (size_t)(ii)] == rt &&                     \
+     (b->kind[(size_t)(jj)*g->nu + (size_t)(ii)] & 3) == 2)
+#define RIM(ii, jj)                                                                                \
+    (in_grid(g, ii, jj) && b->rimtag[(size_t)(jj)*g->nu + (size_t)(ii)] == rt &&                   \
+     (FILL((ii) + px, (jj) + py) || FILL((ii)-px, (jj)-py)))
+    for (size_t q = 0; q < n_rim; q++) {
+        long i0 = b->rim[q] % g->nu, j0 = b->rim[q] / g->nu;
+        if (!RIM(i0, j0) || RIM(i0 - d[0], j0 - d[1]))
+            continue;
+        long i = i0, j = j0;
+        size_t len = 1;
+        while (RIM(i + d[0], j + d[1])) {
+            i += d[0], j += d[1];
+            len++;
+        }
+        if (bridge_anchor(b, i0 - d[0], j0 - d[1], k) && bridge_anchor(b, i + d[0], j + d[1], k)) {
+            *cov += len;
+            if (len > *longest)
+                *longest = len;
+        }
+    }
+#undef RIM
+#undef FILL
+}
+
+/* The bridge decision for one region; sets bit 4 on its unsupported cells. */
+static void
+bridge_region(struct bridge_ctx *b, const uint32_t *cells, size_t n, uint32_t rt, int32_t k,
+              double band_mm)
+{
+    const struct ray_grid *g = b->g;
+    bridge_classify(b, cells, n, k, band_mm);
+    size_t n_rim = 0;
+    for (size_t q = 0; q < n; q++) {
+        if (b->kind[cells[q]] != 2)
+            continue;
+        long ci = cells[q] % g->nu, cj = cells[q] / g->nu;
+        for (int dj = -1; dj <= 1; dj++)
+            for (int di = -1; di <= 1; di++) {
+                long x = ci + di, y = cj + dj;
+                if (!in_grid(g, x, y))
+                    continue;
+                size_t c = (size_t)y * g->nu + (size_t)x;
+                if (b->rtag[c] != rt && b->rimtag[c] != rt && solid_layer(b, x, y, k - 1)) {
+                    b->rimtag[c] = rt;
+                    b->rim[n_rim++] = (uint32_t)c;
+                }
+            }
+    }
+    int best = -1;
+    size_t best_cov = 0, best_long = 0;
+    for (int d = 0; d < BRIDGE_DIRS; d++) {
+        size_t cov, longest;
+        bridge_lines(b, cells, n, rt, k, bridge_dir[d], 2, false, 0, &cov, &longest);
+        rim_lines(b, n_rim, rt, k, bridge_dir[d], &cov, &longest);
+        if (cov > best_cov || (cov == best_cov && cov > 0 && longest < best_long)) {
+            best = d;
+            best_cov = cov;
+            best_long = longest;
+        }
+    }
+    if (best < 0)
+        return; /* no anchored line: not a bridge */
+    size_t cov, longest;
+    /* the fill's free ends (its unsupported edges) ... */
+    bridge_lines(b, cells, n, rt, k, bridge_dir[best], 2, true, 0, &cov, &longest);
+    /* ... and straight perimeters anchored at both ends */
+    bridge_lines(b, cells, n, rt, k, bridge_dir[best], 3, true, 1, &cov, &longest);
+    /* fill is bridged, bar 1.5 mm (SUPPORT_MATERIAL_MARGIN) from a free edge: a
+       cell D centres from an edge cell is (D + 1/2) pitches from the edge */
+    double rmax = 1.5 / g->pitch - 0.5;
+    int r = (int)floor(rmax + 1e-9);
+    for (size_t q = 0; q < n; q++)
+        if ((b->kind[cells[q]] & 3) == 2)
+            b->kind[cells[q]] |= 4;
+    for (size_t q = 0; q < n; q++) {
+        if (!(b->kind[cells[q]] & 8))
+            continue;
+        long ci = cells[q] % g->nu, cj = cells[q] / g->nu;
+        for (int dj = -r; dj <= r; dj++)
+            for (int di = -r; di <= r; di++) {
+                long x = ci + di, y = cj + dj;
+                if (di * di + dj * dj > rmax * rmax + 1e-9 || !in_grid(g, x, y))
+                    continue;
+                size_t c = (size_t)y * g->nu + (size_t)x;
+                if (b->rtag[c] == rt && (b->kind[c] & 3) == 2)
+                    b->kind[c] &= (uint8_t)~4;
+            }
+    }
+}
+
+/*
+ * Cells grouped by a layer index: items[first[k] .. first[k + 1]) are layer
+ * k's, in the order given (a counting sort: layers are few, items many).
+ */
+struct by_layer {
+    uint32_t *first; /* n_layers + 1 */
+    uint32_t *items;
+    int32_t n_layers;
+};
+
+static void
+by_layer_release(struct by_layer *bl)
+{
+    free(bl->first);
+    free(bl->items);
+}
+
+/* Group n items (item i in layer k[i], -1: left out) by layer. */
+static bool
+by_layer_build(struct by_layer *bl, const int32_t *k, const uint32_t *item, size_t n)
+{
+    int32_t kmax = -1;
+    for (size_t i = 0; i < n; i++)
+        kmax = k[i] > kmax ? k[i] : kmax;
+    bl->n_layers = kmax + 1;
+    bl->first = mem_calloc((size_t)bl->n_layers + 1, sizeof(uint32_t));
+    bl->items = mem_array(n ? n : 1, sizeof(uint32_t));
+    if (!bl->first || !bl->items)
+        return false;
+    for (size_t i = 0; i < n; i++)
+        if (k[i] >= 0)
+            bl->first[k[i] + 1]++;
+    for (int32_t l = 0; l < bl->n_layers; l++)
+        bl->first[l + 1] += bl->first[l];
+    uint32_t *at = mem_array((size_t)bl->n_layers + 1, sizeof(uint32_t));
+    if (!at)
+        return false;
+    memcpy(at, bl->first, ((size_t)bl->n_layers + 1) * sizeof(uint32_t));
+    for (size_t i = 0; i < n; i++)
+        if (k[i] >= 0)
+            bl->items[at[k[i]]++] = item[i];
+    free(at);
+    return true;
+}
+
+/*
+ * Drop the contacts that PrusaSlicer's bridge detection leaves unsupported.
+ * Only the layers that have contacts, and of those only the regions that
+ * hold a contact, are looked at: a region's verdict matters to its own
+ * contacts alone.
+ */
+static int
+remove_bridges(const struct ray_grid *g, const struct cols *cs, const struct supmodel_params *p,
+               struct contact *ct, size_t *n_ct, struct sf_err *err)
+{
+    size_t cells = (size_t)g->nu * g->nw, n_b = 0;
+    for (size_t c = 0; c < cells; c++)
+        for (uint32_t q = cs->first[c]; q < cs->first[c + 1]; q++)
+            n_b += cs->iv[q].hi > cs->iv[q].lo && cs->iv[q].lo > 0;
+    struct bridge_ctx b = { .g = g, .cs = cs, .h = p->layer_mm };
+    struct by_layer bot = { 0 }, con = { 0 };
+    size_t n_k = n_b > *n_ct ? n_b : *n_ct;
+    int32_t *kk = mem_array(n_k ? n_k : 1, sizeof(*kk));
+    uint32_t *it = mem_array(n_k ? n_k : 1, sizeof(*it));
+    b.tag = mem_calloc(cells, sizeof(uint32_t));
+    b.rtag = mem_calloc(cells, sizeof(uint32_t));
+    b.kind = mem_calloc(cells, 1);
+    b.queue = mem_array(cells, sizeof(uint32_t));
+    b.rimtag = mem_calloc(cells, sizeof(uint32_t));
+    b.rim = mem_array(cells, sizeof(uint32_t));
+    for (int s = 0; s < 2; s++) {
+        b.mtag[s] = mem_calloc(cells, sizeof(uint32_t));
+        b.mval[s] = mem_array(cells, 1);
+    }
+    uint8_t *gone = mem_calloc(*n_ct ? *n_ct : 1, 1);
+    int rc = SF_OK;
+    if (!kk || !it || !b.tag || !b.rtag || !b.kind || !b.queue || !b.rimtag || !b.rim ||
+        !b.mtag[0] || !b.mtag[1] || !b.mval[0] || !b.mval[1] || !gone) {
+        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bridges)");
+        goto done;
+    }
+    /* every layer's new area (the cells whose solid starts in it), and the contacts */
+    n_b = 0;
+    for (size_t c = 0; c < cells; c++)
+        for (uint32_t q = cs->first[c]; q < cs->first[c + 1]; q++)
+            if (cs->iv[q].hi > cs->iv[q].lo && cs->iv[q].lo > 0) {
+                kk[n_b] = bottom_layer(cs->iv[q].lo, p->layer_mm);
+                it[n_b++] = (uint32_t)c;
+            }
+    if (!by_layer_build(&bot, kk, it, n_b)) {
+        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bridges)");
+        goto done;
+    }
+    for (size_t q = 0; q < *n_ct; q++) {
+        kk[q] = bottom_layer(ct[q].top, p->layer_mm);
+        kk[q] = kk[q] < bot.n_layers ? kk[q] : -1; /* (a contact is a bottom) */
+        it[q] = (uint32_t)q;
+    }
+    if (!by_layer_build(&con, kk, it, *n_ct)) {
+        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bridges)");
+        goto done;
+    }
+    uint32_t ltag = 0, rt = 0;
+    for (int32_t k = 0; k < con.n_layers; k++) {
+        uint32_t c0 = con.first[k], c1 = con.first[k + 1];
+        if (c0 == c1)
+            continue;
+        uint32_t rt0 = rt;
+        b.k = k;
+        b.ltag = ++ltag;
+        for (uint32_t q = bot.first[k]; q < bot.first[k + 1]; q++)
+            b.tag[bot.items[q]] = ltag;
+        for (uint32_t q = c0; q < c1; q++) {
+            uint32_t s = ct[con.items[q]].cell;
+            if (b.tag[s] != ltag || b.rtag[s] > rt0)
+                continue; /* not new area (cannot be), or already in a region of this layer */
+            /* flood the 8-connected region of s */
+            size_t n = 0;
+            b.queue[n++] = s;
+            b.rtag[s] = ++rt;
+            for (size_t hq = 0; hq < n; hq++) {
+                long ci = b.queue[hq] % g->nu, cj = b.queue[hq] / g->nu;
+                for (int dj = -1; dj <= 1; dj++)
+                    for (int di = -1; di <= 1; di++) {
+                        long x = ci + di, y = cj + dj;
+                        if (!in_grid(g, x, y))
+                            continue;
+                        size_t c = (size_t)y * g->nu + (size_t)x;
+                        if (b.tag[c] == ltag && b.rtag[c] <= rt0) {
+                            b.rtag[c] = rt;
+                            b.queue[n++] = (uint32_t)c;
+                        }
+                    }
+            }
+            bridge_region(&b, b.queue, n, rt, k, p->bridge_band_mm);
+            for (size_t q2 = 0; q2 < n; q2++) /* keep only the verdict */
+                b.kind[b.queue[q2]] &= 4;
+        }
+        /* drop this layer's bridged contacts */
+        for (uint32_t q = c0; q < c1; q++) {
+            uint32_t c = ct[con.items[q]].cell;
+            if (b.tag[c] == ltag && (b.kind[c] & 4))
+                gone[con.items[q]] = 1;
+        }
+        for (uint32_t q = bot.first[k]; q < bot.first[k + 1]; q++)
+            b.kind[bot.items[q]] = 0;
+    }
+    size_t m = 0;
+    for (size_t q = 0; q < *n_ct; q++)
+        if (!gone[q])
+            ct[m++] = ct[q];
+    *n_ct = m;
+done:
+    by_layer_release(&bot);
+    by_layer_release(&con);
+    free(kk);
+    free(it);
+    free(b.tag);
+    free(b.rtag);
+    free(b.kind);
+    free(b.queue);
+    free(b.rimtag);
+    free(b.rim);
+    for (int s = 0; s < 2; s++) {
+        free(b.mtag[s]);
+        free(b.mval[s]);
+    }
+    free(gone);
+    return rc;
 }
 
 /* A column of support in layer indices [k0, k1) of snap cell blk. */
@@ -241,13 +641,6 @@ run_cmp(const void *a, const void *b)
         return x->blk < y->blk ? -1 : 1;
     return (x->k0 > y->k0) - (x->k0 < y->k0);
 }
-
-/* Walk the contacts: call back for each (cell, bottom, floor) that needs a column. */
-struct contact {
-    uint32_t cell;
-    float top;   /* the overhanging bottom, mm */
-    float floor; /* top of the solid below, 0 for the bed */
-};
 
 static int
 find_contacts(const struct ray_grid *g, const struct cols *cs, const struct supmodel_params *p,
@@ -272,59 +665,290 @@ find_contacts(const struct ray_grid *g, const struct cols *cs, const struct supm
                     continue;
                 if (!overhangs(g, cs, i, j, iv.lo, slope))
                     continue;
-                if (p->bridges && bridged(g, cs, i, j, iv.lo, (float)h))
-                    continue;
                 void *o = v;
                 if (!mem_grow(&o, &cap, n + 1, sizeof(*v))) {
                     free(v);
                     return sf_err_set(err, SF_ENOMEM, "support model: out of memory");
                 }
                 v = o;
-                v[n++] = (struct contact){ (uint32_t)c, iv.lo, below };
+                /* PrusaSlicer prints dense interface only where the overhang passes
+                   the layer below grown by 0.6 external perimeter widths (SM:1798) */
+                bool dense = p->interface_step_mm <= 0 ||
+                             overhangs(g, cs, i, j, iv.lo, h / p->interface_step_mm);
+                v[n++] = (struct contact){ (uint32_t)c, iv.lo, below, dense };
             }
         }
+    }
+    int rc = p->bridges ? remove_bridges(g, cs, p, v, &n, err) : SF_OK;
+    if (rc) {
+        free(v);
+        return rc;
     }
     *out = v;
     *n_out = n;
     return SF_OK;
 }
 
-/* The contacts of grid g under p's rules (*ct freed by the caller, also on error). */
+/* A column range in mm of snap cell blk. */
+struct frun {
+    uint32_t blk;
+    float lo, hi;
+};
+
 static int
-grid_contacts(const struct ray_grid *g, const struct supmodel_params *p, struct contact **ct,
-              size_t *n, struct sf_err *err)
+frun_cmp(const void *a, const void *b)
 {
+    const struct frun *x = a, *y = b;
+    if (x->blk != y->blk)
+        return x->blk < y->blk ? -1 : 1;
+    return (x->lo > y->lo) - (x->lo < y->lo);
+}
+
+static bool
+push_column(struct support_column **v, size_t *n, size_t *cap, struct support_column c)
+{
+    void *o = *v;
+    if (!mem_grow(&o, cap, *n + 1, sizeof(**v)))
+        return false;
+    *v = o;
+    (*v)[(*n)++] = c;
+    return true;
+}
+
+/*
+ * Snap the contacts' columns to the grid as PrusaSlicer does (grid style):
+ * every cell of a snap cell that a column touches gets the snap cell's
+ * merged ranges wherever the part leaves room, and, as the projection goes
+ * down until the part stops it, reaches down to its own floor.
+ */
+static int
+snap_columns(const struct ray_grid *g, const struct cols *cs, const struct contact *ct, size_t n,
+             uint32_t bs, struct support_column **cols, size_t *n_cols, struct sf_err *err)
+{
+    uint32_t nbu = (g->nu + bs - 1) / bs;
+    struct frun *r = mem_array(n ? n : 1, sizeof(*r));
+    if (!r)
+        return sf_err_set(err, SF_ENOMEM, "support model: out of memory (columns)");
+    for (size_t k = 0; k < n; k++) {
+        uint32_t c = ct[k].cell, i = c % g->nu, j = c / g->nu;
+        r[k] = (struct frun){ (j / bs) * nbu + i / bs, ct[k].floor, ct[k].top };
+    }
+    qsort(r, n, sizeof(*r), frun_cmp);
+    size_t m = 0;
+    for (size_t k = 0; k < n; k++) {
+        if (m > 0 && r[m - 1].blk == r[k].blk && r[k].lo <= r[m - 1].hi) {
+            if (r[k].hi > r[m - 1].hi)
+                r[m - 1].hi = r[k].hi;
+        } else {
+            r[m++] = r[k];
+        }
+    }
+    struct support_column *v = NULL;
+    size_t nv = 0, cap = 0;
+    int rc = SF_OK;
+    for (size_t k = 0; k < m && rc == SF_OK; k++) {
+        uint32_t bi = r[k].blk % nbu, bj = r[k].blk / nbu;
+        for (uint32_t j = bj * bs; j < (bj + 1) * bs && j < g->nw && rc == SF_OK; j++) {
+            for (uint32_t i = bi * bs; i < (bi + 1) * bs && i < g->nu && rc == SF_OK; i++) {
+                uint32_t c = j * g->nu + i;
+                /* the cell's free gaps: from the bed or a solid's top to the next bottom */
+                float floor_mm = 0;
+                for (uint32_t q = cs->first[c]; q <= cs->first[c + 1] && rc == SF_OK; q++) {
+                    bool last = q == cs->first[c + 1];
+                    if (!last && !(cs->iv[q].hi > cs->iv[q].lo))
+                        continue;
+                    float top = last ? r[k].hi : cs->iv[q].lo;
+                    if (top > r[k].lo && floor_mm < r[k].hi) {
+                        struct support_column col = { c, floor_mm, top < r[k].hi ? top : r[k].hi,
+                                                      0 };
+                        if (col.hi > col.lo && !push_column(&v, &nv, &cap, col))
+                            rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
+                    }
+                    if (!last)
+                        floor_mm = cs->iv[q].hi;
+                }
+            }
+        }
+    }
+    free(r);
+    if (rc) {
+        free(v);
+        return rc;
+    }
+    *cols = v;
+    *n_cols = nv;
+    return SF_OK;
+}
+
+/*
+ * The dense-interface bands of the snapped columns: under every dense
+ * contact, its snap cell's columns print interface_layers dense layers
+ * (PrusaSlicer's fill_contact_layer fills the whole cell), in the layers the
+ * columns occupy (the gaps applied: piece [lo, hi] occupies lo + gap_z when
+ * lo is on the part, up to hi - gap_z).
+ */
+static int
+snap_bands(const struct ray_grid *g, const struct supmodel_params *p, const struct contact *ct,
+           size_t n, uint32_t bs, const struct support_column *cols, size_t n_cols,
+           struct support_column **bands, size_t *n_bands, struct sf_err *err)
+{
+    size_t cells = (size_t)g->nu * g->nw;
+    uint32_t nbu = (g->nu + bs - 1) / bs;
+    double gap = p->gap_z_mm, dh = p->interface_layers * p->layer_mm;
+    struct frun *r = mem_array(n ? n : 1, sizeof(*r));
+    uint32_t *cfirst = mem_calloc(cells + 1, sizeof(uint32_t));
+    uint32_t *cidx = mem_array(n_cols ? n_cols : 1, sizeof(uint32_t));
+    struct support_column *v = NULL;
+    size_t nv = 0, cap = 0, m = 0;
+    int rc = SF_OK;
+    if (!r || !cfirst || !cidx) {
+        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bands)");
+        goto done;
+    }
+    for (size_t k = 0; k < n; k++) {
+        if (!ct[k].dense || dh <= 0)
+            continue;
+        uint32_t c = ct[k].cell, i = c % g->nu, j = c / g->nu;
+        r[m++] = (struct frun){ (j / bs) * nbu + i / bs, (float)(ct[k].top - gap - dh),
+                                (float)(ct[k].top - gap) };
+    }
+    qsort(r, m, sizeof(*r), frun_cmp);
+    size_t mm = 0;
+    for (size_t k = 0; k < m; k++) {
+        if (mm > 0 && r[mm - 1].blk == r[k].blk && r[k].lo <= r[mm - 1].hi) {
+            if (r[k].hi > r[mm - 1].hi)
+                r[mm - 1].hi = r[k].hi;
+        } else {
+            r[mm++] = r[k];
+        }
+    }
+    /* the column pieces by cell */
+    for (size_t q = 0; q < n_cols; q++)
+        cfirst[cols[q].cell + 1]++;
+    for (size_t c = 0; c < cells; c++)
+        cfirst[c + 1] += cfirst[c];
+    for (size_t q = 0; q < n_cols; q++)
+        cidx[cfirst[cols[q].cell]++] = (uint32_t)q;
+    for (size_t c = cells; c > 0; c--) /* back to the starts */
+        cfirst[c] = cfirst[c - 1];
+    cfirst[0] = 0;
+    for (size_t k = 0; k < mm && rc == SF_OK; k++) {
+        uint32_t bi = r[k].blk % nbu, bj = r[k].blk / nbu;
+        for (uint32_t j = bj * bs; j < (bj + 1) * bs && j < g->nw && rc == SF_OK; j++) {
+            for (uint32_t i = bi * bs; i < (bi + 1) * bs && i < g->nu && rc == SF_OK; i++) {
+                uint32_t c = j * g->nu + i;
+                for (uint32_t q = cfirst[c]; q < cfirst[c + 1] && rc == SF_OK; q++) {
+                    const struct support_column *pc = &cols[cidx[q]];
+                    double lo = pc->lo > 0 ? pc->lo + gap : 0, hi = pc->hi - gap;
+                    lo = lo > r[k].lo ? lo : r[k].lo;
+                    hi = hi < r[k].hi ? hi : r[k].hi;
+                    if (hi - lo < 0.5 * p->layer_mm)
+                        continue;
+                    struct support_column b = { c, (float)lo, (float)hi, 0 };
+                    if (!push_column(&v, &nv, &cap, b))
+                        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bands)");
+                }
+            }
+        }
+    }
+done:
+    free(r);
+    free(cfirst);
+    free(cidx);
+    if (rc) {
+        free(v);
+        return rc;
+    }
+    *bands = v;
+    *n_bands = nv;
+    return SF_OK;
+}
+
+int
+supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
+                 struct support_column **cols, size_t *n_cols, struct support_column **bands,
+                 size_t *n_bands, struct sf_err *err)
+{
+    *cols = NULL;
+    *n_cols = 0;
+    if (bands) {
+        *bands = NULL;
+        *n_bands = 0;
+    }
     int rc = supmodel_params_check(p, err);
     if (rc)
         return rc;
     struct cols cs;
     if ((rc = cols_build(g, &cs, err)))
         return rc;
-    rc = find_contacts(g, &cs, p, ct, n, err);
+    struct contact *ct = NULL;
+    size_t n = 0;
+    rc = find_contacts(g, &cs, p, &ct, &n, err);
+    uint32_t bs = p->snap_mm > g->pitch ? (uint32_t)lround(p->snap_mm / g->pitch) : 1;
+    if (!rc && bs > 1) {
+        rc = snap_columns(g, &cs, ct, n, bs, cols, n_cols, err);
+        if (!rc && bands)
+            rc = snap_bands(g, p, ct, n, bs, *cols, *n_cols, bands, n_bands, err);
+        if (rc) {
+            free(*cols);
+            *cols = NULL;
+            *n_cols = 0;
+        }
+    } else if (!rc) {
+        struct support_column *out = mem_array(n ? n : 1, sizeof(*out));
+        if (!out) {
+            rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
+        } else {
+            for (size_t k = 0; k < n; k++)
+                out[k] = (struct support_column){ ct[k].cell, ct[k].floor, ct[k].top, 0 };
+            *cols = out;
+            *n_cols = n;
+        }
+    }
+    free(ct);
     cols_release(&cs);
     return rc;
 }
 
-int
-supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
-                 struct support_column **cols, size_t *n_cols, struct sf_err *err)
+/* Sort runs by snap cell and k0 (a counting sort by cell, then each cell's
+   few runs by k0) and merge each snap cell's overlapping ones into runs;
+   returns how many are left.  cnt holds n_blk + 1 counters, tmp n runs. */
+static size_t
+merge_runs(struct run *runs, size_t n, size_t n_blk, uint32_t *cnt, struct run *tmp)
 {
-    *cols = NULL;
-    *n_cols = 0;
-    struct contact *ct = NULL;
-    size_t n = 0;
-    int rc = grid_contacts(g, p, &ct, &n, err);
-    struct support_column *out = rc ? NULL : mem_array(n ? n : 1, sizeof(*out));
-    if (!rc && !out)
-        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
-    if (out) {
-        for (size_t k = 0; k < n; k++)
-            out[k] = (struct support_column){ ct[k].cell, ct[k].floor, ct[k].top, 0 };
-        *cols = out;
-        *n_cols = n;
+    memset(cnt, 0, (n_blk + 1) * sizeof(*cnt));
+    for (size_t k = 0; k < n; k++)
+        cnt[runs[k].blk + 1]++;
+    for (size_t b = 0; b < n_blk; b++)
+        cnt[b + 1] += cnt[b];
+    for (size_t k = 0; k < n; k++)
+        tmp[cnt[runs[k].blk]++] = runs[k];
+    /* cnt[b] is now the end of cell b's runs */
+    size_t m = 0;
+    for (size_t b = 0, a = 0; b < n_blk; b++) {
+        size_t e = cnt[b];
+        if (e - a > 32) {
+            qsort(tmp + a, e - a, sizeof(*tmp), run_cmp);
+        } else {
+            for (size_t i = a + 1; i < e; i++) { /* insertion sort by k0 */
+                struct run r = tmp[i];
+                size_t j = i;
+                for (; j > a && tmp[j - 1].k0 > r.k0; j--)
+                    tmp[j] = tmp[j - 1];
+                tmp[j] = r;
+            }
+        }
+        for (size_t k = a; k < e; k++) {
+            if (m > 0 && runs[m - 1].blk == tmp[k].blk && tmp[k].k0 <= runs[m - 1].k1) {
+                if (tmp[k].k1 > runs[m - 1].k1)
+                    runs[m - 1].k1 = tmp[k].k1;
+            } else {
+                runs[m++] = tmp[k];
+            }
+        }
+        a = e;
     }
-    free(ct);
-    return rc;
+    return m;
 }
 
 /* Layers of [lo, hi] whose middle (k + 0.5) h lies inside, clipped to [k0, k1). */
@@ -384,14 +1008,15 @@ supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
     uint32_t nbu = (g->nu + bs - 1) / bs, nbw = (g->nw + bs - 1) / bs;
     size_t n_blk = (size_t)nbu * nbw;
     struct run *runs = mem_array(n_ct ? n_ct : 1, sizeof(*runs));
+    struct run *iruns = mem_array(n_ct ? n_ct : 1, sizeof(*iruns));
     uint32_t *bfirst = mem_array(n_blk + 1, sizeof(uint32_t));
-    if (!runs || !bfirst) {
+    struct run *tmp = mem_array(n_ct ? n_ct : 1, sizeof(*tmp));
+    if (!runs || !iruns || !bfirst || !tmp) {
         rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
         goto done;
     }
     /* the columns, their contact interface and the classic shadow volume */
-    size_t n_runs = 0;
-    double iface = 0;
+    size_t n_runs = 0, n_iruns = 0;
     for (size_t k = 0; k < n_ct; k++) {
         double top = ct[k].top - p->gap_z_mm;
         double bot = ct[k].floor > 0 ? ct[k].floor + p->gap_z_mm : 0;
@@ -402,22 +1027,16 @@ supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
         out->contact_area_mm2 += cell_a;
         out->shadow_mm3 += (top - bot) * cell_a;
         int32_t nif = k1 - k0 < p->interface_layers ? k1 - k0 : p->interface_layers;
-        iface += cell_a * nif * h;
-        uint32_t c = ct[k].cell, i = c % g->nu, j = c / g->nu;
-        runs[n_runs++] = (struct run){ (j / bs) * nbu + i / bs, k0, k1 };
+        uint32_t c = ct[k].cell, i = c % g->nu, j = c / g->nu, blk = (j / bs) * nbu + i / bs;
+        /* PrusaSlicer snaps contacts to the grid too (fill_contact_layer): the dense
+           layers under a contact fill its whole snap cell */
+        if (ct[k].dense)
+            iruns[n_iruns++] = (struct run){ blk, k1 - nif, k1 };
+        runs[n_runs++] = (struct run){ blk, k0, k1 };
     }
-    /* merge each snap cell's columns into disjoint layer ranges */
-    qsort(runs, n_runs, sizeof(*runs), run_cmp);
-    size_t m = 0;
-    for (size_t k = 0; k < n_runs; k++) {
-        if (m > 0 && runs[m - 1].blk == runs[k].blk && runs[k].k0 <= runs[m - 1].k1) {
-            if (runs[k].k1 > runs[m - 1].k1)
-                runs[m - 1].k1 = runs[k].k1;
-        } else {
-            runs[m++] = runs[k];
-        }
-    }
-    n_runs = m;
+    /* merge each snap cell's columns (and interfaces) into disjoint layer ranges */
+    n_iruns = merge_runs(iruns, n_iruns, n_blk, bfirst, tmp);
+    n_runs = merge_runs(runs, n_runs, n_blk, bfirst, tmp);
     for (size_t b = 0, k = 0; b <= n_blk; b++) {
         while (k < n_runs && runs[k].blk < b)
             k++;
@@ -428,23 +1047,40 @@ supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
     for (size_t r = 0; r < n_runs; r++) {
         uint32_t b = runs[r].blk, bi = b % nbu, bj = b / nbu;
         int32_t k0 = runs[r].k0, k1 = runs[r].k1;
+        /* the projection goes on down each cell until the part (or the range
+           below in the same snap cell) stops it */
+        int32_t below = r > 0 && runs[r - 1].blk == b ? runs[r - 1].k1 : 0;
         for (uint32_t j = bj * bs; j < (bj + 1) * bs && j < g->nw; j++) {
             for (uint32_t i = bi * bs; i < (bi + 1) * bs && i < g->nu; i++) {
                 size_t c = (size_t)j * g->nu + i;
                 int64_t free_l = k1 - k0;
-                bool bed_free = k0 == 0;
+                bool solid_k0 = false;
+                float floor_mm = 0;
                 for (uint32_t q = cs.first[c]; q < cs.first[c + 1]; q++) {
                     struct ival iv = cs.iv[q];
                     free_l -= solid_layers(iv, h, k0, k1);
-                    if (k0 == 0 && solid_layers(iv, h, 0, 1))
-                        bed_free = false;
+                    solid_k0 |= solid_layers(iv, h, k0, k0 + 1) > 0;
+                    if (iv.hi > iv.lo && iv.hi <= (k0 + 0.5) * h && iv.hi > floor_mm)
+                        floor_mm = iv.hi;
                     /* a top surface the range comes down onto: a bottom contact */
                     int32_t kt = (int32_t)lround(iv.hi / h);
                     if (iv.hi > 0 && kt >= k0 - 2 && kt < k1 && kt > 0)
                         land += 1;
                 }
+                int32_t kb = k0;
+                if (!solid_k0) {
+                    int32_t kf = floor_mm > 0 ? (int32_t)lround((floor_mm + p->gap_z_mm) / h) : 0;
+                    kb = kf > below ? kf : below;
+                    if (kb < k0) {
+                        free_l += k0 - kb;
+                        if (floor_mm > 0 && kf >= below && kf < k0 - 2)
+                            land += 1;
+                    } else {
+                        kb = k0;
+                    }
+                }
                 filled += (double)(free_l > 0 ? free_l : 0);
-                first += bed_free;
+                first += kb == 0 && !solid_k0;
             }
         }
     }
@@ -472,6 +1108,22 @@ supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
         }
     }
     outline *= side; /* mm of outline summed over layers */
+    /* the dense cell-layers: the snap cells' free cells under each contact */
+    double iface = 0;
+    for (size_t r = 0; r < n_iruns; r++) {
+        uint32_t b = iruns[r].blk, bi = b % nbu, bj = b / nbu;
+        for (uint32_t j = bj * bs; j < (bj + 1) * bs && j < g->nw; j++) {
+            for (uint32_t i = bi * bs; i < (bi + 1) * bs && i < g->nu; i++) {
+                size_t c = (size_t)j * g->nu + i;
+                int64_t free_l = iruns[r].k1 - iruns[r].k0;
+                for (uint32_t q = cs.first[c]; q < cs.first[c + 1]; q++)
+                    free_l -= solid_layers(cs.iv[q], h, iruns[r].k0, iruns[r].k1);
+                iface += (double)(free_l > 0 ? free_l : 0);
+            }
+        }
+    }
+    filled -= iface; /* printed dense, not sparse */
+    iface *= cell_a * h;
     out->base_mm3 = filled * cell_a * h * p->base_density +
                     first * cell_a * h * max_d(0, p->first_density - p->base_density);
     out->interface_mm3 = iface + land * cell_a * p->interface_layers * h;
@@ -485,10 +1137,20 @@ supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
     out->n_layers = top_k;
 done:
     free(runs);
+    free(iruns);
     free(bfirst);
+    free(tmp);
     free(ct);
     cols_release(&cs);
     return rc;
+}
+
+double
+supmodel_raster_pitch(const struct supmodel_params *p)
+{
+    if (!(p->snap_mm > p->pitch_mm))
+        return p->pitch_mm;
+    return p->snap_mm / ceil(p->snap_mm / p->pitch_mm - 1e-9);
 }
 
 int
@@ -500,7 +1162,7 @@ supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *
     if (r)
         return r;
     struct ray_grid g;
-    if ((r = raycast_grid(rc, v3_normalize(up), p->pitch_mm, &g, err)))
+    if ((r = raycast_grid(rc, v3_normalize(up), supmodel_raster_pitch(p), &g, err)))
         return r;
     r = supmodel_eval_grid(&g, p, out, err);
     ray_grid_release(&g);

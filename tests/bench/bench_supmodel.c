@@ -10,6 +10,7 @@
  * grams, ray-cast volume mm3 at 45 and at 40 degrees (orient's scoring
  * margin), model shadow mm3, then the median milliseconds of one model
  * evaluation (cast included) and of one measure_support on a "# " line.
+ * SUPMODEL_BRIDGES=0 turns the PrusaSlicer model's bridge rule off.
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -75,6 +76,10 @@ main(int argc, char **argv)
     supmodel_params_default(&ce, SUPMODEL_CURA);
     if (argc > 3)
         ps.pitch_mm = ce.pitch_mm = strtod(argv[3], NULL);
+    /* SUPMODEL_BRIDGES=0: PrusaSlicer's model supports bridges (to measure the rule) */
+    const char *br = getenv("SUPMODEL_BRIDGES");
+    if (br && *br)
+        ps.bridges = strcmp(br, "0") != 0;
     struct support_params sp[2];
     support_params_default(&sp[0]);
     sp[1] = sp[0];

@@ -21,6 +21,7 @@ printf '%-17s %4s %4s | %8s %8s %8s | %8s %8s %8s | %8s %8s\n' mesh n_ps n_ce \
 for d in "$cache"/*/; do
   name=$(basename "$d")
   [ -f "$d/dirs.txt" ] || continue
+  ls "$d" | grep -q '\.csv$' || continue  # no peer row yet
   "$build/bench/bench_supmodel" "$shared/meshes/$name.stl" "$d/dirs.txt" ${SUPMODEL_PITCH:-} > "$work/m.txt" || continue
   for s in prusaslicer curaengine; do
     : > "$work/$s.txt"

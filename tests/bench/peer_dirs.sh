@@ -4,12 +4,13 @@
 # curaengine, supports on, 45 deg) and cache each run's CSV row under
 # build/peercache/dirsN/MESH/I.SLICER.csv, with the turned part as I.stl and
 # the directions as dirs.txt (one "i ux uy uz" a line).  A cached row is never
-# recomputed, so the run can be stopped and resumed.  The peers run under
+# recomputed (bar a timed-out one), so the run can be stopped and resumed.  The peers run under
 # nice -n 19: the machine is shared.  Read by bench_supmodel.sh.
 # PEER_MESHES="anchor dino" limits the meshes (default: all, smallest first).
 # The directions go in bit-reversed order, a quarter of them for every mesh
 # before the next quarter, so a run stopped early still has well-spread
-# directions on every mesh.
+# directions on every mesh.  PEER_LIMIT=K stops after the first K directions
+# of that order on every mesh (default: all n).
 set -u
 slicer=${1:?usage: peer_dirs.sh prusaslicer|curaengine [N]}
 n=${2:-64}
@@ -60,6 +61,7 @@ done
 # bit-reversed order of 0..n-1 (n a power of two; other n: plain order)
 order=$(awk -v n="$n" 'BEGIN { b = 0; while (2 ^ b < n) b++; if (2 ^ b != n) { for (i = 0; i < n; i++) print i; exit }
   for (i = 0; i < n; i++) { r = 0; x = i; for (k = 0; k < b; k++) { r = r * 2 + x % 2; x = int(x / 2) } print r } }')
+[ -n "${PEER_LIMIT:-}" ] && order=$(echo "$order" | head -n "$PEER_LIMIT")
 quarter=$(( (n + 3) / 4 ))
 for ((q = 0; q < 4; q++)); do
   part=$(echo "$order" | sed -n "$((q * quarter + 1)),$(((q + 1) * quarter))p")
@@ -69,7 +71,8 @@ for ((q = 0; q < 4; q++)); do
     d="$cache/$name"
     for i in $part; do
       row="$d/$i.$slicer.csv"
-      [ -s "$row" ] && continue
+      # a row is kept unless the run timed out (rc 124: a loaded machine, try again)
+      [ -s "$row" ] && awk -F, 'NR == 2 { exit $8 == 124 }' "$row" && continue
       PEER_RUNS=$slicer:on PEER_TIMEOUT=${PEER_TIMEOUT:-900} nice -n 19 "$peers" "$d/$i.stl" --format csv > "$row.tmp" 2>/dev/null &&
         mv "$row.tmp" "$row"
     done

@@ -235,9 +235,14 @@ T_CASE(tee_arms_rise_until_safe)
     mesh_init(&m);
     T_OK(shape_tee(&m, &err), &err);
     slim_params_default(&p);
-    /* the tee's arms are flat: at alpha = 75 they are safe once tilted 15 degrees,
-       a deformation past the default deviation limits */
+    /* the tee's arms are flat: at alpha = 75 they are safe once tilted 15 degrees
+       by the ray cast and 16 by PrusaSlicer (threshold 15, + 1 inclusive): arms
+       planar at 15.5 degrees need 8.18 g in PrusaSlicer 2.5 at --angle 75 (the
+       flat tee 6.17 g), at 16.5 none.  A deformation past the default deviation
+       limits, aimed 10 degrees past alpha: at the default 5 the arms stall in
+       that one-degree band, which the support model rightly refuses. */
     p.angle_deg = 75;
+    p.margin_deg = 10;
     p.max_mndr = 0.5;
     p.max_andr = 0.5;
     T_OK(slim_optimize(&m, &p, &r, &err), &err);
@@ -245,6 +250,9 @@ T_CASE(tee_arms_rise_until_safe)
     T_EQ_INT(r.after.n_risky, 0);
     T_EQ_DBL(r.after.volume_mm3, 0, 1e-9);
     T_TRUE(r.before.volume_mm3 > 1000);
+    /* PrusaSlicer prints no support under this result (0.00 g at --angle 75) */
+    T_TRUE(r.model_before_g > 4);
+    T_EQ_DBL(r.model_after_g, 0, 1e-12);
     double left, right;
     tip_heights(&m, &r.out, &left, &right);
     T_TRUE(left > 31 && right > 31); /* both rose from z = 30 */
@@ -254,7 +262,36 @@ T_CASE(tee_arms_rise_until_safe)
     mesh_release(&m);
 }
 
-T_CASE(tee_at_45_degrees_stays_within_the_limits)
+T_CASE(tee_at_45_degrees_keeps_the_input)
+{
+    /* At 45 degrees a budget that lets the arms turn (0.15 / 0.05) tilts them
+       partway, which lowers the ray-cast volume but costs more support in
+       PrusaSlicer 2.5 (--angle 45: flat 6.17 g, arms planar at 10 degrees
+       7.82 g, at 20 8.58 g: the flat arms are partly bridged, sloped ones are
+       not, and their columns are taller).  The model sees no gain: the input
+       stays. */
+    struct mesh m;
+    struct sf_err err;
+    struct slim_params p;
+    struct slim_result r;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    quick_params(&p);
+    p.beta_step_deg = 15;
+    p.max_mndr = 0.15;
+    p.max_andr = 0.05;
+    p.min_gain = 0;
+    T_OK(slim_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(r.model_before_g > 4);
+    T_EQ_INT(r.best_iter, 0);
+    T_EQ_DBL(r.model_after_g, r.model_before_g, 1e-12);
+    T_EQ_INT(r.out.n_verts, m.n_verts);
+    T_TRUE(memcmp(r.out.v, m.v, sizeof(*m.v) * m.n_verts) == 0);
+    slim_result_release(&r);
+    mesh_release(&m);
+}
+
+T_CASE(tee_at_75_degrees_stays_within_the_limits)
 {
     struct mesh m;
     struct sf_err err;
@@ -265,10 +302,15 @@ T_CASE(tee_at_45_degrees_stays_within_the_limits)
     quick_params(&p);
     p.beta_step_deg = 15; /* fewer rounds: the sanitizer build is slow */
     /* the tee's 20 mm arms cannot turn within the default 5 % / 1.5 %: a
-       budget where they can, to see the limits and the volume kept */
+       budget where they can, to see the limits and the volume kept; at 75
+       degrees they turn far enough (past 16, aimed at 85) for PrusaSlicer to
+       drop their support (0.00 g at --angle 75, the input 6.17 g) */
+    p.angle_deg = 75;
+    p.margin_deg = 10;
     p.max_mndr = 0.15;
     p.max_andr = 0.05;
     T_OK(slim_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(r.model_after_g < r.model_before_g);
     T_TRUE(r.dev.mndr <= p.max_mndr && r.dev.andr <= p.max_andr);
     T_TRUE(r.after.volume_mm3 <= r.before.volume_mm3);
     T_TRUE(r.after.n_risky <= r.before.n_risky);
@@ -287,9 +329,12 @@ T_CASE(tee_at_45_degrees_stays_within_the_limits)
     mesh_release(&m);
 }
 
-/* A result must save at least min_gain of the input's ray-cast support; else the input is kept. */
+/* A result must save at least min_gain of the input's modelled support; else the input is kept. */
 T_CASE(a_small_saving_keeps_the_input)
 {
+    /* The tee at 75 degrees with its left arm held: the free arm rises past
+       PrusaSlicer's 16 degrees, about half the support goes (PrusaSlicer 2.5
+       at --angle 75: 6.17 g -> 3.46 g on this result) */
     struct mesh m;
     struct sf_err err;
     struct slim_params p;
@@ -297,15 +342,21 @@ T_CASE(a_small_saving_keeps_the_input)
     mesh_init(&m);
     T_OK(shape_tee(&m, &err), &err);
     quick_params(&p);
-    p.beta_step_deg = 15;
-    p.max_mndr = 0.15; /* a budget where the tee's arms can turn */
-    p.max_andr = 0.05;
+    p.angle_deg = 75;
+    p.margin_deg = 10;
+    p.max_mndr = 0.5;
+    p.max_andr = 0.5;
+    struct slim_box box = { v3(-30, -1, 28), v3(-6, 21, 36) };
+    p.fix_boxes = &box;
+    p.n_fix_boxes = 1;
+    p.fix_bottom_mm = 3;
     p.min_gain = 0;
     T_OK(slim_optimize(&m, &p, &any, &err), &err);
-    T_TRUE(any.best_iter > 0 && any.after.volume_mm3 < any.before.volume_mm3);
-    p.min_gain = 0.05; /* the default */
+    T_TRUE(any.best_iter > 0 && any.model_after_g < any.model_before_g);
+    T_TRUE(any.model_after_g > 0.3 * any.model_before_g); /* the held arm keeps its support */
+    p.min_gain = 0.05;                                    /* the default */
     T_OK(slim_optimize(&m, &p, &dflt, &err), &err);
-    T_TRUE(dflt.best_iter == 0 || dflt.after.volume_mm3 <= 0.95 * dflt.before.volume_mm3);
+    T_TRUE(dflt.best_iter > 0 && dflt.model_after_g <= 0.95 * dflt.model_before_g);
     /* nothing saves 99 %: the input comes back as it was */
     p.min_gain = 0.99;
     T_OK(slim_optimize(&m, &p, &none, &err), &err);
@@ -344,6 +395,10 @@ T_CASE(result_keeps_the_part_volume)
     p.angle_deg = 0; /* every downward face: the most shrink (5 % at this tet mesh) */
     p.margin_deg = 0;
     p.max_iters = 30;
+    /* what this case checks is the volume: the support model's saving on the
+       rescaled torus is small (8.80 -> 8.47 g, under the default 5 %), so any
+       saving is taken */
+    p.min_gain = 0;
     p.keep_volume = false;
     T_OK(slim_optimize(&m, &p, &shrunk, &err), &err);
     p.keep_volume = true;
@@ -524,7 +579,9 @@ T_CASE(no_gain_by_the_support_model_keeps_the_input)
        about 16 degrees, which halves the ray-cast volume (faces flatter than
        15 degrees are risky) but PrusaSlicer's T + 1 rule still supports it,
        and the taller arm needs longer columns: the support model sees no
-       saving, so the input stays (the ray-cast acceptance took the iterate) */
+       saving, so the input stays (the ray-cast acceptance took the iterate).
+       PrusaSlicer 2.5 at --angle 75: arms planar at 15.5 degrees 8.18 g, the
+       flat tee 6.17 g. */
     struct mesh m;
     struct sf_err err;
     struct slim_params p;
@@ -541,7 +598,7 @@ T_CASE(no_gain_by_the_support_model_keeps_the_input)
     p.fix_bottom_mm = 3;
     T_OK(slim_optimize(&m, &p, &r, &err), &err);
     T_EQ_INT(r.best_iter, 0);
-    T_TRUE(r.model_before_g > 5);
+    T_TRUE(r.model_before_g > 4); /* PrusaSlicer: 6.17 g; the model 4.96 */
     T_EQ_DBL(r.model_after_g, r.model_before_g, 1e-12);
     T_EQ_INT(r.out.n_verts, m.n_verts);
     for (uint32_t v = 0; v < m.n_verts; v++)
