@@ -438,6 +438,7 @@ layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, 
         paths_init(&out->l[k].region);
         paths_init(&out->l[k].inner);
         paths_init(&out->l[k].skin);
+        paths_init(&out->l[k].skin_bottom);
         if (plane_of(out, k) >= height)
             break;
     }
@@ -531,6 +532,7 @@ layer_stack_release(struct layer_stack *s)
         paths_release(&s->l[k].region);
         paths_release(&s->l[k].inner);
         paths_release(&s->l[k].skin);
+        paths_release(&s->l[k].skin_bottom);
     }
     free(s->l);
     memset(s, 0, sizeof(*s));

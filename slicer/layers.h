@@ -29,12 +29,13 @@
 #include "poly.h"
 
 struct layer {
-    double z_mm;         /* top of the layer above the bed */
-    double h_mm;         /* its thickness */
-    struct paths region; /* part cross-section at z_mm - h_mm / 2 */
-    struct paths inner;  /* inside the perimeters: filled by toolpath_areas() */
-    struct paths skin;   /* surfaces open above or below, and their part in inner grown
-                            skin_margin: toolpath_areas() */
+    double z_mm;              /* top of the layer above the bed */
+    double h_mm;              /* its thickness */
+    struct paths region;      /* part cross-section at z_mm - h_mm / 2 */
+    struct paths inner;       /* inside the perimeters: filled by toolpath_areas() */
+    struct paths skin;        /* the surface open to the air above, and its part in inner
+                                 grown skin_margin: toolpath_areas() */
+    struct paths skin_bottom; /* the same for the surface open below */
 };
 
 struct layer_stack {

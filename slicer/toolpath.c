@@ -506,6 +506,43 @@ intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
     return rc;
 }
 
+/*
+ * The skin of one surface a (the cross-section open to the air on one
+ * side; a is used up): without slivers under a tenth of a line wide, as
+ * PrusaSlicer 2.5 finds top and bottom surfaces (detect_surfaces_type:
+ * opening by the external perimeter width / 10), then kept where it
+ * reaches the inner area, grown skin_margin into it.  The skin is that
+ * grown part and the surface itself, perimeter zone included: projected
+ * onto the layers within reach, a sloping surface's band lands inside
+ * their inner areas (PrusaSlicer's discover_horizontal_shells projects
+ * the slices' surfaces so).  b, c: scratch.
+ */
+static int
+skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *p, struct paths *b,
+        struct paths *c, struct paths *out)
+{
+    paths_reset(out);
+    paths_reset(c);
+    if (!a->n)
+        return SF_OK;
+    double open = p->width_mm / 20;
+    int rc = clip_offset(a, -open, CLIP_JOIN_MITER, b);
+    if (rc < 0 || !b->n)
+        return rc;
+    if ((rc = clip_offset(b, open, CLIP_JOIN_MITER, a)) < 0)
+        return rc;
+    if ((rc = clip_bool(CLIP_INTERSECTION, a, inner, CLIP_NONZERO, b)) < 0)
+        return rc;
+    if (b->n && (rc = clip_offset(b, p->skin_margin_mm, CLIP_JOIN_SQUARE, c)) < 0)
+        return rc;
+    paths_reset(b);
+    if (c->n && (rc = clip_bool(CLIP_INTERSECTION, c, inner, CLIP_NONZERO, b)) < 0)
+        return rc;
+    if (!paths_append(b, a))
+        return SF_ENOMEM;
+    return b->n ? clip_bool(CLIP_UNION, b, NULL, CLIP_NONZERO, out) : SF_OK;
+}
+
 int
 toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
 {
@@ -513,6 +550,7 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
     double sp = tp_spacing(p->width_mm, L->h_mm);
     paths_reset(&L->inner);
     paths_reset(&L->skin);
+    paths_reset(&L->skin_bottom);
     int rc;
     if (p->perimeters > 0)
         rc = clip_offset(&L->region, -(p->width_mm / 2 + (p->perimeters - 1) * sp + sp / 2),
@@ -521,46 +559,26 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
         rc = paths_append(&L->inner, &L->region) ? SF_OK : SF_ENOMEM;
     if (rc < 0 || !L->inner.n)
         return rc;
-    /* the seed of the skins: the cross-section open to the air above or
-       below, without slivers under a tenth of a line wide, as PrusaSlicer
-       2.5 finds top and bottom surfaces (detect_surfaces_type: opening by
-       the external perimeter width / 10), then kept where it reaches the
-       inner area, grown skin_margin into it */
+    /* the seeds of the skins: the cross-section open to the air above
+       (top) and below (bottom), each its own skin, since a top surface
+       thickens the layers under it and a bottom surface those over it,
+       never the other way (PrusaSlicer's discover_horizontal_shells; one
+       skin for both put solid under every overhang and over every top) */
     struct paths a, b, c;
     paths_init(&a);
     paths_init(&b);
     paths_init(&c);
-    if (k + 1 < s->n)
-        rc = clip_bool(CLIP_DIFFERENCE, &L->region, &s->l[k + 1].region, CLIP_NONZERO, &a);
-    else if (!paths_append(&a, &L->region))
-        rc = SF_ENOMEM;
-    if (rc == SF_OK && k > 0)
-        rc = clip_bool(CLIP_DIFFERENCE, &L->region, &s->l[k - 1].region, CLIP_NONZERO, &b);
-    else if (rc == SF_OK && !paths_append(&b, &L->region))
-        rc = SF_ENOMEM;
-    if (rc == SF_OK && !paths_append(&a, &b))
-        rc = SF_ENOMEM;
-    double open = p->width_mm / 20;
-    if (rc == SF_OK)
-        rc = clip_offset(&a, -open, CLIP_JOIN_MITER, &b);
-    if (rc == SF_OK && b.n)
-        rc = clip_offset(&b, open, CLIP_JOIN_MITER, &a);
-    if (rc == SF_OK && b.n)
-        rc = clip_bool(CLIP_INTERSECTION, &a, &L->inner, CLIP_NONZERO, &b);
-    else
-        paths_reset(&a), paths_reset(&b);
-    if (rc == SF_OK && b.n)
-        rc = clip_offset(&b, p->skin_margin_mm, CLIP_JOIN_SQUARE, &c);
-    if (rc == SF_OK && c.n)
-        rc = clip_bool(CLIP_INTERSECTION, &c, &L->inner, CLIP_NONZERO, &b);
-    /* the skin is that grown part and the surface itself, perimeter zone
-       included: projected onto the layers within reach, a sloping
-       surface's band lands inside their inner areas (PrusaSlicer's
-       discover_horizontal_shells projects the slices' surfaces so) */
-    if (rc == SF_OK && !paths_append(&b, &a))
-        rc = SF_ENOMEM;
-    if (rc == SF_OK && b.n)
-        rc = clip_bool(CLIP_UNION, &b, NULL, CLIP_NONZERO, &L->skin);
+    for (int side = 0; side < 2 && rc == SF_OK; side++) {
+        struct paths *out = side ? &L->skin_bottom : &L->skin;
+        long nb = side ? (long)k - 1 : (long)k + 1;
+        if (nb >= 0 && nb < (long)s->n)
+            rc = clip_bool(CLIP_DIFFERENCE, &L->region, &s->l[nb].region, CLIP_NONZERO, &a);
+        else
+            rc = paths_append(&a, &L->region) ? SF_OK : SF_ENOMEM;
+        if (rc == SF_OK)
+            rc = skin_of(&a, &L->inner, p, &b, &c, out);
+        paths_reset(&a);
+    }
     paths_release(&a);
     paths_release(&b);
     paths_release(&c);
@@ -956,8 +974,11 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
            (EXTERNAL_INFILL_MARGIN) and projects them so
            (discover_horizontal_shells) */
         paths_reset(&t[T_LINES]);
-        for (long j = (long)k - p->bottom_layers + 1; j < (long)k + p->top_layers; j++)
-            if (j >= 0 && j < (long)s->n && !paths_append(&t[T_LINES], &s->l[j].skin))
+        for (long j = k; j < (long)k + p->top_layers && j < (long)s->n; j++)
+            if (!paths_append(&t[T_LINES], &s->l[j].skin))
+                TRY(SF_ENOMEM);
+        for (long j = k; j > (long)k - p->bottom_layers && j >= 0; j--)
+            if (!paths_append(&t[T_LINES], &s->l[j].skin_bottom))
                 TRY(SF_ENOMEM);
         if (t[T_LINES].n) {
             /* one pass: under the nonzero rule the overlapping skins are

@@ -91,10 +91,24 @@ ours() { # mesh support(on|off)
     --set arc_fitting=no >/dev/null 2>&1 && mv_lin=$(grep -c '^G[123] ' "$work/l.gcode")
   echo "$g $(awk -v s="$secs" 'BEGIN { printf "%.1f", s / 60 }') $sg $best $layers $cpu $ccpu $cwall $mv_arc ${mv_lin:-0}"
 }
+# A peer's row and its G-code (gzip) are cached by the mesh's content under
+# $PEER_CACHE/slice (default build/peercache): written to a temporary name,
+# then moved into place, so trees sharing a cache never read half a file.
+# The planner column is always our estimator run on the cached G-code.
+cache=${PEER_CACHE:-build/peercache}/slice
 peer() { # mesh support [slicer] -> "g min support_g wall_s layers planner_min"
-  local row est
-  rm -rf "$work/peer"
-  row=$(PEER_RUNS="${3:-prusaslicer}:$2" bash "$shared/peers/slice-peers.sh" "$1" --format csv --keep "$work/peer" 2>/dev/null | tail -n 1)
+  local row est key slicer=${3:-prusaslicer}
+  key="$cache/$(md5sum <"$1" | cut -c1-32).$slicer.$2"
+  rm -rf "$work/peer"; mkdir -p "$work/peer" "$cache"
+  if [ -s "$key.csv" ] && [ -s "$key.gcode.gz" ]; then
+    row=$(tail -n 1 "$key.csv"); gzip -dc "$key.gcode.gz" >"$work/peer/peer.gcode"
+  else
+    row=$(PEER_RUNS="$slicer:$2" nice -n 19 bash "$shared/peers/slice-peers.sh" "$1" --format csv --keep "$work/peer" 2>/dev/null | tail -n 1)
+    if [ "$(cut -d, -f8 <<<"$row")" = 0 ] && ls "$work"/peer/*.gcode >/dev/null 2>&1; then
+      gzip -c "$work"/peer/*.gcode >"$key.gcode.gz.$$" && mv "$key.gcode.gz.$$" "$key.gcode.gz"
+      echo "$row" >"$key.csv.$$" && mv "$key.csv.$$" "$key.csv"
+    fi
+  fi
   est=$("$bin" estimate "$work"/peer/*.gcode 2>/dev/null | sed -n 's/.*(\([0-9]*\) s)$/\1/p')
   python3 - "$row" "${est:-0}" <<'PY'
 import sys, csv
