@@ -22,6 +22,7 @@
 #ifndef SF_SLICER_LAYERS_H
 #define SF_SLICER_LAYERS_H
 
+#include <stdbool.h>
 #include <stdint.h>
 
 #include "../src/base/err.h"
@@ -36,6 +37,10 @@ struct layer {
     struct paths skin;        /* the surface open to the air above, and its part in inner
                                  grown skin_margin: toolpath_areas() */
     struct paths skin_bottom; /* the same for the surface open below */
+    /* the infill area split by toolpath_store_regions(): solid, top solid
+       and sparse (the layer above bridges over this sparse) */
+    struct paths solid, top, sparse;
+    bool has_regions;
 };
 
 struct layer_stack {

@@ -705,6 +705,7 @@ enum {
     T_GAP,
     T_S,
     T_C,
+    T_BELOW,
     T_N
 };
 
@@ -1064,6 +1065,64 @@ out:
     return rc;
 }
 
+int
+toolpath_store_regions(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
+{
+    struct layer *L = &s->l[k];
+    int rc = toolpath_regions(s, k, p, &L->solid, &L->top, &L->sparse);
+    L->has_regions = rc == SF_OK;
+    return rc;
+}
+
+/* The regions of layer k: kept ones copied, else computed. */
+static int
+regions_of(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+           struct paths *solid, struct paths *top, struct paths *sparse)
+{
+    const struct layer *L = &s->l[k];
+    if (!L->has_regions)
+        return toolpath_regions(s, k, p, solid, top, sparse);
+    paths_reset(solid);
+    paths_reset(top);
+    paths_reset(sparse);
+    return paths_append(solid, &L->solid) && paths_append(top, &L->top) &&
+                   paths_append(sparse, &L->sparse)
+               ? SF_OK
+               : SF_ENOMEM;
+}
+
+/*
+ * Internal bridges: solid infill laid straight over the sparse infill of
+ * the layer below prints as bridge lines (nozzle-wide round threads at
+ * bridge speed, as over air), since under it is mostly air between the
+ * grid's lines: PrusaSlicer's bridge_over_infill.  Pieces narrower than 6
+ * nozzle widths stay solid (its opening by 3 bridge widths).  The lines
+ * keep the solid infill's direction.  solid loses what is bridged.
+ */
+static int
+internal_bridges(struct paths *solid, const struct paths *below_sparse, double nz, double ang,
+                 struct layer_paths *out, struct paths *t1, struct paths *t2, struct paths *lines)
+{
+    int rc = clip_bool(CLIP_INTERSECTION, solid, below_sparse, CLIP_NONZERO, t1);
+    if (rc < 0 || !t1->n)
+        return rc;
+    if ((rc = clip_offset(t1, -3 * nz, CLIP_JOIN_MITER, t2)) < 0 || !t2->n)
+        return rc;
+    if ((rc = clip_offset(t2, 3 * nz, CLIP_JOIN_MITER, t1)) < 0)
+        return rc;
+    if ((rc = clip_bool(CLIP_INTERSECTION, t1, solid, CLIP_NONZERO, t2)) < 0 || !t2->n)
+        return rc;
+    if ((rc = clip_bool(CLIP_DIFFERENCE, solid, t2, CLIP_NONZERO, t1)) < 0)
+        return rc;
+    paths_move(solid, t1);
+    paths_reset(lines);
+    if ((rc = tp_fill_lines(t2, ang, nz + 0.05, lines)) < 0)
+        return rc;
+    if ((rc = tp_link(lines, t2, 2 * (nz + 0.05), nz / 2)) < 0)
+        return rc;
+    return add(out, lines, ROLE_BRIDGE, false, nz);
+}
+
 /* Flags of q[a..b] (one segment, split to ~0.05 mm where it leaves
    below): append the points after a and their segments' flags. */
 static bool
@@ -1261,7 +1320,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
     }
     if (!L->inner.n)
         goto out;
-    TRY(toolpath_regions(s, k, p, &t[T_SOLID], &t[T_TOP], &t[T_SPARSE]));
+    TRY(regions_of(s, k, p, &t[T_SOLID], &t[T_TOP], &t[T_SPARSE]));
     if (p->gap_fill) {
         /* infill pieces under 3.5 spacings wide: zig-zag links would lay
            more than their area there, so they are gap-filled instead */
@@ -1286,6 +1345,17 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
             paths_move(&t[T_SOLID], &t[T_TMP]);
             TRY(bridges(&t[T_KEEP], &s->l[k - 1].region, nz, out, &t[T_TMP], &t[T_LINES], &t[T_S]));
         }
+    }
+    if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0 && p->infill_density > 0 &&
+        p->infill_density < 1) { /* 100 % "sparse" is solid: nothing to bridge */
+        const struct paths *below = &s->l[k - 1].sparse;
+        if (!s->l[k - 1].has_regions) {
+            TRY(toolpath_regions(s, k - 1, p, &t[T_TMP], &t[T_KEEP], &t[T_BELOW]));
+            below = &t[T_BELOW];
+        }
+        if (below->n)
+            TRY(internal_bridges(&t[T_SOLID], below, p->nozzle_mm, ang, out, &t[T_TMP], &t[T_KEEP],
+                                 &t[T_LINES]));
     }
     paths_reset(&t[T_LINES]);
     TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, &t[T_LINES]));
