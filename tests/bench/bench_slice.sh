@@ -15,6 +15,12 @@
 # side: ours and CuraEngine alternate, three runs each, best of each; the
 # "CPU ratio" column is ours / CuraEngine's.  The last column counts our
 # move commands (G1/G2/G3) with arcs and with arc_fitting = no.
+# Both slicers' time estimates are with cooling on (PrusaSlicer's default
+# cooling = 1 and our material defaults: slowdown below 5 s, fan by layer
+# time), so "time ratio" compares what each would print, minimum layer
+# time included.  BENCH_RUNS (default 3) sets the alternations;
+# BENCH_CE_ROW=0 skips CuraEngine's own filament/estimate row (one more
+# niced run per mesh; the CPU columns still come from the side-by-side runs).
 # BENCH_MESHES="a.stl b.stl" picks meshes; BENCH_PEERS=0 skips the peers;
 # BENCH_SUPPORT="off" runs only supports off (default "off on"); BENCH_PS=0
 # leaves PrusaSlicer out (CuraEngine's CPU ratio only).
@@ -64,7 +70,7 @@ ce_run() { # mesh support
 # ours and CuraEngine alternating, three runs each: "g min support_g wall_s layers cpu_s ce_cpu_s ce_wall_s"
 ours() { # mesh support(on|off)
   local best=999999 cpu=999999 ccpu=999999 cwall=999999 w c
-  for _ in 1 2 3; do
+  for ((run = 0; run < ${BENCH_RUNS:-3}; run++)); do
     read -r w c <<<"$(ours_run "$1" "$2")"
     [ "$c" = 0 ] && { echo "0 0 0 0 0 0 0 0"; return; }
     best=$(awk -v a="$best" -v b="$w" 'BEGIN { print (b < a ? b : a) }')
@@ -129,7 +135,7 @@ for m in "${meshes[@]}"; do
     read -r og omin osg ow ol ocpu ccpu ccw marc mlin <<<"$(ours "$m" "$sup")"
     if [ "$peers" = 1 ] && [ "${BENCH_PS:-1}" = 1 ]; then read -r pg pmin psg pw pl pest <<<"$(peer "$m" "$sup")"
     else pg=0 pmin=0 psg=0 pw=0 pest=0; fi
-    if [ "$peers" = 1 ] && command -v CuraEngine >/dev/null; then
+    if [ "$peers" = 1 ] && [ "${BENCH_CE_ROW:-1}" = 1 ] && command -v CuraEngine >/dev/null; then
       read -r cg cmin csg cw cl cest <<<"$(peer "$m" "$sup" curaengine)"
     else cg=0 cmin=0 cw=0; fi
     awk -v m="$(basename "$m")" -v s="$sup" -v og="$og" -v pg="$pg" -v omin="$omin" -v pmin="$pmin" \
