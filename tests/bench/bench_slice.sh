@@ -13,7 +13,8 @@
 # CPU seconds (user + system, from GNU time: the machine is shared, so wall
 # time says more about the load than about the slicer) are taken side by
 # side: ours and CuraEngine alternate, three runs each, best of each; the
-# "CPU ratio" column is ours / CuraEngine's.  The last column counts our
+# "CPU ratio" column is ours / CuraEngine's, "wall ratio vs CE" the same
+# for the best wall times of those runs.  The last column counts our
 # move commands (G1/G2/G3) with arcs and with arc_fitting = no.
 # Both slicers' time estimates are with cooling on (PrusaSlicer's default
 # cooling = 1 and our material defaults: slowdown below 5 s, fan by layer
@@ -128,8 +129,8 @@ except Exception:
     print("0 0 0 0 0 0")
 PY
 }
-printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s | ours CPU s | CE CPU s | CPU ratio vs CE | moves, arcs / no arcs |\n'
-printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s | ours CPU s | CE CPU s | CPU ratio vs CE | wall ratio vs CE | moves, arcs / no arcs |\n'
+printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
 for m in "${meshes[@]}"; do
   for sup in ${BENCH_SUPPORT:-off on}; do
     read -r og omin osg ow ol ocpu ccpu ccw marc mlin <<<"$(ours "$m" "$sup")"
@@ -140,9 +141,9 @@ for m in "${meshes[@]}"; do
     else cg=0 cmin=0 cw=0; fi
     awk -v m="$(basename "$m")" -v s="$sup" -v og="$og" -v pg="$pg" -v omin="$omin" -v pmin="$pmin" \
         -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" -v pest="$pest" \
-        -v cg="$cg" -v cmin="$cmin" -v cw="$cw" -v oc="$ocpu" -v cc="$ccpu" -v ma="$marc" -v ml="$mlin" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
-      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s | %.2f | %.1f | %.2f | %.2f | %.2f | %s | %d / %d (%sx fewer) |\n",
+        -v cg="$cg" -v cmin="$cmin" -v cw="$cw" -v oc="$ocpu" -v cc="$ccpu" -v ccw="$ccw" -v ma="$marc" -v ml="$mlin" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
+      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s | %.2f | %.1f | %.2f | %.2f | %.2f | %s | %s | %d / %d (%sx fewer) |\n",
               m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), pest, r(pest, pmin), osg, psg, ow, pw, r(ow, pw),
-              cg, cmin, cw, oc, cc, r(oc, cc), ma, ml, r(ml, ma) }'
+              cg, cmin, cw, oc, cc, r(oc, cc), r(ow, ccw), ma, ml, r(ml, ma) }'
   done
 done
