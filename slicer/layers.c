@@ -438,6 +438,11 @@ layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, 
         paths_init(&out->l[k].region);
         paths_init(&out->l[k].inner);
         paths_init(&out->l[k].skin);
+        paths_init(&out->l[k].skin_bottom);
+        paths_init(&out->l[k].solid);
+        paths_init(&out->l[k].top);
+        paths_init(&out->l[k].sparse);
+        out->l[k].has_regions = false;
         if (plane_of(out, k) >= height)
             break;
     }
@@ -531,6 +536,10 @@ layer_stack_release(struct layer_stack *s)
         paths_release(&s->l[k].region);
         paths_release(&s->l[k].inner);
         paths_release(&s->l[k].skin);
+        paths_release(&s->l[k].skin_bottom);
+        paths_release(&s->l[k].solid);
+        paths_release(&s->l[k].top);
+        paths_release(&s->l[k].sparse);
     }
     free(s->l);
     memset(s, 0, sizeof(*s));

@@ -22,6 +22,7 @@
 #ifndef SF_SLICER_LAYERS_H
 #define SF_SLICER_LAYERS_H
 
+#include <stdbool.h>
 #include <stdint.h>
 
 #include "../src/base/err.h"
@@ -29,12 +30,17 @@
 #include "poly.h"
 
 struct layer {
-    double z_mm;         /* top of the layer above the bed */
-    double h_mm;         /* its thickness */
-    struct paths region; /* part cross-section at z_mm - h_mm / 2 */
-    struct paths inner;  /* inside the perimeters: filled by toolpath_areas() */
-    struct paths skin;   /* surfaces open above or below, and their part in inner grown
-                            skin_margin: toolpath_areas() */
+    double z_mm;              /* top of the layer above the bed */
+    double h_mm;              /* its thickness */
+    struct paths region;      /* part cross-section at z_mm - h_mm / 2 */
+    struct paths inner;       /* inside the perimeters: filled by toolpath_areas() */
+    struct paths skin;        /* the surface open to the air above, and its part in inner
+                                 grown skin_margin: toolpath_areas() */
+    struct paths skin_bottom; /* the same for the surface open below */
+    /* the infill area split by toolpath_store_regions(): solid, top solid
+       and sparse (the layer above bridges over this sparse) */
+    struct paths solid, top, sparse;
+    bool has_regions;
 };
 
 struct layer_stack {

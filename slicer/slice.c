@@ -186,7 +186,7 @@ ray_columns(const struct mesh *m, const struct slice_profile *p, const struct la
 
 struct tp_job {
     struct layer_stack *s;
-    int phase; /* 0: inner areas, 1: toolpaths */
+    int phase; /* 0: inner areas, 1: solid/top/sparse regions, 2: toolpaths */
     const struct slice_profile *p;
     const struct support_layer *sup;
     struct layer_paths *lp;
@@ -290,10 +290,12 @@ tp_layers(void *ud, uint32_t begin, uint32_t end, int worker)
            and a cancel stops either phase there (issue 16: a cancelled job's
            worker must stop) */
         if (worker == 0 && cancelled(j->progress, j->ud, "toolpaths",
-                                     0.5 * j->phase + 0.5 * atomic_load(&j->done) / j->s->n))
+                                     (j->phase + (double)atomic_load(&j->done) / j->s->n) / 3))
             return SF_ECANCELED;
-        int rc = j->phase ? toolpath_layer(j->s, k, j->p, j->sup ? &j->sup[k] : NULL, &j->lp[k])
-                          : toolpath_areas(j->s, k, j->p);
+        int rc = j->phase == 2
+                     ? toolpath_layer(j->s, k, j->p, j->sup ? &j->sup[k] : NULL, &j->lp[k])
+                 : j->phase ? toolpath_store_regions(j->s, k, j->p)
+                            : toolpath_areas(j->s, k, j->p);
         if (rc < 0)
             return rc;
         atomic_fetch_add(&j->done, 1);
@@ -376,7 +378,7 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
     }
     struct tp_job j = { .s = &s, .p = p, .sup = sup, .lp = lp, .progress = progress, .ud = ud };
     rc = SF_OK;
-    for (j.phase = 0; j.phase < 2 && rc == SF_OK; j.phase++) {
+    for (j.phase = 0; j.phase < 3 && rc == SF_OK; j.phase++) {
         atomic_init(&j.done, 0);
         rc = par_for(s.n, 1, 0, tp_layers, &j);
     }

@@ -506,6 +506,43 @@ intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
     return rc;
 }
 
+/*
+ * The skin of one surface a (the cross-section open to the air on one
+ * side; a is used up): without slivers under a tenth of a line wide, as
+ * PrusaSlicer 2.5 finds top and bottom surfaces (detect_surfaces_type:
+ * opening by the external perimeter width / 10), then kept where it
+ * reaches the inner area, grown skin_margin into it.  The skin is that
+ * grown part and the surface itself, perimeter zone included: projected
+ * onto the layers within reach, a sloping surface's band lands inside
+ * their inner areas (PrusaSlicer's discover_horizontal_shells projects
+ * the slices' surfaces so).  b, c: scratch.
+ */
+static int
+skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *p, struct paths *b,
+        struct paths *c, struct paths *out)
+{
+    paths_reset(out);
+    paths_reset(c);
+    if (!a->n)
+        return SF_OK;
+    double open = p->width_mm / 20;
+    int rc = clip_offset(a, -open, CLIP_JOIN_MITER, b);
+    if (rc < 0 || !b->n)
+        return rc;
+    if ((rc = clip_offset(b, open, CLIP_JOIN_MITER, a)) < 0)
+        return rc;
+    if ((rc = clip_bool(CLIP_INTERSECTION, a, inner, CLIP_NONZERO, b)) < 0)
+        return rc;
+    if (b->n && (rc = clip_offset(b, p->skin_margin_mm, CLIP_JOIN_SQUARE, c)) < 0)
+        return rc;
+    paths_reset(b);
+    if (c->n && (rc = clip_bool(CLIP_INTERSECTION, c, inner, CLIP_NONZERO, b)) < 0)
+        return rc;
+    if (!paths_append(b, a))
+        return SF_ENOMEM;
+    return b->n ? clip_bool(CLIP_UNION, b, NULL, CLIP_NONZERO, out) : SF_OK;
+}
+
 int
 toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
 {
@@ -513,6 +550,7 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
     double sp = tp_spacing(p->width_mm, L->h_mm);
     paths_reset(&L->inner);
     paths_reset(&L->skin);
+    paths_reset(&L->skin_bottom);
     int rc;
     if (p->perimeters > 0)
         rc = clip_offset(&L->region, -(p->width_mm / 2 + (p->perimeters - 1) * sp + sp / 2),
@@ -521,46 +559,26 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
         rc = paths_append(&L->inner, &L->region) ? SF_OK : SF_ENOMEM;
     if (rc < 0 || !L->inner.n)
         return rc;
-    /* the seed of the skins: the cross-section open to the air above or
-       below, without slivers under a tenth of a line wide, as PrusaSlicer
-       2.5 finds top and bottom surfaces (detect_surfaces_type: opening by
-       the external perimeter width / 10), then kept where it reaches the
-       inner area, grown skin_margin into it */
+    /* the seeds of the skins: the cross-section open to the air above
+       (top) and below (bottom), each its own skin, since a top surface
+       thickens the layers under it and a bottom surface those over it,
+       never the other way (PrusaSlicer's discover_horizontal_shells; one
+       skin for both put solid under every overhang and over every top) */
     struct paths a, b, c;
     paths_init(&a);
     paths_init(&b);
     paths_init(&c);
-    if (k + 1 < s->n)
-        rc = clip_bool(CLIP_DIFFERENCE, &L->region, &s->l[k + 1].region, CLIP_NONZERO, &a);
-    else if (!paths_append(&a, &L->region))
-        rc = SF_ENOMEM;
-    if (rc == SF_OK && k > 0)
-        rc = clip_bool(CLIP_DIFFERENCE, &L->region, &s->l[k - 1].region, CLIP_NONZERO, &b);
-    else if (rc == SF_OK && !paths_append(&b, &L->region))
-        rc = SF_ENOMEM;
-    if (rc == SF_OK && !paths_append(&a, &b))
-        rc = SF_ENOMEM;
-    double open = p->width_mm / 20;
-    if (rc == SF_OK)
-        rc = clip_offset(&a, -open, CLIP_JOIN_MITER, &b);
-    if (rc == SF_OK && b.n)
-        rc = clip_offset(&b, open, CLIP_JOIN_MITER, &a);
-    if (rc == SF_OK && b.n)
-        rc = clip_bool(CLIP_INTERSECTION, &a, &L->inner, CLIP_NONZERO, &b);
-    else
-        paths_reset(&a), paths_reset(&b);
-    if (rc == SF_OK && b.n)
-        rc = clip_offset(&b, p->skin_margin_mm, CLIP_JOIN_SQUARE, &c);
-    if (rc == SF_OK && c.n)
-        rc = clip_bool(CLIP_INTERSECTION, &c, &L->inner, CLIP_NONZERO, &b);
-    /* the skin is that grown part and the surface itself, perimeter zone
-       included: projected onto the layers within reach, a sloping
-       surface's band lands inside their inner areas (PrusaSlicer's
-       discover_horizontal_shells projects the slices' surfaces so) */
-    if (rc == SF_OK && !paths_append(&b, &a))
-        rc = SF_ENOMEM;
-    if (rc == SF_OK && b.n)
-        rc = clip_bool(CLIP_UNION, &b, NULL, CLIP_NONZERO, &L->skin);
+    for (int side = 0; side < 2 && rc == SF_OK; side++) {
+        struct paths *out = side ? &L->skin_bottom : &L->skin;
+        long nb = side ? (long)k - 1 : (long)k + 1;
+        if (nb >= 0 && nb < (long)s->n)
+            rc = clip_bool(CLIP_DIFFERENCE, &L->region, &s->l[nb].region, CLIP_NONZERO, &a);
+        else
+            rc = paths_append(&a, &L->region) ? SF_OK : SF_ENOMEM;
+        if (rc == SF_OK)
+            rc = skin_of(&a, &L->inner, p, &b, &c, out);
+        paths_reset(&a);
+    }
     paths_release(&a);
     paths_release(&b);
     paths_release(&c);
@@ -687,6 +705,7 @@ enum {
     T_GAP,
     T_S,
     T_C,
+    T_BELOW,
     T_N
 };
 
@@ -956,8 +975,11 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
            (EXTERNAL_INFILL_MARGIN) and projects them so
            (discover_horizontal_shells) */
         paths_reset(&t[T_LINES]);
-        for (long j = (long)k - p->bottom_layers + 1; j < (long)k + p->top_layers; j++)
-            if (j >= 0 && j < (long)s->n && !paths_append(&t[T_LINES], &s->l[j].skin))
+        for (long j = k; j < (long)k + p->top_layers && j < (long)s->n; j++)
+            if (!paths_append(&t[T_LINES], &s->l[j].skin))
+                TRY(SF_ENOMEM);
+        for (long j = k; j > (long)k - p->bottom_layers && j >= 0; j--)
+            if (!paths_append(&t[T_LINES], &s->l[j].skin_bottom))
                 TRY(SF_ENOMEM);
         if (t[T_LINES].n) {
             /* one pass: under the nonzero rule the overlapping skins are
@@ -1041,6 +1063,64 @@ out:
     for (int i = 0; i < T_N; i++)
         paths_release(&t[i]);
     return rc;
+}
+
+int
+toolpath_store_regions(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
+{
+    struct layer *L = &s->l[k];
+    int rc = toolpath_regions(s, k, p, &L->solid, &L->top, &L->sparse);
+    L->has_regions = rc == SF_OK;
+    return rc;
+}
+
+/* The regions of layer k: kept ones copied, else computed. */
+static int
+regions_of(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+           struct paths *solid, struct paths *top, struct paths *sparse)
+{
+    const struct layer *L = &s->l[k];
+    if (!L->has_regions)
+        return toolpath_regions(s, k, p, solid, top, sparse);
+    paths_reset(solid);
+    paths_reset(top);
+    paths_reset(sparse);
+    return paths_append(solid, &L->solid) && paths_append(top, &L->top) &&
+                   paths_append(sparse, &L->sparse)
+               ? SF_OK
+               : SF_ENOMEM;
+}
+
+/*
+ * Internal bridges: solid infill laid straight over the sparse infill of
+ * the layer below prints as bridge lines (nozzle-wide round threads at
+ * bridge speed, as over air), since under it is mostly air between the
+ * grid's lines: PrusaSlicer's bridge_over_infill.  Pieces narrower than 6
+ * nozzle widths stay solid (its opening by 3 bridge widths).  The lines
+ * keep the solid infill's direction.  solid loses what is bridged.
+ */
+static int
+internal_bridges(struct paths *solid, const struct paths *below_sparse, double nz, double ang,
+                 struct layer_paths *out, struct paths *t1, struct paths *t2, struct paths *lines)
+{
+    int rc = clip_bool(CLIP_INTERSECTION, solid, below_sparse, CLIP_NONZERO, t1);
+    if (rc < 0 || !t1->n)
+        return rc;
+    if ((rc = clip_offset(t1, -3 * nz, CLIP_JOIN_MITER, t2)) < 0 || !t2->n)
+        return rc;
+    if ((rc = clip_offset(t2, 3 * nz, CLIP_JOIN_MITER, t1)) < 0)
+        return rc;
+    if ((rc = clip_bool(CLIP_INTERSECTION, t1, solid, CLIP_NONZERO, t2)) < 0 || !t2->n)
+        return rc;
+    if ((rc = clip_bool(CLIP_DIFFERENCE, solid, t2, CLIP_NONZERO, t1)) < 0)
+        return rc;
+    paths_move(solid, t1);
+    paths_reset(lines);
+    if ((rc = tp_fill_lines(t2, ang, nz + 0.05, lines)) < 0)
+        return rc;
+    if ((rc = tp_link(lines, t2, 2 * (nz + 0.05), nz / 2)) < 0)
+        return rc;
+    return add(out, lines, ROLE_BRIDGE, false, nz);
 }
 
 /* Flags of q[a..b] (one segment, split to ~0.05 mm where it leaves
@@ -1242,7 +1322,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
     }
     if (!L->inner.n)
         goto out;
-    TRY(toolpath_regions(s, k, p, &t[T_SOLID], &t[T_TOP], &t[T_SPARSE]));
+    TRY(regions_of(s, k, p, &t[T_SOLID], &t[T_TOP], &t[T_SPARSE]));
     if (p->gap_fill) {
         /* infill pieces under 3.5 spacings wide: zig-zag links would lay
            more than their area there, so they are gap-filled instead */
@@ -1267,6 +1347,17 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
             paths_move(&t[T_SOLID], &t[T_TMP]);
             TRY(bridges(&t[T_KEEP], &s->l[k - 1].region, nz, out, &t[T_TMP], &t[T_LINES], &t[T_S]));
         }
+    }
+    if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0 && p->infill_density > 0 &&
+        p->infill_density < 1) { /* 100 % "sparse" is solid: nothing to bridge */
+        const struct paths *below = &s->l[k - 1].sparse;
+        if (!s->l[k - 1].has_regions) {
+            TRY(toolpath_regions(s, k - 1, p, &t[T_TMP], &t[T_KEEP], &t[T_BELOW]));
+            below = &t[T_BELOW];
+        }
+        if (below->n)
+            TRY(internal_bridges(&t[T_SOLID], below, p->nozzle_mm, ang, out, &t[T_TMP], &t[T_KEEP],
+                                 &t[T_LINES]));
     }
     paths_reset(&t[T_LINES]);
     TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, &t[T_LINES]));

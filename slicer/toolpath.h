@@ -104,6 +104,13 @@ int toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice
                      struct paths *solid, struct paths *top, struct paths *sparse);
 
 /*
+ * toolpath_regions of layer k kept in s->l[k] (solid, top, sparse,
+ * has_regions), after toolpath_areas on all layers: toolpath_layer uses
+ * them, and the layer above lays internal bridges over the sparse part.
+ * Optional: toolpath_layer computes what is not kept.  SF_ENOMEM / SF_EBUG.
+ */
+int toolpath_store_regions(struct layer_stack *s, uint32_t k, const struct slice_profile *p);
+/*
  * Build the paths of layer k of s (after toolpath_areas on all layers).  sup (may be NULL) is that
  * layer's support.  SF_ENOMEM / SF_EBUG (Clipper).
  */

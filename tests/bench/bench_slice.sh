@@ -13,8 +13,15 @@
 # CPU seconds (user + system, from GNU time: the machine is shared, so wall
 # time says more about the load than about the slicer) are taken side by
 # side: ours and CuraEngine alternate, three runs each, best of each; the
-# "CPU ratio" column is ours / CuraEngine's.  The last column counts our
+# "CPU ratio" column is ours / CuraEngine's, "wall ratio vs CE" the same
+# for the best wall times of those runs.  The last column counts our
 # move commands (G1/G2/G3) with arcs and with arc_fitting = no.
+# Both slicers' time estimates are with cooling on (PrusaSlicer's default
+# cooling = 1 and our material defaults: slowdown below 5 s, fan by layer
+# time), so "time ratio" compares what each would print, minimum layer
+# time included.  BENCH_RUNS (default 3) sets the alternations;
+# BENCH_CE_ROW=0 skips CuraEngine's own filament/estimate row (one more
+# niced run per mesh; the CPU columns still come from the side-by-side runs).
 # BENCH_MESHES="a.stl b.stl" picks meshes; BENCH_PEERS=0 skips the peers;
 # BENCH_SUPPORT="off" runs only supports off (default "off on"); BENCH_PS=0
 # leaves PrusaSlicer out (CuraEngine's CPU ratio only).
@@ -64,7 +71,7 @@ ce_run() { # mesh support
 # ours and CuraEngine alternating, three runs each: "g min support_g wall_s layers cpu_s ce_cpu_s ce_wall_s"
 ours() { # mesh support(on|off)
   local best=999999 cpu=999999 ccpu=999999 cwall=999999 w c
-  for _ in 1 2 3; do
+  for ((run = 0; run < ${BENCH_RUNS:-3}; run++)); do
     read -r w c <<<"$(ours_run "$1" "$2")"
     [ "$c" = 0 ] && { echo "0 0 0 0 0 0 0 0"; return; }
     best=$(awk -v a="$best" -v b="$w" 'BEGIN { print (b < a ? b : a) }')
@@ -91,10 +98,24 @@ ours() { # mesh support(on|off)
     --set arc_fitting=no >/dev/null 2>&1 && mv_lin=$(grep -c '^G[123] ' "$work/l.gcode")
   echo "$g $(awk -v s="$secs" 'BEGIN { printf "%.1f", s / 60 }') $sg $best $layers $cpu $ccpu $cwall $mv_arc ${mv_lin:-0}"
 }
+# A peer's row and its G-code (gzip) are cached by the mesh's content under
+# $PEER_CACHE/slice (default build/peercache): written to a temporary name,
+# then moved into place, so trees sharing a cache never read half a file.
+# The planner column is always our estimator run on the cached G-code.
+cache=${PEER_CACHE:-build/peercache}/slice
 peer() { # mesh support [slicer] -> "g min support_g wall_s layers planner_min"
-  local row est
-  rm -rf "$work/peer"
-  row=$(PEER_RUNS="${3:-prusaslicer}:$2" bash "$shared/peers/slice-peers.sh" "$1" --format csv --keep "$work/peer" 2>/dev/null | tail -n 1)
+  local row est key slicer=${3:-prusaslicer}
+  key="$cache/$(md5sum <"$1" | cut -c1-32).$slicer.$2"
+  rm -rf "$work/peer"; mkdir -p "$work/peer" "$cache"
+  if [ -s "$key.csv" ] && [ -s "$key.gcode.gz" ]; then
+    row=$(tail -n 1 "$key.csv"); gzip -dc "$key.gcode.gz" >"$work/peer/peer.gcode"
+  else
+    row=$(PEER_RUNS="$slicer:$2" nice -n 19 bash "$shared/peers/slice-peers.sh" "$1" --format csv --keep "$work/peer" 2>/dev/null | tail -n 1)
+    if [ "$(cut -d, -f8 <<<"$row")" = 0 ] && ls "$work"/peer/*.gcode >/dev/null 2>&1; then
+      gzip -c "$work"/peer/*.gcode >"$key.gcode.gz.$$" && mv "$key.gcode.gz.$$" "$key.gcode.gz"
+      echo "$row" >"$key.csv.$$" && mv "$key.csv.$$" "$key.csv"
+    fi
+  fi
   est=$("$bin" estimate "$work"/peer/*.gcode 2>/dev/null | sed -n 's/.*(\([0-9]*\) s)$/\1/p')
   python3 - "$row" "${est:-0}" <<'PY'
 import sys, csv
@@ -108,21 +129,21 @@ except Exception:
     print("0 0 0 0 0 0")
 PY
 }
-printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s | ours CPU s | CE CPU s | CPU ratio vs CE | moves, arcs / no arcs |\n'
-printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s | ours CPU s | CE CPU s | CPU ratio vs CE | wall ratio vs CE | moves, arcs / no arcs |\n'
+printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
 for m in "${meshes[@]}"; do
   for sup in ${BENCH_SUPPORT:-off on}; do
     read -r og omin osg ow ol ocpu ccpu ccw marc mlin <<<"$(ours "$m" "$sup")"
     if [ "$peers" = 1 ] && [ "${BENCH_PS:-1}" = 1 ]; then read -r pg pmin psg pw pl pest <<<"$(peer "$m" "$sup")"
     else pg=0 pmin=0 psg=0 pw=0 pest=0; fi
-    if [ "$peers" = 1 ] && command -v CuraEngine >/dev/null; then
+    if [ "$peers" = 1 ] && [ "${BENCH_CE_ROW:-1}" = 1 ] && command -v CuraEngine >/dev/null; then
       read -r cg cmin csg cw cl cest <<<"$(peer "$m" "$sup" curaengine)"
     else cg=0 cmin=0 cw=0; fi
     awk -v m="$(basename "$m")" -v s="$sup" -v og="$og" -v pg="$pg" -v omin="$omin" -v pmin="$pmin" \
         -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" -v pest="$pest" \
-        -v cg="$cg" -v cmin="$cmin" -v cw="$cw" -v oc="$ocpu" -v cc="$ccpu" -v ma="$marc" -v ml="$mlin" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
-      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s | %.2f | %.1f | %.2f | %.2f | %.2f | %s | %d / %d (%sx fewer) |\n",
+        -v cg="$cg" -v cmin="$cmin" -v cw="$cw" -v oc="$ocpu" -v cc="$ccpu" -v ccw="$ccw" -v ma="$marc" -v ml="$mlin" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
+      BEGIN { printf "| %s | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | %.1f (%s) | %.2f | %.2f | %.2f | %.2f | %s | %.2f | %.1f | %.2f | %.2f | %.2f | %s | %s | %d / %d (%sx fewer) |\n",
               m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), pest, r(pest, pmin), osg, psg, ow, pw, r(ow, pw),
-              cg, cmin, cw, oc, cc, r(oc, cc), ma, ml, r(ml, ma) }'
+              cg, cmin, cw, oc, cc, r(oc, cc), r(ow, ccw), ma, ml, r(ml, ma) }'
   done
 done

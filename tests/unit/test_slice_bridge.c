@@ -8,7 +8,9 @@
 #include <string.h>
 
 #include "../../slicer/estimate.h"
+#include "../../slicer/layers.h"
 #include "../../slicer/slice.h"
+#include "../../slicer/toolpath.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/mem.h"
 #include "../../src/mesh/shapes.h"
@@ -56,8 +58,10 @@ bridge_dir(bool turn, struct dir *d, struct sf_err *err)
     mesh_release(&b);
     mesh_init(&b);
     if (rc == SF_OK)
-        rc = turn ? shape_box(&b, v3(0, 0, 6), v3(W, L, 8), err)
-                  : shape_box(&b, v3(0, 0, 6), v3(L, W, 8), err);
+        /* 1.4 mm: 3 bottom and 4 top layers, all solid, so no internal
+           bridge (over sparse infill, in the solid's direction) mixes in */
+        rc = turn ? shape_box(&b, v3(0, 0, 6), v3(W, L, 7.4), err)
+                  : shape_box(&b, v3(0, 0, 6), v3(L, W, 7.4), err);
     if (rc == SF_OK)
         rc = ts_merge(&m, &b);
     struct slice_profile p;
@@ -87,4 +91,66 @@ T_CASE(bridge_lines_span_the_gap)
     if (!(d.along_y > 0 && d.along_y > 9 * d.along_x))
         t_fail(__FILE__, __LINE__, "gap along y: bridge %.0f mm along x, %.0f along y", d.along_x,
                d.along_y);
+}
+
+/* Bridge line length and the layer's solid infill length on layer k. */
+static void
+roles_of(const struct layer_paths *lp, double *bridge_mm, double *solid_mm, float *bridge_w)
+{
+    *bridge_mm = *solid_mm = 0;
+    for (uint32_t i = 0; i < lp->p.n; i++) {
+        double l = paths_length_k(&lp->p, i, lp->info[i].closed);
+        if (lp->info[i].role == ROLE_BRIDGE) {
+            *bridge_mm += l;
+            *bridge_w = lp->info[i].width_mm;
+        } else if (lp->info[i].role == ROLE_SOLID || lp->info[i].role == ROLE_TOP) {
+            *solid_mm += l;
+        }
+    }
+}
+
+T_CASE(solid_over_sparse_infill_is_an_internal_bridge)
+{
+    /* a 30 mm box 10 mm tall: its first solid layer under the top (layer
+       46, over layer 45's sparse grid) is bridged with nozzle-wide lines,
+       as PrusaSlicer's bridge_over_infill does; the layers over solid are
+       not.  Before, layer 46 was ordinary solid infill. */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_box(&m, 0, 0, 0, 30, 30, 10) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
+    T_EQ_INT(s.n, 50);
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    for (uint32_t k = 0; k < s.n; k++)
+        T_OK(toolpath_areas(&s, k, &p), NULL);
+    double inner = 30 - 2 * (p.width_mm / 2 + 1.5 * tp_spacing(p.width_mm, 0.2));
+    for (int stored = 0; stored < 2; stored++) {
+        /* with the regions kept (slice_mesh) and without (computed) */
+        for (uint32_t k = 0; stored && k < s.n; k++)
+            T_OK(toolpath_store_regions(&s, k, &p), NULL);
+        for (uint32_t k = 45; k < 48; k++) {
+            struct layer_paths lp;
+            layer_paths_init(&lp);
+            T_OK(toolpath_layer(&s, k, &p, NULL, &lp), NULL);
+            double br, so;
+            float w = 0;
+            roles_of(&lp, &br, &so, &w);
+            if (k == 46) {
+                /* lines nz + 0.05 apart over the whole inner area */
+                T_EQ_DBL(br, inner * inner / (p.nozzle_mm + 0.05), 0.05 * inner * inner / 0.45);
+                T_EQ_DBL(w, p.nozzle_mm, 1e-6);
+                T_EQ_DBL(so, 0, 1e-9);
+            } else {
+                T_EQ_DBL(br, 0, 1e-9);
+                if (k == 47)
+                    T_TRUE(so > 1000);
+            }
+            layer_paths_release(&lp);
+        }
+    }
+    slice_profile_release(&p);
+    layer_stack_release(&s);
+    ts_free(&m);
 }

@@ -216,6 +216,67 @@ region_areas(const struct layer_stack *s, uint32_t k, const struct slice_profile
     return rc;
 }
 
+T_CASE(surfaces_thicken_only_their_own_side)
+{
+    /* a 12 mm post under a 30 mm slab (z 10-12), and a 30 mm block under
+       a 12 mm post (z 0-10, then 10-20).  The slab's underside is a
+       bottom surface: it thickens the 3 layers from it up, never the post
+       below it; the block's top is a top surface: it thickens the 4 layers
+       from it down, never the post above (PrusaSlicer's
+       discover_horizontal_shells).  Before, one skin for both put solid
+       in the first post's 3 layers under the slab and in the second
+       post's 2 layers over the block. */
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    double inset = p.width_mm / 2 + 1.5 * tp_spacing(p.width_mm, 0.2);
+    double post = (12 - 2 * inset) * (12 - 2 * inset), wide = (30 - 2 * inset) * (30 - 2 * inset);
+    for (int part = 0; part < 2; part++) {
+        struct mesh m = { 0 };
+        struct sf_err err;
+        if (part == 0) {
+            T_TRUE(ts_box(&m, 0, 0, 0, 12, 12, 10) == 0);
+            T_TRUE(ts_box(&m, -9, -9, 10, 21, 21, 12) == 0);
+        } else {
+            T_TRUE(ts_box(&m, -9, -9, 0, 21, 21, 10) == 0);
+            T_TRUE(ts_box(&m, 0, 0, 10, 12, 12, 20) == 0);
+        }
+        struct layer_stack s;
+        T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
+        for (uint32_t k = 0; k < s.n; k++)
+            T_OK(toolpath_areas(&s, k, &p), NULL);
+        double solid, sparse;
+        if (part == 0) {
+            /* z 9.2-10: the post under the slab is sparse */
+            for (uint32_t k = 46; k < 50; k++) {
+                T_OK(region_areas(&s, k, &p, &solid, &sparse), NULL);
+                T_EQ_DBL(solid, 0, 1e-9);
+                T_EQ_DBL(sparse, post, 0.01 * post);
+            }
+            /* the slab's first 3 layers are solid but over the post's middle */
+            for (uint32_t k = 50; k < 53; k++) {
+                T_OK(region_areas(&s, k, &p, &solid, &sparse), NULL);
+                T_EQ_DBL(solid + sparse, wide, 0.01 * wide);
+                T_TRUE(sparse < post / 2);
+            }
+        } else {
+            /* z 9.2-10: the block's top 4 layers are solid */
+            for (uint32_t k = 46; k < 50; k++) {
+                T_OK(region_areas(&s, k, &p, &solid, &sparse), NULL);
+                T_EQ_DBL(solid, wide, 0.01 * wide);
+            }
+            /* z 10-10.6: the post over it is sparse */
+            for (uint32_t k = 50; k < 53; k++) {
+                T_OK(region_areas(&s, k, &p, &solid, &sparse), NULL);
+                T_EQ_DBL(solid, 0, 1e-9);
+                T_EQ_DBL(sparse, post, 0.01 * post);
+            }
+        }
+        layer_stack_release(&s);
+        ts_free(&m);
+    }
+    slice_profile_release(&p);
+}
+
 T_CASE(slope_gets_projected_top_surfaces)
 {
     /* a pyramid 50 wide, 10 tall: its faces move 0.5 mm in per 0.2 mm
@@ -292,6 +353,84 @@ T_CASE(clip_offset_and_difference)
     T_OK(clip_bool(CLIP_DIFFERENCE, &a, &b, CLIP_NONZERO, &c), NULL);
     T_EQ_DBL(paths_area(&c), 36, 1e-6);
     T_EQ_INT(c.n, 2);
+    paths_release(&a);
+    paths_release(&b);
+    paths_release(&c);
+}
+
+/* Squares centred at (cx, cy), side 2 r, counter-clockwise. */
+static void
+sq_at(struct paths *p, double cx, double cy, double r)
+{
+    struct ipt q[4] = { { poly_i(cx - r), poly_i(cy - r) },
+                        { poly_i(cx + r), poly_i(cy - r) },
+                        { poly_i(cx + r), poly_i(cy + r) },
+                        { poly_i(cx - r), poly_i(cy + r) } };
+    paths_add(p, q, 4);
+}
+
+T_CASE(clip_results_in_tree_order)
+{
+    /* two separate nests, given in reverse: rings of squares 20, 14, 8, 2
+       wide (even-odd: outer, hole, island, its hole), a square next to
+       them and, inside the second nest's hole, two islands.  Out of every
+       Boolean and offset come: an outer, its holes, then each island in
+       those holes with its own holes, recursively (the toolpaths walk
+       pieces as "a positive ring and the negative ones after it") */
+    struct paths a, b, c;
+    paths_init(&a);
+    paths_init(&b);
+    paths_init(&c);
+    sq_at(&a, 60, 0, 10);
+    sq_at(&a, 60, 0, 7);
+    sq_at(&a, 57, 0, 2);
+    sq_at(&a, 63, 0, 2);
+    sq_at(&a, 30, 0, 3);
+    sq_at(&a, 0, 0, 10);
+    sq_at(&a, 0, 0, 7);
+    sq_at(&a, 0, 0, 4);
+    sq_at(&a, 0, 0, 1);
+    T_OK(clip_bool(CLIP_UNION, &a, NULL, CLIP_EVENODD, &b), NULL);
+    T_EQ_INT(b.n, 9);
+    for (int pass = 0; pass < 2; pass++) {
+        const struct paths *r = pass ? &c : &b;
+        /* every negative ring lies inside the positive ring before it,
+           every positive ring after the first of a nest inside a
+           negative ring somewhere before it */
+        int outers = 0;
+        for (uint32_t i = 0; i < r->n; i++) {
+            double ar = paths_area_k(r, i);
+            struct ipt q = r->pts[r->start[i]];
+            if (ar < 0) {
+                uint32_t j = i;
+                while (j > 0 && paths_area_k(r, j) < 0)
+                    j--;
+                struct paths one;
+                paths_init(&one);
+                T_TRUE(paths_add(&one, r->pts + r->start[j], paths_len(r, j)));
+                T_TRUE(paths_contains(&one, q));
+                T_TRUE(paths_area_k(r, j) > -ar);
+                paths_release(&one);
+            } else {
+                outers++;
+            }
+        }
+        T_EQ_INT(outers, 6);
+        /* the first nest: ring 20/14, then the island 8/2 in its hole
+           (grown 0.5 mm: 21/13, 9/1) */
+        double want[4] = { 400, -196, 64, -4 }, grown[4] = { 441, -169, 81, -1 };
+        const double *w = pass ? grown : want;
+        uint32_t m = 0;
+        while (m < r->n && fabs(paths_area_k(r, m) - w[2]) > 1e-6)
+            m++;
+        T_TRUE(m >= 2 && m + 1 < r->n);
+        for (int i = 0; i < 4 && m >= 2 && m + 1 < r->n; i++)
+            T_EQ_DBL(paths_area_k(r, m - 2 + (uint32_t)i), w[i], 1e-6);
+        if (!pass) {
+            T_OK(clip_offset(&b, 0.5, CLIP_JOIN_MITER, &c), NULL);
+            T_EQ_INT(c.n, 9);
+        }
+    }
     paths_release(&a);
     paths_release(&b);
     paths_release(&c);
