@@ -53,6 +53,8 @@ struct drv_status {
     uint64_t lines_total;   /* command lines in the running job */
     uint64_t lines_acked;   /* of those, acknowledged by the printer */
     double progress;        /* 0..1 */
+    bool has_time_left;     /* the printer gave its own estimate of the time left */
+    int64_t time_left_s;    /* that estimate, seconds */
     int64_t job_started_ms; /* loop time the job started */
     char message[160];      /* last error or notice, for operators */
 };
