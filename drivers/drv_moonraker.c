@@ -182,6 +182,97 @@ out:
     return rc;
 }
 
+int
+drv_moonraker_parse_meta(const char *body, size_t len, struct moonraker_meta *m, struct sf_err *err)
+{
+    memset(m, 0, sizeof(*m));
+    m->estimated_s = -1;
+    json_t *root = load(body, len, "file metadata", err);
+    if (!root)
+        return SF_EINVAL;
+    json_t *r = json_object_get(root, "result");
+    int rc;
+    if (!r || !json_is_object(r)) {
+        rc = sf_err_set(err, SF_EINVAL, "moonraker file metadata: no result object");
+        goto out;
+    }
+    if ((rc = netdrv_json_num(WHO, r, "modified", "result", &m->modified, true, err)) ||
+        (rc = netdrv_json_int(WHO, r, "size", "result", &m->size, true, err)) ||
+        (rc = get_num(r, "estimated_time", "result", &m->estimated_s, err)))
+        goto out;
+    if (m->estimated_s < 0)
+        m->estimated_s = -1;
+out:
+    json_decref(root);
+    return rc;
+}
+
+int
+drv_moonraker_parse_history(const char *body, size_t len, const char *filename, double since,
+                            struct moonraker_hist *h, struct sf_err *err)
+{
+    memset(h, 0, sizeof(*h));
+    h->size = -1;
+    json_t *root = load(body, len, "history list", err);
+    if (!root)
+        return SF_EINVAL;
+    int rc = SF_EINVAL;
+    json_t *r = json_object_get(root, "result");
+    json_t *jobs = r && json_is_object(r) ? json_object_get(r, "jobs") : NULL;
+    if (!jobs || !json_is_array(jobs)) {
+        sf_err_set(err, SF_EINVAL, "moonraker history list: %s",
+                   r && json_is_object(r) ? "result.jobs: missing or not a list"
+                                          : "no result object");
+        goto out;
+    }
+    size_t i;
+    json_t *job;
+    json_array_foreach(jobs, i, job)
+    {
+        char where[32], name[256], status[24];
+        double start = 0, end = 0;
+        snprintf(where, sizeof(where), "jobs[%zu]", i);
+        if (!json_is_object(job)) {
+            sf_err_set(err, SF_EINVAL, "moonraker history %s: not an object", where);
+            goto out;
+        }
+        if ((rc = get_str(job, "filename", where, name, sizeof(name), true, err)) ||
+            (rc = get_str(job, "status", where, status, sizeof(status), true, err)) ||
+            (rc = netdrv_json_num(WHO, job, "start_time", where, &start, true, err)))
+            goto out;
+        json_t *e = json_object_get(job, "end_time"); /* null while in progress */
+        if (e && !json_is_null(e) && (rc = get_num(job, "end_time", where, &end, err)))
+            goto out;
+        rc = SF_EINVAL;
+        if (strcmp(name, filename) != 0 || start < since || (h->found && start <= h->start_time))
+            continue;
+        h->found = true;
+        snprintf(h->status, sizeof(h->status), "%s", status);
+        h->start_time = start;
+        h->end_time = end;
+        h->size = -1;
+        json_t *md = json_object_get(job, "metadata");
+        json_t *sz = md && json_is_object(md) ? json_object_get(md, "size") : NULL;
+        if (sz && json_is_integer(sz))
+            h->size = (int64_t)json_integer_value(sz);
+    }
+    rc = SF_OK;
+out:
+    json_decref(root);
+    return rc;
+}
+
+double
+drv_moonraker_time_left(const struct moonraker_status *st, double estimated_s)
+{
+    double d = st->print_duration_s;
+    if (estimated_s > 0 && d > 0 && estimated_s > d)
+        return estimated_s - d; /* Mainsail's "slicer" */
+    if (d > 0 && st->progress > 0)
+        return d / st->progress - d; /* Mainsail's "file" */
+    return -1;
+}
+
 void
 drv_moonraker_error_text(const char *body, size_t len, char *out, size_t n)
 {
@@ -254,8 +345,12 @@ drv_moonraker_observe(const struct moonraker_status *st, const char *job_name, i
 #define MR_STARTUP_MS 2000 /* docs: ask /server/info again after 2 s while Klippy starts */
 #define MR_SCRIPT_MAX 4096 /* manual commands waiting to be sent */
 
-enum { RQ_START = NETDRV_RQ_OWN, RQ_GCODE };
-static const char *const own_names[] = { "print start", "gcode script" };
+enum { RQ_START = NETDRV_RQ_OWN, RQ_GCODE, RQ_META, RQ_HISTORY };
+static const char *const own_names[] = { "print start", "gcode script", "file metadata",
+                                         "history" };
+
+/* attach()'s look-up, in Moonraker's job history, of a job print_stats no longer shows */
+enum hist_state { H_NONE, H_ASKING, H_ANSWERED };
 
 struct moonraker {
     struct netdrv n;
@@ -265,6 +360,16 @@ struct moonraker {
     struct moonraker_status last; /* the last poll's answer (attach reads it) */
     char script[MR_SCRIPT_MAX];   /* manual commands waiting, '\n'-separated */
     size_t script_len;
+    /* the job file's metadata (its slicer's time estimate; its upload time) */
+    char meta_name[160]; /* the file asked about ("" none) */
+    bool meta_known;     /* answered (meta_found: the printer has the file) */
+    bool meta_found;
+    bool want_meta;             /* ask when the slot frees */
+    struct moonraker_meta meta; /* the answer */
+    enum hist_state hist_state; /* the history look-up of hist_name */
+    char hist_name[160];
+    struct moonraker_hist hist; /* its answer (H_ANSWERED) */
+    char hist_why[200];         /* why the look-up could not tell, "" if it could */
 };
 
 static struct moonraker *
@@ -333,9 +438,30 @@ mr_start(struct netdrv *n, int kind)
         return send_req(m, kind, "POST", "/printer/print/resume", NULL);
     case NETDRV_RQ_CANCEL:
         return send_req(m, kind, "POST", "/printer/print/cancel", NULL);
+    case RQ_META: {
+        char path[256];
+        snprintf(path, sizeof(path), "/server/files/metadata?filename=%s", m->meta_name);
+        return send_req(m, kind, "GET", path, NULL);
+    }
+    case RQ_HISTORY: {
+        /* the entries created since the file was written, newest first */
+        char path[160];
+        snprintf(path, sizeof(path), "/server/history/list?limit=50&order=desc&since=%.3f",
+                 m->meta.modified - 1);
+        return send_req(m, kind, "GET", path, NULL);
+    }
     default:
         return false;
     }
+}
+
+/* Ask for name's metadata when the slot is free (our remote names need no escaping). */
+static void
+want_meta(struct moonraker *m, const char *name)
+{
+    snprintf(m->meta_name, sizeof(m->meta_name), "%s", name);
+    m->meta_known = m->meta_found = false;
+    m->want_meta = true;
 }
 
 static bool
@@ -373,6 +499,13 @@ on_poll(struct moonraker *m, const struct httpc_result *res)
     drv_moonraker_observe(&st, n->job.name, n->job.size, &ob);
     if (netdrv_settle(n, &ob))
         return;
+    /* the time left as Mainsail tells it (drv_moonraker_time_left): the
+       slicer's estimate from the file's metadata, asked once per job */
+    bool meta = m->meta_found && strcmp(m->meta_name, st.filename) == 0;
+    netdrv_time_left(n, &ob,
+                     ob.ours ? drv_moonraker_time_left(&st, meta ? m->meta.estimated_s : -1) : -1);
+    if (ob.ours && n->job.phase != NETJOB_NONE && strcmp(m->meta_name, st.filename) != 0)
+        want_meta(m, st.filename);
     netdrv_report(n, &ob, st.progress);
     /* Klippy restarting: /server/info tells when it is back (docs: every 2 s) */
     if (ob.remote == NETJOB_R_STARTING) {
@@ -476,6 +609,66 @@ on_own(struct moonraker *m, int kind, const struct httpc_result *res)
         netdrv_schedule(n, 0);
 }
 
+/* The history look-up of hist_name ends (hist_why: why it could not tell, or ""). */
+static void
+hist_answered(struct moonraker *m, const char *why)
+{
+    m->hist_state = H_ANSWERED;
+    snprintf(m->hist_why, sizeof(m->hist_why), "%s", why);
+}
+
+static void
+on_meta(struct moonraker *m, const struct httpc_result *res)
+{
+    struct netdrv *n = &m->n;
+    char why[200];
+    enum netdrv_outcome o = netdrv_judge(n, RQ_META, res, why, sizeof(why));
+    if (o == NETDRV_DOWN || o == NETDRV_AUTH) {
+        netdrv_contact_lost(n, why);
+        return;
+    }
+    struct sf_err err;
+    m->meta_known = true;
+    m->meta_found = o == NETDRV_OK &&
+                    drv_moonraker_parse_meta(res->body, res->body_len, &m->meta, &err) == SF_OK;
+    if (o == NETDRV_OK && !m->meta_found)
+        log_printer(LOG_WARN, n->base.name, "%s", err.msg);
+    if (m->hist_state == H_ASKING && strcmp(m->hist_name, m->meta_name) == 0) {
+        if (!m->meta_found) {
+            hist_answered(m, o == NETDRV_OK ? err.msg : "the file is no longer on the printer");
+        } else if (mr_start(n, RQ_HISTORY)) {
+            return;
+        } else {
+            hist_answered(m, "could not ask Moonraker's job history");
+        }
+    }
+    netdrv_schedule(n, 0);
+}
+
+static void
+on_history(struct moonraker *m, const struct httpc_result *res)
+{
+    struct netdrv *n = &m->n;
+    char why[200];
+    enum netdrv_outcome o = netdrv_judge(n, RQ_HISTORY, res, why, sizeof(why));
+    if (o == NETDRV_DOWN || o == NETDRV_AUTH) {
+        netdrv_contact_lost(n, why);
+        return;
+    }
+    struct sf_err err;
+    if (o != NETDRV_OK) {
+        char msg[260];
+        snprintf(msg, sizeof(msg), "Moonraker keeps no job history (%s)", why);
+        hist_answered(m, msg);
+    } else if (drv_moonraker_parse_history(res->body, res->body_len, m->hist_name,
+                                           m->meta.modified - 1, &m->hist, &err)) {
+        hist_answered(m, err.msg);
+    } else {
+        hist_answered(m, "");
+    }
+    netdrv_schedule(n, 0);
+}
+
 static void
 mr_reply(struct netdrv *n, int kind, const struct httpc_result *res)
 {
@@ -493,6 +686,12 @@ mr_reply(struct netdrv *n, int kind, const struct httpc_result *res)
     case RQ_START:
     case RQ_GCODE:
         on_own(m, kind, res);
+        break;
+    case RQ_META:
+        on_meta(m, res);
+        break;
+    case RQ_HISTORY:
+        on_history(m, res);
         break;
     default:
         netdrv_action_reply(n, kind, res);
@@ -517,13 +716,22 @@ mr_kick(struct netdrv *n)
         m->script[m->script_len] = '\0';
         m->script_len = 0;
         send_json(m, RQ_GCODE, "/printer/gcode/script", "script", m->script);
+        return;
+    }
+    if (m->want_meta) {
+        m->want_meta = false;
+        mr_start(n, RQ_META);
     }
 }
 
 static void
 mr_lost(struct netdrv *n)
 {
-    MR(n)->ready = false;
+    struct moonraker *m = MR(n);
+    m->ready = false;
+    m->want_meta = false;
+    m->meta_name[0] = '\0';
+    m->hist_state = H_NONE; /* a look-up cut short is asked again */
 }
 
 /* ---- drv_ops ---- */
@@ -542,14 +750,65 @@ mr_attach(struct drv *d, const char *gcode_path, const struct drv_job_scan *scan
        says how it ended */
     struct netjob_obs ob;
     drv_moonraker_observe(&m->last, j.name, j.size, &ob);
-    if (!ob.ours)
+    if (ob.ours) {
+        log_printer(LOG_INFO, d->name, "re-attached to '%s', which the printer still knows (%s)",
+                    j.name, m->last.state);
+        netdrv_adopt(&m->n, &j, &ob, m->last.progress);
+        return SF_OK;
+    }
+    if (ob.remote == NETJOB_R_STARTING || ob.remote == NETJOB_R_HALTED)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': Klipper is %s", d->name, m->last.klippy);
+    /* print_stats forgot it (a Klipper restart, another print since):
+       Moonraker's job history tells how the newest run of this file,
+       started after it was uploaded, ended */
+    if (m->hist_state != H_ANSWERED || strcmp(m->hist_name, j.name) != 0) {
+        if (m->hist_state == H_NONE || strcmp(m->hist_name, j.name) != 0) {
+            snprintf(m->hist_name, sizeof(m->hist_name), "%s", j.name);
+            m->hist_state = H_ASKING;
+            want_meta(m, j.name);
+            netdrv_preempt_poll(&m->n);
+            mr_kick(&m->n);
+        }
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer '%s': looking '%s' up in Moonraker's job history", d->name,
+                          j.name);
+    }
+    m->hist_state = H_NONE; /* the answer is used once: a later attach asks again */
+    const struct moonraker_hist *h = &m->hist;
+    if (m->hist_why[0] || !h->found || (h->size >= 0 && h->size != j.size))
         return sf_err_set(err, SF_ENOTFOUND,
-                          "printer '%s' has no job '%s' (print_stats: %s '%s'): how it ended is "
-                          "not known",
-                          d->name, j.name, m->last.state, m->last.filename);
-    log_printer(LOG_INFO, d->name, "re-attached to '%s', which the printer still knows (%s)",
-                j.name, m->last.state);
-    netdrv_adopt(&m->n, &j, &ob, m->last.progress);
+                          "printer '%s' has no job '%s' (print_stats: %s '%s'; job history: %s): "
+                          "how it ended is not known",
+                          d->name, j.name, m->last.state, m->last.filename,
+                          m->hist_why[0] ? m->hist_why
+                          : h->found     ? "a run of another size"
+                                         : "no run since the upload");
+    static const struct {
+        const char *status;
+        enum netjob_remote r;
+    } ends[] = {
+        { "completed", NETJOB_R_DONE },
+        { "cancelled", NETJOB_R_CANCELLED },
+        { "error", NETJOB_R_FAILED },
+        { "klippy_shutdown", NETJOB_R_FAILED },
+        { "klippy_disconnect", NETJOB_R_FAILED },
+    };
+    char msg[160];
+    snprintf(msg, sizeof(msg), "Moonraker's job history: %s", h->status);
+    struct netjob_obs hob = { .ours = true, .file = j.name, .message = msg };
+    bool known = false;
+    for (size_t i = 0; i < sizeof(ends) / sizeof(ends[0]); i++)
+        if (strcmp(h->status, ends[i].status) == 0) {
+            hob.remote = ends[i].r;
+            known = true;
+        }
+    if (!known) /* interrupted (Moonraker died), in_progress with print_stats idle */
+        return sf_err_set(err, SF_ENOTFOUND,
+                          "printer '%s': job history says '%s' of '%s': how it ended is not known",
+                          d->name, h->status, j.name);
+    log_printer(LOG_INFO, d->name, "re-attached to '%s', which ended while we were away (%s)",
+                j.name, msg);
+    netdrv_adopt(&m->n, &j, &hob, hob.remote == NETJOB_R_DONE ? 1.0 : 0);
     return SF_OK;
 }
 

@@ -7,7 +7,8 @@
  * JSON, so the tests can check them against bodies that follow Moonraker's
  * documentation field by field (tests/replay/moonraker/).
  *
- * The API as documented (Arksine/moonraker docs/external_api/ (server, printer, file_manager) and
+ * The API as documented (Arksine/moonraker docs/external_api/ (server, printer, file_manager,
+ * history) and
  * docs/printer_objects.md, v0.10.0-31): HTTP replies are {"result": ...},
  * except the upload's, which is the bare object; errors are
  * {"error": {"code", "message"}}.
@@ -56,6 +57,46 @@ struct moonraker_upload {
  */
 int drv_moonraker_parse_status(const char *body, size_t len, struct moonraker_status *st,
                                struct sf_err *err);
+
+/* What GET /server/files/metadata?filename=NAME says of the file (file_manager.md). */
+struct moonraker_meta {
+    double modified;    /* result.modified: unix time the file was last written (uploaded) */
+    int64_t size;       /* result.size, bytes */
+    double estimated_s; /* result.estimated_time: the slicer's print time, s; -1 if absent */
+};
+
+/* Parse a metadata reply; modified and size are required.  SF_EINVAL naming the field. */
+int drv_moonraker_parse_meta(const char *body, size_t len, struct moonraker_meta *m,
+                             struct sf_err *err);
+
+/* How the newest job of one file ended, from GET /server/history/list (history.md). */
+struct moonraker_hist {
+    bool found;        /* an entry for the file, started at or after `since` */
+    char status[24];   /* its status: completed, cancelled, error, klippy_shutdown,
+                          klippy_disconnect, interrupted, in_progress */
+    double start_time; /* unix time */
+    double end_time;   /* unix time; 0 if null */
+    int64_t size;      /* metadata.size of the file then, bytes; -1 if not given */
+};
+
+/*
+ * Parse a history list reply (newest first or not: the newest entry wins)
+ * and find the newest job of filename that started at or after since
+ * (unix time: the upload's).  SF_EINVAL naming the field for a reply not
+ * of the documented shape (result.jobs[i].filename, .status, .start_time).
+ */
+int drv_moonraker_parse_history(const char *body, size_t len, const char *filename, double since,
+                                struct moonraker_hist *h, struct sf_err *err);
+
+/*
+ * The time left of the job in st (s; -1 when it cannot be told), as
+ * Mainsail tells it (src/store/printer/getters.ts): the slicer's estimate
+ * (the file's metadata estimated_time, estimated_s; < 0 if unknown) less
+ * print_stats.print_duration while that is still short of it, else
+ * print_duration / progress - print_duration (Mainsail's "file"
+ * estimate).  Moonraker itself reports no time left.  Pure.
+ */
+double drv_moonraker_time_left(const struct moonraker_status *st, double estimated_s);
 
 /* Parse GET /server/info: result.klippy_state into state (n bytes).  SF_EINVAL. */
 int drv_moonraker_parse_info(const char *body, size_t len, char *state, size_t n,

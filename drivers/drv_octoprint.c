@@ -445,6 +445,7 @@ job_end(struct octo *o, enum drv_event ev, enum drv_state next)
     struct drv_status *st = &o->base.status;
     o->job = J_NONE;
     cursor_close(o);
+    st->has_time_left = false;
     if (ev == DRV_EV_JOB_DONE) {
         st->lines_acked = st->lines_total;
         st->progress = 1.0;
@@ -543,6 +544,10 @@ update_progress(struct octo *o)
     if (p > 1)
         p = 1;
     st->progress = p;
+    /* OctoPrint's own estimate (progress.printTimeLeft: its estimator, from
+       the file's analysis and the progress so far; null until it has one) */
+    st->has_time_left = j->time_left_s >= 0;
+    st->time_left_s = st->has_time_left ? (int64_t)(j->time_left_s + 0.5) : 0;
     /* OctoPrint counts bytes; the lines are those wholly before its position. */
     uint64_t lines = j->filepos >= 0 && o->cur ? lines_before(o, j->filepos)
                                                : (uint64_t)((double)st->lines_total * p);
@@ -919,6 +924,7 @@ octo_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
     st->lines_total = scan->lines_total;
     st->lines_acked = 0;
     st->progress = 0;
+    st->has_time_left = false;
     st->job_started_ms = loop_now_ms(d->loop);
     msg(o, "uploading");
     set_state(o, DRV_PRINTING);

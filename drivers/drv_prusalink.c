@@ -379,6 +379,9 @@ on_status(struct prusalink *p, const struct httpc_result *res)
         netdrv_schedule(n, n->poll_ms);
         return;
     }
+    /* job.time_remaining (s): the firmware's own estimate (from the file's
+       M73 R lines when the slicer wrote them) */
+    netdrv_time_left(n, &ob, st.has_job ? (double)st.time_remaining_s : -1);
     netdrv_report(n, &ob, st.has_job ? st.progress : n->base.status.progress);
     netdrv_schedule(n, n->poll_ms);
 }

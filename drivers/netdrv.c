@@ -203,6 +203,14 @@ forget(struct netdrv *n)
 }
 
 void
+netdrv_time_left(struct netdrv *n, const struct netjob_obs *ob, double secs)
+{
+    struct drv_status *st = &n->base.status;
+    st->has_time_left = n->job.phase != NETJOB_NONE && ob->ours && secs >= 0;
+    st->time_left_s = st->has_time_left ? (int64_t)(secs + 0.5) : 0;
+}
+
+void
 netdrv_end_job(struct netdrv *n, enum drv_state st, enum drv_event ev, const char *msg)
 {
     struct netjob_verdict v = { .state = st, .ends = true, .ev = ev };
@@ -412,6 +420,7 @@ netdrv_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
     d->status.lines_total = j.lines_total;
     d->status.lines_acked = 0;
     d->status.progress = 0;
+    d->status.has_time_left = false;
     d->status.job_started_ms = loop_now_ms(d->loop);
     netdrv_preempt_poll(n);
     if (n->req || !n->nops->start(n, NETDRV_RQ_UPLOAD)) {

@@ -150,6 +150,13 @@ enum netdrv_outcome netdrv_upload_reply(struct netdrv *n, const struct httpc_res
  */
 bool netdrv_settle(struct netdrv *n, const struct netjob_obs *ob);
 
+/*
+ * The printer's own estimate of the time left (secs; < 0: it gave none)
+ * into status.has_time_left / time_left_s, kept only while the job on the
+ * printer is ours (ob); call before netdrv_report.
+ */
+void netdrv_time_left(struct netdrv *n, const struct netjob_obs *ob, double secs);
+
 /* Judge ob for the job and report it (netjob_judge, netjob_report), progress 0..1. */
 void netdrv_report(struct netdrv *n, const struct netjob_obs *ob, double progress);
 

@@ -275,6 +275,7 @@ netjob_report(struct drv *d, struct netjob *j, const struct netjob_verdict *v, d
                                                     : "failed",
                     v->message[0] ? ": " : "", v->message);
         j->phase = NETJOB_NONE;
+        st->has_time_left = false;
         emit(d, v->ev);
     }
 }

@@ -16,6 +16,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <time.h>
 
 #include "../src/base/mem.h"
@@ -24,7 +25,21 @@
 #define WATCH_MS   20  /* how often line-triggered faults are checked */
 #define RESTART_MS 300 /* a firmware_restart's "startup" phase */
 
+#define HISTORY_MAX 256 /* job history entries kept (Moonraker keeps them all; tests need few) */
+
 enum klippy { K_READY, K_STARTUP, K_SHUTDOWN };
+
+/* One entry of Moonraker's job history (history.md, "Job History"). */
+struct hist_job {
+    char id[8];                     /* job_id: "000001", ... */
+    char file[SIM_NP_NAME_MAX + 1]; /* filename */
+    char status[24];                /* in_progress, completed, cancelled, error, ... */
+    double start, end;              /* unix times; end 0 while in progress */
+    double print_s;                 /* print_duration */
+    int64_t size;                   /* metadata.size */
+    double modified;                /* metadata.modified */
+    double estimated_s;             /* metadata.estimated_time, -1 if none */
+};
 
 struct sim_moonraker {
     struct loop *l;
@@ -40,6 +55,9 @@ struct sim_moonraker {
     char fired_for[SIM_NP_NAME_MAX + 1];            /* ... the job they fired for */
     int64_t fired_started;                          /* its start (print_time_s of 0) */
     double file_mtime;                              /* upload time of the current file */
+    struct hist_job hist[HISTORY_MAX];              /* the job history, oldest first */
+    int n_hist;
+    int hist_ids; /* job_ids handed out */
 };
 
 static const char shutdown_text[] =
@@ -298,18 +316,137 @@ on_printer_info(struct sim_http_req *r, void *ud)
                               "v0.12.0-slimfarm-sim"));
 }
 
+/* ---- file metadata and job history ---- */
+
+static double
+unix_now(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
+}
+
+/* PrusaSlicer's "1d 2h 3m 4s" after key in text, in s; -1 if absent. */
+static double
+find_estimate(const char *text, const char *key)
+{
+    const char *p = strstr(text, key);
+    if (!p)
+        return -1;
+    p += strlen(key);
+    double total = 0;
+    bool any = false;
+    for (;;) {
+        while (*p == ' ')
+            p++;
+        char *end;
+        long v = strtol(p, &end, 10);
+        if (end == p || v < 0)
+            break;
+        int mul = *end == 'd' ? 86400 : *end == 'h' ? 3600 : *end == 'm' ? 60 : *end == 's' ? 1 : 0;
+        if (!mul)
+            break;
+        total += (double)v * mul;
+        any = true;
+        p = end + 1;
+    }
+    return any ? total : -1;
+}
+
+/*
+ * The slicer's print time as Moonraker's metadata parser finds it: for
+ * PrusaSlicer-style files the "; estimated printing time (normal mode) ="
+ * comment, read in the file's head and tail; -1 if absent.
+ */
+static double
+file_estimate(const char *path)
+{
+    static const char key[] = "; estimated printing time (normal mode) =";
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return -1;
+    enum { CHUNK = 64 * 1024 };
+    char *buf = mem_alloc(CHUNK + 1);
+    double est = -1;
+    for (int pass = 0; buf && pass < 2 && est < 0; pass++) {
+        if (pass == 1 && fseeko(f, -(off_t)CHUNK, SEEK_END) != 0)
+            rewind(f);
+        size_t n = fread(buf, 1, CHUNK, f);
+        buf[n] = '\0';
+        est = find_estimate(buf, key);
+    }
+    free(buf);
+    fclose(f);
+    return est;
+}
+
+/* The uploaded file name's modification time (unix) and size; false if it is not there. */
+static bool
+file_stat(struct sim_moonraker *s, const char *name, double *mtime, int64_t *size)
+{
+    char path[1024];
+    struct stat sb;
+    if (sim_netprinter_path(s->np, name, path, sizeof(path), NULL) || stat(path, &sb) != 0)
+        return false;
+    *mtime = (double)sb.st_mtim.tv_sec + (double)sb.st_mtim.tv_nsec / 1e9;
+    *size = (int64_t)sb.st_size;
+    return true;
+}
+
+/* The newest history entry, if it is still in progress, takes the end st shows. */
+static void
+hist_settle(struct sim_moonraker *s, const struct sim_np_status *st, const char *otherwise)
+{
+    struct hist_job *h = s->n_hist ? &s->hist[s->n_hist - 1] : NULL;
+    if (!h || strcmp(h->status, "in_progress") != 0)
+        return;
+    const char *end = st->state == SIM_NP_COMPLETE    ? "completed"
+                      : st->state == SIM_NP_CANCELLED ? "cancelled"
+                      : st->state == SIM_NP_ERROR
+                          ? (s->klippy == K_SHUTDOWN ? "klippy_shutdown" : "error")
+                          : otherwise;
+    if (!end)
+        return;
+    snprintf(h->status, sizeof(h->status), "%s", end);
+    h->end = unix_now();
+    h->print_s = st->print_time_s;
+}
+
+/* A print of name started: a new history entry (the oldest goes when full). */
+static void
+hist_add(struct sim_moonraker *s, const char *name)
+{
+    if (s->n_hist == HISTORY_MAX) {
+        memmove(s->hist, s->hist + 1, sizeof(s->hist[0]) * (HISTORY_MAX - 1));
+        s->n_hist--;
+    }
+    struct hist_job *h = &s->hist[s->n_hist++];
+    memset(h, 0, sizeof(*h));
+    snprintf(h->id, sizeof(h->id), "%06X", ++s->hist_ids & 0xffffff);
+    snprintf(h->file, sizeof(h->file), "%s", name);
+    snprintf(h->status, sizeof(h->status), "in_progress");
+    h->start = unix_now();
+    h->estimated_s = -1;
+    char path[1024];
+    if (file_stat(s, name, &h->modified, &h->size) &&
+        sim_netprinter_path(s->np, name, path, sizeof(path), NULL) == SF_OK)
+        h->estimated_s = file_estimate(path);
+}
+
 /* Start file name as SDCARD_PRINT_FILE would; replies on failure, true on success. */
 static bool
 start_print(struct sim_moonraker *s, struct sim_http_req *r, const char *name)
 {
     struct sim_np_status st;
     sim_netprinter_status(s->np, &st);
+    hist_settle(s, &st, NULL);
     if (st.state == SIM_NP_ERROR)
         sim_netprinter_reset(s->np); /* an errored print is over; Klipper prints again */
     struct sf_err err;
     int rc = sim_netprinter_start(s->np, name, &err);
     if (rc == SF_OK) {
         s->fired_shutdown = s->fired_error = s->fired_cancel = false;
+        hist_add(s, name);
         return true;
     }
     if (r)
@@ -373,15 +510,92 @@ on_metadata(struct sim_http_req *r, void *ud)
 {
     struct sim_moonraker *s = ud;
     const char *name = sim_http_query(r, "filename");
-    int64_t size = name ? sim_netprinter_file_size(s->np, name) : -1;
-    if (size < 0) {
+    double mtime;
+    int64_t size;
+    char path[1024];
+    if (!name || !file_stat(s, name, &mtime, &size) ||
+        sim_netprinter_path(s->np, name, path, sizeof(path), NULL)) {
         char msg[300];
         snprintf(msg, sizeof(msg), "Metadata not available for <%s>", name ? name : "");
         reply_err(r, 404, msg);
         return;
     }
-    reply_result(r, json_pack("{s:I,s:f,s:s,s:n}", "size", (json_int_t)size, "modified", 0.0,
-                              "filename", name, "job_id"));
+    json_t *md = json_pack("{s:I,s:f,s:s,s:n,s:s}", "size", (json_int_t)size, "modified", mtime,
+                           "filename", name, "job_id", "uuid", "00000000-sim");
+    double est = file_estimate(path);
+    if (est >= 0) { /* as Moonraker's parser reports a PrusaSlicer-style file */
+        json_object_set_new(md, "slicer", json_string("PrusaSlicer"));
+        json_object_set_new(md, "estimated_time", json_real(est));
+    }
+    reply_result(r, md);
+}
+
+/* A query argument as a number, or dflt when absent; false (replied 400) when not a number. */
+static bool
+num_arg(struct sim_http_req *r, const char *name, double dflt, double *out)
+{
+    const char *v = sim_http_query(r, name);
+    *out = dflt;
+    if (!v)
+        return true;
+    char *end;
+    errno = 0;
+    *out = strtod(v, &end);
+    if (errno || end == v || *end) {
+        char msg[120];
+        snprintf(msg, sizeof(msg), "Unable to convert argument '%s' to float", name);
+        reply_err(r, 400, msg);
+        return false;
+    }
+    return true;
+}
+
+/* GET /server/history/list?limit&start&since&before&order (history.md). */
+static void
+on_history_list(struct sim_http_req *r, void *ud)
+{
+    struct sim_moonraker *s = ud;
+    double limit, start, since, before;
+    if (!num_arg(r, "limit", 50, &limit) || !num_arg(r, "start", 0, &start) ||
+        !num_arg(r, "since", -1, &since) || !num_arg(r, "before", -1, &before))
+        return;
+    const char *order = sim_http_query(r, "order");
+    if (order && strcmp(order, "asc") != 0 && strcmp(order, "desc") != 0) {
+        char msg[200];
+        snprintf(msg, sizeof(msg), "Invalid `order` value '%.64s'. Must be 'asc' or 'desc'", order);
+        reply_err(r, 400, msg);
+        return;
+    }
+    bool asc = order && strcmp(order, "asc") == 0;
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    json_t *jobs = json_array();
+    long skipped = 0;
+    for (int k = 0; k < s->n_hist && json_array_size(jobs) < (size_t)limit; k++) {
+        const struct hist_job *h = &s->hist[asc ? k : s->n_hist - 1 - k];
+        if ((since >= 0 && h->start <= since) || (before >= 0 && h->start >= before))
+            continue;
+        if (skipped++ < (long)start)
+            continue;
+        bool live = strcmp(h->status, "in_progress") == 0;
+        double mtime = 0;
+        int64_t size = -1;
+        bool exists = file_stat(s, h->file, &mtime, &size) && mtime == h->modified;
+        json_t *md = json_pack("{s:I,s:f,s:s}", "size", (json_int_t)h->size, "modified",
+                               h->modified, "filename", h->file);
+        if (h->estimated_s >= 0)
+            json_object_set_new(md, "estimated_time", json_real(h->estimated_s));
+        double dur = live ? st.print_time_s : h->print_s;
+        json_array_append_new(jobs,
+                              json_pack("{s:s,s:n,s:s,s:b,s:s,s:f,s:o,s:f,s:f,s:f,s:o,s:[]}",
+                                        "job_id", h->id, "user", "filename", h->file, "exists",
+                                        exists, "status", h->status, "start_time", h->start,
+                                        "end_time", live ? json_null() : json_real(h->end),
+                                        "print_duration", dur, "total_duration", dur,
+                                        "filament_used", 0.0, "metadata", md, "auxiliary_data"));
+    }
+    reply_result(r,
+                 json_pack("{s:I,s:o}", "count", (json_int_t)json_array_size(jobs), "jobs", jobs));
 }
 
 static void
@@ -481,6 +695,9 @@ static void
 on_firmware_restart(struct sim_http_req *r, void *ud)
 {
     struct sim_moonraker *s = ud;
+    struct sim_np_status st;
+    sim_netprinter_status(s->np, &st);
+    hist_settle(s, &st, "klippy_disconnect"); /* a print cut short by the restart */
     sim_netprinter_reset(s->np);
     s->klippy = K_STARTUP;
     snprintf(s->klippy_msg, sizeof(s->klippy_msg), "Printer is not ready");
@@ -495,6 +712,7 @@ static const struct sim_http_route routes[] = {
     { "POST", "/printer/objects/query", SIM_HTTP_BODY_MEM, false, on_query },
     { "POST", "/server/files/upload", SIM_HTTP_BODY_FORM, false, on_upload },
     { "GET", "/server/files/metadata", SIM_HTTP_BODY_MEM, false, on_metadata },
+    { "GET", "/server/history/list", SIM_HTTP_BODY_MEM, false, on_history_list },
     { "POST", "/printer/print/start", SIM_HTTP_BODY_MEM, false, on_print_start },
     { "POST", "/printer/print/pause", SIM_HTTP_BODY_MEM, false, on_pause },
     { "POST", "/printer/print/resume", SIM_HTTP_BODY_MEM, false, on_resume },
@@ -517,6 +735,7 @@ on_watch(struct loop *l, void *ud)
     }
     struct sim_np_status st;
     sim_netprinter_status(s->np, &st);
+    hist_settle(s, &st, NULL);
     sim_http_outage_watch(s->http, sim_np_running(&st), st.lines_done);
     if (st.state != SIM_NP_PRINTING || s->klippy != K_READY)
         return;

@@ -82,6 +82,8 @@ struct sim_netprinter {
     enum sent_kind sent;          /* what is in flight */
     long sent_n;                  /* its number */
     int64_t sent_end_pos;         /* job line: file position after it */
+    long sent_m73_r;              /* job line: its M73 R (minutes left), -1 if none */
+    long m73_r;                   /* the last M73 R the firmware took this job, -1 if none */
     long resend_n;                /* > 0: the firmware asked for this line; the next ok sends it */
     char hist[HISTORY][LINE_MAX]; /* numbered lines sent, by number % HISTORY */
     uint64_t watchdog;            /* timer */
@@ -263,6 +265,9 @@ next_job_line(struct sim_netprinter *np, char *cmd, size_t cap)
         size_t n = gcode_strip(np->linebuf, (size_t)k, cmd, cap, NULL);
         if (n > 0) {
             np->sent_end_pos = ftello(np->job);
+            /* M73 P.. R..: the slicer's minutes left, which Prusa firmware shows */
+            const char *r = strncmp(cmd, "M73 ", 4) == 0 ? strstr(cmd, " R") : NULL;
+            np->sent_m73_r = r && r[2] >= '0' && r[2] <= '9' ? strtol(r + 2, NULL, 10) : -1;
             return true;
         }
         /* a comment or blank line: consumed without a round trip */
@@ -326,6 +331,8 @@ line_taken(struct sim_netprinter *np)
     case SENT_JOB:
         np->lines_done++;
         np->file_pos = np->sent_end_pos;
+        if (np->sent_m73_r >= 0)
+            np->m73_r = np->sent_m73_r;
         break;
     case SENT_FINAL:
         if (np->state == SIM_NP_PRINTING || np->state == SIM_NP_PAUSING)
@@ -636,6 +643,7 @@ sim_netprinter_start(struct sim_netprinter *np, const char *name, struct sf_err 
     np->file_pos = 0;
     np->lines_total = lines;
     np->lines_done = 0;
+    np->m73_r = -1;
     np->start_ms = loop_now_ms(np->l);
     np->end_ms = 0;
     np->cancel_next = 0;
@@ -737,6 +745,7 @@ sim_netprinter_status(const struct sim_netprinter *np, struct sim_np_status *out
         double speed = np->cfg.speed > 0 ? np->cfg.speed : 1;
         out->print_time_s = (double)(end - np->start_ms) / 1000.0 * speed;
     }
+    out->m73_left_s = job_active(np) && np->m73_r >= 0 ? (double)np->m73_r * 60 : -1;
     out->time_left_s = -1;
     if (job_active(np) && out->progress > 0.001)
         out->time_left_s = out->print_time_s * (1 - out->progress) / out->progress;

@@ -73,6 +73,8 @@ struct sim_np_status {
     double print_time_s;            /* simulated seconds since the job started (pauses
                                        included), frozen when it ends */
     double time_left_s;             /* estimate from progress, -1 when unknown */
+    double m73_left_s; /* the job's last M73 R the firmware ran (the slicer's minutes left), in
+                          s, while a job is on; -1 if the file has none (yet) */
     double nozzle_c, nozzle_target_c, bed_c, bed_target_c; /* from the firmware */
     char message[160]; /* why ERROR (or the last notice), "" if none */
 };

@@ -165,6 +165,19 @@ shown(const struct sim_prusalink *s, struct sim_np_status *st)
         st->state = SIM_NP_IDLE;
 }
 
+/*
+ * job.time_remaining as Prusa firmware gives it: the slicer's minutes left
+ * from the file's last M73 R it ran (PrusaSlicer writes them), else its
+ * own estimate from the progress; -1 when it has none.
+ */
+static json_int_t
+time_left(const struct sim_np_status *st)
+{
+    if (st->m73_left_s >= 0)
+        return (json_int_t)st->m73_left_s;
+    return st->time_left_s >= 0 ? (json_int_t)st->time_left_s : -1;
+}
+
 static void
 on_status(struct sim_http_req *r, void *ud)
 {
@@ -184,8 +197,8 @@ on_status(struct sim_http_req *r, void *ud)
     if (st.state != SIM_NP_IDLE && s->job_id > 0) {
         json_t *job = json_pack("{s:I,s:f,s:I}", "id", (json_int_t)s->job_id, "progress",
                                 st.progress * 100, "time_printing", (json_int_t)st.print_time_s);
-        if (st.time_left_s >= 0)
-            json_object_set_new(job, "time_remaining", json_integer((json_int_t)st.time_left_s));
+        if (time_left(&st) >= 0)
+            json_object_set_new(job, "time_remaining", json_integer(time_left(&st)));
         json_object_set_new(body, "job", job);
     }
     sim_http_reply_json(r, 200, body);
@@ -209,8 +222,8 @@ on_job(struct sim_http_req *r, void *ud)
         st.progress * 100, "time_printing", (json_int_t)st.print_time_s, "inaccurate_estimates", 0,
         "file", "name", sn, "display_name", st.file, "path", "/usb", "display_path", "/usb", "size",
         (json_int_t)st.file_size, "m_timestamp", (json_int_t)s->m_timestamp);
-    if (st.time_left_s >= 0)
-        json_object_set_new(job, "time_remaining", json_integer((json_int_t)st.time_left_s));
+    if (time_left(&st) >= 0)
+        json_object_set_new(job, "time_remaining", json_integer(time_left(&st)));
     sim_http_reply_json(r, 200, job);
 }
 

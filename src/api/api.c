@@ -23,6 +23,7 @@
 #include <strings.h>
 
 #include "../base/buf.h"
+#include "../base/limits.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "api_compat.h"
@@ -294,6 +295,8 @@ jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
     changed(a);
 }
 
+static void time_left_json(json_t *o, const struct printer_info *p);
+
 static void
 job_get(struct api *a, int64_t id, struct http_resp *resp)
 {
@@ -314,7 +317,18 @@ job_get(struct api *a, int64_t id, struct http_resp *resp)
     for (size_t i = 0; prints && i < n; i++)
         json_array_append_new(prints, api_print_json(&p[i]));
     free(p);
-    resp->json = json_pack("{soso}", "job", api_job_json(&j), "prints", prints);
+    json_t *job = api_job_json(&j);
+    /* on a printer: its time left, as GET /api/printers gives it */
+    size_t np = a->cfg.farm && job ? farm_printer_count(a->cfg.farm) : 0;
+    for (size_t i = 0; i < np; i++) {
+        struct printer_info pi;
+        farm_printer_info(a->cfg.farm, i, &pi);
+        if (pi.job_id == id) {
+            time_left_json(job, &pi);
+            break;
+        }
+    }
+    resp->json = json_pack("{soso}", "job", job, "prints", prints);
 }
 
 static void
@@ -394,17 +408,30 @@ job_resume(struct api *a, int64_t id, const struct http_req *req, struct http_re
 
 /* ---- printers ---- */
 
+/* The job's time left, s, and whose estimate it is ("printer" or "farm"); nulls if none. */
+static void
+time_left_json(json_t *o, const struct printer_info *p)
+{
+    bool known = p->time_left_s >= 0 && p->time_left_from && p->time_left_from[0];
+    json_object_set_new(o, "time_left_s",
+                        known ? json_integer((json_int_t)p->time_left_s) : json_null());
+    json_object_set_new(o, "time_left_from", known ? json_string(p->time_left_from) : json_null());
+}
+
 static json_t *
 printer_json(const struct printer_info *p)
 {
     const struct farmcfg_printer *c = p->cfg;
-    return json_pack("{ss ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf ss}", "name", c->name, "state",
-                     printer_state_name(p->state), "enabled", c->enabled, "material", c->material,
-                     "nozzle_mm", c->nozzle_mm, "bed_mm", c->bed_mm[0], c->bed_mm[1], c->bed_mm[2],
-                     "group", c->group, "temps", "nozzle_c", p->nozzle_c, "nozzle_target_c",
-                     p->nozzle_target_c, "bed_c", p->bed_c, "bed_target_c", p->bed_target_c,
-                     "job_id", (json_int_t)p->job_id, "progress", p->progress, "message",
-                     p->message ? p->message : "");
+    json_t *o = json_pack("{ss ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf ss}", "name", c->name,
+                          "state", printer_state_name(p->state), "enabled", c->enabled, "material",
+                          c->material, "nozzle_mm", c->nozzle_mm, "bed_mm", c->bed_mm[0],
+                          c->bed_mm[1], c->bed_mm[2], "group", c->group, "temps", "nozzle_c",
+                          p->nozzle_c, "nozzle_target_c", p->nozzle_target_c, "bed_c", p->bed_c,
+                          "bed_target_c", p->bed_target_c, "job_id", (json_int_t)p->job_id,
+                          "progress", p->progress, "message", p->message ? p->message : "");
+    if (o)
+        time_left_json(o, p);
+    return o;
 }
 
 static void
@@ -451,6 +478,38 @@ printer_act(struct api *a, const char *name, const char *action, struct http_res
     changed(a);
 }
 
+/*
+ * POST /api/printers/NAME/command {"command": "G28"}: one manual G-code
+ * line for an idle printer.  400 a bad body, 404 no such printer, 409 the
+ * printer cannot take one now (offline, printing: the driver's SF_EAGAIN),
+ * 501 its kind has no way to send one (PrusaLink); 200 with the printer.
+ */
+static void
+printer_cmd(struct api *a, const char *name, const struct http_req *req, struct http_resp *resp)
+{
+    struct sf_err err;
+    char line[SF_COMMAND_MAX + 1];
+    if (api_command_parse(req->body, req->body_len, line, sizeof(line), &err)) {
+        http_error(resp, 400, "%s", err.msg);
+        return;
+    }
+    sf_err_clear(&err);
+    int rc = a->cfg.farm ? farm_printer_command(a->cfg.farm, name, line, &err)
+                         : sf_err_set(&err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    if (rc) {
+        http_error(resp,
+                   rc == SF_ENOTFOUND ? 404
+                   : rc == SF_EAGAIN  ? 409
+                   : rc == SF_EINVAL  ? 400
+                   : rc == SF_EUNSUPP ? 501
+                                      : 500,
+                   "%s", err.msg);
+        return;
+    }
+    printers_list(a, name, resp);
+    json_object_set_new(resp->json, "command", json_string(line));
+}
+
 /* ---- events ---- */
 
 /*
@@ -467,11 +526,14 @@ sse_progress(struct sse *s)
     for (size_t i = 0; arr && i < n; i++) {
         struct printer_info p;
         farm_printer_info(f, i, &p);
-        if (p.job_id)
-            json_array_append_new(arr,
-                                  json_pack("{ss sI ss sf}", "printer", p.cfg->name, "job_id",
-                                            (json_int_t)p.job_id, "state",
-                                            printer_state_name(p.state), "progress", p.progress));
+        if (p.job_id) {
+            json_t *o =
+                json_pack("{ss sI ss sf}", "printer", p.cfg->name, "job_id", (json_int_t)p.job_id,
+                          "state", printer_state_name(p.state), "progress", p.progress);
+            if (o)
+                time_left_json(o, &p);
+            json_array_append_new(arr, o);
+        }
     }
     char *text = json_array_size(arr) ? json_dumps(arr, JSON_COMPACT) : NULL;
     json_decref(arr);
@@ -664,10 +726,11 @@ route(void *ud, const struct http_req *req, struct http_resp *resp)
             goto bad_method;
         memcpy(action, seg[3], len[3]);
         action[len[3]] = '\0';
-        {
+        if (strcmp(action, "command") == 0)
+            printer_cmd(a, name, req, resp);
+        else
             printer_act(a, name, action, resp);
-            return;
-        }
+        return;
     }
     if (n == 2 && seg_is(seg[1], len[1], "events")) {
         if (!get)
@@ -698,9 +761,12 @@ body_kind(void *ud, const char *method, const char *path)
     const char *seg[5];
     size_t len[5];
     size_t n = split(path, seg, len, 4);
+    bool post = strcmp(method, "POST") == 0;
+    if (n == 4 && post && seg_is(seg[0], len[0], "api") && seg_is(seg[1], len[1], "printers") &&
+        seg_is(seg[3], len[3], "command"))
+        return HTTP_BODY_JSON;
     if (n < 2 || n > 4 || !seg_is(seg[0], len[0], "api") || !seg_is(seg[1], len[1], "jobs"))
         return HTTP_BODY_NONE;
-    bool post = strcmp(method, "POST") == 0;
     if (n == 2 && post)
         return HTTP_BODY_UPLOAD;
     if (n == 3 && strcmp(method, "PATCH") == 0)

@@ -19,6 +19,9 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../base/gcode.h"
+#include "../base/limits.h"
+
 enum ftype { F_STR, F_DBL, F_INT };
 
 /* One accepted option field. */
@@ -137,6 +140,41 @@ api_priority_parse(const char *text, size_t len, int *priority, struct sf_err *e
         else
             *priority = (int)n;
     }
+    json_decref(root);
+    return rc;
+}
+
+int
+api_command_parse(const char *text, size_t len, char *out, size_t n, struct sf_err *err)
+{
+    json_t *root = load_object(text, len, "body", err);
+    if (!root)
+        return SF_EINVAL;
+    int rc = SF_OK;
+    json_t *c = json_object_get(root, "command");
+    if (json_object_size(root) != 1 || !json_is_string(c)) {
+        rc = sf_err_set(err, SF_EINVAL,
+                        "body: expected {\"command\": \"G-CODE LINE\"} and nothing else");
+        goto out;
+    }
+    const char *line = json_string_value(c);
+    size_t ll = json_string_length(c);
+    for (size_t i = 0; i < ll; i++)
+        if ((unsigned char)line[i] < 0x20 || (unsigned char)line[i] > 0x7e) {
+            rc = sf_err_set(err, SF_EINVAL,
+                            "command: byte %zu is not printable ASCII (one G-code line only)",
+                            i + 1);
+            goto out;
+        }
+    bool too_long = false;
+    size_t cap = n < SF_COMMAND_MAX + 1 ? n : SF_COMMAND_MAX + 1;
+    if (gcode_strip(line, ll, out, cap, &too_long) > 0)
+        goto out;
+    if (too_long)
+        rc = sf_err_set(err, SF_EINVAL, "command: longer than %d bytes", SF_COMMAND_MAX);
+    else
+        rc = sf_err_set(err, SF_EINVAL, "command: '%.64s' holds no command", line);
+out:
     json_decref(root);
     return rc;
 }

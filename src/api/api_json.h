@@ -31,6 +31,14 @@ int api_opts_parse(const char *text, size_t len, struct job_opts *o, struct sf_e
 /* Parse {"priority": N}. */
 int api_priority_parse(const char *text, size_t len, int *priority, struct sf_err *err);
 
+/*
+ * POST /api/printers/NAME/command's body: {"command": "G28"} and nothing
+ * else; the command is one line of printable ASCII, its comment and blanks
+ * stripped (gcode_strip), at most SF_COMMAND_MAX bytes, into out (n >=
+ * SF_COMMAND_MAX + 1).  SF_EINVAL naming what is wrong.
+ */
+int api_command_parse(const char *text, size_t len, char *out, size_t n, struct sf_err *err);
+
 /* POST .../resume's body: empty (*line = -1, the stored line) or {"line": N >= 0}. */
 int api_resume_parse(const char *text, size_t len, int64_t *line, struct sf_err *err);
 

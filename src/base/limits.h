@@ -41,6 +41,11 @@
    long comments, which we strip, so allow 4 KiB of raw line. */
 #define SF_GCODE_LINE_MAX 4096
 
+/* A manual command (POST /api/printers/NAME/command): one line, its comment
+   stripped; Marlin takes 96 bytes with the line number and checksum, and a
+   Klipper macro call with its parameters fits in 256. */
+#define SF_COMMAND_MAX 256
+
 /* Longest reply line from a printer before it is dropped as garbage:
    M115 capability lines and M503 dumps stay under 512 bytes. */
 #define SF_PRINTER_LINE_MAX 1024

@@ -17,6 +17,7 @@
 #include <errno.h>
 #include <jansson.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
@@ -290,6 +291,23 @@ run_jobs(int argc, char **argv)
 
 CMD_REGISTER(jobs, "jobs", "jobs [--url URL] [--key KEY]", "list the farm's jobs", run_jobs)
 
+/* "1h02m (printer)", "4m05s (farm)": p's time left and whose estimate it is; "-" if none. */
+static void
+time_left_text(json_t *p, char *out, size_t n)
+{
+    json_t *t = json_object_get(p, "time_left_s");
+    const char *from = str(p, "time_left_from");
+    if (!json_is_integer(t) || !from[0]) {
+        snprintf(out, n, "-");
+        return;
+    }
+    long long s = json_integer_value(t);
+    if (s >= 3600)
+        snprintf(out, n, "%lldh%02lldm (%s)", s / 3600, s / 60 % 60, from);
+    else
+        snprintf(out, n, "%lldm%02llds (%s)", s / 60, s % 60, from);
+}
+
 static int
 run_printers(int argc, char **argv)
 {
@@ -301,8 +319,8 @@ run_printers(int argc, char **argv)
     json_t *r = request(&c, "GET", "/api/printers", NULL, NULL);
     if (!r)
         return 1;
-    printf("%-12s %-15s %-8s %-6s %-14s %-5s %-5s %s\n", "NAME", "STATE", "MATERIAL", "NOZZLE",
-           "BED", "JOB", "DONE", "MESSAGE");
+    printf("%-12s %-15s %-8s %-6s %-14s %-5s %-5s %-17s %s\n", "NAME", "STATE", "MATERIAL",
+           "NOZZLE", "BED", "JOB", "DONE", "LEFT", "MESSAGE");
     size_t i;
     json_t *p;
     json_array_foreach(json_object_get(r, "printers"), i, p)
@@ -313,17 +331,22 @@ run_printers(int argc, char **argv)
                  json_number_value(json_array_get(bed, 1)),
                  json_number_value(json_array_get(bed, 2)));
         snprintf(job, sizeof(job), "%lld", num(p, "job_id"));
-        printf("%-12s %-15s %-8s %-6g %-14s %-5s %3.0f%%  %s\n", str(p, "name"), str(p, "state"),
-               str(p, "material"), json_number_value(json_object_get(p, "nozzle_mm")), bedtxt,
+        char left[48];
+        time_left_text(p, left, sizeof(left));
+        printf("%-12s %-15s %-8s %-6g %-14s %-5s %3.0f%%  %-17s %s\n", str(p, "name"),
+               str(p, "state"), str(p, "material"),
+               json_number_value(json_object_get(p, "nozzle_mm")), bedtxt,
                num(p, "job_id") ? job : "-",
-               100 * json_number_value(json_object_get(p, "progress")), str(p, "message"));
+               100 * json_number_value(json_object_get(p, "progress")), left, str(p, "message"));
     }
     json_decref(r);
     return 0;
 }
 
 CMD_REGISTER(printers, "printers", "printers [--url URL] [--key KEY]",
-             "list the farm's printers with state and progress", run_printers)
+             "list the farm's printers with state, progress and time left (the printer's own "
+             "estimate when it gives one, else the farm's from the G-code)",
+             run_printers)
 
 /* ---- actions ---- */
 
@@ -394,6 +417,50 @@ run_cleared(int argc, char **argv)
 {
     return action("cleared", argc, argv);
 }
+
+/* command PRINTER G-CODE...: one manual command for an idle printer. */
+static int
+run_command(int argc, char **argv)
+{
+    struct client c;
+    argc = client_init(&c, "command", argc, argv);
+    if (argc < 3) {
+        fprintf(stderr,
+                "usage: slimfarm command PRINTER G-CODE...  (e.g. slimfarm command a G28 X Y)\n");
+        return 2;
+    }
+    /* the words after the printer are one line: "G1 X10 F600" */
+    char line[1024] = "";
+    size_t len = 0;
+    for (int i = 2; i < argc; i++) {
+        int k = snprintf(line + len, sizeof(line) - len, "%s%s", i > 2 ? " " : "", argv[i]);
+        if (k < 0 || (size_t)k >= sizeof(line) - len) {
+            fprintf(stderr, "slimfarm command: the command is too long\n");
+            return 2;
+        }
+        len += (size_t)k;
+    }
+    json_t *body = json_pack("{ss}", "command", line);
+    char *text = body ? json_dumps(body, JSON_COMPACT) : NULL;
+    json_decref(body);
+    char path[256];
+    char *esc = curl_easy_escape(NULL, argv[1], 0);
+    snprintf(path, sizeof(path), "/api/printers/%s/command", esc ? esc : "");
+    curl_free(esc);
+    json_t *r = text ? request(&c, "POST", path, text, NULL) : NULL;
+    free(text);
+    if (!r)
+        return 1;
+    printf("printer %s: sent '%s'\n", str(json_object_get(r, "printer"), "name"),
+           str(r, "command"));
+    json_decref(r);
+    return 0;
+}
+
+CMD_REGISTER(command, "command", "command PRINTER G-CODE...",
+             "send one manual G-code command (G28, M104 S200, ...) to an idle printer: queued to "
+             "Marlin, OctoPrint's and Moonraker's consoles (PrusaLink has none)",
+             run_command)
 
 /* resume-job JOB_ID [--line N]: continue an interrupted job on its printer. */
 static int

@@ -611,6 +611,15 @@ farm_printer_action(struct farm *f, const char *name, enum printer_action act, s
     return printer_action(p, act, err);
 }
 
+int
+farm_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err)
+{
+    struct printer *p = find(f, name);
+    if (!p)
+        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    return printer_command(p, line, err);
+}
+
 /* A resume waiting for its read (drv_job_scan_to) on the io thread. */
 struct resume {
     struct farm *f;

@@ -77,6 +77,12 @@ int farm_printer_action(struct farm *f, const char *name, enum printer_action ac
                         struct sf_err *err);
 
 /*
+ * A manual command for printer name (printer_command): SF_ENOTFOUND
+ * unknown printer, else printer_command's codes.
+ */
+int farm_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err);
+
+/*
  * Resume interrupted job id on the printer its part is on, from command
  * line `line` (0-based; -1: the last acknowledged line the store holds).
  * The printer must be idle.  SF_ENOTFOUND no such job; SF_EINVAL not

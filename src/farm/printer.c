@@ -20,8 +20,11 @@
  */
 #include "printer.h"
 
+#include <fcntl.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../base/log.h"
 #include "../base/mem.h"
@@ -61,7 +64,36 @@ struct printer {
     int refusals;          /* starts refused in a row (drive) */
     uint64_t attach_retry; /* timer offering the interrupted job again, 0 if none */
     int attach_waits;      /* attach() answers "not yet" on this connection */
+    double est_s;          /* the job's G-code estimate of its print time, s; -1 unknown */
 };
+
+/* Bytes of a job's G-code head read for its time estimate (our slicer writes it in line 4). */
+#define PRINTER_GCODE_HEAD 4096
+
+/*
+ * The print time the G-code's head states ("; estimated printing time [s]
+ * = N", slicer/slice.c), or -1: what the farm's own time left starts from.
+ */
+static double
+gcode_estimate_s(const char *path)
+{
+    static const char key[] = "\n; estimated printing time [s] = ";
+    char head[PRINTER_GCODE_HEAD + 2];
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    ssize_t n = fd >= 0 ? read(fd, head + 1, PRINTER_GCODE_HEAD) : -1;
+    if (fd >= 0)
+        close(fd);
+    if (n <= 0)
+        return -1;
+    head[0] = '\n';
+    head[n + 1] = '\0';
+    const char *p = strstr(head, key);
+    if (!p)
+        return -1;
+    char *end;
+    double v = strtod(p + sizeof(key) - 1, &end);
+    return end != p + sizeof(key) - 1 && v >= 0 && v < 1e9 ? v : -1;
+}
 
 static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
                                                                 "cleared" };
@@ -202,6 +234,7 @@ try_attach(struct printer *p)
         struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
         int rc = p->drv->ops->attach(p->drv, path, j->gcode_lines > 0 ? &scan : NULL, &err);
         if (rc == SF_OK) {
+            p->est_s = gcode_estimate_s(path);
             p->attempts = 0;
             p->message[0] = '\0';
             move(p, PRINTER_EV_CONNECTED);
@@ -434,6 +467,7 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
     struct printer *p = mem_calloc(1, sizeof(*p));
     if (!p)
         return NULL;
+    p->est_s = -1;
     p->env = *env;
     p->cfg = *cfg;
     p->state = PRINTER_OFFLINE;
@@ -562,8 +596,21 @@ printer_info(const struct printer *p, struct printer_info *out)
     out->state = p->state;
     out->job_id = p->job_id;
     out->message = p->message;
+    out->time_left_s = -1;
+    out->time_left_from = "";
     if (p->drv) {
         const struct drv_status *st = &p->drv->status;
+        if (p->job_id && st->has_time_left) {
+            out->time_left_s = st->time_left_s; /* the printer's own */
+            out->time_left_from = "printer";
+        } else if (p->job_id && p->est_s >= 0) {
+            /* the farm's: the G-code's estimate, what the progress leaves of it */
+            double left = p->est_s * (1 - (st->progress < 0   ? 0
+                                           : st->progress > 1 ? 1
+                                                              : st->progress));
+            out->time_left_s = (int64_t)(left + 0.5);
+            out->time_left_from = "farm";
+        }
         out->progress = st->progress;
         out->nozzle_c = st->nozzle_c;
         out->nozzle_target_c = st->nozzle_target_c;
@@ -644,6 +691,7 @@ printer_start(struct printer *p, const struct job_row *j, const char *path)
         return;
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
+    p->est_s = gcode_estimate_s(path);
     move(p, PRINTER_EV_START);
     /* The scan prepare made; G-code prepared before the count was stored
        (gcode_lines 0) is read by the driver itself, once. */
@@ -686,7 +734,33 @@ printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line
         move(p, PRINTER_EV_FINISHED);
         return;
     }
+    p->est_s = gcode_estimate_s(path);
     drive(p, path, line, scan);
+}
+
+int
+printer_command(struct printer *p, const char *line, struct sf_err *err)
+{
+    if (!line[0] || strpbrk(line, "\r\n"))
+        return sf_err_set(err, SF_EINVAL, "printer %s: a command is one non-empty line",
+                          p->cfg.name);
+    if (!p->drv)
+        return sf_err_set(err, SF_EAGAIN, "printer %s is not connected%s%s", p->cfg.name,
+                          p->message[0] ? ": " : "", p->message);
+    if (!p->drv->ops->command)
+        return sf_err_set(err, SF_EUNSUPP, "printer %s: its %s driver sends no manual commands",
+                          p->cfg.name, p->drv->ops->kind);
+    if (p->state == PRINTER_OFFLINE)
+        return sf_err_set(err, SF_EAGAIN, "printer %s is offline%s%s", p->cfg.name,
+                          p->message[0] ? ": " : "", p->message);
+    if (p->job_id || p->state == PRINTER_PRINTING)
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer %s is %s job %lld: manual commands wait until it ends",
+                          p->cfg.name, printer_state_name(p->state), (long long)p->job_id);
+    int rc = p->drv->ops->command(p->drv, line, err);
+    if (rc == SF_OK)
+        log_printer(LOG_INFO, p->cfg.name, "manual command: %s", line);
+    return rc;
 }
 
 int

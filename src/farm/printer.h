@@ -63,7 +63,11 @@ struct printer_info {
     int64_t job_id;                                        /* job on it, 0 if none */
     double progress;                                       /* 0..1 */
     double nozzle_c, nozzle_target_c, bed_c, bed_target_c; /* deg C, 0 if unknown */
-    const char *message; /* why offline/error, "" if nothing to say */
+    const char *message;        /* why offline/error, "" if nothing to say */
+    int64_t time_left_s;        /* the job's time left, s; -1 when not known */
+    const char *time_left_from; /* whose estimate: "printer" (its own, drv_status.time_left_s),
+                                   "farm" (the G-code's print time less the progress made), or
+                                   "" (none) */
 };
 
 struct printer;
@@ -117,6 +121,16 @@ void printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t
  * idle", "printer a has no job to cancel"); driver errors as they come.
  */
 int printer_action(struct printer *p, enum printer_action a, struct sf_err *err);
+
+/*
+ * Send p a manual command (one G-code line, no job on p): its driver
+ * queues it (the console; the executed command shows in the printer's
+ * log).  SF_EAGAIN while p is offline, prints or the driver cannot take it
+ * now ("printer a is printing job 4"); SF_EUNSUPP when the driver has no
+ * way to send one (PrusaLink: its API has no console endpoint); SF_EINVAL
+ * for a line that is not one command.
+ */
+int printer_command(struct printer *p, const char *line, struct sf_err *err);
 
 /*
  * Progress persistence, batched by the owner: printer_progress gives the

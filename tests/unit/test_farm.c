@@ -221,12 +221,16 @@ test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomi
     double x = 0, y = 0, z = 0;
     int n = sscanf(part.data ? part.data : "", "size %lf %lf %lf", &x, &y, &z);
     bool long_cmd = part.data && strstr(part.data, "long command");
+    const char *est = part.data ? strstr(part.data, "est ") : NULL;
+    long est_s = est ? strtol(est + 4, NULL, 10) : -1;
     buf_release(&part);
     if (n != 3)
         return sf_err_set(err, SF_EINVAL, "test part: no size line");
     FILE *f = fopen(req->out_path, "w");
     if (!f)
         return sf_err_sys(err, "cannot write '%s'", req->out_path);
+    if (est_s >= 0) /* the slicer's header line (slicer/slice.c) */
+        fprintf(f, "; estimated printing time [s] = %ld\n", est_s);
     fprintf(f, "; for %s\nG28\nG1 X%g Y%g Z%g\n", req->printer.name, x, y, z);
     if (long_cmd) /* fits the G-code limit, not a numbered Marlin line */
         fprintf(f, "M117 %0120d\nG1 X0\n", 0);
@@ -516,6 +520,43 @@ T_CASE(farm_refused_start_waits_without_spending_a_retry)
     report(a, DRV_IDLE, DRV_EV_JOB_DONE);
     T_TRUE(wait_job(id, JOB_DONE));
     T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+/*
+ * The time left a printer shows: the printer's own estimate when its
+ * driver has one, else the farm's (the G-code's estimated print time less
+ * the progress made), saying which; none without either.
+ */
+T_CASE(farm_time_left_is_the_printers_own_else_the_farms)
+{
+    struct sf_err err;
+    T_OK(setup("left", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE) && wait_printer(1, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20 est 400", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    a->base.status.progress = 0.25;
+    struct printer_info info;
+    farm_printer_info(fx.f, 0, &info);
+    T_EQ_STR(info.time_left_from, "farm");
+    T_EQ_INT(info.time_left_s, 300);
+    a->base.status.has_time_left = true;
+    a->base.status.time_left_s = 42;
+    farm_printer_info(fx.f, 0, &info);
+    T_EQ_STR(info.time_left_from, "printer");
+    T_EQ_INT(info.time_left_s, 42);
+    /* no estimate anywhere: none */
+    int64_t other = add("size 20 20 20", "PETG", 1);
+    T_TRUE(wait_job(other, JOB_PRINTING));
+    farm_printer_info(fx.f, 1, &info);
+    T_EQ_STR(info.time_left_from, "");
+    T_EQ_INT(info.time_left_s, -1);
+    /* the printer's estimate goes with the job */
+    report(a, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(id, JOB_DONE));
+    farm_printer_info(fx.f, 0, &info);
+    T_EQ_STR(info.time_left_from, "");
     teardown();
 }
 

@@ -273,6 +273,63 @@ T_CASE(moonraker_info_upload_errors)
     T_EQ_STR(text, "<html>502 Bad Gateway</html>");
 }
 
+/*
+ * The file's metadata (file_manager.md, "Gcode Metadata") and the job
+ * history (history.md, "Job History"): the newest run of a file started
+ * since its upload, and the time left as Mainsail tells it.
+ */
+T_CASE(moonraker_metadata_history_time_left)
+{
+    struct sf_err err;
+    struct buf b;
+    struct moonraker_meta md;
+    T_OK(fixture(&b, "moonraker", "metadata.json", &err), &err);
+    int rc = drv_moonraker_parse_meta(b.data, b.len, &md, &err);
+    buf_release(&b);
+    T_OK(rc, &err);
+    T_EQ_DBL(md.modified, 1765000000.25, 1e-6);
+    T_EQ_INT(md.size, 1024000);
+    T_EQ_DBL(md.estimated_s, 3632, 1e-9);
+    static const char no_mtime[] = "{\"result\": {\"size\": 3}}";
+    T_ERR(drv_moonraker_parse_meta(no_mtime, sizeof(no_mtime) - 1, &md, &err), SF_EINVAL, &err,
+          "moonraker result.modified: missing");
+
+    struct moonraker_hist h;
+    T_OK(fixture(&b, "moonraker", "history_list.json", &err), &err);
+    /* since the upload: the completed run, not the older cancelled one */
+    rc = drv_moonraker_parse_history(b.data, b.len, "sf-3f2a9c0d1e4b5a67.gcode", md.modified - 1,
+                                     &h, &err);
+    T_OK(rc, &err);
+    T_TRUE(h.found);
+    T_EQ_STR(h.status, "completed");
+    T_EQ_DBL(h.start_time, 1765000001.0, 1e-6);
+    T_EQ_DBL(h.end_time, 1765000950.75, 1e-6);
+    T_EQ_INT(h.size, 1024000);
+    /* a later upload of the same name: none of these runs is of it */
+    T_OK(drv_moonraker_parse_history(b.data, b.len, "sf-3f2a9c0d1e4b5a67.gcode", 1765000500, &h,
+                                     &err),
+         &err);
+    T_TRUE(!h.found);
+    /* the other file's run is in progress: end_time null */
+    T_OK(drv_moonraker_parse_history(b.data, b.len, "other.gcode", 0, &h, &err), &err);
+    T_TRUE(h.found);
+    T_EQ_STR(h.status, "in_progress");
+    T_EQ_DBL(h.end_time, 0, 0);
+    buf_release(&b);
+    static const char bad[] = "{\"result\": {\"count\": 1, \"jobs\": [{\"filename\": \"a\", "
+                              "\"status\": \"completed\"}]}}";
+    T_ERR(drv_moonraker_parse_history(bad, sizeof(bad) - 1, "a", 0, &h, &err), SF_EINVAL, &err,
+          "moonraker jobs[0].start_time: missing");
+
+    /* Mainsail: the slicer's estimate less print_duration, else by the file's progress */
+    struct moonraker_status st = { .print_duration_s = 600, .progress = 0.25 };
+    T_EQ_DBL(drv_moonraker_time_left(&st, 3632), 3032, 1e-9);
+    T_EQ_DBL(drv_moonraker_time_left(&st, -1), 1800, 1e-9);
+    T_EQ_DBL(drv_moonraker_time_left(&st, 500), 1800, 1e-9); /* running past the slicer's */
+    st.print_duration_s = 0;
+    T_EQ_DBL(drv_moonraker_time_left(&st, 3632), -1, 0);
+}
+
 T_CASE(moonraker_query_rejects_bad_shapes)
 {
     struct sf_err err;

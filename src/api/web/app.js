@@ -22,7 +22,6 @@ const st = {
   jobs: new Map(), // id -> job JSON
   hist: new Map(), // printer name -> [[t, nozzle, bed]]
   cards: new Map(), // printer name -> card element
-  reports: new Map(), // job id -> report JSON
   es: null,
   retryMs: 1000,
   refreshTimer: 0,
@@ -179,6 +178,8 @@ function connect() {
         const cur = st.printers.get(p.printer);
         if (cur) {
           cur.progress = p.progress;
+          cur.time_left_s = p.time_left_s;
+          cur.time_left_from = p.time_left_from;
           cur.job_id = p.job_id;
         }
       }
@@ -223,19 +224,6 @@ function fmtTime(s) {
   s = Math.round(s);
   const h = Math.floor(s / 3600), m = Math.floor((s % 3600) / 60), sec = s % 60;
   return h ? `${h} h ${m} min` : m ? `${m} min ${sec} s` : `${sec} s`;
-}
-
-async function report(id) {
-  if (!st.reports.has(id)) {
-    st.reports.set(id, null);
-    try {
-      st.reports.set(id, await api(`/api/jobs/${id}/report`));
-    } catch (e) {
-      st.reports.delete(id);
-    }
-    renderPrinters();
-  }
-  return st.reports.get(id);
 }
 
 function printerAction(name, action) {
@@ -323,10 +311,10 @@ function renderPrinters() {
     bar.firstChild.style.width = (p.job_id ? pct : 0) + "%";
     let eta = "";
     if (p.job_id) {
-      const r = st.reports.get(p.job_id);
-      if (r === undefined) report(p.job_id);
-      const total = r && r.gcode && r.gcode.time_s;
-      eta = `${pct} %` + (total > 0 ? ` · about ${fmtTime(total * (1 - (p.progress || 0)))} left` : "");
+      // the printer's own estimate when it gives one, else the farm's (the G-code's)
+      const whose = p.time_left_from === "printer" ? "the printer's estimate" : "the farm's estimate";
+      eta = `${pct} %` + (p.time_left_s != null && p.time_left_from
+        ? ` · about ${fmtTime(p.time_left_s)} left (${whose})` : "");
     }
     $(".eta", c).textContent = eta;
     const t = p.temps;
