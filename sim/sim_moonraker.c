@@ -43,7 +43,6 @@ struct hist_job {
 
 struct sim_moonraker {
     struct loop *l;
-    char address[64]; /* "http://127.0.0.1:PORT" */
     struct sim_moonraker_config cfg;
     struct sim_netprinter *np;
     struct sim_http *http;
@@ -827,33 +826,23 @@ face_new(struct loop *l, const struct sim_net_opts *o, int index, struct sf_err 
     sim_moonraker_config_init(&c);
     c.port = o->port;
     c.api_key = o->api_key;
-    c.machine.speed = o->speed;
-    c.machine.log_path = o->log_path;
-    c.machine.uploads_dir = o->uploads_dir;
+    sim_net_machine(o, &c.machine);
     for (int i = 0; i < o->n_faults; i++)
         if (sim_moonraker_fault_parse(&c, o->faults[i], err))
             return NULL;
-    struct sim_moonraker *s = sim_moonraker_new(l, &c, err);
-    if (s)
-        snprintf(s->address, sizeof(s->address), "http://127.0.0.1:%d", sim_http_port(s->http));
-    return s;
+    return sim_moonraker_new(l, &c, err);
 }
 
-static const char *
-face_address(void *sim)
+static struct sim_netprinter *
+face_machine(void *sim)
 {
-    return ((struct sim_moonraker *)sim)->address;
+    return ((struct sim_moonraker *)sim)->np;
 }
 
-static void
-face_stats(void *sim, char *out, size_t n)
+static struct sim_http *
+face_http(void *sim)
 {
-    struct sim_moonraker *s = sim;
-    struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
-    snprintf(out, n, "state=%s file=%s lines_done=%llu requests=%llu", sim_np_state_name(st.state),
-             st.file, (unsigned long long)st.lines_done,
-             (unsigned long long)sim_http_served(s->http));
+    return ((struct sim_moonraker *)sim)->http;
 }
 
 static void
@@ -865,7 +854,9 @@ face_free(void *sim)
 int
 sim_moonraker_main(int argc, char **argv)
 {
-    static const struct sim_net_face face = { face_new, face_address, face_stats, face_free };
+    static const struct sim_net_face face = {
+        .create = face_new, .destroy = face_free, .machine = face_machine, .http = face_http
+    };
     struct sim_net_opts o;
     int rc = sim_net_parse(
         argc, argv, &o,

@@ -13,6 +13,8 @@
 #include <string.h>
 
 #include "../src/base/mem.h"
+#include "sim_http.h"
+#include "sim_netprinter.h"
 
 static void
 usage(FILE *f, const char *kind, const char *extra)
@@ -111,6 +113,25 @@ on_stop(struct loop *l, int signo, void *ud)
     loop_stop(l);
 }
 
+void
+sim_net_machine(const struct sim_net_opts *o, struct sim_netprinter_config *m)
+{
+    m->speed = o->speed;
+    m->log_path = o->log_path;
+    m->uploads_dir = o->uploads_dir;
+}
+
+/* The stats line of a face without its own: the machine's state and the requests served. */
+static void
+default_stats(const struct sim_net_face *face, void *sim, char *out, size_t n)
+{
+    struct sim_np_status st;
+    sim_netprinter_status(face->machine(sim), &st);
+    snprintf(out, n, "state=%s file=%s lines_done=%llu requests=%llu", sim_np_state_name(st.state),
+             st.file, (unsigned long long)st.lines_done,
+             (unsigned long long)sim_http_served(face->http(sim)));
+}
+
 int
 sim_net_serve(const struct sim_net_opts *o, const struct sim_net_face *face)
 {
@@ -146,13 +167,19 @@ sim_net_serve(const struct sim_net_opts *o, const struct sim_net_face *face)
             fprintf(stderr, "slimfarm-sim: %s printer %d: %s\n", o->kind, i, err.msg);
             goto out;
         }
-        printf("%s\n", face->address(sims[i]));
+        if (face->address)
+            printf("%s\n", face->address(sims[i]));
+        else
+            printf("http://127.0.0.1:%d\n", sim_http_port(face->http(sims[i])));
     }
     fflush(stdout);
     rc = loop_run(l) < 0 ? 1 : 0;
     for (int i = 0; i < o->count; i++) {
         char line[512];
-        face->stats(sims[i], line, sizeof(line));
+        if (face->stats)
+            face->stats(sims[i], line, sizeof(line));
+        else
+            default_stats(face, sims[i], line, sizeof(line));
         if (o->count > 1)
             fprintf(stderr, "stats: printer=%d %s\n", i, line);
         else

@@ -43,13 +43,24 @@ struct sim_net_opts {
     int n_faults;
 };
 
+struct sim_netprinter;
+struct sim_netprinter_config;
+struct sim_http;
+
 /* One printer of the instance i: paths and port already suffixed. */
 struct sim_net_face {
     void *(*create)(struct loop *l, const struct sim_net_opts *o, int index, struct sf_err *err);
-    const char *(*address)(void *sim);             /* "http://127.0.0.1:PORT" */
-    void (*stats)(void *sim, char *out, size_t n); /* one line, without "stats: " */
+    const char *(*address)(void *sim);             /* "http://127.0.0.1:PORT"; NULL: from http */
+    void (*stats)(void *sim, char *out, size_t n); /* one line, without "stats: "; NULL: the
+                                                      machine's state, file, lines, requests */
     void (*destroy)(void *sim);
+    /* For address and stats left NULL: the sim's machine and HTTP side. */
+    struct sim_netprinter *(*machine)(void *sim);
+    struct sim_http *(*http)(void *sim);
 };
+
+/* The machine options every face takes from o: speed, --log, --uploads. */
+void sim_net_machine(const struct sim_net_opts *o, struct sim_netprinter_config *m);
 
 /*
  * Parse argv[2..] into o.  Prints usage (extra: the face's own lines) and

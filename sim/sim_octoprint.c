@@ -568,6 +568,8 @@ sim_octoprint_main(int argc, char **argv)
         sim_net_parse(argc, argv, &o, "octoprint faults: error-at=LINES cancel-at=LINES busy=1\n");
     if (rc >= 0)
         return rc;
-    static const struct sim_net_face face = { create, address, stats, destroy };
+    static const struct sim_net_face face = {
+        .create = create, .address = address, .stats = stats, .destroy = destroy
+    };
     return sim_net_serve(&o, &face);
 }
