@@ -5,7 +5,9 @@
  * surface-optimized (surfopt.h, one geometry round, no re-orientation),
  * and the layer-based support model (supmodel.h) picks the winner.  The
  * input is returned unchanged unless the winner's model grams are at least
- * min_gain below the input's.
+ * min_gain below the input's.  A part the orientation search finds is no
+ * closed solid (orient_result.not_solid) keeps its up: only its shape step
+ * runs.
  *
  * Thread-safety: each call is independent (the orientation search starts
  * its own threads).

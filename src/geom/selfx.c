@@ -16,6 +16,7 @@
 #include <embree3/rtcore.h>
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../base/mem.h"
 
@@ -180,7 +181,7 @@ seg_tri(struct vec3 p, struct vec3 q, struct vec3 a, struct vec3 b, struct vec3 
     return fmin(d, seg_seg(p, q, c, a));
 }
 
-struct new_ctx {
+struct selfx_ref {
     const struct mesh *ref;
     double tol;
     uint32_t *comp;       /* per vertex: its connected shell (a representative vertex) */
@@ -188,6 +189,12 @@ struct new_ctx {
     uint32_t (*pairs)[2]; /* shells that cross each other in the input */
     size_t n_pairs, cap_pairs;
     bool oom;
+};
+
+/* One check of a deformed mesh against a prepared reference. */
+struct new_ctx {
+    const struct selfx_ref *sr;
+    uint8_t *mark; /* optional: vertices of new crossings are set to 1 */
 };
 
 static uint32_t
@@ -202,7 +209,7 @@ find(uint32_t *up, uint32_t v)
 static bool
 note_input(void *ud, uint32_t a, uint32_t b, uint32_t tri)
 {
-    struct new_ctx *nc = ud;
+    struct selfx_ref *nc = ud;
     const uint32_t *t = nc->ref->t[tri];
     nc->near[a] = nc->near[b] = 1;
     for (int k = 0; k < 3; k++)
@@ -230,11 +237,13 @@ note_input(void *ud, uint32_t a, uint32_t b, uint32_t tri)
 }
 
 /* Is this crossing new: not between shells that crossed in the input, not in
-   the neighbourhood of a crossing the input had, and apart there? */
+   the neighbourhood of a crossing the input had, and apart there?  A new one
+   marks its edge's and triangle's vertices when the caller asked. */
 static bool
 apart_in_ref(void *ud, uint32_t a, uint32_t b, uint32_t tri)
 {
-    const struct new_ctx *nc = ud;
+    const struct new_ctx *ctx = ud;
+    const struct selfx_ref *nc = ctx->sr;
     const struct mesh *r = nc->ref;
     const uint32_t *t = r->t[tri];
     if (nc->near[a] || nc->near[b] || nc->near[t[0]] || nc->near[t[1]] || nc->near[t[2]])
@@ -246,7 +255,90 @@ apart_in_ref(void *ud, uint32_t a, uint32_t b, uint32_t tri)
             if (nc->pairs[i][0] == lo && nc->pairs[i][1] == hi)
                 return false;
     }
-    return seg_tri(r->v[a], r->v[b], r->v[t[0]], r->v[t[1]], r->v[t[2]]) > nc->tol;
+    if (!(seg_tri(r->v[a], r->v[b], r->v[t[0]], r->v[t[1]], r->v[t[2]]) > nc->tol))
+        return false;
+    if (ctx->mark)
+        ctx->mark[a] = ctx->mark[b] = ctx->mark[t[0]] = ctx->mark[t[1]] = ctx->mark[t[2]] = 1;
+    return true;
+}
+
+void
+selfx_ref_free(struct selfx_ref *sr)
+{
+    if (!sr)
+        return;
+    free(sr->comp);
+    free(sr->near);
+    free(sr->pairs);
+    free(sr);
+}
+
+struct selfx_ref *
+selfx_ref_new(const struct mesh *ref, double tol, struct sf_err *err)
+{
+    if (!(tol >= 0)) {
+        sf_err_set(err, SF_EINVAL, "selfx: tolerance %g: want >= 0", tol);
+        return NULL;
+    }
+    struct selfx_ref *nc = mem_calloc(1, sizeof(*nc));
+    uint8_t *grow = mem_calloc(ref->n_verts ? ref->n_verts : 1, 1);
+    if (nc) {
+        nc->ref = ref;
+        nc->tol = tol;
+        nc->comp = mem_array(ref->n_verts ? ref->n_verts : 1, sizeof(uint32_t));
+        nc->near = mem_calloc(ref->n_verts ? ref->n_verts : 1, 1);
+    }
+    if (!nc || !nc->comp || !nc->near || !grow) {
+        sf_err_set(err, SF_ENOMEM, "selfx: out of memory for %u vertices", ref->n_verts);
+        goto fail;
+    }
+    for (uint32_t v = 0; v < ref->n_verts; v++)
+        nc->comp[v] = v;
+    for (uint32_t f = 0; f < ref->n_tris; f++)
+        for (int k = 1; k < 3; k++) {
+            uint32_t x = find(nc->comp, ref->t[f][0]), y = find(nc->comp, ref->t[f][k]);
+            if (x != y)
+                nc->comp[x > y ? x : y] = x < y ? x : y;
+        }
+    for (uint32_t v = 0; v < ref->n_verts; v++)
+        nc->comp[v] = find(nc->comp, v);
+    if (edges_pierced(ref, note_input, nc, err) < 0)
+        goto fail;
+    if (nc->oom) {
+        sf_err_set(err, SF_ENOMEM, "selfx: out of memory for the crossing shells");
+        goto fail;
+    }
+    /* two rings around the input's crossings: a deformation slides the
+       crossing curve over the triangles next to it */
+    for (int ring = 0; ring < 2; ring++) {
+        for (uint32_t f = 0; f < ref->n_tris; f++) {
+            const uint32_t *t = ref->t[f];
+            if (nc->near[t[0]] || nc->near[t[1]] || nc->near[t[2]])
+                grow[t[0]] = grow[t[1]] = grow[t[2]] = 1;
+        }
+        for (uint32_t v = 0; v < ref->n_verts; v++)
+            nc->near[v] |= grow[v];
+    }
+    free(grow);
+    return nc;
+fail:
+    free(grow);
+    selfx_ref_free(nc);
+    return NULL;
+}
+
+int
+selfx_ref_count(const struct selfx_ref *sr, const struct mesh *m, uint8_t *mark, struct sf_err *err)
+{
+    const struct mesh *ref = sr->ref;
+    if (ref->n_verts != m->n_verts || ref->n_tris != m->n_tris)
+        return sf_err_set(err, SF_EINVAL,
+                          "selfx: the reference has %u/%u vertices/triangles, the mesh %u/%u",
+                          ref->n_verts, ref->n_tris, m->n_verts, m->n_tris);
+    if (mark)
+        memset(mark, 0, m->n_verts);
+    struct new_ctx ctx = { .sr = sr, .mark = mark };
+    return edges_pierced(m, apart_in_ref, &ctx, err);
 }
 
 int
@@ -256,49 +348,10 @@ selfx_count_new(const struct mesh *ref, const struct mesh *m, double tol, struct
         return sf_err_set(err, SF_EINVAL,
                           "selfx: the reference has %u/%u vertices/triangles, the mesh %u/%u",
                           ref->n_verts, ref->n_tris, m->n_verts, m->n_tris);
-    if (!(tol >= 0))
-        return sf_err_set(err, SF_EINVAL, "selfx: tolerance %g: want >= 0", tol);
-    struct new_ctx nc = { .ref = ref, .tol = tol };
-    nc.comp = mem_array(ref->n_verts ? ref->n_verts : 1, sizeof(uint32_t));
-    nc.near = mem_calloc(ref->n_verts ? ref->n_verts : 1, 1);
-    uint8_t *grow = mem_calloc(ref->n_verts ? ref->n_verts : 1, 1);
-    int rc;
-    if (!nc.comp || !nc.near || !grow) {
-        rc = sf_err_set(err, SF_ENOMEM, "selfx: out of memory for %u vertices", ref->n_verts);
-        goto out;
-    }
-    for (uint32_t v = 0; v < ref->n_verts; v++)
-        nc.comp[v] = v;
-    for (uint32_t f = 0; f < ref->n_tris; f++)
-        for (int k = 1; k < 3; k++) {
-            uint32_t x = find(nc.comp, ref->t[f][0]), y = find(nc.comp, ref->t[f][k]);
-            if (x != y)
-                nc.comp[x > y ? x : y] = x < y ? x : y;
-        }
-    for (uint32_t v = 0; v < ref->n_verts; v++)
-        nc.comp[v] = find(nc.comp, v);
-    if ((rc = edges_pierced(ref, note_input, &nc, err)) < 0)
-        goto out;
-    if (nc.oom) {
-        rc = sf_err_set(err, SF_ENOMEM, "selfx: out of memory for the crossing shells");
-        goto out;
-    }
-    /* two rings around the input's crossings: a deformation slides the
-       crossing curve over the triangles next to it */
-    for (int ring = 0; ring < 2; ring++) {
-        for (uint32_t f = 0; f < ref->n_tris; f++) {
-            const uint32_t *t = ref->t[f];
-            if (nc.near[t[0]] || nc.near[t[1]] || nc.near[t[2]])
-                grow[t[0]] = grow[t[1]] = grow[t[2]] = 1;
-        }
-        for (uint32_t v = 0; v < ref->n_verts; v++)
-            nc.near[v] |= grow[v];
-    }
-    rc = edges_pierced(m, apart_in_ref, &nc, err);
-out:
-    free(nc.comp);
-    free(nc.near);
-    free(grow);
-    free(nc.pairs);
+    struct selfx_ref *sr = selfx_ref_new(ref, tol, err);
+    if (!sr)
+        return err->code;
+    int rc = selfx_ref_count(sr, m, NULL, err);
+    selfx_ref_free(sr);
     return rc;
 }

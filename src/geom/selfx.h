@@ -33,4 +33,19 @@ int selfx_count(const struct mesh *m, struct sf_err *err);
  */
 int selfx_count_new(const struct mesh *ref, const struct mesh *m, double tol, struct sf_err *err);
 
+/*
+ * The same with the reference's work done once, for a deformation checked
+ * iterate by iterate: selfx_ref_new notes ref's shells and crossings (ref
+ * must outlive the handle and keep its shape; NULL on error: SF_EINVAL for
+ * tol < 0, SF_ENOMEM); selfx_ref_count counts m's new crossings as
+ * selfx_count_new does and, when mark (m->n_verts bytes) is given, sets it
+ * to 1 at the vertices of each new crossing's edge and triangle, 0 elsewhere
+ * (where the deformation folded).  selfx_ref_free(NULL) is a no-op.
+ */
+struct selfx_ref;
+struct selfx_ref *selfx_ref_new(const struct mesh *ref, double tol, struct sf_err *err);
+int selfx_ref_count(const struct selfx_ref *sr, const struct mesh *m, uint8_t *mark,
+                    struct sf_err *err);
+void selfx_ref_free(struct selfx_ref *sr);
+
 #endif
