@@ -637,13 +637,16 @@ printer_progress_saved(struct printer *p, int64_t lines)
 
 /* ---- jobs ---- */
 
+/* How drive() words a refused start; the hold's end clears only that message. */
+#define PRINTER_REFUSED_MSG "refused a start"
+
 static void
 on_hold_end(struct loop *l, void *ud)
 {
     (void)l;
     struct printer *p = ud;
     p->hold = 0;
-    if (strncmp(p->message, "refused a start", 15) == 0)
+    if (strncmp(p->message, PRINTER_REFUSED_MSG, sizeof(PRINTER_REFUSED_MSG) - 1) == 0)
         p->message[0] = '\0';
     changed(p); /* the scheduler may use p again */
 }
@@ -676,7 +679,7 @@ drive(struct printer *p, const char *path, uint64_t line, const struct drv_job_s
     if (p->hold)
         loop_timer_cancel(p->env.l, p->hold);
     p->hold = loop_timer_add(p->env.l, wait_ms, on_hold_end, p);
-    snprintf(p->message, sizeof(p->message), "refused a start (%s): takes no job for %lld ms",
+    snprintf(p->message, sizeof(p->message), PRINTER_REFUSED_MSG " (%s): takes no job for %lld ms",
              err.msg, (long long)wait_ms);
     move(p, PRINTER_EV_REFUSED);
     job_event(p, id, JOB_EV_REFUSED, &a);
