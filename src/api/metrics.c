@@ -122,7 +122,7 @@ hist_out(struct out *b, const char *name, const char *lname, const char *lval, c
 /* Per printer: counts by outcome, grams. */
 struct per {
     char name[64];
-    unsigned long long done, failed, cancelled, interrupted;
+    unsigned long long done, failed, cancelled, refused, interrupted;
     double filament_g, saved_g;
 };
 
@@ -200,6 +200,8 @@ metrics_render(struct store *s, struct farm *f, struct sf_err *err)
             q->failed++;
         else if (strcmp(p->outcome, "cancelled") == 0)
             q->cancelled++;
+        else if (strcmp(p->outcome, "refused") == 0)
+            q->refused++; /* the printer would not start it: nothing printed */
         else
             q->interrupted++;
         if (p->wait_ms > 0)
@@ -207,10 +209,10 @@ metrics_render(struct store *s, struct farm *f, struct sf_err *err)
     }
     family(&b, "slimfarm_prints_total", "counter", "Prints ended, by printer and outcome.");
     for (size_t i = 0; i < n_per; i++) {
-        const char *oc[] = { "done", "failed", "cancelled", "interrupted" };
-        unsigned long long v[] = { per[i].done, per[i].failed, per[i].cancelled,
+        const char *oc[] = { "done", "failed", "cancelled", "refused", "interrupted" };
+        unsigned long long v[] = { per[i].done, per[i].failed, per[i].cancelled, per[i].refused,
                                    per[i].interrupted };
-        for (int k = 0; k < 4; k++) {
+        for (size_t k = 0; k < sizeof(oc) / sizeof(oc[0]); k++) {
             put(&b, "slimfarm_prints_total{printer=\"");
             label(&b, per[i].name);
             put(&b, "\",outcome=\"%s\"} %llu\n", oc[k], v[k]);

@@ -7,7 +7,7 @@
  *   slimfarm_jobs{state}                      gauge: jobs by state (all 9 states)
  *   slimfarm_printers{state}                  gauge: configured printers by state
  *   slimfarm_prints_total{printer,outcome}    counter: prints ended (done, failed,
- *                                             cancelled, interrupted)
+ *                                             cancelled, refused, interrupted)
  *   slimfarm_filament_used_grams_total{printer}       counter: prints done x their
  *                                             G-code's filament estimate
  *   slimfarm_support_saved_grams_total{printer}       counter: prints done x the

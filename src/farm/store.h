@@ -112,7 +112,7 @@ struct print_row {
     double filament_mm;  /* filament used */
     int64_t started_ms;  /* wall clock */
     int64_t ended_ms;    /* 0 while running */
-    char outcome[16];    /* "" running, "done", "failed", "cancelled", "interrupted" */
+    char outcome[16];    /* "" running, "done", "failed", "cancelled", "refused", "interrupted" */
 };
 
 /* One entry of the event log. */
