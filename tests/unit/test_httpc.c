@@ -310,6 +310,30 @@ on_progress(struct httpc_req *r, uint64_t sent, uint64_t total, void *ud)
     p->calls++;
 }
 
+/* Send path to u and run the loop until it is done: as a PUT body, or, with n_parts parts (one
+   of them the file), as a multipart POST.  Outcome and progress in *up; false if it did not
+   start. */
+static bool
+upload(struct loop *l, struct httpc *h, const char *u, const char *path,
+       const struct httpc_part *parts, size_t n_parts, struct upl *up)
+{
+    struct sf_err err;
+    struct httpc_opts o = { .method = n_parts ? NULL : "PUT",
+                            .url = u,
+                            .body_path = n_parts ? NULL : path,
+                            .parts = parts,
+                            .n_parts = n_parts,
+                            .done = on_done,
+                            .progress = on_progress,
+                            .ud = up };
+    if (!httpc_start(h, &o, &err)) {
+        fprintf(stderr, "upload: %s\n", err.msg);
+        return false;
+    }
+    run_until(l, &up->g.calls, 1);
+    return true;
+}
+
 T_CASE(streamed_file_upload_arrives_intact)
 {
     struct loop *l;
@@ -320,14 +344,7 @@ T_CASE(streamed_file_upload_arrives_intact)
     struct sf_err err;
     url(u, sizeof(u), "/echo");
     struct upl a = { 0 };
-    struct httpc_opts o = { .method = "PUT",
-                            .url = u,
-                            .body_path = path,
-                            .done = on_done,
-                            .progress = on_progress,
-                            .ud = &a };
-    T_TRUE(httpc_start(h, &o, &err) != NULL);
-    run_until(l, &a.g.calls, 1);
+    T_TRUE(upload(l, h, u, path, NULL, 0, &a));
     T_EQ_INT(a.g.code, SF_OK);
     T_EQ_STR(a.g.body, "PUT 6291456");
     T_TRUE(body_matches_file(path, true));
@@ -340,11 +357,7 @@ T_CASE(streamed_file_upload_arrives_intact)
         { .name = "select", .value = "true" },
         { .name = "file", .file_path = path, .filename = "job 1.gcode" },
     };
-    struct httpc_opts mo = {
-        .url = u, .parts = parts, .n_parts = 2, .done = on_done, .progress = on_progress, .ud = &m
-    };
-    T_TRUE(httpc_start(h, &mo, &err) != NULL);
-    run_until(l, &m.g.calls, 1);
+    T_TRUE(upload(l, h, u, path, parts, 2, &m));
     T_EQ_INT(m.g.status, 201);
     T_TRUE(body_matches_file(path, false));
     pthread_mutex_lock(&srv_lock);
@@ -596,27 +609,15 @@ T_CASE(a_100_mb_upload_never_sits_in_memory)
     long before = peak_rss_kb();
     T_TRUE(before > 0);
     char u[128];
-    struct sf_err err;
     url(u, sizeof(u), "/sink");
     struct upl a = { 0 };
-    struct httpc_opts o = { .method = "PUT",
-                            .url = u,
-                            .body_path = path,
-                            .done = on_done,
-                            .progress = on_progress,
-                            .ud = &a };
-    T_TRUE(httpc_start(h, &o, &err) != NULL);
-    run_until(l, &a.g.calls, 1);
+    T_TRUE(upload(l, h, u, path, NULL, 0, &a));
     T_EQ_INT(a.g.code, SF_OK);
     T_EQ_STR(a.g.body, "PUT 104857600");
     T_EQ_INT(a.p.sent, (uint64_t)100 << 20);
     struct upl m = { 0 };
     struct httpc_part parts[] = { { .name = "file", .file_path = path, .filename = "big.gcode" } };
-    struct httpc_opts mo = {
-        .url = u, .parts = parts, .n_parts = 1, .done = on_done, .progress = on_progress, .ud = &m
-    };
-    T_TRUE(httpc_start(h, &mo, &err) != NULL);
-    run_until(l, &m.g.calls, 1);
+    T_TRUE(upload(l, h, u, path, parts, 1, &m));
     T_EQ_INT(m.g.status, 201);
     T_TRUE(m.p.total > (uint64_t)100 << 20);
     long grew = peak_rss_kb() - before;
