@@ -19,32 +19,10 @@ set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
 . "$(dirname "$0")/lib/netprint.sh"
-t0=$(date +%s)
-ENV=tests/bambu/env.sh
 CODE=27182818
-brokers=()
-cleanup_brokers() { for b in "${brokers[@]}"; do $ENV stop "$b"; done; }
-trap 'cleanup_brokers; cleanup' EXIT
+. "$(dirname "$0")/lib/bambu.sh"
+t0=$(date +%s)
 
-# bambu_printer NAME SERIAL MODEL SPEED: certificates, a broker, a simulator.
-bambu_printer() {
-  local name=$1 serial=$2 model=$3 speed=$4 dir=$tmp/$1-certs out
-  $ENV certs "$dir" "$serial"; local rc=$?
-  [ $rc -eq 77 ] && { echo "farmd_bambu: skipped (no mosquitto/openssl)"; exit 0; }
-  [ $rc -eq 0 ] || fail "certificates for $name"
-  out=$($ENV broker "$dir" "$CODE") || fail "broker for $name"
-  brokers+=("${out#* }")
-  eval "mqtt_$name=${out% *}"
-  "$S" bambu --serial "$serial" --access-code "$CODE" --ca "$dir" --mqtt-port "${out% *}" \
-    --model "$model" --speed "$speed" --report-ms 100 --log "$tmp/$name.log" \
-    > "$tmp/$name.out" 2> "$tmp/$name.err" &
-  sims+=($!)
-  for _ in $(seq 200); do [ "$(wc -l < "$tmp/$name.out")" -ge 2 ] && break; sleep 0.05; done
-  local a b; a=$(sed -n 1p "$tmp/$name.out"); b=$(sed -n 2p "$tmp/$name.out")
-  [ -n "$a" ] && [ -n "$b" ] || fail "sim $name did not start: $(cat "$tmp/$name.err")"
-  eval "ftps_$name=${a##*:}"
-  eval "mqtt_$name=${b##*:}" # the printer's own MQTT port, in front of its broker
-}
 bambu_printer x1 01S00X1000000001 x1 80
 bambu_printer p1 01P00P1000000002 p1 200
 start_sim mk3 --speed 3000

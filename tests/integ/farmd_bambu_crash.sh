@@ -11,30 +11,15 @@
 set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
-t0=$(date +%s)
-ENV=tests/bambu/env.sh
 CODE=16180339
-SERIAL=01S00C0000000042
-broker=
-trap '[ -n "$broker" ] && $ENV stop "$broker"; cleanup' EXIT
+. "$(dirname "$0")/lib/bambu.sh"
+t0=$(date +%s)
 
-dir=$tmp/certs
-$ENV certs "$dir" "$SERIAL"; rc=$?
-[ $rc -eq 77 ] && { echo "farmd_bambu_crash: skipped (no mosquitto/openssl)"; exit 0; }
-[ $rc -eq 0 ] || fail "certificates"
-out=$($ENV broker "$dir" "$CODE") || fail "broker"
-mqtt=${out% *} broker=${out#* }
-"$S" bambu --serial "$SERIAL" --access-code "$CODE" --ca "$dir" --mqtt-port "$mqtt" --model p1 \
-  --speed 150 --report-ms 100 --log "$tmp/x1.log" > "$tmp/x1.out" 2> "$tmp/x1.err" &
-sims+=($!)
-for _ in $(seq 100); do [ -s "$tmp/x1.out" ] && break; sleep 0.05; done
-ftps=$(head -n 1 "$tmp/x1.out"); ftps=${ftps##*:}
-[ -n "$ftps" ] || fail "sim did not start: $(cat "$tmp/x1.err")"
+bambu_printer x1 01S00C0000000042 p1 150
 cp -r config/printers config/materials "$tmp/"
 {
   printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
-  printf '[printer x1]\ndriver: bambu\nurl: mqtts://127.0.0.1:%s\nserial: %s\n' "$mqtt" "$SERIAL"
-  printf 'access_code: %s\nca_file: %s/ca.pem\nftps_port: %s\nauto_eject: true\n' "$CODE" "$dir" "$ftps"
+  bambu_ini x1 "$broker_x1" # through the broker itself: it restarts below
 } > "$tmp/farm.ini"
 start_daemon
 wait_for 60 sh -c "'$C' printers | grep -qE '^x1 +idle'" || fail "x1: $("$C" printers)"
@@ -54,12 +39,11 @@ grep -q "job $j_kill re-attached" "$tmp/log" || fail "no re-attach of job $j_kil
 # the broker restarts mid-print
 j_broker=$(submit "$tmp/lbracket.stl" --material PLA --printer x1 --method none)
 wait_for 240 printing "$j_broker" || fail "job $j_broker never printed: $("$C" jobs)"
-$ENV stop "$broker"; broker=
+bambu_broker_stop x1
 wait_for 60 sh -c "'$C' printers | grep -qE '^x1 +offline'" || fail "x1 not offline without its broker: $("$C" printers)"
 st=$(job_state "$j_broker")
 [ "$st" = interrupted ] || [ "$st" = done ] || fail "job $j_broker: $st, wanted interrupted"
-out=$($ENV broker "$dir" "$CODE" "$mqtt") || fail "broker restart"
-broker=${out#* }
+bambu_broker_start x1 "$broker_x1"
 wait_for 600 is_done "$j_broker" || fail "job $j_broker not done after the broker came back: $("$C" jobs); $("$C" printers)"
 grep -q "job $j_broker re-attached" "$tmp/log" || fail "no re-attach of job $j_broker in the daemon log"
 api "/api/jobs/$j_kill" > "$tmp/job-a.json"

@@ -16,33 +16,15 @@
 set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
-t0=$(date +%s)
-ENV=tests/bambu/env.sh
 CODE=14142135
-SERIAL=01S00C0000000077
-broker=
-trap '[ -n "$broker" ] && $ENV stop "$broker"; cleanup' EXIT
+. "$(dirname "$0")/lib/bambu.sh"
+t0=$(date +%s)
 
-dir=$tmp/certs
-$ENV certs "$dir" "$SERIAL"; rc=$?
-[ $rc -eq 77 ] && { echo "farmd_bambu_upload: skipped (no mosquitto/openssl)"; exit 0; }
-[ $rc -eq 0 ] || fail "certificates"
-out=$($ENV broker "$dir" "$CODE") || fail "broker"
-broker=${out#* }
-"$S" bambu --serial "$SERIAL" --access-code "$CODE" --ca "$dir" --mqtt-port "${out% *}" --model x1 \
-  --speed 300 --report-ms 100 --log "$tmp/x1.log" --fault ftps-drop=4096 --fault mqtt-drop=10 \
-  > "$tmp/x1.out" 2> "$tmp/x1.err" &
-sims+=($!)
-sim=$!
-for _ in $(seq 200); do [ "$(wc -l < "$tmp/x1.out")" -ge 2 ] && break; sleep 0.05; done
-ftps=$(sed -n 1p "$tmp/x1.out"); ftps=${ftps##*:}
-mqtt=$(sed -n 2p "$tmp/x1.out"); mqtt=${mqtt##*:}
-[ -n "$ftps" ] && [ -n "$mqtt" ] || fail "sim did not start: $(cat "$tmp/x1.err")"
+bambu_printer x1 01S00C0000000077 x1 300 --fault ftps-drop=4096 --fault mqtt-drop=10
 cp -r config/printers config/materials "$tmp/"
 {
   printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
-  printf '[printer x1]\ndriver: bambu\nurl: mqtts://127.0.0.1:%s\nserial: %s\n' "$mqtt" "$SERIAL"
-  printf 'access_code: %s\nca_file: %s/ca.pem\nftps_port: %s\nauto_eject: true\n' "$CODE" "$dir" "$ftps"
+  bambu_ini x1 "$mqtt_x1" # through the printer's own port: mqtt-drop cuts it
 } > "$tmp/farm.ini"
 start_daemon
 wait_for 60 sh -c "'$C' printers | grep -qE '^x1 +idle'" || fail "x1: $("$C" printers)"
@@ -66,7 +48,7 @@ grep -m 1 "upload failed" "$tmp/log" || fail "no upload failure in the daemon lo
 grep -m 1 "MQTT: connection lost" "$tmp/log" || fail "the daemon never lost MQTT"
 grep -qE "job $j re-attached" "$tmp/log" || fail "no re-attach of job $j in the daemon log"
 sleep 0.5
-kill "$sim"; wait "$sim" 2>/dev/null; sims=()
+kill "$sim_x1"; wait "$sim_x1" 2>/dev/null; sims=()
 grep -q "uploads=1 " "$tmp/x1.err" || fail "the printer stored other than one package: $(grep stats: "$tmp/x1.err")"
 grep -q "jobs_started=1 " "$tmp/x1.err" || fail "the printer started other than one job: $(grep stats: "$tmp/x1.err")"
 /usr/bin/python3 - "$tmp" <<'PY' || fail "x1's log is not the job's G-code exactly once"
