@@ -20,6 +20,7 @@
 #include <time.h>
 
 #include "../src/base/mem.h"
+#include "sim_netbase.h"
 #include "sim_netcli.h"
 
 #define WATCH_MS   20  /* how often line-triggered faults are checked */
@@ -42,14 +43,11 @@ struct hist_job {
 };
 
 struct sim_moonraker {
-    struct loop *l;
+    struct sim_netbase b; /* machine, HTTP server, watch timer; first (sim_netbase.h) */
     struct sim_moonraker_config cfg;
-    struct sim_netprinter *np;
-    struct sim_http *http;
     enum klippy klippy;
     char klippy_msg[512];                           /* webhooks.state_message */
     int64_t ready_at_ms;                            /* startup ends at this loop time */
-    uint64_t watch;                                 /* watch timer */
     bool fired_shutdown, fired_error, fired_cancel; /* each fault once a job */
     char fired_for[SIM_NP_NAME_MAX + 1];            /* ... the job they fired for */
     int64_t fired_started;                          /* its start (print_time_s of 0) */
@@ -74,36 +72,22 @@ sim_moonraker_config_init(struct sim_moonraker_config *c)
     sim_netprinter_config_init(&c->machine);
 }
 
-static int
-parse_line(const char *spec, const char *v, long *out, struct sf_err *err)
-{
-    char *end;
-    errno = 0;
-    long n = strtol(v, &end, 10);
-    if (errno || end == v || *end || n < 1 || n > 1000000000L)
-        return sf_err_set(err, SF_EINVAL, "fault '%s': expected a whole number from 1", spec);
-    *out = n;
-    return SF_OK;
-}
-
 int
 sim_moonraker_fault_parse(struct sim_moonraker_config *c, const char *spec, struct sf_err *err)
 {
     int rc = sim_http_fault_parse(&c->http, spec, err);
     if (rc != SF_EUNSUPP)
         return rc;
-    const char *eq = strchr(spec, '=');
-    const char *v = eq ? eq + 1 : "";
-    size_t n = eq ? (size_t)(eq - spec) : strlen(spec);
-    if (n == 8 && strncmp(spec, "shutdown", n) == 0)
-        return parse_line(spec, v, &c->shutdown_at, err);
-    if (n == 5 && strncmp(spec, "error", n) == 0)
-        return parse_line(spec, v, &c->error_at, err);
-    if (n == 6 && strncmp(spec, "cancel", n) == 0)
-        return parse_line(spec, v, &c->cancel_at, err);
-    if (n == 7 && strncmp(spec, "startup", n) == 0) {
+    const char *v;
+    if ((v = sim_netbase_fault_arg(spec, "shutdown")))
+        return sim_netbase_fault_count(spec, v, &c->shutdown_at, err);
+    if ((v = sim_netbase_fault_arg(spec, "error")))
+        return sim_netbase_fault_count(spec, v, &c->error_at, err);
+    if ((v = sim_netbase_fault_arg(spec, "cancel")))
+        return sim_netbase_fault_count(spec, v, &c->cancel_at, err);
+    if ((v = sim_netbase_fault_arg(spec, "startup"))) {
         long ms;
-        if ((rc = parse_line(spec, v, &ms, err)))
+        if ((rc = sim_netbase_fault_count(spec, v, &ms, err)))
             return rc;
         c->startup_ms = (int)(ms > 3600000 ? 3600000 : ms);
         return SF_OK;
@@ -208,7 +192,7 @@ object(struct sim_moonraker *s, const char *name, const struct sim_np_status *st
     if (strcmp(name, "virtual_sdcard") == 0) {
         char path[1024];
         json_t *fp = json_null();
-        if (loaded && sim_netprinter_path(s->np, st->file, path, sizeof(path), NULL) == SF_OK)
+        if (loaded && sim_netprinter_path(s->b.np, st->file, path, sizeof(path), NULL) == SF_OK)
             fp = json_string(path);
         return json_pack("{s:o,s:f,s:b,s:I,s:I}", "file_path", fp, "progress", st->progress,
                          "is_active", st->state == SIM_NP_PRINTING, "file_position",
@@ -240,7 +224,7 @@ on_query(struct sim_http_req *r, void *ud)
         return;
     }
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
+    sim_netprinter_status(s->b.np, &st);
     json_t *status = json_object();
     json_t *want = NULL;
     size_t len = 0;
@@ -385,7 +369,7 @@ file_stat(struct sim_moonraker *s, const char *name, double *mtime, int64_t *siz
 {
     char path[1024];
     struct stat sb;
-    if (sim_netprinter_path(s->np, name, path, sizeof(path), NULL) || stat(path, &sb) != 0)
+    if (sim_netprinter_path(s->b.np, name, path, sizeof(path), NULL) || stat(path, &sb) != 0)
         return false;
     *mtime = (double)sb.st_mtim.tv_sec + (double)sb.st_mtim.tv_nsec / 1e9;
     *size = (int64_t)sb.st_size;
@@ -428,7 +412,7 @@ hist_add(struct sim_moonraker *s, const char *name)
     h->estimated_s = -1;
     char path[1024];
     if (file_stat(s, name, &h->modified, &h->size) &&
-        sim_netprinter_path(s->np, name, path, sizeof(path), NULL) == SF_OK)
+        sim_netprinter_path(s->b.np, name, path, sizeof(path), NULL) == SF_OK)
         h->estimated_s = file_estimate(path);
 }
 
@@ -437,12 +421,12 @@ static bool
 start_print(struct sim_moonraker *s, struct sim_http_req *r, const char *name)
 {
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
+    sim_netprinter_status(s->b.np, &st);
     hist_settle(s, &st, NULL);
     if (st.state == SIM_NP_ERROR)
-        sim_netprinter_reset(s->np); /* an errored print is over; Klipper prints again */
+        sim_netprinter_reset(s->b.np); /* an errored print is over; Klipper prints again */
     struct sf_err err;
-    int rc = sim_netprinter_start(s->np, name, &err);
+    int rc = sim_netprinter_start(s->b.np, name, &err);
     if (rc == SF_OK) {
         s->fired_shutdown = s->fired_error = s->fired_cancel = false;
         hist_add(s, name);
@@ -475,11 +459,11 @@ on_upload(struct sim_http_req *r, void *ud)
     }
     char path[1024];
     struct sf_err err;
-    if (sim_netprinter_path(s->np, f->filename, path, sizeof(path), &err)) {
+    if (sim_netprinter_path(s->b.np, f->filename, path, sizeof(path), &err)) {
         reply_err(r, 400, err.msg);
         return;
     }
-    if (sim_netprinter_file_busy(s->np, f->filename)) {
+    if (sim_netprinter_file_busy(s->b.np, f->filename)) {
         reply_err(r, 403, "File is loaded, upload not permitted");
         return;
     }
@@ -491,8 +475,8 @@ on_upload(struct sim_http_req *r, void *ud)
     if (print && strcmp(print, "true") == 0 && s->klippy == K_READY)
         started = start_print(s, NULL, f->filename);
     char loc[1200];
-    snprintf(loc, sizeof(loc), "http://127.0.0.1:%d/server/files/gcodes/%s", sim_http_port(s->http),
-             f->filename);
+    snprintf(loc, sizeof(loc), "http://127.0.0.1:%d/server/files/gcodes/%s",
+             sim_http_port(s->b.http), f->filename);
     sim_http_add_header(r, "Location", loc);
     struct timespec ts;
     clock_gettime(CLOCK_REALTIME, &ts);
@@ -513,7 +497,7 @@ on_metadata(struct sim_http_req *r, void *ud)
     int64_t size;
     char path[1024];
     if (!name || !file_stat(s, name, &mtime, &size) ||
-        sim_netprinter_path(s->np, name, path, sizeof(path), NULL)) {
+        sim_netprinter_path(s->b.np, name, path, sizeof(path), NULL)) {
         char msg[300];
         snprintf(msg, sizeof(msg), "Metadata not available for <%s>", name ? name : "");
         reply_err(r, 404, msg);
@@ -567,7 +551,7 @@ on_history_list(struct sim_http_req *r, void *ud)
     }
     bool asc = order && strcmp(order, "asc") == 0;
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
+    sim_netprinter_status(s->b.np, &st);
     json_t *jobs = json_array();
     long skipped = 0;
     for (int k = 0; k < s->n_hist && json_array_size(jobs) < (size_t)limit; k++) {
@@ -617,7 +601,7 @@ on_pause(struct sim_http_req *r, void *ud)
     struct sim_moonraker *s = ud;
     if (!need_ready(s, r))
         return;
-    sim_netprinter_pause(s->np, NULL); /* "Print already paused" is not an error */
+    sim_netprinter_pause(s->b.np, NULL); /* "Print already paused" is not an error */
     reply_ok(r);
 }
 
@@ -627,7 +611,7 @@ on_resume(struct sim_http_req *r, void *ud)
     struct sim_moonraker *s = ud;
     if (!need_ready(s, r))
         return;
-    sim_netprinter_resume(s->np, NULL);
+    sim_netprinter_resume(s->b.np, NULL);
     reply_ok(r);
 }
 
@@ -637,7 +621,7 @@ on_cancel(struct sim_http_req *r, void *ud)
     struct sim_moonraker *s = ud;
     if (!need_ready(s, r))
         return;
-    sim_netprinter_cancel(s->np, NULL);
+    sim_netprinter_cancel(s->b.np, NULL);
     reply_ok(r);
 }
 
@@ -660,7 +644,7 @@ on_script(struct sim_http_req *r, void *ud)
             if (n > 0 && n < sizeof(line)) {
                 memcpy(line, p, n);
                 line[n] = '\0';
-                rc = sim_netprinter_command(s->np, line, &err);
+                rc = sim_netprinter_command(s->b.np, line, &err);
             } else if (n >= sizeof(line)) {
                 rc = sf_err_set(&err, SF_EINVAL, "command too long");
             }
@@ -679,7 +663,7 @@ shut_down(struct sim_moonraker *s, const char *why)
 {
     s->klippy = K_SHUTDOWN;
     snprintf(s->klippy_msg, sizeof(s->klippy_msg), "%s", why);
-    sim_netprinter_fail(s->np, "Printer is shutdown");
+    sim_netprinter_fail(s->b.np, "Printer is shutdown");
 }
 
 static void
@@ -695,12 +679,12 @@ on_firmware_restart(struct sim_http_req *r, void *ud)
 {
     struct sim_moonraker *s = ud;
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
+    sim_netprinter_status(s->b.np, &st);
     hist_settle(s, &st, "klippy_disconnect"); /* a print cut short by the restart */
-    sim_netprinter_reset(s->np);
+    sim_netprinter_reset(s->b.np);
     s->klippy = K_STARTUP;
     snprintf(s->klippy_msg, sizeof(s->klippy_msg), "Printer is not ready");
-    s->ready_at_ms = loop_now_ms(s->l) + RESTART_MS;
+    s->ready_at_ms = loop_now_ms(s->b.l) + RESTART_MS;
     reply_ok(r);
 }
 
@@ -724,18 +708,17 @@ static const struct sim_http_route routes[] = {
 /* ---- faults on the job's way ---- */
 
 static void
-on_watch(struct loop *l, void *ud)
+on_watch(void *ud)
 {
     struct sim_moonraker *s = ud;
-    s->watch = loop_timer_add(l, WATCH_MS, on_watch, s);
-    if (s->klippy == K_STARTUP && loop_now_ms(l) >= s->ready_at_ms) {
+    if (s->klippy == K_STARTUP && loop_now_ms(s->b.l) >= s->ready_at_ms) {
         s->klippy = K_READY;
         snprintf(s->klippy_msg, sizeof(s->klippy_msg), "Printer is ready");
     }
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
+    sim_netprinter_status(s->b.np, &st);
     hist_settle(s, &st, NULL);
-    sim_http_outage_watch(s->http, sim_np_running(&st), st.lines_done);
+    sim_http_outage_watch(s->b.http, sim_np_running(&st), st.lines_done);
     if (st.state != SIM_NP_PRINTING || s->klippy != K_READY)
         return;
     long done = (long)st.lines_done;
@@ -744,10 +727,10 @@ on_watch(struct loop *l, void *ud)
         shut_down(s, shutdown_text);
     } else if (s->cfg.error_at && !s->fired_error && done >= s->cfg.error_at) {
         s->fired_error = true;
-        sim_netprinter_fail(s->np, "Move out of range: 260.000 10.000 0.300 [1203.442]");
+        sim_netprinter_fail(s->b.np, "Move out of range: 260.000 10.000 0.300 [1203.442]");
     } else if (s->cfg.cancel_at && !s->fired_cancel && done >= s->cfg.cancel_at) {
         s->fired_cancel = true;
-        sim_netprinter_cancel(s->np, NULL); /* someone pressed cancel on the printer */
+        sim_netprinter_cancel(s->b.np, NULL); /* someone pressed cancel on the printer */
     }
 }
 
@@ -756,16 +739,10 @@ on_watch(struct loop *l, void *ud)
 struct sim_moonraker *
 sim_moonraker_new(struct loop *l, const struct sim_moonraker_config *c, struct sf_err *err)
 {
-    struct sim_moonraker *s = mem_calloc(1, sizeof(*s));
-    if (!s) {
-        sf_err_set(err, SF_ENOMEM, "moonraker sim: out of memory");
+    struct sim_moonraker *s = sim_netbase_alloc(sizeof(*s), "moonraker", err);
+    if (!s)
         return NULL;
-    }
-    s->l = l;
     s->cfg = *c;
-    s->np = sim_netprinter_new(l, &c->machine, err);
-    if (!s->np)
-        goto fail;
     struct sim_http_config hc = {
         .port = c->port,
         .routes = routes,
@@ -775,17 +752,14 @@ sim_moonraker_new(struct loop *l, const struct sim_moonraker_config *c, struct s
         .key_header = "X-Api-Key",
         .auth_status = 401,
         .auth_body = "{\"error\": {\"code\": 401, \"message\": \"Unauthorized\"}}",
-        .upload_dir = sim_netprinter_uploads(s->np),
         .faults = c->http,
     };
-    s->http = sim_http_new(l, &hc, err);
-    if (!s->http)
+    if (sim_netbase_init(&s->b, l, &c->machine, &hc, WATCH_MS, on_watch, err))
         goto fail;
     s->klippy = c->startup_ms > 0 ? K_STARTUP : K_READY;
     snprintf(s->klippy_msg, sizeof(s->klippy_msg), "%s",
              s->klippy == K_READY ? "Printer is ready" : "Printer is not ready");
     s->ready_at_ms = loop_now_ms(l) + c->startup_ms;
-    s->watch = loop_timer_add(l, WATCH_MS, on_watch, s);
     return s;
 fail:
     sim_moonraker_free(s);
@@ -795,25 +769,19 @@ fail:
 int
 sim_moonraker_port(const struct sim_moonraker *s)
 {
-    return sim_http_port(s->http);
+    return sim_netbase_port(&s->b);
 }
 
 void
 sim_moonraker_status(const struct sim_moonraker *s, struct sim_np_status *out)
 {
-    sim_netprinter_status(s->np, out);
+    sim_netbase_status(&s->b, out);
 }
 
 void
 sim_moonraker_free(struct sim_moonraker *s)
 {
-    if (!s)
-        return;
-    if (s->watch)
-        loop_timer_cancel(s->l, s->watch);
-    sim_http_free(s->http);
-    sim_netprinter_free(s->np);
-    free(s);
+    sim_netbase_free(s);
 }
 
 /* ---- slimfarm-sim moonraker (sim_netcli.h) ---- */
@@ -833,34 +801,12 @@ face_new(struct loop *l, const struct sim_net_opts *o, int index, struct sf_err 
     return sim_moonraker_new(l, &c, err);
 }
 
-static struct sim_netprinter *
-face_machine(void *sim)
-{
-    return ((struct sim_moonraker *)sim)->np;
-}
-
-static struct sim_http *
-face_http(void *sim)
-{
-    return ((struct sim_moonraker *)sim)->http;
-}
-
-static void
-face_free(void *sim)
-{
-    sim_moonraker_free(sim);
-}
-
 int
 sim_moonraker_main(int argc, char **argv)
 {
-    static const struct sim_net_face face = {
-        .create = face_new, .destroy = face_free, .machine = face_machine, .http = face_http
-    };
-    struct sim_net_opts o;
-    int rc = sim_net_parse(
-        argc, argv, &o,
+    return sim_netbase_main(
+        argc, argv,
         "faults: shutdown=LINE error=LINE cancel=LINE startup=MS (Klipper), and the HTTP and\n"
-        "        firmware faults of every simulator\n");
-    return rc >= 0 ? rc : sim_net_serve(&o, &face);
+        "        firmware faults of every simulator\n",
+        face_new);
 }

@@ -20,17 +20,14 @@
 #include <string.h>
 #include <time.h>
 
-#include "../src/base/mem.h"
+#include "sim_netbase.h"
 #include "sim_netcli.h"
 
 #define WATCH_MS 20
 
 struct sim_prusalink {
-    struct loop *l;
+    struct sim_netbase b; /* machine, HTTP server, watch timer; first (sim_netbase.h) */
     struct sim_prusalink_config cfg;
-    struct sim_netprinter *np;
-    struct sim_http *http;
-    uint64_t watch;                 /* watch timer */
     int64_t job_id;                 /* id of the current (or last) job, 0 before the first */
     int64_t next_id;                /* the next job's id */
     long busy_left;                 /* uploads still to meet a busy printer */
@@ -45,35 +42,21 @@ sim_prusalink_config_init(struct sim_prusalink_config *c)
     sim_netprinter_config_init(&c->machine);
 }
 
-static int
-parse_count(const char *spec, const char *v, long *out, struct sf_err *err)
-{
-    char *end;
-    errno = 0;
-    long n = strtol(v, &end, 10);
-    if (errno || end == v || *end || n < 1 || n > 1000000000L)
-        return sf_err_set(err, SF_EINVAL, "fault '%s': expected a whole number from 1", spec);
-    *out = n;
-    return SF_OK;
-}
-
 int
 sim_prusalink_fault_parse(struct sim_prusalink_config *c, const char *spec, struct sf_err *err)
 {
     int rc = sim_http_fault_parse(&c->http, spec, err);
     if (rc != SF_EUNSUPP)
         return rc;
-    const char *eq = strchr(spec, '=');
-    const char *v = eq ? eq + 1 : "";
-    size_t n = eq ? (size_t)(eq - spec) : strlen(spec);
-    if (n == 4 && strncmp(spec, "busy", n) == 0)
-        return parse_count(spec, v, &c->busy_uploads, err);
-    if (n == 5 && strncmp(spec, "error", n) == 0)
-        return parse_count(spec, v, &c->error_at, err);
-    if (n == 6 && strncmp(spec, "cancel", n) == 0)
-        return parse_count(spec, v, &c->cancel_at, err);
-    if (n == 7 && strncmp(spec, "dismiss", n) == 0)
-        return parse_count(spec, v, &c->dismiss, err);
+    const char *v;
+    if ((v = sim_netbase_fault_arg(spec, "busy")))
+        return sim_netbase_fault_count(spec, v, &c->busy_uploads, err);
+    if ((v = sim_netbase_fault_arg(spec, "error")))
+        return sim_netbase_fault_count(spec, v, &c->error_at, err);
+    if ((v = sim_netbase_fault_arg(spec, "cancel")))
+        return sim_netbase_fault_count(spec, v, &c->cancel_at, err);
+    if ((v = sim_netbase_fault_arg(spec, "dismiss")))
+        return sim_netbase_fault_count(spec, v, &c->dismiss, err);
     return faults_parse(&c->machine.faults, spec, err);
 }
 
@@ -159,7 +142,7 @@ on_info(struct sim_http_req *r, void *ud)
 static void
 shown(const struct sim_prusalink *s, struct sim_np_status *st)
 {
-    sim_netprinter_status(s->np, st);
+    sim_netprinter_status(s->b.np, st);
     if (s->cfg.dismiss && (st->state == SIM_NP_COMPLETE || st->state == SIM_NP_CANCELLED))
         st->state = SIM_NP_IDLE;
 }
@@ -236,7 +219,7 @@ flag(struct sim_http_req *r, const char *name)
 static int
 start(struct sim_prusalink *s, const char *name, struct sf_err *err)
 {
-    int rc = sim_netprinter_start(s->np, name, err);
+    int rc = sim_netprinter_start(s->b.np, name, err);
     if (rc == SF_OK) {
         s->job_id = s->next_id++;
         s->fired_error = s->fired_cancel = false;
@@ -252,7 +235,7 @@ on_file_put(struct sim_http_req *r, void *ud)
     const char *name = sim_http_rest(r);
     char path[1024];
     struct sf_err err;
-    if (sim_netprinter_path(s->np, name, path, sizeof(path), &err)) {
+    if (sim_netprinter_path(s->b.np, name, path, sizeof(path), &err)) {
         reply_err(r, 400, "BAD REQUEST", err.msg);
         return;
     }
@@ -262,17 +245,17 @@ on_file_put(struct sim_http_req *r, void *ud)
     }
     bool print = flag(r, "Print-After-Upload");
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
+    sim_netprinter_status(s->b.np, &st);
     if (s->busy_left > 0) {
         s->busy_left--;
         reply_err(r, 409, "CONFLICT", "Printer is busy");
         return;
     }
-    if (sim_netprinter_file_busy(s->np, name)) {
+    if (sim_netprinter_file_busy(s->b.np, name)) {
         reply_err(r, 409, "CONFLICT", "File is currently being printed");
         return;
     }
-    if (sim_netprinter_file_size(s->np, name) >= 0 && !flag(r, "Overwrite")) {
+    if (sim_netprinter_file_size(s->b.np, name) >= 0 && !flag(r, "Overwrite")) {
         reply_err(r, 409, "CONFLICT", "File already exists");
         return;
     }
@@ -298,11 +281,11 @@ on_file_other(struct sim_http_req *r, void *ud)
     const char *name = sim_http_rest(r);
     const char *m = sim_http_method(r);
     struct sf_err err;
-    if (sim_netprinter_file_size(s->np, name) < 0) {
+    if (sim_netprinter_file_size(s->b.np, name) < 0) {
         reply_err(r, 404, "NOT FOUND", "File not found");
         return;
     }
-    bool busy = sim_netprinter_file_busy(s->np, name);
+    bool busy = sim_netprinter_file_busy(s->b.np, name);
     if (strcmp(m, "HEAD") == 0) {
         sim_http_add_header(r, "Read-Only", "?0");
         sim_http_add_header(r, "Currently-Printed", busy ? "?1" : "?0");
@@ -316,7 +299,7 @@ on_file_other(struct sim_http_req *r, void *ud)
         char path[1024];
         if (busy) {
             reply_err(r, 409, "CONFLICT", "File is currently being printed");
-        } else if (sim_netprinter_path(s->np, name, path, sizeof(path), &err) == SF_OK &&
+        } else if (sim_netprinter_path(s->b.np, name, path, sizeof(path), &err) == SF_OK &&
                    remove(path) == 0) {
             sim_http_reply_empty(r, 204);
         } else {
@@ -337,15 +320,15 @@ on_job_action(struct sim_http_req *r, void *ud)
     const char *what = *end == '/' ? end + 1 : end;
     bool del = strcmp(sim_http_method(r), "DELETE") == 0;
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
+    sim_netprinter_status(s->b.np, &st);
     if (errno || end == rest || id != s->job_id || s->job_id == 0 || st.state == SIM_NP_IDLE ||
         (del ? *what != '\0' : (strcmp(what, "pause") && strcmp(what, "resume")))) {
         reply_err(r, 404, "NOT FOUND", "Job not found");
         return;
     }
-    int rc = del                          ? sim_netprinter_cancel(s->np, NULL)
-             : strcmp(what, "pause") == 0 ? sim_netprinter_pause(s->np, NULL)
-                                          : sim_netprinter_resume(s->np, NULL);
+    int rc = del                          ? sim_netprinter_cancel(s->b.np, NULL)
+             : strcmp(what, "pause") == 0 ? sim_netprinter_pause(s->b.np, NULL)
+                                          : sim_netprinter_resume(s->b.np, NULL);
     if (rc) {
         reply_err(r, 409, "CONFLICT", "Job is not in a state that allows this");
         return;
@@ -367,40 +350,33 @@ static const struct sim_http_route routes[] = {
 };
 
 static void
-on_watch(struct loop *l, void *ud)
+on_watch(void *ud)
 {
     struct sim_prusalink *s = ud;
-    s->watch = loop_timer_add(l, WATCH_MS, on_watch, s);
     struct sim_np_status st;
-    sim_netprinter_status(s->np, &st);
-    sim_http_outage_watch(s->http, sim_np_running(&st), st.lines_done);
+    sim_netprinter_status(s->b.np, &st);
+    sim_http_outage_watch(s->b.http, sim_np_running(&st), st.lines_done);
     if (st.state != SIM_NP_PRINTING)
         return;
     long done = (long)st.lines_done;
     if (s->cfg.error_at && !s->fired_error && done >= s->cfg.error_at) {
         s->fired_error = true;
-        sim_netprinter_fail(s->np, "Thermal runaway: heater nozzle");
+        sim_netprinter_fail(s->b.np, "Thermal runaway: heater nozzle");
     } else if (s->cfg.cancel_at && !s->fired_cancel && done >= s->cfg.cancel_at) {
         s->fired_cancel = true;
-        sim_netprinter_cancel(s->np, NULL); /* stopped on the printer's screen */
+        sim_netprinter_cancel(s->b.np, NULL); /* stopped on the printer's screen */
     }
 }
 
 struct sim_prusalink *
 sim_prusalink_new(struct loop *l, const struct sim_prusalink_config *c, struct sf_err *err)
 {
-    struct sim_prusalink *s = mem_calloc(1, sizeof(*s));
-    if (!s) {
-        sf_err_set(err, SF_ENOMEM, "prusalink sim: out of memory");
+    struct sim_prusalink *s = sim_netbase_alloc(sizeof(*s), "prusalink", err);
+    if (!s)
         return NULL;
-    }
-    s->l = l;
     s->cfg = *c;
     s->next_id = 100;
     s->busy_left = c->busy_uploads;
-    s->np = sim_netprinter_new(l, &c->machine, err);
-    if (!s->np)
-        goto fail;
     bool digest = c->user && c->user[0];
     struct sim_http_config hc = {
         .port = c->port,
@@ -414,13 +390,10 @@ sim_prusalink_new(struct loop *l, const struct sim_prusalink_config *c, struct s
         .digest_user = digest ? c->user : NULL,
         .digest_password = digest ? (c->password ? c->password : "") : NULL,
         .realm = "Printer API",
-        .upload_dir = sim_netprinter_uploads(s->np),
         .faults = c->http,
     };
-    s->http = sim_http_new(l, &hc, err);
-    if (!s->http)
+    if (sim_netbase_init(&s->b, l, &c->machine, &hc, WATCH_MS, on_watch, err))
         goto fail;
-    s->watch = loop_timer_add(l, WATCH_MS, on_watch, s);
     return s;
 fail:
     sim_prusalink_free(s);
@@ -430,25 +403,19 @@ fail:
 int
 sim_prusalink_port(const struct sim_prusalink *s)
 {
-    return sim_http_port(s->http);
+    return sim_netbase_port(&s->b);
 }
 
 void
 sim_prusalink_status(const struct sim_prusalink *s, struct sim_np_status *out)
 {
-    sim_netprinter_status(s->np, out);
+    sim_netbase_status(&s->b, out);
 }
 
 void
 sim_prusalink_free(struct sim_prusalink *s)
 {
-    if (!s)
-        return;
-    if (s->watch)
-        loop_timer_cancel(s->l, s->watch);
-    sim_http_free(s->http);
-    sim_netprinter_free(s->np);
-    free(s);
+    sim_netbase_free(s);
 }
 
 /* ---- slimfarm-sim prusalink (sim_netcli.h) ---- */
@@ -470,34 +437,12 @@ face_new(struct loop *l, const struct sim_net_opts *o, int index, struct sf_err 
     return sim_prusalink_new(l, &c, err);
 }
 
-static struct sim_netprinter *
-face_machine(void *sim)
-{
-    return ((struct sim_prusalink *)sim)->np;
-}
-
-static struct sim_http *
-face_http(void *sim)
-{
-    return ((struct sim_prusalink *)sim)->http;
-}
-
-static void
-face_free(void *sim)
-{
-    sim_prusalink_free(sim);
-}
-
 int
 sim_prusalink_main(int argc, char **argv)
 {
-    static const struct sim_net_face face = {
-        .create = face_new, .destroy = face_free, .machine = face_machine, .http = face_http
-    };
-    struct sim_net_opts o;
-    int rc = sim_net_parse(
-        argc, argv, &o,
+    return sim_netbase_main(
+        argc, argv,
         "faults: busy=N error=LINE cancel=LINE (the printer), and the HTTP and firmware\n"
-        "        faults of every simulator; --user/--password: HTTP Digest instead of the key\n");
-    return rc >= 0 ? rc : sim_net_serve(&o, &face);
+        "        faults of every simulator; --user/--password: HTTP Digest instead of the key\n",
+        face_new);
 }
