@@ -97,6 +97,35 @@ T_CASE(tetmesh_encloses_any_genus_and_several_shells)
     mesh_release(&sos);
 }
 
+/*
+ * An open shell (a box without its top, as mech-holes-shark's 431 rays of
+ * 5981 meet unpaired surfaces): the rays entering through its bottom never
+ * leave, and the envelope, which took everything above such an entry for
+ * inside, ran off its lattice open; TetGen then kept no tetrahedra.
+ */
+T_CASE(tetmesh_encloses_an_open_shell)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(20, 20, 10), &err), &err);
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < m.n_tris; i++)
+        if (!(mesh_tri_normal(&m, i).z > 0.5))
+            memcpy(m.t[n++], m.t[i], sizeof(*m.t));
+    T_EQ_INT(n, m.n_tris - 2);
+    m.n_tris = n;
+    T_OK(check_embedding(&m, &err), &err);
+    /* and it slims: its bottom rests on the bed, nothing to do, the input back */
+    struct slim_params p;
+    struct slim_result r;
+    quick_params(&p);
+    T_OK(slim_optimize(&m, &p, &r, &err), &err);
+    T_EQ_INT(r.best_iter, 0);
+    slim_result_release(&r);
+    mesh_release(&m);
+}
+
 T_CASE(tetmesh_respects_the_vertex_target)
 {
     struct mesh m;
