@@ -193,8 +193,9 @@ struct part_figures {
  * The figures of the mapped part w->cur, with one pass over its faces
  * (armadillo has 52k, several times its tets): the risky count as
  * measure_proxy gives it (centroid at least w->gap above the part's own
- * lowest point), and the overhang severity, the sum over risky faces of
- * area * (sin(alpha) - n . z) above the input's lowest point: how far past
+ * lowest point) but at the support model's threshold (tau = sin of
+ * safe_angle_deg), and the overhang severity, the sum over risky faces of
+ * area * (tau - n . z) above the input's lowest point: how far past
  * the threshold they lean.  A low-poly part (a tee has four risky
  * triangles) keeps the same risky count for many iterations while its
  * faces turn; the severity still falls, so it breaks the count's ties in
@@ -305,14 +306,32 @@ compute_drives(struct work *w, double tau_aim)
     return n;
 }
 
+/*
+ * The steepest face, in degrees from vertical, that needs no support by
+ * the layer-based model's rules (supmodel.c, slope_limit: PrusaSlicer 2.5's
+ * threshold T = round(90 - alpha), at least 1, supports faces up to T + 1
+ * degrees from the horizontal, see ../shared/SUPPORT-DETECTION.md (1)).
+ * At alpha 45 a face 44.5 degrees from vertical is safe by alpha and
+ * supported by PrusaSlicer: counted by alpha alone, the loop stopped
+ * turning faces in that band and the model, which picks the result, still
+ * saw their support.
+ */
+static double
+safe_angle_deg(double angle_deg)
+{
+    double t = fmax(floor(90 - angle_deg + 0.5), 1);
+    return fmax(90 - (t + 1), 0);
+}
+
 /* One round at penalty beta; *within says whether its last iterate held the limits. */
 static int
 run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *curve, int *n_curve,
           bool *within, struct sf_err *err)
 {
     const struct slim_params *p = w->cx->p;
-    double tau = sin(p->angle_deg * M_PI / 180), beta = beta_deg * M_PI / 180;
-    double tau_aim = sin(fmin(p->angle_deg - p->margin_deg, 89.9) * M_PI / 180);
+    double safe_deg = safe_angle_deg(p->angle_deg);
+    double tau = sin(safe_deg * M_PI / 180), beta = beta_deg * M_PI / 180;
+    double tau_aim = sin(fmax(safe_deg - p->margin_deg, 0) * M_PI / 180);
     memcpy(w->x, w->tm.x, sizeof(*w->x) * w->tm.n_verts);
     memcpy(w->cur.v, w->d->in.v, sizeof(*w->cur.v) * w->cur.n_verts);
     uint32_t best_seen = curve[0];
@@ -648,7 +667,7 @@ run_dir(struct ctx *cx, struct dir *d, struct sf_err *err)
     }
     struct part_figures pf0; /* the input */
     memcpy(w.cur.v, d->in.v, sizeof(*w.cur.v) * w.cur.n_verts);
-    measure_part(&w, sin(p->angle_deg * M_PI / 180), &pf0);
+    measure_part(&w, sin(safe_angle_deg(p->angle_deg) * M_PI / 180), &pf0);
     offer(w.list, &w.n_list, (struct cand){ NULL, pf0.n_risky, pf0.severity, 0, 0, 0 });
     uint32_t curve[SLIM_CURVE_MAX];
     curve[0] = pf0.n_risky;

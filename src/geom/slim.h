@@ -59,7 +59,9 @@ struct slim_progress {
 
 struct slim_params {
     double angle_deg;     /* alpha: self-supporting angle from vertical (45) */
-    double margin_deg;    /* the minimal rotation aims this far past alpha (5): the global
+    double margin_deg;    /* the minimal rotation aims this far past the steepest face the
+                             support model leaves unsupported (alpha less PrusaSlicer's
+                             inclusive degree; 5): the global
                              step realises only part of each target, so aiming at the
                              threshold itself stalls just short of it */
     double beta_deg;      /* starting penalty angle (0) */

@@ -25,6 +25,33 @@ quick_params(struct slim_params *p)
     p->threads = 1;
 }
 
+/* The tee's left arm (shape_tee), held by the cases that fix it. */
+static const struct slim_box tee_left_arm = { { -30, -1, 28 }, { -6, 21, 36 } };
+
+/*
+ * The tee cases' preamble: shape_tee in m (initialised here; mesh_release
+ * it) and quick parameters at alpha 75 degrees, where its flat arms are
+ * safe once tilted 16 (PrusaSlicer's threshold 15, + 1 inclusive), with a
+ * deviation budget its 20 mm arms can turn in (0.5 / 0.5; they cannot in
+ * the default 5 % / 1.5 %).  With hold_left the left arm is fixed by a box
+ * and the bottom by 3 mm.
+ */
+static int
+tee_at_75(struct mesh *m, struct slim_params *p, bool hold_left, struct sf_err *err)
+{
+    mesh_init(m);
+    quick_params(p);
+    p->angle_deg = 75;
+    p->max_mndr = 0.5;
+    p->max_andr = 0.5;
+    if (hold_left) {
+        p->fix_boxes = &tee_left_arm;
+        p->n_fix_boxes = 1;
+        p->fix_bottom_mm = 3;
+    }
+    return shape_tee(m, err);
+}
+
 /* a and b side by side (b moved by off) as one mesh */
 static int
 concat(struct mesh *out, const struct mesh *a, const struct mesh *b, struct vec3 off,
@@ -326,15 +353,12 @@ T_CASE(tee_at_75_degrees_stays_within_the_limits)
     struct sf_err err;
     struct slim_params p;
     struct slim_result r;
-    mesh_init(&m);
-    T_OK(shape_tee(&m, &err), &err);
-    quick_params(&p);
+    T_OK(tee_at_75(&m, &p, false, &err), &err);
     p.beta_step_deg = 15; /* fewer rounds: the sanitizer build is slow */
-    /* the tee's 20 mm arms cannot turn within the default 5 % / 1.5 %: a
-       budget where they can, to see the limits and the volume kept; at 75
-       degrees they turn far enough (past 16, aimed at 85) for PrusaSlicer to
-       drop their support (0.00 g at --angle 75, the input 6.17 g) */
-    p.angle_deg = 75;
+    /* a tighter budget, still one the arms can turn in, to see the limits and
+       the volume kept; aimed 10 degrees past the model's 16, they turn far
+       enough for PrusaSlicer to drop their support (0.00 g at --angle 75, the
+       input 6.17 g) */
     p.margin_deg = 10;
     p.max_mndr = 0.15;
     p.max_andr = 0.05;
@@ -368,17 +392,7 @@ T_CASE(a_small_saving_keeps_the_input)
     struct sf_err err;
     struct slim_params p;
     struct slim_result any, dflt, none;
-    mesh_init(&m);
-    T_OK(shape_tee(&m, &err), &err);
-    quick_params(&p);
-    p.angle_deg = 75;
-    p.margin_deg = 10;
-    p.max_mndr = 0.5;
-    p.max_andr = 0.5;
-    struct slim_box box = { v3(-30, -1, 28), v3(-6, 21, 36) };
-    p.fix_boxes = &box;
-    p.n_fix_boxes = 1;
-    p.fix_bottom_mm = 3;
+    T_OK(tee_at_75(&m, &p, true, &err), &err);
     p.min_gain = 0;
     T_OK(slim_optimize(&m, &p, &any, &err), &err);
     T_TRUE(any.best_iter > 0 && any.model_after_g < any.model_before_g);
@@ -461,19 +475,8 @@ T_CASE(fixed_vertices_never_move)
     struct sf_err err;
     struct slim_params p;
     struct slim_result r;
-    mesh_init(&m);
-    T_OK(shape_tee(&m, &err), &err);
-    quick_params(&p);
-    p.angle_deg = 75;
-    /* aim well past the limit: the support model (PrusaSlicer's T + 1 rule) still
-       supports an arm that ends up at 16 degrees, as the default 5 leaves it */
-    p.margin_deg = 10;
-    p.max_mndr = 0.5;
-    p.max_andr = 0.5;
-    struct slim_box box = { v3(-30, -1, 28), v3(-6, 21, 36) }; /* the left arm */
-    p.fix_boxes = &box;
-    p.n_fix_boxes = 1;
-    p.fix_bottom_mm = 3;
+    T_OK(tee_at_75(&m, &p, true, &err), &err);
+    const struct slim_box box = tee_left_arm;
     T_OK(slim_optimize(&m, &p, &r, &err), &err);
     T_TRUE(r.best_iter > 0); /* it did deform */
     int n_fixed = 0, n_moved = 0;
@@ -602,36 +605,27 @@ T_CASE(shared_mesh_support_drops_within_limits)
     mesh_release(&m);
 }
 
-T_CASE(no_gain_by_the_support_model_keeps_the_input)
+T_CASE(faces_in_prusaslicers_inclusive_degree_are_turned)
 {
-    /* The tee at 75 degrees with its left arm held: the free arm rises to
-       about 16 degrees, which halves the ray-cast volume (faces flatter than
-       15 degrees are risky) but PrusaSlicer's T + 1 rule still supports it,
-       and the taller arm needs longer columns: the support model sees no
-       saving, so the input stays (the ray-cast acceptance took the iterate).
-       PrusaSlicer 2.5 at --angle 75: arms planar at 15.5 degrees 8.18 g, the
-       flat tee 6.17 g. */
+    /* The tee at 75 degrees with its left arm held, at the default margin:
+       PrusaSlicer (threshold 15, + 1 inclusive) supports faces flatter than
+       16 degrees, so the free arm must rise past 16, not stall between 15
+       and 16, where the support model still prices it (PrusaSlicer 2.5 at
+       --angle 75: arms planar at 15.5 degrees 8.18 g, the flat tee 6.17 g)
+       and the input came back. */
     struct mesh m;
     struct sf_err err;
     struct slim_params p;
     struct slim_result r;
-    mesh_init(&m);
-    T_OK(shape_tee(&m, &err), &err);
-    quick_params(&p);
-    p.angle_deg = 75;
-    p.max_mndr = 0.5;
-    p.max_andr = 0.5;
-    struct slim_box box = { v3(-30, -1, 28), v3(-6, 21, 36) };
-    p.fix_boxes = &box;
-    p.n_fix_boxes = 1;
-    p.fix_bottom_mm = 3;
+    T_OK(tee_at_75(&m, &p, true, &err), &err);
     T_OK(slim_optimize(&m, &p, &r, &err), &err);
-    T_EQ_INT(r.best_iter, 0);
-    T_TRUE(r.model_before_g > 4); /* PrusaSlicer: 6.17 g; the model 4.96 */
-    T_EQ_DBL(r.model_after_g, r.model_before_g, 1e-12);
-    T_EQ_INT(r.out.n_verts, m.n_verts);
-    for (uint32_t v = 0; v < m.n_verts; v++)
-        T_EQ_DBL(v3_len(v3_sub(r.out.v[v], m.v[v])), 0, 1e-9);
+    T_TRUE(r.model_before_g > 4); /* PrusaSlicer: 6.17 g */
+    T_TRUE(r.best_iter > 0);
+    T_TRUE(r.model_after_g <= (1 - p.min_gain) * r.model_before_g);
+    double left, right;
+    tip_heights(&m, &r.out, &left, &right);
+    T_EQ_DBL(left, 30, 0);
+    T_TRUE(right > 31);
     slim_result_release(&r);
     mesh_release(&m);
 }
