@@ -55,6 +55,9 @@ struct slim_progress {
     int iter, max_iters; /* iteration just done, from 1 */
     uint32_t n_risky;    /* risky faces of the part now */
     double mndr, andr;   /* deviation now */
+    double model_g;      /* the support model's grams of this iterate (supmodel.h, PrusaSlicer's
+                            rules; rescaled with keep_volume), which ranks it; NAN when it is
+                            past the limits and not weighed */
 };
 
 struct slim_params {
@@ -98,9 +101,10 @@ void slim_params_default(struct slim_params *p);
 struct slim_result {
     struct mesh out;      /* the slimmed part in the print orientation (mesh_release) */
     struct mat3 rotation; /* applied to the input first (identity unless searched) */
-    struct support_metrics before, after; /* ray-cast metrics, input (rotated) vs output */
-    /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams: it picks the
-       iterate and the direction, and a result must save min_gain of the input's */
+    struct support_metrics before, after; /* ray-cast metrics, the input as given vs output */
+    /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams of the input as
+       given and of out: it picks the iterate and the direction, and a result (slimmed, turned
+       or both) must save min_gain of the input's */
     double model_before_g, model_after_g;
     struct deviation dev; /* MNDR / ANDR of out against the rotated input */
     /* enclosed volume of the rotated input and of out (mesh_volume): equal up to rounding with
@@ -134,6 +138,7 @@ struct slim_result {
         double rhs_s;        /* right-hand sides */
         double solve_s;      /* back-substitutions */
         double part_s;       /* mapping the part, measuring it, finding the drives */
+        double score_s;      /* weighing each iterate within the limits by the support model */
         double choose_s;     /* checking the kept iterates (self-intersection, ray cast) */
     } timing;
 };
