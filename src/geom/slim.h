@@ -7,19 +7,20 @@
  * local/global ARAP loop (arap.h) rotates the tets whose surface faces
  * overhang toward safe orientations by the minimal rotation, keeping the
  * bottom fixed; the part follows through barycentric coordinates.  The
- * iterate with the fewest risky faces is kept; if the deviation limits
- * (MNDR, ANDR) fail, the penalty angle beta is raised and the loop runs
- * again.  Optionally, print directions on a grid of rotations about x and
- * y are each optimized (in parallel) and the one needing the least support
- * volume wins (the paper's extension).  A result never has inverted tets
+ * iterate the layer-based support model (supmodel.h) gives the fewest
+ * grams is kept; if the deviation limits (MNDR, ANDR) fail, the penalty
+ * angle beta is raised and the loop runs again.  Optionally, print
+ * directions on a grid of rotations about x and y are each optimized (in
+ * parallel) and the one the model gives the fewest grams wins (the
+ * paper's extension).  A result never has inverted tets
  * or new self-intersections: it falls back to the best clean iterate, and
  * at worst to the input.
  *
  * Volume: the deformation shrinks the part (arap.h, "Volume"), and a
  * smaller part needs less support for that reason alone.  So by default
  * (keep_volume) each kept iterate is scaled uniformly about its bed contact
- * back to the input's volume before it is checked (deviation limits, self-
- * intersections, ray-cast support no more than the input's): a uniform
+ * back to the input's volume before it is weighed and checked (deviation
+ * limits, self-intersections, min_gain of the model's grams): a uniform
  * scale turns no face, so the risky faces stay as they were, and the part
  * keeps resting on the bed.  The fixed bottom then scales with the part
  * (it stays on the bed; its outline grows by the scale, 1-7 % on the
@@ -83,7 +84,7 @@ struct slim_params {
     double search_max_deg;     /* largest tilt about each axis (30) */
     int threads;               /* threads for the search, at most (0: par.h's budget) */
     double min_gain;           /* keep the input unless the result needs at least this fraction
-                                  less ray-cast support (0.05): a part's shape is not changed
+                                  less support by the model (0.05): a part's shape is not changed
                                   for a saving the slicers' own rules blur (orient.h keeps its
                                   input orientation by the same rule) */
     bool keep_volume;          /* scale the result uniformly about its bed contact so its volume
