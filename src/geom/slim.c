@@ -12,10 +12,10 @@
  * faces (measure_proxy), MNDR and ANDR (measure_deviation), inverted tets.
  * Clean iterates within the deviation limits are weighed by the layer-based
  * support model (supmodel.h) and offered to a short list of the best
- * (fewest grams, then fewest risky faces).  A round stops when the risky
- * count has not dropped for `patience` iterations; if its last iterate
- * breaks the limits, beta is raised and a new round starts (Hu 2015, sec.
- * 5.1).  The first listed iterate with no new self-intersection (selfx.h)
+ * (fewest grams, then fewest risky faces).  A round stops when neither the
+ * risky count nor the grams have dropped for `patience` iterations; if its
+ * last iterate breaks the limits, beta is raised and a new round starts
+ * (Hu 2015, sec. 5.1).  The first listed iterate with no new self-intersection (selfx.h)
  * is the answer if it saves min_gain of the input's grams, each scaled back
  * to the input's volume before it is weighed and checked (keep_volume,
  * slim.h); the input itself is always on the list.
@@ -381,7 +381,7 @@ support_of(const struct mesh *m, double angle_deg, struct support_metrics *sm, d
 }
 
 /*
- * Scale the mapped part w->cur uniformly about its bed contact (the mean of
+ * Scale part m uniformly about its bed contact (the mean of
  * its vertices within gap_mm of its lowest point, at that height) so that
  * its enclosed volume is vol_mm3; returns the scale, 1 when it cannot
  * (no volume).  The deformation shrinks parts (arap.h, "Volume"); a uniform
