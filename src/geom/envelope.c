@@ -50,7 +50,19 @@ lat_pos(const struct lattice *l, size_t idx)
     return v3(l->o.x + i * l->h, l->o.y + j * l->h, l->o.z + k * l->h);
 }
 
-/* Inside test from the rays structure: the last hit below z on column (ci, cj). */
+/*
+ * Inside test from the rays structure: the winding count of column (ci, cj)
+ * below z (entering hits +1, leaving -1) and the same counted down from
+ * above z (leaving +1, entering -1) are both positive.  For a closed part
+ * the two are equal (a column's hits sum to zero) and this is the plain
+ * winding test, overlapping shells included.  An open shell (a missing
+ * top, a hole) leaves a column with an entering hit and no leaving one:
+ * counted from below alone everything above it is inside up to the
+ * lattice's top, the contour runs off the lattice and is not closed, and
+ * TetGen, carving the tets outside a surface that does not enclose them,
+ * keeps none ("no tetrahedra").  Counted from both ends, such a column is
+ * inside only under hits that do leave the part.
+ */
 static bool
 inside_at(const struct ray_grid *g, long ci, long cj, double z)
 {
@@ -58,10 +70,15 @@ inside_at(const struct ray_grid *g, long ci, long cj, double z)
         return false;
     uint32_t c = ray_grid_cell(g, (uint32_t)ci, (uint32_t)cj);
     double hz = z - g->base;
-    bool in = false;
-    for (uint32_t k = g->first[c]; k < g->first[c + 1] && g->hits[k].h < hz; k++)
-        in = g->hits[k].cos_up < 0;
-    return in;
+    int below = 0, above = 0;
+    for (uint32_t k = g->first[c]; k < g->first[c + 1]; k++) {
+        int s = g->hits[k].cos_up < 0 ? 1 : g->hits[k].cos_up > 0 ? -1 : 0;
+        if (g->hits[k].h < hz)
+            below += s;
+        else
+            above -= s;
+    }
+    return below > 0 && above > 0;
 }
 
 static int
@@ -95,6 +112,12 @@ fill_field(struct lattice *l, const struct mesh *part, double offset, struct sf_
                 if (inside_at(&g, (long)i - pad_x, (long)j - pad_y, p.z))
                     d = -d;
                 float f = (float)(d - offset);
+                /* the lattice's border lies 2 pitches past the offset: outside, always, so
+                   the contour closes whatever the inside test says */
+                bool border = i == 0 || j == 0 || k == 0 || i + 1 == l->n[0] || j + 1 == l->n[1] ||
+                              k + 1 == l->n[2];
+                if (border)
+                    f = fmaxf(f, 1e-6f);
                 l->f[idx] = f != 0 ? f : 1e-6f; /* no corner exactly on the contour */
             }
     surface_dist_free(sd);

@@ -7,19 +7,20 @@
  * local/global ARAP loop (arap.h) rotates the tets whose surface faces
  * overhang toward safe orientations by the minimal rotation, keeping the
  * bottom fixed; the part follows through barycentric coordinates.  The
- * iterate with the fewest risky faces is kept; if the deviation limits
- * (MNDR, ANDR) fail, the penalty angle beta is raised and the loop runs
- * again.  Optionally, print directions on a grid of rotations about x and
- * y are each optimized (in parallel) and the one needing the least support
- * volume wins (the paper's extension).  A result never has inverted tets
+ * iterate the layer-based support model (supmodel.h) gives the fewest
+ * grams is kept; if the deviation limits (MNDR, ANDR) fail, the penalty
+ * angle beta is raised and the loop runs again.  Optionally, print
+ * directions on a grid of rotations about x and y are each optimized (in
+ * parallel) and the one the model gives the fewest grams wins (the
+ * paper's extension).  A result never has inverted tets
  * or new self-intersections: it falls back to the best clean iterate, and
  * at worst to the input.
  *
  * Volume: the deformation shrinks the part (arap.h, "Volume"), and a
  * smaller part needs less support for that reason alone.  So by default
  * (keep_volume) each kept iterate is scaled uniformly about its bed contact
- * back to the input's volume before it is checked (deviation limits, self-
- * intersections, ray-cast support no more than the input's): a uniform
+ * back to the input's volume before it is weighed and checked (deviation
+ * limits, self-intersections, min_gain of the model's grams): a uniform
  * scale turns no face, so the risky faces stay as they were, and the part
  * keeps resting on the bed.  The fixed bottom then scales with the part
  * (it stays on the bed; its outline grows by the scale, 1-7 % on the
@@ -55,11 +56,16 @@ struct slim_progress {
     int iter, max_iters; /* iteration just done, from 1 */
     uint32_t n_risky;    /* risky faces of the part now */
     double mndr, andr;   /* deviation now */
+    double model_g;      /* the support model's grams of this iterate (supmodel.h, PrusaSlicer's
+                            rules; rescaled with keep_volume), which ranks it; NAN when it is
+                            past the limits and not weighed */
 };
 
 struct slim_params {
     double angle_deg;     /* alpha: self-supporting angle from vertical (45) */
-    double margin_deg;    /* the minimal rotation aims this far past alpha (5): the global
+    double margin_deg;    /* the minimal rotation aims this far past the steepest face the
+                             support model leaves unsupported (alpha less PrusaSlicer's
+                             inclusive degree; 5): the global
                              step realises only part of each target, so aiming at the
                              threshold itself stalls just short of it */
     double beta_deg;      /* starting penalty angle (0) */
@@ -78,7 +84,7 @@ struct slim_params {
     double search_max_deg;     /* largest tilt about each axis (30) */
     int threads;               /* threads for the search, at most (0: par.h's budget) */
     double min_gain;           /* keep the input unless the result needs at least this fraction
-                                  less ray-cast support (0.05): a part's shape is not changed
+                                  less support by the model (0.05): a part's shape is not changed
                                   for a saving the slicers' own rules blur (orient.h keeps its
                                   input orientation by the same rule) */
     bool keep_volume;          /* scale the result uniformly about its bed contact so its volume
@@ -96,9 +102,10 @@ void slim_params_default(struct slim_params *p);
 struct slim_result {
     struct mesh out;      /* the slimmed part in the print orientation (mesh_release) */
     struct mat3 rotation; /* applied to the input first (identity unless searched) */
-    struct support_metrics before, after; /* ray-cast metrics, input (rotated) vs output */
-    /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams: it picks the
-       iterate and the direction, and a result must save min_gain of the input's */
+    struct support_metrics before, after; /* ray-cast metrics, the input as given vs output */
+    /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams of the input as
+       given and of out: it picks the iterate and the direction, and a result (slimmed, turned
+       or both) must save min_gain of the input's */
     double model_before_g, model_after_g;
     struct deviation dev; /* MNDR / ANDR of out against the rotated input */
     /* enclosed volume of the rotated input and of out (mesh_volume): equal up to rounding with
@@ -132,6 +139,7 @@ struct slim_result {
         double rhs_s;        /* right-hand sides */
         double solve_s;      /* back-substitutions */
         double part_s;       /* mapping the part, measuring it, finding the drives */
+        double score_s;      /* weighing each iterate within the limits by the support model */
         double choose_s;     /* checking the kept iterates (self-intersection, ray cast) */
     } timing;
 };
