@@ -36,8 +36,10 @@ T_CASE(supmodel_tee_arms_are_supported_from_the_bed)
         p.bridges = false; /* PrusaSlicer's bridge rule: the next case */
         struct supmodel_result r;
         T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
-        /* two 20 x 20 arms; the raster loses at most a cell's strip along the stem */
-        T_TRUE(r.contact_area_mm2 > 760 && r.contact_area_mm2 <= 800);
+        /* two 20 x 20 arms, the strip along the stem included (the slicers
+           grow the overhang back to the layer below); the raster's cells
+           along the arms' edges count whole */
+        T_EQ_DBL(r.contact_area_mm2, 800, 40);
         /* columns from the arms' underside (z 30) less the gap down to the bed */
         T_EQ_DBL(r.shadow_mm3 / r.contact_area_mm2, 30 - p.gap_z_mm, 0.3);
         T_TRUE(r.grams > 0 && r.time_s > 0);
@@ -423,5 +425,42 @@ T_CASE(supmodel_prusa_supports_a_lip_a_few_tenths_wide)
         /* under the lip (its whole length), from z 20 down to the bed */
         T_TRUE(r.contact_area_mm2 > 0.5 * 20 * 0.3);
         T_EQ_DBL(r.shadow_mm3 / r.contact_area_mm2, 20 - p.gap_z_mm, 0.3);
+    }
+}
+
+T_CASE(supmodel_prusa_supports_a_narrow_chamfer_along_a_wall)
+{
+    /* A wall steps out 0.6 mm over a 45-degree chamfer (a bore's edge under
+       its ceiling, couplingdown's): every layer crossing the chamfer passes
+       the one below by h / tan 45 = 0.2 > d = 0.19 mm, so PrusaSlicer
+       supports the whole chamfer.  The neighbours' test alone finds the wall
+       a raster step away and drops the cells within a step of it
+       (couplingdown as given: 4.9 g in the model, 5.74 g in PrusaSlicer).
+       Every ray that meets the chamfer is a contact, at any raster phase. */
+    struct supmodel_params p;
+    supmodel_params_default(&p, SUPMODEL_PRUSA);
+    p.bridges = false; /* (a chamfer is no bridge; the count is the contacts') */
+    for (int k = 0; k < 8; k++) {
+        struct mesh m;
+        struct sf_err err;
+        struct supmodel_result r;
+        double w = 10 + k * p.pitch_mm / 8;
+        double x[6] = { 0, w, w, w + 0.6, w + 0.6, 0 };
+        double z[6] = { 0, 0, 15, 15.6, 25, 25 };
+        mesh_init(&m);
+        T_OK(shape_extrude_xz(&m, x, z, 6, 20, &err), &err);
+        struct raycast *rc = raycast_new(&m, &err);
+        T_TRUE(rc != NULL);
+        struct ray_grid g;
+        T_OK(raycast_grid(rc, v3(0, 0, 1), supmodel_raster_pitch(&p), &g, &err), &err);
+        uint32_t on_chamfer = 0;
+        for (size_t c = 0; c < (size_t)g.nu * g.nw; c++)
+            on_chamfer += g.first[c] < g.first[c + 1] && g.hits[g.first[c]].h > 14.9;
+        T_OK(supmodel_eval_grid(&g, &p, &r, &err), &err);
+        T_TRUE(on_chamfer > 0);
+        T_EQ_INT(r.n_contacts, on_chamfer);
+        ray_grid_release(&g);
+        raycast_free(rc);
+        mesh_release(&m);
     }
 }
