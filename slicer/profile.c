@@ -264,7 +264,7 @@ slice_profile_default(struct slice_profile *p)
         .retract_only_crossing = true,
         .support = true,
         .support_angle_deg = 0,
-        .support_pitch_mm = 0.5, /* the support model's raster (supmodel.h) */
+        .support_pitch_mm = 0.25, /* the support model's raster (supmodel.h) */
         .support_z_gap_mm = 0.2,
         .support_xy_gap_mm = 0.3,
         .support_interface_layers = 3, /* PrusaSlicer 2.5: 3 top, as many bottom */
@@ -430,8 +430,9 @@ slice_profile_check(const struct slice_profile *p, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL,
                           "fan_below_layer_time %g is below slowdown_below_layer_time %g",
                           p->fan_below_s, p->slowdown_below_s);
-    if (p->support_pitch_mm < p->solid_width_mm)
-        return sf_err_set(err, SF_EINVAL, "support_pitch %g is below the line width",
+    /* the pitch is the detection raster: columns fill whole snap cells (supmodel.h) */
+    if (p->support_pitch_mm < 0.5 * p->solid_width_mm)
+        return sf_err_set(err, SF_EINVAL, "support_pitch %g is below half the line width",
                           p->support_pitch_mm);
     return SF_OK;
 }

@@ -48,7 +48,7 @@ struct supmodel_params {
     enum supmodel_slicer slicer; /* whose rules: PrusaSlicer 2.5 or CuraEngine 4.13 */
     double angle_deg;            /* alpha, largest self-supporting angle from vertical (45) */
     double layer_mm;             /* layer height (0.2, as ../shared/peers sets) */
-    double pitch_mm;             /* raster pitch, at most (0.5; see supmodel_raster_pitch) */
+    double pitch_mm;             /* raster pitch, at most (0.25; see supmodel_raster_pitch) */
     double gap_z_mm;             /* contact distance above and below support (0.2) */
     double gap_xy_mm;            /* support kept this far from the part (0.225 / 0.7) */
     double snap_mm;              /* support footprint cell (PrusaSlicer 2.84, CuraEngine 2) */

@@ -15,6 +15,7 @@
 #include "../../src/base/buf.h"
 #include "../../src/base/mem.h"
 #include "../../src/geom/measure.h"
+#include "../../src/geom/supmodel.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
 #include "slice_run.h"
@@ -162,10 +163,14 @@ T_CASE(slice_island_gets_support)
     struct slice_result res;
     T_OK(ts_slice(&m, &p, "island", &res, path, sizeof(path), &err), &err);
     /* the support model's layer rule finds the tip itself (no neighbouring
-       column is solid below it); its columns fill the 3 mm snap cells (of
-       1 mm cells) the tip's rays fall in, at most four */
+       column is solid below it); its columns fill the snap cells (of the
+       model's raster cells) the tip's rays fall in, at most four */
+    struct supmodel_params mp;
+    supmodel_params_default(&mp, SUPMODEL_PRUSA);
+    mp.pitch_mm = p.support_pitch_mm;
+    double k = round(mp.snap_mm / supmodel_raster_pitch(&mp)); /* raster cells a side */
     if (res.n_columns + res.n_island_columns < 1 ||
-        res.n_columns + res.n_island_columns > 4 * 9 + 4)
+        res.n_columns + res.n_island_columns > 4 * k * k + 4)
         t_fail(__FILE__, __LINE__, "%u columns, %u island columns", res.n_columns,
                res.n_island_columns);
     /* from the plate (+0.2 gap) to 0.2 under the tip (4.6 mm), in the cells
