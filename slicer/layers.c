@@ -439,6 +439,7 @@ layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, 
         paths_init(&out->l[k].inner);
         paths_init(&out->l[k].skin);
         paths_init(&out->l[k].skin_bottom);
+        paths_init(&out->l[k].small);
         paths_init(&out->l[k].solid);
         paths_init(&out->l[k].top);
         paths_init(&out->l[k].sparse);
@@ -537,6 +538,7 @@ layer_stack_release(struct layer_stack *s)
         paths_release(&s->l[k].inner);
         paths_release(&s->l[k].skin);
         paths_release(&s->l[k].skin_bottom);
+        paths_release(&s->l[k].small);
         paths_release(&s->l[k].solid);
         paths_release(&s->l[k].top);
         paths_release(&s->l[k].sparse);

@@ -37,6 +37,9 @@ struct layer {
     struct paths skin;        /* the surface open to the air above, and its part in inner
                                  grown skin_margin: toolpath_areas() */
     struct paths skin_bottom; /* the same for the surface open below */
+    struct paths small;       /* pieces of inner away from this layer's own top and bottom
+                                 surfaces no larger than solid_infill_below_area: solid
+                                 (toolpath_areas()) */
     /* the infill area split by toolpath_store_regions(): solid, top solid
        and sparse (the layer above bridges over this sparse) */
     struct paths solid, top, sparse;
