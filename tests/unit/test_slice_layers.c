@@ -560,6 +560,42 @@ T_CASE(poly_index_crossing)
     paths_release(&c);
 }
 
+T_CASE(fill_lines_cut_by_the_region)
+{
+    /* a 10 mm square with a 4 mm hole, off the 1 mm grid by 0.25: lines
+       at y = 1..10 (10 x 10 mm), 4 of them cut by the hole (4 mm each),
+       in 14 pieces */
+    struct paths r, lines;
+    paths_init(&r);
+    paths_init(&lines);
+    double o = 0.25;
+    struct ipt sq[4] = { { poly_i(o), poly_i(o) },
+                         { poly_i(10 + o), poly_i(o) },
+                         { poly_i(10 + o), poly_i(10 + o) },
+                         { poly_i(o), poly_i(10 + o) } };
+    struct ipt hole[4] = { { poly_i(3 + o), poly_i(3 + o) },
+                           { poly_i(3 + o), poly_i(7 + o) },
+                           { poly_i(7 + o), poly_i(7 + o) },
+                           { poly_i(7 + o), poly_i(3 + o) } };
+    T_TRUE(paths_add(&r, sq, 4));
+    T_TRUE(paths_add(&r, hole, 4));
+    T_OK(tp_fill_lines(&r, 0, 1, &lines), NULL);
+    T_EQ_INT(lines.n, 14);
+    double total = 0;
+    for (uint32_t k = 0; k < lines.n; k++)
+        total += paths_length_k(&lines, k, false);
+    T_EQ_DBL(total, 100 - 16, 1e-4);
+    /* at 45 degrees: the area over the spacing, within a line or two */
+    paths_reset(&lines);
+    T_OK(tp_fill_lines(&r, 45, 0.5, &lines), NULL);
+    total = 0;
+    for (uint32_t k = 0; k < lines.n; k++)
+        total += paths_length_k(&lines, k, false);
+    T_EQ_DBL(total, 84 / 0.5, 2 * 10 * M_SQRT2);
+    paths_release(&r);
+    paths_release(&lines);
+}
+
 T_CASE(infill_anchors_follow_the_boundary)
 {
     /* two vertical lines across a 10 x 10 square, 4 mm apart, as
