@@ -121,21 +121,23 @@ cmp_xing(const void *x, const void *y)
 }
 
 /*
- * Lines of one island (or any set) at angle_deg, spacing_mm apart on the
- * bed's grid, cut to the region (nonzero rule) by a scanline: each edge
+ * Lines of one island (or any set) at angle_deg, spacing_mm apart, one
+ * through org, cut to the region (nonzero rule) by a scanline: each edge
  * adds its crossings with the lines it spans (half-open in the normal
  * direction, so a vertex on a line counts once), and each line's sorted
  * crossings open and close its pieces by the winding they add.  The same
  * pieces as clipping the lines with Clipper, a fraction of the work.
  */
 static int
-fill_set(const struct paths *region, double angle_deg, double spacing_mm, struct paths *out)
+fill_set(const struct paths *region, double angle_deg, double spacing_mm, const double org[2],
+         struct paths *out)
 {
     if (!region->n || spacing_mm <= 0)
         return SF_OK;
     double a = angle_deg * M_PI / 180, dx = cos(a), dy = sin(a);
     double nx = -dy, ny = dx; /* line normal */
     double sp = spacing_mm * POLY_SCALE;
+    double oc = (org[0] * nx + org[1] * ny) * POLY_SCALE; /* a line runs through org */
     size_t np = region->start[region->n], cap = np + 16, n = 0;
     struct xing *x = mem_array(cap, sizeof(*x));
     if (!x)
@@ -152,12 +154,12 @@ fill_set(const struct paths *region, double angle_deg, double spacing_mm, struct
             double lo = op < oq ? op : oq, hi = op < oq ? oq : op;
             double tp = (double)p.x * dx + (double)p.y * dy,
                    tq = (double)q.x * dx + (double)q.y * dy;
-            for (int64_t l = (int64_t)ceil(lo / sp); (double)l * sp < hi; l++) {
+            for (int64_t l = (int64_t)ceil((lo - oc) / sp); oc + (double)l * sp < hi; l++) {
                 if (n == cap && !mem_grow((void **)&x, &cap, n + 1, sizeof(*x))) {
                     rc = SF_ENOMEM;
                     break;
                 }
-                double o = (double)l * sp;
+                double o = oc + (double)l * sp;
                 x[n++] =
                     (struct xing){ l, tp + (o - op) / (oq - op) * (tq - tp), oq > op ? 1 : -1 };
             }
@@ -175,7 +177,7 @@ fill_set(const struct paths *region, double angle_deg, double spacing_mm, struct
             if (was == 0 && w != 0) {
                 t0 = x[j].t;
             } else if (was != 0 && w == 0 && x[j].t > t0) {
-                double o = (double)x[i].line * sp;
+                double o = oc + (double)x[i].line * sp;
                 struct ipt seg[2] = {
                     { llround(o * nx + t0 * dx), llround(o * ny + t0 * dy) },
                     { llround(o * nx + x[j].t * dx), llround(o * ny + x[j].t * dy) },
@@ -191,8 +193,10 @@ fill_set(const struct paths *region, double angle_deg, double spacing_mm, struct
 }
 
 int
-tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, struct paths *out)
+tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, double ox_mm,
+              double oy_mm, struct paths *out)
 {
+    const double org[2] = { ox_mm, oy_mm };
     /* island by island: lines cover only their own island's box, so
        Clipper does not intersect every line with every sliver of a layer */
     struct paths isl;
@@ -207,7 +211,7 @@ tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, s
             if (!paths_add(&isl, region->pts + region->start[k], paths_len(region, k)))
                 rc = SF_ENOMEM;
         if (rc == SF_OK)
-            rc = fill_set(&isl, angle_deg, spacing_mm, out);
+            rc = fill_set(&isl, angle_deg, spacing_mm, org, out);
         a = b;
     }
     paths_release(&isl);
@@ -778,6 +782,7 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
     paths_reset(&L->skin);
     paths_reset(&L->skin_bottom);
     paths_reset(&L->small);
+    paths_reset(&L->top_in);
     int rc;
     if (p->perimeters > 0)
         rc = clip_offset(&L->region, -(p->width_mm / 2 + (p->perimeters - 1) * sp + sp / 2),
@@ -804,9 +809,11 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
         else
             rc = paths_append(&a, &L->region) ? SF_OK : SF_ENOMEM;
         if (rc == SF_OK)
-            rc = skin_of(&a, &L->inner, p, &b, &c, out, &seeds);
+            rc = skin_of(&a, &L->inner, p, &b, &c, out, side ? &seeds : &L->top_in);
         paths_reset(&a);
     }
+    if (rc == SF_OK && !paths_append(&seeds, &L->top_in))
+        rc = SF_ENOMEM;
     if (rc == SF_OK && p->solid_below_mm2 > 0 && p->infill_density > 0) {
         /* the inner area away from this layer's own top and bottom
            surfaces, piece by piece: pieces no larger than
@@ -963,7 +970,7 @@ enum {
  */
 static double
 bridge_angle(const struct paths *piece, const struct paths_index *below, double spacing,
-             struct paths *lines, int *rc)
+             const double org[2], struct paths *lines, int *rc)
 {
     double best_cov = -1, best_max = INFINITY, best = 0;
     double cov[18], mx[18];
@@ -971,7 +978,7 @@ bridge_angle(const struct paths *piece, const struct paths_index *below, double 
         paths_reset(lines);
         cov[a] = 0;
         mx[a] = 0;
-        if ((*rc = tp_fill_lines(piece, a * 10.0, spacing, lines)) < 0)
+        if ((*rc = tp_fill_lines(piece, a * 10.0, spacing, org[0], org[1], lines)) < 0)
             return 0;
         for (uint32_t i = 0; i < lines->n; i++) {
             uint32_t n = paths_len(lines, i);
@@ -993,8 +1000,8 @@ bridge_angle(const struct paths *piece, const struct paths_index *below, double 
 /* Bridge lines over each piece of area (one outer and its holes), in
    the piece's own direction (bridge_angle) over the layer below. */
 static int
-bridges(const struct paths *area, const struct paths *below, double nz, struct layer_paths *out,
-        struct paths *grown, struct paths *lines, struct paths *piece)
+bridges(const struct paths *area, const struct paths *below, double nz, const double org[2],
+        struct layer_paths *out, struct paths *grown, struct paths *lines, struct paths *piece)
 {
     struct paths_index ix;
     int rc = clip_offset(below, nz, CLIP_JOIN_MITER, grown);
@@ -1011,10 +1018,10 @@ bridges(const struct paths *area, const struct paths *below, double nz, struct l
             if (!paths_add(piece, area->pts + area->start[i], paths_len(area, i)))
                 rc = SF_ENOMEM;
         k = e;
-        double ang = rc == SF_OK ? bridge_angle(piece, &ix, nz + 0.05, lines, &rc) : 0;
+        double ang = rc == SF_OK ? bridge_angle(piece, &ix, nz + 0.05, org, lines, &rc) : 0;
         paths_reset(lines);
         if (rc == SF_OK)
-            rc = tp_fill_lines(piece, ang, nz + 0.05, lines);
+            rc = tp_fill_lines(piece, ang, nz + 0.05, org[0], org[1], lines);
         if (rc == SF_OK)
             rc = tp_link(lines, piece, 2 * (nz + 0.05), nz / 2);
         if (rc == SF_OK)
@@ -1286,13 +1293,15 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
     }
     TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
     if (p->top_layers > 0) {
-        /* the part of the solid the next layer does not cover is the top surface */
+        /* the solid on this layer's top surface (opened, as
+           PrusaSlicer's detect_surfaces_type finds stTop) is top solid;
+           most layers of a smooth part have none inside the loops */
         if (k + 1 < s->n) {
-            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
-                          &t[T_TOP]));
-            TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
-                          &t[T_TMP]));
-            paths_move(&t[T_SOLID], &t[T_TMP]);
+            if (L->top_in.n && t[T_SOLID].n) {
+                TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &L->top_in, CLIP_NONZERO, &t[T_TOP]));
+                TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &L->top_in, CLIP_NONZERO, &t[T_TMP]));
+                paths_move(&t[T_SOLID], &t[T_TMP]);
+            }
         } else {
             paths_move(&t[T_TOP], &t[T_SOLID]);
         }
@@ -1343,7 +1352,8 @@ regions_of(const struct layer_stack *s, uint32_t k, const struct slice_profile *
  */
 static int
 internal_bridges(struct paths *solid, const struct paths *below_sparse, double nz, double ang,
-                 struct layer_paths *out, struct paths *t1, struct paths *t2, struct paths *lines)
+                 const double org[2], struct layer_paths *out, struct paths *t1, struct paths *t2,
+                 struct paths *lines)
 {
     int rc = clip_bool(CLIP_INTERSECTION, solid, below_sparse, CLIP_NONZERO, t1);
     if (rc < 0 || !t1->n)
@@ -1358,7 +1368,7 @@ internal_bridges(struct paths *solid, const struct paths *below_sparse, double n
         return rc;
     paths_move(solid, t1);
     paths_reset(lines);
-    if ((rc = tp_fill_lines(t2, ang, nz + 0.05, lines)) < 0)
+    if ((rc = tp_fill_lines(t2, ang, nz + 0.05, org[0], org[1], lines)) < 0)
         return rc;
     if ((rc = tp_link(lines, t2, 2 * (nz + 0.05), nz / 2)) < 0)
         return rc;
@@ -1401,7 +1411,11 @@ static int
 mark_overhangs(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
                struct layer_paths *out, struct paths *grown, struct paths *tmp)
 {
-    if (k == 0 || !p->overhangs || !out->p.n)
+    /* a loop's centre (at least half a line in) more than half a nozzle
+       out from the layer below puts a disc that wide in the bottom
+       surface, which its opening (a tenth of a line) keeps: no bottom
+       skin, no overhang */
+    if (k == 0 || !p->overhangs || !out->p.n || !s->l[k].skin_bottom.n)
         return SF_OK;
     int rc = clip_offset(&s->l[k - 1].region, p->nozzle_mm / 2, CLIP_JOIN_MITER, grown);
     if (rc < 0)
@@ -1479,6 +1493,9 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
     const struct layer *L = &s->l[k];
     double h = L->h_mm, w = p->width_mm, sw = p->solid_width_mm;
     double sp = tp_spacing(w, h), ssp = tp_spacing(sw, h);
+    /* the part's fills run on a grid through its bounding-box centre, as
+       PrusaSlicer's (Fill::_infill_direction), so both line up on a part */
+    const double org[2] = { s->cx_mm, s->cy_mm };
     struct paths t[T_N];
     for (int i = 0; i < T_N; i++)
         paths_init(&t[i]);
@@ -1496,14 +1513,14 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         paths_reset(&t[T_LINES]);
         /* the bed layer holds the columns down: 90 % dense, as PrusaSlicer prints it */
         double bsp = k == 0 ? ssp / 0.9 : p->support_spacing_mm;
-        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, bsp, &t[T_LINES]));
+        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, bsp, 0, 0, &t[T_LINES]));
         TRY(tp_link(&t[T_LINES], &t[T_TMP], 1.5 * bsp, sw / 2));
         TRY(add(out, &t[T_LINES], ROLE_SUPPORT, false, sw));
     }
     if (sup && sup->iface.n) {
         paths_reset(&t[T_LINES]);
         TRY(clip_offset(&sup->iface, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
-        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, ssp, &t[T_LINES]));
+        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, ssp, 0, 0, &t[T_LINES]));
         TRY(tp_link(&t[T_LINES], &t[T_TMP], 2 * ssp, sw / 2));
         TRY(add(out, &t[T_LINES], ROLE_INTERFACE, false, sw));
     }
@@ -1594,7 +1611,8 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
             TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_SOLID], CLIP_NONZERO, &t[T_KEEP]));
             TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
             paths_move(&t[T_SOLID], &t[T_TMP]);
-            TRY(bridges(&t[T_KEEP], &s->l[k - 1].region, nz, out, &t[T_TMP], &t[T_LINES], &t[T_S]));
+            TRY(bridges(&t[T_KEEP], &s->l[k - 1].region, nz, org, out, &t[T_TMP], &t[T_LINES],
+                        &t[T_S]));
         }
     }
     if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0 && p->infill_density > 0 &&
@@ -1622,15 +1640,15 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
                 break;
         }
         if (below->n)
-            TRY(internal_bridges(&t[T_SOLID], below, p->nozzle_mm, ang, out, &t[T_TMP], &t[T_KEEP],
-                                 &t[T_LINES]));
+            TRY(internal_bridges(&t[T_SOLID], below, p->nozzle_mm, ang, org, out, &t[T_TMP],
+                                 &t[T_KEEP], &t[T_LINES]));
     }
     paths_reset(&t[T_LINES]);
-    TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, &t[T_LINES]));
+    TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, org[0], org[1], &t[T_LINES]));
     TRY(tp_link(&t[T_LINES], &t[T_SOLID], 2 * ssp, sw / 2));
     TRY(add(out, &t[T_LINES], ROLE_SOLID, false, sw));
     paths_reset(&t[T_LINES]);
-    TRY(tp_fill_lines(&t[T_TOP], ang, ssp, &t[T_LINES]));
+    TRY(tp_fill_lines(&t[T_TOP], ang, ssp, org[0], org[1], &t[T_LINES]));
     TRY(tp_link(&t[T_LINES], &t[T_TOP], 2 * ssp, sw / 2));
     TRY(add(out, &t[T_LINES], ROLE_TOP, false, sw));
     if (p->infill_density > 0 && t[T_SPARSE].n) {
@@ -1643,10 +1661,11 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         paths_reset(&t[T_LINES]);
         if (strcmp(p->infill_pattern, "grid") == 0) {
             double gsp = 2 * sp / p->infill_density;
-            TRY(tp_fill_lines(&t[T_KEEP], 45, gsp, &t[T_LINES]));
-            TRY(tp_fill_lines(&t[T_KEEP], 135, gsp, &t[T_LINES]));
+            TRY(tp_fill_lines(&t[T_KEEP], 45, gsp, org[0], org[1], &t[T_LINES]));
+            TRY(tp_fill_lines(&t[T_KEEP], 135, gsp, org[0], org[1], &t[T_LINES]));
         } else {
-            TRY(tp_fill_lines(&t[T_KEEP], ang, sp / p->infill_density, &t[T_LINES]));
+            TRY(tp_fill_lines(&t[T_KEEP], ang, sp / p->infill_density, org[0], org[1],
+                              &t[T_LINES]));
         }
         TRY(tp_anchor(&t[T_LINES], &t[T_KEEP], p->infill_anchor_mm, p->infill_anchor_max_mm,
                       sp / 2));

@@ -139,11 +139,12 @@ int toolpath_skirt_brim(const struct layer_stack *s, uint32_t k, const struct sl
                         const struct support_layer *sup0, double brim_mm, struct layer_paths *lp);
 
 /*
- * Parallel lines at angle_deg, spacing_mm apart (aligned to the bed origin
- * so layers line up), clipped to region, appended to out as open paths.
+ * Parallel lines at angle_deg, spacing_mm apart, one of them through
+ * (ox_mm, oy_mm) (the part's centre, so its layers line up; 0, 0: the bed
+ * origin), cut to region (nonzero rule), appended to out as open paths.
  */
-int tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm,
-                  struct paths *out);
+int tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, double ox_mm,
+                  double oy_mm, struct paths *out);
 
 /*
  * Join lines end to end into zig-zag polylines: from each line's end to

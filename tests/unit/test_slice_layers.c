@@ -579,7 +579,7 @@ T_CASE(fill_lines_cut_by_the_region)
                            { poly_i(7 + o), poly_i(3 + o) } };
     T_TRUE(paths_add(&r, sq, 4));
     T_TRUE(paths_add(&r, hole, 4));
-    T_OK(tp_fill_lines(&r, 0, 1, &lines), NULL);
+    T_OK(tp_fill_lines(&r, 0, 1, 0, 0, &lines), NULL);
     T_EQ_INT(lines.n, 14);
     double total = 0;
     for (uint32_t k = 0; k < lines.n; k++)
@@ -587,11 +587,20 @@ T_CASE(fill_lines_cut_by_the_region)
     T_EQ_DBL(total, 100 - 16, 1e-4);
     /* at 45 degrees: the area over the spacing, within a line or two */
     paths_reset(&lines);
-    T_OK(tp_fill_lines(&r, 45, 0.5, &lines), NULL);
+    T_OK(tp_fill_lines(&r, 45, 0.5, 0, 0, &lines), NULL);
     total = 0;
     for (uint32_t k = 0; k < lines.n; k++)
         total += paths_length_k(&lines, k, false);
     T_EQ_DBL(total, 84 / 0.5, 2 * 10 * M_SQRT2);
+    /* the grid runs through the origin given (a part's centre, as
+       PrusaSlicer aligns its fills): lines at y = 0.6 + k */
+    paths_reset(&lines);
+    T_OK(tp_fill_lines(&r, 0, 1, 5, 0.6, &lines), NULL);
+    T_EQ_INT(lines.n, 14);
+    for (uint32_t k = 0; k < lines.n; k++) {
+        double y = poly_mm(lines.pts[lines.start[k]].y);
+        T_EQ_DBL(y - floor(y), 0.6, 1e-4);
+    }
     paths_release(&r);
     paths_release(&lines);
 }
