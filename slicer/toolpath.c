@@ -755,15 +755,20 @@ skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *
     return b->n ? clip_bool(CLIP_UNION, b, NULL, CLIP_NONZERO, out) : SF_OK;
 }
 
-/* Append to out the pieces (an outer and its holes) of set whose area is at
-   most max_mm2 (above: at least). */
+/* Append to out the pieces (an outer and its holes) of set whose area,
+   grown grow_mm all round, is at most lim_mm2 (above: at least).  The
+   grown area is the area plus grow_mm x the perimeter (Steiner's formula,
+   without its grow^2 term). */
 static int
-pieces_by_area(const struct paths *set, double lim_mm2, bool above, struct paths *out)
+pieces_by_area(const struct paths *set, double lim_mm2, double grow_mm, bool above,
+               struct paths *out)
 {
     for (uint32_t a = 0, b; a < set->n; a = b) {
         double area = paths_area_k(set, a);
+        if (grow_mm > 0)
+            area += grow_mm * paths_length_k(set, a, true);
         for (b = a + 1; b < set->n && paths_area_k(set, b) < 0; b++)
-            area += paths_area_k(set, b);
+            area += paths_area_k(set, b) + grow_mm * paths_length_k(set, b, true);
         if (above ? area < lim_mm2 : area > lim_mm2)
             continue;
         for (uint32_t j = a; j < b; j++)
@@ -820,14 +825,15 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
            solid_infill_below_area print solid (PrusaSlicer's
            prepare_fill_surfaces, which sees the internal surfaces before
            the skins of other layers are projected onto them, so a big
-           island that the skins cut into small pieces stays sparse) */
+           island that the skins cut into small pieces stays sparse; its
+           surfaces reach infill_overlap into the loops, so do ours here) */
         const struct paths *in = &L->inner; /* seeds: the surfaces' parts in it */
         if (seeds.n) {
             rc = clip_bool(CLIP_DIFFERENCE, &L->inner, &seeds, CLIP_NONZERO, &b);
             in = &b;
         }
         if (rc == SF_OK)
-            rc = pieces_by_area(in, p->solid_below_mm2, false, &L->small);
+            rc = pieces_by_area(in, p->solid_below_mm2, p->infill_overlap * sp, false, &L->small);
     }
     paths_release(&a);
     paths_release(&b);
@@ -1580,7 +1586,8 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
            meet at corners), then fill; pieces too small to fill go
            first (opening only shrinks them) */
         paths_reset(&t[T_TMP]);
-        TRY(pieces_by_area(&t[T_GAP], GAP_MIN_AREA * p->nozzle_mm * p->nozzle_mm, true, &t[T_TMP]));
+        TRY(pieces_by_area(&t[T_GAP], GAP_MIN_AREA * p->nozzle_mm * p->nozzle_mm, 0, true,
+                           &t[T_TMP]));
         paths_move(&t[T_GAP], &t[T_TMP]);
         TRY(clip_offset(&t[T_GAP], -sp / 8, CLIP_JOIN_MITER, &t[T_TMP]));
         TRY(clip_offset(&t[T_TMP], sp / 8, CLIP_JOIN_MITER, &t[T_GAP]));

@@ -380,6 +380,33 @@ T_CASE(skins_leave_small_pieces_of_big_islands_sparse)
     ts_free(&m);
 }
 
+T_CASE(small_island_area_counts_the_infill_overlap)
+{
+    /* PrusaSlicer's infill areas reach infill_overlap (0.1 mm) into the
+       loops, and solid_infill_below_area tests those: a tower whose inner
+       area is 67 mm2 (under 70) has a 70.5 mm2 infill area, so it stays
+       sparse */
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    double sp = tp_spacing(p.width_mm, 0.2), inset = p.width_mm / 2 + 1.5 * sp;
+    double ai = 8.2, ov = p.infill_overlap * sp, a = ai + 2 * inset;
+    T_TRUE(ai * ai < p.solid_below_mm2 && ai * ai + 4 * ai * ov > p.solid_below_mm2);
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_box(&m, 0, 0, 0, a, a, 10) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
+    for (uint32_t k = 0; k < s.n; k++)
+        T_OK(toolpath_areas(&s, k, &p), NULL);
+    double solid, sparse;
+    T_OK(region_areas(&s, 25, &p, &solid, &sparse), NULL);
+    T_EQ_DBL(solid, 0, 1e-9);
+    T_EQ_DBL(sparse, ai * ai, 0.01 * ai * ai);
+    slice_profile_release(&p);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
 T_CASE(small_islands_print_solid)
 {
     /* PrusaSlicer's solid_infill_below_area: a 7 mm tower's infill
