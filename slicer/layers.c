@@ -428,6 +428,8 @@ layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, 
     out->l = mem_calloc(n, sizeof(*out->l));
     if (!out->l)
         return sf_err_set(err, SF_ENOMEM, "slice: out of memory");
+    out->cx_mm = cx;
+    out->cy_mm = cy;
     out->dx = cx - (lo.x + hi.x) / 2;
     out->dy = cy - (lo.y + hi.y) / 2;
     out->dz = -lo.z;
@@ -439,6 +441,8 @@ layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, 
         paths_init(&out->l[k].inner);
         paths_init(&out->l[k].skin);
         paths_init(&out->l[k].skin_bottom);
+        paths_init(&out->l[k].small);
+        paths_init(&out->l[k].top_in);
         paths_init(&out->l[k].solid);
         paths_init(&out->l[k].top);
         paths_init(&out->l[k].sparse);
@@ -537,6 +541,8 @@ layer_stack_release(struct layer_stack *s)
         paths_release(&s->l[k].inner);
         paths_release(&s->l[k].skin);
         paths_release(&s->l[k].skin_bottom);
+        paths_release(&s->l[k].small);
+        paths_release(&s->l[k].top_in);
         paths_release(&s->l[k].solid);
         paths_release(&s->l[k].top);
         paths_release(&s->l[k].sparse);

@@ -37,6 +37,11 @@ struct layer {
     struct paths skin;        /* the surface open to the air above, and its part in inner
                                  grown skin_margin: toolpath_areas() */
     struct paths skin_bottom; /* the same for the surface open below */
+    struct paths top_in;      /* the surface open to the air above (opened) inside inner:
+                                 toolpath_areas() */
+    struct paths small;       /* pieces of inner away from this layer's own top and bottom
+                                 surfaces no larger than solid_infill_below_area: solid
+                                 (toolpath_areas()) */
     /* the infill area split by toolpath_store_regions(): solid, top solid
        and sparse (the layer above bridges over this sparse) */
     struct paths solid, top, sparse;
@@ -46,8 +51,9 @@ struct layer {
 struct layer_stack {
     struct layer *l;
     uint32_t n;
-    double dx, dy, dz; /* translation applied to the mesh to place it */
-    uint32_t n_open;   /* open chains closed straight (holes over 2 mm) */
+    double dx, dy, dz;   /* translation applied to the mesh to place it */
+    double cx_mm, cy_mm; /* where its bounding box's centre went (the fills' grid runs through) */
+    uint32_t n_open;     /* open chains closed straight (holes over 2 mm) */
 };
 
 /*

@@ -119,6 +119,8 @@ static const struct popt popts[] = {
     S("print", infill_pattern, infill_pattern, "grid or rectilinear"),
     R("print", infill_anchor, infill_anchor_mm, 0, 50,
       "sparse lines follow the boundary this far, mm"),
+    R("print", infill_anchor_max, infill_anchor_max_mm, 0, 1000,
+      "sparse lines whose ends lie closer than this along the boundary are joined, mm"),
     R("print", line_width, width_mm, 0.1, 3, "perimeter and infill line width, mm"),
     R("print", solid_line_width, solid_width_mm, 0.1, 3, "solid, top and support line width, mm"),
     R("print", perimeter_speed, perimeter_mm_s, 1, 1000, "inner perimeters, mm/s"),
@@ -245,7 +247,8 @@ slice_profile_default(struct slice_profile *p)
         .solid_below_mm2 = 70,
         .infill_density = 0.15,
         .infill_pattern = (char *)"grid",
-        .infill_anchor_mm = 2.7,
+        .infill_anchor_mm = 2.44,   /* PrusaSlicer 2.5: 600 % of the infill spacing */
+        .infill_anchor_max_mm = 50, /* PrusaSlicer 2.5: infill_anchor_max 50 mm */
         .width_mm = 0.45,
         .solid_width_mm = 0.45,
         .perimeter_mm_s = 60,

@@ -43,15 +43,17 @@ struct slice_profile {
     /* [print] */
     double layer_mm, first_layer_mm;
     int perimeters, top_layers, bottom_layers;
-    char *seam_position;     /* "aligned", "nearest" or "rear" */
-    double skin_margin_mm;   /* solid skins grow this far into the infill */
-    bool vertical_shells;    /* solid wherever the neighbours' inner areas differ */
-    double solid_below_mm2;  /* sparse islands smaller than this print solid */
-    double infill_density;   /* 0..1 */
-    char *infill_pattern;    /* "grid" or "rectilinear" */
-    double infill_anchor_mm; /* sparse lines hook along the boundary this far */
-    double width_mm;         /* perimeters and sparse infill */
-    double solid_width_mm;   /* solid, top and support lines */
+    char *seam_position;         /* "aligned", "nearest" or "rear" */
+    double skin_margin_mm;       /* solid skins grow this far into the infill */
+    bool vertical_shells;        /* solid wherever the neighbours' inner areas differ */
+    double solid_below_mm2;      /* sparse islands smaller than this print solid */
+    double infill_density;       /* 0..1 */
+    char *infill_pattern;        /* "grid" or "rectilinear" */
+    double infill_anchor_mm;     /* sparse lines hook along the boundary this far */
+    double infill_anchor_max_mm; /* neighbouring sparse lines closer than this along the
+                                    boundary are joined */
+    double width_mm;             /* perimeters and sparse infill */
+    double solid_width_mm;       /* solid, top and support lines */
     double perimeter_mm_s, ext_perimeter_mm_s, infill_mm_s, solid_mm_s, top_mm_s;
     double support_mm_s, first_layer_mm_s, bridge_mm_s, gap_fill_mm_s;
     bool gap_fill;              /* thin walls and gaps get one line of matching width */

@@ -18,6 +18,12 @@
 #include "../src/base/mem.h"
 #include "clip_shim.h"
 
+/* Gap pieces under this x nozzle^2 are not filled. */
+#define GAP_MIN_AREA 0.1
+/* The loops' grown outlines reach this much further when the gaps are cut
+   out of the region: 1 um, more than the offsets' rounding. */
+#define GAP_SAFETY_MM 0.001
+
 const char *
 tp_role_name(enum tp_role r)
 {
@@ -98,49 +104,99 @@ add(struct layer_paths *lp, const struct paths *src, enum tp_role role, bool clo
     return SF_OK;
 }
 
-/* Lines of one island (or any set) over its bounding box, clipped. */
+/* Where a fill line crosses the region's boundary. */
+struct xing {
+    int64_t line; /* index of the line along the normal */
+    double t;     /* position along it, units */
+    int w;        /* +1 / -1: the edge's direction across the lines */
+};
+
 static int
-fill_set(const struct paths *region, double angle_deg, double spacing_mm, struct paths *out)
+cmp_xing(const void *x, const void *y)
 {
-    struct ipt lo, hi;
-    if (!paths_bbox(region, &lo, &hi) || spacing_mm <= 0)
+    const struct xing *p = x, *q = y;
+    if (p->line != q->line)
+        return p->line < q->line ? -1 : 1;
+    return p->t < q->t ? -1 : p->t > q->t;
+}
+
+/*
+ * Lines of one island (or any set) at angle_deg, spacing_mm apart, one
+ * through org, cut to the region (nonzero rule) by a scanline: each edge
+ * adds its crossings with the lines it spans (half-open in the normal
+ * direction, so a vertex on a line counts once), and each line's sorted
+ * crossings open and close its pieces by the winding they add.  The same
+ * pieces as clipping the lines with Clipper, a fraction of the work.
+ */
+static int
+fill_set(const struct paths *region, double angle_deg, double spacing_mm, const double org[2],
+         struct paths *out)
+{
+    if (!region->n || spacing_mm <= 0)
         return SF_OK;
     double a = angle_deg * M_PI / 180, dx = cos(a), dy = sin(a);
     double nx = -dy, ny = dx; /* line normal */
-    double x[2] = { poly_mm(lo.x), poly_mm(hi.x) }, y[2] = { poly_mm(lo.y), poly_mm(hi.y) };
-    double t0 = INFINITY, t1 = -INFINITY, o0 = INFINITY, o1 = -INFINITY;
-    for (int i = 0; i < 4; i++) {
-        double px = x[i & 1], py = y[i >> 1];
-        double t = px * dx + py * dy, o = px * nx + py * ny;
-        t0 = fmin(t0, t);
-        t1 = fmax(t1, t);
-        o0 = fmin(o0, o);
-        o1 = fmax(o1, o);
-    }
-    t0 -= 1;
-    t1 += 1;
-    struct paths lines, clipped;
-    paths_init(&lines);
-    paths_init(&clipped);
+    double sp = spacing_mm * POLY_SCALE;
+    double oc = (org[0] * nx + org[1] * ny) * POLY_SCALE; /* a line runs through org */
+    size_t np = region->start[region->n], cap = np + 16, n = 0;
+    struct xing *x = mem_array(cap, sizeof(*x));
+    if (!x)
+        return SF_ENOMEM;
     int rc = SF_OK;
-    for (double o = ceil(o0 / spacing_mm) * spacing_mm; o <= o1 && rc == SF_OK; o += spacing_mm) {
-        struct ipt seg[2] = { { poly_i(o * nx + t0 * dx), poly_i(o * ny + t0 * dy) },
-                              { poly_i(o * nx + t1 * dx), poly_i(o * ny + t1 * dy) } };
-        if (!paths_add(&lines, seg, 2))
-            rc = SF_ENOMEM;
+    for (uint32_t k = 0; k < region->n && rc == SF_OK; k++) {
+        uint32_t s0 = region->start[k], m = paths_len(region, k);
+        for (uint32_t i = 0; i < m; i++) {
+            struct ipt p = region->pts[s0 + i], q = region->pts[s0 + (i + 1) % m];
+            double op = (double)p.x * nx + (double)p.y * ny,
+                   oq = (double)q.x * nx + (double)q.y * ny;
+            if (op == oq)
+                continue;
+            double lo = op < oq ? op : oq, hi = op < oq ? oq : op;
+            double tp = (double)p.x * dx + (double)p.y * dy,
+                   tq = (double)q.x * dx + (double)q.y * dy;
+            for (int64_t l = (int64_t)ceil((lo - oc) / sp); oc + (double)l * sp < hi; l++) {
+                if (n == cap && !mem_grow((void **)&x, &cap, n + 1, sizeof(*x))) {
+                    rc = SF_ENOMEM;
+                    break;
+                }
+                double o = oc + (double)l * sp;
+                x[n++] =
+                    (struct xing){ l, tp + (o - op) / (oq - op) * (tq - tp), oq > op ? 1 : -1 };
+            }
+        }
     }
-    if (rc == SF_OK && lines.n)
-        rc = clip_lines(&lines, region, &clipped);
-    if (rc == SF_OK && !paths_append(out, &clipped))
-        rc = SF_ENOMEM;
-    paths_release(&lines);
-    paths_release(&clipped);
+    if (rc == SF_OK)
+        qsort(x, n, sizeof(*x), cmp_xing);
+    for (size_t i = 0; i < n && rc == SF_OK;) {
+        size_t j = i;
+        int w = 0;
+        double t0 = 0;
+        for (; j < n && x[j].line == x[i].line; j++) {
+            int was = w;
+            w += x[j].w;
+            if (was == 0 && w != 0) {
+                t0 = x[j].t;
+            } else if (was != 0 && w == 0 && x[j].t > t0) {
+                double o = oc + (double)x[i].line * sp;
+                struct ipt seg[2] = {
+                    { llround(o * nx + t0 * dx), llround(o * ny + t0 * dy) },
+                    { llround(o * nx + x[j].t * dx), llround(o * ny + x[j].t * dy) },
+                };
+                if ((seg[0].x != seg[1].x || seg[0].y != seg[1].y) && !paths_add(out, seg, 2))
+                    rc = SF_ENOMEM;
+            }
+        }
+        i = j;
+    }
+    free(x);
     return rc;
 }
 
 int
-tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, struct paths *out)
+tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, double ox_mm,
+              double oy_mm, struct paths *out)
 {
+    const double org[2] = { ox_mm, oy_mm };
     /* island by island: lines cover only their own island's box, so
        Clipper does not intersect every line with every sliver of a layer */
     struct paths isl;
@@ -155,7 +211,7 @@ tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, s
             if (!paths_add(&isl, region->pts + region->start[k], paths_len(region, k)))
                 rc = SF_ENOMEM;
         if (rc == SF_OK)
-            rc = fill_set(&isl, angle_deg, spacing_mm, out);
+            rc = fill_set(&isl, angle_deg, spacing_mm, org, out);
         a = b;
     }
     paths_release(&isl);
@@ -326,7 +382,6 @@ struct bpos {
     uint32_t line, end;  /* end 0: first point, 1: last */
     uint32_t path, a, b; /* boundary path and the edge's point indices (global) */
     double s;            /* arc length from the path's first point, mm */
-    double stub;         /* anchor length, mm */
 };
 
 static int
@@ -335,7 +390,9 @@ cmp_bpos(const void *x, const void *y)
     const struct bpos *p = x, *q = y;
     if (p->path != q->path)
         return p->path < q->path ? -1 : 1;
-    return p->s < q->s ? -1 : p->s > q->s;
+    if (p->s != q->s)
+        return p->s < q->s ? -1 : 1;
+    return p->line != q->line ? (p->line < q->line ? -1 : 1) : (int)p->end - (int)q->end;
 }
 
 static double
@@ -344,15 +401,17 @@ dist_mm(struct ipt a, struct ipt b)
     return hypot((double)(a.x - b.x), (double)(a.y - b.y)) / POLY_SCALE;
 }
 
-/* Points of the walk forward along the boundary from pos for len mm (excluding the start). */
+/* Points of the walk along the boundary from pos (at point from) for len
+   mm, forward (the path's order) or back, excluding the start. */
 static bool
-walk(const struct paths *r, const struct bpos *pos, struct ipt from, double len, struct paths *out)
+walk(const struct paths *r, const struct bpos *pos, struct ipt from, double len, bool back,
+     struct paths *out)
 {
     uint32_t s0 = r->start[pos->path], n = paths_len(r, pos->path);
-    uint32_t b = pos->b;
+    uint32_t v = back ? pos->a : pos->b;
     struct ipt cur = from;
-    for (uint32_t steps = 0; steps < n && len > 1e-6; steps++) {
-        struct ipt nx = r->pts[b];
+    for (uint32_t steps = 0; steps <= n && len > 1e-6; steps++) {
+        struct ipt nx = r->pts[v];
         double d = dist_mm(cur, nx);
         if (d >= len) {
             double t = len / d;
@@ -360,20 +419,52 @@ walk(const struct paths *r, const struct bpos *pos, struct ipt from, double len,
                              cur.y + (int64_t)llround((double)(nx.y - cur.y) * t) };
             return paths_push(out, q);
         }
-        if (!paths_push(out, nx))
+        if (d > 0 && !paths_push(out, nx))
             return false;
         len -= d;
         cur = nx;
-        b = s0 + (b - s0 + 1) % n;
+        v = s0 + (back ? v - s0 + n - 1 : v - s0 + 1) % n;
     }
     return true;
 }
 
+/* An arc between two neighbouring line ends on one boundary path. */
+struct arc {
+    uint32_t i; /* index in the sorted ends; the arc runs forward to its next */
+    double len_mm;
+};
+
+static int
+cmp_arc(const void *x, const void *y)
+{
+    const struct arc *p = x, *q = y;
+    if (p->len_mm != q->len_mm)
+        return p->len_mm < q->len_mm ? -1 : 1;
+    return p->i < q->i ? -1 : p->i > q->i;
+}
+
+static uint32_t
+uf_find(uint32_t *uf, uint32_t x)
+{
+    while (uf[x] != x)
+        x = uf[x] = uf[uf[x]];
+    return x;
+}
+
+/* What happens at one line end (index in the sorted ends). */
+struct end_use {
+    int32_t to;       /* the end it is joined to along the boundary, -1 none */
+    double len_mm;    /* the joining arc, or the stub's length (0: none) */
+    uint8_t back;     /* the arc or stub runs against the path's order */
+    uint8_t consumed; /* joined or anchored (PrusaSlicer's "consumed") */
+};
+
 int
-tp_anchor(struct paths *lines, const struct paths *region, double len_mm)
+tp_anchor(struct paths *lines, const struct paths *region, double len_mm, double max_mm,
+          double half_w_mm)
 {
     uint32_t n = lines->n;
-    if (!n || !region->n || len_mm <= 0)
+    if (!n || !region->n || (len_mm <= 0 && max_mm <= 0))
         return SF_OK;
     struct paths_index ix = { 0 };
     struct paths out, stub;
@@ -384,7 +475,20 @@ tp_anchor(struct paths *lines, const struct paths *region, double len_mm)
     uint32_t *path_of = mem_array(np + 1, sizeof(*path_of));
     struct bpos *bp = mem_array(2 * (size_t)n, sizeof(*bp));
     int32_t *slot = mem_array(2 * (size_t)n, sizeof(*slot)); /* (line, end) -> index in bp or -1 */
-    int rc = cum && path_of && bp && slot && paths_index_init(&ix, region) ? SF_OK : SF_ENOMEM;
+    uint32_t *nx = mem_array(2 * (size_t)n, sizeof(*nx)),
+             *pv = mem_array(2 * (size_t)n, sizeof(*pv));
+    double *gap = mem_array(2 * (size_t)n, sizeof(*gap)); /* forward to nx, mm */
+    /* boundary not yet taken forward and back from each end, mm */
+    double *free_fw = mem_array(2 * (size_t)n, sizeof(*free_fw));
+    double *free_bk = mem_array(2 * (size_t)n, sizeof(*free_bk));
+    struct end_use *use = mem_calloc(2 * (size_t)n, sizeof(*use));
+    struct arc *arcs = mem_array(2 * (size_t)n, sizeof(*arcs));
+    uint32_t *uf = mem_array(n, sizeof(*uf));
+    uint8_t *done = mem_calloc(n, 1);
+    int rc = cum && path_of && bp && slot && nx && pv && gap && free_fw && free_bk && use && arcs &&
+                     uf && done && paths_index_init(&ix, region)
+                 ? SF_OK
+                 : SF_ENOMEM;
     if (rc < 0)
         goto out;
     for (uint32_t k = 0; k < region->n; k++) {
@@ -399,6 +503,7 @@ tp_anchor(struct paths *lines, const struct paths *region, double len_mm)
     /* locate every line end on its boundary edge */
     size_t nb = 0;
     for (uint32_t l = 0; l < n; l++) {
+        uf[l] = l;
         for (uint32_t e = 0; e < 2; e++) {
             slot[2 * l + e] = -1;
             struct ipt q = lines->pts[e ? lines->start[l + 1] - 1 : lines->start[l]];
@@ -433,42 +538,137 @@ tp_anchor(struct paths *lines, const struct paths *region, double len_mm)
         }
     }
     qsort(bp, nb, sizeof(*bp), cmp_bpos);
-    for (size_t i = 0; i < nb; i++) {
-        uint32_t k = bp[i].path;
+    /* neighbours along each boundary path and the arcs between them */
+    size_t n_arcs = 0;
+    for (size_t g0 = 0, g1; g0 < nb; g0 = g1) {
+        uint32_t k = bp[g0].path;
+        for (g1 = g0 + 1; g1 < nb && bp[g1].path == k;)
+            g1++;
         uint32_t last = region->start[k + 1] - 1;
         double per = cum[last] + dist_mm(region->pts[last], region->pts[region->start[k]]);
-        size_t j = i + 1 < nb && bp[i + 1].path == k ? i + 1 : i;
-        if (j == i) /* wrap to the first end on this path */
-            while (j > 0 && bp[j - 1].path == k)
-                j--;
-        double gap = j == i ? per : bp[j].s - bp[i].s;
-        if (gap <= 0)
-            gap += per;
-        bp[i].stub = fmin(len_mm, 0.45 * gap);
+        for (size_t i = g0; i < g1; i++) {
+            nx[i] = (uint32_t)(i + 1 < g1 ? i + 1 : g0);
+            pv[i] = (uint32_t)(i > g0 ? i - 1 : g1 - 1);
+            gap[i] = nx[i] == i ? per : bp[nx[i]].s - bp[i].s;
+            if (gap[i] < 0)
+                gap[i] += per;
+            if (nx[i] != i)
+                arcs[n_arcs++] = (struct arc){ (uint32_t)i, gap[i] };
+        }
+        for (size_t i = g0; i < g1; i++) {
+            free_fw[i] = gap[i];
+            free_bk[i] = gap[pv[i]];
+        }
+    }
+    for (size_t i = 0; i < nb; i++) {
+        use[i].to = -1;
         slot[2 * bp[i].line + bp[i].end] = (int32_t)i;
     }
-    for (uint32_t l = 0; l < n && rc == SF_OK; l++) {
-        const struct ipt *q = lines->pts + lines->start[l];
-        uint32_t m = paths_len(lines, l);
+    /* PrusaSlicer's connect_infill: the shortest arcs first, each joining
+       two lines not yet joined (no loops) along the whole arc when it is
+       shorter than max_mm; a longer one gives both ends a stub instead */
+    qsort(arcs, n_arcs, sizeof(*arcs), cmp_arc);
+    for (size_t a = 0; a < n_arcs; a++) {
+        uint32_t i = arcs[a].i, j = nx[i];
+        if (use[i].consumed || use[j].consumed)
+            continue;
+        uint32_t li = uf_find(uf, bp[i].line), lj = uf_find(uf, bp[j].line);
+        if (li == lj)
+            continue;
+        if (arcs[a].len_mm < max_mm) {
+            use[i] = (struct end_use){ (int32_t)j, arcs[a].len_mm, 0, 1 };
+            use[j] = (struct end_use){ (int32_t)i, arcs[a].len_mm, 1, 1 };
+            free_fw[i] = free_bk[j] = 0;
+            uf[lj] = li;
+            continue;
+        }
+        /* stubs toward each other, each stopping half a line short of the other's */
+        double t = fmax(0, fmin(fmin(len_mm, free_fw[i]), gap[i] - half_w_mm));
+        use[i] = (struct end_use){ -1, t, 0, 1 };
+        free_bk[j] = fmin(free_bk[j], gap[i] - t);
+        t = fmax(0, fmin(fmin(len_mm, free_bk[j]), gap[i] - half_w_mm));
+        use[j] = (struct end_use){ -1, t, 1, 1 };
+        free_fw[i] = fmin(free_fw[i], gap[i] - t);
+    }
+    /* the ends left: a stub toward the side with more boundary free, in
+       line order (PrusaSlicer's order) */
+    for (uint32_t k = 0; k < 2 * n && len_mm > 0; k++) {
+        int32_t i = slot[k];
+        if (i < 0 || use[i].consumed)
+            continue;
+        bool back = free_bk[i] > free_fw[i];
+        uint32_t j = back ? pv[i] : nx[i];
+        double g = back ? gap[pv[i]] : gap[i];
+        double t = fmax(0, fmin(fmin(len_mm, back ? free_bk[i] : free_fw[i]), g - half_w_mm));
+        use[i] = (struct end_use){ -1, t, back, 1 };
+        if ((uint32_t)i != j) {
+            if (back)
+                free_fw[j] = fmin(free_fw[j], g - t);
+            else
+                free_bk[j] = fmin(free_bk[j], g - t);
+        }
+    }
+    /* chains: from a line with a free end (no cycles: every chain has
+       two), its stub reversed, the line, then arc, line, ..., stub */
+    for (uint32_t l0 = 0; l0 < n && rc == SF_OK; l0++) {
+        if (done[l0])
+            continue;
+        int32_t s0 = slot[2 * l0], s1 = slot[2 * l0 + 1];
+        uint32_t e0; /* the end the chain starts at */
+        if (s0 < 0 || use[s0].to < 0)
+            e0 = 0;
+        else if (s1 < 0 || use[s1].to < 0)
+            e0 = 1;
+        else
+            continue; /* inside a chain: reached from its ends */
         if (!paths_begin(&out)) {
             rc = SF_ENOMEM;
             break;
         }
-        if (slot[2 * l] >= 0) { /* the start's stub, walked out then reversed */
+        int32_t si = slot[2 * l0 + e0];
+        if (si >= 0 && use[si].len_mm > 0) {
+            struct ipt q = lines->pts[e0 ? lines->start[l0 + 1] - 1 : lines->start[l0]];
             paths_reset(&stub);
             if (!paths_begin(&stub) ||
-                !walk(region, &bp[slot[2 * l]], q[0], bp[slot[2 * l]].stub, &stub))
+                !walk(region, &bp[si], q, use[si].len_mm, use[si].back, &stub))
                 rc = SF_ENOMEM;
             for (uint32_t i = rc == SF_OK ? paths_len(&stub, 0) : 0; i-- > 0;)
                 if (!paths_push(&out, stub.pts[i]))
                     rc = SF_ENOMEM;
         }
-        for (uint32_t i = 0; i < m && rc == SF_OK; i++)
-            if (!paths_push(&out, q[i]))
+        uint32_t l = l0, e = e0;
+        while (rc == SF_OK) {
+            done[l] = 1;
+            const struct ipt *q = lines->pts + lines->start[l];
+            uint32_t m = paths_len(lines, l);
+            for (uint32_t i = 0; i < m && rc == SF_OK; i++) {
+                struct ipt pt = q[e ? m - 1 - i : i];
+                if (!paths_push(&out, pt))
+                    rc = SF_ENOMEM;
+            }
+            int32_t sf = slot[2 * l + (1 - e)]; /* the far end */
+            if (rc < 0 || sf < 0)
+                break;
+            struct ipt qe = q[e ? 0 : m - 1];
+            if (!walk(region, &bp[sf], qe, use[sf].len_mm, use[sf].back, &out)) {
                 rc = SF_ENOMEM;
-        if (rc == SF_OK && slot[2 * l + 1] >= 0)
-            if (!walk(region, &bp[slot[2 * l + 1]], q[m - 1], bp[slot[2 * l + 1]].stub, &out))
-                rc = SF_ENOMEM;
+                break;
+            }
+            if (use[sf].to < 0)
+                break;
+            const struct bpos *nxt = &bp[use[sf].to];
+            l = nxt->line;
+            e = nxt->end;
+            if (done[l])
+                break; /* cannot happen: no cycles */
+        }
+        /* drop points within 1 um of the one before (an arc's or stub's
+           end on the next line's end): a zero-length move is not a move */
+        uint32_t o = out.start[out.n - 1], w = o + 1;
+        for (uint32_t i = o + 1; i < out.start[out.n]; i++)
+            if (d2(out.pts[w - 1], out.pts[i]) >= 1e4)
+                out.pts[w++] = out.pts[i];
+        out.start[out.n] = w;
     }
     if (rc == SF_OK)
         paths_move(lines, &out);
@@ -480,6 +680,15 @@ out:
     free(path_of);
     free(bp);
     free(slot);
+    free(nx);
+    free(pv);
+    free(gap);
+    free(free_fw);
+    free(free_bk);
+    free(use);
+    free(arcs);
+    free(uf);
+    free(done);
     return rc;
 }
 
@@ -515,17 +724,18 @@ intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
  * grown part and the surface itself, perimeter zone included: projected
  * onto the layers within reach, a sloping surface's band lands inside
  * their inner areas (PrusaSlicer's discover_horizontal_shells projects
- * the slices' surfaces so).  b, c: scratch.
+ * the slices' surfaces so).  b, c: scratch; reach (may be NULL) gets the
+ * surface's part in the inner area appended.
  */
 static int
 skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *p, struct paths *b,
-        struct paths *c, struct paths *out)
+        struct paths *c, struct paths *out, struct paths *reach)
 {
     paths_reset(out);
     paths_reset(c);
     if (!a->n)
         return SF_OK;
-    double open = p->width_mm / 20;
+    double open = p->width_mm / 10;
     int rc = clip_offset(a, -open, CLIP_JOIN_MITER, b);
     if (rc < 0 || !b->n)
         return rc;
@@ -533,6 +743,8 @@ skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *
         return rc;
     if ((rc = clip_bool(CLIP_INTERSECTION, a, inner, CLIP_NONZERO, b)) < 0)
         return rc;
+    if (reach && !paths_append(reach, b))
+        return SF_ENOMEM;
     if (b->n && (rc = clip_offset(b, p->skin_margin_mm, CLIP_JOIN_SQUARE, c)) < 0)
         return rc;
     paths_reset(b);
@@ -543,6 +755,29 @@ skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *
     return b->n ? clip_bool(CLIP_UNION, b, NULL, CLIP_NONZERO, out) : SF_OK;
 }
 
+/* Append to out the pieces (an outer and its holes) of set whose area,
+   grown grow_mm all round, is at most lim_mm2 (above: at least).  The
+   grown area is the area plus grow_mm x the perimeter (Steiner's formula,
+   without its grow^2 term). */
+static int
+pieces_by_area(const struct paths *set, double lim_mm2, double grow_mm, bool above,
+               struct paths *out)
+{
+    for (uint32_t a = 0, b; a < set->n; a = b) {
+        double area = paths_area_k(set, a);
+        if (grow_mm > 0)
+            area += grow_mm * paths_length_k(set, a, true);
+        for (b = a + 1; b < set->n && paths_area_k(set, b) < 0; b++)
+            area += paths_area_k(set, b) + grow_mm * paths_length_k(set, b, true);
+        if (above ? area < lim_mm2 : area > lim_mm2)
+            continue;
+        for (uint32_t j = a; j < b; j++)
+            if (!paths_add(out, set->pts + set->start[j], paths_len(set, j)))
+                return SF_ENOMEM;
+    }
+    return SF_OK;
+}
+
 int
 toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
 {
@@ -551,6 +786,8 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
     paths_reset(&L->inner);
     paths_reset(&L->skin);
     paths_reset(&L->skin_bottom);
+    paths_reset(&L->small);
+    paths_reset(&L->top_in);
     int rc;
     if (p->perimeters > 0)
         rc = clip_offset(&L->region, -(p->width_mm / 2 + (p->perimeters - 1) * sp + sp / 2),
@@ -564,10 +801,11 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
        thickens the layers under it and a bottom surface those over it,
        never the other way (PrusaSlicer's discover_horizontal_shells; one
        skin for both put solid under every overhang and over every top) */
-    struct paths a, b, c;
+    struct paths a, b, c, seeds;
     paths_init(&a);
     paths_init(&b);
     paths_init(&c);
+    paths_init(&seeds);
     for (int side = 0; side < 2 && rc == SF_OK; side++) {
         struct paths *out = side ? &L->skin_bottom : &L->skin;
         long nb = side ? (long)k - 1 : (long)k + 1;
@@ -576,12 +814,31 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
         else
             rc = paths_append(&a, &L->region) ? SF_OK : SF_ENOMEM;
         if (rc == SF_OK)
-            rc = skin_of(&a, &L->inner, p, &b, &c, out);
+            rc = skin_of(&a, &L->inner, p, &b, &c, out, side ? &seeds : &L->top_in);
         paths_reset(&a);
+    }
+    if (rc == SF_OK && !paths_append(&seeds, &L->top_in))
+        rc = SF_ENOMEM;
+    if (rc == SF_OK && p->solid_below_mm2 > 0 && p->infill_density > 0) {
+        /* the inner area away from this layer's own top and bottom
+           surfaces, piece by piece: pieces no larger than
+           solid_infill_below_area print solid (PrusaSlicer's
+           prepare_fill_surfaces, which sees the internal surfaces before
+           the skins of other layers are projected onto them, so a big
+           island that the skins cut into small pieces stays sparse; its
+           surfaces reach infill_overlap into the loops, so do ours here) */
+        const struct paths *in = &L->inner; /* seeds: the surfaces' parts in it */
+        if (seeds.n) {
+            rc = clip_bool(CLIP_DIFFERENCE, &L->inner, &seeds, CLIP_NONZERO, &b);
+            in = &b;
+        }
+        if (rc == SF_OK)
+            rc = pieces_by_area(in, p->solid_below_mm2, p->infill_overlap * sp, false, &L->small);
     }
     paths_release(&a);
     paths_release(&b);
     paths_release(&c);
+    paths_release(&seeds);
     return rc;
 }
 
@@ -719,7 +976,7 @@ enum {
  */
 static double
 bridge_angle(const struct paths *piece, const struct paths_index *below, double spacing,
-             struct paths *lines, int *rc)
+             const double org[2], struct paths *lines, int *rc)
 {
     double best_cov = -1, best_max = INFINITY, best = 0;
     double cov[18], mx[18];
@@ -727,7 +984,7 @@ bridge_angle(const struct paths *piece, const struct paths_index *below, double 
         paths_reset(lines);
         cov[a] = 0;
         mx[a] = 0;
-        if ((*rc = tp_fill_lines(piece, a * 10.0, spacing, lines)) < 0)
+        if ((*rc = tp_fill_lines(piece, a * 10.0, spacing, org[0], org[1], lines)) < 0)
             return 0;
         for (uint32_t i = 0; i < lines->n; i++) {
             uint32_t n = paths_len(lines, i);
@@ -749,8 +1006,8 @@ bridge_angle(const struct paths *piece, const struct paths_index *below, double 
 /* Bridge lines over each piece of area (one outer and its holes), in
    the piece's own direction (bridge_angle) over the layer below. */
 static int
-bridges(const struct paths *area, const struct paths *below, double nz, struct layer_paths *out,
-        struct paths *grown, struct paths *lines, struct paths *piece)
+bridges(const struct paths *area, const struct paths *below, double nz, const double org[2],
+        struct layer_paths *out, struct paths *grown, struct paths *lines, struct paths *piece)
 {
     struct paths_index ix;
     int rc = clip_offset(below, nz, CLIP_JOIN_MITER, grown);
@@ -767,10 +1024,10 @@ bridges(const struct paths *area, const struct paths *below, double nz, struct l
             if (!paths_add(piece, area->pts + area->start[i], paths_len(area, i)))
                 rc = SF_ENOMEM;
         k = e;
-        double ang = rc == SF_OK ? bridge_angle(piece, &ix, nz + 0.05, lines, &rc) : 0;
+        double ang = rc == SF_OK ? bridge_angle(piece, &ix, nz + 0.05, org, lines, &rc) : 0;
         paths_reset(lines);
         if (rc == SF_OK)
-            rc = tp_fill_lines(piece, ang, nz + 0.05, lines);
+            rc = tp_fill_lines(piece, ang, nz + 0.05, org[0], org[1], lines);
         if (rc == SF_OK)
             rc = tp_link(lines, piece, 2 * (nz + 0.05), nz / 2);
         if (rc == SF_OK)
@@ -857,7 +1114,7 @@ gap_fill(const struct paths *gap, double h, double nozzle, double sp, double ove
             per += paths_length_k(gap, i, true);
         }
         k = e;
-        if (area < 0.1 * nozzle * nozzle || per <= 0)
+        if (area < GAP_MIN_AREA * nozzle * nozzle || per <= 0)
             continue;
         double t = 2 * area / per;
         /* an infill piece at least min_bead_width wide is infill in
@@ -981,6 +1238,14 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
         for (long j = k; j > (long)k - p->bottom_layers && j >= 0; j--)
             if (!paths_append(&t[T_LINES], &s->l[j].skin_bottom))
                 TRY(SF_ENOMEM);
+        /* PrusaSlicer's infill areas reach infill_overlap into the loops
+           (its fill_expolygons): a skin projected from a slope can end
+           just inside them, short of the inner area, and its sliver there
+           grows below into a band of solid along the slope */
+        bool grown = !p->vertical_shells && p->infill_overlap > 0 && t[T_LINES].n;
+        if (grown)
+            TRY(clip_offset(&t[T_AREA], p->infill_overlap * tp_spacing(p->width_mm, L->h_mm),
+                            CLIP_JOIN_MITER, &t[T_BELOW]));
         if (t[T_LINES].n) {
             /* one pass: under the nonzero rule the overlapping skins are
                their union, clipped to the area at once (a separate union
@@ -988,7 +1253,8 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
                instructions, most of it joining their common edges) */
             if (!paths_append(&t[T_LINES], &t[T_SOLID]))
                 TRY(SF_ENOMEM);
-            TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+            TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], grown ? &t[T_BELOW] : &t[T_AREA],
+                          CLIP_NONZERO, &t[T_SOLID]));
         }
         if (!p->vertical_shells && t[T_SOLID].n) {
             /* bands narrower than 3 solid lines grow 3 lines wider, so
@@ -1004,6 +1270,9 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
                     TRY(SF_ENOMEM);
                 TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_TMP]));
                 TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+            } else if (grown) {
+                TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &t[T_AREA], CLIP_NONZERO, &t[T_TMP]));
+                paths_move(&t[T_SOLID], &t[T_TMP]);
             }
             paths_reset(&t[T_KEEP]);
         }
@@ -1019,38 +1288,26 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
         TRY(clip_offset(&t[T_TMP], 0.8 * ms, CLIP_JOIN_SQUARE, &t[T_LINES]));
         TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
     }
-    TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
-    if (p->solid_below_mm2 > 0 && p->infill_density > 0 && t[T_SPARSE].n) {
-        /* sparse islands too small for the grid to hold anything print
-           solid (PrusaSlicer's solid_infill_below_area, 70 mm2): thin
-           limbs, ears and tails */
-        paths_reset(&t[T_TMP]);
+    if (L->small.n && p->solid_below_mm2 > 0 && p->infill_density > 0) {
+        /* internal pieces too small for the grid to hold anything print
+           solid (solid_infill_below_area, 70 mm2: thin limbs, ears and
+           tails; toolpath_areas found them) */
         paths_reset(&t[T_LINES]);
-        const struct paths *sp_ = &t[T_SPARSE];
-        for (uint32_t a = 0, b; a < sp_->n; a = b) {
-            double area = paths_area_k(sp_, a);
-            for (b = a + 1; b < sp_->n && paths_area_k(sp_, b) < 0; b++)
-                area += paths_area_k(sp_, b);
-            struct paths *dst = area <= p->solid_below_mm2 ? &t[T_LINES] : &t[T_TMP];
-            for (uint32_t j = a; j < b; j++)
-                if (!paths_add(dst, sp_->pts + sp_->start[j], paths_len(sp_, j)))
-                    TRY(SF_ENOMEM);
-        }
-        if (t[T_LINES].n) {
-            if (!paths_append(&t[T_LINES], &t[T_SOLID]))
-                TRY(SF_ENOMEM);
-            TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_SOLID]));
-            paths_move(&t[T_SPARSE], &t[T_TMP]);
-        }
+        if (!paths_append(&t[T_LINES], &L->small) || !paths_append(&t[T_LINES], &t[T_SOLID]))
+            TRY(SF_ENOMEM);
+        TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_SOLID]));
     }
+    TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
     if (p->top_layers > 0) {
-        /* the part of the solid the next layer does not cover is the top surface */
+        /* the solid on this layer's top surface (opened, as
+           PrusaSlicer's detect_surfaces_type finds stTop) is top solid;
+           most layers of a smooth part have none inside the loops */
         if (k + 1 < s->n) {
-            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
-                          &t[T_TOP]));
-            TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &s->l[k + 1].region, CLIP_NONZERO,
-                          &t[T_TMP]));
-            paths_move(&t[T_SOLID], &t[T_TMP]);
+            if (L->top_in.n && t[T_SOLID].n) {
+                TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &L->top_in, CLIP_NONZERO, &t[T_TOP]));
+                TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &L->top_in, CLIP_NONZERO, &t[T_TMP]));
+                paths_move(&t[T_SOLID], &t[T_TMP]);
+            }
         } else {
             paths_move(&t[T_TOP], &t[T_SOLID]);
         }
@@ -1101,7 +1358,8 @@ regions_of(const struct layer_stack *s, uint32_t k, const struct slice_profile *
  */
 static int
 internal_bridges(struct paths *solid, const struct paths *below_sparse, double nz, double ang,
-                 struct layer_paths *out, struct paths *t1, struct paths *t2, struct paths *lines)
+                 const double org[2], struct layer_paths *out, struct paths *t1, struct paths *t2,
+                 struct paths *lines)
 {
     int rc = clip_bool(CLIP_INTERSECTION, solid, below_sparse, CLIP_NONZERO, t1);
     if (rc < 0 || !t1->n)
@@ -1116,7 +1374,7 @@ internal_bridges(struct paths *solid, const struct paths *below_sparse, double n
         return rc;
     paths_move(solid, t1);
     paths_reset(lines);
-    if ((rc = tp_fill_lines(t2, ang, nz + 0.05, lines)) < 0)
+    if ((rc = tp_fill_lines(t2, ang, nz + 0.05, org[0], org[1], lines)) < 0)
         return rc;
     if ((rc = tp_link(lines, t2, 2 * (nz + 0.05), nz / 2)) < 0)
         return rc;
@@ -1159,7 +1417,11 @@ static int
 mark_overhangs(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
                struct layer_paths *out, struct paths *grown, struct paths *tmp)
 {
-    if (k == 0 || !p->overhangs || !out->p.n)
+    /* a loop's centre (at least half a line in) more than half a nozzle
+       out from the layer below puts a disc that wide in the bottom
+       surface, which its opening (a tenth of a line) keeps: no bottom
+       skin, no overhang */
+    if (k == 0 || !p->overhangs || !out->p.n || !s->l[k].skin_bottom.n)
         return SF_OK;
     int rc = clip_offset(&s->l[k - 1].region, p->nozzle_mm / 2, CLIP_JOIN_MITER, grown);
     if (rc < 0)
@@ -1237,6 +1499,9 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
     const struct layer *L = &s->l[k];
     double h = L->h_mm, w = p->width_mm, sw = p->solid_width_mm;
     double sp = tp_spacing(w, h), ssp = tp_spacing(sw, h);
+    /* the part's fills run on a grid through its bounding-box centre, as
+       PrusaSlicer's (Fill::_infill_direction), so both line up on a part */
+    const double org[2] = { s->cx_mm, s->cy_mm };
     struct paths t[T_N];
     for (int i = 0; i < T_N; i++)
         paths_init(&t[i]);
@@ -1254,14 +1519,14 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         paths_reset(&t[T_LINES]);
         /* the bed layer holds the columns down: 90 % dense, as PrusaSlicer prints it */
         double bsp = k == 0 ? ssp / 0.9 : p->support_spacing_mm;
-        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, bsp, &t[T_LINES]));
+        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, bsp, 0, 0, &t[T_LINES]));
         TRY(tp_link(&t[T_LINES], &t[T_TMP], 1.5 * bsp, sw / 2));
         TRY(add(out, &t[T_LINES], ROLE_SUPPORT, false, sw));
     }
     if (sup && sup->iface.n) {
         paths_reset(&t[T_LINES]);
         TRY(clip_offset(&sup->iface, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
-        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, ssp, &t[T_LINES]));
+        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, ssp, 0, 0, &t[T_LINES]));
         TRY(tp_link(&t[T_LINES], &t[T_TMP], 2 * ssp, sw / 2));
         TRY(add(out, &t[T_LINES], ROLE_INTERFACE, false, sw));
     }
@@ -1296,8 +1561,11 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         if ((rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
             break;
         if (p->gap_fill) {
-            if ((rc = clip_offset(&loops[i], i ? sp / 2 : w / 2, CLIP_JOIN_MITER, &t[T_LINES])) <
-                    0 ||
+            /* 1 um more: where the loop follows the edge, the offsets'
+               rounding leaves no hairline for the difference to trace
+               (PrusaSlicer's safety offset, for the same reason) */
+            if ((rc = clip_offset(&loops[i], (i ? sp / 2 : w / 2) + GAP_SAFETY_MM, CLIP_JOIN_MITER,
+                                  &t[T_LINES])) < 0 ||
                 (rc = clip_bool(CLIP_DIFFERENCE, prev, &t[T_LINES], CLIP_NONZERO, &t[T_KEEP])) < 0)
                 break;
             if (!paths_append(&t[T_GAP], &t[T_KEEP]))
@@ -1315,7 +1583,12 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
         goto out;
     if (t[T_GAP].n) {
         /* drop slivers under a quarter spacing wide (where the loops' bands
-           meet at corners), then fill */
+           meet at corners), then fill; pieces too small to fill go
+           first (opening only shrinks them) */
+        paths_reset(&t[T_TMP]);
+        TRY(pieces_by_area(&t[T_GAP], GAP_MIN_AREA * p->nozzle_mm * p->nozzle_mm, 0, true,
+                           &t[T_TMP]));
+        paths_move(&t[T_GAP], &t[T_TMP]);
         TRY(clip_offset(&t[T_GAP], -sp / 8, CLIP_JOIN_MITER, &t[T_TMP]));
         TRY(clip_offset(&t[T_TMP], sp / 8, CLIP_JOIN_MITER, &t[T_GAP]));
         TRY(gap_fill(&t[T_GAP], h, p->nozzle_mm, sp, 0, 0, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
@@ -1345,38 +1618,64 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
             TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_SOLID], CLIP_NONZERO, &t[T_KEEP]));
             TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
             paths_move(&t[T_SOLID], &t[T_TMP]);
-            TRY(bridges(&t[T_KEEP], &s->l[k - 1].region, nz, out, &t[T_TMP], &t[T_LINES], &t[T_S]));
+            TRY(bridges(&t[T_KEEP], &s->l[k - 1].region, nz, org, out, &t[T_TMP], &t[T_LINES],
+                        &t[T_S]));
         }
     }
     if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0 && p->infill_density > 0 &&
         p->infill_density < 1) { /* 100 % "sparse" is solid: nothing to bridge */
-        const struct paths *below = &s->l[k - 1].sparse;
-        if (!s->l[k - 1].has_regions) {
-            TRY(toolpath_regions(s, k - 1, p, &t[T_TMP], &t[T_KEEP], &t[T_BELOW]));
-            below = &t[T_BELOW];
+        /* sparse in every layer a thick bridge's thread reaches down
+           into (a nozzle deep: PrusaSlicer's bridge_over_infill looks
+           down the bridge flow's height) */
+        long depth = (long)floor(p->nozzle_mm / h + 1e-6);
+        const struct paths *below = &t[T_BELOW];
+        paths_reset(&t[T_BELOW]);
+        for (long j = (long)k - 1; j >= 0 && j >= (long)k - (depth > 1 ? depth : 1); j--) {
+            const struct paths *sj = &s->l[j].sparse;
+            if (!s->l[j].has_regions) {
+                TRY(toolpath_regions(s, (uint32_t)j, p, &t[T_TMP], &t[T_KEEP], &t[T_LINES]));
+                sj = &t[T_LINES];
+            }
+            if (j == (long)k - 1) {
+                if (!paths_append(&t[T_BELOW], sj))
+                    TRY(SF_ENOMEM);
+            } else if (t[T_BELOW].n) {
+                TRY(clip_bool(CLIP_INTERSECTION, &t[T_BELOW], sj, CLIP_NONZERO, &t[T_TMP]));
+                paths_move(&t[T_BELOW], &t[T_TMP]);
+            }
+            if (!t[T_BELOW].n)
+                break;
         }
         if (below->n)
-            TRY(internal_bridges(&t[T_SOLID], below, p->nozzle_mm, ang, out, &t[T_TMP], &t[T_KEEP],
-                                 &t[T_LINES]));
+            TRY(internal_bridges(&t[T_SOLID], below, p->nozzle_mm, ang, org, out, &t[T_TMP],
+                                 &t[T_KEEP], &t[T_LINES]));
     }
     paths_reset(&t[T_LINES]);
-    TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, &t[T_LINES]));
+    TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, org[0], org[1], &t[T_LINES]));
     TRY(tp_link(&t[T_LINES], &t[T_SOLID], 2 * ssp, sw / 2));
     TRY(add(out, &t[T_LINES], ROLE_SOLID, false, sw));
     paths_reset(&t[T_LINES]);
-    TRY(tp_fill_lines(&t[T_TOP], ang, ssp, &t[T_LINES]));
+    TRY(tp_fill_lines(&t[T_TOP], ang, ssp, org[0], org[1], &t[T_LINES]));
     TRY(tp_link(&t[T_LINES], &t[T_TOP], 2 * ssp, sw / 2));
     TRY(add(out, &t[T_LINES], ROLE_TOP, false, sw));
     if (p->infill_density > 0 && t[T_SPARSE].n) {
+        /* the lines' ends and anchors run half a line inside the sparse
+           area grown infill_overlap into the loops, as PrusaSlicer fills
+           its infill areas (fill_surface_by_multilines: the area shrunk by
+           half a spacing) */
+        TRY(clip_offset(&t[T_SPARSE], p->infill_overlap * sp - sp / 2, CLIP_JOIN_MITER,
+                        &t[T_KEEP]));
         paths_reset(&t[T_LINES]);
         if (strcmp(p->infill_pattern, "grid") == 0) {
             double gsp = 2 * sp / p->infill_density;
-            TRY(tp_fill_lines(&t[T_SPARSE], 45, gsp, &t[T_LINES]));
-            TRY(tp_fill_lines(&t[T_SPARSE], 135, gsp, &t[T_LINES]));
+            TRY(tp_fill_lines(&t[T_KEEP], 45, gsp, org[0], org[1], &t[T_LINES]));
+            TRY(tp_fill_lines(&t[T_KEEP], 135, gsp, org[0], org[1], &t[T_LINES]));
         } else {
-            TRY(tp_fill_lines(&t[T_SPARSE], ang, sp / p->infill_density, &t[T_LINES]));
+            TRY(tp_fill_lines(&t[T_KEEP], ang, sp / p->infill_density, org[0], org[1],
+                              &t[T_LINES]));
         }
-        TRY(tp_anchor(&t[T_LINES], &t[T_SPARSE], p->infill_anchor_mm));
+        TRY(tp_anchor(&t[T_LINES], &t[T_KEEP], p->infill_anchor_mm, p->infill_anchor_max_mm,
+                      sp / 2));
         TRY(add(out, &t[T_LINES], ROLE_INFILL, false, w));
     }
     TRY(mark_overhangs(s, k, p, out, &t[T_TMP], &t[T_LINES]));

@@ -10,9 +10,10 @@
  * projected onto this one, as PrusaSlicer's discover_horizontal_shells;
  * or, with vertical_shells, wherever the areas inside the perimeters of
  * the top_layers above and bottom_layers below do not all cover it, like
- * its "ensure vertical shell thickness"; plus sparse islands smaller
- * than solid_below_mm2) and sparse infill (grid or rectilinear lines at a
- * spacing set by the density).  Paths come in
+ * its "ensure vertical shell thickness"; plus the internal pieces, away
+ * from the layer's own top and bottom surfaces, smaller than
+ * solid_below_mm2) and sparse infill (grid or rectilinear lines at a
+ * spacing set by the density, joined along the boundary).  Paths come in
  * print order of roles: support, interface, perimeters (inner first,
  * external last), solid, top, sparse.
  *
@@ -138,11 +139,12 @@ int toolpath_skirt_brim(const struct layer_stack *s, uint32_t k, const struct sl
                         const struct support_layer *sup0, double brim_mm, struct layer_paths *lp);
 
 /*
- * Parallel lines at angle_deg, spacing_mm apart (aligned to the bed origin
- * so layers line up), clipped to region, appended to out as open paths.
+ * Parallel lines at angle_deg, spacing_mm apart, one of them through
+ * (ox_mm, oy_mm) (the part's centre, so its layers line up; 0, 0: the bed
+ * origin), cut to region (nonzero rule), appended to out as open paths.
  */
-int tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm,
-                  struct paths *out);
+int tp_fill_lines(const struct paths *region, double angle_deg, double spacing_mm, double ox_mm,
+                  double oy_mm, struct paths *out);
 
 /*
  * Join lines end to end into zig-zag polylines: from each line's end to
@@ -152,11 +154,15 @@ int tp_fill_lines(const struct paths *region, double angle_deg, double spacing_m
 int tp_link(struct paths *lines, const struct paths *region, double link_max_mm, double grow_mm);
 
 /*
- * Anchor open lines clipped to region: each end gets a stub that follows
- * the region's boundary forward for up to len_mm, and never more than
- * 0.45 of the way to the next line end on that boundary (PrusaSlicer's
- * infill anchors, 600 % of the line width by default).  Replaces lines.
+ * Join and anchor open lines clipped to region, as PrusaSlicer's
+ * connect_infill does: the arcs of boundary between neighbouring line ends,
+ * shortest first, each join two lines not yet joined (no loops) along the
+ * whole arc when it is shorter than max_mm; an end left over gets a stub
+ * along the boundary of up to len_mm, toward the side with more boundary
+ * free, stopping half_w_mm short of the next line end or stub.  Replaces
+ * lines.  SF_ENOMEM.
  */
-int tp_anchor(struct paths *lines, const struct paths *region, double len_mm);
+int tp_anchor(struct paths *lines, const struct paths *region, double len_mm, double max_mm,
+              double half_w_mm);
 
 #endif

@@ -49,6 +49,7 @@ T_CASE(slice_cube_extrudes_its_volume)
        are extra material by design, tested in test_slice_layers) */
     p.infill_density = 0.15;
     p.infill_anchor_mm = 0;
+    p.infill_anchor_max_mm = 0;
     T_TRUE(slice_profile_set(&p, "infill_pattern=grid", &err) == SF_OK);
     T_OK(ts_slice(&m, &p, "cube_grid", &r, path, sizeof(path), &err), &err);
     double sp = tp_spacing(p.width_mm, 0.2);
