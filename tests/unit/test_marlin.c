@@ -11,6 +11,7 @@
  */
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 #include <sys/socket.h>
 #include <unistd.h>
 
@@ -237,7 +238,22 @@ budget_ms(int real_ms)
     return sim_time ? 3600 * 1000 : 4 * real_ms;
 }
 
-/* Start a sim with cfg tweaks and a connected driver; false on failure (reported). */
+/* Free what setup() made; a second call does nothing. */
+static void
+teardown(struct run *r)
+{
+    drv_free(r->drv);
+    sim_marlin_free(r->sim);
+    loop_free(r->loop);
+    r->drv = NULL;
+    r->sim = NULL;
+    r->loop = NULL;
+}
+
+/*
+ * Start a sim with cfg tweaks and a connected driver; false on failure
+ * (reported, and what was made is torn down).
+ */
 static bool
 setup(struct run *r, struct sim_marlin_config *sc, int buffer_lines)
 {
@@ -252,7 +268,7 @@ setup(struct run *r, struct sim_marlin_config *sc, int buffer_lines)
         loop_set_virtual(r->loop);
         if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv) < 0) {
             t_fail(__FILE__, __LINE__, "socketpair failed");
-            return false;
+            goto fail;
         }
         sc->fd = sv[0];
         sc->virtual_time = true;
@@ -266,7 +282,7 @@ setup(struct run *r, struct sim_marlin_config *sc, int buffer_lines)
     r->sim = sim_marlin_new(r->loop, sc, &err);
     if (!r->sim) {
         t_fail(__FILE__, __LINE__, "sim: %s", err.msg);
-        return false;
+        goto fail;
     }
     struct drv_config dc = { .name = "t",
                              .kind = "marlin",
@@ -280,21 +296,84 @@ setup(struct run *r, struct sim_marlin_config *sc, int buffer_lines)
         close(sv[1]); /* the transport holds its own copy */
     if (rc < 0) {
         t_fail(__FILE__, __LINE__, "driver: %s", err.msg);
-        return false;
+        goto fail;
     }
     if (!until(r, is_idle, budget_ms(5000))) {
         t_fail(__FILE__, __LINE__, "no handshake: %s", r->drv->status.message);
-        return false;
+        goto fail;
     }
     return true;
+fail:
+    teardown(r);
+    return false;
 }
 
+/*
+ * sc for a simulated Marlin: ADVANCED_OK or plain ok, on a UART (an RX
+ * overrun loses bytes) or not, with faults: specs of sim/faults.h separated
+ * by spaces ("corrupt=0.01 seed=7"), or NULL.
+ */
 static void
-teardown(struct run *r)
+sim_config(struct sim_marlin_config *sc, bool advanced, bool uart, const char *faults)
 {
-    drv_free(r->drv);
-    sim_marlin_free(r->sim);
-    loop_free(r->loop);
+    sim_marlin_config_init(sc);
+    sc->advanced_ok = advanced;
+    sc->uart = uart;
+    while (faults && *faults) {
+        size_t n = strcspn(faults, " ");
+        char spec[128];
+        snprintf(spec, sizeof(spec), "%.*s", (int)n, faults);
+        struct sf_err err;
+        if (n)
+            T_OK(faults_parse(&sc->faults, spec, &err), &err);
+        faults += n + (faults[n] == ' ');
+    }
+}
+
+/* What a job left: both sides' counters, and the printer's log judged against the file. */
+struct outcome {
+    bool over;       /* the job ended (done, failed or cancelled) within the budget */
+    int64_t took_ms; /* from the job's start to the end of the run */
+    size_t want;     /* commands in the file */
+    size_t matched;  /* of those, how many ran once, in order (match_log) */
+    size_t extra;    /* other commands that ran, the driver's own apart */
+    bool bad;        /* a job line ran twice or out of order */
+    struct sim_marlin_stats st;
+    struct drv_marlin_stats ds;
+};
+
+/* Start r's job (its file written) from its first line, run it to its end, judge the log. */
+static void
+run_job(struct run *r, int max_ms, struct outcome *o)
+{
+    struct sf_err err;
+    T_OK(r->drv->ops->start_job(r->drv, r->gcode_path, 0, NULL, &err), &err);
+    T_EQ_INT(r->drv->status.state, DRV_PRINTING);
+    o->over = until(r, job_over, budget_ms(max_ms));
+    o->took_ms = loop_now_ms(r->loop) - r->drv->status.job_started_ms;
+    sim_marlin_stats(r->sim, &o->st);
+    drv_marlin_stats(r->drv, &o->ds);
+    o->want = count_commands(r->gcode_path);
+    o->matched = match_log(r, &o->extra, &o->bad);
+}
+
+/*
+ * The job ended done with every command of its file run once, in order,
+ * and nothing else ran; if not, the case fails saying so (what names the
+ * run) and this returns false.
+ */
+static bool
+ran_exactly(struct run *r, const struct outcome *o, const char *what)
+{
+    if (o->over && r->done == 1 && r->drv->status.state == DRV_IDLE && o->matched == o->want &&
+        o->extra == 0 && !o->bad)
+        return true;
+    t_fail(__FILE__, __LINE__,
+           "%s: %s, done %d, %zu of %zu executed in order, %zu extra, %s (%s: %s)", what,
+           o->over ? "over" : "not over", r->done, o->matched, o->want, o->extra,
+           o->bad ? "duplicates" : "no duplicates", drv_state_name(r->drv->status.state),
+           r->drv->status.message);
+    return false;
 }
 
 /* Stream a whole job and check the log; the common body of most cases. */
@@ -312,47 +391,29 @@ stream_exact_frag(struct sim_marlin_config *sc, int buffer_lines, int max_ms, si
     struct run r = { 0 };
     size_t fragments = 0;
     r.fragments = &fragments;
-    if (!setup(&r, sc, buffer_lines)) {
-        teardown(&r);
+    if (!setup(&r, sc, buffer_lines))
         return;
-    }
     write_job(&r, JOB_LINES, NULL);
-    struct sf_err err;
-    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, &err), &err);
-    T_EQ_INT(r.drv->status.state, DRV_PRINTING);
-    bool over = until(&r, job_over, budget_ms(max_ms));
-    struct sim_marlin_stats st;
-    sim_marlin_stats(r.sim, &st);
-    struct drv_marlin_stats ds;
-    drv_marlin_stats(r.drv, &ds);
-    if (!over || getenv("T_VERBOSE"))
+    struct outcome o;
+    run_job(&r, max_ms, &o);
+    if (!o.over || getenv("T_VERBOSE"))
         printf(
             "    acked %llu of %llu, lines sent %llu, rewinds %llu, probes %llu, deadlines %llu, "
             "resends %llu, rx dropped %llu, executed %llu, t %.1f s\n",
             (unsigned long long)r.drv->status.lines_acked,
-            (unsigned long long)r.drv->status.lines_total, (unsigned long long)ds.lines_sent,
-            (unsigned long long)ds.rewinds, (unsigned long long)ds.probes,
-            (unsigned long long)ds.deadlines, (unsigned long long)st.resends,
-            (unsigned long long)st.rx_dropped, (unsigned long long)st.executed,
-            (double)(loop_now_ms(r.loop) - r.drv->status.job_started_ms) / 1000.0);
-    T_TRUE(over);
-    if (r.done != 1)
-        t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
-    T_EQ_INT(r.done, 1);
-    T_EQ_INT(r.drv->status.state, DRV_IDLE);
-    size_t extra;
-    bool bad;
-    size_t matched = match_log(&r, &extra, &bad);
-    T_EQ_INT(matched, count_commands(r.gcode_path));
-    T_EQ_INT(extra, 0);
-    T_TRUE(!bad);
+            (unsigned long long)r.drv->status.lines_total, (unsigned long long)o.ds.lines_sent,
+            (unsigned long long)o.ds.rewinds, (unsigned long long)o.ds.probes,
+            (unsigned long long)o.ds.deadlines, (unsigned long long)o.st.resends,
+            (unsigned long long)o.st.rx_dropped, (unsigned long long)o.st.executed,
+            (double)o.took_ms / 1000.0);
+    ran_exactly(&r, &o, "job");
     T_EQ_INT(r.drv->status.lines_acked, r.drv->status.lines_total);
-    T_EQ_DBL(st.x, r.end_x, 1e-3);
-    T_EQ_DBL(st.e, r.end_e, 1e-4);
+    T_EQ_DBL(o.st.x, r.end_x, 1e-3);
+    T_EQ_DBL(o.st.e, r.end_e, 1e-4);
     if (sc->faults.corrupt_rx > 0)
-        T_TRUE(st.resends > 10); /* the faults really happened */
+        T_TRUE(o.st.resends > 10); /* the faults really happened */
     if (sc->faults.hit_kind)
-        T_EQ_INT(st.hits, 1);
+        T_EQ_INT(o.st.hits, 1);
     if (fragments > max_fragments)
         t_fail(__FILE__, __LINE__, "%zu line heads ran (at most %zu)", fragments, max_fragments);
     teardown(&r);
@@ -370,8 +431,7 @@ T_CASE(marlin_streams_exactly_advanced_ok)
        can exhaust (the pty and TCP links are covered by the cases below). */
     sim_time = true;
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
+    sim_config(&sc, true, false, NULL);
     stream_exact(&sc, 0, 30000);
     sim_time = false;
 }
@@ -382,7 +442,7 @@ T_CASE(marlin_streams_exactly_plain_ok)
        can exhaust (the pty and TCP links are covered by the cases below). */
     sim_time = true;
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
+    sim_config(&sc, false, false, NULL);
     stream_exact(&sc, 0, 30000);
     sim_time = false;
 }
@@ -393,89 +453,64 @@ T_CASE(marlin_streams_exactly_ping_pong)
        measure of the machine's load. */
     sim_time = true;
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
+    sim_config(&sc, true, false, NULL);
     stream_exact(&sc, 1, 30000);
+    sim_time = false;
+}
+
+/* A job on simulated time to a printer with faults, judged by stream_exact_frag. */
+static void
+faulty_stream(bool advanced, const char *faults, size_t max_fragments)
+{
+    sim_time = true;
+    struct sim_marlin_config sc;
+    sim_config(&sc, advanced, false, faults);
+    stream_exact_frag(&sc, 0, 60000, max_fragments);
     sim_time = false;
 }
 
 T_CASE(marlin_survives_corruption_advanced_ok)
 {
-    sim_time = true;
-    struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
-    T_OK(faults_parse(&sc.faults, "corrupt=0.01", NULL), NULL);
-    T_OK(faults_parse(&sc.faults, "seed=7", NULL), NULL);
-    stream_exact_frag(&sc, 0, 60000, 2);
-    sim_time = false;
+    faulty_stream(true, "corrupt=0.01 seed=7", 2);
 }
 
 T_CASE(marlin_survives_corruption_plain_ok)
 {
-    sim_time = true;
-    struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    T_OK(faults_parse(&sc.faults, "corrupt=0.01", NULL), NULL);
-    T_OK(faults_parse(&sc.faults, "seed=11", NULL), NULL);
-    stream_exact_frag(&sc, 0, 60000, 2);
-    sim_time = false;
+    faulty_stream(false, "corrupt=0.01 seed=11", 2);
 }
 
 T_CASE(marlin_survives_dropped_oks)
 {
-    sim_time = true;
-    struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
-    T_OK(faults_parse(&sc.faults, "drop-ok=0.01", NULL), NULL);
-    stream_exact(&sc, 0, 60000);
-    sim_time = false;
+    faulty_stream(true, "drop-ok=0.01", 0);
 }
 
 T_CASE(marlin_survives_dropped_oks_plain_ok)
 {
-    sim_time = true;
-    struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    T_OK(faults_parse(&sc.faults, "drop-ok=0.005", NULL), NULL);
-    T_OK(faults_parse(&sc.faults, "seed=3", NULL), NULL);
-    stream_exact(&sc, 0, 60000);
-    sim_time = false;
+    faulty_stream(false, "drop-ok=0.005 seed=3", 0);
 }
 
 T_CASE(marlin_survives_garbage_and_slow_replies)
 {
-    sim_time = true;
-    struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
-    T_OK(faults_parse(&sc.faults, "garbage=0.05", NULL), NULL);
-    T_OK(faults_parse(&sc.faults, "slow=3", NULL), NULL);
-    stream_exact(&sc, 0, 60000);
-    sim_time = false;
+    faulty_stream(true, "garbage=0.05 slow=3", 0);
 }
 
 T_CASE(marlin_streams_over_tcp)
 {
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
+    sim_config(&sc, true, false, NULL);
     sc.tcp_port = 0;
     stream_exact(&sc, 0, 30000);
 }
 
 T_CASE(marlin_survives_corruption_over_tcp)
 {
-    struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.tcp_port = 0;
-    sc.advanced_ok = true; /* plain-ok recovery is covered over the pty */
     /* One line garbled on the way in, its Resend's R on the way back: the
        recovery path over a socket.  Rates of corruption wait out execution
-       times, which simulated time covers (the cases above). */
-    T_OK(faults_parse(&sc.faults, "bad-line=700", NULL), NULL);
-    T_OK(faults_parse(&sc.faults, "hit=resend:699:0:118", NULL), NULL);
+       times, which simulated time covers (the cases above); plain-ok
+       recovery is covered over the pty. */
+    struct sim_marlin_config sc;
+    sim_config(&sc, true, false, "bad-line=700 hit=resend:699:0:118");
+    sc.tcp_port = 0;
     stream_exact_frag(&sc, 0, 60000, 0);
 }
 
@@ -490,35 +525,22 @@ T_CASE(marlin_garbled_resend_mid_job)
     sim_time = true;
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.uart = true;
-    T_OK(faults_parse(&sc.faults, "bad-line=350", NULL), NULL);
-    T_OK(faults_parse(&sc.faults, "hit=resend:349:0:118", NULL), NULL); /* 'v' */
+    sim_config(&sc, false, true, "bad-line=350 hit=resend:349:0:118"); /* 118: 'v' */
     if (setup(&r, &sc, 0)) {
         write_job(&r, JOB_LINES, NULL);
-        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-        T_TRUE(until(&r, job_over, budget_ms(0)));
-        if (r.done != 1)
-            t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
-        struct sim_marlin_stats st;
-        sim_marlin_stats(r.sim, &st);
-        T_EQ_INT(st.hits, 1);
-        T_TRUE(st.resends >= 1); /* 350, and the lines in flight behind it */
-        T_EQ_INT(st.rx_dropped, 0);
-        size_t extra;
-        bool bad;
-        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
-        T_EQ_INT(extra, 0);
-        T_TRUE(!bad);
-        struct drv_marlin_stats ds;
-        drv_marlin_stats(r.drv, &ds);
+        struct outcome o;
+        run_job(&r, 0, &o);
+        ran_exactly(&r, &o, "job");
+        T_EQ_INT(o.st.hits, 1);
+        T_TRUE(o.st.resends >= 1); /* 350, and the lines in flight behind it */
+        T_EQ_INT(o.st.rx_dropped, 0);
         /* Recovered by the next line's Resend or a probe, never a silence. */
-        T_EQ_INT(ds.deadlines, 0);
+        T_EQ_INT(o.ds.deadlines, 0);
         /* Stock Marlin's byte-counted window (BUFSIZE 4): ping-pong after the
            Resend, then back to the full window as clean lines pass. */
         T_EQ_INT(r.max_window, 4);
         T_EQ_INT(r.min_window, 1);
-        T_EQ_INT(ds.window, 4);
+        T_EQ_INT(o.ds.window, 4);
     }
     teardown(&r);
     sim_time = false;
@@ -551,31 +573,19 @@ T_CASE(marlin_hello_taken_after_start_banner)
     sim_time = true;
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.uart = true;
+    sim_config(&sc, false, true, NULL);
     sc.boot_hold = true;
     if (setup(&r, &sc, 0)) {
         /* Both hellos ran: the first was held through the boot. */
         T_EQ_INT(count_in_log(r.log_path, "M110 N0"), 2);
         write_job(&r, JOB_LINES, NULL);
-        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-        T_TRUE(until(&r, job_over, budget_ms(0)));
-        if (r.done != 1)
-            t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
-        T_EQ_INT(r.done, 1);
-        struct sim_marlin_stats st;
-        sim_marlin_stats(r.sim, &st);
-        T_EQ_INT(st.rx_dropped, 0);
-        T_EQ_INT(st.resends, 0);
-        size_t extra;
-        bool bad;
-        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
-        T_EQ_INT(extra, 0);
-        T_TRUE(!bad);
-        struct drv_marlin_stats ds;
-        drv_marlin_stats(r.drv, &ds);
-        T_EQ_INT(ds.rewinds, 0);
-        T_EQ_INT(ds.deadlines, 0);
+        struct outcome o;
+        run_job(&r, 0, &o);
+        ran_exactly(&r, &o, "job");
+        T_EQ_INT(o.st.rx_dropped, 0);
+        T_EQ_INT(o.st.resends, 0);
+        T_EQ_INT(o.ds.rewinds, 0);
+        T_EQ_INT(o.ds.deadlines, 0);
         T_EQ_INT(count_in_log(r.log_path, "M110 N0"), 2); /* no third handshake */
     }
     teardown(&r);
@@ -588,27 +598,17 @@ timed_job(const char *fault, int64_t *took, uint64_t *oks_dropped, struct drv_ma
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.uart = true;
-    if (fault)
-        T_OK(faults_parse(&sc.faults, fault, NULL), NULL);
+    sim_config(&sc, false, true, fault);
     T_OK(faults_parse(&sc.faults, "seed=5", NULL), NULL);
     *took = -1;
     if (setup(&r, &sc, 0)) {
         write_job(&r, JOB_LINES, NULL);
-        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-        T_TRUE(until(&r, job_over, budget_ms(0)));
-        T_EQ_INT(r.done, 1);
-        *took = loop_now_ms(r.loop) - r.drv->status.job_started_ms;
-        size_t extra;
-        bool bad;
-        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
-        T_EQ_INT(extra, 0);
-        T_TRUE(!bad);
-        struct sim_marlin_stats st;
-        sim_marlin_stats(r.sim, &st);
-        *oks_dropped = st.oks_dropped;
-        drv_marlin_stats(r.drv, ds);
+        struct outcome o;
+        run_job(&r, 0, &o);
+        ran_exactly(&r, &o, fault ? fault : "clean job");
+        *took = o.took_ms;
+        *oks_dropped = o.st.oks_dropped;
+        *ds = o.ds;
     }
     teardown(&r);
 }
@@ -655,8 +655,7 @@ T_CASE(marlin_long_commands_without_keepalive_never_probe)
     sim_time = true;
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.uart = true;
+    sim_config(&sc, false, true, NULL);
     sc.no_keepalive = true;
     if (setup(&r, &sc, 0)) {
         snprintf(r.gcode_path, sizeof(r.gcode_path), "%s/long.gcode", t_tmpdir());
@@ -668,22 +667,13 @@ T_CASE(marlin_long_commands_without_keepalive_never_probe)
                     100 + 20 * sin(i * 0.1), 0.02 * (i + 1));
         fprintf(f, "G28 X Y\nG29\nG1 X5 Y5 F300\n");
         fclose(f);
-        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-        T_TRUE(until(&r, job_over, budget_ms(0)));
-        if (r.done != 1)
-            t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
-        T_EQ_INT(r.done, 1);
-        struct drv_marlin_stats ds;
-        drv_marlin_stats(r.drv, &ds);
-        T_EQ_INT(ds.deadlines, 0);
-        T_EQ_INT(ds.probes, 0);
-        size_t extra;
-        bool bad;
-        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
-        T_EQ_INT(extra, 0);
-        T_TRUE(!bad);
+        struct outcome o;
+        run_job(&r, 0, &o);
+        ran_exactly(&r, &o, "job");
+        T_EQ_INT(o.ds.deadlines, 0);
+        T_EQ_INT(o.ds.probes, 0);
         /* it took what the commands take: two G29s, the heat-up, 200 s of move */
-        T_TRUE(loop_now_ms(r.loop) - r.drv->status.job_started_ms > 300000);
+        T_TRUE(o.took_ms > 300000);
     }
     teardown(&r);
     sim_time = false;
@@ -713,8 +703,7 @@ T_CASE(marlin_printer_that_stops_answering_fails_the_job)
     sim_time = true;
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.uart = true;
+    sim_config(&sc, false, true, NULL);
     sc.hang_after = 1500;
     if (setup(&r, &sc, 0)) {
         write_job(&r, JOB_LINES, NULL);
@@ -769,32 +758,18 @@ ep_stream(bool advanced, const char *fault)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = advanced;
-    sc.uart = true;
-    if (fault)
-        T_OK(faults_parse(&sc.faults, fault, NULL), NULL);
+    sim_config(&sc, advanced, true, fault);
     if (setup(&r, &sc, 0)) {
         write_ep_job(&r, JOB_LINES);
-        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
-        T_TRUE(until(&r, job_over, budget_ms(0)));
-        if (r.done != 1)
-            t_fail(__FILE__, __LINE__, "job: %s", r.drv->status.message);
-        struct sim_marlin_stats st;
-        sim_marlin_stats(r.sim, &st);
-        T_TRUE(!st.halted);
-        T_EQ_INT(st.ep_acted, 0);
-        T_EQ_INT(st.ep_near, 0);
-        T_EQ_INT(st.hits, 0); /* no line went out under the number aimed at */
-        size_t extra;
-        bool bad;
-        T_EQ_INT(match_log(&r, &extra, &bad), count_commands(r.gcode_path));
-        T_EQ_INT(extra, 0);
-        T_TRUE(!bad);
-        T_EQ_DBL(st.e, r.end_e, 1e-4);
-        struct drv_marlin_stats ds;
-        drv_marlin_stats(r.drv, &ds);
-        T_TRUE(ds.renumbers >= 10); /* the numbers were there to skip */
+        struct outcome o;
+        run_job(&r, 0, &o);
+        ran_exactly(&r, &o, fault);
+        T_TRUE(!o.st.halted);
+        T_EQ_INT(o.st.ep_acted, 0);
+        T_EQ_INT(o.st.ep_near, 0);
+        T_EQ_INT(o.st.hits, 0); /* no line went out under the number aimed at */
+        T_EQ_DBL(o.st.e, r.end_e, 1e-4);
+        T_TRUE(o.ds.renumbers >= 10); /* the numbers were there to skip */
     }
     teardown(&r);
 }
@@ -851,35 +826,20 @@ corrupt_one(const char *kind, const char *extra_fault, const char *at55, bool ad
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = advanced;
-    sc.uart = true;
-    char spec[64];
-    snprintf(spec, sizeof(spec), "hit=%s:50:%d:%d", kind, pos, byte);
-    if (faults_parse(&sc.faults, spec, NULL) < 0 ||
-        (extra_fault && faults_parse(&sc.faults, extra_fault, NULL) < 0)) {
-        t_fail(__FILE__, __LINE__, "bad fault %s / %s", spec, extra_fault);
-        return false;
-    }
+    char faults[96];
+    snprintf(faults, sizeof(faults), "hit=%s:50:%d:%d %s", kind, pos, byte,
+             extra_fault ? extra_fault : "");
+    sim_config(&sc, advanced, true, faults);
     bool hit = false;
     if (setup(&r, &sc, 0)) {
         write_small_job(&r, at55);
-        r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL);
-        bool over = until(&r, job_over, budget_ms(0));
-        struct sim_marlin_stats st;
-        sim_marlin_stats(r.sim, &st);
-        hit = st.hits > 0;
-        size_t extra;
-        bool bad;
-        size_t matched = match_log(&r, &extra, &bad);
-        if (!over || r.done != 1 || matched != count_commands(r.gcode_path) || extra || bad) {
+        struct outcome o;
+        run_job(&r, 0, &o);
+        hit = o.st.hits > 0;
+        char what[64];
+        snprintf(what, sizeof(what), "%s byte %d -> 0x%02x", kind, pos, byte);
+        if (!ran_exactly(&r, &o, what))
             corrupt_failures++;
-            t_fail(__FILE__, __LINE__,
-                   "%s byte %d -> 0x%02x: done %d, %zu of %zu executed in order, %zu extra, "
-                   "%s (%s)",
-                   kind, pos, byte, r.done, matched, count_commands(r.gcode_path), extra,
-                   bad ? "duplicates" : "no duplicates", r.drv->status.message);
-        }
     }
     teardown(&r);
     return hit;
@@ -932,15 +892,12 @@ reset_mid_print(bool tcp)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
+    sim_config(&sc, true, false, NULL);
     if (tcp)
         sc.tcp_port = 0;
     T_OK(faults_parse(&sc.faults, "reset=1500", NULL), NULL);
-    if (!setup(&r, &sc, 0)) {
-        teardown(&r);
+    if (!setup(&r, &sc, 0))
         return;
-    }
     write_job(&r, JOB_LINES, NULL);
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     T_TRUE(until(&r, job_over, budget_ms(30000)));
@@ -980,16 +937,13 @@ T_CASE(marlin_disconnect_then_reconnect_with_backoff)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
+    sim_config(&sc, true, false, NULL);
     char link[512];
     snprintf(link, sizeof(link), "%s/printer", t_tmpdir());
     sc.link = link;
     T_OK(faults_parse(&sc.faults, "disconnect=1200", NULL), NULL);
-    if (!setup(&r, &sc, 0)) {
-        teardown(&r);
+    if (!setup(&r, &sc, 0))
         return;
-    }
     write_job(&r, JOB_LINES, NULL);
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     T_TRUE(until(&r, job_over, budget_ms(30000)));
@@ -1027,11 +981,9 @@ T_CASE(marlin_thermal_runaway_stops_stream)
     sim_time = true;
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
+    sim_config(&sc, true, false, NULL);
     T_OK(faults_parse(&sc.faults, "runaway=800", NULL), NULL);
     if (!setup(&r, &sc, 0)) {
-        teardown(&r);
         sim_time = false;
         return;
     }
@@ -1069,14 +1021,11 @@ pause_resume(bool tcp)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
+    sim_config(&sc, true, false, NULL);
     if (tcp)
         sc.tcp_port = 0;
-    if (!setup(&r, &sc, 0)) {
-        teardown(&r);
+    if (!setup(&r, &sc, 0))
         return;
-    }
     write_job(&r, JOB_LINES, NULL);
     r.pause_at = 1000;
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
@@ -1125,12 +1074,9 @@ host_action_pause(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
-    if (!setup(&r, &sc, 0)) {
-        teardown(&r);
+    sim_config(&sc, true, false, NULL);
+    if (!setup(&r, &sc, 0))
         return;
-    }
     /* M118 A1 makes Marlin print "//action:pause", as a runout sensor would. */
     write_job(&r, 1000, "M118 A1 action:pause");
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
@@ -1154,11 +1100,9 @@ cancel_end_sequence(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    if (!setup(&r, &sc, 0)) {
-        teardown(&r);
+    sim_config(&sc, false, false, NULL);
+    if (!setup(&r, &sc, 0))
         return;
-    }
     write_job(&r, JOB_LINES, NULL);
     r.cancel_at = 1000;
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
@@ -1192,11 +1136,9 @@ emergency_stop(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    if (!setup(&r, &sc, 0)) {
-        teardown(&r);
+    sim_config(&sc, false, false, NULL);
+    if (!setup(&r, &sc, 0))
         return;
-    }
     write_job(&r, JOB_LINES, NULL);
     T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
     for (int i = 0; i < 5; i++)
@@ -1314,12 +1256,9 @@ resume_from_line(enum resume_way way)
     bool with_scan = way != READ_ALL;
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
-    if (!setup(&r, &sc, 0)) {
-        teardown(&r);
+    sim_config(&sc, true, false, NULL);
+    if (!setup(&r, &sc, 0))
         return;
-    }
     write_layered_job(&r, 3, 400);
     size_t n_want;
     char **want = file_commands(r.gcode_path, &n_want);
@@ -1466,12 +1405,9 @@ start_job_with_scan(void)
 {
     struct run r = { 0 };
     struct sim_marlin_config sc;
-    sim_marlin_config_init(&sc);
-    sc.advanced_ok = true;
-    if (!setup(&r, &sc, 0)) {
-        teardown(&r);
+    sim_config(&sc, true, false, NULL);
+    if (!setup(&r, &sc, 0))
         return;
-    }
     char bad[160];
     snprintf(bad, sizeof(bad), "M117 %0100d", 7);
     write_job(&r, JOB_LINES, bad);
