@@ -320,19 +320,15 @@ compute_drives(struct work *w, double tau_aim)
 
 /*
  * The steepest face, in degrees from vertical, that needs no support by
- * the layer-based model's rules (supmodel.c, slope_limit: PrusaSlicer 2.5's
- * threshold T = round(90 - alpha), at least 1, supports faces up to T + 1
- * degrees from the horizontal, see ../shared/SUPPORT-DETECTION.md (1)).
- * At alpha 45 a face 44.5 degrees from vertical is safe by alpha and
- * supported by PrusaSlicer: counted by alpha alone, the loop stopped
- * turning faces in that band and the model, which picks the result, still
- * saw their support.
+ * the layer-based model's rule (supmodel_prusa_safe_angle_deg).  At alpha
+ * 45 a face 44.5 degrees from vertical is safe by alpha and supported by
+ * PrusaSlicer: counted by alpha alone, the loop stopped turning faces in
+ * that band and the model, which picks the result, still saw their support.
  */
 static double
 safe_angle_deg(double angle_deg)
 {
-    double t = fmax(floor(90 - angle_deg + 0.5), 1);
-    return fmax(90 - (t + 1), 0);
+    return supmodel_prusa_safe_angle_deg(angle_deg);
 }
 
 /* The layer-based model's grams of m printed along +z (supmodel.h, PrusaSlicer's rules) on

@@ -157,18 +157,23 @@ solid_at(const struct cols *cs, size_t c, float z)
     return false;
 }
 
+double
+supmodel_prusa_safe_angle_deg(double angle_deg)
+{
+    double t = fmax(floor(90 - angle_deg + 0.5), 1);
+    return fmax(90 - (t + 1), 0);
+}
+
 /* tan of the steepest face angle from the horizontal that still overhangs */
 static double
 slope_limit(const struct supmodel_params *p)
 {
     if (p->slicer == SUPMODEL_PRUSA) {
-        /* support_material_threshold T = round(90 - alpha), at least 1; d = h / tan(T + 1) */
-        double t = floor(90 - p->angle_deg + 0.5);
-        if (t < 1)
-            t = 1;
-        if (t + 1 >= 90)
+        /* d = h / tan(T + 1), T + 1 = 90 - the safe angle */
+        double safe = supmodel_prusa_safe_angle_deg(p->angle_deg);
+        if (safe <= 0)
             return 1e6; /* alpha 0: every bottom that is not a vertical wall overhangs */
-        return tan((t + 1) * M_PI / 180);
+        return tan((90 - safe) * M_PI / 180);
     }
     /* d = h (tan A - 0.01); a face at phi steps h / tan(phi) */
     double d = tan(p->angle_deg * M_PI / 180) - 0.01;

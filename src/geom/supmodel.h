@@ -71,6 +71,16 @@ struct supmodel_params {
 /* The defaults of ../shared/peers/slice-peers.sh for slicer s at 45 degrees. */
 void supmodel_params_default(struct supmodel_params *p, enum supmodel_slicer s);
 
+/*
+ * PrusaSlicer 2.5's overhang rule at overhang angle alpha (degrees from
+ * vertical): its threshold T = round(90 - alpha), at least 1, supports faces
+ * up to T + 1 degrees from the horizontal (../shared/SUPPORT-DETECTION.md).
+ * Returns the steepest face angle from vertical it leaves unsupported,
+ * 90 - (T + 1), never below 0.  The model's SUPMODEL_PRUSA rule and the
+ * slimming loop's risky-face test both use it.
+ */
+double supmodel_prusa_safe_angle_deg(double angle_deg);
+
 struct supmodel_result {
     double grams;            /* all support extrusion */
     double time_s;           /* support path length / speed */
