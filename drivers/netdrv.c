@@ -271,15 +271,20 @@ netdrv_upload_reply(struct netdrv *n, const struct httpc_result *res)
         netdrv_schedule(n, 0);
         return o;
     case NETDRV_DOWN:
-        /* sent in part, or whole with the answer lost: the printer knows */
+        /* Sent in part, or whole with the answer lost: the printer knows,
+           and the next poll asks it.  Not a failed contact: the upload has
+           its own budget (upload_tries), and the poll that follows counts
+           if the printer does not answer.  Counted as both, one cut upload
+           and three 5xx answers to the polls after it (job_tries - 1, a
+           short outage the job should ride out) took the printer offline
+           and left a job that never reached it interrupted. */
         snprintf(n->upload_err, sizeof(n->upload_err), "upload failed: %s", why);
         log_printer(LOG_WARN, n->base.name,
                     "upload failed (%s); asking the printer whether it arrived", why);
         n->verify = true;
-        n->fails++;
         if (n->nops->lost)
             n->nops->lost(n);
-        netdrv_schedule(n, drv_backoff_ms(n->fails - 1));
+        netdrv_schedule(n, drv_backoff_ms(n->fails));
         return o;
     }
     return o;

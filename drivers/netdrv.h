@@ -12,7 +12,8 @@
  * with the reason).  Losing contact (5xx, timeout, refused): without a job
  * the printer goes DRV_OFFLINE and the farm reconnects with its backoff;
  * with one the driver rides out job_tries - 1 failed contacts (backoff 0.5,
- * 1, 2 s: the printer prints on without us), then goes offline too and
+ * 1, 2 s: the printer prints on without us; a failed upload is not one,
+ * it counts against upload_tries), then goes offline too and
  * lets go of the job, which the farm marks interrupted and offers back
  * through attach() when the printer answers.
  *
@@ -62,7 +63,8 @@ struct netdrv_ops {
     const char *product;  /* "Moonraker", for messages */
     const char *key_hint; /* what to check when the printer refuses us ("check api_key") */
     int poll_ms;          /* the poll period when the config gives none */
-    int job_tries;        /* failed contacts in a row a job rides out before going offline */
+    int job_tries;        /* failed contacts in a row a job rides out before going offline
+                             (polls and actions; a failed upload counts in upload_tries) */
     int upload_tries;     /* uploads of one job at the most */
     int timeout_ms;       /* a poll or an action */
     int upload_stall_ms;  /* an upload that moves nothing this long has failed */
