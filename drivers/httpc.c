@@ -68,6 +68,8 @@ struct httpc_req {
     FILE *fp;                      /* streamed body file, or NULL */
     char *body_path;               /* its path, for messages */
     bool file_err;                 /* reading fp failed */
+    uint64_t fp_read;              /* bytes of fp handed to curl (no seek callback: never
+                                      rewound, so no attempt sent more) */
     struct buf resp;               /* response body (capped) */
     struct buf hdr;                /* response headers (capped) */
     bool oversize;                 /* the body passed its cap */
@@ -226,6 +228,7 @@ read_cb(char *ptr, size_t size, size_t nmemb, void *ud)
             r->file_err = true;
             return CURL_READFUNC_ABORT;
         }
+        r->fp_read += got;
         return got;
     }
     size_t left = r->body_len - r->body_off;
@@ -408,6 +411,7 @@ report(struct httpc_req *r)
     const char *detail = r->errbuf[0] ? r->errbuf : curl_easy_strerror(r->result);
     res.detail = r->result == CURLE_OK ? "" : detail;
     res.tls_peer = r->result == CURLE_PEER_FAILED_VERIFICATION;
+    res.body_read = r->fp ? r->fp_read : UINT64_MAX;
     if (r->result == CURLE_OK) {
         res.code = SF_OK;
     } else if (r->oversize) {

@@ -68,6 +68,9 @@ struct httpc_result {
     const char *detail;  /* code != SF_OK: libcurl's own words, without the URL ("" if none) */
     bool tls_peer;       /* SF_EIO because the server's certificate failed verification (its
                             chain, or the name: an operator's fix, not worth a retry) */
+    uint64_t body_read;  /* a body_path body: its bytes handed to curl, which cannot rewind
+                            it, so no attempt sent more (fewer than the file holds: the
+                            server never had it whole); UINT64_MAX for other bodies */
 };
 
 /* One multipart/form-data part: a value or a file streamed from disk. */

@@ -197,6 +197,7 @@ static void
 forget(struct netdrv *n)
 {
     n->verify = false;
+    n->upload_cut = false;
     n->want = NETDRV_RQ_NONE;
     if (n->nops->forget)
         n->nops->forget(n);
@@ -233,6 +234,20 @@ netdrv_contact_lost(struct netdrv *n, const char *why)
                  "unreachable: %s (retrying)", why);
         netdrv_schedule(n, ms);
         return;
+    }
+    if (n->job.phase != NETJOB_NONE && n->verify && n->upload_cut) {
+        /* The upload was cut short and could not be sent again: the
+           printer never had the file whole, so it cannot be printing it.
+           The job failed to start (the farm's retry policy sends it
+           again), rather than interrupted: left to attach(), a printer
+           that keeps no record of its jobs (PrusaLink idle) could only
+           say that how it ended is not known, for an operator to settle. */
+        char msg[sizeof(n->upload_err) + 64];
+        snprintf(msg, sizeof(msg), "unreachable before the upload could be sent again (%s)",
+                 n->upload_err);
+        log_printer(LOG_WARN, n->base.name, "offline before job '%s' reached it: %s", n->job.name,
+                    why);
+        netdrv_end_job(n, DRV_IDLE, DRV_EV_JOB_FAILED, msg);
     }
     if (n->job.phase != NETJOB_NONE) {
         /* The printer prints on without us: the farm marks the job
@@ -271,15 +286,21 @@ netdrv_upload_reply(struct netdrv *n, const struct httpc_result *res)
         netdrv_schedule(n, 0);
         return o;
     case NETDRV_DOWN:
-        /* sent in part, or whole with the answer lost: the printer knows */
+        /* Sent in part, or whole with the answer lost: the printer knows,
+           and the next poll asks it.  Not a failed contact: the upload has
+           its own budget (upload_tries), and the poll that follows counts
+           if the printer does not answer.  Counted as both, one cut upload
+           and three 5xx answers to the polls after it (job_tries - 1, a
+           short outage the job should ride out) took the printer offline
+           and left a job that never reached it interrupted. */
         snprintf(n->upload_err, sizeof(n->upload_err), "upload failed: %s", why);
         log_printer(LOG_WARN, n->base.name,
                     "upload failed (%s); asking the printer whether it arrived", why);
         n->verify = true;
-        n->fails++;
+        n->upload_cut = res->body_read < (uint64_t)n->job.size;
         if (n->nops->lost)
             n->nops->lost(n);
-        netdrv_schedule(n, drv_backoff_ms(n->fails - 1));
+        netdrv_schedule(n, drv_backoff_ms(n->fails));
         return o;
     }
     return o;

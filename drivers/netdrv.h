@@ -12,9 +12,12 @@
  * with the reason).  Losing contact (5xx, timeout, refused): without a job
  * the printer goes DRV_OFFLINE and the farm reconnects with its backoff;
  * with one the driver rides out job_tries - 1 failed contacts (backoff 0.5,
- * 1, 2 s: the printer prints on without us), then goes offline too and
+ * 1, 2 s: the printer prints on without us; a failed upload is not one,
+ * it counts against upload_tries), then goes offline too and
  * lets go of the job, which the farm marks interrupted and offers back
- * through attach() when the printer answers.
+ * through attach() when the printer answers; unless the job's upload was
+ * cut short and not yet sent again: the printer cannot have that file, so
+ * the job fails with the reason (the farm's retry policy).
  *
  * A driver embeds struct netdrv first (which embeds struct drv first),
  * fills a struct netdrv_ops with its requests and replies, and points its
@@ -62,7 +65,8 @@ struct netdrv_ops {
     const char *product;  /* "Moonraker", for messages */
     const char *key_hint; /* what to check when the printer refuses us ("check api_key") */
     int poll_ms;          /* the poll period when the config gives none */
-    int job_tries;        /* failed contacts in a row a job rides out before going offline */
+    int job_tries;        /* failed contacts in a row a job rides out before going offline
+                             (polls and actions; a failed upload counts in upload_tries) */
     int upload_tries;     /* uploads of one job at the most */
     int timeout_ms;       /* a poll or an action */
     int upload_stall_ms;  /* an upload that moves nothing this long has failed */
@@ -101,6 +105,8 @@ struct netdrv {
     int uploads;           /* upload attempts for it */
     bool verify;           /* the upload's fate is unknown: the next poll settles it */
     char upload_err[128];  /* why it is unknown */
+    bool upload_cut;       /* ... and less than the file was sent (httpc_result.body_read):
+                              the printer cannot run it */
     int want;              /* NETDRV_RQ_PAUSE/RESUME/CANCEL to send when the slot frees */
     char lost_name[160];   /* the job let go of at the last loss of contact, or "" */
 };

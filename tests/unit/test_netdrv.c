@@ -529,6 +529,68 @@ T_CASE(prusalink_survives_5xx_and_cut_upload)
     survives_5xx_and_cut_upload(PRUSALINK);
 }
 
+static bool offline_or_ended(void *ud);
+
+static void
+cut_upload_then_5xx(enum kind kind, const char *burst)
+{
+    /* the upload is cut half-way and the three requests right after it (the
+       polls asking whether it arrived) answer 503: three failed contacts, a
+       short outage the job rides out (job_tries 4).  The cut upload is not a
+       fourth: it was counted as one, and the printer went offline with a job
+       that never reached it, left interrupted.  burst is 5xx=3@<the
+       upload's request number at the simulator>.  PrusaLink only: its
+       upload is streamed from the file, which curl cannot rewind, so the
+       cut is one request; Moonraker's form body curl sends again at once
+       on a reused connection, which moves the burst's place with curl's
+       connection reuse. */
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "drop-upload=1", burst, NULL };
+    T_OK(fx_start(&f, kind, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("cut-then-5xx.gcode", 3000); /* over 64 KiB: cut inside the body */
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(run_until(f.l, offline_or_ended, &f));
+    T_TRUE(f.d->status.state != DRV_OFFLINE);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    T_EQ_INT(f.rec.failed, 0);
+    FX_STOP_CHECK(&f, job, true);
+}
+
+T_CASE(prusalink_cut_upload_then_5xx_burst_is_ridden_out)
+{
+    cut_upload_then_5xx(PRUSALINK, "5xx=3@2");
+}
+
+T_CASE(prusalink_cut_upload_then_outage_fails_the_job)
+{
+    /* as above, but the printer answers 503 past job_tries: the driver goes
+       offline before it could send the file again.  The upload was cut
+       short, so the printer never had the file whole and cannot print it:
+       the job failed to start (the farm's retry policy sends it again),
+       not a job left on the printer for attach(), which for an idle
+       PrusaLink could only say how it ended is not known */
+    struct fx f;
+    struct sf_err err;
+    const char *faults[] = { "drop-upload=1", "5xx=5@2", NULL };
+    T_OK(fx_start(&f, PRUSALINK, NULL, faults, NULL, NULL, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    /* 13 MB, cut at 64 KiB: the socket buffers cannot take the rest, so curl
+       never reads the file to its end */
+    const char *job = job_file("cut-then-outage.gcode", 300000);
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(run_until(f.l, offline_or_ended, &f));
+    struct waiter w = { .d = f.d, .r = &f.rec, .state = DRV_OFFLINE };
+    T_TRUE(run_until(f.l, is_state, &w));
+    T_EQ_INT(f.rec.failed, 1);
+    T_EQ_INT(f.rec.done, 0);
+    T_TRUE(strstr(f.rec.end_msg, "unreachable before the upload could be sent again (upload "
+                                 "failed: ") == f.rec.end_msg);
+    fx_stop(&f);
+}
+
 T_CASE(moonraker_offline_without_job_then_back)
 {
     /* a printer that answers 503 (Klippy gone) without a job is offline with the reason */
