@@ -51,7 +51,7 @@ int cmd_optimize_surface(int argc, char **argv);
 #define CMD_OPTIMIZE_SURFACE_USAGE                                                                 \
     "optimize PART -o OUT --method surface [--angle DEG] [--margin DEG] [--max-mndr P] "           \
     "[--max-andr P] [--fix-bottom MM] [--iterations N] [--rounds N] [--saliency S] "               \
-    "[--detail W] [--no-orient] [--search-direction K] [--json]"
+    "[--detail W] [--min-gain P] [--no-orient] [--search-direction K] [--json]"
 
 /*
  * Draw "label [#####.....] 42%" on stderr when it is a terminal; a no-op

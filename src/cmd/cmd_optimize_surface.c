@@ -81,6 +81,7 @@ cmd_optimize_surface(int argc, char **argv)
                                           { "rounds", required_argument, NULL, 'r' },
                                           { "saliency", required_argument, NULL, 's' },
                                           { "detail", required_argument, NULL, 'd' },
+                                          { "min-gain", required_argument, NULL, 'G' },
                                           { "no-orient", no_argument, NULL, 'n' },
                                           { "search-direction", required_argument, NULL, 'S' },
                                           { "json", no_argument, NULL, 'j' },
@@ -145,6 +146,12 @@ cmd_optimize_surface(int argc, char **argv)
                                &p.beta))
                 return 2;
             break;
+        case 'G':
+            if (!cmd_parse_num("optimize", "min-gain", optarg, 0, 99, "a percentage in [0, 99]",
+                               &v))
+                return 2;
+            p.min_gain = v / 100;
+            break;
         case 'n':
             p.orient = false;
             break;
@@ -184,6 +191,7 @@ cmd_optimize_surface(int argc, char **argv)
         dirsearch_params_default(&dp);
         dp.k = search_k;
         dp.sp = p;
+        dp.min_gain = p.min_gain; /* one threshold for the shape and the direction */
         rc = dirsearch_surface(&m, &dp, &ds, &err);
         if (rc == SF_OK) {
             r = ds.best; /* taken over: released with r */

@@ -44,6 +44,7 @@ surfopt_params_default(struct surfopt_params *p)
     p->max_iters = 100;
     p->patience = 5;
     p->rounds = 2;
+    p->min_gain = 0.05;
     p->refine_tris = 10000;
     p->orient = true;
     p->anchor = 0.01;
@@ -80,6 +81,8 @@ check_params(const struct surfopt_params *p, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL, "saliency %g: want a share in [0, 1]", p->saliency);
     if (!(p->max_mndr > 0 && p->max_andr > 0))
         return sf_err_set(err, SF_EINVAL, "deviation limits must be positive");
+    if (!(p->min_gain >= 0 && p->min_gain < 1))
+        return sf_err_set(err, SF_EINVAL, "min-gain %g: want a share in [0, 1)", p->min_gain);
     if (!(p->fix_bottom_mm >= 0))
         return sf_err_set(err, SF_EINVAL, "fix-bottom %g: want mm >= 0", p->fix_bottom_mm);
     if (p->max_iters < 1 || p->max_iters >= SURFOPT_CURVE_MAX || p->patience < 1 || p->rounds < 1 ||
@@ -736,8 +739,8 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
 
     /* The result: of the kept shapes that add no self-intersection, the one
      * the layer-based support model (supmodel.h, PrusaSlicer's rules) gives
-     * the fewest grams, if that is fewer than the orientation alone needs;
-     * else the orientation alone.  The ray-cast volume steered the
+     * the fewest grams, if that saves min_gain of what the orientation alone
+     * needs; else the orientation alone.  The ray-cast volume steered the
      * iterations; the model, which follows what a slicer prints, decides. */
     t0 = now_s();
     struct support_metrics sm;
@@ -768,6 +771,9 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
             res->n_rejected++;
         }
     }
+    bool small_gain = best_k >= 0 && !(best_g < (1 - p->min_gain) * res->model_oriented_g);
+    if (small_gain)
+        best_k = -1;
     if (best_k >= 0) {
         memcpy(cur.v, keep[best_k].v, (size_t)n * sizeof(struct vec3));
         if ((rc = selfx_count(&cur, err)) < 0)
@@ -779,17 +785,18 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
         res->model_after_g = best_g;
     } else {
         res->model_after_g = res->model_oriented_g;
-        res->unchanged_why = n_keep == 0 && res->n_folded > 0
-                                 ? "every iterate that lowered the risky faces within the "
-                                   "deviation limits folded the surface onto itself (new "
-                                   "self-intersections)"
-                             : n_keep == 0
-                                 ? "no iterate lowered the risky faces within the deviation "
-                                   "limits"
-                             : n_selfx == n_keep ? "every kept shape adds self-intersections"
-                             : res->model_oriented_g <= 0
-                                 ? "the oriented part needs no support by the model"
-                                 : "no kept shape needs fewer model grams than the oriented part";
+        res->unchanged_why =
+            n_keep == 0 && res->n_folded > 0
+                ? "every iterate that lowered the risky faces within the "
+                  "deviation limits folded the surface onto itself (new "
+                  "self-intersections)"
+            : n_keep == 0       ? "no iterate lowered the risky faces within the deviation "
+                                  "limits"
+            : n_selfx == n_keep ? "every kept shape adds self-intersections"
+            : res->model_oriented_g <= 0 ? "the oriented part needs no support by the model"
+            : small_gain                 ? "no kept shape saves min_gain of the oriented "
+                                           "part's model grams"
+                         : "no kept shape needs fewer model grams than the oriented part";
     }
     res->check_s = now_s() - t0;
     if (res->shape_changed) {

@@ -107,6 +107,10 @@ struct surfopt_params {
     int max_iters;           /* per round (100) */
     int patience;            /* stop a round when the proxy has not dropped for this many (5) */
     int rounds;              /* orientation/geometry alternations (2) */
+    double min_gain;         /* keep the oriented shape unless a reshape saves this share
+                                of its model grams (0.05, as orient.h and slim.h): a
+                                deformation that buys a rounding error of support is not
+                                worth the part's fidelity */
     uint32_t refine_tris;    /* a coarser part is midpoint-subdivided until it has this many
                                 triangles or edges under 1 % of its diagonal (10000): a
                                 surface can only bend where it has vertices */
@@ -139,7 +143,7 @@ struct surfopt_result {
     uint32_t n_halved;   /* times the face turns were halved everywhere (folds, limits) */
     bool shape_changed;  /* false: only the orientation step's result is returned */
     /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams: it picks the
-       result among the kept shapes, which must need fewer than the oriented part */
+       result among the kept shapes, which must need min_gain fewer than the oriented part */
     double model_oriented_g, model_after_g;
     const char *unchanged_why; /* shape kept: why, in words (static); NULL when changed */
     double saliency_s, factor_s, iterate_s, orient_s, check_s, total_s;

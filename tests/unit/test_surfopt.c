@@ -142,6 +142,35 @@ T_CASE(mushroom_upright_loses_support_within_limits)
     mesh_release(&m);
 }
 
+T_CASE(a_reshape_must_save_min_gain)
+{
+    /* The mushroom's reshape saves some share g of the model's grams: asked
+     * for a little more than g, the shape step keeps the part and says why. */
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    struct surfopt_params p;
+    surfopt_params_default(&p);
+    p.orient = false;
+    p.refine_tris = 4000;
+    struct surfopt_result r;
+    T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(r.shape_changed);
+    double gain = 1 - r.model_after_g / r.model_oriented_g;
+    T_TRUE(gain >= p.min_gain && gain < 0.98);
+    surfopt_result_release(&r);
+    p.min_gain = gain + 0.01;
+    T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(!r.shape_changed);
+    T_TRUE(r.unchanged_why && strstr(r.unchanged_why, "min_gain"));
+    T_EQ_DBL(r.model_after_g, r.model_oriented_g, 1e-12);
+    surfopt_result_release(&r);
+    p.min_gain = 1; /* not a share */
+    T_TRUE(surfopt_optimize(&m, &p, &r, &err) == SF_EINVAL);
+    mesh_release(&m);
+}
+
 T_CASE(tight_limits_keep_the_shape)
 {
     /* A tee's flat arms cannot turn safe within 0.5 % of the diagonal:
@@ -474,6 +503,7 @@ T_CASE(bull_with_crossings_in_its_input_is_reshaped)
     struct surfopt_params p;
     surfopt_params_default(&p);
     p.orient = false; /* as given: the shape step alone */
+    p.min_gain = 0;   /* the crossing rule alone: its best shape saves under 5 % */
     struct surfopt_result r;
     T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
     if (!r.shape_changed)
