@@ -1,36 +1,34 @@
 #!/usr/bin/env bash
 # bench_supmodel.sh BUILD - how well the layer-based support model ranks
-# up-directions the way the peer slicers do.  For every shared mesh with
-# cached peer runs (tests/bench/peer_dirs.sh, 64 Fibonacci directions under
-# build/peercache/dirs64), the Spearman rank correlation over the directions
-# of PrusaSlicer's and CuraEngine's support grams with: our model imitating
-# that slicer (supmodel.h), today's ray-cast support volume at 45 degrees
-# and at 40 (orient's 5-degree margin).  Also the model's milliseconds per
-# direction (cast included) against one ray-cast measure_support.
-# SUPMODEL_PITCH=MM sets the model's raster (default 0.5).  Without the
-# cache (run peer_dirs.sh first: it takes hours) the script says so and exits.
+# up-directions the way the peer slicers do.  For every shared mesh with peer
+# rows in tests/bench/peerdata/dirs64/MESH.SLICER.csv (peer_dirs.sh writes
+# them, format in its header; rows whose mesh_md5 is not the mesh's today are
+# left out, as are failed runs), the Spearman rank correlation over the
+# directions of PrusaSlicer's and CuraEngine's support grams with: our model
+# imitating that slicer (supmodel.h), today's ray-cast support volume at 45
+# degrees and at 40 (orient's 5-degree margin).  n_ps and n_ce count the
+# directions.  Also the model's milliseconds per direction (cast included)
+# against one ray-cast measure_support.  SUPMODEL_PITCH=MM sets the model's
+# raster (default 0.5); PEER_DATA=DIR reads rows elsewhere.  Without rows
+# (run peer_dirs.sh: it takes hours) the script says so and exits.
 set -u
 build=${1:-build/rel}
-cache=${PEER_CACHE:-build/peercache}/dirs${SUPMODEL_DIRS:-64}
+data=${PEER_DATA:-$(dirname "$0")/peerdata}/dirs${SUPMODEL_DIRS:-64}
 shared=${SLIMFARM_SHARED:-../shared}
 [ -d "$shared/meshes" ] || { echo "bench_supmodel: $shared/meshes absent, skipped"; exit 0; }
-[ -d "$cache" ] || { echo "bench_supmodel: no peer cache in $cache (tests/bench/peer_dirs.sh prusaslicer), skipped"; exit 0; }
+ls "$data"/*.csv > /dev/null 2>&1 || { echo "bench_supmodel: no peer rows in $data (tests/bench/peer_dirs.sh prusaslicer), skipped"; exit 0; }
 work=$(mktemp -d); trap 'rm -rf "$work"' EXIT
 printf '%-17s %4s %4s | %8s %8s %8s | %8s %8s %8s | %8s %8s\n' mesh n_ps n_ce \
   ps~model ps~ray45 ps~ray40 ce~model ce~ray45 ce~ray40 model_ms ray_ms
-for d in "$cache"/*/; do
-  name=$(basename "$d")
-  [ -f "$d/dirs.txt" ] || continue
-  ls "$d" | grep -q '\.csv$' || continue  # no peer row yet
-  "$build/bench/bench_supmodel" "$shared/meshes/$name.stl" "$d/dirs.txt" ${SUPMODEL_PITCH:-} > "$work/m.txt" || continue
-  for s in prusaslicer curaengine; do
-    : > "$work/$s.txt"
-    for f in "$d"/*."$s".csv; do
-      [ -f "$f" ] || continue
-      i=$(basename "$f" ".$s.csv")
-      awk -F, -v i="$i" 'NR == 2 && $8 == 0 { print i, $14 }' "$f" >> "$work/$s.txt"
-    done
+for mesh in "$shared"/meshes/*.stl; do
+  name=$(basename "$mesh" .stl)
+  md5=$(md5sum < "$mesh" | cut -c1-32)
+  for s in prusaslicer curaengine; do  # "i grams" of this mesh's successful runs
+    awk -F, -v m="$md5" 'NR > 1 && $2 == m && $11 == 0 { print $3, $9 }' "$data/$name.$s.csv" 2>/dev/null > "$work/$s.txt"
   done
+  cat "$data/$name".*.csv 2>/dev/null | awk -F, -v m="$md5" '$2 == m && !seen[$3]++ { print $3, $4, $5, $6 }' > "$work/dirs.txt"
+  [ -s "$work/prusaslicer.txt" ] || [ -s "$work/curaengine.txt" ] || continue  # no peer row yet
+  "$build/bench/bench_supmodel" "$mesh" "$work/dirs.txt" ${SUPMODEL_PITCH:-} > "$work/m.txt" || continue
   /usr/bin/python3 - "$name" "$work" <<'PYEOF'
 import sys
 import numpy as np

@@ -1,16 +1,26 @@
 #!/usr/bin/env bash
 # peer_dirs.sh SLICER [N] - slice every shared mesh turned onto N (default 64)
 # Fibonacci-sphere up-directions with one peer slicer (prusaslicer or
-# curaengine, supports on, 45 deg) and cache each run's CSV row under
-# build/peercache/dirsN/MESH/I.SLICER.csv, with the turned part as I.stl and
-# the directions as dirs.txt (one "i ux uy uz" a line).  A cached row is never
-# recomputed (bar a timed-out one), so the run can be stopped and resumed.  The peers run under
-# nice -n 19: the machine is shared.  Read by bench_supmodel.sh.
-# PEER_MESHES="anchor dino" limits the meshes (default: all, smallest first).
-# The directions go in bit-reversed order, a quarter of them for every mesh
-# before the next quarter, so a run stopped early still has well-spread
-# directions on every mesh.  PEER_LIMIT=K stops after the first K directions
-# of that order on every mesh (default: all n).
+# curaengine, supports on, 45 deg) and keep one result row a direction in the
+# repo, tests/bench/peerdata/dirsN/MESH.SLICER.csv (PEER_DATA=DIR moves it):
+#   mesh,mesh_md5,i,ux,uy,uz,slicer,version,support_g,est_time_s,rc,wall_s
+# mesh_md5 is the md5 of the source STL, i the direction's index and
+# (ux,uy,uz) the up-direction turned onto +z, support_g and est_time_s the
+# peer's support grams and estimated print time (slice-peers.sh), rc its exit
+# code and wall_s its seconds.  Directions already in the file with this md5
+# are skipped, rows of another md5 (a changed mesh) are dropped and the
+# direction sliced again; each new row is appended as soon as it is done, so
+# the rows accumulate across sessions: commit the file.  A timed-out run
+# (rc 124: a loaded machine) leaves no row and is tried again next time.
+# The turned parts (python rotation, independent of our code) live in
+# ${PEER_CACHE:-build/peercache}/dirsN/MESH-MD5/I.stl, never in the repo.  The
+# peers run under nice -n 19: the machine is shared.  Read by
+# bench_supmodel.sh.
+# PEER_MESHES="anchor dino" limits the meshes and gives their order (default:
+# all, smallest first).  The directions go in bit-reversed order, a quarter of
+# them for every mesh before the next quarter, so a run stopped early still
+# has well-spread directions on every mesh.  PEER_LIMIT=K stops after the
+# first K directions of that order on every mesh (default: all n).
 set -u
 slicer=${1:?usage: peer_dirs.sh prusaslicer|curaengine [N]}
 n=${2:-64}
@@ -18,12 +28,27 @@ shared=${SLIMFARM_SHARED:-../shared}
 [ -d "$shared/meshes" ] || { echo "peer_dirs: $shared/meshes absent, skipped"; exit 0; }
 peers="$(cd "$shared" && pwd)/peers/slice-peers.sh"
 cache=${PEER_CACHE:-build/peercache}/dirs$n
+data=${PEER_DATA:-$(dirname "$0")/peerdata}/dirs$n
+head=mesh,mesh_md5,i,ux,uy,uz,slicer,version,support_g,est_time_s,rc,wall_s
 py=/usr/bin/python3
-meshes=$(ls -S -r "$shared"/meshes/*.stl)
+mkdir -p "$data"
+if [ -n "${PEER_MESHES:-}" ]; then
+  meshes=$(for m in $PEER_MESHES; do echo "$shared/meshes/$m.stl"; done)
+else
+  meshes=$(ls -S -r "$shared"/meshes/*.stl)
+fi
 for f in $meshes; do
   name=$(basename "$f" .stl)
-  [ -n "${PEER_MESHES:-}" ] && [[ " $PEER_MESHES " != *" $name "* ]] && continue
-  d="$cache/$name"; mkdir -p "$d"
+  md5=$(md5sum < "$f" | cut -c1-32)
+  rows="$data/$name.$slicer.csv"
+  # keep the header and this mesh's rows (another md5: the mesh changed)
+  if [ -s "$rows" ]; then
+    awk -F, -v m="$md5" -v h="$head" 'NR == 1 { print h; next } $2 == m' "$rows" > "$rows.tmp" &&
+      { cmp -s "$rows" "$rows.tmp" || cp "$rows.tmp" "$rows"; rm -f "$rows.tmp"; }
+  else
+    echo "$head" > "$rows"
+  fi
+  d="$cache/$name-$md5"; mkdir -p "$d"
   # the turned parts: rotation taking direction i onto +z (Rodrigues, least turn)
   [ -f "$d/dirs.txt" ] || "$py" - "$f" "$d" "$n" <<'PYEOF' || exit 1
 import math, struct, sys
@@ -67,14 +92,16 @@ for ((q = 0; q < 4; q++)); do
   part=$(echo "$order" | sed -n "$((q * quarter + 1)),$(((q + 1) * quarter))p")
   for f in $meshes; do
     name=$(basename "$f" .stl)
-    [ -n "${PEER_MESHES:-}" ] && [[ " $PEER_MESHES " != *" $name "* ]] && continue
-    d="$cache/$name"
+    md5=$(md5sum < "$f" | cut -c1-32)
+    rows="$data/$name.$slicer.csv" d="$cache/$name-$md5"
     for i in $part; do
-      row="$d/$i.$slicer.csv"
-      # a row is kept unless the run timed out (rc 124: a loaded machine, try again)
-      [ -s "$row" ] && awk -F, 'NR == 2 { exit $8 == 124 }' "$row" && continue
-      PEER_RUNS=$slicer:on PEER_TIMEOUT=${PEER_TIMEOUT:-900} nice -n 19 "$peers" "$d/$i.stl" --format csv > "$row.tmp" 2>/dev/null &&
-        mv "$row.tmp" "$row"
+      awk -F, -v m="$md5" -v i="$i" 'NR > 1 && $2 == m && $3 == i { found = 1; exit } END { exit !found }' "$rows" && continue
+      out=$(PEER_RUNS=$slicer:on PEER_TIMEOUT=${PEER_TIMEOUT:-900} nice -n 19 "$peers" "$d/$i.stl" --format csv 2>/dev/null |
+        awk -F, 'NR == 2 { print $5 "," $14 "," $15 "," $8 "," $9 }')  # version,support_g,est_time_s,rc,wall_s
+      [ -n "$out" ] || continue
+      [ "$(echo "$out" | cut -d, -f4)" = 124 ] && continue  # timed out: try again next time
+      u=$(awk -v i="$i" '$1 == i { print $2 "," $3 "," $4 }' "$d/dirs.txt")
+      echo "$name,$md5,$i,$u,$slicer,$out" >> "$rows"
     done
   done
   echo "peer_dirs: $slicer quarter $((q + 1)) done"
