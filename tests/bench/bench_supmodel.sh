@@ -9,7 +9,8 @@
 # degrees and at 40 (orient's 5-degree margin).  n_ps and n_ce count the
 # directions.  Also the model's milliseconds per direction (cast included)
 # against one ray-cast measure_support.  SUPMODEL_PITCH=MM sets the model's
-# raster (default 0.5); PEER_DATA=DIR reads rows elsewhere.  Without rows
+# raster (default: the model's own, supmodel_params_default); PEER_DATA=DIR
+# reads rows elsewhere.  Without rows
 # (run peer_dirs.sh: it takes hours) the script says so and exits.
 set -u
 build=${1:-build/rel}
