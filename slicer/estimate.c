@@ -1,9 +1,14 @@
 /*
  * estimate.c - G-code interpreter and trapezoidal planner (see estimate.h).
  *
- * Blocks are kept for the whole file in one compact array (5 floats each:
- * a 2M-move print costs 40 MB) so the backward and forward passes see the
- * complete sequence, as a firmware with an endless lookahead would.
+ * Blocks stream through a look-ahead window (5 floats each, at most
+ * EST_LOOKAHEAD_BLOCKS of them: 1.3 MB): a block leaves it, timed, once no later
+ * block can lower its entry speed (the window's last block could stop
+ * from it), so the time is the same as a firmware with an endless
+ * look-ahead would take.  Only a window full of blocks that all still
+ * depend on what follows (a file whose deceleration spans more than
+ * EST_LOOKAHEAD_BLOCKS / 2 moves) plans its older half as if the window's end
+ * stopped, as a firmware with a full buffer does.
  * Junction speeds follow Marlin 2's planner.cpp (classic jerk and
  * junction deviation), re-derived, not copied.
  *
@@ -32,13 +37,91 @@ struct block {
 };
 
 struct plan {
-    struct block *b;
+    struct block *b; /* the window: blocks [0, n) are file blocks [done, done + n) */
     size_t n, cap;
+    size_t done;         /* blocks timed and dropped */
+    size_t peak;         /* most blocks held at once */
+    double t;            /* time of the dropped blocks */
+    size_t *layer_block; /* file block at each ;LAYER_CHANGE */
+    double *layer_s;     /* its start time, set as that block is timed */
+    size_t n_layers, next_layer;
     double prev_v[4]; /* axis velocities of the previous block at its nominal speed */
     double prev_unit[4];
     double prev_nom, prev_safe;
     bool have_prev;
 };
+
+static double
+trapezoid_s(double len, double v0, double v1, double vn, double a)
+{
+    double d_acc = (vn * vn - v0 * v0) / (2 * a), d_dec = (vn * vn - v1 * v1) / (2 * a);
+    if (d_acc + d_dec <= len)
+        return (vn - v0) / a + (vn - v1) / a + (len - d_acc - d_dec) / vn;
+    double vp = sqrt(fmax(0, (2 * a * len + v0 * v0 + v1 * v1) / 2));
+    return (vp - v0) / a + (vp - v1) / a;
+}
+
+/*
+ * Time the window's blocks whose entry speeds are final and drop them.
+ * Backward, each block must be able to slow to the next one's entry;
+ * forward, reach it from the previous one's.  At the end of the file
+ * (last) the final block ends at its safe speed and all are timed.
+ * Otherwise block k is final when it keeps its junction limit even if
+ * the window's last block stopped: then no later block can lower it, nor
+ * any block before it, and blocks [0, k) are timed.  A full window with
+ * fewer than half final times its older half as if its end stopped.
+ */
+static void
+plan_flush(struct plan *pl, bool last)
+{
+    struct block *b = pl->b;
+    size_t n = pl->n, k = n;
+    if (!n)
+        return;
+    double next = last ? b[n - 1].v_safe : 0;
+    if (!last) {
+        size_t half = n / 2;
+        for (k = n; k-- > 0;) {
+            double lim = sqrt(next * next + 2.0 * b[k].accel * b[k].len);
+            if (b[k].v_max_in <= lim)
+                break; /* final */
+            if (k == half && pl->n == EST_LOOKAHEAD_BLOCKS)
+                break; /* forced: b[half] as if the window's end stopped */
+            next = (float)lim;
+        }
+        if (k == (size_t)-1 || k == 0)
+            return;
+        if (b[k].v_max_in > sqrt(next * next + 2.0 * b[k].accel * b[k].len))
+            b[k].v_max_in = (float)sqrt(next * next + 2.0 * b[k].accel * b[k].len);
+        next = b[k].v_max_in;
+    } else {
+        k = n;
+    }
+    for (size_t i = k; i-- > 0;) {
+        double lim = sqrt(next * next + 2.0 * b[i].accel * b[i].len);
+        if (b[i].v_max_in > lim)
+            b[i].v_max_in = (float)lim;
+        next = b[i].v_max_in;
+    }
+    size_t end = last ? n : k + 1; /* forward pass over [0, end) */
+    for (size_t i = 0; i + 1 < end; i++) {
+        double lim = sqrt((double)b[i].v_max_in * b[i].v_max_in + 2.0 * b[i].accel * b[i].len);
+        if (b[i + 1].v_max_in > lim)
+            b[i + 1].v_max_in = (float)lim;
+    }
+    double t = pl->t;
+    for (size_t i = 0; i < k; i++) {
+        while (pl->next_layer < pl->n_layers && pl->layer_block[pl->next_layer] <= pl->done + i)
+            pl->layer_s[pl->next_layer++] = t;
+        double v1 = i + 1 < n ? b[i + 1].v_max_in : fminf(b[i].v_safe, b[i].v_nom);
+        double v0 = b[i].v_max_in;
+        t += trapezoid_s(b[i].len, v0, fmin(v1, b[i].v_nom), b[i].v_nom, b[i].accel);
+    }
+    pl->t = t;
+    pl->done += k;
+    pl->n = n - k;
+    memmove(b, b + k, pl->n * sizeof(*b));
+}
 
 static int
 plan_add(struct plan *pl, const struct est_limits *lim, const double d[4], double f_mm_s)
@@ -114,14 +197,20 @@ plan_add(struct plan *pl, const struct est_limits *lim, const double d[4], doubl
                 vj = fmax(vj, fmin(safe, pl->prev_safe));
         }
     }
+    if (pl->n == EST_LOOKAHEAD_BLOCKS)
+        plan_flush(pl, false);
     if (!mem_grow((void **)&pl->b, &pl->cap, pl->n + 1, sizeof(*pl->b)))
         return SF_ENOMEM;
     struct block *b = &pl->b[pl->n++];
+    if (pl->n > pl->peak)
+        pl->peak = pl->n;
     b->len = (float)len;
     b->v_nom = (float)v;
     b->accel = (float)acc;
     b->v_max_in = (float)vj;
     b->v_safe = (float)safe;
+    if (pl->done == 0 && pl->n == 1) /* the print starts from rest */
+        b->v_max_in = fminf(b->v_max_in, b->v_safe);
     memcpy(pl->prev_v, vel, sizeof(vel));
     memcpy(pl->prev_unit, unit, sizeof(unit));
     pl->prev_nom = v;
@@ -138,9 +227,12 @@ plan_add(struct plan *pl, const struct est_limits *lim, const double d[4], doubl
  * centre offset) is a straight move.
  */
 #define EST_ARC_SEGMENT_MM 1.0
+/* Longer than any printer's bed holds (a full turn around a 1 m bed is
+   3.1 m): the file is broken, and its segments would cost unbounded work. */
+#define EST_ARC_MM_MAX 10000.0
 static int
 plan_arc(struct plan *pl, const struct est_limits *lim, const double pos[4], const double d[4],
-         double i, double j, bool cw, double f_mm_s)
+         double i, double j, bool cw, double f_mm_s, double *len_mm)
 {
     double r = hypot(i, j);
     if (r < 1e-9)
@@ -151,7 +243,10 @@ plan_arc(struct plan *pl, const struct est_limits *lim, const double pos[4], con
     while (sweep <= 1e-9)
         sweep += 2 * M_PI;
     double len = sweep * r;
-    int n = len / EST_ARC_SEGMENT_MM < 100000 ? (int)ceil(len / EST_ARC_SEGMENT_MM) : 100000;
+    *len_mm = len;
+    if (!(len <= EST_ARC_MM_MAX))
+        return SF_EINVAL;
+    int n = (int)ceil(len / EST_ARC_SEGMENT_MM);
     if (n < 1)
         n = 1;
     double px = pos[0], py = pos[1];
@@ -167,51 +262,6 @@ plan_arc(struct plan *pl, const struct est_limits *lim, const double pos[4], con
         py = y;
     }
     return SF_OK;
-}
-
-static double
-trapezoid_s(double len, double v0, double v1, double vn, double a)
-{
-    double d_acc = (vn * vn - v0 * v0) / (2 * a), d_dec = (vn * vn - v1 * v1) / (2 * a);
-    if (d_acc + d_dec <= len)
-        return (vn - v0) / a + (vn - v1) / a + (len - d_acc - d_dec) / vn;
-    double vp = sqrt(fmax(0, (2 * a * len + v0 * v0 + v1 * v1) / 2));
-    return (vp - v0) / a + (vp - v1) / a;
-}
-
-/* Entry speeds (in place into v_max_in), then time of blocks [0, n); cum[i] = time before block i.
- */
-static double
-plan_time(struct plan *pl, double *cum)
-{
-    size_t n = pl->n;
-    if (!n)
-        return 0;
-    struct block *b = pl->b;
-    b[0].v_max_in = fminf(b[0].v_max_in, b[0].v_safe);
-    /* backward: each block must be able to slow to the next one's entry */
-    double next = b[n - 1].v_safe; /* exit of the last block */
-    for (size_t i = n; i-- > 0;) {
-        double lim = sqrt(next * next + 2.0 * b[i].accel * b[i].len);
-        if (b[i].v_max_in > lim)
-            b[i].v_max_in = (float)lim;
-        next = b[i].v_max_in;
-    }
-    /* forward: and reach it from the previous one's entry */
-    for (size_t i = 0; i + 1 < n; i++) {
-        double lim = sqrt((double)b[i].v_max_in * b[i].v_max_in + 2.0 * b[i].accel * b[i].len);
-        if (b[i + 1].v_max_in > lim)
-            b[i + 1].v_max_in = (float)lim;
-    }
-    double t = 0;
-    for (size_t i = 0; i < n; i++) {
-        if (cum)
-            cum[i] = t;
-        double v1 = i + 1 < n ? b[i + 1].v_max_in : fminf(b[i].v_safe, b[i].v_nom);
-        double v0 = b[i].v_max_in;
-        t += trapezoid_s(b[i].len, v0, fmin(v1, b[i].v_nom), b[i].v_nom, b[i].accel);
-    }
-    return t;
 }
 
 static bool
@@ -270,7 +320,7 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
     memset(out, 0, sizeof(*out));
     struct est_limits cur = *lim; /* as changed by the file's M201-M205 */
     struct plan pl = { 0 };
-    size_t *layer_block = NULL, cap_layers = 0;
+    size_t cap_layers = 0, cap_layer_s = 0;
     double pos[4] = { 0 }, f = 25, dwell = 0;
     bool rel_xyz = false, rel_e = false, support = false;
     const char *type = NULL;
@@ -293,12 +343,15 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
         }
         if (l && s[0] == ';') {
             if (has_prefix(s, l, ";LAYER_CHANGE")) {
-                if (!mem_grow((void **)&layer_block, &cap_layers, out->n_layers + 1,
-                              sizeof(*layer_block))) {
+                if (!mem_grow((void **)&pl.layer_block, &cap_layers, out->n_layers + 1,
+                              sizeof(*pl.layer_block)) ||
+                    !mem_grow((void **)&pl.layer_s, &cap_layer_s, out->n_layers + 1,
+                              sizeof(*pl.layer_s))) {
                     rc = sf_err_set(err, SF_ENOMEM, "%s: out of memory", name);
                     goto fail;
                 }
-                layer_block[out->n_layers++] = pl.n;
+                pl.layer_block[out->n_layers++] = pl.done + pl.n;
+                pl.n_layers = out->n_layers;
             } else if (has_prefix(s, l, ";TYPE:")) {
                 support = has_prefix(s, l, ";TYPE:Support material");
                 type = s + 6;
@@ -334,10 +387,17 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
             double ci = 0, cj = 0;
             bool has_i = gcode_get(&gl, 'I', &ci) && isfinite(ci) && fabs(ci) < EST_COORD_MAX;
             bool has_j = gcode_get(&gl, 'J', &cj) && isfinite(cj) && fabs(cj) < EST_COORD_MAX;
+            double arc_mm = 0;
             if (gl.code >= 2 && (has_i || has_j))
-                rc = plan_arc(&pl, &cur, pos, d, has_i ? ci : 0, has_j ? cj : 0, gl.code == 2, f);
+                rc = plan_arc(&pl, &cur, pos, d, has_i ? ci : 0, has_j ? cj : 0, gl.code == 2, f,
+                              &arc_mm);
             else
                 rc = plan_add(&pl, &cur, d, f);
+            if (rc == SF_EINVAL) {
+                sf_err_set(err, rc, "%s:%u: arc of %.0f mm is longer than %.0f m", name, lineno,
+                           arc_mm, EST_ARC_MM_MAX / 1000);
+                goto fail;
+            }
             if (rc < 0) {
                 sf_err_set(err, rc, "%s: out of memory", name);
                 goto fail;
@@ -385,24 +445,27 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
                 dwell += fmin(v / 1000, EST_COORD_MAX);
         }
     }
-    double *cum = mem_array(pl.n + 1, sizeof(*cum));
-    out->layer_start_s = mem_calloc(out->n_layers + 1, sizeof(double));
-    if (!cum || !out->layer_start_s) {
-        free(cum);
-        rc = sf_err_set(err, SF_ENOMEM, "%s: out of memory", name);
-        goto fail;
+    plan_flush(&pl, true);
+    out->time_s = pl.t + dwell;
+    out->peak_blocks = pl.peak;
+    while (pl.next_layer < pl.n_layers)
+        pl.layer_s[pl.next_layer++] = pl.t;
+    if (!out->n_layers) {
+        free(pl.layer_s);
+        pl.layer_s = mem_calloc(1, sizeof(double));
+        if (!pl.layer_s) {
+            rc = sf_err_set(err, SF_ENOMEM, "%s: out of memory", name);
+            goto fail;
+        }
     }
-    out->time_s = plan_time(&pl, cum) + dwell;
-    cum[pl.n] = out->time_s - dwell;
-    for (uint32_t k = 0; k < out->n_layers; k++)
-        out->layer_start_s[k] = cum[layer_block[k]];
-    free(cum);
+    out->layer_start_s = pl.layer_s;
     free(pl.b);
-    free(layer_block);
+    free(pl.layer_block);
     return SF_OK;
 fail:
     free(pl.b);
-    free(layer_block);
+    free(pl.layer_block);
+    free(pl.layer_s);
     estimate_release(out);
     return rc < 0 ? rc : SF_EBUG;
 }

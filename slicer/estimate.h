@@ -3,7 +3,8 @@
  * trapezoidal planner like the firmware's, filament per role.
  *
  * The interpreter follows G0/G1, G2/G3 arcs (I J centre offsets, split
- * into segments of at most 1 mm as Marlin's ARC_SUPPORT does), G90/
+ * into segments of at most 1 mm as Marlin's ARC_SUPPORT does; an arc
+ * longer than 10 m is an error naming its line), G90/
  * G91, M82/M83, G92, G4 dwell and G28 (to the origin), and the comments
  * the slicer writes: ;LAYER_CHANGE starts a layer, ;TYPE: sets the role
  * (support when it names "Support material...").  Filament is summed the
@@ -36,6 +37,11 @@
 
 #include "../src/base/err.h"
 
+/* Most planner blocks held at once (20 bytes each): a block leaves once
+   no later one can change its time, so a longer look-ahead changes no
+   real print's estimate. */
+#define EST_LOOKAHEAD_BLOCKS 65536
+
 struct est_limits {
     double max_feed_mm_s[4];   /* X Y Z E (M203) */
     double max_accel_mm_s2[4]; /* X Y Z E (M201); 0: no per-axis cap */
@@ -66,11 +72,13 @@ struct estimate {
     uint32_t n_moves;
     uint32_t n_layers;     /* ;LAYER_CHANGE count */
     double *layer_start_s; /* n_layers entries: time when each layer starts (free()) */
+    size_t peak_blocks;    /* most planner blocks held at once (bounded by the look-ahead) */
 };
 
 /*
  * Interpret len bytes of G-code (name for messages).  on_move may be NULL.
- * SF_EINVAL naming the line on a malformed line; SF_ENOMEM.  Release out
+ * SF_EINVAL naming the line on a malformed line or an arc longer than
+ * 10 m; SF_ENOMEM.  Release out
  * with estimate_release.
  */
 int estimate_gcode(const char *text, size_t len, const char *name, const struct est_limits *lim,

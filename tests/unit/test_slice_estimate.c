@@ -3,6 +3,8 @@
  * move sequences, and the interpreter's modes (relative E, G92, roles).
  */
 #include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "../../slicer/estimate.h"
@@ -181,5 +183,83 @@ T_CASE(estimate_follows_firmware_limits_in_the_file)
     estimate_release(&e);
     /* nonsense values are ignored */
     T_EQ_DBL(est("M204 T-5 S0\nM201 X0\nM203 X-1\nG1 X10 F6000\n", &l, &e), 0.2, 1e-6);
+    estimate_release(&e);
+}
+
+/* n copies of line into a fresh buffer (free()), after head. */
+static char *
+repeat(const char *head, const char *line, size_t n)
+{
+    size_t hl = strlen(head), ll = strlen(line);
+    char *g = malloc(hl + n * ll + 1);
+    if (!g)
+        return NULL;
+    memcpy(g, head, hl);
+    for (size_t i = 0; i < n; i++)
+        memcpy(g + hl + i * ll, line, ll);
+    g[hl + n * ll] = 0;
+    return g;
+}
+
+T_CASE(estimate_refuses_an_arc_longer_than_any_printer_naming_its_line)
+{
+    /* radius 100 m: a full turn is 628 km of 1 mm segments */
+    struct est_limits l;
+    struct estimate e;
+    struct sf_err err;
+    limits(&l, 1000, 10);
+    char *g = repeat("G1 X10 F6000\n", "G2 I100000\n", 370);
+    T_TRUE(g != NULL);
+    T_ERR(estimate_gcode(g, strlen(g), "arc.gcode", &l, NULL, NULL, &e, &err), SF_EINVAL, &err,
+          "arc.gcode:2: arc of 628319 mm is longer than 10 m");
+    free(g);
+}
+
+T_CASE(estimate_holds_a_bounded_window_of_arc_segments)
+{
+    /* 300 full turns of radius 1 m (6284 segments each, 1.9M in all),
+       with sane and with absurdly low acceleration (no block is final
+       until the window is full) */
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 10);
+    static const char *heads[] = { "G1 X10 F6000\n", "M204 S0.001\nG1 X10 F6000\n" };
+    for (int h = 0; h < 2; h++) {
+        char *g = repeat(heads[h], "G2 I1000\n", 300);
+        T_TRUE(g != NULL);
+        double t = est(g, &l, &e);
+        free(g);
+        T_TRUE(t > 0 && isfinite(t));
+        T_EQ_INT(e.n_moves, 301);
+        T_TRUE(e.peak_blocks > 0 && e.peak_blocks <= EST_LOOKAHEAD_BLOCKS);
+        estimate_release(&e);
+    }
+}
+
+T_CASE(estimate_streams_a_long_file_as_one_plan)
+{
+    /* 200000 collinear 0.5 mm moves (three windows' worth) plan as one
+       100 m move: 0.09 s up from jerk 10 to 100 mm/s over 4.95 mm, the
+       same down, the rest at 100 mm/s; the layer at move 100000 starts
+       0.09 s + (50000 - 4.95) mm / 100 mm/s in */
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 10);
+    size_t n = 200000;
+    size_t cap = n * 24 + 64, used = 0;
+    char *g = malloc(cap);
+    T_TRUE(g != NULL);
+    used += (size_t)snprintf(g, cap, "G1 F6000\n");
+    for (size_t i = 1; i <= n; i++) {
+        if (i == n / 2 + 1)
+            used += (size_t)snprintf(g + used, cap - used, ";LAYER_CHANGE\n");
+        used += (size_t)snprintf(g + used, cap - used, "G1 X%.1f\n", (double)i * 0.5);
+    }
+    double t = est(g, &l, &e);
+    free(g);
+    T_EQ_DBL(t, 0.18 + (100000 - 9.9) / 100, 1e-3);
+    T_EQ_INT(e.n_layers, 1);
+    T_EQ_DBL(e.layer_start_s[0], 0.09 + (50000 - 4.95) / 100, 1e-3);
+    T_TRUE(e.peak_blocks <= EST_LOOKAHEAD_BLOCKS);
     estimate_release(&e);
 }
