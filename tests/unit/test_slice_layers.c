@@ -216,6 +216,21 @@ region_areas(const struct layer_stack *s, uint32_t k, const struct slice_profile
     return rc;
 }
 
+/* m sliced at 0.2 mm into s, with every layer's areas for profile p. */
+static int
+slice_areas(const struct mesh *m, const struct slice_profile *p, struct layer_stack *s,
+            struct sf_err *err)
+{
+    int rc = layers_slice(m, 0.2, 0.2, 0, 0, s, err);
+    for (uint32_t k = 0; rc == SF_OK && k < s->n; k++) {
+        if ((rc = toolpath_areas(s, k, p)) < 0) {
+            layer_stack_release(s);
+            return sf_err_set(err, rc, "toolpath_areas: layer %u", k);
+        }
+    }
+    return rc;
+}
+
 T_CASE(surfaces_thicken_only_their_own_side)
 {
     /* a 12 mm post under a 30 mm slab (z 10-12), and a 30 mm block under
@@ -241,9 +256,7 @@ T_CASE(surfaces_thicken_only_their_own_side)
             T_TRUE(ts_box(&m, 0, 0, 10, 12, 12, 20) == 0);
         }
         struct layer_stack s;
-        T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
-        for (uint32_t k = 0; k < s.n; k++)
-            T_OK(toolpath_areas(&s, k, &p), NULL);
+        T_OK(slice_areas(&m, &p, &s, &err), &err);
         double solid, sparse;
         if (part == 0) {
             /* z 9.2-10: the post under the slab is sparse */
@@ -296,11 +309,9 @@ T_CASE(slope_gets_projected_top_surfaces)
     struct sf_err err;
     T_TRUE(ts_pyramid(&m, 50, 10) == 0);
     struct layer_stack s;
-    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
-    for (uint32_t k = 0; k < s.n; k++)
-        T_OK(toolpath_areas(&s, k, &p), NULL);
+    T_OK(slice_areas(&m, &p, &s, &err), &err);
     uint32_t k = 25; /* plane at z 5.1: side 24.5 */
     double inset = p.width_mm / 2 + 1.5 * tp_spacing(p.width_mm, 0.2);
     double inner = 24.5 - 2 * inset;
@@ -328,11 +339,9 @@ T_CASE(steep_slope_gets_a_band_of_solid)
     struct sf_err err;
     T_TRUE(ts_pyramid(&m, 40, 20) == 0);
     struct layer_stack s;
-    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
-    for (uint32_t k = 0; k < s.n; k++)
-        T_OK(toolpath_areas(&s, k, &p), NULL);
+    T_OK(slice_areas(&m, &p, &s, &err), &err);
     double sp = tp_spacing(p.width_mm, 0.2);
     double inset = p.width_mm / 2 + 1.5 * sp;
     T_TRUE(p.infill_overlap * sp > inset - p.top_layers * 0.2); /* the sliver exists */
@@ -363,11 +372,9 @@ T_CASE(skins_leave_small_pieces_of_big_islands_sparse)
     T_TRUE(ts_box(&m, -15, -15, 0, 15, 15, 10) == 0);
     T_TRUE(ts_box(&m, -7, -7, 10, 7, 7, 20) == 0);
     struct layer_stack s;
-    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
-    for (uint32_t k = 0; k < s.n; k++)
-        T_OK(toolpath_areas(&s, k, &p), NULL);
+    T_OK(slice_areas(&m, &p, &s, &err), &err);
     double mid = (14 - 2 * p.skin_margin_mm) * (14 - 2 * p.skin_margin_mm);
     T_TRUE(mid < p.solid_below_mm2);
     for (uint32_t k = 46; k < 50; k++) {
@@ -395,9 +402,7 @@ T_CASE(small_island_area_counts_the_infill_overlap)
     struct sf_err err;
     T_TRUE(ts_box(&m, 0, 0, 0, a, a, 10) == 0);
     struct layer_stack s;
-    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
-    for (uint32_t k = 0; k < s.n; k++)
-        T_OK(toolpath_areas(&s, k, &p), NULL);
+    T_OK(slice_areas(&m, &p, &s, &err), &err);
     double solid, sparse;
     T_OK(region_areas(&s, 25, &p, &solid, &sparse), NULL);
     T_EQ_DBL(solid, 0, 1e-9);
@@ -416,11 +421,9 @@ T_CASE(small_islands_print_solid)
     T_TRUE(ts_box(&m, 0, 0, 0, 7, 7, 10) == 0);
     T_TRUE(ts_box(&m, 20, 0, 0, 40, 20, 10) == 0);
     struct layer_stack s;
-    T_OK(layers_slice(&m, 0.2, 0.2, 0, 0, &s, &err), &err);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
-    for (uint32_t k = 0; k < s.n; k++)
-        T_OK(toolpath_areas(&s, k, &p), NULL);
+    T_OK(slice_areas(&m, &p, &s, &err), &err);
     double inset = p.width_mm / 2 + 1.5 * tp_spacing(p.width_mm, 0.2);
     double small = (7 - 2 * inset) * (7 - 2 * inset), big = (20 - 2 * inset) * (20 - 2 * inset);
     double solid, sparse;
