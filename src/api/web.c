@@ -261,8 +261,7 @@ render_work(void *ud, const atomic_bool *cancel)
     struct supmodel_params sp;
     struct supmodel_result sr;
     struct sf_err serr;
-    supmodel_params_default(&sp, SUPMODEL_PRUSA);
-    sp.angle_deg = t->angle_deg;
+    supmodel_params_steer(&sp, t->angle_deg);
     if (rc == SF_OK && !atomic_load(cancel) &&
         supmodel_of_mesh(&m, (struct vec3){ 0, 0, 1 }, &sp, &sr, &serr) == SF_OK) {
         t->support_g = sr.grams;

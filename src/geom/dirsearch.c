@@ -54,8 +54,7 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
     if (rc < 0)
         return rc;
     struct supmodel_params mp;
-    supmodel_params_default(&mp, SUPMODEL_PRUSA);
-    mp.angle_deg = p->sp.angle_deg;
+    supmodel_params_steer(&mp, p->sp.angle_deg);
     struct supmodel_result mr;
     if ((rc = supmodel_of_mesh(m, v3(0, 0, 1), &mp, &mr, err)) < 0)
         return rc;

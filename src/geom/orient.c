@@ -350,8 +350,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     /* report at the operator's angle: the margin only steers the choice */
     j.at = j.sp;
     j.at.angle_deg = p->angle_deg;
-    supmodel_params_default(&j.mp, SUPMODEL_PRUSA);
-    j.mp.angle_deg = p->angle_deg;
+    supmodel_params_steer(&j.mp, p->angle_deg);
 
     struct opening o = { .m = m,
                          .p = p,

@@ -33,6 +33,7 @@ struct raycast {
     struct vec3 com;   /* centre of mass (raycast_com) */
     uint32_t *extreme; /* hull vertices (raycast_set_extreme), or NULL: every vertex */
     uint32_t n_extreme;
+    struct rims rims; /* open rims, for models of how other slicers treat them */
 };
 
 int
@@ -80,6 +81,18 @@ struct vec3
 raycast_com(const struct raycast *rc)
 {
     return rc->com;
+}
+
+const struct mesh *
+raycast_mesh(const struct raycast *rc)
+{
+    return rc->mesh;
+}
+
+const struct rims *
+raycast_rims(const struct raycast *rc)
+{
+    return &rc->rims;
 }
 
 static pthread_once_t device_once = PTHREAD_ONCE_INIT;
@@ -184,6 +197,10 @@ raycast_new(const struct mesh *m, struct sf_err *err)
     }
     rc->mesh = m;
     rc->com = centre_of_mass(m);
+    if (rims_build(m, &rc->rims, err)) {
+        free(rc);
+        return NULL;
+    }
     rc->normal = mem_array((size_t)m->n_tris * 3 + 3, sizeof(float));
     RTCGeometry geom = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     float *vb = geom ? rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
@@ -239,6 +256,7 @@ raycast_free(struct raycast *rc)
         rtcReleaseScene(rc->scene);
     free(rc->normal);
     free(rc->extreme);
+    rims_release(&rc->rims);
     free(rc);
 }
 

@@ -19,6 +19,7 @@
 
 #include "../base/err.h"
 #include "../mesh/mesh.h"
+#include "rims.h"
 
 struct raycast;
 
@@ -59,6 +60,10 @@ int raycast_set_extreme(struct raycast *rc, const uint32_t *verts, uint32_t n, s
 /* The part's centre of mass (solid for a closed mesh, surface centroid for an
    open one), computed once with the scene: it does not depend on direction. */
 struct vec3 raycast_com(const struct raycast *rc);
+
+/* The mesh the scene was built from, and its open rims (built with the scene). */
+const struct mesh *raycast_mesh(const struct raycast *rc);
+const struct rims *raycast_rims(const struct raycast *rc);
 
 /*
  * Cast the grid for unit vector up with the given pitch (mm) over the

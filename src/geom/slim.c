@@ -337,8 +337,7 @@ static int
 model_on(struct raycast *rc, double angle_deg, double *model_g, struct sf_err *err)
 {
     struct supmodel_params mp;
-    supmodel_params_default(&mp, SUPMODEL_PRUSA);
-    mp.angle_deg = angle_deg;
+    supmodel_params_steer(&mp, angle_deg);
     struct supmodel_result mr;
     int r = supmodel_eval(rc, v3(0, 0, 1), &mp, &mr, err);
     *model_g = r == SF_OK ? mr.grams : 0;

@@ -47,6 +47,7 @@ supmodel_params_default(struct supmodel_params *p, enum supmodel_slicer s)
         p->bridges = true;
         /* two perimeters of 0.45 mm, less the infill's overlap with them */
         p->bridge_band_mm = 0.8;
+        p->open_gap_mm = 2; /* TriangleMeshSlicer's make_loops */
     } else {
         /* zigzag at 2.667 mm line distance: 0.4 / 2.667; join distance 2 mm */
         p->gap_xy_mm = 0.7;
@@ -54,7 +55,16 @@ supmodel_params_default(struct supmodel_params *p, enum supmodel_slicer s)
         p->base_density = 0.15;
         p->first_density = 0.15;
         p->connector_factor = 0.6;
+        p->open_gap_mm = 10; /* slicer.cpp's max_stitch1 */
     }
+}
+
+void
+supmodel_params_steer(struct supmodel_params *p, double angle_deg)
+{
+    supmodel_params_default(p, SUPMODEL_PRUSA);
+    p->angle_deg = angle_deg;
+    p->open_gap_mm = 0;
 }
 
 int
@@ -76,6 +86,9 @@ supmodel_params_check(const struct supmodel_params *p, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL,
                           "support model: interface_step_mm outside [0, 5] or bridge_band_mm "
                           "outside [0, 10]");
+    if (!(p->open_gap_mm >= 0 && p->open_gap_mm <= 100))
+        return sf_err_set(err, SF_EINVAL, "support model: open_gap_mm %g outside [0, 100]",
+                          p->open_gap_mm);
     if (!(p->snap_mm >= 0 && p->snap_mm <= 50))
         return sf_err_set(err, SF_EINVAL, "support model: snap_mm %g outside [0, 50]", p->snap_mm);
     if (p->interface_layers < 0 || p->interface_layers > 50)
@@ -110,39 +123,108 @@ cols_release(struct cols *c)
     free(c->iv);
 }
 
-static int
-cols_build(const struct ray_grid *g, struct cols *out, struct sf_err *err)
+/* The open layers of one direction (rims_open_layers) and the triangles'
+   components: solid of a component in its open layers is not there. */
+struct open_cut {
+    const struct open_layer *ol; /* sorted by (comp, k) */
+    size_t n;
+    const uint32_t *tri_comp;
+    double layer_mm;
+};
+
+/* Append interval iv to out (n of cap), less the open layers of the
+   component of triangle tri (cut NULL: nothing dropped). */
+static bool
+push_ival(struct cols *out, uint32_t *n, size_t *cap, struct ival iv, uint32_t tri,
+          const struct open_cut *cut)
 {
-    size_t cells = (size_t)g->nu * g->nw;
+    const struct open_layer *ol = NULL, *end = NULL;
+    if (cut && cut->n && iv.hi > iv.lo) {
+        uint32_t comp = cut->tri_comp[tri];
+        size_t a = 0, b = cut->n; /* the component's first open layer */
+        while (a < b) {
+            size_t mid = (a + b) / 2;
+            if (cut->ol[mid].comp < comp)
+                a = mid + 1;
+            else
+                b = mid;
+        }
+        ol = cut->ol + a;
+        end = ol;
+        while (end < cut->ol + cut->n && end->comp == comp)
+            end++;
+    }
+    double h = cut ? cut->layer_mm : 0;
+    while (ol < end) {
+        /* a run of consecutive open layers k0..k1 drops the slab [k0 h, (k1 + 1) h] */
+        int32_t k0 = ol->k, k1 = k0;
+        for (ol++; ol < end && ol->k == k1 + 1; ol++)
+            k1++;
+        float lo = (float)(k0 * h), hi = (float)((k1 + 1) * h);
+        if (hi <= iv.lo || lo >= iv.hi)
+            continue;
+        if (lo > iv.lo) {
+            void *o = out->iv;
+            if (!mem_grow(&o, cap, *n + 1, sizeof(*out->iv)))
+                return false;
+            out->iv = o;
+            out->iv[(*n)++] = (struct ival){ iv.lo, lo, iv.cos_lo };
+        }
+        if (hi >= iv.hi)
+            return true;
+        iv.lo = hi; /* the layer above an open one rests on nothing: a flat bottom */
+        iv.cos_lo = -1;
+    }
+    void *o = out->iv;
+    if (!mem_grow(&o, cap, *n + 1, sizeof(*out->iv)))
+        return false;
+    out->iv = o;
+    out->iv[(*n)++] = iv;
+    return true;
+}
+
+/* The columns' solid intervals, less what cut drops (NULL or empty: nothing). */
+static int
+cols_build(const struct ray_grid *g, const struct open_cut *cut, struct cols *out,
+           struct sf_err *err)
+{
+    size_t cells = (size_t)g->nu * g->nw, cap = g->n_hits + 1;
     out->first = mem_array(cells + 1, sizeof(uint32_t));
-    /* at most one interval per hit */
-    out->iv = mem_array(g->n_hits + 1, sizeof(struct ival));
+    /* at most one interval per hit, unless open layers split them */
+    out->iv = mem_array(cap, sizeof(struct ival));
     if (!out->first || !out->iv) {
         cols_release(out);
         return sf_err_set(err, SF_ENOMEM, "support model: out of memory (%zu cells)", cells);
     }
     uint32_t n = 0;
-    for (size_t c = 0; c < cells; c++) {
+    bool ok = true;
+    for (size_t c = 0; c < cells && ok; c++) {
         out->first[c] = n;
         int depth = 0;
         float lo = 0, lo_cos = 0, last = 0;
-        for (uint32_t k = g->first[c]; k < g->first[c + 1]; k++) {
+        uint32_t lo_tri = 0;
+        for (uint32_t k = g->first[c]; k < g->first[c + 1] && ok; k++) {
             const struct ray_hit *h = &g->hits[k];
             last = h->h;
             if (h->cos_up > 0) {
                 if (depth > 0 && --depth == 0)
-                    out->iv[n++] = (struct ival){ lo, h->h, lo_cos };
+                    ok = push_ival(out, &n, &cap, (struct ival){ lo, h->h, lo_cos }, lo_tri, cut);
                 else if (depth == 0) /* an exit with no entry: a floor, no material */
-                    out->iv[n++] = (struct ival){ h->h, h->h, 0 };
+                    ok = push_ival(out, &n, &cap, (struct ival){ h->h, h->h, 0 }, h->tri, cut);
             } else if (h->cos_up < 0) {
                 if (depth++ == 0) {
                     lo = h->h;
                     lo_cos = h->cos_up;
+                    lo_tri = h->tri;
                 }
             }
         }
-        if (depth > 0) /* an open top: material up to the last hit */
-            out->iv[n++] = (struct ival){ lo, last, lo_cos };
+        if (depth > 0 && ok) /* an open top: material up to the last hit */
+            ok = push_ival(out, &n, &cap, (struct ival){ lo, last, lo_cos }, lo_tri, cut);
+    }
+    if (!ok) {
+        cols_release(out);
+        return sf_err_set(err, SF_ENOMEM, "support model: out of memory (%zu cells)", cells);
     }
     out->first[cells] = n;
     return SF_OK;
@@ -900,7 +982,7 @@ supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
     if (rc)
         return rc;
     struct cols cs;
-    if ((rc = cols_build(g, &cs, err)))
+    if ((rc = cols_build(g, NULL, &cs, err)))
         return rc;
     struct contact *ct = NULL;
     size_t n = 0;
@@ -1007,9 +1089,9 @@ xor_len(const struct run *a, size_t na, const struct run *b, size_t nb)
     return la + lb - 2 * both;
 }
 
-int
-supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
-                   struct supmodel_result *out, struct sf_err *err)
+static int
+eval_cut(const struct ray_grid *g, const struct supmodel_params *p, const struct open_cut *cut,
+         struct supmodel_result *out, struct sf_err *err)
 {
     memset(out, 0, sizeof(*out));
     int rc = supmodel_params_check(p, err);
@@ -1017,7 +1099,7 @@ supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
         return rc;
     double h = p->layer_mm, px = g->pitch, cell_a = px * px;
     struct cols cs;
-    if ((rc = cols_build(g, &cs, err)))
+    if ((rc = cols_build(g, cut, &cs, err)))
         return rc;
     struct contact *ct = NULL;
     size_t n_ct = 0;
@@ -1166,6 +1248,13 @@ done:
     return rc;
 }
 
+int
+supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
+                   struct supmodel_result *out, struct sf_err *err)
+{
+    return eval_cut(g, p, NULL, out, err);
+}
+
 double
 supmodel_raster_pitch(const struct supmodel_params *p)
 {
@@ -1185,7 +1274,15 @@ supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *
     struct ray_grid g;
     if ((r = raycast_grid(rc, v3_normalize(up), supmodel_raster_pitch(p), &g, err)))
         return r;
-    r = supmodel_eval_grid(&g, p, out, err);
+    struct open_cut cut = { NULL, 0, raycast_rims(rc)->tri_comp, p->layer_mm };
+    struct open_layer *ol = NULL;
+    if (p->open_gap_mm > 0)
+        r = rims_open_layers(raycast_rims(rc), raycast_mesh(rc), g.up, g.base, p->layer_mm,
+                             p->open_gap_mm, &ol, &cut.n, err);
+    cut.ol = ol;
+    if (r == SF_OK)
+        r = eval_cut(&g, p, &cut, out, err);
+    free(ol);
     ray_grid_release(&g);
     return r;
 }

@@ -29,6 +29,10 @@
  * bridge keep support, and perimeters keep it unless a straight line of the
  * bridge's direction anchors them at both ends (supmodel.c says how the
  * raster follows BridgeDetector).  CuraEngine supports bridges.
+ * Open shells (supmodel_eval only: it needs the mesh): where a layer cuts
+ * an open rim and the slicer cannot close the section (open_gap_mm), the
+ * component's solid in that layer is dropped, as the slicers drop it, and
+ * the layer above rests on nothing (rims.h).
  *
  * Pure functions: thread-safe on distinct outputs; the raycast may be shared.
  */
@@ -66,10 +70,22 @@ struct supmodel_params {
                                     detector anchors need no support (on / off) */
     double bridge_band_mm;       /* perimeters' width inside a layer's outline: bottom
                                     there is perimeter, not bridge fill (0.8) */
+    double open_gap_mm;          /* a cross-section an open rim leaves open is closed
+                                    across gaps up to this, else dropped (rims.h; 2 / 10);
+                                    0: closed by winding, as our slicer prints it */
 };
 
 /* The defaults of ../shared/peers/slice-peers.sh for slicer s at 45 degrees. */
 void supmodel_params_default(struct supmodel_params *p, enum supmodel_slicer s);
+
+/*
+ * What the optimizers steer by: PrusaSlicer's rules at angle_deg on the part
+ * as our own slicer prints it, open sections closed by winding (open_gap_mm
+ * 0).  The farm prints what it steered by; an open shell is not scored by
+ * the little of it PrusaSlicer would print (mech-holes-shark: 1.1 g of
+ * support and almost no part in the direction PrusaSlicer rates best).
+ */
+void supmodel_params_steer(struct supmodel_params *p, double angle_deg);
 
 /*
  * PrusaSlicer 2.5's overhang rule at overhang angle alpha (degrees from
@@ -96,7 +112,8 @@ struct supmodel_result {
 /* Validate p: SF_EINVAL naming the field when a value is out of range. */
 int supmodel_params_check(const struct supmodel_params *p, struct sf_err *err);
 
-/* The model on a cast grid (g's pitch is the raster; p->pitch_mm is ignored). */
+/* The model on a cast grid (g's pitch is the raster; p->pitch_mm is ignored;
+   cross-sections closed by winding whatever p->open_gap_mm). */
 int supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p,
                        struct supmodel_result *out, struct sf_err *err);
 

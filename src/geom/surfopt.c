@@ -745,8 +745,7 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
     t0 = now_s();
     struct support_metrics sm;
     struct supmodel_params mp;
-    supmodel_params_default(&mp, SUPMODEL_PRUSA);
-    mp.angle_deg = p->angle_deg;
+    supmodel_params_steer(&mp, p->angle_deg);
     struct supmodel_result mr;
     if ((rc = supmodel_of_mesh(&oriented, v3(0, 0, 1), &mp, &mr, err)) < 0)
         goto out;
