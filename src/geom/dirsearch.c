@@ -99,7 +99,13 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
         }
     }
     res->up = res->ups[best];
-    if (!(res->model_g[best] < (1 - p->min_gain) * res->model_input_g)) {
+    bool gain = res->model_g[best] < (1 - p->min_gain) * res->model_input_g, rises = false;
+    if (gain &&
+        (rc = supmodel_peers_rise(m, &res->best.out, p->sp.angle_deg, &rises, NULL, err)) < 0) {
+        dirsearch_result_release(res);
+        return rc;
+    }
+    if (!gain || rises) {
         /* not worth it: the input as given, resting on z = 0 */
         surfopt_result_release(&res->best);
         memset(&res->best, 0, sizeof(res->best));
@@ -108,8 +114,12 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
             return rc;
         orient_apply(&res->best.out, v3(0, 0, 1), 0, 0);
         res->best.model_oriented_g = res->best.model_after_g = res->model_input_g;
-        res->best.unchanged_why = "no direction's result saves min_gain of the model's "
-                                  "grams for the input as given";
+        res->best.unchanged_why =
+            rises ? "the best direction's result of this open shell needs more support than "
+                    "the part as given in PrusaSlicer or CuraEngine, which drop what its open "
+                    "rims leave open"
+                  : "no direction's result saves min_gain of the model's grams for the input "
+                    "as given";
         res->up = v3(0, 0, 1);
         res->kept_input = true;
     }

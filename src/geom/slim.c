@@ -633,8 +633,19 @@ choose(struct work *w, struct sf_err *err)
             d->n_rejected++;
             continue;
         }
+        /* an open shell steered as our slicer prints it must not cost more in
+           the slicers that drop what its rims leave open (mech-holes-shark:
+           PrusaSlicer 3.14 -> 3.40 g slimmed) */
+        bool rises;
+        int rc = supmodel_peers_rise(w->cx->m, &w->cur, p->angle_deg, &rises, NULL, err);
+        if (rc)
+            return rc;
+        if (rises) {
+            d->n_rejected++;
+            continue;
+        }
         double g;
-        int rc = support_of(&w->cur, p->angle_deg, &d->after, &g, err);
+        rc = support_of(&w->cur, p->angle_deg, &d->after, &g, err);
         if (rc)
             return rc;
         d->model_after_g = g; /* c->model_g: the same mesh, weighed again */

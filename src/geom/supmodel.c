@@ -1299,3 +1299,31 @@ supmodel_of_mesh(const struct mesh *m, struct vec3 up, const struct supmodel_par
     raycast_free(rc);
     return r;
 }
+
+int
+supmodel_peers_rise(const struct mesh *before, const struct mesh *after, double angle_deg,
+                    bool *rises, enum supmodel_slicer *slicer, struct sf_err *err)
+{
+    *rises = false;
+    struct rims r;
+    int rc = rims_build(before, &r, err);
+    if (rc)
+        return rc;
+    bool open = r.n_edges > 0;
+    rims_release(&r);
+    if (!open)
+        return SF_OK;
+    for (int s = 0; s < 2 && !*rises; s++) {
+        struct supmodel_params p;
+        struct supmodel_result a, b;
+        supmodel_params_default(&p, s ? SUPMODEL_CURA : SUPMODEL_PRUSA);
+        p.angle_deg = angle_deg;
+        if ((rc = supmodel_of_mesh(before, v3(0, 0, 1), &p, &a, err)) ||
+            (rc = supmodel_of_mesh(after, v3(0, 0, 1), &p, &b, err)))
+            return rc;
+        *rises = b.grams > a.grams;
+        if (slicer)
+            *slicer = p.slicer;
+    }
+    return SF_OK;
+}

@@ -97,6 +97,18 @@ void supmodel_params_steer(struct supmodel_params *p, double angle_deg);
  */
 double supmodel_prusa_safe_angle_deg(double angle_deg);
 
+/*
+ * Does either outside slicer need more support for after than for before
+ * (both printed along +z), each by its own rules and its own treatment of
+ * open rims (supmodel_params_default at angle_deg)?  *rises says so and
+ * *slicer which.  A closed before answers no at once: there the steering
+ * model is PrusaSlicer's own.  For an open shell the optimizers score the
+ * part as our slicer prints it; this is their check that a result does not
+ * cost more in the slicers that drop what the rims leave open.
+ */
+int supmodel_peers_rise(const struct mesh *before, const struct mesh *after, double angle_deg,
+                        bool *rises, enum supmodel_slicer *slicer, struct sf_err *err);
+
 struct supmodel_result {
     double grams;            /* all support extrusion */
     double time_s;           /* support path length / speed */

@@ -750,7 +750,7 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
     if ((rc = supmodel_of_mesh(&oriented, v3(0, 0, 1), &mp, &mr, err)) < 0)
         goto out;
     res->model_oriented_g = mr.grams;
-    int best_k = -1, n_selfx = 0;
+    int best_k = -1, n_selfx = 0, n_peer_rise = 0;
     double best_g = mr.grams;
     for (int k = n_keep - 1; k >= 0; k--) {
         memcpy(cur.v, keep[k].v, (size_t)n * sizeof(struct vec3));
@@ -763,11 +763,18 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
         }
         if ((rc = supmodel_of_mesh(&cur, v3(0, 0, 1), &mp, &mr, err)) < 0)
             goto out;
-        if (mr.grams < best_g) {
+        /* nor may it cost the part as given more in a slicer that drops what
+           open rims leave open (supmodel_peers_rise; closed parts: no) */
+        bool rises = false;
+        if (mr.grams < best_g &&
+            (rc = supmodel_peers_rise(m, &cur, p->angle_deg, &rises, NULL, err)) < 0)
+            goto out;
+        if (mr.grams < best_g && !rises) {
             best_g = mr.grams;
             best_k = k;
         } else {
             res->n_rejected++;
+            n_peer_rise += rises;
         }
     }
     bool small_gain = best_k >= 0 && !(best_g < (1 - p->min_gain) * res->model_oriented_g);
@@ -792,6 +799,9 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
             : n_keep == 0       ? "no iterate lowered the risky faces within the deviation "
                                   "limits"
             : n_selfx == n_keep ? "every kept shape adds self-intersections"
+            : n_peer_rise > 0   ? "the kept shapes of this open shell need more support than "
+                                  "the part as given in PrusaSlicer or CuraEngine, which drop "
+                                  "what its open rims leave open"
             : res->model_oriented_g <= 0 ? "the oriented part needs no support by the model"
             : small_gain                 ? "no kept shape saves min_gain of the oriented "
                                            "part's model grams"

@@ -548,3 +548,29 @@ T_CASE(supmodel_prusa_drops_what_an_open_rim_leaves_open)
     T_EQ_DBL(r.contact_area_mm2, 0, 1e-9);
     mesh_release(&m);
 }
+
+T_CASE(supmodel_peers_rise_when_an_open_result_loses_more_layers)
+{
+    /* a slot the slicers close across, and a window they do not: widening
+       the slot costs support in both peers (the block above rests on
+       nothing) while the steering model sees the same box */
+    struct mesh slot, window, box;
+    struct sf_err err;
+    windowed_box(&slot, 9.25, 10.75, &err);
+    windowed_box(&window, 4, 16, &err);
+    bool rises = false;
+    enum supmodel_slicer who = SUPMODEL_CURA;
+    T_OK(supmodel_peers_rise(&slot, &window, 45, &rises, &who, &err), &err);
+    T_TRUE(rises);
+    T_TRUE(who == SUPMODEL_PRUSA);
+    T_OK(supmodel_peers_rise(&window, &slot, 45, &rises, &who, &err), &err);
+    T_TRUE(!rises);
+    /* a closed part before: no question of rims */
+    mesh_init(&box);
+    T_OK(shape_box(&box, v3(0, 0, 0), v3(20, 20, 30), &err), &err);
+    T_OK(supmodel_peers_rise(&box, &window, 45, &rises, NULL, &err), &err);
+    T_TRUE(!rises);
+    mesh_release(&slot);
+    mesh_release(&window);
+    mesh_release(&box);
+}
