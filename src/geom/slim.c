@@ -634,8 +634,7 @@ choose(struct work *w, struct sf_err *err)
             continue;
         }
         /* an open shell steered as our slicer prints it must not cost more in
-           the slicers that drop what its rims leave open (mech-holes-shark:
-           PrusaSlicer 3.14 -> 3.40 g slimmed) */
+           the slicers that drop what its rims leave open, by their models */
         bool rises;
         int rc = supmodel_peers_rise(w->cx->m, &w->cur, p->angle_deg, &rises, NULL, err);
         if (rc)

@@ -123,56 +123,66 @@ cols_release(struct cols *c)
     free(c->iv);
 }
 
-/* The open layers of one direction (rims_open_layers) and the triangles'
-   components: solid of a component in its open layers is not there. */
+/* What the slicer keeps of the open layers (rims.h) in a grid's cells. */
 struct open_cut {
-    const struct open_layer *ol; /* sorted by (comp, k) */
-    size_t n;
-    const uint32_t *tri_comp;
+    const struct open_sections *os;
     double layer_mm;
+    uint32_t nu;
+    struct layer_run {
+        int32_t k0, k1;
+    } * run; /* scratch: one interval's dropped layers */
+    size_t cap;
 };
 
-/* Append interval iv to out (n of cap), less the open layers of the
-   component of triangle tri (cut NULL: nothing dropped). */
+/* Append interval iv of cell c to out (n of cap), less the open layers the
+   slicer does not keep in c (cut NULL or empty: nothing dropped). */
 static bool
-push_ival(struct cols *out, uint32_t *n, size_t *cap, struct ival iv, uint32_t tri,
-          const struct open_cut *cut)
+push_ival(struct cols *out, uint32_t *n, size_t *cap, struct ival iv, size_t c,
+          struct open_cut *cut)
 {
-    const struct open_layer *ol = NULL, *end = NULL;
-    if (cut && cut->n && iv.hi > iv.lo) {
-        uint32_t comp = cut->tri_comp[tri];
-        size_t a = 0, b = cut->n; /* the component's first open layer */
+    size_t n_run = 0;
+    if (cut && cut->os->n_layers && iv.hi > iv.lo) {
+        const struct open_sections *os = cut->os;
+        double h = cut->layer_mm;
+        uint32_t i = (uint32_t)(c % cut->nu), j = (uint32_t)(c / cut->nu);
+        size_t a = 0, b = os->n_layers; /* the first open plane above iv.lo */
         while (a < b) {
             size_t mid = (a + b) / 2;
-            if (cut->ol[mid].comp < comp)
+            if ((os->k[mid] + 0.5) * h <= iv.lo)
                 a = mid + 1;
             else
                 b = mid;
         }
-        ol = cut->ol + a;
-        end = ol;
-        while (end < cut->ol + cut->n && end->comp == comp)
-            end++;
+        for (size_t l = a; l < os->n_layers && (os->k[l] + 0.5) * h < iv.hi; l++) {
+            if (open_sections_keeps(os, (uint32_t)l, i, j))
+                continue;
+            int32_t k = os->k[l];
+            if (n_run && cut->run[n_run - 1].k1 == k - 1) {
+                cut->run[n_run - 1].k1 = k;
+                continue;
+            }
+            void *o = cut->run;
+            if (!mem_grow(&o, &cut->cap, n_run + 1, sizeof(*cut->run)))
+                return false;
+            cut->run = o;
+            cut->run[n_run++] = (struct layer_run){ k, k };
+        }
     }
-    double h = cut ? cut->layer_mm : 0;
-    while (ol < end) {
-        /* a run of consecutive open layers k0..k1 drops the slab [k0 h, (k1 + 1) h] */
-        int32_t k0 = ol->k, k1 = k0;
-        for (ol++; ol < end && ol->k == k1 + 1; ol++)
-            k1++;
-        float lo = (float)(k0 * h), hi = (float)((k1 + 1) * h);
-        if (hi <= iv.lo || lo >= iv.hi)
-            continue;
-        if (lo > iv.lo) {
+    for (size_t q = 0; q < n_run; q++) {
+        /* dropped layers k0..k1 take the slab [k0 h, (k1 + 1) h]; what is left
+           on either side is printed only if a layer plane cuts it */
+        double h = cut->layer_mm;
+        float lo = (float)(cut->run[q].k0 * h), hi = (float)((cut->run[q].k1 + 1) * h);
+        if (lo > iv.lo && (cut->run[q].k0 - 0.5) * h > iv.lo) {
             void *o = out->iv;
             if (!mem_grow(&o, cap, *n + 1, sizeof(*out->iv)))
                 return false;
             out->iv = o;
             out->iv[(*n)++] = (struct ival){ iv.lo, lo, iv.cos_lo };
         }
-        if (hi >= iv.hi)
+        if (hi >= iv.hi || (cut->run[q].k1 + 1.5) * h >= iv.hi)
             return true;
-        iv.lo = hi; /* the layer above an open one rests on nothing: a flat bottom */
+        iv.lo = hi > iv.lo ? hi : iv.lo; /* the layer above a dropped one rests on nothing */
         iv.cos_lo = -1;
     }
     void *o = out->iv;
@@ -183,10 +193,8 @@ push_ival(struct cols *out, uint32_t *n, size_t *cap, struct ival iv, uint32_t t
     return true;
 }
 
-/* The columns' solid intervals, less what cut drops (NULL or empty: nothing). */
 static int
-cols_build(const struct ray_grid *g, const struct open_cut *cut, struct cols *out,
-           struct sf_err *err)
+cols_build(const struct ray_grid *g, struct open_cut *cut, struct cols *out, struct sf_err *err)
 {
     size_t cells = (size_t)g->nu * g->nw, cap = g->n_hits + 1;
     out->first = mem_array(cells + 1, sizeof(uint32_t));
@@ -202,25 +210,28 @@ cols_build(const struct ray_grid *g, const struct open_cut *cut, struct cols *ou
         out->first[c] = n;
         int depth = 0;
         float lo = 0, lo_cos = 0, last = 0;
-        uint32_t lo_tri = 0;
         for (uint32_t k = g->first[c]; k < g->first[c + 1] && ok; k++) {
             const struct ray_hit *h = &g->hits[k];
             last = h->h;
             if (h->cos_up > 0) {
                 if (depth > 0 && --depth == 0)
-                    ok = push_ival(out, &n, &cap, (struct ival){ lo, h->h, lo_cos }, lo_tri, cut);
+                    ok = push_ival(out, &n, &cap, (struct ival){ lo, h->h, lo_cos }, c, cut);
                 else if (depth == 0) /* an exit with no entry: a floor, no material */
-                    ok = push_ival(out, &n, &cap, (struct ival){ h->h, h->h, 0 }, h->tri, cut);
+                    ok = push_ival(out, &n, &cap, (struct ival){ h->h, h->h, 0 }, c, cut);
             } else if (h->cos_up < 0) {
                 if (depth++ == 0) {
                     lo = h->h;
                     lo_cos = h->cos_up;
-                    lo_tri = h->tri;
                 }
             }
         }
         if (depth > 0 && ok) /* an open top: material up to the last hit */
-            ok = push_ival(out, &n, &cap, (struct ival){ lo, last, lo_cos }, lo_tri, cut);
+            ok = push_ival(out, &n, &cap, (struct ival){ lo, last, lo_cos }, c, cut);
+    }
+    if (cut) {
+        free(cut->run);
+        cut->run = NULL;
+        cut->cap = 0;
     }
     if (!ok) {
         cols_release(out);
@@ -1090,7 +1101,7 @@ xor_len(const struct run *a, size_t na, const struct run *b, size_t nb)
 }
 
 static int
-eval_cut(const struct ray_grid *g, const struct supmodel_params *p, const struct open_cut *cut,
+eval_cut(const struct ray_grid *g, const struct supmodel_params *p, struct open_cut *cut,
          struct supmodel_result *out, struct sf_err *err)
 {
     memset(out, 0, sizeof(*out));
@@ -1274,15 +1285,17 @@ supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *
     struct ray_grid g;
     if ((r = raycast_grid(rc, v3_normalize(up), supmodel_raster_pitch(p), &g, err)))
         return r;
-    struct open_cut cut = { NULL, 0, raycast_rims(rc)->tri_comp, p->layer_mm };
-    struct open_layer *ol = NULL;
-    if (p->open_gap_mm > 0)
-        r = rims_open_layers(raycast_rims(rc), raycast_mesh(rc), g.up, g.base, p->layer_mm,
-                             p->open_gap_mm, &ol, &cut.n, err);
-    cut.ol = ol;
+    struct open_sections os = { 0 };
+    if (p->open_gap_mm > 0) {
+        struct rim_frame f = {
+            g.up, g.u, g.w, g.u0, g.w0, g.pitch, g.base, p->layer_mm, g.nu, g.nw
+        };
+        r = rims_open_sections(raycast_rims(rc), raycast_mesh(rc), &f, p->open_gap_mm, &os, err);
+    }
+    struct open_cut cut = { &os, p->layer_mm, g.nu, NULL, 0 };
     if (r == SF_OK)
-        r = eval_cut(&g, p, &cut, out, err);
-    free(ol);
+        r = eval_cut(&g, p, os.n_layers ? &cut : NULL, out, err);
+    open_sections_release(&os);
     ray_grid_release(&g);
     return r;
 }

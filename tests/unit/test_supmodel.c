@@ -12,6 +12,7 @@
 #include "../../src/geom/rims.h"
 #include "../../src/geom/supmodel.h"
 #include "../../src/mesh/shapes.h"
+#include "../../src/mesh/subdiv.h"
 #include "../t.h"
 
 static int
@@ -486,38 +487,86 @@ windowed_box(struct mesh *m, double y0, double y1, struct sf_err *err)
     memcpy(m->t, t, sizeof(t));
 }
 
+/* The open sections of m along +z at the model's raster for a slicer with gap. */
+static void
+sections_of(const struct mesh *m, double gap, struct open_sections *os, struct ray_grid *g,
+            struct sf_err *err)
+{
+    struct raycast *rc = raycast_new(m, err);
+    T_TRUE(rc != NULL);
+    T_OK(raycast_grid(rc, v3(0, 0, 1), 0.25, g, err), err);
+    struct rim_frame f = { g->up, g->u, g->w, g->u0, g->w0, g->pitch, g->base, 0.2, g->nu, g->nw };
+    T_OK(rims_open_sections(raycast_rims(rc), m, &f, gap, os, err), err);
+    raycast_free(rc);
+}
+
 T_CASE(rims_open_layers_are_where_the_window_is_wider_than_the_gap)
 {
     struct mesh m;
     struct sf_err err;
-    windowed_box(&m, 4, 16, &err);
     struct rims r;
+    struct open_sections os;
+    struct ray_grid g;
+    windowed_box(&m, 4, 16, &err);
     T_OK(rims_build(&m, &r, &err), &err);
     T_EQ_INT(r.n_edges, 4);
-    T_EQ_INT(r.n_comps, 1);
-    struct open_layer *ol;
-    size_t n;
-    /* planes (k + 0.5) 0.2 inside z 10..20: k = 50..99; the window's sides are
-       12 mm apart: open for a 2 mm gap (PrusaSlicer), closed for 12 */
-    T_OK(rims_open_layers(&r, &m, v3(0, 0, 1), 0, 0.2, 2, &ol, &n, &err), &err);
-    T_EQ_INT(n, 50);
-    T_EQ_INT(ol[0].k, 50);
-    T_EQ_INT(ol[49].k, 99);
-    free(ol);
-    T_OK(rims_open_layers(&r, &m, v3(0, 0, 1), 0, 0.2, 12.5, &ol, &n, &err), &err);
-    T_EQ_INT(n, 0);
-    T_TRUE(ol == NULL);
-    /* turned on its side (the window facing down) no plane cuts a rim edge
-       twice apart: the rim lies in the bottom plane */
-    T_OK(rims_open_layers(&r, &m, v3(-1, 0, 0), -20, 0.2, 2, &ol, &n, &err), &err);
-    T_EQ_INT(n, 0);
     rims_release(&r);
+    /* planes (k + 0.5) 0.2 inside z 10..20: k = 50..99; the window's sides are
+       12 mm apart: open for a 2 mm gap (PrusaSlicer), closed across for 12.5,
+       and the box's one loop is the open one: nothing kept */
+    sections_of(&m, 2, &os, &g, &err);
+    T_EQ_INT(os.n_layers, 50);
+    T_EQ_INT(os.k[0], 50);
+    T_EQ_INT(os.k[49], 99);
+    T_TRUE(!open_sections_keeps(&os, 0, g.nu / 2, g.nw / 2));
+    open_sections_release(&os);
+    ray_grid_release(&g);
+    sections_of(&m, 12.5, &os, &g, &err);
+    T_EQ_INT(os.n_layers, 0);
+    open_sections_release(&os);
+    ray_grid_release(&g);
     mesh_release(&m);
     /* a closed box has no rims */
     T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
     T_OK(rims_build(&m, &r, &err), &err);
     T_EQ_INT(r.n_edges, 0);
     rims_release(&r);
+    mesh_release(&m);
+}
+
+T_CASE(supmodel_prusa_keeps_the_closed_loop_beside_an_open_one)
+{
+    /* an arch (legs x 0..10 and 30..40, z 0..20, under a bar to z 30, 20
+       deep) with a 10 x 10 window cut into the left leg's outer wall: layers
+       through the window hold the left leg's loop open, which PrusaSlicer
+       drops; the right leg's loop closes and stays.  So the left leg's top
+       rests on nothing (another 10 x 20 of contact), the right leg's does
+       not; the steering model sees the arch whole (the bar's 20 x 20) */
+    struct mesh m;
+    struct sf_err err;
+    double x[8] = { 0, 10, 10, 30, 30, 40, 40, 0 }, z[8] = { 0, 0, 20, 20, 0, 0, 30, 30 };
+    mesh_init(&m);
+    T_OK(shape_extrude_xz(&m, x, z, 8, 20, &err), &err);
+    for (int k = 0; k < 5; k++)
+        T_OK(mesh_subdivide(&m, &err), &err);
+    uint32_t n = 0;
+    for (uint32_t t = 0; t < m.n_tris; t++) {
+        struct vec3 c = mesh_tri_centroid(&m, t);
+        if (!(fabs(c.x) < 1e-9 && c.y > 5 && c.y < 15 && c.z > 5 && c.z < 15))
+            memcpy(m.t[n++], m.t[t], sizeof(m.t[t]));
+    }
+    T_TRUE(n < m.n_tris);
+    m.n_tris = n;
+    struct supmodel_params p;
+    struct supmodel_result r;
+    supmodel_params_default(&p, SUPMODEL_PRUSA);
+    p.bridges = false;
+    T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+    T_EQ_DBL(r.contact_area_mm2, 400 + 200, 40);
+    supmodel_params_steer(&p, 45);
+    p.bridges = false;
+    T_OK(model_at(&m, v3(0, 0, 1), &p, &r, &err), &err);
+    T_EQ_DBL(r.contact_area_mm2, 400, 40);
     mesh_release(&m);
 }
 
