@@ -137,6 +137,8 @@ slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_prof
     struct slim_params sp;
     slim_params_default(&sp);
     sp.angle_deg = prof->max_overhang_deg;
+    /* a job may ask for less than the margin (1..89 degrees): aim at vertical */
+    sp.margin_deg = sp.margin_deg < sp.angle_deg ? sp.margin_deg : sp.angle_deg;
     sp.cancel = cancel;
     cap_deviation(m, req->opts.deviation_mm, &sp.max_mndr, &sp.max_andr);
     struct slim_result sr;
