@@ -359,8 +359,9 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
             }
             continue;
         }
-        if (gcode_parse(s, l, &gl, err) < 0) {
-            rc = sf_err_prefix(err, "%s:%u", name, lineno);
+        if ((rc = gcode_parse(s, l, &gl, err)) < 0) {
+            /* rc, not sf_err_prefix's SF_EBUG for a NULL err */
+            sf_err_prefix(err, "%s:%u", name, lineno);
             goto fail;
         }
         if (gl.letter == 'G' && gl.code >= 0 && gl.code <= 3) {
@@ -399,7 +400,8 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
                 goto fail;
             }
             if (rc < 0) {
-                sf_err_set(err, rc, "%s: out of memory", name);
+                sf_err_set(err, rc, "%s:%u: %s", name, lineno,
+                           rc == SF_ENOMEM ? "out of memory" : "the planner failed");
                 goto fail;
             }
             if (xy && d[3] > 0) {
@@ -415,8 +417,11 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
                     f,      support, type,   type_len, out->n_layers ? out->n_layers - 1 : 0,
                     lineno
                 };
-                if ((rc = on_move(ud, &mv)) < 0)
+                if ((rc = on_move(ud, &mv)) < 0) {
+                    sf_err_set(err, rc, "%s:%u: stopped by the move callback (%s)", name, lineno,
+                               sf_status_name(rc));
                     goto fail;
+                }
             }
         } else if (gcode_is(&gl, 'G', 90)) {
             rel_xyz = false;
@@ -467,7 +472,9 @@ fail:
     free(pl.layer_block);
     free(pl.layer_s);
     estimate_release(out);
-    return rc < 0 ? rc : SF_EBUG;
+    if (rc >= 0) /* every path above sets a status: a failure without one is ours */
+        rc = sf_err_set(err, SF_EBUG, "%s:%u: estimate failed without a status", name, lineno);
+    return rc;
 }
 
 void

@@ -78,8 +78,9 @@ struct estimate {
 /*
  * Interpret len bytes of G-code (name for messages).  on_move may be NULL.
  * SF_EINVAL naming the line on a malformed line or an arc longer than
- * 10 m; SF_ENOMEM.  Release out
- * with estimate_release.
+ * 10 m; SF_ENOMEM; on_move's status when it stops the walk (the message
+ * names the line and says the callback stopped it).  Every error sets err.
+ * Release out with estimate_release.
  */
 int estimate_gcode(const char *text, size_t len, const char *name, const struct est_limits *lim,
                    est_move_fn on_move, void *ud, struct estimate *out, struct sf_err *err);

@@ -9,7 +9,10 @@
  * or the printer's, slim it (Hu 2015) within the job's deviation budget
  * when the method is 'slim' (a method not in the build is SF_EUNSUPP
  * naming it: never fake output), keeping the slimmed shape only if our
- * slicer prints it with less support (prepare_slice_better), then slice with the
+ * slicer prints it with less support (prepare_slice_better); a slimming
+ * that fails (a mesh TetGen cannot enclose, a budget it refuses) is no
+ * reason to leave the job unprinted: the part prints as oriented and the
+ * outcome says why (prepare_out.shape_failed).  Then slice with the
  * printer's profile, overridden by the farm config's view of the hardware
  * (nozzle, bed, overhang angle) so one file is the truth about machines.
  * The part as it prints is saved for a later re-slice for another printer
@@ -134,6 +137,8 @@ slim_part(struct mesh *m, const struct prepare_req *req, const struct slice_prof
     struct slim_params sp;
     slim_params_default(&sp);
     sp.angle_deg = prof->max_overhang_deg;
+    /* a job may ask for less than the margin (1..89 degrees): aim at vertical */
+    sp.margin_deg = sp.margin_deg < sp.angle_deg ? sp.margin_deg : sp.angle_deg;
     sp.cancel = cancel;
     cap_deviation(m, req->opts.deviation_mm, &sp.max_mndr, &sp.max_andr);
     struct slim_result sr;
@@ -245,11 +250,14 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     const char *method = req->opts.method;
     out->dev_measured = out->shape_changed = false;
     out->mndr = out->andr = 0;
+    out->shape_failed[0] = '\0';
     if (atomic_load(cancel))
         return cancelled(req, err);
     struct buf data;
     struct mesh m, start; /* start: a slim job's part before slimming */
     double saved_g = 0;   /* support the optimization saved (prepare_out) */
+    struct sf_err serr;   /* slimming's failure, kept even when err is NULL */
+    sf_err_clear(&serr);
     buf_init(&data, SF_MESH_FILE_MAX);
     mesh_init(&m);
     mesh_init(&start);
@@ -287,9 +295,25 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     }
     bool slimmed = false;
     struct deviation sdev = { 0 };
-    if (slim && ((rc = mesh_copy(&start, &m, err)) ||
-                 (rc = slim_part(&m, req, &prof, cancel, &slimmed, &sdev, err))))
+    if (slim && (rc = mesh_copy(&start, &m, err)))
         goto release;
+    if (slim && (rc = slim_part(&m, req, &prof, cancel, &slimmed, &sdev, &serr))) {
+        /* A part TetGen or CHOLMOD cannot take still prints: m is the part as
+           oriented, untouched.  A cancel cancels; out of memory fails the job
+           as it does in every other stage. */
+        if (rc == SF_ECANCELED || rc == SF_ENOMEM) {
+            if (err)
+                *err = serr;
+            goto release;
+        }
+        snprintf(out->shape_failed, sizeof(out->shape_failed), "%s",
+                 serr.msg[0] ? serr.msg : sf_status_name(rc));
+        log_warn("prepare",
+                 "job %lld: slimming failed (%s): printing the part as oriented, unchanged",
+                 (long long)req->job_id, out->shape_failed);
+        slimmed = false;
+        rc = SF_OK;
+    }
     if (slim) {
         out->dev_measured = true;
         out->shape_changed = slimmed;

@@ -59,6 +59,10 @@ struct prepare_out {
     bool dev_measured;  /* mndr, andr are set: method slim or surface ran */
     bool shape_changed; /* the part prints reshaped, not only turned */
     double mndr, andr;
+    /* "" or why slimming failed (its error message, e.g. "tetgen: no tetrahedra
+       produced"): the part then prints as oriented, unchanged (shape_changed false,
+       mndr = andr = 0 with dev_measured) */
+    char shape_failed[SF_ERR_MSG_MAX];
 };
 
 typedef int (*prepare_fn)(const struct prepare_req *req, struct prepare_out *out,
@@ -72,7 +76,9 @@ typedef int (*prepare_fn)(const struct prepare_req *req, struct prepare_out *out
  * prepare_slice_better), slice it with the
  * printer's profile and the job's material, the farm config's nozzle, bed
  * and angle overriding the profile's.  SF_EINVAL for a bad part or
- * profile (the message names the file), SF_ECANCELED if cancelled.
+ * profile (the message names the file), SF_ECANCELED if cancelled.  A
+ * slimming that fails other than by cancel or SF_ENOMEM does not fail the
+ * job: the part as oriented is sliced and out->shape_failed says why.
  */
 int prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
                  struct sf_err *err);

@@ -1152,9 +1152,10 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     if ((rc = step_done(s, st, err, "update job")))
         goto fail;
     char kind[24], detail[192];
+    const char *why = j.reason[0] ? j.reason : ev == JOB_EV_PREPARED && a->note ? a->note : "";
     snprintf(kind, sizeof(kind), "job-%s", job_event_name(ev));
     snprintf(detail, sizeof(detail), "%s -> %s%s%s", job_state_name(from), job_state_name(j.state),
-             j.reason[0] ? ": " : "", j.reason);
+             why[0] ? ": " : "", why);
     if ((rc = log_event(s, id, j.printer, kind, detail, err)) || (rc = commit(s, err)))
         goto fail;
     if (to)

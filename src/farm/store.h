@@ -98,6 +98,9 @@ struct job_event_args {
                               RESUME of an interrupted job: line to resume from (0: stored) */
     double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */
     const char *reason;    /* PREPARE_FAILED/PRINT_FAILED/CANCEL: why, for operators */
+    const char *note;      /* PREPARED: NULL or what the preparation did other than the job
+                              asked (a slimming that failed, prepare.h's shape_failed), for
+                              operators: kept in the event's detail, not as the job's reason */
 };
 
 /* One row of print history. */

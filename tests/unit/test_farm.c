@@ -794,6 +794,50 @@ T_CASE(farm_default_prepare_runs_every_method)
     teardown();
 }
 
+/*
+ * A slimming that fails does not fail the job (prepare.h): it is prepared
+ * from the part as oriented, records the shape as unchanged, and its
+ * prepared event says why.  Slimming fails for real here: a 0 mm deviation
+ * budget is a valid job option that slim_optimize refuses.
+ */
+T_CASE(farm_prepares_the_oriented_part_when_slimming_fails)
+{
+    struct sf_err err;
+    T_OK(setup("slimfail", farm_ini, NULL, prepare_part, &err), &err);
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.method, sizeof(o.method), "slim");
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    snprintf(o.material, sizeof(o.material), "PLA");
+    o.deviation_mm = 0;
+    char sha[STORE_SHA_HEX];
+    int64_t id = 0;
+    T_OK(store_file_put(fx.s, tetra_stl, strlen(tetra_stl), sha, &err), &err);
+    T_OK(store_job_add(fx.s, &o, sha, &id, &err), &err);
+    farm_kick(fx.f);
+    T_TRUE(wait_job(id, JOB_READY));
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_TRUE(j.gcode_sha[0] && j.gcode_lines > 0);
+    T_TRUE(j.dev_measured && !j.shape_changed);
+    T_EQ_DBL(j.mndr, 0, 0);
+    T_TRUE(strstr(j.reason, "slimming") == NULL); /* the reason is why it waits */
+    struct event_row *ev;
+    size_t n;
+    T_OK(store_events(fx.s, 0, 1000, &ev, &n, &err), &err);
+    const char *detail = NULL;
+    for (size_t i = 0; i < n; i++)
+        if (ev[i].job_id == id && strcmp(ev[i].kind, "job-prepared") == 0)
+            detail = ev[i].detail;
+    T_TRUE(detail != NULL);
+    printf("    job-prepared: %s\n", detail ? detail : "(none)");
+    T_TRUE(detail && strstr(detail, "-> ready: slimming failed (slim: deviation limits must be "
+                                    "positive): printed as oriented, unchanged") != NULL);
+    free(ev);
+    T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
 T_CASE(farm_missing_profile_fails_the_job_naming_the_file)
 {
     struct sf_err err;

@@ -3,6 +3,7 @@
  * the part it came from: the G-code left is the one with less support in
  * our slicer (the farm's whole pipeline is in test_farm.c).
  */
+#include <stdbool.h>
 #include <stdio.h>
 #include <string.h>
 #include <unistd.h>
@@ -10,6 +11,7 @@
 #include "../../slicer/profile.h"
 #include "../../slicer/slice.h"
 #include "../../src/base/buf.h"
+#include "../../src/base/log.h"
 #include "../../src/farm/prepare.h"
 #include "../../src/mesh/mesh.h"
 #include "../../src/mesh/shapes.h"
@@ -30,6 +32,21 @@ support_g_in(const char *path)
     }
     buf_release(&g);
     return grams;
+}
+
+/* Whether two files hold the same bytes. */
+static bool
+same_bytes(const char *a, const char *b)
+{
+    struct buf x, y;
+    struct sf_err err;
+    buf_init(&x, 64 << 20);
+    buf_init(&y, 64 << 20);
+    bool same = buf_read_file(&x, a, &err) == SF_OK && buf_read_file(&y, b, &err) == SF_OK &&
+                x.len > 0 && x.len == y.len && memcmp(x.data, y.data, x.len) == 0;
+    buf_release(&x);
+    buf_release(&y);
+    return same;
 }
 
 /* The tee standing on its stem (its arms overhang) and turned upside down (flat top down). */
@@ -91,9 +108,11 @@ T_CASE(prepare_keeps_the_slicing_with_less_support)
     slice_profile_release(&p);
 }
 
-/* Prepare the part in part_path with method for a generic 220 mm Marlin printer. */
+/* Prepare the part in part_path with method, a deviation budget and an overhang angle (0: the
+   printer's, 45) for a generic 220 mm Marlin printer. */
 static int
-prepare_with(const char *part_path, const char *method, struct prepare_out *out, struct sf_err *err)
+prepare_job(const char *part_path, const char *method, double deviation_mm, double overhang_deg,
+            struct prepare_out *out, struct sf_err *err)
 {
     static struct prepare_req req;
     memset(&req, 0, sizeof(req));
@@ -102,7 +121,8 @@ prepare_with(const char *part_path, const char *method, struct prepare_out *out,
     snprintf(req.part_name, sizeof(req.part_name), "part.stl");
     job_opts_init(&req.opts);
     snprintf(req.opts.method, sizeof(req.opts.method), "%s", method);
-    req.opts.deviation_mm = 2;
+    req.opts.deviation_mm = deviation_mm;
+    req.opts.overhang_deg = overhang_deg;
     snprintf(req.printer.name, sizeof(req.printer.name), "a");
     snprintf(req.printer.profile, sizeof(req.printer.profile), "generic-marlin");
     snprintf(req.printer.material, sizeof(req.printer.material), "PLA");
@@ -115,6 +135,13 @@ prepare_with(const char *part_path, const char *method, struct prepare_out *out,
     atomic_bool cancel = false;
     memset(out, 0, sizeof(*out));
     return prepare_part(&req, out, &cancel, err);
+}
+
+/* The same with a 2 mm budget. */
+static int
+prepare_with(const char *part_path, const char *method, struct prepare_out *out, struct sf_err *err)
+{
+    return prepare_job(part_path, method, 2, 0, out, err);
 }
 
 /*
@@ -148,4 +175,88 @@ T_CASE(prepare_reports_the_deviation_of_a_reshaped_part)
     T_OK(prepare_with(part, "slim", &out, &err), &err);
     T_TRUE(out.dev_measured);
     T_TRUE(out.shape_changed ? out.mndr > 0 && out.andr > 0 : out.mndr == 0 && out.andr == 0);
+}
+
+/* What prepare logged at warn level, one line per call, appended. */
+static char warned[4096];
+
+static void
+warn_sink(void *ud, enum log_level level, const char *subsys, const char *printer, const char *msg)
+{
+    (void)ud, (void)printer;
+    size_t n = strlen(warned);
+    if (level == LOG_WARN && strcmp(subsys, "prepare") == 0)
+        snprintf(warned + n, sizeof(warned) - n, "%s\n", msg);
+}
+
+/*
+ * A slimming that fails does not fail the job: the part prints as
+ * oriented.  The failure here is slimming's own: a job's deviation budget
+ * may be 0 mm (job.c takes 0..10), which slim_optimize refuses ("deviation
+ * limits must be positive"), as it refuses a part TetGen cannot enclose.
+ * The job then gives the G-code of the part as oriented (the orient
+ * method's, figure for figure), reports the shape unchanged and says why.
+ */
+T_CASE(prepare_prints_the_oriented_part_when_slimming_fails)
+{
+    struct sf_err err;
+    struct mesh m;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    char part[512];
+    snprintf(part, sizeof(part), "%s/tee.stl", t_tmpdir());
+    T_OK(mesh_save_stl(&m, part, &err), &err);
+    mesh_release(&m);
+    struct prepare_out oriented, out;
+    T_OK(prepare_job(part, "orient", 0, 0, &oriented, &err), &err);
+    T_TRUE(oriented.shape_failed[0] == '\0');
+
+    warned[0] = '\0';
+    log_set_sink(warn_sink, NULL);
+    int rc = prepare_job(part, "slim", 0, 0, &out, &err);
+    log_set_sink(NULL, NULL);
+    T_OK(rc, &err);
+    printf("    %s", warned);
+    /* the G-code is there and is the oriented part's */
+    char gcode[600], gcode_oriented[600];
+    snprintf(gcode, sizeof(gcode), "%s/prep-slim.gcode", t_tmpdir());
+    snprintf(gcode_oriented, sizeof(gcode_oriented), "%s/prep-orient.gcode", t_tmpdir());
+    T_TRUE(same_bytes(gcode, gcode_oriented));
+    T_EQ_DBL(support_g_in(gcode), oriented.support_g, 0.005);
+    for (int i = 0; i < 3; i++)
+        T_EQ_DBL(out.size_mm[i], oriented.size_mm[i], 1e-9);
+    T_EQ_DBL(out.filament_g, oriented.filament_g, 1e-9);
+    T_EQ_DBL(out.support_g, oriented.support_g, 1e-9);
+    /* the shape is reported unchanged, and why slimming did not run */
+    T_TRUE(out.dev_measured && !out.shape_changed);
+    T_EQ_DBL(out.mndr, 0, 0);
+    T_EQ_DBL(out.andr, 0, 0);
+    T_TRUE(strstr(out.shape_failed, "deviation limits") != NULL);
+    T_TRUE(strstr(warned, "job 1: slimming failed") != NULL);
+    T_TRUE(strstr(warned, "deviation limits") != NULL);
+    T_TRUE(strstr(warned, "as oriented, unchanged") != NULL);
+    T_EQ_DBL(out.support_saved_g, oriented.support_saved_g, 1e-9); /* orientation's saving */
+}
+
+/*
+ * A job may ask for any overhang angle from 1 to 89 degrees (job.c); below
+ * slimming's 5 degree margin it refused the angle, so a slim job printed
+ * the part unslimmed.  The margin narrows to the angle, as the surface
+ * method's does.
+ */
+T_CASE(prepare_slims_at_an_angle_below_the_margin)
+{
+    struct sf_err err;
+    struct mesh m;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    char part[512];
+    snprintf(part, sizeof(part), "%s/tee3.stl", t_tmpdir());
+    T_OK(mesh_save_stl(&m, part, &err), &err);
+    mesh_release(&m);
+    struct prepare_out out;
+    T_OK(prepare_job(part, "slim", 2, 3, &out, &err), &err);
+    printf("    shape_failed \"%s\", changed %d\n", out.shape_failed, out.shape_changed);
+    T_EQ_STR(out.shape_failed, "");
+    T_TRUE(out.dev_measured);
 }

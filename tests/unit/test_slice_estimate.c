@@ -115,6 +115,43 @@ T_CASE(estimate_bad_line_names_it)
     T_TRUE(rc == SF_OK || (rc == SF_EINVAL && strstr(err.msg, "part.gcode:2") != NULL));
 }
 
+/* A malformed line is SF_EINVAL naming it, with or without a message buffer (the fuzz
+   harness passes none; it was SF_EBUG then). */
+T_CASE(estimate_bad_line_is_einval_even_without_err)
+{
+    struct est_limits l;
+    struct estimate e;
+    struct sf_err err;
+    limits(&l, 1000, 10);
+    const char *g = "G1 X1\n5 X2\n";
+    T_EQ_INT(estimate_gcode(g, strlen(g), "bad.gcode", &l, NULL, NULL, &e, NULL), SF_EINVAL);
+    T_ERR(estimate_gcode(g, strlen(g), "bad.gcode", &l, NULL, NULL, &e, &err), SF_EINVAL, &err,
+          "bad.gcode:2: column 1: command expected");
+}
+
+static int
+stop_at_second(void *ud, const struct est_move *mv)
+{
+    (void)mv;
+    return ++*(int *)ud == 2 ? SF_ECANCELED : SF_OK;
+}
+
+/* A move callback that stops the walk gets its status back, and the message says where and
+   why (it was left empty). */
+T_CASE(estimate_names_the_line_a_move_callback_stopped_at)
+{
+    struct est_limits l;
+    struct estimate e;
+    struct sf_err err;
+    limits(&l, 1000, 10);
+    const char *g = "G1 X1 F600\n;TYPE:Perimeter\nG1 X2\nG1 X3\n";
+    int calls = 0;
+    sf_err_clear(&err);
+    T_ERR(estimate_gcode(g, strlen(g), "stop.gcode", &l, stop_at_second, &calls, &e, &err),
+          SF_ECANCELED, &err, "stop.gcode:3: stopped by the move callback (ECANCELED)");
+    T_EQ_INT(calls, 2);
+}
+
 T_CASE(estimate_rejects_absurd_coordinates)
 {
     struct est_limits l;
