@@ -124,6 +124,8 @@ struct crossing {
     uint32_t mate;
 };
 
+#define JOIN_WINDOW 16
+
 /* A candidate join of two crossings of a layer, d apart. */
 struct join {
     double d;
@@ -214,7 +216,9 @@ rim_crossings(const struct rims *r, const struct mesh *m, const struct rim_frame
         size_t nj = 0;
         for (size_t i = s; i < e; i++) {
             c[i].mate = UINT32_MAX;
-            for (size_t j = i + 1; j < e && c[j].x - c[i].x <= gap; j++) {
+            /* the next JOIN_WINDOW crossings along x at most: a soup of open
+               triangles has thousands of ends within the gap of each other */
+            for (size_t j = i + 1; j < e && j <= i + JOIN_WINDOW && c[j].x - c[i].x <= gap; j++) {
                 double d = hypot(c[j].x - c[i].x, c[j].y - c[i].y);
                 if (d > gap)
                     continue;

@@ -623,3 +623,35 @@ T_CASE(supmodel_peers_rise_when_an_open_result_loses_more_layers)
     mesh_release(&window);
     mesh_release(&box);
 }
+
+T_CASE(supmodel_prusa_takes_a_triangle_soup)
+{
+    /* every edge of a soup is a rim and every layer full of ends within the
+       gap of each other: the model answers (joins are looked for among a few
+       neighbours along the row, not among all pairs) */
+    struct mesh s, m;
+    struct sf_err err;
+    mesh_init(&s);
+    T_OK(shape_sphere(&s, 15, 48, &err), &err);
+    mesh_init(&m);
+    T_OK(mesh_alloc(&m, 3 * s.n_tris, s.n_tris, &err), &err);
+    for (uint32_t t = 0; t < s.n_tris; t++)
+        for (int k = 0; k < 3; k++) {
+            m.v[3 * t + k] = s.v[s.t[t][k]];
+            m.t[t][k] = 3 * t + k;
+        }
+    struct rims r;
+    T_OK(rims_build(&m, &r, &err), &err);
+    T_EQ_INT(r.n_edges, 3 * m.n_tris);
+    rims_release(&r);
+    struct supmodel_params p;
+    struct supmodel_result a, b;
+    supmodel_params_default(&p, SUPMODEL_PRUSA);
+    T_OK(model_at(&m, v3(0, 0, 1), &p, &a, &err), &err);
+    T_TRUE(a.grams >= 0 && isfinite(a.grams));
+    /* the soup's ends all meet their neighbours': the sphere's cap, as welded */
+    T_OK(model_at(&s, v3(0, 0, 1), &p, &b, &err), &err);
+    T_EQ_DBL(a.grams, b.grams, 0.1 * b.grams + 0.05);
+    mesh_release(&s);
+    mesh_release(&m);
+}
