@@ -48,6 +48,21 @@ struct httpc {
     struct httpc *next_shared; /* shared registry link */
 };
 
+/*
+ * One multipart file part, read by us (curl_mime_data_cb) rather than by
+ * curl (curl_mime_filedata) only to count how far curl read it: curl
+ * rewinds a form body to send it again on a reused connection that died
+ * (part_seek), so the most read in any attempt is what a server can have
+ * had of it (httpc_result.body_read).
+ */
+struct part_file {
+    struct httpc_req *r; /* the request, for its cancel flag and file error */
+    FILE *fp;            /* the open file */
+    char *path;          /* its path, for messages */
+    uint64_t pos;        /* bytes handed to curl since the last rewind */
+    uint64_t most;       /* the most pos has been */
+};
+
 struct httpc_req {
     struct httpc *h;               /* owner */
     CURL *easy;                    /* the transfer */
@@ -67,9 +82,12 @@ struct httpc_req {
     size_t body_len, body_off;     /* its size and how much was read (PUT from memory) */
     FILE *fp;                      /* streamed body file, or NULL */
     char *body_path;               /* its path, for messages */
-    bool file_err;                 /* reading fp failed */
+    bool file_err;                 /* reading fp or a part's file failed */
+    const char *err_path;          /* the file that failed (body_path or a part's) */
     uint64_t fp_read;              /* bytes of fp handed to curl (no seek callback: never
                                       rewound, so no attempt sent more) */
+    struct part_file *files;       /* multipart file parts, streamed by part_read */
+    size_t n_files;                /* their count */
     struct buf resp;               /* response body (capped) */
     struct buf hdr;                /* response headers (capped) */
     bool oversize;                 /* the body passed its cap */
@@ -226,6 +244,7 @@ read_cb(char *ptr, size_t size, size_t nmemb, void *ud)
         size_t got = fread(ptr, 1, want, r->fp);
         if (got < want && ferror(r->fp)) {
             r->file_err = true;
+            r->err_path = r->body_path;
             return CURL_READFUNC_ABORT;
         }
         r->fp_read += got;
@@ -237,6 +256,37 @@ read_cb(char *ptr, size_t size, size_t nmemb, void *ud)
         memcpy(ptr, r->body + r->body_off, n);
     r->body_off += n;
     return n;
+}
+
+static size_t
+part_read(char *ptr, size_t size, size_t nmemb, void *ud)
+{
+    struct part_file *pf = ud;
+    struct httpc_req *r = pf->r;
+    r->body_started = true;
+    if (r->cancelled)
+        return CURL_READFUNC_ABORT;
+    size_t want = size * nmemb;
+    size_t got = fread(ptr, 1, want, pf->fp);
+    if (got < want && ferror(pf->fp)) {
+        r->file_err = true;
+        r->err_path = pf->path;
+        return CURL_READFUNC_ABORT;
+    }
+    pf->pos += got;
+    if (pf->pos > pf->most)
+        pf->most = pf->pos;
+    return got;
+}
+
+static int
+part_seek(void *ud, curl_off_t offset, int origin)
+{
+    struct part_file *pf = ud;
+    if (origin != SEEK_SET || offset < 0 || fseeko(pf->fp, (off_t)offset, SEEK_SET) != 0)
+        return CURL_SEEKFUNC_CANTSEEK;
+    pf->pos = (uint64_t)offset;
+    return CURL_SEEKFUNC_OK;
 }
 
 static int
@@ -283,6 +333,12 @@ free_req(struct httpc_req *r)
     curl_easy_cleanup(r->easy);
     curl_slist_free_all(r->hdrs);
     curl_mime_free(r->mime);
+    for (size_t i = 0; i < r->n_files; i++) {
+        if (r->files[i].fp)
+            fclose(r->files[i].fp);
+        free(r->files[i].path);
+    }
+    free(r->files);
     if (r->fp)
         fclose(r->fp);
     free(r->body_path);
@@ -412,6 +468,11 @@ report(struct httpc_req *r)
     res.detail = r->result == CURLE_OK ? "" : detail;
     res.tls_peer = r->result == CURLE_PEER_FAILED_VERIFICATION;
     res.body_read = r->fp ? r->fp_read : UINT64_MAX;
+    if (r->n_files) {
+        res.body_read = 0;
+        for (size_t i = 0; i < r->n_files; i++)
+            res.body_read += r->files[i].most;
+    }
     if (r->result == CURLE_OK) {
         res.code = SF_OK;
     } else if (r->oversize) {
@@ -419,7 +480,7 @@ report(struct httpc_req *r)
                               r->method, r->url, r->resp.max);
     } else if (r->file_err) {
         res.code = sf_err_set(&res.err, SF_EIO, "%s %s: reading '%s' failed", r->method, r->url,
-                              r->body_path);
+                              r->err_path);
     } else if (r->result == CURLE_OPERATION_TIMEDOUT) {
         res.code =
             sf_err_set(&res.err, SF_ETIMEDOUT, "%s %s: timed out (%s)", r->method, r->url, detail);
@@ -584,7 +645,8 @@ static int
 build_mime(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
 {
     r->mime = curl_mime_init(r->easy);
-    if (!r->mime)
+    r->files = mem_calloc(o->n_parts, sizeof(*r->files));
+    if (!r->mime || !r->files)
         return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
     for (size_t i = 0; i < o->n_parts; i++) {
         const struct httpc_part *p = &o->parts[i];
@@ -599,15 +661,22 @@ build_mime(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
             if (curl_mime_data(mp, p->value, CURL_ZERO_TERMINATED) != CURLE_OK)
                 return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
         } else {
-            /* curl opens the file and reads it in chunks while sending. */
+            /* streamed from disk in chunks while sending, by part_read */
+            struct part_file *pf = &r->files[r->n_files++];
+            pf->r = r;
+            pf->path = mem_strdup(p->file_path);
+            if (!pf->path)
+                return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
+            pf->fp = fopen(p->file_path, "rb");
             struct stat st;
-            if (stat(p->file_path, &st) < 0 || !S_ISREG(st.st_mode))
+            if (!pf->fp || fstat(fileno(pf->fp), &st) < 0 || !S_ISREG(st.st_mode))
                 return sf_err_sys(err, "%s %s: part '%s': cannot read '%s'", r->method, r->url,
                                   p->name, p->file_path);
-            if (curl_mime_filedata(mp, p->file_path) != CURLE_OK)
-                return sf_err_set(err, SF_EIO, "%s %s: part '%s': cannot read '%s'", r->method,
-                                  r->url, p->name, p->file_path);
-            if (p->filename && curl_mime_filename(mp, p->filename) != CURLE_OK)
+            const char *base = strrchr(p->file_path, '/');
+            base = p->filename ? p->filename : base ? base + 1 : p->file_path;
+            if (curl_mime_data_cb(mp, (curl_off_t)st.st_size, part_read, part_seek, NULL, pf) !=
+                    CURLE_OK ||
+                curl_mime_filename(mp, base) != CURLE_OK)
                 return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
         }
         if (p->type && curl_mime_type(mp, p->type) != CURLE_OK)

@@ -24,7 +24,7 @@
  *
  * Request bodies come from memory (copied), from a file streamed from disk
  * in small reads (a 100 MB G-code file never sits in memory), or as
- * multipart/form-data whose file parts curl also streams from disk.  The
+ * multipart/form-data whose file parts are also streamed from disk.  The
  * response body goes into a buffer capped per request (max_body): a larger
  * body fails the request with SF_ENOMEM and a message saying so.
  *
@@ -69,8 +69,10 @@ struct httpc_result {
     bool tls_peer;       /* SF_EIO because the server's certificate failed verification (its
                             chain, or the name: an operator's fix, not worth a retry) */
     uint64_t body_read;  /* a body_path body: its bytes handed to curl, which cannot rewind
-                            it, so no attempt sent more (fewer than the file holds: the
-                            server never had it whole); UINT64_MAX for other bodies */
+                            it, so no attempt sent more; a form with file parts: the most
+                            of each handed to curl in any one attempt (curl rewinds a form
+                            to send it again), summed.  Fewer than the file holds: the
+                            server never had it whole.  UINT64_MAX for other bodies */
 };
 
 /* One multipart/form-data part: a value or a file streamed from disk. */

@@ -168,6 +168,7 @@ struct got {
     size_t body_len;
     char location[128];
     char msg[256];
+    uint64_t body_read;
 };
 
 static void
@@ -179,6 +180,7 @@ on_done(struct httpc_req *r, const struct httpc_result *res, void *ud)
     g->code = res->code;
     g->status = res->status;
     g->body_len = res->body_len;
+    g->body_read = res->body_read;
     snprintf(g->body, sizeof(g->body), "%s", res->body);
     if (!httpc_header(res, "location", g->location, sizeof(g->location)))
         g->location[0] = 0;
@@ -350,6 +352,7 @@ T_CASE(streamed_file_upload_arrives_intact)
     T_TRUE(body_matches_file(path, true));
     T_EQ_INT(a.p.sent, 6u << 20);
     T_TRUE(a.p.calls >= 1);
+    T_EQ_INT(a.g.body_read, 6u << 20);
 
     /* The same file as the 'file' part of a multipart POST, beside text fields. */
     struct upl m = { 0 };
@@ -365,6 +368,7 @@ T_CASE(streamed_file_upload_arrives_intact)
     T_TRUE(memmem(last_body.data, last_body.len, "name=\"select\"", 13) != NULL);
     pthread_mutex_unlock(&srv_lock);
     T_TRUE(m.p.total > 6u << 20);
+    T_EQ_INT(m.g.body_read, 6u << 20); /* the file part's bytes, not the form's */
 
     /* A body file that does not exist fails at start, naming it. */
     struct httpc_opts bad = {
@@ -372,6 +376,13 @@ T_CASE(streamed_file_upload_arrives_intact)
     };
     T_TRUE(httpc_start(h, &bad, &err) == NULL);
     T_TRUE(strstr(err.msg, "/nonexistent/x.gcode") != NULL);
+    /* ... and so does a file part's */
+    struct httpc_part gone[] = { { .name = "file", .file_path = "/nonexistent/y.gcode" } };
+    struct httpc_opts bad_part = {
+        .url = u, .parts = gone, .n_parts = 1, .done = on_done, .ud = &m.g
+    };
+    T_TRUE(httpc_start(h, &bad_part, &err) == NULL);
+    T_TRUE(strstr(err.msg, "/nonexistent/y.gcode") != NULL);
     httpc_free(h);
     loop_free(l);
 }

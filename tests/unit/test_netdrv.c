@@ -564,18 +564,22 @@ T_CASE(prusalink_cut_upload_then_5xx_burst_is_ridden_out)
     cut_upload_then_5xx(PRUSALINK, "5xx=3@2");
 }
 
-T_CASE(prusalink_cut_upload_then_outage_fails_the_job)
+static void
+cut_upload_then_outage(enum kind kind, const char *burst)
 {
     /* as above, but the printer answers 503 past job_tries: the driver goes
        offline before it could send the file again.  The upload was cut
        short, so the printer never had the file whole and cannot print it:
        the job failed to start (the farm's retry policy sends it again),
        not a job left on the printer for attach(), which for an idle
-       PrusaLink could only say how it ended is not known */
+       PrusaLink could only say how it ended is not known.  burst is
+       5xx=5@<the upload's request number>: the four polls after it, and
+       for Moonraker the form body curl may send again at once on the
+       reused connection (then answered 503, the polls one later) */
     struct fx f;
     struct sf_err err;
-    const char *faults[] = { "drop-upload=1", "5xx=5@2", NULL };
-    T_OK(fx_start(&f, PRUSALINK, NULL, faults, NULL, NULL, NULL, &err), &err);
+    const char *faults[] = { "drop-upload=1", burst, NULL };
+    T_OK(fx_start(&f, kind, NULL, faults, NULL, NULL, NULL, &err), &err);
     T_TRUE(fx_wait_state(&f, DRV_IDLE));
     /* 13 MB, cut at 64 KiB: the socket buffers cannot take the rest, so curl
        never reads the file to its end */
@@ -589,6 +593,17 @@ T_CASE(prusalink_cut_upload_then_outage_fails_the_job)
     T_TRUE(strstr(f.rec.end_msg, "unreachable before the upload could be sent again (upload "
                                  "failed: ") == f.rec.end_msg);
     fx_stop(&f);
+}
+
+T_CASE(prusalink_cut_upload_then_outage_fails_the_job)
+{
+    cut_upload_then_outage(PRUSALINK, "5xx=5@2");
+}
+
+T_CASE(moonraker_cut_upload_then_outage_fails_the_job)
+{
+    /* requests 1 and 2 are /server/info and the first objects query */
+    cut_upload_then_outage(MOONRAKER, "5xx=5@3");
 }
 
 T_CASE(moonraker_offline_without_job_then_back)
