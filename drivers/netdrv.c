@@ -252,7 +252,11 @@ netdrv_contact_lost(struct netdrv *n, const char *why)
     if (n->job.phase != NETJOB_NONE) {
         /* The printer prints on without us: the farm marks the job
            interrupted and offers it back through attach() once the
-           printer answers again. */
+           printer answers again.  So does an upload whose fate is unknown
+           (curl read the file to its end): attach() settles it from what
+           the printer then shows, or says it cannot (an operator checks
+           the bed), where failing it would have the farm print it again
+           on a bed that may hold it. */
         log_printer(LOG_WARN, n->base.name, "offline with job '%s' on the printer: %s", n->job.name,
                     why);
         snprintf(n->lost_name, sizeof(n->lost_name), "%s", n->job.name);
@@ -297,6 +301,13 @@ netdrv_upload_reply(struct netdrv *n, const struct httpc_result *res)
         log_printer(LOG_WARN, n->base.name,
                     "upload failed (%s); asking the printer whether it arrived", why);
         n->verify = true;
+        /* Fewer bytes read than the file holds: the printer cannot have it
+           whole.  All of it read proves nothing either way: a small file
+           sits whole in curl's buffer and the socket's before the cut (a
+           10938-byte job cut half-way by the simulator was read whole),
+           and a body sent whole whose answer was lost may be printing.
+           Such a job is left interrupted if contact is lost (see
+           netdrv_contact_lost): sending it again could print it twice. */
         n->upload_cut = res->body_read < (uint64_t)n->job.size;
         if (n->nops->lost)
             n->nops->lost(n);
