@@ -97,6 +97,7 @@ open_sections_release(struct open_sections *s)
     free(s->k);
     free(s->first);
     free(s->span);
+    free(s->empty_to);
     memset(s, 0, sizeof(*s));
 }
 
@@ -564,6 +565,17 @@ rims_open_sections(const struct rims *r, const struct mesh *m, const struct rim_
             goto nomem;
     }
     out->first[(size_t)out->n_layers * f->nw] = (uint32_t)wk.n_span;
+    /* runs of layers that keep nothing: a column skips each in one step */
+    out->empty_to = mem_array(out->n_layers, sizeof(uint32_t));
+    if (!out->empty_to)
+        goto nomem;
+    for (uint32_t l = out->n_layers; l-- > 0;) {
+        bool empty = out->first[(size_t)l * f->nw] == out->first[(size_t)(l + 1) * f->nw];
+        out->empty_to[l] = l;
+        if (empty && l + 1 < out->n_layers && out->k[l + 1] == out->k[l] + 1 &&
+            out->first[(size_t)(l + 1) * f->nw] == out->first[(size_t)(l + 2) * f->nw])
+            out->empty_to[l] = out->empty_to[l + 1];
+    }
     goto done;
 nomem:
     rc = sf_err_set(err, SF_ENOMEM, "open rims: out of memory");

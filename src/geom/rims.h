@@ -69,6 +69,8 @@ struct open_sections {
     int32_t *k;
     uint32_t *first;
     struct cell_span *span;
+    uint32_t *empty_to; /* per layer with no kept span: the last layer of the run
+                           of such layers with consecutive k it starts (else l) */
 };
 
 /*

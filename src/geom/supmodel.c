@@ -156,16 +156,22 @@ push_ival(struct cols *out, uint32_t *n, size_t *cap, struct ival iv, size_t c,
         for (size_t l = a; l < os->n_layers && (os->k[l] + 0.5) * h < iv.hi; l++) {
             if (open_sections_keeps(os, (uint32_t)l, i, j))
                 continue;
-            int32_t k = os->k[l];
-            if (n_run && cut->run[n_run - 1].k1 == k - 1) {
-                cut->run[n_run - 1].k1 = k;
+            int32_t k0 = os->k[l];
+            /* a run of layers that keep nothing at all drops in one step */
+            uint32_t to = os->empty_to[l];
+            while (to > l && (os->k[to] + 0.5) * h >= iv.hi)
+                to--;
+            l = to;
+            int32_t k1 = os->k[l];
+            if (n_run && cut->run[n_run - 1].k1 == k0 - 1) {
+                cut->run[n_run - 1].k1 = k1;
                 continue;
             }
             void *o = cut->run;
             if (!mem_grow(&o, &cut->cap, n_run + 1, sizeof(*cut->run)))
                 return false;
             cut->run = o;
-            cut->run[n_run++] = (struct layer_run){ k, k };
+            cut->run[n_run++] = (struct layer_run){ k0, k1 };
         }
     }
     for (size_t q = 0; q < n_run; q++) {
