@@ -16,6 +16,7 @@
 
 #include "../src/base/err.h"
 #include "../src/base/mem.h"
+#include "../src/base/uf.h"
 #include "clip_shim.h"
 
 /* Gap pieces under this x nozzle^2 are not filled. */
@@ -441,14 +442,6 @@ cmp_arc(const void *x, const void *y)
     if (p->len_mm != q->len_mm)
         return p->len_mm < q->len_mm ? -1 : 1;
     return p->i < q->i ? -1 : p->i > q->i;
-}
-
-static uint32_t
-uf_find(uint32_t *uf, uint32_t x)
-{
-    while (uf[x] != x)
-        x = uf[x] = uf[uf[x]];
-    return x;
 }
 
 /* What happens at one line end (index in the sorted ends). */

@@ -25,6 +25,7 @@
 #include <string.h>
 
 #include "../base/mem.h"
+#include "../base/uf.h"
 #include "growth.h"
 
 void
@@ -124,16 +125,6 @@ measure_columns(const struct ray_grid *g, const struct support_params *p,
     return SF_OK;
 }
 
-static uint32_t
-uf_find(uint32_t *parent, uint32_t x)
-{
-    while (parent[x] != x) {
-        parent[x] = parent[parent[x]];
-        x = parent[x];
-    }
-    return x;
-}
-
 /* Clusters of columns on 4-neighbouring cells whose tops are within 2 pitches. */
 static uint32_t
 count_anchors(const struct ray_grid *g, const struct support_column *cols, size_t n)
@@ -169,11 +160,8 @@ count_anchors(const struct ray_grid *g, const struct support_column *cols, size_
             if (nb[q] == UINT32_MAX)
                 continue;
             for (uint32_t o = start[nb[q]]; o < start[nb[q] + 1]; o++) {
-                if (fabsf(cols[o].hi - cols[i].hi) <= reach) {
-                    uint32_t a = uf_find(parent, (uint32_t)i), b = uf_find(parent, o);
-                    if (a != b)
-                        parent[a] = b;
-                }
+                if (fabsf(cols[o].hi - cols[i].hi) <= reach)
+                    uf_union(parent, (uint32_t)i, o);
             }
         }
     }

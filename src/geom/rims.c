@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "../base/mem.h"
+#include "../base/uf.h"
 
 void
 rims_release(struct rims *r)
@@ -249,25 +250,6 @@ rim_crossings(const struct rims *r, const struct mesh *m, const struct rim_frame
     *out = c;
     *n_out = n;
     return SF_OK;
-}
-
-static uint32_t
-uf_find(uint32_t *par, uint32_t x)
-{
-    while (par[x] != x) {
-        par[x] = par[par[x]];
-        x = par[x];
-    }
-    return x;
-}
-
-static void
-uf_union(uint32_t *par, uint32_t a, uint32_t b)
-{
-    a = uf_find(par, a);
-    b = uf_find(par, b);
-    if (a != b)
-        par[a] = b;
 }
 
 /* Where a kept loop crosses row j: at u, winding +1 (entering) or -1. */
