@@ -248,11 +248,11 @@ plan_push(struct plan *pl, const struct seg *s, double v_nom, double vj)
     if (pl->n > pl->peak)
         pl->peak = pl->n;
     pl->n_blocks++;
-    double safe = fmin(s->safe, v_nom);
+    double safe = s->safe < v_nom ? s->safe : v_nom; /* not fmin: a call, per block */
     b->len = (float)s->len;
     b->v_nom = (float)v_nom;
     b->accel = (float)s->acc;
-    b->v_max_in = (float)fmin(vj, v_nom);
+    b->v_max_in = (float)(vj < v_nom ? vj : v_nom);
     b->v_safe = (float)safe;
     if (pl->done == 0 && pl->n == 1) /* the print starts from rest */
         b->v_max_in = fminf(b->v_max_in, b->v_safe);
