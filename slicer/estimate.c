@@ -288,76 +288,58 @@ plan_add(struct plan *pl, const struct est_limits *lim, const double d[4], doubl
    segments' time (test_slice_estimate). */
 #define EST_ARC_SAMPLES 4
 
-/* The fine segment of an arc of radius r that ends at angle a after a step of step radians
-   (negative: clockwise), with its share dz, de of Z and E. */
+/* A chord of an arc, len mm long (negative: clockwise) around the angle mid of its middle,
+   with its share dz, de of Z and E. */
 static bool
-arc_seg(struct seg *s, const struct est_limits *lim, double r, double a, double step, double dz,
-        double de, double f_mm_s)
+arc_seg(struct seg *s, const struct est_limits *lim, double len, double mid, double dz, double de,
+        double f_mm_s)
 {
-    double d[4] = { r * (cos(a) - cos(a - step)), r * (sin(a) - sin(a - step)), dz, de };
+    double d[4] = { -len * sin(mid), len * cos(mid), dz, de };
     return seg_init(s, lim, d, f_mm_s);
 }
 
-/*
- * An arc of nf fine segments (more than EST_ARC_BLOCKS_MAX) as
- * EST_ARC_BLOCKS_MAX blocks, each along its own part of the arc, as long as
- * the fine segments it stands for, and taking the time they would.  All
- * fine junctions of an arc are alike (the same turn between segments of
- * the same length), so in the middle of an arc the firmware either keeps
- * full speed through them or, when the junction limit vj is below the
- * nominal speed, saws between vj and a peak on every segment, averaging
- * len / trapezoid(len, vj, vj).  A coarse block cruises at that average
- * (its direction's fine junction decides it) and the junctions between
- * coarse blocks take it, so the middle of the arc times exactly as the
- * fine segments would (up to how feed caps and jerk vary with direction
- * within one block).  The arc is entered by the junction with its first
- * fine segment and left by the junction of its last, so only the
- * acceleration into and out of the saw-tooth differs: well under one fine
- * segment's time per arc.
- */
 static int
-plan_arc_coarse(struct plan *pl, const struct est_limits *lim, const double pos[4],
-                const double d[4], double cx, double cy, double r, double a0, double sweep, int nf,
-                double f_mm_s)
+plan_arc_coarse(struct plan *pl, const struct est_limits *lim, const double d[4], double r,
+                double a0, double sweep, int nf, double f_mm_s)
 {
     const int n = EST_ARC_BLOCKS_MAX;
     double step = sweep / nf, dz = d[2] / nf, de = d[3] / nf;
-    double share = 2 * r * sin(fabs(step) / 2) * nf / n; /* XY length of a block's fine segments */
+    double chord = 2 * r * sin(step / 2); /* a fine segment's, negative clockwise */
+    double c_step = cos(step), s_step = sin(step);
     struct seg fa, fb, c;
     double v_in = 0, v_prev = 0;
-    if (arc_seg(&fa, lim, r, a0 + step, step, dz, de, f_mm_s))
+    if (arc_seg(&fa, lim, chord, a0 + step / 2, dz, de, f_mm_s))
         v_in = junction_mm_s(lim, pl->have_prev ? &pl->prev : NULL, &fa);
-    double px = pos[0], py = pos[1];
     for (int k = 1; k <= n; k++) {
-        double a = a0 + sweep * k / n;
-        double x = k == n ? pos[0] + d[0] : cx + r * cos(a);
-        double y = k == n ? pos[1] + d[1] : cy + r * sin(a);
-        double cl = hypot(x - px, y - py), g = cl > 1e-12 ? share / cl : 0;
-        double s[4] = { (x - px) * g, (y - py) * g, d[2] / n, d[3] / n };
-        px = x;
-        py = y;
-        if (!seg_init(&c, lim, s, f_mm_s))
+        /* along the arc at the block's middle, as long as the fine segments it stands for */
+        if (!arc_seg(&c, lim, chord * nf / n, a0 + sweep * (k - 0.5) / n, d[2] / n, d[3] / n,
+                     f_mm_s))
             continue;
         /* fine junctions spread over the block: the average speed through them */
         double v_nom = c.v, len_s = 0, t_s = 0;
         for (int m = 0; m < EST_ARC_SAMPLES; m++) {
             double am = a0 + sweep * (k - 1 + (m + 0.5) / EST_ARC_SAMPLES) / n;
-            if (!arc_seg(&fa, lim, r, am, step, dz, de, f_mm_s) ||
-                !arc_seg(&fb, lim, r, am + step, step, dz, de, f_mm_s))
+            double sa = sin(am - step / 2), ca = cos(am - step / 2);
+            double da[4] = { -chord * sa, chord * ca, dz, de };
+            double db[4] = { da[0] * c_step - da[1] * s_step, da[0] * s_step + da[1] * c_step, dz,
+                             de }; /* the next one: da turned by a step */
+            if (!seg_init(&fa, lim, da, f_mm_s) || !seg_init(&fb, lim, db, f_mm_s))
                 continue;
-            double vj = fmin(junction_mm_s(lim, &fa, &fb), fb.v);
+            double vj = junction_mm_s(lim, &fa, &fb);
+            if (vj > fb.v)
+                vj = fb.v;
             len_s += fb.len;
             t_s += trapezoid_s(fb.len, vj, vj, fb.v, fb.acc);
         }
-        if (t_s > 0)
-            v_nom = fmin(v_nom, len_s / t_s);
+        if (t_s > 0 && len_s / t_s < v_nom)
+            v_nom = len_s / t_s;
         int rc = plan_push(pl, &c, v_nom, k == 1 ? v_in : fmin(v_prev, v_nom));
         if (rc < 0)
             return rc;
         v_prev = v_nom;
     }
     /* the next move's junction is with the last fine segment, at the last block's speed */
-    if (pl->have_prev && arc_seg(&fa, lim, r, a0 + sweep, step, dz, de, f_mm_s))
+    if (pl->have_prev && arc_seg(&fa, lim, chord, a0 + sweep - step / 2, dz, de, f_mm_s))
         set_prev(pl, &fa, v_prev);
     return SF_OK;
 }
@@ -382,7 +364,7 @@ plan_arc(struct plan *pl, const struct est_limits *lim, const double pos[4], con
     if (n < 1)
         n = 1;
     if (n > EST_ARC_BLOCKS_MAX)
-        return plan_arc_coarse(pl, lim, pos, d, cx, cy, r, a0, cw ? -sweep : sweep, n, f_mm_s);
+        return plan_arc_coarse(pl, lim, d, r, a0, cw ? -sweep : sweep, n, f_mm_s);
     double px = pos[0], py = pos[1];
     for (int k = 1; k <= n; k++) {
         double a = a0 + (cw ? -1 : 1) * sweep * k / n;
