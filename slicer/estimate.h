@@ -3,8 +3,9 @@
  * trapezoidal planner like the firmware's, filament per role.
  *
  * The interpreter follows G0/G1, G2/G3 arcs (I J centre offsets, split
- * into segments of at most 1 mm as Marlin's ARC_SUPPORT does; an arc
- * longer than 10 m is an error naming its line), G90/
+ * into segments of at most 1 mm as Marlin's ARC_SUPPORT does, planned
+ * as at most EST_ARC_BLOCKS_MAX blocks; an arc longer than 10 m is an
+ * error naming its line), G90/
  * G91, M82/M83, G92, G4 dwell and G28 (to the origin), and the comments
  * the slicer writes: ;LAYER_CHANGE starts a layer, ;TYPE: sets the role
  * (support when it names "Support material...").  Filament is summed the
@@ -42,6 +43,17 @@
    real print's estimate. */
 #define EST_LOOKAHEAD_BLOCKS 65536
 
+/* Most planner blocks one arc becomes.  An arc is split into 1 mm
+   segments as the firmware does, but one longer than this many planned
+   that way would let a few bytes of G-code cost thousands of blocks (a
+   "G2 I1591" line: 10 m, 10000 segments, 0.7 ms); a longer arc is
+   planned as this many blocks that take the time its 1 mm segments
+   would (estimate.c, plan_arc_coarse): to within 1 % where the firmware
+   would saw through a segment junction limit (0.6 % the worst seen), to
+   within float rounding where it keeps full speed, as a slicer's arcs do.  An arc's line takes 4
+   bytes at least ("G2I9"), so a file costs at most 8 blocks per byte. */
+#define EST_ARC_BLOCKS_MAX 32
+
 struct est_limits {
     double max_feed_mm_s[4];   /* X Y Z E (M203) */
     double max_accel_mm_s2[4]; /* X Y Z E (M201); 0: no per-axis cap */
@@ -73,6 +85,7 @@ struct estimate {
     uint32_t n_layers;     /* ;LAYER_CHANGE count */
     double *layer_start_s; /* n_layers entries: time when each layer starts (free()) */
     size_t peak_blocks;    /* most planner blocks held at once (bounded by the look-ahead) */
+    size_t n_blocks;       /* planner blocks in all: a move, or an arc's segments (the work done) */
 };
 
 /*

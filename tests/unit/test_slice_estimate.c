@@ -254,22 +254,113 @@ T_CASE(estimate_refuses_an_arc_longer_than_any_printer_naming_its_line)
 
 T_CASE(estimate_holds_a_bounded_window_of_arc_segments)
 {
-    /* 300 full turns of radius 1 m (6284 segments each, 1.9M in all),
-       with sane and with absurdly low acceleration (no block is final
-       until the window is full) */
+    /* 3000 full turns of radius 1 m (EST_ARC_BLOCKS_MAX blocks each, more
+       than a window's worth), with sane and with absurdly low acceleration
+       (no block is final until the window is full) */
     struct est_limits l;
     struct estimate e;
     limits(&l, 1000, 10);
     static const char *heads[] = { "G1 X10 F6000\n", "M204 S0.001\nG1 X10 F6000\n" };
     for (int h = 0; h < 2; h++) {
-        char *g = repeat(heads[h], "G2 I1000\n", 300);
+        char *g = repeat(heads[h], "G2 I1000\n", 3000);
         T_TRUE(g != NULL);
         double t = est(g, &l, &e);
         free(g);
         T_TRUE(t > 0 && isfinite(t));
-        T_EQ_INT(e.n_moves, 301);
+        T_EQ_INT(e.n_moves, 3001);
+        T_TRUE(e.n_blocks > EST_LOOKAHEAD_BLOCKS);
         T_TRUE(e.peak_blocks > 0 && e.peak_blocks <= EST_LOOKAHEAD_BLOCKS);
         estimate_release(&e);
+    }
+}
+
+/* An upload of arcs just under the 10 m limit, a few bytes each, was
+   planned as 1 mm segments: 10000 blocks per 9-byte line.  Each arc now
+   costs at most EST_ARC_BLOCKS_MAX blocks, and its time is still that of
+   its 1 mm segments: here every turn continues the one before, so the
+   whole file is one smooth path at 100 mm/s. */
+T_CASE(estimate_bounds_the_work_of_arcs_just_under_the_limit)
+{
+    struct est_limits l;
+    struct estimate e;
+    limits(&l, 1000, 10);
+    size_t n = 200;
+    double r = 1591; /* 9996.5 mm a turn */
+    char *g = repeat("G1 Y10 F6000\n", "G2 I1591\n", n);
+    T_TRUE(g != NULL);
+    double t = est(g, &l, &e);
+    size_t len = strlen(g);
+    free(g);
+    T_EQ_INT(e.n_moves, n + 1);
+    T_TRUE(e.n_blocks <= 1 + n * EST_ARC_BLOCKS_MAX);
+    /* the rule in estimate.h: at most 8 blocks per byte of G-code */
+    T_TRUE(e.n_blocks <= len * 8);
+    /* jerk 10 to 100 mm/s and back: 0.09 s and 4.95 mm at each end */
+    double path = 10 + n * 2 * M_PI * r;
+    T_EQ_DBL(t, 0.18 + (path - 9.9) / 100, 1e-3);
+    estimate_release(&e);
+}
+
+/* The arc of lines 2- as 1 mm chords: G1 lines after head (free()). */
+static char *
+arc_as_chords(const char *head, double x0, double y0, double r, double sweep)
+{
+    int n = (int)ceil(fabs(sweep) * r);
+    size_t cap = strlen(head) + (size_t)n * 48 + 1, used = 0;
+    char *g = malloc(cap);
+    if (!g)
+        return NULL;
+    used += (size_t)snprintf(g, cap, "%s", head);
+    double cx = x0 - r, cy = y0; /* the arc starts at angle 0 */
+    for (int k = 1; k <= n; k++) {
+        double a = sweep * k / n;
+        used += (size_t)snprintf(g + used, cap - used, "G1 X%.9f Y%.9f E%.9f\n", cx + r * cos(a),
+                                 cy + r * sin(a), 0.03 * fabs(sweep) * r / n);
+    }
+    return g;
+}
+
+/* A long arc planned as EST_ARC_BLOCKS_MAX blocks times as its 1 mm
+   segments do: at full speed through them (jerk 10 at 100 mm/s, radius
+   100), sawing between junction stops (jerk 1 at 200 mm/s, radius 20;
+   jerk 0: every segment a triangle), by junction deviation, and at an
+   acceleration too low to reach speed on the arc. */
+T_CASE(estimate_times_a_long_arc_as_its_1mm_segments)
+{
+    static const struct {
+        double r, sweep, jerk, jd, accel;
+        const char *f;
+    } c[] = {
+        { 100, 5.5, 10, 0, 1000, "F6000" }, { 20, -5.9, 1, 0, 1000, "F12000" },
+        { 50, 3.0, 0, 0, 1500, "F3000" },   { 10, 6.0, 10, 0.02, 1500, "F12000" },
+        { 300, -4.0, 10, 0, 0.5, "F6000" },
+    };
+    for (size_t i = 0; i < sizeof(c) / sizeof(c[0]); i++) {
+        struct est_limits l;
+        struct estimate e;
+        limits(&l, c[i].accel, c[i].jerk);
+        l.junction_dev_mm = c[i].jd;
+        char head[96], arc[160];
+        snprintf(head, sizeof(head), "M83\nG1 X%.1f Y0 %s\n", c[i].r + 5, c[i].f);
+        double x1 = 5 + cos(c[i].sweep) * c[i].r, y1 = sin(c[i].sweep) * c[i].r;
+        snprintf(arc, sizeof(arc), "%sG%d X%.9f Y%.9f I%.1f J0 E%.9f\nG1 X%.9f Y%.9f\n", head,
+                 c[i].sweep < 0 ? 2 : 3, x1, y1, -c[i].r, 0.03 * fabs(c[i].sweep) * c[i].r, x1 + 5,
+                 y1);
+        double t_arc = est(arc, &l, &e);
+        T_TRUE(e.n_blocks <= 2 + EST_ARC_BLOCKS_MAX);
+        estimate_release(&e);
+        char *g = arc_as_chords(head, c[i].r + 5, 0, c[i].r, c[i].sweep);
+        T_TRUE(g != NULL);
+        char *g2 = malloc(strlen(g) + 64);
+        T_TRUE(g2 != NULL);
+        snprintf(g2, strlen(g) + 64, "%sG1 X%.9f Y%.9f\n", g, x1 + 5, y1);
+        double t_seg = est(g2, &l, &e);
+        T_TRUE(e.n_blocks > 2 + EST_ARC_BLOCKS_MAX);
+        estimate_release(&e);
+        free(g);
+        free(g2);
+        /* within estimate.h's 1 % */
+        T_EQ_DBL(t_arc, t_seg, 0.01 * t_seg);
     }
 }
 
