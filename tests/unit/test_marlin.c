@@ -522,6 +522,20 @@ T_CASE(marlin_survives_dropped_oks_plain_ok)
     faulty_stream(false, "drop-ok=0.005 seed=3 drop-oks=1500:8", 0);
 }
 
+/*
+ * The same burst from the job's third line, where the window holds short
+ * homing and heat-up lines and fills by count: each silence sends a probe
+ * past the window, and the burst swallows the first probes' answers too.
+ * The answer that arrives stands for every probe before it.  Taken for
+ * the oldest probe's, each answer only moved the count to the next probe,
+ * one time-out each: 10 oks lost, 13 time-outs (7 now).
+ */
+T_CASE(marlin_probe_answer_stands_for_lost_ones)
+{
+    faulty_stream(false, "drop-oks=4:10", 0);
+    faulty_stream(true, "drop-oks=4:10", 0);
+}
+
 /* drop-oks takes LINE:N; a typo is an error, not a run without the fault. */
 T_CASE(marlin_sim_drop_oks_spec)
 {
