@@ -1218,11 +1218,18 @@ deadline(struct marlin *m, int64_t now)
     m->st.probes++;
     m->win.stale = 0;
     m->win.swallow = 0;
-    /* An M105 whose answer is overdue lost it (or was refused, and the
-       Resend was lost): the next probe's answer stands for it too, and must
-       not be taken for its, or each probe would only answer the one before. */
-    if (linewin_tag(&m->win, m->win.acked + 1) == TAG_M105)
-        linewin_set_tag(&m->win, m->win.acked + 1, TAG_HOST);
+    /* Every M105 in flight is overdue: each lost its answer (or was
+       refused, and the Resend was lost).  The next probe's answer stands
+       for them all, and must not be taken for one of theirs, or each probe
+       would only answer the one before.  Not only the oldest line: when
+       the oks of the lines before a probe were lost too, the probe is not
+       the oldest line in flight, and a burst that swallowed k probes'
+       answers cost k more deadlines, each answer acknowledging the probe
+       before it (10 oks lost from a job's third line: 13 deadlines, not 7;
+       test_marlin, marlin_probe_answer_stands_for_lost_ones). */
+    for (long n = m->win.acked + 1; n < m->win.next; n++)
+        if (linewin_tag(&m->win, n) == TAG_M105)
+            linewin_set_tag(&m->win, n, TAG_HOST);
     if (m->renumber_n && m->win.next > m->renumber_n) {
         /* The renumbering's ok is overdue: send it again.  Run already,
            the copy is refused with "Resend: m + 1" (on_resend); lost, it

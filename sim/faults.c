@@ -128,6 +128,24 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
         return parse_rate(spec, v, &f->corrupt_tx, err);
     if (NAME_IS("drop-ok"))
         return parse_rate(spec, v, &f->drop_ok, err);
+    if (NAME_IS("drop-oks")) {
+        char *end;
+        errno = 0;
+        long line = strtol(v, &end, 10);
+        long count = -1;
+        if (!errno && end != v && *end == ':') {
+            const char *q = end + 1;
+            count = strtol(q, &end, 10);
+            if (errno || end == q || *end)
+                count = -1;
+        }
+        if (line < 0 || count < 1 || count > 1000000)
+            return sf_err_set(err, SF_EINVAL,
+                              "fault '%s': expected drop-oks=LINE:N, LINE >= 0, N 1-1000000", spec);
+        f->drop_oks_line = line;
+        f->drop_oks = count;
+        return SF_OK;
+    }
     if (NAME_IS("garbage"))
         return parse_rate(spec, v, &f->garbage, err);
     if (NAME_IS("slow")) {
@@ -181,7 +199,7 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
     return sf_err_set(
         err, SF_EINVAL,
         "fault '%s': unknown; expected corrupt, corrupt-rx, corrupt-tx, drop-ok, "
-        "garbage, dup, merge, bad-line, hit, hit-rx, slow, reset, disconnect, runaway or "
+        "drop-oks, garbage, dup, merge, bad-line, hit, hit-rx, slow, reset, disconnect, runaway or "
         "seed",
         spec);
 }

@@ -7,6 +7,10 @@
  *   corrupt-rx=RATE   only bytes host -> printer
  *   corrupt-tx=RATE   only bytes printer -> host
  *   drop-ok=RATE      an "ok" reply is not sent, with probability RATE
+ *   drop-oks=LINE:N   once, the first N oks after line LINE was received are not sent (M105's
+ *                     "ok T:" among them): a burst, where drop-ok's losses are scattered.
+ *                     With ADVANCED_OK a later "ok N" makes up for a scattered loss; nothing
+ *                     makes up for a burst of at least the host's window: it must time out.
  *   garbage=RATE      after a reply line, a line of random bytes, with probability RATE
  *   slow=MS           every reply line leaves MS milliseconds late
  *   reset=N           the firmware resets after executing N commands
@@ -41,6 +45,8 @@ struct faults {
     double corrupt_rx;     /* byte corruption rate host -> printer, 0..1 */
     double corrupt_tx;     /* byte corruption rate printer -> host, 0..1 */
     double drop_ok;        /* probability an ok is swallowed */
+    long drop_oks_line;    /* drop-oks: the burst starts after this line was received */
+    long drop_oks;         /* ... and swallows this many oks in a row; 0 = none */
     double garbage;        /* probability of a garbage line after a reply */
     int slow_ms;           /* delay added before each reply line */
     long reset_after;      /* commands executed before a firmware reset; 0 = never */

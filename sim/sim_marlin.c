@@ -189,9 +189,14 @@ emit(struct sim_marlin *s, const char *fmt, ...)
         return;
     if ((size_t)n > sizeof(text) - 2)
         n = (int)sizeof(text) - 2;
-    if (strncmp(text, "ok", 2) == 0 && faults_roll(&s->faults, s->faults.drop_ok)) {
-        s->st.oks_dropped++;
-        return;
+    if (strncmp(text, "ok", 2) == 0) {
+        bool burst =
+            s->st.oks_burst < (uint64_t)s->faults.drop_oks && s->last_n >= s->faults.drop_oks_line;
+        if (burst || faults_roll(&s->faults, s->faults.drop_ok)) {
+            s->st.oks_burst += burst;
+            s->st.oks_dropped++;
+            return;
+        }
     }
     int kind = s->faults.hit_kind && !s->hit_done && s->last_n >= s->faults.hit_line
                    ? faults_hit_kind(text)

@@ -59,7 +59,8 @@ struct sim_marlin_stats {
     uint64_t connects;           /* host connections (TCP) or pty openings */
     uint64_t rx_dropped;         /* bytes lost to a full RX buffer (uart) */
     uint64_t hits;               /* targeted reply corruptions made (faults.hit_*) */
-    uint64_t oks_dropped;        /* oks not sent (faults.drop_ok) */
+    uint64_t oks_dropped;        /* oks not sent (faults.drop_ok, faults.drop_oks) */
+    uint64_t oks_burst;          /* of them, the burst's (faults.drop_oks) */
     uint64_t ep_near;  /* lines numbered from 1 one byte from the emergency parser acting */
     uint64_t ep_acted; /* lines the emergency parser acted on (M108, M112, M410) */
     bool halted;       /* killed (M112, thermal runaway); needs a reset */

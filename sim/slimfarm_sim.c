@@ -45,7 +45,7 @@ static const char usage_text[] =
     "       slimfarm-sim -h|--help\n"
     "  --uart  bytes reaching a full RX buffer are lost (else the host waits, as on USB)\n"
     "faults: corrupt=RATE corrupt-rx=RATE corrupt-tx=RATE drop-ok=RATE garbage=RATE\n"
-    "        dup=RATE merge=RATE bad-line=N hit=KIND:LINE:POS:BYTE\n"
+    "        drop-oks=LINE:N dup=RATE merge=RATE bad-line=N hit=KIND:LINE:POS:BYTE\n"
     "        slow=MS reset=N disconnect=N runaway=N seed=N\n"
     "        (hit KIND: ok okn okt resend error busy temp; see sim/faults.h)\n";
 

@@ -399,12 +399,14 @@ stream_exact_frag(struct sim_marlin_config *sc, int buffer_lines, int max_ms, si
     if (!o.over || getenv("T_VERBOSE"))
         printf(
             "    acked %llu of %llu, lines sent %llu, rewinds %llu, probes %llu, deadlines %llu, "
-            "resends %llu, rx dropped %llu, executed %llu, t %.1f s\n",
+            "resends %llu, rx dropped %llu, oks dropped %llu (burst %llu), "
+            "executed %llu, t %.1f s\n",
             (unsigned long long)r.drv->status.lines_acked,
             (unsigned long long)r.drv->status.lines_total, (unsigned long long)o.ds.lines_sent,
             (unsigned long long)o.ds.rewinds, (unsigned long long)o.ds.probes,
             (unsigned long long)o.ds.deadlines, (unsigned long long)o.st.resends,
-            (unsigned long long)o.st.rx_dropped, (unsigned long long)o.st.executed,
+            (unsigned long long)o.st.rx_dropped, (unsigned long long)o.st.oks_dropped,
+            (unsigned long long)o.st.oks_burst, (unsigned long long)o.st.executed,
             (double)o.took_ms / 1000.0);
     ran_exactly(&r, &o, "job");
     T_EQ_INT(r.drv->status.lines_acked, r.drv->status.lines_total);
@@ -414,6 +416,26 @@ stream_exact_frag(struct sim_marlin_config *sc, int buffer_lines, int max_ms, si
         T_TRUE(o.st.resends > 10); /* the faults really happened */
     if (sc->faults.hit_kind)
         T_EQ_INT(o.st.hits, 1);
+    if (sc->faults.drop_ok > 0)
+        T_TRUE(o.st.oks_dropped > o.st.oks_burst); /* scattered losses happened */
+    if (sc->faults.drop_oks) {
+        /* The burst was lost whole.  It is at least twice the window
+           (BUFSIZE lines in flight at most), so it swallowed the ok of
+           every line in flight, and nothing else could restart the stream
+           but the driver's time-out; and then the replies to what that
+           recovery sent (a probe's "ok T:", or the lines after a resync),
+           so the recovery itself had to run again. */
+        T_TRUE(sc->faults.drop_oks >= 2 * sc->bufsize);
+        T_EQ_INT(o.st.oks_burst, sc->faults.drop_oks);
+        T_TRUE(o.ds.deadlines >= 2);
+    }
+    if (sc->faults.drop_ok > 0 || sc->faults.drop_oks) {
+        /* Lost oks are these cases' only fault: every time-out answers a
+           lost reply, and one recovery makes up for all lost before it. */
+        if (o.ds.deadlines > o.st.oks_dropped)
+            t_fail(__FILE__, __LINE__, "%llu time-outs for %llu lost oks",
+                   (unsigned long long)o.ds.deadlines, (unsigned long long)o.st.oks_dropped);
+    }
     if (fragments > max_fragments)
         t_fail(__FILE__, __LINE__, "%zu line heads ran (at most %zu)", fragments, max_fragments);
     teardown(&r);
@@ -479,14 +501,53 @@ T_CASE(marlin_survives_corruption_plain_ok)
     faulty_stream(false, "corrupt=0.01 seed=11", 2);
 }
 
+/*
+ * Lost oks: scattered (drop-ok) and a burst of 8 after line 1500
+ * (drop-oks).  With ADVANCED_OK the next "ok N" acknowledges every line
+ * before N, so a scattered loss costs nothing unless no ok follows it (a
+ * renumbering M110's, the last line's): with drop-ok alone this job lost
+ * 46 oks and never timed out.  The burst leaves no later ok to make up
+ * for it, so the driver must time out and probe or resync, and again when
+ * the burst swallows that probe's answer too (stream_exact_frag checks).
+ * Plain oks are anonymous, so each loss leaves the count one line behind
+ * until a barrier or a time-out puts it right.
+ */
 T_CASE(marlin_survives_dropped_oks)
 {
-    faulty_stream(true, "drop-ok=0.01", 0);
+    faulty_stream(true, "drop-ok=0.01 drop-oks=1500:8", 0);
 }
 
 T_CASE(marlin_survives_dropped_oks_plain_ok)
 {
-    faulty_stream(false, "drop-ok=0.005 seed=3", 0);
+    faulty_stream(false, "drop-ok=0.005 seed=3 drop-oks=1500:8", 0);
+}
+
+/*
+ * The same burst from the job's third line, where the window holds short
+ * homing and heat-up lines and fills by count: each silence sends a probe
+ * past the window, and the burst swallows the first probes' answers too.
+ * The answer that arrives stands for every probe before it.  Taken for
+ * the oldest probe's, each answer only moved the count to the next probe,
+ * one time-out each: 10 oks lost, 13 time-outs (7 now).
+ */
+T_CASE(marlin_probe_answer_stands_for_lost_ones)
+{
+    faulty_stream(false, "drop-oks=4:10", 0);
+    faulty_stream(true, "drop-oks=4:10", 0);
+}
+
+/* drop-oks takes LINE:N; a typo is an error, not a run without the fault. */
+T_CASE(marlin_sim_drop_oks_spec)
+{
+    struct faults f;
+    faults_init(&f);
+    T_OK(faults_parse(&f, "drop-oks=1500:8", NULL), NULL);
+    T_EQ_INT(f.drop_oks_line, 1500);
+    T_EQ_INT(f.drop_oks, 8);
+    static const char *const bad[] = { "drop-oks=1500",    "drop-oks=1500:0", "drop-oks=:8",
+                                       "drop-oks=1500:8x", "drop-oks=-1:8",   "drop-oks=0.01" };
+    for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++)
+        T_EQ_INT(faults_parse(&f, bad[i], NULL), SF_EINVAL);
 }
 
 T_CASE(marlin_survives_garbage_and_slow_replies)
