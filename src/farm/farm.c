@@ -198,10 +198,6 @@ prep_done(struct loop *l, void *ud, int rc)
     if (rc == SF_OK && (rc = store_file_record(f->s, t->gcode_sha, t->gcode_size, &err)) == SF_OK &&
         (!t->mesh_sha[0] ||
          (rc = store_file_record(f->s, t->mesh_sha, t->mesh_size, &err)) == SF_OK)) {
-        char note[SF_ERR_MSG_MAX + 64] = "";
-        if (t->out.shape_failed[0])
-            snprintf(note, sizeof(note), "slimming failed (%s): printed as oriented, unchanged",
-                     t->out.shape_failed);
         struct job_event_args a = { .gcode_sha = t->gcode_sha,
                                     .nozzle_mm = t->out.nozzle_mm,
                                     .gcode_lines = (int64_t)t->scan.lines_total,
@@ -217,7 +213,7 @@ prep_done(struct loop *l, void *ud, int rc)
                                     .shape_changed = t->out.shape_changed,
                                     .mndr = t->out.mndr,
                                     .andr = t->out.andr,
-                                    .note = note };
+                                    .note = t->out.shape_failed };
         memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
         /* A re-slice whose job started meanwhile on a printer of its old key
            (or was cancelled) is refused here and dropped: nothing changed. */

@@ -11,8 +11,9 @@
  * naming it: never fake output), keeping the slimmed shape only if our
  * slicer prints it with less support (prepare_slice_better); a slimming
  * that fails (a mesh TetGen cannot enclose, a budget it refuses) is no
- * reason to leave the job unprinted: the part prints as oriented and the
- * outcome says why (prepare_out.shape_failed).  Then slice with the
+ * reason to leave the job unprinted: the part prints as oriented (a failed
+ * surface optimization: as given) and the outcome says why
+ * (prepare_out.shape_failed).  Then slice with the
  * printer's profile, overridden by the farm config's view of the hardware
  * (nozzle, bed, overhang angle) so one file is the truth about machines.
  * The part as it prints is saved for a later re-slice for another printer
@@ -243,6 +244,17 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     return SF_OK;
 }
 
+/* A shape step (what) failed with rc / serr: say so in out->shape_failed and
+   the log; the part prints `as` it stood before the step. */
+static void
+shape_fallback(const struct prepare_req *req, struct prepare_out *out, int rc,
+               const struct sf_err *serr, const char *what, const char *as)
+{
+    snprintf(out->shape_failed, sizeof(out->shape_failed), "%s failed (%s): printed %s, unchanged",
+             what, serr->msg[0] ? serr->msg : sf_status_name(rc), as);
+    log_warn("prepare", "job %lld: %s", (long long)req->job_id, out->shape_failed);
+}
+
 int
 prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
              struct sf_err *err)
@@ -306,11 +318,7 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
                 *err = serr;
             goto release;
         }
-        snprintf(out->shape_failed, sizeof(out->shape_failed), "%s",
-                 serr.msg[0] ? serr.msg : sf_status_name(rc));
-        log_warn("prepare",
-                 "job %lld: slimming failed (%s): printing the part as oriented, unchanged",
-                 (long long)req->job_id, out->shape_failed);
+        shape_fallback(req, out, rc, &serr, "slimming", "as oriented");
         slimmed = false;
         rc = SF_OK;
     }
@@ -321,8 +329,19 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
         out->andr = slimmed ? sdev.andr : 0;
     }
     if (strcmp(method, "surface") == 0 &&
-        (rc = surface_part(&m, req, &prof, cancel, &saved_g, out, err)))
-        goto release;
+        (rc = surface_part(&m, req, &prof, cancel, &saved_g, out, &serr))) {
+        /* as for slimming: the part prints as given, m untouched */
+        if (rc == SF_ECANCELED || rc == SF_ENOMEM) {
+            if (err)
+                *err = serr;
+            goto release;
+        }
+        shape_fallback(req, out, rc, &serr, "surface optimization", "as given");
+        out->dev_measured = true;
+        out->shape_changed = false;
+        out->mndr = out->andr = 0;
+        rc = SF_OK;
+    }
     if (atomic_load(cancel)) {
         rc = cancelled(req, err);
         goto release;

@@ -59,9 +59,10 @@ struct prepare_out {
     bool dev_measured;  /* mndr, andr are set: method slim or surface ran */
     bool shape_changed; /* the part prints reshaped, not only turned */
     double mndr, andr;
-    /* "" or why slimming failed (its error message, e.g. "tetgen: no tetrahedra
-       produced"): the part then prints as oriented, unchanged (shape_changed false,
-       mndr = andr = 0 with dev_measured) */
+    /* "" or what shape step failed, why and how the part prints instead, e.g.
+       "slimming failed (tetgen: no tetrahedra produced): printed as oriented,
+       unchanged", or a surface optimization's "... printed as given, unchanged"
+       (shape_changed false, mndr = andr = 0 with dev_measured) */
     char shape_failed[SF_ERR_MSG_MAX];
 };
 
@@ -77,8 +78,9 @@ typedef int (*prepare_fn)(const struct prepare_req *req, struct prepare_out *out
  * printer's profile and the job's material, the farm config's nozzle, bed
  * and angle overriding the profile's.  SF_EINVAL for a bad part or
  * profile (the message names the file), SF_ECANCELED if cancelled.  A
- * slimming that fails other than by cancel or SF_ENOMEM does not fail the
- * job: the part as oriented is sliced and out->shape_failed says why.
+ * slimming or surface optimization that fails other than by cancel or
+ * SF_ENOMEM does not fail the job: the part as oriented (surface: as given)
+ * is sliced and out->shape_failed says why.
  */
 int prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
                  struct sf_err *err);

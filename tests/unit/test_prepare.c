@@ -239,6 +239,41 @@ T_CASE(prepare_prints_the_oriented_part_when_slimming_fails)
 }
 
 /*
+ * The same for the surface method: its optimizer refuses a 0 mm budget as
+ * slimming does, and the job prints the part as given (the method none's
+ * G-code, byte for byte) and says why.
+ */
+T_CASE(prepare_prints_the_part_as_given_when_surface_optimization_fails)
+{
+    struct sf_err err;
+    struct mesh m;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    char part[512];
+    snprintf(part, sizeof(part), "%s/tee-s.stl", t_tmpdir());
+    T_OK(mesh_save_stl(&m, part, &err), &err);
+    mesh_release(&m);
+    struct prepare_out given, out;
+    T_OK(prepare_job(part, "none", 0, 0, &given, &err), &err);
+    warned[0] = '\0';
+    log_set_sink(warn_sink, NULL);
+    int rc = prepare_job(part, "surface", 0, 0, &out, &err);
+    log_set_sink(NULL, NULL);
+    T_OK(rc, &err);
+    printf("    %s", warned);
+    char gcode[600], gcode_given[600];
+    snprintf(gcode, sizeof(gcode), "%s/prep-surface.gcode", t_tmpdir());
+    snprintf(gcode_given, sizeof(gcode_given), "%s/prep-none.gcode", t_tmpdir());
+    T_TRUE(same_bytes(gcode, gcode_given));
+    T_EQ_DBL(out.support_g, given.support_g, 1e-9);
+    T_TRUE(out.dev_measured && !out.shape_changed);
+    T_TRUE(strstr(out.shape_failed, "surface optimization failed") != NULL);
+    T_TRUE(strstr(out.shape_failed, "deviation limits") != NULL);
+    T_TRUE(strstr(out.shape_failed, "printed as given, unchanged") != NULL);
+    T_TRUE(strstr(warned, "job 1: surface optimization failed") != NULL);
+}
+
+/*
  * A job may ask for any overhang angle from 1 to 89 degrees (job.c); below
  * slimming's 5 degree margin it refused the angle, so a slim job printed
  * the part unslimmed.  The margin narrows to the angle, as the surface
