@@ -30,7 +30,14 @@ LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     struct rims r;
     if (rims_build(&m, &r, NULL) != SF_OK)
         goto out;
-    struct rim_frame f = { v3(0, 0, 1), v3(1, 0, 0), v3(0, 1, 0), lo.x, lo.y, 0.5, lo.z, 0.2,
+    struct rim_frame f = { v3(0, 0, 1),
+                           v3(1, 0, 0),
+                           v3(0, 1, 0),
+                           lo.x,
+                           lo.y,
+                           0.5,
+                           lo.z,
+                           0.2,
                            (uint32_t)ceil((hi.x - lo.x) / 0.5) + 1,
                            (uint32_t)ceil((hi.y - lo.y) / 0.5) + 1 };
     struct open_sections os;
