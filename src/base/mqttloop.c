@@ -200,6 +200,15 @@ drop(struct mqttloop *m)
     sync_fd(m);
 }
 
+/* Did OpenSSL report a handshake the peer ended (EOF, reset) rather than one
+   it refused?  OpenSSL 3's reason strings, as libmosquitto logs them. */
+static bool
+handshake_cut(const char *lib_err)
+{
+    return strstr(lib_err, "unexpected eof") || strstr(lib_err, "Connection reset") ||
+           strstr(lib_err, "Broken pipe");
+}
+
 /* Why the connection ended (or never came up), from rc and what the callbacks saw. */
 static void
 describe(struct mqttloop *m, int rc, bool was_up, char *why, size_t n, bool *tls, int *connack)
@@ -210,6 +219,10 @@ describe(struct mqttloop *m, int rc, bool was_up, char *why, size_t n, bool *tls
         *connack = m->connack;
         snprintf(why, n, "broker refused the connection: %s (CONNACK %d)",
                  mosquitto_connack_string(m->connack), m->connack);
+    } else if (rc == MOSQ_ERR_TLS && !m->verify_err[0] && handshake_cut(m->lib_err)) {
+        /* the peer closed or reset the connection mid-handshake: a port coming
+           back up (a printer's MQTT restarting), not a certificate to reject */
+        snprintf(why, n, "TLS handshake cut short: %s", m->lib_err);
     } else if (rc == MOSQ_ERR_TLS || m->verify_err[0]) {
         *tls = true;
         if (m->verify_err[0])

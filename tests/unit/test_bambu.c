@@ -10,8 +10,11 @@
  * commands of the G-code file: every command exactly once, in order.
  * Waits are bounded by the wall clock and end on events, never on sleeps.
  */
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <signal.h>
 #include <stdlib.h>
+#include <sys/socket.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
@@ -1016,6 +1019,56 @@ T_CASE(bambu_mqtt_drop_mid_print_reconnects_and_job_ends_done)
     T_EQ_INT(ss.jobs_started, 1);
     T_EQ_INT(ss.jobs_finished, 1);
     T_TRUE(ran_the_file(&r));
+}
+
+/* A port that reads a client's first bytes (its TLS hello) and hangs up, as a
+   printer's MQTT port does while the broker behind it comes back up. */
+static void
+read_and_close(struct loop *l, int fd, unsigned events, void *ud)
+{
+    (void)events;
+    int *n = ud;
+    char buf[4096];
+    if (recv(fd, buf, sizeof(buf), 0) > 0)
+        (*n)++;
+    loop_del_fd(l, fd);
+    close(fd);
+}
+
+static void
+accept_hello(struct loop *l, int fd, unsigned events, void *ud)
+{
+    (void)events;
+    int c = accept(fd, NULL, NULL);
+    if (c >= 0 && loop_add_fd(l, c, LOOP_READ, read_and_close, ud, NULL) != SF_OK)
+        close(c);
+}
+
+/* A TLS handshake the other end cuts short is a lost connection (offline: the
+   farm connects again), not a certificate the operator must fix (error). */
+T_CASE(bambu_tls_handshake_cut_short_is_offline_not_an_error)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    memset(&r, 0, sizeof(r));
+    struct sf_err err;
+    r.loop = loop_new(&err);
+    T_TRUE(r.loop != NULL);
+    int ls = socket(AF_INET, SOCK_STREAM, 0);
+    struct sockaddr_in a = { .sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
+    socklen_t al = sizeof(a);
+    T_TRUE(ls >= 0 && bind(ls, (struct sockaddr *)&a, sizeof(a)) == 0 && listen(ls, 8) == 0 &&
+           getsockname(ls, (struct sockaddr *)&a, &al) == 0);
+    int hellos = 0;
+    T_OK(loop_add_fd(r.loop, ls, LOOP_READ, accept_hello, &hellos, &err), &err);
+    T_EQ_INT(open_driver(&r, &(struct setup){ 0 }, ntohs(a.sin_port), 1, &err), 0);
+    T_TRUE(WAIT_FOR(&r, hellos > 0 && r.drv->status.state != DRV_CONNECTING));
+    printf("    %s\n", r.drv->status.message);
+    T_EQ_INT(r.drv->status.state, DRV_OFFLINE);
+    T_TRUE(strstr(r.drv->status.message, "handshake cut short") != NULL);
+    loop_del_fd(r.loop, ls);
+    close(ls);
+    teardown(&r);
 }
 
 T_CASE(bambu_broker_restart_offline_then_job_finishes)
