@@ -168,8 +168,17 @@ cuts(double a, double b, double z)
 static void
 planes_between(double lo, double hi, double h, int32_t *k0, int32_t *k1)
 {
+    /* the division's guess, settled by the products cuts() compares */
     *k0 = (int32_t)floor(lo / h - 0.5) + 1;
     *k1 = (int32_t)floor(hi / h - 0.5);
+    while ((*k0 - 0.5) * h > lo)
+        --*k0;
+    while ((*k0 + 0.5) * h <= lo)
+        ++*k0;
+    while ((*k1 + 1.5) * h <= hi)
+        ++*k1;
+    while ((*k1 + 0.5) * h > hi)
+        --*k1;
     if (*k0 < 0)
         *k0 = 0;
 }
