@@ -1332,17 +1332,22 @@ supmodel_peers_rise(const struct mesh *before, const struct mesh *after, double 
     rims_release(&r);
     if (!open)
         return SF_OK;
-    for (int s = 0; s < 2 && !*rises; s++) {
+    /* one scene a part, both slicers' rules on each */
+    struct raycast *rb = raycast_new(before, err), *ra = rb ? raycast_new(after, err) : NULL;
+    rc = ra ? SF_OK : err && err->code ? err->code : SF_ENOMEM;
+    for (int s = 0; s < 2 && rc == SF_OK && !*rises; s++) {
         struct supmodel_params p;
         struct supmodel_result a, b;
         supmodel_params_default(&p, s ? SUPMODEL_CURA : SUPMODEL_PRUSA);
         p.angle_deg = angle_deg;
-        if ((rc = supmodel_of_mesh(before, v3(0, 0, 1), &p, &a, err)) ||
-            (rc = supmodel_of_mesh(after, v3(0, 0, 1), &p, &b, err)))
-            return rc;
-        *rises = b.grams > a.grams;
-        if (slicer)
-            *slicer = p.slicer;
+        if ((rc = supmodel_eval(rb, v3(0, 0, 1), &p, &a, err)) == SF_OK &&
+            (rc = supmodel_eval(ra, v3(0, 0, 1), &p, &b, err)) == SF_OK) {
+            *rises = b.grams > a.grams;
+            if (slicer)
+                *slicer = p.slicer;
+        }
     }
-    return SF_OK;
+    raycast_free(ra);
+    raycast_free(rb);
+    return rc;
 }

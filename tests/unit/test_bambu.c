@@ -337,6 +337,15 @@ teardown(struct run *r)
     loop_free(r->loop);
 }
 
+/* r with a loop and nothing else: a driver the case opens itself, no printer. */
+static void
+bare_run(struct run *r)
+{
+    memset(r, 0, sizeof(*r));
+    r->loop = loop_new(NULL);
+    T_TRUE(r->loop != NULL);
+}
+
 /* Write a job of layers x per_layer moves and start it on r's printer. */
 static int
 start(struct run *r, int layers, int per_layer, struct sf_err *err)
@@ -512,10 +521,8 @@ T_CASE(bambu_time_left_from_full_and_delta_reports)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
     struct run r;
-    memset(&r, 0, sizeof(r));
     struct sf_err err;
-    r.loop = loop_new(&err);
-    T_TRUE(r.loop != NULL);
+    bare_run(&r);
     T_OK(open_driver(&r, &(struct setup){ 0 }, broker_port, 1, &err), &err);
     char ca[600];
     snprintf(ca, sizeof(ca), "%s/ca.pem", certs);
@@ -1050,10 +1057,8 @@ T_CASE(bambu_tls_handshake_cut_short_is_offline_not_an_error)
 {
     T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
     struct run r;
-    memset(&r, 0, sizeof(r));
     struct sf_err err;
-    r.loop = loop_new(&err);
-    T_TRUE(r.loop != NULL);
+    bare_run(&r);
     int ls = socket(AF_INET, SOCK_STREAM, 0);
     struct sockaddr_in a = { .sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
     socklen_t al = sizeof(a);

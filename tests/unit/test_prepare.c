@@ -177,6 +177,19 @@ T_CASE(prepare_reports_the_deviation_of_a_reshaped_part)
     T_TRUE(out.shape_changed ? out.mndr > 0 && out.andr > 0 : out.mndr == 0 && out.andr == 0);
 }
 
+/* The tee saved as STL under name in the test's tmpdir: its path in part. */
+static void
+tee_file(const char *name, char *part, size_t n)
+{
+    struct sf_err err;
+    struct mesh m;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    snprintf(part, n, "%s/%s", t_tmpdir(), name);
+    T_OK(mesh_save_stl(&m, part, &err), &err);
+    mesh_release(&m);
+}
+
 /* What prepare logged at warn level, one line per call, appended. */
 static char warned[4096];
 
@@ -200,13 +213,8 @@ warn_sink(void *ud, enum log_level level, const char *subsys, const char *printe
 T_CASE(prepare_prints_the_oriented_part_when_slimming_fails)
 {
     struct sf_err err;
-    struct mesh m;
-    mesh_init(&m);
-    T_OK(shape_tee(&m, &err), &err);
     char part[512];
-    snprintf(part, sizeof(part), "%s/tee.stl", t_tmpdir());
-    T_OK(mesh_save_stl(&m, part, &err), &err);
-    mesh_release(&m);
+    tee_file("tee.stl", part, sizeof(part));
     struct prepare_out oriented, out;
     T_OK(prepare_job(part, "orient", 0, 0, &oriented, &err), &err);
     T_TRUE(oriented.shape_failed[0] == '\0');
@@ -246,13 +254,8 @@ T_CASE(prepare_prints_the_oriented_part_when_slimming_fails)
 T_CASE(prepare_prints_the_part_as_given_when_surface_optimization_fails)
 {
     struct sf_err err;
-    struct mesh m;
-    mesh_init(&m);
-    T_OK(shape_tee(&m, &err), &err);
     char part[512];
-    snprintf(part, sizeof(part), "%s/tee-s.stl", t_tmpdir());
-    T_OK(mesh_save_stl(&m, part, &err), &err);
-    mesh_release(&m);
+    tee_file("tee-s.stl", part, sizeof(part));
     struct prepare_out given, out;
     T_OK(prepare_job(part, "none", 0, 0, &given, &err), &err);
     warned[0] = '\0';
@@ -282,13 +285,8 @@ T_CASE(prepare_prints_the_part_as_given_when_surface_optimization_fails)
 T_CASE(prepare_slims_at_an_angle_below_the_margin)
 {
     struct sf_err err;
-    struct mesh m;
-    mesh_init(&m);
-    T_OK(shape_tee(&m, &err), &err);
     char part[512];
-    snprintf(part, sizeof(part), "%s/tee3.stl", t_tmpdir());
-    T_OK(mesh_save_stl(&m, part, &err), &err);
-    mesh_release(&m);
+    tee_file("tee3.stl", part, sizeof(part));
     struct prepare_out out;
     T_OK(prepare_job(part, "slim", 2, 3, &out, &err), &err);
     printf("    shape_failed \"%s\", changed %d\n", out.shape_failed, out.shape_changed);

@@ -216,6 +216,19 @@ region_areas(const struct layer_stack *s, uint32_t k, const struct slice_profile
     return rc;
 }
 
+/* Layer k of a square pyramid: its infill area is the inner square (side
+   inner), and the solid of it a ring band wide inside the inner edge. */
+static void
+expect_solid_band(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                  double inner, double band)
+{
+    double want = inner * inner - (inner - 2 * band) * (inner - 2 * band);
+    double solid, sparse;
+    T_OK(region_areas(s, k, p, &solid, &sparse), NULL);
+    T_EQ_DBL(solid + sparse, inner * inner, 0.01 * inner * inner);
+    T_EQ_DBL(solid, want, 0.03 * want);
+}
+
 /* m sliced at 0.2 mm into s, with every layer's areas for profile p. */
 static int
 slice_areas(const struct mesh *m, const struct slice_profile *p, struct layer_stack *s,
@@ -315,12 +328,7 @@ T_CASE(slope_gets_projected_top_surfaces)
     uint32_t k = 25; /* plane at z 5.1: side 24.5 */
     double inset = p.width_mm / 2 + 1.5 * tp_spacing(p.width_mm, 0.2);
     double inner = 24.5 - 2 * inset;
-    double band = p.top_layers * 0.5 - inset + 3 * p.solid_width_mm;
-    double want = inner * inner - (inner - 2 * band) * (inner - 2 * band);
-    double solid, sparse;
-    T_OK(region_areas(&s, k, &p, &solid, &sparse), NULL);
-    T_EQ_DBL(solid + sparse, inner * inner, 0.01 * inner * inner);
-    T_EQ_DBL(solid, want, 0.03 * want);
+    expect_solid_band(&s, k, &p, inner, p.top_layers * 0.5 - inset + 3 * p.solid_width_mm);
     slice_profile_release(&p);
     layer_stack_release(&s);
     ts_free(&m);
@@ -347,12 +355,7 @@ T_CASE(steep_slope_gets_a_band_of_solid)
     T_TRUE(p.infill_overlap * sp > inset - p.top_layers * 0.2); /* the sliver exists */
     for (uint32_t k = 30; k < 60; k += 10) {
         double side = 40 - 2 * (k * 0.2 + 0.1), inner = side - 2 * inset;
-        double band = p.top_layers * 0.2 + 3 * p.solid_width_mm - inset;
-        double want = inner * inner - (inner - 2 * band) * (inner - 2 * band);
-        double solid, sparse;
-        T_OK(region_areas(&s, k, &p, &solid, &sparse), NULL);
-        T_EQ_DBL(solid + sparse, inner * inner, 0.01 * inner * inner);
-        T_EQ_DBL(solid, want, 0.03 * want);
+        expect_solid_band(&s, k, &p, inner, p.top_layers * 0.2 + 3 * p.solid_width_mm - inset);
     }
     slice_profile_release(&p);
     layer_stack_release(&s);
