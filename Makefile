@@ -12,6 +12,7 @@
 # library, tests/unit/test_NAME.c becomes a test program, tests/fuzz/fuzz_NAME.c
 # a fuzz target.  Folders, in dependency order (tests/check-layers.sh):
 # src/base src/mesh src/geom slicer drivers src/farm src/api src/cmd; sim uses base.
+# drivers/ and sim/ hold one folder per printer family (marlin, net, bambu).
 
 SHELL := /bin/bash
 CC := gcc
@@ -66,9 +67,11 @@ $(BUILD)/obj/src/geom/polar.o: CFLAGS += -fno-math-errno -ffp-contract=fast
 $(BUILD)/obj/src/geom/arap.o: CFLAGS += -ffp-contract=fast
 
 LIB_DIRS := src/base src/mesh src/geom slicer drivers src/farm src/api
-LIB_C := $(wildcard $(addsuffix /*.c,$(LIB_DIRS)))
-LIB_CXX := $(wildcard $(addsuffix /*.cpp,$(LIB_DIRS)))
-SIM_C := $(filter-out sim/slimfarm_sim.c,$(wildcard sim/*.c))
+# A library folder's sources, and those of its family folders one level down
+# (drivers/marlin, drivers/net, sim/bambu, ...).
+LIB_C := $(wildcard $(addsuffix /*.c,$(LIB_DIRS)) $(addsuffix /*/*.c,$(LIB_DIRS)))
+LIB_CXX := $(wildcard $(addsuffix /*.cpp,$(LIB_DIRS)) $(addsuffix /*/*.cpp,$(LIB_DIRS)))
+SIM_C := $(filter-out sim/slimfarm_sim.c,$(wildcard sim/*.c sim/*/*.c))
 # The CLI: bin/slimfarm (src/cmd/slimfarm.c, no libraries) execs
 # libexec/slimfarm/slimfarm-MODULE, one program per src/cmd/cmd_MODULE.c (with
 # its parts cmd_MODULE_*.c and the shared cmd.c), each linked --as-needed so

@@ -14,11 +14,11 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "drv_bambu.h"
-#include "drv_marlin.h"
-#include "drv_moonraker.h"
-#include "drv_octoprint.h"
-#include "drv_prusalink.h"
+#include "bambu/drv_bambu.h"
+#include "marlin/drv_marlin.h"
+#include "net/drv_moonraker.h"
+#include "net/drv_octoprint.h"
+#include "net/drv_prusalink.h"
 
 /* Every kind this build has; a new driver is one row here. */
 static const struct drv_kind kinds[] = {

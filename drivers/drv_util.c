@@ -12,7 +12,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "drv_marlin.h"
+#include "marlin/drv_marlin.h"
 
 void
 drv_free(struct drv *d)

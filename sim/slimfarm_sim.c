@@ -30,11 +30,11 @@
 
 #include "../src/base/loop.h"
 #include "../src/base/mem.h"
-#include "sim_bambu.h"
-#include "sim_marlin.h"
-#include "sim_moonraker.h"
-#include "sim_octoprint.h"
-#include "sim_prusalink.h"
+#include "bambu/sim_bambu.h"
+#include "marlin/sim_marlin.h"
+#include "net/sim_moonraker.h"
+#include "net/sim_octoprint.h"
+#include "net/sim_prusalink.h"
 #include "simopt.h"
 
 static const char usage_text[] =
@@ -47,7 +47,7 @@ static const char usage_text[] =
     "faults: corrupt=RATE corrupt-rx=RATE corrupt-tx=RATE drop-ok=RATE garbage=RATE\n"
     "        drop-oks=LINE:N dup=RATE merge=RATE bad-line=N hit=KIND:LINE:POS:BYTE\n"
     "        slow=MS reset=N disconnect=N runaway=N seed=N\n"
-    "        (hit KIND: ok okn okt resend error busy temp; see sim/faults.h)\n";
+    "        (hit KIND: ok okn okt resend error busy temp; see sim/marlin/faults.h)\n";
 
 /* Printers one process may serve: each holds a pty or socket and a log file. */
 #define SIM_COUNT_MAX 256

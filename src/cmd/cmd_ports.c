@@ -7,7 +7,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 
-#include "../../drivers/transport.h"
+#include "../../drivers/marlin/transport.h"
 #include "cmd.h"
 
 static int

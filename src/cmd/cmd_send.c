@@ -20,7 +20,7 @@
 #include <unistd.h>
 
 #include "../../drivers/drv.h"
-#include "../../drivers/drv_marlin.h"
+#include "../../drivers/marlin/drv_marlin.h"
 #include "../base/log.h"
 #include "../base/loop.h"
 #include "cmd.h"

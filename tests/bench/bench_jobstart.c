@@ -26,7 +26,7 @@
 #include <unistd.h>
 
 #include "../../drivers/drv.h"
-#include "../../sim/sim_marlin.h"
+#include "../../sim/marlin/sim_marlin.h"
 #include "../../src/base/log.h"
 #include "../../src/farm/store.h"
 

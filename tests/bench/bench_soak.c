@@ -36,8 +36,8 @@
 #include <unistd.h>
 
 #include "../../drivers/drv.h"
-#include "../../drivers/drv_marlin.h"
-#include "../../sim/sim_marlin.h"
+#include "../../drivers/marlin/drv_marlin.h"
+#include "../../sim/marlin/sim_marlin.h"
 #include "../../sim/simlog.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"

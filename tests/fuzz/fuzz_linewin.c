@@ -9,8 +9,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../../drivers/linewin.h"
-#include "../../drivers/marlin_reply.h"
+#include "../../drivers/marlin/linewin.h"
+#include "../../drivers/marlin/marlin_reply.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 

@@ -1,7 +1,7 @@
 /* fuzz_marlin_reply.c - the Marlin reply classifier on arbitrary bytes. */
 #include <stdint.h>
 
-#include "../../drivers/marlin_reply.h"
+#include "../../drivers/marlin/marlin_reply.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 

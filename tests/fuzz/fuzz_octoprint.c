@@ -1,7 +1,7 @@
 /* fuzz_octoprint.c - the OctoPrint driver's reply parsers on arbitrary bytes. */
 #include <stdint.h>
 
-#include "../../drivers/drv_octoprint.h"
+#include "../../drivers/net/drv_octoprint.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 

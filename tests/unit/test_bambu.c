@@ -19,9 +19,9 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../../drivers/bambu/drv_bambu.h"
 #include "../../drivers/drv.h"
-#include "../../drivers/drv_bambu.h"
-#include "../../sim/sim_bambu.h"
+#include "../../sim/bambu/sim_bambu.h"
 #include "../../src/base/log.h"
 #include "../../src/base/mqttloop.h"
 #include "../t.h"

@@ -10,7 +10,7 @@
 #include <stdlib.h>
 #include <unistd.h>
 
-#include "../../drivers/gcode3mf.h"
+#include "../../drivers/bambu/gcode3mf.h"
 #include "../t.h"
 
 #define PY "/usr/bin/python3"

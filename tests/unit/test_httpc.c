@@ -19,7 +19,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "../../drivers/httpc.h"
+#include "../../drivers/net/httpc.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/mem.h"
 #include "../t.h"

@@ -3,8 +3,8 @@
  * checksums, acknowledgements with and without ADVANCED_OK, Marlin's
  * repeated Resend after a bad line, resync after a probe, garbled replies.
  */
-#include "../../drivers/linewin.h"
-#include "../../drivers/marlin_reply.h"
+#include "../../drivers/marlin/linewin.h"
+#include "../../drivers/marlin/marlin_reply.h"
 #include "../../src/base/gcode.h"
 #include "../t.h"
 

@@ -16,9 +16,9 @@
 #include <unistd.h>
 
 #include "../../drivers/drv.h"
-#include "../../drivers/drv_marlin.h"
-#include "../../drivers/linewin.h"
-#include "../../sim/sim_marlin.h"
+#include "../../drivers/marlin/drv_marlin.h"
+#include "../../drivers/marlin/linewin.h"
+#include "../../sim/marlin/sim_marlin.h"
 #include "../../sim/simlog.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
@@ -310,7 +310,7 @@ fail:
 
 /*
  * sc for a simulated Marlin: ADVANCED_OK or plain ok, on a UART (an RX
- * overrun loses bytes) or not, with faults: specs of sim/faults.h separated
+ * overrun loses bytes) or not, with faults: specs of sim/marlin/faults.h separated
  * by spaces ("corrupt=0.01 seed=7"), or NULL.
  */
 static void

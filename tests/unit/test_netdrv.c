@@ -16,10 +16,10 @@
 #include <unistd.h>
 
 #include "../../drivers/drv.h"
-#include "../../drivers/drv_moonraker.h"
-#include "../../drivers/drv_prusalink.h"
-#include "../../sim/sim_moonraker.h"
-#include "../../sim/sim_prusalink.h"
+#include "../../drivers/net/drv_moonraker.h"
+#include "../../drivers/net/drv_prusalink.h"
+#include "../../sim/net/sim_moonraker.h"
+#include "../../sim/net/sim_prusalink.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/log.h"
 #include "../t.h"

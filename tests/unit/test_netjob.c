@@ -1,14 +1,14 @@
 /*
- * test_netjob.c - the remote-state table (drivers/netjob.h) and the
+ * test_netjob.c - the remote-state table (drivers/net/netjob.h) and the
  * Moonraker and PrusaLink reply parsers, against replay fixtures whose
  * bodies follow each project's documentation field by field
  * (tests/replay/README.md says which documents and versions).
  */
 #include <stdlib.h>
 
-#include "../../drivers/drv_moonraker.h"
-#include "../../drivers/drv_prusalink.h"
-#include "../../drivers/netjob.h"
+#include "../../drivers/net/drv_moonraker.h"
+#include "../../drivers/net/drv_prusalink.h"
+#include "../../drivers/net/netjob.h"
 #include "../../src/base/buf.h"
 #include "../t.h"
 

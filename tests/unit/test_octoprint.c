@@ -13,8 +13,8 @@
 #include <string.h>
 #include <time.h>
 
-#include "../../drivers/drv_octoprint.h"
-#include "../../sim/sim_http.h"
+#include "../../drivers/net/drv_octoprint.h"
+#include "../../sim/net/sim_http.h"
 #include "../../src/base/buf.h"
 #include "../t.h"
 

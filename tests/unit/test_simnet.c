@@ -13,9 +13,9 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "../../drivers/httpc.h"
-#include "../../sim/sim_http.h"
-#include "../../sim/sim_netprinter.h"
+#include "../../drivers/net/httpc.h"
+#include "../../sim/net/sim_http.h"
+#include "../../sim/net/sim_netprinter.h"
 #include "../../src/base/buf.h"
 #include "../t.h"
 

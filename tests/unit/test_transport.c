@@ -21,7 +21,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "../../drivers/transport.h"
+#include "../../drivers/marlin/transport.h"
 #include "../../src/base/limits.h"
 #include "../t.h"
 

@@ -1,0 +1,575 @@
+/*
+ * sim_octoprint.c - a simulated OctoPrint (sim_octoprint.h): the REST API
+ * over sim_http, the printer over sim_netprinter.
+ *
+ * Replies follow docs.octoprint.org (api/version, api/job, api/printer,
+ * api/files, api/connection; 1.10.0 and 1.11.x read side by side) field by
+ * field where a client could read them; fields no client of ours reads
+ * (history, sd card details, refs.download) are kept minimal but present.
+ * State texts are OctoPrint's: Operational, Printing, Pausing, Paused,
+ * Cancelling, Error.  After a job ends /api/job keeps its file and final
+ * progress and the state is Operational again, as OctoPrint does.
+ *
+ * Thread: the loop thread.
+ */
+#include "sim_octoprint.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../src/base/mem.h"
+#include "sim_http.h"
+#include "sim_netcli.h"
+#include "sim_netprinter.h"
+
+struct octo_sim {
+    struct sim_netprinter *np;
+    struct sim_http *http;
+    struct loop *l;
+    char address[64];
+    long error_at;  /* fault: fail after this many job lines (0: never) */
+    long cancel_at; /* fault: cancel at the printer after this many job lines */
+    bool busy;      /* fault: the printer says it is busy */
+    bool fired;     /* cancel-at done for this job */
+    bool err_fired; /* error-at done (once per run: the printer is fixed after) */
+    uint64_t tick;  /* fault watch timer */
+    uint64_t uploads, jobs;
+};
+
+static const char *
+state_text(const struct sim_np_status *st)
+{
+    switch (st->state) {
+    case SIM_NP_PRINTING:
+        return "Printing";
+    case SIM_NP_PAUSING:
+        return "Pausing";
+    case SIM_NP_PAUSED:
+        return "Paused";
+    case SIM_NP_CANCELLING:
+        return "Cancelling";
+    case SIM_NP_ERROR:
+        return "Error";
+    default:
+        return "Operational";
+    }
+}
+
+static bool
+active(const struct sim_np_status *st)
+{
+    return st->state == SIM_NP_PRINTING || st->state == SIM_NP_PAUSING ||
+           st->state == SIM_NP_PAUSED || st->state == SIM_NP_CANCELLING;
+}
+
+static json_t *
+flags(const struct sim_np_status *st, bool busy)
+{
+    bool err = st->state == SIM_NP_ERROR;
+    bool printing = st->state == SIM_NP_PRINTING || st->state == SIM_NP_PAUSING ||
+                    st->state == SIM_NP_CANCELLING;
+    return json_pack("{s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b}", "operational", !err, "paused",
+                     st->state == SIM_NP_PAUSED, "printing", printing || busy, "pausing",
+                     st->state == SIM_NP_PAUSING, "cancelling", st->state == SIM_NP_CANCELLING,
+                     "sdReady", false, "error", err, "ready", !err && !active(st) && !busy,
+                     "closedOrError", err, "finishing", false);
+}
+
+/* ---- handlers ---- */
+
+static void
+h_version(struct sim_http_req *r, void *ud)
+{
+    (void)ud;
+    sim_http_reply_json(
+        r, 200,
+        json_pack("{s:s,s:s,s:s}", "api", "0.1", "server", "1.10.0", "text", "OctoPrint 1.10.0"));
+}
+
+static void
+h_server(struct sim_http_req *r, void *ud)
+{
+    (void)ud;
+    sim_http_reply_json(r, 200, json_pack("{s:s,s:n}", "version", "1.10.0", "safemode"));
+}
+
+static void
+h_connection(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    sim_http_reply_json(
+        r, 200,
+        json_pack("{s:{s:s,s:s,s:i,s:s},s:{s:[s],s:[i],s:[{s:s,s:s}],s:s,s:i,s:s}}", "current",
+                  "state", state_text(&st), "port", "VIRTUAL", "baudrate", 250000, "printerProfile",
+                  "_default", "options", "ports", "VIRTUAL", "baudrates", 250000, "printerProfiles",
+                  "id", "_default", "name", "Default", "portPreference", "VIRTUAL",
+                  "baudratePreference", 250000, "printerProfilePreference", "_default"));
+}
+
+/* POST /api/connection: "connect" brings a printer out of Error, as reconnecting does. */
+static void
+h_connect(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    struct sf_err err;
+    json_t *j = sim_http_json(r, &err);
+    if (!j) {
+        sim_http_reply_error(r, 400, err.msg);
+        return;
+    }
+    const char *cmd = json_string_value(json_object_get(j, "command"));
+    if (cmd && strcmp(cmd, "connect") == 0) {
+        sim_netprinter_reset(o->np);
+        sim_http_reply_empty(r, 204);
+    } else {
+        sim_http_reply_error(r, 400, "Unknown command");
+    }
+    json_decref(j);
+}
+
+static json_t *
+null_or_real(bool known, double v)
+{
+    return known ? json_real(v) : json_null();
+}
+
+static void
+h_job(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    bool has = st.file[0] != 0;
+    json_t *file = has ? json_pack("{s:s,s:s,s:s,s:s,s:I,s:I}", "name", st.file, "path", st.file,
+                                   "display", st.file, "origin", "local", "size",
+                                   (json_int_t)st.file_size, "date", (json_int_t)1700000000)
+                       : json_pack("{s:n,s:n,s:n,s:n,s:n}", "name", "path", "display", "origin",
+                                   "size", "date");
+    json_t *job = json_pack("{s:o,s:n,s:n,s:n,s:n,s:s}", "file", file, "estimatedPrintTime",
+                            "lastPrintTime", "filament", "averagePrintTime", "user", "slimfarm");
+    json_t *progress = json_pack(
+        "{s:o,s:o,s:o,s:o,s:s}", "completion", null_or_real(has, st.progress * 100.0), "filepos",
+        has ? json_integer((json_int_t)st.file_pos) : json_null(), "printTime",
+        has ? json_integer((json_int_t)st.print_time_s) : json_null(), "printTimeLeft",
+        has && st.time_left_s >= 0 ? json_integer((json_int_t)st.time_left_s) : json_null(),
+        "printTimeLeftOrigin", "linear");
+    json_t *reply = json_pack("{s:o,s:o,s:s}", "job", job, "progress", progress, "state",
+                              o->busy && !active(&st) ? "Printing" : state_text(&st));
+    if (st.state == SIM_NP_ERROR)
+        json_object_set_new(reply, "error", json_string(st.message));
+    sim_http_reply_json(r, 200, reply);
+}
+
+static void
+h_printer(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    if (st.state == SIM_NP_ERROR) {
+        sim_http_reply_error(r, 409, "Printer is not operational");
+        return;
+    }
+    json_t *temps = json_pack("{s:{s:f,s:f,s:i},s:{s:f,s:f,s:i}}", "tool0", "actual", st.nozzle_c,
+                              "target", st.nozzle_target_c, "offset", 0, "bed", "actual", st.bed_c,
+                              "target", st.bed_target_c, "offset", 0);
+    sim_http_reply_json(r, 200,
+                        json_pack("{s:o,s:{s:b},s:{s:s,s:o}}", "temperature", temps, "sd", "ready",
+                                  false, "state", "text",
+                                  o->busy && !active(&st) ? "Printing" : state_text(&st), "flags",
+                                  flags(&st, o->busy)));
+}
+
+static void
+file_json_reply(struct sim_http_req *r, unsigned status, const char *name, bool done,
+                bool eff_select, bool eff_print, const char *base)
+{
+    char res[512];
+    snprintf(res, sizeof(res), "%s/api/files/local/%s", base, name);
+    char dl[512];
+    snprintf(dl, sizeof(dl), "%s/downloads/files/local/%s", base, name);
+    sim_http_add_header(r, "Location", res);
+    sim_http_reply_json(r, status,
+                        json_pack("{s:{s:{s:s,s:s,s:s,s:{s:s,s:s}}},s:b,s:b,s:b}", "files", "local",
+                                  "name", name, "path", name, "origin", "local", "refs", "resource",
+                                  res, "download", dl, "done", done, "effectiveSelect", eff_select,
+                                  "effectivePrint", eff_print));
+}
+
+static bool
+truthy(const char *v)
+{
+    return v && (strcmp(v, "true") == 0 || strcmp(v, "1") == 0 || strcmp(v, "yes") == 0);
+}
+
+static void
+start_job(struct octo_sim *o, const char *name)
+{
+    o->fired = false;
+    o->jobs++;
+    (void)sim_netprinter_start(o->np, name, NULL);
+}
+
+static void
+h_upload(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    const struct sim_http_file *f = sim_http_upload(r);
+    if (!f || !f->filename[0]) {
+        sim_http_reply_error(r, 400, "No file to upload and no folder to create");
+        return;
+    }
+    const char *name = strrchr(f->filename, '/');
+    name = name ? name + 1 : f->filename;
+    size_t n = strlen(name);
+    if (n < 6 || (strcmp(name + n - 6, ".gcode") != 0 && strcmp(name + n - 4, ".gco") != 0 &&
+                  strcmp(name + n - 2, ".g") != 0)) {
+        sim_http_reply_error(r, 415, "Could not upload the file, invalid type");
+        return;
+    }
+    char path[1024];
+    struct sf_err err;
+    if (sim_netprinter_path(o->np, name, path, sizeof(path), &err) < 0) {
+        sim_http_reply_error(r, 400, err.msg);
+        return;
+    }
+    if (sim_netprinter_file_busy(o->np, name)) {
+        sim_http_reply_error(r, 409, "Trying to overwrite file that is currently being printed");
+        return;
+    }
+    if (sim_http_keep_upload(r, path, &err) < 0) {
+        sim_http_reply_error(r, 500, err.msg);
+        return;
+    }
+    o->uploads++;
+    bool want_print = truthy(sim_http_field(r, "print"));
+    bool want_select = want_print || truthy(sim_http_field(r, "select"));
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    /* Not operational, or busy: select and print are silently dropped, as OctoPrint does. */
+    bool can = !active(&st) && st.state != SIM_NP_ERROR && !o->busy;
+    bool printing = false;
+    if (want_print && can) {
+        start_job(o, name);
+        printing = true;
+    }
+    char base[64];
+    snprintf(base, sizeof(base), "%s", o->address);
+    file_json_reply(r, 201, name, true, want_select && can, printing, base);
+}
+
+static void
+h_file(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    const char *name = sim_http_rest(r);
+    int64_t size = sim_netprinter_file_size(o->np, name);
+    if (size < 0) {
+        sim_http_reply_error(r, 404, "File not found");
+        return;
+    }
+    const char *m = sim_http_method(r);
+    if (strcmp(m, "GET") == 0) {
+        sim_http_reply_json(r, 200,
+                            json_pack("{s:s,s:s,s:s,s:s,s:I,s:I}", "name", name, "path", name,
+                                      "display", name, "origin", "local", "size", (json_int_t)size,
+                                      "date", (json_int_t)1700000000));
+        return;
+    }
+    if (strcmp(m, "DELETE") == 0) {
+        char path[1024];
+        if (sim_netprinter_file_busy(o->np, name)) {
+            sim_http_reply_error(r, 409, "Trying to delete a file that is currently in use");
+            return;
+        }
+        if (sim_netprinter_path(o->np, name, path, sizeof(path), NULL) == 0)
+            remove(path);
+        sim_http_reply_empty(r, 204);
+        return;
+    }
+    struct sf_err err;
+    json_t *j = sim_http_json(r, &err);
+    if (!j) {
+        sim_http_reply_error(r, 400, err.msg);
+        return;
+    }
+    const char *cmd = json_string_value(json_object_get(j, "command"));
+    bool print = json_is_true(json_object_get(j, "print"));
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    if (!cmd || strcmp(cmd, "select") != 0) {
+        sim_http_reply_error(r, 400, "Unknown command");
+    } else if (active(&st) || o->busy) {
+        sim_http_reply_error(r, 409, "Printer is already printing, cannot select a new file");
+    } else if (print && st.state == SIM_NP_ERROR) {
+        sim_http_reply_error(r, 409, "Printer is not operational, cannot directly start printing");
+    } else {
+        if (print)
+            start_job(o, name);
+        sim_http_reply_empty(r, 204);
+    }
+    json_decref(j);
+}
+
+static void
+h_job_command(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    struct sf_err err;
+    json_t *j = sim_http_json(r, &err);
+    if (!j) {
+        sim_http_reply_error(r, 400, err.msg);
+        return;
+    }
+    const char *cmd = json_string_value(json_object_get(j, "command"));
+    const char *action = json_string_value(json_object_get(j, "action"));
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    int rc = SF_OK;
+    if (!cmd) {
+        sim_http_reply_error(r, 400, "Expected a command");
+        json_decref(j);
+        return;
+    }
+    if (strcmp(cmd, "start") == 0) {
+        if (active(&st) || o->busy || !st.file[0]) {
+            sim_http_reply_error(r, 409, "Printer is not operational or already printing");
+            rc = SF_EAGAIN;
+        } else {
+            start_job(o, st.file);
+        }
+    } else if (strcmp(cmd, "cancel") == 0) {
+        rc = sim_netprinter_cancel(o->np, &err);
+        if (rc)
+            sim_http_reply_error(r, 409, "Printer is neither printing nor paused");
+    } else if (strcmp(cmd, "pause") == 0) {
+        if (!action || strcmp(action, "toggle") == 0)
+            action = st.state == SIM_NP_PAUSED ? "resume" : "pause";
+        if (!active(&st)) {
+            sim_http_reply_error(r, 409, "Printer is neither printing nor paused");
+            rc = SF_EAGAIN;
+        } else if (strcmp(action, "pause") == 0) {
+            if (st.state == SIM_NP_PRINTING)
+                sim_netprinter_pause(o->np, NULL); /* already paused: nothing to do */
+        } else if (strcmp(action, "resume") == 0) {
+            if (st.state == SIM_NP_PAUSED || st.state == SIM_NP_PAUSING)
+                sim_netprinter_resume(o->np, NULL);
+        } else {
+            sim_http_reply_error(r, 400, "Unknown action");
+            rc = SF_EINVAL;
+        }
+    } else if (strcmp(cmd, "restart") == 0) {
+        if (st.state != SIM_NP_PAUSED) {
+            sim_http_reply_error(r, 409, "Printer is not paused");
+            rc = SF_EAGAIN;
+        } else {
+            sim_netprinter_cancel(o->np, NULL);
+        }
+    } else {
+        sim_http_reply_error(r, 400, "Unknown command");
+        rc = SF_EINVAL;
+    }
+    if (rc == SF_OK)
+        sim_http_reply_empty(r, 204);
+    json_decref(j);
+}
+
+static void
+h_command(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    struct sf_err err;
+    json_t *j = sim_http_json(r, &err);
+    if (!j) {
+        sim_http_reply_error(r, 400, err.msg);
+        return;
+    }
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    if (st.state == SIM_NP_ERROR) {
+        sim_http_reply_error(r, 409, "Printer is not operational");
+        json_decref(j);
+        return;
+    }
+    json_t *one = json_object_get(j, "command");
+    json_t *many = json_object_get(j, "commands");
+    size_t i;
+    json_t *c;
+    int rc = SF_OK;
+    if (json_is_string(one))
+        rc = sim_netprinter_command(o->np, json_string_value(one), &err);
+    else if (json_is_array(many))
+        json_array_foreach(many, i, c)
+        {
+            if (rc == SF_OK && json_is_string(c))
+                rc = sim_netprinter_command(o->np, json_string_value(c), &err);
+        }
+    else
+        rc = sf_err_set(&err, SF_EINVAL, "Expected command or commands");
+    if (rc)
+        sim_http_reply_error(r, rc == SF_EAGAIN ? 409 : 400, err.msg);
+    else
+        sim_http_reply_empty(r, 204);
+    json_decref(j);
+}
+
+static const struct sim_http_route routes[] = {
+    { "GET", "/api/version", SIM_HTTP_BODY_MEM, false, h_version },
+    { "GET", "/api/server", SIM_HTTP_BODY_MEM, false, h_server },
+    { "GET", "/api/connection", SIM_HTTP_BODY_MEM, false, h_connection },
+    { "POST", "/api/connection", SIM_HTTP_BODY_MEM, false, h_connect },
+    { "GET", "/api/job", SIM_HTTP_BODY_MEM, false, h_job },
+    { "POST", "/api/job", SIM_HTTP_BODY_MEM, false, h_job_command },
+    { "GET", "/api/printer", SIM_HTTP_BODY_MEM, false, h_printer },
+    { "POST", "/api/printer/command", SIM_HTTP_BODY_MEM, false, h_command },
+    { "POST", "/api/files/local", SIM_HTTP_BODY_FORM, false, h_upload },
+    { "GET", "/api/files/local/*", SIM_HTTP_BODY_MEM, false, h_file },
+    { "POST", "/api/files/local/*", SIM_HTTP_BODY_MEM, false, h_file },
+    { "DELETE", "/api/files/local/*", SIM_HTTP_BODY_MEM, false, h_file },
+};
+
+/* ---- faults on the job ---- */
+
+static void
+on_tick(struct loop *l, void *ud)
+{
+    struct octo_sim *o = ud;
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    sim_http_outage_watch(o->http, sim_np_running(&st), st.lines_done);
+    if (!o->fired && (st.state == SIM_NP_PRINTING || st.state == SIM_NP_PAUSED)) {
+        if (o->error_at && !o->err_fired && st.lines_done >= (uint64_t)o->error_at) {
+            o->err_fired = true;
+            sim_netprinter_fail(o->np, "Printer halted: heater failure (simulated)");
+        } else if (o->cancel_at && st.lines_done >= (uint64_t)o->cancel_at) {
+            o->fired = true;
+            sim_netprinter_cancel(o->np, NULL);
+        }
+    }
+    o->tick = loop_timer_add(l, 10, on_tick, o);
+}
+
+static int
+octo_fault(struct octo_sim *o, const char *spec, struct sf_err *err)
+{
+    long *dst = NULL;
+    const char *v = NULL;
+    if (strncmp(spec, "error-at=", 9) == 0)
+        dst = &o->error_at, v = spec + 9;
+    else if (strncmp(spec, "cancel-at=", 10) == 0)
+        dst = &o->cancel_at, v = spec + 10;
+    else if (strcmp(spec, "busy=1") == 0) {
+        o->busy = true;
+        return SF_OK;
+    } else
+        return SF_EUNSUPP;
+    char *end;
+    errno = 0;
+    long n = strtol(v, &end, 10);
+    if (errno || end == v || *end || n < 1)
+        return sf_err_set(err, SF_EINVAL, "fault '%s': expected a line count above 0", spec);
+    *dst = n;
+    return SF_OK;
+}
+
+/* ---- the face for sim_netcli ---- */
+
+static void
+destroy(void *sim)
+{
+    struct octo_sim *o = sim;
+    if (!o)
+        return;
+    if (o->tick)
+        loop_timer_cancel(o->l, o->tick);
+    sim_http_free(o->http);
+    sim_netprinter_free(o->np);
+    free(o);
+}
+
+static void *
+create(struct loop *l, const struct sim_net_opts *opt, int index, struct sf_err *err)
+{
+    (void)index;
+    struct octo_sim *o = mem_calloc(1, sizeof(*o));
+    if (!o) {
+        sf_err_set(err, SF_ENOMEM, "out of memory");
+        return NULL;
+    }
+    o->l = l;
+    struct sim_netprinter_config nc;
+    sim_netprinter_config_init(&nc);
+    nc.speed = opt->speed;
+    nc.log_path = opt->log_path;
+    nc.uploads_dir = opt->uploads_dir;
+    struct sim_http_config hc = { 0 };
+    hc.port = opt->port;
+    hc.routes = routes;
+    hc.n_routes = sizeof(routes) / sizeof(routes[0]);
+    hc.ud = o;
+    hc.api_key = opt->api_key;
+    hc.auth_status = 403;
+    hc.auth_body = "{\"error\":\"You don't have the permission to access the requested "
+                   "resource. It is either read-protected or not readable by the server.\"}";
+    for (int i = 0; i < opt->n_faults; i++) {
+        int rc = octo_fault(o, opt->faults[i], err);
+        if (rc == SF_EUNSUPP)
+            rc = sim_http_fault_parse(&hc.faults, opt->faults[i], err);
+        if (rc == SF_EUNSUPP)
+            rc = faults_parse(&nc.faults, opt->faults[i], err);
+        if (rc < 0) {
+            destroy(o);
+            return NULL;
+        }
+    }
+    o->np = sim_netprinter_new(l, &nc, err);
+    if (!o->np) {
+        destroy(o);
+        return NULL;
+    }
+    hc.upload_dir = sim_netprinter_uploads(o->np);
+    o->http = sim_http_new(l, &hc, err);
+    if (!o->http) {
+        destroy(o);
+        return NULL;
+    }
+    snprintf(o->address, sizeof(o->address), "http://127.0.0.1:%d", sim_http_port(o->http));
+    o->tick = loop_timer_add(l, 10, on_tick, o);
+    return o;
+}
+
+static const char *
+address(void *sim)
+{
+    return ((struct octo_sim *)sim)->address;
+}
+
+static void
+stats(void *sim, char *out, size_t n)
+{
+    struct octo_sim *o = sim;
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    snprintf(out, n, "requests=%llu uploads=%llu jobs=%llu state=%s lines=%llu/%llu",
+             (unsigned long long)sim_http_served(o->http), (unsigned long long)o->uploads,
+             (unsigned long long)o->jobs, sim_np_state_name(st.state),
+             (unsigned long long)st.lines_done, (unsigned long long)st.lines_total);
+}
+
+int
+sim_octoprint_main(int argc, char **argv)
+{
+    struct sim_net_opts o;
+    int rc =
+        sim_net_parse(argc, argv, &o, "octoprint faults: error-at=LINES cancel-at=LINES busy=1\n");
+    if (rc >= 0)
+        return rc;
+    static const struct sim_net_face face = {
+        .create = create, .address = address, .stats = stats, .destroy = destroy
+    };
+    return sim_net_serve(&o, &face);
+}
