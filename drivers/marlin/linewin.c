@@ -15,6 +15,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../../src/base/eparser.h"
 #include "../../src/base/gcode.h"
 #include "../../src/base/mem.h"
 
@@ -302,51 +303,31 @@ linewin_rewind(struct linewin *w, long k)
 
 /* ---- Marlin's emergency parser ------------------------------------------ */
 
-/* Its states (e_parser.h), folded: ACT is any of M108/M112/M410 reached. */
-enum ep_state { EP_RESET, EP_N, EP_M, EP_M1, EP_M10, EP_M11, EP_M4, EP_M41, EP_ACT, EP_IGNORE };
-
 static bool
 ep_eol(unsigned char c)
 {
     return c == '\n' || c == '\r';
 }
 
-/* One byte; *fired when it ends a line that acts. */
-static enum ep_state
-ep_step(enum ep_state s, unsigned char c, bool *fired)
+/* One byte; *fired when it ends a line that acts.  The states are
+   eparser.h's; a line end after ACT acts, and either final state starts
+   the next line over. */
+static enum eparser_state
+ep_step(enum eparser_state s, unsigned char c, bool *fired)
 {
-    switch (s) {
-    case EP_RESET:
-        return c == ' ' || ep_eol(c) ? EP_RESET : c == 'N' ? EP_N : c == 'M' ? EP_M : EP_IGNORE;
-    case EP_N:
-        return (c >= '0' && c <= '9') || c == '-' || c == ' ' ? EP_N : c == 'M' ? EP_M : EP_IGNORE;
-    case EP_M:
-        return c == ' ' ? EP_M : c == '1' ? EP_M1 : c == '4' ? EP_M4 : EP_IGNORE;
-    case EP_M1:
-        return c == '0' ? EP_M10 : c == '1' ? EP_M11 : EP_IGNORE;
-    case EP_M10:
-        return c == '8' ? EP_ACT : EP_IGNORE;
-    case EP_M11:
-        return c == '2' ? EP_ACT : EP_IGNORE;
-    case EP_M4:
-        return c == '1' ? EP_M41 : EP_IGNORE;
-    case EP_M41:
-        return c == '0' ? EP_ACT : EP_IGNORE;
-    case EP_ACT:
-        if (!ep_eol(c))
-            return EP_ACT;
+    if (s != EPARSER_ACT && s != EPARSER_IGNORE)
+        return eparser_step(s, c);
+    if (!ep_eol(c))
+        return s;
+    if (s == EPARSER_ACT)
         *fired = true;
-        return EP_RESET;
-    case EP_IGNORE:
-        return ep_eol(c) ? EP_RESET : EP_IGNORE;
-    }
-    return EP_IGNORE;
+    return EPARSER_RESET;
 }
 
 /* Run bytes from state s; true if a line among them acts.  Ends early once
    the rest of a line is ignored and no line end follows. */
 static bool
-ep_run(enum ep_state s, const unsigned char *b, size_t len)
+ep_run(enum eparser_state s, const unsigned char *b, size_t len)
 {
     bool fired = false;
     size_t last_eol = 0; /* one past the last line end */
@@ -354,11 +335,11 @@ ep_run(enum ep_state s, const unsigned char *b, size_t len)
         if (ep_eol(b[i - 1]))
             last_eol = i;
     for (size_t i = 0; i < len && !fired; i++) {
-        if (s == EP_IGNORE && i >= last_eol)
+        if (s == EPARSER_IGNORE && i >= last_eol)
             return false;
         s = ep_step(s, b[i], &fired);
     }
-    return fired || s == EP_ACT; /* a line still open that acts when it ends */
+    return fired || s == EPARSER_ACT; /* a line still open that acts when it ends */
 }
 
 /* True when line acts as written (it is M108, M112 or M410). */
@@ -370,7 +351,7 @@ ep_acts(const char *line, size_t len)
         return false;
     memcpy(b, line, len);
     b[len] = '\n';
-    return ep_run(EP_RESET, b, len + 1);
+    return ep_run(EPARSER_RESET, b, len + 1);
 }
 
 bool
@@ -387,7 +368,7 @@ linewin_ep_hazard(const char *line, size_t len)
     /* Each byte replaced by each other value: the prefix's state, the new
        byte, then the rest as written.  A line that came in ignored (the one
        before it lost its newline) is ignored whatever its bytes. */
-    enum ep_state s = EP_RESET;
+    enum eparser_state s = EPARSER_RESET;
     bool fired = false;
     /* The parser tells apart only these bytes; X and Y stand for all others. */
     static const char tell[] = " NM0123456789-\n\rXY";
@@ -396,10 +377,10 @@ linewin_ep_hazard(const char *line, size_t len)
             unsigned char c = (unsigned char)*pc;
             if (c == b[i])
                 continue;
-            if (s == EP_IGNORE && !ep_eol(c))
+            if (s == EPARSER_IGNORE && !ep_eol(c))
                 continue; /* ignored before and after: only a new line end matters */
             bool f = false;
-            enum ep_state t = ep_step(s, c, &f);
+            enum eparser_state t = ep_step(s, c, &f);
             if (f || ep_run(t, b + i + 1, n - i - 1))
                 return true;
         }

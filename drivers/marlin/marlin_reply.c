@@ -107,6 +107,128 @@ copy_name(struct mreply *r, const char *s)
     r->name[n] = '\0';
 }
 
+/* An ok, damaged or not, with its N, P, B and temperatures. */
+static bool
+parse_ok(const char *p, struct mreply *r)
+{
+    /* "ok" with one byte damaged: "oR T:...", "\x18k T:...", "ok\xcdN12 ...". */
+    bool ok_like = strncmp(p, "ok", 2) == 0 && !isalnum((unsigned char)p[2]) && p[2] != ':';
+    bool ok_damaged = !ok_like && strlen(p) > 4 && p[2] == ' ' && (p[0] == 'o' || p[1] == 'k') &&
+                      (strncmp(p + 3, "T:", 2) == 0 || p[3] == 'N');
+    if (!ok_like && !ok_damaged)
+        return false;
+    r->kind = MR_OK;
+    r->garbled = ok_damaged || (p[2] != '\0' && p[2] != ' ');
+    const char *w;
+    long v;
+    if ((w = find_word(p, "N")) && get_word_long(w, 0, 2147483647L, &v)) {
+        r->has_n = true;
+        r->n = v;
+    }
+    if ((w = find_word(p, "P")) && get_word_long(w, 0, 4096, &v))
+        r->p = (int)v;
+    if ((w = find_word(p, "B")) && get_word_long(w, 0, 4096, &v))
+        r->b = (int)v;
+    parse_temps(p, r);
+    return true;
+}
+
+/* "Resend: N" or "rs N"; a number that fails its check leaves MR_OTHER. */
+static bool
+parse_resend(const char *p, struct mreply *r)
+{
+    if (strncmp(p, "Resend:", 7) != 0 && strncmp(p, "rs ", 3) != 0)
+        return false;
+    const char *q = p + (p[0] == 'R' ? 7 : 3);
+    while (*q == ' ' || *q == 'N')
+        q++;
+    long v;
+    if (get_long(q, 0, 2147483647L, &v)) {
+        r->kind = MR_RESEND;
+        r->resend = v;
+        while (*q >= '0' && *q <= '9')
+            q++;
+        r->tail = *q != '\0';
+    }
+    return true;
+}
+
+/* "Error:..." or "!!...": its class, and the Last Line it names. */
+static bool
+parse_error(const char *p, struct mreply *r)
+{
+    if (strncmp(p, "Error:", 6) != 0 && strncmp(p, "!!", 2) != 0)
+        return false;
+    r->kind = MR_ERROR;
+    const char *ll = strstr(p, "Last Line:");
+    long v;
+    if (ll && get_long(ll + 10, -1, 2147483647L, &v))
+        r->last_line = v;
+    if (strstr(p, "checksum") || strstr(p, "Checksum") || strstr(p, "Line Number") ||
+        strstr(p, "Last Line")) {
+        r->err = MR_ERR_LINE;
+        r->resend_follows =
+            strstr(p, "mismatch") || strstr(p, "not Last") || strstr(p, "No Checksum");
+    } else if (strstr(p, "halted") || strstr(p, "kill()") || strstr(p, "Thermal Runaway") ||
+               strstr(p, "MAXTEMP") || strstr(p, "MINTEMP") || strstr(p, "stopped") ||
+               strstr(p, "Heating failed") || strncmp(p, "!!", 2) == 0)
+        r->err = MR_ERR_FATAL;
+    else
+        r->err = MR_ERR_OTHER;
+    snprintf(r->name, sizeof(r->name), "%s", p + (p[0] == 'E' ? 6 : 2));
+    return true;
+}
+
+/* "// action:NAME": a host action. */
+static bool
+parse_action(const char *p, struct mreply *r)
+{
+    if (strncmp(p, "//", 2) != 0)
+        return false;
+    const char *q = p + 2;
+    while (*q == ' ')
+        q++;
+    if (strncmp(q, "action:", 7) == 0 && q[7]) {
+        r->kind = MR_ACTION;
+        copy_name(r, q + 7);
+    }
+    return true;
+}
+
+/* "Cap:NAME:0|1" from M115. */
+static bool
+parse_cap(const char *p, struct mreply *r)
+{
+    if (strncmp(p, "Cap:", 4) != 0)
+        return false;
+    const char *colon = strrchr(p + 4, ':');
+    if (colon && (colon[1] == '0' || colon[1] == '1') && colon[2] == '\0' &&
+        (size_t)(colon - (p + 4)) < sizeof(r->name)) {
+        r->kind = MR_CAP;
+        memcpy(r->name, p + 4, (size_t)(colon - (p + 4)));
+        r->name[colon - (p + 4)] = '\0';
+        r->cap_value = colon[1] - '0';
+    }
+    return true;
+}
+
+/* "FIRMWARE_NAME:..." from M115, up to its SOURCE_CODE_URL. */
+static bool
+parse_firmware(const char *p, struct mreply *r)
+{
+    if (strncmp(p, "FIRMWARE_NAME:", 14) != 0)
+        return false;
+    r->kind = MR_FIRMWARE;
+    const char *q = p + 14;
+    const char *end = strstr(q, " SOURCE_CODE_URL:");
+    size_t n = end ? (size_t)(end - q) : strlen(q);
+    if (n >= sizeof(r->name))
+        n = sizeof(r->name) - 1;
+    memcpy(r->name, q, n);
+    r->name[n] = '\0';
+    return true;
+}
+
 void
 mreply_parse(const char *line, size_t len, struct mreply *r)
 {
@@ -126,60 +248,8 @@ mreply_parse(const char *line, size_t len, struct mreply *r)
     while (*p == ' ')
         p++;
 
-    /* "ok" with one byte damaged: "oR T:...", "\x18k T:...", "ok\xcdN12 ...". */
-    bool ok_like = strncmp(p, "ok", 2) == 0 && !isalnum((unsigned char)p[2]) && p[2] != ':';
-    bool ok_damaged = !ok_like && strlen(p) > 4 && p[2] == ' ' && (p[0] == 'o' || p[1] == 'k') &&
-                      (strncmp(p + 3, "T:", 2) == 0 || p[3] == 'N');
-    if (ok_like || ok_damaged) {
-        r->kind = MR_OK;
-        r->garbled = ok_damaged || (p[2] != '\0' && p[2] != ' ');
-        const char *w;
-        long v;
-        if ((w = find_word(p, "N")) && get_word_long(w, 0, 2147483647L, &v)) {
-            r->has_n = true;
-            r->n = v;
-        }
-        if ((w = find_word(p, "P")) && get_word_long(w, 0, 4096, &v))
-            r->p = (int)v;
-        if ((w = find_word(p, "B")) && get_word_long(w, 0, 4096, &v))
-            r->b = (int)v;
-        parse_temps(p, r);
+    if (parse_ok(p, r) || parse_resend(p, r) || parse_error(p, r))
         return;
-    }
-    if (strncmp(p, "Resend:", 7) == 0 || strncmp(p, "rs ", 3) == 0) {
-        const char *q = p + (p[0] == 'R' ? 7 : 3);
-        while (*q == ' ' || *q == 'N')
-            q++;
-        long v;
-        if (get_long(q, 0, 2147483647L, &v)) {
-            r->kind = MR_RESEND;
-            r->resend = v;
-            while (*q >= '0' && *q <= '9')
-                q++;
-            r->tail = *q != '\0';
-        }
-        return;
-    }
-    if (strncmp(p, "Error:", 6) == 0 || strncmp(p, "!!", 2) == 0) {
-        r->kind = MR_ERROR;
-        const char *ll = strstr(p, "Last Line:");
-        long v;
-        if (ll && get_long(ll + 10, -1, 2147483647L, &v))
-            r->last_line = v;
-        if (strstr(p, "checksum") || strstr(p, "Checksum") || strstr(p, "Line Number") ||
-            strstr(p, "Last Line")) {
-            r->err = MR_ERR_LINE;
-            r->resend_follows =
-                strstr(p, "mismatch") || strstr(p, "not Last") || strstr(p, "No Checksum");
-        } else if (strstr(p, "halted") || strstr(p, "kill()") || strstr(p, "Thermal Runaway") ||
-                   strstr(p, "MAXTEMP") || strstr(p, "MINTEMP") || strstr(p, "stopped") ||
-                   strstr(p, "Heating failed") || strncmp(p, "!!", 2) == 0)
-            r->err = MR_ERR_FATAL;
-        else
-            r->err = MR_ERR_OTHER;
-        snprintf(r->name, sizeof(r->name), "%s", p + (p[0] == 'E' ? 6 : 2));
-        return;
-    }
     if (strncmp(p, "echo:busy:", 10) == 0 || strncmp(p, "busy:", 5) == 0) {
         r->kind = MR_BUSY;
         return;
@@ -197,38 +267,8 @@ mreply_parse(const char *line, size_t len, struct mreply *r)
         r->kind = MR_START;
         return;
     }
-    if (strncmp(p, "//", 2) == 0) {
-        const char *q = p + 2;
-        while (*q == ' ')
-            q++;
-        if (strncmp(q, "action:", 7) == 0 && q[7]) {
-            r->kind = MR_ACTION;
-            copy_name(r, q + 7);
-        }
+    if (parse_action(p, r) || parse_cap(p, r) || parse_firmware(p, r))
         return;
-    }
-    if (strncmp(p, "Cap:", 4) == 0) {
-        const char *colon = strrchr(p + 4, ':');
-        if (colon && (colon[1] == '0' || colon[1] == '1') && colon[2] == '\0' &&
-            (size_t)(colon - (p + 4)) < sizeof(r->name)) {
-            r->kind = MR_CAP;
-            memcpy(r->name, p + 4, (size_t)(colon - (p + 4)));
-            r->name[colon - (p + 4)] = '\0';
-            r->cap_value = colon[1] - '0';
-        }
-        return;
-    }
-    if (strncmp(p, "FIRMWARE_NAME:", 14) == 0) {
-        r->kind = MR_FIRMWARE;
-        const char *q = p + 14;
-        const char *end = strstr(q, " SOURCE_CODE_URL:");
-        size_t n = end ? (size_t)(end - q) : strlen(q);
-        if (n >= sizeof(r->name))
-            n = sizeof(r->name) - 1;
-        memcpy(r->name, q, n);
-        r->name[n] = '\0';
-        return;
-    }
     if (strncmp(p, "T:", 2) == 0) {
         parse_temps(p, r);
         if (r->has_temps)

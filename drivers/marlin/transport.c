@@ -477,6 +477,20 @@ adopt_fd(struct transport *t, const char *num, struct sf_err *err)
     return SF_OK;
 }
 
+/* Close the port or fd (out of the loop already) and free t. */
+static void
+close_free(struct transport *t)
+{
+    if (t->port) {
+        sp_close(t->port);
+        sp_free_port(t->port);
+    } else if (t->fd >= 0) {
+        close(t->fd);
+    }
+    buf_release(&t->out);
+    free(t);
+}
+
 struct transport *
 transport_open(struct loop *l, const char *spec, int baud, transport_data_fn on_data,
                transport_close_fn on_close, void *ud, struct sf_err *err)
@@ -526,14 +540,7 @@ transport_open(struct loop *l, const char *spec, int baud, transport_data_fn on_
         goto fail;
     return t;
 fail:
-    if (t->port) {
-        sp_close(t->port);
-        sp_free_port(t->port);
-    } else if (t->fd >= 0) {
-        close(t->fd);
-    }
-    buf_release(&t->out);
-    free(t);
+    close_free(t);
     return NULL;
 }
 
@@ -572,14 +579,7 @@ transport_free(struct transport *t)
     cancel_lookup(t);
     if (!t->closed && t->fd >= 0)
         loop_del_fd(t->loop, t->fd);
-    if (t->port) {
-        sp_close(t->port);
-        sp_free_port(t->port);
-    } else if (t->fd >= 0) {
-        close(t->fd);
-    }
-    buf_release(&t->out);
-    free(t);
+    close_free(t);
 }
 
 void
