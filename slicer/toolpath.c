@@ -26,10 +26,6 @@
 #include "clip_shim.h"
 #include "toolpath_int.h"
 
-/* The loops' grown outlines reach this much further when the gaps are cut
-   out of the region: 1 um, more than the offsets' rounding. */
-#define GAP_SAFETY_MM 0.001
-
 const char *
 tp_role_name(enum tp_role r)
 {
@@ -217,6 +213,102 @@ fail:
     return rc;
 }
 
+/* Support paths of layer k (sup: its regions), printed before the part
+   they hold: the body's outline and lines (90 % dense on the bed layer,
+   as PrusaSlicer prints it), the interface's dense lines. */
+static int
+support_paths(uint32_t k, const struct slice_profile *p, double ssp,
+              const struct support_layer *sup, struct paths *t, struct layer_paths *out)
+{
+    double sw = p->solid_width_mm;
+    int rc = SF_OK;
+    if (sup && sup->body.n) {
+        TP_TRY(clip_offset(&sup->body, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
+        TP_TRY(tp_add(out, &t[T_TMP], ROLE_SUPPORT, true, sw));
+        paths_reset(&t[T_LINES]);
+        /* the bed layer holds the columns down: 90 % dense, as PrusaSlicer prints it */
+        double bsp = k == 0 ? ssp / 0.9 : p->support_spacing_mm;
+        TP_TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, bsp, 0, 0, &t[T_LINES]));
+        TP_TRY(tp_link(&t[T_LINES], &t[T_TMP], 1.5 * bsp, sw / 2));
+        TP_TRY(tp_add(out, &t[T_LINES], ROLE_SUPPORT, false, sw));
+    }
+    if (sup && sup->iface.n) {
+        paths_reset(&t[T_LINES]);
+        TP_TRY(clip_offset(&sup->iface, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
+        TP_TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, ssp, 0, 0, &t[T_LINES]));
+        TP_TRY(tp_link(&t[T_LINES], &t[T_TMP], 2 * ssp, sw / 2));
+        TP_TRY(tp_add(out, &t[T_LINES], ROLE_INTERFACE, false, sw));
+    }
+out:
+    return rc;
+}
+
+/* Solid and top solid lines over t[T_SOLID] and t[T_TOP], zig-zag linked,
+   at angle ang. */
+static int
+solid_paths(const struct slice_profile *p, double ssp, double ang, const double org[2],
+            struct paths *t, struct layer_paths *out)
+{
+    double sw = p->solid_width_mm;
+    int rc;
+    paths_reset(&t[T_LINES]);
+    TP_TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, org[0], org[1], &t[T_LINES]));
+    TP_TRY(tp_link(&t[T_LINES], &t[T_SOLID], 2 * ssp, sw / 2));
+    TP_TRY(tp_add(out, &t[T_LINES], ROLE_SOLID, false, sw));
+    paths_reset(&t[T_LINES]);
+    TP_TRY(tp_fill_lines(&t[T_TOP], ang, ssp, org[0], org[1], &t[T_LINES]));
+    TP_TRY(tp_link(&t[T_LINES], &t[T_TOP], 2 * ssp, sw / 2));
+    TP_TRY(tp_add(out, &t[T_LINES], ROLE_TOP, false, sw));
+out:
+    return rc;
+}
+
+/* Sparse infill over t[T_SPARSE]: grid or rectilinear lines, joined and
+   anchored along the boundary (tp_anchor). */
+static int
+sparse_paths(const struct slice_profile *p, double sp, double ang, const double org[2],
+             struct paths *t, struct layer_paths *out)
+{
+    double w = p->width_mm;
+    int rc = SF_OK;
+    if (p->infill_density > 0 && t[T_SPARSE].n) {
+        /* the lines' ends and anchors run half a line inside the sparse
+           area grown infill_overlap into the loops, as PrusaSlicer fills
+           its infill areas (fill_surface_by_multilines: the area shrunk by
+           half a spacing) */
+        TP_TRY(clip_offset(&t[T_SPARSE], p->infill_overlap * sp - sp / 2, CLIP_JOIN_MITER,
+                           &t[T_KEEP]));
+        paths_reset(&t[T_LINES]);
+        if (strcmp(p->infill_pattern, "grid") == 0) {
+            double gsp = 2 * sp / p->infill_density;
+            TP_TRY(tp_fill_lines(&t[T_KEEP], 45, gsp, org[0], org[1], &t[T_LINES]));
+            TP_TRY(tp_fill_lines(&t[T_KEEP], 135, gsp, org[0], org[1], &t[T_LINES]));
+        } else {
+            TP_TRY(tp_fill_lines(&t[T_KEEP], ang, sp / p->infill_density, org[0], org[1],
+                                 &t[T_LINES]));
+        }
+        TP_TRY(tp_anchor(&t[T_LINES], &t[T_KEEP], p->infill_anchor_mm, p->infill_anchor_max_mm,
+                         sp / 2));
+        TP_TRY(tp_add(out, &t[T_LINES], ROLE_INFILL, false, w));
+    }
+out:
+    return rc;
+}
+
+void
+tp_scratch_init(struct paths *t)
+{
+    for (int i = 0; i < T_N; i++)
+        paths_init(&t[i]);
+}
+
+void
+tp_scratch_release(struct paths *t)
+{
+    for (int i = 0; i < T_N; i++)
+        paths_release(&t[i]);
+}
+
 int
 toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
                const struct support_layer *sup, struct layer_paths *out)
@@ -228,187 +320,24 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
        PrusaSlicer's (Fill::_infill_direction), so both line up on a part */
     const double org[2] = { s->cx_mm, s->cy_mm };
     struct paths t[T_N];
-    for (int i = 0; i < T_N; i++)
-        paths_init(&t[i]);
-    int rc = SF_OK;
-#define TRY(x)                                                                                     \
-    do {                                                                                           \
-        if ((rc = (x)) < 0)                                                                        \
-            goto out;                                                                              \
-    } while (0)
-
-    /* support first: it is printed before the part it holds */
-    if (sup && sup->body.n) {
-        TRY(clip_offset(&sup->body, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
-        TRY(tp_add(out, &t[T_TMP], ROLE_SUPPORT, true, sw));
-        paths_reset(&t[T_LINES]);
-        /* the bed layer holds the columns down: 90 % dense, as PrusaSlicer prints it */
-        double bsp = k == 0 ? ssp / 0.9 : p->support_spacing_mm;
-        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, bsp, 0, 0, &t[T_LINES]));
-        TRY(tp_link(&t[T_LINES], &t[T_TMP], 1.5 * bsp, sw / 2));
-        TRY(tp_add(out, &t[T_LINES], ROLE_SUPPORT, false, sw));
-    }
-    if (sup && sup->iface.n) {
-        paths_reset(&t[T_LINES]);
-        TRY(clip_offset(&sup->iface, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
-        TRY(tp_fill_lines(&t[T_TMP], k % 2 ? 90 : 0, ssp, 0, 0, &t[T_LINES]));
-        TRY(tp_link(&t[T_LINES], &t[T_TMP], 2 * ssp, sw / 2));
-        TRY(tp_add(out, &t[T_LINES], ROLE_INTERFACE, false, sw));
-    }
-
-    /*
-     * Perimeters, inner loops first, external last.  Loop i's centre line
-     * is opened by half a spacing (shrunk by that much more, grown back),
-     * so a loop never wraps a sliver it cannot fill (it would lay two lines
-     * where one fits), as PrusaSlicer's classic generator does.  What the
-     * loops leave between them, the part's edge and the infill goes to
-     * gap fill: S is the area inside loop i - 1 (the region for i = 0),
-     * and the gap is the part of it loop i does not reach.
-     */
-    struct paths *loops = p->perimeters ? mem_calloc((size_t)p->perimeters, sizeof(*loops)) : NULL;
-    if (p->perimeters && !loops)
-        TRY(SF_ENOMEM);
-    paths_reset(&t[T_GAP]);
-    for (int i = 0; i < p->perimeters && rc == SF_OK; i++) {
-        double d = w / 2 + i * sp;
-        const struct paths *prev = i ? &t[T_S] : &L->region;
-        paths_init(&loops[i]);
-        /* the innermost loop's shrink is the inner area toolpath_areas made */
-        if (i + 1 == p->perimeters) {
-            paths_reset(&t[T_TMP]);
-            if (!paths_append(&t[T_TMP], &L->inner)) {
-                rc = SF_ENOMEM;
-                break;
-            }
-        } else if ((rc = clip_offset(&L->region, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0) {
-            break;
-        }
-        if ((rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
-            break;
-        if (p->gap_fill) {
-            /* 1 um more: where the loop follows the edge, the offsets'
-               rounding leaves no hairline for the difference to trace
-               (PrusaSlicer's safety offset, for the same reason) */
-            if ((rc = clip_offset(&loops[i], (i ? sp / 2 : w / 2) + GAP_SAFETY_MM, CLIP_JOIN_MITER,
-                                  &t[T_LINES])) < 0 ||
-                (rc = clip_bool(CLIP_DIFFERENCE, prev, &t[T_LINES], CLIP_NONZERO, &t[T_KEEP])) < 0)
-                break;
-            if (!paths_append(&t[T_GAP], &t[T_KEEP]))
-                rc = SF_ENOMEM;
-        }
-        paths_move(&t[T_S], &t[T_TMP]);
-    }
-    for (int i = p->perimeters - 1; i >= 0; i--) {
-        if (rc == SF_OK)
-            rc = tp_add(out, &loops[i], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w);
-        paths_release(&loops[i]);
-    }
-    free(loops);
-    if (rc < 0)
-        goto out;
-    if (t[T_GAP].n) {
-        /* drop slivers under a quarter spacing wide (where the loops' bands
-           meet at corners), then fill; pieces too small to fill go
-           first (opening only shrinks them) */
-        paths_reset(&t[T_TMP]);
-        TRY(tp_pieces_by_area(&t[T_GAP], GAP_MIN_AREA * p->nozzle_mm * p->nozzle_mm, 0, true,
-                              &t[T_TMP]));
-        paths_move(&t[T_GAP], &t[T_TMP]);
-        TRY(clip_offset(&t[T_GAP], -sp / 8, CLIP_JOIN_MITER, &t[T_TMP]));
-        TRY(clip_offset(&t[T_TMP], sp / 8, CLIP_JOIN_MITER, &t[T_GAP]));
-        TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, sp, 0, 0, out, &t[T_TMP], &t[T_S],
-                        &t[T_LINES]));
-    }
+    tp_scratch_init(t);
+    int rc;
+    TP_TRY(support_paths(k, p, ssp, sup, t, out));
+    TP_TRY(tp_perimeters(L, p, sp, t, out));
+    TP_TRY(tp_gap_fill_loops(h, p, sp, t, out));
     if (!L->inner.n)
         goto out;
-    TRY(tp_regions_of(s, k, p, &t[T_SOLID], &t[T_TOP], &t[T_SPARSE]));
-    if (p->gap_fill) {
-        /* infill pieces under 3.5 spacings wide: zig-zag links would lay
-           more than their area there, so they are gap-filled instead */
-        paths_reset(&t[T_GAP]);
-        struct paths *sets[3] = { &t[T_SOLID], &t[T_TOP], &t[T_SPARSE] };
-        for (int i = 0; i < 3; i++)
-            TRY(tp_split_narrow(sets[i], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
-        if (t[T_GAP].n)
-            TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, p->infill_overlap * sp,
-                            p->min_bead * p->nozzle_mm, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
-    }
+    TP_TRY(tp_regions_of(s, k, p, &t[T_SOLID], &t[T_TOP], &t[T_SPARSE]));
+    if (p->gap_fill)
+        TP_TRY(tp_gap_fill_narrow(h, p, sp, ssp, t, out));
     double ang = k % 2 ? 135 : 45;
-    if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0) {
-        /* solid over air is a bridge; slivers narrower than the nozzle are not */
-        double nz = p->nozzle_mm;
-        TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &s->l[k - 1].region, CLIP_NONZERO, &t[T_TMP]));
-        TRY(clip_offset(&t[T_TMP], -nz / 2, CLIP_JOIN_MITER, &t[T_KEEP]));
-        TRY(clip_offset(&t[T_KEEP], nz / 2, CLIP_JOIN_MITER, &t[T_TMP]));
-        if (t[T_TMP].n) {
-            TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_SOLID], CLIP_NONZERO, &t[T_KEEP]));
-            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
-            paths_move(&t[T_SOLID], &t[T_TMP]);
-            TRY(tp_bridges(&t[T_KEEP], &s->l[k - 1].region, nz, org, out, &t[T_TMP], &t[T_LINES],
-                           &t[T_S]));
-        }
-    }
-    if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0 && p->infill_density > 0 &&
-        p->infill_density < 1) { /* 100 % "sparse" is solid: nothing to bridge */
-        /* sparse in every layer a thick bridge's thread reaches down
-           into (a nozzle deep: PrusaSlicer's bridge_over_infill looks
-           down the bridge flow's height) */
-        long depth = (long)floor(p->nozzle_mm / h + 1e-6);
-        const struct paths *below = &t[T_BELOW];
-        paths_reset(&t[T_BELOW]);
-        for (long j = (long)k - 1; j >= 0 && j >= (long)k - (depth > 1 ? depth : 1); j--) {
-            const struct paths *sj = &s->l[j].sparse;
-            if (!s->l[j].has_regions) {
-                TRY(toolpath_regions(s, (uint32_t)j, p, &t[T_TMP], &t[T_KEEP], &t[T_LINES]));
-                sj = &t[T_LINES];
-            }
-            if (j == (long)k - 1) {
-                if (!paths_append(&t[T_BELOW], sj))
-                    TRY(SF_ENOMEM);
-            } else if (t[T_BELOW].n) {
-                TRY(clip_bool(CLIP_INTERSECTION, &t[T_BELOW], sj, CLIP_NONZERO, &t[T_TMP]));
-                paths_move(&t[T_BELOW], &t[T_TMP]);
-            }
-            if (!t[T_BELOW].n)
-                break;
-        }
-        if (below->n)
-            TRY(tp_internal_bridges(&t[T_SOLID], below, p->nozzle_mm, ang, org, out, &t[T_TMP],
-                                    &t[T_KEEP], &t[T_LINES]));
-    }
-    paths_reset(&t[T_LINES]);
-    TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, org[0], org[1], &t[T_LINES]));
-    TRY(tp_link(&t[T_LINES], &t[T_SOLID], 2 * ssp, sw / 2));
-    TRY(tp_add(out, &t[T_LINES], ROLE_SOLID, false, sw));
-    paths_reset(&t[T_LINES]);
-    TRY(tp_fill_lines(&t[T_TOP], ang, ssp, org[0], org[1], &t[T_LINES]));
-    TRY(tp_link(&t[T_LINES], &t[T_TOP], 2 * ssp, sw / 2));
-    TRY(tp_add(out, &t[T_LINES], ROLE_TOP, false, sw));
-    if (p->infill_density > 0 && t[T_SPARSE].n) {
-        /* the lines' ends and anchors run half a line inside the sparse
-           area grown infill_overlap into the loops, as PrusaSlicer fills
-           its infill areas (fill_surface_by_multilines: the area shrunk by
-           half a spacing) */
-        TRY(clip_offset(&t[T_SPARSE], p->infill_overlap * sp - sp / 2, CLIP_JOIN_MITER,
-                        &t[T_KEEP]));
-        paths_reset(&t[T_LINES]);
-        if (strcmp(p->infill_pattern, "grid") == 0) {
-            double gsp = 2 * sp / p->infill_density;
-            TRY(tp_fill_lines(&t[T_KEEP], 45, gsp, org[0], org[1], &t[T_LINES]));
-            TRY(tp_fill_lines(&t[T_KEEP], 135, gsp, org[0], org[1], &t[T_LINES]));
-        } else {
-            TRY(tp_fill_lines(&t[T_KEEP], ang, sp / p->infill_density, org[0], org[1],
-                              &t[T_LINES]));
-        }
-        TRY(tp_anchor(&t[T_LINES], &t[T_KEEP], p->infill_anchor_mm, p->infill_anchor_max_mm,
-                      sp / 2));
-        TRY(tp_add(out, &t[T_LINES], ROLE_INFILL, false, w));
-    }
-    TRY(tp_mark_overhangs(s, k, p, out, &t[T_TMP], &t[T_LINES]));
-    TRY(group_by_island(&L->region, out));
-#undef TRY
+    TP_TRY(tp_bridges_over_air(s, k, p, org, t, out));
+    TP_TRY(tp_bridges_over_sparse(s, k, p, ang, org, t, out));
+    TP_TRY(solid_paths(p, ssp, ang, org, t, out));
+    TP_TRY(sparse_paths(p, sp, ang, org, t, out));
+    TP_TRY(tp_mark_overhangs(s, k, p, out, &t[T_TMP], &t[T_LINES]));
+    TP_TRY(group_by_island(&L->region, out));
 out:
-    for (int i = 0; i < T_N; i++)
-        paths_release(&t[i]);
+    tp_scratch_release(t);
     return rc;
 }

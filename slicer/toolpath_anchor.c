@@ -90,127 +90,189 @@ struct end_use {
     uint8_t consumed; /* joined or anchored (PrusaSlicer's "consumed") */
 };
 
-int
-tp_anchor(struct paths *lines, const struct paths *region, double len_mm, double max_mm,
-          double half_w_mm)
+/* The working state of tp_anchor.  Arrays of 2 n are indexed by a line
+   end's place among the sorted ends (bp), except slot. */
+struct anchor {
+    const struct paths *lines, *region;
+    uint32_t n; /* lines */
+    struct paths_index ix;
+    double *cum;       /* per boundary point: arc length from its path's first point, mm */
+    uint32_t *path_of; /* per boundary point: its path */
+    struct bpos *bp;   /* the line ends found on the boundary, sorted */
+    size_t nb;         /* how many */
+    int32_t *slot;     /* (line, end) -> index in bp or -1 */
+    uint32_t *nx, *pv; /* the next and previous end along the same path */
+    double *gap;       /* forward to nx, mm */
+    double *free_fw;   /* boundary not yet taken forward from each end, mm */
+    double *free_bk;   /* and back */
+    struct end_use *use;
+    struct arc *arcs; /* between neighbouring ends */
+    size_t n_arcs;
+    uint32_t *uf;  /* per line: union-find of the lines joined */
+    uint8_t *done; /* per line: in a chain already */
+};
+
+static void
+anchor_release(struct anchor *a)
+{
+    paths_index_release(&a->ix);
+    free(a->cum);
+    free(a->path_of);
+    free(a->bp);
+    free(a->slot);
+    free(a->nx);
+    free(a->pv);
+    free(a->gap);
+    free(a->free_fw);
+    free(a->free_bk);
+    free(a->use);
+    free(a->arcs);
+    free(a->uf);
+    free(a->done);
+}
+
+/* Allocate a's arrays (a zeroed first) and the arc lengths along the
+   boundary.  SF_ENOMEM (a is released by anchor_release either way). */
+static int
+anchor_init(struct anchor *a, const struct paths *lines, const struct paths *region)
 {
     uint32_t n = lines->n;
-    if (!n || !region->n || (len_mm <= 0 && max_mm <= 0))
-        return SF_OK;
-    struct paths_index ix = { 0 };
-    struct paths out, stub;
-    paths_init(&out);
-    paths_init(&stub);
+    memset(a, 0, sizeof(*a));
+    a->lines = lines;
+    a->region = region;
+    a->n = n;
     size_t np = region->start[region->n];
-    double *cum = mem_array(np + 1, sizeof(*cum));
-    uint32_t *path_of = mem_array(np + 1, sizeof(*path_of));
-    struct bpos *bp = mem_array(2 * (size_t)n, sizeof(*bp));
-    int32_t *slot = mem_array(2 * (size_t)n, sizeof(*slot)); /* (line, end) -> index in bp or -1 */
-    uint32_t *nx = mem_array(2 * (size_t)n, sizeof(*nx)),
-             *pv = mem_array(2 * (size_t)n, sizeof(*pv));
-    double *gap = mem_array(2 * (size_t)n, sizeof(*gap)); /* forward to nx, mm */
-    /* boundary not yet taken forward and back from each end, mm */
-    double *free_fw = mem_array(2 * (size_t)n, sizeof(*free_fw));
-    double *free_bk = mem_array(2 * (size_t)n, sizeof(*free_bk));
-    struct end_use *use = mem_calloc(2 * (size_t)n, sizeof(*use));
-    struct arc *arcs = mem_array(2 * (size_t)n, sizeof(*arcs));
-    uint32_t *uf = mem_array(n, sizeof(*uf));
-    uint8_t *done = mem_calloc(n, 1);
-    int rc = cum && path_of && bp && slot && nx && pv && gap && free_fw && free_bk && use && arcs &&
-                     uf && done && paths_index_init(&ix, region)
-                 ? SF_OK
-                 : SF_ENOMEM;
-    if (rc < 0)
-        goto out;
+    a->cum = mem_array(np + 1, sizeof(*a->cum));
+    a->path_of = mem_array(np + 1, sizeof(*a->path_of));
+    a->bp = mem_array(2 * (size_t)n, sizeof(*a->bp));
+    a->slot = mem_array(2 * (size_t)n, sizeof(*a->slot));
+    a->nx = mem_array(2 * (size_t)n, sizeof(*a->nx));
+    a->pv = mem_array(2 * (size_t)n, sizeof(*a->pv));
+    a->gap = mem_array(2 * (size_t)n, sizeof(*a->gap));
+    a->free_fw = mem_array(2 * (size_t)n, sizeof(*a->free_fw));
+    a->free_bk = mem_array(2 * (size_t)n, sizeof(*a->free_bk));
+    a->use = mem_calloc(2 * (size_t)n, sizeof(*a->use));
+    a->arcs = mem_array(2 * (size_t)n, sizeof(*a->arcs));
+    a->uf = mem_array(n, sizeof(*a->uf));
+    a->done = mem_calloc(n, 1);
+    if (!(a->cum && a->path_of && a->bp && a->slot && a->nx && a->pv && a->gap && a->free_fw &&
+          a->free_bk && a->use && a->arcs && a->uf && a->done && paths_index_init(&a->ix, region)))
+        return SF_ENOMEM;
     for (uint32_t k = 0; k < region->n; k++) {
         double c = 0;
         for (uint32_t i = region->start[k]; i < region->start[k + 1]; i++) {
-            cum[i] = c;
-            path_of[i] = k;
+            a->cum[i] = c;
+            a->path_of[i] = k;
             uint32_t j = i + 1 < region->start[k + 1] ? i + 1 : region->start[k];
             c += dist_mm(region->pts[i], region->pts[j]);
         }
     }
-    /* locate every line end on its boundary edge */
+    return SF_OK;
+}
+
+/* Locate every line end on its boundary edge (within 2 units: Clipper
+   rounds intersections to the unit) into a->bp, sorted along each path. */
+static void
+locate_ends(struct anchor *a)
+{
+    const struct paths *lines = a->lines, *region = a->region;
+    const struct paths_index *ix = &a->ix;
     size_t nb = 0;
-    for (uint32_t l = 0; l < n; l++) {
-        uf[l] = l;
+    for (uint32_t l = 0; l < a->n; l++) {
+        a->uf[l] = l;
         for (uint32_t e = 0; e < 2; e++) {
-            slot[2 * l + e] = -1;
+            a->slot[2 * l + e] = -1;
             struct ipt q = lines->pts[e ? lines->start[l + 1] - 1 : lines->start[l]];
-            uint32_t band = band_of_index(&ix, q.y);
+            uint32_t band = band_of_index(ix, q.y);
             double best = 4.0; /* units^2: Clipper rounds intersections to the unit */
             uint32_t ba = 0, bb = 0;
             bool found = false;
-            for (uint32_t i = ix.first[band]; i < ix.first[band + 1]; i++) {
-                struct ipt a = ix.pts[ix.edges[i][0]], b = ix.pts[ix.edges[i][1]];
-                double dx = (double)(b.x - a.x), dy = (double)(b.y - a.y);
-                double px = (double)(q.x - a.x), py = (double)(q.y - a.y);
+            for (uint32_t i = ix->first[band]; i < ix->first[band + 1]; i++) {
+                struct ipt pa = ix->pts[ix->edges[i][0]], pb = ix->pts[ix->edges[i][1]];
+                double dx = (double)(pb.x - pa.x), dy = (double)(pb.y - pa.y);
+                double px = (double)(q.x - pa.x), py = (double)(q.y - pa.y);
                 double l2 = dx * dx + dy * dy, t = l2 > 0 ? (px * dx + py * dy) / l2 : 0;
                 t = t < 0 ? 0 : t > 1 ? 1 : t;
                 double ex = px - t * dx, ey = py - t * dy, d = ex * ex + ey * ey;
                 if (d <= best) {
                     best = d;
-                    ba = ix.edges[i][0];
-                    bb = ix.edges[i][1];
+                    ba = ix->edges[i][0];
+                    bb = ix->edges[i][1];
                     found = true;
                 }
             }
             if (!found)
                 continue;
-            struct bpos *p = &bp[nb];
+            struct bpos *p = &a->bp[nb];
             p->line = l;
             p->end = e;
-            p->path = path_of[ba];
+            p->path = a->path_of[ba];
             p->a = ba;
             p->b = bb;
-            p->s = cum[ba] + dist_mm(region->pts[ba], q);
+            p->s = a->cum[ba] + dist_mm(region->pts[ba], q);
             nb++;
         }
     }
-    qsort(bp, nb, sizeof(*bp), cmp_bpos);
-    /* neighbours along each boundary path and the arcs between them */
-    size_t n_arcs = 0;
+    qsort(a->bp, nb, sizeof(*a->bp), cmp_bpos);
+    a->nb = nb;
+}
+
+/* Neighbours along each boundary path, the arcs between them (sorted,
+   shortest first) and the boundary free on either side of each end. */
+static void
+find_arcs(struct anchor *a)
+{
+    const struct paths *region = a->region;
+    const struct bpos *bp = a->bp;
+    size_t nb = a->nb, n_arcs = 0;
     for (size_t g0 = 0, g1; g0 < nb; g0 = g1) {
         uint32_t k = bp[g0].path;
         for (g1 = g0 + 1; g1 < nb && bp[g1].path == k;)
             g1++;
         uint32_t last = region->start[k + 1] - 1;
-        double per = cum[last] + dist_mm(region->pts[last], region->pts[region->start[k]]);
+        double per = a->cum[last] + dist_mm(region->pts[last], region->pts[region->start[k]]);
         for (size_t i = g0; i < g1; i++) {
-            nx[i] = (uint32_t)(i + 1 < g1 ? i + 1 : g0);
-            pv[i] = (uint32_t)(i > g0 ? i - 1 : g1 - 1);
-            gap[i] = nx[i] == i ? per : bp[nx[i]].s - bp[i].s;
-            if (gap[i] < 0)
-                gap[i] += per;
-            if (nx[i] != i)
-                arcs[n_arcs++] = (struct arc){ (uint32_t)i, gap[i] };
+            a->nx[i] = (uint32_t)(i + 1 < g1 ? i + 1 : g0);
+            a->pv[i] = (uint32_t)(i > g0 ? i - 1 : g1 - 1);
+            a->gap[i] = a->nx[i] == i ? per : bp[a->nx[i]].s - bp[i].s;
+            if (a->gap[i] < 0)
+                a->gap[i] += per;
+            if (a->nx[i] != i)
+                a->arcs[n_arcs++] = (struct arc){ (uint32_t)i, a->gap[i] };
         }
         for (size_t i = g0; i < g1; i++) {
-            free_fw[i] = gap[i];
-            free_bk[i] = gap[pv[i]];
+            a->free_fw[i] = a->gap[i];
+            a->free_bk[i] = a->gap[a->pv[i]];
         }
     }
     for (size_t i = 0; i < nb; i++) {
-        use[i].to = -1;
-        slot[2 * bp[i].line + bp[i].end] = (int32_t)i;
+        a->use[i].to = -1;
+        a->slot[2 * bp[i].line + bp[i].end] = (int32_t)i;
     }
-    /* PrusaSlicer's connect_infill: the shortest arcs first, each joining
-       two lines not yet joined (no loops) along the whole arc when it is
-       shorter than max_mm; a longer one gives both ends a stub instead */
-    qsort(arcs, n_arcs, sizeof(*arcs), cmp_arc);
-    for (size_t a = 0; a < n_arcs; a++) {
-        uint32_t i = arcs[a].i, j = nx[i];
+    qsort(a->arcs, n_arcs, sizeof(*a->arcs), cmp_arc);
+    a->n_arcs = n_arcs;
+}
+
+/* PrusaSlicer's connect_infill: the shortest arcs first, each joining
+   two lines not yet joined (no loops) along the whole arc when it is
+   shorter than max_mm; a longer one gives both ends a stub instead. */
+static void
+join_arcs(struct anchor *a, double len_mm, double max_mm, double half_w_mm)
+{
+    double *free_fw = a->free_fw, *free_bk = a->free_bk, *gap = a->gap;
+    struct end_use *use = a->use;
+    for (size_t k = 0; k < a->n_arcs; k++) {
+        uint32_t i = a->arcs[k].i, j = a->nx[i];
         if (use[i].consumed || use[j].consumed)
             continue;
-        uint32_t li = uf_find(uf, bp[i].line), lj = uf_find(uf, bp[j].line);
+        uint32_t li = uf_find(a->uf, a->bp[i].line), lj = uf_find(a->uf, a->bp[j].line);
         if (li == lj)
             continue;
-        if (arcs[a].len_mm < max_mm) {
-            use[i] = (struct end_use){ (int32_t)j, arcs[a].len_mm, 0, 1 };
-            use[j] = (struct end_use){ (int32_t)i, arcs[a].len_mm, 1, 1 };
+        if (a->arcs[k].len_mm < max_mm) {
+            use[i] = (struct end_use){ (int32_t)j, a->arcs[k].len_mm, 0, 1 };
+            use[j] = (struct end_use){ (int32_t)i, a->arcs[k].len_mm, 1, 1 };
             free_fw[i] = free_bk[j] = 0;
-            uf[lj] = li;
+            a->uf[lj] = li;
             continue;
         }
         /* stubs toward each other, each stopping half a line short of the other's */
@@ -221,17 +283,23 @@ tp_anchor(struct paths *lines, const struct paths *region, double len_mm, double
         use[j] = (struct end_use){ -1, t, 1, 1 };
         free_fw[i] = fmin(free_fw[i], gap[i] - t);
     }
-    /* the ends left: a stub toward the side with more boundary free, in
-       line order (PrusaSlicer's order) */
-    for (uint32_t k = 0; k < 2 * n && len_mm > 0; k++) {
-        int32_t i = slot[k];
-        if (i < 0 || use[i].consumed)
+}
+
+/* The ends left: a stub toward the side with more boundary free, in
+   line order (PrusaSlicer's order). */
+static void
+stub_leftovers(struct anchor *a, double len_mm, double half_w_mm)
+{
+    double *free_fw = a->free_fw, *free_bk = a->free_bk, *gap = a->gap;
+    for (uint32_t k = 0; k < 2 * a->n && len_mm > 0; k++) {
+        int32_t i = a->slot[k];
+        if (i < 0 || a->use[i].consumed)
             continue;
         bool back = free_bk[i] > free_fw[i];
-        uint32_t j = back ? pv[i] : nx[i];
-        double g = back ? gap[pv[i]] : gap[i];
+        uint32_t j = back ? a->pv[i] : a->nx[i];
+        double g = back ? gap[a->pv[i]] : gap[i];
         double t = fmax(0, fmin(fmin(len_mm, back ? free_bk[i] : free_fw[i]), g - half_w_mm));
-        use[i] = (struct end_use){ -1, t, back, 1 };
+        a->use[i] = (struct end_use){ -1, t, back, 1 };
         if ((uint32_t)i != j) {
             if (back)
                 free_fw[j] = fmin(free_fw[j], g - t);
@@ -239,86 +307,111 @@ tp_anchor(struct paths *lines, const struct paths *region, double len_mm, double
                 free_bk[j] = fmin(free_bk[j], g - t);
         }
     }
-    /* chains: from a line with a free end (no cycles: every chain has
-       two), its stub reversed, the line, then arc, line, ..., stub */
-    for (uint32_t l0 = 0; l0 < n && rc == SF_OK; l0++) {
-        if (done[l0])
-            continue;
-        int32_t s0 = slot[2 * l0], s1 = slot[2 * l0 + 1];
-        uint32_t e0; /* the end the chain starts at */
-        if (s0 < 0 || use[s0].to < 0)
-            e0 = 0;
-        else if (s1 < 0 || use[s1].to < 0)
-            e0 = 1;
-        else
-            continue; /* inside a chain: reached from its ends */
-        if (!paths_begin(&out)) {
+}
+
+/* One chain into out (a path begun): from line l0's free end e0, its
+   stub reversed, the line, then arc, line, ..., stub.  stub: scratch. */
+static int
+chain_from(struct anchor *a, uint32_t l0, uint32_t e0, struct paths *out, struct paths *stub)
+{
+    const struct paths *lines = a->lines;
+    const struct end_use *use = a->use;
+    int rc = SF_OK;
+    int32_t si = a->slot[2 * l0 + e0];
+    if (si >= 0 && use[si].len_mm > 0) {
+        struct ipt q = lines->pts[e0 ? lines->start[l0 + 1] - 1 : lines->start[l0]];
+        paths_reset(stub);
+        if (!paths_begin(stub) ||
+            !walk(a->region, &a->bp[si], q, use[si].len_mm, use[si].back, stub))
+            rc = SF_ENOMEM;
+        for (uint32_t i = rc == SF_OK ? paths_len(stub, 0) : 0; i-- > 0;)
+            if (!paths_push(out, stub->pts[i]))
+                rc = SF_ENOMEM;
+    }
+    uint32_t l = l0, e = e0;
+    while (rc == SF_OK) {
+        a->done[l] = 1;
+        const struct ipt *q = lines->pts + lines->start[l];
+        uint32_t m = paths_len(lines, l);
+        for (uint32_t i = 0; i < m && rc == SF_OK; i++) {
+            struct ipt pt = q[e ? m - 1 - i : i];
+            if (!paths_push(out, pt))
+                rc = SF_ENOMEM;
+        }
+        int32_t sf = a->slot[2 * l + (1 - e)]; /* the far end */
+        if (rc < 0 || sf < 0)
+            break;
+        struct ipt qe = q[e ? 0 : m - 1];
+        if (!walk(a->region, &a->bp[sf], qe, use[sf].len_mm, use[sf].back, out)) {
             rc = SF_ENOMEM;
             break;
         }
-        int32_t si = slot[2 * l0 + e0];
-        if (si >= 0 && use[si].len_mm > 0) {
-            struct ipt q = lines->pts[e0 ? lines->start[l0 + 1] - 1 : lines->start[l0]];
-            paths_reset(&stub);
-            if (!paths_begin(&stub) ||
-                !walk(region, &bp[si], q, use[si].len_mm, use[si].back, &stub))
-                rc = SF_ENOMEM;
-            for (uint32_t i = rc == SF_OK ? paths_len(&stub, 0) : 0; i-- > 0;)
-                if (!paths_push(&out, stub.pts[i]))
-                    rc = SF_ENOMEM;
+        if (use[sf].to < 0)
+            break;
+        const struct bpos *nxt = &a->bp[use[sf].to];
+        l = nxt->line;
+        e = nxt->end;
+        if (a->done[l])
+            break; /* cannot happen: no cycles */
+    }
+    return rc;
+}
+
+/* The chains, each from a line with a free end (no cycles: every chain
+   has two), into out. */
+static int
+chains(struct anchor *a, struct paths *out, struct paths *stub)
+{
+    int rc = SF_OK;
+    for (uint32_t l0 = 0; l0 < a->n && rc == SF_OK; l0++) {
+        if (a->done[l0])
+            continue;
+        int32_t s0 = a->slot[2 * l0], s1 = a->slot[2 * l0 + 1];
+        uint32_t e0; /* the end the chain starts at */
+        if (s0 < 0 || a->use[s0].to < 0)
+            e0 = 0;
+        else if (s1 < 0 || a->use[s1].to < 0)
+            e0 = 1;
+        else
+            continue; /* inside a chain: reached from its ends */
+        if (!paths_begin(out)) {
+            rc = SF_ENOMEM;
+            break;
         }
-        uint32_t l = l0, e = e0;
-        while (rc == SF_OK) {
-            done[l] = 1;
-            const struct ipt *q = lines->pts + lines->start[l];
-            uint32_t m = paths_len(lines, l);
-            for (uint32_t i = 0; i < m && rc == SF_OK; i++) {
-                struct ipt pt = q[e ? m - 1 - i : i];
-                if (!paths_push(&out, pt))
-                    rc = SF_ENOMEM;
-            }
-            int32_t sf = slot[2 * l + (1 - e)]; /* the far end */
-            if (rc < 0 || sf < 0)
-                break;
-            struct ipt qe = q[e ? 0 : m - 1];
-            if (!walk(region, &bp[sf], qe, use[sf].len_mm, use[sf].back, &out)) {
-                rc = SF_ENOMEM;
-                break;
-            }
-            if (use[sf].to < 0)
-                break;
-            const struct bpos *nxt = &bp[use[sf].to];
-            l = nxt->line;
-            e = nxt->end;
-            if (done[l])
-                break; /* cannot happen: no cycles */
-        }
+        rc = chain_from(a, l0, e0, out, stub);
         /* drop points within 1 um of the one before (an arc's or stub's
            end on the next line's end): a zero-length move is not a move */
-        uint32_t o = out.start[out.n - 1], w = o + 1;
-        for (uint32_t i = o + 1; i < out.start[out.n]; i++)
-            if (tp_d2(out.pts[w - 1], out.pts[i]) >= 1e4)
-                out.pts[w++] = out.pts[i];
-        out.start[out.n] = w;
+        uint32_t o = out->start[out->n - 1], w = o + 1;
+        for (uint32_t i = o + 1; i < out->start[out->n]; i++)
+            if (tp_d2(out->pts[w - 1], out->pts[i]) >= 1e4)
+                out->pts[w++] = out->pts[i];
+        out->start[out->n] = w;
+    }
+    return rc;
+}
+
+int
+tp_anchor(struct paths *lines, const struct paths *region, double len_mm, double max_mm,
+          double half_w_mm)
+{
+    if (!lines->n || !region->n || (len_mm <= 0 && max_mm <= 0))
+        return SF_OK;
+    struct anchor a;
+    struct paths out, stub;
+    paths_init(&out);
+    paths_init(&stub);
+    int rc = anchor_init(&a, lines, region);
+    if (rc == SF_OK) {
+        locate_ends(&a);
+        find_arcs(&a);
+        join_arcs(&a, len_mm, max_mm, half_w_mm);
+        stub_leftovers(&a, len_mm, half_w_mm);
+        rc = chains(&a, &out, &stub);
     }
     if (rc == SF_OK)
         paths_move(lines, &out);
-out:
-    paths_index_release(&ix);
+    anchor_release(&a);
     paths_release(&out);
     paths_release(&stub);
-    free(cum);
-    free(path_of);
-    free(bp);
-    free(slot);
-    free(nx);
-    free(pv);
-    free(gap);
-    free(free_fw);
-    free(free_bk);
-    free(use);
-    free(arcs);
-    free(uf);
-    free(done);
     return rc;
 }

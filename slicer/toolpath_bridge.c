@@ -53,8 +53,8 @@ bridge_angle(const struct paths *piece, const struct paths_index *below, double 
 
 /* Bridge lines over each piece of area (one outer and its holes), in
    the piece's own direction (bridge_angle) over the layer below. */
-int
-tp_bridges(const struct paths *area, const struct paths *below, double nz, const double org[2],
+static int
+bridges(const struct paths *area, const struct paths *below, double nz, const double org[2],
         struct layer_paths *out, struct paths *grown, struct paths *lines, struct paths *piece)
 {
     struct paths_index ix;
@@ -85,7 +85,6 @@ tp_bridges(const struct paths *area, const struct paths *below, double nz, const
     return rc;
 }
 
-
 /*
  * Internal bridges: solid infill laid straight over the sparse infill of
  * the layer below prints as bridge lines (nozzle-wide round threads at
@@ -94,8 +93,8 @@ tp_bridges(const struct paths *area, const struct paths *below, double nz, const
  * nozzle widths stay solid (its opening by 3 bridge widths).  The lines
  * keep the solid infill's direction.  solid loses what is bridged.
  */
-int
-tp_internal_bridges(struct paths *solid, const struct paths *below_sparse, double nz, double ang,
+static int
+internal_bridges(struct paths *solid, const struct paths *below_sparse, double nz, double ang,
                  const double org[2], struct layer_paths *out, struct paths *t1, struct paths *t2,
                  struct paths *lines)
 {
@@ -117,4 +116,65 @@ tp_internal_bridges(struct paths *solid, const struct paths *below_sparse, doubl
     if ((rc = tp_link(lines, t2, 2 * (nz + 0.05), nz / 2)) < 0)
         return rc;
     return tp_add(out, lines, ROLE_BRIDGE, false, nz);
+}
+
+int
+tp_bridges_over_air(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                    const double org[2], struct paths *t, struct layer_paths *out)
+{
+    int rc = SF_OK;
+    if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0) {
+        /* solid over air is a bridge; slivers narrower than the nozzle are not */
+        double nz = p->nozzle_mm;
+        TP_TRY(
+            clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &s->l[k - 1].region, CLIP_NONZERO, &t[T_TMP]));
+        TP_TRY(clip_offset(&t[T_TMP], -nz / 2, CLIP_JOIN_MITER, &t[T_KEEP]));
+        TP_TRY(clip_offset(&t[T_KEEP], nz / 2, CLIP_JOIN_MITER, &t[T_TMP]));
+        if (t[T_TMP].n) {
+            TP_TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_SOLID], CLIP_NONZERO, &t[T_KEEP]));
+            TP_TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
+            paths_move(&t[T_SOLID], &t[T_TMP]);
+            TP_TRY(bridges(&t[T_KEEP], &s->l[k - 1].region, nz, org, out, &t[T_TMP], &t[T_LINES],
+                           &t[T_S]));
+        }
+    }
+out:
+    return rc;
+}
+
+int
+tp_bridges_over_sparse(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                       double ang, const double org[2], struct paths *t, struct layer_paths *out)
+{
+    int rc = SF_OK;
+    if (k > 0 && t[T_SOLID].n && p->bridge_mm_s > 0 && p->infill_density > 0 &&
+        p->infill_density < 1) { /* 100 % "sparse" is solid: nothing to bridge */
+        /* sparse in every layer a thick bridge's thread reaches down
+           into (a nozzle deep: PrusaSlicer's bridge_over_infill looks
+           down the bridge flow's height) */
+        long depth = (long)floor(p->nozzle_mm / s->l[k].h_mm + 1e-6);
+        const struct paths *below = &t[T_BELOW];
+        paths_reset(&t[T_BELOW]);
+        for (long j = (long)k - 1; j >= 0 && j >= (long)k - (depth > 1 ? depth : 1); j--) {
+            const struct paths *sj = &s->l[j].sparse;
+            if (!s->l[j].has_regions) {
+                TP_TRY(toolpath_regions(s, (uint32_t)j, p, &t[T_TMP], &t[T_KEEP], &t[T_LINES]));
+                sj = &t[T_LINES];
+            }
+            if (j == (long)k - 1) {
+                if (!paths_append(&t[T_BELOW], sj))
+                    TP_TRY(SF_ENOMEM);
+            } else if (t[T_BELOW].n) {
+                TP_TRY(clip_bool(CLIP_INTERSECTION, &t[T_BELOW], sj, CLIP_NONZERO, &t[T_TMP]));
+                paths_move(&t[T_BELOW], &t[T_TMP]);
+            }
+            if (!t[T_BELOW].n)
+                break;
+        }
+        if (below->n)
+            TP_TRY(internal_bridges(&t[T_SOLID], below, p->nozzle_mm, ang, org, out, &t[T_TMP],
+                                    &t[T_KEEP], &t[T_LINES]));
+    }
+out:
+    return rc;
 }

@@ -70,8 +70,8 @@ farthest(const struct ipt *q, uint32_t n, uint32_t from)
  */
 int
 tp_gap_fill(const struct paths *gap, double h, double nozzle, double sp, double overlap,
-         double min_bead, struct layer_paths *out, struct paths *piece, struct paths *sliver,
-         struct paths *line)
+            double min_bead, struct layer_paths *out, struct paths *piece, struct paths *sliver,
+            struct paths *line)
 {
     int rc = SF_OK;
     for (uint32_t k = 0; k < gap->n && rc == SF_OK;) {
@@ -161,5 +161,45 @@ tp_gap_fill(const struct paths *gap, double h, double nozzle, double sp, double 
             wl = 2.5 * nozzle;
         rc = tp_add(out, line, ROLE_GAP_FILL, ring, wl);
     }
+    return rc;
+}
+
+int
+tp_gap_fill_loops(double h, const struct slice_profile *p, double sp, struct paths *t,
+                  struct layer_paths *out)
+{
+    int rc = SF_OK;
+    if (t[T_GAP].n) {
+        /* drop slivers under a quarter spacing wide (where the loops' bands
+           meet at corners), then fill; pieces too small to fill go
+           first (opening only shrinks them) */
+        paths_reset(&t[T_TMP]);
+        TP_TRY(tp_pieces_by_area(&t[T_GAP], GAP_MIN_AREA * p->nozzle_mm * p->nozzle_mm, 0, true,
+                                 &t[T_TMP]));
+        paths_move(&t[T_GAP], &t[T_TMP]);
+        TP_TRY(clip_offset(&t[T_GAP], -sp / 8, CLIP_JOIN_MITER, &t[T_TMP]));
+        TP_TRY(clip_offset(&t[T_TMP], sp / 8, CLIP_JOIN_MITER, &t[T_GAP]));
+        TP_TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, sp, 0, 0, out, &t[T_TMP], &t[T_S],
+                           &t[T_LINES]));
+    }
+out:
+    return rc;
+}
+
+int
+tp_gap_fill_narrow(double h, const struct slice_profile *p, double sp, double ssp, struct paths *t,
+                   struct layer_paths *out)
+{
+    int rc = SF_OK;
+    /* infill pieces under 3.5 spacings wide: zig-zag links would lay
+       more than their area there, so they are gap-filled instead */
+    paths_reset(&t[T_GAP]);
+    struct paths *sets[3] = { &t[T_SOLID], &t[T_TOP], &t[T_SPARSE] };
+    for (int i = 0; i < 3; i++)
+        TP_TRY(tp_split_narrow(sets[i], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
+    if (t[T_GAP].n)
+        TP_TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, p->infill_overlap * sp,
+                           p->min_bead * p->nozzle_mm, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
+out:
     return rc;
 }

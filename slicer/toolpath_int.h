@@ -46,6 +46,10 @@ enum {
             goto out;                                                                              \
     } while (0)
 
+/* Init / release the T_N scratch sets of t. */
+void tp_scratch_init(struct paths *t);
+void tp_scratch_release(struct paths *t);
+
 /* Squared distance between two points, in units^2. */
 static inline double
 tp_d2(struct ipt a, struct ipt b)
@@ -86,22 +90,33 @@ int tp_split_narrow(struct paths *set, double t_mm, struct paths *narrow, struct
  * piece, sliver, line: scratch.  SF_ENOMEM / SF_EBUG.
  */
 int tp_gap_fill(const struct paths *gap, double h, double nozzle, double sp, double overlap,
-                double min_bead, struct layer_paths *out, struct paths *piece,
-                struct paths *sliver, struct paths *line);
+                double min_bead, struct layer_paths *out, struct paths *piece, struct paths *sliver,
+                struct paths *line);
 
-/* Bridge lines over each piece of area (one outer and its holes), in
-   the piece's own direction over below, appended to out; grown, lines,
-   piece: scratch.  SF_ENOMEM / SF_EBUG. */
-int tp_bridges(const struct paths *area, const struct paths *below, double nz, const double org[2],
-               struct layer_paths *out, struct paths *grown, struct paths *lines,
-               struct paths *piece);
-
-/* Internal bridges over below_sparse, appended to out; solid loses what
-   is bridged.  t1, t2, lines: scratch.  SF_ENOMEM / SF_EBUG. */
-int tp_internal_bridges(struct paths *solid, const struct paths *below_sparse, double nz,
-                        double ang, const double org[2], struct layer_paths *out, struct paths *t1,
-                        struct paths *t2, struct paths *lines);
-
+/*
+ * Stages of toolpath_layer, in its order.  t is its scratch (T_N sets):
+ * each stage reads and leaves the sets its comment names; out gets the
+ * paths.  SF_ENOMEM / SF_EBUG.
+ */
+/* Perimeter loops of L (external last); the gaps they leave in t[T_GAP]. */
+int tp_perimeters(const struct layer *L, const struct slice_profile *p, double sp, struct paths *t,
+                  struct layer_paths *out);
+/* Gap fill of the loops' gaps, t[T_GAP] (opened by an eighth of sp first). */
+int tp_gap_fill_loops(double h, const struct slice_profile *p, double sp, struct paths *t,
+                      struct layer_paths *out);
+/* Gap fill of the pieces of t[T_SOLID], t[T_TOP] and t[T_SPARSE] under 3.5
+   solid spacings (ssp) wide, which those sets lose. */
+int tp_gap_fill_narrow(double h, const struct slice_profile *p, double sp, double ssp,
+                       struct paths *t, struct layer_paths *out);
+/* Bridges: t[T_SOLID] over air on layer k (each piece in the direction
+   of its shortest anchored span), which t[T_SOLID] loses. */
+int tp_bridges_over_air(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                        const double org[2], struct paths *t, struct layer_paths *out);
+/* Internal bridges: t[T_SOLID] over the sparse infill of every layer a
+   nozzle deep below (lines at ang), which t[T_SOLID] loses. */
+int tp_bridges_over_sparse(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                           double ang, const double org[2], struct paths *t,
+                           struct layer_paths *out);
 /* Flag the overhanging segments of layer k's perimeter loops in out
    (layer_paths.ovh); grown, tmp: scratch.  SF_ENOMEM / SF_EBUG. */
 int tp_mark_overhangs(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,

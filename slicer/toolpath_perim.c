@@ -12,6 +12,10 @@
 #include "clip_shim.h"
 #include "toolpath_int.h"
 
+/* The loops' grown outlines reach this much further when the gaps are cut
+   out of the region: 1 um, more than the offsets' rounding. */
+#define GAP_SAFETY_MM 0.001
+
 /* Flags of q[a..b] (one segment, split to ~0.05 mm where it leaves
    below): append the points after a and their segments' flags. */
 static bool
@@ -46,7 +50,7 @@ ovh_segment(const struct paths_index *below, struct ipt a, struct ipt b, bool in
  */
 int
 tp_mark_overhangs(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
-               struct layer_paths *out, struct paths *grown, struct paths *tmp)
+                  struct layer_paths *out, struct paths *grown, struct paths *tmp)
 {
     /* a loop's centre (at least half a line in) more than half a nozzle
        out from the layer below puts a disc that wide in the bottom
@@ -103,7 +107,8 @@ tp_mark_overhangs(const struct layer_stack *s, uint32_t k, const struct slice_pr
                last (the loop closes itself); flag i is of the segment
                from point i, so fl is already in place */
             uint32_t nt = paths_len(tmp, 0) - 1;
-            if (!paths_add(&lp.p, tmp->pts, nt) || !tp_ovh_fill(&lp, lp.p.start[lp.p.n - 1], fl, nt))
+            if (!paths_add(&lp.p, tmp->pts, nt) ||
+                !tp_ovh_fill(&lp, lp.p.start[lp.p.n - 1], fl, nt))
                 rc = SF_ENOMEM;
             any = true;
         } else if (!paths_add(&lp.p, q, m) || (lp.ovh && !tp_ovh_fill(&lp, 0, NULL, 0))) {
@@ -120,5 +125,62 @@ tp_mark_overhangs(const struct layer_stack *s, uint32_t k, const struct slice_pr
     free(fl);
     layer_paths_release(&lp);
     paths_index_release(&below);
+    return rc;
+}
+
+/*
+ * Perimeters, inner loops first, external last.  Loop i's centre line
+ * is opened by half a spacing (shrunk by that much more, grown back),
+ * so a loop never wraps a sliver it cannot fill (it would lay two lines
+ * where one fits), as PrusaSlicer's classic generator does.  What the
+ * loops leave between them, the part's edge and the infill goes to
+ * gap fill: S is the area inside loop i - 1 (the region for i = 0),
+ * and the gap is the part of it loop i does not reach.
+ */
+int
+tp_perimeters(const struct layer *L, const struct slice_profile *p, double sp, struct paths *t,
+              struct layer_paths *out)
+{
+    double w = p->width_mm;
+    int rc = SF_OK;
+    struct paths *loops = p->perimeters ? mem_calloc((size_t)p->perimeters, sizeof(*loops)) : NULL;
+    if (p->perimeters && !loops)
+        return SF_ENOMEM;
+    paths_reset(&t[T_GAP]);
+    for (int i = 0; i < p->perimeters && rc == SF_OK; i++) {
+        double d = w / 2 + i * sp;
+        const struct paths *prev = i ? &t[T_S] : &L->region;
+        paths_init(&loops[i]);
+        /* the innermost loop's shrink is the inner area toolpath_areas made */
+        if (i + 1 == p->perimeters) {
+            paths_reset(&t[T_TMP]);
+            if (!paths_append(&t[T_TMP], &L->inner)) {
+                rc = SF_ENOMEM;
+                break;
+            }
+        } else if ((rc = clip_offset(&L->region, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0) {
+            break;
+        }
+        if ((rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
+            break;
+        if (p->gap_fill) {
+            /* 1 um more: where the loop follows the edge, the offsets'
+               rounding leaves no hairline for the difference to trace
+               (PrusaSlicer's safety offset, for the same reason) */
+            if ((rc = clip_offset(&loops[i], (i ? sp / 2 : w / 2) + GAP_SAFETY_MM, CLIP_JOIN_MITER,
+                                  &t[T_LINES])) < 0 ||
+                (rc = clip_bool(CLIP_DIFFERENCE, prev, &t[T_LINES], CLIP_NONZERO, &t[T_KEEP])) < 0)
+                break;
+            if (!paths_append(&t[T_GAP], &t[T_KEEP]))
+                rc = SF_ENOMEM;
+        }
+        paths_move(&t[T_S], &t[T_TMP]);
+    }
+    for (int i = p->perimeters - 1; i >= 0; i--) {
+        if (rc == SF_OK)
+            rc = tp_add(out, &loops[i], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w);
+        paths_release(&loops[i]);
+    }
+    free(loops);
     return rc;
 }

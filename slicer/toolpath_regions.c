@@ -83,7 +83,7 @@ skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *
    without its grow^2 term). */
 int
 tp_pieces_by_area(const struct paths *set, double lim_mm2, double grow_mm, bool above,
-               struct paths *out)
+                  struct paths *out)
 {
     for (uint32_t a = 0, b; a < set->n; a = b) {
         double area = paths_area_k(set, a);
@@ -155,7 +155,8 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
             in = &b;
         }
         if (rc == SF_OK)
-            rc = tp_pieces_by_area(in, p->solid_below_mm2, p->infill_overlap * sp, false, &L->small);
+            rc =
+                tp_pieces_by_area(in, p->solid_below_mm2, p->infill_overlap * sp, false, &L->small);
     }
     paths_release(&a);
     paths_release(&b);
@@ -164,6 +165,88 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
     return rc;
 }
 
+/* Vertical shells (ensure_vertical_shells): t[T_SOLID] = t[T_AREA]
+   wherever the inner areas of the top_layers above and the bottom_layers
+   below do not all cover it; t[T_KEEP] = what they all cover. */
+static int
+vertical_shells(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                struct paths *t)
+{
+    int rc;
+    TP_TRY(intersect_range(s, (long)k + 1, (long)k + 1 + p->top_layers, &t[T_TOPI]));
+    if (p->top_layers == 0 && !paths_append(&t[T_TOPI], &t[T_AREA]))
+        TP_TRY(SF_ENOMEM);
+    TP_TRY(intersect_range(s, (long)k - p->bottom_layers, (long)k, &t[T_BOTI]));
+    if (p->bottom_layers == 0 && !paths_append(&t[T_BOTI], &t[T_AREA]))
+        TP_TRY(SF_ENOMEM);
+    TP_TRY(clip_bool(CLIP_INTERSECTION, &t[T_TOPI], &t[T_BOTI], CLIP_NONZERO, &t[T_KEEP]));
+    TP_TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_KEEP], CLIP_NONZERO, &t[T_SOLID]));
+out:
+    return rc;
+}
+
+/* t[T_SOLID] gets the skins of the layers within reach projected onto
+   t[T_AREA] (added to what it holds), bands of it narrower than 3 solid
+   lines widened (without vertical shells: t[T_KEEP] is then emptied). */
+static int
+projected_skins(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                struct paths *t)
+{
+    const struct layer *L = &s->l[k];
+    int rc = SF_OK;
+    /* the top and bottom surfaces of the layers within reach (top_layers
+       - 1 above, bottom_layers - 1 below, and this one), grown
+       skin_margin into the infill: PrusaSlicer 2.5 grows them 3 mm
+       (EXTERNAL_INFILL_MARGIN) and projects them so
+       (discover_horizontal_shells) */
+    paths_reset(&t[T_LINES]);
+    for (long j = k; j < (long)k + p->top_layers && j < (long)s->n; j++)
+        if (!paths_append(&t[T_LINES], &s->l[j].skin))
+            TP_TRY(SF_ENOMEM);
+    for (long j = k; j > (long)k - p->bottom_layers && j >= 0; j--)
+        if (!paths_append(&t[T_LINES], &s->l[j].skin_bottom))
+            TP_TRY(SF_ENOMEM);
+    /* PrusaSlicer's infill areas reach infill_overlap into the loops
+       (its fill_expolygons): a skin projected from a slope can end
+       just inside them, short of the inner area, and its sliver there
+       grows below into a band of solid along the slope */
+    bool grown = !p->vertical_shells && p->infill_overlap > 0 && t[T_LINES].n;
+    if (grown)
+        TP_TRY(clip_offset(&t[T_AREA], p->infill_overlap * tp_spacing(p->width_mm, L->h_mm),
+                           CLIP_JOIN_MITER, &t[T_BELOW]));
+    if (t[T_LINES].n) {
+        /* one pass: under the nonzero rule the overlapping skins are
+           their union, clipped to the area at once (a separate union
+           of the stacked skins first cost 41 % of knot1's
+           instructions, most of it joining their common edges) */
+        if (!paths_append(&t[T_LINES], &t[T_SOLID]))
+            TP_TRY(SF_ENOMEM);
+        TP_TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], grown ? &t[T_BELOW] : &t[T_AREA],
+                         CLIP_NONZERO, &t[T_SOLID]));
+    }
+    if (!p->vertical_shells && t[T_SOLID].n) {
+        /* bands narrower than 3 solid lines grow 3 lines wider, so
+           the solid can be filled and holds (PrusaSlicer's "too
+           narrow" regularization in discover_horizontal_shells) */
+        double mg = 3 * p->solid_width_mm;
+        TP_TRY(clip_offset(&t[T_SOLID], -mg, CLIP_JOIN_MITER, &t[T_TMP]));
+        TP_TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_KEEP]));
+        TP_TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
+        if (t[T_TMP].n) {
+            TP_TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_LINES]));
+            if (!paths_append(&t[T_LINES], &t[T_SOLID]))
+                TP_TRY(SF_ENOMEM);
+            TP_TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_TMP]));
+            TP_TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+        } else if (grown) {
+            TP_TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &t[T_AREA], CLIP_NONZERO, &t[T_TMP]));
+            paths_move(&t[T_SOLID], &t[T_TMP]);
+        }
+        paths_reset(&t[T_KEEP]);
+    }
+out:
+    return rc;
+}
 
 int
 toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
@@ -172,87 +255,22 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
     const struct layer *L = &s->l[k];
     double ssp = tp_spacing(p->solid_width_mm, L->h_mm);
     struct paths t[T_N];
-    for (int i = 0; i < T_N; i++)
-        paths_init(&t[i]);
+    tp_scratch_init(t);
     paths_reset(solid);
     paths_reset(top);
     paths_reset(sparse);
     int rc = SF_OK;
-#define TRY(x)                                                                                     \
-    do {                                                                                           \
-        if ((rc = (x)) < 0)                                                                        \
-            goto out;                                                                              \
-    } while (0)
     if (!paths_append(&t[T_AREA], &L->inner))
-        TRY(SF_ENOMEM);
+        TP_TRY(SF_ENOMEM);
     if (!t[T_AREA].n)
         goto out;
-    if (p->vertical_shells) {
-        /* solid wherever the inner areas of the top_layers above and the
-           bottom_layers below do not all cover it: keeps the shell thick
-           on slopes (PrusaSlicer's ensure_vertical_shell_thickness, off by
-           default and in the peers' runs) */
-        TRY(intersect_range(s, (long)k + 1, (long)k + 1 + p->top_layers, &t[T_TOPI]));
-        if (p->top_layers == 0 && !paths_append(&t[T_TOPI], &t[T_AREA]))
-            TRY(SF_ENOMEM);
-        TRY(intersect_range(s, (long)k - p->bottom_layers, (long)k, &t[T_BOTI]));
-        if (p->bottom_layers == 0 && !paths_append(&t[T_BOTI], &t[T_AREA]))
-            TRY(SF_ENOMEM);
-        TRY(clip_bool(CLIP_INTERSECTION, &t[T_TOPI], &t[T_BOTI], CLIP_NONZERO, &t[T_KEEP]));
-        TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_KEEP], CLIP_NONZERO, &t[T_SOLID]));
-    }
-    {
-        /* the top and bottom surfaces of the layers within reach (top_layers
-           - 1 above, bottom_layers - 1 below, and this one), grown
-           skin_margin into the infill: PrusaSlicer 2.5 grows them 3 mm
-           (EXTERNAL_INFILL_MARGIN) and projects them so
-           (discover_horizontal_shells) */
-        paths_reset(&t[T_LINES]);
-        for (long j = k; j < (long)k + p->top_layers && j < (long)s->n; j++)
-            if (!paths_append(&t[T_LINES], &s->l[j].skin))
-                TRY(SF_ENOMEM);
-        for (long j = k; j > (long)k - p->bottom_layers && j >= 0; j--)
-            if (!paths_append(&t[T_LINES], &s->l[j].skin_bottom))
-                TRY(SF_ENOMEM);
-        /* PrusaSlicer's infill areas reach infill_overlap into the loops
-           (its fill_expolygons): a skin projected from a slope can end
-           just inside them, short of the inner area, and its sliver there
-           grows below into a band of solid along the slope */
-        bool grown = !p->vertical_shells && p->infill_overlap > 0 && t[T_LINES].n;
-        if (grown)
-            TRY(clip_offset(&t[T_AREA], p->infill_overlap * tp_spacing(p->width_mm, L->h_mm),
-                            CLIP_JOIN_MITER, &t[T_BELOW]));
-        if (t[T_LINES].n) {
-            /* one pass: under the nonzero rule the overlapping skins are
-               their union, clipped to the area at once (a separate union
-               of the stacked skins first cost 41 % of knot1's
-               instructions, most of it joining their common edges) */
-            if (!paths_append(&t[T_LINES], &t[T_SOLID]))
-                TRY(SF_ENOMEM);
-            TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], grown ? &t[T_BELOW] : &t[T_AREA],
-                          CLIP_NONZERO, &t[T_SOLID]));
-        }
-        if (!p->vertical_shells && t[T_SOLID].n) {
-            /* bands narrower than 3 solid lines grow 3 lines wider, so
-               the solid can be filled and holds (PrusaSlicer's "too
-               narrow" regularization in discover_horizontal_shells) */
-            double mg = 3 * p->solid_width_mm;
-            TRY(clip_offset(&t[T_SOLID], -mg, CLIP_JOIN_MITER, &t[T_TMP]));
-            TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_KEEP]));
-            TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
-            if (t[T_TMP].n) {
-                TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_LINES]));
-                if (!paths_append(&t[T_LINES], &t[T_SOLID]))
-                    TRY(SF_ENOMEM);
-                TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_TMP]));
-                TRY(clip_bool(CLIP_INTERSECTION, &t[T_TMP], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
-            } else if (grown) {
-                TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &t[T_AREA], CLIP_NONZERO, &t[T_TMP]));
-                paths_move(&t[T_SOLID], &t[T_TMP]);
-            }
-            paths_reset(&t[T_KEEP]);
-        }
-    }
+    /* solid wherever the inner areas of the top_layers above and the
+       bottom_layers below do not all cover it: keeps the shell thick
+       on slopes (PrusaSlicer's ensure_vertical_shell_thickness, off by
+       default and in the peers' runs) */
+    if (p->vertical_shells)
+        TP_TRY(vertical_shells(s, k, p, t));
+    TP_TRY(projected_skins(s, k, p, t));
     if (t[T_SOLID].n && t[T_KEEP].n) {
         /* solid narrower than a line is a sliver along a slope, not a
            skin: drop it and grow the rest a little, as PrusaSlicer 2.5
@@ -260,9 +278,9 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
            s = 1.05 x the solid line spacing (min_perimeter_infill_spacing
            in PrintObject::discover_vertical_shells) */
         double ms = 1.05 * ssp;
-        TRY(clip_offset(&t[T_SOLID], -0.5 * ms, CLIP_JOIN_SQUARE, &t[T_TMP]));
-        TRY(clip_offset(&t[T_TMP], 0.8 * ms, CLIP_JOIN_SQUARE, &t[T_LINES]));
-        TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+        TP_TRY(clip_offset(&t[T_SOLID], -0.5 * ms, CLIP_JOIN_SQUARE, &t[T_TMP]));
+        TP_TRY(clip_offset(&t[T_TMP], 0.8 * ms, CLIP_JOIN_SQUARE, &t[T_LINES]));
+        TP_TRY(clip_bool(CLIP_INTERSECTION, &t[T_LINES], &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
     }
     if (L->small.n && p->solid_below_mm2 > 0 && p->infill_density > 0) {
         /* internal pieces too small for the grid to hold anything print
@@ -270,18 +288,20 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
            tails; toolpath_areas found them) */
         paths_reset(&t[T_LINES]);
         if (!paths_append(&t[T_LINES], &L->small) || !paths_append(&t[T_LINES], &t[T_SOLID]))
-            TRY(SF_ENOMEM);
-        TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_SOLID]));
+            TP_TRY(SF_ENOMEM);
+        TP_TRY(clip_bool(CLIP_UNION, &t[T_LINES], NULL, CLIP_NONZERO, &t[T_SOLID]));
     }
-    TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
+    TP_TRY(clip_bool(CLIP_DIFFERENCE, &t[T_AREA], &t[T_SOLID], CLIP_NONZERO, &t[T_SPARSE]));
     if (p->top_layers > 0) {
         /* the solid on this layer's top surface (opened, as
            PrusaSlicer's detect_surfaces_type finds stTop) is top solid;
            most layers of a smooth part have none inside the loops */
         if (k + 1 < s->n) {
             if (L->top_in.n && t[T_SOLID].n) {
-                TRY(clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &L->top_in, CLIP_NONZERO, &t[T_TOP]));
-                TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &L->top_in, CLIP_NONZERO, &t[T_TMP]));
+                TP_TRY(
+                    clip_bool(CLIP_INTERSECTION, &t[T_SOLID], &L->top_in, CLIP_NONZERO, &t[T_TOP]));
+                TP_TRY(
+                    clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &L->top_in, CLIP_NONZERO, &t[T_TMP]));
                 paths_move(&t[T_SOLID], &t[T_TMP]);
             }
         } else {
@@ -291,10 +311,8 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
     paths_move(solid, &t[T_SOLID]);
     paths_move(top, &t[T_TOP]);
     paths_move(sparse, &t[T_SPARSE]);
-#undef TRY
 out:
-    for (int i = 0; i < T_N; i++)
-        paths_release(&t[i]);
+    tp_scratch_release(t);
     return rc;
 }
 
@@ -310,7 +328,7 @@ toolpath_store_regions(struct layer_stack *s, uint32_t k, const struct slice_pro
 /* The regions of layer k: kept ones copied, else computed. */
 int
 tp_regions_of(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
-           struct paths *solid, struct paths *top, struct paths *sparse)
+              struct paths *solid, struct paths *top, struct paths *sparse)
 {
     const struct layer *L = &s->l[k];
     if (!L->has_regions)
