@@ -73,12 +73,27 @@ fill_of(enum clip_fill f)
     return f == CLIP_NONZERO ? pftNonZero : pftEvenOdd;
 }
 
+/* out reset, then op (returning a status) run with exceptions turned
+   into status codes: SF_ENOMEM for bad_alloc, SF_EBUG for anything else. */
+template <typename F>
+static int
+guarded(struct paths *out, F op)
+{
+    paths_reset(out);
+    try {
+        return op();
+    } catch (const std::bad_alloc &) {
+        return SF_ENOMEM;
+    } catch (...) {
+        return SF_EBUG;
+    }
+}
+
 extern "C" int
 clip_bool(enum clip_op op, const struct paths *subj, const struct paths *clip, enum clip_fill fill,
           struct paths *out)
 {
-    paths_reset(out);
-    try {
+    return guarded(out, [&]() {
         Paths s, c;
         to_cl(subj, s);
         to_cl(clip, c);
@@ -90,18 +105,13 @@ clip_bool(enum clip_op op, const struct paths *subj, const struct paths *clip, e
         PolyTree tree;
         cl.Execute(ct[op], tree, fill_of(fill), fill_of(fill));
         return from_tree(&tree, out) ? SF_OK : SF_ENOMEM;
-    } catch (const std::bad_alloc &) {
-        return SF_ENOMEM;
-    } catch (...) {
-        return SF_EBUG;
-    }
+    });
 }
 
 extern "C" int
 clip_offset(const struct paths *in, double delta_mm, enum clip_join join, struct paths *out)
 {
-    paths_reset(out);
-    try {
+    return guarded(out, [&]() {
         Paths s;
         to_cl(in, s);
         static const JoinType jt[] = { jtMiter, jtRound, jtSquare };
@@ -110,18 +120,13 @@ clip_offset(const struct paths *in, double delta_mm, enum clip_join join, struct
         PolyTree tree;
         co.Execute(tree, delta_mm * POLY_SCALE);
         return from_tree(&tree, out) ? SF_OK : SF_ENOMEM;
-    } catch (const std::bad_alloc &) {
-        return SF_ENOMEM;
-    } catch (...) {
-        return SF_EBUG;
-    }
+    });
 }
 
 extern "C" int
 clip_lines(const struct paths *lines, const struct paths *region, struct paths *out)
 {
-    paths_reset(out);
-    try {
+    return guarded(out, [&]() {
         Paths s, c;
         to_cl(lines, s);
         to_cl(region, c);
@@ -136,9 +141,5 @@ clip_lines(const struct paths *lines, const struct paths *region, struct paths *
             if (p.size() >= 2 && !add_path(out, p))
                 return SF_ENOMEM;
         return SF_OK;
-    } catch (const std::bad_alloc &) {
-        return SF_ENOMEM;
-    } catch (...) {
-        return SF_EBUG;
-    }
+    });
 }

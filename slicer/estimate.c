@@ -469,19 +469,151 @@ firmware_limits(const struct gcode_line *l, struct est_limits *lim)
     }
 }
 
+/* The reader's state from one line of estimate_gcode to the next. */
+struct reader {
+    const char *name;
+    struct est_limits cur; /* as changed by the file's M201-M205 */
+    struct plan pl;
+    size_t cap_layers, cap_layer_s;
+    double pos[4], f, dwell;
+    bool rel_xyz, rel_e, support;
+    const char *type; /* the last ;TYPE: (not NUL-terminated) */
+    size_t type_len;
+    uint32_t lineno;
+    est_move_fn on_move;
+    void *ud;
+    struct estimate *out;
+};
+
+/* A comment line s[0..l): ;LAYER_CHANGE starts a layer, ;TYPE: sets the
+   role.  SF_ENOMEM (err set). */
+static int
+comment_line(struct reader *r, const char *s, size_t l, struct sf_err *err)
+{
+    struct plan *pl = &r->pl;
+    struct estimate *out = r->out;
+    if (has_prefix(s, l, ";LAYER_CHANGE")) {
+        if (!mem_grow((void **)&pl->layer_block, &r->cap_layers, out->n_layers + 1,
+                      sizeof(*pl->layer_block)) ||
+            !mem_grow((void **)&pl->layer_s, &r->cap_layer_s, out->n_layers + 1,
+                      sizeof(*pl->layer_s)))
+            return sf_err_set(err, SF_ENOMEM, "%s: out of memory", r->name);
+        pl->layer_block[out->n_layers++] = pl->done + pl->n;
+        pl->n_layers = out->n_layers;
+    } else if (has_prefix(s, l, ";TYPE:")) {
+        r->support = has_prefix(s, l, ";TYPE:Support material");
+        r->type = s + 6;
+        r->type_len = l - 6;
+    }
+    return SF_OK;
+}
+
+/* A G0-G3 move: planned (arcs in segments), filament counted, the move
+   callback called.  SF_EINVAL (out of range, an arc too long), SF_ENOMEM,
+   the planner's or the callback's status; err set. */
+static int
+move_line(struct reader *r, const struct gcode_line *gl, struct sf_err *err)
+{
+    const char *name = r->name;
+    uint32_t lineno = r->lineno;
+    struct estimate *out = r->out;
+    double *pos = r->pos;
+    int rc;
+    double v, tgt[4], d[4];
+    bool xy = false;
+    static const char ax[4] = { 'X', 'Y', 'Z', 'E' };
+    for (int a = 0; a < 4; a++) {
+        bool rel = a == 3 ? r->rel_e : r->rel_xyz;
+        tgt[a] = pos[a];
+        if (gcode_get(gl, ax[a], &v) && !isnan(v)) {
+            tgt[a] = rel ? pos[a] + v : v;
+            if (!isfinite(tgt[a]) || fabs(tgt[a]) > (a == 3 ? EST_E_MAX : EST_COORD_MAX))
+                return sf_err_set(err, SF_EINVAL, "%s:%u: %c%g is out of range", name, lineno,
+                                  ax[a], v);
+            if (a < 2 && tgt[a] != pos[a])
+                xy = true;
+        }
+        d[a] = tgt[a] - pos[a];
+    }
+    if (gcode_get(gl, 'F', &v) && isfinite(v) && v > 0)
+        r->f = fmin(v, EST_COORD_MAX) / 60;
+    double f = r->f;
+    double ci = 0, cj = 0;
+    bool has_i = gcode_get(gl, 'I', &ci) && isfinite(ci) && fabs(ci) < EST_COORD_MAX;
+    bool has_j = gcode_get(gl, 'J', &cj) && isfinite(cj) && fabs(cj) < EST_COORD_MAX;
+    double arc_mm = 0;
+    if (gl->code >= 2 && (has_i || has_j))
+        rc = plan_arc(&r->pl, &r->cur, pos, d, has_i ? ci : 0, has_j ? cj : 0, gl->code == 2, f,
+                      &arc_mm);
+    else
+        rc = plan_add(&r->pl, &r->cur, d, f);
+    if (rc == SF_EINVAL)
+        return sf_err_set(err, rc, "%s:%u: arc of %.0f mm is longer than %.0f m", name, lineno,
+                          arc_mm, EST_ARC_MM_MAX / 1000);
+    if (rc < 0)
+        return sf_err_set(err, rc, "%s:%u: %s", name, lineno,
+                          rc == SF_ENOMEM ? "out of memory" : "the planner failed");
+    if (xy && d[3] > 0) {
+        out->filament_mm += d[3];
+        if (r->support)
+            out->support_mm += d[3];
+    }
+    memcpy(pos, tgt, sizeof(r->pos));
+    out->n_moves++;
+    if (r->on_move) {
+        struct est_move mv = {
+            pos[0], pos[1],     pos[2],  pos[3],      d[3],
+            f,      r->support, r->type, r->type_len, out->n_layers ? out->n_layers - 1 : 0,
+            lineno
+        };
+        if ((rc = r->on_move(r->ud, &mv)) < 0)
+            return sf_err_set(err, rc, "%s:%u: stopped by the move callback (%s)", name, lineno,
+                              sf_status_name(rc));
+    }
+    return rc;
+}
+
+/* Any other line: modes (G90/G91, M82/M83), G92, M201-M205, G28, G4. */
+static void
+other_line(struct reader *r, const struct gcode_line *gl)
+{
+    if (gcode_is(gl, 'G', 90)) {
+        r->rel_xyz = false;
+    } else if (gcode_is(gl, 'G', 91)) {
+        r->rel_xyz = true;
+    } else if (gcode_is(gl, 'M', 82)) {
+        r->rel_e = false;
+    } else if (gcode_is(gl, 'M', 83)) {
+        r->rel_e = true;
+    } else if (gcode_is(gl, 'G', 92)) {
+        static const char ax[4] = { 'X', 'Y', 'Z', 'E' };
+        double v;
+        for (int a = 0; a < 4; a++)
+            if (gcode_get(gl, ax[a], &v) && isfinite(v) &&
+                fabs(v) <= (a == 3 ? EST_E_MAX : EST_COORD_MAX))
+                r->pos[a] = v;
+    } else if (gl->letter == 'M' && gl->code >= 201 && gl->code <= 205) {
+        firmware_limits(gl, &r->cur);
+    } else if (gcode_is(gl, 'G', 28)) {
+        r->pos[0] = r->pos[1] = r->pos[2] = 0;
+    } else if (gcode_is(gl, 'G', 4)) {
+        double v;
+        if (gcode_get(gl, 'S', &v) && isfinite(v) && v > 0)
+            r->dwell += fmin(v, EST_COORD_MAX);
+        else if (gcode_get(gl, 'P', &v) && isfinite(v) && v > 0)
+            r->dwell += fmin(v / 1000, EST_COORD_MAX);
+    }
+}
+
 int
 estimate_gcode(const char *text, size_t len, const char *name, const struct est_limits *lim,
                est_move_fn on_move, void *ud, struct estimate *out, struct sf_err *err)
 {
     memset(out, 0, sizeof(*out));
-    struct est_limits cur = *lim; /* as changed by the file's M201-M205 */
-    struct plan pl = { 0 };
-    size_t cap_layers = 0, cap_layer_s = 0;
-    double pos[4] = { 0 }, f = 25, dwell = 0;
-    bool rel_xyz = false, rel_e = false, support = false;
-    const char *type = NULL;
-    size_t type_len = 0;
-    uint32_t lineno = 0;
+    struct reader r = {
+        .name = name, .cur = *lim, .f = 25, .on_move = on_move, .ud = ud, .out = out
+    };
+    struct plan *pl = &r.pl;
     int rc = SF_OK;
     struct gcode_line gl;
     for (size_t i = 0; i < len;) {
@@ -489,148 +621,56 @@ estimate_gcode(const char *text, size_t len, const char *name, const struct est_
         const char *nl = memchr(s, '\n', len - i);
         size_t l = nl ? (size_t)(nl - s) : len - i;
         i += l + 1;
-        lineno++;
+        r.lineno++;
         if (l && s[l - 1] == '\r')
             l--;
         if (l > SF_GCODE_LINE_MAX) {
-            rc = sf_err_set(err, SF_EINVAL, "%s:%u: line longer than %d bytes", name, lineno,
+            rc = sf_err_set(err, SF_EINVAL, "%s:%u: line longer than %d bytes", name, r.lineno,
                             SF_GCODE_LINE_MAX);
             goto fail;
         }
         if (l && s[0] == ';') {
-            if (has_prefix(s, l, ";LAYER_CHANGE")) {
-                if (!mem_grow((void **)&pl.layer_block, &cap_layers, out->n_layers + 1,
-                              sizeof(*pl.layer_block)) ||
-                    !mem_grow((void **)&pl.layer_s, &cap_layer_s, out->n_layers + 1,
-                              sizeof(*pl.layer_s))) {
-                    rc = sf_err_set(err, SF_ENOMEM, "%s: out of memory", name);
-                    goto fail;
-                }
-                pl.layer_block[out->n_layers++] = pl.done + pl.n;
-                pl.n_layers = out->n_layers;
-            } else if (has_prefix(s, l, ";TYPE:")) {
-                support = has_prefix(s, l, ";TYPE:Support material");
-                type = s + 6;
-                type_len = l - 6;
-            }
+            if ((rc = comment_line(&r, s, l, err)) < 0)
+                goto fail;
             continue;
         }
         if ((rc = gcode_parse(s, l, &gl, err)) < 0) {
             /* rc, not sf_err_prefix's SF_EBUG for a NULL err */
-            sf_err_prefix(err, "%s:%u", name, lineno);
+            sf_err_prefix(err, "%s:%u", name, r.lineno);
             goto fail;
         }
         if (gl.letter == 'G' && gl.code >= 0 && gl.code <= 3) {
-            double v, tgt[4], d[4];
-            bool xy = false;
-            static const char ax[4] = { 'X', 'Y', 'Z', 'E' };
-            for (int a = 0; a < 4; a++) {
-                bool rel = a == 3 ? rel_e : rel_xyz;
-                tgt[a] = pos[a];
-                if (gcode_get(&gl, ax[a], &v) && !isnan(v)) {
-                    tgt[a] = rel ? pos[a] + v : v;
-                    if (!isfinite(tgt[a]) || fabs(tgt[a]) > (a == 3 ? EST_E_MAX : EST_COORD_MAX)) {
-                        rc = sf_err_set(err, SF_EINVAL, "%s:%u: %c%g is out of range", name, lineno,
-                                        ax[a], v);
-                        goto fail;
-                    }
-                    if (a < 2 && tgt[a] != pos[a])
-                        xy = true;
-                }
-                d[a] = tgt[a] - pos[a];
-            }
-            if (gcode_get(&gl, 'F', &v) && isfinite(v) && v > 0)
-                f = fmin(v, EST_COORD_MAX) / 60;
-            double ci = 0, cj = 0;
-            bool has_i = gcode_get(&gl, 'I', &ci) && isfinite(ci) && fabs(ci) < EST_COORD_MAX;
-            bool has_j = gcode_get(&gl, 'J', &cj) && isfinite(cj) && fabs(cj) < EST_COORD_MAX;
-            double arc_mm = 0;
-            if (gl.code >= 2 && (has_i || has_j))
-                rc = plan_arc(&pl, &cur, pos, d, has_i ? ci : 0, has_j ? cj : 0, gl.code == 2, f,
-                              &arc_mm);
-            else
-                rc = plan_add(&pl, &cur, d, f);
-            if (rc == SF_EINVAL) {
-                sf_err_set(err, rc, "%s:%u: arc of %.0f mm is longer than %.0f m", name, lineno,
-                           arc_mm, EST_ARC_MM_MAX / 1000);
+            if ((rc = move_line(&r, &gl, err)) < 0)
                 goto fail;
-            }
-            if (rc < 0) {
-                sf_err_set(err, rc, "%s:%u: %s", name, lineno,
-                           rc == SF_ENOMEM ? "out of memory" : "the planner failed");
-                goto fail;
-            }
-            if (xy && d[3] > 0) {
-                out->filament_mm += d[3];
-                if (support)
-                    out->support_mm += d[3];
-            }
-            memcpy(pos, tgt, sizeof(pos));
-            out->n_moves++;
-            if (on_move) {
-                struct est_move mv = {
-                    pos[0], pos[1],  pos[2], pos[3],   d[3],
-                    f,      support, type,   type_len, out->n_layers ? out->n_layers - 1 : 0,
-                    lineno
-                };
-                if ((rc = on_move(ud, &mv)) < 0) {
-                    sf_err_set(err, rc, "%s:%u: stopped by the move callback (%s)", name, lineno,
-                               sf_status_name(rc));
-                    goto fail;
-                }
-            }
-        } else if (gcode_is(&gl, 'G', 90)) {
-            rel_xyz = false;
-        } else if (gcode_is(&gl, 'G', 91)) {
-            rel_xyz = true;
-        } else if (gcode_is(&gl, 'M', 82)) {
-            rel_e = false;
-        } else if (gcode_is(&gl, 'M', 83)) {
-            rel_e = true;
-        } else if (gcode_is(&gl, 'G', 92)) {
-            static const char ax[4] = { 'X', 'Y', 'Z', 'E' };
-            double v;
-            for (int a = 0; a < 4; a++)
-                if (gcode_get(&gl, ax[a], &v) && isfinite(v) &&
-                    fabs(v) <= (a == 3 ? EST_E_MAX : EST_COORD_MAX))
-                    pos[a] = v;
-        } else if (gl.letter == 'M' && gl.code >= 201 && gl.code <= 205) {
-            firmware_limits(&gl, &cur);
-        } else if (gcode_is(&gl, 'G', 28)) {
-            pos[0] = pos[1] = pos[2] = 0;
-        } else if (gcode_is(&gl, 'G', 4)) {
-            double v;
-            if (gcode_get(&gl, 'S', &v) && isfinite(v) && v > 0)
-                dwell += fmin(v, EST_COORD_MAX);
-            else if (gcode_get(&gl, 'P', &v) && isfinite(v) && v > 0)
-                dwell += fmin(v / 1000, EST_COORD_MAX);
+        } else {
+            other_line(&r, &gl);
         }
     }
-    plan_flush(&pl, true);
-    out->time_s = pl.t + dwell;
-    out->peak_blocks = pl.peak;
-    out->n_blocks = pl.n_blocks;
-    while (pl.next_layer < pl.n_layers)
-        pl.layer_s[pl.next_layer++] = pl.t;
+    plan_flush(pl, true);
+    out->time_s = pl->t + r.dwell;
+    out->peak_blocks = pl->peak;
+    out->n_blocks = pl->n_blocks;
+    while (pl->next_layer < pl->n_layers)
+        pl->layer_s[pl->next_layer++] = pl->t;
     if (!out->n_layers) {
-        free(pl.layer_s);
-        pl.layer_s = mem_calloc(1, sizeof(double));
-        if (!pl.layer_s) {
+        free(pl->layer_s);
+        pl->layer_s = mem_calloc(1, sizeof(double));
+        if (!pl->layer_s) {
             rc = sf_err_set(err, SF_ENOMEM, "%s: out of memory", name);
             goto fail;
         }
     }
-    out->layer_start_s = pl.layer_s;
-    free(pl.b);
-    free(pl.layer_block);
+    out->layer_start_s = pl->layer_s;
+    free(pl->b);
+    free(pl->layer_block);
     return SF_OK;
 fail:
-    free(pl.b);
-    free(pl.layer_block);
-    free(pl.layer_s);
+    free(pl->b);
+    free(pl->layer_block);
+    free(pl->layer_s);
     estimate_release(out);
     if (rc >= 0) /* every path above sets a status: a failure without one is ours */
-        rc = sf_err_set(err, SF_EBUG, "%s:%u: estimate failed without a status", name, lineno);
+        rc = sf_err_set(err, SF_EBUG, "%s:%u: estimate failed without a status", name, r.lineno);
     return rc;
 }
 

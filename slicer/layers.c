@@ -398,6 +398,133 @@ plane_of(const struct layer_stack *s, uint32_t k)
     return s->l[k].z_mm - s->l[k].h_mm / 2;
 }
 
+/* out->l: n layers from first_mm up, layer_mm apart, each initialised;
+   out->n stops at the first whose plane is at or above height (at least
+   one).  SF_ENOMEM. */
+static int
+plan_layers(struct layer_stack *out, uint32_t n, double first_mm, double layer_mm, double height)
+{
+    out->l = mem_calloc(n, sizeof(*out->l));
+    if (!out->l)
+        return SF_ENOMEM;
+    uint32_t k = 0;
+    for (; k < n; k++) {
+        out->l[k].h_mm = k ? layer_mm : first_mm;
+        out->l[k].z_mm = first_mm + k * layer_mm;
+        paths_init(&out->l[k].region);
+        paths_init(&out->l[k].inner);
+        paths_init(&out->l[k].skin);
+        paths_init(&out->l[k].skin_bottom);
+        paths_init(&out->l[k].small);
+        paths_init(&out->l[k].top_in);
+        paths_init(&out->l[k].solid);
+        paths_init(&out->l[k].top);
+        paths_init(&out->l[k].sparse);
+        out->l[k].has_regions = false;
+        if (plane_of(out, k) >= height)
+            break;
+    }
+    out->n = k ? k : 1;
+    return SF_OK;
+}
+
+/* The layers [r[0], r[1]) whose plane p satisfies z0 < p <= z1 (z from
+   the part's bottom). */
+static void
+layer_range(const struct layer_stack *out, double z0, double z1, double first_mm, double layer_mm,
+            uint32_t r[2])
+{
+    /* first k with plane > z0, last k with plane <= z1 */
+    double f = (z0 - first_mm) / layer_mm + 0.5;
+    long a = z0 < first_mm / 2 ? 0 : (long)floor(f) + 1;
+    if (a < 0)
+        a = 0;
+    while (a > 0 && plane_of(out, (uint32_t)a - 1) > z0)
+        a--;
+    while ((uint32_t)a < out->n && plane_of(out, (uint32_t)a) <= z0)
+        a++;
+    long b = a;
+    double g = (z1 - first_mm) / layer_mm + 0.5;
+    if (z1 >= first_mm / 2 && (long)floor(g) + 1 > b)
+        b = (long)floor(g) + 1;
+    if (b > (long)out->n)
+        b = out->n;
+    while (b > a && plane_of(out, (uint32_t)b - 1) > z1)
+        b--;
+    while ((uint32_t)b < out->n && plane_of(out, (uint32_t)b) <= z1)
+        b++;
+    r[0] = (uint32_t)a;
+    r[1] = (uint32_t)b; /* exclusive */
+}
+
+/* Bucket triangles by the layers whose plane p satisfies zmin < p <= zmax:
+   *first (out->n + 1 offsets into *tris; both free, also on an error).
+   SF_ENOMEM. */
+static int
+bucket_tris(const struct mesh *m, const struct layer_stack *out, double zmin, double first_mm,
+            double layer_mm, uint32_t **first_out, uint32_t **tris_out)
+{
+    uint32_t *first = mem_calloc((size_t)out->n + 1, sizeof(*first));
+    uint32_t(*range)[2] = mem_array(m->n_tris, sizeof(*range));
+    *first_out = first;
+    *tris_out = NULL;
+    if (!first || !range) {
+        free(range);
+        return SF_ENOMEM;
+    }
+    size_t total = 0;
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        double z0 = m->v[m->t[i][0]].z, z1 = z0;
+        for (int c = 1; c < 3; c++) {
+            z0 = fmin(z0, m->v[m->t[i][c]].z);
+            z1 = fmax(z1, m->v[m->t[i][c]].z);
+        }
+        z0 -= zmin;
+        z1 -= zmin;
+        layer_range(out, z0, z1, first_mm, layer_mm, range[i]);
+        for (uint32_t q = range[i][0]; q < range[i][1]; q++)
+            first[q + 1]++;
+        total += range[i][1] - range[i][0];
+    }
+    for (uint32_t q = 0; q < out->n; q++)
+        first[q + 1] += first[q];
+    uint32_t *tris = mem_array(total ? total : 1, sizeof(*tris));
+    uint32_t *fill = mem_array(out->n, sizeof(*fill));
+    *tris_out = tris;
+    if (!tris || !fill) {
+        free(fill);
+        free(range);
+        return SF_ENOMEM;
+    }
+    memcpy(fill, first, out->n * sizeof(*fill));
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        for (uint32_t q = range[i][0]; q < range[i][1]; q++)
+            tris[fill[q]++] = i;
+    free(fill);
+    free(range);
+    return SF_OK;
+}
+
+/* Cut every layer of out on the par_for threads (first, tris: the
+   triangles of each layer, bucket_tris).  SF_ENOMEM / SF_EBUG. */
+static int
+slice_all(const struct mesh *m, struct layer_stack *out, const uint32_t *first,
+          const uint32_t *tris, double zmin)
+{
+    int n_work = par_threads();
+    struct job j = { .m = m, .out = out, .first = first, .tris = tris, .zmin = zmin };
+    j.scratch = mem_calloc((size_t)n_work, sizeof(*j.scratch));
+    if (!j.scratch)
+        return SF_ENOMEM;
+    atomic_init(&j.n_open, 0);
+    int rc = par_for(out->n, 1, 0, slice_layers, &j);
+    for (int w = 0; w < n_work; w++)
+        free(j.scratch[w].segs);
+    free(j.scratch);
+    out->n_open = atomic_load(&j.n_open);
+    return rc;
+}
+
 int
 layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, double cy,
              struct layer_stack *out, struct sf_err *err)
@@ -423,114 +550,27 @@ layers_slice(const struct mesh *m, double first_mm, double layer_mm, double cx, 
     if (nl > SF_SLICE_LAYERS_MAX)
         return sf_err_set(err, SF_EINVAL, "slice: %.0f layers exceed the cap of %u", nl,
                           SF_SLICE_LAYERS_MAX);
-    uint32_t n = (uint32_t)nl;
     /* drop layers whose plane is at or above the top */
-    out->l = mem_calloc(n, sizeof(*out->l));
-    if (!out->l)
+    if (plan_layers(out, (uint32_t)nl, first_mm, layer_mm, height) < 0)
         return sf_err_set(err, SF_ENOMEM, "slice: out of memory");
     out->cx_mm = cx;
     out->cy_mm = cy;
     out->dx = cx - (lo.x + hi.x) / 2;
     out->dy = cy - (lo.y + hi.y) / 2;
     out->dz = -lo.z;
-    uint32_t k = 0;
-    for (; k < n; k++) {
-        out->l[k].h_mm = k ? layer_mm : first_mm;
-        out->l[k].z_mm = first_mm + k * layer_mm;
-        paths_init(&out->l[k].region);
-        paths_init(&out->l[k].inner);
-        paths_init(&out->l[k].skin);
-        paths_init(&out->l[k].skin_bottom);
-        paths_init(&out->l[k].small);
-        paths_init(&out->l[k].top_in);
-        paths_init(&out->l[k].solid);
-        paths_init(&out->l[k].top);
-        paths_init(&out->l[k].sparse);
-        out->l[k].has_regions = false;
-        if (plane_of(out, k) >= height)
-            break;
-    }
-    out->n = k ? k : 1;
 
-    /* Bucket triangles by the layers whose plane p satisfies zmin < p <= zmax. */
-    int rc = SF_ENOMEM;
-    uint32_t *first = mem_calloc((size_t)out->n + 1, sizeof(*first));
-    uint32_t *tris = NULL;
-    uint32_t(*range)[2] = mem_array(m->n_tris, sizeof(*range));
-    if (!first || !range)
-        goto fail;
-    size_t total = 0;
-    for (uint32_t i = 0; i < m->n_tris; i++) {
-        double z0 = m->v[m->t[i][0]].z, z1 = z0;
-        for (int c = 1; c < 3; c++) {
-            z0 = fmin(z0, m->v[m->t[i][c]].z);
-            z1 = fmax(z1, m->v[m->t[i][c]].z);
-        }
-        z0 -= lo.z;
-        z1 -= lo.z;
-        /* first k with plane > z0, last k with plane <= z1 */
-        double f = (z0 - first_mm) / layer_mm + 0.5;
-        long a = z0 < first_mm / 2 ? 0 : (long)floor(f) + 1;
-        if (a < 0)
-            a = 0;
-        while (a > 0 && plane_of(out, (uint32_t)a - 1) > z0)
-            a--;
-        while ((uint32_t)a < out->n && plane_of(out, (uint32_t)a) <= z0)
-            a++;
-        long b = a;
-        double g = (z1 - first_mm) / layer_mm + 0.5;
-        if (z1 >= first_mm / 2 && (long)floor(g) + 1 > b)
-            b = (long)floor(g) + 1;
-        if (b > (long)out->n)
-            b = out->n;
-        while (b > a && plane_of(out, (uint32_t)b - 1) > z1)
-            b--;
-        while ((uint32_t)b < out->n && plane_of(out, (uint32_t)b) <= z1)
-            b++;
-        range[i][0] = (uint32_t)a;
-        range[i][1] = (uint32_t)b; /* exclusive */
-        for (uint32_t q = range[i][0]; q < range[i][1]; q++)
-            first[q + 1]++;
-        total += range[i][1] - range[i][0];
-    }
-    for (uint32_t q = 0; q < out->n; q++)
-        first[q + 1] += first[q];
-    tris = mem_array(total ? total : 1, sizeof(*tris));
-    uint32_t *fill = mem_array(out->n, sizeof(*fill));
-    if (!tris || !fill) {
-        free(fill);
-        goto fail;
-    }
-    memcpy(fill, first, out->n * sizeof(*fill));
-    for (uint32_t i = 0; i < m->n_tris; i++)
-        for (uint32_t q = range[i][0]; q < range[i][1]; q++)
-            tris[fill[q]++] = i;
-    free(fill);
-
-    int n_work = par_threads();
-    struct job j = { .m = m, .out = out, .first = first, .tris = tris, .zmin = lo.z };
-    j.scratch = mem_calloc((size_t)n_work, sizeof(*j.scratch));
-    if (!j.scratch)
-        goto fail;
-    atomic_init(&j.n_open, 0);
-    rc = par_for(out->n, 1, 0, slice_layers, &j);
-    for (int w = 0; w < n_work; w++)
-        free(j.scratch[w].segs);
-    free(j.scratch);
-    out->n_open = atomic_load(&j.n_open);
-    if (rc < 0)
-        goto fail;
+    uint32_t *first, *tris;
+    int rc = bucket_tris(m, out, lo.z, first_mm, layer_mm, &first, &tris);
+    if (rc == SF_OK)
+        rc = slice_all(m, out, first, tris, lo.z);
     free(first);
     free(tris);
-    free(range);
+    if (rc < 0) {
+        layer_stack_release(out);
+        return sf_err_set(err, rc == SF_EBUG ? SF_EBUG : SF_ENOMEM, "slice: %s",
+                          rc == SF_EBUG ? "polygon clipping failed" : "out of memory");
+    }
     return SF_OK;
-fail:
-    free(first);
-    free(tris);
-    free(range);
-    layer_stack_release(out);
-    return sf_err_set(err, rc == SF_EBUG ? SF_EBUG : SF_ENOMEM, "slice: %s",
-                      rc == SF_EBUG ? "polygon clipping failed" : "out of memory");
 }
 
 void

@@ -162,6 +162,19 @@ paths_length_k(const struct paths *p, uint32_t k, bool closed)
     return l / POLY_SCALE;
 }
 
+/* What edge a->b adds to the winding number about q: +1 crossing q's
+   level upward with q on its left, -1 downward with q on its right. */
+static long
+wind_step(struct ipt a, struct ipt b, struct ipt q)
+{
+    /* orientation of q against a->b, in long double to avoid overflow */
+    long double cr =
+        (long double)(b.x - a.x) * (q.y - a.y) - (long double)(q.x - a.x) * (b.y - a.y);
+    if (a.y <= q.y)
+        return b.y > q.y && cr > 0 ? 1 : 0;
+    return b.y <= q.y && cr < 0 ? -1 : 0;
+}
+
 /* Winding number of path k about q. */
 static long
 winding_k(const struct paths *p, uint32_t k, struct ipt q)
@@ -171,15 +184,7 @@ winding_k(const struct paths *p, uint32_t k, struct ipt q)
     uint32_t n = paths_len(p, k);
     for (uint32_t i = 0; i < n; i++) {
         struct ipt a = v[i], b = v[i + 1 < n ? i + 1 : 0];
-        /* orientation of q against a->b, in long double to avoid overflow */
-        long double cr =
-            (long double)(b.x - a.x) * (q.y - a.y) - (long double)(q.x - a.x) * (b.y - a.y);
-        if (a.y <= q.y) {
-            if (b.y > q.y && cr > 0)
-                wind++;
-        } else if (b.y <= q.y && cr < 0) {
-            wind--;
-        }
+        wind += wind_step(a, b, q);
     }
     return wind;
 }
@@ -280,14 +285,7 @@ paths_index_contains(const struct paths_index *ix, struct ipt q)
     long wind = 0;
     for (uint32_t e = ix->first[bb]; e < ix->first[bb + 1]; e++) {
         struct ipt a = ix->pts[ix->edges[e][0]], b = ix->pts[ix->edges[e][1]];
-        long double cr =
-            (long double)(b.x - a.x) * (q.y - a.y) - (long double)(q.x - a.x) * (b.y - a.y);
-        if (a.y <= q.y) {
-            if (b.y > q.y && cr > 0)
-                wind++;
-        } else if (b.y <= q.y && cr < 0) {
-            wind--;
-        }
+        wind += wind_step(a, b, q);
     }
     return wind != 0;
 }

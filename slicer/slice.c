@@ -303,18 +303,12 @@ tp_layers(void *ud, uint32_t begin, uint32_t end, int worker)
     return SF_OK;
 }
 
-int
-slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcode_path,
-           struct slice_result *res, slice_progress_fn progress, void *ud, struct sf_err *err)
+/* The part's height into res->height_mm; SF_EINVAL when it has no
+   triangles or does not fit the printer. */
+static int
+check_fit(const struct mesh *m, const struct slice_profile *p, struct slice_result *res,
+          struct sf_err *err)
 {
-    double t0 = now_s();
-    struct slice_result dummy;
-    if (!res)
-        res = &dummy;
-    memset(res, 0, sizeof(*res));
-    int rc = slice_profile_check(p, err);
-    if (rc < 0)
-        return rc;
     if (!m->n_tris)
         return sf_err_set(err, SF_EINVAL, "slice: the part has no triangles");
     struct vec3 lo = m->v[m->t[0][0]], hi = lo;
@@ -330,12 +324,106 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
                           hi.x - lo.x, hi.y - lo.y, hi.z - lo.z, p->printer_name, p->bed_x_mm,
                           p->bed_y_mm, p->max_z_mm);
     res->height_mm = hi.z - lo.z;
+    return SF_OK;
+}
+
+/* The support regions of every layer into *sup (s->n of them, freed with
+   support_layer_release each and free; NULL on an error), from the ray
+   grid's columns and the islands'; *cols (free) holds the columns. */
+static int
+supports(const struct mesh *m, const struct slice_profile *p, const struct layer_stack *s,
+         struct support_layer **sup, struct sup_col **cols, struct slice_result *res,
+         struct sf_err *err)
+{
+    size_t n_cols = 0, cap_cols = 0;
+    struct sup_grid g;
+    int rc = ray_columns(m, p, s, &g, cols, &n_cols, &cap_cols, res, err);
+    size_t n_ray = n_cols;
+    if (rc == SF_OK && (rc = support_islands(s, &g, cols, &n_cols, &cap_cols)) < 0)
+        sf_err_set(err, rc, "support islands: %s",
+                   rc == SF_ENOMEM ? "out of memory" : "clipping failed");
+    res->n_island_columns = (uint32_t)(n_cols - n_ray);
+    if (rc == SF_OK && !(*sup = mem_calloc(s->n, sizeof(**sup))))
+        rc = sf_err_set(err, SF_ENOMEM, "support: out of memory");
+    if (rc == SF_OK)
+        rc = support_layers(s, &g, *cols, n_cols, p, *sup, err);
+    if (rc < 0) {
+        free(*sup);
+        *sup = NULL;
+        return rc;
+    }
+    res->support_volume_mm3 = support_volume(s, *sup);
+    return rc;
+}
+
+/* Every layer's paths into lp (the three phases on the par_for threads),
+   then the skirt and brim (res->brim_mm). */
+static int
+toolpaths(struct layer_stack *s, const struct slice_profile *p, const struct support_layer *sup,
+          struct layer_paths *lp, slice_progress_fn progress, void *ud, struct slice_result *res,
+          struct sf_err *err)
+{
+    struct tp_job j = { .s = s, .p = p, .sup = sup, .lp = lp, .progress = progress, .ud = ud };
+    int rc = SF_OK;
+    for (j.phase = 0; j.phase < 3 && rc == SF_OK; j.phase++) {
+        atomic_init(&j.done, 0);
+        rc = par_for(s->n, 1, 0, tp_layers, &j);
+    }
+    /* the stage's last report, also when other threads built the last layers */
+    if (rc == SF_OK && cancelled(progress, ud, "toolpaths", 1))
+        rc = SF_ECANCELED;
+    if (rc < 0)
+        return sf_err_set(err, rc, "toolpaths: %s",
+                          rc == SF_ECANCELED ? "cancelled"
+                          : rc == SF_ENOMEM  ? "out of memory"
+                                             : "clipping failed");
+
+    res->brim_mm = tp_brim_width(s, p, res->height_mm);
+    for (uint32_t k = 0; k < s->n && rc == SF_OK && (k == 0 || (int)k < p->skirt_height); k++)
+        if ((rc = toolpath_skirt_brim(s, k, p, sup, res->brim_mm, &lp[k])) < 0)
+            sf_err_set(err, rc, "skirt and brim: %s",
+                       rc == SF_ENOMEM ? "out of memory" : "clipping failed");
+    return rc;
+}
+
+/* The estimate of the G-code body into est (estimate_release) and the
+   filament and time figures into res. */
+static int
+estimate_body(const struct slice_profile *p, const struct buf *body, struct estimate *est,
+              struct slice_result *res, struct sf_err *err)
+{
+    struct est_limits lim;
+    slice_limits(p, &lim);
+    int rc = estimate_gcode(body->data ? body->data : "", body->len, "gcode body", &lim, NULL, NULL,
+                            est, err);
+    if (rc < 0)
+        return rc;
+    double g_per_mm = M_PI * p->filament_mm * p->filament_mm / 4 * p->density_g_cm3 / 1000;
+    res->filament_mm = est->filament_mm;
+    res->filament_g = est->filament_mm * g_per_mm;
+    res->support_mm = est->support_mm;
+    res->support_g = est->support_mm * g_per_mm;
+    res->time_s = est->time_s;
+    return rc;
+}
+
+int
+slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcode_path,
+           struct slice_result *res, slice_progress_fn progress, void *ud, struct sf_err *err)
+{
+    double t0 = now_s();
+    struct slice_result dummy;
+    if (!res)
+        res = &dummy;
+    memset(res, 0, sizeof(*res));
+    int rc = slice_profile_check(p, err);
+    if (rc < 0 || (rc = check_fit(m, p, res, err)) < 0)
+        return rc;
 
     struct layer_stack s;
     struct support_layer *sup = NULL;
     struct layer_paths *lp = NULL;
     struct sup_col *cols = NULL;
-    size_t n_cols = 0, cap_cols = 0;
     struct buf body;
     struct estimate est;
     memset(&est, 0, sizeof(est));
@@ -351,23 +439,8 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
 
     if (p->support) {
         STAGE("supports");
-        struct sup_grid g;
-        rc = ray_columns(m, p, &s, &g, &cols, &n_cols, &cap_cols, res, err);
-        size_t n_ray = n_cols;
-        if (rc == SF_OK && (rc = support_islands(&s, &g, &cols, &n_cols, &cap_cols)) < 0)
-            sf_err_set(err, rc, "support islands: %s",
-                       rc == SF_ENOMEM ? "out of memory" : "clipping failed");
-        res->n_island_columns = (uint32_t)(n_cols - n_ray);
-        if (rc == SF_OK && !(sup = mem_calloc(s.n, sizeof(*sup))))
-            rc = sf_err_set(err, SF_ENOMEM, "support: out of memory");
-        if (rc == SF_OK)
-            rc = support_layers(&s, &g, cols, n_cols, p, sup, err);
-        if (rc < 0) {
-            free(sup);
-            sup = NULL;
+        if ((rc = supports(m, p, &s, &sup, &cols, res, err)) < 0)
             goto out;
-        }
-        res->support_volume_mm3 = support_volume(&s, sup);
     }
 
     STAGE("toolpaths");
@@ -376,29 +449,7 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
         rc = sf_err_set(err, SF_ENOMEM, "toolpaths: out of memory");
         goto out;
     }
-    struct tp_job j = { .s = &s, .p = p, .sup = sup, .lp = lp, .progress = progress, .ud = ud };
-    rc = SF_OK;
-    for (j.phase = 0; j.phase < 3 && rc == SF_OK; j.phase++) {
-        atomic_init(&j.done, 0);
-        rc = par_for(s.n, 1, 0, tp_layers, &j);
-    }
-    /* the stage's last report, also when other threads built the last layers */
-    if (rc == SF_OK && cancelled(progress, ud, "toolpaths", 1))
-        rc = SF_ECANCELED;
-    if (rc < 0) {
-        sf_err_set(err, rc, "toolpaths: %s",
-                   rc == SF_ECANCELED ? "cancelled"
-                   : rc == SF_ENOMEM  ? "out of memory"
-                                      : "clipping failed");
-        goto out;
-    }
-
-    res->brim_mm = tp_brim_width(&s, p, res->height_mm);
-    for (uint32_t k = 0; k < s.n && rc == SF_OK && (k == 0 || (int)k < p->skirt_height); k++)
-        if ((rc = toolpath_skirt_brim(&s, k, p, sup, res->brim_mm, &lp[k])) < 0)
-            sf_err_set(err, rc, "skirt and brim: %s",
-                       rc == SF_ENOMEM ? "out of memory" : "clipping failed");
-    if (rc < 0)
+    if ((rc = toolpaths(&s, p, sup, lp, progress, ud, res, err)) < 0)
         goto out;
 
     STAGE("gcode");
@@ -408,17 +459,8 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
     if (rc < 0)
         goto out;
     STAGE("estimate");
-    struct est_limits lim;
-    slice_limits(p, &lim);
-    if ((rc = estimate_gcode(body.data ? body.data : "", body.len, "gcode body", &lim, NULL, NULL,
-                             &est, err)) < 0)
+    if ((rc = estimate_body(p, &body, &est, res, err)) < 0)
         goto out;
-    double g_per_mm = M_PI * p->filament_mm * p->filament_mm / 4 * p->density_g_cm3 / 1000;
-    res->filament_mm = est.filament_mm;
-    res->filament_g = est.filament_mm * g_per_mm;
-    res->support_mm = est.support_mm;
-    res->support_g = est.support_mm * g_per_mm;
-    res->time_s = est.time_s;
     STAGE("write");
     rc = write_file(gcode_path, p, &body, &est, res, err);
     if (rc == SF_OK)
