@@ -34,6 +34,7 @@
 #include "../../slicer/profile.h"
 #include "../../slicer/slice.h"
 #include "../base/buf.h"
+#include "../base/clock.h"
 #include "../base/limits.h"
 #include "../base/log.h"
 #include "../geom/dirsearch.h"
@@ -46,14 +47,6 @@ static int
 cancelled(const struct prepare_req *req, struct sf_err *err)
 {
     return sf_err_set(err, SF_ECANCELED, "job %lld: prepare cancelled", (long long)req->job_id);
-}
-
-static int64_t
-mono_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
 }
 
 static int
@@ -348,7 +341,7 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     }
     const struct mesh *printed = &m;
     struct slice_result sres = { 0 };
-    int64_t t0 = mono_ms();
+    int64_t t0 = clock_mono_ms();
     if (slimmed) {
         struct prepare_choice ch;
         rc = prepare_slice_better(&start, &m, &prof, req->out_path, cancel, &ch, err);
@@ -369,7 +362,7 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     } else {
         rc = slice_mesh(&m, &prof, req->out_path, &sres, on_slice_progress, (void *)cancel, err);
     }
-    out->slice_ms = mono_ms() - t0;
+    out->slice_ms = clock_mono_ms() - t0;
     struct vec3 lo, hi;
     mesh_bbox(printed, &lo, &hi);
     if (rc == SF_OK && req->mesh_out[0] && !reuse && strcmp(method, "none") != 0) {
