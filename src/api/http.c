@@ -44,8 +44,10 @@
 #include <unistd.h>
 
 #include "../base/buf.h"
+#include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "../base/utf8.h"
 
 /* A streamed response; lives from the route's answer until MHD frees it. */
 struct stream {
@@ -126,38 +128,7 @@ defer_unlink(struct http *h, struct http_defer *d)
         }
 }
 
-static int64_t
-now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
-
 /* ---- UTF-8 ---- */
-
-/* Length of the valid UTF-8 sequence at p (1..4); 0 if invalid; -1 if p
-   holds a valid beginning cut by the end of the string. */
-static int
-utf8_seq(const unsigned char *p)
-{
-    if (p[0] < 0x80)
-        return 1;
-    int n = p[0] >= 0xf0 ? 4 : p[0] >= 0xe0 ? 3 : p[0] >= 0xc2 ? 2 : 0;
-    if (n == 0 || p[0] > 0xf4)
-        return 0;
-    for (int i = 1; i < n; i++) {
-        if (p[i] == 0)
-            return -1;
-        if ((p[i] & 0xc0) != 0x80)
-            return 0;
-        /* overlong 3/4-byte forms, surrogates, > U+10FFFF */
-        if (i == 1 && ((p[0] == 0xe0 && p[1] < 0xa0) || (p[0] == 0xed && p[1] >= 0xa0) ||
-                       (p[0] == 0xf0 && p[1] < 0x90) || (p[0] == 0xf4 && p[1] >= 0x90)))
-            return 0;
-    }
-    return n;
-}
 
 char *
 http_text_clean(char *out, size_t cap, const char *s)
@@ -568,7 +539,7 @@ on_connection(void *cls, struct MHD_Connection *conn, void **socket_context,
         return; /* untracked: MHD's idle timeout still applies */
     }
     unsigned ms = h->cfg.header_timeout_ms ? h->cfg.header_timeout_ms : HTTP_HEADER_TIMEOUT_MS;
-    *pd = (struct pending){ .fd = info->connect_fd, .deadline_ms = now_ms() + ms };
+    *pd = (struct pending){ .fd = info->connect_fd, .deadline_ms = clock_mono_ms() + ms };
     pd->prev = h->pending_tail;
     if (h->pending_tail)
         h->pending_tail->next = pd;
@@ -595,7 +566,7 @@ head_arrived(struct http *h, struct MHD_Connection *conn)
 static void
 drop_late(struct http *h)
 {
-    int64_t now = now_ms();
+    int64_t now = clock_mono_ms();
     while (h->pending_head && h->pending_head->deadline_ms <= now)
         pending_drop(h, h->pending_head, "header deadline passed");
 }
@@ -1034,7 +1005,7 @@ http_timeout_ms(struct http *h)
     if (MHD_get_timeout(h->d, &ms) == MHD_YES)
         t = ms > INT64_MAX ? INT64_MAX : (int64_t)ms;
     if (h->pending_head) {
-        int64_t left = h->pending_head->deadline_ms - now_ms();
+        int64_t left = h->pending_head->deadline_ms - clock_mono_ms();
         if (left < 0)
             left = 0;
         if (t < 0 || left < t)

@@ -30,6 +30,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "clock.h"
 #include "mem.h"
 
 #define LOOP_EVENTS_MAX  64
@@ -81,14 +82,6 @@ struct loop {
     bool virtual_time; /* loop_set_virtual(): now_ms moves only to the next due timer */
 };
 
-static int64_t
-mono_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
-
 static void
 on_eventfd(struct loop *l, int fd, unsigned events, void *ud)
 {
@@ -130,7 +123,7 @@ loop_new(struct sf_err *err)
     }
     pthread_mutex_init(&l->post_lock, NULL);
     sigemptyset(&l->sigmask);
-    l->now_ms = mono_ms();
+    l->now_ms = clock_mono_ms();
     if (loop_add_fd(l, l->evfd, LOOP_READ, on_eventfd, NULL, err) < 0)
         goto close_ev;
     return l;
@@ -438,7 +431,7 @@ loop_run_once(struct loop *l, int timeout_ms)
         n = run_once_virtual(l, evs);
         goto dispatch;
     }
-    l->now_ms = mono_ms();
+    l->now_ms = clock_mono_ms();
     if (l->n_timers > 0) {
         int64_t wait = l->heap[0].due_ms - l->now_ms;
         if (wait < 0)
@@ -447,7 +440,7 @@ loop_run_once(struct loop *l, int timeout_ms)
             timeout_ms = (int)(wait > 1000000 ? 1000000 : wait);
     }
     n = epoll_wait(l->epfd, evs, LOOP_EVENTS_MAX, timeout_ms);
-    l->now_ms = mono_ms();
+    l->now_ms = clock_mono_ms();
 dispatch:
     if (n < 0) {
         if (errno == EINTR)

@@ -62,6 +62,54 @@ bad:
     return false;
 }
 
+/* If key is one of the n options in nums, parse text into its target and return 1, or print
+   cmd_parse_num's message and return -1; 0 for any other key. */
+static int
+parse_nums(const char *cmd, const struct cmd_num *nums, int n, int key, const char *text)
+{
+    for (int i = 0; i < n; i++) {
+        const struct cmd_num *o = &nums[i];
+        double v;
+        if (o->key != key)
+            continue;
+        if (!cmd_parse_num(cmd, o->name, text, o->lo, o->hi, o->want, &v))
+            return -1;
+        if (o->out)
+            *o->out = o->div != 0 ? v / o->div : v;
+        else
+            *o->out_int = (int)v;
+        return 1;
+    }
+    return 0;
+}
+
+int
+cmd_getopt(const char *cmd, int argc, char **argv, const char *shortopts,
+           const struct option *longopts, const struct cmd_num *nums, int n_nums)
+{
+    int c, k;
+    while ((c = getopt_long(argc, argv, shortopts, longopts, NULL)) != -1) {
+        if ((k = parse_nums(cmd, nums, n_nums, c, optarg)) == 0)
+            return c;
+        if (k < 0)
+            return CMD_OPT_BAD;
+    }
+    return -1;
+}
+
+int
+cmd_usage(const char *usage)
+{
+    fprintf(stderr, "usage: slimfarm %s\n", usage);
+    return 2;
+}
+
+int
+cmd_opt_error(int c, const char *usage)
+{
+    return c == CMD_OPT_BAD ? 2 : cmd_usage(usage);
+}
+
 void
 cmd_progress(const char *label, double done, double total)
 {

@@ -15,6 +15,7 @@
 #ifndef SF_CMD_CMD_H
 #define SF_CMD_CMD_H
 
+#include <getopt.h>
 #include <stdbool.h>
 
 typedef int (*cmd_fn)(int argc, char **argv);
@@ -44,6 +45,36 @@ void cmd_register(const struct cmd *c);
 bool cmd_parse_num(const char *cmd, const char *opt, const char *text, double lo, double hi,
                    const char *want, double *out);
 bool cmd_parse_vec3(const char *cmd, const char *opt, const char *text, double out[3]);
+
+/* A numeric option for cmd_getopt: its value as cmd_parse_num checks it. */
+struct cmd_num {
+    int key;          /* getopt_long's value for the option */
+    const char *name; /* "angle": the option without its dashes */
+    double lo, hi;    /* the range it must be in */
+    const char *want; /* for the message: "degrees in [0, 90)" */
+    double *out;      /* where the value goes (scaled by div); NULL: to out_int */
+    int *out_int;     /* where the value goes, truncated, when out is NULL */
+    double div;       /* 0, or what the value is divided by (100: a percentage) */
+};
+
+/* What cmd_getopt returns for a numeric option whose value it refused. */
+#define CMD_OPT_BAD (-2)
+
+/*
+ * getopt_long(argc, argv, shortopts, longopts) (the caller sets optind to
+ * 1 before the first call), parsing the n_nums numeric options of nums
+ * into their targets itself: returns the next other option for the
+ * caller's switch, -1 at the end, or CMD_OPT_BAD after printing
+ * cmd_parse_num's message for a bad value.
+ */
+int cmd_getopt(const char *cmd, int argc, char **argv, const char *shortopts,
+               const struct option *longopts, const struct cmd_num *nums, int n_nums);
+
+/* Print "usage: slimfarm USAGE" on stderr; returns 2, the usage-error status. */
+int cmd_usage(const char *usage);
+/* For an option c from cmd_getopt that the caller does not take (its switch's default): print
+   the usage unless c is CMD_OPT_BAD (whose message is out already); returns 2. */
+int cmd_opt_error(int c, const char *usage);
 
 /* `optimize --method surface` (cmd_optimize_surface.c), reached from cmd_optimize.c,
    whose usage shows this form second. */

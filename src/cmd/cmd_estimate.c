@@ -37,14 +37,11 @@ run(int argc, char **argv)
             material = optarg;
             break;
         default:
-            fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-            return 2;
+            return cmd_usage(usage_line);
         }
     }
-    if (optind != argc - 1) {
-        fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-        return 2;
-    }
+    if (optind != argc - 1)
+        return cmd_usage(usage_line);
     struct slice_profile p;
     if (!cmd_load_profile("estimate", printer, material, &p))
         return 1;

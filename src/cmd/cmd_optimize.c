@@ -16,6 +16,7 @@
 #include "../base/mem.h"
 #include "../geom/slim.h"
 #include "cmd.h"
+#include "cmdmesh.h"
 #include "cmdreport.h"
 
 static const char usage_line[] =
@@ -107,8 +108,33 @@ report_text(const char *in, const char *out, const struct slim_result *r)
                r->rotation.m[1][2], r->rotation.m[2][0], r->rotation.m[2][1], r->rotation.m[2][2]);
 }
 
+/* One --fix-box X0,Y0,Z0,X1,Y1,Z1 into boxes[*n_boxes]; false with a message if it is not one
+   or there are MAX_BOXES already. */
+static bool
+parse_box(const char *arg, struct slim_box *boxes, int *n_boxes)
+{
+    struct slim_box *b = &boxes[*n_boxes];
+    int used = 0;
+    if (*n_boxes == MAX_BOXES ||
+        sscanf(arg, "%lf,%lf,%lf,%lf,%lf,%lf%n", &b->lo.x, &b->lo.y, &b->lo.z, &b->hi.x, &b->hi.y,
+               &b->hi.z, &used) != 6 ||
+        arg[used] || !v3_isfinite(b->lo) || !v3_isfinite(b->hi) || b->lo.x > b->hi.x ||
+        b->lo.y > b->hi.y || b->lo.z > b->hi.z) {
+        fprintf(stderr,
+                "slimfarm optimize: --fix-box wants X0,Y0,Z0,X1,Y1,Z1 in mm with X0 <= X1 "
+                "(at most %d boxes), got '%s'\n",
+                MAX_BOXES, arg);
+        return false;
+    }
+    (*n_boxes)++;
+    return true;
+}
+
+/* The volumetric options into p, boxes, out and json: 0, or 2 (a usage error, message
+   printed). */
 static int
-run(int argc, char **argv)
+parse_opts(int argc, char **argv, struct slim_params *p, struct slim_box *boxes, int *n_boxes,
+           const char **out, bool *json)
 {
     static const struct option opts[] = { { "output", required_argument, NULL, 'o' },
                                           { "method", required_argument, NULL, 'm' },
@@ -125,6 +151,86 @@ run(int argc, char **argv)
                                           { "min-gain", required_argument, NULL, 'g' },
                                           { "json", no_argument, NULL, 'j' },
                                           { NULL, 0, NULL, 0 } };
+    const char *method = NULL;
+    double v;
+    int c;
+    optind = 1;
+    while ((c = getopt_long(argc, argv, "o:", opts, NULL)) != -1) {
+        switch (c) {
+        case 'o':
+            *out = optarg;
+            break;
+        case 'm':
+            method = optarg;
+            break;
+        case 'a':
+            if (!parse_num("--angle", optarg, 0, 89, &p->angle_deg))
+                return 2;
+            p->margin_deg = fmin(p->margin_deg, p->angle_deg);
+            break;
+        case 'b':
+            if (!parse_num("--beta", optarg, 0, 90, &p->beta_deg))
+                return 2;
+            break;
+        case 'M':
+            if (!parse_num("--max-mndr", optarg, 0.01, 100, &v))
+                return 2;
+            p->max_mndr = v / 100;
+            break;
+        case 'A':
+            if (!parse_num("--max-andr", optarg, 0.01, 100, &v))
+                return 2;
+            p->max_andr = v / 100;
+            break;
+        case 'f':
+            if (!parse_num("--fix-bottom", optarg, 0, 1e4, &p->fix_bottom_mm))
+                return 2;
+            break;
+        case 'x':
+            if (!parse_box(optarg, boxes, n_boxes))
+                return 2;
+            break;
+        case 'v':
+            if (!parse_num("--max-tet-verts", optarg, 100, 1e6, &v))
+                return 2;
+            p->tet.max_verts = (uint32_t)v;
+            break;
+        case 'i':
+            if (!parse_num("--iterations", optarg, 1, SLIM_CURVE_MAX - 1, &v))
+                return 2;
+            p->max_iters = (int)v;
+            break;
+        case 's':
+            p->search_direction = true;
+            break;
+        case 'k':
+            p->keep_volume = false;
+            break;
+        case 'g':
+            if (!parse_num("--min-gain", optarg, 0, 99, &v))
+                return 2;
+            p->min_gain = v / 100;
+            break;
+        case 'j':
+            *json = true;
+            break;
+        default:
+            return cmd_usage(usage_line);
+        }
+    }
+    if (optind != argc - 1 || !*out || !method)
+        return cmd_usage(usage_line);
+    if (strcmp(method, "volumetric") != 0) {
+        fprintf(stderr, "slimfarm optimize: method '%s' is not supported (volumetric, surface)\n",
+                method);
+        return 2;
+    }
+    return 0;
+}
+
+static int
+run(int argc, char **argv)
+{
     for (int i = 1; i < argc; i++) {
         if ((strcmp(argv[i], "--method") == 0 && i + 1 < argc &&
              strcmp(argv[i + 1], "surface") == 0) ||
@@ -135,97 +241,11 @@ run(int argc, char **argv)
     slim_params_default(&p);
     struct slim_box boxes[MAX_BOXES];
     int n_boxes = 0;
-    const char *out = NULL, *method = NULL;
+    const char *out = NULL;
     bool json = false;
-    double v;
-    int c;
-    optind = 1;
-    while ((c = getopt_long(argc, argv, "o:", opts, NULL)) != -1) {
-        switch (c) {
-        case 'o':
-            out = optarg;
-            break;
-        case 'm':
-            method = optarg;
-            break;
-        case 'a':
-            if (!parse_num("--angle", optarg, 0, 89, &p.angle_deg))
-                return 2;
-            p.margin_deg = fmin(p.margin_deg, p.angle_deg);
-            break;
-        case 'b':
-            if (!parse_num("--beta", optarg, 0, 90, &p.beta_deg))
-                return 2;
-            break;
-        case 'M':
-            if (!parse_num("--max-mndr", optarg, 0.01, 100, &v))
-                return 2;
-            p.max_mndr = v / 100;
-            break;
-        case 'A':
-            if (!parse_num("--max-andr", optarg, 0.01, 100, &v))
-                return 2;
-            p.max_andr = v / 100;
-            break;
-        case 'f':
-            if (!parse_num("--fix-bottom", optarg, 0, 1e4, &p.fix_bottom_mm))
-                return 2;
-            break;
-        case 'x': {
-            struct slim_box *b = &boxes[n_boxes];
-            int used = 0;
-            if (n_boxes == MAX_BOXES ||
-                sscanf(optarg, "%lf,%lf,%lf,%lf,%lf,%lf%n", &b->lo.x, &b->lo.y, &b->lo.z, &b->hi.x,
-                       &b->hi.y, &b->hi.z, &used) != 6 ||
-                optarg[used] || !v3_isfinite(b->lo) || !v3_isfinite(b->hi) || b->lo.x > b->hi.x ||
-                b->lo.y > b->hi.y || b->lo.z > b->hi.z) {
-                fprintf(stderr,
-                        "slimfarm optimize: --fix-box wants X0,Y0,Z0,X1,Y1,Z1 in mm with X0 <= X1 "
-                        "(at most %d boxes), got '%s'\n",
-                        MAX_BOXES, optarg);
-                return 2;
-            }
-            n_boxes++;
-            break;
-        }
-        case 'v':
-            if (!parse_num("--max-tet-verts", optarg, 100, 1e6, &v))
-                return 2;
-            p.tet.max_verts = (uint32_t)v;
-            break;
-        case 'i':
-            if (!parse_num("--iterations", optarg, 1, SLIM_CURVE_MAX - 1, &v))
-                return 2;
-            p.max_iters = (int)v;
-            break;
-        case 's':
-            p.search_direction = true;
-            break;
-        case 'k':
-            p.keep_volume = false;
-            break;
-        case 'g':
-            if (!parse_num("--min-gain", optarg, 0, 99, &v))
-                return 2;
-            p.min_gain = v / 100;
-            break;
-        case 'j':
-            json = true;
-            break;
-        default:
-            fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-            return 2;
-        }
-    }
-    if (optind != argc - 1 || !out || !method) {
-        fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-        return 2;
-    }
-    if (strcmp(method, "volumetric") != 0) {
-        fprintf(stderr, "slimfarm optimize: method '%s' is not supported (volumetric, surface)\n",
-                method);
-        return 2;
-    }
+    int rc = parse_opts(argc, argv, &p, boxes, &n_boxes, &out, &json);
+    if (rc)
+        return rc;
     p.fix_boxes = n_boxes ? boxes : NULL;
     p.n_fix_boxes = n_boxes;
     p.progress = progress;
@@ -237,19 +257,15 @@ run(int argc, char **argv)
     struct sf_err err;
     struct slim_result r;
     mesh_init(&m);
-    if (mesh_load(argv[optind], &m, NULL, &err) != SF_OK) {
-        fprintf(stderr, "slimfarm optimize: %s\n", err.msg);
+    if (!cmd_load_part("optimize", argv[optind], &m, NULL))
         return 1;
-    }
-    int rc = slim_optimize(&m, &p, &r, &err);
+    rc = slim_optimize(&m, &p, &r, &err);
     mesh_release(&m);
     if (rc != SF_OK) {
         fprintf(stderr, "slimfarm optimize: %s: %s\n", argv[optind], err.msg);
         return 1;
     }
-    rc = mesh_save(&r.out, out, &err);
-    if (rc != SF_OK) {
-        fprintf(stderr, "slimfarm optimize: %s\n", err.msg);
+    if (!cmd_save_part("optimize", &r.out, out)) {
         slim_result_release(&r);
         return 1;
     }

@@ -15,6 +15,7 @@
 #include "../geom/dirsearch.h"
 #include "../geom/surfopt.h"
 #include "cmd.h"
+#include "cmdmesh.h"
 #include "cmdreport.h"
 
 static void
@@ -67,8 +68,10 @@ report_text(const char *in, const char *out, const struct surfopt_result *r)
     cmd_print_curve(r->curve, r->n_curve);
 }
 
-int
-cmd_optimize_surface(int argc, char **argv)
+/* The options into p, out, json and search_k: 0, or 2 (a usage error, message printed). */
+static int
+parse_opts(int argc, char **argv, struct surfopt_params *p, const char **out, bool *json,
+           int *search_k)
 {
     static const struct option opts[] = { { "output", required_argument, NULL, 'o' },
                                           { "method", required_argument, NULL, 'm' },
@@ -86,93 +89,56 @@ cmd_optimize_surface(int argc, char **argv)
                                           { "search-direction", required_argument, NULL, 'S' },
                                           { "json", no_argument, NULL, 'j' },
                                           { NULL, 0, NULL, 0 } };
+    const struct cmd_num nums[] = {
+        { 'a', "angle", 0, 89, "degrees in [0, 89]", &p->angle_deg, NULL, 0 },
+        { 'g', "margin", 0, 45, "degrees in [0, 45]", &p->margin_deg, NULL, 0 },
+        { 'M', "max-mndr", 0.01, 100, "a percentage", &p->max_mndr, NULL, 100 },
+        { 'A', "max-andr", 0.01, 100, "a percentage", &p->max_andr, NULL, 100 },
+        { 'f', "fix-bottom", 0, 1e4, "mm", &p->fix_bottom_mm, NULL, 0 },
+        { 'i', "iterations", 1, SURFOPT_CURVE_MAX - 2, "a count", NULL, &p->max_iters, 0 },
+        { 'r', "rounds", 1, 16, "a count in [1, 16]", NULL, &p->rounds, 0 },
+        { 's', "saliency", 0, 1, "a share in [0, 1]", &p->saliency, NULL, 0 },
+        { 'd', "detail", 0, 1e3, "a weight in [0, 1000]", &p->beta, NULL, 0 },
+        { 'G', "min-gain", 0, 99, "a percentage in [0, 99]", &p->min_gain, NULL, 100 },
+        { 'S', "search-direction", 1, DIRSEARCH_K_MAX, "a count of directions in [1, 5]", NULL,
+          search_k, 0 },
+    };
+    int c;
+    optind = 1;
+    while ((c = cmd_getopt("optimize", argc, argv, "o:", opts, nums,
+                           (int)(sizeof(nums) / sizeof(nums[0])))) != -1) {
+        switch (c) {
+        case 'o':
+            *out = optarg;
+            break;
+        case 'm':
+            break; /* "surface": how we got here */
+        case 'n':
+            p->orient = false;
+            break;
+        case 'j':
+            *json = true;
+            break;
+        default:
+            return cmd_opt_error(c, CMD_OPTIMIZE_SURFACE_USAGE);
+        }
+    }
+    if (optind != argc - 1 || !*out)
+        return cmd_usage(CMD_OPTIMIZE_SURFACE_USAGE);
+    return 0;
+}
+
+int
+cmd_optimize_surface(int argc, char **argv)
+{
     struct surfopt_params p;
     surfopt_params_default(&p);
     const char *out = NULL;
     bool json = false;
     int search_k = 0; /* > 0: shape inside the direction search (dirsearch.h) */
-    double v;
-    int c;
-    optind = 1;
-    while ((c = getopt_long(argc, argv, "o:", opts, NULL)) != -1) {
-        switch (c) {
-        case 'o':
-            out = optarg;
-            break;
-        case 'm':
-            break; /* "surface": how we got here */
-        case 'a':
-            if (!cmd_parse_num("optimize", "angle", optarg, 0, 89, "degrees in [0, 89]",
-                               &p.angle_deg))
-                return 2;
-            break;
-        case 'g':
-            if (!cmd_parse_num("optimize", "margin", optarg, 0, 45, "degrees in [0, 45]",
-                               &p.margin_deg))
-                return 2;
-            break;
-        case 'M':
-            if (!cmd_parse_num("optimize", "max-mndr", optarg, 0.01, 100, "a percentage", &v))
-                return 2;
-            p.max_mndr = v / 100;
-            break;
-        case 'A':
-            if (!cmd_parse_num("optimize", "max-andr", optarg, 0.01, 100, "a percentage", &v))
-                return 2;
-            p.max_andr = v / 100;
-            break;
-        case 'f':
-            if (!cmd_parse_num("optimize", "fix-bottom", optarg, 0, 1e4, "mm", &p.fix_bottom_mm))
-                return 2;
-            break;
-        case 'i':
-            if (!cmd_parse_num("optimize", "iterations", optarg, 1, SURFOPT_CURVE_MAX - 2,
-                               "a count", &v))
-                return 2;
-            p.max_iters = (int)v;
-            break;
-        case 'r':
-            if (!cmd_parse_num("optimize", "rounds", optarg, 1, 16, "a count in [1, 16]", &v))
-                return 2;
-            p.rounds = (int)v;
-            break;
-        case 's':
-            if (!cmd_parse_num("optimize", "saliency", optarg, 0, 1, "a share in [0, 1]",
-                               &p.saliency))
-                return 2;
-            break;
-        case 'd':
-            if (!cmd_parse_num("optimize", "detail", optarg, 0, 1e3, "a weight in [0, 1000]",
-                               &p.beta))
-                return 2;
-            break;
-        case 'G':
-            if (!cmd_parse_num("optimize", "min-gain", optarg, 0, 99, "a percentage in [0, 99]",
-                               &v))
-                return 2;
-            p.min_gain = v / 100;
-            break;
-        case 'n':
-            p.orient = false;
-            break;
-        case 'S':
-            if (!cmd_parse_num("optimize", "search-direction", optarg, 1, DIRSEARCH_K_MAX,
-                               "a count of directions in [1, 5]", &v))
-                return 2;
-            search_k = (int)v;
-            break;
-        case 'j':
-            json = true;
-            break;
-        default:
-            fprintf(stderr, "usage: slimfarm %s\n", CMD_OPTIMIZE_SURFACE_USAGE);
-            return 2;
-        }
-    }
-    if (optind != argc - 1 || !out) {
-        fprintf(stderr, "usage: slimfarm %s\n", CMD_OPTIMIZE_SURFACE_USAGE);
-        return 2;
-    }
+    int rc = parse_opts(argc, argv, &p, &out, &json, &search_k);
+    if (rc)
+        return rc;
     if (p.margin_deg > p.angle_deg)
         p.margin_deg = p.angle_deg;
     p.progress = progress;
@@ -180,11 +146,8 @@ cmd_optimize_surface(int argc, char **argv)
     struct sf_err err;
     struct surfopt_result r;
     mesh_init(&m);
-    if (mesh_load(argv[optind], &m, NULL, &err) != SF_OK) {
-        fprintf(stderr, "slimfarm optimize: %s\n", err.msg);
+    if (!cmd_load_part("optimize", argv[optind], &m, NULL))
         return 1;
-    }
-    int rc;
     struct dirsearch_result ds;
     if (search_k > 0) {
         struct dirsearch_params dp;
@@ -209,8 +172,7 @@ cmd_optimize_surface(int argc, char **argv)
         fprintf(stderr, "slimfarm optimize: %s: %s\n", argv[optind], err.msg);
         return 1;
     }
-    if (mesh_save(&r.out, out, &err) != SF_OK) {
-        fprintf(stderr, "slimfarm optimize: %s\n", err.msg);
+    if (!cmd_save_part("optimize", &r.out, out)) {
         surfopt_result_release(&r);
         return 1;
     }

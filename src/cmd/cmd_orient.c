@@ -13,6 +13,7 @@
 #include "../base/mem.h"
 #include "../geom/orient.h"
 #include "cmd.h"
+#include "cmdmesh.h"
 #include "cmdreport.h"
 
 static const char usage_line[] = "orient PART -o OUT [--angle DEG] [--margin DEG] [--samples N] "
@@ -60,23 +61,18 @@ run(int argc, char **argv)
     const char *out = NULL;
     double bed_x = 125, bed_y = 105;
     bool json = false;
+    const struct cmd_num nums[] = {
+        { 'a', "angle", 0, 89.9, "degrees in [0, 90)", &p.angle_deg, NULL, 0 },
+        { 'm', "margin", 0, 44.9, "degrees in [0, 45)", &p.margin_deg, NULL, 0 },
+        { 'g', "grid", 0.05, 50, "mm in [0.05, 50]", &p.pitch_mm, NULL, 0 },
+    };
     int c;
     char *end;
     optind = 1;
-    while ((c = getopt_long(argc, argv, "o:", opts, NULL)) != -1) {
+    while ((c = cmd_getopt("orient", argc, argv, "o:", opts, nums, 3)) != -1) {
         switch (c) {
         case 'o':
             out = optarg;
-            break;
-        case 'a':
-            if (!cmd_parse_num("orient", "angle", optarg, 0, 89.9, "degrees in [0, 90)",
-                               &p.angle_deg))
-                return 2;
-            break;
-        case 'm':
-            if (!cmd_parse_num("orient", "margin", optarg, 0, 44.9, "degrees in [0, 45)",
-                               &p.margin_deg))
-                return 2;
             break;
         case 's': {
             long n = strtol(optarg, &end, 10);
@@ -87,10 +83,6 @@ run(int argc, char **argv)
             p.samples = (int)n;
             break;
         }
-        case 'g':
-            if (!cmd_parse_num("orient", "grid", optarg, 0.05, 50, "mm in [0.05, 50]", &p.pitch_mm))
-                return 2;
-            break;
         case 'b':
             if (sscanf(optarg, "%lf,%lf", &bed_x, &bed_y) != 2 || !isfinite(bed_x) ||
                 !isfinite(bed_y)) {
@@ -102,14 +94,11 @@ run(int argc, char **argv)
             json = true;
             break;
         default:
-            fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-            return 2;
+            return cmd_opt_error(c, usage_line);
         }
     }
-    if (optind != argc - 1 || !out) {
-        fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-        return 2;
-    }
+    if (optind != argc - 1 || !out)
+        return cmd_usage(usage_line);
     /* A short-lived process: reuse freed memory, back the heap with huge pages
        (each 4 KB first touch is a page fault of 14-24 us on the farm's VMs) */
     mem_batch_mode(64);
@@ -117,10 +106,8 @@ run(int argc, char **argv)
     struct sf_err err;
     struct orient_result r;
     mesh_init(&m);
-    if (mesh_load(argv[optind], &m, NULL, &err) != SF_OK) {
-        fprintf(stderr, "slimfarm orient: %s\n", err.msg);
+    if (!cmd_load_part("orient", argv[optind], &m, NULL))
         return 1;
-    }
     p.progress = progress;
     if (orient_find(&m, &p, &r, &err) != SF_OK) {
         fprintf(stderr, "slimfarm orient: %s: %s\n", argv[optind], err.msg);
@@ -134,12 +121,10 @@ run(int argc, char **argv)
                 "mesh to orient it.\n",
                 argv[optind], r.input.m.n_rays_open, r.input.m.n_rays);
     orient_apply(&m, r.best.up, bed_x, bed_y);
-    int rc = mesh_save(&m, out, &err);
+    bool saved = cmd_save_part("orient", &m, out);
     mesh_release(&m);
-    if (rc != SF_OK) {
-        fprintf(stderr, "slimfarm orient: %s\n", err.msg);
+    if (!saved)
         return 1;
-    }
     if (json) {
         json_t *o =
             json_pack("{s:s, s:s, s:o, s:o, s:[], s:i, s:i, s:f}", "file", argv[optind], "output",

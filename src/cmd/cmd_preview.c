@@ -37,27 +37,17 @@ run(int argc, char **argv)
     struct preview_opts po;
     preview_opts_default(&po);
     const char *out = NULL;
-    double v;
+    const struct cmd_num nums[] = {
+        { 'l', "layer", 0, 1e6, "a layer number", NULL, &po.layer, 0 },
+        { 'a', "angle", 0, 89.9, "degrees in [0, 90)", &po.angle_deg, NULL, 0 },
+        { 'g', "grid", 0.1, 20, "mm in [0.1, 20]", &po.pitch_mm, NULL, 0 },
+    };
     int c, w, h;
     optind = 1;
-    while ((c = getopt_long(argc, argv, "o:", opts, NULL)) != -1) {
+    while ((c = cmd_getopt("preview", argc, argv, "o:", opts, nums, 3)) != -1) {
         switch (c) {
         case 'o':
             out = optarg;
-            break;
-        case 'l':
-            if (!cmd_parse_num("preview", "layer", optarg, 0, 1e6, "a layer number", &v))
-                return 2;
-            po.layer = (int)v;
-            break;
-        case 'a':
-            if (!cmd_parse_num("preview", "angle", optarg, 0, 89.9, "degrees in [0, 90)",
-                               &po.angle_deg))
-                return 2;
-            break;
-        case 'g':
-            if (!cmd_parse_num("preview", "grid", optarg, 0.1, 20, "mm in [0.1, 20]", &po.pitch_mm))
-                return 2;
             break;
         case 's':
             if (sscanf(optarg, "%dx%d", &w, &h) != 2 || w < 16 || h < 16 || w > 8192 || h > 8192) {
@@ -69,14 +59,11 @@ run(int argc, char **argv)
             po.height_px = h;
             break;
         default:
-            fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-            return 2;
+            return cmd_opt_error(c, usage_line);
         }
     }
-    if (optind != argc - 1 || !out) {
-        fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-        return 2;
-    }
+    if (optind != argc - 1 || !out)
+        return cmd_usage(usage_line);
     const char *in = argv[optind];
     struct sf_err err;
     int rc;

@@ -17,6 +17,7 @@
 #include "../../slicer/slice.h"
 #include "../mesh/mesh.h"
 #include "cmd.h"
+#include "cmdmesh.h"
 #include "cmdprofile.h"
 
 static const char usage_line[] = "slice PART -o OUT.gcode [--printer NAME] [--material NAME] "
@@ -71,14 +72,11 @@ run(int argc, char **argv)
             sets[n_sets++] = optarg;
             break;
         default:
-            fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-            return 2;
+            return cmd_usage(usage_line);
         }
     }
-    if (optind != argc - 1 || !out) {
-        fprintf(stderr, "usage: slimfarm %s\n", usage_line);
-        return 2;
-    }
+    if (optind != argc - 1 || !out)
+        return cmd_usage(usage_line);
     const char *part = argv[optind];
     struct slice_profile prof;
     if (!cmd_load_profile("slice", printer, material, &prof))
@@ -95,10 +93,8 @@ run(int argc, char **argv)
     }
     if (no_support)
         prof.support = false;
-    if (mesh_load(part, &m, NULL, &err) < 0) {
-        fprintf(stderr, "slimfarm slice: %s\n", err.msg);
+    if (!cmd_load_part("slice", part, &m, NULL))
         goto out;
-    }
     struct slice_result r;
     if (slice_mesh(&m, &prof, out, &r, on_progress, NULL, &err) < 0) {
         fprintf(stderr, "slimfarm slice: %s\n", err.msg);

@@ -22,6 +22,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "gcjob.h"
@@ -127,21 +128,13 @@ job_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_
 
 /* ---- prepare ---- */
 
-static int64_t
-mono_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
-
 static int
 prep_work(void *ud, const atomic_bool *cancel)
 {
     struct prep *t = ud;
-    int64_t t0 = mono_ms();
+    int64_t t0 = clock_mono_ms();
     int rc = t->f->hooks.prepare(&t->req, &t->out, cancel, &t->err);
-    t->prepare_ms = mono_ms() - t0;
+    t->prepare_ms = clock_mono_ms() - t0;
     /* Count and check the G-code here, off the loop: a bad line fails the
        job now, not half-way through a print, and start_job need not read
        the file on the loop thread (a 150 MB job stalled every printer's

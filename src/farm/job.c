@@ -16,6 +16,8 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../base/utf8.h"
+
 static const char *const job_names[JOB_STATE_COUNT] = {
     "queued", "preparing", "ready",     "printing",    "paused",
     "done",   "failed",    "cancelled", "interrupted",
@@ -242,25 +244,6 @@ job_opts_init(struct job_opts *o)
     o->max_retries = 1;
 }
 
-/* Length of the valid UTF-8 sequence at p (1..4), or 0 if invalid. */
-static int
-utf8_len(const unsigned char *p)
-{
-    if (p[0] < 0x80)
-        return 1;
-    int n = p[0] >= 0xf0 ? 4 : p[0] >= 0xe0 ? 3 : p[0] >= 0xc2 ? 2 : 0;
-    if (n == 0 || p[0] > 0xf4)
-        return 0;
-    for (int i = 1; i < n; i++)
-        if ((p[i] & 0xc0) != 0x80)
-            return 0;
-    /* overlong 3/4-byte forms, surrogates, > U+10FFFF */
-    if ((p[0] == 0xe0 && p[1] < 0xa0) || (p[0] == 0xed && p[1] >= 0xa0) ||
-        (p[0] == 0xf0 && p[1] < 0x90) || (p[0] == 0xf4 && p[1] >= 0x90))
-        return 0;
-    return n;
-}
-
 bool
 job_name_valid(const char *s)
 {
@@ -270,8 +253,8 @@ job_name_valid(const char *s)
     for (const unsigned char *p = (const unsigned char *)s; *p;) {
         if (*p < 0x20 || *p == 0x7f || *p == '/' || *p == '\\')
             return false;
-        int len = utf8_len(p);
-        if (!len)
+        int len = utf8_seq(p);
+        if (len <= 0)
             return false;
         p += len;
     }

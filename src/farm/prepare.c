@@ -34,6 +34,7 @@
 #include "../../slicer/profile.h"
 #include "../../slicer/slice.h"
 #include "../base/buf.h"
+#include "../base/clock.h"
 #include "../base/limits.h"
 #include "../base/log.h"
 #include "../geom/dirsearch.h"
@@ -46,14 +47,6 @@ static int
 cancelled(const struct prepare_req *req, struct sf_err *err)
 {
     return sf_err_set(err, SF_ECANCELED, "job %lld: prepare cancelled", (long long)req->job_id);
-}
-
-static int64_t
-mono_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
 }
 
 static int
@@ -255,6 +248,71 @@ shape_fallback(const struct prepare_req *req, struct prepare_out *out, int rc,
     log_warn("prepare", "job %lld: %s", (long long)req->job_id, out->shape_failed);
 }
 
+/* Load stage: the part file (or the saved part a re-slice reuses) into m. */
+static int
+load_part(const struct prepare_req *req, bool reuse, struct mesh *m, struct sf_err *err)
+{
+    struct buf data;
+    buf_init(&data, SF_MESH_FILE_MAX);
+    int rc = buf_read_file(&data, reuse ? req->mesh_in : req->part_path, err);
+    if (rc == SF_OK)
+        rc = mesh_load_mem(data.data ? data.data : "", data.len, req->part_name, m, NULL, err);
+    buf_release(&data);
+    return rc;
+}
+
+/* Orient stage: m turned to the up-direction that needs the least support at the profile's
+   overhang angle, on the bed centre; *saved_g the support that saves, when the model knows. */
+static int
+orient_part(struct mesh *m, const struct prepare_req *req, const struct slice_profile *prof,
+            const atomic_bool *cancel, double *saved_g, struct sf_err *err)
+{
+    if (atomic_load(cancel))
+        return cancelled(req, err);
+    struct orient_params op;
+    struct orient_result res;
+    orient_params_default(&op);
+    op.angle_deg = prof->max_overhang_deg;
+    op.cancel = cancel;
+    int rc = orient_find(m, &op, &res, err);
+    if (rc)
+        return rc;
+    orient_apply(m, res.best.up, prof->bed_x_mm / 2, prof->bed_y_mm / 2);
+    /* the support model ranks only finalists: both grams are known only
+       when the input direction was one */
+    if (res.input.support_g > 0 && res.best.support_g > 0 &&
+        res.input.support_g > res.best.support_g)
+        *saved_g = res.input.support_g - res.best.support_g;
+    return SF_OK;
+}
+
+/* Record stage, after a slice that succeeded: save the part as it prints for a re-slice when
+   save (and req->mesh_out asks; a failure removes the G-code) and fill out's figures. */
+static int
+record(const struct prepare_req *req, const struct mesh *printed, bool save,
+       const struct slice_profile *prof, const struct slice_result *sres, double saved_g,
+       struct prepare_out *out, struct sf_err *err)
+{
+    struct vec3 lo, hi;
+    mesh_bbox(printed, &lo, &hi);
+    int rc = SF_OK;
+    if (req->mesh_out[0] && save) {
+        if ((rc = mesh_save_stl(printed, req->mesh_out, err)))
+            unlink(req->out_path);
+        out->mesh_saved = rc == SF_OK;
+    }
+    if (rc == SF_OK) {
+        out->size_mm[0] = hi.x - lo.x;
+        out->size_mm[1] = hi.y - lo.y;
+        out->size_mm[2] = hi.z - lo.z;
+        out->nozzle_mm = prof->nozzle_mm;
+        out->filament_g = sres->filament_g;
+        out->support_g = sres->support_g;
+        out->support_saved_g = saved_g;
+    }
+    return rc;
+}
+
 int
 prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
              struct sf_err *err)
@@ -265,19 +323,14 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     out->shape_failed[0] = '\0';
     if (atomic_load(cancel))
         return cancelled(req, err);
-    struct buf data;
     struct mesh m, start; /* start: a slim job's part before slimming */
     double saved_g = 0;   /* support the optimization saved (prepare_out) */
     struct sf_err serr;   /* slimming's failure, kept even when err is NULL */
     sf_err_clear(&serr);
-    buf_init(&data, SF_MESH_FILE_MAX);
     mesh_init(&m);
     mesh_init(&start);
     bool reuse = req->mesh_in[0] != '\0';
-    int rc = buf_read_file(&data, reuse ? req->mesh_in : req->part_path, err);
-    if (rc == SF_OK)
-        rc = mesh_load_mem(data.data ? data.data : "", data.len, req->part_name, &m, NULL, err);
-    buf_release(&data);
+    int rc = load_part(req, reuse, &m, err);
     if (rc)
         goto out;
     struct slice_profile prof;
@@ -286,25 +339,9 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     if (reuse)
         method = "none"; /* oriented and shaped already: the slicer centres it on this bed */
     bool slim = strcmp(method, "slim") == 0;
-    if (strcmp(method, "orient") == 0 || slim) {
-        if (atomic_load(cancel)) {
-            rc = cancelled(req, err);
-            goto release;
-        }
-        struct orient_params op;
-        struct orient_result res;
-        orient_params_default(&op);
-        op.angle_deg = prof.max_overhang_deg;
-        op.cancel = cancel;
-        if ((rc = orient_find(&m, &op, &res, err)))
-            goto release;
-        orient_apply(&m, res.best.up, prof.bed_x_mm / 2, prof.bed_y_mm / 2);
-        /* the support model ranks only finalists: both grams are known only
-           when the input direction was one */
-        if (res.input.support_g > 0 && res.best.support_g > 0 &&
-            res.input.support_g > res.best.support_g)
-            saved_g = res.input.support_g - res.best.support_g;
-    }
+    if ((strcmp(method, "orient") == 0 || slim) &&
+        (rc = orient_part(&m, req, &prof, cancel, &saved_g, err)))
+        goto release;
     bool slimmed = false;
     struct deviation sdev = { 0 };
     if (slim && (rc = mesh_copy(&start, &m, err)))
@@ -348,7 +385,7 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     }
     const struct mesh *printed = &m;
     struct slice_result sres = { 0 };
-    int64_t t0 = mono_ms();
+    int64_t t0 = clock_mono_ms();
     if (slimmed) {
         struct prepare_choice ch;
         rc = prepare_slice_better(&start, &m, &prof, req->out_path, cancel, &ch, err);
@@ -369,23 +406,10 @@ prepare_part(const struct prepare_req *req, struct prepare_out *out, const atomi
     } else {
         rc = slice_mesh(&m, &prof, req->out_path, &sres, on_slice_progress, (void *)cancel, err);
     }
-    out->slice_ms = mono_ms() - t0;
-    struct vec3 lo, hi;
-    mesh_bbox(printed, &lo, &hi);
-    if (rc == SF_OK && req->mesh_out[0] && !reuse && strcmp(method, "none") != 0) {
-        if ((rc = mesh_save_stl(printed, req->mesh_out, err)))
-            unlink(req->out_path);
-        out->mesh_saved = rc == SF_OK;
-    }
-    if (rc == SF_OK) {
-        out->size_mm[0] = hi.x - lo.x;
-        out->size_mm[1] = hi.y - lo.y;
-        out->size_mm[2] = hi.z - lo.z;
-        out->nozzle_mm = prof.nozzle_mm;
-        out->filament_g = sres.filament_g;
-        out->support_g = sres.support_g;
-        out->support_saved_g = saved_g;
-    }
+    out->slice_ms = clock_mono_ms() - t0;
+    if (rc == SF_OK)
+        rc = record(req, printed, !reuse && strcmp(method, "none") != 0, &prof, &sres, saved_g, out,
+                    err);
 release:
     slice_profile_release(&prof);
 out:

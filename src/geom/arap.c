@@ -26,6 +26,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../base/clock.h"
 #include "../base/mem.h"
 #include "minrot.h"
 #include "polar.h"
@@ -58,14 +59,6 @@ struct arap {
     uint32_t q_cap;
     struct arap_timing timing;
 };
-
-static double
-now_s(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
 
 static bool
 invert3(const double m[3][3], double out[3][3])
@@ -359,7 +352,7 @@ void
 arap_local(struct arap *a, const struct vec3 *x, struct vec3 d, double tau, double beta,
            const struct arap_drive *drv, uint32_t n_drv, struct arap_local_stats *stats)
 {
-    double t0 = now_s();
+    double t0 = clock_mono_s();
     uint32_t rotated = 0;
     if (n_drv > a->q_cap) {
         free(a->q);
@@ -390,11 +383,11 @@ arap_local(struct arap *a, const struct vec3 *x, struct vec3 d, double tau, doub
         for (int c = 0; c < 9; c++)
             a->q[s][c] = q.m[c / 3][c % 3];
     }
-    double t1 = now_s();
+    double t1 = clock_mono_s();
     uint32_t slow = local_pass(a, x);
     a->b_fresh = true;
     a->timing.minrot_s += t1 - t0;
-    a->timing.local_s += now_s() - t1;
+    a->timing.local_s += clock_mono_s() - t1;
     if (stats) {
         stats->n_rotated = rotated;
         stats->n_slow_polar = slow;
@@ -414,7 +407,7 @@ arap_set_rotation(struct arap *a, struct mat3 r)
 int
 arap_global(struct arap *a, struct vec3 *x, struct sf_err *err)
 {
-    double t0 = now_s();
+    double t0 = clock_mono_s();
     const double *b = a->b;
     if (!a->b_fresh)
         assemble_rhs(a);
@@ -431,13 +424,13 @@ arap_global(struct arap *a, struct vec3 *x, struct sf_err *err)
         a->rhs[nf + r] = br[1] - cy;
         a->rhs[2 * (size_t)nf + r] = br[2] - cz;
     }
-    double t1 = now_s();
+    double t1 = clock_mono_s();
     int rc = sparse_chol_solve(a->chol, a->rhs, a->sol, 3, err);
     if (rc == SF_OK)
         for (uint32_t r = 0; r < nf; r++)
             x[a->free_vert[r]] = v3(a->sol[r], a->sol[nf + r], a->sol[2 * (size_t)nf + r]);
     a->timing.rhs_s += t1 - t0;
-    a->timing.solve_s += now_s() - t1;
+    a->timing.solve_s += clock_mono_s() - t1;
     return rc;
 }
 

@@ -8,6 +8,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../base/clock.h"
 #include "supmodel.h"
 
 void
@@ -26,14 +27,6 @@ dirsearch_result_release(struct dirsearch_result *res)
     surfopt_result_release(&res->best);
 }
 
-static double
-now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
 int
 dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
                   struct dirsearch_result *res, struct sf_err *err)
@@ -46,7 +39,7 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
     if (!(p->min_gain >= 0 && p->min_gain < 1))
         return sf_err_set(err, SF_EINVAL, "direction search: min_gain %g outside [0, 1)",
                           p->min_gain);
-    double t0 = now_s();
+    double t0 = clock_mono_s();
     struct orient_params op = p->op;
     op.angle_deg = p->sp.angle_deg;
     struct orient_result found;
@@ -123,6 +116,6 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
         res->up = v3(0, 0, 1);
         res->kept_input = true;
     }
-    res->seconds = now_s() - t0;
+    res->seconds = clock_mono_s() - t0;
     return SF_OK;
 }

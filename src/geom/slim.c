@@ -34,6 +34,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "../base/par.h"
@@ -68,14 +69,6 @@ void
 slim_result_release(struct slim_result *res)
 {
     mesh_release(&res->out);
-}
-
-static double
-now_s(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
 }
 
 struct cand {
@@ -449,9 +442,9 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
     for (int it = 1; it <= p->max_iters; it++) {
         if (p->cancel && atomic_load(p->cancel))
             return sf_err_set(err, SF_ECANCELED, "slim: cancelled");
-        double t0 = now_s();
+        double t0 = clock_mono_s();
         uint32_t n_drv = compute_drives(w, tau_aim);
-        w->d->timing.part_s += now_s() - t0;
+        w->d->timing.part_s += clock_mono_s() - t0;
         struct arap_local_stats ls;
         arap_local(a, w->x, v3(0, 0, 1), tau_aim, beta, w->drv, n_drv, &ls);
         w->d->timing.slow_polar += ls.n_slow_polar;
@@ -460,13 +453,13 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
         if (rc)
             return rc;
         w->d->timing.iterations++;
-        t0 = now_s();
+        t0 = clock_mono_s();
         uint32_t inverted = count_inverted(&w->tm, w->x);
         map_part(w, w->x);
         measure_part(w, tau, &pf);
         uint32_t n_risky = pf.n_risky;
         double sev = pf.severity;
-        w->d->timing.part_s += now_s() - t0;
+        w->d->timing.part_s += clock_mono_s() - t0;
         if (*n_curve < SLIM_CURVE_MAX)
             curve[(*n_curve)++] = n_risky;
         *within = pf.dv.mndr <= p->max_mndr && pf.dv.andr <= p->max_andr && inverted == 0;
@@ -475,9 +468,9 @@ run_round(struct work *w, struct arap *a, int round, double beta_deg, uint32_t *
                       pf.dv.mndr, pf.dv.andr, inverted);
         double model_g = NAN;
         if (*within) {
-            t0 = now_s();
+            t0 = clock_mono_s();
             rc = score_iterate(w, &model_g, err);
-            w->d->timing.score_s += now_s() - t0;
+            w->d->timing.score_s += clock_mono_s() - t0;
             if (rc)
                 return rc;
             struct cand c = { mem_array(w->tm.n_verts, sizeof(struct vec3)),
@@ -718,9 +711,9 @@ run_dir(struct ctx *cx, struct dir *d, struct sf_err *err)
         w.zlo = fmin(w.zlo, d->in.v[v].z);
     w.diag = mesh_diag(&d->in);
     setup_fixed(&w);
-    double t0 = now_s();
+    double t0 = clock_mono_s();
     a = arap_new(&w.tm, w.fixed, err);
-    d->timing.factor_s = now_s() - t0;
+    d->timing.factor_s = clock_mono_s() - t0;
     if (!a) {
         rc = err ? err->code : SF_EINVAL;
         goto done;
@@ -765,9 +758,9 @@ run_dir(struct ctx *cx, struct dir *d, struct sf_err *err)
     d->timing.minrot_s = at->minrot_s;
     d->timing.rhs_s = at->rhs_s;
     d->timing.solve_s = at->solve_s;
-    t0 = now_s();
+    t0 = clock_mono_s();
     rc = choose(&w, err);
-    d->timing.choose_s = now_s() - t0;
+    d->timing.choose_s = clock_mono_s() - t0;
 done:
     arap_free(a);
     for (int i = 0; i < w.n_list; i++)
@@ -931,7 +924,7 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
         return rc;
     if (m->n_tris == 0)
         return sf_err_set(err, SF_EINVAL, "slim: the part has no triangles");
-    double t0 = now_s();
+    double t0 = clock_mono_s();
     struct tetmesh tm;
     rc = tetmesh_build(m, &p->tet, &tm, err);
     if (rc)
@@ -942,7 +935,7 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
         tetmesh_release(&tm);
         return rc;
     }
-    res->setup_s = now_s() - t0;
+    res->setup_s = clock_mono_s() - t0;
     int steps = p->search_direction ? (int)floor(p->search_max_deg / p->search_step_deg + 1e-9) : 0;
     cx.n_dirs = (2 * steps + 1) * (2 * steps + 1);
     cx.dirs = mem_calloc((size_t)cx.n_dirs, sizeof(*cx.dirs));
@@ -1036,6 +1029,6 @@ slim_optimize(const struct mesh *m, const struct slim_params *p, struct slim_res
     free(cx.dirs);
     face_hosts_release(&cx.fh);
     tetmesh_release(&tm);
-    res->total_s = now_s() - t0;
+    res->total_s = clock_mono_s() - t0;
     return rc;
 }

@@ -9,6 +9,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../base/clock.h"
 #include "../base/mem.h"
 #include "../mesh/subdiv.h"
 #include "saliency.h"
@@ -55,14 +56,6 @@ void
 surfopt_result_release(struct surfopt_result *res)
 {
     mesh_release(&res->out);
-}
-
-static double
-now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
 }
 
 static int
@@ -465,13 +458,13 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const struct selfx_ref 
     double mean_area = cur->n_tris ? area_sum / cur->n_tris : 1;
     for (uint32_t f = 0; f < cur->n_tris; f++)
         s.w_face[f] = mean_area > 0 ? s.w_face[f] / mean_area : 1;
-    double t0 = now_s();
+    double t0 = clock_mono_s();
     double beta = p->beta, anchor = p->anchor;
     if ((beta > 0 && (rc = build_neighbours(cur, &s, err)) < 0) ||
         (rc = system_build(&s, cur, ref, p, beta, anchor, err)) < 0)
         goto out;
-    res->factor_s += now_s() - t0;
-    t0 = now_s();
+    res->factor_s += clock_mono_s() - t0;
+    t0 = clock_mono_s();
 
     struct support_params sp = support_at(p->angle_deg);
     struct support_metrics sm;
@@ -596,17 +589,17 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const struct selfx_ref 
             beta /= 4;
             anchor /= 4;
             memcpy(cur->v, best, (size_t)n * sizeof(*best));
-            double tf = now_s();
+            double tf = clock_mono_s();
             system_free_factor(&s);
             if ((rc = system_build(&s, cur, ref, p, beta, anchor, err)) < 0)
                 goto out;
-            res->factor_s += now_s() - tf;
+            res->factor_s += clock_mono_s() - tf;
             since_best = 0;
             stall_ref = best_proxy;
         }
     }
     memcpy(cur->v, best, (size_t)n * sizeof(*best));
-    res->iterate_s += now_s() - t0;
+    res->iterate_s += clock_mono_s() - t0;
     rc = SF_OK;
 out:
     system_free(&s);
@@ -671,7 +664,7 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
         return rc;
     if (m->n_verts < 4 || m->n_tris < 4)
         return sf_err_set(err, SF_EINVAL, "part has %u triangles: nothing to optimize", m->n_tris);
-    double t_start = now_s();
+    double t_start = clock_mono_s();
     struct mesh cur, ref, oriented;
     mesh_init(&cur);
     mesh_init(&ref);
@@ -701,12 +694,12 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
     }
     if ((rc = ray_metrics(m, p->angle_deg, &res->input, err)) < 0)
         goto out;
-    double t0 = now_s();
+    double t0 = clock_mono_s();
     if ((rc = mesh_saliency(&ref, sal, err)) < 0)
         goto out;
     for (uint32_t v = 0; v < n; v++)
         sal[v] = 1 - p->saliency * sal[v]; /* the share of its target a vertex moves */
-    res->saliency_s = now_s() - t0;
+    res->saliency_s = clock_mono_s() - t0;
     if ((rc = selfx_count(&ref, err)) < 0)
         goto out;
     res->selfx_input = rc;
@@ -718,11 +711,11 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
     }
 
     for (int round = 0; round < p->rounds; round++) {
-        t0 = now_s();
+        t0 = clock_mono_s();
         bool search = p->orient && !(round == 0 && p->keep_start_up);
         if ((rc = orientation_step(&cur, &ref, keep, n_keep, p, search, err)) < 0)
             goto out;
-        res->orient_s += now_s() - t0;
+        res->orient_s += clock_mono_s() - t0;
         if (round == 0) {
             if ((rc = mesh_copy(&oriented, &cur, err)) < 0 ||
                 (rc = ray_metrics(&oriented, p->angle_deg, &res->oriented, err)) < 0)
@@ -742,7 +735,7 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
      * the fewest grams, if that saves min_gain of what the orientation alone
      * needs; else the orientation alone.  The ray-cast volume steered the
      * iterations; the model, which follows what a slicer prints, decides. */
-    t0 = now_s();
+    t0 = clock_mono_s();
     struct support_metrics sm;
     struct supmodel_params mp;
     supmodel_params_steer(&mp, p->angle_deg);
@@ -807,7 +800,7 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
                                            "part's model grams"
                          : "no kept shape needs fewer model grams than the oriented part";
     }
-    res->check_s = now_s() - t0;
+    res->check_s = clock_mono_s() - t0;
     if (res->shape_changed) {
         res->out = cur;
         mesh_init(&cur);
@@ -824,7 +817,7 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
     }
     rc = SF_OK;
 out:
-    res->total_s = now_s() - t_start;
+    res->total_s = clock_mono_s() - t_start;
     for (int k = 0; k < KEEP_MAX; k++)
         free(keep[k].v);
     free(sal);
@@ -841,7 +834,7 @@ int
 surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct surfopt_result *res,
                  struct sf_err *err)
 {
-    double t0 = now_s();
+    double t0 = clock_mono_s();
     int rc = optimize_once(m, p, false, res, err);
     if (rc < 0 || res->n_halved == 0)
         return rc;
@@ -861,6 +854,6 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
     } else {
         surfopt_result_release(&alt);
     }
-    res->total_s = now_s() - t0;
+    res->total_s = clock_mono_s() - t0;
     return SF_OK;
 }

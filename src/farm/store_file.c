@@ -1,0 +1,250 @@
+/*
+ * store_file.c - the store's content-addressed file directory (store.h).
+ *
+ * Files are named by their SHA-256 (OpenSSL's libcrypto EVP interface, the
+ * most widely reviewed implementation on the system): a writer hashes while
+ * it streams into a temporary file, fsyncs, and renames it to
+ * files/ab/abcdef...; a crash leaves at worst an orphan temporary or an
+ * unreferenced file, never a row pointing at a missing or partial file.
+ * The files table records which addresses are complete.
+ *
+ * Thread: the store's, except store_file_adopt (file system only, any).
+ */
+#include "store.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <openssl/evp.h>
+#include <sqlite3.h>
+#include <stdio.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "../base/clock.h"
+#include "../base/mem.h"
+#include "store_int.h"
+
+struct store_file {
+    struct store *s;               /* owner */
+    int fd;                        /* temporary file being written */
+    char tmp[STORE_PATH_MAX + 64]; /* its path */
+    EVP_MD_CTX *md;                /* running SHA-256 */
+    int64_t size;                  /* bytes written */
+};
+
+/* ---- files ---- */
+
+bool
+store_sha_valid(const char *sha)
+{
+    if (strlen(sha) != 64)
+        return false;
+    for (const char *p = sha; *p; p++)
+        if (!((*p >= '0' && *p <= '9') || (*p >= 'a' && *p <= 'f')))
+            return false;
+    return true;
+}
+
+struct store_file *
+store_file_begin(struct store *s, struct sf_err *err)
+{
+    struct store_file *f = mem_calloc(1, sizeof(*f));
+    if (!f) {
+        sf_err_set(err, SF_ENOMEM, "store: out of memory");
+        return NULL;
+    }
+    f->s = s;
+    snprintf(f->tmp, sizeof(f->tmp), "%s/files/tmp-XXXXXX", s->dir);
+    f->fd = mkstemp(f->tmp);
+    if (f->fd < 0) {
+        sf_err_sys(err, "store: cannot create a file in '%s/files'", s->dir);
+        free(f);
+        return NULL;
+    }
+    f->md = EVP_MD_CTX_new();
+    if (!f->md || EVP_DigestInit_ex(f->md, EVP_sha256(), NULL) != 1) {
+        sf_err_set(err, SF_ENOMEM, "store: cannot start SHA-256");
+        store_file_abort(f);
+        return NULL;
+    }
+    return f;
+}
+
+int
+store_file_write(struct store_file *f, const void *data, size_t len, struct sf_err *err)
+{
+    const char *p = data;
+    if (EVP_DigestUpdate(f->md, data, len) != 1)
+        return sf_err_set(err, SF_EBUG, "store: SHA-256 update failed");
+    while (len > 0) {
+        ssize_t w = write(f->fd, p, len);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w < 0)
+            return sf_err_sys(err, "store: writing '%s'", f->tmp);
+        p += w;
+        len -= (size_t)w;
+        f->size += w;
+    }
+    return SF_OK;
+}
+
+void
+store_file_abort(struct store_file *f)
+{
+    if (!f)
+        return;
+    if (f->fd >= 0) {
+        close(f->fd);
+        unlink(f->tmp);
+    }
+    EVP_MD_CTX_free(f->md);
+    free(f);
+}
+
+static void
+fsync_dir(const char *path)
+{
+    int fd = open(path, O_RDONLY | O_DIRECTORY);
+    if (fd >= 0) {
+        fsync(fd);
+        close(fd);
+    }
+}
+
+/* The hex digest of md into sha. */
+static int
+sha_hex(EVP_MD_CTX *md, char sha[STORE_SHA_HEX], struct sf_err *err)
+{
+    unsigned char d[EVP_MAX_MD_SIZE];
+    unsigned int n = 0;
+    if (EVP_DigestFinal_ex(md, d, &n) != 1 || n != 32)
+        return sf_err_set(err, SF_EBUG, "store: SHA-256 final failed");
+    for (int i = 0; i < 32; i++)
+        snprintf(sha + 2 * i, 3, "%02x", d[i]);
+    return SF_OK;
+}
+
+/* Make the file at from (open as fd) durable and move it to sha's address.  Touches the file
+   system only: s->dir is fixed at open, so this may run on any thread. */
+static int
+place_file(const struct store *s, int fd, const char *from, const char *sha, struct sf_err *err)
+{
+    if (fsync(fd) != 0)
+        return sf_err_sys(err, "store: fsync '%s'", from);
+    char dir[STORE_PATH_MAX + 16], path[STORE_PATH_MAX + 96];
+    snprintf(dir, sizeof(dir), "%s/files/%.2s", s->dir, sha);
+    snprintf(path, sizeof(path), "%s/%s", dir, sha);
+    if (mkdir(dir, 0755) != 0 && errno != EEXIST)
+        return sf_err_sys(err, "store: cannot create '%s'", dir);
+    if (rename(from, path) != 0)
+        return sf_err_sys(err, "store: cannot move '%s' to '%s'", from, path);
+    fsync_dir(dir);
+    return SF_OK;
+}
+
+int
+store_file_record(struct store *s, const char *sha, int64_t size, struct sf_err *err)
+{
+    if (!store_sha_valid(sha))
+        return sf_err_set(err, SF_EINVAL, "store: '%.80s' is not a SHA-256 in hex", sha);
+    sqlite3_stmt *st;
+    int rc = store_prepare(
+        s, &st, "INSERT OR IGNORE INTO files(sha256, size, created_ms) VALUES(?,?,?)", err);
+    if (rc)
+        return rc;
+    sqlite3_bind_text(st, 1, sha, 64, SQLITE_TRANSIENT);
+    sqlite3_bind_int64(st, 2, size);
+    sqlite3_bind_int64(st, 3, clock_wall_ms());
+    return store_step_done(s, st, err, "record file");
+}
+
+int
+store_file_commit(struct store_file *f, char sha[STORE_SHA_HEX], struct sf_err *err)
+{
+    int rc = sha_hex(f->md, sha, err);
+    if (rc == SF_OK && (rc = place_file(f->s, f->fd, f->tmp, sha, err)) == SF_OK) {
+        close(f->fd);
+        f->fd = -1;
+        rc = store_file_record(f->s, sha, f->size, err);
+    }
+    store_file_abort(f);
+    return rc;
+}
+
+int
+store_file_adopt(const struct store *s, const char *path, char sha[STORE_SHA_HEX], int64_t *size,
+                 struct sf_err *err)
+{
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0)
+        return sf_err_sys(err, "store: cannot read '%s'", path);
+    EVP_MD_CTX *md = EVP_MD_CTX_new();
+    int rc = md && EVP_DigestInit_ex(md, EVP_sha256(), NULL) == 1
+                 ? SF_OK
+                 : sf_err_set(err, SF_ENOMEM, "store: cannot start SHA-256");
+    char buf[1 << 16];
+    ssize_t n;
+    *size = 0;
+    while (rc == SF_OK && (n = read(fd, buf, sizeof(buf))) != 0) {
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n < 0)
+            rc = sf_err_sys(err, "store: reading '%s'", path);
+        else if (EVP_DigestUpdate(md, buf, (size_t)n) != 1)
+            rc = sf_err_set(err, SF_EBUG, "store: SHA-256 update failed");
+        else
+            *size += n;
+    }
+    if (rc == SF_OK && (rc = sha_hex(md, sha, err)) == SF_OK)
+        rc = place_file(s, fd, path, sha, err);
+    EVP_MD_CTX_free(md);
+    close(fd);
+    return rc;
+}
+
+int
+store_file_put(struct store *s, const void *data, size_t len, char sha[STORE_SHA_HEX],
+               struct sf_err *err)
+{
+    struct store_file *f = store_file_begin(s, err);
+    if (!f)
+        return err ? err->code : SF_EIO;
+    int rc = store_file_write(f, data, len, err);
+    if (rc) {
+        store_file_abort(f);
+        return rc;
+    }
+    return store_file_commit(f, sha, err);
+}
+
+bool
+store_file_known(struct store *s, const char *sha)
+{
+    sqlite3_stmt *st;
+    if (sqlite3_prepare_v2(s->db, "SELECT 1 FROM files WHERE sha256 = ?", -1, &st, NULL))
+        return false;
+    sqlite3_bind_text(st, 1, sha, -1, SQLITE_TRANSIENT);
+    bool found = sqlite3_step(st) == SQLITE_ROW;
+    sqlite3_finalize(st);
+    return found;
+}
+
+int
+store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct sf_err *err)
+{
+    if (!store_sha_valid(sha))
+        return sf_err_set(err, SF_EINVAL, "store: '%.80s' is not a SHA-256 in hex", sha);
+    if (!store_file_known(s, sha))
+        return sf_err_set(err, SF_ENOTFOUND, "store: no file %s", sha);
+    if ((size_t)snprintf(path, cap, "%s/files/%.2s/%s", s->dir, sha, sha) >= cap)
+        return sf_err_set(err, SF_ENOMEM, "store: path of file %s is too long", sha);
+    return SF_OK;
+}
+
+const char *
+store_file_tmp_path(const struct store_file *f)
+{
+    return f->tmp;
+}

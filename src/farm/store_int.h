@@ -1,0 +1,82 @@
+/*
+ * store_int.h - internal to the store module (store.c, store_file.c,
+ * store_job.c, store_printer.c, store_event.c); nothing outside
+ * src/farm/store*.c includes it.
+ *
+ * What the parts share: the connection and data dir (struct store), the
+ * SQLite statement helpers every part writes through (store.c), the event
+ * log append (store_event.c) and the file-table checks (store_file.c).
+ * Each helper's errors are SF_EIO from SQLite with its message, set in
+ * err like the public functions'.
+ *
+ * Thread: as store.h (the store's thread).
+ */
+#ifndef SF_FARM_STORE_INT_H
+#define SF_FARM_STORE_INT_H
+
+#include <sqlite3.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "store.h"
+
+#define STORE_PATH_MAX 1024 /* data dir paths; deeper trees are a config error */
+
+struct store {
+    sqlite3 *db;              /* the connection, WAL mode, foreign keys on */
+    char dir[STORE_PATH_MAX]; /* data directory */
+    int lock_fd;              /* DATA_DIR/lock, flock()ed exclusively; -1 if not open */
+};
+
+/* SF_EIO with what and SQLite's message. */
+int store_db_fail(struct store *s, struct sf_err *err, const char *what);
+/* Run sql (no rows) through sqlite3_exec. */
+int store_exec(struct store *s, const char *sql, struct sf_err *err);
+/* Prepare sql into *st (sqlite3_finalize it). */
+int store_prepare(struct store *s, sqlite3_stmt **st, const char *sql, struct sf_err *err);
+/* Step a statement that returns no rows, then finalize it. */
+int store_step_done(struct store *s, sqlite3_stmt *st, struct sf_err *err, const char *what);
+/* BEGIN IMMEDIATE; COMMIT (rolled back if it fails); ROLLBACK. */
+int store_begin(struct store *s, struct sf_err *err);
+int store_commit(struct store *s, struct sf_err *err);
+void store_rollback(struct store *s);
+/*
+ * A write that logs an event, in one transaction: store_write_begin opens it
+ * and prepares sql into *st (on failure nothing is left open); the caller
+ * binds; store_write_end steps st (what names it in errors), appends the
+ * event (as store_log_event) and commits, or rolls back and returns the
+ * error.  st is finalized either way.
+ */
+int store_write_begin(struct store *s, sqlite3_stmt **st, const char *sql, struct sf_err *err);
+int store_write_end(struct store *s, sqlite3_stmt *st, const char *what, int64_t job_id,
+                    const char *printer, const char *kind, const char *detail, struct sf_err *err);
+/* Prepare the SELECT sql into *st for store_read_rows, *rows NULL and *n 0 until it runs. */
+int store_select(struct store *s, sqlite3_stmt **st, const char *sql, void **rows, size_t *n,
+                 struct sf_err *err);
+/* Column col of st's row as text into dst (cap bytes, cut to fit; NULL is ""). */
+void store_copy_text(char *dst, size_t cap, sqlite3_stmt *st, int col);
+
+/* Fill one element of a result array from the statement's current row. */
+typedef void (*store_row_fn)(sqlite3_stmt *st, void *row);
+/*
+ * Step st to its end, appending one element of elem_size bytes per row to
+ * *rows (filled by read), then finalize st.  A step that ends in anything
+ * but SQLITE_DONE (busy, I/O error, corruption) is an error and nothing is
+ * returned: a caller never takes part of a result for all of it.  *rows is
+ * freed by the caller (NULL when there are no rows or on error).
+ */
+int store_read_rows(struct store *s, sqlite3_stmt *st, size_t elem_size, store_row_fn read,
+                    void **rows, size_t *n, const char *what, struct sf_err *err);
+
+/* Append to the event log (job_id 0 and printer NULL: none), in the caller's transaction. */
+int store_log_event(struct store *s, int64_t job_id, const char *printer, const char *kind,
+                    const char *detail, struct sf_err *err);
+
+/* Whether sha is 64 lowercase hex digits. */
+bool store_sha_valid(const char *sha);
+/* Whether sha is in the files table. */
+bool store_file_known(struct store *s, const char *sha);
+
+#endif

@@ -1,0 +1,622 @@
+/*
+ * store_job.c - jobs in the store (store.h): adding them, reading them,
+ * moving them through job.h's state machine with their copies' print
+ * history, and progress, priority and reason updates.
+ *
+ * Each state change is one transaction that reads the job, lets job_next()
+ * decide whether the event is legal, fills in what the event carries
+ * (apply_event), opens or closes the copy's row in prints, writes the job
+ * row and appends to the event log.
+ *
+ * Thread: the store's.
+ */
+#include "store.h"
+
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../base/clock.h"
+#include "store_int.h"
+
+static const char JOB_COLS[] =
+    "id, name, file_sha, coalesce(gcode_sha, ''), state, method, deviation_mm, overhang_deg,"
+    " copies, copies_done, failures, max_retries, material, target_printer, target_group,"
+    " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"
+    " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg, filament_g, support_g,"
+    " support_saved_g, prepare_ms, slice_ms, ready_ms, mndr, andr, shape_changed";
+
+/* ---- jobs ---- */
+
+static void
+read_job(sqlite3_stmt *st, struct job_row *j)
+{
+    memset(j, 0, sizeof(*j));
+    j->id = sqlite3_column_int64(st, 0);
+    store_copy_text(j->opts.name, sizeof(j->opts.name), st, 1);
+    store_copy_text(j->file_sha, sizeof(j->file_sha), st, 2);
+    store_copy_text(j->gcode_sha, sizeof(j->gcode_sha), st, 3);
+    char state[16];
+    store_copy_text(state, sizeof(state), st, 4);
+    if (!job_state_parse(state, &j->state))
+        j->state = JOB_FAILED; /* the CHECK constraint makes this unreachable */
+    store_copy_text(j->opts.method, sizeof(j->opts.method), st, 5);
+    j->opts.deviation_mm = sqlite3_column_double(st, 6);
+    j->opts.overhang_deg = sqlite3_column_double(st, 7);
+    j->opts.copies = j->counts.copies = sqlite3_column_int(st, 8);
+    j->counts.copies_done = sqlite3_column_int(st, 9);
+    j->counts.failures = sqlite3_column_int(st, 10);
+    j->opts.max_retries = j->counts.max_retries = sqlite3_column_int(st, 11);
+    store_copy_text(j->opts.material, sizeof(j->opts.material), st, 12);
+    store_copy_text(j->opts.printer, sizeof(j->opts.printer), st, 13);
+    store_copy_text(j->opts.group, sizeof(j->opts.group), st, 14);
+    j->opts.priority = sqlite3_column_int(st, 15);
+    for (int i = 0; i < 3; i++)
+        j->size_mm[i] = sqlite3_column_double(st, 16 + i);
+    store_copy_text(j->printer, sizeof(j->printer), st, 19);
+    j->lines_acked = sqlite3_column_int64(st, 20);
+    store_copy_text(j->reason, sizeof(j->reason), st, 21);
+    j->created_ms = sqlite3_column_int64(st, 22);
+    j->updated_ms = sqlite3_column_int64(st, 23);
+    j->nozzle_mm = sqlite3_column_double(st, 24);
+    j->gcode_lines = sqlite3_column_int64(st, 25);
+    store_copy_text(j->prep_key, sizeof(j->prep_key), st, 26);
+    store_copy_text(j->mesh_sha, sizeof(j->mesh_sha), st, 27);
+    j->mesh_angle_deg = sqlite3_column_double(st, 28);
+    j->filament_g = sqlite3_column_double(st, 29);
+    j->support_g = sqlite3_column_double(st, 30);
+    j->support_saved_g = sqlite3_column_double(st, 31);
+    j->prepare_ms = sqlite3_column_int64(st, 32);
+    j->slice_ms = sqlite3_column_int64(st, 33);
+    j->ready_ms = sqlite3_column_int64(st, 34);
+    j->dev_measured = sqlite3_column_type(st, 35) != SQLITE_NULL;
+    j->mndr = sqlite3_column_double(st, 35);
+    j->andr = sqlite3_column_double(st, 36);
+    j->shape_changed = sqlite3_column_int(st, 37) != 0;
+}
+
+static void
+read_job_row(sqlite3_stmt *st, void *row)
+{
+    read_job(st, row);
+}
+
+/* Bind what every new job row takes from o at parameters first .. first + 7: copies,
+   max_retries, material, printer, group, priority, created_ms and updated_ms (both now_ms). */
+static void
+bind_opts(sqlite3_stmt *st, int first, const struct job_opts *o, int64_t now_ms)
+{
+    sqlite3_bind_int(st, first, o->copies);
+    sqlite3_bind_int(st, first + 1, o->max_retries);
+    sqlite3_bind_text(st, first + 2, o->material, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, first + 3, o->printer, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, first + 4, o->group, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_int(st, first + 5, o->priority);
+    sqlite3_bind_int64(st, first + 6, now_ms);
+    sqlite3_bind_int64(st, first + 7, now_ms);
+}
+
+/* Finish a job add begun by store_write_begin: run the INSERT st, log "job-add" with detail
+   and commit, or roll back; the new job's id into *id (may be NULL). */
+static int
+insert_job(struct store *s, sqlite3_stmt *st, const char *what, const char *detail, int64_t *id,
+           struct sf_err *err)
+{
+    int rc = store_step_done(s, st, err, what);
+    if (rc)
+        goto fail;
+    int64_t new_id = sqlite3_last_insert_rowid(s->db);
+    if ((rc = store_log_event(s, new_id, NULL, "job-add", detail, err)) ||
+        (rc = store_commit(s, err)))
+        goto fail;
+    if (id)
+        *id = new_id;
+    return SF_OK;
+fail:
+    store_rollback(s);
+    return rc;
+}
+
+int
+store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, int64_t *id,
+              struct sf_err *err)
+{
+    int rc = job_opts_validate(o, err);
+    if (rc)
+        return rc;
+    if (!store_sha_valid(file_sha) || !store_file_known(s, file_sha))
+        return sf_err_set(err, SF_ENOTFOUND, "store: part file '%.80s' is not stored", file_sha);
+    sqlite3_stmt *st;
+    if ((rc = store_write_begin(
+             s, &st,
+             "INSERT INTO jobs(name, file_sha, state, method, deviation_mm, overhang_deg,"
+             " copies, max_retries, material, target_printer, target_group, priority,"
+             " created_ms, updated_ms) VALUES(?,?,'queued',?,?,?,?,?,?,?,?,?,?,?)",
+             err)))
+        return rc;
+    sqlite3_bind_text(st, 1, o->name, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 2, file_sha, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 3, o->method, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_double(st, 4, o->deviation_mm);
+    sqlite3_bind_double(st, 5, o->overhang_deg);
+    bind_opts(st, 6, o, clock_wall_ms());
+    char detail[192];
+    snprintf(detail, sizeof(detail), "queued '%s' x%d", o->name, o->copies);
+    return insert_job(s, st, "add job", detail, id, err);
+}
+
+int
+store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
+                    const struct job_event_args *g, int64_t *id, struct sf_err *err)
+{
+    struct job_opts v = *o;
+    snprintf(v.method, sizeof(v.method), "none"); /* validate the rest as any job's */
+    int rc = job_opts_validate(&v, err);
+    if (rc)
+        return rc;
+    if (!store_sha_valid(sha) || !store_file_known(s, sha))
+        return sf_err_set(err, SF_ENOTFOUND, "store: G-code file '%.80s' is not stored", sha);
+    if (!g->prep_key || !g->prep_key[0])
+        return sf_err_set(err, SF_EINVAL, "store: G-code job '%s' has no key", o->name);
+    sqlite3_stmt *st;
+    if ((rc = store_write_begin(
+             s, &st,
+             "INSERT INTO jobs(name, file_sha, gcode_sha, state, method, deviation_mm,"
+             " overhang_deg, copies, max_retries, material, target_printer, target_group,"
+             " priority, created_ms, updated_ms, nozzle_mm, gcode_lines, prep_key,"
+             " filament_g, support_g, ready_ms)"
+             " VALUES(?,?,?,'ready','gcode',0,0,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+             err)))
+        return rc;
+    int64_t t = clock_wall_ms();
+    sqlite3_bind_text(st, 1, o->name, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 2, sha, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 3, sha, -1, SQLITE_TRANSIENT);
+    bind_opts(st, 4, o, t);
+    sqlite3_bind_double(st, 12, g->nozzle_mm);
+    sqlite3_bind_int64(st, 13, g->gcode_lines > 0 ? g->gcode_lines : 0);
+    sqlite3_bind_text(st, 14, g->prep_key, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_double(st, 15, g->filament_g);
+    sqlite3_bind_double(st, 16, g->support_g);
+    sqlite3_bind_int64(st, 17, t);
+    char detail[192];
+    snprintf(detail, sizeof(detail), "ready '%s' x%d (G-code as uploaded, for %s)", o->name,
+             o->copies, g->prep_key);
+    return insert_job(s, st, "add G-code job", detail, id, err);
+}
+
+static void
+read_print_stat(sqlite3_stmt *st, void *row)
+{
+    struct print_stat *p = row;
+    memset(p, 0, sizeof(*p));
+    store_copy_text(p->printer, sizeof(p->printer), st, 0);
+    store_copy_text(p->outcome, sizeof(p->outcome), st, 1);
+    p->started_ms = sqlite3_column_int64(st, 2);
+    p->ended_ms = sqlite3_column_int64(st, 3);
+    p->wait_ms = sqlite3_column_int64(st, 4);
+    p->filament_g = sqlite3_column_double(st, 5);
+    p->support_saved_g = sqlite3_column_double(st, 6);
+}
+
+int
+store_print_stats(struct store *s, struct print_stat **rows, size_t *n, struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc =
+        store_select(s, &st,
+                     "SELECT p.printer, p.outcome, p.started_ms, p.ended_ms, p.wait_ms,"
+                     " j.filament_g, j.support_saved_g FROM prints p JOIN jobs j ON j.id = p.job_id"
+                     " ORDER BY p.id",
+                     (void **)rows, n, err);
+    if (rc)
+        return rc;
+    return store_read_rows(s, st, sizeof(**rows), read_print_stat, (void **)rows, n, "print stats",
+                           err);
+}
+
+int
+store_job_get(struct store *s, int64_t id, struct job_row *out, struct sf_err *err)
+{
+    char sql[sizeof(JOB_COLS) + 48];
+    snprintf(sql, sizeof(sql), "SELECT %s FROM jobs WHERE id = ?", JOB_COLS);
+    sqlite3_stmt *st;
+    int rc = store_prepare(s, &st, sql, err);
+    if (rc)
+        return rc;
+    sqlite3_bind_int64(st, 1, id);
+    rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW)
+        read_job(st, out);
+    sqlite3_finalize(st);
+    if (rc == SQLITE_ROW)
+        return SF_OK;
+    if (rc == SQLITE_DONE)
+        return sf_err_set(err, SF_ENOTFOUND, "job %lld: no such job", (long long)id);
+    return store_db_fail(s, err, "get job");
+}
+
+int
+store_job_list(struct store *s, struct job_row **rows, size_t *n, struct sf_err *err)
+{
+    char sql[sizeof(JOB_COLS) + 48];
+    snprintf(sql, sizeof(sql), "SELECT %s FROM jobs ORDER BY id", JOB_COLS);
+    sqlite3_stmt *st;
+    int rc = store_select(s, &st, sql, (void **)rows, n, err);
+    if (rc)
+        return rc;
+    return store_read_rows(s, st, sizeof(**rows), read_job_row, (void **)rows, n, "list jobs", err);
+}
+
+/* Close the job's open print with an outcome. */
+static int
+close_print(struct store *s, int64_t job_id, const char *outcome, int64_t lines_acked,
+            double filament_mm, struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc = store_prepare(s, &st,
+                           "UPDATE prints SET ended_ms = ?, outcome = ?, lines_acked = ?,"
+                           " filament_mm = ? WHERE job_id = ? AND outcome = ''",
+                           err);
+    if (rc)
+        return rc;
+    sqlite3_bind_int64(st, 1, clock_wall_ms());
+    sqlite3_bind_text(st, 2, outcome, -1, SQLITE_STATIC);
+    sqlite3_bind_int64(st, 3, lines_acked);
+    sqlite3_bind_double(st, 4, filament_mm);
+    sqlite3_bind_int64(st, 5, job_id);
+    return store_step_done(s, st, err, "close print");
+}
+
+static int
+open_print(struct store *s, const struct job_row *j, const char *printer, int64_t start_line,
+           struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc = store_prepare(s, &st,
+                           "INSERT INTO prints(job_id, copy, printer, material, start_line,"
+                           " lines_acked, started_ms, wait_ms) VALUES(?,?,?,?,?,?,?,?)",
+                           err);
+    if (rc)
+        return rc;
+    sqlite3_bind_int64(st, 1, j->id);
+    sqlite3_bind_int(st, 2, j->counts.copies_done + 1);
+    sqlite3_bind_text(st, 3, printer, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 4, j->opts.material, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_int64(st, 5, start_line);
+    sqlite3_bind_int64(st, 6, start_line);
+    int64_t t = clock_wall_ms();
+    sqlite3_bind_int64(st, 7, t);
+    /* a resume of an interrupted print waited for the operator, not in the queue */
+    sqlite3_bind_int64(
+        st, 8, j->state == JOB_READY && j->ready_ms > 0 && t > j->ready_ms ? t - j->ready_ms : 0);
+    return store_step_done(s, st, err, "open print");
+}
+
+/* Fill in j (already read) for the move from j->state to `to` by ev. */
+static int
+apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct job_event_args *a,
+            enum job_state to, struct sf_err *err)
+{
+    enum job_state from = j->state;
+    int rc = SF_OK;
+    char printer[sizeof(j->printer)]; /* a copy: j->printer is overwritten below */
+    snprintf(printer, sizeof(printer), "%s", a->printer && a->printer[0] ? a->printer : j->printer);
+    switch (ev) {
+    case JOB_EV_PREPARED:
+        if (!a->gcode_sha || !store_sha_valid(a->gcode_sha) || !store_file_known(s, a->gcode_sha))
+            return sf_err_set(err, SF_EINVAL, "job %lld: prepared without stored G-code",
+                              (long long)j->id);
+        snprintf(j->gcode_sha, sizeof(j->gcode_sha), "%s", a->gcode_sha);
+        for (int i = 0; i < 3; i++)
+            j->size_mm[i] = a->size_mm[i];
+        j->nozzle_mm = a->nozzle_mm;
+        j->gcode_lines = a->gcode_lines > 0 ? a->gcode_lines : 0;
+        snprintf(j->prep_key, sizeof(j->prep_key), "%s", a->prep_key ? a->prep_key : "");
+        if (a->mesh_sha && a->mesh_sha[0]) {
+            if (!store_sha_valid(a->mesh_sha) || !store_file_known(s, a->mesh_sha))
+                return sf_err_set(err, SF_EINVAL, "job %lld: optimized part is not stored",
+                                  (long long)j->id);
+            snprintf(j->mesh_sha, sizeof(j->mesh_sha), "%s", a->mesh_sha);
+            j->mesh_angle_deg = a->mesh_angle_deg;
+        }
+        j->filament_g = a->filament_g;
+        j->support_g = a->support_g;
+        j->support_saved_g = a->saved_g;
+        j->prepare_ms = a->prepare_ms;
+        j->slice_ms = a->slice_ms;
+        if (a->dev_measured || (a->mesh_sha && a->mesh_sha[0])) {
+            j->dev_measured = a->dev_measured; /* a fresh preparation: measured or not */
+            j->shape_changed = a->dev_measured && a->shape_changed;
+            j->mndr = a->dev_measured && a->mndr > 0 ? a->mndr : 0;
+            j->andr = a->dev_measured && a->andr > 0 ? a->andr : 0;
+        }
+        j->reason[0] = '\0';
+        break;
+    case JOB_EV_START:
+    case JOB_EV_RESUME:
+        if (ev == JOB_EV_RESUME && from == JOB_PAUSED)
+            break;
+        if (!printer[0])
+            return sf_err_set(err, SF_EINVAL, "job %lld: %s needs a printer", (long long)j->id,
+                              job_event_name(ev));
+        if (ev == JOB_EV_START)
+            j->lines_acked = 0;
+        else if (a->lines_acked > 0)
+            j->lines_acked = a->lines_acked; /* the operator chose where to resume */
+        rc = open_print(s, j, printer, j->lines_acked, err);
+        snprintf(j->printer, sizeof(j->printer), "%s", printer);
+        j->reason[0] = '\0';
+        break;
+    case JOB_EV_PAUSE:
+        if (a->lines_acked > j->lines_acked)
+            j->lines_acked = a->lines_acked;
+        break;
+    case JOB_EV_PRINT_DONE:
+    case JOB_EV_PRINT_FAILED:
+    case JOB_EV_CANCEL:
+    case JOB_EV_REFUSED:
+        if (a->lines_acked > j->lines_acked)
+            j->lines_acked = a->lines_acked;
+        if (job_state_on_printer(from))
+            rc = close_print(s, j->id,
+                             ev == JOB_EV_PRINT_DONE     ? "done"
+                             : ev == JOB_EV_PRINT_FAILED ? "failed"
+                             : ev == JOB_EV_REFUSED      ? "refused"
+                                                         : "cancelled",
+                             j->lines_acked, a->filament_mm, err);
+        j->printer[0] = '\0';
+        j->lines_acked = 0;
+        snprintf(j->reason, sizeof(j->reason), "%s", a->reason ? a->reason : "");
+        break;
+    case JOB_EV_CRASHED:
+        if (job_state_on_printer(from))
+            rc = close_print(s, j->id, "interrupted", j->lines_acked, 0, err);
+        snprintf(j->reason, sizeof(j->reason), "%s", a->reason ? a->reason : "");
+        break;
+    case JOB_EV_RESTART:
+        j->printer[0] = '\0';
+        j->lines_acked = 0;
+        j->reason[0] = '\0';
+        break;
+    case JOB_EV_PREPARE_FAILED:
+    case JOB_EV_DEFER:
+        snprintf(j->reason, sizeof(j->reason), "%s", a->reason ? a->reason : "");
+        break;
+    case JOB_EV_PREPARE:
+        break;
+    }
+    if (to == JOB_READY && from != JOB_READY)
+        j->ready_ms = clock_wall_ms(); /* a print's queue wait starts here */
+    j->state = to;
+    return rc;
+}
+
+int
+store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job_event_args *a,
+                enum job_state *to, struct sf_err *err)
+{
+    static const struct job_event_args none;
+    if (!a)
+        a = &none;
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    struct job_row j;
+    if ((rc = store_job_get(s, id, &j, err)))
+        goto fail;
+    enum job_state from = j.state, next;
+    struct job_counts c = j.counts;
+    if ((rc = job_next(from, ev, &c, &next, err))) {
+        sf_err_prefix(err, "job %lld", (long long)id);
+        goto fail;
+    }
+    j.counts = c;
+    if ((rc = apply_event(s, &j, ev, a, next, err)))
+        goto fail;
+    sqlite3_stmt *st;
+    if ((rc = store_prepare(
+             s, &st,
+             "UPDATE jobs SET state = ?, copies_done = ?, failures = ?, gcode_sha = ?,"
+             " size_x = ?, size_y = ?, size_z = ?, printer = ?, lines_acked = ?,"
+             " reason = ?, updated_ms = ?, nozzle_mm = ?, gcode_lines = ?, prep_key = ?,"
+             " mesh_sha = ?, mesh_angle_deg = ?, filament_g = ?, support_g = ?,"
+             " support_saved_g = ?, prepare_ms = ?, slice_ms = ?, ready_ms = ?,"
+             " mndr = ?, andr = ?, shape_changed = ? WHERE id = ?",
+             err)))
+        goto fail;
+    sqlite3_bind_text(st, 1, job_state_name(j.state), -1, SQLITE_STATIC);
+    sqlite3_bind_int(st, 2, j.counts.copies_done);
+    sqlite3_bind_int(st, 3, j.counts.failures);
+    if (j.gcode_sha[0])
+        sqlite3_bind_text(st, 4, j.gcode_sha, -1, SQLITE_TRANSIENT);
+    else
+        sqlite3_bind_null(st, 4);
+    for (int i = 0; i < 3; i++)
+        sqlite3_bind_double(st, 5 + i, j.size_mm[i]);
+    sqlite3_bind_text(st, 8, j.printer, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_int64(st, 9, j.lines_acked);
+    sqlite3_bind_text(st, 10, j.reason, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_int64(st, 11, clock_wall_ms());
+    sqlite3_bind_double(st, 12, j.nozzle_mm);
+    sqlite3_bind_int64(st, 13, j.gcode_lines);
+    sqlite3_bind_text(st, 14, j.prep_key, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_text(st, 15, j.mesh_sha, -1, SQLITE_TRANSIENT);
+    sqlite3_bind_double(st, 16, j.mesh_angle_deg);
+    sqlite3_bind_double(st, 17, j.filament_g);
+    sqlite3_bind_double(st, 18, j.support_g);
+    sqlite3_bind_double(st, 19, j.support_saved_g);
+    sqlite3_bind_int64(st, 20, j.prepare_ms);
+    sqlite3_bind_int64(st, 21, j.slice_ms);
+    sqlite3_bind_int64(st, 22, j.ready_ms);
+    if (j.dev_measured) {
+        sqlite3_bind_double(st, 23, j.mndr);
+        sqlite3_bind_double(st, 24, j.andr);
+    } else {
+        sqlite3_bind_null(st, 23);
+        sqlite3_bind_null(st, 24);
+    }
+    sqlite3_bind_int(st, 25, j.shape_changed);
+    sqlite3_bind_int64(st, 26, id);
+    char kind[24], detail[192];
+    const char *why = j.reason[0] ? j.reason : ev == JOB_EV_PREPARED && a->note ? a->note : "";
+    snprintf(kind, sizeof(kind), "job-%s", job_event_name(ev));
+    snprintf(detail, sizeof(detail), "%s -> %s%s%s", job_state_name(from), job_state_name(j.state),
+             why[0] ? ": " : "", why);
+    if ((rc = store_write_end(s, st, "update job", id, j.printer, kind, detail, err)))
+        return rc;
+    if (to)
+        *to = j.state;
+    return SF_OK;
+fail:
+    store_rollback(s);
+    return rc;
+}
+
+static int
+update_job_field(struct store *s, int64_t id, const char *sql, sqlite3_int64 ival, const char *tval,
+                 struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc = store_prepare(s, &st, sql, err);
+    if (rc)
+        return rc;
+    if (tval)
+        sqlite3_bind_text(st, 1, tval, -1, SQLITE_TRANSIENT);
+    else
+        sqlite3_bind_int64(st, 1, ival);
+    sqlite3_bind_int64(st, 2, clock_wall_ms());
+    sqlite3_bind_int64(st, 3, id);
+    rc = sqlite3_step(st);
+    sqlite3_finalize(st);
+    if (rc != SQLITE_DONE)
+        return store_db_fail(s, err, "update job");
+    if (sqlite3_changes(s->db) == 0)
+        return sf_err_set(err, SF_ENOTFOUND, "job %lld: no such job", (long long)id);
+    return SF_OK;
+}
+
+/* Raise job id's lines_acked; SF_ENOTFOUND if it is not printing or paused. */
+static int
+save_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_err *err)
+{
+    return update_job_field(s, id,
+                            "UPDATE jobs SET lines_acked = max(lines_acked, ?), updated_ms = ?"
+                            " WHERE id = ? AND state IN ('printing', 'paused')",
+                            lines_acked, NULL, err);
+}
+
+int
+store_job_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_err *err)
+{
+    int rc = save_progress(s, id, lines_acked, err);
+    if (rc == SF_ENOTFOUND)
+        return sf_err_set(err, SF_EINVAL, "job %lld: not printing", (long long)id);
+    return rc;
+}
+
+static int store_jobs_progress_tx(struct store *s, struct store_progress *p, size_t n,
+                                  struct sf_err *err);
+
+int
+store_jobs_progress(struct store *s, struct store_progress *p, size_t n, struct sf_err *err)
+{
+    /* Progress commits do not fsync (WAL with synchronous=NORMAL: they
+       survive a kill -9, and the next state change's fsync carries them to
+       disk); state changes stay FULL. */
+    sqlite3_exec(s->db, "PRAGMA synchronous = NORMAL", NULL, NULL, NULL);
+    int rc = store_jobs_progress_tx(s, p, n, err);
+    sqlite3_exec(s->db, "PRAGMA synchronous = FULL", NULL, NULL, NULL);
+    return rc;
+}
+
+static int
+store_jobs_progress_tx(struct store *s, struct store_progress *p, size_t n, struct sf_err *err)
+{
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    int saved = 0;
+    for (size_t i = 0; i < n; i++) {
+        rc = save_progress(s, p[i].job_id, p[i].lines_acked, err);
+        if (rc && rc != SF_ENOTFOUND) {
+            store_rollback(s);
+            return rc;
+        }
+        p[i].saved = rc == SF_OK;
+        saved += p[i].saved;
+    }
+    if ((rc = store_commit(s, err))) {
+        store_rollback(s);
+        for (size_t i = 0; i < n; i++)
+            p[i].saved = false;
+        return rc;
+    }
+    return saved;
+}
+
+int
+store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err *err)
+{
+    if (priority < -JOB_PRIORITY_MAX || priority > JOB_PRIORITY_MAX)
+        return sf_err_set(err, SF_EINVAL, "priority: %d is not in -%d..%d", priority,
+                          JOB_PRIORITY_MAX, JOB_PRIORITY_MAX);
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    char detail[64];
+    snprintf(detail, sizeof(detail), "priority %d", priority);
+    if ((rc = update_job_field(s, id, "UPDATE jobs SET priority = ?, updated_ms = ? WHERE id = ?",
+                               priority, NULL, err)) ||
+        (rc = store_log_event(s, id, NULL, "job-priority", detail, err)) ||
+        (rc = store_commit(s, err))) {
+        store_rollback(s);
+        return rc;
+    }
+    return SF_OK;
+}
+
+int
+store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_err *err)
+{
+    int rc = update_job_field(s, id,
+                              "UPDATE jobs SET reason = ?1, updated_ms = ?2"
+                              " WHERE id = ?3 AND reason != ?1",
+                              0, reason, err);
+    return rc == SF_ENOTFOUND ? SF_OK : rc; /* unchanged, or gone: nothing to write */
+}
+
+/* ---- history, events, checks ---- */
+
+static void
+read_print(sqlite3_stmt *st, void *row)
+{
+    struct print_row *p = row;
+    p->id = sqlite3_column_int64(st, 0);
+    p->job_id = sqlite3_column_int64(st, 1);
+    p->copy = sqlite3_column_int(st, 2);
+    store_copy_text(p->printer, sizeof(p->printer), st, 3);
+    store_copy_text(p->material, sizeof(p->material), st, 4);
+    p->start_line = sqlite3_column_int64(st, 5);
+    p->lines_acked = sqlite3_column_int64(st, 6);
+    p->filament_mm = sqlite3_column_double(st, 7);
+    p->started_ms = sqlite3_column_int64(st, 8);
+    p->ended_ms = sqlite3_column_int64(st, 9);
+    store_copy_text(p->outcome, sizeof(p->outcome), st, 10);
+}
+
+int
+store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
+             struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc = store_select(s, &st,
+                          "SELECT id, job_id, copy, printer, material, start_line, lines_acked,"
+                          " filament_mm, started_ms, ended_ms, outcome FROM prints WHERE job_id = ?"
+                          " ORDER BY id",
+                          (void **)rows, n, err);
+    if (rc)
+        return rc;
+    sqlite3_bind_int64(st, 1, job_id);
+    return store_read_rows(s, st, sizeof(**rows), read_print, (void **)rows, n, "list prints", err);
+}
