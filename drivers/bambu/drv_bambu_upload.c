@@ -17,9 +17,9 @@
 
 #include "../../src/base/log.h"
 
-#define PACK_STEP         (1 << 20)    /* G-code bytes packed per loop turn */
-#define UPLOAD_STALL_MS   60000        /* an H2D can take 30 s before its 226 */
-#define UPLOAD_CONNECT_MS 20000        /* TCP + TLS on a busy printer (or test machine) */
+#define PACK_STEP         (1 << 20) /* G-code bytes packed per loop turn */
+#define UPLOAD_STALL_MS   60000     /* an H2D can take 30 s before its 226 */
+#define UPLOAD_CONNECT_MS 20000     /* TCP + TLS on a busy printer (or test machine) */
 
 static CURLcode
 ftps_opts(CURL *e, void *ud)

@@ -641,50 +641,6 @@ httpc_active(const struct httpc *h)
         }                                                                                          \
     } while (0)
 
-static int
-build_mime(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
-{
-    r->mime = curl_mime_init(r->easy);
-    r->files = mem_calloc(o->n_parts, sizeof(*r->files));
-    if (!r->mime || !r->files)
-        return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
-    for (size_t i = 0; i < o->n_parts; i++) {
-        const struct httpc_part *p = &o->parts[i];
-        if (!p->name || (!p->value == !p->file_path))
-            return sf_err_set(err, SF_EINVAL,
-                              "%s %s: part %zu needs a name and either a value or a file",
-                              r->method, r->url, i);
-        curl_mimepart *mp = curl_mime_addpart(r->mime);
-        if (!mp || curl_mime_name(mp, p->name) != CURLE_OK)
-            return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
-        if (p->value) {
-            if (curl_mime_data(mp, p->value, CURL_ZERO_TERMINATED) != CURLE_OK)
-                return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
-        } else {
-            /* streamed from disk in chunks while sending, by part_read */
-            struct part_file *pf = &r->files[r->n_files++];
-            pf->r = r;
-            pf->path = mem_strdup(p->file_path);
-            if (!pf->path)
-                return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
-            pf->fp = fopen(p->file_path, "rb");
-            struct stat st;
-            if (!pf->fp || fstat(fileno(pf->fp), &st) < 0 || !S_ISREG(st.st_mode))
-                return sf_err_sys(err, "%s %s: part '%s': cannot read '%s'", r->method, r->url,
-                                  p->name, p->file_path);
-            const char *base = strrchr(p->file_path, '/');
-            base = p->filename ? p->filename : base ? base + 1 : p->file_path;
-            if (curl_mime_data_cb(mp, (curl_off_t)st.st_size, part_read, part_seek, NULL, pf) !=
-                    CURLE_OK ||
-                curl_mime_filename(mp, base) != CURLE_OK)
-                return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
-        }
-        if (p->type && curl_mime_type(mp, p->type) != CURLE_OK)
-            return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
-    }
-    return SF_OK;
-}
-
 /* The transfer itself: callbacks, keepalive, timeouts, the stall limit and authentication. */
 static int
 setup_transfer(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
@@ -740,6 +696,50 @@ setup_headers(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *er
     return SF_OK;
 fail:
     return SF_EINVAL;
+}
+
+static int
+build_mime(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
+{
+    r->mime = curl_mime_init(r->easy);
+    r->files = mem_calloc(o->n_parts, sizeof(*r->files));
+    if (!r->mime || !r->files)
+        return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
+    for (size_t i = 0; i < o->n_parts; i++) {
+        const struct httpc_part *p = &o->parts[i];
+        if (!p->name || (!p->value == !p->file_path))
+            return sf_err_set(err, SF_EINVAL,
+                              "%s %s: part %zu needs a name and either a value or a file",
+                              r->method, r->url, i);
+        curl_mimepart *mp = curl_mime_addpart(r->mime);
+        if (!mp || curl_mime_name(mp, p->name) != CURLE_OK)
+            return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
+        if (p->value) {
+            if (curl_mime_data(mp, p->value, CURL_ZERO_TERMINATED) != CURLE_OK)
+                return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
+        } else {
+            /* streamed from disk in chunks while sending, by part_read */
+            struct part_file *pf = &r->files[r->n_files++];
+            pf->r = r;
+            pf->path = mem_strdup(p->file_path);
+            if (!pf->path)
+                return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
+            pf->fp = fopen(p->file_path, "rb");
+            struct stat st;
+            if (!pf->fp || fstat(fileno(pf->fp), &st) < 0 || !S_ISREG(st.st_mode))
+                return sf_err_sys(err, "%s %s: part '%s': cannot read '%s'", r->method, r->url,
+                                  p->name, p->file_path);
+            const char *base = strrchr(p->file_path, '/');
+            base = p->filename ? p->filename : base ? base + 1 : p->file_path;
+            if (curl_mime_data_cb(mp, (curl_off_t)st.st_size, part_read, part_seek, NULL, pf) !=
+                    CURLE_OK ||
+                curl_mime_filename(mp, base) != CURLE_OK)
+                return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
+        }
+        if (p->type && curl_mime_type(mp, p->type) != CURLE_OK)
+            return sf_err_set(err, SF_ENOMEM, "%s %s: out of memory", r->method, r->url);
+    }
+    return SF_OK;
 }
 
 /* The body (copied, a file read while sending, or multipart parts) and the method that sends it. */
