@@ -17,6 +17,8 @@
  *
  * Design: all network work on the loop (mqttloop.h for MQTT, the shared
  * httpc client for FTPS); the package is written a megabyte per loop turn.
+ * This file follows the printer (reports, state, job control);
+ * drv_bambu_upload.c packs, uploads and starts the job (drv_bambu_int.h).
  * A dropped MQTT link makes the printer offline but keeps the job: the
  * printer prints on, and the reports after the reconnect carry it to its
  * end.  pushall is sent on connect (P1 printers
@@ -39,6 +41,7 @@
 #include "../../src/base/mem.h"
 #include "../../src/base/mqttloop.h"
 #include "../net/httpc.h"
+#include "drv_bambu_int.h"
 #include "gcode3mf.h"
 
 #define MQTT_PORT_DEFAULT 8883
@@ -49,9 +52,6 @@
                                           5-minute caution (OpenBambuAPI) is for periodic polling,  \
                                           which this driver never does */
 #define REPORT_MAX        (256 * 1024) /* one report (AMS and HMS lists included) */
-#define PACK_STEP         (1 << 20)    /* G-code bytes packed per loop turn */
-#define UPLOAD_STALL_MS   60000        /* an H2D can take 30 s before its 226 */
-#define UPLOAD_CONNECT_MS 20000        /* TCP + TLS on a busy printer (or test machine) */
 #define TIME_LEFT_MAX_MIN 1e7          /* mc_remaining_time past this (19 years) is garbage */
 #define ERR_CANCELED      0x0300400C   /* print_error "task canceled" */
 #define HMS_VERIFY_ATTR   0x05000500   /* HMS 0500-0500-0001-0007 */
@@ -63,47 +63,6 @@ static const char devmode_msg[] =
     "unsigned command refused (HMS 0500-0500-0001-0007): turn on LAN Only mode, then "
     "Developer Mode, on the printer; without them only monitoring works";
 
-enum jphase {
-    J_NONE,      /* no job of ours */
-    J_PACKING,   /* writing the .gcode.3mf */
-    J_UPLOADING, /* FTPS transfer running */
-    J_SENT,      /* project_file published; waiting for a report that shows it running */
-    J_ACTIVE,    /* the printer runs our job */
-};
-
-struct bambu {
-    struct drv d; /* first: drivers are cast from struct drv */
-    char host[128];
-    int mqtt_port, ftps_port;
-    char serial[64];
-    char code[64];
-    char ca_file[512];
-    bool insecure;
-    struct curl_slist *resolve; /* "SERIAL:FTPS_PORT:HOST" for CURLOPT_RESOLVE */
-    char topic_report[96], topic_request[96];
-    struct mqttloop *mqtt;
-    struct httpc *http;
-    bool open;               /* between open() and close() */
-    json_t *print;           /* merged "print" object of every report */
-    int64_t last_pushall_ms; /* loop time of the last pushall, 0 never */
-    uint64_t pushall_timer;
-    unsigned seq; /* request sequence ids */
-    struct drv_bambu_stats stats;
-    bool refused; /* unsigned commands refused: Developer Mode is off */
-    /* the job */
-    enum jphase phase;
-    bool cancelling;    /* stop sent for our job */
-    char subtask[96];   /* our job's name on the printer */
-    char file[128];     /* its package's name on the printer's storage */
-    char pkg_path[600]; /* the package on our disk, while it exists */
-    char pkg_md5[33];
-    struct gcode3mf *pack;
-    uint64_t pack_timer;
-    struct httpc_req *upload;
-    char project_seq[16]; /* sequence_id of our project_file */
-    int last_percent;
-};
-
 static const struct drv_ops bambu_ops;
 
 static struct bambu *
@@ -112,8 +71,8 @@ B(struct drv *d)
     return (struct bambu *)d;
 }
 
-static void
-emit(struct bambu *b, enum drv_event ev)
+void
+drv_bambu_emit(struct bambu *b, enum drv_event ev)
 {
     if (b->d.on_event)
         b->d.on_event(&b->d, ev, b->d.ud);
@@ -127,13 +86,13 @@ set_state(struct bambu *b, enum drv_state s, const char *msg)
     if (b->d.status.state == s)
         return;
     b->d.status.state = s;
-    emit(b, DRV_EV_STATE);
+    drv_bambu_emit(b, DRV_EV_STATE);
 }
 
 /* ---- requests ---- */
 
-static int
-request(struct bambu *b, const char *key, json_t *body, char *seq_out, struct sf_err *err)
+int
+drv_bambu_request(struct bambu *b, const char *key, json_t *body, char *seq_out, struct sf_err *err)
 {
     char seq[16];
     snprintf(seq, sizeof(seq), "%u", ++b->seq);
@@ -158,7 +117,7 @@ static void
 pushall(struct bambu *b)
 {
     json_t *o = json_pack("{s:s,s:i,s:i}", "command", "pushall", "version", 1, "push_target", 1);
-    if (request(b, "pushing", o, NULL, NULL) == SF_OK) {
+    if (drv_bambu_request(b, "pushing", o, NULL, NULL) == SF_OK) {
         int64_t now = loop_now_ms(b->d.loop);
         if (b->stats.pushalls > 0 &&
             (b->stats.pushall_gap_ms < 0 || now - b->last_pushall_ms < b->stats.pushall_gap_ms))
@@ -243,13 +202,13 @@ refused(struct bambu *b)
         b->phase = J_NONE;
         snprintf(b->d.status.message, sizeof(b->d.status.message), "%s", devmode_msg);
         b->d.status.state = DRV_ERROR;
-        emit(b, DRV_EV_JOB_FAILED);
+        drv_bambu_emit(b, DRV_EV_JOB_FAILED);
     }
     set_state(b, DRV_ERROR, devmode_msg);
 }
 
-static void
-job_end(struct bambu *b, enum drv_event ev, const char *msg)
+void
+drv_bambu_job_end(struct bambu *b, enum drv_event ev, const char *msg)
 {
     b->phase = J_NONE;
     b->cancelling = false;
@@ -258,8 +217,8 @@ job_end(struct bambu *b, enum drv_event ev, const char *msg)
     if (msg)
         snprintf(b->d.status.message, sizeof(b->d.status.message), "%s", msg);
     b->d.status.state = DRV_IDLE;
-    emit(b, ev);
-    emit(b, DRV_EV_STATE);
+    drv_bambu_emit(b, ev);
+    drv_bambu_emit(b, DRV_EV_STATE);
 }
 
 /* The cached report changed: move status, progress and the job along. */
@@ -286,7 +245,7 @@ follow(struct bambu *b)
     if (noz != st->nozzle_c || bed != st->bed_c || nozt != st->nozzle_target_c ||
         bedt != st->bed_target_c) {
         st->nozzle_c = noz, st->bed_c = bed, st->nozzle_target_c = nozt, st->bed_target_c = bedt;
-        emit(b, DRV_EV_TEMPS);
+        drv_bambu_emit(b, DRV_EV_TEMPS);
     }
     bool verify = false;
     char hms[160];
@@ -309,15 +268,15 @@ follow(struct bambu *b)
             b->last_percent = pct;
             st->progress = pct / 100.0;
             st->lines_acked = (uint64_t)((double)st->lines_total * pct / 100.0);
-            emit(b, DRV_EV_PROGRESS);
+            drv_bambu_emit(b, DRV_EV_PROGRESS);
         }
         if (!strcmp(gs, "FINISH")) {
-            job_end(b, DRV_EV_JOB_DONE, "");
+            drv_bambu_job_end(b, DRV_EV_JOB_DONE, "");
             return;
         }
         if (!strcmp(gs, "FAILED") || !strcmp(gs, "IDLE")) {
             if (b->cancelling) {
-                job_end(b, DRV_EV_JOB_CANCELLED, "cancelled");
+                drv_bambu_job_end(b, DRV_EV_JOB_CANCELLED, "cancelled");
                 return;
             }
             char msg[160];
@@ -328,7 +287,7 @@ follow(struct bambu *b)
                 snprintf(msg, sizeof(msg), "print failed at %d%%: print_error 0x%08llX%s%s", pct,
                          perr, hms[0] ? "; " : "", hms);
             log_printer(LOG_WARN, b->d.name, "%s", msg);
-            job_end(b, DRV_EV_JOB_FAILED, msg);
+            drv_bambu_job_end(b, DRV_EV_JOB_FAILED, msg);
             return;
         }
         set_state(b, !strcmp(gs, "PAUSE") ? DRV_PAUSED : DRV_PRINTING, NULL);
@@ -364,7 +323,7 @@ on_answer(struct bambu *b, const char *key, json_t *o)
     if (!strcmp(cmd, "project_file") && b->phase == J_SENT && seq && !strcmp(seq, b->project_seq)) {
         char msg[160];
         snprintf(msg, sizeof(msg), "printer refused the job: %s", reason ? reason : result);
-        job_end(b, DRV_EV_JOB_FAILED, msg);
+        drv_bambu_job_end(b, DRV_EV_JOB_FAILED, msg);
     }
 }
 
@@ -424,7 +383,7 @@ on_up(void *ud)
         b->pushall_timer =
             loop_timer_add(b->d.loop, b->last_pushall_ms + min_ms - now, pushall_due, b);
     json_t *v = json_pack("{s:s}", "command", "get_version");
-    request(b, "info", v, NULL, NULL);
+    drv_bambu_request(b, "info", v, NULL, NULL);
     log_printer(LOG_INFO, b->d.name, "connected to %s:%d", b->host, b->mqtt_port);
     /* The state follows from the first report; until then, connected and waiting. */
     if (json_object_size(b->print) > 0 && b->d.status.state != DRV_ERROR)
@@ -439,8 +398,8 @@ on_up(void *ud)
  * what the printer showed.  curl's "certificate subject name 'X' does not
  * match target host name 'Y'" becomes "it shows CN=X".
  */
-static void
-tls_message(struct bambu *b, const char *link, const char *detail, char *out, size_t n)
+void
+drv_bambu_tls_message(struct bambu *b, const char *link, const char *detail, char *out, size_t n)
 {
     const char *subj = strstr(detail, "subject name '");
     const char *end = subj ? strchr(subj + 14, '\'') : NULL;
@@ -471,7 +430,7 @@ on_down(void *ud, int connack, bool tls, const char *why)
     }
     if (tls) {
         const char *p = strstr(why, "certificate rejected: ");
-        tls_message(b, "MQTT", p ? p + 22 : why, msg, sizeof(msg));
+        drv_bambu_tls_message(b, "MQTT", p ? p + 22 : why, msg, sizeof(msg));
         log_printer(LOG_ERROR, b->d.name, "%s; ca_file '%s', MQTT said: %s", msg, b->ca_file, why);
         set_state(b, DRV_ERROR, msg);
         return;
@@ -479,194 +438,6 @@ on_down(void *ud, int connack, bool tls, const char *why)
     log_printer(LOG_WARN, b->d.name, "MQTT: %s", why);
     /* The job stays: the printer prints on without us, and we pick it up again. */
     set_state(b, DRV_OFFLINE, why);
-}
-
-/* ---- upload ---- */
-
-static CURLcode
-ftps_opts(CURL *e, void *ud)
-{
-    struct bambu *b = ud;
-    CURLcode rc = CURLE_OK;
-    /* The serial is the URL's host, resolved to the printer: curl checks the name on the
-       certificate (CN = serial) against it. */
-    rc |= curl_easy_setopt(e, CURLOPT_RESOLVE, b->resolve);
-    /* PROT P and TLS everywhere; fail rather than fall back to clear text. */
-    rc |= curl_easy_setopt(e, CURLOPT_USE_SSL, (long)CURLUSESSL_ALL);
-    /* The data connection resumes the control connection's session (X1: 522 otherwise). */
-    rc |= curl_easy_setopt(e, CURLOPT_SSL_SESSIONID_CACHE, 1L);
-    /* curl's TLS session cache belongs to the easy handle, its connection pool to the
-       multi: a control connection kept from an earlier upload (another easy handle) has
-       no session in this handle's cache, so the data connection would handshake afresh
-       and be refused (522; test_bambu's second job caught it).  One control connection
-       per upload, closed after it. */
-    rc |= curl_easy_setopt(e, CURLOPT_FRESH_CONNECT, 1L);
-    rc |= curl_easy_setopt(e, CURLOPT_FORBID_REUSE, 1L);
-    /* TLS 1.2: X1C/H2D refuse others, and vsftpd's session reuse breaks on 1.3 (curl #4654). */
-    rc |= curl_easy_setopt(e, CURLOPT_SSLVERSION,
-                           (long)(CURL_SSLVERSION_TLSv1_2 | CURL_SSLVERSION_MAX_TLSv1_2));
-    rc |= curl_easy_setopt(e, CURLOPT_FTP_SKIP_PASV_IP, 1L);
-    rc |= curl_easy_setopt(e, CURLOPT_FTP_USE_EPSV, 0L); /* EPSV is unverified on printers */
-    if (log_trace_enabled("ftps")) /* SLIMFARM_TRACE=ftps: curl's own account on stderr */
-        rc |= curl_easy_setopt(e, CURLOPT_VERBOSE, 1L);
-    if (b->insecure) {
-        rc |= curl_easy_setopt(e, CURLOPT_SSL_VERIFYPEER, 0L);
-        rc |= curl_easy_setopt(e, CURLOPT_SSL_VERIFYHOST, 0L);
-    } else {
-        rc |= curl_easy_setopt(e, CURLOPT_CAINFO, b->ca_file);
-    }
-    return rc;
-}
-
-static void
-drop_package(struct bambu *b)
-{
-    gcode3mf_free(b->pack);
-    b->pack = NULL;
-    loop_timer_cancel(b->d.loop, b->pack_timer);
-    b->pack_timer = 0;
-    if (b->pkg_path[0])
-        unlink(b->pkg_path);
-    b->pkg_path[0] = '\0';
-}
-
-static void
-fail_start(struct bambu *b, const char *msg)
-{
-    log_printer(LOG_WARN, b->d.name, "%s", msg);
-    drop_package(b);
-    job_end(b, DRV_EV_JOB_FAILED, msg);
-}
-
-static void
-upload_done(struct httpc_req *r, const struct httpc_result *res, void *ud)
-{
-    (void)r;
-    struct bambu *b = ud;
-    b->upload = NULL;
-    drop_package(b);
-    if (res->code != SF_OK && res->tls_peer) {
-        /* not worth a retry: the printer waits for the operator, as for MQTT's */
-        char msg[300];
-        tls_message(b, "FTPS upload", res->detail, msg, sizeof(msg));
-        log_printer(LOG_ERROR, b->d.name, "%s; ca_file '%s', curl said: %s", msg, b->ca_file,
-                    res->err.msg);
-        b->phase = J_NONE;
-        b->cancelling = false;
-        snprintf(b->d.status.message, sizeof(b->d.status.message), "%s", msg);
-        b->d.status.state = DRV_ERROR;
-        emit(b, DRV_EV_JOB_FAILED);
-        emit(b, DRV_EV_STATE);
-        return;
-    }
-    /* curl itself requires the 226 after the data (else CURLE_UPLOAD_FAILED / PARTIAL_FILE);
-       status is the last reply, the QUIT's 221 on success. */
-    if (res->code != SF_OK) {
-        char msg[300];
-        snprintf(msg, sizeof(msg), "upload failed: %s", res->err.msg);
-        /* status is the last reply curl read, not always the refusal (a 227 when STOR's
-           552 ended it): the code is taken from curl's words when they carry it */
-        long code = strstr(res->err.msg, ": 552")   ? 552
-                    : strstr(res->err.msg, ": 553") ? 553
-                                                    : res->status;
-        if (code == 552 || code == 553)
-            snprintf(msg, sizeof(msg),
-                     "upload refused (FTP %ld): the printer's storage is full or missing", code);
-        fail_start(b, msg);
-        return;
-    }
-    b->stats.uploads++;
-    /* project_file: the stock plugin's LAN frame (BAMBU-LAN.md section 2). */
-    char url[160];
-    snprintf(url, sizeof(url), "ftp://%s", b->file);
-    json_t *o = json_pack("{s:s,s:s,s:s,s:s,s:s,s:s,s:s,s:s,s:s,s:s,s:s,s:b,s:b,s:b,s:b,s:b,s:b,"
-                          "s:[i]}",
-                          "command", "project_file", "param", "Metadata/plate_1.gcode", "url", url,
-                          "file", b->file, "subtask_name", b->subtask, "md5", b->pkg_md5,
-                          "project_id", "0", "profile_id", "0", "task_id", "0", "subtask_id", "0",
-                          "bed_type", "auto", "bed_leveling", 1, "flow_cali", 0, "vibration_cali",
-                          0, "layer_inspect", 0, "timelapse", 0, "use_ams", 0, "ams_mapping", -1);
-    struct sf_err err;
-    if (!o || request(b, "print", o, b->project_seq, &err) < 0) {
-        /* The link dropped between upload and start: the file waits on the printer. */
-        fail_start(b, "could not send project_file: not connected");
-        return;
-    }
-    b->phase = J_SENT;
-    snprintf(b->d.status.message, sizeof(b->d.status.message), "uploaded; starting");
-    log_printer(LOG_INFO, b->d.name, "job '%s' sent", b->subtask);
-}
-
-/* "uploading N %" in the printer's message, as the HTTP drivers show it; N only rises, and
-   100 only once every byte is sent (the printer's 226 and the start still follow). */
-static void
-upload_progress(struct httpc_req *r, uint64_t sent, uint64_t total, void *ud)
-{
-    (void)r;
-    struct bambu *b = ud;
-    if (!total || b->phase != J_UPLOADING)
-        return;
-    int pct = sent >= total ? 100 : (int)((double)sent * 100.0 / (double)total);
-    if (pct <= b->stats.upload_pct)
-        return;
-    b->stats.upload_pct = pct;
-    if (pct > 0 && pct < 100)
-        b->stats.upload_steps++;
-    snprintf(b->d.status.message, sizeof(b->d.status.message), "uploading %d %%", pct);
-}
-
-static void
-start_upload(struct bambu *b)
-{
-    struct sf_err err;
-    if (gcode3mf_file_md5(b->pkg_path, b->pkg_md5, &err) < 0) {
-        fail_start(b, err.msg);
-        return;
-    }
-    char url[400];
-    /* The serial as host name: curl checks the certificate against it (CN = serial). */
-    snprintf(url, sizeof(url), "ftps://%s:%d/%s", b->serial, b->ftps_port, b->file);
-    struct httpc_opts o = { .method = "PUT",
-                            .url = url,
-                            .body_path = b->pkg_path,
-                            .timeout_ms = -1,
-                            .connect_timeout_ms = UPLOAD_CONNECT_MS,
-                            .stall_ms = UPLOAD_STALL_MS,
-                            .user = "bblp",
-                            .password = b->code,
-                            .done = upload_done,
-                            .progress = upload_progress,
-                            .ud = b,
-                            .setopt = ftps_opts,
-                            .setopt_ud = b };
-    b->upload = httpc_start(b->http, &o, &err);
-    if (!b->upload) {
-        fail_start(b, err.msg);
-        return;
-    }
-    b->phase = J_UPLOADING;
-    b->stats.upload_pct = -1;
-    snprintf(b->d.status.message, sizeof(b->d.status.message), "uploading");
-}
-
-static void
-pack_step(struct loop *l, void *ud)
-{
-    struct bambu *b = ud;
-    b->pack_timer = 0;
-    struct sf_err err;
-    int rc = gcode3mf_step(b->pack, PACK_STEP, &err);
-    if (rc < 0) {
-        fail_start(b, err.msg);
-        return;
-    }
-    if (rc == 1) {
-        b->pack_timer = loop_timer_add(l, 0, pack_step, b);
-        return;
-    }
-    gcode3mf_free(b->pack);
-    b->pack = NULL;
-    start_upload(b);
 }
 
 /* ---- drv_ops ---- */
@@ -735,7 +506,7 @@ bambu_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
     d->status.lines_acked = 0;
     d->status.progress = 0;
     d->status.job_started_ms = loop_now_ms(d->loop);
-    b->pack_timer = loop_timer_add(d->loop, 0, pack_step, b);
+    b->pack_timer = loop_timer_add(d->loop, 0, drv_bambu_pack_step, b);
     set_state(b, DRV_PRINTING, "packing");
     return SF_OK;
 }
@@ -791,7 +562,7 @@ static int
 simple_cmd(struct bambu *b, const char *cmd, struct sf_err *err)
 {
     json_t *o = json_pack("{s:s,s:s}", "command", cmd, "param", "");
-    return request(b, "print", o, NULL, err);
+    return drv_bambu_request(b, "print", o, NULL, err);
 }
 
 static int
@@ -824,8 +595,8 @@ bambu_cancel(struct drv *d, struct sf_err *err)
         if (b->upload)
             httpc_cancel(b->upload);
         b->upload = NULL;
-        drop_package(b);
-        job_end(b, DRV_EV_JOB_CANCELLED, "cancelled before it started");
+        drv_bambu_drop_package(b);
+        drv_bambu_job_end(b, DRV_EV_JOB_CANCELLED, "cancelled before it started");
         return SF_OK;
     case J_SENT:
     case J_ACTIVE:
@@ -846,7 +617,7 @@ bambu_command(struct drv *d, const char *line, struct sf_err *err)
     char text[4100];
     snprintf(text, sizeof(text), "%s\n", line);
     json_t *o = json_pack("{s:s,s:s}", "command", "gcode_line", "param", text);
-    return request(b, "print", o, NULL, err);
+    return drv_bambu_request(b, "print", o, NULL, err);
 }
 
 static void
@@ -859,7 +630,7 @@ bambu_close(struct drv *d)
     mqttloop_close(b->mqtt);
     if (d->status.state != DRV_OFFLINE) {
         d->status.state = DRV_OFFLINE;
-        emit(b, DRV_EV_STATE);
+        drv_bambu_emit(b, DRV_EV_STATE);
     }
 }
 
@@ -869,7 +640,7 @@ bambu_destroy(struct drv *d)
     struct bambu *b = B(d);
     if (b->upload)
         httpc_cancel(b->upload);
-    drop_package(b);
+    drv_bambu_drop_package(b);
     loop_timer_cancel(d->loop, b->pushall_timer);
     mqttloop_free(b->mqtt);
     if (b->http)

@@ -704,14 +704,8 @@ static void
 mr_kick(struct netdrv *n)
 {
     struct moonraker *m = MR(n);
-    if (!n->open || n->req)
+    if (!netdrv_send_want(n))
         return;
-    if (n->want != NETDRV_RQ_NONE) {
-        int w = n->want;
-        n->want = NETDRV_RQ_NONE;
-        if (mr_start(n, w))
-            return;
-    }
     if (m->script_len > 0) {
         m->script[m->script_len] = '\0';
         m->script_len = 0;

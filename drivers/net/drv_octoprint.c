@@ -1,78 +1,29 @@
 /*
  * drv_octoprint.c - a printer behind OctoPrint (drv_octoprint.h).
  *
- * Why this shape: OctoPrint streams the G-code itself, so the driver's job
- * is a file transfer plus a watch.  Everything is a request on the shared
- * httpc client; the driver never waits.  Three kinds of traffic:
- *  - the link: GET /api/version on open(), then a poll cycle (GET /api/job
- *    and GET /api/printer, both answered, then the next cycle after
- *    poll_ms).  Any poll that finds OctoPrint unreachable (refused,
- *    timeout, 5xx) or refusing our key takes the link down (DRV_OFFLINE);
- *    the owner re-open()s after drv_backoff_ms.
- *  - the job: an upload (multipart, streamed from disk by curl) with
- *    print=true, select+print if OctoPrint did not start it, then the poll
- *    decides how it ends (evaluate()).
- *  - actions: pause/resume/cancel/command, one request each.  A poll that
- *    started before an action was answered says nothing about the action's
- *    effect, so state changes from such polls are dropped (act_epoch).
+ * OctoPrint streams the G-code itself, so the driver's job is a file
+ * transfer plus a watch, as for Moonraker and PrusaLink: it runs on their
+ * core (netdrv.h: the request slot, the poll timer, losing contact, the
+ * job operations), and judges what OctoPrint says with netjob.h's table.
+ * This file holds what is OctoPrint's own: its replies' parsers (pure,
+ * exposed for the replay tests and the fuzz target), its routes and auth
+ * header, its words for a fault, its state texts in netjob's words, and
+ * the job's lines counted from OctoPrint's file position.
  *
- * Thread: the loop thread.
+ * Thread: the parsers are pure; the driver runs on the loop thread.
  */
 #include "drv_octoprint.h"
 
 #include <jansson.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/stat.h>
 
 #include "../../src/base/gcode.h"
 #include "../../src/base/limits.h"
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
-#include "httpc.h"
-
-/* Replies we read are small; a status reply of a few kB, 256 kB is plenty. */
-#define OCTO_BODY_MAX ((size_t)256 << 10)
-/* A poll or an action that takes longer than this finds OctoPrint down. */
-#define OCTO_REQ_TIMEOUT_MS 10000
-/* An upload that moves nothing for this long has failed. */
-#define OCTO_STALL_MS 60000
-/* Polls that may pass without our file printing before the job counts as gone. */
-#define OCTO_GRACE_POLLS 3
-
-enum link { L_DOWN, L_VERSION, L_UP };
-enum job { J_NONE, J_UPLOADING, J_SELECTING, J_RUNNING, J_CANCELLING };
-
-struct octo {
-    struct drv base;
-    struct httpc *http; /* the loop's shared client (httpc_get) */
-    char url[256];      /* base URL, no trailing '/' */
-    char key_hdr[200];  /* "X-Api-Key: ..." */
-    int poll_ms;        /* poll period */
-    enum link link;     /* connection progress */
-    bool polled;        /* a whole poll cycle came back since the link came up */
-    struct httpc_req *req_version, *req_job, *req_printer;            /* link and poll requests */
-    struct httpc_req *req_upload, *req_select, *req_action, *req_cmd; /* job and actions */
-    int poll_pending;          /* poll replies still awaited this cycle */
-    bool poll_again;           /* poll once more at once when this cycle ends */
-    uint64_t poll_timer;       /* next cycle */
-    uint64_t act_epoch;        /* bumped when an action is answered */
-    uint64_t poll_epoch;       /* act_epoch when this cycle started */
-    struct octo_job last;      /* the last /api/job */
-    struct octo_printer lastp; /* the last /api/printer (temperatures) */
-    enum job job;              /* our job's phase */
-    char remote[80];           /* its name on OctoPrint (drv_remote_name) */
-    int64_t file_size;         /* its size */
-    bool saw_printing;         /* OctoPrint was seen printing it (or we re-attached) */
-    int missing_polls;         /* cycles without it where it should be */
-    FILE *cur;                 /* the job file, read up to OctoPrint's file position */
-    int64_t cur_pos;           /* bytes of it counted */
-    uint64_t cur_lines;        /* command lines in those bytes */
-    char *cur_buf;             /* getline buffer */
-    size_t cur_cap;
-};
+#include "netdrv.h"
 
 /* ---- reply parsing (pure) ---- */
 
@@ -274,129 +225,175 @@ octo_reason(const char *body, size_t len, char *out, size_t n)
             *c = ' ';
 }
 
-/* ---- driver plumbing ---- */
+/* ---- the driver ---- */
 
-static void
-emit(struct octo *o, enum drv_event ev)
+/*
+ * How it talks: netdrv.h's core (one request at a time, polls on a timer
+ * that actions pre-empt), with job_tries and upload_tries 1: any poll that
+ * finds OctoPrint unreachable (refused, timeout, 5xx), refusing our key or
+ * answering what is not OctoPrint takes the printer offline at once, and a
+ * job OctoPrint runs is left to attach() on reconnect; an upload that fails
+ * fails the job (the farm's retry policy sends it again).  Over OctoPrint's
+ * API: GET /api/version on connecting, then a poll is GET /api/job and
+ * GET /api/printer one after the other, judged when both are in; the
+ * upload is multipart POST /api/files/local with select and print, then
+ * select+print if OctoPrint stored it without starting it.
+ *
+ * How a job ends: OctoPrint reports bytes and has no job id, so the job is
+ * ours while its file has our name; Operational with our file read to its
+ * end is done, Operational short of it after we saw it print is stopped
+ * at the printer, and a file OctoPrint does not show for
+ * OCTO_GRACE_POLLS polls (it takes a moment to start one) is gone.
+ */
+/* Replies we read are small; a status reply of a few kB, 256 kB is plenty. */
+#define OCTO_BODY_MAX ((size_t)256 << 10)
+/* Polls that may pass without our file printing before the job counts as gone. */
+#define OCTO_GRACE_POLLS 3
+#define OCTO_POLL_MS     1000 /* drv_config.poll_ms 0 */
+
+enum { RQ_PRINTER = NETDRV_RQ_OWN, RQ_SELECT, RQ_COMMAND };
+
+struct octo {
+    struct netdrv n;
+    const char *hdrs[2];         /* the key, NULL */
+    const char *json_hdrs[3];    /* the key, Content-Type: application/json, NULL */
+    bool ready;                  /* /api/version answered since the last loss of contact */
+    struct octo_job last;        /* the last /api/job (attach reads it) */
+    bool saw_printing;           /* OctoPrint was seen printing our job (or we re-attached) */
+    int missing_polls;           /* polls without it where it should be */
+    char cmd[SF_GCODE_LINE_MAX]; /* the manual command waiting, or the last one sent */
+    bool want_cmd;               /* it waits for the slot */
+    FILE *cur;                   /* the job file, read up to OctoPrint's file position */
+    int64_t cur_pos;             /* bytes of it counted */
+    uint64_t cur_lines;          /* command lines in those bytes */
+    char *cur_buf;               /* getline buffer */
+    size_t cur_cap;
+};
+
+static struct octo *
+OC(struct netdrv *n)
 {
-    if (o->base.on_event)
-        o->base.on_event(&o->base, ev, o->base.ud);
+    return (struct octo *)n;
 }
 
-static void
-set_state(struct octo *o, enum drv_state s)
+/* OctoPrint's routes, and what each request is called in messages ("GET /api/job answered
+   HTTP 503"); select+print appends the file name, a command brings its own body. */
+static const struct route {
+    int kind;
+    const char *method, *path, *body, *name;
+} routes[] = {
+    { NETDRV_RQ_INFO, "GET", "/api/version", NULL, "GET /api/version" },
+    { NETDRV_RQ_POLL, "GET", "/api/job", NULL, "GET /api/job" },
+    { RQ_PRINTER, "GET", "/api/printer?exclude=sd", NULL, "GET /api/printer" },
+    { NETDRV_RQ_UPLOAD, "POST", "/api/files/local", NULL, "upload" },
+    { RQ_SELECT, "POST", "/api/files/local/", "{\"command\":\"select\",\"print\":true}",
+      "select+print" },
+    { NETDRV_RQ_PAUSE, "POST", "/api/job", "{\"command\":\"pause\",\"action\":\"pause\"}",
+      "POST /api/job" },
+    { NETDRV_RQ_RESUME, "POST", "/api/job", "{\"command\":\"pause\",\"action\":\"resume\"}",
+      "POST /api/job" },
+    { NETDRV_RQ_CANCEL, "POST", "/api/job", "{\"command\":\"cancel\"}", "POST /api/job" },
+    { RQ_COMMAND, "POST", "/api/printer/command", NULL, "POST /api/printer/command" },
+};
+
+static const struct route *
+route(int kind)
 {
-    if (o->base.status.state == s)
-        return;
-    o->base.status.state = s;
-    emit(o, DRV_EV_STATE);
+    for (size_t i = 0; i < sizeof(routes) / sizeof(routes[0]); i++)
+        if (routes[i].kind == kind)
+            return &routes[i];
+    return NULL;
 }
 
-static void msg(struct octo *o, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void
-msg(struct octo *o, const char *fmt, ...)
+static enum netdrv_outcome
+octo_judge(struct netdrv *n, int kind, const struct httpc_result *res, char *why, size_t len)
 {
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(o->base.status.message, sizeof(o->base.status.message), fmt, ap);
-    va_end(ap);
-}
-
-static void
-cancel_req(struct httpc_req **r)
-{
-    if (*r)
-        httpc_cancel(*r);
-    *r = NULL;
-}
-
-/* What an HTTP outcome means for us. */
-enum outcome { O_OK, O_AUTH, O_CONFLICT, O_NOTFOUND, O_DOWN, O_REFUSED };
-
-static enum outcome
-judge(const struct httpc_result *res, const char *what, char *why, size_t n)
-{
+    (void)n;
     char reason[160];
+    const struct route *rt = route(kind);
+    const char *w = rt ? rt->name : "?";
     if (res->code != SF_OK) {
-        snprintf(why, n, "OctoPrint unreachable: %s", res->err.msg);
-        return O_DOWN;
+        snprintf(why, len, "OctoPrint unreachable: %s", res->err.msg);
+        return NETDRV_DOWN;
     }
     if (res->status >= 200 && res->status < 300) {
         why[0] = 0;
-        return O_OK;
+        return NETDRV_OK;
     }
     octo_reason(res->body, res->body_len, reason, sizeof(reason));
     if (res->status == 401 || res->status == 403) {
-        snprintf(why, n, "authentication failed (check api_key): %s answered %ld", what,
+        snprintf(why, len, "authentication failed (check api_key): %s answered %ld", w,
                  res->status);
-        return O_AUTH;
+        return NETDRV_AUTH;
     }
-    if (res->status == 409) {
-        snprintf(why, n, "OctoPrint: %s", reason[0] ? reason : "conflict (409)");
-        return O_CONFLICT;
-    }
-    if (res->status == 404) {
-        snprintf(why, n, "OctoPrint: %s: not found (404)", what);
-        return O_NOTFOUND;
-    }
-    if (res->status >= 500) {
-        snprintf(why, n, "OctoPrint: %s answered HTTP %ld%s%s", what, res->status,
+    if (res->status == 409)
+        snprintf(why, len, "OctoPrint: %s", reason[0] ? reason : "conflict (409)");
+    else if (res->status == 404)
+        snprintf(why, len, "OctoPrint: %s: not found (404)", w);
+    else
+        snprintf(why, len, "OctoPrint: %s answered HTTP %ld%s%s", w, res->status,
                  reason[0] ? ": " : "", reason);
-        return O_DOWN;
-    }
-    snprintf(why, n, "OctoPrint: %s answered HTTP %ld%s%s", what, res->status,
-             reason[0] ? ": " : "", reason);
-    return O_REFUSED;
-}
-
-/* The reply to the request held in *slot (which empties): what it amounts to. */
-static enum outcome
-answered(struct httpc_req **slot, const struct httpc_result *res, const char *what, char *why,
-         size_t n)
-{
-    *slot = NULL;
-    return judge(res, what, why, n);
+    return res->status >= 500 ? NETDRV_DOWN : NETDRV_REFUSED;
 }
 
 /* A 2xx reply whose body the parser refused (rc < 0): refused, with the parser's reason. */
-static enum outcome
+static enum netdrv_outcome
 parsed(int rc, const struct sf_err *err, char *why, size_t n)
 {
     if (rc >= 0)
-        return O_OK;
+        return NETDRV_OK;
     snprintf(why, n, "%s", err->msg);
-    return O_REFUSED;
+    return NETDRV_REFUSED;
 }
 
-static struct httpc_req *
-request(struct octo *o, const char *method, const char *path, const char *json,
-        const struct httpc_part *parts, size_t n_parts, httpc_done_fn done)
+/* Request kind in the free slot: its route, the key, JSON when there is a body. */
+static bool
+octo_start(struct netdrv *n, int kind)
 {
-    char url[512];
-    snprintf(url, sizeof(url), "%s%s", o->url, path);
-    const char *hdrs[3] = { o->key_hdr, json ? "Content-Type: application/json" : NULL, NULL };
-    struct httpc_opts opt = {
-        .method = method,
-        .url = url,
-        .headers = hdrs,
-        .body = json,
-        .body_len = json ? strlen(json) : 0,
-        .parts = parts,
-        .n_parts = n_parts,
-        .max_body = OCTO_BODY_MAX,
-        .timeout_ms = parts ? -1 : OCTO_REQ_TIMEOUT_MS,
-        .stall_ms = parts ? OCTO_STALL_MS : 0,
-        .done = done,
-        .ud = o,
+    struct octo *o = OC(n);
+    const struct route *rt = route(kind);
+    if (!rt)
+        return false;
+    char url[512], *cmd = NULL;
+    snprintf(url, sizeof(url), "%s%s%s", n->url, rt->path, kind == RQ_SELECT ? n->job.name : "");
+    const char *body = rt->body;
+    if (kind == RQ_COMMAND) {
+        json_t *j = json_pack("{s:s}", "command", o->cmd);
+        body = cmd = j ? json_dumps(j, JSON_COMPACT) : NULL;
+        json_decref(j);
+        if (!cmd)
+            return false;
+    }
+    struct httpc_opts opt = { .method = rt->method,
+                              .url = url,
+                              .headers = body ? o->json_hdrs : o->hdrs,
+                              .body = body,
+                              .body_len = body ? strlen(body) : 0,
+                              .max_body = OCTO_BODY_MAX };
+    struct httpc_part parts[] = {
+        { .name = "select", .value = "true" },
+        { .name = "print", .value = "true" },
+        { .name = "file",
+          .file_path = n->path,
+          .filename = n->job.name,
+          .type = "application/octet-stream" },
     };
-    struct sf_err err;
-    struct httpc_req *r = httpc_start(o->http, &opt, &err);
-    if (!r)
-        log_printer(LOG_WARN, o->base.name, "%s", err.msg);
-    return r;
+    if (kind == NETDRV_RQ_UPLOAD) {
+        opt.parts = parts; /* httpc_start copies them, and the body */
+        opt.n_parts = 3;
+    }
+    bool ok = netdrv_request(n, kind, &opt);
+    free(cmd);
+    return ok;
 }
 
-/* ---- the job's end ---- */
+static bool
+octo_poll(struct netdrv *n)
+{
+    return octo_start(n, OC(n)->ready ? NETDRV_RQ_POLL : NETDRV_RQ_INFO);
+}
+
+/* ---- the job's lines ---- */
 
 static void
 cursor_close(struct octo *o)
@@ -439,124 +436,34 @@ lines_before(struct octo *o, int64_t pos)
     return o->cur_lines;
 }
 
-static void
-job_end(struct octo *o, enum drv_event ev, enum drv_state next)
+/* netdrv lines: those wholly before OctoPrint's file position; they only rise, and the
+   last one counts at DONE. */
+static uint64_t
+octo_lines(struct netdrv *n, double progress)
 {
-    struct drv_status *st = &o->base.status;
-    o->job = J_NONE;
-    cursor_close(o);
-    st->has_time_left = false;
-    if (ev == DRV_EV_JOB_DONE) {
-        st->lines_acked = st->lines_total;
-        st->progress = 1.0;
-        st->message[0] = 0;
-    } else if (ev == DRV_EV_JOB_FAILED) {
-        log_printer(LOG_WARN, o->base.name, "job failed: %s", st->message);
-    }
-    st->state = next; /* the event carries the state the job left the printer in */
-    emit(o, ev);
-    emit(o, DRV_EV_STATE);
+    struct octo *o = OC(n);
+    const struct drv_status *st = &n->base.status;
+    if (strcmp(o->last.file, n->job.name) != 0)
+        return st->lines_acked; /* another file's position says nothing of ours */
+    uint64_t lines = o->last.filepos >= 0 && o->cur
+                         ? lines_before(o, o->last.filepos)
+                         : (uint64_t)((double)n->job.lines_total * progress);
+    if (lines >= n->job.lines_total && n->job.lines_total)
+        lines = n->job.lines_total - 1;
+    return lines > st->lines_acked ? lines : st->lines_acked;
 }
 
-static void job_fail(struct octo *o, enum drv_state next, const char *fmt, ...)
-    __attribute__((format(printf, 3, 4)));
-static void
-job_fail(struct octo *o, enum drv_state next, const char *fmt, ...)
+/* The job's progress 0..1 from the last /api/job. */
+static double
+progress_of(struct octo *o)
 {
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(o->base.status.message, sizeof(o->base.status.message), fmt, ap);
-    va_end(ap);
-    job_end(o, DRV_EV_JOB_FAILED, next);
-}
-
-/* ---- the link ---- */
-
-static void poll_start(struct octo *o);
-static void on_poll_timer(struct loop *l, void *ud);
-
-/* Cancel every request but the upload, and the poll timer: the link is down. */
-static void
-drop_requests(struct octo *o)
-{
-    cancel_req(&o->req_version);
-    cancel_req(&o->req_job);
-    cancel_req(&o->req_printer);
-    cancel_req(&o->req_select);
-    cancel_req(&o->req_action);
-    cancel_req(&o->req_cmd);
-    if (o->poll_timer)
-        loop_timer_cancel(o->base.loop, o->poll_timer);
-    o->poll_timer = 0;
-    o->poll_pending = 0;
-    o->link = L_DOWN;
-    o->polled = false;
-}
-
-static void
-link_down(struct octo *o, const char *why)
-{
-    drop_requests(o);
-    log_printer(LOG_WARN, o->base.name, "%s", why);
-    if (o->job == J_UPLOADING || o->job == J_SELECTING) {
-        cancel_req(&o->req_upload);
-        job_fail(o, DRV_OFFLINE, "upload failed: %s", why);
-    }
-    /* A job OctoPrint runs goes on without us: the owner re-attaches it
-       (drv.h attach) once the link is back. */
-    o->job = J_NONE;
-    cursor_close(o);
-    msg(o, "%s", why);
-    set_state(o, DRV_OFFLINE);
-}
-
-static void
-poll_soon(struct octo *o, int64_t delay_ms)
-{
-    if (o->link != L_UP)
-        return;
-    if (o->poll_pending) {
-        if (delay_ms == 0)
-            o->poll_again = true;
-        return;
-    }
-    if (o->poll_timer)
-        loop_timer_cancel(o->base.loop, o->poll_timer);
-    o->poll_timer = 0;
-    if (delay_ms == 0) {
-        poll_start(o);
-        return;
-    }
-    o->poll_timer = loop_timer_add(o->base.loop, delay_ms, on_poll_timer, o);
-}
-
-static void
-update_progress(struct octo *o)
-{
-    struct drv_status *st = &o->base.status;
     const struct octo_job *j = &o->last;
-    uint64_t before = st->lines_acked;
     /* Bytes first: OctoPrint's own docs show "completion" both as a
        percentage (the data model) and as a fraction (the GET /api/job example). */
     double p = j->filepos >= 0 && j->size > 0 ? (double)j->filepos / (double)j->size
                : j->completion >= 0           ? j->completion / 100.0
-                                              : st->progress;
-    if (p > 1)
-        p = 1;
-    st->progress = p;
-    /* OctoPrint's own estimate (progress.printTimeLeft: its estimator, from
-       the file's analysis and the progress so far; null until it has one) */
-    st->has_time_left = j->time_left_s >= 0;
-    st->time_left_s = st->has_time_left ? (int64_t)(j->time_left_s + 0.5) : 0;
-    /* OctoPrint counts bytes; the lines are those wholly before its position. */
-    uint64_t lines = j->filepos >= 0 && o->cur ? lines_before(o, j->filepos)
-                                               : (uint64_t)((double)st->lines_total * p);
-    if (lines >= st->lines_total && st->lines_total)
-        lines = st->lines_total - 1; /* the last line counts at DONE */
-    if (lines > before)
-        st->lines_acked = lines;
-    if (st->lines_acked != before)
-        emit(o, DRV_EV_PROGRESS);
+                                              : o->n.base.status.progress;
+    return p > 1 ? 1 : p;
 }
 
 static bool
@@ -565,272 +472,220 @@ finished(const struct octo_job *j)
     return (j->filepos >= 0 && j->size > 0 && j->filepos >= j->size) || j->completion >= 99.9999;
 }
 
-/* A whole poll cycle came back: what it means. */
+/* ---- what a poll means ---- */
+
+/* OctoPrint's state with no job of ours, in netjob's words. */
+static void
+observe_free(struct octo *o, enum octo_remote r, struct netjob_obs *ob, char *msg, size_t n)
+{
+    const struct octo_job *j = &o->last;
+    if (r == OCTO_R_ERROR) {
+        ob->remote = NETJOB_R_HALTED;
+        snprintf(msg, n, "OctoPrint: %s%s%s", j->state, j->error[0] ? ": " : "", j->error);
+    } else if (r == OCTO_R_IDLE) {
+        ob->remote = NETJOB_R_IDLE;
+    } else if (r == OCTO_R_PAUSED) {
+        ob->remote = NETJOB_R_PAUSED;
+    } else {
+        ob->remote = NETJOB_R_BUSY;
+        snprintf(msg, n, "OctoPrint is busy (%s '%s')", j->state, j->file);
+    }
+}
+
+/* OctoPrint's state with our job on it, in netjob's words. */
+static void
+observe_job(struct octo *o, enum octo_remote r, struct netjob_obs *ob, char *msg, size_t n)
+{
+    const struct octo_job *j = &o->last;
+    ob->ours = strcmp(j->file, o->n.job.name) == 0;
+    if (r == OCTO_R_ERROR) {
+        ob->remote = NETJOB_R_HALTED;
+        snprintf(msg, n, "OctoPrint: %s%s%s", j->state, j->error[0] ? ": " : "", j->error);
+        return;
+    }
+    if (ob->ours && r != OCTO_R_IDLE) {
+        o->saw_printing = true;
+        o->missing_polls = 0;
+        ob->remote = r == OCTO_R_PAUSED ? NETJOB_R_PAUSED : NETJOB_R_PRINTING;
+        return;
+    }
+    if (o->n.job.phase == NETJOB_CANCELLING) {
+        ob->remote = r == OCTO_R_IDLE ? NETJOB_R_IDLE : NETJOB_R_PRINTING;
+        ob->ours = false; /* idle, or on to another file: the cancel is done */
+        return;
+    }
+    if (ob->ours && finished(j)) {
+        ob->remote = NETJOB_R_DONE;
+        return;
+    }
+    if (ob->ours && o->saw_printing) {
+        ob->remote = NETJOB_R_FAILED;
+        snprintf(msg, n, "the print was stopped at the printer at %.0f %%",
+                 j->completion >= 0 ? j->completion : 0);
+        return;
+    }
+    if (++o->missing_polls < OCTO_GRACE_POLLS) {
+        ob->remote = NETJOB_R_BUSY; /* OctoPrint takes a moment to start a file */
+        return;
+    }
+    if (!ob->ours && r != OCTO_R_IDLE) {
+        ob->remote = r == OCTO_R_PAUSED ? NETJOB_R_PAUSED : NETJOB_R_PRINTING;
+        return;
+    }
+    ob->remote = NETJOB_R_FAILED; /* told as ours, to end it with OctoPrint's reason */
+    ob->ours = true;
+    if (strcmp(j->file, o->n.job.name) != 0)
+        snprintf(msg, n, "OctoPrint no longer has the job's file '%s'", o->n.job.name);
+    else
+        snprintf(msg, n, "OctoPrint did not start the print of '%s'", o->n.job.name);
+}
+
+/* The reply to GET /api/printer closes a poll: judge it. */
 static void
 evaluate(struct octo *o)
 {
+    struct netdrv *n = &o->n;
     const struct octo_job *j = &o->last;
     enum octo_remote r = octo_classify(j->state);
-    bool fresh = o->poll_epoch == o->act_epoch && !o->req_action;
-    o->polled = true;
+    n->have_last = true;
     if (r == OCTO_R_OFFLINE) {
-        if (o->job == J_RUNNING || o->job == J_CANCELLING)
-            job_fail(o, DRV_OFFLINE, "OctoPrint lost the printer (%s)", j->state);
         char why[160];
+        if (n->job.phase != NETJOB_NONE) {
+            snprintf(why, sizeof(why), "OctoPrint lost the printer (%s)", j->state);
+            netdrv_end_job(n, DRV_IDLE, DRV_EV_JOB_FAILED, why); /* failed, then offline */
+        }
         snprintf(why, sizeof(why), "OctoPrint is up, its printer is not connected (%s)", j->state);
-        link_down(o, why);
+        netdrv_contact_lost(n, why);
         return;
     }
-    bool ours = o->remote[0] && strcmp(j->file, o->remote) == 0;
-    switch (o->job) {
-    case J_NONE:
-        if (!fresh)
-            break;
-        if (r == OCTO_R_ERROR) {
-            msg(o, "OctoPrint: %s%s%s", j->state, j->error[0] ? ": " : "", j->error);
-            set_state(o, DRV_ERROR);
-        } else if (r == OCTO_R_IDLE) {
-            if (o->base.status.state == DRV_CONNECTING || o->base.status.state == DRV_ERROR)
-                o->base.status.message[0] = 0;
-            set_state(o, DRV_IDLE);
-        } else if (r == OCTO_R_PAUSED) {
-            msg(o, "OctoPrint is paused on '%s', which the farm did not start", j->file);
-            set_state(o, DRV_PAUSED);
-        } else {
-            msg(o, "OctoPrint is busy (%s '%s')", j->state, j->file);
-            set_state(o, DRV_PRINTING);
-        }
-        break;
-    case J_UPLOADING:
-    case J_SELECTING:
-        break;
-    case J_RUNNING:
-    case J_CANCELLING:
-        if (r == OCTO_R_ERROR) {
-            job_fail(o, DRV_ERROR, "OctoPrint: %s%s%s", j->state, j->error[0] ? ": " : "",
-                     j->error);
-            break;
-        }
-        if (ours && r != OCTO_R_IDLE) {
-            o->saw_printing = true;
-            o->missing_polls = 0;
-            update_progress(o);
-            if (fresh && o->job == J_RUNNING)
-                set_state(o, r == OCTO_R_PAUSED ? DRV_PAUSED : DRV_PRINTING);
-            break;
-        }
-        if (o->job == J_CANCELLING && (r == OCTO_R_IDLE || !ours)) {
-            msg(o, "cancelled at %.0f %%", o->base.status.progress * 100);
-            job_end(o, DRV_EV_JOB_CANCELLED, r == OCTO_R_IDLE ? DRV_IDLE : DRV_PRINTING);
-            break;
-        }
-        if (ours && r == OCTO_R_IDLE && finished(j)) {
-            job_end(o, DRV_EV_JOB_DONE, DRV_IDLE);
-            break;
-        }
-        if (ours && r == OCTO_R_IDLE && o->saw_printing) {
-            update_progress(o);
-            job_fail(o, DRV_IDLE, "the print was stopped at the printer at %.0f %%",
-                     j->completion >= 0 ? j->completion : 0);
-            break;
-        }
-        if (++o->missing_polls < OCTO_GRACE_POLLS)
-            break;
-        if (!ours && r != OCTO_R_IDLE)
-            job_fail(o, DRV_PRINTING, "OctoPrint prints '%s' instead of the job's '%s'", j->file,
-                     o->remote);
-        else if (!ours)
-            job_fail(o, DRV_IDLE, "OctoPrint no longer has the job's file '%s'", o->remote);
-        else
-            job_fail(o, DRV_IDLE, "OctoPrint did not start the print of '%s'", o->remote);
-        break;
-    }
+    char msg[160] = "";
+    struct netjob_obs ob = { .file = j->file, .message = msg };
+    if (n->job.phase == NETJOB_NONE)
+        observe_free(o, r, &ob, msg, sizeof(msg));
+    else
+        observe_job(o, r, &ob, msg, sizeof(msg));
+    /* OctoPrint's own estimate (progress.printTimeLeft: its estimator, from
+       the file's analysis and the progress so far; null until it has one) */
+    netdrv_time_left(n, &ob, j->time_left_s);
+    netdrv_report(n, &ob, ob.ours ? progress_of(o) : n->base.status.progress);
 }
 
-static void
-poll_done(struct octo *o)
-{
-    if (--o->poll_pending > 0 || o->link != L_UP)
-        return;
-    evaluate(o);
-    if (o->link != L_UP)
-        return;
-    if (o->poll_again) {
-        o->poll_again = false;
-        poll_start(o);
-        return;
-    }
-    o->poll_timer = loop_timer_add(o->base.loop, o->poll_ms, on_poll_timer, o);
-}
+/* ---- replies ---- */
 
-static void
-on_job(struct httpc_req *r, const struct httpc_result *res, void *ud)
+/* A poll's reply (or the version's) is good: else contact is lost, with OctoPrint's reason. */
+static bool
+reply_ok(struct netdrv *n, int kind, const struct httpc_result *res)
 {
-    (void)r;
-    struct octo *o = ud;
     char why[SF_ERR_MSG_MAX];
-    enum outcome oc = answered(&o->req_job, res, "GET /api/job", why, sizeof(why));
+    if (netdrv_judge(n, kind, res, why, sizeof(why)) == NETDRV_OK)
+        return true;
+    netdrv_contact_lost(n, why);
+    return false;
+}
+
+static void
+on_version(struct octo *o, const struct httpc_result *res)
+{
+    struct netdrv *n = &o->n;
+    char text[64];
     struct sf_err err;
-    if (oc == O_OK)
-        oc = parsed(octo_parse_job(res->body, res->body_len, &o->last, &err), &err, why,
-                    sizeof(why));
-    if (oc != O_OK) {
-        link_down(o, why);
+    if (!reply_ok(n, NETDRV_RQ_INFO, res))
+        return;
+    if (octo_parse_version(res->body, res->body_len, text, sizeof(text), &err) < 0) {
+        netdrv_contact_lost(n, err.msg);
         return;
     }
-    poll_done(o);
+    snprintf(n->base.caps.firmware, sizeof(n->base.caps.firmware), "%s", text);
+    o->ready = true;
+    if (!octo_start(n, NETDRV_RQ_POLL)) /* its answer sets the state */
+        netdrv_contact_lost(n, "out of memory starting a poll");
 }
 
 static void
-on_printer(struct httpc_req *r, const struct httpc_result *res, void *ud)
+on_job(struct octo *o, const struct httpc_result *res)
 {
-    (void)r;
-    struct octo *o = ud;
-    char why[SF_ERR_MSG_MAX];
-    enum outcome oc = answered(&o->req_printer, res, "GET /api/printer", why, sizeof(why));
-    if (oc == O_CONFLICT) {
-        poll_done(o); /* 409: the printer is not operational; /api/job says how */
+    struct netdrv *n = &o->n;
+    struct sf_err err;
+    if (!reply_ok(n, NETDRV_RQ_POLL, res))
+        return;
+    if (octo_parse_job(res->body, res->body_len, &o->last, &err) < 0) {
+        netdrv_contact_lost(n, err.msg);
         return;
     }
+    if (!octo_start(n, RQ_PRINTER))
+        netdrv_contact_lost(n, "out of memory starting a poll");
+}
+
+static void
+on_printer(struct octo *o, const struct httpc_result *res)
+{
+    struct netdrv *n = &o->n;
     struct octo_printer p;
     struct sf_err err;
-    if (oc == O_OK)
-        oc = parsed(octo_parse_printer(res->body, res->body_len, &p, &err), &err, why, sizeof(why));
-    if (oc != O_OK) {
-        link_down(o, why);
-        return;
+    /* 409: the printer is not operational; /api/job says how */
+    if (res->code != SF_OK || res->status != 409) {
+        if (!reply_ok(n, RQ_PRINTER, res))
+            return;
+        if (octo_parse_printer(res->body, res->body_len, &p, &err) < 0) {
+            netdrv_contact_lost(n, err.msg);
+            return;
+        }
+        if (p.tool_c >= 0)
+            netjob_temps(&n->base, p.tool_c, p.tool_target_c > 0 ? p.tool_target_c : 0,
+                         p.bed_c >= 0 ? p.bed_c : 0, p.bed_target_c > 0 ? p.bed_target_c : 0);
     }
-    struct drv_status *st = &o->base.status;
-    if (p.tool_c >= 0 &&
-        (p.tool_c != st->nozzle_c || p.bed_c != st->bed_c ||
-         p.tool_target_c != st->nozzle_target_c || p.bed_target_c != st->bed_target_c)) {
-        st->nozzle_c = p.tool_c;
-        st->nozzle_target_c = p.tool_target_c > 0 ? p.tool_target_c : 0;
-        st->bed_c = p.bed_c >= 0 ? p.bed_c : 0;
-        st->bed_target_c = p.bed_target_c > 0 ? p.bed_target_c : 0;
-        emit(o, DRV_EV_TEMPS);
-    }
-    o->lastp = p;
-    poll_done(o);
-}
-
-static void
-poll_start(struct octo *o)
-{
-    if (o->link != L_UP || o->poll_pending)
-        return;
-    if (o->poll_timer)
-        loop_timer_cancel(o->base.loop, o->poll_timer);
-    o->poll_timer = 0;
-    o->poll_epoch = o->act_epoch;
-    o->req_job = request(o, "GET", "/api/job", NULL, NULL, 0, on_job);
-    o->req_printer = request(o, "GET", "/api/printer?exclude=sd", NULL, NULL, 0, on_printer);
-    if (!o->req_job || !o->req_printer) {
-        link_down(o, "out of memory starting a poll");
-        return;
-    }
-    o->poll_pending = 2;
-}
-
-static void
-on_poll_timer(struct loop *l, void *ud)
-{
-    (void)l;
-    struct octo *o = ud;
-    o->poll_timer = 0;
-    poll_start(o);
-}
-
-static void
-on_version(struct httpc_req *r, const struct httpc_result *res, void *ud)
-{
-    (void)r;
-    struct octo *o = ud;
-    char why[SF_ERR_MSG_MAX];
-    enum outcome oc = answered(&o->req_version, res, "GET /api/version", why, sizeof(why));
-    struct sf_err err;
-    char text[64];
-    if (oc == O_OK)
-        oc = parsed(octo_parse_version(res->body, res->body_len, text, sizeof(text), &err), &err,
-                    why, sizeof(why));
-    if (oc != O_OK) {
-        link_down(o, why);
-        return;
-    }
-    snprintf(o->base.caps.firmware, sizeof(o->base.caps.firmware), "%s", text);
-    o->link = L_UP;
-    poll_start(o); /* its answer sets the state */
-}
-
-/* ---- ops ---- */
-
-static int
-octo_open(struct drv *d, struct sf_err *err)
-{
-    struct octo *o = (struct octo *)d;
-    (void)err;
-    if (o->link != L_DOWN)
-        return SF_OK;
-    o->link = L_VERSION;
-    o->polled = false;
-    set_state(o, DRV_CONNECTING);
-    o->req_version = request(o, "GET", "/api/version", NULL, NULL, 0, on_version);
-    if (!o->req_version) {
-        o->link = L_DOWN;
-        set_state(o, DRV_OFFLINE);
-        return sf_err_set(err, SF_ENOMEM, "printer '%s': cannot start a request", d->name);
-    }
-    return SF_OK;
+    n->fails = 0;
+    netdrv_schedule(n, n->poll_ms);
+    /* An action asked meanwhile goes first (kick): this poll began before it, so it says
+       nothing of what the action did; the action's answer polls again. */
+    if (n->want == NETDRV_RQ_NONE)
+        evaluate(o);
 }
 
 /* OctoPrint took the job and prints it: the polls say how it goes. */
 static void
 print_started(struct octo *o)
 {
-    o->job = J_RUNNING;
+    o->n.fails = 0;
     o->missing_polls = 0;
-    o->base.status.message[0] = 0;
-    poll_soon(o, 0);
+    o->n.base.status.message[0] = 0;
+    netdrv_schedule(&o->n, 0);
 }
 
+/* The upload or select+print failed (why): contact lost (oc) or refused, the job fails. */
 static void
-on_select(struct httpc_req *r, const struct httpc_result *res, void *ud)
+start_failed(struct octo *o, enum netdrv_outcome oc, const char *prefix, const char *why)
 {
-    (void)r;
-    struct octo *o = ud;
-    char why[SF_ERR_MSG_MAX];
-    enum outcome oc = answered(&o->req_select, res, "select+print", why, sizeof(why));
-    if (oc == O_OK) {
-        print_started(o);
-    } else if (oc == O_DOWN || oc == O_AUTH) {
-        link_down(o, why);
-    } else {
-        job_fail(o, DRV_IDLE, "OctoPrint did not start the print: %s", why);
-        poll_soon(o, 0);
+    char msg[SF_ERR_MSG_MAX + 64];
+    if (oc == NETDRV_DOWN || oc == NETDRV_AUTH) {
+        /* failed first, then offline: the farm takes a printer going offline
+           with a job as the job interrupted, not failed */
+        snprintf(msg, sizeof(msg), "upload failed: %s", why);
+        netdrv_end_job(&o->n, DRV_IDLE, DRV_EV_JOB_FAILED, msg);
+        netdrv_contact_lost(&o->n, why);
+        return;
     }
+    snprintf(msg, sizeof(msg), "%s%s", prefix, why);
+    netdrv_end_job(&o->n, DRV_IDLE, DRV_EV_JOB_FAILED, msg);
+    netdrv_schedule(&o->n, 0);
 }
 
 static void
-on_upload(struct httpc_req *r, const struct httpc_result *res, void *ud)
+on_upload(struct octo *o, const struct httpc_result *res)
 {
-    (void)r;
-    struct octo *o = ud;
-    char why[SF_ERR_MSG_MAX];
-    enum outcome oc = answered(&o->req_upload, res, "upload", why, sizeof(why));
+    struct netdrv *n = &o->n;
+    char why[SF_ERR_MSG_MAX], name[128];
     bool printing = false;
-    char name[128];
     struct sf_err err;
-    if (oc == O_OK)
+    enum netdrv_outcome oc = netdrv_judge(n, NETDRV_RQ_UPLOAD, res, why, sizeof(why));
+    if (n->job.phase != NETJOB_RUNNING) /* cancelled meanwhile */
+        return;
+    if (oc == NETDRV_OK)
         oc =
             parsed(octo_parse_upload(res->body, res->body_len, &printing, name, sizeof(name), &err),
                    &err, why, sizeof(why));
-    if (oc == O_DOWN || oc == O_AUTH) {
-        link_down(o, why); /* fails the job, as an upload */
-        return;
-    }
-    if (oc != O_OK) {
-        job_fail(o, DRV_IDLE, "upload refused: %s", why);
-        poll_soon(o, 0);
+    if (oc != NETDRV_OK) {
+        start_failed(o, oc, "upload refused: ", why);
         return;
     }
     if (printing) {
@@ -839,33 +694,85 @@ on_upload(struct httpc_req *r, const struct httpc_result *res, void *ud)
     }
     /* Stored, not started (OctoPrint drops print=true when it cannot start):
        ask explicitly, which says why if it refuses. */
-    o->job = J_SELECTING;
-    char path[200];
-    snprintf(path, sizeof(path), "/api/files/local/%s", o->remote);
-    o->req_select =
-        request(o, "POST", path, "{\"command\":\"select\",\"print\":true}", NULL, 0, on_select);
-    if (!o->req_select)
-        job_fail(o, DRV_IDLE, "out of memory asking OctoPrint to print");
+    if (!octo_start(n, RQ_SELECT))
+        start_failed(o, NETDRV_REFUSED, "", "out of memory asking OctoPrint to print");
 }
 
 static void
-on_upload_progress(struct httpc_req *r, uint64_t sent, uint64_t total, void *ud)
+on_select(struct octo *o, const struct httpc_result *res)
 {
-    (void)r;
-    struct octo *o = ud;
-    if (total)
-        msg(o, "uploading %.0f %%", 100.0 * (double)sent / (double)total);
+    char why[SF_ERR_MSG_MAX];
+    enum netdrv_outcome oc = netdrv_judge(&o->n, RQ_SELECT, res, why, sizeof(why));
+    if (o->n.job.phase != NETJOB_RUNNING)
+        return;
+    if (oc == NETDRV_OK)
+        print_started(o);
+    else
+        start_failed(o, oc, "OctoPrint did not start the print: ", why);
 }
 
-static int
-file_size(const char *path, int64_t *size, struct sf_err *err)
+static void
+on_command(struct octo *o, const struct httpc_result *res)
 {
-    struct stat st;
-    if (stat(path, &st) < 0 || !S_ISREG(st.st_mode))
-        return sf_err_sys(err, "octoprint: cannot read '%s'", path);
-    *size = (int64_t)st.st_size;
-    return SF_OK;
+    char why[SF_ERR_MSG_MAX];
+    enum netdrv_outcome oc = netdrv_judge(&o->n, RQ_COMMAND, res, why, sizeof(why));
+    if (oc == NETDRV_DOWN || oc == NETDRV_AUTH)
+        netdrv_contact_lost(&o->n, why);
+    else if (oc != NETDRV_OK)
+        log_printer(LOG_WARN, o->n.base.name, "command refused: %s", why);
 }
+
+static void
+octo_reply(struct netdrv *n, int kind, const struct httpc_result *res)
+{
+    static const struct {
+        int kind;
+        void (*fn)(struct octo *o, const struct httpc_result *res);
+    } own[] = {
+        { NETDRV_RQ_INFO, on_version },  { NETDRV_RQ_POLL, on_job }, { RQ_PRINTER, on_printer },
+        { NETDRV_RQ_UPLOAD, on_upload }, { RQ_SELECT, on_select },   { RQ_COMMAND, on_command },
+    };
+    for (size_t i = 0; i < sizeof(own) / sizeof(own[0]); i++)
+        if (own[i].kind == kind) {
+            own[i].fn(OC(n), res);
+            return;
+        }
+    netdrv_action_reply(n, kind, res); /* pause, resume, cancel */
+}
+
+/* Send what waits (an action, then a manual command) if the slot is free. */
+static void
+octo_kick(struct netdrv *n)
+{
+    struct octo *o = OC(n);
+    if (!netdrv_send_want(n))
+        return;
+    if (o->want_cmd) {
+        o->want_cmd = false;
+        octo_start(n, RQ_COMMAND); /* logged if it could not start */
+    }
+}
+
+/* The job ended: its file is read no more. */
+static void
+octo_forget(struct netdrv *n)
+{
+    struct octo *o = OC(n);
+    cursor_close(o);
+    o->saw_printing = false;
+    o->missing_polls = 0;
+}
+
+/* Contact lost, or a new connection: ask /api/version first; a command waiting is dropped. */
+static void
+octo_lost(struct netdrv *n)
+{
+    struct octo *o = OC(n);
+    o->ready = false;
+    o->want_cmd = false;
+}
+
+/* ---- drv_ops ---- */
 
 static int
 octo_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
@@ -877,174 +784,25 @@ octo_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
                           "printer '%s': OctoPrint prints whole files; resuming at line %llu is "
                           "not supported (restart the job)",
                           d->name, (unsigned long long)first_line);
-    if (o->link != L_UP || d->status.state != DRV_IDLE || o->job != J_NONE)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s' is not idle (%s)", d->name,
-                          drv_state_name(d->status.state));
-    int64_t size = 0;
-    if (file_size(gcode_path, &size, err) < 0)
-        return err ? err->code : SF_EIO;
-    struct drv_job_scan own;
-    if (!scan) {
-        int rc = drv_job_scan(gcode_path, &own, err);
-        if (rc < 0)
-            return rc;
-        scan = &own;
-    }
-    drv_remote_name(gcode_path, o->remote, sizeof(o->remote));
-    o->file_size = size;
-    struct httpc_part parts[] = {
-        { .name = "select", .value = "true" },
-        { .name = "print", .value = "true" },
-        { .name = "file",
-          .file_path = gcode_path,
-          .filename = o->remote,
-          .type = "application/octet-stream" },
-    };
-    char url[512];
-    snprintf(url, sizeof(url), "%s/api/files/local", o->url);
-    const char *hdrs[] = { o->key_hdr, NULL };
-    struct httpc_opts opt = { .url = url,
-                              .headers = hdrs,
-                              .parts = parts,
-                              .n_parts = 3,
-                              .max_body = OCTO_BODY_MAX,
-                              .timeout_ms = -1,
-                              .stall_ms = OCTO_STALL_MS,
-                              .done = on_upload,
-                              .progress = on_upload_progress,
-                              .ud = o };
-    o->req_upload = httpc_start(o->http, &opt, err);
-    if (!o->req_upload)
-        return err ? err->code : SF_EIO;
-    struct drv_status *st = &d->status;
-    o->job = J_UPLOADING;
-    cursor_open(o, gcode_path);
-    o->saw_printing = false;
-    o->missing_polls = 0;
-    st->lines_total = scan->lines_total;
-    st->lines_acked = 0;
-    st->progress = 0;
-    st->has_time_left = false;
-    st->job_started_ms = loop_now_ms(d->loop);
-    msg(o, "uploading");
-    set_state(o, DRV_PRINTING);
-    return SF_OK;
-}
-
-static void
-on_action(struct httpc_req *r, const struct httpc_result *res, void *ud)
-{
-    (void)r;
-    struct octo *o = ud;
-    o->act_epoch++;
-    char why[SF_ERR_MSG_MAX];
-    enum outcome oc = answered(&o->req_action, res, "POST /api/job", why, sizeof(why));
-    if (oc == O_DOWN || oc == O_AUTH) {
-        link_down(o, why);
-        return;
-    }
-    if (oc != O_OK) {
-        msg(o, "%s", why);
-        log_printer(LOG_WARN, o->base.name, "%s", why);
-    }
-    poll_soon(o, 0); /* see what it did */
-}
-
-static int
-action(struct octo *o, const char *body, struct sf_err *err)
-{
-    if (o->req_action)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s': another action is still on its way",
-                          o->base.name);
-    o->req_action = request(o, "POST", "/api/job", body, NULL, 0, on_action);
-    if (!o->req_action)
-        return sf_err_set(err, SF_ENOMEM, "printer '%s': cannot start a request", o->base.name);
-    return SF_OK;
-}
-
-/* POST /api/job {"command": "pause", "action": pause or resume}, from state `from`. */
-static int
-pause_action(struct drv *d, bool pause, struct sf_err *err)
-{
-    struct octo *o = (struct octo *)d;
-    enum drv_state from = pause ? DRV_PRINTING : DRV_PAUSED;
-    if (o->job != J_RUNNING || d->status.state != from)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s' is not %s", d->name,
-                          pause ? "printing a job" : "paused");
-    int rc = action(o,
-                    pause ? "{\"command\":\"pause\",\"action\":\"pause\"}"
-                          : "{\"command\":\"pause\",\"action\":\"resume\"}",
-                    err);
+    int rc = netdrv_start_job(d, gcode_path, 0, scan, err);
     if (rc == SF_OK)
-        set_state(o, pause ? DRV_PAUSED : DRV_PRINTING);
+        cursor_open(o, o->n.path);
     return rc;
-}
-
-static int
-octo_pause(struct drv *d, struct sf_err *err)
-{
-    return pause_action(d, true, err);
-}
-
-static int
-octo_resume(struct drv *d, struct sf_err *err)
-{
-    return pause_action(d, false, err);
-}
-
-static int
-octo_cancel(struct drv *d, struct sf_err *err)
-{
-    struct octo *o = (struct octo *)d;
-    if (o->job == J_UPLOADING || o->job == J_SELECTING) {
-        /* Not printing yet: stop the transfer and it is over. */
-        cancel_req(&o->req_upload);
-        cancel_req(&o->req_select);
-        msg(o, "cancelled before the print started");
-        job_end(o, DRV_EV_JOB_CANCELLED, DRV_IDLE);
-        return SF_OK;
-    }
-    if (o->job != J_RUNNING)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s' has no job to cancel", d->name);
-    int rc = action(o, "{\"command\":\"cancel\"}", err);
-    if (rc == SF_OK) {
-        o->job = J_CANCELLING;
-        d->status.state = DRV_PRINTING; /* until OctoPrint is done cancelling */
-    }
-    return rc;
-}
-
-static void
-on_command(struct httpc_req *r, const struct httpc_result *res, void *ud)
-{
-    (void)r;
-    struct octo *o = ud;
-    char why[SF_ERR_MSG_MAX];
-    enum outcome oc = answered(&o->req_cmd, res, "POST /api/printer/command", why, sizeof(why));
-    if (oc == O_DOWN || oc == O_AUTH)
-        link_down(o, why);
-    else if (oc != O_OK)
-        log_printer(LOG_WARN, o->base.name, "command refused: %s", why);
 }
 
 static int
 octo_command(struct drv *d, const char *line, struct sf_err *err)
 {
     struct octo *o = (struct octo *)d;
-    if (o->link != L_UP)
+    if (!o->n.open || !o->ready)
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is not connected", d->name);
-    if (o->req_cmd)
+    if (o->want_cmd || o->n.rq == RQ_COMMAND)
         return sf_err_set(err, SF_EAGAIN, "printer '%s': the last command is still on its way",
                           d->name);
-    json_t *j = json_pack("{s:s}", "command", line ? line : "");
-    char *body = j ? json_dumps(j, JSON_COMPACT) : NULL;
-    json_decref(j);
-    if (!body)
-        return sf_err_set(err, SF_ENOMEM, "out of memory");
-    o->req_cmd = request(o, "POST", "/api/printer/command", body, NULL, 0, on_command);
-    free(body);
-    if (!o->req_cmd)
-        return sf_err_set(err, SF_ENOMEM, "printer '%s': cannot start a request", d->name);
+    snprintf(o->cmd, sizeof(o->cmd), "%s", line ? line : "");
+    o->want_cmd = true;
+    netdrv_preempt_poll(&o->n);
+    octo_kick(&o->n);
     return SF_OK;
 }
 
@@ -1053,86 +811,73 @@ octo_attach(struct drv *d, const char *gcode_path, const struct drv_job_scan *sc
             struct sf_err *err)
 {
     struct octo *o = (struct octo *)d;
-    if (o->link != L_UP || !o->polled)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s' is not connected yet", d->name);
-    if (o->job != J_NONE)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s' already has a job", d->name);
-    int64_t size = 0;
-    if (file_size(gcode_path, &size, err) < 0)
-        return err ? err->code : SF_EIO;
-    char remote[80];
-    drv_remote_name(gcode_path, remote, sizeof(remote));
-    const struct octo_job *j = &o->last;
-    if (strcmp(j->file, remote) != 0 || j->size != size)
+    struct netjob j;
+    int rc = netdrv_attach_prepare(&o->n, gcode_path, scan, &j, err);
+    if (rc)
+        return rc;
+    const struct octo_job *last = &o->last;
+    if (strcmp(last->file, j.name) != 0 || last->size != j.size)
         return sf_err_set(err, SF_ENOTFOUND,
                           "printer '%s': OctoPrint's job is '%s' (%lld bytes), not the farm's "
                           "'%s' (%lld bytes)",
-                          d->name, j->file[0] ? j->file : "none", (long long)j->size, remote,
-                          (long long)size);
-    enum octo_remote r = octo_classify(j->state);
-    if (r == OCTO_R_OFFLINE)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s': OctoPrint has no printer", d->name);
-    snprintf(o->remote, sizeof(o->remote), "%s", remote);
-    o->file_size = size;
-    o->job = J_RUNNING;
-    cursor_open(o, gcode_path);
+                          d->name, last->file[0] ? last->file : "none", (long long)last->size,
+                          j.name, (long long)j.size);
+    enum octo_remote r = octo_classify(last->state);
+    cursor_open(o, o->n.path);
     o->saw_printing = true; /* it printed this before the daemon went away */
-    d->status.message[0] = 0;
     o->missing_polls = 0;
-    struct drv_status *st = &d->status;
-    if (scan)
-        st->lines_total = scan->lines_total;
-    else {
-        struct drv_job_scan own;
-        st->lines_total = drv_job_scan(gcode_path, &own, NULL) == SF_OK ? own.lines_total : 0;
-    }
-    st->lines_acked = 0;
-    st->job_started_ms = loop_now_ms(d->loop);
-    update_progress(o);
-    log_printer(LOG_INFO, d->name, "re-attached to '%s' at %.0f %% (%s)", remote,
-                st->progress * 100, j->state);
+    log_printer(LOG_INFO, d->name, "re-attached to '%s' at %.0f %% (%s)", j.name,
+                progress_of(o) * 100, last->state);
     /* The next poll tells how it goes on (or that it ended meanwhile). */
-    if (r == OCTO_R_PAUSED)
-        set_state(o, DRV_PAUSED);
-    else
-        set_state(o, DRV_PRINTING);
-    poll_soon(o, 0);
+    struct netjob_obs ob = { .remote = r == OCTO_R_PAUSED ? NETJOB_R_PAUSED : NETJOB_R_PRINTING,
+                             .ours = true,
+                             .file = last->file };
+    netdrv_adopt(&o->n, &j, &ob, progress_of(o));
+    netdrv_schedule(&o->n, 0);
     return SF_OK;
-}
-
-static void
-octo_close(struct drv *d)
-{
-    struct octo *o = (struct octo *)d;
-    cancel_req(&o->req_upload);
-    drop_requests(o);
-    o->job = J_NONE;
-    cursor_close(o);
-    set_state(o, DRV_OFFLINE);
 }
 
 static void
 octo_destroy(struct drv *d)
 {
     struct octo *o = (struct octo *)d;
-    httpc_put(o->http);
     cursor_close(o);
     free(o->cur_buf);
-    free(o);
+    netdrv_destroy(d);
 }
 
 static const struct drv_ops octo_ops = {
     .version = DRV_OPS_VERSION,
     .kind = "octoprint",
-    .open = octo_open,
+    .open = netdrv_open,
     .start_job = octo_start_job,
-    .pause = octo_pause,
-    .resume = octo_resume,
-    .cancel = octo_cancel,
+    .pause = netdrv_pause,
+    .resume = netdrv_resume,
+    .cancel = netdrv_cancel,
     .command = octo_command,
-    .close = octo_close,
+    .close = netdrv_close,
     .destroy = octo_destroy,
     .attach = octo_attach,
+};
+
+static const struct netdrv_ops octo_nops = {
+    .product = "OctoPrint",
+    .key_hint = "check api_key",
+    .poll_ms = OCTO_POLL_MS,
+    .job_tries = 1,    /* a failed contact: offline at once, the job left to attach() */
+    .upload_tries = 1, /* a failed upload fails the job: the farm's retry sends it again */
+    .timeout_ms = 10000,
+    .upload_stall_ms = 60000,
+    .start_rq = RQ_SELECT,
+    .start = octo_start,
+    .poll = octo_poll,
+    .reply = octo_reply,
+    .kick = octo_kick,
+    .error_text = octo_reason,
+    .forget = octo_forget,
+    .lost = octo_lost,
+    .judge = octo_judge,
+    .lines = octo_lines,
 };
 
 struct drv *
@@ -1140,18 +885,8 @@ drv_octoprint_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_
                   struct sf_err *err)
 {
     const char *name = cfg->name ? cfg->name : "?";
-    if (!cfg->url || (strncmp(cfg->url, "http://", 7) != 0 && strncmp(cfg->url, "https://", 8))) {
-        sf_err_set(err, SF_EINVAL, "printer '%s': octoprint needs an http:// or https:// url",
-                   name);
-        return NULL;
-    }
     if (!cfg->api_key || !cfg->api_key[0]) {
         sf_err_set(err, SF_EINVAL, "printer '%s': octoprint needs an api_key", name);
-        return NULL;
-    }
-    if (strlen(cfg->url) >= sizeof(((struct octo *)0)->url) || strlen(cfg->api_key) > 160 ||
-        strpbrk(cfg->api_key, "\r\n")) {
-        sf_err_set(err, SF_EINVAL, "printer '%s': url or api_key too long or not one line", name);
         return NULL;
     }
     struct octo *o = mem_calloc(1, sizeof(*o));
@@ -1159,23 +894,13 @@ drv_octoprint_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_
         sf_err_set(err, SF_ENOMEM, "printer '%s': out of memory", name);
         return NULL;
     }
-    o->http = httpc_get(l, err);
-    if (!o->http) {
+    if (netdrv_init(&o->n, l, cfg, &octo_ops, &octo_nops, on_event, ud, err)) {
         free(o);
         return NULL;
     }
-    o->base.ops = &octo_ops;
-    o->base.loop = l;
-    snprintf(o->base.name, sizeof(o->base.name), "%s", name);
-    o->base.on_event = on_event;
-    o->base.ud = ud;
-    o->base.status.state = DRV_OFFLINE;
-    snprintf(o->base.caps.firmware, sizeof(o->base.caps.firmware), "OctoPrint");
-    snprintf(o->url, sizeof(o->url), "%s", cfg->url);
-    size_t n = strlen(o->url);
-    while (n && o->url[n - 1] == '/')
-        o->url[--n] = 0;
-    snprintf(o->key_hdr, sizeof(o->key_hdr), "X-Api-Key: %s", cfg->api_key);
-    o->poll_ms = cfg->poll_ms > 0 ? cfg->poll_ms : 1000;
-    return &o->base;
+    o->hdrs[0] = o->n.key_hdr;
+    o->json_hdrs[0] = o->n.key_hdr;
+    o->json_hdrs[1] = "Content-Type: application/json";
+    snprintf(o->n.base.caps.firmware, sizeof(o->n.base.caps.firmware), "OctoPrint");
+    return &o->n.base;
 }

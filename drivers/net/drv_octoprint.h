@@ -4,7 +4,8 @@
  *
  * What it does: connects with GET /api/version (the reply must carry
  * "api", and a "text" starting with "OctoPrint") and a first poll; polls
- * GET /api/job and GET /api/printer every poll_ms; uploads the job's
+ * GET /api/job, then GET /api/printer, every poll_ms (netdrv.h's core: one
+ * request at a time, actions pre-empt a poll); uploads the job's
  * G-code streamed from disk as multipart POST /api/files/local with
  * print=true under drv_remote_name() (and, when OctoPrint does not start
  * it, POST /api/files/local/NAME select+print); pauses, resumes and

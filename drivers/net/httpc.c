@@ -641,6 +641,63 @@ httpc_active(const struct httpc *h)
         }                                                                                          \
     } while (0)
 
+/* The transfer itself: callbacks, keepalive, timeouts, the stall limit and authentication. */
+static int
+setup_transfer(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
+{
+    SET(CURLOPT_PRIVATE, r);
+    SET(CURLOPT_URL, o->url);
+    SET(CURLOPT_NOSIGNAL, 1L);
+    SET(CURLOPT_ERRORBUFFER, r->errbuf);
+    SET(CURLOPT_WRITEFUNCTION, write_cb);
+    SET(CURLOPT_WRITEDATA, r);
+    SET(CURLOPT_HEADERFUNCTION, header_cb);
+    SET(CURLOPT_HEADERDATA, r);
+    SET(CURLOPT_NOPROGRESS, 0L);
+    SET(CURLOPT_XFERINFOFUNCTION, xferinfo_cb);
+    SET(CURLOPT_XFERINFODATA, r);
+    SET(CURLOPT_TCP_KEEPALIVE, 1L);
+    r->timeout_ms = o->timeout_ms ? o->timeout_ms : HTTPC_TIMEOUT_MS_DEFAULT;
+    if (r->timeout_ms > 0)
+        SET(CURLOPT_TIMEOUT_MS, r->timeout_ms);
+    SET(CURLOPT_CONNECTTIMEOUT_MS,
+        (long)(o->connect_timeout_ms ? o->connect_timeout_ms : HTTPC_CONNECT_TIMEOUT_MS_DEFAULT));
+    if (o->stall_ms > 0) {
+        SET(CURLOPT_LOW_SPEED_LIMIT, 1L);
+        SET(CURLOPT_LOW_SPEED_TIME, (long)((o->stall_ms + 999) / 1000));
+    }
+    if (o->user) {
+        SET(CURLOPT_USERNAME, o->user);
+        SET(CURLOPT_PASSWORD, o->password ? o->password : "");
+        SET(CURLOPT_HTTPAUTH, o->digest ? CURLAUTH_DIGEST : CURLAUTH_BASIC);
+    }
+    return SF_OK;
+fail:
+    return SF_EINVAL;
+}
+
+/* The caller's headers, and no "Expect: 100-continue". */
+static int
+setup_headers(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
+{
+    for (const char *const *hp = o->headers; hp && *hp; hp++) {
+        struct curl_slist *s = curl_slist_append(r->hdrs, *hp);
+        if (!s)
+            return sf_err_set(err, SF_ENOMEM, "http: out of memory");
+        r->hdrs = s;
+    }
+    /* No "Expect: 100-continue" round trip before large bodies: the servers
+       we talk to read the body anyway, and some embedded ones never answer it. */
+    struct curl_slist *s = curl_slist_append(r->hdrs, "Expect:");
+    if (!s)
+        return sf_err_set(err, SF_ENOMEM, "http: out of memory");
+    r->hdrs = s;
+    SET(CURLOPT_HTTPHEADER, r->hdrs);
+    return SF_OK;
+fail:
+    return SF_EINVAL;
+}
+
 static int
 build_mime(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
 {
@@ -685,6 +742,58 @@ build_mime(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
     return SF_OK;
 }
 
+/* The body (copied, a file read while sending, or multipart parts) and the method that sends it. */
+static int
+setup_body(struct httpc_req *r, const struct httpc_opts *o, struct sf_err *err)
+{
+    const char *method = r->method;
+    bool put = strcmp(method, "PUT") == 0;
+    curl_off_t body_size = 0;
+    if (o->body) {
+        r->body = mem_alloc(o->body_len ? o->body_len : 1);
+        if (!r->body)
+            return sf_err_set(err, SF_ENOMEM, "http: out of memory");
+        memcpy(r->body, o->body, o->body_len);
+        r->body_len = o->body_len;
+        body_size = (curl_off_t)o->body_len;
+    } else if (o->body_path) {
+        r->body_path = mem_strdup(o->body_path);
+        r->fp = fopen(o->body_path, "rb");
+        struct stat st;
+        if (!r->body_path || !r->fp || fstat(fileno(r->fp), &st) < 0)
+            return sf_err_sys(err, "%s %s: cannot read '%s'", method, o->url, o->body_path);
+        body_size = (curl_off_t)st.st_size;
+    }
+    if (o->n_parts) {
+        if (build_mime(r, o, err) < 0)
+            return SF_EINVAL;
+        SET(CURLOPT_MIMEPOST, r->mime);
+        if (strcmp(method, "POST") != 0)
+            SET(CURLOPT_CUSTOMREQUEST, method);
+    } else if (put) {
+        SET(CURLOPT_UPLOAD, 1L);
+        SET(CURLOPT_READFUNCTION, read_cb);
+        SET(CURLOPT_READDATA, r);
+        SET(CURLOPT_INFILESIZE_LARGE, body_size);
+    } else if (strcmp(method, "POST") == 0 || r->body || r->fp) {
+        SET(CURLOPT_POST, 1L);
+        SET(CURLOPT_READFUNCTION, read_cb);
+        SET(CURLOPT_READDATA, r);
+        SET(CURLOPT_POSTFIELDSIZE_LARGE, body_size);
+        if (strcmp(method, "POST") != 0)
+            SET(CURLOPT_CUSTOMREQUEST, method);
+    } else if (strcmp(method, "GET") == 0) {
+        SET(CURLOPT_HTTPGET, 1L);
+    } else if (strcmp(method, "HEAD") == 0) {
+        SET(CURLOPT_NOBODY, 1L);
+    } else {
+        SET(CURLOPT_CUSTOMREQUEST, method);
+    }
+    return SF_OK;
+fail:
+    return SF_EINVAL;
+}
+
 struct httpc_req *
 httpc_start(struct httpc *h, const struct httpc_opts *o, struct sf_err *err)
 {
@@ -727,96 +836,8 @@ httpc_start(struct httpc *h, const struct httpc_opts *o, struct sf_err *err)
         sf_err_set(err, SF_ENOMEM, "http: out of memory");
         goto fail;
     }
-    SET(CURLOPT_PRIVATE, r);
-    SET(CURLOPT_URL, o->url);
-    SET(CURLOPT_NOSIGNAL, 1L);
-    SET(CURLOPT_ERRORBUFFER, r->errbuf);
-    SET(CURLOPT_WRITEFUNCTION, write_cb);
-    SET(CURLOPT_WRITEDATA, r);
-    SET(CURLOPT_HEADERFUNCTION, header_cb);
-    SET(CURLOPT_HEADERDATA, r);
-    SET(CURLOPT_NOPROGRESS, 0L);
-    SET(CURLOPT_XFERINFOFUNCTION, xferinfo_cb);
-    SET(CURLOPT_XFERINFODATA, r);
-    SET(CURLOPT_TCP_KEEPALIVE, 1L);
-    r->timeout_ms = o->timeout_ms ? o->timeout_ms : HTTPC_TIMEOUT_MS_DEFAULT;
-    if (r->timeout_ms > 0)
-        SET(CURLOPT_TIMEOUT_MS, r->timeout_ms);
-    SET(CURLOPT_CONNECTTIMEOUT_MS,
-        (long)(o->connect_timeout_ms ? o->connect_timeout_ms : HTTPC_CONNECT_TIMEOUT_MS_DEFAULT));
-    if (o->stall_ms > 0) {
-        SET(CURLOPT_LOW_SPEED_LIMIT, 1L);
-        SET(CURLOPT_LOW_SPEED_TIME, (long)((o->stall_ms + 999) / 1000));
-    }
-    if (o->user) {
-        SET(CURLOPT_USERNAME, o->user);
-        SET(CURLOPT_PASSWORD, o->password ? o->password : "");
-        SET(CURLOPT_HTTPAUTH, o->digest ? CURLAUTH_DIGEST : CURLAUTH_BASIC);
-    }
-    for (const char *const *hp = o->headers; hp && *hp; hp++) {
-        struct curl_slist *s = curl_slist_append(r->hdrs, *hp);
-        if (!s) {
-            sf_err_set(err, SF_ENOMEM, "http: out of memory");
-            goto fail;
-        }
-        r->hdrs = s;
-    }
-    /* No "Expect: 100-continue" round trip before large bodies: the servers
-       we talk to read the body anyway, and some embedded ones never answer it. */
-    struct curl_slist *s = curl_slist_append(r->hdrs, "Expect:");
-    if (!s) {
-        sf_err_set(err, SF_ENOMEM, "http: out of memory");
+    if (setup_transfer(r, o, err) < 0 || setup_headers(r, o, err) < 0 || setup_body(r, o, err) < 0)
         goto fail;
-    }
-    r->hdrs = s;
-    SET(CURLOPT_HTTPHEADER, r->hdrs);
-
-    bool put = strcmp(method, "PUT") == 0;
-    curl_off_t body_size = 0;
-    if (o->body) {
-        r->body = mem_alloc(o->body_len ? o->body_len : 1);
-        if (!r->body) {
-            sf_err_set(err, SF_ENOMEM, "http: out of memory");
-            goto fail;
-        }
-        memcpy(r->body, o->body, o->body_len);
-        r->body_len = o->body_len;
-        body_size = (curl_off_t)o->body_len;
-    } else if (o->body_path) {
-        r->body_path = mem_strdup(o->body_path);
-        r->fp = fopen(o->body_path, "rb");
-        struct stat st;
-        if (!r->body_path || !r->fp || fstat(fileno(r->fp), &st) < 0) {
-            sf_err_sys(err, "%s %s: cannot read '%s'", method, o->url, o->body_path);
-            goto fail;
-        }
-        body_size = (curl_off_t)st.st_size;
-    }
-    if (o->n_parts) {
-        if (build_mime(r, o, err) < 0)
-            goto fail;
-        SET(CURLOPT_MIMEPOST, r->mime);
-        if (strcmp(method, "POST") != 0)
-            SET(CURLOPT_CUSTOMREQUEST, method);
-    } else if (put) {
-        SET(CURLOPT_UPLOAD, 1L);
-        SET(CURLOPT_READFUNCTION, read_cb);
-        SET(CURLOPT_READDATA, r);
-        SET(CURLOPT_INFILESIZE_LARGE, body_size);
-    } else if (strcmp(method, "POST") == 0 || r->body || r->fp) {
-        SET(CURLOPT_POST, 1L);
-        SET(CURLOPT_READFUNCTION, read_cb);
-        SET(CURLOPT_READDATA, r);
-        SET(CURLOPT_POSTFIELDSIZE_LARGE, body_size);
-        if (strcmp(method, "POST") != 0)
-            SET(CURLOPT_CUSTOMREQUEST, method);
-    } else if (strcmp(method, "GET") == 0) {
-        SET(CURLOPT_HTTPGET, 1L);
-    } else if (strcmp(method, "HEAD") == 0) {
-        SET(CURLOPT_NOBODY, 1L);
-    } else {
-        SET(CURLOPT_CUSTOMREQUEST, method);
-    }
     if (o->setopt) {
         CURLcode cc = o->setopt(r->easy, o->setopt_ud);
         if (cc != CURLE_OK) {

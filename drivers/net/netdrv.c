@@ -1,10 +1,10 @@
 /*
- * netdrv.c - the polling core of the Moonraker and PrusaLink drivers
+ * netdrv.c - the polling core of the Moonraker, PrusaLink and OctoPrint drivers
  * (netdrv.h): the request slot, the poll timer, losing and regaining
  * contact, the upload whose fate a poll settles, and the job operations
- * that are the same for both.
+ * that are the same for all.
  *
- * Why one core: the two drivers differ in their printers' words (which
+ * Why one core: the drivers differ in their printers' words (which
  * netjob.c maps) and in their requests, not in how a farm must treat a
  * printer that runs its own file: the same rules for a lost answer, a
  * refused upload or a printer that stops answering mid-print keep the
@@ -170,12 +170,28 @@ netdrv_preempt_poll(struct netdrv *n)
     }
 }
 
+bool
+netdrv_send_want(struct netdrv *n)
+{
+    if (!n->open || n->req)
+        return false;
+    if (n->want != NETDRV_RQ_NONE) {
+        int w = n->want;
+        n->want = NETDRV_RQ_NONE;
+        if (n->nops->start(n, w))
+            return false;
+    }
+    return true;
+}
+
 /* ---- replies ---- */
 
 enum netdrv_outcome
 netdrv_judge(struct netdrv *n, int kind, const struct httpc_result *res, char *why, size_t len)
 {
     char text[128];
+    if (n->nops->judge)
+        return n->nops->judge(n, kind, res, why, len);
     if (res->code != SF_OK) {
         snprintf(why, len, "%s", res->err.msg);
         return NETDRV_DOWN;
@@ -349,6 +365,10 @@ netdrv_report(struct netdrv *n, const struct netjob_obs *ob, double progress)
     netjob_judge(n->job.phase, ob, &v);
     if (n->job.phase != NETJOB_NONE && !v.ends && n->verify)
         snprintf(v.message, sizeof(v.message), "%s", n->upload_err);
+    if (n->nops->lines && n->job.phase != NETJOB_NONE) {
+        v.has_lines = true;
+        v.lines = n->nops->lines(n, progress);
+    }
     if (v.ends)
         forget(n);
     netjob_report(&n->base, &n->job, &v, progress);
@@ -439,7 +459,7 @@ netdrv_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
                           "the file itself)",
                           d->name, n->nops->product);
     if (!n->open || d->status.state != DRV_IDLE || n->job.phase != NETJOB_NONE)
-        return sf_err_set(err, SF_EAGAIN, "printer '%s' is %s", d->name,
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is not idle (%s)", d->name,
                           drv_state_name(d->status.state));
     struct netjob j;
     int rc = netjob_prepare(&j, gcode_path, scan, n->path, sizeof(n->path), err);
@@ -463,6 +483,13 @@ netdrv_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
     return SF_OK;
 }
 
+/* The job is still starting: its upload, or the request that starts it, is on its way. */
+static bool
+starting(const struct netdrv *n)
+{
+    return n->rq == NETDRV_RQ_UPLOAD || (n->nops->start_rq && n->rq == n->nops->start_rq);
+}
+
 static int
 want(struct netdrv *n, int w)
 {
@@ -476,8 +503,8 @@ int
 netdrv_pause(struct drv *d, struct sf_err *err)
 {
     struct netdrv *n = ND(d);
-    if (n->job.phase != NETJOB_RUNNING || d->status.state != DRV_PRINTING ||
-        n->rq == NETDRV_RQ_UPLOAD || n->verify)
+    if (n->job.phase != NETJOB_RUNNING || d->status.state != DRV_PRINTING || starting(n) ||
+        n->verify)
         return sf_err_set(err, SF_EAGAIN, "printer '%s': nothing to pause", d->name);
     d->status.state = DRV_PAUSED; /* the farm moves itself; the poll confirms */
     return want(n, NETDRV_RQ_PAUSE);
@@ -499,10 +526,10 @@ netdrv_cancel(struct drv *d, struct sf_err *err)
     struct netdrv *n = ND(d);
     if (n->job.phase == NETJOB_NONE)
         return sf_err_set(err, SF_EAGAIN, "printer '%s': no job to cancel", d->name);
-    if (n->rq == NETDRV_RQ_UPLOAD || n->verify) {
+    if (starting(n) || n->verify) {
         /* not printing yet: stop the upload; the printer never starts a
            file it did not get whole */
-        if (n->rq == NETDRV_RQ_UPLOAD) {
+        if (starting(n)) {
             httpc_cancel(n->req);
             n->req = NULL;
             n->rq = NETDRV_RQ_NONE;

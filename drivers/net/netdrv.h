@@ -1,8 +1,8 @@
 /*
- * netdrv.h - the core the Moonraker and PrusaLink drivers share: a
+ * netdrv.h - the core the Moonraker, PrusaLink and OctoPrint drivers share: a
  * network printer that runs the job file itself and is watched by polling.
  *
- * Both talk the same way (drv_moonraker.c and drv_prusalink.c say what
+ * All talk the same way (drv_moonraker.c, drv_prusalink.c and drv_octoprint.c say what
  * differs): one request at a time per printer; polls on a timer; an
  * action (upload, pause, resume, cancel, a manual command) takes the slot
  * as soon as it is free, cancelling a poll under way, so that no poll begun
@@ -18,6 +18,10 @@
  * through attach() when the printer answers; unless the job's upload was
  * cut short and not yet sent again: the printer cannot have that file, so
  * the job fails with the reason (the farm's retry policy).
+ *
+ * OctoPrint's driver uses the core with job_tries and upload_tries 1: a
+ * failed contact takes it offline at once, and a failed upload fails the
+ * job (the farm's retry policy sends it again).
  *
  * A driver embeds struct netdrv first (which embeds struct drv first),
  * fills a struct netdrv_ops with its requests and replies, and points its
@@ -71,6 +75,9 @@ struct netdrv_ops {
     int timeout_ms;       /* a poll or an action */
     int upload_stall_ms;  /* an upload that moves nothing this long has failed */
     bool upload_403;      /* 403 to an upload is a refusal (Moonraker: the file is loaded) */
+    int start_rq;         /* the driver's request that starts the uploaded file (OctoPrint's
+                             select+print), or 0: on its way, the job is still starting, as
+                             during the upload (cancel stops it, pause waits) */
     /* Start request kind in the free slot with netdrv_request; false (logged) if it could not. */
     bool (*start)(struct netdrv *n, int kind);
     /* The timer fired with the slot free: start the next poll; false if it could not. */
@@ -85,6 +92,13 @@ struct netdrv_ops {
     void (*forget)(struct netdrv *n);
     /* Optional: contact was lost; open() and close() too (connection state to reset). */
     void (*lost)(struct netdrv *n);
+    /* Optional: read a reply in the driver's own words (OctoPrint names the request and
+       "answered HTTP 503"); netdrv_judge's rule otherwise. */
+    enum netdrv_outcome (*judge)(struct netdrv *n, int kind, const struct httpc_result *res,
+                                 char *why, size_t len);
+    /* Optional: the job's command lines done at progress (OctoPrint: those wholly before its
+       file position); progress times lines_total otherwise. */
+    uint64_t (*lines)(struct netdrv *n, double progress);
 };
 
 struct netdrv {
@@ -92,7 +106,7 @@ struct netdrv {
     const struct netdrv_ops *nops;
     struct httpc *http;    /* the loop's shared client (httpc_get) */
     char url[256];         /* base URL, no trailing '/' */
-    char key_hdr[160];     /* "X-Api-Key: ...", or "" */
+    char key_hdr[200];     /* "X-Api-Key: ...", or "" */
     bool open;             /* open() and not closed or gone offline */
     bool have_last;        /* a poll has answered since open() (attach reads it) */
     struct httpc_req *req; /* the request in flight, or NULL */
@@ -199,6 +213,13 @@ void netdrv_destroy(struct drv *d);
 
 /* Cancel a poll under way so an action goes first (the poll is asked again after it). */
 void netdrv_preempt_poll(struct netdrv *n);
+
+/*
+ * kick()'s first step: when the slot is free, start the action that waits
+ * (n->want).  True when the slot is still free for the driver's own
+ * requests; false when it is taken or the printer is not open.
+ */
+bool netdrv_send_want(struct netdrv *n);
 
 /*
  * Reading the printers' JSON with messages that name the field: "who

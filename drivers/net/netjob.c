@@ -248,7 +248,9 @@ netjob_report(struct drv *d, struct netjob *j, const struct netjob_verdict *v, d
     if (j->phase != NETJOB_NONE) {
         if (v->ends && v->ev == DRV_EV_JOB_DONE)
             progress = 1;
-        uint64_t lines = (uint64_t)(progress * (double)j->lines_total + 0.5);
+        uint64_t lines = v->has_lines && !(v->ends && v->ev == DRV_EV_JOB_DONE)
+                             ? v->lines
+                             : (uint64_t)(progress * (double)j->lines_total + 0.5);
         if (lines > j->lines_total)
             lines = j->lines_total;
         st->progress = progress;

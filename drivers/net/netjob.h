@@ -57,6 +57,8 @@ struct netjob_verdict {
     bool ends;            /* the driver's job has ended: report ev, phase becomes NONE */
     enum drv_event ev;    /* when ends: DRV_EV_JOB_DONE, _FAILED or _CANCELLED */
     char message[160];    /* status.message to show ("" clears it) */
+    bool has_lines;       /* the driver counted the job's lines done itself (netdrv lines) */
+    uint64_t lines;       /* ... that many (else progress times lines_total) */
 };
 
 /*
