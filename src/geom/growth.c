@@ -128,6 +128,186 @@ layer_of(float h, double layer_mm)
     return l;
 }
 
+/* The simulation's per-cell state and scratch (growth_simulate). */
+struct sim {
+    const struct ray_grid *g;
+    uint8_t *solid, *was;
+    uint32_t *changed_at; /* layer + 1 of the last change */
+    uint32_t *visit;      /* id of the search that met it */
+    uint32_t *stack, *changed;
+    uint32_t *ev_first, *ev_hit, *ev_cell;
+    uint32_t *ev_layer; /* layer of each hit */
+    float *col_top;     /* highest column top per cell */
+    float *floor_h;     /* last exit below, per cell */
+    uint16_t *depth;    /* shells each ray is inside */
+    uint32_t *row_lo, *row_hi;
+    struct pt *base, *hull;
+};
+
+static void
+sim_release(struct sim *s)
+{
+    free(s->solid);
+    free(s->was);
+    free(s->changed_at);
+    free(s->visit);
+    free(s->stack);
+    free(s->changed);
+    free(s->ev_first);
+    free(s->ev_hit);
+    free(s->ev_cell);
+    free(s->ev_layer);
+    free(s->col_top);
+    free(s->floor_h);
+    free(s->depth);
+    free(s->row_lo);
+    free(s->base);
+    free(s->hull);
+}
+
+static bool
+sim_alloc(struct sim *s, const struct ray_grid *g, size_t cells, uint32_t layers)
+{
+    size_t nh = g->n_hits ? g->n_hits : 1;
+    s->g = g;
+    s->solid = mem_calloc(cells, 1), s->was = mem_calloc(cells, 1);
+    s->changed_at = mem_array(cells, sizeof(uint32_t));
+    s->visit = mem_calloc(cells, sizeof(uint32_t));
+    s->stack = mem_array(cells, sizeof(uint32_t));
+    s->changed = mem_array(cells, sizeof(uint32_t));
+    s->ev_first = mem_calloc((size_t)layers + 2, sizeof(uint32_t));
+    s->ev_hit = mem_array(nh, sizeof(uint32_t)), s->ev_cell = mem_array(nh, sizeof(uint32_t));
+    s->ev_layer = mem_array(nh, sizeof(uint32_t));
+    s->col_top = mem_array(cells, sizeof(float));
+    s->floor_h = mem_array(cells, sizeof(float));
+    s->depth = mem_calloc(cells, sizeof(uint16_t));
+    s->row_lo = mem_array(2 * (size_t)g->nw, sizeof(uint32_t));
+    s->row_hi = s->row_lo ? s->row_lo + g->nw : NULL;
+    s->base = mem_array(2 * (size_t)g->nw + 1, sizeof(struct pt));
+    s->hull = mem_array(2 * (size_t)g->nw + 2, sizeof(struct pt));
+    return s->solid && s->was && s->changed_at && s->visit && s->stack && s->changed &&
+           s->ev_first && s->ev_hit && s->ev_cell && s->ev_layer && s->col_top && s->floor_h &&
+           s->depth && s->row_lo && s->base && s->hull;
+}
+
+/* Counting sort of the hits by layer, stable: each cell's hits stay in height
+   order.  Layer k's hits are ev_hit/ev_cell[ev_first[k] .. ev_first[k + 1]). */
+static void
+sort_events(struct sim *s, double layer_mm, uint32_t layers)
+{
+    const struct ray_grid *g = s->g;
+    size_t cells = (size_t)g->nu * g->nw;
+    for (size_t k = 0; k < g->n_hits; k++) {
+        s->ev_layer[k] = layer_of(g->hits[k].h, layer_mm);
+        if (s->ev_layer[k] < layers)
+            s->ev_first[s->ev_layer[k] + 1]++;
+    }
+    for (uint32_t l = 0; l < layers; l++)
+        s->ev_first[l + 1] += s->ev_first[l];
+    for (size_t c = 0; c < cells; c++)
+        for (uint32_t k = g->first[c]; k < g->first[c + 1]; k++)
+            if (s->ev_layer[k] < layers) {
+                uint32_t e = s->ev_first[s->ev_layer[k]]++;
+                s->ev_hit[e] = k;
+                s->ev_cell[e] = (uint32_t)c;
+            }
+    for (uint32_t l = layers; l > 0; l--) /* back to bucket starts */
+        s->ev_first[l] = s->ev_first[l - 1];
+    s->ev_first[0] = 0;
+}
+
+/* Apply layer k's hits, counting shells as measure_columns does, and keep the
+   sums of this layer's voxels (li, lj, ln) up to date.  The new voxels go to
+   the front of changed[], as seeds; returns how many. */
+static size_t
+apply_layer(struct sim *s, uint32_t k, uint64_t *li, uint64_t *lj, uint64_t *ln)
+{
+    const struct ray_grid *g = s->g;
+    size_t n_changed = 0;
+    for (uint32_t e = s->ev_first[k]; e < s->ev_first[k + 1]; e++) {
+        uint32_t c = s->ev_cell[e];
+        const struct ray_hit *h = &g->hits[s->ev_hit[e]];
+        if (s->changed_at[c] != k + 1) {
+            s->changed_at[c] = k + 1;
+            s->was[c] = s->solid[c];
+            s->changed[n_changed++] = c;
+        }
+        if (h->cos_up > 0) {
+            s->depth[c] -= s->depth[c] > 0;
+            if (s->depth[c] == 0)
+                s->floor_h[c] = h->h;
+        } else if (h->cos_up < 0) {
+            s->depth[c]++;
+        }
+    }
+    size_t n_new = 0;
+    for (size_t q = 0; q < n_changed; q++) {
+        uint32_t c = s->changed[q];
+        uint8_t now = s->depth[c] > 0;
+        if (now != s->solid[c]) {
+            int64_t sign = now ? 1 : -1;
+            *li += (uint64_t)(sign * (int64_t)(c % g->nu));
+            *lj += (uint64_t)(sign * (int64_t)(c / g->nu));
+            *ln += (uint64_t)sign;
+            s->solid[c] = now;
+        }
+        if (now && !s->was[c])
+            s->changed[n_new++] = c;
+    }
+    return n_new;
+}
+
+/* Regions of layer k (mid-height z) with a new voxel: held by the layer below,
+   a column or (layer 0) the bed?  Those that are not are islands of out;
+   *search numbers the searches. */
+static void
+find_islands(struct sim *s, uint32_t k, size_t n_new, float z, float half, uint32_t *search,
+             struct growth_report *out)
+{
+    const struct ray_grid *g = s->g;
+    uint32_t *visit = s->visit, *stack = s->stack;
+    uint32_t layer_first = *search + 1;
+    for (size_t q = 0; q < n_new && k > 0; q++) {
+        uint32_t seed = s->changed[q];
+        if (visit[seed] >= layer_first)
+            continue; /* in a region searched already */
+        size_t sp = 0, first = 0;
+        bool held = false;
+        double island_vol = 0;
+        uint32_t id = ++*search;
+        stack[sp++] = seed;
+        visit[seed] = id;
+        while (sp > first && !held) {
+            uint32_t c = stack[first++];
+            bool below = s->changed_at[c] == k + 1 ? s->was[c] : s->solid[c];
+            if (below || (s->col_top[c] >= z - 3 * half && s->col_top[c] <= z + half)) {
+                held = true;
+                break;
+            }
+            island_vol += (z - half - s->floor_h[c]) * g->pitch * g->pitch;
+            uint32_t ci = c % g->nu, cj = c / g->nu;
+            uint32_t nb[4] = { ci > 0 ? c - 1 : UINT32_MAX, ci + 1 < g->nu ? c + 1 : UINT32_MAX,
+                               cj > 0 ? c - g->nu : UINT32_MAX,
+                               cj + 1 < g->nw ? c + g->nu : UINT32_MAX };
+            for (int d = 0; d < 4; d++) {
+                uint32_t n = nb[d];
+                if (n == UINT32_MAX || !s->solid[n] || visit[n] == id)
+                    continue;
+                if (visit[n] >= layer_first) {
+                    held = true; /* an earlier search of this layer stopped there, held */
+                    break;
+                }
+                visit[n] = id;
+                stack[sp++] = n;
+            }
+        }
+        if (!held) {
+            out->n_islands++;
+            out->island_volume_mm3 += island_vol;
+        }
+    }
+}
+
 /*
  * Event-driven: a cell's solidity changes only at its hits, so the hits are
  * bucketed by the layer in which they take effect and each layer touches only
@@ -153,58 +333,25 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
         return SF_OK;
     out->n_layers = layers;
 
-    size_t nh = g->n_hits ? g->n_hits : 1;
-    uint8_t *solid = mem_calloc(cells, 1), *was = mem_calloc(cells, 1);
-    uint32_t *changed_at = mem_array(cells, sizeof(uint32_t)); /* layer + 1 of the last change */
-    uint32_t *visit = mem_calloc(cells, sizeof(uint32_t));     /* id of the search that met it */
-    uint32_t *stack = mem_array(cells, sizeof(uint32_t));
-    uint32_t *changed = mem_array(cells, sizeof(uint32_t));
-    uint32_t *ev_first = mem_calloc((size_t)layers + 2, sizeof(uint32_t));
-    uint32_t *ev_hit = mem_array(nh, sizeof(uint32_t)), *ev_cell = mem_array(nh, sizeof(uint32_t));
-    uint32_t *ev_layer = mem_array(nh, sizeof(uint32_t));  /* layer of each hit */
-    float *col_top = mem_array(cells, sizeof(float));      /* highest column top per cell */
-    float *floor_h = mem_array(cells, sizeof(float));      /* last exit below, per cell */
-    uint16_t *depth = mem_calloc(cells, sizeof(uint16_t)); /* shells each ray is inside */
-    uint32_t *row_lo = mem_array(2 * (size_t)g->nw, sizeof(uint32_t)), *row_hi = row_lo + g->nw;
-    struct pt *base = mem_array(2 * (size_t)g->nw + 1, sizeof(struct pt));
-    struct pt *hull = mem_array(2 * (size_t)g->nw + 2, sizeof(struct pt));
+    struct sim s = { 0 };
     int rc = SF_OK;
-    if (!solid || !was || !changed_at || !visit || !stack || !changed || !ev_first || !ev_hit ||
-        !ev_cell || !ev_layer || !col_top || !floor_h || !depth || !row_lo || !base || !hull) {
+    if (!sim_alloc(&s, g, cells, layers)) {
         rc = sf_err_set(err, SF_ENOMEM, "growth: out of memory for %zu cells", cells);
         goto out;
     }
     for (size_t c = 0; c < cells; c++) {
-        changed_at[c] = 0;
-        col_top[c] = -1;
-        floor_h[c] = 0;
+        s.changed_at[c] = 0;
+        s.col_top[c] = -1;
+        s.floor_h[c] = 0;
     }
-    /* counting sort of the hits by layer, stable: each cell's hits stay in height order */
-    for (size_t k = 0; k < g->n_hits; k++) {
-        ev_layer[k] = layer_of(g->hits[k].h, layer_mm);
-        if (ev_layer[k] < layers)
-            ev_first[ev_layer[k] + 1]++;
-    }
-    for (uint32_t l = 0; l < layers; l++)
-        ev_first[l + 1] += ev_first[l];
-    for (size_t c = 0; c < cells; c++)
-        for (uint32_t k = g->first[c]; k < g->first[c + 1]; k++)
-            if (ev_layer[k] < layers) {
-                uint32_t e = ev_first[ev_layer[k]]++;
-                ev_hit[e] = k;
-                ev_cell[e] = (uint32_t)c;
-            }
-    for (uint32_t l = layers; l > 0; l--) /* back to bucket starts */
-        ev_first[l] = ev_first[l - 1];
-    ev_first[0] = 0;
-
+    sort_events(&s, layer_mm, layers);
     for (uint32_t j = 0; j < g->nw; j++)
-        row_lo[j] = UINT32_MAX, row_hi[j] = 0;
+        s.row_lo[j] = UINT32_MAX, s.row_hi[j] = 0;
     for (size_t i = 0; i < n_cols; i++) {
         uint32_t c = cols[i].cell;
-        col_top[c] = cols[i].hi > col_top[c] ? cols[i].hi : col_top[c];
+        s.col_top[c] = cols[i].hi > s.col_top[c] ? cols[i].hi : s.col_top[c];
         if (cols[i].lo < layer_mm)
-            base_add(row_lo, row_hi, c % g->nu, c / g->nu);
+            base_add(s.row_lo, s.row_hi, c % g->nu, c / g->nu);
     }
     uint64_t li = 0, lj = 0, ln = 0;    /* column and row sums and count of this layer's voxels */
     uint64_t si = 0, sj = 0, count = 0; /* the same over every layer so far */
@@ -213,91 +360,19 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
     float half = (float)(0.5 * layer_mm);
     for (uint32_t k = 0; k < layers; k++) {
         float z = (float)((k + 0.5) * layer_mm);
-        /* apply this layer's hits, counting shells as measure_columns does */
-        size_t n_changed = 0;
-        for (uint32_t e = ev_first[k]; e < ev_first[k + 1]; e++) {
-            uint32_t c = ev_cell[e];
-            const struct ray_hit *h = &g->hits[ev_hit[e]];
-            if (changed_at[c] != k + 1) {
-                changed_at[c] = k + 1;
-                was[c] = solid[c];
-                changed[n_changed++] = c;
-            }
-            if (h->cos_up > 0) {
-                depth[c] -= depth[c] > 0;
-                if (depth[c] == 0)
-                    floor_h[c] = h->h;
-            } else if (h->cos_up < 0) {
-                depth[c]++;
-            }
-        }
-        /* new voxels go to the front of changed[], as seeds */
-        size_t n_new = 0;
-        for (size_t q = 0; q < n_changed; q++) {
-            uint32_t c = changed[q];
-            uint8_t now = depth[c] > 0;
-            if (now != solid[c]) {
-                int64_t sign = now ? 1 : -1;
-                li += (uint64_t)(sign * (int64_t)(c % g->nu));
-                lj += (uint64_t)(sign * (int64_t)(c / g->nu));
-                ln += (uint64_t)sign;
-                solid[c] = now;
-            }
-            if (now && !was[c])
-                changed[n_new++] = c;
-        }
+        size_t n_new = apply_layer(&s, k, &li, &lj, &ln);
         si += li, sj += lj, count += ln;
         if (k == 0) {
             for (size_t q = 0; q < n_new; q++)
-                base_add(row_lo, row_hi, changed[q] % g->nu, changed[q] / g->nu);
-            hull_n = base_hull(g, row_lo, row_hi, base, hull);
+                base_add(s.row_lo, s.row_hi, s.changed[q] % g->nu, s.changed[q] / g->nu);
+            hull_n = base_hull(g, s.row_lo, s.row_hi, s.base, s.hull);
         }
-        /* regions with a new voxel: held by the layer below, a column or (layer 0) the bed? */
-        uint32_t layer_first = search + 1;
-        for (size_t q = 0; q < n_new && k > 0; q++) {
-            uint32_t seed = changed[q];
-            if (visit[seed] >= layer_first)
-                continue; /* in a region searched already */
-            size_t sp = 0, first = 0;
-            bool held = false;
-            double island_vol = 0;
-            uint32_t id = ++search;
-            stack[sp++] = seed;
-            visit[seed] = id;
-            while (sp > first && !held) {
-                uint32_t c = stack[first++];
-                bool below = changed_at[c] == k + 1 ? was[c] : solid[c];
-                if (below || (col_top[c] >= z - 3 * half && col_top[c] <= z + half)) {
-                    held = true;
-                    break;
-                }
-                island_vol += (z - half - floor_h[c]) * g->pitch * g->pitch;
-                uint32_t ci = c % g->nu, cj = c / g->nu;
-                uint32_t nb[4] = { ci > 0 ? c - 1 : UINT32_MAX, ci + 1 < g->nu ? c + 1 : UINT32_MAX,
-                                   cj > 0 ? c - g->nu : UINT32_MAX,
-                                   cj + 1 < g->nw ? c + g->nu : UINT32_MAX };
-                for (int d = 0; d < 4; d++) {
-                    uint32_t n = nb[d];
-                    if (n == UINT32_MAX || !solid[n] || visit[n] == id)
-                        continue;
-                    if (visit[n] >= layer_first) {
-                        held = true; /* an earlier search of this layer stopped there, held */
-                        break;
-                    }
-                    visit[n] = id;
-                    stack[sp++] = n;
-                }
-            }
-            if (!held) {
-                out->n_islands++;
-                out->island_volume_mm3 += island_vol;
-            }
-        }
+        find_islands(&s, k, n_new, z, half, &search, out);
         /* what is built so far must stand on the extended base */
         if (count > 0) {
             struct pt com = { g->u0 + g->pitch * ((double)si / (double)count),
                               g->w0 + g->pitch * ((double)sj / (double)count) };
-            double m = margin_in(hull, hull_n, com);
+            double m = margin_in(s.hull, hull_n, com);
             if (m < out->min_margin_mm)
                 out->min_margin_mm = m;
             if (m < 0 && out->unstable_layer < 0)
@@ -305,21 +380,6 @@ growth_simulate(const struct ray_grid *g, const struct support_column *cols, siz
         }
     }
 out:
-    free(solid);
-    free(was);
-    free(changed_at);
-    free(visit);
-    free(stack);
-    free(changed);
-    free(ev_first);
-    free(ev_hit);
-    free(ev_cell);
-    free(ev_layer);
-    free(col_top);
-    free(floor_h);
-    free(depth);
-    free(row_lo);
-    free(base);
-    free(hull);
+    sim_release(&s);
     return rc;
 }

@@ -50,6 +50,41 @@ inside_margin(const struct angle_pt *pts, int n, double px, double py)
     return m;
 }
 
+/* The base that hull facet (normal nrm) gives: its vertices in the facet's
+   plane (poly, room for all), in angle order; its area and com's margin. */
+static void
+facet_base(facetT *facet, struct vec3 nrm, struct vec3 com, struct angle_pt *poly,
+           struct hull_base *b)
+{
+    /* plane basis */
+    struct vec3 e1 = fabs(nrm.x) < 0.9 ? v3(1, 0, 0) : v3(0, 1, 0);
+    e1 = v3_normalize(v3_sub(e1, v3_scale(nrm, v3_dot(e1, nrm))));
+    struct vec3 e2 = v3_cross(nrm, e1);
+    double cx = 0, cy = 0;
+    vertexT *vertex, **vertexp;
+    int k = 0;
+    FOREACHvertex_(facet->vertices)
+    {
+        struct vec3 p = v3(vertex->point[0], vertex->point[1], vertex->point[2]);
+        poly[k].x = v3_dot(p, e1);
+        poly[k].y = v3_dot(p, e2);
+        cx += poly[k].x;
+        cy += poly[k].y;
+        k++;
+    }
+    cx /= k;
+    cy /= k;
+    for (int i = 0; i < k; i++)
+        poly[i].a = atan2(poly[i].y - cy, poly[i].x - cx);
+    qsort(poly, (size_t)k, sizeof(*poly), cmp_angle);
+    double area = 0;
+    for (int i = 0; i < k; i++)
+        area += poly[i].x * poly[(i + 1) % k].y - poly[(i + 1) % k].x * poly[i].y;
+    b->normal = nrm;
+    b->area_mm2 = 0.5 * fabs(area);
+    b->margin_mm = inside_margin(poly, k, v3_dot(com, e1), v3_dot(com, e2));
+}
+
 int
 hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **out, uint32_t *n_out,
            uint32_t **verts, uint32_t *n_verts, struct sf_err *err)
@@ -109,30 +144,6 @@ hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **out, uint32
             goto out;
         }
         poly = pp;
-        /* plane basis */
-        struct vec3 e1 = fabs(nrm.x) < 0.9 ? v3(1, 0, 0) : v3(0, 1, 0);
-        e1 = v3_normalize(v3_sub(e1, v3_scale(nrm, v3_dot(e1, nrm))));
-        struct vec3 e2 = v3_cross(nrm, e1);
-        double cx = 0, cy = 0;
-        vertexT *vertex, **vertexp;
-        int k = 0;
-        FOREACHvertex_(facet->vertices)
-        {
-            struct vec3 p = v3(vertex->point[0], vertex->point[1], vertex->point[2]);
-            poly[k].x = v3_dot(p, e1);
-            poly[k].y = v3_dot(p, e2);
-            cx += poly[k].x;
-            cy += poly[k].y;
-            k++;
-        }
-        cx /= k;
-        cy /= k;
-        for (int i = 0; i < k; i++)
-            poly[i].a = atan2(poly[i].y - cy, poly[i].x - cx);
-        qsort(poly, (size_t)k, sizeof(*poly), cmp_angle);
-        double area = 0;
-        for (int i = 0; i < k; i++)
-            area += poly[i].x * poly[(i + 1) % k].y - poly[(i + 1) % k].x * poly[i].y;
         void *bp = bases;
         size_t bcap = cap;
         if (!mem_grow(&bp, &bcap, n + 1, sizeof(*bases))) {
@@ -141,9 +152,7 @@ hull_bases(const struct mesh *m, struct vec3 com, struct hull_base **out, uint32
         }
         bases = bp;
         cap = (uint32_t)bcap;
-        bases[n].normal = nrm;
-        bases[n].area_mm2 = 0.5 * fabs(area);
-        bases[n].margin_mm = inside_margin(poly, k, v3_dot(com, e1), v3_dot(com, e2));
+        facet_base(facet, nrm, com, poly, &bases[n]);
         n++;
         free(poly);
         poly = NULL;

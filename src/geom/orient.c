@@ -325,6 +325,60 @@ open_task(void *ud, uint32_t begin, uint32_t end, int worker)
     return SF_OK;
 }
 
+/* Two rings of REFINE_PER / 2 directions around each seed, pushed onto cands
+   (room reserved) and appended to order after n_coarse; returns the new count. */
+static uint32_t
+push_refine(struct cand **cands, uint32_t *n, size_t *cap, uint32_t *order, uint32_t n_coarse,
+            const uint32_t *seeds, uint32_t n_seeds)
+{
+    for (uint32_t b = 0; b < n_seeds; b++) {
+        struct mat3 to = m3_rotate_onto(v3(0, 0, 1), (*cands)[seeds[b]].c.up);
+        for (int k = 0; k < REFINE_PER; k++) {
+            const int h = REFINE_PER / 2; /* per ring, the outer one turned half a step */
+            double ring = (k < h ? 3.0 : 7.0) * M_PI / 180;
+            double az = 2 * M_PI * (k % h) / h + (k < h ? 0 : M_PI / h);
+            struct vec3 local = v3(sin(ring) * cos(az), sin(ring) * sin(az), cos(ring));
+            push(cands, n, cap, m3_mul_v(to, local), ORIENT_REFINE); /* room reserved */
+            order[n_coarse++] = *n - 1;
+        }
+    }
+    return n_coarse;
+}
+
+/* The answer from the final stage's directions (sorted, final[0] the best):
+   the best, the input and the runners-up. */
+static void
+fill_result(const struct cand *cands, uint32_t n, uint32_t n_coarse, const uint32_t *final,
+            uint32_t n_final, const struct orient_params *p, struct orient_result *res)
+{
+    uint32_t best = final[0];
+    /* Not worth turning the part unless the model's grams fall by min_gain; where
+       neither needs support (under a hundredth of a gram) the ray-cast cost, whose
+       centre-of-mass term prefers the lower pose, decides as it did before */
+    bool none = cands[0].model_g < 0.01 && cands[best].model_g < 0.01;
+    if (!cands[0].dropped && (none ? cands[best].c.cost > (1 - p->min_gain) * cands[0].c.cost
+                                   : !(cands[best].model_g < (1 - p->min_gain) * cands[0].model_g)))
+        best = 0;
+    const struct support_metrics *in = &cands[0].c.m;
+    if (in->n_rays && in->n_rays_open > p->max_open_rays * in->n_rays) {
+        best = 0; /* rays cannot tell inside from outside: no figure to trust */
+        res->not_solid = true;
+    }
+    res->best = cands[best].c;
+    res->best.m = cands[best].at;
+    res->input = cands[0].c;
+    res->input.m = cands[0].at;
+    res->n_candidates = n;
+    res->n_exact = n_coarse + n_final;
+    for (uint32_t i = 0; i < n_final && res->n_runners < 4; i++) {
+        if (final[i] == best || cands[final[i]].dropped)
+            continue;
+        struct orient_candidate *r = &res->runners[res->n_runners++];
+        *r = cands[final[i]].c;
+        r->m = cands[final[i]].at;
+    }
+}
+
 int
 orient_find(const struct mesh *m, const struct orient_params *p, struct orient_result *res,
             struct sf_err *err)
@@ -397,17 +451,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
     /* refine around the best distinct directions, still coarse */
     uint32_t seeds[REFINE_SEEDS],
         n_seeds = pick_distinct(cands, order, n_coarse, REFINE_SEEDS, 10, seeds);
-    for (uint32_t b = 0; b < n_seeds; b++) {
-        struct mat3 to = m3_rotate_onto(v3(0, 0, 1), cands[seeds[b]].c.up);
-        for (int k = 0; k < REFINE_PER; k++) {
-            const int h = REFINE_PER / 2; /* per ring, the outer one turned half a step */
-            double ring = (k < h ? 3.0 : 7.0) * M_PI / 180;
-            double az = 2 * M_PI * (k % h) / h + (k < h ? 0 : M_PI / h);
-            struct vec3 local = v3(sin(ring) * cos(az), sin(ring) * sin(az), cos(ring));
-            push(&cands, &n, &cap, m3_mul_v(to, local), ORIENT_REFINE); /* room reserved */
-            order[n_coarse++] = n - 1;
-        }
-    }
+    n_coarse = push_refine(&cands, &n, &cap, order, n_coarse, seeds, n_seeds);
     if ((rcode =
              run_stage(&j, 1, order + n_coarse - n_seeds * REFINE_PER, n_seeds * REFINE_PER, err)))
         goto out;
@@ -425,32 +469,7 @@ orient_find(const struct mesh *m, const struct orient_params *p, struct orient_r
         goto out;
     qsort_r(final, n_final, sizeof(uint32_t), cmp_key, cands);
 
-    uint32_t best = final[0];
-    /* Not worth turning the part unless the model's grams fall by min_gain; where
-       neither needs support (under a hundredth of a gram) the ray-cast cost, whose
-       centre-of-mass term prefers the lower pose, decides as it did before */
-    bool none = cands[0].model_g < 0.01 && cands[best].model_g < 0.01;
-    if (!cands[0].dropped && (none ? cands[best].c.cost > (1 - p->min_gain) * cands[0].c.cost
-                                   : !(cands[best].model_g < (1 - p->min_gain) * cands[0].model_g)))
-        best = 0;
-    const struct support_metrics *in = &cands[0].c.m;
-    if (in->n_rays && in->n_rays_open > p->max_open_rays * in->n_rays) {
-        best = 0; /* rays cannot tell inside from outside: no figure to trust */
-        res->not_solid = true;
-    }
-    res->best = cands[best].c;
-    res->best.m = cands[best].at;
-    res->input = cands[0].c;
-    res->input.m = cands[0].at;
-    res->n_candidates = n;
-    res->n_exact = n_coarse + n_final;
-    for (uint32_t i = 0; i < n_final && res->n_runners < 4; i++) {
-        if (final[i] == best || cands[final[i]].dropped)
-            continue;
-        struct orient_candidate *r = &res->runners[res->n_runners++];
-        *r = cands[final[i]].c;
-        r->m = cands[final[i]].at;
-    }
+    fill_result(cands, n, n_coarse, final, n_final, p, res);
     res->seconds = elapsed(&t0);
     res->seconds_exact = res->seconds - res->seconds_setup - res->seconds_proxy;
 out:

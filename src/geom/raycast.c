@@ -297,11 +297,12 @@ sort_hits(struct ray_hit *b, size_t n)
     }
 }
 
-int
-raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *g,
-             struct sf_err *err)
+/* g's frame for up at pitch: the axes, the cells over the part's shadow and
+   its extent along up (*dlo, *dhi); SF_EINVAL, SF_ENOMEM over the cap. */
+static int
+grid_frame(const struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *g,
+           double *dlo_out, double *dhi_out, struct sf_err *err)
 {
-    memset(g, 0, sizeof(*g));
     const struct mesh *m = rc->mesh;
     if (!(pitch > 0) || m->n_verts == 0)
         return sf_err_set(err, SF_EINVAL,
@@ -337,7 +338,100 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
     g->u0 = 0.5 * (ulo + uhi) - 0.5 * (nu - 1) * pitch + 1.23e-4 * pitch * M_SQRT2;
     g->w0 = 0.5 * (wlo + whi) - 0.5 * (nw - 1) * pitch + 1.17e-4 * pitch * M_PI;
     g->base = dlo;
+    *dlo_out = dlo;
+    *dhi_out = dhi;
+    return SF_OK;
+}
 
+/* Cast the rows j0 .. j0 + rows of g from height start along up, a 4 x 4
+   tile a packet; the hits go to hc's collector. */
+static void
+cast_band(const struct raycast *rc, const struct ray_grid *g, uint32_t j0, uint32_t rows,
+          double start, struct hit_context *hc, struct RTCRayHit16 *pk, int *valid)
+{
+    enum { TILE = 4 };
+    double pitch = g->pitch;
+    for (uint32_t i0 = 0; i0 < g->nu; i0 += TILE) {
+        for (int q = 0; q < 16; q++) {
+            uint32_t r = (uint32_t)q / TILE, i = i0 + (uint32_t)q % TILE;
+            valid[q] = r < rows && i < g->nu ? -1 : 0;
+            double wc = g->w0 + (j0 + r) * pitch;
+            struct vec3 o = v3_add(v3_add(v3_scale(g->u, g->u0 + i * pitch), v3_scale(g->w, wc)),
+                                   v3_scale(g->up, start));
+            pk->ray.org_x[q] = (float)o.x;
+            pk->ray.org_y[q] = (float)o.y;
+            pk->ray.org_z[q] = (float)o.z;
+            pk->ray.dir_x[q] = (float)g->up.x;
+            pk->ray.dir_y[q] = (float)g->up.y;
+            pk->ray.dir_z[q] = (float)g->up.z;
+            pk->ray.tnear[q] = 0;
+            pk->ray.time[q] = 0;
+            pk->ray.tfar[q] = INFINITY;
+            pk->ray.mask[q] = UINT32_MAX;
+            pk->ray.id[q] = r * g->nu + i; /* the cell, counted from the band's first */
+            pk->ray.flags[q] = 0;
+            pk->hit.geomID[q] = RTC_INVALID_GEOMETRY_ID;
+        }
+        rtcIntersect16(valid, rc->scene, &hc->ctx, pk);
+    }
+}
+
+/* Append the band's hits (col, n_rays cells from row j0) to g in grid order:
+   bucketed by cell (count: n_rays + 1 counters), sorted, deduped within eps;
+   SF_ENOMEM. */
+static int
+append_band(const struct raycast *rc, struct ray_grid *g, uint32_t j0, size_t n_rays,
+            const struct collector *col, float eps, uint32_t *count, size_t *cap_hits,
+            struct sf_err *err)
+{
+    memset(count, 0, sizeof(uint32_t) * (n_rays + 1));
+    for (size_t k = 0; k < col->n; k++)
+        count[col->ray[k] + 1]++;
+    for (size_t i = 0; i < n_rays; i++)
+        count[i + 1] += count[i];
+    size_t base = g->n_hits;
+    void *hp = g->hits;
+    if (!mem_grow(&hp, cap_hits, base + col->n + 1, sizeof(struct ray_hit)))
+        return sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
+    g->hits = hp;
+    struct ray_hit *band = g->hits + base;
+    for (size_t k = 0; k < col->n; k++) {
+        struct ray_hit h = col->hits[k];
+        const float *n = rc->normal + 3 * (size_t)h.tri;
+        h.cos_up = (float)(n[0] * g->up.x + n[1] * g->up.y + n[2] * g->up.z);
+        band[count[col->ray[k]]++] = h;
+    }
+    /* count[c] is now the end of bucket c; walk the cells in grid order */
+    size_t out_n = base, bstart = 0, cell0 = (size_t)j0 * g->nu;
+    for (size_t c = 0; c < n_rays; c++) {
+        size_t bend = count[c];
+        struct ray_hit *b = band + bstart;
+        size_t bn = bend - bstart;
+        sort_hits(b, bn);
+        for (size_t k = 0; k < bn; k++) {
+            struct ray_hit h = b[k];
+            h.h = (float)(h.h - 1.0); /* from the ray start to the bed */
+            if (out_n > g->first[cell0 + c] && fabsf(g->hits[out_n - 1].h - h.h) < eps &&
+                (g->hits[out_n - 1].cos_up < 0) == (h.cos_up < 0))
+                continue; /* the same crossing seen through a shared edge */
+            g->hits[out_n++] = h;
+        }
+        g->first[cell0 + c + 1] = (uint32_t)out_n;
+        bstart = bend;
+    }
+    g->n_hits = out_n;
+    return SF_OK;
+}
+
+int
+raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *g,
+             struct sf_err *err)
+{
+    memset(g, 0, sizeof(*g));
+    double dlo = 0, dhi = 0;
+    int rc_out = grid_frame(rc, up, pitch, g, &dlo, &dhi, err);
+    if (rc_out)
+        return rc_out;
     size_t cells = (size_t)g->nu * g->nw;
     g->first = mem_array(cells + 1, sizeof(uint32_t));
     /* Rays go to Embree as packets of 16, each a 4 x 4 tile of the grid:
@@ -345,12 +439,11 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
        stream: native thread CPU, armadillo, 20 pitch-1 grids 51 -> 39 ms),
        and packets skip Embree's stream-to-packet copy.  BAND rows of tiles
        are collected, bucketed by cell and walked in grid order. */
-    enum { BAND = 4, TILE = 4 };
+    enum { BAND = 4 };
     size_t band_rays = (size_t)g->nu * BAND;
     uint32_t *count = mem_array(band_rays + 1, sizeof(uint32_t));
     struct collector col = { 0 };
     size_t cap_hits = 0;
-    int rc_out = SF_OK;
     if (!g->first || !count) {
         rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory");
         goto out;
@@ -369,73 +462,14 @@ raycast_grid(struct raycast *rc, struct vec3 up, double pitch, struct ray_grid *
         uint32_t rows = g->nw - j0 < BAND ? g->nw - j0 : BAND;
         size_t n_rays = (size_t)rows * g->nu;
         col.n = 0;
-        for (uint32_t i0 = 0; i0 < g->nu; i0 += TILE) {
-            for (int q = 0; q < 16; q++) {
-                uint32_t r = (uint32_t)q / TILE, i = i0 + (uint32_t)q % TILE;
-                valid[q] = r < rows && i < g->nu ? -1 : 0;
-                double wc = g->w0 + (j0 + r) * pitch;
-                struct vec3 o =
-                    v3_add(v3_add(v3_scale(g->u, g->u0 + i * pitch), v3_scale(g->w, wc)),
-                           v3_scale(g->up, start));
-                pk.ray.org_x[q] = (float)o.x;
-                pk.ray.org_y[q] = (float)o.y;
-                pk.ray.org_z[q] = (float)o.z;
-                pk.ray.dir_x[q] = (float)g->up.x;
-                pk.ray.dir_y[q] = (float)g->up.y;
-                pk.ray.dir_z[q] = (float)g->up.z;
-                pk.ray.tnear[q] = 0;
-                pk.ray.time[q] = 0;
-                pk.ray.tfar[q] = INFINITY;
-                pk.ray.mask[q] = UINT32_MAX;
-                pk.ray.id[q] = r * g->nu + i; /* the cell, counted from the band's first */
-                pk.ray.flags[q] = 0;
-                pk.hit.geomID[q] = RTC_INVALID_GEOMETRY_ID;
-            }
-            rtcIntersect16(valid, rc->scene, &hc.ctx, &pk);
-        }
+        cast_band(rc, g, j0, rows, start, &hc, &pk, valid);
         if (col.oom) {
             rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
             goto out;
         }
         /* bucket the band's hits by cell, then sort and dedupe each bucket */
-        memset(count, 0, sizeof(uint32_t) * (n_rays + 1));
-        for (size_t k = 0; k < col.n; k++)
-            count[col.ray[k] + 1]++;
-        for (size_t i = 0; i < n_rays; i++)
-            count[i + 1] += count[i];
-        size_t base = g->n_hits;
-        void *hp = g->hits;
-        if (!mem_grow(&hp, &cap_hits, base + col.n + 1, sizeof(struct ray_hit))) {
-            rc_out = sf_err_set(err, SF_ENOMEM, "ray grid: out of memory for hits");
+        if ((rc_out = append_band(rc, g, j0, n_rays, &col, eps, count, &cap_hits, err)))
             goto out;
-        }
-        g->hits = hp;
-        struct ray_hit *band = g->hits + base;
-        for (size_t k = 0; k < col.n; k++) {
-            struct ray_hit h = col.hits[k];
-            const float *n = rc->normal + 3 * (size_t)h.tri;
-            h.cos_up = (float)(n[0] * g->up.x + n[1] * g->up.y + n[2] * g->up.z);
-            band[count[col.ray[k]]++] = h;
-        }
-        /* count[c] is now the end of bucket c; walk the cells in grid order */
-        size_t out_n = base, bstart = 0, cell0 = (size_t)j0 * g->nu;
-        for (size_t c = 0; c < n_rays; c++) {
-            size_t bend = count[c];
-            struct ray_hit *b = band + bstart;
-            size_t bn = bend - bstart;
-            sort_hits(b, bn);
-            for (size_t k = 0; k < bn; k++) {
-                struct ray_hit h = b[k];
-                h.h = (float)(h.h - 1.0); /* from the ray start to the bed */
-                if (out_n > g->first[cell0 + c] && fabsf(g->hits[out_n - 1].h - h.h) < eps &&
-                    (g->hits[out_n - 1].cos_up < 0) == (h.cos_up < 0))
-                    continue; /* the same crossing seen through a shared edge */
-                g->hits[out_n++] = h;
-            }
-            g->first[cell0 + c + 1] = (uint32_t)out_n;
-            bstart = bend;
-        }
-        g->n_hits = out_n;
     }
 out:
     free(count);

@@ -460,6 +460,51 @@ section_layer(struct work *wk, uint32_t l, int32_t k, uint32_t nt, const struct 
     return true;
 }
 
+/* The triangles each open layer cuts (lidx: layer index of plane k, -1 not
+   open), as (l, tri) pairs into *tk (n_tk values; grown, free()); false when
+   out of memory. */
+static bool
+layer_tris(const struct mesh *m, const struct rim_frame *f, const double *hv, const int32_t *lidx,
+           int32_t k_top, uint32_t **tk, size_t *n_tk)
+{
+    size_t cap_tk = 0;
+    for (uint32_t t = 0; t < m->n_tris; t++) {
+        double lo = hv[m->t[t][0]], hi = lo;
+        for (int e = 1; e < 3; e++) {
+            double h = hv[m->t[t][e]];
+            lo = h < lo ? h : lo;
+            hi = h > hi ? h : hi;
+        }
+        int32_t k0, k1;
+        planes_between(lo, hi, f->layer_mm, &k0, &k1);
+        for (int32_t k = k0; k <= k1 && k <= k_top; k++) {
+            if (lidx[k] < 0)
+                continue;
+            void *o = *tk;
+            if (!mem_grow(&o, &cap_tk, *n_tk + 2, sizeof(uint32_t)))
+                return false;
+            *tk = o;
+            (*tk)[(*n_tk)++] = (uint32_t)lidx[k];
+            (*tk)[(*n_tk)++] = t;
+        }
+    }
+    return true;
+}
+
+/* out->empty_to: the last layer of each run of open layers that keep nothing
+   (consecutive planes, no span in any of nw rows). */
+static void
+empty_runs(struct open_sections *out, uint32_t nw)
+{
+    for (uint32_t l = out->n_layers; l-- > 0;) {
+        bool empty = out->first[(size_t)l * nw] == out->first[(size_t)(l + 1) * nw];
+        out->empty_to[l] = l;
+        if (empty && l + 1 < out->n_layers && out->k[l + 1] == out->k[l] + 1 &&
+            out->first[(size_t)(l + 1) * nw] == out->first[(size_t)(l + 2) * nw])
+            out->empty_to[l] = out->empty_to[l + 1];
+    }
+}
+
 int
 rims_open_sections(const struct rims *r, const struct mesh *m, const struct rim_frame *f,
                    double max_gap_mm, struct open_sections *out, struct sf_err *err)
@@ -509,27 +554,9 @@ rims_open_sections(const struct rims *r, const struct mesh *m, const struct rim_
         goto nomem;
     memset(wk.loc, 0xff, sizeof(uint32_t) * m->n_tris);
     /* the triangles each open layer cuts, as (l, tri) pairs, then by layer */
-    size_t n_tk = 0, cap_tk = 0;
-    for (uint32_t t = 0; t < m->n_tris; t++) {
-        double lo = hv[m->t[t][0]], hi = lo;
-        for (int e = 1; e < 3; e++) {
-            double h = hv[m->t[t][e]];
-            lo = h < lo ? h : lo;
-            hi = h > hi ? h : hi;
-        }
-        int32_t k0, k1;
-        planes_between(lo, hi, f->layer_mm, &k0, &k1);
-        for (int32_t k = k0; k <= k1 && k <= k_top; k++) {
-            if (lidx[k] < 0)
-                continue;
-            void *o = tk;
-            if (!mem_grow(&o, &cap_tk, n_tk + 2, sizeof(uint32_t)))
-                goto nomem;
-            tk = o;
-            tk[n_tk++] = (uint32_t)lidx[k];
-            tk[n_tk++] = t;
-        }
-    }
+    size_t n_tk = 0;
+    if (!layer_tris(m, f, hv, lidx, k_top, &tk, &n_tk))
+        goto nomem;
     size_t n_pairs = n_tk / 2;
     cnt = mem_calloc((size_t)out->n_layers + 1, sizeof(uint32_t));
     by = mem_array(n_pairs ? n_pairs : 1, sizeof(uint32_t));
@@ -557,16 +584,9 @@ rims_open_sections(const struct rims *r, const struct mesh *m, const struct rim_
     }
     out->first[(size_t)out->n_layers * f->nw] = (uint32_t)wk.n_span;
     /* runs of layers that keep nothing: a column skips each in one step */
-    out->empty_to = mem_array(out->n_layers, sizeof(uint32_t));
-    if (!out->empty_to)
+    if (!(out->empty_to = mem_array(out->n_layers, sizeof(uint32_t))))
         goto nomem;
-    for (uint32_t l = out->n_layers; l-- > 0;) {
-        bool empty = out->first[(size_t)l * f->nw] == out->first[(size_t)(l + 1) * f->nw];
-        out->empty_to[l] = l;
-        if (empty && l + 1 < out->n_layers && out->k[l + 1] == out->k[l] + 1 &&
-            out->first[(size_t)(l + 1) * f->nw] == out->first[(size_t)(l + 2) * f->nw])
-            out->empty_to[l] = out->empty_to[l + 1];
-    }
+    empty_runs(out, f->nw);
     goto done;
 nomem:
     rc = sf_err_set(err, SF_ENOMEM, "open rims: out of memory");

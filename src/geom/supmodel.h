@@ -27,7 +27,7 @@
  * bridge when a straight line crosses it from the layer below to the layer
  * below; then only 1.5 mm bands along its free edges not parallel to the
  * bridge keep support, and perimeters keep it unless a straight line of the
- * bridge's direction anchors them at both ends (supmodel.c says how the
+ * bridge's direction anchors them at both ends (supmodel_rules.c says how the
  * raster follows BridgeDetector).  CuraEngine supports bridges.
  * Open shells (supmodel_eval only: it needs the mesh): where a layer cuts
  * an open rim and the slicer cannot close the section (open_gap_mm), the

@@ -431,6 +431,159 @@ freeze_folds(const struct mesh *m, uint8_t *fold, uint8_t *grow, double *share)
     return fresh;
 }
 
+/* The faces' weights: their areas in ref over the mean. */
+static void
+face_weights(struct system *s, const struct mesh *cur, const struct mesh *ref)
+{
+    double area_sum = 0;
+    for (uint32_t f = 0; f < cur->n_tris; f++)
+        area_sum += (s->w_face[f] = mesh_tri_area(ref, f));
+    double mean_area = cur->n_tris ? area_sum / cur->n_tris : 1;
+    for (uint32_t f = 0; f < cur->n_tris; f++)
+        s->w_face[f] = mean_area > 0 ? s->w_face[f] / mean_area : 1;
+}
+
+/* One global step: the right-hand side from the edges' targets acc, solved
+   into cur's positions. */
+static int
+solve_step(struct mesh *cur, const struct mesh *ref, struct system *s, const double *acc,
+           struct sf_err *err)
+{
+    uint32_t n = cur->n_verts;
+    for (uint32_t v = 0; v < n; v++) {
+        for (int d = 0; d < 3; d++) {
+            size_t k = (size_t)d * n + v;
+            double x = d == 0 ? cur->v[v].x : d == 1 ? cur->v[v].y : cur->v[v].z;
+            double x0 = d == 0 ? ref->v[v].x : d == 1 ? ref->v[v].y : ref->v[v].z;
+            s->rhs[k] = s->fixed[v] ? s->b0[k] : s->b0[k] + acc[k] + MU * x + s->anchor * x0;
+        }
+    }
+    int rc = sparse_chol_solve(s->chol, s->rhs, s->x, 3, err);
+    if (rc < 0)
+        return rc;
+    for (uint32_t v = 0; v < n; v++)
+        cur->v[v] = v3(s->x[v], s->x[n + v], s->x[2 * (size_t)n + v]);
+    return SF_OK;
+}
+
+/* Count the iterate, its risky faces on the curve, and the progress callback. */
+static void
+note_iterate(const struct surfopt_params *p, int round, int it, const struct support_metrics *sm,
+             const struct deviation *dev, struct surfopt_result *res)
+{
+    res->n_iters++;
+    if (res->n_curve < SURFOPT_CURVE_MAX)
+        res->curve[res->n_curve++] = sm->n_risky;
+    if (p->progress) {
+        struct surfopt_progress pr = { round,       p->rounds, it,       p->max_iters,
+                                       sm->n_risky, dev->mndr, dev->andr };
+        p->progress(p->progress_ud, &pr);
+    }
+}
+
+/* Past the largest move only: mark the vertices that moved more than lim
+   from ref (fold[v] 1, else 0); returns how many. */
+static uint32_t
+mark_far(const struct mesh *cur, const struct mesh *ref, double lim, uint8_t *fold)
+{
+    uint32_t far = 0;
+    for (uint32_t v = 0; v < cur->n_verts; v++)
+        far += (fold[v] = v3_len(v3_sub(cur->v[v], ref->v[v])) > lim);
+    return far;
+}
+
+/* Factorize the system again at weights beta and anchor (timed in res). */
+static int
+refactor(struct system *s, const struct mesh *cur, const struct mesh *ref,
+         const struct surfopt_params *p, double beta, double anchor, struct surfopt_result *res,
+         struct sf_err *err)
+{
+    double tf = clock_mono_s();
+    system_free_factor(s);
+    int rc = system_build(s, cur, ref, p, beta, anchor, err);
+    if (rc < 0)
+        return rc;
+    res->factor_s += clock_mono_s() - tf;
+    return SF_OK;
+}
+
+/* A round's scratch: n = cur->n_verts of each (acc 3n). */
+struct round_buf {
+    double *acc;
+    struct vec3 *best;
+    double *share;
+    uint8_t *fold, *grow;
+};
+
+static void
+round_buf_release(struct round_buf *rb)
+{
+    free(rb->acc);
+    free(rb->best);
+    free(rb->share);
+    free(rb->fold);
+    free(rb->grow);
+}
+
+/* rb's buffers and s's face weights for cur, the shares from the saliency
+   sal (folds freeze); SF_ENOMEM (release rb all the same). */
+static int
+round_buf_alloc(struct round_buf *rb, struct system *s, const struct mesh *cur, const double *sal,
+                struct sf_err *err)
+{
+    uint32_t n = cur->n_verts;
+    rb->acc = mem_array(3 * (size_t)n, sizeof(double));
+    rb->best = mem_array(n, sizeof(*rb->best));
+    rb->share = mem_array(n, sizeof(double));
+    rb->fold = mem_array(n, 1), rb->grow = mem_array(n, 1);
+    s->w_face = mem_array(cur->n_tris, sizeof(double));
+    if (!rb->acc || !rb->best || !rb->share || !rb->fold || !rb->grow || !s->w_face)
+        return sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
+    memcpy(rb->share, sal, (size_t)n * sizeof(*rb->share));
+    return SF_OK;
+}
+
+/* The round's first system: face weights, neighbours, factor (timed in res). */
+static int
+system_start(struct system *s, struct mesh *cur, const struct mesh *ref,
+             const struct surfopt_params *p, struct surfopt_result *res, struct sf_err *err)
+{
+    int rc;
+    face_weights(s, cur, ref);
+    double t0 = clock_mono_s();
+    if ((p->beta > 0 && (rc = build_neighbours(cur, s, err)) < 0) ||
+        (rc = system_build(s, cur, ref, p, p->beta, p->anchor, err)) < 0)
+        return rc;
+    res->factor_s += clock_mono_s() - t0;
+    return SF_OK;
+}
+
+/* How a round is getting on: the best proxy, and the iterations since it
+   last dropped by CRAWL (from stall_ref). */
+struct pace {
+    double best_proxy, stall_ref;
+    int since_best;
+};
+
+/* After an iterate within the limits (improved: its proxy is the new best):
+   *crawling, improving by less than CRAWL in patience iterations; *stalled,
+   not improving in patience iterations. */
+static void
+pace_step(struct pace *pc, bool improved, double proxy, int patience, bool *crawling, bool *stalled)
+{
+    if (improved) {
+        pc->best_proxy = proxy;
+        if (pc->best_proxy < pc->stall_ref * (1 - CRAWL)) {
+            pc->since_best = 0;
+            pc->stall_ref = pc->best_proxy;
+        } else {
+            *crawling = ++pc->since_best >= patience;
+        }
+    } else {
+        *stalled = ++pc->since_best >= patience;
+    }
+}
+
 /* One geometry round in the current frame.  cur ends as the round's best. */
 static int
 geometry_round(struct mesh *cur, const struct mesh *ref, const struct selfx_ref *sxr,
@@ -440,93 +593,53 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const struct selfx_ref 
 {
     uint32_t n = cur->n_verts;
     struct system s = { 0 };
-    double *acc = mem_array(3 * (size_t)n, sizeof(double));
-    struct vec3 *best = mem_array(n, sizeof(*best));
-    double *share = mem_array(n, sizeof(double));
-    uint8_t *fold = mem_array(n, 1), *grow = mem_array(n, 1);
-    s.w_face = mem_array(cur->n_tris, sizeof(double));
-    int rc = SF_ENOMEM;
-    if (!acc || !best || !share || !fold || !grow || !s.w_face) {
-        rc = sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
+    struct round_buf rb;
+    int rc = round_buf_alloc(&rb, &s, cur, sal, err);
+    if (rc < 0)
         goto out;
-    }
-    memcpy(share, sal, (size_t)n * sizeof(*share)); /* the saliency shares; folds freeze */
     int n_freezes = 0;
-    double area_sum = 0;
-    for (uint32_t f = 0; f < cur->n_tris; f++)
-        area_sum += (s.w_face[f] = mesh_tri_area(ref, f));
-    double mean_area = cur->n_tris ? area_sum / cur->n_tris : 1;
-    for (uint32_t f = 0; f < cur->n_tris; f++)
-        s.w_face[f] = mean_area > 0 ? s.w_face[f] / mean_area : 1;
-    double t0 = clock_mono_s();
     double beta = p->beta, anchor = p->anchor;
-    if ((beta > 0 && (rc = build_neighbours(cur, &s, err)) < 0) ||
-        (rc = system_build(&s, cur, ref, p, beta, anchor, err)) < 0)
+    if ((rc = system_start(&s, cur, ref, p, res, err)) < 0)
         goto out;
-    res->factor_s += clock_mono_s() - t0;
-    t0 = clock_mono_s();
+    double t0 = clock_mono_s();
 
     struct support_params sp = support_at(p->angle_deg);
     struct support_metrics sm;
     measure_proxy(cur, v3(0, 0, 1), &sp, &sm);
-    double best_proxy = sm.proxy_mm3;
+    struct pace pc = { sm.proxy_mm3, sm.proxy_mm3, 0 };
     if (res->n_curve == 0)
         res->curve[res->n_curve++] = sm.n_risky; /* the oriented input */
-    memcpy(best, cur->v, (size_t)n * sizeof(*best));
+    memcpy(rb.best, cur->v, (size_t)n * sizeof(*rb.best));
     *n_improved = 0;
     struct vec3 centre;
     mesh_volume(cur, &centre);
     double sin_a = sin((p->angle_deg - p->margin_deg) * M_PI / 180);
     double aim = (p->angle_deg - p->margin_deg) * M_PI / 180;
     double diag = mesh_diag(ref);
-    int since_best = 0;
-    double stall_ref = best_proxy; /* the proxy when since_best was last reset */
-    double step = 1;               /* share of each face's turn asked for; halved past the limits */
+    double step = 1; /* share of each face's turn asked for; halved past the limits */
     for (int it = 1; it <= p->max_iters; it++) {
         if (p->cancel && atomic_load(p->cancel)) {
             rc = sf_err_set(err, SF_ECANCELED, "surface optimization cancelled");
             goto out;
         }
-        edge_rhs(cur, &s, share, step, sin_a, aim, centre, p->gamma, acc);
-        for (uint32_t v = 0; v < n; v++) {
-            for (int d = 0; d < 3; d++) {
-                size_t k = (size_t)d * n + v;
-                double x = d == 0 ? cur->v[v].x : d == 1 ? cur->v[v].y : cur->v[v].z;
-                double x0 = d == 0 ? ref->v[v].x : d == 1 ? ref->v[v].y : ref->v[v].z;
-                s.rhs[k] = s.fixed[v] ? s.b0[k] : s.b0[k] + acc[k] + MU * x + s.anchor * x0;
-            }
-        }
-        if ((rc = sparse_chol_solve(s.chol, s.rhs, s.x, 3, err)) < 0)
+        edge_rhs(cur, &s, rb.share, step, sin_a, aim, centre, p->gamma, rb.acc);
+        if ((rc = solve_step(cur, ref, &s, rb.acc, err)) < 0)
             goto out;
-        for (uint32_t v = 0; v < n; v++)
-            cur->v[v] = v3(s.x[v], s.x[n + v], s.x[2 * (size_t)n + v]);
-        res->n_iters++;
         measure_proxy(cur, v3(0, 0, 1), &sp, &sm);
         struct deviation dev;
         measure_deviation(ref, cur, &dev, NULL);
-        if (res->n_curve < SURFOPT_CURVE_MAX)
-            res->curve[res->n_curve++] = sm.n_risky;
-        if (p->progress) {
-            struct surfopt_progress pr = { round,      p->rounds, it,      p->max_iters,
-                                           sm.n_risky, dev.mndr,  dev.andr };
-            p->progress(p->progress_ud, &pr);
-        }
-        bool improved = sm.proxy_mm3 < best_proxy * (1 - 1e-6);
-        int folds = 0; /* new self-intersections, checked only where the shape would be kept */
-        if (improved && dev.mndr <= p->max_mndr && dev.andr <= p->max_andr &&
-            (folds = selfx_ref_count(sxr, cur, fold, err)) < 0) {
-            rc = folds;
+        note_iterate(p, round, it, &sm, &dev, res);
+        bool improved = sm.proxy_mm3 < pc.best_proxy * (1 - 1e-6);
+        /* new self-intersections, checked only where the shape would be kept */
+        int folds = improved && dev.mndr <= p->max_mndr && dev.andr <= p->max_andr
+                        ? selfx_ref_count(sxr, cur, rb.fold, err)
+                        : 0;
+        if ((rc = folds) < 0)
             goto out;
-        }
-        if (folds > 0)
-            res->n_folded++;
+        res->n_folded += folds > 0;
         uint32_t far = 0;
-        if (freeze && folds == 0 && dev.mndr > p->max_mndr && dev.andr <= p->max_andr) {
-            /* past the largest move only: the vertices that moved too far */
-            double lim = p->max_mndr * diag;
-            for (uint32_t v = 0; v < n; v++)
-                far += (fold[v] = v3_len(v3_sub(cur->v[v], ref->v[v])) > lim);
-        }
+        if (freeze && folds == 0 && dev.mndr > p->max_mndr && dev.andr <= p->max_andr)
+            far = mark_far(cur, ref, p->max_mndr * diag, rb.fold);
         if ((folds > 0 || far > 0) && freeze) {
             /* Freezing: a fold is local (a thin fin, a tight crease), and so
              * is a move past the largest allowed one (a flange, a ledge):
@@ -536,10 +649,10 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const struct selfx_ref 
              * same step, so the rest of the part still turns.  Only when
              * nothing new can be frozen, or after FREEZE_MAX freezes, are
              * the turns halved everywhere. */
-            if (freeze_folds(ref, fold, grow, share) > 0 && n_freezes < FREEZE_MAX) {
+            if (freeze_folds(ref, rb.fold, rb.grow, rb.share) > 0 && n_freezes < FREEZE_MAX) {
                 n_freezes++;
-                memcpy(cur->v, best, (size_t)n * sizeof(*best));
-                since_best = 0;
+                memcpy(cur->v, rb.best, (size_t)n * sizeof(*rb.best));
+                pc.since_best = 0;
                 continue;
             }
         }
@@ -552,25 +665,17 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const struct selfx_ref 
                 break;
             step /= 2;
             res->n_halved++;
-            memcpy(cur->v, best, (size_t)n * sizeof(*best));
-            since_best = 0;
+            memcpy(cur->v, rb.best, (size_t)n * sizeof(*rb.best));
+            pc.since_best = 0;
             continue;
         }
         bool crawling = false, stalled = false;
         if (improved) {
-            best_proxy = sm.proxy_mm3;
-            memcpy(best, cur->v, (size_t)n * sizeof(*best));
+            memcpy(rb.best, cur->v, (size_t)n * sizeof(*rb.best));
             (*n_improved)++;
-            keep_push(keep, n_keep, cur->v, n, best_proxy);
-            if (best_proxy < stall_ref * (1 - CRAWL)) {
-                since_best = 0;
-                stall_ref = best_proxy;
-            } else {
-                crawling = ++since_best >= p->patience;
-            }
-        } else {
-            stalled = ++since_best >= p->patience;
+            keep_push(keep, n_keep, cur->v, n, sm.proxy_mm3);
         }
+        pace_step(&pc, improved, sm.proxy_mm3, p->patience, &crawling, &stalled);
         if (crawling || stalled) {
             /* Adaptive weight: stalled, or crawling (under CRAWL in
              * `patience` iterations), well inside the deviation budget,
@@ -582,32 +687,25 @@ geometry_round(struct mesh *cur, const struct mesh *ref, const struct selfx_ref 
             if (step < 1 || !loosen || dev.mndr > p->max_mndr / 2 || dev.andr > p->max_andr / 2) {
                 if (stalled)
                     break;
-                since_best = 0;
-                stall_ref = best_proxy;
+                pc.since_best = 0;
+                pc.stall_ref = pc.best_proxy;
                 continue;
             }
             beta /= 4;
             anchor /= 4;
-            memcpy(cur->v, best, (size_t)n * sizeof(*best));
-            double tf = clock_mono_s();
-            system_free_factor(&s);
-            if ((rc = system_build(&s, cur, ref, p, beta, anchor, err)) < 0)
+            memcpy(cur->v, rb.best, (size_t)n * sizeof(*rb.best));
+            if ((rc = refactor(&s, cur, ref, p, beta, anchor, res, err)) < 0)
                 goto out;
-            res->factor_s += clock_mono_s() - tf;
-            since_best = 0;
-            stall_ref = best_proxy;
+            pc.since_best = 0;
+            pc.stall_ref = pc.best_proxy;
         }
     }
-    memcpy(cur->v, best, (size_t)n * sizeof(*best));
+    memcpy(cur->v, rb.best, (size_t)n * sizeof(*rb.best));
     res->iterate_s += clock_mono_s() - t0;
     rc = SF_OK;
 out:
     system_free(&s);
-    free(acc);
-    free(best);
-    free(share);
-    free(fold);
-    free(grow);
+    round_buf_release(&rb);
     return rc;
 }
 
@@ -648,6 +746,96 @@ orientation_step(struct mesh *cur, struct mesh *ref, struct snapshot *keep, int 
     move_positions(ref->v, ref->n_verts, r, t);
     for (int k = 0; k < n_keep; k++)
         move_positions(keep[k].v, cur->n_verts, r, t);
+    return SF_OK;
+}
+
+/* Why the result is the orientation alone (choose_kept). */
+static const char *
+unchanged_why(const struct surfopt_result *res, int n_keep, int n_selfx, int n_peer_rise,
+              bool small_gain)
+{
+    return n_keep == 0 && res->n_folded > 0
+               ? "every iterate that lowered the risky faces within the "
+                 "deviation limits folded the surface onto itself (new "
+                 "self-intersections)"
+           : n_keep == 0       ? "no iterate lowered the risky faces within the deviation "
+                                 "limits"
+           : n_selfx == n_keep ? "every kept shape adds self-intersections"
+           : n_peer_rise > 0   ? "the kept shapes of this open shell need more support than "
+                                 "the part as given in PrusaSlicer or CuraEngine, which drop "
+                                 "what its open rims leave open"
+           : res->model_oriented_g <= 0 ? "the oriented part needs no support by the model"
+           : small_gain                 ? "no kept shape saves min_gain of the oriented "
+                                          "part's model grams"
+                        : "no kept shape needs fewer model grams than the oriented part";
+}
+
+/*
+ * The result: of the kept shapes that add no self-intersection, the one the
+ * layer-based support model (supmodel.h, PrusaSlicer's rules) gives the
+ * fewest grams, if that saves min_gain of what the orientation alone needs;
+ * else the orientation alone.  The ray-cast volume steered the iterations;
+ * the model, which follows what a slicer prints, decides.  cur (scratch,
+ * n positions) ends as the chosen shape with its metrics in *sm when
+ * res->shape_changed.
+ */
+static int
+choose_kept(const struct mesh *m, struct mesh *cur, const struct mesh *oriented,
+            const struct snapshot *keep, int n_keep, const struct selfx_ref *sxr,
+            const struct surfopt_params *p, struct surfopt_result *res, struct support_metrics *sm,
+            struct sf_err *err)
+{
+    uint32_t n = cur->n_verts;
+    int rc;
+    struct supmodel_params mp;
+    supmodel_params_steer(&mp, p->angle_deg);
+    struct supmodel_result mr;
+    if ((rc = supmodel_of_mesh(oriented, v3(0, 0, 1), &mp, &mr, err)) < 0)
+        return rc;
+    res->model_oriented_g = mr.grams;
+    int best_k = -1, n_selfx = 0, n_peer_rise = 0;
+    double best_g = mr.grams;
+    for (int k = n_keep - 1; k >= 0; k--) {
+        memcpy(cur->v, keep[k].v, (size_t)n * sizeof(struct vec3));
+        if ((rc = selfx_ref_count(sxr, cur, NULL, err)) < 0)
+            return rc;
+        if (rc > 0) {
+            res->n_rejected++;
+            n_selfx++;
+            continue;
+        }
+        if ((rc = supmodel_of_mesh(cur, v3(0, 0, 1), &mp, &mr, err)) < 0)
+            return rc;
+        /* nor may it cost the part as given more in a slicer that drops what
+           open rims leave open (supmodel_peers_rise; closed parts: no) */
+        bool rises = false;
+        if (mr.grams < best_g &&
+            (rc = supmodel_peers_rise(m, cur, p->angle_deg, &rises, NULL, err)) < 0)
+            return rc;
+        if (mr.grams < best_g && !rises) {
+            best_g = mr.grams;
+            best_k = k;
+        } else {
+            res->n_rejected++;
+            n_peer_rise += rises;
+        }
+    }
+    bool small_gain = best_k >= 0 && !(best_g < (1 - p->min_gain) * res->model_oriented_g);
+    if (small_gain)
+        best_k = -1;
+    if (best_k >= 0) {
+        memcpy(cur->v, keep[best_k].v, (size_t)n * sizeof(struct vec3));
+        if ((rc = selfx_count(cur, err)) < 0)
+            return rc;
+        res->selfx_out = rc;
+        if ((rc = ray_metrics(cur, p->angle_deg, sm, err)) < 0)
+            return rc;
+        res->shape_changed = true;
+        res->model_after_g = best_g;
+    } else {
+        res->model_after_g = res->model_oriented_g;
+        res->unchanged_why = unchanged_why(res, n_keep, n_selfx, n_peer_rise, small_gain);
+    }
     return SF_OK;
 }
 
@@ -730,76 +918,11 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
             break; /* another orientation step would see the same shape */
     }
 
-    /* The result: of the kept shapes that add no self-intersection, the one
-     * the layer-based support model (supmodel.h, PrusaSlicer's rules) gives
-     * the fewest grams, if that saves min_gain of what the orientation alone
-     * needs; else the orientation alone.  The ray-cast volume steered the
-     * iterations; the model, which follows what a slicer prints, decides. */
+    /* the result: a kept shape, or the orientation alone (choose_kept) */
     t0 = clock_mono_s();
     struct support_metrics sm;
-    struct supmodel_params mp;
-    supmodel_params_steer(&mp, p->angle_deg);
-    struct supmodel_result mr;
-    if ((rc = supmodel_of_mesh(&oriented, v3(0, 0, 1), &mp, &mr, err)) < 0)
+    if ((rc = choose_kept(m, &cur, &oriented, keep, n_keep, sxr, p, res, &sm, err)) < 0)
         goto out;
-    res->model_oriented_g = mr.grams;
-    int best_k = -1, n_selfx = 0, n_peer_rise = 0;
-    double best_g = mr.grams;
-    for (int k = n_keep - 1; k >= 0; k--) {
-        memcpy(cur.v, keep[k].v, (size_t)n * sizeof(struct vec3));
-        if ((rc = selfx_ref_count(sxr, &cur, NULL, err)) < 0)
-            goto out;
-        if (rc > 0) {
-            res->n_rejected++;
-            n_selfx++;
-            continue;
-        }
-        if ((rc = supmodel_of_mesh(&cur, v3(0, 0, 1), &mp, &mr, err)) < 0)
-            goto out;
-        /* nor may it cost the part as given more in a slicer that drops what
-           open rims leave open (supmodel_peers_rise; closed parts: no) */
-        bool rises = false;
-        if (mr.grams < best_g &&
-            (rc = supmodel_peers_rise(m, &cur, p->angle_deg, &rises, NULL, err)) < 0)
-            goto out;
-        if (mr.grams < best_g && !rises) {
-            best_g = mr.grams;
-            best_k = k;
-        } else {
-            res->n_rejected++;
-            n_peer_rise += rises;
-        }
-    }
-    bool small_gain = best_k >= 0 && !(best_g < (1 - p->min_gain) * res->model_oriented_g);
-    if (small_gain)
-        best_k = -1;
-    if (best_k >= 0) {
-        memcpy(cur.v, keep[best_k].v, (size_t)n * sizeof(struct vec3));
-        if ((rc = selfx_count(&cur, err)) < 0)
-            goto out;
-        res->selfx_out = rc;
-        if ((rc = ray_metrics(&cur, p->angle_deg, &sm, err)) < 0)
-            goto out;
-        res->shape_changed = true;
-        res->model_after_g = best_g;
-    } else {
-        res->model_after_g = res->model_oriented_g;
-        res->unchanged_why =
-            n_keep == 0 && res->n_folded > 0
-                ? "every iterate that lowered the risky faces within the "
-                  "deviation limits folded the surface onto itself (new "
-                  "self-intersections)"
-            : n_keep == 0       ? "no iterate lowered the risky faces within the deviation "
-                                  "limits"
-            : n_selfx == n_keep ? "every kept shape adds self-intersections"
-            : n_peer_rise > 0   ? "the kept shapes of this open shell need more support than "
-                                  "the part as given in PrusaSlicer or CuraEngine, which drop "
-                                  "what its open rims leave open"
-            : res->model_oriented_g <= 0 ? "the oriented part needs no support by the model"
-            : small_gain                 ? "no kept shape saves min_gain of the oriented "
-                                           "part's model grams"
-                         : "no kept shape needs fewer model grams than the oriented part";
-    }
     res->check_s = clock_mono_s() - t0;
     if (res->shape_changed) {
         res->out = cur;

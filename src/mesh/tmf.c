@@ -171,130 +171,162 @@ parse_xform(const char *s, struct tmf_xform *x)
     return *s == '\0';
 }
 
+/* <model unit=...>: the unit of the coordinates. */
+static void
+on_model(struct tmf_parse *p, const char **atts)
+{
+    const char *u = attr(atts, "unit");
+    static const struct {
+        const char *name;
+        double mm;
+    } units[] = { { "micron", 0.001 }, { "millimeter", 1 }, { "centimeter", 10 },
+                  { "inch", 25.4 },    { "foot", 304.8 },   { "meter", 1000 } };
+    if (u) {
+        p->unit_mm = 0;
+        for (size_t i = 0; i < sizeof(units) / sizeof(units[0]); i++)
+            if (strcmp(u, units[i].name) == 0)
+                p->unit_mm = units[i].mm;
+        if (p->unit_mm == 0)
+            fail(p, SF_EINVAL, "unknown unit");
+    }
+}
+
+/* <object id=...>: a new current object. */
+static void
+on_object(struct tmf_parse *p, const char **atts)
+{
+    if (p->n_objs >= TMF_OBJECTS_MAX) {
+        fail(p, SF_EINVAL, "too many objects");
+        return;
+    }
+    void *o = p->objs;
+    size_t cap = p->cap_objs;
+    if (!mem_grow(&o, &cap, p->n_objs + 1, sizeof(*p->objs))) {
+        fail(p, SF_ENOMEM, "out of memory");
+        return;
+    }
+    p->objs = o;
+    p->cap_objs = (uint32_t)cap;
+    p->cur = &p->objs[p->n_objs++];
+    memset(p->cur, 0, sizeof(*p->cur));
+    if (!id_attr(atts, "id", &p->cur->id))
+        fail(p, SF_EINVAL, "object without a valid id");
+}
+
+/* <vertex x= y= z=>: a vertex of the current object. */
+static void
+on_vertex(struct tmf_parse *p, const char **atts)
+{
+    double c[3];
+    if (!p->cur) {
+        fail(p, SF_EINVAL, "vertex outside an object");
+        return;
+    }
+    if (!num_attr(atts, "x", &c[0]) || !num_attr(atts, "y", &c[1]) || !num_attr(atts, "z", &c[2])) {
+        fail(p, SF_EINVAL, "vertex needs finite x, y and z");
+        return;
+    }
+    if (p->cur->n_v >= SF_MESH_VERTS_MAX) {
+        fail(p, SF_EINVAL, "too many vertices");
+        return;
+    }
+    void *v = p->cur->v;
+    size_t cap = p->cur->cap_v;
+    if (!mem_grow(&v, &cap, p->cur->n_v + 1, sizeof(struct vec3))) {
+        fail(p, SF_ENOMEM, "out of memory");
+        return;
+    }
+    p->cur->v = v;
+    p->cur->cap_v = (uint32_t)cap;
+    p->cur->v[p->cur->n_v++] = v3(c[0], c[1], c[2]);
+}
+
+/* <triangle v1= v2= v3=>: a triangle of the current object. */
+static void
+on_triangle(struct tmf_parse *p, const char **atts)
+{
+    uint32_t a, b, c;
+    if (!p->cur) {
+        fail(p, SF_EINVAL, "triangle outside an object");
+        return;
+    }
+    if (!id_attr(atts, "v1", &a) || !id_attr(atts, "v2", &b) || !id_attr(atts, "v3", &c)) {
+        fail(p, SF_EINVAL, "triangle needs indices v1, v2 and v3");
+        return;
+    }
+    if (a >= p->cur->n_v || b >= p->cur->n_v || c >= p->cur->n_v) {
+        fail(p, SF_EINVAL, "triangle index out of range");
+        return;
+    }
+    if (++p->n_tris_total > SF_MESH_TRIS_MAX) {
+        fail(p, SF_EINVAL, "too many triangles");
+        return;
+    }
+    void *t = p->cur->t;
+    size_t cap = p->cur->cap_t;
+    if (!mem_grow(&t, &cap, p->cur->n_t + 1, sizeof(*p->cur->t))) {
+        fail(p, SF_ENOMEM, "out of memory");
+        return;
+    }
+    p->cur->t = t;
+    p->cur->cap_t = (uint32_t)cap;
+    uint32_t *tri = p->cur->t[p->cur->n_t++];
+    tri[0] = a;
+    tri[1] = b;
+    tri[2] = c;
+}
+
+/* <component> of the current object, or a build <item>: a placed object. */
+static void
+on_ref(struct tmf_parse *p, const char **atts, bool item)
+{
+    struct tmf_ref ref;
+    if (!item && !p->cur) {
+        fail(p, SF_EINVAL, "component outside an object");
+        return;
+    }
+    if (!id_attr(atts, "objectid", &ref.object_id)) {
+        fail(p, SF_EINVAL, "missing objectid");
+        return;
+    }
+    if (!parse_xform(attr(atts, "transform"), &ref.xf)) {
+        fail(p, SF_EINVAL, "transform needs 12 numbers");
+        return;
+    }
+    struct tmf_ref **arr = item ? &p->items : &p->cur->comps;
+    uint32_t *n = item ? &p->n_items : &p->cur->n_comps;
+    uint32_t *capp = item ? &p->cap_items : &p->cur->cap_comps;
+    if (*n >= TMF_ITEMS_MAX) {
+        fail(p, SF_EINVAL, "too many items or components");
+        return;
+    }
+    void *a = *arr;
+    size_t cap = *capp;
+    if (!mem_grow(&a, &cap, *n + 1, sizeof(struct tmf_ref))) {
+        fail(p, SF_ENOMEM, "out of memory");
+        return;
+    }
+    *arr = a;
+    *capp = (uint32_t)cap;
+    (*arr)[(*n)++] = ref;
+}
+
 static void XMLCALL
 on_start(void *ud, const char *el, const char **atts)
 {
     struct tmf_parse *p = ud;
     if (p->rc)
         return;
-    if (is(el, "model")) {
-        const char *u = attr(atts, "unit");
-        static const struct {
-            const char *name;
-            double mm;
-        } units[] = { { "micron", 0.001 }, { "millimeter", 1 }, { "centimeter", 10 },
-                      { "inch", 25.4 },    { "foot", 304.8 },   { "meter", 1000 } };
-        if (u) {
-            p->unit_mm = 0;
-            for (size_t i = 0; i < sizeof(units) / sizeof(units[0]); i++)
-                if (strcmp(u, units[i].name) == 0)
-                    p->unit_mm = units[i].mm;
-            if (p->unit_mm == 0)
-                fail(p, SF_EINVAL, "unknown unit");
-        }
-    } else if (is(el, "object")) {
-        if (p->n_objs >= TMF_OBJECTS_MAX) {
-            fail(p, SF_EINVAL, "too many objects");
-            return;
-        }
-        void *o = p->objs;
-        size_t cap = p->cap_objs;
-        if (!mem_grow(&o, &cap, p->n_objs + 1, sizeof(*p->objs))) {
-            fail(p, SF_ENOMEM, "out of memory");
-            return;
-        }
-        p->objs = o;
-        p->cap_objs = (uint32_t)cap;
-        p->cur = &p->objs[p->n_objs++];
-        memset(p->cur, 0, sizeof(*p->cur));
-        if (!id_attr(atts, "id", &p->cur->id))
-            fail(p, SF_EINVAL, "object without a valid id");
-    } else if (is(el, "vertex")) {
-        double c[3];
-        if (!p->cur) {
-            fail(p, SF_EINVAL, "vertex outside an object");
-            return;
-        }
-        if (!num_attr(atts, "x", &c[0]) || !num_attr(atts, "y", &c[1]) ||
-            !num_attr(atts, "z", &c[2])) {
-            fail(p, SF_EINVAL, "vertex needs finite x, y and z");
-            return;
-        }
-        if (p->cur->n_v >= SF_MESH_VERTS_MAX) {
-            fail(p, SF_EINVAL, "too many vertices");
-            return;
-        }
-        void *v = p->cur->v;
-        size_t cap = p->cur->cap_v;
-        if (!mem_grow(&v, &cap, p->cur->n_v + 1, sizeof(struct vec3))) {
-            fail(p, SF_ENOMEM, "out of memory");
-            return;
-        }
-        p->cur->v = v;
-        p->cur->cap_v = (uint32_t)cap;
-        p->cur->v[p->cur->n_v++] = v3(c[0], c[1], c[2]);
-    } else if (is(el, "triangle")) {
-        uint32_t a, b, c;
-        if (!p->cur) {
-            fail(p, SF_EINVAL, "triangle outside an object");
-            return;
-        }
-        if (!id_attr(atts, "v1", &a) || !id_attr(atts, "v2", &b) || !id_attr(atts, "v3", &c)) {
-            fail(p, SF_EINVAL, "triangle needs indices v1, v2 and v3");
-            return;
-        }
-        if (a >= p->cur->n_v || b >= p->cur->n_v || c >= p->cur->n_v) {
-            fail(p, SF_EINVAL, "triangle index out of range");
-            return;
-        }
-        if (++p->n_tris_total > SF_MESH_TRIS_MAX) {
-            fail(p, SF_EINVAL, "too many triangles");
-            return;
-        }
-        void *t = p->cur->t;
-        size_t cap = p->cur->cap_t;
-        if (!mem_grow(&t, &cap, p->cur->n_t + 1, sizeof(*p->cur->t))) {
-            fail(p, SF_ENOMEM, "out of memory");
-            return;
-        }
-        p->cur->t = t;
-        p->cur->cap_t = (uint32_t)cap;
-        uint32_t *tri = p->cur->t[p->cur->n_t++];
-        tri[0] = a;
-        tri[1] = b;
-        tri[2] = c;
-    } else if (is(el, "component") || is(el, "item")) {
-        bool item = is(el, "item");
-        struct tmf_ref ref;
-        if (!item && !p->cur) {
-            fail(p, SF_EINVAL, "component outside an object");
-            return;
-        }
-        if (!id_attr(atts, "objectid", &ref.object_id)) {
-            fail(p, SF_EINVAL, "missing objectid");
-            return;
-        }
-        if (!parse_xform(attr(atts, "transform"), &ref.xf)) {
-            fail(p, SF_EINVAL, "transform needs 12 numbers");
-            return;
-        }
-        struct tmf_ref **arr = item ? &p->items : &p->cur->comps;
-        uint32_t *n = item ? &p->n_items : &p->cur->n_comps;
-        uint32_t *capp = item ? &p->cap_items : &p->cur->cap_comps;
-        if (*n >= TMF_ITEMS_MAX) {
-            fail(p, SF_EINVAL, "too many items or components");
-            return;
-        }
-        void *a = *arr;
-        size_t cap = *capp;
-        if (!mem_grow(&a, &cap, *n + 1, sizeof(struct tmf_ref))) {
-            fail(p, SF_ENOMEM, "out of memory");
-            return;
-        }
-        *arr = a;
-        *capp = (uint32_t)cap;
-        (*arr)[(*n)++] = ref;
-    }
+    if (is(el, "model"))
+        on_model(p, atts);
+    else if (is(el, "object"))
+        on_object(p, atts);
+    else if (is(el, "vertex"))
+        on_vertex(p, atts);
+    else if (is(el, "triangle"))
+        on_triangle(p, atts);
+    else if (is(el, "component") || is(el, "item"))
+        on_ref(p, atts, is(el, "item"));
 }
 
 static void XMLCALL

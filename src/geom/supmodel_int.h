@@ -1,0 +1,89 @@
+/*
+ * supmodel_int.h - internal to the support model (supmodel*.c), not a
+ * contract for anyone else: the raster of solid intervals the model's
+ * passes share, and the entry points of its files.
+ *
+ *   supmodel_raster.c  the columns' solid intervals from the ray grid, less
+ *                      the open layers the slicer drops (rims.h)
+ *   supmodel_rules.c   the slicers' overhang rules and PrusaSlicer's bridge
+ *                      exemption: which bottoms are contacts
+ *   supmodel_eval.c    the layer model's volumes (eval_cut) and the public
+ *                      evaluations built on it
+ *   supmodel.c         parameters, the raster pitch, the snapped columns
+ *
+ * Pure functions, as supmodel.h.
+ */
+#ifndef SF_GEOM_SUPMODEL_INT_H
+#define SF_GEOM_SUPMODEL_INT_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "raycast.h"
+#include "rims.h"
+#include "supmodel.h"
+
+/* Solid intervals of every column: cell c holds iv[first[c] .. first[c+1]). */
+struct ival {
+    float lo, hi;
+    float cos_lo; /* n . up of the facet the bottom lies on (< 0) */
+};
+
+struct cols {
+    uint32_t *first;
+    struct ival *iv;
+};
+
+/* What the slicer keeps of the open layers (rims.h) in a grid's cells. */
+struct open_cut {
+    const struct open_sections *os;
+    double layer_mm;
+    uint32_t nu;
+    struct layer_run {
+        int32_t k0, k1;
+    } * run; /* scratch: one interval's dropped layers */
+    size_t cap;
+};
+
+/* Build the solid intervals of every cell of g, less what cut drops (NULL:
+   nothing); SF_ENOMEM.  Free out with supmodel_cols_release. */
+int supmodel_cols_build(const struct ray_grid *g, struct open_cut *cut, struct cols *out,
+                        struct sf_err *err);
+void supmodel_cols_release(struct cols *c);
+
+/* Is cell c solid at height z? */
+static inline bool
+supmodel_solid_at(const struct cols *cs, size_t c, float z)
+{
+    for (uint32_t k = cs->first[c]; k < cs->first[c + 1]; k++)
+        if (cs->iv[k].lo <= z && z <= cs->iv[k].hi && cs->iv[k].hi > cs->iv[k].lo)
+            return true;
+    return false;
+}
+
+/* A bottom that needs a column: (cell, bottom, floor). */
+struct contact {
+    uint32_t cell;
+    float top;   /* the overhanging bottom, mm */
+    float floor; /* top of the solid below, 0 for the bed */
+    bool dense;  /* overhangs by more than interface_step_mm a layer: dense interface */
+};
+
+/* The contacts of cs by p's slicer rules (bridges removed when p->bridges),
+   allocated into out (free()); SF_ENOMEM. */
+int supmodel_find_contacts(const struct ray_grid *g, const struct cols *cs,
+                           const struct supmodel_params *p, struct contact **out, size_t *n_out,
+                           struct sf_err *err);
+
+/* Order of two ranges of snap cells: by cell, then by key (a range's lower end). */
+static inline int
+supmodel_blk_cmp(uint32_t blk_a, double key_a, uint32_t blk_b, double key_b)
+{
+    if (blk_a != blk_b)
+        return blk_a < blk_b ? -1 : 1;
+    return (key_a > key_b) - (key_a < key_b);
+}
+
+#endif
