@@ -68,7 +68,12 @@ struct drv_caps {
     int buffer_lines;     /* command lines the firmware can queue (BUFSIZE) */
 };
 
-/* How to reach a printer (from the farm config). */
+/*
+ * How to reach a printer.  From the farm config, each field is filled by the
+ * link option whose row names it (the kinds' tables in drv.c, drv_link.h);
+ * a new field needs its row there and nothing else in the farm.  Text
+ * fields may be NULL or "" for "not given" (timeout_ms has no option).
+ */
 struct drv_config {
     const char *name;     /* printer name, for logs */
     const char *kind;     /* "marlin", "octoprint", "moonraker", "bambu" */
