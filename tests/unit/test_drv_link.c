@@ -18,8 +18,8 @@ T_CASE(drv_link_tables_are_sound)
         T_TRUE(drv_link_option(o->name) == o); /* one row per name, whichever kinds share it */
         if (o->type == DRV_OPT_INT) {
             if (o->def != 0 && (o->def < o->lo || o->def > o->hi))
-                t_fail(__FILE__, __LINE__, "option '%s': default %d not in %d..%d", o->name,
-                       o->def, o->lo, o->hi);
+                t_fail(__FILE__, __LINE__, "option '%s': default %d not in %d..%d", o->name, o->def,
+                       o->lo, o->hi);
         } else if (o->type != DRV_OPT_BOOL) {
             T_TRUE(o->size > 1);
             text += o->size + (o->prefix ? strlen(o->prefix) : 0);
