@@ -22,7 +22,6 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "../../drivers/drv_link.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "gcjob.h"
