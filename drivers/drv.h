@@ -24,6 +24,7 @@
 
 #include "../src/base/err.h"
 #include "../src/base/loop.h"
+#include "gcheck.h"
 
 /* 2: attach (network printers re-attach after a daemon restart); drv_kind.auth, schemes. */
 #define DRV_OPS_VERSION 2
@@ -67,7 +68,12 @@ struct drv_caps {
     int buffer_lines;     /* command lines the firmware can queue (BUFSIZE) */
 };
 
-/* How to reach a printer (from the farm config). */
+/*
+ * How to reach a printer.  From the farm config, each field is filled by the
+ * link option whose row names it (the kinds' tables in drv.c, drv_link.h);
+ * a new field needs its row there and nothing else in the farm.  Text
+ * fields may be NULL or "" for "not given" (timeout_ms has no option).
+ */
 struct drv_config {
     const char *name;     /* printer name, for logs */
     const char *kind;     /* "marlin", "octoprint", "moonraker", "bambu" */
@@ -180,7 +186,16 @@ enum drv_auth {
     DRV_AUTH_KEY_OR_DIGEST, /* api_key, or user and password for HTTP digest (PrusaLink) */
 };
 
-/* One kind of printer driver: a row of drv.c's registry, the one list of kinds. */
+struct drv_option; /* drv_link.h */
+
+/*
+ * One kind of printer driver: a row of drv.c's registry, the one list of
+ * kinds.  The row says everything the rest of the farm needs to know of the
+ * kind: how to create it, its link options (each with its type, default,
+ * check, drv_config field, secrecy and whether a reload may change it live:
+ * drv_link.h), its own rules over them, and which G-code rules its jobs
+ * must pass.
+ */
 struct drv_kind {
     const char *name;    /* the config's "driver:" value, e.g. "marlin" */
     bool url;            /* reached by URL (network) rather than by port (serial, pty, TCP) */
@@ -188,7 +203,22 @@ struct drv_kind {
     const char *schemes; /* url kinds: accepted URL schemes, space-separated ("http https") */
     struct drv *(*create)(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event,
                           void *ud, struct sf_err *err);
+    /* its link options: tables (each ended by a row with a NULL name, shared between kinds
+       where the options are), NULL after the last */
+    const struct drv_option *options[4];
+    /* its own rules over a whole link (NULL: none): 0 when cfg is fine, else -1 with why set
+       to what the config must change ("options 'serial' and 'access_code' are required by
+       driver bambu"); cfg is drv_link_config's */
+    int (*check)(const struct drv_config *cfg, char *why, size_t n);
+    enum gcheck_rules gcode; /* the rules its job files must pass (gcheck.h) */
 };
+
+/*
+ * The rules drv_job_scan applies: every kind's row names these today (a unit
+ * test holds them equal), so a file checked before its printer is known
+ * fits whichever printer takes it.
+ */
+#define DRV_JOB_RULES GCHECK_MARLIN
 
 /* The kind called name, or NULL. */
 const struct drv_kind *drv_kind_find(const char *name);
@@ -217,9 +247,10 @@ void drv_remote_name(const char *gcode_path, char *out, size_t n);
 
 /*
  * Read and check a whole job file once, so that a job never fails half-way
- * on a bad line and start_job need not read it: count its command lines,
- * and refuse a line longer than SF_GCODE_LINE_MAX or a command no driver
- * could send (SF_EINVAL, the message naming 'path':line).  SF_EIO when the
+ * on a bad line and start_job need not read it: gcheck_scan by
+ * DRV_JOB_RULES.  Counts its command lines, and refuses a line longer than
+ * SF_GCODE_LINE_MAX or a command no driver could send (SF_EINVAL, the
+ * message naming 'path':line).  SF_EIO when the
  * file cannot be read.  Pure: any thread (the farm runs it on a prepare
  * worker); it reads a 150 MB file in about as long as start_job used to
  * stall the loop.
@@ -227,10 +258,10 @@ void drv_remote_name(const char *gcode_path, char *out, size_t n);
 int drv_job_scan(const char *path, struct drv_job_scan *scan, struct sf_err *err);
 
 /*
- * Add to scan (whose lines_total the caller knows) the resume point of
- * command first_line (1 .. lines_total - 1): where it starts and the
- * machine state the commands before it leave, reading the file only up to
- * it.  start_job given this scan and first_line reads nothing before it
+ * gcheck_scan_to by DRV_JOB_RULES: add to scan (whose lines_total the
+ * caller knows) the resume point of command first_line (1 .. lines_total -
+ * 1): where it starts and the machine state the commands before it leave,
+ * reading the file only up to it.  start_job given this scan and first_line reads nothing before it
  * streams.  SF_EINVAL if the file holds no such command, SF_EIO.  Pure:
  * any thread (a resume from 2/3 of a 112 MB job reads for ~0.5 s).
  */

@@ -1,6 +1,7 @@
 /*
  * drv_util.c - the helpers of drv.h that every driver shares: drv_free,
- * state names, the job file scan, remote file names, the reconnect policy.
+ * state names, the job file scan (gcheck.h by the rules every kind names),
+ * remote file names, the reconnect policy.
  *
  * Apart from the registry (drv.c) so that a driver, or a tool using one
  * driver, links these without linking every other driver.  Thread: loop
@@ -12,7 +13,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "marlin/drv_marlin.h"
+#include "gcheck.h"
 
 void
 drv_free(struct drv *d)
@@ -46,16 +47,14 @@ drv_state_name(enum drv_state s)
 int
 drv_job_scan(const char *path, struct drv_job_scan *scan, struct sf_err *err)
 {
-    /* Marlin is the only kind today, and its limits are the tightest a
-       driver will have (a numbered, checksummed line in a 96-byte buffer). */
-    return drv_marlin_scan(path, scan, err);
+    return gcheck_scan(DRV_JOB_RULES, path, scan, err);
 }
 
 int
 drv_job_scan_to(const char *path, uint64_t first_line, struct drv_job_scan *scan,
                 struct sf_err *err)
 {
-    return drv_marlin_scan_to(path, first_line, scan, err);
+    return gcheck_scan_to(DRV_JOB_RULES, path, first_line, scan, err);
 }
 
 void

@@ -50,6 +50,12 @@
    M115 capability lines and M503 dumps stay under 512 bytes. */
 #define SF_PRINTER_LINE_MAX 1024
 
+/* A printer's link options (drivers/drv_link.h): each option at most once
+   per section; the longest values of all of them together (about 1.4 KiB:
+   URLs, keys, paths) fit the text, which a unit test checks. */
+#define SF_LINK_OPTS_MAX 32
+#define SF_LINK_TEXT_MAX 2048
+
 /* Config file size: a farm of 1000 printers fits easily in 4 MiB. */
 #define SF_CONFIG_FILE_MAX ((size_t)4 << 20)
 

@@ -519,12 +519,27 @@ farm_free(struct farm *f)
     free(f);
 }
 
+/*
+ * Does a printer's link differ between its configs a and b: its driver,
+ * enabled, or an option of its kind not marked live (drv_link_diff)?  If
+ * so, say what in why (secrets not shown).
+ */
 static bool
-same_link(const struct farmcfg_printer *a, const struct farmcfg_printer *b)
+link_change(const struct farmcfg_printer *a, const struct farmcfg_printer *b, char *why, size_t n)
 {
-    return strcmp(a->driver, b->driver) == 0 && strcmp(a->port, b->port) == 0 &&
-           a->baud == b->baud && strcmp(a->url, b->url) == 0 &&
-           strcmp(a->api_key, b->api_key) == 0 && a->enabled == b->enabled;
+    if (strcmp(a->driver, b->driver) != 0 || a->enabled != b->enabled) {
+        snprintf(why, n, "option '%s' changed", a->enabled != b->enabled ? "enabled" : "driver");
+        return true;
+    }
+    const struct drv_kind *k = drv_kind_find(a->driver);
+    const struct drv_option *o = drv_link_diff(k, &a->link, &b->link);
+    if (!o)
+        return false;
+    char was[80], now[80];
+    drv_link_show(&a->link, k, o, was, sizeof(was));
+    drv_link_show(&b->link, k, o, now, sizeof(now));
+    snprintf(why, n, "option '%s' changed from '%s' to '%s'", o->name, was, now);
+    return true;
 }
 
 int
@@ -544,21 +559,21 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
             continue;
         }
         const struct farmcfg_printer *old = printer_cfg(p);
-        if (same_link(old, c) || printer_job(p)) {
+        char why[200];
+        bool change = link_change(old, c, why, sizeof(why));
+        if (!change || printer_job(p)) {
             /* Same link, or busy: change what the scheduler reads only. */
             struct farmcfg_printer next = *c;
-            if (!same_link(old, c)) {
+            if (change) {
                 log_printer(LOG_WARN, c->name, "link change waits for the print to end");
                 memcpy(next.driver, old->driver, sizeof(next.driver));
-                memcpy(next.port, old->port, sizeof(next.port));
-                memcpy(next.url, old->url, sizeof(next.url));
-                memcpy(next.api_key, old->api_key, sizeof(next.api_key));
-                next.baud = old->baud;
+                next.link = old->link;
                 next.enabled = old->enabled;
             }
             printer_set_cfg(p, &next);
             continue;
         }
+        log_printer(LOG_INFO, c->name, "reload: %s: reconnecting", why);
         /* New link and idle: replace the printer. */
         struct printer *fresh = add_printer_new(f, c);
         if (!fresh)

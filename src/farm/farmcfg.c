@@ -11,7 +11,10 @@
  * inline '#'/';' comments (after a blank), Klipper style.  The first error
  * stops the reader; its message wins.  Each option is a row of a table
  * (name, section kind, parser, offset, range), so the set of options, their
- * checks and config/farm.ini stay in step.
+ * checks and config/farm.ini stay in step; a printer's link options are the
+ * rows of the driver kinds' tables (drivers/drv.c), parsed by the same
+ * value checks and kept in its struct drv_link, and checked against its
+ * kind once the section is complete (its driver may come last).
  *
  * Thread: any; no global state is touched (inih's global switches are left
  * at their defaults).
@@ -27,6 +30,7 @@
 #include <string.h>
 
 #include "../../drivers/drv.h"
+#include "../../drivers/drv_link.h"
 #include "../base/buf.h"
 #include "../base/limits.h"
 #include "../base/mem.h"
@@ -56,21 +60,6 @@ static const struct option options[] = {
     { "metrics_keys", false, K_KEYS, 2, 0, 0, 0 },
     { "upload_max_mb", false, K_MIB, 0, 0, 1, 4096 },
     { "driver", true, K_IDENT, P(driver), 0, 0 },
-    { "port", true, K_STR, P(port), 0, 0 },
-    { "baud", true, K_INT, P(baud), 1200, 4000000 },
-    { "buffer_lines", true, K_INT, P(buffer_lines), 1, 32 },
-    { "rx_buffer", true, K_INT, P(rx_buffer), 64, 65536 },
-    { "url", true, K_STR, P(url), 0, 0 },
-    { "api_key", true, K_STR, P(api_key), 0, 0 },
-    { "user", true, K_STR, P(user), 0, 0 },
-    { "password", true, K_STR, P(password), 0, 0 },
-    { "poll_ms", true, K_INT, P(poll_ms), 200, 60000 },
-    { "host", true, K_STR, P(host), 0, 0 },           /* bambu: url = mqtts://HOST */
-    { "access_code", true, K_STR, P(api_key), 0, 0 }, /* bambu: LAN access code (= api_key) */
-    { "serial", true, K_IDENT, P(serial), 0, 0 },
-    { "ca_file", true, K_STR, P(ca_file), 0, 0 },
-    { "tls_insecure", true, K_BOOL, P(tls_insecure), 0, 0 },
-    { "ftps_port", true, K_INT, P(ftps_port), 1, 65535 },
     { "profile", true, K_IDENT, P(profile), 0, 0 },
     { "material", true, K_IDENT, P(material), 0, 0 },
     { "nozzle_mm", true, K_DBL, P(nozzle_mm), 0.1, 2.0 },
@@ -129,10 +118,7 @@ static void
 printer_defaults(struct farmcfg_printer *p)
 {
     memset(p, 0, sizeof(*p));
-    p->baud = 115200;
-    p->buffer_lines = 4;
-    p->rx_buffer = 128;
-    p->poll_ms = 1000;
+    drv_link_init(&p->link);
     snprintf(p->profile, sizeof(p->profile), "generic-marlin");
     snprintf(p->material, sizeof(p->material), "PLA");
     p->nozzle_mm = 0.4;
@@ -328,6 +314,103 @@ parse_listen(struct parse *ps, const char *sec, const char *v)
     return 1;
 }
 
+/* A text value of at most size - 1 bytes (K_IDENT: an identifier or empty): 1 if good. */
+static int
+check_text(struct parse *ps, const char *name, const char *section, enum kind kind, size_t size,
+           const char *value)
+{
+    if (strlen(value) >= size)
+        return fail(ps, "option '%s' in section '%s': value is longer than %zu bytes", name,
+                    section, size - 1);
+    if (kind == K_IDENT && value[0] && !ident_ok(value))
+        return fail(ps,
+                    "option '%s' in section '%s': '%s' may hold only letters, digits, "
+                    "'-', '_', '.'",
+                    name, section, value);
+    return 1;
+}
+
+/* A number in lo..hi, whole unless kind is K_DBL: 1 with *d set if good. */
+static int
+check_number(struct parse *ps, const char *name, const char *section, enum kind kind, double lo,
+             double hi, const char *value, double *d)
+{
+    if (!parse_double(value, d) || *d < lo || *d > hi || (kind != K_DBL && *d != floor(*d)))
+        return fail(ps, "option '%s' in section '%s': '%s' is not a %s in %g..%g", name, section,
+                    value, kind == K_DBL ? "number" : "whole number", lo, hi);
+    return 1;
+}
+
+/* true/yes/1 or false/no/0: 1 with *b set if good. */
+static int
+check_bool(struct parse *ps, const char *name, const char *section, const char *value, bool *b)
+{
+    if (strcmp(value, "true") == 0 || strcmp(value, "yes") == 0 || strcmp(value, "1") == 0)
+        *b = true;
+    else if (strcmp(value, "false") == 0 || strcmp(value, "no") == 0 || strcmp(value, "0") == 0)
+        *b = false;
+    else
+        return fail(ps, "option '%s' in section '%s': '%s' is not true or false", name, section,
+                    value);
+    return 1;
+}
+
+static int
+parse_triple(struct parse *ps, const struct option *o, const char *section, const char *value,
+             double *field)
+{
+    double v[3];
+    char tmp[128];
+    snprintf(tmp, sizeof(tmp), "%s", value);
+    char *save = NULL, *tok = strtok_r(tmp, ",", &save);
+    int n = 0;
+    for (; tok && n < 3; tok = strtok_r(NULL, ",", &save)) {
+        while (*tok == ' ')
+            tok++;
+        if (!parse_double(tok, &v[n]) || v[n] < o->lo || v[n] > o->hi)
+            break;
+        n++;
+    }
+    if (n != 3 || tok)
+        return fail(ps,
+                    "option '%s' in section '%s': '%s' is not X, Y, Z with each in "
+                    "%g..%g mm",
+                    o->name, section, value, o->lo, o->hi);
+    memcpy(field, v, sizeof(v));
+    return 1;
+}
+
+/* A printer's link option (a row of a driver kind's table): check it by its row and keep it. */
+static int
+link_option(struct parse *ps, const struct drv_option *o, const char *section, const char *value)
+{
+    struct farmcfg_printer *p = &ps->cfg->printers[ps->section];
+    if (drv_link_get(&p->link, o))
+        return fail(ps, "option '%s' in section '%s' is given twice", o->name, section);
+    double d = 0;
+    bool b = false;
+    int ok;
+    switch (o->type) {
+    case DRV_OPT_INT:
+        ok = check_number(ps, o->name, section, K_INT, o->lo, o->hi, value, &d);
+        break;
+    case DRV_OPT_BOOL:
+        ok = check_bool(ps, o->name, section, value, &b);
+        d = b;
+        break;
+    case DRV_OPT_IDENT:
+        ok = check_text(ps, o->name, section, K_IDENT, o->size, value);
+        break;
+    default: /* other text: the URL is checked once the kind is known */
+        ok = check_text(ps, o->name, section, K_STR, o->size, value);
+        break;
+    }
+    struct sf_err err;
+    if (ok && drv_link_set(&p->link, o, value, (int)d, ps->line, &err))
+        return fail(ps, "option '%s' in section '%s': %s", o->name, section, err.msg);
+    return ok;
+}
+
 static int
 handler(void *user, const char *section, const char *name, const char *value)
 {
@@ -341,6 +424,9 @@ handler(void *user, const char *section, const char *name, const char *value)
     for (size_t i = 0; i < N_OPTIONS; i++)
         if (strcmp(options[i].name, name) == 0 && options[i].printer == in_printer)
             o = &options[i];
+    const struct drv_option *lo = !o && in_printer ? drv_link_option(name) : NULL;
+    if (lo)
+        return link_option(ps, lo, section, value);
     if (!o)
         return fail(ps, "option '%s' is not valid in section '%s'", name, section);
     if (ps->seen[o - options])
@@ -354,25 +440,15 @@ handler(void *user, const char *section, const char *name, const char *value)
     case K_IDENT:
         if (!value[0] && strcmp(name, "profiles_dir") == 0)
             return 1; /* empty: keep the default, the config file's directory */
-        if (strlen(value) >= o->size)
-            return fail(ps, "option '%s' in section '%s': value is longer than %zu bytes", name,
-                        section, o->size - 1);
-        if (o->kind == K_IDENT && value[0] && !ident_ok(value))
-            return fail(ps,
-                        "option '%s' in section '%s': '%s' may hold only letters, digits, "
-                        "'-', '_', '.'",
-                        name, section, value);
+        if (!check_text(ps, name, section, o->kind, o->size, value))
+            return 0;
         snprintf(field, o->size, "%s", value);
-        if (in_printer && strcmp(name, "url") == 0)
-            ps->cfg->printers[ps->section].url_line = ps->line;
         return 1;
     case K_INT:
     case K_DBL:
     case K_MIB:
-        if (!parse_double(value, &d) || d < o->lo || d > o->hi ||
-            (o->kind != K_DBL && d != floor(d)))
-            return fail(ps, "option '%s' in section '%s': '%s' is not a %s in %g..%g", name,
-                        section, value, o->kind == K_DBL ? "number" : "whole number", o->lo, o->hi);
+        if (!check_number(ps, name, section, o->kind, o->lo, o->hi, value, &d))
+            return 0;
         if (o->kind == K_INT)
             *(int *)field = (int)d;
         else if (o->kind == K_DBL)
@@ -381,35 +457,9 @@ handler(void *user, const char *section, const char *name, const char *value)
             ps->cfg->upload_max_bytes = (size_t)d << 20;
         return 1;
     case K_BOOL:
-        if (strcmp(value, "true") == 0 || strcmp(value, "yes") == 0 || strcmp(value, "1") == 0)
-            *(bool *)field = true;
-        else if (strcmp(value, "false") == 0 || strcmp(value, "no") == 0 || strcmp(value, "0") == 0)
-            *(bool *)field = false;
-        else
-            return fail(ps, "option '%s' in section '%s': '%s' is not true or false", name, section,
-                        value);
-        return 1;
-    case K_TRIPLE: {
-        double v[3];
-        char tmp[128];
-        snprintf(tmp, sizeof(tmp), "%s", value);
-        char *save = NULL, *tok = strtok_r(tmp, ",", &save);
-        int n = 0;
-        for (; tok && n < 3; tok = strtok_r(NULL, ",", &save)) {
-            while (*tok == ' ')
-                tok++;
-            if (!parse_double(tok, &v[n]) || v[n] < o->lo || v[n] > o->hi)
-                break;
-            n++;
-        }
-        if (n != 3 || tok)
-            return fail(ps,
-                        "option '%s' in section '%s': '%s' is not X, Y, Z with each in "
-                        "%g..%g mm",
-                        name, section, value, o->lo, o->hi);
-        memcpy(field, v, sizeof(v));
-        return 1;
-    }
+        return check_bool(ps, name, section, value, field);
+    case K_TRIPLE:
+        return parse_triple(ps, o, section, value, field);
     case K_LISTEN:
         return parse_listen(ps, section, value);
     case K_KEYS:
@@ -421,18 +471,19 @@ handler(void *user, const char *section, const char *name, const char *value)
 /*
  * A network printer's url: a scheme the driver takes, then a host, an
  * optional port and path, nothing a request line could trip on.  The
- * message names the url option's own line.
+ * message names line, the url option's own (when it came from another
+ * option, bambu's host, the section's).
  */
 static int
-check_url(struct parse *ps, const struct farmcfg_printer *p, const struct drv_kind *k)
+check_url(struct parse *ps, const char *printer, const char *url, int line,
+          const struct drv_kind *k)
 {
-    int line = ps->line;
-    if (p->url_line)
-        ps->line = p->url_line;
-    const char *sep = strstr(p->url, "://");
+    if (line)
+        ps->line = line;
+    const char *sep = strstr(url, "://");
     char scheme[16] = "";
-    if (sep && (size_t)(sep - p->url) < sizeof(scheme))
-        snprintf(scheme, sizeof(scheme), "%.*s", (int)(sep - p->url), p->url);
+    if (sep && (size_t)(sep - url) < sizeof(scheme))
+        snprintf(scheme, sizeof(scheme), "%.*s", (int)(sep - url), url);
     bool known = false;
     const char *s = k->schemes ? k->schemes : "http https";
     size_t sl = strlen(scheme);
@@ -442,38 +493,86 @@ check_url(struct parse *ps, const struct farmcfg_printer *p, const struct drv_ki
             known = true;
         s += w + (s[w] == ' ');
     }
-    if (!known) {
-        fail(ps, "section 'printer %s': option 'url': '%s' does not start with %s://", p->name,
-             p->url, k->schemes ? k->schemes : "http");
-        return -1;
-    }
+    if (!known)
+        return fail(ps, "section 'printer %s': option 'url': '%s' does not start with %s://",
+                    printer, url, k->schemes ? k->schemes : "http");
     const char *host = sep + 3;
-    if (!*host || *host == '/' || *host == ':') {
-        fail(ps, "section 'printer %s': option 'url': '%s' has no host", p->name, p->url);
-        return -1;
-    }
-    for (const char *c = p->url; *c; c++)
-        if ((unsigned char)*c <= ' ' || *c == '"' || *c == '\\' || (unsigned char)*c >= 0x7f) {
-            fail(ps, "section 'printer %s': option 'url': '%s' holds a space or control byte",
-                 p->name, p->url);
-            return -1;
-        }
+    if (!*host || *host == '/' || *host == ':')
+        return fail(ps, "section 'printer %s': option 'url': '%s' has no host", printer, url);
+    for (const char *c = url; *c; c++)
+        if ((unsigned char)*c <= ' ' || *c == '"' || *c == '\\' || (unsigned char)*c >= 0x7f)
+            return fail(ps,
+                        "section 'printer %s': option 'url': '%s' holds a space or control byte",
+                        printer, url);
     const char *colon = strchr(host, ':');
     const char *slash = strchr(host, '/');
     if (colon && (!slash || colon < slash)) {
         char *end;
         long port = strtol(colon + 1, &end, 10);
-        if (end == colon + 1 || (*end && *end != '/') || port < 1 || port > 65535) {
-            fail(ps, "section 'printer %s': option 'url': '%s' has no port in 1..65535", p->name,
-                 p->url);
-            return -1;
-        }
+        if (end == colon + 1 || (*end && *end != '/') || port < 1 || port > 65535)
+            return fail(ps, "section 'printer %s': option 'url': '%s' has no port in 1..65535",
+                        printer, url);
     }
-    ps->line = line;
-    return 0;
+    return 1;
 }
 
-/* Checks that need a whole section: required options, driver-specific ones. */
+/* Is o's field in cfg set (text non-empty, number non-zero)? */
+static bool
+is_set(const struct drv_config *cfg, const struct drv_option *o)
+{
+    const char *f = (const char *)cfg + o->off;
+    if (o->type == DRV_OPT_INT)
+        return *(const int *)f != 0;
+    if (o->type == DRV_OPT_BOOL)
+        return *(const bool *)f;
+    return (*(const char *const *)f)[0] != 0;
+}
+
+/*
+ * Printer p's link against its kind k's rows: required options, URLs, the
+ * credentials k's auth needs, then k's own check.  1 if good.
+ */
+static int
+check_link(struct parse *ps, const struct farmcfg_printer *p, const struct drv_kind *k)
+{
+    struct drv_config dc = { .name = p->name, .kind = k->name };
+    drv_link_config(&p->link, k, &dc);
+    const struct drv_option *o;
+    for (size_t i = 0; (o = drv_kind_option(k, i)); i++) {
+        if ((o->flags & DRV_OPT_REQUIRED) && !is_set(&dc, o))
+            return fail(ps, "section 'printer %s': option '%s' is required by driver %s", p->name,
+                        o->name, p->driver);
+        const struct drv_link_val *v = drv_link_get(&p->link, o);
+        if (o->type == DRV_OPT_URL &&
+            !check_url(ps, p->name, *(const char **)((char *)&dc + o->off), v ? v->line : 0, k))
+            return 0;
+        ps->line = p->line;
+    }
+    /* user and password as given, whether or not the kind takes them */
+    bool user = drv_link_text(&p->link, "user")[0],
+         password = drv_link_text(&p->link, "password")[0];
+    if (k->auth == DRV_AUTH_KEY && !dc.api_key[0])
+        return fail(ps,
+                    "section 'printer %s': option 'api_key' is required by driver %s "
+                    "(%s: Settings > Application Keys, or the global API key)",
+                    p->name, p->driver, p->driver);
+    if (k->auth == DRV_AUTH_KEY_OR_DIGEST && !dc.api_key[0] && !(user && password))
+        return fail(ps,
+                    "section 'printer %s': driver %s needs option 'api_key', or 'user' "
+                    "and 'password'",
+                    p->name, p->driver);
+    if (k->url && user != password)
+        return fail(ps, "section 'printer %s': options 'user' and 'password' go together", p->name);
+    if (k->url && user && k->auth != DRV_AUTH_KEY_OR_DIGEST)
+        return fail(ps, "section 'printer %s': driver %s takes no 'user'/'password'", p->name,
+                    p->driver);
+    char why[200];
+    if (k->check && k->check(&dc, why, sizeof(why)) < 0)
+        return fail(ps, "section 'printer %s': %s", p->name, why);
+    return 1;
+}
+
+/* Checks that need a whole section: the driver, then its link. */
 static int
 check_printers(struct parse *ps)
 {
@@ -491,42 +590,8 @@ check_printers(struct parse *ps)
             return fail(ps, "section 'printer %s': option 'driver': '%s' is not one of %s", p->name,
                         p->driver, known);
         }
-        if (!k->url && !p->port[0])
-            return fail(ps, "section 'printer %s': option 'port' is required by driver %s", p->name,
-                        p->driver);
-        if (p->host[0] && !p->url[0]) /* bambu's host: IP */
-            snprintf(p->url, sizeof(p->url), "mqtts://%s", p->host);
-        if (k->url && !p->url[0])
-            return fail(ps, "section 'printer %s': option 'url' is required by driver %s", p->name,
-                        p->driver);
-        if (k->url && check_url(ps, p, k) < 0)
+        if (!check_link(ps, p, k))
             return 0;
-        if (k->auth == DRV_AUTH_KEY && !p->api_key[0])
-            return fail(ps,
-                        "section 'printer %s': option 'api_key' is required by driver %s "
-                        "(%s: Settings > Application Keys, or the global API key)",
-                        p->name, p->driver, p->driver);
-        if (k->auth == DRV_AUTH_KEY_OR_DIGEST && !p->api_key[0] && !(p->user[0] && p->password[0]))
-            return fail(ps,
-                        "section 'printer %s': driver %s needs option 'api_key', or 'user' "
-                        "and 'password'",
-                        p->name, p->driver);
-        if (k->url && (p->user[0] != 0) != (p->password[0] != 0))
-            return fail(ps, "section 'printer %s': options 'user' and 'password' go together",
-                        p->name);
-        if (k->url && p->user[0] && k->auth != DRV_AUTH_KEY_OR_DIGEST)
-            return fail(ps, "section 'printer %s': driver %s takes no 'user'/'password'", p->name,
-                        p->driver);
-        if (!strcmp(p->driver, "bambu") && (!p->serial[0] || !p->api_key[0]))
-            return fail(ps,
-                        "section 'printer %s': options 'serial' and 'access_code' are "
-                        "required by driver bambu",
-                        p->name);
-        if (!strcmp(p->driver, "bambu") && !p->ca_file[0] && !p->tls_insecure)
-            return fail(ps,
-                        "section 'printer %s': option 'ca_file' is required by driver bambu "
-                        "(or tls_insecure: true, which checks no certificate)",
-                        p->name);
     }
     return 1;
 }
@@ -594,8 +659,12 @@ farmcfg_load(struct farmcfg *c, const char *path, struct sf_err *err)
 const char *
 farmcfg_option_name(size_t i, bool *printer)
 {
-    if (i >= N_OPTIONS)
-        return NULL;
+    if (i >= N_OPTIONS) {
+        const struct drv_option *o = drv_link_option_at(i - N_OPTIONS);
+        if (o && printer)
+            *printer = true;
+        return o ? o->name : NULL;
+    }
     if (printer)
         *printer = options[i].printer;
     return options[i].name;

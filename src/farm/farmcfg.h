@@ -4,6 +4,11 @@
  * '#' or ';' comments).  config/farm.ini documents every option and its
  * default.
  *
+ * A printer's link options (how to reach it) are not listed here: each
+ * driver kind's registry row carries them (drivers/drv.c, drv_link.h), and
+ * [printer NAME] takes the options of every kind (those its driver does
+ * not take are ignored, so one commented example documents them all).
+ *
  * Parsing is strict: an unknown section or option, an option given twice, a
  * value out of range or a missing required option is an error naming
  * file:line, the option and the section, e.g.
@@ -17,6 +22,7 @@
 #include <stdbool.h>
 #include <stddef.h>
 
+#include "../../drivers/drv_link.h"
 #include "../base/err.h"
 
 #define FARMCFG_KEY_MIN      16   /* shorter API keys are guessable */
@@ -33,32 +39,19 @@ struct farmcfg_key {
 
 /* One [printer NAME] section. */
 struct farmcfg_printer {
-    char name[64];       /* NAME: letters, digits, -_. */
-    int line;            /* line of the section header, for later messages */
-    char driver[16];     /* a kind of drivers/drv.c's registry, e.g. marlin (required) */
-    char port[256];      /* marlin: /dev/ttyUSB0 | pty:/dev/pts/N | tcp://host:port */
-    int baud;            /* marlin serial speed (default 115200) */
-    int buffer_lines;    /* marlin: the firmware's BUFSIZE, lines in flight (default 4) */
-    int rx_buffer;       /* marlin: the firmware's RX ring, bytes in flight (default 128) */
-    char url[256];       /* network drivers: base URL, http://host[:port][/prefix] */
-    int url_line;        /* line of the url option, for later messages (0: none) */
-    char api_key[128];   /* network drivers: key or access code */
-    char user[64];       /* network drivers: HTTP digest user (PrusaLink's "maker") */
-    char password[128];  /* its password */
-    int poll_ms;         /* network drivers: status poll period, ms (default 1000) */
-    char host[128];      /* bambu: the printer's IP; url becomes mqtts://HOST */
-    char serial[48];     /* bambu: device id (MQTT topics, certificate CN) */
-    char ca_file[256];   /* bambu: CA the printer's certificate must chain to */
-    bool tls_insecure;   /* bambu: check no certificate (default false) */
-    int ftps_port;       /* bambu: FTPS port (default 990) */
-    char profile[64];    /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */
-    char material[32];   /* loaded material (default "PLA") */
-    double nozzle_mm;    /* nozzle diameter (default 0.4) */
-    double bed_mm[3];    /* build volume x, y, z (default 220, 220, 250) */
-    double overhang_deg; /* overhang threshold for this printer (default 45) */
-    bool enabled;        /* schedule jobs on it (default true) */
-    bool auto_eject;     /* clears its own bed: skip the bed-clear gate (default false) */
-    char group[64];      /* group name jobs may target; "" for none (default) */
+    char name[64];        /* NAME: letters, digits, -_. */
+    int line;             /* line of the section header, for later messages */
+    char driver[16];      /* a kind of drivers/drv.c's registry, e.g. marlin (required) */
+    struct drv_link link; /* link options (port, url, api_key, ...): the rows of the driver's
+                             kind (drivers/drv.c), values as given (drivers/drv_link.h) */
+    char profile[64];     /* PROFILES_DIR/printers/PROFILE.cfg (default "generic-marlin") */
+    char material[32];    /* loaded material (default "PLA") */
+    double nozzle_mm;     /* nozzle diameter (default 0.4) */
+    double bed_mm[3];     /* build volume x, y, z (default 220, 220, 250) */
+    double overhang_deg;  /* overhang threshold for this printer (default 45) */
+    bool enabled;         /* schedule jobs on it (default true) */
+    bool auto_eject;      /* clears its own bed: skip the bed-clear gate (default false) */
+    char group[64];       /* group name jobs may target; "" for none (default) */
     /* uploaded G-code it runs (gcjob.h): slicer printer models, comma-separated;
        "*" any, "" none (default) */
     char gcode_models[256];
@@ -94,7 +87,8 @@ int farmcfg_parse(struct farmcfg *c, const char *text, size_t len, const char *n
 /* Read and parse a file (capped at SF_CONFIG_FILE_MAX). */
 int farmcfg_load(struct farmcfg *c, const char *path, struct sf_err *err);
 
-/* Name of option i (NULL past the last); *printer says which section kind. */
+/* Name of option i, link options included (NULL past the last); *printer says which
+   section kind. */
 const char *farmcfg_option_name(size_t i, bool *printer);
 
 /* The printer called name, or NULL. */

@@ -26,6 +26,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "../../drivers/drv_link.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 
@@ -485,21 +486,8 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
         snprintf(p->message, sizeof(p->message), "not connected: the farm runs without drivers");
         return p;
     }
-    struct drv_config dc = { .name = cfg->name,
-                             .kind = cfg->driver,
-                             .port = cfg->port,
-                             .baud = cfg->baud,
-                             .buffer_lines = cfg->buffer_lines,
-                             .rx_buffer = cfg->rx_buffer,
-                             .url = cfg->url,
-                             .api_key = cfg->api_key,
-                             .user = cfg->user[0] ? cfg->user : NULL,
-                             .password = cfg->password,
-                             .poll_ms = cfg->poll_ms,
-                             .serial = cfg->serial,
-                             .ca_file = cfg->ca_file,
-                             .tls_insecure = cfg->tls_insecure,
-                             .ftps_port = cfg->ftps_port };
+    struct drv_config dc = { .name = p->cfg.name, .kind = p->cfg.driver };
+    drv_link_config(&p->cfg.link, drv_kind_find(p->cfg.driver), &dc);
     p->drv = env->driver(env->l, &dc, on_drv_event, p, &err);
     if (!p->drv) {
         snprintf(p->message, sizeof(p->message), "%s", err.msg);

@@ -84,7 +84,7 @@ void printer_free(struct printer *p);
 void printer_stop(struct printer *p);
 
 const struct farmcfg_printer *printer_cfg(const struct printer *p);
-/* Take a new config whose link (driver, port, url, key, enabled) is p's own. */
+/* Take a new config whose link (driver, its link options, enabled) is p's own. */
 void printer_set_cfg(struct printer *p, const struct farmcfg_printer *cfg);
 enum printer_state printer_state(const struct printer *p);
 int64_t printer_job(const struct printer *p);

@@ -2,7 +2,9 @@
  * test_farm.c - the farm glue on a real loop, pool and store: prepare on
  * the pool, scheduling, starts, copies, the bed-clear gate, auto-eject,
  * pause/resume, a dropped printer failing its print into a retry, a job
- * that fits no printer, the missing-slicer path, and reload.
+ * that fits no printer, the missing-slicer path, and reload (one of them
+ * with a real PrusaLink driver against the simulator over HTTP: a changed
+ * password must reach the driver).
  *
  * Printers here are "tdrv", a small in-test driver behind drv.h standing
  * in for sim/ (being written on another branch): it records what it was
@@ -18,6 +20,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../../sim/net/sim_prusalink.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/gcode.h"
 #include "../../src/base/log.h"
@@ -945,6 +948,76 @@ T_CASE(farm_reload_adds_and_removes_printers)
     farm_printer_info(fx.f, 0, &info);
     T_EQ_STR(info.cfg->name, "b");
     farmcfg_release(&c2);
+    teardown();
+}
+
+/* Printer i's message holds what. */
+static bool
+message_has(size_t i, const char *what)
+{
+    struct printer_info info;
+    farm_printer_info(fx.f, i, &info);
+    return info.message && strstr(info.message, what);
+}
+
+/* Reload the farm with text (the new farm.ini); the config is kept in *c. */
+static int
+reload_with(struct farmcfg *c, const char *text, struct sf_err *err)
+{
+    farmcfg_init(c);
+    int rc = farmcfg_parse(c, text, strlen(text), "farm.ini", err);
+    return rc ? rc : farm_reload(fx.f, c, err);
+}
+
+/*
+ * A PrusaLink printer on HTTP Digest whose password changes in farm.ini:
+ * the reload must hand the new one to the driver (it used to compare only
+ * driver, port, baud, url, api_key and enabled, so the driver kept the old
+ * password while the config showed the new one).  The simulator takes only
+ * the new password: the printer is refused, then comes online.
+ */
+T_CASE(farm_reload_gives_the_driver_a_changed_password)
+{
+    struct sf_err err;
+    T_OK(setup("reload-pw", "", drv_new, test_prepare, &err), &err);
+    struct sim_prusalink_config sc;
+    sim_prusalink_config_init(&sc);
+    sc.user = "maker";
+    sc.password = "new-pw";
+    struct sim_prusalink *sim = sim_prusalink_new(fx.l, &sc, &err);
+    T_TRUE(sim != NULL);
+    char ini[2][512];
+    for (int i = 0; i < 2; i++)
+        snprintf(ini[i], sizeof(ini[i]),
+                 "[printer mk4]\ndriver: prusalink\nurl: http://127.0.0.1:%d\nuser: maker\n"
+                 "password: %s\nmaterial: PLA\nbed_size: 250, 210, 220\n",
+                 sim_prusalink_port(sim), i ? "new-pw" : "old-pw");
+    struct farmcfg c1, c2;
+    T_OK(reload_with(&c1, ini[0], &err), &err);
+    T_EQ_INT(farm_printer_count(fx.f), 1);
+    /* the old password is refused */
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
+         wall_ms() < end && !message_has(0, "authentication failed");)
+        loop_run_once(fx.l, 10);
+    T_TRUE(message_has(0, "authentication failed"));
+    T_EQ_INT(pstate(0), PRINTER_OFFLINE);
+    /* SIGHUP's path: the new farm.ini, only the password changed */
+    T_OK(reload_with(&c2, ini[1], &err), &err);
+    T_EQ_INT(farm_printer_count(fx.f), 1);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    T_TRUE(!message_has(0, "authentication failed"));
+    /* the same config again: nothing changed, the printer stays connected */
+    struct printer_info before, after;
+    farm_printer_info(fx.f, 0, &before);
+    struct farmcfg c3;
+    T_OK(reload_with(&c3, ini[1], &err), &err);
+    farm_printer_info(fx.f, 0, &after);
+    T_TRUE(before.cfg == after.cfg); /* the same printer, not a fresh one */
+    T_EQ_INT(after.state, PRINTER_IDLE);
+    sim_prusalink_free(sim);
+    farmcfg_release(&c1);
+    farmcfg_release(&c2);
+    farmcfg_release(&c3);
     teardown();
 }
 

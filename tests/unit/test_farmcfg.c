@@ -4,9 +4,27 @@
  * kept in step with the parser (uncommented, it must parse, and it must
  * document every option).
  */
+#include "../../drivers/drv_link.h"
 #include "../../src/base/buf.h"
 #include "../../src/farm/farmcfg.h"
 #include "../t.h"
+
+/* Printer p's driver config, as the farm makes it (text points into p). */
+static struct drv_config
+link_of(const struct farmcfg_printer *p)
+{
+    struct drv_config dc = { .name = p->name, .kind = p->driver };
+    drv_link_config(&p->link, drv_kind_find(p->driver), &dc);
+    return dc;
+}
+
+/* The line option name was given on in p's section, 0 if it was not. */
+static int
+line_of(const struct farmcfg_printer *p, const char *name)
+{
+    const struct drv_link_val *v = drv_link_get(&p->link, drv_link_option(name));
+    return v ? v->line : 0;
+}
 
 static int
 parse(struct farmcfg *c, const char *text, struct sf_err *err)
@@ -56,23 +74,23 @@ T_CASE(farmcfg_full_example)
     const struct farmcfg_printer *p = farmcfg_printer(&c, "mk3-a");
     T_TRUE(p != NULL);
     T_EQ_STR(p->driver, "marlin");
-    T_EQ_STR(p->port, "pty:/dev/pts/7");
+    T_EQ_STR(link_of(p).port, "pty:/dev/pts/7");
     T_EQ_STR(p->material, "PETG");
     T_EQ_DBL(p->nozzle_mm, 0.6, 0);
     T_EQ_DBL(p->bed_mm[0], 250, 0);
     T_EQ_DBL(p->bed_mm[2], 200, 0);
     T_TRUE(p->auto_eject && p->enabled);
-    T_EQ_INT(p->baud, 115200);
+    T_EQ_INT(link_of(p).baud, 115200);
     T_EQ_DBL(p->overhang_deg, 45, 0);
     T_EQ_STR(p->group, "big");
-    T_EQ_INT(p->buffer_lines, 8);
-    T_EQ_INT(p->rx_buffer, 256);
+    T_EQ_INT(link_of(p).buffer_lines, 8);
+    T_EQ_INT(link_of(p).rx_buffer, 256);
     p = farmcfg_printer(&c, "voron");
-    T_EQ_STR(p->port, "tcp://10.0.0.5:7125");
+    T_EQ_STR(link_of(p).port, "tcp://10.0.0.5:7125");
     T_TRUE(!p->enabled);
     T_EQ_STR(p->material, "PLA");
-    T_EQ_INT(p->buffer_lines, 4);
-    T_EQ_INT(p->rx_buffer, 128);
+    T_EQ_INT(link_of(p).buffer_lines, 4);
+    T_EQ_INT(link_of(p).rx_buffer, 128);
     T_EQ_INT(p->line, 19);
     farmcfg_release(&c);
     T_EQ_INT(c.n_printers, 0);
@@ -87,11 +105,11 @@ T_CASE(farmcfg_octoprint_printer)
                        "[printer octo2]\ndriver: octoprint\nurl: http://10.0.0.9\napi_key: k\n";
     T_OK(parse(&c, text, &err), &err);
     const struct farmcfg_printer *p = farmcfg_printer(&c, "octo");
-    T_EQ_STR(p->url, "https://pi.local:5000/octo/");
-    T_EQ_STR(p->api_key, "ABCDEF0123456789");
-    T_EQ_INT(p->poll_ms, 2000);
-    T_EQ_INT(p->url_line, 3);
-    T_EQ_INT(farmcfg_printer(&c, "octo2")->poll_ms, 1000);
+    T_EQ_STR(link_of(p).url, "https://pi.local:5000/octo/");
+    T_EQ_STR(link_of(p).api_key, "ABCDEF0123456789");
+    T_EQ_INT(link_of(p).poll_ms, 2000);
+    T_EQ_INT(line_of(p, "url"), 3);
+    T_EQ_INT(link_of(farmcfg_printer(&c, "octo2")).poll_ms, 1000);
     farmcfg_release(&c);
 }
 
@@ -236,7 +254,7 @@ T_CASE(farmcfg_documented_file_parses_and_documents_everything)
     farmcfg_init(&c);
     T_OK(farmcfg_parse(&c, u.data, u.len, "farm.ini (uncommented)", &err), &err);
     T_EQ_INT(c.n_printers, 1);
-    T_EQ_STR(c.printers[0].port, "/dev/ttyUSB0");
+    T_EQ_STR(link_of(&c.printers[0]).port, "/dev/ttyUSB0");
     farmcfg_release(&c);
     /* every option the parser knows is documented */
     bool printer;
