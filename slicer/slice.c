@@ -18,10 +18,10 @@
 #include <stdatomic.h>
 #include <stdio.h>
 #include <string.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "../src/base/buf.h"
+#include "../src/base/clock.h"
 #include "../src/base/mem.h"
 #include "../src/base/par.h"
 #include "../src/geom/measure.h"
@@ -35,14 +35,6 @@
 
 /* Biggest G-code we build in memory: ~20M lines. */
 #define GCODE_BODY_MAX ((size_t)1 << 30)
-
-static double
-now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
 
 void
 slice_limits(const struct slice_profile *p, struct est_limits *lim)
@@ -411,7 +403,7 @@ int
 slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcode_path,
            struct slice_result *res, slice_progress_fn progress, void *ud, struct sf_err *err)
 {
-    double t0 = now_s();
+    double t0 = clock_mono_s();
     struct slice_result dummy;
     if (!res)
         res = &dummy;
@@ -466,7 +458,7 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
     if (rc == SF_OK)
         (void)cancelled(progress, ud, "done", 1);
 out:
-    res->wall_s = now_s() - t0;
+    res->wall_s = clock_mono_s() - t0;
     estimate_release(&est);
     buf_release(&body);
     for (uint32_t k = 0; k < s.n; k++) {

@@ -98,13 +98,14 @@ skip_paren(const char *s, size_t len, size_t i)
     return i < len ? i + 1 : i;
 }
 
-int
-gcode_parse(const char *s, size_t len, struct gcode_line *out, struct sf_err *err)
+/*
+ * The checksum: it covers everything before the last '*' outside comments.
+ * Sets *end to where the line's words end (the '*', the comment or len).
+ */
+static int
+parse_checksum(const char *s, size_t len, struct gcode_line *out, size_t *end_out,
+               struct sf_err *err)
 {
-    memset(out, 0, sizeof(*out));
-    out->subcode = -1;
-
-    /* The checksum covers everything before the last '*' outside comments. */
     size_t end = len;
     for (size_t i = 0; i < len; i++) {
         if (s[i] == ';') {
@@ -130,6 +131,80 @@ gcode_parse(const char *s, size_t len, struct gcode_line *out, struct sf_err *er
         out->checksum_ok = gcode_checksum(s, star) == out->checksum;
         end = star;
     }
+    *end_out = end;
+    return SF_OK;
+}
+
+/* The parameter words from s[i] to s[end], after the command. */
+static int
+parse_words(const char *s, size_t end, size_t i, struct gcode_line *out, struct sf_err *err)
+{
+    for (;;) {
+        i = skip_blanks(s, end, i);
+        if (i < end && s[i] == '(') {
+            i = skip_paren(s, end, i);
+            continue;
+        }
+        if (i >= end)
+            break;
+        char w = (char)toupper((unsigned char)s[i]);
+        if (w < 'A' || w > 'Z')
+            return sf_err_set(err, SF_EINVAL, "column %zu: parameter letter expected, found '%c'",
+                              i + 1, isprint((unsigned char)s[i]) ? s[i] : '?');
+        if (out->n_words == GCODE_WORDS_MAX)
+            return sf_err_set(err, SF_EINVAL, "column %zu: more than %d parameters", i + 1,
+                              GCODE_WORDS_MAX);
+        struct gcode_word *word = &out->words[out->n_words++];
+        word->letter = w;
+        size_t p = i + 1;
+        size_t quote = skip_blanks(s, end, p); /* P "MK3S": blanks may come first */
+        if (quote < end && s[quote] == '"') {
+            p = quote;
+            /* A quoted string value (Prusa's M862.3 P "MK3S", Marlin's
+             * GCODE_QUOTED_STRINGS): the word has no number; the first
+             * string is kept as the line's text. */
+            size_t q = p + 1;
+            while (q < end && s[q] != '"')
+                q++;
+            if (q >= end)
+                return sf_err_set(err, SF_EINVAL, "column %zu: unterminated string after '%c'",
+                                  p + 1, w);
+            word->value = NAN;
+            if (!out->text) {
+                out->text = s + p + 1;
+                out->text_len = q - p - 1;
+            }
+            i = q + 1;
+            continue;
+        }
+        bool num_ok = scan_number(s, end, &p, &word->value);
+        size_t stop = p;
+        while (stop < end && !is_blank(s[stop]) && s[stop] != '(')
+            stop++;
+        if (!num_ok || stop != p) {
+            /* A bare letter ("G28 X") is legal.  So is any other value of an
+             * M command's word (Prusa's M115 U3.13.0 firmware version):
+             * firmware-specific settings, kept as no number.  A move's
+             * words must be numbers. */
+            if (stop != p && out->letter != 'M')
+                return sf_err_set(err, SF_EINVAL, "column %zu: number expected after '%c'", p + 1,
+                                  w);
+            word->value = NAN;
+        }
+        i = stop;
+    }
+    return SF_OK;
+}
+
+int
+gcode_parse(const char *s, size_t len, struct gcode_line *out, struct sf_err *err)
+{
+    memset(out, 0, sizeof(*out));
+    out->subcode = -1;
+    size_t end = len;
+    int rc = parse_checksum(s, len, out, &end, err);
+    if (rc < 0)
+        return rc;
 
     size_t i = skip_blanks(s, end, 0);
     while (i < end && s[i] == '(')
@@ -172,61 +247,7 @@ gcode_parse(const char *s, size_t len, struct gcode_line *out, struct sf_err *er
         return SF_OK;
     }
 
-    for (;;) {
-        i = skip_blanks(s, end, i);
-        if (i < end && s[i] == '(') {
-            i = skip_paren(s, end, i);
-            continue;
-        }
-        if (i >= end)
-            break;
-        char w = (char)toupper((unsigned char)s[i]);
-        if (w < 'A' || w > 'Z')
-            return sf_err_set(err, SF_EINVAL, "column %zu: parameter letter expected, found '%c'",
-                              i + 1, isprint((unsigned char)s[i]) ? s[i] : '?');
-        if (out->n_words == GCODE_WORDS_MAX)
-            return sf_err_set(err, SF_EINVAL, "column %zu: more than %d parameters", i + 1,
-                              GCODE_WORDS_MAX);
-        struct gcode_word *word = &out->words[out->n_words++];
-        word->letter = w;
-        p = i + 1;
-        size_t quote = skip_blanks(s, end, p); /* P "MK3S": blanks may come first */
-        if (quote < end && s[quote] == '"') {
-            p = quote;
-            /* A quoted string value (Prusa's M862.3 P "MK3S", Marlin's
-             * GCODE_QUOTED_STRINGS): the word has no number; the first
-             * string is kept as the line's text. */
-            size_t q = p + 1;
-            while (q < end && s[q] != '"')
-                q++;
-            if (q >= end)
-                return sf_err_set(err, SF_EINVAL, "column %zu: unterminated string after '%c'",
-                                  p + 1, w);
-            word->value = NAN;
-            if (!out->text) {
-                out->text = s + p + 1;
-                out->text_len = q - p - 1;
-            }
-            i = q + 1;
-            continue;
-        }
-        bool num_ok = scan_number(s, end, &p, &word->value);
-        size_t stop = p;
-        while (stop < end && !is_blank(s[stop]) && s[stop] != '(')
-            stop++;
-        if (!num_ok || stop != p) {
-            /* A bare letter ("G28 X") is legal.  So is any other value of an
-             * M command's word (Prusa's M115 U3.13.0 firmware version):
-             * firmware-specific settings, kept as no number.  A move's
-             * words must be numbers. */
-            if (stop != p && out->letter != 'M')
-                return sf_err_set(err, SF_EINVAL, "column %zu: number expected after '%c'", p + 1,
-                                  w);
-            word->value = NAN;
-        }
-        i = stop;
-    }
-    return SF_OK;
+    return parse_words(s, end, i, out, err);
 }
 
 bool
