@@ -213,6 +213,32 @@ http_error(struct http_resp *resp, int status, const char *fmt, ...)
     resp->json = json_pack("{s:s}", "error", msg);
 }
 
+int
+http_status_of(int code)
+{
+    switch (code) {
+    case SF_EINVAL:
+        return MHD_HTTP_BAD_REQUEST;
+    case SF_ENOTFOUND:
+        return MHD_HTTP_NOT_FOUND;
+    case SF_EAGAIN:
+        return MHD_HTTP_CONFLICT;
+    case SF_EUNSUPP:
+        return MHD_HTTP_NOT_IMPLEMENTED;
+    case SF_EUNREACH:
+    case SF_ECANCELED:
+        return MHD_HTTP_SERVICE_UNAVAILABLE;
+    default:
+        return MHD_HTTP_INTERNAL_SERVER_ERROR;
+    }
+}
+
+void
+http_fail(struct http_resp *resp, int code, const char *msg)
+{
+    http_error(resp, http_status_of(code), "%s", msg);
+}
+
 static enum MHD_Result
 send_json(struct MHD_Connection *conn, int status, json_t *j, bool close)
 {
@@ -820,8 +846,7 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     struct sf_err err;
     sf_err_clear(&err);
     if (!c->status && c->upload && h->cfg.sink->finish(c->upload, &err))
-        fail(c, err.code == SF_EINVAL ? MHD_HTTP_BAD_REQUEST : MHD_HTTP_INTERNAL_SERVER_ERROR, "%s",
-             err.msg);
+        fail(c, http_status_of(err.code), "%s", err.msg);
     if (c->status) {
         drop_upload(c); /* before the client hears of it */
         return send_error(conn, c->status, c->msg);

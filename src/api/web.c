@@ -530,55 +530,60 @@ report(struct web *w, const struct job_row *j, struct http_resp *resp)
 
 /* ---- dispatch ---- */
 
-bool
-web_route(struct web *w, const struct http_req *req, struct http_resp *resp)
+static void
+asset(void *ctx, const struct route_args *args, const struct http_req *req, struct http_resp *resp)
 {
-    bool get = strcmp(req->method, "GET") == 0 || strcmp(req->method, "HEAD") == 0;
-    const struct web_asset *a = asset_find(req->path);
-    if (a) {
-        if (get)
-            serve_asset(a, req, resp);
-        else
-            http_error(resp, 405, "use GET");
-        return true;
-    }
-    if (strcmp(req->path, "/api/whoami") == 0) {
-        if (get)
-            whoami(w, req, resp);
-        else
-            http_error(resp, 405, "use GET");
-        return true;
-    }
-    const char *p = req->path;
-    if (strncmp(p, "/api/jobs/", 10) != 0)
-        return false;
-    p += 10;
-    char *end;
-    long long id = strtoll(p, &end, 10);
-    if (end == p || id <= 0 || *p < '1' || *p > '9' || *end != '/')
-        return false;
-    const char *what = end + 1;
-    bool png = strcmp(what, "preview.png") == 0, gc = strcmp(what, "gcode") == 0;
-    if (!png && !gc && strcmp(what, "report") != 0)
-        return false;
-    if (!get) {
-        http_error(resp, 405, "use GET");
-        return true;
-    }
+    (void)ctx, (void)args;
+    serve_asset(asset_find(req->path), req, resp);
+}
+
+static void
+whoami_route(void *ctx, const struct route_args *args, const struct http_req *req,
+             struct http_resp *resp)
+{
+    (void)args;
+    whoami(ctx, req, resp);
+}
+
+/* GET /api/jobs/ID/preview.png, /gcode or /report. */
+static void
+job_route(void *ctx, const struct route_args *args, const struct http_req *req,
+          struct http_resp *resp)
+{
+    struct web *w = ctx;
     struct job_row j;
     struct sf_err err;
-    int rc = store_job_get(w->cfg.store, id, &j, &err);
+    int rc = store_job_get(w->cfg.store, args->id, &j, &err);
     if (rc) {
-        http_error(resp, rc == SF_ENOTFOUND ? 404 : 500, "%s", err.msg);
-        return true;
+        http_fail(resp, rc, err.msg);
+        return;
     }
-    if (png)
-        preview(w, &j, req, resp);
-    else if (gc)
+    const char *what = strrchr(req->path, '/') + 1;
+    if (strcmp(what, "gcode") == 0)
         gcode(w, &j, resp);
-    else
+    else if (strcmp(what, "report") == 0)
         report(w, &j, resp);
-    return true;
+    else
+        preview(w, &j, req, resp);
+}
+
+#define GET_HEAD (ROUTE_GET | ROUTE_HEAD)
+
+static const struct route rows[] = {
+    /* methods, pattern, match, body, scope, handler, 405 message */
+    { GET_HEAD, NULL, web_is_public, HTTP_BODY_NONE, ROUTE_PUBLIC, asset, "use GET" },
+    { GET_HEAD, "/api/whoami", NULL, HTTP_BODY_NONE, ROUTE_READ, whoami_route, "use GET" },
+    { GET_HEAD, "/api/jobs/{id}/preview.png", NULL, HTTP_BODY_NONE, ROUTE_READ, job_route,
+      "use GET" },
+    { GET_HEAD, "/api/jobs/{id}/gcode", NULL, HTTP_BODY_NONE, ROUTE_READ, job_route, "use GET" },
+    { GET_HEAD, "/api/jobs/{id}/report", NULL, HTTP_BODY_NONE, ROUTE_READ, job_route, "use GET" },
+};
+
+const struct route *
+web_routes(size_t *n)
+{
+    *n = sizeof(rows) / sizeof(rows[0]);
+    return rows;
 }
 
 struct web *

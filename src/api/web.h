@@ -36,6 +36,7 @@
 #include "../base/pool.h"
 #include "../farm/store.h"
 #include "http.h"
+#include "route.h"
 
 #define WEB_SESSIONS_MAX   64 /* browser sessions: a farm has few operators */
 #define WEB_PREVIEWS_MAX   16 /* rendered pictures kept (about 100 kB each) */
@@ -75,7 +76,8 @@ bool web_is_public(const char *path);
 /* The API key a session token stands for, or NULL. */
 const char *web_session_key(struct web *w, const char *token);
 
-/* Answer req if it is one of the routes above: true if resp was filled. */
-bool web_route(struct web *w, const struct http_req *req, struct http_resp *resp);
+/* The routes above as rows of the route table; their handlers take the
+   struct web as ctx.  *n their count. */
+const struct route *web_routes(size_t *n);
 
 #endif
