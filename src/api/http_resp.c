@@ -141,7 +141,7 @@ enum MHD_Result
 http_send_error(struct MHD_Connection *conn, int status, const char *msg)
 {
     return http_send_json(conn, status, json_pack("{s:s}", "error", msg),
-                     status == MHD_HTTP_UNAUTHORIZED || status == MHD_HTTP_BAD_REQUEST);
+                          status == MHD_HTTP_UNAUTHORIZED || status == MHD_HTTP_BAD_REQUEST);
 }
 
 int

@@ -12,8 +12,8 @@
  *                                      later GETs (EventSource, <img>)
  *   GET /api/jobs/ID/preview.png?stage=before|after
  *                                      the part as uploaded / as it prints,
- *                                      risky faces red (slicer/preview.h),
- *                                      rendered on the worker pool
+ *                                      risky faces red, as the farm gives
+ *                                      it (farm/pictures.h)
  *   GET /api/jobs/ID/gcode             the job's G-code (text/plain)
  *   GET /api/jobs/ID/report            what the G-code's header says: time,
  *                                      filament and support grams, layers
@@ -34,14 +34,12 @@
 
 #include "../base/err.h"
 #include "../base/pool.h"
+#include "../farm/pictures.h"
 #include "../farm/store.h"
 #include "http.h"
 #include "route.h"
 
-#define WEB_SESSIONS_MAX   64 /* browser sessions: a farm has few operators */
-#define WEB_PREVIEWS_MAX   16 /* rendered pictures kept (about 100 kB each) */
-#define WEB_PREVIEW_W      640
-#define WEB_PREVIEW_H      480
+#define WEB_SESSIONS_MAX   64   /* browser sessions: a farm has few operators */
 #define WEB_GCODE_HEAD_MAX 4096 /* bytes of G-code header read for /report */
 
 /* One embedded static file (build/gen/web_assets.c, from src/api/web/). */
