@@ -9,8 +9,8 @@
  *   SF_EINVAL     bad input (a command that is not one line)
  *   SF_EAGAIN     not now: the job or the printer is not in a state for it
  *                 (the job and printer rules refuse, or the driver is busy:
- *                 "nothing to pause" while a network printer uploads, "Klipper
- *                 is starting")
+ *                 "nothing to pause" while a network printer's upload runs,
+ *                 "another action is still on its way")
  *   SF_EUNREACH   the printer does not answer: the farm holds it offline
  *                 (PRINTER_OFFLINE: its driver has lost contact, or never
  *                 had it: a network printer that does not answer, a serial
