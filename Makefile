@@ -6,7 +6,7 @@
 #   make bench      benchmarks against peers; prints figures, never fails on time
 #   make fuzz T=NAME SECS=60   long libFuzzer run of one parser
 #   make deps       install missing Debian packages (quiet when all present)
-#   make format / check-format / check-headers / install / clean
+#   make format / check-format / check-headers / check-layers / check-size / install / clean
 #
 # Sources are found by wildcard: a new .c file in a library folder joins the
 # library, tests/unit/test_NAME.c becomes a test program, tests/fuzz/fuzz_NAME.c
@@ -97,7 +97,7 @@ BENCHES := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(BENCH_C))
 FUZZERS := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(FUZZ_C))
 
 .PHONY: all check tests demo bench soak fuzz fuzzers deps install clean format check-format \
-	check-headers check-layers browser-deps
+	check-headers check-layers check-size browser-deps
 .DEFAULT_GOAL := all
 
 all: $(PROGS)
@@ -223,7 +223,7 @@ check: deps
 	$(MAKE) --no-print-directory browser-deps
 	$(MAKE) --no-print-directory SAN=1 tests
 	$(MAKE) --no-print-directory fuzzers
-	$(MAKE) --no-print-directory check-layers check-format check-headers
+	$(MAKE) --no-print-directory check-layers check-size check-format check-headers
 	FUZZ_RUNS=$(FUZZ_RUNS) JOBS=$(JOBS) tests/run.sh build/san $(T)
 
 T ?=
@@ -273,6 +273,9 @@ check-headers:
 	done; echo "every header compiles alone"
 check-layers:
 	@tests/check-layers.sh
+# One job per file: no source over 1000 lines, no function over 120 (--report: the longest).
+check-size:
+	@tests/check-size.sh
 
 clean:
 	rm -rf build bin

@@ -3,15 +3,18 @@
  * the event log as Server-Sent Events.
  *
  * Why this split: http.c knows HTTP (keys, caps, multipart, streams) and
- * nothing of jobs; api_json.c knows JSON shapes; this file only maps URLs
- * to store calls and printer actions, so each route is a few lines.
+ * nothing of jobs; api_json.c knows JSON shapes; route.c dispatches the
+ * route table, whose rows are this file's, api_compat.c's and web.c's; the
+ * farm (jobctl.h) decides what a cancel or an action does.  This file only
+ * maps URLs to store and farm calls and their codes to statuses
+ * (http_status_of), so each route is a few lines.
  * Uploads stream straight into a temporary file of the store (never whole
  * in memory); the route commits it to its content address only once the
  * options are valid, and the job row is added right after, so a refused
  * or broken upload leaves neither a file nor a job.  A client file name is
  * only ever a label: it must be a plain name (job_name_valid) and a part
  * format we load, and it never becomes a path; text a client sent is
- * echoed in errors cut on a character boundary (clip()).
+ * echoed in errors cut on a character boundary (route_clip()).
  *
  * Thread: the loop thread, like the store it uses.
  */
@@ -26,11 +29,14 @@
 #include "../base/limits.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "../farm/jobctl.h"
 #include "api_compat.h"
 #include "api_json.h"
+#include "route.h"
 #include "web.h"
 
-#define SSE_BATCH 64 /* events read from the store per stream refill */
+#define SSE_BATCH  64 /* events read from the store per stream refill */
+#define API_GROUPS 3  /* route groups: api_compat's, web's, api.c's */
 
 struct api {
     struct api_config cfg;         /* as given */
@@ -38,6 +44,7 @@ struct api {
     struct http *http;             /* the server */
     struct web *web;               /* the dashboard's files, sessions and pictures */
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
+    struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
 };
 
 /* An upload in progress: the store's writer, until the route commits it. */
@@ -55,22 +62,6 @@ struct sse {
     struct buf out;     /* formatted, not yet sent */
 };
 
-/* s cut to fit out (cap bytes with the NUL) between UTF-8 characters: a
-   message quoting it stays valid text (http.c replaces what is invalid). */
-static const char *
-clip(char *out, size_t cap, const char *s)
-{
-    size_t n = strlen(s);
-    if (n >= cap) {
-        n = cap - 1;
-        while (n > 0 && ((unsigned char)s[n] & 0xc0) == 0x80)
-            n--; /* s[n] continues a character: cut before its lead byte */
-    }
-    memcpy(out, s, n);
-    out[n] = '\0';
-    return out;
-}
-
 /* ---- upload sink ---- */
 
 static bool
@@ -87,7 +78,7 @@ up_begin(void *ud, const char *filename, struct sf_err *err)
 {
     struct api *a = ud;
     char name[81];
-    clip(name, sizeof(name), filename);
+    route_clip(name, sizeof(name), filename);
     if (!job_name_valid(filename)) {
         sf_err_set(err, SF_EINVAL,
                    "file name '%s' is not a plain file name (valid UTF-8; no paths, '..' or "
@@ -105,7 +96,7 @@ up_begin(void *ud, const char *filename, struct sf_err *err)
         sf_err_set(err, SF_ENOMEM, "out of memory");
         return NULL;
     }
-    clip(u->name, sizeof(u->name), filename);
+    route_clip(u->name, sizeof(u->name), filename);
     u->f = store_file_begin(a->cfg.store, err);
     if (!u->f) {
         free(u);
@@ -159,44 +150,6 @@ up_commit(void *ctx, char sha[STORE_SHA_HEX], struct sf_err *err)
 
 /* ---- helpers ---- */
 
-static int
-status_of(int rc)
-{
-    switch (rc) {
-    case SF_EINVAL:
-        return 409;
-    case SF_ENOTFOUND:
-        return 404;
-    case SF_EUNSUPP:
-        return 501;
-    default:
-        return 500;
-    }
-}
-
-/* Parse a decimal number >= 0 that is the whole segment [s, s+n). */
-static bool
-parse_num(const char *s, size_t n, int64_t *out)
-{
-    if (n == 0 || n > 18)
-        return false;
-    int64_t v = 0;
-    for (size_t i = 0; i < n; i++) {
-        if (s[i] < '0' || s[i] > '9')
-            return false;
-        v = v * 10 + (s[i] - '0');
-    }
-    *out = v;
-    return true;
-}
-
-/* Parse a job id (> 0). */
-static bool
-parse_id(const char *s, size_t n, int64_t *id)
-{
-    return parse_num(s, n, id) && *id > 0;
-}
-
 static const char *
 field(const struct http_req *req, const char *name)
 {
@@ -223,13 +176,17 @@ compat_changed(void *ud)
 /* ---- jobs ---- */
 
 static void
-jobs_list(struct api *a, struct http_resp *resp)
+jobs_list(void *ctx, const struct route_args *args, const struct http_req *req,
+          struct http_resp *resp)
 {
+    (void)args, (void)req;
+    struct api *a = ctx;
     struct job_row *rows;
     size_t n;
     struct sf_err err;
-    if (store_job_list(a->cfg.store, &rows, &n, &err)) {
-        http_error(resp, 500, "%s", err.msg);
+    int rc = store_job_list(a->cfg.store, &rows, &n, &err);
+    if (rc) {
+        http_fail(resp, rc, err.msg);
         return;
     }
     json_t *arr = json_array();
@@ -240,8 +197,11 @@ jobs_list(struct api *a, struct http_resp *resp)
 }
 
 static void
-jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
+jobs_submit(void *ctx, const struct route_args *args, const struct http_req *req,
+            struct http_resp *resp)
 {
+    (void)args;
+    struct api *a = ctx;
     struct sf_err err;
     if (!req->upload_name || !req->upload) {
         http_error(resp, 400, "multipart field 'file' (the part) is required");
@@ -255,7 +215,7 @@ jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
     for (size_t i = 0; i < req->n_fields; i++)
         if (strcmp(req->field_name[i], "options") != 0) {
             http_error(resp, 400, "unknown form field '%s' (expected 'file' and 'options')",
-                       clip(clipped, sizeof(clipped), req->field_name[i]));
+                       route_clip(clipped, sizeof(clipped), req->field_name[i]));
             return;
         }
     if (api_opts_parse(opts ? opts : "", opts ? strlen(opts) : 0, &o, &err) ||
@@ -273,20 +233,13 @@ jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
        (on a refusal above, http.c discards the temporary file). */
     struct upload *u = req->upload;
     char sha[STORE_SHA_HEX];
+    int64_t id;
+    struct job_row j;
     int rc = store_file_commit(u->f, sha, &err);
     u->f = NULL; /* commit frees the writer either way */
-    if (rc) {
-        http_error(resp, 500, "%s", err.msg);
-        return;
-    }
-    int64_t id;
-    if (store_job_add(a->cfg.store, &o, sha, &id, &err)) {
-        http_error(resp, err.code == SF_EINVAL ? 400 : 500, "%s", err.msg);
-        return;
-    }
-    struct job_row j;
-    if (store_job_get(a->cfg.store, id, &j, &err)) {
-        http_error(resp, 500, "%s", err.msg);
+    if (rc || (rc = store_job_add(a->cfg.store, &o, sha, &id, &err)) ||
+        (rc = store_job_get(a->cfg.store, id, &j, &err))) {
+        http_fail(resp, rc, err.msg);
         return;
     }
     log_info("api", "job %lld: '%s' submitted, %d copies", (long long)id, o.name, o.copies);
@@ -297,20 +250,21 @@ jobs_submit(struct api *a, const struct http_req *req, struct http_resp *resp)
 
 static void time_left_json(json_t *o, const struct printer_info *p);
 
+/* Job args->id with its print history, or the failure. */
 static void
-job_get(struct api *a, int64_t id, struct http_resp *resp)
+job_get(void *ctx, const struct route_args *args, const struct http_req *req,
+        struct http_resp *resp)
 {
+    (void)req;
+    struct api *a = ctx;
+    int64_t id = args->id;
     struct sf_err err;
     struct job_row j;
-    int rc = store_job_get(a->cfg.store, id, &j, &err);
-    if (rc) {
-        http_error(resp, rc == SF_ENOTFOUND ? 404 : 500, "%s", err.msg);
-        return;
-    }
     struct print_row *p;
     size_t n;
-    if (store_prints(a->cfg.store, id, &p, &n, &err)) {
-        http_error(resp, 500, "%s", err.msg);
+    int rc = store_job_get(a->cfg.store, id, &j, &err);
+    if (rc || (rc = store_prints(a->cfg.store, id, &p, &n, &err))) {
+        http_fail(resp, rc, err.msg);
         return;
     }
     json_t *prints = json_array();
@@ -331,79 +285,62 @@ job_get(struct api *a, int64_t id, struct http_resp *resp)
     resp->json = json_pack("{soso}", "job", job, "prints", prints);
 }
 
+/* After a change the farm made (rc SF_OK): the job as it is now. */
 static void
-job_patch(struct api *a, int64_t id, const struct http_req *req, struct http_resp *resp)
+job_changed(struct api *a, const struct route_args *args, int rc, const struct sf_err *err,
+            struct http_resp *resp)
 {
+    if (rc) {
+        http_fail(resp, rc, err->msg);
+        return;
+    }
+    job_get(a, args, NULL, resp);
+    changed(a);
+}
+
+static void
+job_patch(void *ctx, const struct route_args *args, const struct http_req *req,
+          struct http_resp *resp)
+{
+    struct api *a = ctx;
     struct sf_err err;
     int prio;
     if (api_priority_parse(req->body, req->body_len, &prio, &err)) {
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    int rc = store_job_set_priority(a->cfg.store, id, prio, &err);
-    if (rc) {
-        http_error(resp, rc == SF_ENOTFOUND ? 404 : 500, "%s", err.msg);
-        return;
-    }
-    job_get(a, id, resp);
-    changed(a);
+    int rc = store_job_set_priority(a->cfg.store, args->id, prio, &err);
+    job_changed(a, args, rc, &err, resp);
 }
 
+/* POST /api/jobs/ID/cancel, or /restart: the operator prints an
+   interrupted job's copy again from the start. */
 static void
-job_cancel(struct api *a, int64_t id, struct http_resp *resp)
+job_cancel_restart(void *ctx, const struct route_args *args, const struct http_req *req,
+                   struct http_resp *resp)
 {
+    struct api *a = ctx;
     struct sf_err err;
-    struct job_row j;
-    int rc = store_job_get(a->cfg.store, id, &j, &err);
-    if (rc == SF_OK && job_state_on_printer(j.state)) {
-        /* The printer must stop first; its registry records the cancel. */
-        rc = a->cfg.farm ? farm_printer_action(a->cfg.farm, j.printer, PRINTER_ACT_CANCEL, &err)
-                         : sf_err_set(&err, SF_EINVAL, "job %lld: no farm to stop its printer",
-                                      (long long)id);
-    } else if (rc == SF_OK) {
-        struct job_event_args args = { .reason = "cancelled by an operator" };
-        rc = store_job_event(a->cfg.store, id, JOB_EV_CANCEL, &args, NULL, &err);
-    }
-    if (rc) {
-        http_error(resp, status_of(rc), "%s", err.msg);
-        return;
-    }
-    job_get(a, id, resp);
-    changed(a);
-}
-
-/* The operator prints an interrupted job's copy again from the start. */
-static void
-job_restart(struct api *a, int64_t id, struct http_resp *resp)
-{
-    struct sf_err err;
-    int rc = store_job_event(a->cfg.store, id, JOB_EV_RESTART, NULL, NULL, &err);
-    if (rc) {
-        http_error(resp, status_of(rc), "%s", err.msg);
-        return;
-    }
-    job_get(a, id, resp);
-    changed(a);
+    int rc = strcmp(strrchr(req->path, '/'), "/cancel") == 0
+                 ? jobctl_cancel(a->cfg.farm, a->cfg.store, args->id, &err)
+                 : jobctl_restart(a->cfg.store, args->id, &err);
+    job_changed(a, args, rc, &err, resp);
 }
 
 /* The operator continues an interrupted job where its printer stopped. */
 static void
-job_resume(struct api *a, int64_t id, const struct http_req *req, struct http_resp *resp)
+job_resume(void *ctx, const struct route_args *args, const struct http_req *req,
+           struct http_resp *resp)
 {
+    struct api *a = ctx;
     struct sf_err err;
     int64_t line;
     if (api_resume_parse(req->body, req->body_len, &line, &err)) {
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    int rc = a->cfg.farm ? farm_job_resume(a->cfg.farm, id, line, &err)
-                         : sf_err_set(&err, SF_EINVAL, "resuming jobs is not available here");
-    if (rc) {
-        http_error(resp, status_of(rc), "%s", err.msg);
-        return;
-    }
-    job_get(a, id, resp);
-    changed(a);
+    int rc = jobctl_resume(a->cfg.farm, args->id, line, &err);
+    job_changed(a, args, rc, &err, resp);
 }
 
 /* ---- printers ---- */
@@ -434,8 +371,9 @@ printer_json(const struct printer_info *p)
     return o;
 }
 
+/* Every printer, or the one called name (NULL: all). */
 static void
-printers_list(struct api *a, const char *name, struct http_resp *resp)
+printers_answer(struct api *a, const char *name, struct http_resp *resp)
 {
     json_t *arr = json_array();
     size_t n = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
@@ -458,55 +396,61 @@ printers_list(struct api *a, const char *name, struct http_resp *resp)
     resp->json = json_pack("{so}", "printers", arr);
 }
 
+/* GET /api/printers (args->name ""), or /api/printers/NAME. */
 static void
-printer_act(struct api *a, const char *name, const char *action, struct http_resp *resp)
+printers_get(void *ctx, const struct route_args *args, const struct http_req *req,
+             struct http_resp *resp)
 {
+    (void)req;
+    printers_answer(ctx, args->name[0] ? args->name : NULL, resp);
+}
+
+static void
+printer_act(void *ctx, const struct route_args *args, const struct http_req *req,
+            struct http_resp *resp)
+{
+    (void)req;
+    struct api *a = ctx;
     enum printer_action act;
-    if (!printer_action_parse(action, &act)) {
-        http_error(resp, 404, "no printer action '%.32s' (pause, resume, cancel, cleared)", action);
+    if (!printer_action_parse(args->action, &act)) {
+        http_error(resp, 404, "no printer action '%.32s' (pause, resume, cancel, cleared)",
+                   args->action);
         return;
     }
     struct sf_err err;
-    sf_err_clear(&err);
-    int rc = a->cfg.farm ? farm_printer_action(a->cfg.farm, name, act, &err)
-                         : sf_err_set(&err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    int rc = jobctl_printer_action(a->cfg.farm, args->name, act, &err);
     if (rc) {
-        http_error(resp, status_of(rc), "%s", err.msg);
+        http_fail(resp, rc, err.msg);
         return;
     }
-    printers_list(a, name, resp);
+    printers_answer(a, args->name, resp);
     changed(a);
 }
 
 /*
  * POST /api/printers/NAME/command {"command": "G28"}: one manual G-code
  * line for an idle printer.  400 a bad body, 404 no such printer, 409 the
- * printer cannot take one now (offline, printing: the driver's SF_EAGAIN),
- * 501 its kind has no way to send one (PrusaLink); 200 with the printer.
+ * printer cannot take one now (printing, busy: SF_EAGAIN), 503 it is
+ * offline, 501 its kind has no way to send one (PrusaLink); 200 with the
+ * printer.
  */
 static void
-printer_cmd(struct api *a, const char *name, const struct http_req *req, struct http_resp *resp)
+printer_cmd(void *ctx, const struct route_args *args, const struct http_req *req,
+            struct http_resp *resp)
 {
+    struct api *a = ctx;
     struct sf_err err;
     char line[SF_COMMAND_MAX + 1];
     if (api_command_parse(req->body, req->body_len, line, sizeof(line), &err)) {
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    sf_err_clear(&err);
-    int rc = a->cfg.farm ? farm_printer_command(a->cfg.farm, name, line, &err)
-                         : sf_err_set(&err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    int rc = jobctl_printer_command(a->cfg.farm, args->name, line, &err);
     if (rc) {
-        http_error(resp,
-                   rc == SF_ENOTFOUND ? 404
-                   : rc == SF_EAGAIN  ? 409
-                   : rc == SF_EINVAL  ? 400
-                   : rc == SF_EUNSUPP ? 501
-                                      : 500,
-                   "%s", err.msg);
+        http_fail(resp, rc, err.msg);
         return;
     }
-    printers_list(a, name, resp);
+    printers_answer(a, args->name, resp);
     json_object_set_new(resp->json, "command", json_string(line));
 }
 
@@ -588,8 +532,11 @@ sse_free(void *ud)
 }
 
 static void
-events_stream(struct api *a, const struct http_req *req, struct http_resp *resp)
+events_stream(void *ctx, const struct route_args *args, const struct http_req *req,
+              struct http_resp *resp)
 {
+    (void)args;
+    struct api *a = ctx;
     struct sse *s = mem_calloc(1, sizeof(*s));
     if (!s) {
         http_error(resp, 500, "out of memory");
@@ -602,7 +549,7 @@ events_stream(struct api *a, const struct http_req *req, struct http_resp *resp)
        newest is from another (restored or reset) event log: the client is
        told so and gets this log from its start, rather than silence until
        the log catches up with a number that means nothing here. */
-    if (req->last_event_id && parse_num(req->last_event_id, strlen(req->last_event_id), &id)) {
+    if (req->last_event_id && route_num(req->last_event_id, strlen(req->last_event_id), &id)) {
         s->last_id = id;
         if (id > newest) {
             s->last_id = 0;
@@ -622,131 +569,34 @@ events_stream(struct api *a, const struct http_req *req, struct http_resp *resp)
 
 /* ---- dispatch ---- */
 
-/* Segment i of path ("/api/jobs/12" -> "api", "jobs", "12") as [*s, *s + *n). */
-static size_t
-split(const char *path, const char **seg, size_t *len, size_t max)
-{
-    size_t n = 0;
-    const char *p = path;
-    while (*p) {
-        while (*p == '/')
-            p++;
-        if (!*p)
-            break;
-        const char *e = strchr(p, '/');
-        size_t l = e ? (size_t)(e - p) : strlen(p);
-        if (n == max)
-            return max + 1;
-        seg[n] = p;
-        len[n++] = l;
-        p += l;
-    }
-    return n;
-}
-
-static bool
-seg_is(const char *s, size_t n, const char *word)
-{
-    return strlen(word) == n && memcmp(s, word, n) == 0;
-}
+/* api.c's rows of the route table (route.h); api_compat's and web's come first. */
+static const struct route rows[] = {
+    /* methods, pattern, match, body, scope, handler, 405 message */
+    { ROUTE_GET, "/api/jobs", NULL, HTTP_BODY_NONE, ROUTE_READ, jobs_list, ROUTE_405 },
+    { ROUTE_POST, "/api/jobs", NULL, HTTP_BODY_UPLOAD, ROUTE_WRITE, jobs_submit, ROUTE_405 },
+    { ROUTE_GET, "/api/jobs/{id}", NULL, HTTP_BODY_NONE, ROUTE_READ, job_get, ROUTE_405 },
+    { ROUTE_PATCH, "/api/jobs/{id}", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_patch, ROUTE_405 },
+    { ROUTE_POST, "/api/jobs/{id}/cancel", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,
+      ROUTE_405 },
+    { ROUTE_POST, "/api/jobs/{id}/restart", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,
+      ROUTE_405 },
+    { ROUTE_POST, "/api/jobs/{id}/resume", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_resume,
+      ROUTE_405 },
+    { ROUTE_GET, "/api/printers", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get, "use GET" },
+    { ROUTE_GET, "/api/printers/{name}", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get,
+      "use GET" },
+    { ROUTE_POST, "/api/printers/{name}/command", NULL, HTTP_BODY_JSON, ROUTE_WRITE, printer_cmd,
+      ROUTE_405 },
+    { ROUTE_POST, "/api/printers/{name}/{action}", NULL, HTTP_BODY_NONE, ROUTE_WRITE, printer_act,
+      ROUTE_405 },
+    { ROUTE_GET, "/api/events", NULL, HTTP_BODY_NONE, ROUTE_READ, events_stream, ROUTE_405 },
+};
 
 static void
 route(void *ud, const struct http_req *req, struct http_resp *resp)
 {
     struct api *a = ud;
-    const char *seg[5];
-    size_t len[5];
-    size_t n = split(req->path, seg, len, 4);
-    bool get = strcmp(req->method, "GET") == 0, post = strcmp(req->method, "POST") == 0;
-    int64_t id;
-    char name[64], action[16];
-    if (api_compat_route(&a->slicers, req, resp))
-        return; /* /metrics, OctoPrint's and Moonraker's upload routes */
-    if (web_route(a->web, req, resp))
-        return; /* the dashboard */
-    if (n < 2 || n > 4 || !seg_is(seg[0], len[0], "api"))
-        goto not_found;
-    if (seg_is(seg[1], len[1], "jobs")) {
-        if (n == 2 && get) {
-            jobs_list(a, resp);
-            return;
-        }
-        if (n == 2 && post) {
-            jobs_submit(a, req, resp);
-            return;
-        }
-        if (n == 2)
-            goto bad_method;
-        if (!parse_id(seg[2], len[2], &id))
-            goto not_found;
-        if (n == 3 && get) {
-            job_get(a, id, resp);
-            return;
-        }
-        if (n == 3 && strcmp(req->method, "PATCH") == 0) {
-            job_patch(a, id, req, resp);
-            return;
-        }
-        if (n == 3)
-            goto bad_method;
-        bool cancel = seg_is(seg[3], len[3], "cancel");
-        bool resume = seg_is(seg[3], len[3], "resume");
-        if (!cancel && !resume && !seg_is(seg[3], len[3], "restart"))
-            goto not_found;
-        if (!post)
-            goto bad_method;
-        if (cancel)
-            job_cancel(a, id, resp);
-        else if (resume)
-            job_resume(a, id, req, resp);
-        else
-            job_restart(a, id, resp);
-        return;
-    }
-    if (seg_is(seg[1], len[1], "printers")) {
-        if (n == 2) {
-            if (get)
-                printers_list(a, NULL, resp);
-            else
-                http_error(resp, 405, "use GET");
-            return;
-        }
-        if (len[2] >= sizeof(name) || (n == 4 && len[3] >= sizeof(action)))
-            goto not_found;
-        memcpy(name, seg[2], len[2]);
-        name[len[2]] = '\0';
-        if (n == 3) {
-            if (get)
-                printers_list(a, name, resp);
-            else
-                http_error(resp, 405, "use GET");
-            return;
-        }
-        if (!post)
-            goto bad_method;
-        memcpy(action, seg[3], len[3]);
-        action[len[3]] = '\0';
-        if (strcmp(action, "command") == 0)
-            printer_cmd(a, name, req, resp);
-        else
-            printer_act(a, name, action, resp);
-        return;
-    }
-    if (n == 2 && seg_is(seg[1], len[1], "events")) {
-        if (!get)
-            goto bad_method;
-        {
-            events_stream(a, req, resp);
-            return;
-        }
-    }
-    char clipped[101];
-not_found:
-    http_error(resp, 404, "no such resource: %s", clip(clipped, sizeof(clipped), req->path));
-    return;
-bad_method:
-    http_error(resp, 405, "method %s is not allowed on %s", req->method,
-               clip(clipped, sizeof(clipped), req->path));
+    route_dispatch(a->groups, API_GROUPS, req, resp);
 }
 
 /* Which body a request may carry, from its head (http.c refuses a
@@ -754,26 +604,8 @@ bad_method:
 static enum http_body
 body_kind(void *ud, const char *method, const char *path)
 {
-    (void)ud;
-    enum http_body compat;
-    if (api_compat_body(method, path, &compat))
-        return compat;
-    const char *seg[5];
-    size_t len[5];
-    size_t n = split(path, seg, len, 4);
-    bool post = strcmp(method, "POST") == 0;
-    if (n == 4 && post && seg_is(seg[0], len[0], "api") && seg_is(seg[1], len[1], "printers") &&
-        seg_is(seg[3], len[3], "command"))
-        return HTTP_BODY_JSON;
-    if (n < 2 || n > 4 || !seg_is(seg[0], len[0], "api") || !seg_is(seg[1], len[1], "jobs"))
-        return HTTP_BODY_NONE;
-    if (n == 2 && post)
-        return HTTP_BODY_UPLOAD;
-    if (n == 3 && strcmp(method, "PATCH") == 0)
-        return HTTP_BODY_JSON;
-    if (n == 4 && post && seg_is(seg[3], len[3], "resume"))
-        return HTTP_BODY_JSON;
-    return HTTP_BODY_NONE;
+    struct api *a = ud;
+    return route_body(a->groups, API_GROUPS, method, path);
 }
 
 static bool
@@ -827,6 +659,11 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                               .session_key = session_key };
     struct web_config wc = { .store = cfg->store, .pool = cfg->pool, .wake = web_wake, .ud = a };
     a->web = web_new(&wc, err);
+    size_t n_compat, n_web;
+    const struct route *compat = api_compat_routes(&n_compat), *web = web_routes(&n_web);
+    a->groups[0] = (struct route_group){ compat, n_compat, &a->slicers };
+    a->groups[1] = (struct route_group){ web, n_web, a->web };
+    a->groups[2] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
     a->http = a->web ? http_new(&hc, err) : NULL;
     if (!a->http) {
         web_free(a->web);

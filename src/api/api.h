@@ -1,6 +1,7 @@
 /*
  * api.h - the REST API of slimfarmd (routes over http.h, data from the
- * store, printers, their actions and resumes through farm.h).
+ * store, printers through farm.h, what operators ask of jobs and printers
+ * through jobctl.h).
  *
  *   GET    /api/jobs                      list jobs
  *   POST   /api/jobs                      multipart: "file" (the part) and
@@ -28,8 +29,11 @@
  * Errors are {"error": "message"}: 400 bad input (a multipart upload
  * anywhere but POST /api/jobs, a body cut before its closing boundary, an
  * empty file), 401/403 keys (a read-only key may send no body), 404
- * unknown, 405 wrong method, 409 not legal in the current state, 413 too
- * large, 500 server trouble.  Text a client sent is echoed as valid UTF-8.
+ * unknown, 405 wrong method (Allow says which would do), 409 not legal in
+ * the current state or busy now, 413 too large, 501 not possible on that
+ * kind of printer, 503 the printer is offline, 500 server trouble: the
+ * status of a failure code is http_status_of()'s, for every route.  Text a
+ * client sent is echoed as valid UTF-8.
  *
  * Thread: the loop thread (the one driving api_http()).
  */

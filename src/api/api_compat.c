@@ -160,10 +160,10 @@ checked(void *ud, int rc, const struct farm_gcode *g, const char *msg)
     struct sf_err err;
     int64_t id;
     if (rc)
-        http_error(&resp, rc == SF_EINVAL ? 400 : rc == SF_ECANCELED ? 503 : 500, "%s", msg);
+        http_fail(&resp, rc, msg); /* SF_ECANCELED: the daemon is stopping, 503 */
     else if ((rc = env->upload_commit(http_defer_upload(d), sha, &err)) ||
              (rc = farm_gcode_add(env->farm, &p->o, sha, g, &id, &err)))
-        http_error(&resp, rc == SF_EINVAL ? 400 : 500, "%s", err.msg);
+        http_fail(&resp, rc, err.msg);
     else {
         log_info("api", "job %lld: '%s' uploaded through the %s API", (long long)id, p->o.name,
                  p->fl == MOONRAKER ? "Moonraker" : "OctoPrint");
@@ -226,7 +226,8 @@ upload(const struct api_compat_env *env, enum flavor fl, const struct http_req *
     int rc;
     if ((rc = job_opts_validate(&o, &err)) || (rc = env->upload_commit(req->upload, sha, &err)) ||
         (rc = store_job_add(env->store, &o, sha, &id, &err))) {
-        http_error(resp, rc == SF_EINVAL || rc == SF_ENOTFOUND ? 400 : 500, "%s", err.msg);
+        /* a file the job names that is not stored: the upload's fault */
+        http_fail(resp, rc == SF_ENOTFOUND ? SF_EINVAL : rc, err.msg);
         return;
     }
     log_info("api", "job %lld: '%s' uploaded through the %s API", (long long)id, o.name,
@@ -237,8 +238,11 @@ upload(const struct api_compat_env *env, enum flavor fl, const struct http_req *
 }
 
 static void
-moon_upload(const struct api_compat_env *env, const struct http_req *req, struct http_resp *resp)
+moon_upload(void *ctx, const struct route_args *args, const struct http_req *req,
+            struct http_resp *resp)
 {
+    (void)args;
+    const struct api_compat_env *env = ctx;
     const char *root = field(req, "root");
     if (root && root[0] && strcmp(root, "gcodes") != 0) {
         http_error(resp, 400, "root '%.32s': the farm takes uploads only to 'gcodes'", root);
@@ -273,7 +277,7 @@ select_job(const struct api_compat_env *env, int64_t id, struct http_resp *resp,
         return;
     }
     if (rc) {
-        http_error(resp, 500, "%s", err.msg);
+        http_fail(resp, rc, err.msg);
         return;
     }
     if (job_state_terminal(j.state)) {
@@ -372,8 +376,11 @@ moon_get(const char *path, struct http_resp *resp)
 
 /* Moonraker's print start names the file in the query or a JSON body. */
 static void
-moon_start(const struct api_compat_env *env, const struct http_req *req, struct http_resp *resp)
+moon_start(void *ctx, const struct route_args *args, const struct http_req *req,
+           struct http_resp *resp)
 {
+    (void)args;
+    const struct api_compat_env *env = ctx;
     char name[512] = "";
     const char *q = req->query;
     while (q && *q) {
@@ -398,70 +405,85 @@ moon_start(const struct api_compat_env *env, const struct http_req *req, struct 
     select_job(env, job_of(name), resp, true);
 }
 
-bool
-api_compat_body(const char *method, const char *path, enum http_body *kind)
+static void
+metrics(void *ctx, const struct route_args *args, const struct http_req *req,
+        struct http_resp *resp)
 {
-    bool post = strcmp(method, "POST") == 0;
-    if (strcmp(path, "/api/files/local") == 0 || strcmp(path, "/server/files/upload") == 0) {
-        *kind = post ? HTTP_BODY_UPLOAD : HTTP_BODY_NONE;
-        return true;
+    (void)args, (void)req;
+    const struct api_compat_env *env = ctx;
+    struct sf_err err;
+    char *text = metrics_render(env->store, env->farm, &err);
+    if (!text) {
+        http_fail(resp, err.code, err.msg);
+        return;
     }
-    if (strncmp(path, "/api/files/local/", 17) == 0 || strcmp(path, "/printer/print/start") == 0) {
-        *kind = post ? HTTP_BODY_JSON : HTTP_BODY_NONE;
-        return true;
-    }
-    return false;
+    resp->body = text;
+    resp->body_len = strlen(text);
+    resp->body_free = free;
+    resp->content_type = METRICS_CONTENT_TYPE;
 }
 
-bool
-api_compat_route(const struct api_compat_env *env, const struct http_req *req,
-                 struct http_resp *resp)
+static void
+octo_upload(void *ctx, const struct route_args *args, const struct http_req *req,
+            struct http_resp *resp)
 {
-    const char *path = req->path;
-    bool get = strcmp(req->method, "GET") == 0, post = strcmp(req->method, "POST") == 0;
-    if (strcmp(path, "/metrics") == 0) {
-        struct sf_err err;
-        char *text;
-        if (!get)
-            http_error(resp, 405, "use GET");
-        else if (!(text = metrics_render(env->store, env->farm, &err)))
-            http_error(resp, 500, "%s", err.msg);
-        else {
-            resp->body = text;
-            resp->body_len = strlen(text);
-            resp->body_free = free;
-            resp->content_type = METRICS_CONTENT_TYPE;
-        }
-        return true;
-    }
-    if (strcmp(path, "/api/files/local") == 0 || strcmp(path, "/server/files/upload") == 0) {
-        if (!post)
-            http_error(resp, 405, "use POST with a multipart/form-data upload");
-        else if (path[1] == 'a')
-            upload(env, OCTOPRINT, req, resp);
-        else
-            moon_upload(env, req, resp);
-        return true;
-    }
-    if (strcmp(path, "/api/files/sdcard") == 0) {
-        http_error(resp, 400, "the farm has no SD card: upload to /api/files/local");
-        return true;
-    }
-    if (strncmp(path, "/api/files/local/", 17) == 0) {
-        if (post)
-            octo_command(env, req, path + 17, resp);
-        else
-            http_error(resp, 405, "use POST with {\"command\": \"select\"}");
-        return true;
-    }
-    if (strcmp(path, "/printer/print/start") == 0) {
-        if (post)
-            moon_start(env, req, resp);
-        else
-            http_error(resp, 405, "use POST");
-        return true;
-    }
-    if (get && (octo_get(path, resp) || moon_get(path, resp)))
-        return true;
-    return false;
+    (void)args;
+    upload(ctx, OCTOPRINT, req, resp);
+}
+
+static void
+sdcard(void *ctx, const struct route_args *args, const struct http_req *req, struct http_resp *resp)
+{
+    (void)ctx, (void)args, (void)req;
+    http_error(resp, 400, "the farm has no SD card: upload to /api/files/local");
+}
+
+static void
+octo_select(void *ctx, const struct route_args *args, const struct http_req *req,
+            struct http_resp *resp)
+{
+    octo_command(ctx, req, args->rest, resp);
+}
+
+static void
+info(void *ctx, const struct route_args *args, const struct http_req *req, struct http_resp *resp)
+{
+    (void)ctx, (void)args;
+    if (!octo_get(req->path, resp))
+        moon_get(req->path, resp);
+}
+
+#define UPLOAD_405 "use POST with a multipart/form-data upload"
+
+/* Rows of the route table (route.h); the read-only answers are unknown to
+   other methods (404). */
+static const struct route rows[] = {
+    /* methods, pattern, match, body, scope, handler, 405 message */
+    { ROUTE_GET, "/metrics", NULL, HTTP_BODY_NONE, ROUTE_READ, metrics, "use GET" },
+    { ROUTE_POST, "/api/files/local", NULL, HTTP_BODY_UPLOAD, ROUTE_WRITE, octo_upload,
+      UPLOAD_405 },
+    { ROUTE_POST, "/server/files/upload", NULL, HTTP_BODY_UPLOAD, ROUTE_WRITE, moon_upload,
+      UPLOAD_405 },
+    { ROUTE_ANY, "/api/files/sdcard", NULL, HTTP_BODY_NONE, ROUTE_READ, sdcard, NULL },
+    { ROUTE_POST, "/api/files/local/{*}", NULL, HTTP_BODY_JSON, ROUTE_WRITE, octo_select,
+      "use POST with {\"command\": \"select\"}" },
+    { ROUTE_POST, "/printer/print/start", NULL, HTTP_BODY_JSON, ROUTE_WRITE, moon_start,
+      "use POST" },
+    { ROUTE_GET, "/api/version", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/api/server", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/api/settings", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/api/printerprofiles", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/api/printer", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/api/job", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/api/connection", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/server/info", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/server/files/roots", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/printer/info", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+};
+
+const struct route *
+api_compat_routes(size_t *n)
+{
+    *n = sizeof(rows) / sizeof(rows[0]);
+    return rows;
 }

@@ -35,11 +35,13 @@
 #define SF_API_API_COMPAT_H
 
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
 
 #include "../farm/farm.h"
 #include "../farm/store.h"
 #include "http.h"
+#include "route.h"
 
 #define API_COMPAT_OCTOPRINT "1.10.0" /* the OctoPrint version reported */
 
@@ -55,12 +57,9 @@ struct api_compat_env {
     void *ud;
 };
 
-/* Answer req if it is one of the routes above; false if not ours. */
-bool api_compat_route(const struct api_compat_env *env, const struct http_req *req,
-                      struct http_resp *resp);
-
-/* The body a request to our routes takes; false if the path is not ours. */
-bool api_compat_body(const char *method, const char *path, enum http_body *kind);
+/* The routes above as rows of the route table; their handlers take the
+   struct api_compat_env as ctx.  *n their count. */
+const struct route *api_compat_routes(size_t *n);
 
 /* True for a G-code file name (.gcode, .gco, .g). */
 bool api_compat_is_gcode(const char *name);

@@ -1,6 +1,7 @@
 /*
  * http.c - libmicrohttpd on the daemon's event loop: keys, caps, multipart,
- * JSON replies, suspended streams.
+ * suspended streams and deferred answers; how an answer is sent (JSON,
+ * raw bodies, errors, the status map) is http_resp.c's.
  *
  * Why external epoll mode: the daemon owns one loop and every socket
  * (STYLE.md, "Threads"); MHD's internal threads would put request handlers
@@ -47,7 +48,7 @@
 #include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
-#include "../base/utf8.h"
+#include "http_int.h"
 
 /* A streamed response; lives from the route's answer until MHD frees it. */
 struct stream {
@@ -128,31 +129,6 @@ defer_unlink(struct http *h, struct http_defer *d)
         }
 }
 
-/* ---- UTF-8 ---- */
-
-char *
-http_text_clean(char *out, size_t cap, const char *s)
-{
-    static const char repl[] = "\xef\xbf\xbd"; /* U+FFFD */
-    size_t o = 0;
-    const unsigned char *p = (const unsigned char *)s;
-    while (*p) {
-        int n = utf8_seq(p);
-        if (n < 0)
-            break; /* a character cut by whoever cut the text: drop it */
-        const char *src = n ? (const char *)p : repl;
-        size_t len = n ? (size_t)n : 3;
-        if (o + len >= cap)
-            break;
-        memcpy(out + o, src, len);
-        o += len;
-        p += n ? n : 1;
-    }
-    if (cap)
-        out[o] = '\0';
-    return out;
-}
-
 static void fail(struct conn *c, int status, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 
@@ -168,129 +144,6 @@ fail(struct conn *c, int status, const char *fmt, ...)
     vsnprintf(raw, sizeof(raw), fmt, ap);
     va_end(ap);
     http_text_clean(c->msg, sizeof(c->msg), raw);
-}
-
-void
-http_error(struct http_resp *resp, int status, const char *fmt, ...)
-{
-    char raw[SF_ERR_MSG_MAX], msg[SF_ERR_MSG_MAX];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(raw, sizeof(raw), fmt, ap);
-    va_end(ap);
-    http_text_clean(msg, sizeof(msg), raw);
-    resp->status = status;
-    json_decref(resp->json);
-    resp->json = json_pack("{s:s}", "error", msg);
-}
-
-static enum MHD_Result
-send_json(struct MHD_Connection *conn, int status, json_t *j, bool close)
-{
-    char *s = j ? json_dumps(j, JSON_COMPACT) : NULL;
-    json_decref(j);
-    struct MHD_Response *r;
-    if (s) {
-        r = MHD_create_response_from_buffer(strlen(s), s, MHD_RESPMEM_MUST_FREE);
-    } else {
-        static const char oom[] = "{\"error\":\"out of memory\"}";
-        status = MHD_HTTP_INTERNAL_SERVER_ERROR;
-        r = MHD_create_response_from_buffer(sizeof(oom) - 1, (void *)oom, MHD_RESPMEM_PERSISTENT);
-    }
-    if (!r) {
-        free(s);
-        return MHD_NO;
-    }
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, "application/json");
-    if (close) /* MHD closes the connection after a response saying so */
-        MHD_add_response_header(r, MHD_HTTP_HEADER_CONNECTION, "close");
-    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)status, r);
-    MHD_destroy_response(r);
-    return rc;
-}
-
-/* An error; a client without a valid key, or one sent a bad request
-   head, is not served again on this connection. */
-static enum MHD_Result
-send_error(struct MHD_Connection *conn, int status, const char *msg)
-{
-    return send_json(conn, status, json_pack("{s:s}", "error", msg),
-                     status == MHD_HTTP_UNAUTHORIZED || status == MHD_HTTP_BAD_REQUEST);
-}
-
-int
-http_resp_header(struct http_resp *resp, const char *name, const char *fmt, ...)
-{
-    if (resp->n_headers == HTTP_RESP_HEADERS_MAX || strlen(name) >= sizeof(resp->headers[0].name))
-        return SF_EINVAL;
-    struct http_header *hd = &resp->headers[resp->n_headers];
-    va_list ap;
-    va_start(ap, fmt);
-    int n = vsnprintf(hd->value, sizeof(hd->value), fmt, ap);
-    va_end(ap);
-    if (n < 0 || (size_t)n >= sizeof(hd->value))
-        return SF_EINVAL;
-    snprintf(hd->name, sizeof(hd->name), "%s", name);
-    resp->n_headers++;
-    return SF_OK;
-}
-
-static void
-add_headers(struct MHD_Response *r, const struct http_resp *resp)
-{
-    for (size_t i = 0; i < resp->n_headers; i++)
-        MHD_add_response_header(r, resp->headers[i].name, resp->headers[i].value);
-}
-
-/* Free what a route answered without sending it. */
-static void
-resp_discard(struct http_resp *resp)
-{
-    json_decref(resp->json);
-    if (resp->body && resp->body_free)
-        resp->body_free((void *)resp->body);
-    if (resp->fd > 0)
-        close(resp->fd);
-    if (resp->stream_free)
-        resp->stream_free(resp->stream_ud);
-}
-
-/* A raw body (static file, picture) or an open file. */
-static enum MHD_Result
-send_raw(struct MHD_Connection *conn, struct http_resp *resp)
-{
-    struct MHD_Response *r;
-    if (resp->fd > 0) {
-        r = MHD_create_response_from_fd(resp->fd_size, resp->fd);
-        if (!r)
-            close(resp->fd);
-    } else {
-        size_t len = resp->status == MHD_HTTP_NOT_MODIFIED ? 0 : resp->body_len;
-        r = MHD_create_response_from_buffer_with_free_callback(len, (void *)resp->body,
-                                                               resp->body_free);
-        if (!r && resp->body_free)
-            resp->body_free((void *)resp->body);
-    }
-    if (!r)
-        return send_error(conn, MHD_HTTP_INTERNAL_SERVER_ERROR, "out of memory");
-    if (resp->content_type)
-        MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, resp->content_type);
-    add_headers(r, resp);
-    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)resp->status, r);
-    MHD_destroy_response(r);
-    return rc;
-}
-
-const char *
-http_req_header(const struct http_req *req, const char *name)
-{
-    return MHD_lookup_connection_value(req->conn, MHD_HEADER_KIND, name);
-}
-
-const char *
-http_req_arg(const struct http_req *req, const char *name)
-{
-    return MHD_lookup_connection_value(req->conn, MHD_GET_ARGUMENT_KIND, name);
 }
 
 /* ---- streams ---- */
@@ -347,7 +200,7 @@ send_stream(struct http *h, struct MHD_Connection *conn, const char *key, struct
         if (resp->stream_free)
             resp->stream_free(resp->stream_ud);
         free(st);
-        return send_error(conn, MHD_HTTP_INTERNAL_SERVER_ERROR, "out of memory");
+        return http_send_error(conn, MHD_HTTP_INTERNAL_SERVER_ERROR, "out of memory");
     }
     *st = (struct stream){ .h = h,
                            .conn = conn,
@@ -359,7 +212,7 @@ send_stream(struct http *h, struct MHD_Connection *conn, const char *key, struct
     h->streams = st;
     MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE,
                             resp->content_type ? resp->content_type : "text/event-stream");
-    add_headers(r, resp);
+    http_add_headers(r, resp);
     if (!MHD_get_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL))
         MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
     enum MHD_Result rc = MHD_queue_response(conn, (unsigned)resp->status, r);
@@ -453,7 +306,7 @@ conn_free(struct http *h, struct conn *c)
         struct http_defer *d = c->defer;
         defer_unlink(h, d);
         if (d->ready) { /* answered, never sent: the server stopped first */
-            resp_discard(&d->resp);
+            http_resp_discard(&d->resp);
             free(d);
         } else { /* the answer to come only frees it */
             d->c = NULL;
@@ -712,7 +565,7 @@ respond(struct http *h, struct conn *c, struct MHD_Connection *conn, struct http
         return send_stream(h, conn, c->key, resp);
     if (resp->body || resp->fd > 0 || resp->status == MHD_HTTP_NOT_MODIFIED) {
         json_decref(resp->json);
-        return send_raw(conn, resp);
+        return http_send_raw(conn, resp);
     }
     if (!resp->json)
         resp->json = json_object();
@@ -720,12 +573,12 @@ respond(struct http *h, struct conn *c, struct MHD_Connection *conn, struct http
         char *text = json_dumps(resp->json, JSON_COMPACT);
         json_decref(resp->json);
         if (!text)
-            return send_error(conn, MHD_HTTP_INTERNAL_SERVER_ERROR, "out of memory");
+            return http_send_error(conn, MHD_HTTP_INTERNAL_SERVER_ERROR, "out of memory");
         resp->body = text, resp->body_len = strlen(text), resp->body_free = free;
         resp->content_type = "application/json";
-        return send_raw(conn, resp);
+        return http_send_raw(conn, resp);
     }
-    return send_json(conn, resp->status, resp->json, false);
+    return http_send_json(conn, resp->status, resp->json, false);
 }
 
 static enum MHD_Result
@@ -748,7 +601,7 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
            answer comes at its end. */
         if (c->status && (!c->has_body || c->expect || c->status == MHD_HTTP_UNAUTHORIZED ||
                           c->status == MHD_HTTP_CONTENT_TOO_LARGE))
-            return send_error(conn, c->status, c->msg);
+            return http_send_error(conn, c->status, c->msg);
         return MHD_YES;
     }
     if (*upload_data_size) {
@@ -791,11 +644,10 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     struct sf_err err;
     sf_err_clear(&err);
     if (!c->status && c->upload && h->cfg.sink->finish(c->upload, &err))
-        fail(c, err.code == SF_EINVAL ? MHD_HTTP_BAD_REQUEST : MHD_HTTP_INTERNAL_SERVER_ERROR, "%s",
-             err.msg);
+        fail(c, http_status_of(err.code), "%s", err.msg);
     if (c->status) {
         drop_upload(c); /* before the client hears of it */
-        return send_error(conn, c->status, c->msg);
+        return http_send_error(conn, c->status, c->msg);
     }
 
     struct http_req req = { .method = method,
@@ -821,7 +673,7 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
         /* The answer comes later (http_defer_answer): keep the upload and
            wait, suspended, so other clients and printers go on. */
         struct http_defer *d = resp.defer;
-        resp_discard(&resp); /* a deferring route answers nothing now */
+        http_resp_discard(&resp); /* a deferring route answers nothing now */
         d->h = h;
         d->c = c;
         d->conn = conn;
@@ -857,7 +709,7 @@ void
 http_defer_answer(struct http_defer *d, struct http_resp *resp)
 {
     if (!d->conn) {
-        resp_discard(resp);
+        http_resp_discard(resp);
         free(d);
         return;
     }

@@ -229,4 +229,15 @@ void http_defer_answer(struct http_defer *d, struct http_resp *resp);
 void http_error(struct http_resp *resp, int status, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 
+/*
+ * The HTTP status of a failure, the one map every route uses:
+ *   SF_EINVAL 400 (bad input), SF_ENOTFOUND 404, SF_EAGAIN 409 (not now:
+ *   not in a state for it, or busy), SF_EUNSUPP 501, SF_EUNREACH 503 (a
+ *   printer that does not answer), SF_ECANCELED 503 (the daemon is
+ *   stopping), anything else 500.
+ */
+int http_status_of(int code);
+/* http_error with the status of failure code and its message msg. */
+void http_fail(struct http_resp *resp, int code, const char *msg);
+
 #endif

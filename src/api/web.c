@@ -5,15 +5,12 @@
  * use; this file is what only a browser needs (files, a cookie, pictures),
  * so each can change without the other.
  *
- * Pictures: a render is slow (load, ray grid, cairo: a second or more), so
- * it runs on the worker pool and the request waits as a suspended stream
- * (http.c's SSE machinery) that the render's done() wakes.  Rendered PNGs
- * are kept by content (file sha and overhang angle) in a small LRU, and
- * their ETag says the same, so a page reload costs a 304.  A task owns
- * its own data; web_free cuts its link to us, and done() of a task whose
- * web is gone only frees it.
+ * Pictures: the farm makes them (pictures.h); a render is slow, so the
+ * request waits as a suspended stream (http.c's SSE machinery) that the
+ * render's end wakes.  Their ETag says what they show (file sha and
+ * overhang angle), so a page reload costs a 304.
  *
- * Thread: the loop thread; render_work() on a pool worker.
+ * Thread: the loop thread.
  */
 #include "web.h"
 
@@ -25,45 +22,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "../../slicer/preview.h"
-#include "../base/buf.h"
-#include "../base/log.h"
 #include "../base/mem.h"
-#include "../geom/supmodel.h"
-#include "../mesh/mesh.h"
 
 /* The Content-Security-Policy of every static file: scripts and styles
    from this origin only, no inline script, nothing framed or embedded. */
 #define WEB_CSP                                                                                    \
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "              \
     "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
-
-enum render_state { R_FREE, R_PENDING, R_READY, R_FAILED };
-
-/* One picture, cached by what it shows. */
-struct render {
-    enum render_state state;
-    char key[96];       /* "SHA@ANGLE" */
-    unsigned char *png; /* R_READY */
-    size_t len;
-    uint64_t used;            /* LRU stamp */
-    char why[SF_ERR_MSG_MAX]; /* R_FAILED */
-    double support_g;         /* R_READY: the support model's grams for it, -1 if it failed */
-    double support_s;         /* and seconds */
-};
-
-/* A render on the pool: its own copies of everything. */
-struct task {
-    struct web *w; /* NULL once web_free ran */
-    char key[96];
-    char path[1100]; /* the stored part */
-    double angle_deg;
-    unsigned char *png;
-    size_t len;
-    double support_g, support_s; /* supmodel_of_mesh, PrusaSlicer's rules; -1 if it failed */
-    struct sf_err err;
-    struct task *next; /* in w->tasks */
-};
 
 struct session {
     char token[33];                /* 32 hex digits; "" if unused */
@@ -75,15 +40,13 @@ struct web {
     struct web_config cfg;
     struct session sessions[WEB_SESSIONS_MAX];
     uint64_t n_made;
-    struct render renders[WEB_PREVIEWS_MAX];
-    uint64_t stamp;
-    struct task *tasks;
+    struct pictures *pictures; /* the jobs' pictures, from the farm */
 };
 
 /* A request waiting for (or sending) a picture. */
 struct pstream {
     struct web *w;
-    char key[96];
+    char key[PICTURES_KEY_MAX];
     unsigned char *png; /* our copy, once ready */
     size_t len, off;
 };
@@ -187,153 +150,16 @@ whoami(struct web *w, const struct http_req *req, struct http_resp *resp)
 
 /* ---- pictures ---- */
 
-static struct render *
-render_find(struct web *w, const char *key)
-{
-    for (size_t i = 0; i < WEB_PREVIEWS_MAX; i++)
-        if (w->renders[i].state != R_FREE && strcmp(w->renders[i].key, key) == 0)
-            return &w->renders[i];
-    return NULL;
-}
-
-/* A slot for a new render: a free one, else the least recently used
-   finished one; NULL when every slot is rendering. */
-static struct render *
-render_slot(struct web *w)
-{
-    struct render *best = NULL;
-    for (size_t i = 0; i < WEB_PREVIEWS_MAX; i++) {
-        struct render *r = &w->renders[i];
-        if (r->state == R_FREE)
-            return r;
-        if (r->state != R_PENDING && (!best || r->used < best->used))
-            best = r;
-    }
-    if (best) {
-        free(best->png);
-        memset(best, 0, sizeof(*best));
-    }
-    return best;
-}
-
-static int
-render_work(void *ud, const atomic_bool *cancel)
-{
-    struct task *t = ud;
-    struct mesh m;
-    mesh_init(&m);
-    char png[64] = "";
-    int rc = mesh_load(t->path, &m, NULL, &t->err);
-    if (rc == SF_OK && atomic_load(cancel))
-        rc = sf_err_set(&t->err, SF_ECANCELED, "cancelled");
-    if (rc == SF_OK) {
-        const char *dir = getenv("TMPDIR");
-        snprintf(png, sizeof(png), "%.40s/sfpreview.XXXXXX", dir && *dir ? dir : "/tmp");
-        int fd = mkstemp(png);
-        if (fd < 0) {
-            rc = sf_err_sys(&t->err, "preview: temporary file in %s", png);
-            png[0] = '\0';
-        } else {
-            close(fd);
-        }
-    }
-    if (rc == SF_OK) {
-        struct preview_opts po;
-        preview_opts_default(&po);
-        po.width_px = WEB_PREVIEW_W;
-        po.height_px = WEB_PREVIEW_H;
-        po.angle_deg = t->angle_deg;
-        rc = preview_part(&m, &po, png, &t->err);
-    }
-    if (rc == SF_OK) {
-        struct buf b;
-        buf_init(&b, 64 << 20);
-        rc = buf_read_file(&b, png, &t->err);
-        if (rc == SF_OK)
-            t->png = (unsigned char *)buf_take(&b, &t->len);
-        buf_release(&b);
-    }
-    if (png[0])
-        unlink(png);
-    /* what this part needs in support, as it stands on the bed (+z): the
-       same model orientation and slimming rank by (supmodel.h) */
-    t->support_g = t->support_s = -1;
-    struct supmodel_params sp;
-    struct supmodel_result sr;
-    struct sf_err serr;
-    supmodel_params_steer(&sp, t->angle_deg);
-    if (rc == SF_OK && !atomic_load(cancel) &&
-        supmodel_of_mesh(&m, (struct vec3){ 0, 0, 1 }, &sp, &sr, &serr) == SF_OK) {
-        t->support_g = sr.grams;
-        t->support_s = sr.time_s;
-    }
-    mesh_release(&m);
-    return rc;
-}
-
-static void
-render_done(struct loop *l, void *ud, int rc)
-{
-    (void)l;
-    struct task *t = ud;
-    struct web *w = t->w;
-    if (w) {
-        for (struct task **pp = &w->tasks; *pp; pp = &(*pp)->next)
-            if (*pp == t) {
-                *pp = t->next;
-                break;
-            }
-        struct render *r = render_find(w, t->key);
-        if (r && r->state == R_PENDING) {
-            if (rc == SF_OK && t->png) {
-                r->state = R_READY;
-                r->png = t->png;
-                r->len = t->len;
-                r->support_g = t->support_g;
-                r->support_s = t->support_s;
-                t->png = NULL;
-            } else {
-                r->state = R_FAILED;
-                snprintf(r->why, sizeof(r->why), "%s",
-                         rc == SF_ECANCELED ? "cancelled" : t->err.msg);
-                log_warn("web", "preview %s: %s", t->key, r->why);
-            }
-        }
-        if (w->cfg.wake)
-            w->cfg.wake(w->cfg.ud);
-    }
-    free(t->png);
-    free(t);
-}
-
-static double
-render_angle(const struct job_row *j)
-{
-    return j->opts.overhang_deg > 0 ? j->opts.overhang_deg : 45;
-}
-
-/* The cache key of a job's picture: what it shows (after: the part as it
-   prints, oriented and shaped; a job that kept its part, or is not
-   prepared yet, shows the upload) and the angle its risky faces are for. */
-static void
-render_key(const struct job_row *j, bool after, char *key, size_t cap)
-{
-    const char *sha = after && j->mesh_sha[0] ? j->mesh_sha : j->file_sha;
-    snprintf(key, cap, "%.64s@%g", sha, render_angle(j));
-}
-
 static ssize_t
 pstream_read(void *ud, char *buf, size_t max)
 {
     struct pstream *s = ud;
     if (!s->png) {
-        struct render *r = render_find(s->w, s->key);
-        if (r && r->state == R_PENDING)
+        enum pictures_state st = pictures_take(s->w->pictures, s->key, &s->png, &s->len);
+        if (st == PICTURES_PENDING)
             return 0; /* still rendering: suspended until a render ends */
-        if (!r || r->state != R_READY || !(s->png = mem_alloc(r->len)))
+        if (st != PICTURES_READY)
             return -1; /* failed (logged): the picture ends empty */
-        memcpy(s->png, r->png, r->len);
-        s->len = r->len;
     }
     size_t n = s->len - s->off < max ? s->len - s->off : max;
     if (n == 0)
@@ -351,6 +177,22 @@ pstream_free(void *ud)
     free(s);
 }
 
+/* A picture the farm could not give now, as an error answer. */
+static void
+preview_refused(const struct job_row *j, enum pictures_state st, const struct sf_err *err,
+                struct http_resp *resp)
+{
+    resp->content_type = NULL;
+    if (st == PICTURES_FAILED) {
+        http_error(resp, 422, "job %lld: no picture of its part: %s", (long long)j->id, err->msg);
+    } else if (st == PICTURES_NONE) {
+        http_error(resp, 503, "job %lld: no worker pool for pictures", (long long)j->id);
+    } else {
+        http_resp_header(resp, "Retry-After", "2");
+        http_error(resp, 503, "every picture slot is rendering; try again");
+    }
+}
+
 static void
 preview(struct web *w, const struct job_row *j, const struct http_req *req, struct http_resp *resp)
 {
@@ -360,10 +202,10 @@ preview(struct web *w, const struct job_row *j, const struct http_req *req, stru
         http_error(resp, 400, "stage: '%.16s' is not 'before' or 'after'", stage);
         return;
     }
-    const char *sha = after && j->mesh_sha[0] ? j->mesh_sha : j->file_sha;
-    double angle = render_angle(j);
-    char key[96], etag[112];
-    render_key(j, after, key, sizeof(key));
+    const char *sha;
+    double angle;
+    char etag[112];
+    pictures_what(j, after, &sha, &angle);
     snprintf(etag, sizeof(etag), "\"%.24s-%g\"", sha, angle);
     http_resp_header(resp, "ETag", "%s", etag);
     http_resp_header(resp, "Cache-Control", "private, no-cache");
@@ -372,57 +214,25 @@ preview(struct web *w, const struct job_row *j, const struct http_req *req, stru
         resp->status = 304;
         return;
     }
-    struct render *r = render_find(w, key);
-    if (r && r->state == R_FAILED) {
+    enum pictures_state st;
+    unsigned char *png = NULL;
+    size_t len = 0;
+    struct sf_err err;
+    int rc = pictures_get(w->pictures, j, after, &st, &png, &len, &err);
+    if (rc) {
         resp->content_type = NULL;
-        http_error(resp, 422, "job %lld: no picture of its part: %s", (long long)j->id, r->why);
-        r->state = R_FREE; /* the next request tries again */
+        http_error(resp, 500, "%s", err.msg);
         return;
     }
-    if (!r) {
-        struct sf_err err;
-        struct task *t = w->cfg.pool ? mem_calloc(1, sizeof(*t)) : NULL;
-        if (!t || store_file_path(w->cfg.store, sha, t->path, sizeof(t->path), &err)) {
-            resp->content_type = NULL;
-            http_error(resp, t ? 500 : 503, "job %lld: %s", (long long)j->id,
-                       t ? err.msg : "no worker pool for pictures");
-            free(t);
-            return;
-        }
-        if (!(r = render_slot(w))) {
-            free(t);
-            resp->content_type = NULL;
-            http_resp_header(resp, "Retry-After", "2");
-            http_error(resp, 503, "every picture slot is rendering; try again");
-            return;
-        }
-        t->w = w;
-        snprintf(t->key, sizeof(t->key), "%s", key);
-        t->angle_deg = angle;
-        if (!pool_submit(w->cfg.pool, render_work, render_done, t, &err)) {
-            free(t);
-            resp->content_type = NULL;
-            http_error(resp, 500, "%s", err.msg);
-            return;
-        }
-        t->next = w->tasks;
-        w->tasks = t;
-        r->state = R_PENDING;
-        snprintf(r->key, sizeof(r->key), "%s", key);
-    }
-    r->used = ++w->stamp;
-    if (r->state == R_READY) {
+    if (st == PICTURES_READY) {
         /* MHD may send it after the cache evicted it: a copy it frees */
-        void *copy = mem_alloc(r->len);
-        if (!copy) {
-            resp->content_type = NULL;
-            http_error(resp, 500, "out of memory");
-            return;
-        }
-        memcpy(copy, r->png, r->len);
-        resp->body = copy;
-        resp->body_len = r->len;
+        resp->body = png;
+        resp->body_len = len;
         resp->body_free = free;
+        return;
+    }
+    if (st != PICTURES_PENDING) {
+        preview_refused(j, st, &err, resp);
         return;
     }
     struct pstream *s = mem_calloc(1, sizeof(*s));
@@ -432,7 +242,7 @@ preview(struct web *w, const struct job_row *j, const struct http_req *req, stru
         return;
     }
     s->w = w;
-    snprintf(s->key, sizeof(s->key), "%s", key);
+    pictures_key(j, after, s->key);
     resp->stream = pstream_read;
     resp->stream_ud = s;
     resp->stream_free = pstream_free;
@@ -488,12 +298,10 @@ head_num(const char *text, const char *name)
 static json_t *
 model_json(struct web *w, const struct job_row *j, bool after)
 {
-    char key[96];
-    render_key(j, after, key, sizeof(key));
-    struct render *r = render_find(w, key);
-    if (!r || r->state != R_READY || r->support_g < 0)
+    double g, sec;
+    if (!pictures_support(w->pictures, j, after, &g, &sec))
         return json_null();
-    return json_pack("{sf sf}", "support_g", r->support_g, "support_s", r->support_s);
+    return json_pack("{sf sf}", "support_g", g, "support_s", sec);
 }
 
 static void
@@ -530,55 +338,60 @@ report(struct web *w, const struct job_row *j, struct http_resp *resp)
 
 /* ---- dispatch ---- */
 
-bool
-web_route(struct web *w, const struct http_req *req, struct http_resp *resp)
+static void
+asset(void *ctx, const struct route_args *args, const struct http_req *req, struct http_resp *resp)
 {
-    bool get = strcmp(req->method, "GET") == 0 || strcmp(req->method, "HEAD") == 0;
-    const struct web_asset *a = asset_find(req->path);
-    if (a) {
-        if (get)
-            serve_asset(a, req, resp);
-        else
-            http_error(resp, 405, "use GET");
-        return true;
-    }
-    if (strcmp(req->path, "/api/whoami") == 0) {
-        if (get)
-            whoami(w, req, resp);
-        else
-            http_error(resp, 405, "use GET");
-        return true;
-    }
-    const char *p = req->path;
-    if (strncmp(p, "/api/jobs/", 10) != 0)
-        return false;
-    p += 10;
-    char *end;
-    long long id = strtoll(p, &end, 10);
-    if (end == p || id <= 0 || *p < '1' || *p > '9' || *end != '/')
-        return false;
-    const char *what = end + 1;
-    bool png = strcmp(what, "preview.png") == 0, gc = strcmp(what, "gcode") == 0;
-    if (!png && !gc && strcmp(what, "report") != 0)
-        return false;
-    if (!get) {
-        http_error(resp, 405, "use GET");
-        return true;
-    }
+    (void)ctx, (void)args;
+    serve_asset(asset_find(req->path), req, resp);
+}
+
+static void
+whoami_route(void *ctx, const struct route_args *args, const struct http_req *req,
+             struct http_resp *resp)
+{
+    (void)args;
+    whoami(ctx, req, resp);
+}
+
+/* GET /api/jobs/ID/preview.png, /gcode or /report. */
+static void
+job_route(void *ctx, const struct route_args *args, const struct http_req *req,
+          struct http_resp *resp)
+{
+    struct web *w = ctx;
     struct job_row j;
     struct sf_err err;
-    int rc = store_job_get(w->cfg.store, id, &j, &err);
+    int rc = store_job_get(w->cfg.store, args->id, &j, &err);
     if (rc) {
-        http_error(resp, rc == SF_ENOTFOUND ? 404 : 500, "%s", err.msg);
-        return true;
+        http_fail(resp, rc, err.msg);
+        return;
     }
-    if (png)
-        preview(w, &j, req, resp);
-    else if (gc)
+    const char *what = strrchr(req->path, '/') + 1;
+    if (strcmp(what, "gcode") == 0)
         gcode(w, &j, resp);
-    else
+    else if (strcmp(what, "report") == 0)
         report(w, &j, resp);
-    return true;
+    else
+        preview(w, &j, req, resp);
+}
+
+#define GET_HEAD (ROUTE_GET | ROUTE_HEAD)
+
+static const struct route rows[] = {
+    /* methods, pattern, match, body, scope, handler, 405 message */
+    { GET_HEAD, NULL, web_is_public, HTTP_BODY_NONE, ROUTE_PUBLIC, asset, "use GET" },
+    { GET_HEAD, "/api/whoami", NULL, HTTP_BODY_NONE, ROUTE_READ, whoami_route, "use GET" },
+    { GET_HEAD, "/api/jobs/{id}/preview.png", NULL, HTTP_BODY_NONE, ROUTE_READ, job_route,
+      "use GET" },
+    { GET_HEAD, "/api/jobs/{id}/gcode", NULL, HTTP_BODY_NONE, ROUTE_READ, job_route, "use GET" },
+    { GET_HEAD, "/api/jobs/{id}/report", NULL, HTTP_BODY_NONE, ROUTE_READ, job_route, "use GET" },
+};
+
+const struct route *
+web_routes(size_t *n)
+{
+    *n = sizeof(rows) / sizeof(rows[0]);
+    return rows;
 }
 
 struct web *
@@ -590,6 +403,13 @@ web_new(const struct web_config *cfg, struct sf_err *err)
         return NULL;
     }
     w->cfg = *cfg;
+    struct pictures_config pc = {
+        .store = cfg->store, .pool = cfg->pool, .ready = cfg->wake, .ud = cfg->ud
+    };
+    if (!(w->pictures = pictures_new(&pc, err))) {
+        free(w);
+        return NULL;
+    }
     return w;
 }
 
@@ -598,9 +418,6 @@ web_free(struct web *w)
 {
     if (!w)
         return;
-    for (struct task *t = w->tasks; t; t = t->next)
-        t->w = NULL; /* its done() frees it alone */
-    for (size_t i = 0; i < WEB_PREVIEWS_MAX; i++)
-        free(w->renders[i].png);
+    pictures_free(w->pictures); /* renders in flight finish unseen */
     free(w);
 }

@@ -12,8 +12,8 @@
  *                                      later GETs (EventSource, <img>)
  *   GET /api/jobs/ID/preview.png?stage=before|after
  *                                      the part as uploaded / as it prints,
- *                                      risky faces red (slicer/preview.h),
- *                                      rendered on the worker pool
+ *                                      risky faces red, as the farm gives
+ *                                      it (farm/pictures.h)
  *   GET /api/jobs/ID/gcode             the job's G-code (text/plain)
  *   GET /api/jobs/ID/report            what the G-code's header says: time,
  *                                      filament and support grams, layers
@@ -34,13 +34,12 @@
 
 #include "../base/err.h"
 #include "../base/pool.h"
+#include "../farm/pictures.h"
 #include "../farm/store.h"
 #include "http.h"
+#include "route.h"
 
-#define WEB_SESSIONS_MAX   64 /* browser sessions: a farm has few operators */
-#define WEB_PREVIEWS_MAX   16 /* rendered pictures kept (about 100 kB each) */
-#define WEB_PREVIEW_W      640
-#define WEB_PREVIEW_H      480
+#define WEB_SESSIONS_MAX   64   /* browser sessions: a farm has few operators */
 #define WEB_GCODE_HEAD_MAX 4096 /* bytes of G-code header read for /report */
 
 /* One embedded static file (build/gen/web_assets.c, from src/api/web/). */
@@ -75,7 +74,8 @@ bool web_is_public(const char *path);
 /* The API key a session token stands for, or NULL. */
 const char *web_session_key(struct web *w, const char *token);
 
-/* Answer req if it is one of the routes above: true if resp was filled. */
-bool web_route(struct web *w, const struct http_req *req, struct http_resp *resp);
+/* The routes above as rows of the route table; their handlers take the
+   struct web as ctx.  *n their count. */
+const struct route *web_routes(size_t *n);
 
 #endif

@@ -98,6 +98,8 @@ sf_status_name(int code)
         return "EBUG";
     case SF_ENOTFOUND:
         return "ENOTFOUND";
+    case SF_EUNREACH:
+        return "EUNREACH";
     }
     return code > 0 ? "count" : "unknown";
 }

@@ -27,6 +27,7 @@ enum sf_status {
     SF_ECANCELED = -7, /* cancelled by request */
     SF_EBUG = -8,      /* a broken internal invariant */
     SF_ENOTFOUND = -9, /* a named thing does not exist */
+    SF_EUNREACH = -10, /* a device does not answer now (an offline printer) */
 };
 
 #define SF_ERR_MSG_MAX 256

@@ -129,7 +129,7 @@ grep -q "job-add" "$tmp/watch" || fail "watch: $(cat "$tmp/watch")"
 out=$("$C" cancel 4 2>&1) && fail "cancelled twice"
 [[ "$out" == *"409: job 4: cannot cancel a cancelled job"* ]] || fail "double cancel: $out"
 out=$("$C" pause mk3 2>&1) && fail "paused an offline printer"
-[[ "$out" == *"409: "* ]] || fail "pause offline: $out"
+[[ "$out" == *"503: printer mk3 is offline"* ]] || fail "pause offline: $out"
 out=$("$C" cleared nosuch 2>&1) && fail "unknown printer"
 [[ "$out" == *"404: no printer 'nosuch'"* ]] || fail "unknown printer: $out"
 

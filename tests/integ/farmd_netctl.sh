@@ -8,7 +8,8 @@
 #    executed-command log, for Marlin, OctoPrint and Moonraker; PrusaLink's
 #    API has no console, so its printer refuses plainly (501); a printer
 #    printing a job refuses (409); a bad body is a 400, an unknown printer
-#    a 404;
+#    a 404; a network printer that no longer answers (its simulator gone,
+#    the farm holds it offline) refuses commands and actions with 503;
 #  - mid-print, GET /api/printers, GET /api/jobs/ID and `slimfarm printers`
 #    give the time left and whose estimate it is: the printer's own for
 #    the three network printers (OctoPrint's printTimeLeft, PrusaLink's
@@ -103,5 +104,14 @@ for p in mar octo klip; do
 done
 grep -qx "G4 P1" "$tmp/klip.log" || fail "klip's log lacks G4 P1"
 grep -q "sf-manual" "$tmp/prusa.log" && fail "prusa ran a command it refused"
+# the simulators are gone: once offline, a network printer is unreachable (503)
+offline() { "$C" printers | grep -qE "^$1 +offline "; }
+for p in klip prusa; do
+  wait_for 120 offline $p || fail "$p never went offline: $("$C" printers)"
+done
+out=$("$C" command klip M117 x 2>&1) && fail "klip took a command offline: $out"
+echo "$out" | grep -q "503: printer klip is offline" || fail "klip offline: $out"
+out=$("$C" pause prusa 2>&1) && fail "prusa paused offline: $out"
+echo "$out" | grep -q "503: printer prusa is offline" || fail "prusa offline: $out"
 kill -TERM $pid; wait $pid; pid=
 echo "farmd_netctl: ok ($(( $(date +%s) - t0 )) s)"

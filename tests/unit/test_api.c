@@ -43,10 +43,17 @@
  */
 #define GCODE_LINES 2000
 
+/* Test switches, set on the server thread: the driver says "not now" to a
+   pause, as Moonraker's and PrusaLink's do while their upload runs; printer
+   b's link is gone (it stays offline across reconnects). */
+static atomic_bool adrv_busy, adrv_unplugged;
+static struct drv *adrv_b; /* printer b's driver */
+
 static int
 adrv_open(struct drv *d, struct sf_err *err)
 {
-    (void)err;
+    if (d == adrv_b && atomic_load(&adrv_unplugged))
+        return sf_err_set(err, SF_EIO, "adrv: no answer");
     d->status.state = DRV_IDLE;
     d->status.nozzle_c = d->status.nozzle_target_c = 215;
     d->on_event(d, DRV_EV_STATE, d->ud);
@@ -75,7 +82,8 @@ adrv_set(struct drv *d, enum drv_state st)
 static int
 adrv_pause(struct drv *d, struct sf_err *err)
 {
-    (void)err;
+    if (atomic_load(&adrv_busy))
+        return sf_err_set(err, SF_EAGAIN, "printer '%s': nothing to pause", d->name);
     return adrv_set(d, DRV_PAUSED);
 }
 
@@ -127,6 +135,8 @@ adrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, vo
     }
     *d = (struct drv){ .ops = &adrv_ops, .loop = l, .on_event = on_event, .ud = ud };
     snprintf(d->name, sizeof(d->name), "%s", cfg->name);
+    if (strcmp(cfg->name, "b") == 0)
+        adrv_b = d;
     return d;
 }
 
@@ -651,6 +661,52 @@ T_CASE(api_restart_interrupted_job)
     T_EQ_STR(jstr(&b, "job", "state"), "ready");
     T_EQ_INT(call("POST", "/api/jobs/1/explode", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 404);
     T_EQ_INT(call("GET", "/api/jobs/1/restart", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 405);
+    buf_release(&b);
+    stop();
+}
+
+/* On the server thread: printer b's link goes and does not come back. */
+static void
+unplug_b(void *arg)
+{
+    (void)arg;
+    atomic_store(&adrv_unplugged, true);
+    snprintf(adrv_b->status.message, sizeof(adrv_b->status.message), "no answer");
+    adrv_set(adrv_b, DRV_OFFLINE);
+}
+
+static void on_server(void (*fn)(void *), void *arg);
+
+/* A printer that cannot do it now answers 409, whoever says so (the farm or
+   its driver: it was 500 when the driver said it); one the farm holds
+   offline answers 503, for actions, commands and the cancel of its job. */
+T_CASE(api_busy_printer_is_409_unreachable_is_503)
+{
+    struct sf_err err;
+    T_OK(start("busy", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    atomic_store(&adrv_busy, true);
+    T_EQ_INT(call("POST", "/api/printers/a/pause", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 409);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "printer 'a': nothing to pause") != NULL);
+    atomic_store(&adrv_busy, false);
+    T_EQ_INT(call("POST", "/api/printers/a/command", KEY_RW, "{\"command\": \"G28\"}", NULL, NULL,
+                  0, NULL, &b),
+             409);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "manual commands wait") != NULL);
+    on_server(unplug_b, NULL);
+    T_EQ_INT(get("/api/printers/b", KEY_RW, &b), 200);
+    T_EQ_STR(jstr(&b, "printer", "state"), "offline");
+    T_EQ_INT(call("POST", "/api/printers/b/command", KEY_RW, "{\"command\": \"G28\"}", NULL, NULL,
+                  0, NULL, &b),
+             503);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "printer b is offline") != NULL);
+    T_EQ_INT(call("POST", "/api/printers/b/pause", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 503);
+    T_EQ_INT(call("POST", "/api/printers/b/cleared", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 503);
+    /* a wrong method on a known path says which would do */
+    T_EQ_INT(call("DELETE", "/api/printers/b", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 405);
+    T_EQ_STR(jstr(&b, NULL, "error"), "use GET");
+    atomic_store(&adrv_unplugged, false);
     buf_release(&b);
     stop();
 }

@@ -1,0 +1,89 @@
+/*
+ * jobctl.c - an operator's requests to the farm's jobs and printers, with
+ * their refusals as precise status codes (see jobctl.h).
+ *
+ * Why here and not in the API: what a cancel means depends on where the
+ * job is (on a printer: stop the printer, whose registry records it;
+ * elsewhere: the store alone), which is the farm's knowledge; the HTTP
+ * side only turns the code into a status.  The job and printer rules say
+ * SF_EINVAL when an event is not legal from a state; to an operator that
+ * is "not now" (SF_EAGAIN), not bad input.
+ *
+ * Thread: the loop thread.
+ */
+#include "jobctl.h"
+
+#include <string.h>
+
+/* A refusal of the job or printer rules (SF_EINVAL) is "not now". */
+static int
+not_now(int rc, struct sf_err *err)
+{
+    if (rc != SF_EINVAL)
+        return rc;
+    if (err)
+        err->code = SF_EAGAIN;
+    return SF_EAGAIN;
+}
+
+/* SF_ENOTFOUND for an unknown printer, SF_EUNREACH for an offline one. */
+static int
+reachable(struct farm *f, const char *name, struct sf_err *err)
+{
+    size_t n = f ? farm_printer_count(f) : 0;
+    for (size_t i = 0; i < n; i++) {
+        struct printer_info p;
+        farm_printer_info(f, i, &p);
+        if (strcmp(p.cfg->name, name) != 0)
+            continue;
+        if (p.state == PRINTER_OFFLINE)
+            return sf_err_set(err, SF_EUNREACH, "printer %s is offline%s%s", name,
+                              p.message && p.message[0] ? ": " : "", p.message ? p.message : "");
+        return SF_OK;
+    }
+    return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
+}
+
+int
+jobctl_printer_action(struct farm *f, const char *name, enum printer_action act, struct sf_err *err)
+{
+    int rc = reachable(f, name, err);
+    return rc ? rc : not_now(farm_printer_action(f, name, act, err), err);
+}
+
+int
+jobctl_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err)
+{
+    int rc = reachable(f, name, err);
+    return rc ? rc : farm_printer_command(f, name, line, err);
+}
+
+int
+jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *err)
+{
+    struct job_row j;
+    int rc = store_job_get(s, id, &j, err);
+    if (rc)
+        return rc;
+    if (job_state_on_printer(j.state))
+        /* The printer must stop first; its registry records the cancel. */
+        return f ? jobctl_printer_action(f, j.printer, PRINTER_ACT_CANCEL, err)
+                 : sf_err_set(err, SF_EAGAIN, "job %lld: no farm to stop its printer",
+                              (long long)id);
+    struct job_event_args args = { .reason = "cancelled by an operator" };
+    return not_now(store_job_event(s, id, JOB_EV_CANCEL, &args, NULL, err), err);
+}
+
+int
+jobctl_restart(struct store *s, int64_t id, struct sf_err *err)
+{
+    return not_now(store_job_event(s, id, JOB_EV_RESTART, NULL, NULL, err), err);
+}
+
+int
+jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
+{
+    if (!f)
+        return sf_err_set(err, SF_EAGAIN, "resuming jobs is not available here");
+    return not_now(farm_job_resume(f, id, line, err), err);
+}

@@ -1,0 +1,59 @@
+/*
+ * jobctl.h - what an operator asks of the farm's jobs and printers: cancel
+ * a job (through its printer when it is on one), restart or resume an
+ * interrupted one, act on a printer (pause, resume, cancel, cleared), send
+ * it a manual command.  The farm decides by state and touches the store
+ * and the printer; the API only maps the status codes to HTTP:
+ *
+ *   SF_ENOTFOUND  no such job or printer
+ *   SF_EINVAL     bad input (a command that is not one line)
+ *   SF_EAGAIN     not now: the job or the printer is not in a state for it
+ *                 (the job and printer rules refuse, or the driver is busy:
+ *                 "nothing to pause" while a network printer's upload runs,
+ *                 "another action is still on its way")
+ *   SF_EUNREACH   the printer does not answer: the farm holds it offline
+ *                 (PRINTER_OFFLINE: its driver has lost contact, or never
+ *                 had it: a network printer that does not answer, a serial
+ *                 port that is gone), so nothing can be asked of it
+ *   SF_EUNSUPP    its kind cannot do it (a PrusaLink console command)
+ *   other         the store or the system failed
+ *
+ * f may be NULL (an API over a store alone): what needs a printer is then
+ * refused as not now, or a printer is not found.
+ *
+ * Thread: the loop thread (the farm's and the store's).
+ */
+#ifndef SF_FARM_JOBCTL_H
+#define SF_FARM_JOBCTL_H
+
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "farm.h"
+#include "printer.h"
+#include "store.h"
+
+/*
+ * Cancel job id: a job on a printer is cancelled by stopping the printer
+ * (its registry records the cancel), any other in the store directly.
+ */
+int jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *err);
+
+/* Interrupted job id prints its copy again from the start. */
+int jobctl_restart(struct store *s, int64_t id, struct sf_err *err);
+
+/*
+ * Interrupted job id continues on its printer from command line `line`
+ * (-1: the last acknowledged one); farm_job_resume, whose refusals (not
+ * interrupted, printer not idle, line out of range) are SF_EAGAIN here.
+ */
+int jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err);
+
+/* Act on printer name (farm_printer_action). */
+int jobctl_printer_action(struct farm *f, const char *name, enum printer_action act,
+                          struct sf_err *err);
+
+/* One manual G-code line for printer name (farm_printer_command). */
+int jobctl_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err);
+
+#endif
