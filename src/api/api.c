@@ -150,15 +150,6 @@ up_commit(void *ctx, char sha[STORE_SHA_HEX], struct sf_err *err)
 
 /* ---- helpers ---- */
 
-static const char *
-field(const struct http_req *req, const char *name)
-{
-    for (size_t i = 0; i < req->n_fields; i++)
-        if (strcmp(req->field_name[i], name) == 0)
-            return req->field_value[i];
-    return NULL;
-}
-
 static void
 changed(struct api *a)
 {
@@ -210,7 +201,7 @@ jobs_submit(void *ctx, const struct route_args *args, const struct http_req *req
     struct job_opts o;
     job_opts_init(&o);
     snprintf(o.name, sizeof(o.name), "%s", req->upload_name);
-    const char *opts = field(req, "options");
+    const char *opts = http_req_field(req, "options");
     char clipped[65];
     for (size_t i = 0; i < req->n_fields; i++)
         if (strcmp(req->field_name[i], "options") != 0) {

@@ -38,15 +38,6 @@ api_compat_is_gcode(const char *name)
                    strcasecmp(dot, ".g") == 0);
 }
 
-static const char *
-field(const struct http_req *req, const char *name)
-{
-    for (size_t i = 0; i < req->n_fields; i++)
-        if (strcmp(req->field_name[i], name) == 0)
-            return req->field_value[i];
-    return NULL;
-}
-
 /* OctoPrint's and Moonraker's booleans: "true"/"false" (any case), "1"/"0". */
 static int
 boolean(const char *v, bool *out)
@@ -189,7 +180,7 @@ upload(const struct api_compat_env *env, enum flavor fl, const struct http_req *
     bool b;
     const char *names[] = { "print", "select" };
     for (size_t i = 0; i < 2; i++)
-        if (boolean(field(req, names[i]), &b)) {
+        if (boolean(http_req_field(req, names[i]), &b)) {
             http_error(resp, 400, "form field '%s' must be true or false", names[i]);
             return;
         }
@@ -243,7 +234,7 @@ moon_upload(void *ctx, const struct route_args *args, const struct http_req *req
 {
     (void)args;
     const struct api_compat_env *env = ctx;
-    const char *root = field(req, "root");
+    const char *root = http_req_field(req, "root");
     if (root && root[0] && strcmp(root, "gcodes") != 0) {
         http_error(resp, 400, "root '%.32s': the farm takes uploads only to 'gcodes'", root);
         return;

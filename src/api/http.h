@@ -91,6 +91,8 @@ struct http_req {
 const char *http_req_header(const struct http_req *req, const char *name);
 /* Query argument name (URL-decoded) or NULL. */
 const char *http_req_arg(const struct http_req *req, const char *name);
+/* The multipart form field name (its first value) or NULL. */
+const char *http_req_field(const struct http_req *req, const char *name);
 
 /*
  * Stream body: write up to max bytes to buf and return how many; 0 when

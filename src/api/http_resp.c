@@ -194,3 +194,12 @@ http_req_arg(const struct http_req *req, const char *name)
 {
     return MHD_lookup_connection_value(req->conn, MHD_GET_ARGUMENT_KIND, name);
 }
+
+const char *
+http_req_field(const struct http_req *req, const char *name)
+{
+    for (size_t i = 0; i < req->n_fields; i++)
+        if (strcmp(req->field_name[i], name) == 0)
+            return req->field_value[i];
+    return NULL;
+}
