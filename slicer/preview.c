@@ -3,8 +3,9 @@
  *
  * The part: every triangle projected once, sorted by depth with qsort,
  * filled back to front; shade = 0.35 + 0.65 |n . light|.  Columns come
- * from the same ray grid and measure_columns() the slicer uses, so the
- * picture shows exactly what will be supported.  The layer: moves are
+ * from support_columns() on the profile the slicer gets, so the picture
+ * shows exactly what will be supported (less the columns the slicer adds
+ * under islands it finds in the layers).  The layer: moves are
  * collected through the estimator's move callback (one G-code reader for
  * everything), then stroked with the role's colour and line width.
  *
@@ -19,9 +20,8 @@
 #include <string.h>
 
 #include "../src/base/mem.h"
-#include "../src/geom/measure.h"
-#include "../src/geom/raycast.h"
 #include "estimate.h"
+#include "support.h"
 
 void
 preview_opts_default(struct preview_opts *o)
@@ -29,7 +29,8 @@ preview_opts_default(struct preview_opts *o)
     o->width_px = 800;
     o->height_px = 600;
     o->angle_deg = 45;
-    o->pitch_mm = 1;
+    o->profile = NULL;
+    o->pitch_mm = 0;
     o->layer = -1;
 }
 
@@ -91,6 +92,28 @@ finish(cairo_surface_t *s, cairo_t *cr, const char *png_path, struct sf_err *err
 }
 
 int
+preview_columns(const struct mesh *m, const struct preview_opts *o, struct support_grid *g,
+                struct support_column **cols, size_t *n, size_t *n_body, struct sf_err *err)
+{
+    struct slice_profile def;
+    const struct slice_profile *p = o->profile;
+    size_t cap;
+    if (!p) {
+        int rc = slice_profile_default(&def);
+        if (rc < 0)
+            return sf_err_set(err, rc, "preview: out of memory");
+        def.max_overhang_deg = def.support_angle_deg = o->angle_deg;
+        if (o->pitch_mm > 0)
+            def.support_pitch_mm = o->pitch_mm;
+        p = &def;
+    }
+    int rc = support_columns(m, p, g, cols, n, &cap, n_body, err);
+    if (p == &def)
+        slice_profile_release(&def);
+    return rc;
+}
+
+int
 preview_part(const struct mesh *m, const struct preview_opts *o, const char *png_path,
              struct sf_err *err)
 {
@@ -113,7 +136,8 @@ preview_part(const struct mesh *m, const struct preview_opts *o, const char *png
     cairo_t *cr = cairo_create(s);
     cairo_set_source_rgb(cr, 1, 1, 1);
     cairo_paint(cr);
-    double tau = sin(o->angle_deg * M_PI / 180);
+    double angle = o->profile ? slice_profile_angle(o->profile) : o->angle_deg;
+    double tau = sin(angle * M_PI / 180);
     struct vec3 light = v3_normalize(v3(0.3, -0.5, 0.8));
     cairo_set_line_width(cr, 0.3);
     for (uint32_t k = 0; k < m->n_tris; k++) {
@@ -141,28 +165,17 @@ preview_part(const struct mesh *m, const struct preview_opts *o, const char *png
     }
     free(keys);
 
-    /* support columns from the ray grid, translucent over the part */
-    struct raycast *rc = raycast_new(m, err);
-    int st = rc ? SF_OK : (err ? err->code : SF_ENOMEM);
-    struct ray_grid g;
-    memset(&g, 0, sizeof(g));
+    /* the printed support columns, translucent over the part */
+    struct support_grid g;
     struct support_column *cols = NULL;
-    size_t n_cols = 0;
-    if (st == SF_OK)
-        st = raycast_grid(rc, v3(0, 0, 1), o->pitch_mm, &g, err);
-    if (st == SF_OK) {
-        struct support_params sp;
-        support_params_default(&sp);
-        sp.angle_deg = o->angle_deg;
-        sp.pitch_mm = o->pitch_mm;
-        st = measure_columns(&g, &sp, &cols, &n_cols, err);
-    }
+    size_t n_cols = 0, n_body = 0;
+    int st = preview_columns(m, o, &g, &cols, &n_cols, &n_body, err);
     if (st == SF_OK) {
         cairo_set_source_rgba(cr, 0.1, 0.35, 0.95, 0.12);
-        cairo_set_line_width(cr, fmax(1, 0.3 * o->pitch_mm * v.scale));
-        for (size_t c = 0; c < n_cols; c++) {
+        cairo_set_line_width(cr, fmax(1, 0.3 * g.pitch * v.scale));
+        for (size_t c = 0; c < n_body; c++) {
             uint32_t i = cols[c].cell % g.nu, j = cols[c].cell / g.nu;
-            double x = g.u0 + i * g.pitch, y = g.w0 + j * g.pitch, sx, sy, tx, ty;
+            double x = g.x0 + i * g.pitch, y = g.y0 + j * g.pitch, sx, sy, tx, ty;
             project(&v, v3(x, y, g.base + cols[c].lo), &sx, &sy);
             project(&v, v3(x, y, g.base + cols[c].hi), &tx, &ty);
             cairo_move_to(cr, sx, sy);
@@ -171,8 +184,6 @@ preview_part(const struct mesh *m, const struct preview_opts *o, const char *png
         }
     }
     free(cols);
-    ray_grid_release(&g);
-    raycast_free(rc);
     if (st < 0) {
         cairo_destroy(cr);
         cairo_surface_destroy(s);
@@ -186,7 +197,8 @@ struct seg {
     uint8_t role; /* index into role_colours, 0 = travel */
 };
 
-struct collect {
+/* What preview_gcode collects of a G-code file: the shown layer's moves, every layer's seams. */
+struct layer_moves {
     int layer;
     struct seg *segs;
     size_t n, cap;
@@ -222,7 +234,7 @@ role_of(const struct est_move *mv)
 static int
 on_move(void *ud, const struct est_move *mv)
 {
-    struct collect *c = ud;
+    struct layer_moves *c = ud;
     bool ext = mv->type && mv->type_len == 18 && memcmp(mv->type, "External perimeter", 18) == 0 &&
                mv->de > 0 && c->have && (mv->x != c->x || mv->y != c->y);
     if (ext && !c->in_ext) {
@@ -271,7 +283,7 @@ preview_gcode(const char *text, size_t len, const char *name, const struct previ
     if (layer >= (int)n_layers)
         return sf_err_set(err, SF_EINVAL, "%s: layer %d asked, the file has %u", name, layer,
                           n_layers);
-    struct collect c = { .layer = layer };
+    struct layer_moves c = { .layer = layer };
     rc = estimate_gcode(text, len, name, &lim, on_move, &c, &e, err);
     estimate_release(&e);
     if (rc < 0) {

@@ -5,8 +5,9 @@
  *
  * The part view is an orthographic three-quarter view from the front,
  * flat-shaded, faces sorted back to front (painter's algorithm); faces
- * that need support at the given angle are red, the columns from the ray
- * grid blue and translucent.  The layer view is from the top, scaled to
+ * that need support at the profile's angle are red, and the support
+ * columns the slicer prints for it (support.h support_columns, the same
+ * function on the same parameters) blue and translucent.  The layer view is from the top, scaled to
  * the layer's extent, with travel moves as thin grey lines.
  *
  * Thread: reentrant (each call has its own cairo surface).
@@ -17,16 +18,29 @@
 #include <stddef.h>
 
 #include "../src/base/err.h"
+#include "../src/geom/measure.h"
 #include "../src/mesh/mesh.h"
+#include "profile.h"
 
 struct preview_opts {
-    int width_px, height_px; /* image size (default 800 x 600) */
-    double angle_deg;        /* overhang angle from vertical (default 45) */
-    double pitch_mm;         /* column grid pitch (default 1) */
-    int layer;               /* G-code layer to draw, -1: the middle one */
+    int width_px, height_px;             /* image size (default 800 x 600) */
+    const struct slice_profile *profile; /* the part's columns as this profile slices
+                                            them; NULL (default): the default profile
+                                            at angle_deg and pitch_mm */
+    double angle_deg;                    /* overhang angle from vertical (default 45) */
+    double pitch_mm;                     /* column pitch, 0 (default): the profile's */
+    int layer;                           /* G-code layer to draw, -1: the middle one */
 };
 
 void preview_opts_default(struct preview_opts *o);
+
+/*
+ * The support columns preview_part draws for m: support_columns (support.h)
+ * under o's profile, *n_body columns then their interface bands, *cols
+ * allocated (free()).  SF_ENOMEM, or what the ray cast reports.
+ */
+int preview_columns(const struct mesh *m, const struct preview_opts *o, struct support_grid *g,
+                    struct support_column **cols, size_t *n, size_t *n_body, struct sf_err *err);
 
 /* Draw m and its support columns into png_path.  SF_EIO, SF_ENOMEM. */
 int preview_part(const struct mesh *m, const struct preview_opts *o, const char *png_path,

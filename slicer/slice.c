@@ -24,9 +24,6 @@
 #include "../src/base/clock.h"
 #include "../src/base/mem.h"
 #include "../src/base/par.h"
-#include "../src/geom/measure.h"
-#include "../src/geom/raycast.h"
-#include "../src/geom/supmodel.h"
 #include "estimate.h"
 #include "gcwrite.h"
 #include "layers.h"
@@ -109,70 +106,23 @@ slice_expand(const struct slice_profile *p, const char *what, const char *t, str
     return SF_OK;
 }
 
-/* Columns from the ray grid (src/geom), in bed coordinates. */
+/* The printed columns (support_columns), moved onto the bed. */
 static int
 ray_columns(const struct mesh *m, const struct slice_profile *p, const struct layer_stack *s,
-            struct sup_grid *g, struct sup_col **cols, size_t *n, size_t *cap,
+            struct support_grid *g, struct support_column **cols, size_t *n, size_t *cap,
             struct slice_result *res, struct sf_err *err)
 {
-    struct raycast *rc = raycast_new(m, err);
-    if (!rc)
-        return err ? err->code : SF_ENOMEM;
-    /* the same detection the optimizers were steered by (supmodel.h): a
-       bottom needs a column where a slicer's layer rule says it overhangs */
-    struct supmodel_params mp;
-    supmodel_params_default(&mp, SUPMODEL_PRUSA);
-    mp.angle_deg = slice_profile_angle(p);
-    mp.layer_mm = p->layer_mm;
-    mp.pitch_mm = p->support_pitch_mm;
-    /* PrusaSlicer leaves bridges it can anchor unsupported and prints them
-       with bridge infill along the anchored direction; our bridge infill
-       does not follow that direction yet, so our slicer still holds them
-       up (more support than PrusaSlicer, never less) */
-    mp.bridges = false;
-    mp.gap_z_mm = p->support_z_gap_mm;
-    mp.interface_layers = p->support_interface_layers;
-    struct ray_grid rg;
-    memset(&rg, 0, sizeof(rg));
-    /* at the model's raster: its snap cells are whole numbers of columns */
-    int st = raycast_grid(rc, v3(0, 0, 1), supmodel_raster_pitch(&mp), &rg, err);
-    struct support_column *sc = NULL, *bands = NULL;
-    size_t nsc = 0, nb = 0;
+    size_t n_body = 0;
+    int st = support_columns(m, p, g, cols, n, cap, &n_body, err);
     if (st == SF_OK) {
-        st = supmodel_columns(&rg, &mp, &sc, &nsc, &bands, &nb, err);
-    }
-    if (st == SF_OK) {
-        g->x0 = rg.u0 + s->dx;
-        g->y0 = rg.w0 + s->dy;
-        g->pitch = rg.pitch;
-        g->nu = rg.nu;
-        g->nw = rg.nw;
+        g->x0 += s->dx;
+        g->y0 += s->dy;
         double vol = 0;
-        for (size_t i = 0; i < nsc && st == SF_OK; i++) {
-            struct sup_col c = { sc[i].cell % rg.nu, sc[i].cell / rg.nu, sc[i].lo, sc[i].hi,
-                                 false };
-            vol += (double)(sc[i].hi - sc[i].lo) * rg.pitch * rg.pitch;
-            if (!mem_grow((void **)cols, cap, *n + 1, sizeof(**cols)))
-                st = sf_err_set(err, SF_ENOMEM, "support: out of memory");
-            else
-                (*cols)[(*n)++] = c;
-        }
+        for (size_t i = 0; i < n_body; i++)
+            vol += (double)((*cols)[i].hi - (*cols)[i].lo) * g->pitch * g->pitch;
         res->ray_volume_mm3 = vol;
-        res->n_columns = (uint32_t)nsc;
-        /* the model's dense-interface bands (whole snap cells under contacts) */
-        for (size_t i = 0; i < nb && st == SF_OK; i++) {
-            struct sup_col c = { bands[i].cell % rg.nu, bands[i].cell / rg.nu, bands[i].lo,
-                                 bands[i].hi, true };
-            if (!mem_grow((void **)cols, cap, *n + 1, sizeof(**cols)))
-                st = sf_err_set(err, SF_ENOMEM, "support: out of memory");
-            else
-                (*cols)[(*n)++] = c;
-        }
+        res->n_columns = (uint32_t)n_body;
     }
-    free(sc);
-    free(bands);
-    ray_grid_release(&rg);
-    raycast_free(rc);
     return st;
 }
 
@@ -324,11 +274,11 @@ check_fit(const struct mesh *m, const struct slice_profile *p, struct slice_resu
    grid's columns and the islands'; *cols (free) holds the columns. */
 static int
 supports(const struct mesh *m, const struct slice_profile *p, const struct layer_stack *s,
-         struct support_layer **sup, struct sup_col **cols, struct slice_result *res,
+         struct support_layer **sup, struct support_column **cols, struct slice_result *res,
          struct sf_err *err)
 {
     size_t n_cols = 0, cap_cols = 0;
-    struct sup_grid g;
+    struct support_grid g;
     int rc = ray_columns(m, p, s, &g, cols, &n_cols, &cap_cols, res, err);
     size_t n_ray = n_cols;
     if (rc == SF_OK && (rc = support_islands(s, &g, cols, &n_cols, &cap_cols)) < 0)
@@ -415,7 +365,7 @@ slice_mesh(const struct mesh *m, const struct slice_profile *p, const char *gcod
     struct layer_stack s;
     struct support_layer *sup = NULL;
     struct layer_paths *lp = NULL;
-    struct sup_col *cols = NULL;
+    struct support_column *cols = NULL;
     struct buf body;
     struct estimate est;
     memset(&est, 0, sizeof(est));

@@ -11,8 +11,8 @@
  *
  * The part is placed on the bed as given (lowest point on z = 0, bounding
  * box centred on the bed); orient and slim it before.  Pipeline: layers
- * (layers.h), column supports from the ray grid (support.h, src/geom
- * measure_columns), toolpaths (toolpath.h), G-code body (gcwrite.h), time
+ * (layers.h), column supports (support.h support_columns, src/geom's
+ * support model), toolpaths (toolpath.h), G-code body (gcwrite.h), time
  * and filament (estimate.h), then the file: header comments with the
  * estimates, start G-code, body with M73 progress, end G-code.
  *

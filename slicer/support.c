@@ -24,16 +24,14 @@
 static int
 cmp_col(const void *a, const void *b)
 {
-    const struct sup_col *x = a, *y = b;
-    if (x->j != y->j)
-        return x->j < y->j ? -1 : 1;
-    if (x->i != y->i)
-        return x->i < y->i ? -1 : 1;
+    const struct support_column *x = a, *y = b; /* by row, cell in the row, height */
+    if (x->cell != y->cell)
+        return x->cell < y->cell ? -1 : 1;
     return x->lo < y->lo ? -1 : x->lo > y->lo;
 }
 
 static bool
-push_col(struct sup_col **cols, size_t *n, size_t *cap, struct sup_col c)
+push_col(struct support_column **cols, size_t *n, size_t *cap, struct support_column c)
 {
     if (!mem_grow((void **)cols, cap, *n + 1, sizeof(**cols)))
         return false;
@@ -41,19 +39,19 @@ push_col(struct sup_col **cols, size_t *n, size_t *cap, struct sup_col c)
     return true;
 }
 
-/* Is there already a column in cell (i, j) ending within 1 mm of z? */
+/* Is there already a column in cell c ending within 1 mm of z? */
 static bool
-has_column_near(const struct sup_col *cols, size_t n, uint32_t i, uint32_t j, double z)
+has_column_near(const struct support_column *cols, size_t n, uint32_t c, double z)
 {
     for (size_t k = 0; k < n; k++)
-        if (!cols[k].iface && cols[k].i == i && cols[k].j == j && fabs(cols[k].hi - z) < 1)
+        if (!cols[k].iface && cols[k].cell == c && fabs(cols[k].hi - z) < 1)
             return true;
     return false;
 }
 
 static int
 island_columns(const struct layer_stack *s, uint32_t k, const struct paths *isl,
-               const struct sup_grid *g, struct sup_col **cols, size_t *n, size_t *cap,
+               const struct support_grid *g, struct support_column **cols, size_t *n, size_t *cap,
                size_t n_ray)
 {
     struct ipt lo, hi;
@@ -78,7 +76,8 @@ island_columns(const struct layer_stack *s, uint32_t k, const struct paths *isl,
                 if (pass == 0 && !paths_contains(isl, c))
                     continue;
                 any = true;
-                if (has_column_near(*cols, n_ray, (uint32_t)i, (uint32_t)j, zb))
+                uint32_t cell = (uint32_t)j * g->nu + (uint32_t)i;
+                if (has_column_near(*cols, n_ray, cell, zb))
                     continue;
                 double floor_z = 0;
                 for (long q = (long)k - 1; q >= 0; q--) {
@@ -87,7 +86,7 @@ island_columns(const struct layer_stack *s, uint32_t k, const struct paths *isl,
                         break;
                     }
                 }
-                struct sup_col col = { (uint32_t)i, (uint32_t)j, (float)floor_z, (float)zb, false };
+                struct support_column col = { cell, (float)floor_z, (float)zb, 0, false };
                 if (zb > floor_z && !push_col(cols, n, cap, col))
                     return SF_ENOMEM;
             }
@@ -97,8 +96,8 @@ island_columns(const struct layer_stack *s, uint32_t k, const struct paths *isl,
 }
 
 int
-support_islands(const struct layer_stack *s, const struct sup_grid *g, struct sup_col **cols,
-                size_t *n, size_t *cap)
+support_islands(const struct layer_stack *s, const struct support_grid *g,
+                struct support_column **cols, size_t *n, size_t *cap)
 {
     size_t n_ray = *n;
     struct paths isl, both;
@@ -137,7 +136,7 @@ support_layer_release(struct support_layer *l)
 
 /* Add one rectangle per run of active neighbouring cells in a row. */
 static bool
-add_runs(struct paths *rects, const struct sup_grid *g, const struct sup_col *cols,
+add_runs(struct paths *rects, const struct support_grid *g, const struct support_column *cols,
          const uint8_t *on, size_t n)
 {
     double hp = g->pitch / 2;
@@ -147,14 +146,17 @@ add_runs(struct paths *rects, const struct sup_grid *g, const struct sup_col *co
             continue;
         }
         size_t b = a + 1, last = a;
-        while (b < n && (!on[b] || (cols[b].j == cols[a].j && cols[b].i <= cols[last].i + 1))) {
+        uint32_t j = cols[a].cell / g->nu;
+        while (b < n && (!on[b] || (cols[b].cell / g->nu == j &&
+                                    cols[b].cell % g->nu <= cols[last].cell % g->nu + 1))) {
             if (on[b])
                 last = b;
             b++;
         }
         b = last + 1;
-        double x0 = g->x0 + cols[a].i * g->pitch - hp, x1 = g->x0 + cols[last].i * g->pitch + hp;
-        double y = g->y0 + cols[a].j * g->pitch;
+        uint32_t ia = cols[a].cell % g->nu, il = cols[last].cell % g->nu;
+        double x0 = g->x0 + ia * g->pitch - hp, x1 = g->x0 + il * g->pitch + hp;
+        double y = g->y0 + j * g->pitch;
         /* 1 um overlap so neighbouring rows merge in the union */
         struct ipt r[4] = { { poly_i(x0 - 1e-3), poly_i(y - hp - 1e-3) },
                             { poly_i(x1 + 1e-3), poly_i(y - hp - 1e-3) },
@@ -168,9 +170,9 @@ add_runs(struct paths *rects, const struct sup_grid *g, const struct sup_col *co
 }
 
 int
-support_layers(const struct layer_stack *s, const struct sup_grid *g, struct sup_col *cols,
-               size_t n, const struct slice_profile *p, struct support_layer *out,
-               struct sf_err *err)
+support_layers(const struct layer_stack *s, const struct support_grid *g,
+               struct support_column *cols, size_t n, const struct slice_profile *p,
+               struct support_layer *out, struct sf_err *err)
 {
     for (uint32_t k = 0; k < s->n; k++) {
         paths_init(&out[k].body);

@@ -1,10 +1,14 @@
 /*
- * support.h - column supports sliced into per-layer support regions.
+ * support.h - the support columns the slicer prints, and their per-layer
+ * support regions.
  *
- * Columns come from the rays structure (src/geom measure_columns: a
- * vertical ray per cell of an x-y grid, a column from the bed or the
- * part's last exit below up to each risky hit), converted to bed
- * coordinates.  Islands - a piece of a layer that touches nothing in the
+ * Columns come from the support model (src/geom supmodel_columns: the
+ * outside slicer's overhang rules the optimizers steer by, on a ray grid of
+ * vertical cells), built by support_columns from the slicer profile through
+ * support_model_params: the one generator the slicer and the part picture
+ * (preview.h) both call, so the picture shows the columns the print gets.
+ * The column and grid types are src/geom's (measure.h: support_column,
+ * support_grid).  Islands - a piece of a layer that touches nothing in the
  * layer below (a local minimum, a part starting in mid-air) - add columns
  * of their own even where no face is steep enough to count as risky.
  *
@@ -24,42 +28,46 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "../src/geom/measure.h"
+#include "../src/geom/supmodel.h"
+#include "../src/mesh/mesh.h"
 #include "layers.h"
 #include "profile.h"
 #include "toolpath.h"
 
-/* The column grid in bed coordinates: cell (i, j) is centred at
-   (x0 + i pitch, y0 + j pitch). */
-struct sup_grid {
-    double x0, y0, pitch;
-    uint32_t nu, nw;
-};
+/* The support model's parameters for profile p: PrusaSlicer's rules at the
+   profile's overhang angle, layer height, column pitch, gaps and interface
+   layers, bridges held up (our bridge infill does not follow the anchored
+   direction yet: more support than PrusaSlicer, never less). */
+void support_model_params(const struct slice_profile *p, struct supmodel_params *mp);
 
-/* A column: cell (i, j) from z lo to z hi (mm above the bed).  With iface
-   set, not a column but a dense-interface band of one: the layers of cell
-   (i, j) wholly inside lo..hi print dense (gaps already applied). */
-struct sup_col {
-    uint32_t i, j;
-    float lo, hi;
-    bool iface;
-};
+/*
+ * The columns the slicer prints for m as it lies (+z up, m's coordinates)
+ * under profile p: *g the grid (x0, y0 cell (0, 0)'s centre, base m's
+ * lowest z), *cols (allocated, capacity *cap; free()) *n columns: the
+ * *n_body columns first, then their dense-interface bands (iface set).
+ * SF_ENOMEM, or what the ray cast reports.
+ */
+int support_columns(const struct mesh *m, const struct slice_profile *p, struct support_grid *g,
+                    struct support_column **cols, size_t *n, size_t *cap, size_t *n_body,
+                    struct sf_err *err);
 
 /*
  * Append a column under every island of s (layers 1 and up) whose cells
  * have no column ending near the island's bottom.  *cols (capacity *cap,
  * grown with mem_grow) holds *n columns.  SF_ENOMEM / SF_EBUG.
  */
-int support_islands(const struct layer_stack *s, const struct sup_grid *g, struct sup_col **cols,
-                    size_t *n, size_t *cap);
+int support_islands(const struct layer_stack *s, const struct support_grid *g,
+                    struct support_column **cols, size_t *n, size_t *cap);
 
 /*
  * Fill out[k] (s->n entries, initialised here; release each with
  * support_layer_release) with the support of layer k.  cols is sorted in
  * place.  SF_ENOMEM / SF_EBUG.
  */
-int support_layers(const struct layer_stack *s, const struct sup_grid *g, struct sup_col *cols,
-                   size_t n, const struct slice_profile *p, struct support_layer *out,
-                   struct sf_err *err);
+int support_layers(const struct layer_stack *s, const struct support_grid *g,
+                   struct support_column *cols, size_t n, const struct slice_profile *p,
+                   struct support_layer *out, struct sf_err *err);
 
 void support_layer_release(struct support_layer *l);
 

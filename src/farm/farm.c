@@ -62,6 +62,7 @@ struct prep {
     struct prepare_req req;        /* input */
     struct prepare_out out;        /* output */
     struct drv_job_scan scan;      /* the G-code's scan, made on the worker too */
+    double est_s;                  /* and its print time estimate (gcjob_estimate_s) */
     const struct store *store;     /* for store_file_adopt on the worker */
     char gcode_sha[STORE_SHA_HEX]; /* the G-code, adopted into the store by the worker */
     int64_t gcode_size;
@@ -139,6 +140,8 @@ prep_work(void *ud, const atomic_bool *cancel)
        job now, not half-way through a print, and start_job need not read
        the file on the loop thread (a 150 MB job stalled every printer's
        stream ~2.5 s).  Hashing it into the store is the other long read. */
+    if (rc == SF_OK) /* kept with the job: a start reads it from there, not the file */
+        t->est_s = gcjob_estimate_s(t->req.out_path);
     if (rc == SF_OK &&
         ((rc = drv_job_scan(t->req.out_path, &t->scan, &t->err)) ||
          (rc =
@@ -206,6 +209,8 @@ prep_done(struct loop *l, void *ud, int rc)
                                     .shape_changed = t->out.shape_changed,
                                     .mndr = t->out.mndr,
                                     .andr = t->out.andr,
+                                    .est_known = true,
+                                    .est_s = t->est_s,
                                     .note = t->out.shape_failed };
         memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
         /* A re-slice whose job started meanwhile on a printer of its old key
@@ -637,6 +642,7 @@ struct resume {
     char path[1200];
     uint64_t line;
     struct drv_job_scan scan;
+    double est_s; /* the job's print time estimate (printer_estimate_s) */
     struct sf_err err;
 };
 
@@ -656,7 +662,7 @@ resume_done(struct loop *l, void *ud, int rc)
     /* Shutting down (SF_ECANCELED) leaves it for printer_stop. */
     struct printer *p = rc == SF_ECANCELED ? NULL : find(r->f, r->printer);
     if (p)
-        printer_resume_go(p, r->job_id, r->path, r->line, &r->scan, rc, r->err.msg);
+        printer_resume_go(p, r->job_id, r->path, r->line, &r->scan, r->est_s, rc, r->err.msg);
     free(r);
 }
 
@@ -702,16 +708,19 @@ farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
        printers' streams do not wait; the driver starts when it is read. */
     log_printer(LOG_INFO, j.printer, "job %lld: resumed at line %lld of %llu", (long long)id,
                 (long long)line, (unsigned long long)total);
+    double est_s = printer_estimate_s(&j, path);
     struct resume *r = mem_calloc(1, sizeof(*r));
     struct sf_err perr;
     if (r) {
-        *r = (struct resume){ .f = f, .job_id = id, .line = (uint64_t)line, .scan = scan };
+        *r = (struct resume){
+            .f = f, .job_id = id, .line = (uint64_t)line, .scan = scan, .est_s = est_s
+        };
         snprintf(r->printer, sizeof(r->printer), "%s", j.printer);
         snprintf(r->path, sizeof(r->path), "%s", path);
     }
     if (!r || !pool_submit(f->io, resume_work, resume_done, r, &perr)) {
         free(r);
-        printer_resume_go(p, id, path, (uint64_t)line, &scan, SF_OK, ""); /* reads here */
+        printer_resume_go(p, id, path, (uint64_t)line, &scan, est_s, SF_OK, ""); /* reads here */
     }
     farm_kick(f);
     return SF_OK;
@@ -751,6 +760,7 @@ gcheck_work(void *ud, const atomic_bool *cancel)
     if (scan.lines_total == 0)
         return sf_err_set(&t->err, SF_EINVAL, "G-code '%s' holds no command", t->o.name);
     t->g.lines = (int64_t)scan.lines_total;
+    t->g.est_s = gcjob_estimate_s(t->path);
     gcjob_key(&t->g.info, t->g.key, sizeof(t->g.key));
     return SF_OK;
 }
@@ -831,7 +841,9 @@ farm_gcode_add(struct farm *f, const struct job_opts *o, const char *sha,
                                 .nozzle_mm = g->info.nozzle_mm,
                                 .gcode_lines = g->lines,
                                 .filament_g = g->info.filament_g,
-                                .support_g = g->info.support_g };
+                                .support_g = g->info.support_g,
+                                .est_known = true,
+                                .est_s = g->est_s };
     int64_t new_id;
     int rc = store_job_add_gcode(f->s, &jo, sha, &a, &new_id, err);
     if (rc)

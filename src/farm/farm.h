@@ -96,6 +96,7 @@ struct farm_gcode {
     struct gcjob_info info;  /* what its slicer wrote */
     char key[SCHED_KEY_MAX]; /* gcjob_key */
     int64_t lines;           /* command lines (drv_job_scan) */
+    double est_s;            /* print time estimate (gcjob_estimate_s), -1 if none */
 };
 
 /* The end of a check: rc SF_OK with g, or an error with msg (g NULL). */

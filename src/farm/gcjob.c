@@ -13,11 +13,13 @@
  */
 #include "gcjob.h"
 
+#include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include "../base/mem.h"
 
@@ -274,4 +276,25 @@ gcjob_runs_on(const char *key, const char *gcode_models, double nozzle_mm, char 
         return false;
     }
     return true;
+}
+
+double
+gcjob_estimate_s(const char *path)
+{
+    static const char key[] = "\n; estimated printing time [s] = ";
+    char head[GCJOB_EST_HEAD_BYTES + 2];
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    ssize_t n = fd >= 0 ? read(fd, head + 1, GCJOB_EST_HEAD_BYTES) : -1;
+    if (fd >= 0)
+        close(fd);
+    if (n <= 0)
+        return -1;
+    head[0] = '\n';
+    head[n + 1] = '\0';
+    const char *p = strstr(head, key);
+    if (!p)
+        return -1;
+    char *end;
+    double v = strtod(p + sizeof(key) - 1, &end);
+    return end != p + sizeof(key) - 1 && v >= 0 && v < 1e9 ? v : -1;
 }

@@ -59,6 +59,16 @@ int gcjob_read(const char *path, struct gcjob_info *out, struct sf_err *err);
 /* Same over bytes in memory (the tests, the fuzzer). */
 int gcjob_parse(const char *text, size_t len, struct gcjob_info *out, struct sf_err *err);
 
+/*
+ * The print time the head of the G-code at path states ("; estimated
+ * printing time [s] = N" in its first GCJOB_EST_HEAD_BYTES: this project's
+ * slicer writes it in line 4, and outside tools read it), or -1.  Read once
+ * when a job's G-code is made or checked, and kept in the job (store.h
+ * est_s); the printer reads the file only for a job stored before that.
+ */
+#define GCJOB_EST_HEAD_BYTES 4096
+double gcjob_estimate_s(const char *path);
+
 /* The prepared-for key of G-code with info g: "gcode/n0.4/MODEL". */
 void gcjob_key(const struct gcjob_info *g, char *key, size_t cap);
 

@@ -20,15 +20,14 @@
  */
 #include "printer.h"
 
-#include <fcntl.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "../../drivers/drv_link.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "gcjob.h"
 
 #define PRINTER_SAVE_LINES 16 /* progress this far ahead of the store is saved at once */
 /* attach() answers "not yet" taken on one connection before the job stays interrupted
@@ -65,36 +64,8 @@ struct printer {
     int refusals;          /* starts refused in a row (drive) */
     uint64_t attach_retry; /* timer offering the interrupted job again, 0 if none */
     int attach_waits;      /* attach() answers "not yet" on this connection */
-    double est_s;          /* the job's G-code estimate of its print time, s; -1 unknown */
+    double est_s;          /* the job's print time estimate (printer_estimate_s), s; -1 unknown */
 };
-
-/* Bytes of a job's G-code head read for its time estimate (our slicer writes it in line 4). */
-#define PRINTER_GCODE_HEAD 4096
-
-/*
- * The print time the G-code's head states ("; estimated printing time [s]
- * = N", slicer/slice.c), or -1: what the farm's own time left starts from.
- */
-static double
-gcode_estimate_s(const char *path)
-{
-    static const char key[] = "\n; estimated printing time [s] = ";
-    char head[PRINTER_GCODE_HEAD + 2];
-    int fd = open(path, O_RDONLY | O_CLOEXEC);
-    ssize_t n = fd >= 0 ? read(fd, head + 1, PRINTER_GCODE_HEAD) : -1;
-    if (fd >= 0)
-        close(fd);
-    if (n <= 0)
-        return -1;
-    head[0] = '\n';
-    head[n + 1] = '\0';
-    const char *p = strstr(head, key);
-    if (!p)
-        return -1;
-    char *end;
-    double v = strtod(p + sizeof(key) - 1, &end);
-    return end != p + sizeof(key) - 1 && v >= 0 && v < 1e9 ? v : -1;
-}
 
 static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
                                                                 "cleared" };
@@ -235,7 +206,7 @@ try_attach(struct printer *p)
         struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
         int rc = p->drv->ops->attach(p->drv, path, j->gcode_lines > 0 ? &scan : NULL, &err);
         if (rc == SF_OK) {
-            p->est_s = gcode_estimate_s(path);
+            p->est_s = printer_estimate_s(j, path);
             p->attempts = 0;
             p->message[0] = '\0';
             move(p, PRINTER_EV_CONNECTED);
@@ -682,7 +653,7 @@ printer_start(struct printer *p, const struct job_row *j, const char *path)
         return;
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
-    p->est_s = gcode_estimate_s(path);
+    p->est_s = printer_estimate_s(j, path);
     move(p, PRINTER_EV_START);
     /* The scan prepare made; G-code prepared before the count was stored
        (gcode_lines 0) is read by the driver itself, once. */
@@ -704,9 +675,15 @@ printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err
     return SF_OK;
 }
 
+double
+printer_estimate_s(const struct job_row *j, const char *path)
+{
+    return j->est_known ? j->est_s : gcjob_estimate_s(path);
+}
+
 void
 printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
-                  const struct drv_job_scan *scan, int rc, const char *why)
+                  const struct drv_job_scan *scan, double est_s, int rc, const char *why)
 {
     /* Meanwhile the job may have been cancelled or its printer lost (the
        job moved on with it). */
@@ -725,7 +702,7 @@ printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line
         move(p, PRINTER_EV_FINISHED);
         return;
     }
-    p->est_s = gcode_estimate_s(path);
+    p->est_s = est_s;
     drive(p, path, line, scan);
 }
 

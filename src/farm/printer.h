@@ -109,12 +109,21 @@ void printer_start(struct printer *p, const struct job_row *j, const char *path)
  * Resume interrupted job id on p (idle, connected) from command `line`:
  * printer_resume_commit records it (SF_EINVAL and friends from the store);
  * printer_resume_go starts the driver once the resume point is read
- * (scan), unless the job left p meanwhile; rc != SF_OK (the read failed)
- * fails the print with why.
+ * (scan), unless the job left p meanwhile, with the job's time estimate
+ * est_s (printer_estimate_s); rc != SF_OK (the read failed) fails the
+ * print with why.
  */
 int printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err *err);
 void printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
-                       const struct drv_job_scan *scan, int rc, const char *why);
+                       const struct drv_job_scan *scan, double est_s, int rc, const char *why);
+
+/*
+ * Job j's print time estimate, s (-1 if none), what the farm's own time
+ * left starts from: the one kept with the job (store.h est_s), or for a
+ * job stored before it was kept, the head of its G-code at path
+ * (gcjob_estimate_s).
+ */
+double printer_estimate_s(const struct job_row *j, const char *path);
 
 /*
  * Act on p.  SF_EINVAL when not legal now ("cannot pause a printer that is

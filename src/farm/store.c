@@ -158,6 +158,11 @@ static const char *const migrations[] = {
     "ALTER TABLE jobs ADD COLUMN mndr REAL CHECK(mndr IS NULL OR mndr >= 0);"
     "ALTER TABLE jobs ADD COLUMN andr REAL CHECK(andr IS NULL OR andr >= 0);"
     "ALTER TABLE jobs ADD COLUMN shape_changed INTEGER NOT NULL DEFAULT 0;",
+    /* 6: the G-code's print time estimate (gcjob_estimate_s: -1 when it
+       states none), read once when the G-code is made or checked, so a
+       start need not read the file; NULL for G-code before (the printer
+       then reads the file's head) */
+    "ALTER TABLE jobs ADD COLUMN est_s REAL CHECK(est_s IS NULL OR est_s >= -1);",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

@@ -70,6 +70,10 @@ struct job_row {
     bool shape_changed;            /* the part prints reshaped (prepare.h) */
     double mndr, andr;             /* max / mean displacement of the part as it prints over
                                       its bounding-box diagonal (measure.h); 0 if not known */
+    bool est_known;                /* est_s was kept with the G-code (schema 6); false for
+                                      G-code stored before and jobs not prepared */
+    double est_s;                  /* the G-code's print time estimate, s (gcjob_estimate_s);
+                                      -1 when it states none */
 };
 
 /* Extra data some events carry (zero-initialise; unused fields ignored). */
@@ -94,6 +98,8 @@ struct job_event_args {
                               deviation stays */
     bool shape_changed;    /* PREPARED: the part prints reshaped */
     double mndr, andr;     /* PREPARED: its deviation (prepare.h) */
+    bool est_known;        /* PREPARED: est_s is set (else the job has none kept) */
+    double est_s;          /* PREPARED: the G-code's print time estimate (gcjob_estimate_s) */
     int64_t lines_acked;   /* PRINT_DONE/FAILED/PAUSE/CANCEL: where the printer got to;
                               RESUME of an interrupted job: line to resume from (0: stored) */
     double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */
@@ -181,7 +187,8 @@ int store_job_add(struct store *s, const struct job_opts *o, const char *file_sh
  * Add a job whose stored file sha is G-code to print as is (gcjob.h): it
  * is ready at once, its G-code is the file itself.  g gives what a
  * preparation would: prep_key (a gcjob_key, required), nozzle_mm,
- * gcode_lines (drv_job_scan's count), filament_g, support_g.  o is
+ * gcode_lines (drv_job_scan's count), filament_g, support_g, est_known
+ * and est_s.  o is
  * validated as store_job_add's (its method is stored as "gcode").
  */
 int store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,

@@ -24,7 +24,7 @@ static const char JOB_COLS[] =
     " copies, copies_done, failures, max_retries, material, target_printer, target_group,"
     " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"
     " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg, filament_g, support_g,"
-    " support_saved_g, prepare_ms, slice_ms, ready_ms, mndr, andr, shape_changed";
+    " support_saved_g, prepare_ms, slice_ms, ready_ms, mndr, andr, shape_changed, est_s";
 
 /* ---- jobs ---- */
 
@@ -73,6 +73,8 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     j->mndr = sqlite3_column_double(st, 35);
     j->andr = sqlite3_column_double(st, 36);
     j->shape_changed = sqlite3_column_int(st, 37) != 0;
+    j->est_known = sqlite3_column_type(st, 38) != SQLITE_NULL;
+    j->est_s = j->est_known ? sqlite3_column_double(st, 38) : -1;
 }
 
 static void
@@ -83,6 +85,16 @@ read_job_row(sqlite3_stmt *st, void *row)
 
 /* Bind what every new job row takes from o at parameters first .. first + 7: copies,
    max_retries, material, printer, group, priority, created_ms and updated_ms (both now_ms). */
+/* The G-code's time estimate at parameter i: NULL when not known (store.h). */
+static void
+bind_est(sqlite3_stmt *st, int i, bool known, double est_s)
+{
+    if (known)
+        sqlite3_bind_double(st, i, est_s >= 0 ? est_s : -1);
+    else
+        sqlite3_bind_null(st, i);
+}
+
 static void
 bind_opts(sqlite3_stmt *st, int first, const struct job_opts *o, int64_t now_ms)
 {
@@ -164,8 +176,8 @@ store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
              "INSERT INTO jobs(name, file_sha, gcode_sha, state, method, deviation_mm,"
              " overhang_deg, copies, max_retries, material, target_printer, target_group,"
              " priority, created_ms, updated_ms, nozzle_mm, gcode_lines, prep_key,"
-             " filament_g, support_g, ready_ms)"
-             " VALUES(?,?,?,'ready','gcode',0,0,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+             " filament_g, support_g, ready_ms, est_s)"
+             " VALUES(?,?,?,'ready','gcode',0,0,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
              err)))
         return rc;
     int64_t t = clock_wall_ms();
@@ -179,6 +191,7 @@ store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
     sqlite3_bind_double(st, 15, g->filament_g);
     sqlite3_bind_double(st, 16, g->support_g);
     sqlite3_bind_int64(st, 17, t);
+    bind_est(st, 18, g->est_known, g->est_s);
     char detail[192];
     snprintf(detail, sizeof(detail), "ready '%s' x%d (G-code as uploaded, for %s)", o->name,
              o->copies, g->prep_key);
@@ -323,6 +336,8 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
         j->filament_g = a->filament_g;
         j->support_g = a->support_g;
         j->support_saved_g = a->saved_g;
+        j->est_known = a->est_known;
+        j->est_s = a->est_known ? a->est_s : -1;
         j->prepare_ms = a->prepare_ms;
         j->slice_ms = a->slice_ms;
         if (a->dev_measured || (a->mesh_sha && a->mesh_sha[0])) {
@@ -422,7 +437,7 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
              " reason = ?, updated_ms = ?, nozzle_mm = ?, gcode_lines = ?, prep_key = ?,"
              " mesh_sha = ?, mesh_angle_deg = ?, filament_g = ?, support_g = ?,"
              " support_saved_g = ?, prepare_ms = ?, slice_ms = ?, ready_ms = ?,"
-             " mndr = ?, andr = ?, shape_changed = ? WHERE id = ?",
+             " mndr = ?, andr = ?, shape_changed = ?, est_s = ? WHERE id = ?",
              err)))
         goto fail;
     sqlite3_bind_text(st, 1, job_state_name(j.state), -1, SQLITE_STATIC);
@@ -457,7 +472,8 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
         sqlite3_bind_null(st, 24);
     }
     sqlite3_bind_int(st, 25, j.shape_changed);
-    sqlite3_bind_int64(st, 26, id);
+    bind_est(st, 26, j.est_known, j.est_s);
+    sqlite3_bind_int64(st, 27, id);
     char kind[24], detail[192];
     const char *why = j.reason[0] ? j.reason : ev == JOB_EV_PREPARED && a->note ? a->note : "";
     snprintf(kind, sizeof(kind), "job-%s", job_event_name(ev));

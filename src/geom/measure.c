@@ -116,6 +116,7 @@ measure_columns(const struct ray_grid *g, const struct support_params *p,
                 out[n].lo = below;
                 out[n].hi = h->h;
                 out[n].tri = h->tri;
+                out[n].iface = false;
                 n++;
             }
         }

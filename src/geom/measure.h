@@ -14,6 +14,7 @@
 #ifndef SF_GEOM_MEASURE_H
 #define SF_GEOM_MEASURE_H
 
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -32,12 +33,27 @@ struct support_params {
 /* Defaults: 45 degrees, 1 mm grid, 0.05 mm gap. */
 void support_params_default(struct support_params *p);
 
-/* A support column found on the ray grid: from z_lo (bed or part below) up
-   to z_hi (the risky hit), heights along up above the bed. */
+/* A support column on a grid of vertical cells (a ray grid, or the
+   support_grid below): from lo (bed or part below) up to hi (the risky hit
+   or the overhanging bottom), heights along up above the bed.  The one
+   column type of the farm: the metrics, the growth simulation, the support
+   model, the slicer's layers and the pictures all use it.  With iface set
+   it is not a column but a dense-interface band of one (supmodel_columns):
+   the layers of the cell wholly inside lo..hi print dense. */
 struct support_column {
-    uint32_t cell; /* ray grid cell */
+    uint32_t cell; /* grid cell: i = cell % nu, j = cell / nu */
     float lo, hi;  /* mm above the bed */
-    uint32_t tri;  /* the risky triangle it holds up */
+    uint32_t tri;  /* the risky triangle it holds up (measure_columns), else 0 */
+    bool iface;    /* a dense-interface band, not a column */
+};
+
+/* Where the cells of support columns stand: cell (i, j) is centred at
+   (x0 + i pitch, y0 + j pitch), the bed at height base (columns' lo and hi
+   are above it).  A ray grid along +z in the part's coordinates, or the
+   same moved onto the print bed. */
+struct support_grid {
+    double x0, y0, base, pitch;
+    uint32_t nu, nw;
 };
 
 struct support_metrics {

@@ -156,7 +156,7 @@ push_column(struct support_column **v, size_t *n, size_t *cap, struct support_co
  * down until the part stops it, reaches down to its own floor.
  */
 static int
-snap_columns(const struct ray_grid *g, const struct cols *cs, const struct contact *ct, size_t n,
+snap_columns(const struct ray_grid *g, const struct solids *cs, const struct contact *ct, size_t n,
              uint32_t bs, struct support_column **cols, size_t *n_cols, struct sf_err *err)
 {
     uint32_t nbu = (g->nu + bs - 1) / bs;
@@ -184,8 +184,8 @@ snap_columns(const struct ray_grid *g, const struct cols *cs, const struct conta
                         continue;
                     float top = last ? r[k].hi : cs->iv[q].lo;
                     if (top > r[k].lo && floor_mm < r[k].hi) {
-                        struct support_column col = { c, floor_mm, top < r[k].hi ? top : r[k].hi,
-                                                      0 };
+                        struct support_column col = { c, floor_mm, top < r[k].hi ? top : r[k].hi, 0,
+                                                      false };
                         if (col.hi > col.lo && !push_column(&v, &nv, &cap, col))
                             rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
                     }
@@ -260,7 +260,7 @@ snap_bands(const struct ray_grid *g, const struct supmodel_params *p, const stru
                     hi = hi < r[k].hi ? hi : r[k].hi;
                     if (hi - lo < 0.5 * p->layer_mm)
                         continue;
-                    struct support_column b = { c, (float)lo, (float)hi, 0 };
+                    struct support_column b = { c, (float)lo, (float)hi, 0, true };
                     if (!push_column(&v, &nv, &cap, b))
                         rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bands)");
                 }
@@ -294,8 +294,8 @@ supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
     int rc = supmodel_params_check(p, err);
     if (rc)
         return rc;
-    struct cols cs;
-    if ((rc = supmodel_cols_build(g, NULL, &cs, err)))
+    struct solids cs;
+    if ((rc = supmodel_solids_build(g, NULL, &cs, err)))
         return rc;
     struct contact *ct = NULL;
     size_t n = 0;
@@ -316,13 +316,13 @@ supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
             rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
         } else {
             for (size_t k = 0; k < n; k++)
-                out[k] = (struct support_column){ ct[k].cell, ct[k].floor, ct[k].top, 0 };
+                out[k] = (struct support_column){ ct[k].cell, ct[k].floor, ct[k].top, 0, false };
             *cols = out;
             *n_cols = n;
         }
     }
     free(ct);
-    supmodel_cols_release(&cs);
+    supmodel_solids_release(&cs);
     return rc;
 }
 

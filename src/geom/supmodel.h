@@ -152,8 +152,8 @@ int supmodel_of_mesh(const struct mesh *m, struct vec3 up, const struct supmodel
  * the top of the part below, hi the overhanging bottom, tri 0), for a
  * slicer that prints what the model predicts.  *cols is allocated (free()).
  * With bands non-NULL (snapped columns only, else none), also the dense
- * interface: cell, and the heights lo..hi (gaps applied: layers wholly
- * inside print dense) under every contact the model gives a dense
+ * interface (iface set): cell, and the heights lo..hi (gaps applied: layers
+ * wholly inside print dense) under every contact the model gives a dense
  * interface, over its whole snap cell, interface_layers deep.
  */
 int supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,

@@ -141,7 +141,7 @@ contact_runs(const struct ray_grid *g, const struct supmodel_params *p, const st
 /* Filled cell-layers (cells of the snap cell where the part is not) of the
    merged runs, those at the bed (*first) and the landings on the part. */
 static void
-fill_runs(const struct ray_grid *g, const struct supmodel_params *p, const struct cols *cs,
+fill_runs(const struct ray_grid *g, const struct supmodel_params *p, const struct solids *cs,
           const struct run *runs, size_t n_runs, struct snap sn, double *filled_out,
           double *first_out, double *land_out)
 {
@@ -225,7 +225,7 @@ outline_runs(const struct run *runs, const uint32_t *bfirst, struct snap sn)
 
 /* The dense cell-layers: the snap cells' free cells under each contact. */
 static double
-iface_runs(const struct ray_grid *g, double h, const struct cols *cs, const struct run *iruns,
+iface_runs(const struct ray_grid *g, double h, const struct solids *cs, const struct run *iruns,
            size_t n_iruns, struct snap sn)
 {
     uint32_t bs = sn.bs, nbu = sn.nbu;
@@ -254,13 +254,13 @@ eval_cut(const struct ray_grid *g, const struct supmodel_params *p, struct open_
     if (rc)
         return rc;
     double h = p->layer_mm, px = g->pitch, cell_a = px * px;
-    struct cols cs;
-    if ((rc = supmodel_cols_build(g, cut, &cs, err)))
+    struct solids cs;
+    if ((rc = supmodel_solids_build(g, cut, &cs, err)))
         return rc;
     struct contact *ct = NULL;
     size_t n_ct = 0;
     if ((rc = supmodel_find_contacts(g, &cs, p, &ct, &n_ct, err))) {
-        supmodel_cols_release(&cs);
+        supmodel_solids_release(&cs);
         return rc;
     }
     uint32_t bs = p->snap_mm > px ? (uint32_t)lround(p->snap_mm / px) : 1;
@@ -309,7 +309,7 @@ done:
     free(bfirst);
     free(tmp);
     free(ct);
-    supmodel_cols_release(&cs);
+    supmodel_solids_release(&cs);
     return rc;
 }
 

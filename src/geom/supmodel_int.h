@@ -25,13 +25,14 @@
 #include "rims.h"
 #include "supmodel.h"
 
-/* Solid intervals of every column: cell c holds iv[first[c] .. first[c+1]). */
+/* The part's solid intervals along every grid cell (what the model reads,
+   not support): cell c holds iv[first[c] .. first[c+1]). */
 struct ival {
     float lo, hi;
     float cos_lo; /* n . up of the facet the bottom lies on (< 0) */
 };
 
-struct cols {
+struct solids {
     uint32_t *first;
     struct ival *iv;
 };
@@ -48,14 +49,14 @@ struct open_cut {
 };
 
 /* Build the solid intervals of every cell of g, less what cut drops (NULL:
-   nothing); SF_ENOMEM.  Free out with supmodel_cols_release. */
-int supmodel_cols_build(const struct ray_grid *g, struct open_cut *cut, struct cols *out,
-                        struct sf_err *err);
-void supmodel_cols_release(struct cols *c);
+   nothing); SF_ENOMEM.  Free out with supmodel_solids_release. */
+int supmodel_solids_build(const struct ray_grid *g, struct open_cut *cut, struct solids *out,
+                          struct sf_err *err);
+void supmodel_solids_release(struct solids *c);
 
 /* Is cell c solid at height z? */
 static inline bool
-supmodel_solid_at(const struct cols *cs, size_t c, float z)
+supmodel_solid_at(const struct solids *cs, size_t c, float z)
 {
     for (uint32_t k = cs->first[c]; k < cs->first[c + 1]; k++)
         if (cs->iv[k].lo <= z && z <= cs->iv[k].hi && cs->iv[k].hi > cs->iv[k].lo)
@@ -73,7 +74,7 @@ struct contact {
 
 /* The contacts of cs by p's slicer rules (bridges removed when p->bridges),
    allocated into out (free()); SF_ENOMEM. */
-int supmodel_find_contacts(const struct ray_grid *g, const struct cols *cs,
+int supmodel_find_contacts(const struct ray_grid *g, const struct solids *cs,
                            const struct supmodel_params *p, struct contact **out, size_t *n_out,
                            struct sf_err *err);
 

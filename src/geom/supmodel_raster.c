@@ -11,7 +11,7 @@
 #include "../base/mem.h"
 
 void
-supmodel_cols_release(struct cols *c)
+supmodel_solids_release(struct solids *c)
 {
     free(c->first);
     free(c->iv);
@@ -20,7 +20,7 @@ supmodel_cols_release(struct cols *c)
 /* Append interval iv of cell c to out (n of cap), less the open layers the
    slicer does not keep in c (cut NULL or empty: nothing dropped). */
 static bool
-push_ival(struct cols *out, uint32_t *n, size_t *cap, struct ival iv, size_t c,
+push_ival(struct solids *out, uint32_t *n, size_t *cap, struct ival iv, size_t c,
           struct open_cut *cut)
 {
     size_t n_run = 0;
@@ -83,15 +83,15 @@ push_ival(struct cols *out, uint32_t *n, size_t *cap, struct ival iv, size_t c,
 }
 
 int
-supmodel_cols_build(const struct ray_grid *g, struct open_cut *cut, struct cols *out,
-                    struct sf_err *err)
+supmodel_solids_build(const struct ray_grid *g, struct open_cut *cut, struct solids *out,
+                      struct sf_err *err)
 {
     size_t cells = (size_t)g->nu * g->nw, cap = g->n_hits + 1;
     out->first = mem_array(cells + 1, sizeof(uint32_t));
     /* at most one interval per hit, unless open layers split them */
     out->iv = mem_array(cap, sizeof(struct ival));
     if (!out->first || !out->iv) {
-        supmodel_cols_release(out);
+        supmodel_solids_release(out);
         return sf_err_set(err, SF_ENOMEM, "support model: out of memory (%zu cells)", cells);
     }
     uint32_t n = 0;
@@ -124,7 +124,7 @@ supmodel_cols_build(const struct ray_grid *g, struct open_cut *cut, struct cols 
         cut->cap = 0;
     }
     if (!ok) {
-        supmodel_cols_release(out);
+        supmodel_solids_release(out);
         return sf_err_set(err, SF_ENOMEM, "support model: out of memory (%zu cells)", cells);
     }
     out->first[cells] = n;

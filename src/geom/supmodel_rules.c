@@ -36,7 +36,7 @@ slope_limit(const struct supmodel_params *p)
 
 /* Does the bottom at height lo of cell (i, j) overhang its neighbours? */
 static bool
-overhangs(const struct ray_grid *g, const struct cols *cs, uint32_t i, uint32_t j, float lo,
+overhangs(const struct ray_grid *g, const struct solids *cs, uint32_t i, uint32_t j, float lo,
           double slope)
 {
     for (int dj = -1; dj <= 1; dj++) {
@@ -87,7 +87,7 @@ bottom_layer(float lo, double h)
 /* Scratch for one layer's regions: member marks are stamped with a layer tag. */
 struct bridge_ctx {
     const struct ray_grid *g;
-    const struct cols *cs;
+    const struct solids *cs;
     double h;
     int32_t k;         /* the layer being processed */
     uint32_t ltag;     /* its tag */
@@ -367,7 +367,7 @@ by_layer_build(struct by_layer *bl, const int32_t *k, const uint32_t *item, size
  * contacts alone.
  */
 static int
-remove_bridges(const struct ray_grid *g, const struct cols *cs, const struct supmodel_params *p,
+remove_bridges(const struct ray_grid *g, const struct solids *cs, const struct supmodel_params *p,
                struct contact *ct, size_t *n_ct, struct sf_err *err)
 {
     size_t cells = (size_t)g->nu * g->nw, n_b = 0;
@@ -487,7 +487,7 @@ done:
 }
 
 int
-supmodel_find_contacts(const struct ray_grid *g, const struct cols *cs,
+supmodel_find_contacts(const struct ray_grid *g, const struct solids *cs,
                        const struct supmodel_params *p, struct contact **out, size_t *n_out,
                        struct sf_err *err)
 {

@@ -13,6 +13,7 @@
  */
 #include <errno.h>
 #include <signal.h>
+#include <sqlite3.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <sys/stat.h>
@@ -523,6 +524,68 @@ T_CASE(farm_refused_start_waits_without_spending_a_retry)
     report(a, DRV_IDLE, DRV_EV_JOB_DONE);
     T_TRUE(wait_job(id, JOB_DONE));
     T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+/* Rewrite the "[s] = 400" of job id's stored G-code to say 900 (same size). */
+static bool
+gcode_says_900(int64_t id)
+{
+    struct job_row j;
+    char path[1024];
+    struct buf g;
+    buf_init(&g, 1 << 20);
+    bool ok = store_job_get(fx.s, id, &j, NULL) == SF_OK &&
+              store_file_path(fx.s, j.gcode_sha, path, sizeof(path), NULL) == SF_OK &&
+              buf_read_file(&g, path, NULL) == SF_OK && g.data && strstr(g.data, "= 400\n");
+    if (ok) {
+        memcpy(strstr(g.data, "= 400\n"), "= 900", 5);
+        chmod(path, 0644);
+        FILE *f = fopen(path, "w");
+        ok = f && fwrite(g.data, 1, g.len, f) == g.len;
+        ok = f && fclose(f) == 0 && ok;
+    }
+    buf_release(&g);
+    return ok;
+}
+
+/*
+ * The G-code's time estimate is kept with the job when it is prepared, and
+ * a start takes it from there, not from the file; a job stored before the
+ * store kept it (no est_s: an older data dir) reads the file's head.
+ */
+T_CASE(farm_time_estimate_travels_in_the_job)
+{
+    struct sf_err err;
+    struct job_row j;
+    T_OK(setup("estjob", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20 est 400", "PLA", 3);
+    T_TRUE(wait_job(id, JOB_PRINTING) && store_job_get(fx.s, id, &j, NULL) == SF_OK);
+    T_TRUE(j.est_known);
+    T_EQ_DBL(j.est_s, 400, 0);
+    T_TRUE(gcode_says_900(id));
+    struct tdrv *a = tdrv_named("a");
+    struct printer_info info;
+    for (int copy = 2; copy <= 3; copy++) {
+        report(a, DRV_IDLE, DRV_EV_JOB_DONE);
+        T_TRUE(wait_printer(0, PRINTER_AWAITING_CLEAR));
+        if (copy == 3) { /* the row as a schema-5 store left it */
+            char db_path[600];
+            snprintf(db_path, sizeof(db_path), "%s/estjob/slimfarm.db", t_tmpdir());
+            sqlite3 *db;
+            T_EQ_INT(sqlite3_open(db_path, &db), SQLITE_OK);
+            T_EQ_INT(sqlite3_exec(db, "UPDATE jobs SET est_s = NULL", NULL, NULL, NULL), SQLITE_OK);
+            sqlite3_close(db);
+        }
+        T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
+        T_TRUE(wait_job(id, JOB_PRINTING));
+        a->base.status.progress = 0.25;
+        farm_printer_info(fx.f, 0, &info);
+        T_EQ_STR(info.time_left_from, "farm");
+        /* copy 2: the job's 400, though the file now says 900; copy 3: the file's */
+        T_EQ_INT(info.time_left_s, copy == 2 ? 300 : 675);
+    }
     teardown();
 }
 

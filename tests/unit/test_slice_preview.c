@@ -5,6 +5,7 @@
 #include <cairo.h>
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "../../slicer/preview.h"
@@ -103,6 +104,56 @@ T_CASE(preview_shows_the_seam)
     T_TRUE(white >= 5);
     cairo_surface_destroy(s);
     buf_release(&b);
+    slice_profile_release(&p);
+    mesh_release(&m);
+}
+
+/* The picture draws the columns the slicer prints: the same set, from the
+   same function on the same parameters, for a part with overhangs; and the
+   farm's picture (no profile, the job's angle) is the default profile's. */
+T_CASE(preview_columns_are_the_sliced_columns)
+{
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    p.support_angle_deg = 40; /* not the default's, so the picture must take it */
+    char gc[512];
+    snprintf(gc, sizeof(gc), "%s/cols.gcode", t_tmpdir());
+    struct mesh m;
+    struct sf_err err;
+    struct slice_result r;
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    T_OK(slice_mesh(&m, &p, gc, &r, NULL, NULL, &err), &err);
+    T_TRUE(r.n_columns > 10);
+
+    struct preview_opts o;
+    preview_opts_default(&o);
+    o.profile = &p;
+    struct support_grid g, g2;
+    struct support_column *cols = NULL, *cols2 = NULL;
+    size_t n, n_body, n2, n_body2;
+    T_OK(preview_columns(&m, &o, &g, &cols, &n, &n_body, &err), &err);
+    T_EQ_INT(n_body, r.n_columns);
+    double vol = 0;
+    for (size_t i = 0; i < n_body; i++) {
+        T_TRUE(!cols[i].iface);
+        vol += (double)(cols[i].hi - cols[i].lo) * g.pitch * g.pitch;
+    }
+    T_TRUE(vol == r.ray_volume_mm3);
+    T_TRUE(n > n_body); /* the interface bands travel with them */
+
+    /* the farm's picture: no profile, the job's angle */
+    o.profile = NULL;
+    o.angle_deg = 40;
+    T_OK(preview_columns(&m, &o, &g2, &cols2, &n2, &n_body2, &err), &err);
+    T_EQ_INT(n2, n);
+    T_EQ_INT(n_body2, n_body);
+    T_TRUE(memcmp(&g, &g2, sizeof(g)) == 0);
+    for (size_t i = 0; i < n; i++)
+        T_TRUE(cols[i].cell == cols2[i].cell && cols[i].lo == cols2[i].lo &&
+               cols[i].hi == cols2[i].hi && cols[i].iface == cols2[i].iface);
+    free(cols);
+    free(cols2);
     slice_profile_release(&p);
     mesh_release(&m);
 }

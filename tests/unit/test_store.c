@@ -131,6 +131,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
                           "ALTER TABLE jobs DROP COLUMN ready_ms; ALTER TABLE prints DROP COLUMN "
                           "wait_ms; ALTER TABLE jobs DROP COLUMN mndr; ALTER TABLE jobs DROP "
                           "COLUMN andr; ALTER TABLE jobs DROP COLUMN shape_changed;"
+                          "ALTER TABLE jobs DROP COLUMN est_s;"
                           "PRAGMA user_version = 1",
                           NULL, NULL, NULL),
              SQLITE_OK);
@@ -142,6 +143,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     T_EQ_DBL(j.size_mm[1], 30, 0);
     T_EQ_INT(j.gcode_lines, 0);
     T_TRUE(!j.dev_measured && !j.shape_changed); /* schema 5: not measured before */
+    T_TRUE(!j.est_known && j.est_s == -1);       /* schema 6: the printer reads the file */
     T_OK(store_check(s, &err), &err);
     /* prepared again (a new job here): the count and the deviation are stored */
     int64_t id2 = add_job(s, "part 2", 1, &err);
@@ -150,9 +152,13 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     a.dev_measured = a.shape_changed = true;
     a.mndr = 0.02;
     a.andr = 0.005;
+    a.est_known = true;
+    a.est_s = 754;
     T_OK(store_job_event(s, id2, JOB_EV_PREPARED, &a, NULL, &err), &err);
     T_OK(store_job_get(s, id2, &j, &err), &err);
     T_EQ_INT(j.gcode_lines, 7);
+    T_TRUE(j.est_known);
+    T_EQ_DBL(j.est_s, 754, 0);
     T_TRUE(j.dev_measured && j.shape_changed);
     T_EQ_DBL(j.mndr, 0.02, 0);
     T_EQ_DBL(j.andr, 0.005, 0);
