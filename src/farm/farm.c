@@ -22,6 +22,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../../drivers/gpolicy.h"
 #include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
@@ -723,7 +724,9 @@ struct gcheck {
     char path[1200];
     struct job_opts o;
     struct farm_gcode g;
+    struct gpolicy policy; /* what every printer that may take it passes (gpolicy_meet) */
     struct sf_err err;
+    char msg[4096]; /* the policy's findings, every refused line (up to 20) */
     farm_gcode_fn done;
     void *ud;
 };
@@ -735,7 +738,10 @@ gcheck_work(void *ud, const atomic_bool *cancel)
     (void)cancel;
     struct gcheck *t = ud;
     struct drv_job_scan scan;
-    int rc;
+    int rc =
+        gpolicy_check_file(&t->policy, t->path, t->o.name, t->msg, sizeof(t->msg), NULL, &t->err);
+    if (rc)
+        return rc;
     if ((rc = drv_job_scan(t->path, &scan, &t->err)) ||
         (rc = gcjob_read(t->path, &t->g.info, &t->err))) {
         /* the message names the temporary path: name the upload instead */
@@ -793,7 +799,7 @@ gcheck_done(struct loop *l, void *ud, int rc)
                             g->model, g->model[0] ? "'" : "", g->nozzle_mm,
                             f->n_printers ? why : "no printers configured");
     }
-    t->done(t->ud, rc, rc ? NULL : &t->g, t->err.msg);
+    t->done(t->ud, rc, rc ? NULL : &t->g, t->msg[0] ? t->msg : t->err.msg);
     free(t);
 }
 
@@ -810,6 +816,17 @@ farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, far
     }
     t->f = f;
     t->o = *o;
+    /* a file passes the policy of every printer that may take it */
+    gpolicy_all(&t->policy);
+    for (size_t i = 0; i < f->n_printers; i++) {
+        const struct farmcfg_printer *c = printer_cfg(f->printers[i]);
+        struct gpolicy one;
+        if ((o->printer[0] && strcmp(o->printer, c->name) != 0) ||
+            (o->group[0] && strcmp(o->group, c->group) != 0))
+            continue;
+        farmcfg_policy(c, &one);
+        gpolicy_meet(&t->policy, &one);
+    }
     t->done = done;
     t->ud = ud;
     /* on the io thread, beside resume reads: never queued behind slicing */
