@@ -81,10 +81,14 @@ static const struct row rows[] = {
 #undef W
 
 /* Host replies a printed line must not look like (marlin_reply.c's prefixes, case ignored). */
-static const char *const replies[] = { "ok",    "resend", "rs ",       "error",           "!!",
-                                       "busy",  "wait",   "start",     "echo:busy",       "t:",
-                                       "b:",    "cap:",   "//action:", "firmware_name:", "x:",
-                                       "echo:unknown command" };
+static const char *const replies[] = { "ok",        "resend",
+                                       "rs ",       "error",
+                                       "!!",        "busy",
+                                       "wait",      "start",
+                                       "echo:busy", "t:",
+                                       "b:",        "cap:",
+                                       "//action:", "firmware_name:",
+                                       "x:",        "echo:unknown command" };
 
 void
 gpolicy_init(struct gpolicy *p)
@@ -370,8 +374,8 @@ judge(struct report *r, const char *b, size_t len)
     if (gpolicy_check_line(r->p, GPOLICY_FILE, b, len, &v) == GPOLICY_PASS)
         return;
     if (++r->found <= GPOLICY_FINDINGS_MAX)
-        add(r, "%sline %llu: %s: %s", r->found > 1 ? "; " : "", (unsigned long long)r->line,
-            v.cmd, v.why);
+        add(r, "%sline %llu: %s: %s", r->found > 1 ? "; " : "", (unsigned long long)r->line, v.cmd,
+            v.why);
 }
 
 static void
@@ -436,8 +440,8 @@ read_lines(struct report *r, FILE *fp, char *line)
 }
 
 int
-gpolicy_check_file(const struct gpolicy *p, const char *path, const char *name, char *msg,
-                   size_t n, size_t *n_found, struct sf_err *err)
+gpolicy_check_file(const struct gpolicy *p, const char *path, const char *name, char *msg, size_t n,
+                   size_t *n_found, struct sf_err *err)
 {
     struct report r = { .p = p, .msg = msg, .n = n };
     if (n)

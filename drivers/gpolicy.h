@@ -108,7 +108,7 @@ size_t gpolicy_check_text(const struct gpolicy *p, const char *text, size_t len,
  * file and a manual command get by default, whether gpolicy_allow may name
  * it, and why.  For listings (README, tests).
  */
-bool gpolicy_row(size_t i, const char **cmd, enum gpolicy_action *file,
-                 enum gpolicy_action *manual, bool *allowable, const char **why);
+bool gpolicy_row(size_t i, const char **cmd, enum gpolicy_action *file, enum gpolicy_action *manual,
+                 bool *allowable, const char **why);
 
 #endif

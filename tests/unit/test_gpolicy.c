@@ -48,10 +48,11 @@ T_CASE(gpolicy_refuses_text_that_reads_as_a_host_reply)
     char msg[4096];
     T_EQ_INT(judge(NULL, "G28\nM118 Resend: 1\n", msg, sizeof(msg)), 1);
     T_TRUE(strstr(msg, "line 2: M118: prints its text raw") != NULL);
-    const char *bad[] = { "M118 ok",         "M118 ok T:210",    "M118 Error:x",  "M118 busy: x",
-                          "M118 E1 busy: x", "M118 start",       "M118 wait",     "M118 !! x",
-                          "M117 Resend: 3",  "M118 A1 action:cancel", "M118 P0 rs 4",
-                          "M118 T:20 /0",    "M118 oR T:210" };
+    const char *bad[] = {
+        "M118 ok",      "M118 ok T:210", "M118 Error:x", "M118 busy: x",   "M118 E1 busy: x",
+        "M118 start",   "M118 wait",     "M118 !! x",    "M117 Resend: 3", "M118 A1 action:cancel",
+        "M118 P0 rs 4", "M118 T:20 /0",  "M118 oR T:210"
+    };
     for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++)
         T_EQ_INT(judge(NULL, bad[i], msg, sizeof(msg)), 1);
     const char *good[] = { "M118 E1 Resend: 1", "M118 A1 hello", "M117 Printing...",
@@ -73,15 +74,21 @@ T_CASE(gpolicy_refuses_control_and_non_ascii_bytes)
     T_TRUE(strstr(msg, "line 2: byte 0x1b") != NULL);
     T_EQ_INT(judge(NULL, "G1 X1 \xc2\xb0\n", msg, sizeof(msg)), 1);
     T_TRUE(strstr(msg, "non-ASCII") != NULL);
-    T_EQ_INT(judge(NULL, "G1 X1 ; 210 \xc2\xb0" "C\n\tG1 X2\n", msg, sizeof(msg)), 0);
+    T_EQ_INT(judge(NULL,
+                   "G1 X1 ; 210 \xc2\xb0"
+                   "C\n\tG1 X2\n",
+                   msg, sizeof(msg)),
+             0);
 }
 
 T_CASE(gpolicy_refuses_eeprom_firmware_waits_and_stops)
 {
     char msg[4096];
-    const char *rows[] = { "M502", "M500", "M501", "M997", "M999", "M0",  "M1",
-                           "M600", "M25",  "M226 P1 S0", "M112", "M108", "M410",
-                           "M111 S7", "SAVE_CONFIG", "FIRMWARE_RESTART", "pause" };
+    const char *rows[] = { "M502", "M500",       "M501",        "M997",
+                           "M999", "M0",         "M1",          "M600",
+                           "M25",  "M226 P1 S0", "M112",        "M108",
+                           "M410", "M111 S7",    "SAVE_CONFIG", "FIRMWARE_RESTART",
+                           "pause" };
     for (size_t i = 0; i < sizeof(rows) / sizeof(rows[0]); i++) {
         char text[64];
         snprintf(text, sizeof(text), "G28\n%s\n", rows[i]);
