@@ -21,8 +21,8 @@
 struct host {
     struct loop *loop;
     struct sim_marlin *sim;
-    int fd;         /* our end */
-    char in[8192];  /* what the printer said, NUL-terminated */
+    int fd;        /* our end */
+    char in[8192]; /* what the printer said, NUL-terminated */
     size_t in_len;
 };
 
@@ -43,8 +43,8 @@ pump(struct host *h, int ms)
         loop_run_once(h->loop, 1);
         ssize_t n;
         while (h->in_len + 1 < sizeof(h->in) &&
-               (n = recv(h->fd, h->in + h->in_len, sizeof(h->in) - 1 - h->in_len,
-                         MSG_DONTWAIT)) > 0)
+               (n = recv(h->fd, h->in + h->in_len, sizeof(h->in) - 1 - h->in_len, MSG_DONTWAIT)) >
+                   0)
             h->in_len += (size_t)n;
         h->in[h->in_len] = '\0';
     }
