@@ -80,15 +80,16 @@ static const struct row rows[] = {
 #undef P
 #undef W
 
-/* Host replies a printed line must not look like (marlin_reply.c's prefixes, case ignored). */
+/* Host replies a printed line must not look like (marlin_reply.c's prefixes, case ignored);
+   "start" and "wait" are replies only as the whole line. */
 static const char *const replies[] = { "ok",        "resend",
                                        "rs ",       "error",
                                        "!!",        "busy",
-                                       "wait",      "start",
                                        "echo:busy", "t:",
                                        "b:",        "cap:",
                                        "//action:", "firmware_name:",
                                        "x:",        "echo:unknown command" };
+static const char *const whole[] = { "start", "wait" };
 
 void
 gpolicy_init(struct gpolicy *p)
@@ -248,6 +249,11 @@ reply_like(const char *out, size_t n)
              !isalnum((unsigned char)out[k])))
             return true;
     }
+    while (n && out[n - 1] == ' ')
+        n--;
+    for (size_t i = 0; i < sizeof(whole) / sizeof(whole[0]); i++)
+        if (n == strlen(whole[i]) && prefix_ci(out, n, whole[i]))
+            return true;
     /* an "ok" with a byte damaged, as marlin_reply.c still reads it ("oR T:...") */
     return n > 4 && out[2] == ' ' && (out[0] == 'o' || out[1] == 'k') &&
            (strncmp(out + 3, "T:", 2) == 0 || out[3] == 'N');
@@ -332,6 +338,10 @@ gpolicy_check_line(const struct gpolicy *p, enum gpolicy_source src, const char 
             n--;
         }
         snprintf(v->line, sizeof(v->line), "M118 E1 %.*s", (int)(n < 200 ? n : 200), t);
+        if (judge_text(true, v->line + 4, strlen(v->line + 4), &e1)) { /* "echo:busy" */
+            v->line[0] = '\0';
+            return verdict(v, GPOLICY_REFUSE, rows[r].why);
+        }
         return verdict(v, GPOLICY_REWRITE, "its text would read as a host reply: echoed instead");
     }
     if (passed(p) & ((uint64_t)1 << r))

@@ -140,8 +140,15 @@ prep_work(void *ud, const atomic_bool *cancel)
        job now, not half-way through a print, and start_job need not read
        the file on the loop thread (a 150 MB job stalled every printer's
        stream ~2.5 s).  Hashing it into the store is the other long read. */
+    /* The policy too (gpolicy.h): the farm's own slicer never breaks it, a
+       profile's custom G-code could (an M600 for an unattended printer). */
+    struct gpolicy pol;
+    char why[1024];
+    farmcfg_policy(&t->req.printer, &pol);
     if (rc == SF_OK &&
-        ((rc = drv_job_scan(t->req.out_path, &t->scan, &t->err)) ||
+        ((rc = gpolicy_check_file(&pol, t->req.out_path, t->req.part_name, why, sizeof(why), NULL,
+                                  &t->err)) ||
+         (rc = drv_job_scan(t->req.out_path, &t->scan, &t->err)) ||
          (rc =
               store_file_adopt(t->store, t->req.out_path, t->gcode_sha, &t->gcode_size, &t->err)) ||
          (t->out.mesh_saved &&

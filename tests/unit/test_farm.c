@@ -224,6 +224,7 @@ test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomi
     double x = 0, y = 0, z = 0;
     int n = sscanf(part.data ? part.data : "", "size %lf %lf %lf", &x, &y, &z);
     bool long_cmd = part.data && strstr(part.data, "long command");
+    bool m600 = part.data && strstr(part.data, "filament change"); /* a profile's custom G-code */
     const char *est = part.data ? strstr(part.data, "est ") : NULL;
     long est_s = est ? strtol(est + 4, NULL, 10) : -1;
     buf_release(&part);
@@ -237,6 +238,8 @@ test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomi
     fprintf(f, "; for %s\nG28\nG1 X%g Y%g Z%g\n", req->printer.name, x, y, z);
     if (long_cmd) /* fits the G-code limit, not a numbered Marlin line */
         fprintf(f, "M117 %0120d\nG1 X0\n", 0);
+    if (m600)
+        fprintf(f, "M600\n");
     fclose(f);
     out->size_mm[0] = x;
     out->size_mm[1] = y;
@@ -679,6 +682,22 @@ T_CASE(farm_bad_gcode_line_fails_at_prepare_naming_file_and_line)
     int64_t good = add("size 20 20 20", "PLA", 1);
     T_TRUE(wait_job(good, JOB_PRINTING));
     T_EQ_INT(tdrv_named("a")->scan_lines, 2);
+    teardown();
+}
+
+/* Sliced G-code that breaks the printer's G-code policy (a profile's M600 on an unattended
+   printer) fails at prepare, naming its line; it never reaches the driver. */
+T_CASE(farm_sliced_gcode_passes_the_gcode_policy_or_fails_at_prepare)
+{
+    struct sf_err err;
+    T_OK(setup("policy", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t bad = add("size 20 20 20 filament change", "PLA", 1);
+    T_TRUE(wait_job(bad, JOB_FAILED));
+    struct job_row j;
+    T_OK(store_job_get(fx.s, bad, &j, &err), &err);
+    T_TRUE(strstr(j.reason, "line 4: M600: a filament change waits for a person") != NULL);
+    T_EQ_INT(tdrv_named("a")->starts, 0);
     teardown();
 }
 

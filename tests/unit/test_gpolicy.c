@@ -55,8 +55,9 @@ T_CASE(gpolicy_refuses_text_that_reads_as_a_host_reply)
     };
     for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++)
         T_EQ_INT(judge(NULL, bad[i], msg, sizeof(msg)), 1);
-    const char *good[] = { "M118 E1 Resend: 1", "M118 A1 hello", "M117 Printing...",
-                           "M118 okay",         "M118 Starting", "M117 Layer 3 of 40" };
+    const char *good[] = { "M118 E1 Resend: 1", "M118 A1 hello",  "M117 Printing...",
+                           "M118 okay",         "M118 Starting",  "M117 Layer 3 of 40",
+                           "M117 start wide",   "M118 wait a bit" };
     for (size_t i = 0; i < sizeof(good) / sizeof(good[0]); i++)
         T_EQ_INT(judge(NULL, good[i], msg, sizeof(msg)), 0);
 }
