@@ -664,7 +664,7 @@ T_CASE(farm_printer_takes_jobs_only_when_its_driver_is_idle)
  * check that used to run in start_job on the loop thread now runs on the
  * prepare worker, and it still keeps a job from failing half-way.
  */
-T_CASE(farm_bad_gcode_line_fails_at_prepare_naming_file_and_line)
+T_CASE(farm_bad_gcode_line_or_policy_fails_at_prepare_naming_file_and_line)
 {
     struct sf_err err;
     T_OK(setup("badline", farm_ini, tdrv_new, test_prepare, &err), &err);
@@ -677,27 +677,17 @@ T_CASE(farm_bad_gcode_line_fails_at_prepare_naming_file_and_line)
     snprintf(want, sizeof(want), "job-%lld.gcode':4: command too long", (long long)bad);
     T_TRUE(strstr(j.reason, want) != NULL);
     T_EQ_STR(j.gcode_sha, "");
+    /* sliced G-code that breaks the printer's G-code policy (a profile's M600 on an
+       unattended printer) fails the same way, naming its line */
+    int64_t m600 = add("size 20 20 20 filament change", "PLA", 1);
+    T_TRUE(wait_job(m600, JOB_FAILED));
+    T_OK(store_job_get(fx.s, m600, &j, &err), &err);
+    T_TRUE(strstr(j.reason, "line 4: M600: a filament change waits for a person") != NULL);
     T_EQ_INT(tdrv_named("a")->starts, 0);
     /* a good job after it prints */
     int64_t good = add("size 20 20 20", "PLA", 1);
     T_TRUE(wait_job(good, JOB_PRINTING));
     T_EQ_INT(tdrv_named("a")->scan_lines, 2);
-    teardown();
-}
-
-/* Sliced G-code that breaks the printer's G-code policy (a profile's M600 on an unattended
-   printer) fails at prepare, naming its line; it never reaches the driver. */
-T_CASE(farm_sliced_gcode_passes_the_gcode_policy_or_fails_at_prepare)
-{
-    struct sf_err err;
-    T_OK(setup("policy", farm_ini, tdrv_new, test_prepare, &err), &err);
-    T_TRUE(wait_printer(0, PRINTER_IDLE));
-    int64_t bad = add("size 20 20 20 filament change", "PLA", 1);
-    T_TRUE(wait_job(bad, JOB_FAILED));
-    struct job_row j;
-    T_OK(store_job_get(fx.s, bad, &j, &err), &err);
-    T_TRUE(strstr(j.reason, "line 4: M600: a filament change waits for a person") != NULL);
-    T_EQ_INT(tdrv_named("a")->starts, 0);
     teardown();
 }
 

@@ -106,6 +106,25 @@ open_host(struct host *h)
     return heard(h, "start", 10000);
 }
 
+/* Forget what was heard, send line (numbered n, as say), and wait up to ms for want. */
+static bool
+ask(struct host *h, long n, const char *line, const char *want, int ms)
+{
+    clear(h);
+    say(h, n, line);
+    return heard(h, want, ms);
+}
+
+/* open_host, then "N0 M110 N0" answered: the next line is N1. */
+static bool
+open_numbered(struct host *h)
+{
+    if (!open_host(h))
+        return false;
+    say(h, 0, "M110 N0");
+    return heard(h, "ok", 2000);
+}
+
 static void
 close_host(struct host *h)
 {
@@ -119,26 +138,16 @@ close_host(struct host *h)
 T_CASE(sim_m110_as_marlin_queue_and_handler)
 {
     struct host h;
-    T_TRUE(open_host(&h));
-    say(&h, 0, "M110 N0");
-    T_TRUE(heard(&h, "ok", 2000));
+    T_TRUE(open_numbered(&h));
     say(&h, 1, "G28");
     T_TRUE(heard(&h, "ok", 20000));
     /* "M110" in another command's text: the queue takes the N after it */
-    clear(&h);
-    say(&h, 2, "M117 M110 N7");
-    T_TRUE(heard(&h, "ok", 2000));
-    clear(&h);
-    say(&h, 3, "G1 X1");
-    T_TRUE(heard(&h, "Resend: 8", 2000));
+    T_TRUE(ask(&h, 2, "M117 M110 N7", "ok", 2000));
+    T_TRUE(ask(&h, 3, "G1 X1", "Resend: 8", 2000));
     T_TRUE(strstr(h.in, "Line Number is not Last Line Number+1, Last Line: 7") != NULL);
     /* the handler: an unnumbered M110 sets the number when it runs */
-    clear(&h);
-    say(&h, -1, "M110 N50");
-    T_TRUE(heard(&h, "ok", 2000));
-    clear(&h);
-    say(&h, 51, "G1 X2");
-    T_TRUE(heard(&h, "ok", 2000));
+    T_TRUE(ask(&h, -1, "M110 N50", "ok", 2000));
+    T_TRUE(ask(&h, 51, "G1 X2", "ok", 2000));
     T_TRUE(strstr(h.in, "Resend") == NULL);
     close_host(&h);
 }
@@ -146,25 +155,19 @@ T_CASE(sim_m110_as_marlin_queue_and_handler)
 T_CASE(sim_m118_prints_raw_without_e1)
 {
     struct host h;
-    T_TRUE(open_host(&h));
-    say(&h, 0, "M110 N0");
-    T_TRUE(heard(&h, "ok", 2000));
+    T_TRUE(open_numbered(&h));
     clear(&h);
     say(&h, 1, "M118 Resend: 1");
     T_TRUE(heard(&h, "\nok", 2000) || heard(&h, "ok", 100));
     T_TRUE(strncmp(h.in, "Resend: 1\n", 10) == 0);
-    clear(&h);
-    say(&h, 2, "M118 E1 A1 P0 Resend: 1");
-    T_TRUE(heard(&h, "echo://Resend: 1\n", 2000));
+    T_TRUE(ask(&h, 2, "M118 E1 A1 P0 Resend: 1", "echo://Resend: 1\n", 2000));
     close_host(&h);
 }
 
 T_CASE(sim_waits_for_the_user_until_m108)
 {
     struct host h;
-    T_TRUE(open_host(&h));
-    say(&h, 0, "M110 N0");
-    T_TRUE(heard(&h, "ok", 2000));
+    T_TRUE(open_numbered(&h));
     const char *waits[] = { "M0", "M600" };
     for (int i = 0; i < 2; i++) {
         clear(&h);
@@ -182,20 +185,10 @@ T_CASE(sim_waits_for_the_user_until_m108)
 T_CASE(sim_m999_m111_m997)
 {
     struct host h;
-    T_TRUE(open_host(&h));
-    say(&h, 0, "M110 N0");
-    T_TRUE(heard(&h, "ok", 2000));
-    clear(&h);
-    say(&h, 1, "M999");
-    T_TRUE(heard(&h, "Resend: 2", 2000));
-    clear(&h);
-    say(&h, 2, "M111 S1");
-    T_TRUE(heard(&h, "echo:DEBUG:ECHO", 2000));
-    clear(&h);
-    say(&h, 3, "G1 X3");
-    T_TRUE(heard(&h, "echo:G1 X3", 2000));
-    clear(&h);
-    say(&h, 4, "M997");
-    T_TRUE(heard(&h, "start", 10000));
+    T_TRUE(open_numbered(&h));
+    T_TRUE(ask(&h, 1, "M999", "Resend: 2", 2000));
+    T_TRUE(ask(&h, 2, "M111 S1", "echo:DEBUG:ECHO", 2000));
+    T_TRUE(ask(&h, 3, "G1 X3", "echo:G1 X3", 2000));
+    T_TRUE(ask(&h, 4, "M997", "start", 10000));
     close_host(&h);
 }
