@@ -13,8 +13,8 @@
  * commands, e.g. "SET_HEATER_TEMPERATURE HEATER=extruder TARGET=200",
  * are longer than Marlin allows and need no line numbers), a new
  * enum gcheck_rules value and its case in gcheck.c are the whole change.
- * A G-code safety policy (which commands a job may hold) belongs here too,
- * as a rule of the set, judged command by command in the same pass.
+ * Which commands a job may hold (the farm's safety policy, the same for
+ * every kind) is gpolicy.h's: the upload check runs it before this scan.
  *
  * Thread: any (pure: reads the file, touches only its arguments).
  */

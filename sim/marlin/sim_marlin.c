@@ -367,6 +367,7 @@ sim_firmware_reset(struct sim_marlin *s, bool banner)
     s->feed_mm_s = 25;
     s->t_noz_target = s->t_bed_target = 0;
     s->autoreport_s = 0;
+    s->debug_flags = 0;
     s->dwell_s = -1;
     sim_free_out(s);
     buf_reset(&s->tx);

@@ -276,17 +276,92 @@ run_report(struct sim_marlin *s, const struct gcode_line *g)
     case 115:
         report_firmware(s);
         return RUN_DONE;
-    default: { /* 118 */
+    default: { /* 118: A1, E1 and Pn are parsed off the front, up to three (M118.cpp) */
         const char *t = g->text ? g->text : "";
         size_t n = g->text ? g->text_len : 0;
-        if (n >= 3 && strncmp(t, "A1 ", 3) == 0)
-            sim_emit(s, "//%.*s", (int)(n - 3), t + 3);
-        else if (n >= 3 && strncmp(t, "E1 ", 3) == 0)
-            sim_emit(s, "echo:%.*s", (int)(n - 3), t + 3);
-        else
-            sim_emit(s, "%.*s", (int)n, t);
+        bool e = false, a = false;
+        for (int k = 0; k < 3 && n >= 2; k++) {
+            if (!(((t[0] == 'A' || t[0] == 'E') && t[1] == '1') ||
+                  (t[0] == 'P' && t[1] >= '0' && t[1] <= '9')))
+                break;
+            e |= t[0] == 'E';
+            a |= t[0] == 'A';
+            for (t += 2, n -= 2; n && *t == ' '; t++, n--)
+                ;
+        }
+        /* without E1 the text goes out raw: a host reads "ok" or "Resend: 1" as a reply */
+        sim_emit(s, "%s%s%.*s", e ? "echo:" : "", a ? "//" : "", (int)n, t);
         return RUN_DONE;
     }
+    }
+}
+
+/*
+ * Waits for a person: M0/M1 (no S or P), M600 (the filament change's
+ * "press to continue"): "busy: paused for user" every 2 s until M108 (the
+ * emergency parser clears wait_for_user as it clears wait_for_heatup), as
+ * Marlin does with no LCD.  M226 (a pin's state) never changes in the sim:
+ * it waits for good, "busy: processing", as Marlin's loop does (M108 does
+ * not break it).
+ */
+static enum run
+run_wait_user(struct sim_marlin *s, const struct gcode_line *g, int64_t now)
+{
+    bool pin = g->code == 226;
+    if (s->pl_len > 0)
+        return RUN_BLOCKED; /* planner.synchronize() first */
+    sync_planner(s);
+    if (!pin && s->wait_heat_interrupted) {
+        s->wait_heat_interrupted = false;
+        return RUN_DONE;
+    }
+    if (!s->cfg.no_keepalive && now >= s->keepalive_ms) {
+        sim_emit(s, pin ? "echo:busy: processing" : "echo:busy: paused for user");
+        s->keepalive_ms = now + KEEPALIVE_MS;
+    }
+    return RUN_BLOCKED;
+}
+
+/*
+ * The rest of the policy's rows (drivers/gpolicy.h) as Marlin runs them:
+ * M111 sets the debug flags and says which (with ECHO on, every command is
+ * echoed back), M502 loads the defaults, M997 reboots into the bootloader
+ * (after this command's ok is lost), M999 asks the host to resend from
+ * last_n + 1 and empties the queue, M25 asks the host to pause (its
+ * ACTION_ON_PAUSE).
+ */
+static enum run
+run_policy_row(struct sim_marlin *s, const struct gcode_line *g)
+{
+    double v;
+    switch (g->code) {
+    case 111: {
+        static const char *const names[] = { "ECHO",   "INFO",          "ERRORS",
+                                             "DRYRUN", "COMMUNICATION", "LEVELING" };
+        if (gcode_get(g, 'S', &v) && !isnan(v))
+            s->debug_flags = (int)v & 63;
+        char buf[96] = "";
+        for (size_t i = 0, n = 0; i < 6; i++)
+            if (s->debug_flags & (1 << i))
+                n += (size_t)snprintf(buf + n, sizeof(buf) - n, "%s%s", n ? "," : "", names[i]);
+        sim_emit(s, "echo:DEBUG:%s", buf[0] ? buf : "None");
+        return RUN_DONE;
+    }
+    case 502:
+        sim_emit(s, "echo:Hardcoded Default Settings Loaded");
+        return RUN_DONE;
+    case 997:
+        s->reset_pending = true;
+        return RUN_OWN_OK;
+    case 999:
+        s->halted = false;
+        s->q_len = 1; /* flush_and_request_resend: the queue is emptied (this head popped next) */
+        sim_emit(s, "Resend: %ld", s->last_n + 1);
+        sim_emit(s, "ok");
+        return RUN_OWN_OK;
+    default: /* 25 */
+        sim_emit(s, "//action:pause");
+        return RUN_DONE;
     }
 }
 
@@ -314,6 +389,20 @@ run_m(struct sim_marlin *s, const struct gcode_line *g, int64_t now)
     case 115:
     case 118:
         return run_report(s, g);
+    case 0:
+    case 1:
+        if (gcode_get(g, 'S', NULL) || gcode_get(g, 'P', NULL))
+            return run_wait(s, g, now); /* a timed wait, as G4 */
+        return run_wait_user(s, g, now);
+    case 226:
+    case 600:
+        return run_wait_user(s, g, now);
+    case 25:
+    case 111:
+    case 502:
+    case 997:
+    case 999:
+        return run_policy_row(s, g);
     case 400:
         if (s->pl_len > 0)
             return RUN_BLOCKED;
@@ -349,7 +438,6 @@ run_m(struct sim_marlin *s, const struct gcode_line *g, int64_t now)
     case 221:
     case 410:
     case 900:
-    case 999:
         return RUN_DONE;
     default:
         return RUN_UNKNOWN;
@@ -378,6 +466,8 @@ run_command(struct sim_marlin *s, const char *raw, const char *cmd, struct gcode
         return true;
     if (rc == RUN_UNKNOWN)
         sim_emit(s, "echo:Unknown command: \"%s\"", cmd);
+    else if (s->debug_flags & 1)
+        sim_emit(s, "echo:%s", cmd); /* M111 S1: DEBUG_ECHO echoes each command */
     sim_send_ok(s, raw);
     return true;
 }
@@ -387,9 +477,10 @@ static bool
 known(const struct gcode_line *g)
 {
     static const int g_codes[] = { 0, 1, 2, 3, 4, 20, 21, 28, 29, 90, 91, 92 };
-    static const int m_codes[] = { 17,  18,  73,  75,  76,  77,  82,  83,  84,  104, 105, 106,
-                                   107, 108, 109, 110, 112, 114, 115, 117, 118, 140, 155, 190,
-                                   201, 203, 204, 205, 220, 221, 400, 410, 900, 999 };
+    static const int m_codes[] = { 0,   1,   17,  18,  25,  73,  75,  76,  77,  82,  83,
+                                   84,  104, 105, 106, 107, 108, 109, 110, 111, 112, 114,
+                                   115, 117, 118, 140, 155, 190, 201, 203, 204, 205, 220,
+                                   221, 226, 400, 410, 502, 600, 900, 997, 999 };
     if (g->letter == 'T')
         return true;
     const int *v = g->letter == 'G' ? g_codes : g->letter == 'M' ? m_codes : NULL;
@@ -460,6 +551,11 @@ sim_run_queue(struct sim_marlin *s)
         s->q_head = (s->q_head + 1) % s->cfg.bufsize;
         s->q_len--;
         check_fault_triggers(s);
+        if (s->reset_pending) { /* M997: the bootloader, then "start" */
+            s->reset_pending = false;
+            sim_firmware_reset(s, true);
+            return;
+        }
         if (s->fd < 0 && s->kind == LINK_TCP)
             return;
     }

@@ -107,7 +107,9 @@ struct sim_marlin {
     double pos[4]; /* X Y Z E */
     double feed_mm_s;
     double t_noz, t_noz_target, t_bed, t_bed_target;
-    bool wait_heat_interrupted; /* M108 */
+    bool wait_heat_interrupted; /* M108: ends a heating wait, and a wait for the user (M0, M600) */
+    int debug_flags;            /* M111 S: Marlin's marlin_debug_flags (1 ECHO ... 32 LEVELING) */
+    bool reset_pending;         /* M997 ran: reset once it is popped */
     int autoreport_s;           /* M155 S; 0 off */
     int64_t autoreport_ms;      /* next auto-report */
     struct sim_marlin_stats st;

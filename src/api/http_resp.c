@@ -49,7 +49,8 @@ http_text_clean(char *out, size_t cap, const char *s)
 void
 http_error(struct http_resp *resp, int status, const char *fmt, ...)
 {
-    char raw[SF_ERR_MSG_MAX], msg[SF_ERR_MSG_MAX];
+    /* longer than an sf_err: a refused upload names up to 20 lines (gpolicy.h) */
+    char raw[4096], msg[4096];
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(raw, sizeof(raw), fmt, ap);

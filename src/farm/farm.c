@@ -22,6 +22,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "../../drivers/gpolicy.h"
 #include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
@@ -136,14 +137,21 @@ prep_work(void *ud, const atomic_bool *cancel)
     int64_t t0 = clock_mono_ms();
     int rc = t->f->hooks.prepare(&t->req, &t->out, cancel, &t->err);
     t->prepare_ms = clock_mono_ms() - t0;
+    if (rc == SF_OK) /* kept with the job: a start reads it from there, not the file */
+        t->est_s = gcjob_estimate_s(t->req.out_path);
     /* Count and check the G-code here, off the loop: a bad line fails the
        job now, not half-way through a print, and start_job need not read
        the file on the loop thread (a 150 MB job stalled every printer's
        stream ~2.5 s).  Hashing it into the store is the other long read. */
-    if (rc == SF_OK) /* kept with the job: a start reads it from there, not the file */
-        t->est_s = gcjob_estimate_s(t->req.out_path);
+    /* The policy too (gpolicy.h): the farm's own slicer never breaks it, a
+       profile's custom G-code could (an M600 for an unattended printer). */
+    struct gpolicy pol;
+    char why[1024];
+    farmcfg_policy(&t->req.printer, &pol);
     if (rc == SF_OK &&
-        ((rc = drv_job_scan(t->req.out_path, &t->scan, &t->err)) ||
+        ((rc = gpolicy_check_file(&pol, t->req.out_path, t->req.part_name, why, sizeof(why), NULL,
+                                  &t->err)) ||
+         (rc = drv_job_scan(t->req.out_path, &t->scan, &t->err)) ||
          (rc =
               store_file_adopt(t->store, t->req.out_path, t->gcode_sha, &t->gcode_size, &t->err)) ||
          (t->out.mesh_saved &&
@@ -732,7 +740,9 @@ struct gcheck {
     char path[1200];
     struct job_opts o;
     struct farm_gcode g;
+    struct gpolicy policy; /* what every printer that may take it passes (gpolicy_meet) */
     struct sf_err err;
+    char msg[4096]; /* the policy's findings, every refused line (up to 20) */
     farm_gcode_fn done;
     void *ud;
 };
@@ -744,7 +754,10 @@ gcheck_work(void *ud, const atomic_bool *cancel)
     (void)cancel;
     struct gcheck *t = ud;
     struct drv_job_scan scan;
-    int rc;
+    int rc =
+        gpolicy_check_file(&t->policy, t->path, t->o.name, t->msg, sizeof(t->msg), NULL, &t->err);
+    if (rc)
+        return rc;
     if ((rc = drv_job_scan(t->path, &scan, &t->err)) ||
         (rc = gcjob_read(t->path, &t->g.info, &t->err))) {
         /* the message names the temporary path: name the upload instead */
@@ -803,7 +816,7 @@ gcheck_done(struct loop *l, void *ud, int rc)
                             g->model, g->model[0] ? "'" : "", g->nozzle_mm,
                             f->n_printers ? why : "no printers configured");
     }
-    t->done(t->ud, rc, rc ? NULL : &t->g, t->err.msg);
+    t->done(t->ud, rc, rc ? NULL : &t->g, t->msg[0] ? t->msg : t->err.msg);
     free(t);
 }
 
@@ -820,6 +833,17 @@ farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, far
     }
     t->f = f;
     t->o = *o;
+    /* a file passes the policy of every printer that may take it */
+    gpolicy_all(&t->policy);
+    for (size_t i = 0; i < f->n_printers; i++) {
+        const struct farmcfg_printer *c = printer_cfg(f->printers[i]);
+        struct gpolicy one;
+        if ((o->printer[0] && strcmp(o->printer, c->name) != 0) ||
+            (o->group[0] && strcmp(o->group, c->group) != 0))
+            continue;
+        farmcfg_policy(c, &one);
+        gpolicy_meet(&t->policy, &one);
+    }
     t->done = done;
     t->ud = ud;
     /* on the io thread, beside resume reads: never queued behind slicing */

@@ -31,6 +31,7 @@
 
 #include "../../drivers/drv.h"
 #include "../../drivers/drv_link.h"
+#include "../../drivers/gpolicy.h"
 #include "../base/buf.h"
 #include "../base/limits.h"
 #include "../base/mem.h"
@@ -69,6 +70,8 @@ static const struct option options[] = {
     { "auto_eject", true, K_BOOL, P(auto_eject), 0, 0 },
     { "group", true, K_IDENT, P(group), 0, 0 },
     { "gcode_models", true, K_STR, P(gcode_models), 0, 0 },
+    { "attended", true, K_BOOL, P(attended), 0, 0 },
+    { "allow_gcode", true, K_STR, P(allow_gcode), 0, 0 },
 };
 #define N_OPTIONS (sizeof(options) / sizeof(options[0]))
 
@@ -442,6 +445,11 @@ handler(void *user, const char *section, const char *name, const char *value)
             return 1; /* empty: keep the default, the config file's directory */
         if (!check_text(ps, name, section, o->kind, o->size, value))
             return 0;
+        struct gpolicy gp;
+        struct sf_err e;
+        gpolicy_init(&gp);
+        if (strcmp(name, "allow_gcode") == 0 && gpolicy_allow(&gp, value, &e))
+            return fail(ps, "option 'allow_gcode' in section '%s': %s", section, e.msg);
         snprintf(field, o->size, "%s", value);
         return 1;
     case K_INT:
@@ -668,6 +676,14 @@ farmcfg_option_name(size_t i, bool *printer)
     if (printer)
         *printer = options[i].printer;
     return options[i].name;
+}
+
+void
+farmcfg_policy(const struct farmcfg_printer *p, struct gpolicy *out)
+{
+    gpolicy_init(out);
+    out->attended = p->attended;
+    gpolicy_allow(out, p->allow_gcode, NULL); /* checked when it was parsed */
 }
 
 const struct farmcfg_printer *

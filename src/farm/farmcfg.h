@@ -25,6 +25,8 @@
 #include "../../drivers/drv_link.h"
 #include "../base/err.h"
 
+struct gpolicy; /* drivers/gpolicy.h */
+
 #define FARMCFG_KEY_MIN      16   /* shorter API keys are guessable */
 #define FARMCFG_KEY_MAX      128  /* longer ones are a paste error */
 #define FARMCFG_KEYS_MAX     64   /* API keys per farm */
@@ -55,6 +57,10 @@ struct farmcfg_printer {
     /* uploaded G-code it runs (gcjob.h): slicer printer models, comma-separated;
        "*" any, "" none (default) */
     char gcode_models[256];
+    bool attended; /* a person watches it: waits for a person (M0, M600, ...) pass the G-code
+                      policy (drivers/gpolicy.h; default false) */
+    /* commands the G-code policy refuses that this printer takes: "M600 M0" (default "") */
+    char allow_gcode[256];
 };
 
 struct farmcfg {
@@ -90,6 +96,9 @@ int farmcfg_load(struct farmcfg *c, const char *path, struct sf_err *err);
 /* Name of option i, link options included (NULL past the last); *printer says which
    section kind. */
 const char *farmcfg_option_name(size_t i, bool *printer);
+
+/* The G-code policy (drivers/gpolicy.h) of printer p: its attended and allow_gcode. */
+void farmcfg_policy(const struct farmcfg_printer *p, struct gpolicy *out);
 
 /* The printer called name, or NULL. */
 const struct farmcfg_printer *farmcfg_printer(const struct farmcfg *c, const char *name);

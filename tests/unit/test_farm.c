@@ -225,6 +225,7 @@ test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomi
     double x = 0, y = 0, z = 0;
     int n = sscanf(part.data ? part.data : "", "size %lf %lf %lf", &x, &y, &z);
     bool long_cmd = part.data && strstr(part.data, "long command");
+    bool m600 = part.data && strstr(part.data, "filament change"); /* a profile's custom G-code */
     const char *est = part.data ? strstr(part.data, "est ") : NULL;
     long est_s = est ? strtol(est + 4, NULL, 10) : -1;
     buf_release(&part);
@@ -238,6 +239,8 @@ test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomi
     fprintf(f, "; for %s\nG28\nG1 X%g Y%g Z%g\n", req->printer.name, x, y, z);
     if (long_cmd) /* fits the G-code limit, not a numbered Marlin line */
         fprintf(f, "M117 %0120d\nG1 X0\n", 0);
+    if (m600)
+        fprintf(f, "M600\n");
     fclose(f);
     out->size_mm[0] = x;
     out->size_mm[1] = y;
@@ -724,7 +727,7 @@ T_CASE(farm_printer_takes_jobs_only_when_its_driver_is_idle)
  * check that used to run in start_job on the loop thread now runs on the
  * prepare worker, and it still keeps a job from failing half-way.
  */
-T_CASE(farm_bad_gcode_line_fails_at_prepare_naming_file_and_line)
+T_CASE(farm_bad_gcode_line_or_policy_fails_at_prepare_naming_file_and_line)
 {
     struct sf_err err;
     T_OK(setup("badline", farm_ini, tdrv_new, test_prepare, &err), &err);
@@ -737,6 +740,12 @@ T_CASE(farm_bad_gcode_line_fails_at_prepare_naming_file_and_line)
     snprintf(want, sizeof(want), "job-%lld.gcode':4: command too long", (long long)bad);
     T_TRUE(strstr(j.reason, want) != NULL);
     T_EQ_STR(j.gcode_sha, "");
+    /* sliced G-code that breaks the printer's G-code policy (a profile's M600 on an
+       unattended printer) fails the same way, naming its line */
+    int64_t m600 = add("size 20 20 20 filament change", "PLA", 1);
+    T_TRUE(wait_job(m600, JOB_FAILED));
+    T_OK(store_job_get(fx.s, m600, &j, &err), &err);
+    T_TRUE(strstr(j.reason, "line 4: M600: a filament change waits for a person") != NULL);
     T_EQ_INT(tdrv_named("a")->starts, 0);
     /* a good job after it prints */
     int64_t good = add("size 20 20 20", "PLA", 1);

@@ -5,6 +5,7 @@
  * document every option).
  */
 #include "../../drivers/drv_link.h"
+#include "../../drivers/gpolicy.h"
 #include "../../src/base/buf.h"
 #include "../../src/farm/farmcfg.h"
 #include "../t.h"
@@ -96,6 +97,28 @@ T_CASE(farmcfg_full_example)
     T_EQ_INT(c.n_printers, 0);
 }
 
+T_CASE(farmcfg_gcode_policy_options)
+{
+    struct farmcfg c;
+    struct sf_err err;
+    T_OK(parse(&c,
+               "[printer a]\ndriver: marlin\nport: x\nattended: true\nallow_gcode: m500, M997\n"
+               "[printer b]\ndriver: marlin\nport: y\n",
+               &err),
+         &err);
+    struct gpolicy p;
+    struct gpolicy_verdict v;
+    farmcfg_policy(&c.printers[0], &p);
+    T_TRUE(p.attended);
+    T_EQ_INT(gpolicy_check_line(&p, GPOLICY_FILE, "M997", 4, &v), GPOLICY_PASS);
+    T_EQ_INT(gpolicy_check_line(&p, GPOLICY_FILE, "M600", 4, &v), GPOLICY_PASS);
+    T_EQ_INT(gpolicy_check_line(&p, GPOLICY_FILE, "M502", 4, &v), GPOLICY_REFUSE);
+    farmcfg_policy(&c.printers[1], &p); /* the defaults: unattended, nothing allowed */
+    T_TRUE(!p.attended);
+    T_EQ_INT(gpolicy_check_line(&p, GPOLICY_FILE, "M600", 4, &v), GPOLICY_REFUSE);
+    farmcfg_release(&c);
+}
+
 T_CASE(farmcfg_octoprint_printer)
 {
     struct farmcfg c;
@@ -152,6 +175,11 @@ T_CASE(farmcfg_errors_name_file_line_option_section)
         { "[printer a]\ndriver: marlin\nport: x\nbed_size: 200, 200, 200, 5\n", "not X, Y, Z" },
         { "[printer a]\ndriver: marlin\nport: x\nenabled: maybe\n",
           "'maybe' is not true or false" },
+        { "[printer a]\ndriver: marlin\nport: x\nallow_gcode: M600 M110\n",
+          "farm.ini:4: option 'allow_gcode' in section 'printer a': 'M110' is the host's "
+          "protocol" },
+        { "[printer a]\ndriver: marlin\nport: x\nallow_gcode: G28\n",
+          "'G28' is not a command of the G-code policy" },
         { "[printer a]\nport: x\n",
           "farm.ini:1: section 'printer a': option 'driver' is required" },
         { "[printer a]\ndriver: marlin\n", "option 'port' is required by driver marlin" },

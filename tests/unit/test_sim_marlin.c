@@ -1,0 +1,194 @@
+/*
+ * test_sim_marlin.c - the Marlin simulator runs the G-code policy's rows
+ * (drivers/gpolicy.h) as Marlin 2.1 does, talked to raw over a socketpair
+ * on simulated time: M110 by queue.cpp's line-number check (the number
+ * after "M110" when the line's text holds "M110", whatever the command)
+ * and by the M110 handler (set_current_line_number when the command runs,
+ * unnumbered too); M118 without E1 prints its text raw ("Resend: 1" looks
+ * like a reply), with E1 as echo:; M0 and M600 wait for the user until
+ * M108; M999 asks for a resend; M111 S1 echoes every command; M997 reboots.
+ */
+#include <stdio.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "../../sim/marlin/sim_marlin.h"
+#include "../../src/base/gcode.h"
+#include "../../src/base/log.h"
+#include "../t.h"
+
+struct host {
+    struct loop *loop;
+    struct sim_marlin *sim;
+    int fd;        /* our end */
+    char in[8192]; /* what the printer said, NUL-terminated */
+    size_t in_len;
+};
+
+static void
+quiet(void *ud, enum log_level lv, const char *subsys, const char *printer, const char *msg)
+{
+    (void)ud;
+    (void)lv;
+    (void)subsys;
+    (void)printer;
+    (void)msg;
+}
+
+static void
+pump(struct host *h, int ms)
+{
+    for (int i = 0; i < ms; i++) {
+        loop_run_once(h->loop, 1);
+        ssize_t n;
+        while (h->in_len + 1 < sizeof(h->in) &&
+               (n = recv(h->fd, h->in + h->in_len, sizeof(h->in) - 1 - h->in_len, MSG_DONTWAIT)) >
+                   0)
+            h->in_len += (size_t)n;
+        h->in[h->in_len] = '\0';
+    }
+}
+
+/* Pump until the printer has said want since the last clear (true), or ms ran out. */
+static bool
+heard(struct host *h, const char *want, int ms)
+{
+    for (int i = 0; i < ms && !strstr(h->in, want); i += 10)
+        pump(h, 10);
+    return strstr(h->in, want) != NULL;
+}
+
+static void
+clear(struct host *h)
+{
+    h->in_len = 0;
+    h->in[0] = '\0';
+}
+
+/* Send line, numbered n (with its checksum) when n >= 0. */
+static void
+say(struct host *h, long n, const char *line)
+{
+    char b[160];
+    if (n >= 0) {
+        int k = snprintf(b, sizeof(b), "N%ld %s", n, line);
+        snprintf(b + k, sizeof(b) - (size_t)k, "*%u\n", gcode_checksum(b, (size_t)k));
+    } else {
+        snprintf(b, sizeof(b), "%s\n", line);
+    }
+    T_TRUE(write(h->fd, b, strlen(b)) == (ssize_t)strlen(b));
+}
+
+static bool
+open_host(struct host *h)
+{
+    struct sf_err err;
+    log_set_sink(quiet, NULL);
+    *h = (struct host){ .fd = -1 };
+    h->loop = loop_new(&err);
+    if (!h->loop)
+        return false;
+    loop_set_virtual(h->loop);
+    int sv[2];
+    if (socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv) < 0)
+        return false;
+    struct sim_marlin_config c;
+    sim_marlin_config_init(&c);
+    c.fd = sv[0];
+    c.virtual_time = true;
+    c.speed = 100;
+    c.boot_hold = true;
+    h->fd = sv[1];
+    h->sim = sim_marlin_new(h->loop, &c, &err);
+    if (!h->sim)
+        return false;
+    return heard(h, "start", 10000);
+}
+
+/* Forget what was heard, send line (numbered n, as say), and wait up to ms for want. */
+static bool
+ask(struct host *h, long n, const char *line, const char *want, int ms)
+{
+    clear(h);
+    say(h, n, line);
+    return heard(h, want, ms);
+}
+
+/* open_host, then "N0 M110 N0" answered: the next line is N1. */
+static bool
+open_numbered(struct host *h)
+{
+    if (!open_host(h))
+        return false;
+    say(h, 0, "M110 N0");
+    return heard(h, "ok", 2000);
+}
+
+static void
+close_host(struct host *h)
+{
+    sim_marlin_free(h->sim);
+    if (h->fd >= 0)
+        close(h->fd);
+    loop_free(h->loop);
+    log_set_sink(NULL, NULL);
+}
+
+T_CASE(sim_m110_as_marlin_queue_and_handler)
+{
+    struct host h;
+    T_TRUE(open_numbered(&h));
+    say(&h, 1, "G28");
+    T_TRUE(heard(&h, "ok", 20000));
+    /* "M110" in another command's text: the queue takes the N after it */
+    T_TRUE(ask(&h, 2, "M117 M110 N7", "ok", 2000));
+    T_TRUE(ask(&h, 3, "G1 X1", "Resend: 8", 2000));
+    T_TRUE(strstr(h.in, "Line Number is not Last Line Number+1, Last Line: 7") != NULL);
+    /* the handler: an unnumbered M110 sets the number when it runs */
+    T_TRUE(ask(&h, -1, "M110 N50", "ok", 2000));
+    T_TRUE(ask(&h, 51, "G1 X2", "ok", 2000));
+    T_TRUE(strstr(h.in, "Resend") == NULL);
+    close_host(&h);
+}
+
+T_CASE(sim_m118_prints_raw_without_e1)
+{
+    struct host h;
+    T_TRUE(open_numbered(&h));
+    clear(&h);
+    say(&h, 1, "M118 Resend: 1");
+    T_TRUE(heard(&h, "\nok", 2000) || heard(&h, "ok", 100));
+    T_TRUE(strncmp(h.in, "Resend: 1\n", 10) == 0);
+    T_TRUE(ask(&h, 2, "M118 E1 A1 P0 Resend: 1", "echo://Resend: 1\n", 2000));
+    close_host(&h);
+}
+
+T_CASE(sim_waits_for_the_user_until_m108)
+{
+    struct host h;
+    T_TRUE(open_numbered(&h));
+    const char *waits[] = { "M0", "M600" };
+    for (int i = 0; i < 2; i++) {
+        clear(&h);
+        say(&h, 1 + i, waits[i]);
+        T_TRUE(heard(&h, "echo:busy: paused for user", 10000));
+        T_TRUE(strstr(h.in, "ok") == NULL);
+        pump(&h, 3000);
+        T_TRUE(strstr(h.in, "ok") == NULL);
+        say(&h, -1, "M108");
+        T_TRUE(heard(&h, "ok", 2000));
+    }
+    close_host(&h);
+}
+
+T_CASE(sim_m999_m111_m997)
+{
+    struct host h;
+    T_TRUE(open_numbered(&h));
+    T_TRUE(ask(&h, 1, "M999", "Resend: 2", 2000));
+    T_TRUE(ask(&h, 2, "M111 S1", "echo:DEBUG:ECHO", 2000));
+    T_TRUE(ask(&h, 3, "G1 X3", "echo:G1 X3", 2000));
+    T_TRUE(ask(&h, 4, "M997", "start", 10000));
+    close_host(&h);
+}
