@@ -621,12 +621,22 @@ farm_printer_action(struct farm *f, const char *name, enum printer_action act, s
 }
 
 int
-farm_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err)
+farm_printer_command(struct farm *f, const char *name, const char *line, const char *who,
+                     struct sf_err *err)
 {
     struct printer *p = find(f, name);
     if (!p)
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
-    return printer_command(p, line, err);
+    return printer_command(p, line, who, err);
+}
+
+int
+farm_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err)
+{
+    struct printer *p = find(f, name);
+    if (!p)
+        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    return printer_estop(p, who, err);
 }
 
 /* A resume waiting for its read (drv_job_scan_to) on the io thread. */

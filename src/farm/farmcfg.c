@@ -68,6 +68,7 @@ static const struct option options[] = {
     { "enabled", true, K_BOOL, P(enabled), 0, 0 },
     { "auto_eject", true, K_BOOL, P(auto_eject), 0, 0 },
     { "group", true, K_IDENT, P(group), 0, 0 },
+    { "hold_heat_min", true, K_DBL, P(hold_heat_min), 0, 1440 },
     { "gcode_models", true, K_STR, P(gcode_models), 0, 0 },
 };
 #define N_OPTIONS (sizeof(options) / sizeof(options[0]))
@@ -126,6 +127,7 @@ printer_defaults(struct farmcfg_printer *p)
     p->bed_mm[2] = 250;
     p->overhang_deg = 45;
     p->enabled = true;
+    p->hold_heat_min = 10;
 }
 
 /* A section header "[...]" on the current line: open the section. */

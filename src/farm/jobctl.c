@@ -51,11 +51,43 @@ jobctl_printer_action(struct farm *f, const char *name, enum printer_action act,
     return rc ? rc : not_now(farm_printer_action(f, name, act, err), err);
 }
 
+/*
+ * POLICY CALL POINT (issue 29): what a manual command's line may carry.
+ * The G-code policy module replaces this function's body with its table;
+ * until then it refuses what takes the link from the host: M110 (the
+ * line numbering), M111 (debug output on the line the host parses), and
+ * any control byte (a NUL or an escape that ends or splits a line).
+ */
 int
-jobctl_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err)
+jobctl_manual_check(const char *line, struct sf_err *err)
+{
+    for (const unsigned char *c = (const unsigned char *)line; *c; c++)
+        if (*c < 0x20 || *c == 0x7f)
+            return sf_err_set(err, SF_EINVAL, "manual command: control byte 0x%02x refused", *c);
+    const char *c = line + strspn(line, " \t");
+    if ((c[0] == 'M' || c[0] == 'm') && c[1] == '1' && c[2] == '1' &&
+        (c[3] == '0' || c[3] == '1') && !(c[4] >= '0' && c[4] <= '9'))
+        return sf_err_set(err, SF_EINVAL,
+                          "manual command: M11%c is the host's (the link's %s): refused", c[3],
+                          c[3] == '0' ? "line numbering" : "debug output");
+    return SF_OK;
+}
+
+int
+jobctl_printer_command(struct farm *f, const char *name, const char *line, const char *who,
+                       struct sf_err *err)
 {
     int rc = reachable(f, name, err);
-    return rc ? rc : farm_printer_command(f, name, line, err);
+    if (!rc)
+        rc = jobctl_manual_check(line, err);
+    return rc ? rc : farm_printer_command(f, name, line, who, err);
+}
+
+int
+jobctl_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err)
+{
+    int rc = reachable(f, name, err);
+    return rc ? rc : farm_printer_estop(f, name, who, err);
 }
 
 int

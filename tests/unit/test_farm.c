@@ -155,7 +155,7 @@ t_destroy(struct drv *d)
 
 static const struct drv_ops tdrv_ops = { DRV_OPS_VERSION, "tdrv",    t_open,   t_start,
                                          t_pause,         t_resume,  t_cancel, t_command,
-                                         t_close,         t_destroy, NULL };
+                                         t_close,         t_destroy, NULL,     NULL };
 
 /* A network printer's attach: "not yet" attach_waits times, then the job is still printing. */
 static int
@@ -176,7 +176,7 @@ t_attach(struct drv *d, const char *path, const struct drv_job_scan *scan, struc
 /* tdrv for config kinds that re-attach (the network ones) */
 static const struct drv_ops tdrv_net_ops = { DRV_OPS_VERSION, "tdrv-net", t_open,   t_start,
                                              t_pause,         t_resume,   t_cancel, t_command,
-                                             t_close,         t_destroy,  t_attach };
+                                             t_close,         t_destroy,  t_attach, NULL };
 
 static struct drv *
 tdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
