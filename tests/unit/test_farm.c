@@ -26,6 +26,7 @@
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
 #include "../../src/farm/farm.h"
+#include "../../src/farm/jobctl.h"
 #include "../t.h"
 
 /* ---- tdrv ---- */
@@ -1341,5 +1342,45 @@ T_CASE(farm_bed_gate_survives_stop_and_kill)
     T_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
     T_OK(setup("bedkill", farm_ini, tdrv_new, test_prepare, &err), &err);
     check_bed_gate_kept();
+    teardown();
+}
+
+/*
+ * Issue 29: manual commands only on an idle printer with a clear bed (a
+ * move on a finished part, or in error, is refused as "not now"), never
+ * M110/M111 or control bytes; an operator's emergency stop puts the
+ * printer in error and fails its job for good, although it has a retry
+ * left (max_retries 1: a plain failure goes back to ready).
+ */
+T_CASE(farm_manual_commands_and_emergency_stop)
+{
+    struct sf_err err;
+    T_OK(setup("estop", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_ERR(jobctl_manual_check("M110 N1000", &err), SF_EINVAL, &err, "M110");
+    T_ERR(jobctl_manual_check(" m111 S7", &err), SF_EINVAL, &err, "M111");
+    T_ERR(jobctl_manual_check("G28\x1b", &err), SF_EINVAL, &err, "control byte");
+    T_OK(jobctl_manual_check("M1100 G28 M104 S0", &err), &err);
+    T_TRUE(finish_one_on_a());
+    T_ERR(farm_printer_command(fx.f, "a", "G1 Z0.2 F600", "key t", &err), SF_EAGAIN, &err,
+          "awaiting-clear");
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    /* past the farm's gate: tdrv has no console */
+    T_ERR(farm_printer_command(fx.f, "a", "G28", "key t", &err), SF_EUNSUPP, &err, "console");
+
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_OK(farm_printer_estop(fx.f, "a", "key t", &err), &err);
+    T_EQ_INT(state_of(id), JOB_FAILED);
+    T_EQ_INT(pstate(0), PRINTER_ERROR);
+    T_EQ_INT(tdrv_named("a")->cancels, 1); /* tdrv has no estop of its own: the job's cancel */
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_TRUE(strstr(j.reason, "emergency stop by an operator (key t)") != NULL);
+    T_ERR(farm_printer_command(fx.f, "a", "G28", "key t", &err), SF_EAGAIN, &err, "error");
+    for (int i = 0; i < 10; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(state_of(id), JOB_FAILED);
+    T_EQ_INT(tdrv_named("a")->starts, 2); /* no retry started */
     teardown();
 }
