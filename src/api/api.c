@@ -405,6 +405,19 @@ printers_get(void *ctx, const struct route_args *args, const struct http_req *re
     printers_answer(ctx, args->name[0] ? args->name : NULL, resp);
 }
 
+/* The end of an action on printer name: its refusal (rc, err), or the printer as it is now. */
+static void
+printer_acted(struct api *a, const char *name, int rc, const struct sf_err *err,
+              struct http_resp *resp)
+{
+    if (rc) {
+        http_fail(resp, rc, err->msg);
+        return;
+    }
+    printers_answer(a, name, resp);
+    changed(a);
+}
+
 static void
 printer_act(void *ctx, const struct route_args *args, const struct http_req *req,
             struct http_resp *resp)
@@ -419,12 +432,7 @@ printer_act(void *ctx, const struct route_args *args, const struct http_req *req
     }
     struct sf_err err;
     int rc = jobctl_printer_action(a->cfg.farm, args->name, act, &err);
-    if (rc) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    printers_answer(a, args->name, resp);
-    changed(a);
+    printer_acted(a, args->name, rc, &err, resp);
 }
 
 /*
@@ -484,12 +492,7 @@ printer_estop_route(void *ctx, const struct route_args *args, const struct http_
     char who[16];
     key_label(req, who, sizeof(who));
     int rc = jobctl_printer_estop(a->cfg.farm, args->name, who, &err);
-    if (rc) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    printers_answer(a, args->name, resp);
-    changed(a);
+    printer_acted(a, args->name, rc, &err, resp);
 }
 
 /* ---- events ---- */
