@@ -125,11 +125,17 @@ t_cancel(struct drv *d, struct sf_err *err)
     return SF_OK;
 }
 
+static bool t_console;   /* t_command takes commands (else SF_EUNSUPP) */
+static char t_sent[128]; /* what it took, one line each */
+
 static int
 t_command(struct drv *d, const char *line, struct sf_err *err)
 {
-    (void)d, (void)line;
-    return sf_err_set(err, SF_EUNSUPP, "tdrv: no console");
+    if (!t_console)
+        return sf_err_set(err, SF_EUNSUPP, "printer '%s': tdrv: no console", d->name);
+    size_t n = strlen(t_sent);
+    snprintf(t_sent + n, sizeof(t_sent) - n, "%s\n", line);
+    return SF_OK;
 }
 
 /* As Marlin's: closing reports OFFLINE at once, to whoever still listens. */
@@ -277,6 +283,8 @@ setup(const char *name, const char *ini, printer_driver_fn driver, prepare_fn pr
     setup_held = NULL;
     open_state = DRV_IDLE;
     refuse_starts = attach_waits = attaches = 0;
+    t_console = false;
+    t_sent[0] = '\0';
     log_set_level(LOG_ERROR);
     farmcfg_init(&fx.cfg);
     int rc = farmcfg_parse(&fx.cfg, ini, strlen(ini), "test.ini", err);
@@ -1382,5 +1390,35 @@ T_CASE(farm_manual_commands_and_emergency_stop)
         loop_run_once(fx.l, 10);
     T_EQ_INT(state_of(id), JOB_FAILED);
     T_EQ_INT(tdrv_named("a")->starts, 2); /* no retry started */
+    teardown();
+}
+
+/*
+ * Issue 29, heaters: a printer hot with no print (found so after a
+ * restart: a TCP bridge does not reset it) keeps its temperatures for
+ * hold_heat_min, then the farm turns them off and says so; a job started
+ * meanwhile keeps them.
+ */
+T_CASE(farm_heaters_off_after_hold_heat_min)
+{
+    struct sf_err err;
+    static const char ini[] = "[printer a]\ndriver: marlin\nport: pty:/dev/null\n"
+                              "material: PLA\nhold_heat_min: 0.005\n";
+    T_OK(setup("heat", ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    t_console = true;
+    t_sent[0] = '\0';
+    struct tdrv *t = tdrv_named("a");
+    t->base.status.nozzle_target_c = 210;
+    t->base.status.bed_target_c = 60;
+    report(t, DRV_IDLE, DRV_EV_TEMPS);
+    for (int64_t end = wall_ms() + 200; wall_ms() < end;) /* 0.3 s hold: not yet */
+        loop_run_once(fx.l, 10);
+    T_EQ_STR(t_sent, "");
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && !t_sent[0];)
+        loop_run_once(fx.l, 10);
+    T_EQ_STR(t_sent, "M104 S0\nM140 S0\n");
+    T_TRUE(message_has(0, "heaters off (were 210/60 C)"));
+    t_console = false;
     teardown();
 }
