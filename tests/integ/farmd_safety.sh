@@ -12,11 +12,14 @@
 #      message and the event log); a resume heats again;
 #   e  the emergency stop: M112 reaches the printer, the printer is in
 #      error and the job on it failed although it had a retry left;
+#   e' Moonraker's emergency stop is its /printer/emergency_stop (Klippy
+#      shut down), the printer in error, the job failed;
 #   7  a printer answering M105 with a plain "ok" fails its job within
 #      seconds, saying what it answered (it used to crawl a line a second).
 set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
+. "$(dirname "$0")/lib/netprint.sh"
 
 start_sim m --tcp 0 --speed 20
 # k without ADVANCED_OK: its oks carry no line number, so a plain ok to M105 passes for a line's
@@ -24,15 +27,18 @@ start_sim m --tcp 0 --speed 20
 sims+=($!)
 wait_for 30 test -s "$tmp/k.out" || fail "sim k did not start"
 echo "pty:$(head -n 1 "$tmp/k.out")" > "$tmp/k.addr"
+start_net klip moonraker --speed 5 --api-key klip-key
 cp -r config/printers config/materials "$tmp/"
 {
   printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
   printf '[printer m]\ndriver: marlin\nport: %s\nbaud: 1000000\nmaterial: PLA\nhold_heat_min: 0.05\n' \
     "$(cat "$tmp/m.addr")"
   printf '[printer k]\ndriver: marlin\nport: %s\nbaud: 1000000\nmaterial: PLA\n' "$(cat "$tmp/k.addr")"
+  printf '[printer klip]\ndriver: moonraker\nurl: %s\napi_key: klip-key\npoll_ms: 300\nmaterial: PLA\n' \
+    "$(cat "$tmp/klip.addr")"
 } > "$tmp/farm.ini"
 start_daemon
-wait_for 20 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq 2 ]" || fail "printers: $("$C" printers)"
+wait_for 30 sh -c "[ \$('$C' printers | grep -c ' idle ') -eq 3 ]" || fail "printers: $("$C" printers)"
 tetra "$tmp/t.stl" 12
 
 # cmd PRINTER GCODE: POST a manual command, print the HTTP status.
@@ -92,6 +98,17 @@ halted() { kill -USR1 "$sim_m"; sleep 0.2; grep -q 'halted=1' "$tmp/m.err"; }
 wait_for 5 halted || fail "e: the printer did not halt: $(tail -2 "$tmp/m.err")"
 c=$(cmd m 'G28'); [ "$c" = 409 ] || fail "3: error: $c $(cat "$tmp/r")"
 echo "e: $(cat "$tmp/estop.out"); job $b $(job_state "$b"); 3: error -> $c"
+
+# e': Moonraker's emergency stop
+kj=$(submit "$tmp/t.stl" --printer klip --method none --retries 1)
+wait_for 120 sh -c "[ \"\$(curl -sf -H 'X-Api-Key: $RW' $SLIMFARM_URL/api/jobs/$kj | grep -o '\"state\":\"printing\"')\" ]" ||
+  fail "e': job $kj not printing: $(job_state "$kj")"
+"$C" emergency-stop klip > "$tmp/estop.out" 2>&1 || fail "e': emergency-stop klip: $(cat "$tmp/estop.out")"
+[ "$(job_state "$kj")" = failed ] || fail "e': job $kj is $(job_state "$kj")"
+klippy() { curl -sf -H 'X-Api-Key: klip-key' "$(cat "$tmp/klip.addr")/printer/info" | grep -q '"shutdown"'; }
+wait_for 10 klippy || fail "e': Klippy not shut down: $(curl -s -H 'X-Api-Key: klip-key' "$(cat "$tmp/klip.addr")/printer/info")"
+[ "$(pfield klip "['state']")" = error ] || fail "e': klip is $(pfield klip "['state']")"
+echo "e': $(cat "$tmp/estop.out"); job $kj $(job_state "$kj"); Klippy shut down"
 
 # 7: plain "ok" to M105: the job fails within seconds, saying what came
 k=$(submit "$tmp/t.stl" --printer k --method none --retries 0)
