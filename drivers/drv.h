@@ -26,8 +26,9 @@
 #include "../src/base/loop.h"
 #include "gcheck.h"
 
-/* 2: attach (network printers re-attach after a daemon restart); drv_kind.auth, schemes. */
-#define DRV_OPS_VERSION 2
+/* 2: attach (network printers re-attach after a daemon restart); drv_kind.auth, schemes.
+   3: estop (an operator's emergency stop). */
+#define DRV_OPS_VERSION 3
 
 enum drv_state {
     DRV_OFFLINE = 0, /* not connected */
@@ -166,6 +167,15 @@ struct drv_ops {
      */
     int (*attach)(struct drv *d, const char *gcode_path, const struct drv_job_scan *scan,
                   struct sf_err *err);
+    /* Version 3 on: */
+    /*
+     * An operator's emergency stop (NULL: the kind has none; the owner
+     * cancels the job instead): halt the printer now, past anything queued
+     * (Marlin: M112 straight to the wire, which its emergency parser runs
+     * on arrival), fail the job, if any, and report DRV_ERROR.  Any state
+     * but offline; SF_EAGAIN when offline.
+     */
+    int (*estop)(struct drv *d, struct sf_err *err);
 };
 
 struct drv {

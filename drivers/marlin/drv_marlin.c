@@ -308,6 +308,18 @@ m_open(struct drv *d, struct sf_err *err)
     return SF_OK;
 }
 
+/* Emergency stop: straight to the wire, past the queue (drv.h estop). */
+static int
+m_estop(struct drv *d, struct sf_err *err)
+{
+    struct marlin *m = marlin_of(d);
+    if (!m->t)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is offline", d->name);
+    marlin_send_raw(m, "M112\n");
+    marlin_job_fail(m, DRV_ERROR, "emergency stop (M112)");
+    return SF_OK;
+}
+
 static int
 m_command(struct drv *d, const char *line, struct sf_err *err)
 {
@@ -322,12 +334,13 @@ m_command(struct drv *d, const char *line, struct sf_err *err)
     if (m->phase != PH_READY)
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is %s", d->name,
                           drv_state_name(d->status.state));
-    if (strncmp(cmd, "M112", 4) == 0 && (cmd[4] == '\0' || cmd[4] == ' ')) {
-        /* Emergency stop: straight to the wire, past the queue. */
-        marlin_send_raw(m, "M112\n");
-        marlin_job_fail(m, DRV_ERROR, "emergency stop (M112)");
-        return SF_OK;
-    }
+    if (strncmp(cmd, "M112", 4) == 0 && (cmd[4] == '\0' || cmd[4] == ' '))
+        return m_estop(d, err);
+    if (strncmp(cmd, "M11", 3) == 0 && (cmd[3] == '0' || cmd[3] == '1') &&
+        (cmd[4] == '\0' || cmd[4] == ' '))
+        /* the link's numbering and debug output are the driver's own (issue 29) */
+        return sf_err_set(err, SF_EINVAL, "printer '%s': %.4s is the host's: not a manual command",
+                          d->name, cmd);
     if (d->status.state == DRV_PRINTING)
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is printing", d->name);
     if (!marlin_inject(m, "%s", cmd))
@@ -378,6 +391,7 @@ static const struct drv_ops marlin_ops = {
     .resume = marlin_resume,
     .cancel = marlin_cancel,
     .command = m_command,
+    .estop = m_estop,
     .close = m_close,
     .destroy = m_destroy,
 };

@@ -62,6 +62,12 @@ struct marlin {
     int64_t progress_ms;        /* last protocol progress (ok, resend, busy...) */
     int64_t last_rx_ms;         /* last byte of any kind */
     int probes;                 /* deadlines in a row with no protocol reply */
+    int unmatched;              /* deadlines in a row whose probe went unanswered as one ("ok T:")
+                                   though oks came: the oks do not match the lines */
+    bool probe_sent;            /* the last deadline sent a probe */
+    bool m105_answered;         /* an M105 answer came since the last deadline */
+    bool ok_since;              /* an ok came since the last deadline */
+    char last_ok[40];           /* the last ok as it came, for the message */
     bool probe_wanted;          /* a probe waits in the inject queue */
     bool keepalive_seen;        /* the firmware sends "busy:" while any command blocks */
     bool heat_reports_seen;     /* it reports temperatures while M109/M190 wait */

@@ -22,6 +22,7 @@
 #define PLANNER_BLOCKS 16    /* Marlin's BLOCK_BUFFER_SIZE: moves acknowledged, not yet run */
 #define KEEPALIVE_MS   3000  /* busy/wait reports come at least this often once seen */
 #define CLIMB_LINES    16    /* clean lines per step back up after a rewind */
+#define UNMATCHED_MAX  8     /* probes in a row answered by oks that are not theirs: fail */
 
 /*
  * When the printer's next reply is overdue, ms: after the last reply, or
@@ -178,6 +179,7 @@ start_settling(struct marlin *m)
 void
 marlin_on_m105_answer(struct marlin *m)
 {
+    m->m105_answered = true;
     for (long n = m->win.acked + 1; n < m->win.next; n++) {
         if (linewin_tag(&m->win, n) == TAG_M105) {
             long before = m->win.acked;
@@ -241,9 +243,37 @@ marlin_on_resend(struct marlin *m, long k)
  * printer truly says nothing: PROBES_MAX deadlines in a row and no byte at
  * all for SILENCE_MS, or only unreadable bytes for GARBLED_MAX deadlines.
  */
+/*
+ * A printer whose oks do not match the lines (M105 answered with a plain
+ * "ok", so the host counts one ok short for ever): each probe gets oks but
+ * never its own answer, and the stream would crawl a line per deadline.
+ * UNMATCHED_MAX such probes in a row fail the job, saying what came.
+ */
+static bool
+stalled(struct marlin *m)
+{
+    if (m->mode != J_RUN || !m->probe_sent || m->m105_answered || !m->ok_since)
+        m->unmatched = 0;
+    else
+        m->unmatched++;
+    m->probe_sent = m->m105_answered = m->ok_since = false;
+    if (m->unmatched < UNMATCHED_MAX)
+        return false;
+    char why[160];
+    snprintf(why, sizeof(why),
+             "stream stalled: %d probes (M105) in a row answered only by '%s', no temperature "
+             "report: acknowledgements do not match lines",
+             m->unmatched, m->last_ok);
+    m->unmatched = 0;
+    marlin_job_fail(m, DRV_ERROR, why);
+    return true;
+}
+
 void
 marlin_deadline(struct marlin *m, int64_t now)
 {
+    if (stalled(m))
+        return;
     m->probes++;
     bool silent = now - m->last_rx_ms >= SILENCE_MS;
     if ((m->probes >= PROBES_MAX && silent) || m->probes >= GARBLED_MAX) {
@@ -296,6 +326,7 @@ marlin_deadline(struct marlin *m, int64_t now)
         long n = marlin_push_host(m, "M105", TAG_M105, &err);
         if (n > 0) {
             m->st.host_lines++;
+            m->probe_sent = true;
             linewin_force(&m->win);
         }
     } else {

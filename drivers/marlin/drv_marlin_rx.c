@@ -175,6 +175,8 @@ on_ok(struct marlin *m, const struct mreply *r, const char *line, size_t len)
     /* Only a whole ADVANCED_OK reply teaches the window. */
     if (r->has_n && r->p >= 0 && r->b >= 0 && !r->has_temps)
         learn_window(m, r->b, r->p);
+    m->ok_since = true;
+    snprintf(m->last_ok, sizeof(m->last_ok), "%.*s", (int)(len < 39 ? len : 39), line);
     if (!r->has_n && (r->has_temps || (len > 6 && looks_like_m105(line, len)))) {
         marlin_on_m105_answer(m);
     } else {

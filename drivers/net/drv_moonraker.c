@@ -345,9 +345,9 @@ drv_moonraker_observe(const struct moonraker_status *st, const char *job_name, i
 #define MR_STARTUP_MS 2000 /* docs: ask /server/info again after 2 s while Klippy starts */
 #define MR_SCRIPT_MAX 4096 /* manual commands waiting to be sent */
 
-enum { RQ_START = NETDRV_RQ_OWN, RQ_GCODE, RQ_META, RQ_HISTORY };
-static const char *const own_names[] = { "print start", "gcode script", "file metadata",
-                                         "history" };
+enum { RQ_START = NETDRV_RQ_OWN, RQ_GCODE, RQ_META, RQ_HISTORY, RQ_ESTOP };
+static const char *const own_names[] = { "print start", "gcode script", "file metadata", "history",
+                                         "emergency stop" };
 
 /* attach()'s look-up, in Moonraker's job history, of a job print_stats no longer shows */
 enum hist_state { H_NONE, H_ASKING, H_ANSWERED };
@@ -360,6 +360,7 @@ struct moonraker {
     struct moonraker_status last; /* the last poll's answer (attach reads it) */
     char script[MR_SCRIPT_MAX];   /* manual commands waiting, '\n'-separated */
     size_t script_len;
+    bool want_estop; /* an emergency stop waits for the slot (before all else) */
     /* the job file's metadata (its slicer's time estimate; its upload time) */
     char meta_name[160]; /* the file asked about ("" none) */
     bool meta_known;     /* answered (meta_found: the printer has the file) */
@@ -685,6 +686,7 @@ mr_reply(struct netdrv *n, int kind, const struct httpc_result *res)
         break;
     case RQ_START:
     case RQ_GCODE:
+    case RQ_ESTOP:
         on_own(m, kind, res);
         break;
     case RQ_META:
@@ -706,6 +708,14 @@ mr_kick(struct netdrv *n)
     struct moonraker *m = MR(n);
     if (!netdrv_send_want(n))
         return;
+    if (m->want_estop) {
+        /* Klipper's own emergency stop (the webhook): at once, not queued behind G-code as an
+           M112 script would be; what else waited is dropped */
+        m->want_estop = false;
+        m->script_len = 0;
+        send_req(m, RQ_ESTOP, "POST", "/printer/emergency_stop", NULL);
+        return;
+    }
     if (m->script_len > 0) {
         m->script[m->script_len] = '\0';
         m->script_len = 0;
@@ -828,10 +838,24 @@ mr_command(struct drv *d, const char *line, struct sf_err *err)
     return SF_OK;
 }
 
+/* drv.h estop: Moonraker's /printer/emergency_stop, ahead of anything waiting. */
+static int
+mr_estop(struct drv *d, struct sf_err *err)
+{
+    struct moonraker *m = (struct moonraker *)d;
+    if (!m->n.open || d->status.state == DRV_OFFLINE)
+        return sf_err_set(err, SF_EAGAIN, "printer '%s' is offline", d->name);
+    m->want_estop = true;
+    netdrv_preempt_poll(&m->n);
+    mr_kick(&m->n);
+    return SF_OK;
+}
+
 static void
 mr_close(struct drv *d)
 {
     ((struct moonraker *)d)->script_len = 0;
+    ((struct moonraker *)d)->want_estop = false;
     netdrv_close(d);
 }
 
@@ -845,6 +869,7 @@ static const struct drv_ops moonraker_ops = {
     .cancel = netdrv_cancel,
     .command = mr_command,
     .close = mr_close,
+    .estop = mr_estop,
     .destroy = netdrv_destroy,
     .attach = mr_attach,
 };

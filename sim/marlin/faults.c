@@ -167,6 +167,11 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
         return parse_count(spec, v, 1L << 40, &f->bad_line, err);
     if (NAME_IS("hit"))
         return parse_hit(f, spec, v, err);
+    if (NAME_IS("okt")) {
+        f->okt_plain = strcmp(v, "plain") == 0;
+        return f->okt_plain ? SF_OK
+                            : sf_err_set(err, SF_EINVAL, "fault '%s': expected okt=plain", spec);
+    }
     if (NAME_IS("hit-rx")) {
         long num[3];
         const char *p = v;
@@ -196,12 +201,12 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
         return rc;
     }
 #undef NAME_IS
-    return sf_err_set(
-        err, SF_EINVAL,
-        "fault '%s': unknown; expected corrupt, corrupt-rx, corrupt-tx, drop-ok, "
-        "drop-oks, garbage, dup, merge, bad-line, hit, hit-rx, slow, reset, disconnect, runaway or "
-        "seed",
-        spec);
+    return sf_err_set(err, SF_EINVAL,
+                      "fault '%s': unknown; expected corrupt, corrupt-rx, corrupt-tx, drop-ok, "
+                      "drop-oks, garbage, dup, merge, bad-line, hit, hit-rx, okt, slow, reset, "
+                      "disconnect, runaway or "
+                      "seed",
+                      spec);
 }
 
 static uint64_t

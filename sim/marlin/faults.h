@@ -23,6 +23,8 @@
  *                     its byte POS (0-based; its length is the newline) replaced by BYTE
  *                     (0-255; 256 flips its low bit); KIND is ok (a plain "ok"), okn ("ok N.."),
  * okt (M105's "ok T:.."), resend, error, busy or temp (an M109/M190 wait report)
+ *   okt=plain         M105 is answered with a plain "ok", no temperatures (a firmware or
+ *                     bridge that reports them elsewhere, or not at all)
  *   hit-rx=LINE:POS:BYTE  once, the first line the host sends numbered LINE has its byte POS
  *                     (0-based, from its N) replaced by BYTE as it arrives: the emergency
  *                     parser reads it so, and the checksum refuses it
@@ -63,6 +65,7 @@ struct faults {
     long hit_rx_line;      /* ... its number */
     int hit_rx_pos;        /* ... its byte position */
     int hit_rx_byte;       /* ... the byte written there */
+    bool okt_plain;        /* M105 answers a plain "ok" (okt=plain) */
     uint64_t rng;          /* xorshift state; never 0 */
 };
 

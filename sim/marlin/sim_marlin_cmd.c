@@ -266,6 +266,8 @@ run_report(struct sim_marlin *s, const struct gcode_line *g)
 {
     switch (g->code) {
     case 105:
+        if (s->faults.okt_plain)
+            return RUN_DONE; /* fault okt=plain: the ok alone */
         sim_emit_temps(s, "ok ", false);
         return RUN_OWN_OK; /* M105 prints its own ok */
     case 114:

@@ -396,6 +396,19 @@ printers_get(void *ctx, const struct route_args *args, const struct http_req *re
     printers_answer(ctx, args->name[0] ? args->name : NULL, resp);
 }
 
+/* The end of an action on printer name: its refusal (rc, err), or the printer as it is now. */
+static void
+printer_acted(struct api *a, const char *name, int rc, const struct sf_err *err,
+              struct http_resp *resp)
+{
+    if (rc) {
+        http_fail(resp, rc, err->msg);
+        return;
+    }
+    printers_answer(a, name, resp);
+    changed(a);
+}
+
 static void
 printer_act(void *ctx, const struct route_args *args, const struct http_req *req,
             struct http_resp *resp)
@@ -410,20 +423,30 @@ printer_act(void *ctx, const struct route_args *args, const struct http_req *req
     }
     struct sf_err err;
     int rc = jobctl_printer_action(a->cfg.farm, args->name, act, &err);
-    if (rc) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    printers_answer(a, args->name, resp);
-    changed(a);
+    printer_acted(a, args->name, rc, &err, resp);
+}
+
+/*
+ * Who sent req, for the printer's log: "key " and a fingerprint of its API
+ * key (FNV-1a, 32 bits: tells the farm's keys apart, gives nothing of the
+ * key away), since keys carry no names of their own.
+ */
+static void
+key_label(const struct http_req *req, char *out, size_t n)
+{
+    uint32_t h = 2166136261u;
+    for (const unsigned char *c = (const unsigned char *)(req->key ? req->key : ""); *c; c++)
+        h = (h ^ *c) * 16777619u;
+    snprintf(out, n, "key %08x", (unsigned)h);
 }
 
 /*
  * POST /api/printers/NAME/command {"command": "G28"}: one manual G-code
- * line for an idle printer.  400 a bad body, 404 no such printer, 409 the
- * printer cannot take one now (printing, busy: SF_EAGAIN), 503 it is
- * offline, 501 its kind has no way to send one (PrusaLink); 200 with the
- * printer.
+ * line for an idle printer with a clear bed.  400 a bad body or a refused
+ * command (M110, M111, control bytes), 404 no such printer, 409 the
+ * printer cannot take one now (printing, busy, awaiting clear, in error,
+ * holding an interrupted job: SF_EAGAIN), 503 it is offline, 501 its kind
+ * has no way to send one (PrusaLink); 200 with the printer.
  */
 static void
 printer_cmd(void *ctx, const struct route_args *args, const struct http_req *req,
@@ -431,18 +454,36 @@ printer_cmd(void *ctx, const struct route_args *args, const struct http_req *req
 {
     struct api *a = ctx;
     struct sf_err err;
-    char line[SF_COMMAND_MAX + 1];
+    char line[SF_COMMAND_MAX + 1], who[16];
     if (api_command_parse(req->body, req->body_len, line, sizeof(line), &err)) {
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    int rc = jobctl_printer_command(a->cfg.farm, args->name, line, &err);
+    key_label(req, who, sizeof(who));
+    int rc = jobctl_printer_command(a->cfg.farm, args->name, line, who, &err);
     if (rc) {
         http_fail(resp, rc, err.msg);
         return;
     }
     printers_answer(a, args->name, resp);
     json_object_set_new(resp->json, "command", json_string(line));
+}
+
+/*
+ * POST /api/printers/NAME/emergency-stop: the printer's own emergency stop
+ * (not a G-code line), the printer then in error and the job on it failed
+ * without retry.  404 no such printer, 503 offline; 200 with the printer.
+ */
+static void
+printer_estop_route(void *ctx, const struct route_args *args, const struct http_req *req,
+                    struct http_resp *resp)
+{
+    struct api *a = ctx;
+    struct sf_err err;
+    char who[16];
+    key_label(req, who, sizeof(who));
+    int rc = jobctl_printer_estop(a->cfg.farm, args->name, who, &err);
+    printer_acted(a, args->name, rc, &err, resp);
 }
 
 /* ---- events ---- */
@@ -578,6 +619,8 @@ static const struct route rows[] = {
       "use GET" },
     { ROUTE_POST, "/api/printers/{name}/command", NULL, HTTP_BODY_JSON, ROUTE_WRITE, printer_cmd,
       ROUTE_405 },
+    { ROUTE_POST, "/api/printers/{name}/emergency-stop", NULL, HTTP_BODY_NONE, ROUTE_WRITE,
+      printer_estop_route, ROUTE_405 },
     { ROUTE_POST, "/api/printers/{name}/{action}", NULL, HTTP_BODY_NONE, ROUTE_WRITE, printer_act,
       ROUTE_405 },
     { ROUTE_GET, "/api/events", NULL, HTTP_BODY_NONE, ROUTE_READ, events_stream, ROUTE_405 },

@@ -418,6 +418,12 @@ run_cleared(int argc, char **argv)
     return action("cleared", argc, argv);
 }
 
+static int
+run_estop(int argc, char **argv)
+{
+    return action("emergency-stop", argc, argv);
+}
+
 /* command PRINTER G-CODE...: one manual command for an idle printer. */
 static int
 run_command(int argc, char **argv)
@@ -503,6 +509,8 @@ CMD_REGISTER(pause, "pause", "pause PRINTER", "pause the job on a printer", run_
 CMD_REGISTER(resume, "resume", "resume PRINTER", "resume a paused printer", run_resume)
 CMD_REGISTER(cleared, "cleared", "cleared PRINTER",
              "confirm a printer's bed is clear so it takes the next job", run_cleared)
+CMD_REGISTER(estop, "emergency-stop", "emergency-stop PRINTER",
+             "halt a printer now (its emergency stop; the job on it fails, not retried)", run_estop)
 
 /* ---- watch ---- */
 

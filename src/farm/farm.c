@@ -634,12 +634,39 @@ farm_printer_action(struct farm *f, const char *name, enum printer_action act, s
 }
 
 int
-farm_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err)
+farm_printer_command(struct farm *f, const char *name, const char *line, const char *who,
+                     struct sf_err *err)
 {
     struct printer *p = find(f, name);
     if (!p)
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
-    return printer_command(p, line, err);
+    /* The printer's G-code policy judges the line as a manual command
+       (gpolicy.h): the host's protocol commands, control bytes and what the
+       printer's config does not allow are refused; a rewrite is sent instead. */
+    struct gpolicy pol;
+    struct gpolicy_verdict v;
+    farmcfg_policy(printer_cfg(p), &pol);
+    switch (gpolicy_check_line(&pol, GPOLICY_MANUAL, line, strlen(line), &v)) {
+    case GPOLICY_REFUSE:
+        return sf_err_set(err, SF_EINVAL, "manual command on '%.64s': %s refused: %s", name, v.cmd,
+                          v.why);
+    case GPOLICY_REWRITE:
+        log_printer(LOG_INFO, name, "manual command '%.80s' sent as '%.80s' (%s)", line, v.line,
+                    v.why);
+        return printer_command(p, v.line, who, err);
+    case GPOLICY_PASS:
+        break;
+    }
+    return printer_command(p, line, who, err);
+}
+
+int
+farm_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err)
+{
+    struct printer *p = find(f, name);
+    if (!p)
+        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    return printer_estop(p, who, err);
 }
 
 /* A resume waiting for its read (drv_job_scan_to) on the io thread. */

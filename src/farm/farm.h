@@ -77,10 +77,15 @@ int farm_printer_action(struct farm *f, const char *name, enum printer_action ac
                         struct sf_err *err);
 
 /*
- * A manual command for printer name (printer_command): SF_ENOTFOUND
- * unknown printer, else printer_command's codes.
+ * A manual command for printer name from who (the sender's label, logged
+ * with it; printer_command): SF_ENOTFOUND unknown printer, else
+ * printer_command's codes.
  */
-int farm_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err);
+int farm_printer_command(struct farm *f, const char *name, const char *line, const char *who,
+                         struct sf_err *err);
+
+/* An operator's emergency stop of printer name (printer_estop), as above. */
+int farm_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err);
 
 /*
  * Resume interrupted job id on the printer its part is on, from command

@@ -69,6 +69,7 @@ static const struct option options[] = {
     { "enabled", true, K_BOOL, P(enabled), 0, 0 },
     { "auto_eject", true, K_BOOL, P(auto_eject), 0, 0 },
     { "group", true, K_IDENT, P(group), 0, 0 },
+    { "hold_heat_min", true, K_DBL, P(hold_heat_min), 0, 1440 },
     { "gcode_models", true, K_STR, P(gcode_models), 0, 0 },
     { "attended", true, K_BOOL, P(attended), 0, 0 },
     { "allow_gcode", true, K_STR, P(allow_gcode), 0, 0 },
@@ -129,6 +130,7 @@ printer_defaults(struct farmcfg_printer *p)
     p->bed_mm[2] = 250;
     p->overhang_deg = 45;
     p->enabled = true;
+    p->hold_heat_min = 10;
 }
 
 /* A section header "[...]" on the current line: open the section. */

@@ -54,6 +54,8 @@ struct farmcfg_printer {
     bool enabled;         /* schedule jobs on it (default true) */
     bool auto_eject;      /* clears its own bed: skip the bed-clear gate (default false) */
     char group[64];       /* group name jobs may target; "" for none (default) */
+    double hold_heat_min; /* minutes a printer hot with no print (an interrupted one) keeps its
+                             temperatures before the farm turns its heaters off (default 10) */
     /* uploaded G-code it runs (gcjob.h): slicer printer models, comma-separated;
        "*" any, "" none (default) */
     char gcode_models[256];

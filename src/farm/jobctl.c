@@ -52,10 +52,18 @@ jobctl_printer_action(struct farm *f, const char *name, enum printer_action act,
 }
 
 int
-jobctl_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err)
+jobctl_printer_command(struct farm *f, const char *name, const char *line, const char *who,
+                       struct sf_err *err)
 {
     int rc = reachable(f, name, err);
-    return rc ? rc : farm_printer_command(f, name, line, err);
+    return rc ? rc : farm_printer_command(f, name, line, who, err);
+}
+
+int
+jobctl_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err)
+{
+    int rc = reachable(f, name, err);
+    return rc ? rc : farm_printer_estop(f, name, who, err);
 }
 
 int

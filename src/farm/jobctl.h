@@ -53,7 +53,17 @@ int jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err);
 int jobctl_printer_action(struct farm *f, const char *name, enum printer_action act,
                           struct sf_err *err);
 
-/* One manual G-code line for printer name (farm_printer_command). */
-int jobctl_printer_command(struct farm *f, const char *name, const char *line, struct sf_err *err);
+/*
+ * One manual G-code line for printer name from who (the sending key's
+ * label, logged with the command): farm_printer_command, which judges
+ * the line by the printer's G-code policy (SF_EINVAL for what it refuses)
+ * and takes it only on an idle printer with a clear bed and no
+ * interrupted job (SF_EAGAIN otherwise).
+ */
+int jobctl_printer_command(struct farm *f, const char *name, const char *line, const char *who,
+                           struct sf_err *err);
+
+/* An operator's (who's) emergency stop of printer name (farm_printer_estop). */
+int jobctl_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err);
 
 #endif

@@ -65,6 +65,7 @@ struct printer {
     uint64_t attach_retry; /* timer offering the interrupted job again, 0 if none */
     int attach_waits;      /* attach() answers "not yet" on this connection */
     double est_s;          /* the job's print time estimate (printer_estimate_s), s; -1 unknown */
+    uint64_t heat_timer;   /* hot with no print: timer turning the heaters off, 0 if none */
 };
 
 static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
@@ -390,12 +391,74 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
         break;
     case DRV_EV_JOB_FAILED:
         p->lines_acked = (int64_t)st->lines_acked;
-        if (st->state == DRV_ERROR && st->message[0])
+        if (st->state == DRV_ERROR && st->message[0] && p->state != PRINTER_ERROR)
             snprintf(p->message, sizeof(p->message), "%s", st->message); /* why it halted */
         fail_job(p, st->message[0] ? st->message : "the print stopped");
         if (p->state == PRINTER_PRINTING || p->state == PRINTER_PAUSED)
             move(p, st->state == DRV_ERROR ? PRINTER_EV_FAULT : PRINTER_EV_FINISHED);
         break;
+    }
+}
+
+/* ---- heaters after an interruption ---- */
+
+/* Connected, no print on it, and a heater set: what hold_heat_min bounds. */
+static bool
+hot_idle(const struct printer *p)
+{
+    if (!p->drv || p->job_id || p->state == PRINTER_OFFLINE || p->state == PRINTER_PRINTING ||
+        p->state == PRINTER_PAUSED)
+        return false;
+    const struct drv_status *st = &p->drv->status;
+    return st->state == DRV_IDLE && (st->nozzle_target_c > 0 || st->bed_target_c > 0);
+}
+
+/*
+ * hold_heat_min is over: the print is not coming back (no resume, no job),
+ * so the heaters go off (M104 S0 and M140 S0: Marlin's, and what Klipper
+ * and OctoPrint take as console G-code), said in p's message and the log.
+ */
+static void
+on_heat_off(struct loop *l, void *ud)
+{
+    (void)l;
+    struct printer *p = ud;
+    p->heat_timer = 0;
+    if (!hot_idle(p))
+        return;
+    struct sf_err err;
+    char what[160];
+    const struct drv_status *st = &p->drv->status;
+    int rc = !p->drv->ops->command ? sf_err_set(&err, SF_EUNSUPP, "its %s driver sends no commands",
+                                                p->drv->ops->kind)
+                                   : p->drv->ops->command(p->drv, "M104 S0", &err);
+    if (rc == SF_OK)
+        rc = p->drv->ops->command(p->drv, "M140 S0", &err);
+    if (rc == SF_OK)
+        snprintf(what, sizeof(what),
+                 "heaters off (were %.0f/%.0f C): no print for %g min (hold_heat_min)",
+                 st->nozzle_target_c, st->bed_target_c, p->cfg.hold_heat_min);
+    else
+        snprintf(what, sizeof(what), "hot with no print for %g min, heaters not turned off: %s",
+                 p->cfg.hold_heat_min, err.msg);
+    log_printer(rc ? LOG_ERROR : LOG_WARN, p->cfg.name, "%s", what);
+    snprintf(p->message, sizeof(p->message), "%s", what);
+    if (store_printer_note(p->env.s, p->cfg.name, "printer-heat", what, &err))
+        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    changed(p);
+}
+
+/* Arm the heaters' timer when p is hot with no print, disarm it when not. */
+static void
+heat_watch(struct printer *p)
+{
+    bool hot = hot_idle(p);
+    if (hot && !p->heat_timer)
+        p->heat_timer =
+            loop_timer_add(p->env.l, (int64_t)(p->cfg.hold_heat_min * 60000.0), on_heat_off, p);
+    else if (!hot && p->heat_timer) {
+        loop_timer_cancel(p->env.l, p->heat_timer);
+        p->heat_timer = 0;
     }
 }
 
@@ -414,6 +477,8 @@ deliver(struct loop *l, void *ud)
     for (size_t i = 0; i < n && !p->deaf; i++)
         apply(p, q[i].ev, &q[i].st);
     free(q);
+    if (!p->deaf)
+        heat_watch(p);
 }
 
 static void
@@ -494,6 +559,8 @@ printer_free(struct printer *p)
         loop_timer_cancel(p->env.l, p->hold);
     if (p->attach_retry)
         loop_timer_cancel(p->env.l, p->attach_retry);
+    if (p->heat_timer)
+        loop_timer_cancel(p->env.l, p->heat_timer);
     if (p->drv) {
         /* drv_free() lives with the drivers; the vtable is all we rely on. */
         p->drv->ops->close(p->drv);
@@ -706,8 +773,37 @@ printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line
     drive(p, path, line, scan);
 }
 
+/* The job the store holds as interrupted on p (its part may be on the bed), or 0. */
+static int64_t
+interrupted_here(struct printer *p)
+{
+    struct sf_err err;
+    struct job_row *jobs;
+    size_t n;
+    if (store_job_list(p->env.s, &jobs, &n, &err))
+        return -1; /* unknown: treated as held */
+    int64_t id = 0;
+    for (size_t i = 0; i < n && !id; i++)
+        if (jobs[i].state == JOB_INTERRUPTED && strcmp(jobs[i].printer, p->cfg.name) == 0)
+            id = jobs[i].id;
+    free(jobs);
+    return id;
+}
+
+/* Record what an operator did to p in the log and the event log. */
+static void
+note(struct printer *p, const char *kind, const char *fmt, const char *a, const char *b)
+{
+    struct sf_err err;
+    char what[192];
+    snprintf(what, sizeof(what), fmt, a, b);
+    log_printer(LOG_INFO, p->cfg.name, "%s", what);
+    if (store_printer_note(p->env.s, p->cfg.name, kind, what, &err))
+        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+}
+
 int
-printer_command(struct printer *p, const char *line, struct sf_err *err)
+printer_command(struct printer *p, const char *line, const char *who, struct sf_err *err)
 {
     if (!line[0] || strpbrk(line, "\r\n"))
         return sf_err_set(err, SF_EINVAL, "printer %s: a command is one non-empty line",
@@ -725,10 +821,53 @@ printer_command(struct printer *p, const char *line, struct sf_err *err)
         return sf_err_set(err, SF_EAGAIN,
                           "printer %s is %s job %lld: manual commands wait until it ends",
                           p->cfg.name, printer_state_name(p->state), (long long)p->job_id);
+    /* Only an idle printer with a clear bed: a move on a part (or into it,
+       before a resume's G92 Z) is the operator's to make at the printer. */
+    if (p->state != PRINTER_IDLE || p->bed_full)
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer %s is %s%s: manual commands only on an idle printer with a "
+                          "clear bed (clear it first)",
+                          p->cfg.name, printer_state_name(p->state),
+                          p->bed_full && p->state == PRINTER_IDLE ? " with a part on its bed" : "");
+    int64_t held = interrupted_here(p);
+    if (held)
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer %s holds interrupted job %lld: resume, restart or cancel it "
+                          "before manual commands",
+                          p->cfg.name, (long long)held);
     int rc = p->drv->ops->command(p->drv, line, err);
     if (rc == SF_OK)
-        log_printer(LOG_INFO, p->cfg.name, "manual command: %s", line);
+        note(p, "printer-command", "manual command from %s: %s", who && who[0] ? who : "?", line);
     return rc;
+}
+
+int
+printer_estop(struct printer *p, const char *who, struct sf_err *err)
+{
+    if (!p->drv || p->state == PRINTER_OFFLINE)
+        return sf_err_set(err, SF_EUNREACH, "printer %s is offline: no emergency stop reaches it",
+                          p->cfg.name);
+    int rc = p->drv->ops->version >= 3 && p->drv->ops->estop ? p->drv->ops->estop(p->drv, err)
+             : p->job_id                                     ? p->drv->ops->cancel(p->drv, err)
+                         : SF_OK; /* nothing it could stop: the farm holds it in error */
+    if (rc)
+        return rc;
+    char why[160];
+    snprintf(why, sizeof(why), "emergency stop by an operator (%s)", who && who[0] ? who : "?");
+    note(p, "printer-estop", "%s%s", why, p->job_id ? ": the job on it fails, not retried" : "");
+    set_bed(p, true); /* whatever it printed stays until an operator clears it */
+    if (p->job_id) {
+        struct job_event_args a = { .lines_acked = p->lines_acked,
+                                    .reason = why,
+                                    .no_retry = true };
+        int64_t id = p->job_id;
+        p->job_id = 0;
+        job_event(p, id, JOB_EV_PRINT_FAILED, &a);
+    }
+    snprintf(p->message, sizeof(p->message), "%s", why);
+    if (p->state != PRINTER_ERROR)
+        move(p, PRINTER_EV_FAULT);
+    return SF_OK;
 }
 
 int

@@ -132,14 +132,24 @@ double printer_estimate_s(const struct job_row *j, const char *path);
 int printer_action(struct printer *p, enum printer_action a, struct sf_err *err);
 
 /*
- * Send p a manual command (one G-code line, no job on p): its driver
- * queues it (the console; the executed command shows in the printer's
- * log).  SF_EAGAIN while p is offline, prints or the driver cannot take it
- * now ("printer a is printing job 4"); SF_EUNSUPP when the driver has no
- * way to send one (PrusaLink: its API has no console endpoint); SF_EINVAL
- * for a line that is not one command.
+ * Send p a manual command (one G-code line) from who (the sender's label,
+ * for the log): its driver queues it (the console; the executed command
+ * shows in the printer's log), logged on its own line with who.  Only on
+ * an idle printer with a clear bed that holds no interrupted job:
+ * SF_EAGAIN otherwise ("printer a is awaiting-clear: ..."), and while p is
+ * offline, prints or the driver cannot take it now; SF_EUNSUPP when the
+ * driver has no way to send one (PrusaLink: its API has no console
+ * endpoint); SF_EINVAL for a line that is not one command.
  */
-int printer_command(struct printer *p, const char *line, struct sf_err *err);
+int printer_command(struct printer *p, const char *line, const char *who, struct sf_err *err);
+
+/*
+ * An operator's (who's) emergency stop: the driver's own (drv.h estop;
+ * a kind without one cancels the job), then p is in error with its bed
+ * marked full, and the job on it fails with no retry.  SF_EUNREACH when p
+ * is offline; driver errors as they come.
+ */
+int printer_estop(struct printer *p, const char *who, struct sf_err *err);
 
 /*
  * Progress persistence, batched by the owner: printer_progress gives the

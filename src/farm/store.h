@@ -104,6 +104,8 @@ struct job_event_args {
                               RESUME of an interrupted job: line to resume from (0: stored) */
     double filament_mm;    /* PRINT_DONE/FAILED/CANCEL: filament used by this print */
     const char *reason;    /* PREPARE_FAILED/PRINT_FAILED/CANCEL: why, for operators */
+    bool no_retry;         /* PRINT_FAILED: fail the job whatever retries it has left (an
+                              operator's emergency stop stopped it) */
     const char *note;      /* PREPARED: NULL or what the preparation did other than the job
                               asked (a slimming that failed, prepare.h's shape_failed), for
                               operators: kept in the event's detail, not as the job's reason */
@@ -238,6 +240,14 @@ int store_printer_get(struct store *s, const char *name, enum printer_state *st,
  */
 int store_printer_bed_set(struct store *s, const char *name, bool full, struct sf_err *err);
 int store_printer_bed_get(struct store *s, const char *name, bool *full, struct sf_err *err);
+
+/*
+ * Log what the farm did to printer name on its own (kind "printer-heat":
+ * heaters turned off; "printer-command": a manual command and who sent
+ * it; "printer-estop": an emergency stop), detail for operators.
+ */
+int store_printer_note(struct store *s, const char *name, const char *kind, const char *detail,
+                       struct sf_err *err);
 
 /* One print for the metrics, with its job's estimates. */
 struct print_stat {

@@ -422,6 +422,8 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
         goto fail;
     enum job_state from = j.state, next;
     struct job_counts c = j.counts;
+    if (ev == JOB_EV_PRINT_FAILED && a->no_retry && c.failures < c.max_retries)
+        c.failures = c.max_retries; /* no retry left: the job fails */
     if ((rc = job_next(from, ev, &c, &next, err))) {
         sf_err_prefix(err, "job %lld", (long long)id);
         goto fail;

@@ -81,3 +81,17 @@ store_printer_bed_get(struct store *s, const char *name, bool *full, struct sf_e
         return SF_OK;
     return store_db_fail(s, err, "get printer bed");
 }
+
+int
+store_printer_note(struct store *s, const char *name, const char *kind, const char *detail,
+                   struct sf_err *err)
+{
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    if ((rc = store_log_event(s, 0, name, kind, detail, err))) {
+        store_rollback(s);
+        return rc;
+    }
+    return store_commit(s, err);
+}

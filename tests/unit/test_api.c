@@ -122,7 +122,7 @@ adrv_destroy(struct drv *d)
 
 static const struct drv_ops adrv_ops = { DRV_OPS_VERSION, "adrv",       adrv_open,   adrv_start,
                                          adrv_pause,      adrv_resume,  adrv_cancel, adrv_command,
-                                         adrv_close,      adrv_destroy, NULL };
+                                         adrv_close,      adrv_destroy, NULL,        NULL };
 
 static struct drv *
 adrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,

@@ -27,6 +27,7 @@
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
 #include "../../src/farm/farm.h"
+#include "../../src/farm/jobctl.h"
 #include "../t.h"
 
 /* ---- tdrv ---- */
@@ -125,11 +126,17 @@ t_cancel(struct drv *d, struct sf_err *err)
     return SF_OK;
 }
 
+static bool t_console;   /* t_command takes commands (else SF_EUNSUPP) */
+static char t_sent[128]; /* what it took, one line each */
+
 static int
 t_command(struct drv *d, const char *line, struct sf_err *err)
 {
-    (void)d, (void)line;
-    return sf_err_set(err, SF_EUNSUPP, "tdrv: no console");
+    if (!t_console)
+        return sf_err_set(err, SF_EUNSUPP, "printer '%s': tdrv: no console", d->name);
+    size_t n = strlen(t_sent);
+    snprintf(t_sent + n, sizeof(t_sent) - n, "%s\n", line);
+    return SF_OK;
 }
 
 /* As Marlin's: closing reports OFFLINE at once, to whoever still listens. */
@@ -156,7 +163,7 @@ t_destroy(struct drv *d)
 
 static const struct drv_ops tdrv_ops = { DRV_OPS_VERSION, "tdrv",    t_open,   t_start,
                                          t_pause,         t_resume,  t_cancel, t_command,
-                                         t_close,         t_destroy, NULL };
+                                         t_close,         t_destroy, NULL,     NULL };
 
 /* A network printer's attach: "not yet" attach_waits times, then the job is still printing. */
 static int
@@ -177,7 +184,7 @@ t_attach(struct drv *d, const char *path, const struct drv_job_scan *scan, struc
 /* tdrv for config kinds that re-attach (the network ones) */
 static const struct drv_ops tdrv_net_ops = { DRV_OPS_VERSION, "tdrv-net", t_open,   t_start,
                                              t_pause,         t_resume,   t_cancel, t_command,
-                                             t_close,         t_destroy,  t_attach };
+                                             t_close,         t_destroy,  t_attach, NULL };
 
 static struct drv *
 tdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
@@ -280,6 +287,8 @@ setup(const char *name, const char *ini, printer_driver_fn driver, prepare_fn pr
     setup_held = NULL;
     open_state = DRV_IDLE;
     refuse_starts = attach_waits = attaches = 0;
+    t_console = false;
+    t_sent[0] = '\0';
     log_set_level(LOG_ERROR);
     farmcfg_init(&fx.cfg);
     int rc = farmcfg_parse(&fx.cfg, ini, strlen(ini), "test.ini", err);
@@ -1413,5 +1422,75 @@ T_CASE(farm_bed_gate_survives_stop_and_kill)
     T_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGKILL);
     T_OK(setup("bedkill", farm_ini, tdrv_new, test_prepare, &err), &err);
     check_bed_gate_kept();
+    teardown();
+}
+
+/*
+ * Issue 29: manual commands only on an idle printer with a clear bed (a
+ * move on a finished part, or in error, is refused as "not now"), never
+ * M110/M111 or control bytes; an operator's emergency stop puts the
+ * printer in error and fails its job for good, although it has a retry
+ * left (max_retries 1: a plain failure goes back to ready).
+ */
+T_CASE(farm_manual_commands_and_emergency_stop)
+{
+    struct sf_err err;
+    T_OK(setup("estop", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_ERR(farm_printer_command(fx.f, "a", "M110 N1000", "key t", &err), SF_EINVAL, &err, "M110");
+    T_ERR(farm_printer_command(fx.f, "a", " m111 S7", "key t", &err), SF_EINVAL, &err, "M111");
+    T_ERR(farm_printer_command(fx.f, "a", "G28\x1b", "key t", &err), SF_EINVAL, &err, "0x1b");
+    T_ERR(farm_printer_command(fx.f, "a", "M112", "key t", &err), SF_EINVAL, &err, "M112");
+    T_TRUE(finish_one_on_a());
+    T_ERR(farm_printer_command(fx.f, "a", "G1 Z0.2 F600", "key t", &err), SF_EAGAIN, &err,
+          "awaiting-clear");
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    /* past the farm's gate: tdrv has no console */
+    T_ERR(farm_printer_command(fx.f, "a", "G28", "key t", &err), SF_EUNSUPP, &err, "console");
+
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_OK(farm_printer_estop(fx.f, "a", "key t", &err), &err);
+    T_EQ_INT(state_of(id), JOB_FAILED);
+    T_EQ_INT(pstate(0), PRINTER_ERROR);
+    T_EQ_INT(tdrv_named("a")->cancels, 1); /* tdrv has no estop of its own: the job's cancel */
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_TRUE(strstr(j.reason, "emergency stop by an operator (key t)") != NULL);
+    T_ERR(farm_printer_command(fx.f, "a", "G28", "key t", &err), SF_EAGAIN, &err, "error");
+    for (int i = 0; i < 10; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(state_of(id), JOB_FAILED);
+    T_EQ_INT(tdrv_named("a")->starts, 2); /* no retry started */
+    teardown();
+}
+
+/*
+ * Issue 29, heaters: a printer hot with no print (found so after a
+ * restart: a TCP bridge does not reset it) keeps its temperatures for
+ * hold_heat_min, then the farm turns them off and says so; a job started
+ * meanwhile keeps them.
+ */
+T_CASE(farm_heaters_off_after_hold_heat_min)
+{
+    struct sf_err err;
+    static const char ini[] = "[printer a]\ndriver: marlin\nport: pty:/dev/null\n"
+                              "material: PLA\nhold_heat_min: 0.005\n";
+    T_OK(setup("heat", ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    t_console = true;
+    t_sent[0] = '\0';
+    struct tdrv *t = tdrv_named("a");
+    t->base.status.nozzle_target_c = 210;
+    t->base.status.bed_target_c = 60;
+    report(t, DRV_IDLE, DRV_EV_TEMPS);
+    for (int64_t end = wall_ms() + 200; wall_ms() < end;) /* 0.3 s hold: not yet */
+        loop_run_once(fx.l, 10);
+    T_EQ_STR(t_sent, "");
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && !t_sent[0];)
+        loop_run_once(fx.l, 10);
+    T_EQ_STR(t_sent, "M104 S0\nM140 S0\n");
+    T_TRUE(message_has(0, "heaters off (were 210/60 C)"));
+    t_console = false;
     teardown();
 }

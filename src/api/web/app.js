@@ -230,6 +230,15 @@ function printerAction(name, action) {
   return act(() => api(`/api/printers/${encodeURIComponent(name)}/${action}`, { method: "POST" }));
 }
 
+// The printer's own emergency stop: it halts at once (a Marlin needs a reset
+// after it), the job on it fails for good; asked twice, as it cannot be undone.
+function emergencyStop(name) {
+  const go = printerAction(name, "emergency-stop");
+  return (ev) => {
+    if (window.confirm(`Emergency stop ${name}? It halts at once; the job on it fails and is not retried.`)) go(ev);
+  };
+}
+
 function makeCard(p) {
   const name = p.name;
   const c = el("article", { class: "printer", "data-printer": name, "aria-label": "printer " + name });
@@ -253,7 +262,9 @@ function makeCard(p) {
       el("button", { type: "button", "data-act": "resume", "aria-label": "Resume " + name,
         onclick: printerAction(name, "resume") }, "Resume"),
       el("button", { type: "button", class: "danger", "data-act": "cancel",
-        "aria-label": "Cancel the print on " + name, onclick: printerAction(name, "cancel") }, "Cancel")));
+        "aria-label": "Cancel the print on " + name, onclick: printerAction(name, "cancel") }, "Cancel"),
+      el("button", { type: "button", class: "danger", "data-act": "estop",
+        "aria-label": "Emergency stop " + name, onclick: emergencyStop(name) }, "Emergency stop")));
   }
   return c;
 }
@@ -328,6 +339,7 @@ function renderPrinters() {
         pause: p.state === "printing",
         resume: p.state === "paused",
         cancel: p.state === "printing" || p.state === "paused",
+        estop: p.state !== "offline" && p.state !== "error",
       };
       for (const b of c.querySelectorAll("button[data-act]")) b.hidden = !show[b.dataset.act];
     }
