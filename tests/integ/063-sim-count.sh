@@ -9,7 +9,7 @@ for i in 0 1 2; do make_job "$TMP/job$i.gcode" $((300 + 200 * i)); done
 "$BUILD/bin/slimfarm-sim" marlin --count 3 --baud 1000000 --speed 2000 --advanced-ok \
   --log "$TMP/plog" > "$TMP/sim.out" 2> "$TMP/sim.err" &
 SIM_PID=$!
-for _ in $(seq 50); do [ "$(wc -l < "$TMP/sim.out")" -ge 3 ] && break; sleep 0.05; done
+for _ in $(seq 600); do [ "$(wc -l < "$TMP/sim.out")" -ge 3 ] && break; sleep 0.05; done
 mapfile -t ports < "$TMP/sim.out"
 [ "${#ports[@]}" = 3 ] || { echo "expected 3 addresses, got: ${ports[*]}; $(cat "$TMP/sim.err")"; exit 1; }
 [ "${ports[0]}" != "${ports[1]}" ] && [ "${ports[1]}" != "${ports[2]}" ] || { echo "ports shared: ${ports[*]}"; exit 1; }
@@ -20,7 +20,7 @@ for i in 0 1 2; do
 done
 for i in 0 1 2; do wait "${hosts[$i]}" || { echo "send $i failed: $(tail -n 2 "$TMP/send$i.out")"; exit 1; }; done
 kill -USR1 "$SIM_PID"
-for _ in $(seq 50); do [ "$(grep -c '^stats: printer=' "$TMP/sim.err")" -ge 3 ] && break; sleep 0.05; done
+for _ in $(seq 600); do [ "$(grep -c '^stats: printer=' "$TMP/sim.err")" -ge 3 ] && break; sleep 0.05; done
 kill -0 "$SIM_PID" || { echo "SIGUSR1 stopped the simulator"; exit 1; }
 stop_sim
 # Each printer executed its own job: the job's commands plus the host's handshake and probes.

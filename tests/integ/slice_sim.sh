@@ -18,7 +18,7 @@ trap cleanup EXIT
 "$bin" slice "$work/tee.stl" -o "$work/tee.gcode" >/dev/null || { echo "slice failed"; exit 1; }
 "$sim" marlin --tcp 0 --speed 100000 --baud 4000000 >"$work/sim.out" 2>"$work/sim.err" &
 simpid=$!
-for _ in $(seq 50); do [ -s "$work/sim.out" ] && break; sleep 0.1; done
+for _ in $(seq 300); do [ -s "$work/sim.out" ] && break; sleep 0.1; done
 addr=$(head -n 1 "$work/sim.out")
 out=$(timeout 300 "$bin" send "$work/tee.gcode" --port "$addr" --window 8 2>&1) || {
   echo "send failed: $(tail -n 3 <<<"$out")"; exit 1; }

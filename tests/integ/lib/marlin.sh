@@ -26,7 +26,8 @@ commands() { sed -e 's/;.*//' -e 's/[[:space:]]*$//' -e 's/^[[:space:]]*//' "$1"
 start_sim() {
   "$BUILD/bin/slimfarm-sim" marlin "$@" > "$TMP/sim.out" 2> "$TMP/sim.err" &
   SIM_PID=$!
-  for _ in $(seq 50); do [ -s "$TMP/sim.out" ] && break; sleep 0.05; done
+  # up to 30 s: a sanitizer build starting on a loaded machine can take seconds
+  for _ in $(seq 600); do [ -s "$TMP/sim.out" ] && break; sleep 0.05; done
   PORT=$(head -n 1 "$TMP/sim.out")
   [ -n "$PORT" ] || { echo "simulator did not start: $(cat "$TMP/sim.err")"; return 1; }
 }
