@@ -526,9 +526,15 @@ on_request(void *ud, const char *topic, const char *payload, size_t len)
     json_object_foreach(root, key, o)
     {
         const char *cmd = json_string_value(json_object_get(o, "command"));
-        const char *seq = json_string_value(json_object_get(o, "sequence_id"));
+        json_t *sj = json_object_get(o, "sequence_id");
+        const char *seq = json_string_value(sj);
+        char num[32];
         if (!cmd)
             continue;
+        if (json_is_integer(sj)) { /* some clients send a number: the reply echoes it */
+            snprintf(num, sizeof(num), "%" JSON_INTEGER_FORMAT, json_integer_value(sj));
+            seq = num;
+        }
         if (!seq)
             seq = "0";
         if (strcmp(key, "pushing") == 0 && strcmp(cmd, "pushall") == 0) {

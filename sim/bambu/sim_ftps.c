@@ -3,7 +3,10 @@
  *
  * The command set is what Bambu clients send (BAMBU-LAN.md section 3,
  * OpenBambuAPI ftp.md): USER PASS TYPE PBSZ PROT PASV EPSV STOR SIZE DELE
- * CWD PWD SYST FEAT OPTS NOOP QUIT, answered with vsFTPd's codes.  The
+ * CWD PWD SYST FEAT OPTS NOOP QUIT, and LIST (clients list the root to
+ * check the connection and find files: "LIST", "LIST /", "LIST -a /"),
+ * STRU F and MODE S, answered with vsFTPd's codes and texts.  LIST's data
+ * connection follows the same rules as STOR's.  The
  * order of a transfer follows vsFTPd: the data connection's TCP is
  * accepted, "150" goes out, and only then does the data TLS handshake run
  * (clients such as curl start it after reading the 150); a handshake that
@@ -17,6 +20,7 @@
  */
 #include "sim_ftps.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <netinet/in.h>
@@ -31,6 +35,8 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../../src/base/log.h"
@@ -191,6 +197,148 @@ name_ok(const char *n)
     return true;
 }
 
+/* Close a data connection from open_data(). */
+static void
+close_data(struct session *s, SSL *d, int dfd)
+{
+    if (d)
+        SSL_free(d);
+    set_live(s, 2, -1);
+    close(dfd);
+}
+
+/*
+ * The data connection of a transfer, as vsFTPd makes it: accept the PASV
+ * connection, send prelim (the 150), then the TLS handshake, which must
+ * resume the control session.  1 with *d and *dfd ready (close_data()
+ * frees them); else the failure was answered: the command's result (0, or
+ * -1 to end the session).
+ */
+static int
+open_data(struct session *s, const char *prelim, SSL **d, int *dfd)
+{
+    struct sim_ftps *f = s->f;
+    struct pollfd pfd = { .fd = s->pasv_fd, .events = POLLIN };
+    if (poll(&pfd, 1, 10000) <= 0) {
+        close_pasv(s);
+        return reply(s, "425 Failed to establish connection.");
+    }
+    *dfd = accept4(s->pasv_fd, NULL, NULL, SOCK_CLOEXEC);
+    close_pasv(s);
+    if (*dfd < 0)
+        return reply(s, "425 Failed to establish connection.");
+    set_live(s, 2, *dfd);
+    int rc = -1;
+    *d = NULL;
+    if (reply(s, "%s", prelim) < 0)
+        goto fail;
+    *d = SSL_new(f->ctx);
+    if (!*d || SSL_set_fd(*d, *dfd) != 1 || SSL_accept(*d) != 1) {
+        char e[160];
+        ERR_error_string_n(ERR_get_error(), e, sizeof(e));
+        log_info("sim-ftps", "data connection: TLS handshake failed: %s", e);
+        rc = reply(s, "522 SSL connection failed; session reuse required?");
+        goto fail;
+    }
+    if (!f->c.no_reuse_check && !resumed_control(s->ssl, *d)) {
+        log_info("sim-ftps", "data connection did not resume the control session (resumed: %d)",
+                 SSL_session_reused(*d));
+        count(f, &f->stats.refused_reuse);
+        rc = reply(s, "522 SSL connection failed: session reuse required");
+        goto fail;
+    }
+    return 1;
+fail:
+    close_data(s, *d, *dfd);
+    return rc;
+}
+
+/* One ls -l line as vsFTPd writes it (numeric owner, the date of the last change). */
+static int
+list_line(char *out, size_t n, const char *name, const struct stat *st)
+{
+    struct tm tm;
+    char when[32];
+    time_t mt = st->st_mtime;
+    gmtime_r(&mt, &tm);
+    bool recent = time(NULL) - mt < 182 * 24 * 3600;
+    strftime(when, sizeof(when), recent ? "%b %d %H:%M" : "%b %d  %Y", &tm);
+    return snprintf(out, n, "%s    1 0        0        %8lld %s %s\r\n",
+                    S_ISDIR(st->st_mode) ? "drwxr-xr-x" : "-rw-r--r--", (long long)st->st_size,
+                    when, name);
+}
+
+/* The listing of the printer's storage (flat: its root) into d; dot files only with -a. */
+static void
+send_listing(struct sim_ftps *f, SSL *d, const char *path, bool all)
+{
+    char line[512], full[1024];
+    struct stat st;
+    const char *name = *path == '/' ? path + 1 : path;
+    if (*name) { /* LIST of one file: its line */
+        snprintf(full, sizeof(full), "%s/%s", f->dir, name);
+        if (stat(full, &st) == 0 && S_ISREG(st.st_mode)) {
+            int k = list_line(line, sizeof(line), name, &st);
+            SSL_write(d, line, k);
+        }
+        return;
+    }
+    DIR *dir = opendir(f->dir);
+    struct dirent *e;
+    while (dir && (e = readdir(dir)) != NULL) {
+        if (strcmp(e->d_name, ".") == 0 || strcmp(e->d_name, "..") == 0 ||
+            (e->d_name[0] == '.' && !all))
+            continue;
+        snprintf(full, sizeof(full), "%s/%s", f->dir, e->d_name);
+        if (stat(full, &st) < 0)
+            continue;
+        int k = list_line(line, sizeof(line), e->d_name, &st);
+        if (k > 0 && (size_t)k < sizeof(line) && SSL_write(d, line, k) != k)
+            break;
+    }
+    if (dir)
+        closedir(dir);
+}
+
+/*
+ * LIST [-options] [path]: the root (path empty or "/") or one file, over a
+ * data connection with the same rules as STOR.  A path that is neither
+ * gets vsFTPd's empty listing and "226 Transfer done (but failed to open
+ * directory).".
+ */
+static int
+do_list(struct session *s, char *arg)
+{
+    struct sim_ftps *f = s->f;
+    bool all = false;
+    while (*arg == '-') { /* ls options: vsFTPd honours a (dot files), ignores the rest */
+        for (; *arg && *arg != ' '; arg++)
+            all |= *arg == 'a';
+        while (*arg == ' ')
+            arg++;
+    }
+    if (!s->prot_p)
+        return reply(s, "522 Data connections must be encrypted.");
+    if (s->pasv_fd < 0)
+        return reply(s, "425 Use PORT or PASV first.");
+    bool root = !*arg || strcmp(arg, "/") == 0;
+    char full[1024];
+    struct stat st;
+    snprintf(full, sizeof(full), "%s/%s", f->dir, *arg == '/' ? arg + 1 : arg);
+    bool found = root || (name_ok(arg) && stat(full, &st) == 0 && S_ISREG(st.st_mode));
+    int dfd;
+    SSL *d;
+    int rc = open_data(s, "150 Here comes the directory listing.", &d, &dfd);
+    if (rc != 1)
+        return rc;
+    if (found)
+        send_listing(f, d, root ? "" : arg, all);
+    SSL_shutdown(d);
+    close_data(s, d, dfd);
+    return reply(s, found ? "226 Directory send OK."
+                          : "226 Transfer done (but failed to open directory).");
+}
+
 static int
 do_stor(struct session *s, const char *arg)
 {
@@ -208,39 +356,14 @@ do_stor(struct session *s, const char *arg)
         return reply(s, "552 Requested file action aborted. Exceeded storage allocation.");
     }
     const char *name = *arg == '/' ? arg + 1 : arg;
-    struct pollfd pfd = { .fd = s->pasv_fd, .events = POLLIN };
-    if (poll(&pfd, 1, 10000) <= 0) {
-        close_pasv(s);
-        return reply(s, "425 Failed to establish connection.");
-    }
-    int dfd = accept4(s->pasv_fd, NULL, NULL, SOCK_CLOEXEC);
-    close_pasv(s);
-    if (dfd < 0)
-        return reply(s, "425 Failed to establish connection.");
-    set_live(s, 2, dfd);
-    int rc = 0;
+    int dfd;
+    SSL *d;
+    int rc = open_data(s, "150 Ok to send data.", &d, &dfd);
+    if (rc != 1)
+        return rc;
+    rc = 0;
     FILE *out = NULL;
     char part[1024], final[1024];
-    SSL *d = NULL;
-    if (reply(s, "150 Ok to send data.") < 0) {
-        rc = -1;
-        goto done;
-    }
-    d = SSL_new(f->ctx);
-    if (!d || SSL_set_fd(d, dfd) != 1 || SSL_accept(d) != 1) {
-        char e[160];
-        ERR_error_string_n(ERR_get_error(), e, sizeof(e));
-        log_info("sim-ftps", "data connection: TLS handshake failed: %s", e);
-        rc = reply(s, "522 SSL connection failed; session reuse required?");
-        goto done;
-    }
-    if (!f->c.no_reuse_check && !resumed_control(s->ssl, d)) {
-        log_info("sim-ftps", "data connection did not resume the control session (resumed: %d)",
-                 SSL_session_reused(d));
-        count(f, &f->stats.refused_reuse);
-        rc = reply(s, "522 SSL connection failed: session reuse required");
-        goto done;
-    }
     snprintf(part, sizeof(part), "%s/%s.part", f->dir, name);
     snprintf(final, sizeof(final), "%s/%s", f->dir, name);
     out = fopen(part, "wb");
@@ -294,10 +417,7 @@ do_stor(struct session *s, const char *arg)
 done:
     if (out)
         fclose(out);
-    if (d)
-        SSL_free(d);
-    set_live(s, 2, -1);
-    close(dfd);
+    close_data(s, d, dfd);
     return rc;
 }
 
@@ -375,6 +495,13 @@ command(struct session *s, char *line)
         return open_pasv(s, true);
     if (strcasecmp(cmd, "STOR") == 0)
         return do_stor(s, arg);
+    if (strcasecmp(cmd, "LIST") == 0)
+        return do_list(s, arg);
+    if (strcasecmp(cmd, "STRU") == 0)
+        return reply(s, strcasecmp(arg, "F") == 0 ? "200 Structure set to F."
+                                                  : "504 Bad STRU command.");
+    if (strcasecmp(cmd, "MODE") == 0)
+        return reply(s, strcasecmp(arg, "S") == 0 ? "200 Mode set to S." : "504 Bad MODE command.");
     if (strcasecmp(cmd, "SIZE") == 0 || strcasecmp(cmd, "DELE") == 0) {
         char path[1024];
         if (!name_ok(arg))

@@ -6,7 +6,10 @@
  * sim_netprinter and is reported in Klipper's words: print_stats.state
  * standby, printing, paused, complete, cancelled or error, and the
  * virtual_sdcard's file position.  A watch timer fires the line-triggered
- * faults (shutdown, error, cancel at the printer) when the job gets there.
+ * faults (shutdown, error, cancel at the printer) when the job gets there,
+ * and samples the temperature store.  The server side clients read beside
+ * the printer (file lists, roots, temperature store, config, HTTP
+ * subscribe, the [octoprint_compat] emulation) is sim_moonraker_srv.c.
  *
  * Thread: the loop thread.
  */
@@ -20,42 +23,12 @@
 #include <time.h>
 
 #include "../../src/base/mem.h"
+#include "sim_moonraker_int.h"
 #include "sim_netbase.h"
 #include "sim_netcli.h"
 
 #define WATCH_MS   20  /* how often line-triggered faults are checked */
 #define RESTART_MS 300 /* a firmware_restart's "startup" phase */
-
-#define HISTORY_MAX 256 /* job history entries kept (Moonraker keeps them all; tests need few) */
-
-enum klippy { K_READY, K_STARTUP, K_SHUTDOWN };
-
-/* One entry of Moonraker's job history (history.md, "Job History"). */
-struct hist_job {
-    char id[8];                     /* job_id: "000001", ... */
-    char file[SIM_NP_NAME_MAX + 1]; /* filename */
-    char status[24];                /* in_progress, completed, cancelled, error, ... */
-    double start, end;              /* unix times; end 0 while in progress */
-    double print_s;                 /* print_duration */
-    int64_t size;                   /* metadata.size */
-    double modified;                /* metadata.modified */
-    double estimated_s;             /* metadata.estimated_time, -1 if none */
-};
-
-struct sim_moonraker {
-    struct sim_netbase b; /* machine, HTTP server, watch timer; first (sim_netbase.h) */
-    struct sim_moonraker_config cfg;
-    enum klippy klippy;
-    char klippy_msg[512];                           /* webhooks.state_message */
-    int64_t ready_at_ms;                            /* startup ends at this loop time */
-    bool fired_shutdown, fired_error, fired_cancel; /* each fault once a job */
-    char fired_for[SIM_NP_NAME_MAX + 1];            /* ... the job they fired for */
-    int64_t fired_started;                          /* its start (print_time_s of 0) */
-    double file_mtime;                              /* upload time of the current file */
-    struct hist_job hist[HISTORY_MAX];              /* the job history, oldest first */
-    int n_hist;
-    int hist_ids; /* job_ids handed out */
-};
 
 static const char shutdown_text[] =
     "MCU 'mcu' shutdown: Timer too close\nThis often indicates the host computer is "
@@ -97,8 +70,8 @@ sim_moonraker_fault_parse(struct sim_moonraker_config *c, const char *spec, stru
 
 /* ---- replies ---- */
 
-static void
-reply_result(struct sim_http_req *r, json_t *result)
+void
+sim_moonraker_result(struct sim_http_req *r, json_t *result)
 {
     sim_http_reply_json(r, 200, json_pack("{s:o}", "result", result ? result : json_null()));
 }
@@ -106,11 +79,11 @@ reply_result(struct sim_http_req *r, json_t *result)
 static void
 reply_ok(struct sim_http_req *r)
 {
-    reply_result(r, json_string("ok"));
+    sim_moonraker_result(r, json_string("ok"));
 }
 
-static void
-reply_err(struct sim_http_req *r, unsigned status, const char *message)
+void
+sim_moonraker_error(struct sim_http_req *r, unsigned status, const char *message)
 {
     sim_http_reply_json(
         r, status, json_pack("{s:{s:i,s:s}}", "error", "code", (int)status, "message", message));
@@ -122,14 +95,24 @@ klippy_name(enum klippy k)
     return k == K_READY ? "ready" : k == K_STARTUP ? "startup" : "shutdown";
 }
 
+bool
+sim_moonraker_klippy_up(struct sim_moonraker *s, struct sim_http_req *r)
+{
+    if (s->klippy != K_STARTUP)
+        return true;
+    sim_moonraker_error(r, 503, "Klippy Host not connected");
+    return false;
+}
+
 /* Klippy must be ready for gcode and print requests; else the error Klipper gives. */
 static bool
 need_ready(struct sim_moonraker *s, struct sim_http_req *r)
 {
     if (s->klippy == K_READY)
         return true;
-    reply_err(r, s->klippy == K_STARTUP ? 503 : 400,
-              s->klippy == K_STARTUP ? "Klippy Host not connected" : "Printer is shutdown");
+    sim_moonraker_error(r, s->klippy == K_STARTUP ? 503 : 400,
+                        s->klippy == K_STARTUP ? "Klippy Host not connected"
+                                               : "Printer is shutdown");
     return false;
 }
 
@@ -220,7 +203,7 @@ on_query(struct sim_http_req *r, void *ud)
 {
     struct sim_moonraker *s = ud;
     if (s->klippy == K_STARTUP) {
-        reply_err(r, 503, "Klippy Host not connected");
+        sim_moonraker_error(r, 503, "Klippy Host not connected");
         return;
     }
     struct sim_np_status st;
@@ -236,7 +219,7 @@ on_query(struct sim_http_req *r, void *ud)
         if (!want || !json_is_object(want)) {
             json_decref(b);
             json_decref(status);
-            reply_err(r, 400, "Invalid argument 'objects'");
+            sim_moonraker_error(r, 400, "Invalid argument 'objects'");
             return;
         }
         const char *name;
@@ -269,21 +252,34 @@ on_query(struct sim_http_req *r, void *ud)
     }
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
-    reply_result(r, json_pack("{s:f,s:o}", "eventtime",
-                              (double)ts.tv_sec + (double)ts.tv_nsec / 1e9, "status", status));
+    sim_moonraker_result(r,
+                         json_pack("{s:f,s:o}", "eventtime",
+                                   (double)ts.tv_sec + (double)ts.tv_nsec / 1e9, "status", status));
+}
+
+/* GET /printer/objects/list: the objects this printer has (Klippy's objects/list). */
+static void
+on_objects_list(struct sim_http_req *r, void *ud)
+{
+    if (!sim_moonraker_klippy_up(ud, r))
+        return;
+    json_t *list = json_array();
+    for (size_t i = 0; i < sizeof(all_objects) / sizeof(all_objects[0]); i++)
+        json_array_append_new(list, json_string(all_objects[i]));
+    sim_moonraker_result(r, json_pack("{s:o}", "objects", list));
 }
 
 static void
 on_server_info(struct sim_http_req *r, void *ud)
 {
     struct sim_moonraker *s = ud;
-    reply_result(r, json_pack("{s:b,s:s,s:[sssss],s:[],s:[ss],s:[],s:i,s:s,s:[iii],s:s}",
-                              "klippy_connected", 1, "klippy_state", klippy_name(s->klippy),
-                              "components", "database", "file_manager", "klippy_apis", "machine",
-                              "history", "failed_components", "registered_directories", "config",
-                              "gcodes", "warnings", "websocket_count", 0, "moonraker_version",
-                              "v0.10.0-slimfarm-sim", "api_version", 1, 5, 0, "api_version_string",
-                              "1.5.0"));
+    sim_moonraker_result(
+        r, json_pack("{s:b,s:s,s:[sssss],s:[],s:[ss],s:[],s:i,s:s,s:[iii],s:s}", "klippy_connected",
+                     1, "klippy_state", klippy_name(s->klippy), "components", "database",
+                     "file_manager", "klippy_apis", "machine", "history", "failed_components",
+                     "registered_directories", "config", "gcodes", "warnings", "websocket_count", 0,
+                     "moonraker_version", "v0.10.0-slimfarm-sim", "api_version", 1, 5, 0,
+                     "api_version_string", "1.5.0"));
 }
 
 static void
@@ -291,12 +287,12 @@ on_printer_info(struct sim_http_req *r, void *ud)
 {
     struct sim_moonraker *s = ud;
     if (s->klippy == K_STARTUP) {
-        reply_err(r, 503, "Klippy Host not connected");
+        sim_moonraker_error(r, 503, "Klippy Host not connected");
         return;
     }
-    reply_result(r, json_pack("{s:s,s:s,s:s,s:s}", "state", klippy_name(s->klippy), "state_message",
-                              s->klippy_msg, "hostname", "slimfarm-sim", "software_version",
-                              "v0.12.0-slimfarm-sim"));
+    sim_moonraker_result(r, json_pack("{s:s,s:s,s:s,s:s}", "state", klippy_name(s->klippy),
+                                      "state_message", s->klippy_msg, "hostname", "slimfarm-sim",
+                                      "software_version", "v0.12.0-slimfarm-sim"));
 }
 
 /* ---- file metadata and job history ---- */
@@ -433,7 +429,7 @@ start_print(struct sim_moonraker *s, struct sim_http_req *r, const char *name)
         return true;
     }
     if (r)
-        reply_err(r, 400, rc == SF_EAGAIN ? "SD busy" : "Unable to open file");
+        sim_moonraker_error(r, 400, rc == SF_EAGAIN ? "SD busy" : "Unable to open file");
     return false;
 }
 
@@ -443,32 +439,33 @@ on_upload(struct sim_http_req *r, void *ud)
     struct sim_moonraker *s = ud;
     const struct sim_http_file *f = sim_http_upload(r);
     if (!f || !f->filename[0]) {
-        reply_err(r, 400, "Multipart filename omitted");
+        sim_moonraker_error(r, 400, "Multipart filename omitted");
         return;
     }
     const char *root = sim_http_field(r, "root");
     const char *sub = sim_http_field(r, "path");
     const char *print = sim_http_field(r, "print");
     if (root && strcmp(root, "gcodes") != 0) {
-        reply_err(r, 400, "Invalid root request"); /* config uploads: not a printer's job */
+        sim_moonraker_error(r, 400,
+                            "Invalid root request"); /* config uploads: not a printer's job */
         return;
     }
     if (sub && sub[0]) {
-        reply_err(r, 400, "slimfarm-sim: upload sub-folders are not simulated");
+        sim_moonraker_error(r, 400, "slimfarm-sim: upload sub-folders are not simulated");
         return;
     }
     char path[1024];
     struct sf_err err;
     if (sim_netprinter_path(s->b.np, f->filename, path, sizeof(path), &err)) {
-        reply_err(r, 400, err.msg);
+        sim_moonraker_error(r, 400, err.msg);
         return;
     }
     if (sim_netprinter_file_busy(s->b.np, f->filename)) {
-        reply_err(r, 403, "File is loaded, upload not permitted");
+        sim_moonraker_error(r, 403, "File is loaded, upload not permitted");
         return;
     }
     if (sim_http_keep_upload(r, path, &err)) {
-        reply_err(r, 500, err.msg);
+        sim_moonraker_error(r, 500, err.msg);
         return;
     }
     bool started = false;
@@ -500,7 +497,7 @@ on_metadata(struct sim_http_req *r, void *ud)
         sim_netprinter_path(s->b.np, name, path, sizeof(path), NULL)) {
         char msg[300];
         snprintf(msg, sizeof(msg), "Metadata not available for <%s>", name ? name : "");
-        reply_err(r, 404, msg);
+        sim_moonraker_error(r, 404, msg);
         return;
     }
     json_t *md = json_pack("{s:I,s:f,s:s,s:n,s:s}", "size", (json_int_t)size, "modified", mtime,
@@ -510,7 +507,7 @@ on_metadata(struct sim_http_req *r, void *ud)
         json_object_set_new(md, "slicer", json_string("PrusaSlicer"));
         json_object_set_new(md, "estimated_time", json_real(est));
     }
-    reply_result(r, md);
+    sim_moonraker_result(r, md);
 }
 
 /* A query argument as a number, or dflt when absent; false (replied 400) when not a number. */
@@ -527,7 +524,7 @@ num_arg(struct sim_http_req *r, const char *name, double dflt, double *out)
     if (errno || end == v || *end) {
         char msg[120];
         snprintf(msg, sizeof(msg), "Unable to convert argument '%s' to float", name);
-        reply_err(r, 400, msg);
+        sim_moonraker_error(r, 400, msg);
         return false;
     }
     return true;
@@ -546,7 +543,7 @@ on_history_list(struct sim_http_req *r, void *ud)
     if (order && strcmp(order, "asc") != 0 && strcmp(order, "desc") != 0) {
         char msg[200];
         snprintf(msg, sizeof(msg), "Invalid `order` value '%.64s'. Must be 'asc' or 'desc'", order);
-        reply_err(r, 400, msg);
+        sim_moonraker_error(r, 400, msg);
         return;
     }
     bool asc = order && strcmp(order, "asc") == 0;
@@ -577,8 +574,8 @@ on_history_list(struct sim_http_req *r, void *ud)
                                         "print_duration", dur, "total_duration", dur,
                                         "filament_used", 0.0, "metadata", md, "auxiliary_data"));
     }
-    reply_result(r,
-                 json_pack("{s:I,s:o}", "count", (json_int_t)json_array_size(jobs), "jobs", jobs));
+    sim_moonraker_result(
+        r, json_pack("{s:I,s:o}", "count", (json_int_t)json_array_size(jobs), "jobs", jobs));
 }
 
 static void
@@ -588,7 +585,7 @@ on_print_start(struct sim_http_req *r, void *ud)
     json_t *hold = NULL;
     const char *name = arg(r, "filename", &hold);
     if (!name) {
-        reply_err(r, 400, "No data for argument: filename");
+        sim_moonraker_error(r, 400, "No data for argument: filename");
     } else if (need_ready(s, r) && start_print(s, r, name)) {
         reply_ok(r);
     }
@@ -632,7 +629,7 @@ on_script(struct sim_http_req *r, void *ud)
     json_t *hold = NULL;
     const char *script = arg(r, "script", &hold);
     if (!script) {
-        reply_err(r, 400, "No data for argument: script");
+        sim_moonraker_error(r, 400, "No data for argument: script");
     } else if (need_ready(s, r)) {
         /* several commands separated by newlines, each queued in turn */
         char line[256];
@@ -651,7 +648,7 @@ on_script(struct sim_http_req *r, void *ud)
             p += n + (p[n] == '\n');
         }
         if (rc)
-            reply_err(r, 400, err.msg);
+            sim_moonraker_error(r, 400, err.msg);
         else
             reply_ok(r);
     }
@@ -691,6 +688,7 @@ on_firmware_restart(struct sim_http_req *r, void *ud)
 static const struct sim_http_route routes[] = {
     { "GET", "/server/info", SIM_HTTP_BODY_MEM, false, on_server_info },
     { "GET", "/printer/info", SIM_HTTP_BODY_MEM, false, on_printer_info },
+    { "GET", "/printer/objects/list", SIM_HTTP_BODY_MEM, false, on_objects_list },
     { "GET", "/printer/objects/query", SIM_HTTP_BODY_MEM, false, on_query },
     { "POST", "/printer/objects/query", SIM_HTTP_BODY_MEM, false, on_query },
     { "POST", "/server/files/upload", SIM_HTTP_BODY_FORM, false, on_upload },
@@ -703,6 +701,16 @@ static const struct sim_http_route routes[] = {
     { "POST", "/printer/gcode/script", SIM_HTTP_BODY_MEM, false, on_script },
     { "POST", "/printer/emergency_stop", SIM_HTTP_BODY_MEM, false, on_estop },
     { "POST", "/printer/firmware_restart", SIM_HTTP_BODY_MEM, false, on_firmware_restart },
+    { "GET", "/printer/objects/subscribe", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_subscribe },
+    { "POST", "/printer/objects/subscribe", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_subscribe },
+    { "GET", "/server/files/list", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_files_list },
+    { "GET", "/server/files/roots", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_roots },
+    { "GET", "/server/temperature_store", SIM_HTTP_BODY_MEM, false,
+      sim_moonraker_on_temperature_store },
+    { "GET", "/server/config", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_config },
+    { "GET", "/api/version", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_octo_version },
+    { "GET", "/api/server", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_octo_server },
+    { "POST", "/api/login", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_octo_login },
 };
 
 /* ---- faults on the job's way ---- */
@@ -718,6 +726,7 @@ on_watch(void *ud)
     struct sim_np_status st;
     sim_netprinter_status(s->b.np, &st);
     hist_settle(s, &st, NULL);
+    sim_moonraker_temps_sample(s, &st);
     sim_http_outage_watch(s->b.http, sim_np_running(&st), st.lines_done);
     if (st.state != SIM_NP_PRINTING || s->klippy != K_READY)
         return;

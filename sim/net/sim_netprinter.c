@@ -605,6 +605,37 @@ sim_netprinter_file_size(const struct sim_netprinter *np, const char *name)
     return (int64_t)st.st_size;
 }
 
+static int
+file_cmp(const void *a, const void *b)
+{
+    return strcmp(((const struct sim_np_file *)a)->name, ((const struct sim_np_file *)b)->name);
+}
+
+int
+sim_netprinter_files(const struct sim_netprinter *np, struct sim_np_file *out, int max)
+{
+    DIR *d = opendir(np->uploads);
+    if (!d)
+        return 0;
+    int n = 0;
+    struct dirent *e;
+    while (n < max && (e = readdir(d)) != NULL) {
+        char path[1024];
+        struct stat st;
+        if (e->d_name[0] == '.' || strlen(e->d_name) > SIM_NP_NAME_MAX ||
+            sim_netprinter_path(np, e->d_name, path, sizeof(path), NULL) < 0 ||
+            stat(path, &st) < 0 || !S_ISREG(st.st_mode))
+            continue;
+        snprintf(out[n].name, sizeof(out[n].name), "%s", e->d_name);
+        out[n].size = (int64_t)st.st_size;
+        out[n].mtime_s = (int64_t)st.st_mtime;
+        n++;
+    }
+    closedir(d);
+    qsort(out, (size_t)n, sizeof(*out), file_cmp);
+    return n;
+}
+
 bool
 sim_netprinter_file_busy(const struct sim_netprinter *np, const char *name)
 {

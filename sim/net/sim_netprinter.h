@@ -102,6 +102,19 @@ int sim_netprinter_path(const struct sim_netprinter *np, const char *name, char 
                         struct sf_err *err);
 /* Size of uploaded file name, or -1 if there is none. */
 int64_t sim_netprinter_file_size(const struct sim_netprinter *np, const char *name);
+/* One uploaded file, as sim_netprinter_files lists it. */
+struct sim_np_file {
+    char name[SIM_NP_NAME_MAX + 1];
+    int64_t size;    /* bytes */
+    int64_t mtime_s; /* last change, Unix seconds */
+};
+
+/*
+ * List up to max uploaded files (regular files, not dot files: those are
+ * uploads still arriving) into out, sorted by name; returns how many (0 when
+ * the directory cannot be read).
+ */
+int sim_netprinter_files(const struct sim_netprinter *np, struct sim_np_file *out, int max);
 /* True while name is the file of a job that is not over (it may not be replaced). */
 bool sim_netprinter_file_busy(const struct sim_netprinter *np, const char *name);
 

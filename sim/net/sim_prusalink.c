@@ -9,6 +9,13 @@
  * PAUSED, FINISHED, STOPPED, ERROR.  A watch timer fires the
  * line-triggered faults.
  *
+ * Beside v1 (spec/openapi.yaml), the legacy endpoints Buddy firmware and
+ * Prusa-Link still serve and clients call (spec/openapi-legacy.yaml,
+ * info.version 2.0.0, Prusa-Link-Web commit 337fabbd): GET /api/printer,
+ * /api/job and /api/files, in their OctoPrint-like shapes; and from v1
+ * also GET /api/v1/files/usb/NAME (the file's PrintFileInfo) and GET
+ * /api/v1/storage (PrusaSlicer asks it before an upload).
+ *
  * Thread: the loop thread.
  */
 #include "sim_prusalink.h"
@@ -20,10 +27,12 @@
 #include <string.h>
 #include <time.h>
 
+#include "../../src/base/mem.h"
 #include "sim_netbase.h"
 #include "sim_netcli.h"
 
-#define WATCH_MS 20
+#define WATCH_MS  20
+#define FILES_MAX 1024 /* files a list shows */
 
 struct sim_prusalink {
     struct sim_netbase b; /* machine, HTTP server, watch timer; first (sim_netbase.h) */
@@ -336,11 +345,171 @@ on_job_action(struct sim_http_req *r, void *ud)
     sim_http_reply_empty(r, 204);
 }
 
+/* ---- the legacy API (Prusa-Link-Web spec/openapi-legacy.yaml, "2.0.0") ---- */
+
+/* The OctoPrint-style state text the legacy API gives for a machine state. */
+static const char *
+legacy_text(const struct sim_np_status *st)
+{
+    switch (st->state) {
+    case SIM_NP_PRINTING:
+    case SIM_NP_CANCELLING:
+        return "Printing";
+    case SIM_NP_PAUSING:
+        return "Pausing";
+    case SIM_NP_PAUSED:
+        return "Paused";
+    case SIM_NP_ERROR:
+        return "Error";
+    default:
+        return "Operational";
+    }
+}
+
+/* GET /api/printer: temperature, sd, state {text, flags}, telemetry.  The telemetry
+   carries the spec's names (temp_nozzle) and Buddy firmware's (temp-nozzle): clients
+   read either. */
+static void
+on_legacy_printer(struct sim_http_req *r, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    struct sim_np_status st;
+    shown(s, &st);
+    bool err = st.state == SIM_NP_ERROR, run = sim_np_running(&st);
+    json_t *temps = json_pack("{s:{s:f,s:f,s:f},s:{s:f,s:f,s:f}}", "tool0", "actual", st.nozzle_c,
+                              "target", st.nozzle_target_c, "offset", 0.0, "bed", "actual",
+                              st.bed_c, "target", st.bed_target_c, "offset", 0.0);
+    json_t *fl = json_pack(
+        "{s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:s}", "operational", !err, "paused",
+        st.state == SIM_NP_PAUSED || st.state == SIM_NP_PAUSING, "printing", run, "cancelling",
+        st.state == SIM_NP_CANCELLING, "pausing", st.state == SIM_NP_PAUSING, "sdReady", false,
+        "error", err, "ready", !err && !run, "closedOrError", err, "finished",
+        st.state == SIM_NP_COMPLETE, "prepared", false, "busy", false, "link_state", pl_state(&st));
+    json_t *tele =
+        json_pack("{s:f,s:f,s:s,s:f,s:i,s:f,s:f,s:f}", "temp_bed", st.bed_c, "temp_nozzle",
+                  st.nozzle_c, "material", "PLA", "z-height", 0.2, "print-speed", 100, "temp-bed",
+                  st.bed_c, "temp-nozzle", st.nozzle_c, "axis_z", 0.2);
+    sim_http_reply_json(r, 200,
+                        json_pack("{s:o,s:{s:b},s:{s:s,s:o},s:o}", "temperature", temps, "sd",
+                                  "ready", false, "state", "text", legacy_text(&st), "flags", fl,
+                                  "telemetry", tele));
+}
+
+/* GET /api/job: job {file, estimatedPrintTime}, progress (completion as the spec's
+   percentage), state; nulls without a job. */
+static void
+on_legacy_job(struct sim_http_req *r, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    struct sim_np_status st;
+    shown(s, &st);
+    bool has = st.state != SIM_NP_IDLE && s->job_id > 0;
+    json_int_t left = has ? time_left(&st) : -1;
+    char path[SIM_NP_NAME_MAX + 8];
+    snprintf(path, sizeof(path), "/usb/%s", st.file);
+    json_t *file = has ? json_pack("{s:s,s:s,s:s,s:s,s:I,s:I}", "name", st.file, "display", st.file,
+                                   "path", path, "origin", "usb", "size", (json_int_t)st.file_size,
+                                   "date", (json_int_t)s->m_timestamp)
+                       : json_pack("{s:n,s:n,s:n,s:n,s:n,s:n}", "name", "display", "path", "origin",
+                                   "size", "date");
+    json_t *job =
+        json_pack("{s:o,s:o,s:n,s:n,s:n,s:s}", "file", file, "estimatedPrintTime",
+                  left >= 0 ? json_integer((json_int_t)st.print_time_s + left) : json_null(),
+                  "averagePrintTime", "lastPrintTime", "filament", "user", "_api");
+    json_t *progress = json_pack(
+        "{s:o,s:o,s:o,s:o,s:s}", "completion", has ? json_real(st.progress * 100) : json_null(),
+        "filepos", has ? json_integer((json_int_t)st.file_pos) : json_null(), "printTime",
+        has ? json_integer((json_int_t)st.print_time_s) : json_null(), "printTimeLeft",
+        left >= 0 ? json_integer(left) : json_null(), "printTimeLeftOrigin", "estimate");
+    sim_http_reply_json(
+        r, 200,
+        json_pack("{s:o,s:o,s:s}", "job", job, "progress", progress, "state", legacy_text(&st)));
+}
+
+/* GET /api/files: the stick as one folder with its files as children. */
+static void
+on_legacy_files(struct sim_http_req *r, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    struct sim_np_file *list = mem_calloc(FILES_MAX, sizeof(*list));
+    if (!list) {
+        reply_err(r, 500, "INTERNAL SERVER ERROR", "out of memory");
+        return;
+    }
+    int n = sim_netprinter_files(s->b.np, list, FILES_MAX);
+    json_t *children = json_array();
+    for (int i = 0; i < n; i++) {
+        char path[SIM_NP_NAME_MAX + 8], res[SIM_NP_NAME_MAX + 32];
+        snprintf(path, sizeof(path), "/usb/%s", list[i].name);
+        snprintf(res, sizeof(res), "/api/files%s", path);
+        json_array_append_new(
+            children,
+            json_pack("{s:s,s:s,s:s,s:s,s:s,s:[s,s],s:I,s:I,s:{s:s,s:s}}", "name", list[i].name,
+                      "display", list[i].name, "path", path, "origin", "usb", "type", "machinecode",
+                      "typePath", "machinecode", "gcode", "size", (json_int_t)list[i].size, "date",
+                      (json_int_t)list[i].mtime_s, "refs", "resource", res, "download", path));
+    }
+    free(list);
+    json_t *usb = json_pack("{s:s,s:s,s:s,s:s,s:s,s:[s],s:o}", "name", "usb", "display", "usb",
+                            "path", "/usb", "origin", "usb", "type", "folder", "typePath", "folder",
+                            "children", children);
+    sim_http_reply_json(r, 200,
+                        json_pack("{s:[o],s:I,s:I}", "files", usb, "free", (json_int_t)4000000000LL,
+                                  "total", (json_int_t)8000000000LL));
+}
+
+/* GET /api/v1/files/usb/NAME: PrintFileInfo (openapi.yaml). */
+static void
+on_file_get(struct sim_http_req *r, void *ud)
+{
+    struct sim_prusalink *s = ud;
+    const char *name = sim_http_rest(r);
+    struct sim_np_file *list = mem_calloc(FILES_MAX, sizeof(*list));
+    if (!list) {
+        reply_err(r, 500, "INTERNAL SERVER ERROR", "out of memory");
+        return;
+    }
+    int n = sim_netprinter_files(s->b.np, list, FILES_MAX), i = 0;
+    while (i < n && strcmp(list[i].name, name) != 0)
+        i++;
+    if (i == n) {
+        free(list);
+        reply_err(r, 404, "NOT FOUND", "File not found");
+        return;
+    }
+    char sn[16], dl[SIM_NP_NAME_MAX + 8];
+    short_name(name, sn, sizeof(sn));
+    snprintf(dl, sizeof(dl), "/usb/%s", name);
+    sim_http_reply_json(r, 200,
+                        json_pack("{s:s,s:s,s:b,s:I,s:s,s:I,s:{s:s},s:{}}", "name", sn,
+                                  "display_name", name, "read_only", false, "size",
+                                  (json_int_t)list[i].size, "type", "PRINT_FILE", "m_timestamp",
+                                  (json_int_t)list[i].mtime_s, "refs", "download", dl, "meta"));
+    free(list);
+}
+
+/* GET /api/v1/storage: {storage_list: [Storage]}, the one USB stick. */
+static void
+on_storage(struct sim_http_req *r, void *ud)
+{
+    (void)ud;
+    sim_http_reply_json(r, 200,
+                        json_pack("{s:[{s:s,s:s,s:s,s:I,s:I,s:b,s:b}]}", "storage_list", "name",
+                                  "usb", "type", "USB", "path", "/usb", "free_space",
+                                  (json_int_t)4000000000LL, "total_space", (json_int_t)8000000000LL,
+                                  "available", true, "read_only", false));
+}
+
 static const struct sim_http_route routes[] = {
     { "GET", "/api/version", SIM_HTTP_BODY_MEM, false, on_version },
     { "GET", "/api/v1/info", SIM_HTTP_BODY_MEM, false, on_info },
     { "GET", "/api/v1/status", SIM_HTTP_BODY_MEM, false, on_status },
     { "GET", "/api/v1/job", SIM_HTTP_BODY_MEM, false, on_job },
+    { "GET", "/api/v1/storage", SIM_HTTP_BODY_MEM, false, on_storage },
+    { "GET", "/api/printer", SIM_HTTP_BODY_MEM, false, on_legacy_printer },
+    { "GET", "/api/job", SIM_HTTP_BODY_MEM, false, on_legacy_job },
+    { "GET", "/api/files", SIM_HTTP_BODY_MEM, false, on_legacy_files },
+    { "GET", "/api/v1/files/usb/*", SIM_HTTP_BODY_MEM, false, on_file_get },
     { "PUT", "/api/v1/files/usb/*", SIM_HTTP_BODY_FILE, false, on_file_put },
     { "HEAD", "/api/v1/files/usb/*", SIM_HTTP_BODY_MEM, false, on_file_other },
     { "POST", "/api/v1/files/usb/*", SIM_HTTP_BODY_MEM, false, on_file_other },

@@ -11,6 +11,7 @@
  * Waits are bounded by the wall clock and end on events, never on sleeps.
  */
 #include <arpa/inet.h>
+#include <jansson.h>
 #include <netinet/in.h>
 #include <signal.h>
 #include <stdlib.h>
@@ -473,6 +474,8 @@ T_CASE(bambu_job_p1_delta_reports)
 struct fake {
     struct mqttloop *m;
     bool up;
+    const char *want; /* a sequence_id awaited in a get_version reply (NULL: none) */
+    bool got;         /* ... and seen (the driver's own get_version replies go by too) */
 };
 
 static void
@@ -491,7 +494,39 @@ fake_down(void *ud, int connack, bool tls, const char *why)
 static void
 fake_msg(void *ud, const char *topic, const char *payload, size_t len)
 {
-    (void)ud, (void)topic, (void)payload, (void)len;
+    struct fake *f = ud;
+    (void)topic;
+    if (!f->want)
+        return;
+    json_t *j = json_loadb(payload, len, 0, NULL);
+    json_t *info = json_object_get(j, "info");
+    const char *cmd = json_string_value(json_object_get(info, "command"));
+    const char *seq = json_string_value(json_object_get(info, "sequence_id"));
+    if (cmd && strcmp(cmd, "get_version") == 0 && seq && strcmp(seq, f->want) == 0)
+        f->got = true;
+    json_decref(j);
+}
+
+/* Connect f to the broker as another MQTT client (a fake printer, or a second client). */
+static bool
+fake_connect(struct run *r, struct fake *f, const char *client_id)
+{
+    struct sf_err err;
+    char ca[600];
+    snprintf(ca, sizeof(ca), "%s/ca.pem", certs);
+    struct mqttloop_config mc = { .host = "127.0.0.1",
+                                  .port = broker_port,
+                                  .client_id = client_id,
+                                  .user = "bblp",
+                                  .password = CODE,
+                                  .ca_file = ca,
+                                  .tls_name = SERIAL,
+                                  .on_up = fake_up,
+                                  .on_down = fake_down,
+                                  .on_message = fake_msg,
+                                  .ud = f };
+    f->m = mqttloop_new(r->loop, &mc, &err);
+    return f->m && mqttloop_connect(f->m, &err) == SF_OK;
 }
 
 static uint64_t
@@ -524,23 +559,8 @@ T_CASE(bambu_time_left_from_full_and_delta_reports)
     struct sf_err err;
     bare_run(&r);
     T_OK(open_driver(&r, &(struct setup){ 0 }, broker_port, 1, &err), &err);
-    char ca[600];
-    snprintf(ca, sizeof(ca), "%s/ca.pem", certs);
     struct fake f = { 0 };
-    struct mqttloop_config mc = { .host = "127.0.0.1",
-                                  .port = broker_port,
-                                  .client_id = "test-printer",
-                                  .user = "bblp",
-                                  .password = CODE,
-                                  .ca_file = ca,
-                                  .tls_name = SERIAL,
-                                  .on_up = fake_up,
-                                  .on_down = fake_down,
-                                  .on_message = fake_msg,
-                                  .ud = &f };
-    f.m = mqttloop_new(r.loop, &mc, &err);
-    T_TRUE(f.m != NULL);
-    T_OK(mqttloop_connect(f.m, &err), &err);
+    T_TRUE(fake_connect(&r, &f, "test-printer"));
     struct drv_bambu_stats bs;
     T_TRUE(WAIT_FOR(&r, f.up && (drv_bambu_stats(r.drv, &bs), bs.connects == 1)));
     /* The driver's subscription may reach the broker after a first report: send the
@@ -929,6 +949,84 @@ T_CASE(bambu_ftps_refuses_data_without_session_reuse)
     sim_bambu_stats(r.sim, &ss);
     T_EQ_INT(ss.refused_reuse, 1);
     T_EQ_INT(ss.uploads, 1);
+    teardown(&r);
+}
+
+/*
+ * LIST as the printer's vsFTPd answers it (issue 35): clients list the root
+ * to check the connection and find files ("LIST", "LIST /", "LIST -a /"),
+ * over a data connection that must resume the control session like STOR's;
+ * STRU F is accepted.  curl lists a URL ending in '/' with LIST, -X sets
+ * the list command, -Q sends a command first.
+ */
+T_CASE(bambu_ftps_lists_files_as_vsftpd)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    T_SKIP_UNLESS(access("/usr/bin/curl", X_OK) == 0, "curl missing");
+    struct run r;
+    T_EQ_INT(setup(&r, &(struct setup){ 0 }), 0);
+    int port = sim_bambu_ftps_port(r.sim);
+    char file[600], base[1024], cmd[2048], out[4096];
+    snprintf(file, sizeof(file), "%s/listed.gcode", t_tmpdir());
+    FILE *f = fopen(file, "w");
+    fputs("G28\n", f);
+    fclose(f);
+    snprintf(base, sizeof(base),
+             "curl -sS --cacert %s/ca.pem --resolve %s:%d:127.0.0.1 --ssl-reqd -u bblp:%s", certs,
+             SERIAL, port, CODE);
+    snprintf(cmd, sizeof(cmd), "%s -Q 'STRU F' -T %s ftps://%s:%d/listed.gcode 2>&1", base, file,
+             SERIAL, port);
+    T_EQ_INT(run(cmd, out, sizeof(out)), 0);
+    const char *lists[] = { "", "-X 'LIST /'", "-X 'LIST -a /'" };
+    for (int i = 0; i < 3; i++) {
+        snprintf(cmd, sizeof(cmd), "%s %s ftps://%s:%d/ 2>&1", base, lists[i], SERIAL, port);
+        T_EQ_INT(run(cmd, out, sizeof(out)), 0);
+        T_TRUE(strstr(out, "-rw-r--r--    1 0        0               4 ") != NULL);
+        /* vsFTPd ends lines with CRLF; curl's ASCII listing turns them to LF */
+        T_TRUE(strstr(out, " listed.gcode\n") != NULL || strstr(out, " listed.gcode\r\n") != NULL);
+    }
+    /* without session reuse the listing is refused, as an upload is */
+    snprintf(cmd, sizeof(cmd), "%s --no-sessionid ftps://%s:%d/ 2>&1", base, SERIAL, port);
+    T_TRUE(run(cmd, out, sizeof(out)) != 0);
+    struct sim_bambu_stats ss;
+    sim_bambu_stats(r.sim, &ss);
+    T_EQ_INT(ss.refused_reuse, 1);
+    T_EQ_INT(ss.uploads, 1);
+    teardown(&r);
+}
+
+/* Ask get_version with sequence_id seq_json (JSON text) until a reply carries want. */
+static bool
+ask_version(struct run *r, struct fake *e, const char *seq_json, const char *want)
+{
+    char req[160];
+    snprintf(req, sizeof(req), "{\"info\":{\"command\":\"get_version\",\"sequence_id\":%s}}",
+             seq_json);
+    e->want = want;
+    e->got = false;
+    int64_t end = wall_ms() + WAIT_MS;
+    while (!e->got && wall_ms() < end) {
+        mqttloop_publish(e->m, "device/" SERIAL "/request", req, strlen(req), NULL);
+        for (int i = 0; i < 4 && !e->got; i++)
+            loop_run_once(r->loop, 50);
+    }
+    return e->got;
+}
+
+/* The printer's replies echo the request's sequence_id, a string or a number (issue 35). */
+T_CASE(bambu_replies_echo_the_sequence_id)
+{
+    T_SKIP_UNLESS(env_ready(), "mosquitto or openssl missing");
+    struct run r;
+    T_EQ_INT(setup(&r, &(struct setup){ 0 }), 0);
+    struct fake e = { 0 };
+    struct sf_err err;
+    T_TRUE(fake_connect(&r, &e, "test-client"));
+    T_TRUE(WAIT_FOR(&r, e.up));
+    T_OK(mqttloop_subscribe(e.m, "device/" SERIAL "/report", &err), &err);
+    T_TRUE(ask_version(&r, &e, "\"4711\"", "4711"));
+    T_TRUE(ask_version(&r, &e, "20002", "20002"));
+    mqttloop_free(e.m);
     teardown(&r);
 }
 
