@@ -60,10 +60,13 @@ ROWS = [(b"M110 N5", "M110"), (b"M111 S7", "M111"), (b"M118 Resend: 1", "M118"),
 def draw():
     r = rng.choice(ROWS)
     if r[0] == "nul":
-        return b"G1 X10\x00 Y10", "byte 0x00"
-    if r[0] == "control":  # not TAB, LF, CR (a CR is allowed as a line's last byte)
-        c = rng.choice([c for c in range(1, 32) if c not in (9, 10, 13)])
-        return b"G1 X10 Y10" + bytes([c]) + b" F3000", "byte 0x%02x" % c
+        return rng.choice([b"G1 X10\x00 Y10", b"\x00G1 X10", b"G1 X10 ; \x00"]), "byte 0x00"
+    if r[0] == "control":  # not TAB or LF; a CR only inside a line (it may end one)
+        c = bytes([rng.choice([c for c in range(1, 32) if c not in (9, 10)] + [0x7f])])
+        line = b"G1 X10 Y10" + c + b" F3000"
+        if c != b"\r" and rng.random() < 0.5:
+            line = b"G1 X10 Y10 ; in a comment " + c
+        return line, "byte 0x%02x" % c[0]
     if r[0] == "nonascii":
         c = rng.randrange(0x80, 0x100)
         return b"M117 T=200" + bytes([c]), "byte 0x%02x" % c
