@@ -9,7 +9,10 @@
 # 2. farmd_crash_print.sh with SOAK_KILLS (100) kill -9 of slimfarmd at
 #    random moments while four simulated printers print: every job exists
 #    once and ends done, resumed or restarted.
-# Exit 1 if either fails.
+# 3. policy_soak.sh: SOAK_FILES (200) G-code files carrying random G-code
+#    policy rows, uploaded to four simulated printers: each is refused
+#    naming its lines, or prints once with no line lost or repeated.
+# Exit 1 if any fails.
 set -u
 build=${1:-build/rel}
 rc=0
@@ -19,4 +22,6 @@ echo "=== soak: prints"
 echo "=== soak: slimfarmd killed ${SOAK_KILLS:-100} times while 4 printers print"
 kills=${SOAK_KILLS:-100}
 BUILD=$build ROUNDS=$kills PRINTERS=4 bash tests/integ/farmd_crash_print.sh || rc=1
+echo "=== soak: ${SOAK_FILES:-200} files with random G-code policy rows, 4 printers"
+BUILD=$build N=${SOAK_FILES:-200} bash tests/bench/policy_soak.sh || rc=1
 exit $rc
