@@ -24,6 +24,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../src/base/gcode.h"
 #include "../src/base/limits.h"
 #include "../src/base/mem.h"
 
@@ -213,8 +214,14 @@ command_word(const char *s, size_t len, char *w, size_t wn)
             i++;
     }
     w[0] = '\0';
-    if (i + 1 < len && isalpha((unsigned char)s[i]) && isdigit((unsigned char)s[i + 1])) {
-        w[k++] = (char)toupper((unsigned char)s[i++]);
+    /* Marlin's parser skips blanks between a command's letter and its
+       number: "M 110" runs M110 */
+    size_t d = i + 1;
+    while (d < len && (s[d] == ' ' || s[d] == '\t'))
+        d++;
+    if (d < len && isalpha((unsigned char)s[i]) && isdigit((unsigned char)s[d])) {
+        w[k++] = (char)toupper((unsigned char)s[i]);
+        i = d;
         while (i + 1 < len && s[i] == '0' && isdigit((unsigned char)s[i + 1]))
             i++; /* Marlin reads the number: M0110 runs M110 */
         while (i < len && isdigit((unsigned char)s[i])) {
@@ -310,23 +317,28 @@ verdict(struct gpolicy_verdict *v, enum gpolicy_action a, const char *why)
     return a;
 }
 
-enum gpolicy_action
-gpolicy_check_line(const struct gpolicy *p, enum gpolicy_source src, const char *line, size_t len,
-                   struct gpolicy_verdict *v)
+/* One form of a line (bytes already judged), by p from src. */
+static enum gpolicy_action
+judge_line(const struct gpolicy *p, enum gpolicy_source src, const char *line, size_t len,
+           struct gpolicy_verdict *v)
 {
-    *v = (struct gpolicy_verdict){ .action = GPOLICY_PASS, .why = "" };
-    if (judge_bytes(line, len, v))
-        return v->action;
     size_t code = 0;
     while (code < len && line[code] != ';')
         code++;
     size_t end = command_word(line, code, v->cmd, sizeof(v->cmd));
     int r = find_row(v->cmd, strlen(v->cmd));
-    if (r < 0 || (rows[r].flags & TEXT)) {
+    bool text = r < 0 || (rows[r].flags & TEXT);
+    if (!text && !(passed(p) & ((uint64_t)1 << r))) {
+        enum gpolicy_action a = src == GPOLICY_FILE ? rows[r].file : rows[r].manual;
+        if (a != GPOLICY_PASS)
+            return verdict(v, a, rows[r].why);
+    }
+    /* whatever the command, even one a printer allows (Marlin's queue.cpp) */
+    if (holds_m110(line, code))
+        return verdict(v, GPOLICY_REFUSE,
+                       "the line holds \"M110\", which Marlin reads as a line number reset");
+    if (text) {
         bool e1 = false;
-        if (holds_m110(line, code))
-            return verdict(v, GPOLICY_REFUSE,
-                           "the line holds \"M110\", which Marlin reads as a line number reset");
         if (r < 0 || !judge_text(strcmp(v->cmd, "M118") == 0, line + end, code - end, &e1))
             return GPOLICY_PASS;
         if (e1 || src == GPOLICY_FILE || rows[r].manual != GPOLICY_REWRITE)
@@ -344,10 +356,27 @@ gpolicy_check_line(const struct gpolicy *p, enum gpolicy_source src, const char 
         }
         return verdict(v, GPOLICY_REWRITE, "its text would read as a host reply: echoed instead");
     }
-    if (passed(p) & ((uint64_t)1 << r))
-        return GPOLICY_PASS;
-    enum gpolicy_action a = src == GPOLICY_FILE ? rows[r].file : rows[r].manual;
-    return a == GPOLICY_PASS ? GPOLICY_PASS : verdict(v, a, rows[r].why);
+    return GPOLICY_PASS;
+}
+
+enum gpolicy_action
+gpolicy_check_line(const struct gpolicy *p, enum gpolicy_source src, const char *line, size_t len,
+                   struct gpolicy_verdict *v)
+{
+    *v = (struct gpolicy_verdict){ .action = GPOLICY_PASS, .why = "" };
+    if (judge_bytes(line, len, v))
+        return v->action;
+    /* The line as a Marlin printer receives it first: the driver sends
+       gcode_strip's form, without (paren) comments, line number or
+       checksum, so "M(x)110" arrives as "M 110" and "M118 (x)ok" prints
+       "ok".  Then the line as written, for the hosts that send it whole. */
+    char sent[SF_GCODE_LINE_MAX];
+    size_t n = gcode_strip(line, len, sent, sizeof(sent), NULL);
+    if (n && (n != len || memcmp(sent, line, n) != 0) &&
+        judge_line(p, src, sent, n, v) != GPOLICY_PASS)
+        return v->action;
+    *v = (struct gpolicy_verdict){ .action = GPOLICY_PASS, .why = "" };
+    return judge_line(p, src, line, len, v);
 }
 
 /* The findings of one file or text: counted, the first GPOLICY_FINDINGS_MAX written. */
@@ -471,9 +500,12 @@ gpolicy_check_file(const struct gpolicy *p, const char *path, const char *name, 
         rc = read_lines(&r, fp, line);
     free(line);
     fclose(fp);
-    if (rc)
+    if (rc) {
+        if (n) /* the error, not a report begun on a file that could not be read */
+            msg[0] = '\0';
         return sf_err_set(err, rc, "G-code '%s': %s", name,
                           rc == SF_EIO ? "read failed" : "out of memory");
+    }
     finish(&r);
     if (n_found)
         *n_found = r.found;

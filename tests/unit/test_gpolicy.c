@@ -100,6 +100,33 @@ T_CASE(gpolicy_refuses_eeprom_firmware_waits_and_stops)
     T_EQ_INT(judge(NULL, "M104 S200\nM10\nM1000\nG1 X1\n", msg, sizeof(msg)), 0);
 }
 
+/*
+ * The line as the printer receives it: Marlin skips blanks between a
+ * command's letter and its number, and our driver sends the line without
+ * (paren) comments and checksum, so none of these spellings gets past.
+ */
+T_CASE(gpolicy_judges_the_line_the_printer_runs)
+{
+    char msg[4096];
+    const char *bad[] = { "M 110 N1000",       "M\t110 N1000", "M(c)110 N5",    "(x)M112",
+                          "N3 M 112*40",       "M 500",        "M118 start*57", "M118 (x)ok",
+                          "M118 (x)Resend: 1", "M118 wait*1" };
+    for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
+        T_EQ_INT(judge(NULL, bad[i], msg, sizeof(msg)), 1);
+        T_TRUE(strstr(msg, "line 1: ") != NULL);
+    }
+    /* "M110" in a line an attended printer passes still resets the numbering */
+    struct gpolicy p;
+    gpolicy_init(&p);
+    p.attended = true;
+    T_EQ_INT(judge(&p, "M600 M110 N1000\nM600\n", msg, sizeof(msg)), 1);
+    T_TRUE(strstr(msg, "line 1: ") != NULL);
+    /* a manual command is judged the same way */
+    struct gpolicy_verdict v;
+    T_EQ_INT(gpolicy_check_line(&p, GPOLICY_MANUAL, "M 110 N1000", 11, &v), GPOLICY_REFUSE);
+    T_EQ_INT(gpolicy_check_line(&p, GPOLICY_MANUAL, "G 28", 4, &v), GPOLICY_PASS);
+}
+
 T_CASE(gpolicy_attended_and_allowed_printers_pass_their_rows)
 {
     char msg[4096];
