@@ -29,7 +29,7 @@ start_sim() {
   # up to 30 s: a sanitizer build starting on a loaded machine can take seconds
   for _ in $(seq 600); do [ -s "$TMP/sim.out" ] && break; sleep 0.05; done
   PORT=$(head -n 1 "$TMP/sim.out")
-  [ -n "$PORT" ] || { echo "simulator did not start: $(cat "$TMP/sim.err")"; return 1; }
+  [ -n "$PORT" ] || { echo "simulator did not start (slimfarm-sim marlin $*): $(cat "$TMP/sim.err")"; ps -o pid,stat,etime,args -p "$SIM_PID" 2>&1 | tail -1; return 1; }
 }
 
 # stop_sim: SIGTERM, wait (the log is flushed on exit).
