@@ -41,6 +41,7 @@
 #include "../../src/base/gcode.h"
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
+#include "../gpolicy.h"
 #include "drv_marlin_int.h"
 
 #define RING_LINES      512  /* numbered lines kept for resends */
@@ -336,11 +337,19 @@ m_command(struct drv *d, const char *line, struct sf_err *err)
                           drv_state_name(d->status.state));
     if (strncmp(cmd, "M112", 4) == 0 && (cmd[4] == '\0' || cmd[4] == ' '))
         return m_estop(d, err);
-    if (strncmp(cmd, "M11", 3) == 0 && (cmd[3] == '0' || cmd[3] == '1') &&
-        (cmd[4] == '\0' || cmd[4] == ' '))
-        /* the link's numbering and debug output are the driver's own (issue 29) */
-        return sf_err_set(err, SF_EINVAL, "printer '%s': %.4s is the host's: not a manual command",
-                          d->name, cmd);
+    /* The link's protocol is the driver's own (issue 29): whatever a
+       printer's config allows, the policy's protocol rows (M110, M111, text
+       that reads as a reply) never come from the console.  The farm judged
+       the line already; this guards every other caller of the driver. */
+    struct gpolicy pol;
+    struct gpolicy_verdict v;
+    gpolicy_all(&pol);
+    if (gpolicy_check_line(&pol, GPOLICY_MANUAL, cmd, n, &v) == GPOLICY_REFUSE)
+        return sf_err_set(err, SF_EINVAL,
+                          "printer '%s': %s is the host's: not a manual command (%s)", d->name,
+                          v.cmd, v.why);
+    if (v.action == GPOLICY_REWRITE)
+        snprintf(cmd, sizeof(cmd), "%s", v.line);
     if (d->status.state == DRV_PRINTING)
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is printing", d->name);
     if (!marlin_inject(m, "%s", cmd))
