@@ -21,13 +21,18 @@
  * nothing to send suspends its connection; http_wake_streams() resumes
  * every suspended one.
  *
- * Slow clients: MHD's own timeout is an idle timeout, which a client that
- * sends a header line every few seconds never trips.  So every connection
- * is tracked from accept (MHD's connection notifier) until its request
- * head is complete: past the header deadline, or when more than
- * HTTP_PREAUTH_MAX are waiting (the oldest goes), its socket is shut down
- * and MHD closes it.  Error text is made valid UTF-8 before it is put in
- * JSON (jansson refuses anything else, which used to turn a 400 into 500).
+ * Slow and hostile clients: MHD's own timeout is an idle timeout, which a
+ * client that sends a header line every few seconds never trips, and its
+ * one connection limit is filled by whoever asks most.  So every
+ * connection is counted from accept (MHD's connection notifier) in a class
+ * of http_budget.c: pending until its request head is complete (past the
+ * header deadline, or past the pending caps, its socket is shut down and
+ * MHD closes it), then keyless, read or write as its request asked, each
+ * with its own cap and idle timeout; MHD's limit is their sum.  The
+ * request head is checked for two-way framing (http_frame.c) before
+ * anything else.  Event streams are counted per key and end past their
+ * lifetime.  Error text is made valid UTF-8 before it is put in JSON
+ * (jansson refuses anything else, which used to turn a 400 into 500).
  *
  * Thread: whichever thread calls http_run(), the loop thread in the daemon.
  */
@@ -48,6 +53,8 @@
 #include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "http_budget.h"
+#include "http_frame.h"
 #include "http_int.h"
 
 /* A streamed response; lives from the route's answer until MHD frees it. */
@@ -59,33 +66,30 @@ struct stream {
     void (*free_fn)(void *ud);     /* frees ud */
     bool suspended;                /* waiting for http_wake_streams */
     bool revoked;                  /* its key is gone: end it */
+    bool event;                    /* an event stream (text/event-stream): counted per key */
+    bool expired;                  /* past its lifetime: ends at its next quiet moment */
+    bool retry_sent;               /* the "retry:" hint before that end is out */
+    int64_t end_ms;                /* event stream: monotonic end of its lifetime */
     char key[FARMCFG_KEY_MAX + 1]; /* the API key it was opened with */
     struct stream *next;           /* in h->streams */
 };
 
-/* A connection that has not yet sent a complete request head. */
-struct pending {
-    int fd;               /* its socket, shut down to drop it */
-    int64_t deadline_ms;  /* monotonic time its head must be in by */
-    bool dropped;         /* shut down already; MHD closes it */
-    struct pending *prev; /* in h->pending, oldest first */
-    struct pending *next;
-};
-
 struct http {
-    struct MHD_Daemon *d;                        /* the MHD daemon, external epoll mode */
-    struct http_config cfg;                      /* as given; keys point at our copy */
-    struct farmcfg_key *keys;                    /* copy of the API keys */
-    int port;                                    /* bound port, -1 if none */
-    struct stream *streams;                      /* live streams */
-    struct http_defer *defers;                   /* requests waiting for their answer */
-    struct pending *pending_head, *pending_tail; /* connections without a request head yet */
-    size_t n_pending;                            /* their count */
+    struct MHD_Daemon *d;      /* the MHD daemon, external epoll mode */
+    struct http_config cfg;    /* as given; keys point at our copy */
+    struct farmcfg_key *keys;  /* copy of the API keys */
+    int port;                  /* bound port, -1 if none */
+    struct stream *streams;    /* live streams */
+    struct http_defer *defers; /* requests waiting for their answer */
+    struct http_budget budget; /* connections per class (http_budget.h) */
+    int64_t next_end_ms;       /* earliest event stream lifetime end, or -1 */
 };
 
 /* Per-request state, MHD's *con_cls (made by the URI logger, before the headers). */
 struct conn {
     bool started;                 /* on_request has seen the headers */
+    bool now;                     /* answer status before any body, and close */
+    enum http_class cls;          /* the class its request asked as */
     bool nul_in_url;              /* the raw URL has %00 */
     int status;                   /* early error to answer with, 0 if none */
     char msg[SF_ERR_MSG_MAX];     /* its message */
@@ -158,6 +162,13 @@ stream_read(void *cls, uint64_t pos, char *buf, size_t max)
     ssize_t n = st->fn(st->ud, buf, max);
     if (n < 0)
         return MHD_CONTENT_READER_END_OF_STREAM;
+    if (n == 0 && st->expired) { /* a quiet moment past its lifetime: end it */
+        int len = snprintf(buf, max, "retry: %d\n\n", HTTP_STREAM_RETRY_MS);
+        if (st->retry_sent || len < 0 || (size_t)len >= max)
+            return MHD_CONTENT_READER_END_OF_STREAM;
+        st->retry_sent = true;
+        return len;
+    }
     if (n == 0 && !st->suspended) {
         MHD_suspend_connection(st->conn);
         st->suspended = true;
@@ -189,9 +200,57 @@ http_wake_streams(struct http *h)
         }
 }
 
+/* End the event streams past their lifetime (at their next quiet moment);
+   note when the next one is due. */
+static void
+streams_expire(struct http *h)
+{
+    int64_t now = clock_mono_ms();
+    if (h->next_end_ms < 0 || now < h->next_end_ms)
+        return;
+    h->next_end_ms = -1;
+    for (struct stream *st = h->streams; st; st = st->next) {
+        if (!st->event || st->expired)
+            continue;
+        if (st->end_ms <= now) {
+            st->expired = true;
+            if (st->suspended) {
+                st->suspended = false;
+                MHD_resume_connection(st->conn);
+            }
+        } else if (h->next_end_ms < 0 || st->end_ms < h->next_end_ms) {
+            h->next_end_ms = st->end_ms;
+        }
+    }
+}
+
+static bool
+is_event_stream(const struct http_resp *resp)
+{
+    return !resp->content_type || strcmp(resp->content_type, "text/event-stream") == 0;
+}
+
+static size_t
+streams_of(const struct http *h, const char *key)
+{
+    size_t n = 0;
+    for (const struct stream *st = h->streams; st; st = st->next)
+        n += st->event && !st->revoked && !st->expired && strcmp(st->key, key) == 0;
+    return n;
+}
+
 static enum MHD_Result
 send_stream(struct http *h, struct MHD_Connection *conn, const char *key, struct http_resp *resp)
 {
+    if (is_event_stream(resp) && streams_of(h, key) >= HTTP_STREAMS_PER_KEY) {
+        if (resp->stream_free)
+            resp->stream_free(resp->stream_ud);
+        char msg[128];
+        snprintf(msg, sizeof(msg), "this API key has %d event streams open already",
+                 HTTP_STREAMS_PER_KEY);
+        return http_send_json(conn, MHD_HTTP_TOO_MANY_REQUESTS, json_pack("{s:s}", "error", msg),
+                              false);
+    }
     struct stream *st = mem_calloc(1, sizeof(*st));
     struct MHD_Response *r = NULL;
     if (st)
@@ -207,7 +266,15 @@ send_stream(struct http *h, struct MHD_Connection *conn, const char *key, struct
                            .fn = resp->stream,
                            .ud = resp->stream_ud,
                            .free_fn = resp->stream_free,
+                           .event = is_event_stream(resp),
                            .next = h->streams };
+    if (st->event) {
+        unsigned life_ms =
+            h->cfg.stream_lifetime_ms ? h->cfg.stream_lifetime_ms : HTTP_STREAM_LIFETIME_S * 1000u;
+        st->end_ms = clock_mono_ms() + life_ms;
+        if (h->next_end_ms < 0 || st->end_ms < h->next_end_ms)
+            h->next_end_ms = st->end_ms;
+    }
     snprintf(st->key, sizeof(st->key), "%s", key);
     h->streams = st;
     MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE,
@@ -344,84 +411,65 @@ on_completed(void *cls, struct MHD_Connection *conn, void **con_cls,
     *con_cls = NULL;
 }
 
-/* ---- connections not yet past their request head ---- */
-
-static void
-pending_unlink(struct http *h, struct pending *pd)
-{
-    if (pd->prev)
-        pd->prev->next = pd->next;
-    else
-        h->pending_head = pd->next;
-    if (pd->next)
-        pd->next->prev = pd->prev;
-    else
-        h->pending_tail = pd->prev;
-    pd->prev = pd->next = NULL;
-    h->n_pending--;
-}
-
-/* Shut the socket down: MHD sees the end of the stream and closes it. */
-static void
-pending_drop(struct http *h, struct pending *pd, const char *why)
-{
-    log_info("http", "closing a connection that sent no complete request head: %s", why);
-    shutdown(pd->fd, SHUT_RDWR);
-    pd->dropped = true;
-    pending_unlink(h, pd);
-}
+/* ---- connection budgets (http_budget.h) ---- */
 
 static void
 on_connection(void *cls, struct MHD_Connection *conn, void **socket_context,
               enum MHD_ConnectionNotificationCode toe)
 {
     struct http *h = cls;
-    struct pending *pd = *socket_context;
+    struct http_slot *s = *socket_context;
     if (toe == MHD_CONNECTION_NOTIFY_CLOSED) {
-        if (pd && (pd->prev || pd->next || h->pending_head == pd))
-            pending_unlink(h, pd);
-        free(pd);
+        if (s)
+            http_budget_close(&h->budget, s);
+        free(s);
         *socket_context = NULL;
         return;
     }
-    const union MHD_ConnectionInfo *info =
+    const union MHD_ConnectionInfo *fd =
         MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CONNECTION_FD);
-    pd = mem_calloc(1, sizeof(*pd));
-    if (!pd || !info) {
-        free(pd);
+    const union MHD_ConnectionInfo *addr =
+        MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+    s = mem_calloc(1, sizeof(*s));
+    if (!s || !fd) {
+        free(s);
         return; /* untracked: MHD's idle timeout still applies */
     }
     unsigned ms = h->cfg.header_timeout_ms ? h->cfg.header_timeout_ms : HTTP_HEADER_TIMEOUT_MS;
-    *pd = (struct pending){ .fd = info->connect_fd, .deadline_ms = clock_mono_ms() + ms };
-    pd->prev = h->pending_tail;
-    if (h->pending_tail)
-        h->pending_tail->next = pd;
-    else
-        h->pending_head = pd;
-    h->pending_tail = pd;
-    h->n_pending++;
-    *socket_context = pd;
-    if (h->n_pending > HTTP_PREAUTH_MAX)
-        pending_drop(h, h->pending_head, "too many connections waiting for theirs");
+    *s = (struct http_slot){ .fd = fd->connect_fd, .deadline_ms = clock_mono_ms() + ms };
+    if (addr && addr->client_addr && addr->client_addr->sa_family == AF_INET)
+        s->addr = ((const struct sockaddr_in *)(const void *)addr->client_addr)->sin_addr.s_addr;
+    *socket_context = s;
+    http_budget_accept(&h->budget, s);
 }
 
-/* The request head is complete: the connection no longer counts as pending. */
+/* The request head is in: count the connection in the class it asked as
+   (nowhere if it is refused and closed), or refuse it when that is full. */
 static void
-head_arrived(struct http *h, struct MHD_Connection *conn)
+head_counted(struct http *h, struct conn *c, struct MHD_Connection *conn)
 {
     const union MHD_ConnectionInfo *info =
         MHD_get_connection_info(conn, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
-    struct pending *pd = info ? info->socket_context : NULL;
-    if (pd && (pd->prev || pd->next || h->pending_head == pd))
-        pending_unlink(h, pd);
-}
-
-static void
-drop_late(struct http *h)
-{
-    int64_t now = clock_mono_ms();
-    while (h->pending_head && h->pending_head->deadline_ms <= now)
-        pending_drop(h, h->pending_head, "header deadline passed");
+    struct http_slot *s = info ? info->socket_context : NULL;
+    if (!s)
+        return;
+    if (c->cls == HTTP_CLASS_N || (c->status && c->now)) {
+        http_budget_close(&h->budget, s);
+        return;
+    }
+    if (!http_budget_enter(&h->budget, s, c->cls)) {
+        static const char *const what[] = { "", "clients without a key", "read-only keys",
+                                            "read-write keys" };
+        c->status = 0;
+        fail(c, MHD_HTTP_SERVICE_UNAVAILABLE, "every connection for %s is taken; try again",
+             what[c->cls]);
+        c->now = true;
+        return;
+    }
+    unsigned idle_s = h->cfg.idle_s ? h->cfg.idle_s : HTTP_IDLE_S;
+    if (c->cls == HTTP_CLASS_KEYLESS && idle_s > HTTP_KEYLESS_IDLE_S)
+        idle_s = HTTP_KEYLESS_IDLE_S;
+    MHD_set_connection_option(conn, MHD_CONNECTION_OPTION_TIMEOUT, idle_s);
 }
 
 /* ---- requests ---- */
@@ -452,7 +500,14 @@ static void
 on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const char *url,
            const char *method)
 {
-    head_arrived(h, conn);
+    c->cls = HTTP_CLASS_N;
+    char why[SF_ERR_MSG_MAX];
+    int frame = http_frame_check(conn, why, sizeof(why));
+    if (frame) { /* framed two ways: read no body, answer, close */
+        fail(c, frame, "%s", why);
+        c->now = true;
+        return;
+    }
     if (c->nul_in_url) {
         fail(c, MHD_HTTP_BAD_REQUEST, "the URL holds an encoded NUL (%%00)");
         return;
@@ -482,6 +537,7 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     bool get = strcmp(method, "GET") == 0 || strcmp(method, "HEAD") == 0;
     if (!key && get && h->cfg.is_public && h->cfg.is_public(h->cfg.ud, url)) {
         c->read_only = true; /* a static file: no key, no data */
+        c->cls = HTTP_CLASS_KEYLESS;
         return;
     }
     const char *cookie = MHD_lookup_connection_value(conn, MHD_COOKIE_KIND, HTTP_SESSION_COOKIE);
@@ -501,6 +557,7 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     }
     snprintf(c->key, sizeof(c->key), "%s", k->key);
     c->read_only = k->read_only;
+    c->cls = k->read_only || k->metrics_only ? HTTP_CLASS_READ : HTTP_CLASS_WRITE;
     if (k->metrics_only && (strcmp(method, "GET") != 0 || strcmp(url, "/metrics") != 0)) {
         fail(c, MHD_HTTP_FORBIDDEN, "metrics key: only GET /metrics is allowed");
         return;
@@ -593,14 +650,17 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     if (!c->started) {
         c->started = true;
         on_headers(h, c, conn, url, method);
+        head_counted(h, c, conn);
         /* Refuse now when the client sent no body or waits for 100
            Continue before it (curl does for large ones), when it has no
-           key, or announced too much.  A client already sending its body
-           would lose the answer to the reset of a socket closed on unread
-           bytes: its body is read and dropped (never stored), and the
-           answer comes at its end. */
-        if (c->status && (!c->has_body || c->expect || c->status == MHD_HTTP_UNAUTHORIZED ||
-                          c->status == MHD_HTTP_CONTENT_TOO_LARGE))
+           key, announced too much, framed its request two ways or finds
+           its class full.  A client already sending its body would lose
+           the answer to the reset of a socket closed on unread bytes: its
+           body is read and dropped (never stored), and the answer comes at
+           its end. */
+        if (c->status &&
+            (!c->has_body || c->expect || c->now || c->status == MHD_HTTP_UNAUTHORIZED ||
+             c->status == MHD_HTTP_CONTENT_TOO_LARGE))
             return http_send_error(conn, c->status, c->msg);
         return MHD_YES;
     }
@@ -796,6 +856,10 @@ http_new(const struct http_config *cfg, struct sf_err *err)
     struct farmcfg_key *keys = h->keys;
     h->cfg = *cfg;
     h->cfg.keys = keys;
+    h->next_end_ms = -1;
+    struct http_budget_caps caps;
+    http_budget_size(&caps);
+    http_budget_init(&h->budget, &caps);
     unsigned flags = MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME | MHD_USE_ERROR_LOG;
     if (cfg->port < 0)
         flags |= MHD_USE_NO_LISTEN_SOCKET;
@@ -804,9 +868,8 @@ http_new(const struct http_config *cfg, struct sf_err *err)
                             cfg->port < 0 ? NULL : &sa, MHD_OPTION_NOTIFY_COMPLETED, on_completed,
                             h, MHD_OPTION_NOTIFY_CONNECTION, on_connection, h,
                             MHD_OPTION_URI_LOG_CALLBACK, on_uri, h, MHD_OPTION_CONNECTION_LIMIT,
-                            (unsigned)HTTP_CONNECTIONS_MAX, MHD_OPTION_PER_IP_CONNECTION_LIMIT,
-                            (unsigned)HTTP_PER_IP_MAX, MHD_OPTION_CONNECTION_TIMEOUT,
-                            (unsigned)HTTP_TIMEOUT_S, MHD_OPTION_END);
+                            caps.total, MHD_OPTION_CONNECTION_TIMEOUT,
+                            cfg->idle_s ? cfg->idle_s : (unsigned)HTTP_IDLE_S, MHD_OPTION_END);
     if (!h->d) {
         sf_err_set(err, SF_EIO, "http: cannot listen on %s:%d (in use, or not allowed)", cfg->host,
                    cfg->port);
@@ -856,13 +919,15 @@ http_timeout_ms(struct http *h)
     int64_t t = -1;
     if (MHD_get_timeout(h->d, &ms) == MHD_YES)
         t = ms > INT64_MAX ? INT64_MAX : (int64_t)ms;
-    if (h->pending_head) {
-        int64_t left = h->pending_head->deadline_ms - clock_mono_ms();
-        if (left < 0)
-            left = 0;
-        if (t < 0 || left < t)
-            t = left;
-    }
+    int64_t due[2] = { http_budget_next_ms(&h->budget), h->next_end_ms };
+    for (int i = 0; i < 2; i++)
+        if (due[i] >= 0) {
+            int64_t left = due[i] - clock_mono_ms();
+            if (left < 0)
+                left = 0;
+            if (t < 0 || left < t)
+                t = left;
+        }
     return t;
 }
 
@@ -870,6 +935,7 @@ int
 http_run(struct http *h)
 {
     int rc = MHD_run(h->d) == MHD_YES ? SF_OK : SF_EIO;
-    drop_late(h);
+    http_budget_expire(&h->budget, clock_mono_ms());
+    streams_expire(h);
     return rc;
 }

@@ -24,11 +24,17 @@
  * request that changes something always carries the key in a header,
  * which no other site can make a browser send.
  *
- * Connections: at most HTTP_CONNECTIONS_MAX, HTTP_PER_IP_MAX per client
- * address; a connection that has not sent a complete request head within
- * header_timeout_ms, or is the oldest of more than HTTP_PREAUTH_MAX such
- * connections, is closed, so clients with no key cannot hold the server;
- * a request without a valid key is answered 401 and its connection closed.
+ * Connections are budgeted by class (the limits below, with their
+ * reasons; http_budget.h keeps the count): a connection that has not sent
+ * a complete request head within header_timeout_ms, or is the oldest of
+ * more than HTTP_PREAUTH_MAX such connections (or HTTP_PREAUTH_PER_IP_MAX
+ * of its address), is closed; a request without a valid key is answered
+ * 401 and its connection closed; keyless, read-only and read-write
+ * requests each have their own slots (503 and close when full), so
+ * neither clients without a key nor a read-only key can lock out the
+ * read-write keys.  Event streams count per key, and end at their first
+ * quiet moment past their lifetime.  A request framed two ways (http_frame.h)
+ * is answered 400 and its connection closed.
  *
  * Driving it: the owner watches http_fd() for reading and calls http_run()
  * when it is readable or when http_timeout_ms() passes (http_loop.c does
@@ -50,18 +56,67 @@
 #include "../base/err.h"
 #include "../farm/farmcfg.h"
 
-#define HTTP_FIELDS_MAX      8          /* multipart fields besides the file */
-#define HTTP_FIELD_MAX       (64 << 10) /* bytes per field: options JSON is far smaller */
-#define HTTP_CONNECTIONS_MAX 256        /* concurrent clients: a farm has few operators */
-#define HTTP_TIMEOUT_S       60         /* idle connection timeout */
-/* Connections from one address: an operator's browser opens 6, a script a few more. */
-#define HTTP_PER_IP_MAX 32
-/* Connections still sending their request head; past this the oldest is
-   closed, so slow clients never hold more than a quarter of the slots. */
+#define HTTP_FIELDS_MAX 8          /* multipart fields besides the file */
+#define HTTP_FIELD_MAX  (64 << 10) /* bytes per field: options JSON is far smaller */
+
+/*
+ * Connection budgets.  A connection is counted, from accept to close, in
+ * one class: "pending" until its first request head is in, then the class
+ * of its latest request: keyless (the login page's static files, or a
+ * request about to be answered 401), read (a read-only or metrics key) or
+ * write (a read-write key).  Each class has its own cap, and MHD's limit is
+ * their sum, so no class can take another's slots: with every keyless and
+ * read slot held, a read-write key still connects.  A request whose class
+ * is full is answered 503 and its connection closed.  Behind a reverse
+ * proxy every client has the proxy's address, so only classes without a
+ * key are also capped per address.  The caps shrink (in proportion) when
+ * RLIMIT_NOFILE cannot be raised to cover them plus HTTP_FD_RESERVE.
+ */
+/* Connections still sending their first request head; past this the
+   oldest is closed (slow clients end their own, not others'). */
 #define HTTP_PREAUTH_MAX 64
+/* ... of which from one address; past this that address's oldest goes. */
+#define HTTP_PREAUTH_PER_IP_MAX 16
+/* Keyless connections: the login page is 4 files and a browser opens at
+   most 6 connections to a host, so a few people logging in at once fit. */
+#define HTTP_KEYLESS_MAX 32
+/* ... from one address: one browser's worth. */
+#define HTTP_KEYLESS_PER_IP_MAX 8
+/* A keyless connection idle this long is closed: a page load is over in
+   well under a second, and an idle keyless slot serves nobody. */
+#define HTTP_KEYLESS_IDLE_S 5
+/* Read-only and metrics keys: dashboards, scrapers and their streams. */
+#define HTTP_READ_MAX 128
+/* Read-write keys: operators, the CLI and slicers; no other class may
+   take these. */
+#define HTTP_WRITE_MAX 128
+/* Above the class caps: connections already refused or shut down but not
+   yet closed by MHD, so they never hold up a new keyed client. */
+#define HTTP_CONNECTIONS_SPARE 32
+#define HTTP_CONNECTIONS_MAX                                                                       \
+    (HTTP_PREAUTH_MAX + HTTP_KEYLESS_MAX + HTTP_READ_MAX + HTTP_WRITE_MAX + HTTP_CONNECTIONS_SPARE)
+/* File descriptors kept for everything else (printers, the store, uploads,
+   libcurl, the pool): the soft RLIMIT_NOFILE is raised toward its hard
+   limit to cover HTTP_CONNECTIONS_MAX plus this. */
+#define HTTP_FD_RESERVE 256
+/* A keyed connection idle this long is closed (keep-alive): the dashboard
+   asks every 5 s, a script that waits longer reconnects. */
+#define HTTP_IDLE_S 30
 /* A request head must arrive within this (a client trickling header lines
    is never idle, so the idle timeout alone does not end it). */
 #define HTTP_HEADER_TIMEOUT_MS 10000
+/* Event streams (text/event-stream) open per API key (429 past it): a few
+   operators sharing a key, each with a tab or two and `slimfarm watch`. */
+#define HTTP_STREAMS_PER_KEY 16
+/* An event stream ends at its first quiet moment after this (with a
+   "retry:" hint): a client that stopped reading holds its slot no longer,
+   and EventSource reconnects with Last-Event-ID, missing nothing.  The
+   heartbeat is the events route's (a comment line every API_TICK_MS); a
+   client that reads nothing fills the socket, the heartbeat cannot be
+   written and HTTP_IDLE_S closes the stream sooner. */
+#define HTTP_STREAM_LIFETIME_S 600
+/* Reconnection delay a stream ended by its lifetime asks for (SSE retry:). */
+#define HTTP_STREAM_RETRY_MS 1000
 /* Extra response headers a route may set (ETag, Cache-Control, CSP ...). */
 #define HTTP_RESP_HEADERS_MAX 8
 #define HTTP_SESSION_COOKIE   "sf_session" /* the dashboard's session cookie */
@@ -162,6 +217,8 @@ struct http_config {
     size_t body_max;                     /* largest non-multipart body */
     size_t upload_max;                   /* largest multipart request */
     unsigned header_timeout_ms;          /* 0: HTTP_HEADER_TIMEOUT_MS */
+    unsigned stream_lifetime_ms;         /* 0: HTTP_STREAM_LIFETIME_S */
+    unsigned idle_s;                     /* 0: HTTP_IDLE_S (keyless: at most HTTP_KEYLESS_IDLE_S) */
     http_route_fn route;                 /* every authenticated request */
     http_body_fn body_kind;              /* NULL: every route takes any body */
     void *ud;                            /* route's and sink's argument */

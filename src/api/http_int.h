@@ -17,7 +17,7 @@
 /* Queue j (the reference is taken) as the JSON answer; close: end the
    connection after it. */
 enum MHD_Result http_send_json(struct MHD_Connection *conn, int status, json_t *j, bool close);
-/* {"error": msg}; a 400 or 401 closes the connection. */
+/* {"error": msg}; a 400, 401, 501 or 503 closes the connection. */
 enum MHD_Result http_send_error(struct MHD_Connection *conn, int status, const char *msg);
 /* A route's raw body (resp->body, freed by body_free) or open file (resp->fd, closed). */
 enum MHD_Result http_send_raw(struct MHD_Connection *conn, struct http_resp *resp);

@@ -112,13 +112,16 @@ http_send_json(struct MHD_Connection *conn, int status, json_t *j, bool close)
     return rc;
 }
 
-/* An error; a client without a valid key, or one sent a bad request
-   head, is not served again on this connection. */
+/* An error; a client without a valid key, or one that sent a bad request
+   head (400, or 501: a transfer coding we do not read, so its body cannot
+   be skipped) or finds every connection of its class taken (503), is not
+   served again on this connection. */
 enum MHD_Result
 http_send_error(struct MHD_Connection *conn, int status, const char *msg)
 {
-    return http_send_json(conn, status, json_pack("{s:s}", "error", msg),
-                          status == MHD_HTTP_UNAUTHORIZED || status == MHD_HTTP_BAD_REQUEST);
+    bool close = status == MHD_HTTP_UNAUTHORIZED || status == MHD_HTTP_BAD_REQUEST ||
+                 status == MHD_HTTP_NOT_IMPLEMENTED || status == MHD_HTTP_SERVICE_UNAVAILABLE;
+    return http_send_json(conn, status, json_pack("{s:s}", "error", msg), close);
 }
 
 int
