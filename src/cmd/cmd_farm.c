@@ -20,6 +20,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "../base/buf.h"
 #include "cmd.h"
@@ -520,6 +521,8 @@ struct watch {
     char event[32];  /* "event:" of the current event */
     struct buf data; /* "data:" of the current event */
     long left;       /* events still to print; < 0 for no limit */
+    char id[32];     /* "id:" of the last whole event, to resume after */
+    char id_cur[32]; /* "id:" of the current event */
 };
 
 /* A progress snapshot: one line per printer with a job. */
@@ -581,12 +584,16 @@ on_sse(char *data, size_t size, size_t n, void *ud)
                 if (strcmp(w->event, "progress") != 0 && w->left > 0 && --w->left == 0)
                     return 0; /* enough: end the transfer */
             }
-            w->event[0] = '\0';
+            if (w->id_cur[0])
+                memcpy(w->id, w->id_cur, sizeof(w->id));
+            w->event[0] = w->id_cur[0] = '\0';
             buf_reset(&w->data);
         } else if (strncmp(l, "event: ", 7) == 0) {
             snprintf(w->event, sizeof(w->event), "%s", l + 7);
         } else if (strncmp(l, "data: ", 6) == 0) {
             buf_append(&w->data, l + 6, w->line.len - 6);
+        } else if (strncmp(l, "id: ", 4) == 0) {
+            snprintf(w->id_cur, sizeof(w->id_cur), "%s", l + 4);
         }
         buf_reset(&w->line);
     }
@@ -613,27 +620,40 @@ run_watch(int argc, char **argv)
     }
     buf_init(&w.line, 1 << 20);
     buf_init(&w.data, 1 << 20);
+    if (since)
+        snprintf(w.id, sizeof(w.id), "%s", since);
     CURL *h = curl_easy_init();
     char url[600], hdr[200], last[64];
     snprintf(url, sizeof(url), "%s/api/events", c.url);
     snprintf(hdr, sizeof(hdr), "X-Api-Key: %s", c.key);
-    struct curl_slist *hs = curl_slist_append(NULL, hdr);
-    if (since) {
-        snprintf(last, sizeof(last), "Last-Event-ID: %s", since);
-        hs = curl_slist_append(hs, last);
+    CURLcode rc;
+    /* The daemon ends a stream after its lifetime (README, "Connection
+       limits"): reconnect after the last event seen, as EventSource does. */
+    for (;;) {
+        struct curl_slist *hs = curl_slist_append(NULL, hdr);
+        if (w.id[0]) {
+            snprintf(last, sizeof(last), "Last-Event-ID: %s", w.id);
+            hs = curl_slist_append(hs, last);
+        }
+        curl_easy_setopt(h, CURLOPT_URL, url);
+        curl_easy_setopt(h, CURLOPT_HTTPHEADER, hs);
+        curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, on_sse);
+        curl_easy_setopt(h, CURLOPT_WRITEDATA, &w);
+        curl_easy_setopt(h, CURLOPT_FAILONERROR, 1L);
+        rc = curl_easy_perform(h);
+        curl_slist_free_all(hs);
+        if (rc != CURLE_OK)
+            break;
+        buf_reset(&w.line); /* an event cut by the end is sent again */
+        buf_reset(&w.data);
+        w.event[0] = w.id_cur[0] = '\0';
+        sleep(1);
     }
-    curl_easy_setopt(h, CURLOPT_URL, url);
-    curl_easy_setopt(h, CURLOPT_HTTPHEADER, hs);
-    curl_easy_setopt(h, CURLOPT_WRITEFUNCTION, on_sse);
-    curl_easy_setopt(h, CURLOPT_WRITEDATA, &w);
-    curl_easy_setopt(h, CURLOPT_FAILONERROR, 1L);
-    CURLcode rc = curl_easy_perform(h);
     int status = 0;
-    if (rc != CURLE_OK && !(rc == CURLE_WRITE_ERROR && w.left == 0)) {
+    if (!(rc == CURLE_WRITE_ERROR && w.left == 0)) {
         fprintf(stderr, "slimfarm watch: %s: %s\n", url, curl_easy_strerror(rc));
         status = 1;
     }
-    curl_slist_free_all(hs);
     curl_easy_cleanup(h);
     buf_release(&w.line);
     buf_release(&w.data);
