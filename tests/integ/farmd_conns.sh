@@ -10,6 +10,7 @@
 # 5: requests framed two ways (Transfer-Encoding with Content-Length, a
 #    space before the colon, a folded line, control bytes in a value) are
 #    answered 400 and their connection closed; clean ones still work.
+# And `slimfarm watch` reconnects when the daemon ends a stream.
 # No timing is asserted: each probe waits for its answer with a deadline.
 set -u
 BUILD=${BUILD:-build/san}
@@ -138,6 +139,39 @@ echo "case 3: event streams"
 probe case3_ro
 restart
 probe case3_addr
+# slimfarm watch, when a stream ends (its lifetime is over), reconnects
+# after the last whole event: a stand-in server ends the first stream in
+# the middle of an event, then checks the second request's Last-Event-ID
+echo "watch: a stream that ends"
+"$PY" - > "$tmp/sse.port" 2> "$tmp/sse.err" <<'PYEOF' &
+import socket, sys
+srv = socket.socket()
+srv.bind(("127.0.0.1", 0))
+srv.listen(5)
+srv.settimeout(30)
+print(srv.getsockname()[1], flush=True)
+for n in range(2):
+    c, _ = srv.accept()
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += c.recv(4096)
+    lei = [l for l in head.decode().split("\r\n") if l.lower().startswith("last-event-id:")]
+    sys.stderr.write("request %d: %s\n" % (n + 1, lei[0] if lei else "no Last-Event-ID"))
+    c.sendall(b"HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nConnection: close\r\n\r\n" +
+              (b'id: %d\nevent: job-add\ndata: {"job_id": %d}\n\nid: 99\nevent: job-add\ndata: {"jo'
+               % (5 + n, 5 + n)))
+    c.close()
+PYEOF
+spid=$!
+for _ in $(seq 100); do [ -s "$tmp/sse.port" ] && break; sleep 0.05; done
+timeout 30 "$BUILD/bin/slimfarm" watch --count 2 --url "http://127.0.0.1:$(cat "$tmp/sse.port")" \
+  --key "$RW" > "$tmp/watch.out" 2>&1
+rc=$?
+wait $spid
+sed -e 's/^/  /' "$tmp/sse.err"
+grep -q "request 2: Last-Event-ID: 5" "$tmp/sse.err" && [ $rc = 0 ] &&
+  [ "$(grep -c 'job-add' "$tmp/watch.out")" = 2 ] || failed="$failed watch($rc: $(tr '\n' ' ' < "$tmp/watch.out"))"
+
 [ -z "$failed" ] || fail "$failed"
 kill -TERM "$pid"; wait "$pid"; rc=$?; pid=
 [ $rc = 0 ] || fail "SIGTERM: exit $rc"
