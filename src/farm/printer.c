@@ -711,21 +711,37 @@ drive(struct printer *p, const char *path, uint64_t line, const struct drv_job_s
     job_event(p, id, JOB_EV_REFUSED, &a);
 }
 
-void
+int
 printer_start(struct printer *p, const struct job_row *j, const char *path)
 {
     struct job_event_args a = { .printer = p->cfg.name };
     /* Commit first: a crash from here on leaves the job interrupted. */
-    if (job_event(p, j->id, JOB_EV_START, &a))
-        return;
+    int rc = job_event(p, j->id, JOB_EV_START, &a);
+    if (rc)
+        return rc;
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
     p->est_s = printer_estimate_s(j, path);
     move(p, PRINTER_EV_START);
-    /* The scan prepare made; G-code prepared before the count was stored
-       (gcode_lines 0) is read by the driver itself, once. */
-    struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
-    drive(p, path, 0, j->gcode_lines > 0 ? &scan : NULL);
+    return SF_OK;
+}
+
+void
+printer_start_go(struct printer *p, int64_t id, const char *path, const struct drv_job_scan *scan,
+                 int rc, const char *why)
+{
+    if (p->job_id != id) /* cancelled, or its printer lost, while the file was judged */
+        return;
+    if (rc == SF_OK) {
+        drive(p, path, 0, scan);
+        return;
+    }
+    /* A retry would judge the same file the same way. */
+    log_printer(LOG_WARN, p->cfg.name, "job %lld refused at its start: %s", (long long)id, why);
+    struct job_event_args a = { .reason = why, .no_retry = true };
+    p->job_id = 0;
+    move(p, PRINTER_EV_REFUSED);
+    job_event(p, id, JOB_EV_PRINT_FAILED, &a);
 }
 
 int
