@@ -66,6 +66,7 @@ struct printer {
     int attach_waits;      /* attach() answers "not yet" on this connection */
     double est_s;          /* the job's print time estimate (printer_estimate_s), s; -1 unknown */
     uint64_t heat_timer;   /* hot with no print: timer turning the heaters off, 0 if none */
+    int64_t judging; /* job started whose file is judged before the driver has it, 0 if none */
 };
 
 static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
@@ -722,6 +723,7 @@ printer_start(struct printer *p, const struct job_row *j, const char *path)
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
     p->est_s = printer_estimate_s(j, path);
+    p->judging = j->id;
     move(p, PRINTER_EV_START);
     return SF_OK;
 }
@@ -732,6 +734,7 @@ printer_start_go(struct printer *p, int64_t id, const char *path, const struct d
 {
     if (p->job_id != id) /* cancelled, or its printer lost, while the file was judged */
         return;
+    p->judging = 0;
     if (rc == SF_OK) {
         drive(p, path, 0, scan);
         return;
@@ -886,6 +889,19 @@ printer_estop(struct printer *p, const char *who, struct sf_err *err)
     return SF_OK;
 }
 
+/* Cancel the job p was starting while its file is judged: nothing was sent. */
+static int
+cancel_judged(struct printer *p, struct sf_err *err)
+{
+    struct job_event_args a = { .reason = "cancelled by an operator" };
+    int rc = store_job_event(p->env.s, p->job_id, JOB_EV_CANCEL, &a, NULL, err);
+    if (rc)
+        return rc;
+    p->job_id = p->judging = 0;
+    move(p, PRINTER_EV_REFUSED); /* idle again, the bed as it was */
+    return SF_OK;
+}
+
 int
 printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
 {
@@ -918,6 +934,12 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
     if (!p->drv || !p->job_id)
         return sf_err_set(err, SF_EINVAL, "printer %s has no job to %s", p->cfg.name,
                           action_names[act]);
+    if (p->judging == p->job_id) /* the driver has nothing yet: a cancel is the store's alone */
+        return act == PRINTER_ACT_CANCEL ? cancel_judged(p, err)
+                                         : sf_err_set(err, SF_EAGAIN,
+                                                      "printer %s is starting its job: %s it once "
+                                                      "it prints",
+                                                      p->cfg.name, action_names[act]);
     /* The driver's own report of this comes on a later loop turn and finds
        the printer moved already. */
     rc = act == PRINTER_ACT_PAUSE    ? p->drv->ops->pause(p->drv, err)
