@@ -68,6 +68,10 @@ struct marlin {
     bool m105_answered;         /* an M105 answer came since the last deadline */
     bool ok_since;              /* an ok came since the last deadline */
     char last_ok[40];           /* the last ok as it came, for the message */
+    char last_reply[40];        /* the last reply line of any kind, for the message */
+    bool waits_for_user;        /* the last busy said "paused for user" (M0, M600 attended) */
+    uint64_t stall_acked;       /* lines_acked when the stall clock last restarted */
+    int64_t stall_ms;           /* ... and when: the last confirmed job line, or the job's start */
     bool probe_wanted;          /* a probe waits in the inject queue */
     bool keepalive_seen;        /* the firmware sends "busy:" while any command blocks */
     bool heat_reports_seen;     /* it reports temperatures while M109/M190 wait */
@@ -208,6 +212,13 @@ void marlin_on_resend(struct marlin *m, long k);
  * all for SILENCE_MS, or only unreadable bytes for GARBLED_MAX deadlines.
  */
 void marlin_deadline(struct marlin *m, int64_t now);
+
+/*
+ * After each reply and each deadline: true when the job was failed because
+ * its stream stopped moving (no job line confirmed for STALL_MS while the
+ * printer kept talking, unless it waits for a person).
+ */
+bool marlin_stall_check(struct marlin *m, int64_t now);
 
 /* ---- drv_marlin_rx.c ---- */
 

@@ -114,7 +114,7 @@ marlin_check_job_progress(struct marlin *m)
         m->progress_ev_lines = st->lines_acked;
         marlin_emit_event(m, DRV_EV_PROGRESS);
     }
-    if (m->inj_len > 0 || !linewin_idle(&m->win))
+    if (marlin_stall_check(m, now) || m->inj_len > 0 || !linewin_idle(&m->win))
         return;
     if (m->mode == J_RUN && m->job_eof && m->final_pushed) {
         st->lines_acked = st->lines_total;
@@ -329,6 +329,8 @@ marlin_start_job(struct drv *d, const char *path, uint64_t first_line,
     m->unconfirmed_to = 0; /* a silence before this job says nothing of its lines */
     d->status.progress = total ? (double)first_line / (double)total : 0;
     d->status.job_started_ms = loop_now_ms(d->loop);
+    m->stall_acked = first_line; /* the stall clock starts with the job */
+    m->stall_ms = d->status.job_started_ms;
     if (first_line > 0) {
         inject_resume(m, &sc.machine);
         marlin_message(m, "resuming '%s' at line %llu of %llu", path,

@@ -22,7 +22,8 @@
 #define PLANNER_BLOCKS 16    /* Marlin's BLOCK_BUFFER_SIZE: moves acknowledged, not yet run */
 #define KEEPALIVE_MS   3000  /* busy/wait reports come at least this often once seen */
 #define CLIMB_LINES    16    /* clean lines per step back up after a rewind */
-#define UNMATCHED_MAX  8     /* probes in a row answered by oks that are not theirs: fail */
+#define UNMATCHED_MAX  8     /* probes answered by oks not theirs, no job line confirmed: fail */
+#define STALL_MS       (30 * 60 * 1000) /* no job line confirmed for this long: fail */
 
 /*
  * When the printer's next reply is overdue, ms: after the last reply, or
@@ -244,35 +245,64 @@ marlin_on_resend(struct marlin *m, long k)
  * all for SILENCE_MS, or only unreadable bytes for GARBLED_MAX deadlines.
  */
 /*
- * A printer whose oks do not match the lines (M105 answered with a plain
- * "ok", so the host counts one ok short for ever): each probe gets oks but
- * never its own answer, and the stream would crawl a line per deadline.
- * UNMATCHED_MAX such probes in a row fail the job, saying what came.
+ * A stream that stops moving fails, never crawls (issue 29).  The printer
+ * keeps answering but no job line is confirmed: oks that are not the
+ * lines' (M105 answered with a plain "ok", so the host counts one ok short
+ * for ever: each probe gets an ok but never its own answer), or only
+ * "busy:" keepalives of a command that never ends (a probing that hangs),
+ * echo lines, replies just slower than each deadline.  Two bounds, both
+ * counted from the last confirmed job line: UNMATCHED_MAX probes answered
+ * by oks that are not theirs, and STALL_MS of wall time whatever came.
+ * Neither restarts on a deadline that sent no probe (a resync after a
+ * Resend) or heard no ok: only a confirmed job line, a probe answered as
+ * one ("ok T:"), or a pause does.  The wall time is long enough for a
+ * blocking command of a real print (a bed heat-up, a mesh probing: the
+ * firmware's own watchdogs end a heat-up that does not climb) and does not
+ * run while the printer says it waits for a person ("busy: paused for
+ * user": an attended printer's M600).
  */
-static bool
-stalled(struct marlin *m)
+bool
+marlin_stall_check(struct marlin *m, int64_t now)
 {
-    if (m->mode != J_RUN || !m->probe_sent || m->m105_answered || !m->ok_since)
+    if (m->mode != J_RUN || m->waits_for_user || m->base.status.lines_acked != m->stall_acked) {
+        m->stall_acked = m->base.status.lines_acked;
+        m->stall_ms = now;
         m->unmatched = 0;
-    else
-        m->unmatched++;
-    m->probe_sent = m->m105_answered = m->ok_since = false;
-    if (m->unmatched < UNMATCHED_MAX)
         return false;
-    char why[160];
-    snprintf(why, sizeof(why),
-             "stream stalled: %d probes (M105) in a row answered only by '%s', no temperature "
-             "report: acknowledgements do not match lines",
-             m->unmatched, m->last_ok);
+    }
+    char why[200];
+    if (m->unmatched >= UNMATCHED_MAX)
+        snprintf(why, sizeof(why),
+                 "stream stalled: %d probes (M105) answered only by '%s', no temperature "
+                 "report: acknowledgements do not match lines",
+                 m->unmatched, m->last_ok);
+    else if (now - m->stall_ms >= STALL_MS)
+        snprintf(why, sizeof(why),
+                 "stream stalled: no line confirmed for %lld min, the printer answering '%s'",
+                 (long long)((now - m->stall_ms) / 60000), m->last_reply);
+    else
+        return false;
     m->unmatched = 0;
     marlin_job_fail(m, DRV_ERROR, why);
     return true;
 }
 
+/* A deadline: count a probe answered by oks that are not its own. */
+static bool
+stalled(struct marlin *m, int64_t now)
+{
+    if (m->mode == J_RUN && m->probe_sent && m->ok_since && !m->m105_answered)
+        m->unmatched++;
+    else if (m->m105_answered)
+        m->unmatched = 0;
+    m->probe_sent = m->m105_answered = m->ok_since = false;
+    return marlin_stall_check(m, now);
+}
+
 void
 marlin_deadline(struct marlin *m, int64_t now)
 {
-    if (stalled(m))
+    if (stalled(m, now))
         return;
     m->probes++;
     bool silent = now - m->last_rx_ms >= SILENCE_MS;

@@ -234,6 +234,9 @@ on_reply(struct marlin *m, const char *line, size_t len)
     struct mreply r;
     mreply_parse(line, len, &r);
     note_reply(m, &r);
+    snprintf(m->last_reply, sizeof(m->last_reply), "%.*s", (int)(len < 39 ? len : 39), line);
+    if (r.kind == MR_BUSY || r.kind == MR_OK)
+        m->waits_for_user = r.kind == MR_BUSY && memmem(line, len, "paused for", 10);
     if (m->phase == PH_HELLO) {
         on_hello_reply(m, &r);
         return;

@@ -159,6 +159,8 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
         return parse_count(spec, v, 1L << 40, &f->disconnect_after, err);
     if (NAME_IS("runaway"))
         return parse_count(spec, v, 1L << 40, &f->runaway_after, err);
+    if (NAME_IS("stuck"))
+        return parse_count(spec, v, 1L << 40, &f->stuck_after, err);
     if (NAME_IS("dup"))
         return parse_rate(spec, v, &f->dup, err);
     if (NAME_IS("merge"))
@@ -204,7 +206,7 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
     return sf_err_set(err, SF_EINVAL,
                       "fault '%s': unknown; expected corrupt, corrupt-rx, corrupt-tx, drop-ok, "
                       "drop-oks, garbage, dup, merge, bad-line, hit, hit-rx, okt, slow, reset, "
-                      "disconnect, runaway or "
+                      "disconnect, runaway, stuck or "
                       "seed",
                       spec);
 }

@@ -16,6 +16,9 @@
  *   reset=N           the firmware resets after executing N commands
  *   disconnect=N      the link drops after executing N commands
  *   runaway=N         thermal runaway (Error:Thermal Runaway, then halt) after N commands
+ *   stuck=N           after N commands the firmware never ends the next one (a probing or a
+ *                     homing that hangs): no ok, nothing read past its command buffer, only
+ *                     "echo:busy: processing" every 2 s (its host keepalive), for good
  *   dup=RATE          a reply line is sent twice, with probability RATE
  *   merge=RATE        a reply line loses its newline (runs into the next), with probability RATE
  *   bad-line=N        line N is taken as garbled once (checksum mismatch): Error, Resend, ok
@@ -54,6 +57,7 @@ struct faults {
     long reset_after;      /* commands executed before a firmware reset; 0 = never */
     long disconnect_after; /* commands executed before the link drops; 0 = never */
     long runaway_after;    /* commands executed before thermal runaway; 0 = never */
+    long stuck_after;      /* commands executed before the firmware is stuck for good; 0 = never */
     double dup;            /* probability a reply line is sent twice */
     double merge;          /* probability a reply line loses its newline */
     long bad_line;         /* line taken as garbled once; 0 = none */

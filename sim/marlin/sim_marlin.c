@@ -350,6 +350,7 @@ void
 sim_firmware_reset(struct sim_marlin *s, bool banner)
 {
     s->halted = false;
+    s->stuck = false;
     s->last_n = 0;
     s->q_len = 0;
     s->q_head = 0;

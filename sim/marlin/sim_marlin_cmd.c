@@ -504,6 +504,8 @@ check_fault_triggers(struct sim_marlin *s)
     }
     if (s->faults.reset_after && n == (uint64_t)s->faults.reset_after)
         sim_firmware_reset(s, true);
+    if (s->faults.stuck_after && n == (uint64_t)s->faults.stuck_after)
+        s->stuck = true;
     if (s->faults.disconnect_after && n == (uint64_t)s->faults.disconnect_after)
         sim_drop_link(s);
     if (s->cfg.hang_after && n == (uint64_t)s->cfg.hang_after) {
@@ -516,6 +518,14 @@ check_fault_triggers(struct sim_marlin *s)
 void
 sim_run_queue(struct sim_marlin *s)
 {
+    if (s->stuck) { /* the command at the head never ends: keepalives only */
+        int64_t now = loop_now_ms(s->loop);
+        if (s->q_len > 0 && !s->cfg.no_keepalive && now >= s->keepalive_ms) {
+            sim_emit(s, "echo:busy: processing");
+            s->keepalive_ms = now + KEEPALIVE_MS;
+        }
+        return;
+    }
     for (int guard = 0; guard < 64 && s->q_len > 0 && !s->halted && !s->hung; guard++) {
         const char *raw = s->queue[s->q_head];
         char cmd[MAX_CMD_SIZE];

@@ -86,6 +86,7 @@ struct sim_marlin {
     /* firmware */
     int64_t boot_until_ms; /* > now: booting, input dropped */
     bool hung;             /* cfg.hang_after reached: silent for good */
+    bool stuck;            /* faults.stuck_after reached: busy for good */
     bool halted;           /* killed */
     long last_n;           /* last good line number */
     char line[MAX_CMD_SIZE];

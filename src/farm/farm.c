@@ -354,16 +354,79 @@ sched_view(const struct job_row *j, struct sched_job *out)
     memcpy(out->size_mm, j->size_mm, sizeof(out->size_mm));
 }
 
+/*
+ * A start judged again by the G-code policy of the printer it starts on.
+ * The upload (or prepare) judged the file by the policy of its day; a
+ * reload since may have made the printer stricter (attended turned off,
+ * an allow_gcode entry gone).  Every start reads the whole file once more,
+ * on the io thread (as the upload check does), rather than keeping with
+ * the job the policy it passed and judging again only when the printer's
+ * is stricter: that would be a column in the store for one saved read of
+ * a file the driver is about to read anyway, and a job that passed on one
+ * printer of its key would need the same care when it starts on another.
+ */
+struct startcheck {
+    struct farm *f;
+    int64_t job_id;
+    char printer[64];
+    char name[JOB_NAME_MAX]; /* the job's name, for the policy's messages */
+    char path[1200];
+    struct drv_job_scan scan;
+    bool counted;          /* scan holds the job's line count (else the driver counts) */
+    struct gpolicy policy; /* the printer's, now */
+    struct sf_err err;
+    char msg[1024]; /* the refused lines, "G-code 'NAME': line 12: M600: ..." */
+};
+
+static int
+startcheck_work(void *ud, const atomic_bool *cancel)
+{
+    (void)cancel;
+    struct startcheck *t = ud;
+    return gpolicy_check_file(&t->policy, t->path, t->name, t->msg, sizeof(t->msg), NULL, &t->err);
+}
+
+static void
+startcheck_done(struct loop *l, void *ud, int rc)
+{
+    (void)l;
+    struct startcheck *t = ud;
+    struct printer *p;
+    /* Shutting down (SF_ECANCELED) leaves it for printer_stop. */
+    if (rc != SF_ECANCELED && (p = find(t->f, t->printer)) != NULL)
+        printer_start_go(p, t->job_id, t->path, t->counted ? &t->scan : NULL, rc,
+                         t->msg[0] ? t->msg : t->err.msg);
+    free(t);
+}
+
 static void
 start(struct farm *f, const struct job_row *j, struct printer *p)
 {
     struct sf_err err;
-    char path[1200];
-    if (store_file_path(f->s, j->gcode_sha, path, sizeof(path), &err)) {
+    struct startcheck *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return; /* the next kick tries again */
+    if (store_file_path(f->s, j->gcode_sha, t->path, sizeof(t->path), &err)) {
         log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
+        free(t);
         return;
     }
-    printer_start(p, j, path);
+    t->f = f;
+    t->job_id = j->id;
+    snprintf(t->printer, sizeof(t->printer), "%s", printer_cfg(p)->name);
+    snprintf(t->name, sizeof(t->name), "%s", j->opts.name);
+    /* The scan prepare made; G-code prepared before the count was stored
+       (gcode_lines 0) is read by the driver itself, once. */
+    t->scan = (struct drv_job_scan){ .lines_total = (uint64_t)j->gcode_lines };
+    t->counted = j->gcode_lines > 0;
+    farmcfg_policy(printer_cfg(p), &t->policy);
+    /* p is printing j from here: the scheduler picks neither again */
+    if (printer_start(p, j, t->path)) {
+        free(t);
+        return;
+    }
+    if (!pool_submit(f->io, startcheck_work, startcheck_done, t, &err))
+        startcheck_done(f->l, t, startcheck_work(t, NULL)); /* no worker: judged here */
 }
 
 static void
@@ -845,6 +908,12 @@ gcheck_done(struct loop *l, void *ud, int rc)
     }
     t->done(t->ud, rc, rc ? NULL : &t->g, t->msg[0] ? t->msg : t->err.msg);
     free(t);
+    /* The answer just given (the upload's deferred reply) leaves when the
+       daemon next runs its HTTP server, which the notify hook does
+       (slimfarmd.c wake_streams).  A stored file notifies anyway
+       (farm_gcode_add); a refusal, without this, waited up to the 5 s API
+       tick. */
+    notify(f);
 }
 
 int

@@ -66,6 +66,7 @@ struct printer {
     int attach_waits;      /* attach() answers "not yet" on this connection */
     double est_s;          /* the job's print time estimate (printer_estimate_s), s; -1 unknown */
     uint64_t heat_timer;   /* hot with no print: timer turning the heaters off, 0 if none */
+    int64_t judging; /* job started whose file is judged before the driver has it, 0 if none */
 };
 
 static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
@@ -711,21 +712,39 @@ drive(struct printer *p, const char *path, uint64_t line, const struct drv_job_s
     job_event(p, id, JOB_EV_REFUSED, &a);
 }
 
-void
+int
 printer_start(struct printer *p, const struct job_row *j, const char *path)
 {
     struct job_event_args a = { .printer = p->cfg.name };
     /* Commit first: a crash from here on leaves the job interrupted. */
-    if (job_event(p, j->id, JOB_EV_START, &a))
-        return;
+    int rc = job_event(p, j->id, JOB_EV_START, &a);
+    if (rc)
+        return rc;
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
     p->est_s = printer_estimate_s(j, path);
+    p->judging = j->id;
     move(p, PRINTER_EV_START);
-    /* The scan prepare made; G-code prepared before the count was stored
-       (gcode_lines 0) is read by the driver itself, once. */
-    struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
-    drive(p, path, 0, j->gcode_lines > 0 ? &scan : NULL);
+    return SF_OK;
+}
+
+void
+printer_start_go(struct printer *p, int64_t id, const char *path, const struct drv_job_scan *scan,
+                 int rc, const char *why)
+{
+    if (p->job_id != id) /* cancelled, or its printer lost, while the file was judged */
+        return;
+    p->judging = 0;
+    if (rc == SF_OK) {
+        drive(p, path, 0, scan);
+        return;
+    }
+    /* A retry would judge the same file the same way. */
+    log_printer(LOG_WARN, p->cfg.name, "job %lld refused at its start: %s", (long long)id, why);
+    struct job_event_args a = { .reason = why, .no_retry = true };
+    p->job_id = 0;
+    move(p, PRINTER_EV_REFUSED);
+    job_event(p, id, JOB_EV_PRINT_FAILED, &a);
 }
 
 int
@@ -870,6 +889,19 @@ printer_estop(struct printer *p, const char *who, struct sf_err *err)
     return SF_OK;
 }
 
+/* Cancel the job p was starting while its file is judged: nothing was sent. */
+static int
+cancel_judged(struct printer *p, struct sf_err *err)
+{
+    struct job_event_args a = { .reason = "cancelled by an operator" };
+    int rc = store_job_event(p->env.s, p->job_id, JOB_EV_CANCEL, &a, NULL, err);
+    if (rc)
+        return rc;
+    p->job_id = p->judging = 0;
+    move(p, PRINTER_EV_REFUSED); /* idle again, the bed as it was */
+    return SF_OK;
+}
+
 int
 printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
 {
@@ -902,6 +934,12 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
     if (!p->drv || !p->job_id)
         return sf_err_set(err, SF_EINVAL, "printer %s has no job to %s", p->cfg.name,
                           action_names[act]);
+    if (p->judging == p->job_id) /* the driver has nothing yet: a cancel is the store's alone */
+        return act == PRINTER_ACT_CANCEL ? cancel_judged(p, err)
+                                         : sf_err_set(err, SF_EAGAIN,
+                                                      "printer %s is starting its job: %s it once "
+                                                      "it prints",
+                                                      p->cfg.name, action_names[act]);
     /* The driver's own report of this comes on a later loop turn and finds
        the printer moved already. */
     rc = act == PRINTER_ACT_PAUSE    ? p->drv->ops->pause(p->drv, err)

@@ -97,13 +97,22 @@ void printer_set_removed(struct printer *p, bool removed);
 bool printer_removed(const struct printer *p);
 
 /*
- * Start job j (ready; its G-code at path) from line 0: the start is
- * committed, then the driver streams.  A driver refusing with SF_EAGAIN
- * (not idle: "not now") sends the job back to ready without spending a
- * retry (JOB_EV_REFUSED) and p takes no job for drv_backoff_ms(refusals in
- * a row); any other refusal fails the print (the retry policy applies).
+ * Start job j (ready; its G-code at path) from line 0, in two steps like a
+ * resume: printer_start commits the start (SF_OK: j is p's job now;
+ * otherwise the store's error, logged, and nothing changed), then
+ * printer_start_go hands it to the driver once the farm has judged the
+ * file by p's policy off the loop (rc, why: the verdict), unless the job
+ * left p meanwhile.  scan (NULL: the driver counts the lines) is the
+ * job's.  A driver refusing with SF_EAGAIN (not idle: "not now") sends the
+ * job back to ready without spending a retry (JOB_EV_REFUSED) and p takes
+ * no job for drv_backoff_ms(refusals in a row); any other refusal fails
+ * the print (the retry policy applies).  rc != SF_OK (the file breaks p's
+ * policy, or cannot be read) fails the job with why, not retried: nothing
+ * was sent, p is idle again with its bed as it was.
  */
-void printer_start(struct printer *p, const struct job_row *j, const char *path);
+int printer_start(struct printer *p, const struct job_row *j, const char *path);
+void printer_start_go(struct printer *p, int64_t id, const char *path,
+                      const struct drv_job_scan *scan, int rc, const char *why);
 
 /*
  * Resume interrupted job id on p (idle, connected) from command `line`:

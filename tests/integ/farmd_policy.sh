@@ -71,7 +71,7 @@ def post(data, want, route):
 
 def refused(cases):
     """Each (data, want[, route]) is a 400 naming want; together they leave no file, no job.
-    In parallel: a refused upload is answered after a few seconds."""
+    In parallel, each answered once its check is done."""
     from concurrent.futures import ThreadPoolExecutor
     before_files, before_jobs = files(), len(jobs())
     with ThreadPoolExecutor(len(cases)) as ex:

@@ -12,6 +12,7 @@
  * real driver would.  The prepare hook writes a tiny real G-code file.
  */
 #include <errno.h>
+#include <fcntl.h>
 #include <signal.h>
 #include <sqlite3.h>
 #include <stdatomic.h>
@@ -369,12 +370,27 @@ wall_ms(void)
    ends early whenever an event comes, so both bounds are on the wall clock. */
 #define WAIT_LIMIT_MS 120000
 
+/* Every printer printing a job has its driver started: a start is committed
+   first, and reaches the driver once the file is judged (farm.c start). */
+static bool
+drivers_started(void)
+{
+    for (size_t i = 0; i < farm_printer_count(fx.f); i++) {
+        struct printer_info info;
+        farm_printer_info(fx.f, i, &info);
+        struct tdrv *t = tdrv_named(info.cfg->name);
+        if (info.state == PRINTER_PRINTING && info.job_id && t && t->base.status.state == DRV_IDLE)
+            return false;
+    }
+    return true;
+}
+
 /* Turn the loop until job id is in state want (or WAIT_LIMIT_MS pass). */
 static bool
 wait_job(int64_t id, enum job_state want)
 {
     for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end;) {
-        if (state_of(id) == want)
+        if (state_of(id) == want && drivers_started())
             return true;
         loop_run_once(fx.l, 10);
     }
@@ -386,7 +402,7 @@ static bool
 wait_printer(size_t i, enum printer_state want)
 {
     for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end;) {
-        if (pstate(i) == want)
+        if (pstate(i) == want && drivers_started())
             return true;
         loop_run_once(fx.l, 10);
     }
@@ -1268,7 +1284,7 @@ T_CASE(farm_mixed_profiles_print_each_file_inside_its_printers_bed)
     T_TRUE(wait_printer(0, PRINTER_IDLE) && wait_printer(1, PRINTER_IDLE));
     int64_t j1 = add_plate(), j2 = add_plate();
     T_TRUE(wait_job(j1, JOB_PRINTING));
-    for (int i = 0; i < 3000 && state_of(j2) != JOB_PRINTING; i++)
+    for (int i = 0; i < 3000 && !(state_of(j2) == JOB_PRINTING && drivers_started()); i++)
         loop_run_once(fx.l, 10);
     T_EQ_INT(state_of(j2), JOB_PRINTING);
     T_EQ_INT(tdrv_named("big")->starts, 1);
@@ -1304,7 +1320,7 @@ T_CASE(farm_job_waiting_for_a_busy_printer_is_resliced_for_an_idle_one)
     /* small comes up */
     struct tdrv *small = tdrv_named("small");
     report(small, DRV_IDLE, DRV_EV_STATE);
-    for (int i = 0; i < 3000 && state_of(j2) != JOB_PRINTING; i++)
+    for (int i = 0; i < 3000 && !(state_of(j2) == JOB_PRINTING && drivers_started()); i++)
         loop_run_once(fx.l, 10);
     T_EQ_INT(state_of(j2), JOB_PRINTING);
     T_EQ_INT(small->starts, 1);
@@ -1492,5 +1508,66 @@ T_CASE(farm_heaters_off_after_hold_heat_min)
     T_EQ_STR(t_sent, "M104 S0\nM140 S0\n");
     T_TRUE(message_has(0, "heaters off (were 210/60 C)"));
     t_console = false;
+    teardown();
+}
+
+/* farm_gcode_check's answer: how many came. */
+static int gchecks_done;
+
+static void
+on_gcheck(void *ud, int rc, const struct farm_gcode *g, const char *msg)
+{
+    (void)ud, (void)rc, (void)g, (void)msg;
+    gchecks_done++;
+}
+
+/*
+ * A start is committed, then its file judged on the io thread before the
+ * driver has it.  A cancel in between cancels the job without the driver
+ * (which has nothing to cancel: it answered "no job to cancel", 409, under
+ * load in farmd_mr_history), the printer is idle again, and the judged
+ * start that comes later sends nothing.  The io thread is held by an
+ * upload check reading a FIFO until the test writes it.
+ */
+T_CASE(farm_cancel_while_the_start_is_judged)
+{
+    struct sf_err err;
+    T_OK(setup("judged", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    char fifo[600];
+    snprintf(fifo, sizeof(fifo), "%s/judged/hold.gcode", t_tmpdir());
+    T_EQ_INT(mkfifo(fifo, 0600), 0);
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "hold.gcode");
+    gchecks_done = 0;
+    T_OK(farm_gcode_check(fx.f, fifo, &o, on_gcheck, NULL, &err), &err);
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && state_of(id) != JOB_PRINTING;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(state_of(id), JOB_PRINTING);
+    struct tdrv *a = tdrv_named("a");
+    T_EQ_INT(a->starts, 0);
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CANCEL, &err), &err);
+    T_EQ_INT(state_of(id), JOB_CANCELLED);
+    T_EQ_INT(pstate(0), PRINTER_IDLE);
+    /* release the io thread (its later reads find a plain file there); a
+       second check, queued after the start's, says that one ran */
+    int w = open(fifo, O_WRONLY);
+    T_TRUE(w >= 0 && unlink(fifo) == 0);
+    FILE *plain = fopen(fifo, "w");
+    T_TRUE(plain && fputs("G28\n", plain) >= 0 && fclose(plain) == 0);
+    T_TRUE(write(w, "G28\n", 4) == 4);
+    close(w);
+    T_OK(farm_gcode_check(fx.f, fifo, &o, on_gcheck, NULL, &err), &err);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && gchecks_done < 2;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(gchecks_done, 2);
+    T_EQ_INT(a->starts, 0);
+    T_EQ_INT(pstate(0), PRINTER_IDLE);
+    /* the printer takes the next job */
+    int64_t next = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(next, JOB_PRINTING));
+    T_EQ_INT(a->starts, 1);
     teardown();
 }

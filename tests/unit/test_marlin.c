@@ -1528,3 +1528,72 @@ T_CASE(marlin_ep_hazard_model)
     T_TRUE(linewin_ep_safe_form(5, "G1 X2", out, sizeof(out)));
     T_EQ_STR(out, "G1 X2");
 }
+
+/*
+ * Issue 29: a stream that stops moving fails.  A firmware stuck in a
+ * command that never ends answers only "echo:busy: processing" every 2 s:
+ * each keepalive passed for progress, and the job waited for ever (2 h of
+ * simulated time, 3566 unanswered probes, no error).  It fails once no job
+ * line has been confirmed for the stall bound (30 min), saying what came.
+ */
+T_CASE(marlin_stuck_firmware_fails_after_the_stall_bound)
+{
+    sim_time = true;
+    for (int adv = 0; adv <= 1; adv++) {
+        struct run r = { 0 };
+        struct sim_marlin_config sc;
+        sim_config(&sc, adv, false, "stuck=300");
+        if (!setup(&r, &sc, 0))
+            break;
+        write_job(&r, 600, NULL);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        int64_t t0 = loop_now_ms(r.loop);
+        T_TRUE(until(&r, job_over, 2 * 3600 * 1000));
+        int64_t took = loop_now_ms(r.loop) - t0;
+        T_EQ_INT(r.failed, 1);
+        T_TRUE(took >= 30 * 60 * 1000 && took < 35 * 60 * 1000);
+        T_TRUE(r.drv->status.lines_acked < 300);
+        T_TRUE(strstr(r.drv->status.message, "no line confirmed for 30 min") != NULL);
+        T_TRUE(strstr(r.drv->status.message, "'echo:busy: processing'") != NULL);
+        teardown(&r);
+    }
+    sim_time = false;
+}
+
+/* over_or_late: the job is over, or the clock is past this. */
+static int64_t wait_until_ms;
+
+static bool
+over_or_late(struct run *r)
+{
+    return job_over(r) || loop_now_ms(r->loop) >= wait_until_ms;
+}
+
+/*
+ * ... but a printer waiting for a person ("busy: paused for user": an
+ * attended printer's M600) waits as long as it takes: after 40 min the
+ * job still prints, and a cancel (its M108 ends the wait) ends it.
+ */
+T_CASE(marlin_wait_for_a_person_is_no_stall)
+{
+    sim_time = true;
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_config(&sc, true, false, NULL);
+    if (!setup(&r, &sc, 0)) {
+        sim_time = false;
+        return;
+    }
+    write_job(&r, 600, "M600");
+    T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+    wait_until_ms = loop_now_ms(r.loop) + 40 * 60 * 1000;
+    until(&r, over_or_late, 2 * 3600 * 1000);
+    T_EQ_INT(r.failed, 0);
+    T_EQ_INT(r.drv->status.state, DRV_PRINTING);
+    struct sf_err err;
+    T_OK(r.drv->ops->cancel(r.drv, &err), &err);
+    T_TRUE(until(&r, job_over, 3600 * 1000));
+    T_EQ_INT(r.cancelled, 1);
+    teardown(&r);
+    sim_time = false;
+}
