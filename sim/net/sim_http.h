@@ -159,4 +159,19 @@ void sim_http_reply_empty(struct sim_http_req *r, unsigned status);
 /* Reply status with {"error": text} (OctoPrint's and fdm-monster's error shape). */
 void sim_http_reply_error(struct sim_http_req *r, unsigned status, const char *text);
 
+/*
+ * A protocol upgrade (sim_ws.c's websockets): reply 101 Switching Protocols
+ * with the headers added, and once it is sent call fn with the socket (in
+ * non-blocking mode; never close() it: sim_http_upgraded_close), the bytes
+ * that came after the request, and ud and tag as given here.  If the
+ * connection dies before, fn is never called.  Whoever gets the socket
+ * must close it before sim_http_free.
+ */
+struct sim_http_upgraded;
+typedef void (*sim_http_upgrade_fn)(struct sim_http_upgraded *u, int fd, const char *extra,
+                                    size_t n_extra, void *ud, int tag);
+void sim_http_reply_upgrade(struct sim_http_req *r, sim_http_upgrade_fn fn, void *ud, int tag);
+/* Close an upgraded connection's socket. */
+void sim_http_upgraded_close(struct sim_http_upgraded *u);
+
 #endif

@@ -63,6 +63,7 @@ sim_netbase_release(struct sim_netbase *b)
 {
     if (b->watch)
         loop_timer_cancel(b->l, b->watch);
+    sim_ws_hub_free(b->hub); /* its sockets came through the server: before it */
     sim_http_free(b->http);
     sim_netprinter_free(b->np);
     memset(b, 0, sizeof(*b));
