@@ -64,8 +64,10 @@ str_arg(json_t *params, const char *name, bool required, struct rpc_err *e)
         return json_string_value(v);
     if (required || v) {
         char m[128];
-        snprintf(m, sizeof(m), v ? "Unable to convert argument [%s] to str" : "No data for "
-                                                                              "argument: %s",
+        snprintf(m, sizeof(m),
+                 v ? "Unable to convert argument [%s] to str"
+                   : "No data for "
+                     "argument: %s",
                  name);
         rpc_fail(e, 400, m);
     }
@@ -75,8 +77,8 @@ str_arg(json_t *params, const char *name, bool required, struct rpc_err *e)
 static json_t *
 m_identify(struct mr_conn *c, json_t *params, struct rpc_err *e)
 {
-    static const char *const types[] = { "web", "mobile", "desktop", "display", "bot", "agent",
-                                         "other" };
+    static const char *const types[] = { "web", "mobile", "desktop", "display",
+                                         "bot", "agent",  "other" };
     if (c->identified)
         return rpc_fail(e, 400, "Connection already identified");
     const char *fields[] = { "client_name", "version", "type", "url" };
@@ -309,7 +311,8 @@ sim_moonraker_on_websocket(struct sim_http_req *r, void *ud)
 {
     struct sim_moonraker *s = ud;
     const char *key = sim_http_header(r, "X-Api-Key");
-    bool authed = !s->cfg.api_key || !s->cfg.api_key[0] || (key && strcmp(key, s->cfg.api_key) == 0);
+    bool authed =
+        !s->cfg.api_key || !s->cfg.api_key[0] || (key && strcmp(key, s->cfg.api_key) == 0);
     sim_ws_accept(r, s->b.hub, authed);
 }
 

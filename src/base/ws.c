@@ -191,8 +191,8 @@ ws_parser_next(struct ws_parser *p, struct ws_msg *m, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL, "websocket: the stream failed before");
     for (;;) {
         const uint8_t *b = (const uint8_t *)p->in.data;
-        size_t hdr;
-        uint64_t len;
+        size_t hdr = 0;
+        uint64_t len = 0;
         int rc = header(p, b, p->in.len, &hdr, &len, err);
         if (rc <= 0)
             return rc;
@@ -300,8 +300,10 @@ int
 ws_accept(const char *key, char out[WS_ACCEPT_LEN + 1], struct sf_err *err)
 {
     if (!ws_key_valid(key))
-        return sf_err_set(err, SF_EINVAL, "websocket: Sec-WebSocket-Key '%.40s' is not base64 of "
-                                          "16 bytes", key ? key : "");
+        return sf_err_set(err, SF_EINVAL,
+                          "websocket: Sec-WebSocket-Key '%.40s' is not base64 of "
+                          "16 bytes",
+                          key ? key : "");
     char text[24 + sizeof(ws_guid)];
     memcpy(text, key, 24);
     memcpy(text + 24, ws_guid, sizeof(ws_guid));

@@ -29,6 +29,8 @@ Push sockets (tests/replay/wsclient.py) take lines beginning with WS:
   WS SEND TEXT              send one text message ({NAME} substituted)
   WS NEXT [SECONDS] CHECK...  the very next message (JSON) must pass the checks
   WS RECV [SECONDS] CHECK...  skip messages until one passes them
+  WS ONLY [SECONDS] SKIP -- CHECK...  skip messages that pass the check SKIP;
+                            the first other one must pass the CHECKs
   WS CLOSED [SECONDS]       the server closes the socket
   WS CLOSE                  close it
 
@@ -178,6 +180,9 @@ def ws_line(base, key, toks):
     secs = 30.0
     if rest and re.match(r"^\d+(\.\d+)?$", rest[0]):
         secs, rest = float(rest[0]), rest[1:]
+    skip = None
+    if verb == "ONLY":
+        skip, rest = rest[0], rest[rest.index("--") + 1:]
     end = time.monotonic() + secs
     last, why = "", "nothing arrived"
     while True:
@@ -195,10 +200,12 @@ def ws_line(base, key, toks):
             body = json.loads(text)
         except ValueError:
             return "message is not JSON: %r" % text[:200], text
+        if skip and check(body, skip) is None:
+            continue
         why = None
         for c in rest:
             why = why or check(body, c)
-        if why is None or verb == "NEXT":
+        if why is None or verb in ("NEXT", "ONLY"):
             return why, text
 
 

@@ -120,6 +120,8 @@ class Ws:
             text = payload.decode("utf-8")
             if not self.sockjs:
                 return text
+            if not self.opened and text != "o":
+                raise WsError("SockJS frame %r before the open frame" % text[:80])
             if text == "o":
                 self.opened = True
             elif text == "h":

@@ -53,12 +53,12 @@ T_CASE(ws_accept_matches_rfc6455)
 T_CASE(ws_parses_rfc_examples_whole_and_bytewise)
 {
     static const unsigned char frames[] = {
-        0x81, 0x05, 'H', 'e', 'l', 'l', 'o',                   /* unmasked text */
-        0x01, 0x03, 'H', 'e', 'l',                             /* fragmented ... */
-        0x89, 0x05, 'H', 'e', 'l', 'l', 'o',                   /* ... a ping between ... */
-        0x80, 0x02, 'l', 'o',                                  /* ... its end */
-        0x8a, 0x00,                                            /* an empty pong */
-        0x88, 0x05, 0x03, 0xe8, 'b', 'y', 'e',                 /* close 1000 "bye" */
+        0x81, 0x05, 'H',  'e',  'l', 'l', 'o', /* unmasked text */
+        0x01, 0x03, 'H',  'e',  'l',           /* fragmented ... */
+        0x89, 0x05, 'H',  'e',  'l', 'l', 'o', /* ... a ping between ... */
+        0x80, 0x02, 'l',  'o',                 /* ... its end */
+        0x8a, 0x00,                            /* an empty pong */
+        0x88, 0x05, 0x03, 0xe8, 'b', 'y', 'e', /* close 1000 "bye" */
     };
     char got[512];
     uint16_t code = 0;
@@ -86,7 +86,11 @@ T_CASE(ws_frames_round_trip_at_every_length_form)
             struct buf out;
             buf_init(&out, 0);
             T_OK(ws_frame(&out, WS_TEXT, payload, lens[k], m ? mask : NULL), NULL);
-            T_EQ_INT(out.len, lens[k] + (lens[k] < 126 ? 2 : lens[k] < 65536 ? 4 : 10) + (m ? 4 : 0));
+            T_EQ_INT(out.len, lens[k] +
+                                  (lens[k] < 126     ? 2
+                                   : lens[k] < 65536 ? 4
+                                                     : 10) +
+                                  (m ? 4 : 0));
             struct ws_parser p;
             ws_parser_init(&p, m, 70000);
             struct ws_msg msg;
@@ -127,7 +131,11 @@ T_CASE(ws_refuses_protocol_errors_with_their_codes)
         { "fragmented ping", false, "\x09\x00", 2, WS_CLOSE_PROTOCOL },
         { "126-byte ping", false, "\x89\x7e\x00\x7e", 4, WS_CLOSE_PROTOCOL },
         { "stray continuation", false, "\x80\x00", 2, WS_CLOSE_PROTOCOL },
-        { "text inside a fragmented text", false, "\x01\x01" "a\x81\x01" "b", 6, WS_CLOSE_PROTOCOL },
+        { "text inside a fragmented text", false,
+          "\x01\x01"
+          "a\x81\x01"
+          "b",
+          6, WS_CLOSE_PROTOCOL },
         { "close of one byte", false, "\x88\x01\x03", 3, WS_CLOSE_PROTOCOL },
         { "close code 1005", false, "\x88\x02\x03\xed", 4, WS_CLOSE_PROTOCOL },
         { "close code 999", false, "\x88\x02\x03\xe7", 4, WS_CLOSE_PROTOCOL },
@@ -162,8 +170,8 @@ T_CASE(ws_refuses_protocol_errors_with_their_codes)
 T_CASE(ws_joins_fragments_and_keeps_binary)
 {
     /* "a\u00a9" cut inside its second character, then two binary bytes */
-    static const unsigned char s[] = { 0x01, 0x02, 'a', 0xc2, 0x80, 0x01, 0xa9,
-                                       0x82, 0x02, 0xff, 0x00 };
+    static const unsigned char s[] = { 0x01, 0x02, 'a',  0xc2, 0x80, 0x01,
+                                       0xa9, 0x82, 0x02, 0xff, 0x00 };
     struct ws_parser p;
     ws_parser_init(&p, false, 100);
     struct ws_msg m;
