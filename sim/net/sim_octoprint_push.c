@@ -42,13 +42,13 @@ enum { RAW = 0, FRAMED = 1 }; /* the transports (sim_ws_accept's tag) */
 
 struct op_conn {
     struct octo_sim *o;
-    bool framed;      /* SockJS framing */
-    bool authed;      /* a valid auth came (or no key is set) */
-    bool state_sub;   /* current and history wanted */
-    json_t *events;   /* event names wanted; NULL: all; an empty array: none */
-    int throttle;     /* current every CURRENT_MS times this */
-    int64_t next_ms;  /* loop time of the next current */
-    int64_t beat_ms;  /* ... and of the next heartbeat */
+    bool framed;     /* SockJS framing */
+    bool authed;     /* a valid auth came (or no key is set) */
+    bool state_sub;  /* current and history wanted */
+    json_t *events;  /* event names wanted; NULL: all; an empty array: none */
+    int throttle;    /* current every CURRENT_MS times this */
+    int64_t next_ms; /* loop time of the next current */
+    int64_t beat_ms; /* ... and of the next heartbeat */
 };
 
 /* Send one message {type: payload} (payload stolen), framed as the transport wants. */
@@ -96,7 +96,7 @@ state_payload(struct octo_sim *o, const struct sim_np_status *st)
     json_t *text = json_object_get(p, "state");
     json_t *state = json_pack("{s:O,s:o}", "text", text, "flags", sim_octoprint_flags(o, st));
     json_t *err = json_object_get(p, "error");
-    json_object_set(state, "error", err ? err : json_string(""));
+    json_object_set_new(state, "error", err ? json_incref(err) : json_string(""));
     json_object_set_new(p, "state", state);
     json_object_del(p, "error");
     double now = server_time();
@@ -145,8 +145,7 @@ on_open(struct sim_ws *ws, int tag, void *ud)
     c->beat_ms = loop_now_ms(o->l) + SOCKJS_HEARTBEAT_MS;
     if (c->framed)
         sim_ws_send(ws, "o", 1);
-    emit(ws, c,
-         "connected",
+    emit(ws, c, "connected",
          json_pack("{s:s,s:s,s:s,s:s,s:s,s:s,s:b,s:n,s:b,s:[{s:s,s:s},{s:s,s:s}]}", "version",
                    "1.10.0", "display_version", "1.10.0", "branch", "", "python_version", "3.11.2",
                    "plugin_hash", "5e6d8c2a4b1f0d3e9a7c6b5d4e3f2a1b", "config_hash",
@@ -193,7 +192,7 @@ on_subscribe(struct sim_ws *ws, struct op_conn *c, json_t *sub)
     bool was = c->state_sub;
     c->state_sub = json_is_true(state) || json_is_object(state);
     json_decref(c->events);
-    c->events = json_is_array(events) ? json_deep_copy(events)
+    c->events = json_is_array(events)  ? json_deep_copy(events)
                 : json_is_true(events) ? NULL
                                        : json_array();
     if (c->state_sub && !was && c->authed)
@@ -340,8 +339,7 @@ push_one(struct sim_ws *ws, void *conn, void *arg)
     if (!c->authed)
         return;
     if (p->event && wants_event(c, p->event))
-        emit(ws, c, "event",
-             json_pack("{s:s,s:O}", "type", p->event, "payload", p->payload));
+        emit(ws, c, "event", json_pack("{s:s,s:O}", "type", p->event, "payload", p->payload));
     if (p->current && c->state_sub && p->now >= c->next_ms) {
         emit(ws, c, "current", state_payload(c->o, p->st));
         c->next_ms = p->now + CURRENT_MS * c->throttle;
@@ -364,9 +362,9 @@ fire(struct octo_sim *o, const char *name, json_t *payload, struct push *p)
 static json_t *
 job_payload(const struct octo_sim *o, const char *more, double time_s)
 {
-    json_t *j = json_pack("{s:s,s:s,s:s,s:I,s:s}", "name", o->push_file, "path", o->push_file,
-                          "origin", "local", "size", (json_int_t)o->push_size, "owner",
-                          SIM_OCTO_USER);
+    json_t *j =
+        json_pack("{s:s,s:s,s:s,s:I,s:s}", "name", o->push_file, "path", o->push_file, "origin",
+                  "local", "size", (json_int_t)o->push_size, "owner", SIM_OCTO_USER);
     if (strchr(more, 'u'))
         json_object_set_new(j, "user", json_string(SIM_OCTO_USER));
     if (strchr(more, 't'))
@@ -378,9 +376,12 @@ static const char *
 state_id(const char *text)
 {
     static const char *const ids[][2] = {
-        { "Operational", "OPERATIONAL" }, { "Printing", "PRINTING" },
-        { "Pausing", "PAUSING" },         { "Paused", "PAUSED" },
-        { "Cancelling", "CANCELLING" },   { "Finishing", "FINISHING" },
+        { "Operational", "OPERATIONAL" },
+        { "Printing", "PRINTING" },
+        { "Pausing", "PAUSING" },
+        { "Paused", "PAUSED" },
+        { "Cancelling", "CANCELLING" },
+        { "Finishing", "FINISHING" },
         { "Error", "ERROR" },
     };
     for (size_t i = 0; i < sizeof(ids) / sizeof(ids[0]); i++)

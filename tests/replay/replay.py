@@ -31,7 +31,8 @@ Push sockets (tests/replay/wsclient.py) take lines beginning with WS:
   WS RECV [SECONDS] CHECK...  skip messages until one passes them
   WS ONLY [SECONDS] SKIP -- CHECK...  skip messages that pass the check SKIP;
                             the first other one must pass the CHECKs
-  WS CLOSED [SECONDS]       the server closes the socket
+  WS FRAME HEX              send these bytes as they are (a broken frame)
+  WS CLOSED [SECONDS] [code=N]  the server closes the socket (with close code N)
   WS CLOSE                  close it
 
 SECONDS defaults to 30.  sockjs speaks SockJS's websocket transport ("o",
@@ -173,6 +174,9 @@ def ws_line(base, key, toks):
     if verb == "SEND":
         ws.send(rest[0])
         return None, ""
+    if verb == "FRAME":
+        ws.sock.sendall(bytes.fromhex(rest[0]))
+        return None, ""
     if verb == "CLOSE":
         ws.close()
         WS.pop("ws")
@@ -191,7 +195,12 @@ def ws_line(base, key, toks):
         except socket.timeout:
             return "%s in %.0f s (last: %s)" % (why, secs, last[:300]), last
         if text is None:
-            return (None if verb == "CLOSED" else "the server closed the socket"), last
+            code = [c for c in rest if c.startswith("code=")]
+            if verb != "CLOSED":
+                return "the server closed the socket", last
+            if code and str(getattr(ws, "close_code", None)) != code[0][5:]:
+                return "closed with code %s, not %s" % (getattr(ws, "close_code", None), code[0][5:]), last
+            return None, last
         if verb == "CLOSED":
             why, last = "still open", text
             continue

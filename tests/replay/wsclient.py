@@ -26,9 +26,10 @@ class Ws:
         self.pending = []  # messages of a SockJS frame not handed out yet
         self.opened = False  # SockJS "o" seen
         key = base64.b64encode(os.urandom(16)).decode()
-        lines = ["GET %s HTTP/1.1" % path, "Host: %s:%s" % (host, port), "Upgrade: websocket",
-                 "Connection: Upgrade", "Sec-WebSocket-Key: " + key, "Sec-WebSocket-Version: 13"]
-        lines += ["%s: %s" % kv for kv in (headers or {}).items()]
+        hdrs = {"Host": "%s:%s" % (host, port), "Upgrade": "websocket", "Connection": "Upgrade",
+                "Sec-WebSocket-Key": key, "Sec-WebSocket-Version": "13"}
+        hdrs.update(headers or {})
+        lines = ["GET %s HTTP/1.1" % path] + ["%s: %s" % kv for kv in hdrs.items()]
         self.sock.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
         self.buf = b""
         while b"\r\n\r\n" not in self.buf:
