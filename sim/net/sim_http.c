@@ -752,6 +752,15 @@ sim_http_outage_watch(struct sim_http *h, bool running, uint64_t lines_done)
     }
 }
 
+bool
+sim_http_refusing(const struct sim_http *h)
+{
+    const struct sim_http_faults *f = &h->cfg.faults;
+    long k = h->n_requests;
+    return h->down ||
+           (f->err5xx_count && k > f->err5xx_after && k < f->err5xx_after + f->err5xx_count);
+}
+
 int
 sim_http_port(const struct sim_http *h)
 {

@@ -129,6 +129,12 @@ uint64_t sim_http_served(const struct sim_http *h);
  * without the fault.
  */
 void sim_http_outage_watch(struct sim_http *h, bool running, uint64_t lines_done);
+/*
+ * Whether the server is in a simulated failure: an outage, or a 5xx burst
+ * begun and not yet spent.  A face closes its push sockets then (a server
+ * in trouble loses them too), so clients see the failure as pollers do.
+ */
+bool sim_http_refusing(const struct sim_http *h);
 
 /* ---- inside a handler ---- */
 

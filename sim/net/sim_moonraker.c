@@ -23,6 +23,7 @@
 #include <time.h>
 
 #include "../../src/base/mem.h"
+#include "../../src/base/ws.h"
 #include "sim_moonraker_int.h"
 #include "sim_netbase.h"
 #include "sim_netcli.h"
@@ -248,6 +249,7 @@ on_query(struct sim_http_req *r, void *ud)
         sim_moonraker_error(r, 503, "Klippy Host not connected");
         return;
     }
+    s->n_queries++;
     struct sim_np_status st;
     sim_netprinter_status(s->b.np, &st);
     json_t *b = NULL, *want = NULL;
@@ -822,6 +824,18 @@ void
 sim_moonraker_status(const struct sim_moonraker *s, struct sim_np_status *out)
 {
     sim_netbase_status(&s->b, out);
+}
+
+uint64_t
+sim_moonraker_queries(const struct sim_moonraker *s)
+{
+    return s->n_queries;
+}
+
+void
+sim_moonraker_drop_sockets(struct sim_moonraker *s)
+{
+    sim_ws_hub_close_all(s->b.hub, WS_CLOSE_AWAY, "dropped");
 }
 
 void

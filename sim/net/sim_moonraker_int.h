@@ -64,6 +64,7 @@ struct sim_moonraker {
     int ws_ids;            /* websocket connection ids handed out */
     enum klippy ws_klippy; /* Klippy's state the sockets were last told */
     int64_t next_push_ms;  /* loop time of the next notify_status_update round */
+    uint64_t n_queries;    /* /printer/objects/query answered over HTTP */
 };
 
 /* Reply 200 with {"result": result} (stolen; NULL: null). */

@@ -29,6 +29,7 @@
 #include <strings.h>
 
 #include "../../src/base/mem.h"
+#include "../../src/base/ws.h"
 #include "sim_moonraker_int.h"
 #include "sim_ws.h"
 
@@ -316,6 +317,23 @@ sim_moonraker_on_websocket(struct sim_http_req *r, void *ud)
     sim_ws_accept(r, s->b.hub, authed);
 }
 
+static void
+count_sub(struct sim_ws *ws, void *conn, void *arg)
+{
+    (void)ws;
+    struct mr_conn *c = conn;
+    if (c && c->sub)
+        ++*(int *)arg;
+}
+
+int
+sim_moonraker_subscribed(struct sim_moonraker *s)
+{
+    int n = 0;
+    sim_ws_hub_each(s->b.hub, count_sub, &n);
+    return n;
+}
+
 /* The fields of cur that differ from last (updating last), NULL if none. */
 static json_t *
 changed(json_t *cur, json_t *last)
@@ -379,6 +397,10 @@ sim_moonraker_ws_watch(struct sim_moonraker *s, const struct sim_np_status *st)
 {
     if (!s->b.hub || !sim_ws_hub_count(s->b.hub)) {
         s->ws_klippy = s->klippy;
+        return;
+    }
+    if (sim_http_refusing(s->b.http)) { /* a simulated 5xx burst or outage: sockets die too */
+        sim_ws_hub_close_all(s->b.hub, WS_CLOSE_AWAY, "simulated failure");
         return;
     }
     struct push p = { st, NULL, false };

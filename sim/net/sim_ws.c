@@ -337,6 +337,13 @@ sim_ws_hub_each(struct sim_ws_hub *hub, void (*fn)(struct sim_ws *ws, void *conn
             fn(ws, ws->conn, arg);
 }
 
+void
+sim_ws_hub_close_all(struct sim_ws_hub *hub, uint16_t code, const char *reason)
+{
+    for (struct sim_ws *ws = hub->conns; ws; ws = ws->next)
+        sim_ws_close(ws, code, reason);
+}
+
 uint64_t
 sim_ws_hub_sent(const struct sim_ws_hub *hub)
 {

@@ -54,6 +54,8 @@ size_t sim_ws_hub_count(const struct sim_ws_hub *hub);
 /* Call fn on each open (not closing) connection with its state. */
 void sim_ws_hub_each(struct sim_ws_hub *hub, void (*fn)(struct sim_ws *ws, void *conn, void *arg),
                      void *arg);
+/* Close every open connection with code and reason (they go on a later turn). */
+void sim_ws_hub_close_all(struct sim_ws_hub *hub, uint16_t code, const char *reason);
 /* Messages sent to clients so far (all connections; the push rate in stats). */
 uint64_t sim_ws_hub_sent(const struct sim_ws_hub *hub);
 
