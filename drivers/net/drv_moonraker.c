@@ -18,6 +18,7 @@
 
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
+#include "drv_moonraker_int.h"
 #include "netdrv.h"
 
 /* ---- JSON helpers: field access that names what is wrong ---- */
@@ -322,56 +323,10 @@ drv_moonraker_observe(const struct moonraker_status *st, const char *job_name, i
             o->remote = map[i].r;
 }
 
-/* ---- the driver ---- */
+/* ---- the driver (its state and how it talks: drv_moonraker_int.h) ---- */
 
-/*
- * How it talks: netdrv.h's core (one request at a time, polls on a timer
- * that actions pre-empt, a short outage ridden out with a job on the
- * printer, a longer one offline with the job left to attach()), over
- * Moonraker: GET /server/info until Klippy is ready (every 2 s while it
- * starts, as the docs ask), then GET /printer/objects/query every
- * MR_POLL_MS (the rate Moonraker's docs give simple polling clients: "1
- * to 2 seconds"); the upload is POST /server/files/upload with print=true
- * (multipart, the file streamed from disk), /printer/print/start by name
- * if the printer stored it without starting; pause, resume and cancel are
- * POST /printer/print/...; manual commands POST /printer/gcode/script.
- * Polling rather than the websocket subscription: one GET a second per
- * printer is what Moonraker recommends for simple clients, it needs no
- * websocket client in C, and a missed update is simply the next poll (a
- * subscription's missed delta is a wrong state until the next full
- * snapshot).
- */
-#define MR_POLL_MS    1000 /* drv_config.poll_ms 0 */
-#define MR_STARTUP_MS 2000 /* docs: ask /server/info again after 2 s while Klippy starts */
-#define MR_SCRIPT_MAX 4096 /* manual commands waiting to be sent */
-
-enum { RQ_START = NETDRV_RQ_OWN, RQ_GCODE, RQ_META, RQ_HISTORY, RQ_ESTOP };
 static const char *const own_names[] = { "print start", "gcode script", "file metadata", "history",
                                          "emergency stop" };
-
-/* attach()'s look-up, in Moonraker's job history, of a job print_stats no longer shows */
-enum hist_state { H_NONE, H_ASKING, H_ANSWERED };
-
-struct moonraker {
-    struct netdrv n;
-    const char *json_hdrs[3];     /* the key (if any), Content-Type: application/json, NULL */
-    const char *hdrs[2];          /* the key (if any), NULL */
-    bool ready;                   /* Klippy answered /server/info: poll the objects */
-    struct moonraker_status last; /* the last poll's answer (attach reads it) */
-    char script[MR_SCRIPT_MAX];   /* manual commands waiting, '\n'-separated */
-    size_t script_len;
-    bool want_estop; /* an emergency stop waits for the slot (before all else) */
-    /* the job file's metadata (its slicer's time estimate; its upload time) */
-    char meta_name[160]; /* the file asked about ("" none) */
-    bool meta_known;     /* answered (meta_found: the printer has the file) */
-    bool meta_found;
-    bool want_meta;             /* ask when the slot frees */
-    struct moonraker_meta meta; /* the answer */
-    enum hist_state hist_state; /* the history look-up of hist_name */
-    char hist_name[160];
-    struct moonraker_hist hist; /* its answer (H_ANSWERED) */
-    char hist_why[200];         /* why the look-up could not tell, "" if it could */
-};
 
 static struct moonraker *
 MR(struct netdrv *n)
@@ -471,27 +426,23 @@ mr_poll(struct netdrv *n)
     struct moonraker *m = MR(n);
     if (!m->ready)
         return send_req(m, NETDRV_RQ_INFO, "GET", "/server/info", NULL);
+    if (m->ws_live && !n->poll_now) { /* the socket's updates stand in for the polls */
+        drv_moonraker_ws_apply(m);
+        return true;
+    }
     return send_req(m, NETDRV_RQ_POLL, "GET",
                     "/printer/objects/query?webhooks&print_stats&virtual_sdcard"
                     "&extruder&heater_bed&display_status",
                     NULL);
 }
 
-static void
-on_poll(struct moonraker *m, const struct httpc_result *res)
+void
+drv_moonraker_seen(struct moonraker *m, const struct moonraker_status *stp, bool pushed)
 {
     struct netdrv *n = &m->n;
-    char why[200];
-    if (netdrv_judge(n, NETDRV_RQ_POLL, res, why, sizeof(why)) != NETDRV_OK) {
-        netdrv_contact_lost(n, why);
-        return;
-    }
-    struct moonraker_status st;
-    struct sf_err err;
-    if (drv_moonraker_parse_status(res->body, res->body_len, &st, &err)) {
-        netdrv_contact_lost(n, err.msg);
-        return;
-    }
+    struct moonraker_status st = *stp;
+    if (!pushed)
+        m->ws_dirty = false; /* a poll's answer is as new as anything the socket said before it */
     n->fails = 0;
     m->last = st;
     n->have_last = true;
@@ -511,10 +462,30 @@ on_poll(struct moonraker *m, const struct httpc_result *res)
     /* Klippy restarting: /server/info tells when it is back (docs: every 2 s) */
     if (ob.remote == NETJOB_R_STARTING) {
         m->ready = false;
+        drv_moonraker_ws_close(m, NULL);
         netdrv_schedule(n, MR_STARTUP_MS);
-    } else {
+    } else if (!pushed) {
         netdrv_schedule(n, n->poll_ms);
     }
+}
+
+static void
+on_poll(struct moonraker *m, const struct httpc_result *res)
+{
+    struct netdrv *n = &m->n;
+    char why[200];
+    if (netdrv_judge(n, NETDRV_RQ_POLL, res, why, sizeof(why)) != NETDRV_OK) {
+        netdrv_contact_lost(n, why);
+        return;
+    }
+    struct moonraker_status st;
+    struct sf_err err;
+    if (drv_moonraker_parse_status(res->body, res->body_len, &st, &err)) {
+        netdrv_contact_lost(n, err.msg);
+        return;
+    }
+    drv_moonraker_seen(m, &st, false);
+    drv_moonraker_ws_open(m, res->peer_ip); /* a push socket, if there is none */
 }
 
 static void
@@ -725,13 +696,16 @@ mr_kick(struct netdrv *n)
     if (m->want_meta) {
         m->want_meta = false;
         mr_start(n, RQ_META);
+        return;
     }
+    drv_moonraker_ws_apply(m); /* what the socket said while the slot was taken */
 }
 
 static void
 mr_lost(struct netdrv *n)
 {
     struct moonraker *m = MR(n);
+    drv_moonraker_ws_close(m, NULL);
     m->ready = false;
     m->want_meta = false;
     m->meta_name[0] = '\0';
@@ -852,6 +826,13 @@ mr_estop(struct drv *d, struct sf_err *err)
 }
 
 static void
+mr_destroy(struct drv *d)
+{
+    drv_moonraker_ws_close((struct moonraker *)d, NULL);
+    netdrv_destroy(d);
+}
+
+static void
 mr_close(struct drv *d)
 {
     ((struct moonraker *)d)->script_len = 0;
@@ -870,7 +851,7 @@ static const struct drv_ops moonraker_ops = {
     .command = mr_command,
     .close = mr_close,
     .estop = mr_estop,
-    .destroy = netdrv_destroy,
+    .destroy = mr_destroy,
     .attach = mr_attach,
 };
 

@@ -464,6 +464,8 @@ report(struct httpc_req *r)
     res.body = r->resp.data ? r->resp.data : "";
     res.body_len = r->resp.len;
     res.headers = r->hdr.data ? r->hdr.data : "";
+    char *ip = NULL;
+    res.peer_ip = curl_easy_getinfo(r->easy, CURLINFO_PRIMARY_IP, &ip) == CURLE_OK && ip ? ip : "";
     const char *detail = r->errbuf[0] ? r->errbuf : curl_easy_strerror(r->result);
     res.detail = r->result == CURLE_OK ? "" : detail;
     res.tls_peer = r->result == CURLE_PEER_FAILED_VERIFICATION;

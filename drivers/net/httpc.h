@@ -64,6 +64,8 @@ struct httpc_result {
     const char *body;    /* response body, NUL-terminated (not counted in body_len); never NULL */
     size_t body_len;     /* its bytes */
     const char *headers; /* the final response's header block, "Name: value\r\n" lines */
+    const char *peer_ip; /* the address it reached (libcurl's primary IP), "" if none: a
+                            socket of the caller's own goes there without resolving again */
     struct sf_err err;   /* code != SF_OK: what happened, naming the URL */
     const char *detail;  /* code != SF_OK: libcurl's own words, without the URL ("" if none) */
     bool tls_peer;       /* SF_EIO because the server's certificate failed verification (its

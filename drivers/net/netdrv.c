@@ -132,7 +132,10 @@ on_timer(struct loop *l, void *ud)
     n->timer = 0;
     if (!n->open)
         return;
-    if (n->req || !n->nops->poll(n)) /* an action holds the slot: poll after it */
+    bool ok = !n->req && n->nops->poll(n);
+    if (!n->timer) /* (poll may have set the next one, and poll_now with it) */
+        n->poll_now = false;
+    if (!ok) /* an action holds the slot: poll after it */
         netdrv_schedule(n, n->poll_ms);
 }
 
@@ -144,6 +147,7 @@ netdrv_schedule(struct netdrv *n, int64_t ms)
     if (n->timer)
         loop_timer_cancel(n->base.loop, n->timer);
     n->timer = loop_timer_add(n->base.loop, ms, on_timer, n);
+    n->poll_now = ms == 0;
 }
 
 /* Stop talking: no request, no timer (the job, if any, is kept). */

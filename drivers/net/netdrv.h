@@ -112,6 +112,8 @@ struct netdrv {
     struct httpc_req *req; /* the request in flight, or NULL */
     int rq;                /* its kind (enum netdrv_rq or the driver's) */
     uint64_t timer;        /* the next poll, 0 if none */
+    bool poll_now;         /* ... asked "at once" (netdrv_schedule 0: after an action), not the
+                              period's (a driver with a push socket polls only then) */
     int fails;             /* contacts failed in a row */
     int poll_ms;           /* the poll period */
     struct netjob job;     /* the job on the printer */

@@ -83,6 +83,9 @@ struct sim_http_req {
     bool resumed;   /* the timer fired: queue resp now */
     uint64_t slow_timer;
     struct sim_http_req *slow_next; /* in h->slow */
+    sim_http_upgrade_fn up_fn;      /* sim_http_reply_upgrade: who takes the socket */
+    void *up_ud;
+    int up_tag;
 };
 
 static void
@@ -239,6 +242,42 @@ void
 sim_http_reply_error(struct sim_http_req *r, unsigned status, const char *text)
 {
     sim_http_reply_json(r, status, json_pack("{s:s}", "error", text));
+}
+
+/* MHD sent the 101: hand the socket on (con_cls is still our request). */
+static void
+on_upgraded(void *cls, struct MHD_Connection *c, void *con_cls, const char *extra_in,
+            size_t extra_in_size, MHD_socket sock, struct MHD_UpgradeResponseHandle *urh)
+{
+    (void)cls, (void)c;
+    struct sim_http_req *r = con_cls;
+    int fl = fcntl(sock, F_GETFL);
+    if (fl >= 0)
+        fcntl(sock, F_SETFL, fl | O_NONBLOCK);
+    r->up_fn((struct sim_http_upgraded *)urh, sock, extra_in, extra_in_size, r->up_ud, r->up_tag);
+}
+
+void
+sim_http_reply_upgrade(struct sim_http_req *r, sim_http_upgrade_fn fn, void *ud, int tag)
+{
+    if (r->replied)
+        return;
+    r->replied = true;
+    r->status = MHD_HTTP_SWITCHING_PROTOCOLS;
+    r->up_fn = fn;
+    r->up_ud = ud;
+    r->up_tag = tag;
+    r->resp = MHD_create_response_for_upgrade(on_upgraded, r->h);
+    if (!r->resp)
+        return;
+    for (size_t i = 0; i < r->n_out_hdr; i++)
+        MHD_add_response_header(r->resp, r->out_hdr[i][0], r->out_hdr[i][1]);
+}
+
+void
+sim_http_upgraded_close(struct sim_http_upgraded *u)
+{
+    MHD_upgrade_action((struct MHD_UpgradeResponseHandle *)u, MHD_UPGRADE_ACTION_CLOSE);
 }
 
 static enum MHD_Result
@@ -652,11 +691,11 @@ sim_http_new(struct loop *l, const struct sim_http_config *c, struct sf_err *err
     struct sockaddr_in sa = { .sin_family = AF_INET,
                               .sin_port = htons((uint16_t)c->port),
                               .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
-    h->d = MHD_start_daemon(MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME, (uint16_t)c->port, NULL, NULL,
-                            on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, h,
-                            MHD_OPTION_SOCK_ADDR, &sa, MHD_OPTION_CONNECTION_TIMEOUT, 120u,
-                            MHD_OPTION_DIGEST_AUTH_RANDOM, sizeof(h->digest_random),
-                            h->digest_random, MHD_OPTION_NONCE_NC_SIZE, 256u, MHD_OPTION_END);
+    h->d = MHD_start_daemon(
+        MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME | MHD_ALLOW_UPGRADE, (uint16_t)c->port, NULL, NULL,
+        on_request, h, MHD_OPTION_NOTIFY_COMPLETED, on_completed, h, MHD_OPTION_SOCK_ADDR, &sa,
+        MHD_OPTION_CONNECTION_TIMEOUT, 120u, MHD_OPTION_DIGEST_AUTH_RANDOM,
+        sizeof(h->digest_random), h->digest_random, MHD_OPTION_NONCE_NC_SIZE, 256u, MHD_OPTION_END);
     if (!h->d) {
         sf_err_set(err, SF_EIO, "sim: cannot listen on 127.0.0.1:%d", c->port);
         free(h);
@@ -711,6 +750,15 @@ sim_http_outage_watch(struct sim_http *h, bool running, uint64_t lines_done)
         if (h->outage_refused >= SIM_HTTP_OUTAGE_MIN)
             h->down = false;
     }
+}
+
+bool
+sim_http_refusing(const struct sim_http *h)
+{
+    const struct sim_http_faults *f = &h->cfg.faults;
+    long k = h->n_requests;
+    return h->down ||
+           (f->err5xx_count && k > f->err5xx_after && k < f->err5xx_after + f->err5xx_count);
 }
 
 int

@@ -129,6 +129,12 @@ uint64_t sim_http_served(const struct sim_http *h);
  * without the fault.
  */
 void sim_http_outage_watch(struct sim_http *h, bool running, uint64_t lines_done);
+/*
+ * Whether the server is in a simulated failure: an outage, or a 5xx burst
+ * begun and not yet spent.  A face closes its push sockets then (a server
+ * in trouble loses them too), so clients see the failure as pollers do.
+ */
+bool sim_http_refusing(const struct sim_http *h);
 
 /* ---- inside a handler ---- */
 
@@ -158,5 +164,20 @@ void sim_http_reply_json(struct sim_http_req *r, unsigned status, json_t *value)
 void sim_http_reply_empty(struct sim_http_req *r, unsigned status);
 /* Reply status with {"error": text} (OctoPrint's and fdm-monster's error shape). */
 void sim_http_reply_error(struct sim_http_req *r, unsigned status, const char *text);
+
+/*
+ * A protocol upgrade (sim_ws.c's websockets): reply 101 Switching Protocols
+ * with the headers added, and once it is sent call fn with the socket (in
+ * non-blocking mode; never close() it: sim_http_upgraded_close), the bytes
+ * that came after the request, and ud and tag as given here.  If the
+ * connection dies before, fn is never called.  Whoever gets the socket
+ * must close it before sim_http_free.
+ */
+struct sim_http_upgraded;
+typedef void (*sim_http_upgrade_fn)(struct sim_http_upgraded *u, int fd, const char *extra,
+                                    size_t n_extra, void *ud, int tag);
+void sim_http_reply_upgrade(struct sim_http_req *r, sim_http_upgrade_fn fn, void *ud, int tag);
+/* Close an upgraded connection's socket. */
+void sim_http_upgraded_close(struct sim_http_upgraded *u);
 
 #endif

@@ -23,6 +23,7 @@
 #include <time.h>
 
 #include "../../src/base/mem.h"
+#include "../../src/base/ws.h"
 #include "sim_moonraker_int.h"
 #include "sim_netbase.h"
 #include "sim_netcli.h"
@@ -198,6 +199,48 @@ object(struct sim_moonraker *s, const char *name, const struct sim_np_status *st
 static const char *const all_objects[] = { "webhooks", "print_stats", "virtual_sdcard",
                                            "extruder", "heater_bed",  "display_status" };
 
+json_t *
+sim_moonraker_pick(struct sim_moonraker *s, json_t *want, const struct sim_np_status *st)
+{
+    json_t *status = json_object();
+    if (!want) {
+        for (size_t i = 0; i < sizeof(all_objects) / sizeof(all_objects[0]); i++)
+            json_object_set_new(status, all_objects[i], object(s, all_objects[i], st));
+        return status;
+    }
+    const char *name;
+    json_t *attrs;
+    json_object_foreach(want, name, attrs)
+    {
+        json_t *o = object(s, name, st);
+        if (!o)
+            continue;               /* the docs: an object the printer lacks is left out */
+        if (json_is_array(attrs)) { /* keep only the attributes asked for */
+            json_t *pick = json_object();
+            size_t i;
+            json_t *a;
+            json_array_foreach(attrs, i, a)
+            {
+                json_t *v = json_is_string(a) ? json_object_get(o, json_string_value(a)) : NULL;
+                if (v)
+                    json_object_set(pick, json_string_value(a), v);
+            }
+            json_decref(o);
+            o = pick;
+        }
+        json_object_set_new(status, name, o);
+    }
+    return status;
+}
+
+double
+sim_moonraker_eventtime(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
+}
+
 static void
 on_query(struct sim_http_req *r, void *ud)
 {
@@ -206,55 +249,26 @@ on_query(struct sim_http_req *r, void *ud)
         sim_moonraker_error(r, 503, "Klippy Host not connected");
         return;
     }
+    s->n_queries++;
     struct sim_np_status st;
     sim_netprinter_status(s->b.np, &st);
-    json_t *status = json_object();
-    json_t *want = NULL;
+    json_t *b = NULL, *want = NULL;
     size_t len = 0;
     sim_http_body(r, &len);
     if (strcmp(sim_http_method(r), "POST") == 0 && len > 0) {
         struct sf_err err;
-        json_t *b = sim_http_json(r, &err);
+        b = sim_http_json(r, &err);
         want = b ? json_object_get(b, "objects") : NULL;
         if (!want || !json_is_object(want)) {
             json_decref(b);
-            json_decref(status);
             sim_moonraker_error(r, 400, "Invalid argument 'objects'");
             return;
         }
-        const char *name;
-        json_t *attrs;
-        json_object_foreach(want, name, attrs)
-        {
-            json_t *o = object(s, name, &st);
-            if (!o)
-                continue;               /* the docs: an object the printer lacks is left out */
-            if (json_is_array(attrs)) { /* keep only the attributes asked for */
-                json_t *pick = json_object();
-                size_t i;
-                json_t *a;
-                json_array_foreach(attrs, i, a)
-                {
-                    json_t *v = json_is_string(a) ? json_object_get(o, json_string_value(a)) : NULL;
-                    if (v)
-                        json_object_set(pick, json_string_value(a), v);
-                }
-                json_decref(o);
-                o = pick;
-            }
-            json_object_set_new(status, name, o);
-        }
-        json_decref(b);
-    } else {
-        /* GET ?webhooks&print_stats...: the sim answers with every object it has */
-        for (size_t i = 0; i < sizeof(all_objects) / sizeof(all_objects[0]); i++)
-            json_object_set_new(status, all_objects[i], object(s, all_objects[i], &st));
-    }
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    sim_moonraker_result(r,
-                         json_pack("{s:f,s:o}", "eventtime",
-                                   (double)ts.tv_sec + (double)ts.tv_nsec / 1e9, "status", status));
+    } /* else GET ?webhooks&print_stats...: the sim answers with every object it has */
+    json_t *status = sim_moonraker_pick(s, want, &st);
+    json_decref(b);
+    sim_moonraker_result(
+        r, json_pack("{s:f,s:o}", "eventtime", sim_moonraker_eventtime(), "status", status));
 }
 
 /* GET /printer/objects/list: the objects this printer has (Klippy's objects/list). */
@@ -263,23 +277,41 @@ on_objects_list(struct sim_http_req *r, void *ud)
 {
     if (!sim_moonraker_klippy_up(ud, r))
         return;
+    sim_moonraker_result(r, sim_moonraker_objects_list());
+}
+
+json_t *
+sim_moonraker_objects_list(void)
+{
     json_t *list = json_array();
     for (size_t i = 0; i < sizeof(all_objects) / sizeof(all_objects[0]); i++)
         json_array_append_new(list, json_string(all_objects[i]));
-    sim_moonraker_result(r, json_pack("{s:o}", "objects", list));
+    return json_pack("{s:o}", "objects", list);
+}
+
+json_t *
+sim_moonraker_server_info(struct sim_moonraker *s)
+{
+    return json_pack("{s:b,s:s,s:[sssss],s:[],s:[ss],s:[],s:i,s:s,s:[iii],s:s}", "klippy_connected",
+                     1, "klippy_state", klippy_name(s->klippy), "components", "database",
+                     "file_manager", "klippy_apis", "machine", "history", "failed_components",
+                     "registered_directories", "config", "gcodes", "warnings", "websocket_count",
+                     (int)sim_ws_hub_count(s->b.hub), "moonraker_version", "v0.10.0-slimfarm-sim",
+                     "api_version", 1, 5, 0, "api_version_string", "1.5.0");
+}
+
+json_t *
+sim_moonraker_printer_info(struct sim_moonraker *s)
+{
+    return json_pack("{s:s,s:s,s:s,s:s}", "state", klippy_name(s->klippy), "state_message",
+                     s->klippy_msg, "hostname", "slimfarm-sim", "software_version",
+                     "v0.12.0-slimfarm-sim");
 }
 
 static void
 on_server_info(struct sim_http_req *r, void *ud)
 {
-    struct sim_moonraker *s = ud;
-    sim_moonraker_result(
-        r, json_pack("{s:b,s:s,s:[sssss],s:[],s:[ss],s:[],s:i,s:s,s:[iii],s:s}", "klippy_connected",
-                     1, "klippy_state", klippy_name(s->klippy), "components", "database",
-                     "file_manager", "klippy_apis", "machine", "history", "failed_components",
-                     "registered_directories", "config", "gcodes", "warnings", "websocket_count", 0,
-                     "moonraker_version", "v0.10.0-slimfarm-sim", "api_version", 1, 5, 0,
-                     "api_version_string", "1.5.0"));
+    sim_moonraker_result(r, sim_moonraker_server_info(ud));
 }
 
 static void
@@ -290,9 +322,7 @@ on_printer_info(struct sim_http_req *r, void *ud)
         sim_moonraker_error(r, 503, "Klippy Host not connected");
         return;
     }
-    sim_moonraker_result(r, json_pack("{s:s,s:s,s:s,s:s}", "state", klippy_name(s->klippy),
-                                      "state_message", s->klippy_msg, "hostname", "slimfarm-sim",
-                                      "software_version", "v0.12.0-slimfarm-sim"));
+    sim_moonraker_result(r, sim_moonraker_printer_info(s));
 }
 
 /* ---- file metadata and job history ---- */
@@ -711,6 +741,8 @@ static const struct sim_http_route routes[] = {
     { "GET", "/api/version", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_octo_version },
     { "GET", "/api/server", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_octo_server },
     { "POST", "/api/login", SIM_HTTP_BODY_MEM, false, sim_moonraker_on_octo_login },
+    /* open: a browser cannot set X-Api-Key on a websocket; the socket asks it (identify) */
+    { "GET", "/websocket", SIM_HTTP_BODY_MEM, true, sim_moonraker_on_websocket },
 };
 
 /* ---- faults on the job's way ---- */
@@ -727,6 +759,7 @@ on_watch(void *ud)
     sim_netprinter_status(s->b.np, &st);
     hist_settle(s, &st, NULL);
     sim_moonraker_temps_sample(s, &st);
+    sim_moonraker_ws_watch(s, &st);
     sim_http_outage_watch(s->b.http, sim_np_running(&st), st.lines_done);
     if (st.state != SIM_NP_PRINTING || s->klippy != K_READY)
         return;
@@ -765,7 +798,13 @@ sim_moonraker_new(struct loop *l, const struct sim_moonraker_config *c, struct s
     };
     if (sim_netbase_init(&s->b, l, &c->machine, &hc, WATCH_MS, on_watch, err))
         goto fail;
+    s->b.hub = sim_moonraker_ws_hub(s);
+    if (!s->b.hub) {
+        sf_err_set(err, SF_ENOMEM, "moonraker sim: out of memory");
+        goto fail;
+    }
     s->klippy = c->startup_ms > 0 ? K_STARTUP : K_READY;
+    s->ws_klippy = s->klippy;
     snprintf(s->klippy_msg, sizeof(s->klippy_msg), "%s",
              s->klippy == K_READY ? "Printer is ready" : "Printer is not ready");
     s->ready_at_ms = loop_now_ms(l) + c->startup_ms;
@@ -785,6 +824,18 @@ void
 sim_moonraker_status(const struct sim_moonraker *s, struct sim_np_status *out)
 {
     sim_netbase_status(&s->b, out);
+}
+
+uint64_t
+sim_moonraker_queries(const struct sim_moonraker *s)
+{
+    return s->n_queries;
+}
+
+void
+sim_moonraker_drop_sockets(struct sim_moonraker *s)
+{
+    sim_ws_hub_close_all(s->b.hub, WS_CLOSE_AWAY, "dropped");
 }
 
 void

@@ -67,6 +67,11 @@ struct sim_moonraker *sim_moonraker_new(struct loop *l, const struct sim_moonrak
 int sim_moonraker_port(const struct sim_moonraker *s);
 /* The machine's status (tests). */
 void sim_moonraker_status(const struct sim_moonraker *s, struct sim_np_status *out);
+/* Status queries answered over HTTP, and websockets holding a subscription (tests). */
+uint64_t sim_moonraker_queries(const struct sim_moonraker *s);
+int sim_moonraker_subscribed(struct sim_moonraker *s);
+/* Close every websocket (a network blip; tests). */
+void sim_moonraker_drop_sockets(struct sim_moonraker *s);
 /* Stop, flush the log, free.  NULL is fine. */
 void sim_moonraker_free(struct sim_moonraker *s);
 

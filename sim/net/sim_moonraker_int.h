@@ -61,6 +61,10 @@ struct sim_moonraker {
     int n_hist;
     int hist_ids; /* job_ids handed out */
     struct temp_store temps;
+    int ws_ids;            /* websocket connection ids handed out */
+    enum klippy ws_klippy; /* Klippy's state the sockets were last told */
+    int64_t next_push_ms;  /* loop time of the next notify_status_update round */
+    uint64_t n_queries;    /* /printer/objects/query answered over HTTP */
 };
 
 /* Reply 200 with {"result": result} (stolen; NULL: null). */
@@ -73,6 +77,22 @@ bool sim_moonraker_klippy_up(struct sim_moonraker *s, struct sim_http_req *r);
 
 /* Take a temperature sample if a second has passed (the watch calls it). */
 void sim_moonraker_temps_sample(struct sim_moonraker *s, const struct sim_np_status *st);
+
+/* The status objects want asks for ({"name": null or [attrs]}; NULL: all of them, whole). */
+json_t *sim_moonraker_pick(struct sim_moonraker *s, json_t *want, const struct sim_np_status *st);
+/* Klipper's eventtime: monotonic seconds. */
+double sim_moonraker_eventtime(void);
+/* The results of server.info, printer.info and printer.objects.list. */
+json_t *sim_moonraker_server_info(struct sim_moonraker *s);
+json_t *sim_moonraker_printer_info(struct sim_moonraker *s);
+json_t *sim_moonraker_objects_list(void);
+
+/* sim_moonraker_ws.c: the /websocket route's handler, the sockets' hub (NULL if out of memory),
+   and the watch's turn (Klippy's state changes, status updates every SIM_MR_PUSH_MS). */
+#define SIM_MR_PUSH_MS 250 /* Klipper batches subscription updates every 250 ms */
+void sim_moonraker_on_websocket(struct sim_http_req *r, void *ud);
+struct sim_ws_hub *sim_moonraker_ws_hub(struct sim_moonraker *s);
+void sim_moonraker_ws_watch(struct sim_moonraker *s, const struct sim_np_status *st);
 
 /* Handlers of sim_moonraker_srv.c (ud: the simulator). */
 void sim_moonraker_on_subscribe(struct sim_http_req *r, void *ud);

@@ -63,6 +63,7 @@ sim_netbase_release(struct sim_netbase *b)
 {
     if (b->watch)
         loop_timer_cancel(b->l, b->watch);
+    sim_ws_hub_free(b->hub); /* its sockets came through the server: before it */
     sim_http_free(b->http);
     sim_netprinter_free(b->np);
     memset(b, 0, sizeof(*b));
@@ -101,6 +102,12 @@ face_http(void *sim)
     return ((struct sim_netbase *)sim)->http;
 }
 
+static struct sim_ws_hub *
+face_hub(void *sim)
+{
+    return ((struct sim_netbase *)sim)->hub;
+}
+
 int
 sim_netbase_main(int argc, char **argv, const char *extra,
                  void *(*create)(struct loop *l, const struct sim_net_opts *o, int index,
@@ -111,7 +118,11 @@ sim_netbase_main(int argc, char **argv, const char *extra,
     if (rc >= 0)
         return rc;
     struct sim_net_face face = {
-        .create = create, .destroy = sim_netbase_free, .machine = face_machine, .http = face_http
+        .create = create,
+        .destroy = sim_netbase_free,
+        .machine = face_machine,
+        .http = face_http,
+        .hub = face_hub,
     };
     return sim_net_serve(&o, &face);
 }

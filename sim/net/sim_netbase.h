@@ -29,6 +29,7 @@
 #include "sim_http.h"
 #include "sim_netcli.h"
 #include "sim_netprinter.h"
+#include "sim_ws.h"
 
 /* Called on each watch tick with the server's ud (the simulator). */
 typedef void (*sim_netbase_watch_fn)(void *ud);
@@ -41,6 +42,7 @@ struct sim_netbase {
     int watch_ms;                  /* its period */
     sim_netbase_watch_fn on_watch; /* what it calls */
     void *ud;                      /* with what (hc->ud) */
+    struct sim_ws_hub *hub;        /* push sockets the face opened (NULL: none); freed first */
 };
 
 /* A zeroed simulator of size bytes (its struct, sim_netbase first), or NULL with err set
@@ -56,7 +58,8 @@ void *sim_netbase_alloc(size_t size, const char *kind, struct sf_err *err);
 int sim_netbase_init(struct sim_netbase *b, struct loop *l,
                      const struct sim_netprinter_config *machine, struct sim_http_config *hc,
                      int watch_ms, sim_netbase_watch_fn on_watch, struct sf_err *err);
-/* Stop the timer, free the server and the machine (flushing its log); zeroed b is fine. */
+/* Stop the timer, close the push sockets, free the server and the machine (flushing its log);
+   zeroed b is fine. */
 void sim_netbase_release(struct sim_netbase *b);
 /* Release a simulator from sim_netbase_alloc() and free it.  NULL is fine. */
 void sim_netbase_free(void *sim);

@@ -15,6 +15,7 @@
 #include "../../src/base/mem.h"
 #include "sim_http.h"
 #include "sim_netprinter.h"
+#include "sim_ws.h"
 
 static void
 usage(FILE *f, const char *kind, const char *extra)
@@ -127,9 +128,44 @@ default_stats(const struct sim_net_face *face, void *sim, char *out, size_t n)
 {
     struct sim_np_status st;
     sim_netprinter_status(face->machine(sim), &st);
-    snprintf(out, n, "state=%s file=%s lines_done=%llu requests=%llu", sim_np_state_name(st.state),
-             st.file, (unsigned long long)st.lines_done,
-             (unsigned long long)sim_http_served(face->http(sim)));
+    struct sim_ws_hub *hub = face->hub ? face->hub(sim) : NULL;
+    snprintf(out, n, "state=%s file=%s lines_done=%llu requests=%llu pushed=%llu",
+             sim_np_state_name(st.state), st.file, (unsigned long long)st.lines_done,
+             (unsigned long long)sim_http_served(face->http(sim)),
+             (unsigned long long)(hub ? sim_ws_hub_sent(hub) : 0));
+}
+
+struct serving {
+    const struct sim_net_opts *o;
+    const struct sim_net_face *face;
+    void **sims;
+};
+
+/* One stats line per printer on stderr (at exit, and on SIGUSR1: a running count). */
+static void
+print_stats(const struct serving *sv)
+{
+    for (int i = 0; i < sv->o->count; i++) {
+        char line[512];
+        if (!sv->sims[i])
+            continue;
+        if (sv->face->stats)
+            sv->face->stats(sv->sims[i], line, sizeof(line));
+        else
+            default_stats(sv->face, sv->sims[i], line, sizeof(line));
+        if (sv->o->count > 1)
+            fprintf(stderr, "stats: printer=%d %s\n", i, line);
+        else
+            fprintf(stderr, "stats: %s\n", line);
+    }
+    fflush(stderr);
+}
+
+static void
+on_usr1(struct loop *l, int signo, void *ud)
+{
+    (void)l, (void)signo;
+    print_stats(ud);
 }
 
 int
@@ -142,9 +178,11 @@ sim_net_serve(const struct sim_net_opts *o, const struct sim_net_face *face)
         return 1;
     }
     void **sims = mem_calloc((size_t)o->count, sizeof(*sims));
+    struct serving sv = { o, face, sims };
     int rc = 1;
     if (!sims || loop_add_signal(l, SIGINT, on_stop, NULL, &err) < 0 ||
-        loop_add_signal(l, SIGTERM, on_stop, NULL, &err) < 0) {
+        loop_add_signal(l, SIGTERM, on_stop, NULL, &err) < 0 ||
+        loop_add_signal(l, SIGUSR1, on_usr1, &sv, &err) < 0) {
         fprintf(stderr, "slimfarm-sim: %s\n", sims ? err.msg : "out of memory");
         goto out;
     }
@@ -174,17 +212,7 @@ sim_net_serve(const struct sim_net_opts *o, const struct sim_net_face *face)
     }
     fflush(stdout);
     rc = loop_run(l) < 0 ? 1 : 0;
-    for (int i = 0; i < o->count; i++) {
-        char line[512];
-        if (face->stats)
-            face->stats(sims[i], line, sizeof(line));
-        else
-            default_stats(face, sims[i], line, sizeof(line));
-        if (o->count > 1)
-            fprintf(stderr, "stats: printer=%d %s\n", i, line);
-        else
-            fprintf(stderr, "stats: %s\n", line);
-    }
+    print_stats(&sv);
 out:
     for (int i = 0; sims && i < o->count; i++)
         if (sims[i])

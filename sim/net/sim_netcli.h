@@ -7,8 +7,8 @@
  * sim_net_parse() and hands a face (new/address/free) to sim_net_serve(),
  * which starts --count printers on one loop, prints one address line per
  * printer ("http://127.0.0.1:PORT"), serves until SIGINT/SIGTERM and
- * prints one "stats:" line each on stderr.  With --count N > 1, --port P
- * becomes P+i, --log FILE and --uploads DIR get a ".i" suffix.
+ * prints one "stats:" line each on stderr (so does SIGUSR1, running on).  With --count N > 1,
+ * --port P becomes P+i, --log FILE and --uploads DIR get a ".i" suffix.
  *
  * Fault specs are kept as given: each face applies them (its own faults,
  * then sim_http_fault_parse, then faults_parse for the firmware) and
@@ -28,6 +28,8 @@
 #define SIM_NET_FAULTS_MAX 32
 /* Printers one process may serve (the 50-printer bench and some room). */
 #define SIM_NET_COUNT_MAX 256
+
+struct sim_ws_hub;
 
 struct sim_net_opts {
     const char *kind;                       /* "octoprint", ... (argv[1]) */
@@ -57,6 +59,7 @@ struct sim_net_face {
     /* For address and stats left NULL: the sim's machine and HTTP side. */
     struct sim_netprinter *(*machine)(void *sim);
     struct sim_http *(*http)(void *sim);
+    struct sim_ws_hub *(*hub)(void *sim); /* its push sockets (stats: pushed=); NULL: none */
 };
 
 /* The machine options every face takes from o: speed, --log, --uploads. */

@@ -35,32 +35,10 @@
 #include "sim_http.h"
 #include "sim_netcli.h"
 #include "sim_netprinter.h"
+#include "sim_octoprint_int.h"
 
-struct octo_sim {
-    struct sim_netprinter *np;
-    struct sim_http *http;
-    struct loop *l;
-    char address[64];
-    long error_at;  /* fault: fail after this many job lines (0: never) */
-    long cancel_at; /* fault: cancel at the printer after this many job lines */
-    bool busy;      /* fault: the printer says it is busy */
-    bool fired;     /* cancel-at done for this job */
-    bool err_fired; /* error-at done (once per run: the printer is fixed after) */
-    uint64_t tick;  /* fault watch timer */
-    uint64_t uploads, jobs;
-    const char *api_key; /* the key (the sim's options own it), NULL: none */
-    bool was_running;    /* the job ran on the last watch turn */
-    int finishing;       /* watch turns left in Finishing */
-    double bed_offset_c; /* /api/printer/bed offset */
-};
-
-/* Watch turns (10 ms each) a completed job shows Finishing. */
-#define FINISH_TICKS 30
-/* Most files a file list shows. */
-#define FILES_MAX 256
-
-static const char *
-state_text(const struct octo_sim *o, const struct sim_np_status *st)
+const char *
+sim_octoprint_state_text(const struct octo_sim *o, const struct sim_np_status *st)
 {
     if (o->finishing > 0)
         return "Finishing";
@@ -80,8 +58,8 @@ state_text(const struct octo_sim *o, const struct sim_np_status *st)
     }
 }
 
-static bool
-active(const struct sim_np_status *st)
+bool
+sim_octoprint_active(const struct sim_np_status *st)
 {
     return st->state == SIM_NP_PRINTING || st->state == SIM_NP_PAUSING ||
            st->state == SIM_NP_PAUSED || st->state == SIM_NP_CANCELLING;
@@ -94,8 +72,8 @@ busy(const struct octo_sim *o)
     return o->busy || o->finishing > 0;
 }
 
-static json_t *
-flags(const struct octo_sim *o, const struct sim_np_status *st)
+json_t *
+sim_octoprint_flags(const struct octo_sim *o, const struct sim_np_status *st)
 {
     bool err = st->state == SIM_NP_ERROR;
     bool printing = st->state == SIM_NP_PRINTING || st->state == SIM_NP_PAUSING ||
@@ -104,8 +82,9 @@ flags(const struct octo_sim *o, const struct sim_np_status *st)
     return json_pack("{s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b}", "operational", !err, "paused",
                      st->state == SIM_NP_PAUSED, "printing", printing || held, "pausing",
                      st->state == SIM_NP_PAUSING, "cancelling", st->state == SIM_NP_CANCELLING,
-                     "sdReady", false, "error", err, "ready", !err && !active(st) && !held,
-                     "closedOrError", err, "finishing", o->finishing > 0);
+                     "sdReady", false, "error", err, "ready",
+                     !err && !sim_octoprint_active(st) && !held, "closedOrError", err, "finishing",
+                     o->finishing > 0);
 }
 
 /* ---- handlers ---- */
@@ -135,7 +114,7 @@ h_connection(struct sim_http_req *r, void *ud)
     sim_http_reply_json(
         r, 200,
         json_pack("{s:{s:s,s:s,s:i,s:s},s:{s:[s],s:[i],s:[{s:s,s:s}],s:s,s:i,s:s}}", "current",
-                  "state", state_text(o, &st), "port", "VIRTUAL", "baudrate", 250000,
+                  "state", sim_octoprint_state_text(o, &st), "port", "VIRTUAL", "baudrate", 250000,
                   "printerProfile", "_default", "options", "ports", "VIRTUAL", "baudrates", 250000,
                   "printerProfiles", "id", "_default", "name", "Default", "portPreference",
                   "VIRTUAL", "baudratePreference", 250000, "printerProfilePreference", "_default"));
@@ -168,12 +147,10 @@ null_or_real(bool known, double v)
     return known ? json_real(v) : json_null();
 }
 
-static void
-h_job(struct sim_http_req *r, void *ud)
+json_t *
+sim_octoprint_job(const struct octo_sim *o, const struct sim_np_status *stp)
 {
-    struct octo_sim *o = ud;
-    struct sim_np_status st;
-    sim_netprinter_status(o->np, &st);
+    struct sim_np_status st = *stp;
     bool has = st.file[0] != 0;
     json_t *file = has ? json_pack("{s:s,s:s,s:s,s:s,s:I,s:I}", "name", st.file, "path", st.file,
                                    "display", st.file, "origin", "local", "size",
@@ -191,11 +168,21 @@ h_job(struct sim_http_req *r, void *ud)
         has ? json_integer((json_int_t)st.print_time_s) : json_null(), "printTimeLeft",
         has && st.time_left_s >= 0 ? json_integer((json_int_t)st.time_left_s) : json_null(),
         "printTimeLeftOrigin", "linear");
-    json_t *reply = json_pack("{s:o,s:o,s:s}", "job", job, "progress", progress, "state",
-                              o->busy && !active(&st) ? "Printing" : state_text(o, &st));
+    json_t *reply = json_pack(
+        "{s:o,s:o,s:s}", "job", job, "progress", progress, "state",
+        o->busy && !sim_octoprint_active(&st) ? "Printing" : sim_octoprint_state_text(o, &st));
     if (st.state == SIM_NP_ERROR)
         json_object_set_new(reply, "error", json_string(st.message));
-    sim_http_reply_json(r, 200, reply);
+    return reply;
+}
+
+static void
+h_job(struct sim_http_req *r, void *ud)
+{
+    struct octo_sim *o = ud;
+    struct sim_np_status st;
+    sim_netprinter_status(o->np, &st);
+    sim_http_reply_json(r, 200, sim_octoprint_job(o, &st));
 }
 
 static void
@@ -214,8 +201,10 @@ h_printer(struct sim_http_req *r, void *ud)
     sim_http_reply_json(r, 200,
                         json_pack("{s:o,s:{s:b},s:{s:s,s:o}}", "temperature", temps, "sd", "ready",
                                   false, "state", "text",
-                                  o->busy && !active(&st) ? "Printing" : state_text(o, &st),
-                                  "flags", flags(o, &st)));
+                                  o->busy && !sim_octoprint_active(&st)
+                                      ? "Printing"
+                                      : sim_octoprint_state_text(o, &st),
+                                  "flags", sim_octoprint_flags(o, &st)));
 }
 
 static void
@@ -285,7 +274,7 @@ h_upload(struct sim_http_req *r, void *ud)
     struct sim_np_status st;
     sim_netprinter_status(o->np, &st);
     /* Not operational, or busy: select and print are silently dropped, as OctoPrint does. */
-    bool can = !active(&st) && st.state != SIM_NP_ERROR && !busy(o);
+    bool can = !sim_octoprint_active(&st) && st.state != SIM_NP_ERROR && !busy(o);
     bool printing = false;
     if (want_print && can) {
         start_job(o, name);
@@ -337,7 +326,7 @@ h_file(struct sim_http_req *r, void *ud)
     sim_netprinter_status(o->np, &st);
     if (!cmd || strcmp(cmd, "select") != 0) {
         sim_http_reply_error(r, 400, "Unknown command");
-    } else if (active(&st) || busy(o)) {
+    } else if (sim_octoprint_active(&st) || busy(o)) {
         sim_http_reply_error(r, 409, "Printer is already printing, cannot select a new file");
     } else if (print && st.state == SIM_NP_ERROR) {
         sim_http_reply_error(r, 409, "Printer is not operational, cannot directly start printing");
@@ -370,7 +359,7 @@ h_job_command(struct sim_http_req *r, void *ud)
         return;
     }
     if (strcmp(cmd, "start") == 0) {
-        if (active(&st) || busy(o) || !st.file[0]) {
+        if (sim_octoprint_active(&st) || busy(o) || !st.file[0]) {
             sim_http_reply_error(r, 409, "Printer is not operational or already printing");
             rc = SF_EAGAIN;
         } else {
@@ -383,7 +372,7 @@ h_job_command(struct sim_http_req *r, void *ud)
     } else if (strcmp(cmd, "pause") == 0) {
         if (!action || strcmp(action, "toggle") == 0)
             action = st.state == SIM_NP_PAUSED ? "resume" : "pause";
-        if (!active(&st)) {
+        if (!sim_octoprint_active(&st)) {
             sim_http_reply_error(r, 409, "Printer is neither printing nor paused");
             rc = SF_EAGAIN;
         } else if (strcmp(action, "pause") == 0) {
@@ -516,7 +505,7 @@ h_login(struct sim_http_req *r, void *ud)
                       "name", "slimfarm", "active", true, "permissions", user_permissions(true),
                       "groups", user_groups(true), "needs", "role", "admin", "status", "print",
                       "group", "admins", "users", "apikey", key, "settings", "admin", true, "user",
-                      true, "roles", "user", "admin", "session", "0123456789abcdef",
+                      true, "roles", "user", "admin", "session", SIM_OCTO_SESSION,
                       "_is_external_client", false, "_login_mechanism", "apikey",
                       "_credentials_seen", false));
     json_decref(j);
@@ -720,7 +709,7 @@ printhead(struct octo_sim *o, struct sim_http_req *r, json_t *j, const char *cmd
     bool ok = false;
     if (!feed && strcmp(cmd, "jog") != 0 && strcmp(cmd, "home") != 0)
         sim_http_reply_error(r, 400, "command is invalid");
-    else if (st->state == SIM_NP_ERROR || (!feed && (active(st) || busy(o))))
+    else if (st->state == SIM_NP_ERROR || (!feed && (sim_octoprint_active(st) || busy(o))))
         sim_http_reply_error(r, 409, "Printer is not operational or currently printing");
     else if (feed && !json_is_number(json_object_get(j, "factor")))
         sim_http_reply_error(r, 400, "factor is invalid");
@@ -799,6 +788,10 @@ static const struct sim_http_route routes[] = {
     { "GET", "/api/files/local/*", SIM_HTTP_BODY_MEM, false, h_file },
     { "POST", "/api/files/local/*", SIM_HTTP_BODY_MEM, false, h_file },
     { "DELETE", "/api/files/local/*", SIM_HTTP_BODY_MEM, false, h_file },
+    /* the push socket: open, as a browser cannot send the key; the socket's auth message
+       carries the user instead */
+    { "GET", "/sockjs/info", SIM_HTTP_BODY_MEM, true, sim_octoprint_on_sockjs_info },
+    { "GET", "/sockjs/*", SIM_HTTP_BODY_MEM, true, sim_octoprint_on_sockjs },
 };
 
 /* ---- faults on the job ---- */
@@ -814,7 +807,8 @@ on_tick(struct loop *l, void *ud)
         o->finishing--;
     if (o->was_running && st.state == SIM_NP_COMPLETE)
         o->finishing = FINISH_TICKS;
-    o->was_running = active(&st);
+    o->was_running = sim_octoprint_active(&st);
+    sim_octoprint_push_watch(o, &st);
     if (!o->fired && (st.state == SIM_NP_PRINTING || st.state == SIM_NP_PAUSED)) {
         if (o->error_at && !o->err_fired && st.lines_done >= (uint64_t)o->error_at) {
             o->err_fired = true;
@@ -860,6 +854,7 @@ destroy(void *sim)
         return;
     if (o->tick)
         loop_timer_cancel(o->l, o->tick);
+    sim_ws_hub_free(o->hub); /* its sockets came through the server: before it */
     sim_http_free(o->http);
     sim_netprinter_free(o->np);
     free(o);
@@ -876,6 +871,12 @@ create(struct loop *l, const struct sim_net_opts *opt, int index, struct sf_err 
     }
     o->l = l;
     o->api_key = opt->api_key;
+    o->hub = sim_octoprint_push_hub(o);
+    if (!o->hub) {
+        sf_err_set(err, SF_ENOMEM, "out of memory");
+        destroy(o);
+        return NULL;
+    }
     struct sim_netprinter_config nc;
     sim_netprinter_config_init(&nc);
     nc.speed = opt->speed;
@@ -929,8 +930,9 @@ stats(void *sim, char *out, size_t n)
     struct octo_sim *o = sim;
     struct sim_np_status st;
     sim_netprinter_status(o->np, &st);
-    snprintf(out, n, "requests=%llu uploads=%llu jobs=%llu state=%s lines=%llu/%llu",
-             (unsigned long long)sim_http_served(o->http), (unsigned long long)o->uploads,
+    snprintf(out, n, "requests=%llu pushed=%llu uploads=%llu jobs=%llu state=%s lines=%llu/%llu",
+             (unsigned long long)sim_http_served(o->http),
+             (unsigned long long)sim_ws_hub_sent(o->hub), (unsigned long long)o->uploads,
              (unsigned long long)o->jobs, sim_np_state_name(st.state),
              (unsigned long long)st.lines_done, (unsigned long long)st.lines_total);
 }

@@ -17,10 +17,14 @@ n=0
 for f in "$dir"/clients/*.txt; do
   client=$(basename "$f" .txt)
   kind=${client%%-*}
-  # speed 200: a replayed print runs for about two seconds, long enough to
-  # pause, short enough to wait for its end
+  # speed 200: a replayed print runs for a fraction of a second, enough to
+  # pause, short enough to wait for its end; a session may ask for other
+  # options in a "# sim-args:" line (a push session, to see a print's
+  # updates go by at their real rate)
   name=${client//-/_}
-  start_net "$name" "$kind" --speed 200 --api-key replay-key
+  args=$(sed -n 's/^# sim-args: //p' "$f" | head -n 1)
+  # shellcheck disable=SC2086
+  start_net "$name" "$kind" ${args:---speed 200} --api-key replay-key
   /usr/bin/python3 "$dir/replay.py" "$(cat "$tmp/$name.addr")" replay-key "$f" ||
     fail "$client: the simulator does not answer as the client expects"
   eval "kill \$sim_$name" 2>/dev/null

@@ -21,8 +21,26 @@ body stands for it); !PATH: absent.  UNTIL repeats the request every 20 ms
 until the status and checks hold or SECONDS pass (a client waiting for a
 state).  Lines are quoted as a shell would (shlex).  The first failing line
 ends the run with its file and line number; exit status 1.
+
+Push sockets (tests/replay/wsclient.py) take lines beginning with WS:
+
+  WS OPEN PATH [hdr:NAME=VALUE]... [sockjs] -> STATUS   open the socket (101), or
+                                             expect the handshake to be refused
+  WS SEND TEXT              send one text message ({NAME} substituted)
+  WS NEXT [SECONDS] CHECK...  the very next message (JSON) must pass the checks
+  WS RECV [SECONDS] CHECK...  skip messages until one passes them
+  WS ONLY [SECONDS] SKIP -- CHECK...  skip messages that pass the check SKIP;
+                            the first other one must pass the CHECKs
+  WS FRAME HEX              send these bytes as they are (a broken frame)
+  WS CLOSED [SECONDS] [code=N]  the server closes the socket (with close code N)
+  WS CLOSE                  close it
+
+SECONDS defaults to 30.  sockjs speaks SockJS's websocket transport ("o",
+'a["..."]' frames).
 """
-import json, re, shlex, sys, time, urllib.error, urllib.request, uuid
+import json, re, shlex, socket, sys, time, urllib.error, urllib.request, uuid
+
+import wsclient
 
 GCODE = b"; replayed by tests/replay/replay.py\nG28\nG1 X10 Y10 F3000\n" + \
     b"".join(b"G1 X%d Y%d\n" % (10 + i % 50, 10 + i % 40) for i in range(400)) + b"M400\n"
@@ -131,7 +149,79 @@ def send(req):
         return e.code, e.read()
 
 
+WS = {}  # the open push socket
+
+
+def ws_line(base, key, toks):
+    """One WS line: (why it failed or None, the last message's text)."""
+    verb, rest = toks[1], toks[2:]
+    if verb == "OPEN":
+        arrow = rest.index("->")
+        path, opts, want = rest[0], rest[1:arrow], int(rest[arrow + 1])
+        hdrs = {o[4:].partition("=")[0]: o[4:].partition("=")[2] for o in opts if o.startswith("hdr:")}
+        try:
+            WS["ws"] = wsclient.Ws(base, path, hdrs, sockjs="sockjs" in opts)
+            status = 101
+        except wsclient.WsError as e:
+            m = re.search(r"HTTP/1.1 (\d+)", str(e))
+            if not m:
+                return str(e), ""
+            status = int(m.group(1))
+        return (None if status == want else "handshake %d, not %d" % (status, want)), ""
+    ws = WS.get("ws")
+    if ws is None:
+        return "no socket open", ""
+    if verb == "SEND":
+        ws.send(rest[0])
+        return None, ""
+    if verb == "FRAME":
+        ws.sock.sendall(bytes.fromhex(rest[0]))
+        return None, ""
+    if verb == "CLOSE":
+        ws.close()
+        WS.pop("ws")
+        return None, ""
+    secs = 30.0
+    if rest and re.match(r"^\d+(\.\d+)?$", rest[0]):
+        secs, rest = float(rest[0]), rest[1:]
+    skip = None
+    if verb == "ONLY":
+        skip, rest = rest[0], rest[rest.index("--") + 1:]
+    end = time.monotonic() + secs
+    last, why = "", "nothing arrived"
+    while True:
+        try:
+            text = ws.recv(max(0.0, end - time.monotonic()))
+        except socket.timeout:
+            return "%s in %.0f s (last: %s)" % (why, secs, last[:300]), last
+        if text is None:
+            code = [c for c in rest if c.startswith("code=")]
+            if verb != "CLOSED":
+                return "the server closed the socket", last
+            if code and str(getattr(ws, "close_code", None)) != code[0][5:]:
+                return "closed with code %s, not %s" % (getattr(ws, "close_code", None), code[0][5:]), last
+            return None, last
+        if verb == "CLOSED":
+            why, last = "still open", text
+            continue
+        last = text
+        try:
+            body = json.loads(text)
+        except ValueError:
+            return "message is not JSON: %r" % text[:200], text
+        if skip and check(body, skip) is None:
+            continue
+        why = None
+        for c in rest:
+            why = why or check(body, c)
+        if why is None or verb in ("NEXT", "ONLY"):
+            return why, text
+
+
 def run_line(base, key, toks):
+    if toks[0] == "WS":
+        why, text = ws_line(base, key, toks)
+        return why, text.encode()
     until = 0
     if toks[0] == "UNTIL":
         until, toks = float(toks[1]), toks[2:]

@@ -251,6 +251,9 @@ struct fx {
     char url[64];
 };
 
+/* The simulators' speed (a case may slow them down for a print that lasts). */
+static double fx_speed = SPEED;
+
 /* Start a simulator of kind with faults (NULL-terminated) and a driver with key/user. */
 static int
 fx_start(struct fx *f, enum kind kind, const char *sim_key, const char *const *faults,
@@ -268,7 +271,7 @@ fx_start(struct fx *f, enum kind kind, const char *sim_key, const char *const *f
         struct sim_moonraker_config c;
         sim_moonraker_config_init(&c);
         c.api_key = sim_key;
-        c.machine.speed = SPEED;
+        c.machine.speed = fx_speed;
         c.machine.log_path = f->log;
         for (int i = 0; faults && faults[i]; i++)
             if (sim_moonraker_fault_parse(&c, faults[i], err))
@@ -383,6 +386,73 @@ job_runs_once_each(enum kind kind)
 T_CASE(moonraker_job_runs_once_each)
 {
     job_runs_once_each(MOONRAKER);
+}
+
+static bool
+mr_subscribed(void *ud)
+{
+    struct fx *f = ud;
+    return sim_moonraker_subscribed(f->mr) > 0;
+}
+
+static int
+progress_events(const struct rec *r)
+{
+    int k = 0;
+    for (int i = 0; i < r->n; i++)
+        k += r->ev[i] == DRV_EV_PROGRESS;
+    return k;
+}
+
+static uint64_t queries_mark; /* the simulator's status queries at a point of the case */
+
+static bool
+progress_6_or_end(void *ud)
+{
+    struct fx *f = ud;
+    return progress_events(&f->rec) >= 6 || f->rec.done + f->rec.failed > 0;
+}
+
+static bool
+polled_again(void *ud)
+{
+    struct fx *f = ud;
+    return sim_moonraker_queries(f->mr) > queries_mark;
+}
+
+/*
+ * Moonraker's websocket: once the driver has subscribed, the socket's
+ * updates replace the polls.  A print whose progress the farm sees move
+ * again and again costs no status query but the one that confirms its
+ * start; when the socket drops mid-print, polling takes over at once, the
+ * socket comes back, and the job ends done with every line run once.
+ */
+T_CASE(moonraker_push_socket_replaces_polls)
+{
+    struct fx f;
+    struct sf_err err;
+    fx_speed = 60; /* a print of seconds: time for many updates */
+    int rc = fx_start(&f, MOONRAKER, "k3y", NULL, "k3y", NULL, NULL, &err);
+    fx_speed = SPEED;
+    T_OK(rc, &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    T_TRUE(run_until(f.l, mr_subscribed, &f));
+    uint64_t q0 = sim_moonraker_queries(f.mr);
+    const char *job = job_file("push.gcode", 4000);
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(run_until(f.l, progress_6_or_end, &f));
+    T_EQ_INT(f.rec.done + f.rec.failed, 0);
+    T_TRUE(sim_moonraker_queries(f.mr) - q0 <= 2); /* polling would have asked each time */
+    /* the socket drops mid-print: a poll at once, later the socket again */
+    queries_mark = sim_moonraker_queries(f.mr);
+    sim_moonraker_drop_sockets(f.mr);
+    T_TRUE(run_until(f.l, polled_again, &f));
+    T_EQ_INT(f.rec.done + f.rec.failed, 0);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    T_EQ_INT(f.d->status.lines_acked, f.d->status.lines_total);
+    T_TRUE(run_until(f.l, mr_subscribed, &f));
+    FX_STOP_CHECK(&f, job, true);
 }
 
 T_CASE(prusalink_job_runs_once_each)

@@ -1,0 +1,218 @@
+/*
+ * drv_moonraker_ws.c - the Moonraker driver's push socket (how it stands
+ * in for the polls: drv_moonraker_int.h).
+ *
+ * On the socket, as Moonraker's JSON-RPC wants it (docs/external_api/
+ * server.md, printer.md, jsonrpc_notifications.md of v0.10): first
+ * server.connection.identify (with the API key when the printer has one:
+ * the upgrade's X-Api-Key header suffices for Moonraker, identify is for
+ * a proxy that drops headers), then printer.objects.subscribe to the
+ * objects the poll asks.  Its reply is the full status; each
+ * notify_status_update after it is merged in, field by field, and the
+ * whole read as a poll's answer would be (drv_moonraker_parse_status),
+ * so one parser checks both.  An error reply, notify_klippy_disconnected
+ * (the subscription dies with Klippy) or a status that does not parse
+ * closes the socket and polling takes over.
+ *
+ * Thread: the loop thread.
+ */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../src/base/log.h"
+#include "drv_moonraker_int.h"
+
+#define ID_IDENTIFY  1
+#define ID_SUBSCRIBE 2
+
+static const char subscribe_objects[] =
+    "{\"webhooks\":null,\"print_stats\":null,"
+    "\"virtual_sdcard\":[\"progress\",\"file_position\",\"file_size\"],"
+    "\"extruder\":[\"temperature\",\"target\"],\"heater_bed\":[\"temperature\",\"target\"]}";
+
+static void
+send_rpc(struct moonraker *m, const char *method, json_t *params, int id)
+{
+    json_t *req = json_pack("{s:s,s:s,s:o,s:i}", "jsonrpc", "2.0", "method", method, "params",
+                            params ? params : json_object(), "id", id);
+    char *text = req ? json_dumps(req, JSON_COMPACT) : NULL;
+    json_decref(req);
+    if (text && m->ws)
+        wsc_send(m->ws, text, strlen(text)); /* a failure closes the socket: closed() says so */
+    free(text);
+}
+
+static void
+on_open(struct wsc *w, void *ud)
+{
+    (void)w;
+    struct moonraker *m = ud;
+    json_t *id = json_pack("{s:s,s:s,s:s,s:s}", "client_name", "slimfarm", "version", "1", "type",
+                           "other", "url", "https://github.com/slimfarm/slimfarm");
+    const char *key = m->n.key_hdr[0] ? strchr(m->n.key_hdr, ':') : NULL;
+    if (key) {
+        key++;
+        while (*key == ' ')
+            key++;
+        json_object_set_new(id, "api_key", json_string(key));
+    }
+    send_rpc(m, "server.connection.identify", id, ID_IDENTIFY);
+    send_rpc(m, "printer.objects.subscribe",
+             json_pack("{s:o}", "objects", json_loads(subscribe_objects, 0, NULL)), ID_SUBSCRIBE);
+}
+
+/* Merge a notify_status_update's changed fields into the status. */
+static void
+merge(json_t *status, json_t *diff)
+{
+    const char *obj;
+    json_t *fields;
+    json_object_foreach(diff, obj, fields)
+    {
+        json_t *have = json_object_get(status, obj);
+        if (json_is_object(have) && json_is_object(fields))
+            json_object_update(have, fields);
+        else if (json_is_object(fields))
+            json_object_set(status, obj, fields);
+    }
+}
+
+/* A reply to one of ours: identify's needs nothing, subscribe's starts the push. */
+static void
+on_reply(struct moonraker *m, json_t *msg, json_int_t id)
+{
+    json_t *e = json_object_get(msg, "error");
+    if (e) {
+        char why[200];
+        snprintf(why, sizeof(why), "push socket: %s refused: %s",
+                 id == ID_IDENTIFY ? "identify" : "subscribe",
+                 json_string_value(json_object_get(e, "message"))
+                     ? json_string_value(json_object_get(e, "message"))
+                     : "(no message)");
+        drv_moonraker_ws_close(m, why);
+        return;
+    }
+    json_t *status = json_object_get(json_object_get(msg, "result"), "status");
+    if (id != ID_SUBSCRIBE)
+        return;
+    if (!json_is_object(status)) {
+        drv_moonraker_ws_close(m, "push socket: the subscription's reply has no status");
+        return;
+    }
+    json_decref(m->ws_status);
+    m->ws_status = json_deep_copy(status);
+    m->ws_live = true;
+    m->ws_dirty = true;
+    m->ws_backoff_ms = 1000;
+    log_printer(LOG_INFO, m->n.base.name, "push socket subscribed: its updates replace the polls");
+    drv_moonraker_ws_apply(m);
+}
+
+static void
+on_text(struct wsc *w, const char *text, size_t len, void *ud)
+{
+    (void)w;
+    struct moonraker *m = ud;
+    json_t *msg = json_loadb(text, len, 0, NULL);
+    json_t *id = json_object_get(msg, "id");
+    const char *method = json_string_value(json_object_get(msg, "method"));
+    if (json_is_integer(id)) {
+        on_reply(m, msg, json_integer_value(id));
+    } else if (method && strcmp(method, "notify_status_update") == 0 && m->ws_live) {
+        json_t *diff = json_array_get(json_object_get(msg, "params"), 0);
+        if (json_is_object(diff)) {
+            merge(m->ws_status, diff);
+            m->ws_updates++;
+            m->ws_dirty = true;
+            drv_moonraker_ws_apply(m);
+        }
+    } else if (method && strcmp(method, "notify_klippy_disconnected") == 0) {
+        drv_moonraker_ws_close(m, "push socket: Klippy disconnected from Moonraker");
+    }
+    json_decref(msg);
+}
+
+static void
+on_closed(struct wsc *w, const char *why, void *ud)
+{
+    (void)w;
+    drv_moonraker_ws_close(ud, why);
+}
+
+static const struct wsc_ops ops = { on_open, on_text, on_closed };
+
+void
+drv_moonraker_ws_open(struct moonraker *m, const char *ip)
+{
+    struct netdrv *n = &m->n;
+    int64_t now = loop_now_ms(n->base.loop);
+    if (m->ws || m->ws_never || !m->ready || !n->open || now < m->ws_retry_ms)
+        return;
+    char hdrs[sizeof(n->key_hdr) + 4] = "";
+    if (n->key_hdr[0])
+        snprintf(hdrs, sizeof(hdrs), "%s\r\n", n->key_hdr);
+    struct sf_err err;
+    m->ws = wsc_new(n->base.loop, n->url, ip, "/websocket", hdrs, &ops, m, &err);
+    if (m->ws)
+        return;
+    if (err.code == SF_EUNSUPP) {
+        m->ws_never = true;
+        log_printer(LOG_INFO, n->base.name, "no push socket (%s): polling", err.msg);
+        return;
+    }
+    drv_moonraker_ws_close(m, err.msg);
+}
+
+void
+drv_moonraker_ws_close(struct moonraker *m, const char *why)
+{
+    struct netdrv *n = &m->n;
+    bool was_live = m->ws_live;
+    wsc_free(m->ws);
+    m->ws = NULL;
+    m->ws_live = m->ws_dirty = false;
+    json_decref(m->ws_status);
+    m->ws_status = NULL;
+    if (!why)
+        return;
+    if (m->ws_backoff_ms < 1000)
+        m->ws_backoff_ms = 1000;
+    m->ws_retry_ms = loop_now_ms(n->base.loop) + m->ws_backoff_ms;
+    log_printer(LOG_INFO, n->base.name, "%s; polling%s, socket again in %d ms", why,
+                was_live ? " again" : "", m->ws_backoff_ms);
+    m->ws_backoff_ms =
+        m->ws_backoff_ms * 2 > MR_WS_BACKOFF_MAX_MS ? MR_WS_BACKOFF_MAX_MS : m->ws_backoff_ms * 2;
+    if (was_live && n->open && !n->req)
+        netdrv_schedule(n, 0);
+    else if (was_live && n->open && !n->timer)
+        netdrv_schedule(n, n->poll_ms);
+}
+
+void
+drv_moonraker_ws_apply(struct moonraker *m)
+{
+    struct netdrv *n = &m->n;
+    /* not while a request holds the slot, nor before the poll that confirms an action: what
+       the socket said may predate the action (its updates and our requests are two streams) */
+    if (!m->ws_live || !m->ws_dirty || n->req || !n->open || (n->timer && n->poll_now))
+        return;
+    m->ws_dirty = false;
+    json_t *wrap = json_pack("{s:{s:O}}", "result", "status", m->ws_status);
+    char *text = wrap ? json_dumps(wrap, JSON_COMPACT) : NULL;
+    json_decref(wrap);
+    struct moonraker_status st;
+    struct sf_err err;
+    int rc = text ? drv_moonraker_parse_status(text, strlen(text), &st, &err)
+                  : sf_err_set(&err, SF_ENOMEM, "out of memory");
+    free(text);
+    if (rc) {
+        char why[300];
+        snprintf(why, sizeof(why), "push socket: %s", err.msg);
+        drv_moonraker_ws_close(m, why);
+        return;
+    }
+    drv_moonraker_seen(m, &st, true);
+    if (!n->req)
+        n->nops->kick(n); /* what the status asks for (the file's metadata) */
+}
