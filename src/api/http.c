@@ -48,6 +48,7 @@
 #include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "authlimit.h"
 #include "http_int.h"
 
 /* A streamed response; lives from the route's answer until MHD frees it. */
@@ -81,6 +82,7 @@ struct http {
     struct http_defer *defers;                   /* requests waiting for their answer */
     struct pending *pending_head, *pending_tail; /* connections without a request head yet */
     size_t n_pending;                            /* their count */
+    struct authlimit *authlimit;                 /* failed logins per address */
 };
 
 /* Per-request state, MHD's *con_cls (made by the URI logger, before the headers). */
@@ -480,19 +482,22 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     if (!key && bearer && strncasecmp(bearer, "Bearer ", 7) == 0)
         key = bearer + 7;
     bool get = strcmp(method, "GET") == 0 || strcmp(method, "HEAD") == 0;
-    if (!key && get && h->cfg.is_public && h->cfg.is_public(h->cfg.ud, url)) {
-        c->read_only = true; /* a static file: no key, no data */
+    if (!key && h->cfg.is_public && h->cfg.is_public(h->cfg.ud, url)) {
+        c->read_only = true; /* a static file or log out: no key, no data */
         return;
     }
-    const char *cookie = MHD_lookup_connection_value(conn, MHD_COOKIE_KIND, HTTP_SESSION_COOKIE);
-    if (!key && get && cookie && h->cfg.session_key)
-        key = h->cfg.session_key(h->cfg.ud, cookie);
+    const char *cookie = MHD_lookup_connection_value(
+        conn, MHD_COOKIE_KIND, h->cfg.session_cookie ? h->cfg.session_cookie : HTTP_SESSION_COOKIE);
+    const char *csrf = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, HTTP_CSRF_HEADER);
+    if (!key && cookie && h->cfg.session_key)
+        key = h->cfg.session_key(h->cfg.ud, cookie, get ? NULL : csrf ? csrf : "");
     const struct farmcfg_key *k = key ? find_key(h, key) : NULL;
     if (!key) {
         fail(c, MHD_HTTP_UNAUTHORIZED, "%s",
-             !cookie ? "missing X-Api-Key header"
-             : get   ? "session expired: log in again"
-                     : "missing X-Api-Key header (a session cookie serves GET only)");
+             !cookie       ? "missing X-Api-Key header"
+             : get || csrf ? "session expired or ended: log in again"
+                           : "missing X-Api-Key header (a session cookie needs X-Csrf-Token to "
+                             "change things)");
         return;
     }
     if (!k) {
@@ -531,6 +536,26 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
         c->pp = MHD_create_post_processor(conn, 64 << 10, on_post, c);
         if (!c->pp)
             fail(c, MHD_HTTP_BAD_REQUEST, "malformed multipart/form-data header");
+    }
+}
+
+/* Failed logins are counted and logged per client address, and an address
+   past its burst is answered 429 whatever its key (authlimit.h). */
+static void
+limit_logins(struct http *h, struct conn *c, struct MHD_Connection *conn)
+{
+    bool failed = c->status == MHD_HTTP_UNAUTHORIZED;
+    if (!h->authlimit || (!failed && !c->key[0]))
+        return; /* a public path, or refused before its key was read */
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+    char addr[AUTHLIMIT_ADDR_MAX];
+    authlimit_addr(ci ? ci->client_addr : NULL, addr);
+    unsigned wait_s = authlimit_check(h->authlimit, addr, failed, c->msg, clock_mono_ms());
+    if (wait_s) {
+        c->status = 0;
+        fail(c, MHD_HTTP_TOO_MANY_REQUESTS, "too many failed logins from %s: try again in %u s",
+             addr, wait_s);
     }
 }
 
@@ -593,6 +618,7 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     if (!c->started) {
         c->started = true;
         on_headers(h, c, conn, url, method);
+        limit_logins(h, c, conn);
         /* Refuse now when the client sent no body or waits for 100
            Continue before it (curl does for large ones), when it has no
            key, or announced too much.  A client already sending its body
@@ -788,7 +814,8 @@ http_new(const struct http_config *cfg, struct sf_err *err)
         return NULL;
     }
     struct http *h = mem_calloc(1, sizeof(*h));
-    if (!h || http_set_keys(h, cfg->keys, cfg->n_keys, NULL)) {
+    if (!h || http_set_keys(h, cfg->keys, cfg->n_keys, NULL) || !(h->authlimit = authlimit_new())) {
+        free(h ? h->keys : NULL);
         free(h);
         sf_err_set(err, SF_ENOMEM, "http: out of memory");
         return NULL;
@@ -811,6 +838,7 @@ http_new(const struct http_config *cfg, struct sf_err *err)
         sf_err_set(err, SF_EIO, "http: cannot listen on %s:%d (in use, or not allowed)", cfg->host,
                    cfg->port);
         free(h->keys);
+        authlimit_free(h->authlimit);
         free(h);
         return NULL;
     }
@@ -832,6 +860,7 @@ http_free(struct http *h)
         if (!d->ready)
             MHD_resume_connection(d->conn);
     MHD_stop_daemon(h->d);
+    authlimit_free(h->authlimit);
     free(h->keys);
     free(h);
 }
