@@ -29,12 +29,12 @@
 #include <stdint.h>
 #include <sys/socket.h>
 
-#define AUTHLIMIT_BURST     20    /* failures at once: typos, a tab reloading with an old cookie */
-#define AUTHLIMIT_REFILL_MS 1000  /* then one a second */
-#define AUTHLIMIT_LOG_MS    10000 /* one log line per address per 10 s */
+#define AUTHLIMIT_BURST          20    /* failures at once: typos, a tab with an old cookie */
+#define AUTHLIMIT_REFILL_MS      1000  /* then one a second */
+#define AUTHLIMIT_LOG_MS         10000 /* one log line per address per 10 s */
 #define AUTHLIMIT_PENALTY_MAX_MS 60000 /* refused requests extend the wait up to a minute */
-#define AUTHLIMIT_ADDRS     256   /* addresses tracked: a farm's LAN, and then some */
-#define AUTHLIMIT_ADDR_MAX  64    /* an address as text (IPv6 with zone fits) */
+#define AUTHLIMIT_ADDRS          256   /* addresses tracked: a farm's LAN, and then some */
+#define AUTHLIMIT_ADDR_MAX       64    /* an address as text (IPv6 with zone fits) */
 
 struct authlimit;
 

@@ -38,7 +38,7 @@
 
 #define SESSION_IDLE_S      (8 * 3600)      /* a working shift away ends it */
 #define SESSION_MAX_S       (7 * 24 * 3600) /* a week, however busy */
-#define SESSION_PER_KEY_MAX 16 /* browsers per key: tabs of one browser share one */
+#define SESSION_PER_KEY_MAX 16              /* browsers per key: tabs of one browser share one */
 /* Every key at its quota: FARMCFG_KEYS_MAX * 16 * ~200 bytes = 200 KiB at most. */
 #define SESSION_TABLE_MAX (FARMCFG_KEYS_MAX * SESSION_PER_KEY_MAX)
 #define SESSION_TOKEN_LEN 32 /* hex digits of a token or CSRF token (128 bits) */
