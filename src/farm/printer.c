@@ -798,7 +798,7 @@ note(struct printer *p, const char *kind, const char *fmt, const char *a, const 
     char what[192];
     snprintf(what, sizeof(what), fmt, a, b);
     if (strcmp(kind, "printer-command") == 0) /* each one, never folded as a repeat */
-        log_info("printer", "%s: %s", p->cfg.name, what);
+        log_printer_each(LOG_INFO, p->cfg.name, "%s", what);
     else
         log_printer(LOG_INFO, p->cfg.name, "%s", what);
     if (store_printer_note(p->env.s, p->cfg.name, kind, what, &err))

@@ -94,7 +94,7 @@ for i in 1 2 3; do
     -H 'Content-Type: application/json' -d '{"command": "M117 hello"}')
   [ "$s" = 200 ] || fail "manual command $i: $s $(cat "$tmp/body")"
 done
-n=$(grep -c "mk3: manual command from $label: M117 hello" "$tmp/log")
+n=$(grep -c "printer\[mk3\]: manual command from $label: M117 hello" "$tmp/log")
 [ "$n" = 3 ] || fail "3 manual commands, $n lines with the key's label: $(grep 'manual command' "$tmp/log")"
 grep -q "repeated" "$tmp/log" && grep "manual command.*repeated" "$tmp/log" && fail "repeats folded"
 grep -q "POST /api/printers/mk3/command by $label: 200" "$tmp/log" || fail "the change is not logged with its key"
