@@ -7,12 +7,20 @@
 # its printer, and printed at simulation speed; the run ends with a summary
 # table.  With --once it exits there; otherwise the farm keeps running
 # (http://127.0.0.1:$PORT, key below) until Ctrl-C.
+#
+# The API key is made fresh each run (24 random bytes, printed below), never
+# a fixed one a neighbour could read here; the config holding it and the
+# data dir are the user's alone (umask 077).  --key prints a fresh key the
+# way a run makes it, and exits (tests/integ/demo_key.sh).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+umask 077
+demo_key() { head -c 24 /dev/urandom | base64 | tr '+/' '-_'; }
+[ "${1:-}" = --key ] && { demo_key; exit 0; }
 once=0; [ "${1:-}" = --once ] && once=1
 data=${SLIMFARM_DEMO_DIR:-demo-data}
 port=${SLIMFARM_DEMO_PORT:-7420}
-key=demo-key-0123456789abcdef
+key=$(demo_key)
 rm -rf "$data"; mkdir -p "$data/parts" "$data/sim"
 pids=()
 cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null || true; done; wait 2>/dev/null || true; }

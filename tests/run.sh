@@ -16,6 +16,9 @@
 # when it ends, with its wall-clock and CPU time; the slowest are listed
 # last.  JOBS=1 runs one at a time, in order.
 set -u
+# Files the tests write are their owner's alone, as slimfarmd wants of a
+# config holding keys (it refuses one others can read).
+umask 077
 build=${1:?usage: tests/run.sh BUILD_DIR [FILTER]}
 filter=${2:-}
 jobs=${JOBS:-$(nproc)}

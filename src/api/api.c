@@ -427,20 +427,6 @@ printer_act(void *ctx, const struct route_args *args, const struct http_req *req
 }
 
 /*
- * Who sent req, for the printer's log: "key " and a fingerprint of its API
- * key (FNV-1a, 32 bits: tells the farm's keys apart, gives nothing of the
- * key away), since keys carry no names of their own.
- */
-static void
-key_label(const struct http_req *req, char *out, size_t n)
-{
-    uint32_t h = 2166136261u;
-    for (const unsigned char *c = (const unsigned char *)(req->key ? req->key : ""); *c; c++)
-        h = (h ^ *c) * 16777619u;
-    snprintf(out, n, "key %08x", (unsigned)h);
-}
-
-/*
  * POST /api/printers/NAME/command {"command": "G28"}: one manual G-code
  * line for an idle printer with a clear bed.  400 a bad body or a refused
  * command (M110, M111, control bytes), 404 no such printer, 409 the
@@ -459,7 +445,7 @@ printer_cmd(void *ctx, const struct route_args *args, const struct http_req *req
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    key_label(req, who, sizeof(who));
+    route_key_label(req, who, sizeof(who));
     int rc = jobctl_printer_command(a->cfg.farm, args->name, line, who, &err);
     if (rc) {
         http_fail(resp, rc, err.msg);
@@ -481,7 +467,7 @@ printer_estop_route(void *ctx, const struct route_args *args, const struct http_
     struct api *a = ctx;
     struct sf_err err;
     char who[16];
-    key_label(req, who, sizeof(who));
+    route_key_label(req, who, sizeof(who));
     int rc = jobctl_printer_estop(a->cfg.farm, args->name, who, &err);
     printer_acted(a, args->name, rc, &err, resp);
 }
@@ -646,14 +632,14 @@ static bool
 is_public(void *ud, const char *path)
 {
     (void)ud;
-    return web_is_public(path);
+    return web_needs_no_key(path);
 }
 
 static const char *
-session_key(void *ud, const char *token)
+session_key(void *ud, const char *token, const char *csrf)
 {
     struct api *a = ud;
-    return web_session_key(a->web, token);
+    return web_session_key(a->web, token, csrf);
 }
 
 static void
@@ -691,8 +677,15 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                               .sink = &sink,
                               .is_public = is_public,
                               .session_key = session_key };
-    struct web_config wc = { .store = cfg->store, .pool = cfg->pool, .wake = web_wake, .ud = a };
+    struct web_config wc = { .store = cfg->store,
+                             .pool = cfg->pool,
+                             .wake = web_wake,
+                             .ud = a,
+                             .instance = cfg->instance,
+                             .session_idle_ms = cfg->session_idle_ms,
+                             .session_max_ms = cfg->session_max_ms };
     a->web = web_new(&wc, err);
+    hc.session_cookie = a->web ? web_cookie_name(a->web) : NULL;
     size_t n_compat, n_web;
     const struct route *compat = api_compat_routes(&n_compat), *web = web_routes(&n_web);
     a->groups[0] = (struct route_group){ compat, n_compat, &a->slicers };
@@ -725,6 +718,9 @@ api_reload(struct api *a, const struct farmcfg *old, const struct farmcfg *next,
         return sf_err_set(err, SF_ENOMEM, "api: out of memory for %zu API keys", next->n_keys);
     if (closed)
         log_info("api", "reload: closed %zu event streams of revoked API keys", closed);
+    size_t ended = web_keys_changed(a->web, next->keys, next->n_keys);
+    if (ended)
+        log_info("api", "reload: ended %zu dashboard sessions of revoked API keys", ended);
     if (next->upload_max_bytes != a->cfg.upload_max) {
         log_info("api", "reload: upload_max %zu -> %zu bytes", a->cfg.upload_max,
                  next->upload_max_bytes);

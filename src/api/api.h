@@ -66,6 +66,9 @@ struct api_config {
     struct pool *pool;           /* renders the dashboard's pictures (not owned); NULL: none */
     void (*on_change)(void *ud); /* a job was added or changed (run the scheduler) */
     void *ud;                    /* its argument */
+    const char *instance;        /* this daemon's id, names the session cookie; NULL: random */
+    int64_t session_idle_ms;     /* dashboard sessions (session.h); <= 0: the defaults */
+    int64_t session_max_ms;
 };
 
 struct api;

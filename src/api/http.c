@@ -53,6 +53,7 @@
 #include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "authlimit.h"
 #include "http_budget.h"
 #include "http_frame.h"
 #include "http_int.h"
@@ -75,14 +76,15 @@ struct stream {
 };
 
 struct http {
-    struct MHD_Daemon *d;      /* the MHD daemon, external epoll mode */
-    struct http_config cfg;    /* as given; keys point at our copy */
-    struct farmcfg_key *keys;  /* copy of the API keys */
-    int port;                  /* bound port, -1 if none */
-    struct stream *streams;    /* live streams */
-    struct http_defer *defers; /* requests waiting for their answer */
-    struct http_budget budget; /* connections per class (http_budget.h) */
-    int64_t next_end_ms;       /* earliest event stream lifetime end, or -1 */
+    struct MHD_Daemon *d;        /* the MHD daemon, external epoll mode */
+    struct http_config cfg;      /* as given; keys point at our copy */
+    struct farmcfg_key *keys;    /* copy of the API keys */
+    int port;                    /* bound port, -1 if none */
+    struct stream *streams;      /* live streams */
+    struct http_defer *defers;   /* requests waiting for their answer */
+    struct http_budget budget;   /* connections per class (http_budget.h) */
+    int64_t next_end_ms;         /* earliest event stream lifetime end, or -1 */
+    struct authlimit *authlimit; /* failed logins per address */
 };
 
 /* Per-request state, MHD's *con_cls (made by the URI logger, before the headers). */
@@ -535,20 +537,23 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     if (!key && bearer && strncasecmp(bearer, "Bearer ", 7) == 0)
         key = bearer + 7;
     bool get = strcmp(method, "GET") == 0 || strcmp(method, "HEAD") == 0;
-    if (!key && get && h->cfg.is_public && h->cfg.is_public(h->cfg.ud, url)) {
-        c->read_only = true; /* a static file: no key, no data */
+    if (!key && h->cfg.is_public && h->cfg.is_public(h->cfg.ud, url)) {
+        c->read_only = true; /* a static file or log out: no key, no data */
         c->cls = HTTP_CLASS_KEYLESS;
         return;
     }
-    const char *cookie = MHD_lookup_connection_value(conn, MHD_COOKIE_KIND, HTTP_SESSION_COOKIE);
-    if (!key && get && cookie && h->cfg.session_key)
-        key = h->cfg.session_key(h->cfg.ud, cookie);
+    const char *cookie = MHD_lookup_connection_value(
+        conn, MHD_COOKIE_KIND, h->cfg.session_cookie ? h->cfg.session_cookie : HTTP_SESSION_COOKIE);
+    const char *csrf = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, HTTP_CSRF_HEADER);
+    if (!key && cookie && h->cfg.session_key)
+        key = h->cfg.session_key(h->cfg.ud, cookie, get ? NULL : csrf ? csrf : "");
     const struct farmcfg_key *k = key ? find_key(h, key) : NULL;
     if (!key) {
         fail(c, MHD_HTTP_UNAUTHORIZED, "%s",
-             !cookie ? "missing X-Api-Key header"
-             : get   ? "session expired: log in again"
-                     : "missing X-Api-Key header (a session cookie serves GET only)");
+             !cookie       ? "missing X-Api-Key header"
+             : get || csrf ? "session expired or ended: log in again"
+                           : "missing X-Api-Key header (a session cookie needs X-Csrf-Token to "
+                             "change things)");
         return;
     }
     if (!k) {
@@ -588,6 +593,26 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
         c->pp = MHD_create_post_processor(conn, 64 << 10, on_post, c);
         if (!c->pp)
             fail(c, MHD_HTTP_BAD_REQUEST, "malformed multipart/form-data header");
+    }
+}
+
+/* Failed logins are counted and logged per client address, and an address
+   past its burst is answered 429 whatever its key (authlimit.h). */
+static void
+limit_logins(struct http *h, struct conn *c, struct MHD_Connection *conn)
+{
+    bool failed = c->status == MHD_HTTP_UNAUTHORIZED;
+    if (!h->authlimit || (!failed && !c->key[0]))
+        return; /* a public path, or refused before its key was read */
+    const union MHD_ConnectionInfo *ci =
+        MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+    char addr[AUTHLIMIT_ADDR_MAX];
+    authlimit_addr(ci ? ci->client_addr : NULL, addr);
+    unsigned wait_s = authlimit_check(h->authlimit, addr, failed, c->msg, clock_mono_ms());
+    if (wait_s) {
+        c->status = 0;
+        fail(c, MHD_HTTP_TOO_MANY_REQUESTS, "too many failed logins from %s: try again in %u s",
+             addr, wait_s);
     }
 }
 
@@ -650,6 +675,7 @@ on_request(void *cls, struct MHD_Connection *conn, const char *url, const char *
     if (!c->started) {
         c->started = true;
         on_headers(h, c, conn, url, method);
+        limit_logins(h, c, conn);
         head_counted(h, c, conn);
         /* Refuse now when the client sent no body or waits for 100
            Continue before it (curl does for large ones), when it has no
@@ -848,7 +874,8 @@ http_new(const struct http_config *cfg, struct sf_err *err)
         return NULL;
     }
     struct http *h = mem_calloc(1, sizeof(*h));
-    if (!h || http_set_keys(h, cfg->keys, cfg->n_keys, NULL)) {
+    if (!h || http_set_keys(h, cfg->keys, cfg->n_keys, NULL) || !(h->authlimit = authlimit_new())) {
+        free(h ? h->keys : NULL);
         free(h);
         sf_err_set(err, SF_ENOMEM, "http: out of memory");
         return NULL;
@@ -874,6 +901,7 @@ http_new(const struct http_config *cfg, struct sf_err *err)
         sf_err_set(err, SF_EIO, "http: cannot listen on %s:%d (in use, or not allowed)", cfg->host,
                    cfg->port);
         free(h->keys);
+        authlimit_free(h->authlimit);
         free(h);
         return NULL;
     }
@@ -895,6 +923,7 @@ http_free(struct http *h)
         if (!d->ready)
             MHD_resume_connection(d->conn);
     MHD_stop_daemon(h->d);
+    authlimit_free(h->authlimit);
     free(h->keys);
     free(h);
 }

@@ -17,12 +17,15 @@
  * Routes see a struct http_req and fill a struct http_resp.
  *
  * Two ways in without an X-Api-Key header, both decided by the owner's
- * hooks: GET/HEAD of a public path (the dashboard's static files, which
- * hold no data), and GET/HEAD with the session cookie HTTP_SESSION_COOKIE
- * that session_key() maps to an API key (a browser's EventSource and <img>
- * cannot send headers).  A cookie never authorizes another method, so a
- * request that changes something always carries the key in a header,
- * which no other site can make a browser send.
+ * hooks: a public path (the dashboard's static files, which hold no data,
+ * and its log out), and the session cookie (named by session_cookie) that
+ * session_key() maps to an API key (a browser's EventSource and <img>
+ * cannot send headers).  A cookie authorizes another method than GET/HEAD
+ * only with the session's CSRF token in the X-Csrf-Token header, which no
+ * page of another origin can read or make a browser send.
+ *
+ * Failed logins (401) are counted per client address (authlimit.h): an
+ * address past its burst is answered 429 on every keyed request.
  *
  * Connections are budgeted by class (the limits below, with their
  * reasons; http_budget.h keeps the count): a connection that has not sent
@@ -119,7 +122,8 @@
 #define HTTP_STREAM_RETRY_MS 1000
 /* Extra response headers a route may set (ETag, Cache-Control, CSP ...). */
 #define HTTP_RESP_HEADERS_MAX 8
-#define HTTP_SESSION_COOKIE   "sf_session" /* the dashboard's session cookie */
+#define HTTP_SESSION_COOKIE   "sf_session"   /* the session cookie's name unless configured */
+#define HTTP_CSRF_HEADER      "X-Csrf-Token" /* lets a session cookie change things */
 
 struct http;
 
@@ -223,11 +227,14 @@ struct http_config {
     http_body_fn body_kind;              /* NULL: every route takes any body */
     void *ud;                            /* route's and sink's argument */
     const struct http_upload_sink *sink; /* NULL: multipart files are refused */
-    /* NULL or: GET/HEAD of path needs no key (static files). */
+    /* NULL or: path needs no key (static files; the routes refuse other
+       methods than theirs). */
     bool (*is_public)(void *ud, const char *path);
     /* NULL or: the API key a session cookie's value stands for, NULL if
-       none (then the request needs its header).  GET/HEAD only. */
-    const char *(*session_key)(void *ud, const char *token);
+       none (then the request needs its header).  csrf is NULL for GET/HEAD,
+       else the X-Csrf-Token header ("" if none), which must match. */
+    const char *(*session_key)(void *ud, const char *token, const char *csrf);
+    const char *session_cookie; /* its cookie's name (kept by the owner); NULL: sf_session */
 };
 
 /*

@@ -6,12 +6,17 @@
  * As rows, what each path takes (methods, body, key) reads in one place
  * and the dispatcher decides 404/405 once.
  *
+ * Every request that may change something (any method but GET/HEAD) is
+ * logged once answered, with its key's label, so the log says who did it.
+ *
  * Thread: the thread that runs http_run().
  */
 #include "route.h"
 
 #include <stdio.h>
 #include <string.h>
+
+#include "../base/log.h"
 
 const char *
 route_clip(char *out, size_t cap, const char *s)
@@ -102,8 +107,22 @@ row_matches(const struct route *r, const char *path, struct route_args *a)
 }
 
 void
-route_dispatch(const struct route_group *groups, size_t n_groups, const struct http_req *req,
-               struct http_resp *resp)
+route_key_label(const struct http_req *req, char *out, size_t n)
+{
+    if (!req->key || !req->key[0]) {
+        snprintf(out, n, "no key");
+        return;
+    }
+    /* FNV-1a: a name that tells keys apart in logs, not a way back to one */
+    uint32_t h = 2166136261u;
+    for (const unsigned char *c = (const unsigned char *)req->key; *c; c++)
+        h = (h ^ *c) * 16777619u;
+    snprintf(out, n, "key %08x", (unsigned)h);
+}
+
+static void
+dispatch(const struct route_group *groups, size_t n_groups, const struct http_req *req,
+         struct http_resp *resp)
 {
     unsigned m = method_bit(req->method), allow = 0;
     const struct route *known = NULL; /* the first row of the path, for its 405 */
@@ -144,6 +163,24 @@ route_dispatch(const struct route_group *groups, size_t n_groups, const struct h
     else
         http_error(resp, 405, "method %s is not allowed on %s", req->method,
                    route_clip(clipped, sizeof(clipped), req->path));
+}
+
+void
+route_dispatch(const struct route_group *groups, size_t n_groups, const struct http_req *req,
+               struct http_resp *resp)
+{
+    dispatch(groups, n_groups, req, resp);
+    if (strcmp(req->method, "GET") == 0 || strcmp(req->method, "HEAD") == 0)
+        return;
+    /* Who changed what: every other method is logged with its key's label
+       (never the key), whatever came of it. */
+    char label[32], clipped[101];
+    route_key_label(req, label, sizeof(label));
+    route_clip(clipped, sizeof(clipped), req->path);
+    if (resp->defer)
+        log_info("api", "%s %s by %s: answer deferred", req->method, clipped, label);
+    else
+        log_info("api", "%s %s by %s: %d", req->method, clipped, label, resp->status);
 }
 
 enum http_body

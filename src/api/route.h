@@ -22,6 +22,9 @@
  * not_allowed message; a row whose not_allowed is NULL is unknown to other
  * methods (404), as the OctoPrint and Moonraker read-only answers are.
  *
+ * Every request but GET/HEAD is logged once answered: method, path, the
+ * key's label (route_key_label, never the key) and the status.
+ *
  * Scope: ROUTE_WRITE rows need a read-write key; http.c already refused a
  * read-only key on anything but GET/HEAD before the body (it must decide
  * from the head alone), and the dispatcher checks the row's scope again.
@@ -99,6 +102,10 @@ enum http_body route_body(const struct route_group *groups, size_t n_groups, con
 /* The decimal number >= 0 of 1 to 18 digits that is all of [s, s+n), into
  *out; false if it is not one. */
 bool route_num(const char *s, size_t n, int64_t *out);
+
+/* The label of the request's key for logs and notes, "key 1a2b3c4d" (a
+   hash: never the key), or "no key". */
+void route_key_label(const struct http_req *req, char *out, size_t n);
 
 /* s cut to fit out (cap bytes with the NUL) between UTF-8 characters, for
    quoting client text in a message.  Returns out. */

@@ -22,7 +22,9 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "../base/clock.h"
 #include "../base/mem.h"
+#include "session.h"
 
 /* The Content-Security-Policy of every static file: scripts and styles
    from this origin only, no inline script, nothing framed or embedded. */
@@ -30,16 +32,10 @@
     "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data:; "              \
     "connect-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'"
 
-struct session {
-    char token[33];                /* 32 hex digits; "" if unused */
-    char key[FARMCFG_KEY_MAX + 1]; /* the API key it stands for */
-    uint64_t made;                 /* order of making: the oldest goes first */
-};
-
 struct web {
     struct web_config cfg;
-    struct session sessions[WEB_SESSIONS_MAX];
-    uint64_t n_made;
+    struct sessions *sessions; /* the browsers logged in */
+    char cookie[64];           /* the session cookie's name: sf_session_INSTANCE */
     struct pictures *pictures; /* the jobs' pictures, from the farm */
 };
 
@@ -99,53 +95,113 @@ serve_asset(const struct web_asset *a, const struct http_req *req, struct http_r
 /* ---- sessions ---- */
 
 const char *
-web_session_key(struct web *w, const char *token)
+web_session_key(struct web *w, const char *token, const char *csrf)
 {
-    if (strlen(token) != 32)
-        return NULL;
-    for (size_t i = 0; i < WEB_SESSIONS_MAX; i++)
-        if (w->sessions[i].token[0] && strcmp(w->sessions[i].token, token) == 0)
-            return w->sessions[i].key;
-    return NULL;
+    return sessions_key(w->sessions, token, csrf, clock_mono_ms());
 }
 
-/* A new session for key, in the free or the oldest slot; SF_EIO if the
-   kernel has no random bytes for its token. */
-static int
-session_new(struct web *w, const char *key, char token[33])
+const char *
+web_cookie_name(const struct web *w)
 {
-    unsigned char rnd[16];
-    if (getrandom(rnd, sizeof(rnd), 0) != (ssize_t)sizeof(rnd))
-        return SF_EIO;
-    struct session *s = &w->sessions[0];
-    for (size_t i = 0; i < WEB_SESSIONS_MAX; i++) {
-        if (!w->sessions[i].token[0]) {
-            s = &w->sessions[i];
-            break;
+    return w->cookie;
+}
+
+bool
+web_needs_no_key(const char *path)
+{
+    return web_is_public(path) || strcmp(path, "/api/logout") == 0;
+}
+
+size_t
+web_keys_changed(struct web *w, const struct farmcfg_key *keys, size_t n_keys)
+{
+    return sessions_keep_keys(w->sessions, keys, n_keys);
+}
+
+/* The value of cookie name in the request's Cookie header into out; false if none. */
+static bool
+cookie_get(const struct http_req *req, const char *name, char *out, size_t cap)
+{
+    const char *p = http_req_header(req, "Cookie");
+    size_t n = strlen(name);
+    while (p && *p) {
+        p += strspn(p, " ;");
+        size_t len = strcspn(p, ";");
+        if (len > n && strncmp(p, name, n) == 0 && p[n] == '=') {
+            size_t v = len - n - 1;
+            if (v >= cap)
+                return false;
+            memcpy(out, p + n + 1, v);
+            out[v] = '\0';
+            return true;
         }
-        if (w->sessions[i].made < s->made)
-            s = &w->sessions[i];
+        p += len;
     }
-    for (size_t i = 0; i < sizeof(rnd); i++)
-        snprintf(s->token + 2 * i, 3, "%02x", rnd[i]);
-    snprintf(s->key, sizeof(s->key), "%s", key);
-    s->made = ++w->n_made;
-    memcpy(token, s->token, 33);
-    return SF_OK;
+    return false;
 }
 
+/* The request came with its key in a header (a log in), not by its cookie. */
+static bool
+has_key_header(const struct http_req *req)
+{
+    return http_req_header(req, "X-Api-Key") || http_req_header(req, "Authorization");
+}
+
+/*
+ * GET /api/whoami.  With the key in a header: log in (a new session; the
+ * browser's old one, if its cookie came along, ends).  By the cookie alone
+ * (a new tab of a logged-in browser): the session it has.  Either way the
+ * page learns the CSRF token its changes must carry.
+ */
 static void
 whoami(struct web *w, const struct http_req *req, struct http_resp *resp)
 {
-    char token[33];
-    if (session_new(w, req->key, token)) {
-        http_error(resp, 500, "no random bytes for a session token");
-        return;
+    char token[SESSION_TOKEN_LEN + 1], csrf[SESSION_TOKEN_LEN + 1], old[SESSION_TOKEN_LEN + 2];
+    int64_t now = clock_mono_ms();
+    bool had = cookie_get(req, w->cookie, old, sizeof(old));
+    const char *csrf_now =
+        !has_key_header(req) && had ? sessions_csrf(w->sessions, old, now) : NULL;
+    if (csrf_now) {
+        snprintf(csrf, sizeof(csrf), "%s", csrf_now);
+    } else {
+        struct sf_err err;
+        int rc = sessions_make(w->sessions, req->key, now, token, csrf, &err);
+        if (rc) {
+            http_fail(resp, rc, err.msg);
+            return;
+        }
+        if (had)
+            sessions_revoke(w->sessions, old);
+        http_resp_header(resp, "Set-Cookie", "%s=%s; Path=/; HttpOnly; SameSite=Strict", w->cookie,
+                         token);
     }
-    http_resp_header(resp, "Set-Cookie", "%s=%s; Path=/; HttpOnly; SameSite=Strict",
-                     HTTP_SESSION_COOKIE, token);
     http_resp_header(resp, "Cache-Control", "no-store");
-    resp->json = json_pack("{sb}", "read_only", req->read_only);
+    resp->json = json_pack("{sb ss}", "read_only", req->read_only, "csrf", csrf);
+}
+
+/* POST /api/logout (no key: the cookie and its CSRF token are the proof):
+   the session ends here, and the cookie in the browser. */
+static void
+logout(struct web *w, const struct http_req *req, struct http_resp *resp)
+{
+    char token[SESSION_TOKEN_LEN + 2];
+    const char *csrf = http_req_header(req, HTTP_CSRF_HEADER);
+    bool ended = false;
+    if (cookie_get(req, w->cookie, token, sizeof(token))) {
+        int64_t now = clock_mono_ms();
+        if (!csrf || !sessions_key(w->sessions, token, csrf, now)) {
+            if (sessions_csrf(w->sessions, token, now)) {
+                http_error(resp, 403, "log out needs the session's %s header", HTTP_CSRF_HEADER);
+                return;
+            }
+        } else {
+            ended = sessions_revoke(w->sessions, token);
+        }
+    }
+    http_resp_header(resp, "Set-Cookie", "%s=; Path=/; HttpOnly; SameSite=Strict; Max-Age=0",
+                     w->cookie);
+    http_resp_header(resp, "Cache-Control", "no-store");
+    resp->json = json_pack("{sb}", "ended", ended);
 }
 
 /* ---- pictures ---- */
@@ -353,6 +409,14 @@ whoami_route(void *ctx, const struct route_args *args, const struct http_req *re
     whoami(ctx, req, resp);
 }
 
+static void
+logout_route(void *ctx, const struct route_args *args, const struct http_req *req,
+             struct http_resp *resp)
+{
+    (void)args;
+    logout(ctx, req, resp);
+}
+
 /* GET /api/jobs/ID/preview.png, /gcode or /report. */
 static void
 job_route(void *ctx, const struct route_args *args, const struct http_req *req,
@@ -381,6 +445,7 @@ static const struct route rows[] = {
     /* methods, pattern, match, body, scope, handler, 405 message */
     { GET_HEAD, NULL, web_is_public, HTTP_BODY_NONE, ROUTE_PUBLIC, asset, "use GET" },
     { GET_HEAD, "/api/whoami", NULL, HTTP_BODY_NONE, ROUTE_READ, whoami_route, "use GET" },
+    { ROUTE_POST, "/api/logout", NULL, HTTP_BODY_NONE, ROUTE_PUBLIC, logout_route, "use POST" },
     { GET_HEAD, "/api/jobs/{id}/preview.png", NULL, HTTP_BODY_NONE, ROUTE_READ, job_route,
       "use GET" },
     { GET_HEAD, "/api/jobs/{id}/gcode", NULL, HTTP_BODY_NONE, ROUTE_READ, job_route, "use GET" },
@@ -403,10 +468,22 @@ web_new(const struct web_config *cfg, struct sf_err *err)
         return NULL;
     }
     w->cfg = *cfg;
+    unsigned char rnd[8];
+    char id[2 * sizeof(rnd) + 1] = "";
+    if (!cfg->instance && getrandom(rnd, sizeof(rnd), 0) == sizeof(rnd)) /* this process's own */
+        for (size_t i = 0; i < sizeof(rnd); i++)
+            snprintf(id + 2 * i, 3, "%02x", rnd[i]);
+    snprintf(w->cookie, sizeof(w->cookie), "%s_%.40s", HTTP_SESSION_COOKIE,
+             cfg->instance ? cfg->instance : id);
+    if (!(w->sessions = sessions_new(cfg->session_idle_ms, cfg->session_max_ms, err))) {
+        free(w);
+        return NULL;
+    }
     struct pictures_config pc = {
         .store = cfg->store, .pool = cfg->pool, .ready = cfg->wake, .ud = cfg->ud
     };
     if (!(w->pictures = pictures_new(&pc, err))) {
+        sessions_free(w->sessions);
         free(w);
         return NULL;
     }
@@ -419,5 +496,6 @@ web_free(struct web *w)
     if (!w)
         return;
     pictures_free(w->pictures); /* renders in flight finish unseen */
+    sessions_free(w->sessions);
     free(w);
 }

@@ -112,20 +112,35 @@ emit(enum log_level level, const char *subsys, const char *printer, const char *
     fputs(line, stderr);
 }
 
-void
-log_msg(enum log_level level, const char *subsys, const char *fmt, ...)
+static void
+vlog(enum log_level level, const char *subsys, const char *printer, const char *fmt, va_list ap)
 {
     char msg[LOG_LINE_MAX];
-    va_list ap;
 
     pthread_mutex_lock(&log_lock);
     if ((int)level <= threshold()) {
-        va_start(ap, fmt);
         vsnprintf(msg, sizeof(msg), fmt, ap);
-        va_end(ap);
-        emit(level, subsys, NULL, msg);
+        emit(level, subsys, printer, msg);
     }
     pthread_mutex_unlock(&log_lock);
+}
+
+void
+log_msg(enum log_level level, const char *subsys, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vlog(level, subsys, NULL, fmt, ap);
+    va_end(ap);
+}
+
+void
+log_printer_each(enum log_level level, const char *printer, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vlog(level, "printer", printer, fmt, ap);
+    va_end(ap);
 }
 
 static uint64_t

@@ -40,6 +40,11 @@ void log_msg(enum log_level level, const char *subsys, const char *fmt, ...)
 void log_printer(enum log_level level, const char *printer, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 
+/* As log_printer, every line printed, never folded as a repeat: for events
+   each of which matters (who sent which manual command). */
+void log_printer_each(enum log_level level, const char *printer, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
 #define log_error(subsys, ...) log_msg(LOG_ERROR, subsys, __VA_ARGS__)
 #define log_warn(subsys, ...)  log_msg(LOG_WARN, subsys, __VA_ARGS__)
 #define log_info(subsys, ...)  log_msg(LOG_INFO, subsys, __VA_ARGS__)

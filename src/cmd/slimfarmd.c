@@ -2,7 +2,8 @@
  * slimfarmd.c - the farm daemon: config, job store, event loop, worker
  * pool, printers, REST API, signals.
  *
- *     slimfarmd [-c CONFIG] [--check | --fsck]
+ *     slimfarmd [-c CONFIG] [--check | --fsck] [--allow-readable-config]
+ *               [--session-idle SECONDS] [--session-max SECONDS]
  *
  * Why it is small: every part is a module (farmcfg, store, farm, api,
  * loop, pool); main() only builds them in dependency order, wires the
@@ -11,13 +12,26 @@
  * config and applies it (keys, printers) without disturbing running
  * prints, keeping the old config if the new one is invalid.
  *
+ * Files: the daemon runs with umask 077, and the store keeps its data dir
+ * for its owner (0700, files 0600); a config holding keys that other users
+ * can read is refused (its keys are as good as published), unless
+ * --allow-readable-config, which warns instead.  The data dir's "instance"
+ * file holds this daemon's random id, which names its session cookie.
+ *
  * Thread: main is the loop thread; the pool's workers run prepare work.
  */
+#include <errno.h>
+#include <fcntl.h>
 #include <signal.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+#include <sys/random.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "../../drivers/drv.h"
+#include "../../drivers/drv_link.h"
 #include "../api/api.h"
 #include "../api/http_loop.h"
 #include "../base/log.h"
@@ -138,23 +152,120 @@ run_fsck(struct farmcfg *cfg)
     return status;
 }
 
+/* The config holds something secret: API keys, or a printer's key or password. */
+static bool
+holds_secrets(const struct farmcfg *cfg)
+{
+    if (cfg->n_keys)
+        return true;
+    for (size_t i = 0; i < cfg->n_printers; i++) {
+        const struct drv_link *l = &cfg->printers[i].link;
+        for (size_t j = 0; j < l->n; j++)
+            if ((l->v[j].opt->flags & DRV_OPT_SECRET) && l->text[l->v[j].at])
+                return true;
+    }
+    return false;
+}
+
+/* A config holding secrets that group or others can read: refused (1,
+   with the message on stderr), or with allow a loud warning (0). */
+static int
+check_config_mode(const char *path, const struct farmcfg *cfg, bool allow)
+{
+    struct stat st;
+    if (!holds_secrets(cfg) || stat(path, &st) != 0 || !(st.st_mode & 044))
+        return 0;
+    if (allow) {
+        log_warn("slimfarmd",
+                 "WARNING: %s holds API keys or printer passwords and is readable by other users "
+                 "(mode %04o); running anyway (--allow-readable-config). Fix: chmod 600 %s",
+                 path, (unsigned)(st.st_mode & 07777), path);
+        return 0;
+    }
+    fprintf(stderr,
+            "slimfarmd: %s holds API keys or printer passwords and is readable by other users "
+            "(mode %04o): refusing to start.  Fix: chmod 600 %s (or run with "
+            "--allow-readable-config)\n",
+            path, (unsigned)(st.st_mode & 07777), path);
+    return 1;
+}
+
+/* DATA_DIR/instance: this daemon's random id (16 hex digits, made on first
+   start, 0600), which names its session cookie. */
+static int
+instance_id(const char *data_dir, char id[17], struct sf_err *err)
+{
+    char path[1100];
+    snprintf(path, sizeof(path), "%s/instance", data_dir);
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd >= 0) {
+        ssize_t n = read(fd, id, 16);
+        close(fd);
+        id[n > 0 ? n : 0] = '\0';
+        if (n == 16 && strspn(id, "0123456789abcdef") == 16)
+            return SF_OK;
+        log_warn("slimfarmd", "%s is not an instance id: making a new one", path);
+        unlink(path);
+    } else if (errno != ENOENT) {
+        return sf_err_sys(err, "cannot read '%s'", path);
+    }
+    unsigned char rnd[8];
+    if (getrandom(rnd, sizeof(rnd), 0) != (ssize_t)sizeof(rnd))
+        return sf_err_sys(err, "no random bytes for an instance id");
+    for (size_t i = 0; i < sizeof(rnd); i++)
+        snprintf(id + 2 * i, 3, "%02x", rnd[i]);
+    fd = open(path, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+    if (fd < 0 || write(fd, id, 16) != 16 || fsync(fd) != 0) {
+        int rc = sf_err_sys(err, "cannot write '%s'", path);
+        if (fd >= 0)
+            close(fd);
+        return rc;
+    }
+    close(fd);
+    return SF_OK;
+}
+
 /* The usage on f; 0 when asked for (stdout), 2 after a usage error (stderr). */
 static int
 usage(FILE *f)
 {
-    fprintf(f, "usage: slimfarmd [-c CONFIG] [--check | --fsck]\n"
+    fprintf(f, "usage: slimfarmd [-c CONFIG] [--check | --fsck] [--allow-readable-config]\n"
+               "                 [--session-idle SECONDS] [--session-max SECONDS]\n"
                "  -c CONFIG  farm config (default config/farm.ini)\n"
                "  --check    validate the config and exit\n"
                "  --fsck     recover and check the job store, then exit\n"
+               "  --allow-readable-config\n"
+               "             start even though CONFIG holds keys other users can read\n"
+               "             (warns; without it such a config is refused: chmod 600 it)\n"
+               "  --session-idle SECONDS\n"
+               "             a dashboard session unused this long ends (default 28800: 8 h)\n"
+               "  --session-max SECONDS\n"
+               "             a dashboard session ends this long after log in, used or not\n"
+               "             (default 604800: 7 days)\n"
                "  -h, --help show this and exit\n");
     return f == stdout ? 0 : 2;
+}
+
+/* A whole number of seconds, 1 .. 10 years; false if not. */
+static bool
+seconds_arg(const char *s, int64_t *ms)
+{
+    char *end;
+    errno = 0;
+    long long v = strtoll(s, &end, 10);
+    if (errno || end == s || *end || v < 1 || v > 10LL * 365 * 86400)
+        return false;
+    *ms = v * 1000;
+    return true;
 }
 
 int
 main(int argc, char **argv)
 {
     struct daemon d = { .config_path = "config/farm.ini" };
-    bool check = false, fsck = false;
+    bool check = false, fsck = false, allow_readable = false;
+    int64_t idle_ms = 0, max_ms = 0;
+    umask(077); /* the data dir and all in it are the farm's alone */
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "-c") == 0 && i + 1 < argc)
             d.config_path = argv[++i];
@@ -162,6 +273,14 @@ main(int argc, char **argv)
             check = true;
         else if (strcmp(argv[i], "--fsck") == 0)
             fsck = true;
+        else if (strcmp(argv[i], "--allow-readable-config") == 0)
+            allow_readable = true;
+        else if (strcmp(argv[i], "--session-idle") == 0 && i + 1 < argc &&
+                 seconds_arg(argv[i + 1], &idle_ms))
+            i++;
+        else if (strcmp(argv[i], "--session-max") == 0 && i + 1 < argc &&
+                 seconds_arg(argv[i + 1], &max_ms))
+            i++;
         else if (strcmp(argv[i], "-h") == 0 || strcmp(argv[i], "--help") == 0)
             return usage(stdout);
         else
@@ -172,6 +291,10 @@ main(int argc, char **argv)
     farmcfg_init(&d.cfg);
     if (farmcfg_load(&d.cfg, d.config_path, &err)) {
         fprintf(stderr, "slimfarmd: %s\n", err.msg);
+        return 1;
+    }
+    if (check_config_mode(d.config_path, &d.cfg, allow_readable)) {
+        farmcfg_release(&d.cfg);
         return 1;
     }
     if (check) {
@@ -187,6 +310,9 @@ main(int argc, char **argv)
     struct store_recovery rec;
     if (!(d.l = loop_new(&err)) || !(d.s = store_open(d.cfg.data_dir, &rec, &err)) ||
         !(d.pool = pool_new(d.l, 0, &err)))
+        goto out;
+    char instance[17];
+    if (instance_id(d.cfg.data_dir, instance, &err))
         goto out;
     par_share(pool_size(d.pool)); /* the prepare workers divide the cores (base/par.h) */
     if (rec.interrupted || rec.requeued)
@@ -208,7 +334,10 @@ main(int argc, char **argv)
                              .upload_max = d.cfg.upload_max_bytes,
                              .pool = d.pool,
                              .on_change = on_api_change,
-                             .ud = &d };
+                             .ud = &d,
+                             .instance = instance,
+                             .session_idle_ms = idle_ms,
+                             .session_max_ms = max_ms };
     if (!(d.api = api_new(&ac, &err)) || !(d.hl = http_loop_attach(d.l, api_http(d.api), &err)))
         goto out;
     d.tick = loop_timer_add(d.l, API_TICK_MS, on_tick, &d);

@@ -714,8 +714,8 @@ farm_printer_command(struct farm *f, const char *name, const char *line, const c
         return sf_err_set(err, SF_EINVAL, "manual command on '%.64s': %s refused: %s", name, v.cmd,
                           v.why);
     case GPOLICY_REWRITE:
-        log_printer(LOG_INFO, name, "manual command '%.80s' sent as '%.80s' (%s)", line, v.line,
-                    v.why);
+        log_printer_each(LOG_INFO, name, "manual command '%.80s' from %s sent as '%.80s' (%s)",
+                         line, who && who[0] ? who : "?", v.line, v.why);
         return printer_command(p, v.line, who, err);
     case GPOLICY_PASS:
         break;

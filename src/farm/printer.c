@@ -816,7 +816,10 @@ note(struct printer *p, const char *kind, const char *fmt, const char *a, const 
     struct sf_err err;
     char what[192];
     snprintf(what, sizeof(what), fmt, a, b);
-    log_printer(LOG_INFO, p->cfg.name, "%s", what);
+    if (strcmp(kind, "printer-command") == 0) /* each one, never folded as a repeat */
+        log_printer_each(LOG_INFO, p->cfg.name, "%s", what);
+    else
+        log_printer(LOG_INFO, p->cfg.name, "%s", what);
     if (store_printer_note(p->env.s, p->cfg.name, kind, what, &err))
         log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
 }

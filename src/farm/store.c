@@ -24,6 +24,7 @@
 #include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <ftw.h>
 #include <limits.h>
 #include <sqlite3.h>
 #include <stdio.h>
@@ -392,13 +393,54 @@ mkdir_p(const char *path, struct sf_err *err)
         if (*p == '/' || *p == '\0') {
             char c = *p;
             *p = '\0';
-            if (mkdir(tmp, 0755) != 0 && errno != EEXIST)
+            if (mkdir(tmp, 0700) != 0 && errno != EEXIST)
                 return sf_err_sys(err, "store: cannot create '%s'", tmp);
             *p = c;
             if (!c)
                 break;
         }
     }
+    return SF_OK;
+}
+
+/* nftw's callback can take no argument: the count of fix_modes' walk. */
+static int n_fixed;
+
+static int
+fix_one(const char *path, const struct stat *st, int flag, struct FTW *ftw)
+{
+    (void)ftw;
+    if ((flag == FTW_F || flag == FTW_D) && (st->st_mode & 077) &&
+        chmod(path, (st->st_mode & 0700) | (flag == FTW_D ? 0700 : 0600)) == 0)
+        n_fixed++;
+    return 0;
+}
+
+/* The data dir and everything in it for its owner alone (0700 folders,
+   0600 files: jobs, G-code, the database and its WAL say what the farm
+   prints and hold no one else's business); a dir made before this rule,
+   or by hand, is fixed here and the log says so. */
+static void
+fix_modes(const char *data_dir)
+{
+    n_fixed = 0;
+    nftw(data_dir, fix_one, 16, FTW_PHYS);
+    if (n_fixed)
+        log_warn("store",
+                 "data dir '%s': %d files and folders were open to other users; now "
+                 "0600 files, 0700 folders",
+                 data_dir, n_fixed);
+}
+
+/* Create the database file 0600 before SQLite does (0644 by default); its
+   WAL and SHM files take its mode. */
+static int
+create_private(const char *path, struct sf_err *err)
+{
+    int fd = open(path, O_RDWR | O_CREAT | O_CLOEXEC, 0600);
+    if (fd < 0)
+        return sf_err_sys(err, "store: cannot create '%s'", path);
+    close(fd);
     return SF_OK;
 }
 
@@ -444,8 +486,11 @@ store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
     snprintf(path, sizeof(path), "%s/files", data_dir);
     if (mkdir_p(path, err) || lock_dir(s, err))
         goto fail;
+    fix_modes(data_dir);
     sweep_tmp(path);
     snprintf(path, sizeof(path), "%s/slimfarm.db", data_dir);
+    if (create_private(path, err))
+        goto fail;
     if (sqlite3_open_v2(path, &s->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, NULL) !=
         SQLITE_OK) {
         sf_err_set(err, SF_EIO, "store: cannot open '%s': %s", path,

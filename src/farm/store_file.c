@@ -136,7 +136,7 @@ place_file(const struct store *s, int fd, const char *from, const char *sha, str
     char dir[STORE_PATH_MAX + 16], path[STORE_PATH_MAX + 96];
     snprintf(dir, sizeof(dir), "%s/files/%.2s", s->dir, sha);
     snprintf(path, sizeof(path), "%s/%s", dir, sha);
-    if (mkdir(dir, 0755) != 0 && errno != EEXIST)
+    if (mkdir(dir, 0700) != 0 && errno != EEXIST)
         return sf_err_sys(err, "store: cannot create '%s'", dir);
     if (rename(from, path) != 0)
         return sf_err_sys(err, "store: cannot move '%s' to '%s'", from, path);

@@ -77,6 +77,12 @@ async function waitCard(page, name, state) {
 
 async function login(page, key) {
   await page.goto(URL + "/");
+  await logIn(page, key);
+}
+
+// Fill the login form the page shows (no reload).
+async function logIn(page, key) {
+  await page.waitForSelector("#login:not([hidden])", { timeout: 60000 });
   await page.getByLabel("API key").fill(key);
   await page.getByRole("button", { name: "Log in" }).click();
   await page.waitForSelector("#app:not([hidden]) article.printer", { timeout: 60000 });
@@ -274,8 +280,20 @@ async function run() {
   await page.waitForSelector(`#finished tr[data-job="${j2}"][data-state="done"]`, { state: "attached", timeout: LONG });
   check(await page.evaluate(() => window.__sentinel === "no reload"), "the page was reloaded");
 
-  log("a read-only key shows the dashboard without buttons");
-  const ro = await ctx.newPage();
+  log("a new tab of the same browser is logged in by its session cookie");
+  const tab = await ctx.newPage();
+  watch(tab);
+  await tab.goto(URL + "/");
+  await tab.waitForSelector("#app:not([hidden]) article.printer", { timeout: 60000 });
+  check((await tab.locator("#who").innerText()) === "operator key", "the new tab is not the operator's");
+  check(await tab.evaluate(() => sessionStorage.length === 0 && localStorage.length === 0),
+    "the page keeps something in storage (the key?)");
+  await tab.close();
+
+  log("a read-only key (another browser) shows the dashboard without buttons");
+  const other = await chromium.launch({ executablePath: "/usr/bin/chromium", headless: true,
+    args: ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run"] });
+  const ro = await (await other.newContext({ viewport: { width: 1280, height: 800 } })).newPage();
   watch(ro);
   await login(ro, RO);
   await ro.waitForSelector("#who", { state: "visible" });
@@ -287,9 +305,9 @@ async function run() {
   await ro.goto(URL + `/#job/${j1}`);
   await ro.waitForSelector(`#view-job[data-job="${j1}"][data-state="done"]`, { timeout: 60000 });
   check((await ro.locator("button:visible").count()) === 1, "read-only job page has buttons");
-  await ro.close();
+  await other.close();
 
-  log("the daemon is killed mid-print: the page says the connection is lost, then recovers");
+  log("the daemon is killed mid-print: the page says the connection is lost, asks for the key again, recovers");
   const j3 = await submitForm(page, { file: `${PARTS}/frame.stl`, method: "none", target: "printer:mini" });
   await page.getByRole("link", { name: "back to the farm" }).click();
   await until(async () => {
@@ -302,6 +320,8 @@ async function run() {
   const out = fs.openSync(env("SF_LOG"), "a");
   const d = await startDaemon(out);
   fs.writeFileSync(env("SF_PIDFILE"), String(d.pid));
+  // sessions live in the daemon's memory: a restarted one asks for the key
+  await logIn(page, RW);
   await page.waitForSelector("#banner[hidden]", { state: "attached", timeout: LONG });
   await page.waitForSelector("#conn.live", { timeout: LONG });
   check(await page.evaluate(() => window.__sentinel === "no reload"), "the page was reloaded");
@@ -317,6 +337,13 @@ async function run() {
   check(prints.length === 2 && prints[0][0] === "interrupted" && prints[1][0] === "done" && prints[1][1] > 0,
     "print history after the resume: " + JSON.stringify(prints));
   check(await page.evaluate(() => window.__sentinel === "no reload"), "the page was reloaded");
+
+  log("Log out ends the session on the daemon, not only in the page");
+  await page.getByRole("button", { name: "Log out" }).click();
+  await page.waitForSelector("#login:not([hidden])", { timeout: 60000 });
+  check(await page.evaluate(async () => (await fetch("/api/jobs")).status === 401),
+    "the session still reads after Log out");
+  check((await ctx.cookies()).every((c) => !c.name.startsWith("sf_session")), "the cookie is still there");
 
   check(problems.length === 0, "browser reported: " + problems.join("; "));
   log("ok");

@@ -12,6 +12,7 @@
 # Skips (passes, saying so) when chromium or node is absent: `make check`
 # installs both.
 set -u
+umask 077 # slimfarmd refuses a config holding keys that others can read
 BUILD=${BUILD:-build/san}
 here=$(cd "$(dirname "$0")" && pwd)
 if [ ! -x /usr/bin/chromium ] || ! command -v node > /dev/null ||

@@ -3,8 +3,9 @@
  * client; the API, a store and a one-thread pool on a server thread that
  * stands in for the loop): static files without a key but nothing else,
  * their ETag/304, CSP and types; /api/whoami and its session cookie, which
- * authorizes GETs only; the part pictures (rendered on the pool, cached,
- * 304 by ETag) with the support model's grams in /report; G-code serving.
+ * authorizes GETs, and changes only with its CSRF token; a new tab's
+ * session by its cookie, log out, and the per-key session quota; the part pictures (rendered on the
+ * pool, cached, 304 by ETag) with the support model's grams in /report; G-code serving.
  */
 #include <curl/curl.h>
 #include <poll.h>
@@ -215,14 +216,15 @@ T_CASE(web_static_files_need_no_key_and_say_what_they_are)
     T_EQ_INT(call("GET", "/api/jobs", NULL, NULL, NULL, &b, &h), 401);
     T_EQ_INT(call("GET", "/secret.html", NULL, NULL, NULL, &b, &h), 401);
     T_EQ_INT(call("GET", "/../etc/passwd", NULL, NULL, NULL, &b, &h), 401);
-    T_EQ_INT(call("POST", "/", NULL, NULL, NULL, &b, &h), 401);
+    /* a static file takes GET/HEAD only, key or not */
+    T_EQ_INT(call("POST", "/", NULL, NULL, NULL, &b, &h), 405);
     T_EQ_INT(call("POST", "/", KEY_RW, NULL, NULL, &b, &h), 405);
     buf_release(&b);
     buf_release(&h);
     stop();
 }
 
-/* "sf_session=TOKEN" from a whoami reply's Set-Cookie into out. */
+/* "sf_session_ID=TOKEN" from a whoami reply's Set-Cookie into out. */
 static const char *
 session_of(const struct buf *head, char *out, size_t cap)
 {
@@ -232,20 +234,51 @@ session_of(const struct buf *head, char *out, size_t cap)
     return v[0] ? out : NULL;
 }
 
-T_CASE(web_session_cookie_stands_for_its_key_on_gets_only)
+/* The "X-Csrf-Token: T" header line for the "csrf" of a whoami reply, into out. */
+static const char *
+csrf_of(const struct buf *body, char *out, size_t cap)
+{
+    const char *p = body->data ? strstr(body->data, "\"csrf\":\"") : NULL;
+    out[0] = '\0';
+    if (p)
+        snprintf(out, cap, "X-Csrf-Token: %.*s", (int)strcspn(p + 8, "\""), p + 8);
+    return out;
+}
+
+/* The start of a case: its server (named name) and its buffers. */
+static int
+begin(const char *name, struct buf *b, struct buf *h, struct sf_err *err)
+{
+    buf_init(b, 0);
+    buf_init(h, 0);
+    return start(name, err);
+}
+
+/* The end of a case: its buffers and its server. */
+static void
+finish(struct buf *b, struct buf *h)
+{
+    buf_release(b);
+    buf_release(h);
+    stop();
+}
+
+T_CASE(web_session_cookie_stands_for_its_key_and_changes_only_with_its_csrf)
 {
     struct sf_err err;
-    T_OK(start("session", &err), &err);
     struct buf b, h;
-    buf_init(&b, 0);
-    buf_init(&h, 0);
-    char v[256], rw[128], ro[128];
+    T_OK(begin("session", &b, &h, &err), &err);
+    char v[256], rw[128], ro[128], csrf[96], bad[128];
     T_EQ_INT(call("GET", "/api/whoami", NULL, NULL, NULL, &b, &h), 401);
     T_EQ_INT(call("GET", "/api/whoami", KEY_RW, NULL, NULL, &b, &h), 200);
     T_TRUE(strstr(b.data, "\"read_only\":false") != NULL);
+    csrf_of(&b, csrf, sizeof(csrf));
+    T_EQ_INT(strlen(csrf), strlen("X-Csrf-Token: ") + 32);
     header(&h, "Set-Cookie", v, sizeof(v));
     T_TRUE(strstr(v, "HttpOnly") != NULL && strstr(v, "SameSite=Strict") != NULL);
-    T_TRUE(strstr(v, KEY_RW) == NULL); /* a token, not the key */
+    T_TRUE(strstr(v, "Path=/;") != NULL);
+    T_TRUE(strncmp(v, "sf_session_", 11) == 0); /* named after this daemon */
+    T_TRUE(strstr(v, KEY_RW) == NULL);          /* a token, not the key */
     T_TRUE(session_of(&h, rw, sizeof(rw)) != NULL);
     T_EQ_INT(call("GET", "/api/whoami", KEY_RO, NULL, NULL, &b, &h), 200);
     T_TRUE(strstr(b.data, "\"read_only\":true") != NULL);
@@ -255,19 +288,71 @@ T_CASE(web_session_cookie_stands_for_its_key_on_gets_only)
     T_TRUE(strstr(b.data, "tetra.stl") != NULL);
     T_EQ_INT(call("GET", "/api/whoami", NULL, ro, NULL, &b, &h), 200);
     T_TRUE(strstr(b.data, "\"read_only\":true") != NULL);
-    /* ...but never changes anything: that takes the key in a header */
+    /* ...and changes things only with its CSRF token, which no other page can read */
     char path[64];
     snprintf(path, sizeof(path), "/api/jobs/%lld/cancel", (long long)srv.job);
     T_EQ_INT(call("POST", path, NULL, rw, NULL, &b, &h), 401);
-    T_TRUE(strstr(b.data, "serves GET only") != NULL);
+    T_TRUE(strstr(b.data, "X-Csrf-Token") != NULL);
+    T_EQ_INT(call("POST", path, NULL, rw, "X-Csrf-Token: 0123456789abcdef0123456789abcdef", &b, &h),
+             401);
+    T_EQ_INT(call("POST", path, NULL, ro, csrf, &b, &h), 401); /* another session's token */
+    T_EQ_INT(call("POST", path, NULL, rw, csrf, &b, &h), 200);
+    /* a token this daemon never made, under its cookie name */
+    snprintf(bad, sizeof(bad), "%.*s=0123456789abcdef0123456789abcdef", (int)strcspn(rw, "="), rw);
+    T_EQ_INT(call("GET", "/api/jobs", NULL, bad, NULL, &b, &h), 401);
+    T_TRUE(strstr(b.data, "session expired") != NULL);
+    /* the old name means nothing */
     T_EQ_INT(
         call("GET", "/api/jobs", NULL, "sf_session=0123456789abcdef0123456789abcdef", NULL, &b, &h),
         401);
-    T_TRUE(strstr(b.data, "session expired") != NULL);
-    T_EQ_INT(call("POST", path, KEY_RW, NULL, NULL, &b, &h), 200);
-    buf_release(&b);
-    buf_release(&h);
-    stop();
+    finish(&b, &h);
+}
+
+T_CASE(web_new_tab_gets_the_session_by_its_cookie_and_log_out_ends_it)
+{
+    struct sf_err err;
+    struct buf b, h;
+    T_OK(begin("logout", &b, &h, &err), &err);
+    char v[256], rw[128], csrf[96], csrf2[96];
+    T_EQ_INT(call("GET", "/api/whoami", KEY_RW, NULL, NULL, &b, &h), 200);
+    T_TRUE(session_of(&h, rw, sizeof(rw)) != NULL);
+    csrf_of(&b, csrf, sizeof(csrf));
+    /* a new tab: the cookie alone, no key; the same session, no new cookie */
+    T_EQ_INT(call("GET", "/api/whoami", NULL, rw, NULL, &b, &h), 200);
+    T_EQ_STR(csrf_of(&b, csrf2, sizeof(csrf2)), csrf);
+    T_EQ_STR(header(&h, "Set-Cookie", v, sizeof(v)), "");
+    /* log out needs the CSRF token too (no other page may log us out) */
+    T_EQ_INT(call("POST", "/api/logout", NULL, rw, NULL, &b, &h), 403);
+    T_EQ_INT(call("GET", "/api/jobs", NULL, rw, NULL, &b, &h), 200);
+    T_EQ_INT(call("POST", "/api/logout", NULL, rw, csrf, &b, &h), 200);
+    T_TRUE(strstr(b.data, "\"ended\":true") != NULL);
+    header(&h, "Set-Cookie", v, sizeof(v));
+    T_TRUE(strstr(v, "Max-Age=0") != NULL); /* the browser drops it */
+    /* the token is dead on the daemon, whoever still holds it */
+    T_EQ_INT(call("GET", "/api/jobs", NULL, rw, NULL, &b, &h), 401);
+    T_EQ_INT(call("GET", "/api/whoami", NULL, rw, NULL, &b, &h), 401);
+    T_EQ_INT(call("POST", "/api/logout", NULL, rw, csrf, &b, &h), 200);
+    T_TRUE(strstr(b.data, "\"ended\":false") != NULL);
+    finish(&b, &h);
+}
+
+T_CASE(web_read_only_logins_never_evict_another_keys_session)
+{
+    struct sf_err err;
+    struct buf b, h;
+    T_OK(begin("evict", &b, &h, &err), &err);
+    char rw[128], first_ro[128], last_ro[128];
+    T_EQ_INT(call("GET", "/api/whoami", KEY_RW, NULL, NULL, &b, &h), 200);
+    T_TRUE(session_of(&h, rw, sizeof(rw)) != NULL);
+    /* 64 logins used to evict every session; a key now evicts only its own */
+    for (int i = 0; i < 200; i++) {
+        T_EQ_INT(call("GET", "/api/whoami", KEY_RO, NULL, NULL, &b, &h), 200);
+        T_TRUE(session_of(&h, i ? last_ro : first_ro, sizeof(rw)) != NULL);
+    }
+    T_EQ_INT(call("GET", "/api/jobs", NULL, rw, NULL, &b, &h), 200);
+    T_EQ_INT(call("GET", "/api/jobs", NULL, last_ro, NULL, &b, &h), 200);
+    T_EQ_INT(call("GET", "/api/jobs", NULL, first_ro, NULL, &b, &h), 401); /* its own oldest */
+    finish(&b, &h);
 }
 
 T_CASE(web_part_pictures_render_on_the_pool_and_revalidate)

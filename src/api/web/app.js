@@ -1,22 +1,26 @@
 // slimfarm dashboard: plain JS, no build step, served from the daemon.
 //
-// The API key is asked once and kept in sessionStorage (never in a URL);
-// every fetch sends it as X-Api-Key.  GET /api/whoami also sets an
-// HttpOnly session cookie, because EventSource and <img> cannot send
-// headers: the event stream and the pictures use it.  Live state comes
-// from /api/events (Server-Sent Events); each event refetches what it
-// touched, so the page never reloads.  A lost stream shows a banner;
-// EventSource reconnects by itself, and when the stream was refused (the
-// daemon restarted and forgot the session) the page logs in again with
-// the stored key.
+// Log in: the API key is sent once, as X-Api-Key on GET /api/whoami, which
+// makes a session on the daemon and sets its HttpOnly cookie; the page
+// keeps only the session's CSRF token (in memory), never the key.  GETs
+// (fetch, EventSource, <img>) go by the cookie; a change also sends the
+// CSRF token as X-Csrf-Token.  A new tab of the same browser has the
+// cookie: GET /api/whoami by the cookie alone gives it the CSRF token, so
+// it is logged in too.  "Log out" ends the session on the daemon (POST
+// /api/logout), which clears the cookie.  A session that ended (expired,
+// logged out elsewhere, a restarted daemon) brings back the login form.
+// Live state comes from /api/events (Server-Sent Events); each event
+// refetches what it touched, so the page never reloads.  A lost stream
+// shows a banner; EventSource reconnects by itself, and when the stream
+// was refused the page checks its session and opens a new stream.
 "use strict";
 
 const $ = (sel, root) => (root || document).querySelector(sel);
-const KEY = "slimfarm.key";
+const KEY = "slimfarm.key"; // where older pages kept the key: removed on load
 const HIST = 120; // temperature samples kept per printer (about 10 minutes)
 
 const st = {
-  key: sessionStorage.getItem(KEY) || "",
+  csrf: "", // the session's CSRF token; "" when logged out
   readOnly: true,
   printers: new Map(), // name -> printer JSON
   jobs: new Map(), // id -> job JSON
@@ -56,10 +60,11 @@ class HttpError extends Error {
 
 async function api(path, opts) {
   opts = opts || {};
-  const headers = Object.assign({ "X-Api-Key": st.key }, opts.headers || {});
+  const headers = Object.assign({}, opts.headers || {});
+  if (opts.method && opts.method !== "GET" && opts.method !== "HEAD") headers["X-Csrf-Token"] = st.csrf;
   const r = await fetch(path, Object.assign({}, opts, { headers, credentials: "same-origin" }));
   if (r.status === 401) {
-    logout("The key was refused: log in again.");
+    if (!opts.quiet) loggedOut(st.csrf ? "Your session ended: log in again." : "The key was refused.");
     throw new HttpError(401, "unauthorized");
   }
   const text = await r.text();
@@ -92,10 +97,12 @@ function act(fn) {
 
 // ---- login ----
 
+// key: log in with it; none: the session this browser has (a new tab).
 async function login(key) {
-  st.key = key;
-  const who = await api("/api/whoami");
-  sessionStorage.setItem(KEY, key);
+  const who = key
+    ? await api("/api/whoami", { headers: { "X-Api-Key": key } })
+    : await api("/api/whoami", { quiet: true });
+  st.csrf = who.csrf;
   st.readOnly = !!who.read_only;
   document.body.classList.toggle("ro", st.readOnly);
   $("#who").textContent = st.readOnly ? "read-only key" : "operator key";
@@ -107,9 +114,9 @@ async function login(key) {
   route();
 }
 
-function logout(msg) {
-  sessionStorage.removeItem(KEY);
-  st.key = "";
+// The session is over (or never was): show the login form.
+function loggedOut(msg) {
+  st.csrf = "";
   if (st.es) st.es.close();
   st.es = null;
   clearInterval(st.tempTimer);
@@ -120,6 +127,16 @@ function logout(msg) {
   setConn("offline", "");
   $("#login-error").textContent = msg || "";
   $("#key").focus();
+}
+
+// "Log out": end the session on the daemon (it clears the cookie), then here.
+async function logout() {
+  try {
+    await api("/api/logout", { method: "POST", quiet: true });
+  } catch (e) {
+    // the session had ended already, or the daemon is gone: nothing to end
+  }
+  loggedOut("");
 }
 
 // ---- live updates ----
@@ -149,11 +166,11 @@ function connect() {
     $("#banner").hidden = false;
     setConn("reconnecting", "lost");
     if (es.readyState === EventSource.CLOSED) {
-      // refused (401 after a daemon restart) or not an event stream: log
-      // in again with the stored key and open a new stream
+      // refused (401: the session ended) or not an event stream: check
+      // the session (a 401 brings back the login form), open a new stream
       es.close();
       setTimeout(async () => {
-        if (st.es !== es || !st.key) return;
+        if (st.es !== es || !st.csrf) return;
         try {
           await api("/api/whoami");
           connect();
@@ -593,7 +610,7 @@ async function loadLayers(j) {
   if (layerData && layerData.sha === j.gcode_sha) return;
   layerData = { sha: j.gcode_sha, layers: [] };
   msg.textContent = "Loading the G-code…";
-  const r = await fetch(`/api/jobs/${j.id}/gcode`, { headers: { "X-Api-Key": st.key } });
+  const r = await fetch(`/api/jobs/${j.id}/gcode`, { credentials: "same-origin" });
   if (!r.ok) { msg.textContent = "Could not load the G-code: " + r.status; return; }
   layerData = parseGcode(await r.text(), j.gcode_sha);
   const n = layerData.layers.length;
@@ -710,13 +727,13 @@ document.addEventListener("DOMContentLoaded", () => {
       if (err.status !== 401) $("#login-error").textContent = err.message;
     }
   });
-  $("#logout").addEventListener("click", () => logout(""));
+  $("#logout").addEventListener("click", () => logout());
   $("#layer").addEventListener("input", drawLayer);
   // the support model's numbers come with the pictures
   for (const img of ["#pic-before", "#pic-after"])
     $(img).addEventListener("load", () => jobShown && renderJob(jobShown, false));
   window.addEventListener("hashchange", route);
   setupSubmit();
-  if (st.key) login(st.key).catch(() => logout(""));
-  else logout("");
+  sessionStorage.removeItem(KEY);
+  login("").catch(() => loggedOut(""));
 });
