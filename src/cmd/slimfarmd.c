@@ -207,6 +207,7 @@ main(int argc, char **argv)
                              .n_keys = d.cfg.n_keys,
                              .upload_max = d.cfg.upload_max_bytes,
                              .pool = d.pool,
+                             .loop = d.l,
                              .on_change = on_api_change,
                              .ud = &d };
     if (!(d.api = api_new(&ac, &err)) || !(d.hl = http_loop_attach(d.l, api_http(d.api), &err)))

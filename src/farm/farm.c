@@ -375,7 +375,8 @@ run(struct loop *l, void *ud)
     struct sf_err err;
     struct job_row *jobs;
     size_t n;
-    if (store_job_list(f->s, &jobs, &n, &err)) {
+    /* the live jobs only: the scheduler never reads history (store.h) */
+    if (store_job_live(f->s, &jobs, &n, &err)) {
         log_error("farm", "%s", err.msg);
         return;
     }
