@@ -721,6 +721,19 @@ web_wake(void *ud)
     http_wake_streams(a->http);
 }
 
+/* A read's answer is in: let MHD send it now, and re-arm its timer (MHD then
+   watches the connection for the next request on it; without the re-arm a
+   keep-alive client's next request waited for the 5 s tick). */
+static void
+reads_answered(void *ud)
+{
+    struct api *a = ud;
+    if (a->cfg.kick)
+        a->cfg.kick(a->cfg.ud);
+    else
+        http_run(a->http);
+}
+
 struct api *
 api_new(const struct api_config *cfg, struct sf_err *err)
 {
@@ -750,7 +763,7 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                               .is_public = is_public,
                               .session_key = session_key };
     struct web_config wc = { .store = cfg->store, .pool = cfg->pool, .wake = web_wake, .ud = a };
-    a->reads = api_read_new(cfg->loop, cfg->store, err);
+    a->reads = api_read_new(cfg->loop, cfg->store, reads_answered, a, err);
     a->slicers.reads = a->reads;
     a->web = a->reads ? web_new(&wc, err) : NULL;
     size_t n_compat, n_web;

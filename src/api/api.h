@@ -73,6 +73,8 @@ struct api_config {
     struct loop *loop;           /* the loop thread's, for the store reads off it (api_read.h);
                                     NULL: reads run on the caller's thread */
     void (*on_change)(void *ud); /* a job was added or changed (run the scheduler) */
+    void (*kick)(void *ud);      /* run the server now and re-arm its timer (http_loop_kick),
+                                    after a deferred answer; NULL: http_run alone */
     void *ud;                    /* its argument */
 };
 

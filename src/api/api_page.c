@@ -150,7 +150,7 @@ api_page_parse(const char *query, struct api_page_query *q, struct sf_err *err)
     int64_t cursor = 0;
     for (const char *p = query; p && *p;) {
         size_t n = strcspn(p, "&"), k = strcspn(p, "=&");
-        char key[16], v[VALUE_MAX];
+        char key[64], v[VALUE_MAX];
         if (n == 0) { /* "a&&b" */
             p++;
             continue;

@@ -81,6 +81,15 @@ on_api_change(void *ud)
     farm_kick(d->farm);
 }
 
+/* A deferred answer is in (a read off the loop): send it, and watch for the next request. */
+static void
+on_api_kick(void *ud)
+{
+    struct daemon *d = ud;
+    if (d->hl)
+        http_loop_kick(d->hl);
+}
+
 static void
 on_stop(struct loop *l, int signo, void *ud)
 {
@@ -209,6 +218,7 @@ main(int argc, char **argv)
                              .pool = d.pool,
                              .loop = d.l,
                              .on_change = on_api_change,
+                             .kick = on_api_kick,
                              .ud = &d };
     if (!(d.api = api_new(&ac, &err)) || !(d.hl = http_loop_attach(d.l, api_http(d.api), &err)))
         goto out;
