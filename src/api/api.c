@@ -32,6 +32,8 @@
 #include "../farm/jobctl.h"
 #include "api_compat.h"
 #include "api_json.h"
+#include "api_page.h"
+#include "api_read.h"
 #include "route.h"
 #include "web.h"
 
@@ -43,6 +45,7 @@ struct api {
     struct api_compat_env slicers; /* the slicer-upload routes' view (api_compat.h) */
     struct http *http;             /* the server */
     struct web *web;               /* the dashboard's files, sessions and pictures */
+    struct api_read *reads;        /* store reads off the loop (api_read.h) */
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
     struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
 };
@@ -166,25 +169,42 @@ compat_changed(void *ud)
 
 /* ---- jobs ---- */
 
+/* GET /api/jobs: a page (api_page.h), read on the reader's thread. */
+static void
+read_page(struct store *s, void *ud, struct http_resp *resp)
+{
+    struct sf_err err;
+    size_t len;
+    char *text = api_page_render(s, ud, &len, &err);
+    if (!text) {
+        http_fail(resp, err.code, err.msg);
+        return;
+    }
+    resp->body = text;
+    resp->body_len = len;
+    resp->body_free = free;
+    resp->content_type = "application/json";
+}
+
 static void
 jobs_list(void *ctx, const struct route_args *args, const struct http_req *req,
           struct http_resp *resp)
 {
-    (void)args, (void)req;
+    (void)args;
     struct api *a = ctx;
-    struct job_row *rows;
-    size_t n;
     struct sf_err err;
-    int rc = store_job_list(a->cfg.store, &rows, &n, &err);
-    if (rc) {
-        http_fail(resp, rc, err.msg);
+    struct api_page_query *q = mem_calloc(1, sizeof(*q));
+    if (!q) {
+        http_error(resp, 500, "out of memory");
         return;
     }
-    json_t *arr = json_array();
-    for (size_t i = 0; arr && i < n; i++)
-        json_array_append_new(arr, api_job_json(&rows[i]));
-    free(rows);
-    resp->json = json_pack("{so}", "jobs", arr);
+    if (api_page_parse(req->query, q, &err)) {
+        http_error(resp, 400, "%s", err.msg);
+        free(q);
+        return;
+    }
+    q->f.printer = q->printer; /* q moved to the heap: point into it */
+    api_read_run(a->reads, resp, read_page, NULL, q, free);
 }
 
 static void
@@ -241,20 +261,16 @@ jobs_submit(void *ctx, const struct route_args *args, const struct http_req *req
 
 static void time_left_json(json_t *o, const struct printer_info *p);
 
-/* Job args->id with its print history, or the failure. */
+/* Job id with its print history from s, or the failure (any thread with its s). */
 static void
-job_get(void *ctx, const struct route_args *args, const struct http_req *req,
-        struct http_resp *resp)
+job_read(struct store *s, int64_t id, struct http_resp *resp)
 {
-    (void)req;
-    struct api *a = ctx;
-    int64_t id = args->id;
     struct sf_err err;
     struct job_row j;
     struct print_row *p;
     size_t n;
-    int rc = store_job_get(a->cfg.store, id, &j, &err);
-    if (rc || (rc = store_prints(a->cfg.store, id, &p, &n, &err))) {
+    int rc = store_job_get(s, id, &j, &err);
+    if (rc || (rc = store_prints(s, id, &p, &n, &err))) {
         http_fail(resp, rc, err.msg);
         return;
     }
@@ -262,8 +278,15 @@ job_get(void *ctx, const struct route_args *args, const struct http_req *req,
     for (size_t i = 0; prints && i < n; i++)
         json_array_append_new(prints, api_print_json(&p[i]));
     free(p);
-    json_t *job = api_job_json(&j);
-    /* on a printer: its time left, as GET /api/printers gives it */
+    resp->json = json_pack("{soso}", "job", api_job_json(&j), "prints", prints);
+}
+
+/* On the loop: the time left of the job in resp if it is on a printer, as GET
+   /api/printers gives it. */
+static void
+job_time_left(struct api *a, int64_t id, struct http_resp *resp)
+{
+    json_t *job = json_object_get(resp->json, "job");
     size_t np = a->cfg.farm && job ? farm_printer_count(a->cfg.farm) : 0;
     for (size_t i = 0; i < np; i++) {
         struct printer_info pi;
@@ -273,7 +296,40 @@ job_get(void *ctx, const struct route_args *args, const struct http_req *req,
             break;
         }
     }
-    resp->json = json_pack("{soso}", "job", job, "prints", prints);
+}
+
+/* A GET /api/jobs/ID on its way: the reader reads, the loop adds the printer's part. */
+struct job_ask {
+    struct api *a;
+    int64_t id;
+};
+
+static void
+job_ask_read(struct store *s, void *ud, struct http_resp *resp)
+{
+    job_read(s, ((struct job_ask *)ud)->id, resp);
+}
+
+static void
+job_ask_finish(void *ud, struct http_resp *resp)
+{
+    struct job_ask *q = ud;
+    job_time_left(q->a, q->id, resp);
+}
+
+static void
+job_get(void *ctx, const struct route_args *args, const struct http_req *req,
+        struct http_resp *resp)
+{
+    (void)req;
+    struct api *a = ctx;
+    struct job_ask *q = mem_calloc(1, sizeof(*q));
+    if (!q) {
+        http_error(resp, 500, "out of memory");
+        return;
+    }
+    *q = (struct job_ask){ a, args->id };
+    api_read_run(a->reads, resp, job_ask_read, job_ask_finish, q, free);
 }
 
 /* After a change the farm made (rc SF_OK): the job as it is now. */
@@ -285,7 +341,9 @@ job_changed(struct api *a, const struct route_args *args, int rc, const struct s
         http_fail(resp, rc, err->msg);
         return;
     }
-    job_get(a, args, NULL, resp);
+    /* read at once on the loop: the client waits for its own change */
+    job_read(a->cfg.store, args->id, resp);
+    job_time_left(a, args->id, resp);
     changed(a);
 }
 
@@ -684,7 +742,9 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                              .instance = cfg->instance,
                              .session_idle_ms = cfg->session_idle_ms,
                              .session_max_ms = cfg->session_max_ms };
-    a->web = web_new(&wc, err);
+    a->reads = api_read_new(cfg->loop, cfg->store, NULL, NULL, err);
+    a->slicers.reads = a->reads;
+    a->web = a->reads ? web_new(&wc, err) : NULL;
     hc.session_cookie = a->web ? web_cookie_name(a->web) : NULL;
     size_t n_compat, n_web;
     const struct route *compat = api_compat_routes(&n_compat), *web = web_routes(&n_web);
@@ -694,6 +754,7 @@ api_new(const struct api_config *cfg, struct sf_err *err)
     a->http = a->web ? http_new(&hc, err) : NULL;
     if (!a->http) {
         web_free(a->web);
+        api_read_free(a->reads);
         free(a);
         return NULL;
     }
@@ -707,6 +768,7 @@ api_free(struct api *a)
         return;
     http_free(a->http); /* ends the picture streams before the renders they wait for */
     web_free(a->web);
+    api_read_free(a->reads); /* reads still queued: their requests went with the server */
     free(a);
 }
 

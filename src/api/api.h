@@ -3,7 +3,8 @@
  * store, printers through farm.h, what operators ask of jobs and printers
  * through jobctl.h).
  *
- *   GET    /api/jobs                      list jobs
+ *   GET    /api/jobs                      a page of jobs (api_page.h: limit, cursor,
+ *                                         state, printer, since, until, order)
  *   POST   /api/jobs                      multipart: "file" (the part) and
  *                                         optional "options" (JSON) -> 201
  *   GET    /api/jobs/ID                   one job with its print history
@@ -35,6 +36,11 @@
  * status of a failure code is http_status_of()'s, for every route.  Text a
  * client sent is echoed as valid UTF-8.
  *
+ * Reads of the store a client asks for (GET /api/jobs, /api/jobs/ID and
+ * /metrics) run on a reader thread (api_read.h), never on the loop that
+ * feeds the printers; writes, and the event streams' small indexed reads,
+ * stay on the loop.
+ *
  * Thread: the loop thread (the one driving api_http()).
  */
 #ifndef SF_API_API_H
@@ -64,6 +70,8 @@ struct api_config {
     size_t upload_max;           /* largest upload, bytes */
     unsigned header_timeout_ms;  /* 0: HTTP_HEADER_TIMEOUT_MS (tests shorten it) */
     struct pool *pool;           /* renders the dashboard's pictures (not owned); NULL: none */
+    struct loop *loop;           /* the loop thread's, for the store reads off it (api_read.h);
+                                    NULL: reads run on the caller's thread */
     void (*on_change)(void *ud); /* a job was added or changed (run the scheduler) */
     void *ud;                    /* its argument */
     const char *instance;        /* this daemon's id, names the session cookie; NULL: random */

@@ -28,6 +28,7 @@
 
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "api_read.h"
 #include "metrics.h"
 
 bool
@@ -396,14 +397,18 @@ moon_start(void *ctx, const struct route_args *args, const struct http_req *req,
     select_job(env, job_of(name), resp, true);
 }
 
+/* /metrics: the printers taken on the loop, the store counted on the reader thread. */
+struct scrape {
+    struct metrics_printer *printers;
+    size_t n;
+};
+
 static void
-metrics(void *ctx, const struct route_args *args, const struct http_req *req,
-        struct http_resp *resp)
+scrape_read(struct store *s, void *ud, struct http_resp *resp)
 {
-    (void)args, (void)req;
-    const struct api_compat_env *env = ctx;
+    struct scrape *sc = ud;
     struct sf_err err;
-    char *text = metrics_render(env->store, env->farm, &err);
+    char *text = metrics_render(s, sc->printers, sc->n, &err);
     if (!text) {
         http_fail(resp, err.code, err.msg);
         return;
@@ -412,6 +417,29 @@ metrics(void *ctx, const struct route_args *args, const struct http_req *req,
     resp->body_len = strlen(text);
     resp->body_free = free;
     resp->content_type = METRICS_CONTENT_TYPE;
+}
+
+static void
+scrape_free(void *ud)
+{
+    struct scrape *sc = ud;
+    free(sc->printers);
+    free(sc);
+}
+
+static void
+metrics(void *ctx, const struct route_args *args, const struct http_req *req,
+        struct http_resp *resp)
+{
+    (void)args, (void)req;
+    const struct api_compat_env *env = ctx;
+    struct scrape *sc = mem_calloc(1, sizeof(*sc));
+    if (!sc || metrics_printers(env->farm, &sc->printers, &sc->n)) {
+        free(sc);
+        http_error(resp, 500, "out of memory");
+        return;
+    }
+    api_read_run(env->reads, resp, scrape_read, NULL, sc, scrape_free);
 }
 
 static void

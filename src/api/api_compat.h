@@ -46,9 +46,12 @@
 #define API_COMPAT_OCTOPRINT "1.10.0" /* the OctoPrint version reported */
 
 /* What the compatible routes use of the API (api.c owns it). */
+struct api_read;
+
 struct api_compat_env {
-    struct store *store; /* jobs */
-    struct farm *farm;   /* printers; NULL: none (G-code is then refused) */
+    struct store *store;    /* jobs */
+    struct farm *farm;      /* printers; NULL: none (G-code is then refused) */
+    struct api_read *reads; /* where /metrics reads the store (api_read.h) */
     /* The temporary file of an upload (http.h sink context), to check it. */
     const char *(*upload_path)(void *upload);
     /* Store the upload at its content address (once). */

@@ -85,6 +85,8 @@ struct http {
     struct http_budget budget;   /* connections per class (http_budget.h) */
     int64_t next_end_ms;         /* earliest event stream lifetime end, or -1 */
     struct authlimit *authlimit; /* failed logins per address */
+    void (*wake)(void *ud);      /* http_set_wake's hook, or NULL */
+    void *wake_ud;
 };
 
 /* Per-request state, MHD's *con_cls (made by the URI logger, before the headers). */
@@ -195,11 +197,22 @@ stream_free(void *cls)
 void
 http_wake_streams(struct http *h)
 {
+    bool resumed = false;
     for (struct stream *st = h->streams; st; st = st->next)
         if (st->suspended) {
             st->suspended = false;
             MHD_resume_connection(st->conn);
+            resumed = true;
         }
+    if (resumed && h->wake)
+        h->wake(h->wake_ud);
+}
+
+void
+http_set_wake(struct http *h, void (*wake)(void *ud), void *ud)
+{
+    h->wake = wake;
+    h->wake_ud = ud;
 }
 
 /* End the event streams past their lifetime (at their next quiet moment);
@@ -802,6 +815,8 @@ http_defer_answer(struct http_defer *d, struct http_resp *resp)
     d->resp = *resp;
     d->ready = true;
     MHD_resume_connection(d->conn); /* MHD calls on_request again: deferred_reply */
+    if (d->h && d->h->wake)
+        d->h->wake(d->h->wake_ud);
 }
 
 static void

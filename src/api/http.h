@@ -266,6 +266,14 @@ int64_t http_timeout_ms(struct http *h);
 int http_run(struct http *h);
 /* Resume suspended streams (there is news for them). */
 void http_wake_streams(struct http *h);
+/*
+ * The owner's hook for a connection resumed outside http_run() (a stream
+ * woken, a deferred answer given): MHD only sends it when it runs again,
+ * so wake(ud) must make http_run() happen soon and re-arm its timeout.
+ * wake is called from wherever the resume happened (a route included), so
+ * it must not run the server itself: http_loop.c schedules a 0 ms timer.
+ */
+void http_set_wake(struct http *h, void (*wake)(void *ud), void *ud);
 
 /*
  * Copy s into out (cap bytes with the NUL) as valid UTF-8: each byte that

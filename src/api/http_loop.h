@@ -20,7 +20,7 @@ struct http_loop;
 struct http_loop *http_loop_attach(struct loop *l, struct http *h, struct sf_err *err);
 /* Stop watching (before http_free). */
 void http_loop_detach(struct http_loop *hl);
-/* Run MHD now and re-arm its timer: call after http_wake_streams(). */
+/* Run MHD now and re-arm its timer. */
 void http_loop_kick(struct http_loop *hl);
 
 #endif

@@ -4,10 +4,11 @@
  * Why from the store at each scrape rather than counters in memory: the
  * store already holds every print and job with its times and estimates,
  * so a restart loses nothing and the numbers agree with /api/jobs.  A
- * scrape reads every print row: a farm's few thousand a day take
- * milliseconds; a retention window can come when a farm needs it.
+ * scrape asks SQLite for counts, sums and histogram buckets (store.h's
+ * aggregates) rather than loading every row, and runs on the API's
+ * reader thread (api_read.h), not on the loop that feeds the printers.
  *
- * Thread: the loop thread.
+ * Thread: see metrics.h.
  */
 #include "metrics.h"
 
@@ -52,16 +53,6 @@ struct hist {
     unsigned long long count;
     double sum;
 };
-
-static void
-observe(struct hist *h, double v)
-{
-    for (size_t i = 0; i < N_BOUNDS; i++)
-        if (v <= bounds[i])
-            h->n[i]++;
-    h->count++;
-    h->sum += v;
-}
 
 /* A label value as the text format wants it: \ " and newline escaped. */
 static void
@@ -140,73 +131,100 @@ per_find(struct per **arr, size_t *n, size_t *cap, const char *name)
     return p;
 }
 
-char *
-metrics_render(struct store *s, struct farm *f, struct sf_err *err)
+int
+metrics_printers(struct farm *f, struct metrics_printer **out, size_t *n)
 {
-    struct job_row *jobs = NULL;
-    struct print_stat *prints = NULL;
+    *n = f ? farm_printer_count(f) : 0;
+    *out = mem_array(*n ? *n : 1, sizeof(**out));
+    if (!*out)
+        return SF_ENOMEM;
+    for (size_t i = 0; i < *n; i++) {
+        struct printer_info pi;
+        farm_printer_info(f, i, &pi);
+        snprintf((*out)[i].name, sizeof((*out)[i].name), "%s", pi.cfg->name);
+        (*out)[i].state = pi.state;
+    }
+    return SF_OK;
+}
+
+/* The printers' counters: every configured printer, then every other that printed. */
+static int
+tally(struct store *s, const struct metrics_printer *pr, size_t n_pr, struct per **per,
+      size_t *n_per, struct sf_err *err)
+{
+    struct print_tally *t = NULL;
+    size_t n_t = 0, cap = 0;
+    int rc = store_print_tally(s, &t, &n_t, err);
+    for (size_t i = 0; rc == SF_OK && i < n_pr; i++)
+        if (!per_find(per, n_per, &cap, pr[i].name))
+            rc = SF_ENOMEM;
+    for (size_t i = 0; rc == SF_OK && i < n_t; i++) {
+        struct per *q = per_find(per, n_per, &cap, t[i].printer);
+        if (!q) {
+            rc = SF_ENOMEM;
+            break;
+        }
+        if (strcmp(t[i].outcome, "done") == 0) {
+            q->done += t[i].n;
+            q->filament_g += t[i].filament_g;
+            q->saved_g += t[i].saved_g;
+        } else if (strcmp(t[i].outcome, "failed") == 0)
+            q->failed += t[i].n;
+        else if (strcmp(t[i].outcome, "cancelled") == 0)
+            q->cancelled += t[i].n;
+        else if (strcmp(t[i].outcome, "refused") == 0)
+            q->refused += t[i].n; /* the printer would not start it: nothing printed */
+        else
+            q->interrupted += t[i].n;
+    }
+    free(t);
+    if (rc == SF_ENOMEM)
+        sf_err_set(err, SF_ENOMEM, "metrics: out of memory");
+    return rc;
+}
+
+/* Histogram which from the store into h. */
+static int
+hist_read(struct store *s, enum store_hist which, struct hist *h, struct sf_err *err)
+{
+    struct store_hist_out o;
+    int rc = store_hist(s, which, bounds, N_BOUNDS, &o, err);
+    for (size_t i = 0; rc == SF_OK && i < N_BOUNDS; i++)
+        h->n[i] = o.le[i];
+    h->count = o.count;
+    h->sum = o.sum_s;
+    return rc;
+}
+
+char *
+metrics_render(struct store *s, const struct metrics_printer *pr, size_t n_pr, struct sf_err *err)
+{
     struct per *per = NULL;
-    size_t n_jobs = 0, n_prints = 0, n_per = 0, cap_per = 0;
+    size_t n_per = 0;
     struct out b = { .rc = SF_OK };
     buf_init(&b.b, METRICS_TEXT_MAX);
     char *out = NULL;
-    if (store_job_list(s, &jobs, &n_jobs, err) || store_print_stats(s, &prints, &n_prints, err))
-        goto done;
-
-    unsigned long long by_state[JOB_STATE_COUNT] = { 0 };
+    uint64_t by_state[JOB_STATE_COUNT];
     struct hist prep = { 0 }, slice = { 0 }, print = { 0 }, wait = { 0 };
-    for (size_t i = 0; i < n_jobs; i++) {
-        if ((unsigned)jobs[i].state < JOB_STATE_COUNT)
-            by_state[jobs[i].state]++;
-        if (jobs[i].prepare_ms > 0)
-            observe(&prep, jobs[i].prepare_ms / 1000.0);
-        if (jobs[i].slice_ms > 0)
-            observe(&slice, jobs[i].slice_ms / 1000.0);
-    }
+    if (store_job_counts(s, by_state, err) || hist_read(s, STORE_HIST_PREPARE, &prep, err) ||
+        hist_read(s, STORE_HIST_SLICE, &slice, err) ||
+        hist_read(s, STORE_HIST_PRINT, &print, err) || hist_read(s, STORE_HIST_WAIT, &wait, err) ||
+        tally(s, pr, n_pr, &per, &n_per, err))
+        goto done;
     family(&b, "slimfarm_jobs", "gauge", "Jobs in the store by state.");
     for (int st = 0; st < JOB_STATE_COUNT; st++)
         put(&b, "slimfarm_jobs{state=\"%s\"} %llu\n", job_state_name((enum job_state)st),
-            by_state[st]);
+            (unsigned long long)by_state[st]);
 
     unsigned long long pstate[PRINTER_STATE_COUNT] = { 0 };
-    size_t n_printers = f ? farm_printer_count(f) : 0;
-    for (size_t i = 0; i < n_printers; i++) {
-        struct printer_info pi;
-        farm_printer_info(f, i, &pi);
-        if ((unsigned)pi.state < PRINTER_STATE_COUNT)
-            pstate[pi.state]++;
-        if (!per_find(&per, &n_per, &cap_per, pi.cfg->name))
-            goto oom;
-    }
+    for (size_t i = 0; i < n_pr; i++)
+        if ((unsigned)pr[i].state < PRINTER_STATE_COUNT)
+            pstate[pr[i].state]++;
     family(&b, "slimfarm_printers", "gauge", "Configured printers by state.");
     for (int st = 0; st < PRINTER_STATE_COUNT; st++)
         put(&b, "slimfarm_printers{state=\"%s\"} %llu\n",
             printer_state_name((enum printer_state)st), pstate[st]);
 
-    for (size_t i = 0; i < n_prints; i++) {
-        const struct print_stat *p = &prints[i];
-        if (!p->outcome[0])
-            continue; /* still running */
-        struct per *q = per_find(&per, &n_per, &cap_per, p->printer);
-        if (!q)
-            goto oom;
-        if (strcmp(p->outcome, "done") == 0) {
-            q->done++;
-            q->filament_g += p->filament_g;
-            q->saved_g += p->support_saved_g;
-            if (p->ended_ms >= p->started_ms)
-                observe(&print, (p->ended_ms - p->started_ms) / 1000.0);
-        } else if (strcmp(p->outcome, "failed") == 0)
-            q->failed++;
-        else if (strcmp(p->outcome, "cancelled") == 0)
-            q->cancelled++;
-        else if (strcmp(p->outcome, "refused") == 0)
-            q->refused++; /* the printer would not start it: nothing printed */
-        else
-            q->interrupted++;
-        if (p->wait_ms > 0)
-            observe(&wait, p->wait_ms / 1000.0);
-    }
     family(&b, "slimfarm_prints_total", "counter", "Prints ended, by printer and outcome.");
     for (size_t i = 0; i < n_per; i++) {
         const char *oc[] = { "done", "failed", "cancelled", "refused", "interrupted" };
@@ -248,8 +266,6 @@ oom:
     sf_err_set(err, SF_ENOMEM, "metrics: out of memory");
 done:
     buf_release(&b.b);
-    free(jobs);
-    free(prints);
     free(per);
     return out;
 }

@@ -18,10 +18,13 @@
  *   slimfarm_queue_wait_seconds               histogram: a print's wait from its job
  *                                             becoming ready to its start
  *
- * Thread: the loop thread (the store's).
+ * Thread: metrics_printers on the loop thread (the farm's); metrics_render
+ * on the thread of the store it is given (the API's reader).
  */
 #ifndef SF_API_METRICS_H
 #define SF_API_METRICS_H
+
+#include <stddef.h>
 
 #include "../base/err.h"
 #include "../farm/farm.h"
@@ -29,7 +32,16 @@
 
 #define METRICS_CONTENT_TYPE "text/plain; version=0.0.4; charset=utf-8"
 
-/* The exposition text (free() it), or NULL with err set.  farm may be NULL. */
-char *metrics_render(struct store *s, struct farm *f, struct sf_err *err);
+/* The printers as a scrape reports them. */
+struct metrics_printer {
+    char name[64];
+    enum printer_state state;
+};
+/* f's printers now (f NULL: none) into *out (free() it), *n their count; SF_ENOMEM. */
+int metrics_printers(struct farm *f, struct metrics_printer **out, size_t *n);
+
+/* The exposition text (free() it) from s and n printers, or NULL with err set. */
+char *metrics_render(struct store *s, const struct metrics_printer *printers, size_t n,
+                     struct sf_err *err);
 
 #endif

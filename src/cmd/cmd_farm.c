@@ -258,39 +258,63 @@ CMD_REGISTER(submit, "submit", submit_usage, "queue a part on the farm (slimfarm
 
 /* ---- jobs, printers ---- */
 
+static void
+print_job(json_t *j)
+{
+    char copies[32], line[48] = "-";
+    snprintf(copies, sizeof(copies), "%lld/%lld", num(j, "copies_done"), num(j, "copies"));
+    /* where a print stands, or where a resume would start */
+    const char *state = str(j, "state");
+    if (num(j, "gcode_lines") > 0 &&
+        (!strcmp(state, "printing") || !strcmp(state, "paused") || !strcmp(state, "interrupted")))
+        snprintf(line, sizeof(line), "%lld/%lld", num(j, "lines_acked"), num(j, "gcode_lines"));
+    printf("%-5lld %-11s %-6s %-17s %-4lld %-12s %-24s %s\n", num(j, "id"), state, copies, line,
+           num(j, "priority"), str(j, "printer")[0] ? str(j, "printer") : "-", str(j, "name"),
+           str(j, "reason"));
+}
+
+#define JOBS_USAGE "jobs [--state S[,S...]] [--printer NAME] [--url URL] [--key KEY]"
+
+/* Every job that passes the filters, a page at a time (GET /api/jobs follows "next"). */
 static int
 run_jobs(int argc, char **argv)
 {
     struct client c;
-    if (client_init(&c, "jobs", argc, argv) != 1) {
-        fprintf(stderr, "usage: slimfarm jobs [--url URL] [--key KEY]\n");
-        return 2;
+    argc = client_init(&c, "jobs", argc, argv);
+    char path[1024] = "/api/jobs?limit=500";
+    for (int i = 1; i < argc; i++) {
+        char *v = i + 1 < argc ? curl_easy_escape(NULL, argv[i + 1], 0) : NULL;
+        size_t len = strlen(path);
+        if (v && (strcmp(argv[i], "--state") == 0 || strcmp(argv[i], "--printer") == 0) &&
+            strlen(v) < 200)
+            snprintf(path + len, sizeof(path) - len, "&%s=%s", argv[i] + 2, v);
+        else
+            argc = -1;
+        curl_free(v);
+        if (argc < 0) {
+            fprintf(stderr, "usage: slimfarm " JOBS_USAGE "\n");
+            return 2;
+        }
+        i++;
     }
-    json_t *r = request(&c, "GET", "/api/jobs", NULL, NULL);
-    if (!r)
-        return 1;
     printf("%-5s %-11s %-6s %-17s %-4s %-12s %-24s %s\n", "ID", "STATE", "COPIES", "LINE", "PRIO",
            "PRINTER", "NAME", "REASON");
-    size_t i;
-    json_t *j;
-    json_array_foreach(json_object_get(r, "jobs"), i, j)
-    {
-        char copies[32], line[48] = "-";
-        snprintf(copies, sizeof(copies), "%lld/%lld", num(j, "copies_done"), num(j, "copies"));
-        /* where a print stands, or where a resume would start */
-        const char *state = str(j, "state");
-        if (num(j, "gcode_lines") > 0 && (!strcmp(state, "printing") || !strcmp(state, "paused") ||
-                                          !strcmp(state, "interrupted")))
-            snprintf(line, sizeof(line), "%lld/%lld", num(j, "lines_acked"), num(j, "gcode_lines"));
-        printf("%-5lld %-11s %-6s %-17s %-4lld %-12s %-24s %s\n", num(j, "id"), state, copies, line,
-               num(j, "priority"), str(j, "printer")[0] ? str(j, "printer") : "-", str(j, "name"),
-               str(j, "reason"));
+    while (path[0]) {
+        json_t *r = request(&c, "GET", path, NULL, NULL);
+        if (!r)
+            return 1;
+        size_t i;
+        json_t *j;
+        json_array_foreach(json_object_get(r, "jobs"), i, j) print_job(j);
+        const char *next = json_string_value(json_object_get(r, "next"));
+        snprintf(path, sizeof(path), "%s", next && next[0] == '/' ? next : "");
+        json_decref(r);
     }
-    json_decref(r);
     return 0;
 }
 
-CMD_REGISTER(jobs, "jobs", "jobs [--url URL] [--key KEY]", "list the farm's jobs", run_jobs)
+CMD_REGISTER(jobs, "jobs", JOBS_USAGE, "list the farm's jobs (every page; filters: state, printer)",
+             run_jobs)
 
 /* "1h02m (printer)", "4m05s (farm)": p's time left and whose estimate it is; "-" if none. */
 static void

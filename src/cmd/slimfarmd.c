@@ -333,6 +333,7 @@ main(int argc, char **argv)
                              .n_keys = d.cfg.n_keys,
                              .upload_max = d.cfg.upload_max_bytes,
                              .pool = d.pool,
+                             .loop = d.l,
                              .on_change = on_api_change,
                              .ud = &d,
                              .instance = instance,

@@ -438,7 +438,8 @@ run(struct loop *l, void *ud)
     struct sf_err err;
     struct job_row *jobs;
     size_t n;
-    if (store_job_list(f->s, &jobs, &n, &err)) {
+    /* the live jobs only: the scheduler never reads history (store.h) */
+    if (store_job_live(f->s, &jobs, &n, &err)) {
         log_error("farm", "%s", err.msg);
         return;
     }
@@ -908,12 +909,6 @@ gcheck_done(struct loop *l, void *ud, int rc)
     }
     t->done(t->ud, rc, rc ? NULL : &t->g, t->msg[0] ? t->msg : t->err.msg);
     free(t);
-    /* The answer just given (the upload's deferred reply) leaves when the
-       daemon next runs its HTTP server, which the notify hook does
-       (slimfarmd.c wake_streams).  A stored file notifies anyway
-       (farm_gcode_add); a refusal, without this, waited up to the 5 s API
-       tick. */
-    notify(f);
 }
 
 int

@@ -193,15 +193,10 @@ static int
 try_attach(struct printer *p)
 {
     struct sf_err err;
-    struct job_row *jobs;
-    size_t n;
-    if (p->bed_full || store_job_list(p->env.s, &jobs, &n, &err))
+    struct job_row row;
+    if (p->bed_full || store_job_interrupted(p->env.s, p->cfg.name, &row, &err))
         return SF_ENOTFOUND;
-    const struct job_row *j = NULL;
-    for (size_t i = 0; i < n; i++)
-        if (jobs[i].state == JOB_INTERRUPTED && strcmp(jobs[i].printer, p->cfg.name) == 0 &&
-            jobs[i].gcode_sha[0] && (!j || jobs[i].updated_ms > j->updated_ms))
-            j = &jobs[i];
+    const struct job_row *j = row.gcode_sha[0] ? &row : NULL;
     int ok = SF_ENOTFOUND;
     char path[1024];
     if (j && store_file_path(p->env.s, j->gcode_sha, path, sizeof(path), &err) == SF_OK) {
@@ -231,7 +226,6 @@ try_attach(struct printer *p)
                         err.msg);
         }
     }
-    free(jobs);
     return ok;
 }
 
@@ -797,16 +791,11 @@ static int64_t
 interrupted_here(struct printer *p)
 {
     struct sf_err err;
-    struct job_row *jobs;
-    size_t n;
-    if (store_job_list(p->env.s, &jobs, &n, &err))
-        return -1; /* unknown: treated as held */
-    int64_t id = 0;
-    for (size_t i = 0; i < n && !id; i++)
-        if (jobs[i].state == JOB_INTERRUPTED && strcmp(jobs[i].printer, p->cfg.name) == 0)
-            id = jobs[i].id;
-    free(jobs);
-    return id;
+    struct job_row j;
+    int rc = store_job_interrupted(p->env.s, p->cfg.name, &j, &err);
+    if (rc == SF_ENOTFOUND)
+        return 0;
+    return rc ? -1 : j.id; /* unknown: treated as held */
 }
 
 /* Record what an operator did to p in the log and the event log. */

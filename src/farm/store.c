@@ -164,6 +164,12 @@ static const char *const migrations[] = {
        start need not read the file; NULL for G-code before (the printer
        then reads the file's head) */
     "ALTER TABLE jobs ADD COLUMN est_s REAL CHECK(est_s IS NULL OR est_s >= -1);",
+    /* 7: reads that stay small as history grows: the live jobs (what the
+       scheduler reads at each change, store_job_live) as a partial index,
+       so 10,000 finished jobs cost it nothing; and prints by printer, for
+       GET /api/jobs?printer= (store_job_page) */
+    "CREATE INDEX jobs_live ON jobs(id) WHERE state NOT IN ('done','failed','cancelled');"
+    "CREATE INDEX prints_printer ON prints(printer, job_id);",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

@@ -16,7 +16,8 @@
  *
  * Thread: one store per thread (the loop thread in the daemon); the
  * connection is not shared.  Workers hand results back to the loop, which
- * writes them.
+ * writes them; a worker that only reads may have a reader of its own
+ * (store_open_reader).
  */
 #ifndef SF_FARM_STORE_H
 #define SF_FARM_STORE_H
@@ -197,8 +198,49 @@ int store_job_add_gcode(struct store *s, const struct job_opts *o, const char *s
                         const struct job_event_args *g, int64_t *id, struct sf_err *err);
 /* SF_ENOTFOUND if no such job. */
 int store_job_get(struct store *s, int64_t id, struct job_row *out, struct sf_err *err);
-/* Every job, oldest first, into *rows (free() it); *n its count. */
+/*
+ * Every job, oldest first, into *rows (free() it); *n its count.  It reads
+ * all history: for a check or a tool, never for the daemon's loop (the
+ * scheduler reads store_job_live, the API store_job_page).
+ */
 int store_job_list(struct store *s, struct job_row **rows, size_t *n, struct sf_err *err);
+/*
+ * The live jobs (every state but done, failed and cancelled), oldest first,
+ * into *rows (free() it): what the scheduler works from.  Read through the
+ * partial index jobs_live (schema 7), so its cost follows the live jobs, not
+ * the history: 10,000 finished jobs add nothing.
+ */
+int store_job_live(struct store *s, struct job_row **rows, size_t *n, struct sf_err *err);
+/*
+ * The job interrupted on printer (its part may still be on the bed), the
+ * most recently changed if there are several, into *out: SF_ENOTFOUND if
+ * none.  An indexed lookup (jobs_state), not a scan.
+ */
+int store_job_interrupted(struct store *s, const char *printer, struct job_row *out,
+                          struct sf_err *err);
+
+#define STORE_PAGE_MAX 500 /* jobs in one page: a page's JSON stays well under a MiB */
+
+/* Which jobs a page holds (zero-initialise: every job, oldest first). */
+struct store_job_filter {
+    unsigned states;     /* bit 1u << state for each state wanted; 0: every state */
+    const char *printer; /* NULL or "": any; else jobs on that printer now or with a print
+                            on it (prints_printer index) */
+    int64_t since_ms;    /* > 0: updated_ms >= since_ms */
+    int64_t until_ms;    /* > 0: updated_ms < until_ms */
+    bool newest_first;   /* order by id descending */
+    int64_t after_id;    /* > 0: only ids after it in that order (the cursor) */
+};
+/*
+ * Up to limit (1 .. STORE_PAGE_MAX) jobs that pass f, in id order (f's
+ * direction), into *rows (free() it).  *more (may be NULL) tells whether
+ * more pass after the last one.  Ids are never reused and a new job gets a
+ * higher id, so walking pages by after_id = the last id returns every job
+ * exactly once while jobs are added (new ones at the end of an oldest-first
+ * walk).  SF_EINVAL for a bad limit.
+ */
+int store_job_page(struct store *s, const struct store_job_filter *f, size_t limit,
+                   struct job_row **rows, size_t *n, bool *more, struct sf_err *err);
 /*
  * Apply ev to job id (job.h rules) in one transaction: the job row, print
  * history and the event log change together.  *to (may be NULL) receives
@@ -249,20 +291,6 @@ int store_printer_bed_get(struct store *s, const char *name, bool *full, struct 
 int store_printer_note(struct store *s, const char *name, const char *kind, const char *detail,
                        struct sf_err *err);
 
-/* One print for the metrics, with its job's estimates. */
-struct print_stat {
-    char printer[64];
-    char outcome[16];       /* as print_row */
-    int64_t started_ms;     /* wall clock */
-    int64_t ended_ms;       /* 0 while running */
-    int64_t wait_ms;        /* from the job becoming ready to this print's start; 0 for a
-                               resume, or a print before schema 4 */
-    double filament_g;      /* its job's estimate per copy */
-    double support_saved_g; /* its job's estimate per copy */
-};
-/* Every print ever made, oldest first, into *rows (free() it). */
-int store_print_stats(struct store *s, struct print_stat **rows, size_t *n, struct sf_err *err);
-
 /* Print history of one job, oldest first, into *rows (free() it). */
 int store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
                  struct sf_err *err);
@@ -272,6 +300,50 @@ int store_events(struct store *s, int64_t after_id, size_t max, struct event_row
 
 /* Id of the newest event (0 if none): where a live event stream starts. */
 int64_t store_event_last(struct store *s);
+
+/*
+ * Aggregates for the metrics, counted by SQLite rather than by loading
+ * every row.  store_job_counts: jobs by state.  store_print_tally: ended
+ * prints grouped by printer and outcome, in the order each pair first
+ * occurred, with the sum of their jobs' estimates.
+ */
+int store_job_counts(struct store *s, uint64_t by_state[JOB_STATE_COUNT], struct sf_err *err);
+struct print_tally {
+    char printer[64];
+    char outcome[16];  /* as print_row, never "" */
+    uint64_t n;        /* prints */
+    double filament_g; /* sum of their jobs' filament estimate per copy */
+    double saved_g;    /* sum of their jobs' support saved per copy */
+};
+int store_print_tally(struct store *s, struct print_tally **rows, size_t *n, struct sf_err *err);
+
+/* A duration histogram over the store (seconds). */
+enum store_hist {
+    STORE_HIST_PREPARE, /* each job's last preparation (prepare_ms > 0) */
+    STORE_HIST_SLICE,   /* its slicing part (slice_ms > 0) */
+    STORE_HIST_PRINT,   /* prints done, start to end */
+    STORE_HIST_WAIT,    /* ended prints' wait from ready to start (wait_ms > 0) */
+};
+#define STORE_HIST_BOUNDS_MAX 16
+struct store_hist_out {
+    uint64_t le[STORE_HIST_BOUNDS_MAX]; /* observations <= bounds[i] (cumulative) */
+    uint64_t count;
+    double sum_s;
+};
+/* Fill out for n (<= STORE_HIST_BOUNDS_MAX, else SF_EINVAL) ascending bounds in seconds. */
+int store_hist(struct store *s, enum store_hist which, const double *bounds_s, size_t n,
+               struct store_hist_out *out, struct sf_err *err);
+
+/*
+ * A second, read-only connection to s's database, for one other thread
+ * (the API's reader): SQLite's WAL lets it read while s writes, so a
+ * client's read never waits for the loop and the loop never waits for it.
+ * It takes no lock, migrates nothing and recovers nothing (s did); only
+ * the read functions may be called on it (a write fails: SQLITE_READONLY).
+ * Open and close it on s's thread, use it on one thread at a time.  NULL
+ * with err set (SF_EIO).  Free with store_close().
+ */
+struct store *store_open_reader(const struct store *s, struct sf_err *err);
 
 /*
  * Check the database: SQLite's integrity and foreign-key checks plus the

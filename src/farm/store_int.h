@@ -1,6 +1,6 @@
 /*
  * store_int.h - internal to the store module (store.c, store_file.c,
- * store_job.c, store_printer.c, store_event.c); nothing outside
+ * store_job.c, store_printer.c, store_event.c, store_query.c); nothing outside
  * src/farm/store*.c includes it.
  *
  * What the parts share: the connection and data dir (struct store), the
@@ -69,6 +69,20 @@ typedef void (*store_row_fn)(sqlite3_stmt *st, void *row);
  */
 int store_read_rows(struct store *s, sqlite3_stmt *st, size_t elem_size, store_row_fn read,
                     void **rows, size_t *n, const char *what, struct sf_err *err);
+
+/* The columns store_read_job reads, in its order. */
+#define STORE_JOB_COLS                                                                             \
+    "id, name, file_sha, coalesce(gcode_sha, ''), state, method, deviation_mm, overhang_deg,"      \
+    " copies, copies_done, failures, max_retries, material, target_printer, target_group,"         \
+    " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"     \
+    " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg, filament_g, support_g,"          \
+    " support_saved_g, prepare_ms, slice_ms, ready_ms, mndr, andr, shape_changed, est_s"
+/* A store_row_fn: a struct job_row from a row of STORE_JOB_COLS. */
+void store_read_job(sqlite3_stmt *st, void *row);
+/* Step st (a SELECT of STORE_JOB_COLS) once and finalize it: its row into *out, or
+   SF_ENOTFOUND (err not set: the caller says what was not found), or SF_EIO naming what. */
+int store_job_one(struct store *s, sqlite3_stmt *st, struct job_row *out, const char *what,
+                  struct sf_err *err);
 
 /* Append to the event log (job_id 0 and printer NULL: none), in the caller's transaction. */
 int store_log_event(struct store *s, int64_t job_id, const char *printer, const char *kind,

@@ -19,13 +19,6 @@
 #include "../base/clock.h"
 #include "store_int.h"
 
-static const char JOB_COLS[] =
-    "id, name, file_sha, coalesce(gcode_sha, ''), state, method, deviation_mm, overhang_deg,"
-    " copies, copies_done, failures, max_retries, material, target_printer, target_group,"
-    " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"
-    " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg, filament_g, support_g,"
-    " support_saved_g, prepare_ms, slice_ms, ready_ms, mndr, andr, shape_changed, est_s";
-
 /* ---- jobs ---- */
 
 static void
@@ -77,8 +70,8 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     j->est_s = j->est_known ? sqlite3_column_double(st, 38) : -1;
 }
 
-static void
-read_job_row(sqlite3_stmt *st, void *row)
+void
+store_read_job(sqlite3_stmt *st, void *row)
 {
     read_job(st, row);
 }
@@ -198,67 +191,46 @@ store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
     return insert_job(s, st, "add G-code job", detail, id, err);
 }
 
-static void
-read_print_stat(sqlite3_stmt *st, void *row)
-{
-    struct print_stat *p = row;
-    memset(p, 0, sizeof(*p));
-    store_copy_text(p->printer, sizeof(p->printer), st, 0);
-    store_copy_text(p->outcome, sizeof(p->outcome), st, 1);
-    p->started_ms = sqlite3_column_int64(st, 2);
-    p->ended_ms = sqlite3_column_int64(st, 3);
-    p->wait_ms = sqlite3_column_int64(st, 4);
-    p->filament_g = sqlite3_column_double(st, 5);
-    p->support_saved_g = sqlite3_column_double(st, 6);
-}
-
-int
-store_print_stats(struct store *s, struct print_stat **rows, size_t *n, struct sf_err *err)
-{
-    sqlite3_stmt *st;
-    int rc =
-        store_select(s, &st,
-                     "SELECT p.printer, p.outcome, p.started_ms, p.ended_ms, p.wait_ms,"
-                     " j.filament_g, j.support_saved_g FROM prints p JOIN jobs j ON j.id = p.job_id"
-                     " ORDER BY p.id",
-                     (void **)rows, n, err);
-    if (rc)
-        return rc;
-    return store_read_rows(s, st, sizeof(**rows), read_print_stat, (void **)rows, n, "print stats",
-                           err);
-}
-
 int
 store_job_get(struct store *s, int64_t id, struct job_row *out, struct sf_err *err)
 {
-    char sql[sizeof(JOB_COLS) + 48];
-    snprintf(sql, sizeof(sql), "SELECT %s FROM jobs WHERE id = ?", JOB_COLS);
+    char sql[sizeof(STORE_JOB_COLS) + 48];
+    snprintf(sql, sizeof(sql), "SELECT %s FROM jobs WHERE id = ?", STORE_JOB_COLS);
     sqlite3_stmt *st;
     int rc = store_prepare(s, &st, sql, err);
     if (rc)
         return rc;
     sqlite3_bind_int64(st, 1, id);
-    rc = sqlite3_step(st);
+    rc = store_job_one(s, st, out, "get job", err);
+    if (rc == SF_ENOTFOUND)
+        return sf_err_set(err, SF_ENOTFOUND, "job %lld: no such job", (long long)id);
+    return rc;
+}
+
+int
+store_job_one(struct store *s, sqlite3_stmt *st, struct job_row *out, const char *what,
+              struct sf_err *err)
+{
+    int rc = sqlite3_step(st);
     if (rc == SQLITE_ROW)
         read_job(st, out);
     sqlite3_finalize(st);
     if (rc == SQLITE_ROW)
         return SF_OK;
-    if (rc == SQLITE_DONE)
-        return sf_err_set(err, SF_ENOTFOUND, "job %lld: no such job", (long long)id);
-    return store_db_fail(s, err, "get job");
+    return rc == SQLITE_DONE ? SF_ENOTFOUND : store_db_fail(s, err, what);
 }
 
 int
 store_job_list(struct store *s, struct job_row **rows, size_t *n, struct sf_err *err)
 {
-    char sql[sizeof(JOB_COLS) + 48];
-    snprintf(sql, sizeof(sql), "SELECT %s FROM jobs ORDER BY id", JOB_COLS);
+    char sql[sizeof(STORE_JOB_COLS) + 48];
+    snprintf(sql, sizeof(sql), "SELECT %s FROM jobs ORDER BY id", STORE_JOB_COLS);
     sqlite3_stmt *st;
     int rc = store_select(s, &st, sql, (void **)rows, n, err);
     if (rc)
         return rc;
-    return store_read_rows(s, st, sizeof(**rows), read_job_row, (void **)rows, n, "list jobs", err);
+    return store_read_rows(s, st, sizeof(**rows), store_read_job, (void **)rows, n, "list jobs",
+                           err);
 }
 
 /* Close the job's open print with an outcome. */

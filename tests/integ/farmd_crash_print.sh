@@ -54,10 +54,10 @@ submit_group() { # four jobs, one of each part
 # against a round, which the machine's load decides)
 for _ in $(seq "${JOB_GROUPS:-1}"); do submit_group; done
 n_printers=$(echo $names | wc -w)
-n_waiting() { api /api/jobs | json 'sum(j["state"] in ("queued", "preparing", "ready") for j in d["jobs"])'; }
+n_waiting() { api_jobs | json 'sum(j["state"] in ("queued", "preparing", "ready") for j in d["jobs"])'; }
 
 snapshot() { # id state lines_acked, one job a line
-  api /api/jobs | json '"\n".join("%d %s %d" % (j["id"], j["state"], j["lines_acked"]) for j in d["jobs"])'
+  api_jobs | json '"\n".join("%d %s %d" % (j["id"], j["state"], j["lines_acked"]) for j in d["jobs"])'
 }
 resumed=0 restarted=0 interrupted=0 finished=0
 for round in $(seq "$ROUNDS"); do
@@ -127,7 +127,7 @@ done
 [ "$interrupted" -ge 5 ] || fail "only $interrupted prints were interrupted by $ROUNDS kills"
 [ "$resumed" -ge 3 ] || fail "only $resumed resumed"
 # every job ends done: fail only when none ends for 240 s, however many are left
-n_done() { api /api/jobs | json 'sum(j["state"] == "done" for j in d["jobs"])'; }
+n_done() { api_jobs | json 'sum(j["state"] == "done" for j in d["jobs"])'; }
 n_jobs=$(echo $ids | wc -w)
 more_done() { local n; n=$(n_done); [ "$n" -gt "$1" ] || [ "$n" -eq "$n_jobs" ]; }
 while [ "$(n_done)" -lt "$n_jobs" ]; do

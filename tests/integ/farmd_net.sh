@@ -66,7 +66,7 @@ j_flaky=$(submit "$tmp/t12.stl" --material PLA --printer flaky --method none)
 
 # job_on PRINTER: the job printing (or paused) on PRINTER, if any.
 job_on() {
-  api /api/jobs | json "' '.join(str(j['id']) for j in d['jobs'] if j['printer'] == '$1' and j['state'] in ('printing', 'paused'))"
+  api_jobs | json "' '.join(str(j['id']) for j in d['jobs'] if j['printer'] == '$1' and j['state'] in ('printing', 'paused'))"
 }
 
 # pause voron's long job once it is under way (the short one may end as the

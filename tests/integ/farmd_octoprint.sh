@@ -70,7 +70,7 @@ j_cancel=$(submit "$tmp/frame.stl" --material PLA --printer op --method none)
 j_flaky=$(submit "$tmp/t12.stl" --material PETG --printer flaky --method none --retries 5)
 
 job_on() { # PRINTER: the job printing or paused on it
-  api /api/jobs | json "' '.join(str(j['id']) for j in d['jobs'] if j['printer'] == '$1' and j['state'] in ('printing', 'paused'))"
+  api_jobs | json "' '.join(str(j['id']) for j in d['jobs'] if j['printer'] == '$1' and j['state'] in ('printing', 'paused'))"
 }
 # op clears its bed after each job (no ejector): clear it whenever it waits
 clear_op() { "$C" printers | grep -qE '^op +awaiting-clear' && "$C" cleared op > /dev/null; return 0; }

@@ -79,7 +79,7 @@ done
 
 # job_on PRINTER: the id of the job printing (or paused) on PRINTER, if any.
 job_on() {
-  api /api/jobs | json "' '.join(str(j['id']) for j in d['jobs'] if j['printer'] == '$1' and j['state'] in ('printing', 'paused'))"
+  api_jobs | json "' '.join(str(j['id']) for j in d['jobs'] if j['printer'] == '$1' and j['state'] in ('printing', 'paused'))"
 }
 
 # pause mini mid-print (whichever of its two long jobs came first); nothing
@@ -151,11 +151,11 @@ done
 # each printer printed something, and its log is exactly its prints' G-code
 sleep 0.5
 stop_sims
-[ "$(api /api/jobs | /usr/bin/python3 -c "import json,sys; print(sum(1 for j in json.load(sys.stdin)['jobs'] if j['state']=='done'))")" -ge 13 ] || fail "done count"
+[ "$(api_jobs | /usr/bin/python3 -c "import json,sys; print(sum(1 for j in json.load(sys.stdin)['jobs'] if j['state']=='done'))")" -ge 13 ] || fail "done count"
 # every printer, network ones included, finished at least one print (each has a job pinned)
 for p in mk3 mini voron mk4 $octo; do
   n=0
-  for j in $(api /api/jobs | json '" ".join(str(x["id"]) for x in d["jobs"])'); do
+  for j in $(api_jobs | json '" ".join(str(x["id"]) for x in d["jobs"])'); do
     n=$((n + $(api "/api/jobs/$j" | json "sum(1 for p in d['prints'] if p['printer'] == '$p' and p['outcome'] == 'done')")))
   done
   [ "$n" -ge 1 ] || fail "$p finished no print: $("$C" jobs)"

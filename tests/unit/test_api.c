@@ -290,7 +290,8 @@ start_api(unsigned header_ms, struct sf_err *err)
                               .keys = keys,
                               .n_keys = 2,
                               .upload_max = UPLOAD_MAX,
-                              .header_timeout_ms = header_ms };
+                              .header_timeout_ms = header_ms,
+                              .loop = srv.l };
     srv.api = api_new(&cfg, err);
     if (!srv.api)
         return err->code;

@@ -132,6 +132,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
                           "wait_ms; ALTER TABLE jobs DROP COLUMN mndr; ALTER TABLE jobs DROP "
                           "COLUMN andr; ALTER TABLE jobs DROP COLUMN shape_changed;"
                           "ALTER TABLE jobs DROP COLUMN est_s;"
+                          "DROP INDEX jobs_live; DROP INDEX prints_printer;"
                           "PRAGMA user_version = 1",
                           NULL, NULL, NULL),
              SQLITE_OK);

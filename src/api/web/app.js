@@ -215,8 +215,22 @@ function scheduleRefresh(ms) {
   }, ms);
 }
 
+// The jobs the dashboard shows: every live one (a page at a time, following
+// "next") and the newest FINISHED_SHOWN finished ones; never the whole history.
+const FINISHED_SHOWN = 50;
+async function fetchJobs() {
+  const jobs = [];
+  for (let next = "/api/jobs?limit=500&state=" + ACTIVE.join(","); next;) {
+    const r = await api(next);
+    jobs.push(...r.jobs);
+    next = r.next;
+  }
+  const done = await api(`/api/jobs?limit=${FINISHED_SHOWN}&order=desc&state=done,failed,cancelled`);
+  return { jobs: jobs.concat(done.jobs) };
+}
+
 async function refreshAll() {
-  const [p, j] = await Promise.all([api("/api/printers"), api("/api/jobs")]);
+  const [p, j] = await Promise.all([api("/api/printers"), fetchJobs()]);
   const now = Date.now();
   st.printers.clear();
   for (const x of p.printers) {

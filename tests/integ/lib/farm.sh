@@ -73,6 +73,50 @@ tetra() {
 
 api() { curl -sf -H "X-Api-Key: $RW" "$SLIMFARM_URL$1"; }
 
+# api_jobs [QUERY]: every job that GET /api/jobs?QUERY lists, walking its
+# pages ("next"), as one {"jobs": [...]} on stdout.
+api_jobs() {
+  /usr/bin/python3 - "$SLIMFARM_URL" "$RW" "${1:-}" <<'PY'
+import json, sys, urllib.request
+url, key, q = sys.argv[1:4]
+nxt, jobs = "/api/jobs?limit=500" + ("&" + q if q else ""), []
+while nxt:
+    r = urllib.request.Request(url + nxt, headers={"X-Api-Key": key})
+    d = json.load(urllib.request.urlopen(r, timeout=60))
+    jobs += d["jobs"]
+    nxt = d["next"]
+print(json.dumps({"jobs": jobs}))
+PY
+}
+
+# fill_jobs DB N: N finished jobs (two in three done on printer "mk3" with
+# their print, the others cancelled) written straight into a stopped
+# daemon's database DB, as its schema wants them: a farm's history, in
+# seconds rather than hours.
+fill_jobs() {
+  /usr/bin/python3 - "$1" "$2" <<'PY'
+import hashlib, sqlite3, sys, time
+db, n = sqlite3.connect(sys.argv[1]), int(sys.argv[2])
+now = int(time.time() * 1000)
+sha = hashlib.sha256(b"history").hexdigest()
+db.execute("INSERT OR IGNORE INTO files(sha256, size, created_ms) VALUES(?, 7, ?)", (sha, now))
+for i in range(n):
+    done = i % 3 != 2
+    cur = db.execute(
+        "INSERT INTO jobs(name, file_sha, gcode_sha, state, method, deviation_mm, overhang_deg,"
+        " copies, copies_done, max_retries, material, target_printer, target_group, priority,"
+        " reason, created_ms, updated_ms, gcode_lines, filament_g)"
+        " VALUES(?,?,?,?,'orient',0.5,45,1,?,2,'PLA','','',0,?,?,?,5000,3.5)",
+        ("bracket-%05d.stl" % i, sha, sha, "done" if done else "cancelled", 1 if done else 0,
+         "" if done else "cancelled by an operator", now - (n - i) * 60000, now - (n - i) * 60000))
+    if done:
+        db.execute("INSERT INTO prints(job_id, copy, printer, material, start_line, lines_acked,"
+                   " started_ms, ended_ms, outcome) VALUES(?,1,'mk3','PLA',1,5000,?,?,'done')",
+                   (cur.lastrowid, now - (n - i) * 60000, now - (n - i) * 60000 + 30000))
+db.commit()
+PY
+}
+
 # jq-free JSON field access: json EXPR reads the API reply on stdin.
 json() { /usr/bin/python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
 
@@ -95,7 +139,7 @@ wait_for() {
 # fetch_jobs: every job with its print history from the API, into
 # $tmp/job-ID.json (the list in $tmp/jobs.json), for the log checks.
 fetch_jobs() {
-  api /api/jobs > "$tmp/jobs.json"
+  api_jobs > "$tmp/jobs.json"
   for j in $(json '" ".join(str(x["id"]) for x in d["jobs"])' < "$tmp/jobs.json"); do
     api "/api/jobs/$j" > "$tmp/job-$j.json"
   done

@@ -1,0 +1,223 @@
+/*
+ * store_query.c - the store's reads whose cost must not grow with history
+ * (store.h): the live jobs the scheduler works from, the targeted lookup
+ * of a printer's interrupted job, pages of jobs for the API, the metrics'
+ * aggregates, and read-only connections for a thread off the loop.
+ *
+ * Why: a farm keeps every job it ever printed.  The scheduler, the
+ * printers and /metrics once read them all at each change or scrape, on
+ * the loop that feeds the printers; 5,700 jobs were 3.7 MB of JSON and a
+ * print stretched from 26 s to 47 s under one client listing jobs
+ * (issue 30).  Each query here goes through an index (schema 7) or an
+ * SQL aggregate, and a page has a hard bound.
+ *
+ * Thread: the store's (a reader's: the one thread that uses it).
+ */
+#include "store.h"
+
+#include <sqlite3.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../base/mem.h"
+#include "store_int.h"
+
+int
+store_job_live(struct store *s, struct job_row **rows, size_t *n, struct sf_err *err)
+{
+    /* the WHERE is the partial index's own, word for word, so SQLite reads jobs_live */
+    sqlite3_stmt *st;
+    int rc = store_select(s, &st,
+                          "SELECT " STORE_JOB_COLS " FROM jobs"
+                          " WHERE state NOT IN ('done','failed','cancelled') ORDER BY id",
+                          (void **)rows, n, err);
+    if (rc)
+        return rc;
+    return store_read_rows(s, st, sizeof(**rows), store_read_job, (void **)rows, n,
+                           "list live jobs", err);
+}
+
+int
+store_job_interrupted(struct store *s, const char *printer, struct job_row *out, struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc = store_prepare(s, &st,
+                           "SELECT " STORE_JOB_COLS " FROM jobs"
+                           " WHERE state = 'interrupted' AND printer = ?"
+                           " ORDER BY updated_ms DESC, id DESC LIMIT 1",
+                           err);
+    if (rc)
+        return rc;
+    sqlite3_bind_text(st, 1, printer, -1, SQLITE_TRANSIENT);
+    rc = store_job_one(s, st, out, "interrupted job", err);
+    if (rc == SF_ENOTFOUND)
+        return sf_err_set(err, SF_ENOTFOUND, "printer %s holds no interrupted job", printer);
+    return rc;
+}
+
+/* The WHERE and ORDER of a page for f (states from job.h's fixed names, the rest bound). */
+static void
+page_sql(const struct store_job_filter *f, char *sql, size_t cap)
+{
+    size_t len = (size_t)snprintf(sql, cap, "SELECT " STORE_JOB_COLS " FROM jobs WHERE %s",
+                                  f->newest_first ? "id < ?1" : "id > ?1");
+    if (f->states) {
+        len += (size_t)snprintf(sql + len, cap - len, " AND state IN (");
+        const char *sep = "";
+        for (int i = 0; i < JOB_STATE_COUNT; i++)
+            if (f->states & (1u << i)) {
+                len += (size_t)snprintf(sql + len, cap - len, "%s'%s'", sep,
+                                        job_state_name((enum job_state)i));
+                sep = ",";
+            }
+        len += (size_t)snprintf(sql + len, cap - len, ")");
+    }
+    if (f->printer && f->printer[0])
+        len += (size_t)snprintf(sql + len, cap - len,
+                                " AND (printer = ?2 OR id IN"
+                                " (SELECT job_id FROM prints WHERE printer = ?2))");
+    if (f->since_ms > 0)
+        len += (size_t)snprintf(sql + len, cap - len, " AND updated_ms >= ?3");
+    if (f->until_ms > 0)
+        len += (size_t)snprintf(sql + len, cap - len, " AND updated_ms < ?4");
+    snprintf(sql + len, cap - len, " ORDER BY id %s LIMIT ?5", f->newest_first ? "DESC" : "ASC");
+}
+
+int
+store_job_page(struct store *s, const struct store_job_filter *f, size_t limit,
+               struct job_row **rows, size_t *n, bool *more, struct sf_err *err)
+{
+    *rows = NULL;
+    *n = 0;
+    if (more)
+        *more = false;
+    if (limit < 1 || limit > STORE_PAGE_MAX)
+        return sf_err_set(err, SF_EINVAL, "store: page limit %zu is not 1 to %d", limit,
+                          STORE_PAGE_MAX);
+    char sql[sizeof(STORE_JOB_COLS) + 512];
+    page_sql(f, sql, sizeof(sql));
+    sqlite3_stmt *st;
+    int rc = store_select(s, &st, sql, (void **)rows, n, err);
+    if (rc)
+        return rc;
+    int64_t after = f->after_id > 0 ? f->after_id : (f->newest_first ? INT64_MAX : 0);
+    sqlite3_bind_int64(st, 1, after);
+    if (f->printer && f->printer[0])
+        sqlite3_bind_text(st, 2, f->printer, -1, SQLITE_TRANSIENT);
+    if (f->since_ms > 0)
+        sqlite3_bind_int64(st, 3, f->since_ms);
+    if (f->until_ms > 0)
+        sqlite3_bind_int64(st, 4, f->until_ms);
+    sqlite3_bind_int64(st, 5, (sqlite3_int64)limit + 1); /* one more: is there a next page */
+    rc = store_read_rows(s, st, sizeof(**rows), store_read_job, (void **)rows, n, "page of jobs",
+                         err);
+    if (rc == SF_OK && *n > limit) {
+        *n = limit;
+        if (more)
+            *more = true;
+    }
+    return rc;
+}
+
+int
+store_job_counts(struct store *s, uint64_t by_state[JOB_STATE_COUNT], struct sf_err *err)
+{
+    memset(by_state, 0, sizeof(uint64_t) * JOB_STATE_COUNT);
+    sqlite3_stmt *st;
+    int rc = store_prepare(s, &st, "SELECT state, count(*) FROM jobs GROUP BY state", err);
+    if (rc)
+        return rc;
+    while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+        enum job_state js;
+        const unsigned char *t = sqlite3_column_text(st, 0);
+        if (t && job_state_parse((const char *)t, &js))
+            by_state[js] = (uint64_t)sqlite3_column_int64(st, 1);
+    }
+    sqlite3_finalize(st);
+    return rc == SQLITE_DONE ? SF_OK : store_db_fail(s, err, "count jobs");
+}
+
+static void
+read_tally(sqlite3_stmt *st, void *row)
+{
+    struct print_tally *t = row;
+    memset(t, 0, sizeof(*t));
+    store_copy_text(t->printer, sizeof(t->printer), st, 0);
+    store_copy_text(t->outcome, sizeof(t->outcome), st, 1);
+    t->n = (uint64_t)sqlite3_column_int64(st, 2);
+    t->filament_g = sqlite3_column_double(st, 3);
+    t->saved_g = sqlite3_column_double(st, 4);
+}
+
+int
+store_print_tally(struct store *s, struct print_tally **rows, size_t *n, struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc = store_select(s, &st,
+                          "SELECT p.printer, p.outcome, count(*), total(j.filament_g),"
+                          " total(j.support_saved_g) FROM prints p JOIN jobs j ON j.id = p.job_id"
+                          " WHERE p.outcome != '' GROUP BY p.printer, p.outcome ORDER BY min(p.id)",
+                          (void **)rows, n, err);
+    if (rc)
+        return rc;
+    return store_read_rows(s, st, sizeof(**rows), read_tally, (void **)rows, n, "tally prints",
+                           err);
+}
+
+int
+store_hist(struct store *s, enum store_hist which, const double *bounds_s, size_t n,
+           struct store_hist_out *out, struct sf_err *err)
+{
+    static const char *const from[] = {
+        [STORE_HIST_PREPARE] = "prepare_ms / 1000.0 AS v FROM jobs WHERE prepare_ms > 0",
+        [STORE_HIST_SLICE] = "slice_ms / 1000.0 AS v FROM jobs WHERE slice_ms > 0",
+        [STORE_HIST_PRINT] = "(ended_ms - started_ms) / 1000.0 AS v FROM prints"
+                             " WHERE outcome = 'done' AND ended_ms >= started_ms",
+        [STORE_HIST_WAIT] = "wait_ms / 1000.0 AS v FROM prints WHERE outcome != '' AND wait_ms > 0",
+    };
+    memset(out, 0, sizeof(*out));
+    if (n > STORE_HIST_BOUNDS_MAX || (unsigned)which >= sizeof(from) / sizeof(from[0]))
+        return sf_err_set(err, SF_EINVAL, "store: histogram of %zu bounds", n);
+    char sql[1024];
+    size_t len = (size_t)snprintf(sql, sizeof(sql), "SELECT count(*), total(v)");
+    for (size_t i = 0; i < n; i++)
+        len += (size_t)snprintf(sql + len, sizeof(sql) - len, ", total(v <= ?%zu)", i + 1);
+    snprintf(sql + len, sizeof(sql) - len, " FROM (SELECT %s)", from[which]);
+    sqlite3_stmt *st;
+    int rc = store_prepare(s, &st, sql, err);
+    if (rc)
+        return rc;
+    for (size_t i = 0; i < n; i++)
+        sqlite3_bind_double(st, (int)i + 1, bounds_s[i]);
+    rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW) {
+        out->count = (uint64_t)sqlite3_column_int64(st, 0);
+        out->sum_s = sqlite3_column_double(st, 1);
+        for (size_t i = 0; i < n; i++)
+            out->le[i] = (uint64_t)sqlite3_column_double(st, (int)i + 2);
+    }
+    sqlite3_finalize(st);
+    return rc == SQLITE_ROW ? SF_OK : store_db_fail(s, err, "histogram");
+}
+
+struct store *
+store_open_reader(const struct store *s, struct sf_err *err)
+{
+    struct store *r = mem_calloc(1, sizeof(*r));
+    if (!r) {
+        sf_err_set(err, SF_ENOMEM, "store: out of memory");
+        return NULL;
+    }
+    snprintf(r->dir, sizeof(r->dir), "%s", s->dir);
+    r->lock_fd = -1; /* the writer holds the data dir */
+    const char *path = sqlite3_db_filename(s->db, "main");
+    if (sqlite3_open_v2(path ? path : "", &r->db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
+        sf_err_set(err, SF_EIO, "store: cannot open a reader of '%s': %s", path ? path : "?",
+                   r->db ? sqlite3_errmsg(r->db) : "out of memory");
+        store_close(r);
+        return NULL;
+    }
+    /* a checkpoint may hold the WAL index for a moment; wait rather than fail a read */
+    sqlite3_busy_timeout(r->db, 5000);
+    return r;
+}
