@@ -18,6 +18,7 @@
 # too (say main's, to show the lock-out) and prints both rows.
 # BENCH_N (300), BENCH_HOSTILE (300), BENCH_SECS (60).
 set -u
+umask 077 # slimfarmd refuses a farm.ini holding keys that others can read
 build=${1:-build/rel}
 PY=/usr/bin/python3
 [ -x "$PY" ] || { echo "bench_api_conns: no python3, skipped"; exit 0; }

@@ -35,6 +35,7 @@
 # (115200), BENCH_PEER=0 skips printcore, BENCH_NET=0 skips the network
 # variant, BENCH_SIM_PROCS=1 runs one Marlin simulator process per printer.
 set -u
+umask 077 # slimfarmd refuses a farm.ini holding keys that others can read
 build=${1:-build/rel}
 n=${BENCH_PRINTERS:-50}
 secs=${BENCH_SECS:-60}

@@ -21,6 +21,7 @@
 # PAR_DAEMON_MESH (dino).
 # Figures only: it never fails on time.
 set -u
+umask 077 # slimfarmd refuses a farm.ini holding keys that others can read
 build=${1:-build/rel}
 shared=${SLIMFARM_SHARED:-../shared}
 [ -d "$shared/meshes" ] || { echo "bench_par: $shared/meshes absent, skipped"; exit 0; }

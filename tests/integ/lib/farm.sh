@@ -6,6 +6,7 @@
 # port a test's farm.ini listens on (the kernel picks one, lib/daemon.sh);
 # start_daemon sets $http_port and SLIMFARM_URL to the daemon's.
 set -u
+umask 077 # slimfarmd refuses a farm.ini holding keys that others can read
 . "$(dirname "${BASH_SOURCE[0]}")/daemon.sh"
 D=$BUILD/bin/slimfarmd
 C=$BUILD/bin/slimfarm
