@@ -82,9 +82,9 @@ api_octoprint_login(void *ctx, const struct route_args *args, const struct http_
     json_t *roles = rw ? json_pack("[ss]", "user", "admin") : json_pack("[s]", "user");
     resp->json = json_pack("{ss sb so so ss sb sb so s{s[s] s[s]} s{} sb ss}", "name", label,
                            "active", 1, "permissions", permissions(rw), "groups", groups(rw),
-                           "session", hash, "admin", rw, "user", 1, "roles", roles, "needs",
-                           "role", rw ? "admin" : "user", "group", rw ? "admins" : "readonly",
-                           "settings", "_is_external_client", 0, "_login_mechanism", "apikey");
+                           "session", hash, "admin", rw, "user", 1, "roles", roles, "needs", "role",
+                           rw ? "admin" : "user", "group", rw ? "admins" : "readonly", "settings",
+                           "_is_external_client", 0, "_login_mechanism", "apikey");
 }
 
 /* ---- the files: the newest jobs ---- */
@@ -117,11 +117,11 @@ file_entry(struct store *s, const struct job_row *j, const char *base)
     json_t *est = j->est_known && j->est_s >= 0 ? json_real(j->est_s) : json_null();
     return json_pack("{ss ss ss ss s[ss] ss sI sI s{ss ss} s{so} s{si si} s{ss sI}}", "name",
                      j->opts.name, "display", j->opts.name, "path", path, "type", "machinecode",
-                     "typePath", "machinecode", "gcode", "origin", "local", "size",
-                     file_size(s, j), "date", (json_int_t)(j->created_ms / 1000), "refs",
-                     "resource", res, "download", dl, "gcodeAnalysis", "estimatedPrintTime", est,
-                     "prints", "success", j->counts.copies_done, "failure", j->counts.failures,
-                     "slimfarm", "state", job_state_name(j->state), "job_id", (json_int_t)j->id);
+                     "typePath", "machinecode", "gcode", "origin", "local", "size", file_size(s, j),
+                     "date", (json_int_t)(j->created_ms / 1000), "refs", "resource", res,
+                     "download", dl, "gcodeAnalysis", "estimatedPrintTime", est, "prints",
+                     "success", j->counts.copies_done, "failure", j->counts.failures, "slimfarm",
+                     "state", job_state_name(j->state), "job_id", (json_int_t)j->id);
 }
 
 static void
@@ -141,8 +141,8 @@ files_read(struct store *s, void *ud, struct http_resp *resp)
         json_array_append_new(files, file_entry(s, &rows[i], fl->base));
     free(rows);
     /* free and total: the farm stores what it is sent; OctoPrint clients want numbers */
-    resp->json = json_pack("{so sI sI}", "files", files, "free", (json_int_t)0, "total",
-                           (json_int_t)0);
+    resp->json =
+        json_pack("{so sI sI}", "files", files, "free", (json_int_t)0, "total", (json_int_t)0);
 }
 
 void
@@ -163,11 +163,11 @@ api_octoprint_files(void *ctx, const struct route_args *args, const struct http_
 /* ---- the farm as one printer ---- */
 
 struct summary {
-    const char *text;         /* OctoPrint's state text */
+    const char *text; /* OctoPrint's state text */
     size_t n, printing, paused, offline, error;
-    double progress;          /* mean of the printing and paused printers', 0..1 */
-    int64_t left_s;           /* the longest known time left; -1 if none */
-    int64_t job;              /* the one job printing or paused, 0 if none or several */
+    double progress; /* mean of the printing and paused printers', 0..1 */
+    int64_t left_s;  /* the longest known time left; -1 if none */
+    int64_t job;     /* the one job printing or paused, 0 if none or several */
 };
 
 static void
@@ -209,19 +209,19 @@ state_json(const struct summary *s)
 {
     bool down = strcmp(s->text, "Offline") == 0 || strcmp(s->text, "Error") == 0;
     return json_pack("{ss s{sb sb sb sb sb sb sb sb sb sb}}", "text", s->text, "flags",
-                     "operational", !down, "ready", !down && !s->printing && !s->paused,
-                     "printing", s->printing > 0, "paused", !s->printing && s->paused, "pausing",
-                     0, "cancelling", 0, "error", strcmp(s->text, "Error") == 0, "closedOrError",
-                     down, "sdReady", 0, "finishing", 0);
+                     "operational", !down, "ready", !down && !s->printing && !s->paused, "printing",
+                     s->printing > 0, "paused", !s->printing && s->paused, "pausing", 0,
+                     "cancelling", 0, "error", strcmp(s->text, "Error") == 0, "closedOrError", down,
+                     "sdReady", 0, "finishing", 0);
 }
 
 static json_t *
 printer_json(const struct summary *s)
 {
-    return json_pack("{so s{} s{sb} s{si si si si si}}", "state", state_json(s),
-                           "temperature", "sd", "ready", 0, "slimfarm", "printers", (int)s->n,
-                           "printing", (int)s->printing, "paused", (int)s->paused, "offline",
-                           (int)s->offline, "error", (int)s->error);
+    return json_pack("{so s{} s{sb} s{si si si si si}}", "state", state_json(s), "temperature",
+                     "sd", "ready", 0, "slimfarm", "printers", (int)s->n, "printing",
+                     (int)s->printing, "paused", (int)s->paused, "offline", (int)s->offline,
+                     "error", (int)s->error);
 }
 
 /* The one job printing is read from the loop's store: one row by its key. */
@@ -241,10 +241,9 @@ job_json(const struct api_compat_env *env, const struct summary *s)
     bool busy = s->printing + s->paused > 0;
     json_t *completion = busy ? json_real(100.0 * s->progress) : json_null();
     json_t *left = busy && s->left_s >= 0 ? json_integer(s->left_s) : json_null();
-    return json_pack("{s{s{so so ss} so} s{so sn so} ss}", "job", "file", "name", name,
-                           "path", path, "origin", "local", "estimatedPrintTime", est, "progress",
-                           "completion", completion, "printTime", "printTimeLeft", left, "state",
-                           s->text);
+    return json_pack("{s{s{so so ss} so} s{so sn so} ss}", "job", "file", "name", name, "path",
+                     path, "origin", "local", "estimatedPrintTime", est, "progress", "completion",
+                     completion, "printTime", "printTimeLeft", left, "state", s->text);
 }
 
 void

@@ -46,7 +46,7 @@ void api_octoprint_files(void *ctx, const struct route_args *args, const struct 
 /* GET /api/printer and GET /api/job (by req->path). */
 void api_octoprint_state(void *ctx, const struct route_args *args, const struct http_req *req,
                          struct http_resp *resp);
-void api_octoprint_job_command(void *ctx, const struct route_args *args,
-                               const struct http_req *req, struct http_resp *resp);
+void api_octoprint_job_command(void *ctx, const struct route_args *args, const struct http_req *req,
+                               struct http_resp *resp);
 
 #endif
