@@ -28,6 +28,7 @@
 
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "api_octoprint.h"
 #include "api_read.h"
 #include "metrics.h"
 
@@ -56,10 +57,8 @@ boolean(const char *v, bool *out)
 
 /* ---- uploads ---- */
 
-/* The scheme-and-host prefix of an absolute URL from the Host header, or
-   "" when it holds anything but a host name, address and port. */
-static void
-base_url(const struct http_req *req, char *out, size_t cap)
+void
+api_compat_base_url(const struct http_req *req, char *out, size_t cap)
 {
     out[0] = '\0';
     const char *h = req->host;
@@ -72,9 +71,8 @@ base_url(const struct http_req *req, char *out, size_t cap)
     snprintf(out, cap, "http://%s", h);
 }
 
-/* name percent-encoded for a URL path segment (RFC 3986 unreserved kept). */
-static void
-url_escape(const char *name, char *out, size_t cap)
+void
+api_compat_url_escape(const char *name, char *out, size_t cap)
 {
     size_t o = 0;
     for (const unsigned char *p = (const unsigned char *)name; *p && o + 4 < cap; p++) {
@@ -95,7 +93,7 @@ answer(enum flavor fl, const char *base, const char *name, int64_t id, struct ht
        struct store *s)
 {
     char esc[3 * JOB_NAME_MAX + 1], shown[JOB_NAME_MAX + 32], clean[JOB_NAME_MAX + 4];
-    url_escape(name, esc, sizeof(esc));
+    api_compat_url_escape(name, esc, sizeof(esc));
     snprintf(shown, sizeof(shown), "job-%lld/%s", (long long)id, name);
     http_text_clean(shown, sizeof(shown), shown);
     http_text_clean(clean, sizeof(clean), name);
@@ -189,7 +187,7 @@ upload(const struct api_compat_env *env, enum flavor fl, const struct http_req *
     job_opts_init(&o);
     snprintf(o.name, sizeof(o.name), "%s", req->upload_name);
     char base[256];
-    base_url(req, base, sizeof(base));
+    api_compat_base_url(req, base, sizeof(base));
     if (api_compat_is_gcode(o.name)) {
         if (!env->farm) {
             http_error(resp, 400, "'%s': this daemon runs no farm to print G-code", o.name);
@@ -306,14 +304,6 @@ octo_command(const struct api_compat_env *env, const struct http_req *req, const
 
 /* ---- read-only answers ---- */
 
-static json_t *
-octo_state(void)
-{
-    return json_pack("{ss s{sb sb sb sb sb sb sb sb sb sb}}", "text", "Operational", "flags",
-                     "operational", 1, "ready", 1, "printing", 0, "paused", 0, "pausing", 0,
-                     "cancelling", 0, "error", 0, "closedOrError", 0, "sdReady", 0, "finishing", 0);
-}
-
 static bool
 octo_get(const char *path, struct http_resp *resp)
 {
@@ -330,13 +320,6 @@ octo_get(const char *path, struct http_resp *resp)
         resp->json =
             json_pack("{s{s{ss ss ss sb sb}}}", "profiles", "_default", "id", "_default", "name",
                       "slimfarm", "model", "slimfarm print farm", "current", 1, "default", 1);
-    else if (strcmp(path, "/api/printer") == 0)
-        resp->json =
-            json_pack("{so s{} s{sb}}", "state", octo_state(), "temperature", "sd", "ready", 0);
-    else if (strcmp(path, "/api/job") == 0)
-        resp->json = json_pack("{s{s{sn ss}} s{sn sn sn} ss}", "job", "file", "name", "origin",
-                               "local", "progress", "completion", "printTime", "printTimeLeft",
-                               "state", "Operational");
     else if (strcmp(path, "/api/connection") == 0)
         resp->json = json_pack("{s{ss ss sn}}", "current", "state", "Operational", "port",
                                "slimfarm", "baudrate");
@@ -481,6 +464,8 @@ static const struct route rows[] = {
     { ROUTE_GET, "/metrics", NULL, HTTP_BODY_NONE, ROUTE_READ, metrics, "use GET" },
     { ROUTE_POST, "/api/files/local", NULL, HTTP_BODY_UPLOAD, ROUTE_WRITE, octo_upload,
       UPLOAD_405 },
+    { ROUTE_GET, "/api/files/local", NULL, HTTP_BODY_NONE, ROUTE_READ, api_octoprint_files,
+      UPLOAD_405 },
     { ROUTE_POST, "/server/files/upload", NULL, HTTP_BODY_UPLOAD, ROUTE_WRITE, moon_upload,
       UPLOAD_405 },
     { ROUTE_ANY, "/api/files/sdcard", NULL, HTTP_BODY_NONE, ROUTE_READ, sdcard, NULL },
@@ -492,8 +477,12 @@ static const struct route rows[] = {
     { ROUTE_GET, "/api/server", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
     { ROUTE_GET, "/api/settings", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
     { ROUTE_GET, "/api/printerprofiles", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
-    { ROUTE_GET, "/api/printer", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
-    { ROUTE_GET, "/api/job", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/api/printer", NULL, HTTP_BODY_NONE, ROUTE_READ, api_octoprint_state, NULL },
+    { ROUTE_GET, "/api/job", NULL, HTTP_BODY_NONE, ROUTE_READ, api_octoprint_state, NULL },
+    { ROUTE_POST, "/api/job", NULL, HTTP_BODY_JSON, ROUTE_WRITE, api_octoprint_job_command, NULL },
+    { ROUTE_POST, "/api/login", NULL, HTTP_BODY_JSON, ROUTE_READ, api_octoprint_login, NULL },
+    { ROUTE_GET, "/api/currentuser", NULL, HTTP_BODY_NONE, ROUTE_READ, api_octoprint_user, NULL },
+    { ROUTE_GET, "/api/files", NULL, HTTP_BODY_NONE, ROUTE_READ, api_octoprint_files, NULL },
     { ROUTE_GET, "/api/connection", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
     { ROUTE_GET, "/server/info", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
     { ROUTE_GET, "/server/files/roots", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },

@@ -9,7 +9,9 @@
  *   GET  /api/server             {"version": ..., "safemode": null}
  *   GET  /api/settings           no SD card, no webcam, no G-code analysis to wait for
  *   GET  /api/printerprofiles    one profile, the farm
- *   GET  /api/printer, /api/job, /api/connection: the farm as one operational printer
+ *   GET  /api/connection         the farm as one operational printer
+ *   /api/login, /api/currentuser, GET /api/files[/local], /api/printer,
+ *   /api/job: the farm as one OctoPrint printer (api_octoprint.h)
  *   POST /api/files/local        multipart file (+ path, select, print, userdata):
  *                                201, Location: .../api/files/local/job-ID/NAME
  *   POST /api/files/local/job-ID/NAME   {"command": "select"[, "print": true]} -> 204
@@ -63,6 +65,12 @@ struct api_compat_env {
 /* The routes above as rows of the route table; their handlers take the
    struct api_compat_env as ctx.  *n their count. */
 const struct route *api_compat_routes(size_t *n);
+
+/* The scheme-and-host prefix of an absolute URL from req's Host header, or
+   "" when it holds anything but a host name, address and port. */
+void api_compat_base_url(const struct http_req *req, char *out, size_t cap);
+/* name percent-encoded for a URL path segment (RFC 3986 unreserved kept). */
+void api_compat_url_escape(const char *name, char *out, size_t cap);
 
 /* True for a G-code file name (.gcode, .gco, .g). */
 bool api_compat_is_gcode(const char *name);
