@@ -12,10 +12,17 @@
  * Work is triggered by a zero-delay timer (farm_kick), so bursts of
  * printer and job events coalesce into one scheduling pass.
  *
+ * Files: this one holds the prepare stage, the scheduling pass, the
+ * printers' lifecycle and reload; farm_gcheck.c the G-code checks on the io
+ * thread (an upload's, and every start's by its printer's policy),
+ * farm_resume.c an interrupted job's resume; farm_int.h what they share
+ * (struct farm), internal to these files.
+ *
  * Thread: the loop thread; prepare work runs on pool workers with copies,
- * resume reads on the farm's own io thread.
+ * resume reads and G-code checks on the farm's own io thread.
  */
 #include "farm.h"
+#include "farm_int.h"
 
 #include <stdio.h>
 #include <string.h>
@@ -28,24 +35,6 @@
 #include "../base/mem.h"
 #include "gcjob.h"
 #include "sched.h"
-
-struct farm {
-    struct loop *l;            /* the loop */
-    struct store *s;           /* the job store */
-    struct pool *pool;         /* prepare workers */
-    struct pool *io;           /* one thread for resume reads: not queued behind slicing */
-    struct farm_hooks hooks;   /* drivers, prepare, notify */
-    char profiles_dir[512];    /* slicing profiles (farmcfg profiles_dir) */
-    struct printer **printers; /* n_printers, config order */
-    size_t n_printers;
-    uint64_t kick;         /* pending run() timer, 0 if none */
-    uint64_t progress;     /* progress timer */
-    bool stopping;         /* farm_free: what drivers report while closing goes unheard */
-    int preparing;         /* prepare tasks in flight */
-    struct prep *reslices; /* re-slices in flight (their jobs stay ready), linked by next */
-    struct noreslice *no;  /* re-slices that failed: not tried again until a reload */
-    size_t n_no, cap_no;
-};
 
 /* A job that could not be prepared for a printer's key (its profile is broken). */
 struct noreslice {
@@ -75,8 +64,8 @@ struct prep {
 
 static void run(struct loop *l, void *ud);
 
-static void
-notify(struct farm *f)
+void
+farm_notify(struct farm *f)
 {
     if (f->hooks.notify)
         f->hooks.notify(f->hooks.notify_ud);
@@ -89,8 +78,8 @@ farm_kick(struct farm *f)
         f->kick = loop_timer_add(f->l, 0, run, f);
 }
 
-static struct printer *
-find(const struct farm *f, const char *name)
+struct printer *
+farm_find(const struct farm *f, const char *name)
 {
     for (size_t i = 0; i < f->n_printers; i++)
         if (strcmp(printer_cfg(f->printers[i])->name, name) == 0)
@@ -103,7 +92,7 @@ static void
 on_printer_changed(void *ud)
 {
     struct farm *f = ud;
-    notify(f);
+    farm_notify(f);
     farm_kick(f);
 }
 
@@ -124,7 +113,7 @@ job_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_
     int rc = store_job_event(f->s, id, ev, a, NULL, &err);
     if (rc)
         log_warn("farm", "%s", err.msg);
-    notify(f);
+    farm_notify(f);
     return rc;
 }
 
@@ -228,7 +217,7 @@ prep_done(struct loop *l, void *ud, int rc)
                      t->reslice ? "prepared again" : "prepared", t->key);
         else
             log_info("farm", "job %lld: %s", (long long)id, err.msg);
-        notify(f);
+        farm_notify(f);
     } else if (rc != SF_OK && rc != SF_ECANCELED) {
         const char *why = t->err.msg[0] ? t->err.msg : err.msg;
         if (t->reslice) {
@@ -251,8 +240,8 @@ prep_done(struct loop *l, void *ud, int rc)
 }
 
 /* The printer as the scheduler sees it; its strings live in p. */
-static void
-printer_view(const struct printer *p, struct sched_printer *out)
+void
+farm_printer_view(const struct printer *p, struct sched_printer *out)
 {
     const struct farmcfg_printer *c = printer_cfg(p);
     enum printer_state st = printer_state(p);
@@ -286,7 +275,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     if (!t)
         return; /* retried on the next kick */
     struct sched_printer view;
-    printer_view(p, &view);
+    farm_printer_view(p, &view);
     t->f = f;
     t->store = f->s;
     t->reslice = reslice;
@@ -354,81 +343,6 @@ sched_view(const struct job_row *j, struct sched_job *out)
     memcpy(out->size_mm, j->size_mm, sizeof(out->size_mm));
 }
 
-/*
- * A start judged again by the G-code policy of the printer it starts on.
- * The upload (or prepare) judged the file by the policy of its day; a
- * reload since may have made the printer stricter (attended turned off,
- * an allow_gcode entry gone).  Every start reads the whole file once more,
- * on the io thread (as the upload check does), rather than keeping with
- * the job the policy it passed and judging again only when the printer's
- * is stricter: that would be a column in the store for one saved read of
- * a file the driver is about to read anyway, and a job that passed on one
- * printer of its key would need the same care when it starts on another.
- */
-struct startcheck {
-    struct farm *f;
-    int64_t job_id;
-    char printer[64];
-    char name[JOB_NAME_MAX]; /* the job's name, for the policy's messages */
-    char path[1200];
-    struct drv_job_scan scan;
-    bool counted;          /* scan holds the job's line count (else the driver counts) */
-    struct gpolicy policy; /* the printer's, now */
-    struct sf_err err;
-    char msg[1024]; /* the refused lines, "G-code 'NAME': line 12: M600: ..." */
-};
-
-static int
-startcheck_work(void *ud, const atomic_bool *cancel)
-{
-    (void)cancel;
-    struct startcheck *t = ud;
-    return gpolicy_check_file(&t->policy, t->path, t->name, t->msg, sizeof(t->msg), NULL, &t->err);
-}
-
-static void
-startcheck_done(struct loop *l, void *ud, int rc)
-{
-    (void)l;
-    struct startcheck *t = ud;
-    struct printer *p;
-    /* Shutting down (SF_ECANCELED) leaves it for printer_stop. */
-    if (rc != SF_ECANCELED && (p = find(t->f, t->printer)) != NULL)
-        printer_start_go(p, t->job_id, t->path, t->counted ? &t->scan : NULL, rc,
-                         t->msg[0] ? t->msg : t->err.msg);
-    free(t);
-}
-
-static void
-start(struct farm *f, const struct job_row *j, struct printer *p)
-{
-    struct sf_err err;
-    struct startcheck *t = mem_calloc(1, sizeof(*t));
-    if (!t)
-        return; /* the next kick tries again */
-    if (store_file_path(f->s, j->gcode_sha, t->path, sizeof(t->path), &err)) {
-        log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
-        free(t);
-        return;
-    }
-    t->f = f;
-    t->job_id = j->id;
-    snprintf(t->printer, sizeof(t->printer), "%s", printer_cfg(p)->name);
-    snprintf(t->name, sizeof(t->name), "%s", j->opts.name);
-    /* The scan prepare made; G-code prepared before the count was stored
-       (gcode_lines 0) is read by the driver itself, once. */
-    t->scan = (struct drv_job_scan){ .lines_total = (uint64_t)j->gcode_lines };
-    t->counted = j->gcode_lines > 0;
-    farmcfg_policy(printer_cfg(p), &t->policy);
-    /* p is printing j from here: the scheduler picks neither again */
-    if (printer_start(p, j, t->path)) {
-        free(t);
-        return;
-    }
-    if (!pool_submit(f->io, startcheck_work, startcheck_done, t, &err))
-        startcheck_done(f->l, t, startcheck_work(t, NULL)); /* no worker: judged here */
-}
-
 static void
 run(struct loop *l, void *ud)
 {
@@ -451,7 +365,7 @@ run(struct loop *l, void *ud)
         goto out; /* the next kick tries again */
     for (size_t i = 0; i < f->n_printers; i++) {
         const struct printer *p = f->printers[i];
-        printer_view(p, &sp[i]);
+        farm_printer_view(p, &sp[i]);
         /* An interrupted part is still on this bed, waiting to be resumed:
            nothing else may start on top of it. */
         for (size_t k = 0; k < n; k++)
@@ -466,7 +380,7 @@ run(struct loop *l, void *ud)
         const struct job_row *j = &jobs[out[k].job];
         struct printer *p = f->printers[out[k].printer];
         if (!out[k].reslice) {
-            start(f, j, p);
+            farm_start(f, j, p);
             continue;
         }
         /* Waiting for a busy printer of its key while p idles: slice it for p. */
@@ -629,7 +543,7 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     }
     for (size_t i = 0; i < cfg->n_printers; i++) {
         const struct farmcfg_printer *c = &cfg->printers[i];
-        struct printer *p = find(f, c->name);
+        struct printer *p = farm_find(f, c->name);
         if (!p) {
             if (add_printer(f, c, err))
                 return err ? err->code : SF_ENOMEM;
@@ -691,7 +605,7 @@ farm_printer_info(const struct farm *f, size_t i, struct printer_info *out)
 int
 farm_printer_action(struct farm *f, const char *name, enum printer_action act, struct sf_err *err)
 {
-    struct printer *p = find(f, name);
+    struct printer *p = farm_find(f, name);
     if (!p)
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
     return printer_action(p, act, err);
@@ -701,7 +615,7 @@ int
 farm_printer_command(struct farm *f, const char *name, const char *line, const char *who,
                      struct sf_err *err)
 {
-    struct printer *p = find(f, name);
+    struct printer *p = farm_find(f, name);
     if (!p)
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
     /* The printer's G-code policy judges the line as a manual command
@@ -727,247 +641,8 @@ farm_printer_command(struct farm *f, const char *name, const char *line, const c
 int
 farm_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err)
 {
-    struct printer *p = find(f, name);
+    struct printer *p = farm_find(f, name);
     if (!p)
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
     return printer_estop(p, who, err);
-}
-
-/* A resume waiting for its read (drv_job_scan_to) on the io thread. */
-struct resume {
-    struct farm *f;
-    int64_t job_id;
-    char printer[64];
-    char path[1200];
-    uint64_t line;
-    struct drv_job_scan scan;
-    double est_s; /* the job's print time estimate (printer_estimate_s) */
-    struct sf_err err;
-};
-
-static int
-resume_work(void *ud, const atomic_bool *cancel)
-{
-    (void)cancel;
-    struct resume *r = ud;
-    return drv_job_scan_to(r->path, r->line, &r->scan, &r->err);
-}
-
-static void
-resume_done(struct loop *l, void *ud, int rc)
-{
-    (void)l;
-    struct resume *r = ud;
-    /* Shutting down (SF_ECANCELED) leaves it for printer_stop. */
-    struct printer *p = rc == SF_ECANCELED ? NULL : find(r->f, r->printer);
-    if (p)
-        printer_resume_go(p, r->job_id, r->path, r->line, &r->scan, r->est_s, rc, r->err.msg);
-    free(r);
-}
-
-int
-farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
-{
-    struct job_row j;
-    int rc = store_job_get(f->s, id, &j, err);
-    if (rc)
-        return rc;
-    if (j.state != JOB_INTERRUPTED)
-        return sf_err_set(err, SF_EINVAL, "job %lld is %s: only an interrupted job can be resumed",
-                          (long long)id, job_state_name(j.state));
-    struct printer *p = find(f, j.printer);
-    if (!p || printer_removed(p))
-        return sf_err_set(err, SF_EINVAL,
-                          "job %lld: its part is on printer '%s', which is no longer configured",
-                          (long long)id, j.printer);
-    if (printer_state(p) != PRINTER_IDLE || !printer_connected(p) || printer_job(p))
-        return sf_err_set(err, SF_EINVAL, "job %lld: printer %s is %s; resume when it is idle",
-                          (long long)id, j.printer, printer_state_name(printer_state(p)));
-    if (line < 0)
-        line = j.lines_acked;
-    char path[1200];
-    /* G-code prepared before its count was kept (gcode_lines 0) is scanned here */
-    struct drv_job_scan scan = { .lines_total = (uint64_t)j.gcode_lines };
-    if ((rc = store_file_path(f->s, j.gcode_sha, path, sizeof(path), err)) ||
-        (j.gcode_lines == 0 && (rc = drv_job_scan(path, &scan, err))))
-        return rc;
-    uint64_t total = scan.lines_total;
-    /* Line 0 would run the job's own start: its G28 homes Z into the part. */
-    if (line < 1 || (uint64_t)line >= total)
-        return sf_err_set(err, SF_EINVAL,
-                          "job %lld: line %lld is out of range: resume from 1..%llu (the job has "
-                          "%llu command lines; to print from line 0, clear the bed and restart)",
-                          (long long)id, (long long)line,
-                          (unsigned long long)(total > 1 ? total - 1 : 1),
-                          (unsigned long long)total);
-    if ((rc = printer_resume_commit(p, id, line, err)))
-        return rc;
-    /* The machine state at `line` comes from reading the file up to it
-       (0.5 s for 2/3 of a 112 MB job): on the io thread, so the other
-       printers' streams do not wait; the driver starts when it is read. */
-    log_printer(LOG_INFO, j.printer, "job %lld: resumed at line %lld of %llu", (long long)id,
-                (long long)line, (unsigned long long)total);
-    double est_s = printer_estimate_s(&j, path);
-    struct resume *r = mem_calloc(1, sizeof(*r));
-    struct sf_err perr;
-    if (r) {
-        *r = (struct resume){
-            .f = f, .job_id = id, .line = (uint64_t)line, .scan = scan, .est_s = est_s
-        };
-        snprintf(r->printer, sizeof(r->printer), "%s", j.printer);
-        snprintf(r->path, sizeof(r->path), "%s", path);
-    }
-    if (!r || !pool_submit(f->io, resume_work, resume_done, r, &perr)) {
-        free(r);
-        printer_resume_go(p, id, path, (uint64_t)line, &scan, est_s, SF_OK, ""); /* reads here */
-    }
-    farm_kick(f);
-    return SF_OK;
-}
-
-/* An uploaded G-code file being checked on the io thread. */
-struct gcheck {
-    struct farm *f;
-    char path[1200];
-    struct job_opts o;
-    struct farm_gcode g;
-    struct gpolicy policy; /* what every printer that may take it passes (gpolicy_meet) */
-    struct sf_err err;
-    char msg[4096]; /* the policy's findings, every refused line (up to 20) */
-    farm_gcode_fn done;
-    void *ud;
-};
-
-/* The io thread: every line, and the slicer's comments (pure reads). */
-static int
-gcheck_work(void *ud, const atomic_bool *cancel)
-{
-    (void)cancel;
-    struct gcheck *t = ud;
-    struct drv_job_scan scan;
-    int rc =
-        gpolicy_check_file(&t->policy, t->path, t->o.name, t->msg, sizeof(t->msg), NULL, &t->err);
-    if (rc)
-        return rc;
-    if ((rc = drv_job_scan(t->path, &scan, &t->err)) ||
-        (rc = gcjob_read(t->path, &t->g.info, &t->err))) {
-        /* the message names the temporary path: name the upload instead */
-        const char *at = strstr(t->err.msg, t->path);
-        if (at) {
-            char rest[SF_ERR_MSG_MAX];
-            size_t n = strlen(t->path);
-            snprintf(rest, sizeof(rest), "%s", at + n + (at[n] == '\''));
-            sf_err_set(&t->err, rc, "G-code '%s'%s", t->o.name, rest);
-        }
-        return rc;
-    }
-    if (scan.lines_total == 0)
-        return sf_err_set(&t->err, SF_EINVAL, "G-code '%s' holds no command", t->o.name);
-    t->g.lines = (int64_t)scan.lines_total;
-    t->g.est_s = gcjob_estimate_s(t->path);
-    gcjob_key(&t->g.info, t->g.key, sizeof(t->g.key));
-    return SF_OK;
-}
-
-/* The loop thread: could some printer of the farm run it? */
-static void
-gcheck_done(struct loop *l, void *ud, int rc)
-{
-    (void)l;
-    struct gcheck *t = ud;
-    struct farm *f = t->f;
-    if (rc == SF_ECANCELED) {
-        sf_err_set(&t->err, rc, "the farm is stopping");
-    } else if (rc == SF_OK) {
-        /* Refuse now what no printer of the farm could ever run: a slicer
-           user hears it at once, not from a job that waits forever.
-           Material is not asked: an operator loads another spool, not
-           another printer. */
-        struct sched_job vj = { .state = JOB_READY,
-                                .printer = t->o.printer,
-                                .group = t->o.group,
-                                .material = "",
-                                .key = t->g.key };
-        char why[SCHED_REASON_MAX] = "", one[160];
-        bool any = false;
-        for (size_t i = 0; i < f->n_printers && !any; i++) {
-            struct sched_printer sp;
-            printer_view(f->printers[i], &sp);
-            any = sched_compatible(&vj, &sp, one, sizeof(one));
-            size_t len = strlen(why);
-            if (!any)
-                snprintf(why + len, sizeof(why) - len, "%s%s: %s", i ? "; " : "", sp.name, one);
-        }
-        const struct gcjob_info *g = &t->g.info;
-        if (!any)
-            rc = sf_err_set(&t->err, SF_EINVAL,
-                            "G-code '%s' (%s%s%s, nozzle %g mm): no printer could run it: %s",
-                            t->o.name,
-                            g->model[0] ? "for printer model '" : "names no printer model",
-                            g->model, g->model[0] ? "'" : "", g->nozzle_mm,
-                            f->n_printers ? why : "no printers configured");
-    }
-    t->done(t->ud, rc, rc ? NULL : &t->g, t->msg[0] ? t->msg : t->err.msg);
-    free(t);
-}
-
-int
-farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, farm_gcode_fn done,
-                 void *ud, struct sf_err *err)
-{
-    struct gcheck *t = mem_calloc(1, sizeof(*t));
-    if (!t)
-        return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
-    if (snprintf(t->path, sizeof(t->path), "%s", path) >= (int)sizeof(t->path)) {
-        free(t);
-        return sf_err_set(err, SF_EINVAL, "farm: path too long: '%.80s...'", path);
-    }
-    t->f = f;
-    t->o = *o;
-    /* a file passes the policy of every printer that may take it */
-    gpolicy_all(&t->policy);
-    for (size_t i = 0; i < f->n_printers; i++) {
-        const struct farmcfg_printer *c = printer_cfg(f->printers[i]);
-        struct gpolicy one;
-        if ((o->printer[0] && strcmp(o->printer, c->name) != 0) ||
-            (o->group[0] && strcmp(o->group, c->group) != 0))
-            continue;
-        farmcfg_policy(c, &one);
-        gpolicy_meet(&t->policy, &one);
-    }
-    t->done = done;
-    t->ud = ud;
-    /* on the io thread, beside resume reads: never queued behind slicing */
-    if (!pool_submit(f->io, gcheck_work, gcheck_done, t, err)) {
-        free(t);
-        return err ? err->code : SF_ENOMEM;
-    }
-    return SF_OK;
-}
-
-int
-farm_gcode_add(struct farm *f, const struct job_opts *o, const char *sha,
-               const struct farm_gcode *g, int64_t *id, struct sf_err *err)
-{
-    struct job_opts jo = *o;
-    if (!jo.material[0] && g->info.material[0])
-        snprintf(jo.material, sizeof(jo.material), "%s", g->info.material);
-    struct job_event_args a = { .prep_key = g->key,
-                                .nozzle_mm = g->info.nozzle_mm,
-                                .gcode_lines = g->lines,
-                                .filament_g = g->info.filament_g,
-                                .support_g = g->info.support_g,
-                                .est_known = true,
-                                .est_s = g->est_s };
-    int64_t new_id;
-    int rc = store_job_add_gcode(f->s, &jo, sha, &a, &new_id, err);
-    if (rc)
-        return rc;
-    log_info("farm", "job %lld: G-code '%s' queued as is (%lld lines, %s)", (long long)new_id,
-             o->name, (long long)g->lines, g->key);
-    if (id)
-        *id = new_id;
-    notify(f);
-    farm_kick(f);
-    return SF_OK;
 }

@@ -1,0 +1,240 @@
+/*
+ * farm_gcheck.c - the farm's G-code checks on its io thread (farm_int.h,
+ * farm.h): an uploaded G-code file judged before it becomes a job (the
+ * G-code policy of every printer that may take it, its line count, the
+ * slicer's comments, some printer that could run it), and every start's
+ * file judged again by the policy of the printer it starts on.
+ *
+ * Thread: the loop thread; the reads run on the farm's io thread with
+ * copies (never queued behind slicing).
+ */
+#include "farm_int.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "../../drivers/gpolicy.h"
+#include "../base/log.h"
+#include "../base/mem.h"
+
+/*
+ * A start judged again by the G-code policy of the printer it starts on.
+ * The upload (or prepare) judged the file by the policy of its day; a
+ * reload since may have made the printer stricter (attended turned off,
+ * an allow_gcode entry gone).  Every start reads the whole file once more,
+ * on the io thread (as the upload check does), rather than keeping with
+ * the job the policy it passed and judging again only when the printer's
+ * is stricter: that would be a column in the store for one saved read of
+ * a file the driver is about to read anyway, and a job that passed on one
+ * printer of its key would need the same care when it starts on another.
+ */
+struct startcheck {
+    struct farm *f;
+    int64_t job_id;
+    char printer[64];
+    char name[JOB_NAME_MAX]; /* the job's name, for the policy's messages */
+    char path[1200];
+    struct drv_job_scan scan;
+    bool counted;          /* scan holds the job's line count (else the driver counts) */
+    struct gpolicy policy; /* the printer's, now */
+    struct sf_err err;
+    char msg[1024]; /* the refused lines, "G-code 'NAME': line 12: M600: ..." */
+};
+
+static int
+startcheck_work(void *ud, const atomic_bool *cancel)
+{
+    (void)cancel;
+    struct startcheck *t = ud;
+    return gpolicy_check_file(&t->policy, t->path, t->name, t->msg, sizeof(t->msg), NULL, &t->err);
+}
+
+static void
+startcheck_done(struct loop *l, void *ud, int rc)
+{
+    (void)l;
+    struct startcheck *t = ud;
+    struct printer *p;
+    /* Shutting down (SF_ECANCELED) leaves it for printer_stop. */
+    if (rc != SF_ECANCELED && (p = farm_find(t->f, t->printer)) != NULL)
+        printer_start_go(p, t->job_id, t->path, t->counted ? &t->scan : NULL, rc,
+                         t->msg[0] ? t->msg : t->err.msg);
+    free(t);
+}
+
+void
+farm_start(struct farm *f, const struct job_row *j, struct printer *p)
+{
+    struct sf_err err;
+    struct startcheck *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return; /* the next kick tries again */
+    if (store_file_path(f->s, j->gcode_sha, t->path, sizeof(t->path), &err)) {
+        log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
+        free(t);
+        return;
+    }
+    t->f = f;
+    t->job_id = j->id;
+    snprintf(t->printer, sizeof(t->printer), "%s", printer_cfg(p)->name);
+    snprintf(t->name, sizeof(t->name), "%s", j->opts.name);
+    /* The scan prepare made; G-code prepared before the count was stored
+       (gcode_lines 0) is read by the driver itself, once. */
+    t->scan = (struct drv_job_scan){ .lines_total = (uint64_t)j->gcode_lines };
+    t->counted = j->gcode_lines > 0;
+    farmcfg_policy(printer_cfg(p), &t->policy);
+    /* p is printing j from here: the scheduler picks neither again */
+    if (printer_start(p, j, t->path)) {
+        free(t);
+        return;
+    }
+    if (!pool_submit(f->io, startcheck_work, startcheck_done, t, &err))
+        startcheck_done(f->l, t, startcheck_work(t, NULL)); /* no worker: judged here */
+}
+
+/* An uploaded G-code file being checked on the io thread. */
+struct gcheck {
+    struct farm *f;
+    char path[1200];
+    struct job_opts o;
+    struct farm_gcode g;
+    struct gpolicy policy; /* what every printer that may take it passes (gpolicy_meet) */
+    struct sf_err err;
+    char msg[4096]; /* the policy's findings, every refused line (up to 20) */
+    farm_gcode_fn done;
+    void *ud;
+};
+
+/* The io thread: every line, and the slicer's comments (pure reads). */
+static int
+gcheck_work(void *ud, const atomic_bool *cancel)
+{
+    (void)cancel;
+    struct gcheck *t = ud;
+    struct drv_job_scan scan;
+    int rc =
+        gpolicy_check_file(&t->policy, t->path, t->o.name, t->msg, sizeof(t->msg), NULL, &t->err);
+    if (rc)
+        return rc;
+    if ((rc = drv_job_scan(t->path, &scan, &t->err)) ||
+        (rc = gcjob_read(t->path, &t->g.info, &t->err))) {
+        /* the message names the temporary path: name the upload instead */
+        const char *at = strstr(t->err.msg, t->path);
+        if (at) {
+            char rest[SF_ERR_MSG_MAX];
+            size_t n = strlen(t->path);
+            snprintf(rest, sizeof(rest), "%s", at + n + (at[n] == '\''));
+            sf_err_set(&t->err, rc, "G-code '%s'%s", t->o.name, rest);
+        }
+        return rc;
+    }
+    if (scan.lines_total == 0)
+        return sf_err_set(&t->err, SF_EINVAL, "G-code '%s' holds no command", t->o.name);
+    t->g.lines = (int64_t)scan.lines_total;
+    t->g.est_s = gcjob_estimate_s(t->path);
+    gcjob_key(&t->g.info, t->g.key, sizeof(t->g.key));
+    return SF_OK;
+}
+
+/* The loop thread: could some printer of the farm run it? */
+static void
+gcheck_done(struct loop *l, void *ud, int rc)
+{
+    (void)l;
+    struct gcheck *t = ud;
+    struct farm *f = t->f;
+    if (rc == SF_ECANCELED) {
+        sf_err_set(&t->err, rc, "the farm is stopping");
+    } else if (rc == SF_OK) {
+        /* Refuse now what no printer of the farm could ever run: a slicer
+           user hears it at once, not from a job that waits forever.
+           Material is not asked: an operator loads another spool, not
+           another printer. */
+        struct sched_job vj = { .state = JOB_READY,
+                                .printer = t->o.printer,
+                                .group = t->o.group,
+                                .material = "",
+                                .key = t->g.key };
+        char why[SCHED_REASON_MAX] = "", one[160];
+        bool any = false;
+        for (size_t i = 0; i < f->n_printers && !any; i++) {
+            struct sched_printer sp;
+            farm_printer_view(f->printers[i], &sp);
+            any = sched_compatible(&vj, &sp, one, sizeof(one));
+            size_t len = strlen(why);
+            if (!any)
+                snprintf(why + len, sizeof(why) - len, "%s%s: %s", i ? "; " : "", sp.name, one);
+        }
+        const struct gcjob_info *g = &t->g.info;
+        if (!any)
+            rc = sf_err_set(&t->err, SF_EINVAL,
+                            "G-code '%s' (%s%s%s, nozzle %g mm): no printer could run it: %s",
+                            t->o.name,
+                            g->model[0] ? "for printer model '" : "names no printer model",
+                            g->model, g->model[0] ? "'" : "", g->nozzle_mm,
+                            f->n_printers ? why : "no printers configured");
+    }
+    t->done(t->ud, rc, rc ? NULL : &t->g, t->msg[0] ? t->msg : t->err.msg);
+    free(t);
+}
+
+int
+farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, farm_gcode_fn done,
+                 void *ud, struct sf_err *err)
+{
+    struct gcheck *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
+    if (snprintf(t->path, sizeof(t->path), "%s", path) >= (int)sizeof(t->path)) {
+        free(t);
+        return sf_err_set(err, SF_EINVAL, "farm: path too long: '%.80s...'", path);
+    }
+    t->f = f;
+    t->o = *o;
+    /* a file passes the policy of every printer that may take it */
+    gpolicy_all(&t->policy);
+    for (size_t i = 0; i < f->n_printers; i++) {
+        const struct farmcfg_printer *c = printer_cfg(f->printers[i]);
+        struct gpolicy one;
+        if ((o->printer[0] && strcmp(o->printer, c->name) != 0) ||
+            (o->group[0] && strcmp(o->group, c->group) != 0))
+            continue;
+        farmcfg_policy(c, &one);
+        gpolicy_meet(&t->policy, &one);
+    }
+    t->done = done;
+    t->ud = ud;
+    /* on the io thread, beside resume reads: never queued behind slicing */
+    if (!pool_submit(f->io, gcheck_work, gcheck_done, t, err)) {
+        free(t);
+        return err ? err->code : SF_ENOMEM;
+    }
+    return SF_OK;
+}
+
+int
+farm_gcode_add(struct farm *f, const struct job_opts *o, const char *sha,
+               const struct farm_gcode *g, int64_t *id, struct sf_err *err)
+{
+    struct job_opts jo = *o;
+    if (!jo.material[0] && g->info.material[0])
+        snprintf(jo.material, sizeof(jo.material), "%s", g->info.material);
+    struct job_event_args a = { .prep_key = g->key,
+                                .nozzle_mm = g->info.nozzle_mm,
+                                .gcode_lines = g->lines,
+                                .filament_g = g->info.filament_g,
+                                .support_g = g->info.support_g,
+                                .est_known = true,
+                                .est_s = g->est_s };
+    int64_t new_id;
+    int rc = store_job_add_gcode(f->s, &jo, sha, &a, &new_id, err);
+    if (rc)
+        return rc;
+    log_info("farm", "job %lld: G-code '%s' queued as is (%lld lines, %s)", (long long)new_id,
+             o->name, (long long)g->lines, g->key);
+    if (id)
+        *id = new_id;
+    farm_notify(f);
+    farm_kick(f);
+    return SF_OK;
+}

@@ -1,0 +1,61 @@
+/*
+ * farm_int.h - internal to the farm module (farm.c, farm_gcheck.c,
+ * farm_resume.c), not a contract for anyone else: nothing outside
+ * src/farm/farm*.c includes it; farm.h is the module's contract.
+ *
+ * What the parts share: the farm itself (struct farm), finding a printer
+ * by name, the printer as the scheduler sees it, the event streams' wake,
+ * and the start of a job (farm_gcheck.c judges its file on the io thread
+ * before the driver has it; farm.c's scheduling pass calls it).
+ *
+ * Thread: as farm.h (the loop thread).
+ */
+#ifndef SF_FARM_FARM_INT_H
+#define SF_FARM_FARM_INT_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "farm.h"
+
+struct prep;      /* farm.c: a prepare task */
+struct noreslice; /* farm.c: a re-slice that failed */
+
+struct farm {
+    struct loop *l;            /* the loop */
+    struct store *s;           /* the job store */
+    struct pool *pool;         /* prepare workers */
+    struct pool *io;           /* one thread for resume reads and G-code checks: not queued
+                                  behind slicing */
+    struct farm_hooks hooks;   /* drivers, prepare, notify */
+    char profiles_dir[512];    /* slicing profiles (farmcfg profiles_dir) */
+    struct printer **printers; /* n_printers, config order */
+    size_t n_printers;
+    uint64_t kick;         /* pending run() timer, 0 if none */
+    uint64_t progress;     /* progress timer */
+    bool stopping;         /* farm_free: what drivers report while closing goes unheard */
+    int preparing;         /* prepare tasks in flight */
+    struct prep *reslices; /* re-slices in flight (their jobs stay ready), linked by next */
+    struct noreslice *no;  /* re-slices that failed: not tried again until a reload */
+    size_t n_no, cap_no;
+};
+
+/* Wake the event streams (the notify hook), if any. */
+void farm_notify(struct farm *f);
+
+/* The printer named name, or NULL (removed printers too, until freed). */
+struct printer *farm_find(const struct farm *f, const char *name);
+
+/* The printer as the scheduler sees it; its strings live in p. */
+void farm_printer_view(const struct printer *p, struct sched_printer *out);
+
+/*
+ * Start job j (ready) on printer p (idle): p takes it at once (committed
+ * in the store), and the driver gets it once the file passed p's G-code
+ * policy on the io thread (farm_gcheck.c).  Failures are logged; the next
+ * scheduling pass tries again when nothing was committed.
+ */
+void farm_start(struct farm *f, const struct job_row *j, struct printer *p);
+
+#endif

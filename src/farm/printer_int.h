@@ -1,0 +1,83 @@
+/*
+ * printer_int.h - internal to the printer module (printer.c, printer_heat.c,
+ * printer_op.c), not a contract for anyone else: nothing outside
+ * src/farm/printer*.c includes it; printer.h is the module's contract.
+ *
+ * What the parts share: the printer itself (struct printer), its moves on
+ * job.h's machine with the bed they record, the job events it writes, the
+ * owner's wake, and the heaters' watch (printer_heat.c) that the driver
+ * events' delivery (printer.c) re-arms.
+ *
+ * Thread: as printer.h (the loop thread).
+ */
+#ifndef SF_FARM_PRINTER_INT_H
+#define SF_FARM_PRINTER_INT_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../../drivers/drv.h"
+#include "farmcfg.h"
+#include "job.h"
+#include "printer.h"
+
+/* One driver event as it happened. */
+struct queued {
+    enum drv_event ev;    /* what */
+    struct drv_status st; /* the driver's status at that moment */
+};
+
+struct printer {
+    struct printer_env env;     /* owner, store, loop */
+    struct farmcfg_printer cfg; /* its config section */
+    enum printer_state state;   /* job.h printer state: the one truth */
+    struct drv *drv;            /* its driver; NULL without one */
+    int64_t job_id;             /* job on it, 0 if none */
+    int64_t lines_acked;        /* latest from the driver */
+    int64_t lines_saved;        /* last value written to the store */
+    char message[160];          /* why offline / error */
+    uint64_t reconnect;         /* reconnect timer id, 0 if none */
+    int attempts;               /* reconnects since the link was last up (drv_backoff_ms) */
+    bool removed;               /* dropped from the config */
+    bool bed_full;              /* the bed holds a part (store_printer_bed_get) */
+    bool deaf;                  /* printer_stop: driver events are dropped */
+    bool attach_tried;          /* this connection offered the driver its interrupted job */
+    bool error_cleared;         /* an operator cleared the error before the driver saw the
+                                   printer recover: leave it when the driver reports idle */
+    struct queued *queue;       /* driver events not applied yet, n_queue of cap_queue */
+    size_t n_queue, cap_queue;
+    uint64_t deliver;      /* timer applying the queue, 0 if none */
+    uint64_t hold;         /* after a refused start: timer until p takes jobs again, 0 if none */
+    int refusals;          /* starts refused in a row (drive) */
+    uint64_t attach_retry; /* timer offering the interrupted job again, 0 if none */
+    int attach_waits;      /* attach() answers "not yet" on this connection */
+    double est_s;          /* the job's print time estimate (printer_estimate_s), s; -1 unknown */
+    uint64_t heat_timer;   /* hot with no print: timer turning the heaters off, 0 if none */
+    int64_t judging; /* job started whose file is judged before the driver has it, 0 if none */
+};
+
+/* Tell p's owner it changed (printer_env.changed), if it listens. */
+void printer_changed(struct printer *p);
+
+/* Record whether p's bed holds a part (in the store: a crash keeps the bed gate). */
+void printer_set_bed(struct printer *p, bool full);
+
+/*
+ * Move p by ev on job.h's machine, recording the bed and the state in the
+ * store; false (logged) when the machine refuses the move.
+ */
+bool printer_move(struct printer *p, enum printer_event ev);
+
+/* Apply a job event in the store; a failure is logged and returned (the job fails alone). */
+int printer_job_event(struct printer *p, int64_t id, enum job_event ev,
+                      const struct job_event_args *a);
+
+/*
+ * Arm the heaters' timer when p is hot with no print on it (turned off
+ * after cfg.hold_heat_min), disarm it when not; called after each batch of
+ * driver events.
+ */
+void printer_heat_watch(struct printer *p);
+
+#endif

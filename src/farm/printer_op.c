@@ -1,0 +1,202 @@
+/*
+ * printer_op.c - what an operator does to a printer (printer.h): pause,
+ * resume, cancel and clear its job or bed, send it a manual command, stop
+ * it in an emergency; each recorded in the log and the event log.
+ *
+ * Thread: the loop thread.
+ */
+#include "printer_int.h"
+
+#include <stdio.h>
+#include <string.h>
+
+#include "../base/log.h"
+
+static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
+                                                                "cleared" };
+
+bool
+printer_action_parse(const char *s, enum printer_action *out)
+{
+    for (int i = 0; i < PRINTER_ACTION_COUNT; i++)
+        if (strcmp(s, action_names[i]) == 0) {
+            *out = (enum printer_action)i;
+            return true;
+        }
+    return false;
+}
+
+/* The job the store holds as interrupted on p (its part may be on the bed), or 0. */
+static int64_t
+interrupted_here(struct printer *p)
+{
+    struct sf_err err;
+    struct job_row j;
+    int rc = store_job_interrupted(p->env.s, p->cfg.name, &j, &err);
+    if (rc == SF_ENOTFOUND)
+        return 0;
+    return rc ? -1 : j.id; /* unknown: treated as held */
+}
+
+/* Record what an operator did to p in the log and the event log. */
+static void
+note(struct printer *p, const char *kind, const char *fmt, const char *a, const char *b)
+{
+    struct sf_err err;
+    char what[192];
+    snprintf(what, sizeof(what), fmt, a, b);
+    if (strcmp(kind, "printer-command") == 0) /* each one, never folded as a repeat */
+        log_printer_each(LOG_INFO, p->cfg.name, "%s", what);
+    else
+        log_printer(LOG_INFO, p->cfg.name, "%s", what);
+    if (store_printer_note(p->env.s, p->cfg.name, kind, what, &err))
+        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+}
+
+int
+printer_command(struct printer *p, const char *line, const char *who, struct sf_err *err)
+{
+    if (!line[0] || strpbrk(line, "\r\n"))
+        return sf_err_set(err, SF_EINVAL, "printer %s: a command is one non-empty line",
+                          p->cfg.name);
+    if (!p->drv)
+        return sf_err_set(err, SF_EAGAIN, "printer %s is not connected%s%s", p->cfg.name,
+                          p->message[0] ? ": " : "", p->message);
+    if (!p->drv->ops->command)
+        return sf_err_set(err, SF_EUNSUPP, "printer %s: its %s driver sends no manual commands",
+                          p->cfg.name, p->drv->ops->kind);
+    if (p->state == PRINTER_OFFLINE)
+        return sf_err_set(err, SF_EAGAIN, "printer %s is offline%s%s", p->cfg.name,
+                          p->message[0] ? ": " : "", p->message);
+    if (p->job_id || p->state == PRINTER_PRINTING)
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer %s is %s job %lld: manual commands wait until it ends",
+                          p->cfg.name, printer_state_name(p->state), (long long)p->job_id);
+    /* Only an idle printer with a clear bed: a move on a part (or into it,
+       before a resume's G92 Z) is the operator's to make at the printer. */
+    if (p->state != PRINTER_IDLE || p->bed_full)
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer %s is %s%s: manual commands only on an idle printer with a "
+                          "clear bed (clear it first)",
+                          p->cfg.name, printer_state_name(p->state),
+                          p->bed_full && p->state == PRINTER_IDLE ? " with a part on its bed" : "");
+    int64_t held = interrupted_here(p);
+    if (held)
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer %s holds interrupted job %lld: resume, restart or cancel it "
+                          "before manual commands",
+                          p->cfg.name, (long long)held);
+    int rc = p->drv->ops->command(p->drv, line, err);
+    if (rc == SF_OK)
+        note(p, "printer-command", "manual command from %s: %s", who && who[0] ? who : "?", line);
+    return rc;
+}
+
+int
+printer_estop(struct printer *p, const char *who, struct sf_err *err)
+{
+    if (!p->drv || p->state == PRINTER_OFFLINE)
+        return sf_err_set(err, SF_EUNREACH, "printer %s is offline: no emergency stop reaches it",
+                          p->cfg.name);
+    int rc = p->drv->ops->version >= 3 && p->drv->ops->estop ? p->drv->ops->estop(p->drv, err)
+             : p->job_id                                     ? p->drv->ops->cancel(p->drv, err)
+                         : SF_OK; /* nothing it could stop: the farm holds it in error */
+    if (rc)
+        return rc;
+    char why[160];
+    snprintf(why, sizeof(why), "emergency stop by an operator (%s)", who && who[0] ? who : "?");
+    note(p, "printer-estop", "%s%s", why, p->job_id ? ": the job on it fails, not retried" : "");
+    printer_set_bed(p, true); /* whatever it printed stays until an operator clears it */
+    if (p->job_id) {
+        struct job_event_args a = { .lines_acked = p->lines_acked,
+                                    .reason = why,
+                                    .no_retry = true };
+        int64_t id = p->job_id;
+        p->job_id = 0;
+        printer_job_event(p, id, JOB_EV_PRINT_FAILED, &a);
+    }
+    snprintf(p->message, sizeof(p->message), "%s", why);
+    if (p->state != PRINTER_ERROR)
+        printer_move(p, PRINTER_EV_FAULT);
+    return SF_OK;
+}
+
+/* Cancel the job p was starting while its file is judged: nothing was sent. */
+static int
+cancel_judged(struct printer *p, struct sf_err *err)
+{
+    struct job_event_args a = { .reason = "cancelled by an operator" };
+    int rc = store_job_event(p->env.s, p->job_id, JOB_EV_CANCEL, &a, NULL, err);
+    if (rc)
+        return rc;
+    p->job_id = p->judging = 0;
+    printer_move(p, PRINTER_EV_REFUSED); /* idle again, the bed as it was */
+    return SF_OK;
+}
+
+int
+printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
+{
+    static const enum printer_event evs[PRINTER_ACTION_COUNT] = {
+        PRINTER_EV_PAUSE, PRINTER_EV_RESUME, PRINTER_EV_FINISHED, PRINTER_EV_CLEARED
+    };
+    if ((unsigned)act >= PRINTER_ACTION_COUNT)
+        return sf_err_set(err, SF_EINVAL, "printer %s: no action %d", p->cfg.name, (int)act);
+    enum printer_event ev = evs[act];
+    enum printer_state to;
+    int rc = printer_next(p->state, ev, p->cfg.auto_eject, &to, err);
+    if (rc)
+        return sf_err_prefix(err, "printer %s", p->cfg.name);
+    if (act == PRINTER_ACT_CLEARED) {
+        if (p->state == PRINTER_ERROR && p->drv && p->drv->status.state != DRV_IDLE) {
+            /* The driver has not seen the printer recover (its next poll
+               may): take the operator's word for the bed now and leave the
+               error when the driver reports idle, so no job goes to a
+               printer that would refuse it. */
+            printer_set_bed(p, false);
+            p->error_cleared = true;
+            snprintf(p->message, sizeof(p->message),
+                     "cleared: waits for the printer to report ready");
+            printer_changed(p);
+            return SF_OK;
+        }
+        printer_move(p, ev);
+        return SF_OK;
+    }
+    if (!p->drv || !p->job_id)
+        return sf_err_set(err, SF_EINVAL, "printer %s has no job to %s", p->cfg.name,
+                          action_names[act]);
+    if (p->judging == p->job_id) /* the driver has nothing yet: a cancel is the store's alone */
+        return act == PRINTER_ACT_CANCEL ? cancel_judged(p, err)
+                                         : sf_err_set(err, SF_EAGAIN,
+                                                      "printer %s is starting its job: %s it once "
+                                                      "it prints",
+                                                      p->cfg.name, action_names[act]);
+    /* The driver's own report of this comes on a later loop turn and finds
+       the printer moved already. */
+    rc = act == PRINTER_ACT_PAUSE    ? p->drv->ops->pause(p->drv, err)
+         : act == PRINTER_ACT_RESUME ? p->drv->ops->resume(p->drv, err)
+                                     : p->drv->ops->cancel(p->drv, err);
+    if (rc)
+        return rc;
+    struct job_event_args a = { .lines_acked = p->lines_acked,
+                                .reason = "cancelled by an operator" };
+    enum job_event jev = act == PRINTER_ACT_PAUSE    ? JOB_EV_PAUSE
+                         : act == PRINTER_ACT_RESUME ? JOB_EV_RESUME
+                                                     : JOB_EV_CANCEL;
+    if (jev == JOB_EV_CANCEL && !p->cfg.auto_eject)
+        printer_set_bed(p, true); /* the cancelled part stays on the bed */
+    if ((rc = store_job_event(p->env.s, p->job_id, jev, &a, NULL, err)))
+        return rc;
+    if (jev == JOB_EV_CANCEL) {
+        p->job_id = 0;
+        if (p->drv->status.state == DRV_PRINTING) {
+            /* still running the end sequence: printing with no job until
+               DRV_EV_JOB_CANCELLED */
+            printer_changed(p);
+            return SF_OK;
+        }
+    }
+    printer_move(p, ev);
+    return SF_OK;
+}
