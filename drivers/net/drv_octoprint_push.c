@@ -61,10 +61,9 @@ read_state(struct octo *o, json_t *p, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL, "octoprint push current: no \"state\" object");
     json_t *temps = json_object_get(p, "temps");
     json_t *t = json_array_size(temps) ? json_array_get(temps, json_array_size(temps) - 1) : NULL;
-    json_t *job = json_pack("{s:O?,s:O?,s:O?,s:O?}", "job", json_object_get(p, "job"),
-                            "progress", json_object_get(p, "progress"), "state",
-                            json_object_get(state, "text"), "error",
-                            json_object_get(state, "error"));
+    json_t *job = json_pack("{s:O?,s:O?,s:O?,s:O?}", "job", json_object_get(p, "job"), "progress",
+                            json_object_get(p, "progress"), "state", json_object_get(state, "text"),
+                            "error", json_object_get(state, "error"));
     json_t *prn = json_pack("{s:O,s:{s:O?,s:O?}}", "state", state, "temperature", "tool0",
                             json_object_get(t, "tool0"), "bed", json_object_get(t, "bed"));
     char *jt = job ? json_dumps(job, JSON_COMPACT) : NULL;
@@ -72,9 +71,9 @@ read_state(struct octo *o, json_t *p, struct sf_err *err)
     json_decref(job);
     json_decref(prn);
     int rc = !jt || !pt ? sf_err_set(err, SF_ENOMEM, "out of memory")
-             : octo_parse_job(jt, strlen(jt), &o->ws_job, err) < 0            ? SF_EINVAL
-             : octo_parse_printer(pt, strlen(pt), &o->ws_printer, err) < 0    ? SF_EINVAL
-                                                                              : SF_OK;
+             : octo_parse_job(jt, strlen(jt), &o->ws_job, err) < 0         ? SF_EINVAL
+             : octo_parse_printer(pt, strlen(pt), &o->ws_printer, err) < 0 ? SF_EINVAL
+                                                                           : SF_OK;
     free(jt);
     free(pt);
     return rc;
@@ -165,8 +164,9 @@ read_login(struct octo *o, const struct httpc_result *res, struct sf_err *err)
     if (rc)
         return rc;
     if (strchr(name, ':') || strchr(session, ':') || !session[0])
-        return sf_err_set(err, SF_EINVAL, "octoprint /api/login: name or session holds ':' or "
-                                          "is empty");
+        return sf_err_set(err, SF_EINVAL,
+                          "octoprint /api/login: name or session holds ':' or "
+                          "is empty");
     snprintf(o->auth, sizeof(o->auth), "%s:%s", name, session);
     return SF_OK;
 }

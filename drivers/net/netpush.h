@@ -31,13 +31,13 @@
 #define NETPUSH_BACKOFF_MAX_MS 60000 /* the longest wait before another socket */
 
 struct netpush {
-    struct wsc *ws;     /* open or opening, NULL if none */
-    bool live;          /* its messages stand in for the polls */
-    bool dirty;         /* a status not yet judged (the slot was taken) */
-    bool never;         /* the URL cannot take a socket: poll only */
-    int64_t retry_ms;   /* loop time before which no socket is opened again */
-    int backoff_ms;     /* the wait after the next failure */
-    uint64_t updates;   /* status messages taken */
+    struct wsc *ws;   /* open or opening, NULL if none */
+    bool live;        /* its messages stand in for the polls */
+    bool dirty;       /* a status not yet judged (the slot was taken) */
+    bool never;       /* the URL cannot take a socket: poll only */
+    int64_t retry_ms; /* loop time before which no socket is opened again */
+    int backoff_ms;   /* the wait after the next failure */
+    uint64_t updates; /* status messages taken */
 };
 
 /* A socket may be opened now: none is, the URL can take one, n is open, the backoff passed. */
