@@ -38,9 +38,9 @@ send_rpc(struct moonraker *m, const char *method, json_t *params, int id)
                             params ? params : json_object(), "id", id);
     char *text = req ? json_dumps(req, JSON_COMPACT) : NULL;
     json_decref(req);
+    /* a failure closes the socket: closed() says so */
     if (text && m->push.ws)
-        wsc_send(m->push.ws, text,
-                 strlen(text)); /* a failure closes the socket: closed() says so */
+        wsc_send(m->push.ws, text, strlen(text));
     free(text);
 }
 
