@@ -426,7 +426,7 @@ mr_poll(struct netdrv *n)
     struct moonraker *m = MR(n);
     if (!m->ready)
         return send_req(m, NETDRV_RQ_INFO, "GET", "/server/info", NULL);
-    if (m->ws_live && !n->poll_now) { /* the socket's updates stand in for the polls */
+    if (netpush_standing(&m->push, n)) { /* the socket's updates stand in for the polls */
         drv_moonraker_ws_apply(m);
         return true;
     }
@@ -442,7 +442,7 @@ drv_moonraker_seen(struct moonraker *m, const struct moonraker_status *stp, bool
     struct netdrv *n = &m->n;
     struct moonraker_status st = *stp;
     if (!pushed)
-        m->ws_dirty = false; /* a poll's answer is as new as anything the socket said before it */
+        m->push.dirty = false; /* a poll's answer is as new as anything the socket said before it */
     n->fails = 0;
     m->last = st;
     n->have_last = true;

@@ -22,7 +22,7 @@
  * for the slot to free, so no update is judged in the middle of an
  * upload or an action.  When the socket closes, goes silent, or the
  * printer's Klippy restarts, polling takes over at once and the socket is
- * tried again later (backoff 1 s doubling to MR_WS_BACKOFF_MAX_MS).
+ * tried again later (netpush.h: the lifecycle the OctoPrint driver shares).
  * Deltas are not missed: they come in order over one TCP stream, and a
  * new socket starts from the subscription's full snapshot.
  *
@@ -38,12 +38,11 @@
 
 #include "drv_moonraker.h"
 #include "netdrv.h"
-#include "wsc.h"
+#include "netpush.h"
 
-#define MR_POLL_MS           1000  /* drv_config.poll_ms 0 */
-#define MR_STARTUP_MS        2000  /* docs: ask /server/info again after 2 s while Klippy starts */
-#define MR_SCRIPT_MAX        4096  /* manual commands waiting to be sent */
-#define MR_WS_BACKOFF_MAX_MS 60000 /* the longest wait before another socket */
+#define MR_POLL_MS    1000 /* drv_config.poll_ms 0 */
+#define MR_STARTUP_MS 2000 /* docs: ask /server/info again after 2 s while Klippy starts */
+#define MR_SCRIPT_MAX 4096 /* manual commands waiting to be sent */
 
 enum { RQ_START = NETDRV_RQ_OWN, RQ_GCODE, RQ_META, RQ_HISTORY, RQ_ESTOP };
 
@@ -70,14 +69,8 @@ struct moonraker {
     struct moonraker_hist hist; /* its answer (H_ANSWERED) */
     char hist_why[200];         /* why the look-up could not tell, "" if it could */
     /* the push socket (drv_moonraker_ws.c) */
-    struct wsc *ws;      /* open or opening, NULL if none */
-    bool ws_live;        /* subscribed: its updates stand in for the polls */
-    bool ws_dirty;       /* an update not yet judged (the slot was taken) */
-    bool ws_never;       /* the URL cannot take a socket (https, a host name): poll only */
-    json_t *ws_status;   /* the objects as the socket told them */
-    int64_t ws_retry_ms; /* loop time before which no socket is opened again */
-    int ws_backoff_ms;   /* the wait after the next failure */
-    uint64_t ws_updates; /* notify_status_update messages taken */
+    struct netpush push;
+    json_t *ws_status; /* the objects as the socket told them */
 };
 
 /* The status st seen (by a poll, or pushed by the socket): judge and report it. */

@@ -38,8 +38,9 @@ send_rpc(struct moonraker *m, const char *method, json_t *params, int id)
                             params ? params : json_object(), "id", id);
     char *text = req ? json_dumps(req, JSON_COMPACT) : NULL;
     json_decref(req);
-    if (text && m->ws)
-        wsc_send(m->ws, text, strlen(text)); /* a failure closes the socket: closed() says so */
+    /* a failure closes the socket: closed() says so */
+    if (text && m->push.ws)
+        wsc_send(m->push.ws, text, strlen(text));
     free(text);
 }
 
@@ -102,10 +103,7 @@ on_reply(struct moonraker *m, json_t *msg, json_int_t id)
     }
     json_decref(m->ws_status);
     m->ws_status = json_deep_copy(status);
-    m->ws_live = true;
-    m->ws_dirty = true;
-    m->ws_backoff_ms = 1000;
-    log_printer(LOG_INFO, m->n.base.name, "push socket subscribed: its updates replace the polls");
+    netpush_live(&m->push, &m->n);
     drv_moonraker_ws_apply(m);
 }
 
@@ -119,12 +117,12 @@ on_text(struct wsc *w, const char *text, size_t len, void *ud)
     const char *method = json_string_value(json_object_get(msg, "method"));
     if (json_is_integer(id)) {
         on_reply(m, msg, json_integer_value(id));
-    } else if (method && strcmp(method, "notify_status_update") == 0 && m->ws_live) {
+    } else if (method && strcmp(method, "notify_status_update") == 0 && m->push.live) {
         json_t *diff = json_array_get(json_object_get(msg, "params"), 0);
         if (json_is_object(diff)) {
             merge(m->ws_status, diff);
-            m->ws_updates++;
-            m->ws_dirty = true;
+            m->push.updates++;
+            m->push.dirty = true;
             drv_moonraker_ws_apply(m);
         }
     } else if (method && strcmp(method, "notify_klippy_disconnected") == 0) {
@@ -145,48 +143,16 @@ static const struct wsc_ops ops = { on_open, on_text, on_closed };
 void
 drv_moonraker_ws_open(struct moonraker *m, const char *ip)
 {
-    struct netdrv *n = &m->n;
-    int64_t now = loop_now_ms(n->base.loop);
-    if (m->ws || m->ws_never || !m->ready || !n->open || now < m->ws_retry_ms)
-        return;
-    char hdrs[sizeof(n->key_hdr) + 4] = "";
-    if (n->key_hdr[0])
-        snprintf(hdrs, sizeof(hdrs), "%s\r\n", n->key_hdr);
-    struct sf_err err;
-    m->ws = wsc_new(n->base.loop, n->url, ip, "/websocket", hdrs, &ops, m, &err);
-    if (m->ws)
-        return;
-    if (err.code == SF_EUNSUPP) {
-        m->ws_never = true;
-        log_printer(LOG_INFO, n->base.name, "no push socket (%s): polling", err.msg);
-        return;
-    }
-    drv_moonraker_ws_close(m, err.msg);
+    if (m->ready)
+        netpush_open(&m->push, &m->n, ip, "/websocket", &ops, m);
 }
 
 void
 drv_moonraker_ws_close(struct moonraker *m, const char *why)
 {
-    struct netdrv *n = &m->n;
-    bool was_live = m->ws_live;
-    wsc_free(m->ws);
-    m->ws = NULL;
-    m->ws_live = m->ws_dirty = false;
+    netpush_close(&m->push, &m->n, why);
     json_decref(m->ws_status);
     m->ws_status = NULL;
-    if (!why)
-        return;
-    if (m->ws_backoff_ms < 1000)
-        m->ws_backoff_ms = 1000;
-    m->ws_retry_ms = loop_now_ms(n->base.loop) + m->ws_backoff_ms;
-    log_printer(LOG_INFO, n->base.name, "%s; polling%s, socket again in %d ms", why,
-                was_live ? " again" : "", m->ws_backoff_ms);
-    m->ws_backoff_ms =
-        m->ws_backoff_ms * 2 > MR_WS_BACKOFF_MAX_MS ? MR_WS_BACKOFF_MAX_MS : m->ws_backoff_ms * 2;
-    if (was_live && n->open && !n->req)
-        netdrv_schedule(n, 0);
-    else if (was_live && n->open && !n->timer)
-        netdrv_schedule(n, n->poll_ms);
 }
 
 void
@@ -195,9 +161,8 @@ drv_moonraker_ws_apply(struct moonraker *m)
     struct netdrv *n = &m->n;
     /* not while a request holds the slot, nor before the poll that confirms an action: what
        the socket said may predate the action (its updates and our requests are two streams) */
-    if (!m->ws_live || !m->ws_dirty || n->req || !n->open || (n->timer && n->poll_now))
+    if (!netpush_due(&m->push, n))
         return;
-    m->ws_dirty = false;
     json_t *wrap = json_pack("{s:{s:O}}", "result", "status", m->ws_status);
     char *text = wrap ? json_dumps(wrap, JSON_COMPACT) : NULL;
     json_decref(wrap);

@@ -23,7 +23,7 @@
 #include "../../src/base/limits.h"
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
-#include "netdrv.h"
+#include "drv_octoprint_int.h"
 
 /* ---- reply parsing (pure) ---- */
 
@@ -251,25 +251,6 @@ octo_reason(const char *body, size_t len, char *out, size_t n)
 #define OCTO_GRACE_POLLS 3
 #define OCTO_POLL_MS     1000 /* drv_config.poll_ms 0 */
 
-enum { RQ_PRINTER = NETDRV_RQ_OWN, RQ_SELECT, RQ_COMMAND };
-
-struct octo {
-    struct netdrv n;
-    const char *hdrs[2];         /* the key, NULL */
-    const char *json_hdrs[3];    /* the key, Content-Type: application/json, NULL */
-    bool ready;                  /* /api/version answered since the last loss of contact */
-    struct octo_job last;        /* the last /api/job (attach reads it) */
-    bool saw_printing;           /* OctoPrint was seen printing our job (or we re-attached) */
-    int missing_polls;           /* polls without it where it should be */
-    char cmd[SF_GCODE_LINE_MAX]; /* the manual command waiting, or the last one sent */
-    bool want_cmd;               /* it waits for the slot */
-    FILE *cur;                   /* the job file, read up to OctoPrint's file position */
-    int64_t cur_pos;             /* bytes of it counted */
-    uint64_t cur_lines;          /* command lines in those bytes */
-    char *cur_buf;               /* getline buffer */
-    size_t cur_cap;
-};
-
 static struct octo *
 OC(struct netdrv *n)
 {
@@ -294,6 +275,7 @@ static const struct route {
       "POST /api/job" },
     { NETDRV_RQ_CANCEL, "POST", "/api/job", "{\"command\":\"cancel\"}", "POST /api/job" },
     { RQ_COMMAND, "POST", "/api/printer/command", NULL, "POST /api/printer/command" },
+    { RQ_LOGIN, "POST", "/api/login", "{\"passive\":true}", "POST /api/login" },
 };
 
 static const struct route *
@@ -347,7 +329,7 @@ parsed(int rc, const struct sf_err *err, char *why, size_t n)
 }
 
 /* Request kind in the free slot: its route, the key, JSON when there is a body. */
-static bool
+bool
 octo_start(struct netdrv *n, int kind)
 {
     struct octo *o = OC(n);
@@ -390,7 +372,12 @@ octo_start(struct netdrv *n, int kind)
 static bool
 octo_poll(struct netdrv *n)
 {
-    return octo_start(n, OC(n)->ready ? NETDRV_RQ_POLL : NETDRV_RQ_INFO);
+    struct octo *o = OC(n);
+    if (o->ready && netpush_standing(&o->push, n)) { /* the socket stands in for the polls */
+        octo_push_apply(o);
+        return true;
+    }
+    return octo_start(n, o->ready ? NETDRV_RQ_POLL : NETDRV_RQ_INFO);
 }
 
 /* ---- the job's lines ---- */
@@ -541,8 +528,8 @@ observe_job(struct octo *o, enum octo_remote r, struct netjob_obs *ob, char *msg
 }
 
 /* The reply to GET /api/printer closes a poll: judge it. */
-static void
-evaluate(struct octo *o)
+void
+octo_evaluate(struct octo *o)
 {
     struct netdrv *n = &o->n;
     const struct octo_job *j = &o->last;
@@ -616,6 +603,14 @@ on_job(struct octo *o, const struct httpc_result *res)
         netdrv_contact_lost(n, "out of memory starting a poll");
 }
 
+void
+octo_temps(struct octo *o, const struct octo_printer *p)
+{
+    if (p->tool_c >= 0)
+        netjob_temps(&o->n.base, p->tool_c, p->tool_target_c > 0 ? p->tool_target_c : 0,
+                     p->bed_c >= 0 ? p->bed_c : 0, p->bed_target_c > 0 ? p->bed_target_c : 0);
+}
+
 static void
 on_printer(struct octo *o, const struct httpc_result *res)
 {
@@ -630,16 +625,16 @@ on_printer(struct octo *o, const struct httpc_result *res)
             netdrv_contact_lost(n, err.msg);
             return;
         }
-        if (p.tool_c >= 0)
-            netjob_temps(&n->base, p.tool_c, p.tool_target_c > 0 ? p.tool_target_c : 0,
-                         p.bed_c >= 0 ? p.bed_c : 0, p.bed_target_c > 0 ? p.bed_target_c : 0);
+        octo_temps(o, &p);
+        snprintf(o->peer_ip, sizeof(o->peer_ip), "%s", res->peer_ip ? res->peer_ip : "");
     }
+    o->push.dirty = false; /* a poll's answer is as new as anything the socket said before */
     n->fails = 0;
     netdrv_schedule(n, n->poll_ms);
     /* An action asked meanwhile goes first (kick): this poll began before it, so it says
        nothing of what the action did; the action's answer polls again. */
     if (n->want == NETDRV_RQ_NONE)
-        evaluate(o);
+        octo_evaluate(o);
 }
 
 /* OctoPrint took the job and prints it: the polls say how it goes. */
@@ -729,8 +724,9 @@ octo_reply(struct netdrv *n, int kind, const struct httpc_result *res)
         int kind;
         void (*fn)(struct octo *o, const struct httpc_result *res);
     } own[] = {
-        { NETDRV_RQ_INFO, on_version },  { NETDRV_RQ_POLL, on_job }, { RQ_PRINTER, on_printer },
-        { NETDRV_RQ_UPLOAD, on_upload }, { RQ_SELECT, on_select },   { RQ_COMMAND, on_command },
+        { NETDRV_RQ_INFO, on_version },      { NETDRV_RQ_POLL, on_job }, { RQ_PRINTER, on_printer },
+        { NETDRV_RQ_UPLOAD, on_upload },     { RQ_SELECT, on_select },   { RQ_COMMAND, on_command },
+        { RQ_LOGIN, octo_push_login_reply },
     };
     for (size_t i = 0; i < sizeof(own) / sizeof(own[0]); i++)
         if (own[i].kind == kind) {
@@ -750,7 +746,12 @@ octo_kick(struct netdrv *n)
     if (o->want_cmd) {
         o->want_cmd = false;
         octo_start(n, RQ_COMMAND); /* logged if it could not start */
+        return;
     }
+    if (o->ready && n->have_last)
+        octo_push_kick(o); /* the login, the socket */
+    if (!n->req)
+        octo_push_apply(o); /* what the socket said while the slot was taken */
 }
 
 /* The job ended: its file is read no more. */
@@ -768,8 +769,10 @@ static void
 octo_lost(struct netdrv *n)
 {
     struct octo *o = OC(n);
+    octo_push_close(o, NULL);
     o->ready = false;
     o->want_cmd = false;
+    o->auth[0] = '\0'; /* a new session after a new contact */
 }
 
 /* ---- drv_ops ---- */
@@ -841,6 +844,7 @@ static void
 octo_destroy(struct drv *d)
 {
     struct octo *o = (struct octo *)d;
+    octo_push_close(o, NULL);
     cursor_close(o);
     free(o->cur_buf);
     netdrv_destroy(d);
@@ -878,6 +882,7 @@ static const struct netdrv_ops octo_nops = {
     .lost = octo_lost,
     .judge = octo_judge,
     .lines = octo_lines,
+    .side_rq = RQ_LOGIN,
 };
 
 struct drv *

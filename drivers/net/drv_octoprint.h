@@ -11,7 +11,9 @@
  * it, POST /api/files/local/NAME select+print); pauses, resumes and
  * cancels with POST /api/job; sends manual commands with POST
  * /api/printer/command; re-attaches (drv.h attach) to a print that went on
- * while the daemon was down.
+ * while the daemon was down.  Where it can, it logs in passively (POST
+ * /api/login) and reads OctoPrint's push socket (/sockjs/websocket) in
+ * place of the status polls while that stands (drv_octoprint_int.h).
  *
  * Remote states: Operational -> DRV_IDLE; Printing, Pausing, Cancelling,
  * Starting, Resuming, Finishing -> DRV_PRINTING; Paused -> DRV_PAUSED;

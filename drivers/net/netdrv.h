@@ -99,6 +99,9 @@ struct netdrv_ops {
     /* Optional: the job's command lines done at progress (OctoPrint: those wholly before its
        file position); progress times lines_total otherwise. */
     uint64_t (*lines)(struct netdrv *n, double progress);
+    /* Optional: a request of the driver's own that an action cuts short as it does a poll (one
+       it asks again later: OctoPrint's push socket login). */
+    int side_rq;
 };
 
 struct netdrv {

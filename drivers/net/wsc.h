@@ -1,7 +1,7 @@
 /*
  * wsc.h - a websocket client on the daemon's loop, for a printer's push
- * socket (Moonraker's /websocket): RFC 6455 over plain TCP, framed by
- * src/base/ws.h.
+ * socket (Moonraker's /websocket, OctoPrint's /sockjs/websocket): RFC 6455 over plain TCP, framed
+ * by src/base/ws.h.
  *
  * wsc_new connects without blocking (http:// URLs; to the address the
  * caller gives, the one its HTTP client reached, else to the URL's host

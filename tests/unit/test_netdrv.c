@@ -10,8 +10,13 @@
  * Waits are bounded on the wall clock (WAIT_MS), never by loop turns: the
  * machine may be loaded.
  */
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <signal.h>
 #include <stdlib.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -19,6 +24,7 @@
 #include "../../drivers/net/drv_moonraker.h"
 #include "../../drivers/net/drv_prusalink.h"
 #include "../../sim/net/sim_moonraker.h"
+#include "../../sim/net/sim_octoprint.h"
 #include "../../sim/net/sim_prusalink.h"
 #include "../../src/base/buf.h"
 #include "../../src/base/log.h"
@@ -404,8 +410,6 @@ progress_events(const struct rec *r)
     return k;
 }
 
-static uint64_t queries_mark; /* the simulator's status queries at a point of the case */
-
 static bool
 progress_6_or_end(void *ud)
 {
@@ -413,20 +417,73 @@ progress_6_or_end(void *ud)
     return progress_events(&f->rec) >= 6 || f->rec.done + f->rec.failed > 0;
 }
 
+/* How a push case watches its printer: status polls made so far, cutting the push sockets,
+   and whether one stands. */
+struct push_probe {
+    void *ud;
+    uint64_t (*polls)(void *ud);
+    void (*cut)(void *ud);
+    bool (*up)(void *ud);
+};
+static const struct push_probe *probe;
+static uint64_t polls_mark; /* the status polls at a point of the case */
+
 static bool
-polled_again(void *ud)
+probe_polled_again(void *ud)
 {
-    struct fx *f = ud;
-    return sim_moonraker_queries(f->mr) > queries_mark;
+    (void)ud;
+    return probe->polls(probe->ud) > polls_mark;
+}
+
+static bool
+probe_up(void *ud)
+{
+    (void)ud;
+    return probe->up(probe->ud);
 }
 
 /*
- * Moonraker's websocket: once the driver has subscribed, the socket's
- * updates replace the polls.  A print whose progress the farm sees move
- * again and again costs no status query but the one that confirms its
- * start; when the socket drops mid-print, polling takes over at once, the
- * socket comes back, and the job ends done with every line run once.
+ * A push driver's print (f idle): once the socket stands, a print whose
+ * progress the farm sees move again and again costs no status poll but the
+ * one or two that confirm its start; when the socket drops mid-print,
+ * polling takes over at once, the socket comes back, and the job ends done
+ * with every line counted.
  */
+static void
+push_print(struct fx *f, const char *job, const struct push_probe *p)
+{
+    struct sf_err err;
+    probe = p;
+    T_TRUE(run_until(f->l, probe_up, NULL));
+    uint64_t q0 = p->polls(p->ud);
+    T_OK(f->d->ops->start_job(f->d, job, 0, NULL, &err), &err);
+    T_TRUE(run_until(f->l, progress_6_or_end, f));
+    T_EQ_INT(f->rec.done + f->rec.failed, 0);
+    T_TRUE(p->polls(p->ud) - q0 <= 2); /* polling would have asked each time */
+    polls_mark = p->polls(p->ud);
+    p->cut(p->ud);
+    T_TRUE(run_until(f->l, probe_polled_again, NULL));
+    T_EQ_INT(f->rec.done + f->rec.failed, 0);
+    T_TRUE(fx_wait_end(f, 1));
+    T_EQ_INT(f->rec.done, 1);
+    T_EQ_INT(f->d->status.lines_acked, f->d->status.lines_total);
+    T_TRUE(run_until(f->l, probe_up, NULL));
+}
+
+static uint64_t
+mr_queries(void *ud)
+{
+    return sim_moonraker_queries(((struct fx *)ud)->mr);
+}
+
+static void
+mr_drop(void *ud)
+{
+    sim_moonraker_drop_sockets(((struct fx *)ud)->mr);
+}
+
+/* Moonraker's websocket: once the driver has subscribed, the socket's updates replace the
+   polls (push_print). */
 T_CASE(moonraker_push_socket_replaces_polls)
 {
     struct fx f;
@@ -436,22 +493,9 @@ T_CASE(moonraker_push_socket_replaces_polls)
     fx_speed = SPEED;
     T_OK(rc, &err);
     T_TRUE(fx_wait_state(&f, DRV_IDLE));
-    T_TRUE(run_until(f.l, mr_subscribed, &f));
-    uint64_t q0 = sim_moonraker_queries(f.mr);
     const char *job = job_file("push.gcode", 4000);
-    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
-    T_TRUE(run_until(f.l, progress_6_or_end, &f));
-    T_EQ_INT(f.rec.done + f.rec.failed, 0);
-    T_TRUE(sim_moonraker_queries(f.mr) - q0 <= 2); /* polling would have asked each time */
-    /* the socket drops mid-print: a poll at once, later the socket again */
-    queries_mark = sim_moonraker_queries(f.mr);
-    sim_moonraker_drop_sockets(f.mr);
-    T_TRUE(run_until(f.l, polled_again, &f));
-    T_EQ_INT(f.rec.done + f.rec.failed, 0);
-    T_TRUE(fx_wait_end(&f, 1));
-    T_EQ_INT(f.rec.done, 1);
-    T_EQ_INT(f.d->status.lines_acked, f.d->status.lines_total);
-    T_TRUE(run_until(f.l, mr_subscribed, &f));
+    struct push_probe p = { &f, mr_queries, mr_drop, mr_subscribed };
+    push_print(&f, job, &p);
     FX_STOP_CHECK(&f, job, true);
 }
 
@@ -1046,4 +1090,224 @@ T_CASE(prusalink_job_query_lost_is_asked_again)
     T_EQ_INT(f.rec.done, 1);
     T_EQ_INT(f.rec.failed, 0);
     fx_stop(&f);
+}
+
+/* ---- OctoPrint's push socket: the simulator in a child, a relay on the loop ---- */
+
+/*
+ * The OctoPrint simulator has no in-process face: it runs in a child
+ * (sim_octoprint_main, as `slimfarm-sim octoprint`), and the driver
+ * reaches it through a relay on the test's loop, which counts the status
+ * polls (GET /api/job request lines) and can cut the push sockets alone.
+ */
+#define RELAY_MAX 64
+
+struct relay {
+    struct loop *l;
+    int lfd, port, to_port;
+    int a[RELAY_MAX], b[RELAY_MAX]; /* client side, simulator side; -1 free */
+    bool ws[RELAY_MAX];             /* the pair carries a push socket */
+    uint64_t job_polls;             /* GET /api/job requests relayed */
+};
+
+static void
+relay_cut(struct relay *r, int i)
+{
+    loop_del_fd(r->l, r->a[i]);
+    loop_del_fd(r->l, r->b[i]);
+    close(r->a[i]);
+    close(r->b[i]);
+    r->a[i] = r->b[i] = -1;
+}
+
+static bool
+write_all(int fd, const char *p, size_t n)
+{
+    while (n) {
+        ssize_t k = write(fd, p, n);
+        if (k <= 0)
+            return false;
+        p += k;
+        n -= (size_t)k;
+    }
+    return true;
+}
+
+static void
+relay_io(struct loop *l, int fd, unsigned ev, void *ud)
+{
+    (void)l, (void)ev;
+    struct relay *r = ud;
+    int i = 0;
+    while (i < RELAY_MAX && r->a[i] != fd && r->b[i] != fd)
+        i++;
+    if (i == RELAY_MAX)
+        return;
+    char buf[65536];
+    ssize_t k = read(fd, buf, sizeof(buf) - 1);
+    bool up = fd == r->a[i];
+    if (k <= 0 || !write_all(up ? r->b[i] : r->a[i], buf, (size_t)k)) {
+        relay_cut(r, i);
+        return;
+    }
+    buf[k] = 0;
+    if (up && strncmp(buf, "GET /sockjs/", 12) == 0)
+        r->ws[i] = true;
+    for (char *s = buf; up && (s = strstr(s, "GET /api/job ")); s++)
+        r->job_polls++;
+}
+
+static void
+relay_accept(struct loop *l, int fd, unsigned ev, void *ud)
+{
+    (void)ev;
+    struct relay *r = ud;
+    int c = accept(fd, NULL, NULL);
+    if (c < 0)
+        return;
+    int i = 0;
+    while (i < RELAY_MAX && r->a[i] >= 0)
+        i++;
+    int s = socket(AF_INET, SOCK_STREAM, 0);
+    struct sockaddr_in sa = { .sin_family = AF_INET, .sin_port = htons((uint16_t)r->to_port) };
+    sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    if (i == RELAY_MAX || s < 0 || connect(s, (struct sockaddr *)&sa, sizeof(sa)) < 0) {
+        close(c);
+        if (s >= 0)
+            close(s);
+        return;
+    }
+    r->a[i] = c;
+    r->b[i] = s;
+    r->ws[i] = false;
+    loop_add_fd(l, c, LOOP_READ, relay_io, r, NULL);
+    loop_add_fd(l, s, LOOP_READ, relay_io, r, NULL);
+}
+
+static int
+relay_start(struct relay *r, struct loop *l, int to_port)
+{
+    memset(r, 0, sizeof(*r));
+    r->l = l;
+    r->to_port = to_port;
+    for (int i = 0; i < RELAY_MAX; i++)
+        r->a[i] = r->b[i] = -1;
+    r->lfd = socket(AF_INET, SOCK_STREAM, 0);
+    struct sockaddr_in sa = { .sin_family = AF_INET };
+    sa.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+    socklen_t n = sizeof(sa);
+    if (r->lfd < 0 || bind(r->lfd, (struct sockaddr *)&sa, sizeof(sa)) || listen(r->lfd, 16) ||
+        getsockname(r->lfd, (struct sockaddr *)&sa, &n))
+        return -1;
+    r->port = ntohs(sa.sin_port);
+    return loop_add_fd(l, r->lfd, LOOP_READ, relay_accept, r, NULL);
+}
+
+static void
+relay_stop(struct relay *r)
+{
+    for (int i = 0; i < RELAY_MAX; i++)
+        if (r->a[i] >= 0)
+            relay_cut(r, i);
+    loop_del_fd(r->l, r->lfd);
+    close(r->lfd);
+}
+
+/* Cut every push socket (the HTTP connections stay); how many. */
+static int
+relay_cut_sockets(struct relay *r)
+{
+    int k = 0;
+    for (int i = 0; i < RELAY_MAX; i++)
+        if (r->a[i] >= 0 && r->ws[i]) {
+            relay_cut(r, i);
+            k++;
+        }
+    return k;
+}
+
+static bool
+relay_has_socket(void *ud)
+{
+    struct relay *r = ud;
+    for (int i = 0; i < RELAY_MAX; i++)
+        if (r->a[i] >= 0 && r->ws[i])
+            return true;
+    return false;
+}
+
+/* The simulator in a child: its pid, and its port read from the address line it prints. */
+static pid_t
+octo_sim_spawn(const char *key, const char *speed, const char *log_path, int *port)
+{
+    int fds[2];
+    if (pipe(fds))
+        return -1;
+    pid_t pid = fork();
+    if (pid == 0) {
+        dup2(fds[1], 1);
+        close(fds[0]);
+        char *argv[] = { "slimfarm-sim", "octoprint",      "--port",  "0",
+                         "--api-key",    (char *)key,      "--speed", (char *)speed,
+                         "--log",        (char *)log_path, NULL };
+        _exit(sim_octoprint_main(10, argv));
+    }
+    close(fds[1]);
+    char line[128] = "";
+    FILE *f = fdopen(fds[0], "r");
+    if (!f || !fgets(line, sizeof(line), f) || sscanf(line, "http://127.0.0.1:%d", port) != 1)
+        *port = 0;
+    if (f)
+        fclose(f);
+    return pid;
+}
+
+static uint64_t
+relay_polls(void *ud)
+{
+    return ((struct relay *)ud)->job_polls;
+}
+
+static void
+relay_cut_all(void *ud)
+{
+    T_TRUE(relay_cut_sockets(ud) > 0);
+}
+
+/*
+ * OctoPrint's push socket: after the passive login the driver opens
+ * /sockjs/websocket and its `current` messages replace the polls
+ * (push_print, the polls counted as GET /api/job); every line runs once.
+ */
+T_CASE(octoprint_push_socket_replaces_polls)
+{
+    struct fx f;
+    struct sf_err err;
+    memset(&f, 0, sizeof(f));
+    snprintf(f.log, sizeof(f.log), "%s/exec-octo.log", t_tmpdir());
+    f.l = loop_new(&err);
+    T_TRUE(f.l != NULL);
+    int sim_port = 0;
+    pid_t pid = octo_sim_spawn("k3y", "60", f.log, &sim_port);
+    T_TRUE(pid > 0 && sim_port > 0);
+    struct relay r;
+    T_TRUE(relay_start(&r, f.l, sim_port) == 0);
+    snprintf(f.url, sizeof(f.url), "http://127.0.0.1:%d/", r.port);
+    struct drv_config dc = { .name = "octo", .kind = "octoprint", .url = f.url, .api_key = "k3y" };
+    f.d = drv_new(f.l, &dc, on_event, &f.rec, &err);
+    T_TRUE(f.d != NULL);
+    T_OK(f.d->ops->open(f.d, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("octo-push.gcode", 4000);
+    struct push_probe p = { &r, relay_polls, relay_cut_all, relay_has_socket };
+    push_print(&f, job, &p);
+    drv_free(f.d);
+    f.d = NULL;
+    relay_stop(&r);
+    kill(pid, SIGTERM);
+    waitpid(pid, NULL, 0);
+    loop_free(f.l);
+    char why[300] = "";
+    if (log_matches(f.log, job, true, why, sizeof(why)) < 0)
+        t_fail(__FILE__, __LINE__, "%s", why);
 }
