@@ -1,7 +1,9 @@
 /*
  * farm_resume.c - an interrupted job resumed at a line (farm_job_resume,
- * farm.h): its checks, the commit, and the read of the file up to that
- * line on the farm's io thread before the driver starts.
+ * farm.h): its checks, the commit, and on the farm's io thread the file
+ * judged by its printer's G-code policy as it is now (as every start is,
+ * farm_gcheck.c: a reload may have made the printer stricter) and read up
+ * to that line, before the driver starts.
  *
  * Thread: the loop thread; the read runs on the io thread with a copy.
  */
@@ -9,6 +11,7 @@
 
 #include <stdio.h>
 
+#include "../../drivers/gpolicy.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 
@@ -20,8 +23,11 @@ struct resume {
     char path[1200];
     uint64_t line;
     struct drv_job_scan scan;
-    double est_s; /* the job's print time estimate (printer_estimate_s) */
+    double est_s;            /* the job's print time estimate (printer_estimate_s) */
+    char name[JOB_NAME_MAX]; /* the job's name, for the policy's messages */
+    struct gpolicy policy;   /* the printer's, now */
     struct sf_err err;
+    char msg[1024]; /* the refused lines, as a start's check gives them */
 };
 
 static int
@@ -29,7 +35,9 @@ resume_work(void *ud, const atomic_bool *cancel)
 {
     (void)cancel;
     struct resume *r = ud;
-    return drv_job_scan_to(r->path, r->line, &r->scan, &r->err);
+    int rc =
+        gpolicy_check_file(&r->policy, r->path, r->name, r->msg, sizeof(r->msg), NULL, &r->err);
+    return rc ? rc : drv_job_scan_to(r->path, r->line, &r->scan, &r->err);
 }
 
 static void
@@ -40,7 +48,8 @@ resume_done(struct loop *l, void *ud, int rc)
     /* Shutting down (SF_ECANCELED) leaves it for printer_stop. */
     struct printer *p = rc == SF_ECANCELED ? NULL : farm_find(r->f, r->printer);
     if (p)
-        printer_resume_go(p, r->job_id, r->path, r->line, &r->scan, r->est_s, rc, r->err.msg);
+        printer_resume_go(p, r->job_id, r->path, r->line, &r->scan, r->est_s, rc,
+                          r->msg[0] ? r->msg : r->err.msg);
     free(r);
 }
 
@@ -79,27 +88,29 @@ farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
                           (long long)id, (long long)line,
                           (unsigned long long)(total > 1 ? total - 1 : 1),
                           (unsigned long long)total);
-    if ((rc = printer_resume_commit(p, id, line, err)))
+    struct resume *r = mem_calloc(1, sizeof(*r));
+    if (!r)
+        return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
+    if ((rc = printer_resume_commit(p, id, line, err))) {
+        free(r);
         return rc;
+    }
     /* The machine state at `line` comes from reading the file up to it
        (0.5 s for 2/3 of a 112 MB job): on the io thread, so the other
        printers' streams do not wait; the driver starts when it is read. */
     log_printer(LOG_INFO, j.printer, "job %lld: resumed at line %lld of %llu", (long long)id,
                 (long long)line, (unsigned long long)total);
     double est_s = printer_estimate_s(&j, path);
-    struct resume *r = mem_calloc(1, sizeof(*r));
     struct sf_err perr;
-    if (r) {
-        *r = (struct resume){
-            .f = f, .job_id = id, .line = (uint64_t)line, .scan = scan, .est_s = est_s
-        };
-        snprintf(r->printer, sizeof(r->printer), "%s", j.printer);
-        snprintf(r->path, sizeof(r->path), "%s", path);
-    }
-    if (!r || !pool_submit(f->io, resume_work, resume_done, r, &perr)) {
-        free(r);
-        printer_resume_go(p, id, path, (uint64_t)line, &scan, est_s, SF_OK, ""); /* reads here */
-    }
+    *r = (struct resume){
+        .f = f, .job_id = id, .line = (uint64_t)line, .scan = scan, .est_s = est_s
+    };
+    snprintf(r->printer, sizeof(r->printer), "%s", j.printer);
+    snprintf(r->path, sizeof(r->path), "%s", path);
+    snprintf(r->name, sizeof(r->name), "%s", j.opts.name);
+    farmcfg_policy(printer_cfg(p), &r->policy);
+    if (!pool_submit(f->io, resume_work, resume_done, r, &perr))
+        resume_done(f->l, r, resume_work(r, NULL)); /* no worker: judged and read here */
     farm_kick(f);
     return SF_OK;
 }

@@ -622,7 +622,9 @@ void
 printer_start_go(struct printer *p, int64_t id, const char *path, const struct drv_job_scan *scan,
                  int rc, const char *why)
 {
-    if (p->job_id != id) /* cancelled, or its printer lost, while the file was judged */
+    /* Cancelled, or its printer lost (and the job perhaps resumed since), while the file was
+       judged: this check is stale. */
+    if (p->job_id != id || p->judging != id)
         return;
     p->judging = 0;
     if (rc == SF_OK) {
@@ -646,6 +648,7 @@ printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err
     if (rc)
         return rc;
     p->job_id = id;
+    p->judging = 0; /* a start's check still on the io thread is stale now */
     p->lines_acked = p->lines_saved = line;
     printer_move(p, PRINTER_EV_START);
     return SF_OK;
