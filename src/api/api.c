@@ -742,7 +742,7 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                              .instance = cfg->instance,
                              .session_idle_ms = cfg->session_idle_ms,
                              .session_max_ms = cfg->session_max_ms };
-    a->reads = api_read_new(cfg->loop, cfg->store, NULL, NULL, err);
+    a->reads = api_read_new(cfg->loop, cfg->store, err);
     a->slicers.reads = a->reads;
     a->web = a->reads ? web_new(&wc, err) : NULL;
     hc.session_cookie = a->web ? web_cookie_name(a->web) : NULL;

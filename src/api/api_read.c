@@ -18,8 +18,6 @@ struct api_read {
     struct store *s;      /* the loop's store (reads that cannot be deferred) */
     struct store *reader; /* the reader thread's connection; NULL: reads run on the loop */
     struct pool *pool;    /* one thread; NULL with reader */
-    api_read_answered_fn answered;
-    void *ud; /* its argument */
 };
 
 struct task {
@@ -33,8 +31,7 @@ struct task {
 };
 
 struct api_read *
-api_read_new(struct loop *l, struct store *s, api_read_answered_fn answered, void *ud,
-             struct sf_err *err)
+api_read_new(struct loop *l, struct store *s, struct sf_err *err)
 {
     struct api_read *r = mem_calloc(1, sizeof(*r));
     if (!r) {
@@ -42,8 +39,6 @@ api_read_new(struct loop *l, struct store *s, api_read_answered_fn answered, voi
         return NULL;
     }
     r->s = s;
-    r->answered = answered;
-    r->ud = ud;
     if (!l)
         return r;
     if (!(r->reader = store_open_reader(s, err)) || !(r->pool = pool_new(l, 1, err))) {
@@ -96,14 +91,10 @@ done(struct loop *l, void *ud, int rc)
     } else if (t->finish && http_defer_alive(t->d)) {
         t->finish(t->ud, &t->resp);
     }
-    bool alive = rc == SF_OK && http_defer_alive(t->d);
-    http_defer_answer(t->d, &t->resp); /* frees the answer if the client left */
+    http_defer_answer(t->d, &t->resp); /* frees the answer if the client left; wakes the server */
     if (t->ud_free)
         t->ud_free(t->ud);
-    struct api_read *r = t->r;
     free(t);
-    if (alive && r->answered)
-        r->answered(r->ud);
 }
 
 void

@@ -27,20 +27,14 @@
 
 struct api_read;
 
-/* Called on the loop after a deferred answer is given: run the server now (MHD sends a
-   resumed connection's answer only when it runs; left to its timer, each answer waited
-   ~5 s). */
-typedef void (*api_read_answered_fn)(void *ud);
-
 /*
  * A reader of store s (its thread and connection).  l NULL: no thread,
  * every read runs at once on the caller's thread with s itself (a test
- * without a loop).  answered(ud) follows every deferred answer.  NULL with
- * err set.  Free with api_read_free() before s; reads still queued are
+ * without a loop).  The server runs again after each deferred answer
+ * (http_set_wake).  NULL with err set.  Free with api_read_free() before s; reads still queued are
  * answered 503.
  */
-struct api_read *api_read_new(struct loop *l, struct store *s, api_read_answered_fn answered,
-                              void *ud, struct sf_err *err);
+struct api_read *api_read_new(struct loop *l, struct store *s, struct sf_err *err);
 void api_read_free(struct api_read *r);
 
 /* Fills resp (json or a body, or an error) from the store s given (the reader's). */

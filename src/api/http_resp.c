@@ -114,13 +114,15 @@ http_send_json(struct MHD_Connection *conn, int status, json_t *j, bool close)
 
 /* An error; a client without a valid key, or one that sent a bad request
    head (400, or 501: a transfer coding we do not read, so its body cannot
-   be skipped) or finds every connection of its class taken (503), is not
-   served again on this connection. */
+   be skipped), finds every connection of its class taken (503) or is
+   slowed for failed logins (429: its connection counts in no class, so it
+   must not stay open), is not served again on this connection. */
 enum MHD_Result
 http_send_error(struct MHD_Connection *conn, int status, const char *msg)
 {
     bool close = status == MHD_HTTP_UNAUTHORIZED || status == MHD_HTTP_BAD_REQUEST ||
-                 status == MHD_HTTP_NOT_IMPLEMENTED || status == MHD_HTTP_SERVICE_UNAVAILABLE;
+                 status == MHD_HTTP_NOT_IMPLEMENTED || status == MHD_HTTP_SERVICE_UNAVAILABLE ||
+                 status == MHD_HTTP_TOO_MANY_REQUESTS;
     return http_send_json(conn, status, json_pack("{s:s}", "error", msg), close);
 }
 

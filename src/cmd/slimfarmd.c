@@ -65,8 +65,7 @@ wake_streams(struct loop *l, void *ud)
     (void)l;
     struct daemon *d = ud;
     d->wake = 0;
-    api_notify(d->api);
-    http_loop_kick(d->hl); /* MHD must run after resuming connections */
+    api_notify(d->api); /* resumed streams ask for a server run (http_set_wake) */
 }
 
 /* The farm logged events: wake the event streams on the next turn (never
