@@ -772,7 +772,8 @@ octo_lost(struct netdrv *n)
     octo_push_close(o, NULL);
     o->ready = false;
     o->want_cmd = false;
-    o->auth[0] = '\0'; /* a new session after a new contact */
+    o->auth[0] = '\0';   /* a new session after a new contact */
+    o->no_login = false; /* the server may have changed (an upgrade): ask again */
 }
 
 /* ---- drv_ops ---- */

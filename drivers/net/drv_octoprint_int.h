@@ -50,7 +50,7 @@ struct octo {
     /* the push socket (drv_octoprint_push.c) */
     struct netpush push;
     char auth[256];         /* "name:session" from the passive login, "" before it */
-    bool no_login;          /* /api/login is not there: poll only */
+    bool no_login;          /* /api/login is not there: poll until contact is lost */
     char peer_ip[64];       /* the address the last poll reached */
     struct octo_job ws_job; /* the job as the socket told it last */
     struct octo_printer ws_printer;

@@ -3,7 +3,7 @@
  *
  * One state machine: connecting (the socket writable tells the connect's
  * outcome), handshake (the request goes out from the output buffer, the
- * reply head is gathered up to HEAD_MAX bytes and checked), open (frames
+ * reply head, up to HEAD_MAX bytes, is gathered and checked), open (frames
  * through ws_parser, which must see no mask on the server's frames).  One
  * timer serves the handshake's deadline, then the pings.  Callbacks run
  * with a depth count, so the owner may free the connection from inside
@@ -16,6 +16,7 @@
 #include <arpa/inet.h>
 #include <errno.h>
 #include <netinet/in.h>
+#include <openssl/evp.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -128,16 +129,18 @@ flush(struct wsc *w)
     return true;
 }
 
-/* Queue a frame: 1 sent or queued, 0 the queue is full, -1 the connection died (and w may be
-   gone). */
+/* Queue a frame: 1 sent or queued, 0 the queue was full (the connection is closed, its
+   closed() said so), -1 the connection died (and w may be gone). */
 static int
 queue_frame(struct wsc *w, enum ws_op op, const char *data, size_t len)
 {
     uint8_t mask[4];
-    if (getrandom(mask, sizeof(mask), 0) != (ssize_t)sizeof(mask))
+    /* GRND_NONBLOCK: a mask need not be secret, and the loop must not wait
+       for an early-boot entropy pool */
+    if (getrandom(mask, sizeof(mask), GRND_NONBLOCK) != (ssize_t)sizeof(mask))
         memset(mask, 0x5a, sizeof(mask));
     if (ws_frame(&w->out, op, data, len, mask) < 0)
-        return 0;
+        return die(w, "websocket: send queue full") ? 0 : -1;
     bool alive = flush(w);
     return alive && w->st != W_DEAD ? 1 : -1;
 }
@@ -258,11 +261,15 @@ on_fd(struct loop *l, int fd, unsigned events, void *ud)
         }
         w->heard_ms = loop_now_ms(l);
         if (w->st == W_HANDSHAKE) {
-            if (buf_append(&w->head, chunk, (size_t)k) < 0) {
+            /* the head's bound is HEAD_MAX; the buffer also holds the frames
+               a server sends in the same read as its 101 */
+            const char *end = buf_append(&w->head, chunk, (size_t)k) < 0
+                                  ? NULL
+                                  : strstr(w->head.data, "\r\n\r\n");
+            if (end ? end - w->head.data > HEAD_MAX : w->head.len >= HEAD_MAX) {
                 die(w, "websocket handshake reply too long");
                 return;
             }
-            const char *end = strstr(w->head.data, "\r\n\r\n");
             if (end && (!handshake_done(w, end) || !drain(w)))
                 return;
             continue;
@@ -289,15 +296,16 @@ on_timer(struct loop *l, void *ud)
         die(w, "websocket: the printer went silent");
         return;
     }
-    if (queue_frame(w, WS_PING, "", 0) < 0)
-        return; /* died: w may be gone */
+    if (queue_frame(w, WS_PING, "", 0) != 1)
+        return; /* closed (w may be gone) */
     w->timer = loop_timer_add(l, WSC_PING_MS, on_timer, w);
 }
 
-/* url's host and port into an address; SF_EUNSUPP for what wsc does not reach. */
+/* url's host and port into an address, and *prefix its path ("" or "/octoprint" behind a
+   proxy, which the socket's path follows); SF_EUNSUPP for what wsc does not reach. */
 static int
 address(const char *url, const char *at, struct sockaddr_storage *sa, socklen_t *sl, char *host,
-        size_t hn, struct sf_err *err)
+        size_t hn, const char **prefix, struct sf_err *err)
 {
     if (strncmp(url, "http://", 7) != 0)
         return sf_err_set(err, SF_EUNSUPP, "websocket: only http:// URLs, not '%.60s'", url);
@@ -307,6 +315,7 @@ address(const char *url, const char *at, struct sockaddr_storage *sa, socklen_t 
     if (n == 0 || n >= hn || (v6 && h[n - 1] != ']'))
         return sf_err_set(err, SF_EUNSUPP, "websocket: no host in '%.60s'", url);
     snprintf(host, hn, "%.*s", (int)n, h);
+    *prefix = h + n + strcspn(h + n, "/");
     long port = 80;
     if (h[n] == ':') {
         char *end;
@@ -347,8 +356,12 @@ wsc_new(struct loop *l, const char *url, const char *ip, const char *path, const
     struct sockaddr_storage sa;
     socklen_t sl = 0;
     char host[128];
-    if (address(url, ip, &sa, &sl, host, sizeof(host), err))
+    const char *prefix = "";
+    if (address(url, ip, &sa, &sl, host, sizeof(host), &prefix, err))
         return NULL;
+    size_t pl = strlen(prefix);
+    while (pl && prefix[pl - 1] == '/')
+        pl--;
     struct wsc *w = mem_calloc(1, sizeof(*w));
     if (!w) {
         sf_err_set(err, SF_ENOMEM, "websocket: out of memory");
@@ -358,30 +371,22 @@ wsc_new(struct loop *l, const char *url, const char *ip, const char *path, const
     w->ops = ops;
     w->ud = ud;
     buf_init(&w->out, OUT_MAX);
-    buf_init(&w->head, HEAD_MAX);
+    buf_init(&w->head, HEAD_MAX + 16384); /* + one read's frames after the head */
     ws_parser_init(&w->in, false, WSC_MSG_MAX);
-    /* the key: 16 random bytes in base64 */
-    static const char b64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    /* the key: 16 random bytes in base64 (24 characters and a NUL) */
     unsigned char raw[16];
-    if (getrandom(raw, sizeof(raw), 0) != (ssize_t)sizeof(raw))
+    if (getrandom(raw, sizeof(raw), GRND_NONBLOCK) != (ssize_t)sizeof(raw))
         memset(raw, 0x3c, sizeof(raw));
-    for (int i = 0, o = 0; i < 15; i += 3) {
-        uint32_t v = (uint32_t)raw[i] << 16 | (uint32_t)raw[i + 1] << 8 | raw[i + 2];
-        for (int k = 18; k >= 0; k -= 6)
-            w->key[o++] = b64[v >> k & 63];
-    }
-    w->key[20] = b64[raw[15] >> 2];
-    w->key[21] = b64[(raw[15] & 3) << 4];
-    memcpy(w->key + 22, "==", 3);
+    EVP_EncodeBlock((unsigned char *)w->key, raw, (int)sizeof(raw));
     int rc = SF_OK;
     w->fd = socket(sa.ss_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
     if (w->fd < 0 || (connect(w->fd, (struct sockaddr *)&sa, sl) < 0 && errno != EINPROGRESS))
         rc = sf_err_sys(err, "websocket connect to %s", host);
     else if (buf_printf(&w->out,
-                        "GET %s HTTP/1.1\r\nHost: %s\r\nUpgrade: websocket\r\n"
+                        "GET %.*s%s HTTP/1.1\r\nHost: %s\r\nUpgrade: websocket\r\n"
                         "Connection: Upgrade\r\nSec-WebSocket-Key: %s\r\n"
                         "Sec-WebSocket-Version: 13\r\n%s\r\n",
-                        path, host, w->key, headers ? headers : "") < 0)
+                        (int)pl, prefix, path, host, w->key, headers ? headers : "") < 0)
         rc = sf_err_set(err, SF_ENOMEM, "websocket: request too long");
     else
         rc = loop_add_fd(l, w->fd, LOOP_READ | LOOP_WRITE, on_fd, w, err);
