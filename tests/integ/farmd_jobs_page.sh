@@ -81,10 +81,12 @@ seen, _, _ = walk("/api/jobs?state=cancelled")
 check(len(seen) == n // 3, "cancelled %d" % len(seen))
 seen, _, _ = walk("/api/jobs?printer=mk3&limit=500")
 check(len(seen) == n - n // 3, "printed on mk3: %d" % len(seen))
-# the submitted jobs, whatever became of them, and by their states
+# the submitted jobs, whatever became of them, and by their states: every
+# state, for they move on (queued, preparing, ready ...) between two reads
 d = json.loads(get("/api/jobs?order=desc&limit=3")[1])
 check([j["id"] for j in d["jobs"]] == [n + 3, n + 2, n + 1], "newest first %s" % d)
-states = sorted(set(j["state"] for j in d["jobs"]))
+states = ["queued", "preparing", "ready", "printing", "paused", "done", "failed", "cancelled",
+          "interrupted"]
 seen, _, _ = walk("/api/jobs?state=" + ",".join(states))
 check([i for i in seen if i > n] == [n + 1, n + 2, n + 3], "by state %s: %s" % (states, seen[-5:]))
 # time: the history was written a minute apart, oldest N minutes ago
