@@ -37,10 +37,19 @@
 #include "sim_netprinter.h"
 #include "sim_octoprint_int.h"
 
+/* A print that ran to its end is Finishing from that moment on: the watch turn that starts
+   the count may come after a client's request, which must not see Operational first (a farm
+   that starts its next job then is refused: "already printing"). */
+static bool
+finishing(const struct octo_sim *o, const struct sim_np_status *st)
+{
+    return o->finishing > 0 || (o->was_running && st->state == SIM_NP_COMPLETE);
+}
+
 const char *
 sim_octoprint_state_text(const struct octo_sim *o, const struct sim_np_status *st)
 {
-    if (o->finishing > 0)
+    if (finishing(o, st))
         return "Finishing";
     switch (st->state) {
     case SIM_NP_PRINTING:
@@ -67,9 +76,9 @@ sim_octoprint_active(const struct sim_np_status *st)
 
 /* Not free for a new job: the busy fault, or the end of a print still Finishing. */
 static bool
-busy(const struct octo_sim *o)
+busy(const struct octo_sim *o, const struct sim_np_status *st)
 {
-    return o->busy || o->finishing > 0;
+    return o->busy || finishing(o, st);
 }
 
 json_t *
@@ -78,13 +87,13 @@ sim_octoprint_flags(const struct octo_sim *o, const struct sim_np_status *st)
     bool err = st->state == SIM_NP_ERROR;
     bool printing = st->state == SIM_NP_PRINTING || st->state == SIM_NP_PAUSING ||
                     st->state == SIM_NP_CANCELLING;
-    bool held = busy(o);
+    bool held = busy(o, st);
     return json_pack("{s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b,s:b}", "operational", !err, "paused",
                      st->state == SIM_NP_PAUSED, "printing", printing || held, "pausing",
                      st->state == SIM_NP_PAUSING, "cancelling", st->state == SIM_NP_CANCELLING,
                      "sdReady", false, "error", err, "ready",
                      !err && !sim_octoprint_active(st) && !held, "closedOrError", err, "finishing",
-                     o->finishing > 0);
+                     finishing(o, st));
 }
 
 /* ---- handlers ---- */
@@ -274,7 +283,7 @@ h_upload(struct sim_http_req *r, void *ud)
     struct sim_np_status st;
     sim_netprinter_status(o->np, &st);
     /* Not operational, or busy: select and print are silently dropped, as OctoPrint does. */
-    bool can = !sim_octoprint_active(&st) && st.state != SIM_NP_ERROR && !busy(o);
+    bool can = !sim_octoprint_active(&st) && st.state != SIM_NP_ERROR && !busy(o, &st);
     bool printing = false;
     if (want_print && can) {
         start_job(o, name);
@@ -326,7 +335,7 @@ h_file(struct sim_http_req *r, void *ud)
     sim_netprinter_status(o->np, &st);
     if (!cmd || strcmp(cmd, "select") != 0) {
         sim_http_reply_error(r, 400, "Unknown command");
-    } else if (sim_octoprint_active(&st) || busy(o)) {
+    } else if (sim_octoprint_active(&st) || busy(o, &st)) {
         sim_http_reply_error(r, 409, "Printer is already printing, cannot select a new file");
     } else if (print && st.state == SIM_NP_ERROR) {
         sim_http_reply_error(r, 409, "Printer is not operational, cannot directly start printing");
@@ -359,7 +368,7 @@ h_job_command(struct sim_http_req *r, void *ud)
         return;
     }
     if (strcmp(cmd, "start") == 0) {
-        if (sim_octoprint_active(&st) || busy(o) || !st.file[0]) {
+        if (sim_octoprint_active(&st) || busy(o, &st) || !st.file[0]) {
             sim_http_reply_error(r, 409, "Printer is not operational or already printing");
             rc = SF_EAGAIN;
         } else {
@@ -709,7 +718,7 @@ printhead(struct octo_sim *o, struct sim_http_req *r, json_t *j, const char *cmd
     bool ok = false;
     if (!feed && strcmp(cmd, "jog") != 0 && strcmp(cmd, "home") != 0)
         sim_http_reply_error(r, 400, "command is invalid");
-    else if (st->state == SIM_NP_ERROR || (!feed && (sim_octoprint_active(st) || busy(o))))
+    else if (st->state == SIM_NP_ERROR || (!feed && (sim_octoprint_active(st) || busy(o, st))))
         sim_http_reply_error(r, 409, "Printer is not operational or currently printing");
     else if (feed && !json_is_number(json_object_get(j, "factor")))
         sim_http_reply_error(r, 400, "factor is invalid");

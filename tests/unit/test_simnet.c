@@ -16,6 +16,7 @@
 #include "../../drivers/net/httpc.h"
 #include "../../sim/net/sim_http.h"
 #include "../../sim/net/sim_netprinter.h"
+#include "../../sim/net/sim_octoprint_int.h"
 #include "../../src/base/buf.h"
 #include "../t.h"
 
@@ -440,4 +441,23 @@ T_CASE(http_faults)
     sim_http_free(sh);
     httpc_free(h);
     loop_free(l);
+}
+
+/* A print that ran to its end reads Finishing, not ready, from the moment the printer completes
+   it, before the simulator's next watch turn: a client polling in between saw Operational and
+   ready, started its next print and was refused "already printing" (a farmd_bambu flake). */
+T_CASE(octoprint_finishing_from_the_moment_a_print_completes)
+{
+    struct octo_sim o = { .was_running = true };
+    struct sim_np_status st = { .state = SIM_NP_COMPLETE };
+    T_EQ_STR(sim_octoprint_state_text(&o, &st), "Finishing");
+    json_t *flags = sim_octoprint_flags(&o, &st);
+    T_TRUE(json_is_true(json_object_get(flags, "finishing")));
+    T_TRUE(json_is_false(json_object_get(flags, "ready")));
+    json_decref(flags);
+    o.was_running = false; /* the watch turns passed: Operational and ready again */
+    T_EQ_STR(sim_octoprint_state_text(&o, &st), "Operational");
+    flags = sim_octoprint_flags(&o, &st);
+    T_TRUE(json_is_true(json_object_get(flags, "ready")));
+    json_decref(flags);
 }
