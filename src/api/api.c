@@ -31,9 +31,11 @@
 #include "../base/mem.h"
 #include "../farm/jobctl.h"
 #include "api_compat.h"
+#include "api_csv.h"
 #include "api_json.h"
 #include "api_page.h"
 #include "api_read.h"
+#include "api_stats.h"
 #include "route.h"
 #include "web.h"
 
@@ -175,7 +177,10 @@ read_page(struct store *s, void *ud, struct http_resp *resp)
 {
     struct sf_err err;
     size_t len;
-    char *text = api_page_render(s, ud, &len, &err);
+    const struct api_page_query *q = ud;
+    char next[24] = "";
+    char *text =
+        q->csv ? api_csv_render(s, q, &len, next, &err) : api_page_render(s, q, &len, &err);
     if (!text) {
         http_fail(resp, err.code, err.msg);
         return;
@@ -183,7 +188,11 @@ read_page(struct store *s, void *ud, struct http_resp *resp)
     resp->body = text;
     resp->body_len = len;
     resp->body_free = free;
-    resp->content_type = "application/json";
+    resp->content_type = q->csv ? "text/csv; charset=utf-8" : "application/json";
+    if (q->csv)
+        http_resp_header(resp, "Content-Disposition", "attachment; filename=\"jobs.csv\"");
+    if (next[0]) /* more jobs pass: the same query with cursor=next goes on */
+        http_resp_header(resp, "X-Next-Cursor", "%s", next);
 }
 
 static void
@@ -204,6 +213,7 @@ jobs_list(void *ctx, const struct route_args *args, const struct http_req *req,
         return;
     }
     q->f.printer = q->printer; /* q moved to the heap: point into it */
+    q->f.name = q->name[0] ? q->name : NULL;
     api_read_run(a->reads, resp, read_page, NULL, q, free);
 }
 
@@ -374,6 +384,49 @@ job_cancel_restart(void *ctx, const struct route_args *args, const struct http_r
                  ? jobctl_cancel(a->cfg.farm, a->cfg.store, args->id, &err)
                  : jobctl_restart(a->cfg.store, args->id, &err);
     job_changed(a, args, rc, &err, resp);
+}
+
+/* POST /api/jobs/ID/again: a new job from the same file and options (jobctl_again). */
+static void
+job_again(void *ctx, const struct route_args *args, const struct http_req *req,
+          struct http_resp *resp)
+{
+    (void)req;
+    struct api *a = ctx;
+    struct sf_err err;
+    int64_t id;
+    struct job_row j;
+    int rc = jobctl_again(a->cfg.store, args->id, &id, &err);
+    if (rc || (rc = store_job_get(a->cfg.store, id, &j, &err))) {
+        http_fail(resp, rc, err.msg);
+        return;
+    }
+    log_info("api", "job %lld: '%s' submitted again as job %lld", (long long)args->id, j.opts.name,
+             (long long)id);
+    resp->status = 201;
+    resp->json = json_pack("{so}", "job", api_job_json(&j));
+    changed(a);
+}
+
+/* GET /api/stats?days=N (api_stats.h), read on the reader's thread. */
+static void
+stats_get(void *ctx, const struct route_args *args, const struct http_req *req,
+          struct http_resp *resp)
+{
+    (void)args;
+    struct api *a = ctx;
+    struct sf_err err;
+    int *days = mem_calloc(1, sizeof(*days));
+    if (!days) {
+        http_error(resp, 500, "out of memory");
+        return;
+    }
+    if (api_stats_parse(req->query, days, &err)) {
+        http_error(resp, 400, "%s", err.msg);
+        free(days);
+        return;
+    }
+    api_read_run(a->reads, resp, api_stats_read, NULL, days, free);
 }
 
 /* The operator continues an interrupted job where its printer stopped. */
@@ -658,6 +711,8 @@ static const struct route rows[] = {
       ROUTE_405 },
     { ROUTE_POST, "/api/jobs/{id}/resume", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_resume,
       ROUTE_405 },
+    { ROUTE_POST, "/api/jobs/{id}/again", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_again, ROUTE_405 },
+    { ROUTE_GET, "/api/stats", NULL, HTTP_BODY_NONE, ROUTE_READ, stats_get, ROUTE_405 },
     { ROUTE_GET, "/api/printers", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get, "use GET" },
     { ROUTE_GET, "/api/printers/{name}", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get,
       "use GET" },

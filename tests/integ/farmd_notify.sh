@@ -36,16 +36,8 @@ bad "option 'colour' is not valid in section 'notify x'" "url: http://h/x" "colo
 
 start_sim mk3 --speed 3000
 TOKEN=tok-secret-0123456789
-cat > "$tmp/farm.ini" <<INI
-[farm]
-listen: 127.0.0.1:$port
-data_dir: $tmp/data
-api_keys: $RW
-[printer mk3]
-driver: marlin
-port: $(cat "$tmp/mk3.addr")
-baud: 1000000
-auto_eject: false
+one_printer_ini mk3 false
+cat >> "$tmp/farm.ini" <<INI
 [notify hook]
 url: http://127.0.0.1:$hport/hook/secret-path
 events: job-done, bed-clear
@@ -56,7 +48,6 @@ from: farm@example.org
 to: ops@example.org, night@example.org
 events: job-failed
 INI
-cp -r config/printers config/materials "$tmp/"
 start_daemon
 wait_for 60 sh -c "'$C' printers | grep -q ' idle '" || fail "printer: $("$C" printers)"
 

@@ -96,7 +96,8 @@ T_CASE(notify_webhook_bodies)
 
     /* a template: escaped for JSON, as is for text; unknown braces kept */
     t.format = NOTIFY_FMT_TEMPLATE;
-    snprintf(t.template_text, sizeof(t.template_text), "{\"m\": \"{job_name}\", \"e\": \"{event}\"} {x}");
+    snprintf(t.template_text, sizeof(t.template_text),
+             "{\"m\": \"{job_name}\", \"e\": \"{event}\"} {x}");
     snprintf(t.content_type, sizeof(t.content_type), "application/json");
     d = notify_delivery_new(&t, &m);
     T_EQ_STR(d->body, "{\"m\": \"say \\\"hi\\\".stl\", \"e\": \"job-done\"} {x}");
