@@ -26,6 +26,7 @@
 #include <strings.h>
 
 #include "../base/buf.h"
+#include "../base/clock.h"
 #include "../base/limits.h"
 #include "../base/log.h"
 #include "../base/mem.h"
@@ -37,6 +38,7 @@
 #include "api_read.h"
 #include "api_stats.h"
 #include "route.h"
+#include "temps.h"
 #include "web.h"
 
 #define SSE_BATCH  64 /* events read from the store per stream refill */
@@ -49,6 +51,7 @@ struct api {
     struct web *web;               /* the dashboard's files, sessions and pictures */
     struct api_read *reads;        /* store reads off the loop (api_read.h) */
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
+    struct temps *temps;           /* each printer's last hour of temperatures (temps.h) */
     struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
 };
 
@@ -520,6 +523,33 @@ printer_acted(struct api *a, const char *name, int rc, const struct sf_err *err,
     changed(a);
 }
 
+/* GET /api/printers/NAME/temps: its last hour (temps.h), from memory. */
+static void
+printer_temps(void *ctx, const struct route_args *args, const struct http_req *req,
+              struct http_resp *resp)
+{
+    (void)req;
+    struct api *a = ctx;
+    json_t *o = temps_json(a->temps, args->name, API_TICK_MS);
+    if (o) {
+        resp->json = o;
+        return;
+    }
+    bool known = false;
+    size_t np = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
+    for (size_t i = 0; i < np && !known; i++) {
+        struct printer_info pi;
+        farm_printer_info(a->cfg.farm, i, &pi);
+        known = strcmp(pi.cfg->name, args->name) == 0;
+    }
+    if (!known) {
+        http_error(resp, 404, "no printer '%.64s'", args->name);
+        return;
+    }
+    resp->json = json_pack("{ss si s[]}", "printer", args->name, "interval_ms", API_TICK_MS,
+                           "samples"); /* not sampled yet */
+}
+
 static void
 printer_act(void *ctx, const struct route_args *args, const struct http_req *req,
             struct http_resp *resp)
@@ -716,6 +746,8 @@ static const struct route rows[] = {
     { ROUTE_GET, "/api/printers", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get, "use GET" },
     { ROUTE_GET, "/api/printers/{name}", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get,
       "use GET" },
+    { ROUTE_GET, "/api/printers/{name}/temps", NULL, HTTP_BODY_NONE, ROUTE_READ, printer_temps,
+      ROUTE_405 },
     { ROUTE_POST, "/api/printers/{name}/command", NULL, HTTP_BODY_JSON, ROUTE_WRITE, printer_cmd,
       ROUTE_405 },
     { ROUTE_POST, "/api/printers/{name}/emergency-stop", NULL, HTTP_BODY_NONE, ROUTE_WRITE,
@@ -806,8 +838,12 @@ api_new(const struct api_config *cfg, struct sf_err *err)
     a->groups[0] = (struct route_group){ compat, n_compat, &a->slicers };
     a->groups[1] = (struct route_group){ web, n_web, a->web };
     a->groups[2] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
-    a->http = a->web ? http_new(&hc, err) : NULL;
+    a->temps = temps_new();
+    a->http = a->web && a->temps ? http_new(&hc, err) : NULL;
     if (!a->http) {
+        if (!a->temps)
+            sf_err_set(err, SF_ENOMEM, "api: out of memory");
+        temps_free(a->temps);
         web_free(a->web);
         api_read_free(a->reads);
         free(a);
@@ -824,6 +860,7 @@ api_free(struct api *a)
     http_free(a->http); /* ends the picture streams before the renders they wait for */
     web_free(a->web);
     api_read_free(a->reads); /* reads still queued: their requests went with the server */
+    temps_free(a->temps);
     free(a);
 }
 
@@ -868,4 +905,13 @@ api_tick(struct api *a)
 {
     a->tick++;
     http_wake_streams(a->http);
+    /* a sample a printer each tick: the chart's history (temps.h) */
+    size_t np = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
+    int64_t now = clock_wall_ms();
+    for (size_t i = 0; i < np; i++) {
+        struct printer_info pi;
+        farm_printer_info(a->cfg.farm, i, &pi);
+        const double c[4] = { pi.nozzle_c, pi.nozzle_target_c, pi.bed_c, pi.bed_target_c };
+        temps_add(a->temps, pi.cfg->name, now, pi.state != PRINTER_OFFLINE, c);
+    }
 }

@@ -3,7 +3,8 @@
 # printing on a simulated Marlin: GET /api/jobs finds the finished job by a
 # piece of its name and exports it as CSV (printer, filament, print time),
 # POST /api/jobs/ID/again queues a new job from the same file and options,
-# which prints too, and GET /api/stats counts both prints for the printer.
+# which prints too, GET /api/stats counts the prints for the printer, and
+# GET /api/printers/NAME/temps holds the temperatures sampled meanwhile.
 # Every wait polls for its condition.
 set -u
 BUILD=${BUILD:-build/san}
@@ -63,4 +64,16 @@ assert len(p["utilisation"]) == 3 and p["utilisation"][2] > 0, p
 check_stats || fail "stats: $(api '/api/stats?days=3')"
 code=$(curl -s -o /dev/null -w '%{http_code}' -H "X-Api-Key: $RW" "$SLIMFARM_URL/api/stats?days=0")
 [ "$code" = 400 ] || fail "days=0: $code"
+# the temperature history: sampled every 5 s, kept by the daemon
+has_temps() {
+  api "/api/printers/mk3/temps" | /usr/bin/python3 -c '
+import json, sys
+d = json.load(sys.stdin)
+assert d["printer"] == "mk3" and d["interval_ms"] == 5000, d
+assert d["samples"] and isinstance(d["samples"][-1][1], float), d
+'
+}
+wait_for 60 has_temps || fail "temps: $(api /api/printers/mk3/temps)"
+code=$(curl -s -o /dev/null -w '%{http_code}' -H "X-Api-Key: $RW" "$SLIMFARM_URL/api/printers/nope/temps")
+[ "$code" = 404 ] || fail "temps of no printer: $code"
 echo "farmd_history: ok"
