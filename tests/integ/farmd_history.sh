@@ -76,4 +76,8 @@ assert d["samples"] and isinstance(d["samples"][-1][1], float), d
 wait_for 60 has_temps || fail "temps: $(api /api/printers/mk3/temps)"
 code=$(curl -s -o /dev/null -w '%{http_code}' -H "X-Api-Key: $RW" "$SLIMFARM_URL/api/printers/nope/temps")
 [ "$code" = 404 ] || fail "temps of no printer: $code"
+# the history page and its script are served like the dashboard's files
+for f in history.html history.js; do
+  curl -sf -o /dev/null "$SLIMFARM_URL/$f" || fail "$f not served"
+done
 echo "farmd_history: ok"
