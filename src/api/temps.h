@@ -28,8 +28,7 @@ struct temps *temps_new(void);
 void temps_free(struct temps *t);
 
 /* One sample of printer at at_ms; known false: the printer is offline. */
-void temps_add(struct temps *t, const char *printer, int64_t at_ms, bool known,
-               const double c[4]);
+void temps_add(struct temps *t, const char *printer, int64_t at_ms, bool known, const double c[4]);
 
 /* The JSON above for printer (a new reference); NULL if it has no samples. */
 json_t *temps_json(const struct temps *t, const char *printer, int interval_ms);

@@ -36,8 +36,8 @@ notify_msg_text(struct notify_msg *m, const struct job_row *job)
         m->copies = job->counts.copies;
         m->copies_done = job->counts.copies_done;
         snprintf(m->reason, sizeof(m->reason), "%s", job->reason);
-    } else if (e->job_id > 0) {
-        m->job_id = e->job_id;
+    } else if (e->job_id > 0 && (m->ev == NOTIFY_JOB_DONE || m->ev == NOTIFY_JOB_FAILED)) {
+        m->job_id = e->job_id; /* a job event whose row could not be read */
     }
     const char *on = m->printer[0] ? " on " : "";
     switch (m->ev) {

@@ -2,8 +2,9 @@
 # tests/integ/farmd_notify.sh - the daemon tells the operator: a real
 # slimfarmd printing on a simulated Marlin (no ejector) posts a webhook for
 # the job done and for the bed that needs clearing to a loopback listener
-# (which answers the first request 500: the daemon tries it again), and
-# mails a failed job through a loopback SMTP sink (aiosmtpd).  Also: the
+# (which answers the first request 500: the daemon tries it again), mails
+# a failed job through a loopback SMTP sink (aiosmtpd), and tells a
+# Slack-style listener when the queue runs empty.  Also: the
 # [notify] section's options are checked with messages naming the field,
 # and neither the token nor the webhook's url reaches the log.  Every wait
 # polls for its condition.
@@ -13,11 +14,13 @@ BUILD=${BUILD:-build/san}
 SINKS=$(dirname "$0")/lib/sinks.py
 /usr/bin/python3 -c 'import aiosmtpd' 2>/dev/null || { echo "SKIP: python3-aiosmtpd missing (make deps)"; exit 77; }
 
-mkdir -p "$tmp/sink"
+mkdir -p "$tmp/sink" "$tmp/chat"
 /usr/bin/python3 "$SINKS" http "$tmp/sink" & sims+=($!)
 /usr/bin/python3 "$SINKS" smtp "$tmp/sink" & sims+=($!)
-wait_for 30 test -s "$tmp/sink/http.port" -a -s "$tmp/sink/smtp.port" || fail "sinks did not start"
-hport=$(cat "$tmp/sink/http.port") sport=$(cat "$tmp/sink/smtp.port")
+/usr/bin/python3 "$SINKS" http "$tmp/chat" & sims+=($!)
+wait_for 30 test -s "$tmp/sink/http.port" -a -s "$tmp/sink/smtp.port" -a -s "$tmp/chat/http.port" \
+  || fail "sinks did not start"
+hport=$(cat "$tmp/sink/http.port") sport=$(cat "$tmp/sink/smtp.port") cport=$(cat "$tmp/chat/http.port")
 
 # Bad sections are refused, naming the field.
 bad() { # EXPECTED LINES...
@@ -47,6 +50,10 @@ url: smtp://127.0.0.1:$sport
 from: farm@example.org
 to: ops@example.org, night@example.org
 events: job-failed
+[notify chat]
+url: http://127.0.0.1:$cport/chat
+format: slack
+events: queue-empty
 INI
 start_daemon
 wait_for 60 sh -c "'$C' printers | grep -q ' idle '" || fail "printer: $("$C" printers)"
@@ -104,8 +111,22 @@ PY
 }
 wait_for 120 check_mail 2>/dev/null || { check_mail; fail "mail: $(cat "$tmp/sink/smtp.log" 2>/dev/null)"; }
 
+# The queue ran empty (when the job started, and after the failed one):
+# a Slack-style body, its first attempt answered 500 and tried again.
+check_chat() {
+  /usr/bin/python3 - "$tmp/chat/http.log" <<'PY'
+import json, sys
+reqs = [json.loads(l) for l in open(sys.argv[1])]
+assert reqs[0]["status"] == 500, reqs
+ok = [json.loads(r["body"]) for r in reqs if r["status"] == 200]
+assert ok and all(b == {"text": "slimfarm: the queue is empty: no job waits for a printer"}
+                  for b in ok), reqs
+PY
+}
+wait_for 60 check_chat 2>/dev/null || { check_chat; fail "chat: $(cat "$tmp/chat/http.log" 2>/dev/null)"; }
+
 # Secrets stay out of the log; a reload keeps the targets.
 grep -q "$TOKEN\|secret-path" "$tmp/log" && fail "a secret reached the log"
 kill -HUP "$pid"
-wait_for 30 grep -q "reloaded .*, 2 notify targets" "$tmp/log" || fail "reload"
+wait_for 30 grep -q "reloaded .*, 3 notify targets" "$tmp/log" || fail "reload"
 echo "farmd_notify: ok"

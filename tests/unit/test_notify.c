@@ -52,6 +52,7 @@ T_CASE(notify_text_of_each_event)
     T_EQ_STR(msg(NOTIFY_PRINTER_OFFLINE, NULL).text, "printer mk3 went offline");
     T_EQ_STR(msg(NOTIFY_QUEUE_EMPTY, NULL).text, "the queue is empty: no job waits for a printer");
     T_EQ_STR(msg(NOTIFY_QUEUE_EMPTY, NULL).event, "queue-empty");
+    T_EQ_INT(msg(NOTIFY_QUEUE_EMPTY, NULL).job_id, 0); /* not about the job that ended */
 }
 
 static struct notifycfg

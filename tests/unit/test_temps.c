@@ -26,7 +26,7 @@ T_CASE(temps_ring_keeps_the_last_hour)
     T_EQ_INT(json_integer_value(json_array_get(first, 0)), 10000); /* the 10 oldest dropped */
     T_EQ_DBL(json_real_value(json_array_get(first, 1)), 203, 1e-9);
     T_EQ_DBL(json_real_value(json_array_get(first, 3)), 60, 1e-9); /* a tenth of a degree */
-    T_TRUE(json_is_null(json_array_get(last, 1)));                  /* offline: unknown */
+    T_TRUE(json_is_null(json_array_get(last, 1)));                 /* offline: unknown */
     T_EQ_INT(json_integer_value(json_array_get(last, 0)), 1000 * (TEMPS_SAMPLES + 9));
     T_EQ_INT(json_integer_value(json_object_get(o, "interval_ms")), 5000);
     json_decref(o);
