@@ -25,7 +25,7 @@ DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev li
 	libmicrohttpd-dev libmosquitto-dev libinih-dev libqhull-dev libpolyclipping-dev \
 	libjansson-dev libminizip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
 	libsuitesparse-dev clang-14 clang-format libclang-rt-14-dev python3 procps libssl-dev \
-	printrun-common mosquitto chromium nodejs
+	printrun-common mosquitto chromium nodejs python3-aiosmtpd
 # Only for `make bench`: the independent peers and their helpers.
 BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy bc
 
