@@ -191,15 +191,24 @@ tp_gap_fill_narrow(double h, const struct slice_profile *p, double sp, double ss
                    struct layer_paths *out)
 {
     int rc = SF_OK;
-    /* infill pieces under 3.5 spacings wide: zig-zag links would lay
+    /* solid pieces under 3.5 spacings wide: zig-zag links would lay
        more than their area there, so they are gap-filled instead */
     paths_reset(&t[T_GAP]);
-    struct paths *sets[3] = { &t[T_SOLID], &t[T_TOP], &t[T_SPARSE] };
-    for (int i = 0; i < 3; i++)
-        TP_TRY(tp_split_narrow(sets[i], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
+    TP_TRY(tp_split_narrow(&t[T_SOLID], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
+    TP_TRY(tp_split_narrow(&t[T_TOP], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
     if (t[T_GAP].n)
         TP_TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, p->infill_overlap * sp,
                            p->min_bead * p->nozzle_mm, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
+    /* sparse pieces stay sparse however narrow, as PrusaSlicer 2.5 fills
+       the strip inside a 2-4 mm wall with anchored sparse lines (its
+       PerimeterGenerator keeps an inner contour at least a perimeter
+       spacing wide); narrower ones are what its Arachne beads widen
+       over: gap fill laying their area, no overlap band */
+    paths_reset(&t[T_GAP]);
+    TP_TRY(tp_split_narrow(&t[T_SPARSE], sp, &t[T_GAP], &t[T_TMP]));
+    if (t[T_GAP].n)
+        TP_TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, 0, 0, out, &t[T_TMP], &t[T_S],
+                           &t[T_LINES]));
 out:
     return rc;
 }
