@@ -3,18 +3,25 @@
  * (issue 33).  The strip inside a 2.4 mm wall is anchored sparse infill,
  * not gap fill, with as many wall loops as PrusaSlicer's (before, narrow
  * sparse pieces were gap-filled solid: +16 % filament on this box).
+ * Bridges that PrusaSlicer's dont_support_bridges leaves unsupported (a
+ * slot's roof, a lid modelled lip-down) get no columns in the print, the
+ * part picture or the optimizers' model, while a cantilever still does
+ * (before, the slicer held every bridge up).
  */
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "../../slicer/estimate.h"
+#include "../../slicer/preview.h"
 #include "../../slicer/slice.h"
+#include "../../src/geom/supmodel.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
 #include "slice_run.h"
 
 /* The box: 60 x 40 x 20, 2.4 mm walls, 2 mm floor. */
-#define BOX_H 20.0
+#define BOX_H     20.0
 #define BOX_FLOOR 2.0
 
 struct walls {
@@ -90,11 +97,81 @@ T_CASE(thin_walled_box_fills_its_walls_sparse)
        gap fill: two loops a side, sparse infill in the 0.6 mm between
        them, 658.7 mm of it in all, and 4553.6 mm of filament */
     if (!(w.total_mm > 0 && w.gap_mm < 0.01 * w.total_mm && w.infill_mm > 0.1 * w.total_mm))
-        t_fail(__FILE__, __LINE__, "wall middle: %.1f mm gap fill, %.1f mm sparse of %.1f", w.gap_mm,
-               w.infill_mm, w.total_mm);
+        t_fail(__FILE__, __LINE__, "wall middle: %.1f mm gap fill, %.1f mm sparse of %.1f",
+               w.gap_mm, w.infill_mm, w.total_mm);
     T_TRUE(w.loops_min >= 4); /* outer and inner face: an external and an inner loop each */
     if (!(w.all_mm < 1.03 * 4553.6))
         t_fail(__FILE__, __LINE__, "%.1f mm of filament, PrusaSlicer 4553.6", w.all_mm);
     slice_profile_release(&p);
+    mesh_release(&m);
+}
+
+/* Support filament of m sliced with supports on, and the picture's and the
+   optimizers' model's view of it: columns drawn, contacts scored. */
+static void
+supports_of(const struct mesh *m, const char *name, double *support_mm, size_t *drawn,
+            uint32_t *contacts)
+{
+    struct sf_err err;
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    p.support = true;
+    p.skirts = 0;
+    p.brim_auto = false;
+    char path[512];
+    struct slice_result r;
+    T_OK(ts_slice(m, &p, name, &r, path, sizeof(path), &err), &err);
+    *support_mm = r.support_mm;
+    struct preview_opts o;
+    preview_opts_default(&o);
+    o.profile = &p;
+    struct support_grid g;
+    struct support_column *cols = NULL;
+    size_t n;
+    T_OK(preview_columns(m, &o, &g, &cols, &n, drawn, &err), &err);
+    free(cols);
+    struct supmodel_params mp;
+    supmodel_params_steer(&mp, slice_profile_angle(&p));
+    struct supmodel_result mr;
+    T_OK(supmodel_of_mesh(m, v3(0, 0, 1), &mp, &mr, &err), &err);
+    *contacts = mr.n_contacts;
+    slice_profile_release(&p);
+}
+
+T_CASE(bridges_are_not_supported_overhangs_are)
+{
+    struct sf_err err;
+    double sup;
+    size_t drawn;
+    uint32_t contacts;
+    /* a 40 x 20 x 15 block with a 10 mm slot, 10 tall, from below along y:
+       its roof is bridged wall to wall (PrusaSlicer: no support) */
+    struct mesh m;
+    mesh_init(&m);
+    double x[8] = { 0, 15, 15, 25, 25, 40, 40, 0 }, z[8] = { 0, 0, 10, 10, 0, 0, 15, 15 };
+    T_OK(shape_extrude_xz(&m, x, z, 8, 20, &err), &err);
+    supports_of(&m, "slot", &sup, &drawn, &contacts);
+    if (sup != 0 || drawn != 0 || contacts != 0)
+        t_fail(__FILE__, __LINE__, "slot: %.1f mm of support, %zu columns drawn, %u contacts", sup,
+               drawn, contacts);
+    mesh_release(&m);
+
+    /* a 60 x 40 lid, 8 tall, modelled lip-down: its plate spans 35 mm
+       between the lip's walls (PrusaSlicer: no support) */
+    mesh_init(&m);
+    T_OK(shape_tray(&m, 60, 40, 8, 2.4, 2, true, &err), &err);
+    supports_of(&m, "lid", &sup, &drawn, &contacts);
+    if (sup != 0 || drawn != 0 || contacts != 0)
+        t_fail(__FILE__, __LINE__, "lid: %.1f mm of support, %zu columns drawn, %u contacts", sup,
+               drawn, contacts);
+    mesh_release(&m);
+
+    /* the tee's 20 mm arms hang free at their ends: held up, in all three */
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    supports_of(&m, "tee", &sup, &drawn, &contacts);
+    if (!(sup > 100 && drawn > 10 && contacts > 0))
+        t_fail(__FILE__, __LINE__, "tee: %.1f mm of support, %zu columns drawn, %u contacts", sup,
+               drawn, contacts);
     mesh_release(&m);
 }
