@@ -439,6 +439,8 @@ layer_range(const struct layer_stack *out, double z0, double z1, double first_mm
     long a = z0 < first_mm / 2 ? 0 : (long)floor(f) + 1;
     if (a < 0)
         a = 0;
+    if (a > (long)out->n) /* above the last plane (a top face): an empty range */
+        a = out->n;
     while (a > 0 && plane_of(out, (uint32_t)a - 1) > z0)
         a--;
     while ((uint32_t)a < out->n && plane_of(out, (uint32_t)a) <= z0)

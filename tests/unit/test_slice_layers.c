@@ -32,6 +32,29 @@ T_CASE(slice_cube_layers_and_area)
     ts_free(&m);
 }
 
+T_CASE(slice_any_height_with_a_flat_top)
+{
+    /* a flat top just above the last layer's plane gave its triangles a
+       reversed layer range, which asked for terabytes (a 12.5 mm plate on
+       standoffs: "slice: out of memory"); every height from 5 to 15 mm in
+       0.05 mm steps slices */
+    for (int i = 100; i <= 300; i++) {
+        struct mesh m = { 0 };
+        struct sf_err err;
+        double h = i * 0.05;
+        T_TRUE(ts_box(&m, 0, 0, 0, 20, 20, (float)h) == 0);
+        struct layer_stack s;
+        int rc = layers_slice(&m, 0.2, 0.2, 100, 100, &s, &err);
+        if (rc != SF_OK)
+            t_fail(__FILE__, __LINE__, "height %.2f: %s", h, err.msg);
+        else if (fabs(s.l[s.n - 1].z_mm - h) > 0.2)
+            t_fail(__FILE__, __LINE__, "height %.2f: top layer at %.2f", h, s.l[s.n - 1].z_mm);
+        if (rc == SF_OK)
+            layer_stack_release(&s);
+        ts_free(&m);
+    }
+}
+
 T_CASE(slice_pyramid_area_follows_formula)
 {
     struct mesh m = { 0 };
