@@ -24,7 +24,8 @@
 # niced run per mesh; the CPU columns still come from the side-by-side runs).
 # BENCH_SET picks the sets (tests/bench/valsets.sh): shared (default), mech,
 # scad, or several ("mech scad", all); each set gets its table and a total
-# row per support setting (sums; the ratios of the sums).
+# row per support setting (sums over the parts both slicers sliced; the
+# ratios of the sums).
 # BENCH_MESHES="a.stl b.stl" picks meshes instead (one set, "given");
 # BENCH_PEERS=0 skips the peers;
 # BENCH_SUPPORT="off" runs only supports off (default "off on"); BENCH_PS=0
@@ -151,10 +152,12 @@ table_head() {
 }
 # set_end SET: the set's total rows, then its per-role table
 set_end() {
+  # over the parts both slicers sliced (a failed slice prints zeros)
   awk -F'\t' -v set="$1" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
-    { og[$2] += $3; pg[$2] += $4; om[$2] += $5; pm[$2] += $6; os[$2] += $7; ps[$2] += $8; cg[$2] += $9; cm[$2] += $10; n[$2]++ }
-    END { for (s in n) printf "| **total %s (%d)** | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | | %.2f | %.2f | | | | %.2f | %.1f | | | | | | |\n",
-            set, n[s], s, og[s], pg[s], r(og[s], pg[s]), om[s], pm[s], r(om[s], pm[s]), os[s], ps[s], cg[s], cm[s] }' "$work/sums"
+    { all[$2]++ } $3 > 0 && $4 > 0 { og[$2] += $3; pg[$2] += $4; om[$2] += $5; pm[$2] += $6; os[$2] += $7; ps[$2] += $8
+      cg[$2] += $9; cm[$2] += $10; n[$2]++ }
+    END { for (s in all) printf "| **total %s (%d of %d parts)** | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | | %.2f | %.2f | | | | %.2f | %.1f | | | | | | |\n",
+            set, n[s], all[s], s, og[s], pg[s], r(og[s], pg[s]), om[s], pm[s], r(om[s], pm[s]), os[s], ps[s], cg[s], cm[s] }' "$work/sums"
   echo
   echo "filament mm by ;TYPE: role, ours / PrusaSlicer; walls = perimeter loops per contour; top, bottom = solid skin over / under sparse infill (median mm)"
   echo
