@@ -79,20 +79,32 @@ on_move(void *ud, const struct est_move *mv)
     return SF_OK;
 }
 
-T_CASE(thin_walled_box_fills_its_walls_sparse)
+/* Slice the 60 x 40 x 20 box with wall_mm walls (no support, skirt or brim)
+   and walk its G-code into w. */
+static void
+slice_box(double wall_mm, const char *name, struct walls *w)
 {
     struct mesh m;
     struct sf_err err;
     mesh_init(&m);
-    T_OK(shape_tray(&m, 60, 40, BOX_H, 2.4, BOX_FLOOR, false, &err), &err);
+    T_OK(shape_tray(&m, 60, 40, BOX_H, wall_mm, BOX_FLOOR, false, &err), &err);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
     p.support = false;
     p.skirts = 0;
     p.brim_auto = false;
-    struct walls w = { .loops_min = UINT32_MAX };
-    T_OK(ts_slice_walk(&m, &p, "box24", NULL, on_move, &w, &err), &err);
-    end_layer(&w);
+    memset(w, 0, sizeof(*w));
+    w->loops_min = UINT32_MAX;
+    T_OK(ts_slice_walk(&m, &p, name, NULL, on_move, w, &err), &err);
+    end_layer(w);
+    slice_profile_release(&p);
+    mesh_release(&m);
+}
+
+T_CASE(thin_walled_box_fills_its_walls_sparse)
+{
+    struct walls w;
+    slice_box(2.4, "box24", &w);
     /* PrusaSlicer 2.5 (the peers' settings) prints this box with 0 mm of
        gap fill: two loops a side, sparse infill in the 0.6 mm between
        them, 658.7 mm of it in all, and 4553.6 mm of filament */
@@ -102,8 +114,20 @@ T_CASE(thin_walled_box_fills_its_walls_sparse)
     T_TRUE(w.loops_min >= 4); /* outer and inner face: an external and an inner loop each */
     if (!(w.all_mm < 1.03 * 4553.6))
         t_fail(__FILE__, __LINE__, "%.1f mm of filament, PrusaSlicer 4553.6", w.all_mm);
-    slice_profile_release(&p);
-    mesh_release(&m);
+}
+
+T_CASE(box_walls_too_thin_for_two_loops_print_four_wall_lines)
+{
+    /* 1.6 mm walls: no second loop fits a side; PrusaSlicer 2.5's Arachne
+       prints four perimeter beads (615 mm external, 567 mm inner on a
+       10 mm tray).  Ours: the ring between the external loops is two
+       wall lines of their own width, printed as perimeters (before:
+       gap fill, two wall loops a layer by role) */
+    struct walls w;
+    slice_box(1.6, "box16", &w);
+    if (!(w.total_mm > 0 && w.gap_mm < 0.01 * w.total_mm && w.loops_min >= 4))
+        t_fail(__FILE__, __LINE__, "wall middle: %.1f mm gap fill of %.1f, %u wall loops", w.gap_mm,
+               w.total_mm, w.loops_min);
 }
 
 /* Support filament of m sliced with supports on, and the picture's and the
