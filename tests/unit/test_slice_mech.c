@@ -79,6 +79,17 @@ on_move(void *ud, const struct est_move *mv)
     return SF_OK;
 }
 
+/* The default profile without skirt or brim (as the peers slice), with or
+   without supports. */
+static void
+bare_profile(struct slice_profile *p, bool support)
+{
+    T_OK(slice_profile_default(p), NULL);
+    p->support = support;
+    p->skirts = 0;
+    p->brim_auto = false;
+}
+
 /* Slice the 60 x 40 x 20 box with wall_mm walls (no support, skirt or brim)
    and walk its G-code into w. */
 static void
@@ -89,10 +100,7 @@ slice_box(double wall_mm, const char *name, struct walls *w)
     mesh_init(&m);
     T_OK(shape_tray(&m, 60, 40, BOX_H, wall_mm, BOX_FLOOR, false, &err), &err);
     struct slice_profile p;
-    T_OK(slice_profile_default(&p), NULL);
-    p.support = false;
-    p.skirts = 0;
-    p.brim_auto = false;
+    bare_profile(&p, false);
     memset(w, 0, sizeof(*w));
     w->loops_min = UINT32_MAX;
     T_OK(ts_slice_walk(&m, &p, name, NULL, on_move, w, &err), &err);
@@ -138,10 +146,7 @@ supports_of(const struct mesh *m, const char *name, double *support_mm, size_t *
 {
     struct sf_err err;
     struct slice_profile p;
-    T_OK(slice_profile_default(&p), NULL);
-    p.support = true;
-    p.skirts = 0;
-    p.brim_auto = false;
+    bare_profile(&p, true);
     char path[512];
     struct slice_result r;
     T_OK(ts_slice(m, &p, name, &r, path, sizeof(path), &err), &err);
