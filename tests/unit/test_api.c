@@ -47,6 +47,9 @@
    pause, as Moonraker's and PrusaLink's do while their upload runs; printer
    b's link is gone (it stays offline across reconnects). */
 static atomic_bool adrv_busy, adrv_unplugged;
+/* Jobs the in-test driver was given: the store says PRINTING before the farm's start check
+   (on its io thread) hands the job to the driver. */
+static atomic_int adrv_starts;
 static struct drv *adrv_b; /* printer b's driver */
 
 static int
@@ -65,6 +68,7 @@ adrv_start(struct drv *d, const char *path, uint64_t first_line, const struct dr
            struct sf_err *err)
 {
     (void)path, (void)scan, (void)err;
+    atomic_fetch_add(&adrv_starts, 1);
     d->status.state = DRV_PRINTING;
     d->status.lines_acked = first_line;
     d->on_event(d, DRV_EV_STATE, d->ud);
@@ -270,9 +274,15 @@ start(const char *name, struct sf_err *err)
     if ((rc = store_file_put(srv.store, "solid x", 7, sha, err)) ||
         (rc = store_job_add(srv.store, &o, sha, &id, err)))
         return rc;
+    int starts = atomic_load(&adrv_starts);
     farm_kick(srv.farm);
     if (!wait_state(id, JOB_PRINTING))
         return sf_err_set(err, SF_ETIMEDOUT, "job %lld never printed", (long long)id);
+    /* the printer acts on it only once its driver has it (a pause before is "starting") */
+    for (int i = 0; i < 3000 && atomic_load(&adrv_starts) == starts; i++)
+        loop_run_once(srv.l, 10);
+    if (atomic_load(&adrv_starts) == starts)
+        return sf_err_set(err, SF_ETIMEDOUT, "job %lld never reached the driver", (long long)id);
     return start_api(0, err);
 }
 
