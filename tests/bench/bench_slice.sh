@@ -73,6 +73,7 @@ ours_run() { # mesh support(on|off)
   [ "$2" = off ] && flag=--no-support
   # like the peers: no skirt, no brim (slice-peers.sh passes --skirts 0 --brim-width 0)
   flag="$flag --set skirts=0 --set brim_auto=no"
+  rm -f "$work/o.gcode" # a failed slice leaves no G-code to read
   /usr/bin/time -f "%e %U %S" -o "$work/o.time" "$bin" slice "$1" -o "$work/o.gcode" $flag \
     >"$work/o.line" 2>/dev/null || { echo "0 0"; return; }
   awk '{ printf "%s %.2f\n", $1, $2 + $3 }' "$work/o.time"
@@ -170,18 +171,19 @@ set_end() {
 # roles MESH SUPPORT OURS_GCODE PS_GCODE: one row of the per-role table
 roles() {
   local o p
-  o=$($gcstats "$3" 2>/dev/null)
+  o=$([ -s "$3" ] && $gcstats "$3" 2>/dev/null)
   p=$([ -s "$4" ] && $gcstats "$4" 2>/dev/null)
   awk -v m="$(basename "$1")" -v s="$2" -v o="$o" -v p="$p" 'function kv(line, a,   i, f, kw) {
       split(line, f, " "); for (i in f) { split(f[i], kw, "="); a[kw[1]] = kw[2] } }
     function pair(k) { return (k in A ? A[k] : "-") " / " (k in B ? B[k] : "-") }
+    function less(k, tol) { return (k in A) && (k in B) && A[k] != "-" && B[k] != "-" && A[k] + tol < B[k] + 0 }
     BEGIN { kv(o, A); kv(p, B); weak = ""
-      if (A["walls"] != "-" && B["walls"] != "-" && A["walls"] + 0.02 < B["walls"] + 0) weak = weak " walls"
-      if (A["top"] != "-" && B["top"] != "-" && A["top"] + 0.001 < B["top"] + 0) weak = weak " top"
-      if (A["bottom"] != "-" && B["bottom"] != "-" && A["bottom"] + 0.001 < B["bottom"] + 0) weak = weak " bottom"
+      if (less("walls", 0.02)) weak = weak " walls"
+      if (less("top", 0.001)) weak = weak " top"
+      if (less("bottom", 0.001)) weak = weak " bottom"
       printf "| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", m, s, pair("perim"), pair("ext"),
         pair("infill"), pair("solid"), pair("gap"), pair("bridge"), pair("support"), pair("iface"), pair("walls"),
-        pair("top"), pair("bottom"), p == "" ? "no PS G-code" : weak == "" ? "ok" : "**WEAKER:" weak "**" }'
+        pair("top"), pair("bottom"), o == "" ? "**ours failed**" : p == "" ? "no PS G-code" : weak == "" ? "ok" : "**WEAKER:" weak "**" }'
 }
 : >"$work/sums"; : >"$work/roles"
 prev_set=

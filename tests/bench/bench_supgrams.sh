@@ -17,9 +17,10 @@
 # CuraEngine support grams, PrusaSlicer's estimated time, ours, each with its
 # % change; the parts whose support rose in either peer beyond 2 % + 0.05 g
 # of slicer noise, those printing over 2 % slower, those unchanged (the same
-# STL, or the same grams in both peers), the largest MNDR and ANDR), over the
-# parts where both rows have figures; with more than one set a last table
-# puts the sets' % changes side by side.
+# STL, or grams within 0.5 % + 0.02 g in both peers), the largest MNDR and
+# ANDR), over the parts where both rows have figures
+# (tests/bench/valsets/totals.awk); with more than one set a last table puts
+# the sets' % changes side by side.
 # SUPGRAMS_MESHES="anchor dino" limits the meshes; SUPGRAMS_VARIANTS (default
 # "given orient surface slim search"); SUPGRAMS_PEERS (default "prusaslicer curaengine");
 # SUPGRAMS_CACHED_ONLY=1 reports cached peer rows only (a dash where none is).

@@ -6,9 +6,11 @@
 # A variant's sum covers the parts where it and the part as given both have
 # the figure (so a missing peer row leaves the part out of that column only).
 # worse: either peer's support rose beyond 2 % + 0.05 g (slicer noise);
-# slower: PrusaSlicer's estimate rose over 2 %; same: the same STL, or the
-# same grams in both peers (the optimizer handed the part back).
+# slower: PrusaSlicer's estimate rose over 2 %; same: the same STL, or
+# grams within 0.5 % + 0.02 g of the part as given in both peers (the
+# optimizer handed the part back, perhaps rewritten).
 function num(x) { return x ~ /^-?[0-9.]+$/ }
+function near(a, b) { return num(a) && num(b) && (a - b <= 0.005 * b + 0.02) && (b - a <= 0.005 * b + 0.02) }
 function pct(a, b) { return b > 0 ? sprintf("%+.1f%%", 100 * (a - b) / b) : "-" }
 {
   sets[$1] = 1; key = $1 SUBSEP $2
@@ -28,7 +30,7 @@ END {
     if (num(ours[i]) && num(gours[key])) { a_ou[t] += ours[i]; b_ou[t] += gours[key] }
     if ((num(ps[i]) && num(gps[key]) && ps[i] > 1.02 * gps[key] + 0.05) ||
         (num(ce[i]) && num(gce[key]) && ce[i] > 1.02 * gce[key] + 0.05)) worse[t]++
-    if (v[i] != "given" && (md5[i] == gmd5[key] || (num(ps[i]) && num(ce[i]) && ps[i] == gps[key] && ce[i] == gce[key]))) same[t]++
+    if (v[i] != "given" && (md5[i] == gmd5[key] || (near(ps[i], gps[key]) && near(ce[i], gce[key])))) same[t]++
     if (num(mndr[i]) && mndr[i] > mx_m[t]) mx_m[t] = mndr[i]
     if (num(andr[i]) && andr[i] > mx_a[t]) mx_a[t] = andr[i]
   }
