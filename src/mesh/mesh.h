@@ -86,7 +86,11 @@ int mesh_save(const struct mesh *m, const char *path, struct sf_err *err);
 
 /* Merge vertices closer than tol (mm); returns the number merged (>= 0) or an error. */
 int mesh_weld(struct mesh *m, double tol, struct sf_err *err);
-/* Drop triangles with a repeated index or zero area; returns how many. */
+/*
+ * Drop triangles with a repeated index or zero area; returns how many.  A
+ * zero-area sliver along an edge of another triangle is healed instead (that
+ * triangle is split at the sliver's middle corner), so no crack is left.
+ */
 uint32_t mesh_drop_degenerate(struct mesh *m);
 /*
  * Drop every triangle whose three vertices (in any order or winding) an

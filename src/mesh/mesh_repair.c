@@ -209,19 +209,130 @@ mesh_weld(struct mesh *m, double tol, struct sf_err *err)
     return mesh_weld_distinct(m, tol, false, err);
 }
 
+/* An edge of a triangle, its ends in order, for the sorted edge table of heal_slivers. */
+struct tri_edge {
+    uint32_t lo, hi, tri;
+};
+
+static int
+tri_edge_cmp(const void *x, const void *y)
+{
+    const struct tri_edge *a = x, *b = y;
+    if (a->lo != b->lo)
+        return a->lo < b->lo ? -1 : 1;
+    return a->hi < b->hi ? -1 : a->hi > b->hi;
+}
+
+static bool
+is_sliver(const struct mesh *m, uint32_t i)
+{
+    uint32_t a = m->t[i][0], b = m->t[i][1], c = m->t[i][2];
+    if (a == b || b == c || a == c)
+        return false;
+    struct vec3 n = v3_cross(v3_sub(m->v[b], m->v[a]), v3_sub(m->v[c], m->v[a]));
+    return !(v3_dot(n, n) > 0);
+}
+
+/* Split triangle n, which has the edge p-q (either way), at vertex mid on that edge: n keeps
+   its first half, slot gets the second, both in n's winding.  False if n lost the edge. */
+static bool
+split_at(struct mesh *m, uint32_t n, uint32_t p, uint32_t q, uint32_t mid, uint32_t slot)
+{
+    const uint32_t *t = m->t[n];
+    for (int k = 0; k < 3; k++) {
+        uint32_t x = t[k], y = t[(k + 1) % 3], z = t[(k + 2) % 3];
+        if ((x == p && y == q) || (x == q && y == p)) {
+            if (z == mid)
+                return false;
+            uint32_t first[3] = { x, mid, z }, second[3] = { mid, y, z };
+            memcpy(m->t[n], first, sizeof(first));
+            memcpy(m->t[slot], second, sizeof(second));
+            return true;
+        }
+    }
+    return false;
+}
+
+/*
+ * A sliver (three distinct corners on a line, as CAD exporters leave where a
+ * face meets a finer one) covers no area, but dropping it leaves a crack:
+ * its long edge belongs to the triangle beyond, its two short edges to the
+ * triangles on its side.  Splitting the triangle beyond at the sliver's
+ * middle corner closes the crack; the sliver's slot takes the second half.
+ * Marks healed slivers' slots in healed (their new triangles are kept).
+ * Best effort: without memory, or where two slivers share a long edge, the
+ * sliver is dropped as before.
+ */
+static void
+heal_slivers(struct mesh *m, bool *healed)
+{
+    uint32_t n_sliver = 0;
+    for (uint32_t i = 0; i < m->n_tris; i++)
+        n_sliver += is_sliver(m, i);
+    if (n_sliver == 0)
+        return;
+    struct tri_edge *e = mem_array((size_t)m->n_tris * 3, sizeof(*e));
+    if (!e)
+        return;
+    size_t n_e = 0;
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        const uint32_t *t = m->t[i];
+        if (t[0] == t[1] || t[1] == t[2] || t[0] == t[2] || is_sliver(m, i))
+            continue;
+        for (int k = 0; k < 3; k++) {
+            uint32_t a = t[k], b = t[(k + 1) % 3];
+            e[n_e++] = (struct tri_edge){ a < b ? a : b, a < b ? b : a, i };
+        }
+    }
+    qsort(e, n_e, sizeof(*e), tri_edge_cmp);
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        if (!is_sliver(m, i))
+            continue;
+        /* the middle corner is the one opposite the longest edge */
+        const uint32_t *t = m->t[i];
+        int mid = 0;
+        double longest = -1;
+        for (int k = 0; k < 3; k++) {
+            struct vec3 d = v3_sub(m->v[t[(k + 1) % 3]], m->v[t[(k + 2) % 3]]);
+            if (v3_dot(d, d) > longest)
+                longest = v3_dot(d, d), mid = k;
+        }
+        uint32_t c = t[mid], p = t[(mid + 1) % 3], q = t[(mid + 2) % 3];
+        struct tri_edge key = { p < q ? p : q, p < q ? q : p, 0 };
+        const struct tri_edge *hit = bsearch(&key, e, n_e, sizeof(*e), tri_edge_cmp);
+        if (!hit)
+            continue;
+        /* bsearch lands on any of the edge's users: the first unsplit one */
+        while (hit > e && tri_edge_cmp(hit - 1, &key) == 0)
+            hit--;
+        for (; hit < e + n_e && tri_edge_cmp(hit, &key) == 0; hit++)
+            if (split_at(m, hit->tri, p, q, c, i)) {
+                healed[i] = true;
+                break;
+            }
+    }
+    free(e);
+}
+
 uint32_t
 mesh_drop_degenerate(struct mesh *m)
 {
+    bool *healed = m->n_tris ? mem_calloc(m->n_tris, sizeof(*healed)) : NULL;
+    if (healed)
+        heal_slivers(m, healed);
     uint32_t kept = 0;
     for (uint32_t i = 0; i < m->n_tris; i++) {
         uint32_t a = m->t[i][0], b = m->t[i][1], c = m->t[i][2];
-        if (a == b || b == c || a == c)
-            continue;
-        struct vec3 n = v3_cross(v3_sub(m->v[b], m->v[a]), v3_sub(m->v[c], m->v[a]));
-        if (!(v3_dot(n, n) > 0))
-            continue;
+        if (!(healed && healed[i])) {
+            if (a == b || b == c || a == c)
+                continue;
+            struct vec3 n = v3_cross(v3_sub(m->v[b], m->v[a]), v3_sub(m->v[c], m->v[a]));
+            if (!(v3_dot(n, n) > 0))
+                continue;
+        }
         memcpy(m->t[kept++], m->t[i], sizeof(m->t[0]));
     }
+    free(healed);
     uint32_t dropped = m->n_tris - kept;
     m->n_tris = kept;
     return dropped;

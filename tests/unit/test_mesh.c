@@ -207,6 +207,42 @@ T_CASE(stl_ascii_parses_and_orients)
     mesh_release(&m);
 }
 
+/* A tetrahedron whose face y = 0 a CAD exporter cut at the middle of its bottom edge, leaving a
+   sliver (three corners on that edge) between the cut face and the bottom: the sliver goes,
+   the bottom is split at the middle corner, and the part stays one closed solid (dropping the
+   sliver alone left three open edges: PrusaSlicer reads such files as manifold). */
+T_CASE(sliver_along_an_edge_is_healed_not_left_as_a_crack)
+{
+    static const double v[][3] = {
+        { 0, 0, 0 }, { 10, 0, 0 }, { 0, 10, 0 }, { 0, 0, 10 }, { 5, 0, 0 }
+    };
+    enum { A, B, D, E, C }; /* C: the middle of A-B */
+    static const int f[][3] = { { A, D, B }, { A, C, E }, { C, B, E },
+                                { A, B, C }, { A, E, D }, { B, D, E } };
+    char stl[4096];
+    size_t n = (size_t)snprintf(stl, sizeof(stl), "solid cut\n");
+    for (int i = 0; i < 6; i++) {
+        n += (size_t)snprintf(stl + n, sizeof(stl) - n, "facet normal 0 0 0\n outer loop\n");
+        for (int k = 0; k < 3; k++)
+            n += (size_t)snprintf(stl + n, sizeof(stl) - n, " vertex %g %g %g\n", v[f[i][k]][0],
+                                  v[f[i][k]][1], v[f[i][k]][2]);
+        n += (size_t)snprintf(stl + n, sizeof(stl) - n, " endloop\nendfacet\n");
+    }
+    n += (size_t)snprintf(stl + n, sizeof(stl) - n, "endsolid cut\n");
+    struct mesh m;
+    struct sf_err err;
+    struct mesh_load_info info;
+    mesh_init(&m);
+    T_OK(mesh_load_mem(stl, n, "cut.stl", &m, &info, &err), &err);
+    T_EQ_INT(m.n_tris, 6); /* five faces, the bottom in two halves */
+    struct mesh_topo topo;
+    T_OK(mesh_topo_build(&m, &topo, &err), &err);
+    T_TRUE(mesh_topo_closed(&topo));
+    mesh_topo_release(&topo);
+    T_EQ_DBL(mesh_volume(&m, NULL), 1000.0 / 6, 1e-9);
+    mesh_release(&m);
+}
+
 /* Add one entry to zf, deflated or (level 0) stored. */
 static int
 add_entry(zipFile zf, const char *name, const char *text, int level)
