@@ -40,7 +40,9 @@
 # Prints figures and the ratios of poll1s to push; never fails on them.
 #
 # BENCH_PRINTERS (1000; 100 for a quick look), BENCH_PRINTING (a fifth),
-# BENCH_SECS (20), BENCH_WARMUP (5), BENCH_MODES ("push poll poll1s").
+# BENCH_SECS (20), BENCH_WARMUP (5), BENCH_MODES ("push poll poll1s");
+# DAEMON=path runs another build's slimfarmd against this build's
+# simulators (before/after).
 set -u
 umask 077 # slimfarmd refuses a farm.ini holding keys that others can read
 build=${1:-build/rel}
@@ -49,7 +51,7 @@ printing=${BENCH_PRINTING:-$((n / 5))}
 secs=${BENCH_SECS:-20}
 warm=${BENCH_WARMUP:-5}
 modes=${BENCH_MODES:-push poll poll1s}
-D=$build/bin/slimfarmd
+D=${DAEMON:-$build/bin/slimfarmd}
 S=$build/bin/slimfarm-sim
 for b in "$D" "$S"; do [ -x "$b" ] || { echo "bench_farm1000: $b not built"; exit 1; }; done
 # 1,000 printers hold more sockets than many shells allow a process (1,024): up to the hard limit
