@@ -48,9 +48,16 @@ static const struct drv_option net_options[] = {
     { NULL },
 };
 
-/* HTTP kinds that poll the printer's status. */
+/* HTTP kinds that poll the printer's status: fast while it works, slow while it waits. */
 static const struct drv_option poll_options[] = {
     { "poll_ms", DRV_OPT_INT, CFG(poll_ms), 0, 200, 60000, 1000, NULL, 0 },
+    { "poll_idle_ms", DRV_OPT_INT, CFG(poll_idle_ms), 0, 200, 600000, 5000, NULL, 0 },
+    { NULL },
+};
+
+/* HTTP kinds with a push socket: it replaces the polls unless turned off. */
+static const struct drv_option push_options[] = {
+    { "poll_only", DRV_OPT_BOOL, CFG(poll_only), 0, 0, 0, 0, NULL, 0 },
     { NULL },
 };
 
@@ -103,14 +110,14 @@ static const struct drv_kind kinds[] = {
       .auth = DRV_AUTH_KEY,
       .schemes = "http https",
       .create = drv_octoprint_new,
-      .options = { net_options, poll_options },
+      .options = { net_options, poll_options, push_options },
       .gcode = GCHECK_MARLIN },
     { .name = "moonraker",
       .url = true,
       .auth = DRV_AUTH_KEY_OPTIONAL,
       .schemes = "http https",
       .create = drv_moonraker_new,
-      .options = { net_options, poll_options },
+      .options = { net_options, poll_options, push_options },
       .gcode = GCHECK_MARLIN },
     { .name = "prusalink",
       .url = true,

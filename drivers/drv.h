@@ -84,7 +84,11 @@ struct drv_config {
     const char *api_key;  /* network printers: key or access code ("" or NULL: none) */
     const char *user;     /* network printers: HTTP digest user (PrusaLink), or NULL */
     const char *password; /* its password */
-    int poll_ms;          /* network printers: status poll period (0: 1000) */
+    int poll_ms;          /* network printers: status poll period while a job runs or the
+                             printer works (0: the driver's, 1000) */
+    int poll_idle_ms;     /* ... while it waits: idle, finished, halted (0: 5000; never below
+                             poll_ms) */
+    bool poll_only;       /* OctoPrint, Moonraker: no push socket, status by polls alone */
     int timeout_ms;       /* marlin: margin past the expected execution time of the lines in
                              flight before a probe (0: 1000) */
     int buffer_lines;     /* marlin: the firmware's BUFSIZE, most lines in flight (0: 4;

@@ -29,6 +29,17 @@ simopt_num(const char *prog, const char *opt, const char *v, double lo, double h
     return 0;
 }
 
+const char *
+simopt_stats_head(int index, int count)
+{
+    static char head[48];
+    if (count > 1)
+        snprintf(head, sizeof(head), "stats: printer=%d ", index);
+    else
+        snprintf(head, sizeof(head), "stats: ");
+    return head;
+}
+
 static void
 on_stop(struct loop *l, int signo, void *ud)
 {

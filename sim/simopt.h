@@ -1,7 +1,7 @@
 /*
  * simopt.h - the small pieces every `slimfarm-sim KIND` command line
- * shares: a number option checked against its range, and the process's
- * one loop that SIGINT/SIGTERM stop.
+ * shares: a number option checked against its range, the process's one
+ * loop that SIGINT/SIGTERM stop, and the head of a stats line.
  *
  * Why: each simulator's main (marlin in slimfarm_sim.c, bambu in
  * sim_bambu_main.c) had its own copy of both (review finding D6).  The
@@ -23,6 +23,13 @@
  */
 int simopt_num(const char *prog, const char *opt, const char *v, double lo, double hi, bool whole,
                double *out);
+
+/*
+ * The head of printer index's stats line: "stats: " for a process serving
+ * one printer, "stats: printer=INDEX " for one serving count > 1 (--count),
+ * as the benchmarks read them.  A static buffer: use it before the next call.
+ */
+const char *simopt_stats_head(int index, int count);
 
 /*
  * A new loop on which SIGINT and SIGTERM call loop_stop, with SIGPIPE

@@ -53,21 +53,19 @@ static const char usage_text[] =
 #define SIM_COUNT_MAX 256
 
 static void
-print_stats(const struct sim_marlin *s, int index, bool tagged)
+print_stats(const struct sim_marlin *s, int index, int count)
 {
     struct sim_marlin_stats st;
     sim_marlin_stats(s, &st);
-    char tag[32] = "";
-    if (tagged)
-        snprintf(tag, sizeof(tag), "printer=%d ", index);
     fprintf(stderr,
-            "stats: %sexecuted=%llu resends=%llu starved=%llu starved_s=%.3f rx_bytes=%llu "
+            "%sexecuted=%llu resends=%llu starved=%llu starved_s=%.3f rx_bytes=%llu "
             "tx_bytes=%llu rx_dropped=%llu connects=%llu halted=%d x=%.3f y=%.3f z=%.3f "
             "e=%.5f\n",
-            tag, (unsigned long long)st.executed, (unsigned long long)st.resends,
-            (unsigned long long)st.starved, st.starved_s, (unsigned long long)st.rx_bytes,
-            (unsigned long long)st.tx_bytes, (unsigned long long)st.rx_dropped,
-            (unsigned long long)st.connects, st.halted, st.x, st.y, st.z, st.e);
+            simopt_stats_head(index, count), (unsigned long long)st.executed,
+            (unsigned long long)st.resends, (unsigned long long)st.starved, st.starved_s,
+            (unsigned long long)st.rx_bytes, (unsigned long long)st.tx_bytes,
+            (unsigned long long)st.rx_dropped, (unsigned long long)st.connects, st.halted, st.x,
+            st.y, st.z, st.e);
 }
 
 struct farm_of_sims {
@@ -82,7 +80,7 @@ on_usr1(struct loop *l, int signo, void *ud)
     (void)signo;
     struct farm_of_sims *f = ud;
     for (int i = 0; i < f->count; i++)
-        print_stats(f->sims[i], i, f->count > 1);
+        print_stats(f->sims[i], i, f->count);
     fflush(stderr);
 }
 
@@ -131,7 +129,7 @@ serve(struct loop *l, const struct sim_marlin_config *base, int count)
     fflush(stdout);
     rc = loop_run(l) < 0 ? 1 : 0;
     for (int i = 0; i < count; i++)
-        print_stats(sims[i], i, count > 1);
+        print_stats(sims[i], i, count);
 out:
     for (int i = 0; i < count; i++)
         sim_marlin_free(sims[i]);

@@ -491,8 +491,10 @@ bambu_start_job(struct drv *d, const char *gcode_path, uint64_t first_line,
     }
     job_names(b, gcode_path);
     const char *tmp = getenv("TMPDIR");
-    snprintf(b->pkg_path, sizeof(b->pkg_path), "%s/slimfarm-%d-%s", tmp && *tmp ? tmp : "/tmp",
-             (int)getpid(), b->file);
+    /* The serial in the name: printers given the same file at once each pack their own (with
+       the file's name alone they wrote, sent and removed one package between them). */
+    snprintf(b->pkg_path, sizeof(b->pkg_path), "%s/slimfarm-%d-%s-%s", tmp && *tmp ? tmp : "/tmp",
+             (int)getpid(), b->serial, b->file);
     struct gcode3mf_meta meta = { .title = b->subtask };
     b->pack = gcode3mf_new(b->pkg_path, gcode_path, &meta, err);
     if (!b->pack) {

@@ -465,7 +465,7 @@ drv_moonraker_seen(struct moonraker *m, const struct moonraker_status *stp, bool
         drv_moonraker_ws_close(m, NULL);
         netdrv_schedule(n, MR_STARTUP_MS);
     } else if (!pushed) {
-        netdrv_schedule(n, n->poll_ms);
+        netdrv_schedule(n, netdrv_period(n));
     }
 }
 

@@ -630,11 +630,17 @@ on_printer(struct octo *o, const struct httpc_result *res)
     }
     o->push.dirty = false; /* a poll's answer is as new as anything the socket said before */
     n->fails = 0;
-    netdrv_schedule(n, n->poll_ms);
+    int period = netdrv_period(n);
+    netdrv_schedule(n, period);
+    uint64_t next = n->timer;
     /* An action asked meanwhile goes first (kick): this poll began before it, so it says
        nothing of what the action did; the action's answer polls again. */
     if (n->want == NETDRV_RQ_NONE)
         octo_evaluate(o);
+    /* The judgement moved the printer between working and waiting: the next poll at the new
+       state's rate, unless the judgement set its own. */
+    if (next && n->timer == next && netdrv_period(n) != period)
+        netdrv_schedule(n, netdrv_period(n));
 }
 
 /* OctoPrint took the job and prints it: the polls say how it goes. */

@@ -54,6 +54,7 @@ struct octo {
     char peer_ip[64];       /* the address the last poll reached */
     struct octo_job ws_job; /* the job as the socket told it last */
     struct octo_printer ws_printer;
+    int throttle; /* the throttle the socket was last asked for, 0 before it opened */
 };
 
 /* Request kind in the free slot (its route, the key); false if it could not. */
@@ -63,7 +64,8 @@ void octo_evaluate(struct octo *o);
 /* The temperatures of p into the status. */
 void octo_temps(struct octo *o, const struct octo_printer *p);
 
-/* After a poll: log in or open the socket, if the slot is free and there is none. */
+/* After a poll: log in or open the socket, if the slot is free and there is none; the socket's
+   rate follows the printer's state. */
 void octo_push_kick(struct octo *o);
 /* The reply to POST /api/login. */
 void octo_push_login_reply(struct octo *o, const struct httpc_result *res);

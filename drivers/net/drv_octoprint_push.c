@@ -37,14 +37,26 @@ send_msg(struct octo *o, json_t *msg)
     free(text);
 }
 
+/* Ask for `current` at the rate the printer's state sets, if that is not what was asked. */
+static void
+set_throttle(struct octo *o)
+{
+    int t = netdrv_period(&o->n) / 500;
+    t = t < 1 ? 1 : t > 60 ? 60 : t;
+    if (o->push.ws && t != o->throttle) {
+        o->throttle = t;
+        send_msg(o, json_pack("{s:i}", "throttle", t));
+    }
+}
+
 static void
 on_open(struct wsc *w, void *ud)
 {
     (void)w;
     struct octo *o = ud;
-    int throttle = o->n.poll_ms / 500;
     send_msg(o, json_pack("{s:s}", "auth", o->auth));
-    send_msg(o, json_pack("{s:i}", "throttle", throttle < 1 ? 1 : throttle > 60 ? 60 : throttle));
+    o->throttle = 0;
+    set_throttle(o);
     send_msg(o, json_loads(subscribe_msg, 0, NULL));
 }
 
@@ -116,6 +128,8 @@ on_text(struct wsc *w, const char *text, size_t len, void *ud)
         o->push.updates++;
         o->push.dirty = true;
         octo_push_apply(o);
+        if (o->push.ws) /* (apply may have closed it) */
+            set_throttle(o);
     } else if ((p = json_object_get(msg, "event"))) {
         on_event(o, p);
     } else if (json_object_get(msg, "reauthRequired")) {
@@ -138,6 +152,8 @@ void
 octo_push_kick(struct octo *o)
 {
     struct netdrv *n = &o->n;
+    if (o->throttle)
+        set_throttle(o);
     if (o->no_login || !netpush_may_open(&o->push, n))
         return;
     if (!o->auth[0]) {
@@ -206,5 +222,6 @@ octo_push_apply(struct octo *o)
 void
 octo_push_close(struct octo *o, const char *why)
 {
+    o->throttle = 0;
     netpush_close(&o->push, &o->n, why);
 }

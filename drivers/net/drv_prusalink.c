@@ -376,14 +376,14 @@ on_status(struct prusalink *p, const struct httpc_result *res)
         (ob.remote == NETJOB_R_IDLE || ob.remote == NETJOB_R_BUSY) && n->uploads > 0 &&
         loop_now_ms(n->base.loop) - n->base.status.job_started_ms < 2 * n->poll_ms) {
         /* just uploaded: the printer takes a moment to start the file */
-        netdrv_schedule(n, n->poll_ms);
+        netdrv_schedule(n, netdrv_period(n));
         return;
     }
     /* job.time_remaining (s): the firmware's own estimate (from the file's
        M73 R lines when the slicer wrote them) */
     netdrv_time_left(n, &ob, st.has_job ? (double)st.time_remaining_s : -1);
     netdrv_report(n, &ob, st.has_job ? st.progress : n->base.status.progress);
-    netdrv_schedule(n, n->poll_ms);
+    netdrv_schedule(n, netdrv_period(n));
 }
 
 static void

@@ -74,6 +74,10 @@ netdrv_init(struct netdrv *n, struct loop *l, const struct drv_config *cfg,
     n->base.ud = ud;
     n->base.status.state = DRV_OFFLINE;
     n->poll_ms = cfg->poll_ms > 0 ? cfg->poll_ms : nops->poll_ms;
+    n->poll_idle_ms = cfg->poll_idle_ms > 0 ? cfg->poll_idle_ms : NETDRV_IDLE_MS;
+    if (n->poll_idle_ms < n->poll_ms)
+        n->poll_idle_ms = n->poll_ms;
+    n->poll_only = cfg->poll_only;
     return SF_OK;
 }
 
@@ -136,7 +140,7 @@ on_timer(struct loop *l, void *ud)
     if (!n->timer) /* (poll may have set the next one, and poll_now with it) */
         n->poll_now = false;
     if (!ok) /* an action holds the slot: poll after it */
-        netdrv_schedule(n, n->poll_ms);
+        netdrv_schedule(n, netdrv_period(n));
 }
 
 void
@@ -148,6 +152,14 @@ netdrv_schedule(struct netdrv *n, int64_t ms)
         loop_timer_cancel(n->base.loop, n->timer);
     n->timer = loop_timer_add(n->base.loop, ms, on_timer, n);
     n->poll_now = ms == 0;
+}
+
+int
+netdrv_period(const struct netdrv *n)
+{
+    enum drv_state st = n->base.status.state;
+    bool works = n->job.phase != NETJOB_NONE || st == DRV_PRINTING || st == DRV_PAUSED;
+    return works ? n->poll_ms : n->poll_idle_ms;
 }
 
 /* Stop talking: no request, no timer (the job, if any, is kept). */
@@ -171,7 +183,7 @@ netdrv_preempt_poll(struct netdrv *n)
         httpc_cancel(n->req);
         n->req = NULL;
         n->rq = NETDRV_RQ_NONE;
-        netdrv_schedule(n, n->poll_ms);
+        netdrv_schedule(n, netdrv_period(n));
     }
 }
 
@@ -359,7 +371,7 @@ netdrv_settle(struct netdrv *n, const struct netjob_obs *ob)
         }
     }
     netdrv_end_job(n, DRV_IDLE, DRV_EV_JOB_FAILED, n->upload_err);
-    netdrv_schedule(n, n->poll_ms);
+    netdrv_schedule(n, netdrv_period(n));
     return true;
 }
 

@@ -42,6 +42,9 @@
 #include "httpc.h"
 #include "netjob.h"
 
+/* The poll period while the printer waits, when the config gives none (poll_idle_ms). */
+#define NETDRV_IDLE_MS 5000
+
 /* Kinds of request; a driver numbers its own from NETDRV_RQ_OWN. */
 enum netdrv_rq {
     NETDRV_RQ_NONE = 0,
@@ -118,7 +121,9 @@ struct netdrv {
     bool poll_now;         /* ... asked "at once" (netdrv_schedule 0: after an action), not the
                               period's (a driver with a push socket polls only then) */
     int fails;             /* contacts failed in a row */
-    int poll_ms;           /* the poll period */
+    int poll_ms;           /* the poll period while a job runs or the printer works */
+    int poll_idle_ms;      /* ... while it waits (>= poll_ms): netdrv_period */
+    bool poll_only;        /* no push socket (drv_config.poll_only) */
     struct netjob job;     /* the job on the printer */
     char path[1024];       /* its file on disk (for a second upload) */
     int uploads;           /* upload attempts for it */
@@ -149,6 +154,15 @@ bool netdrv_request(struct netdrv *n, int kind, struct httpc_opts *o);
 
 /* Ask again (the timer) after ms. */
 void netdrv_schedule(struct netdrv *n, int64_t ms);
+
+/*
+ * The period of the next poll, as the printer's state sets it: poll_ms
+ * while a job of ours is on it or it prints, pauses or is busy (progress
+ * and an end must be seen soon); poll_idle_ms while it waits (idle,
+ * finished, halted): nothing there changes without us but a person at
+ * the printer.
+ */
+int netdrv_period(const struct netdrv *n);
 
 /* The reply res to request kind: what it amounts to, and why (the printer's words). */
 enum netdrv_outcome netdrv_judge(struct netdrv *n, int kind, const struct httpc_result *res,

@@ -12,7 +12,8 @@
 bool
 netpush_may_open(const struct netpush *p, const struct netdrv *n)
 {
-    return !p->ws && !p->never && n->open && loop_now_ms(n->base.loop) >= p->retry_ms;
+    return !p->ws && !p->never && !n->poll_only && n->open &&
+           loop_now_ms(n->base.loop) >= p->retry_ms;
 }
 
 bool
@@ -71,7 +72,7 @@ netpush_close(struct netpush *p, struct netdrv *n, const char *why)
     if (was_live && n->open && !n->req)
         netdrv_schedule(n, 0);
     else if (was_live && n->open && !n->timer)
-        netdrv_schedule(n, n->poll_ms);
+        netdrv_schedule(n, netdrv_period(n));
     return was_live;
 }
 

@@ -40,7 +40,8 @@ struct netpush {
     uint64_t updates; /* status messages taken */
 };
 
-/* A socket may be opened now: none is, the URL can take one, n is open, the backoff passed. */
+/* A socket may be opened now: none is, the URL can take one, the config did not turn it off
+   (poll_only), n is open, the backoff passed. */
 bool netpush_may_open(const struct netpush *p, const struct netdrv *n);
 
 /*

@@ -18,6 +18,13 @@
  * --allow-readable-config, which warns instead.  The data dir's "instance"
  * file holds this daemon's random id, which names its session cookie.
  *
+ * File descriptors: each printer holds a few (a network printer its kept-alive
+ * HTTP connection, a push socket or MQTT link, one more while a request
+ * reconnects; a Marlin its port), on top of the API's connections
+ * (http.h), so the soft RLIMIT_NOFILE is raised toward the hard limit for
+ * the config's printers at start and on a reload (raise_nofile; 1,000 printers need
+ * 4,640 where many systems start a process at 1,024).
+ *
  * Thread: main is the loop thread; the pool's workers run prepare work.
  */
 #include <errno.h>
@@ -27,12 +34,14 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/random.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include "../../drivers/drv.h"
 #include "../../drivers/drv_link.h"
 #include "../api/api.h"
+#include "../api/http.h"
 #include "../api/http_loop.h"
 #include "../base/log.h"
 #include "../base/loop.h"
@@ -105,6 +114,28 @@ on_stop(struct loop *l, int signo, void *ud)
     loop_stop(l);
 }
 
+/* File descriptors a printer may hold at once (see the top comment), with room to spare. */
+#define FDS_PER_PRINTER 4
+
+/* Raise the soft RLIMIT_NOFILE to cover n_printers and the API (never lowered); warn when
+   the hard limit stops it short. */
+static void
+raise_nofile(size_t n_printers)
+{
+    rlim_t need = (rlim_t)HTTP_CONNECTIONS_MAX + HTTP_FD_RESERVE + FDS_PER_PRINTER * n_printers;
+    struct rlimit rl;
+    if (getrlimit(RLIMIT_NOFILE, &rl) != 0 || rl.rlim_cur == RLIM_INFINITY || rl.rlim_cur >= need)
+        return;
+    struct rlimit up = rl;
+    up.rlim_cur = rl.rlim_max == RLIM_INFINITY || rl.rlim_max > need ? need : rl.rlim_max;
+    rlim_t now = setrlimit(RLIMIT_NOFILE, &up) == 0 ? up.rlim_cur : rl.rlim_cur;
+    if (now < need)
+        log_warn("slimfarmd",
+                 "%zu printers may need %llu file descriptors; RLIMIT_NOFILE allows %llu "
+                 "(raise the hard limit: ulimit -Hn, systemd's LimitNOFILE=)",
+                 n_printers, (unsigned long long)need, (unsigned long long)now);
+}
+
 static void
 on_reload(struct loop *l, int signo, void *ud)
 {
@@ -120,6 +151,7 @@ on_reload(struct loop *l, int signo, void *ud)
     if (strcmp(next.data_dir, d->cfg.data_dir) != 0 ||
         strcmp(next.listen_host, d->cfg.listen_host) || next.listen_port != d->cfg.listen_port)
         log_warn("slimfarmd", "reload: listen and data_dir changes need a restart");
+    raise_nofile(next.n_printers);
     if (api_reload(d->api, &d->cfg, &next, &err) || farm_reload(d->farm, &next, &err) ||
         notify_reload(d->notify, next.notify, next.n_notify, &err)) {
         log_error("slimfarmd", "reload: %s", err.msg);
@@ -342,6 +374,7 @@ main(int argc, char **argv)
     }
     if (fsck)
         return run_fsck(&d.cfg);
+    raise_nofile(d.cfg.n_printers);
     if (d.cfg.n_keys == 0)
         log_warn("slimfarmd", "%s has no api_keys: every API request will get 401", d.config_path);
     struct store_recovery rec;

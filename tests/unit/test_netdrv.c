@@ -24,6 +24,7 @@
 #include "../../drivers/net/drv_moonraker.h"
 #include "../../drivers/net/drv_prusalink.h"
 #include "../../sim/net/sim_moonraker.h"
+#include "../../sim/net/sim_netbase.h"
 #include "../../sim/net/sim_octoprint.h"
 #include "../../sim/net/sim_prusalink.h"
 #include "../../src/base/buf.h"
@@ -259,6 +260,8 @@ struct fx {
 
 /* The simulators' speed (a case may slow them down for a print that lasts). */
 static double fx_speed = SPEED;
+/* The driver's poll periods (0: its defaults; a case may set them). */
+static int fx_poll_ms, fx_poll_idle_ms;
 
 /* Start a simulator of kind with faults (NULL-terminated) and a driver with key/user. */
 static int
@@ -306,7 +309,9 @@ fx_start(struct fx *f, enum kind kind, const char *sim_key, const char *const *f
     struct drv_config dc = { .name = kind == MOONRAKER ? "voron" : "mk4",
                              .kind = kind == MOONRAKER ? "moonraker" : "prusalink",
                              .url = f->url,
-                             .api_key = drv_key };
+                             .api_key = drv_key,
+                             .poll_ms = fx_poll_ms,
+                             .poll_idle_ms = fx_poll_idle_ms };
     (void)password;
 
     dc.user = user;
@@ -837,6 +842,67 @@ T_CASE(prusalink_digest_auth)
     T_OK(fx_start(&f, PRUSALINK, "s3cret", NULL, NULL, "maker", "guess", &err), &err);
     T_TRUE(fx_wait_state(&f, DRV_OFFLINE));
     T_TRUE(strstr(f.d->status.message, "authentication failed") != NULL);
+    fx_stop(&f);
+}
+
+/* The status requests the PrusaLink simulator of f has answered (sim_netbase.h: the
+   simulator embeds its base first, so its pointer is the base's). */
+static uint64_t
+pl_served(const struct fx *f)
+{
+    return sim_http_served(((const struct sim_netbase *)(const void *)f->pl)->http);
+}
+
+static bool
+pl_polled_6_more(void *ud)
+{
+    struct fx *f = ud;
+    return pl_served(f) >= polls_mark + 6;
+}
+
+/*
+ * PrusaLink is polled at the rate its state sets: every poll_idle_ms while
+ * idle, every poll_ms while printing.  Counted at the simulator.  Idle, a
+ * window of three idle periods holds at most four polls (a loaded machine
+ * only makes fewer); at the old fixed rate (poll_ms whatever the state)
+ * it held forty-five.  Printing, six polls come well within four idle
+ * periods (a rate that stayed slow needs five).
+ */
+T_CASE(prusalink_polls_at_its_states_rate)
+{
+    enum { FAST = 200, SLOW = 3000 };
+    struct fx f;
+    struct sf_err err;
+    fx_poll_ms = FAST;
+    fx_poll_idle_ms = SLOW;
+    int rc = fx_start(&f, PRUSALINK, "k3y", NULL, "k3y", NULL, NULL, &err);
+    fx_poll_ms = fx_poll_idle_ms = 0;
+    T_OK(rc, &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    uint64_t q0 = pl_served(&f);
+    for (int64_t end = wall_ms() + 3 * SLOW; wall_ms() < end;)
+        loop_run_once(f.l, 50);
+    uint64_t idle = pl_served(&f) - q0;
+    T_TRUE(idle <= 4);
+    /* a print of 20 dwells of 3000 s, 30 s at the simulator's speed 2000 */
+    char job[512];
+    snprintf(job, sizeof(job), "%s/dwell.gcode", t_tmpdir());
+    FILE *jf = fopen(job, "w");
+    T_TRUE(jf != NULL);
+    fprintf(jf, "G90\nM83\n");
+    for (int i = 0; i < 20; i++)
+        fprintf(jf, "G4 S3000\n");
+    fclose(jf);
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(fx_wait_state(&f, DRV_PRINTING));
+    polls_mark = pl_served(&f);
+    int64_t t0 = wall_ms();
+    T_TRUE(run_until(f.l, pl_polled_6_more, &f));
+    T_TRUE(wall_ms() - t0 < 4 * SLOW);
+    T_TRUE(f.d->status.state == DRV_PRINTING);
+    T_OK(f.d->ops->cancel(f.d, &err), &err);
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.cancelled, 1);
     fx_stop(&f);
 }
 
