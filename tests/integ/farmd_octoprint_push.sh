@@ -48,6 +48,43 @@ WS CLOSED 30 code=1008
 EOS
 /usr/bin/python3 "$dir/replay.py" "$SLIMFARM_URL" "$KEY2" "$tmp/logout.txt" ||
   fail "a removed key's login session does not end its socket"
+# a socket counts with its key's event streams: past HTTP_STREAMS_PER_KEY (16) its auth is
+# refused (reauthRequired, close 1013: try again later) and the streams are untouched
+/usr/bin/python3 - "$dir" "$SLIMFARM_URL" "$RW" <<'EOP' || fail "a socket past the key's 16 streams is not refused"
+import json, socket, sys, time, urllib.parse, urllib.request
+sys.path.insert(0, sys.argv[1])
+import wsclient
+url, key = sys.argv[2], sys.argv[3]
+u = urllib.parse.urlparse(url)
+streams = []
+for i in range(16):
+    s = socket.create_connection((u.hostname, u.port), 30)
+    s.sendall(("GET /api/events HTTP/1.1\r\nHost: x\r\nX-Api-Key: %s\r\n\r\n" % key).encode())
+    s.settimeout(30)
+    assert s.recv(64).startswith(b"HTTP/1.1 200"), "stream %d refused" % i
+    streams.append(s)
+req = urllib.request.Request(url + "/api/login", data=b'{"passive":true}', method="POST",
+                             headers={"X-Api-Key": key, "Content-Type": "application/json"})
+login = json.load(urllib.request.urlopen(req, timeout=30))
+ws = wsclient.Ws(url, "/sockjs/websocket")
+assert "connected" in json.loads(ws.recv(30))
+ws.send(json.dumps({"auth": "%s:%s" % (login["name"], login["session"])}))
+msg = json.loads(ws.recv(30))
+assert msg == {"reauthRequired": {"reason": "stale"}}, msg
+assert ws.recv(30) is None and ws.close_code == 1013, ws.close_code
+streams.pop().close()  # one stream fewer: a socket fits again
+end = time.monotonic() + 30
+while True:
+    ws = wsclient.Ws(url, "/sockjs/websocket")
+    ws.recv(30)
+    ws.send(json.dumps({"auth": "%s:%s" % (login["name"], login["session"])}))
+    msg = json.loads(ws.recv(30))
+    if "history" in msg:
+        break
+    assert time.monotonic() < end, msg  # the closed stream is counted until the server sees it go
+    time.sleep(0.2)
+print("16 streams, then a socket refused; with 15 it stands")
+EOP
 grep -q "ended 1 OctoPrint login sessions of revoked API keys" "$tmp/log" ||
   fail "the reload did not log the session it ended"
 # a clean stop (ASan: nothing leaks, nothing is used after free)
