@@ -462,7 +462,8 @@ drv_moonraker_seen(struct moonraker *m, const struct moonraker_status *stp, bool
     /* Klippy restarting: /server/info tells when it is back (docs: every 2 s) */
     if (ob.remote == NETJOB_R_STARTING) {
         m->ready = false;
-        drv_moonraker_ws_close(m, NULL);
+        if (!m->push.ws || m->push.live) /* one held waits for notify_klippy_ready */
+            drv_moonraker_ws_close(m, NULL);
         netdrv_schedule(n, MR_STARTUP_MS);
     } else if (!pushed) {
         netdrv_schedule(n, netdrv_period(n));

@@ -10,9 +10,15 @@
  * objects the poll asks.  Its reply is the full status; each
  * notify_status_update after it is merged in, field by field, and the
  * whole read as a poll's answer would be (drv_moonraker_parse_status),
- * so one parser checks both.  An error reply, notify_klippy_disconnected
- * (the subscription dies with Klippy) or a status that does not parse
- * closes the socket and polling takes over.
+ * so one parser checks both.  notify_klippy_disconnected (Klippy went
+ * away, and Moonraker dropped every subscription with it: klippy_
+ * connection.py's _on_connection_closed) holds the socket open but polling
+ * takes over, asking /server/info until Klippy is back; notify_klippy_ready
+ * subscribes again on the same socket, and its reply makes the socket
+ * stand again.  A subscribe refused with 503
+ * (Klippy not connected yet) waits for notify_klippy_ready the same way.
+ * Any other error reply or a status that does not parse closes the socket
+ * and polling takes over.
  *
  * Thread: the loop thread.
  */
@@ -45,6 +51,24 @@ send_rpc(struct moonraker *m, const char *method, json_t *params, int id)
 }
 
 static void
+subscribe(struct moonraker *m)
+{
+    send_rpc(m, "printer.objects.subscribe",
+             json_pack("{s:o}", "objects", json_loads(subscribe_objects, 0, NULL)), ID_SUBSCRIBE);
+}
+
+/* Klippy is gone (or not up yet): the socket waits for notify_klippy_ready while the polls
+   ask /server/info when it is back (as after a poll that saw Klippy starting). */
+static void
+hold(struct moonraker *m, const char *why)
+{
+    m->ready = false;
+    netpush_hold(&m->push, &m->n, why);
+    json_decref(m->ws_status);
+    m->ws_status = NULL;
+}
+
+static void
 on_open(struct wsc *w, void *ud)
 {
     (void)w;
@@ -59,8 +83,7 @@ on_open(struct wsc *w, void *ud)
         json_object_set_new(id, "api_key", json_string(key));
     }
     send_rpc(m, "server.connection.identify", id, ID_IDENTIFY);
-    send_rpc(m, "printer.objects.subscribe",
-             json_pack("{s:o}", "objects", json_loads(subscribe_objects, 0, NULL)), ID_SUBSCRIBE);
+    subscribe(m);
 }
 
 /* Merge a notify_status_update's changed fields into the status. */
@@ -84,6 +107,10 @@ static void
 on_reply(struct moonraker *m, json_t *msg, json_int_t id)
 {
     json_t *e = json_object_get(msg, "error");
+    if (e && id == ID_SUBSCRIBE && json_integer_value(json_object_get(e, "code")) == 503) {
+        hold(m, "push socket: Klippy is not connected to Moonraker yet");
+        return;
+    }
     if (e) {
         char why[200];
         snprintf(why, sizeof(why), "push socket: %s refused: %s",
@@ -126,7 +153,9 @@ on_text(struct wsc *w, const char *text, size_t len, void *ud)
             drv_moonraker_ws_apply(m);
         }
     } else if (method && strcmp(method, "notify_klippy_disconnected") == 0) {
-        drv_moonraker_ws_close(m, "push socket: Klippy disconnected from Moonraker");
+        hold(m, "push socket: Klippy disconnected from Moonraker, its subscription with it");
+    } else if (method && strcmp(method, "notify_klippy_ready") == 0 && !m->push.live) {
+        subscribe(m); /* the reply makes the socket stand again */
     }
     json_decref(msg);
 }

@@ -53,6 +53,27 @@ netpush_standing(const struct netpush *p, const struct netdrv *n)
     return p->live && !n->poll_now;
 }
 
+/* The polls take over at once from a socket that stood. */
+static void
+polls_again(struct netdrv *n)
+{
+    if (n->open && !n->req)
+        netdrv_schedule(n, 0);
+    else if (n->open && !n->timer)
+        netdrv_schedule(n, netdrv_period(n));
+}
+
+void
+netpush_hold(struct netpush *p, struct netdrv *n, const char *why)
+{
+    bool was_live = p->live;
+    p->live = p->dirty = false;
+    log_printer(LOG_INFO, n->base.name, "%s; polling%s while the socket waits", why,
+                was_live ? " again" : "");
+    if (was_live)
+        polls_again(n);
+}
+
 bool
 netpush_close(struct netpush *p, struct netdrv *n, const char *why)
 {
@@ -69,10 +90,8 @@ netpush_close(struct netpush *p, struct netdrv *n, const char *why)
                 was_live ? " again" : "", p->backoff_ms);
     p->backoff_ms =
         p->backoff_ms * 2 > NETPUSH_BACKOFF_MAX_MS ? NETPUSH_BACKOFF_MAX_MS : p->backoff_ms * 2;
-    if (was_live && n->open && !n->req)
-        netdrv_schedule(n, 0);
-    else if (was_live && n->open && !n->timer)
-        netdrv_schedule(n, netdrv_period(n));
+    if (was_live)
+        polls_again(n);
     return was_live;
 }
 

@@ -65,6 +65,13 @@ bool netpush_standing(const struct netpush *p, const struct netdrv *n);
  */
 bool netpush_close(struct netpush *p, struct netdrv *n, const char *why);
 
+/*
+ * The socket stays open but its messages stand for the polls no longer
+ * (the printer's side behind it went away and will say when it is back:
+ * Moonraker's notify_klippy_disconnected); why is logged and, if it stood,
+ * polling takes over at once.  netpush_live makes it stand again.
+ */
+void netpush_hold(struct netpush *p, struct netdrv *n, const char *why);
 /* What the socket said is new and may be judged now (the slot free, no action to confirm
    first); true clears dirty: the caller judges it. */
 bool netpush_due(struct netpush *p, const struct netdrv *n);

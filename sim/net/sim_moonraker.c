@@ -19,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 #include <time.h>
 
@@ -652,32 +653,62 @@ on_cancel(struct sim_http_req *r, void *ud)
     reply_ok(r);
 }
 
+/* The text after a RESPOND's MSG= or an M118 (quotes dropped), or NULL: the line says nothing. */
+static const char *
+echo_text(const char *line, char *out, size_t cap)
+{
+    const char *m = NULL;
+    if (strncasecmp(line, "M118", 4) == 0 && (line[4] == ' ' || !line[4]))
+        m = line[4] ? line + 5 : "";
+    else if (strncasecmp(line, "RESPOND", 7) == 0 && (line[7] == ' ' || !line[7]))
+        m = strcasestr(line, "MSG=") ? strcasestr(line, "MSG=") + 4 : "";
+    if (!m)
+        return NULL;
+    size_t n = strlen(m);
+    if (n >= 2 && m[0] == '"' && m[n - 1] == '"')
+        m++, n -= 2;
+    snprintf(out, cap, "echo: %.*s", (int)n, m);
+    return out;
+}
+
+int
+sim_moonraker_script(struct sim_moonraker *s, const char *script, struct sf_err *err)
+{
+    /* several commands separated by newlines, each queued in turn */
+    char line[256], said[300];
+    const char *p = script;
+    int rc = SF_OK;
+    while (*p && rc == SF_OK) {
+        size_t n = strcspn(p, "\n");
+        if (n > 0 && n < sizeof(line)) {
+            memcpy(line, p, n);
+            line[n] = '\0';
+            rc = sim_netprinter_command(s->b.np, line, err);
+            if (rc == SF_OK && echo_text(line, said, sizeof(said)))
+                sim_moonraker_ws_gcode_response(s, said);
+        } else if (n >= sizeof(line)) {
+            rc = sf_err_set(err, SF_EINVAL, "command too long");
+        }
+        p += n + (p[n] == '\n');
+    }
+    if (rc) {
+        snprintf(said, sizeof(said), "!! %s", err->msg);
+        sim_moonraker_ws_gcode_response(s, said);
+    }
+    return rc;
+}
+
 static void
 on_script(struct sim_http_req *r, void *ud)
 {
     struct sim_moonraker *s = ud;
     json_t *hold = NULL;
     const char *script = arg(r, "script", &hold);
+    struct sf_err err;
     if (!script) {
         sim_moonraker_error(r, 400, "No data for argument: script");
     } else if (need_ready(s, r)) {
-        /* several commands separated by newlines, each queued in turn */
-        char line[256];
-        const char *p = script;
-        int rc = SF_OK;
-        struct sf_err err;
-        while (*p && rc == SF_OK) {
-            size_t n = strcspn(p, "\n");
-            if (n > 0 && n < sizeof(line)) {
-                memcpy(line, p, n);
-                line[n] = '\0';
-                rc = sim_netprinter_command(s->b.np, line, &err);
-            } else if (n >= sizeof(line)) {
-                rc = sf_err_set(&err, SF_EINVAL, "command too long");
-            }
-            p += n + (p[n] == '\n');
-        }
-        if (rc)
+        if (sim_moonraker_script(s, script, &err))
             sim_moonraker_error(r, 400, err.msg);
         else
             reply_ok(r);
@@ -701,10 +732,9 @@ on_estop(struct sim_http_req *r, void *ud)
     reply_ok(r);
 }
 
-static void
-on_firmware_restart(struct sim_http_req *r, void *ud)
+void
+sim_moonraker_firmware_restart(struct sim_moonraker *s)
 {
-    struct sim_moonraker *s = ud;
     struct sim_np_status st;
     sim_netprinter_status(s->b.np, &st);
     hist_settle(s, &st, "klippy_disconnect"); /* a print cut short by the restart */
@@ -712,7 +742,20 @@ on_firmware_restart(struct sim_http_req *r, void *ud)
     s->klippy = K_STARTUP;
     snprintf(s->klippy_msg, sizeof(s->klippy_msg), "Printer is not ready");
     s->ready_at_ms = loop_now_ms(s->b.l) + RESTART_MS;
+    sim_moonraker_ws_klippy_lost(s);
+}
+
+static void
+on_firmware_restart(struct sim_http_req *r, void *ud)
+{
+    sim_moonraker_firmware_restart(ud);
     reply_ok(r);
+}
+
+int
+sim_moonraker_ws_opened(const struct sim_moonraker *s)
+{
+    return s->ws_ids;
 }
 
 static const struct sim_http_route routes[] = {

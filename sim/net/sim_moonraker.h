@@ -70,6 +70,10 @@ void sim_moonraker_status(const struct sim_moonraker *s, struct sim_np_status *o
 /* Status queries answered over HTTP, and websockets holding a subscription (tests). */
 uint64_t sim_moonraker_queries(const struct sim_moonraker *s);
 int sim_moonraker_subscribed(struct sim_moonraker *s);
+/* Websocket connections opened so far (tests). */
+int sim_moonraker_ws_opened(const struct sim_moonraker *s);
+/* A firmware restart, as POST /printer/firmware_restart does it (tests). */
+void sim_moonraker_firmware_restart(struct sim_moonraker *s);
 /* Close every websocket (a network blip; tests). */
 void sim_moonraker_drop_sockets(struct sim_moonraker *s);
 /* Stop, flush the log, free.  NULL is fine. */

@@ -93,6 +93,15 @@ json_t *sim_moonraker_objects_list(void);
 void sim_moonraker_on_websocket(struct sim_http_req *r, void *ud);
 struct sim_ws_hub *sim_moonraker_ws_hub(struct sim_moonraker *s);
 void sim_moonraker_ws_watch(struct sim_moonraker *s, const struct sim_np_status *st);
+/* Klippy's connection is gone (a restart): every socket's subscription is dropped, as
+   klippy_connection.py's _on_connection_closed does, and notify_klippy_disconnected sent. */
+void sim_moonraker_ws_klippy_lost(struct sim_moonraker *s);
+/* notify_gcode_response with one line of G-code output, to every authorized socket. */
+void sim_moonraker_ws_gcode_response(struct sim_moonraker *s, const char *line);
+/* Run a G-code script (lines split by newlines; RESPOND and M118 answer "echo: ...", an
+   error "!! ..." on every socket, as Klipper's gcode.py writes them): SF_OK, or the first
+   failure (queue full, printer in error) with err set; what came before it ran. */
+int sim_moonraker_script(struct sim_moonraker *s, const char *script, struct sf_err *err);
 
 /* Handlers of sim_moonraker_srv.c (ud: the simulator). */
 void sim_moonraker_on_subscribe(struct sim_http_req *r, void *ud);

@@ -11,7 +11,12 @@
  * gets notify_status_update, params [changed fields only, eventtime], as
  * Klipper batches them).  A new subscription replaces the last.  Klippy's
  * state changes go to every connection: notify_klippy_ready,
- * notify_klippy_shutdown, notify_klippy_disconnected (a restart).
+ * notify_klippy_shutdown, notify_klippy_disconnected (a restart, which
+ * drops every subscription as klippy_connection.py's _on_connection_closed
+ * does: a client subscribes again after notify_klippy_ready).
+ * printer.gcode.script runs G-code as POST /printer/gcode/script does; its
+ * output (RESPOND, M118, errors) goes to every socket as
+ * notify_gcode_response, params [line].
  *
  * Errors are JSON-RPC error objects with Moonraker's codes: -32700 Parse
  * error, -32600 Invalid Request (no "jsonrpc": "2.0"), -32601 Method not
@@ -170,6 +175,21 @@ m_objects_list(struct mr_conn *c, json_t *params, struct rpc_err *e)
     return sim_moonraker_objects_list();
 }
 
+/* printer.gcode.script: as POST /printer/gcode/script ("ok", or 400 with the error). */
+static json_t *
+m_script(struct mr_conn *c, json_t *params, struct rpc_err *e)
+{
+    const char *script = str_arg(params, "script", true, e);
+    struct sf_err err;
+    if (!script)
+        return NULL;
+    if (c->s->klippy == K_SHUTDOWN)
+        return rpc_fail(e, 400, "Printer is shutdown");
+    if (sim_moonraker_script(c->s, script, &err))
+        return rpc_fail(e, 400, err.msg);
+    return json_string("ok");
+}
+
 static json_t *
 m_websocket_id(struct mr_conn *c, json_t *params, struct rpc_err *e)
 {
@@ -190,6 +210,7 @@ static const struct {
     { "printer.objects.list", false, true, m_objects_list },
     { "printer.objects.query", false, true, m_query },
     { "printer.objects.subscribe", false, true, m_subscribe },
+    { "printer.gcode.script", false, true, m_script },
 };
 
 /* The reply to one request object (NULL: none, a notification or a response). */
@@ -390,6 +411,45 @@ push_one(struct sim_ws *ws, void *conn, void *arg)
         sim_ws_send_json(ws, json_pack("{s:s,s:s,s:[o,f]}", "jsonrpc", "2.0", "method",
                                        "notify_status_update", "params", diff,
                                        sim_moonraker_eventtime()));
+}
+
+static void
+lose_sub(struct sim_ws *ws, void *conn, void *arg)
+{
+    (void)arg;
+    struct mr_conn *c = conn;
+    if (!c)
+        return;
+    json_decref(c->sub);
+    json_decref(c->last);
+    c->sub = c->last = NULL;
+    sim_ws_send_json(
+        ws, json_pack("{s:s,s:s}", "jsonrpc", "2.0", "method", "notify_klippy_disconnected"));
+}
+
+void
+sim_moonraker_ws_klippy_lost(struct sim_moonraker *s)
+{
+    if (!s->b.hub)
+        return;
+    sim_ws_hub_each(s->b.hub, lose_sub, NULL);
+    s->ws_klippy = K_STARTUP; /* told: the watch sends notify_klippy_ready when it is */
+}
+
+static void
+gcode_response(struct sim_ws *ws, void *conn, void *arg)
+{
+    struct mr_conn *c = conn;
+    if (c && c->authed)
+        sim_ws_send_json(ws, json_pack("{s:s,s:s,s:[s]}", "jsonrpc", "2.0", "method",
+                                       "notify_gcode_response", "params", (const char *)arg));
+}
+
+void
+sim_moonraker_ws_gcode_response(struct sim_moonraker *s, const char *line)
+{
+    if (s->b.hub)
+        sim_ws_hub_each(s->b.hub, gcode_response, (void *)line);
 }
 
 void

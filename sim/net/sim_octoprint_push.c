@@ -31,52 +31,30 @@
 #include <time.h>
 
 #include "../../src/base/mem.h"
+#include "../../src/base/octopush.h"
+#include "../../src/base/sockjs.h"
 #include "../../src/base/ws.h"
 #include "sim_octoprint_int.h"
 #include "sim_ws.h"
-
-#define CURRENT_MS          500   /* OctoPrint's base rate limit of `current` */
-#define SOCKJS_HEARTBEAT_MS 25000 /* sockjs-tornado's heartbeat_delay */
 
 enum { RAW = 0, FRAMED = 1 }; /* the transports (sim_ws_accept's tag) */
 
 struct op_conn {
     struct octo_sim *o;
-    bool framed;     /* SockJS framing */
-    bool authed;     /* a valid auth came (or no key is set) */
-    bool state_sub;  /* current and history wanted */
-    json_t *events;  /* event names wanted; NULL: all; an empty array: none */
-    int throttle;    /* current every CURRENT_MS times this */
-    int64_t next_ms; /* loop time of the next current */
-    int64_t beat_ms; /* ... and of the next heartbeat */
+    bool framed;             /* SockJS framing */
+    bool authed;             /* a valid auth came (or no key is set) */
+    struct octopush_sub sub; /* what it asked for */
+    int64_t next_ms;         /* loop time of the next current */
+    int64_t beat_ms;         /* ... and of the next heartbeat */
 };
 
 /* Send one message {type: payload} (payload stolen), framed as the transport wants. */
 static void
 emit(struct sim_ws *ws, struct op_conn *c, const char *type, json_t *payload)
 {
-    json_t *msg = json_object();
-    json_object_set_new(msg, type, payload ? payload : json_null());
-    char *text = json_dumps(msg, JSON_COMPACT);
-    json_decref(msg);
-    if (!text)
-        return;
-    if (!c->framed) {
+    char *text = octopush_text(type, payload, c->framed);
+    if (text)
         sim_ws_send(ws, text, strlen(text));
-    } else {
-        json_t *arr = json_pack("[s]", text);
-        char *inner = arr ? json_dumps(arr, JSON_COMPACT) : NULL;
-        json_decref(arr);
-        size_t n = inner ? strlen(inner) : 0;
-        char *frame = inner ? mem_alloc(n + 2) : NULL;
-        if (frame) {
-            frame[0] = 'a';
-            memcpy(frame + 1, inner, n + 1);
-            sim_ws_send(ws, frame, n + 1);
-        }
-        free(frame);
-        free(inner);
-    }
     free(text);
 }
 
@@ -123,12 +101,12 @@ state_payload(struct octo_sim *o, const struct sim_np_status *st)
 static void
 send_history(struct sim_ws *ws, struct op_conn *c)
 {
-    if (!c->state_sub)
+    if (!c->sub.state)
         return;
     struct sim_np_status st;
     sim_netprinter_status(c->o->np, &st);
     emit(ws, c, "history", state_payload(c->o, &st));
-    c->next_ms = loop_now_ms(c->o->l) + CURRENT_MS * c->throttle;
+    c->next_ms = loop_now_ms(c->o->l) + OCTOPUSH_CURRENT_MS * c->sub.throttle;
 }
 
 static void *
@@ -140,11 +118,10 @@ on_open(struct sim_ws *ws, int tag, void *ud)
         return NULL;
     c->o = o;
     c->framed = tag == FRAMED;
-    c->state_sub = true;
-    c->throttle = 1;
+    octopush_sub_init(&c->sub);
     c->beat_ms = loop_now_ms(o->l) + SOCKJS_HEARTBEAT_MS;
     if (c->framed)
-        sim_ws_send(ws, "o", 1);
+        sim_ws_send(ws, SOCKJS_OPEN, 1);
     emit(ws, c, "connected",
          json_pack("{s:s,s:s,s:s,s:s,s:s,s:s,s:b,s:n,s:b,s:[{s:s,s:s},{s:s,s:s}]}", "version",
                    "1.10.0", "display_version", "1.10.0", "branch", "", "python_version", "3.11.2",
@@ -159,10 +136,9 @@ on_open(struct sim_ws *ws, int tag, void *ud)
 }
 
 static void
-on_auth(struct sim_ws *ws, struct op_conn *c, json_t *v)
+on_auth(struct sim_ws *ws, struct op_conn *c, const char *a)
 {
-    const char *a = json_string_value(v);
-    const char *colon = a ? strchr(a, ':') : NULL;
+    const char *colon = strchr(a, ':');
     if (!colon || strchr(colon + 1, ':'))
         return; /* "Got invalid auth message": ignored */
     bool ok = (size_t)(colon - a) == strlen(SIM_OCTO_USER) &&
@@ -179,45 +155,30 @@ on_auth(struct sim_ws *ws, struct op_conn *c, json_t *v)
     }
 }
 
-/* {"subscribe": {...}}: what is not given is off; a bad value voids the message; state turned
-   on sends history (OctoPrint's on_message). */
-static void
-on_subscribe(struct sim_ws *ws, struct op_conn *c, json_t *sub)
-{
-    json_t *state = json_object_get(sub, "state");
-    json_t *events = json_object_get(sub, "events");
-    if (!json_is_object(sub) || (state && !json_is_boolean(state) && !json_is_object(state)) ||
-        (events && !json_is_boolean(events) && !json_is_array(events)))
-        return; /* "Got invalid subscription message": ignored */
-    bool was = c->state_sub;
-    c->state_sub = json_is_true(state) || json_is_object(state);
-    json_decref(c->events);
-    c->events = json_is_array(events)  ? json_deep_copy(events)
-                : json_is_true(events) ? NULL
-                                       : json_array();
-    if (c->state_sub && !was && c->authed)
-        send_history(ws, c);
-}
-
-/* One message of the client's (OctoPrint's on_message). */
+/* One message of the client's (OctoPrint's on_message); a subscription
+   that turns state on sends history. */
 static void
 on_message(struct sim_ws *ws, struct op_conn *c, const char *text, size_t len)
 {
-    json_t *m = json_loadb(text, len, 0, NULL);
-    if (!json_is_object(m)) { /* "Invalid JSON received from client": ignored */
-        json_decref(m);
-        return;
-    }
-    json_t *v;
-    if ((v = json_object_get(m, "auth"))) {
-        on_auth(ws, c, v);
-    } else if ((v = json_object_get(m, "throttle"))) {
-        if (json_is_integer(v) && json_integer_value(v) >= 1 && json_integer_value(v) <= 1000)
-            c->throttle = (int)json_integer_value(v);
-    } else if ((v = json_object_get(m, "subscribe"))) {
-        on_subscribe(ws, c, v);
-    }
-    json_decref(m);
+    char auth[128];
+    bool history;
+    enum octopush_msg m = octopush_message(&c->sub, text, len, auth, sizeof(auth), &history);
+    if (m == OCTOPUSH_AUTH)
+        on_auth(ws, c, auth);
+    else if (history && c->authed)
+        send_history(ws, c);
+}
+
+struct framed {
+    struct sim_ws *ws;
+    struct op_conn *c;
+};
+
+static void
+framed_message(void *arg, const char *text, size_t len)
+{
+    struct framed *f = arg;
+    on_message(f->ws, f->c, text, len);
 }
 
 static void
@@ -232,24 +193,9 @@ on_text(struct sim_ws *ws, void *conn, const char *text, size_t len, void *ud)
         return;
     }
     /* SockJS: a JSON array of message strings, or one string */
-    json_t *v = json_loadb(text, len, 0, NULL);
-    if (!v || !(json_is_array(v) || json_is_string(v))) {
-        json_decref(v);
+    struct framed f = { ws, c };
+    if (sockjs_unframe(text, len, framed_message, &f) < 0)
         sim_ws_close(ws, WS_CLOSE_PROTOCOL, "Broken framing.");
-        return;
-    }
-    if (json_is_string(v)) {
-        on_message(ws, c, json_string_value(v), json_string_length(v));
-    } else {
-        size_t i;
-        json_t *s;
-        json_array_foreach(v, i, s)
-        {
-            if (json_is_string(s))
-                on_message(ws, c, json_string_value(s), json_string_length(s));
-        }
-    }
-    json_decref(v);
 }
 
 static void
@@ -259,7 +205,7 @@ on_gone(struct sim_ws *ws, void *conn, void *ud)
     struct op_conn *c = conn;
     if (!c)
         return;
-    json_decref(c->events);
+    octopush_sub_release(&c->sub);
     free(c);
 }
 
@@ -310,21 +256,6 @@ struct push {
     int64_t now;
 };
 
-static bool
-wants_event(const struct op_conn *c, const char *name)
-{
-    if (!c->events)
-        return true;
-    size_t i;
-    json_t *e;
-    json_array_foreach(c->events, i, e)
-    {
-        if (json_is_string(e) && strcmp(json_string_value(e), name) == 0)
-            return true;
-    }
-    return false;
-}
-
 static void
 push_one(struct sim_ws *ws, void *conn, void *arg)
 {
@@ -333,16 +264,16 @@ push_one(struct sim_ws *ws, void *conn, void *arg)
     if (!c)
         return;
     if (c->framed && p->now >= c->beat_ms) {
-        sim_ws_send(ws, "h", 1);
+        sim_ws_send(ws, SOCKJS_HEARTBEAT, 1);
         c->beat_ms = p->now + SOCKJS_HEARTBEAT_MS;
     }
     if (!c->authed)
         return;
-    if (p->event && wants_event(c, p->event))
+    if (p->event && octopush_wants(&c->sub, p->event))
         emit(ws, c, "event", json_pack("{s:s,s:O}", "type", p->event, "payload", p->payload));
-    if (p->current && c->state_sub && p->now >= c->next_ms) {
+    if (p->current && c->sub.state && p->now >= c->next_ms) {
         emit(ws, c, "current", state_payload(c->o, p->st));
-        c->next_ms = p->now + CURRENT_MS * c->throttle;
+        c->next_ms = p->now + OCTOPUSH_CURRENT_MS * c->sub.throttle;
     }
 }
 

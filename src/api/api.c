@@ -34,6 +34,7 @@
 #include "api_compat.h"
 #include "api_csv.h"
 #include "api_json.h"
+#include "api_octopush.h"
 #include "api_page.h"
 #include "api_read.h"
 #include "api_stats.h"
@@ -50,6 +51,7 @@ struct api {
     struct http *http;             /* the server */
     struct web *web;               /* the dashboard's files, sessions and pictures */
     struct api_read *reads;        /* store reads off the loop (api_read.h) */
+    struct api_octopush *push;     /* OctoPrint's push sockets (api_octopush.h) */
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
     struct temps *temps;           /* each printer's last hour of temperatures (temps.h) */
     struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
@@ -777,7 +779,7 @@ static bool
 is_public(void *ud, const char *path)
 {
     (void)ud;
-    return web_needs_no_key(path);
+    return web_needs_no_key(path) || api_octopush_public(path);
 }
 
 static const char *
@@ -831,7 +833,11 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                              .session_max_ms = cfg->session_max_ms };
     a->reads = api_read_new(cfg->loop, cfg->store, err);
     a->slicers.reads = a->reads;
-    a->web = a->reads ? web_new(&wc, err) : NULL;
+    a->push = a->reads ? api_octopush_new(cfg->loop, cfg->store, cfg->farm, cfg->session_idle_ms,
+                                          cfg->session_max_ms, err)
+                       : NULL;
+    a->slicers.push = a->push;
+    a->web = a->push ? web_new(&wc, err) : NULL;
     hc.session_cookie = a->web ? web_cookie_name(a->web) : NULL;
     size_t n_compat, n_web;
     const struct route *compat = api_compat_routes(&n_compat), *web = web_routes(&n_web);
@@ -845,6 +851,7 @@ api_new(const struct api_config *cfg, struct sf_err *err)
             sf_err_set(err, SF_ENOMEM, "api: out of memory");
         temps_free(a->temps);
         web_free(a->web);
+        api_octopush_free(a->push);
         api_read_free(a->reads);
         free(a);
         return NULL;
@@ -857,7 +864,8 @@ api_free(struct api *a)
 {
     if (!a)
         return;
-    http_free(a->http); /* ends the picture streams before the renders they wait for */
+    api_octopush_free(a->push); /* its sockets close before the server they came through */
+    http_free(a->http);         /* ends the picture streams before the renders they wait for */
     web_free(a->web);
     api_read_free(a->reads); /* reads still queued: their requests went with the server */
     temps_free(a->temps);
@@ -875,6 +883,9 @@ api_reload(struct api *a, const struct farmcfg *old, const struct farmcfg *next,
     size_t ended = web_keys_changed(a->web, next->keys, next->n_keys);
     if (ended)
         log_info("api", "reload: ended %zu dashboard sessions of revoked API keys", ended);
+    ended = api_octopush_keys_changed(a->push, next->keys, next->n_keys);
+    if (ended)
+        log_info("api", "reload: ended %zu OctoPrint login sessions of revoked API keys", ended);
     if (next->upload_max_bytes != a->cfg.upload_max) {
         log_info("api", "reload: upload_max %zu -> %zu bytes", a->cfg.upload_max,
                  next->upload_max_bytes);

@@ -29,6 +29,7 @@
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "api_octoprint.h"
+#include "api_octopush.h"
 #include "api_read.h"
 #include "metrics.h"
 
@@ -487,6 +488,8 @@ static const struct route rows[] = {
     { ROUTE_GET, "/server/info", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
     { ROUTE_GET, "/server/files/roots", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
     { ROUTE_GET, "/printer/info", NULL, HTTP_BODY_NONE, ROUTE_READ, info, NULL },
+    { ROUTE_GET, "/sockjs/info", NULL, HTTP_BODY_NONE, ROUTE_PUBLIC, api_octopush_route, NULL },
+    { ROUTE_GET, "/sockjs/{*}", NULL, HTTP_BODY_NONE, ROUTE_PUBLIC, api_octopush_route, NULL },
 };
 
 const struct route *

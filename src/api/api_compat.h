@@ -12,6 +12,8 @@
  *   GET  /api/connection         the farm as one operational printer
  *   /api/login, /api/currentuser, GET /api/files[/local], /api/printer,
  *   /api/job: the farm as one OctoPrint printer (api_octoprint.h)
+ *   GET  /sockjs/info, /sockjs/websocket, /sockjs/SERVER/SESSION/websocket:
+ *                                its push socket (api_octopush.h)
  *   POST /api/files/local        multipart file (+ path, select, print, userdata):
  *                                201, Location: .../api/files/local/job-ID/NAME
  *   POST /api/files/local/job-ID/NAME   {"command": "select"[, "print": true]} -> 204
@@ -49,11 +51,13 @@
 
 /* What the compatible routes use of the API (api.c owns it). */
 struct api_read;
+struct api_octopush;
 
 struct api_compat_env {
-    struct store *store;    /* jobs */
-    struct farm *farm;      /* printers; NULL: none (G-code is then refused) */
-    struct api_read *reads; /* where /metrics reads the store (api_read.h) */
+    struct store *store;       /* jobs */
+    struct farm *farm;         /* printers; NULL: none (G-code is then refused) */
+    struct api_read *reads;    /* where /metrics reads the store (api_read.h) */
+    struct api_octopush *push; /* the push sockets and login sessions (api_octopush.h) */
     /* The temporary file of an upload (http.h sink context), to check it. */
     const char *(*upload_path)(void *upload);
     /* Store the upload at its content address (once). */

@@ -22,6 +22,7 @@
 #include "../base/mem.h"
 #include "../farm/jobctl.h"
 #include "api_compat.h"
+#include "api_octopush.h"
 #include "api_read.h"
 
 /* ---- the user ---- */
@@ -55,7 +56,8 @@ void
 api_octoprint_login(void *ctx, const struct route_args *args, const struct http_req *req,
                     struct http_resp *resp)
 {
-    (void)ctx, (void)args;
+    (void)args;
+    const struct api_compat_env *env = ctx;
     json_t *b = req->body_len ? json_loadb(req->body, req->body_len, 0, NULL) : NULL;
     if (req->body_len && !json_is_object(b)) {
         json_decref(b);
@@ -75,16 +77,21 @@ api_octoprint_login(void *ctx, const struct route_args *args, const struct http_
         http_error(resp, 400, "field 'passive' is required (user and pass are not taken)");
         return;
     }
-    char label[32];
+    char label[32], session[SESSION_TOKEN_LEN + 1];
     route_key_label(req, label, sizeof(label));
-    const char *hash = strchr(label, ' ') ? strchr(label, ' ') + 1 : label;
+    struct sf_err err;
+    int rc = api_octopush_login(env->push, req->key, session, &err);
+    if (rc) {
+        http_fail(resp, rc, err.msg);
+        return;
+    }
     bool rw = !req->read_only;
     json_t *roles = rw ? json_pack("[ss]", "user", "admin") : json_pack("[s]", "user");
     resp->json = json_pack("{ss sb so so ss sb sb so s{s[s] s[s]} s{} sb ss}", "name", label,
                            "active", 1, "permissions", permissions(rw), "groups", groups(rw),
-                           "session", hash, "admin", rw, "user", 1, "roles", roles, "needs", "role",
-                           rw ? "admin" : "user", "group", rw ? "admins" : "readonly", "settings",
-                           "_is_external_client", 0, "_login_mechanism", "apikey");
+                           "session", session, "admin", rw, "user", 1, "roles", roles, "needs",
+                           "role", rw ? "admin" : "user", "group", rw ? "admins" : "readonly",
+                           "settings", "_is_external_client", 0, "_login_mechanism", "apikey");
 }
 
 /* ---- the files: the newest jobs ---- */
@@ -162,23 +169,18 @@ api_octoprint_files(void *ctx, const struct route_args *args, const struct http_
 
 /* ---- the farm as one printer ---- */
 
-struct summary {
-    const char *text; /* OctoPrint's state text */
-    size_t n, printing, paused, offline, error;
-    double progress; /* mean of the printing and paused printers', 0..1 */
-    int64_t left_s;  /* the longest known time left; -1 if none */
-    int64_t job;     /* the one job printing or paused, 0 if none or several */
-};
-
-static void
-summarize(struct farm *f, struct summary *s)
+bool
+api_octoprint_summarize(struct farm *f, const char *printer, struct api_octoprint_summary *s)
 {
-    *s = (struct summary){ .left_s = -1 };
-    s->n = f ? farm_printer_count(f) : 0;
+    *s = (struct api_octoprint_summary){ .left_s = -1 };
+    size_t n = f ? farm_printer_count(f) : 0;
     double sum = 0;
-    for (size_t i = 0; i < s->n; i++) {
+    for (size_t i = 0; i < n; i++) {
         struct printer_info pi;
         farm_printer_info(f, i, &pi);
+        if (printer && printer[0] && strcmp(pi.cfg->name, printer) != 0)
+            continue;
+        s->n++;
         s->offline += pi.state == PRINTER_OFFLINE;
         s->error += pi.state == PRINTER_ERROR;
         if (pi.state != PRINTER_PRINTING && pi.state != PRINTER_PAUSED)
@@ -202,10 +204,11 @@ summarize(struct farm *f, struct summary *s)
         s->text = "Error";
     else
         s->text = "Operational";
+    return s->n > 0 || !printer || !printer[0];
 }
 
-static json_t *
-state_json(const struct summary *s)
+json_t *
+api_octoprint_state_json(const struct api_octoprint_summary *s)
 {
     bool down = strcmp(s->text, "Offline") == 0 || strcmp(s->text, "Error") == 0;
     return json_pack("{ss s{sb sb sb sb sb sb sb sb sb sb}}", "text", s->text, "flags",
@@ -216,20 +219,20 @@ state_json(const struct summary *s)
 }
 
 static json_t *
-printer_json(const struct summary *s)
+printer_json(const struct api_octoprint_summary *s)
 {
-    return json_pack("{so s{} s{sb} s{si si si si si}}", "state", state_json(s), "temperature",
-                     "sd", "ready", 0, "slimfarm", "printers", (int)s->n, "printing",
+    return json_pack("{so s{} s{sb} s{si si si si si}}", "state", api_octoprint_state_json(s),
+                     "temperature", "sd", "ready", 0, "slimfarm", "printers", (int)s->n, "printing",
                      (int)s->printing, "paused", (int)s->paused, "offline", (int)s->offline,
                      "error", (int)s->error);
 }
 
 /* The one job printing is read from the loop's store: one row by its key. */
-static json_t *
-job_json(const struct api_compat_env *env, const struct summary *s)
+json_t *
+api_octoprint_job_json(struct store *store, const struct api_octoprint_summary *s)
 {
     struct job_row j;
-    bool one = s->job && store_job_get(env->store, s->job, &j, NULL) == SF_OK;
+    bool one = s->job && store_job_get(store, s->job, &j, NULL) == SF_OK;
     json_t *name = one ? json_string(j.opts.name) : json_null();
     json_t *path = json_null();
     if (one) {
@@ -252,9 +255,14 @@ api_octoprint_state(void *ctx, const struct route_args *args, const struct http_
 {
     (void)args;
     const struct api_compat_env *env = ctx;
-    struct summary s;
-    summarize(env->farm, &s);
-    resp->json = strcmp(req->path, "/api/printer") == 0 ? printer_json(&s) : job_json(env, &s);
+    struct api_octoprint_summary s;
+    const char *printer = http_req_arg(req, "printer");
+    if (!api_octoprint_summarize(env->farm, printer, &s)) {
+        http_error(resp, 404, "printer '%.64s' (query 'printer') is not in the farm", printer);
+        return;
+    }
+    resp->json = strcmp(req->path, "/api/printer") == 0 ? printer_json(&s)
+                                                        : api_octoprint_job_json(env->store, &s);
 }
 
 void
@@ -279,8 +287,8 @@ api_octoprint_job_command(void *ctx, const struct route_args *args, const struct
                    c);
         return;
     }
-    struct summary s;
-    summarize(env->farm, &s);
+    struct api_octoprint_summary s;
+    api_octoprint_summarize(env->farm, NULL, &s);
     if (!s.job) {
         http_error(resp, 409,
                    "%zu jobs print: cancel takes effect only when exactly one does (POST "

@@ -1,7 +1,8 @@
 /*
  * http.c - libmicrohttpd on the daemon's event loop: keys, caps, multipart,
- * suspended streams and deferred answers; how an answer is sent (JSON,
- * raw bodies, errors, the status map) is http_resp.c's.
+ * deferred answers; how an answer is sent (JSON, raw bodies, errors, the
+ * status map) is http_resp.c's, streams (SSE) http_stream.c's and
+ * connections taken over (websockets) http_upgrade.c's.
  *
  * Why external epoll mode: the daemon owns one loop and every socket
  * (STYLE.md, "Threads"); MHD's internal threads would put request handlers
@@ -58,37 +59,6 @@
 #include "http_frame.h"
 #include "http_int.h"
 
-/* A streamed response; lives from the route's answer until MHD frees it. */
-struct stream {
-    struct http *h;                /* owner */
-    struct MHD_Connection *conn;   /* its connection */
-    http_stream_fn fn;             /* produces the body */
-    void *ud;                      /* fn's argument */
-    void (*free_fn)(void *ud);     /* frees ud */
-    bool suspended;                /* waiting for http_wake_streams */
-    bool revoked;                  /* its key is gone: end it */
-    bool event;                    /* an event stream (text/event-stream): counted per key */
-    bool expired;                  /* past its lifetime: ends at its next quiet moment */
-    bool retry_sent;               /* the "retry:" hint before that end is out */
-    int64_t end_ms;                /* event stream: monotonic end of its lifetime */
-    char key[FARMCFG_KEY_MAX + 1]; /* the API key it was opened with */
-    struct stream *next;           /* in h->streams */
-};
-
-struct http {
-    struct MHD_Daemon *d;        /* the MHD daemon, external epoll mode */
-    struct http_config cfg;      /* as given; keys point at our copy */
-    struct farmcfg_key *keys;    /* copy of the API keys */
-    int port;                    /* bound port, -1 if none */
-    struct stream *streams;      /* live streams */
-    struct http_defer *defers;   /* requests waiting for their answer */
-    struct http_budget budget;   /* connections per class (http_budget.h) */
-    int64_t next_end_ms;         /* earliest event stream lifetime end, or -1 */
-    struct authlimit *authlimit; /* failed logins per address */
-    void (*wake)(void *ud);      /* http_set_wake's hook, or NULL */
-    void *wake_ud;
-};
-
 /* Per-request state, MHD's *con_cls (made by the URI logger, before the headers). */
 struct conn {
     bool started;                 /* on_request has seen the headers */
@@ -115,6 +85,7 @@ struct conn {
     struct http *h;                /* owner */
     char query[256];               /* the raw query string, cut at 255 bytes */
     struct http_defer *defer;      /* its deferred answer, while the route works */
+    struct http_upgraded *up;      /* its socket to be taken over (http_upgrade.c), until taken */
 };
 
 /* A route's answer to come (http.h); freed by http_defer_answer. */
@@ -152,161 +123,6 @@ fail(struct conn *c, int status, const char *fmt, ...)
     vsnprintf(raw, sizeof(raw), fmt, ap);
     va_end(ap);
     http_text_clean(c->msg, sizeof(c->msg), raw);
-}
-
-/* ---- streams ---- */
-
-static ssize_t
-stream_read(void *cls, uint64_t pos, char *buf, size_t max)
-{
-    (void)pos;
-    struct stream *st = cls;
-    if (st->revoked)
-        return MHD_CONTENT_READER_END_OF_STREAM;
-    ssize_t n = st->fn(st->ud, buf, max);
-    if (n < 0)
-        return MHD_CONTENT_READER_END_OF_STREAM;
-    if (n == 0 && st->expired) { /* a quiet moment past its lifetime: end it */
-        int len = snprintf(buf, max, "retry: %d\n\n", HTTP_STREAM_RETRY_MS);
-        if (st->retry_sent || len < 0 || (size_t)len >= max)
-            return MHD_CONTENT_READER_END_OF_STREAM;
-        st->retry_sent = true;
-        return len;
-    }
-    if (n == 0 && !st->suspended) {
-        MHD_suspend_connection(st->conn);
-        st->suspended = true;
-    }
-    return n;
-}
-
-static void
-stream_free(void *cls)
-{
-    struct stream *st = cls;
-    for (struct stream **pp = &st->h->streams; *pp; pp = &(*pp)->next)
-        if (*pp == st) {
-            *pp = st->next;
-            break;
-        }
-    if (st->free_fn)
-        st->free_fn(st->ud);
-    free(st);
-}
-
-void
-http_wake_streams(struct http *h)
-{
-    bool resumed = false;
-    for (struct stream *st = h->streams; st; st = st->next)
-        if (st->suspended) {
-            st->suspended = false;
-            MHD_resume_connection(st->conn);
-            resumed = true;
-        }
-    if (resumed && h->wake)
-        h->wake(h->wake_ud);
-}
-
-void
-http_set_wake(struct http *h, void (*wake)(void *ud), void *ud)
-{
-    h->wake = wake;
-    h->wake_ud = ud;
-}
-
-/* End the event streams past their lifetime (at their next quiet moment);
-   note when the next one is due. */
-static void
-streams_expire(struct http *h)
-{
-    int64_t now = clock_mono_ms();
-    if (h->next_end_ms < 0 || now < h->next_end_ms)
-        return;
-    h->next_end_ms = -1;
-    for (struct stream *st = h->streams; st; st = st->next) {
-        if (!st->event || st->expired)
-            continue;
-        if (st->end_ms <= now) {
-            st->expired = true;
-            if (st->suspended) {
-                st->suspended = false;
-                MHD_resume_connection(st->conn);
-            }
-        } else if (h->next_end_ms < 0 || st->end_ms < h->next_end_ms) {
-            h->next_end_ms = st->end_ms;
-        }
-    }
-}
-
-static bool
-is_event_stream(const struct http_resp *resp)
-{
-    return !resp->content_type || strcmp(resp->content_type, "text/event-stream") == 0;
-}
-
-static size_t
-streams_of(const struct http *h, const char *key)
-{
-    size_t n = 0;
-    for (const struct stream *st = h->streams; st; st = st->next)
-        n += st->event && !st->revoked && !st->expired && strcmp(st->key, key) == 0;
-    return n;
-}
-
-static enum MHD_Result
-send_stream(struct http *h, struct MHD_Connection *conn, const char *key, struct http_resp *resp)
-{
-    if (is_event_stream(resp) && streams_of(h, key) >= HTTP_STREAMS_PER_KEY) {
-        if (resp->stream_free)
-            resp->stream_free(resp->stream_ud);
-        char msg[128];
-        snprintf(msg, sizeof(msg), "this API key has %d event streams open already",
-                 HTTP_STREAMS_PER_KEY);
-        return http_send_json(conn, MHD_HTTP_TOO_MANY_REQUESTS, json_pack("{s:s}", "error", msg),
-                              false);
-    }
-    struct stream *st = mem_calloc(1, sizeof(*st));
-    struct MHD_Response *r = NULL;
-    if (st)
-        r = MHD_create_response_from_callback(MHD_SIZE_UNKNOWN, 4096, stream_read, st, stream_free);
-    if (!r) {
-        if (resp->stream_free)
-            resp->stream_free(resp->stream_ud);
-        free(st);
-        return http_send_error(conn, MHD_HTTP_INTERNAL_SERVER_ERROR, "out of memory");
-    }
-    *st = (struct stream){ .h = h,
-                           .conn = conn,
-                           .fn = resp->stream,
-                           .ud = resp->stream_ud,
-                           .free_fn = resp->stream_free,
-                           .event = is_event_stream(resp),
-                           .next = h->streams };
-    if (st->event) {
-        unsigned life_ms =
-            h->cfg.stream_lifetime_ms ? h->cfg.stream_lifetime_ms : HTTP_STREAM_LIFETIME_S * 1000u;
-        st->end_ms = clock_mono_ms() + life_ms;
-        if (h->next_end_ms < 0 || st->end_ms < h->next_end_ms)
-            h->next_end_ms = st->end_ms;
-    }
-    snprintf(st->key, sizeof(st->key), "%s", key);
-    h->streams = st;
-    MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE,
-                            resp->content_type ? resp->content_type : "text/event-stream");
-    http_add_headers(r, resp);
-    if (!MHD_get_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL))
-        MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "no-cache");
-    enum MHD_Result rc = MHD_queue_response(conn, (unsigned)resp->status, r);
-    MHD_destroy_response(r);
-    return rc;
-}
-
-static const struct farmcfg_key *
-find_key(const struct http *h, const char *key)
-{
-    struct farmcfg view = { .keys = h->keys, .n_keys = h->cfg.n_keys };
-    return farmcfg_key(&view, key);
 }
 
 static enum MHD_Result
@@ -395,6 +211,7 @@ conn_free(struct http *h, struct conn *c)
             d->conn = NULL;
         }
     }
+    http_upgrade_done(c->up);
     if (c->pp)
         MHD_destroy_post_processor(c->pp);
     if (c->upload)
@@ -560,7 +377,7 @@ on_headers(struct http *h, struct conn *c, struct MHD_Connection *conn, const ch
     const char *csrf = MHD_lookup_connection_value(conn, MHD_HEADER_KIND, HTTP_CSRF_HEADER);
     if (!key && cookie && h->cfg.session_key)
         key = h->cfg.session_key(h->cfg.ud, cookie, get ? NULL : csrf ? csrf : "");
-    const struct farmcfg_key *k = key ? find_key(h, key) : NULL;
+    const struct farmcfg_key *k = key ? http_find_key(h, key) : NULL;
     if (!key) {
         fail(c, MHD_HTTP_UNAUTHORIZED, "%s",
              !cookie       ? "missing X-Api-Key header"
@@ -657,7 +474,9 @@ respond(struct http *h, struct conn *c, struct MHD_Connection *conn, struct http
 {
     drop_upload(c); /* the route committed it, or it goes before the answer does */
     if (resp->stream)
-        return send_stream(h, conn, c->key, resp);
+        return http_send_stream(h, conn, c->key, resp);
+    if (resp->upgrade)
+        return http_send_upgrade(h, conn, c->key, resp, &c->up);
     if (resp->body || resp->fd > 0 || resp->status == MHD_HTTP_NOT_MODIFIED) {
         json_decref(resp->json);
         return http_send_raw(conn, resp);
@@ -847,18 +666,9 @@ http_set_keys(struct http *h, const struct farmcfg_key *keys, size_t n_keys, siz
     h->keys = copy;
     h->cfg.keys = copy;
     h->cfg.n_keys = n_keys;
-    /* A revoked key's streams end; a stream's key may not be read-only now
-       only if it is gone (streams are GETs, which read-only keys may make). */
-    for (struct stream *st = h->streams; st; st = st->next)
-        if (!st->revoked && !find_key(h, st->key)) {
-            st->revoked = true;
-            if (n_closed)
-                (*n_closed)++;
-            if (st->suspended) {
-                st->suspended = false;
-                MHD_resume_connection(st->conn);
-            }
-        }
+    size_t n = http_streams_revoke(h);
+    if (n_closed)
+        *n_closed = n;
     return SF_OK;
 }
 
@@ -902,7 +712,8 @@ http_new(const struct http_config *cfg, struct sf_err *err)
     struct http_budget_caps caps;
     http_budget_size(&caps);
     http_budget_init(&h->budget, &caps);
-    unsigned flags = MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME | MHD_USE_ERROR_LOG;
+    unsigned flags =
+        MHD_USE_EPOLL | MHD_ALLOW_SUSPEND_RESUME | MHD_ALLOW_UPGRADE | MHD_USE_ERROR_LOG;
     if (cfg->port < 0)
         flags |= MHD_USE_NO_LISTEN_SOCKET;
     h->d = MHD_start_daemon(flags, cfg->port < 0 ? 0 : (uint16_t)cfg->port, NULL, NULL, on_request,
@@ -937,6 +748,7 @@ http_free(struct http *h)
     for (struct http_defer *d = h->defers; d; d = d->next)
         if (!d->ready)
             MHD_resume_connection(d->conn);
+    http_upgraded_close_all(h);
     MHD_stop_daemon(h->d);
     authlimit_free(h->authlimit);
     free(h->keys);
@@ -980,6 +792,6 @@ http_run(struct http *h)
 {
     int rc = MHD_run(h->d) == MHD_YES ? SF_OK : SF_EIO;
     http_budget_expire(&h->budget, clock_mono_ms());
-    streams_expire(h);
+    http_streams_expire(h);
     return rc;
 }

@@ -160,6 +160,18 @@ const char *http_req_field(const struct http_req *req, const char *name);
  */
 typedef ssize_t (*http_stream_fn)(void *ud, char *buf, size_t max);
 
+/*
+ * A connection a route took over (a websocket): from the 101 on its socket
+ * is the route's, counted like an event stream (HTTP_STREAMS_PER_KEY per
+ * key, streams and sockets together) in its key's connection class.
+ * fn gets the socket (non-blocking) and the bytes the client sent after
+ * its request head; the owner closes it with http_upgraded_close, always
+ * before http_free.
+ */
+struct http_upgraded;
+typedef void (*http_upgrade_fn)(void *ud, struct http_upgraded *u, int fd, const char *extra,
+                                size_t n_extra);
+
 /* One extra response header. */
 struct http_header {
     char name[32];
@@ -180,10 +192,13 @@ struct http_resp {
     uint64_t fd_size;
     size_t n_headers; /* headers added with http_resp_header */
     struct http_header headers[HTTP_RESP_HEADERS_MAX];
-    http_stream_fn stream;         /* or a streamed text/event-stream body */
-    void *stream_ud;               /* its argument */
-    void (*stream_free)(void *ud); /* called when the stream ends */
-    struct http_defer *defer;      /* set by http_defer(): the answer comes later */
+    http_stream_fn stream;          /* or a streamed text/event-stream body */
+    void *stream_ud;                /* its argument */
+    void (*stream_free)(void *ud);  /* called when the stream ends */
+    struct http_defer *defer;       /* set by http_defer(): the answer comes later */
+    http_upgrade_fn upgrade;        /* or take the connection over: 101 with the headers */
+    void *upgrade_ud;               /* its argument, the taker's once taken */
+    void (*upgrade_free)(void *ud); /* frees upgrade_ud if it is never taken (NULL: not owned) */
 };
 
 typedef void (*http_route_fn)(void *ud, const struct http_req *req, struct http_resp *resp);
@@ -298,6 +313,23 @@ bool http_defer_alive(const struct http_defer *d);
 /* The request's upload (the sink's context), NULL once the client is gone. */
 void *http_defer_upload(struct http_defer *d);
 void http_defer_answer(struct http_defer *d, struct http_resp *resp);
+
+/* The API key u's request came with ("" for a public path). */
+const char *http_upgraded_key(const struct http_upgraded *u);
+/*
+ * Count u under key from now on (a socket that logs in after its upgrade,
+ * as OctoPrint's push socket does), in key's connection class; *read_only
+ * says whether key is read-only.  SF_EINVAL when key is unknown or is not
+ * the one u came with; SF_EAGAIN when key has HTTP_STREAMS_PER_KEY event
+ * streams and sockets open or its class is full (close u then).  Again with
+ * the same key: SF_OK, nothing changes.
+ */
+int http_upgraded_auth(struct http_upgraded *u, const char *key, bool *read_only,
+                       struct sf_err *err);
+/* Whether u's key was revoked (http_set_keys): its owner closes it. */
+bool http_upgraded_revoked(const struct http_upgraded *u);
+/* Close u's socket and free u: the owner's last call on it. */
+void http_upgraded_close(struct http_upgraded *u);
 
 /* Helpers for routes: status with {"error": msg} body (msg made valid UTF-8). */
 void http_error(struct http_resp *resp, int status, const char *fmt, ...)

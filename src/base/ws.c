@@ -15,6 +15,7 @@
 
 #include <openssl/evp.h>
 #include <string.h>
+#include <strings.h>
 
 #include "utf8.h"
 
@@ -314,4 +315,44 @@ ws_accept(const char *key, char out[WS_ACCEPT_LEN + 1], struct sf_err *err)
     EVP_EncodeBlock((unsigned char *)out, md, 20);
     out[WS_ACCEPT_LEN] = 0;
     return SF_OK;
+}
+
+/* Whether a comma-separated header value holds token (any case). */
+static bool
+has_token(const char *v, const char *token)
+{
+    size_t n = strlen(token);
+    while (v && *v) {
+        while (*v == ' ' || *v == '\t' || *v == ',')
+            v++;
+        size_t k = strcspn(v, ",");
+        size_t e = k;
+        while (e && (v[e - 1] == ' ' || v[e - 1] == '\t'))
+            e--;
+        if (e == n && strncasecmp(v, token, n) == 0)
+            return true;
+        v += k;
+    }
+    return false;
+}
+
+int
+ws_handshake(const char *method, const char *upgrade, const char *connection, const char *version,
+             const char *key, char accept[WS_ACCEPT_LEN + 1], const char **why)
+{
+    *why = NULL;
+    if (strcmp(method, "GET") != 0 || !has_token(upgrade, "websocket") ||
+        !has_token(connection, "upgrade")) {
+        *why = "Can \"Upgrade\" only to \"WebSocket\"."; /* tornado's words */
+        return 400;
+    }
+    if (!version || strcmp(version, "13") != 0) {
+        *why = "Sec-WebSocket-Version must be 13";
+        return 426;
+    }
+    if (ws_accept(key, accept, NULL) < 0) {
+        *why = "Missing/Invalid WebSocket headers";
+        return 400;
+    }
+    return 101;
 }

@@ -1,7 +1,7 @@
 /*
  * ws.h - the websocket protocol of RFC 6455 without the I/O: an
  * incremental frame parser, a frame encoder and the opening handshake's
- * key check and accept value.  Shared by the simulators' push sockets
+ * check (ws_handshake) and accept value.  Shared by the simulators' push sockets
  * (sim/net/sim_ws.c) and any driver that reads one; whoever owns the
  * socket reads and writes the bytes.
  *
@@ -111,5 +111,17 @@ bool ws_key_valid(const char *key);
  * SF_EIO if the digest fails.
  */
 int ws_accept(const char *key, char out[WS_ACCEPT_LEN + 1], struct sf_err *err);
+
+/*
+ * A server's answer to an opening handshake (RFC 6455 4.2.1) from the
+ * request's method and header values (NULL: absent): 101 with accept set;
+ * 400 when it is no websocket upgrade (GET with Upgrade: websocket and
+ * Connection: upgrade) or its key is not valid; 426 for another version
+ * than 13 (answer Sec-WebSocket-Version: 13).  *why is the text to answer
+ * a refusal with (tornado's words, as OctoPrint and Moonraker send them).
+ */
+int ws_handshake(const char *method, const char *upgrade, const char *connection,
+                 const char *version, const char *key, char accept[WS_ACCEPT_LEN + 1],
+                 const char **why);
 
 #endif

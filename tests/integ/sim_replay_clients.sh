@@ -5,7 +5,8 @@
 # follows are named in the file) runs against a fresh `slimfarm-sim KIND`
 # on a port the kernel picks, and every answer's status and shape is
 # checked (tests/replay/replay.py).  At least two independent clients per
-# kind (OctoPrint, Moonraker, PrusaLink).  A simulator that only answered
+# kind (OctoPrint, Moonraker, PrusaLink; Bambu's are replayed by
+# sim_replay_bambu.sh).  A simulator that only answered
 # what our own drivers call fails here.
 set -u
 BUILD=${BUILD:-build/san}
@@ -17,6 +18,7 @@ n=0
 for f in "$dir"/clients/*.txt; do
   client=$(basename "$f" .txt)
   kind=${client%%-*}
+  [ "$kind" = bambu ] && continue # MQTT and FTPS: sim_replay_bambu.sh
   # speed 200: a replayed print runs for a fraction of a second, enough to
   # pause, short enough to wait for its end; a session may ask for other
   # options in a "# sim-args:" line (a push session, to see a print's

@@ -35,10 +35,13 @@ Push sockets (tests/replay/wsclient.py) take lines beginning with WS:
   WS CLOSED [SECONDS] [code=N]  the server closes the socket (with close code N)
   WS CLOSE                  close it
 
+A line RUN TEXT runs TEXT in the shell (the test's environment; a reload
+of the daemon, say) and fails when it exits other than 0.
+
 SECONDS defaults to 30.  sockjs speaks SockJS's websocket transport ("o",
 'a["..."]' frames).
 """
-import json, re, shlex, socket, sys, time, urllib.error, urllib.request, uuid
+import json, re, shlex, socket, subprocess, sys, time, urllib.error, urllib.request, uuid
 
 import wsclient
 
@@ -219,6 +222,9 @@ def ws_line(base, key, toks):
 
 
 def run_line(base, key, toks):
+    if toks[0] == "RUN":
+        rc = subprocess.call(toks[1], shell=True)
+        return (None if rc == 0 else "exit status %d" % rc), b""
     if toks[0] == "WS":
         why, text = ws_line(base, key, toks)
         return why, text.encode()

@@ -504,6 +504,47 @@ T_CASE(moonraker_push_socket_replaces_polls)
     FX_STOP_CHECK(&f, job, true);
 }
 
+static bool
+mr_unsubscribed(void *ud)
+{
+    return !mr_subscribed(ud);
+}
+
+/*
+ * A Klippy restart drops every websocket subscription (Moonraker's
+ * klippy_connection.py, _on_connection_closed): the driver, told by
+ * notify_klippy_disconnected, polls meanwhile and subscribes again on the
+ * same socket after notify_klippy_ready, and the socket's updates stand in
+ * for the polls again (a print costs no more than its confirming polls).
+ */
+T_CASE(moonraker_push_resubscribes_after_klippy_restart)
+{
+    struct fx f;
+    struct sf_err err;
+    fx_speed = 60;
+    int rc = fx_start(&f, MOONRAKER, "k3y", NULL, "k3y", NULL, NULL, &err);
+    fx_speed = SPEED;
+    T_OK(rc, &err);
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    T_TRUE(run_until(f.l, mr_subscribed, &f));
+    int opened = sim_moonraker_ws_opened(f.mr);
+    sim_moonraker_firmware_restart(f.mr);
+    T_TRUE(run_until(f.l, mr_unsubscribed, &f));
+    T_TRUE(run_until(f.l, mr_subscribed, &f));
+    T_EQ_INT(sim_moonraker_ws_opened(f.mr), opened); /* the same socket, not a new one */
+    T_TRUE(fx_wait_state(&f, DRV_IDLE));
+    const char *job = job_file("resub.gcode", 4000);
+    struct push_probe p = { &f, mr_queries, mr_drop, mr_subscribed };
+    probe = &p;
+    uint64_t q0 = mr_queries(&f);
+    T_OK(f.d->ops->start_job(f.d, job, 0, NULL, &err), &err);
+    T_TRUE(run_until(f.l, progress_6_or_end, &f));
+    T_TRUE(mr_queries(&f) - q0 <= 2); /* the socket's updates, not polls */
+    T_TRUE(fx_wait_end(&f, 1));
+    T_EQ_INT(f.rec.done, 1);
+    FX_STOP_CHECK(&f, job, true);
+}
+
 T_CASE(prusalink_job_runs_once_each)
 {
     job_runs_once_each(PRUSALINK);

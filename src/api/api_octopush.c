@@ -1,0 +1,507 @@
+/*
+ * api_octopush.c - OctoPrint's push socket on slimfarmd's OctoPrint face
+ * (see api_octopush.h).
+ *
+ * Shapes: OctoPrint 1.11 docs/api/push.rst (connected, history, current,
+ * event, reauthRequired), server/util/sockjs.py (auth, throttle,
+ * subscribe); the simulator serves the same (sim/net/sim_octoprint_push.c)
+ * and both frame through src/base/wsconn.h and sockjs.h.
+ *
+ * One timer (API_OCTOPUSH_TICK_MS, while a socket is open) drives every
+ * socket: the event log's new rows (an indexed range, as the SSE streams
+ * read it) become `event`s, each socket's session is checked, and
+ * `current` goes out where its time has come.  The summary is
+ * api_octoprint.c's, the one GET /api/printer answers.
+ *
+ * Thread: the loop thread.
+ */
+#include "api_octopush.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "../base/clock.h"
+#include "../base/mem.h"
+#include "../base/octopush.h"
+#include "../base/sockjs.h"
+#include "../base/ws.h"
+#include "../base/wsconn.h"
+#include "api_compat.h"
+#include "api_octoprint.h"
+
+#define MSG_MAX    ((size_t)64 << 10) /* a client's message: auth, throttle, subscribe */
+#define OUT_MAX    ((size_t)4 << 20)  /* queued to a client that reads slowly */
+#define EVENTS_MAX 64                 /* event log rows read a tick */
+
+struct op_conn {
+    struct api_octopush *p;
+    struct wsconn *wc;
+    struct http_upgraded *u;
+    bool framed;             /* SockJS framing */
+    bool authed;             /* a valid auth came */
+    struct octopush_sub sub; /* what it asked for */
+    int64_t open_ms;         /* when it opened */
+    int64_t next_ms;         /* when the next current is due */
+    int64_t beat_ms;         /* ... and the next heartbeat */
+    const char *text;        /* the state text last sent (a static string) */
+    char session[SESSION_TOKEN_LEN + 1];
+    char key[FARMCFG_KEY_MAX + 1];
+    char printer[64]; /* "" for the whole farm */
+    struct op_conn *next;
+};
+
+struct api_octopush {
+    struct loop *l;
+    struct store *store;
+    struct farm *farm;
+    struct sessions *sessions;
+    struct op_conn *conns;
+    uint64_t timer;  /* the tick, while a socket is open */
+    int64_t last_id; /* the event log's newest row seen */
+};
+
+/* What a route hands to the upgrade (owned by it until taken). */
+struct pending {
+    struct api_octopush *p;
+    bool framed;
+    char printer[64];
+};
+
+/* Send one message {type: payload} (payload stolen), framed as the transport wants. */
+static void
+emit(struct op_conn *c, const char *type, json_t *payload)
+{
+    char *text = octopush_text(type, payload, c->framed);
+    if (text)
+        wsconn_send(c->wc, text, strlen(text));
+    free(text);
+}
+
+/* The key's label as api_octoprint's login names it (route_key_label). */
+static void
+key_label(const char *key, char *out, size_t n)
+{
+    struct http_req req = { .key = key };
+    route_key_label(&req, out, n);
+}
+
+/* current's and history's payload (push.rst's data model). */
+static json_t *
+state_payload(struct op_conn *c, struct api_octoprint_summary *s)
+{
+    api_octoprint_summarize(c->p->farm, c->printer, s);
+    json_t *p = api_octoprint_job_json(c->p->store, s);
+    json_t *state = api_octoprint_state_json(s);
+    json_object_set_new(state, "error", json_string(""));
+    json_object_set_new(p, "state", state);
+    json_t *busy = json_array();
+    json_t *path = json_object_get(json_object_get(json_object_get(p, "job"), "file"), "path");
+    if (json_is_string(path))
+        json_array_append_new(busy, json_pack("{s:s,s:O}", "origin", "local", "path", path));
+    struct timespec ts;
+    clock_gettime(CLOCK_REALTIME, &ts);
+    json_object_set_new(p, "currentZ", json_null());
+    json_object_set_new(p, "offsets", json_object());
+    json_object_set_new(p, "temps", json_array()); /* a farm has no one temperature */
+    json_object_set_new(p, "logs", json_array());
+    json_object_set_new(p, "messages", json_array());
+    json_object_set_new(p, "resends",
+                        json_pack("{s:i,s:i,s:f}", "count", 0, "transmitted", 0, "ratio", 0.0));
+    json_object_set_new(p, "serverTime", json_real((double)ts.tv_sec + ts.tv_nsec / 1e9));
+    json_object_set_new(p, "busyFiles", busy);
+    json_object_set_new(p, "markings", json_array());
+    return p;
+}
+
+static void
+send_state(struct op_conn *c, const char *type, int64_t now)
+{
+    struct api_octoprint_summary s;
+    emit(c, type, state_payload(c, &s));
+    c->text = s.text;
+    c->next_ms = now + (int64_t)OCTOPUSH_CURRENT_MS * c->sub.throttle;
+}
+
+/* ---- messages from the client (OctoPrint's on_message) ---- */
+
+static void
+refuse(struct op_conn *c, const char *reason, uint16_t code)
+{
+    c->authed = false;
+    emit(c, "reauthRequired", json_pack("{s:s}", "reason", reason));
+    if (code)
+        wsconn_close(c->wc, code, reason);
+}
+
+static void
+on_auth(struct op_conn *c, const char *a)
+{
+    const char *colon = strrchr(a, ':');
+    if (!colon)
+        return; /* "Got invalid auth message": ignored */
+    int64_t now = clock_mono_ms();
+    const char *key = sessions_key(c->p->sessions, colon + 1, NULL, now);
+    char label[32];
+    key_label(key ? key : "", label, sizeof(label));
+    if (!key || (size_t)(colon - a) != strlen(label) || strncmp(a, label, strlen(label)) != 0) {
+        refuse(c, "stale", 0);
+        return;
+    }
+    bool ro;
+    struct sf_err err;
+    int rc = http_upgraded_auth(c->u, key, &ro, &err);
+    if (rc) {
+        refuse(c, "stale", rc == SF_EAGAIN ? 1013 : 1008); /* 1013: try again later */
+        return;
+    }
+    snprintf(c->session, sizeof(c->session), "%s", colon + 1);
+    snprintf(c->key, sizeof(c->key), "%s", key);
+    if (!c->authed) {
+        c->authed = true;
+        if (c->sub.state)
+            send_state(c, "history", now);
+    }
+}
+
+static void
+on_message(void *arg, const char *text, size_t len)
+{
+    struct op_conn *c = arg;
+    char auth[128];
+    bool history;
+    enum octopush_msg m = octopush_message(&c->sub, text, len, auth, sizeof(auth), &history);
+    if (m == OCTOPUSH_AUTH)
+        on_auth(c, auth);
+    else if (history && c->authed)
+        send_state(c, "history", clock_mono_ms());
+}
+
+static void
+on_text(struct wsconn *wc, const char *text, size_t len, void *ud)
+{
+    struct op_conn *c = ud;
+    if (!c->framed)
+        on_message(c, text, len);
+    else if (sockjs_unframe(text, len, on_message, c) < 0)
+        wsconn_close(wc, WS_CLOSE_PROTOCOL, "Broken framing.");
+}
+
+static void
+on_gone(struct wsconn *wc, void *ud)
+{
+    (void)wc;
+    struct op_conn *c = ud;
+    for (struct op_conn **pp = &c->p->conns; *pp; pp = &(*pp)->next)
+        if (*pp == c) {
+            *pp = c->next;
+            break;
+        }
+    http_upgraded_close(c->u);
+    octopush_sub_release(&c->sub);
+    free(c);
+}
+
+static const struct wsconn_ops ops = { on_text, on_gone };
+
+/* ---- what the tick pushes ---- */
+
+static void
+fire(struct api_octopush *p, const char *printer, const char *name, json_t *payload)
+{
+    for (struct op_conn *c = p->conns; c; c = c->next)
+        if (c->authed && !wsconn_closing(c->wc) && octopush_wants(&c->sub, name) &&
+            (!c->printer[0] || strcmp(c->printer, printer) == 0))
+            emit(c, "event", json_pack("{s:s,s:O}", "type", name, "payload", payload));
+    json_decref(payload);
+}
+
+/* The payload keys OctoPrint's print events share, for the job of ev. */
+static json_t *
+job_payload(struct api_octopush *p, const struct event_row *ev, const char *reason)
+{
+    struct job_row j;
+    bool known = store_job_get(p->store, ev->job_id, &j, NULL) == SF_OK;
+    char path[JOB_NAME_MAX + 32];
+    snprintf(path, sizeof(path), "job-%lld/%s", (long long)ev->job_id, known ? j.opts.name : "");
+    json_t *o = json_pack("{s:s,s:s,s:s,s:{s:s,s:I}}", "name", known ? j.opts.name : "", "path",
+                          path, "origin", "local", "slimfarm", "printer", ev->printer, "job_id",
+                          (json_int_t)ev->job_id);
+    if (reason)
+        json_object_set_new(o, "reason", json_string(reason));
+    return o;
+}
+
+/* A job that left its printer (done, failed, cancelled) is logged without
+   it: ev gets the printer of the job's last print; false if it has none, or
+   ev is a cancel and the last print did not end by it (a queued job's). */
+static bool
+print_printer(struct api_octopush *p, struct event_row *ev)
+{
+    struct print_row *pr;
+    size_t n;
+    if (store_prints(p->store, ev->job_id, &pr, &n, NULL) || !n)
+        return false;
+    const struct print_row *last = &pr[n - 1];
+    bool ok = strcmp(ev->kind, "job-cancel") != 0 || !last->outcome[0] ||
+              strcmp(last->outcome, "cancelled") == 0;
+    if (ok)
+        snprintf(ev->printer, sizeof(ev->printer), "%s", last->printer);
+    free(pr);
+    return ok;
+}
+
+/* The farm's job events as OctoPrint's print events. */
+static void
+log_events(struct api_octopush *p)
+{
+    static const char *const map[][3] = {
+        /* the log's kind, OctoPrint's event, a second event with reason */
+        { "job-start", "PrintStarted", NULL },
+        { "job-pause", "PrintPaused", NULL },
+        { "job-resume", "PrintResumed", NULL },
+        { "job-print-done", "PrintDone", NULL },
+        { "job-print-failed", "PrintFailed", "error" },
+        { "job-cancel", "PrintCancelled", "cancelled" },
+    };
+    struct event_row *ev;
+    size_t n;
+    if (store_events(p->store, p->last_id, EVENTS_MAX, &ev, &n, NULL))
+        return;
+    for (size_t i = 0; i < n; i++) {
+        p->last_id = ev[i].id;
+        if (!ev[i].job_id || (!ev[i].printer[0] && !print_printer(p, &ev[i])))
+            continue; /* a job that was on no printer: no print event */
+        for (size_t k = 0; k < sizeof(map) / sizeof(map[0]); k++) {
+            if (strcmp(ev[i].kind, map[k][0]) != 0)
+                continue;
+            bool failed = strcmp(map[k][1], "PrintFailed") == 0;
+            fire(p, ev[i].printer, map[k][1], job_payload(p, &ev[i], failed ? map[k][2] : NULL));
+            if (map[k][2] && !failed)
+                fire(p, ev[i].printer, "PrintFailed", job_payload(p, &ev[i], map[k][2]));
+        }
+    }
+    free(ev);
+}
+
+static const char *
+state_id(const char *text)
+{
+    static const char *const ids[][2] = {
+        { "Operational", "OPERATIONAL" }, { "Printing", "PRINTING" },
+        { "Paused", "PAUSED" },           { "Error", "ERROR" },
+        { "Offline", "OFFLINE" },
+    };
+    for (size_t i = 0; i < sizeof(ids) / sizeof(ids[0]); i++)
+        if (strcmp(ids[i][0], text) == 0)
+            return ids[i][1];
+    return "UNKNOWN";
+}
+
+/* One socket's turn: its session, its state text, its heartbeat and current. */
+static void
+tick_one(struct op_conn *c, int64_t now)
+{
+    if (c->framed && now >= c->beat_ms) {
+        wsconn_send(c->wc, SOCKJS_HEARTBEAT, 1);
+        c->beat_ms = now + SOCKJS_HEARTBEAT_MS;
+    }
+    if (!c->authed) {
+        if (now - c->open_ms >= API_OCTOPUSH_AUTH_WAIT_MS)
+            wsconn_close(c->wc, 1008, "no auth message came"); /* 1008: policy violation */
+        return;
+    }
+    const char *key = sessions_key(c->p->sessions, c->session, NULL, now);
+    if (!key || strcmp(key, c->key) != 0 || http_upgraded_revoked(c->u)) {
+        refuse(c, "logout", 1008);
+        return;
+    }
+    struct api_octoprint_summary s;
+    api_octoprint_summarize(c->p->farm, c->printer, &s);
+    if (c->text && strcmp(s.text, c->text) != 0 && octopush_wants(&c->sub, "PrinterStateChanged"))
+        emit(c, "event",
+             json_pack("{s:s,s:{s:s,s:s}}", "type", "PrinterStateChanged", "payload", "state_id",
+                       state_id(s.text), "state_string", s.text));
+    c->text = s.text;
+    if (c->sub.state && now >= c->next_ms)
+        send_state(c, "current", now);
+}
+
+static void
+tick(struct loop *l, void *ud)
+{
+    (void)l;
+    struct api_octopush *p = ud;
+    p->timer = 0;
+    if (!p->conns)
+        return;
+    log_events(p);
+    int64_t now = clock_mono_ms();
+    for (struct op_conn *c = p->conns; c; c = c->next)
+        if (!wsconn_closing(c->wc))
+            tick_one(c, now);
+    p->timer = loop_timer_add(p->l, API_OCTOPUSH_TICK_MS, tick, p);
+}
+
+/* ---- the upgrade ---- */
+
+static void
+on_upgraded(void *ud, struct http_upgraded *u, int fd, const char *extra, size_t n_extra)
+{
+    struct pending *pd = ud;
+    struct api_octopush *p = pd->p;
+    struct op_conn *c = mem_calloc(1, sizeof(*c));
+    if (c)
+        c->wc = wsconn_new(p->l, fd, MSG_MAX, OUT_MAX, &ops, c);
+    if (!c || !c->wc) {
+        free(c);
+        free(pd);
+        http_upgraded_close(u);
+        return;
+    }
+    int64_t now = clock_mono_ms();
+    *c = (struct op_conn){ .p = p,
+                           .wc = c->wc,
+                           .u = u,
+                           .framed = pd->framed,
+                           .open_ms = now,
+                           .beat_ms = now + SOCKJS_HEARTBEAT_MS,
+                           .next = p->conns };
+    octopush_sub_init(&c->sub);
+    snprintf(c->printer, sizeof(c->printer), "%s", pd->printer);
+    free(pd);
+    if (!p->conns && !p->timer) {
+        p->last_id = store_event_last(p->store);
+        p->timer = loop_timer_add(p->l, API_OCTOPUSH_TICK_MS, tick, p);
+    }
+    p->conns = c;
+    if (c->framed)
+        wsconn_send(c->wc, SOCKJS_OPEN, 1);
+    emit(c, "connected",
+         json_pack("{s:s,s:s,s:s,s:s,s:s,s:s,s:b,s:n,s:b,s:[{s:s,s:s},{s:s,s:s}]}", "version",
+                   API_COMPAT_OCTOPRINT, "display_version", API_COMPAT_OCTOPRINT, "branch", "",
+                   "python_version", "", "plugin_hash", "slimfarm", "config_hash", "slimfarm",
+                   "debug", false, "safe_mode", "online", true, "permissions", "key", "STATUS",
+                   "name", "Status", "key", "PRINT", "name", "Print"));
+    wsconn_start(c->wc, extra, n_extra);
+}
+
+bool
+api_octopush_public(const char *path)
+{
+    if (strncmp(path, "/sockjs/", 8) != 0)
+        return false;
+    const char *rest = path + 8;
+    if (strcmp(rest, "websocket") == 0 || strcmp(rest, "info") == 0)
+        return true;
+    const char *s1 = strchr(rest, '/');
+    const char *s2 = s1 ? strchr(s1 + 1, '/') : NULL;
+    /* SERVER/SESSION/websocket, as SockJS clients name it (no dots: not a file) */
+    return s1 && s1 != rest && s2 && s2 != s1 + 1 && strcmp(s2, "/websocket") == 0 &&
+           !memchr(rest, '.', (size_t)(s2 - rest));
+}
+
+void
+api_octopush_route(void *ctx, const struct route_args *args, const struct http_req *req,
+                   struct http_resp *resp)
+{
+    (void)args;
+    const struct api_compat_env *env = ctx;
+    if (strcmp(req->path, "/sockjs/info") == 0) {
+        resp->json = json_pack("{s:b,s:[s],s:b,s:i}", "websocket", true, "origins", "*:*",
+                               "cookie_needed", false, "entropy", rand());
+        return;
+    }
+    if (!api_octopush_public(req->path)) {
+        http_error(resp, 404, "no such resource: %.100s (SockJS: websocket transports only)",
+                   req->path);
+        return;
+    }
+    const char *printer = http_req_arg(req, "printer");
+    struct api_octoprint_summary s;
+    if (!api_octoprint_summarize(env->farm, printer, &s) || (printer && strlen(printer) >= 64)) {
+        http_error(resp, 404, "printer '%.64s' (query 'printer') is not in the farm", printer);
+        return;
+    }
+    char accept[WS_ACCEPT_LEN + 1];
+    const char *why;
+    int status = ws_handshake(req->method, http_req_header(req, "Upgrade"),
+                              http_req_header(req, "Connection"),
+                              http_req_header(req, "Sec-WebSocket-Version"),
+                              http_req_header(req, "Sec-WebSocket-Key"), accept, &why);
+    if (status != 101) {
+        if (status == 426)
+            http_resp_header(resp, "Sec-WebSocket-Version", "13");
+        http_error(resp, status, "%s", why);
+        return;
+    }
+    struct pending *pd = mem_calloc(1, sizeof(*pd));
+    if (!pd) {
+        http_error(resp, 500, "out of memory");
+        return;
+    }
+    *pd = (struct pending){ .p = env->push, .framed = strcmp(req->path, "/sockjs/websocket") != 0 };
+    snprintf(pd->printer, sizeof(pd->printer), "%s", printer ? printer : "");
+    http_resp_header(resp, "Upgrade", "websocket");
+    http_resp_header(resp, "Connection", "Upgrade");
+    http_resp_header(resp, "Sec-WebSocket-Accept", "%s", accept);
+    resp->status = 101;
+    resp->upgrade = on_upgraded;
+    resp->upgrade_ud = pd;
+    resp->upgrade_free = free;
+}
+
+/* ---- lifecycle ---- */
+
+struct api_octopush *
+api_octopush_new(struct loop *l, struct store *store, struct farm *f, int64_t idle_ms,
+                 int64_t max_ms, struct sf_err *err)
+{
+    struct api_octopush *p = mem_calloc(1, sizeof(*p));
+    if (!p) {
+        sf_err_set(err, SF_ENOMEM, "api: out of memory");
+        return NULL;
+    }
+    *p = (struct api_octopush){ .l = l, .store = store, .farm = f };
+    if (!(p->sessions = sessions_new(idle_ms, max_ms, err))) {
+        free(p);
+        return NULL;
+    }
+    return p;
+}
+
+void
+api_octopush_free(struct api_octopush *p)
+{
+    if (!p)
+        return;
+    while (p->conns) /* each leaves the list in on_gone */
+        wsconn_free(p->conns->wc, WS_CLOSE_AWAY);
+    if (p->timer)
+        loop_timer_cancel(p->l, p->timer);
+    sessions_free(p->sessions);
+    free(p);
+}
+
+int
+api_octopush_login(struct api_octopush *p, const char *key, char *session, struct sf_err *err)
+{
+    char csrf[SESSION_TOKEN_LEN + 1];
+    return sessions_make(p->sessions, key, clock_mono_ms(), session, csrf, err);
+}
+
+size_t
+api_octopush_keys_changed(struct api_octopush *p, const struct farmcfg_key *keys, size_t n_keys)
+{
+    return sessions_keep_keys(p->sessions, keys, n_keys);
+}
+
+size_t
+api_octopush_count(const struct api_octopush *p)
+{
+    size_t n = 0;
+    for (const struct op_conn *c = p->conns; c; c = c->next)
+        n++;
+    return n;
+}
