@@ -294,6 +294,9 @@ int store_printer_note(struct store *s, const char *name, const char *kind, cons
 /* Print history of one job, oldest first, into *rows (free() it). */
 int store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
                  struct sf_err *err);
+/* The newest print on printer (running or ended) into *out; SF_ENOTFOUND if none. */
+int store_print_last(struct store *s, const char *printer, struct print_row *out,
+                     struct sf_err *err);
 /* Up to max events with id > after_id, oldest first, into *rows (free() it). */
 int store_events(struct store *s, int64_t after_id, size_t max, struct event_row **rows, size_t *n,
                  struct sf_err *err);

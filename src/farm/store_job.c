@@ -14,6 +14,7 @@
 
 #include <stdint.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "../base/clock.h"
@@ -342,6 +343,7 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
     case JOB_EV_PRINT_DONE:
     case JOB_EV_PRINT_FAILED:
     case JOB_EV_CANCEL:
+    case JOB_EV_CANCEL_COPY:
     case JOB_EV_REFUSED:
         if (a->lines_acked > j->lines_acked)
             j->lines_acked = a->lines_acked;
@@ -350,6 +352,7 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
                              ev == JOB_EV_PRINT_DONE     ? "done"
                              : ev == JOB_EV_PRINT_FAILED ? "failed"
                              : ev == JOB_EV_REFUSED      ? "refused"
+                             : ev == JOB_EV_CANCEL_COPY  ? "cancelled"
                                                          : "cancelled",
                              j->lines_acked, a->filament_mm, err);
         j->printer[0] = '\0';
@@ -569,6 +572,23 @@ store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err 
 int
 store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_err *err)
 {
+    /* A reason longer than a job row holds (the scheduler's list of
+       printers) would be cut mid-word when read: cut it here at a word,
+       saying so with "...". */
+    char cut[sizeof(((struct job_row *)0)->reason)];
+    size_t len = strlen(reason);
+    if (len >= sizeof(cut)) {
+        size_t end = sizeof(cut) - 4;
+        while (end > 0 && reason[end] != ' ')
+            end--;
+        while (end > 0 && (reason[end - 1] == ' ' || reason[end - 1] == ';' ||
+                           reason[end - 1] == ':' || reason[end - 1] == ','))
+            end--;
+        if (end == 0) /* one long word: cut it */
+            end = sizeof(cut) - 4;
+        snprintf(cut, sizeof(cut), "%.*s...", (int)end, reason);
+        reason = cut;
+    }
     int rc = update_job_field(s, id,
                               "UPDATE jobs SET reason = ?1, updated_ms = ?2"
                               " WHERE id = ?3 AND reason != ?1",
@@ -595,18 +615,40 @@ read_print(sqlite3_stmt *st, void *row)
     store_copy_text(p->outcome, sizeof(p->outcome), st, 10);
 }
 
+#define PRINT_COLS                                                                                 \
+    "SELECT id, job_id, copy, printer, material, start_line, lines_acked, filament_mm,"            \
+    " started_ms, ended_ms, outcome FROM prints"
+
 int
 store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
              struct sf_err *err)
 {
     sqlite3_stmt *st;
-    int rc = store_select(s, &st,
-                          "SELECT id, job_id, copy, printer, material, start_line, lines_acked,"
-                          " filament_mm, started_ms, ended_ms, outcome FROM prints WHERE job_id = ?"
-                          " ORDER BY id",
-                          (void **)rows, n, err);
+    int rc =
+        store_select(s, &st, PRINT_COLS " WHERE job_id = ? ORDER BY id", (void **)rows, n, err);
     if (rc)
         return rc;
     sqlite3_bind_int64(st, 1, job_id);
     return store_read_rows(s, st, sizeof(**rows), read_print, (void **)rows, n, "list prints", err);
+}
+
+int
+store_print_last(struct store *s, const char *printer, struct print_row *out, struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    struct print_row *rows = NULL;
+    size_t n = 0;
+    /* newest first by rowid: the scan stops at the printer's last print */
+    int rc = store_select(s, &st, PRINT_COLS " WHERE printer = ? ORDER BY id DESC LIMIT 1",
+                          (void **)&rows, &n, err);
+    if (rc)
+        return rc;
+    sqlite3_bind_text(st, 1, printer, -1, SQLITE_TRANSIENT);
+    rc = store_read_rows(s, st, sizeof(*rows), read_print, (void **)&rows, &n, "last print", err);
+    if (rc == SF_OK && n == 0)
+        rc = sf_err_set(err, SF_ENOTFOUND, "printer %s has printed nothing", printer);
+    if (rc == SF_OK)
+        *out = rows[0];
+    free(rows);
+    return rc;
 }
