@@ -82,6 +82,11 @@ up_begin(void *ud, const char *filename, struct sf_err *err)
     struct api *a = ud;
     char name[81];
     route_clip(name, sizeof(name), filename);
+    if (strlen(filename) >= JOB_NAME_MAX) {
+        sf_err_set(err, SF_EINVAL, "file name '%s...' is %zu bytes: at most %d bytes (UTF-8)", name,
+                   strlen(filename), JOB_NAME_MAX - 1);
+        return NULL;
+    }
     if (!job_name_valid(filename)) {
         sf_err_set(err, SF_EINVAL,
                    "file name '%s' is not a plain file name (valid UTF-8; no paths, '..' or "
@@ -404,8 +409,41 @@ time_left_json(json_t *o, const struct printer_info *p)
     json_object_set_new(o, "time_left_from", known ? json_string(p->time_left_from) : json_null());
 }
 
+/*
+ * What is on p's bed, for a dashboard card: "bed_full" (a part waits to be
+ * taken off), "interrupted_job" (a job the daemon left interrupted there,
+ * null if none: the printer is blocked until it is resumed, restarted or
+ * cancelled) and "last_print" (the newest print there, with its job's name
+ * and line count, null if none).  A store failure leaves a field out.
+ */
+static void
+bed_json(struct store *s, json_t *o, const char *name)
+{
+    bool full;
+    struct job_row j;
+    struct print_row pr;
+    if (!s || !o)
+        return;
+    if (store_printer_bed_get(s, name, &full, NULL) == SF_OK)
+        json_object_set_new(o, "bed_full", json_boolean(full));
+    int rc = store_job_interrupted(s, name, &j, NULL);
+    if (rc == SF_OK || rc == SF_ENOTFOUND)
+        json_object_set_new(o, "interrupted_job", rc ? json_null() : json_integer(j.id));
+    rc = store_print_last(s, name, &pr, NULL);
+    if (rc == SF_ENOTFOUND) {
+        json_object_set_new(o, "last_print", json_null());
+    } else if (rc == SF_OK && store_job_get(s, pr.job_id, &j, NULL) == SF_OK) {
+        json_t *l = api_print_json(&pr);
+        if (l)
+            json_object_update_new(l, json_pack("{sI ss si sI}", "job_id", (json_int_t)pr.job_id,
+                                                "job_name", j.opts.name, "copies", j.counts.copies,
+                                                "gcode_lines", (json_int_t)j.gcode_lines));
+        json_object_set_new(o, "last_print", l);
+    }
+}
+
 static json_t *
-printer_json(const struct printer_info *p)
+printer_json(struct store *s, const struct printer_info *p)
 {
     const struct farmcfg_printer *c = p->cfg;
     json_t *o = json_pack("{ss ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf ss}", "name", c->name,
@@ -417,6 +455,7 @@ printer_json(const struct printer_info *p)
                           "progress", p->progress, "message", p->message ? p->message : "");
     if (o)
         time_left_json(o, p);
+    bed_json(s, o, c->name);
     return o;
 }
 
@@ -430,10 +469,10 @@ printers_answer(struct api *a, const char *name, struct http_resp *resp)
         struct printer_info p;
         farm_printer_info(a->cfg.farm, i, &p);
         if (!name) {
-            json_array_append_new(arr, printer_json(&p));
+            json_array_append_new(arr, printer_json(a->cfg.store, &p));
         } else if (strcmp(p.cfg->name, name) == 0) {
             json_decref(arr);
-            resp->json = json_pack("{so}", "printer", printer_json(&p));
+            resp->json = json_pack("{so}", "printer", printer_json(a->cfg.store, &p));
             return;
         }
     }
@@ -475,7 +514,8 @@ printer_act(void *ctx, const struct route_args *args, const struct http_req *req
     struct api *a = ctx;
     enum printer_action act;
     if (!printer_action_parse(args->action, &act)) {
-        http_error(resp, 404, "no printer action '%.32s' (pause, resume, cancel, cleared)",
+        http_error(resp, 404,
+                   "no printer action '%.32s' (pause, resume, cancel, cancel-copy, cleared)",
                    args->action);
         return;
     }

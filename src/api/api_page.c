@@ -228,6 +228,21 @@ put_next(struct buf *b, const struct api_page_query *q, int64_t last_id)
     return buf_printf(b, "&cursor=%s\"}", cursor);
 }
 
+/* "last_printer": where the job's newest print ran ("" if none): a finished
+   job names no printer, the dashboard's Finished jobs show this one. */
+static void
+last_printer(struct store *s, const struct job_row *r, json_t *j)
+{
+    struct print_row *p = NULL;
+    size_t n = 0;
+    if (!j)
+        return;
+    if (store_prints(s, r->id, &p, &n, NULL))
+        n = 0;
+    json_object_set_new(j, "last_printer", json_string(n ? p[n - 1].printer : ""));
+    free(p);
+}
+
 char *
 api_page_render(struct store *s, const struct api_page_query *q, size_t *len, struct sf_err *err)
 {
@@ -246,6 +261,7 @@ api_page_render(struct store *s, const struct api_page_query *q, size_t *len, st
     size_t i;
     for (i = 0; i < n; i++) {
         json_t *j = api_job_json(&rows[i]);
+        last_printer(s, &rows[i], j);
         char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
         json_decref(j);
         size_t tlen = text ? strlen(text) : 0;
