@@ -14,7 +14,6 @@
 
 #include <stdint.h>
 #include <stdio.h>
-#include <stdlib.h>
 #include <string.h>
 
 #include "../base/clock.h"
@@ -352,7 +351,6 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
                              ev == JOB_EV_PRINT_DONE     ? "done"
                              : ev == JOB_EV_PRINT_FAILED ? "failed"
                              : ev == JOB_EV_REFUSED      ? "refused"
-                             : ev == JOB_EV_CANCEL_COPY  ? "cancelled"
                                                          : "cancelled",
                              j->lines_acked, a->filament_mm, err);
         j->printer[0] = '\0';
@@ -615,40 +613,58 @@ read_print(sqlite3_stmt *st, void *row)
     store_copy_text(p->outcome, sizeof(p->outcome), st, 10);
 }
 
-#define PRINT_COLS                                                                                 \
-    "SELECT id, job_id, copy, printer, material, start_line, lines_acked, filament_mm,"            \
-    " started_ms, ended_ms, outcome FROM prints"
-
 int
 store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
              struct sf_err *err)
 {
     sqlite3_stmt *st;
-    int rc =
-        store_select(s, &st, PRINT_COLS " WHERE job_id = ? ORDER BY id", (void **)rows, n, err);
+    int rc = store_select(s, &st,
+                          "SELECT id, job_id, copy, printer, material, start_line, lines_acked,"
+                          " filament_mm, started_ms, ended_ms, outcome FROM prints WHERE job_id = ?"
+                          " ORDER BY id",
+                          (void **)rows, n, err);
     if (rc)
         return rc;
     sqlite3_bind_int64(st, 1, job_id);
     return store_read_rows(s, st, sizeof(**rows), read_print, (void **)rows, n, "list prints", err);
 }
 
-int
-store_print_last(struct store *s, const char *printer, struct print_row *out, struct sf_err *err)
+static void
+read_bed(sqlite3_stmt *st, void *row)
 {
+    struct store_bed *b = row;
+    read_print(st, &b->last); /* columns 0..10; all NULL (id 0) when it printed nothing */
+    store_copy_text(b->printer, sizeof(b->printer), st, 11);
+    b->bed_full = sqlite3_column_int(st, 12) != 0;
+    b->interrupted_job = sqlite3_column_int64(st, 13);
+    store_copy_text(b->job_name, sizeof(b->job_name), st, 14);
+    b->copies = sqlite3_column_int(st, 15);
+    b->gcode_lines = sqlite3_column_int64(st, 16);
+}
+
+int
+store_beds(struct store *s, struct store_bed **rows, size_t *n, struct sf_err *err)
+{
+    /* One statement for the whole farm (GET /api/printers runs it on the
+       loop).  A printer's newest print is read only while a part is on
+       its bed or it is in error or awaiting clear (what the dashboard
+       shows it for), through prints_printer:
+       the printer's own prints, not a scan of every print down to its
+       last one (a printer that never printed read the whole table).  Its
+       interrupted job through jobs_state. */
     sqlite3_stmt *st;
-    struct print_row *rows = NULL;
-    size_t n = 0;
-    /* newest first by rowid: the scan stops at the printer's last print */
-    int rc = store_select(s, &st, PRINT_COLS " WHERE printer = ? ORDER BY id DESC LIMIT 1",
-                          (void **)&rows, &n, err);
+    int rc = store_select(
+        s, &st,
+        "SELECT p.id, p.job_id, p.copy, p.printer, p.material, p.start_line, p.lines_acked,"
+        " p.filament_mm, p.started_ms, p.ended_ms, p.outcome, pr.name, pr.bed_full,"
+        " (SELECT id FROM jobs WHERE state = 'interrupted' AND printer = pr.name"
+        "  ORDER BY updated_ms DESC, id DESC LIMIT 1),"
+        " j.name, j.copies, j.gcode_lines FROM printers pr"
+        " LEFT JOIN prints p ON (pr.bed_full OR pr.state IN ('error', 'awaiting-clear')) AND p.id ="
+        "  (SELECT max(id) FROM prints INDEXED BY prints_printer WHERE printer = pr.name)"
+        " LEFT JOIN jobs j ON j.id = p.job_id ORDER BY pr.name",
+        (void **)rows, n, err);
     if (rc)
         return rc;
-    sqlite3_bind_text(st, 1, printer, -1, SQLITE_TRANSIENT);
-    rc = store_read_rows(s, st, sizeof(*rows), read_print, (void **)&rows, &n, "last print", err);
-    if (rc == SF_OK && n == 0)
-        rc = sf_err_set(err, SF_ENOTFOUND, "printer %s has printed nothing", printer);
-    if (rc == SF_OK)
-        *out = rows[0];
-    free(rows);
-    return rc;
+    return store_read_rows(s, st, sizeof(**rows), read_bed, (void **)rows, n, "list beds", err);
 }

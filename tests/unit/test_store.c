@@ -1029,20 +1029,23 @@ store_with_job(const char *dir, int copies, int64_t *id)
 }
 
 /* An operator stops one copy: the print ends "cancelled", the job waits to
-   print that copy again, and the printer's last print names it. */
-T_CASE(store_cancel_copy_keeps_the_job_and_names_the_last_print)
+   print that copy again, and the printer's bed names it. */
+T_CASE(store_cancel_copy_keeps_the_job_and_the_bed_names_it)
 {
     struct sf_err err;
     int64_t id;
     struct store *s = store_with_job("copy", 3, &id);
     T_TRUE(s && id > 0);
     T_OK(make_ready(s, id, &err), &err);
-    struct print_row last;
-    T_EQ_INT(store_print_last(s, "mk3", &last, &err), SF_ENOTFOUND);
+    struct store_bed *beds;
+    size_t n;
+    T_OK(store_printer_set(s, "mk3", PRINTER_IDLE, &err), &err);
+    T_OK(store_printer_set(s, "mini", PRINTER_IDLE, &err), &err);
+    T_OK(store_beds(s, &beds, &n, &err), &err);
+    T_TRUE(n == 2 && beds[0].last.id == 0 && beds[1].last.id == 0); /* nothing printed yet */
+    free(beds);
     struct job_event_args start = { .printer = "mk3" };
     T_OK(store_job_event(s, id, JOB_EV_START, &start, NULL, &err), &err);
-    T_OK(store_print_last(s, "mk3", &last, &err), &err);
-    T_EQ_STR(last.outcome, ""); /* running */
     struct job_event_args stop = { .lines_acked = 42, .reason = "copy cancelled" };
     enum job_state to;
     T_OK(store_job_event(s, id, JOB_EV_CANCEL_COPY, &stop, &to, &err), &err);
@@ -1050,10 +1053,18 @@ T_CASE(store_cancel_copy_keeps_the_job_and_names_the_last_print)
     struct job_row j;
     T_OK(store_job_get(s, id, &j, &err), &err);
     T_TRUE(j.counts.copies_done == 0 && j.counts.failures == 0);
-    T_OK(store_print_last(s, "mk3", &last, &err), &err);
-    T_TRUE(last.job_id == id && last.copy == 1 && last.lines_acked == 42);
-    T_EQ_STR(last.outcome, "cancelled");
-    T_EQ_INT(store_print_last(s, "mini", &last, &err), SF_ENOTFOUND);
+    T_OK(store_printer_bed_set(s, "mk3", true, &err), &err);
+    T_OK(store_beds(s, &beds, &n, &err), &err);
+    T_EQ_INT(n, 2); /* by name: mini, mk3 */
+    T_TRUE(beds[0].last.id == 0 && !beds[0].bed_full);
+    T_EQ_STR(beds[1].printer, "mk3");
+    T_TRUE(beds[1].bed_full && beds[1].interrupted_job == 0);
+    struct print_row *last = &beds[1].last;
+    T_TRUE(last->job_id == id && last->copy == 1 && last->lines_acked == 42);
+    T_EQ_STR(last->outcome, "cancelled");
+    T_EQ_STR(beds[1].job_name, "part.stl");
+    T_EQ_INT(beds[1].copies, 3);
+    free(beds);
     T_OK(store_check(s, &err), &err);
     store_close(s);
 }
