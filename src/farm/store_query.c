@@ -156,12 +156,13 @@ store_last_printers(struct store *s, int64_t lo, int64_t hi, struct store_job_pr
                           "SELECT job_id, printer FROM prints WHERE id IN (SELECT max(id) FROM"
                           " prints WHERE job_id BETWEEN ?1 AND ?2 GROUP BY job_id) ORDER BY job_id",
                           (void **)rows, n, err);
-    if (rc)
-        return rc;
-    sqlite3_bind_int64(st, 1, lo);
-    sqlite3_bind_int64(st, 2, hi);
-    return store_read_rows(s, st, sizeof(**rows), read_job_printer, (void **)rows, n,
-                           "last printers", err);
+    if (rc == SF_OK) {
+        sqlite3_bind_int64(st, 1, lo);
+        sqlite3_bind_int64(st, 2, hi);
+        rc = store_read_rows(s, st, sizeof(**rows), read_job_printer, (void **)rows, n,
+                             "last printers", err);
+    }
+    return rc;
 }
 
 static void
