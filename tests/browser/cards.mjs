@@ -87,7 +87,7 @@ async function run(page) {
   check(/1 error/.test(await page.locator("#counters").innerText()), "counters: " + await page.locator("#counters").innerText());
   const cleared = await confirmed(page, page.getByRole("button", { name: "Clear error on hot" }), "Clear the error");
   check(/fault is fixed/.test(cleared), "clear dialog: " + cleared);
-  await waitText(page, `${sel("hot")} .msg`, /cleared: waits for the printer|^$/);
+  await waitText(page, `${sel("hot")} .msg`, /Cleared: waits for the printer|^$/);
   check(await page.locator("#error").isHidden(), "an error after Clear error: " + await page.locator("#error").innerText());
 
   log("fast prints an arc-fitted torus: the finished job names its printer; print history has its filament");
