@@ -89,6 +89,11 @@ up_begin(void *ud, const char *filename, struct sf_err *err)
     struct api *a = ud;
     char name[81];
     route_clip(name, sizeof(name), filename);
+    if (strlen(filename) >= JOB_NAME_MAX) {
+        sf_err_set(err, SF_EINVAL, "file name '%s...' is %zu bytes: at most %d bytes (UTF-8)", name,
+                   strlen(filename), JOB_NAME_MAX - 1);
+        return NULL;
+    }
     if (!job_name_valid(filename)) {
         sf_err_set(err, SF_EINVAL,
                    "file name '%s' is not a plain file name (valid UTF-8; no paths, '..' or "
@@ -462,8 +467,32 @@ time_left_json(json_t *o, const struct printer_info *p)
     json_object_set_new(o, "time_left_from", known ? json_string(p->time_left_from) : json_null());
 }
 
+/*
+ * What is on a printer's bed (b from store_beds, NULL: the store has not
+ * seen it), for a dashboard card: "bed_full" (a part waits to be taken
+ * off), "interrupted_job" (a job the daemon left interrupted there, null if
+ * none: the printer is blocked until it is resumed, restarted or
+ * cancelled) and "last_print" (the newest print there with its job's name,
+ * copies and line count, null if none).
+ */
+static void
+bed_json(json_t *o, const struct store_bed *b)
+{
+    if (!o)
+        return;
+    json_object_set_new(o, "bed_full", json_boolean(b && b->bed_full));
+    json_object_set_new(o, "interrupted_job",
+                        b && b->interrupted_job ? json_integer(b->interrupted_job) : json_null());
+    json_t *l = b && b->last.id ? api_print_json(&b->last) : NULL;
+    if (l)
+        json_object_update_new(l, json_pack("{sI ss si sI}", "job_id", (json_int_t)b->last.job_id,
+                                            "job_name", b->job_name, "copies", b->copies,
+                                            "gcode_lines", (json_int_t)b->gcode_lines));
+    json_object_set_new(o, "last_print", l ? l : json_null());
+}
+
 static json_t *
-printer_json(const struct printer_info *p)
+printer_json(const struct store_bed *beds, size_t n_beds, const struct printer_info *p)
 {
     const struct farmcfg_printer *c = p->cfg;
     json_t *o = json_pack("{ss ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf ss}", "name", c->name,
@@ -475,6 +504,11 @@ printer_json(const struct printer_info *p)
                           "progress", p->progress, "message", p->message ? p->message : "");
     if (o)
         time_left_json(o, p);
+    const struct store_bed *b = NULL;
+    for (size_t i = 0; i < n_beds && !b; i++)
+        if (strcmp(beds[i].printer, c->name) == 0)
+            b = &beds[i];
+    bed_json(o, b);
     return o;
 }
 
@@ -484,17 +518,24 @@ printers_answer(struct api *a, const char *name, struct http_resp *resp)
 {
     json_t *arr = json_array();
     size_t n = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
+    struct store_bed *beds = NULL;
+    size_t n_beds = 0;
+    struct sf_err err;
+    if (n && store_beds(a->cfg.store, &beds, &n_beds, &err)) /* the cards go without */
+        log_warn("api", "printers: %s", err.msg);
     for (size_t i = 0; arr && i < n; i++) {
         struct printer_info p;
         farm_printer_info(a->cfg.farm, i, &p);
         if (!name) {
-            json_array_append_new(arr, printer_json(&p));
+            json_array_append_new(arr, printer_json(beds, n_beds, &p));
         } else if (strcmp(p.cfg->name, name) == 0) {
             json_decref(arr);
-            resp->json = json_pack("{so}", "printer", printer_json(&p));
+            resp->json = json_pack("{so}", "printer", printer_json(beds, n_beds, &p));
+            free(beds);
             return;
         }
     }
+    free(beds);
     if (name) {
         json_decref(arr);
         http_error(resp, 404, "no printer '%.64s'", name);
@@ -560,7 +601,8 @@ printer_act(void *ctx, const struct route_args *args, const struct http_req *req
     struct api *a = ctx;
     enum printer_action act;
     if (!printer_action_parse(args->action, &act)) {
-        http_error(resp, 404, "no printer action '%.32s' (pause, resume, cancel, cleared)",
+        http_error(resp, 404,
+                   "no printer action '%.32s' (pause, resume, cancel, cancel-copy, cleared)",
                    args->action);
         return;
     }

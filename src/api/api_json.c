@@ -217,7 +217,12 @@ api_job_json(const struct job_row *j)
     /* MNDR / ANDR (fractions of the bounding-box diagonal): null when not measured */
     if (o && (json_object_set_new(o, "mndr", j->dev_measured ? json_real(j->mndr) : json_null()) ||
               json_object_set_new(o, "andr", j->dev_measured ? json_real(j->andr) : json_null()) ||
-              json_object_set_new(o, "shape_changed", json_boolean(j->shape_changed)))) {
+              json_object_set_new(o, "shape_changed", json_boolean(j->shape_changed)) ||
+              /* the G-code's print time estimate, s, and filament, g: null when not known */
+              json_object_set_new(
+                  o, "est_s", j->est_known && j->est_s >= 0 ? json_real(j->est_s) : json_null()) ||
+              json_object_set_new(o, "filament_g",
+                                  j->gcode_sha[0] ? json_real(j->filament_g) : json_null()))) {
         json_decref(o);
         o = NULL;
     }

@@ -244,6 +244,27 @@ put_next(struct buf *b, const struct api_page_query *q, int64_t last_id)
     return buf_printf(b, "&cursor=%s\"}", cursor);
 }
 
+/* "last_printer": where job r's newest print ran ("" if none; last from
+   store_last_printers, by job id): a finished job names no printer, the
+   dashboard's Finished jobs show this one. */
+static void
+last_printer(const struct store_job_printer *last, size_t n_last, const struct job_row *r,
+             json_t *j)
+{
+    size_t lo = 0, hi = n_last;
+    while (lo < hi) { /* the first row with job_id >= r->id */
+        size_t mid = lo + (hi - lo) / 2;
+        if (last[mid].job_id < r->id)
+            lo = mid + 1;
+        else
+            hi = mid;
+    }
+    if (j)
+        json_object_set_new(
+            j, "last_printer",
+            json_string(lo < n_last && last[lo].job_id == r->id ? last[lo].printer : ""));
+}
+
 char *
 api_page_render(struct store *s, const struct api_page_query *q, size_t *len, struct sf_err *err)
 {
@@ -253,6 +274,17 @@ api_page_render(struct store *s, const struct api_page_query *q, size_t *len, st
     int rc = store_job_page(s, &q->f, q->limit, &rows, &n, &more, err);
     if (rc)
         return NULL;
+    struct store_job_printer *lp = NULL;
+    size_t n_lp = 0;
+    int64_t lo = INT64_MAX, hi = 0;
+    for (size_t k = 0; k < n; k++) {
+        lo = rows[k].id < lo ? rows[k].id : lo;
+        hi = rows[k].id > hi ? rows[k].id : hi;
+    }
+    if (n && (rc = store_last_printers(s, lo, hi, &lp, &n_lp, err))) {
+        free(rows);
+        return NULL;
+    }
     /* room kept for the tail: the cursor and the next URL (~600 bytes at most) */
     const size_t tail = 1024, room = API_PAGE_BYTES_MAX - tail;
     struct buf b;
@@ -262,6 +294,7 @@ api_page_render(struct store *s, const struct api_page_query *q, size_t *len, st
     size_t i;
     for (i = 0; i < n; i++) {
         json_t *j = api_job_json(&rows[i]);
+        last_printer(lp, n_lp, &rows[i], j);
         char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
         json_decref(j);
         size_t tlen = text ? strlen(text) : 0;
@@ -274,6 +307,7 @@ api_page_render(struct store *s, const struct api_page_query *q, size_t *len, st
         last = rows[i].id;
     }
     free(rows);
+    free(lp);
     if (rc == SF_OK && i == 0 && n > 0)
         rc = sf_err_set(err, SF_ENOMEM, "job list: out of memory"); /* no job is near the bound */
     else if (rc == SF_OK)

@@ -25,7 +25,7 @@ static const char *const job_names[JOB_STATE_COUNT] = {
 
 static const char *const job_event_names[JOB_EVENT_COUNT] = {
     "prepare",      "prepared", "prepare-failed", "start",   "pause", "resume",  "print-done",
-    "print-failed", "cancel",   "crashed",        "restart", "defer", "refused",
+    "print-failed", "cancel",   "crashed",        "restart", "defer", "refused", "cancel-copy",
 };
 
 /* One legal move: in state `from`, the event leads to `to`. */
@@ -67,6 +67,8 @@ static const struct move job_moves[JOB_EVENT_COUNT][7] = {
     [JOB_EV_DEFER] = { { JOB_PREPARING, JOB_QUEUED }, { -1, 0 } },
     /* no counter moves: the printer said "not now", the print never began */
     [JOB_EV_REFUSED] = { { JOB_PRINTING, JOB_READY }, { -1, 0 } },
+    /* no counter moves: the operator stopped the copy, not the printer failing it */
+    [JOB_EV_CANCEL_COPY] = { { JOB_PRINTING, JOB_READY }, { JOB_PAUSED, JOB_READY }, { -1, 0 } },
 };
 
 static int

@@ -57,8 +57,10 @@ enum job_event {
     JOB_EV_DEFER,          /* preparing -> queued: a stage is unavailable now; try later */
     JOB_EV_REFUSED,        /* printing -> ready: the printer refused the start ("not idle");
                               nothing printed, so no retry is spent (the printer holds off) */
+    JOB_EV_CANCEL_COPY,    /* printing|paused -> ready: an operator stopped this copy; it is
+                              printed again (no counter moves), the job goes on */
 };
-#define JOB_EVENT_COUNT 13
+#define JOB_EVENT_COUNT 14
 
 /* The counters a transition reads and updates. */
 struct job_counts {

@@ -45,15 +45,17 @@ struct printer_env {
 
 /* What an operator may ask of a printer (the API's ACTION). */
 enum printer_action {
-    PRINTER_ACT_PAUSE = 0, /* pause the job on it */
-    PRINTER_ACT_RESUME,    /* resume it */
-    PRINTER_ACT_CANCEL,    /* cancel it (the part stays on the bed) */
-    PRINTER_ACT_CLEARED,   /* the bed is clear (or the error acknowledged: the printer
-                              leaves the error when its driver reports it ready) */
+    PRINTER_ACT_PAUSE = 0,   /* pause the job on it */
+    PRINTER_ACT_RESUME,      /* resume it */
+    PRINTER_ACT_CANCEL,      /* cancel it (the part stays on the bed) */
+    PRINTER_ACT_CLEARED,     /* the bed is clear (or the error acknowledged: the printer
+                                leaves the error when its driver reports it ready) */
+    PRINTER_ACT_CANCEL_COPY, /* stop the copy on it (the part stays on the bed); the job
+                                goes on and prints that copy again (JOB_EV_CANCEL_COPY) */
 };
-#define PRINTER_ACTION_COUNT 4
+#define PRINTER_ACTION_COUNT 5
 
-/* "pause", "resume", "cancel", "cleared"; false if s is none of them. */
+/* "pause", "resume", "cancel", "cleared", "cancel-copy"; false if s is none of them. */
 bool printer_action_parse(const char *s, enum printer_action *out);
 
 /* A printer as the API shows it (valid until the loop turns or the config reloads). */

@@ -13,7 +13,7 @@
 #include "../base/log.h"
 
 static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
-                                                                "cleared" };
+                                                                "cleared", "cancel-copy" };
 
 bool
 printer_action_parse(const char *s, enum printer_action *out)
@@ -121,12 +121,20 @@ printer_estop(struct printer *p, const char *who, struct sf_err *err)
     return SF_OK;
 }
 
-/* Cancel the job p was starting while its file is judged: nothing was sent. */
-static int
-cancel_judged(struct printer *p, struct sf_err *err)
+/* Why a job (JOB_EV_CANCEL) or a copy of it (JOB_EV_CANCEL_COPY) ended. */
+static const char *
+cancel_reason(enum job_event jev)
 {
-    struct job_event_args a = { .reason = "cancelled by an operator" };
-    int rc = store_job_event(p->env.s, p->job_id, JOB_EV_CANCEL, &a, NULL, err);
+    return jev == JOB_EV_CANCEL_COPY ? "copy cancelled by an operator: it prints again"
+                                     : "cancelled by an operator";
+}
+
+/* Cancel the job (or copy, jev) p was starting while its file is judged: nothing was sent. */
+static int
+cancel_judged(struct printer *p, enum job_event jev, struct sf_err *err)
+{
+    struct job_event_args a = { .reason = cancel_reason(jev) };
+    int rc = store_job_event(p->env.s, p->job_id, jev, &a, NULL, err);
     if (rc)
         return rc;
     p->job_id = p->judging = 0;
@@ -138,7 +146,8 @@ int
 printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
 {
     static const enum printer_event evs[PRINTER_ACTION_COUNT] = {
-        PRINTER_EV_PAUSE, PRINTER_EV_RESUME, PRINTER_EV_FINISHED, PRINTER_EV_CLEARED
+        PRINTER_EV_PAUSE, PRINTER_EV_RESUME, PRINTER_EV_FINISHED, PRINTER_EV_CLEARED,
+        PRINTER_EV_FINISHED
     };
     if ((unsigned)act >= PRINTER_ACTION_COUNT)
         return sf_err_set(err, SF_EINVAL, "printer %s: no action %d", p->cfg.name, (int)act);
@@ -167,11 +176,13 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL, "printer %s has no job to %s", p->cfg.name,
                           action_names[act]);
     if (p->judging == p->job_id) /* the driver has nothing yet: a cancel is the store's alone */
-        return act == PRINTER_ACT_CANCEL ? cancel_judged(p, err)
-                                         : sf_err_set(err, SF_EAGAIN,
-                                                      "printer %s is starting its job: %s it once "
-                                                      "it prints",
-                                                      p->cfg.name, action_names[act]);
+        return act == PRINTER_ACT_CANCEL ? cancel_judged(p, JOB_EV_CANCEL, err)
+               : act == PRINTER_ACT_CANCEL_COPY
+                   ? cancel_judged(p, JOB_EV_CANCEL_COPY, err)
+                   : sf_err_set(err, SF_EAGAIN,
+                                "printer %s is starting its job: %s it once "
+                                "it prints",
+                                p->cfg.name, action_names[act]);
     /* The driver's own report of this comes on a later loop turn and finds
        the printer moved already. */
     rc = act == PRINTER_ACT_PAUSE    ? p->drv->ops->pause(p->drv, err)
@@ -179,16 +190,17 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
                                      : p->drv->ops->cancel(p->drv, err);
     if (rc)
         return rc;
-    struct job_event_args a = { .lines_acked = p->lines_acked,
-                                .reason = "cancelled by an operator" };
-    enum job_event jev = act == PRINTER_ACT_PAUSE    ? JOB_EV_PAUSE
-                         : act == PRINTER_ACT_RESUME ? JOB_EV_RESUME
-                                                     : JOB_EV_CANCEL;
-    if (jev == JOB_EV_CANCEL && !p->cfg.auto_eject)
+    enum job_event jev = act == PRINTER_ACT_PAUSE         ? JOB_EV_PAUSE
+                         : act == PRINTER_ACT_RESUME      ? JOB_EV_RESUME
+                         : act == PRINTER_ACT_CANCEL_COPY ? JOB_EV_CANCEL_COPY
+                                                          : JOB_EV_CANCEL;
+    bool ends = jev == JOB_EV_CANCEL || jev == JOB_EV_CANCEL_COPY;
+    struct job_event_args a = { .lines_acked = p->lines_acked, .reason = cancel_reason(jev) };
+    if (ends && !p->cfg.auto_eject)
         printer_set_bed(p, true); /* the cancelled part stays on the bed */
     if ((rc = store_job_event(p->env.s, p->job_id, jev, &a, NULL, err)))
         return rc;
-    if (jev == JOB_EV_CANCEL) {
+    if (ends) {
         p->job_id = 0;
         if (p->drv->status.state == DRV_PRINTING) {
             /* still running the end sequence: printing with no job until

@@ -295,6 +295,34 @@ int store_printer_note(struct store *s, const char *name, const char *kind, cons
 /* Print history of one job, oldest first, into *rows (free() it). */
 int store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
                  struct sf_err *err);
+/* Where a job's newest print ran. */
+struct store_job_printer {
+    int64_t job_id;
+    char printer[64];
+};
+/*
+ * For each job with id in lo..hi that has printed, where its newest print
+ * ran, by job id, into *rows (free() it): one statement for a page of jobs.
+ */
+int store_last_printers(struct store *s, int64_t lo, int64_t hi, struct store_job_printer **rows,
+                        size_t *n, struct sf_err *err);
+
+/* What a printer's bed holds, as the store knows it (plain data). */
+struct store_bed {
+    char printer[64];            /* the printer's name */
+    bool bed_full;               /* a part waits to be taken off */
+    int64_t interrupted_job;     /* a job left interrupted there (its part on the bed), 0 none */
+    struct print_row last;       /* its newest print while a part is on its bed or it is
+                                    in error or awaiting clear; last.id 0: none (or not read) */
+    char job_name[JOB_NAME_MAX]; /* last's job: its name, */
+    int copies;                  /* its copies */
+    int64_t gcode_lines;         /* and its G-code's command lines */
+};
+/*
+ * Every printer the store has seen, by name, with what its bed holds, into
+ * *rows (free() it): one statement for the farm.
+ */
+int store_beds(struct store *s, struct store_bed **rows, size_t *n, struct sf_err *err);
 /* Up to max events with id > after_id, oldest first, into *rows (free() it). */
 int store_events(struct store *s, int64_t after_id, size_t max, struct event_row **rows, size_t *n,
                  struct sf_err *err);

@@ -342,6 +342,7 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
     case JOB_EV_PRINT_DONE:
     case JOB_EV_PRINT_FAILED:
     case JOB_EV_CANCEL:
+    case JOB_EV_CANCEL_COPY:
     case JOB_EV_REFUSED:
         if (a->lines_acked > j->lines_acked)
             j->lines_acked = a->lines_acked;
@@ -569,6 +570,23 @@ store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err 
 int
 store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_err *err)
 {
+    /* A reason longer than a job row holds (the scheduler's list of
+       printers) would be cut mid-word when read: cut it here at a word,
+       saying so with "...". */
+    char cut[sizeof(((struct job_row *)0)->reason)];
+    size_t len = strlen(reason);
+    if (len >= sizeof(cut)) {
+        size_t end = sizeof(cut) - 4;
+        while (end > 0 && reason[end] != ' ')
+            end--;
+        while (end > 0 && (reason[end - 1] == ' ' || reason[end - 1] == ';' ||
+                           reason[end - 1] == ':' || reason[end - 1] == ','))
+            end--;
+        if (end == 0) /* one long word: cut it */
+            end = sizeof(cut) - 4;
+        snprintf(cut, sizeof(cut), "%.*s...", (int)end, reason);
+        reason = cut;
+    }
     int rc = update_job_field(s, id,
                               "UPDATE jobs SET reason = ?1, updated_ms = ?2"
                               " WHERE id = ?3 AND reason != ?1",
@@ -609,4 +627,44 @@ store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n
         return rc;
     sqlite3_bind_int64(st, 1, job_id);
     return store_read_rows(s, st, sizeof(**rows), read_print, (void **)rows, n, "list prints", err);
+}
+
+static void
+read_bed(sqlite3_stmt *st, void *row)
+{
+    struct store_bed *b = row;
+    read_print(st, &b->last); /* columns 0..10; all NULL (id 0) when it printed nothing */
+    store_copy_text(b->printer, sizeof(b->printer), st, 11);
+    b->bed_full = sqlite3_column_int(st, 12) != 0;
+    b->interrupted_job = sqlite3_column_int64(st, 13);
+    store_copy_text(b->job_name, sizeof(b->job_name), st, 14);
+    b->copies = sqlite3_column_int(st, 15);
+    b->gcode_lines = sqlite3_column_int64(st, 16);
+}
+
+int
+store_beds(struct store *s, struct store_bed **rows, size_t *n, struct sf_err *err)
+{
+    /* One statement for the whole farm (GET /api/printers runs it on the
+       loop).  A printer's newest print is read only while a part is on
+       its bed or it is in error or awaiting clear (what the dashboard
+       shows it for), through prints_printer:
+       the printer's own prints, not a scan of every print down to its
+       last one (a printer that never printed read the whole table).  Its
+       interrupted job through jobs_state. */
+    sqlite3_stmt *st;
+    int rc = store_select(
+        s, &st,
+        "SELECT p.id, p.job_id, p.copy, p.printer, p.material, p.start_line, p.lines_acked,"
+        " p.filament_mm, p.started_ms, p.ended_ms, p.outcome, pr.name, pr.bed_full,"
+        " (SELECT id FROM jobs WHERE state = 'interrupted' AND printer = pr.name"
+        "  ORDER BY updated_ms DESC, id DESC LIMIT 1),"
+        " j.name, j.copies, j.gcode_lines FROM printers pr"
+        " LEFT JOIN prints p ON (pr.bed_full OR pr.state IN ('error', 'awaiting-clear')) AND p.id ="
+        "  (SELECT max(id) FROM prints INDEXED BY prints_printer WHERE printer = pr.name)"
+        " LEFT JOIN jobs j ON j.id = p.job_id ORDER BY pr.name",
+        (void **)rows, n, err);
+    if (rc)
+        return rc;
+    return store_read_rows(s, st, sizeof(**rows), read_bed, (void **)rows, n, "list beds", err);
 }

@@ -142,6 +142,34 @@ store_job_counts(struct store *s, uint64_t by_state[JOB_STATE_COUNT], struct sf_
 }
 
 static void
+read_job_printer(sqlite3_stmt *st, void *row)
+{
+    struct store_job_printer *p = row;
+    p->job_id = sqlite3_column_int64(st, 0);
+    store_copy_text(p->printer, sizeof(p->printer), st, 1);
+}
+
+int
+store_last_printers(struct store *s, int64_t lo, int64_t hi, struct store_job_printer **rows,
+                    size_t *n, struct sf_err *err)
+{
+    /* the newest print of each job is its highest id: max() per group
+       through the prints_job index, not one query per job */
+    sqlite3_stmt *st;
+    int rc = store_select(s, &st,
+                          "SELECT job_id, printer FROM prints WHERE id IN (SELECT max(id) FROM"
+                          " prints WHERE job_id BETWEEN ?1 AND ?2 GROUP BY job_id) ORDER BY job_id",
+                          (void **)rows, n, err);
+    if (rc == SF_OK) {
+        sqlite3_bind_int64(st, 1, lo);
+        sqlite3_bind_int64(st, 2, hi);
+        rc = store_read_rows(s, st, sizeof(**rows), read_job_printer, (void **)rows, n,
+                             "last printers", err);
+    }
+    return rc;
+}
+
+static void
 read_tally(sqlite3_stmt *st, void *row)
 {
     struct print_tally *t = row;

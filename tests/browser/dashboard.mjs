@@ -9,55 +9,15 @@
 // came from the event stream, not a reload.
 import { spawn } from "node:child_process";
 import fs from "node:fs";
-import os from "node:os";
 import path from "node:path";
 import { chromium } from "playwright-core";
+import { LONG, accessible, apiGet, check, confirmed, env, log, runChromium, until } from "./lib.mjs";
 
-const env = (k) => {
-  const v = process.env[k];
-  if (!v) throw new Error(`dashboard.mjs: ${k} is not set (run dashboard.sh)`);
-  return v;
-};
 const URL = env("SF_URL"), RW = env("SF_RW"), RO = env("SF_RO"), PARTS = env("SF_PARTS");
 const SHOTS = env("SF_SHOTS");
-const LONG = 300000; // ms: a slow sanitizer build on a loaded machine
-
-let step = "start";
-const log = (s) => {
-  step = s;
-  console.log("  " + s);
-};
 const problems = [];
 
-function check(cond, what) {
-  if (!cond) throw new Error(`${step}: ${what}`);
-}
-
-const userDir = fs.mkdtempSync(path.join(os.tmpdir(), "sfchromium-"));
-const ctx = await chromium.launchPersistentContext(userDir, {
-  executablePath: "/usr/bin/chromium",
-  headless: true,
-  viewport: { width: 1280, height: 800 },
-  args: ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync"],
-});
-let exitCode = 1;
-try {
-  await run();
-  exitCode = 0;
-} catch (e) {
-  console.log(`FAIL at "${step}": ${e.message}`);
-  for (const p of ctx.pages()) {
-    try {
-      await p.screenshot({ path: path.join(SHOTS, "failure.png"), fullPage: true });
-      console.log("  page text: " + (await p.locator("body").innerText()).slice(0, 1500).replace(/\n+/g, " | "));
-    } catch (e2) { /* the page is gone */ }
-  }
-} finally {
-  await ctx.close();
-  fs.rmSync(userDir, { recursive: true, force: true });
-}
-process.exit(exitCode);
+await runChromium("failure.png", run);
 
 function watch(page) {
   page.on("pageerror", (e) => problems.push("page error: " + e.message));
@@ -68,7 +28,6 @@ function watch(page) {
   });
 }
 
-const card = (page, name) => page.locator(`article.printer[data-printer="${name}"]`);
 
 async function waitCard(page, name, state) {
   await page.waitForSelector(`article.printer[data-printer="${name}"][data-state="${state}"]`,
@@ -148,17 +107,7 @@ async function jobState(page, id) {
   return (await apiJob(id)).job.state;
 }
 
-// Poll cond (async) until it holds, within LONG.
-async function until(cond, what) {
-  const end = Date.now() + LONG;
-  while (Date.now() < end) {
-    if (await cond()) return;
-    await new Promise((w) => setTimeout(w, 200));
-  }
-  throw new Error(`${step}: timed out waiting for ${what}`);
-}
-
-async function run() {
+async function run(ctx) {
   const page = await ctx.newPage();
   watch(page);
 
@@ -182,6 +131,7 @@ async function run() {
   await page.evaluate(() => (window.__sentinel = "no reload"));
   await page.waitForSelector("#conn.live", { timeout: 60000 });
   await checkNames(page, "printer grid");
+  await accessible(page, "printer grid");
 
   log("submit a tee through the form (file input), oriented, to mk3");
   const j1 = await submitForm(page, { file: `${PARTS}/tee.stl`, method: "orient", target: "printer:mk3" });
@@ -215,11 +165,24 @@ async function run() {
   await page.locator("#layer-box").scrollIntoViewIfNeeded();
   await page.screenshot({ path: `${SHOTS}/job-layers-1280.png` });
   await checkNames(page, "job page");
+  await accessible(page, "job page");
 
   log("mk3 waits for its bed to be cleared: press Bed cleared");
   await page.getByRole("link", { name: "back to the farm" }).click();
   await waitCard(page, "mk3", "awaiting-clear");
+  // the card says what is on the bed: the job, its copy and how it ended
+  await page.waitForFunction((id) => {
+    const t = document.querySelector('article.printer[data-printer="mk3"] .job').textContent;
+    return t.includes(`#${id}`) && /copy 1 of 1 — done, bed not cleared/.test(t);
+  }, j1, { timeout: 60000 });
+  // asked first; "Go back" leaves the bed as it is
   await page.getByRole("button", { name: "Bed cleared on mk3" }).click();
+  await page.locator("#confirm").waitFor({ state: "visible" });
+  check(/mk3 takes the next job at once/.test(await page.locator("#confirm").innerText()), "Bed cleared dialog");
+  await page.getByRole("button", { name: "Go back" }).click();
+  await page.locator("#confirm").waitFor({ state: "hidden" });
+  check((await apiGet("/api/printers/mk3")).printer.state === "awaiting-clear", "Go back cleared the bed");
+  await confirmed(page, page.getByRole("button", { name: "Bed cleared on mk3" }), "The bed is clear");
   await waitCard(page, "mk3", "idle");
 
   log("a job no printer can take waits, saying why; reorder the queue");
@@ -254,7 +217,7 @@ async function run() {
   await page.getByRole("button", { name: "Pause mini" }).click();
   await waitCard(page, "mini", "paused");
   check((await jobState(page, j2)) === "paused", "job not paused");
-  await page.waitForSelector(`#queue tr[data-job="${j2}"][data-state="paused"]`, { timeout: 60000 });
+  await page.waitForSelector(`#printing tr[data-job="${j2}"][data-state="paused"]`, { timeout: 60000 });
   await page.getByRole("button", { name: "Resume mini" }).click();
   await waitCard(page, "mini", "printing");
   log("printer grid screenshots while mini prints (1280x800, 390 px)");
@@ -268,11 +231,13 @@ async function run() {
   check(wide <= 390, `the page is ${wide} px wide on a 390 px screen`);
   await page.screenshot({ path: `${SHOTS}/grid-390.png`, fullPage: true });
   await checkNames(page, "printer grid at 390 px");
+  await accessible(page, "printer grid at 390 px");
   await page.setViewportSize({ width: 1280, height: 800 });
 
-  log("cancel the waiting jobs from the queue");
+  log("cancel the waiting jobs from the queue (each asks first, naming the job and its copies)");
   for (const id of q) {
-    await page.getByRole("button", { name: `Cancel job ${id}`, exact: true }).click();
+    const said = await confirmed(page, page.getByRole("button", { name: `Cancel job ${id}`, exact: true }), `Cancel job #${id}`);
+    check(said.includes(`cancels job #${id} (tpu`) && said.includes("its 1 remaining copy"), "cancel dialog: " + said);
     await page.waitForSelector(`#queue tr[data-job="${id}"]`, { state: "detached", timeout: 60000 });
   }
 
@@ -299,12 +264,15 @@ async function run() {
   await ro.waitForSelector("#who", { state: "visible" });
   check((await ro.locator("#who").innerText()) === "read-only key", "not shown as read-only");
   await ro.waitForSelector(`#finished tr[data-job="${j2}"]`, { state: "attached", timeout: 60000 });
+  // only buttons that change nothing on the farm: the view, notifications, Log out
+  const VIEW_ONLY = ["Log out", "Notify me", "List view"];
   const roButtons = await ro.locator("button:visible").allInnerTexts();
-  check(roButtons.length === 1 && roButtons[0] === "Log out", "read-only page has buttons: " + roButtons);
+  check(roButtons.every((b) => VIEW_ONLY.includes(b)), "read-only page has buttons: " + roButtons);
   check(!(await ro.getByRole("link", { name: "Submit a part" }).isVisible()), "read-only page offers submit");
   await ro.goto(URL + `/#job/${j1}`);
   await ro.waitForSelector(`#view-job[data-job="${j1}"][data-state="done"]`, { timeout: 60000 });
-  check((await ro.locator("button:visible").count()) === 1, "read-only job page has buttons");
+  check((await ro.locator("button:visible").allInnerTexts()).every((b) => VIEW_ONLY.includes(b)),
+    "read-only job page has buttons");
   await other.close();
 
   log("the daemon is killed mid-print: the page says the connection is lost, asks for the key again, recovers");
@@ -317,6 +285,10 @@ async function run() {
   process.kill(Number(env("SF_PID")), "SIGKILL");
   await page.waitForSelector("#banner:not([hidden])", { timeout: 60000 });
   check((await page.locator("#conn").innerText()) === "reconnecting", "badge does not say reconnecting");
+  // nothing can be asked of a daemon that is gone: every action button is off
+  const live = await page.evaluate(() => [...document.querySelectorAll("#app button")]
+    .filter((b) => !b.disabled && (b.offsetParent !== null)).map((b) => b.getAttribute("aria-label") || b.textContent));
+  check(live.length === 0, "buttons still live while the daemon is down: " + live.join(", "));
   const out = fs.openSync(env("SF_LOG"), "a");
   const d = await startDaemon(out);
   fs.writeFileSync(env("SF_PIDFILE"), String(d.pid));
@@ -325,13 +297,21 @@ async function run() {
   await page.waitForSelector("#banner[hidden]", { state: "attached", timeout: LONG });
   await page.waitForSelector("#conn.live", { timeout: LONG });
   check(await page.evaluate(() => window.__sentinel === "no reload"), "the page was reloaded");
+  check(await page.locator("#error").isHidden(), "an error stays on screen after the daemon is back: " +
+    await page.locator("#error").innerText());
 
-  log(`job ${j3} was interrupted: resume it from its line in the queue`);
-  await page.waitForSelector(`#queue tr[data-job="${j3}"][data-state="interrupted"]`, { timeout: LONG });
+  log(`job ${j3} was interrupted: the card shows mini blocked by it, the queue offers to resume it`);
+  await page.waitForSelector(`#printing tr[data-job="${j3}"][data-state="interrupted"]`, { timeout: LONG });
   await waitCard(page, "mini", "idle");
+  await page.waitForSelector('article.printer[data-printer="mini"][data-shown="blocked"]', { timeout: LONG });
+  const mj = await page.locator('article.printer[data-printer="mini"] .job').innerText();
+  check(mj.includes(`#${j3}`) && /interrupted at line \d+/.test(mj), "blocked card: " + mj);
+  check(await page.getByRole("button", { name: "Restart the job on mini" }).isVisible(), "no Restart on the blocked card");
+  check((await page.title()).startsWith("(1)"), "the tab's title does not count the blocked printer: " + await page.title());
   const line = page.getByLabel(`Line to resume job ${j3} from`);
   check(Number(await line.inputValue()) > 0, "no line to resume from");
   await page.getByRole("button", { name: `Resume job ${j3} from the chosen line` }).click();
+  await page.waitForSelector('article.printer[data-printer="mini"]:not([data-shown="blocked"])', { timeout: LONG });
   await page.waitForSelector(`#finished tr[data-job="${j3}"][data-state="done"]`, { state: "attached", timeout: LONG });
   const prints = (await apiJob(j3)).prints.map((p) => [p.outcome, p.start_line]);
   check(prints.length === 2 && prints[0][0] === "interrupted" && prints[1][0] === "done" && prints[1][1] > 0,

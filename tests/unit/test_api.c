@@ -607,6 +607,12 @@ T_CASE(api_path_traversal_in_file_names_is_refused)
         }
         T_TRUE(strstr(jstr(&b, NULL, "error"), "file name") != NULL);
     }
+    /* a name over the limit is refused as too long, saying the limit */
+    char long_name[200];
+    memset(long_name, 'a', sizeof(long_name));
+    memcpy(long_name + sizeof(long_name) - 5, ".stl", 5);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, long_name, "x", 1, NULL, &b), 400);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "is 199 bytes: at most 127 bytes") != NULL);
     /* no file of theirs landed outside the data dir, and no job was added */
     T_EQ_INT(get("/api/jobs", KEY_RW, &b), 200);
     json_t *root = json_loads(b.data, 0, NULL);

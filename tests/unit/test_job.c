@@ -3,6 +3,7 @@
  * illegal event refused with a message, copies and retries counted.
  */
 #include "../../src/farm/job.h"
+#include "../../src/farm/printer.h"
 #include "../t.h"
 
 /* Drive a job through events; returns the final state or -1 on refusal. */
@@ -88,6 +89,23 @@ T_CASE(job_refused_start_spends_no_retry)
     enum printer_state ps;
     T_OK(printer_next(PRINTER_PRINTING, PRINTER_EV_REFUSED, false, &ps, NULL), NULL);
     T_EQ_INT(ps, PRINTER_IDLE);
+}
+
+/* An operator's stop of one copy: the job prints it again, no counter moves. */
+T_CASE(job_cancel_copy_prints_the_copy_again)
+{
+    static const enum job_state on_printer[] = { JOB_PRINTING, JOB_PAUSED },
+                                elsewhere[] = { JOB_READY, JOB_DONE };
+    for (size_t i = 0; i < 2; i++) {
+        struct job_counts c = { 3, 1, 0, 1 };
+        enum job_state to = JOB_DONE;
+        T_OK(job_next(on_printer[i], JOB_EV_CANCEL_COPY, &c, &to, NULL), NULL);
+        T_TRUE(to == JOB_READY && c.copies_done == 1 && c.failures == 0);
+        T_EQ_INT(job_next(elsewhere[i], JOB_EV_CANCEL_COPY, &c, &to, NULL), SF_EINVAL);
+    }
+    T_EQ_STR(job_event_name(JOB_EV_CANCEL_COPY), "cancel-copy");
+    enum printer_action a;
+    T_TRUE(printer_action_parse("cancel-copy", &a) && a == PRINTER_ACT_CANCEL_COPY);
 }
 
 T_CASE(job_illegal_events_refused)

@@ -1017,3 +1017,77 @@ T_CASE(store_open_refuses_a_data_dir_in_use)
     T_TRUE((s = store_open(dir, NULL, &err)) != NULL);
     store_close(s);
 }
+
+/* A store in a fresh dir named dir holding one job of copies (its id in *id). */
+static struct store *
+store_with_job(const char *dir, int copies, int64_t *id)
+{
+    struct sf_err err;
+    struct store *s = store_open(fresh_dir(dir), NULL, &err);
+    *id = s ? add_job(s, "solid part", copies, &err) : 0;
+    return s;
+}
+
+/* An operator stops one copy: the print ends "cancelled", the job waits to
+   print that copy again, and the printer's bed names it. */
+T_CASE(store_cancel_copy_keeps_the_job_and_the_bed_names_it)
+{
+    struct sf_err err;
+    int64_t id;
+    struct store *s = store_with_job("copy", 3, &id);
+    T_TRUE(s && id > 0);
+    T_OK(make_ready(s, id, &err), &err);
+    struct store_bed *beds;
+    size_t n;
+    T_OK(store_printer_set(s, "mk3", PRINTER_IDLE, &err), &err);
+    T_OK(store_printer_set(s, "mini", PRINTER_IDLE, &err), &err);
+    T_OK(store_beds(s, &beds, &n, &err), &err);
+    T_TRUE(n == 2 && beds[0].last.id == 0 && beds[1].last.id == 0); /* nothing printed yet */
+    free(beds);
+    struct job_event_args start = { .printer = "mk3" };
+    T_OK(store_job_event(s, id, JOB_EV_START, &start, NULL, &err), &err);
+    struct job_event_args stop = { .lines_acked = 42, .reason = "copy cancelled" };
+    enum job_state to;
+    T_OK(store_job_event(s, id, JOB_EV_CANCEL_COPY, &stop, &to, &err), &err);
+    T_EQ_INT(to, JOB_READY);
+    struct job_row j;
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    T_TRUE(j.counts.copies_done == 0 && j.counts.failures == 0);
+    T_OK(store_printer_bed_set(s, "mk3", true, &err), &err);
+    T_OK(store_beds(s, &beds, &n, &err), &err);
+    T_EQ_INT(n, 2); /* by name: mini, mk3 */
+    T_TRUE(beds[0].last.id == 0 && !beds[0].bed_full);
+    T_EQ_STR(beds[1].printer, "mk3");
+    T_TRUE(beds[1].bed_full && beds[1].interrupted_job == 0);
+    struct print_row *last = &beds[1].last;
+    T_TRUE(last->job_id == id && last->copy == 1 && last->lines_acked == 42);
+    T_EQ_STR(last->outcome, "cancelled");
+    T_EQ_STR(beds[1].job_name, "part.stl");
+    T_EQ_INT(beds[1].copies, 3);
+    free(beds);
+    T_OK(store_check(s, &err), &err);
+    store_close(s);
+}
+
+/* A reason longer than a job row holds is cut at a word, with "...". */
+T_CASE(store_long_reason_is_cut_at_a_word)
+{
+    struct sf_err err;
+    int64_t id;
+    struct store *s = store_with_job("reason", 1, &id);
+    T_TRUE(s && id > 0);
+    char why[300] = "waits for a printer: ";
+    for (int i = 0; strlen(why) < 250; i++)
+        snprintf(why + strlen(why), sizeof(why) - strlen(why), "%sprinter-%02d is printing",
+                 i ? "; " : "", i);
+    T_OK(store_job_set_reason(s, id, why, &err), &err);
+    struct job_row j;
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    size_t n = strlen(j.reason);
+    T_TRUE(n > 100 && n < sizeof(j.reason));
+    T_EQ_STR(j.reason + n - 3, "...");
+    /* what is kept is the reason's start, ending where a word ends */
+    T_TRUE(strncmp(j.reason, why, n - 3) == 0);
+    T_TRUE(why[n - 3] == ';' || why[n - 3] == ' ');
+    store_close(s);
+}

@@ -31,6 +31,10 @@ const st = {
   refreshTimer: 0,
   tempTimer: 0,
   view: "",
+  down: false, // the daemon does not answer: every action button is disabled
+  lastRead: new Map(), // printer name -> {t, noz, bed}: temperatures last read while online
+  needs: new Map(), // printer name -> what it needs from the operator ("" none)
+  notify: false, // browser notifications granted and asked for
 };
 
 function el(tag, attrs, ...kids) {
@@ -78,21 +82,65 @@ async function api(path, opts) {
   return body;
 }
 
-// An action button's handler: run it, show its error, refresh.
+// An action button's handler: run it, show its error, refresh.  A fetch
+// that finds no daemon says so in words (it never reached the farm).
 function act(fn) {
   return async (ev) => {
     const b = ev && ev.currentTarget;
+    if (st.down) return;
     if (b) b.disabled = true;
     try {
       showError("");
       await fn();
     } catch (e) {
-      if (e.status !== 401) showError(e.message);
+      if (e.status !== 401) showError(e.status ? e.message : "The farm did not answer: nothing was done. Try again once it is back.");
     } finally {
-      if (b) b.disabled = false;
+      if (b) b.disabled = st.down;
       scheduleRefresh(0);
     }
   };
+}
+
+// ---- guarded actions: a dialog says in words what will happen ----
+
+// Ask text; resolves true when the operator presses the button named ok.
+function ask(title, text, ok) {
+  const d = $("#confirm");
+  $("#confirm-title").textContent = title;
+  $("#confirm-text").textContent = text;
+  $("#confirm-ok").textContent = ok;
+  return new Promise((done) => {
+    d.addEventListener("close", () => done(d.returnValue === "ok"), { once: true });
+    d.returnValue = "";
+    d.showModal();
+    $("#confirm-no").focus(); // the safe answer is the default
+  });
+}
+
+// A handler that asks (what() gives [title, text, ok] at click time) and then acts.
+function guarded(what, fn) {
+  const go = act(fn);
+  return async (ev) => {
+    const b = ev.currentTarget;
+    if (st.down) return;
+    const [title, text, ok] = what();
+    if (await ask(title, text, ok)) go({ currentTarget: b });
+  };
+}
+
+function copiesLeft(j) {
+  return j ? Math.max(0, j.copies - j.copies_done) : 0;
+}
+
+// "cancel job #8 (bigbox) and its 2 remaining copies"
+function jobCancelText(j, id) {
+  const left = copiesLeft(j);
+  const name = j ? ` (${j.name})` : "";
+  const on = j && (j.state === "printing" || j.state === "paused")
+    ? ` The copy printing on ${j.printer} stops; its part stays on the bed.` : "";
+  return [`Cancel job #${id}?`,
+    `This cancels job #${id}${name} and its ${left} remaining ${left === 1 ? "copy" : "copies"}: ` +
+    `none of them will be printed.${on}`, `Cancel job #${id}`];
 }
 
 // ---- login ----
@@ -125,6 +173,7 @@ function loggedOut(msg) {
   $("#login").hidden = false;
   $("#who").textContent = "";
   setConn("offline", "");
+  setDown(false);
   $("#login-error").textContent = msg || "";
   $("#key").focus();
 }
@@ -147,9 +196,25 @@ function setConn(text, cls) {
   c.className = "badge " + cls;
 }
 
+// The daemon is gone (down) or back: every action button is disabled while
+// it is gone, and what failed meanwhile is not left on screen once it is back.
+function setDown(down) {
+  st.down = down;
+  document.body.classList.toggle("down", down);
+  applyDown();
+  if (!down) showError("");
+}
+
+function applyDown() {
+  for (const b of document.querySelectorAll("#app button")) {
+    if (st.down) b.disabled = true;
+    else if (b.dataset.keep !== "disabled") b.disabled = false;
+  }
+}
+
 const EVENT_KINDS = ["job-add", "job-priority", "printer-state", "printer-bed", "job-prepare",
   "job-prepared", "job-prepare-failed", "job-start", "job-pause", "job-resume", "job-print-done",
-  "job-print-failed", "job-cancel", "job-crashed", "job-restart", "job-defer"];
+  "job-print-failed", "job-cancel", "job-cancel-copy", "job-crashed", "job-restart", "job-defer"];
 
 function connect() {
   if (st.es) st.es.close();
@@ -159,12 +224,14 @@ function connect() {
     st.retryMs = 1000;
     $("#banner").hidden = true;
     setConn("live", "live");
+    setDown(false);
     scheduleRefresh(0); // whatever happened while we were away
   };
   es.onerror = () => {
     if (st.es !== es) return;
     $("#banner").hidden = false;
     setConn("reconnecting", "lost");
+    setDown(true);
     if (es.readyState === EventSource.CLOSED) {
       // refused (401: the session ended) or not an event stream: check
       // the session (a 401 brings back the login form), open a new stream
@@ -211,7 +278,7 @@ function scheduleRefresh(ms) {
   if (st.refreshTimer) return;
   st.refreshTimer = setTimeout(() => {
     st.refreshTimer = 0;
-    refreshAll().catch((e) => e.status !== 401 && showError(e.message));
+    refreshAll().catch((e) => e.status && e.status !== 401 && showError(e.message));
   }, ms);
 }
 
@@ -244,7 +311,9 @@ async function refreshAll() {
   for (const x of j.jobs) st.jobs.set(x.id, x);
   renderPrinters();
   renderQueue();
+  renderCounters();
   fillTargets();
+  applyDown();
   if (st.view.startsWith("job/")) renderJob(Number(st.view.slice(4)), false);
 }
 
@@ -268,36 +337,6 @@ function emergencyStop(name) {
   return (ev) => {
     if (window.confirm(`Emergency stop ${name}? It halts at once; the job on it fails and is not retried.`)) go(ev);
   };
-}
-
-function makeCard(p) {
-  const name = p.name;
-  const c = el("article", { class: "printer", "data-printer": name, "aria-label": "printer " + name });
-  c.append(
-    el("h3", {}, el("span", { text: name }), el("span", { class: "state" })),
-    el("p", { class: "muted spec" }),
-    el("p", { class: "job" }),
-    el("div", { class: "bar", role: "progressbar", "aria-label": "progress of " + name,
-      "aria-valuemin": "0", "aria-valuemax": "100" }, el("div")),
-    el("p", { class: "muted eta" }),
-    el("div", { class: "temps" }, el("span", { class: "t-noz" }), el("span", { class: "t-bed" })),
-    el("canvas", { class: "chart", width: "300", height: "60", role: "img",
-      "aria-label": "nozzle and bed temperature history of " + name }),
-    el("p", { class: "muted msg" }));
-  if (!st.readOnly) {
-    c.append(el("div", { class: "actions" },
-      el("button", { type: "button", class: "big", "data-act": "cleared",
-        "aria-label": "Bed cleared on " + name, onclick: printerAction(name, "cleared") }, "Bed cleared"),
-      el("button", { type: "button", "data-act": "pause", "aria-label": "Pause " + name,
-        onclick: printerAction(name, "pause") }, "Pause"),
-      el("button", { type: "button", "data-act": "resume", "aria-label": "Resume " + name,
-        onclick: printerAction(name, "resume") }, "Resume"),
-      el("button", { type: "button", class: "danger", "data-act": "cancel",
-        "aria-label": "Cancel the print on " + name, onclick: printerAction(name, "cancel") }, "Cancel"),
-      el("button", { type: "button", class: "danger", "data-act": "estop",
-        "aria-label": "Emergency stop " + name, onclick: emergencyStop(name) }, "Emergency stop")));
-  }
-  return c;
 }
 
 function drawChart(cv, hist) {
@@ -324,6 +363,149 @@ function drawChart(cv, hist) {
   }
 }
 
+function makeCard(p) {
+  const name = p.name;
+  const c = el("article", { class: "printer", "data-printer": name, "aria-label": "printer " + name });
+  c.append(
+    el("h3", {}, el("span", { class: "pname", text: name }), el("span", { class: "state" })),
+    el("p", { class: "muted spec" }),
+    el("p", { class: "job" }),
+    el("div", { class: "bar", role: "progressbar", "aria-label": "progress of " + name,
+      "aria-valuemin": "0", "aria-valuemax": "100" }, el("div")),
+    el("p", { class: "muted eta" }),
+    el("div", { class: "temps" }, el("span", { class: "t-noz" }), el("span", { class: "t-bed" })),
+    el("canvas", { class: "chart", width: "300", height: "60", role: "img",
+      "aria-label": "nozzle and bed temperature history of " + name }),
+    el("p", { class: "muted msg" }));
+  if (!st.readOnly) {
+    const job = () => st.jobs.get(st.printers.get(name).job_id) || null;
+    const held = () => st.printers.get(name).interrupted_job;
+    c.append(el("div", { class: "actions" },
+      el("button", { type: "button", class: "big", "data-act": "cleared", "aria-label": "Bed cleared on " + name,
+        onclick: guarded(() => ["Is the bed of " + name + " clear?",
+          `Only if the part is off the bed: ${name} takes the next job at once and prints onto the bed as it is.`,
+          "The bed is clear"], () => printerPost(name, "cleared")) }, "Bed cleared"),
+      el("button", { type: "button", class: "big", "data-act": "clear-error", "aria-label": "Clear error on " + name,
+        onclick: guarded(() => ["Clear the error on " + name + "?",
+          `Only once the fault is fixed and the bed is clear: ${name} leaves the error when it reports ready and takes the next job.`,
+          "Clear the error"], () => printerPost(name, "cleared")) }, "Clear error"),
+      el("button", { type: "button", "data-act": "pause", "aria-label": "Pause " + name,
+        onclick: printerAction(name, "pause") }, "Pause"),
+      el("button", { type: "button", "data-act": "resume", "aria-label": "Resume " + name,
+        onclick: printerAction(name, "resume") }, "Resume"),
+      el("button", { type: "button", "data-act": "job-resume", "aria-label": "Resume job on " + name,
+        onclick: act(() => api(`/api/jobs/${held()}/resume`, { method: "POST" })) }, "Resume job"),
+      el("button", { type: "button", "data-act": "job-restart", "aria-label": "Restart the job on " + name,
+        onclick: guarded(() => restartText(held(), st.jobs.get(held())),
+          () => api(`/api/jobs/${held()}/restart`, { method: "POST" })) }, "Restart"),
+      el("button", { type: "button", class: "danger", "data-act": "cancel", "aria-label": "Stop this copy on " + name,
+        onclick: guarded(() => copyCancelText(name, job()), () => printerPost(name, "cancel-copy")) }, "Stop this copy"),
+      el("button", { type: "button", class: "danger", "data-act": "job-cancel", "aria-label": "Cancel job on " + name,
+        onclick: guarded(() => jobCancelText(st.jobs.get(held()), held()),
+          () => api(`/api/jobs/${held()}/cancel`, { method: "POST" })) }, "Cancel job"),
+      el("button", { type: "button", class: "danger", "data-act": "estop", "aria-label": "Emergency stop " + name,
+        onclick: emergencyStop(name) }, "Emergency stop")));
+  }
+  return c;
+}
+
+function printerPost(name, action) {
+  return api(`/api/printers/${encodeURIComponent(name)}/${action}`, { method: "POST" });
+}
+
+function restartText(id, j) {
+  return [`Restart job #${id}?`, `This prints the interrupted copy of job #${id}${j ? ` (${j.name})` : ""} again ` +
+    "from its first line: take the half-printed part off the bed first.", "Print it again"];
+}
+
+// The card's Stop: this copy only; the job goes on and prints it again.
+function copyCancelText(name, j) {
+  const copy = j ? `copy ${j.copies_done + 1} of ${j.copies} of job #${j.id} (${j.name})` : "the copy";
+  return [`Stop the copy on ${name}?`, `This stops ${copy} on ${name} and prints it again later; ` +
+    "the part stays on the bed until you clear it. The rest of the job goes on. " +
+    "To cancel the whole job, use Cancel in the queue.", "Stop this copy"];
+}
+
+function pct(n, of) {
+  return of > 0 ? Math.min(100, Math.round((100 * n) / of)) : 0;
+}
+
+// What a printer shows as its state: the daemon's, or what it means for
+// the operator (disabled, blocked by an interrupted job, heating).
+function shownState(p) {
+  if (!p.enabled) return "disabled";
+  if (p.interrupted_job && p.state !== "printing" && p.state !== "paused") return "blocked";
+  if (p.state === "printing" && heating(p)) return "heating";
+  return p.state;
+}
+
+// Printing, but the print has not begun: the heaters are on their way up
+// (or not told yet).
+function heating(p) {
+  const t = p.temps;
+  if (p.progress >= 0.05) return false; // a target raised mid-print is not a start
+  const cold = (v, to) => to > 0 && v < to - 3;
+  return cold(t.nozzle_c, t.nozzle_target_c) || cold(t.bed_c, t.bed_target_c) ||
+    (t.nozzle_target_c === 0 && t.bed_target_c === 0);
+}
+
+// "#8 bigbox · copy 2 of 3 — cancelled at 12 %, bed not cleared": the last
+// print on the printer, when that is what its bed holds.
+function lastPrintLine(p) {
+  const l = p.last_print;
+  if (!l) return null;
+  const at = l.outcome === "done" ? "done" : l.outcome
+    ? `${l.outcome} at ${pct(l.lines_acked, l.gcode_lines)} %` : "printing";
+  const bed = p.bed_full ? ", bed not cleared" : "";
+  return [l.job_id, `${l.job_name} · copy ${l.copy} of ${l.copies} — ${at}${bed}`];
+}
+
+function jobLine(p, jp) {
+  jp.textContent = "";
+  const link = (id, text) => jp.append(el("a", { href: `#job/${id}` }, `#${id}`), " " + text);
+  const j = p.job_id ? st.jobs.get(p.job_id) : null;
+  if (p.job_id) {
+    link(p.job_id, j ? `${j.name} · copy ${j.copies_done + 1} of ${j.copies}` : "");
+  } else if (p.interrupted_job) {
+    const h = st.jobs.get(p.interrupted_job);
+    link(p.interrupted_job, (h ? h.name + " — " : "") + "interrupted" +
+      (h ? ` at line ${h.lines_acked} of ${h.gcode_lines} (${pct(h.lines_acked, h.gcode_lines)} %)` : "") +
+      ": its part is on the bed");
+  } else if (lastPrintLine(p) && (p.bed_full || p.state === "error" || p.state === "awaiting-clear")) {
+    const [id, text] = lastPrintLine(p);
+    link(id, text);
+  } else {
+    jp.append(el("span", { class: "muted", text: p.bed_full ? "no job; a part is on the bed" : "no job" }));
+  }
+}
+
+// Offline: what was last read is not now; say when it was read.
+function tempsLine(p, c) {
+  const t = p.temps;
+  if (p.state !== "offline") {
+    st.lastRead.set(p.name, { t: Date.now(), noz: t.nozzle_c, bed: t.bed_c });
+    $(".t-noz", c).textContent = `nozzle ${t.nozzle_c.toFixed(0)} / ${t.nozzle_target_c.toFixed(0)} °C`;
+    $(".t-bed", c).textContent = `bed ${t.bed_c.toFixed(0)} / ${t.bed_target_c.toFixed(0)} °C`;
+    return "";
+  }
+  $(".t-noz", c).textContent = "nozzle unknown";
+  $(".t-bed", c).textContent = "bed unknown";
+  if (!p.enabled) return ""; // never read: the farm does not talk to it
+  const r = st.lastRead.get(p.name);
+  return r ? `Temperatures unknown: last read ${r.noz.toFixed(0)} / ${r.bed.toFixed(0)} °C at ${new Date(r.t).toLocaleTimeString()}.`
+    : "Temperatures unknown: not read since this page opened.";
+}
+
+// What the printer needs from the operator, in words ("" nothing).
+function needs(p) {
+  if (!p.enabled) return "";
+  if (p.interrupted_job && p.state !== "printing" && p.state !== "paused")
+    return `holds interrupted job #${p.interrupted_job}: resume it, restart it or cancel it`;
+  if (p.state === "awaiting-clear") return "take the part off the bed, then press Bed cleared";
+  if (p.state === "error") return "error: fix the printer and clear the bed, then press Clear error";
+  return "";
+}
+
 function renderPrinters() {
   const grid = $("#printers");
   for (const [name, c] of st.cards) if (!st.printers.has(name)) { c.remove(); st.cards.delete(name); }
@@ -334,84 +516,210 @@ function renderPrinters() {
       st.cards.set(p.name, c);
       grid.append(c);
     }
-    c.className = "printer s-" + p.state;
+    const shown = shownState(p);
+    c.className = "printer s-" + shown;
     c.dataset.state = p.state;
-    $(".state", c).textContent = p.state;
+    c.dataset.shown = shown;
+    $(".state", c).textContent = shown;
     $(".spec", c).textContent = `${p.material || "no material"} · ${p.nozzle_mm} mm nozzle` +
-      (p.group ? ` · group ${p.group}` : "") + (p.enabled ? "" : " · disabled");
-    const job = p.job_id ? st.jobs.get(p.job_id) : null;
-    const jp = $(".job", c);
-    jp.textContent = "";
-    if (p.job_id) {
-      jp.append(el("a", { href: `#job/${p.job_id}` }, `#${p.job_id} ${job ? job.name : ""}`));
-    } else {
-      jp.append(el("span", { class: "muted", text: "no job" }));
-    }
-    const pct = Math.round((p.progress || 0) * 100);
+      (p.group ? ` · group ${p.group}` : "");
+    jobLine(p, $(".job", c));
+    const pc = Math.round((p.progress || 0) * 100);
     const bar = $(".bar", c);
-    bar.setAttribute("aria-valuenow", String(pct));
-    bar.firstChild.style.width = (p.job_id ? pct : 0) + "%";
+    bar.setAttribute("aria-valuenow", String(pc));
+    bar.firstChild.style.width = (p.job_id ? pc : 0) + "%";
     let eta = "";
-    if (p.job_id) {
+    if (p.job_id && shown === "heating") {
+      const t = p.temps;
+      eta = `heating: nozzle ${t.nozzle_c.toFixed(0)} → ${t.nozzle_target_c.toFixed(0)} °C, bed ${t.bed_c.toFixed(0)} → ${t.bed_target_c.toFixed(0)} °C`;
+    } else if (p.job_id) {
       // the printer's own estimate when it gives one, else the farm's (the G-code's)
       const whose = p.time_left_from === "printer" ? "the printer's estimate" : "the farm's estimate";
-      eta = `${pct} %` + (p.time_left_s != null && p.time_left_from
-        ? ` · about ${fmtTime(p.time_left_s)} left (${whose})` : "");
+      eta = `${pc} %` + (p.time_left_s != null && p.time_left_from
+        ? ` · about ${fmtTime(p.time_left_s)} left (${whose}), done about ${clock(Date.now() + p.time_left_s * 1000)}` : "");
     }
     $(".eta", c).textContent = eta;
-    const t = p.temps;
-    $(".t-noz", c).textContent = `nozzle ${t.nozzle_c.toFixed(0)} / ${t.nozzle_target_c.toFixed(0)} °C`;
-    $(".t-bed", c).textContent = `bed ${t.bed_c.toFixed(0)} / ${t.bed_target_c.toFixed(0)} °C`;
-    drawChart($("canvas", c), st.hist.get(p.name) || []);
-    $(".msg", c).textContent = p.state === "awaiting-clear" ? "Take the part off the bed, then press Bed cleared." : p.message || "";
+    const unknown = tempsLine(p, c);
+    drawChart($("canvas", c), p.state === "offline" ? [] : st.hist.get(p.name) || []);
+    const need = needs(p);
+    st.needs.set(p.name, need);
+    $(".msg", c).textContent = [need, p.message, unknown].filter((x) => x).map(sentence).join(" ");
     if (!st.readOnly) {
+      const blocked = shown === "blocked";
       const show = {
-        cleared: p.state === "awaiting-clear",
-        pause: p.state === "printing",
+        cleared: p.state === "awaiting-clear" && !blocked,
+        "clear-error": p.state === "error",
+        pause: p.state === "printing" && !!p.job_id,
         resume: p.state === "paused",
-        cancel: p.state === "printing" || p.state === "paused",
-        estop: p.state !== "offline" && p.state !== "error",
+        cancel: (p.state === "printing" || p.state === "paused") && !!p.job_id,
+        "job-resume": blocked && p.state === "idle",
+        "job-restart": blocked,
+        "job-cancel": blocked,
+        estop: p.state !== "offline" && p.state !== "error" && p.enabled,
       };
       for (const b of c.querySelectorAll("button[data-act]")) b.hidden = !show[b.dataset.act];
     }
   }
+  notifyNeeds();
+}
+
+// "link lost" -> "Link lost."
+function sentence(t) {
+  t = t.trim();
+  return t[0].toUpperCase() + t.slice(1) + (/[.!?]$/.test(t) ? "" : ".");
+}
+
+// Clock time of ms ("14:05").
+function clock(ms) {
+  return new Date(ms).toLocaleTimeString([], { hour: "2-digit", minute: "2-digit" });
+}
+
+// ---- what needs the operator: the tab's title, browser notifications ----
+
+const told = new Map(); // printer name -> the need last notified
+
+function notifyNeeds() {
+  let n = 0;
+  for (const [name, need] of st.needs) {
+    if (need) n++;
+    if (need && told.get(name) !== need && st.notify && told.has(name))
+      new Notification(`slimfarm: ${name}`, { body: need, tag: "slimfarm-" + name });
+    told.set(name, need);
+  }
+  document.title = n ? `(${n}) slimfarm: ${n} need${n === 1 ? "s" : ""} you` : "slimfarm";
+  const b = $("#notify");
+  if (b) b.hidden = st.notify || !("Notification" in window) || Notification.permission === "denied";
+}
+
+async function askNotify() {
+  if (!("Notification" in window)) return;
+  const r = await Notification.requestPermission();
+  st.notify = r === "granted";
+  notifyNeeds();
+}
+
+// "9 printing · 2 need bed clear · 1 error · queue 4 h" over the grid.
+function renderCounters() {
+  const ps = [...st.printers.values()];
+  const count = (f) => ps.filter(f).length;
+  const printing = count((p) => p.state === "printing" || p.state === "paused");
+  const clear = count((p) => p.state === "awaiting-clear");
+  const err = count((p) => p.state === "error");
+  const blocked = count((p) => shownState(p) === "blocked");
+  const off = count((p) => p.state === "offline" && p.enabled);
+  const idle = count((p) => p.state === "idle" && shownState(p) === "idle");
+  let queue_s = 0, unknown = 0;
+  for (const j of st.jobs.values()) {
+    if (!["queued", "preparing", "ready"].includes(j.state)) continue;
+    if (j.est_s != null) queue_s += j.est_s * copiesLeft(j);
+    else unknown++;
+  }
+  const parts = [`${printing} printing`, `${idle} idle`];
+  if (clear) parts.push(`${clear} need bed clear`);
+  if (err) parts.push(`${err} error${err === 1 ? "" : "s"}`);
+  if (blocked) parts.push(`${blocked} blocked`);
+  if (off) parts.push(`${off} offline`);
+  parts.push(`queue ${queue_s ? fmtTime(queue_s) : "empty"}${unknown ? ` + ${unknown} not sliced yet` : ""}`);
+  $("#counters").textContent = parts.join(" · ");
 }
 
 // ---- queue ----
 
 const ACTIVE = ["queued", "preparing", "ready", "printing", "paused", "interrupted"];
+const WAITING = ["queued", "preparing", "ready"];
 
+// The scheduler's rule: higher priority first, then first come, first served.
 function queueOrder(a, b) {
   return b.priority - a.priority || a.id - b.id;
 }
 
+function fits(j, p) {
+  return (!j.target_printer || j.target_printer === p.name) && (!j.target_group || j.target_group === p.group) &&
+    (!j.material || j.material === p.material);
+}
+
+// Expected start and finish (ms, NaN unknown) of each waiting job: the queue
+// in its order given, copy by copy, to the printer of the job's kind that
+// frees first (now for an idle one, its time left for a printing one),
+// each copy taking the G-code's estimate.  A guide, not a promise: the
+// scheduler decides when a printer is free.
+function expectations(waiting) {
+  const now = Date.now(), free = new Map(), out = new Map();
+  for (const p of st.printers.values()) {
+    if (!p.enabled || shownState(p) === "blocked" || p.state === "offline" || p.state === "error") continue;
+    if (p.state === "idle" || p.state === "awaiting-clear") free.set(p.name, now);
+    else free.set(p.name, p.job_id && p.time_left_s != null ? now + p.time_left_s * 1000 : NaN);
+  }
+  for (const j of waiting) {
+    let start = NaN, end = NaN;
+    for (let k = 0; k < copiesLeft(j); k++) {
+      let best = null;
+      for (const [name, t] of free)
+        if (fits(j, st.printers.get(name)) && !isNaN(t) && (best === null || t < free.get(best))) best = name;
+      if (best === null) break;
+      if (k === 0) start = free.get(best);
+      end = j.est_s != null ? free.get(best) + j.est_s * 1000 : NaN;
+      free.set(best, end);
+    }
+    out.set(j.id, [start, end]);
+  }
+  return out;
+}
+
+function expectText(e) {
+  if (!e || isNaN(e[0])) return "no printer free for it yet";
+  const now = Date.now();
+  return (e[0] <= now + 60000 ? "start now" : `start ${clock(e[0])}`) + (isNaN(e[1]) ? " · finish once sliced" : ` · done ${clock(e[1])}`);
+}
+
 function renderQueue() {
   const jobs = [...st.jobs.values()];
-  const active = jobs.filter((j) => ACTIVE.includes(j.state)).sort(queueOrder);
+  const active = jobs.filter((j) => ACTIVE.includes(j.state));
+  const waiting = active.filter((j) => WAITING.includes(j.state)).sort(queueOrder);
+  const onPrinters = active.filter((j) => !WAITING.includes(j.state)).sort((a, b) => a.id - b.id);
   const done = jobs.filter((j) => !ACTIVE.includes(j.state)).sort((a, b) => b.id - a.id);
+  const pb = $("#printing tbody");
+  pb.textContent = "";
+  if (!onPrinters.length) pb.append(el("tr", {}, el("td", { colspan: "7", class: "muted", text: "Nothing is printing." })));
+  for (const j of onPrinters) {
+    const p = [...st.printers.values()].find((x) => x.job_id === j.id || x.interrupted_job === j.id);
+    const left = p && p.job_id === j.id && p.time_left_s != null ? `done about ${clock(Date.now() + p.time_left_s * 1000)}` : "";
+    const tr = el("tr", { "data-job": String(j.id), "data-state": j.state },
+      el("td", { "data-label": "Job" }, el("a", { href: `#job/${j.id}` }, `#${j.id}`)),
+      el("td", { "data-label": "Part", class: "name", text: j.name }),
+      el("td", { "data-label": "State", text: j.state }),
+      el("td", { "data-label": "Copy", text: `${Math.min(j.copies_done + 1, j.copies)} of ${j.copies}` }),
+      el("td", { "data-label": "Printer", text: j.printer || (p ? p.name : "") }),
+      el("td", { "data-label": "Expected", text: j.state === "interrupted" ? `stopped at line ${j.lines_acked} of ${j.gcode_lines}` : left }));
+    if (!st.readOnly) tr.append(el("td", { "data-label": "Actions" }, jobActions(j, null, null)));
+    pb.append(tr);
+  }
   const tb = $("#queue tbody");
   tb.textContent = "";
-  if (!active.length) tb.append(el("tr", {}, el("td", { colspan: "8", class: "muted", text: "The queue is empty." })));
-  active.forEach((j, i) => {
+  if (!waiting.length) tb.append(el("tr", {}, el("td", { colspan: "9", class: "muted", text: "No job waits." })));
+  const exp = expectations(waiting);
+  waiting.forEach((j, i) => {
     const link = el("a", { href: `#job/${j.id}` }, `#${j.id}`);
     // data-label: the column's name, shown beside each cell on a phone
     const tr = el("tr", { "data-job": String(j.id), "data-state": j.state },
-      el("td", { "data-label": "Job" }, link), el("td", { "data-label": "Part", text: j.name }),
+      el("td", { "data-label": "Job" }, link), el("td", { "data-label": "Part", class: "name", text: j.name }),
       el("td", { "data-label": "State", text: j.state }),
-      el("td", { "data-label": "Copies left", text: String(j.copies - j.copies_done) }),
+      el("td", { "data-label": "Copies left", text: String(copiesLeft(j)) }),
       el("td", { "data-label": "Priority", text: String(j.priority) }),
       el("td", { "data-label": "Printer", text: j.printer || j.target_printer || j.target_group || "any" }),
-      el("td", { "data-label": "Why it waits", class: "muted", text: j.reason || "" }));
-    if (!st.readOnly) tr.append(el("td", { "data-label": "Actions" }, jobActions(j, active[i - 1], active[i + 1])));
+      el("td", { "data-label": "Expected", class: "expect", text: expectText(exp.get(j.id)) }),
+      el("td", { "data-label": "Why it waits", class: "muted why", text: j.reason || "" }));
+    if (!st.readOnly) tr.append(el("td", { "data-label": "Actions" }, jobActions(j, waiting[i - 1], waiting[i + 1])));
     tb.append(tr);
   });
   const fb = $("#finished tbody");
   fb.textContent = "";
   for (const j of done.slice(0, 50)) {
     fb.append(el("tr", { "data-job": String(j.id), "data-state": j.state },
-      el("td", {}, el("a", { href: `#job/${j.id}` }, `#${j.id}`)), el("td", { text: j.name }),
+      el("td", {}, el("a", { href: `#job/${j.id}` }, `#${j.id}`)), el("td", { class: "name", text: j.name }),
       el("td", { text: j.state }), el("td", { text: `${j.copies_done} / ${j.copies}` }),
-      el("td", { text: j.printer || "" }), el("td", { class: "muted", text: j.reason || "" })));
+      el("td", { text: j.printer || j.last_printer || "" }), el("td", { text: fmtMs(j.updated_ms) }),
+      el("td", { class: "muted why", text: j.reason || "" })));
   }
 }
 
@@ -424,10 +732,12 @@ function setPriority(j, prio) {
 function jobActions(j, above, below) {
   const d = el("div", { class: "actions" });
   const id = j.id;
-  d.append(el("button", { type: "button", "aria-label": `Move job ${id} up`, disabled: !above,
-    onclick: act(() => setPriority(j, Math.max(j.priority + 1, above.priority + 1))) }, "▲"));
-  d.append(el("button", { type: "button", "aria-label": `Move job ${id} down`, disabled: !below,
-    onclick: act(() => setPriority(j, Math.min(j.priority - 1, below.priority - 1))) }, "▼"));
+  if (WAITING.includes(j.state)) {
+    d.append(el("button", { type: "button", "aria-label": `Move job ${id} up`, disabled: !above, "data-keep": above ? null : "disabled",
+      onclick: act(() => setPriority(j, Math.max(j.priority + 1, above.priority + 1))) }, "▲"));
+    d.append(el("button", { type: "button", "aria-label": `Move job ${id} down`, disabled: !below, "data-keep": below ? null : "disabled",
+      onclick: act(() => setPriority(j, Math.min(j.priority - 1, below.priority - 1))) }, "▼"));
+  }
   if (j.state === "interrupted") {
     // the last acknowledged line by default; the operator may pick another
     const line = el("input", { type: "number", min: "1", max: String(Math.max(1, j.gcode_lines - 1)),
@@ -438,10 +748,10 @@ function jobActions(j, above, below) {
         headers: { "Content-Type": "application/json" },
         body: JSON.stringify({ line: Number(line.value) }) })) }, "Resume"));
     d.append(el("button", { type: "button", "aria-label": `Restart job ${id} from the start`,
-      onclick: act(() => api(`/api/jobs/${id}/restart`, { method: "POST" })) }, "Restart"));
+      onclick: guarded(() => restartText(id, j), () => api(`/api/jobs/${id}/restart`, { method: "POST" })) }, "Restart"));
   }
   d.append(el("button", { type: "button", class: "danger", "aria-label": `Cancel job ${id}`,
-    onclick: act(() => api(`/api/jobs/${id}/cancel`, { method: "POST" })) }, "Cancel"));
+    onclick: guarded(() => jobCancelText(st.jobs.get(id) || j, id), () => api(`/api/jobs/${id}/cancel`, { method: "POST" })) }, "Cancel"));
   return d;
 }
 
@@ -465,19 +775,74 @@ function fillTargets() {
   for (const m of mats) dl.append(el("option", { value: m }));
 }
 
+const NAME_MAX = 127; // bytes of a part's file name (the daemon's JOB_NAME_MAX less its NUL)
+
+// Send one part with the form's options; onprogress(fraction) while it goes
+// up.  XMLHttpRequest, as fetch reports no upload progress.
+function upload(file, opts, onprogress) {
+  return new Promise((done, fail) => {
+    const fd = new FormData();
+    fd.append("file", file, file.name);
+    fd.append("options", JSON.stringify(opts));
+    const x = new XMLHttpRequest();
+    x.open("POST", "/api/jobs");
+    x.setRequestHeader("X-Csrf-Token", st.csrf);
+    x.upload.onprogress = (e) => e.lengthComputable && onprogress(e.loaded / e.total);
+    x.onload = () => {
+      let body = null;
+      try { body = JSON.parse(x.responseText); } catch (e) { body = null; }
+      if (x.status === 401) loggedOut("Your session ended: log in again.");
+      if (x.status >= 200 && x.status < 300) done(body);
+      else fail(new HttpError(x.status, (body && body.error) || `${x.status} ${x.statusText}`));
+    };
+    x.onerror = () => fail(new Error("The farm did not answer: the part was not sent."));
+    x.send(fd);
+  });
+}
+
+function submitOptions() {
+  const o = {
+    method: $("#method").value,
+    deviation_mm: Number($("#deviation").value),
+    copies: Number($("#copies").value),
+    priority: Number($("#priority").value),
+  };
+  const mat = $("#material").value.trim();
+  if (mat) o.material = mat;
+  const t = $("#target").value;
+  if (t.startsWith("printer:")) o.printer = t.slice(8);
+  if (t.startsWith("group:")) o.group = t.slice(6);
+  return o;
+}
+
+// What is wrong with a file's name before it is sent ("" nothing).
+function nameProblem(f) {
+  const n = new TextEncoder().encode(f.name).length;
+  if (n > NAME_MAX) return `${f.name.slice(0, 40)}…: the name is ${n} bytes; names are at most ${NAME_MAX} bytes: rename the file`;
+  if (!/\.(stl|obj|3mf|gcode)$/i.test(f.name)) return `${f.name}: not an STL, OBJ, 3MF or G-code file (by its name)`;
+  return "";
+}
+
 function setupSubmit() {
   const drop = $("#drop"), file = $("#file");
-  const shown = () => ($("#file-name").textContent = file.files[0] ? file.files[0].name : "");
-  file.addEventListener("change", shown);
+  let chosen = [];
+  const shown = () => {
+    $("#file-name").textContent = chosen.map((f) => f.name).join(", ");
+    const list = $("#uploads");
+    list.textContent = "";
+    for (const f of chosen)
+      list.append(el("li", { "data-file": f.name }, el("span", { class: "name", text: f.name }),
+        el("progress", { max: "1", value: "0", "aria-label": "upload of " + f.name }),
+        el("span", { class: "up-msg", text: nameProblem(f) })));
+  };
+  const choose = (files) => { chosen = [...files]; shown(); };
+  file.addEventListener("change", () => choose(file.files));
   drop.addEventListener("dragover", (e) => { e.preventDefault(); drop.classList.add("over"); });
   drop.addEventListener("dragleave", () => drop.classList.remove("over"));
   drop.addEventListener("drop", (e) => {
     e.preventDefault();
     drop.classList.remove("over");
-    if (e.dataTransfer.files.length) {
-      file.files = e.dataTransfer.files;
-      shown();
-    }
+    if (e.dataTransfer.files.length) choose(e.dataTransfer.files);
   });
   drop.addEventListener("keydown", (e) => {
     if (e.key === "Enter" || e.key === " ") { e.preventDefault(); file.click(); }
@@ -485,41 +850,40 @@ function setupSubmit() {
   $("#submit-form").addEventListener("submit", async (e) => {
     e.preventDefault();
     const msg = $("#submit-msg");
-    if (!file.files[0]) { msg.textContent = "Choose a part first."; return; }
-    const o = {
-      method: $("#method").value,
-      deviation_mm: Number($("#deviation").value),
-      copies: Number($("#copies").value),
-      priority: Number($("#priority").value),
-    };
-    const mat = $("#material").value.trim();
-    if (mat) o.material = mat;
-    const t = $("#target").value;
-    if (t.startsWith("printer:")) o.printer = t.slice(8);
-    if (t.startsWith("group:")) o.group = t.slice(6);
-    const fd = new FormData();
-    fd.append("file", file.files[0], file.files[0].name);
-    fd.append("options", JSON.stringify(o));
+    if (!chosen.length) { msg.textContent = "Choose a part first."; return; }
     const btn = $("#submit-btn");
     btn.disabled = true;
-    msg.textContent = "Uploading…";
-    try {
-      const r = await api("/api/jobs", { method: "POST", body: fd });
-      msg.textContent = `Job ${r.job.id} queued.`;
+    const ids = [], bad = [];
+    const o = submitOptions();
+    for (const f of chosen) {
+      const li = [...$("#uploads").children].find((x) => x.dataset.file === f.name);
+      const say = (t) => li && ($(".up-msg", li).textContent = t);
+      if (nameProblem(f)) { bad.push(nameProblem(f)); continue; }
+      msg.textContent = `Uploading ${f.name}…`;
+      try {
+        const r = await upload(f, o, (x) => li && ($("progress", li).value = x));
+        ids.push(r.job.id);
+        say(`job #${r.job.id} queued`);
+      } catch (err) {
+        bad.push(`${f.name}: ${err.message}`);
+        say(err.message);
+      }
+    }
+    btn.disabled = false;
+    msg.textContent = (ids.length ? `Queued: ${ids.map((i) => "#" + i).join(", ")}.` : "") +
+      (bad.length ? ` Refused: ${bad.join("; ")}` : "");
+    if (!bad.length) {
+      chosen = [];
       file.value = "";
       shown();
-      location.hash = `#job/${r.job.id}`;
-    } catch (err) {
-      msg.textContent = err.message;
-    } finally {
-      btn.disabled = false;
+      location.hash = ids.length === 1 ? `#job/${ids[0]}` : "#";
     }
   });
 }
 
 // ---- job page ----
 
-let jobShown = 0, layerData = null;
+let jobShown = 0; // layerData: layers.js
 
 function fact(k, v) {
   return el("tr", {}, el("th", { scope: "row", text: k }), el("td", { text: v }));
@@ -548,6 +912,37 @@ function deviation(j) {
   return `${head} (largest move ≈ ${(j.mndr * diag).toFixed(2)} mm of the ${j.deviation_mm} mm budget)`;
 }
 
+// Whether the part was changed, in words that agree with the job's fate and
+// with the deviation line ("shape kept").
+function partChanged(j, r) {
+  if (r.optimized) {
+    if (j.method === "orient" || ((j.method === "slim" || j.method === "surface") && !j.shape_changed))
+      return "yes: oriented (shape kept), the oriented part saved";
+    return "yes: oriented and shaped, the new part saved";
+  }
+  if (!j.gcode_sha) return j.state === "failed" ? "no: the job failed before it was prepared" : "not prepared yet";
+  return j.method === "none" ? "no: printed as uploaded" : "no: the part as uploaded was already best";
+}
+
+function afterCaption(j, r) {
+  if (!r.optimized) {
+    if (!j.gcode_sha) return j.state === "failed" ? "after: none (the job failed before it was prepared)" : "after: not prepared yet";
+    return "after: unchanged (the part prints as uploaded)";
+  }
+  return j.method === "orient" || !j.shape_changed ? "after: as it prints (oriented, shape kept)"
+    : "after: as it prints (oriented and shaped)";
+}
+
+// Filament of one print: the store's figure when it has one, else the
+// G-code's own for a done copy, or its share by lines for an unfinished one.
+function filament(p, lines, j, g) {
+  if (p.filament_mm > 0) return (p.filament_mm / 1000).toFixed(2) + " m";
+  if (!g || !(g.filament_mm > 0)) return "";
+  if (p.outcome === "done" && p.start_line === 0) return (g.filament_mm / 1000).toFixed(2) + " m";
+  const share = j.gcode_lines > 0 ? Math.max(0, lines - p.start_line) / j.gcode_lines : 0;
+  return `≈ ${((g.filament_mm * Math.min(1, share)) / 1000).toFixed(2)} m`;
+}
+
 function fmtMs(ms) {
   return ms ? new Date(ms).toLocaleString() : "";
 }
@@ -557,7 +952,7 @@ async function renderJob(id, fresh) {
   try {
     [d, r] = await Promise.all([api(`/api/jobs/${id}`), api(`/api/jobs/${id}/report`)]);
   } catch (e) {
-    if (e.status !== 401) showError(e.message);
+    if (e.status && e.status !== 401) showError(e.message);
     return;
   }
   if (st.view !== "job/" + id) return;
@@ -576,7 +971,7 @@ async function renderJob(id, fresh) {
   const rows = [
     ["State", j.state + (j.reason ? ` (${j.reason})` : "")],
     ["Method", `${j.method}, deviation budget ${j.deviation_mm} mm` + (j.overhang_deg ? `, overhang ${j.overhang_deg}°` : "")],
-    ["Part changed", r.optimized ? "yes: oriented/shaped part saved" : "no: printed as uploaded"],
+    ["Part changed", partChanged(j, r)],
     ["Copies", `${j.copies_done} of ${j.copies} done, ${j.failures} failed prints`],
     ["Material", j.material || "the printer's"],
     ["Printer", went || "not yet"],
@@ -596,115 +991,25 @@ async function renderJob(id, fresh) {
   for (const [k, v] of rows) tb.append(fact(k, v));
   const pb = $("#job-prints tbody");
   pb.textContent = "";
-  for (const p of prints)
-    pb.append(el("tr", {}, el("td", { text: String(p.copy) }), el("td", { text: p.printer }),
-      el("td", { text: String(p.start_line) }), el("td", { text: String(p.lines_acked) }),
-      el("td", { text: (p.filament_mm / 1000).toFixed(2) + " m" }), el("td", { text: fmtMs(p.started_ms) }),
+  for (const p of prints) {
+    // a running print's lines are the job's (the store closes the print with its own)
+    const lines = p.outcome ? p.lines_acked : Math.max(p.lines_acked, j.lines_acked);
+    pb.append(el("tr", { "data-copy": String(p.copy), "data-outcome": p.outcome || "printing" },
+      el("td", { text: String(p.copy) }), el("td", { text: p.printer }),
+      el("td", { text: String(p.start_line) }), el("td", { text: String(lines) }),
+      el("td", { text: filament(p, lines, j, g) }), el("td", { text: fmtMs(p.started_ms) }),
       el("td", { text: fmtMs(p.ended_ms) }), el("td", { text: p.outcome || "printing" })));
+  }
   if (!prints.length) pb.append(el("tr", {}, el("td", { colspan: "8", class: "muted", text: "Not printed yet." })));
   // pictures: the cookie authorizes these GETs; "after" changes once prepared
   const before = `/api/jobs/${j.id}/preview.png?stage=before`;
   const after = `/api/jobs/${j.id}/preview.png?stage=after&v=${r.optimized ? "opt" : "in"}`;
   if ($("#pic-before").getAttribute("src") !== before) $("#pic-before").src = before;
   if ($("#pic-after").getAttribute("src") !== after) $("#pic-after").src = after;
-  $("#after-cap").textContent = !r.optimized ? "after: unchanged (the part prints as uploaded)"
-    : j.method === "orient" ? "after: as it prints (oriented)" : "after: as it prints (oriented and shaped)";
+  $("#after-cap").textContent = afterCaption(j, r);
+  j.last_printer = went; // the layer preview draws its bed
   if (fresh || (j.gcode_sha && (!layerData || layerData.sha !== j.gcode_sha))) loadLayers(j);
-}
-
-async function loadLayers(j) {
-  const msg = $("#layer-msg"), slider = $("#layer");
-  if (!j.gcode_sha) {
-    layerData = null;
-    slider.disabled = true;
-    msg.textContent = "No G-code yet: the job is not sliced.";
-    $("#layer-canvas").getContext("2d").clearRect(0, 0, 600, 600);
-    return;
-  }
-  if (layerData && layerData.sha === j.gcode_sha) return;
-  layerData = { sha: j.gcode_sha, layers: [] };
-  msg.textContent = "Loading the G-code…";
-  const r = await fetch(`/api/jobs/${j.id}/gcode`, { credentials: "same-origin" });
-  if (!r.ok) { msg.textContent = "Could not load the G-code: " + r.status; return; }
-  layerData = parseGcode(await r.text(), j.gcode_sha);
-  const n = layerData.layers.length;
-  slider.max = String(Math.max(0, n - 1));
-  slider.value = String(Math.floor(n / 2));
-  slider.disabled = n === 0;
-  slider.setAttribute("aria-valuetext", `layer ${Math.floor(n / 2) + 1} of ${n}`);
-  msg.textContent = n ? `${n} layers; extrusions coloured by role, travel grey.` : "No layers in the G-code.";
-  drawLayer();
-}
-
-// Moves of each ;LAYER_CHANGE section: [x0, y0, x1, y1, role] (role -1: travel).
-function parseGcode(text, sha) {
-  const roles = [];
-  const layers = [];
-  let cur = null, x = 0, y = 0, e = 0, relE = false, role = 0, z = 0;
-  const box = [Infinity, Infinity, -Infinity, -Infinity];
-  for (const raw of text.split("\n")) {
-    if (raw.startsWith(";LAYER_CHANGE")) { cur = { segs: [], z }; layers.push(cur); continue; }
-    if (raw.startsWith(";Z:") && cur) { cur.z = parseFloat(raw.slice(3)); continue; }
-    if (raw.startsWith(";TYPE:")) {
-      const name = raw.slice(6).trim();
-      role = roles.indexOf(name);
-      if (role < 0) { roles.push(name); role = roles.length - 1; }
-      continue;
-    }
-    const line = raw.split(";")[0].trim();
-    if (!line) continue;
-    const w = line.split(/\s+/);
-    const cmd = w[0];
-    if (cmd === "M83") relE = true;
-    else if (cmd === "M82") relE = false;
-    else if (cmd === "G92") { for (const a of w) if (a[0] === "E") e = parseFloat(a.slice(1)); }
-    else if (cmd === "G0" || cmd === "G1") {
-      let nx = x, ny = y, ne = null;
-      for (const a of w.slice(1)) {
-        const v = parseFloat(a.slice(1));
-        if (a[0] === "X") nx = v; else if (a[0] === "Y") ny = v; else if (a[0] === "E") ne = v; else if (a[0] === "Z") z = v;
-      }
-      let ext = false;
-      if (ne !== null) { ext = relE ? ne > 0 : ne > e; e = relE ? e : ne; }
-      if (cur && (nx !== x || ny !== y)) {
-        cur.segs.push([x, y, nx, ny, ext ? role : -1]);
-        if (ext) { box[0] = Math.min(box[0], x, nx); box[1] = Math.min(box[1], y, ny); box[2] = Math.max(box[2], x, nx); box[3] = Math.max(box[3], y, ny); }
-      }
-      x = nx; y = ny;
-    }
-  }
-  return { sha, layers, roles, box };
-}
-
-const ROLE_COLORS = { "Perimeter": "#ffa500", "External perimeter": "#e8590c", "Internal infill": "#b03a2e",
-  "Solid infill": "#9b59b6", "Top solid infill": "#e74c3c", "Bottom solid infill": "#8e44ad",
-  "Support material": "#2e8b57", "Support material interface": "#2ecc71", "Skirt/Brim": "#16a085",
-  "Bridge infill": "#3498db", "Gap fill": "#ecf0f1" };
-const FALLBACK = ["#ff8c00", "#c0392b", "#2980b9", "#27ae60", "#8e44ad", "#d35400"];
-
-function drawLayer() {
-  const cv = $("#layer-canvas"), ctx = cv.getContext("2d");
-  ctx.clearRect(0, 0, cv.width, cv.height);
-  if (!layerData || !layerData.layers.length) return;
-  const i = Number($("#layer").value);
-  const L = layerData.layers[i];
-  $("#layer-out").textContent = `${i + 1} of ${layerData.layers.length} (z ${L.z} mm)`;
-  $("#layer").setAttribute("aria-valuetext", `layer ${i + 1} of ${layerData.layers.length}`);
-  const [x0, y0, x1, y1] = layerData.box;
-  const pad = 20, s = Math.min((cv.width - 2 * pad) / Math.max(x1 - x0, 1), (cv.height - 2 * pad) / Math.max(y1 - y0, 1));
-  const X = (v) => pad + (v - x0) * s, Y = (v) => cv.height - pad - (v - y0) * s;
-  ctx.lineCap = "round";
-  for (const travel of [true, false]) {
-    for (const [ax, ay, bx, by, r] of L.segs) {
-      if ((r < 0) !== travel) continue;
-      ctx.strokeStyle = travel ? "rgba(140,149,159,.35)" : ROLE_COLORS[layerData.roles[r]] || FALLBACK[r % FALLBACK.length];
-      ctx.lineWidth = travel ? 0.5 : Math.max(1, 0.45 * s);
-      ctx.beginPath();
-      ctx.moveTo(X(ax), Y(ay));
-      ctx.lineTo(X(bx), Y(by));
-      ctx.stroke();
-    }
-  }
+  else followLayer(j);
 }
 
 // ---- views ----
@@ -742,7 +1047,19 @@ document.addEventListener("DOMContentLoaded", () => {
     }
   });
   $("#logout").addEventListener("click", () => logout());
-  $("#layer").addEventListener("input", drawLayer);
+  $("#layer").addEventListener("input", () => {
+    if (!$("#layer-follow-box").hidden) $("#layer-follow").checked = false; // the operator chose a layer
+    drawLayer();
+  });
+  $("#layer-follow").addEventListener("change", () => layerJob && followLayer(layerJob));
+  $("#confirm-no").addEventListener("click", () => $("#confirm").close("no"));
+  $("#confirm-ok").addEventListener("click", () => $("#confirm").close("ok"));
+  $("#notify").addEventListener("click", askNotify);
+  $("#compact").addEventListener("click", (e) => {
+    const on = document.body.classList.toggle("compact");
+    e.currentTarget.setAttribute("aria-pressed", String(on));
+    e.currentTarget.textContent = on ? "Card view" : "List view";
+  });
   // the support model's numbers come with the pictures
   for (const img of ["#pic-before", "#pic-after"])
     $(img).addEventListener("load", () => jobShown && renderJob(jobShown, false));
