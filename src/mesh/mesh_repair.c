@@ -34,6 +34,17 @@ cell_hash(int64_t x, int64_t y, int64_t z)
     return h ^ (h >> 29);
 }
 
+/* A cell's index along an axis: clamped, as a part 1e19 cells wide (or a zero tolerance, all
+   corners on one point) would overflow the conversion; such cells only make welding slower. */
+static int64_t
+cell_index(double f)
+{
+    const double lim = 4e18; /* below INT64_MAX with room for the neighbours' +-1 */
+    if (!(f == f))
+        return 0;
+    return f > lim ? (int64_t)lim : f < -lim ? -(int64_t)lim : (int64_t)f;
+}
+
 struct weld_table {
     uint64_t mask;
     int64_t (*key)[3]; /* cell coordinates of each slot */
@@ -147,7 +158,7 @@ mesh_weld_distinct(struct mesh *m, double tol, bool distinct, struct sf_err *err
     for (uint32_t i = 0; i < m->n_verts; i++) {
         struct vec3 p = m->v[i];
         double fx = floor(p.x * inv), fy = floor(p.y * inv), fz = floor(p.z * inv);
-        int64_t cx = (int64_t)fx, cy = (int64_t)fy, cz = (int64_t)fz;
+        int64_t cx = cell_index(fx), cy = cell_index(fy), cz = cell_index(fz);
         double rx = p.x - fx * cell, ry = p.y - fy * cell, rz = p.z - fz * cell;
         int lx = rx < tol ? -1 : 0, hx = rx > cell - tol ? 1 : 0;
         int ly = ry < tol ? -1 : 0, hy = ry > cell - tol ? 1 : 0;
