@@ -26,6 +26,12 @@
    TriangleMeshSlicer.cpp): meshes made of unwelded patches leave cracks of
    micrometres to tenths of a millimetre between their chains. */
 #define LAYERS_GAP_MAX_MM 2.0
+/* A vertex this close to a cutting plane lies on it (and counts as above):
+   the part's coordinates are floats, the planes doubles, and a face
+   modelled at a plane's height (a 1.3 mm plate's top) lands within a few
+   float steps of it, below as often as above; PrusaSlicer cuts in floats,
+   where the two are equal, and keeps that layer. */
+#define LAYERS_ON_PLANE_MM 1e-4
 
 struct seg {
     struct ipt a, b;  /* from the above->below crossing to the below->above one */
@@ -277,7 +283,7 @@ slice_one(struct job *j, uint32_t k, struct seg **segs, size_t *cap)
         const uint32_t *t = m->t[tri[i]];
         bool up[3];
         for (int c = 0; c < 3; c++)
-            up[c] = m->v[t[c]].z >= p;
+            up[c] = m->v[t[c]].z >= p - LAYERS_ON_PLANE_MM;
         int e_ab = -1, e_ba = -1; /* edge going above->below, below->above */
         for (int c = 0; c < 3; c++) {
             int d = (c + 1) % 3;
@@ -439,6 +445,8 @@ layer_range(const struct layer_stack *out, double z0, double z1, double first_mm
     long a = z0 < first_mm / 2 ? 0 : (long)floor(f) + 1;
     if (a < 0)
         a = 0;
+    if (a > (long)out->n) /* above the last plane (a top face): an empty range */
+        a = out->n;
     while (a > 0 && plane_of(out, (uint32_t)a - 1) > z0)
         a--;
     while ((uint32_t)a < out->n && plane_of(out, (uint32_t)a) <= z0)
@@ -479,8 +487,9 @@ bucket_tris(const struct mesh *m, const struct layer_stack *out, double zmin, do
             z0 = fmin(z0, m->v[m->t[i][c]].z);
             z1 = fmax(z1, m->v[m->t[i][c]].z);
         }
+        /* a top within LAYERS_ON_PLANE_MM below a plane reaches it */
         z0 -= zmin;
-        z1 -= zmin;
+        z1 -= zmin - LAYERS_ON_PLANE_MM;
         layer_range(out, z0, z1, first_mm, layer_mm, range[i]);
         for (uint32_t q = range[i][0]; q < range[i][1]; q++)
             first[q + 1]++;

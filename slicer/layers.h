@@ -7,8 +7,10 @@
  * (as PrusaSlicer does), so a 20 mm cube at 0.2 mm gives 100 layers.
  * The cross-section is a polygon set with holes in tree order (poly.h).
  *
- * Robustness: a vertex lying exactly on a cutting plane counts as above it
- * (symbolic perturbation), so every cut triangle has exactly two crossing
+ * Robustness: a vertex on a cutting plane (within 0.1 um: float
+ * coordinates, double planes) counts as above it (symbolic perturbation),
+ * so a top face modelled at a plane's height keeps that layer, as in
+ * PrusaSlicer, and every cut triangle has exactly two crossing
  * edges and every crossing point is computed from its edge alone, the same
  * way for both triangles that share it.  Segments are chained through the
  * edges they cross (topology, no epsilon), then, for unwelded or open

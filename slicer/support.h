@@ -37,8 +37,10 @@
 
 /* The support model's parameters for profile p: PrusaSlicer's rules at the
    profile's overhang angle, layer height, column pitch, gaps and interface
-   layers, bridges held up (our bridge infill does not follow the anchored
-   direction yet: more support than PrusaSlicer, never less). */
+   layers, with its bridge exemption (dont_support_bridges: a bottom its
+   bridge detector anchors gets no columns; our bridge infill spans it in
+   the anchored direction), so the print, the part picture and the
+   optimizers' model hold up the same bottoms. */
 void support_model_params(const struct slice_profile *p, struct supmodel_params *mp);
 
 /*

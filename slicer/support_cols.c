@@ -19,7 +19,6 @@ support_model_params(const struct slice_profile *p, struct supmodel_params *mp)
     mp->angle_deg = slice_profile_angle(p);
     mp->layer_mm = p->layer_mm;
     mp->pitch_mm = p->support_pitch_mm;
-    mp->bridges = false;
     mp->gap_z_mm = p->support_z_gap_mm;
     mp->interface_layers = p->support_interface_layers;
 }

@@ -164,6 +164,19 @@ tp_gap_fill(const struct paths *gap, double h, double nozzle, double sp, double 
     return rc;
 }
 
+/* A closed gap-fill line from out's path n0 on runs along a wall (the
+   ring between the outer and the inner face's loops where no second loop
+   fits, round a wall too thin for any, or the middle of a wall whose
+   sparse strip is under a spacing wide): a wall line of its own width,
+   which PrusaSlicer 2.5's Arachne prints as a perimeter bead. */
+static void
+rings_are_walls(struct layer_paths *out, uint32_t n0)
+{
+    for (uint32_t i = n0; i < out->p.n; i++)
+        if (out->info[i].closed && out->info[i].role == ROLE_GAP_FILL)
+            out->info[i].role = ROLE_PERIMETER;
+}
+
 int
 tp_gap_fill_loops(double h, const struct slice_profile *p, double sp, struct paths *t,
                   struct layer_paths *out)
@@ -179,8 +192,10 @@ tp_gap_fill_loops(double h, const struct slice_profile *p, double sp, struct pat
         paths_move(&t[T_GAP], &t[T_TMP]);
         TP_TRY(clip_offset(&t[T_GAP], -sp / 8, CLIP_JOIN_MITER, &t[T_TMP]));
         TP_TRY(clip_offset(&t[T_TMP], sp / 8, CLIP_JOIN_MITER, &t[T_GAP]));
+        uint32_t n0 = out->p.n;
         TP_TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, sp, 0, 0, out, &t[T_TMP], &t[T_S],
                            &t[T_LINES]));
+        rings_are_walls(out, n0);
     }
 out:
     return rc;
@@ -191,15 +206,26 @@ tp_gap_fill_narrow(double h, const struct slice_profile *p, double sp, double ss
                    struct layer_paths *out)
 {
     int rc = SF_OK;
-    /* infill pieces under 3.5 spacings wide: zig-zag links would lay
+    /* solid pieces under 3.5 spacings wide: zig-zag links would lay
        more than their area there, so they are gap-filled instead */
     paths_reset(&t[T_GAP]);
-    struct paths *sets[3] = { &t[T_SOLID], &t[T_TOP], &t[T_SPARSE] };
-    for (int i = 0; i < 3; i++)
-        TP_TRY(tp_split_narrow(sets[i], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
+    TP_TRY(tp_split_narrow(&t[T_SOLID], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
+    TP_TRY(tp_split_narrow(&t[T_TOP], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
     if (t[T_GAP].n)
         TP_TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, p->infill_overlap * sp,
                            p->min_bead * p->nozzle_mm, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
+    /* sparse pieces stay sparse however narrow, as PrusaSlicer 2.5 fills
+       the strip inside a 2-4 mm wall with anchored sparse lines (its
+       PerimeterGenerator keeps an inner contour at least a perimeter
+       spacing wide); narrower ones are what its Arachne beads widen
+       over: gap fill laying their area, no overlap band */
+    paths_reset(&t[T_GAP]);
+    TP_TRY(tp_split_narrow(&t[T_SPARSE], sp, &t[T_GAP], &t[T_TMP]));
+    uint32_t n0 = out->p.n;
+    if (t[T_GAP].n)
+        TP_TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, 0, 0, out, &t[T_TMP], &t[T_S],
+                           &t[T_LINES]));
+    rings_are_walls(out, n0);
 out:
     return rc;
 }

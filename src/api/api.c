@@ -26,15 +26,19 @@
 #include <strings.h>
 
 #include "../base/buf.h"
+#include "../base/clock.h"
 #include "../base/limits.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "../farm/jobctl.h"
 #include "api_compat.h"
+#include "api_csv.h"
 #include "api_json.h"
 #include "api_page.h"
 #include "api_read.h"
+#include "api_stats.h"
 #include "route.h"
+#include "temps.h"
 #include "web.h"
 
 #define SSE_BATCH  64 /* events read from the store per stream refill */
@@ -47,6 +51,7 @@ struct api {
     struct web *web;               /* the dashboard's files, sessions and pictures */
     struct api_read *reads;        /* store reads off the loop (api_read.h) */
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
+    struct temps *temps;           /* each printer's last hour of temperatures (temps.h) */
     struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
 };
 
@@ -175,7 +180,10 @@ read_page(struct store *s, void *ud, struct http_resp *resp)
 {
     struct sf_err err;
     size_t len;
-    char *text = api_page_render(s, ud, &len, &err);
+    const struct api_page_query *q = ud;
+    char next[24] = "";
+    char *text =
+        q->csv ? api_csv_render(s, q, &len, next, &err) : api_page_render(s, q, &len, &err);
     if (!text) {
         http_fail(resp, err.code, err.msg);
         return;
@@ -183,7 +191,11 @@ read_page(struct store *s, void *ud, struct http_resp *resp)
     resp->body = text;
     resp->body_len = len;
     resp->body_free = free;
-    resp->content_type = "application/json";
+    resp->content_type = q->csv ? "text/csv; charset=utf-8" : "application/json";
+    if (q->csv)
+        http_resp_header(resp, "Content-Disposition", "attachment; filename=\"jobs.csv\"");
+    if (next[0]) /* more jobs pass: the same query with cursor=next goes on */
+        http_resp_header(resp, "X-Next-Cursor", "%s", next);
 }
 
 static void
@@ -204,6 +216,7 @@ jobs_list(void *ctx, const struct route_args *args, const struct http_req *req,
         return;
     }
     q->f.printer = q->printer; /* q moved to the heap: point into it */
+    q->f.name = q->name[0] ? q->name : NULL;
     api_read_run(a->reads, resp, read_page, NULL, q, free);
 }
 
@@ -376,6 +389,49 @@ job_cancel_restart(void *ctx, const struct route_args *args, const struct http_r
     job_changed(a, args, rc, &err, resp);
 }
 
+/* POST /api/jobs/ID/again: a new job from the same file and options (jobctl_again). */
+static void
+job_again(void *ctx, const struct route_args *args, const struct http_req *req,
+          struct http_resp *resp)
+{
+    (void)req;
+    struct api *a = ctx;
+    struct sf_err err;
+    int64_t id;
+    struct job_row j;
+    int rc = jobctl_again(a->cfg.store, args->id, &id, &err);
+    if (rc || (rc = store_job_get(a->cfg.store, id, &j, &err))) {
+        http_fail(resp, rc, err.msg);
+        return;
+    }
+    log_info("api", "job %lld: '%s' submitted again as job %lld", (long long)args->id, j.opts.name,
+             (long long)id);
+    resp->status = 201;
+    resp->json = json_pack("{so}", "job", api_job_json(&j));
+    changed(a);
+}
+
+/* GET /api/stats?days=N (api_stats.h), read on the reader's thread. */
+static void
+stats_get(void *ctx, const struct route_args *args, const struct http_req *req,
+          struct http_resp *resp)
+{
+    (void)args;
+    struct api *a = ctx;
+    struct sf_err err;
+    int *days = mem_calloc(1, sizeof(*days));
+    if (!days) {
+        http_error(resp, 500, "out of memory");
+        return;
+    }
+    if (api_stats_parse(req->query, days, &err)) {
+        http_error(resp, 400, "%s", err.msg);
+        free(days);
+        return;
+    }
+    api_read_run(a->reads, resp, api_stats_read, NULL, days, free);
+}
+
 /* The operator continues an interrupted job where its printer stopped. */
 static void
 job_resume(void *ctx, const struct route_args *args, const struct http_req *req,
@@ -465,6 +521,33 @@ printer_acted(struct api *a, const char *name, int rc, const struct sf_err *err,
     }
     printers_answer(a, name, resp);
     changed(a);
+}
+
+/* GET /api/printers/NAME/temps: its last hour (temps.h), from memory. */
+static void
+printer_temps(void *ctx, const struct route_args *args, const struct http_req *req,
+              struct http_resp *resp)
+{
+    (void)req;
+    struct api *a = ctx;
+    json_t *o = temps_json(a->temps, args->name, API_TICK_MS);
+    if (o) {
+        resp->json = o;
+        return;
+    }
+    bool known = false;
+    size_t np = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
+    for (size_t i = 0; i < np && !known; i++) {
+        struct printer_info pi;
+        farm_printer_info(a->cfg.farm, i, &pi);
+        known = strcmp(pi.cfg->name, args->name) == 0;
+    }
+    if (!known) {
+        http_error(resp, 404, "no printer '%.64s'", args->name);
+        return;
+    }
+    resp->json = json_pack("{ss si s[]}", "printer", args->name, "interval_ms", API_TICK_MS,
+                           "samples"); /* not sampled yet */
 }
 
 static void
@@ -658,9 +741,13 @@ static const struct route rows[] = {
       ROUTE_405 },
     { ROUTE_POST, "/api/jobs/{id}/resume", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_resume,
       ROUTE_405 },
+    { ROUTE_POST, "/api/jobs/{id}/again", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_again, ROUTE_405 },
+    { ROUTE_GET, "/api/stats", NULL, HTTP_BODY_NONE, ROUTE_READ, stats_get, ROUTE_405 },
     { ROUTE_GET, "/api/printers", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get, "use GET" },
     { ROUTE_GET, "/api/printers/{name}", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get,
       "use GET" },
+    { ROUTE_GET, "/api/printers/{name}/temps", NULL, HTTP_BODY_NONE, ROUTE_READ, printer_temps,
+      ROUTE_405 },
     { ROUTE_POST, "/api/printers/{name}/command", NULL, HTTP_BODY_JSON, ROUTE_WRITE, printer_cmd,
       ROUTE_405 },
     { ROUTE_POST, "/api/printers/{name}/emergency-stop", NULL, HTTP_BODY_NONE, ROUTE_WRITE,
@@ -751,8 +838,12 @@ api_new(const struct api_config *cfg, struct sf_err *err)
     a->groups[0] = (struct route_group){ compat, n_compat, &a->slicers };
     a->groups[1] = (struct route_group){ web, n_web, a->web };
     a->groups[2] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
-    a->http = a->web ? http_new(&hc, err) : NULL;
+    a->temps = temps_new();
+    a->http = a->web && a->temps ? http_new(&hc, err) : NULL;
     if (!a->http) {
+        if (!a->temps)
+            sf_err_set(err, SF_ENOMEM, "api: out of memory");
+        temps_free(a->temps);
         web_free(a->web);
         api_read_free(a->reads);
         free(a);
@@ -769,6 +860,7 @@ api_free(struct api *a)
     http_free(a->http); /* ends the picture streams before the renders they wait for */
     web_free(a->web);
     api_read_free(a->reads); /* reads still queued: their requests went with the server */
+    temps_free(a->temps);
     free(a);
 }
 
@@ -813,4 +905,13 @@ api_tick(struct api *a)
 {
     a->tick++;
     http_wake_streams(a->http);
+    /* a sample a printer each tick: the chart's history (temps.h) */
+    size_t np = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
+    int64_t now = clock_wall_ms();
+    for (size_t i = 0; i < np; i++) {
+        struct printer_info pi;
+        farm_printer_info(a->cfg.farm, i, &pi);
+        const double c[4] = { pi.nozzle_c, pi.nozzle_target_c, pi.bed_c, pi.bed_target_c };
+        temps_add(a->temps, pi.cfg->name, now, pi.state != PRINTER_OFFLINE, c);
+    }
 }

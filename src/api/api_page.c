@@ -28,8 +28,8 @@
 #define LIMIT_MAX_TEXT STR(STORE_PAGE_MAX)
 #define VALUE_MAX      200 /* a parameter's value, decoded; a printer name or nine states fit */
 
-static const char *const params[] = { "limit", "cursor", "state", "printer",
-                                      "since", "until",  "order" };
+static const char *const params[] = { "limit", "cursor", "state", "printer", "since",
+                                      "until", "order",  "name",  "format" };
 #define N_PARAMS (sizeof(params) / sizeof(params[0]))
 
 static int
@@ -108,6 +108,7 @@ parse_one(struct api_page_query *q, size_t which, const char *v, char *order, in
         if (!route_num(v, strlen(v), &num) || num < 1 || num > API_PAGE_LIMIT_MAX)
             return bad(err, name, v, "expected a number from 1 to " LIMIT_MAX_TEXT);
         q->limit = (size_t)num;
+        q->limit_given = true;
         return SF_OK;
     case 1: /* cursor: a or d, then 1 to 16 hex digits */
         if ((v[0] != 'a' && v[0] != 'd') || strlen(v) < 2 || strlen(v) > 17 ||
@@ -130,10 +131,21 @@ parse_one(struct api_page_query *q, size_t which, const char *v, char *order, in
             return bad(err, name, v, "expected milliseconds since the epoch (0 or more)");
         *(which == 4 ? &q->f.since_ms : &q->f.until_ms) = num;
         return SF_OK;
-    default: /* order */
+    case 6: /* order */
         if (strcmp(v, "asc") != 0 && strcmp(v, "desc") != 0)
             return bad(err, name, v, "expected asc or desc");
         q->f.newest_first = v[0] == 'd';
+        return SF_OK;
+    case 7: /* name */
+        if (strlen(v) >= sizeof(q->name))
+            return bad(err, name, v, "expected 1 to 127 bytes of a job's name");
+        snprintf(q->name, sizeof(q->name), "%s", v);
+        q->f.name = q->name;
+        return SF_OK;
+    default: /* format */
+        if (strcmp(v, "json") != 0 && strcmp(v, "csv") != 0)
+            return bad(err, name, v, "expected json or csv");
+        q->csv = v[0] == 'c';
         return SF_OK;
     }
 }
@@ -164,7 +176,7 @@ api_page_parse(const char *query, struct api_page_query *q, struct sf_err *err)
         if (which == N_PARAMS)
             return sf_err_set(err, SF_EINVAL,
                               "unknown parameter '%s' (expected limit, cursor, state, printer, "
-                              "since, until or order)",
+                              "since, until, order, name or format)",
                               route_clip(clipped, sizeof(clipped), key));
         if (seen[which])
             return bad(err, key, NULL, "given twice");
@@ -225,6 +237,10 @@ put_next(struct buf *b, const struct api_page_query *q, int64_t last_id)
         buf_printf(b, "&since=%" PRId64, q->f.since_ms);
     if (q->f.until_ms)
         buf_printf(b, "&until=%" PRId64, q->f.until_ms);
+    if (q->f.name && q->f.name[0]) {
+        buf_printf(b, "&name=");
+        put_encoded(b, q->f.name);
+    }
     return buf_printf(b, "&cursor=%s\"}", cursor);
 }
 

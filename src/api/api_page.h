@@ -9,6 +9,8 @@
  *   since=MS       only jobs last changed at or after MS (ms since the epoch)
  *   until=MS       only jobs last changed before MS
  *   order=asc|desc oldest first (default) or newest first, by id
+ *   name=TEXT      only jobs whose name holds TEXT (ASCII case aside)
+ *   format=csv     the jobs as CSV (api_csv.h) rather than a JSON page
  *
  * The answer: {"jobs": [...], "next_cursor": C or null, "next": "/api/jobs?..."
  * or null}: "next" repeats the filters with the cursor, and is null on the
@@ -21,9 +23,11 @@
 #ifndef SF_API_API_PAGE_H
 #define SF_API_API_PAGE_H
 
+#include <stdbool.h>
 #include <stddef.h>
 
 #include "../base/err.h"
+#include "../farm/job.h"
 #include "../farm/store.h"
 
 #define API_PAGE_LIMIT     100            /* a page without limit= */
@@ -34,9 +38,12 @@
 
 /* A parsed query. */
 struct api_page_query {
-    struct store_job_filter f; /* f.printer points at printer */
-    size_t limit;
+    struct store_job_filter f; /* f.printer points at printer, f.name at name */
+    size_t limit;              /* jobs a page */
+    bool limit_given;          /* limit= was in the query */
+    bool csv;                  /* format=csv */
     char printer[64];
+    char name[JOB_NAME_MAX];
 };
 
 /*

@@ -40,6 +40,7 @@
 #include "../base/pool.h"
 #include "../farm/farm.h"
 #include "../farm/farmcfg.h"
+#include "../farm/notify.h"
 #include "../farm/prepare.h"
 #include "../farm/store.h"
 
@@ -51,6 +52,7 @@ struct daemon {
     struct store *s;         /* the job store */
     struct pool *pool;       /* prepare workers */
     struct farm *farm;       /* printers, scheduling */
+    struct notify *notify;   /* webhooks and mails ([notify] sections) */
     struct api *api;         /* REST API */
     struct http_loop *hl;    /* the API on the loop */
     uint64_t wake;           /* pending event-stream wake timer */
@@ -74,6 +76,7 @@ static void
 on_farm_event(void *ud)
 {
     struct daemon *d = ud;
+    notify_kick(d->notify);
     if (d->api && d->hl && !d->wake)
         d->wake = loop_timer_add(d->l, 0, wake_streams, d);
 }
@@ -117,15 +120,16 @@ on_reload(struct loop *l, int signo, void *ud)
     if (strcmp(next.data_dir, d->cfg.data_dir) != 0 ||
         strcmp(next.listen_host, d->cfg.listen_host) || next.listen_port != d->cfg.listen_port)
         log_warn("slimfarmd", "reload: listen and data_dir changes need a restart");
-    if (api_reload(d->api, &d->cfg, &next, &err) || farm_reload(d->farm, &next, &err)) {
+    if (api_reload(d->api, &d->cfg, &next, &err) || farm_reload(d->farm, &next, &err) ||
+        notify_reload(d->notify, next.notify, next.n_notify, &err)) {
         log_error("slimfarmd", "reload: %s", err.msg);
         farmcfg_release(&next);
         return;
     }
     farmcfg_release(&d->cfg);
     d->cfg = next;
-    log_info("slimfarmd", "reloaded %s: %zu printers, %zu API keys", d->config_path,
-             d->cfg.n_printers, d->cfg.n_keys);
+    log_info("slimfarmd", "reloaded %s: %zu printers, %zu API keys, %zu notify targets",
+             d->config_path, d->cfg.n_printers, d->cfg.n_keys, d->cfg.n_notify);
 }
 
 /* --fsck: crash recovery plus every store check; prints a summary. */
@@ -157,6 +161,9 @@ holds_secrets(const struct farmcfg *cfg)
 {
     if (cfg->n_keys)
         return true;
+    for (size_t i = 0; i < cfg->n_notify; i++)
+        if (notifycfg_has_secret(&cfg->notify[i]))
+            return true;
     for (size_t i = 0; i < cfg->n_printers; i++) {
         const struct drv_link *l = &cfg->printers[i].link;
         for (size_t j = 0; j < l->n; j++)
@@ -176,13 +183,15 @@ check_config_mode(const char *path, const struct farmcfg *cfg, bool allow)
         return 0;
     if (allow) {
         log_warn("slimfarmd",
-                 "WARNING: %s holds API keys or printer passwords and is readable by other users "
+                 "WARNING: %s holds API keys, printer passwords or notify secrets and is readable "
+                 "by other users "
                  "(mode %04o); running anyway (--allow-readable-config). Fix: chmod 600 %s",
                  path, (unsigned)(st.st_mode & 07777), path);
         return 0;
     }
     fprintf(stderr,
-            "slimfarmd: %s holds API keys or printer passwords and is readable by other users "
+            "slimfarmd: %s holds API keys, printer passwords or notify secrets and is readable by "
+            "other users "
             "(mode %04o): refusing to start.  Fix: chmod 600 %s (or run with "
             "--allow-readable-config)\n",
             path, (unsigned)(st.st_mode & 07777), path);
@@ -258,6 +267,35 @@ seconds_arg(const char *s, int64_t *ms)
     return true;
 }
 
+/* Free what main built, in reverse. */
+static void
+teardown(struct daemon *d)
+{
+    /* Drop the loop work that touches the API before freeing it: the loop
+       turns below (draining the pool) would run a pending wake and kick
+       the stopped server (a use-after-free in MHD_run when printers dropped
+       as the daemon stopped).  With d->api NULL the farm's events post no
+       new wake. */
+    if (d->wake)
+        loop_timer_cancel(d->l, d->wake);
+    if (d->tick)
+        loop_timer_cancel(d->l, d->tick);
+    d->wake = d->tick = 0;
+    http_loop_detach(d->hl);
+    d->hl = NULL;
+    api_free(d->api);
+    d->api = NULL;
+    if (d->pool) {
+        pool_free(d->pool);
+        loop_run_once(d->l, 0); /* deliver cancelled prepares */
+    }
+    farm_free(d->farm); /* may log events: a kick for the notifier, which cancels it */
+    notify_free(d->notify);
+    d->notify = NULL;
+    store_close(d->s);
+    loop_free(d->l);
+}
+
 int
 main(int argc, char **argv)
 {
@@ -322,7 +360,8 @@ main(int argc, char **argv)
     struct farm_hooks hooks = {
         .driver = drv_new, .prepare = prepare_part, .notify = on_farm_event, .notify_ud = &d
     };
-    if (!(d.farm = farm_new(d.l, d.s, d.pool, &d.cfg, &hooks, &err)))
+    if (!(d.farm = farm_new(d.l, d.s, d.pool, &d.cfg, &hooks, &err)) ||
+        !(d.notify = notify_new(d.l, d.s, d.cfg.notify, d.cfg.n_notify, &err)))
         goto out;
     struct api_config ac = { .store = d.s,
                              .farm = d.farm,
@@ -355,27 +394,7 @@ main(int argc, char **argv)
 out:
     if (status)
         fprintf(stderr, "slimfarmd: %s\n", err.msg);
-    /* Drop the loop work that touches the API before freeing it: the loop
-       turns below (draining the pool) would run a pending wake and kick
-       the stopped server (a use-after-free in MHD_run when printers dropped
-       as the daemon stopped).  With d.api NULL the farm's events post no
-       new wake. */
-    if (d.wake)
-        loop_timer_cancel(d.l, d.wake);
-    if (d.tick)
-        loop_timer_cancel(d.l, d.tick);
-    d.wake = d.tick = 0;
-    http_loop_detach(d.hl);
-    d.hl = NULL;
-    api_free(d.api);
-    d.api = NULL;
-    if (d.pool) {
-        pool_free(d.pool);
-        loop_run_once(d.l, 0); /* deliver cancelled prepares */
-    }
-    farm_free(d.farm);
-    store_close(d.s);
-    loop_free(d.l);
+    teardown(&d);
     farmcfg_release(&d.cfg);
     return status;
 }

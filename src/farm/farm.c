@@ -398,12 +398,7 @@ run(struct loop *l, void *ud)
             store_job_set_reason(f->s, jobs[i].id, why[i], NULL);
             continue;
         }
-        size_t best = f->n_printers;
-        for (size_t p = 0; p < f->n_printers; p++)
-            if (sched_compatible(&sj[i], &sp[p], NULL, 0) &&
-                (best == f->n_printers ||
-                 (sp[p].state == PRINTER_IDLE && sp[best].state != PRINTER_IDLE)))
-                best = p;
+        size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
         if (best < f->n_printers)
             prepare(f, &jobs[i], f->printers[best], false);
     }

@@ -84,7 +84,7 @@ struct parse {
     int line;             /* line last handed to inih */
     bool failed;          /* an error was recorded; stop */
     struct sf_err *err;   /* where it went */
-    int section;          /* -2 none yet, -1 [farm], else printer index */
+    int section;          /* -2 none yet, -1 [farm], -3 [notify], else printer index */
     bool farm_seen;       /* [farm] appeared */
     bool seen[N_OPTIONS]; /* options given in the current section */
 };
@@ -133,6 +133,35 @@ printer_defaults(struct farmcfg_printer *p)
     p->hold_heat_min = 10;
 }
 
+/* A [notify NAME] section: a new target with its defaults. */
+static void
+open_notify(struct parse *ps, const char *name)
+{
+    struct farmcfg *c = ps->cfg;
+    while (*name == ' ')
+        name++;
+    if (!ident_ok(name) || strlen(name) >= sizeof(c->notify[0].name)) {
+        fail(ps, "section 'notify %s': name must be 1..63 letters, digits, '-', '_', '.'", name);
+        return;
+    }
+    for (size_t i = 0; i < c->n_notify; i++)
+        if (strcmp(c->notify[i].name, name) == 0) {
+            fail(ps, "section 'notify %s' appears twice", name);
+            return;
+        }
+    size_t cap = c->n_notify;
+    if (c->n_notify == NOTIFYCFG_TARGETS_MAX) {
+        fail(ps, "more than %d notify sections", NOTIFYCFG_TARGETS_MAX);
+        return;
+    }
+    if (!mem_grow((void **)&c->notify, &cap, c->n_notify + 1, sizeof(*c->notify))) {
+        fail(ps, "out of memory");
+        return;
+    }
+    notifycfg_init(&c->notify[c->n_notify++], name, ps->line);
+    ps->section = -3;
+}
+
 /* A section header "[...]" on the current line: open the section. */
 static void
 open_section(struct parse *ps, const char *hdr, size_t len)
@@ -154,8 +183,13 @@ open_section(struct parse *ps, const char *hdr, size_t len)
         ps->section = -1;
         return;
     }
+    if (strncmp(sec, "notify ", 7) == 0) {
+        open_notify(ps, sec + 7);
+        return;
+    }
     if (strncmp(sec, "printer ", 8) != 0) {
-        fail(ps, "section '%s' is not valid (expected 'farm' or 'printer NAME')", sec);
+        fail(ps, "section '%s' is not valid (expected 'farm', 'printer NAME' or 'notify NAME')",
+             sec);
         return;
     }
     const char *name = sec + 8;
@@ -424,6 +458,14 @@ handler(void *user, const char *section, const char *name, const char *value)
         return 0;
     if (ps->section == -2)
         return fail(ps, "option '%s' comes before any section", name);
+    if (ps->section == -3) {
+        char why[SF_ERR_MSG_MAX - 64];
+        int rc = notifycfg_option(&ps->cfg->notify[ps->cfg->n_notify - 1], name, value, why,
+                                  sizeof(why));
+        if (rc == 0)
+            return fail(ps, "option '%s' is not valid in section '%s'", name, section);
+        return rc < 0 ? fail(ps, "section '%s': %s", section, why) : 1;
+    }
     const struct option *o = NULL;
     bool in_printer = ps->section >= 0;
     for (size_t i = 0; i < N_OPTIONS; i++)
@@ -622,6 +664,7 @@ farmcfg_release(struct farmcfg *c)
 {
     free(c->keys);
     free(c->printers);
+    free(c->notify);
     farmcfg_init(c);
 }
 
@@ -640,6 +683,12 @@ farmcfg_parse(struct farmcfg *c, const char *text, size_t len, const char *name,
     }
     if (!ps.failed)
         check_printers(&ps);
+    for (size_t i = 0; !ps.failed && i < c->n_notify; i++) {
+        char why[SF_ERR_MSG_MAX - 64];
+        ps.line = c->notify[i].line;
+        if (notifycfg_check(&c->notify[i], why, sizeof(why)))
+            fail(&ps, "section 'notify %s': %s", c->notify[i].name, why);
+    }
     if (ps.failed) {
         farmcfg_release(c);
         return SF_EINVAL;

@@ -1,7 +1,8 @@
 /*
- * farmcfg.h - the farm configuration (config/farm.ini): one [farm] section
- * and one [printer NAME] section per printer, Klipper style ("key: value",
- * '#' or ';' comments).  config/farm.ini documents every option and its
+ * farmcfg.h - the farm configuration (config/farm.ini): one [farm] section,
+ * one [printer NAME] section per printer and one [notify NAME] section per
+ * place the operator is told about events (notifycfg.h), Klipper style
+ * ("key: value", '#' or ';' comments).  config/farm.ini documents every option and its
  * default.
  *
  * A printer's link options (how to reach it) are not listed here: each
@@ -24,6 +25,7 @@
 
 #include "../../drivers/drv_link.h"
 #include "../base/err.h"
+#include "notifycfg.h"
 
 struct gpolicy; /* drivers/gpolicy.h */
 
@@ -76,6 +78,8 @@ struct farmcfg {
     size_t n_keys;
     struct farmcfg_printer *printers; /* n_printers, in file order */
     size_t n_printers;
+    struct notifycfg *notify; /* n_notify [notify NAME] sections, in file order */
+    size_t n_notify;
 };
 
 /* Set every option to its default (no keys, no printers). */

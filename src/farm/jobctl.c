@@ -89,6 +89,26 @@ jobctl_restart(struct store *s, int64_t id, struct sf_err *err)
 }
 
 int
+jobctl_again(struct store *s, int64_t id, int64_t *new_id, struct sf_err *err)
+{
+    struct job_row j;
+    int rc = store_job_get(s, id, &j, err);
+    if (rc)
+        return rc;
+    if (strcmp(j.opts.method, "gcode") != 0)
+        return store_job_add(s, &j.opts, j.file_sha, new_id, err);
+    /* G-code as uploaded: what the upload's check found about it, kept with the job */
+    struct job_event_args g = { .prep_key = j.prep_key,
+                                .nozzle_mm = j.nozzle_mm,
+                                .gcode_lines = j.gcode_lines,
+                                .filament_g = j.filament_g,
+                                .support_g = j.support_g,
+                                .est_known = j.est_known,
+                                .est_s = j.est_s };
+    return store_job_add_gcode(s, &j.opts, j.gcode_sha, &g, new_id, err);
+}
+
+int
 jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
 {
     if (!f)

@@ -43,6 +43,15 @@ int jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *er
 int jobctl_restart(struct store *s, int64_t id, struct sf_err *err);
 
 /*
+ * "Print again": a new job from job id's file and options (copies,
+ * material, target, priority, method ...), queued as a new submission
+ * would be; uploaded G-code is ready at once, as when it was uploaded.
+ * Any state: a job done, failed or cancelled as well as one still in
+ * the queue.  The new job's id in *new_id.
+ */
+int jobctl_again(struct store *s, int64_t id, int64_t *new_id, struct sf_err *err);
+
+/*
  * Interrupted job id continues on its printer from command line `line`
  * (-1: the last acknowledged one); farm_job_resume, whose refusals (not
  * interrupted, printer not idle, line out of range) are SF_EAGAIN here.

@@ -158,6 +158,130 @@ cmp_jobs(const void *a, const void *b, void *ud)
     return (x->id > y->id) - (x->id < y->id);
 }
 
+/* A job still waiting for a printer: queued, being prepared or ready. */
+static bool
+waiting(const struct sched_job *j)
+{
+    return j->state == JOB_QUEUED || j->state == JOB_PREPARING || j->state == JOB_READY;
+}
+
+/*
+ * Is printer p needed by a waiting job other than jobs[self] that names a
+ * material?  A job that names none should leave such a printer free: a
+ * material-less job once took the farm's only PETG printer while the PETG
+ * job waited (issue 31).
+ */
+static bool
+needed(const struct sched_job *jobs, size_t n_jobs, size_t self, const bool *placed,
+       const struct sched_printer *p)
+{
+    if (!empty(jobs[self].material))
+        return false;
+    for (size_t k = 0; k < n_jobs; k++)
+        if (k != self && !(placed && placed[k]) && waiting(&jobs[k]) && !empty(jobs[k].material) &&
+            sched_compatible(&jobs[k], p, NULL, 0))
+            return true;
+    return false;
+}
+
+/* The walk's state: printers taken (or held), jobs placed. */
+struct walk {
+    const struct sched_job *jobs;
+    size_t n_jobs;
+    const struct sched_printer *printers;
+    size_t n_printers;
+    bool *taken;  /* n_printers: assigned, or held for a job not ready yet */
+    size_t *held; /* n_printers: 1 + the walk rank of the job holding it, 0: none */
+    bool *placed; /* n_jobs: assigned this round */
+};
+
+/* Is printer p free for the job of walk rank `rank`?  A printer held for a
+   later job not ready yet is (pass 1 runs after every hold is made). */
+static bool
+is_free(const struct walk *w, size_t p, size_t rank)
+{
+    return !w->taken[p] || (w->held[p] && w->held[p] - 1 > rank);
+}
+
+/*
+ * The best free idle printer for jobs[i] (n_printers if none): not the
+ * printer it failed on, then one no other waiting job needs, then the
+ * smallest bed.  key_only: only printers its G-code runs on.  *avoided and
+ * *is_needed say what the best one is.
+ */
+static size_t
+pick(const struct walk *w, size_t i, size_t rank, bool key_only, bool *avoided, bool *is_needed)
+{
+    const struct sched_job *j = &w->jobs[i];
+    size_t best = w->n_printers;
+    bool best_avoided = false, best_needed = false;
+    for (size_t p = 0; p < w->n_printers; p++) {
+        const struct sched_printer *pr = &w->printers[p];
+        if (!is_free(w, p, rank) || pr->state != PRINTER_IDLE ||
+            !sched_compatible(j, pr, NULL, 0) || (key_only && !sched_runs_on(j, pr)))
+            continue;
+        bool av = !empty(j->avoid) && strcmp(j->avoid, pr->name) == 0;
+        bool nd = needed(w->jobs, w->n_jobs, i, w->placed, pr);
+        double area = pr->bed_mm[0] * pr->bed_mm[1];
+        bool better = best == w->n_printers || (best_avoided && !av) ||
+                      (av == best_avoided && best_needed && !nd) ||
+                      (av == best_avoided && nd == best_needed &&
+                       area < w->printers[best].bed_mm[0] * w->printers[best].bed_mm[1]);
+        if (better) {
+            best = p;
+            best_avoided = av;
+            best_needed = nd;
+        }
+    }
+    *avoided = best_avoided;
+    *is_needed = best_needed;
+    return best;
+}
+
+/*
+ * Place jobs[order[k]] in this pass; false if it stays waiting.  A job not
+ * ready yet (queued, preparing) holds the printer it would take, so a later
+ * job that prepared faster does not start before it (first come, first
+ * served within a priority: issue 31).
+ */
+static bool
+place(struct walk *w, size_t i, size_t rank, int pass, struct sched_assign *out)
+{
+    const struct sched_job *j = &w->jobs[i];
+    bool ready = j->state == JOB_READY;
+    if (pass == 1 && gcjob_key_is(j->key))
+        return false; /* uploaded G-code is never prepared again */
+    bool avoided, is_needed;
+    size_t best = pick(w, i, rank, ready && pass == 0, &avoided, &is_needed);
+    if (best == w->n_printers)
+        return false;
+    /* The avoided printer is used only if no other qualifying printer
+       exists at all (busy ones count: better to wait for them). */
+    if (avoided)
+        for (size_t p = 0; p < w->n_printers; p++)
+            if (p != best && sched_compatible(j, &w->printers[p], NULL, 0))
+                return false;
+    if (!ready) {
+        w->taken[best] = true;
+        w->held[best] = rank + 1;
+        return false;
+    }
+    /* Its G-code runs on a printer another job needs while a free one no
+       job needs could take it: slice it again for that one (pass 1). */
+    if (pass == 0 && is_needed && !gcjob_key_is(j->key)) {
+        bool a, n;
+        if (pick(w, i, rank, false, &a, &n) < w->n_printers && !n)
+            return false;
+    }
+    w->taken[best] = true;
+    w->held[best] = 0;
+    w->placed[i] = true;
+    *out = (struct sched_assign){ .job = i,
+                                  .printer = best,
+                                  .reslice = !sched_runs_on(j, &w->printers[best]) };
+    return true;
+}
+
 size_t
 sched_plan(const struct sched_job *jobs, size_t n_jobs, const struct sched_printer *printers,
            size_t n_printers, struct sched_assign *out, char (*reasons)[SCHED_REASON_MAX])
@@ -165,58 +289,30 @@ sched_plan(const struct sched_job *jobs, size_t n_jobs, const struct sched_print
     size_t *order = mem_array(n_jobs ? n_jobs : 1, sizeof(*order));
     bool *taken = mem_calloc(n_printers ? n_printers : 1, sizeof(*taken));
     bool *placed = mem_calloc(n_jobs ? n_jobs : 1, sizeof(*placed));
+    size_t *held = mem_calloc(n_printers ? n_printers : 1, sizeof(*held));
     size_t n_out = 0;
-    if (!order || !taken || !placed) {
+    if (!order || !taken || !placed || !held) {
         /* Nothing placed this round; the next call tries again. */
         for (size_t i = 0; reasons && i < n_jobs; i++)
             snprintf(reasons[i], SCHED_REASON_MAX, "scheduler out of memory");
         goto out;
     }
-    size_t n_ready = 0;
+    size_t n_wait = 0;
     for (size_t i = 0; i < n_jobs; i++)
-        if (jobs[i].state == JOB_READY)
-            order[n_ready++] = i;
-    qsort_r(order, n_ready, sizeof(*order), cmp_jobs, (void *)jobs);
-    /* Pass 0 starts jobs on printers of their key; pass 1 gives each job
-       still waiting an idle printer left over, to be prepared again for. */
+        if (waiting(&jobs[i]))
+            order[n_wait++] = i;
+    qsort_r(order, n_wait, sizeof(*order), cmp_jobs, (void *)jobs);
+    struct walk w = { jobs, n_jobs, printers, n_printers, taken, held, placed };
+    /* Pass 0 starts jobs on printers of their key (and lets the jobs not
+       ready hold theirs); pass 1 gives each ready job still waiting an idle
+       printer left over, to be prepared again for. */
     for (int pass = 0; pass < 2; pass++)
-        for (size_t k = 0; k < n_ready; k++) {
-            const struct sched_job *j = &jobs[order[k]];
-            if (placed[order[k]] || (pass == 1 && gcjob_key_is(j->key)))
-                continue; /* uploaded G-code is never prepared again */
-            size_t best = n_printers;
-            bool best_avoided = false;
-            for (size_t p = 0; p < n_printers; p++) {
-                const struct sched_printer *pr = &printers[p];
-                if (taken[p] || pr->state != PRINTER_IDLE || !sched_compatible(j, pr, NULL, 0) ||
-                    (pass == 0 && !sched_runs_on(j, pr)))
-                    continue;
-                bool avoided = !empty(j->avoid) && strcmp(j->avoid, pr->name) == 0;
-                double area = pr->bed_mm[0] * pr->bed_mm[1];
-                if (best == n_printers || (best_avoided && !avoided) ||
-                    (avoided == best_avoided &&
-                     area < printers[best].bed_mm[0] * printers[best].bed_mm[1])) {
-                    best = p;
-                    best_avoided = avoided;
-                }
-            }
-            if (best == n_printers)
+        for (size_t k = 0; k < n_wait; k++) {
+            size_t i = order[k];
+            if (placed[i] || (pass == 1 && jobs[i].state != JOB_READY))
                 continue;
-            /* The avoided printer is used only if no other qualifying printer
-               exists at all (busy ones count: better to wait for them). */
-            if (best_avoided) {
-                bool other = false;
-                for (size_t p = 0; p < n_printers && !other; p++)
-                    other = p != best && sched_compatible(j, &printers[p], NULL, 0);
-                if (other)
-                    continue;
-            }
-            taken[best] = true;
-            placed[order[k]] = true;
-            out[n_out].job = order[k];
-            out[n_out].printer = best;
-            out[n_out].reslice = pass == 1;
-            n_out++;
+            if (place(&w, i, k, pass, &out[n_out]))
+                n_out++;
         }
     for (size_t i = 0; reasons && i < n_jobs; i++) {
         reasons[i][0] = '\0';
@@ -227,5 +323,27 @@ out:
     free(order);
     free(taken);
     free(placed);
+    free(held);
     return n_out;
+}
+
+size_t
+sched_prepare_for(const struct sched_job *jobs, size_t n_jobs, size_t job,
+                  const struct sched_printer *printers, size_t n_printers)
+{
+    size_t best = n_printers;
+    bool best_idle = false, best_needed = false;
+    for (size_t p = 0; p < n_printers; p++) {
+        if (!sched_compatible(&jobs[job], &printers[p], NULL, 0))
+            continue;
+        bool idle = printers[p].state == PRINTER_IDLE;
+        bool nd = needed(jobs, n_jobs, job, NULL, &printers[p]);
+        if (best == n_printers || (idle && !best_idle) ||
+            (idle == best_idle && best_needed && !nd)) {
+            best = p;
+            best_idle = idle;
+            best_needed = nd;
+        }
+    }
+    return best;
 }

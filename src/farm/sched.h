@@ -6,7 +6,10 @@
  * idle.  Rules, in order:
  *  - only enabled, idle printers take jobs (a printer awaiting bed clear is
  *    not idle: the operator, or auto-eject, must free it first);
- *  - ready jobs go by priority (higher first), then FIFO (lower id first);
+ *  - ready jobs go by priority (higher first), then FIFO (lower id first),
+ *    first come first served: a job still queued or being prepared holds
+ *    the idle printer it would take, so a later job that prepared faster
+ *    does not start before it;
  *  - a job goes only to a printer it targets (by name or group), whose
  *    loaded material matches the job's (if it names one), and whose bed
  *    holds the part (x/y may swap: the part can turn 90 degrees on the bed);
@@ -19,8 +22,12 @@
  *  - a ready job left waiting while an idle printer of another key could
  *    take it is assigned to that printer with `reslice` set: the caller
  *    prepares it again for that printer (the printer counts as taken);
- *  - among the printers that qualify, the smallest bed wins (best fit keeps
- *    big printers free for big parts), then the order given;
+ *  - among the printers that qualify, a job that names no material takes
+ *    one that no other waiting job naming a material could use (it once
+ *    took the only PETG printer while a PETG job waited), and is sliced
+ *    again for such a printer rather than start on a needed one; then the
+ *    smallest bed wins (best fit keeps big printers free for big parts),
+ *    then the order given;
  *  - retry policy: a printer that just failed the job is avoided while
  *    another qualifying printer exists;
  *  - copies print one after another (job.h), so a job takes one printer.
@@ -86,6 +93,14 @@ struct sched_assign {
  */
 size_t sched_plan(const struct sched_job *jobs, size_t n_jobs, const struct sched_printer *printers,
                   size_t n_printers, struct sched_assign *out, char (*reasons)[SCHED_REASON_MAX]);
+
+/*
+ * Which printer to prepare queued jobs[job] for: one that could take it, an
+ * idle one first, then (for a job that names no material) one no other
+ * waiting job needs, then the order given.  Returns n_printers if none.
+ */
+size_t sched_prepare_for(const struct sched_job *jobs, size_t n_jobs, size_t job,
+                         const struct sched_printer *printers, size_t n_printers);
 
 /*
  * Could printer p ever take job j (ignoring its state)?  If not and why is

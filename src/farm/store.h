@@ -230,6 +230,7 @@ struct store_job_filter {
     int64_t until_ms;    /* > 0: updated_ms < until_ms */
     bool newest_first;   /* order by id descending */
     int64_t after_id;    /* > 0: only ids after it in that order (the cursor) */
+    const char *name;    /* NULL or "": any; else jobs whose name holds it (ASCII case aside) */
 };
 /*
  * Up to limit (1 .. STORE_PAGE_MAX) jobs that pass f, in id order (f's
@@ -316,6 +317,26 @@ struct print_tally {
     double saved_g;    /* sum of their jobs' support saved per copy */
 };
 int store_print_tally(struct store *s, struct print_tally **rows, size_t *n, struct sf_err *err);
+
+/*
+ * Per printer, its prints over the last n_days UTC days up to now_ms
+ * (store_stats.c): ended prints by outcome, seconds printing (a running
+ * print up to now; a print across midnight split between its days), and
+ * of those the seconds on each day, oldest first.  Printers with a print
+ * in the window only, by name.  Reads every print that overlaps the
+ * window: the API's reader thread, never the loop.
+ */
+#define STORE_STATS_DAYS_MAX 90 /* a quarter: a plot's width, not an archive */
+struct store_printer_stats {
+    char printer[64];
+    uint64_t done, failed, cancelled, other; /* prints ended in the window, by outcome */
+    double print_s;                          /* seconds printing within the window */
+    double day_s[STORE_STATS_DAYS_MAX];      /* of which on each day (n_days used) */
+};
+int store_print_stats(struct store *s, int64_t now_ms, int n_days,
+                      struct store_printer_stats **rows, size_t *n, struct sf_err *err);
+/* Start (ms, UTC midnight) of the first day of an n_days window ending at now_ms. */
+int64_t store_stats_since_ms(int64_t now_ms, int n_days);
 
 /* A duration histogram over the store (seconds). */
 enum store_hist {

@@ -80,6 +80,8 @@ page_sql(const struct store_job_filter *f, char *sql, size_t cap)
         len += (size_t)snprintf(sql + len, cap - len, " AND updated_ms >= ?3");
     if (f->until_ms > 0)
         len += (size_t)snprintf(sql + len, cap - len, " AND updated_ms < ?4");
+    if (f->name && f->name[0]) /* instr, not LIKE: '%' and '_' in a name are plain text */
+        len += (size_t)snprintf(sql + len, cap - len, " AND instr(lower(name), lower(?6)) > 0");
     snprintf(sql + len, cap - len, " ORDER BY id %s LIMIT ?5", f->newest_first ? "DESC" : "ASC");
 }
 
@@ -109,6 +111,8 @@ store_job_page(struct store *s, const struct store_job_filter *f, size_t limit,
     if (f->until_ms > 0)
         sqlite3_bind_int64(st, 4, f->until_ms);
     sqlite3_bind_int64(st, 5, (sqlite3_int64)limit + 1); /* one more: is there a next page */
+    if (f->name && f->name[0])
+        sqlite3_bind_text(st, 6, f->name, -1, SQLITE_TRANSIENT);
     rc = store_read_rows(s, st, sizeof(**rows), store_read_job, (void **)rows, n, "page of jobs",
                          err);
     if (rc == SF_OK && *n > limit) {

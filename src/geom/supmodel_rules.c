@@ -77,11 +77,18 @@ overhangs(const struct ray_grid *g, const struct solids *cs, uint32_t i, uint32_
 static const int bridge_dir[BRIDGE_DIRS][2] = { { 1, 0 }, { 2, 1 },  { 1, 1 },  { 1, 2 },
                                                 { 0, 1 }, { -1, 2 }, { -1, 1 }, { -2, 1 } };
 
+/* Heights within this of a layer's middle are on its cutting plane: the
+   ray hits are floats, and a face modelled at a plane's height (a box's
+   ceiling at 23.9 mm) lands a few float steps either side of it;
+   PrusaSlicer cuts in floats, where the two are equal, and keeps the
+   layer (a bottom on the plane is in it, a top on it too). */
+#define ON_PLANE_MM 1e-4
+
 /* Layer index whose slice (at its middle height) first holds a bottom at lo. */
 static int32_t
 bottom_layer(float lo, double h)
 {
-    return (int32_t)ceil(lo / h - 0.5);
+    return (int32_t)ceil((lo - ON_PLANE_MM) / h - 0.5);
 }
 
 /* Scratch for one layer's regions: member marks are stamped with a layer tag. */
@@ -119,7 +126,9 @@ solid_layer(const struct bridge_ctx *b, long i, long j, int32_t k)
     int s = k == b->k ? 0 : k == b->k - 1 ? 1 : -1;
     if (s >= 0 && b->mtag[s][c] == b->ltag)
         return b->mval[s][c];
-    bool v = supmodel_solid_at(b->cs, c, (float)((k + 0.5) * b->h));
+    double z = (k + 0.5) * b->h;
+    bool v = supmodel_solid_at(b->cs, c, (float)(z + ON_PLANE_MM)) ||
+             supmodel_solid_at(b->cs, c, (float)(z - ON_PLANE_MM));
     if (s >= 0) {
         b->mtag[s][c] = b->ltag;
         b->mval[s][c] = v;

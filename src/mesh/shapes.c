@@ -10,6 +10,7 @@
 
 #include <math.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "../base/mem.h"
 
@@ -337,6 +338,45 @@ shape_frame(struct mesh *m, struct sf_err *err)
         }
     }
     return finish(m, err);
+}
+
+int
+shape_tray(struct mesh *m, double x, double y, double h, double wall_mm, double floor_mm,
+           bool lip_down, struct sf_err *err)
+{
+    double ox[4] = { 0, x, x, 0 }, oy[4] = { 0, 0, y, y };
+    double ix[4] = { wall_mm, x - wall_mm, x - wall_mm, wall_mm };
+    double iy[4] = { wall_mm, wall_mm, y - wall_mm, y - wall_mm };
+    int rc = mesh_alloc(m, 16, 28, err);
+    if (rc)
+        return rc;
+    for (int i = 0; i < 4; i++) { /* outer bottom, outer top, rim inside, pocket floor */
+        m->v[i] = v3(ox[i], oy[i], 0);
+        m->v[4 + i] = v3(ox[i], oy[i], h);
+        m->v[8 + i] = v3(ix[i], iy[i], h);
+        m->v[12 + i] = v3(ix[i], iy[i], floor_mm);
+    }
+    uint32_t quads[14][4] = { { 0, 3, 2, 1 }, { 12, 13, 14, 15 } }; /* bottom, pocket floor */
+    for (uint32_t i = 0; i < 4; i++) {
+        uint32_t j = (i + 1) % 4;
+        /* ring r to ring r + 1: outer wall, rim, pocket wall */
+        for (uint32_t r = 0; r < 3; r++) {
+            uint32_t *q = quads[2 + 3 * i + r];
+            q[0] = 4 * r + i;
+            q[1] = 4 * r + j;
+            q[2] = 4 * r + 4 + j;
+            q[3] = 4 * r + 4 + i;
+        }
+    }
+    for (uint32_t q = 0; q < 14; q++) {
+        uint32_t t[2][3] = { { quads[q][0], quads[q][1], quads[q][2] },
+                             { quads[q][0], quads[q][2], quads[q][3] } };
+        memcpy(m->t[2 * q], t, sizeof(t));
+    }
+    if (lip_down)
+        for (uint32_t i = 0; i < 16; i++)
+            m->v[i].z = h - m->v[i].z;
+    return finish(m, err); /* mesh_orient turns the flipped faces back out */
 }
 
 int

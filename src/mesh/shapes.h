@@ -48,6 +48,15 @@ int shape_sphere_on_stem(struct mesh *m, struct sf_err *err);
 /* Square frame: 40 x 40 outside, 20 x 20 hole, 10 tall (genus 1). */
 int shape_frame(struct mesh *m, struct sf_err *err);
 
+/*
+ * Open box (a tray, an enclosure without its lid): x by y outside, h tall,
+ * walls wall_mm thick, floor floor_mm thick, open at the top; with
+ * lip_down the same solid upside down (a lid modelled lip-down: the plate
+ * on top, its rim standing on the bed).  Corner at (0, 0).
+ */
+int shape_tray(struct mesh *m, double x, double y, double h, double wall_mm, double floor_mm,
+               bool lip_down, struct sf_err *err);
+
 /* Wedge whose one face leans lean_deg from vertical (overhanging), 20 tall. */
 int shape_wedge(struct mesh *m, double lean_deg, struct sf_err *err);
 

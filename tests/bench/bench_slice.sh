@@ -22,17 +22,34 @@
 # time included.  BENCH_RUNS (default 3) sets the alternations;
 # BENCH_CE_ROW=0 skips CuraEngine's own filament/estimate row (one more
 # niced run per mesh; the CPU columns still come from the side-by-side runs).
-# BENCH_MESHES="a.stl b.stl" picks meshes; BENCH_PEERS=0 skips the peers;
+# BENCH_SET picks the sets (tests/bench/valsets.sh): shared (default), mech,
+# scad, or several ("mech scad", all); each set gets its table and a total
+# row per support setting (sums over the parts both slicers sliced; the
+# ratios of the sums).
+# BENCH_MESHES="a.stl b.stl" picks meshes instead (one set, "given");
+# BENCH_PEERS=0 skips the peers;
 # BENCH_SUPPORT="off" runs only supports off (default "off on"); BENCH_PS=0
 # leaves PrusaSlicer out (CuraEngine's CPU ratio only).
+# Each set's second table reads both G-codes by ;TYPE: role
+# (tests/bench/valsets/gcstats.py): filament mm per role, ours / PrusaSlicer
+# (perimeters, external and overhang perimeters, sparse infill, solid and top
+# solid infill, gap fill, bridge infill, support, support interface), and
+# the strength check: perimeter loops per contour and the solid skin over
+# and under sparse infill (median, mm); a row where ours has fewer loops
+# (by more than 0.02) or a thinner top or bottom than PrusaSlicer's is
+# flagged WEAKER.
 set -u
 build=${1:-build/rel}
 shared=${SLIMFARM_SHARED:-../shared}
 bin="$build/bin/slimfarm"
 [ -x "$bin" ] || { echo "bench_slice: $bin not built"; exit 1; }
-if [ -n "${BENCH_MESHES:-}" ]; then meshes=($BENCH_MESHES)
-elif [ -d "$shared/meshes" ]; then meshes=("$shared"/meshes/*.stl)
-else echo "bench_slice: no $shared/meshes, nothing to compare"; exit 0; fi
+if [ -n "${BENCH_MESHES:-}" ]; then list=$(printf 'given\t%s\n' $BENCH_MESHES)
+else
+  # shellcheck disable=SC2086
+  list=$("$(dirname "$0")/valsets.sh" ${BENCH_SET:-shared})
+fi
+[ -n "$list" ] || { echo "bench_slice: no meshes in set ${BENCH_SET:-shared}, nothing to compare"; exit 0; }
+gcstats="python3 $(dirname "$0")/valsets/gcstats.py"
 peers=${BENCH_PEERS:-1}
 if [ "$peers" = 1 ] && ! command -v prusa-slicer >/dev/null; then
   echo "bench_slice: prusa-slicer missing (make bench installs it); ours only"; peers=0
@@ -56,6 +73,7 @@ ours_run() { # mesh support(on|off)
   [ "$2" = off ] && flag=--no-support
   # like the peers: no skirt, no brim (slice-peers.sh passes --skirts 0 --brim-width 0)
   flag="$flag --set skirts=0 --set brim_auto=no"
+  rm -f "$work/o.gcode" # a failed slice leaves no G-code to read
   /usr/bin/time -f "%e %U %S" -o "$work/o.time" "$bin" slice "$1" -o "$work/o.gcode" $flag \
     >"$work/o.line" 2>/dev/null || { echo "0 0"; return; }
   awk '{ printf "%s %.2f\n", $1, $2 + $3 }' "$work/o.time"
@@ -129,16 +147,60 @@ except Exception:
     print("0 0 0 0 0 0")
 PY
 }
-printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s | ours CPU s | CE CPU s | CPU ratio vs CE | wall ratio vs CE | moves, arcs / no arcs |\n'
-printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
-for m in "${meshes[@]}"; do
+table_head() {
+  printf '| mesh | support | ours g | PS g | g ratio | ours min | PS min | time ratio | planner on PS G-code min | ours support g | PS support g | ours wall s | PS wall s | wall ratio | CE g | CE min | CE wall s | ours CPU s | CE CPU s | CPU ratio vs CE | wall ratio vs CE | moves, arcs / no arcs |\n'
+  printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+}
+# set_end SET: the set's total rows, then its per-role table
+set_end() {
+  # over the parts both slicers sliced (a failed slice prints zeros)
+  awk -F'\t' -v set="$1" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
+    { all[$2]++ } $3 > 0 && $4 > 0 { og[$2] += $3; pg[$2] += $4; om[$2] += $5; pm[$2] += $6; os[$2] += $7; ps[$2] += $8
+      cg[$2] += $9; cm[$2] += $10; n[$2]++ }
+    END { for (s in all) printf "| **total %s (%d of %d parts)** | %s | %.2f | %.2f | %s | %.1f | %.1f | %s | | %.2f | %.2f | | | | %.2f | %.1f | | | | | | |\n",
+            set, n[s], all[s], s, og[s], pg[s], r(og[s], pg[s]), om[s], pm[s], r(om[s], pm[s]), os[s], ps[s], cg[s], cm[s] }' "$work/sums"
+  echo
+  echo "filament mm by ;TYPE: role, ours / PrusaSlicer; walls = perimeter loops per contour; top, bottom = solid skin over / under sparse infill (median mm)"
+  echo
+  printf '| mesh | support | perimeter | external + overhang | internal infill | solid + top solid | gap fill | bridge | support | support interface | walls | top mm | bottom mm | strength |\n'
+  printf '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n'
+  cat "$work/roles"
+  echo
+  : >"$work/sums"; : >"$work/roles"
+}
+# roles MESH SUPPORT OURS_GCODE PS_GCODE: one row of the per-role table
+roles() {
+  local o p
+  o=$([ -s "$3" ] && $gcstats "$3" 2>/dev/null)
+  p=$([ -s "$4" ] && $gcstats "$4" 2>/dev/null)
+  awk -v m="$(basename "$1")" -v s="$2" -v o="$o" -v p="$p" 'function kv(line, a,   i, f, kw) {
+      split(line, f, " "); for (i in f) { split(f[i], kw, "="); a[kw[1]] = kw[2] } }
+    function pair(k) { return (k in A ? A[k] : "-") " / " (k in B ? B[k] : "-") }
+    function less(k, tol) { return (k in A) && (k in B) && A[k] != "-" && B[k] != "-" && A[k] + tol < B[k] + 0 }
+    BEGIN { kv(o, A); kv(p, B); weak = ""
+      if (less("walls", 0.02)) weak = weak " walls"
+      if (less("top", 0.001)) weak = weak " top"
+      if (less("bottom", 0.001)) weak = weak " bottom"
+      printf "| %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |\n", m, s, pair("perim"), pair("ext"),
+        pair("infill"), pair("solid"), pair("gap"), pair("bridge"), pair("support"), pair("iface"), pair("walls"),
+        pair("top"), pair("bottom"), o == "" ? "**ours failed**" : p == "" ? "no PS G-code" : weak == "" ? "ok" : "**WEAKER:" weak "**" }'
+}
+: >"$work/sums"; : >"$work/roles"
+prev_set=
+while IFS=$'\t' read -r set m; do
+  if [ "$set" != "$prev_set" ]; then
+    [ -n "$prev_set" ] && set_end "$prev_set"
+    echo "== set $set"; echo; table_head; prev_set=$set
+  fi
   for sup in ${BENCH_SUPPORT:-off on}; do
     read -r og omin osg ow ol ocpu ccpu ccw marc mlin <<<"$(ours "$m" "$sup")"
     if [ "$peers" = 1 ] && [ "${BENCH_PS:-1}" = 1 ]; then read -r pg pmin psg pw pl pest <<<"$(peer "$m" "$sup")"
-    else pg=0 pmin=0 psg=0 pw=0 pest=0; fi
+    else pg=0 pmin=0 psg=0 pw=0 pest=0; rm -rf "$work/peer"; fi
+    roles "$m" "$sup" "$work/o.gcode" "$(ls "$work"/peer/*.gcode 2>/dev/null | head -n 1)" >>"$work/roles"
     if [ "$peers" = 1 ] && [ "${BENCH_CE_ROW:-1}" = 1 ] && command -v CuraEngine >/dev/null; then
       read -r cg cmin csg cw cl cest <<<"$(peer "$m" "$sup" curaengine)"
     else cg=0 cmin=0 cw=0; fi
+    printf '%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\t%s\n' "$(basename "$m")" "$sup" "$og" "$pg" "$omin" "$pmin" "$osg" "$psg" "$cg" "$cmin" >>"$work/sums"
     awk -v m="$(basename "$m")" -v s="$sup" -v og="$og" -v pg="$pg" -v omin="$omin" -v pmin="$pmin" \
         -v osg="$osg" -v psg="$psg" -v ow="$ow" -v pw="$pw" -v pest="$pest" \
         -v cg="$cg" -v cmin="$cmin" -v cw="$cw" -v oc="$ocpu" -v cc="$ccpu" -v ccw="$ccw" -v ma="$marc" -v ml="$mlin" 'function r(a, b) { return b > 0 ? sprintf("%.2f", a / b) : "-" }
@@ -146,4 +208,5 @@ for m in "${meshes[@]}"; do
               m, s, og, pg, r(og, pg), omin, pmin, r(omin, pmin), pest, r(pest, pmin), osg, psg, ow, pw, r(ow, pw),
               cg, cmin, cw, oc, cc, r(oc, cc), r(ow, ccw), ma, ml, r(ml, ma) }'
   done
-done
+done <<<"$list"
+[ -n "$prev_set" ] && set_end "$prev_set"

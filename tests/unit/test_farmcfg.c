@@ -298,3 +298,56 @@ T_CASE(farmcfg_documented_file_parses_and_documents_everything)
     buf_release(&u);
     buf_release(&b);
 }
+
+T_CASE(farmcfg_notify_sections)
+{
+    struct farmcfg c;
+    struct sf_err err;
+    T_OK(parse(&c,
+               "[notify chat]\nurl: https://discord.example/api/webhooks/1/abc\nformat: discord\n"
+               "events: job-done, bed-clear\nretries: 2\n"
+               "[notify mail]\nurl: smtps://relay.example:465\nfrom: farm@example.org\n"
+               "to: a@example.org, b@example.org\nuser: farm\npassword: pw\n"
+               "[notify plain]\nurl: http://10.0.0.9:8123/\n",
+               &err),
+         &err);
+    T_EQ_INT(c.n_notify, 3);
+    T_EQ_STR(c.notify[0].name, "chat");
+    T_EQ_INT(c.notify[0].format, NOTIFY_FMT_DISCORD);
+    T_EQ_INT(c.notify[0].events, NOTIFY_JOB_DONE | NOTIFY_BED_CLEAR);
+    T_EQ_INT(c.notify[0].retries, 2);
+    T_TRUE(notifycfg_has_secret(&c.notify[0])); /* the url's path is its key */
+    T_TRUE(notifycfg_is_mail(&c.notify[1]) && notifycfg_has_secret(&c.notify[1]));
+    T_EQ_INT(c.notify[2].events, NOTIFY_ALL);
+    T_EQ_INT(c.notify[2].retries, 4);
+    T_TRUE(!notifycfg_has_secret(&c.notify[2]));
+    farmcfg_release(&c);
+    T_EQ_INT(c.n_notify, 0);
+    static const char *const bad[][2] = {
+        { "[notify a]\nurl: http://h/\nurl: http://h/\n",
+          "farm.ini:3: section 'notify a': option 'url' is given twice" },
+        { "[notify a]\nurl: http://h/\n[notify a]\nurl: http://h/\n",
+          "farm.ini:3: section 'notify a' appears twice" },
+        { "[notify a]\nurl: http://h/\nformat: template\n",
+          "farm.ini:1: section 'notify a': options 'format: template' and 'template' go together" },
+        { "[notify a]\nurl: http://h/\nfrom: x@y\n",
+          "farm.ini:1: section 'notify a': options 'from', 'to', 'user', 'password' and "
+          "'starttls' are for smtp:// targets, not webhooks" },
+        { "[notify a]\nurl: smtp://h\nfrom: x@y\nto: nobody\n",
+          "farm.ini:1: section 'notify a': option 'to': 'nobody' is not an address name@host" },
+        { "[notify a]\nurl: smtp://h\nfrom: x@y\nto: a@b\ntoken: t\n",
+          "farm.ini:1: section 'notify a': options 'token', 'format' and 'template' are for "
+          "webhooks, not smtp:// targets" },
+        { "[notify a]\nurl: http://\n",
+          "farm.ini:1: section 'notify a': option 'url': it has no host" },
+        { "[notify a]\nurl: http://h/\ntimeout_s: 0\n",
+          "farm.ini:3: section 'notify a': option 'timeout_s': '0' is not a whole number in "
+          "1..300" },
+        { "[notify]\n", "farm.ini:1: section 'notify' is not valid (expected 'farm', 'printer "
+                        "NAME' or 'notify NAME')" },
+    };
+    for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
+        T_EQ_INT(parse(&c, bad[i][0], &err), SF_EINVAL);
+        T_EQ_STR(err.msg, bad[i][1]);
+    }
+}

@@ -151,6 +151,74 @@ T_CASE(sched_ready_job_runs_only_on_its_key_else_is_resliced)
     T_TRUE(out[0].reslice);
 }
 
+/*
+ * Issue 31: a job naming no material took the only PETG printer (the best
+ * fit) while a PETG job waited; it takes the PLA printer no one else needs,
+ * is prepared for it, and is sliced again for it rather than start its
+ * PETG-sliced G-code on the needed printer.
+ */
+T_CASE(sched_materialless_job_leaves_needed_printer)
+{
+    struct sched_printer p[] = { printer("petg", "PETG", 0.4, 200, 200, 200),
+                                 printer("pla", "PLA", 0.4, 250, 250, 250) };
+    struct sched_job j[] = { job(1, 0, "", 10, 10, 10), job(2, 0, "PETG", 10, 10, 10) };
+    j[1].state = JOB_QUEUED;
+    struct sched_assign out[2];
+    char why[2][SCHED_REASON_MAX];
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
+    T_EQ_INT(out[0].job, 0);
+    T_EQ_INT(out[0].printer, 1);
+    T_EQ_INT(sched_prepare_for(j, 2, 0, p, 2), 1);
+    T_EQ_INT(sched_prepare_for(j, 2, 1, p, 2), 0);
+    /* already sliced for the PETG printer: sliced again for the free one */
+    prepared_for(&j[0], p, 2, 0);
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
+    T_EQ_INT(out[0].printer, 1);
+    T_TRUE(out[0].reslice);
+    /* PLA busy: it waits in line, and takes the PETG printer as FIFO says */
+    p[1].state = PRINTER_PRINTING;
+    T_EQ_INT(sched_prepare_for(j, 2, 0, p, 2), 0);
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
+    T_EQ_INT(out[0].printer, 0);
+    /* no job needs PETG any more: best fit again */
+    p[1].state = PRINTER_IDLE;
+    j[1].state = JOB_DONE;
+    j[0].key = NULL;
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
+    T_EQ_INT(out[0].printer, 0);
+}
+
+/*
+ * Issue 31 finding 5: job 2, submitted after job 1, was ready first and
+ * printed first.  Job 1, still being prepared, holds the idle printer.
+ */
+T_CASE(sched_first_come_first_served_while_preparing)
+{
+    struct sched_printer p[] = { printer("a", "PLA", 0.4, 200, 200, 200),
+                                 printer("b", "PLA", 0.4, 200, 200, 200) };
+    p[1].state = PRINTER_PRINTING;
+    struct sched_job j[] = { job(1, 0, "", 10, 10, 10), job(2, 0, "", 10, 10, 10) };
+    j[0].state = JOB_PREPARING;
+    prepared_for(&j[1], p, 2, 0);
+    struct sched_assign out[2];
+    char why[2][SCHED_REASON_MAX];
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 0);
+    T_EQ_STR(why[1], "waits for a printer: a is taken by a job before it; b is printing");
+    j[0].state = JOB_QUEUED;
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 0);
+    /* a higher priority still goes first */
+    j[1].priority = 1;
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
+    T_EQ_INT(out[0].job, 1);
+    /* b free too: both the held printer and the later job are served */
+    j[1].priority = 0;
+    p[1].state = PRINTER_IDLE;
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
+    T_EQ_INT(out[0].job, 1);
+    T_EQ_INT(out[0].printer, 1);
+    T_TRUE(!out[0].reslice); /* a and b share a key */
+}
+
 T_CASE(sched_bed_fit_turns_part)
 {
     double bed[3] = { 250, 210, 200 };
@@ -283,9 +351,17 @@ T_CASE(sched_random_plans_keep_every_rule)
             if (used_j[i] || j[i].state != JOB_READY)
                 continue;
             T_TRUE(why[i][0] != '\0');
-            for (size_t q = 0; q < np; q++)
-                T_TRUE(used_p[q] || p[q].state != PRINTER_IDLE ||
+            for (size_t q = 0; q < np; q++) {
+                /* or it is held for a job before it still being prepared */
+                bool held = false;
+                for (size_t e = 0; e < nj; e++)
+                    held |= (j[e].state == JOB_QUEUED || j[e].state == JOB_PREPARING) &&
+                            (j[e].priority > j[i].priority ||
+                             (j[e].priority == j[i].priority && j[e].id < j[i].id)) &&
+                            sched_compatible(&j[e], &p[q], NULL, 0);
+                T_TRUE(used_p[q] || held || p[q].state != PRINTER_IDLE ||
                        !sched_compatible(&j[i], &p[q], NULL, 0));
+            }
         }
         /* no placed job is outranked by an unplaced one that could have
            used the same printer */

@@ -116,10 +116,13 @@ T_CASE(slice_tee_supports_arms_only)
     T_OK(measure_support(&m, rc, v3(0, 0, 1), &sp, &sm, &err), &err);
     raycast_free(rc);
     /* the columns come from the layer-based support model (supmodel.h),
-       snapped to PrusaSlicer's 3 mm grid cells: the arms' whole shadow as the
-       ray cast sees it (the one-cell strip along the stem that the layer below
-       reaches lies in the arms' snap cells; the grid ends at the part's sides) */
-    T_EQ_DBL(r.ray_volume_mm3, sm.volume_mm3, 0.01 * sm.volume_mm3);
+       snapped to PrusaSlicer's 3 mm grid cells, with its bridge exemption:
+       part of the arms' shadow as the ray cast sees it, over the arms'
+       whole extent (PrusaSlicer 2.5 prints 6.17 g of support under this
+       tee; ours 5.56 g, and 7.48 g when the slicer stood every column) */
+    if (!(r.ray_volume_mm3 > 0.3 * sm.volume_mm3 && r.ray_volume_mm3 < 0.8 * sm.volume_mm3))
+        t_fail(__FILE__, __LINE__, "columns %.0f mm3, the arms' shadow %.0f mm3", r.ray_volume_mm3,
+               sm.volume_mm3);
     /* read the file back: support only under the arms, below the bar */
     struct buf b;
     buf_init(&b, 0);

@@ -32,6 +32,48 @@ T_CASE(slice_cube_layers_and_area)
     ts_free(&m);
 }
 
+T_CASE(slice_any_height_with_a_flat_top)
+{
+    /* a flat top just above the last layer's plane gave its triangles a
+       reversed layer range, which asked for terabytes (a 12.5 mm plate on
+       standoffs: "slice: out of memory"); every height from 5 to 15 mm in
+       0.05 mm steps slices */
+    for (int i = 100; i <= 300; i++) {
+        struct mesh m = { 0 };
+        struct sf_err err;
+        double h = i * 0.05;
+        T_TRUE(ts_box(&m, 0, 0, 0, 20, 20, (float)h) == 0);
+        struct layer_stack s;
+        int rc = layers_slice(&m, 0.2, 0.2, 100, 100, &s, &err);
+        if (rc != SF_OK)
+            t_fail(__FILE__, __LINE__, "height %.2f: %s", h, err.msg);
+        else if (fabs(s.l[s.n - 1].z_mm - h) > 0.2)
+            t_fail(__FILE__, __LINE__, "height %.2f: top layer at %.2f", h, s.l[s.n - 1].z_mm);
+        if (rc == SF_OK)
+            layer_stack_release(&s);
+        ts_free(&m);
+    }
+}
+
+T_CASE(slice_top_on_a_plane_as_read_from_an_stl)
+{
+    /* a 1.3 mm plate under a 5 mm post, its top as an STL stores it (the
+       float 1.29999995, a few float steps under layer 6's plane at 1.3):
+       layer 6 holds the plate, as PrusaSlicer (cutting in floats) prints
+       it; before, it held the post alone and the plate was 1.2 mm thick */
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_box(&m, 0, 0, 0, 20, 20, (float)1.3) == 0);
+    T_TRUE(ts_box(&m, 5, 5, 0, 10, 10, 5) == 0);
+    struct layer_stack s;
+    T_OK(layers_slice(&m, 0.2, 0.2, 100, 100, &s, &err), &err);
+    T_EQ_INT(s.n, 25);
+    T_EQ_DBL(paths_area(&s.l[6].region), 400, 1e-3);
+    T_EQ_DBL(paths_area(&s.l[7].region), 25, 1e-3);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
 T_CASE(slice_pyramid_area_follows_formula)
 {
     struct mesh m = { 0 };

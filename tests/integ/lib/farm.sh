@@ -51,6 +51,16 @@ stop_sims() {
   sims=()
 }
 
+# one_printer_ini NAME AUTO_EJECT: $tmp/farm.ini for one simulated Marlin
+# NAME (started with start_sim) and the slicing profiles beside it; a test
+# appends its own sections.
+one_printer_ini() {
+  printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW" > "$tmp/farm.ini"
+  printf '[printer %s]\ndriver: marlin\nport: %s\nbaud: 1000000\nauto_eject: %s\n' \
+    "$1" "$(cat "$tmp/$1.addr")" "$2" >> "$tmp/farm.ini"
+  cp -r config/printers config/materials "$tmp/"
+}
+
 # start_daemon: slimfarmd on $tmp/farm.ini, logging to $tmp/log; each start
 # (a restart too) listens on a port of its own, in $http_port and SLIMFARM_URL.
 start_daemon() {

@@ -1,0 +1,134 @@
+/*
+ * test_notify.c - what a notification says and how each target gets it:
+ * the one-line text of each event, our JSON, the chat formats, a template
+ * filled JSON-escaped (a job name with quotes must not break the
+ * service's JSON) or as is, and the mail's headers and envelope.  Delivery
+ * over real HTTP and SMTP is tests/integ/farmd_notify.sh.
+ */
+#include <jansson.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "../../src/farm/notify_int.h"
+#include "../t.h"
+
+static struct event_row ev = { .id = 7,
+                               .at_ms = 1796495737000,
+                               .job_id = 3,
+                               .printer = "",
+                               .kind = "job-print-done",
+                               .detail = "printing -> done" };
+
+static struct job_row
+job(const char *name)
+{
+    struct job_row j;
+    memset(&j, 0, sizeof(j));
+    j.id = 3;
+    snprintf(j.opts.name, sizeof(j.opts.name), "%s", name);
+    j.state = JOB_DONE;
+    j.counts.copies = 2;
+    j.counts.copies_done = 2;
+    return j;
+}
+
+static struct notify_msg
+msg(enum notify_event e, const struct job_row *j)
+{
+    struct notify_msg m = { .ev = e, .e = &ev };
+    snprintf(m.printer, sizeof(m.printer), "mk3");
+    notify_msg_text(&m, j);
+    return m;
+}
+
+T_CASE(notify_text_of_each_event)
+{
+    struct job_row j = job("bracket.stl");
+    T_EQ_STR(msg(NOTIFY_JOB_DONE, &j).text, "job #3 bracket.stl done on mk3 (2 of 2 copies)");
+    snprintf(j.reason, sizeof(j.reason), "thermal runaway");
+    T_EQ_STR(msg(NOTIFY_JOB_FAILED, &j).text, "job #3 bracket.stl failed on mk3: thermal runaway");
+    T_EQ_STR(msg(NOTIFY_BED_CLEAR, NULL).text, "printer mk3 needs its bed cleared");
+    T_EQ_STR(msg(NOTIFY_PRINTER_ERROR, NULL).text, "printer mk3 is in error");
+    T_EQ_STR(msg(NOTIFY_PRINTER_OFFLINE, NULL).text, "printer mk3 went offline");
+    T_EQ_STR(msg(NOTIFY_QUEUE_EMPTY, NULL).text, "the queue is empty: no job waits for a printer");
+    T_EQ_STR(msg(NOTIFY_QUEUE_EMPTY, NULL).event, "queue-empty");
+    T_EQ_INT(msg(NOTIFY_QUEUE_EMPTY, NULL).job_id, 0); /* not about the job that ended */
+}
+
+static struct notifycfg
+target(const char *url)
+{
+    struct notifycfg t;
+    notifycfg_init(&t, "t", 1);
+    snprintf(t.url, sizeof(t.url), "%s", url);
+    return t;
+}
+
+T_CASE(notify_webhook_bodies)
+{
+    struct job_row j = job("say \"hi\".stl");
+    struct notify_msg m = msg(NOTIFY_JOB_DONE, &j);
+    struct notifycfg t = target("http://h/x");
+    snprintf(t.token, sizeof(t.token), "tok");
+    struct delivery *d = notify_delivery_new(&t, &m);
+    T_TRUE(d != NULL);
+    json_t *o = json_loads(d->body, 0, NULL);
+    T_TRUE(o != NULL);
+    T_EQ_STR(json_string_value(json_object_get(o, "event")), "job-done");
+    T_EQ_STR(json_string_value(json_object_get(o, "at")), "2026-12-05T18:35:37Z");
+    T_EQ_STR(json_string_value(json_object_get(json_object_get(o, "job"), "name")),
+             "say \"hi\".stl");
+    json_decref(o);
+    T_EQ_STR(d->headers[0], "Content-Type: application/json");
+    T_EQ_STR(d->headers[1], "Authorization: Bearer tok");
+    T_TRUE(d->headers[2] == NULL);
+    notify_delivery_free(d);
+
+    t.format = NOTIFY_FMT_DISCORD;
+    d = notify_delivery_new(&t, &m);
+    T_EQ_STR(d->body, "{\"content\":\"slimfarm: job #3 say \\\"hi\\\".stl done on mk3 (2 of 2 "
+                      "copies)\"}");
+    notify_delivery_free(d);
+    t.format = NOTIFY_FMT_NTFY;
+    d = notify_delivery_new(&t, &m);
+    T_EQ_STR(d->body, m.text);
+    T_EQ_STR(d->headers[0], "Title: slimfarm job-done");
+    notify_delivery_free(d);
+
+    /* a template: escaped for JSON, as is for text; unknown braces kept */
+    t.format = NOTIFY_FMT_TEMPLATE;
+    snprintf(t.template_text, sizeof(t.template_text),
+             "{\"m\": \"{job_name}\", \"e\": \"{event}\"} {x}");
+    snprintf(t.content_type, sizeof(t.content_type), "application/json");
+    d = notify_delivery_new(&t, &m);
+    T_EQ_STR(d->body, "{\"m\": \"say \\\"hi\\\".stl\", \"e\": \"job-done\"} {x}");
+    T_EQ_INT(d->body_len, strlen(d->body));
+    T_EQ_STR(d->headers[0], "Content-Type: application/json");
+    notify_delivery_free(d);
+    snprintf(t.content_type, sizeof(t.content_type), "text/plain");
+    snprintf(t.template_text, sizeof(t.template_text), "{printer}: {job_id} {job_name}");
+    d = notify_delivery_new(&t, &m);
+    T_EQ_STR(d->body, "mk3: 3 say \"hi\".stl");
+    notify_delivery_free(d);
+}
+
+T_CASE(notify_mail_message_and_envelope)
+{
+    struct job_row j = job("bracket.stl");
+    struct notify_msg m = msg(NOTIFY_JOB_DONE, &j);
+    struct notifycfg t = target("smtp://relay:25");
+    snprintf(t.from, sizeof(t.from), "farm@example.org");
+    snprintf(t.to, sizeof(t.to), "a@example.org,  b@example.org");
+    struct delivery *d = notify_delivery_new(&t, &m);
+    T_TRUE(d && d->mail);
+    T_EQ_STR(d->from, "<farm@example.org>");
+    T_EQ_STR(d->rcpt->data, "<a@example.org>");
+    T_EQ_STR(d->rcpt->next->data, "<b@example.org>");
+    T_TRUE(d->rcpt->next->next == NULL);
+    T_TRUE(strstr(d->body, "Subject: [slimfarm] job #3 bracket.stl done on mk3 (2 of 2 "
+                           "copies)\r\n") != NULL);
+    T_TRUE(strstr(d->body, "To: a@example.org,  b@example.org\r\n") != NULL);
+    T_TRUE(strstr(d->body, "\r\n\r\njob #3 bracket.stl done") != NULL);
+    T_TRUE(strstr(d->body, "Date: Sat, 05 Dec 2026 18:35:37 +0000\r\n") != NULL);
+    notify_delivery_free(d);
+}

@@ -1,0 +1,230 @@
+/*
+ * test_slice_mech.c - mechanical parts as PrusaSlicer 2.5 prints them
+ * (issue 33).  The strip inside a 2.4 mm wall is anchored sparse infill,
+ * not gap fill, with as many wall loops as PrusaSlicer's (before, narrow
+ * sparse pieces were gap-filled solid: +16 % filament on this box).
+ * Bridges that PrusaSlicer's dont_support_bridges leaves unsupported (a
+ * slot's roof, a lid modelled lip-down) get no columns in the print, the
+ * part picture or the optimizers' model, while a cantilever still does
+ * (before, the slicer held every bridge up).
+ */
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../slicer/estimate.h"
+#include "../../slicer/preview.h"
+#include "../../slicer/slice.h"
+#include "../../src/geom/supmodel.h"
+#include "../../src/mesh/shapes.h"
+#include "../t.h"
+#include "slice_run.h"
+
+/* The box: 60 x 40 x 20, 2.4 mm walls, 2 mm floor. */
+#define BOX_H     20.0
+#define BOX_FLOOR 2.0
+
+struct walls {
+    double gap_mm, infill_mm, total_mm; /* filament, the wall's middle layers */
+    double all_mm;                      /* filament, every layer */
+    uint32_t layers;                    /* middle layers seen */
+    uint32_t loops_min;                 /* fewest perimeter runs on a middle layer */
+    uint32_t loops, layer;              /* perimeter runs on the current layer */
+    bool was_perim;                     /* the previous move extruded a perimeter */
+    double px, py;                      /* the previous move's end */
+};
+
+static bool
+is_type(const struct est_move *mv, const char *t)
+{
+    size_t n = strlen(t);
+    return mv->type && mv->type_len == n && memcmp(mv->type, t, n) == 0;
+}
+
+static void
+end_layer(struct walls *w)
+{
+    if (w->loops && w->loops < w->loops_min)
+        w->loops_min = w->loops;
+    w->loops = 0;
+}
+
+static int
+on_move(void *ud, const struct est_move *mv)
+{
+    struct walls *w = ud;
+    if (mv->layer != w->layer) {
+        end_layer(w);
+        w->layer = mv->layer;
+    }
+    /* extrusion with XY motion, as the peers count it (no primes) */
+    bool ext = mv->de > 0 && (mv->x != w->px || mv->y != w->py);
+    w->px = mv->x;
+    w->py = mv->y;
+    bool perim = ext && (is_type(mv, "Perimeter") || is_type(mv, "External perimeter"));
+    if (ext)
+        w->all_mm += mv->de;
+    /* the wall's middle: clear of the floor's and the rim's solid layers */
+    bool middle = mv->z > BOX_FLOOR + 1.5 && mv->z < BOX_H - 1.5;
+    if (middle && ext) {
+        w->total_mm += mv->de;
+        if (is_type(mv, "Gap fill"))
+            w->gap_mm += mv->de;
+        if (is_type(mv, "Internal infill"))
+            w->infill_mm += mv->de;
+        if (perim && !w->was_perim)
+            w->loops++;
+    }
+    w->was_perim = perim;
+    return SF_OK;
+}
+
+/* The default profile without skirt or brim (as the peers slice), with or
+   without supports. */
+static void
+bare_profile(struct slice_profile *p, bool support)
+{
+    T_OK(slice_profile_default(p), NULL);
+    p->support = support;
+    p->skirts = 0;
+    p->brim_auto = false;
+}
+
+/* Slice the 60 x 40 x 20 box with wall_mm walls (no support, skirt or brim)
+   and walk its G-code into w. */
+static void
+slice_box(double wall_mm, const char *name, struct walls *w)
+{
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_tray(&m, 60, 40, BOX_H, wall_mm, BOX_FLOOR, false, &err), &err);
+    struct slice_profile p;
+    bare_profile(&p, false);
+    memset(w, 0, sizeof(*w));
+    w->loops_min = UINT32_MAX;
+    T_OK(ts_slice_walk(&m, &p, name, NULL, on_move, w, &err), &err);
+    end_layer(w);
+    slice_profile_release(&p);
+    mesh_release(&m);
+}
+
+T_CASE(thin_walled_box_fills_its_walls_sparse)
+{
+    struct walls w;
+    slice_box(2.4, "box24", &w);
+    /* PrusaSlicer 2.5 (the peers' settings) prints this box with 0 mm of
+       gap fill: two loops a side, sparse infill in the 0.6 mm between
+       them, 658.7 mm of it in all, and 4553.6 mm of filament */
+    if (!(w.total_mm > 0 && w.gap_mm < 0.01 * w.total_mm && w.infill_mm > 0.1 * w.total_mm))
+        t_fail(__FILE__, __LINE__, "wall middle: %.1f mm gap fill, %.1f mm sparse of %.1f",
+               w.gap_mm, w.infill_mm, w.total_mm);
+    T_TRUE(w.loops_min >= 4); /* outer and inner face: an external and an inner loop each */
+    if (!(w.all_mm < 1.03 * 4553.6))
+        t_fail(__FILE__, __LINE__, "%.1f mm of filament, PrusaSlicer 4553.6", w.all_mm);
+}
+
+T_CASE(box_walls_too_thin_for_two_loops_print_four_wall_lines)
+{
+    /* 1.6 mm walls: no second loop fits a side; PrusaSlicer 2.5's Arachne
+       prints four perimeter beads (615 mm external, 567 mm inner on a
+       10 mm tray).  Ours: the ring between the external loops is two
+       wall lines of their own width, printed as perimeters (before:
+       gap fill, two wall loops a layer by role) */
+    struct walls w;
+    slice_box(1.6, "box16", &w);
+    if (!(w.total_mm > 0 && w.gap_mm < 0.01 * w.total_mm && w.loops_min >= 4))
+        t_fail(__FILE__, __LINE__, "wall middle: %.1f mm gap fill of %.1f, %u wall loops", w.gap_mm,
+               w.total_mm, w.loops_min);
+}
+
+/* Support filament of m sliced with supports on, and the picture's and the
+   optimizers' model's view of it: columns drawn, contacts scored. */
+static void
+supports_of(const struct mesh *m, const char *name, double *support_mm, size_t *drawn,
+            uint32_t *contacts)
+{
+    struct sf_err err;
+    struct slice_profile p;
+    bare_profile(&p, true);
+    char path[512];
+    struct slice_result r;
+    T_OK(ts_slice(m, &p, name, &r, path, sizeof(path), &err), &err);
+    *support_mm = r.support_mm;
+    struct preview_opts o;
+    preview_opts_default(&o);
+    o.profile = &p;
+    struct support_grid g;
+    struct support_column *cols = NULL;
+    size_t n;
+    T_OK(preview_columns(m, &o, &g, &cols, &n, drawn, &err), &err);
+    free(cols);
+    struct supmodel_params mp;
+    supmodel_params_steer(&mp, slice_profile_angle(&p));
+    struct supmodel_result mr;
+    T_OK(supmodel_of_mesh(m, v3(0, 0, 1), &mp, &mr, &err), &err);
+    *contacts = mr.n_contacts;
+    slice_profile_release(&p);
+}
+
+T_CASE(bridges_are_not_supported_overhangs_are)
+{
+    struct sf_err err;
+    double sup;
+    size_t drawn;
+    uint32_t contacts;
+    /* a 40 x 20 x 15 block with a 10 mm slot, 10 tall, from below along y:
+       its roof is bridged wall to wall (PrusaSlicer: no support) */
+    struct mesh m;
+    mesh_init(&m);
+    double x[8] = { 0, 15, 15, 25, 25, 40, 40, 0 }, z[8] = { 0, 0, 10, 10, 0, 0, 15, 15 };
+    T_OK(shape_extrude_xz(&m, x, z, 8, 20, &err), &err);
+    supports_of(&m, "slot", &sup, &drawn, &contacts);
+    if (sup != 0 || drawn != 0 || contacts != 0)
+        t_fail(__FILE__, __LINE__, "slot: %.1f mm of support, %zu columns drawn, %u contacts", sup,
+               drawn, contacts);
+    mesh_release(&m);
+
+    /* a 60 x 40 lid, 8 tall, modelled lip-down: its plate spans 35 mm
+       between the lip's walls (PrusaSlicer: no support) */
+    mesh_init(&m);
+    T_OK(shape_tray(&m, 60, 40, 8, 2.4, 2, true, &err), &err);
+    supports_of(&m, "lid", &sup, &drawn, &contacts);
+    if (sup != 0 || drawn != 0 || contacts != 0)
+        t_fail(__FILE__, __LINE__, "lid: %.1f mm of support, %zu columns drawn, %u contacts", sup,
+               drawn, contacts);
+    mesh_release(&m);
+
+    /* the tee's 20 mm arms hang free at their ends: held up, in all three */
+    mesh_init(&m);
+    T_OK(shape_tee(&m, &err), &err);
+    supports_of(&m, "tee", &sup, &drawn, &contacts);
+    if (!(sup > 100 && drawn > 10 && contacts > 0))
+        t_fail(__FILE__, __LINE__, "tee: %.1f mm of support, %zu columns drawn, %u contacts", sup,
+               drawn, contacts);
+    mesh_release(&m);
+}
+
+T_CASE(ceiling_on_a_plane_is_a_bridge)
+{
+    /* boxes uploaded upside down, their ceilings (the floor, 1.1-1.9 mm)
+       at heights on the layers' cutting planes (8.9 to 26.3 mm): the ray
+       hits straddle the plane by float steps, and the model split the
+       ceiling between two layers, whose halves it found unanchored and
+       held up (mech box_upside: 3.03 g where PrusaSlicer prints 1.11) */
+    for (int i = 0; i < 12; i++) {
+        struct mesh m;
+        struct sf_err err;
+        mesh_init(&m);
+        double fl = 1.1 + 0.2 * (i % 5), h = 10 + 1.6 * i;
+        T_OK(shape_tray(&m, 50.8, 47.1, h, 2.1, fl, true, &err), &err);
+        struct supmodel_params mp;
+        supmodel_params_steer(&mp, 45);
+        struct supmodel_result mr;
+        T_OK(supmodel_of_mesh(&m, v3(0, 0, 1), &mp, &mr, &err), &err);
+        if (mr.n_contacts != 0)
+            t_fail(__FILE__, __LINE__, "%.1f mm box, %.1f mm ceiling: %u contacts, %.2f g", h, fl,
+                   mr.n_contacts, mr.grams);
+        mesh_release(&m);
+    }
+}
