@@ -318,6 +318,7 @@ teardown(struct daemon *d)
     api_free(d->api);
     d->api = NULL;
     if (d->pool) {
+        farm_drop_pool(d->farm);
         pool_free(d->pool);
         loop_run_once(d->l, 0); /* deliver cancelled prepares */
     }

@@ -72,8 +72,21 @@ farm_notify(struct farm *f)
 }
 
 void
+farm_drop_pool(struct farm *f)
+{
+    if (!f)
+        return;
+    f->pool = NULL;
+    if (f->kick)
+        loop_timer_cancel(f->l, f->kick);
+    f->kick = 0;
+}
+
+void
 farm_kick(struct farm *f)
 {
+    if (!f->pool)
+        return; /* shutting down: nothing starts any more */
     if (!f->kick)
         f->kick = loop_timer_add(f->l, 0, run, f);
 }
@@ -173,6 +186,16 @@ reslice_failed(const struct farm *f, int64_t id, const char *key)
 {
     for (size_t i = 0; i < f->n_no; i++)
         if (f->no[i].job_id == id && strcmp(f->no[i].key, key) == 0)
+            return true;
+    return false;
+}
+
+/* Did slicing job id again fail for any printer? */
+static bool
+reslice_failed_any(const struct farm *f, int64_t id)
+{
+    for (size_t i = 0; i < f->n_no; i++)
+        if (f->no[i].job_id == id)
             return true;
     return false;
 }
@@ -373,8 +396,16 @@ run(struct loop *l, void *ud)
                 sp[i].state == PRINTER_IDLE)
                 sp[i].state = PRINTER_AWAITING_CLEAR;
     }
-    for (size_t i = 0; i < n; i++)
+    bool pool_full = f->preparing >= pool_size(f->pool);
+    for (size_t i = 0; i < n; i++) {
         sched_view(&jobs[i], &sj[i]);
+        /* a job being prepared is not stalled: it is what fills the pool */
+        if (jobs[i].state == JOB_QUEUED)
+            sj[i].stalled = pool_full;
+        else if (jobs[i].state == JOB_READY)
+            sj[i].stalled =
+                pool_full || reslicing(f, jobs[i].id) || reslice_failed_any(f, jobs[i].id);
+    }
     size_t n_out = sched_plan(sj, n, sp, f->n_printers, out, why);
     for (size_t k = 0; k < n_out; k++) {
         const struct job_row *j = &jobs[out[k].job];

@@ -12,8 +12,9 @@
  * without disturbing running prints; farm_free() leaves printing jobs
  * interrupted at their last line, as a crash would.
  *
- * Thread: the loop thread.  The pool must be drained (pool_free, then one
- * loop iteration) before farm_free, since prepare completions use the farm.
+ * Thread: the loop thread.  The pool must be drained (farm_drop_pool,
+ * pool_free, then one loop iteration) before farm_free, since prepare
+ * completions use the farm.
  */
 #ifndef SF_FARM_FARM_H
 #define SF_FARM_FARM_H
@@ -56,6 +57,9 @@ struct farm;
 struct farm *farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcfg *cfg,
                       const struct farm_hooks *hooks, struct sf_err *err);
 void farm_free(struct farm *f);
+/* The pool is about to be freed: schedule and prepare nothing more (the
+   drain's loop iteration would otherwise run the scheduler on a freed pool). */
+void farm_drop_pool(struct farm *f);
 
 /* Apply a new config; running prints keep their printer until they end. */
 int farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err);

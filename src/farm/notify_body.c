@@ -5,9 +5,10 @@
  *
  * Template placeholders are filled JSON-escaped when the target's
  * Content-Type says json, as they are, otherwise: a job name with a quote
- * must not break the service's JSON.  Mail headers carry only our own
- * text (job names are printable, no line breaks: job.h), so nothing from
- * outside can add a header.
+ * must not break the service's JSON.  The one-line text carries
+ * a job's failure reason, which comes from outside (a printer's or a
+ * slicer's words): its control bytes become spaces, so no reply with a
+ * line break can add a mail or ntfy header.
  *
  * Thread: the loop thread (any, in fact: no state).
  */
@@ -23,6 +24,15 @@
 #include "../base/mem.h"
 
 #define BODY_MAX ((size_t)16 << 10) /* a message, its JSON, or a filled template */
+
+/* Control bytes (CR, LF, ...) in s become spaces. */
+static void
+flatten(char *s)
+{
+    for (; *s; s++)
+        if ((unsigned char)*s < 0x20 || *s == 0x7f)
+            *s = ' ';
+}
 
 void
 notify_msg_text(struct notify_msg *m, const struct job_row *job)
@@ -62,6 +72,8 @@ notify_msg_text(struct notify_msg *m, const struct job_row *job)
         snprintf(m->text, sizeof(m->text), "the queue is empty: no job waits for a printer");
         break;
     }
+    flatten(m->text);
+    flatten(m->reason);
 }
 
 /* "2026-12-05T18:40:00Z" of a wall-clock ms. */

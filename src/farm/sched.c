@@ -262,13 +262,16 @@ place(struct walk *w, size_t i, size_t rank, int pass, struct sched_assign *out)
             if (p != best && sched_compatible(j, &w->printers[p], NULL, 0))
                 return false;
     if (!ready) {
-        w->taken[best] = true;
-        w->held[best] = rank + 1;
+        if (!j->stalled) {
+            w->taken[best] = true;
+            w->held[best] = rank + 1;
+        }
         return false;
     }
     /* Its G-code runs on a printer another job needs while a free one no
-       job needs could take it: slice it again for that one (pass 1). */
-    if (pass == 0 && is_needed && !gcjob_key_is(j->key)) {
+       job needs could take it: slice it again for that one (pass 1), if it
+       can be now (else it would stall beside an idle printer). */
+    if (pass == 0 && is_needed && !j->stalled && !gcjob_key_is(j->key)) {
         bool a, n;
         if (pick(w, i, rank, false, &a, &n) < w->n_printers && !n)
             return false;

@@ -9,7 +9,8 @@
  *  - ready jobs go by priority (higher first), then FIFO (lower id first),
  *    first come first served: a job still queued or being prepared holds
  *    the idle printer it would take, so a later job that prepared faster
- *    does not start before it;
+ *    does not start before it (unless it is stalled: it would hold the
+ *    printer idle for nothing);
  *  - a job goes only to a printer it targets (by name or group), whose
  *    loaded material matches the job's (if it names one), and whose bed
  *    holds the part (x/y may swap: the part can turn 90 degrees on the bed);
@@ -74,6 +75,9 @@ struct sched_job {
     double size_mm[3];    /* part bounding box as it will print; 0s = not known yet */
     const char *avoid;    /* printer that failed it last, "" or NULL for none */
     double overhang_deg;  /* the job's overhang angle; 0 = the printer's */
+    bool stalled;         /* cannot be prepared now (the pool is full, or, ready, it is being
+                             sliced again or a slicing of it failed): it holds no printer and
+                             gives up none to be sliced again */
 };
 
 /* One decision: jobs[job] starts on printers[printer]. */

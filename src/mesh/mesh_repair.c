@@ -34,6 +34,17 @@ cell_hash(int64_t x, int64_t y, int64_t z)
     return h ^ (h >> 29);
 }
 
+/* A cell's index along an axis: clamped, as a part 1e19 cells wide (or a zero tolerance, all
+   corners on one point) would overflow the conversion; such cells only make welding slower. */
+static int64_t
+cell_index(double f)
+{
+    const double lim = 4e18; /* below INT64_MAX with room for the neighbours' +-1 */
+    if (!(f == f))
+        return 0;
+    return f > lim ? (int64_t)lim : f < -lim ? -(int64_t)lim : (int64_t)f;
+}
+
 struct weld_table {
     uint64_t mask;
     int64_t (*key)[3]; /* cell coordinates of each slot */
@@ -147,7 +158,7 @@ mesh_weld_distinct(struct mesh *m, double tol, bool distinct, struct sf_err *err
     for (uint32_t i = 0; i < m->n_verts; i++) {
         struct vec3 p = m->v[i];
         double fx = floor(p.x * inv), fy = floor(p.y * inv), fz = floor(p.z * inv);
-        int64_t cx = (int64_t)fx, cy = (int64_t)fy, cz = (int64_t)fz;
+        int64_t cx = cell_index(fx), cy = cell_index(fy), cz = cell_index(fz);
         double rx = p.x - fx * cell, ry = p.y - fy * cell, rz = p.z - fz * cell;
         int lx = rx < tol ? -1 : 0, hx = rx > cell - tol ? 1 : 0;
         int ly = ry < tol ? -1 : 0, hy = ry > cell - tol ? 1 : 0;
@@ -259,12 +270,11 @@ split_at(struct mesh *m, uint32_t n, uint32_t p, uint32_t q, uint32_t mid, uint3
  * its long edge belongs to the triangle beyond, its two short edges to the
  * triangles on its side.  Splitting the triangle beyond at the sliver's
  * middle corner closes the crack; the sliver's slot takes the second half.
- * Marks healed slivers' slots in healed (their new triangles are kept).
  * Best effort: without memory, or where two slivers share a long edge, the
  * sliver is dropped as before.
  */
 static void
-heal_slivers(struct mesh *m, bool *healed)
+heal_slivers(struct mesh *m)
 {
     uint32_t n_sliver = 0;
     for (uint32_t i = 0; i < m->n_tris; i++)
@@ -298,6 +308,11 @@ heal_slivers(struct mesh *m, bool *healed)
                 longest = v3_dot(d, d), mid = k;
         }
         uint32_t c = t[mid], p = t[(mid + 1) % 3], q = t[(mid + 2) % 3];
+        /* only a corner strictly inside the edge splits it (corners not welded onto one point
+           are no middle) */
+        if (v3_dot(v3_sub(m->v[c], m->v[p]), v3_sub(m->v[c], m->v[p])) == 0 ||
+            v3_dot(v3_sub(m->v[c], m->v[q]), v3_sub(m->v[c], m->v[q])) == 0)
+            continue;
         struct tri_edge key = { p < q ? p : q, p < q ? q : p, 0 };
         const struct tri_edge *hit = bsearch(&key, e, n_e, sizeof(*e), tri_edge_cmp);
         if (!hit)
@@ -306,10 +321,8 @@ heal_slivers(struct mesh *m, bool *healed)
         while (hit > e && tri_edge_cmp(hit - 1, &key) == 0)
             hit--;
         for (; hit < e + n_e && tri_edge_cmp(hit, &key) == 0; hit++)
-            if (split_at(m, hit->tri, p, q, c, i)) {
-                healed[i] = true;
+            if (split_at(m, hit->tri, p, q, c, i))
                 break;
-            }
     }
     free(e);
 }
@@ -317,22 +330,17 @@ heal_slivers(struct mesh *m, bool *healed)
 uint32_t
 mesh_drop_degenerate(struct mesh *m)
 {
-    bool *healed = m->n_tris ? mem_calloc(m->n_tris, sizeof(*healed)) : NULL;
-    if (healed)
-        heal_slivers(m, healed);
+    heal_slivers(m);
     uint32_t kept = 0;
     for (uint32_t i = 0; i < m->n_tris; i++) {
         uint32_t a = m->t[i][0], b = m->t[i][1], c = m->t[i][2];
-        if (!(healed && healed[i])) {
-            if (a == b || b == c || a == c)
-                continue;
-            struct vec3 n = v3_cross(v3_sub(m->v[b], m->v[a]), v3_sub(m->v[c], m->v[a]));
-            if (!(v3_dot(n, n) > 0))
-                continue;
-        }
+        if (a == b || b == c || a == c)
+            continue;
+        struct vec3 n = v3_cross(v3_sub(m->v[b], m->v[a]), v3_sub(m->v[c], m->v[a]));
+        if (!(v3_dot(n, n) > 0))
+            continue;
         memcpy(m->t[kept++], m->t[i], sizeof(m->t[0]));
     }
-    free(healed);
     uint32_t dropped = m->n_tris - kept;
     m->n_tris = kept;
     return dropped;

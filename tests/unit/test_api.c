@@ -320,6 +320,7 @@ stop(void)
     }
     api_free(srv.api);
     if (srv.pool) {
+        farm_drop_pool(srv.farm);
         pool_free(srv.pool);
         loop_run_once(srv.l, 0);
     }

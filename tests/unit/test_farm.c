@@ -309,6 +309,7 @@ setup(const char *name, const char *ini, printer_driver_fn driver, prepare_fn pr
 static void
 teardown(void)
 {
+    farm_drop_pool(fx.f);
     pool_free(fx.pool);
     loop_run_once(fx.l, 0); /* deliver completions of cancelled work */
     farm_free(fx.f);

@@ -47,6 +47,10 @@ T_CASE(notify_text_of_each_event)
     T_EQ_STR(msg(NOTIFY_JOB_DONE, &j).text, "job #3 bracket.stl done on mk3 (2 of 2 copies)");
     snprintf(j.reason, sizeof(j.reason), "thermal runaway");
     T_EQ_STR(msg(NOTIFY_JOB_FAILED, &j).text, "job #3 bracket.stl failed on mk3: thermal runaway");
+    /* a printer's reply with a line break cannot add a mail or ntfy header */
+    snprintf(j.reason, sizeof(j.reason), "halted\r\nBcc: x@example.com");
+    T_EQ_STR(msg(NOTIFY_JOB_FAILED, &j).text,
+             "job #3 bracket.stl failed on mk3: halted  Bcc: x@example.com");
     T_EQ_STR(msg(NOTIFY_BED_CLEAR, NULL).text, "printer mk3 needs its bed cleared");
     T_EQ_STR(msg(NOTIFY_PRINTER_ERROR, NULL).text, "printer mk3 is in error");
     T_EQ_STR(msg(NOTIFY_PRINTER_OFFLINE, NULL).text, "printer mk3 went offline");

@@ -20,7 +20,9 @@ printer(const char *name, const char *material, double nozzle, double x, double 
 static struct sched_job
 job(int64_t id, int prio, const char *material, double x, double y, double z)
 {
-    struct sched_job j = { id, JOB_READY, prio, material, "", "", NULL, { x, y, z }, NULL, 0 };
+    struct sched_job j = {
+        id, JOB_READY, prio, material, "", "", NULL, { x, y, z }, NULL, 0, false
+    };
     return j;
 }
 
@@ -175,6 +177,13 @@ T_CASE(sched_materialless_job_leaves_needed_printer)
     T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
     T_EQ_INT(out[0].printer, 1);
     T_TRUE(out[0].reslice);
+    /* it cannot be sliced again now (the pool is full, or slicing it failed): it prints on the
+       PETG printer rather than wait beside it for a slicing that does not come (review) */
+    j[0].stalled = true;
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
+    T_EQ_INT(out[0].printer, 0);
+    T_TRUE(!out[0].reslice);
+    j[0].stalled = false;
     /* PLA busy: it waits in line, and takes the PETG printer as FIFO says */
     p[1].state = PRINTER_PRINTING;
     T_EQ_INT(sched_prepare_for(j, 2, 0, p, 2), 0);
@@ -206,6 +215,11 @@ T_CASE(sched_first_come_first_served_while_preparing)
     T_EQ_STR(why[1], "waits for a printer: a is taken by a job before it; b is printing");
     j[0].state = JOB_QUEUED;
     T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 0);
+    /* a queued job that cannot be prepared now (the pool is full) holds no printer idle */
+    j[0].stalled = true;
+    T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
+    T_EQ_INT(out[0].job, 1);
+    j[0].stalled = false;
     /* a higher priority still goes first */
     j[1].priority = 1;
     T_EQ_INT(sched_plan(j, 2, p, 2, out, why), 1);
