@@ -158,6 +158,12 @@ on_auth(struct op_conn *c, const char *a)
     }
     snprintf(c->session, sizeof(c->session), "%s", colon + 1);
     snprintf(c->key, sizeof(c->key), "%s", key);
+    /* A socket's life is an event stream's (a silent client that vanished is found at the
+       latest then; OctoPrint's clients reconnect, as EventSource does). */
+    if (now - c->open_ms >= (int64_t)HTTP_STREAM_LIFETIME_S * 1000) {
+        wsconn_close(c->wc, 1001, "socket lifetime over: connect again"); /* 1001: going away */
+        return;
+    }
     if (!c->authed) {
         c->authed = true;
         if (c->sub.state)

@@ -59,8 +59,10 @@
 #include "route.h"
 #include "session.h"
 
-#define API_OCTOPUSH_TICK_MS      100   /* how often sockets are looked at */
-#define API_OCTOPUSH_AUTH_WAIT_MS 30000 /* an unauthenticated socket's life */
+#define API_OCTOPUSH_TICK_MS 100 /* how often sockets are looked at */
+/* An unauthenticated socket's life: it holds a keyless slot, which is sized for page loads
+   (http.h); clients send their auth right after `connected`. */
+#define API_OCTOPUSH_AUTH_WAIT_MS (HTTP_KEYLESS_IDLE_S * 1000)
 
 struct api_octopush;
 

@@ -191,8 +191,11 @@ on_fd(struct loop *l, int fd, unsigned events, void *ud)
         return;
     if (events & LOOP_WRITE)
         flush(ws);
+    /* At most 64 KiB a turn: a client streaming faster than its messages are handled must not
+       keep the loop (which feeds the printers) from everything else; the loop's epoll is level
+       triggered, so what is left is read on the next turn. */
     char chunk[16384];
-    while (!ws->dead) {
+    for (int reads = 0; reads < 4 && !ws->dead; reads++) {
         ssize_t k = recv(fd, chunk, sizeof(chunk), 0);
         if (k < 0 && errno == EINTR)
             continue;

@@ -36,6 +36,7 @@ struct startcheck {
     char path[1200];
     struct drv_job_scan scan;
     bool counted;          /* scan holds the job's line count (else the driver counts) */
+    uint64_t token;        /* the start it judges (printer_start_token) */
     struct gpolicy policy; /* the printer's, now */
     struct sf_err err;
     char msg[1024]; /* the refused lines, "G-code 'NAME': line 12: M600: ..." */
@@ -57,7 +58,7 @@ startcheck_done(struct loop *l, void *ud, int rc)
     struct printer *p;
     /* Shutting down (SF_ECANCELED) leaves it for printer_stop. */
     if (rc != SF_ECANCELED && (p = farm_find(t->f, t->printer)) != NULL)
-        printer_start_go(p, t->job_id, t->path, t->counted ? &t->scan : NULL, rc,
+        printer_start_go(p, t->job_id, t->token, t->path, t->counted ? &t->scan : NULL, rc,
                          t->msg[0] ? t->msg : t->err.msg);
     free(t);
 }
@@ -88,6 +89,7 @@ farm_start(struct farm *f, const struct job_row *j, struct printer *p)
         free(t);
         return;
     }
+    t->token = printer_start_token(p);
     if (!pool_submit(f->io, startcheck_work, startcheck_done, t, &err))
         startcheck_done(f->l, t, startcheck_work(t, NULL)); /* no worker: judged here */
 }

@@ -613,18 +613,24 @@ printer_start(struct printer *p, const struct job_row *j, const char *path)
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
     p->est_s = printer_estimate_s(j, path);
-    p->judging = j->id;
+    p->judging = ++p->starts;
     printer_move(p, PRINTER_EV_START);
     return SF_OK;
 }
 
-void
-printer_start_go(struct printer *p, int64_t id, const char *path, const struct drv_job_scan *scan,
-                 int rc, const char *why)
+uint64_t
+printer_start_token(const struct printer *p)
 {
-    /* Cancelled, or its printer lost (and the job perhaps resumed since), while the file was
-       judged: this check is stale. */
-    if (p->job_id != id || p->judging != id)
+    return p->judging;
+}
+
+void
+printer_start_go(struct printer *p, int64_t id, uint64_t token, const char *path,
+                 const struct drv_job_scan *scan, int rc, const char *why)
+{
+    /* Cancelled, or its printer lost (and the job perhaps resumed since, or, a copy cancelled,
+       started again), while the file was judged: this check is stale. */
+    if (p->job_id != id || !p->judging || p->judging != token)
         return;
     p->judging = 0;
     if (rc == SF_OK) {

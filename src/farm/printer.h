@@ -113,7 +113,10 @@ bool printer_removed(const struct printer *p);
  * was sent, p is idle again with its bed as it was.
  */
 int printer_start(struct printer *p, const struct job_row *j, const char *path);
-void printer_start_go(struct printer *p, int64_t id, const char *path,
+/* The start printer_start just made (its check is stale once p starts anything else, even the
+   same job again after a copy was cancelled). */
+uint64_t printer_start_token(const struct printer *p);
+void printer_start_go(struct printer *p, int64_t id, uint64_t token, const char *path,
                       const struct drv_job_scan *scan, int rc, const char *why);
 
 /*

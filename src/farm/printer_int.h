@@ -54,7 +54,8 @@ struct printer {
     int attach_waits;      /* attach() answers "not yet" on this connection */
     double est_s;          /* the job's print time estimate (printer_estimate_s), s; -1 unknown */
     uint64_t heat_timer;   /* hot with no print: timer turning the heaters off, 0 if none */
-    int64_t judging; /* job started whose file is judged before the driver has it, 0 if none */
+    uint64_t judging;      /* the start whose file is judged before the driver has it, 0 if none */
+    uint64_t starts;       /* starts made: the next start's token */
 };
 
 /* Tell p's owner it changed (printer_env.changed), if it listens. */

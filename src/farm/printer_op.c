@@ -175,7 +175,7 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
     if (!p->drv || !p->job_id)
         return sf_err_set(err, SF_EINVAL, "printer %s has no job to %s", p->cfg.name,
                           action_names[act]);
-    if (p->judging == p->job_id) /* the driver has nothing yet: a cancel is the store's alone */
+    if (p->judging) /* the driver has nothing yet: a cancel is the store's alone */
         return act == PRINTER_ACT_CANCEL ? cancel_judged(p, JOB_EV_CANCEL, err)
                : act == PRINTER_ACT_CANCEL_COPY
                    ? cancel_judged(p, JOB_EV_CANCEL_COPY, err)

@@ -170,6 +170,10 @@ static const char *const migrations[] = {
        GET /api/jobs?printer= (store_job_page) */
     "CREATE INDEX jobs_live ON jobs(id) WHERE state NOT IN ('done','failed','cancelled');"
     "CREATE INDEX prints_printer ON prints(printer, job_id);",
+    /* 8: a printer's newest print (store_beds, on the loop for GET
+       /api/printers) in one index step: max(id) over (printer, job_id)
+       walked every print of the printer */
+    "CREATE INDEX prints_printer_id ON prints(printer, id);",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

@@ -648,7 +648,7 @@ store_beds(struct store *s, struct store_bed **rows, size_t *n, struct sf_err *e
     /* One statement for the whole farm (GET /api/printers runs it on the
        loop).  A printer's newest print is read only while a part is on
        its bed or it is in error or awaiting clear (what the dashboard
-       shows it for), through prints_printer:
+       shows it for), through prints_printer_id (max(id) is one step):
        the printer's own prints, not a scan of every print down to its
        last one (a printer that never printed read the whole table).  Its
        interrupted job through jobs_state. */
@@ -661,7 +661,7 @@ store_beds(struct store *s, struct store_bed **rows, size_t *n, struct sf_err *e
         "  ORDER BY updated_ms DESC, id DESC LIMIT 1),"
         " j.name, j.copies, j.gcode_lines FROM printers pr"
         " LEFT JOIN prints p ON (pr.bed_full OR pr.state IN ('error', 'awaiting-clear')) AND p.id ="
-        "  (SELECT max(id) FROM prints INDEXED BY prints_printer WHERE printer = pr.name)"
+        "  (SELECT max(id) FROM prints INDEXED BY prints_printer_id WHERE printer = pr.name)"
         " LEFT JOIN jobs j ON j.id = p.job_id ORDER BY pr.name",
         (void **)rows, n, err);
     if (rc)

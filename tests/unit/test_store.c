@@ -120,21 +120,22 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     snprintf(path, sizeof(path), "%s/slimfarm.db", dir);
     sqlite3 *db;
     T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
-    T_EQ_INT(sqlite3_exec(db,
-                          "ALTER TABLE jobs DROP COLUMN prep_key; ALTER TABLE jobs DROP COLUMN "
-                          "mesh_sha; ALTER TABLE jobs DROP COLUMN mesh_angle_deg;"
-                          "ALTER TABLE printers DROP COLUMN bed_full;"
-                          "ALTER TABLE jobs DROP COLUMN gcode_lines;"
-                          "ALTER TABLE jobs DROP COLUMN filament_g; ALTER TABLE jobs DROP COLUMN "
-                          "support_g; ALTER TABLE jobs DROP COLUMN support_saved_g; ALTER TABLE "
-                          "jobs DROP COLUMN prepare_ms; ALTER TABLE jobs DROP COLUMN slice_ms;"
-                          "ALTER TABLE jobs DROP COLUMN ready_ms; ALTER TABLE prints DROP COLUMN "
-                          "wait_ms; ALTER TABLE jobs DROP COLUMN mndr; ALTER TABLE jobs DROP "
-                          "COLUMN andr; ALTER TABLE jobs DROP COLUMN shape_changed;"
-                          "ALTER TABLE jobs DROP COLUMN est_s;"
-                          "DROP INDEX jobs_live; DROP INDEX prints_printer;"
-                          "PRAGMA user_version = 1",
-                          NULL, NULL, NULL),
+    T_EQ_INT(sqlite3_exec(
+                 db,
+                 "ALTER TABLE jobs DROP COLUMN prep_key; ALTER TABLE jobs DROP COLUMN "
+                 "mesh_sha; ALTER TABLE jobs DROP COLUMN mesh_angle_deg;"
+                 "ALTER TABLE printers DROP COLUMN bed_full;"
+                 "ALTER TABLE jobs DROP COLUMN gcode_lines;"
+                 "ALTER TABLE jobs DROP COLUMN filament_g; ALTER TABLE jobs DROP COLUMN "
+                 "support_g; ALTER TABLE jobs DROP COLUMN support_saved_g; ALTER TABLE "
+                 "jobs DROP COLUMN prepare_ms; ALTER TABLE jobs DROP COLUMN slice_ms;"
+                 "ALTER TABLE jobs DROP COLUMN ready_ms; ALTER TABLE prints DROP COLUMN "
+                 "wait_ms; ALTER TABLE jobs DROP COLUMN mndr; ALTER TABLE jobs DROP "
+                 "COLUMN andr; ALTER TABLE jobs DROP COLUMN shape_changed;"
+                 "ALTER TABLE jobs DROP COLUMN est_s;"
+                 "DROP INDEX jobs_live; DROP INDEX prints_printer; DROP INDEX prints_printer_id;"
+                 "PRAGMA user_version = 1",
+                 NULL, NULL, NULL),
              SQLITE_OK);
     sqlite3_close(db);
     T_TRUE((s = store_open(dir, NULL, &err)) != NULL);
