@@ -9,6 +9,7 @@
 #include <time.h>
 
 #include "../base/clock.h"
+#include "printtime.h"
 #include "supmodel.h"
 
 void
@@ -16,7 +17,8 @@ dirsearch_params_default(struct dirsearch_params *p)
 {
     memset(p, 0, sizeof(*p));
     p->k = 4;
-    p->min_gain = 0.05;
+    printtime_policy_default(&p->policy);
+    printtime_params_default(&p->pt);
     orient_params_default(&p->op);
     surfopt_params_default(&p->sp);
 }
@@ -25,6 +27,60 @@ void
 dirsearch_result_release(struct dirsearch_result *res)
 {
     surfopt_result_release(&res->best);
+}
+
+/* The input as given (+z up): the model's grams, its print seconds (part and
+   support) in *c, the support's own seconds in *support_s. */
+static int
+input_cost(const struct mesh *m, const struct dirsearch_params *p, struct printtime_cost *c,
+           double *support_s, struct sf_err *err)
+{
+    struct supmodel_params mp;
+    supmodel_params_steer(&mp, p->sp.angle_deg);
+    struct supmodel_result mr;
+    int rc = supmodel_of_mesh(m, v3(0, 0, 1), &mp, &mr, err);
+    if (rc < 0)
+        return rc;
+    struct printtime_result pr;
+    if ((rc = printtime_eval(m, v3(0, 0, 1), &p->pt, &pr, err)) < 0)
+        return rc;
+    c->support_g = mr.grams;
+    c->print_s = pr.part_s + mr.time_s;
+    *support_s = mr.time_s;
+    return SF_OK;
+}
+
+/* A direction's result (on z = 0, +z up): its model grams and print seconds. */
+static int
+result_cost(const struct surfopt_result *r, const struct dirsearch_params *p,
+            struct printtime_cost *c, struct sf_err *err)
+{
+    struct printtime_result pr;
+    int rc = printtime_eval(&r->out, v3(0, 0, 1), &p->pt, &pr, err);
+    if (rc < 0)
+        return rc;
+    c->support_g = r->model_after_g;
+    c->print_s = pr.part_s + r->model_after_s;
+    return SF_OK;
+}
+
+/* The shape step on m turned to up; the first (best) direction is the
+   orientation-fused run itself (its first orientation step finds this
+   direction on the refined part), the others keep their start (sp). */
+static int
+shape_one(const struct mesh *m, const struct dirsearch_params *p, const struct surfopt_params *sp,
+          struct vec3 up, bool first, struct surfopt_result *r, struct sf_err *err)
+{
+    struct mesh turned;
+    mesh_init(&turned);
+    int rc = mesh_copy(&turned, m, err);
+    if (rc < 0)
+        return rc;
+    if (!first)
+        orient_apply(&turned, up, 0, 0);
+    rc = surfopt_optimize(&turned, first ? &p->sp : sp, r, err);
+    mesh_release(&turned);
+    return rc;
 }
 
 int
@@ -36,22 +92,21 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
     if (p->k < 1 || p->k > DIRSEARCH_K_MAX)
         return sf_err_set(err, SF_EINVAL, "direction search: k %d outside [1, %d]", p->k,
                           DIRSEARCH_K_MAX);
-    if (!(p->min_gain >= 0 && p->min_gain < 1))
-        return sf_err_set(err, SF_EINVAL, "direction search: min_gain %g outside [0, 1)",
-                          p->min_gain);
-    double t0 = clock_mono_s();
+    int rc = printtime_policy_check(&p->policy, err);
+    if (rc < 0)
+        return rc;
+    double t0 = clock_mono_s(), t1;
     struct orient_params op = p->op;
     op.angle_deg = p->sp.angle_deg;
     struct orient_result found;
-    int rc = orient_find(m, &op, &found, err);
-    if (rc < 0)
+    if ((rc = orient_find(m, &op, &found, err)) < 0)
         return rc;
-    struct supmodel_params mp;
-    supmodel_params_steer(&mp, p->sp.angle_deg);
-    struct supmodel_result mr;
-    if ((rc = supmodel_of_mesh(m, v3(0, 0, 1), &mp, &mr, err)) < 0)
+    res->orient_s = (t1 = clock_mono_s()) - t0;
+    double in_support_s;
+    if ((rc = input_cost(m, p, &res->input_cost, &in_support_s, err)) < 0)
         return rc;
-    res->model_input_g = mr.grams;
+    res->model_input_g = res->input_cost.support_g;
+    res->input_s = clock_mono_s() - t1;
     /* the best direction, then the runners-up (distinct by construction);
        a part that is no closed solid keeps its up (orient.h: its ray counts
        are guesses; mech-holes-shark turned by the model's 14.4 -> 8.7 g
@@ -62,42 +117,49 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
     struct surfopt_params sp = p->sp;
     sp.keep_start_up = true; /* each start keeps its direction for its first round */
     int best = -1;
+    bool best_ok = false;
     for (int i = 0; i < res->n_tried; i++) {
-        struct mesh turned;
-        mesh_init(&turned);
-        if ((rc = mesh_copy(&turned, m, err)) < 0)
-            return rc;
+        t1 = clock_mono_s();
         struct surfopt_result r;
-        if (i == 0) {
-            /* the best direction: the orientation-fused run itself (its first
-               orientation step finds this direction on the refined part) */
-            rc = surfopt_optimize(&turned, &p->sp, &r, err);
-        } else {
-            orient_apply(&turned, res->ups[i], 0, 0);
-            rc = surfopt_optimize(&turned, &sp, &r, err);
-        }
-        mesh_release(&turned);
-        if (rc < 0) {
+        if ((rc = shape_one(m, p, &sp, res->ups[i], i == 0, &r, err)) < 0) {
             dirsearch_result_release(res);
             return rc;
         }
-        res->model_g[i] = r.model_after_g;
+        struct printtime_cost c;
+        if ((rc = result_cost(&r, p, &c, err)) < 0) {
+            surfopt_result_release(&r);
+            dirsearch_result_release(res);
+            return rc;
+        }
+        res->model_g[i] = c.support_g;
+        res->print_s[i] = c.print_s;
         res->shape_changed[i] = r.shape_changed;
-        if (best < 0 || r.model_after_g < res->model_g[best]) {
+        res->shape_s[i] = clock_mono_s() - t1;
+        /* the least value among the results that may replace the input (no
+           more support, no slower unless asked), else the least value */
+        bool ok = c.support_g <= res->input_cost.support_g &&
+                  (p->policy.material_first || c.print_s <= res->input_cost.print_s);
+        if (best < 0 || (ok && !best_ok) ||
+            (ok == best_ok &&
+             printtime_value_s(&p->policy, &c) < printtime_value_s(&p->policy, &res->cost))) {
             surfopt_result_release(&res->best);
             res->best = r;
+            res->cost = c;
             best = i;
+            best_ok = ok;
         } else {
             surfopt_result_release(&r);
         }
     }
     res->up = res->ups[best];
-    bool gain = res->model_g[best] < (1 - p->min_gain) * res->model_input_g, rises = false;
+    t1 = clock_mono_s();
+    bool gain = printtime_worth(&p->policy, &res->input_cost, &res->cost), rises = false;
     if (gain &&
         (rc = supmodel_peers_rise(m, &res->best.out, p->sp.angle_deg, &rises, NULL, err)) < 0) {
         dirsearch_result_release(res);
         return rc;
     }
+    res->check_s = clock_mono_s() - t1;
     if (!gain || rises) {
         /* not worth it: the input as given, resting on z = 0 */
         surfopt_result_release(&res->best);
@@ -107,14 +169,19 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
             return rc;
         orient_apply(&res->best.out, v3(0, 0, 1), 0, 0);
         res->best.model_oriented_g = res->best.model_after_g = res->model_input_g;
+        res->best.model_after_s = in_support_s;
         res->best.unchanged_why =
             rises ? "the best direction's result of this open shell needs more support than "
                     "the part as given in PrusaSlicer or CuraEngine, which drop what its open "
                     "rims leave open"
-                  : "no direction's result saves min_gain of the model's grams for the input "
-                    "as given";
+            : !best_ok
+                ? "every direction's result needs more support or prints slower than the part "
+                  "as given"
+                : "no direction's result saves min_gain of the input's support grams (plus "
+                  "min_gain_g) or of its print seconds";
         res->up = v3(0, 0, 1);
         res->kept_input = true;
+        res->cost = res->input_cost;
     }
     res->seconds = clock_mono_s() - t0;
     return SF_OK;

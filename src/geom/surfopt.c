@@ -793,7 +793,7 @@ choose_kept(const struct mesh *m, struct mesh *cur, const struct mesh *oriented,
         return rc;
     res->model_oriented_g = mr.grams;
     int best_k = -1, n_selfx = 0, n_peer_rise = 0;
-    double best_g = mr.grams;
+    double best_g = mr.grams, oriented_s = mr.time_s, best_s = mr.time_s;
     for (int k = n_keep - 1; k >= 0; k--) {
         memcpy(cur->v, keep[k].v, (size_t)n * sizeof(struct vec3));
         if ((rc = selfx_ref_count(sxr, cur, NULL, err)) < 0)
@@ -813,6 +813,7 @@ choose_kept(const struct mesh *m, struct mesh *cur, const struct mesh *oriented,
             return rc;
         if (mr.grams < best_g && !rises) {
             best_g = mr.grams;
+            best_s = mr.time_s;
             best_k = k;
         } else {
             res->n_rejected++;
@@ -831,8 +832,10 @@ choose_kept(const struct mesh *m, struct mesh *cur, const struct mesh *oriented,
             return rc;
         res->shape_changed = true;
         res->model_after_g = best_g;
+        res->model_after_s = best_s;
     } else {
         res->model_after_g = res->model_oriented_g;
+        res->model_after_s = oriented_s;
         res->unchanged_why = unchanged_why(res, n_keep, n_selfx, n_peer_rise, small_gain);
     }
     return SF_OK;

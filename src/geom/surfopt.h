@@ -145,6 +145,7 @@ struct surfopt_result {
     /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams: it picks the
        result among the kept shapes, which must need min_gain fewer than the oriented part */
     double model_oriented_g, model_after_g;
+    double model_after_s;      /* the model's seconds of support for out (supmodel_result.time_s) */
     const char *unchanged_why; /* shape kept: why, in words (static); NULL when changed */
     double saliency_s, factor_s, iterate_s, orient_s, check_s, total_s;
 };
