@@ -26,8 +26,14 @@ DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev li
 	libjansson-dev libminizip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
 	libsuitesparse-dev clang-14 clang-format libclang-rt-14-dev python3 procps libssl-dev \
 	printrun-common mosquitto chromium nodejs
-# Only for `make bench`: the independent peers and their helpers.
-BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy bc
+# Only for `make bench`: the independent peers and their helpers, and OpenSCAD
+# (its CLI generates the validation sets, tests/bench/valsets.sh).
+BENCH_PKGS := prusa-slicer cura-engine cura time valgrind hyperfine python3-numpy bc openscad
+# Wanted by `make check` but not required: tests that need them skip without
+# (tests/integ/slice_mech.sh generates its parts with OpenSCAD).
+CHECK_OPT_PKGS := openscad
+# shell: the packages of the list $(1) that dpkg has not installed, one a line
+MISSING = for p in $(1); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done
 
 # Libraries with a pkg-config file; the rest get fixed flags (Debian ships no .pc).
 PKGS := libserialport libcurl sqlite3 libmicrohttpd libmosquitto inih qhull_r polyclipping \
@@ -220,6 +226,11 @@ FUZZ_RUNS ?= 3000
 # Tests at once (tests/run.sh; empty: one per core); JOBS=1 runs them one by one.
 JOBS ?=
 check: deps
+	@missing=$$($(call MISSING,$(CHECK_OPT_PKGS))); \
+	if [ -n "$$missing" ]; then \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -q $$missing >/dev/null 2>&1 || \
+			echo "make check: could not install $$missing; the tests that need it skip"; \
+	fi
 	$(MAKE) --no-print-directory browser-deps
 	$(MAKE) --no-print-directory SAN=1 tests
 	$(MAKE) --no-print-directory fuzzers
@@ -238,7 +249,7 @@ demo: deps all
 	tests/demo.sh $(if $(ONCE),--once)
 
 bench: deps all $(BENCHES)
-	@missing=$$(for p in $(BENCH_PKGS); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done); \
+	@missing=$$($(call MISSING,$(BENCH_PKGS))); \
 	if [ -n "$$missing" ]; then apt-get install -y -q $$missing >/dev/null; fi
 	tests/bench/run.sh $(BUILD)
 
@@ -247,7 +258,7 @@ soak: deps all $(BUILD)/bench/bench_soak
 	tests/bench/soak.sh $(BUILD)
 
 deps:
-	@missing=$$(for p in $(DEB_PKGS); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done); \
+	@missing=$$($(call MISSING,$(DEB_PKGS))); \
 	if [ -n "$$missing" ]; then \
 		echo "installing: $$missing"; \
 		export DEBIAN_FRONTEND=noninteractive; \

@@ -1,14 +1,25 @@
 #!/usr/bin/env bash
 # bench_supgrams.sh BUILD - the peers' verdict on the optimizers: for every
-# shared mesh, the part as given, oriented (slimfarm orient), surface
-# optimized (optimize --method surface) and oriented then volumetrically
-# slimmed (orient + optimize --method volumetric, as the farm's --method slim
-# does) and the direction search with surface optimization inside
-# (optimize --method surface --search-direction 4; its seconds are wall time), each sliced by PrusaSlicer and CuraEngine (../shared/peers, 45 deg,
-# supports on): support grams and their print-time estimate, with the layer-
-# based model's grams (supmodel.h), our optimizers' seconds and MNDR/ANDR,
-# and our own slicer's support grams.  Peer rows are cached by the STL's md5
-# under build/peercache/stl (peers run under nice -n 19: a shared machine).
+# mesh of the sets asked for, the part as given, oriented (slimfarm orient),
+# surface optimized (optimize --method surface) and oriented then
+# volumetrically slimmed (orient + optimize --method volumetric, as the
+# farm's --method slim does) and the direction search with surface
+# optimization inside (optimize --method surface --search-direction 4; its
+# seconds are wall time), each sliced by PrusaSlicer and CuraEngine
+# (../shared/peers, 45 deg, supports on): support grams and their print-time
+# estimate, with the layer-based model's grams (supmodel.h), our optimizers'
+# seconds and MNDR/ANDR, and our own slicer's support grams.  Peer rows are
+# cached by the STL's md5 under build/peercache/stl (peers run under nice -n
+# 19: a shared machine).
+# SUPGRAMS_SET picks the sets (tests/bench/valsets.sh): shared (default, the
+# tuning set), mech, scad, or several ("mech scad", all).  Each set's rows
+# end with its totals per variant against the part as given (PrusaSlicer and
+# CuraEngine support grams, PrusaSlicer's estimated time, ours, each with its
+# % change; the parts whose support rose in either peer beyond 2 % + 0.05 g
+# of slicer noise, those printing over 2 % slower, those unchanged (the same
+# STL, or the same grams in both peers), the largest MNDR and ANDR), over the
+# parts where both rows have figures; with more than one set a last table
+# puts the sets' % changes side by side.
 # SUPGRAMS_MESHES="anchor dino" limits the meshes; SUPGRAMS_VARIANTS (default
 # "given orient surface slim search"); SUPGRAMS_PEERS (default "prusaslicer curaengine");
 # SUPGRAMS_CACHED_ONLY=1 reports cached peer rows only (a dash where none is).
@@ -20,8 +31,11 @@
 set -u
 build=${1:-build/rel}
 shared=${SLIMFARM_SHARED:-../shared}
-[ -d "$shared/meshes" ] || { echo "bench_supgrams: $shared/meshes absent, skipped"; exit 0; }
+[ -d "$shared/peers" ] || { echo "bench_supgrams: $shared/peers absent, skipped"; exit 0; }
 peers="$(cd "$shared" && pwd)/peers/slice-peers.sh"
+# shellcheck disable=SC2086
+meshes=$("$(dirname "$0")/valsets.sh" ${SUPGRAMS_SET:-shared})
+[ -n "$meshes" ] || { echo "bench_supgrams: no meshes in set ${SUPGRAMS_SET:-shared}, skipped"; exit 0; }
 cache=${PEER_CACHE:-build/peercache}
 sf="$build/bin/slimfarm"
 # the CLI runs its commands from libexec: the key covers them all
@@ -42,12 +56,30 @@ peer() {
   fi
   awk -F, 'NR == 2 { print ($8 == 0 ? $14 " " $15 : "fail -") }' "$row" 2>/dev/null || echo "- -"
 }
-one_dir=$(mktemp); echo "0 0 0 1" > "$one_dir"; trap 'rm -f "$one_dir"' EXIT
-printf '%-17s %-8s | %8s %8s | %8s %8s | %8s %8s | %7s %7s %8s | %8s\n' mesh variant PS_g PS_h CE_g CE_h \
-  model_PS model_CE MNDR% ANDR% opt_s ours_g
-for f in $(ls -S -r "$shared"/meshes/*.stl); do
+# totals SET: its rows summed per variant over the parts where the variant
+# and the part as given both have the figure, with the % change
+totals() {
+  awk -v set="$1" -v vars="$variants" -f "$(dirname "$0")/valsets/totals.awk" "$rows"
+}
+# side_by_side: every set's % changes against the part as given, per variant
+side_by_side() {
+  awk -v vars="$variants" -v side=1 -f "$(dirname "$0")/valsets/totals.awk" "$rows"
+}
+one_dir=$(mktemp); echo "0 0 0 1" > "$one_dir"
+rows=$(mktemp) # set mesh variant PS_g PS_s CE_g CE_s ours_g mndr% andr% md5, for the totals
+trap 'rm -f "$one_dir" "$rows"' EXIT
+header() {
+  printf '%-17s %-8s | %8s %8s | %8s %8s | %8s %8s | %7s %7s %8s | %8s\n' mesh variant PS_g PS_h CE_g CE_h \
+    model_PS model_CE MNDR% ANDR% opt_s ours_g
+}
+prev_set=
+while IFS=$'\t' read -r set f; do
   name=$(basename "$f" .stl)
   [ -n "${SUPGRAMS_MESHES:-}" ] && [[ " $SUPGRAMS_MESHES " != *" $name "* ]] && continue
+  if [ "$set" != "$prev_set" ]; then
+    [ -n "$prev_set" ] && totals "$prev_set"
+    echo "== set $set"; header; prev_set=$set
+  fi
   for v in $variants; do
     out="$vdir/$name-$v.stl" js="$vdir/$name-$v.json"
     mndr=- andr=- secs=-
@@ -71,15 +103,19 @@ for f in $(ls -S -r "$shared"/meshes/*.stl); do
       sed -n 's/.*(support \([0-9.]*\) g).*/\1/p')
     ours=${ours:--}
     row="$name $v"
-    cols=""
+    cols="" raw=""
     for s in prusaslicer curaengine; do
       if [[ " $slicers " == *" $s "* ]]; then read -r g t < <(peer "$out" "$s"); else g=- t=-; fi
       cols="$cols $g $(awk -v t="$t" 'BEGIN { if (t + 0 > 0) printf "%.2f", t / 3600; else print "-" }')"
+      raw="$raw $g ${t:--}"
     done
+    pm=$(awk -v x="$mndr" 'BEGIN { if (x == "-") print "-"; else printf "%.2f", 100 * x }')
+    pa=$(awk -v x="$andr" 'BEGIN { if (x == "-") print "-"; else printf "%.2f", 100 * x }')
     # shellcheck disable=SC2086
     printf '%-17s %-8s | %8s %8s | %8s %8s | %8s %8s | %7s %7s %8s | %8s\n' $row $cols "$mps" "$mce" \
-      "$(awk -v x="$mndr" 'BEGIN { if (x == "-") print "-"; else printf "%.2f", 100 * x }')" \
-      "$(awk -v x="$andr" 'BEGIN { if (x == "-") print "-"; else printf "%.2f", 100 * x }')" \
-      "$(awk -v x="$secs" 'BEGIN { if (x == "-") print "-"; else printf "%.1f", x }')" "$ours"
+      "$pm" "$pa" "$(awk -v x="$secs" 'BEGIN { if (x == "-") print "-"; else printf "%.1f", x }')" "$ours"
+    echo "$set $name $v$raw $ours $pm $pa $(md5sum < "$out" | cut -c1-32)" >> "$rows"
   done
-done
+done <<< "$meshes"
+[ -n "$prev_set" ] && totals "$prev_set"
+[ "$(cut -d' ' -f1 "$rows" | sort -u | wc -l)" -gt 1 ] && side_by_side
