@@ -156,15 +156,20 @@ parse_opts(int argc, char **argv, struct surfopt_params *p, const char **out, bo
 static json_t *
 search_json(const struct dirsearch_result *ds)
 {
-    json_t *shape = json_array();
-    for (int i = 0; i < ds->n_tried; i++)
+    json_t *shape = json_array(), *dirs = json_array();
+    for (int i = 0; i < ds->n_tried; i++) {
         json_array_append_new(shape, json_real(ds->shape_s[i]));
-    return json_pack("{s:i, s:b, s:{s:f, s:f}, s:{s:f, s:f}, s:{s:f, s:f, s:f, s:o, s:f}}",
-                     "directions", (json_int_t)ds->n_tried, "kept_input", ds->kept_input, "input",
-                     "model_support_g", ds->input_cost.support_g, "print_s", ds->input_cost.print_s,
-                     "result", "model_support_g", ds->cost.support_g, "print_s", ds->cost.print_s,
-                     "seconds", "total", ds->seconds, "orient", ds->orient_s, "input", ds->input_s,
-                     "shape", shape, "check", ds->check_s);
+        json_array_append_new(dirs, json_pack("{s:[f, f, f], s:f, s:f, s:b}", "up", ds->ups[i].x,
+                                              ds->ups[i].y, ds->ups[i].z, "model_support_g",
+                                              ds->model_g[i], "print_s", ds->print_s[i],
+                                              "shape_changed", ds->shape_changed[i]));
+    }
+    return json_pack("{s:o, s:b, s:{s:f, s:f}, s:{s:f, s:f}, s:{s:f, s:f, s:f, s:o, s:f}}",
+                     "directions", dirs, "kept_input", ds->kept_input, "input", "model_support_g",
+                     ds->input_cost.support_g, "print_s", ds->input_cost.print_s, "result",
+                     "model_support_g", ds->cost.support_g, "print_s", ds->cost.print_s, "seconds",
+                     "total", ds->seconds, "orient", ds->orient_s, "input", ds->input_s, "shape",
+                     shape, "check", ds->check_s);
 }
 
 int

@@ -5,10 +5,13 @@
 #include "dirsearch.h"
 
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
 #include "../base/clock.h"
+#include "../base/mem.h"
+#include "../base/par.h"
 #include "printtime.h"
 #include "supmodel.h"
 
@@ -45,7 +48,7 @@ input_cost(const struct mesh *m, const struct dirsearch_params *p, struct printt
     if ((rc = printtime_eval(m, v3(0, 0, 1), &p->pt, &pr, err)) < 0)
         return rc;
     c->support_g = mr.grams;
-    c->print_s = pr.part_s + mr.time_s;
+    c->print_s = printtime_total_s(&p->pt, &pr, mr.time_s);
     *support_s = mr.time_s;
     return SF_OK;
 }
@@ -60,7 +63,7 @@ result_cost(const struct surfopt_result *r, const struct dirsearch_params *p,
     if (rc < 0)
         return rc;
     c->support_g = r->model_after_g;
-    c->print_s = pr.part_s + r->model_after_s;
+    c->print_s = printtime_total_s(&p->pt, &pr, r->model_after_s);
     return SF_OK;
 }
 
@@ -80,6 +83,64 @@ shape_one(const struct mesh *m, const struct dirsearch_params *p, const struct s
         orient_apply(&turned, up, 0, 0);
     rc = surfopt_optimize(&turned, first ? &p->sp : sp, r, err);
     mesh_release(&turned);
+    return rc;
+}
+
+/* The directions' shape steps, one per par_for index (each writes its own
+   slots; the caller picks in index order, so the answer does not depend on
+   which thread ran which direction). */
+struct shapes {
+    const struct mesh *m;
+    const struct dirsearch_params *p;
+    const struct surfopt_params *sp; /* the runners-up's settings */
+    const struct vec3 *ups;
+    struct surfopt_result r[DIRSEARCH_K_MAX];
+    struct printtime_cost c[DIRSEARCH_K_MAX];
+    double seconds[DIRSEARCH_K_MAX];
+    bool done[DIRSEARCH_K_MAX]; /* r[i] holds a result to release */
+    struct sf_err err[DIRSEARCH_K_MAX];
+};
+
+static int
+shape_task(void *ud, uint32_t begin, uint32_t end, int worker)
+{
+    struct shapes *s = ud;
+    (void)worker;
+    for (uint32_t i = begin; i < end; i++) {
+        double t0 = clock_mono_s();
+        int rc = shape_one(s->m, s->p, s->sp, s->ups[i], i == 0, &s->r[i], &s->err[i]);
+        if (rc < 0)
+            return rc;
+        s->done[i] = true;
+        if ((rc = result_cost(&s->r[i], s->p, &s->c[i], &s->err[i])) < 0)
+            return rc;
+        s->seconds[i] = clock_mono_s() - t0;
+    }
+    return SF_OK;
+}
+
+/* Run the shape steps of res->ups on par_for's threads (the directions are
+   independent: on two cores the search takes about half the wall time).
+   On failure every result is released and err says the lowest failing
+   direction's error. */
+static int
+shape_all(const struct mesh *m, const struct dirsearch_params *p, const struct surfopt_params *sp,
+          struct dirsearch_result *res, struct shapes *s, struct sf_err *err)
+{
+    memset(s, 0, sizeof(*s));
+    *s = (struct shapes){ .m = m, .p = p, .sp = sp, .ups = res->ups };
+    int rc = par_for((uint32_t)res->n_tried, 1, 0, shape_task, s);
+    if (rc >= 0)
+        return rc;
+    for (int i = 0; i < res->n_tried; i++) {
+        if (s->err[i].code < 0 && err) {
+            *err = s->err[i];
+            break;
+        }
+    }
+    for (int i = 0; i < res->n_tried; i++)
+        if (s->done[i])
+            surfopt_result_release(&s->r[i]);
     return rc;
 }
 
@@ -116,41 +177,38 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
         res->ups[res->n_tried++] = found.runners[i].up;
     struct surfopt_params sp = p->sp;
     sp.keep_start_up = true; /* each start keeps its direction for its first round */
+    struct shapes *sh = mem_alloc(sizeof(*sh));
+    if (!sh)
+        return sf_err_set(err, SF_ENOMEM, "direction search: out of memory");
+    if ((rc = shape_all(m, p, &sp, res, sh, err)) < 0) {
+        free(sh);
+        return rc;
+    }
+    /* the least value among the results that may replace the input (no
+       more support, no slower unless asked), else the least value */
     int best = -1;
     bool best_ok = false;
     for (int i = 0; i < res->n_tried; i++) {
-        t1 = clock_mono_s();
-        struct surfopt_result r;
-        if ((rc = shape_one(m, p, &sp, res->ups[i], i == 0, &r, err)) < 0) {
-            dirsearch_result_release(res);
-            return rc;
-        }
-        struct printtime_cost c;
-        if ((rc = result_cost(&r, p, &c, err)) < 0) {
-            surfopt_result_release(&r);
-            dirsearch_result_release(res);
-            return rc;
-        }
-        res->model_g[i] = c.support_g;
-        res->print_s[i] = c.print_s;
-        res->shape_changed[i] = r.shape_changed;
-        res->shape_s[i] = clock_mono_s() - t1;
-        /* the least value among the results that may replace the input (no
-           more support, no slower unless asked), else the least value */
-        bool ok = c.support_g <= res->input_cost.support_g &&
-                  (p->policy.material_first || c.print_s <= res->input_cost.print_s);
+        const struct printtime_cost *c = &sh->c[i];
+        res->model_g[i] = c->support_g;
+        res->print_s[i] = c->print_s;
+        res->shape_changed[i] = sh->r[i].shape_changed;
+        res->shape_s[i] = sh->seconds[i];
+        bool ok = c->support_g <= res->input_cost.support_g &&
+                  (p->policy.material_first || c->print_s <= res->input_cost.print_s);
         if (best < 0 || (ok && !best_ok) ||
             (ok == best_ok &&
-             printtime_value_s(&p->policy, &c) < printtime_value_s(&p->policy, &res->cost))) {
-            surfopt_result_release(&res->best);
-            res->best = r;
-            res->cost = c;
+             printtime_value_s(&p->policy, c) < printtime_value_s(&p->policy, &sh->c[best]))) {
             best = i;
             best_ok = ok;
-        } else {
-            surfopt_result_release(&r);
         }
     }
+    for (int i = 0; i < res->n_tried; i++)
+        if (i != best)
+            surfopt_result_release(&sh->r[i]);
+    res->best = sh->r[best];
+    res->cost = sh->c[best];
+    free(sh);
     res->up = res->ups[best];
     t1 = clock_mono_s();
     bool gain = printtime_worth(&p->policy, &res->input_cost, &res->cost), rises = false;

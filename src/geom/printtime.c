@@ -12,12 +12,19 @@
 void
 printtime_params_default(struct printtime_params *p)
 {
-    *p = (struct printtime_params){ .layer_mm = 0.2,          .line_width_mm = 0.45,
-                                    .perimeters = 2,          .ext_perimeter_mm_s = 30,
-                                    .perimeter_mm_s = 60,     .top_layers = 4,
-                                    .bottom_layers = 3,       .solid_mm_s = 20,
-                                    .infill_density = 0.15,   .infill_mm_s = 80,
-                                    .layer_change_s = 1,      .min_layer_s = 5 };
+    *p = (struct printtime_params){ .layer_mm = 0.2,
+                                    .line_width_mm = 0.45,
+                                    .perimeters = 2,
+                                    .ext_perimeter_mm_s = 30,
+                                    .perimeter_mm_s = 60,
+                                    .top_layers = 4,
+                                    .bottom_layers = 3,
+                                    .solid_mm_s = 20,
+                                    .infill_density = 0.15,
+                                    .infill_mm_s = 80,
+                                    .layer_change_s = 0.3,
+                                    .min_layer_s = 5,
+                                    .support_factor = 2.5 };
 }
 
 void
@@ -35,8 +42,7 @@ printtime_policy_check(const struct printtime_policy *p, struct sf_err *err)
     if (!(p->min_gain >= 0 && p->min_gain < 1))
         return sf_err_set(err, SF_EINVAL, "min-gain %g: want a share in [0, 1)", p->min_gain);
     if (!(p->min_gain_g >= 0 && p->min_gain_g <= 1000))
-        return sf_err_set(err, SF_EINVAL, "min_gain_g %g: want grams in [0, 1000]",
-                          p->min_gain_g);
+        return sf_err_set(err, SF_EINVAL, "min_gain_g %g: want grams in [0, 1000]", p->min_gain_g);
     return SF_OK;
 }
 
@@ -59,6 +65,13 @@ printtime_worth(const struct printtime_policy *p, const struct printtime_cost *i
            saved_s >= p->min_gain * in->print_s;
 }
 
+double
+printtime_total_s(const struct printtime_params *p, const struct printtime_result *r,
+                  double support_s)
+{
+    return r->part_s + p->support_factor * support_s;
+}
+
 static int
 check_params(const struct printtime_params *p, struct sf_err *err)
 {
@@ -75,10 +88,10 @@ check_params(const struct printtime_params *p, struct sf_err *err)
         !(p->infill_mm_s > 0))
         return sf_err_set(err, SF_EINVAL, "print time: every speed must be positive");
     if (!(p->infill_density >= 0 && p->infill_density <= 1) || !(p->layer_change_s >= 0) ||
-        !(p->min_layer_s >= 0))
+        !(p->min_layer_s >= 0) || !(p->support_factor >= 0 && p->support_factor <= 100))
         return sf_err_set(err, SF_EINVAL,
                           "print time: infill_density in [0, 1], layer_change_s and "
-                          "min_layer_s not negative");
+                          "min_layer_s not negative, support_factor in [0, 100]");
     return SF_OK;
 }
 
@@ -176,9 +189,8 @@ printtime_eval(const struct mesh *m, struct vec3 up, const struct printtime_para
     memset(buf, 0, (size_t)3 * n * sizeof(double));
     struct layers L = { buf, buf + n, buf + 2 * n };
     add_faces(m, up, zmin, n, p, &L);
-    double per_mm = p->perimeters > 0
-                        ? 1 / p->ext_perimeter_mm_s + (p->perimeters - 1) / p->perimeter_mm_s
-                        : 0;
+    double per_mm =
+        p->perimeters > 0 ? 1 / p->ext_perimeter_mm_s + (p->perimeters - 1) / p->perimeter_mm_s : 0;
     double pw = p->perimeters * p->line_width_mm, section = 0;
     for (uint32_t k = n; k-- > 0;) {
         section += L.dsec_mm2[k];
@@ -191,7 +203,7 @@ printtime_eval(const struct mesh *m, struct vec3 up, const struct printtime_para
         out->perimeter_s += per_s;
         out->infill_s += fill_s;
         out->solid_s += L.solid_s[k];
-        double layer = fmax(work, p->min_layer_s) + p->layer_change_s;
+        double layer = fmax(work + p->layer_change_s, p->min_layer_s);
         out->layers_s += layer - work;
         out->part_s += layer;
     }
