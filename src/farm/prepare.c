@@ -207,6 +207,8 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     dirsearch_params_default(&dp);
     dp.sp = sp;
     dp.op.cancel = cancel;
+    dp.policy.gram_s = req->gram_s;
+    dp.policy.material_first = req->material_first;
     struct dirsearch_result dr;
     int rc = dirsearch_surface(m, &dp, &dr, err);
     if (rc)
