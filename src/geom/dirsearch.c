@@ -152,35 +152,23 @@ may_replace(const struct printtime_policy *pol, const struct printtime_cost *in,
     return c->support_g <= in->support_g && (pol->material_first || c->print_s <= in->print_s);
 }
 
-/*
- * The direction to hand back: the least value among the results that may
- * replace the input, else the least value (*ok says which).  A reshaped
- * winner gives way to the best result of unchanged shape unless it is
- * worth it against that (printtime_worth), as a reshape must be worth it
- * against its own orientation (surfopt.h): a flat lid bent into a shallow
- * tent saved the model 0.01 g over the lid turned over and printed 33 %
- * slower in PrusaSlicer (mech lid_down).
- */
-static int
-pick(const struct dirsearch_result *res, const struct shapes *sh,
-     const struct printtime_policy *pol, bool *ok)
+int
+dirsearch_pick(const struct printtime_policy *pol, const struct printtime_cost *in,
+               const struct printtime_cost *c, const bool *reshaped, int n, bool *ok)
 {
     int best = -1, plain = -1;
     *ok = false;
-    for (int i = 0; i < res->n_tried; i++) {
-        const struct printtime_cost *c = &sh->c[i];
-        bool may = may_replace(pol, &res->input_cost, c);
-        double v = printtime_value_s(pol, c);
-        if (best < 0 || (may && !*ok) || (may == *ok && v < printtime_value_s(pol, &sh->c[best]))) {
+    for (int i = 0; i < n; i++) {
+        bool may = may_replace(pol, in, &c[i]);
+        double v = printtime_value_s(pol, &c[i]);
+        if (best < 0 || (may && !*ok) || (may == *ok && v < printtime_value_s(pol, &c[best]))) {
             best = i;
             *ok = may;
         }
-        if (may && !sh->r[i].shape_changed &&
-            (plain < 0 || v < printtime_value_s(pol, &sh->c[plain])))
+        if (may && !reshaped[i] && (plain < 0 || v < printtime_value_s(pol, &c[plain])))
             plain = i;
     }
-    if (*ok && plain >= 0 && sh->r[best].shape_changed &&
-        !printtime_worth(pol, &sh->c[plain], &sh->c[best]))
+    if (*ok && plain >= 0 && reshaped[best] && !printtime_worth(pol, &c[plain], &c[best]))
         best = plain;
     return best;
 }
@@ -232,7 +220,8 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
         res->shape_s[i] = sh->seconds[i];
     }
     bool best_ok;
-    int best = pick(res, sh, &p->policy, &best_ok);
+    int best = dirsearch_pick(&p->policy, &res->input_cost, sh->c, res->shape_changed, res->n_tried,
+                              &best_ok);
     for (int i = 0; i < res->n_tried; i++)
         if (i != best)
             surfopt_result_release(&sh->r[i]);

@@ -66,4 +66,18 @@ int dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
                       struct dirsearch_result *res, struct sf_err *err);
 void dirsearch_result_release(struct dirsearch_result *res);
 
+/*
+ * The search's choice among n results c (reshaped[i]: shape changed):
+ * the least printtime_value_s among those that may replace the input in
+ * (no more support, no slower unless pol->material_first), else the least
+ * value (*ok says which).  A reshaped winner gives way to the best result
+ * of unchanged shape unless it is worth it against that (printtime_worth),
+ * as a reshape must be worth it against its own orientation (surfopt.h): a
+ * flat lid bent into a shallow roof saved the model 0.01 g over the lid
+ * turned over and printed 33 % slower in PrusaSlicer (mech lid_down).
+ * Returns the index (n >= 1).
+ */
+int dirsearch_pick(const struct printtime_policy *pol, const struct printtime_cost *in,
+                   const struct printtime_cost *c, const bool *reshaped, int n, bool *ok);
+
 #endif

@@ -88,3 +88,30 @@ T_CASE(dirsearch_refuses_a_bad_policy)
     double height;
     T_ERR(search_bar(-1, false, &r, &height, &err), SF_EINVAL, &err, "gram-seconds");
 }
+
+T_CASE(dirsearch_pick_prefers_an_unchanged_shape_unless_the_reshape_is_worth_it)
+{
+    /* mech lid_down's directions: turned over (shape unchanged), a runner-up,
+       and bent into a roof for 9 mg less; the input needed 1.27 g */
+    struct printtime_policy pol;
+    printtime_policy_default(&pol);
+    struct printtime_cost in = { 1.271, 5883 };
+    struct printtime_cost c[] = { { 0.164, 5407 }, { 1.98, 4770 }, { 0.155, 5368 } };
+    bool reshaped[] = { false, false, true };
+    bool ok;
+    T_EQ_INT(dirsearch_pick(&pol, &in, c, reshaped, 3, &ok), 0);
+    T_TRUE(ok);
+    /* a reshape that saves a gram more than the turn is worth it */
+    c[2].support_g = 0.01;
+    c[0].support_g = 1.1;
+    T_EQ_INT(dirsearch_pick(&pol, &in, c, reshaped, 3, &ok), 2);
+    /* more support than the input (1.98 g) never wins while another may
+       replace it, however fast */
+    c[1].print_s = 100;
+    T_EQ_INT(dirsearch_pick(&pol, &in, c, reshaped, 3, &ok), 2);
+    /* nothing may replace it: the least value, not ok */
+    struct printtime_cost slow[] = { { 2, 9000 } };
+    bool no[] = { false };
+    T_EQ_INT(dirsearch_pick(&pol, &in, slow, no, 1, &ok), 0);
+    T_TRUE(!ok);
+}
