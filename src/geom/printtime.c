@@ -24,7 +24,8 @@ printtime_params_default(struct printtime_params *p)
                                     .infill_mm_s = 80,
                                     .layer_change_s = 0.3,
                                     .min_layer_s = 5,
-                                    .support_factor = 2.5 };
+                                    .solid_factor = 0.5,
+                                    .support_factor = 1.3 };
 }
 
 void
@@ -88,10 +89,12 @@ check_params(const struct printtime_params *p, struct sf_err *err)
         !(p->infill_mm_s > 0))
         return sf_err_set(err, SF_EINVAL, "print time: every speed must be positive");
     if (!(p->infill_density >= 0 && p->infill_density <= 1) || !(p->layer_change_s >= 0) ||
-        !(p->min_layer_s >= 0) || !(p->support_factor >= 0 && p->support_factor <= 100))
+        !(p->min_layer_s >= 0) || !(p->support_factor >= 0 && p->support_factor <= 100) ||
+        !(p->solid_factor >= 0 && p->solid_factor <= 100))
         return sf_err_set(err, SF_EINVAL,
                           "print time: infill_density in [0, 1], layer_change_s and "
-                          "min_layer_s not negative, support_factor in [0, 100]");
+                          "min_layer_s not negative, support_factor and solid_factor in "
+                          "[0, 100]");
     return SF_OK;
 }
 
@@ -199,10 +202,11 @@ printtime_eval(const struct mesh *m, struct vec3 up, const struct printtime_para
         double inner = fmax(0, section - L.outline_mm[k] * pw - solid_mm2);
         double per_s = L.outline_mm[k] * per_mm;
         double fill_s = inner * p->infill_density / p->line_width_mm / p->infill_mm_s;
-        double work = per_s + fill_s + L.solid_s[k];
+        double solid_s = L.solid_s[k] * p->solid_factor;
+        double work = per_s + fill_s + solid_s;
         out->perimeter_s += per_s;
         out->infill_s += fill_s;
-        out->solid_s += L.solid_s[k];
+        out->solid_s += solid_s;
         double layer = fmax(work + p->layer_change_s, p->min_layer_s);
         out->layers_s += layer - work;
         out->part_s += layer;
