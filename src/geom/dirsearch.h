@@ -70,7 +70,9 @@ void dirsearch_result_release(struct dirsearch_result *res);
  * The search's choice among n results c (reshaped[i]: shape changed):
  * the least printtime_value_s among those that may replace the input in
  * (no more support, no slower unless pol->material_first), else the least
- * value (*ok says which).  A reshaped winner gives way to the best result
+ * value (*ok says which); between results whose print seconds are within
+ * pol->min_gain of each other (the estimate's noise) the one with less
+ * support.  A reshaped winner gives way to the best result
  * of unchanged shape unless it is worth it against that (printtime_worth),
  * as a reshape must be worth it against its own orientation (surfopt.h): a
  * flat lid bent into a shallow roof saved the model 0.01 g over the lid
