@@ -123,15 +123,20 @@ T_CASE(dirsearch_pick_lets_support_decide_within_the_estimate_noise)
        value (60 s a gram) took the second: PrusaSlicer gave it 0.15 g more
        support and 1 % more time.  Within min_gain (2 %) of each other the
        print times are noise and support decides. */
+    const struct printtime_cost given = { .support_g = 12.72, .print_s = 5090 };
+    struct printtime_cost dirs[3] = {
+        { .support_g = 5.441, .print_s = 3740.6 },
+        { .support_g = 5.575, .print_s = 3809.2 },
+        { .support_g = 5.509, .print_s = 3729.2 },
+    };
+    const bool all_reshaped[3] = { true, true, true };
     struct printtime_policy pol;
     printtime_policy_default(&pol);
-    struct printtime_cost in = { 12.72, 5090 };
-    struct printtime_cost c[] = { { 5.441, 3740.6 }, { 5.575, 3809.2 }, { 5.509, 3729.2 } };
-    bool reshaped[] = { true, true, true };
-    bool ok;
-    T_EQ_INT(dirsearch_pick(&pol, &in, c, reshaped, 3, &ok), 0);
-    T_TRUE(ok);
+    bool ok = false;
+    int picked = dirsearch_pick(&pol, &given, dirs, all_reshaped, 3, &ok);
+    T_TRUE(ok && picked == 0);
     /* 3 % faster is no noise: the value decides again */
-    c[2].print_s = 3628;
-    T_EQ_INT(dirsearch_pick(&pol, &in, c, reshaped, 3, &ok), 2);
+    dirs[2].print_s = 3628;
+    picked = dirsearch_pick(&pol, &given, dirs, all_reshaped, 3, &ok);
+    T_EQ_INT(picked, 2);
 }
