@@ -82,7 +82,8 @@ int cmd_optimize_surface(int argc, char **argv);
 #define CMD_OPTIMIZE_SURFACE_USAGE                                                                 \
     "optimize PART -o OUT --method surface [--angle DEG] [--margin DEG] [--max-mndr P] "           \
     "[--max-andr P] [--fix-bottom MM] [--iterations N] [--rounds N] [--saliency S] "               \
-    "[--detail W] [--min-gain P] [--no-orient] [--search-direction K] [--json]"
+    "[--detail W] [--min-gain P] [--no-orient] [--search-direction K] [--gram-seconds S] "         \
+    "[--material-first] [--json]"
 
 /*
  * Draw "label [#####.....] 42%" on stderr when it is a terminal; a no-op

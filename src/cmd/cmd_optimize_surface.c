@@ -4,7 +4,11 @@
  * src/geom/surfopt.h).  cmd_optimize.c hands `--method surface` here; the
  * report has the support metrics as given, after the orientation step
  * alone and after the shape step, the deviation and the risky faces per
- * iteration.
+ * iteration.  With --search-direction K the shape step runs inside the
+ * direction search (dirsearch.h), weighed by print time and support grams
+ * (printtime.h: --gram-seconds, --material-first); the JSON's "search"
+ * object has both figures as given and as returned and the seconds of each
+ * stage.
  */
 #include <getopt.h>
 #include <jansson.h>
@@ -28,7 +32,7 @@ progress(void *ud, const struct surfopt_progress *pr)
 
 static int
 report_json(const char *in, const char *out, const struct surfopt_params *p,
-            const struct surfopt_result *r)
+            const struct surfopt_result *r, json_t *search)
 {
     json_t *o = json_pack(
         "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:b, s:i, s:i, s:i, "
@@ -45,6 +49,10 @@ report_json(const char *in, const char *out, const struct surfopt_params *p,
         "model_support_g", "oriented", r->model_oriented_g, "after", r->model_after_g);
     if (o && r->unchanged_why)
         json_object_set_new(o, "unchanged_why", json_string(r->unchanged_why));
+    if (o && search)
+        json_object_set_new(o, "search", search);
+    else
+        json_decref(search);
     return cmd_put_json("optimize", o);
 }
 
@@ -68,10 +76,18 @@ report_text(const char *in, const char *out, const struct surfopt_result *r)
     cmd_print_curve(r->curve, r->n_curve);
 }
 
-/* The options into p, out, json and search_k: 0, or 2 (a usage error, message printed). */
+/* The direction search's options. */
+struct search_opts {
+    int k;         /* > 0: shape inside the direction search */
+    double gram_s; /* --gram-seconds */
+    bool material_first;
+    double min_gain; /* --min-gain as a share, < 0 when not given */
+};
+
+/* The options into p, out, json and so: 0, or 2 (a usage error, message printed). */
 static int
 parse_opts(int argc, char **argv, struct surfopt_params *p, const char **out, bool *json,
-           int *search_k)
+           struct search_opts *so)
 {
     static const struct option opts[] = { { "output", required_argument, NULL, 'o' },
                                           { "method", required_argument, NULL, 'm' },
@@ -87,6 +103,8 @@ parse_opts(int argc, char **argv, struct surfopt_params *p, const char **out, bo
                                           { "min-gain", required_argument, NULL, 'G' },
                                           { "no-orient", no_argument, NULL, 'n' },
                                           { "search-direction", required_argument, NULL, 'S' },
+                                          { "gram-seconds", required_argument, NULL, 'W' },
+                                          { "material-first", no_argument, NULL, 'F' },
                                           { "json", no_argument, NULL, 'j' },
                                           { NULL, 0, NULL, 0 } };
     const struct cmd_num nums[] = {
@@ -99,9 +117,10 @@ parse_opts(int argc, char **argv, struct surfopt_params *p, const char **out, bo
         { 'r', "rounds", 1, 16, "a count in [1, 16]", NULL, &p->rounds, 0 },
         { 's', "saliency", 0, 1, "a share in [0, 1]", &p->saliency, NULL, 0 },
         { 'd', "detail", 0, 1e3, "a weight in [0, 1000]", &p->beta, NULL, 0 },
-        { 'G', "min-gain", 0, 99, "a percentage in [0, 99]", &p->min_gain, NULL, 100 },
+        { 'G', "min-gain", 0, 99, "a percentage in [0, 99]", &so->min_gain, NULL, 100 },
         { 'S', "search-direction", 1, DIRSEARCH_K_MAX, "a count of directions in [1, 5]", NULL,
-          search_k, 0 },
+          &so->k, 0 },
+        { 'W', "gram-seconds", 0, 1e6, "seconds in [0, 1000000]", &so->gram_s, NULL, 0 },
     };
     int c;
     optind = 1;
@@ -119,13 +138,38 @@ parse_opts(int argc, char **argv, struct surfopt_params *p, const char **out, bo
         case 'j':
             *json = true;
             break;
+        case 'F':
+            so->material_first = true;
+            break;
         default:
             return cmd_opt_error(c, CMD_OPTIMIZE_SURFACE_USAGE);
         }
     }
     if (optind != argc - 1 || !*out)
         return cmd_usage(CMD_OPTIMIZE_SURFACE_USAGE);
+    if (so->min_gain >= 0)
+        p->min_gain = so->min_gain;
     return 0;
+}
+
+/* The direction search's figures and stage seconds, for the JSON report. */
+static json_t *
+search_json(const struct dirsearch_result *ds)
+{
+    json_t *shape = json_array(), *dirs = json_array();
+    for (int i = 0; i < ds->n_tried; i++) {
+        json_array_append_new(shape, json_real(ds->shape_s[i]));
+        json_array_append_new(dirs, json_pack("{s:[f, f, f], s:f, s:f, s:b}", "up", ds->ups[i].x,
+                                              ds->ups[i].y, ds->ups[i].z, "model_support_g",
+                                              ds->model_g[i], "print_s", ds->print_s[i],
+                                              "shape_changed", ds->shape_changed[i]));
+    }
+    return json_pack("{s:o, s:b, s:{s:f, s:f}, s:{s:f, s:f}, s:{s:f, s:f, s:f, s:o, s:f}}",
+                     "directions", dirs, "kept_input", ds->kept_input, "input", "model_support_g",
+                     ds->input_cost.support_g, "print_s", ds->input_cost.print_s, "result",
+                     "model_support_g", ds->cost.support_g, "print_s", ds->cost.print_s, "seconds",
+                     "total", ds->seconds, "orient", ds->orient_s, "input", ds->input_s, "shape",
+                     shape, "check", ds->check_s);
 }
 
 int
@@ -135,8 +179,10 @@ cmd_optimize_surface(int argc, char **argv)
     surfopt_params_default(&p);
     const char *out = NULL;
     bool json = false;
-    int search_k = 0; /* > 0: shape inside the direction search (dirsearch.h) */
-    int rc = parse_opts(argc, argv, &p, &out, &json, &search_k);
+    struct dirsearch_params dp;
+    dirsearch_params_default(&dp);
+    struct search_opts so = { .gram_s = dp.policy.gram_s, .min_gain = -1 };
+    int rc = parse_opts(argc, argv, &p, &out, &json, &so);
     if (rc)
         return rc;
     if (p.margin_deg > p.angle_deg)
@@ -149,20 +195,24 @@ cmd_optimize_surface(int argc, char **argv)
     if (!cmd_load_part("optimize", argv[optind], &m, NULL))
         return 1;
     struct dirsearch_result ds;
-    if (search_k > 0) {
-        struct dirsearch_params dp;
-        dirsearch_params_default(&dp);
-        dp.k = search_k;
+    json_t *sj = NULL;
+    if (so.k > 0) {
+        dp.k = so.k;
         dp.sp = p;
-        dp.min_gain = p.min_gain; /* one threshold for the shape and the direction */
+        dp.policy.gram_s = so.gram_s;
+        dp.policy.material_first = so.material_first;
+        if (so.min_gain >= 0)
+            dp.policy.min_gain = so.min_gain; /* one threshold for the shape and the direction */
         rc = dirsearch_surface(&m, &dp, &ds, &err);
         if (rc == SF_OK) {
             r = ds.best; /* taken over: released with r */
-            if (!json)
+            if (json)
+                sj = search_json(&ds);
+            else
                 printf("direction search: %d directions reshaped, model grams as given %.2f, "
-                       "best %.2f%s\n",
-                       ds.n_tried, ds.model_input_g, r.model_after_g,
-                       ds.kept_input ? " (input kept: under min_gain)" : "");
+                       "best %.2f, estimated print time %.0f -> %.0f s%s\n",
+                       ds.n_tried, ds.model_input_g, r.model_after_g, ds.input_cost.print_s,
+                       ds.cost.print_s, ds.kept_input ? " (input kept)" : "");
         }
     } else {
         rc = surfopt_optimize(&m, &p, &r, &err);
@@ -174,11 +224,12 @@ cmd_optimize_surface(int argc, char **argv)
     }
     if (!cmd_save_part("optimize", &r.out, out)) {
         surfopt_result_release(&r);
+        json_decref(sj);
         return 1;
     }
     int status = 0;
     if (json)
-        status = report_json(argv[optind], out, &p, &r);
+        status = report_json(argv[optind], out, &p, &r, sj);
     else
         report_text(argv[optind], out, &r);
     surfopt_result_release(&r);

@@ -308,6 +308,8 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     t->req.opts = j->opts;
     t->req.printer = *printer_cfg(p);
     snprintf(t->req.profiles_dir, sizeof(t->req.profiles_dir), "%s", f->profiles_dir);
+    t->req.gram_s = f->gram_s;
+    t->req.material_first = f->material_first;
     snprintf(t->req.part_name, sizeof(t->req.part_name), "%s", j->opts.name);
     bool reuse = j->mesh_sha[0] && j->mesh_angle_deg == t->angle_deg;
     if (store_file_path(f->s, j->file_sha, t->req.part_path, sizeof(t->req.part_path), &err) ||
@@ -494,6 +496,8 @@ farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcf
     }
     *f = (struct farm){ .l = l, .s = s, .pool = pool, .hooks = *hooks };
     snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
+    f->gram_s = cfg->gram_s;
+    f->material_first = cfg->material_first;
     if (!(f->io = pool_new(l, 1, err))) {
         farm_free(f);
         return NULL;
@@ -612,6 +616,8 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     f->n_printers = w;
     f->n_no = 0; /* a reload may have mended a profile */
     snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
+    f->gram_s = cfg->gram_s;
+    f->material_first = cfg->material_first;
     farm_kick(f);
     return SF_OK;
 }

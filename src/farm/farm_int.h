@@ -32,6 +32,8 @@ struct farm {
     char profiles_dir[512];    /* slicing profiles (farmcfg profiles_dir) */
     struct printer **printers; /* n_printers, config order */
     size_t n_printers;
+    double gram_s;         /* farmcfg gram_seconds and material_first: the search's */
+    bool material_first;   /* policy for the parts prepared from now on */
     uint64_t kick;         /* pending run() timer, 0 if none */
     uint64_t progress;     /* progress timer */
     bool stopping;         /* farm_free: what drivers report while closing goes unheard */

@@ -60,6 +60,8 @@ static const struct option options[] = {
     { "api_keys_readonly", false, K_KEYS, 1, 0, 0, 0 },
     { "metrics_keys", false, K_KEYS, 2, 0, 0, 0 },
     { "upload_max_mb", false, K_MIB, 0, 0, 1, 4096 },
+    { "gram_seconds", false, K_DBL, F(gram_s), 0, 1e6 },
+    { "material_first", false, K_BOOL, F(material_first), 0, 0 },
     { "driver", true, K_IDENT, P(driver), 0, 0 },
     { "profile", true, K_IDENT, P(profile), 0, 0 },
     { "material", true, K_IDENT, P(material), 0, 0 },
@@ -657,6 +659,7 @@ farmcfg_init(struct farmcfg *c)
     snprintf(c->data_dir, sizeof(c->data_dir), "/var/lib/slimfarm");
     snprintf(c->profiles_dir, sizeof(c->profiles_dir), "config");
     c->upload_max_bytes = (size_t)256 << 20;
+    c->gram_s = 60;
 }
 
 void

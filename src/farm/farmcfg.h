@@ -74,6 +74,10 @@ struct farmcfg {
     char profiles_dir[512];   /* printers/NAME.cfg, materials/NAME.cfg live here (default: the
                                  config file's directory; "config" before a file is loaded) */
     size_t upload_max_bytes;  /* largest part upload (default 256 MiB) */
+    double gram_s;            /* the direction search: a gram of support is worth this many
+                                 print seconds (default 60; printtime.h) */
+    bool material_first;      /* the search may hand back a part that prints slower than
+                                 uploaded when it saves support (default false) */
     struct farmcfg_key *keys; /* n_keys API keys; free with farmcfg_release */
     size_t n_keys;
     struct farmcfg_printer *printers; /* n_printers, in file order */

@@ -207,6 +207,8 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     dirsearch_params_default(&dp);
     dp.sp = sp;
     dp.op.cancel = cancel;
+    dp.policy.gram_s = req->gram_s;
+    dp.policy.material_first = req->material_first;
     struct dirsearch_result dr;
     int rc = dirsearch_surface(m, &dp, &dr, err);
     if (rc)
@@ -221,17 +223,19 @@ surface_part(struct mesh *m, const struct prepare_req *req, const struct slice_p
     if (dr.kept_input)
         log_info("prepare",
                  "job %lld: surface (Jayakody 2025) in the direction search: none of %d "
-                 "directions saves %.0f %% of the model's %.2f g of support: printed as given",
-                 (long long)req->job_id, dr.n_tried, 100 * dp.min_gain, dr.model_input_g);
+                 "directions is worth it (model %.2f g of support, %.0f s estimated): printed "
+                 "as given: %s",
+                 (long long)req->job_id, dr.n_tried, dr.model_input_g, dr.input_cost.print_s,
+                 sr->unchanged_why ? sr->unchanged_why : "");
     else
         log_info("prepare",
                  "job %lld: surface (Jayakody 2025) in the direction search: %d directions, "
-                 "model support %.2f -> %.2f g, risky faces %u -> %u, shape %s%s%s, largest "
-                 "move %.3f mm",
+                 "model support %.2f -> %.2f g, estimated %.0f -> %.0f s, risky faces %u -> %u, "
+                 "shape %s%s%s, largest move %.3f mm",
                  (long long)req->job_id, dr.n_tried, dr.model_input_g, sr->model_after_g,
-                 sr->input.n_risky, sr->after.n_risky, sr->shape_changed ? "changed" : "kept",
-                 sr->unchanged_why ? ": " : "", sr->unchanged_why ? sr->unchanged_why : "",
-                 sr->dev.max_mm);
+                 dr.input_cost.print_s, dr.cost.print_s, sr->input.n_risky, sr->after.n_risky,
+                 sr->shape_changed ? "changed" : "kept", sr->unchanged_why ? ": " : "",
+                 sr->unchanged_why ? sr->unchanged_why : "", sr->dev.max_mm);
     take_part(m, &dr.best.out, prof);
     dirsearch_result_release(&dr);
     return SF_OK;

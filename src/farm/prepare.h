@@ -30,6 +30,9 @@ struct prepare_req {
     char part_path[PREPARE_PATH_MAX];    /* stored part file (read only) */
     char part_name[JOB_NAME_MAX];        /* the uploaded name; its extension tells the format */
     struct job_opts opts;                /* method, deviation budget, overhang angle ... */
+    double gram_s;                       /* surface: a gram of support is worth this many
+                                            print seconds (farmcfg gram_seconds) */
+    bool material_first;                 /* surface: may print slower to save support */
     struct farmcfg_printer printer;      /* target printer: profile, nozzle, bed, overhang */
     char profiles_dir[PREPARE_PATH_MAX]; /* printers/PROFILE.cfg, materials/MATERIAL.cfg */
     char out_path[PREPARE_PATH_MAX];     /* write the G-code here */

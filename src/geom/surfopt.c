@@ -44,7 +44,8 @@ surfopt_params_default(struct surfopt_params *p)
     p->max_iters = 100;
     p->patience = 5;
     p->rounds = 2;
-    p->min_gain = 0.05;
+    p->min_gain = 0.02;
+    p->min_gain_g = 0.05;
     p->refine_tris = 10000;
     p->orient = true;
     p->anchor = 0.01;
@@ -75,6 +76,8 @@ check_params(const struct surfopt_params *p, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL, "deviation limits must be positive");
     if (!(p->min_gain >= 0 && p->min_gain < 1))
         return sf_err_set(err, SF_EINVAL, "min-gain %g: want a share in [0, 1)", p->min_gain);
+    if (!(p->min_gain_g >= 0 && p->min_gain_g <= 1000))
+        return sf_err_set(err, SF_EINVAL, "min_gain_g %g: want grams in [0, 1000]", p->min_gain_g);
     if (!(p->fix_bottom_mm >= 0))
         return sf_err_set(err, SF_EINVAL, "fix-bottom %g: want mm >= 0", p->fix_bottom_mm);
     if (p->max_iters < 1 || p->max_iters >= SURFOPT_CURVE_MAX || p->patience < 1 || p->rounds < 1 ||
@@ -772,7 +775,8 @@ unchanged_why(const struct surfopt_result *res, int n_keep, int n_selfx, int n_p
 /*
  * The result: of the kept shapes that add no self-intersection, the one the
  * layer-based support model (supmodel.h, PrusaSlicer's rules) gives the
- * fewest grams, if that saves min_gain of what the orientation alone needs;
+ * fewest grams, if that saves min_gain of what the orientation alone needs
+ * and min_gain_g more;
  * else the orientation alone.  The ray-cast volume steered the iterations;
  * the model, which follows what a slicer prints, decides.  cur (scratch,
  * n positions) ends as the chosen shape with its metrics in *sm when
@@ -793,7 +797,7 @@ choose_kept(const struct mesh *m, struct mesh *cur, const struct mesh *oriented,
         return rc;
     res->model_oriented_g = mr.grams;
     int best_k = -1, n_selfx = 0, n_peer_rise = 0;
-    double best_g = mr.grams;
+    double best_g = mr.grams, oriented_s = mr.time_s, best_s = mr.time_s;
     for (int k = n_keep - 1; k >= 0; k--) {
         memcpy(cur->v, keep[k].v, (size_t)n * sizeof(struct vec3));
         if ((rc = selfx_ref_count(sxr, cur, NULL, err)) < 0)
@@ -813,13 +817,15 @@ choose_kept(const struct mesh *m, struct mesh *cur, const struct mesh *oriented,
             return rc;
         if (mr.grams < best_g && !rises) {
             best_g = mr.grams;
+            best_s = mr.time_s;
             best_k = k;
         } else {
             res->n_rejected++;
             n_peer_rise += rises;
         }
     }
-    bool small_gain = best_k >= 0 && !(best_g < (1 - p->min_gain) * res->model_oriented_g);
+    bool small_gain =
+        best_k >= 0 && !(best_g <= (1 - p->min_gain) * res->model_oriented_g - p->min_gain_g);
     if (small_gain)
         best_k = -1;
     if (best_k >= 0) {
@@ -831,8 +837,10 @@ choose_kept(const struct mesh *m, struct mesh *cur, const struct mesh *oriented,
             return rc;
         res->shape_changed = true;
         res->model_after_g = best_g;
+        res->model_after_s = best_s;
     } else {
         res->model_after_g = res->model_oriented_g;
+        res->model_after_s = oriented_s;
         res->unchanged_why = unchanged_why(res, n_keep, n_selfx, n_peer_rise, small_gain);
     }
     return SF_OK;

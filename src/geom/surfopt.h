@@ -108,9 +108,11 @@ struct surfopt_params {
     int patience;            /* stop a round when the proxy has not dropped for this many (5) */
     int rounds;              /* orientation/geometry alternations (2) */
     double min_gain;         /* keep the oriented shape unless a reshape saves this share
-                                of its model grams (0.05, as orient.h and slim.h): a
+                                of its model grams and min_gain_g more (0.02): a
                                 deformation that buys a rounding error of support is not
                                 worth the part's fidelity */
+    double min_gain_g;       /* (0.05 g: with 2 %, the peers' noise; a flat 5 % asked a
+                                25 g part for 1.25 g and a 2 g part for 0.1 g, issue 36) */
     uint32_t refine_tris;    /* a coarser part is midpoint-subdivided until it has this many
                                 triangles or edges under 1 % of its diagonal (10000): a
                                 surface can only bend where it has vertices */
@@ -143,8 +145,10 @@ struct surfopt_result {
     uint32_t n_halved;   /* times the face turns were halved everywhere (folds, limits) */
     bool shape_changed;  /* false: only the orientation step's result is returned */
     /* the layer-based support model (supmodel.h, PrusaSlicer's rules), grams: it picks the
-       result among the kept shapes, which must need min_gain fewer than the oriented part */
+       result among the kept shapes, which must need min_gain (and min_gain_g) fewer than the
+       oriented part */
     double model_oriented_g, model_after_g;
+    double model_after_s;      /* the model's seconds of support for out (supmodel_result.time_s) */
     const char *unchanged_why; /* shape kept: why, in words (static); NULL when changed */
     double saliency_s, factor_s, iterate_s, orient_s, check_s, total_s;
 };

@@ -137,6 +137,16 @@ T_CASE(farmcfg_octoprint_printer)
 }
 
 /* Port 0: the kernel picks a free one (the integration tests run side by side). */
+T_CASE(farmcfg_search_policy)
+{
+    struct farmcfg c;
+    struct sf_err err;
+    T_OK(parse(&c, "[farm]\ngram_seconds: 30\nmaterial_first: yes\n", &err), &err);
+    T_EQ_DBL(c.gram_s, 30, 0);
+    T_TRUE(c.material_first);
+    farmcfg_release(&c);
+}
+
 T_CASE(farmcfg_listen_port_zero)
 {
     struct farmcfg c;
@@ -144,6 +154,9 @@ T_CASE(farmcfg_listen_port_zero)
     T_OK(parse(&c, "[farm]\nlisten: 127.0.0.1:0\n", &err), &err);
     T_EQ_STR(c.listen_host, "127.0.0.1");
     T_EQ_INT(c.listen_port, 0);
+    /* the search's policy by default: a gram is worth a minute, never slower */
+    T_EQ_DBL(c.gram_s, 60, 0);
+    T_TRUE(!c.material_first);
     farmcfg_release(&c);
 }
 
@@ -217,6 +230,7 @@ T_CASE(farmcfg_errors_name_file_line_option_section)
           "farm.ini:3: option 'api_keys_readonly' in section 'farm': key given twice" },
         { "[farm]\napi_keys: aaaaaaaaaaaaaaa$\n", "keys may hold only" },
         { "[farm]\nupload_max_mb: 0\n", "upload_max_mb" },
+        { "[farm]\ngram_seconds: -1\n", "option 'gram_seconds' in section 'farm'" },
         { "[farm]\njust words\n", "farm.ini:2: syntax error" },
         { "[farm\n", "farm.ini:1: section header lacks ']'" },
         { "[farm]\ndata_dir: /x\0y\n", "" /* NUL handled: text is cut at strlen */ },

@@ -123,6 +123,7 @@ prepare_job(const char *part_path, const char *method, double deviation_mm, doub
     snprintf(req.opts.method, sizeof(req.opts.method), "%s", method);
     req.opts.deviation_mm = deviation_mm;
     req.opts.overhang_deg = overhang_deg;
+    req.gram_s = 60; /* farmcfg's default */
     snprintf(req.printer.name, sizeof(req.printer.name), "a");
     snprintf(req.printer.profile, sizeof(req.printer.profile), "generic-marlin");
     snprintf(req.printer.material, sizeof(req.printer.material), "PLA");

@@ -145,7 +145,8 @@ T_CASE(mushroom_upright_loses_support_within_limits)
 T_CASE(a_reshape_must_save_min_gain)
 {
     /* The mushroom's reshape saves some share g of the model's grams: asked
-     * for a little more than g, the shape step keeps the part and says why. */
+     * for a little more than g, the shape step keeps the part and says why;
+     * so it does when the floor in grams asks for more than it saves. */
     struct mesh m;
     struct sf_err err;
     mesh_init(&m);
@@ -158,7 +159,9 @@ T_CASE(a_reshape_must_save_min_gain)
     T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
     T_TRUE(r.shape_changed);
     double gain = 1 - r.model_after_g / r.model_oriented_g;
+    double saved_g = r.model_oriented_g - r.model_after_g;
     T_TRUE(gain >= p.min_gain && gain < 0.98);
+    T_TRUE(saved_g > 0.02);
     surfopt_result_release(&r);
     p.min_gain = gain + 0.01;
     T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
@@ -166,6 +169,19 @@ T_CASE(a_reshape_must_save_min_gain)
     T_TRUE(r.unchanged_why && strstr(r.unchanged_why, "min_gain"));
     T_EQ_DBL(r.model_after_g, r.model_oriented_g, 1e-12);
     surfopt_result_release(&r);
+    /* the floor in grams: no share asked, but 10 mg more than it saves */
+    p.min_gain = 0;
+    p.min_gain_g = saved_g + 0.01;
+    T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(!r.shape_changed);
+    surfopt_result_release(&r);
+    p.min_gain_g = saved_g - 0.01;
+    T_OK(surfopt_optimize(&m, &p, &r, &err), &err);
+    T_TRUE(r.shape_changed);
+    surfopt_result_release(&r);
+    p.min_gain_g = -1; /* not grams */
+    T_TRUE(surfopt_optimize(&m, &p, &r, &err) == SF_EINVAL);
+    p.min_gain_g = 0.05;
     p.min_gain = 1; /* not a share */
     T_TRUE(surfopt_optimize(&m, &p, &r, &err) == SF_EINVAL);
     mesh_release(&m);

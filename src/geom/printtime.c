@@ -1,0 +1,217 @@
+/*
+ * printtime.c - print-time estimate and the value rule (see printtime.h).
+ */
+#include "printtime.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../base/mem.h"
+
+void
+printtime_params_default(struct printtime_params *p)
+{
+    *p = (struct printtime_params){ .layer_mm = 0.2,
+                                    .line_width_mm = 0.45,
+                                    .perimeters = 2,
+                                    .ext_perimeter_mm_s = 30,
+                                    .perimeter_mm_s = 60,
+                                    .top_layers = 4,
+                                    .bottom_layers = 3,
+                                    .solid_mm_s = 20,
+                                    .infill_density = 0.15,
+                                    .infill_mm_s = 80,
+                                    .layer_change_s = 0.3,
+                                    .min_layer_s = 5,
+                                    .solid_factor = 0.5,
+                                    .support_factor = 1.3 };
+}
+
+void
+printtime_policy_default(struct printtime_policy *p)
+{
+    *p = (struct printtime_policy){ .gram_s = 60, .min_gain = 0.02, .min_gain_g = 0.05 };
+}
+
+int
+printtime_policy_check(const struct printtime_policy *p, struct sf_err *err)
+{
+    if (!(p->gram_s >= 0 && p->gram_s <= 1e6))
+        return sf_err_set(err, SF_EINVAL, "gram-seconds %g: want seconds in [0, 1000000]",
+                          p->gram_s);
+    if (!(p->min_gain >= 0 && p->min_gain < 1))
+        return sf_err_set(err, SF_EINVAL, "min-gain %g: want a share in [0, 1)", p->min_gain);
+    if (!(p->min_gain_g >= 0 && p->min_gain_g <= 1000))
+        return sf_err_set(err, SF_EINVAL, "min_gain_g %g: want grams in [0, 1000]", p->min_gain_g);
+    return SF_OK;
+}
+
+double
+printtime_value_s(const struct printtime_policy *p, const struct printtime_cost *c)
+{
+    return c->print_s + p->gram_s * c->support_g;
+}
+
+bool
+printtime_worth(const struct printtime_policy *p, const struct printtime_cost *in,
+                const struct printtime_cost *out)
+{
+    if (!(out->support_g <= in->support_g))
+        return false; /* never more support than the input */
+    if (!p->material_first && out->print_s > in->print_s)
+        return false; /* never slower, unless asked */
+    double saved_g = in->support_g - out->support_g, saved_s = in->print_s - out->print_s;
+    return saved_g >= p->min_gain * in->support_g + p->min_gain_g ||
+           saved_s >= p->min_gain * in->print_s;
+}
+
+double
+printtime_total_s(const struct printtime_params *p, const struct printtime_result *r,
+                  double support_s)
+{
+    return r->part_s + p->support_factor * support_s;
+}
+
+static int
+check_params(const struct printtime_params *p, struct sf_err *err)
+{
+    if (!(p->layer_mm >= 0.01 && p->layer_mm <= 2) ||
+        !(p->line_width_mm >= 0.05 && p->line_width_mm <= 5))
+        return sf_err_set(err, SF_EINVAL,
+                          "print time: layer_mm and line_width_mm must be in [0.01, 2] and "
+                          "[0.05, 5]");
+    if (p->perimeters < 0 || p->perimeters > 100 || p->top_layers < 0 || p->top_layers > 1000 ||
+        p->bottom_layers < 0 || p->bottom_layers > 1000)
+        return sf_err_set(err, SF_EINVAL,
+                          "print time: perimeters, top_layers, bottom_layers out of range");
+    if (!(p->ext_perimeter_mm_s > 0) || !(p->perimeter_mm_s > 0) || !(p->solid_mm_s > 0) ||
+        !(p->infill_mm_s > 0))
+        return sf_err_set(err, SF_EINVAL, "print time: every speed must be positive");
+    if (!(p->infill_density >= 0 && p->infill_density <= 1) || !(p->layer_change_s >= 0) ||
+        !(p->min_layer_s >= 0) || !(p->support_factor >= 0 && p->support_factor <= 100) ||
+        !(p->solid_factor >= 0 && p->solid_factor <= 100))
+        return sf_err_set(err, SF_EINVAL,
+                          "print time: infill_density in [0, 1], layer_change_s and "
+                          "min_layer_s not negative, support_factor and solid_factor in "
+                          "[0, 100]");
+    return SF_OK;
+}
+
+/* Add amount to the layers [a, b) (heights in layers, 0 <= a <= b <= n), in
+   proportion to each layer's overlap; a face inside one layer adds it there. */
+static void
+spread(double *acc, uint32_t n, double a, double b, double amount)
+{
+    if (!(amount != 0))
+        return;
+    if (b - a < 1e-9) {
+        uint32_t l = a < n ? (uint32_t)a : n - 1;
+        acc[l] += amount;
+        return;
+    }
+    uint32_t l0 = (uint32_t)a, l1 = (uint32_t)ceil(b);
+    if (l1 > n)
+        l1 = n;
+    double per = amount / (b - a);
+    for (uint32_t l = l0; l < l1; l++) {
+        double lo = a > l ? a : l, hi = b < l + 1 ? b : l + 1;
+        if (hi > lo)
+            acc[l] += per * (hi - lo);
+    }
+}
+
+/* Per-layer sums of one part: outline length, seconds of solid fill, and
+   n_z dA (the section's area, summed from the top down). */
+struct layers {
+    double *outline_mm, *solid_s, *dsec_mm2;
+};
+
+static void
+add_faces(const struct mesh *m, struct vec3 up, double zmin, uint32_t n,
+          const struct printtime_params *p, struct layers *L)
+{
+    double h = p->layer_mm, pw = p->perimeters * p->line_width_mm;
+    for (uint32_t i = 0; i < m->n_tris; i++) {
+        const uint32_t *t = m->t[i];
+        double z[3];
+        for (int k = 0; k < 3; k++)
+            z[k] = (v3_dot(m->v[t[k]], up) - zmin) / h;
+        double a = fmin(z[0], fmin(z[1], z[2])), b = fmax(z[0], fmax(z[1], z[2]));
+        struct vec3 c = mesh_tri_cross(m, i);
+        double area = 0.5 * v3_len(c);
+        if (!(area > 0))
+            continue;
+        double nz = v3_dot(c, up) / (2 * area), s = sqrt(fmax(0, 1 - nz * nz));
+        spread(L->outline_mm, n, a, b, area * s / h);
+        spread(L->dsec_mm2, n, a, b, area * nz);
+        /* solid backing: the shell's thickness t, seen across the face, less
+           the perimeters' width where the face is steep (tan a = s / |nz|) */
+        double an = fabs(nz);
+        double th = (nz > 0 ? p->top_layers : p->bottom_layers) * h;
+        if (an < 1e-6 || th <= 0)
+            continue;
+        double share = 1 - pw * (s / an) / th;
+        if (share <= 0)
+            continue;
+        double vol = area * an * th * share;
+        double secs = vol / (p->line_width_mm * h * p->solid_mm_s);
+        /* under a top, over a bottom */
+        double nl = th / h;
+        if (nz > 0)
+            spread(L->solid_s, n, fmax(0, a - nl), b, secs);
+        else
+            spread(L->solid_s, n, a, fmin(b + nl, n), secs);
+    }
+}
+
+int
+printtime_eval(const struct mesh *m, struct vec3 up, const struct printtime_params *p,
+               struct printtime_result *out, struct sf_err *err)
+{
+    memset(out, 0, sizeof(*out));
+    int rc = check_params(p, err);
+    if (rc)
+        return rc;
+    if (m->n_verts == 0)
+        return SF_OK;
+    double zmin = INFINITY, zmax = -INFINITY;
+    for (uint32_t i = 0; i < m->n_verts; i++) {
+        double z = v3_dot(m->v[i], up);
+        zmin = fmin(zmin, z);
+        zmax = fmax(zmax, z);
+    }
+    double layers = ceil((zmax - zmin) / p->layer_mm - 1e-9);
+    if (!(layers <= PRINTTIME_LAYERS_MAX))
+        return sf_err_set(err, SF_EINVAL, "print time: part %.1f mm tall is over %u layers",
+                          zmax - zmin, PRINTTIME_LAYERS_MAX);
+    uint32_t n = layers < 1 ? 1 : (uint32_t)layers;
+    double *buf = mem_array((size_t)3 * n, sizeof(double));
+    if (!buf)
+        return sf_err_set(err, SF_ENOMEM, "print time: out of memory for %u layers", n);
+    memset(buf, 0, (size_t)3 * n * sizeof(double));
+    struct layers L = { buf, buf + n, buf + 2 * n };
+    add_faces(m, up, zmin, n, p, &L);
+    double per_mm =
+        p->perimeters > 0 ? 1 / p->ext_perimeter_mm_s + (p->perimeters - 1) / p->perimeter_mm_s : 0;
+    double pw = p->perimeters * p->line_width_mm, section = 0;
+    for (uint32_t k = n; k-- > 0;) {
+        section += L.dsec_mm2[k];
+        /* sparse where neither perimeters nor solid layers fill the section */
+        double solid_mm2 = L.solid_s[k] * p->line_width_mm * p->solid_mm_s;
+        double inner = fmax(0, section - L.outline_mm[k] * pw - solid_mm2);
+        double per_s = L.outline_mm[k] * per_mm;
+        double fill_s = inner * p->infill_density / p->line_width_mm / p->infill_mm_s;
+        double solid_s = L.solid_s[k] * p->solid_factor;
+        double work = per_s + fill_s + solid_s;
+        out->perimeter_s += per_s;
+        out->infill_s += fill_s;
+        out->solid_s += solid_s;
+        double layer = fmax(work + p->layer_change_s, p->min_layer_s);
+        out->layers_s += layer - work;
+        out->part_s += layer;
+    }
+    out->n_layers = n;
+    free(buf);
+    return SF_OK;
+}
