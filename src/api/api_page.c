@@ -19,6 +19,7 @@
 #include <string.h>
 
 #include "../base/buf.h"
+#include "../base/mem.h"
 #include "../farm/job.h"
 #include "api_json.h"
 #include "route.h"
@@ -276,12 +277,17 @@ api_page_render(struct store *s, const struct api_page_query *q, size_t *len, st
         return NULL;
     struct store_job_printer *lp = NULL;
     size_t n_lp = 0;
-    int64_t lo = INT64_MAX, hi = 0;
-    for (size_t k = 0; k < n; k++) {
-        lo = rows[k].id < lo ? rows[k].id : lo;
-        hi = rows[k].id > hi ? rows[k].id : hi;
+    int64_t *ids = n ? mem_array(n, sizeof(*ids)) : NULL;
+    if (n && !ids) {
+        free(rows);
+        sf_err_set(err, SF_ENOMEM, "out of memory listing a page");
+        return NULL;
     }
-    if (n && (rc = store_last_printers(s, lo, hi, &lp, &n_lp, err))) {
+    for (size_t k = 0; k < n; k++)
+        ids[k] = rows[k].id;
+    rc = n ? store_last_printers(s, ids, n, &lp, &n_lp, err) : SF_OK;
+    free(ids);
+    if (rc) {
         free(rows);
         return NULL;
     }

@@ -64,6 +64,9 @@ size_t http_streams_revoke(struct http *h);
 size_t http_streams_of(const struct http *h, const char *key);
 /* The configured key record of key, or NULL. */
 const struct farmcfg_key *http_find_key(const struct http *h, const char *key);
+/* May key still watch the farm (an event stream, a push socket): it exists and is not
+   metrics-only (a reload can turn a key into one). */
+bool http_key_may_watch(const struct http *h, const char *key);
 
 /* The answer of an upgrading route (resp->upgrade): the 101 with the
    route's headers, the socket handed to it once sent (http_upgrade.c). */

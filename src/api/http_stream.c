@@ -180,14 +180,22 @@ http_find_key(const struct http *h, const char *key)
     return farmcfg_key(&view, key);
 }
 
-/* A revoked key's streams end; a stream's key may not be read-only now
-   only if it is gone (streams are GETs, which read-only keys may make). */
+bool
+http_key_may_watch(const struct http *h, const char *key)
+{
+    const struct farmcfg_key *k = http_find_key(h, key);
+    return k && !k->metrics_only;
+}
+
+/* A revoked key's streams end, and those of a key now metrics-only (a key
+   turned read-only keeps them: streams are GETs, which read-only keys may
+   make). */
 size_t
 http_streams_revoke(struct http *h)
 {
     size_t n = http_upgraded_revoke(h);
     for (struct stream *st = h->streams; st; st = st->next)
-        if (!st->revoked && !http_find_key(h, st->key)) {
+        if (!st->revoked && !http_key_may_watch(h, st->key)) {
             st->revoked = true;
             n++;
             if (st->suspended) {

@@ -132,7 +132,7 @@ http_upgraded_revoke(struct http *h)
 {
     size_t n = 0;
     for (struct http_upgraded *u = h->ups; u; u = u->next)
-        if (u->urh && u->key[0] && !u->revoked && !http_find_key(h, u->key)) {
+        if (u->urh && u->key[0] && !u->revoked && !http_key_may_watch(h, u->key)) {
             u->revoked = true;
             n++;
         }

@@ -301,11 +301,13 @@ struct store_job_printer {
     char printer[64];
 };
 /*
- * For each job with id in lo..hi that has printed, where its newest print
- * ran, by job id, into *rows (free() it): one statement for a page of jobs.
+ * For each of the n_ids jobs ids that has printed, where its newest print
+ * ran, by job id, into *rows (free() it): one statement for a page of jobs,
+ * reading those jobs' prints alone (an id range would read every job
+ * between a sparse page's first and last).
  */
-int store_last_printers(struct store *s, int64_t lo, int64_t hi, struct store_job_printer **rows,
-                        size_t *n, struct sf_err *err);
+int store_last_printers(struct store *s, const int64_t *ids, size_t n_ids,
+                        struct store_job_printer **rows, size_t *n, struct sf_err *err);
 
 /* What a printer's bed holds, as the store knows it (plain data). */
 struct store_bed {

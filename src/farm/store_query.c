@@ -19,6 +19,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "../base/buf.h"
 #include "../base/mem.h"
 #include "store_int.h"
 
@@ -150,22 +151,35 @@ read_job_printer(sqlite3_stmt *st, void *row)
 }
 
 int
-store_last_printers(struct store *s, int64_t lo, int64_t hi, struct store_job_printer **rows,
-                    size_t *n, struct sf_err *err)
+store_last_printers(struct store *s, const int64_t *ids, size_t n_ids,
+                    struct store_job_printer **rows, size_t *n, struct sf_err *err)
 {
-    /* the newest print of each job is its highest id: max() per group
-       through the prints_job index, not one query per job */
+    /* the page's ids as one JSON array parameter (at most STORE_PAGE_MAX of
+       them); the newest print of each job is its highest id, through the
+       prints_job index */
+    struct buf list;
+    buf_init(&list, 0);
+    int rc = buf_printf(&list, "[");
+    for (size_t i = 0; i < n_ids && rc == SF_OK; i++)
+        rc = buf_printf(&list, "%s%lld", i ? "," : "", (long long)ids[i]);
+    if (rc == SF_OK)
+        rc = buf_printf(&list, "]");
+    if (rc) {
+        buf_release(&list);
+        return sf_err_set(err, SF_ENOMEM, "store: out of memory listing a page's jobs");
+    }
     sqlite3_stmt *st;
-    int rc = store_select(s, &st,
-                          "SELECT job_id, printer FROM prints WHERE id IN (SELECT max(id) FROM"
-                          " prints WHERE job_id BETWEEN ?1 AND ?2 GROUP BY job_id) ORDER BY job_id",
-                          (void **)rows, n, err);
+    rc = store_select(s, &st,
+                      "SELECT job_id, printer FROM prints WHERE id IN (SELECT (SELECT max(id)"
+                      " FROM prints WHERE job_id = ids.value) FROM json_each(?1) AS ids)"
+                      " ORDER BY job_id",
+                      (void **)rows, n, err);
     if (rc == SF_OK) {
-        sqlite3_bind_int64(st, 1, lo);
-        sqlite3_bind_int64(st, 2, hi);
+        sqlite3_bind_text(st, 1, list.data, (int)list.len, SQLITE_TRANSIENT);
         rc = store_read_rows(s, st, sizeof(**rows), read_job_printer, (void **)rows, n,
                              "last printers", err);
     }
+    buf_release(&list);
     return rc;
 }
 

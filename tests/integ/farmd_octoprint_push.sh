@@ -9,7 +9,8 @@
 # `history` and `current` shapes, the print events of a job that ends and
 # one that is cancelled.  Then the session's end closes the socket: a
 # reload that removes the key (SIGHUP) ends its login sessions, and the
-# socket gets reauthRequired "logout" and is closed.  Every wait has a
+# socket gets reauthRequired "logout" and is closed; so does one whose key a
+# reload turns metrics-only.  Every wait has a
 # generous bound (a loaded machine).
 set -u
 BUILD=${BUILD:-build/san}
@@ -87,6 +88,16 @@ print("16 streams, then a socket refused; with 15 it stands")
 EOP
 grep -q "ended 1 OctoPrint login sessions of revoked API keys" "$tmp/log" ||
   fail "the reload did not log the session it ended"
+# a key that a reload turns metrics-only ends its sockets as a removed key does (found by
+# review: a metrics key may read /metrics alone)
+write_ini "$RW, $KEY2"
+sed "s/^api_keys: .*/api_keys: $RW\nmetrics_keys: $KEY2/" "$tmp/farm.ini" > "$tmp/farm-metrics.ini"
+kill -HUP $pid
+wait_for 60 sh -c "curl -sf -H 'X-Api-Key: $KEY2' '$SLIMFARM_URL/api/printers' > /dev/null" ||
+  fail "the reload did not bring KEY2 back"
+sed 's/-rw.ini/-metrics.ini/' "$tmp/logout.txt" > "$tmp/metrics.txt"
+/usr/bin/python3 "$dir/replay.py" "$SLIMFARM_URL" "$KEY2" "$tmp/metrics.txt" ||
+  fail "a key turned metrics-only keeps its socket"
 # a clean stop (ASan: nothing leaks, nothing is used after free)
 kill -TERM $pid; wait $pid; rc=$?; pid=
 if [ $rc -ne 0 ] || grep -q "LeakSanitizer\|AddressSanitizer" "$tmp/log"; then

@@ -254,3 +254,31 @@ T_CASE(store_counts_and_a_reader_beside_the_writer)
     store_close(r);
     store_close(s);
 }
+
+/* A page's last printers are read for the page's jobs alone: a sparse page (jobs 1 and 6 of a
+   filter) read every print of the jobs between them (review). */
+T_CASE(store_last_printers_of_a_page_only)
+{
+    struct sf_err err;
+    struct store *s = store_open(fresh_dir("lastpr"), NULL, &err);
+    T_TRUE(s != NULL);
+    int64_t ids[6];
+    const char *printers[6] = { "a", "b", "c", "d", "e", "f" };
+    for (int i = 0; i < 6; i++) {
+        char part[32];
+        snprintf(part, sizeof(part), "solid p%d", i);
+        T_TRUE((ids[i] = add_job(s, part, &err)) > 0);
+        T_OK(start_on(s, ids[i], printers[i], &err), &err);
+    }
+    int64_t page[2] = { ids[0], ids[5] };
+    struct store_job_printer *rows = NULL;
+    size_t n = 0;
+    T_OK(store_last_printers(s, page, 2, &rows, &n, &err), &err);
+    T_EQ_INT(n, 2);
+    T_EQ_INT(rows[0].job_id, ids[0]);
+    T_EQ_STR(rows[0].printer, "a");
+    T_EQ_INT(rows[1].job_id, ids[5]);
+    T_EQ_STR(rows[1].printer, "f");
+    free(rows);
+    store_close(s);
+}
