@@ -158,12 +158,6 @@ on_auth(struct op_conn *c, const char *a)
     }
     snprintf(c->session, sizeof(c->session), "%s", colon + 1);
     snprintf(c->key, sizeof(c->key), "%s", key);
-    /* A socket's life is an event stream's (a silent client that vanished is found at the
-       latest then; OctoPrint's clients reconnect, as EventSource does). */
-    if (now - c->open_ms >= (int64_t)HTTP_STREAM_LIFETIME_S * 1000) {
-        wsconn_close(c->wc, 1001, "socket lifetime over: connect again"); /* 1001: going away */
-        return;
-    }
     if (!c->authed) {
         c->authed = true;
         if (c->sub.state)
@@ -312,6 +306,12 @@ tick_one(struct op_conn *c, int64_t now)
     if (c->framed && now >= c->beat_ms) {
         wsconn_send(c->wc, SOCKJS_HEARTBEAT, 1);
         c->beat_ms = now + SOCKJS_HEARTBEAT_MS;
+    }
+    /* A socket's life is an event stream's (a silent client that vanished is found at the
+       latest then; OctoPrint's clients reconnect, as EventSource does). */
+    if (now - c->open_ms >= http_upgraded_lifetime_ms(c->u)) {
+        wsconn_close(c->wc, 1001, "socket lifetime over: connect again"); /* 1001: going away */
+        return;
     }
     if (!c->authed) {
         if (now - c->open_ms >= API_OCTOPUSH_AUTH_WAIT_MS)

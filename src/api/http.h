@@ -328,6 +328,8 @@ int http_upgraded_auth(struct http_upgraded *u, const char *key, bool *read_only
                        struct sf_err *err);
 /* Whether u's key was revoked (http_set_keys): its owner closes it. */
 bool http_upgraded_revoked(const struct http_upgraded *u);
+/* How long an upgraded socket may live, ms: an event stream's lifetime (stream_lifetime_ms). */
+int64_t http_upgraded_lifetime_ms(const struct http_upgraded *u);
 /* Close u's socket and free u: the owner's last call on it. */
 void http_upgraded_close(struct http_upgraded *u);
 

@@ -163,6 +163,13 @@ http_upgraded_revoked(const struct http_upgraded *u)
     return u->revoked;
 }
 
+int64_t
+http_upgraded_lifetime_ms(const struct http_upgraded *u)
+{
+    return u->h->cfg.stream_lifetime_ms ? u->h->cfg.stream_lifetime_ms
+                                        : (int64_t)HTTP_STREAM_LIFETIME_S * 1000;
+}
+
 int
 http_upgraded_auth(struct http_upgraded *u, const char *key, bool *read_only, struct sf_err *err)
 {
