@@ -12,11 +12,8 @@ BUILD=${BUILD:-build/san}
 
 start_sim mk3 --speed 1
 write_config() { # ATTENDED
-  {
-    printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\n' "$port" "$tmp" "$RW"
-    printf '[printer mk3]\ndriver: marlin\nport: %s\nbaud: 1000000\nmaterial: PLA\n' "$(cat "$tmp/mk3.addr")"
-    printf 'auto_eject: true\ngcode_models: *\nattended: %s\n' "$1"
-  } > "$tmp/farm.ini"
+  one_printer_ini mk3 true
+  printf 'material: PLA\ngcode_models: *\nattended: %s\n' "$1" >> "$tmp/farm.ini"
 }
 write_config true
 start_daemon
