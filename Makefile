@@ -2,6 +2,7 @@
 #
 #   make            release build into build/rel (bin/ links to it)
 #   make check      deps, sanitizer build (-Werror, ASan+UBSan), every test
+#   make check-pg   the store's tests on SQLite and on a PostgreSQL server of their own
 #   make demo       deps, build, run the farm on embedded defaults (ONCE=1 exits)
 #   make bench      benchmarks against peers; prints figures, never fails on time
 #   make fuzz T=NAME SECS=60   long libFuzzer run of one parser
@@ -24,7 +25,7 @@ PREFIX ?= /usr/local
 DEB_PKGS := build-essential pkg-config libserialport-dev libcurl4-openssl-dev libsqlite3-dev \
 	libmicrohttpd-dev libmosquitto-dev libinih-dev libqhull-dev libpolyclipping-dev \
 	libjansson-dev libminizip-dev libexpat1-dev libcairo2-dev libembree-dev libtet1.5-dev \
-	libsuitesparse-dev clang-14 clang-format libclang-rt-14-dev python3 procps libssl-dev \
+	libsuitesparse-dev libpq-dev postgresql clang-14 clang-format libclang-rt-14-dev python3 procps libssl-dev \
 	printrun-common mosquitto chromium nodejs python3-aiosmtpd
 # Only for `make bench`: the independent peers and their helpers, and OpenSCAD
 # (its CLI generates the validation sets, tests/bench/valsets.sh).
@@ -36,7 +37,7 @@ CHECK_OPT_PKGS := openscad
 MISSING = for p in $(1); do dpkg-query -W -f='$${db:Status-Status}\n' $$p 2>/dev/null | grep -qx installed || echo $$p; done
 
 # Libraries with a pkg-config file; the rest get fixed flags (Debian ships no .pc).
-PKGS := libserialport libcurl sqlite3 libmicrohttpd libmosquitto inih qhull_r polyclipping \
+PKGS := libserialport libcurl sqlite3 libpq libmicrohttpd libmosquitto inih qhull_r polyclipping \
 	jansson minizip expat cairo libcrypto libssl
 PKG_CFLAGS = $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS = $(shell pkg-config --libs $(PKGS) 2>/dev/null)
@@ -102,7 +103,7 @@ TESTS := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(TEST_C)) \
 BENCHES := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(BENCH_C))
 FUZZERS := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(FUZZ_C))
 
-.PHONY: all check tests demo bench soak fuzz fuzzers deps install clean format check-format \
+.PHONY: all check check-pg tests demo bench soak fuzz fuzzers deps install clean format check-format \
 	check-headers check-layers check-size browser-deps
 .DEFAULT_GOAL := all
 
@@ -236,6 +237,13 @@ check: deps
 	$(MAKE) --no-print-directory fuzzers
 	$(MAKE) --no-print-directory check-layers check-size check-format check-headers
 	FUZZ_RUNS=$(FUZZ_RUNS) JOBS=$(JOBS) tests/run.sh build/san $(T)
+
+# The store on both engines: its unit tests on SQLite, and tests/integ/store_pg.sh,
+# which starts a PostgreSQL server of its own (initdb into a temp dir, a Unix
+# socket) and runs the store, farm and API tests on it.  `make check` runs both.
+check-pg: deps
+	$(MAKE) --no-print-directory SAN=1 tests
+	tests/run.sh build/san store
 
 T ?=
 SECS ?= 60

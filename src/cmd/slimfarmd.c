@@ -4,6 +4,7 @@
  *
  *     slimfarmd [-c CONFIG] [--check | --fsck] [--allow-readable-config]
  *               [--session-idle SECONDS] [--session-max SECONDS]
+ *     slimfarmd --init-store DATA_DIR|postgresql://...
  *
  * Why it is small: every part is a module (farmcfg, store, farm, api,
  * loop, pool); main() only builds them in dependency order, wires the
@@ -187,6 +188,26 @@ run_fsck(struct farmcfg *cfg)
     return status;
 }
 
+/* --init-store: create or migrate a store's schema (store_init), say which, and exit. */
+static int
+run_init_store(const char *target)
+{
+    struct sf_err err;
+    int from = 0;
+    if (store_init(target, &from, &err) != SF_OK) {
+        fprintf(stderr, "slimfarmd: --init-store: %s\n", err.msg);
+        return 1;
+    }
+    int to = store_schema_version();
+    if (from == 0)
+        printf("store created at schema %d\n", to);
+    else if (from < to)
+        printf("store migrated from schema %d to %d\n", from, to);
+    else
+        printf("store at schema %d: up to date\n", to);
+    return 0;
+}
+
 /* The config holds something secret: API keys, or a printer's key or password. */
 static bool
 holds_secrets(const struct farmcfg *cfg)
@@ -271,9 +292,14 @@ usage(FILE *f)
 {
     fprintf(f, "usage: slimfarmd [-c CONFIG] [--check | --fsck] [--allow-readable-config]\n"
                "                 [--session-idle SECONDS] [--session-max SECONDS]\n"
+               "       slimfarmd --init-store DATA_DIR|postgresql://...\n"
                "  -c CONFIG  farm config (default config/farm.ini)\n"
                "  --check    validate the config and exit\n"
                "  --fsck     recover and check the job store, then exit\n"
+               "  --init-store DATA_DIR|postgresql://...\n"
+               "             create or migrate the store's schema (SQLite in DATA_DIR, or a\n"
+               "             PostgreSQL database by libpq URL) and exit; no config needed,\n"
+               "             a schema newer than this program is refused\n"
                "  --allow-readable-config\n"
                "             start even though CONFIG holds keys other users can read\n"
                "             (warns; without it such a config is refused: chmod 600 it)\n"
@@ -339,6 +365,8 @@ main(int argc, char **argv)
     for (int i = 1; i < argc; i++) {
         if (strcmp(argv[i], "-c") == 0 && i + 1 < argc)
             d.config_path = argv[++i];
+        else if (strcmp(argv[i], "--init-store") == 0 && i + 1 < argc)
+            return run_init_store(argv[i + 1]);
         else if (strcmp(argv[i], "--check") == 0)
             check = true;
         else if (strcmp(argv[i], "--fsck") == 0)

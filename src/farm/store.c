@@ -1,5 +1,6 @@
 /*
- * store.c - the SQLite job store and the content-addressed file directory.
+ * store.c - the job store (SQLite, or PostgreSQL: store_open_db) and the
+ * content-addressed file directory.
  *
  * Why SQLite: a farm must survive kill -9 and power cuts with every job
  * where it was, and SQLite's WAL mode gives atomic, durable transactions
@@ -10,11 +11,13 @@
  * written on a timer) and "committed" must mean "on disk".  The schema
  * version lives in PRAGMA user_version; migrations[] upgrades one version
  * per transaction, and a newer database is refused rather than guessed at.
+ * On PostgreSQL the same versions live in the schema_version table, and
+ * the same migrations run translated to its types (store_pg.c).
  *
- * This file opens the store (data dir lock, WAL, migrations, crash
- * recovery), checks it, and holds the SQLite helpers the other parts
- * share (store_int.h).  The rest of the interface lives by subject:
- * store_file.c (the content-addressed files), store_job.c (jobs, their
+ * This file opens the store (data dir lock, migrations, crash recovery),
+ * checks it, and holds the statement helpers the other parts share
+ * (store_int.h), written over sqldb.h so one SQL text serves both engines.  The rest of the
+ * interface lives by subject: store_file.c (the content-addressed files), store_job.c (jobs, their
  * copies and print history), store_printer.c, store_event.c.
  *
  * Thread: one connection per store, used by one thread at a time.
@@ -26,7 +29,6 @@
 #include <fcntl.h>
 #include <ftw.h>
 #include <limits.h>
-#include <sqlite3.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/file.h>
@@ -71,7 +73,9 @@ lock_dir(struct store *s, struct sf_err *err)
     return SF_OK;
 }
 
-/* Schema migrations; index i upgrades user_version i to i + 1. */
+/* Schema migrations; index i upgrades user_version i to i + 1.  PostgreSQL
+   runs the same text with its type names (store_pg.c): write SQL both
+   engines read (make check-pg runs the store's tests on both). */
 static const char *const migrations[] = {
     /* 1: the first schema */
     "CREATE TABLE files("
@@ -186,61 +190,58 @@ store_schema_version(void)
 int
 store_db_fail(struct store *s, struct sf_err *err, const char *what)
 {
-    return sf_err_set(err, SF_EIO, "store: %s: %s", what, sqlite3_errmsg(s->db));
+    return sf_err_set(err, SF_EIO, "store: %s: %s", what, sqldb_errmsg(s->db));
 }
 
 int
 store_exec(struct store *s, const char *sql, struct sf_err *err)
 {
-    char *msg = NULL;
-    if (sqlite3_exec(s->db, sql, NULL, NULL, &msg) != SQLITE_OK) {
-        int rc = sf_err_set(err, SF_EIO, "store: %.60s: %s", sql, msg ? msg : "?");
-        sqlite3_free(msg);
-        return rc;
-    }
+    if (sqldb_exec(s->db, sql) != SF_OK)
+        return sf_err_set(err, SF_EIO, "store: %.60s: %s", sql, sqldb_errmsg(s->db));
     return SF_OK;
 }
 
 int
-store_prepare(struct store *s, sqlite3_stmt **st, const char *sql, struct sf_err *err)
+store_prepare(struct store *s, struct sqldb_stmt **st, const char *sql, struct sf_err *err)
 {
-    if (sqlite3_prepare_v2(s->db, sql, -1, st, NULL) != SQLITE_OK)
+    if (sqldb_prepare(s->db, sql, st) != SF_OK)
         return store_db_fail(s, err, "prepare");
     return SF_OK;
 }
 
 int
-store_step_done(struct store *s, sqlite3_stmt *st, struct sf_err *err, const char *what)
+store_step_done(struct store *s, struct sqldb_stmt *st, struct sf_err *err, const char *what)
 {
-    int rc = sqlite3_step(st);
-    int out = rc == SQLITE_DONE ? SF_OK : store_db_fail(s, err, what);
-    sqlite3_finalize(st);
+    int rc = sqldb_step(st);
+    int out = rc == SQLDB_DONE ? SF_OK : store_db_fail(s, err, what);
+    sqldb_finalize(st);
     return out;
 }
 
 int
 store_begin(struct store *s, struct sf_err *err)
 {
-    return store_exec(s, "BEGIN IMMEDIATE", err);
+    if (sqldb_begin(s->db) != SF_OK)
+        return sf_err_set(err, SF_EIO, "store: begin: %s", sqldb_errmsg(s->db));
+    return SF_OK;
 }
 
 int
 store_commit(struct store *s, struct sf_err *err)
 {
-    int rc = store_exec(s, "COMMIT", err);
-    if (rc != SF_OK)
-        sqlite3_exec(s->db, "ROLLBACK", NULL, NULL, NULL);
-    return rc;
+    if (sqldb_commit(s->db) != SF_OK) /* rolled back */
+        return sf_err_set(err, SF_EIO, "store: commit: %s", sqldb_errmsg(s->db));
+    return SF_OK;
 }
 
 void
 store_rollback(struct store *s)
 {
-    sqlite3_exec(s->db, "ROLLBACK", NULL, NULL, NULL);
+    sqldb_rollback(s->db);
 }
 
 int
-store_write_begin(struct store *s, sqlite3_stmt **st, const char *sql, struct sf_err *err)
+store_write_begin(struct store *s, struct sqldb_stmt **st, const char *sql, struct sf_err *err)
 {
     int rc = store_begin(s, err);
     if (rc == SF_OK && (rc = store_prepare(s, st, sql, err)))
@@ -249,7 +250,7 @@ store_write_begin(struct store *s, sqlite3_stmt **st, const char *sql, struct sf
 }
 
 int
-store_write_end(struct store *s, sqlite3_stmt *st, const char *what, int64_t job_id,
+store_write_end(struct store *s, struct sqldb_stmt *st, const char *what, int64_t job_id,
                 const char *printer, const char *kind, const char *detail, struct sf_err *err)
 {
     int rc;
@@ -261,7 +262,7 @@ store_write_end(struct store *s, sqlite3_stmt *st, const char *what, int64_t job
 }
 
 int
-store_select(struct store *s, sqlite3_stmt **st, const char *sql, void **rows, size_t *n,
+store_select(struct store *s, struct sqldb_stmt **st, const char *sql, void **rows, size_t *n,
              struct sf_err *err)
 {
     *rows = NULL;
@@ -270,21 +271,21 @@ store_select(struct store *s, sqlite3_stmt **st, const char *sql, void **rows, s
 }
 
 void
-store_copy_text(char *dst, size_t cap, sqlite3_stmt *st, int col)
+store_copy_text(char *dst, size_t cap, struct sqldb_stmt *st, int col)
 {
-    const unsigned char *t = sqlite3_column_text(st, col);
+    const char *t = sqldb_column_text(st, col);
     snprintf(dst, cap, "%s", t ? (const char *)t : "");
 }
 
 int
-store_read_rows(struct store *s, sqlite3_stmt *st, size_t elem_size, store_row_fn read, void **rows,
-                size_t *n, const char *what, struct sf_err *err)
+store_read_rows(struct store *s, struct sqldb_stmt *st, size_t elem_size, store_row_fn read,
+                void **rows, size_t *n, const char *what, struct sf_err *err)
 {
     size_t cap = 0;
     int step, rc = SF_OK;
     *rows = NULL;
     *n = 0;
-    while ((step = sqlite3_step(st)) == SQLITE_ROW) {
+    while ((step = sqldb_step(st)) == SQLDB_ROW) {
         if (!mem_grow(rows, &cap, *n + 1, elem_size)) {
             rc = sf_err_set(err, SF_ENOMEM, "store: %s: out of memory", what);
             break;
@@ -292,9 +293,9 @@ store_read_rows(struct store *s, sqlite3_stmt *st, size_t elem_size, store_row_f
         read(st, (char *)*rows + *n * elem_size);
         (*n)++;
     }
-    if (rc == SF_OK && step != SQLITE_DONE)
+    if (rc == SF_OK && step != SQLDB_DONE)
         rc = store_db_fail(s, err, what);
-    sqlite3_finalize(st);
+    sqldb_finalize(st);
     if (rc != SF_OK) {
         free(*rows);
         *rows = NULL;
@@ -307,50 +308,99 @@ store_read_rows(struct store *s, sqlite3_stmt *st, size_t elem_size, store_row_f
 static int
 pragma_is(struct store *s, const char *sql, const char *want, bool *ok, struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st, sql, err);
     if (rc)
         return rc;
-    *ok = sqlite3_step(st) == SQLITE_ROW &&
-          strcmp((const char *)sqlite3_column_text(st, 0), want) == 0;
-    sqlite3_finalize(st);
+    *ok = sqldb_step(st) == SQLDB_ROW && strcmp(sqldb_column_text(st, 0), want) == 0;
+    sqldb_finalize(st);
     return SF_OK;
 }
 
+/* The schema version (SQLite: user_version; PostgreSQL: the schema_version row, 0
+   if none), read in the caller's transaction. */
 static int
-migrate(struct store *s, struct sf_err *err)
+read_version(struct store *s, int *version, struct sf_err *err)
 {
-    sqlite3_stmt *st;
-    int rc = store_prepare(s, &st, "PRAGMA user_version", err);
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st,
+                           sqldb_engine(s->db) == SQLDB_SQLITE
+                               ? "PRAGMA user_version"
+                               : "SELECT coalesce(max(version), 0) FROM schema_version",
+                           err);
     if (rc)
         return rc;
-    int version = sqlite3_step(st) == SQLITE_ROW ? sqlite3_column_int(st, 0) : -1;
-    sqlite3_finalize(st);
-    if (version < 0)
-        return store_db_fail(s, err, "read schema version");
-    if (version > N_MIGRATIONS)
-        return sf_err_set(err, SF_EUNSUPP,
-                          "store: database schema %d is newer than this slimfarm (%d)", version,
-                          N_MIGRATIONS);
-    for (int v = version; v < N_MIGRATIONS; v++) {
-        char pragma[48];
-        snprintf(pragma, sizeof(pragma), "PRAGMA user_version = %d", v + 1);
+    *version = sqldb_step(st) == SQLDB_ROW ? sqldb_column_int(st, 0) : -1;
+    sqldb_finalize(st);
+    return *version < 0 ? store_db_fail(s, err, "read schema version") : SF_OK;
+}
+
+/* Migration v + 1 and the version it records, in the caller's transaction. */
+static int
+migrate_one(struct store *s, int v, struct sf_err *err)
+{
+    bool pg = sqldb_engine(s->db) == SQLDB_PG;
+    char set[96];
+    snprintf(set, sizeof(set),
+             pg ? "DELETE FROM schema_version; INSERT INTO schema_version VALUES(%d)"
+                : "PRAGMA user_version = %d",
+             v + 1);
+    char *sql = pg ? store_pg_migration(v, migrations[v]) : NULL;
+    if (pg && !sql)
+        return sf_err_set(err, SF_ENOMEM, "store: out of memory");
+    int rc = store_exec(s, pg ? sql : migrations[v], err);
+    free(sql);
+    return rc ? rc : store_exec(s, set, err);
+}
+
+/*
+ * Bring the schema to this program's version, one version per transaction,
+ * each reading the version again inside it: hosts that migrate one
+ * PostgreSQL database at once (PostgreSQL's LOCK, SQLite's BEGIN
+ * IMMEDIATE) apply each migration once.  *from (may be NULL): the version
+ * found.
+ */
+static int
+migrate(struct store *s, int *from, struct sf_err *err)
+{
+    bool pg = sqldb_engine(s->db) == SQLDB_PG;
+    int rc;
+    if (pg && (rc = store_exec(
+                   s, "CREATE TABLE IF NOT EXISTS schema_version(version INTEGER NOT NULL)", err)))
+        return rc;
+    for (bool first = true;; first = false) {
+        int version;
         if ((rc = store_begin(s, err)))
             return rc;
-        if ((rc = store_exec(s, migrations[v], err)) || (rc = store_exec(s, pragma, err))) {
-            store_rollback(s);
-            return sf_err_prefix(err, "store: migration to schema %d", v + 1);
+        if ((rc = pg ? store_exec(s, "LOCK TABLE schema_version IN EXCLUSIVE MODE", err) : SF_OK) ||
+            (rc = read_version(s, &version, err)))
+            goto fail;
+        if (first && from)
+            *from = version;
+        if (version > N_MIGRATIONS) {
+            rc = sf_err_set(err, SF_EUNSUPP,
+                            "store: database schema %d is newer than this slimfarm (%d)", version,
+                            N_MIGRATIONS);
+            goto fail;
+        }
+        if (version == N_MIGRATIONS)
+            return store_commit(s, err);
+        if ((rc = migrate_one(s, version, err))) {
+            sf_err_prefix(err, "store: migration to schema %d", version + 1);
+            goto fail;
         }
         if ((rc = store_commit(s, err)))
             return rc;
     }
-    return SF_OK;
+fail:
+    store_rollback(s);
+    return rc;
 }
 
 static void
-read_id(sqlite3_stmt *st, void *row)
+read_id(struct sqldb_stmt *st, void *row)
 {
-    *(int64_t *)row = sqlite3_column_int64(st, 0);
+    *(int64_t *)row = sqldb_column_int64(st, 0);
 }
 
 /*
@@ -362,7 +412,7 @@ static int
 recover(struct store *s, struct store_recovery *rec, struct sf_err *err)
 {
     struct store_recovery r = { 0, 0 };
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int64_t *ids;
     size_t n;
     int rc = store_prepare(s, &st,
@@ -476,13 +526,26 @@ sweep_tmp(const char *files_dir)
                  files_dir);
 }
 
-struct store *
-store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
+/* Connect s to its database (s->target) and bring its schema up to date. */
+static int
+connect(struct store *s, int *from, struct sf_err *err)
 {
-    if (rec)
-        *rec = (struct store_recovery){ 0, 0 };
-    if (!data_dir[0] || strlen(data_dir) >= STORE_PATH_MAX - 80) {
+    int rc = sqldb_is_url(s->target) ? SF_OK : create_private(s->target, err);
+    if (rc == SF_OK && !(s->db = sqldb_open(s->target, 0, err)))
+        rc = SF_EIO;
+    return rc ? rc : migrate(s, from, err);
+}
+
+/* A new store for data_dir (NULL: none, a database alone) and db (as store_open_db). */
+static struct store *
+store_new(const char *data_dir, const char *db, struct sf_err *err)
+{
+    if (data_dir && (!data_dir[0] || strlen(data_dir) >= STORE_PATH_MAX - 80)) {
         sf_err_set(err, SF_EINVAL, "store: data dir '%.80s' is empty or too long", data_dir);
+        return NULL;
+    }
+    if (db && db[0] && (!sqldb_is_url(db) || strlen(db) >= STORE_PATH_MAX)) {
+        sf_err_set(err, SF_EINVAL, "store: '%.80s' is not a postgresql:// URL", db);
         return NULL;
     }
     struct store *s = mem_calloc(1, sizeof(*s));
@@ -490,33 +553,36 @@ store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
         sf_err_set(err, SF_ENOMEM, "store: out of memory");
         return NULL;
     }
-    snprintf(s->dir, sizeof(s->dir), "%s", data_dir);
+    snprintf(s->dir, sizeof(s->dir), "%s", data_dir ? data_dir : "");
+    if (db && db[0])
+        snprintf(s->target, sizeof(s->target), "%s", db);
+    else
+        snprintf(s->target, sizeof(s->target), "%s/slimfarm.db", s->dir);
     s->lock_fd = -1;
+    return s;
+}
+
+struct store *
+store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
+{
+    return store_open_db(data_dir, NULL, rec, err);
+}
+
+struct store *
+store_open_db(const char *data_dir, const char *db, struct store_recovery *rec, struct sf_err *err)
+{
+    if (rec)
+        *rec = (struct store_recovery){ 0, 0 };
+    struct store *s = store_new(data_dir, db, err);
+    if (!s)
+        return NULL;
     char path[STORE_PATH_MAX + 32];
     snprintf(path, sizeof(path), "%s/files", data_dir);
     if (mkdir_p(path, err) || lock_dir(s, err))
         goto fail;
     fix_modes(data_dir);
     sweep_tmp(path);
-    snprintf(path, sizeof(path), "%s/slimfarm.db", data_dir);
-    if (create_private(path, err))
-        goto fail;
-    if (sqlite3_open_v2(path, &s->db, SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE, NULL) !=
-        SQLITE_OK) {
-        sf_err_set(err, SF_EIO, "store: cannot open '%s': %s", path,
-                   s->db ? sqlite3_errmsg(s->db) : "out of memory");
-        goto fail;
-    }
-    sqlite3_busy_timeout(s->db, 5000);
-    bool ok;
-    if (pragma_is(s, "PRAGMA journal_mode = WAL", "wal", &ok, err))
-        goto fail;
-    if (!ok) {
-        sf_err_set(err, SF_EIO, "store: '%s': cannot switch to WAL mode", path);
-        goto fail;
-    }
-    if (store_exec(s, "PRAGMA foreign_keys = ON; PRAGMA synchronous = FULL;", err) ||
-        migrate(s, err) || recover(s, rec, err))
+    if (connect(s, NULL, err) || recover(s, rec, err))
         goto fail;
     return s;
 fail:
@@ -524,12 +590,28 @@ fail:
     return NULL;
 }
 
+int
+store_init(const char *target, int *from, struct sf_err *err)
+{
+    bool url = sqldb_is_url(target);
+    struct store *s = store_new(url ? NULL : target, url ? target : NULL, err);
+    if (!s)
+        return err ? err->code : SF_EINVAL;
+    int rc = url ? SF_OK : mkdir_p(target, err);
+    if (rc == SF_OK && !url && (rc = lock_dir(s, err)) == SF_OK)
+        fix_modes(target);
+    if (rc == SF_OK)
+        rc = connect(s, from, err);
+    store_close(s);
+    return rc;
+}
+
 void
 store_close(struct store *s)
 {
     if (!s)
         return;
-    sqlite3_close(s->db);
+    sqldb_close(s->db);
     if (s->lock_fd >= 0)
         close(s->lock_fd); /* releases the flock */
     free(s);
@@ -539,26 +621,28 @@ store_close(struct store *s)
 static int
 check_none(struct store *s, const char *sql, const char *what, struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st, sql, err);
     if (rc)
         return rc;
-    rc = sqlite3_step(st);
-    if (rc == SQLITE_ROW) {
-        const unsigned char *t = sqlite3_column_text(st, 0);
+    rc = sqldb_step(st);
+    if (rc == SQLDB_ROW) {
+        const char *t = sqldb_column_text(st, 0);
         sf_err_set(err, SF_EBUG, "store check: %s: %s", what, t ? (const char *)t : "?");
     }
-    sqlite3_finalize(st);
-    if (rc == SQLITE_ROW)
+    sqldb_finalize(st);
+    if (rc == SQLDB_ROW)
         return SF_EBUG;
-    return rc == SQLITE_DONE ? SF_OK : store_db_fail(s, err, what);
+    return rc == SQLDB_DONE ? SF_OK : store_db_fail(s, err, what);
 }
 
 int
 store_check(struct store *s, struct sf_err *err)
 {
-    bool ok;
-    int rc = pragma_is(s, "PRAGMA integrity_check", "ok", &ok, err);
+    /* SQLite checks its file and, on request, foreign keys; PostgreSQL
+       enforces foreign keys always and checks its pages itself */
+    bool lite = sqldb_engine(s->db) == SQLDB_SQLITE, ok = true;
+    int rc = lite ? pragma_is(s, "PRAGMA integrity_check", "ok", &ok, err) : SF_OK;
     if (rc)
         return rc;
     if (!ok)
@@ -566,7 +650,8 @@ store_check(struct store *s, struct sf_err *err)
     static const struct {
         const char *what, *sql;
     } checks[] = {
-        { "foreign key", "SELECT \"table\" || ' row ' || rowid FROM pragma_foreign_key_check" },
+        { "foreign key", /* first: SQLite only */
+          "SELECT \"table\" || ' row ' || rowid FROM pragma_foreign_key_check" },
         { "job on a printer without printer name",
           "SELECT 'job ' || id FROM jobs WHERE state IN ('printing','paused') AND printer = ''" },
         { "job on a printer without exactly one open print",
@@ -584,7 +669,7 @@ store_check(struct store *s, struct sf_err *err)
           "SELECT 'job ' || j.id FROM jobs j WHERE (SELECT count(*) FROM prints p"
           " WHERE p.job_id = j.id AND outcome = 'done') != j.copies_done" },
     };
-    for (size_t i = 0; i < sizeof(checks) / sizeof(checks[0]); i++)
+    for (size_t i = lite ? 0 : 1; i < sizeof(checks) / sizeof(checks[0]); i++)
         if ((rc = check_none(s, checks[i].sql, checks[i].what, err)))
             return rc;
     return SF_OK;

@@ -1,7 +1,8 @@
 /*
  * store.h - the farm's durable memory: jobs, their files, printers, an
- * event log and print history, in one SQLite database plus a
- * content-addressed file directory under the data dir.
+ * event log and print history, in one SQLite database (or a PostgreSQL
+ * one: store_open_db) plus a content-addressed file directory under the
+ * data dir.
  *
  *     DATA_DIR/slimfarm.db            SQLite, WAL, foreign keys, user_version
  *     DATA_DIR/files/ab/abcdef...     part and G-code files by SHA-256
@@ -147,7 +148,25 @@ struct event_row {
  * program).  Free with store_close().
  */
 struct store *store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err);
+/*
+ * As store_open, with the database at db: NULL or "" for SQLite in
+ * DATA_DIR/slimfarm.db, or a PostgreSQL URL (postgresql://...; libpq's
+ * form, e.g. postgresql:///farm?host=/run/postgresql).  The file directory
+ * and the lock stay in data_dir either way.  One host per PostgreSQL
+ * database for now: crash recovery takes every active job in the database
+ * for its own.  SF_EINVAL for a db that is not such a URL.
+ */
+struct store *store_open_db(const char *data_dir, const char *db, struct store_recovery *rec,
+                            struct sf_err *err);
 void store_close(struct store *s);
+
+/*
+ * Create or migrate the store at target, a PostgreSQL URL or a data dir
+ * (its SQLite database, under the data dir's lock), and close it: no crash
+ * recovery.  *from (may be NULL): the schema version found (0: new).
+ * Errors as store_open's.
+ */
+int store_init(const char *target, int *from, struct sf_err *err);
 
 /* The schema version this program writes. */
 int store_schema_version(void);

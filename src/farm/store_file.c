@@ -15,7 +15,6 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <openssl/evp.h>
-#include <sqlite3.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/stat.h>
@@ -149,14 +148,15 @@ store_file_record(struct store *s, const char *sha, int64_t size, struct sf_err 
 {
     if (!store_sha_valid(sha))
         return sf_err_set(err, SF_EINVAL, "store: '%.80s' is not a SHA-256 in hex", sha);
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(
-        s, &st, "INSERT OR IGNORE INTO files(sha256, size, created_ms) VALUES(?,?,?)", err);
+        s, &st, "INSERT INTO files(sha256, size, created_ms) VALUES(?,?,?) ON CONFLICT DO NOTHING",
+        err);
     if (rc)
         return rc;
-    sqlite3_bind_text(st, 1, sha, 64, SQLITE_TRANSIENT);
-    sqlite3_bind_int64(st, 2, size);
-    sqlite3_bind_int64(st, 3, clock_wall_ms());
+    sqldb_bind_text(st, 1, sha); /* store_sha_valid: 64 digits */
+    sqldb_bind_int64(st, 2, size);
+    sqldb_bind_int64(st, 3, clock_wall_ms());
     return store_step_done(s, st, err, "record file");
 }
 
@@ -222,12 +222,12 @@ store_file_put(struct store *s, const void *data, size_t len, char sha[STORE_SHA
 bool
 store_file_known(struct store *s, const char *sha)
 {
-    sqlite3_stmt *st;
-    if (sqlite3_prepare_v2(s->db, "SELECT 1 FROM files WHERE sha256 = ?", -1, &st, NULL))
+    struct sqldb_stmt *st;
+    if (sqldb_prepare(s->db, "SELECT 1 FROM files WHERE sha256 = ?", &st))
         return false;
-    sqlite3_bind_text(st, 1, sha, -1, SQLITE_TRANSIENT);
-    bool found = sqlite3_step(st) == SQLITE_ROW;
-    sqlite3_finalize(st);
+    sqldb_bind_text(st, 1, sha);
+    bool found = sqldb_step(st) == SQLDB_ROW;
+    sqldb_finalize(st);
     return found;
 }
 

@@ -4,41 +4,43 @@
  * src/farm/store*.c includes it.
  *
  * What the parts share: the connection and data dir (struct store), the
- * SQLite statement helpers every part writes through (store.c), the event
- * log append (store_event.c) and the file-table checks (store_file.c).
- * Each helper's errors are SF_EIO from SQLite with its message, set in
- * err like the public functions'.
+ * statement helpers every part writes through (store.c, over sqldb.h, so
+ * one SQL text serves SQLite and PostgreSQL), the event log append
+ * (store_event.c) and the file-table checks (store_file.c).  Each
+ * helper's errors are SF_EIO from the engine with its message, set in err
+ * like the public functions'.
  *
  * Thread: as store.h (the store's thread).
  */
 #ifndef SF_FARM_STORE_INT_H
 #define SF_FARM_STORE_INT_H
 
-#include <sqlite3.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
 #include "../base/err.h"
+#include "sqldb.h"
 #include "store.h"
 
 #define STORE_PATH_MAX 1024 /* data dir paths; deeper trees are a config error */
 
 struct store {
-    sqlite3 *db;              /* the connection, WAL mode, foreign keys on */
-    char dir[STORE_PATH_MAX]; /* data directory */
-    int lock_fd;              /* DATA_DIR/lock, flock()ed exclusively; -1 if not open */
+    struct sqldb *db;            /* the connection (SQLite: WAL mode, foreign keys on) */
+    char dir[STORE_PATH_MAX];    /* data directory */
+    char target[STORE_PATH_MAX]; /* what db connects to: the SQLite file or a URL */
+    int lock_fd;                 /* DATA_DIR/lock, flock()ed exclusively; -1 if not open */
 };
 
 /* SF_EIO with what and SQLite's message. */
 int store_db_fail(struct store *s, struct sf_err *err, const char *what);
-/* Run sql (no rows) through sqlite3_exec. */
+/* Run sql (no rows, no parameters). */
 int store_exec(struct store *s, const char *sql, struct sf_err *err);
-/* Prepare sql into *st (sqlite3_finalize it). */
-int store_prepare(struct store *s, sqlite3_stmt **st, const char *sql, struct sf_err *err);
+/* Prepare sql into *st (sqldb_finalize it). */
+int store_prepare(struct store *s, struct sqldb_stmt **st, const char *sql, struct sf_err *err);
 /* Step a statement that returns no rows, then finalize it. */
-int store_step_done(struct store *s, sqlite3_stmt *st, struct sf_err *err, const char *what);
-/* BEGIN IMMEDIATE; COMMIT (rolled back if it fails); ROLLBACK. */
+int store_step_done(struct store *s, struct sqldb_stmt *st, struct sf_err *err, const char *what);
+/* BEGIN (SQLite: IMMEDIATE); COMMIT (rolled back if it fails); ROLLBACK. */
 int store_begin(struct store *s, struct sf_err *err);
 int store_commit(struct store *s, struct sf_err *err);
 void store_rollback(struct store *s);
@@ -49,25 +51,25 @@ void store_rollback(struct store *s);
  * event (as store_log_event) and commits, or rolls back and returns the
  * error.  st is finalized either way.
  */
-int store_write_begin(struct store *s, sqlite3_stmt **st, const char *sql, struct sf_err *err);
-int store_write_end(struct store *s, sqlite3_stmt *st, const char *what, int64_t job_id,
+int store_write_begin(struct store *s, struct sqldb_stmt **st, const char *sql, struct sf_err *err);
+int store_write_end(struct store *s, struct sqldb_stmt *st, const char *what, int64_t job_id,
                     const char *printer, const char *kind, const char *detail, struct sf_err *err);
 /* Prepare the SELECT sql into *st for store_read_rows, *rows NULL and *n 0 until it runs. */
-int store_select(struct store *s, sqlite3_stmt **st, const char *sql, void **rows, size_t *n,
+int store_select(struct store *s, struct sqldb_stmt **st, const char *sql, void **rows, size_t *n,
                  struct sf_err *err);
 /* Column col of st's row as text into dst (cap bytes, cut to fit; NULL is ""). */
-void store_copy_text(char *dst, size_t cap, sqlite3_stmt *st, int col);
+void store_copy_text(char *dst, size_t cap, struct sqldb_stmt *st, int col);
 
 /* Fill one element of a result array from the statement's current row. */
-typedef void (*store_row_fn)(sqlite3_stmt *st, void *row);
+typedef void (*store_row_fn)(struct sqldb_stmt *st, void *row);
 /*
  * Step st to its end, appending one element of elem_size bytes per row to
  * *rows (filled by read), then finalize st.  A step that ends in anything
- * but SQLITE_DONE (busy, I/O error, corruption) is an error and nothing is
+ * but SQLDB_DONE (busy, I/O error, corruption) is an error and nothing is
  * returned: a caller never takes part of a result for all of it.  *rows is
  * freed by the caller (NULL when there are no rows or on error).
  */
-int store_read_rows(struct store *s, sqlite3_stmt *st, size_t elem_size, store_row_fn read,
+int store_read_rows(struct store *s, struct sqldb_stmt *st, size_t elem_size, store_row_fn read,
                     void **rows, size_t *n, const char *what, struct sf_err *err);
 
 /* The columns store_read_job reads, in its order. */
@@ -78,11 +80,15 @@ int store_read_rows(struct store *s, sqlite3_stmt *st, size_t elem_size, store_r
     " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg, filament_g, support_g,"          \
     " support_saved_g, prepare_ms, slice_ms, ready_ms, mndr, andr, shape_changed, est_s"
 /* A store_row_fn: a struct job_row from a row of STORE_JOB_COLS. */
-void store_read_job(sqlite3_stmt *st, void *row);
+void store_read_job(struct sqldb_stmt *st, void *row);
 /* Step st (a SELECT of STORE_JOB_COLS) once and finalize it: its row into *out, or
    SF_ENOTFOUND (err not set: the caller says what was not found), or SF_EIO naming what. */
-int store_job_one(struct store *s, sqlite3_stmt *st, struct job_row *out, const char *what,
+int store_job_one(struct store *s, struct sqldb_stmt *st, struct job_row *out, const char *what,
                   struct sf_err *err);
+
+/* PostgreSQL's text of store.c's SQLite migration v (0-based: to schema v + 1), sql,
+   in PostgreSQL's types (store_pg.c); free() it.  NULL when out of memory. */
+char *store_pg_migration(int v, const char *sql);
 
 /* Append to the event log (job_id 0 and printer NULL: none), in the caller's transaction. */
 int store_log_event(struct store *s, int64_t job_id, const char *printer, const char *kind,

@@ -22,10 +22,10 @@
 /* ---- jobs ---- */
 
 static void
-read_job(sqlite3_stmt *st, struct job_row *j)
+read_job(struct sqldb_stmt *st, struct job_row *j)
 {
     memset(j, 0, sizeof(*j));
-    j->id = sqlite3_column_int64(st, 0);
+    j->id = sqldb_column_int64(st, 0);
     store_copy_text(j->opts.name, sizeof(j->opts.name), st, 1);
     store_copy_text(j->file_sha, sizeof(j->file_sha), st, 2);
     store_copy_text(j->gcode_sha, sizeof(j->gcode_sha), st, 3);
@@ -34,44 +34,44 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     if (!job_state_parse(state, &j->state))
         j->state = JOB_FAILED; /* the CHECK constraint makes this unreachable */
     store_copy_text(j->opts.method, sizeof(j->opts.method), st, 5);
-    j->opts.deviation_mm = sqlite3_column_double(st, 6);
-    j->opts.overhang_deg = sqlite3_column_double(st, 7);
-    j->opts.copies = j->counts.copies = sqlite3_column_int(st, 8);
-    j->counts.copies_done = sqlite3_column_int(st, 9);
-    j->counts.failures = sqlite3_column_int(st, 10);
-    j->opts.max_retries = j->counts.max_retries = sqlite3_column_int(st, 11);
+    j->opts.deviation_mm = sqldb_column_double(st, 6);
+    j->opts.overhang_deg = sqldb_column_double(st, 7);
+    j->opts.copies = j->counts.copies = sqldb_column_int(st, 8);
+    j->counts.copies_done = sqldb_column_int(st, 9);
+    j->counts.failures = sqldb_column_int(st, 10);
+    j->opts.max_retries = j->counts.max_retries = sqldb_column_int(st, 11);
     store_copy_text(j->opts.material, sizeof(j->opts.material), st, 12);
     store_copy_text(j->opts.printer, sizeof(j->opts.printer), st, 13);
     store_copy_text(j->opts.group, sizeof(j->opts.group), st, 14);
-    j->opts.priority = sqlite3_column_int(st, 15);
+    j->opts.priority = sqldb_column_int(st, 15);
     for (int i = 0; i < 3; i++)
-        j->size_mm[i] = sqlite3_column_double(st, 16 + i);
+        j->size_mm[i] = sqldb_column_double(st, 16 + i);
     store_copy_text(j->printer, sizeof(j->printer), st, 19);
-    j->lines_acked = sqlite3_column_int64(st, 20);
+    j->lines_acked = sqldb_column_int64(st, 20);
     store_copy_text(j->reason, sizeof(j->reason), st, 21);
-    j->created_ms = sqlite3_column_int64(st, 22);
-    j->updated_ms = sqlite3_column_int64(st, 23);
-    j->nozzle_mm = sqlite3_column_double(st, 24);
-    j->gcode_lines = sqlite3_column_int64(st, 25);
+    j->created_ms = sqldb_column_int64(st, 22);
+    j->updated_ms = sqldb_column_int64(st, 23);
+    j->nozzle_mm = sqldb_column_double(st, 24);
+    j->gcode_lines = sqldb_column_int64(st, 25);
     store_copy_text(j->prep_key, sizeof(j->prep_key), st, 26);
     store_copy_text(j->mesh_sha, sizeof(j->mesh_sha), st, 27);
-    j->mesh_angle_deg = sqlite3_column_double(st, 28);
-    j->filament_g = sqlite3_column_double(st, 29);
-    j->support_g = sqlite3_column_double(st, 30);
-    j->support_saved_g = sqlite3_column_double(st, 31);
-    j->prepare_ms = sqlite3_column_int64(st, 32);
-    j->slice_ms = sqlite3_column_int64(st, 33);
-    j->ready_ms = sqlite3_column_int64(st, 34);
-    j->dev_measured = sqlite3_column_type(st, 35) != SQLITE_NULL;
-    j->mndr = sqlite3_column_double(st, 35);
-    j->andr = sqlite3_column_double(st, 36);
-    j->shape_changed = sqlite3_column_int(st, 37) != 0;
-    j->est_known = sqlite3_column_type(st, 38) != SQLITE_NULL;
-    j->est_s = j->est_known ? sqlite3_column_double(st, 38) : -1;
+    j->mesh_angle_deg = sqldb_column_double(st, 28);
+    j->filament_g = sqldb_column_double(st, 29);
+    j->support_g = sqldb_column_double(st, 30);
+    j->support_saved_g = sqldb_column_double(st, 31);
+    j->prepare_ms = sqldb_column_int64(st, 32);
+    j->slice_ms = sqldb_column_int64(st, 33);
+    j->ready_ms = sqldb_column_int64(st, 34);
+    j->dev_measured = !sqldb_column_null(st, 35);
+    j->mndr = sqldb_column_double(st, 35);
+    j->andr = sqldb_column_double(st, 36);
+    j->shape_changed = sqldb_column_int(st, 37) != 0;
+    j->est_known = !sqldb_column_null(st, 38);
+    j->est_s = j->est_known ? sqldb_column_double(st, 38) : -1;
 }
 
 void
-store_read_job(sqlite3_stmt *st, void *row)
+store_read_job(struct sqldb_stmt *st, void *row)
 {
     read_job(st, row);
 }
@@ -80,37 +80,38 @@ store_read_job(sqlite3_stmt *st, void *row)
    max_retries, material, printer, group, priority, created_ms and updated_ms (both now_ms). */
 /* The G-code's time estimate at parameter i: NULL when not known (store.h). */
 static void
-bind_est(sqlite3_stmt *st, int i, bool known, double est_s)
+bind_est(struct sqldb_stmt *st, int i, bool known, double est_s)
 {
     if (known)
-        sqlite3_bind_double(st, i, est_s >= 0 ? est_s : -1);
+        sqldb_bind_double(st, i, est_s >= 0 ? est_s : -1);
     else
-        sqlite3_bind_null(st, i);
+        sqldb_bind_null(st, i);
 }
 
 static void
-bind_opts(sqlite3_stmt *st, int first, const struct job_opts *o, int64_t now_ms)
+bind_opts(struct sqldb_stmt *st, int first, const struct job_opts *o, int64_t now_ms)
 {
-    sqlite3_bind_int(st, first, o->copies);
-    sqlite3_bind_int(st, first + 1, o->max_retries);
-    sqlite3_bind_text(st, first + 2, o->material, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_text(st, first + 3, o->printer, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_text(st, first + 4, o->group, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_int(st, first + 5, o->priority);
-    sqlite3_bind_int64(st, first + 6, now_ms);
-    sqlite3_bind_int64(st, first + 7, now_ms);
+    sqldb_bind_int64(st, first, o->copies);
+    sqldb_bind_int64(st, first + 1, o->max_retries);
+    sqldb_bind_text(st, first + 2, o->material);
+    sqldb_bind_text(st, first + 3, o->printer);
+    sqldb_bind_text(st, first + 4, o->group);
+    sqldb_bind_int64(st, first + 5, o->priority);
+    sqldb_bind_int64(st, first + 6, now_ms);
+    sqldb_bind_int64(st, first + 7, now_ms);
 }
 
-/* Finish a job add begun by store_write_begin: run the INSERT st, log "job-add" with detail
-   and commit, or roll back; the new job's id into *id (may be NULL). */
+/* Finish a job add begun by store_write_begin: run the INSERT ... RETURNING id st, log "job-add"
+   with detail and commit, or roll back; the new job's id into *id (may be NULL). */
 static int
-insert_job(struct store *s, sqlite3_stmt *st, const char *what, const char *detail, int64_t *id,
-           struct sf_err *err)
+insert_job(struct store *s, struct sqldb_stmt *st, const char *what, const char *detail,
+           int64_t *id, struct sf_err *err)
 {
-    int rc = store_step_done(s, st, err, what);
+    int rc = sqldb_step(st) == SQLDB_ROW ? SF_OK : store_db_fail(s, err, what);
+    int64_t new_id = rc ? 0 : sqldb_column_int64(st, 0);
+    sqldb_finalize(st);
     if (rc)
         goto fail;
-    int64_t new_id = sqlite3_last_insert_rowid(s->db);
     if ((rc = store_log_event(s, new_id, NULL, "job-add", detail, err)) ||
         (rc = store_commit(s, err)))
         goto fail;
@@ -131,19 +132,19 @@ store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, i
         return rc;
     if (!store_sha_valid(file_sha) || !store_file_known(s, file_sha))
         return sf_err_set(err, SF_ENOTFOUND, "store: part file '%.80s' is not stored", file_sha);
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     if ((rc = store_write_begin(
              s, &st,
              "INSERT INTO jobs(name, file_sha, state, method, deviation_mm, overhang_deg,"
              " copies, max_retries, material, target_printer, target_group, priority,"
-             " created_ms, updated_ms) VALUES(?,?,'queued',?,?,?,?,?,?,?,?,?,?,?)",
+             " created_ms, updated_ms) VALUES(?,?,'queued',?,?,?,?,?,?,?,?,?,?,?) RETURNING id",
              err)))
         return rc;
-    sqlite3_bind_text(st, 1, o->name, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_text(st, 2, file_sha, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_text(st, 3, o->method, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_double(st, 4, o->deviation_mm);
-    sqlite3_bind_double(st, 5, o->overhang_deg);
+    sqldb_bind_text(st, 1, o->name);
+    sqldb_bind_text(st, 2, file_sha);
+    sqldb_bind_text(st, 3, o->method);
+    sqldb_bind_double(st, 4, o->deviation_mm);
+    sqldb_bind_double(st, 5, o->overhang_deg);
     bind_opts(st, 6, o, clock_wall_ms());
     char detail[192];
     snprintf(detail, sizeof(detail), "queued '%s' x%d", o->name, o->copies);
@@ -163,27 +164,27 @@ store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
         return sf_err_set(err, SF_ENOTFOUND, "store: G-code file '%.80s' is not stored", sha);
     if (!g->prep_key || !g->prep_key[0])
         return sf_err_set(err, SF_EINVAL, "store: G-code job '%s' has no key", o->name);
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     if ((rc = store_write_begin(
              s, &st,
              "INSERT INTO jobs(name, file_sha, gcode_sha, state, method, deviation_mm,"
              " overhang_deg, copies, max_retries, material, target_printer, target_group,"
              " priority, created_ms, updated_ms, nozzle_mm, gcode_lines, prep_key,"
              " filament_g, support_g, ready_ms, est_s)"
-             " VALUES(?,?,?,'ready','gcode',0,0,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+             " VALUES(?,?,?,'ready','gcode',0,0,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?) RETURNING id",
              err)))
         return rc;
     int64_t t = clock_wall_ms();
-    sqlite3_bind_text(st, 1, o->name, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_text(st, 2, sha, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_text(st, 3, sha, -1, SQLITE_TRANSIENT);
+    sqldb_bind_text(st, 1, o->name);
+    sqldb_bind_text(st, 2, sha);
+    sqldb_bind_text(st, 3, sha);
     bind_opts(st, 4, o, t);
-    sqlite3_bind_double(st, 12, g->nozzle_mm);
-    sqlite3_bind_int64(st, 13, g->gcode_lines > 0 ? g->gcode_lines : 0);
-    sqlite3_bind_text(st, 14, g->prep_key, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_double(st, 15, g->filament_g);
-    sqlite3_bind_double(st, 16, g->support_g);
-    sqlite3_bind_int64(st, 17, t);
+    sqldb_bind_double(st, 12, g->nozzle_mm);
+    sqldb_bind_int64(st, 13, g->gcode_lines > 0 ? g->gcode_lines : 0);
+    sqldb_bind_text(st, 14, g->prep_key);
+    sqldb_bind_double(st, 15, g->filament_g);
+    sqldb_bind_double(st, 16, g->support_g);
+    sqldb_bind_int64(st, 17, t);
     bind_est(st, 18, g->est_known, g->est_s);
     char detail[192];
     snprintf(detail, sizeof(detail), "ready '%s' x%d (G-code as uploaded, for %s)", o->name,
@@ -196,11 +197,11 @@ store_job_get(struct store *s, int64_t id, struct job_row *out, struct sf_err *e
 {
     char sql[sizeof(STORE_JOB_COLS) + 48];
     snprintf(sql, sizeof(sql), "SELECT %s FROM jobs WHERE id = ?", STORE_JOB_COLS);
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st, sql, err);
     if (rc)
         return rc;
-    sqlite3_bind_int64(st, 1, id);
+    sqldb_bind_int64(st, 1, id);
     rc = store_job_one(s, st, out, "get job", err);
     if (rc == SF_ENOTFOUND)
         return sf_err_set(err, SF_ENOTFOUND, "job %lld: no such job", (long long)id);
@@ -208,16 +209,16 @@ store_job_get(struct store *s, int64_t id, struct job_row *out, struct sf_err *e
 }
 
 int
-store_job_one(struct store *s, sqlite3_stmt *st, struct job_row *out, const char *what,
+store_job_one(struct store *s, struct sqldb_stmt *st, struct job_row *out, const char *what,
               struct sf_err *err)
 {
-    int rc = sqlite3_step(st);
-    if (rc == SQLITE_ROW)
+    int rc = sqldb_step(st);
+    if (rc == SQLDB_ROW)
         read_job(st, out);
-    sqlite3_finalize(st);
-    if (rc == SQLITE_ROW)
+    sqldb_finalize(st);
+    if (rc == SQLDB_ROW)
         return SF_OK;
-    return rc == SQLITE_DONE ? SF_ENOTFOUND : store_db_fail(s, err, what);
+    return rc == SQLDB_DONE ? SF_ENOTFOUND : store_db_fail(s, err, what);
 }
 
 int
@@ -225,7 +226,7 @@ store_job_list(struct store *s, struct job_row **rows, size_t *n, struct sf_err 
 {
     char sql[sizeof(STORE_JOB_COLS) + 48];
     snprintf(sql, sizeof(sql), "SELECT %s FROM jobs ORDER BY id", STORE_JOB_COLS);
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_select(s, &st, sql, (void **)rows, n, err);
     if (rc)
         return rc;
@@ -238,18 +239,18 @@ static int
 close_print(struct store *s, int64_t job_id, const char *outcome, int64_t lines_acked,
             double filament_mm, struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st,
                            "UPDATE prints SET ended_ms = ?, outcome = ?, lines_acked = ?,"
                            " filament_mm = ? WHERE job_id = ? AND outcome = ''",
                            err);
     if (rc)
         return rc;
-    sqlite3_bind_int64(st, 1, clock_wall_ms());
-    sqlite3_bind_text(st, 2, outcome, -1, SQLITE_STATIC);
-    sqlite3_bind_int64(st, 3, lines_acked);
-    sqlite3_bind_double(st, 4, filament_mm);
-    sqlite3_bind_int64(st, 5, job_id);
+    sqldb_bind_int64(st, 1, clock_wall_ms());
+    sqldb_bind_text(st, 2, outcome);
+    sqldb_bind_int64(st, 3, lines_acked);
+    sqldb_bind_double(st, 4, filament_mm);
+    sqldb_bind_int64(st, 5, job_id);
     return store_step_done(s, st, err, "close print");
 }
 
@@ -257,23 +258,23 @@ static int
 open_print(struct store *s, const struct job_row *j, const char *printer, int64_t start_line,
            struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st,
                            "INSERT INTO prints(job_id, copy, printer, material, start_line,"
                            " lines_acked, started_ms, wait_ms) VALUES(?,?,?,?,?,?,?,?)",
                            err);
     if (rc)
         return rc;
-    sqlite3_bind_int64(st, 1, j->id);
-    sqlite3_bind_int(st, 2, j->counts.copies_done + 1);
-    sqlite3_bind_text(st, 3, printer, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_text(st, 4, j->opts.material, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_int64(st, 5, start_line);
-    sqlite3_bind_int64(st, 6, start_line);
+    sqldb_bind_int64(st, 1, j->id);
+    sqldb_bind_int64(st, 2, j->counts.copies_done + 1);
+    sqldb_bind_text(st, 3, printer);
+    sqldb_bind_text(st, 4, j->opts.material);
+    sqldb_bind_int64(st, 5, start_line);
+    sqldb_bind_int64(st, 6, start_line);
     int64_t t = clock_wall_ms();
-    sqlite3_bind_int64(st, 7, t);
+    sqldb_bind_int64(st, 7, t);
     /* a resume of an interrupted print waited for the operator, not in the queue */
-    sqlite3_bind_int64(
+    sqldb_bind_int64(
         st, 8, j->state == JOB_READY && j->ready_ms > 0 && t > j->ready_ms ? t - j->ready_ms : 0);
     return store_step_done(s, st, err, "open print");
 }
@@ -404,7 +405,7 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     j.counts = c;
     if ((rc = apply_event(s, &j, ev, a, next, err)))
         goto fail;
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     if ((rc = store_prepare(
              s, &st,
              "UPDATE jobs SET state = ?, copies_done = ?, failures = ?, gcode_sha = ?,"
@@ -415,40 +416,40 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
              " mndr = ?, andr = ?, shape_changed = ?, est_s = ? WHERE id = ?",
              err)))
         goto fail;
-    sqlite3_bind_text(st, 1, job_state_name(j.state), -1, SQLITE_STATIC);
-    sqlite3_bind_int(st, 2, j.counts.copies_done);
-    sqlite3_bind_int(st, 3, j.counts.failures);
+    sqldb_bind_text(st, 1, job_state_name(j.state));
+    sqldb_bind_int64(st, 2, j.counts.copies_done);
+    sqldb_bind_int64(st, 3, j.counts.failures);
     if (j.gcode_sha[0])
-        sqlite3_bind_text(st, 4, j.gcode_sha, -1, SQLITE_TRANSIENT);
+        sqldb_bind_text(st, 4, j.gcode_sha);
     else
-        sqlite3_bind_null(st, 4);
+        sqldb_bind_null(st, 4);
     for (int i = 0; i < 3; i++)
-        sqlite3_bind_double(st, 5 + i, j.size_mm[i]);
-    sqlite3_bind_text(st, 8, j.printer, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_int64(st, 9, j.lines_acked);
-    sqlite3_bind_text(st, 10, j.reason, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_int64(st, 11, clock_wall_ms());
-    sqlite3_bind_double(st, 12, j.nozzle_mm);
-    sqlite3_bind_int64(st, 13, j.gcode_lines);
-    sqlite3_bind_text(st, 14, j.prep_key, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_text(st, 15, j.mesh_sha, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_double(st, 16, j.mesh_angle_deg);
-    sqlite3_bind_double(st, 17, j.filament_g);
-    sqlite3_bind_double(st, 18, j.support_g);
-    sqlite3_bind_double(st, 19, j.support_saved_g);
-    sqlite3_bind_int64(st, 20, j.prepare_ms);
-    sqlite3_bind_int64(st, 21, j.slice_ms);
-    sqlite3_bind_int64(st, 22, j.ready_ms);
+        sqldb_bind_double(st, 5 + i, j.size_mm[i]);
+    sqldb_bind_text(st, 8, j.printer);
+    sqldb_bind_int64(st, 9, j.lines_acked);
+    sqldb_bind_text(st, 10, j.reason);
+    sqldb_bind_int64(st, 11, clock_wall_ms());
+    sqldb_bind_double(st, 12, j.nozzle_mm);
+    sqldb_bind_int64(st, 13, j.gcode_lines);
+    sqldb_bind_text(st, 14, j.prep_key);
+    sqldb_bind_text(st, 15, j.mesh_sha);
+    sqldb_bind_double(st, 16, j.mesh_angle_deg);
+    sqldb_bind_double(st, 17, j.filament_g);
+    sqldb_bind_double(st, 18, j.support_g);
+    sqldb_bind_double(st, 19, j.support_saved_g);
+    sqldb_bind_int64(st, 20, j.prepare_ms);
+    sqldb_bind_int64(st, 21, j.slice_ms);
+    sqldb_bind_int64(st, 22, j.ready_ms);
     if (j.dev_measured) {
-        sqlite3_bind_double(st, 23, j.mndr);
-        sqlite3_bind_double(st, 24, j.andr);
+        sqldb_bind_double(st, 23, j.mndr);
+        sqldb_bind_double(st, 24, j.andr);
     } else {
-        sqlite3_bind_null(st, 23);
-        sqlite3_bind_null(st, 24);
+        sqldb_bind_null(st, 23);
+        sqldb_bind_null(st, 24);
     }
-    sqlite3_bind_int(st, 25, j.shape_changed);
+    sqldb_bind_int64(st, 25, j.shape_changed);
     bind_est(st, 26, j.est_known, j.est_s);
-    sqlite3_bind_int64(st, 27, id);
+    sqldb_bind_int64(st, 27, id);
     char kind[24], detail[192];
     const char *why = j.reason[0] ? j.reason : ev == JOB_EV_PREPARED && a->note ? a->note : "";
     snprintf(kind, sizeof(kind), "job-%s", job_event_name(ev));
@@ -465,24 +466,24 @@ fail:
 }
 
 static int
-update_job_field(struct store *s, int64_t id, const char *sql, sqlite3_int64 ival, const char *tval,
+update_job_field(struct store *s, int64_t id, const char *sql, int64_t ival, const char *tval,
                  struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st, sql, err);
     if (rc)
         return rc;
     if (tval)
-        sqlite3_bind_text(st, 1, tval, -1, SQLITE_TRANSIENT);
+        sqldb_bind_text(st, 1, tval);
     else
-        sqlite3_bind_int64(st, 1, ival);
-    sqlite3_bind_int64(st, 2, clock_wall_ms());
-    sqlite3_bind_int64(st, 3, id);
-    rc = sqlite3_step(st);
-    sqlite3_finalize(st);
-    if (rc != SQLITE_DONE)
+        sqldb_bind_int64(st, 1, ival);
+    sqldb_bind_int64(st, 2, clock_wall_ms());
+    sqldb_bind_int64(st, 3, id);
+    rc = sqldb_step(st);
+    sqldb_finalize(st);
+    if (rc != SQLDB_DONE)
         return store_db_fail(s, err, "update job");
-    if (sqlite3_changes(s->db) == 0)
+    if (sqldb_changes(s->db) == 0)
         return sf_err_set(err, SF_ENOTFOUND, "job %lld: no such job", (long long)id);
     return SF_OK;
 }
@@ -492,8 +493,9 @@ static int
 save_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_err *err)
 {
     return update_job_field(s, id,
-                            "UPDATE jobs SET lines_acked = max(lines_acked, ?), updated_ms = ?"
-                            " WHERE id = ? AND state IN ('printing', 'paused')",
+                            "UPDATE jobs SET lines_acked = CASE WHEN lines_acked > ?1 THEN"
+                            " lines_acked ELSE ?1 END, updated_ms = ?2"
+                            " WHERE id = ?3 AND state IN ('printing', 'paused')",
                             lines_acked, NULL, err);
 }
 
@@ -512,12 +514,12 @@ static int store_jobs_progress_tx(struct store *s, struct store_progress *p, siz
 int
 store_jobs_progress(struct store *s, struct store_progress *p, size_t n, struct sf_err *err)
 {
-    /* Progress commits do not fsync (WAL with synchronous=NORMAL: they
-       survive a kill -9, and the next state change's fsync carries them to
-       disk); state changes stay FULL. */
-    sqlite3_exec(s->db, "PRAGMA synchronous = NORMAL", NULL, NULL, NULL);
+    /* Progress commits do not wait for the disk (sqldb_set_durable: they
+       survive a kill -9, and the next state change's flush carries them to
+       disk); state changes stay durable. */
+    sqldb_set_durable(s->db, false);
     int rc = store_jobs_progress_tx(s, p, n, err);
-    sqlite3_exec(s->db, "PRAGMA synchronous = FULL", NULL, NULL, NULL);
+    sqldb_set_durable(s->db, true);
     return rc;
 }
 
@@ -597,19 +599,19 @@ store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_
 /* ---- history, events, checks ---- */
 
 static void
-read_print(sqlite3_stmt *st, void *row)
+read_print(struct sqldb_stmt *st, void *row)
 {
     struct print_row *p = row;
-    p->id = sqlite3_column_int64(st, 0);
-    p->job_id = sqlite3_column_int64(st, 1);
-    p->copy = sqlite3_column_int(st, 2);
+    p->id = sqldb_column_int64(st, 0);
+    p->job_id = sqldb_column_int64(st, 1);
+    p->copy = sqldb_column_int(st, 2);
     store_copy_text(p->printer, sizeof(p->printer), st, 3);
     store_copy_text(p->material, sizeof(p->material), st, 4);
-    p->start_line = sqlite3_column_int64(st, 5);
-    p->lines_acked = sqlite3_column_int64(st, 6);
-    p->filament_mm = sqlite3_column_double(st, 7);
-    p->started_ms = sqlite3_column_int64(st, 8);
-    p->ended_ms = sqlite3_column_int64(st, 9);
+    p->start_line = sqldb_column_int64(st, 5);
+    p->lines_acked = sqldb_column_int64(st, 6);
+    p->filament_mm = sqldb_column_double(st, 7);
+    p->started_ms = sqldb_column_int64(st, 8);
+    p->ended_ms = sqldb_column_int64(st, 9);
     store_copy_text(p->outcome, sizeof(p->outcome), st, 10);
 }
 
@@ -617,7 +619,7 @@ int
 store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
              struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_select(s, &st,
                           "SELECT id, job_id, copy, printer, material, start_line, lines_acked,"
                           " filament_mm, started_ms, ended_ms, outcome FROM prints WHERE job_id = ?"
@@ -625,21 +627,21 @@ store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n
                           (void **)rows, n, err);
     if (rc)
         return rc;
-    sqlite3_bind_int64(st, 1, job_id);
+    sqldb_bind_int64(st, 1, job_id);
     return store_read_rows(s, st, sizeof(**rows), read_print, (void **)rows, n, "list prints", err);
 }
 
 static void
-read_bed(sqlite3_stmt *st, void *row)
+read_bed(struct sqldb_stmt *st, void *row)
 {
     struct store_bed *b = row;
     read_print(st, &b->last); /* columns 0..10; all NULL (id 0) when it printed nothing */
     store_copy_text(b->printer, sizeof(b->printer), st, 11);
-    b->bed_full = sqlite3_column_int(st, 12) != 0;
-    b->interrupted_job = sqlite3_column_int64(st, 13);
+    b->bed_full = sqldb_column_int(st, 12) != 0;
+    b->interrupted_job = sqldb_column_int64(st, 13);
     store_copy_text(b->job_name, sizeof(b->job_name), st, 14);
-    b->copies = sqlite3_column_int(st, 15);
-    b->gcode_lines = sqlite3_column_int64(st, 16);
+    b->copies = sqldb_column_int(st, 15);
+    b->gcode_lines = sqldb_column_int64(st, 16);
 }
 
 int
@@ -651,19 +653,21 @@ store_beds(struct store *s, struct store_bed **rows, size_t *n, struct sf_err *e
        shows it for), through prints_printer_id (max(id) is one step):
        the printer's own prints, not a scan of every print down to its
        last one (a printer that never printed read the whole table).  Its
-       interrupted job through jobs_state. */
-    sqlite3_stmt *st;
-    int rc = store_select(
-        s, &st,
-        "SELECT p.id, p.job_id, p.copy, p.printer, p.material, p.start_line, p.lines_acked,"
-        " p.filament_mm, p.started_ms, p.ended_ms, p.outcome, pr.name, pr.bed_full,"
-        " (SELECT id FROM jobs WHERE state = 'interrupted' AND printer = pr.name"
-        "  ORDER BY updated_ms DESC, id DESC LIMIT 1),"
-        " j.name, j.copies, j.gcode_lines FROM printers pr"
-        " LEFT JOIN prints p ON (pr.bed_full OR pr.state IN ('error', 'awaiting-clear')) AND p.id ="
-        "  (SELECT max(id) FROM prints INDEXED BY prints_printer_id WHERE printer = pr.name)"
-        " LEFT JOIN jobs j ON j.id = p.job_id ORDER BY pr.name",
-        (void **)rows, n, err);
+       interrupted job through jobs_state.  INDEXED BY is SQLite's
+       (PostgreSQL's planner takes the index by itself). */
+    char sql[1024];
+    snprintf(sql, sizeof(sql),
+             "SELECT p.id, p.job_id, p.copy, p.printer, p.material, p.start_line, p.lines_acked,"
+             " p.filament_mm, p.started_ms, p.ended_ms, p.outcome, pr.name, pr.bed_full,"
+             " (SELECT id FROM jobs WHERE state = 'interrupted' AND printer = pr.name"
+             "  ORDER BY updated_ms DESC, id DESC LIMIT 1),"
+             " j.name, j.copies, j.gcode_lines FROM printers pr"
+             " LEFT JOIN prints p ON (pr.bed_full != 0 OR pr.state IN ('error', 'awaiting-clear'))"
+             " AND p.id = (SELECT max(id) FROM prints%s WHERE printer = pr.name)"
+             " LEFT JOIN jobs j ON j.id = p.job_id ORDER BY pr.name",
+             sqldb_engine(s->db) == SQLDB_SQLITE ? " INDEXED BY prints_printer_id" : "");
+    struct sqldb_stmt *st;
+    int rc = store_select(s, &st, sql, (void **)rows, n, err);
     if (rc)
         return rc;
     return store_read_rows(s, st, sizeof(**rows), read_bed, (void **)rows, n, "list beds", err);

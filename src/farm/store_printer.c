@@ -6,24 +6,22 @@
  */
 #include "store.h"
 
-#include <sqlite3.h>
-
 #include "../base/clock.h"
 #include "store_int.h"
 
 int
 store_printer_set(struct store *s, const char *name, enum printer_state state, struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_write_begin(s, &st,
                                "INSERT INTO printers(name, state, updated_ms) VALUES(?1, ?2, ?3)"
                                " ON CONFLICT(name) DO UPDATE SET state = ?2, updated_ms = ?3",
                                err);
     if (rc)
         return rc;
-    sqlite3_bind_text(st, 1, name, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_text(st, 2, printer_state_name(state), -1, SQLITE_STATIC);
-    sqlite3_bind_int64(st, 3, clock_wall_ms());
+    sqldb_bind_text(st, 1, name);
+    sqldb_bind_text(st, 2, printer_state_name(state));
+    sqldb_bind_int64(st, 3, clock_wall_ms());
     return store_write_end(s, st, "set printer", 0, name, "printer-state",
                            printer_state_name(state), err);
 }
@@ -31,19 +29,19 @@ store_printer_set(struct store *s, const char *name, enum printer_state state, s
 int
 store_printer_get(struct store *s, const char *name, enum printer_state *state, struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st, "SELECT state FROM printers WHERE name = ?", err);
     if (rc)
         return rc;
-    sqlite3_bind_text(st, 1, name, -1, SQLITE_TRANSIENT);
-    rc = sqlite3_step(st);
+    sqldb_bind_text(st, 1, name);
+    rc = sqldb_step(st);
     bool ok = false;
-    if (rc == SQLITE_ROW)
-        ok = printer_state_parse((const char *)sqlite3_column_text(st, 0), state);
-    sqlite3_finalize(st);
-    if (rc == SQLITE_ROW)
+    if (rc == SQLDB_ROW)
+        ok = printer_state_parse(sqldb_column_text(st, 0), state);
+    sqldb_finalize(st);
+    if (rc == SQLDB_ROW)
         return ok ? SF_OK : sf_err_set(err, SF_EBUG, "printer '%s': unknown state", name);
-    if (rc == SQLITE_DONE)
+    if (rc == SQLDB_DONE)
         return sf_err_set(err, SF_ENOTFOUND, "printer '%s': never seen", name);
     return store_db_fail(s, err, "get printer");
 }
@@ -51,7 +49,7 @@ store_printer_get(struct store *s, const char *name, enum printer_state *state, 
 int
 store_printer_bed_set(struct store *s, const char *name, bool full, struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_write_begin(
         s, &st,
         "INSERT INTO printers(name, state, updated_ms, bed_full) VALUES(?1, 'offline',"
@@ -59,9 +57,9 @@ store_printer_bed_set(struct store *s, const char *name, bool full, struct sf_er
         err);
     if (rc)
         return rc;
-    sqlite3_bind_text(st, 1, name, -1, SQLITE_TRANSIENT);
-    sqlite3_bind_int64(st, 2, clock_wall_ms());
-    sqlite3_bind_int(st, 3, full);
+    sqldb_bind_text(st, 1, name);
+    sqldb_bind_int64(st, 2, clock_wall_ms());
+    sqldb_bind_int64(st, 3, full);
     return store_write_end(s, st, "set printer bed", 0, name, "printer-bed",
                            full ? "holds a part" : "cleared", err);
 }
@@ -69,15 +67,15 @@ store_printer_bed_set(struct store *s, const char *name, bool full, struct sf_er
 int
 store_printer_bed_get(struct store *s, const char *name, bool *full, struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st, "SELECT bed_full FROM printers WHERE name = ?", err);
     if (rc)
         return rc;
-    sqlite3_bind_text(st, 1, name, -1, SQLITE_TRANSIENT);
-    rc = sqlite3_step(st);
-    *full = rc == SQLITE_ROW && sqlite3_column_int(st, 0) != 0;
-    sqlite3_finalize(st);
-    if (rc == SQLITE_ROW || rc == SQLITE_DONE)
+    sqldb_bind_text(st, 1, name);
+    rc = sqldb_step(st);
+    *full = rc == SQLDB_ROW && sqldb_column_int(st, 0) != 0;
+    sqldb_finalize(st);
+    if (rc == SQLDB_ROW || rc == SQLDB_DONE)
         return SF_OK;
     return store_db_fail(s, err, "get printer bed");
 }

@@ -15,7 +15,6 @@
  */
 #include "store.h"
 
-#include <sqlite3.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -27,7 +26,7 @@ int
 store_job_live(struct store *s, struct job_row **rows, size_t *n, struct sf_err *err)
 {
     /* the WHERE is the partial index's own, word for word, so SQLite reads jobs_live */
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_select(s, &st,
                           "SELECT " STORE_JOB_COLS " FROM jobs"
                           " WHERE state NOT IN ('done','failed','cancelled') ORDER BY id",
@@ -41,7 +40,7 @@ store_job_live(struct store *s, struct job_row **rows, size_t *n, struct sf_err 
 int
 store_job_interrupted(struct store *s, const char *printer, struct job_row *out, struct sf_err *err)
 {
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st,
                            "SELECT " STORE_JOB_COLS " FROM jobs"
                            " WHERE state = 'interrupted' AND printer = ?"
@@ -49,7 +48,7 @@ store_job_interrupted(struct store *s, const char *printer, struct job_row *out,
                            err);
     if (rc)
         return rc;
-    sqlite3_bind_text(st, 1, printer, -1, SQLITE_TRANSIENT);
+    sqldb_bind_text(st, 1, printer);
     rc = store_job_one(s, st, out, "interrupted job", err);
     if (rc == SF_ENOTFOUND)
         return sf_err_set(err, SF_ENOTFOUND, "printer %s holds no interrupted job", printer);
@@ -99,21 +98,21 @@ store_job_page(struct store *s, const struct store_job_filter *f, size_t limit,
                           STORE_PAGE_MAX);
     char sql[sizeof(STORE_JOB_COLS) + 512];
     page_sql(f, sql, sizeof(sql));
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_select(s, &st, sql, (void **)rows, n, err);
     if (rc)
         return rc;
     int64_t after = f->after_id > 0 ? f->after_id : (f->newest_first ? INT64_MAX : 0);
-    sqlite3_bind_int64(st, 1, after);
+    sqldb_bind_int64(st, 1, after);
     if (f->printer && f->printer[0])
-        sqlite3_bind_text(st, 2, f->printer, -1, SQLITE_TRANSIENT);
+        sqldb_bind_text(st, 2, f->printer);
     if (f->since_ms > 0)
-        sqlite3_bind_int64(st, 3, f->since_ms);
+        sqldb_bind_int64(st, 3, f->since_ms);
     if (f->until_ms > 0)
-        sqlite3_bind_int64(st, 4, f->until_ms);
-    sqlite3_bind_int64(st, 5, (sqlite3_int64)limit + 1); /* one more: is there a next page */
+        sqldb_bind_int64(st, 4, f->until_ms);
+    sqldb_bind_int64(st, 5, (int64_t)limit + 1); /* one more: is there a next page */
     if (f->name && f->name[0])
-        sqlite3_bind_text(st, 6, f->name, -1, SQLITE_TRANSIENT);
+        sqldb_bind_text(st, 6, f->name);
     rc = store_read_rows(s, st, sizeof(**rows), store_read_job, (void **)rows, n, "page of jobs",
                          err);
     if (rc == SF_OK && *n > limit) {
@@ -128,25 +127,25 @@ int
 store_job_counts(struct store *s, uint64_t by_state[JOB_STATE_COUNT], struct sf_err *err)
 {
     memset(by_state, 0, sizeof(uint64_t) * JOB_STATE_COUNT);
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st, "SELECT state, count(*) FROM jobs GROUP BY state", err);
     if (rc)
         return rc;
-    while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
+    while ((rc = sqldb_step(st)) == SQLDB_ROW) {
         enum job_state js;
-        const unsigned char *t = sqlite3_column_text(st, 0);
+        const char *t = sqldb_column_text(st, 0);
         if (t && job_state_parse((const char *)t, &js))
-            by_state[js] = (uint64_t)sqlite3_column_int64(st, 1);
+            by_state[js] = (uint64_t)sqldb_column_int64(st, 1);
     }
-    sqlite3_finalize(st);
-    return rc == SQLITE_DONE ? SF_OK : store_db_fail(s, err, "count jobs");
+    sqldb_finalize(st);
+    return rc == SQLDB_DONE ? SF_OK : store_db_fail(s, err, "count jobs");
 }
 
 static void
-read_job_printer(sqlite3_stmt *st, void *row)
+read_job_printer(struct sqldb_stmt *st, void *row)
 {
     struct store_job_printer *p = row;
-    p->job_id = sqlite3_column_int64(st, 0);
+    p->job_id = sqldb_column_int64(st, 0);
     store_copy_text(p->printer, sizeof(p->printer), st, 1);
 }
 
@@ -154,28 +153,30 @@ int
 store_last_printers(struct store *s, const int64_t *ids, size_t n_ids,
                     struct store_job_printer **rows, size_t *n, struct sf_err *err)
 {
-    /* the page's ids as one JSON array parameter (at most STORE_PAGE_MAX of
-       them); the newest print of each job is its highest id, through the
-       prints_job index */
+    /* the page's ids as one array parameter (at most STORE_PAGE_MAX of
+       them: SQLite's JSON [1,2], PostgreSQL's bigint[] {1,2}); the newest
+       print of each job is its highest id, through the prints_job index */
+    bool lite = sqldb_engine(s->db) == SQLDB_SQLITE;
     struct buf list;
     buf_init(&list, 0);
-    int rc = buf_printf(&list, "[");
+    int rc = buf_printf(&list, lite ? "[" : "{");
     for (size_t i = 0; i < n_ids && rc == SF_OK; i++)
         rc = buf_printf(&list, "%s%lld", i ? "," : "", (long long)ids[i]);
     if (rc == SF_OK)
-        rc = buf_printf(&list, "]");
+        rc = buf_printf(&list, lite ? "]" : "}");
     if (rc) {
         buf_release(&list);
         return sf_err_set(err, SF_ENOMEM, "store: out of memory listing a page's jobs");
     }
-    sqlite3_stmt *st;
-    rc = store_select(s, &st,
-                      "SELECT job_id, printer FROM prints WHERE id IN (SELECT (SELECT max(id)"
-                      " FROM prints WHERE job_id = ids.value) FROM json_each(?1) AS ids)"
-                      " ORDER BY job_id",
-                      (void **)rows, n, err);
+    char sql[256];
+    snprintf(sql, sizeof(sql),
+             "SELECT job_id, printer FROM prints WHERE id IN (SELECT (SELECT max(id)"
+             " FROM prints WHERE job_id = ids.value) FROM %s) ORDER BY job_id",
+             lite ? "json_each(?1) AS ids" : "unnest(CAST(?1 AS bigint[])) AS ids(value)");
+    struct sqldb_stmt *st;
+    rc = store_select(s, &st, sql, (void **)rows, n, err);
     if (rc == SF_OK) {
-        sqlite3_bind_text(st, 1, list.data, (int)list.len, SQLITE_TRANSIENT);
+        sqldb_bind_text(st, 1, list.data);
         rc = store_read_rows(s, st, sizeof(**rows), read_job_printer, (void **)rows, n,
                              "last printers", err);
     }
@@ -184,26 +185,27 @@ store_last_printers(struct store *s, const int64_t *ids, size_t n_ids,
 }
 
 static void
-read_tally(sqlite3_stmt *st, void *row)
+read_tally(struct sqldb_stmt *st, void *row)
 {
     struct print_tally *t = row;
     memset(t, 0, sizeof(*t));
     store_copy_text(t->printer, sizeof(t->printer), st, 0);
     store_copy_text(t->outcome, sizeof(t->outcome), st, 1);
-    t->n = (uint64_t)sqlite3_column_int64(st, 2);
-    t->filament_g = sqlite3_column_double(st, 3);
-    t->saved_g = sqlite3_column_double(st, 4);
+    t->n = (uint64_t)sqldb_column_int64(st, 2);
+    t->filament_g = sqldb_column_double(st, 3);
+    t->saved_g = sqldb_column_double(st, 4);
 }
 
 int
 store_print_tally(struct store *s, struct print_tally **rows, size_t *n, struct sf_err *err)
 {
-    sqlite3_stmt *st;
-    int rc = store_select(s, &st,
-                          "SELECT p.printer, p.outcome, count(*), total(j.filament_g),"
-                          " total(j.support_saved_g) FROM prints p JOIN jobs j ON j.id = p.job_id"
-                          " WHERE p.outcome != '' GROUP BY p.printer, p.outcome ORDER BY min(p.id)",
-                          (void **)rows, n, err);
+    struct sqldb_stmt *st;
+    int rc = store_select(
+        s, &st,
+        "SELECT p.printer, p.outcome, count(*), coalesce(sum(j.filament_g), 0),"
+        " coalesce(sum(j.support_saved_g), 0) FROM prints p JOIN jobs j ON j.id = p.job_id"
+        " WHERE p.outcome != '' GROUP BY p.printer, p.outcome ORDER BY min(p.id)",
+        (void **)rows, n, err);
     if (rc)
         return rc;
     return store_read_rows(s, st, sizeof(**rows), read_tally, (void **)rows, n, "tally prints",
@@ -225,25 +227,26 @@ store_hist(struct store *s, enum store_hist which, const double *bounds_s, size_
     if (n > STORE_HIST_BOUNDS_MAX || (unsigned)which >= sizeof(from) / sizeof(from[0]))
         return sf_err_set(err, SF_EINVAL, "store: histogram of %zu bounds", n);
     char sql[1024];
-    size_t len = (size_t)snprintf(sql, sizeof(sql), "SELECT count(*), total(v)");
+    size_t len = (size_t)snprintf(sql, sizeof(sql), "SELECT count(*), coalesce(sum(v), 0)");
     for (size_t i = 0; i < n; i++)
-        len += (size_t)snprintf(sql + len, sizeof(sql) - len, ", total(v <= ?%zu)", i + 1);
-    snprintf(sql + len, sizeof(sql) - len, " FROM (SELECT %s)", from[which]);
-    sqlite3_stmt *st;
+        len += (size_t)snprintf(sql + len, sizeof(sql) - len,
+                                ", coalesce(sum(CASE WHEN v <= ?%zu THEN 1 ELSE 0 END), 0)", i + 1);
+    snprintf(sql + len, sizeof(sql) - len, " FROM (SELECT %s) AS t", from[which]);
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st, sql, err);
     if (rc)
         return rc;
     for (size_t i = 0; i < n; i++)
-        sqlite3_bind_double(st, (int)i + 1, bounds_s[i]);
-    rc = sqlite3_step(st);
-    if (rc == SQLITE_ROW) {
-        out->count = (uint64_t)sqlite3_column_int64(st, 0);
-        out->sum_s = sqlite3_column_double(st, 1);
+        sqldb_bind_double(st, (int)i + 1, bounds_s[i]);
+    rc = sqldb_step(st);
+    if (rc == SQLDB_ROW) {
+        out->count = (uint64_t)sqldb_column_int64(st, 0);
+        out->sum_s = sqldb_column_double(st, 1);
         for (size_t i = 0; i < n; i++)
-            out->le[i] = (uint64_t)sqlite3_column_double(st, (int)i + 2);
+            out->le[i] = (uint64_t)sqldb_column_double(st, (int)i + 2);
     }
-    sqlite3_finalize(st);
-    return rc == SQLITE_ROW ? SF_OK : store_db_fail(s, err, "histogram");
+    sqldb_finalize(st);
+    return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "histogram");
 }
 
 struct store *
@@ -255,15 +258,11 @@ store_open_reader(const struct store *s, struct sf_err *err)
         return NULL;
     }
     snprintf(r->dir, sizeof(r->dir), "%s", s->dir);
+    snprintf(r->target, sizeof(r->target), "%s", s->target);
     r->lock_fd = -1; /* the writer holds the data dir */
-    const char *path = sqlite3_db_filename(s->db, "main");
-    if (sqlite3_open_v2(path ? path : "", &r->db, SQLITE_OPEN_READONLY, NULL) != SQLITE_OK) {
-        sf_err_set(err, SF_EIO, "store: cannot open a reader of '%s': %s", path ? path : "?",
-                   r->db ? sqlite3_errmsg(r->db) : "out of memory");
+    if (!(r->db = sqldb_open(r->target, SQLDB_READONLY, err))) {
         store_close(r);
         return NULL;
     }
-    /* a checkpoint may hold the WAL index for a moment; wait rather than fail a read */
-    sqlite3_busy_timeout(r->db, 5000);
     return r;
 }

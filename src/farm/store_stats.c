@@ -14,7 +14,6 @@
  */
 #include "store.h"
 
-#include <sqlite3.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -80,29 +79,29 @@ store_print_stats(struct store *s, int64_t now_ms, int n_days, struct store_prin
         return sf_err_set(err, SF_EINVAL, "store: statistics over %d days (1 to %d)", n_days,
                           STORE_STATS_DAYS_MAX);
     int64_t since = store_stats_since_ms(now_ms, n_days);
-    sqlite3_stmt *st;
+    struct sqldb_stmt *st;
     int rc = store_prepare(s, &st,
                            "SELECT printer, outcome, started_ms, ended_ms FROM prints"
                            " WHERE started_ms < ?1 AND (outcome = '' OR ended_ms >= ?2)",
                            err);
     if (rc)
         return rc;
-    sqlite3_bind_int64(st, 1, now_ms);
-    sqlite3_bind_int64(st, 2, since);
+    sqldb_bind_int64(st, 1, now_ms);
+    sqldb_bind_int64(st, 2, since);
     size_t cap = 0;
-    while ((rc = sqlite3_step(st)) == SQLITE_ROW) {
-        const char *printer = (const char *)sqlite3_column_text(st, 0);
-        const char *outcome = (const char *)sqlite3_column_text(st, 1);
+    while ((rc = sqldb_step(st)) == SQLDB_ROW) {
+        const char *printer = sqldb_column_text(st, 0);
+        const char *outcome = sqldb_column_text(st, 1);
         struct store_printer_stats *r = slot(rows, n, &cap, printer ? printer : "");
         if (!r) {
-            sqlite3_finalize(st);
+            sqldb_finalize(st);
             free(*rows);
             *rows = NULL;
             *n = 0;
             return sf_err_set(err, SF_ENOMEM, "store: out of memory");
         }
         outcome = outcome ? outcome : "";
-        int64_t a = sqlite3_column_int64(st, 2), b = sqlite3_column_int64(st, 3);
+        int64_t a = sqldb_column_int64(st, 2), b = sqldb_column_int64(st, 3);
         bool running = !outcome[0];
         add_time(r, a, running || b > now_ms ? now_ms : b, since, n_days);
         if (running)
@@ -116,8 +115,8 @@ store_print_stats(struct store *s, int64_t now_ms, int n_days, struct store_prin
         else
             r->other++;
     }
-    sqlite3_finalize(st);
-    if (rc != SQLITE_DONE) {
+    sqldb_finalize(st);
+    if (rc != SQLDB_DONE) {
         free(*rows);
         *rows = NULL;
         *n = 0;

@@ -30,6 +30,7 @@
 #include "../../src/farm/farm.h"
 #include "../../src/farm/store.h"
 #include "../t.h"
+#include "../tstore.h"
 
 #define KEY_RW     "rw-key-0123456789abcdef"
 #define KEY_RO     "ro-key-0123456789abcdef"
@@ -224,7 +225,7 @@ open_farm(const char *name, struct sf_err *err)
     farmcfg_init(&srv.cfg);
     struct farm_hooks hooks = { .driver = adrv_new, .prepare = api_prepare, .progress_ms = 50 };
     if (farmcfg_parse(&srv.cfg, farm_ini, strlen(farm_ini), "api.ini", err) ||
-        !(srv.store = store_open(dir, NULL, err)) || !(srv.l = loop_new(err)) ||
+        !(srv.store = t_store_open(dir, NULL, err)) || !(srv.l = loop_new(err)) ||
         !(srv.pool = pool_new(srv.l, 1, err)) ||
         !(srv.farm = farm_new(srv.l, srv.store, srv.pool, &srv.cfg, &hooks, err)))
         return err->code ? err->code : SF_EIO;
@@ -1095,7 +1096,7 @@ T_CASE(api_refused_options_leave_no_file)
     T_EQ_INT(store_files("refused"), before + 1);
     char dir[600];
     snprintf(dir, sizeof(dir), "%s/refused", t_tmpdir());
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     store_close(s);
     T_EQ_INT(store_files("refused"), before);

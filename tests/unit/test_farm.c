@@ -14,7 +14,6 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <signal.h>
-#include <sqlite3.h>
 #include <stdatomic.h>
 #include <stdlib.h>
 #include <sys/stat.h>
@@ -30,6 +29,7 @@
 #include "../../src/farm/farm.h"
 #include "../../src/farm/jobctl.h"
 #include "../t.h"
+#include "../tstore.h"
 
 /* ---- tdrv ---- */
 
@@ -295,7 +295,7 @@ setup(const char *name, const char *ini, printer_driver_fn driver, prepare_fn pr
     int rc = farmcfg_parse(&fx.cfg, ini, strlen(ini), "test.ini", err);
     if (rc)
         return rc;
-    if (!(fx.l = loop_new(err)) || !(fx.s = store_open(dir, NULL, err)) ||
+    if (!(fx.l = loop_new(err)) || !(fx.s = t_store_open(dir, NULL, err)) ||
         !(fx.pool = pool_new(fx.l, 2, err)))
         return SF_EIO;
     struct farm_hooks hooks = { .driver = driver,
@@ -600,12 +600,9 @@ T_CASE(farm_time_estimate_travels_in_the_job)
         report(a, DRV_IDLE, DRV_EV_JOB_DONE);
         T_TRUE(wait_printer(0, PRINTER_AWAITING_CLEAR));
         if (copy == 3) { /* the row as a schema-5 store left it */
-            char db_path[600];
-            snprintf(db_path, sizeof(db_path), "%s/estjob/slimfarm.db", t_tmpdir());
-            sqlite3 *db;
-            T_EQ_INT(sqlite3_open(db_path, &db), SQLITE_OK);
-            T_EQ_INT(sqlite3_exec(db, "UPDATE jobs SET est_s = NULL", NULL, NULL, NULL), SQLITE_OK);
-            sqlite3_close(db);
+            char dir[600];
+            snprintf(dir, sizeof(dir), "%s/estjob", t_tmpdir());
+            T_OK(t_store_exec(dir, "UPDATE jobs SET est_s = NULL"), NULL);
         }
         T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
         T_TRUE(wait_job(id, JOB_PRINTING));
@@ -973,7 +970,7 @@ T_CASE(farm_progress_is_persisted_and_survives_a_crash)
     snprintf(dir, sizeof(dir), "%s/crash", t_tmpdir());
     teardown();
     struct store_recovery rec;
-    struct store *s = store_open(dir, &rec, &err);
+    struct store *s = t_store_open(dir, &rec, &err);
     T_TRUE(s != NULL);
     T_OK(store_job_get(s, id, &j, &err), &err);
     T_EQ_INT(j.state, JOB_INTERRUPTED);
@@ -1362,7 +1359,7 @@ T_CASE(farm_stop_mid_print_leaves_the_job_interrupted_at_its_line)
     char dir[512];
     snprintf(dir, sizeof(dir), "%s/stop", t_tmpdir());
     struct store_recovery rec;
-    struct store *s = store_open(dir, &rec, &err);
+    struct store *s = t_store_open(dir, &rec, &err);
     T_TRUE(s != NULL);
     T_EQ_INT(rec.interrupted, 0); /* the stop did it already */
     struct job_row j;

@@ -5,10 +5,10 @@
  * a formula defused, the rows cap and the cursor to go on), and "print
  * again" (jobctl_again: a new job from the same file and options, uploaded
  * G-code ready at once), and each printer's statistics over a window of
- * days (store_print_stats, GET /api/stats's JSON).  Real SQLite files.
+ * days (store_print_stats, GET /api/stats's JSON).  Real SQLite files, or
+ * PostgreSQL with SLIMFARM_TEST_STORE (tstore.h).
  */
 #include <jansson.h>
-#include <sqlite3.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -20,13 +20,14 @@
 #include "../../src/farm/jobctl.h"
 #include "../../src/farm/store.h"
 #include "../t.h"
+#include "../tstore.h"
 
 static struct store *
 fresh(const char *name, struct sf_err *err)
 {
     char path[512];
     snprintf(path, sizeof(path), "%s/%s", t_tmpdir(), name);
-    return store_open(path, NULL, err);
+    return t_store_open(path, NULL, err);
 }
 
 /* A job called name, printed on printer to done (filament 2.5 g a copy). */
@@ -166,12 +167,7 @@ T_CASE(history_print_again)
 static void
 db_exec(const char *dir, const char *sql)
 {
-    char path[600];
-    snprintf(path, sizeof(path), "%s/slimfarm.db", dir);
-    sqlite3 *db;
-    T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
-    T_EQ_INT(sqlite3_exec(db, sql, NULL, NULL, NULL), SQLITE_OK);
-    sqlite3_close(db);
+    T_OK(t_store_exec(dir, sql), NULL);
 }
 
 /* Set print id's times (ended 0: still running, outcome ""). */
@@ -190,7 +186,7 @@ T_CASE(history_stats_per_printer_and_day)
     struct sf_err err;
     char dir[512];
     snprintf(dir, sizeof(dir), "%s/stats", t_tmpdir());
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     T_TRUE(done_job(s, "a.stl", "mk3", &err) > 0);
     T_TRUE(done_job(s, "b.stl", "mk3", &err) > 0);

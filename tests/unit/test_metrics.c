@@ -10,6 +10,7 @@
 #include "../../src/api/metrics.h"
 #include "../../src/farm/store.h"
 #include "../t.h"
+#include "../tstore.h"
 
 /* Add a job of copies for some part bytes and make it ready with some G-code; 0 on failure. */
 static int64_t
@@ -60,7 +61,7 @@ T_CASE(metrics_count_each_print_outcome)
     struct sf_err err;
     char dir[512];
     snprintf(dir, sizeof(dir), "%s/outcomes", t_tmpdir());
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     int64_t a = ready_job(s, "a", 2, &err), b = ready_job(s, "b", 1, &err);
     T_TRUE(a && b);

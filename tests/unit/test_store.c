@@ -1,12 +1,14 @@
 /*
- * test_store.c - the SQLite job store on real files: schema and migrations,
+ * test_store.c - the job store on real files: schema and migrations,
  * content-addressed files, every job event with its history and log, crash
  * recovery, and a kill -9 test: a child process hammering the store is
  * SIGKILLed mid-transaction again and again, and each reopen must find a
  * consistent store with every acknowledged job present.  I/O faults come
  * from a VFS that fails the Nth read (Debian's SQLite has no
  * sqlite3_test_control fault hooks): recovery and every listing must fail
- * or return all their rows, never part of them as success.
+ * or return all their rows, never part of them as success.  With
+ * SLIMFARM_TEST_STORE (tstore.h) every case that does not read SQLite's
+ * file itself runs on PostgreSQL.
  */
 #include <signal.h>
 #include <sqlite3.h>
@@ -20,6 +22,16 @@
 #include "../../src/base/mem.h"
 #include "../../src/farm/store.h"
 #include "../t.h"
+#include "../tstore.h"
+
+/* Leave a case that reads or breaks SQLite's file itself when the run is on PostgreSQL. */
+#define SQLITE_ONLY()                                                                              \
+    do {                                                                                           \
+        if (t_store_pg()) {                                                                        \
+            t_skip("reads SQLite's file");                                                         \
+            return;                                                                                \
+        }                                                                                          \
+    } while (0)
 
 /* A fresh data dir per case, under the program's scratch dir. */
 static const char *
@@ -64,11 +76,43 @@ make_ready(struct store *s, int64_t id, struct sf_err *err)
     return store_job_event(s, id, JOB_EV_PREPARED, &a, NULL, err);
 }
 
-T_CASE(store_open_creates_schema_in_wal_mode)
+/* Either engine: the schema version is this program's, and a newer one is refused. */
+T_CASE(store_schema_version_is_kept_and_a_newer_one_refused)
 {
     struct sf_err err;
+    const char *dir = fresh_dir("version");
+    struct store *s = t_store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    store_close(s);
+    const char *get = t_store_pg() ? "SELECT version FROM schema_version" : "PRAGMA user_version";
+    T_EQ_INT(t_store_int(dir, get), store_schema_version());
+    /* opened again: nothing to migrate, one version row */
+    T_TRUE((s = t_store_open(dir, NULL, &err)) != NULL);
+    store_close(s);
+    T_EQ_INT(t_store_int(dir, get), store_schema_version());
+    T_OK(t_store_exec(dir, t_store_pg() ? "UPDATE schema_version SET version = 99"
+                                        : "PRAGMA user_version = 99"),
+         NULL);
+    T_TRUE(t_store_open(dir, NULL, &err) == NULL);
+    T_EQ_INT(err.code, SF_EUNSUPP);
+    T_TRUE(strstr(err.msg, "schema 99 is newer") != NULL);
+    /* store_init (slimfarmd --init-store) refuses it too, and makes a new one */
+    T_EQ_INT(store_init(t_store_pg() ? t_store_db(dir) : dir, NULL, &err), SF_EUNSUPP);
+    const char *fresh = fresh_dir("version-init");
+    int from = -1;
+    T_OK(store_init(t_store_pg() ? t_store_db(fresh) : fresh, &from, &err), &err);
+    T_EQ_INT(from, 0);
+    T_EQ_INT(t_store_int(fresh, get), store_schema_version());
+    T_OK(store_init(t_store_pg() ? t_store_db(fresh) : fresh, &from, &err), &err);
+    T_EQ_INT(from, store_schema_version());
+}
+
+T_CASE(store_open_creates_schema_in_wal_mode)
+{
+    SQLITE_ONLY();
+    struct sf_err err;
     const char *dir = fresh_dir("open");
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     store_close(s);
     char path[600];
@@ -87,7 +131,7 @@ T_CASE(store_open_creates_schema_in_wal_mode)
     /* a schema from the future is refused, not guessed at */
     sqlite3_exec(db, "PRAGMA user_version = 99", NULL, NULL, NULL);
     sqlite3_close(db);
-    T_TRUE(store_open(dir, NULL, &err) == NULL);
+    T_TRUE(t_store_open(dir, NULL, &err) == NULL);
     T_EQ_INT(err.code, SF_EUNSUPP);
     T_TRUE(strstr(err.msg, "schema 99 is newer") != NULL);
 }
@@ -100,9 +144,10 @@ T_CASE(store_open_creates_schema_in_wal_mode)
  */
 T_CASE(store_migrates_schema_1_to_gcode_lines)
 {
+    SQLITE_ONLY();
     struct sf_err err;
     const char *dir = fresh_dir("migrate1");
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     int64_t id = add_job(s, "part", 1, &err);
     T_TRUE(id > 0);
@@ -138,7 +183,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
                  NULL, NULL, NULL),
              SQLITE_OK);
     sqlite3_close(db);
-    T_TRUE((s = store_open(dir, NULL, &err)) != NULL);
+    T_TRUE((s = t_store_open(dir, NULL, &err)) != NULL);
     T_OK(store_job_get(s, id, &j, &err), &err);
     T_EQ_INT(j.state, JOB_READY);
     T_EQ_STR(j.gcode_sha, sha);
@@ -183,7 +228,7 @@ T_CASE(store_keeps_the_deviation_of_a_reshaped_part)
 {
     struct sf_err err;
     const char *dir = fresh_dir("deviation");
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     char gc[STORE_SHA_HEX], mesh[STORE_SHA_HEX];
     T_OK(store_file_put(s, "G28\n", 4, gc, &err), &err);
@@ -215,27 +260,21 @@ T_CASE(store_keeps_the_deviation_of_a_reshaped_part)
     T_EQ_DBL(j.mndr, 0.031, 0);
     /* on disk as NULL for the unmeasured job */
     store_close(s);
-    char path[600];
-    snprintf(path, sizeof(path), "%s/slimfarm.db", dir);
-    sqlite3 *db;
-    sqlite3_stmt *st;
-    T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
-    sqlite3_prepare_v2(db, "SELECT mndr IS NULL, andr IS NULL, andr FROM jobs ORDER BY id", -1, &st,
-                       NULL);
-    T_EQ_INT(sqlite3_step(st), SQLITE_ROW);
-    T_EQ_INT(sqlite3_column_int(st, 0), 1);
-    T_EQ_INT(sqlite3_column_int(st, 1), 1);
-    T_EQ_INT(sqlite3_step(st), SQLITE_ROW);
-    T_EQ_INT(sqlite3_column_int(st, 0), 0);
-    T_EQ_DBL(sqlite3_column_double(st, 2), 0.0042, 0);
-    sqlite3_finalize(st);
-    sqlite3_close(db);
+    char sql[128];
+    snprintf(sql, sizeof(sql),
+             "SELECT count(*) FROM jobs WHERE mndr IS NULL AND andr IS NULL"
+             " AND id = %lld",
+             (long long)orient);
+    T_EQ_INT(t_store_int(dir, sql), 1);
+    snprintf(sql, sizeof(sql), "SELECT count(*) FROM jobs WHERE andr = 0.0042 AND id = %lld",
+             (long long)slim);
+    T_EQ_INT(t_store_int(dir, sql), 1);
 }
 
 T_CASE(store_files_are_content_addressed)
 {
     struct sf_err err;
-    struct store *s = store_open(fresh_dir("files"), NULL, &err);
+    struct store *s = t_store_open(fresh_dir("files"), NULL, &err);
     T_TRUE(s != NULL);
     char a[STORE_SHA_HEX], b[STORE_SHA_HEX], path[1200];
     T_OK(store_file_put(s, "abc", 3, a, &err), &err);
@@ -274,7 +313,7 @@ T_CASE(store_adopts_a_file_then_records_it)
 {
     struct sf_err err;
     const char *dir = fresh_dir("adopt");
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     char made[600], sha[STORE_SHA_HEX], path[1200];
     snprintf(made, sizeof(made), "%s/files/job-1.gcode", dir);
@@ -309,7 +348,7 @@ T_CASE(store_adopts_a_file_then_records_it)
 T_CASE(store_job_lifecycle_with_copies_and_history)
 {
     struct sf_err err;
-    struct store *s = store_open(fresh_dir("life"), NULL, &err);
+    struct store *s = t_store_open(fresh_dir("life"), NULL, &err);
     T_TRUE(s != NULL);
     int64_t id = add_job(s, "solid part", 2, &err);
     T_TRUE(id > 0);
@@ -366,7 +405,7 @@ T_CASE(store_job_lifecycle_with_copies_and_history)
 T_CASE(store_illegal_event_changes_nothing)
 {
     struct sf_err err;
-    struct store *s = store_open(fresh_dir("illegal"), NULL, &err);
+    struct store *s = t_store_open(fresh_dir("illegal"), NULL, &err);
     T_TRUE(s != NULL);
     int64_t id = add_job(s, "x", 1, &err);
     T_TRUE(id > 0);
@@ -405,7 +444,7 @@ T_CASE(store_reopen_recovers_interrupted_and_preparing)
 {
     struct sf_err err;
     const char *dir = fresh_dir("recover");
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     int64_t printing = add_job(s, "a", 1, &err), preparing = add_job(s, "b", 1, &err),
             paused = add_job(s, "c", 1, &err), ready = add_job(s, "d", 1, &err);
@@ -424,7 +463,7 @@ T_CASE(store_reopen_recovers_interrupted_and_preparing)
     store_close(s); /* as if the daemon died here */
 
     struct store_recovery rec;
-    s = store_open(dir, &rec, &err);
+    s = t_store_open(dir, &rec, &err);
     T_TRUE(s != NULL);
     T_EQ_INT(rec.interrupted, 2);
     T_EQ_INT(rec.requeued, 1);
@@ -455,7 +494,7 @@ T_CASE(store_reopen_recovers_interrupted_and_preparing)
     T_OK(store_check(s, &err), &err);
     store_close(s);
     /* nothing left to recover */
-    s = store_open(dir, &rec, &err);
+    s = t_store_open(dir, &rec, &err);
     T_TRUE(s != NULL);
     T_EQ_INT(rec.interrupted, 1); /* the resumed one was printing again */
     T_EQ_INT(rec.requeued, 0);
@@ -480,7 +519,7 @@ static void
 hammer(const char *dir, int fd, unsigned seed)
 {
     struct sf_err err;
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     if (!s)
         hammer_fail(3, "open", &err);
     for (unsigned i = 0;; i++) {
@@ -553,7 +592,7 @@ T_CASE(store_survives_sigkill_mid_transaction)
 
         struct sf_err err;
         struct store_recovery rec;
-        struct store *s = store_open(dir, &rec, &err);
+        struct store *s = t_store_open(dir, &rec, &err);
         T_TRUE(s != NULL);
         T_OK(store_check(s, &err), &err);
         /* every acknowledged job is there; none is left mid-flight */
@@ -802,9 +841,10 @@ count_active(struct store *s, struct sf_err *err)
  */
 T_CASE(store_recovery_never_succeeds_on_a_failed_read)
 {
+    SQLITE_ONLY();
     struct sf_err err;
     const char *dir = fresh_dir("recover-io");
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     enum { N_PRINTING = 4, N_PREPARING = 2 };
     for (int i = 0; i < N_PRINTING + N_PREPARING + 2; i++) {
@@ -835,12 +875,12 @@ T_CASE(store_recovery_never_succeeds_on_a_failed_read)
         long fired = fault_fired;
         fault_after = k;
         struct store_recovery rec = { -1, -1 };
-        s = store_open(dir, &rec, &err);
+        s = t_store_open(dir, &rec, &err);
         fault_after = -1;
         if (!s) {
             T_EQ_INT(err.code, SF_EIO);
             failed++;
-            s = store_open(dir, &rec, &err); /* the next start finishes the work */
+            s = t_store_open(dir, &rec, &err); /* the next start finishes the work */
             T_TRUE(s != NULL);
         } else if (fault_fired == fired) {
             T_EQ_INT(rec.interrupted, N_PRINTING);
@@ -868,9 +908,10 @@ T_CASE(store_recovery_never_succeeds_on_a_failed_read)
 /* Each listing with each of its reads failing in turn: an error, or every row. */
 T_CASE(store_listings_report_a_failed_read)
 {
+    SQLITE_ONLY();
     struct sf_err err;
     const char *dir = fresh_dir("list-io");
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     int64_t id = add_job(s, "part", 3, &err);
     T_TRUE(id > 0);
@@ -894,7 +935,7 @@ T_CASE(store_listings_report_a_failed_read)
         int failed = 0;
         long k;
         for (k = 0; k < 2000; k++) {
-            s = store_open(dir, NULL, &err);
+            s = t_store_open(dir, NULL, &err);
             T_TRUE(s != NULL);
             long fired = fault_fired;
             fault_after = k;
@@ -938,13 +979,13 @@ T_CASE(store_survives_allocation_failures)
     /* every allocation the store makes through mem.h, failed in turn */
     const char *dir = fresh_dir("oom");
     struct sf_err err;
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     T_TRUE(add_job(s, "seed", 1, &err) > 0);
     store_close(s);
     for (long n = 1; n < 40; n++) {
         mem_fail_after(n);
-        s = store_open(dir, NULL, &err);
+        s = t_store_open(dir, NULL, &err);
         if (s) {
             struct job_row *rows = NULL;
             size_t cnt;
@@ -955,7 +996,7 @@ T_CASE(store_survives_allocation_failures)
         }
         mem_fail_after(0);
     }
-    s = store_open(dir, NULL, &err);
+    s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     T_OK(store_check(s, &err), &err);
     store_close(s);
@@ -964,7 +1005,7 @@ T_CASE(store_survives_allocation_failures)
 T_CASE(store_jobs_progress_saves_printing_jobs_in_one_go)
 {
     struct sf_err err;
-    struct store *s = store_open(fresh_dir("progress"), NULL, &err);
+    struct store *s = t_store_open(fresh_dir("progress"), NULL, &err);
     T_TRUE(s != NULL);
     int64_t a = add_job(s, "a", 1, &err), b = add_job(s, "b", 1, &err),
             idle = add_job(s, "c", 1, &err);
@@ -1006,16 +1047,16 @@ T_CASE(store_open_refuses_a_data_dir_in_use)
 {
     struct sf_err err;
     const char *dir = fresh_dir("locked");
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
-    T_TRUE(store_open(dir, NULL, &err) == NULL);
+    T_TRUE(t_store_open(dir, NULL, &err) == NULL);
     T_EQ_INT(err.code, SF_EAGAIN);
     char want[700];
     snprintf(want, sizeof(want), "store: data dir '%s' is in use by another process (pid %ld)", dir,
              (long)getpid());
     T_TRUE(strstr(err.msg, want) != NULL);
     store_close(s);
-    T_TRUE((s = store_open(dir, NULL, &err)) != NULL);
+    T_TRUE((s = t_store_open(dir, NULL, &err)) != NULL);
     store_close(s);
 }
 
@@ -1024,7 +1065,7 @@ static struct store *
 store_with_job(const char *dir, int copies, int64_t *id)
 {
     struct sf_err err;
-    struct store *s = store_open(fresh_dir(dir), NULL, &err);
+    struct store *s = t_store_open(fresh_dir(dir), NULL, &err);
     *id = s ? add_job(s, "solid part", copies, &err) : 0;
     return s;
 }

@@ -12,6 +12,7 @@
 
 #include "../../src/farm/store.h"
 #include "../t.h"
+#include "../tstore.h"
 
 static const char *
 fresh_dir(const char *name)
@@ -73,7 +74,7 @@ T_CASE(store_live_jobs_come_from_their_index_not_history)
 {
     struct sf_err err;
     const char *dir = fresh_dir("live");
-    struct store *s = store_open(dir, NULL, &err);
+    struct store *s = t_store_open(dir, NULL, &err);
     T_TRUE(s != NULL);
     int64_t ids[40];
     char part[16];
@@ -100,7 +101,7 @@ T_CASE(store_live_jobs_come_from_their_index_not_history)
     struct job_row j;
     T_EQ_INT(store_job_interrupted(s, "a", &j, &err), SF_ENOTFOUND);
     store_close(s);
-    T_TRUE((s = store_open(dir, NULL, &err)) != NULL);
+    T_TRUE((s = t_store_open(dir, NULL, &err)) != NULL);
     T_OK(store_job_interrupted(s, "a", &j, &err), &err);
     T_EQ_INT(j.id, ids[35]);
     T_EQ_INT(j.state, JOB_INTERRUPTED);
@@ -111,6 +112,8 @@ T_CASE(store_live_jobs_come_from_their_index_not_history)
     T_EQ_INT((long long)n, 10);
     free(rows);
     store_close(s);
+    if (t_store_pg())
+        return; /* PostgreSQL's plans are its own (and a table this small is scanned) */
     /* SQLite reads the live jobs through the partial index, not the table */
     char plan[512];
     plan_of(dir,
@@ -158,7 +161,7 @@ walk(struct store *s, struct store_job_filter f, size_t limit, int *seen, int64_
 static struct store *
 store_with_jobs(const char *name, int n, int64_t printing, struct sf_err *err)
 {
-    struct store *s = store_open(fresh_dir(name), NULL, err);
+    struct store *s = t_store_open(fresh_dir(name), NULL, err);
     for (int i = 0; s && i < n; i++)
         if (!add_job(s, name, err)) {
             store_close(s);
@@ -260,7 +263,7 @@ T_CASE(store_counts_and_a_reader_beside_the_writer)
 T_CASE(store_last_printers_of_a_page_only)
 {
     struct sf_err err;
-    struct store *s = store_open(fresh_dir("lastpr"), NULL, &err);
+    struct store *s = t_store_open(fresh_dir("lastpr"), NULL, &err);
     T_TRUE(s != NULL);
     int64_t ids[6];
     const char *printers[6] = { "a", "b", "c", "d", "e", "f" };

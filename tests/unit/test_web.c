@@ -19,6 +19,7 @@
 #include "../../src/base/log.h"
 #include "../../src/farm/store.h"
 #include "../t.h"
+#include "../tstore.h"
 
 #define KEY_RW "rw-key-0123456789abcdef"
 #define KEY_RO "ro-key-0123456789abcdef"
@@ -70,7 +71,7 @@ start(const char *name, struct sf_err *err)
     log_set_level(LOG_WARN);
     char dir[512];
     snprintf(dir, sizeof(dir), "%s/%s", t_tmpdir(), name);
-    if (!(srv.store = store_open(dir, NULL, err)) || !(srv.l = loop_new(err)) ||
+    if (!(srv.store = t_store_open(dir, NULL, err)) || !(srv.l = loop_new(err)) ||
         !(srv.pool = pool_new(srv.l, 1, err)))
         return err->code ? err->code : SF_EIO;
     char sha[STORE_SHA_HEX];

@@ -1,0 +1,56 @@
+/*
+ * sqldb_int.h - internal to the sqldb module (sqldb.c and its drivers
+ * sqldb_sqlite.c, sqldb_pg.c): the driver table sqldb.c dispatches
+ * through, after SQLite's own VFS table.  A driver's connection and
+ * statement structs begin with struct sqldb and struct sqldb_stmt.
+ *
+ * Thread: as sqldb.h.
+ */
+#ifndef SF_FARM_SQLDB_INT_H
+#define SF_FARM_SQLDB_INT_H
+
+#include <stdbool.h>
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "sqldb.h"
+
+#define SQLDB_MSG_MAX 256
+
+struct sqldb_ops {
+    enum sqldb_engine engine;
+    void (*close)(struct sqldb *db);
+    int (*exec)(struct sqldb *db, const char *sql);
+    const char *begin_sql; /* what sqldb_begin runs */
+    int (*set_durable)(struct sqldb *db, bool durable);
+    int (*prepare)(struct sqldb *db, const char *sql, struct sqldb_stmt **st);
+    void (*bind_int64)(struct sqldb_stmt *st, int i, int64_t v);
+    void (*bind_double)(struct sqldb_stmt *st, int i, double v);
+    void (*bind_text)(struct sqldb_stmt *st, int i, const char *text);
+    void (*bind_null)(struct sqldb_stmt *st, int i);
+    int (*step)(struct sqldb_stmt *st);
+    int64_t (*column_int64)(struct sqldb_stmt *st, int col);
+    double (*column_double)(struct sqldb_stmt *st, int col);
+    const char *(*column_text)(struct sqldb_stmt *st, int col);
+    bool (*column_null)(struct sqldb_stmt *st, int col);
+    void (*reset)(struct sqldb_stmt *st);
+    void (*finalize)(struct sqldb_stmt *st);
+};
+
+struct sqldb {
+    const struct sqldb_ops *ops;
+    char msg[SQLDB_MSG_MAX]; /* the last failure's message */
+    int64_t changes;         /* rows the last write changed */
+};
+
+struct sqldb_stmt {
+    struct sqldb *db;
+};
+
+/* The drivers' open functions (sqldb_open picks one); NULL with err set. */
+struct sqldb *sqldb_sqlite_open(const char *path, unsigned flags, struct sf_err *err);
+struct sqldb *sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err);
+/* Keep msg (cut to fit, without a trailing newline) as db's last failure; returns SF_EIO. */
+int sqldb_fail(struct sqldb *db, const char *msg);
+
+#endif
