@@ -16,7 +16,10 @@
  * SQL is written once, in the dialect both engines share: placeholders `?`
  * or `?N` (the PostgreSQL driver rewrites them to `$N`), INSERT ...
  * RETURNING instead of a last insert id, ON CONFLICT, CASE and coalesce
- * rather than SQLite's two-argument max() or total().  What only one
+ * rather than SQLite's two-argument max() or total(); a parameter whose
+ * type nothing in the statement fixes (`? || 'x'`) takes a CAST, as
+ * PostgreSQL infers parameter types from their use (so a `?N` used twice
+ * is used as one type).  What only one
  * engine has (PRAGMAs, json_each, INDEXED BY) the caller picks by
  * sqldb_engine(); connection set-up (SQLite's WAL and busy timeout) lives
  * in the drivers.

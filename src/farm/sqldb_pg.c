@@ -79,10 +79,13 @@ pg_exec(struct sqldb *db, const char *sql)
     PGresult *res = PQexec(conn(db), sql);
     ExecStatusType es = PQresultStatus(res);
     int rc = SF_OK;
-    if (es == PGRES_COMMAND_OK || es == PGRES_TUPLES_OK)
-        count_changes(db, res);
-    else
+    if (es != PGRES_COMMAND_OK && es != PGRES_TUPLES_OK)
         rc = fail_res(db, res);
+    else if (strcmp(sql, "COMMIT") == 0 && strcmp(PQcmdStatus(res), "ROLLBACK") == 0)
+        /* a COMMIT of a transaction a failed statement aborted "succeeds" as a rollback */
+        rc = sqldb_fail(db, "the transaction was aborted by an earlier error and rolled back");
+    else
+        count_changes(db, res);
     PQclear(res);
     return rc;
 }
