@@ -49,8 +49,8 @@ T_CASE(sqldb_binds_reads_and_counts_alike)
     struct sqldb_stmt *st;
     /* bare ? take 1, 2, 3; the '?' in the string is text (a CAST where PostgreSQL could
        not tell the parameter's type: sqldb.h) */
-    T_OK(sqldb_prepare(db, "INSERT INTO t(n, x, s) VALUES(?, ?, CAST(? AS TEXT) || '?') RETURNING id",
-                       &st),
+    T_OK(sqldb_prepare(
+             db, "INSERT INTO t(n, x, s) VALUES(?, ?, CAST(? AS TEXT) || '?') RETURNING id", &st),
          NULL);
     sqldb_bind_int64(st, 1, INT64_C(9007199254740993)); /* not a double */
     sqldb_bind_double(st, 2, 0.1);
@@ -67,7 +67,8 @@ T_CASE(sqldb_binds_reads_and_counts_alike)
     T_STEP(st, SQLDB_DONE);
     sqldb_finalize(st);
     /* ?2 left out of the text while ?1 and ?3 are bound: numbering holds */
-    T_OK(sqldb_prepare(db, "SELECT n, x, s, s IS NULL FROM t WHERE (n > ?1 OR n = ?1) AND id >= ?3"
+    T_OK(sqldb_prepare(db,
+                       "SELECT n, x, s, s IS NULL FROM t WHERE (n > ?1 OR n = ?1) AND id >= ?3"
                        " ORDER BY id",
                        &st),
          NULL);

@@ -9,7 +9,8 @@
 #                                 PG_DIR and PG_URL (its postgres database)
 #   pg_url DB                     the URL of database DB on it
 #   pg_stop                       stop it and remove PG_DIR (safe to call twice;
-#                                 pg_start arranges it on EXIT)
+#                                 pg_start arranges it on EXIT, and makes TERM,
+#                                 INT and HUP exit, so a killed test stops it too)
 
 # The server's bin dir: pg_config's when it has initdb, else the newest installed.
 pg_bindir() {
@@ -33,6 +34,7 @@ pg_start() {
   fi
   PG_DIR=$(mktemp -d /tmp/sfpg.XXXXXX) || return 1
   trap pg_stop EXIT
+  trap 'exit 143' TERM INT HUP # a killed test (run.sh's timeout) still runs its EXIT trap
   [ "$(id -u)" = 0 ] && chown postgres: "$PG_DIR"
   for o in listen_addresses= "unix_socket_directories=$PG_DIR" "$@"; do opts+=(-c "$o"); done
   if ! pg_as "$bin/initdb" -D "$PG_DIR/data" -U postgres --auth=trust -E UTF8 --no-sync \
