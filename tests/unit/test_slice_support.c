@@ -5,7 +5,9 @@
  * and its columns fill cells of the grid PrusaSlicer snaps support to,
  * whose lines lie at whole multiples of the cell from the part's centre
  * (before, from the raster's corner: a narrow ledge got a cell more or
- * less than PrusaSlicer gives it, by where the part's edge fell).
+ * less than PrusaSlicer gives it, by where the part's edge fell), out
+ * past the part's outline where a contact's cell reaches beyond it
+ * (before, the raster of the part's shadow stopped them at its edge).
  */
 #include <math.h>
 #include <stdio.h>
@@ -52,23 +54,26 @@ on_move(void *ud, const struct est_move *mv)
     return SF_OK;
 }
 
-/* A wall 3 mm thick, 20 tall and 30 long on a 10 mm foot, 2 mm thick,
-   with a 0.8 mm ledge along its top 5 mm (a snap bead under a box's rim,
-   inside the part's shadow), sliced with supports on. */
+/* A wall 3 mm thick, 20 tall and 30 long with a 0.8 mm ledge along its
+   top 5 mm (a snap bead under a box's rim), sliced with supports on: on a
+   10 mm foot, 2 mm thick (the ledge inside the part's shadow), or without
+   (the ledge at its edge). */
 static void
-slice_ledge(struct sup_walk *w)
+slice_ledge(bool foot, struct sup_walk *w)
 {
     struct mesh m;
     struct sf_err err;
     mesh_init(&m);
     double x[8] = { 0, 10, 10, 3, 3, 3.8, 3.8, 0 }, z[8] = { 0, 0, 2, 2, 15, 15, 20, 20 };
-    T_OK(shape_extrude_xz(&m, x, z, 8, 30, &err), &err);
+    double xs[6] = { 0, 3, 3, 3.8, 3.8, 0 }, zs[6] = { 0, 0, 15, 15, 20, 20 };
+    T_OK(foot ? shape_extrude_xz(&m, x, z, 8, 30, &err) : shape_extrude_xz(&m, xs, zs, 6, 30, &err),
+         &err);
     struct slice_profile p;
     T_OK(slice_profile_default(&p), NULL);
     p.skirts = 0;
     p.brim_auto = false;
     *w = (struct sup_walk){ INFINITY, -INFINITY, INFINITY, -INFINITY, 0, 0, 0, 0 };
-    T_OK(ts_slice_walk(&m, &p, "ledge", NULL, on_move, w, &err), &err);
+    T_OK(ts_slice_walk(&m, &p, foot ? "ledge_foot" : "ledge", NULL, on_move, w, &err), &err);
     slice_profile_release(&p);
     mesh_release(&m);
 }
@@ -76,7 +81,7 @@ slice_ledge(struct sup_walk *w)
 T_CASE(support_lines_are_the_nozzles_width)
 {
     struct sup_walk w;
-    slice_ledge(&w);
+    slice_ledge(true, &w);
     T_TRUE(w.sup_mm > 100);
     /* filament a mm of support line at 0.2 mm layers: spacing
        0.4 - 0.2 (1 - pi / 4) times 0.2 over the 1.75 mm filament's
@@ -90,7 +95,7 @@ T_CASE(support_lines_are_the_nozzles_width)
 T_CASE(support_snaps_to_the_grid_through_the_parts_centre)
 {
     struct sup_walk w;
-    slice_ledge(&w);
+    slice_ledge(true, &w);
     T_TRUE(w.sup_hi > w.sup_lo);
     /* the part is 10 mm wide, its centre 5 mm from the wall's back; the
        ledge (3 to 3.8 mm) lies in PrusaSlicer's grid cell from one cell
@@ -105,4 +110,20 @@ T_CASE(support_snaps_to_the_grid_through_the_parts_centre)
         t_fail(__FILE__, __LINE__,
                "support %.3f..%.3f, part %.3f..%.3f: %.3f mm from the centre, want %.3f", w.sup_lo,
                w.sup_hi, w.ext_lo, w.ext_hi, w.sup_hi - cx, want);
+}
+
+T_CASE(support_reaches_past_the_parts_outline)
+{
+    /* the ledge is the part's widest point: PrusaSlicer fills the grid
+       cell it touches beyond it (an enclosure's ears: 1.3 mm past their
+       ends).  Here that cell's side lies 2.72 mm out from the centre
+       (11.5 raster cells of 0.236 mm), the ledge's edge 1.9 mm: support
+       lines to 2.52 mm.  Before, the raster of the part's shadow ended at
+       the ledge's edge, and the support with it (lines to 1.81 mm) */
+    struct sup_walk w;
+    slice_ledge(false, &w);
+    double cx = (w.ext_lo + w.ext_hi) / 2;
+    if (!(w.sup_hi - cx > 2.3 && w.sup_hi - cx < 2.836))
+        t_fail(__FILE__, __LINE__, "support %.3f..%.3f, part %.3f..%.3f: %.3f mm from the centre",
+               w.sup_lo, w.sup_hi, w.ext_lo, w.ext_hi, w.sup_hi - cx);
 }
