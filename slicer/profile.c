@@ -122,7 +122,9 @@ static const struct popt popts[] = {
     R("print", infill_anchor_max, infill_anchor_max_mm, 0, 1000,
       "sparse lines whose ends lie closer than this along the boundary are joined, mm"),
     R("print", line_width, width_mm, 0.1, 3, "perimeter and infill line width, mm"),
-    R("print", solid_line_width, solid_width_mm, 0.1, 3, "solid, top and support line width, mm"),
+    R("print", solid_line_width, solid_width_mm, 0.1, 3, "solid and top line width, mm"),
+    R("print", support_line_width, support_width_mm, 0.1, 3,
+      "support and interface line width, mm"),
     R("print", perimeter_speed, perimeter_mm_s, 1, 1000, "inner perimeters, mm/s"),
     R("print", external_perimeter_speed, ext_perimeter_mm_s, 1, 1000, "outer perimeter, mm/s"),
     R("print", infill_speed, infill_mm_s, 1, 1000, "sparse infill, mm/s"),
@@ -251,6 +253,8 @@ slice_profile_default(struct slice_profile *p)
         .infill_anchor_max_mm = 50, /* PrusaSlicer 2.5: infill_anchor_max 50 mm */
         .width_mm = 0.45,
         .solid_width_mm = 0.45,
+        .support_width_mm = 0.4, /* PrusaSlicer 2.5: support_material_extrusion_width 0,
+                                    its automatic width for support, the nozzle's */
         .perimeter_mm_s = 60,
         .ext_perimeter_mm_s = 30,
         .infill_mm_s = 80,
@@ -424,7 +428,8 @@ slice_profile_check(const struct slice_profile *p, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL,
                           "layer height %g / first layer %g too thick for a %g mm nozzle",
                           p->layer_mm, p->first_layer_mm, p->nozzle_mm);
-    if (p->width_mm < p->layer_mm || p->solid_width_mm < p->layer_mm)
+    if (p->width_mm < p->layer_mm || p->solid_width_mm < p->layer_mm ||
+        p->support_width_mm < p->layer_mm)
         return sf_err_set(err, SF_EINVAL, "line width below the layer height");
     if (p->min_fan_pct > p->max_fan_pct)
         return sf_err_set(err, SF_EINVAL, "min_fan_speed %g is above max_fan_speed %g",
@@ -434,7 +439,7 @@ slice_profile_check(const struct slice_profile *p, struct sf_err *err)
                           "fan_below_layer_time %g is below slowdown_below_layer_time %g",
                           p->fan_below_s, p->slowdown_below_s);
     /* the pitch is the detection raster: columns fill whole snap cells (supmodel.h) */
-    if (p->support_pitch_mm < 0.5 * p->solid_width_mm)
+    if (p->support_pitch_mm < 0.5 * p->support_width_mm)
         return sf_err_set(err, SF_EINVAL, "support_pitch %g is below half the line width",
                           p->support_pitch_mm);
     return SF_OK;

@@ -53,7 +53,8 @@ struct slice_profile {
     double infill_anchor_max_mm; /* neighbouring sparse lines closer than this along the
                                     boundary are joined */
     double width_mm;             /* perimeters and sparse infill */
-    double solid_width_mm;       /* solid, top and support lines */
+    double solid_width_mm;       /* solid and top lines */
+    double support_width_mm;     /* support and its interface */
     double perimeter_mm_s, ext_perimeter_mm_s, infill_mm_s, solid_mm_s, top_mm_s;
     double support_mm_s, first_layer_mm_s, bridge_mm_s, gap_fill_mm_s;
     bool gap_fill;              /* thin walls and gaps get one line of matching width */

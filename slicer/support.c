@@ -134,27 +134,20 @@ support_layer_release(struct support_layer *l)
     paths_release(&l->iface);
 }
 
-/* Add one rectangle per run of active neighbouring cells in a row. */
+/* Add one rectangle per run of neighbouring cells in a row among the
+   columns idx[0..m) (ascending: cols are sorted by cell). */
 static bool
 add_runs(struct paths *rects, const struct support_grid *g, const struct support_column *cols,
-         const uint8_t *on, size_t n)
+         const uint32_t *idx, size_t m)
 {
     double hp = g->pitch / 2;
-    for (size_t a = 0; a < n;) {
-        if (!on[a]) {
-            a++;
-            continue;
-        }
-        size_t b = a + 1, last = a;
-        uint32_t j = cols[a].cell / g->nu;
-        while (b < n && (!on[b] || (cols[b].cell / g->nu == j &&
-                                    cols[b].cell % g->nu <= cols[last].cell % g->nu + 1))) {
-            if (on[b])
-                last = b;
-            b++;
-        }
-        b = last + 1;
-        uint32_t ia = cols[a].cell % g->nu, il = cols[last].cell % g->nu;
+    for (size_t a = 0; a < m;) {
+        size_t last = a;
+        uint32_t j = cols[idx[a]].cell / g->nu;
+        while (last + 1 < m && cols[idx[last + 1]].cell / g->nu == j &&
+               cols[idx[last + 1]].cell % g->nu <= cols[idx[last]].cell % g->nu + 1)
+            last++;
+        uint32_t ia = cols[idx[a]].cell % g->nu, il = cols[idx[last]].cell % g->nu;
         double x0 = g->x0 + ia * g->pitch - hp, x1 = g->x0 + il * g->pitch + hp;
         double y = g->y0 + j * g->pitch;
         /* 1 um overlap so neighbouring rows merge in the union */
@@ -164,9 +157,96 @@ add_runs(struct paths *rects, const struct support_grid *g, const struct support
                             { poly_i(x0 - 1e-3), poly_i(y + hp + 1e-3) } };
         if (!paths_add(rects, r, 4))
             return false;
-        a = b;
+        a = last + 1;
     }
     return true;
+}
+
+/* The first layer whose top is above z (s->n if none). */
+static uint32_t
+layer_above(const struct layer_stack *s, double z)
+{
+    uint32_t a = 0, b = s->n;
+    while (a < b) {
+        uint32_t mid = a + (b - a) / 2;
+        if (s->l[mid].z_mm > z)
+            b = mid;
+        else
+            a = mid + 1;
+    }
+    return a;
+}
+
+/*
+ * The columns that may print in each layer, a layer at a time: live holds
+ * them in cell order (their indices ascending), from the layer that holds a
+ * column's foot (less 1 mm) to the one that holds its head (plus 1 mm), so
+ * a layer looks at its own columns, not at every column of the part.
+ */
+struct live_cols {
+    uint32_t *k0, *k1;    /* a column's first and last layer (k0: the block of the five) */
+    uint32_t *first, *by; /* by[first[k] .. first[k + 1]): the columns starting at layer k */
+    uint32_t *live, *tmp; /* the live columns, and scratch */
+    size_t n_live;
+};
+
+static bool
+live_init(struct live_cols *lc, const struct layer_stack *s, const struct support_column *cols,
+          size_t n)
+{
+    size_t m = n ? n : 1;
+    /* k0, k1, by, live and tmp in one block */
+    lc->k0 = mem_array(5 * m, sizeof(uint32_t));
+    lc->first = mem_calloc((size_t)s->n + 2, sizeof(uint32_t));
+    lc->n_live = 0;
+    if (!lc->k0 || !lc->first)
+        return false;
+    lc->k1 = lc->k0 + m;
+    lc->by = lc->k1 + m;
+    lc->live = lc->by + m;
+    lc->tmp = lc->live + m;
+    for (size_t c = 0; c < n; c++) {
+        lc->k0[c] = layer_above(s, cols[c].lo - 1.0);
+        uint32_t k1 = layer_above(s, cols[c].hi + 1.0);
+        lc->k1[c] = k1 < s->n ? k1 : s->n - 1;
+        lc->first[lc->k0[c] + 1]++;
+    }
+    for (uint32_t k = 0; k <= s->n; k++)
+        lc->first[k + 1] += lc->first[k];
+    for (size_t c = 0; c < n; c++) /* ascending within a layer's bucket */
+        lc->by[lc->first[lc->k0[c]]++] = (uint32_t)c;
+    for (uint32_t k = s->n + 1; k > 0; k--)
+        lc->first[k] = lc->first[k - 1];
+    lc->first[0] = 0;
+    return true;
+}
+
+/* Advance to layer k: drop the columns that ended, merge in those that start. */
+static void
+live_step(struct live_cols *lc, uint32_t k)
+{
+    const uint32_t *add = lc->by + lc->first[k];
+    size_t n_add = lc->first[k + 1] - lc->first[k], a = 0, m = 0;
+    for (size_t q = 0; q < lc->n_live || a < n_add;) {
+        uint32_t c;
+        if (a < n_add && (q == lc->n_live || add[a] < lc->live[q]))
+            c = add[a++];
+        else
+            c = lc->live[q++];
+        if (lc->k1[c] >= k)
+            lc->tmp[m++] = c;
+    }
+    uint32_t *t = lc->live;
+    lc->live = lc->tmp;
+    lc->tmp = t;
+    lc->n_live = m;
+}
+
+static void
+live_release(struct live_cols *lc)
+{
+    free(lc->k0); /* the block */
+    free(lc->first);
 }
 
 int
@@ -180,32 +260,36 @@ support_layers(const struct layer_stack *s, const struct support_grid *g,
     }
     if (n)
         qsort(cols, n, sizeof(*cols), cmp_col);
-    uint8_t *on = mem_calloc(n ? n : 1, 1), *top = mem_calloc(n ? n : 1, 1);
+    struct live_cols lc;
+    uint32_t *on = mem_array(n ? n : 1, sizeof(uint32_t)),
+             *top = mem_array(n ? n : 1, sizeof(uint32_t));
     struct paths rects, all, grown, tmp;
     paths_init(&rects);
     paths_init(&all);
     paths_init(&grown);
     paths_init(&tmp);
-    int rc = on && top ? SF_OK : SF_ENOMEM;
+    int rc = live_init(&lc, s, cols, n) && on && top ? SF_OK : SF_ENOMEM;
     double gap = p->support_z_gap_mm, if_h = p->support_interface_layers * p->layer_mm;
     for (uint32_t k = 0; k < s->n && rc == SF_OK; k++) {
         double zt = s->l[k].z_mm, zb = zt - s->l[k].h_mm;
         size_t n_on = 0, n_top = 0;
-        for (size_t c = 0; c < n; c++) {
+        live_step(&lc, k);
+        for (size_t q = 0; q < lc.n_live; q++) {
+            uint32_t c = lc.live[q];
             if (cols[c].iface) { /* a dense band (supmodel.h): inside a column */
-                on[c] = 0;
-                top[c] = zb >= cols[c].lo - EPS && zt <= cols[c].hi + EPS;
-                n_top += top[c];
+                if (zb >= cols[c].lo - EPS && zt <= cols[c].hi + EPS)
+                    top[n_top++] = c;
                 continue;
             }
             double floor_z = cols[c].lo > EPS ? cols[c].lo + gap : 0;
-            on[c] = zb >= floor_z - EPS && zt <= cols[c].hi - gap + EPS;
+            if (!(zb >= floor_z - EPS && zt <= cols[c].hi - gap + EPS))
+                continue;
+            on[n_on++] = c;
             /* dense under the part it holds up, and where it lands on the part
                (PrusaSlicer: as many bottom interface layers as top ones) */
-            top[c] = on[c] && (zt > cols[c].hi - gap - if_h + EPS ||
-                               (cols[c].lo > EPS && zb < floor_z + if_h - EPS));
-            n_on += on[c];
-            n_top += top[c];
+            if (zt > cols[c].hi - gap - if_h + EPS ||
+                (cols[c].lo > EPS && zb < floor_z + if_h - EPS))
+                top[n_top++] = c;
         }
         if (!n_on)
             continue;
@@ -214,7 +298,7 @@ support_layers(const struct layer_stack *s, const struct support_grid *g,
             if (pass == 1 && !n_top)
                 break;
             paths_reset(&rects);
-            if (!add_runs(&rects, g, cols, pass ? top : on, n)) {
+            if (!add_runs(&rects, g, cols, pass ? top : on, pass ? n_top : n_on)) {
                 rc = SF_ENOMEM;
                 break;
             }
@@ -228,6 +312,7 @@ support_layers(const struct layer_stack *s, const struct support_grid *g,
             paths_move(&out[k].body, &tmp);
         }
     }
+    live_release(&lc);
     free(on);
     free(top);
     paths_release(&rects);

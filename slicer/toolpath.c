@@ -215,12 +215,13 @@ fail:
 
 /* Support paths of layer k (sup: its regions), printed before the part
    they hold: the body's outline and lines (90 % dense on the bed layer,
-   as PrusaSlicer prints it), the interface's dense lines. */
+   as PrusaSlicer prints it), the interface's dense lines; all of
+   support_line_width (h: the layer's height). */
 static int
-support_paths(uint32_t k, const struct slice_profile *p, double ssp,
-              const struct support_layer *sup, struct paths *t, struct layer_paths *out)
+support_paths(uint32_t k, const struct slice_profile *p, double h, const struct support_layer *sup,
+              struct paths *t, struct layer_paths *out)
 {
-    double sw = p->solid_width_mm;
+    double sw = p->support_width_mm, ssp = tp_spacing(sw, h);
     int rc = SF_OK;
     if (sup && sup->body.n) {
         TP_TRY(clip_offset(&sup->body, -sw / 2, CLIP_JOIN_MITER, &t[T_TMP]));
@@ -322,7 +323,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
     struct paths t[T_N];
     tp_scratch_init(t);
     int rc;
-    TP_TRY(support_paths(k, p, ssp, sup, t, out));
+    TP_TRY(support_paths(k, p, h, sup, t, out));
     TP_TRY(tp_perimeters(L, p, sp, t, out));
     TP_TRY(tp_gap_fill_loops(h, p, sp, t, out));
     if (!L->inner.n)

@@ -8,12 +8,22 @@
 #ifndef SF_TESTS_SLICE_RUN_H
 #define SF_TESTS_SLICE_RUN_H
 
+#include <stdbool.h>
 #include <stdio.h>
+#include <string.h>
 
 #include "../../slicer/estimate.h"
 #include "../../slicer/slice.h"
 #include "../../src/base/buf.h"
 #include "../t.h"
+
+/* Is mv's ;TYPE: role t? */
+static inline bool
+ts_is_type(const struct est_move *mv, const char *t)
+{
+    size_t n = strlen(t);
+    return mv->type && mv->type_len == n && memcmp(mv->type, t, n) == 0;
+}
 
 /* Slice m with p into t_tmpdir()/NAME.gcode, its path in path[cap]; r may be NULL. */
 static inline int

@@ -34,13 +34,6 @@ struct walls {
     double px, py;                      /* the previous move's end */
 };
 
-static bool
-is_type(const struct est_move *mv, const char *t)
-{
-    size_t n = strlen(t);
-    return mv->type && mv->type_len == n && memcmp(mv->type, t, n) == 0;
-}
-
 static void
 end_layer(struct walls *w)
 {
@@ -61,16 +54,16 @@ on_move(void *ud, const struct est_move *mv)
     bool ext = mv->de > 0 && (mv->x != w->px || mv->y != w->py);
     w->px = mv->x;
     w->py = mv->y;
-    bool perim = ext && (is_type(mv, "Perimeter") || is_type(mv, "External perimeter"));
+    bool perim = ext && (ts_is_type(mv, "Perimeter") || ts_is_type(mv, "External perimeter"));
     if (ext)
         w->all_mm += mv->de;
     /* the wall's middle: clear of the floor's and the rim's solid layers */
     bool middle = mv->z > BOX_FLOOR + 1.5 && mv->z < BOX_H - 1.5;
     if (middle && ext) {
         w->total_mm += mv->de;
-        if (is_type(mv, "Gap fill"))
+        if (ts_is_type(mv, "Gap fill"))
             w->gap_mm += mv->de;
-        if (is_type(mv, "Internal infill"))
+        if (ts_is_type(mv, "Internal infill"))
             w->infill_mm += mv->de;
         if (perim && !w->was_perim)
             w->loops++;
