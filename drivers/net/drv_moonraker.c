@@ -518,6 +518,7 @@ on_info(struct moonraker *m, const struct httpc_result *res)
     /* ready, shutdown, error: the object query says the rest (webhooks) */
     snprintf(n->base.caps.firmware, sizeof(n->base.caps.firmware), "Klipper (Moonraker)");
     m->ready = true;
+    drv_moonraker_ws_klippy_ready(m);
     netdrv_schedule(n, 0);
 }
 

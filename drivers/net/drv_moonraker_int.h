@@ -71,6 +71,7 @@ struct moonraker {
     /* the push socket (drv_moonraker_ws.c) */
     struct netpush push;
     json_t *ws_status; /* the objects as the socket told them */
+    bool ws_held;      /* the socket waits for Klippy to be ready again (hold) */
 };
 
 /* The status st seen (by a poll, or pushed by the socket): judge and report it. */
@@ -83,5 +84,8 @@ void drv_moonraker_ws_open(struct moonraker *m, const char *ip);
 void drv_moonraker_ws_close(struct moonraker *m, const char *why);
 /* Judge what the socket said last, if it is new and the slot is free. */
 void drv_moonraker_ws_apply(struct moonraker *m);
+/* The polls saw Klippy ready: a socket still held subscribes again (it missed
+   notify_klippy_ready). */
+void drv_moonraker_ws_klippy_ready(struct moonraker *m);
 
 #endif

@@ -15,7 +15,8 @@
  * connection.py's _on_connection_closed) holds the socket open but polling
  * takes over, asking /server/info until Klippy is back; notify_klippy_ready
  * subscribes again on the same socket, and its reply makes the socket
- * stand again.  A subscribe refused with 503
+ * stand again; so does /server/info saying Klippy is ready, should the
+ * socket have missed the notification.  A subscribe refused with 503
  * (Klippy not connected yet) waits for notify_klippy_ready the same way.
  * Any other error reply or a status that does not parse closes the socket
  * and polling takes over.
@@ -63,6 +64,7 @@ static void
 hold(struct moonraker *m, const char *why)
 {
     m->ready = false;
+    m->ws_held = true;
     netpush_hold(&m->push, &m->n, why);
     json_decref(m->ws_status);
     m->ws_status = NULL;
@@ -130,6 +132,7 @@ on_reply(struct moonraker *m, json_t *msg, json_int_t id)
     }
     json_decref(m->ws_status);
     m->ws_status = json_deep_copy(status);
+    m->ws_held = false;
     netpush_live(&m->push, &m->n);
     drv_moonraker_ws_apply(m);
 }
@@ -182,6 +185,21 @@ drv_moonraker_ws_close(struct moonraker *m, const char *why)
     netpush_close(&m->push, &m->n, why);
     json_decref(m->ws_status);
     m->ws_status = NULL;
+    m->ws_held = false;
+}
+
+void
+drv_moonraker_ws_klippy_ready(struct moonraker *m)
+{
+    /* Moonraker says notify_klippy_ready once; a socket that missed it
+       (lost, or sent before the socket was held) would have waited for it
+       for ever, the printer polled meanwhile at the poll rate */
+    if (m->ws_held && m->push.ws && !m->push.live) {
+        log_printer(LOG_INFO, m->n.base.name,
+                    "push socket: Klippy is ready again (/server/info): subscribing again");
+        m->ws_held = false;
+        subscribe(m);
+    }
 }
 
 void

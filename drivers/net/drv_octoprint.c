@@ -40,10 +40,13 @@ octo_classify(const char *s)
         { "Starting", OCTO_R_PRINTING },
         { "Resuming", OCTO_R_PRINTING },
         { "Finishing", OCTO_R_PRINTING },
-        { "Pausing", OCTO_R_PRINTING },
         { "Sending file to SD", OCTO_R_PRINTING },
         { "Transferring file to SD", OCTO_R_PRINTING },
         { "Paused", OCTO_R_PAUSED },
+        /* between the pause command and Paused, while the printer finishes the moves it
+           holds: a pause taking effect (said printing, the farm took it for a resume at
+           the printer, and the job went paused, printing, paused within two polls) */
+        { "Pausing", OCTO_R_PAUSED },
         { "Cancelling", OCTO_R_CANCELLING },
         { "Offline after error", OCTO_R_ERROR },
         { "Error", OCTO_R_ERROR },
@@ -890,6 +893,7 @@ static const struct netdrv_ops octo_nops = {
     .judge = octo_judge,
     .lines = octo_lines,
     .side_rq = RQ_LOGIN,
+    .poll_rq = RQ_PRINTER,
 };
 
 struct drv *

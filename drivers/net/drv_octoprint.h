@@ -15,8 +15,8 @@
  * /api/login) and reads OctoPrint's push socket (/sockjs/websocket) in
  * place of the status polls while that stands (drv_octoprint_int.h).
  *
- * Remote states: Operational -> DRV_IDLE; Printing, Pausing, Cancelling,
- * Starting, Resuming, Finishing -> DRV_PRINTING; Paused -> DRV_PAUSED;
+ * Remote states: Operational -> DRV_IDLE; Printing, Cancelling, Starting,
+ * Resuming, Finishing -> DRV_PRINTING; Pausing, Paused -> DRV_PAUSED;
  * Error, Offline after error -> DRV_ERROR; Offline, Closed, Connecting ->
  * DRV_OFFLINE (OctoPrint answers, its printer does not).  Our job ends
  * DONE when OctoPrint is Operational again at 100 %, FAILED when it stopped
@@ -51,8 +51,8 @@ struct drv *drv_octoprint_new(struct loop *l, const struct drv_config *cfg, drv_
 enum octo_remote {
     OCTO_R_UNKNOWN = 0, /* a text we do not know: treated as busy */
     OCTO_R_IDLE,        /* Operational */
-    OCTO_R_PRINTING,    /* Printing, Starting, Resuming, Finishing, Pausing, Sending file to SD */
-    OCTO_R_PAUSED,      /* Paused */
+    OCTO_R_PRINTING,    /* Printing, Starting, Resuming, Finishing, Sending file to SD */
+    OCTO_R_PAUSED,      /* Paused, Pausing (the pause taking effect) */
     OCTO_R_CANCELLING,  /* Cancelling */
     OCTO_R_ERROR,       /* Error, Offline after error */
     OCTO_R_OFFLINE,     /* Offline, Closed, Opening serial connection, Connecting, Detecting */

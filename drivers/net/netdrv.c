@@ -179,7 +179,8 @@ void
 netdrv_preempt_poll(struct netdrv *n)
 {
     if (n->req && (n->rq == NETDRV_RQ_POLL || n->rq == NETDRV_RQ_INFO ||
-                   (n->nops->side_rq && n->rq == n->nops->side_rq))) {
+                   (n->nops->side_rq && n->rq == n->nops->side_rq) ||
+                   (n->nops->poll_rq && n->rq == n->nops->poll_rq))) {
         httpc_cancel(n->req);
         n->req = NULL;
         n->rq = NETDRV_RQ_NONE;

@@ -105,6 +105,11 @@ struct netdrv_ops {
     /* Optional: a request of the driver's own that an action cuts short as it does a poll (one
        it asks again later: OctoPrint's push socket login). */
     int side_rq;
+    /* Optional: the second request of the driver's status poll (OctoPrint's GET /api/printer),
+       cut short by an action as the poll is: the next poll asks it again.  Left running, it
+       held the slot an upload needs, and a job handed over then was refused ("the upload
+       could not start"). */
+    int poll_rq;
 };
 
 struct netdrv {

@@ -60,6 +60,8 @@ sim_moonraker_fault_parse(struct sim_moonraker_config *c, const char *spec, stru
         return sim_netbase_fault_count(spec, v, &c->error_at, err);
     if ((v = sim_netbase_fault_arg(spec, "cancel")))
         return sim_netbase_fault_count(spec, v, &c->cancel_at, err);
+    if ((v = sim_netbase_fault_arg(spec, "miss-ready")))
+        return sim_netbase_fault_count(spec, v, &c->miss_ready, err);
     if ((v = sim_netbase_fault_arg(spec, "startup"))) {
         long ms;
         if ((rc = sim_netbase_fault_count(spec, v, &ms, err)))
@@ -909,7 +911,7 @@ sim_moonraker_main(int argc, char **argv)
 {
     return sim_netbase_main(
         argc, argv,
-        "faults: shutdown=LINE error=LINE cancel=LINE startup=MS (Klipper), and the HTTP and\n"
-        "        firmware faults of every simulator\n",
+        "faults: shutdown=LINE error=LINE cancel=LINE startup=MS miss-ready=N (Klipper), and\n"
+        "        the HTTP and firmware faults of every simulator\n",
         face_new);
 }

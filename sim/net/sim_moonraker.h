@@ -24,6 +24,9 @@
  *   error=L       the job ends in print_stats "error" at line L (Klippy stays ready)
  *   cancel=L      the job is cancelled at the printer at line L
  *   startup=MS    Klippy is in "startup" for its first MS milliseconds
+ *   miss-ready=N  the sockets are not told the first N times Klippy is ready
+ *                 again (notify_klippy_ready lost: a client must see it
+ *                 some other way, /server/info)
  *
  * Thread: the loop thread.  Owns its HTTP server and machine.
  */
@@ -47,6 +50,7 @@ struct sim_moonraker_config {
     long error_at;                        /* error=L (0: never) */
     long cancel_at;                       /* cancel=L (0: never) */
     int startup_ms;                       /* startup=MS */
+    long miss_ready;                      /* miss-ready=N (0: none) */
 };
 
 /* Defaults: any port, no key, sim_netprinter_config_init, no faults. */

@@ -63,6 +63,7 @@ struct sim_moonraker {
     struct temp_store temps;
     int ws_ids;            /* websocket connection ids handed out */
     enum klippy ws_klippy; /* Klippy's state the sockets were last told */
+    long ready_missed;     /* notify_klippy_ready not sent (miss-ready) */
     int64_t next_push_ms;  /* loop time of the next notify_status_update round */
     uint64_t n_queries;    /* /printer/objects/query answered over HTTP */
 };

@@ -469,6 +469,10 @@ sim_moonraker_ws_watch(struct sim_moonraker *s, const struct sim_np_status *st)
                         : s->klippy == K_SHUTDOWN ? "notify_klippy_shutdown"
                                                   : "notify_klippy_disconnected";
         s->ws_klippy = s->klippy;
+        if (s->klippy == K_READY && s->ready_missed < s->cfg.miss_ready) {
+            s->ready_missed++;
+            p.klippy_note = NULL; /* lost on its way */
+        }
     }
     int64_t now = loop_now_ms(s->b.l);
     if (now >= s->next_push_ms) {

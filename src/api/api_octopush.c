@@ -126,13 +126,14 @@ send_state(struct op_conn *c, const char *type, int64_t now)
 
 /* ---- messages from the client (OctoPrint's on_message) ---- */
 
+/* reauthRequired with reason; code: then close with it, and text (NULL: reason) */
 static void
-refuse(struct op_conn *c, const char *reason, uint16_t code)
+refuse(struct op_conn *c, const char *reason, uint16_t code, const char *text)
 {
     c->authed = false;
     emit(c, "reauthRequired", json_pack("{s:s}", "reason", reason));
     if (code)
-        wsconn_close(c->wc, code, reason);
+        wsconn_close(c->wc, code, text ? text : reason);
 }
 
 static void
@@ -145,15 +146,27 @@ on_auth(struct op_conn *c, const char *a)
     const char *key = sessions_key(c->p->sessions, colon + 1, NULL, now);
     char label[32];
     key_label(key ? key : "", label, sizeof(label));
-    if (!key || (size_t)(colon - a) != strlen(label) || strncmp(a, label, strlen(label)) != 0) {
-        refuse(c, "stale", 0);
+    bool bad =
+        !key || (size_t)(colon - a) != strlen(label) || strncmp(a, label, strlen(label)) != 0;
+    /* Counted with its address's REST logins (authlimit.h): guessing
+       sessions, many a socket, once went unslowed and unlogged.  Past the
+       burst, the socket is closed whatever it sent, as a 429 answers. */
+    unsigned wait_s = http_upgraded_login(c->u, bad, "push socket auth: unknown or stale session");
+    if (wait_s) {
+        char text[64];
+        snprintf(text, sizeof(text), "too many failed logins: try again in %u s", wait_s);
+        refuse(c, "stale", 1013, text); /* 1013: try again later */
+        return;
+    }
+    if (bad) {
+        refuse(c, "stale", 0, NULL);
         return;
     }
     bool ro;
     struct sf_err err;
     int rc = http_upgraded_auth(c->u, key, &ro, &err);
     if (rc) {
-        refuse(c, "stale", rc == SF_EAGAIN ? 1013 : 1008); /* 1013: try again later */
+        refuse(c, "stale", rc == SF_EAGAIN ? 1013 : 1008, NULL); /* 1013: try again later */
         return;
     }
     snprintf(c->session, sizeof(c->session), "%s", colon + 1);
@@ -320,7 +333,7 @@ tick_one(struct op_conn *c, int64_t now)
     }
     const char *key = sessions_key(c->p->sessions, c->session, NULL, now);
     if (!key || strcmp(key, c->key) != 0 || http_upgraded_revoked(c->u)) {
-        refuse(c, "logout", 1008);
+        refuse(c, "logout", 1008, NULL);
         return;
     }
     struct api_octoprint_summary s;

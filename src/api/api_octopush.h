@@ -23,7 +23,10 @@
  * PrinterStateChanged as the summary's state text changes.  {"subscribe":
  * {"state": bool, "events": bool or [names]}} narrows them as OctoPrint
  * 1.8+ does.  A wrong or ended session gets reauthRequired {"reason":
- * "stale"}; nothing is sent but `connected` until a valid auth.
+ * "stale"}; nothing is sent but `connected` until a valid auth.  Each
+ * auth counts as a login of the client's address with its REST logins
+ * (http_upgraded_login, authlimit.h): past the burst of failures the
+ * socket gets reauthRequired and is closed (1013), whatever it sent.
  *
  * Sessions: POST /api/login makes one per login (api_octopush_login): 128
  * random bits, tied to the key it was made with, in a table of this

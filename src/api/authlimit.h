@@ -3,7 +3,9 @@
  * flooding the log, and slowed.
  *
  * A failed login is a request to a keyed route with no key, an unknown key
- * or a dead session (http.c answers 401).  Each address has a token bucket
+ * or a dead session (http.c answers 401), or an OctoPrint push socket's
+ * auth message with an unknown session (api_octopush.c, which closes the
+ * socket where http.c answers 429).  Each address has a token bucket
  * (kept as the time its debt is paid, GCRA): AUTHLIMIT_BURST failures at
  * once, then one per AUTHLIMIT_REFILL_MS.  An address past its burst gets
  * 429 for every keyed request, good key or not, until the bucket refills

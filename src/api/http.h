@@ -326,6 +326,13 @@ const char *http_upgraded_key(const struct http_upgraded *u);
  */
 int http_upgraded_auth(struct http_upgraded *u, const char *key, bool *read_only,
                        struct sf_err *err);
+/*
+ * A login on u (its owner's own, as OctoPrint's push socket's auth
+ * message) that failed or passed, counted with the REST logins of u's
+ * client address (authlimit.h): 0, or the seconds to wait when the
+ * address is past its burst (refuse the login then, whatever it was).
+ */
+unsigned http_upgraded_login(struct http_upgraded *u, bool failed, const char *why);
 /* Whether u's key was revoked (http_set_keys): its owner closes it. */
 bool http_upgraded_revoked(const struct http_upgraded *u);
 /* How long an upgraded socket may live, ms: an event stream's lifetime (stream_lifetime_ms). */

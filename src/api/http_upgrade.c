@@ -25,7 +25,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../base/clock.h"
 #include "../base/mem.h"
+#include "authlimit.h"
 #include "http.h"
 #include "http_int.h"
 
@@ -39,6 +41,7 @@ struct http_upgraded {
     void (*ud_free)(void *ud);     /* frees ud if it is never taken */
     bool revoked;                  /* its key is gone */
     char key[FARMCFG_KEY_MAX + 1]; /* the key it is counted under, "" for none */
+    char addr[AUTHLIMIT_ADDR_MAX]; /* the client's address (http_upgraded_login) */
     struct http_upgraded *next;    /* in h->ups */
 };
 
@@ -65,6 +68,8 @@ on_upgraded(void *cls, struct MHD_Connection *conn, void *req_cls, const char *e
     const union MHD_ConnectionInfo *info =
         MHD_get_connection_info(conn, MHD_CONNECTION_INFO_SOCKET_CONTEXT);
     u->slot = info ? info->socket_context : NULL;
+    info = MHD_get_connection_info(conn, MHD_CONNECTION_INFO_CLIENT_ADDRESS);
+    authlimit_addr(info ? info->client_addr : NULL, u->addr);
     /* the socket's life is its owner's now: no idle timeout of MHD's */
     MHD_set_connection_option(conn, MHD_CONNECTION_OPTION_TIMEOUT, 0);
     int fl = fcntl(sock, F_GETFL);
@@ -155,6 +160,14 @@ const char *
 http_upgraded_key(const struct http_upgraded *u)
 {
     return u->key;
+}
+
+unsigned
+http_upgraded_login(struct http_upgraded *u, bool failed, const char *why)
+{
+    return u->h->authlimit ? authlimit_check(u->h->authlimit, u->addr[0] ? u->addr : "?", failed,
+                                             why, clock_mono_ms())
+                           : 0;
 }
 
 bool

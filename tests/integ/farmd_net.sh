@@ -108,7 +108,12 @@ grep -q 'printer\[flaky\]: upload failed' "$tmp/log" || fail "flaky's cut upload
 
 # the daemon dies mid-print and comes back: the print is taken back
 j_kill=$(submit "$tmp/frame.stl" --material PLA --printer mk4 --method none)
-wait_for 180 sh -c "'$C' printers | grep -qE '^mk4 +printing .* [1-9][0-9]?%'" || fail "mk4 never printed: $("$C" printers)"
+# (the printer's own progress of it: "printing ... N%" in `slimfarm printers` also
+# matched "uploading N%", and a kill then left a job the printer never got interrupted)
+kill_ready() {
+  [ "$(api "/api/jobs/$j_kill" | json '"%s %s" % (d["job"]["state"], d["job"]["lines_acked"] > 0)')" = "printing True" ]
+}
+wait_for 180 kill_ready || fail "mk4 never printed job $j_kill: $("$C" printers)"
 kill -9 $pid; wait $pid 2>/dev/null; pid=
 start_daemon
 wait_for 300 all_done $j_kill || fail "job $j_kill after the restart: $(job_state "$j_kill"); $("$C" jobs)"

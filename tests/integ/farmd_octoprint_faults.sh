@@ -15,17 +15,14 @@
 set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
+. "$(dirname "$0")/lib/netprint.sh"
 t0=$(date +%s)
 KEY=octo-key-0123456789
 
+# start_octo NAME ARGS...: lib/netprint.sh's start_net (30 s to start, not 5)
 start_octo() {
   local name=$1; shift
-  "$S" octoprint --api-key "$KEY" --speed 2000 --log "$tmp/$name.log" "$@" \
-    > "$tmp/$name.out" 2> "$tmp/$name.err" &
-  sims+=($!)
-  for _ in $(seq 100); do [ -s "$tmp/$name.out" ] && break; sleep 0.05; done
-  [ -s "$tmp/$name.out" ] || fail "sim $name did not start: $(cat "$tmp/$name.err")"
-  head -n 1 "$tmp/$name.out" > "$tmp/$name.addr"
+  start_net "$name" octoprint --api-key "$KEY" --speed 2000 "$@"
 }
 start_octo err --fault error-at=300
 start_octo stop --fault cancel-at=300

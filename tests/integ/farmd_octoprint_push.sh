@@ -10,7 +10,9 @@
 # one that is cancelled.  Then the session's end closes the socket: a
 # reload that removes the key (SIGHUP) ends its login sessions, and the
 # socket gets reauthRequired "logout" and is closed; so does one whose key a
-# reload turns metrics-only.  Every wait has a
+# reload turns metrics-only.  Guessed sessions count as failed logins of
+# the address, with its REST ones: past the burst the socket is closed
+# (1013) and the address's keyed requests get 429.  Every wait has a
 # generous bound (a loaded machine).
 set -u
 BUILD=${BUILD:-build/san}
@@ -98,6 +100,38 @@ wait_for 60 sh -c "curl -sf -H 'X-Api-Key: $KEY2' '$SLIMFARM_URL/api/printers' >
 sed 's/-rw.ini/-metrics.ini/' "$tmp/logout.txt" > "$tmp/metrics.txt"
 /usr/bin/python3 "$dir/replay.py" "$SLIMFARM_URL" "$KEY2" "$tmp/metrics.txt" ||
   fail "a key turned metrics-only keeps its socket"
+# guessing sessions on a socket counts as failed logins of the address, with its REST
+# ones (review finding): past the burst the socket is closed (1013: try again later),
+# and a good key's REST request from that address is answered 429 (last: it slows this
+# address for up to a minute)
+/usr/bin/python3 - "$dir" "$SLIMFARM_URL" "$RW" <<'EOP' || fail "guessed push socket sessions are not slowed"
+import json, sys, time, urllib.error, urllib.request
+sys.path.insert(0, sys.argv[1])
+import wsclient
+url, key = sys.argv[2], sys.argv[3]
+ws = wsclient.Ws(url, "/sockjs/websocket")
+assert "connected" in json.loads(ws.recv(30))
+guesses, end = 0, time.monotonic() + 60
+while True:  # each guess answered "stale"; the last ones' answer is followed by the close
+    try:
+        ws.send(json.dumps({"auth": "key 0:guess-%d" % guesses}))
+    except OSError:
+        break
+    guesses += 1
+    msg = ws.recv(30)
+    if msg is None:
+        break
+    assert json.loads(msg) == {"reauthRequired": {"reason": "stale"}}, msg
+    assert guesses < 5000 and time.monotonic() < end, "%d guesses, the socket still open" % guesses
+assert ws.close_code == 1013, ws.close_code
+req = urllib.request.Request(url + "/api/printers", headers={"X-Api-Key": key})
+try:
+    urllib.request.urlopen(req, timeout=30)
+    assert False, "a good key's request after the guesses was answered"
+except urllib.error.HTTPError as e:
+    assert e.code == 429, e.code
+print("socket closed (1013) after %d guessed sessions; REST from the address: 429" % guesses)
+EOP
 # a clean stop (ASan: nothing leaks, nothing is used after free)
 kill -TERM $pid; wait $pid; rc=$?; pid=
 if [ $rc -ne 0 ] || grep -q "LeakSanitizer\|AddressSanitizer" "$tmp/log"; then

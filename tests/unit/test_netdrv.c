@@ -517,12 +517,13 @@ mr_unsubscribed(void *ud)
  * same socket after notify_klippy_ready, and the socket's updates stand in
  * for the polls again (a print costs no more than its confirming polls).
  */
-T_CASE(moonraker_push_resubscribes_after_klippy_restart)
+static void
+resubscribes_after_klippy_restart(const char *const *faults)
 {
     struct fx f;
     struct sf_err err;
     fx_speed = 60;
-    int rc = fx_start(&f, MOONRAKER, "k3y", NULL, "k3y", NULL, NULL, &err);
+    int rc = fx_start(&f, MOONRAKER, "k3y", faults, "k3y", NULL, NULL, &err);
     fx_speed = SPEED;
     T_OK(rc, &err);
     T_TRUE(fx_wait_state(&f, DRV_IDLE));
@@ -543,6 +544,23 @@ T_CASE(moonraker_push_resubscribes_after_klippy_restart)
     T_TRUE(fx_wait_end(&f, 1));
     T_EQ_INT(f.rec.done, 1);
     FX_STOP_CHECK(&f, job, true);
+}
+
+T_CASE(moonraker_push_resubscribes_after_klippy_restart)
+{
+    resubscribes_after_klippy_restart(NULL);
+}
+
+/*
+ * As above, but the socket never hears notify_klippy_ready (miss-ready=1:
+ * lost on its way): the polls, asking /server/info meanwhile, see Klippy
+ * ready, and the driver subscribes again on the held socket.  It once
+ * waited for the notification for ever, the printer polled all along.
+ */
+T_CASE(moonraker_push_resubscribes_when_klippy_ready_is_missed)
+{
+    const char *faults[] = { "miss-ready=1", NULL };
+    resubscribes_after_klippy_restart(faults);
 }
 
 T_CASE(prusalink_job_runs_once_each)

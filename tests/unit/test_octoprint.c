@@ -121,7 +121,7 @@ T_CASE(parsers_read_the_documented_bodies)
 
     T_EQ_INT(octo_classify("Operational"), OCTO_R_IDLE);
     T_EQ_INT(octo_classify("Printing from SD"), OCTO_R_PRINTING);
-    T_EQ_INT(octo_classify("Pausing"), OCTO_R_PRINTING);
+    T_EQ_INT(octo_classify("Pausing"), OCTO_R_PAUSED);
     T_EQ_INT(octo_classify("Paused"), OCTO_R_PAUSED);
     T_EQ_INT(octo_classify("Cancelling"), OCTO_R_CANCELLING);
     T_EQ_INT(octo_classify("Offline after error"), OCTO_R_ERROR);
@@ -141,6 +141,8 @@ struct script {
     struct buf last_post; /* body of the last POST /api/job */
     char fields[256];     /* upload: "select=... print=... file=NAME:SIZE" */
     int uploads, job_posts;
+    int job_gets;     /* GET /api/job answered */
+    int printer_gets; /* GET /api/printer answered */
 };
 static struct script sc;
 
@@ -156,6 +158,7 @@ static void
 h_job(struct sim_http_req *r, void *ud)
 {
     (void)ud;
+    sc.job_gets++;
     sim_http_reply(r, 200, "application/json", sc.job, strlen(sc.job));
 }
 
@@ -163,6 +166,7 @@ static void
 h_printer(struct sim_http_req *r, void *ud)
 {
     (void)ud;
+    sc.printer_gets++;
     sim_http_reply(r, 200, "application/json", printer_ex1, strlen(printer_ex1));
 }
 
@@ -265,9 +269,12 @@ driver(struct loop *l, struct sim_http *h, const char *key, struct events *ev)
 {
     char url[64];
     snprintf(url, sizeof(url), "http://127.0.0.1:%d/", sim_http_port(h));
-    struct drv_config cfg = {
-        .name = "op", .kind = "octoprint", .url = url, .api_key = key, .poll_ms = 50
-    };
+    struct drv_config cfg = { .name = "op",
+                              .kind = "octoprint",
+                              .url = url,
+                              .api_key = key,
+                              .poll_ms = 50,
+                              .poll_idle_ms = 50 };
     struct sf_err err;
     return drv_new(l, &cfg, on_event, ev, &err);
 }
@@ -374,6 +381,133 @@ T_CASE(driver_speaks_the_documented_api)
     sim_http_free(h);
     buf_release(&sc.last_post);
     loop_free(l);
+}
+
+/* The scripted OctoPrint, Operational, and a driver that has seen it idle. */
+struct ofx {
+    struct loop *l;
+    struct sim_http *h;
+    struct drv *d;
+    struct events ev;
+    char path[600]; /* the job (job_of_100) */
+};
+
+static void job_of_100(const char *name, char *path, size_t n);
+
+static bool
+ofx_idle(struct ofx *x, const char *job)
+{
+    struct sf_err err;
+    memset(x, 0, sizeof(*x));
+    x->l = loop_new(&err);
+    buf_init(&sc.last_post, 0);
+    set_job("Operational", "", 0, 0);
+    sc.upload_status = 201;
+    sc.uploads = sc.job_posts = 0;
+    x->h = x->l ? serve(x->l, "abcdef") : NULL;
+    x->d = x->h ? driver(x->l, x->h, "abcdef", &x->ev) : NULL; /* polls every 50 ms */
+    job_of_100(job, x->path, sizeof(x->path));
+    return x->d && x->d->ops->open(x->d, &err) == SF_OK && wait_for(x->l, x->d, DRV_IDLE, NULL, 0);
+}
+
+static void
+ofx_stop(struct ofx *x)
+{
+    drv_free(x->d);
+    sim_http_free(x->h);
+    buf_release(&sc.last_post);
+    loop_free(x->l);
+}
+
+/* A job of 100 lines of 20 bytes at path (n bytes), which OctoPrint takes and prints as
+   sf-NAME. */
+static void
+job_of_100(const char *name, char *path, size_t n)
+{
+    snprintf(path, n, "%s/%s", t_tmpdir(), name);
+    FILE *f = fopen(path, "w");
+    for (int i = 0; f && i < 100; i++)
+        fprintf(f, "G1 X%04d Y%03d F3000\n", i, i);
+    if (f)
+        fclose(f);
+    snprintf(sc.upload_reply, sizeof(sc.upload_reply),
+             "{\"files\":{\"local\":{\"name\":\"sf-%s\",\"origin\":\"local\"}},"
+             "\"done\":true,\"effectiveSelect\":true,\"effectivePrint\":true}",
+             name);
+}
+
+/* Run l until OctoPrint has answered n more polls; false if d left DRV_PAUSED meanwhile. */
+static bool
+stays_paused(struct loop *l, struct drv *d, int n)
+{
+    int until = sc.job_gets + n;
+    double end = wall_s() + 30;
+    while (wall_s() < end && sc.job_gets < until && d->status.state == DRV_PAUSED)
+        loop_run_once(l, 20);
+    return d->status.state == DRV_PAUSED && sc.job_gets >= until;
+}
+
+/*
+ * OctoPrint is "Pausing" between the pause command and "Paused" (while the
+ * printer finishes the moves it holds): a pause taking effect, not a
+ * print, so the driver says paused throughout.  It once said printing
+ * there, which the farm took for a resume at the printer: the job went
+ * paused, printing, paused again within a poll or two.
+ */
+T_CASE(driver_pausing_is_paused)
+{
+    struct sf_err err;
+    struct ofx x;
+    T_TRUE(ofx_idle(&x, "pausing.gcode"));
+    struct loop *l = x.l;
+    struct drv *d = x.d;
+    set_job("Printing", "sf-pausing.gcode", 2000, 500);
+    T_OK(d->ops->start_job(d, x.path, 0, NULL, &err), &err);
+    T_TRUE(wait_lines(l, d, 25) && d->status.state == DRV_PRINTING);
+
+    T_OK(d->ops->pause(d, &err), &err);
+    set_job("Pausing", "sf-pausing.gcode", 2000, 520);
+    T_TRUE(stays_paused(l, d, 3));
+    T_EQ_INT(sc.job_posts, 1);
+    set_job("Paused", "sf-pausing.gcode", 2000, 540);
+    T_TRUE(stays_paused(l, d, 2));
+    /* someone pauses at the printer: "Pausing" is already paused */
+    T_OK(d->ops->resume(d, &err), &err);
+    set_job("Printing", "sf-pausing.gcode", 2000, 600);
+    T_TRUE(wait_for(l, d, DRV_PRINTING, &sc.job_posts, 2));
+    set_job("Pausing", "sf-pausing.gcode", 2000, 620);
+    T_TRUE(wait_for(l, d, DRV_PAUSED, NULL, 0));
+    T_EQ_INT(x.ev.n[DRV_EV_JOB_FAILED] + x.ev.n[DRV_EV_JOB_DONE], 0);
+    ofx_stop(&x);
+}
+
+/*
+ * A job handed over while a poll's second request (GET /api/printer) is
+ * under way starts at once: the upload cuts it short as it does the poll's
+ * first.  It once answered "not now" (SF_EAGAIN: the upload could not
+ * start), which the farm counts as a refused start: a print of the job that
+ * never began, the job back to ready and the printer held for 0.5 s.
+ */
+T_CASE(driver_starts_a_job_during_a_poll)
+{
+    struct sf_err err;
+    struct ofx x;
+    T_TRUE(ofx_idle(&x, "mid-poll.gcode"));
+    /* OctoPrint has just answered GET /api/printer: the driver has not read it yet */
+    int gets = sc.printer_gets;
+    double end = wall_s() + 30;
+    while (wall_s() < end && sc.printer_gets == gets)
+        loop_run_once(x.l, 20);
+    T_TRUE(sc.printer_gets > gets);
+    T_OK(x.d->ops->start_job(x.d, x.path, 0, NULL, &err), &err);
+    set_job("Printing", "sf-mid-poll.gcode", 2000, 100);
+    end = wall_s() + 30;
+    while (wall_s() < end && !sc.uploads)
+        loop_run_once(x.l, 20);
+    T_EQ_INT(sc.uploads, 1);
+    set_job("Operational", "sf-mid-poll.gcode", 2000, 2000);
+    T_TRUE(wait_for(x.l, x.d, DRV_IDLE, &x.ev.n[DRV_EV_JOB_DONE], 1));
+    ofx_stop(&x);
 }
 
 T_CASE(driver_wrong_key_and_reattach)
