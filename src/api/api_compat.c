@@ -256,7 +256,9 @@ job_of(const char *p)
 }
 
 /* The select (OctoPrint) or print start (Moonraker) of an uploaded job:
-   it is queued already; a job that can no longer print is 409. */
+   it is queued already.  A job already done did what the select asks for
+   (a slicer's select can arrive after a fast printer finished the upload);
+   one that failed or was cancelled can no longer print: 409. */
 static void
 select_job(const struct api_compat_env *env, int64_t id, struct http_resp *resp, bool moonraker)
 {
@@ -271,7 +273,7 @@ select_job(const struct api_compat_env *env, int64_t id, struct http_resp *resp,
         http_fail(resp, rc, err.msg);
         return;
     }
-    if (job_state_terminal(j.state)) {
+    if (job_state_terminal(j.state) && j.state != JOB_DONE) {
         http_error(resp, 409, "job %lld is %s; upload it again to print it again", (long long)id,
                    job_state_name(j.state));
         return;

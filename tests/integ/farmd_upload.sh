@@ -166,6 +166,10 @@ while time.time() < end:
         break
     time.sleep(0.5)
 check(all(states[j] == "done" for j in jobs), "jobs not done: %r" % states)
+# a select that arrives after the printer finished the upload is answered as done
+st, h, b = request(port, ("POST /api/files/local/job-%d/x.gcode HTTP/1.1\r\nHost: x\r\nX-Api-Key: %s\r\n"
+                          "Content-Type: application/json\r\nContent-Length: 20\r\n\r\n{\"command\":\"select\"}" % (jobs[0], rw)).encode())
+check(st == 204, "select of an upload already printed: %d %s" % (st, b[:200]))
 m1 = metrics()
 done = sum(metric(m1, "slimfarm_prints_total", printer=p, outcome="done") for p in ("mk3", "ender"))
 check(done == len(jobs), "prints_total done %s, want %d" % (done, len(jobs)))
