@@ -382,6 +382,20 @@ job_patch(void *ctx, const struct route_args *args, const struct http_req *req,
     job_changed(a, args, rc, &err, resp);
 }
 
+/* POST /api/jobs/ID/move {"by": -1 | 1}: one place up or down among the waiting jobs. */
+static void
+job_move(void *ctx, const struct route_args *args, const struct http_req *req,
+         struct http_resp *resp)
+{
+    struct api *a = ctx;
+    struct sf_err err;
+    int by;
+    int rc = api_move_parse(req->body, req->body_len, &by, &err);
+    if (rc == SF_OK)
+        rc = store_job_move(a->cfg.store, args->id, by, &err);
+    job_changed(a, args, rc, &err, resp);
+}
+
 /* POST /api/jobs/ID/cancel, or /restart: the operator prints an
    interrupted job's copy again from the start. */
 static void
@@ -779,6 +793,7 @@ static const struct route rows[] = {
     { ROUTE_POST, "/api/jobs", NULL, HTTP_BODY_UPLOAD, ROUTE_WRITE, jobs_submit, ROUTE_405 },
     { ROUTE_GET, "/api/jobs/{id}", NULL, HTTP_BODY_NONE, ROUTE_READ, job_get, ROUTE_405 },
     { ROUTE_PATCH, "/api/jobs/{id}", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_patch, ROUTE_405 },
+    { ROUTE_POST, "/api/jobs/{id}/move", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_move, ROUTE_405 },
     { ROUTE_POST, "/api/jobs/{id}/cancel", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,
       ROUTE_405 },
     { ROUTE_POST, "/api/jobs/{id}/restart", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,

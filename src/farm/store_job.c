@@ -68,6 +68,7 @@ read_job(sqlite3_stmt *st, struct job_row *j)
     j->shape_changed = sqlite3_column_int(st, 37) != 0;
     j->est_known = sqlite3_column_type(st, 38) != SQLITE_NULL;
     j->est_s = j->est_known ? sqlite3_column_double(st, 38) : -1;
+    j->queue_pos = sqlite3_column_int64(st, 39);
 }
 
 void
@@ -111,7 +112,13 @@ insert_job(struct store *s, sqlite3_stmt *st, const char *what, const char *deta
     if (rc)
         goto fail;
     int64_t new_id = sqlite3_last_insert_rowid(s->db);
-    if ((rc = store_log_event(s, new_id, NULL, "job-add", detail, err)) ||
+    /* a new job goes last in the queue of its priority (schema 9) */
+    char sql[96];
+    snprintf(sql, sizeof(sql),
+             "UPDATE jobs SET queue_pos = (SELECT max(queue_pos) FROM jobs) + 1 WHERE id = %lld",
+             (long long)new_id);
+    if ((rc = store_exec(s, sql, err)) ||
+        (rc = store_log_event(s, new_id, NULL, "job-add", detail, err)) ||
         (rc = store_commit(s, err)))
         goto fail;
     if (id)
@@ -565,6 +572,130 @@ store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err 
         return rc;
     }
     return SF_OK;
+}
+
+/* A job's place in the scheduler's order. */
+struct qplace {
+    int64_t id;
+    int priority;
+    int64_t pos;
+};
+
+/* The waiting job just before (by < 0) or after me in queue order, into *nb;
+   SF_ENOTFOUND (err not set) if me is first (last). */
+static int
+queue_neighbour(struct store *s, const struct qplace *me, int by, struct qplace *nb,
+                struct sf_err *err)
+{
+    static const char *const sql[2] = {
+        "SELECT id, priority, queue_pos FROM jobs WHERE state IN ('queued','preparing','ready')"
+        " AND (priority > ?1 OR (priority = ?1 AND (queue_pos < ?2 OR (queue_pos = ?2 AND id < "
+        "?3))))"
+        " ORDER BY priority, queue_pos DESC, id DESC LIMIT 1",
+        "SELECT id, priority, queue_pos FROM jobs WHERE state IN ('queued','preparing','ready')"
+        " AND (priority < ?1 OR (priority = ?1 AND (queue_pos > ?2 OR (queue_pos = ?2 AND id > "
+        "?3))))"
+        " ORDER BY priority DESC, queue_pos, id LIMIT 1",
+    };
+    sqlite3_stmt *st;
+    int rc = store_prepare(s, &st, sql[by > 0], err);
+    if (rc)
+        return rc;
+    sqlite3_bind_int(st, 1, me->priority);
+    sqlite3_bind_int64(st, 2, me->pos);
+    sqlite3_bind_int64(st, 3, me->id);
+    rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW)
+        *nb = (struct qplace){ sqlite3_column_int64(st, 0), sqlite3_column_int(st, 1),
+                               sqlite3_column_int64(st, 2) };
+    sqlite3_finalize(st);
+    if (rc == SQLITE_DONE)
+        return SF_ENOTFOUND;
+    return rc == SQLITE_ROW ? SF_OK : store_db_fail(s, err, "queue neighbour");
+}
+
+/* Put job j at (priority, pos), in the caller's transaction. */
+static int
+queue_place(struct store *s, const struct qplace *j, struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc = store_prepare(
+        s, &st, "UPDATE jobs SET priority = ?, queue_pos = ?, updated_ms = ? WHERE id = ?", err);
+    if (rc)
+        return rc;
+    sqlite3_bind_int(st, 1, j->priority);
+    sqlite3_bind_int64(st, 2, j->pos);
+    sqlite3_bind_int64(st, 3, clock_wall_ms());
+    sqlite3_bind_int64(st, 4, j->id);
+    return store_step_done(s, st, err, "move job");
+}
+
+/* One more than the largest queue_pos (by > 0: one less than the smallest). */
+static int64_t
+queue_end(struct store *s, int by)
+{
+    sqlite3_stmt *st;
+    int64_t out = 0;
+    if (store_prepare(s, &st,
+                      by > 0 ? "SELECT min(queue_pos) - 1 FROM jobs"
+                             : "SELECT max(queue_pos) + 1 FROM jobs",
+                      NULL) == SF_OK) {
+        if (sqlite3_step(st) == SQLITE_ROW)
+            out = sqlite3_column_int64(st, 0);
+        sqlite3_finalize(st);
+    }
+    return out;
+}
+
+/* Trade places with the neighbour nb (store_job_move).  Within a priority the
+   two swap queue_pos; across a boundary me takes nb's priority and place, and
+   nb moves to its group's end on me's side (it was that group's last waiting
+   job when me moves up, its first when me moves down), so no other job of
+   either priority changes place. */
+static int
+queue_swap(struct store *s, struct qplace me, struct qplace nb, int by, struct sf_err *err)
+{
+    struct qplace a = { me.id, nb.priority, nb.pos };
+    struct qplace b = { nb.id, nb.priority,
+                        me.priority == nb.priority ? me.pos : queue_end(s, by) };
+    int rc = queue_place(s, &a, err);
+    return rc ? rc : queue_place(s, &b, err);
+}
+
+int
+store_job_move(struct store *s, int64_t id, int by, struct sf_err *err)
+{
+    if (by != -1 && by != 1)
+        return sf_err_set(err, SF_EINVAL, "by: %d is not -1 (up) or 1 (down)", by);
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    struct job_row j;
+    if ((rc = store_job_get(s, id, &j, err)))
+        goto fail;
+    if (j.state != JOB_QUEUED && j.state != JOB_PREPARING && j.state != JOB_READY) {
+        rc = sf_err_set(err, SF_EAGAIN,
+                        "job %lld is %s: only a waiting job (queued, preparing, ready) moves in "
+                        "the queue",
+                        (long long)id, job_state_name(j.state));
+        goto fail;
+    }
+    struct qplace me = { id, j.opts.priority, j.queue_pos }, nb;
+    if ((rc = queue_neighbour(s, &me, by, &nb, err)) == SF_ENOTFOUND)
+        rc = sf_err_set(err, SF_EAGAIN, "job %lld is already %s of the waiting jobs", (long long)id,
+                        by < 0 ? "first" : "last");
+    if (rc)
+        goto fail;
+    char detail[96];
+    snprintf(detail, sizeof(detail), "moved %s job %lld, priority %d", by < 0 ? "above" : "below",
+             (long long)nb.id, nb.priority);
+    if ((rc = queue_swap(s, me, nb, by, err)) ||
+        (rc = store_log_event(s, id, NULL, "job-move", detail, err)) || (rc = store_commit(s, err)))
+        goto fail;
+    return SF_OK;
+fail:
+    store_rollback(s);
+    return rc;
 }
 
 int

@@ -188,7 +188,7 @@ async function run(ctx) {
   log("a job no printer can take waits, saying why; reorder the queue");
   const q = await page.evaluate(async ([u, k]) => {
     const ids = [];
-    for (let i = 0; i < 2; i++) {
+    for (let i = 0; i < 3; i++) {
       const fd = new FormData();
       fd.append("file", new File(["solid x\nendsolid x\n"], `tpu${i}.stl`));
       fd.append("options", JSON.stringify({ material: "TPU", method: "none" }));
@@ -200,15 +200,20 @@ async function run(ctx) {
   await page.waitForFunction((id) => {
     const tr = document.querySelector(`#queue tr[data-job="${id}"]`);
     return tr && /TPU/.test(tr.innerText);
-  }, q[1], { timeout: LONG });
+  }, q[2], { timeout: LONG });
   const order = () => page.evaluate(() => [...document.querySelectorAll("#queue tbody tr[data-job]")].map((t) => Number(t.dataset.job)));
-  let o = await order();
-  check(o.indexOf(q[0]) < o.indexOf(q[1]), "queue order " + o);
-  await page.getByRole("button", { name: `Move job ${q[1]} up` }).click();
+  const ours = async () => (await order()).filter((id) => q.includes(id));
+  check((await ours()).join() === q.join(), "queue order " + (await order()));
+  // ▲ on the third of three jobs of equal priority: one place, to second (a
+  // priority change once jumped it past both, to first)
+  await page.getByRole("button", { name: `Move job ${q[2]} up` }).click();
   await page.waitForFunction(([a, b]) => {
     const ids = [...document.querySelectorAll("#queue tbody tr[data-job]")].map((t) => Number(t.dataset.job));
     return ids.indexOf(b) >= 0 && ids.indexOf(b) < ids.indexOf(a);
-  }, q, { timeout: 60000 });
+  }, [q[1], q[2]], { timeout: 60000 });
+  check((await ours()).join() === [q[0], q[2], q[1]].join(), "▲ moved it more than one place: " + (await order()));
+  const jobs = (await apiGet("/api/jobs?state=queued")).jobs.filter((j) => q.includes(j.id));
+  check(jobs.every((j) => j.priority === 0), "▲ changed a priority: " + JSON.stringify(jobs.map((j) => j.priority)));
 
   log("submit a frame by drag and drop, to mini, two copies; pause and resume it");
   const j2 = await submitForm(page, { file: `${PARTS}/frame.stl`, method: "none", target: "printer:mini", drop: true, copies: 2 });

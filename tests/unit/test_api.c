@@ -485,6 +485,57 @@ T_CASE(api_submit_get_list_and_reprioritize)
     stop();
 }
 
+/* Job id's queue_pos from GET /api/jobs/ID. */
+static long long
+queue_pos(int id, struct buf *b)
+{
+    char path[64];
+    snprintf(path, sizeof(path), "/api/jobs/%d", id);
+    if (get(path, KEY_RW, b) != 200 || strcmp(jstr(b, "job", "priority"), "0") != 0)
+        return -1; /* a move within one priority changes none */
+    return atoll(jstr(b, "job", "queue_pos"));
+}
+
+/* ▲ on the third of three waiting jobs of equal priority moves it one
+   place, to second (a priority change jumped it to first: issue 31). */
+T_CASE(api_move_a_waiting_job_one_place)
+{
+    struct sf_err err;
+    T_OK(start("move", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    const char part[] = "solid cube\nendsolid cube\n";
+    for (int i = 0; i < 3; i++) /* jobs 2, 3, 4: a group no printer is in, so they wait */
+        T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "w.stl", part, sizeof(part) - 1,
+                      "{\"group\": \"big\"}", &b),
+                 201);
+    T_TRUE(0 < queue_pos(2, &b) && queue_pos(2, &b) < queue_pos(3, &b) &&
+           queue_pos(3, &b) < queue_pos(4, &b));
+    T_EQ_INT(call("POST", "/api/jobs/4/move", KEY_RW, "{\"by\": -1}", NULL, NULL, 0, NULL, &b),
+             200);
+    T_EQ_STR(jstr(&b, "job", "id"), "4");
+    T_TRUE(0 < queue_pos(2, &b) && queue_pos(2, &b) < queue_pos(4, &b) &&
+           queue_pos(4, &b) < queue_pos(3, &b));
+    /* and back down */
+    T_EQ_INT(call("POST", "/api/jobs/4/move", KEY_RW, "{\"by\": 1}", NULL, NULL, 0, NULL, &b), 200);
+    T_TRUE(0 < queue_pos(3, &b) && queue_pos(3, &b) < queue_pos(4, &b));
+    /* refusals, each naming why */
+    T_EQ_INT(call("POST", "/api/jobs/2/move", KEY_RW, "{\"by\": -1}", NULL, NULL, 0, NULL, &b),
+             409);
+    T_EQ_STR(jstr(&b, NULL, "error"), "job 2 is already first of the waiting jobs");
+    T_EQ_INT(call("POST", "/api/jobs/1/move", KEY_RW, "{\"by\": 1}", NULL, NULL, 0, NULL, &b), 409);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "job 1 is printing: only a waiting job") != NULL);
+    T_EQ_INT(call("POST", "/api/jobs/2/move", KEY_RW, "{\"by\": 2}", NULL, NULL, 0, NULL, &b), 400);
+    T_EQ_STR(jstr(&b, NULL, "error"), "by: 2 is not in -1..1");
+    T_EQ_INT(call("POST", "/api/jobs/2/move", KEY_RW, "{\"by\": 0}", NULL, NULL, 0, NULL, &b), 400);
+    T_EQ_INT(call("POST", "/api/jobs/2/move", KEY_RW, "{\"up\": 1}", NULL, NULL, 0, NULL, &b), 400);
+    T_EQ_INT(call("POST", "/api/jobs/99/move", KEY_RW, "{\"by\": 1}", NULL, NULL, 0, NULL, &b),
+             404);
+    T_EQ_INT(call("POST", "/api/jobs/3/move", KEY_RO, "{\"by\": 1}", NULL, NULL, 0, NULL, &b), 403);
+    buf_release(&b);
+    stop();
+}
+
 T_CASE(api_malformed_json_is_400_with_message)
 {
     struct sf_err err;
