@@ -26,12 +26,12 @@
 #define FILAMENT_MARKS 1024
 
 struct filament {
-    int64_t job_id;                       /* whose file (0: none read) */
-    int64_t lines;                        /* its command lines */
-    int64_t step;                         /* command lines between two marks (>= 1) */
-    int n_marks;                          /* marks kept (mark 0 is the start) */
-    double total_mm;                      /* net E of the whole file */
-    double mark_mm[FILAMENT_MARKS + 1];   /* net E after k * step command lines */
+    int64_t job_id;                     /* whose file (0: none read) */
+    int64_t lines;                      /* its command lines */
+    int64_t step;                       /* command lines between two marks (>= 1) */
+    int n_marks;                        /* marks kept (mark 0 is the start) */
+    double total_mm;                    /* net E of the whole file */
+    double mark_mm[FILAMENT_MARKS + 1]; /* net E after k * step command lines */
 };
 
 /*

@@ -581,6 +581,27 @@ struct qplace {
     int64_t pos;
 };
 
+/* Job me->id's place and state (16 bytes) from the store; SF_ENOTFOUND naming it. */
+static int
+queue_self(struct store *s, struct qplace *me, char *state, struct sf_err *err)
+{
+    sqlite3_stmt *st;
+    int rc = store_prepare(s, &st, "SELECT state, priority, queue_pos FROM jobs WHERE id = ?", err);
+    if (rc)
+        return rc;
+    sqlite3_bind_int64(st, 1, me->id);
+    rc = sqlite3_step(st);
+    if (rc == SQLITE_ROW) {
+        store_copy_text(state, 16, st, 0);
+        me->priority = sqlite3_column_int(st, 1);
+        me->pos = sqlite3_column_int64(st, 2);
+    }
+    sqlite3_finalize(st);
+    if (rc == SQLITE_DONE)
+        return sf_err_set(err, SF_ENOTFOUND, "job %lld: no such job", (long long)me->id);
+    return rc == SQLITE_ROW ? SF_OK : store_db_fail(s, err, "job's place");
+}
+
 /* The waiting job just before (by < 0) or after me in queue order, into *nb;
    SF_ENOTFOUND (err not set) if me is first (last). */
 static int
@@ -667,20 +688,21 @@ store_job_move(struct store *s, int64_t id, int by, struct sf_err *err)
 {
     if (by != -1 && by != 1)
         return sf_err_set(err, SF_EINVAL, "by: %d is not -1 (up) or 1 (down)", by);
+    struct qplace me = { id, 0, 0 }, nb;
+    char state[16];
     int rc = store_begin(s, err);
     if (rc)
         return rc;
-    struct job_row j;
-    if ((rc = store_job_get(s, id, &j, err)))
+    if ((rc = queue_self(s, &me, state, err)))
         goto fail;
-    if (j.state != JOB_QUEUED && j.state != JOB_PREPARING && j.state != JOB_READY) {
+    if (strcmp(state, "queued") != 0 && strcmp(state, "preparing") != 0 &&
+        strcmp(state, "ready") != 0) {
         rc = sf_err_set(err, SF_EAGAIN,
                         "job %lld is %s: only a waiting job (queued, preparing, ready) moves in "
                         "the queue",
-                        (long long)id, job_state_name(j.state));
+                        (long long)id, state);
         goto fail;
     }
-    struct qplace me = { id, j.opts.priority, j.queue_pos }, nb;
     if ((rc = queue_neighbour(s, &me, by, &nb, err)) == SF_ENOTFOUND)
         rc = sf_err_set(err, SF_EAGAIN, "job %lld is already %s of the waiting jobs", (long long)id,
                         by < 0 ? "first" : "last");

@@ -29,17 +29,17 @@ T_CASE(filament_follows_e_modes_and_resets)
     struct filament f;
     const char *path = write_file("modes.gcode", "; header\n"
                                                  "G28\n"
-                                                 "G1 X1 E2\n"        /* absolute: 2 */
+                                                 "G1 X1 E2\n"          /* absolute: 2 */
                                                  "G1 X2 E1.5 ; wipe\n" /* retract 0.5 */
                                                  "\n"
-                                                 "G1 X3 E4\n"        /* 2.5 */
+                                                 "G1 X3 E4\n" /* 2.5 */
                                                  "G92 E0\n"
                                                  "M83\n"
-                                                 "G1 X4 E1\n"        /* relative: 1 */
-                                                 "G1 E-1\nG1 E1\n"   /* retract, prime: 0 */
-                                                 "G90\n"             /* E absolute again */
+                                                 "G1 X4 E1\n"           /* relative: 1 */
+                                                 "G1 E-1\nG1 E1\n"      /* retract, prime: 0 */
+                                                 "G90\n"                /* E absolute again */
                                                  "G92 E10\nG1 X5 E11\n" /* 1 */
-                                                 "G2 X6 Y1 I1 E12\n"); /* an arc: 1 */
+                                                 "G2 X6 Y1 I1 E12\n");  /* an arc: 1 */
     T_OK(filament_scan(path, &f, &err), &err);
     T_EQ_INT(f.lines, 13);
     T_EQ_DBL(f.total_mm, 2 - 0.5 + 2.5 + 1 + 1 + 1, 1e-9);
@@ -69,7 +69,8 @@ T_CASE(filament_of_a_long_file_thins_its_marks)
     T_TRUE(f.n_marks <= FILAMENT_MARKS + 1);
     T_EQ_INT(f.step, 128); /* 100,001 lines over at most 1024 spans */
     T_EQ_DBL(f.total_mm, 100000, 1e-6);
-    T_EQ_DBL(filament_at(&f, 128 * 300), 128 * 300 - 0.5, 1e-6); /* on a mark: M83, then 38399 G1s */
+    T_EQ_DBL(filament_at(&f, 128 * 300), 128 * 300 - 0.5,
+             1e-6);                                           /* on a mark: M83, then 38399 G1s */
     T_EQ_DBL(filament_at(&f, 1 + 2 * 12345), 2 * 12345, 1.0); /* between marks: by lines */
     T_EQ_DBL(filament_at(&f, 100000), 100000 - 0.5, 1.0);
 }
