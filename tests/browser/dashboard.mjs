@@ -17,12 +17,15 @@ const URL = env("SF_URL"), RW = env("SF_RW"), RO = env("SF_RO"), PARTS = env("SF
 const SHOTS = env("SF_SHOTS");
 const problems = [];
 
+let refusals = 0; // 400s a step expects (the browser logs each as an error)
+
 await runChromium("failure.png", run);
 
 function watch(page) {
   page.on("pageerror", (e) => problems.push("page error: " + e.message));
   page.on("console", (m) => {
-    if (m.type() === "error" && !/status of 40[13]|ERR_CONNECTION_REFUSED|net::ERR/.test(m.text()))
+    if (m.type() === "error" && refusals > 0 && /status of 400/.test(m.text())) refusals--;
+    else if (m.type() === "error" && !/status of 40[13]|ERR_CONNECTION_REFUSED|net::ERR/.test(m.text()))
       problems.push("console error: " + m.text());
     if (/Content Security Policy/i.test(m.text())) problems.push("CSP violation: " + m.text());
   });
@@ -132,6 +135,18 @@ async function run(ctx) {
   await page.waitForSelector("#conn.live", { timeout: 60000 });
   await checkNames(page, "printer grid");
   await accessible(page, "printer grid");
+
+  log("a text file renamed .stl is refused at upload, the page saying why");
+  const jobsBefore = (await (await fetch(`${URL}/api/jobs`, { headers: { "X-Api-Key": RW } })).json()).jobs.length;
+  await page.getByRole("link", { name: "Submit a part" }).click();
+  await page.setInputFiles("#file", { name: "notes.stl", mimeType: "model/stl", buffer: Buffer.from("shopping list:\nmilk\n") });
+  refusals = 1;
+  await page.getByRole("button", { name: "Submit", exact: true }).click();
+  await page.waitForFunction(() => /Refused: notes\.stl: not an STL: 'notes\.stl' holds plain text/.test(document.querySelector("#submit-msg").textContent),
+    null, { timeout: 60000 });
+  check(/not an STL/.test(await page.locator('#uploads li[data-file="notes.stl"] .up-msg').innerText()), "the file's line says why");
+  const jobsAfter = (await (await fetch(`${URL}/api/jobs`, { headers: { "X-Api-Key": RW } })).json()).jobs.length;
+  check(jobsAfter === jobsBefore, `the refused file made a job: ${jobsBefore} -> ${jobsAfter}`);
 
   log("submit a tee through the form (file input), oriented, to mk3");
   const j1 = await submitForm(page, { file: `${PARTS}/tee.stl`, method: "orient", target: "printer:mk3" });

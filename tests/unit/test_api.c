@@ -465,7 +465,7 @@ T_CASE(api_submit_get_list_and_reprioritize)
     snprintf(id, sizeof(id), "%s", jstr(&b, "job", "id"));
     T_EQ_STR(id, "2");
     /* defaults when no options are sent */
-    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "plain.3mf", "PK", 2, NULL, &b), 201);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "plain.3mf", "PK\3\4", 4, NULL, &b), 201);
     T_EQ_STR(jstr(&b, "job", "copies"), "1");
     T_EQ_STR(jstr(&b, "job", "method"), "orient");
     T_EQ_INT(get("/api/jobs", KEY_RW, &b), 200);
@@ -532,6 +532,49 @@ T_CASE(api_move_a_waiting_job_one_place)
     T_EQ_INT(call("POST", "/api/jobs/99/move", KEY_RW, "{\"by\": 1}", NULL, NULL, 0, NULL, &b),
              404);
     T_EQ_INT(call("POST", "/api/jobs/3/move", KEY_RO, "{\"by\": 1}", NULL, NULL, 0, NULL, &b), 403);
+    buf_release(&b);
+    stop();
+}
+
+static int n_jobs(void);
+
+/* An upload is judged by its content before it is queued, the reason
+   naming the file (issue 31: a text file renamed .stl was queued). */
+T_CASE(api_upload_content_is_checked)
+{
+    struct sf_err err;
+    T_OK(start("content", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    int before = n_jobs();
+    static const struct {
+        const char *name, *data, *says;
+    } bad[] = {
+        { "notes.stl", "shopping list:\nmilk\n", "not an STL: 'notes.stl' holds plain text" },
+        { "cube.stl", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+          "not an STL: 'cube.stl' is a Wavefront OBJ by its content: name it .obj" },
+        { "print.stl", "; sliced\nG28\nG1 X10 E1\n", "not an STL: 'print.stl' is G-code" },
+        { "cut.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n",
+          "not an STL: stl 'cut.stl': line " },
+        { "part.obj", "hello\n", "not an OBJ: 'part.obj' holds plain text" },
+        { "part.3mf", "solid t\nendsolid t\n", "not a 3MF: 'part.3mf' is an ASCII STL" },
+    };
+    for (size_t i = 0; i < sizeof(bad) / sizeof(*bad); i++) {
+        T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, bad[i].name, bad[i].data,
+                      strlen(bad[i].data), NULL, &b),
+                 400);
+        T_TRUE(strstr(jstr(&b, NULL, "error"), bad[i].says) != NULL);
+    }
+    /* a binary STL of one triangle (its header begins "solid", as many do) */
+    unsigned char stl[134] = "solid binary";
+    uint32_t one = 1;
+    memcpy(stl + 80, &one, 4);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "bin.stl", stl, sizeof(stl), NULL, &b), 201);
+    /* G-code through OctoPrint's route: a mesh is refused there too */
+    T_EQ_INT(call("POST", "/api/files/local", KEY_RW, NULL, "x.gcode", stl, sizeof(stl), NULL, &b),
+             400);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "not G-code: 'x.gcode' is a binary STL") != NULL);
+    T_EQ_INT(n_jobs(), before + 1); /* only the good one */
     buf_release(&b);
     stop();
 }
