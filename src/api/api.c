@@ -38,6 +38,7 @@
 #include "api_page.h"
 #include "api_read.h"
 #include "api_stats.h"
+#include "partcheck.h"
 #include "route.h"
 #include "temps.h"
 #include "web.h"
@@ -260,13 +261,19 @@ jobs_submit(void *ctx, const struct route_args *args, const struct http_req *req
                    o.name);
         return;
     }
-    /* Options are good: only now does the file reach its content address
-       (on a refusal above, http.c discards the temporary file). */
+    /* Options are good: only now does the file reach its content address, once
+       its content is what its name says (on a refusal, http.c discards the
+       temporary file). */
     struct upload *u = req->upload;
     char sha[STORE_SHA_HEX];
     int64_t id;
     struct job_row j;
-    int rc = store_file_commit(u->f, sha, &err);
+    int rc = partcheck_file(store_file_tmp_path(u->f), o.name, &err);
+    if (rc) {
+        http_fail(resp, rc, err.msg);
+        return;
+    }
+    rc = store_file_commit(u->f, sha, &err);
     u->f = NULL; /* commit frees the writer either way */
     if (rc || (rc = store_job_add(a->cfg.store, &o, sha, &id, &err)) ||
         (rc = store_job_get(a->cfg.store, id, &j, &err))) {
@@ -367,18 +374,21 @@ job_changed(struct api *a, const struct route_args *args, int rc, const struct s
     changed(a);
 }
 
+/* PATCH /api/jobs/ID {"priority": N}, or POST /api/jobs/ID/move {"by": -1 | 1}: one place
+   up or down among the waiting jobs. */
 static void
-job_patch(void *ctx, const struct route_args *args, const struct http_req *req,
+job_order(void *ctx, const struct route_args *args, const struct http_req *req,
           struct http_resp *resp)
 {
     struct api *a = ctx;
     struct sf_err err;
-    int prio;
-    if (api_priority_parse(req->body, req->body_len, &prio, &err)) {
-        http_error(resp, 400, "%s", err.msg);
-        return;
-    }
-    int rc = store_job_set_priority(a->cfg.store, args->id, prio, &err);
+    bool move = strcmp(req->method, "POST") == 0;
+    int n;
+    int rc = move ? api_move_parse(req->body, req->body_len, &n, &err)
+                  : api_priority_parse(req->body, req->body_len, &n, &err);
+    if (rc == SF_OK)
+        rc = move ? store_job_move(a->cfg.store, args->id, n, &err)
+                  : store_job_set_priority(a->cfg.store, args->id, n, &err);
     job_changed(a, args, rc, &err, resp);
 }
 
@@ -778,7 +788,8 @@ static const struct route rows[] = {
     { ROUTE_GET, "/api/jobs", NULL, HTTP_BODY_NONE, ROUTE_READ, jobs_list, ROUTE_405 },
     { ROUTE_POST, "/api/jobs", NULL, HTTP_BODY_UPLOAD, ROUTE_WRITE, jobs_submit, ROUTE_405 },
     { ROUTE_GET, "/api/jobs/{id}", NULL, HTTP_BODY_NONE, ROUTE_READ, job_get, ROUTE_405 },
-    { ROUTE_PATCH, "/api/jobs/{id}", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_patch, ROUTE_405 },
+    { ROUTE_PATCH, "/api/jobs/{id}", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_order, ROUTE_405 },
+    { ROUTE_POST, "/api/jobs/{id}/move", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_order, ROUTE_405 },
     { ROUTE_POST, "/api/jobs/{id}/cancel", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,
       ROUTE_405 },
     { ROUTE_POST, "/api/jobs/{id}/restart", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,

@@ -32,6 +32,7 @@
 #include "api_octopush.h"
 #include "api_read.h"
 #include "metrics.h"
+#include "partcheck.h"
 
 bool
 api_compat_is_gcode(const char *name)
@@ -189,6 +190,10 @@ upload(const struct api_compat_env *env, enum flavor fl, const struct http_req *
     snprintf(o.name, sizeof(o.name), "%s", req->upload_name);
     char base[256];
     api_compat_base_url(req, base, sizeof(base));
+    if (partcheck_file(env->upload_path(req->upload), o.name, &err)) {
+        http_fail(resp, err.code, err.msg); /* what it holds is not what its name says */
+        return;
+    }
     if (api_compat_is_gcode(o.name)) {
         if (!env->farm) {
             http_error(resp, 400, "'%s': this daemon runs no farm to print G-code", o.name);

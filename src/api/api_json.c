@@ -122,25 +122,40 @@ out:
     return rc;
 }
 
-int
-api_priority_parse(const char *text, size_t len, int *priority, struct sf_err *err)
+/* Parse a body of one integer field {"key": N} with lo <= N <= hi. */
+static int
+one_int(const char *text, size_t len, const char *key, int lo, int hi, int *out, struct sf_err *err)
 {
     json_t *root = load_object(text, len, "body", err);
     if (!root)
         return SF_EINVAL;
     int rc = SF_OK;
-    json_t *p = json_object_get(root, "priority");
+    json_t *p = json_object_get(root, key);
     if (json_object_size(root) != 1 || !json_is_integer(p)) {
-        rc = sf_err_set(err, SF_EINVAL, "body: expected {\"priority\": INTEGER} and nothing else");
+        rc = sf_err_set(err, SF_EINVAL, "body: expected {\"%s\": INTEGER} and nothing else", key);
     } else {
         json_int_t n = json_integer_value(p);
-        if (n < -JOB_PRIORITY_MAX || n > JOB_PRIORITY_MAX)
-            rc = sf_err_set(err, SF_EINVAL, "priority: %lld is not in -%d..%d", (long long)n,
-                            JOB_PRIORITY_MAX, JOB_PRIORITY_MAX);
+        if (n < lo || n > hi)
+            rc = sf_err_set(err, SF_EINVAL, "%s: %lld is not in %d..%d", key, (long long)n, lo, hi);
         else
-            *priority = (int)n;
+            *out = (int)n;
     }
     json_decref(root);
+    return rc;
+}
+
+int
+api_priority_parse(const char *text, size_t len, int *priority, struct sf_err *err)
+{
+    return one_int(text, len, "priority", -JOB_PRIORITY_MAX, JOB_PRIORITY_MAX, priority, err);
+}
+
+int
+api_move_parse(const char *text, size_t len, int *by, struct sf_err *err)
+{
+    int rc = one_int(text, len, "by", -1, 1, by, err);
+    if (rc == SF_OK && *by == 0)
+        rc = sf_err_set(err, SF_EINVAL, "by: 0 is not -1 (up) or 1 (down)");
     return rc;
 }
 
@@ -218,6 +233,7 @@ api_job_json(const struct job_row *j)
     if (o && (json_object_set_new(o, "mndr", j->dev_measured ? json_real(j->mndr) : json_null()) ||
               json_object_set_new(o, "andr", j->dev_measured ? json_real(j->andr) : json_null()) ||
               json_object_set_new(o, "shape_changed", json_boolean(j->shape_changed)) ||
+              json_object_set_new(o, "queue_pos", json_integer((json_int_t)j->queue_pos)) ||
               /* the G-code's print time estimate, s, and filament, g: null when not known */
               json_object_set_new(
                   o, "est_s", j->est_known && j->est_s >= 0 ? json_real(j->est_s) : json_null()) ||

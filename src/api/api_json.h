@@ -30,6 +30,8 @@ int api_opts_parse(const char *text, size_t len, struct job_opts *o, struct sf_e
 
 /* Parse {"priority": N}. */
 int api_priority_parse(const char *text, size_t len, int *priority, struct sf_err *err);
+/* Parse POST /api/jobs/ID/move's {"by": -1 | 1}. */
+int api_move_parse(const char *text, size_t len, int *by, struct sf_err *err);
 
 /*
  * POST /api/printers/NAME/command's body: {"command": "G28"} and nothing

@@ -360,6 +360,7 @@ sched_view(const struct job_row *j, struct sched_job *out)
     *out = (struct sched_job){ .id = j->id,
                                .state = j->state,
                                .priority = j->opts.priority,
+                               .order = j->queue_pos,
                                .material = j->opts.material,
                                .printer = j->opts.printer,
                                .group = j->opts.group,

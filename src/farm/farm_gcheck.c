@@ -38,6 +38,7 @@ struct startcheck {
     bool counted;          /* scan holds the job's line count (else the driver counts) */
     uint64_t token;        /* the start it judges (printer_start_token) */
     struct gpolicy policy; /* the printer's, now */
+    struct filament fil;   /* the file's net E by line, for the print's filament */
     struct sf_err err;
     char msg[1024]; /* the refused lines, "G-code 'NAME': line 12: M600: ..." */
 };
@@ -47,7 +48,12 @@ startcheck_work(void *ud, const atomic_bool *cancel)
 {
     (void)cancel;
     struct startcheck *t = ud;
-    return gpolicy_check_file(&t->policy, t->path, t->name, t->msg, sizeof(t->msg), NULL, &t->err);
+    int rc =
+        gpolicy_check_file(&t->policy, t->path, t->name, t->msg, sizeof(t->msg), NULL, &t->err);
+    /* a file it cannot read again only leaves the print's filament unknown (0) */
+    if (rc == SF_OK && filament_scan(t->path, &t->fil, NULL) == SF_OK)
+        t->fil.job_id = t->job_id;
+    return rc;
 }
 
 static void
@@ -58,7 +64,7 @@ startcheck_done(struct loop *l, void *ud, int rc)
     struct printer *p;
     /* Shutting down (SF_ECANCELED) leaves it for printer_stop. */
     if (rc != SF_ECANCELED && (p = farm_find(t->f, t->printer)) != NULL)
-        printer_start_go(p, t->job_id, t->token, t->path, t->counted ? &t->scan : NULL, rc,
+        printer_start_go(p, t->job_id, t->token, t->path, t->counted ? &t->scan : NULL, &t->fil, rc,
                          t->msg[0] ? t->msg : t->err.msg);
     free(t);
 }

@@ -92,11 +92,24 @@ printer_move(struct printer *p, enum printer_event ev)
 }
 
 /* Apply a job event in the store, logging failures (the job fails alone). */
+double
+printer_filament_mm(const struct printer *p, int64_t id, enum job_event ev, int64_t lines)
+{
+    if (!id || p->fil.job_id != id)
+        return 0;
+    return ev == JOB_EV_PRINT_DONE ? filament_at(&p->fil, p->fil.lines)
+                                   : filament_at(&p->fil, lines);
+}
+
 int
 printer_job_event(struct printer *p, int64_t id, enum job_event ev, const struct job_event_args *a)
 {
     struct sf_err err;
-    int rc = store_job_event(p->env.s, id, ev, a, NULL, &err);
+    struct job_event_args with = a ? *a : (struct job_event_args){ 0 };
+    if (ev == JOB_EV_PRINT_DONE || ev == JOB_EV_PRINT_FAILED || ev == JOB_EV_CANCEL ||
+        ev == JOB_EV_CANCEL_COPY)
+        with.filament_mm = printer_filament_mm(p, id, ev, with.lines_acked);
+    int rc = store_job_event(p->env.s, id, ev, a ? &with : NULL, NULL, &err);
     if (rc)
         log_printer(LOG_WARN, p->cfg.name, "%s", err.msg);
     printer_changed(p);
@@ -626,13 +639,17 @@ printer_start_token(const struct printer *p)
 
 void
 printer_start_go(struct printer *p, int64_t id, uint64_t token, const char *path,
-                 const struct drv_job_scan *scan, int rc, const char *why)
+                 const struct drv_job_scan *scan, const struct filament *fil, int rc,
+                 const char *why)
 {
     /* Cancelled, or its printer lost (and the job perhaps resumed since, or, a copy cancelled,
        started again), while the file was judged: this check is stale. */
     if (p->job_id != id || !p->judging || p->judging != token)
         return;
     p->judging = 0;
+    p->fil.job_id = 0;
+    if (fil && fil->job_id == id)
+        p->fil = *fil;
     if (rc == SF_OK) {
         drive(p, path, 0, scan);
         return;
@@ -656,6 +673,7 @@ printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err
     p->job_id = id;
     p->judging = 0; /* a start's check still on the io thread is stale now */
     p->lines_acked = p->lines_saved = line;
+    p->fil.job_id = 0; /* a print from mid-file: its filament is not counted */
     printer_move(p, PRINTER_EV_START);
     return SF_OK;
 }

@@ -27,6 +27,7 @@
 #include "../base/err.h"
 #include "../base/loop.h"
 #include "farmcfg.h"
+#include "filament.h"
 #include "job.h"
 #include "store.h"
 
@@ -105,19 +106,20 @@ bool printer_removed(const struct printer *p);
  * printer_start_go hands it to the driver once the farm has judged the
  * file by p's policy off the loop (rc, why: the verdict), unless the job
  * left p meanwhile.  scan (NULL: the driver counts the lines) is the
- * job's.  A driver refusing with SF_EAGAIN (not idle: "not now") sends the
- * job back to ready without spending a retry (JOB_EV_REFUSED) and p takes
- * no job for drv_backoff_ms(refusals in a row); any other refusal fails
- * the print (the retry policy applies).  rc != SF_OK (the file breaks p's
- * policy, or cannot be read) fails the job with why, not retried: nothing
- * was sent, p is idle again with its bed as it was.
+ * job's; fil (NULL: not read) its net E by line, from which each end of
+ * this print records the filament it used.  A driver refusing with SF_EAGAIN (not idle: "not now")
+ * sends the job back to ready without spending a retry (JOB_EV_REFUSED) and p takes no job for
+ * drv_backoff_ms(refusals in a row); any other refusal fails the print (the retry policy applies).
+ * rc != SF_OK (the file breaks p's policy, or cannot be read) fails the job with why, not retried:
+ * nothing was sent, p is idle again with its bed as it was.
  */
 int printer_start(struct printer *p, const struct job_row *j, const char *path);
 /* The start printer_start just made (its check is stale once p starts anything else, even the
    same job again after a copy was cancelled). */
 uint64_t printer_start_token(const struct printer *p);
 void printer_start_go(struct printer *p, int64_t id, uint64_t token, const char *path,
-                      const struct drv_job_scan *scan, int rc, const char *why);
+                      const struct drv_job_scan *scan, const struct filament *fil, int rc,
+                      const char *why);
 
 /*
  * Resume interrupted job id on p (idle, connected) from command `line`:

@@ -35,6 +35,7 @@ struct printer {
     struct drv *drv;            /* its driver; NULL without one */
     int64_t job_id;             /* job on it, 0 if none */
     int64_t lines_acked;        /* latest from the driver */
+    struct filament fil;        /* the net E by line of the print started on it (filament.h) */
     int64_t lines_saved;        /* last value written to the store */
     char message[160];          /* why offline / error */
     uint64_t reconnect;         /* reconnect timer id, 0 if none */
@@ -70,9 +71,13 @@ void printer_set_bed(struct printer *p, bool full);
  */
 bool printer_move(struct printer *p, enum printer_event ev);
 
-/* Apply a job event in the store; a failure is logged and returned (the job fails alone). */
+/* Apply a job event in the store; a failure is logged and returned (the job fails alone).
+   An event ending job id's print records the filament it used (printer_filament_mm). */
 int printer_job_event(struct printer *p, int64_t id, enum job_event ev,
                       const struct job_event_args *a);
+/* The filament job id's print on p used by command line `lines` (all of its file's when ev is
+   JOB_EV_PRINT_DONE); 0 when p did not read the file (a resumed or re-attached print). */
+double printer_filament_mm(const struct printer *p, int64_t id, enum job_event ev, int64_t lines);
 
 /*
  * Arm the heaters' timer when p is hot with no print on it (turned off

@@ -195,7 +195,10 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
                          : act == PRINTER_ACT_CANCEL_COPY ? JOB_EV_CANCEL_COPY
                                                           : JOB_EV_CANCEL;
     bool ends = jev == JOB_EV_CANCEL || jev == JOB_EV_CANCEL_COPY;
-    struct job_event_args a = { .lines_acked = p->lines_acked, .reason = cancel_reason(jev) };
+    struct job_event_args a = { .lines_acked = p->lines_acked,
+                                .reason = cancel_reason(jev),
+                                .filament_mm =
+                                    printer_filament_mm(p, p->job_id, jev, p->lines_acked) };
     if (ends && !p->cfg.auto_eject)
         printer_set_bed(p, true); /* the cancelled part stays on the bed */
     if ((rc = store_job_event(p->env.s, p->job_id, jev, &a, NULL, err)))

@@ -6,7 +6,7 @@
  * operator expects and can predict; the only freedom left is which of the
  * qualifying printers a job takes, and best fit by bed area is the classic
  * answer that keeps large printers for large parts.  Design: sort job
- * indices once (priority, id), then walk them, each taking the best free
+ * indices once (priority, order, id), then walk them, each taking the best free
  * printer; O(jobs log jobs + jobs x printers), trivial for a farm of
  * hundreds.  Reasons are built only for jobs left waiting.
  *
@@ -155,6 +155,8 @@ cmp_jobs(const void *a, const void *b, void *ud)
     const struct sched_job *x = &jobs[*(const size_t *)a], *y = &jobs[*(const size_t *)b];
     if (x->priority != y->priority)
         return x->priority > y->priority ? -1 : 1;
+    if (x->order != y->order)
+        return x->order < y->order ? -1 : 1;
     return (x->id > y->id) - (x->id < y->id);
 }
 

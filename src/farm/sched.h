@@ -6,11 +6,10 @@
  * idle.  Rules, in order:
  *  - only enabled, idle printers take jobs (a printer awaiting bed clear is
  *    not idle: the operator, or auto-eject, must free it first);
- *  - ready jobs go by priority (higher first), then FIFO (lower id first),
- *    first come first served: a job still queued or being prepared holds
- *    the idle printer it would take, so a later job that prepared faster
- *    does not start before it (unless it is stalled: it would hold the
- *    printer idle for nothing);
+ *  - ready jobs go by priority (higher first), then their order (the
+ *    operator's ▲/▼, else FIFO), then lower id: first come first served: a job still queued or
+ * being prepared holds the idle printer it would take, so a later job that prepared faster does not
+ * start before it (unless it is stalled: it would hold the printer idle for nothing);
  *  - a job goes only to a printer it targets (by name or group), whose
  *    loaded material matches the job's (if it names one), and whose bed
  *    holds the part (x/y may swap: the part can turn 90 degrees on the bed);
@@ -78,6 +77,8 @@ struct sched_job {
     bool stalled;         /* cannot be prepared now (the pool is full, or, ready, it is being
                              sliced again or a slicing of it failed): it holds no printer and
                              gives up none to be sliced again */
+    int64_t order;        /* within a priority, lower first (the store's queue_pos: the
+                             operator's ▲/▼, else FIFO); then lower id */
 };
 
 /* One decision: jobs[job] starts on printers[printer]. */

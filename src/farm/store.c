@@ -178,6 +178,14 @@ static const char *const migrations[] = {
        /api/printers) in one index step: max(id) over (printer, job_id)
        walked every print of the printer */
     "CREATE INDEX prints_printer_id ON prints(printer, id);",
+    /* 9: each job's place in the queue within its priority, lower first
+       (issue 31: ▲/▼ move a job one place among the waiting jobs, where a
+       priority change jumped it past every job of its priority); jobs
+       before keep their order, first come first served, by taking their
+       id; a new job takes the largest + 1, which the index finds in a step */
+    "ALTER TABLE jobs ADD COLUMN queue_pos INTEGER NOT NULL DEFAULT 0;"
+    "UPDATE jobs SET queue_pos = id;"
+    "CREATE INDEX jobs_queue_pos ON jobs(queue_pos);",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

@@ -76,6 +76,8 @@ struct job_row {
                                       G-code stored before and jobs not prepared */
     double est_s;                  /* the G-code's print time estimate, s (gcjob_estimate_s);
                                       -1 when it states none */
+    int64_t queue_pos;             /* its place among the waiting jobs of its priority, lower
+                                      first (schema 9; store_job_move) */
 };
 
 /* Extra data some events carry (zero-initialise; unused fields ignored). */
@@ -285,6 +287,16 @@ struct store_progress {
  */
 int store_jobs_progress(struct store *s, struct store_progress *p, size_t n, struct sf_err *err);
 int store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err *err);
+/*
+ * Move waiting job id one place in the queue (by -1: up, +1: down): it
+ * trades places with the waiting job next to it in the scheduler's order
+ * (priority, higher first, then queue_pos, lower first).  Next to a job of
+ * another priority, it takes that priority and lands just past it.  Logs
+ * "job-move".  SF_EINVAL: by is not -1 or 1; SF_ENOTFOUND: no such job;
+ * SF_EAGAIN: the job is not waiting (queued, preparing, ready) or is
+ * already first (last).
+ */
+int store_job_move(struct store *s, int64_t id, int by, struct sf_err *err);
 /* Set why a job waits (scheduler); writes only when it changed. */
 int store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_err *err);
 

@@ -78,7 +78,8 @@ int store_read_rows(struct store *s, struct sqldb_stmt *st, size_t elem_size, st
     " copies, copies_done, failures, max_retries, material, target_printer, target_group,"         \
     " priority, size_x, size_y, size_z, printer, lines_acked, reason, created_ms, updated_ms,"     \
     " nozzle_mm, gcode_lines, prep_key, mesh_sha, mesh_angle_deg, filament_g, support_g,"          \
-    " support_saved_g, prepare_ms, slice_ms, ready_ms, mndr, andr, shape_changed, est_s"
+    " support_saved_g, prepare_ms, slice_ms, ready_ms, mndr, andr, shape_changed, est_s,"          \
+    " queue_pos"
 /* A store_row_fn: a struct job_row from a row of STORE_JOB_COLS. */
 void store_read_job(struct sqldb_stmt *st, void *row);
 /* Step st (a SELECT of STORE_JOB_COLS) once and finalize it: its row into *out, or

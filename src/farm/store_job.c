@@ -68,6 +68,7 @@ read_job(struct sqldb_stmt *st, struct job_row *j)
     j->shape_changed = sqldb_column_int(st, 37) != 0;
     j->est_known = !sqldb_column_null(st, 38);
     j->est_s = j->est_known ? sqldb_column_double(st, 38) : -1;
+    j->queue_pos = sqldb_column_int64(st, 39);
 }
 
 void
@@ -112,7 +113,13 @@ insert_job(struct store *s, struct sqldb_stmt *st, const char *what, const char 
     sqldb_finalize(st);
     if (rc)
         goto fail;
-    if ((rc = store_log_event(s, new_id, NULL, "job-add", detail, err)) ||
+    /* a new job goes last in the queue of its priority (schema 9) */
+    char sql[96];
+    snprintf(sql, sizeof(sql),
+             "UPDATE jobs SET queue_pos = (SELECT max(queue_pos) FROM jobs) + 1 WHERE id = %lld",
+             (long long)new_id);
+    if ((rc = store_exec(s, sql, err)) ||
+        (rc = store_log_event(s, new_id, NULL, "job-add", detail, err)) ||
         (rc = store_commit(s, err)))
         goto fail;
     if (id)
@@ -567,6 +574,152 @@ store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err 
         return rc;
     }
     return SF_OK;
+}
+
+/* A job's place in the scheduler's order. */
+struct qplace {
+    int64_t id;
+    int priority;
+    int64_t pos;
+};
+
+/* Job me->id's place and state (16 bytes) from the store; SF_ENOTFOUND naming it. */
+static int
+queue_self(struct store *s, struct qplace *me, char *state, struct sf_err *err)
+{
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st, "SELECT state, priority, queue_pos FROM jobs WHERE id = ?", err);
+    if (rc)
+        return rc;
+    sqldb_bind_int64(st, 1, me->id);
+    rc = sqldb_step(st);
+    if (rc == SQLDB_ROW) {
+        store_copy_text(state, 16, st, 0);
+        me->priority = sqldb_column_int(st, 1);
+        me->pos = sqldb_column_int64(st, 2);
+    }
+    sqldb_finalize(st);
+    if (rc == SQLDB_DONE)
+        return sf_err_set(err, SF_ENOTFOUND, "job %lld: no such job", (long long)me->id);
+    return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "job's place");
+}
+
+/* The waiting job just before (by < 0) or after me in queue order, into *nb;
+   SF_ENOTFOUND (err not set) if me is first (last). */
+static int
+queue_neighbour(struct store *s, const struct qplace *me, int by, struct qplace *nb,
+                struct sf_err *err)
+{
+    static const char *const sql[2] = {
+        "SELECT id, priority, queue_pos FROM jobs WHERE state IN ('queued','preparing','ready')"
+        " AND (priority > ?1 OR (priority = ?1 AND (queue_pos < ?2 OR (queue_pos = ?2 AND id < "
+        "?3))))"
+        " ORDER BY priority, queue_pos DESC, id DESC LIMIT 1",
+        "SELECT id, priority, queue_pos FROM jobs WHERE state IN ('queued','preparing','ready')"
+        " AND (priority < ?1 OR (priority = ?1 AND (queue_pos > ?2 OR (queue_pos = ?2 AND id > "
+        "?3))))"
+        " ORDER BY priority DESC, queue_pos, id LIMIT 1",
+    };
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st, sql[by > 0], err);
+    if (rc)
+        return rc;
+    sqldb_bind_int64(st, 1, me->priority);
+    sqldb_bind_int64(st, 2, me->pos);
+    sqldb_bind_int64(st, 3, me->id);
+    rc = sqldb_step(st);
+    if (rc == SQLDB_ROW)
+        *nb = (struct qplace){ sqldb_column_int64(st, 0), sqldb_column_int(st, 1),
+                               sqldb_column_int64(st, 2) };
+    sqldb_finalize(st);
+    if (rc == SQLDB_DONE)
+        return SF_ENOTFOUND;
+    return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "queue neighbour");
+}
+
+/* Put job j at (priority, pos), in the caller's transaction. */
+static int
+queue_place(struct store *s, const struct qplace *j, struct sf_err *err)
+{
+    struct sqldb_stmt *st;
+    int rc = store_prepare(
+        s, &st, "UPDATE jobs SET priority = ?, queue_pos = ?, updated_ms = ? WHERE id = ?", err);
+    if (rc)
+        return rc;
+    sqldb_bind_int64(st, 1, j->priority);
+    sqldb_bind_int64(st, 2, j->pos);
+    sqldb_bind_int64(st, 3, clock_wall_ms());
+    sqldb_bind_int64(st, 4, j->id);
+    return store_step_done(s, st, err, "move job");
+}
+
+/* One more than the largest queue_pos (by > 0: one less than the smallest). */
+static int64_t
+queue_end(struct store *s, int by)
+{
+    struct sqldb_stmt *st;
+    int64_t out = 0;
+    if (store_prepare(s, &st,
+                      by > 0 ? "SELECT min(queue_pos) - 1 FROM jobs"
+                             : "SELECT max(queue_pos) + 1 FROM jobs",
+                      NULL) == SF_OK) {
+        if (sqldb_step(st) == SQLDB_ROW)
+            out = sqldb_column_int64(st, 0);
+        sqldb_finalize(st);
+    }
+    return out;
+}
+
+/* Trade places with the neighbour nb (store_job_move).  Within a priority the
+   two swap queue_pos; across a boundary me takes nb's priority and place, and
+   nb moves to its group's end on me's side (it was that group's last waiting
+   job when me moves up, its first when me moves down), so no other job of
+   either priority changes place. */
+static int
+queue_swap(struct store *s, struct qplace me, struct qplace nb, int by, struct sf_err *err)
+{
+    struct qplace a = { me.id, nb.priority, nb.pos };
+    struct qplace b = { nb.id, nb.priority,
+                        me.priority == nb.priority ? me.pos : queue_end(s, by) };
+    int rc = queue_place(s, &a, err);
+    return rc ? rc : queue_place(s, &b, err);
+}
+
+int
+store_job_move(struct store *s, int64_t id, int by, struct sf_err *err)
+{
+    if (by != -1 && by != 1)
+        return sf_err_set(err, SF_EINVAL, "by: %d is not -1 (up) or 1 (down)", by);
+    struct qplace me = { id, 0, 0 }, nb;
+    char state[16];
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    if ((rc = queue_self(s, &me, state, err)))
+        goto fail;
+    if (strcmp(state, "queued") != 0 && strcmp(state, "preparing") != 0 &&
+        strcmp(state, "ready") != 0) {
+        rc = sf_err_set(err, SF_EAGAIN,
+                        "job %lld is %s: only a waiting job (queued, preparing, ready) moves in "
+                        "the queue",
+                        (long long)id, state);
+        goto fail;
+    }
+    if ((rc = queue_neighbour(s, &me, by, &nb, err)) == SF_ENOTFOUND)
+        rc = sf_err_set(err, SF_EAGAIN, "job %lld is already %s of the waiting jobs", (long long)id,
+                        by < 0 ? "first" : "last");
+    if (rc)
+        goto fail;
+    char detail[96];
+    snprintf(detail, sizeof(detail), "moved %s job %lld, priority %d", by < 0 ? "above" : "below",
+             (long long)nb.id, nb.priority);
+    if ((rc = queue_swap(s, me, nb, by, err)) ||
+        (rc = store_log_event(s, id, NULL, "job-move", detail, err)) || (rc = store_commit(s, err)))
+        goto fail;
+    return SF_OK;
+fail:
+    store_rollback(s);
+    return rc;
 }
 
 int

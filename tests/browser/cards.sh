@@ -13,17 +13,8 @@
 # Screenshots (1280x800, 1920x1080, 390x844) land in build/browser/cards/.
 # Skips (passes, saying so) when chromium, node or the npm packages are
 # absent: `make check` installs them.
-set -u
-umask 077
-BUILD=${BUILD:-build/san}
-here=$(cd "$(dirname "$0")" && pwd)
-if [ ! -x /usr/bin/chromium ] || ! command -v node > /dev/null ||
-  [ ! -f "$here/node_modules/playwright-core/package.json" ] ||
-  [ ! -f "$here/node_modules/axe-core/axe.min.js" ]; then
-  echo "cards: skipped (chromium, node, playwright-core or axe-core missing: make browser-deps)"
-  exit 0
-fi
-. "$here/../integ/lib/farm.sh"
+name=cards
+. "$(dirname "$0")/lib/browser.sh"
 
 start_sim slow --speed 1
 start_sim hot --speed 3000 --fault runaway=3000
@@ -55,14 +46,5 @@ cp -r config/printers config/materials "$tmp/"
     i=$((i + 1))
   done < "$tmp/many.out"
 } > "$tmp/farm.ini"
-start_daemon
-wait_for 120 sh -c "[ \$('$C' printers | grep -c ' idle ') -ge 23 ]" || fail "printers: $("$C" printers)"
-"$C" shapes "$tmp/parts" > /dev/null || fail "shapes"
-
-shots=$(pwd)/build/browser/cards # dashboard.sh empties build/browser
-mkdir -p "$shots"
-rm -f "$shots"/*.png
-SF_URL=$SLIMFARM_URL SF_RW=$RW SF_PARTS=$tmp/parts SF_SHOTS=$shots SF_GONE_PID=$sim_gone \
-  timeout 600 node "$here/cards.mjs" || fail "the browser test failed"
-kill -TERM "$pid"; wait "$pid" 2>/dev/null; pid=
-echo "cards: ok (screenshots in $shots)"
+browser_run 23 cards.mjs SF_GONE_PID="$sim_gone"
+echo "cards: ok (screenshots in build/browser/cards)"

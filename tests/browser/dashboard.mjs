@@ -17,12 +17,15 @@ const URL = env("SF_URL"), RW = env("SF_RW"), RO = env("SF_RO"), PARTS = env("SF
 const SHOTS = env("SF_SHOTS");
 const problems = [];
 
+let refusals = 0; // 400s a step expects (the browser logs each as an error)
+
 await runChromium("failure.png", run);
 
 function watch(page) {
   page.on("pageerror", (e) => problems.push("page error: " + e.message));
   page.on("console", (m) => {
-    if (m.type() === "error" && !/status of 40[13]|ERR_CONNECTION_REFUSED|net::ERR/.test(m.text()))
+    if (m.type() === "error" && refusals > 0 && /status of 400/.test(m.text())) refusals--;
+    else if (m.type() === "error" && !/status of 40[13]|ERR_CONNECTION_REFUSED|net::ERR/.test(m.text()))
       problems.push("console error: " + m.text());
     if (/Content Security Policy/i.test(m.text())) problems.push("CSP violation: " + m.text());
   });
@@ -133,6 +136,18 @@ async function run(ctx) {
   await checkNames(page, "printer grid");
   await accessible(page, "printer grid");
 
+  log("a text file renamed .stl is refused at upload, the page saying why");
+  const jobsBefore = (await (await fetch(`${URL}/api/jobs`, { headers: { "X-Api-Key": RW } })).json()).jobs.length;
+  await page.getByRole("link", { name: "Submit a part" }).click();
+  await page.setInputFiles("#file", { name: "notes.stl", mimeType: "model/stl", buffer: Buffer.from("shopping list:\nmilk\n") });
+  refusals = 1;
+  await page.getByRole("button", { name: "Submit", exact: true }).click();
+  await page.waitForFunction(() => /Refused: notes\.stl: not an STL: 'notes\.stl' holds plain text/.test(document.querySelector("#submit-msg").textContent),
+    null, { timeout: 60000 });
+  check(/not an STL/.test(await page.locator('#uploads li[data-file="notes.stl"] .up-msg').innerText()), "the file's line says why");
+  const jobsAfter = (await (await fetch(`${URL}/api/jobs`, { headers: { "X-Api-Key": RW } })).json()).jobs.length;
+  check(jobsAfter === jobsBefore, `the refused file made a job: ${jobsBefore} -> ${jobsAfter}`);
+
   log("submit a tee through the form (file input), oriented, to mk3");
   const j1 = await submitForm(page, { file: `${PARTS}/tee.stl`, method: "orient", target: "printer:mk3" });
   await page.waitForSelector(`#view-job[data-job="${j1}"]`);
@@ -188,7 +203,7 @@ async function run(ctx) {
   log("a job no printer can take waits, saying why; reorder the queue");
   const q = await page.evaluate(async ([u, k]) => {
     const ids = [];
-    for (let i = 0; i < 2; i++) {
+    for (let i = 0; i < 3; i++) {
       const fd = new FormData();
       fd.append("file", new File(["solid x\nendsolid x\n"], `tpu${i}.stl`));
       fd.append("options", JSON.stringify({ material: "TPU", method: "none" }));
@@ -200,15 +215,20 @@ async function run(ctx) {
   await page.waitForFunction((id) => {
     const tr = document.querySelector(`#queue tr[data-job="${id}"]`);
     return tr && /TPU/.test(tr.innerText);
-  }, q[1], { timeout: LONG });
+  }, q[2], { timeout: LONG });
   const order = () => page.evaluate(() => [...document.querySelectorAll("#queue tbody tr[data-job]")].map((t) => Number(t.dataset.job)));
-  let o = await order();
-  check(o.indexOf(q[0]) < o.indexOf(q[1]), "queue order " + o);
-  await page.getByRole("button", { name: `Move job ${q[1]} up` }).click();
+  const ours = async () => (await order()).filter((id) => q.includes(id));
+  check((await ours()).join() === q.join(), "queue order " + (await order()));
+  // ▲ on the third of three jobs of equal priority: one place, to second (a
+  // priority change once jumped it past both, to first)
+  await page.getByRole("button", { name: `Move job ${q[2]} up` }).click();
   await page.waitForFunction(([a, b]) => {
     const ids = [...document.querySelectorAll("#queue tbody tr[data-job]")].map((t) => Number(t.dataset.job));
     return ids.indexOf(b) >= 0 && ids.indexOf(b) < ids.indexOf(a);
-  }, q, { timeout: 60000 });
+  }, [q[1], q[2]], { timeout: 60000 });
+  check((await ours()).join() === [q[0], q[2], q[1]].join(), "▲ moved it more than one place: " + (await order()));
+  const jobs = (await apiGet("/api/jobs?state=queued")).jobs.filter((j) => q.includes(j.id));
+  check(jobs.every((j) => j.priority === 0), "▲ changed a priority: " + JSON.stringify(jobs.map((j) => j.priority)));
 
   log("submit a frame by drag and drop, to mini, two copies; pause and resume it");
   const j2 = await submitForm(page, { file: `${PARTS}/frame.stl`, method: "none", target: "printer:mini", drop: true, copies: 2 });

@@ -106,10 +106,14 @@ out=$("$C" submit "$tmp/bracket.stl" --method orient) || fail "submit orient: $o
 eventually jobs_match '^2 +ready'
 "$C" jobs | grep -qE '^2 +ready .*waits for a printer: mk3 is offline' || fail "orient job: $("$C" jobs)"
 
-# a part that is no mesh fails at once, saying why
+# a part that is no mesh by its content is refused at upload, saying why
+# (nothing is queued); one that holds no facet fails at once
 echo "not a mesh" > "$tmp/junk.stl"
-"$C" submit "$tmp/junk.stl" >/dev/null || fail "submit junk"
-eventually jobs_match "^3 +failed .*junk.stl .*not a mesh file" || fail "junk part: $("$C" jobs)"
+out=$("$C" submit "$tmp/junk.stl" 2>&1) && fail "junk part accepted: $out"
+[[ "$out" == *"400: not an STL: 'junk.stl' holds plain text"* ]] || fail "junk part: $out"
+printf 'solid empty\nendsolid empty\n' > "$tmp/empty.stl"
+"$C" submit "$tmp/empty.stl" >/dev/null || fail "submit empty"
+eventually jobs_match "^3 +failed .*empty.stl" || fail "empty part: $("$C" jobs)"
 
 # live events: the watcher sees a submission and a cancel made after it
 # started.  It resumes after the newest event so far (which an event id past

@@ -466,7 +466,7 @@ T_CASE(api_submit_get_list_and_reprioritize)
     snprintf(id, sizeof(id), "%s", jstr(&b, "job", "id"));
     T_EQ_STR(id, "2");
     /* defaults when no options are sent */
-    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "plain.3mf", "PK", 2, NULL, &b), 201);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "plain.3mf", "PK\3\4", 4, NULL, &b), 201);
     T_EQ_STR(jstr(&b, "job", "copies"), "1");
     T_EQ_STR(jstr(&b, "job", "method"), "orient");
     T_EQ_INT(get("/api/jobs", KEY_RW, &b), 200);
@@ -482,6 +482,100 @@ T_CASE(api_submit_get_list_and_reprioritize)
     T_EQ_INT(get("/api/jobs/x1", KEY_RW, &b), 404);
     T_EQ_INT(get("/api/nothing", KEY_RW, &b), 404);
     T_EQ_INT(call("DELETE", "/api/jobs", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 405);
+    buf_release(&b);
+    stop();
+}
+
+/* Job id's queue_pos from GET /api/jobs/ID. */
+static long long
+queue_pos(int id, struct buf *b)
+{
+    char path[64];
+    snprintf(path, sizeof(path), "/api/jobs/%d", id);
+    if (get(path, KEY_RW, b) != 200 || strcmp(jstr(b, "job", "priority"), "0") != 0)
+        return -1; /* a move within one priority changes none */
+    return atoll(jstr(b, "job", "queue_pos"));
+}
+
+/* ▲ on the third of three waiting jobs of equal priority moves it one
+   place, to second (a priority change jumped it to first: issue 31). */
+T_CASE(api_move_a_waiting_job_one_place)
+{
+    struct sf_err err;
+    T_OK(start("move", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    const char part[] = "solid cube\nendsolid cube\n";
+    for (int i = 0; i < 3; i++) /* jobs 2, 3, 4: a group no printer is in, so they wait */
+        T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "w.stl", part, sizeof(part) - 1,
+                      "{\"group\": \"big\"}", &b),
+                 201);
+    T_TRUE(0 < queue_pos(2, &b) && queue_pos(2, &b) < queue_pos(3, &b) &&
+           queue_pos(3, &b) < queue_pos(4, &b));
+    T_EQ_INT(call("POST", "/api/jobs/4/move", KEY_RW, "{\"by\": -1}", NULL, NULL, 0, NULL, &b),
+             200);
+    T_EQ_STR(jstr(&b, "job", "id"), "4");
+    T_TRUE(0 < queue_pos(2, &b) && queue_pos(2, &b) < queue_pos(4, &b) &&
+           queue_pos(4, &b) < queue_pos(3, &b));
+    /* and back down */
+    T_EQ_INT(call("POST", "/api/jobs/4/move", KEY_RW, "{\"by\": 1}", NULL, NULL, 0, NULL, &b), 200);
+    T_TRUE(0 < queue_pos(3, &b) && queue_pos(3, &b) < queue_pos(4, &b));
+    /* refusals, each naming why */
+    T_EQ_INT(call("POST", "/api/jobs/2/move", KEY_RW, "{\"by\": -1}", NULL, NULL, 0, NULL, &b),
+             409);
+    T_EQ_STR(jstr(&b, NULL, "error"), "job 2 is already first of the waiting jobs");
+    T_EQ_INT(call("POST", "/api/jobs/1/move", KEY_RW, "{\"by\": 1}", NULL, NULL, 0, NULL, &b), 409);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "job 1 is printing: only a waiting job") != NULL);
+    T_EQ_INT(call("POST", "/api/jobs/2/move", KEY_RW, "{\"by\": 2}", NULL, NULL, 0, NULL, &b), 400);
+    T_EQ_STR(jstr(&b, NULL, "error"), "by: 2 is not in -1..1");
+    T_EQ_INT(call("POST", "/api/jobs/2/move", KEY_RW, "{\"by\": 0}", NULL, NULL, 0, NULL, &b), 400);
+    T_EQ_INT(call("POST", "/api/jobs/2/move", KEY_RW, "{\"up\": 1}", NULL, NULL, 0, NULL, &b), 400);
+    T_EQ_INT(call("POST", "/api/jobs/99/move", KEY_RW, "{\"by\": 1}", NULL, NULL, 0, NULL, &b),
+             404);
+    T_EQ_INT(call("POST", "/api/jobs/3/move", KEY_RO, "{\"by\": 1}", NULL, NULL, 0, NULL, &b), 403);
+    buf_release(&b);
+    stop();
+}
+
+static int n_jobs(void);
+
+/* An upload is judged by its content before it is queued, the reason
+   naming the file (issue 31: a text file renamed .stl was queued). */
+T_CASE(api_upload_content_is_checked)
+{
+    struct sf_err err;
+    T_OK(start("content", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    int before = n_jobs();
+    static const struct {
+        const char *name, *data, *says;
+    } bad[] = {
+        { "notes.stl", "shopping list:\nmilk\n", "not an STL: 'notes.stl' holds plain text" },
+        { "cube.stl", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+          "not an STL: 'cube.stl' is a Wavefront OBJ by its content: name it .obj" },
+        { "print.stl", "; sliced\nG28\nG1 X10 E1\n", "not an STL: 'print.stl' is G-code" },
+        { "cut.stl", "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n",
+          "not an STL: stl 'cut.stl': line " },
+        { "part.obj", "hello\n", "not an OBJ: 'part.obj' holds plain text" },
+        { "part.3mf", "solid t\nendsolid t\n", "not a 3MF: 'part.3mf' is an ASCII STL" },
+    };
+    for (size_t i = 0; i < sizeof(bad) / sizeof(*bad); i++) {
+        T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, bad[i].name, bad[i].data,
+                      strlen(bad[i].data), NULL, &b),
+                 400);
+        T_TRUE(strstr(jstr(&b, NULL, "error"), bad[i].says) != NULL);
+    }
+    /* a binary STL of one triangle (its header begins "solid", as many do) */
+    unsigned char stl[134] = "solid binary";
+    uint32_t one = 1;
+    memcpy(stl + 80, &one, 4);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "bin.stl", stl, sizeof(stl), NULL, &b), 201);
+    /* G-code through OctoPrint's route: a mesh is refused there too */
+    T_EQ_INT(call("POST", "/api/files/local", KEY_RW, NULL, "x.gcode", stl, sizeof(stl), NULL, &b),
+             400);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "not G-code: 'x.gcode' is a binary STL") != NULL);
+    T_EQ_INT(n_jobs(), before + 1); /* only the good one */
     buf_release(&b);
     stop();
 }

@@ -234,6 +234,7 @@ test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomi
     int n = sscanf(part.data ? part.data : "", "size %lf %lf %lf", &x, &y, &z);
     bool long_cmd = part.data && strstr(part.data, "long command");
     bool m600 = part.data && strstr(part.data, "filament change"); /* a profile's custom G-code */
+    bool extrude = part.data && strstr(part.data, "extrude");
     const char *est = part.data ? strstr(part.data, "est ") : NULL;
     long est_s = est ? strtol(est + 4, NULL, 10) : -1;
     buf_release(&part);
@@ -249,6 +250,8 @@ test_prepare(const struct prepare_req *req, struct prepare_out *out, const atomi
         fprintf(f, "M117 %0120d\nG1 X0\n", 0);
     if (m600)
         fprintf(f, "M600\n");
+    if (extrude) /* 15 mm of filament: 5, 7.5 (absolute E), a reset, 2.5 */
+        fprintf(f, "M82\nG1 X10 E5 ; wall\n\nG1 X20 E12.5\nG92 E0\nG1 X30 E2.5\n");
     fclose(f);
     out->size_mm[0] = x;
     out->size_mm[1] = y;
@@ -481,6 +484,55 @@ T_CASE(farm_prints_copies_with_bed_clear_gate_and_auto_eject)
     T_EQ_STR(p[1].outcome, "done");
     free(p);
     T_OK(store_check(fx.s, &err), &err);
+    teardown();
+}
+
+/*
+ * A print's end records the filament it used (issue 31: print history said
+ * Filament 0.00 m for done prints, nobody set job_event_args.filament_mm):
+ * a done print all of its G-code's net E, a cancelled one the E up to its
+ * last acknowledged line (comments and blank lines are not lines).
+ */
+T_CASE(farm_print_records_its_filament)
+{
+    struct sf_err err;
+    T_OK(setup("filament", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t done = add("size 20 20 20 extrude", "PLA", 1);
+    T_TRUE(wait_job(done, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    T_EQ_INT(a->scan_lines, 7); /* G28, G1, M82, G1 E5, G1 E12.5, G92, G1 E2.5 */
+    a->base.status.lines_acked = 7;
+    report(a, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(done, JOB_DONE));
+    struct print_row *p;
+    size_t n;
+    T_OK(store_prints(fx.s, done, &p, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_EQ_DBL(p[0].filament_mm, 15, 1e-9);
+    free(p);
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
+    /* cancelled after 5 lines: G1 E12.5 was the last acknowledged */
+    int64_t cut = add("size 20 20 20 extrude", "PLA", 1);
+    T_TRUE(wait_job(cut, JOB_PRINTING));
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && a->starts < 2;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 2);
+    a->base.status.lines_acked = 5;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    struct job_row jr = { 0 }; /* the farm has it once it saved it (its 50 ms progress timer) */
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && jr.lines_acked != 5;) {
+        loop_run_once(fx.l, 10);
+        T_OK(store_job_get(fx.s, cut, &jr, &err), &err);
+    }
+    T_EQ_INT(jr.lines_acked, 5);
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CANCEL, &err), &err);
+    T_EQ_INT(state_of(cut), JOB_CANCELLED);
+    T_OK(store_prints(fx.s, cut, &p, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_EQ_INT(p[0].lines_acked, 5);
+    T_EQ_DBL(p[0].filament_mm, 12.5, 1e-9);
+    free(p);
     teardown();
 }
 

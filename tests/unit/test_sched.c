@@ -20,9 +20,8 @@ printer(const char *name, const char *material, double nozzle, double x, double 
 static struct sched_job
 job(int64_t id, int prio, const char *material, double x, double y, double z)
 {
-    struct sched_job j = {
-        id, JOB_READY, prio, material, "", "", NULL, { x, y, z }, NULL, 0, false
-    };
+    struct sched_job j = { id,   JOB_READY,   prio, material, "",    "",
+                           NULL, { x, y, z }, NULL, 0,        false, 0 };
     return j;
 }
 
@@ -51,6 +50,12 @@ T_CASE(sched_priority_then_fifo)
     T_EQ_INT(j[out[0].job].id, 1); /* then the oldest */
     T_EQ_STR(why[0], "waits for a printer: a is taken by a job before it");
     T_EQ_STR(why[1], "");
+    /* the queue's order within a priority (the operator moved job 3 up) beats the id */
+    j[0].order = 1;
+    j[1].order = 2;
+    j[2].order = 3;
+    T_EQ_INT(sched_plan(j, 3, p, 1, out, why), 1);
+    T_EQ_INT(j[out[0].job].id, 3);
 }
 
 T_CASE(sched_only_idle_enabled_printers)

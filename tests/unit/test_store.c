@@ -179,6 +179,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
                  "COLUMN andr; ALTER TABLE jobs DROP COLUMN shape_changed;"
                  "ALTER TABLE jobs DROP COLUMN est_s;"
                  "DROP INDEX jobs_live; DROP INDEX prints_printer; DROP INDEX prints_printer_id;"
+                 "DROP INDEX jobs_queue_pos; ALTER TABLE jobs DROP COLUMN queue_pos;"
                  "PRAGMA user_version = 1",
                  NULL, NULL, NULL),
              SQLITE_OK);
@@ -191,6 +192,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     T_EQ_INT(j.gcode_lines, 0);
     T_TRUE(!j.dev_measured && !j.shape_changed); /* schema 5: not measured before */
     T_TRUE(!j.est_known && j.est_s == -1);       /* schema 6: the printer reads the file */
+    T_EQ_INT(j.queue_pos, id);                   /* schema 9: first come, first served */
     T_OK(store_check(s, &err), &err);
     /* prepared again (a new job here): the count and the deviation are stored */
     int64_t id2 = add_job(s, "part 2", 1, &err);

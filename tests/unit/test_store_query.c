@@ -285,3 +285,99 @@ T_CASE(store_last_printers_of_a_page_only)
     free(rows);
     store_close(s);
 }
+
+/* The waiting jobs in the scheduler's order (priority, queue_pos, id) into ids; their count. */
+static int
+cmp_queue(const void *a, const void *b)
+{
+    const struct job_row *x = a, *y = b;
+    if (x->opts.priority != y->opts.priority)
+        return x->opts.priority > y->opts.priority ? -1 : 1;
+    if (x->queue_pos != y->queue_pos)
+        return x->queue_pos < y->queue_pos ? -1 : 1;
+    return (x->id > y->id) - (x->id < y->id);
+}
+
+static size_t
+queue_of(struct store *s, int64_t *ids, struct sf_err *err)
+{
+    struct job_row *rows;
+    size_t n, k = 0;
+    if (store_job_live(s, &rows, &n, err))
+        return 0;
+    for (size_t i = 0; i < n; i++)
+        if (rows[i].state == JOB_QUEUED || rows[i].state == JOB_READY)
+            rows[k++] = rows[i];
+    qsort(rows, k, sizeof(*rows), cmp_queue);
+    for (size_t i = 0; i < k; i++)
+        ids[i] = rows[i].id;
+    free(rows);
+    return k;
+}
+
+#define T_QUEUE(s, ...)                                                                            \
+    do {                                                                                           \
+        int64_t want_[] = { __VA_ARGS__ }, got_[16];                                               \
+        T_EQ_INT((long long)queue_of(s, got_, &err), (long long)(sizeof(want_) / sizeof(*want_))); \
+        for (size_t q_ = 0; q_ < sizeof(want_) / sizeof(*want_); q_++)                             \
+            T_EQ_INT(got_[q_], want_[q_]);                                                         \
+    } while (0)
+
+/*
+ * store_job_move: one place among the waiting jobs (issue 31: ▲ on the
+ * third of three equal-priority jobs jumped it to first).  Within a
+ * priority two jobs trade places; next to a job of another priority the
+ * job takes that priority and lands just past it, no other job moving; a
+ * new job still goes last; printing jobs do not move.
+ */
+T_CASE(store_move_a_waiting_job_one_place)
+{
+    struct sf_err err;
+    struct store *s = store_open(fresh_dir("move"), NULL, &err);
+    T_TRUE(s != NULL);
+    int64_t a = add_job(s, "a", &err), b = add_job(s, "b", &err), c = add_job(s, "c", &err),
+            d = add_job(s, "d", &err);
+    T_QUEUE(s, a, b, c, d);
+    T_OK(store_job_move(s, c, -1, &err), &err);
+    T_QUEUE(s, a, c, b, d);
+    T_ERR(store_job_move(s, a, -1, &err), SF_EAGAIN, &err, "already first");
+    T_ERR(store_job_move(s, d, 1, &err), SF_EAGAIN, &err, "already last");
+    T_ERR(store_job_move(s, d, 2, &err), SF_EINVAL, &err, "by: 2");
+    T_ERR(store_job_move(s, 99, 1, &err), SF_ENOTFOUND, &err, "job 99");
+    /* across a priority: d first at 5; a moves up past it, taking 5 */
+    T_OK(store_job_set_priority(s, d, 5, &err), &err);
+    T_QUEUE(s, d, a, c, b);
+    T_OK(store_job_move(s, a, -1, &err), &err);
+    T_QUEUE(s, a, d, c, b);
+    struct job_row j;
+    T_OK(store_job_get(s, a, &j, &err), &err);
+    T_EQ_INT(j.opts.priority, 5);
+    /* down twice: past d (same priority), then past c, taking 0 */
+    T_OK(store_job_move(s, a, 1, &err), &err);
+    T_OK(store_job_move(s, a, 1, &err), &err);
+    T_QUEUE(s, d, c, a, b);
+    T_OK(store_job_get(s, a, &j, &err), &err);
+    T_EQ_INT(j.opts.priority, 0);
+    /* b back up past a, then up past c: b before c, a after */
+    T_OK(store_job_move(s, b, -1, &err), &err);
+    T_OK(store_job_move(s, b, -1, &err), &err);
+    T_QUEUE(s, d, b, c, a);
+    /* a new job goes last; a printing job does not move */
+    int64_t e = add_job(s, "e", &err);
+    T_QUEUE(s, d, b, c, a, e);
+    T_OK(start_on(s, c, "p", &err), &err);
+    T_ERR(store_job_move(s, c, -1, &err), SF_EAGAIN, &err, "only a waiting job");
+    T_QUEUE(s, d, b, a, e);
+    T_OK(store_job_move(s, e, -1, &err), &err); /* the printing job is not a place */
+    T_QUEUE(s, d, b, e, a);
+    /* each move is in the event log */
+    struct event_row *ev;
+    size_t n, moves = 0;
+    T_OK(store_events(s, 0, 200, &ev, &n, &err), &err);
+    for (size_t i = 0; i < n; i++)
+        moves += strcmp(ev[i].kind, "job-move") == 0;
+    free(ev);
+    T_EQ_INT((long long)moves, 7);
+    T_OK(store_check(s, &err), &err);
+    store_close(s);
+}

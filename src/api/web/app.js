@@ -212,7 +212,7 @@ function applyDown() {
   }
 }
 
-const EVENT_KINDS = ["job-add", "job-priority", "printer-state", "printer-bed", "job-prepare",
+const EVENT_KINDS = ["job-add", "job-priority", "job-move", "printer-state", "printer-bed", "job-prepare",
   "job-prepared", "job-prepare-failed", "job-start", "job-pause", "job-resume", "job-print-done",
   "job-print-failed", "job-cancel", "job-cancel-copy", "job-crashed", "job-restart", "job-defer"];
 
@@ -628,9 +628,10 @@ function renderCounters() {
 const ACTIVE = ["queued", "preparing", "ready", "printing", "paused", "interrupted"];
 const WAITING = ["queued", "preparing", "ready"];
 
-// The scheduler's rule: higher priority first, then first come, first served.
+// The scheduler's rule: higher priority first, then the queue's order (first
+// come, first served unless moved with ▲/▼).
 function queueOrder(a, b) {
-  return b.priority - a.priority || a.id - b.id;
+  return b.priority - a.priority || a.queue_pos - b.queue_pos || a.id - b.id;
 }
 
 function fits(j, p) {
@@ -723,10 +724,10 @@ function renderQueue() {
   }
 }
 
-function setPriority(j, prio) {
-  prio = Math.max(-1000, Math.min(1000, prio));
-  return api(`/api/jobs/${j.id}`, { method: "PATCH", headers: { "Content-Type": "application/json" },
-    body: JSON.stringify({ priority: prio }) });
+// One place up (-1) or down (1) among the waiting jobs.
+function moveJob(j, by) {
+  return api(`/api/jobs/${j.id}/move`, { method: "POST", headers: { "Content-Type": "application/json" },
+    body: JSON.stringify({ by }) });
 }
 
 function jobActions(j, above, below) {
@@ -734,9 +735,9 @@ function jobActions(j, above, below) {
   const id = j.id;
   if (WAITING.includes(j.state)) {
     d.append(el("button", { type: "button", "aria-label": `Move job ${id} up`, disabled: !above, "data-keep": above ? null : "disabled",
-      onclick: act(() => setPriority(j, Math.max(j.priority + 1, above.priority + 1))) }, "▲"));
+      onclick: act(() => moveJob(j, -1)) }, "▲"));
     d.append(el("button", { type: "button", "aria-label": `Move job ${id} down`, disabled: !below, "data-keep": below ? null : "disabled",
-      onclick: act(() => setPriority(j, Math.min(j.priority - 1, below.priority - 1))) }, "▼"));
+      onclick: act(() => moveJob(j, 1)) }, "▼"));
   }
   if (j.state === "interrupted") {
     // the last acknowledged line by default; the operator may pick another

@@ -100,7 +100,8 @@ function addRow(j) {
     const b = document.createElement("button");
     b.type = "button";
     b.textContent = "Print again";
-    b.setAttribute("aria-label", `Print job #${j.id} ${j.name} again`);
+    // the name holds the words shown (WCAG 2.5.3, label in name)
+    b.setAttribute("aria-label", `Print again: job #${j.id} ${j.name}`);
     b.addEventListener("click", () => again(j.id, b));
     td.appendChild(b);
   }
