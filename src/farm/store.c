@@ -174,6 +174,8 @@ static const char *const migrations[] = {
        /api/printers) in one index step: max(id) over (printer, job_id)
        walked every print of the printer */
     "CREATE INDEX prints_printer_id ON prints(printer, id);",
+    /* 9: printers managed at run time (store_printer_cfg.c) */
+    STORE_PRINTER_CFG_SCHEMA,
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

@@ -134,6 +134,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
                  "COLUMN andr; ALTER TABLE jobs DROP COLUMN shape_changed;"
                  "ALTER TABLE jobs DROP COLUMN est_s;"
                  "DROP INDEX jobs_live; DROP INDEX prints_printer; DROP INDEX prints_printer_id;"
+                 "DROP TABLE printer_cfgs;"
                  "PRAGMA user_version = 1",
                  NULL, NULL, NULL),
              SQLITE_OK);
