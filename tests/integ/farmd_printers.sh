@@ -12,8 +12,8 @@
 #  - a disabled printer (with its reason shown) takes no job: a job for it
 #    waits, naming it disabled, through a daemon restart, and prints once
 #    it is enabled;
-#  - both printers, the disable and its reason survive the restart; a
-#    removed printer stays removed after another.
+#  - both printers, the disable and its reason survive the restart and a
+#    reload (SIGHUP); a removed printer stays removed after a restart.
 # Every wait polls for its condition with a bound generous for a loaded machine.
 set -u
 BUILD=${BUILD:-build/san}
@@ -130,6 +130,11 @@ expect 200 '"disabled_reason":"nozzle swap"' -- GET /api/printers/op/config
 wait_for 60 printer_is mk awaiting-clear || fail "mk after the restart: $("$C" printers)"
 wait_for 120 waits_disabled || fail "job $j4 after the restart: $(api "/api/jobs/$j4")"
 case "$(job_state "$j4")" in queued | preparing | ready) ;; *) fail "job $j4: $(job_state "$j4")" ;; esac
+# a reload (SIGHUP) of a farm.ini that names neither keeps both as they are
+kill -HUP "$pid"
+wait_for 30 grep -q "reloaded " "$tmp/log" || fail "no reload"
+names=$(api /api/printers | json '" ".join(sorted("%s:%s" % (p["name"], p["enabled"]) for p in d["printers"]))')
+[ "$names" = "mk:True op:False" ] || fail "printers after the reload: $names"
 
 # enabled again, it prints the job that waited
 expect 200 '"enabled":true' -- POST /api/printers/op/enable
