@@ -161,7 +161,7 @@ commit(struct farm *f, const struct store_printer_cfg *r, const struct farmcfg_p
     if (rc == SF_OK && effective(seed, r, true, &c))
         rc = farm_apply(f, &c, err);
     log_printer(rc ? LOG_ERROR : LOG_INFO, r->name, "%s%s%s", detail, rc ? ": " : "",
-                rc ? err->msg : "");
+                rc && err ? err->msg : "");
     farm_notify(f);
     farm_kick(f);
     return rc;
