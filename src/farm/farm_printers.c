@@ -141,13 +141,20 @@ struct target {
     const struct farmcfg_printer *seed; /* farm.ini's printer of its name, or NULL */
 };
 
-/* Printer name as a target into *t: SF_ENOTFOUND with err set, SF_EIO. */
+/*
+ * Printer name as a target into *t: SF_ENOTFOUND with err set, SF_EIO.
+ * busy non-NULL: SF_EAGAIN while it holds a job, err saying so and then busy.
+ */
 static int
-open_printer(struct farm *f, const char *name, struct target *t, struct sf_err *err)
+open_printer(struct farm *f, const char *name, struct target *t, const char *busy,
+             struct sf_err *err)
 {
     t->p = farm_find(f, name);
     if (!t->p || printer_removed(t->p))
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    if (busy && printer_job(t->p))
+        return sf_err_set(err, SF_EAGAIN, "printer '%.64s' is printing job %lld%s", name,
+                          (long long)printer_job(t->p), busy);
     return load(f, name, &t->r, &t->seed, err);
 }
 
@@ -206,7 +213,7 @@ farm_printer_edit(struct farm *f, const char *name, const char *text, struct sf_
     struct farmcfg_printer c;
     struct target t;
     int rc;
-    if ((rc = open_printer(f, name, &t, err)) || (rc = check_text(name, text, &c, err)))
+    if ((rc = open_printer(f, name, &t, NULL, err)) || (rc = check_text(name, text, &c, err)))
         return rc;
     t.r.has_cfg = true;
     snprintf(t.r.cfg, sizeof(t.r.cfg), "%s", text);
@@ -224,16 +231,12 @@ int
 farm_printer_disable(struct farm *f, const char *name, const char *reason, struct sf_err *err)
 {
     struct target t;
-    int rc = open_printer(f, name, &t, err);
-    if (rc)
-        return rc;
     /* Refused rather than deferred: a disable that lands later, when the print ends, is a
        change nobody sees happen; the operator waits for the print or cancels it. */
-    if (printer_job(t.p))
-        return sf_err_set(err, SF_EAGAIN,
-                          "printer '%.64s' is printing job %lld: disable it once the print ends, "
-                          "or cancel the print first",
-                          name, (long long)printer_job(t.p));
+    int rc = open_printer(f, name, &t,
+                          ": disable it once the print ends, or cancel the print first", err);
+    if (rc)
+        return rc;
     if (!reason[0] || strlen(reason) >= sizeof(t.r.reason))
         return sf_err_set(err, SF_EINVAL, "field 'reason': say why, in 1..%zu bytes",
                           sizeof(t.r.reason) - 1);
@@ -248,7 +251,7 @@ int
 farm_printer_enable(struct farm *f, const char *name, struct sf_err *err)
 {
     struct target t;
-    int rc = open_printer(f, name, &t, err);
+    int rc = open_printer(f, name, &t, NULL, err);
     if (rc)
         return rc;
     t.r.disabled = false;
@@ -285,12 +288,9 @@ int
 farm_printer_remove(struct farm *f, const char *name, struct sf_err *err)
 {
     struct target t;
-    int rc = open_printer(f, name, &t, err);
+    int rc = open_printer(f, name, &t, "", err);
     if (rc)
         return rc;
-    if (printer_job(t.p))
-        return sf_err_set(err, SF_EAGAIN, "printer '%.64s' is printing job %lld", name,
-                          (long long)printer_job(t.p));
     if ((rc = bed_busy(f, name, err)))
         return rc;
     /* farm.ini's printer needs a row saying it is gone; the API's own needs none. */
@@ -313,7 +313,7 @@ farm_printer_base(struct farm *f, const char *name, struct farmcfg_printer *out,
                   struct sf_err *err)
 {
     struct target t;
-    int rc = open_printer(f, name, &t, err);
+    int rc = open_printer(f, name, &t, NULL, err);
     if (rc)
         return rc;
     if (!effective(t.seed, &t.r, false, out))

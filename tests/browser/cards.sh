@@ -13,17 +13,8 @@
 # Screenshots (1280x800, 1920x1080, 390x844) land in build/browser/cards/.
 # Skips (passes, saying so) when chromium, node or the npm packages are
 # absent: `make check` installs them.
-set -u
-umask 077
-BUILD=${BUILD:-build/san}
 here=$(cd "$(dirname "$0")" && pwd)
-if [ ! -x /usr/bin/chromium ] || ! command -v node > /dev/null ||
-  [ ! -f "$here/node_modules/playwright-core/package.json" ] ||
-  [ ! -f "$here/node_modules/axe-core/axe.min.js" ]; then
-  echo "cards: skipped (chromium, node, playwright-core or axe-core missing: make browser-deps)"
-  exit 0
-fi
-. "$here/../integ/lib/farm.sh"
+. "$here/../integ/lib/browser.sh" cards
 
 start_sim slow --speed 1
 start_sim hot --speed 3000 --fault runaway=3000

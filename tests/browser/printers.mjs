@@ -75,14 +75,17 @@ async function run(page) {
 
   log("disabled with a reason: the card is grey and says why; the API agrees");
   await page.getByRole("button", { name: "Manage mk" }).click();
+  await page.locator("#pf").waitFor({ state: "visible", timeout: 60000 });
   await page.locator("#pf-disable").click();
-  await page.locator("#pd").waitFor({ state: "visible", timeout: 60000 });
-  const said = await page.locator("#pd").innerText();
+  const d = page.locator("#confirm");
+  await d.waitFor({ state: "visible", timeout: 60000 });
+  const said = await d.innerText();
   check(/takes no new job/.test(said), "the disable dialog: " + said);
+  check(await page.locator("#confirm-ok").isDisabled(), "Disable without a reason is offered");
   await accessible(page, "disable dialog");
-  await page.locator("#pd-reason").fill("nozzle swap");
+  await page.locator("#confirm-input").fill("nozzle swap");
   await page.getByRole("button", { name: "Disable mk" }).click();
-  await page.locator("#pd").waitFor({ state: "hidden", timeout: 60000 });
+  await d.waitFor({ state: "hidden", timeout: 60000 });
   await page.waitForSelector(`${sel("mk")}[data-shown="disabled"]`, { timeout: LONG });
   await page.waitForFunction((s) => /disabled: nozzle swap/i.test(document.querySelector(s + " .msg").textContent), sel("mk"), { timeout: LONG });
   const edge = await page.locator(sel("mk")).evaluate((e) => getComputedStyle(e).borderLeftColor);

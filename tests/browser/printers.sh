@@ -6,17 +6,8 @@
 # form, then disables with a reason, enables and removes.  Screenshots land
 # in build/browser/printers/.  Skips (passes, saying so) when chromium,
 # node or the npm packages are absent: `make check` installs them.
-set -u
-umask 077
-BUILD=${BUILD:-build/san}
 here=$(cd "$(dirname "$0")" && pwd)
-if [ ! -x /usr/bin/chromium ] || ! command -v node > /dev/null ||
-  [ ! -f "$here/node_modules/playwright-core/package.json" ] ||
-  [ ! -f "$here/node_modules/axe-core/axe.min.js" ]; then
-  echo "printers: skipped (chromium, node, playwright-core or axe-core missing: make browser-deps)"
-  exit 0
-fi
-. "$here/../integ/lib/farm.sh"
+. "$here/../integ/lib/browser.sh" printers
 
 start_sim seed --speed 100
 start_sim mk --speed 100

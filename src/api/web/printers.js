@@ -10,7 +10,7 @@
 // the operator filled in is sent: the daemon checks it with farm.ini's own
 // rules, and its refusal, naming the field, is shown in the form with that
 // field marked.  Removing asks first, as every destructive action does;
-// disabling asks for the reason the card will show.
+// disabling asks, in the same dialog, for the reason the card will show.
 "use strict";
 
 const pm = {
@@ -146,31 +146,26 @@ async function pmSave(e) {
   }
 }
 
-// Disable: a dialog asks for the reason (shown on the card), and says what it does.
-function pmDisable() {
+// Disable: the confirmation dialog says what it does and asks for the
+// reason the card will show; its button waits for one.
+async function pmDisable() {
   const name = pm.editing;
   $("#pf").close();
-  $("#pd-title").textContent = `Disable ${name}?`;
-  $("#pd-text").textContent = `${name} takes no new job until it is enabled again, and the farm lets go ` +
-    "of its connection. A printer that is printing cannot be disabled: let the print end or cancel it first.";
-  $("#pd-ok").textContent = `Disable ${name}`;
-  $("#pd-reason").value = "";
-  $("#pd-error").textContent = "";
-  $("#pd").showModal();
-  $("#pd-reason").focus();
-}
-
-async function pmDisableGo(e) {
-  e.preventDefault();
-  const name = pm.editing;
-  try {
-    await api(`/api/printers/${encodeURIComponent(name)}/disable`,
-      { method: "POST", body: JSON.stringify({ reason: $("#pd-reason").value.trim() }) });
-    $("#pd").close();
-    scheduleRefresh(0);
-  } catch (err) {
-    if (err.status !== 401) $("#pd-error").textContent = err.status ? err.message : "The farm did not answer: nothing was done.";
-  }
+  const field = $("#confirm-field"), input = $("#confirm-input"), ok = $("#confirm-ok");
+  const need = () => { ok.disabled = input.value.trim() === ""; };
+  input.value = "";
+  field.hidden = false;
+  input.addEventListener("input", need);
+  need();
+  const go = act(() => api(`/api/printers/${encodeURIComponent(name)}/disable`,
+    { method: "POST", body: JSON.stringify({ reason: input.value.trim() }) }));
+  const yes = await ask(`Disable ${name}?`, `${name} takes no new job until it is enabled again, and the ` +
+    "farm lets go of its connection. A printer that is printing cannot be disabled: let the print end " +
+    "or cancel it first.", `Disable ${name}`);
+  input.removeEventListener("input", need);
+  field.hidden = true;
+  ok.disabled = st.down;
+  if (yes) await go();
 }
 
 function pmEnable(name) {
@@ -212,6 +207,4 @@ document.addEventListener("DOMContentLoaded", () => {
     pmEnable(pm.editing)();
   });
   $("#pf-remove").addEventListener("click", pmRemove);
-  $("#pd-form").addEventListener("submit", pmDisableGo);
-  $("#pd-no").addEventListener("click", () => $("#pd").close());
 });
