@@ -36,6 +36,7 @@
 #include "api_json.h"
 #include "api_octopush.h"
 #include "api_page.h"
+#include "api_printers.h"
 #include "api_read.h"
 #include "api_stats.h"
 #include "partcheck.h"
@@ -44,7 +45,7 @@
 #include "web.h"
 
 #define SSE_BATCH  64 /* events read from the store per stream refill */
-#define API_GROUPS 3  /* route groups: api_compat's, web's, api.c's */
+#define API_GROUPS 4  /* route groups: api_compat's, web's, api_printers', api.c's */
 
 struct api {
     struct api_config cfg;         /* as given */
@@ -512,8 +513,11 @@ printer_json(const struct store_bed *beds, size_t n_beds, const struct printer_i
                           p->nozzle_c, "nozzle_target_c", p->nozzle_target_c, "bed_c", p->bed_c,
                           "bed_target_c", p->bed_target_c, "job_id", (json_int_t)p->job_id,
                           "progress", p->progress, "message", p->message ? p->message : "");
-    if (o)
+    if (o) {
         time_left_json(o, p);
+        json_object_set_new(o, "disabled_reason", /* farm.h: an operator's, with why */
+                            c->disabled[0] ? json_string(c->disabled) : json_null());
+    }
     const struct store_bed *b = NULL;
     for (size_t i = 0; i < n_beds && !b; i++)
         if (strcmp(beds[i].printer, c->name) == 0)
@@ -892,11 +896,13 @@ api_new(const struct api_config *cfg, struct sf_err *err)
     a->slicers.push = a->push;
     a->web = a->push ? web_new(&wc, err) : NULL;
     hc.session_cookie = a->web ? web_cookie_name(a->web) : NULL;
-    size_t n_compat, n_web;
-    const struct route *compat = api_compat_routes(&n_compat), *web = web_routes(&n_web);
+    size_t n_compat, n_web, n_printers;
+    const struct route *compat = api_compat_routes(&n_compat), *web = web_routes(&n_web),
+                       *printers = api_printers_routes(&n_printers);
     a->groups[0] = (struct route_group){ compat, n_compat, &a->slicers };
     a->groups[1] = (struct route_group){ web, n_web, a->web };
-    a->groups[2] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
+    a->groups[2] = (struct route_group){ printers, n_printers, cfg->farm };
+    a->groups[3] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
     a->temps = temps_new();
     a->http = a->web && a->temps ? http_new(&hc, err) : NULL;
     if (!a->http) {

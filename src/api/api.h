@@ -16,6 +16,8 @@
  *   GET    /api/printers                  list printers with state, temperatures
  *   GET    /api/printers/NAME             one printer
  *   POST   /api/printers/NAME/ACTION      pause | resume | cancel | cleared
+ *   POST /api/printers, PUT/PATCH/DELETE /api/printers/NAME, .../disable, .../enable:
+ *                                         printers managed at run time (api_printers.h)
  *   GET    /api/events                    Server-Sent Events: the event log (id: N,
  *                                         event: KIND; Last-Event-ID resumes) and
  *                                         every API_TICK_MS a "progress" snapshot

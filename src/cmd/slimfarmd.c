@@ -425,6 +425,7 @@ main(int argc, char **argv)
     if (!(d.farm = farm_new(d.l, d.s, d.pool, &d.cfg, &hooks, &err)) ||
         !(d.notify = notify_new(d.l, d.s, d.cfg.notify, d.cfg.n_notify, &err)))
         goto out;
+    raise_nofile(farm_printer_count(d.farm)); /* with those managed at run time (farm.h) */
     struct api_config ac = { .store = d.s,
                              .farm = d.farm,
                              .host = d.cfg.listen_host,
@@ -448,7 +449,7 @@ main(int argc, char **argv)
         goto out;
     signal(SIGPIPE, SIG_IGN);
     log_info("slimfarmd", "listening on %s:%d, data in %s, %zu printers", d.cfg.listen_host,
-             http_port(api_http(d.api)), d.cfg.data_dir, d.cfg.n_printers);
+             http_port(api_http(d.api)), d.cfg.data_dir, farm_printer_count(d.farm));
     if (loop_run(d.l) == SF_OK)
         status = 0;
     else

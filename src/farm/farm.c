@@ -503,11 +503,18 @@ farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcf
         farm_free(f);
         return NULL;
     }
-    for (size_t i = 0; i < cfg->n_printers; i++)
-        if (add_printer(f, &cfg->printers[i], err)) {
-            farm_free(f);
-            return NULL;
-        }
+    struct farmcfg_printer *list = NULL;
+    size_t n = 0;
+    int rc = farm_seed(f, cfg->printers, cfg->n_printers, err);
+    if (rc == SF_OK)
+        rc = farm_merged(f, &list, &n, err);
+    for (size_t i = 0; rc == SF_OK && i < n; i++)
+        rc = add_printer(f, &list[i], err);
+    free(list);
+    if (rc) {
+        farm_free(f);
+        return NULL;
+    }
     if (f->hooks.progress_ms <= 0)
         f->hooks.progress_ms = FARM_PROGRESS_MS;
     f->progress = loop_timer_add(l, f->hooks.progress_ms, on_progress, f);
@@ -537,19 +544,18 @@ farm_free(struct farm *f)
     for (size_t i = 0; i < f->n_printers; i++)
         printer_free(f->printers[i]);
     free(f->printers);
+    free(f->seed);
     free(f->no);
     free(f);
 }
 
-/*
- * Does a printer's link differ between its configs a and b: its driver,
- * enabled, or an option of its kind not marked live (drv_link_diff)?  If
- * so, say what in why (secrets not shown).
- */
-static bool
-link_change(const struct farmcfg_printer *a, const struct farmcfg_printer *b, char *why, size_t n)
+bool
+farm_link_change(const struct farmcfg_printer *a, const struct farmcfg_printer *b, char *why,
+                 size_t n)
 {
-    if (strcmp(a->driver, b->driver) != 0 || a->enabled != b->enabled) {
+    /* a new disable reason too: the printer's message says it (printer_new) */
+    if (strcmp(a->driver, b->driver) != 0 || a->enabled != b->enabled ||
+        strcmp(a->disabled, b->disabled) != 0) {
         snprintf(why, n, "option '%s' changed", a->enabled != b->enabled ? "enabled" : "driver");
         return true;
     }
@@ -565,46 +571,43 @@ link_change(const struct farmcfg_printer *a, const struct farmcfg_printer *b, ch
 }
 
 int
-farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
+farm_apply(struct farm *f, const struct farmcfg_printer *c, struct sf_err *err)
 {
-    /* Printers that left the config: free when not printing, else after. */
-    for (size_t i = 0; i < f->n_printers; i++) {
-        struct printer *p = f->printers[i];
-        printer_set_removed(p, !farmcfg_printer(cfg, printer_cfg(p)->name));
-    }
-    for (size_t i = 0; i < cfg->n_printers; i++) {
-        const struct farmcfg_printer *c = &cfg->printers[i];
-        struct printer *p = farm_find(f, c->name);
-        if (!p) {
-            if (add_printer(f, c, err))
-                return err ? err->code : SF_ENOMEM;
-            continue;
+    struct printer *p = farm_find(f, c->name);
+    if (!p)
+        return add_printer(f, c, err);
+    printer_set_removed(p, false);
+    const struct farmcfg_printer *old = printer_cfg(p);
+    char why[200];
+    bool change = farm_link_change(old, c, why, sizeof(why));
+    if (!change || printer_job(p)) {
+        /* Same link, or busy: change what the scheduler reads only. */
+        struct farmcfg_printer next = *c;
+        if (change) {
+            log_printer(LOG_WARN, c->name, "link change waits for the print to end");
+            memcpy(next.driver, old->driver, sizeof(next.driver));
+            next.link = old->link;
+            next.enabled = old->enabled;
+            memcpy(next.disabled, old->disabled, sizeof(next.disabled));
         }
-        const struct farmcfg_printer *old = printer_cfg(p);
-        char why[200];
-        bool change = link_change(old, c, why, sizeof(why));
-        if (!change || printer_job(p)) {
-            /* Same link, or busy: change what the scheduler reads only. */
-            struct farmcfg_printer next = *c;
-            if (change) {
-                log_printer(LOG_WARN, c->name, "link change waits for the print to end");
-                memcpy(next.driver, old->driver, sizeof(next.driver));
-                next.link = old->link;
-                next.enabled = old->enabled;
-            }
-            printer_set_cfg(p, &next);
-            continue;
-        }
-        log_printer(LOG_INFO, c->name, "reload: %s: reconnecting", why);
-        /* New link and idle: replace the printer. */
-        struct printer *fresh = add_printer_new(f, c);
-        if (!fresh)
-            return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
-        for (size_t k = 0; k < f->n_printers; k++)
-            if (f->printers[k] == p)
-                f->printers[k] = fresh;
-        printer_free(p);
+        printer_set_cfg(p, &next);
+        return SF_OK;
     }
+    log_printer(LOG_INFO, c->name, "%s: reconnecting", why);
+    /* New link and idle: replace the printer. */
+    struct printer *fresh = add_printer_new(f, c);
+    if (!fresh)
+        return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
+    for (size_t k = 0; k < f->n_printers; k++)
+        if (f->printers[k] == p)
+            f->printers[k] = fresh;
+    printer_free(p);
+    return SF_OK;
+}
+
+void
+farm_sweep(struct farm *f)
+{
     size_t w = 0;
     for (size_t i = 0; i < f->n_printers; i++) {
         struct printer *p = f->printers[i];
@@ -615,6 +618,31 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
         f->printers[w++] = p;
     }
     f->n_printers = w;
+}
+
+int
+farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
+{
+    /* farm.ini's printers, with the store's run-time rows over them (farm_printers.c) */
+    struct farmcfg_printer *list = NULL;
+    size_t n = 0;
+    int rc = farm_seed(f, cfg->printers, cfg->n_printers, err);
+    if (rc || (rc = farm_merged(f, &list, &n, err)))
+        return rc;
+    /* Printers that left the config: free when not printing, else after. */
+    for (size_t i = 0; i < f->n_printers; i++) {
+        struct printer *p = f->printers[i];
+        bool kept = false;
+        for (size_t k = 0; k < n && !kept; k++)
+            kept = strcmp(list[k].name, printer_cfg(p)->name) == 0;
+        printer_set_removed(p, !kept);
+    }
+    for (size_t i = 0; i < n && rc == SF_OK; i++)
+        rc = farm_apply(f, &list[i], err);
+    free(list);
+    if (rc)
+        return rc;
+    farm_sweep(f);
     f->n_no = 0; /* a reload may have mended a profile */
     snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
     f->gram_s = cfg->gram_s;

@@ -64,6 +64,38 @@ void farm_drop_pool(struct farm *f);
 /* Apply a new config; running prints keep their printer until they end. */
 int farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err);
 
+/*
+ * Run-time printers (farm_printers.c): printers an operator adds, edits,
+ * disables and removes through the API, kept in the store (store.h
+ * store_printer_cfg_*) and applied as a reload applies farm.ini's.  At
+ * start and at each reload the printers in force are farm.ini's with the
+ * store's rows over them: a printer the API edited runs on the API's
+ * config, farm.ini's section of that name no longer counts; one the API
+ * disabled stays disabled whatever farm.ini says; one the API removed
+ * stays removed; the API's own printers come after farm.ini's.
+ *
+ * text is a [printer NAME] section's body, "key: value" lines, checked by
+ * farmcfg_printer_parse (SF_EINVAL naming the option).  SF_ENOTFOUND no
+ * such printer; SF_EAGAIN (409) not now: a name in use (add), a printing
+ * printer's link (edit: driver, enabled or a connection option), a
+ * printer that holds a job (disable, remove) or a part on its bed or an
+ * interrupted job (remove); SF_EIO the store.  Each change is committed
+ * to the store before the printer is touched.
+ */
+int farm_printer_add(struct farm *f, const char *name, const char *text, struct sf_err *err);
+int farm_printer_edit(struct farm *f, const char *name, const char *text, struct sf_err *err);
+/* Disabled: no job starts on it and the farm lets go of its link (enabled false). */
+int farm_printer_disable(struct farm *f, const char *name, const char *reason, struct sf_err *err);
+int farm_printer_enable(struct farm *f, const char *name, struct sf_err *err);
+int farm_printer_remove(struct farm *f, const char *name, struct sf_err *err);
+/*
+ * Printer name's config as an edit starts from, into *out: the store's
+ * when the API edited or added it (*stored true), else farm.ini's; an
+ * operator's disable not applied.  SF_ENOTFOUND, SF_EIO.
+ */
+int farm_printer_base(struct farm *f, const char *name, struct farmcfg_printer *out, bool *stored,
+                      struct sf_err *err);
+
 /* Something changed (job submitted, bed cleared): prepare and schedule soon. */
 void farm_kick(struct farm *f);
 

@@ -41,6 +41,8 @@ struct farm {
     struct prep *reslices; /* re-slices in flight (their jobs stay ready), linked by next */
     struct noreslice *no;  /* re-slices that failed: not tried again until a reload */
     size_t n_no, cap_no;
+    struct farmcfg_printer *seed; /* farm.ini's printers as last given (farm_seed), n_seed */
+    size_t n_seed;
 };
 
 /* Wake the event streams (the notify hook), if any. */
@@ -59,5 +61,28 @@ void farm_printer_view(const struct printer *p, struct sched_printer *out);
  * scheduling pass tries again when nothing was committed.
  */
 void farm_start(struct farm *f, const struct job_row *j, struct printer *p);
+
+/*
+ * Printer c's config into the farm (c->name's printer is added if new):
+ * the same link, or a busy printer, takes it in place (a busy one keeps
+ * its link until a later apply); an idle one with a new link (driver,
+ * enabled, an option not live) is replaced and reconnects.  SF_ENOMEM.
+ */
+int farm_apply(struct farm *f, const struct farmcfg_printer *c, struct sf_err *err);
+/* Free the printers marked removed that hold no job. */
+void farm_sweep(struct farm *f);
+/* Does the link differ between configs a and b (what farm_apply reconnects for)?  why: what. */
+bool farm_link_change(const struct farmcfg_printer *a, const struct farmcfg_printer *b, char *why,
+                      size_t n);
+
+/* farm_printers.c: keep farm.ini's n printers p as the seed (copied).  SF_ENOMEM. */
+int farm_seed(struct farm *f, const struct farmcfg_printer *p, size_t n, struct sf_err *err);
+/*
+ * The printers in force (farm.h, "Run-time printers"): the seed with the
+ * store's rows over it, then the rows' own, into *out (free() it).  A
+ * stored row that no longer parses is logged and left out (the seed's
+ * printer of that name stands).  SF_EIO from the store, SF_ENOMEM.
+ */
+int farm_merged(struct farm *f, struct farmcfg_printer **out, size_t *n, struct sf_err *err);
 
 #endif

@@ -80,8 +80,8 @@ static const struct option options[] = {
 
 /* Parser state shared by the reader and the handler. */
 struct parse {
-    struct farmcfg *cfg;  /* being filled */
-    const char *name;     /* file name for messages */
+    struct farmcfg *cfg; /* being filled */
+    const char *name; /* file name for messages; NULL: none, nor a line (farmcfg_printer_parse) */
     const char *p, *end;  /* unread text */
     int line;             /* line last handed to inih */
     bool failed;          /* an error was recorded; stop */
@@ -104,7 +104,10 @@ fail(struct parse *ps, const char *fmt, ...)
     va_start(ap, fmt);
     vsnprintf(msg, sizeof(msg), fmt, ap);
     va_end(ap);
-    sf_err_set(ps->err, SF_EINVAL, "%s:%d: %s", ps->name, ps->line, msg);
+    if (ps->name)
+        sf_err_set(ps->err, SF_EINVAL, "%s:%d: %s", ps->name, ps->line, msg);
+    else
+        sf_err_set(ps->err, SF_EINVAL, "%s", msg);
     return 0;
 }
 
@@ -120,8 +123,8 @@ ident_ok(const char *s)
     return true;
 }
 
-static void
-printer_defaults(struct farmcfg_printer *p)
+void
+farmcfg_printer_init(struct farmcfg_printer *p)
 {
     memset(p, 0, sizeof(*p));
     drv_link_init(&p->link);
@@ -216,7 +219,7 @@ open_section(struct parse *ps, const char *hdr, size_t len)
         return;
     }
     struct farmcfg_printer *p = &c->printers[c->n_printers];
-    printer_defaults(p);
+    farmcfg_printer_init(p);
     snprintf(p->name, sizeof(p->name), "%s", name);
     p->line = ps->line;
     ps->section = (int)c->n_printers++;
@@ -671,8 +674,9 @@ farmcfg_release(struct farmcfg *c)
     farmcfg_init(c);
 }
 
-int
-farmcfg_parse(struct farmcfg *c, const char *text, size_t len, const char *name, struct sf_err *err)
+/* farmcfg_parse, messages without file:line when name is NULL. */
+static int
+parse_text(struct farmcfg *c, const char *text, size_t len, const char *name, struct sf_err *err)
 {
     struct parse ps = {
         .cfg = c, .name = name, .p = text, .end = text + len, .err = err, .section = -2
@@ -697,6 +701,46 @@ farmcfg_parse(struct farmcfg *c, const char *text, size_t len, const char *name,
         return SF_EINVAL;
     }
     return SF_OK;
+}
+
+int
+farmcfg_parse(struct farmcfg *c, const char *text, size_t len, const char *name, struct sf_err *err)
+{
+    return parse_text(c, text, len, name ? name : "config", err);
+}
+
+int
+farmcfg_printer_parse(struct farmcfg_printer *out, const char *name, const char *text, size_t len,
+                      struct sf_err *err)
+{
+    if (!ident_ok(name) || strlen(name) >= sizeof(out->name))
+        return sf_err_set(err, SF_EINVAL,
+                          "printer name '%.64s' must be 1..63 letters, digits, '-', '_', '.'",
+                          name);
+    /* The body under its own header, parsed as a file of one section: every check is the
+       file's.  A section header in the body would reach past this printer: refused. */
+    for (size_t i = 0; i < len; i++) {
+        size_t j = i;
+        while (j < len && (text[j] == ' ' || text[j] == '\t'))
+            j++;
+        if (j < len && text[j] == '[')
+            return sf_err_set(err, SF_EINVAL, "section 'printer %.64s': a section header in it",
+                              name);
+        const char *nl = memchr(text + i, '\n', len - i);
+        i = nl ? (size_t)(nl - text) : len;
+    }
+    struct buf b;
+    struct farmcfg c;
+    buf_init(&b, SF_CONFIG_FILE_MAX);
+    farmcfg_init(&c);
+    int rc = buf_printf(&b, "[printer %s]\n", name) || buf_append(&b, text, len)
+                 ? sf_err_set(err, SF_ENOMEM, "out of memory")
+                 : parse_text(&c, b.data, b.len, NULL, err);
+    if (rc == SF_OK)
+        *out = c.printers[0];
+    farmcfg_release(&c);
+    buf_release(&b);
+    return rc;
 }
 
 int
@@ -730,6 +774,41 @@ farmcfg_option_name(size_t i, bool *printer)
     if (printer)
         *printer = options[i].printer;
     return options[i].name;
+}
+
+void
+farmcfg_printer_each(const struct farmcfg_printer *p, farmcfg_option_fn fn, void *ud)
+{
+    char v[300];
+    for (size_t i = 0; i < N_OPTIONS; i++) {
+        const struct option *o = &options[i];
+        const char *field = (const char *)p + o->off;
+        if (!o->printer)
+            continue;
+        if (o->kind == K_STR || o->kind == K_IDENT)
+            snprintf(v, sizeof(v), "%s", field);
+        else if (o->kind == K_DBL)
+            snprintf(v, sizeof(v), "%.15g", *(const double *)field);
+        else if (o->kind == K_BOOL)
+            snprintf(v, sizeof(v), "%s", *(const bool *)field ? "true" : "false");
+        else /* K_TRIPLE, the one other kind a printer option has */
+            snprintf(v, sizeof(v), "%.15g, %.15g, %.15g", ((const double *)field)[0],
+                     ((const double *)field)[1], ((const double *)field)[2]);
+        fn(ud, o->name, v, false);
+    }
+    for (size_t i = 0; i < p->link.n; i++) {
+        const struct drv_link_val *lv = &p->link.v[i];
+        const struct drv_option *o = lv->opt;
+        const char *t = p->link.text + lv->at;
+        size_t pre = o->prefix ? strlen(o->prefix) : 0;
+        if (o->type == DRV_OPT_INT)
+            snprintf(v, sizeof(v), "%d", lv->num);
+        else if (o->type == DRV_OPT_BOOL)
+            snprintf(v, sizeof(v), "%s", lv->num ? "true" : "false");
+        else /* text, as given: without the prefix drv_link_set put before it */
+            snprintf(v, sizeof(v), "%s", pre && strncmp(t, o->prefix, pre) == 0 ? t + pre : t);
+        fn(ud, o->name, v, (o->flags & DRV_OPT_SECRET) != 0);
+    }
 }
 
 void

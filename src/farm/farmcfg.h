@@ -65,6 +65,9 @@ struct farmcfg_printer {
                       policy (drivers/gpolicy.h; default false) */
     /* commands the G-code policy refuses that this printer takes: "M600 M0" (default "") */
     char allow_gcode[256];
+    /* why an operator disabled it at run time (farm.h farm_printer_disable; enabled is then
+       false); "" if not.  Not an option of the file: the store keeps it */
+    char disabled[128];
 };
 
 struct farmcfg {
@@ -106,6 +109,32 @@ int farmcfg_load(struct farmcfg *c, const char *path, struct sf_err *err);
 /* Name of option i, link options included (NULL past the last); *printer says which
    section kind. */
 const char *farmcfg_option_name(size_t i, bool *printer);
+
+/* Set every option of printer p to its default (no name, no driver, no link option). */
+void farmcfg_printer_init(struct farmcfg_printer *p);
+
+/*
+ * One printer section's body (text: "key: value" lines, as a [printer NAME]
+ * section of the file holds them) for printer name, checked by the very
+ * rules the file's are, into *out.  SF_EINVAL with a message naming the
+ * option and the section, without a file:line ("option 'nozzle_mm' in
+ * section 'printer a': '9' is not a number in 0.1..2"), also for a name
+ * the file would refuse.  The run-time printers' path (farm.h).
+ */
+int farmcfg_printer_parse(struct farmcfg_printer *out, const char *name, const char *text,
+                          size_t len, struct sf_err *err);
+
+/* Called once per option of a printer by farmcfg_printer_each: its name, its value as the
+   file writes it, and whether it is a secret (an api_key, a password). */
+typedef void (*farmcfg_option_fn)(void *ud, const char *name, const char *value, bool secret);
+
+/*
+ * Every option of printer p with its value as text the parser takes back
+ * (farmcfg_printer_parse gives p again, but for line numbers): the
+ * section's options in table order, defaults included, then the link
+ * options p was given, in the order given.
+ */
+void farmcfg_printer_each(const struct farmcfg_printer *p, farmcfg_option_fn fn, void *ud);
 
 /* The G-code policy (drivers/gpolicy.h) of printer p: its attended and allow_gcode. */
 void farmcfg_policy(const struct farmcfg_printer *p, struct gpolicy *out);

@@ -419,7 +419,10 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
     if (p->bed_full)
         log_printer(LOG_INFO, cfg->name, "its bed holds a part: clear it before the next job");
     if (!cfg->enabled) {
-        snprintf(p->message, sizeof(p->message), "disabled in the config");
+        if (cfg->disabled[0]) /* by an operator, at run time (farm.h) */
+            snprintf(p->message, sizeof(p->message), "disabled: %s", cfg->disabled);
+        else
+            snprintf(p->message, sizeof(p->message), "disabled in the config");
         return p;
     }
     if (!env->driver) {

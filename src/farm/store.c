@@ -186,6 +186,8 @@ static const char *const migrations[] = {
     "ALTER TABLE jobs ADD COLUMN queue_pos INTEGER NOT NULL DEFAULT 0;"
     "UPDATE jobs SET queue_pos = id;"
     "CREATE INDEX jobs_queue_pos ON jobs(queue_pos);",
+    /* 10: printers managed at run time (store_printer_cfg.c) */
+    STORE_PRINTER_CFG_SCHEMA,
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

@@ -427,6 +427,27 @@ int store_hist(struct store *s, enum store_hist which, const double *bounds_s, s
  */
 struct store *store_open_reader(const struct store *s, struct sf_err *err);
 
+/* A printer the API manages (store_printer_cfg.c; farm.h's run-time printers), plain data. */
+#define STORE_PRINTER_CFG_MAX 4096 /* its section body: every option at its longest fits */
+struct store_printer_cfg {
+    int64_t id;                      /* order of the printers farm.ini does not name */
+    char name[64];                   /* the printer */
+    bool has_cfg;                    /* cfg is its section (else farm.ini's is in force) */
+    char cfg[STORE_PRINTER_CFG_MAX]; /* "key: value" lines, as a [printer NAME] body */
+    bool disabled;                   /* an operator disabled it, */
+    char reason[128];                /* saying why */
+    bool removed;                    /* farm.ini's printer of this name is removed */
+};
+/* Every row, by id, into *rows (free() it). */
+int store_printer_cfg_list(struct store *s, struct store_printer_cfg **rows, size_t *n,
+                           struct sf_err *err);
+/* Write r (by r->name; r->id is ignored), logged as event "printer-config" with detail. */
+int store_printer_cfg_put(struct store *s, const struct store_printer_cfg *r, const char *detail,
+                          struct sf_err *err);
+/* Drop printer name's row (none: SF_OK), logged as event "printer-config" with detail. */
+int store_printer_cfg_drop(struct store *s, const char *name, const char *detail,
+                           struct sf_err *err);
+
 /*
  * Check the database: SQLite's integrity and foreign-key checks plus the
  * store's own invariants (states are known, a job on a printer names it and

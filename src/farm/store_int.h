@@ -32,6 +32,23 @@ struct store {
     int lock_fd;                 /* DATA_DIR/lock, flock()ed exclusively; -1 if not open */
 };
 
+/*
+ * Migration 10 (store_printer_cfg.c): a printer the API added, edited,
+ * disabled or removed.  name: the printer; cfg: its [printer NAME]
+ * section's body ("key: value" lines), NULL when farm.ini's section is
+ * the one in force; disabled: the operator's reason, NULL when not
+ * disabled; removed: 1 hides farm.ini's printer of that name.  id orders
+ * the printers farm.ini does not name.
+ */
+#define STORE_PRINTER_CFG_SCHEMA                                                                   \
+    "CREATE TABLE printer_cfgs("                                                                   \
+    "  id INTEGER PRIMARY KEY AUTOINCREMENT,"                                                      \
+    "  name TEXT NOT NULL UNIQUE,"                                                                 \
+    "  cfg TEXT,"                                                                                  \
+    "  disabled TEXT,"                                                                             \
+    "  removed INTEGER NOT NULL DEFAULT 0 CHECK(removed IN (0, 1)),"                               \
+    "  updated_ms INTEGER NOT NULL);"
+
 /* SF_EIO with what and SQLite's message. */
 int store_db_fail(struct store *s, struct sf_err *err, const char *what);
 /* Run sql (no rows, no parameters). */

@@ -817,8 +817,8 @@ T_CASE(api_busy_printer_is_409_unreachable_is_503)
     T_EQ_INT(call("POST", "/api/printers/b/pause", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 503);
     T_EQ_INT(call("POST", "/api/printers/b/cleared", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 503);
     /* a wrong method on a known path says which would do */
-    T_EQ_INT(call("DELETE", "/api/printers/b", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 405);
-    T_EQ_STR(jstr(&b, NULL, "error"), "use GET");
+    T_EQ_INT(call("POST", "/api/printers/b", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 405);
+    T_EQ_STR(jstr(&b, NULL, "error"), "method POST is not allowed on /api/printers/b");
     atomic_store(&adrv_unplugged, false);
     buf_release(&b);
     stop();

@@ -1098,6 +1098,74 @@ T_CASE(farm_reload_adds_and_removes_printers)
     teardown();
 }
 
+/* Printer name's info; false if the farm has none of that name. */
+static bool
+info_of(const char *name, struct printer_info *out)
+{
+    for (size_t i = 0; i < farm_printer_count(fx.f); i++) {
+        farm_printer_info(fx.f, i, out);
+        if (strcmp(out->cfg->name, name) == 0)
+            return true;
+    }
+    return false;
+}
+
+/*
+ * Printers managed at run time (farm.h) over farm.ini's: an added printer
+ * comes after farm.ini's; an edited one runs on the API's options, and a
+ * disabled or removed one stays so, whatever a reload or a restart of
+ * farm.ini says; a disable keeps farm.ini's options.  Refusals name why.
+ */
+T_CASE(farm_runtime_printers_win_over_farm_ini)
+{
+    struct sf_err err;
+    struct printer_info info;
+    T_OK(setup("runtime", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    T_OK(farm_printer_add(fx.f, "c", "driver: marlin\nport: pty:/dev/null\nmaterial: ABS\n", &err),
+         &err);
+    T_OK(farm_printer_edit(fx.f, "a", "driver: marlin\nport: pty:/dev/null\nmaterial: TPU\n", &err),
+         &err);
+    T_OK(farm_printer_disable(fx.f, "b", "belt worn", &err), &err);
+    T_EQ_INT(farm_printer_add(fx.f, "c", "driver: marlin\nport: x\n", &err), SF_EAGAIN);
+    T_EQ_INT(farm_printer_edit(fx.f, "zz", "driver: marlin\nport: x\n", &err), SF_ENOTFOUND);
+    T_EQ_INT(farm_printer_add(fx.f, "d", "driver: marlin\n", &err), SF_EINVAL);
+    T_EQ_STR(err.msg, "section 'printer d': option 'port' is required by driver marlin");
+    T_EQ_INT(farm_printer_disable(fx.f, "a", "", &err), SF_EINVAL);
+    /* farm.ini changes a and b: a stays the API's, b takes farm.ini's options, still disabled */
+    static const char next[] =
+        "[printer a]\ndriver: marlin\nport: pty:/dev/null\nmaterial: PLA\n"
+        "[printer b]\ndriver: marlin\nport: pty:/dev/null\nmaterial: NYLON\n";
+    struct farmcfg c2;
+    farmcfg_init(&c2);
+    T_OK(farmcfg_parse(&c2, next, strlen(next), "next.ini", &err), &err);
+    T_OK(farm_reload(fx.f, &c2, &err), &err);
+    T_EQ_INT(farm_printer_count(fx.f), 3);
+    farm_printer_info(fx.f, 2, &info);
+    T_EQ_STR(info.cfg->name, "c"); /* after farm.ini's */
+    T_TRUE(info_of("a", &info) && strcmp(info.cfg->material, "TPU") == 0);
+    T_TRUE(info_of("b", &info) && strcmp(info.cfg->material, "NYLON") == 0);
+    T_TRUE(!info.cfg->enabled && strcmp(info.cfg->disabled, "belt worn") == 0);
+    T_TRUE(strstr(info.message, "disabled: belt worn") != NULL);
+    /* a farm.ini printer removed stays removed; a restart over the same store agrees */
+    T_OK(farm_printer_remove(fx.f, "a", &err), &err);
+    T_TRUE(!info_of("a", &info));
+    T_OK(farm_reload(fx.f, &c2, &err), &err);
+    T_TRUE(!info_of("a", &info));
+    farmcfg_release(&c2);
+    teardown();
+    T_OK(setup("runtime", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_EQ_INT(farm_printer_count(fx.f), 2);
+    T_TRUE(!info_of("a", &info) && info_of("c", &info));
+    T_TRUE(info_of("b", &info) && !info.cfg->enabled);
+    T_EQ_STR(info.cfg->material, "PETG"); /* farm.ini's at this start */
+    T_OK(farm_printer_enable(fx.f, "b", &err), &err);
+    T_TRUE(info_of("b", &info) && info.cfg->enabled && !info.cfg->disabled[0]);
+    T_OK(farm_printer_add(fx.f, "a", "driver: marlin\nport: pty:/dev/null\n", &err), &err);
+    T_TRUE(info_of("a", &info)); /* added again: back */
+    teardown();
+}
+
 /* Printer i's message holds what. */
 static bool
 message_has(size_t i, const char *what)

@@ -214,7 +214,8 @@ function applyDown() {
 
 const EVENT_KINDS = ["job-add", "job-priority", "job-move", "printer-state", "printer-bed", "job-prepare",
   "job-prepared", "job-prepare-failed", "job-start", "job-pause", "job-resume", "job-print-done",
-  "job-print-failed", "job-cancel", "job-cancel-copy", "job-crashed", "job-restart", "job-defer"];
+  "job-print-failed", "job-cancel", "job-cancel-copy", "job-crashed", "job-restart", "job-defer",
+  "printer-config"];
 
 function connect() {
   if (st.es) st.es.close();
@@ -404,7 +405,8 @@ function makeCard(p) {
         onclick: guarded(() => jobCancelText(st.jobs.get(held()), held()),
           () => api(`/api/jobs/${held()}/cancel`, { method: "POST" })) }, "Cancel job"),
       el("button", { type: "button", class: "danger", "data-act": "estop", "aria-label": "Emergency stop " + name,
-        onclick: emergencyStop(name) }, "Emergency stop")));
+        onclick: emergencyStop(name) }, "Emergency stop"),
+      ...pmCardButtons(name))); // printers.js
   }
   return c;
 }
@@ -556,6 +558,7 @@ function renderPrinters() {
         "job-restart": blocked,
         "job-cancel": blocked,
         estop: p.state !== "offline" && p.state !== "error" && p.enabled,
+        ...pmCardShow(p), // printers.js: Manage, Enable
       };
       for (const b of c.querySelectorAll("button[data-act]")) b.hidden = !show[b.dataset.act];
     }
