@@ -413,6 +413,57 @@ T_CASE(selfx_counts_only_the_crossings_the_input_did_not_have)
     mesh_release(&m);
 }
 
+T_CASE(selfx_ref_knows_the_input_count_and_reads_a_moved_reference)
+{
+    /* two overlapping boxes (the input's crossings) and two apart */
+    struct mesh m, b, turned, pushed;
+    struct sf_err err;
+    mesh_init(&m);
+    mesh_init(&b);
+    mesh_init(&turned);
+    mesh_init(&pushed);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
+    T_OK(shape_box(&b, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
+    T_OK(append_mesh(&m, &b, v3(5, 3, 2), &err), &err);
+    uint32_t third = m.n_verts;
+    T_OK(append_mesh(&m, &b, v3(30, 0, 0), &err), &err);
+    uint32_t fourth = m.n_verts;
+    T_OK(append_mesh(&m, &b, v3(60, 0, 0), &err), &err);
+    struct selfx_ref *sr = selfx_ref_new(&m, 1e-6, &err);
+    T_TRUE(sr != NULL);
+    int in = selfx_count(&m, &err);
+    T_TRUE(in > 0);
+    T_EQ_INT(selfx_ref_input_count(sr), in);
+    /* the reference turned on its side and moved, the third box pushed into
+       the fourth there: read from the turned copy, the same new crossings
+       as the original reference sees in the same push unturned */
+    T_OK(mesh_copy(&turned, &m, &err), &err);
+    mesh_rotate_up(&turned, v3(1, 0, 0));
+    mesh_translate(&turned, v3(7, -3, 11));
+    T_OK(mesh_copy(&pushed, &m, &err), &err);
+    for (uint32_t v = third; v < fourth; v++)
+        pushed.v[v].x += 25;
+    int fresh = selfx_ref_count(sr, &pushed, NULL, &err);
+    T_TRUE(fresh > 0);
+    T_OK(selfx_ref_rebind(sr, &turned, &err), &err);
+    struct mesh pushed_turned;
+    mesh_init(&pushed_turned);
+    T_OK(mesh_copy(&pushed_turned, &pushed, &err), &err);
+    mesh_rotate_up(&pushed_turned, v3(1, 0, 0));
+    mesh_translate(&pushed_turned, v3(7, -3, 11));
+    T_EQ_INT(selfx_ref_count(sr, &pushed_turned, NULL, &err), fresh);
+    T_EQ_INT(selfx_ref_count(sr, &turned, NULL, &err), 0);
+    /* another connectivity is refused, and the handle keeps its reference */
+    T_ERR(selfx_ref_rebind(sr, &b, &err), SF_EINVAL, &err, "reference");
+    T_EQ_INT(selfx_ref_count(sr, &turned, NULL, &err), 0);
+    selfx_ref_free(sr);
+    mesh_release(&pushed_turned);
+    mesh_release(&pushed);
+    mesh_release(&turned);
+    mesh_release(&b);
+    mesh_release(&m);
+}
+
 /* ---- every method keeps the input when the model sees no gain ---- */
 
 T_CASE(surface_keeps_an_upright_box_and_says_why)
