@@ -381,7 +381,8 @@ edge_rhs(const struct mesh *cur, const struct system *s, const double *share, do
  * latest is always kept; older ones only where the proxy fell by 15 %
  * since the one before, and when the slots fill up every other one goes,
  * so the kept iterates spread over the whole run (a late iterate may
- * intersect itself where an earlier one did not).
+ * intersect itself where an earlier one did not).  v has just been found
+ * to add no self-intersection (geometry_round checks every iterate it keeps).
  */
 static void
 keep_push(struct snapshot *keep, int *n_keep, const struct vec3 *v, uint32_t n, double proxy)
@@ -399,6 +400,7 @@ keep_push(struct snapshot *keep, int *n_keep, const struct vec3 *v, uint32_t n, 
     }
     memcpy(keep[k].v, v, (size_t)n * sizeof(*v));
     keep[k].proxy = proxy;
+    keep[k].checked = true;
     *n_keep = k + 1;
 }
 
@@ -742,8 +744,10 @@ orientation_step(struct mesh *cur, struct mesh *ref, struct snapshot *keep, int 
     struct vec3 t = rest_offset(cur);
     mesh_translate(cur, t);
     move_positions(ref->v, ref->n_verts, r, t);
-    for (int k = 0; k < n_keep; k++)
+    for (int k = 0; k < n_keep; k++) {
         move_positions(keep[k].v, cur->n_verts, r, t);
+        keep[k].checked = false; /* a float cast of other positions */
+    }
     return SF_OK;
 }
 

@@ -8,6 +8,8 @@
 #ifndef SF_GEOM_SURFOPT_INT_H
 #define SF_GEOM_SURFOPT_INT_H
 
+#include <stdbool.h>
+
 #include "../base/err.h"
 #include "../mesh/mesh.h"
 #include "measure.h"
@@ -18,6 +20,7 @@
 struct snapshot {
     struct vec3 *v;
     double proxy;
+    bool checked; /* found to add no self-intersection where it stands (not moved since) */
 };
 
 /* Ray-cast support metrics of m with +z up. */

@@ -29,9 +29,10 @@ unchanged_why(const struct surfopt_result *res, int n_keep, int n_selfx, int n_p
 }
 
 int
-surfopt_choose_kept(const struct mesh *m, struct mesh *cur, double oriented_s, const struct snapshot *keep,
-            int n_keep, const struct selfx_ref *sxr, const struct surfopt_params *p,
-            struct surfopt_result *res, struct support_metrics *sm, struct sf_err *err)
+surfopt_choose_kept(const struct mesh *m, struct mesh *cur, double oriented_s,
+                    const struct snapshot *keep, int n_keep, const struct selfx_ref *sxr,
+                    const struct surfopt_params *p, struct surfopt_result *res,
+                    struct support_metrics *sm, struct sf_err *err)
 {
     uint32_t n = cur->n_verts;
     int rc;
@@ -42,7 +43,9 @@ surfopt_choose_kept(const struct mesh *m, struct mesh *cur, double oriented_s, c
     double best_g = res->model_oriented_g, best_s = oriented_s;
     for (int k = n_keep - 1; k >= 0; k--) {
         memcpy(cur->v, keep[k].v, (size_t)n * sizeof(struct vec3));
-        if ((rc = selfx_ref_count(sxr, cur, NULL, err)) < 0)
+        /* a check of the same positions says the same: only the iterates an
+           orientation step moved since (float casts) are checked again */
+        if ((rc = keep[k].checked ? 0 : selfx_ref_count(sxr, cur, NULL, err)) < 0)
             return rc;
         if (rc > 0) {
             res->n_rejected++;
@@ -87,4 +90,3 @@ surfopt_choose_kept(const struct mesh *m, struct mesh *cur, double oriented_s, c
     }
     return SF_OK;
 }
-
