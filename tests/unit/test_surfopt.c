@@ -356,6 +356,23 @@ T_CASE(two_separate_mushrooms_are_reshaped)
     mesh_release(&m);
 }
 
+/* m: two overlapping 10 mm boxes, a third at x = 30 (its first vertex
+ *third) and a fourth at x = 60 (*fourth); b: one such box. */
+static int
+four_boxes(struct mesh *m, struct mesh *b, uint32_t *third, uint32_t *fourth, struct sf_err *err)
+{
+    int rc;
+    if ((rc = shape_box(m, v3(0, 0, 0), v3(10, 10, 10), err)) < 0 ||
+        (rc = shape_box(b, v3(0, 0, 0), v3(10, 10, 10), err)) < 0 ||
+        (rc = append_mesh(m, b, v3(5, 3, 2), err)) < 0)
+        return rc;
+    *third = m->n_verts;
+    if ((rc = append_mesh(m, b, v3(30, 0, 0), err)) < 0)
+        return rc;
+    *fourth = m->n_verts;
+    return append_mesh(m, b, v3(60, 0, 0), err);
+}
+
 T_CASE(selfx_counts_only_the_crossings_the_input_did_not_have)
 {
     /* two overlapping boxes and two more apart: the overlap is the input's;
@@ -364,13 +381,8 @@ T_CASE(selfx_counts_only_the_crossings_the_input_did_not_have)
     struct sf_err err;
     mesh_init(&m);
     mesh_init(&b);
-    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
-    T_OK(shape_box(&b, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
-    T_OK(append_mesh(&m, &b, v3(5, 3, 2), &err), &err);
-    uint32_t third = m.n_verts;
-    T_OK(append_mesh(&m, &b, v3(30, 0, 0), &err), &err);
-    uint32_t fourth = m.n_verts;
-    T_OK(append_mesh(&m, &b, v3(60, 0, 0), &err), &err);
+    uint32_t third, fourth;
+    T_OK(four_boxes(&m, &b, &third, &fourth, &err), &err);
     int in = selfx_count(&m, &err);
     T_TRUE(in > 0);
     T_EQ_INT(selfx_count_new(&m, &m, 1e-6, &err), 0);
@@ -422,13 +434,8 @@ T_CASE(selfx_ref_knows_the_input_count_and_reads_a_moved_reference)
     mesh_init(&b);
     mesh_init(&turned);
     mesh_init(&pushed);
-    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
-    T_OK(shape_box(&b, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
-    T_OK(append_mesh(&m, &b, v3(5, 3, 2), &err), &err);
-    uint32_t third = m.n_verts;
-    T_OK(append_mesh(&m, &b, v3(30, 0, 0), &err), &err);
-    uint32_t fourth = m.n_verts;
-    T_OK(append_mesh(&m, &b, v3(60, 0, 0), &err), &err);
+    uint32_t third, fourth;
+    T_OK(four_boxes(&m, &b, &third, &fourth, &err), &err);
     struct selfx_ref *sr = selfx_ref_new(&m, 1e-6, &err);
     T_TRUE(sr != NULL);
     int in = selfx_count(&m, &err);
