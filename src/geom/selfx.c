@@ -188,6 +188,7 @@ struct selfx_ref {
     uint8_t *near;        /* per vertex: within two rings of a crossing the input has */
     uint32_t (*pairs)[2]; /* shells that cross each other in the input */
     size_t n_pairs, cap_pairs;
+    int n_input; /* edges of ref crossing it (selfx_count) */
     bool oom;
 };
 
@@ -302,7 +303,7 @@ selfx_ref_new(const struct mesh *ref, double tol, struct sf_err *err)
         }
     for (uint32_t v = 0; v < ref->n_verts; v++)
         nc->comp[v] = find(nc->comp, v);
-    if (edges_pierced(ref, note_input, nc, err) < 0)
+    if ((nc->n_input = edges_pierced(ref, note_input, nc, err)) < 0)
         goto fail;
     if (nc->oom) {
         sf_err_set(err, SF_ENOMEM, "selfx: out of memory for the crossing shells");
@@ -325,6 +326,23 @@ fail:
     free(grow);
     selfx_ref_free(nc);
     return NULL;
+}
+
+int
+selfx_ref_input_count(const struct selfx_ref *sr)
+{
+    return sr->n_input;
+}
+
+int
+selfx_ref_rebind(struct selfx_ref *sr, const struct mesh *ref, struct sf_err *err)
+{
+    if (ref->n_verts != sr->ref->n_verts || ref->n_tris != sr->ref->n_tris)
+        return sf_err_set(err, SF_EINVAL,
+                          "selfx: the reference has %u/%u vertices/triangles, the new one %u/%u",
+                          sr->ref->n_verts, sr->ref->n_tris, ref->n_verts, ref->n_tris);
+    sr->ref = ref;
+    return SF_OK;
 }
 
 int

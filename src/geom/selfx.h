@@ -48,4 +48,16 @@ int selfx_ref_count(const struct selfx_ref *sr, const struct mesh *m, uint8_t *m
                     struct sf_err *err);
 void selfx_ref_free(struct selfx_ref *sr);
 
+/* The reference's own crossings: what selfx_count(ref) returns (the same
+   edge casts, done once by selfx_ref_new). */
+int selfx_ref_input_count(const struct selfx_ref *sr);
+
+/*
+ * Read the reference from ref from now on: a copy of it, or it moved
+ * rigidly (the same connectivity and distances; what was noted stays
+ * valid), which must outlive the handle and keep its shape.  SF_EINVAL
+ * when its vertex or triangle count differs.
+ */
+int selfx_ref_rebind(struct selfx_ref *sr, const struct mesh *ref, struct sf_err *err);
+
 #endif

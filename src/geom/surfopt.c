@@ -15,6 +15,7 @@
 #include "selfx.h"
 #include "sparse.h"
 #include "supmodel.h"
+#include "surfopt_int.h"
 
 #define KEEP_MAX 8 /* improving iterates kept as fallbacks (keep_push) */
 /* Edges and triangles closer than this share of the diagonal in the input
@@ -105,9 +106,9 @@ rest_offset(const struct mesh *m)
     return v3(-(lo.x + hi.x) / 2, -(lo.y + hi.y) / 2, -lo.z);
 }
 
-/* Ray-cast support metrics of m with +z up. */
-static int
-ray_metrics(const struct mesh *m, double angle_deg, struct support_metrics *out, struct sf_err *err)
+int
+surfopt_ray_metrics(const struct mesh *m, double angle_deg, struct support_metrics *out,
+                    struct sf_err *err)
 {
     struct support_params sp = support_at(angle_deg);
     struct raycast *rc = raycast_new(m, err);
@@ -375,17 +376,13 @@ edge_rhs(const struct mesh *cur, const struct system *s, const double *share, do
     }
 }
 
-struct snapshot {
-    struct vec3 *v;
-    double proxy;
-};
-
 /*
  * Keep an improving iterate as a fallback for the final checks.  The
  * latest is always kept; older ones only where the proxy fell by 15 %
  * since the one before, and when the slots fill up every other one goes,
  * so the kept iterates spread over the whole run (a late iterate may
- * intersect itself where an earlier one did not).
+ * intersect itself where an earlier one did not).  v has just been found
+ * to add no self-intersection (geometry_round checks every iterate it keeps).
  */
 static void
 keep_push(struct snapshot *keep, int *n_keep, const struct vec3 *v, uint32_t n, double proxy)
@@ -403,6 +400,7 @@ keep_push(struct snapshot *keep, int *n_keep, const struct vec3 *v, uint32_t n, 
     }
     memcpy(keep[k].v, v, (size_t)n * sizeof(*v));
     keep[k].proxy = proxy;
+    keep[k].checked = true;
     *n_keep = k + 1;
 }
 
@@ -746,128 +744,104 @@ orientation_step(struct mesh *cur, struct mesh *ref, struct snapshot *keep, int 
     struct vec3 t = rest_offset(cur);
     mesh_translate(cur, t);
     move_positions(ref->v, ref->n_verts, r, t);
-    for (int k = 0; k < n_keep; k++)
+    for (int k = 0; k < n_keep; k++) {
         move_positions(keep[k].v, cur->n_verts, r, t);
+        keep[k].checked = false; /* a float cast of other positions */
+    }
     return SF_OK;
-}
-
-/* Why the result is the orientation alone (choose_kept). */
-static const char *
-unchanged_why(const struct surfopt_result *res, int n_keep, int n_selfx, int n_peer_rise,
-              bool small_gain)
-{
-    return n_keep == 0 && res->n_folded > 0
-               ? "every iterate that lowered the risky faces within the "
-                 "deviation limits folded the surface onto itself (new "
-                 "self-intersections)"
-           : n_keep == 0       ? "no iterate lowered the risky faces within the deviation "
-                                 "limits"
-           : n_selfx == n_keep ? "every kept shape adds self-intersections"
-           : n_peer_rise > 0   ? "the kept shapes of this open shell need more support than "
-                                 "the part as given in PrusaSlicer or CuraEngine, which drop "
-                                 "what its open rims leave open"
-           : res->model_oriented_g <= 0 ? "the oriented part needs no support by the model"
-           : small_gain                 ? "no kept shape saves min_gain of the oriented "
-                                          "part's model grams"
-                        : "no kept shape needs fewer model grams than the oriented part";
 }
 
 /*
- * The result: of the kept shapes that add no self-intersection, the one the
- * layer-based support model (supmodel.h, PrusaSlicer's rules) gives the
- * fewest grams, if that saves min_gain of what the orientation alone needs
- * and min_gain_g more;
- * else the orientation alone.  The ray-cast volume steered the iterations;
- * the model, which follows what a slicer prints, decides.  cur (scratch,
- * n positions) ends as the chosen shape with its metrics in *sm when
- * res->shape_changed.
+ * What both runs of surfopt_optimize start from, made once: the refined
+ * input, its saliency, its crossings, the first orientation step and the
+ * model of its result (each a pure function of the part and p, so the
+ * freezing run saw the same; they were half of its time).
  */
-static int
-choose_kept(const struct mesh *m, struct mesh *cur, const struct mesh *oriented,
-            const struct snapshot *keep, int n_keep, const struct selfx_ref *sxr,
-            const struct surfopt_params *p, struct surfopt_result *res, struct support_metrics *sm,
-            struct sf_err *err)
+struct prep {
+    struct mesh ref;      /* the refined input after the first orientation step */
+    struct mesh oriented; /* the same, the start of each run */
+    double *sal;          /* per vertex: the share of its target it moves */
+    struct selfx_ref *sxr;
+    struct support_metrics input, oriented_m;
+    double model_g, model_s; /* the model of the oriented part: grams, seconds */
+    double saliency_s, orient_s;
+};
+
+static void
+prep_release(struct prep *pr)
 {
-    uint32_t n = cur->n_verts;
+    mesh_release(&pr->ref);
+    mesh_release(&pr->oriented);
+    free(pr->sal);
+    selfx_ref_free(pr->sxr);
+}
+
+static int
+prep_make(const struct mesh *m, const struct surfopt_params *p, struct prep *pr, struct sf_err *err)
+{
+    memset(pr, 0, sizeof(*pr));
+    mesh_init(&pr->ref);
+    mesh_init(&pr->oriented);
     int rc;
+    if ((rc = mesh_copy(&pr->ref, m, err)) < 0 ||
+        (rc = mesh_refine(&pr->ref, p->refine_tris, 0.01 * mesh_diag(m), 4 * p->refine_tris, err)) <
+            0 ||
+        (rc = mesh_copy(&pr->oriented, &pr->ref, err)) < 0)
+        return rc;
+    uint32_t n = pr->ref.n_verts;
+    if (!(pr->sal = mem_array(n, sizeof(double))))
+        return sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
+    if ((rc = surfopt_ray_metrics(m, p->angle_deg, &pr->input, err)) < 0)
+        return rc;
+    double t0 = clock_mono_s();
+    if ((rc = mesh_saliency(&pr->ref, pr->sal, err)) < 0)
+        return rc;
+    for (uint32_t v = 0; v < n; v++)
+        pr->sal[v] = 1 - p->saliency * pr->sal[v]; /* the share of its target a vertex moves */
+    pr->saliency_s = clock_mono_s() - t0;
+    /* the input's crossings, noted once: the orientation steps move ref
+       rigidly, which keeps its shells, crossings and distances */
+    if (!(pr->sxr = selfx_ref_new(&pr->ref, SELFX_TOUCH * mesh_diag(&pr->ref), err)))
+        return err->code;
+    t0 = clock_mono_s();
+    if ((rc = orientation_step(&pr->oriented, &pr->ref, NULL, 0, p, p->orient && !p->keep_start_up,
+                               err)) < 0)
+        return rc;
+    pr->orient_s = clock_mono_s() - t0;
+    if ((rc = surfopt_ray_metrics(&pr->oriented, p->angle_deg, &pr->oriented_m, err)) < 0)
+        return rc;
     struct supmodel_params mp;
     supmodel_params_steer(&mp, p->angle_deg);
     struct supmodel_result mr;
-    if ((rc = supmodel_of_mesh(oriented, v3(0, 0, 1), &mp, &mr, err)) < 0)
+    if ((rc = supmodel_of_mesh(&pr->oriented, v3(0, 0, 1), &mp, &mr, err)) < 0)
         return rc;
-    res->model_oriented_g = mr.grams;
-    int best_k = -1, n_selfx = 0, n_peer_rise = 0;
-    double best_g = mr.grams, oriented_s = mr.time_s, best_s = mr.time_s;
-    for (int k = n_keep - 1; k >= 0; k--) {
-        memcpy(cur->v, keep[k].v, (size_t)n * sizeof(struct vec3));
-        if ((rc = selfx_ref_count(sxr, cur, NULL, err)) < 0)
-            return rc;
-        if (rc > 0) {
-            res->n_rejected++;
-            n_selfx++;
-            continue;
-        }
-        if ((rc = supmodel_of_mesh(cur, v3(0, 0, 1), &mp, &mr, err)) < 0)
-            return rc;
-        /* nor may it cost the part as given more in a slicer that drops what
-           open rims leave open (supmodel_peers_rise; closed parts: no) */
-        bool rises = false;
-        if (mr.grams < best_g &&
-            (rc = supmodel_peers_rise(m, cur, p->angle_deg, &rises, NULL, err)) < 0)
-            return rc;
-        if (mr.grams < best_g && !rises) {
-            best_g = mr.grams;
-            best_s = mr.time_s;
-            best_k = k;
-        } else {
-            res->n_rejected++;
-            n_peer_rise += rises;
-        }
-    }
-    bool small_gain =
-        best_k >= 0 && !(best_g <= (1 - p->min_gain) * res->model_oriented_g - p->min_gain_g);
-    if (small_gain)
-        best_k = -1;
-    if (best_k >= 0) {
-        memcpy(cur->v, keep[best_k].v, (size_t)n * sizeof(struct vec3));
-        if ((rc = selfx_count(cur, err)) < 0)
-            return rc;
-        res->selfx_out = rc;
-        if ((rc = ray_metrics(cur, p->angle_deg, sm, err)) < 0)
-            return rc;
-        res->shape_changed = true;
-        res->model_after_g = best_g;
-        res->model_after_s = best_s;
-    } else {
-        res->model_after_g = res->model_oriented_g;
-        res->model_after_s = oriented_s;
-        res->unchanged_why = unchanged_why(res, n_keep, n_selfx, n_peer_rise, small_gain);
-    }
+    pr->model_g = mr.grams;
+    pr->model_s = mr.time_s;
     return SF_OK;
 }
 
-/* One optimization of m; a fold halves the turns, or with freeze first
+/* One optimization from pr; a fold halves the turns, or with freeze first
    freezes where it folded (geometry_round). */
 static int
-optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
-              struct surfopt_result *res, struct sf_err *err)
+optimize_once(const struct mesh *m, const struct surfopt_params *p, const struct prep *pr,
+              bool freeze, struct surfopt_result *res, struct sf_err *err)
 {
     memset(res, 0, sizeof(*res));
     mesh_init(&res->out);
-    int rc = check_params(p, err);
-    if (rc < 0)
-        return rc;
-    if (m->n_verts < 4 || m->n_tris < 4)
-        return sf_err_set(err, SF_EINVAL, "part has %u triangles: nothing to optimize", m->n_tris);
     double t_start = clock_mono_s();
-    struct mesh cur, ref, oriented;
+    res->input = pr->input;
+    res->oriented = pr->oriented_m;
+    res->selfx_input = selfx_ref_input_count(pr->sxr);
+    res->model_oriented_g = pr->model_g;
+    res->saliency_s = pr->saliency_s;
+    res->orient_s = pr->orient_s;
+    struct mesh cur, ref;
     mesh_init(&cur);
     mesh_init(&ref);
-    mesh_init(&oriented);
-    if ((rc = mesh_copy(&ref, m, err)) < 0 ||
-        (rc = mesh_refine(&ref, p->refine_tris, 0.01 * mesh_diag(m), 4 * p->refine_tris, err)) <
-            0 ||
-        (rc = mesh_copy(&cur, &ref, err)) < 0) {
+    int rc;
+    if ((rc = mesh_copy(&ref, &pr->ref, err)) < 0 ||
+        (rc = mesh_copy(&cur, &pr->oriented, err)) < 0 ||
+        (rc = selfx_ref_rebind(pr->sxr, &ref, err)) < 0) {
         mesh_release(&ref);
         mesh_release(&cur);
         return rc;
@@ -875,49 +849,20 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
     uint32_t n = cur.n_verts;
     struct snapshot keep[KEEP_MAX] = { 0 };
     int n_keep = 0;
-    struct selfx_ref *sxr = NULL;
-    double *sal = mem_array(n, sizeof(double));
-    if (!sal) {
-        rc = sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
-        goto out;
-    }
     for (int k = 0; k < KEEP_MAX; k++) {
         if (!(keep[k].v = mem_array(n, sizeof(struct vec3)))) {
             rc = sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
             goto out;
         }
     }
-    if ((rc = ray_metrics(m, p->angle_deg, &res->input, err)) < 0)
-        goto out;
-    double t0 = clock_mono_s();
-    if ((rc = mesh_saliency(&ref, sal, err)) < 0)
-        goto out;
-    for (uint32_t v = 0; v < n; v++)
-        sal[v] = 1 - p->saliency * sal[v]; /* the share of its target a vertex moves */
-    res->saliency_s = clock_mono_s() - t0;
-    if ((rc = selfx_count(&ref, err)) < 0)
-        goto out;
-    res->selfx_input = rc;
-    /* the input's crossings, noted once: the orientation steps move ref
-       rigidly, which keeps its shells, crossings and distances */
-    if (!(sxr = selfx_ref_new(&ref, SELFX_TOUCH * mesh_diag(&ref), err))) {
-        rc = err->code;
-        goto out;
-    }
-
     for (int round = 0; round < p->rounds; round++) {
-        t0 = clock_mono_s();
-        bool search = p->orient && !(round == 0 && p->keep_start_up);
-        if ((rc = orientation_step(&cur, &ref, keep, n_keep, p, search, err)) < 0)
+        double t0 = clock_mono_s();
+        /* round 0's orientation step is pr's */
+        if (round > 0 && (rc = orientation_step(&cur, &ref, keep, n_keep, p, p->orient, err)) < 0)
             goto out;
         res->orient_s += clock_mono_s() - t0;
-        if (round == 0) {
-            if ((rc = mesh_copy(&oriented, &cur, err)) < 0 ||
-                (rc = ray_metrics(&oriented, p->angle_deg, &res->oriented, err)) < 0)
-                goto out;
-        }
         int n_improved = 0;
-        if ((rc = geometry_round(&cur, &ref, sxr, sal, p, round, freeze, res, keep, &n_keep,
+        if ((rc = geometry_round(&cur, &ref, pr->sxr, pr->sal, p, round, freeze, res, keep, &n_keep,
                                  &n_improved, err)) < 0)
             goto out;
         res->n_rounds++;
@@ -926,9 +871,10 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
     }
 
     /* the result: a kept shape, or the orientation alone (choose_kept) */
-    t0 = clock_mono_s();
+    double t0 = clock_mono_s();
     struct support_metrics sm;
-    if ((rc = choose_kept(m, &cur, &oriented, keep, n_keep, sxr, p, res, &sm, err)) < 0)
+    if ((rc = surfopt_choose_kept(m, &cur, pr->model_s, keep, n_keep, pr->sxr, p, res, &sm, err)) <
+        0)
         goto out;
     res->check_s = clock_mono_s() - t0;
     if (res->shape_changed) {
@@ -940,8 +886,8 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, bool freeze,
         mesh_translate(&ref, t);
         measure_deviation(&ref, &res->out, &res->dev, NULL);
     } else {
-        res->out = oriented;
-        mesh_init(&oriented);
+        if ((rc = mesh_copy(&res->out, &pr->oriented, err)) < 0)
+            goto out;
         res->after = res->oriented;
         res->selfx_out = res->selfx_input;
     }
@@ -950,11 +896,8 @@ out:
     res->total_s = clock_mono_s() - t_start;
     for (int k = 0; k < KEEP_MAX; k++)
         free(keep[k].v);
-    free(sal);
-    selfx_ref_free(sxr);
     mesh_release(&cur);
     mesh_release(&ref);
-    mesh_release(&oriented);
     if (rc < 0)
         mesh_release(&res->out);
     return rc;
@@ -964,19 +907,27 @@ int
 surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct surfopt_result *res,
                  struct sf_err *err)
 {
-    double t0 = clock_mono_s();
-    int rc = optimize_once(m, p, false, res, err);
-    if (rc < 0 || res->n_halved == 0)
+    memset(res, 0, sizeof(*res));
+    mesh_init(&res->out);
+    int rc = check_params(p, err);
+    if (rc < 0)
         return rc;
+    if (m->n_verts < 4 || m->n_tris < 4)
+        return sf_err_set(err, SF_EINVAL, "part has %u triangles: nothing to optimize", m->n_tris);
+    double t0 = clock_mono_s();
+    struct prep pr;
+    if ((rc = prep_make(m, p, &pr, err)) < 0 ||
+        (rc = optimize_once(m, p, &pr, false, res, err)) < 0 || res->n_halved == 0)
+        goto out;
     /* Some iterate folded or moved too far, and halving the turns
      * everywhere held the whole part back for it: run again freezing only
      * where it folded or moved too far, and the model picks (anchor's 4 searched directions:
      * one 10.84 -> 6.83 model g halving, 9.01 freezing; cow's best 3.67 -> 2.60 halving, 2.96 ->
      * 1.37 freezing). */
     struct surfopt_result alt;
-    if ((rc = optimize_once(m, p, true, &alt, err)) < 0) {
+    if ((rc = optimize_once(m, p, &pr, true, &alt, err)) < 0) {
         surfopt_result_release(res);
-        return rc;
+        goto out;
     }
     if (alt.model_after_g < res->model_after_g) {
         surfopt_result_release(res);
@@ -984,6 +935,8 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
     } else {
         surfopt_result_release(&alt);
     }
+out:
     res->total_s = clock_mono_s() - t0;
-    return SF_OK;
+    prep_release(&pr);
+    return rc;
 }

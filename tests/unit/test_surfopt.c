@@ -356,6 +356,23 @@ T_CASE(two_separate_mushrooms_are_reshaped)
     mesh_release(&m);
 }
 
+/* m: two overlapping 10 mm boxes, a third at x = 30 (its first vertex
+ *third) and a fourth at x = 60 (*fourth); b: one such box. */
+static int
+four_boxes(struct mesh *m, struct mesh *b, uint32_t *third, uint32_t *fourth, struct sf_err *err)
+{
+    int rc;
+    if ((rc = shape_box(m, v3(0, 0, 0), v3(10, 10, 10), err)) < 0 ||
+        (rc = shape_box(b, v3(0, 0, 0), v3(10, 10, 10), err)) < 0 ||
+        (rc = append_mesh(m, b, v3(5, 3, 2), err)) < 0)
+        return rc;
+    *third = m->n_verts;
+    if ((rc = append_mesh(m, b, v3(30, 0, 0), err)) < 0)
+        return rc;
+    *fourth = m->n_verts;
+    return append_mesh(m, b, v3(60, 0, 0), err);
+}
+
 T_CASE(selfx_counts_only_the_crossings_the_input_did_not_have)
 {
     /* two overlapping boxes and two more apart: the overlap is the input's;
@@ -364,13 +381,8 @@ T_CASE(selfx_counts_only_the_crossings_the_input_did_not_have)
     struct sf_err err;
     mesh_init(&m);
     mesh_init(&b);
-    T_OK(shape_box(&m, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
-    T_OK(shape_box(&b, v3(0, 0, 0), v3(10, 10, 10), &err), &err);
-    T_OK(append_mesh(&m, &b, v3(5, 3, 2), &err), &err);
-    uint32_t third = m.n_verts;
-    T_OK(append_mesh(&m, &b, v3(30, 0, 0), &err), &err);
-    uint32_t fourth = m.n_verts;
-    T_OK(append_mesh(&m, &b, v3(60, 0, 0), &err), &err);
+    uint32_t third, fourth;
+    T_OK(four_boxes(&m, &b, &third, &fourth, &err), &err);
     int in = selfx_count(&m, &err);
     T_TRUE(in > 0);
     T_EQ_INT(selfx_count_new(&m, &m, 1e-6, &err), 0);
@@ -409,6 +421,52 @@ T_CASE(selfx_counts_only_the_crossings_the_input_did_not_have)
     moved.n_tris--;
     T_ERR(selfx_count_new(&m, &moved, 1e-6, &err), SF_EINVAL, &err, "reference");
     mesh_release(&moved);
+    mesh_release(&b);
+    mesh_release(&m);
+}
+
+T_CASE(selfx_ref_knows_the_input_count_and_reads_a_moved_reference)
+{
+    /* two overlapping boxes (the input's crossings) and two apart */
+    struct mesh m, b, turned, pushed;
+    struct sf_err err;
+    mesh_init(&m);
+    mesh_init(&b);
+    mesh_init(&turned);
+    mesh_init(&pushed);
+    uint32_t third, fourth;
+    T_OK(four_boxes(&m, &b, &third, &fourth, &err), &err);
+    struct selfx_ref *sr = selfx_ref_new(&m, 1e-6, &err);
+    T_TRUE(sr != NULL);
+    int in = selfx_count(&m, &err);
+    T_TRUE(in > 0);
+    T_EQ_INT(selfx_ref_input_count(sr), in);
+    /* the reference turned on its side and moved, the third box pushed into
+       the fourth there: read from the turned copy, the same new crossings
+       as the original reference sees in the same push unturned */
+    T_OK(mesh_copy(&turned, &m, &err), &err);
+    mesh_rotate_up(&turned, v3(1, 0, 0));
+    mesh_translate(&turned, v3(7, -3, 11));
+    T_OK(mesh_copy(&pushed, &m, &err), &err);
+    for (uint32_t v = third; v < fourth; v++)
+        pushed.v[v].x += 25;
+    int fresh = selfx_ref_count(sr, &pushed, NULL, &err);
+    T_TRUE(fresh > 0);
+    T_OK(selfx_ref_rebind(sr, &turned, &err), &err);
+    struct mesh pushed_turned;
+    mesh_init(&pushed_turned);
+    T_OK(mesh_copy(&pushed_turned, &pushed, &err), &err);
+    mesh_rotate_up(&pushed_turned, v3(1, 0, 0));
+    mesh_translate(&pushed_turned, v3(7, -3, 11));
+    T_EQ_INT(selfx_ref_count(sr, &pushed_turned, NULL, &err), fresh);
+    T_EQ_INT(selfx_ref_count(sr, &turned, NULL, &err), 0);
+    /* another connectivity is refused, and the handle keeps its reference */
+    T_ERR(selfx_ref_rebind(sr, &b, &err), SF_EINVAL, &err, "reference");
+    T_EQ_INT(selfx_ref_count(sr, &turned, NULL, &err), 0);
+    selfx_ref_free(sr);
+    mesh_release(&pushed_turned);
+    mesh_release(&pushed);
+    mesh_release(&turned);
     mesh_release(&b);
     mesh_release(&m);
 }
