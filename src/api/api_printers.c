@@ -252,7 +252,8 @@ write_printer(struct farm *f, const char *name, const struct http_req *req, bool
     if (rc == SF_OK && patch && !(rc = farm_printer_base(f, name, base, &stored, &err)))
         farmcfg_printer_each(base, put_option, fs);
     if (rc == SF_OK && !(rc = overlay(fs, body, &err)) && to_text(fs, &b))
-        rc = sf_err_set(&err, SF_ENOMEM, "out of memory");
+        rc = sf_err_set(&err, SF_EINVAL, "the printer's options are longer than %d bytes",
+                        STORE_PRINTER_CFG_MAX); /* b's cap: memory is not what ran out */
     if (rc == SF_OK)
         rc = name ? farm_printer_edit(f, name, b.data, &err)
                   : farm_printer_add(f, given, b.data, &err);

@@ -59,8 +59,11 @@ ascii_stl(const unsigned char *p, size_t len)
 {
     size_t at = 0, n;
     const char *l;
-    while (next_line(p, len, &at, &l, &n) && n == 0)
+    bool got;
+    while ((got = next_line(p, len, &at, &l, &n)) && n == 0)
         ;
+    if (!got)
+        return false; /* empty, or blank lines only */
     if (!(word_is(l, n, "solid") || (n == 5 && memcmp(l, "solid", 5) == 0)))
         return false;
     while (next_line(p, len, &at, &l, &n))

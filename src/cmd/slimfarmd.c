@@ -22,9 +22,10 @@
  * File descriptors: each printer holds a few (a network printer its kept-alive
  * HTTP connection, a push socket or MQTT link, one more while a request
  * reconnects; a Marlin its port), on top of the API's connections
- * (http.h), so the soft RLIMIT_NOFILE is raised toward the hard limit for
- * the config's printers at start and on a reload (raise_nofile; 1,000 printers need
- * 4,640 where many systems start a process at 1,024).
+ * (http.h), so the soft RLIMIT_NOFILE is raised toward the hard limit at start
+ * for the most printers a farm takes, those the API may add later included
+ * (raise_nofile; 1,000 printers need 4,640 where many systems start a process
+ * at 1,024).
  *
  * Thread: main is the loop thread; the pool's workers run prepare work.
  */
@@ -118,17 +119,26 @@ on_stop(struct loop *l, int signo, void *ud)
 /* File descriptors a printer may hold at once (see the top comment), with room to spare. */
 #define FDS_PER_PRINTER 4
 
-/* Raise the soft RLIMIT_NOFILE to cover n_printers and the API (never lowered); warn when
-   the hard limit stops it short. */
+/* File descriptors n printers and the API may hold at once. */
+static rlim_t
+fds_for(size_t n)
+{
+    return (rlim_t)HTTP_CONNECTIONS_MAX + HTTP_FD_RESERVE + FDS_PER_PRINTER * n;
+}
+
+/* Raise the soft RLIMIT_NOFILE (never lowered) to cover the most printers a farm takes
+   (FARMCFG_PRINTERS_MAX), not only the n_printers in force: printers added through the API
+   at run time (farm.h) open their links without coming back here.  Warn when the hard
+   limit stops it short of the n_printers in force. */
 static void
 raise_nofile(size_t n_printers)
 {
-    rlim_t need = (rlim_t)HTTP_CONNECTIONS_MAX + HTTP_FD_RESERVE + FDS_PER_PRINTER * n_printers;
+    rlim_t need = fds_for(n_printers), want = fds_for(FARMCFG_PRINTERS_MAX);
     struct rlimit rl;
-    if (getrlimit(RLIMIT_NOFILE, &rl) != 0 || rl.rlim_cur == RLIM_INFINITY || rl.rlim_cur >= need)
+    if (getrlimit(RLIMIT_NOFILE, &rl) != 0 || rl.rlim_cur == RLIM_INFINITY || rl.rlim_cur >= want)
         return;
     struct rlimit up = rl;
-    up.rlim_cur = rl.rlim_max == RLIM_INFINITY || rl.rlim_max > need ? need : rl.rlim_max;
+    up.rlim_cur = rl.rlim_max == RLIM_INFINITY || rl.rlim_max > want ? want : rl.rlim_max;
     rlim_t now = setrlimit(RLIMIT_NOFILE, &up) == 0 ? up.rlim_cur : rl.rlim_cur;
     if (now < need)
         log_warn("slimfarmd",

@@ -375,6 +375,9 @@ run(struct loop *l, void *ud)
     (void)l;
     struct farm *f = ud;
     f->kick = 0;
+    /* a printer dropped while it printed or held its heat goes once it is done (a change
+       of it kicked this run) */
+    farm_sweep(f);
     struct sf_err err;
     struct job_row *jobs;
     size_t n;
@@ -580,11 +583,13 @@ farm_apply(struct farm *f, const struct farmcfg_printer *c, struct sf_err *err)
     const struct farmcfg_printer *old = printer_cfg(p);
     char why[200];
     bool change = farm_link_change(old, c, why, sizeof(why));
-    if (!change || printer_job(p)) {
-        /* Same link, or busy: change what the scheduler reads only. */
+    if (!change || printer_job(p) || printer_hot_idle(p)) {
+        /* Same link, or busy (printing, or holding its heat: closing its driver would leave
+           the heaters on, printer.h): change what the scheduler reads only. */
         struct farmcfg_printer next = *c;
         if (change) {
-            log_printer(LOG_WARN, c->name, "link change waits for the print to end");
+            log_printer(LOG_WARN, c->name, "link change waits for the print to end%s",
+                        printer_job(p) ? "" : " (its heaters are on)");
             memcpy(next.driver, old->driver, sizeof(next.driver));
             next.link = old->link;
             next.enabled = old->enabled;
@@ -611,7 +616,7 @@ farm_sweep(struct farm *f)
     size_t w = 0;
     for (size_t i = 0; i < f->n_printers; i++) {
         struct printer *p = f->printers[i];
-        if (printer_removed(p) && !printer_job(p)) {
+        if (printer_removed(p) && !printer_job(p) && !printer_hot_idle(p)) {
             printer_free(p);
             continue;
         }

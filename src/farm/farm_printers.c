@@ -155,6 +155,12 @@ open_printer(struct farm *f, const char *name, struct target *t, const char *bus
     if (busy && printer_job(t->p))
         return sf_err_set(err, SF_EAGAIN, "printer '%.64s' is printing job %lld%s", name,
                           (long long)printer_job(t->p), busy);
+    if (busy && printer_hot_idle(t->p))
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer '%.64s' is idle with its heaters on, held for a print to "
+                          "resume (hold_heat_min): turn them off first (M104 S0, M140 S0) or "
+                          "wait until the farm does",
+                          name);
     return load(f, name, &t->r, &t->seed, err);
 }
 
@@ -224,6 +230,11 @@ farm_printer_edit(struct farm *f, const char *name, const char *text, struct sf_
                           "printer '%.64s' is printing job %lld: its connection cannot change "
                           "while it prints (%s)",
                           name, (long long)printer_job(t.p), why);
+    if (printer_hot_idle(t.p) && farm_link_change(printer_cfg(t.p), &c, why, sizeof(why)))
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer '%.64s' is idle with its heaters on: its connection cannot "
+                          "change until they are off (%s)",
+                          name, why);
     return commit(f, &t.r, t.seed, "edited", err);
 }
 

@@ -717,6 +717,10 @@ farmcfg_printer_parse(struct farmcfg_printer *out, const char *name, const char 
         return sf_err_set(err, SF_EINVAL,
                           "printer name '%.64s' must be 1..63 letters, digits, '-', '_', '.'",
                           name);
+    /* "." and ".." are path steps to every HTTP client (/api/printers/..): a printer of
+       that name could not be reached again to edit or remove it */
+    if (name[0] == '.')
+        return sf_err_set(err, SF_EINVAL, "printer name '%.64s' must not start with '.'", name);
     /* The body under its own header, parsed as a file of one section: every check is the
        file's.  A section header in the body would reach past this printer: refused. */
     for (size_t i = 0; i < len; i++) {

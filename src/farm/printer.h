@@ -95,6 +95,14 @@ int64_t printer_job(const struct printer *p);
 bool printer_connected(const struct printer *p);
 void printer_info(const struct printer *p, struct printer_info *out);
 
+/*
+ * Connected with no print on it and a heater set: holding its heat for a
+ * print to resume (hold_heat_min, printer_heat.c).  Its driver must not be
+ * closed then (disabled, removed or reconnected): the heaters would stay on
+ * with nothing left to turn them off.
+ */
+bool printer_hot_idle(const struct printer *p);
+
 /* Dropped from the config: not scheduled, freed by the farm once idle. */
 void printer_set_removed(struct printer *p, bool removed);
 bool printer_removed(const struct printer *p);

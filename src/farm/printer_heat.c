@@ -12,8 +12,8 @@
 #include "../base/log.h"
 
 /* Connected, no print on it, and a heater set: what hold_heat_min bounds. */
-static bool
-hot_idle(const struct printer *p)
+bool
+printer_hot_idle(const struct printer *p)
 {
     if (!p->drv || p->job_id || p->state == PRINTER_OFFLINE || p->state == PRINTER_PRINTING ||
         p->state == PRINTER_PAUSED)
@@ -33,7 +33,7 @@ on_heat_off(struct loop *l, void *ud)
     (void)l;
     struct printer *p = ud;
     p->heat_timer = 0;
-    if (!hot_idle(p))
+    if (!printer_hot_idle(p))
         return;
     struct sf_err err;
     char what[160];
@@ -60,7 +60,7 @@ on_heat_off(struct loop *l, void *ud)
 void
 printer_heat_watch(struct printer *p)
 {
-    bool hot = hot_idle(p);
+    bool hot = printer_hot_idle(p);
     if (hot && !p->heat_timer)
         p->heat_timer =
             loop_timer_add(p->env.l, (int64_t)(p->cfg.hold_heat_min * 60000.0), on_heat_off, p);

@@ -349,7 +349,8 @@ quiet(void *arg, const char *message)
     (void)message;
 }
 
-/* url for messages: a password in it (postgresql://user:secret@host) as "***". */
+/* url for messages: a password in it (postgresql://user:secret@host, ?password=secret or a
+   conninfo's password=secret) shown as "***" or "*". */
 static void
 show_url(const char *url, char *out, size_t cap)
 {
@@ -360,6 +361,15 @@ show_url(const char *url, char *out, size_t cap)
         snprintf(out, cap, "%.*s***%s", (int)(colon + 1 - url), url, at);
     else
         snprintf(out, cap, "%s", url);
+    /* a password= value: its first byte kept as '*', the rest dropped (shortens, never grows) */
+    for (char *pw = strstr(out, "password="); pw; pw = strstr(pw, "password=")) {
+        pw += strlen("password=");
+        size_t n = strcspn(pw, "& ");
+        if (n) {
+            *pw = '*';
+            memmove(pw + 1, pw + n, strlen(pw + n) + 1);
+        }
+    }
 }
 
 struct sqldb *

@@ -114,11 +114,13 @@ insert_job(struct store *s, struct sqldb_stmt *st, const char *what, const char 
     if (rc)
         goto fail;
     /* a new job goes last in the queue of its priority (schema 9) */
-    char sql[96];
-    snprintf(sql, sizeof(sql),
-             "UPDATE jobs SET queue_pos = (SELECT max(queue_pos) FROM jobs) + 1 WHERE id = %lld",
-             (long long)new_id);
-    if ((rc = store_exec(s, sql, err)) ||
+    if ((rc = store_prepare(
+             s, &st,
+             "UPDATE jobs SET queue_pos = (SELECT max(queue_pos) FROM jobs) + 1 WHERE id = ?",
+             err)))
+        goto fail;
+    sqldb_bind_int64(st, 1, new_id);
+    if ((rc = store_step_done(s, st, err, "queue place")) ||
         (rc = store_log_event(s, new_id, NULL, "job-add", detail, err)) ||
         (rc = store_commit(s, err)))
         goto fail;
@@ -653,21 +655,22 @@ queue_place(struct store *s, const struct qplace *j, struct sf_err *err)
     return store_step_done(s, st, err, "move job");
 }
 
-/* One more than the largest queue_pos (by > 0: one less than the smallest). */
-static int64_t
-queue_end(struct store *s, int by)
+/* One more than the largest queue_pos (by > 0: one less than the smallest), into *pos. */
+static int
+queue_end(struct store *s, int by, int64_t *pos, struct sf_err *err)
 {
     struct sqldb_stmt *st;
-    int64_t out = 0;
-    if (store_prepare(s, &st,
-                      by > 0 ? "SELECT min(queue_pos) - 1 FROM jobs"
-                             : "SELECT max(queue_pos) + 1 FROM jobs",
-                      NULL) == SF_OK) {
-        if (sqldb_step(st) == SQLDB_ROW)
-            out = sqldb_column_int64(st, 0);
-        sqldb_finalize(st);
-    }
-    return out;
+    int rc = store_prepare(s, &st,
+                           by > 0 ? "SELECT min(queue_pos) - 1 FROM jobs"
+                                  : "SELECT max(queue_pos) + 1 FROM jobs",
+                           err);
+    if (rc)
+        return rc;
+    rc = sqldb_step(st);
+    if (rc == SQLDB_ROW)
+        *pos = sqldb_column_int64(st, 0);
+    sqldb_finalize(st);
+    return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "queue end");
 }
 
 /* Trade places with the neighbour nb (store_job_move).  Within a priority the
@@ -679,9 +682,10 @@ static int
 queue_swap(struct store *s, struct qplace me, struct qplace nb, int by, struct sf_err *err)
 {
     struct qplace a = { me.id, nb.priority, nb.pos };
-    struct qplace b = { nb.id, nb.priority,
-                        me.priority == nb.priority ? me.pos : queue_end(s, by) };
-    int rc = queue_place(s, &a, err);
+    struct qplace b = { nb.id, nb.priority, me.pos };
+    int rc = me.priority == nb.priority ? SF_OK : queue_end(s, by, &b.pos, err);
+    if (rc == SF_OK)
+        rc = queue_place(s, &a, err);
     return rc ? rc : queue_place(s, &b, err);
 }
 

@@ -8,7 +8,9 @@
 #  - both printers are added at run time, connect, and each prints a job;
 #  - while a job prints, its printer's connection cannot change, nor can it
 #    be disabled or removed (409), while what the scheduler reads can;
-#  - a printer with a part on its bed cannot be removed;
+#  - a printer with a part on its bed cannot be removed, nor disabled or
+#    removed while idle with its heaters on (its driver would close with
+#    nothing left to turn them off);
 #  - a disabled printer (with its reason shown) takes no job: a job for it
 #    waits, naming it disabled, through a daemon restart, and prints once
 #    it is enabled;
@@ -110,6 +112,16 @@ state_is "$j3" printing || fail "job $j3 after the edit: $(job_state "$j3")"
 # its part stays on the bed: mk cannot go
 wait_for 30 printer_is mk awaiting-clear || fail "mk: $("$C" printers)"
 expect 409 "part on its bed" -- DELETE /api/printers/mk
+
+# an idle printer with its heaters on (as one holding its heat for an interrupted print)
+# keeps its driver: a disable or removal would close it with nothing left to turn them off
+target_is() { [ "$(api "/api/printers/$1" | json '"%g" % d["printer"]["temps"]["nozzle_target_c"]')" = "$2" ]; }
+expect 200 "" -- POST /api/printers/op/command '{"command": "M104 S200"}'
+wait_for 60 target_is op 200 || fail "op's nozzle target: $(api /api/printers/op)"
+expect 409 "heaters on" -- POST /api/printers/op/disable '{"reason": "nozzle swap"}'
+expect 409 "heaters on" -- DELETE /api/printers/op
+expect 200 "" -- POST /api/printers/op/command '{"command": "M104 S0"}'
+wait_for 60 target_is op 0 || fail "op's nozzle target after M104 S0: $(api /api/printers/op)"
 
 # a disabled printer takes no job, and says why it is disabled
 expect 400 "field 'reason'" -- POST /api/printers/op/disable '{}'

@@ -39,4 +39,7 @@ grep -q "is newer than this slimfarm" "$TMP/out" || { cat "$TMP/out"; exit 1; }
 "$D" --init-store "postgresql://nobody:hunter2@/farm?host=$PG_DIR" > "$TMP/out" 2>&1 &&
   { echo "an unknown role connected"; exit 1; }
 grep -q "nobody:\*\*\*@" "$TMP/out" && ! grep -q hunter2 "$TMP/out" || { cat "$TMP/out"; exit 1; }
+"$D" --init-store "postgresql:///farm?host=$PG_DIR&user=nobody&password=hunter3" > "$TMP/out" 2>&1 &&
+  { echo "an unknown role connected"; exit 1; }
+grep -q "password=\*" "$TMP/out" && ! grep -q hunter3 "$TMP/out" || { cat "$TMP/out"; exit 1; }
 exit $fail

@@ -415,6 +415,8 @@ T_CASE(farmcfg_printer_body_round_trip)
           "printer name 'a b' must be 1..63 letters, digits, '-', '_', '.'" },
         { "a]", "driver: marlin\nport: x\n",
           "printer name 'a]' must be 1..63 letters, digits, '-', '_', '.'" },
+        /* a path step to HTTP clients: /api/printers/.. could not reach it again */
+        { "..", "driver: marlin\nport: x\n", "printer name '..' must not start with '.'" },
     };
     for (size_t i = 0; i < sizeof(bad) / sizeof(bad[0]); i++) {
         T_EQ_INT(farmcfg_printer_parse(&p, bad[i][0], bad[i][1], strlen(bad[i][1]), &err),
