@@ -33,6 +33,7 @@
 #include <string.h>
 #include <sys/file.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "../base/log.h"
@@ -546,6 +547,42 @@ connect(struct store *s, int *from, struct sf_err *err)
     return rc ? rc : migrate(s, from, err);
 }
 
+/*
+ * PostgreSQL: one daemon per database until hosts hold leases (issue 32's next
+ * step), since crash recovery takes every printing job in it as its own.  A
+ * session advisory lock, which the server drops when the connection ends (a
+ * killed daemon's too); a connection closed a moment ago may still hold it
+ * while its server process exits, hence the tries over about 5 s.
+ */
+#define STORE_DB_LOCK_KEY 0x736c696d6661726dLL /* "slimfarm" in ASCII */
+static int
+lock_db(struct store *s, struct sf_err *err)
+{
+    if (sqldb_engine(s->db) != SQLDB_PG)
+        return SF_OK; /* SQLite: the data dir's flock covers its file (lock_dir) */
+    for (int tries = 0; tries < 50; tries++) {
+        struct sqldb_stmt *st;
+        int rc = store_prepare(s, &st,
+                               "SELECT CASE WHEN pg_try_advisory_lock(?1) THEN 1 ELSE 0 END", err);
+        if (rc)
+            return rc;
+        sqldb_bind_int64(st, 1, STORE_DB_LOCK_KEY);
+        rc = sqldb_step(st);
+        bool got = rc == SQLDB_ROW && sqldb_column_int(st, 0) == 1;
+        sqldb_finalize(st);
+        if (rc != SQLDB_ROW)
+            return store_db_fail(s, err, "lock the database");
+        if (got)
+            return SF_OK;
+        nanosleep(&(struct timespec){ .tv_nsec = 100 * 1000 * 1000 }, NULL);
+    }
+    return sf_err_set(err, SF_EAGAIN,
+                      "store: the database of data dir '%s' is in use by another slimfarmd "
+                      "(one daemon per database until several hosts share one): stop it first, "
+                      "or give this one another database",
+                      s->dir);
+}
+
 /* A new store for data_dir (NULL: none, a database alone) and db (as store_open_db). */
 static struct store *
 store_new(const char *data_dir, const char *db, struct sf_err *err)
@@ -592,7 +629,7 @@ store_open_db(const char *data_dir, const char *db, struct store_recovery *rec, 
         goto fail;
     fix_modes(data_dir);
     sweep_tmp(path);
-    if (connect(s, NULL, err) || recover(s, rec, err))
+    if (connect(s, NULL, err) || lock_db(s, err) || recover(s, rec, err))
         goto fail;
     return s;
 fail:

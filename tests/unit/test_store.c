@@ -107,6 +107,28 @@ T_CASE(store_schema_version_is_kept_and_a_newer_one_refused)
     T_EQ_INT(from, store_schema_version());
 }
 
+/* PostgreSQL: a second daemon on the same database (another data dir, so no flock stops it)
+   is refused, as its crash recovery would take the first one's printing jobs. */
+T_CASE(store_one_daemon_per_database)
+{
+    if (!t_store_pg()) {
+        t_skip("PostgreSQL only: SQLite's database is in the data dir, under its flock");
+        return;
+    }
+    struct sf_err err;
+    struct store *a = t_store_open(fresh_dir("db-lock-a"), NULL, &err);
+    T_TRUE(a != NULL);
+    char url[1024];
+    snprintf(url, sizeof(url), "%s", t_store_db(fresh_dir("db-lock-a")));
+    struct store *b = store_open_db(fresh_dir("db-lock-b"), url, NULL, &err);
+    T_TRUE(b == NULL);
+    T_EQ_INT(err.code, SF_EAGAIN);
+    T_TRUE(strstr(err.msg, "in use by another slimfarmd") != NULL);
+    store_close(a); /* its lock goes with its connection */
+    T_TRUE((b = store_open_db(fresh_dir("db-lock-b"), url, NULL, &err)) != NULL);
+    store_close(b);
+}
+
 T_CASE(store_open_creates_schema_in_wal_mode)
 {
     SQLITE_ONLY();
