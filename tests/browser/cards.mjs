@@ -227,6 +227,14 @@ async function farmViews(page, j) {
   await waitText(page, "#uploads", /at most 127 bytes/);
   check((await page.locator("#uploads li").count()) === 2, "two files listed");
   await accessible(page, "submit page");
+  log("a reload keeps the temperature charts: they start from the daemon's samples");
+  const kept = await apiGet("/api/printers/slow/temps");
+  check(kept.samples.length >= 4, "the daemon kept slow's temperatures: " + kept.samples.length + " samples");
+  const reloaded = Date.now();
+  await page.reload();
+  const chart = page.locator('canvas[aria-label="nozzle and bed temperature history of slow"]');
+  await until(async () => Number((await chart.getAttribute("data-since")) || Infinity) <= reloaded - 10000,
+    "slow's chart reaches back past the reload");
   log(`job ${j}: cancelled from the queue, the dialog naming its copies`);
   await page.goto(`${URL}/#`);
   const said = await confirmed(page, page.getByRole("button", { name: `Cancel job ${j}`, exact: true }), `Cancel job #${j}`);

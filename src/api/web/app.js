@@ -160,6 +160,27 @@ async function login(key) {
   await refreshAll();
   connect();
   route();
+  loadTempHistory().catch(() => {}); // the charts then fill from the tab alone
+}
+
+// Each chart starts from the daemon's own samples (GET /api/printers/NAME/temps: the last
+// hour, one every 5 s), so a reload or a new tab keeps it; the tab adds its own from then on.
+async function loadTempHistory() {
+  await Promise.all([...st.printers.keys()].map(async (name) => {
+    let r;
+    try {
+      r = await api(`/api/printers/${encodeURIComponent(name)}/temps`, { quiet: true });
+    } catch (e) {
+      return; // the chart fills from the tab's own samples
+    }
+    const mine = st.hist.get(name) || [];
+    const first = mine.length ? mine[0][0] : Infinity;
+    // [at_ms, nozzle, nozzle target, bed, bed target]; null while the printer was offline
+    const old = r.samples.filter((s) => s[0] < first && s[1] != null && s[3] != null)
+      .map((s) => [s[0], s[1], s[3]]);
+    st.hist.set(name, old.concat(mine).slice(-HIST));
+  }));
+  renderPrinters();
 }
 
 // The session is over (or never was): show the login form.
@@ -344,6 +365,7 @@ function drawChart(cv, hist) {
   const ctx = cv.getContext("2d");
   const w = cv.width, h = cv.height;
   ctx.clearRect(0, 0, w, h);
+  cv.dataset.since = hist.length ? String(hist[0][0]) : ""; // the oldest sample drawn (tests read it)
   if (hist.length < 1) return;
   let hi = 60;
   for (const [, n, b] of hist) hi = Math.max(hi, n, b);
