@@ -157,9 +157,9 @@ open_printer(struct farm *f, const char *name, struct target *t, const char *bus
                           (long long)printer_job(t->p), busy);
     if (busy && printer_hot_idle(t->p))
         return sf_err_set(err, SF_EAGAIN,
-                          "printer '%.64s' is idle with its heaters on, held for a print to "
-                          "resume (hold_heat_min): turn them off first (M104 S0, M140 S0) or "
-                          "wait until the farm does",
+                          "printer '%.64s' is idle with its heaters on (held for a print to "
+                          "resume, or set by hand): turn them off first (M104 S0, M140 S0) or "
+                          "wait for hold_heat_min to turn them off",
                           name);
     return load(f, name, &t->r, &t->seed, err);
 }
