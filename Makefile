@@ -1,7 +1,7 @@
 # slimfarm - one plain Makefile, no configure step.
 #
 #   make            release build into build/rel (bin/ links to it)
-#   make check      deps, sanitizer build (-Werror, ASan+UBSan), every test
+#   make check      deps, sanitizer build (-Werror, ASan+UBSan), the release build, every test
 #   make check-pg   the store's tests on SQLite and on a PostgreSQL server of their own
 #   make demo       deps, build, run the farm on embedded defaults (ONCE=1 exits)
 #   make bench      benchmarks against peers; prints figures, never fails on time
@@ -234,6 +234,7 @@ check: deps
 	fi
 	$(MAKE) --no-print-directory browser-deps
 	$(MAKE) --no-print-directory SAN=1 tests
+	$(MAKE) --no-print-directory all
 	$(MAKE) --no-print-directory fuzzers
 	$(MAKE) --no-print-directory check-layers check-size check-format check-headers
 	FUZZ_RUNS=$(FUZZ_RUNS) JOBS=$(JOBS) tests/run.sh build/san $(T)
