@@ -2,7 +2,8 @@
 # sqldb_conn: sqldb's PostgreSQL connection when the server or the network
 # goes away (tests/unit/test_sqldb_conn.c): the server stopped for 30 s
 # under a writer, a loopback proxy (tests/tools/tcpproxy) cutting a
-# transaction and a LISTEN, the store re-taking its lock.  A server of the
+# transaction and a LISTEN, a silent network bounded by connect_timeout
+# with the session restored after it, the store re-taking its lock.  A server of the
 # test's own (lib/pg.sh) with a loopback port besides its Unix socket.
 # Skips (passes, saying so) when the PostgreSQL server is not installed;
 # `make check` installs it (make deps).

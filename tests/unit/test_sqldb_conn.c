@@ -356,6 +356,53 @@ T_CASE(sqldb_pg_listen_survives_a_cut)
     proxy_stop(&px);
 }
 
+/* The first column of sql's first row as text, into out. */
+static const char *
+text1(struct sqldb *db, const char *sql, char *out, size_t cap)
+{
+    struct sqldb_stmt *st;
+    snprintf(out, cap, "(failed)");
+    if (sqldb_prepare(db, sql, &st) == SF_OK) {
+        if (sqldb_step(st) == SQLDB_ROW)
+            snprintf(out, cap, "%s", sqldb_column_text(st, 0));
+        sqldb_finalize(st);
+    }
+    return out;
+}
+
+/* A silent network: a reconnect waits connect_timeout, no longer; the session comes back
+   as it was (read-only, asynchronous commit). */
+T_CASE(sqldb_pg_reconnect_is_bounded_and_keeps_the_session)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sf_err err;
+    struct sqldb *db = sqldb_open(proxy_url(&px), SQLDB_READONLY, &err);
+    T_OK(db ? SF_OK : err.code, &err);
+    T_DB_OK(sqldb_set_durable(db, false), db);
+    T_TRUE(proxy_cmd(&px, "blackhole"));
+    int64_t t0 = clock_mono_ms();
+    T_DB_ERR(sqldb_exec(db, "SELECT 1"), db, SF_EIO, "database unreachable (retrying): ");
+    int64_t took_ms = clock_mono_ms() - t0;
+    printf("# a reconnect into a silent network gave up after %lld ms: %s\n", (long long)took_ms,
+           sqldb_errmsg(db));
+    T_TRUE(strstr(sqldb_errmsg(db), "timeout") != NULL);
+    T_TRUE(took_ms < 15000); /* connect_timeout is 5 s */
+    T_TRUE(proxy_cmd(&px, "heal"));
+    t0 = clock_mono_ms();
+    int rc;
+    while ((rc = sqldb_exec(db, "SELECT 1")) != SF_OK && clock_mono_ms() - t0 < DEADLINE_MS)
+        nap_ms(20);
+    T_DB_OK(rc, db);
+    char v[64];
+    T_EQ_STR(text1(db, "SHOW synchronous_commit", v, sizeof(v)), "off");
+    T_EQ_STR(text1(db, "SHOW default_transaction_read_only", v, sizeof(v)), "on");
+    T_DB_ERR(sqldb_exec(db, "CREATE TABLE t_ro(k INTEGER)"), db, SF_EIO, "read-only");
+    sqldb_close(db);
+    proxy_stop(&px);
+}
+
 /* The store's reconnect hook takes its database lock again (store.c relock). */
 T_CASE(sqldb_pg_store_holds_its_lock_after_a_cut)
 {
