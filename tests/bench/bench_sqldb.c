@@ -135,11 +135,9 @@ reconnect_after(const char *url, const char *ctl, int outage_ms, bool busy)
 int
 main(int argc, char **argv)
 {
-    if (argc < 4) {
-        fprintf(stderr, "usage: bench_sqldb URL N PGCTL\n");
-        return 2;
-    }
-    int n = (int)strtol(argv[2], NULL, 10);
+    int n = argc == 4 ? (int)strtol(argv[2], NULL, 10) : 0;
+    if (n < 1)
+        fprintf(stderr, "usage: bench_sqldb URL N PGCTL (N >= 1)\n");
     if (n < 1 || notify_latency(argv[1], n))
         return 1;
     const int outages_ms[] = { 1000, 3000, 10000 };

@@ -6,19 +6,20 @@
 # outages of 1, 3 and 10 s, for a caller calling through the outage (its
 # back-off grown) and an idle one.  A server of the bench's own (lib/pg.sh).
 set -u
-build=${1:-build/rel}
-n=${BENCH_SQLDB_N:-1000}
-[ -x "$build/bench/bench_sqldb" ] || { echo "bench_sqldb: $build not built"; exit 1; }
 . "$(dirname "$0")/../integ/lib/pg.sh"
-work=$(mktemp -d)
+build=${1:-build/rel}
+if [ ! -x "$build/bench/bench_sqldb" ]; then
+  echo "bench_sqldb: $build not built"
+  exit 1
+fi
 pg_start || exit 1
-trap 'pg_stop; rm -rf "$work"' EXIT
-cat > "$work/pgctl" <<EOT
+ctl=$PG_DIR/bench-pgctl # removed with the server's dir
+cat > "$ctl" <<EOT
 #!/usr/bin/env bash
 . "$(cd "$(dirname "$0")/../integ" && pwd)/lib/pg.sh"
 PG_DIR=$PG_DIR
 pg_ctl_as "\$@"
 EOT
-chmod +x "$work/pgctl"
-echo "$(uptime | sed 's/.*load/load/')"
-"$build/bench/bench_sqldb" "$PG_URL" "$n" "$work/pgctl"
+chmod 755 "$ctl"
+uptime | sed 's/.*load/load/'
+"$build/bench/bench_sqldb" "$PG_URL" "${BENCH_SQLDB_N:-1000}" "$ctl"
