@@ -92,6 +92,8 @@ CMD_HELPERS := $(filter-out src/cmd/cmd.c,$(wildcard src/cmd/cmd[a-z]*.c))
 TEST_C := $(wildcard tests/unit/test_*.c)
 FUZZ_C := $(wildcard tests/fuzz/fuzz_*.c)
 BENCH_C := $(wildcard tests/bench/bench_*.c)
+# Programs the integration tests drive (tests/tools/*.c, libc alone): the partition proxy.
+TOOL_C := $(wildcard tests/tools/*.c)
 
 obj = $(patsubst %.c,$(BUILD)/obj/%.o,$(patsubst %.cpp,$(BUILD)/obj/%.o,$(1)))
 LIB := $(BUILD)/libslimfarm.a
@@ -101,6 +103,7 @@ PROGS := $(BUILD)/bin/slimfarm $(if $(wildcard src/cmd/slimfarmd.c),$(BUILD)/bin
 TESTS := $(patsubst tests/unit/%.c,$(BUILD)/tests/%,$(TEST_C)) \
 	$(patsubst tests/fuzz/fuzz_%.c,$(BUILD)/tests/test_fuzz_%,$(FUZZ_C))
 BENCHES := $(patsubst tests/bench/%.c,$(BUILD)/bench/%,$(BENCH_C))
+TOOLS := $(patsubst tests/tools/%.c,$(BUILD)/tests/tools/%,$(TOOL_C))
 FUZZERS := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(FUZZ_C))
 
 .PHONY: all check check-pg tests demo bench soak fuzz fuzzers deps install clean format check-format \
@@ -110,7 +113,7 @@ FUZZERS := $(patsubst tests/fuzz/%.c,build/fuzz/%,$(FUZZ_C))
 all: $(PROGS)
 	@mkdir -p bin && for p in $(PROGS); do ln -sf ../$$p bin/; done
 
-tests: $(PROGS) $(TESTS)
+tests: $(PROGS) $(TESTS) $(TOOLS)
 
 # V=1 shows whole command lines.
 Q := $(if $(V),,@)
@@ -181,6 +184,10 @@ $(BUILD)/bin/slimfarm-sim: $(call obj,sim/slimfarm_sim.c) $(SIMLIB) $(LIB)
 $(BUILD)/bench/bench_%: $(BUILD)/obj/tests/bench/bench_%.o $(SIMLIB) $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) -o $@ $^ $(EXT_LIBS)
+
+$(BUILD)/tests/tools/%: $(BUILD)/obj/tests/tools/%.o
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) -o $@ $^
 
 $(BUILD)/tests/test_fuzz_%: $(call obj,tests/fuzz/replay.c) $(BUILD)/obj/tests/fuzz/fuzz_%.o $(LIB)
 	@mkdir -p $(dir $@)

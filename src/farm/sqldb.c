@@ -6,6 +6,7 @@
  */
 #include "sqldb.h"
 
+#include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -24,14 +25,41 @@ sqldb_open(const char *target, unsigned flags, struct sf_err *err)
                                 : sqldb_sqlite_open(target, flags, err);
 }
 
+/* One line: libpq's messages span several ("...failed: No such file\n\tIs the server
+   running...?\n"), and a log line must not.  Whitespace runs become one space. */
+static void
+one_line(char *m)
+{
+    char *o = m;
+    for (const char *i = m; *i; i++) {
+        bool ws = *i == '\n' || *i == '\t' || *i == ' ' || *i == '\r';
+        if (!ws)
+            *o++ = *i;
+        else if (o > m && o[-1] != ' ')
+            *o++ = ' ';
+    }
+    while (o > m && o[-1] == ' ')
+        o--;
+    *o = '\0';
+}
+
 int
 sqldb_fail(struct sqldb *db, const char *msg)
 {
     snprintf(db->msg, sizeof(db->msg), "%s", msg ? msg : "unknown error");
-    size_t n = strlen(db->msg);
-    while (n > 0 && (db->msg[n - 1] == '\n' || db->msg[n - 1] == ' '))
-        db->msg[--n] = '\0';
+    one_line(db->msg);
     return SF_EIO;
+}
+
+int
+sqldb_failf(struct sqldb *db, int code, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(db->msg, sizeof(db->msg), fmt, ap);
+    va_end(ap);
+    one_line(db->msg);
+    return code;
 }
 
 void
@@ -62,7 +90,9 @@ sqldb_exec(struct sqldb *db, const char *sql)
 int
 sqldb_begin(struct sqldb *db)
 {
-    return db->ops->exec(db, db->ops->begin_sql);
+    int rc = db->ops->exec(db, db->ops->begin_sql);
+    db->in_tx = rc == SF_OK;
+    return rc;
 }
 
 int
@@ -72,9 +102,10 @@ sqldb_commit(struct sqldb *db)
     if (rc != SF_OK) {
         char msg[SQLDB_MSG_MAX];
         snprintf(msg, sizeof(msg), "%s", db->msg); /* the commit's, not the rollback's */
-        sqldb_rollback(db);
+        sqldb_rollback(db); /* still in the transaction: a lost connection is not retried */
         snprintf(db->msg, sizeof(db->msg), "%s", msg);
     }
+    db->in_tx = false;
     return rc;
 }
 
@@ -84,6 +115,7 @@ sqldb_rollback(struct sqldb *db)
     char msg[SQLDB_MSG_MAX];
     snprintf(msg, sizeof(msg), "%s", db->msg); /* keep the failure that led here */
     db->ops->exec(db, "ROLLBACK");
+    db->in_tx = false;
     snprintf(db->msg, sizeof(db->msg), "%s", msg);
 }
 
@@ -180,4 +212,66 @@ sqldb_finalize(struct sqldb_stmt *st)
 {
     if (st)
         st->db->ops->finalize(st);
+}
+
+void
+sqldb_on_reconnect(struct sqldb *db, sqldb_reconnect_fn fn, void *arg)
+{
+    db->on_reconnect = fn;
+    db->on_reconnect_arg = arg;
+}
+
+int64_t
+sqldb_reconnects(const struct sqldb *db)
+{
+    return db->reconnects;
+}
+
+/* SF_OK if channel is a name LISTEN and pg_notify read alike (sqldb.h), else SF_EINVAL. */
+static int
+check_channel(struct sqldb *db, const char *channel)
+{
+    size_t n = channel ? strlen(channel) : 0;
+    bool ok = n > 0 && n <= SQLDB_CHANNEL_MAX && !(channel[0] >= '0' && channel[0] <= '9');
+    for (size_t i = 0; ok && i < n; i++)
+        ok = (channel[i] >= 'a' && channel[i] <= 'z') || (channel[i] >= '0' && channel[i] <= '9') ||
+             channel[i] == '_';
+    if (ok)
+        return SF_OK;
+    return sqldb_failf(db, SF_EINVAL,
+                       "channel '%.80s': not a valid name (a-z, 0-9 and _, starting with a "
+                       "letter or _, 1 to %d bytes)",
+                       channel ? channel : "(null)", SQLDB_CHANNEL_MAX);
+}
+
+int
+sqldb_listen(struct sqldb *db, const char *channel)
+{
+    int rc = check_channel(db, channel);
+    return rc || !db->ops->listen ? rc : db->ops->listen(db, channel);
+}
+
+int
+sqldb_notify(struct sqldb *db, const char *channel, const char *payload)
+{
+    int rc = check_channel(db, channel);
+    if (rc)
+        return rc;
+    size_t n = payload ? strlen(payload) : 0;
+    if (n > SQLDB_PAYLOAD_MAX)
+        return sqldb_failf(db, SF_EINVAL, "notify '%s': payload of %zu bytes is over %d", channel,
+                           n, SQLDB_PAYLOAD_MAX);
+    return db->ops->notify ? db->ops->notify(db, channel, payload ? payload : "") : SF_OK;
+}
+
+int
+sqldb_notify_fd(struct sqldb *db)
+{
+    return db->ops->notify_fd ? db->ops->notify_fd(db) : -1;
+}
+
+int
+sqldb_notifications(struct sqldb *db, sqldb_notify_fn fn, void *arg)
+{
+    return db->ops->notifications ? db->ops->notifications(db, fn, arg) : 0;
 }

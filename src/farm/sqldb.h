@@ -28,9 +28,14 @@
  * leave the engine's message on the handle (sqldb_errmsg), as sqlite3
  * does; the store wraps it into its sf_err.
  *
+ * A PostgreSQL connection can be lost (the server restarts, the network
+ * parts); sqldb_on_reconnect below says what then.  LISTEN/NOTIFY, which
+ * wakes the other hosts on one database, is sqldb_listen and its friends.
+ *
  * Thread: a connection and its statements are used by one thread at a
  * time.  Calls block until the engine answers (for PostgreSQL: the
- * network); nothing here is for a loop that must not wait.
+ * network, bounded as sqldb_on_reconnect says); nothing here is for a
+ * loop that must not wait.
  */
 #ifndef SF_FARM_SQLDB_H
 #define SF_FARM_SQLDB_H
@@ -92,6 +97,78 @@ void sqldb_rollback(struct sqldb *db);
 int sqldb_set_durable(struct sqldb *db, bool durable);
 /* Rows the last INSERT, UPDATE or DELETE on db changed. */
 int64_t sqldb_changes(const struct sqldb *db);
+
+/*
+ * Lost connections (PostgreSQL only: an SQLite file is never lost).  The
+ * call that finds the connection gone fails with SF_EIO and "connection
+ * lost: " and the server's message.  The next call outside a transaction
+ * connects again (libpq's PQreset: same URL, a new server session); if
+ * that fails, attempts are spaced 0.2 s after the first failure, doubling
+ * to 5 s, and every call in between fails at once with "database
+ * unreachable (retrying): " and the last attempt's message, so a caller
+ * that keeps calling neither waits nor hammers the server.  One attempt
+ * waits at most connect_timeout (5 s unless the URL sets it); TCP
+ * keepalives (10 s idle, then 3 probes 5 s apart) and tcp_user_timeout
+ * (10 s) find a silent network partition, unless the URL sets them.
+ *
+ * Inside a transaction (sqldb_begin until sqldb_commit or sqldb_rollback)
+ * nothing reconnects: every later statement and the COMMIT fail, so a
+ * transaction is never half applied nor silently run again; the caller
+ * rolls back and retries it whole.  A connection lost while its COMMIT
+ * runs leaves the outcome unknown to the client (the message says so): a
+ * caller that must know reads back.  Statements hold no server state (no
+ * server-side prepared statements), so one prepared before a loss runs
+ * after it.
+ *
+ * After a reconnect the session is restored before any other statement:
+ * durability (sqldb_set_durable), read-only mode and every LISTEN; then fn
+ * (if set) runs, so the caller re-takes what its session held (the
+ * store's advisory lock).  fn may run statements on db; an error from it
+ * (SF_*, message in err) fails the reconnect like a server that did not
+ * answer: the new session is dropped and the next attempt waits its turn.
+ * One fn per connection; NULL removes it.
+ */
+typedef int (*sqldb_reconnect_fn)(struct sqldb *db, void *arg, struct sf_err *err);
+void sqldb_on_reconnect(struct sqldb *db, sqldb_reconnect_fn fn, void *arg);
+/* Successful reconnects of db so far (0 on SQLite). */
+int64_t sqldb_reconnects(const struct sqldb *db);
+
+/*
+ * LISTEN/NOTIFY.  A channel name is a-z, 0-9 and _, starting with a letter
+ * or _, at most 63 bytes: the identifiers PostgreSQL reads the same quoted
+ * or not, so LISTEN and pg_notify name one channel; any other is SF_EINVAL
+ * with the name in the message.  A payload is at most SQLDB_PAYLOAD_MAX
+ * bytes (the server's cap), else SF_EINVAL.
+ *
+ * On SQLite all four are valid no-ops (nothing is ever delivered, the fd is
+ * -1): one SQLite database has one daemon (the data dir's flock), so there
+ * is no other host to wake, and the process that wrote knows already.
+ *
+ * sqldb_listen: LISTEN on channel, at most SQLDB_LISTEN_MAX channels a
+ * connection (again is a no-op); re-issued after every reconnect.
+ * sqldb_notify: pg_notify(channel, payload) (NULL payload: empty); in a
+ * transaction it is delivered at COMMIT, and not at all on ROLLBACK.
+ * sqldb_notify_fd: the socket to watch for readability (epoll), or -1 (no
+ * connection now, or SQLite).  It may change at any reconnect: read it
+ * again after each call that may have reconnected (sqldb_reconnects
+ * tells).
+ * sqldb_notifications: read what the socket holds and hand each
+ * notification to fn, oldest first; returns how many (>= 0) or SF_EIO when
+ * the connection is lost -- it then reconnects as any call does (the
+ * back-off allowing), so a listener that only ever drains comes back: call
+ * it again from a timer until it returns >= 0.  Notifications that arrive
+ * while another call runs on db are kept, but do not wake the fd: drain
+ * after other calls on a listening connection too (or give the listener a
+ * connection of its own).
+ */
+#define SQLDB_LISTEN_MAX  16   /* channels a connection listens on: a few per farm */
+#define SQLDB_CHANNEL_MAX 63   /* PostgreSQL's NAMEDATALEN - 1 */
+#define SQLDB_PAYLOAD_MAX 7999 /* PostgreSQL refuses 8000 bytes and more */
+typedef void (*sqldb_notify_fn)(void *arg, const char *channel, const char *payload);
+int sqldb_listen(struct sqldb *db, const char *channel);
+int sqldb_notify(struct sqldb *db, const char *channel, const char *payload);
+int sqldb_notify_fd(struct sqldb *db);
+int sqldb_notifications(struct sqldb *db, sqldb_notify_fn fn, void *arg);
 
 /* Prepare one statement of sql into *st (free with sqldb_finalize). */
 int sqldb_prepare(struct sqldb *db, const char *sql, struct sqldb_stmt **st);

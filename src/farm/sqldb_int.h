@@ -35,12 +35,21 @@ struct sqldb_ops {
     bool (*column_null)(struct sqldb_stmt *st, int col);
     void (*reset)(struct sqldb_stmt *st);
     void (*finalize)(struct sqldb_stmt *st);
+    /* LISTEN/NOTIFY (sqldb.h), the channel checked already; NULL: a no-op (SQLite) */
+    int (*listen)(struct sqldb *db, const char *channel);
+    int (*notify)(struct sqldb *db, const char *channel, const char *payload);
+    int (*notify_fd)(struct sqldb *db);
+    int (*notifications)(struct sqldb *db, sqldb_notify_fn fn, void *arg);
 };
 
 struct sqldb {
     const struct sqldb_ops *ops;
-    char msg[SQLDB_MSG_MAX]; /* the last failure's message */
-    int64_t changes;         /* rows the last write changed */
+    char msg[SQLDB_MSG_MAX];         /* the last failure's message */
+    int64_t changes;                 /* rows the last write changed */
+    bool in_tx;                      /* between a sqldb_begin and its commit or rollback */
+    int64_t reconnects;              /* successful reconnects (sqldb_reconnects) */
+    sqldb_reconnect_fn on_reconnect; /* sqldb_on_reconnect's; NULL if none */
+    void *on_reconnect_arg;
 };
 
 struct sqldb_stmt {
@@ -52,5 +61,8 @@ struct sqldb *sqldb_sqlite_open(const char *path, unsigned flags, struct sf_err 
 struct sqldb *sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err);
 /* Keep msg (cut to fit, without a trailing newline) as db's last failure; returns SF_EIO. */
 int sqldb_fail(struct sqldb *db, const char *msg);
+/* As sqldb_fail with a format; returns code. */
+int sqldb_failf(struct sqldb *db, int code, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
 
 #endif

@@ -11,24 +11,49 @@
  * numbers.  No server-side prepared statements: the store prepares each
  * statement once per call, and a round trip is what they would save.
  *
+ * A lost connection (sqldb.h) is found by the call that meets it: libpq
+ * marks the connection bad, or the server's error says so (SQLSTATE class
+ * 08, or 57P01-57P03: shut down, crashed, starting).  A server that closed
+ * an idle connection (a restart) is seen before the next statement is
+ * sent, by a poll of the socket, so that statement runs on a new session
+ * instead of failing.  The connection is then marked lost and ready()
+ * decides: fail inside a transaction, else reconnect (PQreset) when the
+ * back-off allows, restoring the session (session()) and calling the
+ * caller's hook.  The back-off lives here, not in the caller, so every
+ * caller of the store gets it.
+ *
  * Thread: as sqldb.h.  Every call blocks on the server.
  */
 #include "sqldb.h"
 
 #include <libpq-fe.h>
+#include <poll.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "../base/clock.h"
 #include "../base/mem.h"
 #include "sqldb_int.h"
 
 #define PG_PARAMS_MAX 999 /* as SQLite's default; the store's widest statement binds 27 */
 #define PG_TEXT_OID   25  /* pg_type's oid of text (catalog/pg_type_d.h, a server header) */
 
+#define PG_BACKOFF_MIN_MS 200  /* the wait after a first failed reconnect */
+#define PG_BACKOFF_MAX_MS 5000 /* the longest: a server back is used within 5 s */
+
 struct pg {
     struct sqldb base;
     PGconn *conn;
+    unsigned flags;               /* sqldb_open's: SQLDB_READONLY is restored */
+    bool async_commit;            /* sqldb_set_durable(false) in force: restored */
+    bool lost;                    /* the connection is gone: reconnect before use */
+    bool reconnecting;            /* restoring a session: a loss now fails, no recursion */
+    int backoff_ms;               /* the wait after the next failed attempt; 0: none yet */
+    int64_t retry_ms;             /* clock_mono_ms of the next attempt allowed */
+    char lost_msg[SQLDB_MSG_MAX]; /* why the connection is away (the server's message) */
+    int n_listens;                /* channels LISTENed, re-issued by session() */
+    char listens[SQLDB_LISTEN_MAX][SQLDB_CHANNEL_MAX + 1];
 };
 
 struct pg_stmt {
@@ -48,6 +73,8 @@ conn(struct sqldb *db)
     return ((struct pg *)db)->conn;
 }
 
+static int ready(struct pg *p);
+
 static void
 pg_close(struct sqldb *db)
 {
@@ -55,12 +82,30 @@ pg_close(struct sqldb *db)
     free(db);
 }
 
-/* db's last failure from res (or the connection's message when res has none). */
+/* Whether the failure res reports (NULL: none) means the connection is gone. */
+static bool
+lost_by(struct sqldb *db, const PGresult *res)
+{
+    if (PQstatus(conn(db)) != CONNECTION_OK)
+        return true;
+    const char *code = res ? PQresultErrorField(res, PG_DIAG_SQLSTATE) : NULL;
+    return code && (strncmp(code, "08", 2) == 0 || strcmp(code, "57P01") == 0 ||
+                    strcmp(code, "57P02") == 0 || strcmp(code, "57P03") == 0);
+}
+
+/* db's last failure from res (or the connection's message when res has none); a lost
+   connection is marked so, for ready() to reconnect. */
 static int
 fail_res(struct sqldb *db, const PGresult *res)
 {
     const char *m = res ? PQresultErrorField(res, PG_DIAG_MESSAGE_PRIMARY) : NULL;
-    return sqldb_fail(db, m ? m : PQerrorMessage(conn(db)));
+    sqldb_fail(db, m ? m : PQerrorMessage(conn(db)));
+    if (!lost_by(db, res))
+        return SF_EIO;
+    struct pg *p = (struct pg *)db;
+    p->lost = true;
+    snprintf(p->lost_msg, sizeof(p->lost_msg), "%s", db->msg);
+    return sqldb_failf(db, SF_EIO, "connection lost: %s", p->lost_msg);
 }
 
 /* Rows a finished command changed: INSERT, UPDATE and DELETE only, as SQLite counts. */
@@ -76,12 +121,18 @@ count_changes(struct sqldb *db, PGresult *res)
 static int
 pg_exec(struct sqldb *db, const char *sql)
 {
+    struct pg *p = (struct pg *)db;
+    int rc = ready(p);
+    if (rc)
+        return rc;
     PGresult *res = PQexec(conn(db), sql);
     ExecStatusType es = PQresultStatus(res);
-    int rc = SF_OK;
-    if (es != PGRES_COMMAND_OK && es != PGRES_TUPLES_OK)
+    if (es != PGRES_COMMAND_OK && es != PGRES_TUPLES_OK) {
         rc = fail_res(db, res);
-    else if (strcmp(sql, "COMMIT") == 0 && strcmp(PQcmdStatus(res), "ROLLBACK") == 0)
+        if (p->lost && strcmp(sql, "COMMIT") == 0) /* sent, perhaps committed: nobody knows */
+            sqldb_failf(db, SF_EIO, "connection lost during COMMIT, whose outcome is unknown: %s",
+                        p->lost_msg);
+    } else if (strcmp(sql, "COMMIT") == 0 && strcmp(PQcmdStatus(res), "ROLLBACK") == 0)
         /* a COMMIT of a transaction a failed statement aborted "succeeds" as a rollback */
         rc = sqldb_fail(db, "the transaction was aborted by an earlier error and rolled back");
     else
@@ -95,7 +146,10 @@ pg_set_durable(struct sqldb *db, bool durable)
 {
     /* off: the commit returns before its WAL is flushed; a server crash may
        lose it, whole, never half (PostgreSQL's asynchronous commit) */
-    return pg_exec(db, durable ? "SET synchronous_commit = on" : "SET synchronous_commit = off");
+    int rc = pg_exec(db, durable ? "SET synchronous_commit = on" : "SET synchronous_commit = off");
+    if (rc == SF_OK)
+        ((struct pg *)db)->async_commit = !durable;
+    return rc;
 }
 
 /* Copy the quoted run at sql (quote q) to *out; returns the length copied. */
@@ -233,11 +287,14 @@ pg_step(struct sqldb_stmt *base)
     if (!st->res) {
         if (st->oom)
             return sqldb_fail(base->db, "out of memory binding a parameter");
+        int rc = ready((struct pg *)base->db);
+        if (rc)
+            return rc;
         st->res = PQexecParams(conn(base->db), st->sql, st->n_params, st->types,
                                (const char *const *)st->vals, NULL, NULL, 0);
         ExecStatusType es = PQresultStatus(st->res);
         if (es != PGRES_COMMAND_OK && es != PGRES_TUPLES_OK) {
-            int rc = fail_res(base->db, st->res);
+            rc = fail_res(base->db, st->res);
             PQclear(st->res);
             st->res = NULL;
             return rc;
@@ -321,6 +378,159 @@ pg_finalize(struct sqldb_stmt *base)
     free(st);
 }
 
+/* The server's NOTICEs ("relation already exists, skipping") are not the daemon's log. */
+static void
+quiet(void *arg, const char *message)
+{
+    (void)arg;
+    (void)message;
+}
+
+/* Whether p's connection is gone: libpq knows it, or the server closed it while it was
+   idle (a restart's "terminating connection" and end of file), seen without a round
+   trip.  Reading here also takes in notifications that arrived (PQnotifies). */
+static bool
+gone(struct pg *p)
+{
+    for (int i = 0; i < 4 && !p->lost && PQstatus(p->conn) == CONNECTION_OK; i++) {
+        struct pollfd pfd = { .fd = PQsocket(p->conn), .events = POLLIN };
+        if (poll(&pfd, 1, 0) <= 0)
+            return false;
+        if (!PQconsumeInput(p->conn))
+            break;
+    }
+    if (!p->lost && PQstatus(p->conn) != CONNECTION_OK) {
+        p->lost = true;
+        sqldb_fail(&p->base, PQerrorMessage(p->conn));
+        snprintf(p->lost_msg, sizeof(p->lost_msg), "%s", p->base.msg);
+    }
+    return p->lost;
+}
+
+/* LISTEN on channel (checked by sqldb.c; quoted, so a keyword is a channel too). */
+static int
+run_listen(struct pg *p, const char *channel)
+{
+    char sql[SQLDB_CHANNEL_MAX + 16];
+    snprintf(sql, sizeof(sql), "LISTEN \"%s\"", channel);
+    return pg_exec(&p->base, sql);
+}
+
+/* Set up a new session as the caller left the last: read-only, durability, LISTENs,
+   then the caller's hook (sqldb_on_reconnect).  SF_OK, or SF_EIO with the message. */
+static int
+session(struct pg *p)
+{
+    struct sqldb *db = &p->base;
+    PQsetNoticeProcessor(p->conn, quiet, NULL);
+    p->lost = false;
+    p->reconnecting = true;
+    int rc = SF_OK;
+    if (p->flags & SQLDB_READONLY)
+        rc = pg_exec(db, "SET default_transaction_read_only = on");
+    if (rc == SF_OK && p->async_commit)
+        rc = pg_exec(db, "SET synchronous_commit = off");
+    for (int i = 0; rc == SF_OK && i < p->n_listens; i++)
+        rc = run_listen(p, p->listens[i]);
+    if (rc == SF_OK && db->on_reconnect) {
+        struct sf_err err = { 0 };
+        if (db->on_reconnect(db, db->on_reconnect_arg, &err) != SF_OK)
+            rc = sqldb_failf(db, SF_EIO, "%s", err.msg[0] ? err.msg : "reconnect hook failed");
+    }
+    p->reconnecting = false;
+    return rc;
+}
+
+/* A new session for a lost connection, if the back-off allows one now. */
+static int
+reconnect(struct pg *p)
+{
+    struct sqldb *db = &p->base;
+    if (clock_mono_ms() < p->retry_ms)
+        return sqldb_failf(db, SF_EIO, "database unreachable (retrying): %s", p->lost_msg);
+    PQreset(p->conn); /* blocks at most connect_timeout (sqldb_pg_open) */
+    int rc =
+        PQstatus(p->conn) == CONNECTION_OK ? session(p) : sqldb_fail(db, PQerrorMessage(p->conn));
+    if (rc == SF_OK) {
+        p->backoff_ms = 0;
+        p->retry_ms = 0;
+        db->reconnects++;
+        return SF_OK;
+    }
+    p->lost = true; /* also when the hook refused: the next attempt starts a new session */
+    snprintf(p->lost_msg, sizeof(p->lost_msg), "%s", db->msg);
+    p->backoff_ms = p->backoff_ms ? p->backoff_ms * 2 : PG_BACKOFF_MIN_MS;
+    if (p->backoff_ms > PG_BACKOFF_MAX_MS)
+        p->backoff_ms = PG_BACKOFF_MAX_MS;
+    p->retry_ms = clock_mono_ms() + p->backoff_ms;
+    return sqldb_failf(db, SF_EIO, "database unreachable (retrying): %s", p->lost_msg);
+}
+
+/* SF_OK when p's connection can take a statement: as it is, or connected again outside a
+   transaction (sqldb.h); else SF_EIO with why. */
+static int
+ready(struct pg *p)
+{
+    if (!gone(p))
+        return SF_OK;
+    if (p->base.in_tx)
+        return sqldb_failf(&p->base, SF_EIO,
+                           "connection lost in a transaction, which did not commit: %s",
+                           p->lost_msg);
+    if (p->reconnecting)
+        return sqldb_failf(&p->base, SF_EIO, "connection lost: %s", p->lost_msg);
+    return reconnect(p);
+}
+
+static int
+pg_listen(struct sqldb *db, const char *channel)
+{
+    struct pg *p = (struct pg *)db;
+    for (int i = 0; i < p->n_listens; i++)
+        if (strcmp(p->listens[i], channel) == 0)
+            return SF_OK;
+    if (p->n_listens == SQLDB_LISTEN_MAX)
+        return sqldb_failf(db, SF_EINVAL, "listen '%s': already on %d channels", channel,
+                           SQLDB_LISTEN_MAX);
+    int rc = run_listen(p, channel);
+    if (rc == SF_OK)
+        snprintf(p->listens[p->n_listens++], sizeof(p->listens[0]), "%s", channel);
+    return rc;
+}
+
+static int
+pg_notify(struct sqldb *db, const char *channel, const char *payload)
+{
+    int rc = ready((struct pg *)db);
+    if (rc)
+        return rc;
+    const char *vals[2] = { channel, payload };
+    PGresult *res =
+        PQexecParams(conn(db), "SELECT pg_notify($1, $2)", 2, NULL, vals, NULL, NULL, 0);
+    rc = PQresultStatus(res) == PGRES_TUPLES_OK ? SF_OK : fail_res(db, res);
+    PQclear(res);
+    return rc;
+}
+
+static int
+pg_notify_fd(struct sqldb *db)
+{
+    struct pg *p = (struct pg *)db;
+    return p->lost ? -1 : PQsocket(p->conn);
+}
+
+static int
+pg_notifications(struct sqldb *db, sqldb_notify_fn fn, void *arg)
+{
+    int rc = ready((struct pg *)db); /* reads the socket, and reconnects a lost connection */
+    if (rc)
+        return rc;
+    int n = 0;
+    for (PGnotify *nt; (nt = PQnotifies(conn(db))); PQfreemem(nt), n++)
+        fn(arg, nt->relname, nt->extra);
+    return n;
+}
+
 static const struct sqldb_ops pg_ops = {
     .engine = SQLDB_PG,
     .close = pg_close,
@@ -339,15 +549,11 @@ static const struct sqldb_ops pg_ops = {
     .column_null = pg_column_null,
     .reset = pg_reset,
     .finalize = pg_finalize,
+    .listen = pg_listen,
+    .notify = pg_notify,
+    .notify_fd = pg_notify_fd,
+    .notifications = pg_notifications,
 };
-
-/* The server's NOTICEs ("relation already exists, skipping") are not the daemon's log. */
-static void
-quiet(void *arg, const char *message)
-{
-    (void)arg;
-    (void)message;
-}
 
 /* url for messages: a password in it (postgresql://user:secret@host, ?password=secret or a
    conninfo's password=secret) shown as "***" or "*". */
@@ -383,15 +589,26 @@ sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err)
         return NULL;
     }
     p->base.ops = &pg_ops;
-    p->conn = PQconnectdb(url);
+    p->flags = flags;
+    /* Bounds on waiting for the network (sqldb.h), before the URL so that its own
+       settings win (libpq: later keywords override earlier; dbname expands the URL).
+       keepalives and tcp_user_timeout apply to TCP only. */
+    static const char *const keys[] = { "connect_timeout",
+                                        "keepalives_idle",
+                                        "keepalives_interval",
+                                        "keepalives_count",
+                                        "tcp_user_timeout",
+                                        "dbname",
+                                        NULL };
+    const char *vals[] = { "5", "10", "5", "3", "10000", url, NULL };
+    p->conn = PQconnectdbParams(keys, vals, 1);
     if (!p->conn || PQstatus(p->conn) != CONNECTION_OK) {
         sqldb_fail(&p->base, p->conn ? PQerrorMessage(p->conn) : "out of memory");
         sf_err_set(err, SF_EIO, "store: cannot connect to '%s': %s", shown, p->base.msg);
         pg_close(&p->base);
         return NULL;
     }
-    PQsetNoticeProcessor(p->conn, quiet, NULL);
-    if (flags & SQLDB_READONLY && pg_exec(&p->base, "SET default_transaction_read_only = on")) {
+    if (session(p)) {
         sf_err_set(err, SF_EIO, "store: '%s': %s", shown, p->base.msg);
         pg_close(&p->base);
         return NULL;

@@ -556,11 +556,11 @@ connect(struct store *s, int *from, struct sf_err *err)
  */
 #define STORE_DB_LOCK_KEY 0x736c696d6661726dLL /* "slimfarm" in ASCII */
 static int
-lock_db(struct store *s, struct sf_err *err)
+lock_db(struct store *s, int n_tries, struct sf_err *err)
 {
     if (sqldb_engine(s->db) != SQLDB_PG)
         return SF_OK; /* SQLite: the data dir's flock covers its file (lock_dir) */
-    for (int tries = 0; tries < 50; tries++) {
+    for (int tries = 0; tries < n_tries; tries++) {
         struct sqldb_stmt *st;
         int rc = store_prepare(s, &st,
                                "SELECT CASE WHEN pg_try_advisory_lock(?1) THEN 1 ELSE 0 END", err);
@@ -581,6 +581,15 @@ lock_db(struct store *s, struct sf_err *err)
                       "(one daemon per database until several hosts share one): stop it first, "
                       "or give this one another database",
                       s->dir);
+}
+
+/* A new session after a lost connection (sqldb_on_reconnect) holds no lock: take it
+   again, once (a refusal fails the reconnect, which is tried again later). */
+static int
+relock(struct sqldb *db, void *arg, struct sf_err *err)
+{
+    (void)db;
+    return lock_db(arg, 1, err);
 }
 
 /* A new store for data_dir (NULL: none, a database alone) and db (as store_open_db). */
@@ -629,8 +638,9 @@ store_open_db(const char *data_dir, const char *db, struct store_recovery *rec, 
         goto fail;
     fix_modes(data_dir);
     sweep_tmp(path);
-    if (connect(s, NULL, err) || lock_db(s, err) || recover(s, rec, err))
+    if (connect(s, NULL, err) || lock_db(s, 50, err) || recover(s, rec, err))
         goto fail;
+    sqldb_on_reconnect(s->db, relock, s);
     return s;
 fail:
     store_close(s);

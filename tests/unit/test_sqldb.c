@@ -4,8 +4,10 @@
  * names a server (tests/tstore.h; tests/integ/store_pg.sh).  The same
  * statement text must give the same answers: placeholders bare and
  * numbered (and a `?` inside a string left alone), NULLs, RETURNING,
- * changes, transactions, and a commit that cannot commit.
+ * changes, transactions, a commit that cannot commit, and LISTEN/NOTIFY
+ * (no-ops on SQLite).  A lost connection: test_sqldb_conn.c.
  */
+#include <poll.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
@@ -124,4 +126,72 @@ T_CASE(sqldb_transactions_and_errors)
     sqldb_finalize(st);
     T_TRUE(sqldb_errmsg(db)[0] != '\0');
     sqldb_close(db);
+}
+
+struct notes {
+    int n;
+    char channel[64], payload[64];
+};
+
+static void
+on_note(void *arg, const char *channel, const char *payload)
+{
+    struct notes *g = arg;
+    g->n++;
+    snprintf(g->channel, sizeof(g->channel), "%s", channel);
+    snprintf(g->payload, sizeof(g->payload), "%s", payload);
+}
+
+T_CASE(sqldb_listen_notify_and_channel_names)
+{
+    struct sqldb *db = fresh("notify"), *other = fresh("notify");
+    T_TRUE(db != NULL && other != NULL);
+    /* a name LISTEN and pg_notify would read differently is refused, naming it, on both
+       engines alike */
+    const char *bad[] = { "Jobs", "1jobs", "", "jobs-x", "j\"x", NULL };
+    for (int i = 0; bad[i]; i++) {
+        T_EQ_INT(sqldb_listen(db, bad[i]), SF_EINVAL);
+        T_TRUE(strstr(sqldb_errmsg(db), "not a valid name") != NULL);
+    }
+    T_EQ_INT(sqldb_notify(db, "Jobs", "x"), SF_EINVAL);
+    T_TRUE(strstr(sqldb_errmsg(db), "channel 'Jobs'") != NULL);
+    char big[SQLDB_PAYLOAD_MAX + 2];
+    memset(big, 'x', sizeof(big) - 1);
+    big[sizeof(big) - 1] = '\0';
+    T_EQ_INT(sqldb_notify(db, "jobs", big), SF_EINVAL);
+    T_TRUE(strstr(sqldb_errmsg(db), "payload of 8000 bytes") != NULL);
+    char longest[SQLDB_CHANNEL_MAX + 2];
+    memset(longest, 'a', sizeof(longest) - 1);
+    longest[sizeof(longest) - 1] = '\0';
+    T_EQ_INT(sqldb_listen(db, longest), SF_EINVAL);
+    longest[SQLDB_CHANNEL_MAX] = '\0';
+    T_OK(sqldb_listen(db, longest), NULL);
+    T_OK(sqldb_listen(db, "select"), NULL); /* a keyword is a channel too (quoted) */
+    struct notes g = { 0 };
+    if (!t_store_pg()) { /* SQLite: valid no-ops, nothing to watch (sqldb.h) */
+        T_OK(sqldb_notify(other, "select", "x"), NULL);
+        T_EQ_INT(sqldb_notify_fd(db), -1);
+        T_EQ_INT(sqldb_notifications(db, on_note, &g), 0);
+        sqldb_close(db);
+        sqldb_close(other);
+        return;
+    }
+    /* PostgreSQL: in a transaction, delivered at COMMIT only */
+    T_OK(sqldb_begin(other), NULL);
+    T_OK(sqldb_notify(other, "select", "it's 1"), NULL);
+    sqldb_rollback(other);
+    T_OK(sqldb_begin(other), NULL);
+    T_OK(sqldb_notify(other, "select", "it's 2"), NULL);
+    T_OK(sqldb_commit(other), NULL);
+    for (int tries = 0; g.n == 0 && tries < 60; tries++) { /* generous: a loaded machine */
+        struct pollfd pfd = { .fd = sqldb_notify_fd(db), .events = POLLIN };
+        T_TRUE(pfd.fd >= 0);
+        if (poll(&pfd, 1, 1000) == 1)
+            T_TRUE(sqldb_notifications(db, on_note, &g) >= 0);
+    }
+    T_EQ_INT(g.n, 1);
+    T_EQ_STR(g.channel, "select");
+    T_EQ_STR(g.payload, "it's 2");
+    sqldb_close(db);
+    sqldb_close(other);
 }

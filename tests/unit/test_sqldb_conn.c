@@ -1,0 +1,443 @@
+/*
+ * test_sqldb_conn.c - sqldb's PostgreSQL connection when the server or the
+ * network goes away (sqldb.h: reconnect, transactions, LISTEN/NOTIFY),
+ * against a real server: tests/integ/sqldb_conn.sh starts one with a
+ * loopback port (lib/pg.sh), and names it and its tools in the environment:
+ *   SQLDB_CONN_DB     a database's name on it, SQLDB_CONN_URL its Unix-socket URL
+ *   SQLDB_CONN_PORT   the server's TCP port, reached through tests/tools/tcpproxy
+ *                     (SQLDB_CONN_PROXY) to cut the network
+ *   SQLDB_CONN_PGCTL  a command taking "stop -m fast" or "start" for the server
+ *   SQLDB_CONN_OUTAGE_S  how long the server stays stopped (default 30)
+ * Without them every case skips (the suite's plain run of this program).
+ * Waits are for conditions with generous deadlines; the one bound asserted
+ * on time is the one under test, that no call hangs (here: 3 x connect_timeout).
+ */
+#include <poll.h>
+#include <signal.h>
+#include <spawn.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "../../src/base/clock.h"
+#include "../../src/farm/sqldb.h"
+#include "../../src/farm/store.h"
+#include "../t.h"
+
+extern char **environ;
+
+#define DEADLINE_MS 60000 /* a condition that must come: generous for a loaded machine */
+
+/* expr must fail with code and a message holding substr. */
+#define T_DB_ERR(expr, db, code, substr)                                                           \
+    do {                                                                                           \
+        int t_r_ = (expr);                                                                         \
+        if (t_r_ != (code) || !strstr(sqldb_errmsg(db), (substr))) {                               \
+            t_fail(__FILE__, __LINE__, "%s = %d (%s), not %d with \"%s\"", #expr, t_r_,            \
+                   sqldb_errmsg(db), (code), (substr));                                            \
+            return;                                                                                \
+        }                                                                                          \
+    } while (0)
+
+/* expr must be SF_OK, else fail with db's message. */
+#define T_DB_OK(expr, db) T_DB_ERR(expr, db, SF_OK, "")
+
+static bool
+have_server(void)
+{
+    return getenv("SQLDB_CONN_URL") && getenv("SQLDB_CONN_PORT") && getenv("SQLDB_CONN_DB") &&
+           getenv("SQLDB_CONN_PROXY") && getenv("SQLDB_CONN_PGCTL");
+}
+
+static void
+nap_ms(int ms)
+{
+    nanosleep(&(struct timespec){ .tv_sec = ms / 1000, .tv_nsec = (ms % 1000) * 1000000L }, NULL);
+}
+
+/* A proxy (tests/tools/tcpproxy) to the server's port: its pid and command pipes. */
+struct proxy {
+    pid_t pid;
+    FILE *cmd, *out;
+    int port;
+};
+
+static bool
+proxy_start(struct proxy *p)
+{
+    int in[2], out[2];
+    if (pipe(in) || pipe(out))
+        return false;
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_adddup2(&fa, in[0], 0);
+    posix_spawn_file_actions_adddup2(&fa, out[1], 1);
+    posix_spawn_file_actions_addclose(&fa, in[1]);
+    posix_spawn_file_actions_addclose(&fa, out[0]);
+    char *argv[] = { getenv("SQLDB_CONN_PROXY"), getenv("SQLDB_CONN_PORT"), NULL };
+    int rc = posix_spawn(&p->pid, argv[0], &fa, NULL, argv, environ);
+    posix_spawn_file_actions_destroy(&fa);
+    close(in[0]);
+    close(out[1]);
+    p->cmd = fdopen(in[1], "w");
+    p->out = fdopen(out[0], "r");
+    char line[64];
+    return rc == 0 && p->cmd && p->out && fgets(line, sizeof(line), p->out) &&
+           sscanf(line, "port %d", &p->port) == 1;
+}
+
+/* Send cmd and wait for its "ok" (the cut is made when this returns). */
+static bool
+proxy_cmd(struct proxy *p, const char *cmd)
+{
+    char line[128];
+    fprintf(p->cmd, "%s\n", cmd);
+    fflush(p->cmd);
+    return fgets(line, sizeof(line), p->out) && strncmp(line, "ok ", 3) == 0;
+}
+
+static void
+proxy_stop(struct proxy *p)
+{
+    fclose(p->cmd); /* end of its stdin ends it */
+    fclose(p->out);
+    waitpid(p->pid, NULL, 0);
+}
+
+/* The test database through the proxy. */
+static const char *
+proxy_url(const struct proxy *p)
+{
+    static char url[256];
+    snprintf(url, sizeof(url), "postgresql://postgres@127.0.0.1:%d/%s", p->port,
+             getenv("SQLDB_CONN_DB"));
+    return url;
+}
+
+static struct sqldb *
+open_url(const char *url)
+{
+    struct sf_err err;
+    struct sqldb *db = sqldb_open(url, 0, &err);
+    if (!db)
+        fprintf(stderr, "open %s: %s\n", url, err.msg);
+    return db;
+}
+
+/* A proxy, a connection through it and one direct; false if any fails. */
+static bool
+cut_setup(struct proxy *px, struct sqldb **via, struct sqldb **direct)
+{
+    if (!proxy_start(px))
+        return false;
+    *via = open_url(proxy_url(px));
+    *direct = open_url(getenv("SQLDB_CONN_URL"));
+    return *via && *direct;
+}
+
+/* Run sql with one integer parameter; SF_OK or the failure. */
+static int
+run1(struct sqldb *db, const char *sql, int64_t v)
+{
+    struct sqldb_stmt *st;
+    int rc = sqldb_prepare(db, sql, &st);
+    if (rc)
+        return rc;
+    sqldb_bind_int64(st, 1, v);
+    rc = sqldb_step(st);
+    sqldb_finalize(st);
+    return rc < 0 ? rc : SF_OK;
+}
+
+/* The first column of sql's first row; -1 on failure. */
+static int64_t
+one(struct sqldb *db, const char *sql)
+{
+    struct sqldb_stmt *st;
+    int64_t v = -1;
+    if (sqldb_prepare(db, sql, &st) == SF_OK) {
+        if (sqldb_step(st) == SQLDB_ROW)
+            v = sqldb_column_int64(st, 0);
+        sqldb_finalize(st);
+    }
+    return v;
+}
+
+static int
+pgctl(const char *args)
+{
+    char cmd[1024];
+    snprintf(cmd, sizeof(cmd), "%s %s > /dev/null", getenv("SQLDB_CONN_PGCTL"), args);
+    return system(cmd);
+}
+
+/* (a) The server stops for ~30 s while a writer keeps calling. */
+T_CASE(sqldb_pg_survives_a_server_restart)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    const char *o = getenv("SQLDB_CONN_OUTAGE_S");
+    int64_t outage_ms = (o ? strtol(o, NULL, 10) : 30) * 1000;
+    struct sqldb *db = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(db != NULL);
+    T_DB_OK(sqldb_exec(db, "CREATE TABLE rows_a(k BIGINT PRIMARY KEY)"), db);
+    const char *ins = "INSERT INTO rows_a(k) VALUES(?)";
+    int64_t k = 0, ok[4096];
+    int n_ok = 0;
+    while (n_ok < 20) {
+        T_DB_OK(run1(db, ins, ++k), db);
+        ok[n_ok++] = k;
+    }
+    T_EQ_INT(pgctl("stop -m fast"), 0);
+    int64_t t_stop = clock_mono_ms(), worst_ms = 0;
+    int n_fail = 0, n_fast = 0;
+    while (clock_mono_ms() - t_stop < outage_ms) {
+        int64_t t0 = clock_mono_ms();
+        int rc = run1(db, ins, ++k);
+        int64_t dt = clock_mono_ms() - t0;
+        worst_ms = dt > worst_ms ? dt : worst_ms;
+        n_fail += rc == SF_EIO; /* the server is down: nothing can succeed */
+        n_fast += strstr(sqldb_errmsg(db), "database unreachable (retrying): ") != NULL;
+        if (!strstr(sqldb_errmsg(db), "unreachable") && !strstr(sqldb_errmsg(db), "lost"))
+            printf("# unclear failure: %s\n", sqldb_errmsg(db));
+        nap_ms(20);
+    }
+    int n_calls = (int)(k - ok[n_ok - 1]);
+    T_EQ_INT(pgctl("start"), 0); /* first, so the cases after this one have their server */
+    int64_t t_up = clock_mono_ms();
+    printf("# %d calls failed while the server was down, %d at once (back-off), the longest "
+           "%lld ms\n",
+           n_fail, n_fast, (long long)worst_ms);
+    T_EQ_INT(n_fail, n_calls);
+    T_EQ_INT(n_fast, n_calls); /* each with the clear message */
+    T_TRUE(worst_ms < 15000);  /* one attempt waits at most connect_timeout, 5 s */
+    int rc;
+    while ((rc = run1(db, ins, ++k)) != SF_OK && clock_mono_ms() - t_up < DEADLINE_MS)
+        nap_ms(10);
+    T_DB_OK(rc, db); /* the same handle works again */
+    printf("# the first call succeeded %lld ms after the server was back\n",
+           (long long)(clock_mono_ms() - t_up));
+    ok[n_ok++] = k;
+    for (int i = 0; i < 5; i++) {
+        T_DB_OK(run1(db, ins, ++k), db);
+        ok[n_ok++] = k;
+    }
+    T_EQ_INT(sqldb_reconnects(db), 1);
+    /* no committed row lost; none of the failed calls wrote one */
+    T_EQ_INT(one(db, "SELECT count(*) FROM rows_a"), n_ok);
+    struct sqldb_stmt *st;
+    T_DB_OK(sqldb_prepare(db, "SELECT k FROM rows_a ORDER BY k", &st), db);
+    for (int i = 0; i < n_ok && sqldb_step(st) == SQLDB_ROW; i++)
+        T_EQ_INT(sqldb_column_int64(st, 0), ok[i]);
+    sqldb_finalize(st);
+    sqldb_close(db);
+}
+
+static int n_hook;
+
+/* A reconnect hook that uses the new session, as the store's lock re-take does. */
+static int
+hook(struct sqldb *db, void *arg, struct sf_err *err)
+{
+    (void)arg;
+    n_hook++;
+    return one(db, "SELECT 7") == 7 ? SF_OK : sf_err_set(err, SF_EIO, "hook: no answer");
+}
+
+/* (b) The network parts in the middle of a transaction. */
+T_CASE(sqldb_pg_cut_fails_the_whole_transaction)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    struct sqldb *db, *direct;
+    T_TRUE(cut_setup(&px, &db, &direct));
+    sqldb_on_reconnect(db, hook, NULL);
+    T_DB_OK(sqldb_exec(direct, "CREATE TABLE rows_b(k BIGINT PRIMARY KEY)"), direct);
+    const char *ins = "INSERT INTO rows_b(k) VALUES(?)";
+    T_DB_OK(sqldb_begin(db), db);
+    T_DB_OK(run1(db, ins, 1), db);
+    T_DB_OK(run1(db, ins, 2), db);
+    T_TRUE(proxy_cmd(&px, "drop"));
+    T_DB_ERR(run1(db, ins, 3), db, SF_EIO, "connection lost");
+    T_TRUE(proxy_cmd(&px, "heal"));
+    /* the network is back, but this transaction is gone: nothing runs in its name */
+    T_DB_ERR(run1(db, ins, 4), db, SF_EIO, "connection lost in a transaction");
+    T_DB_ERR(sqldb_commit(db), db, SF_EIO, "connection lost in a transaction");
+    T_EQ_INT(one(direct, "SELECT count(*) FROM rows_b"), 0);
+    T_EQ_INT(n_hook, 0);
+    /* outside a transaction the next call connects again */
+    T_DB_OK(run1(db, ins, 5), db);
+    T_EQ_INT(sqldb_reconnects(db), 1);
+    T_EQ_INT(n_hook, 1);
+    T_EQ_INT(one(direct, "SELECT count(*) FROM rows_b WHERE k = 5"), 1);
+    /* a refused reconnect: the call that finds the loss fails (the end of the connection
+       seen before sending, then the reconnect refused: "unreachable"; or, were the end to
+       come late, sending: "lost"), the next ones fail at once (back-off), and after the
+       heal a call gets through */
+    T_TRUE(proxy_cmd(&px, "drop"));
+    T_EQ_INT(run1(db, ins, 6), SF_EIO);
+    T_TRUE(strstr(sqldb_errmsg(db), "unreachable") || strstr(sqldb_errmsg(db), "lost"));
+    T_DB_ERR(run1(db, ins, 7), db, SF_EIO, "database unreachable (retrying): ");
+    T_DB_ERR(run1(db, ins, 8), db, SF_EIO, "database unreachable (retrying): ");
+    T_TRUE(proxy_cmd(&px, "heal"));
+    int64_t t0 = clock_mono_ms();
+    int rc;
+    while ((rc = run1(db, ins, 9)) != SF_OK && clock_mono_ms() - t0 < DEADLINE_MS)
+        nap_ms(20);
+    T_DB_OK(rc, db);
+    T_EQ_INT(sqldb_reconnects(db), 2);
+    T_EQ_INT(one(direct, "SELECT count(*) FROM rows_b"), 2); /* 5 and 9 */
+    sqldb_close(db);
+    sqldb_close(direct);
+    proxy_stop(&px);
+}
+
+struct got {
+    int n;
+    char last[64];
+};
+
+static void
+on_note(void *arg, const char *channel, const char *payload)
+{
+    struct got *g = arg;
+    if (strcmp(channel, "jobs") == 0) {
+        g->n++;
+        snprintf(g->last, sizeof(g->last), "%s", payload);
+    }
+}
+
+/* Wait until db's notification fd is readable and drain it, until g's last payload is want. */
+static bool
+await_note(struct sqldb *db, struct got *g, const char *want)
+{
+    int64_t t0 = clock_mono_ms();
+    while (strcmp(g->last, want) != 0 && clock_mono_ms() - t0 < DEADLINE_MS) {
+        struct pollfd pfd = { .fd = sqldb_notify_fd(db), .events = POLLIN };
+        if (poll(&pfd, 1, 1000) > 0 && sqldb_notifications(db, on_note, g) < 0)
+            return false;
+    }
+    return strcmp(g->last, want) == 0;
+}
+
+/* (c) LISTEN on one connection, NOTIFY from another; a cut and a heal keep the LISTEN. */
+T_CASE(sqldb_pg_listen_survives_a_cut)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    struct sqldb *l, *n;
+    T_TRUE(cut_setup(&px, &l, &n));
+    T_DB_OK(sqldb_listen(l, "jobs"), l);
+    struct got g = { 0 };
+    T_DB_OK(sqldb_notify(n, "jobs", "queued 1"), n);
+    T_TRUE(await_note(l, &g, "queued 1"));
+    T_TRUE(proxy_cmd(&px, "drop"));
+    /* the fd reads the end of the connection; draining finds it lost, and the proxy
+       refuses the reconnect */
+    struct pollfd pfd = { .fd = sqldb_notify_fd(l), .events = POLLIN };
+    T_TRUE(poll(&pfd, 1, DEADLINE_MS) == 1);
+    T_DB_ERR(sqldb_notifications(l, on_note, &g), l, SF_EIO, "unreachable");
+    T_EQ_INT(sqldb_notify_fd(l), -1);
+    T_TRUE(proxy_cmd(&px, "heal"));
+    int64_t t0 = clock_mono_ms();
+    int rc;
+    while ((rc = sqldb_notifications(l, on_note, &g)) < 0 && clock_mono_ms() - t0 < DEADLINE_MS)
+        nap_ms(20);
+    T_TRUE(rc >= 0);
+    T_EQ_INT(sqldb_reconnects(l), 1);
+    T_TRUE(sqldb_notify_fd(l) >= 0);
+    T_DB_OK(sqldb_notify(n, "jobs", "queued 2"), n);
+    T_TRUE(await_note(l, &g, "queued 2")); /* the LISTEN was issued again */
+    T_EQ_INT(g.n, 2);
+    sqldb_close(l);
+    sqldb_close(n);
+    proxy_stop(&px);
+}
+
+/* The first column of sql's first row as text, into out. */
+static const char *
+text1(struct sqldb *db, const char *sql, char *out, size_t cap)
+{
+    struct sqldb_stmt *st;
+    snprintf(out, cap, "(failed)");
+    if (sqldb_prepare(db, sql, &st) == SF_OK) {
+        if (sqldb_step(st) == SQLDB_ROW)
+            snprintf(out, cap, "%s", sqldb_column_text(st, 0));
+        sqldb_finalize(st);
+    }
+    return out;
+}
+
+/* A silent network: a reconnect waits connect_timeout, no longer; the session comes back
+   as it was (read-only, asynchronous commit). */
+T_CASE(sqldb_pg_reconnect_is_bounded_and_keeps_the_session)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sf_err err;
+    struct sqldb *db = sqldb_open(proxy_url(&px), SQLDB_READONLY, &err);
+    T_OK(db ? SF_OK : err.code, &err);
+    T_DB_OK(sqldb_set_durable(db, false), db);
+    T_TRUE(proxy_cmd(&px, "blackhole"));
+    int64_t t0 = clock_mono_ms();
+    T_DB_ERR(sqldb_exec(db, "SELECT 1"), db, SF_EIO, "database unreachable (retrying): ");
+    int64_t took_ms = clock_mono_ms() - t0;
+    printf("# a reconnect into a silent network gave up after %lld ms: %s\n", (long long)took_ms,
+           sqldb_errmsg(db));
+    T_TRUE(strstr(sqldb_errmsg(db), "timeout") != NULL);
+    T_TRUE(took_ms < 15000); /* connect_timeout is 5 s */
+    T_TRUE(proxy_cmd(&px, "heal"));
+    t0 = clock_mono_ms();
+    int rc;
+    while ((rc = sqldb_exec(db, "SELECT 1")) != SF_OK && clock_mono_ms() - t0 < DEADLINE_MS)
+        nap_ms(20);
+    T_DB_OK(rc, db);
+    char v[64];
+    T_EQ_STR(text1(db, "SHOW synchronous_commit", v, sizeof(v)), "off");
+    T_EQ_STR(text1(db, "SHOW default_transaction_read_only", v, sizeof(v)), "on");
+    T_DB_ERR(sqldb_exec(db, "CREATE TABLE t_ro(k INTEGER)"), db, SF_EIO, "read-only");
+    sqldb_close(db);
+    proxy_stop(&px);
+}
+
+/* The store's reconnect hook takes its database lock again (store.c relock). */
+T_CASE(sqldb_pg_store_holds_its_lock_after_a_cut)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(direct != NULL);
+    char dir[512], dir2[512];
+    snprintf(dir, sizeof(dir), "%s/store", t_tmpdir());
+    snprintf(dir2, sizeof(dir2), "%s/store2", t_tmpdir());
+    struct sf_err err;
+    struct store *s = store_open_db(dir, proxy_url(&px), NULL, &err);
+    T_OK(s ? SF_OK : err.code, &err);
+    const char *held = "SELECT count(*) FROM pg_locks WHERE locktype = 'advisory' AND granted";
+    T_EQ_INT(one(direct, held), 1);
+    T_TRUE(proxy_cmd(&px, "drop"));
+    T_TRUE(proxy_cmd(&px, "heal"));
+    /* the server ends the cut session, and its lock, once it sees the end */
+    int64_t t0 = clock_mono_ms();
+    while (one(direct, held) != 0 && clock_mono_ms() - t0 < DEADLINE_MS)
+        nap_ms(20);
+    T_EQ_INT(one(direct, held), 0);
+    /* a store call fails (the call that finds the loss), the next reconnects and relocks */
+    t0 = clock_mono_ms();
+    int rc;
+    while ((rc = store_printer_set(s, "p1", PRINTER_IDLE, &err)) != SF_OK &&
+           clock_mono_ms() - t0 < DEADLINE_MS)
+        nap_ms(20);
+    T_OK(rc, &err);
+    T_EQ_INT(one(direct, held), 1);
+    struct store *s2 = store_open_db(dir2, getenv("SQLDB_CONN_URL"), NULL, &err);
+    T_TRUE(s2 == NULL);
+    T_TRUE(strstr(err.msg, "in use by another slimfarmd") != NULL);
+    store_close(s);
+    sqldb_close(direct);
+    proxy_stop(&px);
+}
