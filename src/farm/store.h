@@ -113,6 +113,10 @@ struct job_event_args {
     const char *note;      /* PREPARED: NULL or what the preparation did other than the job
                               asked (a slimming that failed, prepare.h's shape_failed), for
                               operators: kept in the event's detail, not as the job's reason */
+    int64_t fence;         /* any event, chiefly START and RESUME: the job's fencing token
+                              its host holds (store_job_claim, store_job_attach); the event
+                              is refused (SF_ESTALE) once another host took the job.  0:
+                              not checked (one host) */
 };
 
 /* One row of print history. */
