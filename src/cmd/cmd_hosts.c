@@ -45,8 +45,8 @@ print_json(const struct store_host_row *rows, size_t n, int64_t now_ms)
     for (size_t i = 0; i < n; i++) {
         const struct store_host_row *h = &rows[i];
         json_array_append_new(
-            a, json_pack("{s:s, s:s, s:f, s:f, s:I, s:I, s:i, s:I, s:i, s:o, s:i}", "name",
-                         h->name, "state", h->live ? "live" : "expired", "lease_age_s",
+            a, json_pack("{s:s, s:s, s:f, s:f, s:I, s:I, s:i, s:I, s:i, s:o, s:i}", "name", h->name,
+                         "state", h->live ? "live" : "expired", "lease_age_s",
                          (double)(now_ms - h->heartbeat_ms) / 1000, "lease_left_s",
                          (double)(h->lease_until_ms - now_ms) / 1000, "pid", (json_int_t)h->pid,
                          "token", (json_int_t)h->token, "version", h->version, "started_ms",
@@ -73,8 +73,8 @@ print_table(const struct store_host_row *rows, size_t n, int64_t now_ms)
         const struct store_host_row *h = &rows[i];
         char age[24];
         snprintf(age, sizeof(age), "%.1f s", (double)(now_ms - h->heartbeat_ms) / 1000);
-        printf("%-20s %-8s %10s %8lld %6lld %6d  %s\n", h->name, h->live ? "live" : "expired",
-               age, (long long)h->pid, (long long)h->token, h->n_claimed,
+        printf("%-20s %-8s %10s %8lld %6lld %6d  %s\n", h->name, h->live ? "live" : "expired", age,
+               (long long)h->pid, (long long)h->token, h->n_claimed,
                h->n_printers ? h->printers : "-");
     }
 }

@@ -641,16 +641,18 @@ claim_next(struct store *s, const char *host, const char *list, int64_t now_ms, 
     int rc = job_next(JOB_QUEUED, JOB_EV_PREPARE, &c, &to, err);
     if (rc)
         return rc;
-    /* the queued state as a literal, so both engines read the claim order's partial index */
+    /* the queued state as a literal, so both engines may read the claim order's partial index;
+       SQLite is told to (INDEXED BY): without statistics it took jobs_state and sorted every
+       queued job at each claim */
     char sql[sizeof(STORE_JOB_COLS) + 512];
     snprintf(sql, sizeof(sql),
              "UPDATE jobs SET state = ?1, claimed_by = ?2, fence = fence + 1, updated_ms = ?3"
-             " WHERE id = (SELECT id FROM jobs WHERE state = '%s'"
+             " WHERE id = (SELECT id FROM jobs%s WHERE state = '%s'"
              " AND (?4 = '' OR instr(?4, ',' || method || ',') > 0)"
              " ORDER BY priority DESC, queue_pos, id LIMIT 1%s) AND state = '%s'"
              " RETURNING %s, fence",
-             job_state_name(JOB_QUEUED), is_pg(s) ? " FOR UPDATE SKIP LOCKED" : "",
-             job_state_name(JOB_QUEUED), STORE_JOB_COLS);
+             is_pg(s) ? "" : " INDEXED BY jobs_claim_order", job_state_name(JOB_QUEUED),
+             is_pg(s) ? " FOR UPDATE SKIP LOCKED" : "", job_state_name(JOB_QUEUED), STORE_JOB_COLS);
     struct sqldb_stmt *st;
     if ((rc = store_prepare(s, &st, sql, err)))
         return rc;

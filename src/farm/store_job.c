@@ -706,7 +706,7 @@ store_job_move(struct store *s, int64_t id, int by, struct sf_err *err)
 {
     if (by != -1 && by != 1)
         return sf_err_set(err, SF_EINVAL, "by: %d is not -1 (up) or 1 (down)", by);
-    struct qplace me = { id, 0, 0 }, nb;
+    struct qplace me = { id, 0, 0 }, nb = { 0, 0, 0 };
     char state[16];
     int rc = store_begin(s, err);
     if (rc)
