@@ -219,6 +219,19 @@ lock_name(struct store *s, const char *name, bool *got, struct sf_err *err)
     return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "lock host name");
 }
 
+/* Undo one lock_name that got the lock (a join that failed after it): the session holds the
+   name as many times as it locked it. */
+static void
+unlock_name(struct store *s, const char *name)
+{
+    struct sqldb_stmt *st;
+    if (!is_pg(s) || store_prepare(s, &st, "SELECT pg_advisory_unlock(?1)", NULL))
+        return;
+    sqldb_bind_int64(st, 1, name_key(name));
+    sqldb_step(st);
+    sqldb_finalize(st);
+}
+
 /* What the name's row holds now, for join. */
 struct holder {
     bool found;
@@ -301,6 +314,23 @@ take_name(struct store *s, const char *name, int64_t now_ms, int64_t lease_ms, i
     return store_log_event(s, 0, NULL, "host-join", detail, err);
 }
 
+/* The rest of store_host_join, in the caller's transaction, once the name is locked. */
+static int
+join_tx(struct store *s, const char *name, int64_t now, int64_t lease_ms, int64_t *token,
+        struct sf_err *err)
+{
+    struct holder h;
+    int rc = read_holder(s, name, &h, err);
+    if (rc)
+        return rc;
+    if (h.found && !h.reaped_ms && h.lease_until_ms > now)
+        return refuse_join(name, &h, now, err);
+    /* the name's last holder died with its lease: its work moves on before this one starts */
+    if (h.found && !h.reaped_ms && (rc = reap_host(s, name, now, h.heartbeat_ms, NULL, err)))
+        return rc;
+    return take_name(s, name, now, lease_ms, token, err);
+}
+
 int
 store_host_join(struct store *s, const char *name, int64_t lease_ms, int64_t *token,
                 struct sf_err *err)
@@ -317,16 +347,11 @@ store_host_join(struct store *s, const char *name, int64_t lease_ms, int64_t *to
             return rc;
         return refuse_join(name, &h, now, err);
     }
-    if ((rc = store_begin(s, err)))
-        return rc;
-    if ((rc = read_holder(s, name, &h, err)))
-        return end_tx(s, rc, err);
-    if (h.found && !h.reaped_ms && h.lease_until_ms > now)
-        return end_tx(s, refuse_join(name, &h, now, err), err);
-    /* the name's last holder died with its lease: its work moves on before this one starts */
-    if (h.found && !h.reaped_ms && (rc = reap_host(s, name, now, h.heartbeat_ms, NULL, err)))
-        return end_tx(s, rc, err);
-    return end_tx(s, take_name(s, name, now, lease_ms, token, err), err);
+    if ((rc = store_begin(s, err)) == SF_OK)
+        rc = end_tx(s, join_tx(s, name, now, lease_ms, token, err), err);
+    if (rc)
+        unlock_name(s, name); /* refused or failed: the name stays free for its holder */
+    return rc;
 }
 
 int

@@ -111,8 +111,7 @@ fill(const char *target, long n, const char *sha)
 
 /* Open the k claimers' stores and join them as hosts h0 .. */
 static int
-open_claimers(struct store *s, const char *dir, const char *url, struct claimer *c, int k,
-              long n)
+open_claimers(struct store *s, const char *dir, const char *url, struct claimer *c, int k, long n)
 {
     struct sf_err err;
     for (int i = 0; i < k; i++) {

@@ -311,8 +311,23 @@ T_CASE(hosts_join_refused_while_another_lease_holds_the_name)
     if (t_store_pg()) {
         store_close(p.b);
         p.b = NULL;
+        /* its connection gone, its lease still holds the name */
+        T_ERR(store_host_join(p.a, "a", LEASE_MS, &t2, &err), SF_EAGAIN, &err, "renewed");
     }
     T_OK(t_store_exec(p.dir, "UPDATE hosts SET lease_until_ms = 1"), NULL);
+    if (t_store_pg()) {
+        /* the refused join kept no hold on the name: a third store takes it, then a's is
+           refused by that one's connection */
+        char dir_c[600];
+        snprintf(dir_c, sizeof(dir_c), "%s-c", p.dir);
+        struct store *c = store_open_host(dir_c, p.url, NULL, &err);
+        T_TRUE(c != NULL);
+        T_OK(store_host_join(c, "a", LEASE_MS, &t2, &err), &err);
+        T_EQ_INT(t2, t1 + 1);
+        store_close(c);
+        T_OK(t_store_exec(p.dir, "UPDATE hosts SET lease_until_ms = 1"), NULL);
+        t1 = t2;
+    }
     T_OK(store_host_join(p.a, "a", LEASE_MS, &t2, &err), &err);
     T_EQ_INT(t2, t1 + 1);
     T_ERR(store_host_beat(p.a, "a", t1, LEASE_MS, &err), SF_ESTALE, &err, "another process");
