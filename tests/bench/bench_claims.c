@@ -10,7 +10,7 @@
  * synchronous_commit).  Prints the claims per second over the whole drain
  * and each claim's latency (p50, p99; a claim that timed out on SQLite's
  * writer lock and was tried again counts from its last try, and the count of
- * such time-outs is printed); tests/bench/bench_claims.sh puts the
+ * such time-outs is printed); tests/bench/bench_store.sh puts the
  * engines and claimer counts side by side.  Wall times on a shared machine:
  * give the load next to them.
  */
