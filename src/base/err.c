@@ -100,6 +100,8 @@ sf_status_name(int code)
         return "ENOTFOUND";
     case SF_EUNREACH:
         return "EUNREACH";
+    case SF_ESTALE:
+        return "ESTALE";
     }
     return code > 0 ? "count" : "unknown";
 }

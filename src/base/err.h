@@ -28,6 +28,7 @@ enum sf_status {
     SF_EBUG = -8,      /* a broken internal invariant */
     SF_ENOTFOUND = -9, /* a named thing does not exist */
     SF_EUNREACH = -10, /* a device does not answer now (an offline printer) */
+    SF_ESTALE = -11,   /* a lease or fencing token another process has since replaced */
 };
 
 #define SF_ERR_MSG_MAX 256

@@ -38,6 +38,7 @@
 
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "store_host.h"
 #include "store_int.h"
 
 /*
@@ -189,6 +190,8 @@ static const char *const migrations[] = {
     "CREATE INDEX jobs_queue_pos ON jobs(queue_pos);",
     /* 10: printers managed at run time (store_printer_cfg.c) */
     STORE_PRINTER_CFG_SCHEMA,
+    /* 11: several hosts on one database (store_host.c) */
+    STORE_HOST_SCHEMA,
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 
@@ -408,8 +411,8 @@ fail:
     return rc;
 }
 
-static void
-read_id(struct sqldb_stmt *st, void *row)
+void
+store_read_id(struct sqldb_stmt *st, void *row)
 {
     *(int64_t *)row = sqldb_column_int64(st, 0);
 }
@@ -433,7 +436,7 @@ recover(struct store *s, struct store_recovery *rec, struct sf_err *err)
     if (rc)
         return rc;
     /* a failed read must fail the open: jobs it missed would stay "printing" for ever */
-    if ((rc = store_read_rows(s, st, sizeof(*ids), read_id, (void **)&ids, &n,
+    if ((rc = store_read_rows(s, st, sizeof(*ids), store_read_id, (void **)&ids, &n,
                               "recovery: list jobs", err)))
         return rc;
     for (size_t i = 0; i < n; i++) {
@@ -548,11 +551,15 @@ connect(struct store *s, int *from, struct sf_err *err)
 }
 
 /*
- * PostgreSQL: one daemon per database until hosts hold leases (issue 32's next
- * step), since crash recovery takes every printing job in it as its own.  A
- * session advisory lock, which the server drops when the connection ends (a
- * killed daemon's too); a connection closed a moment ago may still hold it
- * while its server process exits, hence the tries over about 5 s.
+ * PostgreSQL: one single-host daemon per database, since its crash recovery
+ * takes every printing job in the database as its own; or any number of
+ * hosts (store_open_host), each recovering only its own work (store_host.c:
+ * one process per host name, by a lease and a lock of the name).  A session
+ * advisory lock on one key, exclusive for the single host, shared by the
+ * hosts, so neither kind starts beside the other.  The server drops it when
+ * the connection ends (a killed daemon's too); a connection closed a moment
+ * ago may still hold it while its server process exits, hence the tries
+ * over about 5 s.
  */
 #define STORE_DB_LOCK_KEY 0x736c696d6661726dLL /* "slimfarm" in ASCII */
 static int
@@ -560,10 +567,15 @@ lock_db(struct store *s, int n_tries, struct sf_err *err)
 {
     if (sqldb_engine(s->db) != SQLDB_PG)
         return SF_OK; /* SQLite: the data dir's flock covers its file (lock_dir) */
+    bool shared = s->host;
     for (int tries = 0; tries < n_tries; tries++) {
         struct sqldb_stmt *st;
-        int rc = store_prepare(s, &st,
-                               "SELECT CASE WHEN pg_try_advisory_lock(?1) THEN 1 ELSE 0 END", err);
+        int rc =
+            store_prepare(s, &st,
+                          shared ? "SELECT CASE WHEN pg_try_advisory_lock_shared(?1) THEN 1 "
+                                   "ELSE 0 END"
+                                 : "SELECT CASE WHEN pg_try_advisory_lock(?1) THEN 1 ELSE 0 END",
+                          err);
         if (rc)
             return rc;
         sqldb_bind_int64(st, 1, STORE_DB_LOCK_KEY);
@@ -576,10 +588,15 @@ lock_db(struct store *s, int n_tries, struct sf_err *err)
             return SF_OK;
         nanosleep(&(struct timespec){ .tv_nsec = 100 * 1000 * 1000 }, NULL);
     }
+    if (shared)
+        return sf_err_set(err, SF_EAGAIN,
+                          "store: the database of data dir '%s' is in use by a single-host "
+                          "slimfarmd, whose crash recovery takes every job in it: stop it first",
+                          s->dir);
     return sf_err_set(err, SF_EAGAIN,
                       "store: the database of data dir '%s' is in use by another slimfarmd "
-                      "(one daemon per database until several hosts share one): stop it first, "
-                      "or give this one another database",
+                      "(one single-host daemon per database; several share one only as hosts): "
+                      "stop it first, or give this one another database",
                       s->dir);
 }
 
@@ -624,27 +641,47 @@ store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
     return store_open_db(data_dir, NULL, rec, err);
 }
 
-struct store *
-store_open_db(const char *data_dir, const char *db, struct store_recovery *rec, struct sf_err *err)
+/* store_open_db, or as one of several hosts (store_open_host): a shared database lock, and
+   on PostgreSQL no crash recovery at open (each host recovers its own work). */
+static struct store *
+open_store(const char *data_dir, const char *db, bool host, struct store_recovery *rec,
+           struct sf_err *err)
 {
     if (rec)
         *rec = (struct store_recovery){ 0, 0 };
     struct store *s = store_new(data_dir, db, err);
     if (!s)
         return NULL;
+    s->host = host;
     char path[STORE_PATH_MAX + 32];
     snprintf(path, sizeof(path), "%s/files", data_dir);
     if (mkdir_p(path, err) || lock_dir(s, err))
         goto fail;
     fix_modes(data_dir);
     sweep_tmp(path);
-    if (connect(s, NULL, err) || lock_db(s, 50, err) || recover(s, rec, err))
+    if (connect(s, NULL, err) || lock_db(s, 50, err))
+        goto fail;
+    /* SQLite's file is this data dir's alone (its flock): every job in it is this host's */
+    if ((!host || sqldb_engine(s->db) == SQLDB_SQLITE) && recover(s, rec, err))
         goto fail;
     sqldb_on_reconnect(s->db, relock, s);
     return s;
 fail:
     store_close(s);
     return NULL;
+}
+
+struct store *
+store_open_db(const char *data_dir, const char *db, struct store_recovery *rec, struct sf_err *err)
+{
+    return open_store(data_dir, db, false, rec, err);
+}
+
+struct store *
+store_open_host(const char *data_dir, const char *db, struct store_recovery *rec,
+                struct sf_err *err)
+{
+    return open_store(data_dir, db, true, rec, err);
 }
 
 int

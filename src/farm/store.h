@@ -113,6 +113,10 @@ struct job_event_args {
     const char *note;      /* PREPARED: NULL or what the preparation did other than the job
                               asked (a slimming that failed, prepare.h's shape_failed), for
                               operators: kept in the event's detail, not as the job's reason */
+    int64_t fence;         /* any event, chiefly START and RESUME: the job's fencing token
+                              its host holds (store_job_claim, store_job_attach); the event
+                              is refused (SF_ESTALE) once another host took the job.  0:
+                              not checked (one host) */
 };
 
 /* One row of print history. */
@@ -154,9 +158,11 @@ struct store *store_open(const char *data_dir, struct store_recovery *rec, struc
  * As store_open, with the database at db: NULL or "" for SQLite in
  * DATA_DIR/slimfarm.db, or a PostgreSQL URL (postgresql://...; libpq's
  * form, e.g. postgresql:///farm?host=/run/postgresql).  The file directory
- * and the lock stay in data_dir either way.  One host per PostgreSQL
- * database for now: crash recovery takes every active job in the database
- * for its own.  SF_EINVAL for a db that is not such a URL.
+ * and the lock stay in data_dir either way.  One such store per PostgreSQL
+ * database (SF_EAGAIN beside another, or beside hosts): crash recovery
+ * takes every active job in the database for its own; several hosts share
+ * one through store_open_host (store_host.h).  SF_EINVAL for a db that is
+ * not such a URL.
  */
 struct store *store_open_db(const char *data_dir, const char *db, struct store_recovery *rec,
                             struct sf_err *err);

@@ -30,6 +30,8 @@ struct store {
     char dir[STORE_PATH_MAX];    /* data directory */
     char target[STORE_PATH_MAX]; /* what db connects to: the SQLite file or a URL */
     int lock_fd;                 /* DATA_DIR/lock, flock()ed exclusively; -1 if not open */
+    bool host;                   /* one of several hosts (store_open_host): the database's
+                                    lock is shared */
 };
 
 /*
@@ -48,6 +50,38 @@ struct store {
     "  disabled TEXT,"                                                                             \
     "  removed INTEGER NOT NULL DEFAULT 0 CHECK(removed IN (0, 1)),"                               \
     "  updated_ms INTEGER NOT NULL);"
+
+/*
+ * Migration 11 (store_host.c): several hosts on one database.  hosts: one
+ * row per host name: token, bumped at each join (a process's claim on the
+ * name); pid and version (the schema its program writes) of that process;
+ * started_ms, heartbeat_ms (its last beat) and lease_until_ms, wall clock;
+ * reaped_ms: when store_host_reap released its work (0: not reaped).
+ * host_printers: which host owns a printer (its own config's).  jobs:
+ * claimed_by, the host that claimed (prepares) or attached (prints) it, ''
+ * for none; fence, the job's fencing token, bumped at every claim and
+ * attach.  jobs_claim_order is the claim's order (the scheduler's) over the
+ * queued jobs alone, so a claim is one index step however long the queue.
+ */
+#define STORE_HOST_SCHEMA                                                                          \
+    "CREATE TABLE hosts("                                                                          \
+    "  name TEXT PRIMARY KEY,"                                                                     \
+    "  token INTEGER NOT NULL CHECK(token >= 1),"                                                  \
+    "  pid INTEGER NOT NULL,"                                                                      \
+    "  version INTEGER NOT NULL,"                                                                  \
+    "  started_ms INTEGER NOT NULL,"                                                               \
+    "  heartbeat_ms INTEGER NOT NULL,"                                                             \
+    "  lease_until_ms INTEGER NOT NULL,"                                                           \
+    "  reaped_ms INTEGER NOT NULL DEFAULT 0);"                                                     \
+    "CREATE TABLE host_printers("                                                                  \
+    "  printer TEXT PRIMARY KEY,"                                                                  \
+    "  host TEXT NOT NULL REFERENCES hosts(name),"                                                 \
+    "  since_ms INTEGER NOT NULL);"                                                                \
+    "CREATE INDEX host_printers_host ON host_printers(host);"                                      \
+    "ALTER TABLE jobs ADD COLUMN claimed_by TEXT NOT NULL DEFAULT '';"                             \
+    "ALTER TABLE jobs ADD COLUMN fence INTEGER NOT NULL DEFAULT 0;"                                \
+    "CREATE INDEX jobs_claimed ON jobs(claimed_by) WHERE claimed_by != '';"                        \
+    "CREATE INDEX jobs_claim_order ON jobs(priority DESC, queue_pos, id) WHERE state = 'queued';"
 
 /* SF_EIO with what and SQLite's message. */
 int store_db_fail(struct store *s, struct sf_err *err, const char *what);
@@ -89,6 +123,9 @@ typedef void (*store_row_fn)(struct sqldb_stmt *st, void *row);
 int store_read_rows(struct store *s, struct sqldb_stmt *st, size_t elem_size, store_row_fn read,
                     void **rows, size_t *n, const char *what, struct sf_err *err);
 
+/* A store_row_fn: column 0 as an int64_t (an id). */
+void store_read_id(struct sqldb_stmt *st, void *row);
+
 /* The columns store_read_job reads, in its order. */
 #define STORE_JOB_COLS                                                                             \
     "id, name, file_sha, coalesce(gcode_sha, ''), state, method, deviation_mm, overhang_deg,"      \
@@ -103,6 +140,10 @@ void store_read_job(struct sqldb_stmt *st, void *row);
    SF_ENOTFOUND (err not set: the caller says what was not found), or SF_EIO naming what. */
 int store_job_one(struct store *s, struct sqldb_stmt *st, struct job_row *out, const char *what,
                   struct sf_err *err);
+
+/* store_job_event in the caller's transaction (store_host_reap moves many jobs in one). */
+int store_job_event_in(struct store *s, int64_t id, enum job_event ev,
+                       const struct job_event_args *a, enum job_state *to, struct sf_err *err);
 
 /* PostgreSQL's text of store.c's SQLite migration v (0-based: to schema v + 1), sql,
    in PostgreSQL's types (store_pg.c); free() it.  NULL when out of memory. */

@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "../base/clock.h"
+#include "store_host.h"
 #include "store_int.h"
 
 /* ---- jobs ---- */
@@ -394,26 +395,39 @@ int
 store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job_event_args *a,
                 enum job_state *to, struct sf_err *err)
 {
-    static const struct job_event_args none;
-    if (!a)
-        a = &none;
     int rc = store_begin(s, err);
     if (rc)
         return rc;
+    if ((rc = store_job_event_in(s, id, ev, a, to, err)) || (rc = store_commit(s, err)))
+        store_rollback(s);
+    return rc;
+}
+
+int
+store_job_event_in(struct store *s, int64_t id, enum job_event ev, const struct job_event_args *a,
+                   enum job_state *to, struct sf_err *err)
+{
+    static const struct job_event_args none;
+    if (!a)
+        a = &none;
+    int rc;
+    /* first, so the row is locked (PostgreSQL) before it is read: no claim slips between */
+    if (a->fence > 0 && (rc = store_job_fence(s, id, a->fence, err)))
+        return rc;
     struct job_row j;
     if ((rc = store_job_get(s, id, &j, err)))
-        goto fail;
+        return rc;
     enum job_state from = j.state, next;
     struct job_counts c = j.counts;
     if (ev == JOB_EV_PRINT_FAILED && a->no_retry && c.failures < c.max_retries)
         c.failures = c.max_retries; /* no retry left: the job fails */
     if ((rc = job_next(from, ev, &c, &next, err))) {
         sf_err_prefix(err, "job %lld", (long long)id);
-        goto fail;
+        return rc;
     }
     j.counts = c;
     if ((rc = apply_event(s, &j, ev, a, next, err)))
-        goto fail;
+        return rc;
     struct sqldb_stmt *st;
     if ((rc = store_prepare(
              s, &st,
@@ -424,7 +438,7 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
              " support_saved_g = ?, prepare_ms = ?, slice_ms = ?, ready_ms = ?,"
              " mndr = ?, andr = ?, shape_changed = ?, est_s = ? WHERE id = ?",
              err)))
-        goto fail;
+        return rc;
     sqldb_bind_text(st, 1, job_state_name(j.state));
     sqldb_bind_int64(st, 2, j.counts.copies_done);
     sqldb_bind_int64(st, 3, j.counts.failures);
@@ -464,14 +478,12 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     snprintf(kind, sizeof(kind), "job-%s", job_event_name(ev));
     snprintf(detail, sizeof(detail), "%s -> %s%s%s", job_state_name(from), job_state_name(j.state),
              why[0] ? ": " : "", why);
-    if ((rc = store_write_end(s, st, "update job", id, j.printer, kind, detail, err)))
+    if ((rc = store_step_done(s, st, err, "update job")) ||
+        (rc = store_log_event(s, id, j.printer, kind, detail, err)))
         return rc;
     if (to)
         *to = j.state;
     return SF_OK;
-fail:
-    store_rollback(s);
-    return rc;
 }
 
 static int

@@ -103,6 +103,7 @@ declare -A may=(
   [inspect]="jansson minizip expat embree3"
   [optimize]="qhull_r jansson minizip expat embree3 tet cholmod"
   [orient]="qhull_r jansson minizip expat embree3"
+  [hosts]="sqlite3 pq jansson crypto"
   [ports]="serialport"
   [preview]="inih minizip expat cairo embree3"
   [send]="serialport"

@@ -21,6 +21,7 @@
 #include "../../src/base/buf.h"
 #include "../../src/base/mem.h"
 #include "../../src/farm/store.h"
+#include "../../src/farm/store_host.h"
 #include "../t.h"
 #include "../tstore.h"
 
@@ -107,8 +108,9 @@ T_CASE(store_schema_version_is_kept_and_a_newer_one_refused)
     T_EQ_INT(from, store_schema_version());
 }
 
-/* PostgreSQL: a second daemon on the same database (another data dir, so no flock stops it)
-   is refused, as its crash recovery would take the first one's printing jobs. */
+/* PostgreSQL: a second single-host daemon on the same database (another data dir, so no flock
+   stops it) is refused, as its crash recovery would take the first one's printing jobs; hosts
+   (store_open_host) share a database, but never with a single-host daemon. */
 T_CASE(store_one_daemon_per_database)
 {
     if (!t_store_pg()) {
@@ -124,7 +126,17 @@ T_CASE(store_one_daemon_per_database)
     T_TRUE(b == NULL);
     T_EQ_INT(err.code, SF_EAGAIN);
     T_TRUE(strstr(err.msg, "in use by another slimfarmd") != NULL);
+    T_TRUE(store_open_host(fresh_dir("db-lock-b"), url, NULL, &err) == NULL);
+    T_EQ_INT(err.code, SF_EAGAIN);
+    T_TRUE(strstr(err.msg, "in use by a single-host slimfarmd") != NULL);
     store_close(a); /* its lock goes with its connection */
+    /* two hosts at once; a single-host daemon is refused beside them */
+    T_TRUE((a = store_open_host(fresh_dir("db-lock-a"), url, NULL, &err)) != NULL);
+    T_TRUE((b = store_open_host(fresh_dir("db-lock-b"), url, NULL, &err)) != NULL);
+    T_TRUE(store_open_db(fresh_dir("db-lock-c"), url, NULL, &err) == NULL);
+    T_TRUE(strstr(err.msg, "in use by another slimfarmd") != NULL);
+    store_close(a);
+    store_close(b);
     T_TRUE((b = store_open_db(fresh_dir("db-lock-b"), url, NULL, &err)) != NULL);
     store_close(b);
 }
@@ -189,6 +201,9 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
     T_EQ_INT(sqlite3_exec(
                  db,
+                 "DROP TABLE host_printers; DROP TABLE hosts; DROP INDEX jobs_claimed;"
+                 "DROP INDEX jobs_claim_order; ALTER TABLE jobs DROP COLUMN claimed_by;"
+                 "ALTER TABLE jobs DROP COLUMN fence;"
                  "ALTER TABLE jobs DROP COLUMN prep_key; ALTER TABLE jobs DROP COLUMN "
                  "mesh_sha; ALTER TABLE jobs DROP COLUMN mesh_angle_deg;"
                  "ALTER TABLE printers DROP COLUMN bed_full;"

@@ -1,0 +1,162 @@
+/*
+ * store_host.h - several slimfarmd hosts on one database (issue 32): who
+ * they are, how long each is trusted (a lease it renews), which printers
+ * each owns, and which host holds each job.
+ *
+ * A host joins under a name and gets a token; it renews its lease with
+ * store_host_beat before lease_ms passes.  A host whose lease ran out is
+ * reaped by any host (store_host_reap): its queued and preparing work goes
+ * back to the queue for the others, its printing jobs become interrupted
+ * (a print cannot move to another host's USB port).  Work moves between
+ * hosts only through the database: store_job_claim hands the next queued
+ * job to exactly one host, and store_job_attach gives a ready, printing or
+ * interrupted job to a host for its printer.  Both bump the job's fencing
+ * token; an event that carries an older one (job_event_args.fence) is
+ * refused, so a host that comes back after a partition cannot start or
+ * continue a print another host has taken.
+ *
+ * Times are each host's wall clock (ms since the epoch): hosts keep their
+ * clocks in step (NTP), and leases are seconds, far above their skew.
+ *
+ * Errors: SF_EINVAL for a bad name or argument (the message names it),
+ * SF_ESTALE when the caller's token or lease is no longer current,
+ * SF_EAGAIN when another live host holds what was asked for, SF_EIO from
+ * the engine.  Thread: the store's, as store.h.
+ */
+#ifndef SF_FARM_STORE_HOST_H
+#define SF_FARM_STORE_HOST_H
+
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "../base/err.h"
+#include "store.h"
+
+#define STORE_HOST_NAME_MAX 64 /* a host name: letters, digits, '.', '-', '_' (a DNS label's) */
+#define STORE_LEASE_MAX_MS  (24 * 3600 * 1000LL) /* a day: longer is no lease at all */
+
+/*
+ * As store_open_db, as one of several hosts on the database: on PostgreSQL
+ * it takes the database's lock shared with the other hosts (a single-host
+ * store_open_db refuses to start beside them, and they beside it: SF_EAGAIN)
+ * and runs no crash recovery, since the database's active jobs are the
+ * other hosts' too; each host's own are recovered when it joins or when it
+ * is reaped.  On SQLite, whose file one process holds, it is store_open_db.
+ */
+struct store *store_open_host(const char *data_dir, const char *db, struct store_recovery *rec,
+                              struct sf_err *err);
+
+/*
+ * A second connection to s's database that may write, for another thread
+ * of s's process (a preparation worker claiming jobs): no lock, migration
+ * or recovery (s did them).  Open and close it on s's thread; use it on one
+ * thread at a time.  NULL with err set.  Free with store_close().
+ */
+struct store *store_open_peer(const struct store *s, struct sf_err *err);
+
+/*
+ * A read-only connection to the store at target (a PostgreSQL URL, or a data
+ * dir whose SQLite file is opened beside its daemon), for tools such as
+ * `slimfarm hosts`: no lock, migration or recovery.  NULL with err set
+ * (SF_EIO naming target).  Free with store_close().
+ */
+struct store *store_open_view(const char *target, struct sf_err *err);
+
+/*
+ * Join as host name with a lease of lease_ms (1 .. STORE_LEASE_MAX_MS) from
+ * now: *token receives this process's token, larger than any before under
+ * that name.  A name whose lease another process holds (not run out, or, on
+ * PostgreSQL, a live connection holding the name) is refused with SF_EAGAIN,
+ * the message naming it, its pid and its lease's age.  The name's earlier
+ * holder, if its lease ran out unreaped, is reaped first (store_host_reap).
+ * On PostgreSQL the name stays locked to this connection until it closes:
+ * one process per host name.
+ */
+int store_host_join(struct store *s, const char *name, int64_t lease_ms, int64_t *token,
+                    struct sf_err *err);
+
+/*
+ * Renew host name's lease to lease_ms from now.  SF_ESTALE when the lease is
+ * lost: another process joined under the name (token is not its), or the
+ * lease ran out and a host reaped it (its work has moved on; join again).
+ * A lease that ran out but was not reaped yet is renewed.
+ */
+int store_host_beat(struct store *s, const char *name, int64_t token, int64_t lease_ms,
+                    struct sf_err *err);
+
+/*
+ * Record the printers of host name's config (n names, each 1..63 bytes) as
+ * its own, replacing what it owned before.  A printer another live host
+ * owns is refused (SF_EAGAIN naming both): a printer belongs to one config.
+ * SF_ESTALE when name's lease is lost.
+ */
+int store_host_own(struct store *s, const char *name, int64_t token, const char *const *printers,
+                   size_t n, struct sf_err *err);
+
+/*
+ * Reap every host whose lease ran out by now_ms, in one transaction: its
+ * claims on queued, preparing and ready jobs are released (preparing jobs
+ * go back to queued), its printing and paused jobs (claimed by it, or
+ * unclaimed on a printer it owns) become interrupted, each with an event
+ * whose reason is "host NAME lost its lease", plus one "host-reaped" event
+ * per host.  Idempotent: a reaped host is not reaped again.  Returns the
+ * number of hosts reaped; *moved (may be NULL) the jobs requeued and
+ * interrupted.
+ */
+int store_host_reap(struct store *s, int64_t now_ms, struct store_recovery *moved,
+                    struct sf_err *err);
+
+/* A host as `slimfarm hosts` shows it (plain data). */
+struct store_host_row {
+    char name[STORE_HOST_NAME_MAX];
+    int64_t token;          /* its current process's token */
+    int64_t pid;            /* that process */
+    int version;            /* the schema its program writes */
+    int64_t started_ms;     /* when it joined */
+    int64_t heartbeat_ms;   /* its last beat */
+    int64_t lease_until_ms; /* when its lease runs out */
+    bool live;              /* the lease runs at now_ms and was not reaped */
+    int n_printers;         /* printers it owns, */
+    char printers[256];     /* their names, comma-separated (cut with "..." past 255 bytes) */
+    int n_claimed;          /* jobs it holds: preparing, ready, printing, paused, interrupted */
+};
+
+/* Every host, by name, as of now_ms, into *rows (free() it). */
+int store_host_list(struct store *s, int64_t now_ms, struct store_host_row **rows, size_t *n,
+                    struct sf_err *err);
+
+/*
+ * Claim the next queued job for host (token: its join's) in the scheduler's
+ * order (priority, higher first; queue_pos; id), moving it to preparing (the
+ * PREPARE event, job.c's rule) with its claim, a new fencing token and a
+ * "job-prepare" event, in one statement that no other host can interleave
+ * (PostgreSQL: FOR UPDATE SKIP LOCKED, so claimers never wait on each other;
+ * SQLite: its one writer).  methods: the preparation methods host runs,
+ * comma-separated ("orient,slim"); NULL or "" for all.  The job into *out,
+ * its fencing token into *fence (may be NULL).  SF_ENOTFOUND (err not set)
+ * when no queued job fits; SF_ESTALE when host's lease is lost or run out;
+ * SF_EINVAL for an unknown method.
+ */
+int store_job_claim(struct store *s, const char *host, int64_t token, const char *methods,
+                    struct job_row *out, int64_t *fence, struct sf_err *err);
+
+/*
+ * Give job id (ready, printing, paused or interrupted) to host for its
+ * printer: its claim and a new fencing token (*fence), logged as
+ * "job-attach"; whoever held the job before holds a stale token.
+ * SF_ENOTFOUND: no such job; SF_EAGAIN: not in one of those states;
+ * SF_ESTALE: host's lease is lost or run out.
+ */
+int store_job_attach(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
+                     struct sf_err *err);
+
+/*
+ * Whether fence is job id's current fencing token, in the caller's
+ * transaction (PostgreSQL: the job's row stays locked to it): SF_OK, or
+ * SF_ESTALE naming the host that holds the job now, SF_ENOTFOUND.
+ * store_job_event checks it for events that carry a fence.
+ */
+int store_job_fence(struct store *s, int64_t id, int64_t fence, struct sf_err *err);
+
+#endif

@@ -1,0 +1,366 @@
+/*
+ * test_store_host.c - several hosts on one store (store_host.h): two
+ * connections claiming 500 jobs from two threads at once never get the same
+ * job and together get all; a host whose lease ran out is reaped (its
+ * claims back in the queue, its printing job interrupted with the reason)
+ * once however often the reap runs; a stale fencing token is refused at
+ * START; a host name another process holds is refused with its lease's
+ * age.  With SLIMFARM_TEST_STORE (tstore.h, tests/integ/store_pg.sh) every
+ * case runs on PostgreSQL, the second host then a store of its own on the
+ * same database; on SQLite it is a second connection of the same process
+ * (store_open_peer), as the data dir's flock allows one process.
+ */
+#include <pthread.h>
+#include <stdint.h>
+#include <stdlib.h>
+
+#include "../../src/base/clock.h"
+#include "../../src/farm/store_host.h"
+#include "../t.h"
+#include "../tstore.h"
+
+#define LEASE_MS (600 * 1000) /* far above any stall of a loaded machine: no case waits on it */
+
+static const char *
+fresh_dir(const char *name)
+{
+    static char path[512];
+    snprintf(path, sizeof(path), "%s/%s", t_tmpdir(), name);
+    return path;
+}
+
+/* Two hosts' stores on one database: *a on dir, *b beside it (see the top comment). */
+struct pair {
+    char dir[512], dir_b[512], url[1024];
+    struct store *a, *b;
+};
+
+static bool
+pair_open(struct pair *p, const char *name, struct sf_err *err)
+{
+    snprintf(p->dir, sizeof(p->dir), "%s", fresh_dir(name));
+    snprintf(p->dir_b, sizeof(p->dir_b), "%s-b", p->dir);
+    const char *db = t_store_db(p->dir);
+    snprintf(p->url, sizeof(p->url), "%s", db ? db : "");
+    p->a = store_open_host(p->dir, db, NULL, err);
+    p->b = !p->a ? NULL
+           : db  ? store_open_host(p->dir_b, p->url, NULL, err)
+                 : store_open_peer(p->a, err);
+    return p->a && p->b;
+}
+
+static void
+pair_close(struct pair *p)
+{
+    store_close(p->b);
+    store_close(p->a);
+}
+
+/* n queued jobs of one part, into ids (may be NULL). */
+static int
+add_jobs(struct store *s, int n, int64_t *ids, struct sf_err *err)
+{
+    char sha[STORE_SHA_HEX];
+    int rc = store_file_put(s, "solid part\n", 11, sha, err);
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    for (int i = 0; i < n && rc == SF_OK; i++) {
+        int64_t id;
+        rc = store_job_add(s, &o, sha, &id, err);
+        if (ids)
+            ids[i] = id;
+    }
+    return rc;
+}
+
+/* A job ready at once: G-code to print as it is (store_job_add_gcode), its id into *id. */
+static int
+add_ready(struct store *s, int64_t *id, struct sf_err *err)
+{
+    char sha[STORE_SHA_HEX];
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.gcode");
+    struct job_event_args g = { .prep_key = "k", .gcode_lines = 2 };
+    int rc = store_file_put(s, "G28\nG1 X1\n", 10, sha, err);
+    return rc ? rc : store_job_add_gcode(s, &o, sha, &g, id, err);
+}
+
+#define N_CLAIM 500
+
+/* One claimer: claims until the queue is empty, keeping what it got. */
+struct claimer {
+    struct store *s;
+    const char *host;
+    int64_t token;
+    int64_t ids[N_CLAIM];
+    int n;
+    int rc; /* SF_OK, or the first error */
+    struct sf_err err;
+};
+
+static void *
+claim_all(void *arg)
+{
+    struct claimer *c = arg;
+    for (;;) {
+        struct job_row j;
+        int64_t fence;
+        int rc = store_job_claim(c->s, c->host, c->token, NULL, &j, &fence, &c->err);
+        if (rc == SF_ENOTFOUND)
+            return NULL;
+        /* SQLite: the other thread kept the one writer lock past the busy timeout (a loaded
+           machine); the claim did nothing, so try again */
+        if (rc == SF_EIO && strstr(c->err.msg, "database is locked"))
+            continue;
+        if (rc || c->n == N_CLAIM || j.state != JOB_PREPARING || fence < 1) {
+            c->rc = rc ? rc : SF_EBUG;
+            return NULL;
+        }
+        c->ids[c->n++] = j.id;
+    }
+}
+
+static int
+cmp_id(const void *a, const void *b)
+{
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
+}
+
+T_CASE(hosts_claim_500_jobs_from_two_threads_never_twice)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "claims", &err));
+    static struct claimer c[2];
+    c[0] = (struct claimer){ .s = p.a, .host = "a" };
+    c[1] = (struct claimer){ .s = p.b, .host = "b" };
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &c[0].token, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &c[1].token, &err), &err);
+    T_OK(add_jobs(p.a, N_CLAIM, NULL, &err), &err);
+    pthread_t th[2];
+    for (int i = 0; i < 2; i++)
+        T_EQ_INT(pthread_create(&th[i], NULL, claim_all, &c[i]), 0);
+    for (int i = 0; i < 2; i++)
+        pthread_join(th[i], NULL);
+    T_OK(c[0].rc, &c[0].err);
+    T_OK(c[1].rc, &c[1].err);
+    /* together all 500, none twice */
+    T_EQ_INT(c[0].n + c[1].n, N_CLAIM);
+    static int64_t all[N_CLAIM];
+    memcpy(all, c[0].ids, sizeof(int64_t) * (size_t)c[0].n);
+    memcpy(all + c[0].n, c[1].ids, sizeof(int64_t) * (size_t)c[1].n);
+    qsort(all, N_CLAIM, sizeof(all[0]), cmp_id);
+    for (int i = 1; i < N_CLAIM; i++)
+        T_TRUE(all[i] != all[i - 1]);
+    /* and the store says the same: each preparing, held by the host that got it */
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM jobs WHERE state = 'preparing'"), N_CLAIM);
+    char sql[160];
+    snprintf(sql, sizeof(sql), "SELECT count(*) FROM jobs WHERE claimed_by = 'a'");
+    T_EQ_INT(t_store_int(p.dir, sql), c[0].n);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM events WHERE kind = 'job-prepare'"), N_CLAIM);
+    pair_close(&p);
+}
+
+/* The claim takes the scheduler's order and only the methods the host runs. */
+T_CASE(hosts_claim_follows_queue_order_and_methods)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "claim-order", &err));
+    int64_t ids[3], token, fence = 0;
+    struct job_row j;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &token, &err), &err);
+    T_OK(add_jobs(p.a, 3, ids, &err), &err);
+    T_OK(store_job_set_priority(p.a, ids[2], 5, &err), &err);
+    T_OK(t_store_exec(p.dir, "UPDATE jobs SET method = 'slim' WHERE id IN (SELECT max(id) FROM "
+                             "jobs)"),
+         NULL);
+    T_ERR(store_job_claim(p.a, "a", token, "orient,bogus", &j, &fence, &err), SF_EINVAL, &err,
+          "'bogus' is not one of");
+    /* the priority-5 job is slim: a host that only orients takes the first of the rest */
+    T_OK(store_job_claim(p.a, "a", token, "orient", &j, &fence, &err), &err);
+    T_EQ_INT(j.id, ids[0]);
+    T_EQ_INT(fence, 1);
+    T_OK(store_job_claim(p.a, "a", token, "none,slim", &j, &fence, &err), &err);
+    T_EQ_INT(j.id, ids[2]);
+    T_OK(store_job_claim(p.a, "a", token, NULL, &j, &fence, &err), &err);
+    T_EQ_INT(j.id, ids[1]);
+    T_EQ_INT(store_job_claim(p.a, "a", token, NULL, &j, &fence, &err), SF_ENOTFOUND);
+    pair_close(&p);
+}
+
+T_CASE(hosts_expired_host_is_reaped_once)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "reap", &err));
+    int64_t ids[3], ta, tb, fence;
+    struct job_row j;
+    /* a: lease 1 min, b: 10 min; the reap below runs "2 min later" (its now) */
+    T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    const char *mine[] = { "p1" };
+    T_OK(store_host_own(p.a, "a", ta, mine, 1, &err), &err);
+    const char *theirs[] = { "p1" };
+    T_ERR(store_host_own(p.b, "b", tb, theirs, 1, &err), SF_EAGAIN, &err,
+          "belongs to live host 'a'");
+    T_OK(add_jobs(p.a, 1, &ids[0], &err), &err);
+    T_OK(add_jobs(p.a, 1, &ids[2], &err), &err);
+    /* ids[0] is claimed (preparing) by a; ids[1] prints on a's p1; ids[2] waits unclaimed */
+    T_OK(store_job_claim(p.a, "a", ta, NULL, &j, &fence, &err), &err);
+    T_EQ_INT(j.id, ids[0]);
+    T_OK(add_ready(p.a, &ids[1], &err), &err);
+    T_OK(store_job_attach(p.a, "a", ta, ids[1], &fence, &err), &err);
+    struct job_event_args start = { .printer = "p1", .fence = fence };
+    T_OK(store_job_event(p.a, ids[1], JOB_EV_START, &start, NULL, &err), &err);
+    int64_t later = clock_wall_ms() + 120 * 1000;
+    struct store_recovery moved;
+    T_EQ_INT(store_host_reap(p.b, later, &moved, &err), 1);
+    T_EQ_INT(moved.requeued, 1);
+    T_EQ_INT(moved.interrupted, 1);
+    T_OK(store_job_get(p.b, ids[0], &j, &err), &err);
+    T_EQ_INT(j.state, JOB_QUEUED);
+    T_OK(store_job_get(p.b, ids[1], &j, &err), &err);
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    T_EQ_STR(j.reason, "host a lost its lease");
+    T_EQ_STR(j.printer, "p1");
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM jobs WHERE claimed_by = 'a'"
+                                " AND state != 'interrupted'"),
+             0);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM events WHERE kind = 'job-crashed'"
+                                " AND detail = 'printing -> interrupted: host a lost its lease'"),
+             1);
+    int64_t events = t_store_int(p.dir, "SELECT count(*) FROM events");
+    /* again: nothing more to do, nothing logged */
+    T_EQ_INT(store_host_reap(p.b, later + 1000, &moved, &err), 0);
+    T_EQ_INT(moved.requeued + moved.interrupted, 0);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM events"), events);
+    /* a's lease is lost: no beat, no claim; b takes the requeued job */
+    T_ERR(store_host_beat(p.a, "a", ta, 60 * 1000, &err), SF_ESTALE, &err, "reaped");
+    T_ERR(store_job_claim(p.a, "a", ta, NULL, &j, &fence, &err), SF_ESTALE, &err, "reaped");
+    T_OK(store_job_claim(p.b, "b", tb, NULL, &j, &fence, &err), &err);
+    T_EQ_INT(j.id, ids[0]);
+    T_OK(store_check(p.b, &err), &err);
+    pair_close(&p);
+}
+
+T_CASE(hosts_stale_fencing_token_refused_at_start)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "fence", &err));
+    int64_t id, ta, tb, fa, fb;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    T_OK(add_ready(p.a, &id, &err), &err);
+    T_ERR(store_job_attach(p.a, "a", ta + 1, id, &fa, &err), SF_ESTALE, &err, "another process");
+    T_OK(store_job_attach(p.a, "a", ta, id, &fa, &err), &err);
+    /* b takes the job over (a was cut off): a's token is stale from now on */
+    T_OK(store_job_attach(p.b, "b", tb, id, &fb, &err), &err);
+    T_TRUE(fb > fa);
+    struct job_event_args start = { .printer = "net1", .fence = fa };
+    T_ERR(store_job_event(p.a, id, JOB_EV_START, &start, NULL, &err), SF_ESTALE, &err,
+          "host 'b' holds the job");
+    struct job_row j;
+    T_OK(store_job_get(p.a, id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_READY);
+    start.fence = fb;
+    T_OK(store_job_event(p.b, id, JOB_EV_START, &start, NULL, &err), &err);
+    T_OK(
+        store_job_event(p.b, id, JOB_EV_PAUSE, &(struct job_event_args){ .fence = fb }, NULL, &err),
+        &err);
+    /* a comes back and would continue the print: refused, b's print stays paused */
+    T_ERR(store_job_event(p.a, id, JOB_EV_RESUME, &(struct job_event_args){ .fence = fa }, NULL,
+                          &err),
+          SF_ESTALE, &err, "is stale");
+    T_OK(store_job_get(p.a, id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_PAUSED);
+    T_EQ_INT(store_job_fence(p.a, id + 100, fb, &err), SF_ENOTFOUND);
+    pair_close(&p);
+}
+
+T_CASE(hosts_join_refused_while_another_lease_holds_the_name)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "join", &err));
+    int64_t t1, t2;
+    T_ERR(store_host_join(p.a, "a b", LEASE_MS, &t1, &err), SF_EINVAL, &err, "not a host name");
+    T_ERR(store_host_join(p.a, "a", 0, &t1, &err), SF_EINVAL, &err, "lease_ms");
+    if (t_store_pg()) {
+        /* PostgreSQL: another host's store takes the name first */
+        T_OK(store_host_join(p.b, "a", LEASE_MS, &t1, &err), &err);
+    } else {
+        /* SQLite has one process per file: another's lease, as a process of an earlier
+           life of this data dir left it */
+        char sql[256];
+        int64_t now = clock_wall_ms();
+        snprintf(sql, sizeof(sql),
+                 "INSERT INTO hosts VALUES('a', 1, 424242, 11, %lld, %lld, %lld, 0)",
+                 (long long)now - 5000, (long long)now - 2000, (long long)now + LEASE_MS);
+        T_OK(t_store_exec(p.dir, sql), NULL);
+        t1 = 1;
+    }
+    T_ERR(store_host_join(p.a, "a", LEASE_MS, &t2, &err), SF_EAGAIN, &err, "host 'a' is");
+    T_TRUE(strstr(err.msg, t_store_pg() ? "its connection holds the name" : "pid 424242") ||
+           strstr(err.msg, "renewed"));
+    /* the holder's lease runs out (and on PostgreSQL its connection goes): the name is free */
+    if (t_store_pg()) {
+        store_close(p.b);
+        p.b = NULL;
+        /* its connection gone, its lease still holds the name */
+        T_ERR(store_host_join(p.a, "a", LEASE_MS, &t2, &err), SF_EAGAIN, &err, "renewed");
+    }
+    T_OK(t_store_exec(p.dir, "UPDATE hosts SET lease_until_ms = 1"), NULL);
+    if (t_store_pg()) {
+        /* the refused join kept no hold on the name: a third store takes it, then a's is
+           refused by that one's connection */
+        char dir_c[600];
+        snprintf(dir_c, sizeof(dir_c), "%s-c", p.dir);
+        struct store *c = store_open_host(dir_c, p.url, NULL, &err);
+        T_TRUE(c != NULL);
+        T_OK(store_host_join(c, "a", LEASE_MS, &t2, &err), &err);
+        T_EQ_INT(t2, t1 + 1);
+        store_close(c);
+        T_OK(t_store_exec(p.dir, "UPDATE hosts SET lease_until_ms = 1"), NULL);
+        t1 = t2;
+    }
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &t2, &err), &err);
+    T_EQ_INT(t2, t1 + 1);
+    T_ERR(store_host_beat(p.a, "a", t1, LEASE_MS, &err), SF_ESTALE, &err, "another process");
+    T_OK(store_host_beat(p.a, "a", t2, LEASE_MS, &err), &err);
+    pair_close(&p);
+}
+
+T_CASE(hosts_list_shows_lease_printers_and_claims)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "list", &err));
+    int64_t ta, tb, fence;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", 60 * 1000, &tb, &err), &err);
+    const char *mine[] = { "m2", "m1" };
+    T_OK(store_host_own(p.a, "a", ta, mine, 2, &err), &err);
+    T_OK(add_jobs(p.a, 2, NULL, &err), &err);
+    struct job_row j;
+    T_OK(store_job_claim(p.a, "a", ta, NULL, &j, &fence, &err), &err);
+    struct store_host_row *rows;
+    size_t n;
+    T_OK(store_host_list(p.a, clock_wall_ms() + 120 * 1000, &rows, &n, &err), &err);
+    T_EQ_INT(n, 2);
+    T_EQ_STR(rows[0].name, "a");
+    T_TRUE(rows[0].live);
+    T_EQ_INT(rows[0].n_printers, 2);
+    T_EQ_STR(rows[0].printers, "m1,m2");
+    T_EQ_INT(rows[0].n_claimed, 1);
+    T_EQ_INT(rows[0].token, ta);
+    T_EQ_STR(rows[1].name, "b");
+    T_TRUE(!rows[1].live); /* 2 min on, its 1-min lease has run out */
+    T_EQ_INT(rows[1].n_claimed, 0);
+    free(rows);
+    pair_close(&p);
+}
