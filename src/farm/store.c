@@ -189,6 +189,8 @@ static const char *const migrations[] = {
     "CREATE INDEX jobs_queue_pos ON jobs(queue_pos);",
     /* 10: printers managed at run time (store_printer_cfg.c) */
     STORE_PRINTER_CFG_SCHEMA,
+    /* 11: files shared between hosts through the database (store_blob.c) */
+    STORE_BLOB_SCHEMA,
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 
