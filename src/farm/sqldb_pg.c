@@ -242,13 +242,13 @@ pg_bind_blob(struct sqldb_stmt *base, int i, const void *data, size_t len)
         st->oom = true;
         return;
     }
-    if (!st->fmts) {
+    if (!st->lens)
         st->lens = mem_calloc((size_t)st->n_params, sizeof(*st->lens));
+    if (!st->fmts)
         st->fmts = mem_calloc((size_t)st->n_params, sizeof(*st->fmts));
-        if (!st->lens || !st->fmts) {
-            st->oom = true;
-            return;
-        }
+    if (!st->lens || !st->fmts) {
+        st->oom = true;
+        return;
     }
     char *copy = mem_alloc(len ? len : 1);
     if (copy && len)
