@@ -189,7 +189,8 @@ static const char *const migrations[] = {
     "CREATE INDEX jobs_queue_pos ON jobs(queue_pos);",
     /* 10: printers managed at run time (store_printer_cfg.c) */
     STORE_PRINTER_CFG_SCHEMA,
-    /* 11: files shared between hosts through the database (store_blob.c) */
+    /* 11: files shared between hosts through the database (store_blob.c; store_int.h's
+       STORE_BLOB_VERSION names this number: renumber both together) */
     STORE_BLOB_SCHEMA,
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))

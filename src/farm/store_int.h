@@ -51,7 +51,7 @@ struct store {
     "  updated_ms INTEGER NOT NULL);"
 
 /*
- * Migration 11 (store_blob.c): files shared between hosts through the
+ * Migration STORE_BLOB_VERSION (store_blob.c): files shared between hosts through the
  * database.  file_blobs says the database holds a file's bytes, all of
  * them: its row is written in the one transaction that writes every chunk,
  * so no row ever names a part-sent file.  file_chunks holds the bytes cut
@@ -59,6 +59,7 @@ struct store {
  * PostgreSQL store fills them; on SQLite (one host) the data dir is the
  * store and they stay empty.
  */
+#define STORE_BLOB_VERSION 11 /* the schema version STORE_BLOB_SCHEMA upgrades to */
 #define STORE_BLOB_SCHEMA                                                                          \
     "CREATE TABLE file_blobs("                                                                     \
     "  sha256 TEXT PRIMARY KEY CHECK(length(sha256) = 64),"                                        \

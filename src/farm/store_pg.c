@@ -11,7 +11,7 @@
  * migrations spell types (names are lower case).  What PostgreSQL needs
  * beside them goes with the version that needs it (extra()): version 1
  * gives it the one SQLite function the shared statements call, instr(),
- * and version 11 its file chunks lz4 compression.
+ * and STORE_BLOB_VERSION its file chunks lz4 compression.
  * The version lives in the schema_version table (store.c's migrate), with
  * the numbers of SQLite's user_version.
  *
@@ -41,7 +41,7 @@ extra(int v)
     case 0: /* store_job_page's name filter calls SQLite's instr() */
         return "CREATE FUNCTION instr(text, text) RETURNS integer LANGUAGE sql IMMUTABLE"
                " STRICT AS 'SELECT strpos($1, $2)';";
-    case 10:
+    case STORE_BLOB_VERSION - 1:
         /* file chunks compressed with lz4, not the default pglz: 100 MiB of G-code took
            5.9-6.6 s to send with pglz, 1.4-3.2 s with lz4, for 58 MiB against 68 MiB in
            the database (bench_files, load 11 on 2 cores); a server without lz4 (built
