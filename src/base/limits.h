@@ -56,6 +56,11 @@
 #define SF_LINK_OPTS_MAX 32
 #define SF_LINK_TEXT_MAX 2048
 
+/* Largest file a PostgreSQL store shares through its database (store_blob.c):
+   4 GiB, as upload_max_mb's ceiling; G-code for the largest beds stays far
+   below.  It bounds what a host trusts a database row's size for, too. */
+#define SF_STORE_BLOB_MAX ((int64_t)4 << 30)
+
 /* Config file size: a farm of 1000 printers fits easily in 4 MiB. */
 #define SF_CONFIG_FILE_MAX ((size_t)4 << 20)
 

@@ -165,6 +165,12 @@ sqldb_bind_null(struct sqldb_stmt *st, int i)
     st->db->ops->bind_null(st, i);
 }
 
+void
+sqldb_bind_blob(struct sqldb_stmt *st, int i, const void *data, size_t len)
+{
+    st->db->ops->bind_blob(st, i, data, len);
+}
+
 int
 sqldb_step(struct sqldb_stmt *st)
 {
@@ -199,6 +205,12 @@ bool
 sqldb_column_null(struct sqldb_stmt *st, int col)
 {
     return st->db->ops->column_null(st, col);
+}
+
+const void *
+sqldb_column_blob(struct sqldb_stmt *st, int col, size_t *len)
+{
+    return st->db->ops->column_blob(st, col, len);
 }
 
 void

@@ -178,6 +178,9 @@ void sqldb_bind_int64(struct sqldb_stmt *st, int i, int64_t v);
 void sqldb_bind_double(struct sqldb_stmt *st, int i, double v);
 void sqldb_bind_text(struct sqldb_stmt *st, int i, const char *text);
 void sqldb_bind_null(struct sqldb_stmt *st, int i);
+/* Bind len bytes at data as a blob (PostgreSQL: a bytea, sent in binary, not escaped); the
+   bytes are copied. */
+void sqldb_bind_blob(struct sqldb_stmt *st, int i, const void *data, size_t len);
 /* Run or advance st: SQLDB_ROW, SQLDB_DONE, or SF_EIO (message on the connection). */
 int sqldb_step(struct sqldb_stmt *st);
 /* Column col of the current row (0-based).  NULL reads as 0 and as a NULL text;
@@ -187,6 +190,10 @@ int sqldb_column_int(struct sqldb_stmt *st, int col);
 double sqldb_column_double(struct sqldb_stmt *st, int col);
 const char *sqldb_column_text(struct sqldb_stmt *st, int col);
 bool sqldb_column_null(struct sqldb_stmt *st, int col);
+/* Column col of the current row as bytes (a blob; PostgreSQL: a bytea), *len their count;
+   NULL (and *len 0) for SQL NULL, or for PostgreSQL out of memory.  Valid until the next
+   step or column_blob call on st. */
+const void *sqldb_column_blob(struct sqldb_stmt *st, int col, size_t *len);
 /* Make st ready to run again; bindings are kept. */
 void sqldb_reset(struct sqldb_stmt *st);
 void sqldb_finalize(struct sqldb_stmt *st);

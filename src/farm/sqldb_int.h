@@ -10,6 +10,7 @@
 #define SF_FARM_SQLDB_INT_H
 
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
 
 #include "../base/err.h"
@@ -28,11 +29,13 @@ struct sqldb_ops {
     void (*bind_double)(struct sqldb_stmt *st, int i, double v);
     void (*bind_text)(struct sqldb_stmt *st, int i, const char *text);
     void (*bind_null)(struct sqldb_stmt *st, int i);
+    void (*bind_blob)(struct sqldb_stmt *st, int i, const void *data, size_t len);
     int (*step)(struct sqldb_stmt *st);
     int64_t (*column_int64)(struct sqldb_stmt *st, int col);
     double (*column_double)(struct sqldb_stmt *st, int col);
     const char *(*column_text)(struct sqldb_stmt *st, int col);
     bool (*column_null)(struct sqldb_stmt *st, int col);
+    const void *(*column_blob)(struct sqldb_stmt *st, int col, size_t *len);
     void (*reset)(struct sqldb_stmt *st);
     void (*finalize)(struct sqldb_stmt *st);
     /* LISTEN/NOTIFY (sqldb.h), the channel checked already; NULL: a no-op (SQLite) */

@@ -4,8 +4,9 @@
  * A statement keeps its SQL with the `?`/`?N` placeholders rewritten to
  * PostgreSQL's `$N` (outside quoted strings and names; a bare `?` takes
  * the next number after the highest so far, as SQLite numbers it) and its
- * parameters as text.  The first step runs it (PQexecParams, text in and
- * out) and holds the whole result; later steps walk its rows.  Parameters
+ * parameters as text, but for blobs, sent in binary (a bytea's text form
+ * would double it).  The first step runs it (PQexecParams, text out) and
+ * holds the whole result; later steps walk its rows.  Parameters
  * the SQL never names are sent typed as text, so a statement whose
  * optional clauses are left out (store_job_page) still binds by the same
  * numbers.  No server-side prepared statements: the store prepares each
@@ -62,6 +63,9 @@ struct pg_stmt {
     int n_params;    /* the highest N */
     char **vals;     /* n_params texts, NULL for SQL NULL; owned */
     Oid *types;      /* 0: the server infers it; text for one the SQL never names */
+    int *lens;       /* n_params byte counts, NULL until a blob is bound (pg_bind_blob) */
+    int *fmts;       /* n_params formats (1: binary, a blob's; 0: text), NULL as lens */
+    void *blob;      /* the last column_blob's bytes (PQunescapeBytea's: PQfreemem) */
     bool oom;        /* a bind ran out of memory: the step fails */
     PGresult *res;   /* once run */
     int row, n_rows; /* the current row of res */
@@ -248,6 +252,8 @@ bind_owned(struct sqldb_stmt *base, int i, char *val, bool want)
     }
     free(st->vals[i - 1]);
     st->vals[i - 1] = val;
+    if (st->fmts)
+        st->fmts[i - 1] = 0; /* text, until pg_bind_blob says otherwise */
     if (want && !val)
         st->oom = true;
 }
@@ -280,6 +286,32 @@ pg_bind_null(struct sqldb_stmt *st, int i)
     bind_owned(st, i, NULL, false);
 }
 
+static void
+pg_bind_blob(struct sqldb_stmt *base, int i, const void *data, size_t len)
+{
+    struct pg_stmt *st = (struct pg_stmt *)base;
+    if (i < 1 || i > st->n_params)
+        return;
+    if (len > INT32_MAX) { /* libpq's lengths are int; a bytea holds at most 1 GB anyway */
+        st->oom = true;
+        return;
+    }
+    if (!st->lens)
+        st->lens = mem_calloc((size_t)st->n_params, sizeof(*st->lens));
+    if (!st->fmts)
+        st->fmts = mem_calloc((size_t)st->n_params, sizeof(*st->fmts));
+    if (!st->lens || !st->fmts) {
+        st->oom = true;
+        return;
+    }
+    char *copy = mem_alloc(len ? len : 1);
+    if (copy && len)
+        memcpy(copy, data, len);
+    bind_owned(base, i, copy, true);
+    st->lens[i - 1] = (int)len;
+    st->fmts[i - 1] = 1;
+}
+
 static int
 pg_step(struct sqldb_stmt *base)
 {
@@ -291,7 +323,7 @@ pg_step(struct sqldb_stmt *base)
         if (rc)
             return rc;
         st->res = PQexecParams(conn(base->db), st->sql, st->n_params, st->types,
-                               (const char *const *)st->vals, NULL, NULL, 0);
+                               (const char *const *)st->vals, st->lens, st->fmts, 0);
         ExecStatusType es = PQresultStatus(st->res);
         if (es != PGRES_COMMAND_OK && es != PGRES_TUPLES_OK) {
             rc = fail_res(base->db, st->res);
@@ -357,6 +389,20 @@ pg_column_null(struct sqldb_stmt *st, int col)
     return value(st, col) == NULL;
 }
 
+static const void *
+pg_column_blob(struct sqldb_stmt *base, int col, size_t *len)
+{
+    struct pg_stmt *st = (struct pg_stmt *)base;
+    *len = 0;
+    PQfreemem(st->blob);
+    st->blob = NULL;
+    const char *v = value(base, col);
+    /* results come as text: a bytea in its escaped form (hex by default), which libpq decodes */
+    if (v)
+        st->blob = PQunescapeBytea((const unsigned char *)v, len);
+    return st->blob;
+}
+
 static void
 pg_reset(struct sqldb_stmt *base)
 {
@@ -374,6 +420,9 @@ pg_finalize(struct sqldb_stmt *base)
         free(st->vals[i]);
     free(st->vals);
     free(st->types);
+    free(st->lens);
+    free(st->fmts);
+    PQfreemem(st->blob);
     free(st->sql);
     free(st);
 }
@@ -542,11 +591,13 @@ static const struct sqldb_ops pg_ops = {
     .bind_double = pg_bind_double,
     .bind_text = pg_bind_text,
     .bind_null = pg_bind_null,
+    .bind_blob = pg_bind_blob,
     .step = pg_step,
     .column_int64 = pg_column_int64,
     .column_double = pg_column_double,
     .column_text = pg_column_text,
     .column_null = pg_column_null,
+    .column_blob = pg_column_blob,
     .reset = pg_reset,
     .finalize = pg_finalize,
     .listen = pg_listen,

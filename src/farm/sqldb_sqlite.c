@@ -105,6 +105,16 @@ lite_bind_null(struct sqldb_stmt *st, int i)
     sqlite3_bind_null(stmt(st), i);
 }
 
+static void
+lite_bind_blob(struct sqldb_stmt *st, int i, const void *data, size_t len)
+{
+    /* zeroblob for none: sqlite3_bind_blob binds NULL for a NULL pointer */
+    if (len == 0)
+        sqlite3_bind_zeroblob(stmt(st), i, 0);
+    else
+        sqlite3_bind_blob64(stmt(st), i, data, len, SQLITE_TRANSIENT);
+}
+
 static int
 lite_step(struct sqldb_stmt *st)
 {
@@ -142,6 +152,17 @@ lite_column_null(struct sqldb_stmt *st, int col)
     return sqlite3_column_type(stmt(st), col) == SQLITE_NULL;
 }
 
+static const void *
+lite_column_blob(struct sqldb_stmt *st, int col, size_t *len)
+{
+    *len = 0;
+    if (sqlite3_column_type(stmt(st), col) == SQLITE_NULL)
+        return NULL;
+    const void *p = sqlite3_column_blob(stmt(st), col);
+    *len = (size_t)sqlite3_column_bytes(stmt(st), col);
+    return p ? p : ""; /* an empty blob reads as NULL in sqlite3 */
+}
+
 static void
 lite_reset(struct sqldb_stmt *st)
 {
@@ -166,11 +187,13 @@ static const struct sqldb_ops lite_ops = {
     .bind_double = lite_bind_double,
     .bind_text = lite_bind_text,
     .bind_null = lite_bind_null,
+    .bind_blob = lite_bind_blob,
     .step = lite_step,
     .column_int64 = lite_column_int64,
     .column_double = lite_column_double,
     .column_text = lite_column_text,
     .column_null = lite_column_null,
+    .column_blob = lite_column_blob,
     .reset = lite_reset,
     .finalize = lite_finalize,
 };

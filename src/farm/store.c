@@ -192,6 +192,9 @@ static const char *const migrations[] = {
     STORE_PRINTER_CFG_SCHEMA,
     /* 11: several hosts on one database (store_host.c) */
     STORE_HOST_SCHEMA,
+    /* 12: files shared between hosts through the database (store_blob.c; store_int.h's
+       STORE_BLOB_VERSION names this number: renumber both together) */
+    STORE_BLOB_SCHEMA,
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

@@ -184,6 +184,14 @@ int store_schema_version(void);
  * temporary file, and commit moves it to its content address (a file that
  * is already there is kept) and records it.  store_file_put() does all
  * three for bytes in memory.  The writer is freed by commit or abort.
+ *
+ * On PostgreSQL the database holds every file's bytes, which all hosts
+ * share, and the data dir is this host's cache of them: recording a file
+ * sends it first, chunk by chunk, unless the database has it already
+ * (SF_EINVAL over SF_STORE_BLOB_MAX, SF_EIO for the database or bytes that
+ * no longer hash to sha, and then nothing is recorded), and
+ * store_file_path fetches a file the cache lacks.  Both block on the
+ * network for the file's size (about 1-2 s per 100 MiB, README).
  */
 struct store_file;
 struct store_file *store_file_begin(struct store *s, struct sf_err *err);
@@ -202,12 +210,19 @@ int store_file_put(struct store *s, const void *data, size_t len, char sha[STORE
  * enters it in the database (the store's thread).  A crash between the two
  * leaves an unreferenced file, which the next adopt of the same bytes
  * replaces.  Adopting moves no bytes; streaming a 112 MB job through a
- * writer held the daemon's loop ~0.5 s (bench_jobstart).
+ * writer held the daemon's loop ~0.5 s (bench_jobstart).  On PostgreSQL
+ * adopt also sends the file to the database, on a connection of its own
+ * (errors as record's), so record finds it there and sends nothing.
  */
 int store_file_adopt(const struct store *s, const char *path, char sha[STORE_SHA_HEX],
                      int64_t *size, struct sf_err *err);
 int store_file_record(struct store *s, const char *sha, int64_t size, struct sf_err *err);
-/* Path of a stored file into path; SF_ENOTFOUND if unknown, SF_EINVAL if sha is not hex. */
+/*
+ * Path of a stored file into path; SF_ENOTFOUND if unknown, SF_EINVAL if sha is not hex.
+ * On PostgreSQL a file this host's cache lacks is fetched first, SHA-256 checked before it
+ * is cached: SF_ENOTFOUND when the database lacks its bytes (only the host that stored it
+ * has them), SF_EIO for a missing or damaged chunk or the file system; nothing is cached.
+ */
 int store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct sf_err *err);
 
 /* Add a queued job for a stored part file; o is validated (SF_EINVAL). */

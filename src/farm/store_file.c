@@ -8,7 +8,13 @@
  * unreferenced file, never a row pointing at a missing or partial file.
  * The files table records which addresses are complete.
  *
- * Thread: the store's, except store_file_adopt (file system only, any).
+ * On PostgreSQL (several hosts, one database) the data dir is each host's
+ * cache and the database holds every file's bytes (store_blob.c): a file
+ * recorded here is sent there first, and a path asked for a file the cache
+ * lacks is fetched from there.  On SQLite the data dir is the store.
+ *
+ * Thread: the store's, except store_file_adopt (any: the file system, and
+ * on PostgreSQL a connection of its own).
  */
 #include "store.h"
 
@@ -28,7 +34,7 @@ struct store_file {
     struct store *s;               /* owner */
     int fd;                        /* temporary file being written */
     char tmp[STORE_PATH_MAX + 64]; /* its path */
-    EVP_MD_CTX *md;                /* running SHA-256 */
+    struct store_sha *md;          /* running SHA-256 */
     int64_t size;                  /* bytes written */
 };
 
@@ -61,9 +67,7 @@ store_file_begin(struct store *s, struct sf_err *err)
         free(f);
         return NULL;
     }
-    f->md = EVP_MD_CTX_new();
-    if (!f->md || EVP_DigestInit_ex(f->md, EVP_sha256(), NULL) != 1) {
-        sf_err_set(err, SF_ENOMEM, "store: cannot start SHA-256");
+    if (!(f->md = store_sha_new(err))) {
         store_file_abort(f);
         return NULL;
     }
@@ -74,8 +78,9 @@ int
 store_file_write(struct store_file *f, const void *data, size_t len, struct sf_err *err)
 {
     const char *p = data;
-    if (EVP_DigestUpdate(f->md, data, len) != 1)
-        return sf_err_set(err, SF_EBUG, "store: SHA-256 update failed");
+    int rc = store_sha_update(f->md, data, len, err);
+    if (rc)
+        return rc;
     while (len > 0) {
         ssize_t w = write(f->fd, p, len);
         if (w < 0 && errno == EINTR)
@@ -98,7 +103,7 @@ store_file_abort(struct store_file *f)
         close(f->fd);
         unlink(f->tmp);
     }
-    EVP_MD_CTX_free(f->md);
+    store_sha_free(f->md);
     free(f);
 }
 
@@ -112,28 +117,53 @@ fsync_dir(const char *path)
     }
 }
 
-/* The hex digest of md into sha. */
-static int
-sha_hex(EVP_MD_CTX *md, char sha[STORE_SHA_HEX], struct sf_err *err)
+/* struct store_sha is libcrypto's context under a name of the store's (store_int.h). */
+struct store_sha *
+store_sha_new(struct sf_err *err)
+{
+    EVP_MD_CTX *md = EVP_MD_CTX_new();
+    if (!md || EVP_DigestInit_ex(md, EVP_sha256(), NULL) != 1) {
+        EVP_MD_CTX_free(md);
+        sf_err_set(err, SF_ENOMEM, "store: cannot start SHA-256");
+        return NULL;
+    }
+    return (struct store_sha *)md;
+}
+
+int
+store_sha_update(struct store_sha *h, const void *data, size_t len, struct sf_err *err)
+{
+    if (EVP_DigestUpdate((EVP_MD_CTX *)h, data, len) != 1)
+        return sf_err_set(err, SF_EBUG, "store: SHA-256 update failed");
+    return SF_OK;
+}
+
+int
+store_sha_final(struct store_sha *h, char sha[STORE_SHA_HEX], struct sf_err *err)
 {
     unsigned char d[EVP_MAX_MD_SIZE];
     unsigned int n = 0;
-    if (EVP_DigestFinal_ex(md, d, &n) != 1 || n != 32)
+    if (EVP_DigestFinal_ex((EVP_MD_CTX *)h, d, &n) != 1 || n != 32)
         return sf_err_set(err, SF_EBUG, "store: SHA-256 final failed");
     for (int i = 0; i < 32; i++)
         snprintf(sha + 2 * i, 3, "%02x", d[i]);
     return SF_OK;
 }
 
-/* Make the file at from (open as fd) durable and move it to sha's address.  Touches the file
-   system only: s->dir is fixed at open, so this may run on any thread. */
-static int
-place_file(const struct store *s, int fd, const char *from, const char *sha, struct sf_err *err)
+void
+store_sha_free(struct store_sha *h)
+{
+    EVP_MD_CTX_free((EVP_MD_CTX *)h);
+}
+
+int
+store_file_place(const char *data_dir, int fd, const char *from, const char *sha,
+                 struct sf_err *err)
 {
     if (fsync(fd) != 0)
         return sf_err_sys(err, "store: fsync '%s'", from);
     char dir[STORE_PATH_MAX + 16], path[STORE_PATH_MAX + 96];
-    snprintf(dir, sizeof(dir), "%s/files/%.2s", s->dir, sha);
+    snprintf(dir, sizeof(dir), "%s/files/%.2s", data_dir, sha);
     snprintf(path, sizeof(path), "%s/%s", dir, sha);
     if (mkdir(dir, 0700) != 0 && errno != EEXIST)
         return sf_err_sys(err, "store: cannot create '%s'", dir);
@@ -143,15 +173,28 @@ place_file(const struct store *s, int fd, const char *from, const char *sha, str
     return SF_OK;
 }
 
+/* The path of sha in data_dir's files into path (STORE_PATH_MAX + 96 bytes). */
+static void
+local_path(const char *data_dir, const char *sha, char *path)
+{
+    snprintf(path, STORE_PATH_MAX + 96, "%s/files/%.2s/%s", data_dir, sha, sha);
+}
+
 int
 store_file_record(struct store *s, const char *sha, int64_t size, struct sf_err *err)
 {
     if (!store_sha_valid(sha))
         return sf_err_set(err, SF_EINVAL, "store: '%.80s' is not a SHA-256 in hex", sha);
     struct sqldb_stmt *st;
-    int rc = store_prepare(
-        s, &st, "INSERT INTO files(sha256, size, created_ms) VALUES(?,?,?) ON CONFLICT DO NOTHING",
-        err);
+    char path[STORE_PATH_MAX + 96];
+    local_path(s->dir, sha, path);
+    /* the database's copy first: a recorded file is one every host can read */
+    int rc = sqldb_engine(s->db) == SQLDB_PG ? store_blob_upload(s->db, path, sha, err) : SF_OK;
+    if (rc == SF_OK)
+        rc = store_prepare(
+            s, &st,
+            "INSERT INTO files(sha256, size, created_ms) VALUES(?,?,?) ON CONFLICT DO NOTHING",
+            err);
     if (rc)
         return rc;
     sqldb_bind_text(st, 1, sha); /* store_sha_valid: 64 digits */
@@ -163,13 +206,30 @@ store_file_record(struct store *s, const char *sha, int64_t size, struct sf_err 
 int
 store_file_commit(struct store_file *f, char sha[STORE_SHA_HEX], struct sf_err *err)
 {
-    int rc = sha_hex(f->md, sha, err);
-    if (rc == SF_OK && (rc = place_file(f->s, f->fd, f->tmp, sha, err)) == SF_OK) {
+    int rc = store_sha_final(f->md, sha, err);
+    if (rc == SF_OK && (rc = store_file_place(f->s->dir, f->fd, f->tmp, sha, err)) == SF_OK) {
         close(f->fd);
         f->fd = -1;
         rc = store_file_record(f->s, sha, f->size, err);
     }
     store_file_abort(f);
+    return rc;
+}
+
+/* On PostgreSQL, send an adopted file to the database on a connection of this thread's own,
+   so the heavy part of recording it stays off the store's thread; record then finds it there. */
+static int
+adopt_upload(const struct store *s, const char *sha, struct sf_err *err)
+{
+    if (!sqldb_is_url(s->target))
+        return SF_OK;
+    struct sqldb *db = sqldb_open(s->target, 0, err);
+    if (!db)
+        return err ? err->code : SF_EIO;
+    char path[STORE_PATH_MAX + 96];
+    local_path(s->dir, sha, path);
+    int rc = store_blob_upload(db, path, sha, err);
+    sqldb_close(db);
     return rc;
 }
 
@@ -180,10 +240,8 @@ store_file_adopt(const struct store *s, const char *path, char sha[STORE_SHA_HEX
     int fd = open(path, O_RDONLY | O_CLOEXEC);
     if (fd < 0)
         return sf_err_sys(err, "store: cannot read '%s'", path);
-    EVP_MD_CTX *md = EVP_MD_CTX_new();
-    int rc = md && EVP_DigestInit_ex(md, EVP_sha256(), NULL) == 1
-                 ? SF_OK
-                 : sf_err_set(err, SF_ENOMEM, "store: cannot start SHA-256");
+    struct store_sha *md = store_sha_new(err);
+    int rc = md ? SF_OK : SF_ENOMEM;
     char buf[1 << 16];
     ssize_t n;
     *size = 0;
@@ -192,16 +250,14 @@ store_file_adopt(const struct store *s, const char *path, char sha[STORE_SHA_HEX
             continue;
         if (n < 0)
             rc = sf_err_sys(err, "store: reading '%s'", path);
-        else if (EVP_DigestUpdate(md, buf, (size_t)n) != 1)
-            rc = sf_err_set(err, SF_EBUG, "store: SHA-256 update failed");
-        else
+        else if ((rc = store_sha_update(md, buf, (size_t)n, err)) == SF_OK)
             *size += n;
     }
-    if (rc == SF_OK && (rc = sha_hex(md, sha, err)) == SF_OK)
-        rc = place_file(s, fd, path, sha, err);
-    EVP_MD_CTX_free(md);
+    if (rc == SF_OK && (rc = store_sha_final(md, sha, err)) == SF_OK)
+        rc = store_file_place(s->dir, fd, path, sha, err);
+    store_sha_free(md);
     close(fd);
-    return rc;
+    return rc == SF_OK ? adopt_upload(s, sha, err) : rc;
 }
 
 int
@@ -240,6 +296,9 @@ store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct
         return sf_err_set(err, SF_ENOTFOUND, "store: no file %s", sha);
     if ((size_t)snprintf(path, cap, "%s/files/%.2s/%s", s->dir, sha, sha) >= cap)
         return sf_err_set(err, SF_ENOMEM, "store: path of file %s is too long", sha);
+    /* a host's cache lacks what another host stored: fetch it */
+    if (sqldb_engine(s->db) == SQLDB_PG && access(path, F_OK) != 0)
+        return store_blob_fetch(s->db, s->dir, sha, err);
     return SF_OK;
 }
 

@@ -1,12 +1,13 @@
 /*
  * store_int.h - internal to the store module (store.c, store_file.c,
- * store_job.c, store_printer.c, store_event.c, store_query.c); nothing outside
- * src/farm/store*.c includes it.
+ * store_blob.c, store_job.c, store_printer.c, store_event.c, store_query.c);
+ * nothing outside src/farm/store*.c includes it.
  *
  * What the parts share: the connection and data dir (struct store), the
  * statement helpers every part writes through (store.c, over sqldb.h, so
  * one SQL text serves SQLite and PostgreSQL), the event log append
- * (store_event.c) and the file-table checks (store_file.c).  Each
+ * (store_event.c), the file-table checks and hashing (store_file.c) and
+ * the database's copy of the files (store_blob.c).  Each
  * helper's errors are SF_EIO from the engine with its message, set in err
  * like the public functions'.
  *
@@ -83,6 +84,28 @@ struct store {
     "CREATE INDEX jobs_claimed ON jobs(claimed_by) WHERE claimed_by != '';"                        \
     "CREATE INDEX jobs_claim_order ON jobs(priority DESC, queue_pos, id) WHERE state = 'queued';"
 
+/*
+ * Migration STORE_BLOB_VERSION (store_blob.c): files shared between hosts through the
+ * database.  file_blobs says the database holds a file's bytes, all of
+ * them: its row is written in the one transaction that writes every chunk,
+ * so no row ever names a part-sent file.  file_chunks holds the bytes cut
+ * into chunk_bytes pieces, seq from 0, the last one shorter.  Only a
+ * PostgreSQL store fills them; on SQLite (one host) the data dir is the
+ * store and they stay empty.
+ */
+#define STORE_BLOB_VERSION 12 /* the schema version STORE_BLOB_SCHEMA upgrades to */
+#define STORE_BLOB_SCHEMA                                                                          \
+    "CREATE TABLE file_blobs("                                                                     \
+    "  sha256 TEXT PRIMARY KEY CHECK(length(sha256) = 64),"                                        \
+    "  size INTEGER NOT NULL CHECK(size >= 0),"                                                    \
+    "  chunk_bytes INTEGER NOT NULL CHECK(chunk_bytes > 0),"                                       \
+    "  created_ms INTEGER NOT NULL);"                                                              \
+    "CREATE TABLE file_chunks("                                                                    \
+    "  sha256 TEXT NOT NULL REFERENCES file_blobs(sha256) ON DELETE CASCADE,"                      \
+    "  seq INTEGER NOT NULL CHECK(seq >= 0),"                                                      \
+    "  data BLOB NOT NULL,"                                                                        \
+    "  PRIMARY KEY(sha256, seq));"
+
 /* SF_EIO with what and SQLite's message. */
 int store_db_fail(struct store *s, struct sf_err *err, const char *what);
 /* Run sql (no rows, no parameters). */
@@ -157,5 +180,40 @@ int store_log_event(struct store *s, int64_t job_id, const char *printer, const 
 bool store_sha_valid(const char *sha);
 /* Whether sha is in the files table. */
 bool store_file_known(struct store *s, const char *sha);
+
+/* A running SHA-256 (store_file.c, over libcrypto): new, update with the bytes, final into
+   hex (SF_EBUG if the library fails), free (NULL allowed).  new: NULL with err set. */
+struct store_sha;
+struct store_sha *store_sha_new(struct sf_err *err);
+int store_sha_update(struct store_sha *h, const void *data, size_t len, struct sf_err *err);
+int store_sha_final(struct store_sha *h, char sha[STORE_SHA_HEX], struct sf_err *err);
+void store_sha_free(struct store_sha *h);
+/*
+ * Make the file at from (open as fd) durable and move it to sha's address
+ * under dir/files (store_file.c).  The file system only: any thread.
+ */
+int store_file_place(const char *dir, int fd, const char *from, const char *sha,
+                     struct sf_err *err);
+
+/*
+ * The database's copy of the files (store_blob.c; PostgreSQL stores only).
+ * Each takes the connection to use, so a worker may send on one of its own
+ * (store_file_adopt) while the store's thread works on the store's.
+ *
+ * store_blob_upload: send the file at path, which must hash to sha, to db
+ * chunk by chunk and mark it complete, in one transaction; nothing is sent
+ * when db has it already (or another host is sending it: that upload's
+ * commit is waited for).  SF_EINVAL for a file over SF_STORE_BLOB_MAX,
+ * SF_EIO for the file, the database, or bytes that do not hash to sha;
+ * on error nothing is left in db.  Not inside a transaction of db's.
+ *
+ * store_blob_fetch: copy sha from db into dir's files, at its address:
+ * streamed into a temporary file, SHA-256 checked, then renamed, so a torn
+ * or corrupt copy is never taken for the file.  SF_ENOTFOUND when db does
+ * not hold sha's bytes, SF_EIO for a missing or damaged chunk, bytes that
+ * do not hash to sha, or the file system.
+ */
+int store_blob_upload(struct sqldb *db, const char *path, const char *sha, struct sf_err *err);
+int store_blob_fetch(struct sqldb *db, const char *dir, const char *sha, struct sf_err *err);
 
 #endif
