@@ -25,6 +25,7 @@
 #include "farm_int.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
@@ -113,16 +114,46 @@ static struct printer *
 add_printer_new(struct farm *f, const struct farmcfg_printer *cfg)
 {
     struct printer_env env = {
-        .l = f->l, .s = f->s, .driver = f->hooks.driver, .changed = on_printer_changed, .ud = f
+        .l = f->l,
+        .s = f->s,
+        .q = f->q,
+        .driver = f->hooks.driver,
+        .changed = on_printer_changed,
+        .ud = f,
     };
     return printer_new(&env, cfg);
 }
 
-/* Apply a job event in the store, logging failures (the job fails alone). */
+/* Queued writes committed (storeq.h): event streams read them, the scheduler sees them. */
+static void
+on_store_commit(void *ud)
+{
+    struct farm *f = ud;
+    farm_notify(f);
+    farm_kick(f);
+}
+
+void
+farm_sync(struct farm *f)
+{
+    if (f)
+        storeq_sync(f->q);
+}
+
+void
+farm_health(struct farm *f, struct farm_health *out)
+{
+    out->loop_turn_max_ms = loop_turn_max_ms(f->l);
+    storeq_stats(f->q, &out->store);
+}
+
+/* Apply a job event in the store now, after what is queued, logging failures (the job fails
+   alone). */
 static int
 job_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_args *a)
 {
     struct sf_err err;
+    storeq_sync(f->q);
     int rc = store_job_event(f->s, id, ev, a, NULL, &err);
     if (rc)
         log_warn("farm", "%s", err.msg);
@@ -200,6 +231,30 @@ reslice_failed_any(const struct farm *f, int64_t id)
     return false;
 }
 
+/*
+ * Task t's PREPARED came back from the store thread (its commit wakes the
+ * farm: on_store_commit).  A re-slice stays in f->reslices until now, so
+ * no scheduling pass in between, still reading the old G-code's key,
+ * slices the job once more.
+ */
+static void
+on_prepared(void *ud, int64_t id, enum job_event ev, int rc, enum job_state to,
+            const struct sf_err *err)
+{
+    (void)ev;
+    (void)to;
+    struct prep *t = ud;
+    if (rc == SF_OK)
+        log_info("farm", "job %lld: %s for %s", (long long)id,
+                 t->reslice ? "prepared again" : "prepared", t->key);
+    else
+        log_info("farm", "job %lld: %s", (long long)id, err->msg);
+    if (t->reslice)
+        unlink_reslice(t->f, t);
+    farm_kick(t->f);
+    free(t);
+}
+
 static void
 prep_done(struct loop *l, void *ud, int rc)
 {
@@ -208,9 +263,8 @@ prep_done(struct loop *l, void *ud, int rc)
     struct farm *f = t->f;
     int64_t id = t->req.job_id;
     struct sf_err err;
+    bool queued = false; /* t waits for its PREPARED (on_prepared frees it) */
     f->preparing--;
-    if (t->reslice)
-        unlink_reslice(f, t);
     if (rc == SF_OK && (rc = store_file_record(f->s, t->gcode_sha, t->gcode_size, &err)) == SF_OK &&
         (!t->mesh_sha[0] ||
          (rc = store_file_record(f->s, t->mesh_sha, t->mesh_size, &err)) == SF_OK)) {
@@ -234,13 +288,10 @@ prep_done(struct loop *l, void *ud, int rc)
                                     .note = t->out.shape_failed };
         memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
         /* A re-slice whose job started meanwhile on a printer of its old key
-           (or was cancelled) is refused here and dropped: nothing changed. */
-        if (store_job_event(f->s, id, JOB_EV_PREPARED, &a, NULL, &err) == SF_OK)
-            log_info("farm", "job %lld: %s for %s", (long long)id,
-                     t->reslice ? "prepared again" : "prepared", t->key);
-        else
-            log_info("farm", "job %lld: %s", (long long)id, err.msg);
-        farm_notify(f);
+           (or was cancelled) is refused there and dropped: nothing changed.
+           Queued: a prepare ending while the store is busy holds up no print.
+           Out of memory, the job stays preparing until the next start's recovery. */
+        queued = storeq_job_event(f->q, id, JOB_EV_PREPARED, &a, NULL, on_prepared, t) == SF_OK;
     } else if (rc != SF_OK && rc != SF_ECANCELED) {
         const char *why = t->err.msg[0] ? t->err.msg : err.msg;
         if (t->reslice) {
@@ -258,7 +309,11 @@ prep_done(struct loop *l, void *ud, int rc)
     unlink(t->req.out_path); /* gone when adopted */
     if (t->req.mesh_out[0])
         unlink(t->req.mesh_out);
-    free(t);
+    if (!queued) {
+        if (t->reslice)
+            unlink_reslice(f, t);
+        free(t);
+    }
     farm_kick(f);
 }
 
@@ -432,7 +487,7 @@ run(struct loop *l, void *ud)
         if (jobs[i].state != JOB_QUEUED)
             continue;
         if (why[i][0] || f->preparing >= pool_size(f->pool)) {
-            store_job_set_reason(f->s, jobs[i].id, why[i], NULL);
+            storeq_job_set_reason(f->q, jobs[i].id, why[i]);
             continue;
         }
         size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
@@ -441,7 +496,7 @@ run(struct loop *l, void *ud)
     }
     for (size_t i = 0; i < n; i++)
         if (jobs[i].state == JOB_READY && why[i][0])
-            store_job_set_reason(f->s, jobs[i].id, why[i], NULL);
+            storeq_job_set_reason(f->q, jobs[i].id, why[i]);
 out:
     free(sj);
     free(sp);
@@ -454,8 +509,10 @@ static void
 on_progress(struct loop *l, void *ud)
 {
     struct farm *f = ud;
-    /* One transaction for every printer: one fsync a tick on the loop thread, not one per
-       printer (50 printers stalled the loop ~0.2 s every tick, bench_farm50). */
+    /* One transaction for every printer, not one per printer (50 printers stalled the loop
+       ~0.2 s every tick, bench_farm50), on the store thread: the loop goes on meanwhile.  A
+       job that stopped printing meanwhile is skipped there; marking it saved here is
+       harmless, it has no more progress to save. */
     struct store_progress *batch = f->n_printers ? mem_array(f->n_printers, sizeof(*batch)) : NULL;
     size_t n = 0;
     for (size_t i = 0; batch && i < f->n_printers; i++) {
@@ -463,10 +520,10 @@ on_progress(struct loop *l, void *ud)
         if (printer_progress(f->printers[i], &id, &lines))
             batch[n++] = (struct store_progress){ id, lines, false };
     }
-    if (n && store_jobs_progress(f->s, batch, n, NULL) > 0) {
-        for (size_t i = 0, k = 0; i < f->n_printers && k < n; i++) {
+    if (n && storeq_jobs_progress(f->q, batch, n) == SF_OK) {
+        for (size_t i = 0; i < f->n_printers; i++) {
             int64_t id, lines;
-            if (printer_progress(f->printers[i], &id, &lines) && batch[k++].saved)
+            if (printer_progress(f->printers[i], &id, &lines))
                 printer_progress_saved(f->printers[i], lines);
         }
     }
@@ -502,10 +559,11 @@ farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcf
     snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
     f->gram_s = cfg->gram_s;
     f->material_first = cfg->material_first;
-    if (!(f->io = pool_new(l, 1, err))) {
+    if (!(f->io = pool_new(l, 1, err)) || !(f->q = storeq_new(l, s, err))) {
         farm_free(f);
         return NULL;
     }
+    storeq_set_commit(f->q, on_store_commit, f);
     struct farmcfg_printer *list = NULL;
     size_t n = 0;
     int rc = farm_seed(f, cfg->printers, cfg->n_printers, err);
@@ -544,6 +602,11 @@ farm_free(struct farm *f)
     f->stopping = true;
     for (size_t i = 0; i < f->n_printers; i++)
         printer_stop(f->printers[i]);
+    /* Nothing lost on a stop: what is queued (those CRASHED with it) is written now. */
+    if (f->q) {
+        storeq_set_commit(f->q, NULL, NULL);
+        storeq_free(f->q);
+    }
     for (size_t i = 0; i < f->n_printers; i++)
         printer_free(f->printers[i]);
     free(f->printers);

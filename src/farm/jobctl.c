@@ -70,6 +70,7 @@ int
 jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *err)
 {
     struct job_row j;
+    farm_sync(f); /* the job's end may still be queued, or a reason that a cancel overrides */
     int rc = store_job_get(s, id, &j, err);
     if (rc)
         return rc;

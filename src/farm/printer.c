@@ -52,12 +52,10 @@ printer_changed(struct printer *p)
 void
 printer_set_bed(struct printer *p, bool full)
 {
-    struct sf_err err;
     if (p->bed_full == full)
         return;
     p->bed_full = full;
-    if (store_printer_bed_set(p->env.s, p->cfg.name, full, &err))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    storeq_printer_bed_set(p->env.q, p->cfg.name, full); /* a failure is logged there */
 }
 
 /*
@@ -84,8 +82,7 @@ printer_move(struct printer *p, enum printer_event ev)
         p->error_cleared = false;
     if (to != p->state) {
         p->state = to;
-        if (store_printer_set(p->env.s, p->cfg.name, to, &err))
-            log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+        storeq_printer_set(p->env.q, p->cfg.name, to);
     }
     printer_changed(p);
     return true;
@@ -104,16 +101,22 @@ printer_filament_mm(const struct printer *p, int64_t id, enum job_event ev, int6
 int
 printer_job_event(struct printer *p, int64_t id, enum job_event ev, const struct job_event_args *a)
 {
-    struct sf_err err;
     struct job_event_args with = a ? *a : (struct job_event_args){ 0 };
     if (ev == JOB_EV_PRINT_DONE || ev == JOB_EV_PRINT_FAILED || ev == JOB_EV_CANCEL ||
         ev == JOB_EV_CANCEL_COPY)
         with.filament_mm = printer_filament_mm(p, id, ev, with.lines_acked);
-    int rc = store_job_event(p->env.s, id, ev, a ? &with : NULL, NULL, &err);
-    if (rc)
-        log_printer(LOG_WARN, p->cfg.name, "%s", err.msg);
+    /* a failure is logged when it comes back; its commit wakes the farm (farm.c) */
+    int rc = storeq_job_event(p->env.q, id, ev, a ? &with : NULL, p->cfg.name, NULL, NULL);
     printer_changed(p);
     return rc;
+}
+
+int
+printer_job_commit(struct printer *p, int64_t id, enum job_event ev, const struct job_event_args *a,
+                   struct sf_err *err)
+{
+    storeq_sync(p->env.q); /* after what p queued: its progress, its printer's state */
+    return store_job_event(p->env.s, id, ev, a, NULL, err);
 }
 
 /* The job on p ended badly (drop, fault): fail it, keep the retry policy. */
@@ -136,18 +139,15 @@ fail_job(struct printer *p, const char *why)
 static void
 interrupt_job(struct printer *p, const char *why)
 {
-    struct sf_err err;
     char reason[200];
     snprintf(reason, sizeof(reason), "printer unreachable while printing: %s", why);
     struct job_event_args a = { .reason = reason };
     int64_t id = p->job_id;
     p->job_id = 0;
-    if (store_job_progress(p->env.s, id, p->lines_acked, &err) ||
-        store_job_event(p->env.s, id, JOB_EV_CRASHED, &a, NULL, &err))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
-    else
-        log_printer(LOG_WARN, p->cfg.name, "job %lld interrupted: %s", (long long)id, reason);
-    printer_changed(p);
+    struct store_progress sp = { id, p->lines_acked, false };
+    storeq_jobs_progress(p->env.q, &sp, 1);
+    log_printer(LOG_WARN, p->cfg.name, "job %lld interrupted: %s", (long long)id, reason);
+    printer_job_event(p, id, JOB_EV_CRASHED, &a);
 }
 
 /*
@@ -165,7 +165,10 @@ try_attach(struct printer *p)
 {
     struct sf_err err;
     struct job_row row;
-    if (p->bed_full || store_job_interrupted(p->env.s, p->cfg.name, &row, &err))
+    if (p->bed_full)
+        return SF_ENOTFOUND;
+    storeq_sync(p->env.q); /* the job's CRASHED may still be queued */
+    if (store_job_interrupted(p->env.s, p->cfg.name, &row, &err))
         return SF_ENOTFOUND;
     const struct job_row *j = row.gcode_sha[0] ? &row : NULL;
     int ok = SF_ENOTFOUND;
@@ -333,7 +336,7 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
                re-runs at most these lines plus what the driver had not yet
                reported (drivers report every 16 lines or 250 ms). */
             struct store_progress sp = { p->job_id, p->lines_acked, false };
-            if (store_jobs_progress(p->env.s, &sp, 1, NULL) > 0)
+            if (storeq_jobs_progress(p->env.q, &sp, 1) == SF_OK)
                 p->lines_saved = p->lines_acked;
         }
         break;
@@ -413,8 +416,9 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
     p->cfg = *cfg;
     p->state = PRINTER_OFFLINE;
     struct sf_err err;
-    if (store_printer_set(env->s, cfg->name, PRINTER_OFFLINE, &err) ||
-        store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err))
+    storeq_printer_set(env->q, cfg->name, PRINTER_OFFLINE);
+    storeq_sync(env->q); /* the bed a printer of this name just had (farm_apply) */
+    if (store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err))
         log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
     if (p->bed_full)
         log_printer(LOG_INFO, cfg->name, "its bed holds a part: clear it before the next job");
@@ -444,12 +448,14 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
 void
 printer_stop(struct printer *p)
 {
-    struct sf_err err;
     struct job_event_args a = { .reason = "the daemon stopped while this job was printing" };
     p->deaf = true;
-    if (p->job_id && (store_job_progress(p->env.s, p->job_id, p->lines_acked, &err) ||
-                      store_job_event(p->env.s, p->job_id, JOB_EV_CRASHED, &a, NULL, &err)))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    if (!p->job_id)
+        return;
+    /* queued: the farm drains the queue before the store closes (storeq_free) */
+    struct store_progress sp = { p->job_id, p->lines_acked, false };
+    storeq_jobs_progress(p->env.q, &sp, 1);
+    storeq_job_event(p->env.q, p->job_id, JOB_EV_CRASHED, &a, p->cfg.name, NULL, NULL);
 }
 
 void
@@ -621,11 +627,15 @@ drive(struct printer *p, const char *path, uint64_t line, const struct drv_job_s
 int
 printer_start(struct printer *p, const struct job_row *j, const char *path)
 {
+    struct sf_err err;
     struct job_event_args a = { .printer = p->cfg.name };
     /* Commit first: a crash from here on leaves the job interrupted. */
-    int rc = printer_job_event(p, j->id, JOB_EV_START, &a);
-    if (rc)
+    int rc = printer_job_commit(p, j->id, JOB_EV_START, &a, &err);
+    printer_changed(p);
+    if (rc) {
+        log_printer(LOG_WARN, p->cfg.name, "%s", err.msg);
         return rc;
+    }
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
     p->est_s = printer_estimate_s(j, path);
@@ -670,7 +680,7 @@ printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err
 {
     /* Commit first (the farm's rule): a crash from here on leaves it interrupted again. */
     struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line };
-    int rc = store_job_event(p->env.s, id, JOB_EV_RESUME, &a, NULL, err);
+    int rc = printer_job_commit(p, id, JOB_EV_RESUME, &a, err);
     if (rc)
         return rc;
     p->job_id = id;

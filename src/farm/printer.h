@@ -11,7 +11,12 @@
  * an action's own move is applied once, by the action.
  *
  * Every change follows the farm's rule: commit to the store, then act on
- * the device; the bed is recorded before the job that leaves a part on it.
+ * the device.  What starts a print (its START, a RESUME) and an operator's
+ * action commit before the printer is told; what follows the device
+ * (progress, the printer's state, its bed, notes, the end of a print) is
+ * queued on the store's thread (env.q, storeq.h) and written in the order
+ * it happened, so the loop never waits for it; the bed is recorded before
+ * the job that leaves a part on it.
  * The owner (farm.c) is told after each change (env.changed) to schedule
  * and to wake event streams.
  *
@@ -30,6 +35,7 @@
 #include "filament.h"
 #include "job.h"
 #include "store.h"
+#include "storeq.h"
 
 /* drv_new's shape: slimfarmd hands drv_new in; tests may hand in their own. */
 typedef struct drv *(*printer_driver_fn)(struct loop *l, const struct drv_config *cfg,
@@ -38,7 +44,8 @@ typedef struct drv *(*printer_driver_fn)(struct loop *l, const struct drv_config
 /* What a printer needs from its owner; copied by printer_new. */
 struct printer_env {
     struct loop *l;            /* the loop */
-    struct store *s;           /* the job store */
+    struct store *s;           /* the job store: reads, and writes whose result is needed */
+    struct storeq *q;          /* its queue (storeq.h): the writes nothing waits for */
     printer_driver_fn driver;  /* NULL: the printer stays offline (prepare-only tests) */
     void (*changed)(void *ud); /* a job or the printer moved: schedule, wake streams */
     void *ud;                  /* its argument */

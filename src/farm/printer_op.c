@@ -32,6 +32,7 @@ interrupted_here(struct printer *p)
 {
     struct sf_err err;
     struct job_row j;
+    storeq_sync(p->env.q); /* a CRASHED may still be queued */
     int rc = store_job_interrupted(p->env.s, p->cfg.name, &j, &err);
     if (rc == SF_ENOTFOUND)
         return 0;
@@ -42,15 +43,13 @@ interrupted_here(struct printer *p)
 static void
 note(struct printer *p, const char *kind, const char *fmt, const char *a, const char *b)
 {
-    struct sf_err err;
     char what[192];
     snprintf(what, sizeof(what), fmt, a, b);
     if (strcmp(kind, "printer-command") == 0) /* each one, never folded as a repeat */
         log_printer_each(LOG_INFO, p->cfg.name, "%s", what);
     else
         log_printer(LOG_INFO, p->cfg.name, "%s", what);
-    if (store_printer_note(p->env.s, p->cfg.name, kind, what, &err))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    storeq_printer_note(p->env.q, p->cfg.name, kind, what);
 }
 
 int
@@ -134,7 +133,7 @@ static int
 cancel_judged(struct printer *p, enum job_event jev, struct sf_err *err)
 {
     struct job_event_args a = { .reason = cancel_reason(jev) };
-    int rc = store_job_event(p->env.s, p->job_id, jev, &a, NULL, err);
+    int rc = printer_job_commit(p, p->job_id, jev, &a, err);
     if (rc)
         return rc;
     p->job_id = p->judging = 0;
@@ -201,7 +200,7 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
                                     printer_filament_mm(p, p->job_id, jev, p->lines_acked) };
     if (ends && !p->cfg.auto_eject)
         printer_set_bed(p, true); /* the cancelled part stays on the bed */
-    if ((rc = store_job_event(p->env.s, p->job_id, jev, &a, NULL, err)))
+    if ((rc = printer_job_commit(p, p->job_id, jev, &a, err)))
         return rc;
     if (ends) {
         p->job_id = 0;
