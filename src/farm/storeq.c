@@ -62,22 +62,22 @@ struct req {
     int64_t id;                  /* the job (OP_REASON, OP_EVENT) */
     struct store_progress *prog; /* OP_PROGRESS: n_prog entries, owned */
     size_t n_prog;
-    char name[64];   /* the printer (OP_PRINTER_SET, OP_NOTE, OP_BED_SET), or who (OP_EVENT) */
-    char kind[24];   /* OP_NOTE's kind */
-    char text[512];  /* OP_REASON's reason, OP_NOTE's detail */
-    int value;       /* OP_PRINTER_SET's state, OP_BED_SET's full */
-    enum job_event ev;         /* OP_EVENT */
-    struct job_event_args a;   /* OP_EVENT, its strings pointing into s */
-    bool has_a;                /* OP_EVENT had args */
-    struct event_strs *s;      /* OP_EVENT's strings, owned */
-    storeq_event_fn done;      /* OP_EVENT's callback, may be NULL */
-    void *ud;                  /* its argument */
-    bool started;              /* the thread took it: progress is no longer folded into it */
-    int64_t posted_ms;         /* clock_mono_ms at post */
-    int64_t ended_ms;          /* when it ran for the last time */
-    int rc;                    /* result */
-    enum job_state to;         /* OP_EVENT's new state */
-    struct sf_err err;         /* why it failed */
+    char name[64];     /* the printer (OP_PRINTER_SET, OP_NOTE, OP_BED_SET), or who (OP_EVENT) */
+    char kind[24];     /* OP_NOTE's kind */
+    char text[512];    /* OP_REASON's reason, OP_NOTE's detail */
+    int value;         /* OP_PRINTER_SET's state, OP_BED_SET's full */
+    enum job_event ev; /* OP_EVENT */
+    struct job_event_args a; /* OP_EVENT, its strings pointing into s */
+    bool has_a;              /* OP_EVENT had args */
+    struct event_strs *s;    /* OP_EVENT's strings, owned */
+    storeq_event_fn done;    /* OP_EVENT's callback, may be NULL */
+    void *ud;                /* its argument */
+    bool started;            /* the thread took it: progress is no longer folded into it */
+    int64_t posted_ms;       /* clock_mono_ms at post */
+    int64_t ended_ms;        /* when it ran for the last time */
+    int rc;                  /* result */
+    enum job_state to;       /* OP_EVENT's new state */
+    struct sf_err err;       /* why it failed */
 };
 
 struct storeq {
@@ -85,14 +85,14 @@ struct storeq {
     struct store *conn; /* the queue's own connection (the thread's alone) */
     int evfd;           /* written by the thread when a request ended */
     pthread_t thread;
-    pthread_mutex_t mu;  /* guards everything below down to stats */
-    pthread_cond_t cond; /* work posted, the queue emptied, or a stop */
-    struct req *head, *tail; /* pending, in order (the head may be running) */
+    pthread_mutex_t mu;              /* guards everything below down to stats */
+    pthread_cond_t cond;             /* work posted, the queue emptied, or a stop */
+    struct req *head, *tail;         /* pending, in order (the head may be running) */
     struct req *fin_head, *fin_tail; /* ended, not yet delivered */
-    size_t depth;        /* pending, counting the running one */
-    bool stop;           /* storeq_free: end once the queue is empty */
-    int64_t stop_ms;     /* when stop was asked */
-    uint64_t retries;    /* stats.retries */
+    size_t depth;                    /* pending, counting the running one */
+    bool stop;                       /* storeq_free: end once the queue is empty */
+    int64_t stop_ms;                 /* when stop was asked */
+    uint64_t retries;                /* stats.retries */
     /* loop thread only */
     storeq_commit_fn commit; /* the wake after events were logged */
     void *commit_ud;

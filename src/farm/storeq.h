@@ -46,19 +46,19 @@
 struct storeq;
 
 /* A job event's result: rc (SF_OK, or the store's error in err), the job's state after. */
-typedef void (*storeq_event_fn)(void *ud, int64_t id, enum job_event ev, int rc,
-                                enum job_state to, const struct sf_err *err);
+typedef void (*storeq_event_fn)(void *ud, int64_t id, enum job_event ev, int rc, enum job_state to,
+                                const struct sf_err *err);
 /* Called on the loop after requests that logged an event committed (a batch: once). */
 typedef void (*storeq_commit_fn)(void *ud);
 
 /* What the queue has done since storeq_new. */
 struct storeq_stats {
-    uint64_t posted;    /* requests posted (folded progress counts once) */
-    uint64_t done;      /* requests run to the end, failed or not */
-    uint64_t failed;    /* of which failed (after their retries) */
-    uint64_t retries;   /* SF_EIO failures tried again */
-    size_t depth;       /* requests waiting or running now */
-    size_t depth_max;   /* the most there were */
+    uint64_t posted;     /* requests posted (folded progress counts once) */
+    uint64_t done;       /* requests run to the end, failed or not */
+    uint64_t failed;     /* of which failed (after their retries) */
+    uint64_t retries;    /* SF_EIO failures tried again */
+    size_t depth;        /* requests waiting or running now */
+    size_t depth_max;    /* the most there were */
     int64_t wait_max_ms; /* the longest a request waited from post to its end */
 };
 
