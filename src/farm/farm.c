@@ -133,11 +133,10 @@ on_store_commit(void *ud)
     farm_kick(f);
 }
 
-void
-farm_sync(struct farm *f)
+int
+farm_sync(struct farm *f, int64_t max_ms, struct sf_err *err)
 {
-    if (f)
-        storeq_sync(f->q);
+    return f ? storeq_sync(f->q, max_ms, err) : SF_OK;
 }
 
 void
@@ -148,17 +147,26 @@ farm_health(struct farm *f, struct farm_health *out)
 }
 
 /* Apply a job event in the store now, after what is queued, logging failures (the job fails
-   alone). */
+   alone; a busy store: the next pass tries again). */
 static int
 job_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_args *a)
 {
     struct sf_err err;
-    storeq_sync(f->q);
-    int rc = store_job_event(f->s, id, ev, a, NULL, &err);
+    int rc = storeq_sync(f->q, STOREQ_SYNC_MS, &err);
+    if (rc == SF_OK)
+        rc = store_job_event(f->s, id, ev, a, NULL, &err);
     if (rc)
         log_warn("farm", "%s", err.msg);
     farm_notify(f);
     return rc;
+}
+
+/* Queue a job event nothing waits for; a failure is logged when it comes back, its commit
+   wakes the farm (on_store_commit). */
+static void
+queue_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_args *a)
+{
+    storeq_job_event(f->q, id, ev, a, NULL, NULL, NULL);
 }
 
 /* ---- prepare ---- */
@@ -303,7 +311,7 @@ prep_done(struct loop *l, void *ud, int rc)
             }
         } else {
             struct job_event_args a = { .reason = why };
-            job_event(f, id, JOB_EV_PREPARE_FAILED, &a);
+            queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
         }
     }
     unlink(t->req.out_path); /* gone when adopted */
@@ -377,8 +385,8 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
             return;
         }
         struct job_event_args a = { .reason = err.msg };
-        job_event(f, j->id, JOB_EV_PREPARE, NULL);
-        job_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
+        queue_event(f, j->id, JOB_EV_PREPARE, NULL);
+        queue_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
         return;
     }
     /* out: beside the stored files, named for the job and the task */
@@ -393,7 +401,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
         if (!reslice) {
             struct job_event_args a = { .reason = err.msg };
-            job_event(f, j->id, JOB_EV_DEFER, &a);
+            queue_event(f, j->id, JOB_EV_DEFER, &a);
         }
         free(t);
         return;

@@ -106,11 +106,12 @@ int farm_printer_base(struct farm *f, const char *name, struct farmcfg_printer *
 void farm_kick(struct farm *f);
 
 /*
- * Return once every store write the farm queued (storeq.h) is committed:
- * for a direct store call that must see them (a job's cancel) and for
- * tests.  Blocks the loop while the store is busy.  NULL is ignored.
+ * Return once every store write the farm queued (storeq.h) is committed,
+ * waiting up to max_ms (< 0: as long as it takes; tests): for a direct
+ * store call that must see them (a job's cancel).  SF_EAGAIN (the store
+ * is busy, err says so) when they were not.  NULL is SF_OK.
  */
-void farm_sync(struct farm *f);
+int farm_sync(struct farm *f, int64_t max_ms, struct sf_err *err);
 /* How the farm's loop and its store thread fare, for /metrics. */
 struct farm_health {
     int64_t loop_turn_max_ms;  /* loop_turn_max_ms of the farm's loop */

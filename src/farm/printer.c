@@ -115,8 +115,10 @@ int
 printer_job_commit(struct printer *p, int64_t id, enum job_event ev, const struct job_event_args *a,
                    struct sf_err *err)
 {
-    storeq_sync(p->env.q); /* after what p queued: its progress, its printer's state */
-    return store_job_event(p->env.s, id, ev, a, NULL, err);
+    /* after what p queued (its progress, its printer's state), unless the store is busy */
+    int rc = storeq_sync(p->env.q, STOREQ_SYNC_MS, err);
+    return rc ? sf_err_prefix(err, "job %lld", (long long)id)
+              : store_job_event(p->env.s, id, ev, a, NULL, err);
 }
 
 /* The job on p ended badly (drop, fault): fail it, keep the retry policy. */
@@ -167,7 +169,9 @@ try_attach(struct printer *p)
     struct job_row row;
     if (p->bed_full)
         return SF_ENOTFOUND;
-    storeq_sync(p->env.q); /* the job's CRASHED may still be queued */
+    /* the job's CRASHED may still be queued: with the store busy, ask again later */
+    if (storeq_sync(p->env.q, STOREQ_SYNC_MS, &err))
+        return SF_EAGAIN;
     if (store_job_interrupted(p->env.s, p->cfg.name, &row, &err))
         return SF_ENOTFOUND;
     const struct job_row *j = row.gcode_sha[0] ? &row : NULL;
@@ -417,7 +421,7 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
     p->state = PRINTER_OFFLINE;
     struct sf_err err;
     storeq_printer_set(env->q, cfg->name, PRINTER_OFFLINE);
-    storeq_sync(env->q); /* the bed a printer of this name just had (farm_apply) */
+    storeq_sync(env->q, -1, NULL); /* the bed a printer of this name just had (farm_apply) */
     if (store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err))
         log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
     if (p->bed_full)

@@ -32,8 +32,10 @@ interrupted_here(struct printer *p)
 {
     struct sf_err err;
     struct job_row j;
-    storeq_sync(p->env.q); /* a CRASHED may still be queued */
-    int rc = store_job_interrupted(p->env.s, p->cfg.name, &j, &err);
+    /* a CRASHED may still be queued: with the store busy, unknown */
+    int rc = storeq_sync(p->env.q, STOREQ_SYNC_MS, &err);
+    if (rc == SF_OK)
+        rc = store_job_interrupted(p->env.s, p->cfg.name, &j, &err);
     if (rc == SF_ENOTFOUND)
         return 0;
     return rc ? -1 : j.id; /* unknown: treated as held */
@@ -80,6 +82,11 @@ printer_command(struct printer *p, const char *line, const char *who, struct sf_
                           p->cfg.name, printer_state_name(p->state),
                           p->bed_full && p->state == PRINTER_IDLE ? " with a part on its bed" : "");
     int64_t held = interrupted_here(p);
+    if (held < 0)
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer %s: the store is busy, whether it holds an interrupted job is "
+                          "not known: try again",
+                          p->cfg.name);
     if (held)
         return sf_err_set(err, SF_EAGAIN,
                           "printer %s holds interrupted job %lld: resume, restart or cancel it "

@@ -91,6 +91,7 @@ struct storeq {
     struct req *fin_head, *fin_tail; /* ended, not yet delivered */
     size_t depth;                    /* pending, counting the running one */
     bool stop;                       /* storeq_free: end once the queue is empty */
+    bool refused;                    /* a storeq_sync gave up: call commit once the queue empties */
     int64_t stop_ms;                 /* when stop was asked */
     uint64_t retries;                /* stats.retries */
     /* loop thread only */
@@ -222,8 +223,11 @@ deliver(struct storeq *q)
     pthread_mutex_lock(&q->mu);
     struct req *r = q->fin_head;
     q->fin_head = q->fin_tail = NULL;
+    /* a caller told "busy" acts once the queue has emptied */
+    bool logged = q->refused && !q->depth;
+    if (logged)
+        q->refused = false;
     pthread_mutex_unlock(&q->mu);
-    bool logged = false;
     while (r) {
         struct req *next = r->next;
         q->st.done++;
@@ -484,13 +488,25 @@ storeq_job_event(struct storeq *q, int64_t id, enum job_event ev, const struct j
     return post(q, r);
 }
 
-void
-storeq_sync(struct storeq *q)
+int
+storeq_sync(struct storeq *q, int64_t max_ms, struct sf_err *err)
 {
+    int64_t end = clock_mono_ms() + max_ms;
     pthread_mutex_lock(&q->mu);
-    while (q->depth)
-        pthread_cond_wait(&q->cond, &q->mu);
+    while (q->depth && (max_ms < 0 || clock_mono_ms() < end)) {
+        if (max_ms < 0)
+            pthread_cond_wait(&q->cond, &q->mu);
+        else
+            nap(q, end - clock_mono_ms());
+    }
+    size_t left = q->depth;
+    if (left)
+        q->refused = true;
     pthread_mutex_unlock(&q->mu);
+    if (left)
+        return sf_err_set(err, SF_EAGAIN, "the store is busy: %zu writes wait for the database",
+                          left);
+    return SF_OK;
 }
 
 size_t

@@ -42,6 +42,10 @@
    SQLite lock an operator's tool holds for a while.  At shutdown: STOREQ_STOP_MS. */
 #define STOREQ_RETRY_MS 60000
 #define STOREQ_STOP_MS  10000
+/* How long the loop waits for the queue before a write it acts on (storeq_sync): the
+   queue empties in milliseconds unless the database is held busy, and then the
+   printers must not wait with it. */
+#define STOREQ_SYNC_MS 250
 
 struct storeq;
 
@@ -100,11 +104,14 @@ int storeq_job_event(struct storeq *q, int64_t id, enum job_event ev,
                      void *ud);
 
 /*
- * Wait (blocking the loop) until every request posted so far has run:
- * then the loop's own connection sees what they wrote.  Their results are
- * delivered on a later loop turn, as always.
+ * Wait (blocking the loop) until every request posted so far has run, for
+ * up to max_ms (< 0: as long as it takes): then the loop's own connection
+ * sees what they wrote.  Their results are delivered on a later loop turn,
+ * as always.  SF_EAGAIN when the queue did not empty in time ("the store is
+ * busy: N writes wait for the database"): the caller acts later, and the
+ * commit callback (storeq_set_commit) runs once the queue has emptied.
  */
-void storeq_sync(struct storeq *q);
+int storeq_sync(struct storeq *q, int64_t max_ms, struct sf_err *err);
 
 /* Requests waiting or running. */
 size_t storeq_depth(struct storeq *q);

@@ -349,7 +349,7 @@ add(const char *part, const char *material, int copies)
 static struct store *
 synced(void)
 {
-    farm_sync(fx.f);
+    farm_sync(fx.f, -1, NULL);
     return fx.s;
 }
 
