@@ -246,17 +246,14 @@ reslice_failed_any(const struct farm *f, int64_t id)
  * slices the job once more.
  */
 static void
-on_prepared(void *ud, int64_t id, enum job_event ev, int rc, enum job_state to,
-            const struct sf_err *err)
+on_prepared(void *ud, const struct storeq_result *r)
 {
-    (void)ev;
-    (void)to;
     struct prep *t = ud;
-    if (rc == SF_OK)
-        log_info("farm", "job %lld: %s for %s", (long long)id,
+    if (r->rc == SF_OK)
+        log_info("farm", "job %lld: %s for %s", (long long)r->id,
                  t->reslice ? "prepared again" : "prepared", t->key);
     else
-        log_info("farm", "job %lld: %s", (long long)id, err->msg);
+        log_info("farm", "job %lld: %s", (long long)r->id, r->err->msg);
     if (t->reslice)
         unlink_reslice(t->f, t);
     farm_kick(t->f);
@@ -432,6 +429,36 @@ sched_view(const struct job_row *j, struct sched_job *out)
     memcpy(out->size_mm, j->size_mm, sizeof(out->size_mm));
 }
 
+static int
+cmp_id(const void *a, const void *b)
+{
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/*
+ * A job a printer took reads ready in the store until its START, queued
+ * (printer_start), commits: mark it printing in jobs so no pass starts it
+ * again elsewhere meanwhile.  SF_ENOMEM.
+ */
+static int
+mark_taken(const struct farm *f, struct job_row *jobs, size_t n)
+{
+    int64_t *held = mem_array(f->n_printers ? f->n_printers : 1, sizeof(*held));
+    if (!held)
+        return SF_ENOMEM;
+    size_t n_held = 0;
+    for (size_t i = 0; i < f->n_printers; i++)
+        if (printer_job(f->printers[i]))
+            held[n_held++] = printer_job(f->printers[i]);
+    qsort(held, n_held, sizeof(*held), cmp_id);
+    for (size_t i = 0; n_held && i < n; i++)
+        if (jobs[i].state == JOB_READY && bsearch(&jobs[i].id, held, n_held, sizeof(*held), cmp_id))
+            jobs[i].state = JOB_PRINTING;
+    free(held);
+    return SF_OK;
+}
+
 static void
 run(struct loop *l, void *ud)
 {
@@ -453,7 +480,7 @@ run(struct loop *l, void *ud)
     struct sched_printer *sp = mem_array(f->n_printers ? f->n_printers : 1, sizeof(*sp));
     char(*why)[SCHED_REASON_MAX] = mem_array(n ? n : 1, sizeof(*why));
     struct sched_assign *out = mem_array(n ? n : 1, sizeof(*out));
-    if (!sj || !sp || !why || !out)
+    if (!sj || !sp || !why || !out || mark_taken(f, jobs, n))
         goto out; /* the next kick tries again */
     for (size_t i = 0; i < f->n_printers; i++) {
         const struct printer *p = f->printers[i];

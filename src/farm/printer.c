@@ -41,6 +41,29 @@
    (backoff 0.5, 1, 2, ... s: about two minutes in all) */
 #define PRINTER_ATTACH_WAITS 10
 
+/*
+ * A START on its way to the store: the printer it is for (NULL once that
+ * printer is freed: printer_free) and which start it was.  The store
+ * thread's callback gets the ticket, not the printer, which a reload may
+ * free in between.
+ */
+struct start_ticket {
+    struct printer *p; /* NULL: freed meanwhile */
+    int64_t job_id;
+    uint64_t token; /* p->judging of that start */
+};
+
+/* A start's verdict that came before its START committed (printer_start_go's arguments). */
+struct start_go {
+    char path[1200];
+    struct drv_job_scan scan;
+    bool has_scan;
+    struct filament fil;
+    bool has_fil;
+    int rc;
+    char why[1024];
+};
+
 void
 printer_changed(struct printer *p)
 {
@@ -483,6 +506,9 @@ printer_free(struct printer *p)
         p->drv->ops->close(p->drv);
         p->drv->ops->destroy(p->drv);
     }
+    if (p->ticket)
+        p->ticket->p = NULL; /* its START comes back to no one */
+    free(p->go);
     free(p->queue);
     free(p);
 }
@@ -628,22 +654,60 @@ drive(struct printer *p, const char *path, uint64_t line, const struct drv_job_s
     printer_job_event(p, id, JOB_EV_REFUSED, &a);
 }
 
+static void go(struct printer *p, int64_t id, const char *path, const struct drv_job_scan *scan,
+               const struct filament *fil, int rc, const char *why);
+
+/* The START came back: the driver may have the job now (if judged), or p lets it go. */
+static void
+on_start(void *ud, const struct storeq_result *r)
+{
+    struct start_ticket *t = ud;
+    struct printer *p = t->p;
+    int64_t id = r->id;
+    bool current = p && p->job_id == id && p->judging && p->judging == t->token;
+    free(t);
+    if (!p)
+        return;
+    p->ticket = NULL;
+    struct start_go *g = p->go;
+    p->go = NULL;
+    if (r->rc) {
+        log_printer(LOG_WARN, p->cfg.name, "%s", r->err->msg);
+        if (current) { /* nothing was sent: idle again, the bed as it was */
+            p->job_id = p->judging = 0;
+            printer_move(p, PRINTER_EV_REFUSED);
+        }
+    } else if (current && g) {
+        go(p, id, g->path, g->has_scan ? &g->scan : NULL, g->has_fil ? &g->fil : NULL, g->rc,
+           g->why);
+    }
+    free(g);
+    printer_changed(p);
+}
+
 int
 printer_start(struct printer *p, const struct job_row *j, const char *path)
 {
-    struct sf_err err;
+    /* Queued, and the driver gets nothing before it commits (on_start): a crash from then
+       on leaves the job interrupted, one before it leaves the job ready. */
+    struct start_ticket *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return SF_ENOMEM;
+    *t = (struct start_ticket){ p, j->id, ++p->starts };
     struct job_event_args a = { .printer = p->cfg.name };
-    /* Commit first: a crash from here on leaves the job interrupted. */
-    int rc = printer_job_commit(p, j->id, JOB_EV_START, &a, &err);
-    printer_changed(p);
-    if (rc) {
-        log_printer(LOG_WARN, p->cfg.name, "%s", err.msg);
-        return rc;
+    if (storeq_job_event(p->env.q, j->id, JOB_EV_START, &a, p->cfg.name, on_start, t)) {
+        free(t);
+        return SF_ENOMEM;
     }
+    if (p->ticket)
+        p->ticket->p = NULL; /* an earlier start's, cancelled meanwhile: stale */
+    free(p->go);
+    p->go = NULL;
+    p->ticket = t;
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
     p->est_s = printer_estimate_s(j, path);
-    p->judging = ++p->starts;
+    p->judging = t->token;
     printer_move(p, PRINTER_EV_START);
     return SF_OK;
 }
@@ -663,6 +727,31 @@ printer_start_go(struct printer *p, int64_t id, uint64_t token, const char *path
        started again), while the file was judged: this check is stale. */
     if (p->job_id != id || !p->judging || p->judging != token)
         return;
+    if (p->ticket) { /* its START is still on its way: keep the verdict for on_start */
+        struct start_go *g = mem_calloc(1, sizeof(*g));
+        if (!g) {
+            log_printer(LOG_ERROR, p->cfg.name, "job %lld: out of memory", (long long)id);
+            return; /* p keeps the job until an operator cancels it */
+        }
+        snprintf(g->path, sizeof(g->path), "%s", path);
+        if ((g->has_scan = scan != NULL))
+            g->scan = *scan;
+        if ((g->has_fil = fil != NULL))
+            g->fil = *fil;
+        g->rc = rc;
+        snprintf(g->why, sizeof(g->why), "%s", why ? why : "");
+        free(p->go);
+        p->go = g;
+        return;
+    }
+    go(p, id, path, scan, fil, rc, why);
+}
+
+/* Hand the judged start to the driver, or fail it with why (its START committed). */
+static void
+go(struct printer *p, int64_t id, const char *path, const struct drv_job_scan *scan,
+   const struct filament *fil, int rc, const char *why)
+{
     p->judging = 0;
     p->fil.job_id = 0;
     if (fil && fil->job_id == id)

@@ -116,12 +116,13 @@ bool printer_removed(const struct printer *p);
 
 /*
  * Start job j (ready; its G-code at path) from line 0, in two steps like a
- * resume: printer_start commits the start (SF_OK: j is p's job now;
- * otherwise the store's error, logged, and nothing changed), then
+ * resume: printer_start makes j p's job and queues its START for the store
+ * (env.q; SF_OK, or SF_ENOMEM with nothing changed), then
  * printer_start_go hands it to the driver once the farm has judged the
- * file by p's policy off the loop (rc, why: the verdict), unless the job
- * left p meanwhile.  scan (NULL: the driver counts the lines) is the
- * job's; fil (NULL: not read) its net E by line, from which each end of
+ * file by p's policy off the loop (rc, why: the verdict) and the START has
+ * committed, whichever comes last, unless the job left p meanwhile.  A
+ * START the store refuses (logged) leaves p idle again with nothing sent.  scan (NULL: the driver
+ * counts the lines) is the job's; fil (NULL: not read) its net E by line, from which each end of
  * this print records the filament it used.  A driver refusing with SF_EAGAIN (not idle: "not now")
  * sends the job back to ready without spending a retry (JOB_EV_REFUSED) and p takes no job for
  * drv_backoff_ms(refusals in a row); any other refusal fails the print (the retry policy applies).

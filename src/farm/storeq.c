@@ -236,7 +236,7 @@ deliver(struct storeq *q)
         if (r->rc)
             q->st.failed++;
         if (r->op == OP_EVENT && r->done)
-            r->done(r->ud, r->id, r->ev, r->rc, r->to, &r->err);
+            r->done(r->ud, &(struct storeq_result){ r->id, r->ev, r->rc, r->to, &r->err });
         else if (r->rc && r->name[0])
             log_printer(LOG_ERROR, r->name, "store: %s", r->err.msg);
         else if (r->rc)

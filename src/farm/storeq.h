@@ -49,9 +49,15 @@
 
 struct storeq;
 
-/* A job event's result: rc (SF_OK, or the store's error in err), the job's state after. */
-typedef void (*storeq_event_fn)(void *ud, int64_t id, enum job_event ev, int rc, enum job_state to,
-                                const struct sf_err *err);
+/* What a job event came back with. */
+struct storeq_result {
+    int64_t id;        /* the job */
+    enum job_event ev; /* the event */
+    int rc;            /* SF_OK, or the store's error in err */
+    enum job_state to; /* the job's state after (rc SF_OK) */
+    const struct sf_err *err;
+};
+typedef void (*storeq_event_fn)(void *ud, const struct storeq_result *r);
 /* Called on the loop after requests that logged an event committed (a batch: once). */
 typedef void (*storeq_commit_fn)(void *ud);
 
@@ -95,7 +101,7 @@ int storeq_printer_bed_set(struct storeq *q, const char *name, bool full);
 /*
  * Apply job event ev to job id (store_job_event), a's strings copied (a
  * reason or note is cut at 511 bytes, as the store would cut it anyway);
- * done(ud, ...) on the loop once it ran (NULL: a failure is logged, with
+ * done(ud, result) on the loop once it ran (NULL: a failure is logged, with
  * who (a printer name, or NULL) in front).  SF_OK or SF_ENOMEM (done is
  * not called).
  */

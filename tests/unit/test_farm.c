@@ -28,6 +28,7 @@
 #include "../../src/base/mem.h"
 #include "../../src/farm/farm.h"
 #include "../../src/farm/jobctl.h"
+#include "../../src/farm/sqldb.h"
 #include "../t.h"
 #include "../tstore.h"
 
@@ -69,6 +70,9 @@ static enum drv_state open_state = DRV_IDLE; /* what a (re)connect finds the pri
 static int refuse_starts; /* start_job answers "not idle" (SF_EAGAIN) this many times */
 static int attach_waits;  /* attach answers "not yet" (SF_EAGAIN) this many times */
 static int attaches;      /* attach calls */
+static int64_t watch_job; /* t_start records its state in the store (start_saw), once */
+static int start_saw = -1;
+static enum job_state state_of(int64_t id);
 
 static int
 t_open(struct drv *d, struct sf_err *err)
@@ -88,6 +92,8 @@ t_start(struct drv *d, const char *path, uint64_t first_line, const struct drv_j
     struct tdrv *t = (struct tdrv *)d;
     snprintf(t->path, sizeof(t->path), "%s", path);
     t->starts++;
+    if (watch_job && start_saw < 0)
+        start_saw = state_of(watch_job);
     if (refuse_starts > 0) {
         refuse_starts--;
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is not idle", d->name);
@@ -1701,5 +1707,51 @@ T_CASE(farm_cancel_while_the_start_is_judged)
     int64_t next = add("size 20 20 20", "PLA", 1);
     T_TRUE(wait_job(next, JOB_PRINTING));
     T_EQ_INT(a->starts, 1);
+    teardown();
+}
+
+/*
+ * The store is held busy by another process when a printer takes a job:
+ * the printer takes it at once (the START waits on the store thread, the
+ * loop goes on), the driver gets nothing until the START has committed,
+ * then the print starts.  Before the store thread the START waited out the
+ * busy timeout on the loop and failed, and the printer stayed idle.
+ */
+T_CASE(farm_start_commits_on_the_store_thread_before_the_driver_has_it)
+{
+    if (t_store_pg()) {
+        t_skip("holds SQLite's write lock from a second connection");
+        return;
+    }
+    struct sf_err err;
+    setup_held = "a";
+    T_OK(setup("busystart", farm_ini, tdrv_new, test_prepare, &err), &err);
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_READY)); /* a is not connected yet */
+    char path[600];
+    snprintf(path, sizeof(path), "%s/busystart/slimfarm.db", t_tmpdir());
+    struct sqldb *other = sqldb_open(path, 0, &err);
+    T_TRUE(other != NULL);
+    T_OK(sqldb_begin(other), NULL);
+    watch_job = id;
+    start_saw = -1;
+    struct tdrv *a = tdrv_named("a");
+    report(a, DRV_IDLE, DRV_EV_STATE);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && pstate(0) != PRINTER_PRINTING;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(pstate(0), PRINTER_PRINTING); /* taken while the store is locked */
+    T_EQ_INT(a->starts, 0);
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err); /* a read: WAL lets it through */
+    T_EQ_INT(j.state, JOB_READY);                  /* its START waits on the store thread */
+    sqldb_rollback(other);
+    sqldb_close(other);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && a->starts == 0;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 1);
+    T_EQ_INT(start_saw, JOB_PRINTING); /* committed before the driver had it */
+    watch_job = 0;
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }

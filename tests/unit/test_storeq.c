@@ -32,17 +32,14 @@ struct answer {
 };
 
 static void
-on_event(void *ud, int64_t id, enum job_event ev, int rc, enum job_state to,
-         const struct sf_err *err)
+on_event(void *ud, const struct storeq_result *r)
 {
-    (void)id;
-    (void)ev;
     struct answer *a = ud;
     a->calls++;
     a->on_loop = pthread_equal(pthread_self(), loop_thread);
-    a->rc = rc;
-    a->to = to;
-    snprintf(a->msg, sizeof(a->msg), "%s", rc ? err->msg : "");
+    a->rc = r->rc;
+    a->to = r->to;
+    snprintf(a->msg, sizeof(a->msg), "%s", r->rc ? r->err->msg : "");
 }
 
 /* A job whose stored G-code prints as is: ready at once. */
