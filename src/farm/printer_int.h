@@ -84,9 +84,11 @@ int printer_job_event(struct printer *p, int64_t id, enum job_event ev,
                       const struct job_event_args *a);
 /*
  * Apply a job event in the store now, after what is queued (storeq_sync),
- * for a caller that acts on its result: a start or resume committed before
- * the printer is told, an operator's action answered.  Blocks the loop
- * while the store is busy.  store_job_event's errors.
+ * for a caller that acts on its result: a resume committed before the
+ * printer is told, an operator's action answered.  SF_EAGAIN when the
+ * queue is not written within STOREQ_SYNC_MS (the store is busy); else
+ * store_job_event's errors, its write waiting on the loop (SQLite's busy
+ * timeout).
  */
 int printer_job_commit(struct printer *p, int64_t id, enum job_event ev,
                        const struct job_event_args *a, struct sf_err *err);
