@@ -664,7 +664,8 @@ on_start(void *ud, const struct storeq_result *r)
     struct start_ticket *t = ud;
     struct printer *p = t->p;
     int64_t id = r->id;
-    bool current = p && p->job_id == id && p->judging && p->judging == t->token;
+    /* deaf: the daemon stops (printer_stop queued the job's CRASHED behind it): send nothing */
+    bool current = p && !p->deaf && p->job_id == id && p->judging && p->judging == t->token;
     free(t);
     if (!p)
         return;
