@@ -26,6 +26,7 @@
 
 #include <errno.h>
 #include <pthread.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -317,7 +318,14 @@ storeq_new(struct loop *l, const struct store *s, struct sf_err *err)
     }
     if (loop_add_fd(l, q->evfd, LOOP_READ, on_ended, q, err))
         goto fail;
-    if (pthread_create(&q->thread, NULL, run, q)) {
+    /* Started with every signal blocked, as the pool's workers are: a SIGTERM or SIGHUP
+       must reach the loop's signalfd, not kill the process through this thread. */
+    sigset_t all, old;
+    sigfillset(&all);
+    pthread_sigmask(SIG_SETMASK, &all, &old);
+    int rc = pthread_create(&q->thread, NULL, run, q);
+    pthread_sigmask(SIG_SETMASK, &old, NULL);
+    if (rc) {
         loop_del_fd(l, q->evfd);
         sf_err_set(err, SF_EIO, "storeq: cannot start its thread");
         goto fail;
