@@ -392,6 +392,8 @@ moon_start(void *ctx, const struct route_args *args, const struct http_req *req,
 struct scrape {
     struct metrics_printer *printers;
     size_t n;
+    struct farm_health h; /* when has_h */
+    bool has_h;
 };
 
 static void
@@ -399,7 +401,7 @@ scrape_read(struct store *s, void *ud, struct http_resp *resp)
 {
     struct scrape *sc = ud;
     struct sf_err err;
-    char *text = metrics_render(s, sc->printers, sc->n, &err);
+    char *text = metrics_render(s, sc->printers, sc->n, sc->has_h ? &sc->h : NULL, &err);
     if (!text) {
         http_fail(resp, err.code, err.msg);
         return;
@@ -430,6 +432,8 @@ metrics(void *ctx, const struct route_args *args, const struct http_req *req,
         http_error(resp, 500, "out of memory");
         return;
     }
+    if ((sc->has_h = env->farm != NULL))
+        farm_health(env->farm, &sc->h);
     api_read_run(env->reads, resp, scrape_read, NULL, sc, scrape_free);
 }
 

@@ -196,8 +196,34 @@ hist_read(struct store *s, enum store_hist which, struct hist *h, struct sf_err 
     return rc;
 }
 
+/* The loop's longest turn and the store thread's counters. */
+static void
+health_out(struct out *b, const struct farm_health *h)
+{
+    const struct storeq_stats *q = &h->store;
+    family(b, "slimfarm_loop_turn_max_seconds", "gauge",
+           "Longest turn of the event loop since the start: every printer waited that long.");
+    put(b, "slimfarm_loop_turn_max_seconds %.3f\n", h->loop_turn_max_ms / 1000.0);
+    family(b, "slimfarm_store_queue_depth", "gauge", "Store writes queued on the store thread.");
+    put(b, "slimfarm_store_queue_depth %zu\n", q->depth);
+    family(b, "slimfarm_store_queue_depth_max", "gauge", "The most store writes queued at once.");
+    put(b, "slimfarm_store_queue_depth_max %zu\n", q->depth_max);
+    family(b, "slimfarm_store_queue_wait_max_seconds", "gauge",
+           "Longest a queued store write took from its post to its end.");
+    put(b, "slimfarm_store_queue_wait_max_seconds %.3f\n", q->wait_max_ms / 1000.0);
+    family(b, "slimfarm_store_writes_total", "counter", "Queued store writes run to their end.");
+    put(b, "slimfarm_store_writes_total %llu\n", (unsigned long long)q->done);
+    family(b, "slimfarm_store_write_failures_total", "counter",
+           "Queued store writes that failed after their retries (logged).");
+    put(b, "slimfarm_store_write_failures_total %llu\n", (unsigned long long)q->failed);
+    family(b, "slimfarm_store_write_retries_total", "counter",
+           "Queued store writes tried again (the store was busy or unreachable).");
+    put(b, "slimfarm_store_write_retries_total %llu\n", (unsigned long long)q->retries);
+}
+
 char *
-metrics_render(struct store *s, const struct metrics_printer *pr, size_t n_pr, struct sf_err *err)
+metrics_render(struct store *s, const struct metrics_printer *pr, size_t n_pr,
+               const struct farm_health *h, struct sf_err *err)
 {
     struct per *per = NULL;
     size_t n_per = 0;
@@ -259,6 +285,8 @@ metrics_render(struct store *s, const struct metrics_printer *pr, size_t n_pr, s
     family(&b, "slimfarm_queue_wait_seconds", "histogram",
            "Wait of a print from its job becoming ready to its start on a printer.");
     hist_out(&b, "slimfarm_queue_wait_seconds", NULL, NULL, &wait);
+    if (h)
+        health_out(&b, h);
     if (b.rc || !(out = buf_take(&b.b, NULL)))
         goto oom;
     goto done;

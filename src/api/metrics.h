@@ -17,6 +17,11 @@
  *                                             print (prints done, start to end)
  *   slimfarm_queue_wait_seconds               histogram: a print's wait from its job
  *                                             becoming ready to its start
+ *   slimfarm_loop_turn_max_seconds            gauge: the event loop's longest turn
+ *   slimfarm_store_queue_depth, _depth_max    gauge: store writes queued now, at most
+ *   slimfarm_store_queue_wait_max_seconds     gauge: a queued write's longest post to end
+ *   slimfarm_store_writes_total, _write_failures_total, _write_retries_total
+ *                                             counter: the store thread's writes (storeq.h)
  *
  * Thread: metrics_printers on the loop thread (the farm's); metrics_render
  * on the thread of the store it is given (the API's reader).
@@ -40,8 +45,9 @@ struct metrics_printer {
 /* f's printers now (f NULL: none) into *out (free() it), *n their count; SF_ENOMEM. */
 int metrics_printers(struct farm *f, struct metrics_printer **out, size_t *n);
 
-/* The exposition text (free() it) from s and n printers, or NULL with err set. */
+/* The exposition text (free() it) from s, n printers and the farm's health h (taken on
+   the loop: farm_health; NULL leaves those series out), or NULL with err set. */
 char *metrics_render(struct store *s, const struct metrics_printer *printers, size_t n,
-                     struct sf_err *err);
+                     const struct farm_health *h, struct sf_err *err);
 
 #endif

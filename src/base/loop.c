@@ -83,8 +83,9 @@ struct loop {
     pthread_mutex_t post_lock; /* protects post_head/post_tail */
     struct post *post_head, *post_tail;
     struct sig_reg sigs[LOOP_SIGNALS_MAX];
-    atomic_bool stop;  /* loop_run() should return */
-    bool virtual_time; /* loop_set_virtual(): now_ms moves only to the next due timer */
+    atomic_bool stop;    /* loop_run() should return */
+    bool virtual_time;   /* loop_set_virtual(): now_ms moves only to the next due timer */
+    int64_t turn_max_ms; /* the longest dispatch of one loop_run_once (loop_turn_max_ms) */
 };
 
 static void
@@ -484,7 +485,18 @@ dispatch:
     }
     free_regs(l->graveyard);
     l->graveyard = NULL;
+    if (!l->virtual_time) {
+        int64_t took = clock_mono_ms() - l->now_ms;
+        if (took > l->turn_max_ms)
+            l->turn_max_ms = took;
+    }
     return ran;
+}
+
+int64_t
+loop_turn_max_ms(const struct loop *l)
+{
+    return l->turn_max_ms;
 }
 
 int

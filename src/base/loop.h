@@ -72,6 +72,12 @@ int loop_add_signal(struct loop *l, int signo, loop_signal_fn fn, void *ud, stru
  * what is ready.  Returns the number of callbacks run (>= 0) or an error.
  */
 int loop_run_once(struct loop *l, int timeout_ms);
+/*
+ * The longest one loop_run_once spent running callbacks since loop_new, ms
+ * (0 with simulated time): how long the loop stalled at worst, every
+ * printer and socket waiting meanwhile.
+ */
+int64_t loop_turn_max_ms(const struct loop *l);
 /* Run until loop_stop(). */
 int loop_run(struct loop *l);
 /* Make loop_run() return after the current iteration (thread-safe). */

@@ -25,6 +25,7 @@
 #include "farm_int.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 #include <unistd.h>
@@ -113,21 +114,59 @@ static struct printer *
 add_printer_new(struct farm *f, const struct farmcfg_printer *cfg)
 {
     struct printer_env env = {
-        .l = f->l, .s = f->s, .driver = f->hooks.driver, .changed = on_printer_changed, .ud = f
+        .l = f->l,
+        .s = f->s,
+        .q = f->q,
+        .driver = f->hooks.driver,
+        .changed = on_printer_changed,
+        .ud = f,
     };
     return printer_new(&env, cfg);
 }
 
-/* Apply a job event in the store, logging failures (the job fails alone). */
+/* Queued writes committed (storeq.h): event streams read them, the scheduler sees them. */
+static void
+on_store_commit(void *ud)
+{
+    struct farm *f = ud;
+    farm_notify(f);
+    farm_kick(f);
+}
+
+int
+farm_sync(struct farm *f, int64_t max_ms, struct sf_err *err)
+{
+    return f ? storeq_sync(f->q, max_ms, err) : SF_OK;
+}
+
+void
+farm_health(struct farm *f, struct farm_health *out)
+{
+    out->loop_turn_max_ms = loop_turn_max_ms(f->l);
+    storeq_stats(f->q, &out->store);
+}
+
+/* Apply a job event in the store now, after what is queued, logging failures (the job fails
+   alone; a busy store: the next pass tries again). */
 static int
 job_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_args *a)
 {
     struct sf_err err;
-    int rc = store_job_event(f->s, id, ev, a, NULL, &err);
+    int rc = storeq_sync(f->q, STOREQ_SYNC_MS, &err);
+    if (rc == SF_OK)
+        rc = store_job_event(f->s, id, ev, a, NULL, &err);
     if (rc)
         log_warn("farm", "%s", err.msg);
     farm_notify(f);
     return rc;
+}
+
+/* Queue a job event nothing waits for; a failure is logged when it comes back, its commit
+   wakes the farm (on_store_commit). */
+static void
+queue_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_args *a)
+{
+    storeq_job_event(f->q, id, ev, a, NULL, NULL, NULL);
 }
 
 /* ---- prepare ---- */
@@ -200,6 +239,27 @@ reslice_failed_any(const struct farm *f, int64_t id)
     return false;
 }
 
+/*
+ * Task t's PREPARED came back from the store thread (its commit wakes the
+ * farm: on_store_commit).  A re-slice stays in f->reslices until now, so
+ * no scheduling pass in between, still reading the old G-code's key,
+ * slices the job once more.
+ */
+static void
+on_prepared(void *ud, const struct storeq_result *r)
+{
+    struct prep *t = ud;
+    if (r->rc == SF_OK)
+        log_info("farm", "job %lld: %s for %s", (long long)r->id,
+                 t->reslice ? "prepared again" : "prepared", t->key);
+    else
+        log_info("farm", "job %lld: %s", (long long)r->id, r->err->msg);
+    if (t->reslice)
+        unlink_reslice(t->f, t);
+    farm_kick(t->f);
+    free(t);
+}
+
 static void
 prep_done(struct loop *l, void *ud, int rc)
 {
@@ -208,9 +268,8 @@ prep_done(struct loop *l, void *ud, int rc)
     struct farm *f = t->f;
     int64_t id = t->req.job_id;
     struct sf_err err;
+    bool queued = false; /* t waits for its PREPARED (on_prepared frees it) */
     f->preparing--;
-    if (t->reslice)
-        unlink_reslice(f, t);
     if (rc == SF_OK && (rc = store_file_record(f->s, t->gcode_sha, t->gcode_size, &err)) == SF_OK &&
         (!t->mesh_sha[0] ||
          (rc = store_file_record(f->s, t->mesh_sha, t->mesh_size, &err)) == SF_OK)) {
@@ -234,13 +293,10 @@ prep_done(struct loop *l, void *ud, int rc)
                                     .note = t->out.shape_failed };
         memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
         /* A re-slice whose job started meanwhile on a printer of its old key
-           (or was cancelled) is refused here and dropped: nothing changed. */
-        if (store_job_event(f->s, id, JOB_EV_PREPARED, &a, NULL, &err) == SF_OK)
-            log_info("farm", "job %lld: %s for %s", (long long)id,
-                     t->reslice ? "prepared again" : "prepared", t->key);
-        else
-            log_info("farm", "job %lld: %s", (long long)id, err.msg);
-        farm_notify(f);
+           (or was cancelled) is refused there and dropped: nothing changed.
+           Queued: a prepare ending while the store is busy holds up no print.
+           Out of memory, the job stays preparing until the next start's recovery. */
+        queued = storeq_job_event(f->q, id, JOB_EV_PREPARED, &a, NULL, on_prepared, t) == SF_OK;
     } else if (rc != SF_OK && rc != SF_ECANCELED) {
         const char *why = t->err.msg[0] ? t->err.msg : err.msg;
         if (t->reslice) {
@@ -252,13 +308,17 @@ prep_done(struct loop *l, void *ud, int rc)
             }
         } else {
             struct job_event_args a = { .reason = why };
-            job_event(f, id, JOB_EV_PREPARE_FAILED, &a);
+            queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
         }
     }
     unlink(t->req.out_path); /* gone when adopted */
     if (t->req.mesh_out[0])
         unlink(t->req.mesh_out);
-    free(t);
+    if (!queued) {
+        if (t->reslice)
+            unlink_reslice(f, t);
+        free(t);
+    }
     farm_kick(f);
 }
 
@@ -322,8 +382,8 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
             return;
         }
         struct job_event_args a = { .reason = err.msg };
-        job_event(f, j->id, JOB_EV_PREPARE, NULL);
-        job_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
+        queue_event(f, j->id, JOB_EV_PREPARE, NULL);
+        queue_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
         return;
     }
     /* out: beside the stored files, named for the job and the task */
@@ -338,7 +398,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
         if (!reslice) {
             struct job_event_args a = { .reason = err.msg };
-            job_event(f, j->id, JOB_EV_DEFER, &a);
+            queue_event(f, j->id, JOB_EV_DEFER, &a);
         }
         free(t);
         return;
@@ -369,6 +429,36 @@ sched_view(const struct job_row *j, struct sched_job *out)
     memcpy(out->size_mm, j->size_mm, sizeof(out->size_mm));
 }
 
+static int
+cmp_id(const void *a, const void *b)
+{
+    int64_t x = *(const int64_t *)a, y = *(const int64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/*
+ * A job a printer took reads ready in the store until its START, queued
+ * (printer_start), commits: mark it printing in jobs so no pass starts it
+ * again elsewhere meanwhile.  SF_ENOMEM.
+ */
+static int
+mark_taken(const struct farm *f, struct job_row *jobs, size_t n)
+{
+    int64_t *held = mem_array(f->n_printers ? f->n_printers : 1, sizeof(*held));
+    if (!held)
+        return SF_ENOMEM;
+    size_t n_held = 0;
+    for (size_t i = 0; i < f->n_printers; i++)
+        if (printer_job(f->printers[i]))
+            held[n_held++] = printer_job(f->printers[i]);
+    qsort(held, n_held, sizeof(*held), cmp_id);
+    for (size_t i = 0; n_held && i < n; i++)
+        if (jobs[i].state == JOB_READY && bsearch(&jobs[i].id, held, n_held, sizeof(*held), cmp_id))
+            jobs[i].state = JOB_PRINTING;
+    free(held);
+    return SF_OK;
+}
+
 static void
 run(struct loop *l, void *ud)
 {
@@ -390,7 +480,7 @@ run(struct loop *l, void *ud)
     struct sched_printer *sp = mem_array(f->n_printers ? f->n_printers : 1, sizeof(*sp));
     char(*why)[SCHED_REASON_MAX] = mem_array(n ? n : 1, sizeof(*why));
     struct sched_assign *out = mem_array(n ? n : 1, sizeof(*out));
-    if (!sj || !sp || !why || !out)
+    if (!sj || !sp || !why || !out || mark_taken(f, jobs, n))
         goto out; /* the next kick tries again */
     for (size_t i = 0; i < f->n_printers; i++) {
         const struct printer *p = f->printers[i];
@@ -432,7 +522,7 @@ run(struct loop *l, void *ud)
         if (jobs[i].state != JOB_QUEUED)
             continue;
         if (why[i][0] || f->preparing >= pool_size(f->pool)) {
-            store_job_set_reason(f->s, jobs[i].id, why[i], NULL);
+            storeq_job_set_reason(f->q, jobs[i].id, why[i]);
             continue;
         }
         size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
@@ -441,7 +531,7 @@ run(struct loop *l, void *ud)
     }
     for (size_t i = 0; i < n; i++)
         if (jobs[i].state == JOB_READY && why[i][0])
-            store_job_set_reason(f->s, jobs[i].id, why[i], NULL);
+            storeq_job_set_reason(f->q, jobs[i].id, why[i]);
 out:
     free(sj);
     free(sp);
@@ -454,8 +544,10 @@ static void
 on_progress(struct loop *l, void *ud)
 {
     struct farm *f = ud;
-    /* One transaction for every printer: one fsync a tick on the loop thread, not one per
-       printer (50 printers stalled the loop ~0.2 s every tick, bench_farm50). */
+    /* One transaction for every printer, not one per printer (50 printers stalled the loop
+       ~0.2 s every tick, bench_farm50), on the store thread: the loop goes on meanwhile.  A
+       job that stopped printing meanwhile is skipped there; marking it saved here is
+       harmless, it has no more progress to save. */
     struct store_progress *batch = f->n_printers ? mem_array(f->n_printers, sizeof(*batch)) : NULL;
     size_t n = 0;
     for (size_t i = 0; batch && i < f->n_printers; i++) {
@@ -463,10 +555,10 @@ on_progress(struct loop *l, void *ud)
         if (printer_progress(f->printers[i], &id, &lines))
             batch[n++] = (struct store_progress){ id, lines, false };
     }
-    if (n && store_jobs_progress(f->s, batch, n, NULL) > 0) {
-        for (size_t i = 0, k = 0; i < f->n_printers && k < n; i++) {
+    if (n && storeq_jobs_progress(f->q, batch, n) == SF_OK) {
+        for (size_t i = 0; i < f->n_printers; i++) {
             int64_t id, lines;
-            if (printer_progress(f->printers[i], &id, &lines) && batch[k++].saved)
+            if (printer_progress(f->printers[i], &id, &lines))
                 printer_progress_saved(f->printers[i], lines);
         }
     }
@@ -502,10 +594,11 @@ farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcf
     snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
     f->gram_s = cfg->gram_s;
     f->material_first = cfg->material_first;
-    if (!(f->io = pool_new(l, 1, err))) {
+    if (!(f->io = pool_new(l, 1, err)) || !(f->q = storeq_new(l, s, err))) {
         farm_free(f);
         return NULL;
     }
+    storeq_set_commit(f->q, on_store_commit, f);
     struct farmcfg_printer *list = NULL;
     size_t n = 0;
     int rc = farm_seed(f, cfg->printers, cfg->n_printers, err);
@@ -544,6 +637,11 @@ farm_free(struct farm *f)
     f->stopping = true;
     for (size_t i = 0; i < f->n_printers; i++)
         printer_stop(f->printers[i]);
+    /* Nothing lost on a stop: what is queued (those CRASHED with it) is written now. */
+    if (f->q) {
+        storeq_set_commit(f->q, NULL, NULL);
+        storeq_free(f->q);
+    }
     for (size_t i = 0; i < f->n_printers; i++)
         printer_free(f->printers[i]);
     free(f->printers);

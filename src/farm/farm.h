@@ -8,7 +8,10 @@
  * prepared for, and one that waits for a busy printer while another idles
  * is prepared again for that one (reusing the optimized part).  Printers
  * report through the loop; nothing here waits, so one slow or dead printer
- * never holds up the others.  farm_reload() applies a new config (SIGHUP)
+ * never holds up the others; the store writes that follow the printers
+ * (progress, their states, the end of prints) go to a store thread of the
+ * farm's own (storeq.h), so a busy database holds up no printer either.
+ * farm_reload() applies a new config (SIGHUP)
  * without disturbing running prints; farm_free() leaves printing jobs
  * interrupted at their last line, as a crash would.
  *
@@ -33,6 +36,7 @@
 #include "printer.h"
 #include "sched.h"
 #include "store.h"
+#include "storeq.h"
 
 /* Persist lines acknowledged this often: what a resume after a crash may
    print twice (one UPDATE a second for all printing printers together). */
@@ -51,8 +55,10 @@ struct farm;
 
 /*
  * Build the farm on loop l over store s, preparing on pool; the printers
- * start connecting.  NULL with err set (SF_ENOMEM).  Free with farm_free,
- * which owns nothing it was given.
+ * start connecting; the farm's store thread opens its own connection to
+ * s's database (storeq_new).  NULL with err set (SF_ENOMEM; SF_EIO from
+ * that connection).  Free with farm_free, which owns nothing it was given
+ * and writes what its store thread still holds before it returns.
  */
 struct farm *farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcfg *cfg,
                       const struct farm_hooks *hooks, struct sf_err *err);
@@ -98,6 +104,20 @@ int farm_printer_base(struct farm *f, const char *name, struct farmcfg_printer *
 
 /* Something changed (job submitted, bed cleared): prepare and schedule soon. */
 void farm_kick(struct farm *f);
+
+/*
+ * Return once every store write the farm queued (storeq.h) is committed,
+ * waiting up to max_ms (< 0: as long as it takes; tests): for a direct
+ * store call that must see them (a job's cancel).  SF_EAGAIN (the store
+ * is busy, err says so) when they were not.  NULL is SF_OK.
+ */
+int farm_sync(struct farm *f, int64_t max_ms, struct sf_err *err);
+/* How the farm's loop and its store thread fare, for /metrics. */
+struct farm_health {
+    int64_t loop_turn_max_ms;  /* loop_turn_max_ms of the farm's loop */
+    struct storeq_stats store; /* the store thread's counters (storeq_stats) */
+};
+void farm_health(struct farm *f, struct farm_health *out);
 
 /* Printers in config order (a removed one stays until its print ends). */
 size_t farm_printer_count(const struct farm *f);

@@ -24,7 +24,8 @@ struct noreslice; /* farm.c: a re-slice that failed */
 
 struct farm {
     struct loop *l;            /* the loop */
-    struct store *s;           /* the job store */
+    struct store *s;           /* the job store: reads, and writes the farm acts on */
+    struct storeq *q;          /* its queue on a thread of its own: writes nothing waits for */
     struct pool *pool;         /* prepare workers */
     struct pool *io;           /* one thread for resume reads and G-code checks: not queued
                                   behind slicing */

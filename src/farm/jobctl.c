@@ -70,8 +70,9 @@ int
 jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *err)
 {
     struct job_row j;
-    int rc = store_job_get(s, id, &j, err);
-    if (rc)
+    /* the job's end may still be queued, or a reason that a cancel overrides */
+    int rc = farm_sync(f, STOREQ_SYNC_MS, err);
+    if (rc || (rc = store_job_get(s, id, &j, err)))
         return rc;
     if (job_state_on_printer(j.state))
         /* The printer must stop first; its registry records the cancel. */

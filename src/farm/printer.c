@@ -41,6 +41,29 @@
    (backoff 0.5, 1, 2, ... s: about two minutes in all) */
 #define PRINTER_ATTACH_WAITS 10
 
+/*
+ * A START on its way to the store: the printer it is for (NULL once that
+ * printer is freed: printer_free) and which start it was.  The store
+ * thread's callback gets the ticket, not the printer, which a reload may
+ * free in between.
+ */
+struct start_ticket {
+    struct printer *p; /* NULL: freed meanwhile */
+    int64_t job_id;
+    uint64_t token; /* p->judging of that start */
+};
+
+/* A start's verdict that came before its START committed (printer_start_go's arguments). */
+struct start_go {
+    char path[1200];
+    struct drv_job_scan scan;
+    bool has_scan;
+    struct filament fil;
+    bool has_fil;
+    int rc;
+    char why[1024];
+};
+
 void
 printer_changed(struct printer *p)
 {
@@ -52,12 +75,10 @@ printer_changed(struct printer *p)
 void
 printer_set_bed(struct printer *p, bool full)
 {
-    struct sf_err err;
     if (p->bed_full == full)
         return;
     p->bed_full = full;
-    if (store_printer_bed_set(p->env.s, p->cfg.name, full, &err))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    storeq_printer_bed_set(p->env.q, p->cfg.name, full); /* a failure is logged there */
 }
 
 /*
@@ -84,8 +105,7 @@ printer_move(struct printer *p, enum printer_event ev)
         p->error_cleared = false;
     if (to != p->state) {
         p->state = to;
-        if (store_printer_set(p->env.s, p->cfg.name, to, &err))
-            log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+        storeq_printer_set(p->env.q, p->cfg.name, to);
     }
     printer_changed(p);
     return true;
@@ -104,16 +124,24 @@ printer_filament_mm(const struct printer *p, int64_t id, enum job_event ev, int6
 int
 printer_job_event(struct printer *p, int64_t id, enum job_event ev, const struct job_event_args *a)
 {
-    struct sf_err err;
     struct job_event_args with = a ? *a : (struct job_event_args){ 0 };
     if (ev == JOB_EV_PRINT_DONE || ev == JOB_EV_PRINT_FAILED || ev == JOB_EV_CANCEL ||
         ev == JOB_EV_CANCEL_COPY)
         with.filament_mm = printer_filament_mm(p, id, ev, with.lines_acked);
-    int rc = store_job_event(p->env.s, id, ev, a ? &with : NULL, NULL, &err);
-    if (rc)
-        log_printer(LOG_WARN, p->cfg.name, "%s", err.msg);
+    /* a failure is logged when it comes back; its commit wakes the farm (farm.c) */
+    int rc = storeq_job_event(p->env.q, id, ev, a ? &with : NULL, p->cfg.name, NULL, NULL);
     printer_changed(p);
     return rc;
+}
+
+int
+printer_job_commit(struct printer *p, int64_t id, enum job_event ev, const struct job_event_args *a,
+                   struct sf_err *err)
+{
+    /* after what p queued (its progress, its printer's state), unless the store is busy */
+    int rc = storeq_sync(p->env.q, STOREQ_SYNC_MS, err);
+    return rc ? sf_err_prefix(err, "job %lld", (long long)id)
+              : store_job_event(p->env.s, id, ev, a, NULL, err);
 }
 
 /* The job on p ended badly (drop, fault): fail it, keep the retry policy. */
@@ -136,18 +164,15 @@ fail_job(struct printer *p, const char *why)
 static void
 interrupt_job(struct printer *p, const char *why)
 {
-    struct sf_err err;
     char reason[200];
     snprintf(reason, sizeof(reason), "printer unreachable while printing: %s", why);
     struct job_event_args a = { .reason = reason };
     int64_t id = p->job_id;
     p->job_id = 0;
-    if (store_job_progress(p->env.s, id, p->lines_acked, &err) ||
-        store_job_event(p->env.s, id, JOB_EV_CRASHED, &a, NULL, &err))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
-    else
-        log_printer(LOG_WARN, p->cfg.name, "job %lld interrupted: %s", (long long)id, reason);
-    printer_changed(p);
+    struct store_progress sp = { id, p->lines_acked, false };
+    storeq_jobs_progress(p->env.q, &sp, 1);
+    log_printer(LOG_WARN, p->cfg.name, "job %lld interrupted: %s", (long long)id, reason);
+    printer_job_event(p, id, JOB_EV_CRASHED, &a);
 }
 
 /*
@@ -165,7 +190,12 @@ try_attach(struct printer *p)
 {
     struct sf_err err;
     struct job_row row;
-    if (p->bed_full || store_job_interrupted(p->env.s, p->cfg.name, &row, &err))
+    if (p->bed_full)
+        return SF_ENOTFOUND;
+    /* the job's CRASHED may still be queued: with the store busy, ask again later */
+    if (storeq_sync(p->env.q, STOREQ_SYNC_MS, &err))
+        return SF_EAGAIN;
+    if (store_job_interrupted(p->env.s, p->cfg.name, &row, &err))
         return SF_ENOTFOUND;
     const struct job_row *j = row.gcode_sha[0] ? &row : NULL;
     int ok = SF_ENOTFOUND;
@@ -333,7 +363,7 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
                re-runs at most these lines plus what the driver had not yet
                reported (drivers report every 16 lines or 250 ms). */
             struct store_progress sp = { p->job_id, p->lines_acked, false };
-            if (store_jobs_progress(p->env.s, &sp, 1, NULL) > 0)
+            if (storeq_jobs_progress(p->env.q, &sp, 1) == SF_OK)
                 p->lines_saved = p->lines_acked;
         }
         break;
@@ -413,8 +443,9 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
     p->cfg = *cfg;
     p->state = PRINTER_OFFLINE;
     struct sf_err err;
-    if (store_printer_set(env->s, cfg->name, PRINTER_OFFLINE, &err) ||
-        store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err))
+    storeq_printer_set(env->q, cfg->name, PRINTER_OFFLINE);
+    storeq_sync(env->q, -1, NULL); /* the bed a printer of this name just had (farm_apply) */
+    if (store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err))
         log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
     if (p->bed_full)
         log_printer(LOG_INFO, cfg->name, "its bed holds a part: clear it before the next job");
@@ -444,12 +475,14 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
 void
 printer_stop(struct printer *p)
 {
-    struct sf_err err;
     struct job_event_args a = { .reason = "the daemon stopped while this job was printing" };
     p->deaf = true;
-    if (p->job_id && (store_job_progress(p->env.s, p->job_id, p->lines_acked, &err) ||
-                      store_job_event(p->env.s, p->job_id, JOB_EV_CRASHED, &a, NULL, &err)))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    if (!p->job_id)
+        return;
+    /* queued: the farm drains the queue before the store closes (storeq_free) */
+    struct store_progress sp = { p->job_id, p->lines_acked, false };
+    storeq_jobs_progress(p->env.q, &sp, 1);
+    storeq_job_event(p->env.q, p->job_id, JOB_EV_CRASHED, &a, p->cfg.name, NULL, NULL);
 }
 
 void
@@ -473,6 +506,9 @@ printer_free(struct printer *p)
         p->drv->ops->close(p->drv);
         p->drv->ops->destroy(p->drv);
     }
+    if (p->ticket)
+        p->ticket->p = NULL; /* its START comes back to no one */
+    free(p->go);
     free(p->queue);
     free(p);
 }
@@ -618,18 +654,61 @@ drive(struct printer *p, const char *path, uint64_t line, const struct drv_job_s
     printer_job_event(p, id, JOB_EV_REFUSED, &a);
 }
 
+static void go(struct printer *p, int64_t id, const char *path, const struct drv_job_scan *scan,
+               const struct filament *fil, int rc, const char *why);
+
+/* The START came back: the driver may have the job now (if judged), or p lets it go. */
+static void
+on_start(void *ud, const struct storeq_result *r)
+{
+    struct start_ticket *t = ud;
+    struct printer *p = t->p;
+    int64_t id = r->id;
+    /* deaf: the daemon stops (printer_stop queued the job's CRASHED behind it): send nothing */
+    bool current = p && !p->deaf && p->job_id == id && p->judging && p->judging == t->token;
+    free(t);
+    if (!p)
+        return;
+    p->ticket = NULL;
+    struct start_go *g = p->go;
+    p->go = NULL;
+    if (r->rc) {
+        log_printer(LOG_WARN, p->cfg.name, "%s", r->err->msg);
+        if (current) { /* nothing was sent: idle again, the bed as it was */
+            p->job_id = p->judging = 0;
+            printer_move(p, PRINTER_EV_REFUSED);
+        }
+    } else if (current && g) {
+        go(p, id, g->path, g->has_scan ? &g->scan : NULL, g->has_fil ? &g->fil : NULL, g->rc,
+           g->why);
+    }
+    free(g);
+    printer_changed(p);
+}
+
 int
 printer_start(struct printer *p, const struct job_row *j, const char *path)
 {
+    /* Queued, and the driver gets nothing before it commits (on_start): a crash from then
+       on leaves the job interrupted, one before it leaves the job ready. */
+    struct start_ticket *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return SF_ENOMEM;
+    *t = (struct start_ticket){ p, j->id, ++p->starts };
     struct job_event_args a = { .printer = p->cfg.name };
-    /* Commit first: a crash from here on leaves the job interrupted. */
-    int rc = printer_job_event(p, j->id, JOB_EV_START, &a);
-    if (rc)
-        return rc;
+    if (storeq_job_event(p->env.q, j->id, JOB_EV_START, &a, p->cfg.name, on_start, t)) {
+        free(t);
+        return SF_ENOMEM;
+    }
+    if (p->ticket)
+        p->ticket->p = NULL; /* an earlier start's, cancelled meanwhile: stale */
+    free(p->go);
+    p->go = NULL;
+    p->ticket = t;
     p->job_id = j->id;
     p->lines_acked = p->lines_saved = 0;
     p->est_s = printer_estimate_s(j, path);
-    p->judging = ++p->starts;
+    p->judging = t->token;
     printer_move(p, PRINTER_EV_START);
     return SF_OK;
 }
@@ -649,6 +728,31 @@ printer_start_go(struct printer *p, int64_t id, uint64_t token, const char *path
        started again), while the file was judged: this check is stale. */
     if (p->job_id != id || !p->judging || p->judging != token)
         return;
+    if (p->ticket) { /* its START is still on its way: keep the verdict for on_start */
+        struct start_go *g = mem_calloc(1, sizeof(*g));
+        if (!g) {
+            log_printer(LOG_ERROR, p->cfg.name, "job %lld: out of memory", (long long)id);
+            return; /* p keeps the job until an operator cancels it */
+        }
+        snprintf(g->path, sizeof(g->path), "%s", path);
+        if ((g->has_scan = scan != NULL))
+            g->scan = *scan;
+        if ((g->has_fil = fil != NULL))
+            g->fil = *fil;
+        g->rc = rc;
+        snprintf(g->why, sizeof(g->why), "%s", why ? why : "");
+        free(p->go);
+        p->go = g;
+        return;
+    }
+    go(p, id, path, scan, fil, rc, why);
+}
+
+/* Hand the judged start to the driver, or fail it with why (its START committed). */
+static void
+go(struct printer *p, int64_t id, const char *path, const struct drv_job_scan *scan,
+   const struct filament *fil, int rc, const char *why)
+{
     p->judging = 0;
     p->fil.job_id = 0;
     if (fil && fil->job_id == id)
@@ -670,7 +774,7 @@ printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err
 {
     /* Commit first (the farm's rule): a crash from here on leaves it interrupted again. */
     struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line };
-    int rc = store_job_event(p->env.s, id, JOB_EV_RESUME, &a, NULL, err);
+    int rc = printer_job_commit(p, id, JOB_EV_RESUME, &a, err);
     if (rc)
         return rc;
     p->job_id = id;

@@ -11,7 +11,12 @@
  * an action's own move is applied once, by the action.
  *
  * Every change follows the farm's rule: commit to the store, then act on
- * the device; the bed is recorded before the job that leaves a part on it.
+ * the device.  What starts a print (its START, a RESUME) and an operator's
+ * action commit before the printer is told; what follows the device
+ * (progress, the printer's state, its bed, notes, the end of a print) is
+ * queued on the store's thread (env.q, storeq.h) and written in the order
+ * it happened, so the loop never waits for it; the bed is recorded before
+ * the job that leaves a part on it.
  * The owner (farm.c) is told after each change (env.changed) to schedule
  * and to wake event streams.
  *
@@ -30,6 +35,7 @@
 #include "filament.h"
 #include "job.h"
 #include "store.h"
+#include "storeq.h"
 
 /* drv_new's shape: slimfarmd hands drv_new in; tests may hand in their own. */
 typedef struct drv *(*printer_driver_fn)(struct loop *l, const struct drv_config *cfg,
@@ -38,7 +44,8 @@ typedef struct drv *(*printer_driver_fn)(struct loop *l, const struct drv_config
 /* What a printer needs from its owner; copied by printer_new. */
 struct printer_env {
     struct loop *l;            /* the loop */
-    struct store *s;           /* the job store */
+    struct store *s;           /* the job store: reads, and writes whose result is needed */
+    struct storeq *q;          /* its queue (storeq.h): the writes nothing waits for */
     printer_driver_fn driver;  /* NULL: the printer stays offline (prepare-only tests) */
     void (*changed)(void *ud); /* a job or the printer moved: schedule, wake streams */
     void *ud;                  /* its argument */
@@ -109,12 +116,13 @@ bool printer_removed(const struct printer *p);
 
 /*
  * Start job j (ready; its G-code at path) from line 0, in two steps like a
- * resume: printer_start commits the start (SF_OK: j is p's job now;
- * otherwise the store's error, logged, and nothing changed), then
+ * resume: printer_start makes j p's job and queues its START for the store
+ * (env.q; SF_OK, or SF_ENOMEM with nothing changed), then
  * printer_start_go hands it to the driver once the farm has judged the
- * file by p's policy off the loop (rc, why: the verdict), unless the job
- * left p meanwhile.  scan (NULL: the driver counts the lines) is the
- * job's; fil (NULL: not read) its net E by line, from which each end of
+ * file by p's policy off the loop (rc, why: the verdict) and the START has
+ * committed, whichever comes last, unless the job left p meanwhile.  A
+ * START the store refuses (logged) leaves p idle again with nothing sent.  scan (NULL: the driver
+ * counts the lines) is the job's; fil (NULL: not read) its net E by line, from which each end of
  * this print records the filament it used.  A driver refusing with SF_EAGAIN (not idle: "not now")
  * sends the job back to ready without spending a retry (JOB_EV_REFUSED) and p takes no job for
  * drv_backoff_ms(refusals in a row); any other refusal fails the print (the retry policy applies).

@@ -52,8 +52,7 @@ on_heat_off(struct loop *l, void *ud)
                  p->cfg.hold_heat_min, err.msg);
     log_printer(rc ? LOG_ERROR : LOG_WARN, p->cfg.name, "%s", what);
     snprintf(p->message, sizeof(p->message), "%s", what);
-    if (store_printer_note(p->env.s, p->cfg.name, "printer-heat", what, &err))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    storeq_printer_note(p->env.q, p->cfg.name, "printer-heat", what);
     printer_changed(p);
 }
 

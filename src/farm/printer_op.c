@@ -32,7 +32,10 @@ interrupted_here(struct printer *p)
 {
     struct sf_err err;
     struct job_row j;
-    int rc = store_job_interrupted(p->env.s, p->cfg.name, &j, &err);
+    /* a CRASHED may still be queued: with the store busy, unknown */
+    int rc = storeq_sync(p->env.q, STOREQ_SYNC_MS, &err);
+    if (rc == SF_OK)
+        rc = store_job_interrupted(p->env.s, p->cfg.name, &j, &err);
     if (rc == SF_ENOTFOUND)
         return 0;
     return rc ? -1 : j.id; /* unknown: treated as held */
@@ -42,15 +45,13 @@ interrupted_here(struct printer *p)
 static void
 note(struct printer *p, const char *kind, const char *fmt, const char *a, const char *b)
 {
-    struct sf_err err;
     char what[192];
     snprintf(what, sizeof(what), fmt, a, b);
     if (strcmp(kind, "printer-command") == 0) /* each one, never folded as a repeat */
         log_printer_each(LOG_INFO, p->cfg.name, "%s", what);
     else
         log_printer(LOG_INFO, p->cfg.name, "%s", what);
-    if (store_printer_note(p->env.s, p->cfg.name, kind, what, &err))
-        log_printer(LOG_ERROR, p->cfg.name, "%s", err.msg);
+    storeq_printer_note(p->env.q, p->cfg.name, kind, what);
 }
 
 int
@@ -81,6 +82,11 @@ printer_command(struct printer *p, const char *line, const char *who, struct sf_
                           p->cfg.name, printer_state_name(p->state),
                           p->bed_full && p->state == PRINTER_IDLE ? " with a part on its bed" : "");
     int64_t held = interrupted_here(p);
+    if (held < 0)
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer %s: the store is busy, whether it holds an interrupted job is "
+                          "not known: try again",
+                          p->cfg.name);
     if (held)
         return sf_err_set(err, SF_EAGAIN,
                           "printer %s holds interrupted job %lld: resume, restart or cancel it "
@@ -134,7 +140,7 @@ static int
 cancel_judged(struct printer *p, enum job_event jev, struct sf_err *err)
 {
     struct job_event_args a = { .reason = cancel_reason(jev) };
-    int rc = store_job_event(p->env.s, p->job_id, jev, &a, NULL, err);
+    int rc = printer_job_commit(p, p->job_id, jev, &a, err);
     if (rc)
         return rc;
     p->job_id = p->judging = 0;
@@ -201,7 +207,7 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
                                     printer_filament_mm(p, p->job_id, jev, p->lines_acked) };
     if (ends && !p->cfg.auto_eject)
         printer_set_bed(p, true); /* the cancelled part stays on the bed */
-    if ((rc = store_job_event(p->env.s, p->job_id, jev, &a, NULL, err)))
+    if ((rc = printer_job_commit(p, p->job_id, jev, &a, err)))
         return rc;
     if (ends) {
         p->job_id = 0;

@@ -447,6 +447,13 @@ int store_hist(struct store *s, enum store_hist which, const double *bounds_s, s
  * with err set (SF_EIO).  Free with store_close().
  */
 struct store *store_open_reader(const struct store *s, struct sf_err *err);
+/*
+ * As store_open_reader, but the connection may write: for the store's own
+ * thread (storeq.h), whose writes leave the loop.  Two writers on one
+ * SQLite file take turns (its busy timeout); s keeps the data dir's lock,
+ * the migrations and the recovery.
+ */
+struct store *store_open_writer(const struct store *s, struct sf_err *err);
 
 /* A printer the API manages (store_printer_cfg.c; farm.h's run-time printers), plain data. */
 #define STORE_PRINTER_CFG_MAX 4096 /* its section body: every option at its longest fits */

@@ -249,8 +249,9 @@ store_hist(struct store *s, enum store_hist which, const double *bounds_s, size_
     return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "histogram");
 }
 
-struct store *
-store_open_reader(const struct store *s, struct sf_err *err)
+/* A second connection to s's database: read-only (flags SQLDB_READONLY) or a writer. */
+static struct store *
+open_peer(const struct store *s, unsigned flags, struct sf_err *err)
 {
     struct store *r = mem_calloc(1, sizeof(*r));
     if (!r) {
@@ -260,9 +261,21 @@ store_open_reader(const struct store *s, struct sf_err *err)
     snprintf(r->dir, sizeof(r->dir), "%s", s->dir);
     snprintf(r->target, sizeof(r->target), "%s", s->target);
     r->lock_fd = -1; /* the writer holds the data dir */
-    if (!(r->db = sqldb_open(r->target, SQLDB_READONLY, err))) {
+    if (!(r->db = sqldb_open(r->target, flags, err))) {
         store_close(r);
         return NULL;
     }
     return r;
+}
+
+struct store *
+store_open_reader(const struct store *s, struct sf_err *err)
+{
+    return open_peer(s, SQLDB_READONLY, err);
+}
+
+struct store *
+store_open_writer(const struct store *s, struct sf_err *err)
+{
+    return open_peer(s, 0, err);
 }

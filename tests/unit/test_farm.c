@@ -28,6 +28,7 @@
 #include "../../src/base/mem.h"
 #include "../../src/farm/farm.h"
 #include "../../src/farm/jobctl.h"
+#include "../../src/farm/sqldb.h"
 #include "../t.h"
 #include "../tstore.h"
 
@@ -69,6 +70,9 @@ static enum drv_state open_state = DRV_IDLE; /* what a (re)connect finds the pri
 static int refuse_starts; /* start_job answers "not idle" (SF_EAGAIN) this many times */
 static int attach_waits;  /* attach answers "not yet" (SF_EAGAIN) this many times */
 static int attaches;      /* attach calls */
+static int64_t watch_job; /* t_start records its state in the store (start_saw), once */
+static int start_saw = -1;
+static enum job_state state_of(int64_t id);
 
 static int
 t_open(struct drv *d, struct sf_err *err)
@@ -88,6 +92,8 @@ t_start(struct drv *d, const char *path, uint64_t first_line, const struct drv_j
     struct tdrv *t = (struct tdrv *)d;
     snprintf(t->path, sizeof(t->path), "%s", path);
     t->starts++;
+    if (watch_job && start_saw < 0)
+        start_saw = state_of(watch_job);
     if (refuse_starts > 0) {
         refuse_starts--;
         return sf_err_set(err, SF_EAGAIN, "printer '%s' is not idle", d->name);
@@ -345,11 +351,25 @@ add(const char *part, const char *material, int copies)
     return add_m(part, material, copies, "orient");
 }
 
+/* The store once every write the farm queued is in (farm_sync): what a test reads. */
+static struct store *
+synced(void)
+{
+    farm_sync(fx.f, -1, NULL);
+    return fx.s;
+}
+
+static int
+job_get(int64_t id, struct job_row *j, struct sf_err *err)
+{
+    return store_job_get(synced(), id, j, err);
+}
+
 static enum job_state
 state_of(int64_t id)
 {
     struct job_row j;
-    return store_job_get(fx.s, id, &j, NULL) ? (enum job_state) - 1 : j.state;
+    return job_get(id, &j, NULL) ? (enum job_state) - 1 : j.state;
 }
 
 static enum printer_state
@@ -435,11 +455,11 @@ T_CASE(farm_prints_copies_with_bed_clear_gate_and_auto_eject)
        the job: start_job had no file to read on the loop thread */
     T_EQ_INT(a->scan_lines, 2);
     struct job_row j;
-    T_OK(store_job_get(fx.s, j1, &j, &err), &err);
+    T_OK(job_get(j1, &j, &err), &err);
     T_EQ_INT(j.gcode_lines, 2);
     /* a job nobody can print stays queued, saying why */
     loop_run_once(fx.l, 10);
-    T_OK(store_job_get(fx.s, j3, &j, &err), &err);
+    T_OK(job_get(j3, &j, &err), &err);
     T_EQ_INT(j.state, JOB_QUEUED);
     T_EQ_STR(j.reason, "fits no printer: a: material ABS not loaded (has PLA); b: material ABS "
                        "not loaded (has PETG)");
@@ -452,7 +472,7 @@ T_CASE(farm_prints_copies_with_bed_clear_gate_and_auto_eject)
     for (int i = 0; i < 5; i++)
         loop_run_once(fx.l, 10);
     T_EQ_INT(a->starts, 1);
-    T_OK(store_job_get(fx.s, j1, &j, &err), &err);
+    T_OK(job_get(j1, &j, &err), &err);
     T_EQ_STR(j.reason, "waits for a printer: a is awaiting-clear");
     T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CLEARED, &err), &err);
     T_TRUE(wait_job(j1, JOB_PRINTING));
@@ -478,12 +498,12 @@ T_CASE(farm_prints_copies_with_bed_clear_gate_and_auto_eject)
     T_TRUE(wait_job(j1, JOB_DONE));
     struct print_row *p;
     size_t n;
-    T_OK(store_prints(fx.s, j1, &p, &n, &err), &err);
+    T_OK(store_prints(synced(), j1, &p, &n, &err), &err);
     T_EQ_INT(n, 2);
     T_EQ_STR(p[0].outcome, "done");
     T_EQ_STR(p[1].outcome, "done");
     free(p);
-    T_OK(store_check(fx.s, &err), &err);
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }
 
@@ -507,7 +527,7 @@ T_CASE(farm_print_records_its_filament)
     T_TRUE(wait_job(done, JOB_DONE));
     struct print_row *p;
     size_t n;
-    T_OK(store_prints(fx.s, done, &p, &n, &err), &err);
+    T_OK(store_prints(synced(), done, &p, &n, &err), &err);
     T_EQ_INT(n, 1);
     T_EQ_DBL(p[0].filament_mm, 15, 1e-9);
     free(p);
@@ -523,12 +543,12 @@ T_CASE(farm_print_records_its_filament)
     struct job_row jr = { 0 }; /* the farm has it once it saved it (its 50 ms progress timer) */
     for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && jr.lines_acked != 5;) {
         loop_run_once(fx.l, 10);
-        T_OK(store_job_get(fx.s, cut, &jr, &err), &err);
+        T_OK(job_get(cut, &jr, &err), &err);
     }
     T_EQ_INT(jr.lines_acked, 5);
     T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_CANCEL, &err), &err);
     T_EQ_INT(state_of(cut), JOB_CANCELLED);
-    T_OK(store_prints(fx.s, cut, &p, &n, &err), &err);
+    T_OK(store_prints(synced(), cut, &p, &n, &err), &err);
     T_EQ_INT(n, 1);
     T_EQ_INT(p[0].lines_acked, 5);
     T_EQ_DBL(p[0].filament_mm, 12.5, 1e-9);
@@ -551,12 +571,12 @@ T_CASE(farm_dropped_printer_fails_print_into_retry_and_reconnects)
     report(a, DRV_OFFLINE, DRV_EV_STATE);
     T_TRUE(wait_printer(0, PRINTER_OFFLINE));
     struct job_row j;
-    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_OK(job_get(id, &j, &err), &err);
     T_EQ_INT(j.state, JOB_READY); /* retry */
     T_EQ_INT(j.counts.failures, 1);
     struct print_row *p;
     size_t n;
-    T_OK(store_prints(fx.s, id, &p, &n, &err), &err);
+    T_OK(store_prints(synced(), id, &p, &n, &err), &err);
     T_EQ_INT(n, 1);
     T_EQ_STR(p[0].outcome, "failed");
     T_EQ_INT(p[0].lines_acked, 1);
@@ -570,7 +590,7 @@ T_CASE(farm_dropped_printer_fails_print_into_retry_and_reconnects)
     T_EQ_INT(state_of(id), JOB_CANCELLED);
     T_EQ_INT(pstate(0), PRINTER_AWAITING_CLEAR);
     T_EQ_INT(a->cancels, 1);
-    T_OK(store_check(fx.s, &err), &err);
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }
 
@@ -592,11 +612,11 @@ T_CASE(farm_refused_start_waits_without_spending_a_retry)
     struct tdrv *a = tdrv_named("a");
     T_EQ_INT(a->starts, 4);
     struct job_row j;
-    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_OK(job_get(id, &j, &err), &err);
     T_EQ_INT(j.counts.failures, 0);
     struct print_row *p;
     size_t n;
-    T_OK(store_prints(fx.s, id, &p, &n, &err), &err);
+    T_OK(store_prints(synced(), id, &p, &n, &err), &err);
     T_EQ_INT(n, 4);
     for (size_t i = 0; i < 3; i++)
         T_EQ_STR(p[i].outcome, "refused");
@@ -604,7 +624,7 @@ T_CASE(farm_refused_start_waits_without_spending_a_retry)
     free(p);
     report(a, DRV_IDLE, DRV_EV_JOB_DONE);
     T_TRUE(wait_job(id, JOB_DONE));
-    T_OK(store_check(fx.s, &err), &err);
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }
 
@@ -616,7 +636,7 @@ gcode_says_900(int64_t id)
     char path[1024];
     struct buf g;
     buf_init(&g, 1 << 20);
-    bool ok = store_job_get(fx.s, id, &j, NULL) == SF_OK &&
+    bool ok = job_get(id, &j, NULL) == SF_OK &&
               store_file_path(fx.s, j.gcode_sha, path, sizeof(path), NULL) == SF_OK &&
               buf_read_file(&g, path, NULL) == SF_OK && g.data && strstr(g.data, "= 400\n");
     if (ok) {
@@ -642,7 +662,7 @@ T_CASE(farm_time_estimate_travels_in_the_job)
     T_OK(setup("estjob", farm_ini, tdrv_new, test_prepare, &err), &err);
     T_TRUE(wait_printer(0, PRINTER_IDLE));
     int64_t id = add("size 20 20 20 est 400", "PLA", 3);
-    T_TRUE(wait_job(id, JOB_PRINTING) && store_job_get(fx.s, id, &j, NULL) == SF_OK);
+    T_TRUE(wait_job(id, JOB_PRINTING) && job_get(id, &j, NULL) == SF_OK);
     T_TRUE(j.est_known);
     T_EQ_DBL(j.est_s, 400, 0);
     T_TRUE(gcode_says_900(id));
@@ -733,7 +753,7 @@ T_CASE(farm_attach_not_yet_is_asked_again)
     T_EQ_INT(pstate(0), PRINTER_PRINTING);
     report(t, DRV_IDLE, DRV_EV_JOB_DONE);
     T_TRUE(wait_job(id, JOB_DONE));
-    T_OK(store_check(fx.s, &err), &err);
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }
 
@@ -792,7 +812,7 @@ T_CASE(farm_printer_takes_jobs_only_when_its_driver_is_idle)
     report(a, DRV_IDLE, DRV_EV_STATE);
     T_TRUE(wait_job(next, JOB_PRINTING));
     T_EQ_INT(a->starts, 3);
-    T_OK(store_check(fx.s, &err), &err);
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }
 
@@ -810,7 +830,7 @@ T_CASE(farm_bad_gcode_line_or_policy_fails_at_prepare_naming_file_and_line)
     int64_t bad = add("size 20 20 20 long command", "PLA", 1);
     T_TRUE(wait_job(bad, JOB_FAILED));
     struct job_row j;
-    T_OK(store_job_get(fx.s, bad, &j, &err), &err);
+    T_OK(job_get(bad, &j, &err), &err);
     char want[64];
     snprintf(want, sizeof(want), "job-%lld.gcode':4: command too long", (long long)bad);
     T_TRUE(strstr(j.reason, want) != NULL);
@@ -819,7 +839,7 @@ T_CASE(farm_bad_gcode_line_or_policy_fails_at_prepare_naming_file_and_line)
        unattended printer) fails the same way, naming its line */
     int64_t m600 = add("size 20 20 20 filament change", "PLA", 1);
     T_TRUE(wait_job(m600, JOB_FAILED));
-    T_OK(store_job_get(fx.s, m600, &j, &err), &err);
+    T_OK(job_get(m600, &j, &err), &err);
     T_TRUE(strstr(j.reason, "line 4: M600: a filament change waits for a person") != NULL);
     T_EQ_INT(tdrv_named("a")->starts, 0);
     /* a good job after it prints */
@@ -888,7 +908,7 @@ T_CASE(farm_default_prepare_runs_every_method)
         loop_run_once(fx.l, 10);
     struct job_row j;
     /* oriented and sliced for printer a (PLA, 0.4 mm), waiting for it */
-    T_OK(store_job_get(fx.s, ok, &j, &err), &err);
+    T_OK(job_get(ok, &j, &err), &err);
     T_EQ_DBL(j.nozzle_mm, 0.4, 1e-9);
     T_TRUE(j.size_mm[2] > 0 && j.size_mm[2] <= 10.0 * 1.7321 + 1e-6);
     T_EQ_STR(j.reason, "waits for a printer: a is offline");
@@ -909,10 +929,10 @@ T_CASE(farm_default_prepare_runs_every_method)
     T_TRUE(cmds > 100);
     T_EQ_INT(j.gcode_lines, cmds);
     buf_release(&g);
-    T_OK(store_job_get(fx.s, surf, &j, &err), &err);
+    T_OK(job_get(surf, &j, &err), &err);
     T_EQ_STR(j.reason, "waits for a printer: a is offline");
     /* a broken part fails at once, naming the uploaded file */
-    T_OK(store_job_get(fx.s, junk, &j, &err), &err);
+    T_OK(job_get(junk, &j, &err), &err);
     T_TRUE(strstr(j.reason, "'part.stl': not a mesh file") != NULL);
     /* method none: sliced as uploaded */
     T_TRUE(wait_job(abs, JOB_READY));
@@ -925,8 +945,8 @@ T_CASE(farm_default_prepare_runs_every_method)
     T_TRUE(logged(surf, "surface (Jayakody 2025) in the direction search: "));
     T_TRUE(!logged(ok, "slimmed") && !logged(ok, "surface"));
     struct job_row o, sf;
-    T_OK(store_job_get(fx.s, ok, &o, &err), &err);
-    T_OK(store_job_get(fx.s, surf, &sf, &err), &err);
+    T_OK(job_get(ok, &o, &err), &err);
+    T_OK(job_get(surf, &sf, &err), &err);
     T_TRUE(o.mesh_sha[0] && sf.mesh_sha[0]);
     T_TRUE(strcmp(o.mesh_sha, sf.mesh_sha) != 0);
     T_TRUE(strcmp(o.gcode_sha, sf.gcode_sha) != 0);
@@ -936,11 +956,11 @@ T_CASE(farm_default_prepare_runs_every_method)
     T_TRUE(sf.shape_changed ? sf.mndr > 0 && sf.andr > 0 : sf.mndr == 0);
     T_TRUE(sf.andr <= sf.mndr);
     struct job_row sl, no;
-    T_OK(store_job_get(fx.s, slimmed, &sl, &err), &err);
-    T_OK(store_job_get(fx.s, abs, &no, &err), &err);
+    T_OK(job_get(slimmed, &sl, &err), &err);
+    T_OK(job_get(abs, &no, &err), &err);
     T_TRUE(!no.dev_measured);
     T_TRUE(sl.dev_measured);
-    T_OK(store_check(fx.s, &err), &err);
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }
 
@@ -967,14 +987,14 @@ T_CASE(farm_prepares_the_oriented_part_when_slimming_fails)
     farm_kick(fx.f);
     T_TRUE(wait_job(id, JOB_READY));
     struct job_row j;
-    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_OK(job_get(id, &j, &err), &err);
     T_TRUE(j.gcode_sha[0] && j.gcode_lines > 0);
     T_TRUE(j.dev_measured && !j.shape_changed);
     T_EQ_DBL(j.mndr, 0, 0);
     T_TRUE(strstr(j.reason, "slimming") == NULL); /* the reason is why it waits */
     struct event_row *ev;
     size_t n;
-    T_OK(store_events(fx.s, 0, 1000, &ev, &n, &err), &err);
+    T_OK(store_events(synced(), 0, 1000, &ev, &n, &err), &err);
     const char *detail = NULL;
     for (size_t i = 0; i < n; i++)
         if (ev[i].job_id == id && strcmp(ev[i].kind, "job-prepared") == 0)
@@ -984,7 +1004,7 @@ T_CASE(farm_prepares_the_oriented_part_when_slimming_fails)
     T_TRUE(detail && strstr(detail, "-> ready: slimming failed (slim: deviation limits must be "
                                     "positive): printed as oriented, unchanged") != NULL);
     free(ev);
-    T_OK(store_check(fx.s, &err), &err);
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }
 
@@ -996,7 +1016,7 @@ T_CASE(farm_missing_profile_fails_the_job_naming_the_file)
     int64_t id = add(tetra_stl, "", 1);
     T_TRUE(wait_job(id, JOB_FAILED));
     struct job_row j;
-    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_OK(job_get(id, &j, &err), &err);
     T_TRUE(strstr(j.reason, "profile 'nosuch' not found (config/printers/nosuch.cfg)") != NULL);
     teardown();
 }
@@ -1014,7 +1034,7 @@ T_CASE(farm_progress_is_persisted_and_survives_a_crash)
     for (int i = 0; i < 20; i++)
         loop_run_once(fx.l, 10); /* a few progress periods */
     struct job_row j;
-    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_OK(job_get(id, &j, &err), &err);
     T_EQ_INT(j.lines_acked, 1234);
     /* the daemon stops here (a kill -9 is farm_bed_gate_survives_stop_and_kill's):
        the store is reopened as on restart */
@@ -1051,19 +1071,19 @@ T_CASE(farm_progress_is_saved_within_16_lines)
     report(a, DRV_PRINTING, DRV_EV_PROGRESS);
     for (int i = 0; i < 3; i++)
         loop_run_once(fx.l, 10);
-    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_OK(job_get(id, &j, &err), &err);
     T_EQ_INT(j.lines_acked, 0); /* under 16 lines: the timer's */
     a->base.status.lines_acked = 16;
     report(a, DRV_PRINTING, DRV_EV_PROGRESS);
     for (int i = 0; i < 3; i++)
         loop_run_once(fx.l, 10);
-    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_OK(job_get(id, &j, &err), &err);
     T_EQ_INT(j.lines_acked, 16);
     a->base.status.lines_acked = 40;
     report(a, DRV_PRINTING, DRV_EV_PROGRESS);
     for (int i = 0; i < 3; i++)
         loop_run_once(fx.l, 10);
-    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_OK(job_get(id, &j, &err), &err);
     T_EQ_INT(j.lines_acked, 40);
     teardown();
 }
@@ -1409,7 +1429,7 @@ T_CASE(farm_mixed_profiles_print_each_file_inside_its_printers_bed)
     T_EQ_INT(tdrv_named("small")->starts, 1);
     T_TRUE(printed_for("big", "wide", 300, 300));
     T_TRUE(printed_for("small", "narrow", 180, 180));
-    T_OK(store_check(fx.s, &err), &err);
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }
 
@@ -1428,7 +1448,7 @@ T_CASE(farm_job_waiting_for_a_busy_printer_is_resliced_for_an_idle_one)
     int64_t j2 = add_plate();
     T_TRUE(wait_job(j2, JOB_READY));
     struct job_row before, after;
-    T_OK(store_job_get(fx.s, j2, &before, &err), &err);
+    T_OK(job_get(j2, &before, &err), &err);
     T_TRUE(strncmp(before.prep_key, "wide/", 5) == 0);
     T_TRUE(before.mesh_sha[0] != '\0');
     for (int i = 0; i < 5; i++)
@@ -1443,7 +1463,7 @@ T_CASE(farm_job_waiting_for_a_busy_printer_is_resliced_for_an_idle_one)
     T_EQ_INT(state_of(j2), JOB_PRINTING);
     T_EQ_INT(small->starts, 1);
     T_TRUE(printed_for("small", "narrow", 180, 180));
-    T_OK(store_job_get(fx.s, j2, &after, &err), &err);
+    T_OK(job_get(j2, &after, &err), &err);
     T_TRUE(strncmp(after.prep_key, "narrow/", 7) == 0);
     T_EQ_STR(after.printer, "small");
     T_TRUE(strcmp(after.gcode_sha, before.gcode_sha) != 0);
@@ -1452,7 +1472,7 @@ T_CASE(farm_job_waiting_for_a_busy_printer_is_resliced_for_an_idle_one)
     T_EQ_INT(atomic_load(&reused), 1);
     T_EQ_STR(after.mesh_sha, before.mesh_sha);
     T_TRUE(printed_for("big", "wide", 300, 300));
-    T_OK(store_check(fx.s, &err), &err);
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }
 
@@ -1589,7 +1609,7 @@ T_CASE(farm_manual_commands_and_emergency_stop)
     T_EQ_INT(pstate(0), PRINTER_ERROR);
     T_EQ_INT(tdrv_named("a")->cancels, 1); /* tdrv has no estop of its own: the job's cancel */
     struct job_row j;
-    T_OK(store_job_get(fx.s, id, &j, &err), &err);
+    T_OK(job_get(id, &j, &err), &err);
     T_TRUE(strstr(j.reason, "emergency stop by an operator (key t)") != NULL);
     T_ERR(farm_printer_command(fx.f, "a", "G28", "key t", &err), SF_EAGAIN, &err, "error");
     for (int i = 0; i < 10; i++)
@@ -1687,5 +1707,51 @@ T_CASE(farm_cancel_while_the_start_is_judged)
     int64_t next = add("size 20 20 20", "PLA", 1);
     T_TRUE(wait_job(next, JOB_PRINTING));
     T_EQ_INT(a->starts, 1);
+    teardown();
+}
+
+/*
+ * The store is held busy by another process when a printer takes a job:
+ * the printer takes it at once (the START waits on the store thread, the
+ * loop goes on), the driver gets nothing until the START has committed,
+ * then the print starts.  Before the store thread the START waited out the
+ * busy timeout on the loop and failed, and the printer stayed idle.
+ */
+T_CASE(farm_start_commits_on_the_store_thread_before_the_driver_has_it)
+{
+    if (t_store_pg()) {
+        t_skip("holds SQLite's write lock from a second connection");
+        return;
+    }
+    struct sf_err err;
+    setup_held = "a";
+    T_OK(setup("busystart", farm_ini, tdrv_new, test_prepare, &err), &err);
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_READY)); /* a is not connected yet */
+    char path[600];
+    snprintf(path, sizeof(path), "%s/busystart/slimfarm.db", t_tmpdir());
+    struct sqldb *other = sqldb_open(path, 0, &err);
+    T_TRUE(other != NULL);
+    T_OK(sqldb_begin(other), NULL);
+    watch_job = id;
+    start_saw = -1;
+    struct tdrv *a = tdrv_named("a");
+    report(a, DRV_IDLE, DRV_EV_STATE);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && pstate(0) != PRINTER_PRINTING;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(pstate(0), PRINTER_PRINTING); /* taken while the store is locked */
+    T_EQ_INT(a->starts, 0);
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err); /* a read: WAL lets it through */
+    T_EQ_INT(j.state, JOB_READY);                  /* its START waits on the store thread */
+    sqldb_rollback(other);
+    sqldb_close(other);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && a->starts == 0;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 1);
+    T_EQ_INT(start_saw, JOB_PRINTING); /* committed before the driver had it */
+    watch_job = 0;
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_OK(store_check(synced(), &err), &err);
     teardown();
 }

@@ -70,7 +70,7 @@ T_CASE(metrics_count_each_print_outcome)
     T_OK(print_once(s, a, "mk3", JOB_EV_PRINT_DONE, &err), &err);
     T_OK(print_once(s, a, "mk3", JOB_EV_CANCEL, &err), &err);
     T_OK(print_once(s, b, "mk3", JOB_EV_CRASHED, &err), &err);
-    char *text = metrics_render(s, NULL, 0, &err);
+    char *text = metrics_render(s, NULL, 0, NULL, &err);
     T_TRUE(text != NULL);
     long long refused =
                   value_of(text, "slimfarm_prints_total{printer=\"mk3\",outcome=\"refused\"}"),
