@@ -254,21 +254,33 @@ out:
 }
 
 /* Solid and top solid lines over t[T_SOLID] and t[T_TOP], zig-zag linked,
-   at angle ang. */
+   at angle ang.  The lines and their links stop half a spacing inside the
+   area grown infill_overlap (sp: the loops' spacing) into the loops, as
+   PrusaSlicer 2.5's zig-zag does (FillRectilinear links its lines along
+   the area shrunk half a spacing): 0.1 mm inside the inner area at the
+   defaults.  Run to the inner edge, a 4 mm arm's solid laid 3.93 mm of
+   lines across where PrusaSlicer lays 3.73 (the hook of the mech set:
+   5.9 % more solid infill on every layer). */
 static int
-solid_paths(const struct slice_profile *p, double ssp, double ang, const double org[2],
+solid_paths(const struct slice_profile *p, double sp, double ssp, double ang, const double org[2],
             struct paths *t, struct layer_paths *out)
 {
-    double sw = p->solid_width_mm;
-    int rc;
-    paths_reset(&t[T_LINES]);
-    TP_TRY(tp_fill_lines(&t[T_SOLID], ang, ssp, org[0], org[1], &t[T_LINES]));
-    TP_TRY(tp_link(&t[T_LINES], &t[T_SOLID], 2 * ssp, sw / 2));
-    TP_TRY(tp_add(out, &t[T_LINES], ROLE_SOLID, false, sw));
-    paths_reset(&t[T_LINES]);
-    TP_TRY(tp_fill_lines(&t[T_TOP], ang, ssp, org[0], org[1], &t[T_LINES]));
-    TP_TRY(tp_link(&t[T_LINES], &t[T_TOP], 2 * ssp, sw / 2));
-    TP_TRY(tp_add(out, &t[T_LINES], ROLE_TOP, false, sw));
+    double sw = p->solid_width_mm, in = 0.5 * ssp - p->infill_overlap * sp;
+    int rc = SF_OK;
+    for (int top = 0; top < 2; top++) {
+        const struct paths *area = &t[top ? T_TOP : T_SOLID];
+        if (!area->n)
+            continue;
+        paths_reset(&t[T_KEEP]);
+        if (in > 0)
+            TP_TRY(clip_offset(area, -in, CLIP_JOIN_MITER, &t[T_KEEP]));
+        else if (!paths_append(&t[T_KEEP], area))
+            TP_TRY(SF_ENOMEM);
+        paths_reset(&t[T_LINES]);
+        TP_TRY(tp_fill_lines(&t[T_KEEP], ang, ssp, org[0], org[1], &t[T_LINES]));
+        TP_TRY(tp_link(&t[T_LINES], &t[T_KEEP], 2 * ssp, sw / 2));
+        TP_TRY(tp_add(out, &t[T_LINES], top ? ROLE_TOP : ROLE_SOLID, false, sw));
+    }
 out:
     return rc;
 }
@@ -343,7 +355,7 @@ toolpath_layer(const struct layer_stack *s, uint32_t k, const struct slice_profi
     double ang = k % 2 ? 135 : 45;
     TP_TRY(tp_bridges_over_air(s, k, p, org, t, out));
     TP_TRY(tp_bridges_over_sparse(s, k, p, ang, org, t, out));
-    TP_TRY(solid_paths(p, ssp, ang, org, t, out));
+    TP_TRY(solid_paths(p, sp, ssp, ang, org, t, out));
     TP_TRY(sparse_paths(p, sp, ang, org, t, out));
     TP_TRY(tp_mark_overhangs(s, k, p, out, &t[T_TMP], &t[T_LINES]));
     TP_TRY(group_by_island(&L->region, out));

@@ -480,3 +480,49 @@ T_CASE(slice_prints_island_by_island)
     mesh_release(&m);
     mesh_release(&b);
 }
+
+/* x extents, over the layers above the bed layer, of the external
+   perimeters and of the solid infill (solid and top solid) */
+struct solid_span {
+    double ext_lo, solid_lo;
+};
+
+static int
+on_solid_move(void *ud, const struct est_move *mv)
+{
+    struct solid_span *w = ud;
+    if (!(mv->de > 0) || mv->layer < 2)
+        return SF_OK;
+    if (ts_is_type(mv, "External perimeter"))
+        w->ext_lo = fmin(w->ext_lo, mv->x);
+    if (ts_is_type(mv, "Solid infill") || ts_is_type(mv, "Top solid infill"))
+        w->solid_lo = fmin(w->solid_lo, mv->x);
+    return SF_OK;
+}
+
+T_CASE(slice_solid_lines_stop_where_prusaslicers_do)
+{
+    /* a 20 x 20 x 2 mm plate is solid through: PrusaSlicer 2.5 zig-zags
+       its solid lines along the inner area grown infill_overlap (0.1 mm)
+       and shrunk half a solid spacing (0.204): 0.10 mm inside the inner
+       perimeter's inner edge, 0.713 mm in from the external perimeter's
+       centre line (0.2035 + 0.407 + 0.102).  Ours ran to the inner edge
+       (0.611), 5.9 % more solid infill across the hook's 4 mm arm of the
+       mech set */
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    p.skirts = 0;
+    p.brim_auto = false;
+    struct solid_span w = { INFINITY, INFINITY };
+    struct sf_err err;
+    struct mesh m;
+    mesh_init(&m);
+    T_OK(shape_box(&m, v3(0, 0, 0), v3(20, 20, 2), &err), &err);
+    T_OK(ts_slice_walk(&m, &p, "plate2", NULL, on_solid_move, &w, &err), &err);
+    double sp = 0.45 - 0.2 * (1 - M_PI / 4), want = sp / 2 + sp + (0.5 - 0.25) * sp;
+    if (fabs(w.solid_lo - w.ext_lo - want) > 0.03)
+        t_fail(__FILE__, __LINE__, "solid lines from %.3f mm in, want %.3f", w.solid_lo - w.ext_lo,
+               want);
+    slice_profile_release(&p);
+    mesh_release(&m);
+}
