@@ -20,6 +20,8 @@
 #include "clip_shim.h"
 
 #define EPS 1e-4
+/* PrusaSlicer 2.5's raft_first_layer_expansion default (flange below) */
+#define SUPPORT_FLANGE_MM 3.0
 
 static int
 cmp_col(const void *a, const void *b)
@@ -86,7 +88,8 @@ island_columns(const struct layer_stack *s, uint32_t k, const struct paths *isl,
                         break;
                     }
                 }
-                struct support_column col = { cell, (float)floor_z, (float)zb, 0, false };
+                struct support_column col = { cell, (float)floor_z, (float)zb, SUPPORT_ISLAND_TRI,
+                                              false };
                 if (zb > floor_z && !push_col(cols, n, cap, col))
                     return SF_ENOMEM;
             }
@@ -249,6 +252,29 @@ live_release(struct live_cols *lc)
     free(lc->first);
 }
 
+/*
+ * The bed layer's support grown SUPPORT_FLANGE_MM all round, as PrusaSlicer
+ * 2.5 widens its first support layer for adhesion (raft_first_layer_
+ * expansion, 3 mm by default and in the peers' runs: anchor's bed layer
+ * 7783 mm of support lines where the columns alone take 3057), in steps
+ * of at most 0.6 mm less the part grown by the xy gap (grown), so it does
+ * not leak through thin walls (its generate_raft_base).  a, b: scratch.
+ */
+static int
+flange(struct paths *body, const struct paths *grown, struct paths *a, struct paths *b)
+{
+    int steps = (int)ceil(SUPPORT_FLANGE_MM / 0.6);
+    int rc = SF_OK;
+    for (int i = 0; i < steps && rc == SF_OK; i++) {
+        rc = clip_offset(body, SUPPORT_FLANGE_MM / steps, CLIP_JOIN_SQUARE, a);
+        if (rc == SF_OK)
+            rc = clip_bool(CLIP_DIFFERENCE, a, grown, CLIP_NONZERO, b);
+        if (rc == SF_OK)
+            paths_move(body, b);
+    }
+    return rc;
+}
+
 int
 support_layers(const struct layer_stack *s, const struct support_grid *g,
                struct support_column *cols, size_t n, const struct slice_profile *p,
@@ -269,7 +295,7 @@ support_layers(const struct layer_stack *s, const struct support_grid *g,
     paths_init(&grown);
     paths_init(&tmp);
     int rc = live_init(&lc, s, cols, n) && on && top ? SF_OK : SF_ENOMEM;
-    double gap = p->support_z_gap_mm, if_h = p->support_interface_layers * p->layer_mm;
+    double gap = p->support_z_gap_mm, if_h = support_interface_count(p) * p->layer_mm;
     for (uint32_t k = 0; k < s->n && rc == SF_OK; k++) {
         double zt = s->l[k].z_mm, zb = zt - s->l[k].h_mm;
         size_t n_on = 0, n_top = 0;
@@ -285,9 +311,12 @@ support_layers(const struct layer_stack *s, const struct support_grid *g,
             if (!(zb >= floor_z - EPS && zt <= cols[c].hi - gap + EPS))
                 continue;
             on[n_on++] = c;
-            /* dense under the part it holds up, and where it lands on the part
-               (PrusaSlicer: as many bottom interface layers as top ones) */
-            if (zt > cols[c].hi - gap - if_h + EPS ||
+            /* dense where it lands on the part (PrusaSlicer: as many bottom
+               interface layers as top ones), and under an island it holds up;
+               under the model's contacts the bands say where (only where a
+               layer steps out far enough: PrusaSlicer prints a gentle
+               slope's contacts sparse) */
+            if ((cols[c].tri == SUPPORT_ISLAND_TRI && zt > cols[c].hi - gap - if_h + EPS) ||
                 (cols[c].lo > EPS && zb < floor_z + if_h - EPS))
                 top[n_top++] = c;
         }
@@ -307,6 +336,8 @@ support_layers(const struct layer_stack *s, const struct support_grid *g,
                 rc = clip_bool(CLIP_DIFFERENCE, &all, &grown, CLIP_NONZERO,
                                pass ? &out[k].iface : &out[k].body);
         }
+        if (rc == SF_OK && k == 0 && out[k].body.n)
+            rc = flange(&out[k].body, &grown, &all, &tmp);
         if (rc == SF_OK && out[k].iface.n) {
             rc = clip_bool(CLIP_DIFFERENCE, &out[k].body, &out[k].iface, CLIP_NONZERO, &tmp);
             paths_move(&out[k].body, &tmp);

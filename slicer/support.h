@@ -15,8 +15,9 @@
  * Each layer's support is the union of the cells whose column spans the
  * whole layer, stopping support_z_gap below the part (and above it, when
  * the column stands on the part), minus the part's cross-section grown by
- * support_xy_gap.  The top support_interface_layers of each column are
- * the interface (printed dense).  Cells in a row are merged into
+ * support_xy_gap.  The top support_interface_count layers of each column
+ * (and the bottom ones where it stands on the part) are the interface
+ * (printed dense).  Cells in a row are merged into
  * rectangles before the union, so a layer costs one Clipper call.
  *
  * Thread: reentrant.
@@ -35,6 +36,11 @@
 #include "profile.h"
 #include "toolpath.h"
 
+/* The tri of the columns support_islands adds (no risky triangle): their
+   tops print dense, where the model's columns take the dense interface
+   from its bands. */
+#define SUPPORT_ISLAND_TRI UINT32_MAX
+
 /* The support model's parameters for profile p: PrusaSlicer's rules at the
    profile's overhang angle, layer height, column pitch, gaps and interface
    layers, with its bridge exemption (dont_support_bridges: a bottom its
@@ -42,6 +48,15 @@
    the anchored direction), so the print, the part picture and the
    optimizers' model hold up the same bottoms. */
 void support_model_params(const struct slice_profile *p, struct supmodel_params *mp);
+
+/* How many of our layers the dense interface of a column takes: PrusaSlicer
+   2.5 prints support_interface_layers of its support layers, and those are
+   as thick as its max_layer_height allows (0.75 of the nozzle by default,
+   Slicing.cpp), not the part's layers: 3 at a 0.4 mm nozzle are 0.9 mm
+   dense (hook of the mech set: 0.3 + 0.3 + 0.3 mm under each contact), 5
+   of our 0.2 mm layers (rounded up; its partial contact layer on top
+   makes up the difference). */
+int support_interface_count(const struct slice_profile *p);
 
 /*
  * The columns the slicer prints for m as it lies (+z up, m's coordinates)

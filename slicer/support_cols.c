@@ -10,7 +10,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "../src/base/limits.h"
 #include "../src/base/mem.h"
 #include "../src/geom/raycast.h"
 #include "support.h"
@@ -23,46 +22,14 @@ support_model_params(const struct slice_profile *p, struct supmodel_params *mp)
     mp->layer_mm = p->layer_mm;
     mp->pitch_mm = p->support_pitch_mm;
     mp->gap_z_mm = p->support_z_gap_mm;
-    mp->interface_layers = p->support_interface_layers;
+    mp->interface_layers = support_interface_count(p);
 }
 
-/*
- * g grown by pad empty cells on every side (its hits kept): PrusaSlicer
- * fills every grid cell a contact touches, out past the part's outline (an
- * enclosure's ear ending at its widest point: support 1.3 mm beyond it),
- * where the raster of the part's shadow stopped the columns at its edge.
- * A pad of whole snap cells keeps their phase (supmodel.c).
- */
-static int
-pad_grid(struct ray_grid *g, uint32_t pad, struct sf_err *err)
+int
+support_interface_count(const struct slice_profile *p)
 {
-    uint32_t nu = g->nu + 2 * pad, nw = g->nw + 2 * pad;
-    if ((uint64_t)nu * nw > SF_GRID_CELLS_MAX)
-        return SF_OK; /* a part this big goes without the margin */
-    uint32_t *first = mem_array((size_t)nu * nw + 1, sizeof(uint32_t));
-    if (!first)
-        return sf_err_set(err, SF_ENOMEM, "support: out of memory (%u x %u cells)", nu, nw);
-    uint32_t at = 0; /* where the hits of the cells so far end */
-    for (uint32_t j = 0; j < nw; j++) {
-        for (uint32_t i = 0; i < nu; i++) {
-            size_t c = (size_t)j * nu + i;
-            if (i >= pad && i < pad + g->nu && j >= pad && j < pad + g->nw) {
-                size_t o = (size_t)(j - pad) * g->nu + (i - pad);
-                first[c] = g->first[o];
-                at = g->first[o + 1];
-            } else {
-                first[c] = at; /* empty */
-            }
-        }
-    }
-    first[(size_t)nu * nw] = g->first[(size_t)g->nu * g->nw];
-    free(g->first);
-    g->first = first;
-    g->u0 -= pad * g->pitch;
-    g->w0 -= pad * g->pitch;
-    g->nu = nu;
-    g->nw = nw;
-    return SF_OK;
+    double ps_h = 0.75 * p->nozzle_mm > p->layer_mm ? 0.75 * p->nozzle_mm : p->layer_mm;
+    return (int)ceil(p->support_interface_layers * ps_h / p->layer_mm - 1e-6);
 }
 
 int
@@ -84,7 +51,7 @@ support_columns(const struct mesh *m, const struct slice_profile *p, struct supp
     double pitch = supmodel_raster_pitch(&mp);
     int st = raycast_grid(rc, v3(0, 0, 1), pitch, &rg, err);
     if (st == SF_OK && mp.snap_mm > pitch)
-        st = pad_grid(&rg, (uint32_t)lround(mp.snap_mm / pitch), err);
+        st = supmodel_pad_grid(&rg, (uint32_t)lround(mp.snap_mm / pitch), err);
     struct support_column *bands = NULL;
     size_t nb = 0;
     if (st == SF_OK)

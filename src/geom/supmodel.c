@@ -150,51 +150,6 @@ push_column(struct support_column **v, size_t *n, size_t *cap, struct support_co
 }
 
 /*
- * The snap grid over the raster: cells of bs x bs raster cells, their sides
- * on whole multiples of the snap cell from the shadow's centre, where
- * PrusaSlicer's support grid has its lines (SupportGridPattern aligns its
- * box to multiples of the grid step in object coordinates, whose origin is
- * the object's centre).  The raster is centred on the shadow too, so raster
- * cell i's left side lies (i - nu / 2) cells from the centre: o (0 <= o < bs)
- * shifts the cells so that sides at multiples of bs fall there (within half
- * a raster cell when nu is odd).  Snapped at the raster's corner instead, a
- * 0.8 mm bead along a wall took whichever of one or two snap cells its
- * offset from the corner gave: 2.6 mm of support where PrusaSlicer prints
- * 1.5 (box_open of the mech set).
- */
-struct snapg {
-    uint32_t bs, ou, ow, nbu;
-};
-
-static struct snapg
-snapg_of(const struct ray_grid *g, uint32_t bs)
-{
-    struct snapg s = { bs, (bs - (g->nu / 2) % bs) % bs, (bs - (g->nw / 2) % bs) % bs, 0 };
-    s.nbu = (g->nu + s.ou + bs - 1) / bs;
-    return s;
-}
-
-/* The snap cell of raster cell c. */
-static uint32_t
-snapg_blk(const struct ray_grid *g, struct snapg s, uint32_t c)
-{
-    uint32_t i = c % g->nu, j = c / g->nu;
-    return ((j + s.ow) / s.bs) * s.nbu + (i + s.ou) / s.bs;
-}
-
-/* The raster cells of snap cell blk: [*i0, *i1) x [*j0, *j1). */
-static void
-snapg_cells(const struct ray_grid *g, struct snapg s, uint32_t blk, uint32_t *i0, uint32_t *i1,
-            uint32_t *j0, uint32_t *j1)
-{
-    uint32_t bi = blk % s.nbu, bj = blk / s.nbu;
-    *i0 = bi * s.bs > s.ou ? bi * s.bs - s.ou : 0;
-    *j0 = bj * s.bs > s.ow ? bj * s.bs - s.ow : 0;
-    *i1 = (bi + 1) * s.bs - s.ou < g->nu ? (bi + 1) * s.bs - s.ou : g->nu;
-    *j1 = (bj + 1) * s.bs - s.ow < g->nw ? (bj + 1) * s.bs - s.ow : g->nw;
-}
-
-/*
  * Snap the contacts' columns to the grid as PrusaSlicer does (grid style):
  * every cell of a snap cell that a column touches gets the snap cell's
  * merged ranges wherever the part leaves room, and, as the projection goes
@@ -204,19 +159,19 @@ static int
 snap_columns(const struct ray_grid *g, const struct solids *cs, const struct contact *ct, size_t n,
              uint32_t bs, struct support_column **cols, size_t *n_cols, struct sf_err *err)
 {
-    struct snapg sg = snapg_of(g, bs);
+    struct supmodel_snap sg = supmodel_snap_of(g, bs);
     struct frun *r = mem_array(n ? n : 1, sizeof(*r));
     if (!r)
         return sf_err_set(err, SF_ENOMEM, "support model: out of memory (columns)");
     for (size_t k = 0; k < n; k++)
-        r[k] = (struct frun){ snapg_blk(g, sg, ct[k].cell), ct[k].floor, ct[k].top };
+        r[k] = (struct frun){ supmodel_snap_blk(g, sg, ct[k].cell), ct[k].floor, ct[k].top };
     size_t m = merge_fruns(r, n);
     struct support_column *v = NULL;
     size_t nv = 0, cap = 0;
     int rc = SF_OK;
     for (size_t k = 0; k < m && rc == SF_OK; k++) {
         uint32_t i0, i1, j0, j1;
-        snapg_cells(g, sg, r[k].blk, &i0, &i1, &j0, &j1);
+        supmodel_snap_cells(g, sg, r[k].blk, &i0, &i1, &j0, &j1);
         for (uint32_t j = j0; j < j1 && rc == SF_OK; j++) {
             for (uint32_t i = i0; i < i1 && rc == SF_OK; i++) {
                 uint32_t c = j * g->nu + i;
@@ -262,7 +217,7 @@ snap_bands(const struct ray_grid *g, const struct supmodel_params *p, const stru
            struct support_column **bands, size_t *n_bands, struct sf_err *err)
 {
     size_t cells = (size_t)g->nu * g->nw;
-    struct snapg sg = snapg_of(g, bs);
+    struct supmodel_snap sg = supmodel_snap_of(g, bs);
     double gap = p->gap_z_mm, dh = p->interface_layers * p->layer_mm;
     struct frun *r = mem_array(n ? n : 1, sizeof(*r));
     uint32_t *cfirst = mem_calloc(cells + 1, sizeof(uint32_t));
@@ -277,7 +232,7 @@ snap_bands(const struct ray_grid *g, const struct supmodel_params *p, const stru
     for (size_t k = 0; k < n; k++) {
         if (!ct[k].dense || dh <= 0)
             continue;
-        r[m++] = (struct frun){ snapg_blk(g, sg, ct[k].cell), (float)(ct[k].top - gap - dh),
+        r[m++] = (struct frun){ supmodel_snap_blk(g, sg, ct[k].cell), (float)(ct[k].top - gap - dh),
                                 (float)(ct[k].top - gap) };
     }
     size_t mm = merge_fruns(r, m);
@@ -293,7 +248,7 @@ snap_bands(const struct ray_grid *g, const struct supmodel_params *p, const stru
     cfirst[0] = 0;
     for (size_t k = 0; k < mm && rc == SF_OK; k++) {
         uint32_t i0, i1, j0, j1;
-        snapg_cells(g, sg, r[k].blk, &i0, &i1, &j0, &j1);
+        supmodel_snap_cells(g, sg, r[k].blk, &i0, &i1, &j0, &j1);
         for (uint32_t j = j0; j < j1 && rc == SF_OK; j++) {
             for (uint32_t i = i0; i < i1 && rc == SF_OK; i++) {
                 uint32_t c = j * g->nu + i;

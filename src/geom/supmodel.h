@@ -138,7 +138,19 @@ int supmodel_eval_grid(const struct ray_grid *g, const struct supmodel_params *p
  */
 double supmodel_raster_pitch(const struct supmodel_params *p);
 
-/* Cast the grid for up at supmodel_raster_pitch(p) and evaluate. */
+/*
+ * g grown by pad empty cells on every side (its hits kept; none past
+ * SF_GRID_CELLS_MAX cells: the part goes without the margin).  PrusaSlicer
+ * fills every grid cell a contact touches, out past the part's outline (an
+ * enclosure's ear ending at its widest point: support 1.3 mm beyond it),
+ * where the raster of the part's shadow would stop the columns at its
+ * edge; a pad of whole snap cells keeps their phase.  The slicer's columns
+ * and supmodel_eval pad by one snap cell.  SF_ENOMEM.
+ */
+int supmodel_pad_grid(struct ray_grid *g, uint32_t pad, struct sf_err *err);
+
+/* Cast the grid for up at supmodel_raster_pitch(p), pad it by a snap cell
+   (supmodel_pad_grid) and evaluate. */
 int supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *p,
                   struct supmodel_result *out, struct sf_err *err);
 

@@ -101,21 +101,15 @@ xor_len(const struct run *a, size_t na, const struct run *b, size_t nb)
     return la + lb - 2 * both;
 }
 
-/* The snap grid over the raster: cells of bs x bs raster cells, nbu x nbw of them. */
-struct snap {
-    uint32_t bs, nbu, nbw;
-};
-
 /* The contacts' columns (runs) and dense interfaces (iruns, *n_iruns of them)
    in layer indices of their snap cells, and the contact figures of out;
    returns how many runs. */
 static size_t
 contact_runs(const struct ray_grid *g, const struct supmodel_params *p, const struct contact *ct,
-             size_t n_ct, struct snap sn, struct supmodel_result *out, struct run *runs,
+             size_t n_ct, struct supmodel_snap sn, struct supmodel_result *out, struct run *runs,
              struct run *iruns, size_t *n_iruns)
 {
     double h = p->layer_mm, px = g->pitch, cell_a = px * px;
-    uint32_t bs = sn.bs, nbu = sn.nbu;
     size_t n_runs = 0;
     *n_iruns = 0;
     for (size_t k = 0; k < n_ct; k++) {
@@ -128,7 +122,7 @@ contact_runs(const struct ray_grid *g, const struct supmodel_params *p, const st
         out->contact_area_mm2 += cell_a;
         out->shadow_mm3 += (top - bot) * cell_a;
         int32_t nif = k1 - k0 < p->interface_layers ? k1 - k0 : p->interface_layers;
-        uint32_t c = ct[k].cell, i = c % g->nu, j = c / g->nu, blk = (j / bs) * nbu + i / bs;
+        uint32_t blk = supmodel_snap_blk(g, sn, ct[k].cell);
         /* PrusaSlicer snaps contacts to the grid too (fill_contact_layer): the dense
            layers under a contact fill its whole snap cell */
         if (ct[k].dense)
@@ -142,19 +136,19 @@ contact_runs(const struct ray_grid *g, const struct supmodel_params *p, const st
    merged runs, those at the bed (*first) and the landings on the part. */
 static void
 fill_runs(const struct ray_grid *g, const struct supmodel_params *p, const struct solids *cs,
-          const struct run *runs, size_t n_runs, struct snap sn, double *filled_out,
+          const struct run *runs, size_t n_runs, struct supmodel_snap sn, double *filled_out,
           double *first_out, double *land_out)
 {
     double h = p->layer_mm, filled = 0, first = 0, land = 0;
-    uint32_t bs = sn.bs, nbu = sn.nbu;
     for (size_t r = 0; r < n_runs; r++) {
-        uint32_t b = runs[r].blk, bi = b % nbu, bj = b / nbu;
+        uint32_t b = runs[r].blk, i0, i1, j0, j1;
+        supmodel_snap_cells(g, sn, b, &i0, &i1, &j0, &j1);
         int32_t k0 = runs[r].k0, k1 = runs[r].k1;
         /* the projection goes on down each cell until the part (or the range
            below in the same snap cell) stops it */
         int32_t below = r > 0 && runs[r - 1].blk == b ? runs[r - 1].k1 : 0;
-        for (uint32_t j = bj * bs; j < (bj + 1) * bs && j < g->nw; j++) {
-            for (uint32_t i = bi * bs; i < (bi + 1) * bs && i < g->nu; i++) {
+        for (uint32_t j = j0; j < j1; j++) {
+            for (uint32_t i = i0; i < i1; i++) {
                 size_t c = (size_t)j * g->nu + i;
                 int64_t free_l = k1 - k0;
                 bool solid_k0 = false;
@@ -195,7 +189,7 @@ fill_runs(const struct ray_grid *g, const struct supmodel_params *p, const struc
 /* Outline of the filled snap cells in snap-cell sides, summed over layers
    (snap cell b holds runs[bfirst[b] .. bfirst[b + 1])). */
 static double
-outline_runs(const struct run *runs, const uint32_t *bfirst, struct snap sn)
+outline_runs(const struct run *runs, const uint32_t *bfirst, struct supmodel_snap sn)
 {
     uint32_t nbu = sn.nbu, nbw = sn.nbw;
     double outline = 0;
@@ -226,14 +220,14 @@ outline_runs(const struct run *runs, const uint32_t *bfirst, struct snap sn)
 /* The dense cell-layers: the snap cells' free cells under each contact. */
 static double
 iface_runs(const struct ray_grid *g, double h, const struct solids *cs, const struct run *iruns,
-           size_t n_iruns, struct snap sn)
+           size_t n_iruns, struct supmodel_snap sn)
 {
-    uint32_t bs = sn.bs, nbu = sn.nbu;
     double iface = 0;
     for (size_t r = 0; r < n_iruns; r++) {
-        uint32_t b = iruns[r].blk, bi = b % nbu, bj = b / nbu;
-        for (uint32_t j = bj * bs; j < (bj + 1) * bs && j < g->nw; j++) {
-            for (uint32_t i = bi * bs; i < (bi + 1) * bs && i < g->nu; i++) {
+        uint32_t i0, i1, j0, j1;
+        supmodel_snap_cells(g, sn, iruns[r].blk, &i0, &i1, &j0, &j1);
+        for (uint32_t j = j0; j < j1; j++) {
+            for (uint32_t i = i0; i < i1; i++) {
                 size_t c = (size_t)j * g->nu + i;
                 int64_t free_l = iruns[r].k1 - iruns[r].k0;
                 for (uint32_t q = cs->first[c]; q < cs->first[c + 1]; q++)
@@ -264,7 +258,7 @@ eval_cut(const struct ray_grid *g, const struct supmodel_params *p, struct open_
         return rc;
     }
     uint32_t bs = p->snap_mm > px ? (uint32_t)lround(p->snap_mm / px) : 1;
-    struct snap sn = { bs, (g->nu + bs - 1) / bs, (g->nw + bs - 1) / bs };
+    struct supmodel_snap sn = supmodel_snap_of(g, bs);
     size_t n_blk = (size_t)sn.nbu * sn.nbw;
     struct run *runs = mem_array(n_ct ? n_ct : 1, sizeof(*runs));
     struct run *iruns = mem_array(n_ct ? n_ct : 1, sizeof(*iruns));
@@ -331,6 +325,12 @@ supmodel_eval(struct raycast *rc, struct vec3 up, const struct supmodel_params *
     struct ray_grid g;
     if ((r = raycast_grid(rc, v3_normalize(up), supmodel_raster_pitch(p), &g, err)))
         return r;
+    /* a snap cell of margin, as the slicer's columns have (support_cols.c) */
+    if (p->snap_mm > g.pitch &&
+        (r = supmodel_pad_grid(&g, (uint32_t)lround(p->snap_mm / g.pitch), err))) {
+        ray_grid_release(&g);
+        return r;
+    }
     struct open_sections os = { 0 };
     if (p->open_gap_mm > 0) {
         struct rim_frame f = {

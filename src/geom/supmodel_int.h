@@ -4,7 +4,8 @@
  * passes share, and the entry points of its files.
  *
  *   supmodel_raster.c  the columns' solid intervals from the ray grid, less
- *                      the open layers the slicer drops (rims.h)
+ *                      the open layers the slicer drops (rims.h); the snap
+ *                      grid over the raster; the grid's padding
  *   supmodel_rules.c   the slicers' overhang rules and PrusaSlicer's bridge
  *                      exemption: which bottoms are contacts
  *   supmodel_eval.c    the layer model's volumes (eval_cut) and the public
@@ -77,6 +78,33 @@ struct contact {
 int supmodel_find_contacts(const struct ray_grid *g, const struct solids *cs,
                            const struct supmodel_params *p, struct contact **out, size_t *n_out,
                            struct sf_err *err);
+
+/*
+ * The snap grid over the raster: cells of bs x bs raster cells, their sides
+ * on whole multiples of the snap cell from the shadow's centre, where
+ * PrusaSlicer's support grid has its lines (SupportGridPattern aligns its
+ * box to multiples of the grid step in object coordinates, whose origin is
+ * the object's centre).  The raster is centred on the shadow too, so raster
+ * cell i's left side lies (i - nu / 2) cells from the centre: ou (0 <= ou <
+ * bs) shifts the cells so that sides at multiples of bs fall there (within
+ * half a raster cell when nu is odd), ow the same along w.  Snapped at the
+ * raster's corner instead, a 0.8 mm bead along a wall took whichever of one
+ * or two snap cells its offset from the corner gave: 2.6 mm of support where
+ * PrusaSlicer prints 1.5 (box_open of the mech set).  The slicer's columns
+ * (supmodel_columns) and the model's volumes (supmodel_eval) share it.
+ */
+struct supmodel_snap {
+    uint32_t bs, ou, ow, nbu, nbw; /* nbu x nbw snap cells */
+};
+
+struct supmodel_snap supmodel_snap_of(const struct ray_grid *g, uint32_t bs);
+
+/* The snap cell of raster cell c. */
+uint32_t supmodel_snap_blk(const struct ray_grid *g, struct supmodel_snap s, uint32_t c);
+
+/* The raster cells of snap cell blk: [*i0, *i1) x [*j0, *j1). */
+void supmodel_snap_cells(const struct ray_grid *g, struct supmodel_snap s, uint32_t blk,
+                         uint32_t *i0, uint32_t *i1, uint32_t *j0, uint32_t *j1);
 
 /* Order of two ranges of snap cells: by cell, then by key (a range's lower end). */
 static inline int

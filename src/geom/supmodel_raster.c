@@ -8,6 +8,7 @@
 
 #include <stdlib.h>
 
+#include "../base/limits.h"
 #include "../base/mem.h"
 
 void
@@ -128,5 +129,65 @@ supmodel_solids_build(const struct ray_grid *g, struct open_cut *cut, struct sol
         return sf_err_set(err, SF_ENOMEM, "support model: out of memory (%zu cells)", cells);
     }
     out->first[cells] = n;
+    return SF_OK;
+}
+
+struct supmodel_snap
+supmodel_snap_of(const struct ray_grid *g, uint32_t bs)
+{
+    struct supmodel_snap s = { bs, (bs - (g->nu / 2) % bs) % bs, (bs - (g->nw / 2) % bs) % bs, 0,
+                               0 };
+    s.nbu = (g->nu + s.ou + bs - 1) / bs;
+    s.nbw = (g->nw + s.ow + bs - 1) / bs;
+    return s;
+}
+
+uint32_t
+supmodel_snap_blk(const struct ray_grid *g, struct supmodel_snap s, uint32_t c)
+{
+    uint32_t i = c % g->nu, j = c / g->nu;
+    return ((j + s.ow) / s.bs) * s.nbu + (i + s.ou) / s.bs;
+}
+
+void
+supmodel_snap_cells(const struct ray_grid *g, struct supmodel_snap s, uint32_t blk, uint32_t *i0,
+                    uint32_t *i1, uint32_t *j0, uint32_t *j1)
+{
+    uint32_t bi = blk % s.nbu, bj = blk / s.nbu;
+    *i0 = bi * s.bs > s.ou ? bi * s.bs - s.ou : 0;
+    *j0 = bj * s.bs > s.ow ? bj * s.bs - s.ow : 0;
+    *i1 = (bi + 1) * s.bs - s.ou < g->nu ? (bi + 1) * s.bs - s.ou : g->nu;
+    *j1 = (bj + 1) * s.bs - s.ow < g->nw ? (bj + 1) * s.bs - s.ow : g->nw;
+}
+
+int
+supmodel_pad_grid(struct ray_grid *g, uint32_t pad, struct sf_err *err)
+{
+    uint32_t nu = g->nu + 2 * pad, nw = g->nw + 2 * pad;
+    if (!pad || (uint64_t)nu * nw > SF_GRID_CELLS_MAX)
+        return SF_OK; /* a part this big goes without the margin */
+    uint32_t *first = mem_array((size_t)nu * nw + 1, sizeof(uint32_t));
+    if (!first)
+        return sf_err_set(err, SF_ENOMEM, "support model: out of memory (%u x %u cells)", nu, nw);
+    uint32_t at = 0; /* where the hits of the cells so far end */
+    for (uint32_t j = 0; j < nw; j++) {
+        for (uint32_t i = 0; i < nu; i++) {
+            size_t c = (size_t)j * nu + i;
+            if (i >= pad && i < pad + g->nu && j >= pad && j < pad + g->nw) {
+                size_t o = (size_t)(j - pad) * g->nu + (i - pad);
+                first[c] = g->first[o];
+                at = g->first[o + 1];
+            } else {
+                first[c] = at; /* empty */
+            }
+        }
+    }
+    first[(size_t)nu * nw] = g->first[(size_t)g->nu * g->nw];
+    free(g->first);
+    g->first = first;
+    g->u0 -= pad * g->pitch;
+    g->w0 -= pad * g->pitch;
+    g->nu = nu;
+    g->nw = nw;
     return SF_OK;
 }
