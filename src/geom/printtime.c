@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "../base/mem.h"
+#include "printtime_loops.h"
 
 void
 printtime_params_default(struct printtime_params *p)
@@ -24,6 +25,11 @@ printtime_params_default(struct printtime_params *p)
                                     .infill_mm_s = 80,
                                     .layer_change_s = 0.3,
                                     .min_layer_s = 5,
+                                    .small_perimeter_mm_s = 15,
+                                    .bridge_mm_s = 60,
+                                    .bridge_line_mm = 0.4,
+                                    .small_loop_mm = 2 * M_PI * 6.5,
+                                    .solid_below_mm2 = 70,
                                     .solid_factor = 0.5,
                                     .support_factor = 1.3 };
 }
@@ -86,15 +92,19 @@ check_params(const struct printtime_params *p, struct sf_err *err)
         return sf_err_set(err, SF_EINVAL,
                           "print time: perimeters, top_layers, bottom_layers out of range");
     if (!(p->ext_perimeter_mm_s > 0) || !(p->perimeter_mm_s > 0) || !(p->solid_mm_s > 0) ||
-        !(p->infill_mm_s > 0))
-        return sf_err_set(err, SF_EINVAL, "print time: every speed must be positive");
+        !(p->infill_mm_s > 0) || !(p->small_perimeter_mm_s > 0) || !(p->bridge_mm_s > 0) ||
+        !(p->bridge_line_mm > 0))
+        return sf_err_set(err, SF_EINVAL,
+                          "print time: every speed and the bridge line width must be positive");
     if (!(p->infill_density >= 0 && p->infill_density <= 1) || !(p->layer_change_s >= 0) ||
         !(p->min_layer_s >= 0) || !(p->support_factor >= 0 && p->support_factor <= 100) ||
-        !(p->solid_factor >= 0 && p->solid_factor <= 100))
+        !(p->solid_factor >= 0 && p->solid_factor <= 100) ||
+        !(p->small_loop_mm >= 0 && p->small_loop_mm <= 1e4) ||
+        !(p->solid_below_mm2 >= 0 && p->solid_below_mm2 <= 1e6))
         return sf_err_set(err, SF_EINVAL,
                           "print time: infill_density in [0, 1], layer_change_s and "
                           "min_layer_s not negative, support_factor and solid_factor in "
-                          "[0, 100]");
+                          "[0, 100], small_loop_mm in [0, 10000], solid_below_mm2 in [0, 1e6]");
     return SF_OK;
 }
 
@@ -122,10 +132,13 @@ spread(double *acc, uint32_t n, double a, double b, double amount)
 }
 
 /* Per-layer sums of one part: outline length, seconds of solid fill, and
-   n_z dA (the section's area, summed from the top down). */
+   n_z dA (the section's area, summed from the top down); from its loops
+   (printtime_loops.h), the small loops' length and the small islands'
+   infill area. */
 struct layers {
-    double *outline_mm, *solid_s, *dsec_mm2;
+    double *outline_mm, *solid_s, *dsec_mm2, *small_mm, *small_fill_mm2;
 };
+#define LAYER_SUMS 5
 
 static void
 add_faces(const struct mesh *m, struct vec3 up, double zmin, uint32_t n,
@@ -156,6 +169,13 @@ add_faces(const struct mesh *m, struct vec3 up, double zmin, uint32_t n,
             continue;
         double vol = area * an * th * share;
         double secs = vol / (p->line_width_mm * h * p->solid_mm_s);
+        /* a bottom over air starts with a bridge layer: lines of the
+           nozzle's width at bridge_mm_s (mech box_upside's floor as a roof:
+           PrusaSlicer bridges it at 60 mm/s, on the bed it is solid at 20) */
+        if (nz < 0 && a >= 1 && p->bottom_layers > 0)
+            secs *=
+                1 - (1 - p->line_width_mm * p->solid_mm_s / (p->bridge_line_mm * p->bridge_mm_s)) /
+                        p->bottom_layers;
         /* under a top, over a bottom */
         double nl = th / h;
         if (nz > 0)
@@ -186,23 +206,37 @@ printtime_eval(const struct mesh *m, struct vec3 up, const struct printtime_para
         return sf_err_set(err, SF_EINVAL, "print time: part %.1f mm tall is over %u layers",
                           zmax - zmin, PRINTTIME_LAYERS_MAX);
     uint32_t n = layers < 1 ? 1 : (uint32_t)layers;
-    double *buf = mem_array((size_t)3 * n, sizeof(double));
+    double *buf = mem_array((size_t)LAYER_SUMS * n, sizeof(double));
     if (!buf)
         return sf_err_set(err, SF_ENOMEM, "print time: out of memory for %u layers", n);
-    memset(buf, 0, (size_t)3 * n * sizeof(double));
-    struct layers L = { buf, buf + n, buf + 2 * n };
+    memset(buf, 0, (size_t)LAYER_SUMS * n * sizeof(double));
+    struct layers L = { buf, buf + n, buf + 2 * n, buf + 3 * n, buf + 4 * n };
     add_faces(m, up, zmin, n, p, &L);
+    struct printtime_loops_params lp = { .layer_mm = p->layer_mm,
+                                         .small_loop_mm = p->small_loop_mm,
+                                         .perimeter_mm = p->perimeters * p->line_width_mm,
+                                         .solid_below_mm2 = p->solid_below_mm2 };
+    if ((rc = printtime_loops_eval(m, up, zmin, n, &lp, L.small_mm, L.small_fill_mm2, err)) < 0) {
+        free(buf);
+        return rc;
+    }
     double per_mm =
         p->perimeters > 0 ? 1 / p->ext_perimeter_mm_s + (p->perimeters - 1) / p->perimeter_mm_s : 0;
+    /* a small loop's perimeters all print at small_perimeter_mm_s */
+    double small_per_mm = fmax(0, p->perimeters / p->small_perimeter_mm_s - per_mm);
     double pw = p->perimeters * p->line_width_mm, section = 0;
     for (uint32_t k = n; k-- > 0;) {
         section += L.dsec_mm2[k];
-        /* sparse where neither perimeters nor solid layers fill the section */
+        /* sparse where neither perimeters nor solid layers fill the section,
+           nor a small island's infill, which is solid */
         double solid_mm2 = L.solid_s[k] * p->line_width_mm * p->solid_mm_s;
         double inner = fmax(0, section - L.outline_mm[k] * pw - solid_mm2);
-        double per_s = L.outline_mm[k] * per_mm;
+        double small_mm2 = fmin(inner, L.small_fill_mm2[k]);
+        inner -= small_mm2;
+        double per_s = L.outline_mm[k] * per_mm + L.small_mm[k] * small_per_mm;
         double fill_s = inner * p->infill_density / p->line_width_mm / p->infill_mm_s;
-        double solid_s = L.solid_s[k] * p->solid_factor;
+        double solid_s =
+            (L.solid_s[k] + small_mm2 / (p->line_width_mm * p->solid_mm_s)) * p->solid_factor;
         double work = per_s + fill_s + solid_s;
         out->perimeter_s += per_s;
         out->infill_s += fill_s;

@@ -3,7 +3,9 @@
  * deformation may fold a thin part onto itself; a result that does is
  * never returned (slim.c falls back to an earlier iterate).
  *
- * Thread-safe: each call builds its own Embree scene.
+ * Thread-safe: selfx_count and selfx_count_new build their own Embree
+ * scene; a selfx_ref keeps one, refitted by each selfx_ref_count: one
+ * thread at a time on a handle.
  */
 #ifndef SF_GEOM_SELFX_H
 #define SF_GEOM_SELFX_H
@@ -39,13 +41,14 @@ int selfx_count_new(const struct mesh *ref, const struct mesh *m, double tol, st
  * must outlive the handle and keep its shape; NULL on error: SF_EINVAL for
  * tol < 0, SF_ENOMEM); selfx_ref_count counts m's new crossings as
  * selfx_count_new does and, when mark (m->n_verts bytes) is given, sets it
- * to 1 at the vertices of each new crossing's edge and triangle, 0 elsewhere
- * (where the deformation folded).  selfx_ref_free(NULL) is a no-op.
+ * to 1 at the vertices of each new crossing's edge and triangle (every
+ * triangle an edge pierces, not the first the search meets), 0 elsewhere
+ * (where the deformation folded).  The reference's own crossings are
+ * noted the same way.  selfx_ref_free(NULL) is a no-op.
  */
 struct selfx_ref;
 struct selfx_ref *selfx_ref_new(const struct mesh *ref, double tol, struct sf_err *err);
-int selfx_ref_count(const struct selfx_ref *sr, const struct mesh *m, uint8_t *mark,
-                    struct sf_err *err);
+int selfx_ref_count(struct selfx_ref *sr, const struct mesh *m, uint8_t *mark, struct sf_err *err);
 void selfx_ref_free(struct selfx_ref *sr);
 
 /* The reference's own crossings: what selfx_count(ref) returns (the same

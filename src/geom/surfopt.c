@@ -586,10 +586,9 @@ pace_step(struct pace *pc, bool improved, double proxy, int patience, bool *craw
 
 /* One geometry round in the current frame.  cur ends as the round's best. */
 static int
-geometry_round(struct mesh *cur, const struct mesh *ref, const struct selfx_ref *sxr,
-               const double *sal, const struct surfopt_params *p, int round, bool freeze,
-               struct surfopt_result *res, struct snapshot *keep, int *n_keep, int *n_improved,
-               struct sf_err *err)
+geometry_round(struct mesh *cur, const struct mesh *ref, struct selfx_ref *sxr, const double *sal,
+               const struct surfopt_params *p, int round, bool freeze, struct surfopt_result *res,
+               struct snapshot *keep, int *n_keep, int *n_improved, struct sf_err *err)
 {
     uint32_t n = cur->n_verts;
     struct system s = { 0 };

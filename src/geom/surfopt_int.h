@@ -39,7 +39,7 @@ int surfopt_ray_metrics(const struct mesh *m, double angle_deg, struct support_m
  * with its metrics in *sm when res->shape_changed.
  */
 int surfopt_choose_kept(const struct mesh *m, struct mesh *cur, double oriented_s,
-                        const struct snapshot *keep, int n_keep, const struct selfx_ref *sxr,
+                        const struct snapshot *keep, int n_keep, struct selfx_ref *sxr,
                         const struct surfopt_params *p, struct surfopt_result *res,
                         struct support_metrics *sm, struct sf_err *err);
 

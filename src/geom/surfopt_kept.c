@@ -30,7 +30,7 @@ unchanged_why(const struct surfopt_result *res, int n_keep, int n_selfx, int n_p
 
 int
 surfopt_choose_kept(const struct mesh *m, struct mesh *cur, double oriented_s,
-                    const struct snapshot *keep, int n_keep, const struct selfx_ref *sxr,
+                    const struct snapshot *keep, int n_keep, struct selfx_ref *sxr,
                     const struct surfopt_params *p, struct surfopt_result *res,
                     struct support_metrics *sm, struct sf_err *err)
 {
