@@ -248,11 +248,12 @@ api_job_json(const struct job_row *j)
 json_t *
 api_print_json(const struct print_row *p)
 {
-    return json_pack("{sI si ss ss sI sI sf sI sI ss}", "id", (json_int_t)p->id, "copy", p->copy,
+    return json_pack("{sI si ss ss sI sI sf sI sI ss ss}", "id", (json_int_t)p->id, "copy", p->copy,
                      "printer", p->printer, "material", p->material, "start_line",
                      (json_int_t)p->start_line, "lines_acked", (json_int_t)p->lines_acked,
                      "filament_mm", p->filament_mm, "started_ms", (json_int_t)p->started_ms,
-                     "ended_ms", (json_int_t)p->ended_ms, "outcome", p->outcome);
+                     "ended_ms", (json_int_t)p->ended_ms, "outcome", p->outcome, "gcode_sha",
+                     p->gcode_sha);
 }
 
 json_t *

@@ -195,6 +195,9 @@ static const char *const migrations[] = {
     /* 12: files shared between hosts through the database (store_blob.c; store_int.h's
        STORE_BLOB_VERSION names this number: renumber both together) */
     STORE_BLOB_SCHEMA,
+    /* 13: the G-code each print ran (a job's changes when it is sliced again for another
+       printer between two copies) */
+    "ALTER TABLE prints ADD COLUMN gcode_sha TEXT NOT NULL DEFAULT '';",
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

@@ -132,6 +132,9 @@ struct print_row {
     int64_t started_ms;  /* wall clock */
     int64_t ended_ms;    /* 0 while running */
     char outcome[16];    /* "" running, "done", "failed", "cancelled", "refused", "interrupted" */
+    char gcode_sha[STORE_SHA_HEX]; /* the G-code it ran (schema 13; "" for an older print):
+                                      the job's may change after (a reslice for another
+                                      printer before its next copy) */
 };
 
 /* One entry of the event log. */

@@ -269,10 +269,11 @@ open_print(struct store *s, const struct job_row *j, const char *printer, int64_
            struct sf_err *err)
 {
     struct sqldb_stmt *st;
-    int rc = store_prepare(s, &st,
-                           "INSERT INTO prints(job_id, copy, printer, material, start_line,"
-                           " lines_acked, started_ms, wait_ms) VALUES(?,?,?,?,?,?,?,?)",
-                           err);
+    int rc =
+        store_prepare(s, &st,
+                      "INSERT INTO prints(job_id, copy, printer, material, start_line,"
+                      " lines_acked, started_ms, wait_ms, gcode_sha) VALUES(?,?,?,?,?,?,?,?,?)",
+                      err);
     if (rc)
         return rc;
     sqldb_bind_int64(st, 1, j->id);
@@ -286,6 +287,7 @@ open_print(struct store *s, const struct job_row *j, const char *printer, int64_
     /* a resume of an interrupted print waited for the operator, not in the queue */
     sqldb_bind_int64(
         st, 8, j->state == JOB_READY && j->ready_ms > 0 && t > j->ready_ms ? t - j->ready_ms : 0);
+    sqldb_bind_text(st, 9, j->gcode_sha);
     return store_step_done(s, st, err, "open print");
 }
 
@@ -784,6 +786,15 @@ read_print(struct sqldb_stmt *st, void *row)
     store_copy_text(p->outcome, sizeof(p->outcome), st, 10);
 }
 
+/* read_print and column 11, the print's G-code (store_beds shares columns 0..10 alone). */
+static void
+read_print_gcode(struct sqldb_stmt *st, void *row)
+{
+    struct print_row *p = row;
+    read_print(st, p);
+    store_copy_text(p->gcode_sha, sizeof(p->gcode_sha), st, 11);
+}
+
 int
 store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n,
              struct sf_err *err)
@@ -791,13 +802,14 @@ store_prints(struct store *s, int64_t job_id, struct print_row **rows, size_t *n
     struct sqldb_stmt *st;
     int rc = store_select(s, &st,
                           "SELECT id, job_id, copy, printer, material, start_line, lines_acked,"
-                          " filament_mm, started_ms, ended_ms, outcome FROM prints WHERE job_id = ?"
-                          " ORDER BY id",
+                          " filament_mm, started_ms, ended_ms, outcome, gcode_sha FROM prints"
+                          " WHERE job_id = ? ORDER BY id",
                           (void **)rows, n, err);
     if (rc)
         return rc;
     sqldb_bind_int64(st, 1, job_id);
-    return store_read_rows(s, st, sizeof(**rows), read_print, (void **)rows, n, "list prints", err);
+    return store_read_rows(s, st, sizeof(**rows), read_print_gcode, (void **)rows, n, "list prints",
+                           err);
 }
 
 static void

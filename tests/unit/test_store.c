@@ -218,6 +218,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
                  "DROP INDEX jobs_live; DROP INDEX prints_printer; DROP INDEX prints_printer_id;"
                  "DROP INDEX jobs_queue_pos; ALTER TABLE jobs DROP COLUMN queue_pos;"
                  "DROP TABLE printer_cfgs; DROP TABLE file_chunks; DROP TABLE file_blobs;"
+                 "ALTER TABLE prints DROP COLUMN gcode_sha;"
                  "PRAGMA user_version = 1",
                  NULL, NULL, NULL),
              SQLITE_OK);
@@ -264,6 +265,49 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
  * the table, not measured in the row, for methods that do not reshape; a
  * re-slice of the saved part (no new mesh, nothing measured) keeps it.
  */
+/*
+ * Each print names the G-code it ran: a job of two copies is sliced again
+ * for another printer after its first copy (the farm's reslice for an idle
+ * printer of another kind), and the first print still names the file it
+ * printed.  Before schema 13 only the job's (latest) G-code was known, so an
+ * audit of what a printer executed compared its first copy with the wrong
+ * file.
+ */
+T_CASE(store_print_names_the_gcode_it_ran)
+{
+    struct sf_err err;
+    const char *dir = fresh_dir("gcode_of_print");
+    struct store *s = t_store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    int64_t id = add_job(s, "solid a\nendsolid a\n", 2, &err);
+    T_TRUE(id > 0);
+    T_OK(make_ready(s, id, &err), &err);
+    struct job_row j;
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    char first[STORE_SHA_HEX];
+    snprintf(first, sizeof(first), "%s", j.gcode_sha);
+    struct job_event_args start = { .printer = "mk4" };
+    struct job_event_args done = { .lines_acked = 2 };
+    T_OK(store_job_event(s, id, JOB_EV_START, &start, NULL, &err), &err);
+    T_OK(store_job_event(s, id, JOB_EV_PRINT_DONE, &done, NULL, &err), &err);
+    char again[STORE_SHA_HEX];
+    T_OK(store_file_put(s, "G28\nG1 X2\n", 10, again, &err), &err);
+    struct job_event_args re = { .gcode_sha = again, .size_mm = { 20, 30, 40 } };
+    T_OK(store_job_event(s, id, JOB_EV_PREPARED, &re, NULL, &err), &err);
+    start.printer = "mini";
+    T_OK(store_job_event(s, id, JOB_EV_START, &start, NULL, &err), &err);
+    T_OK(store_job_event(s, id, JOB_EV_PRINT_DONE, &done, NULL, &err), &err);
+    struct print_row *p;
+    size_t n;
+    T_OK(store_prints(s, id, &p, &n, &err), &err);
+    T_EQ_INT(n, 2);
+    T_EQ_STR(p[0].gcode_sha, first);
+    T_EQ_STR(p[1].gcode_sha, again);
+    T_TRUE(strcmp(first, again) != 0);
+    free(p);
+    store_close(s);
+}
+
 T_CASE(store_keeps_the_deviation_of_a_reshaped_part)
 {
     struct sf_err err;

@@ -186,7 +186,7 @@ for f in glob.glob(os.path.join(tmp, "job-*.json")):
     d = json.load(open(f))
     for p in d["prints"]:
         prints.append((p["started_ms"], p["id"], p["printer"], p["outcome"], p["start_line"],
-                       p["lines_acked"], d["job"]["gcode_sha"], d["job"]["id"]))
+                       p["lines_acked"], p.get("gcode_sha") or d["job"]["gcode_sha"], d["job"]["id"]))
 prints.sort()
 bad = 0
 ran_on = []  # lines each interrupted print ran past its last saved line

@@ -43,7 +43,7 @@ prints = []
 for f in glob.glob(os.path.join(tmp, "job-*.json")):
     d = json.load(open(f))
     for p in d["prints"]:
-        prints.append((p["started_ms"], p["id"], p["printer"], p["outcome"], d["job"]["gcode_sha"],
+        prints.append((p["started_ms"], p["id"], p["printer"], p["outcome"], p.get("gcode_sha") or d["job"]["gcode_sha"],
                        d["job"]["id"], p["start_line"]))
 prints.sort()
 bad = 0
