@@ -348,15 +348,17 @@ farm_printer_view(const struct printer *p, struct sched_printer *out)
  * Start preparing job j for printer p.  A queued job goes to preparing; a
  * ready one (reslice) stays ready with the G-code it has until the new one
  * is stored.  The part as optimized for this angle is reused when the job
- * has one: only the slicing is repeated.
+ * has one: only the slicing is repeated.  False when the store is busy (its
+ * PREPARE could not be written within STOREQ_SYNC_MS): the pass stops there
+ * rather than wait that long again for each job (the commit wakes the farm).
  */
-static void
+static bool
 prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice)
 {
     struct sf_err err;
     struct prep *t = mem_calloc(1, sizeof(*t));
     if (!t)
-        return; /* retried on the next kick */
+        return true; /* retried on the next kick */
     struct sched_printer view;
     farm_printer_view(p, &view);
     t->f = f;
@@ -379,21 +381,22 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
         free(t);
         if (reslice) {
             log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
-            return;
+            return true;
         }
         struct job_event_args a = { .reason = err.msg };
         queue_event(f, j->id, JOB_EV_PREPARE, NULL);
         queue_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
-        return;
+        return true;
     }
     /* out: beside the stored files, named for the job and the task */
     char *slash = strrchr(t->req.out_path, '/');
     snprintf(slash + 1, 32, "job-%lld%s.gcode", (long long)j->id, reslice ? "-re" : "");
     if (!reuse)
         snprintf(t->req.mesh_out, sizeof(t->req.mesh_out), "%s.stl", t->req.out_path);
-    if (!reslice && job_event(f, j->id, JOB_EV_PREPARE, NULL)) {
+    int rc = reslice ? SF_OK : job_event(f, j->id, JOB_EV_PREPARE, NULL);
+    if (rc) {
         free(t);
-        return;
+        return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
     }
     if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
         if (!reslice) {
@@ -401,7 +404,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
             queue_event(f, j->id, JOB_EV_DEFER, &a);
         }
         free(t);
-        return;
+        return true;
     }
     if (reslice) {
         log_info("farm", "job %lld: preparing it again for %s (%s)%s", (long long)j->id,
@@ -410,6 +413,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
         f->reslices = t;
     }
     f->preparing++;
+    return true;
 }
 
 /* ---- scheduling ---- */
@@ -526,8 +530,8 @@ run(struct loop *l, void *ud)
             continue;
         }
         size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
-        if (best < f->n_printers)
-            prepare(f, &jobs[i], f->printers[best], false);
+        if (best < f->n_printers && !prepare(f, &jobs[i], f->printers[best], false))
+            break; /* the store is busy: its commit wakes the farm for the rest */
     }
     for (size_t i = 0; i < n; i++)
         if (jobs[i].state == JOB_READY && why[i][0])

@@ -444,9 +444,15 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
     p->state = PRINTER_OFFLINE;
     struct sf_err err;
     storeq_printer_set(env->q, cfg->name, PRINTER_OFFLINE);
-    storeq_sync(env->q, -1, NULL); /* the bed a printer of this name just had (farm_apply) */
-    if (store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err))
-        log_printer(LOG_ERROR, cfg->name, "%s", err.msg);
+    /* The bed a printer of this name just had (farm_apply replaces printers), once the queue
+       is written; the loop waits PRINTER_BED_SYNC_MS at most (a reload or an API add while
+       the database is held busy must not stop the other printers' streams), and a bed it
+       cannot read is taken as holding a part: nothing starts on it until it is cleared. */
+    if (storeq_sync(env->q, PRINTER_BED_SYNC_MS, &err) ||
+        store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err)) {
+        p->bed_full = true;
+        log_printer(LOG_ERROR, cfg->name, "%s: its bed is taken as holding a part", err.msg);
+    }
     if (p->bed_full)
         log_printer(LOG_INFO, cfg->name, "its bed holds a part: clear it before the next job");
     if (!cfg->enabled) {

@@ -22,6 +22,10 @@
 #include "job.h"
 #include "printer.h"
 
+/* How long a new printer waits for the store queue before it reads its bed (printer_new):
+   longer than STOREQ_SYNC_MS, since a bed read too early could miss a part on it. */
+#define PRINTER_BED_SYNC_MS 2000
+
 /* One driver event as it happened. */
 struct queued {
     enum drv_event ev;    /* what */
