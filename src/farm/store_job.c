@@ -784,6 +784,7 @@ read_print(struct sqldb_stmt *st, void *row)
     p->started_ms = sqldb_column_int64(st, 8);
     p->ended_ms = sqldb_column_int64(st, 9);
     store_copy_text(p->outcome, sizeof(p->outcome), st, 10);
+    p->gcode_sha[0] = '\0'; /* read_print_gcode's column 11: store_beds has another there */
 }
 
 /* read_print and column 11, the print's G-code (store_beds shares columns 0..10 alone). */
