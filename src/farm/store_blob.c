@@ -185,17 +185,14 @@ out_close:
     return rc;
 }
 
-/* Fetch sha's n_chunks chunks (size bytes, chunk bytes each but the last) from db into fd,
-   hashing them into got. */
+/* Fetch sha's chunks (size bytes, chunk bytes each but the last) from db into f. */
 static int
-recv_chunks(struct sqldb *db, int fd, const char *tmp, const char *sha, int64_t size, int64_t chunk,
-            char got[STORE_SHA_HEX], struct sf_err *err)
+recv_chunks(struct sqldb *db, struct store_file *f, const char *sha, int64_t size, int64_t chunk,
+            struct sf_err *err)
 {
-    struct store_sha *md = store_sha_new(err);
     struct sqldb_stmt *st = NULL;
-    int rc = md ? SF_OK : SF_ENOMEM;
-    if (rc == SF_OK &&
-        sqldb_prepare(db, "SELECT data FROM file_chunks WHERE sha256 = ? AND seq = ?", &st))
+    int rc = SF_OK;
+    if (sqldb_prepare(db, "SELECT data FROM file_chunks WHERE sha256 = ? AND seq = ?", &st))
         rc = sf_err_set(err, SF_EIO, "store: fetching file %s: %s", sha, sqldb_errmsg(db));
     int64_t n_chunks = size == 0 ? 1 : (size + chunk - 1) / chunk;
     for (int64_t seq = 0; rc == SF_OK && seq < n_chunks; seq++) {
@@ -220,18 +217,10 @@ recv_chunks(struct sqldb *db, int fd, const char *tmp, const char *sha, int64_t 
         else if ((int64_t)len != want)
             rc = sf_err_set(err, SF_EIO, "store: file %s: chunk %lld is %zu bytes, not %lld", sha,
                             (long long)seq, len, (long long)want);
-        else if ((rc = store_sha_update(md, data, len, err)) == SF_OK)
-            for (size_t off = 0; rc == SF_OK && off < len;) {
-                ssize_t w = write(fd, data + off, len - off);
-                if (w < 0 && errno != EINTR)
-                    rc = sf_err_sys(err, "store: writing '%s'", tmp);
-                off += w > 0 ? (size_t)w : 0;
-            }
+        else
+            rc = store_file_write(f, data, len, err);
     }
-    if (rc == SF_OK)
-        rc = store_sha_final(md, got, err);
     sqldb_finalize(st);
-    store_sha_free(md);
     return rc;
 }
 
@@ -253,21 +242,13 @@ store_blob_fetch(struct sqldb *db, const char *dir, const char *sha, struct sf_e
                           "store: file %s: the database gives %lld bytes in chunks "
                           "of %lld: not a file this store wrote",
                           sha, (long long)size, (long long)chunk);
-    char tmp[STORE_PATH_MAX + 64];
-    snprintf(tmp, sizeof(tmp), "%s/files/tmp-XXXXXX", dir);
-    int fd = mkstemp(tmp);
-    if (fd < 0)
-        return sf_err_sys(err, "store: cannot create a file in '%s/files'", dir);
-    char got[STORE_SHA_HEX];
-    rc = recv_chunks(db, fd, tmp, sha, size, chunk, got, err);
-    if (rc == SF_OK && strcmp(got, sha) != 0)
-        rc = sf_err_set(err, SF_EIO,
-                        "store: file %s from the database has SHA-256 %s: corrupt, not kept", sha,
-                        got);
-    if (rc == SF_OK)
-        rc = store_file_place(dir, fd, tmp, sha, err);
-    close(fd);
-    if (rc)
-        unlink(tmp);
-    return rc;
+    /* a temporary file, hashed as it is written, placed only if its SHA-256 is sha */
+    struct store_file *f = store_file_begin_in(dir, err);
+    if (!f)
+        return err ? err->code : SF_EIO;
+    if ((rc = recv_chunks(db, f, sha, size, chunk, err))) {
+        store_file_abort(f);
+        return rc;
+    }
+    return store_file_keep_as(f, sha, err);
 }

@@ -31,7 +31,8 @@
 #include "store_int.h"
 
 struct store_file {
-    struct store *s;               /* owner */
+    struct store *s;               /* owner; NULL for store_file_begin_in's */
+    const char *dir;               /* the data dir it goes into (s's, or the caller's) */
     int fd;                        /* temporary file being written */
     char tmp[STORE_PATH_MAX + 64]; /* its path */
     struct store_sha *md;          /* running SHA-256 */
@@ -52,18 +53,18 @@ store_sha_valid(const char *sha)
 }
 
 struct store_file *
-store_file_begin(struct store *s, struct sf_err *err)
+store_file_begin_in(const char *dir, struct sf_err *err)
 {
     struct store_file *f = mem_calloc(1, sizeof(*f));
     if (!f) {
         sf_err_set(err, SF_ENOMEM, "store: out of memory");
         return NULL;
     }
-    f->s = s;
-    snprintf(f->tmp, sizeof(f->tmp), "%s/files/tmp-XXXXXX", s->dir);
+    f->dir = dir;
+    snprintf(f->tmp, sizeof(f->tmp), "%s/files/tmp-XXXXXX", dir);
     f->fd = mkstemp(f->tmp);
     if (f->fd < 0) {
-        sf_err_sys(err, "store: cannot create a file in '%s/files'", s->dir);
+        sf_err_sys(err, "store: cannot create a file in '%s/files'", dir);
         free(f);
         return NULL;
     }
@@ -71,6 +72,15 @@ store_file_begin(struct store *s, struct sf_err *err)
         store_file_abort(f);
         return NULL;
     }
+    return f;
+}
+
+struct store_file *
+store_file_begin(struct store *s, struct sf_err *err)
+{
+    struct store_file *f = store_file_begin_in(s->dir, err);
+    if (f)
+        f->s = s;
     return f;
 }
 
@@ -204,10 +214,26 @@ store_file_record(struct store *s, const char *sha, int64_t size, struct sf_err 
 }
 
 int
+store_file_keep_as(struct store_file *f, const char *sha, struct sf_err *err)
+{
+    char got[STORE_SHA_HEX];
+    int rc = store_sha_final(f->md, got, err);
+    if (rc == SF_OK && strcmp(got, sha) != 0)
+        rc = sf_err_set(err, SF_EIO, "store: file %s arrived with SHA-256 %s: corrupt, not kept",
+                        sha, got);
+    if (rc == SF_OK && (rc = store_file_place(f->dir, f->fd, f->tmp, sha, err)) == SF_OK) {
+        close(f->fd);
+        f->fd = -1;
+    }
+    store_file_abort(f);
+    return rc;
+}
+
+int
 store_file_commit(struct store_file *f, char sha[STORE_SHA_HEX], struct sf_err *err)
 {
     int rc = store_sha_final(f->md, sha, err);
-    if (rc == SF_OK && (rc = store_file_place(f->s->dir, f->fd, f->tmp, sha, err)) == SF_OK) {
+    if (rc == SF_OK && (rc = store_file_place(f->dir, f->fd, f->tmp, sha, err)) == SF_OK) {
         close(f->fd);
         f->fd = -1;
         rc = store_file_record(f->s, sha, f->size, err);

@@ -194,6 +194,15 @@ void store_sha_free(struct store_sha *h);
  */
 int store_file_place(const char *dir, int fd, const char *from, const char *sha,
                      struct sf_err *err);
+/*
+ * store_file_begin into data dir dir (which must outlive it), for a file that
+ * is not recorded (a fetched copy, store_blob_fetch): written with
+ * store_file_write, then store_file_keep_as places it at sha's address if its
+ * SHA-256 is sha (SF_EIO naming both if not, the temporary file removed);
+ * keep_as always frees f.
+ */
+struct store_file *store_file_begin_in(const char *dir, struct sf_err *err);
+int store_file_keep_as(struct store_file *f, const char *sha, struct sf_err *err);
 
 /*
  * The database's copy of the files (store_blob.c; PostgreSQL stores only).
