@@ -70,6 +70,7 @@ http_status_of(int code)
     case SF_ENOTFOUND:
         return MHD_HTTP_NOT_FOUND;
     case SF_EAGAIN:
+    case SF_ESTALE: /* a fencing token or lease another host has since replaced */
         return MHD_HTTP_CONFLICT;
     case SF_EUNSUPP:
         return MHD_HTTP_NOT_IMPLEMENTED;

@@ -102,6 +102,8 @@ sf_status_name(int code)
         return "EUNREACH";
     case SF_ESTALE:
         return "ESTALE";
+    case SF_EINDOUBT:
+        return "EINDOUBT";
     }
     return code > 0 ? "count" : "unknown";
 }

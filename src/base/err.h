@@ -29,6 +29,8 @@ enum sf_status {
     SF_ENOTFOUND = -9, /* a named thing does not exist */
     SF_EUNREACH = -10, /* a device does not answer now (an offline printer) */
     SF_ESTALE = -11,   /* a lease or fencing token another process has since replaced */
+    SF_EINDOUBT = -12, /* an outcome nobody knows (a commit the connection was lost during):
+                          read it back before trying again */
 };
 
 #define SF_ERR_MSG_MAX 256

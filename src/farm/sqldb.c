@@ -48,6 +48,7 @@ sqldb_fail(struct sqldb *db, const char *msg)
 {
     snprintf(db->msg, sizeof(db->msg), "%s", msg ? msg : "unknown error");
     one_line(db->msg);
+    db->code = SF_EIO;
     return SF_EIO;
 }
 
@@ -59,6 +60,7 @@ sqldb_failf(struct sqldb *db, int code, const char *fmt, ...)
     vsnprintf(db->msg, sizeof(db->msg), fmt, ap);
     va_end(ap);
     one_line(db->msg);
+    db->code = code;
     return code;
 }
 
@@ -82,14 +84,22 @@ sqldb_errmsg(const struct sqldb *db)
 }
 
 int
+sqldb_errcode(const struct sqldb *db)
+{
+    return db->code < 0 ? db->code : SF_EIO;
+}
+
+int
 sqldb_exec(struct sqldb *db, const char *sql)
 {
+    db->code = SF_OK;
     return db->ops->exec(db, sql);
 }
 
 int
 sqldb_begin(struct sqldb *db)
 {
+    db->code = SF_OK;
     int rc = db->ops->exec(db, db->ops->begin_sql);
     db->in_tx = rc == SF_OK;
     return rc;
@@ -98,13 +108,10 @@ sqldb_begin(struct sqldb *db)
 int
 sqldb_commit(struct sqldb *db)
 {
+    db->code = SF_OK;
     int rc = db->ops->exec(db, "COMMIT");
-    if (rc != SF_OK) {
-        char msg[SQLDB_MSG_MAX];
-        snprintf(msg, sizeof(msg), "%s", db->msg); /* the commit's, not the rollback's */
+    if (rc != SF_OK)
         sqldb_rollback(db); /* still in the transaction: a lost connection is not retried */
-        snprintf(db->msg, sizeof(db->msg), "%s", msg);
-    }
     db->in_tx = false;
     return rc;
 }
@@ -112,11 +119,24 @@ sqldb_commit(struct sqldb *db)
 void
 sqldb_rollback(struct sqldb *db)
 {
+    /* outside a transaction there is nothing to undo, and a call could reconnect (a failed
+       COMMIT rolls back itself: the caller's rollback after it must not wait on the network) */
+    if (!db->in_tx)
+        return;
     char msg[SQLDB_MSG_MAX];
     snprintf(msg, sizeof(msg), "%s", db->msg); /* keep the failure that led here */
+    int code = db->code;
     db->ops->exec(db, "ROLLBACK");
     db->in_tx = false;
     snprintf(db->msg, sizeof(db->msg), "%s", msg);
+    db->code = code;
+}
+
+int
+sqldb_commit_outcome(struct sqldb *db)
+{
+    db->code = SF_OK;
+    return db->ops->commit_outcome ? db->ops->commit_outcome(db) : 0;
 }
 
 int
@@ -135,6 +155,7 @@ int
 sqldb_prepare(struct sqldb *db, const char *sql, struct sqldb_stmt **st)
 {
     *st = NULL;
+    db->code = SF_OK;
     return db->ops->prepare(db, sql, st);
 }
 
@@ -174,6 +195,7 @@ sqldb_bind_blob(struct sqldb_stmt *st, int i, const void *data, size_t len)
 int
 sqldb_step(struct sqldb_stmt *st)
 {
+    st->db->code = SF_OK;
     return st->db->ops->step(st);
 }
 
@@ -259,6 +281,7 @@ check_channel(struct sqldb *db, const char *channel)
 int
 sqldb_listen(struct sqldb *db, const char *channel)
 {
+    db->code = SF_OK;
     int rc = check_channel(db, channel);
     return rc || !db->ops->listen ? rc : db->ops->listen(db, channel);
 }
@@ -266,6 +289,7 @@ sqldb_listen(struct sqldb *db, const char *channel)
 int
 sqldb_notify(struct sqldb *db, const char *channel, const char *payload)
 {
+    db->code = SF_OK;
     int rc = check_channel(db, channel);
     if (rc)
         return rc;
@@ -285,5 +309,6 @@ sqldb_notify_fd(struct sqldb *db)
 int
 sqldb_notifications(struct sqldb *db, sqldb_notify_fn fn, void *arg)
 {
+    db->code = SF_OK;
     return db->ops->notifications ? db->ops->notifications(db, fn, arg) : 0;
 }

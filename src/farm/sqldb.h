@@ -24,9 +24,23 @@
  * sqldb_engine(); connection set-up (SQLite's WAL and busy timeout) lives
  * in the drivers.
  *
- * Errors: functions return SF_OK or SF_EIO (SF_ENOMEM for memory) and
- * leave the engine's message on the handle (sqldb_errmsg), as sqlite3
- * does; the store wraps it into its sf_err.
+ * Errors: functions return SF_OK or a code that says what a caller may do
+ * (SF_ENOMEM for memory), and leave the engine's message on the handle
+ * (sqldb_errmsg), as sqlite3 does; the store wraps both into its sf_err
+ * (sqldb_errcode):
+ *   SF_EAGAIN    busy: SQLite's lock, PostgreSQL's serialization failure,
+ *                deadlock, lock not available, insufficient resources, a
+ *                cancelled statement.  Nothing was applied (a transaction that
+ *                met it is rolled back): try it again, whole, later.
+ *   SF_EUNREACH  the connection is lost or not back yet ("connection lost",
+ *                "database unreachable (retrying)") and nothing was applied:
+ *                the statement was not sent, or its transaction did not commit.
+ *   SF_EINDOUBT  the connection was lost while a COMMIT (or a write outside a
+ *                transaction) ran: it may have been applied.  Not to be retried
+ *                blindly: ask sqldb_commit_outcome, or make the write idempotent.
+ *   SF_EIO       anything else: a constraint, invalid input (a byte sequence
+ *                the database's encoding refuses), SQL the engine rejects, a
+ *                damaged file.  Trying again gives the same answer.
  *
  * A PostgreSQL connection can be lost (the server restarts, the network
  * parts); sqldb_on_reconnect below says what then.  LISTEN/NOTIFY, which
@@ -62,6 +76,7 @@ enum {
 
 /* sqldb_open flags */
 #define SQLDB_READONLY 1u /* reads only: a write fails */
+#define SQLDB_NOWAIT   2u /* PostgreSQL: a reconnect never waits (the loop's connection) */
 
 /* Whether target names a PostgreSQL server ("postgresql://..." or "postgres://...")
    rather than an SQLite file. */
@@ -81,13 +96,30 @@ void sqldb_close(struct sqldb *db);
 enum sqldb_engine sqldb_engine(const struct sqldb *db);
 /* The engine's message for the last failure on db ("" if none). */
 const char *sqldb_errmsg(const struct sqldb *db);
+/* The code of the last call's failure (above); SF_EIO when that call did not fail (a caller
+   that found something else wrong, an unexpected row). */
+int sqldb_errcode(const struct sqldb *db);
 
 /* Run sql, one or more statements without parameters or rows. */
 int sqldb_exec(struct sqldb *db, const char *sql);
-/* BEGIN (SQLite: IMMEDIATE, taking the write lock now), COMMIT, ROLLBACK. */
+/* BEGIN (SQLite: IMMEDIATE, taking the write lock now), COMMIT, ROLLBACK.  A COMMIT that
+   fails is rolled back; ROLLBACK outside a transaction does nothing (it never reconnects). */
 int sqldb_begin(struct sqldb *db);
 int sqldb_commit(struct sqldb *db);
 void sqldb_rollback(struct sqldb *db);
+/*
+ * After a write failed with SF_EINDOUBT: whether it was applied.  1: the
+ * transaction committed; 0: it did not (nothing applied: run it again);
+ * < 0, message on db: still unknown (SF_EINDOUBT; the server cannot be
+ * asked now, or the write ran outside a transaction and left nothing to
+ * look up): ask again later, as long as the caller's patience lasts.
+ * PostgreSQL: BEGIN takes the transaction's id (txid_current(), in the same
+ * round trip); this asks txid_status() on a new session, first ending this
+ * handle's last session if the server still runs it (pg_terminate_backend
+ * of that pid and start time: its transaction is then settled, and its
+ * session locks freed).  SQLite: always 0 (a local commit is never in doubt).
+ */
+int sqldb_commit_outcome(struct sqldb *db);
 /*
  * Whether later commits wait for the disk (the default) or may return
  * before it (SQLite synchronous=NORMAL in WAL, PostgreSQL
@@ -109,7 +141,20 @@ int64_t sqldb_changes(const struct sqldb *db);
  * that keeps calling neither waits nor hammers the server.  One attempt
  * waits at most connect_timeout (5 s unless the URL sets it); TCP
  * keepalives (10 s idle, then 3 probes 5 s apart) and tcp_user_timeout
- * (10 s) find a silent network partition, unless the URL sets them.
+ * (10 s) find a silent network partition, unless the URL sets them.  The
+ * server's side of each session gets the same keepalives and user timeout
+ * (SET per session), so a backend whose client vanished in a partition
+ * ends within about 25 s and frees its session's advisory locks, instead
+ * of after the kernel's two hours.
+ *
+ * SQLDB_NOWAIT (a connection on the loop): no call waits for a connect.
+ * The call that finds the loss starts one (PQresetStart) and it and every
+ * later call until the new session is up fail at once with "database
+ * unreachable (retrying): connecting ...", each advancing the connect as
+ * far as it goes without waiting (PQresetPoll on a ready socket); an
+ * attempt not up within connect_timeout is dropped and the back-off above
+ * applies.  Once connected, restoring the session takes a few round trips
+ * on the new connection.
  *
  * Inside a transaction (sqldb_begin until sqldb_commit or sqldb_rollback)
  * nothing reconnects: every later statement and the COMMIT fail, so a
@@ -121,6 +166,8 @@ int64_t sqldb_changes(const struct sqldb *db);
  * after it.
  *
  * After a reconnect the session is restored before any other statement:
+ * the last session is ended if the server still runs it (pg_terminate_backend
+ * of its pid and start time: its locks are freed, its transaction settled),
  * durability (sqldb_set_durable), read-only mode and every LISTEN; then fn
  * (if set) runs, so the caller re-takes what its session held (the
  * store's advisory lock).  fn may run statements on db; an error from it

@@ -43,11 +43,14 @@ struct sqldb_ops {
     int (*notify)(struct sqldb *db, const char *channel, const char *payload);
     int (*notify_fd)(struct sqldb *db);
     int (*notifications)(struct sqldb *db, sqldb_notify_fn fn, void *arg);
+    /* sqldb_commit_outcome; NULL: nothing is ever in doubt (SQLite) */
+    int (*commit_outcome)(struct sqldb *db);
 };
 
 struct sqldb {
     const struct sqldb_ops *ops;
     char msg[SQLDB_MSG_MAX];         /* the last failure's message */
+    int code;                        /* the last call's failure (sqldb_errcode), SF_OK if none */
     int64_t changes;                 /* rows the last write changed */
     bool in_tx;                      /* between a sqldb_begin and its commit or rollback */
     int64_t reconnects;              /* successful reconnects (sqldb_reconnects) */
@@ -62,9 +65,10 @@ struct sqldb_stmt {
 /* The drivers' open functions (sqldb_open picks one); NULL with err set. */
 struct sqldb *sqldb_sqlite_open(const char *path, unsigned flags, struct sf_err *err);
 struct sqldb *sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err);
-/* Keep msg (cut to fit, without a trailing newline) as db's last failure; returns SF_EIO. */
+/* Keep msg (cut to fit, without a trailing newline) as db's last failure, code SF_EIO;
+   returns SF_EIO. */
 int sqldb_fail(struct sqldb *db, const char *msg);
-/* As sqldb_fail with a format; returns code. */
+/* As sqldb_fail with a format and code (kept for sqldb_errcode); returns code. */
 int sqldb_failf(struct sqldb *db, int code, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 

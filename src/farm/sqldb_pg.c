@@ -32,6 +32,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 
 #include "../base/clock.h"
 #include "../base/mem.h"
@@ -50,6 +51,17 @@ struct pg {
     bool async_commit;            /* sqldb_set_durable(false) in force: restored */
     bool lost;                    /* the connection is gone: reconnect before use */
     bool reconnecting;            /* restoring a session: a loss now fails, no recursion */
+    bool connecting;              /* SQLDB_NOWAIT: a PQresetStart is under way */
+    PostgresPollingStatusType poll; /* its last PQresetPoll (what its socket waits for) */
+    int64_t connect_ms;           /* clock_mono_ms when it started */
+    int64_t connect_timeout_ms;   /* the connection's connect_timeout (0: none) */
+    int64_t xid;                  /* the open transaction's id (txid_current), 0 if none */
+    bool doubt;                   /* the last write's outcome is unknown (SF_EINDOUBT) */
+    int64_t doubt_xid;            /* its transaction's id; 0: it ran outside one */
+    int pid;                      /* the server process of this session (pg_backend_pid) */
+    char started[64];             /* and its backend_start, as text: together, this session */
+    int old_pid;                  /* a lost session the server may still run; 0 if none */
+    char old_started[64];
     int backoff_ms;               /* the wait after the next failed attempt; 0: none yet */
     int64_t retry_ms;             /* clock_mono_ms of the next attempt allowed */
     char lost_msg[SQLDB_MSG_MAX]; /* why the connection is away (the server's message) */
@@ -86,6 +98,34 @@ pg_close(struct sqldb *db)
     free(db);
 }
 
+/* Whether sql only reads, or only touches the session (which a lost connection ends): a
+   loss while it ran applied nothing. */
+static bool
+reads_only(const char *sql)
+{
+    while (*sql == ' ' || *sql == '\n' || *sql == '(')
+        sql++;
+    return strncasecmp(sql, "SELECT", 6) == 0 || strncasecmp(sql, "SHOW", 4) == 0 ||
+           strncasecmp(sql, "BEGIN", 5) == 0 || strncasecmp(sql, "LISTEN", 6) == 0 ||
+           strncasecmp(sql, "SET", 3) == 0 || strncasecmp(sql, "ROLLBACK", 8) == 0;
+}
+
+/* The code of a failure the server reported on a live connection (sqldb.h): busy, or not. */
+static int
+code_of(const PGresult *res)
+{
+    const char *c = res ? PQresultErrorField(res, PG_DIAG_SQLSTATE) : NULL;
+    if (!c)
+        return SF_EIO;
+    /* serialization failure, deadlock, lock not available, insufficient resources (disk
+       full, too many connections), a cancelled statement: the transaction is rolled back
+       and a later try may pass */
+    if (strcmp(c, "40001") == 0 || strcmp(c, "40P01") == 0 || strcmp(c, "55P03") == 0 ||
+        strncmp(c, "53", 2) == 0 || strcmp(c, "57014") == 0)
+        return SF_EAGAIN;
+    return SF_EIO;
+}
+
 /* Whether the failure res reports (NULL: none) means the connection is gone. */
 static bool
 lost_by(struct sqldb *db, const PGresult *res)
@@ -97,19 +137,35 @@ lost_by(struct sqldb *db, const PGresult *res)
                     strcmp(code, "57P02") == 0 || strcmp(code, "57P03") == 0);
 }
 
-/* db's last failure from res (or the connection's message when res has none); a lost
-   connection is marked so, for ready() to reconnect. */
+/* db's last failure from res (or the connection's message when res has none) while sql ran,
+   with its code (sqldb.h); a lost connection is marked so, for ready() to reconnect. */
 static int
-fail_res(struct sqldb *db, const PGresult *res)
+fail_res(struct sqldb *db, const PGresult *res, const char *sql)
 {
     const char *m = res ? PQresultErrorField(res, PG_DIAG_MESSAGE_PRIMARY) : NULL;
     sqldb_fail(db, m ? m : PQerrorMessage(conn(db)));
-    if (!lost_by(db, res))
-        return SF_EIO;
+    if (!lost_by(db, res)) {
+        db->code = code_of(res);
+        return db->code;
+    }
     struct pg *p = (struct pg *)db;
     p->lost = true;
     snprintf(p->lost_msg, sizeof(p->lost_msg), "%s", db->msg);
-    return sqldb_failf(db, SF_EIO, "connection lost: %s", p->lost_msg);
+    if (strcmp(sql, "COMMIT") == 0) { /* sent, perhaps committed: nobody knows */
+        p->doubt = true;
+        p->doubt_xid = p->xid;
+        return sqldb_failf(db, SF_EINDOUBT,
+                           "connection lost during COMMIT, whose outcome is unknown: %s",
+                           p->lost_msg);
+    }
+    if (db->in_tx || reads_only(sql)) /* the transaction ends uncommitted with its session */
+        return sqldb_failf(db, SF_EUNREACH, "connection lost: %s", p->lost_msg);
+    p->doubt = true;
+    p->doubt_xid = 0;
+    return sqldb_failf(db, SF_EINDOUBT,
+                       "connection lost: %s (while a write ran outside a transaction: it may "
+                       "have been applied)",
+                       p->lost_msg);
 }
 
 /* Rows a finished command changed: INSERT, UPDATE and DELETE only, as SQLite counts. */
@@ -129,18 +185,23 @@ pg_exec(struct sqldb *db, const char *sql)
     int rc = ready(p);
     if (rc)
         return rc;
-    PGresult *res = PQexec(conn(db), sql);
+    /* a writer's transaction learns its id in BEGIN's round trip: a COMMIT lost on the way
+       can then be looked up (pg_commit_outcome) */
+    bool begin = strcmp(sql, "BEGIN") == 0 && !(p->flags & SQLDB_READONLY);
+    PGresult *res = PQexec(conn(db), begin ? "BEGIN; SELECT txid_current()" : sql);
     ExecStatusType es = PQresultStatus(res);
     if (es != PGRES_COMMAND_OK && es != PGRES_TUPLES_OK) {
-        rc = fail_res(db, res);
-        if (p->lost && strcmp(sql, "COMMIT") == 0) /* sent, perhaps committed: nobody knows */
-            sqldb_failf(db, SF_EIO, "connection lost during COMMIT, whose outcome is unknown: %s",
-                        p->lost_msg);
-    } else if (strcmp(sql, "COMMIT") == 0 && strcmp(PQcmdStatus(res), "ROLLBACK") == 0)
+        rc = fail_res(db, res, sql);
+    } else if (strcmp(sql, "COMMIT") == 0 && strcmp(PQcmdStatus(res), "ROLLBACK") == 0) {
         /* a COMMIT of a transaction a failed statement aborted "succeeds" as a rollback */
         rc = sqldb_fail(db, "the transaction was aborted by an earlier error and rolled back");
-    else
+    } else {
         count_changes(db, res);
+        if (begin)
+            p->xid = PQntuples(res) == 1 ? strtoll(PQgetvalue(res, 0, 0), NULL, 10) : 0;
+    }
+    if (strcmp(sql, "COMMIT") == 0 || strcmp(sql, "ROLLBACK") == 0)
+        p->xid = 0;
     PQclear(res);
     return rc;
 }
@@ -326,7 +387,7 @@ pg_step(struct sqldb_stmt *base)
                                (const char *const *)st->vals, st->lens, st->fmts, 0);
         ExecStatusType es = PQresultStatus(st->res);
         if (es != PGRES_COMMAND_OK && es != PGRES_TUPLES_OK) {
-            rc = fail_res(base->db, st->res);
+            rc = fail_res(base->db, st->res, st->sql);
             PQclear(st->res);
             st->res = NULL;
             return rc;
@@ -465,8 +526,50 @@ run_listen(struct pg *p, const char *channel)
     return pg_exec(&p->base, sql);
 }
 
-/* Set up a new session as the caller left the last: read-only, durability, LISTENs,
-   then the caller's hook (sqldb_on_reconnect).  SF_OK, or SF_EIO with the message. */
+/* The first column of sql's one row (n text parameters) as text into out ("" if none);
+   SF_OK, or the failure (on the connection). */
+static int
+one_text(struct pg *p, const char *sql, int n, const char *const *params, char *out, size_t cap)
+{
+    PGresult *res = PQexecParams(p->conn, sql, n, NULL, params, NULL, NULL, 0);
+    int rc = SF_OK;
+    if (PQresultStatus(res) != PGRES_TUPLES_OK)
+        rc = fail_res(&p->base, res, sql);
+    else
+        snprintf(out, cap, "%s", PQntuples(res) == 1 && PQnfields(res) >= 1 ? PQgetvalue(res, 0, 0)
+                                                                         : "");
+    PQclear(res);
+    return rc;
+}
+
+/* End the session this handle lost, if the server still runs it: a backend whose client
+   vanished in a partition keeps its locks and its open transaction until the server's
+   keepalives find it; its pid and start time name it, so no other session is touched.
+   Without a wait on SQLDB_NOWAIT (the loop): a lock it held may then be free only at the
+   next attempt. */
+static int
+end_old_session(struct pg *p)
+{
+    if (!p->old_pid)
+        return SF_OK;
+    char sql[256], pid[16], out[16];
+    snprintf(pid, sizeof(pid), "%d", p->old_pid);
+    /* OFFSET 0 keeps the subquery whole: only the row that is that session is signalled */
+    snprintf(sql, sizeof(sql),
+             "SELECT count(pg_terminate_backend(pid%s)) FROM (SELECT pid FROM pg_stat_activity"
+             " WHERE pid = $1::int AND backend_start::text = $2 OFFSET 0) a",
+             PQserverVersion(p->conn) >= 140000 && !(p->flags & SQLDB_NOWAIT) ? ", 2000" : "");
+    const char *params[2] = { pid, p->old_started };
+    int rc = one_text(p, sql, 2, params, out, sizeof(out));
+    if (rc == SF_EUNREACH || rc == SF_EINDOUBT)
+        return rc; /* lost again: the next session tries */
+    p->old_pid = 0; /* ended, gone already, or not ours to end (the server's keepalives will) */
+    return SF_OK;
+}
+
+/* Set up a new session as the caller left the last: the last one ended, keepalives on the
+   server's side, read-only, durability, LISTENs, then the caller's hook
+   (sqldb_on_reconnect).  SF_OK, or the failure with the message. */
 static int
 session(struct pg *p)
 {
@@ -474,8 +577,24 @@ session(struct pg *p)
     PQsetNoticeProcessor(p->conn, quiet, NULL);
     p->lost = false;
     p->reconnecting = true;
-    int rc = SF_OK;
-    if (p->flags & SQLDB_READONLY)
+    p->xid = 0;
+    /* the server's side of the keepalives (sqldb.h): an orphaned backend ends in ~25 s
+       (ignored on a Unix socket).  Not idle_session_timeout: that would end healthy idle
+       sessions (a listener, the loop's between passes) and their locks with them. */
+    int rc = pg_exec(db, PQserverVersion(p->conn) >= 120000
+                             ? "SET tcp_keepalives_idle = 10; SET tcp_keepalives_interval = 5;"
+                               " SET tcp_keepalives_count = 3; SET tcp_user_timeout = 10000"
+                             : "SET tcp_keepalives_idle = 10; SET tcp_keepalives_interval = 5;"
+                               " SET tcp_keepalives_count = 3");
+    char ident[96] = "";
+    if (rc == SF_OK)
+        rc = one_text(p,
+                      "SELECT pg_backend_pid() || ' ' || backend_start::text FROM"
+                      " pg_stat_activity WHERE pid = pg_backend_pid()",
+                      0, NULL, ident, sizeof(ident));
+    if (rc == SF_OK)
+        rc = end_old_session(p);
+    if (rc == SF_OK && p->flags & SQLDB_READONLY)
         rc = pg_exec(db, "SET default_transaction_read_only = on");
     if (rc == SF_OK && p->async_commit)
         rc = pg_exec(db, "SET synchronous_commit = off");
@@ -484,10 +603,67 @@ session(struct pg *p)
     if (rc == SF_OK && db->on_reconnect) {
         struct sf_err err = { 0 };
         if (db->on_reconnect(db, db->on_reconnect_arg, &err) != SF_OK)
-            rc = sqldb_failf(db, SF_EIO, "%s", err.msg[0] ? err.msg : "reconnect hook failed");
+            rc = sqldb_failf(db, SF_EUNREACH, "%s",
+                             err.msg[0] ? err.msg : "reconnect hook failed");
+    }
+    char *sp = strchr(ident, ' ');
+    if (rc == SF_OK && sp) { /* this session, to end should it be lost */
+        p->pid = (int)strtol(ident, NULL, 10);
+        snprintf(p->started, sizeof(p->started), "%s", sp + 1);
     }
     p->reconnecting = false;
     return rc;
+}
+
+/* connect_timeout of p's connection in ms (0: none), as libpq reads it (sqldb_pg_open). */
+static int64_t
+connect_timeout_ms(PGconn *c)
+{
+    int64_t ms = 0;
+    PQconninfoOption *o = PQconninfo(c);
+    for (PQconninfoOption *i = o; i && i->keyword; i++)
+        if (strcmp(i->keyword, "connect_timeout") == 0 && i->val)
+            ms = strtoll(i->val, NULL, 10) * 1000;
+    PQconninfoFree(o);
+    return ms;
+}
+
+/* SQLDB_NOWAIT: start a connect, or take the one under way as far as its socket allows
+   without waiting.  1 when connected, 0 when still under way, SF_EIO with the message when
+   this attempt failed. */
+static int
+connect_step(struct pg *p)
+{
+    struct sqldb *db = &p->base;
+    if (!p->connecting) {
+        if (!PQresetStart(p->conn))
+            return sqldb_fail(db, PQerrorMessage(p->conn));
+        p->connecting = true;
+        p->poll = PGRES_POLLING_WRITING; /* libpq: as if the last poll said so */
+        p->connect_ms = clock_mono_ms();
+    }
+    for (int i = 0; i < 64 && p->poll != PGRES_POLLING_OK && p->poll != PGRES_POLLING_FAILED;
+         i++) {
+        struct pollfd pfd = { .fd = PQsocket(p->conn),
+                              .events = p->poll == PGRES_POLLING_READING ? POLLIN : POLLOUT };
+        if (pfd.fd < 0 || poll(&pfd, 1, 0) == 0)
+            break;
+        p->poll = PQresetPoll(p->conn);
+    }
+    if (p->poll == PGRES_POLLING_OK) {
+        p->connecting = false;
+        return 1;
+    }
+    if (p->poll != PGRES_POLLING_FAILED && p->connect_timeout_ms > 0 &&
+        clock_mono_ms() - p->connect_ms >= p->connect_timeout_ms) {
+        p->connecting = false;
+        return sqldb_failf(db, SF_EIO, "connection to server timed out: timeout expired");
+    }
+    if (p->poll == PGRES_POLLING_FAILED) {
+        p->connecting = false;
+        return sqldb_fail(db, PQerrorMessage(p->conn));
+    }
+    return 0;
 }
 
 /* A new session for a lost connection, if the back-off allows one now. */
@@ -495,11 +671,25 @@ static int
 reconnect(struct pg *p)
 {
     struct sqldb *db = &p->base;
-    if (clock_mono_ms() < p->retry_ms)
-        return sqldb_failf(db, SF_EIO, "database unreachable (retrying): %s", p->lost_msg);
-    PQreset(p->conn); /* blocks at most connect_timeout (sqldb_pg_open) */
-    int rc =
-        PQstatus(p->conn) == CONNECTION_OK ? session(p) : sqldb_fail(db, PQerrorMessage(p->conn));
+    if (!p->connecting && clock_mono_ms() < p->retry_ms)
+        return sqldb_failf(db, SF_EUNREACH, "database unreachable (retrying): %s", p->lost_msg);
+    if (!p->old_pid && p->pid) { /* the session lost: ended at the next one's start */
+        p->old_pid = p->pid;
+        snprintf(p->old_started, sizeof(p->old_started), "%s", p->started);
+        p->pid = 0;
+    }
+    int rc;
+    if (p->flags & SQLDB_NOWAIT) {
+        rc = connect_step(p);
+        if (rc == 0)
+            return sqldb_failf(db, SF_EUNREACH, "database unreachable (retrying): connecting: %s",
+                               p->lost_msg);
+        rc = rc == 1 ? session(p) : rc;
+    } else {
+        PQreset(p->conn); /* blocks at most connect_timeout (sqldb_pg_open) */
+        rc = PQstatus(p->conn) == CONNECTION_OK ? session(p)
+                                                : sqldb_fail(db, PQerrorMessage(p->conn));
+    }
     if (rc == SF_OK) {
         p->backoff_ms = 0;
         p->retry_ms = 0;
@@ -512,23 +702,48 @@ reconnect(struct pg *p)
     if (p->backoff_ms > PG_BACKOFF_MAX_MS)
         p->backoff_ms = PG_BACKOFF_MAX_MS;
     p->retry_ms = clock_mono_ms() + p->backoff_ms;
-    return sqldb_failf(db, SF_EIO, "database unreachable (retrying): %s", p->lost_msg);
+    return sqldb_failf(db, SF_EUNREACH, "database unreachable (retrying): %s", p->lost_msg);
 }
 
 /* SF_OK when p's connection can take a statement: as it is, or connected again outside a
-   transaction (sqldb.h); else SF_EIO with why. */
+   transaction (sqldb.h); else SF_EUNREACH with why. */
 static int
 ready(struct pg *p)
 {
-    if (!gone(p))
+    if (!p->connecting && !gone(p))
         return SF_OK;
     if (p->base.in_tx)
-        return sqldb_failf(&p->base, SF_EIO,
+        return sqldb_failf(&p->base, SF_EUNREACH,
                            "connection lost in a transaction, which did not commit: %s",
                            p->lost_msg);
     if (p->reconnecting)
-        return sqldb_failf(&p->base, SF_EIO, "connection lost: %s", p->lost_msg);
+        return sqldb_failf(&p->base, SF_EUNREACH, "connection lost: %s", p->lost_msg);
     return reconnect(p);
+}
+
+/* sqldb_commit_outcome (sqldb.h). */
+static int
+pg_commit_outcome(struct sqldb *db)
+{
+    struct pg *p = (struct pg *)db;
+    if (!p->doubt)
+        return 0;
+    if (!p->doubt_xid)
+        return sqldb_failf(db, SF_EINDOUBT,
+                           "the outcome of a write outside a transaction cannot be looked up");
+    int rc = ready(p); /* a new session, the lost one ended (session()) */
+    char xid[24], st[32];
+    snprintf(xid, sizeof(xid), "%lld", (long long)p->doubt_xid);
+    if (rc == SF_OK)
+        rc = one_text(p, "SELECT coalesce(txid_status($1::bigint), 'unknown')", 1,
+                      (const char *const[]){ xid }, st, sizeof(st));
+    if (rc)
+        return sqldb_failf(db, SF_EINDOUBT, "a commit's outcome is unknown for now: %s", db->msg);
+    if (strcmp(st, "committed") == 0 || strcmp(st, "aborted") == 0) {
+        p->doubt = false;
+        return st[0] == 'c';
+    }
+    return sqldb_failf(db, SF_EINDOUBT, "transaction %s is %s on the server", xid, st);
 }
 
 static int
@@ -556,7 +771,7 @@ pg_notify(struct sqldb *db, const char *channel, const char *payload)
     const char *vals[2] = { channel, payload };
     PGresult *res =
         PQexecParams(conn(db), "SELECT pg_notify($1, $2)", 2, NULL, vals, NULL, NULL, 0);
-    rc = PQresultStatus(res) == PGRES_TUPLES_OK ? SF_OK : fail_res(db, res);
+    rc = PQresultStatus(res) == PGRES_TUPLES_OK ? SF_OK : fail_res(db, res, "SELECT pg_notify");
     PQclear(res);
     return rc;
 }
@@ -604,6 +819,7 @@ static const struct sqldb_ops pg_ops = {
     .notify = pg_notify,
     .notify_fd = pg_notify_fd,
     .notifications = pg_notifications,
+    .commit_outcome = pg_commit_outcome,
 };
 
 /* url for messages: a password in it (postgresql://user:secret@host, ?password=secret or a
@@ -659,6 +875,7 @@ sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err)
         pg_close(&p->base);
         return NULL;
     }
+    p->connect_timeout_ms = connect_timeout_ms(p->conn);
     if (session(p)) {
         sf_err_set(err, SF_EIO, "store: '%s': %s", shown, p->base.msg);
         pg_close(&p->base);

@@ -36,6 +36,16 @@ stmt(struct sqldb_stmt *st)
     return ((struct lite_stmt *)st)->st;
 }
 
+/* db's last failure from SQLite: msg (NULL: SQLite's own), its code per sqldb.h (busy or
+   locked: SF_EAGAIN, nothing applied; anything else SF_EIO). */
+static int
+lite_fail(struct sqldb *db, const char *msg)
+{
+    int ec = sqlite3_errcode(conn(db)) & 0xff;
+    return sqldb_failf(db, ec == SQLITE_BUSY || ec == SQLITE_LOCKED ? SF_EAGAIN : SF_EIO, "%s",
+                       msg ? msg : sqlite3_errmsg(conn(db)));
+}
+
 static void
 lite_close(struct sqldb *db)
 {
@@ -48,9 +58,9 @@ lite_exec(struct sqldb *db, const char *sql)
 {
     char *msg = NULL;
     if (sqlite3_exec(conn(db), sql, NULL, NULL, &msg) != SQLITE_OK) {
-        sqldb_fail(db, msg ? msg : sqlite3_errmsg(conn(db)));
+        int rc = lite_fail(db, msg);
         sqlite3_free(msg);
-        return SF_EIO;
+        return rc;
     }
     db->changes = sqlite3_changes(conn(db));
     return SF_OK;
@@ -72,10 +82,10 @@ lite_prepare(struct sqldb *db, const char *sql, struct sqldb_stmt **out)
         return SF_ENOMEM;
     st->base.db = db;
     if (sqlite3_prepare_v2(conn(db), sql, -1, &st->st, NULL) != SQLITE_OK) {
-        sqldb_fail(db, sqlite3_errmsg(conn(db)));
+        int rc = lite_fail(db, NULL);
         sqlite3_finalize(st->st);
         free(st);
-        return SF_EIO;
+        return rc;
     }
     *out = &st->base;
     return SF_OK;
@@ -125,7 +135,7 @@ lite_step(struct sqldb_stmt *st)
         st->db->changes = sqlite3_changes(conn(st->db));
         return SQLDB_DONE;
     }
-    return sqldb_fail(st->db, sqlite3_errmsg(conn(st->db)));
+    return lite_fail(st->db, NULL);
 }
 
 static int64_t

@@ -210,14 +210,14 @@ store_schema_version(void)
 int
 store_db_fail(struct store *s, struct sf_err *err, const char *what)
 {
-    return sf_err_set(err, SF_EIO, "store: %s: %s", what, sqldb_errmsg(s->db));
+    return sf_err_set(err, sqldb_errcode(s->db), "store: %s: %s", what, sqldb_errmsg(s->db));
 }
 
 int
 store_exec(struct store *s, const char *sql, struct sf_err *err)
 {
     if (sqldb_exec(s->db, sql) != SF_OK)
-        return sf_err_set(err, SF_EIO, "store: %.60s: %s", sql, sqldb_errmsg(s->db));
+        return sf_err_set(err, sqldb_errcode(s->db), "store: %.60s: %s", sql, sqldb_errmsg(s->db));
     return SF_OK;
 }
 
@@ -242,7 +242,7 @@ int
 store_begin(struct store *s, struct sf_err *err)
 {
     if (sqldb_begin(s->db) != SF_OK)
-        return sf_err_set(err, SF_EIO, "store: begin: %s", sqldb_errmsg(s->db));
+        return sf_err_set(err, sqldb_errcode(s->db), "store: begin: %s", sqldb_errmsg(s->db));
     return SF_OK;
 }
 
@@ -250,8 +250,17 @@ int
 store_commit(struct store *s, struct sf_err *err)
 {
     if (sqldb_commit(s->db) != SF_OK) /* rolled back */
-        return sf_err_set(err, SF_EIO, "store: commit: %s", sqldb_errmsg(s->db));
+        return sf_err_set(err, sqldb_errcode(s->db), "store: commit: %s", sqldb_errmsg(s->db));
     return SF_OK;
+}
+
+int
+store_commit_outcome(struct store *s, struct sf_err *err)
+{
+    int rc = sqldb_commit_outcome(s->db);
+    if (rc < 0)
+        return sf_err_set(err, rc, "store: %s", sqldb_errmsg(s->db));
+    return rc;
 }
 
 void
@@ -546,12 +555,13 @@ sweep_tmp(const char *files_dir)
                  files_dir);
 }
 
-/* Connect s to its database (s->target) and bring its schema up to date. */
+/* Connect s to its database (s->target) with sqldb_open's flags and bring its schema up
+   to date. */
 static int
-connect(struct store *s, int *from, struct sf_err *err)
+connect(struct store *s, unsigned flags, int *from, struct sf_err *err)
 {
     int rc = sqldb_is_url(s->target) ? SF_OK : create_private(s->target, err);
-    if (rc == SF_OK && !(s->db = sqldb_open(s->target, 0, err)))
+    if (rc == SF_OK && !(s->db = sqldb_open(s->target, flags, err)))
         rc = SF_EIO;
     return rc ? rc : migrate(s, from, err);
 }
@@ -612,7 +622,8 @@ static int
 relock(struct sqldb *db, void *arg, struct sf_err *err)
 {
     (void)db;
-    return lock_db(arg, 1, err);
+    int rc = lock_db(arg, 1, err);
+    return rc ? rc : store_host_relock(arg, err);
 }
 
 /* A new store for data_dir (NULL: none, a database alone) and db (as store_open_db). */
@@ -665,7 +676,8 @@ open_store(const char *data_dir, const char *db, bool host, struct store_recover
         goto fail;
     fix_modes(data_dir);
     sweep_tmp(path);
-    if (connect(s, NULL, err) || lock_db(s, 50, err))
+    /* the loop's connection: a reconnect never waits for the network (sqldb.h) */
+    if (connect(s, SQLDB_NOWAIT, NULL, err) || lock_db(s, 50, err))
         goto fail;
     /* SQLite's file is this data dir's alone (its flock): every job in it is this host's */
     if ((!host || sqldb_engine(s->db) == SQLDB_SQLITE) && recover(s, rec, err))
@@ -701,7 +713,7 @@ store_init(const char *target, int *from, struct sf_err *err)
     if (rc == SF_OK && !url && (rc = lock_dir(s, err)) == SF_OK)
         fix_modes(target);
     if (rc == SF_OK)
-        rc = connect(s, from, err);
+        rc = connect(s, 0, from, err);
     store_close(s);
     return rc;
 }

@@ -165,7 +165,9 @@ struct store *store_open(const char *data_dir, struct store_recovery *rec, struc
  * database (SF_EAGAIN beside another, or beside hosts): crash recovery
  * takes every active job in the database for its own; several hosts share
  * one through store_open_host (store_host.h).  SF_EINVAL for a db that is
- * not such a URL.
+ * not such a URL.  Its PostgreSQL connection is the loop's: a lost one
+ * reconnects without waiting (sqldb.h's SQLDB_NOWAIT), calls failing with
+ * SF_EUNREACH meanwhile.
  */
 struct store *store_open_db(const char *data_dir, const char *db, struct store_recovery *rec,
                             struct sf_err *err);
@@ -457,6 +459,16 @@ struct store *store_open_reader(const struct store *s, struct sf_err *err);
  * the migrations and the recovery.
  */
 struct store *store_open_writer(const struct store *s, struct sf_err *err);
+
+/*
+ * Database failures keep sqldb.h's codes in err: SF_EAGAIN (busy) and
+ * SF_EUNREACH (the connection is lost or not back yet), both with nothing
+ * applied; SF_EINDOUBT (the connection was lost while the write committed:
+ * it may have been applied); SF_EIO for what a retry cannot change.
+ * store_commit_outcome: after a write on s failed with SF_EINDOUBT, whether
+ * it committed: 1 yes, 0 no (run it again), < 0 still unknown (err set).
+ */
+int store_commit_outcome(struct store *s, struct sf_err *err);
 
 /* A printer the API manages (store_printer_cfg.c; farm.h's run-time printers), plain data. */
 #define STORE_PRINTER_CFG_MAX 4096 /* its section body: every option at its longest fits */

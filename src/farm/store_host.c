@@ -349,9 +349,43 @@ store_host_join(struct store *s, const char *name, int64_t lease_ms, int64_t *to
     }
     if ((rc = store_begin(s, err)) == SF_OK)
         rc = end_tx(s, join_tx(s, name, now, lease_ms, token, err), err);
-    if (rc)
+    if (rc) {
         unlock_name(s, name); /* refused or failed: the name stays free for its holder */
-    return rc;
+        return rc;
+    }
+    /* the lock is this session's: a reconnect takes it again (store_host_relock) */
+    snprintf(s->host_name, sizeof(s->host_name), "%s", name);
+    s->host_token = *token;
+    s->name_lost = false;
+    return SF_OK;
+}
+
+int
+store_host_relock(struct store *s, struct sf_err *err)
+{
+    if (!s->host_name[0] || s->name_lost)
+        return SF_OK;
+    bool got;
+    int rc = lock_name(s, s->host_name, &got, err);
+    if (rc || got)
+        return rc;
+    /* held: by this process's lost session, which the server has not ended yet (try again
+       shortly), or by a process that joined under the name since (the lease is lost) */
+    struct sqldb_stmt *st;
+    if ((rc = store_prepare(s, &st, "SELECT token FROM hosts WHERE name = ?1", err)))
+        return rc;
+    sqldb_bind_text(st, 1, s->host_name);
+    rc = sqldb_step(st);
+    int64_t cur = rc == SQLDB_ROW ? sqldb_column_int64(st, 0) : 0;
+    sqldb_finalize(st);
+    if (rc != SQLDB_ROW && rc != SQLDB_DONE)
+        return store_db_fail(s, err, "read host");
+    if (cur == s->host_token)
+        return sf_err_set(err, SF_EAGAIN,
+                          "host '%s': its name's lock is still held by the lost session",
+                          s->host_name);
+    s->name_lost = true;
+    return SF_OK;
 }
 
 int
@@ -374,6 +408,11 @@ store_host_beat(struct store *s, const char *name, int64_t token, int64_t lease_
     sqldb_bind_int64(st, 4, token);
     if ((rc = store_step_done(s, st, err, "renew lease")))
         return rc;
+    if (s->name_lost && strcmp(name, s->host_name) == 0)
+        return sf_err_set(err, SF_ESTALE,
+                          "host '%s': another process took the name while the connection was "
+                          "away: its lease is lost",
+                          name);
     return sqldb_changes(s->db) == 1 ? SF_OK : lease_lost(s, name, token, now, err);
 }
 

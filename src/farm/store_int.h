@@ -33,7 +33,18 @@ struct store {
     int lock_fd;                 /* DATA_DIR/lock, flock()ed exclusively; -1 if not open */
     bool host;                   /* one of several hosts (store_open_host): the database's
                                     lock is shared */
+    char host_name[64];          /* the name store_host_join locked on this connection ("" if
+                                    none): locked again after a reconnect (store_host_relock) */
+    int64_t host_token;          /* its token */
+    bool name_lost;              /* another process took the name while the connection was
+                                    away: the lease is lost (store_host_beat refuses) */
 };
+
+/* After a reconnect (store.c's hook): lock s's host name again, if it joined one.  SF_OK
+   (also when another process has joined under the name since: name_lost is set), or
+   SF_EAGAIN while the name's lock is held with this process's token still current (the lost
+   session, not yet ended), so the reconnect is tried again. */
+int store_host_relock(struct store *s, struct sf_err *err);
 
 /*
  * Migration 10 (store_printer_cfg.c): a printer the API added, edited,

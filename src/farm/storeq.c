@@ -16,8 +16,13 @@
  * loop_post: storeq_free must withdraw what is undelivered (loop_del_fd),
  * and a posted callback cannot be withdrawn.  storeq_sync waits on a
  * condition signalled when the queue empties.  A request that fails with
- * SF_EIO waits (on the same condition, so a stop cuts the wait short) and
- * runs again: a store transaction that failed left nothing behind.
+ * nothing applied (busy, the connection away: sqldb.h's SF_EAGAIN and
+ * SF_EUNREACH) waits (on the same condition, so a stop cuts the wait short;
+ * a post does not) and runs again: a store transaction that failed left
+ * nothing behind.  One whose COMMIT's answer was lost (SF_EINDOUBT) is read
+ * back first (settle).  Anything else is reported at once: a constraint or
+ * an invalid byte fails the same way every time, and must not hold the
+ * queue for STOREQ_RETRY_MS.
  *
  * Thread: storeq.h's functions on the loop thread; run() and what it calls
  * on the queue's thread.
@@ -94,6 +99,8 @@ struct storeq {
     bool stop;                       /* storeq_free: end once the queue is empty */
     bool refused;                    /* a storeq_sync gave up: call commit once the queue empties */
     int64_t stop_ms;                 /* when stop was asked */
+    bool gave_up;                    /* a request ran out of retries during a stop: the rest
+                                        fail at once instead of each waiting its turn */
     uint64_t retries;                /* stats.retries */
     /* loop thread only */
     storeq_commit_fn commit; /* the wake after events were logged */
@@ -143,26 +150,99 @@ nap(struct storeq *q, int64_t ms)
     pthread_cond_timedwait(&q->cond, &q->mu, &ts);
 }
 
-/* Run r, again while it fails with SF_EIO and time is left; q->mu not held. */
+/* Whether a failure left nothing applied and a later try may pass: busy, or the connection
+   lost or not back yet (sqldb.h).  Anything else (a constraint, invalid input, a refused
+   event) would fail the same way again: it is reported at once. */
+static bool
+transient(int rc)
+{
+    return rc == SF_EAGAIN || rc == SF_EUNREACH;
+}
+
+/* The end of r's retries (started at t0), with q->mu held: STOREQ_RETRY_MS, or less once a
+   stop is asked. */
+static int64_t
+retry_end(const struct storeq *q, int64_t t0)
+{
+    int64_t end = t0 + STOREQ_RETRY_MS;
+    if (q->stop && q->stop_ms + STOREQ_STOP_MS < end)
+        end = q->stop_ms + STOREQ_STOP_MS;
+    return end;
+}
+
+/* Wait ms before a retry unless the end (or a stop) comes first, with q->mu held; false
+   when there is no time left.  A post wakes the condition too: the wait goes on after it. */
+static bool
+back_off(struct storeq *q, int64_t t0, int64_t ms)
+{
+    int64_t now = clock_mono_ms(), until = now + ms;
+    if (until >= retry_end(q, t0))
+        return false;
+    for (bool stop = q->stop; q->stop == stop && now < until; now = clock_mono_ms())
+        nap(q, until - now);
+    return true;
+}
+
+/* r failed with SF_EINDOUBT (its COMMIT's answer was lost): read back whether it committed,
+   asking again while the server cannot tell, until r's retries run out.  SF_OK when it did
+   (its result stands), SF_EAGAIN when it did not (run it again), SF_EINDOUBT when nobody can
+   tell in time (reported: running it again could apply it twice).  A write that sets values
+   (progress, a reason, a printer's state or bed) is simply run again: twice is once. */
+static int
+settle(struct storeq *q, struct req *r, int64_t t0)
+{
+    if (r->op != OP_EVENT && r->op != OP_NOTE)
+        return SF_EAGAIN;
+    for (int64_t backoff = 50;; backoff = backoff * 2 > 1000 ? 1000 : backoff * 2) {
+        struct sf_err e = { 0 };
+        int o = store_commit_outcome(q->conn, &e);
+        if (o >= 0)
+            return o == 1 ? SF_OK : SF_EAGAIN;
+        pthread_mutex_lock(&q->mu);
+        bool again = back_off(q, t0, backoff);
+        if (again)
+            q->retries++;
+        pthread_mutex_unlock(&q->mu);
+        if (!again) {
+            sf_err_prefix(&r->err, "%s; still unknown", e.msg);
+            return SF_EINDOUBT;
+        }
+    }
+}
+
+/* Run r, again while it fails with nothing applied and time is left; q->mu not held. */
 static void
 run_req(struct storeq *q, struct req *r)
 {
     int64_t t0 = clock_mono_ms(), backoff = 50;
+    pthread_mutex_lock(&q->mu);
+    bool late = q->gave_up && q->stop; /* shutdown's window is spent: no more waits */
+    pthread_mutex_unlock(&q->mu);
+    if (late) {
+        r->rc = sf_err_set(&r->err, SF_EUNREACH,
+                           "store: not written: the database stayed busy or unreachable through "
+                           "shutdown's %d s",
+                           STOREQ_STOP_MS / 1000);
+        r->ended_ms = clock_mono_ms();
+        return;
+    }
     for (;;) {
         r->err = (struct sf_err){ 0 };
         r->rc = run_once(q, r);
-        if (r->rc != SF_EIO)
+        if (r->rc == SF_EINDOUBT) {
+            int rc = settle(q, r, t0);
+            if (rc == SF_OK)
+                r->err = (struct sf_err){ 0 };
+            r->rc = rc;
+        }
+        if (!transient(r->rc))
             break;
         pthread_mutex_lock(&q->mu);
-        int64_t now = clock_mono_ms();
-        int64_t end = t0 + STOREQ_RETRY_MS;
-        if (q->stop && q->stop_ms + STOREQ_STOP_MS < end)
-            end = q->stop_ms + STOREQ_STOP_MS;
-        bool again = now + backoff < end;
-        if (again) {
+        bool again = back_off(q, t0, backoff);
+        if (again)
             q->retries++;
-            nap(q, backoff);
-        }
+        else if (q->stop)
+            q->gave_up = true;
         pthread_mutex_unlock(&q->mu);
         if (!again)
             break;

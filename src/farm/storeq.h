@@ -14,10 +14,15 @@
  * not: before a direct store call that must see what was queued, call
  * storeq_sync.
  *
- * Failures: a request that fails with SF_EIO (busy, the server gone) is
- * tried again, backing off to 1 s, for up to STOREQ_RETRY_MS; other
+ * Failures: a request that fails with nothing applied (SF_EAGAIN: busy;
+ * SF_EUNREACH: the server gone) is tried again, backing off to 1 s, for up
+ * to STOREQ_RETRY_MS; one whose commit's outcome is unknown (SF_EINDOUBT)
+ * is read back (store_commit_outcome) and run again only if it did not
+ * commit (a write that only sets values is run again at once); other
  * failures and the last one are reported on the loop: logged, counted in
- * storeq_stats, and given to the request's callback if it has one.
+ * storeq_stats, and given to the request's callback if it has one.  Once a
+ * request has run out of time during storeq_free, the ones after it fail at
+ * once.
  * Progress is folded: a newer count for a job whose older one still waits
  * replaces it, so a long wait queues one progress per job, not one per 16
  * lines.
@@ -38,7 +43,7 @@
 #include "job.h"
 #include "store.h"
 
-/* How long a request that fails with SF_EIO is tried again: a PostgreSQL restart, an
+/* How long a request that fails with nothing applied is tried again: a PostgreSQL restart, an
    SQLite lock an operator's tool holds for a while.  At shutdown: STOREQ_STOP_MS. */
 #define STOREQ_RETRY_MS 60000
 #define STOREQ_STOP_MS  10000
@@ -66,7 +71,7 @@ struct storeq_stats {
     uint64_t posted;     /* requests posted (folded progress counts once) */
     uint64_t done;       /* requests run to the end, failed or not */
     uint64_t failed;     /* of which failed (after their retries) */
-    uint64_t retries;    /* SF_EIO failures tried again */
+    uint64_t retries;    /* failures tried again (or read back) */
     size_t depth;        /* requests waiting or running now */
     size_t depth_max;    /* the most there were */
     int64_t wait_max_ms; /* the longest a request waited from post to its end */
