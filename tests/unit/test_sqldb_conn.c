@@ -13,6 +13,7 @@
  * on time is the one under test, that no call hangs (here: 3 x connect_timeout).
  */
 #include <poll.h>
+#include <pthread.h>
 #include <signal.h>
 #include <spawn.h>
 #include <stdio.h>
@@ -25,6 +26,8 @@
 #include "../../src/base/clock.h"
 #include "../../src/farm/sqldb.h"
 #include "../../src/farm/store.h"
+#include "../../src/farm/store_host.h"
+#include "../../src/farm/storeq.h"
 #include "../t.h"
 
 extern char **environ;
@@ -198,7 +201,9 @@ T_CASE(sqldb_pg_survives_a_server_restart)
         int rc = run1(db, ins, ++k);
         int64_t dt = clock_mono_ms() - t0;
         worst_ms = dt > worst_ms ? dt : worst_ms;
-        n_fail += rc == SF_EIO; /* the server is down: nothing can succeed */
+        /* the server is down: nothing can succeed, and nothing was applied (or, for the
+           insert that met the loss, nobody knows) */
+        n_fail += rc == SF_EUNREACH || rc == SF_EINDOUBT;
         n_fast += strstr(sqldb_errmsg(db), "database unreachable (retrying): ") != NULL;
         if (!strstr(sqldb_errmsg(db), "unreachable") && !strstr(sqldb_errmsg(db), "lost"))
             printf("# unclear failure: %s\n", sqldb_errmsg(db));
@@ -260,11 +265,11 @@ T_CASE(sqldb_pg_cut_fails_the_whole_transaction)
     T_DB_OK(run1(db, ins, 1), db);
     T_DB_OK(run1(db, ins, 2), db);
     T_TRUE(proxy_cmd(&px, "drop"));
-    T_DB_ERR(run1(db, ins, 3), db, SF_EIO, "connection lost");
+    T_DB_ERR(run1(db, ins, 3), db, SF_EUNREACH, "connection lost");
     T_TRUE(proxy_cmd(&px, "heal"));
     /* the network is back, but this transaction is gone: nothing runs in its name */
-    T_DB_ERR(run1(db, ins, 4), db, SF_EIO, "connection lost in a transaction");
-    T_DB_ERR(sqldb_commit(db), db, SF_EIO, "connection lost in a transaction");
+    T_DB_ERR(run1(db, ins, 4), db, SF_EUNREACH, "connection lost in a transaction");
+    T_DB_ERR(sqldb_commit(db), db, SF_EUNREACH, "connection lost in a transaction");
     T_EQ_INT(one(direct, "SELECT count(*) FROM rows_b"), 0);
     T_EQ_INT(n_hook, 0);
     /* outside a transaction the next call connects again */
@@ -277,10 +282,11 @@ T_CASE(sqldb_pg_cut_fails_the_whole_transaction)
        come late, sending: "lost"), the next ones fail at once (back-off), and after the
        heal a call gets through */
     T_TRUE(proxy_cmd(&px, "drop"));
-    T_EQ_INT(run1(db, ins, 6), SF_EIO);
+    int rc6 = run1(db, ins, 6);
+    T_TRUE(rc6 == SF_EUNREACH || rc6 == SF_EINDOUBT);
     T_TRUE(strstr(sqldb_errmsg(db), "unreachable") || strstr(sqldb_errmsg(db), "lost"));
-    T_DB_ERR(run1(db, ins, 7), db, SF_EIO, "database unreachable (retrying): ");
-    T_DB_ERR(run1(db, ins, 8), db, SF_EIO, "database unreachable (retrying): ");
+    T_DB_ERR(run1(db, ins, 7), db, SF_EUNREACH, "database unreachable (retrying): ");
+    T_DB_ERR(run1(db, ins, 8), db, SF_EUNREACH, "database unreachable (retrying): ");
     T_TRUE(proxy_cmd(&px, "heal"));
     int64_t t0 = clock_mono_ms();
     int rc;
@@ -338,7 +344,7 @@ T_CASE(sqldb_pg_listen_survives_a_cut)
        refuses the reconnect */
     struct pollfd pfd = { .fd = sqldb_notify_fd(l), .events = POLLIN };
     T_TRUE(poll(&pfd, 1, DEADLINE_MS) == 1);
-    T_DB_ERR(sqldb_notifications(l, on_note, &g), l, SF_EIO, "unreachable");
+    T_DB_ERR(sqldb_notifications(l, on_note, &g), l, SF_EUNREACH, "unreachable");
     T_EQ_INT(sqldb_notify_fd(l), -1);
     T_TRUE(proxy_cmd(&px, "heal"));
     int64_t t0 = clock_mono_ms();
@@ -383,7 +389,7 @@ T_CASE(sqldb_pg_reconnect_is_bounded_and_keeps_the_session)
     T_DB_OK(sqldb_set_durable(db, false), db);
     T_TRUE(proxy_cmd(&px, "blackhole"));
     int64_t t0 = clock_mono_ms();
-    T_DB_ERR(sqldb_exec(db, "SELECT 1"), db, SF_EIO, "database unreachable (retrying): ");
+    T_DB_ERR(sqldb_exec(db, "SELECT 1"), db, SF_EUNREACH, "database unreachable (retrying): ");
     int64_t took_ms = clock_mono_ms() - t0;
     printf("# a reconnect into a silent network gave up after %lld ms: %s\n", (long long)took_ms,
            sqldb_errmsg(db));
@@ -398,6 +404,9 @@ T_CASE(sqldb_pg_reconnect_is_bounded_and_keeps_the_session)
     char v[64];
     T_EQ_STR(text1(db, "SHOW synchronous_commit", v, sizeof(v)), "off");
     T_EQ_STR(text1(db, "SHOW default_transaction_read_only", v, sizeof(v)), "on");
+    /* the server's keepalives are the session's too (an orphaned backend ends) */
+    T_EQ_STR(text1(db, "SHOW tcp_keepalives_idle", v, sizeof(v)), "10");
+    T_EQ_STR(text1(db, "SHOW tcp_user_timeout", v, sizeof(v)), "10000");
     T_DB_ERR(sqldb_exec(db, "CREATE TABLE t_ro(k INTEGER)"), db, SF_EIO, "read-only");
     sqldb_close(db);
     proxy_stop(&px);
@@ -437,6 +446,235 @@ T_CASE(sqldb_pg_store_holds_its_lock_after_a_cut)
     struct store *s2 = store_open_db(dir2, getenv("SQLDB_CONN_URL"), NULL, &err);
     T_TRUE(s2 == NULL);
     T_TRUE(strstr(err.msg, "in use by another slimfarmd") != NULL);
+    store_close(s);
+    sqldb_close(direct);
+    proxy_stop(&px);
+}
+
+/* The loop's connection (SQLDB_NOWAIT) in a silent network: no call waits for a connect.
+   A blocking reconnect (PQreset) takes connect_timeout (5 s) a call here, so the calls made
+   in 7 s count them: a handful at most with it, hundreds without. */
+T_CASE(sqldb_pg_nowait_reconnect_never_waits_on_connect)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sf_err err;
+    struct sqldb *db = sqldb_open(proxy_url(&px), SQLDB_NOWAIT, &err);
+    T_OK(db ? SF_OK : err.code, &err);
+    T_DB_OK(sqldb_set_durable(db, false), db);
+    T_TRUE(proxy_cmd(&px, "blackhole"));
+    int n_calls = 0, n_connecting = 0;
+    int64_t t0 = clock_mono_ms(), worst_ms = 0;
+    while (clock_mono_ms() - t0 < 7000) {
+        int64_t t1 = clock_mono_ms();
+        T_DB_ERR(sqldb_exec(db, "SELECT 1"), db, SF_EUNREACH, "database unreachable (retrying): ");
+        int64_t dt = clock_mono_ms() - t1;
+        worst_ms = dt > worst_ms ? dt : worst_ms;
+        n_calls++;
+        n_connecting += strstr(sqldb_errmsg(db), "connecting") != NULL;
+        nap_ms(10);
+    }
+    printf("# %d calls in a silent network for 7 s, %d while a connect was under way; the "
+           "longest %lld ms\n",
+           n_calls, n_connecting, (long long)worst_ms);
+    T_TRUE(n_calls >= 20);
+    T_TRUE(n_connecting >= 10);
+    T_TRUE(worst_ms < 2000); /* generous: a call never waits on the connect (5 s) */
+    T_TRUE(proxy_cmd(&px, "heal"));
+    t0 = clock_mono_ms();
+    int rc;
+    while ((rc = sqldb_exec(db, "SELECT 1")) != SF_OK && clock_mono_ms() - t0 < DEADLINE_MS)
+        nap_ms(20);
+    T_DB_OK(rc, db);
+    T_EQ_INT(sqldb_reconnects(db), 1);
+    char v[64];
+    T_EQ_STR(text1(db, "SHOW synchronous_commit", v, sizeof(v)), "off");
+    sqldb_close(db);
+    proxy_stop(&px);
+}
+
+/* A COMMIT sent on another thread (it waits on the server). */
+struct committer {
+    struct sqldb *db;
+    int rc;
+};
+
+static void *
+commit_bg(void *arg)
+{
+    struct committer *c = arg;
+    c->rc = sqldb_commit(c->db);
+    return NULL;
+}
+
+/* Wait until sql's count on db is at least 1. */
+static bool
+await_count(struct sqldb *db, const char *sql)
+{
+    for (int64_t t0 = clock_mono_ms(); clock_mono_ms() - t0 < DEADLINE_MS; nap_ms(20))
+        if (one(db, sql) > 0)
+            return true;
+    return false;
+}
+
+/* A COMMIT whose answer the network lost: SF_EINDOUBT, then read back.  Its transaction
+   waits at COMMIT on another's (a deferred unique key both inserted), so the cut lands
+   while the server holds it; the read-back ends the lost session, whose transaction is
+   then rolled back: "not committed", and no row. */
+T_CASE(sqldb_pg_commit_in_doubt_is_read_back)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    struct sqldb *db, *direct;
+    T_TRUE(cut_setup(&px, &db, &direct));
+    struct sqldb *other = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(other != NULL);
+    T_DB_OK(sqldb_exec(direct, "CREATE TABLE rows_d(k BIGINT UNIQUE DEFERRABLE INITIALLY"
+                               " DEFERRED)"),
+            direct);
+    T_EQ_INT(sqldb_commit_outcome(db), 0); /* nothing in doubt */
+    T_DB_OK(sqldb_begin(other), other);
+    T_DB_OK(run1(other, "INSERT INTO rows_d(k) VALUES(?)", 1), other);
+    T_DB_OK(sqldb_begin(db), db);
+    T_DB_OK(run1(db, "INSERT INTO rows_d(k) VALUES(?)", 1), db);
+    struct committer c = { db, 0 };
+    pthread_t t;
+    T_EQ_INT(pthread_create(&t, NULL, commit_bg, &c), 0);
+    /* its COMMIT checks the key and waits for other's transaction */
+    T_TRUE(await_count(direct, "SELECT count(*) FROM pg_locks WHERE NOT granted AND"
+                               " locktype = 'transactionid'"));
+    T_TRUE(proxy_cmd(&px, "drop"));
+    pthread_join(t, NULL);
+    T_EQ_INT(c.rc, SF_EINDOUBT);
+    T_TRUE(strstr(sqldb_errmsg(db), "outcome is unknown") != NULL);
+    /* unknown while the network is away */
+    T_EQ_INT(sqldb_commit_outcome(db), SF_EINDOUBT);
+    T_TRUE(proxy_cmd(&px, "heal"));
+    int o;
+    int64_t t0 = clock_mono_ms();
+    while ((o = sqldb_commit_outcome(db)) < 0 && clock_mono_ms() - t0 < DEADLINE_MS)
+        nap_ms(20);
+    T_EQ_INT(o, 0); /* its session ended (by the read-back), its transaction rolled back */
+    sqldb_rollback(other);
+    T_EQ_INT(one(direct, "SELECT count(*) FROM rows_d"), 0);
+    T_EQ_INT(sqldb_commit_outcome(db), 0); /* settled */
+    sqldb_close(other);
+    sqldb_close(db);
+    sqldb_close(direct);
+    proxy_stop(&px);
+}
+
+struct started {
+    int calls, rc;
+    enum job_state to;
+};
+
+static void
+on_started(void *ud, const struct storeq_result *r)
+{
+    struct started *s = ud;
+    s->calls++;
+    s->rc = r->rc;
+    s->to = r->to;
+}
+
+/* A START whose COMMIT's answer is lost is read back, not run again (where its own first
+   write would refuse it: "job is printing").  The COMMIT is held on the server by a
+   synchronous standby that does not exist (committed locally, not yet visible), the cut
+   made there; the read-back ends the lost session, which then commits. */
+T_CASE(storeq_start_in_doubt_is_read_back_not_refused)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(direct != NULL);
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/started", t_tmpdir());
+    struct sf_err err;
+    struct loop *l = loop_new(&err);
+    T_TRUE(l != NULL);
+    struct store *s = store_open_db(dir, proxy_url(&px), NULL, &err);
+    T_OK(s ? SF_OK : err.code, &err);
+    struct storeq *q = storeq_new(l, s, &err);
+    T_OK(q ? SF_OK : err.code, &err);
+    char sha[STORE_SHA_HEX];
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.gcode");
+    struct job_event_args g = { .prep_key = "k", .gcode_lines = 2 };
+    int64_t id;
+    T_OK(store_file_put(s, "G28\nG1 X1\n", 10, sha, &err), &err);
+    T_OK(store_job_add_gcode(s, &o, sha, &g, &id, &err), &err);
+    T_DB_OK(sqldb_exec(direct, "ALTER SYSTEM SET synchronous_standby_names = 'nobody'"), direct);
+    T_EQ_INT(one(direct, "SELECT count(*) FROM (SELECT pg_reload_conf()) r"), 1);
+    T_TRUE(await_count(direct, "SELECT count(*) FROM pg_settings WHERE"
+                               " name = 'synchronous_standby_names' AND setting = 'nobody'"));
+    struct started st = { 0 };
+    struct job_event_args sa = { .printer = "mk3" };
+    T_OK(storeq_job_event(q, id, JOB_EV_START, &sa, "mk3", on_started, &st), NULL);
+    T_TRUE(await_count(direct, "SELECT count(*) FROM pg_stat_activity WHERE"
+                               " wait_event = 'SyncRep'"));
+    T_TRUE(proxy_cmd(&px, "drop"));
+    T_TRUE(proxy_cmd(&px, "heal"));
+    for (int64_t t0 = clock_mono_ms(); !st.calls && clock_mono_ms() - t0 < DEADLINE_MS;)
+        loop_run_once(l, 20);
+    T_DB_OK(sqldb_exec(direct, "ALTER SYSTEM RESET synchronous_standby_names"), direct);
+    T_EQ_INT(one(direct, "SELECT count(*) FROM (SELECT pg_reload_conf()) r"), 1);
+    T_EQ_INT(st.calls, 1);
+    T_EQ_INT(st.rc, SF_OK);
+    T_EQ_INT(st.to, JOB_PRINTING);
+    struct storeq_stats qs;
+    storeq_stats(q, &qs);
+    T_EQ_INT(qs.failed, 0);
+    storeq_free(q);
+    int rc;
+    struct job_row j;
+    for (int64_t t0 = clock_mono_ms();
+         (rc = store_job_get(s, id, &j, &err)) != SF_OK && clock_mono_ms() - t0 < DEADLINE_MS;)
+        nap_ms(20);
+    T_OK(rc, &err);
+    T_EQ_INT(j.state, JOB_PRINTING);
+    T_EQ_STR(j.printer, "mk3");
+    store_close(s);
+    loop_free(l);
+    sqldb_close(direct);
+    proxy_stop(&px);
+}
+
+/* A host's name is its connection's lock: after a cut the reconnect takes it again, so a
+   second process cannot join under the name once the lease is gone. */
+T_CASE(sqldb_pg_host_name_lock_is_taken_again_after_a_cut)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(direct != NULL);
+    char dir[512], dir2[512];
+    snprintf(dir, sizeof(dir), "%s/hosta", t_tmpdir());
+    snprintf(dir2, sizeof(dir2), "%s/hostb", t_tmpdir());
+    struct sf_err err;
+    struct store *s = store_open_host(dir, proxy_url(&px), NULL, &err);
+    T_OK(s ? SF_OK : err.code, &err);
+    int64_t token, t2;
+    T_OK(store_host_join(s, "h1", 600 * 1000, &token, &err), &err);
+    T_TRUE(proxy_cmd(&px, "drop"));
+    T_TRUE(proxy_cmd(&px, "heal"));
+    int rc;
+    for (int64_t t0 = clock_mono_ms();
+         (rc = store_host_beat(s, "h1", token, 600 * 1000, &err)) != SF_OK &&
+         clock_mono_ms() - t0 < DEADLINE_MS;)
+        nap_ms(20);
+    T_OK(rc, &err);
+    /* the lease gone, only the lock holds the name */
+    T_DB_OK(sqldb_exec(direct, "UPDATE hosts SET lease_until_ms = 1"), direct);
+    struct store *s2 = store_open_host(dir2, getenv("SQLDB_CONN_URL"), NULL, &err);
+    T_OK(s2 ? SF_OK : err.code, &err);
+    T_ERR(store_host_join(s2, "h1", 600 * 1000, &t2, &err), SF_EAGAIN, &err,
+          "its connection holds the name");
+    store_close(s2);
     store_close(s);
     sqldb_close(direct);
     proxy_stop(&px);

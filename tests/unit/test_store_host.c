@@ -13,6 +13,8 @@
 #include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
+#include <time.h>
 
 #include "../../src/base/clock.h"
 #include "../../src/farm/store_host.h"
@@ -362,5 +364,124 @@ T_CASE(hosts_list_shows_lease_printers_and_claims)
     T_TRUE(!rows[1].live); /* 2 min on, its 1-min lease has run out */
     T_EQ_INT(rows[1].n_claimed, 0);
     free(rows);
+    pair_close(&p);
+}
+
+/* A store call on another thread: a note logged (an event in its own transaction), or the
+   reap of every host. */
+struct bg {
+    struct store *s;
+    bool reap;
+    int rc;
+    struct sf_err err;
+    volatile int done;
+};
+
+static void *
+bg_run(void *arg)
+{
+    struct bg *b = arg;
+    b->rc = b->reap ? store_host_reap(b->s, clock_wall_ms() + 120 * 1000, NULL, &b->err)
+                    : store_printer_note(b->s, "mk3", "printer-note", "from the second writer",
+                                         &b->err);
+    __atomic_store_n(&b->done, 1, __ATOMIC_SEQ_CST);
+    return NULL;
+}
+
+/* Wait until sql (a count on the database) is at least 1, or done is set; false at the
+   deadline. */
+static bool
+wait_for(struct sqldb *db, const char *sql, volatile int *done)
+{
+    for (int64_t end = clock_mono_ms() + 60000; clock_mono_ms() < end;) {
+        if (done && __atomic_load_n(done, __ATOMIC_SEQ_CST))
+            return true;
+        struct sqldb_stmt *st;
+        int64_t v = 0;
+        if (sqldb_prepare(db, sql, &st) == SF_OK) {
+            if (sqldb_step(st) == SQLDB_ROW)
+                v = sqldb_column_int64(st, 0);
+            sqldb_finalize(st);
+        }
+        if (v > 0)
+            return true;
+        nanosleep(&(struct timespec){ .tv_nsec = 10 * 1000 * 1000 }, NULL);
+    }
+    return false;
+}
+
+/* Events read from after_id on, as the API's stream pages them: the count read, the last id
+   into *last. */
+static size_t
+page_events(struct store *s, int64_t *last)
+{
+    struct event_row *ev;
+    size_t n = 0, total = 0;
+    while (store_events(s, *last, 100, &ev, &n, NULL) == SF_OK && n > 0) {
+        *last = ev[n - 1].id;
+        total += n;
+        free(ev);
+    }
+    return total;
+}
+
+/* Two connections write events; the one whose id is lower commits later.  A reader paging
+   `id > last` must still read every event (store_event.c's lock): here the reap holds its
+   first job's event uncommitted (its second job's row is locked by a third connection)
+   while another connection logs a note. */
+T_CASE(hosts_events_commit_in_id_order_across_connections)
+{
+    if (!t_store_pg()) {
+        t_skip("SQLite has one writer at a time: its ids commit in order");
+        return;
+    }
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "evorder", &err));
+    int64_t ta, tb, fence;
+    T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    T_OK(add_jobs(p.a, 2, NULL, &err), &err);
+    struct job_row j1, j2;
+    T_OK(store_job_claim(p.a, "a", ta, NULL, &j1, &fence, &err), &err);
+    T_OK(store_job_claim(p.a, "a", ta, NULL, &j2, &fence, &err), &err);
+    struct store *w = store_open_peer(p.a, &err);
+    T_TRUE(w != NULL);
+    struct sqldb *lock = sqldb_open(p.url, 0, &err), *look = sqldb_open(p.url, 0, &err);
+    T_TRUE(lock && look);
+    int64_t last = 0;
+    page_events(p.a, &last);
+    int64_t before = last;
+    /* the second job's row locked: the reap logs the first job's event, then waits */
+    T_OK(sqldb_begin(lock), NULL);
+    char sql[128];
+    snprintf(sql, sizeof(sql), "SELECT id FROM jobs WHERE id = %lld FOR UPDATE",
+             (long long)(j1.id > j2.id ? j1.id : j2.id));
+    T_OK(sqldb_exec(lock, sql), NULL);
+    struct bg reap = { .s = p.b, .reap = true }, note = { .s = w };
+    pthread_t tr, tn;
+    T_EQ_INT(pthread_create(&tr, NULL, bg_run, &reap), 0);
+    T_TRUE(wait_for(look, "SELECT count(*) FROM pg_locks WHERE NOT granted AND locktype IN"
+                          " ('transactionid', 'tuple')",
+                    NULL));
+    /* the note: it commits at once (ids out of order) or waits for the reap's commit */
+    T_EQ_INT(pthread_create(&tn, NULL, bg_run, &note), 0);
+    T_TRUE(wait_for(look, "SELECT count(*) FROM pg_locks WHERE NOT granted AND"
+                          " locktype = 'advisory'",
+                    &note.done));
+    size_t n = page_events(p.a, &last);
+    sqldb_rollback(lock);
+    pthread_join(tr, NULL);
+    pthread_join(tn, NULL);
+    T_EQ_INT(reap.rc, 1);
+    T_OK(note.rc, &note.err);
+    n += page_events(p.a, &last);
+    snprintf(sql, sizeof(sql), "SELECT count(*) FROM events WHERE id > %lld", (long long)before);
+    int64_t all = t_store_int(p.dir, sql);
+    T_EQ_INT(all, 4); /* two jobs back in the queue, the reap, the note */
+    T_EQ_INT((int64_t)n, all); /* none passed over */
+    sqldb_close(lock);
+    sqldb_close(look);
+    store_close(w);
     pair_close(&p);
 }

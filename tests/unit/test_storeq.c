@@ -316,3 +316,43 @@ T_CASE(storeq_waits_out_a_locked_database_without_the_loop)
     T_EQ_STR(got, "after the lock");
     teardown(&fx);
 }
+
+/* A write the database refuses for good (here a trigger's error, as a constraint or a byte
+   sequence the encoding refuses would be) is reported at once: not retried, not holding
+   the writes behind it for STOREQ_RETRY_MS. */
+T_CASE(storeq_reports_a_permanent_failure_at_once)
+{
+    struct sf_err err;
+    struct fixture fx;
+    T_OK(setup(&fx, "poison", &err), &err);
+    const char *trigger =
+        t_store_pg()
+            ? "CREATE FUNCTION poison() RETURNS trigger AS $$ BEGIN IF NEW.detail = 'poison'"
+              " THEN RAISE EXCEPTION 'poisoned note' USING ERRCODE = 'check_violation'; END IF;"
+              " RETURN NEW; END $$ LANGUAGE plpgsql;"
+              " CREATE TRIGGER poison BEFORE INSERT ON events FOR EACH ROW EXECUTE FUNCTION"
+              " poison()"
+            : "CREATE TRIGGER poison BEFORE INSERT ON events WHEN NEW.detail = 'poison'"
+              " BEGIN SELECT RAISE(ABORT, 'poisoned note'); END";
+    T_OK(t_store_exec(fx.dir, trigger), NULL);
+    n_logged = 0;
+    log_set_sink(sink, NULL);
+    struct answer after = { 0 };
+    T_OK(storeq_printer_note(fx.q, "mk3", "printer-command", "poison"), NULL);
+    T_OK(storeq_printer_note(fx.q, "mk3", "printer-command", "after it"), NULL);
+    struct job_event_args pa = { .printer = "mk3" };
+    T_OK(storeq_job_event(fx.q, fx.id, JOB_EV_START, &pa, "mk3", on_event, &after), NULL);
+    T_TRUE(answered(fx.l, &after));
+    log_set_sink(NULL, NULL);
+    T_EQ_INT(after.rc, SF_OK);
+    T_EQ_INT(n_logged, 1);
+    T_TRUE(strstr(logged, "poisoned note") != NULL);
+    struct storeq_stats st;
+    storeq_stats(fx.q, &st);
+    T_EQ_INT(st.failed, 1);
+    T_EQ_INT(st.retries, 0);
+    char got[256];
+    details(fx.s, "printer-command", got, sizeof(got));
+    T_EQ_STR(got, "after it");
+    teardown(&fx);
+}
