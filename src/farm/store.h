@@ -312,6 +312,14 @@ struct store_progress {
  * Returns how many were saved, or an error (then none was).
  */
 int store_jobs_progress(struct store *s, struct store_progress *p, size_t n, struct sf_err *err);
+/*
+ * One job's progress from a host that holds it by fencing token fence
+ * (store_host.h; > 0): SF_ESTALE, nothing written, when another host has
+ * claimed, attached or reaped the job since; SF_ENOTFOUND when it is not
+ * printing or paused.  Asynchronous commit, as store_jobs_progress.
+ */
+int store_job_progress_fenced(struct store *s, int64_t id, int64_t lines_acked, int64_t fence,
+                              struct sf_err *err);
 int store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err *err);
 /*
  * Move waiting job id one place in the queue (by -1: up, +1: down): it

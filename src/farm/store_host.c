@@ -454,16 +454,27 @@ own_one(struct store *s, const char *name, const char *p, int64_t now_ms, struct
                           p ? p : "");
     int rc = printer_free(s, name, p, now_ms, err);
     struct sqldb_stmt *st;
+    /* the owner's liveness again in the upsert: two hosts that both found the printer free
+       above would otherwise both take it (PostgreSQL: the second waits for the first's row,
+       then finds it live) */
     if (rc || (rc = store_prepare(s, &st,
                                   "INSERT INTO host_printers(printer, host, since_ms)"
                                   " VALUES(?1, ?2, ?3) ON CONFLICT(printer) DO UPDATE SET"
-                                  " host = excluded.host, since_ms = excluded.since_ms",
+                                  " host = excluded.host, since_ms = excluded.since_ms"
+                                  " WHERE host_printers.host = excluded.host OR NOT EXISTS"
+                                  " (SELECT 1 FROM hosts h WHERE h.name = host_printers.host"
+                                  " AND h.reaped_ms = 0 AND h.lease_until_ms > ?3)",
                                   err)))
         return rc;
     sqldb_bind_text(st, 1, p);
     sqldb_bind_text(st, 2, name);
     sqldb_bind_int64(st, 3, now_ms);
-    return store_step_done(s, st, err, "own printer");
+    if ((rc = store_step_done(s, st, err, "own printer")))
+        return rc;
+    if (sqldb_changes(s->db) == 1)
+        return SF_OK;
+    rc = printer_free(s, name, p, now_ms, err); /* the message naming the live owner */
+    return rc ? rc : sf_err_set(err, SF_EAGAIN, "printer '%s' was taken by a live host", p);
 }
 
 /* store_host_own in the caller's transaction. */
@@ -526,12 +537,22 @@ reap_host(struct store *s, const char *name, int64_t now_ms, int64_t heartbeat_m
         enum job_state to;
         if ((rc = store_job_event_in(s, ids[i], JOB_EV_CRASHED, &a, &to, err)) == SF_OK)
             *(to == JOB_INTERRUPTED ? &r.interrupted : &r.requeued) += 1;
+        /* the reaped host's token for the job is stale from now on: a write it still sends
+           (it may be alive behind a partition) is refused */
+        if (rc == SF_OK &&
+            (rc = store_prepare(s, &st, "UPDATE jobs SET fence = fence + 1 WHERE id = ?1", err)) ==
+                SF_OK) {
+            sqldb_bind_int64(st, 1, ids[i]);
+            rc = store_step_done(s, st, err, "bump fencing token");
+        }
     }
     free(ids);
-    /* its claims on waiting jobs go; an interrupted job stays its (its part is on its printer) */
+    /* its claims on waiting jobs go, their tokens with them; an interrupted job stays its
+       (its part is on its printer) */
     if (rc || (rc = store_prepare(s, &st,
-                                  "UPDATE jobs SET claimed_by = '' WHERE claimed_by = ?1"
-                                  " AND state IN ('queued','preparing','ready')",
+                                  "UPDATE jobs SET claimed_by = '', fence = fence + 1"
+                                  " WHERE claimed_by = ?1 AND state IN ('queued','preparing',"
+                                  "'ready')",
                                   err)))
         return rc;
     sqldb_bind_text(st, 1, name);

@@ -405,6 +405,52 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     return rc;
 }
 
+/*
+ * A host-mode store (store_open_host) sent ev for job id without a fencing token: refused
+ * (SF_ESTALE) if ev is one only the job's holder sends (a print's or a preparation's
+ * progress) and a host has claimed or attached the job (its token is past 0), as a
+ * host's writes must carry the token its claim or attach gave it.  The operator's
+ * events (cancel, restart) and the reap's (crashed) need none.
+ */
+static int
+unfenced_event(struct store *s, int64_t id, enum job_event ev, struct sf_err *err)
+{
+    switch (ev) {
+    case JOB_EV_PREPARED:
+    case JOB_EV_PREPARE_FAILED:
+    case JOB_EV_DEFER:
+    case JOB_EV_START:
+    case JOB_EV_PAUSE:
+    case JOB_EV_RESUME:
+    case JOB_EV_PRINT_DONE:
+    case JOB_EV_PRINT_FAILED:
+    case JOB_EV_REFUSED:
+        break;
+    default:
+        return SF_OK;
+    }
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st, "SELECT fence, claimed_by FROM jobs WHERE id = ?1", err);
+    if (rc)
+        return rc;
+    sqldb_bind_int64(st, 1, id);
+    rc = sqldb_step(st);
+    int64_t fence = rc == SQLDB_ROW ? sqldb_column_int64(st, 0) : 0;
+    char holder[64] = "";
+    if (rc == SQLDB_ROW)
+        store_copy_text(holder, sizeof(holder), st, 1);
+    sqldb_finalize(st);
+    if (rc != SQLDB_ROW && rc != SQLDB_DONE)
+        return store_db_fail(s, err, "read fencing token");
+    if (fence == 0)
+        return SF_OK; /* nobody claimed it: no token to show (or no such job: said later) */
+    return sf_err_set(err, SF_ESTALE,
+                      "job %lld: %s without a fencing token, refused: host '%s' holds the job "
+                      "(token %lld)",
+                      (long long)id, job_event_name(ev), holder[0] ? holder : "none",
+                      (long long)fence);
+}
+
 int
 store_job_event_in(struct store *s, int64_t id, enum job_event ev, const struct job_event_args *a,
                    enum job_state *to, struct sf_err *err)
@@ -415,6 +461,8 @@ store_job_event_in(struct store *s, int64_t id, enum job_event ev, const struct 
     int rc;
     /* first, so the row is locked (PostgreSQL) before it is read: no claim slips between */
     if (a->fence > 0 && (rc = store_job_fence(s, id, a->fence, err)))
+        return rc;
+    if (a->fence == 0 && s->host && (rc = unfenced_event(s, id, ev, err)))
         return rc;
     struct job_row j;
     if ((rc = store_job_get(s, id, &j, err)))
@@ -511,10 +559,15 @@ update_job_field(struct store *s, int64_t id, const char *sql, int64_t ival, con
     return SF_OK;
 }
 
-/* Raise job id's lines_acked; SF_ENOTFOUND if it is not printing or paused. */
+/* Raise job id's lines_acked; SF_ENOTFOUND if it is not printing or paused, SF_ESTALE if
+   fence (0: none) is not its token (checked first, locking the row on PostgreSQL). */
 static int
-save_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_err *err)
+save_progress(struct store *s, int64_t id, int64_t lines_acked, int64_t fence,
+              struct sf_err *err)
 {
+    int rc = fence > 0 ? store_job_fence(s, id, fence, err) : SF_OK;
+    if (rc)
+        return rc;
     return update_job_field(s, id,
                             "UPDATE jobs SET lines_acked = CASE WHEN lines_acked > ?1 THEN"
                             " lines_acked ELSE ?1 END, updated_ms = ?2"
@@ -525,7 +578,7 @@ save_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_err *e
 int
 store_job_progress(struct store *s, int64_t id, int64_t lines_acked, struct sf_err *err)
 {
-    int rc = save_progress(s, id, lines_acked, err);
+    int rc = save_progress(s, id, lines_acked, 0, err);
     if (rc == SF_ENOTFOUND)
         return sf_err_set(err, SF_EINVAL, "job %lld: not printing", (long long)id);
     return rc;
@@ -554,7 +607,7 @@ store_jobs_progress_tx(struct store *s, struct store_progress *p, size_t n, stru
         return rc;
     int saved = 0;
     for (size_t i = 0; i < n; i++) {
-        rc = save_progress(s, p[i].job_id, p[i].lines_acked, err);
+        rc = save_progress(s, p[i].job_id, p[i].lines_acked, 0, err);
         if (rc && rc != SF_ENOTFOUND) {
             store_rollback(s);
             return rc;
@@ -569,6 +622,24 @@ store_jobs_progress_tx(struct store *s, struct store_progress *p, size_t n, stru
         return rc;
     }
     return saved;
+}
+
+int
+store_job_progress_fenced(struct store *s, int64_t id, int64_t lines_acked, int64_t fence,
+                          struct sf_err *err)
+{
+    if (fence < 1)
+        return sf_err_set(err, SF_EINVAL, "job %lld: fencing token %lld is not one a host holds",
+                          (long long)id, (long long)fence);
+    sqldb_set_durable(s->db, false);
+    int rc = store_begin(s, err);
+    if (rc == SF_OK) {
+        if ((rc = save_progress(s, id, lines_acked, fence, err)) == SF_OK)
+            rc = store_commit(s, err);
+        store_rollback(s); /* a no-op after the commit */
+    }
+    sqldb_set_durable(s->db, true);
+    return rc;
 }
 
 int

@@ -485,3 +485,53 @@ T_CASE(hosts_events_commit_in_id_order_across_connections)
     store_close(w);
     pair_close(&p);
 }
+
+/* Fencing cannot be bypassed: a reap makes the reaped host's tokens stale (its RESUME of the
+   interrupted print, its PREPARED of a requeued job), a host-mode write without a token is
+   refused once a host holds the job, and progress carries the token. */
+T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "fence2", &err));
+    int64_t ta, tb, fa, fc, id, q;
+    struct job_row j;
+    T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    const char *mine[] = { "p1" };
+    T_OK(store_host_own(p.a, "a", ta, mine, 1, &err), &err);
+    T_OK(add_ready(p.a, &id, &err), &err);
+    T_OK(store_job_attach(p.a, "a", ta, id, &fa, &err), &err);
+    T_ERR(store_job_event(p.a, id, JOB_EV_START, &(struct job_event_args){ .printer = "p1" },
+                          NULL, &err),
+          SF_ESTALE, &err, "without a fencing token");
+    T_OK(store_job_event(p.a, id, JOB_EV_START,
+                         &(struct job_event_args){ .printer = "p1", .fence = fa }, NULL, &err),
+         &err);
+    T_OK(store_job_progress_fenced(p.a, id, 100, fa, &err), &err);
+    T_ERR(store_job_progress_fenced(p.a, id, 200, fa + 1, &err), SF_ESTALE, &err, "is stale");
+    T_OK(add_jobs(p.a, 1, &q, &err), &err);
+    T_OK(store_job_claim(p.a, "a", ta, NULL, &j, &fc, &err), &err);
+    T_EQ_INT(j.id, q);
+    /* a is cut off; its lease runs out and b reaps it */
+    T_EQ_INT(store_host_reap(p.b, clock_wall_ms() + 120 * 1000, NULL, &err), 1);
+    T_OK(store_job_get(p.b, id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    T_EQ_INT(j.lines_acked, 100);
+    /* a comes back with its old tokens: refused, nothing changes */
+    T_ERR(store_job_event(p.a, id, JOB_EV_RESUME, &(struct job_event_args){ .fence = fa }, NULL,
+                          &err),
+          SF_ESTALE, &err, "is stale");
+    T_ERR(store_job_progress_fenced(p.a, id, 300, fa, &err), SF_ESTALE, &err, "is stale");
+    struct job_event_args done = { .gcode_sha = j.gcode_sha, .prep_key = "k", .fence = fc };
+    T_ERR(store_job_event(p.a, q, JOB_EV_PREPARED, &done, NULL, &err), SF_ESTALE, &err,
+          "is stale");
+    T_OK(store_job_get(p.b, id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    T_EQ_INT(j.lines_acked, 100);
+    T_OK(store_job_get(p.b, q, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_QUEUED);
+    /* the operator's events need no token */
+    T_OK(store_job_event(p.a, q, JOB_EV_CANCEL, NULL, NULL, &err), &err);
+    pair_close(&p);
+}
