@@ -195,3 +195,35 @@ T_CASE(sqldb_listen_notify_and_channel_names)
     sqldb_close(db);
     sqldb_close(other);
 }
+
+/* Failure codes say what a caller may do (sqldb.h): a row another connection holds is busy
+   (SF_EAGAIN, nothing applied: try again), a constraint is permanent (SF_EIO); the code
+   survives the rollback. */
+T_CASE(sqldb_busy_and_permanent_failures_differ)
+{
+    struct sqldb *db = fresh("codes");
+    T_TRUE(db != NULL);
+    T_OK(sqldb_exec(db, "CREATE TABLE t(k TEXT PRIMARY KEY)"), NULL);
+    T_OK(sqldb_exec(db, "INSERT INTO t VALUES('a')"), NULL);
+    T_OK(sqldb_begin(db), NULL);
+    T_EQ_INT(sqldb_exec(db, "INSERT INTO t VALUES('a')"), SF_EIO);
+    T_EQ_INT(sqldb_errcode(db), SF_EIO);
+    sqldb_rollback(db);
+    T_EQ_INT(sqldb_errcode(db), SF_EIO);
+    T_TRUE(strcasestr(sqldb_errmsg(db), "unique") != NULL);
+    sqldb_rollback(db); /* outside a transaction: nothing, and the failure is kept */
+    T_TRUE(strcasestr(sqldb_errmsg(db), "unique") != NULL);
+    T_EQ_INT(sqldb_commit_outcome(db), 0); /* nothing in doubt */
+    if (t_store_pg()) {
+        struct sqldb *other = fresh("codes");
+        T_TRUE(other != NULL);
+        T_OK(sqldb_begin(other), NULL);
+        T_OK(sqldb_exec(other, "SELECT k FROM t FOR UPDATE"), NULL);
+        T_EQ_INT(sqldb_exec(db, "SELECT k FROM t FOR UPDATE NOWAIT"), SF_EAGAIN);
+        T_EQ_INT(sqldb_errcode(db), SF_EAGAIN);
+        sqldb_rollback(other);
+        T_OK(sqldb_exec(db, "SELECT k FROM t FOR UPDATE NOWAIT"), NULL);
+        sqldb_close(other);
+    }
+    sqldb_close(db);
+}
