@@ -356,3 +356,38 @@ T_CASE(storeq_reports_a_permanent_failure_at_once)
     T_EQ_STR(got, "after it");
     teardown(&fx);
 }
+
+/* Shutdown with the database held busy: the first write waits out storeq_free's window, the
+   ones after it fail at once (each used to wait out its own busy timeout, 5 s apiece). */
+T_CASE(storeq_free_gives_up_once_on_a_locked_database)
+{
+    if (t_store_pg()) {
+        t_skip("holds SQLite's write lock from a second connection");
+        return;
+    }
+    struct sf_err err;
+    struct fixture fx;
+    T_OK(setup(&fx, "stuck", &err), &err);
+    char path[600];
+    snprintf(path, sizeof(path), "%s/slimfarm.db", fx.dir);
+    struct sqldb *other = sqldb_open(path, 0, &err);
+    T_TRUE(other != NULL);
+    T_OK(sqldb_begin(other), NULL);
+    struct answer a[4] = { { 0 } };
+    struct job_event_args sa = { .printer = "mk3" };
+    for (int i = 0; i < 4; i++)
+        T_OK(storeq_job_event(fx.q, fx.id, JOB_EV_START, &sa, "mk3", on_event, &a[i]), NULL);
+    storeq_free(fx.q);
+    fx.q = NULL;
+    sqldb_rollback(other);
+    sqldb_close(other);
+    T_EQ_INT(a[0].calls, 1);
+    T_EQ_INT(a[0].rc, SF_EAGAIN);
+    T_TRUE(strstr(a[0].msg, "locked") != NULL);
+    for (int i = 1; i < 4; i++) {
+        T_EQ_INT(a[i].calls, 1);
+        T_EQ_INT(a[i].rc, SF_EUNREACH);
+        T_TRUE(strstr(a[i].msg, "through shutdown") != NULL);
+    }
+    teardown(&fx);
+}
