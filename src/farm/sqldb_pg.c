@@ -18,10 +18,20 @@
  * an idle connection (a restart) is seen before the next statement is
  * sent, by a poll of the socket, so that statement runs on a new session
  * instead of failing.  The connection is then marked lost and ready()
- * decides: fail inside a transaction, else reconnect (PQreset) when the
- * back-off allows, restoring the session (session()) and calling the
+ * decides: fail inside a transaction, else reconnect (PQreset; on an
+ * SQLDB_NOWAIT connection PQresetStart, then PQresetPoll a step at each
+ * later call, never waiting) when the back-off allows, restoring the
+ * session (session(): the lost session ended if the server still runs it,
+ * server-side keepalives, read-only, durability, LISTENs) and calling the
  * caller's hook.  The back-off lives here, not in the caller, so every
  * caller of the store gets it.
+ *
+ * Codes (sqldb.h): a loss is SF_EUNREACH when nothing can have been
+ * applied (inside a transaction, a read, before sending), SF_EINDOUBT
+ * during a COMMIT or a write outside a transaction; the server's SQLSTATE
+ * sorts the rest (code_of).  A writer's BEGIN also reads txid_current() in
+ * its round trip, so a COMMIT in doubt is looked up later by txid_status()
+ * (pg_commit_outcome).
  *
  * Thread: as sqldb.h.  Every call blocks on the server.
  */
@@ -47,20 +57,20 @@
 struct pg {
     struct sqldb base;
     PGconn *conn;
-    unsigned flags;               /* sqldb_open's: SQLDB_READONLY is restored */
-    bool async_commit;            /* sqldb_set_durable(false) in force: restored */
-    bool lost;                    /* the connection is gone: reconnect before use */
-    bool reconnecting;            /* restoring a session: a loss now fails, no recursion */
-    bool connecting;              /* SQLDB_NOWAIT: a PQresetStart is under way */
+    unsigned flags;                 /* sqldb_open's: SQLDB_READONLY is restored */
+    bool async_commit;              /* sqldb_set_durable(false) in force: restored */
+    bool lost;                      /* the connection is gone: reconnect before use */
+    bool reconnecting;              /* restoring a session: a loss now fails, no recursion */
+    bool connecting;                /* SQLDB_NOWAIT: a PQresetStart is under way */
     PostgresPollingStatusType poll; /* its last PQresetPoll (what its socket waits for) */
-    int64_t connect_ms;           /* clock_mono_ms when it started */
-    int64_t connect_timeout_ms;   /* the connection's connect_timeout (0: none) */
-    int64_t xid;                  /* the open transaction's id (txid_current), 0 if none */
-    bool doubt;                   /* the last write's outcome is unknown (SF_EINDOUBT) */
-    int64_t doubt_xid;            /* its transaction's id; 0: it ran outside one */
-    int pid;                      /* the server process of this session (pg_backend_pid) */
-    char started[64];             /* and its backend_start, as text: together, this session */
-    int old_pid;                  /* a lost session the server may still run; 0 if none */
+    int64_t connect_ms;             /* clock_mono_ms when it started */
+    int64_t connect_timeout_ms;     /* the connection's connect_timeout (0: none) */
+    int64_t xid;                    /* the open transaction's id (txid_current), 0 if none */
+    bool doubt;                     /* the last write's outcome is unknown (SF_EINDOUBT) */
+    int64_t doubt_xid;              /* its transaction's id; 0: it ran outside one */
+    int pid;                        /* the server process of this session (pg_backend_pid) */
+    char started[64];               /* and its backend_start, as text: together, this session */
+    int old_pid;                    /* a lost session the server may still run; 0 if none */
     char old_started[64];
     int backoff_ms;               /* the wait after the next failed attempt; 0: none yet */
     int64_t retry_ms;             /* clock_mono_ms of the next attempt allowed */
@@ -536,8 +546,8 @@ one_text(struct pg *p, const char *sql, int n, const char *const *params, char *
     if (PQresultStatus(res) != PGRES_TUPLES_OK)
         rc = fail_res(&p->base, res, sql);
     else
-        snprintf(out, cap, "%s", PQntuples(res) == 1 && PQnfields(res) >= 1 ? PQgetvalue(res, 0, 0)
-                                                                         : "");
+        snprintf(out, cap, "%s",
+                 PQntuples(res) == 1 && PQnfields(res) >= 1 ? PQgetvalue(res, 0, 0) : "");
     PQclear(res);
     return rc;
 }
@@ -562,7 +572,7 @@ end_old_session(struct pg *p)
     const char *params[2] = { pid, p->old_started };
     int rc = one_text(p, sql, 2, params, out, sizeof(out));
     if (rc == SF_EUNREACH || rc == SF_EINDOUBT)
-        return rc; /* lost again: the next session tries */
+        return rc;  /* lost again: the next session tries */
     p->old_pid = 0; /* ended, gone already, or not ours to end (the server's keepalives will) */
     return SF_OK;
 }
@@ -603,8 +613,7 @@ session(struct pg *p)
     if (rc == SF_OK && db->on_reconnect) {
         struct sf_err err = { 0 };
         if (db->on_reconnect(db, db->on_reconnect_arg, &err) != SF_OK)
-            rc = sqldb_failf(db, SF_EUNREACH, "%s",
-                             err.msg[0] ? err.msg : "reconnect hook failed");
+            rc = sqldb_failf(db, SF_EUNREACH, "%s", err.msg[0] ? err.msg : "reconnect hook failed");
     }
     char *sp = strchr(ident, ' ');
     if (rc == SF_OK && sp) { /* this session, to end should it be lost */
@@ -642,8 +651,7 @@ connect_step(struct pg *p)
         p->poll = PGRES_POLLING_WRITING; /* libpq: as if the last poll said so */
         p->connect_ms = clock_mono_ms();
     }
-    for (int i = 0; i < 64 && p->poll != PGRES_POLLING_OK && p->poll != PGRES_POLLING_FAILED;
-         i++) {
+    for (int i = 0; i < 64 && p->poll != PGRES_POLLING_OK && p->poll != PGRES_POLLING_FAILED; i++) {
         struct pollfd pfd = { .fd = PQsocket(p->conn),
                               .events = p->poll == PGRES_POLLING_READING ? POLLIN : POLLOUT };
         if (pfd.fd < 0 || poll(&pfd, 1, 0) == 0)

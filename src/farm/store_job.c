@@ -562,8 +562,7 @@ update_job_field(struct store *s, int64_t id, const char *sql, int64_t ival, con
 /* Raise job id's lines_acked; SF_ENOTFOUND if it is not printing or paused, SF_ESTALE if
    fence (0: none) is not its token (checked first, locking the row on PostgreSQL). */
 static int
-save_progress(struct store *s, int64_t id, int64_t lines_acked, int64_t fence,
-              struct sf_err *err)
+save_progress(struct store *s, int64_t id, int64_t lines_acked, int64_t fence, struct sf_err *err)
 {
     int rc = fence > 0 ? store_job_fence(s, id, fence, err) : SF_OK;
     if (rc)

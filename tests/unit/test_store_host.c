@@ -461,13 +461,15 @@ T_CASE(hosts_events_commit_in_id_order_across_connections)
     struct bg reap = { .s = p.b, .reap = true }, note = { .s = w };
     pthread_t tr, tn;
     T_EQ_INT(pthread_create(&tr, NULL, bg_run, &reap), 0);
-    T_TRUE(wait_for(look, "SELECT count(*) FROM pg_locks WHERE NOT granted AND locktype IN"
-                          " ('transactionid', 'tuple')",
+    T_TRUE(wait_for(look,
+                    "SELECT count(*) FROM pg_locks WHERE NOT granted AND locktype IN"
+                    " ('transactionid', 'tuple')",
                     NULL));
     /* the note: it commits at once (ids out of order) or waits for the reap's commit */
     T_EQ_INT(pthread_create(&tn, NULL, bg_run, &note), 0);
-    T_TRUE(wait_for(look, "SELECT count(*) FROM pg_locks WHERE NOT granted AND"
-                          " locktype = 'advisory'",
+    T_TRUE(wait_for(look,
+                    "SELECT count(*) FROM pg_locks WHERE NOT granted AND"
+                    " locktype = 'advisory'",
                     &note.done));
     size_t n = page_events(p.a, &last);
     sqldb_rollback(lock);
@@ -478,7 +480,7 @@ T_CASE(hosts_events_commit_in_id_order_across_connections)
     n += page_events(p.a, &last);
     snprintf(sql, sizeof(sql), "SELECT count(*) FROM events WHERE id > %lld", (long long)before);
     int64_t all = t_store_int(p.dir, sql);
-    T_EQ_INT(all, 4); /* two jobs back in the queue, the reap, the note */
+    T_EQ_INT(all, 4);          /* two jobs back in the queue, the reap, the note */
     T_EQ_INT((int64_t)n, all); /* none passed over */
     sqldb_close(lock);
     sqldb_close(look);
@@ -502,8 +504,8 @@ T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
     T_OK(store_host_own(p.a, "a", ta, mine, 1, &err), &err);
     T_OK(add_ready(p.a, &id, &err), &err);
     T_OK(store_job_attach(p.a, "a", ta, id, &fa, &err), &err);
-    T_ERR(store_job_event(p.a, id, JOB_EV_START, &(struct job_event_args){ .printer = "p1" },
-                          NULL, &err),
+    T_ERR(store_job_event(p.a, id, JOB_EV_START, &(struct job_event_args){ .printer = "p1" }, NULL,
+                          &err),
           SF_ESTALE, &err, "without a fencing token");
     T_OK(store_job_event(p.a, id, JOB_EV_START,
                          &(struct job_event_args){ .printer = "p1", .fence = fa }, NULL, &err),
@@ -524,8 +526,7 @@ T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
           SF_ESTALE, &err, "is stale");
     T_ERR(store_job_progress_fenced(p.a, id, 300, fa, &err), SF_ESTALE, &err, "is stale");
     struct job_event_args done = { .gcode_sha = j.gcode_sha, .prep_key = "k", .fence = fc };
-    T_ERR(store_job_event(p.a, q, JOB_EV_PREPARED, &done, NULL, &err), SF_ESTALE, &err,
-          "is stale");
+    T_ERR(store_job_event(p.a, q, JOB_EV_PREPARED, &done, NULL, &err), SF_ESTALE, &err, "is stale");
     T_OK(store_job_get(p.b, id, &j, &err), &err);
     T_EQ_INT(j.state, JOB_INTERRUPTED);
     T_EQ_INT(j.lines_acked, 100);
