@@ -869,3 +869,50 @@ store_job_fence(struct store *s, int64_t id, int64_t fence, struct sf_err *err)
                       "(token %lld)",
                       (long long)id, (long long)fence, holder[0] ? holder : "none", (long long)cur);
 }
+
+/* store_host_printer_set in the caller's transaction. */
+static int
+printer_set_tx(struct store *s, const char *host, int64_t token, const char *printer,
+               enum printer_state state, struct sf_err *err)
+{
+    int64_t now = clock_wall_ms();
+    struct sqldb_stmt *st;
+    int rc = host_hold(s, host, token, now, err);
+    if (rc ||
+        (rc = store_prepare(s, &st, "SELECT host FROM host_printers WHERE printer = ?1", err)))
+        return rc;
+    sqldb_bind_text(st, 1, printer);
+    rc = sqldb_step(st);
+    char owner[STORE_HOST_NAME_MAX] = "";
+    if (rc == SQLDB_ROW)
+        store_copy_text(owner, sizeof(owner), st, 0);
+    sqldb_finalize(st);
+    if (rc != SQLDB_ROW && rc != SQLDB_DONE)
+        return store_db_fail(s, err, "printer owner");
+    if (!owner[0])
+        return sf_err_set(err, SF_ESTALE, "printer '%s' belongs to no host, not '%s': not written",
+                          printer, host);
+    if (strcmp(owner, host) != 0)
+        return sf_err_set(err, SF_ESTALE,
+                          "printer '%s' belongs to host '%s', not '%s': not written", printer,
+                          owner, host);
+    if ((rc = store_prepare(s, &st,
+                            "INSERT INTO printers(name, state, updated_ms) VALUES(?1, ?2, ?3)"
+                            " ON CONFLICT(name) DO UPDATE SET state = ?2, updated_ms = ?3",
+                            err)))
+        return rc;
+    sqldb_bind_text(st, 1, printer);
+    sqldb_bind_text(st, 2, printer_state_name(state));
+    sqldb_bind_int64(st, 3, now);
+    if ((rc = store_step_done(s, st, err, "set printer")))
+        return rc;
+    return store_log_event(s, 0, printer, "printer-state", printer_state_name(state), err);
+}
+
+int
+store_host_printer_set(struct store *s, const char *host, int64_t token, const char *printer,
+                       enum printer_state state, struct sf_err *err)
+{
+    int rc = store_begin(s, err);
+    return rc ? rc : end_tx(s, printer_set_tx(s, host, token, printer, state, err), err);
+}

@@ -159,4 +159,13 @@ int store_job_attach(struct store *s, const char *host, int64_t token, int64_t i
  */
 int store_job_fence(struct store *s, int64_t id, int64_t fence, struct sf_err *err);
 
+/*
+ * store_printer_set from host (its token): only while host's lease is
+ * current and host owns printer (store_host_own), else SF_ESTALE naming
+ * why, nothing written; so a host back from a partition cannot overwrite
+ * the state of a printer another host has taken over.
+ */
+int store_host_printer_set(struct store *s, const char *host, int64_t token, const char *printer,
+                           enum printer_state state, struct sf_err *err);
+
 #endif

@@ -511,6 +511,9 @@ T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
                          &(struct job_event_args){ .printer = "p1", .fence = fa }, NULL, &err),
          &err);
     T_OK(store_job_progress_fenced(p.a, id, 100, fa, &err), &err);
+    T_OK(store_host_printer_set(p.a, "a", ta, "p1", PRINTER_PRINTING, &err), &err);
+    T_ERR(store_host_printer_set(p.b, "b", tb, "p1", PRINTER_IDLE, &err), SF_ESTALE, &err,
+          "belongs to host 'a', not 'b'");
     T_ERR(store_job_progress_fenced(p.a, id, 200, fa + 1, &err), SF_ESTALE, &err, "is stale");
     T_OK(add_jobs(p.a, 1, &q, &err), &err);
     T_OK(store_job_claim(p.a, "a", ta, NULL, &j, &fc, &err), &err);
@@ -525,6 +528,8 @@ T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
                           &err),
           SF_ESTALE, &err, "is stale");
     T_ERR(store_job_progress_fenced(p.a, id, 300, fa, &err), SF_ESTALE, &err, "is stale");
+    T_ERR(store_host_printer_set(p.a, "a", ta, "p1", PRINTER_PRINTING, &err), SF_ESTALE, &err,
+          "reaped");
     struct job_event_args done = { .gcode_sha = j.gcode_sha, .prep_key = "k", .fence = fc };
     T_ERR(store_job_event(p.a, q, JOB_EV_PREPARED, &done, NULL, &err), SF_ESTALE, &err, "is stale");
     T_OK(store_job_get(p.b, id, &j, &err), &err);
