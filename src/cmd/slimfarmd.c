@@ -185,6 +185,12 @@ run_fsck(struct farmcfg *cfg)
 {
     struct sf_err err;
     struct store_recovery rec;
+    if (cfg->store[0]) { /* its recovery would take every host's jobs for this one's */
+        fprintf(stderr, "slimfarmd: --fsck checks an SQLite store; this config's is shared "
+                        "(store:), which the hosts recover themselves\n");
+        farmcfg_release(cfg);
+        return 1;
+    }
     struct store *s = store_open(cfg->data_dir, &rec, &err);
     int status = 1;
     struct job_row *jobs = NULL;
