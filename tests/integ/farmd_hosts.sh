@@ -10,7 +10,9 @@
 # job.  Nothing polls the queue: a host learns of a job another host's API
 # took through NOTIFY (farm_host.h).
 #
-# Part 2: more jobs, then kill -9 of host c while its Marlin prints.  Once
+# Part 2: a's and b's printers disabled, more jobs, which c alone claims
+# and prepares; kill -9 of host c while its Marlin prints; a's and b's
+# printers enabled again.  Once
 # c's lease (5 s here) runs out another host reaps it: c's Marlin job
 # becomes interrupted, the jobs c had claimed and not started are printed
 # by a and b, and every other job ends done, printed once.  Restarted, c
@@ -90,7 +92,13 @@ submit_on() {
   done
 }
 
-# ---- part 1: nine jobs through the three APIs, each printed once somewhere ----
+# ---- part 1: ten jobs through the three APIs, each printed once somewhere ----
+# first, with the farm idle, a job for c's network printer through a's API: c has nothing
+# else to wake it than a's NOTIFY
+j_pin=$(SLIMFARM_URL=${hurl[a]} submit "$tmp/t8.stl" --material PLA --printer c_net --method none)
+pinned_done() { [ "$(SLIMFARM_URL=${hurl[a]} job_state "$j_pin")" = done ]; }
+wait_for 60 pinned_done || fail "job $j_pin for c_net, submitted on a, not done: $(on c "$C" jobs)"
+jobs=$j_pin
 submit_on a 8 11 14
 submit_on b 9 12 15
 submit_on c 10 13 16
@@ -115,9 +123,16 @@ grep -q "claimed job" "$tmp/a.log" && grep -q "claimed job" "$tmp/b.log" && grep
   echo "   note: not every host claimed a job in part 1"
 
 # ---- part 2: kill -9 of host c while its Marlin prints ----
+# a's and b's printers disabled for now, so c alone claims the new jobs: it prepares every
+# one it can while its slow Marlin prints, and holds them ready
+# post HOST PATH BODY: POST to HOST's API
+post() { curl -sf -X POST -H "X-Api-Key: $RW" -H 'Content-Type: application/json' -d "$3" "${hurl[$1]}$2" > /dev/null; }
+for p in a_mk a_net b_mk b_net; do
+  post "${p%%_*}" "/api/printers/$p/disable" '{"reason": "test: c first"}' || fail "disable $p"
+done
 jobs2=
 k=0
-for s in 14 15 16 14 15 16 14 15 16 14 15 16 14 15 16 14 15 16; do
+for s in 14 15 16 14 15 16 14 15; do
   h=$(echo a b c | cut -d' ' -f$((k % 3 + 1)))
   k=$((k + 1))
   id=$(SLIMFARM_URL=${hurl[$h]} submit "$tmp/t$s.stl" --material PLA --method none)
@@ -146,6 +161,7 @@ echo "   killed c: its Marlin job ${c_usb:-none}, network job ${c_net:-none}, cl
 [ -n "$c_usb" ] || fail "no job on c_mk at the kill"
 reaped() { grep -q "reaped 1 hosts" "$tmp/a.log" "$tmp/b.log"; }
 wait_for 60 reaped || fail "c was never reaped: $(tail -5 "$tmp/a.log")"
+for p in a_mk a_net b_mk b_net; do post "${p%%_*}" "/api/printers/$p/enable" '{}' || fail "enable $p"; done
 [ "$(job_state "$c_usb")" = interrupted ] || fail "c's Marlin job $c_usb: $(job_state "$c_usb"), wanted interrupted"
 api "/api/jobs/$c_usb" | json 'd["job"]["reason"]' | grep -q "host c lost its lease" ||
   fail "job $c_usb's reason: $(api "/api/jobs/$c_usb" | json 'd["job"]["reason"]')"
