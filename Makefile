@@ -248,10 +248,12 @@ check: deps
 
 # The store on both engines: its unit tests on SQLite, and tests/integ/store_pg.sh,
 # which starts a PostgreSQL server of its own (initdb into a temp dir, a Unix
-# socket) and runs the store, farm and API tests on it.  `make check` runs both.
+# socket) and runs the store, farm and API tests on it; then the daemon as three hosts on
+# one PostgreSQL (tests/integ/farmd_hosts.sh).  `make check` runs them all.
 check-pg: deps
 	$(MAKE) --no-print-directory SAN=1 tests
 	tests/run.sh build/san store
+	tests/run.sh build/san farmd_hosts
 
 T ?=
 SECS ?= 60

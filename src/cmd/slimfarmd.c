@@ -50,10 +50,12 @@
 #include "../base/par.h"
 #include "../base/pool.h"
 #include "../farm/farm.h"
+#include "../farm/farm_host.h"
 #include "../farm/farmcfg.h"
 #include "../farm/notify.h"
 #include "../farm/prepare.h"
 #include "../farm/store.h"
+#include "../farm/store_host.h"
 
 /* Everything the daemon runs, for the callbacks. */
 struct daemon {
@@ -106,6 +108,7 @@ on_api_change(void *ud)
 {
     struct daemon *d = ud;
     farm_kick(d->farm);
+    farm_host_wake(d->farm); /* a job added or changed: the other hosts may take it */
 }
 
 static void
@@ -159,9 +162,10 @@ on_reload(struct loop *l, int signo, void *ud)
         log_error("slimfarmd", "reload: %s; keeping the running config", err.msg);
         return;
     }
-    if (strcmp(next.data_dir, d->cfg.data_dir) != 0 ||
+    if (strcmp(next.data_dir, d->cfg.data_dir) != 0 || strcmp(next.store, d->cfg.store) != 0 ||
+        strcmp(next.host, d->cfg.host) != 0 || next.host_lease_s != d->cfg.host_lease_s ||
         strcmp(next.listen_host, d->cfg.listen_host) || next.listen_port != d->cfg.listen_port)
-        log_warn("slimfarmd", "reload: listen and data_dir changes need a restart");
+        log_warn("slimfarmd", "reload: listen, data_dir, store and host changes need a restart");
     raise_nofile(next.n_printers);
     if (api_reload(d->api, &d->cfg, &next, &err) || farm_reload(d->farm, &next, &err) ||
         notify_reload(d->notify, next.notify, next.n_notify, &err)) {
@@ -181,6 +185,12 @@ run_fsck(struct farmcfg *cfg)
 {
     struct sf_err err;
     struct store_recovery rec;
+    if (cfg->store[0]) { /* its recovery would take every host's jobs for this one's */
+        fprintf(stderr, "slimfarmd: --fsck checks an SQLite store; this config's is shared "
+                        "(store:), which the hosts recover themselves\n");
+        farmcfg_release(cfg);
+        return 1;
+    }
     struct store *s = store_open(cfg->data_dir, &rec, &err);
     int status = 1;
     struct job_row *jobs = NULL;
@@ -417,7 +427,10 @@ main(int argc, char **argv)
     if (d.cfg.n_keys == 0)
         log_warn("slimfarmd", "%s has no api_keys: every API request will get 401", d.config_path);
     struct store_recovery rec;
-    if (!(d.l = loop_new(&err)) || !(d.s = store_open(d.cfg.data_dir, &rec, &err)) ||
+    /* a shared store (farm.ini store): one host of several (farm_host.h) */
+    if (!(d.l = loop_new(&err)) ||
+        !(d.s = d.cfg.store[0] ? store_open_host(d.cfg.data_dir, d.cfg.store, &rec, &err)
+                               : store_open(d.cfg.data_dir, &rec, &err)) ||
         !(d.pool = pool_new(d.l, 0, &err)))
         goto out;
     char instance[17];
@@ -458,8 +471,12 @@ main(int argc, char **argv)
         loop_add_signal(d.l, SIGHUP, on_reload, &d, &err))
         goto out;
     signal(SIGPIPE, SIG_IGN);
-    log_info("slimfarmd", "listening on %s:%d, data in %s, %zu printers", d.cfg.listen_host,
-             http_port(api_http(d.api)), d.cfg.data_dir, farm_printer_count(d.farm));
+    char shown[sizeof(d.cfg.store)] = "SQLite";
+    if (d.cfg.store[0])
+        farmcfg_store_shown(d.cfg.store, shown, sizeof(shown));
+    log_info("slimfarmd", "listening on %s:%d, data in %s, store %s, %zu printers",
+             d.cfg.listen_host, http_port(api_http(d.api)), d.cfg.data_dir, shown,
+             farm_printer_count(d.farm));
     if (loop_run(d.l) == SF_OK)
         status = 0;
     else

@@ -34,6 +34,7 @@
 #include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "farm_host.h"
 #include "gcjob.h"
 #include "sched.h"
 
@@ -60,6 +61,7 @@ struct prep {
     char mesh_sha[STORE_SHA_HEX]; /* the optimized part, adopted by the worker; "" if none */
     int64_t mesh_size;
     int64_t prepare_ms; /* the prepare function's wall time */
+    int64_t fence;      /* the claim's fencing token (farm_host.h); 0 on a single host */
     struct sf_err err;  /* why it failed */
 };
 
@@ -290,7 +292,8 @@ prep_done(struct loop *l, void *ud, int rc)
                                     .andr = t->out.andr,
                                     .est_known = true,
                                     .est_s = t->est_s,
-                                    .note = t->out.shape_failed };
+                                    .note = t->out.shape_failed,
+                                    .fence = t->fence };
         memcpy(a.size_mm, t->out.size_mm, sizeof(a.size_mm));
         /* A re-slice whose job started meanwhile on a printer of its old key
            (or was cancelled) is refused there and dropped: nothing changed.
@@ -393,7 +396,9 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     snprintf(slash + 1, 32, "job-%lld%s.gcode", (long long)j->id, reslice ? "-re" : "");
     if (!reuse)
         snprintf(t->req.mesh_out, sizeof(t->req.mesh_out), "%s.stl", t->req.out_path);
-    int rc = reslice ? SF_OK : job_event(f, j->id, JOB_EV_PREPARE, NULL);
+    int rc = reslice           ? SF_OK
+             : farm_host_on(f) ? farm_host_claim(f, j->id, &t->fence)
+                               : job_event(f, j->id, JOB_EV_PREPARE, NULL);
     if (rc) {
         free(t);
         return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
@@ -476,7 +481,7 @@ run(struct loop *l, void *ud)
     struct job_row *jobs;
     size_t n;
     /* the live jobs only: the scheduler never reads history (store.h) */
-    if (store_job_live(f->s, &jobs, &n, &err)) {
+    if (farm_host_live(f, &jobs, &n, &err)) {
         log_error("farm", "%s", err.msg);
         return;
     }
@@ -511,14 +516,15 @@ run(struct loop *l, void *ud)
         const struct job_row *j = &jobs[out[k].job];
         struct printer *p = f->printers[out[k].printer];
         if (!out[k].reslice) {
-            farm_start(f, j, p);
+            if (farm_host_take(f, j->id)) /* another host's printer may have taken it */
+                farm_start(f, j, p);
             continue;
         }
         /* Waiting for a busy printer of its key while p idles: slice it for p. */
         char key[SCHED_KEY_MAX];
         sched_key(&sp[out[k].printer], j->opts.overhang_deg, key);
         if (!reslicing(f, j->id) && !reslice_failed(f, j->id, key) &&
-            f->preparing < pool_size(f->pool))
+            f->preparing < pool_size(f->pool) && farm_host_take(f, j->id))
             prepare(f, j, p, true);
     }
     /* Prepare queued jobs for a printer that could take them, an idle one first. */
@@ -526,7 +532,8 @@ run(struct loop *l, void *ud)
         if (jobs[i].state != JOB_QUEUED)
             continue;
         if (why[i][0] || f->preparing >= pool_size(f->pool)) {
-            storeq_job_set_reason(f->q, jobs[i].id, why[i]);
+            if (!farm_host_on(f)) /* another host's printer may take it */
+                storeq_job_set_reason(f->q, jobs[i].id, why[i]);
             continue;
         }
         size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
@@ -615,6 +622,10 @@ farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcf
         farm_free(f);
         return NULL;
     }
+    if (farm_host_start(f, cfg, err)) {
+        farm_free(f);
+        return NULL;
+    }
     if (f->hooks.progress_ms <= 0)
         f->hooks.progress_ms = FARM_PROGRESS_MS;
     f->progress = loop_timer_add(l, f->hooks.progress_ms, on_progress, f);
@@ -646,6 +657,7 @@ farm_free(struct farm *f)
         storeq_set_commit(f->q, NULL, NULL);
         storeq_free(f->q);
     }
+    farm_host_stop(f); /* leave, once the store holds what the stop wrote */
     for (size_t i = 0; i < f->n_printers; i++)
         printer_free(f->printers[i]);
     free(f->printers);
@@ -754,6 +766,7 @@ farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
     f->gram_s = cfg->gram_s;
     f->material_first = cfg->material_first;
+    farm_host_own(f);
     farm_kick(f);
     return SF_OK;
 }

@@ -62,6 +62,9 @@ static const struct option options[] = {
     { "upload_max_mb", false, K_MIB, 0, 0, 1, 4096 },
     { "gram_seconds", false, K_DBL, F(gram_s), 0, 1e6 },
     { "material_first", false, K_BOOL, F(material_first), 0, 0 },
+    { "store", false, K_STR, F(store), 0, 0 },
+    { "host", false, K_IDENT, F(host), 0, 0 },
+    { "host_lease_s", false, K_DBL, F(host_lease_s), 2, 3600 },
     { "driver", true, K_IDENT, P(driver), 0, 0 },
     { "profile", true, K_IDENT, P(profile), 0, 0 },
     { "material", true, K_IDENT, P(material), 0, 0 },
@@ -494,6 +497,13 @@ handler(void *user, const char *section, const char *name, const char *value)
             return 1; /* empty: keep the default, the config file's directory */
         if (!check_text(ps, name, section, o->kind, o->size, value))
             return 0;
+        /* the value is not quoted back: it may hold a password */
+        if (strcmp(name, "store") == 0 && value[0] && strncmp(value, "postgresql://", 13) != 0 &&
+            strncmp(value, "postgres://", 11) != 0)
+            return fail(ps,
+                        "option 'store' in section '%s': not a postgresql:// URL (leave it out "
+                        "for SQLite in data_dir)",
+                        section);
         struct gpolicy gp;
         struct sf_err e;
         gpolicy_init(&gp);
@@ -663,6 +673,31 @@ farmcfg_init(struct farmcfg *c)
     snprintf(c->profiles_dir, sizeof(c->profiles_dir), "config");
     c->upload_max_bytes = (size_t)256 << 20;
     c->gram_s = 60;
+    c->host_lease_s = 30;
+}
+
+void
+farmcfg_store_shown(const char *url, char *out, size_t n)
+{
+    const char *auth = strstr(url, "://");
+    auth = auth ? auth + 3 : url;
+    const char *at = strchr(auth, '@'), *colon = strchr(auth, ':');
+    if (at && colon && colon < at && !memchr(auth, '/', (size_t)(at - auth)))
+        snprintf(out, n, "%.*s***%s", (int)(colon + 1 - url), url, at);
+    else
+        snprintf(out, n, "%s", url);
+    /* a password=VALUE parameter: its value shown as "***" */
+    char *pw = strstr(out, "password=");
+    if (pw) {
+        pw += strlen("password=");
+        size_t len = strcspn(pw, "& "), rest = strlen(pw + len);
+        if (len && (size_t)(pw - out) + 3 + rest < n) {
+            memmove(pw + 3, pw + len, rest + 1);
+            memcpy(pw, "***", 3);
+        } else if (len) {
+            *pw = '\0'; /* no room for the mask: cut there */
+        }
+    }
 }
 
 void

@@ -81,6 +81,14 @@ struct farmcfg {
                                  print seconds (default 60; printtime.h) */
     bool material_first;      /* the search may hand back a part that prints slower than
                                  uploaded when it saves support (default false) */
+    char store[512];          /* the job database: "" SQLite in data_dir (default), or a
+                                 postgresql:// URL shared by several hosts (farm_host.h);
+                                 its password is never logged (farmcfg_store_shown) */
+    char host[64];            /* this host's name on a shared store; "" (default): the
+                                 machine's hostname */
+    double host_lease_s;      /* a host's lease on a shared store: the others take its
+                                 work this long after its last beat (default 30; it beats
+                                 every third of it) */
     struct farmcfg_key *keys; /* n_keys API keys; free with farmcfg_release */
     size_t n_keys;
     struct farmcfg_printer *printers; /* n_printers, in file order */
@@ -138,6 +146,9 @@ void farmcfg_printer_each(const struct farmcfg_printer *p, farmcfg_option_fn fn,
 
 /* The G-code policy (drivers/gpolicy.h) of printer p: its attended and allow_gcode. */
 void farmcfg_policy(const struct farmcfg_printer *p, struct gpolicy *out);
+
+/* Store URL url for a log line: a password in it shown as "***". */
+void farmcfg_store_shown(const char *url, char *out, size_t n);
 
 /* The printer called name, or NULL. */
 const struct farmcfg_printer *farmcfg_printer(const struct farmcfg *c, const char *name);

@@ -718,8 +718,8 @@ method_list(const char *methods, char *out, size_t cap, struct sf_err *err)
 
 /* The claim, in the caller's transaction: the job into *out and its fence, SF_ENOTFOUND. */
 static int
-claim_next(struct store *s, const char *host, const char *list, int64_t now_ms, struct job_row *out,
-           int64_t *fence, struct sf_err *err)
+claim_next(struct store *s, const char *host, const char *list, int64_t id, int64_t now_ms,
+           struct job_row *out, int64_t *fence, struct sf_err *err)
 {
     enum job_state to;
     struct job_counts c = { 1, 0, 0, 0 };
@@ -733,7 +733,7 @@ claim_next(struct store *s, const char *host, const char *list, int64_t now_ms, 
     snprintf(sql, sizeof(sql),
              "UPDATE jobs SET state = ?1, claimed_by = ?2, fence = fence + 1, updated_ms = ?3"
              " WHERE id = (SELECT id FROM jobs%s WHERE state = '%s'"
-             " AND (?4 = '' OR instr(?4, ',' || method || ',') > 0)"
+             " AND (?4 = '' OR instr(?4, ',' || method || ',') > 0) AND (?5 = 0 OR id = ?5)"
              " ORDER BY priority DESC, queue_pos, id LIMIT 1%s) AND state = '%s'"
              " RETURNING %s, fence",
              is_pg(s) ? "" : " INDEXED BY jobs_claim_order", job_state_name(JOB_QUEUED),
@@ -745,6 +745,7 @@ claim_next(struct store *s, const char *host, const char *list, int64_t now_ms, 
     sqldb_bind_text(st, 2, host);
     sqldb_bind_int64(st, 3, now_ms);
     sqldb_bind_text(st, 4, list);
+    sqldb_bind_int64(st, 5, id);
     rc = sqldb_step(st);
     if (rc == SQLDB_ROW) {
         store_read_job(st, out);
@@ -769,12 +770,116 @@ store_job_claim(struct store *s, const char *host, int64_t token, const char *me
     if (rc || (rc = store_begin(s, err)))
         return rc;
     if ((rc = host_hold(s, host, token, now, err)) == SF_OK)
-        rc = claim_next(s, host, list, now, out, &f, err);
+        rc = claim_next(s, host, list, 0, now, out, &f, err);
     if ((rc = end_tx(s, rc, err)))
         return rc;
     if (fence)
         *fence = f;
     return SF_OK;
+}
+
+int
+store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t id,
+                   struct job_row *out, int64_t *fence, struct sf_err *err)
+{
+    int64_t f = 0, now = clock_wall_ms();
+    if (id <= 0)
+        return sf_err_set(err, SF_EINVAL, "claim: job id %lld", (long long)id);
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    if ((rc = host_hold(s, host, token, now, err)) == SF_OK)
+        rc = claim_next(s, host, "", id, now, out, &f, err);
+    if ((rc = end_tx(s, rc, err)))
+        return rc;
+    if (fence)
+        *fence = f;
+    return SF_OK;
+}
+
+int
+store_job_take(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
+               struct sf_err *err)
+{
+    int64_t now = clock_wall_ms(), f = 0;
+    struct sqldb_stmt *st;
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    if ((rc = host_hold(s, host, token, now, err)) == SF_OK &&
+        (rc = store_prepare(s, &st,
+                            "UPDATE jobs SET claimed_by = ?1, fence = fence + 1, updated_ms = ?2"
+                            " WHERE id = ?3 AND state = 'ready' AND claimed_by IN ('', ?1)"
+                            " RETURNING fence",
+                            err)) == SF_OK) {
+        sqldb_bind_text(st, 1, host);
+        sqldb_bind_int64(st, 2, now);
+        sqldb_bind_int64(st, 3, id);
+        rc = sqldb_step(st);
+        if (rc == SQLDB_ROW)
+            f = sqldb_column_int64(st, 0);
+        sqldb_finalize(st);
+        rc = rc == SQLDB_ROW    ? SF_OK
+             : rc == SQLDB_DONE ? SF_ENOTFOUND
+                                : store_db_fail(s, err, "take job");
+    }
+    if ((rc = end_tx(s, rc, err)))
+        return rc;
+    if (fence)
+        *fence = f;
+    return SF_OK;
+}
+
+int
+store_job_live_host(struct store *s, const char *host, struct job_row **rows, size_t *n,
+                    struct sf_err *err)
+{
+    struct sqldb_stmt *st;
+    int rc = store_select(s, &st,
+                          "SELECT " STORE_JOB_COLS " FROM jobs"
+                          " WHERE state NOT IN ('done','failed','cancelled')"
+                          " AND (claimed_by IN ('', ?1) OR printer IN"
+                          " (SELECT printer FROM host_printers WHERE host = ?1)) ORDER BY id",
+                          (void **)rows, n, err);
+    if (rc)
+        return rc;
+    sqldb_bind_text(st, 1, host);
+    return store_read_rows(s, st, sizeof(**rows), store_read_job, (void **)rows, n,
+                           "list the host's live jobs", err);
+}
+
+/* ---- wake-ups ---- */
+
+int
+store_host_listen(struct store *s, struct sf_err *err)
+{
+    int rc = sqldb_listen(s->db, STORE_HOST_CHANNEL);
+    return rc ? store_db_fail(s, err, "listen") : SF_OK;
+}
+
+int
+store_host_wake(struct store *s, struct sf_err *err)
+{
+    int rc = sqldb_notify(s->db, STORE_HOST_CHANNEL, NULL);
+    return rc ? store_db_fail(s, err, "notify") : SF_OK;
+}
+
+int
+store_host_notify_fd(struct store *s)
+{
+    return sqldb_notify_fd(s->db);
+}
+
+static void
+count_note(void *arg, const char *channel, const char *payload)
+{
+    (void)arg, (void)channel, (void)payload;
+}
+
+int
+store_host_drain(struct store *s)
+{
+    return sqldb_notifications(s->db, count_note, NULL);
 }
 
 /* Why job id cannot be attached: SF_ENOTFOUND or SF_EAGAIN naming its state. */

@@ -142,6 +142,48 @@ int store_job_claim(struct store *s, const char *host, int64_t token, const char
                     struct job_row *out, int64_t *fence, struct sf_err *err);
 
 /*
+ * As store_job_claim, for queued job id only (the one a host's scheduler
+ * chose for a printer of its own), in the same statement: SF_ENOTFOUND (err
+ * not set) when id is not queued or another host's claim holds its row.
+ */
+int store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t id,
+                       struct job_row *out, int64_t *fence, struct sf_err *err);
+
+/*
+ * Take ready job id for host, for a printer of its own, if no other host
+ * holds it (unclaimed, or host's already: an uploaded G-code job, or one a
+ * reaped host had prepared): its claim and a new fencing token (*fence, may
+ * be NULL).  SF_ENOTFOUND (err not set) when id is not ready or another host
+ * holds it; SF_ESTALE when host's lease is lost.  One statement, so two
+ * hosts never both take a job.
+ */
+int store_job_take(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
+                   struct sf_err *err);
+
+/*
+ * The live jobs host's scheduler works from (store_job_live's order): those
+ * no host holds, host's own, and any on a printer host owns (a part on its
+ * bed).  *rows: free() it.
+ */
+int store_job_live_host(struct store *s, const char *host, struct job_row **rows, size_t *n,
+                        struct sf_err *err);
+
+/*
+ * Wake-ups between hosts (sqldb.h's LISTEN/NOTIFY on STORE_HOST_CHANNEL;
+ * no-ops on SQLite): store_host_listen once on a connection kept for it,
+ * store_host_wake after a change other hosts may act on (a job queued,
+ * released or reaped; at COMMIT inside a transaction), store_host_notify_fd
+ * the socket to watch (-1 when none; it may change at a reconnect),
+ * store_host_drain reads what arrived: how many (>= 0), or SF_EIO when the
+ * connection is lost (call it again later: it reconnects).
+ */
+#define STORE_HOST_CHANNEL "slimfarm_jobs"
+int store_host_listen(struct store *s, struct sf_err *err);
+int store_host_wake(struct store *s, struct sf_err *err);
+int store_host_notify_fd(struct store *s);
+int store_host_drain(struct store *s);
+
+/*
  * Give job id (ready, printing, paused or interrupted) to host for its
  * printer: its claim and a new fencing token (*fence), logged as
  * "job-attach"; whoever held the job before holds a stale token.
