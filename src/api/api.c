@@ -57,6 +57,20 @@ struct api {
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
     struct temps *temps;           /* each printer's last hour of temperatures (temps.h) */
     struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
+    struct acting *acting; /* printer actions answered once their writes commit */
+};
+
+/*
+ * A printer action whose answer waits for its store writes (printer.h
+ * printer_action_then): the farm's queue calls back after api_free when
+ * the daemon stops (farm_free drains it), so the answer finds a NULL a
+ * then and only frees its handle.
+ */
+struct acting {
+    struct api *a;        /* NULL once the API is freed */
+    struct http_defer *d; /* the request's answer to come */
+    char name[64];        /* the printer */
+    struct acting *next;  /* in a->acting */
 };
 
 /* An upload in progress: the store's writer, until the route commits it. */
@@ -607,6 +621,27 @@ printer_temps(void *ctx, const struct route_args *args, const struct http_req *r
                            "samples"); /* not sampled yet */
 }
 
+/* A printer action's writes came back from the store: answer it. */
+static void
+on_acted(void *ud, const struct storeq_result *r)
+{
+    struct acting *w = ud;
+    struct http_resp resp = { .status = 200 };
+    if (w->a) {
+        for (struct acting **pp = &w->a->acting; *pp; pp = &(*pp)->next)
+            if (*pp == w) {
+                *pp = w->next;
+                break;
+            }
+        /* the printer has acted: a store that refused the write is the answer (logged too) */
+        if (r->rc)
+            log_warn("api", "printer %s: %s", w->name, r->err->msg);
+        printer_acted(w->a, w->name, r->rc, r->err, &resp);
+    }
+    http_defer_answer(w->d, &resp);
+    free(w);
+}
+
 static void
 printer_act(void *ctx, const struct route_args *args, const struct http_req *req,
             struct http_resp *resp)
@@ -621,8 +656,25 @@ printer_act(void *ctx, const struct route_args *args, const struct http_req *req
         return;
     }
     struct sf_err err;
-    int rc = jobctl_printer_action(a->cfg.farm, args->name, act, &err);
-    printer_acted(a, args->name, rc, &err, resp);
+    struct acting *w = mem_calloc(1, sizeof(*w));
+    if (!w || !(w->d = http_defer(resp))) {
+        free(w); /* out of memory: acted without waiting for the store */
+        int rc = jobctl_printer_action(a->cfg.farm, args->name, act, &err);
+        printer_acted(a, args->name, rc, &err, resp);
+        return;
+    }
+    w->a = a;
+    snprintf(w->name, sizeof(w->name), "%s", args->name);
+    int rc = jobctl_printer_action_then(a->cfg.farm, args->name, act, on_acted, w, &err);
+    if (rc) { /* refused now: answered now */
+        free(resp->defer);
+        resp->defer = NULL;
+        free(w);
+        printer_acted(a, args->name, rc, &err, resp);
+        return;
+    }
+    w->next = a->acting;
+    a->acting = w;
 }
 
 /*
@@ -927,6 +979,8 @@ api_free(struct api *a)
     http_free(a->http);         /* ends the picture streams before the renders they wait for */
     web_free(a->web);
     api_read_free(a->reads); /* reads still queued: their requests went with the server */
+    for (struct acting *w = a->acting; w; w = w->next)
+        w->a = NULL; /* answered to no one (the farm's queue calls back later) */
     temps_free(a->temps);
     free(a);
 }

@@ -46,7 +46,7 @@ struct noreslice {
 /* A prepare task: plain data copied for the worker. */
 struct prep {
     struct farm *f;                /* owner (used only on the loop thread) */
-    struct prep *next;             /* in f->reslices (re-slices only) */
+    struct prep *next;             /* in f->reslices (re-slices), f->posted (its PREPARE) */
     bool reslice;                  /* the job is ready and stays so: this is another printer's */
     char key[SCHED_KEY_MAX];       /* sched_key of the printer it is prepared for */
     double angle_deg;              /* the overhang angle it is prepared with */
@@ -61,6 +61,8 @@ struct prep {
     int64_t mesh_size;
     int64_t prepare_ms; /* the prepare function's wall time */
     struct sf_err err;  /* why it failed */
+    struct job_event_args prepared; /* its PREPARED, written on the store thread */
+    enum job_state to;              /* the job's state after it */
 };
 
 static void run(struct loop *l, void *ud);
@@ -146,21 +148,6 @@ farm_health(struct farm *f, struct farm_health *out)
     storeq_stats(f->q, &out->store);
 }
 
-/* Apply a job event in the store now, after what is queued, logging failures (the job fails
-   alone; a busy store: the next pass tries again). */
-static int
-job_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_args *a)
-{
-    struct sf_err err;
-    int rc = storeq_sync(f->q, STOREQ_SYNC_MS, &err);
-    if (rc == SF_OK)
-        rc = store_job_event(f->s, id, ev, a, NULL, &err);
-    if (rc)
-        log_warn("farm", "%s", err.msg);
-    farm_notify(f);
-    return rc;
-}
-
 /* Queue a job event nothing waits for; a failure is logged when it comes back, its commit
    wakes the farm (on_store_commit). */
 static void
@@ -243,21 +230,44 @@ reslice_failed_any(const struct farm *f, int64_t id)
  * Task t's PREPARED came back from the store thread (its commit wakes the
  * farm: on_store_commit).  A re-slice stays in f->reslices until now, so
  * no scheduling pass in between, still reading the old G-code's key,
- * slices the job once more.
+ * slices the job once more.  A store that stayed unreachable through the
+ * queue's retries (SF_EIO, SF_EAGAIN) wrote nothing: the job goes back to
+ * the queue (DEFER) and is prepared again, not failed.
  */
 static void
 on_prepared(void *ud, const struct storeq_result *r)
 {
     struct prep *t = ud;
+    int64_t id = t->req.job_id;
     if (r->rc == SF_OK)
-        log_info("farm", "job %lld: %s for %s", (long long)r->id,
+        log_info("farm", "job %lld: %s for %s", (long long)id,
                  t->reslice ? "prepared again" : "prepared", t->key);
     else
-        log_info("farm", "job %lld: %s", (long long)r->id, r->err->msg);
+        log_info("farm", "job %lld: %s", (long long)id, r->err->msg);
+    if ((r->rc == SF_EIO || r->rc == SF_EAGAIN) && !t->reslice && t->f->pool) {
+        struct job_event_args a = { .reason = r->err->msg };
+        queue_event(t->f, id, JOB_EV_DEFER, &a);
+    }
     if (t->reslice)
         unlink_reslice(t->f, t);
     farm_kick(t->f);
     free(t);
+}
+
+/* On the store thread: record the files task ud made, then its PREPARED (store_file_record
+   is idempotent: a retry after a failure half-way records nothing twice). */
+static int
+prepared_write(struct store *s, void *ud, struct sf_err *err)
+{
+    struct prep *t = ud;
+    int rc = store_file_record(s, t->gcode_sha, t->gcode_size, err);
+    if (rc == SF_OK && t->mesh_sha[0])
+        rc = store_file_record(s, t->mesh_sha, t->mesh_size, err);
+    if (rc == SF_OK)
+        rc = store_job_event(s, t->req.job_id, JOB_EV_PREPARED, &t->prepared, &t->to, err);
+    if (rc)
+        sf_err_prefix(err, "job %lld", (long long)t->req.job_id);
+    return rc;
 }
 
 static void
@@ -267,12 +277,9 @@ prep_done(struct loop *l, void *ud, int rc)
     struct prep *t = ud;
     struct farm *f = t->f;
     int64_t id = t->req.job_id;
-    struct sf_err err;
     bool queued = false; /* t waits for its PREPARED (on_prepared frees it) */
     f->preparing--;
-    if (rc == SF_OK && (rc = store_file_record(f->s, t->gcode_sha, t->gcode_size, &err)) == SF_OK &&
-        (!t->mesh_sha[0] ||
-         (rc = store_file_record(f->s, t->mesh_sha, t->mesh_size, &err)) == SF_OK)) {
+    if (rc == SF_OK) {
         struct job_event_args a = { .gcode_sha = t->gcode_sha,
                                     .nozzle_mm = t->out.nozzle_mm,
                                     .gcode_lines = (int64_t)t->scan.lines_total,
@@ -296,9 +303,10 @@ prep_done(struct loop *l, void *ud, int rc)
            (or was cancelled) is refused there and dropped: nothing changed.
            Queued: a prepare ending while the store is busy holds up no print.
            Out of memory, the job stays preparing until the next start's recovery. */
-        queued = storeq_job_event(f->q, id, JOB_EV_PREPARED, &a, NULL, on_prepared, t) == SF_OK;
-    } else if (rc != SF_OK && rc != SF_ECANCELED) {
-        const char *why = t->err.msg[0] ? t->err.msg : err.msg;
+        t->prepared = a; /* its strings are t's: t waits, untouched, until on_prepared */
+        queued = storeq_call(f->q, prepared_write, t, NULL, on_prepared, t) == SF_OK;
+    } else if (rc != SF_ECANCELED) {
+        const char *why = t->err.msg;
         if (t->reslice) {
             /* The job keeps the G-code it has; this printer's key is not tried again. */
             log_warn("farm", "job %lld: cannot prepare it for %s: %s", (long long)id, t->key, why);
@@ -344,13 +352,85 @@ farm_printer_view(const struct printer *p, struct sched_printer *out)
     memcpy(out->bed_mm, c->bed_mm, sizeof(out->bed_mm));
 }
 
+/* Run the scheduler again later: a passing store failure left a job queued. */
+static void
+on_retry(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm *f = ud;
+    f->retry = 0;
+    farm_kick(f);
+}
+
+static void
+retry_later(struct farm *f)
+{
+    if (!f->retry && f->pool)
+        f->retry = loop_timer_add(f->l, FARM_RETRY_MS, on_retry, f);
+}
+
+/* Is a store error one that a later try may not have (busy, unreachable), not a verdict? */
+static bool
+passing(int rc)
+{
+    return rc != SF_ENOTFOUND && rc != SF_EINVAL;
+}
+
+/* Hand task t (a queued job's, its PREPARE committed) to a prepare worker; one it cannot
+   take goes back to the queue (DEFER). */
+static void
+submit(struct farm *f, struct prep *t)
+{
+    struct sf_err err;
+    if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
+        f->preparing--;
+        struct job_event_args a = { .reason = err.msg };
+        queue_event(f, t->req.job_id, JOB_EV_DEFER, &a);
+        free(t);
+    }
+}
+
+/*
+ * Task t's PREPARE came back from the store thread: the job is preparing
+ * (a worker takes it), or the store refused (the job left the queue
+ * meanwhile: cancelled, moved) or stayed unreachable through the queue's
+ * retries (the job stays queued; the farm tries again later).
+ */
+static void
+on_prepare(void *ud, const struct storeq_result *r)
+{
+    struct prep *t = ud;
+    struct farm *f = t->f;
+    for (struct prep **pp = &f->posted; *pp; pp = &(*pp)->next)
+        if (*pp == t) {
+            *pp = t->next;
+            break;
+        }
+    t->next = NULL;
+    if (r->rc == SF_OK && f->pool) {
+        submit(f, t);
+        return;
+    }
+    f->preparing--;
+    if (r->rc && passing(r->rc)) {
+        log_warn("farm", "job %lld stays queued: %s", (long long)r->id, r->err->msg);
+        retry_later(f);
+    } else if (r->rc) {
+        log_info("farm", "job %lld is not prepared: %s", (long long)r->id, r->err->msg);
+    }
+    free(t);
+    farm_kick(f);
+}
+
 /*
  * Start preparing job j for printer p.  A queued job goes to preparing; a
  * ready one (reslice) stays ready with the G-code it has until the new one
  * is stored.  The part as optimized for this angle is reused when the job
- * has one: only the slicing is repeated.  False when the store is busy (its
- * PREPARE could not be written within STOREQ_SYNC_MS): the pass stops there
- * rather than wait that long again for each job (the commit wakes the farm).
+ * has one: only the slicing is repeated.  A queued job's PREPARE goes
+ * through the store's queue and the worker gets the task once it committed
+ * (on_prepare): the loop does not wait for the store.  False when the
+ * store failed in passing (the job stays queued and is tried again later;
+ * the pass stops there).
  */
 static bool
 prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice)
@@ -374,14 +454,24 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     t->req.material_first = f->material_first;
     snprintf(t->req.part_name, sizeof(t->req.part_name), "%s", j->opts.name);
     bool reuse = j->mesh_sha[0] && j->mesh_angle_deg == t->angle_deg;
-    if (store_file_path(f->s, j->file_sha, t->req.part_path, sizeof(t->req.part_path), &err) ||
-        store_file_path(f->s, j->file_sha, t->req.out_path, sizeof(t->req.out_path) - 32, &err) ||
+    int rc;
+    if ((rc = store_file_path(f->s, j->file_sha, t->req.part_path, sizeof(t->req.part_path),
+                              &err)) ||
+        (rc = store_file_path(f->s, j->file_sha, t->req.out_path, sizeof(t->req.out_path) - 32,
+                              &err)) ||
         (reuse &&
-         store_file_path(f->s, j->mesh_sha, t->req.mesh_in, sizeof(t->req.mesh_in), &err))) {
+         (rc = store_file_path(f->s, j->mesh_sha, t->req.mesh_in, sizeof(t->req.mesh_in), &err)))) {
         free(t);
         if (reslice) {
             log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
             return true;
+        }
+        /* Only a file that is not there, or not valid, fails the job: a database that does
+           not answer now (another host's upload not fetched yet) may answer later. */
+        if (passing(rc)) {
+            log_warn("farm", "job %lld stays queued: %s", (long long)j->id, err.msg);
+            retry_later(f);
+            return false;
         }
         struct job_event_args a = { .reason = err.msg };
         queue_event(f, j->id, JOB_EV_PREPARE, NULL);
@@ -393,26 +483,26 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     snprintf(slash + 1, 32, "job-%lld%s.gcode", (long long)j->id, reslice ? "-re" : "");
     if (!reuse)
         snprintf(t->req.mesh_out, sizeof(t->req.mesh_out), "%s.stl", t->req.out_path);
-    int rc = reslice ? SF_OK : job_event(f, j->id, JOB_EV_PREPARE, NULL);
-    if (rc) {
-        free(t);
-        return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
-    }
-    if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
-        if (!reslice) {
-            struct job_event_args a = { .reason = err.msg };
-            queue_event(f, j->id, JOB_EV_DEFER, &a);
+    if (reslice) { /* the job stays ready: nothing to write before the worker has it */
+        if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
+            free(t);
+            return true;
         }
-        free(t);
-        return true;
-    }
-    if (reslice) {
         log_info("farm", "job %lld: preparing it again for %s (%s)%s", (long long)j->id,
                  printer_cfg(p)->name, t->key, reuse ? ", reusing the optimized part" : "");
         t->next = f->reslices;
         f->reslices = t;
+        f->preparing++;
+        return true;
     }
-    f->preparing++;
+    f->preparing++; /* counted from now: the pool's places include PREPAREs on their way */
+    if (storeq_job_event(f->q, j->id, JOB_EV_PREPARE, NULL, NULL, on_prepare, t)) {
+        f->preparing--;
+        free(t);
+        return true; /* out of memory: the next kick tries again */
+    }
+    t->next = f->posted;
+    f->posted = t;
     return true;
 }
 
@@ -463,6 +553,17 @@ mark_taken(const struct farm *f, struct job_row *jobs, size_t n)
     return SF_OK;
 }
 
+/* A job whose PREPARE is on its way to the store reads queued until it commits: mark it
+   preparing so no pass prepares it twice. */
+static void
+mark_posted(const struct farm *f, struct job_row *jobs, size_t n)
+{
+    for (const struct prep *t = f->posted; t; t = t->next)
+        for (size_t i = 0; i < n; i++)
+            if (jobs[i].id == t->req.job_id && jobs[i].state == JOB_QUEUED)
+                jobs[i].state = JOB_PREPARING;
+}
+
 static void
 run(struct loop *l, void *ud)
 {
@@ -486,6 +587,7 @@ run(struct loop *l, void *ud)
     struct sched_assign *out = mem_array(n ? n : 1, sizeof(*out));
     if (!sj || !sp || !why || !out || mark_taken(f, jobs, n))
         goto out; /* the next kick tries again */
+    mark_posted(f, jobs, n);
     for (size_t i = 0; i < f->n_printers; i++) {
         const struct printer *p = f->printers[i];
         farm_printer_view(p, &sp[i]);
@@ -633,6 +735,8 @@ farm_free(struct farm *f)
     }
     if (f->kick)
         loop_timer_cancel(f->l, f->kick);
+    if (f->retry)
+        loop_timer_cancel(f->l, f->retry);
     if (f->progress)
         loop_timer_cancel(f->l, f->progress);
     /* A stop leaves each print interrupted at its last acknowledged line,
@@ -777,6 +881,16 @@ farm_printer_action(struct farm *f, const char *name, enum printer_action act, s
     if (!p)
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
     return printer_action(p, act, err);
+}
+
+int
+farm_printer_action_then(struct farm *f, const char *name, enum printer_action act,
+                         storeq_event_fn done, void *ud, struct sf_err *err)
+{
+    struct printer *p = farm_find(f, name);
+    if (!p)
+        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    return printer_action_then(p, act, done, ud, err);
 }
 
 int

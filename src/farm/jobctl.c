@@ -52,6 +52,14 @@ jobctl_printer_action(struct farm *f, const char *name, enum printer_action act,
 }
 
 int
+jobctl_printer_action_then(struct farm *f, const char *name, enum printer_action act,
+                           storeq_event_fn done, void *ud, struct sf_err *err)
+{
+    int rc = reachable(f, name, err);
+    return rc ? rc : not_now(farm_printer_action_then(f, name, act, done, ud, err), err);
+}
+
+int
 jobctl_printer_command(struct farm *f, const char *name, const char *line, const char *who,
                        struct sf_err *err)
 {

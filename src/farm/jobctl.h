@@ -61,6 +61,13 @@ int jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err);
 /* Act on printer name (farm_printer_action). */
 int jobctl_printer_action(struct farm *f, const char *name, enum printer_action act,
                           struct sf_err *err);
+/*
+ * The same, answered once what it wrote has committed (printer.h
+ * printer_action_then): SF_OK, then done(ud, r) on the loop later; a
+ * refusal now as above (done not called).
+ */
+int jobctl_printer_action_then(struct farm *f, const char *name, enum printer_action act,
+                               storeq_event_fn done, void *ud, struct sf_err *err);
 
 /*
  * One manual G-code line for printer name from who (the sending key's

@@ -162,6 +162,17 @@ double printer_estimate_s(const struct job_row *j, const char *path);
  * idle", "printer a has no job to cancel"); driver errors as they come.
  */
 int printer_action(struct printer *p, enum printer_action a, struct sf_err *err);
+/*
+ * printer_action, answered once it is written: the printer and its driver
+ * act now; what it records in the store (the job's pause, resume or
+ * cancel, the printer's state and bed) is queued (storeq), and done(ud, r)
+ * runs on the loop once that has committed, r->rc the store's verdict
+ * (SF_OK, or its error: the printer has acted all the same).  Refused now
+ * (non-zero, err set): done is not called.  done NULL: a store failure is
+ * logged.
+ */
+int printer_action_then(struct printer *p, enum printer_action a, storeq_event_fn done, void *ud,
+                        struct sf_err *err);
 
 /*
  * Send p a manual command (one G-code line) from who (the sender's label,
