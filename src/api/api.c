@@ -57,7 +57,35 @@ struct api {
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
     struct temps *temps;           /* each printer's last hour of temperatures (temps.h) */
     struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
-    struct acting *acting; /* printer actions answered once their writes commit */
+    struct acting *acting;    /* printer actions answered once their writes commit */
+    struct job_write *writes; /* job writes answered once they commit */
+};
+
+/*
+ * A job write on the farm's store queue (storeq_call), answered once it
+ * committed: the loop does not wait for the store (issue 32).  The store's
+ * thread reads and writes the fields down to `size` while the request
+ * waits; the loop touches only the rest.  As with struct acting, the
+ * answer may come after api_free (a NULL a).
+ */
+struct job_write {
+    int64_t id;         /* the job; after an add or again, the new one */
+    int n;              /* a priority, or the places to move */
+    bool move;          /* n is a move */
+    struct job_opts o;  /* a new job's options */
+    char tmp[1200];     /* a new job's upload, adopted on the thread */
+    const struct store *store; /* whose data dir it goes to (read only) */
+    bool adopted, added;       /* done already: not again on a retry */
+    int adopt_rc;              /* the adopt's failure, kept for a retry */
+    struct sf_err adopt_err;
+    char sha[STORE_SHA_HEX];
+    int64_t size;
+    /* the loop's */
+    struct api *a;         /* NULL once the API is freed */
+    struct http_defer *d;  /* the request's answer to come */
+    int status;            /* 201 (a new job: {"job"}) or 200 (the job with its prints) */
+    bool not_now;          /* a refusal of the job rules (SF_EINVAL) is "not now" (409) */
+    struct job_write *next; /* in a->writes */
 };
 
 /*
@@ -243,6 +271,91 @@ jobs_list(void *ctx, const struct route_args *args, const struct http_req *req,
     api_read_run(a->reads, resp, read_page, NULL, q, free);
 }
 
+static void job_time_left(struct api *a, int64_t id, struct http_resp *resp);
+static void job_read(struct store *s, int64_t id, struct http_resp *resp);
+
+/* A job write came back from the store's thread: answer it with the job as it is now. */
+static void
+on_job_written(void *ud, const struct storeq_result *r)
+{
+    struct job_write *w = ud;
+    struct http_resp resp = { .status = 200 };
+    struct api *a = w->a;
+    if (a) {
+        for (struct job_write **pp = &a->writes; *pp; pp = &(*pp)->next)
+            if (*pp == w) {
+                *pp = w->next;
+                break;
+            }
+        struct sf_err err = *r->err;
+        int rc = r->rc;
+        if (rc == SF_EINVAL && w->not_now)
+            rc = err.code = SF_EAGAIN;
+        struct job_row j;
+        if (rc) {
+            http_fail(&resp, rc, err.msg);
+        } else if (w->status == 201) { /* read at once on the loop: committed */
+            if ((rc = store_job_get(a->cfg.store, w->id, &j, &err)) == SF_OK) {
+                log_info("api", "job %lld: '%s' submitted, %d copies", (long long)w->id,
+                         j.opts.name, j.opts.copies);
+                resp.status = 201;
+                resp.json = json_pack("{so}", "job", api_job_json(&j));
+            } else {
+                http_fail(&resp, rc, err.msg);
+            }
+        } else {
+            job_read(a->cfg.store, w->id, &resp);
+            job_time_left(a, w->id, &resp);
+        }
+        if (rc == SF_OK)
+            changed(a);
+    }
+    http_defer_answer(w->d, &resp);
+    free(w);
+}
+
+/*
+ * Post write fn for job id on the farm's store queue (NULL: nothing, the
+ * answer follows what is queued), the answer deferred until it commits.  False when there is no queue (an API over a store
+ * alone) or no memory: the caller writes now, as before.
+ */
+static bool
+job_write_post(struct api *a, struct http_resp *resp, struct job_write *w, storeq_call_fn fn)
+{
+    struct storeq *q = farm_storeq(a->cfg.farm);
+    if (!q || !(w->d = http_defer(resp)))
+        return false;
+    w->a = a;
+    w->store = a->cfg.store;
+    if (storeq_call(q, fn, w, NULL, on_job_written, w)) {
+        free(resp->defer);
+        resp->defer = NULL;
+        return false;
+    }
+    w->next = a->writes;
+    a->writes = w;
+    return true;
+}
+
+/* On the store's thread: a new job from its upload (jobs_submit); each half once. */
+static int
+submit_write(struct store *s, void *ud, struct sf_err *err)
+{
+    struct job_write *w = ud;
+    if (!w->adopted) { /* the file system's half: not tried again (its temporary is moved) */
+        w->adopted = true;
+        w->adopt_rc = store_file_adopt(w->store, w->tmp, w->sha, &w->size, &w->adopt_err);
+    }
+    if (w->adopt_rc) {
+        *err = w->adopt_err;
+        return w->adopt_rc;
+    }
+    int rc = store_file_record(s, w->sha, w->size, err);
+    if (rc == SF_OK && !w->added && (rc = store_job_add(s, &w->o, w->sha, &w->id, err)) == SF_OK)
+        w->added = true; /* a retry after this adds nothing twice */
+    return rc;
+}
+
 static void
 jobs_submit(void *ctx, const struct route_args *args, const struct http_req *req,
             struct http_resp *resp)
@@ -287,6 +400,17 @@ jobs_submit(void *ctx, const struct route_args *args, const struct http_req *req
     if (rc) {
         http_fail(resp, rc, err.msg);
         return;
+    }
+    /* Through the farm's store queue: the file adopted and the job added on its thread, the
+       answer once committed (the upload's temporary stays until then). */
+    struct job_write *w = mem_calloc(1, sizeof(*w));
+    if (w) {
+        w->o = o;
+        w->status = 201;
+        snprintf(w->tmp, sizeof(w->tmp), "%s", store_file_tmp_path(u->f));
+        if (job_write_post(a, resp, w, submit_write))
+            return;
+        free(w);
     }
     rc = store_file_commit(u->f, sha, &err);
     u->f = NULL; /* commit frees the writer either way */
@@ -389,6 +513,44 @@ job_changed(struct api *a, const struct route_args *args, int rc, const struct s
     changed(a);
 }
 
+/* On the store's thread: a priority or a move (job_order). */
+static int
+order_write(struct store *s, void *ud, struct sf_err *err)
+{
+    struct job_write *w = ud;
+    return w->move ? store_job_move(s, w->id, w->n, err)
+                   : store_job_set_priority(s, w->id, w->n, err);
+}
+
+/* On the store's thread: an operator's cancel of a job on no printer, or a restart. */
+static int
+cancel_write(struct store *s, void *ud, struct sf_err *err)
+{
+    return jobctl_cancel_stored(s, ((struct job_write *)ud)->id, err);
+}
+
+static int
+restart_write(struct store *s, void *ud, struct sf_err *err)
+{
+    return jobctl_restart(s, ((struct job_write *)ud)->id, err);
+}
+
+/* On the store's thread: "print again" (jobctl_again), once. */
+static int
+again_write(struct store *s, void *ud, struct sf_err *err)
+{
+    struct job_write *w = ud;
+    if (w->added)
+        return SF_OK;
+    int64_t id;
+    int rc = jobctl_again(s, w->id, &id, err);
+    if (rc == SF_OK) {
+        w->id = id;
+        w->added = true;
+    }
+    return rc;
+}
+
 /* PATCH /api/jobs/ID {"priority": N}, or POST /api/jobs/ID/move {"by": -1 | 1}: one place
    up or down among the waiting jobs. */
 static void
@@ -401,6 +563,13 @@ job_order(void *ctx, const struct route_args *args, const struct http_req *req,
     int n;
     int rc = move ? api_move_parse(req->body, req->body_len, &n, &err)
                   : api_priority_parse(req->body, req->body_len, &n, &err);
+    struct job_write *w = rc == SF_OK ? mem_calloc(1, sizeof(*w)) : NULL;
+    if (w) {
+        *w = (struct job_write){ .id = args->id, .n = n, .move = move, .status = 200 };
+        if (job_write_post(a, resp, w, order_write))
+            return;
+        free(w);
+    }
     if (rc == SF_OK)
         rc = move ? store_job_move(a->cfg.store, args->id, n, &err)
                   : store_job_set_priority(a->cfg.store, args->id, n, &err);
@@ -415,8 +584,34 @@ job_cancel_restart(void *ctx, const struct route_args *args, const struct http_r
 {
     struct api *a = ctx;
     struct sf_err err;
-    int rc = strcmp(strrchr(req->path, '/'), "/cancel") == 0
-                 ? jobctl_cancel(a->cfg.farm, a->cfg.store, args->id, &err)
+    bool cancel = strcmp(strrchr(req->path, '/'), "/cancel") == 0;
+    /* A job on a printer is cancelled by stopping the printer, answered once that is written;
+       any other through the store's queue. */
+    const char *on = cancel ? jobctl_printer_of(a->cfg.farm, args->id) : NULL;
+    struct job_write *w = mem_calloc(1, sizeof(*w));
+    if (w && !on) {
+        *w = (struct job_write){ .id = args->id, .status = 200, .not_now = true };
+        if (job_write_post(a, resp, w, cancel ? cancel_write : restart_write))
+            return;
+    }
+    if (w && on && (w->d = http_defer(resp))) {
+        *w = (struct job_write){ .id = args->id, .status = 200, .not_now = true, .d = w->d,
+                                 .a = a };
+        int rc = jobctl_printer_action_then(a->cfg.farm, on, PRINTER_ACT_CANCEL, on_job_written, w,
+                                            &err);
+        if (rc == SF_OK) {
+            w->next = a->writes;
+            a->writes = w;
+            return;
+        }
+        free(resp->defer);
+        resp->defer = NULL;
+        free(w);
+        job_changed(a, args, rc, &err, resp);
+        return;
+    }
+    free(w);
+    int rc = cancel ? jobctl_cancel(a->cfg.farm, a->cfg.store, args->id, &err)
                  : jobctl_restart(a->cfg.store, args->id, &err);
     job_changed(a, args, rc, &err, resp);
 }
@@ -431,6 +626,13 @@ job_again(void *ctx, const struct route_args *args, const struct http_req *req,
     struct sf_err err;
     int64_t id;
     struct job_row j;
+    struct job_write *w = mem_calloc(1, sizeof(*w));
+    if (w) {
+        *w = (struct job_write){ .id = args->id, .status = 201 };
+        if (job_write_post(a, resp, w, again_write))
+            return;
+        free(w);
+    }
     int rc = jobctl_again(a->cfg.store, args->id, &id, &err);
     if (rc || (rc = store_job_get(a->cfg.store, id, &j, &err))) {
         http_fail(resp, rc, err.msg);
@@ -477,6 +679,14 @@ job_resume(void *ctx, const struct route_args *args, const struct http_req *req,
         return;
     }
     int rc = jobctl_resume(a->cfg.farm, args->id, line, &err);
+    /* its RESUME is queued: answered once it committed (a barrier behind it) */
+    struct job_write *w = rc == SF_OK ? mem_calloc(1, sizeof(*w)) : NULL;
+    if (w) {
+        *w = (struct job_write){ .id = args->id, .status = 200 };
+        if (job_write_post(a, resp, w, NULL))
+            return;
+        free(w);
+    }
     job_changed(a, args, rc, &err, resp);
 }
 
@@ -981,6 +1191,8 @@ api_free(struct api *a)
     api_read_free(a->reads); /* reads still queued: their requests went with the server */
     for (struct acting *w = a->acting; w; w = w->next)
         w->a = NULL; /* answered to no one (the farm's queue calls back later) */
+    for (struct job_write *w = a->writes; w; w = w->next)
+        w->a = NULL;
     temps_free(a->temps);
     free(a);
 }

@@ -883,6 +883,12 @@ farm_printer_action(struct farm *f, const char *name, enum printer_action act, s
     return printer_action(p, act, err);
 }
 
+struct storeq *
+farm_storeq(struct farm *f)
+{
+    return f ? f->q : NULL;
+}
+
 int
 farm_printer_action_then(struct farm *f, const char *name, enum printer_action act,
                          storeq_event_fn done, void *ud, struct sf_err *err)

@@ -21,7 +21,9 @@
  * f may be NULL (an API over a store alone): what needs a printer is then
  * refused as not now, or a printer is not found.
  *
- * Thread: the loop thread (the farm's and the store's).
+ * Thread: the loop thread (the farm's and the store's); the functions
+ * taking only a store (restart, again, jobctl_cancel_stored) any thread
+ * with its own store (the farm's store queue runs them for the API).
  */
 #ifndef SF_FARM_JOBCTL_H
 #define SF_FARM_JOBCTL_H
@@ -38,6 +40,15 @@
  * (its registry records the cancel), any other in the store directly.
  */
 int jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *err);
+
+/*
+ * The store's half of a cancel, on any thread with its store s (the
+ * farm's store queue, storeq_call): job id cancelled unless it is on a
+ * printer (SF_EAGAIN: its printer stops it, jobctl_printer_action).
+ */
+int jobctl_cancel_stored(struct store *s, int64_t id, struct sf_err *err);
+/* The printer of f that holds job id now (its name, f's), or NULL. */
+const char *jobctl_printer_of(struct farm *f, int64_t id);
 
 /* Interrupted job id prints its copy again from the start. */
 int jobctl_restart(struct store *s, int64_t id, struct sf_err *err);
