@@ -112,10 +112,13 @@ on_printer_changed(void *ud)
     farm_kick(f);
 }
 
+/* A printer for cfg; old (NULL: none) the one it replaces, whose bed it keeps. */
 static struct printer *
-add_printer_new(struct farm *f, const struct farmcfg_printer *cfg)
+add_printer_new(struct farm *f, const struct farmcfg_printer *cfg, const struct printer *old)
 {
     struct printer_env env = {
+        .bed_known = old != NULL,
+        .bed_full = old && printer_bed_full(old),
         .l = f->l,
         .s = f->s,
         .q = f->q,
@@ -564,6 +567,53 @@ mark_posted(const struct farm *f, struct job_row *jobs, size_t n)
                 jobs[i].state = JOB_PREPARING;
 }
 
+/* The live jobs, read on the store's thread for a scheduling pass (on_live). */
+struct live {
+    struct farm *f;
+    struct job_row *jobs;
+    size_t n;
+};
+
+static int
+live_read(struct store *s, void *ud, struct sf_err *err)
+{
+    struct live *lv = ud;
+    free(lv->jobs); /* a retry's */
+    lv->jobs = NULL;
+    lv->n = 0;
+    return store_job_live(s, &lv->jobs, &lv->n, err);
+}
+
+static void schedule(struct farm *f, struct job_row *jobs, size_t n);
+
+static void
+on_live(void *ud, const struct storeq_result *r)
+{
+    struct live *lv = ud;
+    struct farm *f = lv->f;
+    f->reading = false;
+    if (r->rc) {
+        log_error("farm", "%s", r->err->msg);
+        retry_later(f);
+    }
+    if (r->rc == SF_OK && f->pool) /* not shutting down */
+        schedule(f, lv->jobs, lv->n);
+    else
+        free(lv->jobs);
+    free(lv);
+    if (f->reread) { /* kicked while it read: what changed may not be in what it read */
+        f->reread = false;
+        farm_kick(f);
+    }
+}
+
+/*
+ * A scheduling pass: the live jobs (the scheduler never reads history,
+ * store.h) are read on the store's thread, after the writes queued before
+ * (the loop does not wait for the store; on PostgreSQL a read is a round
+ * trip), then planned on the loop (schedule).  One read at a time: a kick
+ * meanwhile runs another pass after it.
+ */
 static void
 run(struct loop *l, void *ud)
 {
@@ -573,14 +623,25 @@ run(struct loop *l, void *ud)
     /* a printer dropped while it printed or held its heat goes once it is done (a change
        of it kicked this run) */
     farm_sweep(f);
-    struct sf_err err;
-    struct job_row *jobs;
-    size_t n;
-    /* the live jobs only: the scheduler never reads history (store.h) */
-    if (store_job_live(f->s, &jobs, &n, &err)) {
-        log_error("farm", "%s", err.msg);
+    if (f->reading) {
+        f->reread = true;
         return;
     }
+    struct live *lv = mem_calloc(1, sizeof(*lv));
+    if (!lv)
+        return; /* the next kick tries again */
+    lv->f = f;
+    if (storeq_read(f->q, live_read, lv, on_live, lv)) {
+        free(lv);
+        return;
+    }
+    f->reading = true;
+}
+
+/* Plan and act on jobs (n, the live ones as read; freed here). */
+static void
+schedule(struct farm *f, struct job_row *jobs, size_t n)
+{
     struct sched_job *sj = mem_array(n ? n : 1, sizeof(*sj));
     struct sched_printer *sp = mem_array(f->n_printers ? f->n_printers : 1, sizeof(*sp));
     char(*why)[SCHED_REASON_MAX] = mem_array(n ? n : 1, sizeof(*why));
@@ -680,7 +741,7 @@ add_printer(struct farm *f, const struct farmcfg_printer *cfg, struct sf_err *er
     size_t cap = f->n_printers;
     if (!mem_grow((void **)&f->printers, &cap, f->n_printers + 1, sizeof(*f->printers)))
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
-    struct printer *p = add_printer_new(f, cfg);
+    struct printer *p = add_printer_new(f, cfg, NULL);
     if (!p)
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
     f->printers[f->n_printers++] = p;
@@ -806,7 +867,7 @@ farm_apply(struct farm *f, const struct farmcfg_printer *c, struct sf_err *err)
     }
     log_printer(LOG_INFO, c->name, "%s: reconnecting", why);
     /* New link and idle: replace the printer. */
-    struct printer *fresh = add_printer_new(f, c);
+    struct printer *fresh = add_printer_new(f, c, p);
     if (!fresh)
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
     for (size_t k = 0; k < f->n_printers; k++)

@@ -42,6 +42,8 @@ struct farm {
     uint64_t progress;     /* progress timer */
     uint64_t retry;        /* after a passing store failure: timer for the next pass, 0 if none */
     struct prep *posted;   /* prepare tasks whose PREPARE is on its way to the store */
+    bool reading;          /* a scheduling pass's read of the live jobs is on its way */
+    bool reread;           /* kicked meanwhile: another pass once it is back */
     bool stopping;         /* farm_free: what drivers report while closing goes unheard */
     int preparing;         /* prepare tasks in flight */
     struct prep *reslices; /* re-slices in flight (their jobs stay ready), linked by next */

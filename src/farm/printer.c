@@ -448,8 +448,10 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
        is written; the loop waits PRINTER_BED_SYNC_MS at most (a reload or an API add while
        the database is held busy must not stop the other printers' streams), and a bed it
        cannot read is taken as holding a part: nothing starts on it until it is cleared. */
-    if (storeq_sync(env->q, PRINTER_BED_SYNC_MS, &err) ||
-        store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err)) {
+    if (env->bed_known) /* the printer it replaces knew it (a reload): nothing to read */
+        p->bed_full = env->bed_full;
+    else if (storeq_sync(env->q, PRINTER_BED_SYNC_MS, &err) ||
+             store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err)) {
         p->bed_full = true;
         log_printer(LOG_ERROR, cfg->name, "%s: its bed is taken as holding a part", err.msg);
     }
@@ -564,6 +566,12 @@ bool
 printer_removed(const struct printer *p)
 {
     return p->removed;
+}
+
+bool
+printer_bed_full(const struct printer *p)
+{
+    return p->bed_full;
 }
 
 void

@@ -49,6 +49,9 @@ struct printer_env {
     printer_driver_fn driver;  /* NULL: the printer stays offline (prepare-only tests) */
     void (*changed)(void *ud); /* a job or the printer moved: schedule, wake streams */
     void *ud;                  /* its argument */
+    bool bed_known;            /* bed_full is this printer's bed (it replaces one of the same
+                                  name, farm_apply): not read from the store */
+    bool bed_full;
 };
 
 /* What an operator may ask of a printer (the API's ACTION). */
@@ -113,6 +116,8 @@ bool printer_hot_idle(const struct printer *p);
 /* Dropped from the config: not scheduled, freed by the farm once idle. */
 void printer_set_removed(struct printer *p, bool removed);
 bool printer_removed(const struct printer *p);
+/* Does p's bed hold a part (what the farm knows; the store keeps it for a restart)? */
+bool printer_bed_full(const struct printer *p);
 
 /*
  * Start job j (ready; its G-code at path) from line 0, in two steps like a

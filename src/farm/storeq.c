@@ -67,7 +67,7 @@ struct req {
     char name[64];     /* the printer (OP_PRINTER_SET, OP_NOTE, OP_BED_SET), or who (OP_EVENT) */
     char kind[24];     /* OP_NOTE's kind */
     char text[512];    /* OP_REASON's reason, OP_NOTE's detail */
-    int value;         /* OP_PRINTER_SET's state, OP_BED_SET's full */
+    int value;         /* OP_PRINTER_SET's state, OP_BED_SET's full, OP_CALL: 1 a read */
     enum job_event ev; /* OP_EVENT */
     struct job_event_args a; /* OP_EVENT, its strings pointing into s */
     bool has_a;              /* OP_EVENT had args */
@@ -248,7 +248,7 @@ deliver(struct storeq *q)
         else if (r->rc)
             log_error("store", "%s", r->err.msg);
         logged |= r->rc == SF_OK && r->op != OP_PROGRESS && r->op != OP_REASON &&
-                  (r->op != OP_CALL || r->call);
+                  (r->op != OP_CALL || (r->call && !r->value));
         req_free(r);
         r = next;
     }
@@ -563,4 +563,19 @@ int
 storeq_barrier(struct storeq *q, storeq_event_fn done, void *ud)
 {
     return storeq_call(q, NULL, NULL, NULL, done, ud);
+}
+
+int
+storeq_read(struct storeq *q, storeq_call_fn fn, void *arg, storeq_event_fn done, void *ud)
+{
+    struct req *r = req_new(q, OP_CALL);
+    if (!r)
+        return SF_ENOMEM;
+    r->call = fn;
+    r->arg = arg;
+    r->done = done;
+    r->ud = ud;
+    r->ev = (enum job_event)-1;
+    r->value = 1; /* wakes no one */
+    return post(q, r);
 }

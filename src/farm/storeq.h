@@ -133,6 +133,12 @@ typedef int (*storeq_call_fn)(struct store *s, void *arg, struct sf_err *err);
 int storeq_call(struct storeq *q, storeq_call_fn fn, void *arg, const char *who, storeq_event_fn done,
                 void *ud);
 /*
+ * storeq_call for a read (fn writes nothing): the same, except that it
+ * wakes no one (storeq_set_commit's callback), so a reader that runs on
+ * every wake-up does not wake itself.
+ */
+int storeq_read(struct storeq *q, storeq_call_fn fn, void *arg, storeq_event_fn done, void *ud);
+/*
  * done(ud, r) on the loop (r->rc SF_OK) once every request posted before
  * it has run, failed or not: an answer that must follow what was written
  * before it (an operator's action whose writes are queued).  SF_OK or
