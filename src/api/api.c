@@ -39,13 +39,14 @@
 #include "api_printers.h"
 #include "api_read.h"
 #include "api_stats.h"
+#include "api_writes.h"
 #include "partcheck.h"
 #include "route.h"
 #include "temps.h"
 #include "web.h"
 
 #define SSE_BATCH  64 /* events read from the store per stream refill */
-#define API_GROUPS 4  /* route groups: api_compat's, web's, api_printers', api.c's */
+#define API_GROUPS 5  /* route groups: api_compat's, web's, api_printers', api_writes', api.c's */
 
 struct api {
     struct api_config cfg;         /* as given */
@@ -57,55 +58,7 @@ struct api {
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
     struct temps *temps;           /* each printer's last hour of temperatures (temps.h) */
     struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
-    struct acting *acting;    /* printer actions answered once their writes commit */
-    struct job_write *writes; /* job writes answered once they commit */
-};
-
-/*
- * A job write on the farm's store queue (storeq_call), answered once it
- * committed: the loop does not wait for the store (issue 32).  The store's
- * thread reads and writes the fields down to `size` while the request
- * waits; the loop touches only the rest.  As with struct acting, the
- * answer may come after api_free (a NULL a).
- */
-struct job_write {
-    int64_t id;         /* the job; after an add or again, the new one */
-    int n;              /* a priority, or the places to move */
-    bool move;          /* n is a move */
-    struct job_opts o;  /* a new job's options */
-    char tmp[1200];     /* a new job's upload, adopted on the thread */
-    const struct store *store; /* whose data dir it goes to (read only) */
-    bool adopted, added;       /* done already: not again on a retry */
-    int adopt_rc;              /* the adopt's failure, kept for a retry */
-    struct sf_err adopt_err;
-    char sha[STORE_SHA_HEX];
-    int64_t size;
-    /* the loop's */
-    struct api *a;         /* NULL once the API is freed */
-    struct http_defer *d;  /* the request's answer to come */
-    int status;            /* 201 (a new job: {"job"}) or 200 (the job with its prints) */
-    bool not_now;          /* a refusal of the job rules (SF_EINVAL) is "not now" (409) */
-    struct job_write *next; /* in a->writes */
-};
-
-/*
- * A printer action whose answer waits for its store writes (printer.h
- * printer_action_then): the farm's queue calls back after api_free when
- * the daemon stops (farm_free drains it), so the answer finds a NULL a
- * then and only frees its handle.
- */
-struct acting {
-    struct api *a;        /* NULL once the API is freed */
-    struct http_defer *d; /* the request's answer to come */
-    char name[64];        /* the printer */
-    struct acting *next;  /* in a->acting */
-};
-
-/* An upload in progress: the store's writer, until the route commits it. */
-struct upload {
-    struct store_file *f; /* NULL once committed */
-    size_t size;          /* bytes written */
-    char name[64];        /* the file name, clipped, for messages */
+    struct api_writes writes; /* job writes and printer actions answered once committed */
 };
 
 /* One event stream client. */
@@ -271,160 +224,6 @@ jobs_list(void *ctx, const struct route_args *args, const struct http_req *req,
     api_read_run(a->reads, resp, read_page, NULL, q, free);
 }
 
-static void job_time_left(struct api *a, int64_t id, struct http_resp *resp);
-static void job_read(struct store *s, int64_t id, struct http_resp *resp);
-
-/* A job write came back from the store's thread: answer it with the job as it is now. */
-static void
-on_job_written(void *ud, const struct storeq_result *r)
-{
-    struct job_write *w = ud;
-    struct http_resp resp = { .status = 200 };
-    struct api *a = w->a;
-    if (a) {
-        for (struct job_write **pp = &a->writes; *pp; pp = &(*pp)->next)
-            if (*pp == w) {
-                *pp = w->next;
-                break;
-            }
-        struct sf_err err = *r->err;
-        int rc = r->rc;
-        if (rc == SF_EINVAL && w->not_now)
-            rc = err.code = SF_EAGAIN;
-        struct job_row j;
-        if (rc) {
-            http_fail(&resp, rc, err.msg);
-        } else if (w->status == 201) { /* read at once on the loop: committed */
-            if ((rc = store_job_get(a->cfg.store, w->id, &j, &err)) == SF_OK) {
-                log_info("api", "job %lld: '%s' submitted, %d copies", (long long)w->id,
-                         j.opts.name, j.opts.copies);
-                resp.status = 201;
-                resp.json = json_pack("{so}", "job", api_job_json(&j));
-            } else {
-                http_fail(&resp, rc, err.msg);
-            }
-        } else {
-            job_read(a->cfg.store, w->id, &resp);
-            job_time_left(a, w->id, &resp);
-        }
-        if (rc == SF_OK)
-            changed(a);
-    }
-    http_defer_answer(w->d, &resp);
-    free(w);
-}
-
-/*
- * Post write fn for job id on the farm's store queue (NULL: nothing, the
- * answer follows what is queued), the answer deferred until it commits.  False when there is no queue (an API over a store
- * alone) or no memory: the caller writes now, as before.
- */
-static bool
-job_write_post(struct api *a, struct http_resp *resp, struct job_write *w, storeq_call_fn fn)
-{
-    struct storeq *q = farm_storeq(a->cfg.farm);
-    if (!q || !(w->d = http_defer(resp)))
-        return false;
-    w->a = a;
-    w->store = a->cfg.store;
-    if (storeq_call(q, fn, w, NULL, on_job_written, w)) {
-        free(resp->defer);
-        resp->defer = NULL;
-        return false;
-    }
-    w->next = a->writes;
-    a->writes = w;
-    return true;
-}
-
-/* On the store's thread: a new job from its upload (jobs_submit); each half once. */
-static int
-submit_write(struct store *s, void *ud, struct sf_err *err)
-{
-    struct job_write *w = ud;
-    if (!w->adopted) { /* the file system's half: not tried again (its temporary is moved) */
-        w->adopted = true;
-        w->adopt_rc = store_file_adopt(w->store, w->tmp, w->sha, &w->size, &w->adopt_err);
-    }
-    if (w->adopt_rc) {
-        *err = w->adopt_err;
-        return w->adopt_rc;
-    }
-    int rc = store_file_record(s, w->sha, w->size, err);
-    if (rc == SF_OK && !w->added && (rc = store_job_add(s, &w->o, w->sha, &w->id, err)) == SF_OK)
-        w->added = true; /* a retry after this adds nothing twice */
-    return rc;
-}
-
-static void
-jobs_submit(void *ctx, const struct route_args *args, const struct http_req *req,
-            struct http_resp *resp)
-{
-    (void)args;
-    struct api *a = ctx;
-    struct sf_err err;
-    if (!req->upload_name || !req->upload) {
-        http_error(resp, 400, "multipart field 'file' (the part) is required");
-        return;
-    }
-    struct job_opts o;
-    job_opts_init(&o);
-    snprintf(o.name, sizeof(o.name), "%s", req->upload_name);
-    const char *opts = http_req_field(req, "options");
-    char clipped[65];
-    for (size_t i = 0; i < req->n_fields; i++)
-        if (strcmp(req->field_name[i], "options") != 0) {
-            http_error(resp, 400, "unknown form field '%s' (expected 'file' and 'options')",
-                       route_clip(clipped, sizeof(clipped), req->field_name[i]));
-            return;
-        }
-    if (api_opts_parse(opts ? opts : "", opts ? strlen(opts) : 0, &o, &err) ||
-        job_opts_validate(&o, &err)) {
-        http_error(resp, 400, "%s", err.msg);
-        return;
-    }
-    if (api_compat_is_gcode(o.name)) {
-        http_error(resp, 400,
-                   "'%s' is G-code: send it to POST /api/files/local, which prints it as is",
-                   o.name);
-        return;
-    }
-    /* Options are good: only now does the file reach its content address, once
-       its content is what its name says (on a refusal, http.c discards the
-       temporary file). */
-    struct upload *u = req->upload;
-    char sha[STORE_SHA_HEX];
-    int64_t id;
-    struct job_row j;
-    int rc = partcheck_file(store_file_tmp_path(u->f), o.name, &err);
-    if (rc) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    /* Through the farm's store queue: the file adopted and the job added on its thread, the
-       answer once committed (the upload's temporary stays until then). */
-    struct job_write *w = mem_calloc(1, sizeof(*w));
-    if (w) {
-        w->o = o;
-        w->status = 201;
-        snprintf(w->tmp, sizeof(w->tmp), "%s", store_file_tmp_path(u->f));
-        if (job_write_post(a, resp, w, submit_write))
-            return;
-        free(w);
-    }
-    rc = store_file_commit(u->f, sha, &err);
-    u->f = NULL; /* commit frees the writer either way */
-    if (rc || (rc = store_job_add(a->cfg.store, &o, sha, &id, &err)) ||
-        (rc = store_job_get(a->cfg.store, id, &j, &err))) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    log_info("api", "job %lld: '%s' submitted, %d copies", (long long)id, o.name, o.copies);
-    resp->status = 201;
-    resp->json = json_pack("{so}", "job", api_job_json(&j));
-    changed(a);
-}
-
 static void time_left_json(json_t *o, const struct printer_info *p);
 
 /* Job id with its print history from s, or the failure (any thread with its s). */
@@ -498,151 +297,20 @@ job_get(void *ctx, const struct route_args *args, const struct http_req *req,
     api_read_run(a->reads, resp, job_ask_read, job_ask_finish, q, free);
 }
 
-/* After a change the farm made (rc SF_OK): the job as it is now. */
+/* The job id with its prints and its time left, as the loop's connection reads it now (the
+   answer to a write: api_writes.h). */
 static void
-job_changed(struct api *a, const struct route_args *args, int rc, const struct sf_err *err,
-            struct http_resp *resp)
+job_answer(void *ud, int64_t id, struct http_resp *resp)
 {
-    if (rc) {
-        http_fail(resp, rc, err->msg);
-        return;
-    }
-    /* read at once on the loop: the client waits for its own change */
-    job_read(a->cfg.store, args->id, resp);
-    job_time_left(a, args->id, resp);
-    changed(a);
+    struct api *a = ud;
+    job_read(a->cfg.store, id, resp);
+    job_time_left(a, id, resp);
 }
 
-/* On the store's thread: a priority or a move (job_order). */
-static int
-order_write(struct store *s, void *ud, struct sf_err *err)
-{
-    struct job_write *w = ud;
-    return w->move ? store_job_move(s, w->id, w->n, err)
-                   : store_job_set_priority(s, w->id, w->n, err);
-}
-
-/* On the store's thread: an operator's cancel of a job on no printer, or a restart. */
-static int
-cancel_write(struct store *s, void *ud, struct sf_err *err)
-{
-    return jobctl_cancel_stored(s, ((struct job_write *)ud)->id, err);
-}
-
-static int
-restart_write(struct store *s, void *ud, struct sf_err *err)
-{
-    return jobctl_restart(s, ((struct job_write *)ud)->id, err);
-}
-
-/* On the store's thread: "print again" (jobctl_again), once. */
-static int
-again_write(struct store *s, void *ud, struct sf_err *err)
-{
-    struct job_write *w = ud;
-    if (w->added)
-        return SF_OK;
-    int64_t id;
-    int rc = jobctl_again(s, w->id, &id, err);
-    if (rc == SF_OK) {
-        w->id = id;
-        w->added = true;
-    }
-    return rc;
-}
-
-/* PATCH /api/jobs/ID {"priority": N}, or POST /api/jobs/ID/move {"by": -1 | 1}: one place
-   up or down among the waiting jobs. */
 static void
-job_order(void *ctx, const struct route_args *args, const struct http_req *req,
-          struct http_resp *resp)
+api_changed(void *ud)
 {
-    struct api *a = ctx;
-    struct sf_err err;
-    bool move = strcmp(req->method, "POST") == 0;
-    int n;
-    int rc = move ? api_move_parse(req->body, req->body_len, &n, &err)
-                  : api_priority_parse(req->body, req->body_len, &n, &err);
-    struct job_write *w = rc == SF_OK ? mem_calloc(1, sizeof(*w)) : NULL;
-    if (w) {
-        *w = (struct job_write){ .id = args->id, .n = n, .move = move, .status = 200 };
-        if (job_write_post(a, resp, w, order_write))
-            return;
-        free(w);
-    }
-    if (rc == SF_OK)
-        rc = move ? store_job_move(a->cfg.store, args->id, n, &err)
-                  : store_job_set_priority(a->cfg.store, args->id, n, &err);
-    job_changed(a, args, rc, &err, resp);
-}
-
-/* POST /api/jobs/ID/cancel, or /restart: the operator prints an
-   interrupted job's copy again from the start. */
-static void
-job_cancel_restart(void *ctx, const struct route_args *args, const struct http_req *req,
-                   struct http_resp *resp)
-{
-    struct api *a = ctx;
-    struct sf_err err;
-    bool cancel = strcmp(strrchr(req->path, '/'), "/cancel") == 0;
-    /* A job on a printer is cancelled by stopping the printer, answered once that is written;
-       any other through the store's queue. */
-    const char *on = cancel ? jobctl_printer_of(a->cfg.farm, args->id) : NULL;
-    struct job_write *w = mem_calloc(1, sizeof(*w));
-    if (w && !on) {
-        *w = (struct job_write){ .id = args->id, .status = 200, .not_now = true };
-        if (job_write_post(a, resp, w, cancel ? cancel_write : restart_write))
-            return;
-    }
-    if (w && on && (w->d = http_defer(resp))) {
-        *w = (struct job_write){ .id = args->id, .status = 200, .not_now = true, .d = w->d,
-                                 .a = a };
-        int rc = jobctl_printer_action_then(a->cfg.farm, on, PRINTER_ACT_CANCEL, on_job_written, w,
-                                            &err);
-        if (rc == SF_OK) {
-            w->next = a->writes;
-            a->writes = w;
-            return;
-        }
-        free(resp->defer);
-        resp->defer = NULL;
-        free(w);
-        job_changed(a, args, rc, &err, resp);
-        return;
-    }
-    free(w);
-    int rc = cancel ? jobctl_cancel(a->cfg.farm, a->cfg.store, args->id, &err)
-                 : jobctl_restart(a->cfg.store, args->id, &err);
-    job_changed(a, args, rc, &err, resp);
-}
-
-/* POST /api/jobs/ID/again: a new job from the same file and options (jobctl_again). */
-static void
-job_again(void *ctx, const struct route_args *args, const struct http_req *req,
-          struct http_resp *resp)
-{
-    (void)req;
-    struct api *a = ctx;
-    struct sf_err err;
-    int64_t id;
-    struct job_row j;
-    struct job_write *w = mem_calloc(1, sizeof(*w));
-    if (w) {
-        *w = (struct job_write){ .id = args->id, .status = 201 };
-        if (job_write_post(a, resp, w, again_write))
-            return;
-        free(w);
-    }
-    int rc = jobctl_again(a->cfg.store, args->id, &id, &err);
-    if (rc || (rc = store_job_get(a->cfg.store, id, &j, &err))) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    log_info("api", "job %lld: '%s' submitted again as job %lld", (long long)args->id, j.opts.name,
-             (long long)id);
-    resp->status = 201;
-    resp->json = json_pack("{so}", "job", api_job_json(&j));
-    changed(a);
+    changed(ud);
 }
 
 /* GET /api/stats?days=N (api_stats.h), read on the reader's thread. */
@@ -664,30 +332,6 @@ stats_get(void *ctx, const struct route_args *args, const struct http_req *req,
         return;
     }
     api_read_run(a->reads, resp, api_stats_read, NULL, days, free);
-}
-
-/* The operator continues an interrupted job where its printer stopped. */
-static void
-job_resume(void *ctx, const struct route_args *args, const struct http_req *req,
-           struct http_resp *resp)
-{
-    struct api *a = ctx;
-    struct sf_err err;
-    int64_t line;
-    if (api_resume_parse(req->body, req->body_len, &line, &err)) {
-        http_error(resp, 400, "%s", err.msg);
-        return;
-    }
-    int rc = jobctl_resume(a->cfg.farm, args->id, line, &err);
-    /* its RESUME is queued: answered once it committed (a barrier behind it) */
-    struct job_write *w = rc == SF_OK ? mem_calloc(1, sizeof(*w)) : NULL;
-    if (w) {
-        *w = (struct job_write){ .id = args->id, .status = 200 };
-        if (job_write_post(a, resp, w, NULL))
-            return;
-        free(w);
-    }
-    job_changed(a, args, rc, &err, resp);
 }
 
 /* ---- printers ---- */
@@ -791,6 +435,12 @@ printers_get(void *ctx, const struct route_args *args, const struct http_req *re
     printers_answer(ctx, args->name[0] ? args->name : NULL, resp);
 }
 
+static void
+printer_answer(void *ud, const char *name, struct http_resp *resp)
+{
+    printers_answer(ud, name, resp);
+}
+
 /* The end of an action on printer name: its refusal (rc, err), or the printer as it is now. */
 static void
 printer_acted(struct api *a, const char *name, int rc, const struct sf_err *err,
@@ -831,27 +481,6 @@ printer_temps(void *ctx, const struct route_args *args, const struct http_req *r
                            "samples"); /* not sampled yet */
 }
 
-/* A printer action's writes came back from the store: answer it. */
-static void
-on_acted(void *ud, const struct storeq_result *r)
-{
-    struct acting *w = ud;
-    struct http_resp resp = { .status = 200 };
-    if (w->a) {
-        for (struct acting **pp = &w->a->acting; *pp; pp = &(*pp)->next)
-            if (*pp == w) {
-                *pp = w->next;
-                break;
-            }
-        /* the printer has acted: a store that refused the write is the answer (logged too) */
-        if (r->rc)
-            log_warn("api", "printer %s: %s", w->name, r->err->msg);
-        printer_acted(w->a, w->name, r->rc, r->err, &resp);
-    }
-    http_defer_answer(w->d, &resp);
-    free(w);
-}
-
 static void
 printer_act(void *ctx, const struct route_args *args, const struct http_req *req,
             struct http_resp *resp)
@@ -865,26 +494,7 @@ printer_act(void *ctx, const struct route_args *args, const struct http_req *req
                    args->action);
         return;
     }
-    struct sf_err err;
-    struct acting *w = mem_calloc(1, sizeof(*w));
-    if (!w || !(w->d = http_defer(resp))) {
-        free(w); /* out of memory: acted without waiting for the store */
-        int rc = jobctl_printer_action(a->cfg.farm, args->name, act, &err);
-        printer_acted(a, args->name, rc, &err, resp);
-        return;
-    }
-    w->a = a;
-    snprintf(w->name, sizeof(w->name), "%s", args->name);
-    int rc = jobctl_printer_action_then(a->cfg.farm, args->name, act, on_acted, w, &err);
-    if (rc) { /* refused now: answered now */
-        free(resp->defer);
-        resp->defer = NULL;
-        free(w);
-        printer_acted(a, args->name, rc, &err, resp);
-        return;
-    }
-    w->next = a->acting;
-    a->acting = w;
+    api_writes_printer_act(&a->writes, args->name, act, resp);
 }
 
 /*
@@ -1052,17 +662,7 @@ events_stream(void *ctx, const struct route_args *args, const struct http_req *r
 static const struct route rows[] = {
     /* methods, pattern, match, body, scope, handler, 405 message */
     { ROUTE_GET, "/api/jobs", NULL, HTTP_BODY_NONE, ROUTE_READ, jobs_list, ROUTE_405 },
-    { ROUTE_POST, "/api/jobs", NULL, HTTP_BODY_UPLOAD, ROUTE_WRITE, jobs_submit, ROUTE_405 },
     { ROUTE_GET, "/api/jobs/{id}", NULL, HTTP_BODY_NONE, ROUTE_READ, job_get, ROUTE_405 },
-    { ROUTE_PATCH, "/api/jobs/{id}", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_order, ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/move", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_order, ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/cancel", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,
-      ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/restart", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,
-      ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/resume", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_resume,
-      ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/again", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_again, ROUTE_405 },
     { ROUTE_GET, "/api/stats", NULL, HTTP_BODY_NONE, ROUTE_READ, stats_get, ROUTE_405 },
     { ROUTE_GET, "/api/printers", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get, "use GET" },
     { ROUTE_GET, "/api/printers/{name}", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get,
@@ -1164,7 +764,16 @@ api_new(const struct api_config *cfg, struct sf_err *err)
     a->groups[0] = (struct route_group){ compat, n_compat, &a->slicers };
     a->groups[1] = (struct route_group){ web, n_web, a->web };
     a->groups[2] = (struct route_group){ printers, n_printers, cfg->farm };
-    a->groups[3] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
+    a->writes = (struct api_writes){ .store = cfg->store,
+                                     .farm = cfg->farm,
+                                     .job = job_answer,
+                                     .printer = printer_answer,
+                                     .changed = api_changed,
+                                     .ud = a };
+    size_t n_writes;
+    const struct route *writes = api_writes_routes(&n_writes);
+    a->groups[3] = (struct route_group){ writes, n_writes, &a->writes };
+    a->groups[4] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
     a->temps = temps_new();
     a->http = a->web && a->temps ? http_new(&hc, err) : NULL;
     if (!a->http) {
@@ -1188,11 +797,8 @@ api_free(struct api *a)
     api_octopush_free(a->push); /* its sockets close before the server they came through */
     http_free(a->http);         /* ends the picture streams before the renders they wait for */
     web_free(a->web);
-    api_read_free(a->reads); /* reads still queued: their requests went with the server */
-    for (struct acting *w = a->acting; w; w = w->next)
-        w->a = NULL; /* answered to no one (the farm's queue calls back later) */
-    for (struct job_write *w = a->writes; w; w = w->next)
-        w->a = NULL;
+    api_read_free(a->reads);       /* reads still queued: their requests went with the server */
+    api_writes_orphan(&a->writes); /* answered to no one (the farm's queue calls back later) */
     temps_free(a->temps);
     free(a);
 }

@@ -59,8 +59,8 @@ struct prep {
     int64_t gcode_size;
     char mesh_sha[STORE_SHA_HEX]; /* the optimized part, adopted by the worker; "" if none */
     int64_t mesh_size;
-    int64_t prepare_ms; /* the prepare function's wall time */
-    struct sf_err err;  /* why it failed */
+    int64_t prepare_ms;             /* the prepare function's wall time */
+    struct sf_err err;              /* why it failed */
     struct job_event_args prepared; /* its PREPARED, written on the store thread */
     enum job_state to;              /* the job's state after it */
 };

@@ -61,8 +61,8 @@ struct printer {
     uint64_t heat_timer;   /* hot with no print: timer turning the heaters off, 0 if none */
     uint64_t judging;      /* the start whose file is judged before the driver has it, 0 if none */
     uint64_t starts;       /* starts made: the next start's token */
-    struct start_ticket *ticket; /* the START queued for the store, not yet back; NULL if none */
-    struct start_go *go;         /* a start judged before its START committed: its verdict */
+    struct start_ticket *ticket;  /* the START queued for the store, not yet back; NULL if none */
+    struct start_go *go;          /* a start judged before its START committed: its verdict */
     struct start_ticket *rticket; /* the RESUME queued for the store, not yet back; NULL if none */
     struct resume_go *rgo;        /* a resume read before its RESUME committed: its verdict */
 };

@@ -553,7 +553,7 @@ storeq_call(struct storeq *q, storeq_call_fn fn, void *arg, const char *who, sto
     r->arg = arg;
     r->done = done;
     r->ud = ud;
-    r->ev = (enum job_event)-1;
+    r->ev = (enum job_event) - 1;
     if (who)
         snprintf(r->name, sizeof(r->name), "%s", who);
     return post(q, r);
@@ -575,7 +575,7 @@ storeq_read(struct storeq *q, storeq_call_fn fn, void *arg, storeq_event_fn done
     r->arg = arg;
     r->done = done;
     r->ud = ud;
-    r->ev = (enum job_event)-1;
+    r->ev = (enum job_event) - 1;
     r->value = 1; /* wakes no one */
     return post(q, r);
 }

@@ -130,8 +130,8 @@ int storeq_sync(struct storeq *q, int64_t max_ms, struct sf_err *err);
  * does (storeq_set_commit).  SF_OK, or SF_ENOMEM (done is not called).
  */
 typedef int (*storeq_call_fn)(struct store *s, void *arg, struct sf_err *err);
-int storeq_call(struct storeq *q, storeq_call_fn fn, void *arg, const char *who, storeq_event_fn done,
-                void *ud);
+int storeq_call(struct storeq *q, storeq_call_fn fn, void *arg, const char *who,
+                storeq_event_fn done, void *ud);
 /*
  * storeq_call for a read (fn writes nothing): the same, except that it
  * wakes no one (storeq_set_commit's callback), so a reader that runs on

@@ -320,7 +320,7 @@ T_CASE(storeq_waits_out_a_locked_database_without_the_loop)
 /* A caller's call on the thread: the job's state it finds, then a reason written with it. */
 struct call_arg {
     int64_t id;
-    bool on_thread;  /* it ran off the loop's thread */
+    bool on_thread; /* it ran off the loop's thread */
     enum job_state saw;
     int runs;
 };
