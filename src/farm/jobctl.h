@@ -66,6 +66,8 @@ int jobctl_again(struct store *s, int64_t id, int64_t *new_id, struct sf_err *er
  * Interrupted job id continues on its printer from command line `line`
  * (-1: the last acknowledged one); farm_job_resume, whose refusals (not
  * interrupted, printer not idle, line out of range) are SF_EAGAIN here.
+ * Its RESUME is queued (printer_resume_commit): a storeq_barrier posted
+ * after SF_OK answers once it committed.
  */
 int jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err);
 

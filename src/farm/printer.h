@@ -144,11 +144,14 @@ void printer_start_go(struct printer *p, int64_t id, uint64_t token, const char 
 
 /*
  * Resume interrupted job id on p (idle, connected) from command `line`:
- * printer_resume_commit records it (SF_EINVAL and friends from the store);
+ * printer_resume_commit queues its RESUME on the store's thread and p
+ * takes the job at once (SF_OK, or SF_ENOMEM with nothing changed); a
+ * RESUME the store refuses (logged) leaves p idle again with nothing sent.
  * printer_resume_go starts the driver once the resume point is read
- * (scan), unless the job left p meanwhile, with the job's time estimate
- * est_s (printer_estimate_s); rc != SF_OK (the read failed) fails the
- * print with why.
+ * (scan) and the RESUME has committed, whichever comes last, unless the
+ * job left p meanwhile, with the job's time estimate est_s
+ * (printer_estimate_s); rc != SF_OK (the read failed) fails the print
+ * with why.
  */
 int printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err *err);
 void printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
