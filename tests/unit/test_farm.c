@@ -1905,3 +1905,51 @@ T_CASE(farm_prepare_waits_out_a_locked_store_instead_of_failing_the_job)
     T_OK(store_check(synced(), &err), &err);
     teardown();
 }
+
+/*
+ * An operator resumes an interrupted job while another process holds the
+ * store's write lock: the printer takes the job at once (printing), the
+ * driver gets nothing until the RESUME has committed, then starts at the
+ * resume line.  Before, the RESUME was written on the loop, which waited
+ * out SQLite's busy timeout and refused the resume ("database is locked").
+ */
+T_CASE(farm_resume_commits_on_the_store_thread_before_the_driver_has_it)
+{
+    if (t_store_pg()) {
+        t_skip("holds SQLite's write lock from a second connection");
+        return;
+    }
+    struct sf_err err;
+    T_OK(setup("busyresume", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    a->base.status.lines_acked = 1;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    for (int i = 0; i < 20; i++)
+        loop_run_once(fx.l, 10);
+    teardown(); /* the daemon stops mid-print: the job is interrupted on a */
+    T_OK(setup("busyresume", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    T_EQ_INT(state_of(id), JOB_INTERRUPTED);
+    a = tdrv_named("a");
+    struct sqldb *other = lock_store("busyresume");
+    T_TRUE(other != NULL);
+    T_OK(farm_job_resume(fx.f, id, 1, &err), &err);
+    T_EQ_INT(pstate(0), PRINTER_PRINTING); /* taken at once */
+    for (int i = 0; i < 20; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 0); /* its RESUME waits for the lock: nothing sent */
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err); /* a read: WAL lets it through */
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    unlock_store(other);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && a->starts == 0;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 1);
+    T_EQ_INT(a->first_line, 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_OK(store_check(synced(), &err), &err);
+    teardown();
+}
