@@ -39,13 +39,14 @@
 #include "api_printers.h"
 #include "api_read.h"
 #include "api_stats.h"
+#include "api_writes.h"
 #include "partcheck.h"
 #include "route.h"
 #include "temps.h"
 #include "web.h"
 
 #define SSE_BATCH  64 /* events read from the store per stream refill */
-#define API_GROUPS 4  /* route groups: api_compat's, web's, api_printers', api.c's */
+#define API_GROUPS 5  /* route groups: api_compat's, web's, api_printers', api_writes', api.c's */
 
 struct api {
     struct api_config cfg;         /* as given */
@@ -57,13 +58,7 @@ struct api {
     unsigned tick;                 /* api_tick() count: streams send progress when it moves */
     struct temps *temps;           /* each printer's last hour of temperatures (temps.h) */
     struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
-};
-
-/* An upload in progress: the store's writer, until the route commits it. */
-struct upload {
-    struct store_file *f; /* NULL once committed */
-    size_t size;          /* bytes written */
-    char name[64];        /* the file name, clipped, for messages */
+    struct api_writes writes; /* job writes and printer actions answered once committed */
 };
 
 /* One event stream client. */
@@ -229,64 +224,6 @@ jobs_list(void *ctx, const struct route_args *args, const struct http_req *req,
     api_read_run(a->reads, resp, read_page, NULL, q, free);
 }
 
-static void
-jobs_submit(void *ctx, const struct route_args *args, const struct http_req *req,
-            struct http_resp *resp)
-{
-    (void)args;
-    struct api *a = ctx;
-    struct sf_err err;
-    if (!req->upload_name || !req->upload) {
-        http_error(resp, 400, "multipart field 'file' (the part) is required");
-        return;
-    }
-    struct job_opts o;
-    job_opts_init(&o);
-    snprintf(o.name, sizeof(o.name), "%s", req->upload_name);
-    const char *opts = http_req_field(req, "options");
-    char clipped[65];
-    for (size_t i = 0; i < req->n_fields; i++)
-        if (strcmp(req->field_name[i], "options") != 0) {
-            http_error(resp, 400, "unknown form field '%s' (expected 'file' and 'options')",
-                       route_clip(clipped, sizeof(clipped), req->field_name[i]));
-            return;
-        }
-    if (api_opts_parse(opts ? opts : "", opts ? strlen(opts) : 0, &o, &err) ||
-        job_opts_validate(&o, &err)) {
-        http_error(resp, 400, "%s", err.msg);
-        return;
-    }
-    if (api_compat_is_gcode(o.name)) {
-        http_error(resp, 400,
-                   "'%s' is G-code: send it to POST /api/files/local, which prints it as is",
-                   o.name);
-        return;
-    }
-    /* Options are good: only now does the file reach its content address, once
-       its content is what its name says (on a refusal, http.c discards the
-       temporary file). */
-    struct upload *u = req->upload;
-    char sha[STORE_SHA_HEX];
-    int64_t id;
-    struct job_row j;
-    int rc = partcheck_file(store_file_tmp_path(u->f), o.name, &err);
-    if (rc) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    rc = store_file_commit(u->f, sha, &err);
-    u->f = NULL; /* commit frees the writer either way */
-    if (rc || (rc = store_job_add(a->cfg.store, &o, sha, &id, &err)) ||
-        (rc = store_job_get(a->cfg.store, id, &j, &err))) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    log_info("api", "job %lld: '%s' submitted, %d copies", (long long)id, o.name, o.copies);
-    resp->status = 201;
-    resp->json = json_pack("{so}", "job", api_job_json(&j));
-    changed(a);
-}
-
 static void time_left_json(json_t *o, const struct printer_info *p);
 
 /* Job id with its print history from s, or the failure (any thread with its s). */
@@ -360,73 +297,20 @@ job_get(void *ctx, const struct route_args *args, const struct http_req *req,
     api_read_run(a->reads, resp, job_ask_read, job_ask_finish, q, free);
 }
 
-/* After a change the farm made (rc SF_OK): the job as it is now. */
+/* The job id with its prints and its time left, as the loop's connection reads it now (the
+   answer to a write: api_writes.h). */
 static void
-job_changed(struct api *a, const struct route_args *args, int rc, const struct sf_err *err,
-            struct http_resp *resp)
+job_answer(void *ud, int64_t id, struct http_resp *resp)
 {
-    if (rc) {
-        http_fail(resp, rc, err->msg);
-        return;
-    }
-    /* read at once on the loop: the client waits for its own change */
-    job_read(a->cfg.store, args->id, resp);
-    job_time_left(a, args->id, resp);
-    changed(a);
+    struct api *a = ud;
+    job_read(a->cfg.store, id, resp);
+    job_time_left(a, id, resp);
 }
 
-/* PATCH /api/jobs/ID {"priority": N}, or POST /api/jobs/ID/move {"by": -1 | 1}: one place
-   up or down among the waiting jobs. */
 static void
-job_order(void *ctx, const struct route_args *args, const struct http_req *req,
-          struct http_resp *resp)
+api_changed(void *ud)
 {
-    struct api *a = ctx;
-    struct sf_err err;
-    bool move = strcmp(req->method, "POST") == 0;
-    int n;
-    int rc = move ? api_move_parse(req->body, req->body_len, &n, &err)
-                  : api_priority_parse(req->body, req->body_len, &n, &err);
-    if (rc == SF_OK)
-        rc = move ? store_job_move(a->cfg.store, args->id, n, &err)
-                  : store_job_set_priority(a->cfg.store, args->id, n, &err);
-    job_changed(a, args, rc, &err, resp);
-}
-
-/* POST /api/jobs/ID/cancel, or /restart: the operator prints an
-   interrupted job's copy again from the start. */
-static void
-job_cancel_restart(void *ctx, const struct route_args *args, const struct http_req *req,
-                   struct http_resp *resp)
-{
-    struct api *a = ctx;
-    struct sf_err err;
-    int rc = strcmp(strrchr(req->path, '/'), "/cancel") == 0
-                 ? jobctl_cancel(a->cfg.farm, a->cfg.store, args->id, &err)
-                 : jobctl_restart(a->cfg.store, args->id, &err);
-    job_changed(a, args, rc, &err, resp);
-}
-
-/* POST /api/jobs/ID/again: a new job from the same file and options (jobctl_again). */
-static void
-job_again(void *ctx, const struct route_args *args, const struct http_req *req,
-          struct http_resp *resp)
-{
-    (void)req;
-    struct api *a = ctx;
-    struct sf_err err;
-    int64_t id;
-    struct job_row j;
-    int rc = jobctl_again(a->cfg.store, args->id, &id, &err);
-    if (rc || (rc = store_job_get(a->cfg.store, id, &j, &err))) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    log_info("api", "job %lld: '%s' submitted again as job %lld", (long long)args->id, j.opts.name,
-             (long long)id);
-    resp->status = 201;
-    resp->json = json_pack("{so}", "job", api_job_json(&j));
-    changed(a);
+    changed(ud);
 }
 
 /* GET /api/stats?days=N (api_stats.h), read on the reader's thread. */
@@ -448,22 +332,6 @@ stats_get(void *ctx, const struct route_args *args, const struct http_req *req,
         return;
     }
     api_read_run(a->reads, resp, api_stats_read, NULL, days, free);
-}
-
-/* The operator continues an interrupted job where its printer stopped. */
-static void
-job_resume(void *ctx, const struct route_args *args, const struct http_req *req,
-           struct http_resp *resp)
-{
-    struct api *a = ctx;
-    struct sf_err err;
-    int64_t line;
-    if (api_resume_parse(req->body, req->body_len, &line, &err)) {
-        http_error(resp, 400, "%s", err.msg);
-        return;
-    }
-    int rc = jobctl_resume(a->cfg.farm, args->id, line, &err);
-    job_changed(a, args, rc, &err, resp);
 }
 
 /* ---- printers ---- */
@@ -567,6 +435,12 @@ printers_get(void *ctx, const struct route_args *args, const struct http_req *re
     printers_answer(ctx, args->name[0] ? args->name : NULL, resp);
 }
 
+static void
+printer_answer(void *ud, const char *name, struct http_resp *resp)
+{
+    printers_answer(ud, name, resp);
+}
+
 /* The end of an action on printer name: its refusal (rc, err), or the printer as it is now. */
 static void
 printer_acted(struct api *a, const char *name, int rc, const struct sf_err *err,
@@ -620,9 +494,7 @@ printer_act(void *ctx, const struct route_args *args, const struct http_req *req
                    args->action);
         return;
     }
-    struct sf_err err;
-    int rc = jobctl_printer_action(a->cfg.farm, args->name, act, &err);
-    printer_acted(a, args->name, rc, &err, resp);
+    api_writes_printer_act(&a->writes, args->name, act, resp);
 }
 
 /*
@@ -790,17 +662,7 @@ events_stream(void *ctx, const struct route_args *args, const struct http_req *r
 static const struct route rows[] = {
     /* methods, pattern, match, body, scope, handler, 405 message */
     { ROUTE_GET, "/api/jobs", NULL, HTTP_BODY_NONE, ROUTE_READ, jobs_list, ROUTE_405 },
-    { ROUTE_POST, "/api/jobs", NULL, HTTP_BODY_UPLOAD, ROUTE_WRITE, jobs_submit, ROUTE_405 },
     { ROUTE_GET, "/api/jobs/{id}", NULL, HTTP_BODY_NONE, ROUTE_READ, job_get, ROUTE_405 },
-    { ROUTE_PATCH, "/api/jobs/{id}", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_order, ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/move", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_order, ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/cancel", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,
-      ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/restart", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_cancel_restart,
-      ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/resume", NULL, HTTP_BODY_JSON, ROUTE_WRITE, job_resume,
-      ROUTE_405 },
-    { ROUTE_POST, "/api/jobs/{id}/again", NULL, HTTP_BODY_NONE, ROUTE_WRITE, job_again, ROUTE_405 },
     { ROUTE_GET, "/api/stats", NULL, HTTP_BODY_NONE, ROUTE_READ, stats_get, ROUTE_405 },
     { ROUTE_GET, "/api/printers", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get, "use GET" },
     { ROUTE_GET, "/api/printers/{name}", NULL, HTTP_BODY_NONE, ROUTE_READ, printers_get,
@@ -902,7 +764,16 @@ api_new(const struct api_config *cfg, struct sf_err *err)
     a->groups[0] = (struct route_group){ compat, n_compat, &a->slicers };
     a->groups[1] = (struct route_group){ web, n_web, a->web };
     a->groups[2] = (struct route_group){ printers, n_printers, cfg->farm };
-    a->groups[3] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
+    a->writes = (struct api_writes){ .store = cfg->store,
+                                     .farm = cfg->farm,
+                                     .job = job_answer,
+                                     .printer = printer_answer,
+                                     .changed = api_changed,
+                                     .ud = a };
+    size_t n_writes;
+    const struct route *writes = api_writes_routes(&n_writes);
+    a->groups[3] = (struct route_group){ writes, n_writes, &a->writes };
+    a->groups[4] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
     a->temps = temps_new();
     a->http = a->web && a->temps ? http_new(&hc, err) : NULL;
     if (!a->http) {
@@ -926,7 +797,8 @@ api_free(struct api *a)
     api_octopush_free(a->push); /* its sockets close before the server they came through */
     http_free(a->http);         /* ends the picture streams before the renders they wait for */
     web_free(a->web);
-    api_read_free(a->reads); /* reads still queued: their requests went with the server */
+    api_read_free(a->reads);       /* reads still queued: their requests went with the server */
+    api_writes_orphan(&a->writes); /* answered to no one (the farm's queue calls back later) */
     temps_free(a->temps);
     free(a);
 }

@@ -35,6 +35,7 @@
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "farm_host.h"
+#include "store_host.h"
 #include "gcjob.h"
 #include "sched.h"
 
@@ -47,7 +48,7 @@ struct noreslice {
 /* A prepare task: plain data copied for the worker. */
 struct prep {
     struct farm *f;                /* owner (used only on the loop thread) */
-    struct prep *next;             /* in f->reslices (re-slices only) */
+    struct prep *next;             /* in f->reslices (re-slices), f->posted (its PREPARE) */
     bool reslice;                  /* the job is ready and stays so: this is another printer's */
     char key[SCHED_KEY_MAX];       /* sched_key of the printer it is prepared for */
     double angle_deg;              /* the overhang angle it is prepared with */
@@ -60,9 +61,11 @@ struct prep {
     int64_t gcode_size;
     char mesh_sha[STORE_SHA_HEX]; /* the optimized part, adopted by the worker; "" if none */
     int64_t mesh_size;
-    int64_t prepare_ms; /* the prepare function's wall time */
-    int64_t fence;      /* the claim's fencing token (farm_host.h); 0 on a single host */
-    struct sf_err err;  /* why it failed */
+    int64_t prepare_ms;             /* the prepare function's wall time */
+    int64_t fence;                  /* the claim's fencing token (farm_host.h); 0 on a single host */
+    struct sf_err err;              /* why it failed */
+    struct job_event_args prepared; /* its PREPARED, written on the store thread */
+    enum job_state to;              /* the job's state after it */
 };
 
 static void run(struct loop *l, void *ud);
@@ -112,10 +115,13 @@ on_printer_changed(void *ud)
     farm_kick(f);
 }
 
+/* A printer for cfg; old (NULL: none) the one it replaces, whose bed it keeps. */
 static struct printer *
-add_printer_new(struct farm *f, const struct farmcfg_printer *cfg)
+add_printer_new(struct farm *f, const struct farmcfg_printer *cfg, const struct printer *old)
 {
     struct printer_env env = {
+        .bed_known = old != NULL,
+        .bed_full = old && printer_bed_full(old),
         .l = f->l,
         .s = f->s,
         .q = f->q,
@@ -146,21 +152,6 @@ farm_health(struct farm *f, struct farm_health *out)
 {
     out->loop_turn_max_ms = loop_turn_max_ms(f->l);
     storeq_stats(f->q, &out->store);
-}
-
-/* Apply a job event in the store now, after what is queued, logging failures (the job fails
-   alone; a busy store: the next pass tries again). */
-static int
-job_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_args *a)
-{
-    struct sf_err err;
-    int rc = storeq_sync(f->q, STOREQ_SYNC_MS, &err);
-    if (rc == SF_OK)
-        rc = store_job_event(f->s, id, ev, a, NULL, &err);
-    if (rc)
-        log_warn("farm", "%s", err.msg);
-    farm_notify(f);
-    return rc;
 }
 
 /* Queue a job event nothing waits for; a failure is logged when it comes back, its commit
@@ -245,21 +236,44 @@ reslice_failed_any(const struct farm *f, int64_t id)
  * Task t's PREPARED came back from the store thread (its commit wakes the
  * farm: on_store_commit).  A re-slice stays in f->reslices until now, so
  * no scheduling pass in between, still reading the old G-code's key,
- * slices the job once more.
+ * slices the job once more.  A store that stayed unreachable through the
+ * queue's retries (SF_EIO, SF_EAGAIN) wrote nothing: the job goes back to
+ * the queue (DEFER) and is prepared again, not failed.
  */
 static void
 on_prepared(void *ud, const struct storeq_result *r)
 {
     struct prep *t = ud;
+    int64_t id = t->req.job_id;
     if (r->rc == SF_OK)
-        log_info("farm", "job %lld: %s for %s", (long long)r->id,
+        log_info("farm", "job %lld: %s for %s", (long long)id,
                  t->reslice ? "prepared again" : "prepared", t->key);
     else
-        log_info("farm", "job %lld: %s", (long long)r->id, r->err->msg);
+        log_info("farm", "job %lld: %s", (long long)id, r->err->msg);
+    if ((r->rc == SF_EIO || r->rc == SF_EAGAIN) && !t->reslice && t->f->pool) {
+        struct job_event_args a = { .reason = r->err->msg };
+        queue_event(t->f, id, JOB_EV_DEFER, &a);
+    }
     if (t->reslice)
         unlink_reslice(t->f, t);
     farm_kick(t->f);
     free(t);
+}
+
+/* On the store thread: record the files task ud made, then its PREPARED (store_file_record
+   is idempotent: a retry after a failure half-way records nothing twice). */
+static int
+prepared_write(struct store *s, void *ud, struct sf_err *err)
+{
+    struct prep *t = ud;
+    int rc = store_file_record(s, t->gcode_sha, t->gcode_size, err);
+    if (rc == SF_OK && t->mesh_sha[0])
+        rc = store_file_record(s, t->mesh_sha, t->mesh_size, err);
+    if (rc == SF_OK)
+        rc = store_job_event(s, t->req.job_id, JOB_EV_PREPARED, &t->prepared, &t->to, err);
+    if (rc)
+        sf_err_prefix(err, "job %lld", (long long)t->req.job_id);
+    return rc;
 }
 
 static void
@@ -269,12 +283,9 @@ prep_done(struct loop *l, void *ud, int rc)
     struct prep *t = ud;
     struct farm *f = t->f;
     int64_t id = t->req.job_id;
-    struct sf_err err;
     bool queued = false; /* t waits for its PREPARED (on_prepared frees it) */
     f->preparing--;
-    if (rc == SF_OK && (rc = store_file_record(f->s, t->gcode_sha, t->gcode_size, &err)) == SF_OK &&
-        (!t->mesh_sha[0] ||
-         (rc = store_file_record(f->s, t->mesh_sha, t->mesh_size, &err)) == SF_OK)) {
+    if (rc == SF_OK) {
         struct job_event_args a = { .gcode_sha = t->gcode_sha,
                                     .nozzle_mm = t->out.nozzle_mm,
                                     .gcode_lines = (int64_t)t->scan.lines_total,
@@ -299,9 +310,10 @@ prep_done(struct loop *l, void *ud, int rc)
            (or was cancelled) is refused there and dropped: nothing changed.
            Queued: a prepare ending while the store is busy holds up no print.
            Out of memory, the job stays preparing until the next start's recovery. */
-        queued = storeq_job_event(f->q, id, JOB_EV_PREPARED, &a, NULL, on_prepared, t) == SF_OK;
-    } else if (rc != SF_OK && rc != SF_ECANCELED) {
-        const char *why = t->err.msg[0] ? t->err.msg : err.msg;
+        t->prepared = a; /* its strings are t's: t waits, untouched, until on_prepared */
+        queued = storeq_call(f->q, prepared_write, t, NULL, on_prepared, t) == SF_OK;
+    } else if (rc != SF_ECANCELED) {
+        const char *why = t->err.msg;
         if (t->reslice) {
             /* The job keeps the G-code it has; this printer's key is not tried again. */
             log_warn("farm", "job %lld: cannot prepare it for %s: %s", (long long)id, t->key, why);
@@ -347,13 +359,85 @@ farm_printer_view(const struct printer *p, struct sched_printer *out)
     memcpy(out->bed_mm, c->bed_mm, sizeof(out->bed_mm));
 }
 
+/* Run the scheduler again later: a passing store failure left a job queued. */
+static void
+on_retry(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm *f = ud;
+    f->retry = 0;
+    farm_kick(f);
+}
+
+static void
+retry_later(struct farm *f)
+{
+    if (!f->retry && f->pool)
+        f->retry = loop_timer_add(f->l, FARM_RETRY_MS, on_retry, f);
+}
+
+/* Is a store error one that a later try may not have (busy, unreachable), not a verdict? */
+static bool
+passing(int rc)
+{
+    return rc != SF_ENOTFOUND && rc != SF_EINVAL;
+}
+
+/* Hand task t (a queued job's, its PREPARE committed) to a prepare worker; one it cannot
+   take goes back to the queue (DEFER). */
+static void
+submit(struct farm *f, struct prep *t)
+{
+    struct sf_err err;
+    if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
+        f->preparing--;
+        struct job_event_args a = { .reason = err.msg };
+        queue_event(f, t->req.job_id, JOB_EV_DEFER, &a);
+        free(t);
+    }
+}
+
+/*
+ * Task t's PREPARE came back from the store thread: the job is preparing
+ * (a worker takes it), or the store refused (the job left the queue
+ * meanwhile: cancelled, moved) or stayed unreachable through the queue's
+ * retries (the job stays queued; the farm tries again later).
+ */
+static void
+on_prepare(void *ud, const struct storeq_result *r)
+{
+    struct prep *t = ud;
+    struct farm *f = t->f;
+    for (struct prep **pp = &f->posted; *pp; pp = &(*pp)->next)
+        if (*pp == t) {
+            *pp = t->next;
+            break;
+        }
+    t->next = NULL;
+    if (r->rc == SF_OK && f->pool) {
+        submit(f, t);
+        return;
+    }
+    f->preparing--;
+    if (r->rc && passing(r->rc)) {
+        log_warn("farm", "job %lld stays queued: %s", (long long)r->id, r->err->msg);
+        retry_later(f);
+    } else if (r->rc) {
+        log_info("farm", "job %lld is not prepared: %s", (long long)r->id, r->err->msg);
+    }
+    free(t);
+    farm_kick(f);
+}
+
 /*
  * Start preparing job j for printer p.  A queued job goes to preparing; a
  * ready one (reslice) stays ready with the G-code it has until the new one
  * is stored.  The part as optimized for this angle is reused when the job
- * has one: only the slicing is repeated.  False when the store is busy (its
- * PREPARE could not be written within STOREQ_SYNC_MS): the pass stops there
- * rather than wait that long again for each job (the commit wakes the farm).
+ * has one: only the slicing is repeated.  A queued job's PREPARE goes
+ * through the store's queue and the worker gets the task once it committed
+ * (on_prepare): the loop does not wait for the store.  False when the
+ * store failed in passing (the job stays queued and is tried again later;
+ * the pass stops there).
  */
 static bool
 prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice)
@@ -377,14 +461,24 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     t->req.material_first = f->material_first;
     snprintf(t->req.part_name, sizeof(t->req.part_name), "%s", j->opts.name);
     bool reuse = j->mesh_sha[0] && j->mesh_angle_deg == t->angle_deg;
-    if (store_file_path(f->s, j->file_sha, t->req.part_path, sizeof(t->req.part_path), &err) ||
-        store_file_path(f->s, j->file_sha, t->req.out_path, sizeof(t->req.out_path) - 32, &err) ||
+    int rc;
+    if ((rc = store_file_path(f->s, j->file_sha, t->req.part_path, sizeof(t->req.part_path),
+                              &err)) ||
+        (rc = store_file_path(f->s, j->file_sha, t->req.out_path, sizeof(t->req.out_path) - 32,
+                              &err)) ||
         (reuse &&
-         store_file_path(f->s, j->mesh_sha, t->req.mesh_in, sizeof(t->req.mesh_in), &err))) {
+         (rc = store_file_path(f->s, j->mesh_sha, t->req.mesh_in, sizeof(t->req.mesh_in), &err)))) {
         free(t);
         if (reslice) {
             log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
             return true;
+        }
+        /* Only a file that is not there, or not valid, fails the job: a database that does
+           not answer now (another host's upload not fetched yet) may answer later. */
+        if (passing(rc)) {
+            log_warn("farm", "job %lld stays queued: %s", (long long)j->id, err.msg);
+            retry_later(f);
+            return false;
         }
         struct job_event_args a = { .reason = err.msg };
         queue_event(f, j->id, JOB_EV_PREPARE, NULL);
@@ -396,28 +490,38 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     snprintf(slash + 1, 32, "job-%lld%s.gcode", (long long)j->id, reslice ? "-re" : "");
     if (!reuse)
         snprintf(t->req.mesh_out, sizeof(t->req.mesh_out), "%s.stl", t->req.out_path);
-    int rc = reslice           ? SF_OK
-             : farm_host_on(f) ? farm_host_claim(f, j->id, &t->fence)
-                               : job_event(f, j->id, JOB_EV_PREPARE, NULL);
-    if (rc) {
-        free(t);
-        return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
-    }
-    if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
-        if (!reslice) {
-            struct job_event_args a = { .reason = err.msg };
-            queue_event(f, j->id, JOB_EV_DEFER, &a);
+    if (reslice) { /* the job stays ready: nothing to write before the worker has it */
+        if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
+            free(t);
+            return true;
         }
-        free(t);
-        return true;
-    }
-    if (reslice) {
         log_info("farm", "job %lld: preparing it again for %s (%s)%s", (long long)j->id,
                  printer_cfg(p)->name, t->key, reuse ? ", reusing the optimized part" : "");
         t->next = f->reslices;
         f->reslices = t;
+        f->preparing++;
+        return true;
     }
-    f->preparing++;
+    if (farm_host_on(f)) {
+        /* One of several hosts: the claim (its PREPARE, one statement that no two hosts
+           both win) is the host's own call, on the loop's connection for now. */
+        int rc = farm_host_claim(f, j->id, &t->fence);
+        if (rc) {
+            free(t);
+            return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
+        }
+        f->preparing++;
+        submit(f, t);
+        return true;
+    }
+    f->preparing++; /* counted from now: the pool's places include PREPAREs on their way */
+    if (storeq_job_event(f->q, j->id, JOB_EV_PREPARE, NULL, NULL, on_prepare, t)) {
+        f->preparing--;
+        free(t);
+        return true; /* out of memory: the next kick tries again */
+    }
+    t->next = f->posted;
+    f->posted = t;
     return true;
 }
 
@@ -468,6 +572,66 @@ mark_taken(const struct farm *f, struct job_row *jobs, size_t n)
     return SF_OK;
 }
 
+/* A job whose PREPARE is on its way to the store reads queued until it commits: mark it
+   preparing so no pass prepares it twice. */
+static void
+mark_posted(const struct farm *f, struct job_row *jobs, size_t n)
+{
+    for (const struct prep *t = f->posted; t; t = t->next)
+        for (size_t i = 0; i < n; i++)
+            if (jobs[i].id == t->req.job_id && jobs[i].state == JOB_QUEUED)
+                jobs[i].state = JOB_PREPARING;
+}
+
+/* The live jobs, read on the store's thread for a scheduling pass (on_live). */
+struct live {
+    struct farm *f;
+    struct job_row *jobs;
+    size_t n;
+    char host[STORE_HOST_NAME_MAX]; /* one of several hosts: its name (farm_host_reader) */
+};
+
+static int
+live_read(struct store *s, void *ud, struct sf_err *err)
+{
+    struct live *lv = ud;
+    free(lv->jobs); /* a retry's */
+    lv->jobs = NULL;
+    lv->n = 0;
+    return lv->host[0] ? store_job_live_host(s, lv->host, &lv->jobs, &lv->n, err)
+                       : store_job_live(s, &lv->jobs, &lv->n, err);
+}
+
+static void schedule(struct farm *f, struct job_row *jobs, size_t n);
+
+static void
+on_live(void *ud, const struct storeq_result *r)
+{
+    struct live *lv = ud;
+    struct farm *f = lv->f;
+    f->reading = false;
+    if (r->rc) {
+        log_error("farm", "%s", r->err->msg);
+        retry_later(f);
+    }
+    if (r->rc == SF_OK && f->pool) /* not shutting down */
+        schedule(f, lv->jobs, lv->n);
+    else
+        free(lv->jobs);
+    free(lv);
+    if (f->reread) { /* kicked while it read: what changed may not be in what it read */
+        f->reread = false;
+        farm_kick(f);
+    }
+}
+
+/*
+ * A scheduling pass: the live jobs (the scheduler never reads history,
+ * store.h) are read on the store's thread, after the writes queued before
+ * (the loop does not wait for the store; on PostgreSQL a read is a round
+ * trip), then planned on the loop (schedule).  One read at a time: a kick
+ * meanwhile runs another pass after it.
+ */
 static void
 run(struct loop *l, void *ud)
 {
@@ -477,20 +641,36 @@ run(struct loop *l, void *ud)
     /* a printer dropped while it printed or held its heat goes once it is done (a change
        of it kicked this run) */
     farm_sweep(f);
-    struct sf_err err;
-    struct job_row *jobs;
-    size_t n;
-    /* the live jobs only: the scheduler never reads history (store.h) */
-    if (farm_host_live(f, &jobs, &n, &err)) {
-        log_error("farm", "%s", err.msg);
+    if (f->reading) {
+        f->reread = true;
         return;
     }
+    struct live *lv = mem_calloc(1, sizeof(*lv));
+    if (!lv)
+        return; /* the next kick tries again */
+    lv->f = f;
+    if (!farm_host_reader(f, lv->host, sizeof(lv->host))) {
+        free(lv); /* one of several hosts, not joined now: nothing of the queue is its own */
+        return;
+    }
+    if (storeq_read(f->q, live_read, lv, on_live, lv)) {
+        free(lv);
+        return;
+    }
+    f->reading = true;
+}
+
+/* Plan and act on jobs (n, the live ones as read; freed here). */
+static void
+schedule(struct farm *f, struct job_row *jobs, size_t n)
+{
     struct sched_job *sj = mem_array(n ? n : 1, sizeof(*sj));
     struct sched_printer *sp = mem_array(f->n_printers ? f->n_printers : 1, sizeof(*sp));
     char(*why)[SCHED_REASON_MAX] = mem_array(n ? n : 1, sizeof(*why));
     struct sched_assign *out = mem_array(n ? n : 1, sizeof(*out));
     if (!sj || !sp || !why || !out || mark_taken(f, jobs, n))
         goto out; /* the next kick tries again */
+    mark_posted(f, jobs, n);
     for (size_t i = 0; i < f->n_printers; i++) {
         const struct printer *p = f->printers[i];
         farm_printer_view(p, &sp[i]);
@@ -585,7 +765,7 @@ add_printer(struct farm *f, const struct farmcfg_printer *cfg, struct sf_err *er
     size_t cap = f->n_printers;
     if (!mem_grow((void **)&f->printers, &cap, f->n_printers + 1, sizeof(*f->printers)))
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
-    struct printer *p = add_printer_new(f, cfg);
+    struct printer *p = add_printer_new(f, cfg, NULL);
     if (!p)
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
     f->printers[f->n_printers++] = p;
@@ -644,6 +824,8 @@ farm_free(struct farm *f)
     }
     if (f->kick)
         loop_timer_cancel(f->l, f->kick);
+    if (f->retry)
+        loop_timer_cancel(f->l, f->retry);
     if (f->progress)
         loop_timer_cancel(f->l, f->progress);
     /* A stop leaves each print interrupted at its last acknowledged line,
@@ -714,7 +896,7 @@ farm_apply(struct farm *f, const struct farmcfg_printer *c, struct sf_err *err)
     }
     log_printer(LOG_INFO, c->name, "%s: reconnecting", why);
     /* New link and idle: replace the printer. */
-    struct printer *fresh = add_printer_new(f, c);
+    struct printer *fresh = add_printer_new(f, c, p);
     if (!fresh)
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
     for (size_t k = 0; k < f->n_printers; k++)
@@ -790,6 +972,22 @@ farm_printer_action(struct farm *f, const char *name, enum printer_action act, s
     if (!p)
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
     return printer_action(p, act, err);
+}
+
+struct storeq *
+farm_storeq(struct farm *f)
+{
+    return f ? f->q : NULL;
+}
+
+int
+farm_printer_action_then(struct farm *f, const char *name, enum printer_action act,
+                         storeq_event_fn done, void *ud, struct sf_err *err)
+{
+    struct printer *p = farm_find(f, name);
+    if (!p)
+        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    return printer_action_then(p, act, done, ud, err);
 }
 
 int

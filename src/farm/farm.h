@@ -131,6 +131,13 @@ void farm_printer_info(const struct farm *f, size_t i, struct printer_info *out)
  */
 int farm_printer_action(struct farm *f, const char *name, enum printer_action act,
                         struct sf_err *err);
+/* The farm's store queue (storeq.h): writes the loop does not wait for, in order with the
+   farm's own.  NULL f: NULL. */
+struct storeq *farm_storeq(struct farm *f);
+
+/* The same, done(ud, r) once its writes commit (printer.h printer_action_then). */
+int farm_printer_action_then(struct farm *f, const char *name, enum printer_action act,
+                             storeq_event_fn done, void *ud, struct sf_err *err);
 
 /*
  * A manual command for printer name from who (the sender's label, logged

@@ -226,18 +226,17 @@ farm_host_stop(struct farm *f)
     f->host = NULL;
 }
 
-int
-farm_host_live(struct farm *f, struct job_row **rows, size_t *n, struct sf_err *err)
+bool
+farm_host_reader(const struct farm *f, char *name, size_t size)
 {
-    struct farm_host *h = f->host;
+    const struct farm_host *h = f->host;
+    name[0] = '\0';
     if (!h)
-        return store_job_live(f->s, rows, n, err);
-    if (!h->joined) {
-        *rows = NULL;
-        *n = 0;
-        return SF_OK;
-    }
-    return store_job_live_host(f->s, h->name, rows, n, err);
+        return true;
+    if (!h->joined)
+        return false;
+    snprintf(name, size, "%s", h->name);
+    return true;
 }
 
 int

@@ -59,9 +59,10 @@ void farm_host_stop(struct farm *f);
 /* f runs as one of several hosts. */
 bool farm_host_on(const struct farm *f);
 
-/* The live jobs f's scheduler works from: store_job_live, or store_job_live_host (none before
-   the host joined). */
-int farm_host_live(struct farm *f, struct job_row **rows, size_t *n, struct sf_err *err);
+/* Whose live jobs f's scheduler reads (on the store thread): name "" for a single host
+   (store_job_live), the host's name for store_job_live_host; false before the host joined
+   (none of the queue is its own then). */
+bool farm_host_reader(const struct farm *f, char *name, size_t size);
 /*
  * Claim queued job id for preparing (store_job_claim_id), its fencing token
  * into *fence: SF_OK, SF_ENOTFOUND (another host has it, or it moved on:

@@ -19,6 +19,9 @@
 
 #include "farm.h"
 
+/* After a store failure that may pass (busy, unreachable): the next scheduling pass. */
+#define FARM_RETRY_MS 2000
+
 struct prep;      /* farm.c: a prepare task */
 struct noreslice; /* farm.c: a re-slice that failed */
 
@@ -37,6 +40,10 @@ struct farm {
     bool material_first;   /* policy for the parts prepared from now on */
     uint64_t kick;         /* pending run() timer, 0 if none */
     uint64_t progress;     /* progress timer */
+    uint64_t retry;        /* after a passing store failure: timer for the next pass, 0 if none */
+    struct prep *posted;   /* prepare tasks whose PREPARE is on its way to the store */
+    bool reading;          /* a scheduling pass's read of the live jobs is on its way */
+    bool reread;           /* kicked meanwhile: another pass once it is back */
     bool stopping;         /* farm_free: what drivers report while closing goes unheard */
     int preparing;         /* prepare tasks in flight */
     struct prep *reslices; /* re-slices in flight (their jobs stay ready), linked by next */

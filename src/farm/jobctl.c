@@ -52,6 +52,14 @@ jobctl_printer_action(struct farm *f, const char *name, enum printer_action act,
 }
 
 int
+jobctl_printer_action_then(struct farm *f, const char *name, enum printer_action act,
+                           storeq_event_fn done, void *ud, struct sf_err *err)
+{
+    int rc = reachable(f, name, err);
+    return rc ? rc : not_now(farm_printer_action_then(f, name, act, done, ud, err), err);
+}
+
+int
 jobctl_printer_command(struct farm *f, const char *name, const char *line, const char *who,
                        struct sf_err *err)
 {
@@ -81,6 +89,33 @@ jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *err)
                               (long long)id);
     struct job_event_args args = { .reason = "cancelled by an operator" };
     return not_now(store_job_event(s, id, JOB_EV_CANCEL, &args, NULL, err), err);
+}
+
+int
+jobctl_cancel_stored(struct store *s, int64_t id, struct sf_err *err)
+{
+    struct job_row j;
+    int rc = store_job_get(s, id, &j, err);
+    if (rc)
+        return rc;
+    if (job_state_on_printer(j.state)) /* its printer must stop it: it took it meanwhile */
+        return sf_err_set(err, SF_EAGAIN, "job %lld is %s on printer %s: cancel it again",
+                          (long long)id, job_state_name(j.state), j.printer);
+    struct job_event_args args = { .reason = "cancelled by an operator" };
+    return not_now(store_job_event(s, id, JOB_EV_CANCEL, &args, NULL, err), err);
+}
+
+const char *
+jobctl_printer_of(struct farm *f, int64_t id)
+{
+    size_t n = f ? farm_printer_count(f) : 0;
+    for (size_t i = 0; i < n; i++) {
+        struct printer_info p;
+        farm_printer_info(f, i, &p);
+        if (p.job_id == id)
+            return p.cfg->name;
+    }
+    return NULL;
 }
 
 int

@@ -21,7 +21,9 @@
  * f may be NULL (an API over a store alone): what needs a printer is then
  * refused as not now, or a printer is not found.
  *
- * Thread: the loop thread (the farm's and the store's).
+ * Thread: the loop thread (the farm's and the store's); the functions
+ * taking only a store (restart, again, jobctl_cancel_stored) any thread
+ * with its own store (the farm's store queue runs them for the API).
  */
 #ifndef SF_FARM_JOBCTL_H
 #define SF_FARM_JOBCTL_H
@@ -39,6 +41,15 @@
  */
 int jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *err);
 
+/*
+ * The store's half of a cancel, on any thread with its store s (the
+ * farm's store queue, storeq_call): job id cancelled unless it is on a
+ * printer (SF_EAGAIN: its printer stops it, jobctl_printer_action).
+ */
+int jobctl_cancel_stored(struct store *s, int64_t id, struct sf_err *err);
+/* The printer of f that holds job id now (its name, f's), or NULL. */
+const char *jobctl_printer_of(struct farm *f, int64_t id);
+
 /* Interrupted job id prints its copy again from the start. */
 int jobctl_restart(struct store *s, int64_t id, struct sf_err *err);
 
@@ -55,12 +66,21 @@ int jobctl_again(struct store *s, int64_t id, int64_t *new_id, struct sf_err *er
  * Interrupted job id continues on its printer from command line `line`
  * (-1: the last acknowledged one); farm_job_resume, whose refusals (not
  * interrupted, printer not idle, line out of range) are SF_EAGAIN here.
+ * Its RESUME is queued (printer_resume_commit): a storeq_barrier posted
+ * after SF_OK answers once it committed.
  */
 int jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err);
 
 /* Act on printer name (farm_printer_action). */
 int jobctl_printer_action(struct farm *f, const char *name, enum printer_action act,
                           struct sf_err *err);
+/*
+ * The same, answered once what it wrote has committed (printer.h
+ * printer_action_then): SF_OK, then done(ud, r) on the loop later; a
+ * refusal now as above (done not called).
+ */
+int jobctl_printer_action_then(struct farm *f, const char *name, enum printer_action act,
+                               storeq_event_fn done, void *ud, struct sf_err *err);
 
 /*
  * One manual G-code line for printer name from who (the sending key's

@@ -53,6 +53,16 @@ struct start_ticket {
     uint64_t token; /* p->judging of that start */
 };
 
+/* A resume's read that came before its RESUME committed (printer_resume_go's arguments). */
+struct resume_go {
+    char path[1200];
+    uint64_t line;
+    struct drv_job_scan scan;
+    double est_s;
+    int rc;
+    char why[1024];
+};
+
 /* A start's verdict that came before its START committed (printer_start_go's arguments). */
 struct start_go {
     char path[1200];
@@ -132,16 +142,6 @@ printer_job_event(struct printer *p, int64_t id, enum job_event ev, const struct
     int rc = storeq_job_event(p->env.q, id, ev, a ? &with : NULL, p->cfg.name, NULL, NULL);
     printer_changed(p);
     return rc;
-}
-
-int
-printer_job_commit(struct printer *p, int64_t id, enum job_event ev, const struct job_event_args *a,
-                   struct sf_err *err)
-{
-    /* after what p queued (its progress, its printer's state), unless the store is busy */
-    int rc = storeq_sync(p->env.q, STOREQ_SYNC_MS, err);
-    return rc ? sf_err_prefix(err, "job %lld", (long long)id)
-              : store_job_event(p->env.s, id, ev, a, NULL, err);
 }
 
 /* The job on p ended badly (drop, fault): fail it, keep the retry policy. */
@@ -448,8 +448,10 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
        is written; the loop waits PRINTER_BED_SYNC_MS at most (a reload or an API add while
        the database is held busy must not stop the other printers' streams), and a bed it
        cannot read is taken as holding a part: nothing starts on it until it is cleared. */
-    if (storeq_sync(env->q, PRINTER_BED_SYNC_MS, &err) ||
-        store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err)) {
+    if (env->bed_known) /* the printer it replaces knew it (a reload): nothing to read */
+        p->bed_full = env->bed_full;
+    else if (storeq_sync(env->q, PRINTER_BED_SYNC_MS, &err) ||
+             store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err)) {
         p->bed_full = true;
         log_printer(LOG_ERROR, cfg->name, "%s: its bed is taken as holding a part", err.msg);
     }
@@ -514,7 +516,10 @@ printer_free(struct printer *p)
     }
     if (p->ticket)
         p->ticket->p = NULL; /* its START comes back to no one */
+    if (p->rticket)
+        p->rticket->p = NULL; /* its RESUME too */
     free(p->go);
+    free(p->rgo);
     free(p->queue);
     free(p);
 }
@@ -561,6 +566,12 @@ bool
 printer_removed(const struct printer *p)
 {
     return p->removed;
+}
+
+bool
+printer_bed_full(const struct printer *p)
+{
+    return p->bed_full;
 }
 
 void
@@ -775,14 +786,59 @@ go(struct printer *p, int64_t id, const char *path, const struct drv_job_scan *s
     printer_job_event(p, id, JOB_EV_PRINT_FAILED, &a);
 }
 
+static void resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
+                      const struct drv_job_scan *scan, double est_s, int rc, const char *why);
+
+/* The RESUME came back: the driver may have the job now (if read), or p lets it go. */
+static void
+on_resume(void *ud, const struct storeq_result *r)
+{
+    struct start_ticket *t = ud;
+    struct printer *p = t->p;
+    int64_t id = r->id;
+    bool mine = p && p->rticket == t; /* not a later resume's */
+    bool current = mine && !p->deaf && p->job_id == id;
+    free(t);
+    if (!p)
+        return;
+    if (mine)
+        p->rticket = NULL;
+    struct resume_go *g = current ? p->rgo : NULL;
+    if (current)
+        p->rgo = NULL;
+    if (r->rc) {
+        log_printer(LOG_WARN, p->cfg.name, "job %lld: %s", (long long)id, r->err->msg);
+        if (current) { /* the store did not take it: nothing was sent, idle again */
+            p->job_id = 0;
+            printer_move(p, PRINTER_EV_REFUSED);
+        }
+    } else if (g) {
+        resume_go(p, id, g->path, g->line, &g->scan, g->est_s, g->rc, g->why);
+    }
+    free(g);
+    printer_changed(p);
+}
+
 int
 printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err *err)
 {
-    /* Commit first (the farm's rule): a crash from here on leaves it interrupted again. */
+    /* Queued (the loop does not wait for the store): p takes the job at once and the driver
+       gets it only once the RESUME has committed (on_resume), so a crash before that leaves
+       it interrupted, with nothing sent. */
+    struct start_ticket *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
+    *t = (struct start_ticket){ p, id, 0 };
     struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line };
-    int rc = printer_job_commit(p, id, JOB_EV_RESUME, &a, err);
-    if (rc)
-        return rc;
+    if (storeq_job_event(p->env.q, id, JOB_EV_RESUME, &a, p->cfg.name, on_resume, t)) {
+        free(t);
+        return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
+    }
+    if (p->rticket)
+        p->rticket->p = NULL; /* an earlier resume's, stale */
+    free(p->rgo);
+    p->rgo = NULL;
+    p->rticket = t;
     p->job_id = id;
     p->judging = 0; /* a start's check still on the io thread is stale now */
     p->lines_acked = p->lines_saved = line;
@@ -805,6 +861,31 @@ printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line
        job moved on with it). */
     if (p->job_id != id)
         return;
+    if (p->rticket) { /* its RESUME is still on its way: keep the read for on_resume */
+        struct resume_go *g = mem_calloc(1, sizeof(*g));
+        if (!g) {
+            log_printer(LOG_ERROR, p->cfg.name, "job %lld: out of memory", (long long)id);
+            return; /* p keeps the job until an operator cancels it */
+        }
+        snprintf(g->path, sizeof(g->path), "%s", path);
+        g->line = line;
+        if (scan)
+            g->scan = *scan;
+        g->est_s = est_s;
+        g->rc = rc;
+        snprintf(g->why, sizeof(g->why), "%s", why ? why : "");
+        free(p->rgo);
+        p->rgo = g;
+        return;
+    }
+    resume_go(p, id, path, line, scan, est_s, rc, why);
+}
+
+/* Hand the read resume to the driver, or fail it with why (its RESUME committed). */
+static void
+resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
+          const struct drv_job_scan *scan, double est_s, int rc, const char *why)
+{
     char msg[SF_ERR_MSG_MAX];
     if (rc == SF_OK && (p->state != PRINTER_PRINTING || !printer_connected(p))) {
         rc = SF_EAGAIN;

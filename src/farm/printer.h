@@ -49,6 +49,9 @@ struct printer_env {
     printer_driver_fn driver;  /* NULL: the printer stays offline (prepare-only tests) */
     void (*changed)(void *ud); /* a job or the printer moved: schedule, wake streams */
     void *ud;                  /* its argument */
+    bool bed_known;            /* bed_full is this printer's bed (it replaces one of the same
+                                  name, farm_apply): not read from the store */
+    bool bed_full;
 };
 
 /* What an operator may ask of a printer (the API's ACTION). */
@@ -113,6 +116,8 @@ bool printer_hot_idle(const struct printer *p);
 /* Dropped from the config: not scheduled, freed by the farm once idle. */
 void printer_set_removed(struct printer *p, bool removed);
 bool printer_removed(const struct printer *p);
+/* Does p's bed hold a part (what the farm knows; the store keeps it for a restart)? */
+bool printer_bed_full(const struct printer *p);
 
 /*
  * Start job j (ready; its G-code at path) from line 0, in two steps like a
@@ -139,11 +144,14 @@ void printer_start_go(struct printer *p, int64_t id, uint64_t token, const char 
 
 /*
  * Resume interrupted job id on p (idle, connected) from command `line`:
- * printer_resume_commit records it (SF_EINVAL and friends from the store);
+ * printer_resume_commit queues its RESUME on the store's thread and p
+ * takes the job at once (SF_OK, or SF_ENOMEM with nothing changed); a
+ * RESUME the store refuses (logged) leaves p idle again with nothing sent.
  * printer_resume_go starts the driver once the resume point is read
- * (scan), unless the job left p meanwhile, with the job's time estimate
- * est_s (printer_estimate_s); rc != SF_OK (the read failed) fails the
- * print with why.
+ * (scan) and the RESUME has committed, whichever comes last, unless the
+ * job left p meanwhile, with the job's time estimate est_s
+ * (printer_estimate_s); rc != SF_OK (the read failed) fails the print
+ * with why.
  */
 int printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err *err);
 void printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
@@ -162,6 +170,17 @@ double printer_estimate_s(const struct job_row *j, const char *path);
  * idle", "printer a has no job to cancel"); driver errors as they come.
  */
 int printer_action(struct printer *p, enum printer_action a, struct sf_err *err);
+/*
+ * printer_action, answered once it is written: the printer and its driver
+ * act now; what it records in the store (the job's pause, resume or
+ * cancel, the printer's state and bed) is queued (storeq), and done(ud, r)
+ * runs on the loop once that has committed, r->rc the store's verdict
+ * (SF_OK, or its error: the printer has acted all the same).  Refused now
+ * (non-zero, err set): done is not called.  done NULL: a store failure is
+ * logged.
+ */
+int printer_action_then(struct printer *p, enum printer_action a, storeq_event_fn done, void *ud,
+                        struct sf_err *err);
 
 /*
  * Send p a manual command (one G-code line) from who (the sender's label,

@@ -61,8 +61,10 @@ struct printer {
     uint64_t heat_timer;   /* hot with no print: timer turning the heaters off, 0 if none */
     uint64_t judging;      /* the start whose file is judged before the driver has it, 0 if none */
     uint64_t starts;       /* starts made: the next start's token */
-    struct start_ticket *ticket; /* the START queued for the store, not yet back; NULL if none */
-    struct start_go *go;         /* a start judged before its START committed: its verdict */
+    struct start_ticket *ticket;  /* the START queued for the store, not yet back; NULL if none */
+    struct start_go *go;          /* a start judged before its START committed: its verdict */
+    struct start_ticket *rticket; /* the RESUME queued for the store, not yet back; NULL if none */
+    struct resume_go *rgo;        /* a resume read before its RESUME committed: its verdict */
 };
 
 /* Tell p's owner it changed (printer_env.changed), if it listens. */
@@ -86,16 +88,6 @@ bool printer_move(struct printer *p, enum printer_event ev);
  */
 int printer_job_event(struct printer *p, int64_t id, enum job_event ev,
                       const struct job_event_args *a);
-/*
- * Apply a job event in the store now, after what is queued (storeq_sync),
- * for a caller that acts on its result: a resume committed before the
- * printer is told, an operator's action answered.  SF_EAGAIN when the
- * queue is not written within STOREQ_SYNC_MS (the store is busy); else
- * store_job_event's errors, its write waiting on the loop (SQLite's busy
- * timeout).
- */
-int printer_job_commit(struct printer *p, int64_t id, enum job_event ev,
-                       const struct job_event_args *a, struct sf_err *err);
 /* The filament job id's print on p used by command line `lines` (all of its file's when ev is
    JOB_EV_PRINT_DONE); 0 when p did not read the file (a resumed or re-attached print). */
 double printer_filament_mm(const struct printer *p, int64_t id, enum job_event ev, int64_t lines);

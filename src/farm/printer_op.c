@@ -135,21 +135,40 @@ cancel_reason(enum job_event jev)
                                      : "cancelled by an operator";
 }
 
-/* Cancel the job (or copy, jev) p was starting while its file is judged: nothing was sent. */
+/* Cancel the job (or copy, jev) p was starting while its file is judged: nothing was sent.
+   The CANCEL follows its START in the store's queue; done(ud) once it committed. */
 static int
-cancel_judged(struct printer *p, enum job_event jev, struct sf_err *err)
+cancel_judged(struct printer *p, enum job_event jev, storeq_event_fn done, void *ud,
+              struct sf_err *err)
 {
     struct job_event_args a = { .reason = cancel_reason(jev) };
-    int rc = printer_job_commit(p, p->job_id, jev, &a, err);
-    if (rc)
-        return rc;
+    if (storeq_job_event(p->env.q, p->job_id, jev, &a, p->cfg.name, done, ud))
+        return sf_err_set(err, SF_ENOMEM, "printer %s: out of memory", p->cfg.name);
     p->job_id = p->judging = 0;
     printer_move(p, PRINTER_EV_REFUSED); /* idle again, the bed as it was */
     return SF_OK;
 }
 
+/* done(ud) once what an action queued (its printer's state, its bed) has committed. */
+static int
+answer_after(struct printer *p, storeq_event_fn done, void *ud, struct sf_err *err)
+{
+    if (done && storeq_barrier(p->env.q, done, ud))
+        return sf_err_set(err, SF_ENOMEM,
+                          "printer %s: out of memory: the action was taken, its answer is lost",
+                          p->cfg.name);
+    return SF_OK;
+}
+
 int
 printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
+{
+    return printer_action_then(p, act, NULL, NULL, err);
+}
+
+int
+printer_action_then(struct printer *p, enum printer_action act, storeq_event_fn done, void *ud,
+                    struct sf_err *err)
 {
     static const enum printer_event evs[PRINTER_ACTION_COUNT] = {
         PRINTER_EV_PAUSE, PRINTER_EV_RESUME, PRINTER_EV_FINISHED, PRINTER_EV_CLEARED,
@@ -173,18 +192,18 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
             snprintf(p->message, sizeof(p->message),
                      "cleared: waits for the printer to report ready");
             printer_changed(p);
-            return SF_OK;
+            return answer_after(p, done, ud, err);
         }
         printer_move(p, ev);
-        return SF_OK;
+        return answer_after(p, done, ud, err);
     }
     if (!p->drv || !p->job_id)
         return sf_err_set(err, SF_EINVAL, "printer %s has no job to %s", p->cfg.name,
                           action_names[act]);
     if (p->judging) /* the driver has nothing yet: a cancel is the store's alone */
-        return act == PRINTER_ACT_CANCEL ? cancel_judged(p, JOB_EV_CANCEL, err)
+        return act == PRINTER_ACT_CANCEL ? cancel_judged(p, JOB_EV_CANCEL, done, ud, err)
                : act == PRINTER_ACT_CANCEL_COPY
-                   ? cancel_judged(p, JOB_EV_CANCEL_COPY, err)
+                   ? cancel_judged(p, JOB_EV_CANCEL_COPY, done, ud, err)
                    : sf_err_set(err, SF_EAGAIN,
                                 "printer %s is starting its job: %s it once "
                                 "it prints",
@@ -207,8 +226,10 @@ printer_action(struct printer *p, enum printer_action act, struct sf_err *err)
                                     printer_filament_mm(p, p->job_id, jev, p->lines_acked) };
     if (ends && !p->cfg.auto_eject)
         printer_set_bed(p, true); /* the cancelled part stays on the bed */
-    if ((rc = printer_job_commit(p, p->job_id, jev, &a, err)))
-        return rc;
+    /* Queued: the loop does not wait for the store (a busy database held every printer's
+       stream); the store's verdict goes to done, or is logged. */
+    if (storeq_job_event(p->env.q, p->job_id, jev, &a, p->cfg.name, done, ud))
+        return sf_err_set(err, SF_ENOMEM, "printer %s: out of memory", p->cfg.name);
     if (ends) {
         p->job_id = 0;
         if (p->drv->status.state == DRV_PRINTING) {

@@ -50,6 +50,7 @@ enum op {
     OP_NOTE,        /* store_printer_note */
     OP_BED_SET,     /* store_printer_bed_set */
     OP_EVENT,       /* store_job_event */
+    OP_CALL,        /* a caller's function (storeq_call), or nothing (storeq_barrier) */
 };
 
 /* A job event's argument strings, copied (job_event_args points into them on the thread). */
@@ -71,12 +72,14 @@ struct req {
     char name[64];     /* the printer (OP_PRINTER_SET, OP_NOTE, OP_BED_SET), or who (OP_EVENT) */
     char kind[24];     /* OP_NOTE's kind */
     char text[512];    /* OP_REASON's reason, OP_NOTE's detail */
-    int value;         /* OP_PRINTER_SET's state, OP_BED_SET's full */
+    int value;         /* OP_PRINTER_SET's state, OP_BED_SET's full, OP_CALL: 1 a read */
     enum job_event ev; /* OP_EVENT */
     struct job_event_args a; /* OP_EVENT, its strings pointing into s */
     bool has_a;              /* OP_EVENT had args */
     struct event_strs *s;    /* OP_EVENT's strings, owned */
-    storeq_event_fn done;    /* OP_EVENT's callback, may be NULL */
+    storeq_event_fn done;    /* OP_EVENT's and OP_CALL's callback, may be NULL */
+    storeq_call_fn call;     /* OP_CALL's function, NULL for a barrier */
+    void *arg;               /* its argument */
     void *ud;                /* its argument */
     bool started;            /* the thread took it: progress is no longer folded into it */
     int64_t posted_ms;       /* clock_mono_ms at post */
@@ -131,6 +134,8 @@ run_once(struct storeq *q, struct req *r)
         return store_printer_bed_set(s, r->name, r->value != 0, err);
     case OP_EVENT:
         return store_job_event(s, r->id, r->ev, r->has_a ? &r->a : NULL, &r->to, err);
+    case OP_CALL:
+        return r->call ? r->call(s, r->arg, err) : SF_OK;
     }
     return sf_err_set(err, SF_EBUG, "storeq: unknown request %d", (int)r->op);
 }
@@ -187,11 +192,13 @@ back_off(struct storeq *q, int64_t t0, int64_t ms)
    asking again while the server cannot tell, until r's retries run out.  SF_OK when it did
    (its result stands), SF_EAGAIN when it did not (run it again), SF_EINDOUBT when nobody can
    tell in time (reported: running it again could apply it twice).  A write that sets values
-   (progress, a reason, a printer's state or bed) is simply run again: twice is once. */
+   (progress, a reason, a printer's state or bed) and a read are simply run again: twice is
+   once; a caller's write (storeq_call: a PREPARED with its files) is read back as an event. */
 static int
 settle(struct storeq *q, struct req *r, int64_t t0)
 {
-    if (r->op != OP_EVENT && r->op != OP_NOTE)
+    bool call_write = r->op == OP_CALL && r->call && !r->value;
+    if (r->op != OP_EVENT && r->op != OP_NOTE && !call_write)
         return SF_EAGAIN;
     for (int64_t backoff = 50;; backoff = backoff * 2 > 1000 ? 1000 : backoff * 2) {
         struct sf_err e = { 0 };
@@ -316,13 +323,14 @@ deliver(struct storeq *q)
             q->st.wait_max_ms = r->ended_ms - r->posted_ms;
         if (r->rc)
             q->st.failed++;
-        if (r->op == OP_EVENT && r->done)
+        if ((r->op == OP_EVENT || r->op == OP_CALL) && r->done)
             r->done(r->ud, &(struct storeq_result){ r->id, r->ev, r->rc, r->to, &r->err });
         else if (r->rc && r->name[0])
             log_printer(LOG_ERROR, r->name, "store: %s", r->err.msg);
         else if (r->rc)
             log_error("store", "%s", r->err.msg);
-        logged |= r->rc == SF_OK && r->op != OP_PROGRESS && r->op != OP_REASON;
+        logged |= r->rc == SF_OK && r->op != OP_PROGRESS && r->op != OP_REASON &&
+                  (r->op != OP_CALL || (r->call && !r->value));
         req_free(r);
         r = next;
     }
@@ -614,4 +622,42 @@ storeq_stats(struct storeq *q, struct storeq_stats *out)
     out->retries = q->retries;
     out->depth = q->depth;
     pthread_mutex_unlock(&q->mu);
+}
+
+int
+storeq_call(struct storeq *q, storeq_call_fn fn, void *arg, const char *who, storeq_event_fn done,
+            void *ud)
+{
+    struct req *r = req_new(q, OP_CALL);
+    if (!r)
+        return SF_ENOMEM;
+    r->call = fn;
+    r->arg = arg;
+    r->done = done;
+    r->ud = ud;
+    r->ev = (enum job_event) - 1;
+    if (who)
+        snprintf(r->name, sizeof(r->name), "%s", who);
+    return post(q, r);
+}
+
+int
+storeq_barrier(struct storeq *q, storeq_event_fn done, void *ud)
+{
+    return storeq_call(q, NULL, NULL, NULL, done, ud);
+}
+
+int
+storeq_read(struct storeq *q, storeq_call_fn fn, void *arg, storeq_event_fn done, void *ud)
+{
+    struct req *r = req_new(q, OP_CALL);
+    if (!r)
+        return SF_ENOMEM;
+    r->call = fn;
+    r->arg = arg;
+    r->done = done;
+    r->ud = ud;
+    r->ev = (enum job_event) - 1;
+    r->value = 1; /* wakes no one */
+    return post(q, r);
 }

@@ -124,6 +124,33 @@ int storeq_job_event(struct storeq *q, int64_t id, enum job_event ev,
  */
 int storeq_sync(struct storeq *q, int64_t max_ms, struct sf_err *err);
 
+/*
+ * Run fn(s, arg, err) on the queue's thread with its connection s, after
+ * every request posted before it (retried while it fails with SF_EIO, as
+ * any request: fn must leave nothing behind when it fails, one store
+ * transaction), then done(ud, r) on the loop with r->rc and r->err (r->id
+ * 0; NULL done: a failure is logged with who in front).  arg is the
+ * caller's until done runs: the thread reads and writes it, the loop must
+ * not touch it meanwhile.  A successful call wakes the farm as an event
+ * does (storeq_set_commit).  SF_OK, or SF_ENOMEM (done is not called).
+ */
+typedef int (*storeq_call_fn)(struct store *s, void *arg, struct sf_err *err);
+int storeq_call(struct storeq *q, storeq_call_fn fn, void *arg, const char *who,
+                storeq_event_fn done, void *ud);
+/*
+ * storeq_call for a read (fn writes nothing): the same, except that it
+ * wakes no one (storeq_set_commit's callback), so a reader that runs on
+ * every wake-up does not wake itself.
+ */
+int storeq_read(struct storeq *q, storeq_call_fn fn, void *arg, storeq_event_fn done, void *ud);
+/*
+ * done(ud, r) on the loop (r->rc SF_OK) once every request posted before
+ * it has run, failed or not: an answer that must follow what was written
+ * before it (an operator's action whose writes are queued).  SF_OK or
+ * SF_ENOMEM (done is not called).
+ */
+int storeq_barrier(struct storeq *q, storeq_event_fn done, void *ud);
+
 /* Requests waiting or running. */
 size_t storeq_depth(struct storeq *q);
 void storeq_stats(struct storeq *q, struct storeq_stats *out);

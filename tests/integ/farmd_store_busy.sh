@@ -9,7 +9,10 @@
 # crawled at about 16 lines per 5 s and the wait ran out.  While locked
 # the API answers too.  After the lock goes the job ends done, its print
 # record has every line, and the printer's executed log is the job's
-# commands once each, in order (check_farm_logs).  /metrics shows a write
+# commands once each, in order (check_farm_logs).  Under the lock an
+# operator pauses and resumes the print and adds a job through the API: the
+# printer pauses and resumes at once, the answers come only once the lock
+# goes (200, 201, 200), the added job exists once.  /metrics shows a write
 # was held up and retried, none failed; the loop's longest turn is printed
 # for the record, not asserted.
 set -u
@@ -73,6 +76,31 @@ ran=$(($(executed) - from))
 secs=$(printf '%.2f' "$(echo "$(date +%s.%N) - $t0" | bc)")
 "$C" jobs > /dev/null || fail "the API did not answer while the store was locked"
 metric() { curl -sf -H "X-Api-Key: $RW" "$SLIMFARM_URL/metrics" | sed -n "s/^$1 //p"; }
+
+# An operator's writes under the lock (the loop never waits for them): a pause, a job added
+# (ABS: no printer takes it, it stays queued), a resume.  The printer acts at once; each
+# answer comes once its write has committed, so none before the lock goes.
+post() { # post NAME PATH [CURL ARGS...]: in the background, its status into $tmp/NAME.code
+  local name=$1 path=$2; shift 2
+  (curl -s -o "$tmp/$name.body" -w '%{http_code}' -H "X-Api-Key: $RW" "$@" \
+    "$SLIMFARM_URL$path" > "$tmp/$name.code.part"; mv "$tmp/$name.code.part" "$tmp/$name.code") &
+}
+state_is() { "$C" printers | grep -qE "^mk3 +$1"; }
+if [ "$LOCK" = 1 ]; then
+  post pause /api/printers/mk3/pause -X POST
+  wait_for 60 state_is paused || fail "mk3 did not pause under the lock: $("$C" printers)"
+  paused_at=$(executed)
+  printf 'v 0 0 0\nv 10 0 0\nv 0 10 0\nv 0 0 10\nf 1 3 2\nf 1 2 4\nf 2 3 4\nf 1 4 3\n' > "$tmp/abs.obj"
+  post add /api/jobs -F "file=@$tmp/abs.obj;filename=abs-part.obj" -F 'options={"material": "ABS"}'
+  post resume /api/printers/mk3/resume -X POST
+  wait_for 60 state_is printing || fail "mk3 did not resume under the lock: $("$C" printers)"
+  sleep 1 # the answers would have come by now if they did not wait for the store
+  for n in pause add resume; do
+    [ -e "$tmp/$n.code" ] && fail "the $n was answered ($(cat "$tmp/$n.code")) while the store was locked"
+  done
+  # the print goes on after the resume, still under the lock
+  wait_for 120 past $((paused_at + 200)) || fail "mk3 did not print on after its resume under the lock"
+fi
 if [ "$LOCK" = 1 ]; then
   # and the store was busy for the daemon: a write failed on the lock and waits to be tried again
   retried() { [ "$(metric slimfarm_store_write_retries_total)" -ge 1 ] 2> /dev/null; }
@@ -81,6 +109,17 @@ if [ "$LOCK" = 1 ]; then
   kill -0 "$locker" 2> /dev/null || fail "the lock ended early: $(cat "$tmp/locker.out")"
   touch "$tmp/release"
   wait "$locker" || fail "locker: $(cat "$tmp/locker.out")"
+  for n in pause add resume; do
+    wait_for 120 test -e "$tmp/$n.code" || fail "the $n was not answered once the lock went"
+  done
+  [ "$(cat "$tmp/pause.code") $(cat "$tmp/add.code") $(cat "$tmp/resume.code")" = "200 201 200" ] ||
+    fail "answers: pause $(cat "$tmp/pause.code") $(cat "$tmp/pause.body"); add $(cat "$tmp/add.code") $(cat "$tmp/add.body"); resume $(cat "$tmp/resume.code") $(cat "$tmp/resume.body")"
+  added=$(json 'd["job"]["id"]' < "$tmp/add.body")
+  # the added job exists once, queued
+  n_abs=$(api_jobs | json 'len([j for j in d["jobs"] if j["name"] == "abs-part.obj"])')
+  [ "$n_abs" = 1 ] || fail "the added job is there $n_abs times"
+  st=$(api "/api/jobs/$added" | json 'd["job"]["state"]')
+  [ "$st" = queued ] || fail "the added job is $st"
 fi
 held=$((SECONDS - t_lock))
 

@@ -1755,3 +1755,201 @@ T_CASE(farm_start_commits_on_the_store_thread_before_the_driver_has_it)
     T_OK(store_check(synced(), &err), &err);
     teardown();
 }
+
+/* ---- the loop does not wait for a locked store (issue 32) ---- */
+
+/* A second connection holding SQLite's write lock on fixture `name`'s database; NULL on
+   PostgreSQL (the caller skips). */
+static struct sqldb *
+lock_store(const char *name)
+{
+    char path[600];
+    snprintf(path, sizeof(path), "%s/%s/slimfarm.db", t_tmpdir(), name);
+    struct sqldb *other = sqldb_open(path, 0, NULL);
+    if (other && sqldb_begin(other)) {
+        sqldb_close(other);
+        return NULL;
+    }
+    return other;
+}
+
+static void
+unlock_store(struct sqldb *other)
+{
+    sqldb_rollback(other);
+    sqldb_close(other);
+}
+
+/* Answers to operator actions, in the order they came. */
+static struct {
+    int n;
+    char tag[4];
+    int rc[4];
+} answers;
+
+static void
+on_answer(void *ud, const struct storeq_result *r)
+{
+    if (answers.n < 4) {
+        answers.tag[answers.n] = *(const char *)ud;
+        answers.rc[answers.n] = r->rc;
+    }
+    answers.n++;
+}
+
+/*
+ * An operator's pause and cancel while another process holds the store's
+ * write lock: the printer acts at once (the driver paused, then cancelled,
+ * the loop never waits), the answers come once the lock goes, in order,
+ * each with the store's verdict, and the job is paused then cancelled once
+ * each.  Before (printer_job_commit) the pause waited 250 ms for the queue,
+ * then was refused "the store is busy" with the driver paused already.
+ */
+T_CASE(farm_operator_actions_go_on_while_the_store_is_locked)
+{
+    if (t_store_pg()) {
+        t_skip("holds SQLite's write lock from a second connection");
+        return;
+    }
+    struct sf_err err;
+    T_OK(setup("busyop", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    memset(&answers, 0, sizeof(answers));
+    struct sqldb *other = lock_store("busyop");
+    T_TRUE(other != NULL);
+    /* the plain action (no answer wanted) is taken at once too */
+    T_OK(farm_printer_action(fx.f, "a", PRINTER_ACT_PAUSE, &err), &err);
+    T_EQ_INT(pstate(0), PRINTER_PAUSED);
+    T_EQ_INT(a->pauses, 1);
+    T_OK(farm_printer_action_then(fx.f, "a", PRINTER_ACT_RESUME, on_answer, "r", &err), &err);
+    T_OK(farm_printer_action_then(fx.f, "a", PRINTER_ACT_CANCEL, on_answer, "c", &err), &err);
+    T_EQ_INT(a->resumes, 1);
+    T_EQ_INT(a->cancels, 1);
+    for (int i = 0; i < 20; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(answers.n, 0); /* nothing committed while the lock is held */
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err); /* a read: WAL lets it through */
+    T_EQ_INT(j.state, JOB_PRINTING);
+    unlock_store(other);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && answers.n < 2;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(answers.n, 2);
+    T_EQ_INT(answers.tag[0], 'r');
+    T_EQ_INT(answers.tag[1], 'c');
+    T_EQ_INT(answers.rc[0], SF_OK);
+    T_EQ_INT(answers.rc[1], SF_OK);
+    T_EQ_INT(state_of(id), JOB_CANCELLED);
+    struct print_row *p;
+    size_t n;
+    T_OK(store_prints(synced(), id, &p, &n, &err), &err);
+    T_EQ_INT(n, 1); /* one print, cancelled once */
+    T_EQ_STR(p[0].outcome, "cancelled");
+    free(p);
+    T_OK(store_check(synced(), &err), &err);
+    teardown();
+}
+
+/* The prepare hook takes the store's write lock from a second connection as it ends, so the
+   prepare's records (its files, PREPARED) meet a locked store. */
+static struct sqldb *_Atomic prep_lock;
+
+static int
+locking_prepare(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
+                struct sf_err *err)
+{
+    int rc = test_prepare(req, out, cancel, err);
+    if (!atomic_load(&prep_lock))
+        atomic_store(&prep_lock, lock_store("busyprep"));
+    return rc;
+}
+
+/*
+ * A prepare that ends while another process holds the store's write lock
+ * waits for it on the store thread and the job is ready once the lock
+ * goes.  Before, the G-code's record (store_file_record on the loop) waited
+ * out SQLite's busy timeout on the loop, then failed the job for good
+ * (PREPARE_FAILED) for a lock that was only passing.
+ */
+T_CASE(farm_prepare_waits_out_a_locked_store_instead_of_failing_the_job)
+{
+    if (t_store_pg()) {
+        t_skip("holds SQLite's write lock from a second connection");
+        return;
+    }
+    struct sf_err err;
+    atomic_store(&prep_lock, NULL);
+    setup_held = "a"; /* the job is prepared for a, not started */
+    T_OK(setup("busyprep", farm_ini, tdrv_new, locking_prepare, &err), &err);
+    T_TRUE(wait_printer(1, PRINTER_IDLE));
+    synced(); /* the printers' states are written: what waits under the lock is the prepare's */
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    struct farm_health h = { 0 };
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
+         wall_ms() < end && (!atomic_load(&prep_lock) || h.store.depth == 0);) {
+        loop_run_once(fx.l, 10);
+        farm_health(fx.f, &h);
+    }
+    struct sqldb *other = atomic_load(&prep_lock);
+    T_TRUE(other != NULL);
+    T_TRUE(h.store.depth > 0); /* the prepare's end waits for the store */
+    unlock_store(other);
+    enum job_state st = JOB_QUEUED;
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
+         wall_ms() < end && (st = state_of(id)) != JOB_READY && st != JOB_FAILED;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(st, JOB_READY);
+    T_OK(store_check(synced(), &err), &err);
+    teardown();
+}
+
+/*
+ * An operator resumes an interrupted job while another process holds the
+ * store's write lock: the printer takes the job at once (printing), the
+ * driver gets nothing until the RESUME has committed, then starts at the
+ * resume line.  Before, the RESUME was written on the loop, which waited
+ * out SQLite's busy timeout and refused the resume ("database is locked").
+ */
+T_CASE(farm_resume_commits_on_the_store_thread_before_the_driver_has_it)
+{
+    if (t_store_pg()) {
+        t_skip("holds SQLite's write lock from a second connection");
+        return;
+    }
+    struct sf_err err;
+    T_OK(setup("busyresume", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *a = tdrv_named("a");
+    a->base.status.lines_acked = 1;
+    report(a, DRV_PRINTING, DRV_EV_PROGRESS);
+    for (int i = 0; i < 20; i++)
+        loop_run_once(fx.l, 10);
+    teardown(); /* the daemon stops mid-print: the job is interrupted on a */
+    T_OK(setup("busyresume", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    T_EQ_INT(state_of(id), JOB_INTERRUPTED);
+    a = tdrv_named("a");
+    struct sqldb *other = lock_store("busyresume");
+    T_TRUE(other != NULL);
+    T_OK(farm_job_resume(fx.f, id, 1, &err), &err);
+    T_EQ_INT(pstate(0), PRINTER_PRINTING); /* taken at once */
+    for (int i = 0; i < 20; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 0); /* its RESUME waits for the lock: nothing sent */
+    struct job_row j;
+    T_OK(store_job_get(fx.s, id, &j, &err), &err); /* a read: WAL lets it through */
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    unlock_store(other);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && a->starts == 0;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 1);
+    T_EQ_INT(a->first_line, 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_OK(store_check(synced(), &err), &err);
+    teardown();
+}

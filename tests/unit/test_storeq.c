@@ -391,3 +391,76 @@ T_CASE(storeq_free_gives_up_once_on_a_locked_database)
     }
     teardown(&fx);
 }
+
+/* A caller's call on the thread: the job's state it finds, then a reason written with it. */
+struct call_arg {
+    int64_t id;
+    bool on_thread; /* it ran off the loop's thread */
+    enum job_state saw;
+    int runs;
+};
+
+static int
+call_fn(struct store *s, void *ud, struct sf_err *err)
+{
+    struct call_arg *c = ud;
+    c->runs++;
+    c->on_thread = !pthread_equal(pthread_self(), loop_thread);
+    struct job_row j;
+    int rc = store_job_get(s, c->id, &j, err);
+    if (rc)
+        return rc;
+    c->saw = j.state;
+    return store_job_set_reason(s, c->id, "from a call", err);
+}
+
+static int
+refuse_fn(struct store *s, void *ud, struct sf_err *err)
+{
+    (void)s;
+    (void)ud;
+    return sf_err_set(err, SF_EINVAL, "refused by the call");
+}
+
+/*
+ * storeq_call runs the caller's function on the thread with its connection,
+ * after what was posted before it (it sees the START), and answers once on
+ * the loop with its result; a barrier answers after every request before it
+ * has run, and a call's refusal comes back to its callback, not retried.
+ */
+T_CASE(storeq_call_and_barrier_answer_in_order_on_the_loop)
+{
+    struct sf_err err;
+    struct fixture fx;
+    T_OK(setup(&fx, "call", &err), &err);
+    struct answer start = { 0 }, call = { 0 }, refused = { 0 }, barrier = { 0 };
+    struct call_arg c = { .id = fx.id, .saw = (enum job_state) - 1 };
+    struct job_event_args sa = { .printer = "mk3" };
+    T_OK(storeq_job_event(fx.q, fx.id, JOB_EV_START, &sa, "mk3", on_event, &start), NULL);
+    T_OK(storeq_call(fx.q, call_fn, &c, "mk3", on_event, &call), NULL);
+    T_OK(storeq_call(fx.q, refuse_fn, NULL, "mk3", on_event, &refused), NULL);
+    T_OK(storeq_printer_set(fx.q, "mk3", PRINTER_PRINTING), NULL);
+    T_OK(storeq_barrier(fx.q, on_event, &barrier), NULL);
+    T_TRUE(answered(fx.l, &barrier));
+    /* delivered in the order posted: all before the barrier's */
+    T_EQ_INT(start.calls, 1);
+    T_EQ_INT(call.calls, 1);
+    T_EQ_INT(refused.calls, 1);
+    T_EQ_INT(barrier.calls, 1);
+    T_TRUE(call.on_loop && barrier.on_loop);
+    T_EQ_INT(call.rc, SF_OK);
+    T_TRUE(c.on_thread);
+    T_EQ_INT(c.runs, 1);
+    T_EQ_INT(c.saw, JOB_PRINTING); /* the START before it was written */
+    T_EQ_INT(refused.rc, SF_EINVAL);
+    T_EQ_STR(refused.msg, "refused by the call");
+    T_EQ_INT(barrier.rc, SF_OK);
+    struct job_row j;
+    T_OK(store_job_get(fx.s, fx.id, &j, &err), &err);
+    T_EQ_STR(j.reason, "from a call");
+    struct storeq_stats st;
+    storeq_stats(fx.q, &st);
+    T_EQ_INT(st.failed, 1); /* the refusal, counted */
+    T_EQ_INT(st.retries, 0);
+    teardown(&fx);
+}
