@@ -505,7 +505,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     if (farm_host_on(f)) {
         /* One of several hosts: the claim (its PREPARE, one statement that no two hosts
            both win) is the host's own call, on the loop's connection for now. */
-        int rc = farm_host_claim(f, j->id, &t->fence);
+        rc = farm_host_claim(f, j->id, &t->fence);
         if (rc) {
             free(t);
             return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
