@@ -75,6 +75,7 @@ http_status_of(int code)
     case SF_EUNSUPP:
         return MHD_HTTP_NOT_IMPLEMENTED;
     case SF_EUNREACH:
+    case SF_EBUSY: /* the database, busy past its retries */
     case SF_ECANCELED:
         return MHD_HTTP_SERVICE_UNAVAILABLE;
     default:

@@ -104,6 +104,8 @@ sf_status_name(int code)
         return "ESTALE";
     case SF_EINDOUBT:
         return "EINDOUBT";
+    case SF_EBUSY:
+        return "EBUSY";
     }
     return code > 0 ? "count" : "unknown";
 }

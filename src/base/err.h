@@ -31,6 +31,8 @@ enum sf_status {
     SF_ESTALE = -11,   /* a lease or fencing token another process has since replaced */
     SF_EINDOUBT = -12, /* an outcome nobody knows (a commit the connection was lost during):
                           read it back before trying again */
+    SF_EBUSY = -13,    /* a database busy or locked: nothing applied, try again (not SF_EAGAIN,
+                          which the job rules use for "not in this state": a refusal) */
 };
 
 #define SF_ERR_MSG_MAX 256

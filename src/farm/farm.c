@@ -237,7 +237,7 @@ reslice_failed_any(const struct farm *f, int64_t id)
  * farm: on_store_commit).  A re-slice stays in f->reslices until now, so
  * no scheduling pass in between, still reading the old G-code's key,
  * slices the job once more.  A store that stayed unreachable through the
- * queue's retries (SF_EIO, SF_EAGAIN) wrote nothing: the job goes back to
+ * queue's retries (SF_EIO, SF_EBUSY, SF_EAGAIN) wrote nothing: the job goes back to
  * the queue (DEFER) and is prepared again, not failed.
  */
 static void
@@ -250,7 +250,7 @@ on_prepared(void *ud, const struct storeq_result *r)
                  t->reslice ? "prepared again" : "prepared", t->key);
     else
         log_info("farm", "job %lld: %s", (long long)id, r->err->msg);
-    if ((r->rc == SF_EIO || r->rc == SF_EAGAIN) && !t->reslice && t->f->pool) {
+    if ((r->rc == SF_EIO || r->rc == SF_EBUSY || r->rc == SF_EAGAIN) && !t->reslice && t->f->pool) {
         struct job_event_args a = { .reason = r->err->msg };
         queue_event(t->f, id, JOB_EV_DEFER, &a);
     }

@@ -28,7 +28,7 @@
  * (SF_ENOMEM for memory), and leave the engine's message on the handle
  * (sqldb_errmsg), as sqlite3 does; the store wraps both into its sf_err
  * (sqldb_errcode):
- *   SF_EAGAIN    busy: SQLite's lock, PostgreSQL's serialization failure,
+ *   SF_EBUSY     busy: SQLite's lock, PostgreSQL's serialization failure,
  *                deadlock, lock not available, insufficient resources, a
  *                cancelled statement.  Nothing was applied (a transaction that
  *                met it is rolled back): try it again, whole, later.

@@ -132,7 +132,7 @@ code_of(const PGresult *res)
        and a later try may pass */
     if (strcmp(c, "40001") == 0 || strcmp(c, "40P01") == 0 || strcmp(c, "55P03") == 0 ||
         strncmp(c, "53", 2) == 0 || strcmp(c, "57014") == 0)
-        return SF_EAGAIN;
+        return SF_EBUSY;
     return SF_EIO;
 }
 

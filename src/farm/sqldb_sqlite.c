@@ -37,12 +37,12 @@ stmt(struct sqldb_stmt *st)
 }
 
 /* db's last failure from SQLite: msg (NULL: SQLite's own), its code per sqldb.h (busy or
-   locked: SF_EAGAIN, nothing applied; anything else SF_EIO). */
+   locked: SF_EBUSY, nothing applied; anything else SF_EIO). */
 static int
 lite_fail(struct sqldb *db, const char *msg)
 {
     int ec = sqlite3_errcode(conn(db)) & 0xff;
-    return sqldb_failf(db, ec == SQLITE_BUSY || ec == SQLITE_LOCKED ? SF_EAGAIN : SF_EIO, "%s",
+    return sqldb_failf(db, ec == SQLITE_BUSY || ec == SQLITE_LOCKED ? SF_EBUSY : SF_EIO, "%s",
                        msg ? msg : sqlite3_errmsg(conn(db)));
 }
 

@@ -469,7 +469,7 @@ struct store *store_open_reader(const struct store *s, struct sf_err *err);
 struct store *store_open_writer(const struct store *s, struct sf_err *err);
 
 /*
- * Database failures keep sqldb.h's codes in err: SF_EAGAIN (busy) and
+ * Database failures keep sqldb.h's codes in err: SF_EBUSY (busy) and
  * SF_EUNREACH (the connection is lost or not back yet), both with nothing
  * applied; SF_EINDOUBT (the connection was lost while the write committed:
  * it may have been applied); SF_EIO for what a retry cannot change.

@@ -16,7 +16,7 @@
  * loop_post: storeq_free must withdraw what is undelivered (loop_del_fd),
  * and a posted callback cannot be withdrawn.  storeq_sync waits on a
  * condition signalled when the queue empties.  A request that fails with
- * nothing applied (busy, the connection away: sqldb.h's SF_EAGAIN and
+ * nothing applied (busy, the connection away: sqldb.h's SF_EBUSY and
  * SF_EUNREACH) waits (on the same condition, so a stop cuts the wait short;
  * a post does not) and runs again: a store transaction that failed left
  * nothing behind.  One whose COMMIT's answer was lost (SF_EINDOUBT) is read
@@ -161,7 +161,7 @@ nap(struct storeq *q, int64_t ms)
 static bool
 transient(int rc)
 {
-    return rc == SF_EAGAIN || rc == SF_EUNREACH;
+    return rc == SF_EBUSY || rc == SF_EUNREACH;
 }
 
 /* The end of r's retries (started at t0), with q->mu held: STOREQ_RETRY_MS, or less once a
@@ -190,7 +190,7 @@ back_off(struct storeq *q, int64_t t0, int64_t ms)
 
 /* r failed with SF_EINDOUBT (its COMMIT's answer was lost): read back whether it committed,
    asking again while the server cannot tell, until r's retries run out.  SF_OK when it did
-   (its result stands), SF_EAGAIN when it did not (run it again), SF_EINDOUBT when nobody can
+   (its result stands), SF_EBUSY when it did not (run it again), SF_EINDOUBT when nobody can
    tell in time (reported: running it again could apply it twice).  A write that sets values
    (progress, a reason, a printer's state or bed) and a read are simply run again: twice is
    once; a caller's write (storeq_call: a PREPARED with its files) is read back as an event. */
@@ -199,12 +199,12 @@ settle(struct storeq *q, struct req *r, int64_t t0)
 {
     bool call_write = r->op == OP_CALL && r->call && !r->value;
     if (r->op != OP_EVENT && r->op != OP_NOTE && !call_write)
-        return SF_EAGAIN;
+        return SF_EBUSY;
     for (int64_t backoff = 50;; backoff = backoff * 2 > 1000 ? 1000 : backoff * 2) {
         struct sf_err e = { 0 };
         int o = store_commit_outcome(q->conn, &e);
         if (o >= 0)
-            return o == 1 ? SF_OK : SF_EAGAIN;
+            return o == 1 ? SF_OK : SF_EBUSY;
         pthread_mutex_lock(&q->mu);
         bool again = back_off(q, t0, backoff);
         if (again)

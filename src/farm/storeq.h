@@ -14,7 +14,7 @@
  * not: before a direct store call that must see what was queued, call
  * storeq_sync.
  *
- * Failures: a request that fails with nothing applied (SF_EAGAIN: busy;
+ * Failures: a request that fails with nothing applied (SF_EBUSY: busy;
  * SF_EUNREACH: the server gone) is tried again, backing off to 1 s, for up
  * to STOREQ_RETRY_MS; one whose commit's outcome is unknown (SF_EINDOUBT)
  * is read back (store_commit_outcome) and run again only if it did not

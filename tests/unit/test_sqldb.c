@@ -197,7 +197,7 @@ T_CASE(sqldb_listen_notify_and_channel_names)
 }
 
 /* Failure codes say what a caller may do (sqldb.h): a row another connection holds is busy
-   (SF_EAGAIN, nothing applied: try again), a constraint is permanent (SF_EIO); the code
+   (SF_EBUSY, nothing applied: try again), a constraint is permanent (SF_EIO); the code
    survives the rollback. */
 T_CASE(sqldb_busy_and_permanent_failures_differ)
 {
@@ -219,8 +219,8 @@ T_CASE(sqldb_busy_and_permanent_failures_differ)
         T_TRUE(other != NULL);
         T_OK(sqldb_begin(other), NULL);
         T_OK(sqldb_exec(other, "SELECT k FROM t FOR UPDATE"), NULL);
-        T_EQ_INT(sqldb_exec(db, "SELECT k FROM t FOR UPDATE NOWAIT"), SF_EAGAIN);
-        T_EQ_INT(sqldb_errcode(db), SF_EAGAIN);
+        T_EQ_INT(sqldb_exec(db, "SELECT k FROM t FOR UPDATE NOWAIT"), SF_EBUSY);
+        T_EQ_INT(sqldb_errcode(db), SF_EBUSY);
         sqldb_rollback(other);
         T_OK(sqldb_exec(db, "SELECT k FROM t FOR UPDATE NOWAIT"), NULL);
         sqldb_close(other);

@@ -114,7 +114,7 @@ claim_all(void *arg)
             return NULL;
         /* SQLite: the other thread kept the one writer lock past the busy timeout (a loaded
            machine); the claim did nothing, so try again */
-        if (rc == SF_EAGAIN && strstr(c->err.msg, "database is locked"))
+        if (rc == SF_EBUSY && strstr(c->err.msg, "database is locked"))
             continue;
         if (rc || c->n == N_CLAIM || j.state != JOB_PREPARING || fence < 1) {
             c->rc = rc ? rc : SF_EBUG;

@@ -382,7 +382,7 @@ T_CASE(storeq_free_gives_up_once_on_a_locked_database)
     sqldb_rollback(other);
     sqldb_close(other);
     T_EQ_INT(a[0].calls, 1);
-    T_EQ_INT(a[0].rc, SF_EAGAIN);
+    T_EQ_INT(a[0].rc, SF_EBUSY);
     T_TRUE(strstr(a[0].msg, "locked") != NULL);
     for (int i = 1; i < 4; i++) {
         T_EQ_INT(a[i].calls, 1);
