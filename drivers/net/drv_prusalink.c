@@ -440,9 +440,12 @@ pl_kick(struct netdrv *n)
     struct prusalink *p = PL(n);
     if (!n->open || n->req || n->want == NETDRV_RQ_NONE)
         return;
-    if (p->job_id == 0) { /* learn the id first */
-        if (n->job.phase != NETJOB_NONE)
-            pl_start(n, RQ_JOB);
+    if (p->job_id == 0) {
+        /* Learn the id first: the status polls do (on_status asks
+           /api/v1/job of a job it does not know, and the kick after it
+           sends the want).  Asking /api/v1/job from here left no slot for
+           the poll that reads the answer: each kick asked again (a cancel
+           while the upload's answer was on its way spun so). */
         return;
     }
     int w = n->want;

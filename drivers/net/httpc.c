@@ -469,12 +469,7 @@ report(struct httpc_req *r)
     const char *detail = r->errbuf[0] ? r->errbuf : curl_easy_strerror(r->result);
     res.detail = r->result == CURLE_OK ? "" : detail;
     res.tls_peer = r->result == CURLE_PEER_FAILED_VERIFICATION;
-    res.body_read = r->fp ? r->fp_read : UINT64_MAX;
-    if (r->n_files) {
-        res.body_read = 0;
-        for (size_t i = 0; i < r->n_files; i++)
-            res.body_read += r->files[i].most;
-    }
+    res.body_read = httpc_body_read(r);
     if (r->result == CURLE_OK) {
         res.code = SF_OK;
     } else if (r->oversize) {
@@ -860,6 +855,18 @@ fail:
     r->cancelled = true;
     free_req(r);
     return NULL;
+}
+
+uint64_t
+httpc_body_read(const struct httpc_req *r)
+{
+    if (r->n_files) {
+        uint64_t sum = 0;
+        for (size_t i = 0; i < r->n_files; i++)
+            sum += r->files[i].most;
+        return sum;
+    }
+    return r->fp ? r->fp_read : UINT64_MAX;
 }
 
 void

@@ -154,6 +154,14 @@ struct httpc_req *httpc_start(struct httpc *h, const struct httpc_opts *o, struc
  */
 void httpc_cancel(struct httpc_req *r);
 
+/*
+ * A request in flight: its body's bytes handed to curl so far, counted as
+ * httpc_result.body_read counts them (UINT64_MAX for a body from memory or
+ * none).  Fewer than the file holds: the server cannot have it whole yet,
+ * so cancelling r now leaves it without the file.
+ */
+uint64_t httpc_body_read(const struct httpc_req *r);
+
 /* Requests started and not yet done or cancelled. */
 size_t httpc_active(const struct httpc *h);
 

@@ -308,8 +308,14 @@ netdrv_upload_reply(struct netdrv *n, const struct httpc_result *res)
 {
     char why[200];
     enum netdrv_outcome o = netdrv_judge(n, NETDRV_RQ_UPLOAD, res, why, sizeof(why));
-    if (n->job.phase != NETJOB_RUNNING) /* cancelled meanwhile */
+    if (n->job.phase != NETJOB_RUNNING) { /* cancelled meanwhile (netdrv_cancel) */
+        if (n->job.phase == NETJOB_CANCELLING) {
+            if (o == NETDRV_OK)
+                n->fails = 0;
+            netdrv_schedule(n, 0); /* is it printing? the cancel waits for this poll */
+        }
         return NETDRV_REFUSED;
+    }
     switch (o) {
     case NETDRV_OK:
         n->fails = 0;
@@ -356,7 +362,9 @@ netdrv_settle(struct netdrv *n, const struct netjob_obs *ob)
 {
     if (!n->verify)
         return false;
-    if (ob->ours) {
+    if (ob->ours || n->job.phase == NETJOB_CANCELLING) {
+        /* (cancelling: never sent again; the judge ends it when the
+           printer does not run it, or the cancel stops it) */
         n->verify = false; /* the upload did arrive and start: judge it as any job */
         return false;
     }
@@ -544,10 +552,13 @@ netdrv_cancel(struct drv *d, struct sf_err *err)
     struct netdrv *n = ND(d);
     if (n->job.phase == NETJOB_NONE)
         return sf_err_set(err, SF_EAGAIN, "printer '%s': no job to cancel", d->name);
-    if (starting(n) || n->verify) {
-        /* not printing yet: stop the upload; the printer never starts a
-           file it did not get whole */
-        if (starting(n)) {
+    bool uploading = n->rq == NETDRV_RQ_UPLOAD && n->req;
+    if ((uploading && httpc_body_read(n->req) < (uint64_t)n->job.size) ||
+        (!uploading && n->verify && n->upload_cut)) {
+        /* The printer cannot have the file whole (curl has not read it all
+           yet, or the last try was cut short), and a printer never starts
+           a file it did not get whole: stop the upload, and it is over. */
+        if (uploading) {
             httpc_cancel(n->req);
             n->req = NULL;
             n->rq = NETDRV_RQ_NONE;
@@ -556,6 +567,16 @@ netdrv_cancel(struct drv *d, struct sf_err *err)
         netdrv_schedule(n, 0);
         return SF_OK;
     }
+    /* Otherwise the printer may be printing it: the body sent whole with
+       its answer still on the way (PrusaLink answers a Print-After-Upload
+       PUT after it has started the file), the request that starts it
+       sent, or an upload whose fate is unknown (verify).  Cutting the
+       request then and calling the job cancelled left the printer printing
+       a job the farm thought stopped, and the farm sent the next one to a
+       busy printer (a part on a bed it thought free, on a real one).  So
+       the cancel goes to the printer once the request in flight has its
+       answer (want waits for the slot), and the polls settle it: a printer
+       without our job ends it cancelled (netjob.c: judge_cancelling). */
     n->job.phase = NETJOB_CANCELLING; /* status stays printing until the printer says */
     return want(n, NETDRV_RQ_CANCEL);
 }

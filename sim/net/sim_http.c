@@ -80,6 +80,7 @@ struct sim_http_req {
     unsigned status;
     bool replied;
     bool suspended; /* waiting for the slow fault's timer */
+    long upload_n;  /* an upload: its number (1-based), for the upload faults */
     bool resumed;   /* the timer fired: queue resp now */
     uint64_t slow_timer;
     struct sim_http_req *slow_next; /* in h->slow */
@@ -128,6 +129,15 @@ sim_http_fault_parse(struct sim_http_faults *f, const char *spec, struct sf_err 
             return sf_err_set(err, SF_EINVAL, "fault '%s': expected 5xx=N or 5xx=N@K", spec);
         f->err5xx_count = n;
         f->err5xx_after = k;
+        return SF_OK;
+    }
+    if (nl == 11 && strncmp(spec, "slow-upload", 11) == 0) {
+        if ((used = parse_num(v, 1, 600000, &n)) < 0 ||
+            (v[used] && (v[used] != '@' || parse_num(v + used + 1, 1, 1000000000, &k) < 0)))
+            return sf_err_set(err, SF_EINVAL,
+                              "fault '%s': expected slow-upload=MS or slow-upload=MS@N", spec);
+        f->slow_upload_ms = (int)n;
+        f->slow_uploads = k;
         return SF_OK;
     }
     const char *names[] = { "slow", "drop-upload", "drop", "outage" };
@@ -541,7 +551,7 @@ admit(struct sim_http_req *r)
     }
     bool upload = r->route->body != SIM_HTTP_BODY_MEM;
     if (upload) {
-        h->n_uploads++;
+        r->upload_n = ++h->n_uploads;
         if (f->drop_upload && h->n_uploads <= f->drop_upload) {
             const char *cl = MHD_lookup_connection_value(r->c, MHD_HEADER_KIND, "Content-Length");
             uint64_t len = cl ? strtoull(cl, NULL, 10) : 0;
@@ -629,10 +639,15 @@ on_request(void *cls, struct MHD_Connection *c, const char *url, const char *met
         r->route->fn(r, h->cfg.ud);
     if (!r->replied)
         sim_http_reply_error(r, 500, "handler did not reply");
-    if (h->cfg.faults.slow_ms > 0) {
+    int late = h->cfg.faults.slow_ms;
+    if (r->route->body != SIM_HTTP_BODY_MEM && r->upload_n > 0 &&
+        (!h->cfg.faults.slow_uploads || r->upload_n <= h->cfg.faults.slow_uploads) &&
+        h->cfg.faults.slow_upload_ms > late)
+        late = h->cfg.faults.slow_upload_ms; /* the handler ran: a print it started is on */
+    if (late > 0) {
         r->suspended = true;
         MHD_suspend_connection(c);
-        r->slow_timer = loop_timer_add(h->l, h->cfg.faults.slow_ms, on_slow, r);
+        r->slow_timer = loop_timer_add(h->l, late, on_slow, r);
         r->slow_next = h->slow;
         h->slow = r;
         return MHD_YES;

@@ -21,6 +21,12 @@
  *   5xx=N[@K]     after K requests (default 0), the next N answer 503
  *   slow=MS       every reply leaves MS milliseconds late (the connection is
  *                 suspended, the loop keeps serving others)
+ *   slow-upload=MS[@N] an upload's reply (a route taking a file body) leaves
+ *                 MS milliseconds late (only the first N uploads' with @N),
+ *                 after its handler ran: a print it
+ *                 started runs meanwhile, as on a PrusaLink that answers a
+ *                 Print-After-Upload PUT once the file is stored and started,
+ *                 or whose answer is slow to come back
  *   drop-upload=N the first N uploads lose their connection half-way
  *                 through the body (after 64 KiB, or half a smaller body).
  *                 (libcurl re-sends a request whose reused connection died
@@ -74,12 +80,14 @@ struct sim_http_route {
 };
 
 struct sim_http_faults {
-    long err5xx_after; /* 5xx=N@K: K */
-    long err5xx_count; /* N (0: none) */
-    int slow_ms;       /* every reply this late */
-    long drop_upload;  /* the Nth upload is cut (0: none) */
-    long drop_request; /* the Nth request is cut (0: none) */
-    long outage_line;  /* outage=L: L (0: none) */
+    long err5xx_after;  /* 5xx=N@K: K */
+    long err5xx_count;  /* N (0: none) */
+    int slow_ms;        /* every reply this late */
+    int slow_upload_ms; /* an upload's reply this late */
+    long slow_uploads;  /* ... the first this many uploads' (0: all) */
+    long drop_upload;   /* the Nth upload is cut (0: none) */
+    long drop_request;  /* the Nth request is cut (0: none) */
+    long outage_line;   /* outage=L: L (0: none) */
 };
 
 /* Requests an outage refuses at the least: more than a driver's failed polls

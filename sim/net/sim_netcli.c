@@ -25,7 +25,7 @@ usage(FILE *f, const char *kind, const char *extra)
             "                  [--speed X] [--log FILE] [--uploads DIR] [--fault SPEC]...\n"
             "                  [--count N]\n"
             "  prints http://127.0.0.1:PORT per printer, serves until SIGINT/SIGTERM\n"
-            "http faults: 5xx=N[@K] slow=MS drop-upload=N drop=N\n"
+            "http faults: 5xx=N[@K] slow=MS slow-upload=MS[@N] drop-upload=N drop=N\n"
             "firmware faults: as slimfarm-sim marlin (corrupt=RATE reset=N runaway=N ...)\n"
             "%s",
             kind, extra ? extra : "");

@@ -20,7 +20,9 @@ start_net() {
 # check_net_logs PRINTER...: a network printer runs the file it was sent, so
 # its executed log must hold, in order, each print's G-code: all of it for a
 # print done, a prefix of it for one that stopped, then (cancelled) the
-# printer's own cancel script.  A print interrupted by the daemon's death and
+# printer's own cancel script (none for a print cancelled before a line of
+# it ran: its upload was stopped short, and a printer never starts a file
+# it did not get whole).  A print interrupted by the daemon's death and
 # re-attached after it (the next print of the same job, from a start line
 # past 0) is one run on the printer: the file's commands once, in full.  The
 # host's M110 and M400 aside, nothing else: a job line lost, repeated or
@@ -67,6 +69,8 @@ for name in printers:
             bad += 1
             break
         if outcome == "cancelled":
+            if w == 0 and got[i:i + len(cancel_script)] != cancel_script:
+                continue  # cancelled before its upload was whole: the printer never ran it
             if got[i:i + len(cancel_script)] != cancel_script:
                 print("%s: print %d (job %d): no cancel script after line %d: %r" %
                       (name, pid, job, w, got[i:i + 4]))
