@@ -177,6 +177,15 @@ rings_are_walls(struct layer_paths *out, uint32_t n0)
             out->info[i].role = ROLE_PERIMETER;
 }
 
+/* The gap-fill lines from out's path n0 on fill a piece of skin: role r. */
+static void
+relabel(struct layer_paths *out, uint32_t n0, enum tp_role r)
+{
+    for (uint32_t i = n0; i < out->p.n; i++)
+        if (out->info[i].role == ROLE_GAP_FILL)
+            out->info[i].role = r;
+}
+
 int
 tp_gap_fill_loops(double h, const struct slice_profile *p, double sp, struct paths *t,
                   struct layer_paths *out)
@@ -206,14 +215,20 @@ tp_gap_fill_narrow(double h, const struct slice_profile *p, double sp, double ss
                    struct layer_paths *out)
 {
     int rc = SF_OK;
-    /* solid pieces under 3.5 spacings wide: zig-zag links would lay
-       more than their area there, so they are gap-filled instead */
-    paths_reset(&t[T_GAP]);
-    TP_TRY(tp_split_narrow(&t[T_SOLID], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
-    TP_TRY(tp_split_narrow(&t[T_TOP], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
-    if (t[T_GAP].n)
-        TP_TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, p->infill_overlap * sp,
-                           p->min_bead * p->nozzle_mm, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
+    /* solid and top pieces under 3.5 spacings wide: zig-zag links would
+       lay more than their area there, so they get gap fill's lines
+       instead; but they are the skin (PrusaSlicer 2.5 prints no gap fill
+       there: its solid and top solid infill cover them), so the lines keep
+       the skin's role and speed, the top's at top_solid_infill_speed */
+    for (int top = 0; top < 2; top++) {
+        paths_reset(&t[T_GAP]);
+        TP_TRY(tp_split_narrow(&t[top ? T_TOP : T_SOLID], 3.5 * ssp, &t[T_GAP], &t[T_TMP]));
+        uint32_t n0 = out->p.n;
+        if (t[T_GAP].n)
+            TP_TRY(tp_gap_fill(&t[T_GAP], h, p->nozzle_mm, ssp, p->infill_overlap * sp,
+                               p->min_bead * p->nozzle_mm, out, &t[T_TMP], &t[T_S], &t[T_LINES]));
+        relabel(out, n0, top ? ROLE_TOP : ROLE_SOLID);
+    }
     /* sparse pieces stay sparse however narrow, as PrusaSlicer 2.5 fills
        the strip inside a 2-4 mm wall with anchored sparse lines (its
        PerimeterGenerator keeps an inner contour at least a perimeter

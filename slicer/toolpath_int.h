@@ -104,8 +104,9 @@ int tp_perimeters(const struct layer *L, const struct slice_profile *p, double s
 /* Gap fill of the loops' gaps, t[T_GAP] (opened by an eighth of sp first). */
 int tp_gap_fill_loops(double h, const struct slice_profile *p, double sp, struct paths *t,
                       struct layer_paths *out);
-/* Gap fill of the pieces of t[T_SOLID], t[T_TOP] and t[T_SPARSE] under 3.5
-   solid spacings (ssp) wide, which those sets lose. */
+/* Gap fill's lines over the pieces of t[T_SOLID] and t[T_TOP] under 3.5
+   solid spacings (ssp) wide (printed as solid and top solid infill) and of
+   t[T_SPARSE] under a spacing (gap fill), which those sets lose. */
 int tp_gap_fill_narrow(double h, const struct slice_profile *p, double sp, double ssp,
                        struct paths *t, struct layer_paths *out);
 /* Bridges: t[T_SOLID] over air on layer k (each piece in the direction
