@@ -35,9 +35,9 @@
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "farm_host.h"
-#include "store_host.h"
 #include "gcjob.h"
 #include "sched.h"
+#include "store_host.h"
 
 /* A job that could not be prepared for a printer's key (its profile is broken). */
 struct noreslice {
@@ -61,9 +61,9 @@ struct prep {
     int64_t gcode_size;
     char mesh_sha[STORE_SHA_HEX]; /* the optimized part, adopted by the worker; "" if none */
     int64_t mesh_size;
-    int64_t prepare_ms;             /* the prepare function's wall time */
-    int64_t fence;                  /* the claim's fencing token (farm_host.h); 0 on a single host */
-    struct sf_err err;              /* why it failed */
+    int64_t prepare_ms; /* the prepare function's wall time */
+    int64_t fence;      /* the claim's fencing token (farm_host.h); 0 on a single host */
+    struct sf_err err;  /* why it failed */
     struct job_event_args prepared; /* its PREPARED, written on the store thread */
     enum job_state to;              /* the job's state after it */
 };
@@ -116,8 +116,8 @@ on_printer_changed(void *ud)
 }
 
 /* A printer for cfg; old (NULL: none) the one it replaces, whose bed it keeps. */
-static struct printer *
-add_printer_new(struct farm *f, const struct farmcfg_printer *cfg, const struct printer *old)
+struct printer *
+farm_printer_new(struct farm *f, const struct farmcfg_printer *cfg, const struct printer *old)
 {
     struct printer_env env = {
         .bed_known = old != NULL,
@@ -759,13 +759,13 @@ on_progress(struct loop *l, void *ud)
 
 /* ---- lifecycle ---- */
 
-static int
-add_printer(struct farm *f, const struct farmcfg_printer *cfg, struct sf_err *err)
+int
+farm_add_printer(struct farm *f, const struct farmcfg_printer *cfg, struct sf_err *err)
 {
     size_t cap = f->n_printers;
     if (!mem_grow((void **)&f->printers, &cap, f->n_printers + 1, sizeof(*f->printers)))
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
-    struct printer *p = add_printer_new(f, cfg, NULL);
+    struct printer *p = farm_printer_new(f, cfg, NULL);
     if (!p)
         return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
     f->printers[f->n_printers++] = p;
@@ -796,7 +796,7 @@ farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcf
     if (rc == SF_OK)
         rc = farm_merged(f, &list, &n, err);
     for (size_t i = 0; rc == SF_OK && i < n; i++)
-        rc = add_printer(f, &list[i], err);
+        rc = farm_add_printer(f, &list[i], err);
     free(list);
     if (rc) {
         farm_free(f);
@@ -846,182 +846,4 @@ farm_free(struct farm *f)
     free(f->seed);
     free(f->no);
     free(f);
-}
-
-bool
-farm_link_change(const struct farmcfg_printer *a, const struct farmcfg_printer *b, char *why,
-                 size_t n)
-{
-    /* a new disable reason too: the printer's message says it (printer_new) */
-    if (strcmp(a->driver, b->driver) != 0 || a->enabled != b->enabled ||
-        strcmp(a->disabled, b->disabled) != 0) {
-        snprintf(why, n, "option '%s' changed", a->enabled != b->enabled ? "enabled" : "driver");
-        return true;
-    }
-    const struct drv_kind *k = drv_kind_find(a->driver);
-    const struct drv_option *o = drv_link_diff(k, &a->link, &b->link);
-    if (!o)
-        return false;
-    char was[80], now[80];
-    drv_link_show(&a->link, k, o, was, sizeof(was));
-    drv_link_show(&b->link, k, o, now, sizeof(now));
-    snprintf(why, n, "option '%s' changed from '%s' to '%s'", o->name, was, now);
-    return true;
-}
-
-int
-farm_apply(struct farm *f, const struct farmcfg_printer *c, struct sf_err *err)
-{
-    struct printer *p = farm_find(f, c->name);
-    if (!p)
-        return add_printer(f, c, err);
-    printer_set_removed(p, false);
-    const struct farmcfg_printer *old = printer_cfg(p);
-    char why[200];
-    bool change = farm_link_change(old, c, why, sizeof(why));
-    if (!change || printer_job(p) || printer_hot_idle(p)) {
-        /* Same link, or busy (printing, or holding its heat: closing its driver would leave
-           the heaters on, printer.h): change what the scheduler reads only. */
-        struct farmcfg_printer next = *c;
-        if (change) {
-            log_printer(LOG_WARN, c->name, "link change waits for the print to end%s",
-                        printer_job(p) ? "" : " (its heaters are on)");
-            memcpy(next.driver, old->driver, sizeof(next.driver));
-            next.link = old->link;
-            next.enabled = old->enabled;
-            memcpy(next.disabled, old->disabled, sizeof(next.disabled));
-        }
-        printer_set_cfg(p, &next);
-        return SF_OK;
-    }
-    log_printer(LOG_INFO, c->name, "%s: reconnecting", why);
-    /* New link and idle: replace the printer. */
-    struct printer *fresh = add_printer_new(f, c, p);
-    if (!fresh)
-        return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
-    for (size_t k = 0; k < f->n_printers; k++)
-        if (f->printers[k] == p)
-            f->printers[k] = fresh;
-    printer_free(p);
-    return SF_OK;
-}
-
-void
-farm_sweep(struct farm *f)
-{
-    size_t w = 0;
-    for (size_t i = 0; i < f->n_printers; i++) {
-        struct printer *p = f->printers[i];
-        if (printer_removed(p) && !printer_job(p) && !printer_hot_idle(p)) {
-            printer_free(p);
-            continue;
-        }
-        f->printers[w++] = p;
-    }
-    f->n_printers = w;
-}
-
-int
-farm_reload(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
-{
-    /* farm.ini's printers, with the store's run-time rows over them (farm_printers.c) */
-    struct farmcfg_printer *list = NULL;
-    size_t n = 0;
-    int rc = farm_seed(f, cfg->printers, cfg->n_printers, err);
-    if (rc || (rc = farm_merged(f, &list, &n, err)))
-        return rc;
-    /* Printers that left the config: free when not printing, else after. */
-    for (size_t i = 0; i < f->n_printers; i++) {
-        struct printer *p = f->printers[i];
-        bool kept = false;
-        for (size_t k = 0; k < n && !kept; k++)
-            kept = strcmp(list[k].name, printer_cfg(p)->name) == 0;
-        printer_set_removed(p, !kept);
-    }
-    for (size_t i = 0; i < n && rc == SF_OK; i++)
-        rc = farm_apply(f, &list[i], err);
-    free(list);
-    if (rc)
-        return rc;
-    farm_sweep(f);
-    f->n_no = 0; /* a reload may have mended a profile */
-    snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
-    f->gram_s = cfg->gram_s;
-    f->material_first = cfg->material_first;
-    farm_host_own(f);
-    farm_kick(f);
-    return SF_OK;
-}
-
-size_t
-farm_printer_count(const struct farm *f)
-{
-    return f->n_printers;
-}
-
-void
-farm_printer_info(const struct farm *f, size_t i, struct printer_info *out)
-{
-    printer_info(f->printers[i], out);
-}
-
-int
-farm_printer_action(struct farm *f, const char *name, enum printer_action act, struct sf_err *err)
-{
-    struct printer *p = farm_find(f, name);
-    if (!p)
-        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
-    return printer_action(p, act, err);
-}
-
-struct storeq *
-farm_storeq(struct farm *f)
-{
-    return f ? f->q : NULL;
-}
-
-int
-farm_printer_action_then(struct farm *f, const char *name, enum printer_action act,
-                         storeq_event_fn done, void *ud, struct sf_err *err)
-{
-    struct printer *p = farm_find(f, name);
-    if (!p)
-        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
-    return printer_action_then(p, act, done, ud, err);
-}
-
-int
-farm_printer_command(struct farm *f, const char *name, const char *line, const char *who,
-                     struct sf_err *err)
-{
-    struct printer *p = farm_find(f, name);
-    if (!p)
-        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
-    /* The printer's G-code policy judges the line as a manual command
-       (gpolicy.h): the host's protocol commands, control bytes and what the
-       printer's config does not allow are refused; a rewrite is sent instead. */
-    struct gpolicy pol;
-    struct gpolicy_verdict v;
-    farmcfg_policy(printer_cfg(p), &pol);
-    switch (gpolicy_check_line(&pol, GPOLICY_MANUAL, line, strlen(line), &v)) {
-    case GPOLICY_REFUSE:
-        return sf_err_set(err, SF_EINVAL, "manual command on '%.64s': %s refused: %s", name, v.cmd,
-                          v.why);
-    case GPOLICY_REWRITE:
-        log_printer_each(LOG_INFO, name, "manual command '%.80s' from %s sent as '%.80s' (%s)",
-                         line, who && who[0] ? who : "?", v.line, v.why);
-        return printer_command(p, v.line, who, err);
-    case GPOLICY_PASS:
-        break;
-    }
-    return printer_command(p, line, who, err);
-}
-
-int
-farm_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err)
-{
-    struct printer *p = farm_find(f, name);
-    if (!p)
-        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
-    return printer_estop(p, who, err);
 }

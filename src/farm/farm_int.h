@@ -59,6 +59,11 @@ void farm_notify(struct farm *f);
 
 /* The printer named name, or NULL (removed printers too, until freed). */
 struct printer *farm_find(const struct farm *f, const char *name);
+/* A printer for cfg; old (NULL: none) the one it replaces, whose bed it keeps. */
+struct printer *farm_printer_new(struct farm *f, const struct farmcfg_printer *cfg,
+                                 const struct printer *old);
+/* Append a printer for cfg to f's list. */
+int farm_add_printer(struct farm *f, const struct farmcfg_printer *cfg, struct sf_err *err);
 
 /* The printer as the scheduler sees it; its strings live in p. */
 void farm_printer_view(const struct printer *p, struct sched_printer *out);

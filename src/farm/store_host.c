@@ -65,15 +65,15 @@ check_lease(int64_t lease_ms, struct sf_err *err)
                       (long long)STORE_LEASE_MAX_MS);
 }
 
-static bool
-is_pg(const struct store *s)
+bool
+store_is_pg(const struct store *s)
 {
     return sqldb_engine(s->db) == SQLDB_PG;
 }
 
 /* End the transaction a body ran in: commit if it returned SF_OK, else roll back. */
-static int
-end_tx(struct store *s, int rc, struct sf_err *err)
+int
+store_end_tx(struct store *s, int rc, struct sf_err *err)
 {
     if (rc == SF_OK && (rc = store_commit(s, err)) == SF_OK)
         return SF_OK;
@@ -162,8 +162,9 @@ lease_lost(struct store *s, const char *name, int64_t token, int64_t now_ms, str
 
 /* In the caller's transaction: that name's lease is token's and runs at now_ms, holding its row
    (PostgreSQL: FOR SHARE, so a reap waits for the caller, and the caller's claims go with it). */
-static int
-host_hold(struct store *s, const char *name, int64_t token, int64_t now_ms, struct sf_err *err)
+int
+store_host_hold(struct store *s, const char *name, int64_t token, int64_t now_ms,
+                struct sf_err *err)
 {
     int rc = check_name(name, err);
     if (rc)
@@ -172,7 +173,7 @@ host_hold(struct store *s, const char *name, int64_t token, int64_t now_ms, stru
     snprintf(sql, sizeof(sql),
              "SELECT token FROM hosts WHERE name = ?1 AND token = ?2 AND reaped_ms = 0"
              " AND lease_until_ms > ?3%s",
-             is_pg(s) ? " FOR SHARE" : "");
+             store_is_pg(s) ? " FOR SHARE" : "");
     struct sqldb_stmt *st;
     if ((rc = store_prepare(s, &st, sql, err)))
         return rc;
@@ -205,7 +206,7 @@ static int
 lock_name(struct store *s, const char *name, bool *got, struct sf_err *err)
 {
     *got = true;
-    if (!is_pg(s))
+    if (!store_is_pg(s))
         return SF_OK;
     struct sqldb_stmt *st;
     int rc =
@@ -225,7 +226,7 @@ static void
 unlock_name(struct store *s, const char *name)
 {
     struct sqldb_stmt *st;
-    if (!is_pg(s) || store_prepare(s, &st, "SELECT pg_advisory_unlock(?1)", NULL))
+    if (!store_is_pg(s) || store_prepare(s, &st, "SELECT pg_advisory_unlock(?1)", NULL))
         return;
     sqldb_bind_int64(st, 1, name_key(name));
     sqldb_step(st);
@@ -348,7 +349,7 @@ store_host_join(struct store *s, const char *name, int64_t lease_ms, int64_t *to
         return refuse_join(name, &h, now, err);
     }
     if ((rc = store_begin(s, err)) == SF_OK)
-        rc = end_tx(s, join_tx(s, name, now, lease_ms, token, err), err);
+        rc = store_end_tx(s, join_tx(s, name, now, lease_ms, token, err), err);
     if (rc) {
         unlock_name(s, name); /* refused or failed: the name stays free for its holder */
         return rc;
@@ -484,7 +485,7 @@ own_tx(struct store *s, const char *name, int64_t token, const char *const *prin
 {
     int64_t now = clock_wall_ms();
     struct sqldb_stmt *st;
-    int rc = host_hold(s, name, token, now, err);
+    int rc = store_host_hold(s, name, token, now, err);
     if (rc || (rc = store_prepare(s, &st, "DELETE FROM host_printers WHERE host = ?1", err)))
         return rc;
     sqldb_bind_text(st, 1, name);
@@ -503,7 +504,7 @@ store_host_own(struct store *s, const char *name, int64_t token, const char *con
                size_t n, struct sf_err *err)
 {
     int rc = store_begin(s, err);
-    return rc ? rc : end_tx(s, own_tx(s, name, token, printers, n, err), err);
+    return rc ? rc : store_end_tx(s, own_tx(s, name, token, printers, n, err), err);
 }
 
 /* ---- reaping ---- */
@@ -603,13 +604,13 @@ store_host_reap(struct store *s, int64_t now_ms, struct store_recovery *moved, s
                             "UPDATE hosts SET reaped_ms = ?1 WHERE reaped_ms = 0"
                             " AND lease_until_ms <= ?1 RETURNING name, heartbeat_ms",
                             err)))
-        return end_tx(s, rc, err);
+        return store_end_tx(s, rc, err);
     sqldb_bind_int64(st, 1, now_ms);
     rc = store_read_rows(s, st, sizeof(*rows), read_reaped, (void **)&rows, &n, "reap hosts", err);
     for (size_t i = 0; i < n && rc == SF_OK; i++)
         rc = reap_host(s, rows[i].name, now_ms, rows[i].heartbeat_ms, moved, err);
     free(rows);
-    if ((rc = end_tx(s, rc, err)) && moved)
+    if ((rc = store_end_tx(s, rc, err)) && moved)
         *moved = (struct store_recovery){ 0, 0 };
     return rc ? rc : (int)n;
 }
@@ -687,169 +688,6 @@ store_host_list(struct store *s, int64_t now_ms, struct store_host_row **rows, s
     return rc;
 }
 
-/* ---- claims and fencing ---- */
-
-/* methods ("orient,slim") as ",orient,slim," into out, each checked as a job's method. */
-static int
-method_list(const char *methods, char *out, size_t cap, struct sf_err *err)
-{
-    out[0] = '\0';
-    if (!methods || !methods[0])
-        return SF_OK;
-    if (strlen(methods) + 3 > cap)
-        return sf_err_set(err, SF_EINVAL, "methods: '%.80s' is too long", methods);
-    snprintf(out, cap, ",%s,", methods);
-    for (const char *p = out + 1; *p;) {
-        size_t len = strcspn(p, ",");
-        struct job_opts o;
-        job_opts_init(&o);
-        snprintf(o.name, sizeof(o.name), "x");
-        snprintf(o.method, sizeof(o.method), "%.*s", (int)len, p);
-        if (len == 0 || len >= sizeof(o.method) || job_opts_validate(&o, err)) {
-            sf_err_set(err, SF_EINVAL,
-                       "methods: '%.*s' is not one of none, orient, slim, surface (in '%s')",
-                       (int)len, p, methods);
-            return SF_EINVAL;
-        }
-        p += len + (p[len] == ',');
-    }
-    return SF_OK;
-}
-
-/* The claim, in the caller's transaction: the job into *out and its fence, SF_ENOTFOUND. */
-static int
-claim_next(struct store *s, const char *host, const char *list, int64_t id, int64_t now_ms,
-           struct job_row *out, int64_t *fence, struct sf_err *err)
-{
-    enum job_state to;
-    struct job_counts c = { 1, 0, 0, 0 };
-    int rc = job_next(JOB_QUEUED, JOB_EV_PREPARE, &c, &to, err);
-    if (rc)
-        return rc;
-    /* the queued state as a literal, so both engines may read the claim order's partial index;
-       SQLite is told to (INDEXED BY): without statistics it took jobs_state and sorted every
-       queued job at each claim */
-    char sql[sizeof(STORE_JOB_COLS) + 512];
-    snprintf(sql, sizeof(sql),
-             "UPDATE jobs SET state = ?1, claimed_by = ?2, fence = fence + 1, updated_ms = ?3"
-             " WHERE id = (SELECT id FROM jobs%s WHERE state = '%s'"
-             " AND (?4 = '' OR instr(?4, ',' || method || ',') > 0) AND (?5 = 0 OR id = ?5)"
-             " ORDER BY priority DESC, queue_pos, id LIMIT 1%s) AND state = '%s'"
-             " RETURNING %s, fence",
-             is_pg(s) ? "" : " INDEXED BY jobs_claim_order", job_state_name(JOB_QUEUED),
-             is_pg(s) ? " FOR UPDATE SKIP LOCKED" : "", job_state_name(JOB_QUEUED), STORE_JOB_COLS);
-    struct sqldb_stmt *st;
-    if ((rc = store_prepare(s, &st, sql, err)))
-        return rc;
-    sqldb_bind_text(st, 1, job_state_name(to));
-    sqldb_bind_text(st, 2, host);
-    sqldb_bind_int64(st, 3, now_ms);
-    sqldb_bind_text(st, 4, list);
-    sqldb_bind_int64(st, 5, id);
-    rc = sqldb_step(st);
-    if (rc == SQLDB_ROW) {
-        store_read_job(st, out);
-        *fence = sqldb_column_int64(st, 40);
-    }
-    sqldb_finalize(st);
-    if (rc != SQLDB_ROW)
-        return rc == SQLDB_DONE ? SF_ENOTFOUND : store_db_fail(s, err, "claim job");
-    char detail[192];
-    snprintf(detail, sizeof(detail), "%s -> %s: claimed by host '%s'", job_state_name(JOB_QUEUED),
-             job_state_name(to), host);
-    return store_log_event(s, out->id, NULL, "job-prepare", detail, err);
-}
-
-int
-store_job_claim(struct store *s, const char *host, int64_t token, const char *methods,
-                struct job_row *out, int64_t *fence, struct sf_err *err)
-{
-    char list[128];
-    int64_t f = 0, now = clock_wall_ms();
-    int rc = method_list(methods, list, sizeof(list), err);
-    if (rc || (rc = store_begin(s, err)))
-        return rc;
-    if ((rc = host_hold(s, host, token, now, err)) == SF_OK)
-        rc = claim_next(s, host, list, 0, now, out, &f, err);
-    if ((rc = end_tx(s, rc, err)))
-        return rc;
-    if (fence)
-        *fence = f;
-    return SF_OK;
-}
-
-int
-store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t id,
-                   struct job_row *out, int64_t *fence, struct sf_err *err)
-{
-    int64_t f = 0, now = clock_wall_ms();
-    if (id <= 0)
-        return sf_err_set(err, SF_EINVAL, "claim: job id %lld", (long long)id);
-    int rc = store_begin(s, err);
-    if (rc)
-        return rc;
-    if ((rc = host_hold(s, host, token, now, err)) == SF_OK)
-        rc = claim_next(s, host, "", id, now, out, &f, err);
-    if ((rc = end_tx(s, rc, err)))
-        return rc;
-    if (fence)
-        *fence = f;
-    return SF_OK;
-}
-
-int
-store_job_take(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
-               struct sf_err *err)
-{
-    int64_t now = clock_wall_ms(), f = 0;
-    struct sqldb_stmt *st;
-    int rc = store_begin(s, err);
-    if (rc)
-        return rc;
-    if ((rc = host_hold(s, host, token, now, err)) == SF_OK &&
-        (rc = store_prepare(s, &st,
-                            "UPDATE jobs SET claimed_by = ?1, fence = fence + 1, updated_ms = ?2"
-                            " WHERE id = ?3 AND state = 'ready' AND claimed_by IN ('', ?1)"
-                            " RETURNING fence",
-                            err)) == SF_OK) {
-        sqldb_bind_text(st, 1, host);
-        sqldb_bind_int64(st, 2, now);
-        sqldb_bind_int64(st, 3, id);
-        rc = sqldb_step(st);
-        if (rc == SQLDB_ROW)
-            f = sqldb_column_int64(st, 0);
-        sqldb_finalize(st);
-        rc = rc == SQLDB_ROW    ? SF_OK
-             : rc == SQLDB_DONE ? SF_ENOTFOUND
-                                : store_db_fail(s, err, "take job");
-    }
-    if ((rc = end_tx(s, rc, err)))
-        return rc;
-    if (fence)
-        *fence = f;
-    return SF_OK;
-}
-
-int
-store_job_live_host(struct store *s, const char *host, struct job_row **rows, size_t *n,
-                    struct sf_err *err)
-{
-    struct sqldb_stmt *st;
-    int rc = store_select(s, &st,
-                          "SELECT " STORE_JOB_COLS " FROM jobs"
-                          " WHERE state NOT IN ('done','failed','cancelled')"
-                          " AND (claimed_by IN ('', ?1) OR printer IN"
-                          " (SELECT printer FROM host_printers WHERE host = ?1)) ORDER BY id",
-                          (void **)rows, n, err);
-    if (rc)
-        return rc;
-    sqldb_bind_text(st, 1, host);
-    return store_read_rows(s, st, sizeof(**rows), store_read_job, (void **)rows, n,
-                           "list the host's live jobs", err);
-}
-
-/* ---- wake-ups ---- */
-
 int
 store_host_listen(struct store *s, struct sf_err *err)
 {
@@ -882,99 +720,6 @@ store_host_drain(struct store *s)
     return sqldb_notifications(s->db, count_note, NULL);
 }
 
-/* Why job id cannot be attached: SF_ENOTFOUND or SF_EAGAIN naming its state. */
-static int
-not_attachable(struct store *s, int64_t id, struct sf_err *err)
-{
-    struct job_row j;
-    int rc = store_job_get(s, id, &j, err);
-    if (rc)
-        return rc;
-    return sf_err_set(err, SF_EAGAIN,
-                      "job %lld is %s: a host attaches a ready, printing, paused or interrupted "
-                      "job",
-                      (long long)id, job_state_name(j.state));
-}
-
-/* store_job_attach in the caller's transaction, the new token into *fence. */
-static int
-attach_tx(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
-          struct sf_err *err)
-{
-    int64_t now = clock_wall_ms();
-    struct sqldb_stmt *st;
-    int rc = host_hold(s, host, token, now, err);
-    if (rc || (rc = store_prepare(s, &st,
-                                  "UPDATE jobs SET claimed_by = ?1, fence = fence + 1,"
-                                  " updated_ms = ?2 WHERE id = ?3 AND state IN ('ready',"
-                                  "'printing','paused','interrupted') RETURNING fence, state",
-                                  err)))
-        return rc;
-    sqldb_bind_text(st, 1, host);
-    sqldb_bind_int64(st, 2, now);
-    sqldb_bind_int64(st, 3, id);
-    char state[16] = "";
-    rc = sqldb_step(st);
-    if (rc == SQLDB_ROW) {
-        *fence = sqldb_column_int64(st, 0);
-        store_copy_text(state, sizeof(state), st, 1);
-    }
-    sqldb_finalize(st);
-    if (rc != SQLDB_ROW)
-        return rc == SQLDB_DONE ? not_attachable(s, id, err) : store_db_fail(s, err, "attach job");
-    char detail[160];
-    snprintf(detail, sizeof(detail), "host '%s' holds it (%s), fencing token %lld", host, state,
-             (long long)*fence);
-    return store_log_event(s, id, NULL, "job-attach", detail, err);
-}
-
-int
-store_job_attach(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
-                 struct sf_err *err)
-{
-    int64_t f = 0;
-    int rc = store_begin(s, err);
-    if (rc || (rc = end_tx(s, attach_tx(s, host, token, id, &f, err), err)))
-        return rc;
-    if (fence)
-        *fence = f;
-    return SF_OK;
-}
-
-int
-store_job_fence(struct store *s, int64_t id, int64_t fence, struct sf_err *err)
-{
-    struct sqldb_stmt *st;
-    /* an UPDATE, not a SELECT: it locks the row on PostgreSQL until the caller commits */
-    int rc =
-        store_prepare(s, &st, "UPDATE jobs SET fence = fence WHERE id = ?1 AND fence = ?2", err);
-    if (rc)
-        return rc;
-    sqldb_bind_int64(st, 1, id);
-    sqldb_bind_int64(st, 2, fence);
-    if ((rc = store_step_done(s, st, err, "check fencing token")))
-        return rc;
-    if (sqldb_changes(s->db) == 1)
-        return SF_OK;
-    if ((rc = store_prepare(s, &st, "SELECT fence, claimed_by FROM jobs WHERE id = ?1", err)))
-        return rc;
-    sqldb_bind_int64(st, 1, id);
-    rc = sqldb_step(st);
-    int64_t cur = rc == SQLDB_ROW ? sqldb_column_int64(st, 0) : 0;
-    char holder[STORE_HOST_NAME_MAX] = "";
-    if (rc == SQLDB_ROW)
-        store_copy_text(holder, sizeof(holder), st, 1);
-    sqldb_finalize(st);
-    if (rc == SQLDB_DONE)
-        return sf_err_set(err, SF_ENOTFOUND, "job %lld: no such job", (long long)id);
-    if (rc != SQLDB_ROW)
-        return store_db_fail(s, err, "read fencing token");
-    return sf_err_set(err, SF_ESTALE,
-                      "job %lld: fencing token %lld is stale: host '%s' holds the job now "
-                      "(token %lld)",
-                      (long long)id, (long long)fence, holder[0] ? holder : "none", (long long)cur);
-}
-
 /* store_host_printer_set in the caller's transaction. */
 static int
 printer_set_tx(struct store *s, const char *host, int64_t token, const char *printer,
@@ -982,7 +727,7 @@ printer_set_tx(struct store *s, const char *host, int64_t token, const char *pri
 {
     int64_t now = clock_wall_ms();
     struct sqldb_stmt *st;
-    int rc = host_hold(s, host, token, now, err);
+    int rc = store_host_hold(s, host, token, now, err);
     if (rc ||
         (rc = store_prepare(s, &st, "SELECT host FROM host_printers WHERE printer = ?1", err)))
         return rc;
@@ -1019,5 +764,5 @@ store_host_printer_set(struct store *s, const char *host, int64_t token, const c
                        enum printer_state state, struct sf_err *err)
 {
     int rc = store_begin(s, err);
-    return rc ? rc : end_tx(s, printer_set_tx(s, host, token, printer, state, err), err);
+    return rc ? rc : store_end_tx(s, printer_set_tx(s, host, token, printer, state, err), err);
 }

@@ -236,4 +236,12 @@ int store_file_keep_as(struct store_file *f, const char *sha, struct sf_err *err
 int store_blob_upload(struct sqldb *db, const char *path, const char *sha, struct sf_err *err);
 int store_blob_fetch(struct sqldb *db, const char *dir, const char *sha, struct sf_err *err);
 
+/* store_host.c, shared with store_claim.c: the engine is PostgreSQL; end the transaction a
+   body ran in (commit on SF_OK, else roll back); in the caller's transaction, hold host
+   name's lease row, refused (SF_ESTALE) unless token's lease runs at now_ms. */
+bool store_is_pg(const struct store *s);
+int store_end_tx(struct store *s, int rc, struct sf_err *err);
+int store_host_hold(struct store *s, const char *name, int64_t token, int64_t now_ms,
+                    struct sf_err *err);
+
 #endif
