@@ -331,7 +331,8 @@ int store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_
  * already first (last).
  */
 int store_job_move(struct store *s, int64_t id, int by, struct sf_err *err);
-/* Set why a job waits (scheduler); writes only when it changed. */
+/* Set why a job waits (scheduler); writes only when it changed and the job still waits
+   (queued, preparing, ready): a late write never replaces a cancelled or started job's reason. */
 int store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_err *err);
 
 /* Record a printer's state (creating the row on first sight) and log the change. */

@@ -830,11 +830,14 @@ store_job_set_reason(struct store *s, int64_t id, const char *reason, struct sf_
         snprintf(cut, sizeof(cut), "%.*s...", (int)end, reason);
         reason = cut;
     }
+    /* Only while the job waits: the scheduler's write goes through the store thread, so it
+       may land after the job was cancelled or started, and must not replace that reason. */
     int rc = update_job_field(s, id,
                               "UPDATE jobs SET reason = ?1, updated_ms = ?2"
-                              " WHERE id = ?3 AND reason != ?1",
+                              " WHERE id = ?3 AND reason != ?1"
+                              " AND state IN ('queued', 'preparing', 'ready')",
                               0, reason, err);
-    return rc == SF_ENOTFOUND ? SF_OK : rc; /* unchanged, or gone: nothing to write */
+    return rc == SF_ENOTFOUND ? SF_OK : rc; /* unchanged, gone or no longer waiting */
 }
 
 /* ---- history, events, checks ---- */

@@ -213,12 +213,24 @@ tdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, vo
 }
 
 static struct tdrv *
-tdrv_named(const char *name)
+tdrv_find(const char *name)
 {
     for (int i = n_tdrvs - 1; i >= 0; i--)
         if (tdrvs[i] && strcmp(tdrvs[i]->base.name, name) == 0)
             return tdrvs[i];
     return NULL;
+}
+
+/* tdrv_find, never NULL: the callers write through it (gcc -O2's array-bounds check said so). */
+static struct tdrv *
+tdrv_named(const char *name)
+{
+    struct tdrv *t = tdrv_find(name);
+    if (!t) {
+        fprintf(stderr, "test_farm: no test driver named '%s'\n", name);
+        abort();
+    }
+    return t;
 }
 
 /* ---- prepare hook: a real (tiny) G-code file, size from the part text ---- */
@@ -402,7 +414,7 @@ drivers_started(void)
     for (size_t i = 0; i < farm_printer_count(fx.f); i++) {
         struct printer_info info;
         farm_printer_info(fx.f, i, &info);
-        struct tdrv *t = tdrv_named(info.cfg->name);
+        struct tdrv *t = tdrv_find(info.cfg->name);
         if (info.state == PRINTER_PRINTING && info.job_id && t && t->base.status.state == DRV_IDLE)
             return false;
     }

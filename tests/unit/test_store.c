@@ -1195,6 +1195,28 @@ T_CASE(store_cancel_copy_keeps_the_job_and_the_bed_names_it)
     store_close(s);
 }
 
+/* The scheduler's reason lands through the store thread, maybe after the
+   job was cancelled: it must not replace the cancel's reason (the history
+   page showed a cancelled job as "fits no printer"). */
+T_CASE(store_waiting_reason_never_replaces_a_cancelled_jobs)
+{
+    struct sf_err err;
+    int64_t id;
+    struct store *s = store_with_job("late-reason", 1, &id);
+    T_TRUE(s && id > 0);
+    T_OK(store_job_set_reason(s, id, "fits no printer: mk3: material TPU not loaded", &err), &err);
+    struct job_row j;
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    T_EQ_STR(j.reason, "fits no printer: mk3: material TPU not loaded");
+    struct job_event_args cancel = { .reason = "cancelled by an operator" };
+    T_OK(store_job_event(s, id, JOB_EV_CANCEL, &cancel, NULL, &err), &err);
+    T_OK(store_job_set_reason(s, id, "waits for a printer: mk3 is printing", &err), &err);
+    T_OK(store_job_get(s, id, &j, &err), &err);
+    T_EQ_STR(job_state_name(j.state), "cancelled");
+    T_EQ_STR(j.reason, "cancelled by an operator");
+    store_close(s);
+}
+
 /* A reason longer than a job row holds is cut at a word, with "...". */
 T_CASE(store_long_reason_is_cut_at_a_word)
 {

@@ -134,15 +134,14 @@ T_CASE(storeq_writes_in_the_order_posted)
     struct job_event_args pa = { .lines_acked = 305 };
     T_OK(storeq_job_event(fx.q, id, JOB_EV_PAUSE, &pa, "mk3", on_event, &pause), NULL);
     T_OK(storeq_printer_bed_set(fx.q, "mk3", true), NULL);
-    T_OK(storeq_job_set_reason(fx.q, id, "first"), NULL);
-    T_OK(storeq_job_set_reason(fx.q, id, "second"), NULL);
+    T_OK(storeq_printer_bed_set(fx.q, "mk3", false), NULL);
+    T_OK(storeq_printer_bed_set(fx.q, "mk3", true), NULL);
     T_OK(storeq_sync(fx.q, -1, &err), &err);
     T_EQ_INT(storeq_depth(fx.q), 0);
     struct job_row j;
     T_OK(store_job_get(fx.s, id, &j, &err), &err);
     T_EQ_INT(j.state, JOB_PAUSED);
     T_EQ_INT(j.lines_acked, 305);
-    T_EQ_STR(j.reason, "second");
     bool full = false;
     T_OK(store_printer_bed_get(fx.s, "mk3", &full, &err), &err);
     T_TRUE(full);
@@ -411,7 +410,7 @@ call_fn(struct store *s, void *ud, struct sf_err *err)
     if (rc)
         return rc;
     c->saw = j.state;
-    return store_job_set_reason(s, c->id, "from a call", err);
+    return store_printer_bed_set(s, "mk3", true, err);
 }
 
 static int
@@ -455,9 +454,9 @@ T_CASE(storeq_call_and_barrier_answer_in_order_on_the_loop)
     T_EQ_INT(refused.rc, SF_EINVAL);
     T_EQ_STR(refused.msg, "refused by the call");
     T_EQ_INT(barrier.rc, SF_OK);
-    struct job_row j;
-    T_OK(store_job_get(fx.s, fx.id, &j, &err), &err);
-    T_EQ_STR(j.reason, "from a call");
+    bool full = false;
+    T_OK(store_printer_bed_get(fx.s, "mk3", &full, &err), &err);
+    T_TRUE(full); /* the call's write */
     struct storeq_stats st;
     storeq_stats(fx.q, &st);
     T_EQ_INT(st.failed, 1); /* the refusal, counted */
