@@ -249,11 +249,13 @@ check: deps
 # The store on both engines: its unit tests on SQLite, and tests/integ/store_pg.sh,
 # which starts a PostgreSQL server of its own (initdb into a temp dir, a Unix
 # socket) and runs the store, farm and API tests on it; then the daemon as three hosts on
-# one PostgreSQL (tests/integ/farmd_hosts.sh).  `make check` runs them all.
+# one PostgreSQL (tests/integ/farmd_hosts.sh) and the farm's own scenarios on it
+# (tests/integ/farmd_pg.sh).  `make check` runs them all.
 check-pg: deps
 	$(MAKE) --no-print-directory SAN=1 tests
 	tests/run.sh build/san store
 	tests/run.sh build/san farmd_hosts
+	tests/run.sh build/san farmd_pg
 
 T ?=
 SECS ?= 60

@@ -660,6 +660,25 @@ run(struct loop *l, void *ud)
     f->reading = true;
 }
 
+/*
+ * Say why job j waits, once: the scheduler runs at every change, and a
+ * write per waiting job per pass (a statement each through the store
+ * thread, even unchanged) was most of what 10,000 queued jobs cost a host.
+ * A long reason the row cut ("...") is written again; rare.  On a shared
+ * store with other live hosts a queued job's reason is this host's only for
+ * a printer of its own (another host's printer may take any other job).
+ */
+static void
+post_reason(struct farm *f, const struct job_row *j, const char *why)
+{
+    if (strcmp(j->reason, why) == 0)
+        return;
+    if (!farm_host_alone(f) && j->state == JOB_QUEUED &&
+        !(j->opts.printer[0] && farm_find(f, j->opts.printer)))
+        return;
+    storeq_job_set_reason(f->q, j->id, why);
+}
+
 /* Plan and act on jobs (n, the live ones as read; freed here). */
 static void
 schedule(struct farm *f, struct job_row *jobs, size_t n)
@@ -712,8 +731,7 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
         if (jobs[i].state != JOB_QUEUED)
             continue;
         if (why[i][0] || f->preparing >= pool_size(f->pool)) {
-            if (!farm_host_on(f)) /* another host's printer may take it */
-                storeq_job_set_reason(f->q, jobs[i].id, why[i]);
+            post_reason(f, &jobs[i], why[i]);
             continue;
         }
         size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
@@ -722,7 +740,7 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
     }
     for (size_t i = 0; i < n; i++)
         if (jobs[i].state == JOB_READY && why[i][0])
-            storeq_job_set_reason(f->q, jobs[i].id, why[i]);
+            post_reason(f, &jobs[i], why[i]);
 out:
     free(sj);
     free(sp);

@@ -34,6 +34,7 @@ struct farm_host {
     int64_t lease_ms; /* host_lease_s */
     uint64_t timer;   /* the beat */
     int fd;           /* the listener's socket on the loop, -1 if none */
+    int peers;        /* other live hosts at the last join or beat; -1 if not known */
 };
 
 static void listen_arm(struct farm_host *h);
@@ -42,6 +43,23 @@ bool
 farm_host_on(const struct farm *f)
 {
     return f && f->host;
+}
+
+bool
+farm_host_alone(const struct farm *f)
+{
+    return !farm_host_on(f) || (f->host->joined && f->host->peers == 0);
+}
+
+/* Count the other live hosts (farm_host_alone). */
+static void
+count_peers(struct farm_host *h)
+{
+    struct sf_err err;
+    if (store_host_peers(h->f->s, h->name, clock_wall_ms(), &h->peers, &err)) {
+        log_warn("host", "%s: %s", h->name, err.msg);
+        h->peers = -1;
+    }
 }
 
 /* The machine's hostname as a host name: letters, digits, '.', '-', '_' (others as '-'). */
@@ -90,6 +108,7 @@ join(struct farm_host *h)
     h->joined = true;
     h->waiting = false;
     own(h);
+    count_peers(h);
     log_info("host", "%s joined (token %lld, lease %.1f s, %zu printers)", h->name,
              (long long)h->token, (double)h->lease_ms / 1000, h->f->n_printers);
     farm_host_wake(h->f); /* the others see the printers; this one schedules */
@@ -123,6 +142,8 @@ on_beat(struct loop *l, void *ud)
         farm_host_wake(h->f);
         farm_kick(h->f);
     }
+    if (h->joined)
+        count_peers(h);
     if (h->fd < 0)
         listen_arm(h);
     h->timer = loop_timer_add(l, h->lease_ms / FARM_HOST_BEATS_PER_LEASE, on_beat, h);
@@ -183,6 +204,7 @@ farm_host_start(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
         return sf_err_set(err, SF_ENOMEM, "host: out of memory");
     h->f = f;
     h->fd = -1;
+    h->peers = -1;
     h->lease_ms = (int64_t)(cfg->host_lease_s * 1000);
     if (cfg->host[0])
         snprintf(h->name, sizeof(h->name), "%s", cfg->host);

@@ -58,6 +58,9 @@ int farm_host_start(struct farm *f, const struct farmcfg *cfg, struct sf_err *er
 void farm_host_stop(struct farm *f);
 /* f runs as one of several hosts. */
 bool farm_host_on(const struct farm *f);
+/* f is the farm's only host: a single host, or joined with no other live host at its last
+   beat (what it says of a waiting job is then the whole farm's word). */
+bool farm_host_alone(const struct farm *f);
 
 /* Whose live jobs f's scheduler reads (on the store thread): name "" for a single host
    (store_job_live), the host's name for store_job_live_host; false before the host joined

@@ -417,6 +417,25 @@ store_host_beat(struct store *s, const char *name, int64_t token, int64_t lease_
     return sqldb_changes(s->db) == 1 ? SF_OK : lease_lost(s, name, token, now, err);
 }
 
+/* How many hosts other than name hold a lease running at now_ms, into *n. */
+int
+store_host_peers(struct store *s, const char *name, int64_t now_ms, int *n, struct sf_err *err)
+{
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st,
+                           "SELECT count(*) FROM hosts WHERE name != ?1 AND reaped_ms = 0"
+                           " AND lease_until_ms > ?2",
+                           err);
+    if (rc)
+        return rc;
+    sqldb_bind_text(st, 1, name);
+    sqldb_bind_int64(st, 2, now_ms);
+    rc = sqldb_step(st);
+    *n = rc == SQLDB_ROW ? (int)sqldb_column_int64(st, 0) : 0;
+    sqldb_finalize(st);
+    return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "count the live hosts");
+}
+
 /* ---- printers ---- */
 
 /* Printer p's owner, if a host other than name whose lease runs at now_ms: SF_EAGAIN. */

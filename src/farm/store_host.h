@@ -122,6 +122,8 @@ struct store_host_row {
     int n_claimed;          /* jobs it holds: preparing, ready, printing, paused, interrupted */
 };
 
+/* How many hosts other than name hold a lease running at now_ms (*n). */
+int store_host_peers(struct store *s, const char *name, int64_t now_ms, int *n, struct sf_err *err);
 /* Every host, by name, as of now_ms, into *rows (free() it). */
 int store_host_list(struct store *s, int64_t now_ms, struct store_host_row **rows, size_t *n,
                     struct sf_err *err);

@@ -10,6 +10,7 @@
 # SLIMFARM_URL.  Returns 1 when the daemon exits or says nothing for 60 s.
 daemon_start() {
   local cfg=$1 log=$2 from line end=$((SECONDS + 60))
+  daemon_store "$cfg" || return 1
   touch "$log"
   from=$(($(stat -c %s "$log") + 1))
   "$D" -c "$cfg" >> "$log" 2>&1 &
@@ -26,4 +27,22 @@ daemon_start() {
     sleep 0.05
   done
   return 1
+}
+
+# daemon_store CONFIG: with SLIMFARM_TEST_STORE (a PostgreSQL server's URL,
+# tests/integ/farmd_pg.sh), the config's [farm] gains `store:` on a database of
+# its own, named for the config's path (a restarted daemon finds its jobs
+# again), created once; a config that names a store keeps it.  Without it,
+# nothing: the daemon's SQLite in its data dir.
+daemon_store() {
+  local cfg=$1 db url
+  [ -n "${SLIMFARM_TEST_STORE:-}" ] || return 0
+  grep -q '^store:' "$cfg" && return 0
+  db=t_$(realpath "$cfg" | md5sum | cut -c1-16)
+  if ! psql -qtA "$SLIMFARM_TEST_STORE" -c "SELECT 1 FROM pg_database WHERE datname = '$db'" | grep -q 1; then
+    psql -q "$SLIMFARM_TEST_STORE" -c "CREATE DATABASE $db" || return 1
+  fi
+  url=$(echo "$SLIMFARM_TEST_STORE" | sed "s|^\(postgresql://[^/]*/\)[^?]*|\1$db|")
+  awk -v line="store: $url" '{ print } !done && /^\[farm\]/ { print line; done = 1 }' "$cfg" > "$cfg.store" &&
+    cat "$cfg.store" > "$cfg" && rm -f "$cfg.store" # (cat: the config keeps its mode)
 }
