@@ -38,6 +38,7 @@
 #include "api_page.h"
 #include "api_printers.h"
 #include "api_read.h"
+#include "api_remote.h"
 #include "api_stats.h"
 #include "api_writes.h"
 #include "partcheck.h"
@@ -517,6 +518,8 @@ printer_cmd(void *ctx, const struct route_args *args, const struct http_req *req
         return;
     }
     route_key_label(req, who, sizeof(who));
+    if (api_remote_try(a->cfg.farm, args->name, "command", line, who, resp))
+        return; /* another host's printer: carried to it */
     int rc = jobctl_printer_command(a->cfg.farm, args->name, line, who, &err);
     if (rc) {
         http_fail(resp, rc, err.msg);
@@ -539,6 +542,8 @@ printer_estop_route(void *ctx, const struct route_args *args, const struct http_
     struct sf_err err;
     char who[16];
     route_key_label(req, who, sizeof(who));
+    if (api_remote_try(a->cfg.farm, args->name, "emergency-stop", NULL, who, resp))
+        return;
     int rc = jobctl_printer_estop(a->cfg.farm, args->name, who, &err);
     printer_acted(a, args->name, rc, &err, resp);
 }

@@ -27,6 +27,7 @@
 #include "../farm/jobctl.h"
 #include "api_compat.h"
 #include "api_json.h"
+#include "api_remote.h"
 #include "partcheck.h"
 
 /*
@@ -402,6 +403,8 @@ api_writes_printer_act(struct api_writes *ws, const char *name, enum printer_act
                        struct http_resp *resp)
 {
     struct sf_err err;
+    if (api_remote_try(ws->farm, name, printer_action_name(act), NULL, NULL, resp))
+        return; /* another host's printer: carried to it */
     struct api_write *w = mem_calloc(1, sizeof(*w));
     if (w && defer(ws, resp, w)) {
         snprintf(w->printer, sizeof(w->printer), "%s", name);

@@ -129,7 +129,7 @@ add_tx(struct store *s, const char *from, const char *printer, const char *kind,
         return sf_err_set(err, SF_EINVAL, "printer '%.64s' is host %s's own: not sent to itself",
                           printer, from);
     if (!live)
-        return sf_err_set(err, SF_EUNREACH,
+        return sf_err_set(err, SF_ESTALE,
                           "printer '%.64s' is offline: its host %s is down (its lease ran out "
                           "%.0f s ago); nothing was sent",
                           printer, owner, (double)(down_ms > 0 ? down_ms : 0) / 1000);

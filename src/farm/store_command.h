@@ -17,7 +17,7 @@
  *
  * On SQLite (one host) the table exists and stays empty: no other host
  * asks.  Errors: SF_EINVAL (bad argument, named), SF_ENOTFOUND (no such
- * printer or row), SF_EUNREACH (the owner's lease ran out), SF_EIO from
+ * printer or row), SF_ESTALE (the owner's lease ran out), SF_EIO from
  * the engine.  Thread: the store's, as store.h.
  */
 #ifndef SF_FARM_STORE_COMMAND_H
@@ -64,8 +64,9 @@ struct store_command {
  * Ask printer's owner to run kind (line, who: may be NULL) for host from,
  * by deadline_ms (wall clock): the row into *out, and a NOTIFY to the
  * owner, in one transaction.  SF_ENOTFOUND: no live or dead host owns
- * printer; SF_EUNREACH: its owner's lease ran out (the message names the
- * host and how long ago: "host down"); SF_EINVAL: from owns printer itself,
+ * printer; SF_ESTALE: its owner's lease ran out (the message names the
+ * host and how long ago: "host down"; not SF_EUNREACH, which the store
+ * queue takes for its connection lost and tries again); SF_EINVAL: from owns printer itself,
  * or a bad argument.  Rows finished over STORE_COMMAND_KEEP_MS ago are
  * deleted on the way.
  */

@@ -149,7 +149,7 @@ T_CASE(command_to_a_host_down_or_no_printer_is_refused)
     T_OK(store_host_beat(p.a, "a", p.ta, 1, &err), &err);
     int64_t later = clock_wall_ms() + 5000;
     T_ERR(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, later, later + WAIT_MS, &c, &err),
-          SF_EUNREACH, &err, "its host a is down");
+          SF_ESTALE, &err, "its host a is down");
     T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
     T_EQ_INT(n, 0);
     free(rows);
