@@ -427,19 +427,23 @@ printers_answer(struct api *a, const char *name, struct http_resp *resp)
     resp->json = json_pack("{so}", "printers", arr);
 }
 
+static void
+printer_answer(void *ud, const char *name, struct http_resp *resp)
+{
+    printers_answer(ud, name, resp);
+}
+
 /* GET /api/printers (args->name ""), or /api/printers/NAME. */
 static void
 printers_get(void *ctx, const struct route_args *args, const struct http_req *req,
              struct http_resp *resp)
 {
     (void)req;
-    printers_answer(ctx, args->name[0] ? args->name : NULL, resp);
-}
-
-static void
-printer_answer(void *ud, const char *name, struct http_resp *resp)
-{
-    printers_answer(ud, name, resp);
+    struct api *a = ctx;
+    const char *name = args->name[0] ? args->name : NULL;
+    /* one of several hosts: the other hosts' printers too, read off the loop */
+    if (!api_remote_printers(a->reads, a->cfg.farm, name, printer_answer, a, resp))
+        printers_answer(a, name, resp);
 }
 
 /* The end of an action on printer name: its refusal (rc, err), or the printer as it is now. */

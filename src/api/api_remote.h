@@ -18,6 +18,7 @@
 #include <stdbool.h>
 
 #include "../farm/farm.h"
+#include "api_read.h"
 #include "http.h"
 
 /*
@@ -27,5 +28,21 @@
  */
 bool api_remote_try(struct farm *f, const char *name, const char *kind, const char *line,
                     const char *who, struct http_resp *resp);
+
+/* The API's own printers (NULL name: all, as {"printers": [...]}; else {"printer": ...}). */
+typedef void (*api_remote_local_fn)(void *ud, const char *name, struct http_resp *resp);
+
+/*
+ * GET /api/printers (name NULL) or /api/printers/NAME on one of several
+ * hosts: this host's own printers from local(ud, ...), each with "host"
+ * (this host's name), and every printer another host owns as that host
+ * last wrote it to the store (read on reads' thread: the loop never waits
+ * on the database), with "host", "remote": true, and state "offline" and
+ * a message saying the host is down when its lease ran out.  True when
+ * answered (or deferred); false when f is not one of several hosts (the
+ * caller answers as before).
+ */
+bool api_remote_printers(struct api_read *reads, struct farm *f, const char *name,
+                         api_remote_local_fn local, void *ud, struct http_resp *resp);
 
 #endif

@@ -127,8 +127,8 @@ static int
 add_fn(struct store *s, void *arg, struct sf_err *err)
 {
     struct ask *a = arg;
-    return store_command_add(s, a->c.from, a->c.printer, a->c.kind, a->c.line, a->c.who,
-                             a->now_ms, a->deadline_ms, &a->c, err);
+    return store_command_add(s, a->c.from, a->c.printer, a->c.kind, a->c.line, a->c.who, a->now_ms,
+                             a->deadline_ms, &a->c, err);
 }
 
 static int
@@ -153,9 +153,9 @@ post(struct ask *a, enum ask_op op)
 {
     struct storeq *q = a->r->f->q;
     a->op = op;
-    int rc = op == ASK_ADD      ? storeq_call(q, add_fn, a, "remote", on_ask, a)
-             : op == ASK_READ   ? storeq_read(q, read_fn, a, on_ask, a)
-                                : storeq_call(q, expire_fn, a, "remote", on_ask, a);
+    int rc = op == ASK_ADD    ? storeq_call(q, add_fn, a, "remote", on_ask, a)
+             : op == ASK_READ ? storeq_read(q, read_fn, a, on_ask, a)
+                              : storeq_call(q, expire_fn, a, "remote", on_ask, a);
     if (rc) {
         answer(a, SF_ENOMEM, "remote command: out of memory");
         return false;
@@ -259,8 +259,7 @@ farm_remote_send(struct farm *f, const char *name, const char *kind, const char 
         return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
     if (!farm_host_reader(f, me, sizeof(me)) || !me[0])
         return sf_err_set(err, SF_EAGAIN,
-                          "printer %.64s: this host has not joined the farm yet: try again",
-                          name);
+                          "printer %.64s: this host has not joined the farm yet: try again", name);
     struct ask *a = mem_calloc(1, sizeof(*a));
     if (!a)
         return sf_err_set(err, SF_ENOMEM, "remote command: out of memory");
@@ -347,8 +346,8 @@ finish(struct run *x, int rc, const char *msg)
     struct printer *p = farm_find(r->f, x->printer);
     snprintf(x->state, sizeof(x->state), "%s", p ? printer_state_name(printer_state(p)) : "");
     if (rc)
-        log_warn("remote", "printer %s: %s from host %s refused: %s", x->printer, x->kind,
-                 x->from, x->message);
+        log_warn("remote", "printer %s: %s from host %s refused: %s", x->printer, x->kind, x->from,
+                 x->message);
     else
         log_info("remote", "printer %s: %s from host %s done (%s)", x->printer, x->kind, x->from,
                  x->state);
@@ -424,8 +423,7 @@ on_taken(void *ud, const struct storeq_result *res)
     if (!r->stopped) {
         r->taking = false;
         if (res->rc)
-            log_warn("remote", "%s: take the commands for this host: %s", t->host,
-                     res->err->msg);
+            log_warn("remote", "%s: take the commands for this host: %s", t->host, res->err->msg);
         for (size_t i = 0; res->rc == SF_OK && i < t->n; i++)
             run_one(r, &t->rows[i]);
         if (r->retake) {
@@ -470,7 +468,7 @@ on_payload(void *ud, const char *host)
     char me[STORE_HOST_NAME_MAX];
     if (!farm_host_reader(r->f, me, sizeof(me)) || strcmp(host, me) != 0)
         return;
-    take(r); /* a command for this host's printers, */
+    take(r);                                            /* a command for this host's printers, */
     for (struct ask *a = r->asks, *next; a; a = next) { /* or an answer to one it asked */
         next = a->next;
         if (a->busy)

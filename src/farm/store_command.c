@@ -284,6 +284,51 @@ store_command_expire(struct store *s, int64_t id, struct store_command *out, str
     return store_command_get(s, id, out, err);
 }
 
+static void
+read_printer(struct sqldb_stmt *st, void *row)
+{
+    struct store_remote_printer *p = row;
+    memset(p, 0, sizeof(*p));
+    store_copy_text(p->name, sizeof(p->name), st, 0);
+    store_copy_text(p->host, sizeof(p->host), st, 1);
+    store_copy_text(p->state, sizeof(p->state), st, 2);
+    p->live = sqldb_column_int(st, 3) != 0;
+    p->down_ms = sqldb_column_int64(st, 4);
+    p->bed_full = sqldb_column_int(st, 5) != 0;
+    p->job_id = sqldb_column_int64(st, 6);
+    p->lines_acked = sqldb_column_int64(st, 7);
+    p->gcode_lines = sqldb_column_int64(st, 8);
+}
+
+int
+store_printers_others(struct store *s, const char *me, int64_t now_ms,
+                      struct store_remote_printer **rows, size_t *n, struct sf_err *err)
+{
+    struct sqldb_stmt *st;
+    void *out = NULL;
+    int rc = store_select(
+        s, &st,
+        "SELECT hp.printer, hp.host, coalesce(p.state, ''),"
+        " CASE WHEN h.reaped_ms = 0 AND h.lease_until_ms > ?2 THEN 1 ELSE 0 END,"
+        " ?2 - h.lease_until_ms, coalesce(p.bed_full, 0), coalesce(j.id, 0),"
+        " coalesce(j.lines_acked, 0), coalesce(j.gcode_lines, 0)"
+        " FROM host_printers hp JOIN hosts h ON h.name = hp.host"
+        " LEFT JOIN printers p ON p.name = hp.printer"
+        " LEFT JOIN jobs j ON j.id = (SELECT max(id) FROM jobs WHERE printer = hp.printer"
+        " AND state IN ('printing','paused'))"
+        " WHERE hp.host != ?1 ORDER BY hp.printer",
+        &out, n, err);
+    *rows = NULL;
+    if (rc)
+        return rc;
+    sqldb_bind_text(st, 1, me);
+    sqldb_bind_int64(st, 2, now_ms);
+    rc = store_read_rows(s, st, sizeof(struct store_remote_printer), read_printer, &out, n,
+                         "other hosts' printers", err);
+    *rows = out;
+    return rc;
+}
+
 int
 store_command_listen(struct store *s, struct sf_err *err)
 {

@@ -101,6 +101,25 @@ int store_command_get(struct store *s, int64_t id, struct store_command *out, st
 int store_command_expire(struct store *s, int64_t id, struct store_command *out,
                          struct sf_err *err);
 
+/* A printer another host owns, as that host last wrote it (plain data). */
+struct store_remote_printer {
+    char name[64];
+    char host[STORE_HOST_NAME_MAX]; /* its owner */
+    char state[16];                 /* printer_state_name, as the owner wrote it ("" if never) */
+    bool live;                      /* the owner's lease runs */
+    int64_t down_ms;                /* when not live: how long ago the lease ran out */
+    bool bed_full;
+    int64_t job_id;                   /* the job printing or paused on it, 0 if none, */
+    int64_t lines_acked, gcode_lines; /* and how far it is */
+};
+
+/*
+ * Every printer a host other than me owns, by name, as of now_ms, into
+ * *rows (free() it): what `GET /api/printers` on me lists beside its own.
+ */
+int store_printers_others(struct store *s, const char *me, int64_t now_ms,
+                          struct store_remote_printer **rows, size_t *n, struct sf_err *err);
+
 /*
  * The wake-ups: LISTEN on STORE_COMMAND_CHANNEL on a connection kept for
  * it; drain hands each notification's payload (a host name) to fn and

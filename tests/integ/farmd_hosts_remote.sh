@@ -4,7 +4,9 @@
 # farm_remote.h): three slimfarmd hosts on one PostgreSQL (lib/pg.sh), each
 # with a simulated Marlin.
 #
-# Through host a's API: b's Marlin, printing, is paused (200, the answer
+# Every host's GET /api/printers (and `slimfarm printers`) lists the whole
+# farm, each printer with its host; another host's with the state that host
+# wrote, "offline" once the host is down.  Through host a's API: b's Marlin, printing, is paused (200, the answer
 # names host b and the state paused; the simulator's executed log shows the
 # park move) and resumed (printing again); a refusal of b's own rules comes
 # back with its status (409); a manual G-code line reaches c's Marlin.
@@ -89,11 +91,17 @@ act a b_mk pause
 parked() { [ "$(parks)" = 1 ]; }
 wait_for 60 parked || fail "b_mk's executed log shows no pause: $(tail -5 "$tmp/b_mk.log")"
 on b "$C" printers | grep -qE '^b_mk +paused' || fail "b says: $(on b "$C" printers)"
+# a lists the whole farm: its own printer and the others' as their hosts wrote them
+listed() { on a api /api/printers | json '" ".join(p["name"] + ":" + p["host"] + ":" + p["state"] for p in d["printers"])'; }
+farm_is() { [ "$(listed)" = "$1" ]; }
+wait_for 30 farm_is "a_mk:a:idle b_mk:b:paused c_mk:c:idle" || fail "a lists: $(listed)"
 grep -q "printer b_mk: pause from host a done" "$tmp/b.log" || fail "b's log: $(grep remote "$tmp/b.log")"
 act a b_mk resume
 [ "$code" = 200 ] && [ "$(body 'd["printer"]["state"]')" = printing ] ||
   fail "resume b_mk through a: $code $(cat "$tmp/act.body")"
 on b "$C" printers | grep -qE '^b_mk +printing' || fail "b says: $(on b "$C" printers)"
+cli_lists() { on c "$C" printers | grep -qE '^b_mk +printing .*on host b'; }
+wait_for 30 cli_lists || fail "slimfarm printers on c: $(on c "$C" printers)"
 # b's own rules judge: a resume of a printing printer is "not now", with b's reason
 act a b_mk resume
 [ "$code" = 409 ] || fail "a second resume: $code $(cat "$tmp/act.body")"
@@ -131,6 +139,9 @@ unset 'hpid[c]'
 down() { act a c_mk pause; [ "$code" = 503 ]; }
 wait_for 60 down || fail "an action on a dead host's printer: $code $(cat "$tmp/act.body")"
 grep -q "host c is down" "$tmp/act.body" || fail "503's message: $(cat "$tmp/act.body")"
+farm_is "a_mk:a:idle b_mk:b:printing c_mk:c:offline" || fail "a lists: $(listed)"
+on a api /api/printers/c_mk | json 'd["printer"]["message"]' | grep -q "host c is down" ||
+  fail "c_mk's message: $(on a api /api/printers/c_mk)"
 
 # the print is b's to end: cancelled through a
 act a b_mk cancel
