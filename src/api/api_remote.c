@@ -46,6 +46,26 @@ on_answer(void *ud, const struct farm_remote_result *r)
 }
 
 bool
+api_remote_answer(struct farm *f, const char *name, const char *kind, struct http_defer *d)
+{
+    if (!farm_remote_is(f, name))
+        return false;
+    struct sf_err err;
+    struct remote_wait *w = mem_calloc(1, sizeof(*w));
+    if (w)
+        w->d = d;
+    int rc = w ? farm_remote_send(f, name, kind, NULL, NULL, on_answer, w, &err)
+               : sf_err_set(&err, SF_ENOMEM, "printer %.64s: out of memory", name);
+    if (rc == SF_OK)
+        return true;
+    free(w);
+    struct http_resp resp = { .status = 200 };
+    http_fail(&resp, rc, err.msg);
+    http_defer_answer(d, &resp);
+    return true;
+}
+
+bool
 api_remote_try(struct farm *f, const char *name, const char *kind, const char *line,
                const char *who, struct http_resp *resp)
 {
