@@ -57,11 +57,12 @@ struct ask {
     int64_t now_ms, deadline_ms;
     enum ask_op op;
     /* the loop's */
-    bool busy;      /* a request is on its way */
-    bool answered;  /* done was called: freed once no request is on its way */
-    bool heard;     /* a NOTIFY came while busy: read again */
-    bool late;      /* the deadline passed while busy: withdraw next */
-    uint64_t timer; /* the deadline */
+    char printer[64]; /* c.printer's copy: the answer at a stop reads it while c may change */
+    bool busy;        /* a request is on its way */
+    bool answered;    /* done was called: freed once no request is on its way */
+    bool heard;       /* a NOTIFY came while busy: read again */
+    bool late;        /* the deadline passed while busy: withdraw next */
+    uint64_t timer;   /* the deadline */
     farm_remote_fn done;
     void *ud;
 };
@@ -94,9 +95,9 @@ answer(struct ask *a, int rc, const char *msg)
     snprintf(err.msg, sizeof(err.msg), "%s", msg ? msg : "");
     struct farm_remote_result res = { .rc = rc,
                                       .err = &err,
-                                      .printer = a->c.printer,
-                                      .host = a->c.host,
-                                      .state = a->c.printer_state };
+                                      .printer = a->printer,
+                                      .host = a->busy ? "" : a->c.host,
+                                      .state = a->busy ? "" : a->c.printer_state };
     if (!a->answered) {
         unlink_ask(a->r, a);
         if (a->timer)
@@ -147,15 +148,15 @@ expire_fn(struct store *s, void *arg, struct sf_err *err)
 
 static void on_ask(void *ud, const struct storeq_result *res);
 
-/* Post a's next request (op); false when out of memory (a is answered). */
+/* Post a's next request (op: a read or a withdrawal); false when out of memory (a is
+   answered). */
 static bool
 post(struct ask *a, enum ask_op op)
 {
     struct storeq *q = a->r->f->q;
     a->op = op;
-    int rc = op == ASK_ADD    ? storeq_call(q, add_fn, a, "remote", on_ask, a)
-             : op == ASK_READ ? storeq_read(q, read_fn, a, on_ask, a)
-                              : storeq_call(q, expire_fn, a, "remote", on_ask, a);
+    int rc = op == ASK_READ ? storeq_read(q, read_fn, a, on_ask, a)
+                            : storeq_call(q, expire_fn, a, "remote", on_ask, a);
     if (rc) {
         answer(a, SF_ENOMEM, "remote command: out of memory");
         return false;
@@ -225,7 +226,12 @@ on_ask(void *ud, const struct storeq_result *res)
         log_warn("remote", "printer %s: command %lld: %s", a->c.printer, (long long)a->c.id,
                  res->err->msg);
         if (a->op == ASK_EXPIRE) {
-            answer(a, SF_ETIMEDOUT, res->err->msg);
+            char msg[sizeof(res->err->msg) + 160];
+            snprintf(msg, sizeof(msg),
+                     "printer %s: no answer within %d s, and its withdrawal failed (%s): its "
+                     "owner does not run it after its deadline",
+                     a->printer, FARM_REMOTE_WAIT_MS / 1000, res->err->msg);
+            answer(a, SF_ETIMEDOUT, msg);
             return;
         }
     } else if (a->op == ASK_EXPIRE) {
@@ -269,6 +275,7 @@ farm_remote_send(struct farm *f, const char *name, const char *kind, const char 
         return sf_err_set(err, SF_EINVAL, "printer %.64s: command too long", name);
     }
     snprintf(a->c.printer, sizeof(a->c.printer), "%s", name);
+    snprintf(a->printer, sizeof(a->printer), "%s", name);
     snprintf(a->c.from, sizeof(a->c.from), "%s", me);
     snprintf(a->c.kind, sizeof(a->c.kind), "%s", kind);
     snprintf(a->c.line, sizeof(a->c.line), "%s", line ? line : "");
