@@ -97,7 +97,7 @@ struct listing {
     char name[64]; /* one printer ("": all) */
     int64_t now_ms;
     /* the reader's */
-    struct store_remote_printer *rows;
+    struct store_command_printer *rows;
     size_t n;
     int rc;
     struct sf_err err;
@@ -105,7 +105,7 @@ struct listing {
 
 /* Another host's printer p as GET /api/printers shows a printer. */
 static json_t *
-remote_json(const struct store_remote_printer *p)
+remote_json(const struct store_command_printer *p)
 {
     char msg[160];
     if (p->live)
@@ -132,7 +132,7 @@ listing_read(struct store *s, void *ud, struct http_resp *resp)
 {
     (void)resp;
     struct listing *q = ud;
-    q->rc = store_printers_others(s, q->me, q->now_ms, &q->rows, &q->n, &q->err);
+    q->rc = store_command_printers(s, q->me, q->now_ms, &q->rows, &q->n, &q->err);
 }
 
 /* Set "host" on the printer objects of arr (an array, or one object). */

@@ -287,7 +287,7 @@ store_command_expire(struct store *s, int64_t id, struct store_command *out, str
 static void
 read_printer(struct sqldb_stmt *st, void *row)
 {
-    struct store_remote_printer *p = row;
+    struct store_command_printer *p = row;
     memset(p, 0, sizeof(*p));
     store_copy_text(p->name, sizeof(p->name), st, 0);
     store_copy_text(p->host, sizeof(p->host), st, 1);
@@ -301,8 +301,8 @@ read_printer(struct sqldb_stmt *st, void *row)
 }
 
 int
-store_printers_others(struct store *s, const char *me, int64_t now_ms,
-                      struct store_remote_printer **rows, size_t *n, struct sf_err *err)
+store_command_printers(struct store *s, const char *me, int64_t now_ms,
+                       struct store_command_printer **rows, size_t *n, struct sf_err *err)
 {
     struct sqldb_stmt *st;
     void *out = NULL;
@@ -323,7 +323,7 @@ store_printers_others(struct store *s, const char *me, int64_t now_ms,
         return rc;
     sqldb_bind_text(st, 1, me);
     sqldb_bind_int64(st, 2, now_ms);
-    rc = store_read_rows(s, st, sizeof(struct store_remote_printer), read_printer, &out, n,
+    rc = store_read_rows(s, st, sizeof(struct store_command_printer), read_printer, &out, n,
                          "other hosts' printers", err);
     *rows = out;
     return rc;

@@ -102,7 +102,7 @@ int store_command_expire(struct store *s, int64_t id, struct store_command *out,
                          struct sf_err *err);
 
 /* A printer another host owns, as that host last wrote it (plain data). */
-struct store_remote_printer {
+struct store_command_printer {
     char name[64];
     char host[STORE_HOST_NAME_MAX]; /* its owner */
     char state[16];                 /* printer_state_name, as the owner wrote it ("" if never) */
@@ -117,8 +117,8 @@ struct store_remote_printer {
  * Every printer a host other than me owns, by name, as of now_ms, into
  * *rows (free() it): what `GET /api/printers` on me lists beside its own.
  */
-int store_printers_others(struct store *s, const char *me, int64_t now_ms,
-                          struct store_remote_printer **rows, size_t *n, struct sf_err *err);
+int store_command_printers(struct store *s, const char *me, int64_t now_ms,
+                           struct store_command_printer **rows, size_t *n, struct sf_err *err);
 
 /*
  * The wake-ups: LISTEN on STORE_COMMAND_CHANNEL on a connection kept for

@@ -140,7 +140,7 @@ unset 'hpid[c]'
 down() { act a c_mk pause; [ "$code" = 503 ]; }
 wait_for 60 down || fail "an action on a dead host's printer: $code $(cat "$tmp/act.body")"
 grep -q "host c is down" "$tmp/act.body" || fail "503's message: $(cat "$tmp/act.body")"
-farm_is "a_mk:a:idle b_mk:b:printing c_mk:c:offline" || fail "a lists: $(listed)"
+wait_for 30 farm_is "a_mk:a:idle b_mk:b:printing c_mk:c:offline" || fail "a lists: $(listed)"
 on a api /api/printers/c_mk | json 'd["printer"]["message"]' | grep -q "host c is down" ||
   fail "c_mk's message: $(on a api /api/printers/c_mk)"
 

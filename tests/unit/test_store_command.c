@@ -216,10 +216,10 @@ T_CASE(each_host_lists_the_printers_the_others_own)
     struct sf_err err;
     struct pair p;
     T_TRUE(pair_open(&p, "list", &err));
-    struct store_remote_printer *rows;
+    struct store_command_printer *rows;
     size_t n;
     T_OK(store_printer_set(p.a, "p1", PRINTER_PAUSED, &err), &err);
-    T_OK(store_printers_others(p.b, "b", clock_wall_ms(), &rows, &n, &err), &err);
+    T_OK(store_command_printers(p.b, "b", clock_wall_ms(), &rows, &n, &err), &err);
     T_EQ_INT(n, 1);
     T_EQ_STR(rows[0].name, "p1");
     T_EQ_STR(rows[0].host, "a");
@@ -227,14 +227,14 @@ T_CASE(each_host_lists_the_printers_the_others_own)
     T_TRUE(rows[0].live);
     T_EQ_INT(rows[0].job_id, 0);
     free(rows);
-    T_OK(store_printers_others(p.a, "a", clock_wall_ms(), &rows, &n, &err), &err);
+    T_OK(store_command_printers(p.a, "a", clock_wall_ms(), &rows, &n, &err), &err);
     T_EQ_INT(n, 1);
     T_EQ_STR(rows[0].name, "p2");
     T_EQ_STR(rows[0].state, ""); /* b never wrote its state */
     free(rows);
     /* a's lease runs out: its printer is listed, not live, with how long ago */
     T_OK(store_host_beat(p.a, "a", p.ta, 1, &err), &err);
-    T_OK(store_printers_others(p.b, "b", clock_wall_ms() + 5000, &rows, &n, &err), &err);
+    T_OK(store_command_printers(p.b, "b", clock_wall_ms() + 5000, &rows, &n, &err), &err);
     T_EQ_INT(n, 1);
     T_TRUE(!rows[0].live);
     T_TRUE(rows[0].down_ms >= 4000);
