@@ -52,15 +52,16 @@ start_host() {
 on() { local h=$1; shift; SLIMFARM_URL=${hurl[$h]} "$@"; }
 psql_q() { psql -qAt "$URL" -c "$1"; }
 # act HOST PRINTER ACTION [BODY]: POST through HOST's API; the status into $code, the body
-# into $tmp/act.body
+# into $tmp/act.body, the time it took (s) into $took
 act() {
-  local path=/api/printers/$2/$3
+  local path=/api/printers/$2/$3 out
   if [ -n "${4:-}" ]; then
-    code=$(curl -s -o "$tmp/act.body" -w '%{http_code}' -X POST -H "X-Api-Key: $RW" \
+    out=$(curl -s -o "$tmp/act.body" -w '%{http_code} %{time_total}' -X POST -H "X-Api-Key: $RW" \
       -H 'Content-Type: application/json' -d "$4" "${hurl[$1]}$path")
   else
-    code=$(curl -s -o "$tmp/act.body" -w '%{http_code}' -X POST -H "X-Api-Key: $RW" "${hurl[$1]}$path")
+    out=$(curl -s -o "$tmp/act.body" -w '%{http_code} %{time_total}' -X POST -H "X-Api-Key: $RW" "${hurl[$1]}$path")
   fi
+  code=${out% *} took=${out#* }
 }
 body() { json "$1" < "$tmp/act.body"; }
 parks() { grep -c '^G1 Z10.00 F600$' "$tmp/b_mk.log"; } # marlin_do_pause's lift
@@ -87,6 +88,7 @@ wait_for 120 printing || fail "job $job on b_mk: $(on a job_state "$job")"
 [ "$(parks)" = 0 ] || fail "b_mk parked before the pause"
 act a b_mk pause
 [ "$code" = 200 ] || fail "pause b_mk through a: $code $(cat "$tmp/act.body")"
+took_pause=$took
 [ "$(body 'd["printer"]["host"] + " " + d["printer"]["state"]')" = "b paused" ] ||
   fail "pause's answer: $(cat "$tmp/act.body")"
 parked() { [ "$(parks)" = 1 ]; }
@@ -98,6 +100,7 @@ farm_is() { [ "$(listed)" = "$1" ]; }
 wait_for 30 farm_is "a_mk:a:idle b_mk:b:paused c_mk:c:idle" || fail "a lists: $(listed)"
 grep -q "printer b_mk: pause from host a done" "$tmp/b.log" || fail "b's log: $(grep remote "$tmp/b.log")"
 act a b_mk resume
+took_resume=$took
 [ "$code" = 200 ] && [ "$(body 'd["printer"]["state"]')" = printing ] ||
   fail "resume b_mk through a: $code $(cat "$tmp/act.body")"
 on b "$C" printers | grep -qE '^b_mk +printing' || fail "b says: $(on b "$C" printers)"
@@ -150,4 +153,4 @@ code=$(curl -s -o "$tmp/act.body" -w '%{http_code}' -X POST -H "X-Api-Key: $RW" 
 cancelled() { [ "$(on a job_state "$job")" = cancelled ]; }
 wait_for 60 cancelled || fail "job $job after the cancel: $(on a job_state "$job")"
 for h in a b; do kill -TERM "${hpid[$h]}"; wait "${hpid[$h]}"; unset "hpid[$h]"; done
-echo "farmd_hosts_remote: ok (pause, resume, refusal, G-code, 504 after ${waited} s, host down; $(($(date +%s) - t0)) s)"
+echo "farmd_hosts_remote: ok (pause ${took_pause} s, resume ${took_resume} s through a; refusal, G-code, 504 after ${waited} s, host down; $(($(date +%s) - t0)) s)"
