@@ -835,8 +835,8 @@ farm_free(struct farm *f)
     f->stopping = true;
     for (size_t i = 0; i < f->n_printers; i++)
         printer_stop(f->printers[i]);
-    /* Nothing lost on a stop: what is queued (those CRASHED with it) is written now. */
     farm_remote_stop(f); /* its waiting asks answered; its requests in flight come back below */
+    /* Nothing lost on a stop: what is queued (those CRASHED with it) is written now. */
     if (f->q) {
         storeq_set_commit(f->q, NULL, NULL);
         storeq_free(f->q);
