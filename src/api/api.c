@@ -38,6 +38,7 @@
 #include "api_page.h"
 #include "api_printers.h"
 #include "api_read.h"
+#include "api_remote.h"
 #include "api_stats.h"
 #include "api_writes.h"
 #include "partcheck.h"
@@ -426,19 +427,23 @@ printers_answer(struct api *a, const char *name, struct http_resp *resp)
     resp->json = json_pack("{so}", "printers", arr);
 }
 
+static void
+printer_answer(void *ud, const char *name, struct http_resp *resp)
+{
+    printers_answer(ud, name, resp);
+}
+
 /* GET /api/printers (args->name ""), or /api/printers/NAME. */
 static void
 printers_get(void *ctx, const struct route_args *args, const struct http_req *req,
              struct http_resp *resp)
 {
     (void)req;
-    printers_answer(ctx, args->name[0] ? args->name : NULL, resp);
-}
-
-static void
-printer_answer(void *ud, const char *name, struct http_resp *resp)
-{
-    printers_answer(ud, name, resp);
+    struct api *a = ctx;
+    const char *name = args->name[0] ? args->name : NULL;
+    /* one of several hosts: the other hosts' printers too, read off the loop */
+    if (!api_remote_printers(a->reads, a->cfg.farm, name, printer_answer, a, resp))
+        printers_answer(a, name, resp);
 }
 
 /* The end of an action on printer name: its refusal (rc, err), or the printer as it is now. */
@@ -517,6 +522,8 @@ printer_cmd(void *ctx, const struct route_args *args, const struct http_req *req
         return;
     }
     route_key_label(req, who, sizeof(who));
+    if (api_remote_try(a->cfg.farm, args->name, "command", line, who, resp))
+        return; /* another host's printer: carried to it */
     int rc = jobctl_printer_command(a->cfg.farm, args->name, line, who, &err);
     if (rc) {
         http_fail(resp, rc, err.msg);
@@ -539,6 +546,8 @@ printer_estop_route(void *ctx, const struct route_args *args, const struct http_
     struct sf_err err;
     char who[16];
     route_key_label(req, who, sizeof(who));
+    if (api_remote_try(a->cfg.farm, args->name, "emergency-stop", NULL, who, resp))
+        return;
     int rc = jobctl_printer_estop(a->cfg.farm, args->name, who, &err);
     printer_acted(a, args->name, rc, &err, resp);
 }

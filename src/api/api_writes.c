@@ -27,6 +27,7 @@
 #include "../farm/jobctl.h"
 #include "api_compat.h"
 #include "api_json.h"
+#include "api_remote.h"
 #include "partcheck.h"
 
 /*
@@ -45,6 +46,7 @@ struct api_write {
     int adopt_rc;              /* the adopt's failure, kept for a retry */
     struct sf_err adopt_err;
     char sha[STORE_SHA_HEX];
+    char on[64]; /* a cancel found the job on this printer (jobctl_cancel_stored_on) */
     int64_t size;
     /* the loop's */
     struct api_writes *ws;  /* NULL once the API is freed */
@@ -81,6 +83,11 @@ on_written(void *ud, const struct storeq_result *r)
                 *pp = w->next;
                 break;
             }
+        /* a cancel of a job on another host's printer: that host stops it, and answers */
+        if (r->rc == SF_EAGAIN && w->on[0] && api_remote_answer(ws->farm, w->on, "cancel", w->d)) {
+            free(w);
+            return;
+        }
         struct sf_err err = *r->err;
         int rc = r->rc;
         if (rc == SF_EINVAL && w->not_now)
@@ -255,7 +262,8 @@ order_write(struct store *s, void *ud, struct sf_err *err)
 static int
 cancel_write(struct store *s, void *ud, struct sf_err *err)
 {
-    return jobctl_cancel_stored(s, ((struct api_write *)ud)->id, err);
+    struct api_write *w = ud;
+    return jobctl_cancel_stored_on(s, w->id, w->on, sizeof(w->on), err);
 }
 
 static int
@@ -402,6 +410,8 @@ api_writes_printer_act(struct api_writes *ws, const char *name, enum printer_act
                        struct http_resp *resp)
 {
     struct sf_err err;
+    if (api_remote_try(ws->farm, name, printer_action_name(act), NULL, NULL, resp))
+        return; /* another host's printer: carried to it */
     struct api_write *w = mem_calloc(1, sizeof(*w));
     if (w && defer(ws, resp, w)) {
         snprintf(w->printer, sizeof(w->printer), "%s", name);

@@ -35,6 +35,7 @@
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "farm_host.h"
+#include "farm_remote.h"
 #include "gcjob.h"
 #include "sched.h"
 #include "store_host.h"
@@ -852,6 +853,7 @@ farm_free(struct farm *f)
     f->stopping = true;
     for (size_t i = 0; i < f->n_printers; i++)
         printer_stop(f->printers[i]);
+    farm_remote_stop(f); /* its waiting asks answered; its requests in flight come back below */
     /* Nothing lost on a stop: what is queued (those CRASHED with it) is written now. */
     if (f->q) {
         storeq_set_commit(f->q, NULL, NULL);

@@ -22,6 +22,7 @@
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "farm_int.h"
+#include "farm_remote.h"
 #include "store_host.h"
 
 struct farm_host {
@@ -218,7 +219,7 @@ farm_host_start(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     listen_arm(h);
     join(h);
     h->timer = loop_timer_add(f->l, h->lease_ms / FARM_HOST_BEATS_PER_LEASE, on_beat, h);
-    return SF_OK;
+    return farm_remote_start(f, err); /* actions on printers other hosts own */
 }
 
 void

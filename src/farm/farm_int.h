@@ -51,7 +51,8 @@ struct farm {
     size_t n_no, cap_no;
     struct farmcfg_printer *seed; /* farm.ini's printers as last given (farm_seed), n_seed */
     size_t n_seed;
-    struct farm_host *host; /* one of several hosts on a shared store (farm_host.h), or NULL */
+    struct farm_host *host;     /* one of several hosts on a shared store (farm_host.h), or NULL */
+    struct farm_remote *remote; /* actions on other hosts' printers (farm_remote.h), or NULL */
 };
 
 /* Wake the event streams (the notify hook), if any. */

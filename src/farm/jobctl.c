@@ -13,6 +13,7 @@
  */
 #include "jobctl.h"
 
+#include <stdio.h>
 #include <string.h>
 
 /* A refusal of the job or printer rules (SF_EINVAL) is "not now". */
@@ -94,13 +95,22 @@ jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *err)
 int
 jobctl_cancel_stored(struct store *s, int64_t id, struct sf_err *err)
 {
+    return jobctl_cancel_stored_on(s, id, NULL, 0, err);
+}
+
+int
+jobctl_cancel_stored_on(struct store *s, int64_t id, char *printer, size_t n, struct sf_err *err)
+{
     struct job_row j;
     int rc = store_job_get(s, id, &j, err);
     if (rc)
         return rc;
-    if (job_state_on_printer(j.state)) /* its printer must stop it: it took it meanwhile */
+    if (job_state_on_printer(j.state)) { /* its printer must stop it: it took it meanwhile */
+        if (printer && n)
+            snprintf(printer, n, "%s", j.printer);
         return sf_err_set(err, SF_EAGAIN, "job %lld is %s on printer %s: cancel it again",
                           (long long)id, job_state_name(j.state), j.printer);
+    }
     struct job_event_args args = { .reason = "cancelled by an operator" };
     return not_now(store_job_event(s, id, JOB_EV_CANCEL, &args, NULL, err), err);
 }

@@ -47,6 +47,10 @@ int jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *er
  * printer (SF_EAGAIN: its printer stops it, jobctl_printer_action).
  */
 int jobctl_cancel_stored(struct store *s, int64_t id, struct sf_err *err);
+/* As jobctl_cancel_stored; when the job is on a printer (SF_EAGAIN), that printer's name into
+   printer (n bytes; NULL: not wanted): another host's, whose owner must stop it. */
+int jobctl_cancel_stored_on(struct store *s, int64_t id, char *printer, size_t n,
+                            struct sf_err *err);
 /* The printer of f that holds job id now (its name, f's), or NULL. */
 const char *jobctl_printer_of(struct farm *f, int64_t id);
 

@@ -68,6 +68,8 @@ enum printer_action {
 
 /* "pause", "resume", "cancel", "cleared", "cancel-copy"; false if s is none of them. */
 bool printer_action_parse(const char *s, enum printer_action *out);
+/* a's name, as printer_action_parse reads it ("?" if none). */
+const char *printer_action_name(enum printer_action a);
 
 /* A printer as the API shows it (valid until the loop turns or the config reloads). */
 struct printer_info {

@@ -15,6 +15,12 @@
 static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
                                                                 "cleared", "cancel-copy" };
 
+const char *
+printer_action_name(enum printer_action a)
+{
+    return (unsigned)a < PRINTER_ACTION_COUNT ? action_names[a] : "?";
+}
+
 bool
 printer_action_parse(const char *s, enum printer_action *out)
 {

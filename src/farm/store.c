@@ -198,6 +198,9 @@ static const char *const migrations[] = {
     /* 13: the G-code each print ran (a job's changes when it is sliced again for another
        printer between two copies) */
     "ALTER TABLE prints ADD COLUMN gcode_sha TEXT NOT NULL DEFAULT '';",
+    /* 14: an action on a printer another host owns, carried through the database
+       (store_command.c) */
+    STORE_COMMAND_SCHEMA,
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

@@ -117,6 +117,33 @@ int store_host_relock(struct store *s, struct sf_err *err);
     "  data BLOB NOT NULL,"                                                                        \
     "  PRIMARY KEY(sha256, seq));"
 
+/*
+ * Migration 14 (store_command.c): commands, an operator's action on a
+ * printer another host owns.  host: the printer's owner, who runs it;
+ * from_host: who asked; kind: a printer action, "command" (line: the
+ * G-code) or "emergency-stop"; who: the operator; state: pending (written),
+ * running (the owner took it), done (rc, message and the printer's state
+ * after written), expired (withdrawn at its deadline: never run).
+ * commands_pending finds a host's pending rows in one index step.
+ */
+#define STORE_COMMAND_SCHEMA                                                                       \
+    "CREATE TABLE commands("                                                                       \
+    "  id INTEGER PRIMARY KEY AUTOINCREMENT,"                                                      \
+    "  printer TEXT NOT NULL,"                                                                     \
+    "  host TEXT NOT NULL,"                                                                        \
+    "  from_host TEXT NOT NULL,"                                                                   \
+    "  kind TEXT NOT NULL,"                                                                        \
+    "  line TEXT NOT NULL DEFAULT '',"                                                             \
+    "  who TEXT NOT NULL DEFAULT '',"                                                              \
+    "  state TEXT NOT NULL CHECK(state IN ('pending','running','done','expired')),"                \
+    "  rc INTEGER NOT NULL DEFAULT 0,"                                                             \
+    "  message TEXT NOT NULL DEFAULT '',"                                                          \
+    "  printer_state TEXT NOT NULL DEFAULT '',"                                                    \
+    "  created_ms INTEGER NOT NULL,"                                                               \
+    "  deadline_ms INTEGER NOT NULL);"                                                             \
+    "CREATE INDEX commands_pending ON commands(host) WHERE state = 'pending';"                     \
+    "CREATE INDEX commands_created ON commands(created_ms);"
+
 /* SF_EIO with what and SQLite's message. */
 int store_db_fail(struct store *s, struct sf_err *err, const char *what);
 /* Run sql (no rows, no parameters). */

@@ -72,8 +72,9 @@ host_ini a moonraker
 host_ini b prusalink
 host_ini c moonraker
 for h in a b c; do start_host "$h"; done
-idle6() { [ "$(on a "$C" printers | grep -c ' idle ')" -eq 2 ] && [ "$(on b "$C" printers | grep -c ' idle ')" -eq 2 ] &&
-  [ "$(on c "$C" printers | grep -c ' idle ')" -eq 2 ]; }
+# each host's own two (every host lists the whole farm: farmd_hosts_remote.sh)
+idle6() { [ "$(on a "$C" printers | grep -c '^a_.* idle ')" -eq 2 ] && [ "$(on b "$C" printers | grep -c '^b_.* idle ')" -eq 2 ] &&
+  [ "$(on c "$C" printers | grep -c '^c_.* idle ')" -eq 2 ]; }
 wait_for 60 idle6 || fail "printers: $(for h in a b c; do on $h "$C" printers; done)"
 out=$("$C" hosts --store "$URL") || fail "hosts: $out"
 for h in a b c; do

@@ -13,7 +13,7 @@ TMP=$(mktemp -d)
 pg_start fsync=off || exit 1 # a throw-away server: its disk flushes prove nothing here
 trap 'pg_stop; rm -rf "$TMP"' EXIT
 fail=0
-for t in test_sqldb test_store test_store_file test_store_query test_store_host test_storeq test_farm_host test_history test_metrics test_web test_api test_farm; do
+for t in test_sqldb test_store test_store_file test_store_query test_store_host test_store_command test_storeq test_farm_host test_history test_metrics test_web test_api test_farm; do
   SLIMFARM_TEST_STORE=$PG_URL "$BUILD/tests/$t" > "$TMP/$t.log" 2>&1
   last=$(tail -n 1 "$TMP/$t.log")
   echo "   $t on PostgreSQL: $last"

@@ -218,7 +218,7 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
                  "DROP INDEX jobs_live; DROP INDEX prints_printer; DROP INDEX prints_printer_id;"
                  "DROP INDEX jobs_queue_pos; ALTER TABLE jobs DROP COLUMN queue_pos;"
                  "DROP TABLE printer_cfgs; DROP TABLE file_chunks; DROP TABLE file_blobs;"
-                 "ALTER TABLE prints DROP COLUMN gcode_sha;"
+                 "ALTER TABLE prints DROP COLUMN gcode_sha; DROP TABLE commands;"
                  "PRAGMA user_version = 1",
                  NULL, NULL, NULL),
              SQLITE_OK);

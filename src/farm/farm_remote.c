@@ -1,0 +1,576 @@
+/*
+ * farm_remote.c - actions on printers other hosts own, through command
+ * rows (farm_remote.h, store_command.h).
+ *
+ * Every database call runs on the farm's store thread (storeq_call,
+ * storeq_read): the loop only posts and is called back.  An ask is one
+ * struct that the store thread fills while it is busy (one request at a
+ * time); what arrives meanwhile (a NOTIFY, its deadline) is noted and
+ * handled when the request is back.  The listener is a connection of its
+ * own, as farm_host.c's (a notification that arrives during another call
+ * does not wake the fd), drained on the loop: reading a socket, never
+ * waiting.
+ *
+ * Stopping: the store queue is freed after this (farm_free), and delivers
+ * what is in flight then; so the state outlives farm_remote_stop until
+ * the last request in flight is back (inflight), and answers nothing more.
+ *
+ * Thread: the loop thread; the *_fn functions on the store's.
+ */
+#include "farm_remote.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../base/clock.h"
+#include "../base/log.h"
+#include "../base/mem.h"
+#include "farm_host.h"
+#include "farm_int.h"
+#include "jobctl.h"
+#include "store_command.h"
+#include "storeq.h"
+
+#define RELISTEN_MS 1000 /* a lost listener is tried again this often */
+
+struct farm_remote {
+    struct farm *f;
+    struct store *ls; /* the listener's connection */
+    int fd;           /* its socket on the loop, -1 if none */
+    uint64_t retry;   /* timer: listen again */
+    int inflight;     /* requests on the store queue that point here */
+    bool stopped;     /* farm_remote_stop ran: free once inflight is 0 */
+    bool taking;      /* a take is on its way */
+    bool retake;      /* woken meanwhile: take again once it is back */
+    struct ask *asks; /* this host's commands waiting for their answer */
+};
+
+enum ask_op { ASK_ADD, ASK_READ, ASK_EXPIRE };
+
+/* A command this host asked for, until answered. */
+struct ask {
+    struct farm_remote *r;
+    struct ask *next;
+    /* the store thread's while busy */
+    struct store_command c; /* in: printer, from, kind, line, who; out: the row */
+    int64_t now_ms, deadline_ms;
+    enum ask_op op;
+    /* the loop's */
+    char printer[64]; /* c.printer's copy: the answer at a stop reads it while c may change */
+    bool busy;        /* a request is on its way */
+    bool answered;    /* done was called: freed once no request is on its way */
+    bool heard;       /* a NOTIFY came while busy: read again */
+    bool late;        /* the deadline passed while busy: withdraw next */
+    uint64_t timer;   /* the deadline */
+    farm_remote_fn done;
+    void *ud;
+};
+
+/* Free r once stopped with nothing in flight. */
+static void
+release(struct farm_remote *r)
+{
+    if (r->stopped && r->inflight == 0)
+        free(r);
+}
+
+/* ---- the asker ---- */
+
+static void
+unlink_ask(struct farm_remote *r, struct ask *a)
+{
+    for (struct ask **pp = &r->asks; *pp; pp = &(*pp)->next)
+        if (*pp == a) {
+            *pp = a->next;
+            break;
+        }
+}
+
+/* Answer a (rc, msg) and forget it (freed now, or once its request is back). */
+static void
+answer(struct ask *a, int rc, const char *msg)
+{
+    struct sf_err err = { .code = rc };
+    snprintf(err.msg, sizeof(err.msg), "%s", msg ? msg : "");
+    struct farm_remote_result res = { .rc = rc,
+                                      .err = &err,
+                                      .printer = a->printer,
+                                      .host = a->busy ? "" : a->c.host,
+                                      .state = a->busy ? "" : a->c.printer_state };
+    if (!a->answered) {
+        unlink_ask(a->r, a);
+        if (a->timer)
+            loop_timer_cancel(a->r->f->l, a->timer);
+        a->timer = 0;
+        a->answered = true;
+        a->done(a->ud, &res);
+    }
+    if (!a->busy)
+        free(a);
+}
+
+/* The owner's answer in a's row, as the caller's result. */
+static void
+answer_row(struct ask *a)
+{
+    struct store_command *c = &a->c;
+    char msg[sizeof(c->message) + 128];
+    if (c->rc == SF_OK)
+        snprintf(msg, sizeof(msg), "%s", c->message);
+    else
+        snprintf(msg, sizeof(msg), "%s (on host %s)", c->message[0] ? c->message : "refused",
+                 c->host);
+    answer(a, c->rc, msg);
+}
+
+static int
+add_fn(struct store *s, void *arg, struct sf_err *err)
+{
+    struct ask *a = arg;
+    return store_command_add(s, a->c.from, a->c.printer, a->c.kind, a->c.line, a->c.who, a->now_ms,
+                             a->deadline_ms, &a->c, err);
+}
+
+static int
+read_fn(struct store *s, void *arg, struct sf_err *err)
+{
+    struct ask *a = arg;
+    return store_command_get(s, a->c.id, &a->c, err);
+}
+
+static int
+expire_fn(struct store *s, void *arg, struct sf_err *err)
+{
+    struct ask *a = arg;
+    return store_command_expire(s, a->c.id, &a->c, err);
+}
+
+static void on_ask(void *ud, const struct storeq_result *res);
+
+/* Post a's next request (op: a read or a withdrawal); false when out of memory (a is
+   answered). */
+static bool
+post(struct ask *a, enum ask_op op)
+{
+    struct storeq *q = a->r->f->q;
+    a->op = op;
+    int rc = op == ASK_READ ? storeq_read(q, read_fn, a, on_ask, a)
+                            : storeq_call(q, expire_fn, a, "remote", on_ask, a);
+    if (rc) {
+        answer(a, SF_ENOMEM, "remote command: out of memory");
+        return false;
+    }
+    a->busy = true;
+    a->r->inflight++;
+    return true;
+}
+
+/* The row's deadline passed: withdraw it (or read what the owner did). */
+static void
+on_deadline(struct loop *l, void *ud)
+{
+    (void)l;
+    struct ask *a = ud;
+    a->timer = 0;
+    if (a->busy)
+        a->late = true;
+    else
+        post(a, ASK_EXPIRE);
+}
+
+/* The withdrawal's outcome: the row as it is now. */
+static void
+withdrawn(struct ask *a)
+{
+    char msg[256];
+    switch (a->c.state) {
+    case STORE_CMD_DONE:
+        answer_row(a);
+        return;
+    case STORE_CMD_RUNNING:
+        snprintf(msg, sizeof(msg),
+                 "printer %s: host %s took the %s but did not answer within %d s: it may still "
+                 "act (see the printer's state)",
+                 a->c.printer, a->c.host, a->c.kind, FARM_REMOTE_WAIT_MS / 1000);
+        break;
+    default:
+        snprintf(msg, sizeof(msg),
+                 "printer %s: host %s did not answer within %d s: the %s was withdrawn and "
+                 "will not run",
+                 a->c.printer, a->c.host, FARM_REMOTE_WAIT_MS / 1000, a->c.kind);
+        break;
+    }
+    log_warn("remote", "%s", msg);
+    answer(a, SF_ETIMEDOUT, msg);
+}
+
+static void
+on_ask(void *ud, const struct storeq_result *res)
+{
+    struct ask *a = ud;
+    struct farm_remote *r = a->r;
+    a->busy = false;
+    r->inflight--;
+    if (a->answered) { /* at a stop */
+        free(a);
+        release(r);
+        return;
+    }
+    if (res->rc) {
+        if (a->op == ASK_ADD) { /* the owner's lease ran out: its printer is offline */
+            answer(a, res->rc == SF_ESTALE ? SF_EUNREACH : res->rc, res->err->msg);
+            return;
+        }
+        /* a read or withdrawal failed (the store's queue retried it): the deadline decides */
+        log_warn("remote", "printer %s: command %lld: %s", a->c.printer, (long long)a->c.id,
+                 res->err->msg);
+        if (a->op == ASK_EXPIRE) {
+            char msg[sizeof(res->err->msg) + 160];
+            snprintf(msg, sizeof(msg),
+                     "printer %s: no answer within %d s, and its withdrawal failed (%s): its "
+                     "owner does not run it after its deadline",
+                     a->printer, FARM_REMOTE_WAIT_MS / 1000, res->err->msg);
+            answer(a, SF_ETIMEDOUT, msg);
+            return;
+        }
+    } else if (a->op == ASK_EXPIRE) {
+        withdrawn(a);
+        return;
+    } else if (a->c.state == STORE_CMD_DONE) {
+        answer_row(a);
+        return;
+    }
+    if (a->op == ASK_ADD) {
+        int64_t left = a->deadline_ms - clock_wall_ms();
+        a->timer = loop_timer_add(r->f->l, left > 0 ? left : 0, on_deadline, a);
+        a->heard = true; /* the answer may have come before the row's id was known */
+    }
+    if (a->late) {
+        a->late = false;
+        post(a, ASK_EXPIRE);
+    } else if (a->heard) {
+        a->heard = false;
+        post(a, ASK_READ);
+    }
+}
+
+int
+farm_remote_send(struct farm *f, const char *name, const char *kind, const char *line,
+                 const char *who, farm_remote_fn done, void *ud, struct sf_err *err)
+{
+    struct farm_remote *r = f ? f->remote : NULL;
+    char me[STORE_HOST_NAME_MAX];
+    if (!r || !f->q)
+        return sf_err_set(err, SF_ENOTFOUND, "no printer '%.64s'", name);
+    if (!farm_host_reader(f, me, sizeof(me)) || !me[0])
+        return sf_err_set(err, SF_EAGAIN,
+                          "printer %.64s: this host has not joined the farm yet: try again", name);
+    struct ask *a = mem_calloc(1, sizeof(*a));
+    if (!a)
+        return sf_err_set(err, SF_ENOMEM, "remote command: out of memory");
+    if (strlen(name) >= sizeof(a->c.printer) || strlen(kind) >= sizeof(a->c.kind) ||
+        (line && strlen(line) >= sizeof(a->c.line)) || (who && strlen(who) >= sizeof(a->c.who))) {
+        free(a);
+        return sf_err_set(err, SF_EINVAL, "printer %.64s: command too long", name);
+    }
+    snprintf(a->c.printer, sizeof(a->c.printer), "%s", name);
+    snprintf(a->printer, sizeof(a->printer), "%s", name);
+    snprintf(a->c.from, sizeof(a->c.from), "%s", me);
+    snprintf(a->c.kind, sizeof(a->c.kind), "%s", kind);
+    snprintf(a->c.line, sizeof(a->c.line), "%s", line ? line : "");
+    snprintf(a->c.who, sizeof(a->c.who), "%s", who ? who : "");
+    a->now_ms = clock_wall_ms();
+    a->deadline_ms = a->now_ms + FARM_REMOTE_WAIT_MS;
+    a->r = r;
+    a->done = done;
+    a->ud = ud;
+    a->next = r->asks;
+    r->asks = a;
+    if (storeq_call(f->q, add_fn, a, "remote", on_ask, a)) {
+        r->asks = a->next;
+        free(a);
+        return sf_err_set(err, SF_ENOMEM, "remote command: out of memory");
+    }
+    a->op = ASK_ADD;
+    a->busy = true;
+    r->inflight++;
+    return SF_OK;
+}
+
+/* ---- the owner ---- */
+
+/* A take of this host's pending commands, or one command's result. */
+struct run {
+    struct farm_remote *r;
+    char host[STORE_HOST_NAME_MAX];
+    int64_t now_ms;
+    struct store_command *rows; /* the take's */
+    size_t n;
+    /* one command's */
+    int64_t id;
+    char printer[64], kind[24], from[STORE_HOST_NAME_MAX];
+    int rc;
+    char message[256], state[16];
+};
+
+static int
+take_fn(struct store *s, void *arg, struct sf_err *err)
+{
+    struct run *t = arg;
+    free(t->rows); /* a retry's */
+    t->rows = NULL;
+    return store_command_take(s, t->host, t->now_ms, &t->rows, &t->n, err);
+}
+
+static int
+finish_fn(struct store *s, void *arg, struct sf_err *err)
+{
+    struct run *x = arg;
+    return store_command_finish(s, x->id, x->rc, x->message, x->state, err);
+}
+
+static void
+on_finished(void *ud, const struct storeq_result *res)
+{
+    struct run *x = ud;
+    struct farm_remote *r = x->r;
+    if (res->rc)
+        log_warn("remote", "printer %s: the result of host %s's %s: %s", x->printer, x->from,
+                 x->kind, res->err->msg);
+    free(x);
+    r->inflight--;
+    release(r);
+}
+
+/* Write x's result (rc, msg) with its printer's state now; x is freed. */
+static void
+finish(struct run *x, int rc, const char *msg)
+{
+    struct farm_remote *r = x->r;
+    x->rc = rc;
+    snprintf(x->message, sizeof(x->message), "%s", msg ? msg : "");
+    struct printer *p = farm_find(r->f, x->printer);
+    snprintf(x->state, sizeof(x->state), "%s", p ? printer_state_name(printer_state(p)) : "");
+    if (rc)
+        log_warn("remote", "printer %s: %s from host %s refused: %s", x->printer, x->kind, x->from,
+                 x->message);
+    else
+        log_info("remote", "printer %s: %s from host %s done (%s)", x->printer, x->kind, x->from,
+                 x->state);
+    if (storeq_call(r->f->q, finish_fn, x, "remote", on_finished, x)) {
+        log_error("remote", "printer %s: out of memory for the result", x->printer);
+        free(x);
+        return;
+    }
+    r->inflight++;
+}
+
+/* An action's write is back (jobctl_printer_action_then): its result. */
+static void
+on_acted(void *ud, const struct storeq_result *res)
+{
+    struct run *x = ud;
+    struct farm_remote *r = x->r;
+    r->inflight--;
+    if (r->stopped) {
+        free(x);
+        release(r);
+        return;
+    }
+    finish(x, res->rc, res->rc ? res->err->msg : "");
+}
+
+/* Run command c through this host's own action path. */
+static void
+run_one(struct farm_remote *r, const struct store_command *c)
+{
+    struct run *x = mem_calloc(1, sizeof(*x));
+    struct sf_err err = { 0 };
+    enum printer_action act;
+    if (!x) {
+        log_error("remote", "printer %s: out of memory for command %lld", c->printer,
+                  (long long)c->id);
+        return;
+    }
+    x->r = r;
+    x->id = c->id;
+    snprintf(x->printer, sizeof(x->printer), "%s", c->printer);
+    snprintf(x->kind, sizeof(x->kind), "%s", c->kind);
+    snprintf(x->from, sizeof(x->from), "%s", c->from);
+    char who[96];
+    snprintf(who, sizeof(who), "%s@%s", c->who[0] ? c->who : "?", c->from);
+    int rc;
+    if (clock_wall_ms() >= c->deadline_ms) {
+        rc = sf_err_set(&err, SF_ETIMEDOUT, "came after its deadline: not run");
+    } else if (printer_action_parse(c->kind, &act)) {
+        rc = jobctl_printer_action_then(r->f, c->printer, act, on_acted, x, &err);
+        if (rc == SF_OK) {
+            r->inflight++;
+            return;
+        }
+    } else if (strcmp(c->kind, "command") == 0) {
+        rc = jobctl_printer_command(r->f, c->printer, c->line, who, &err);
+    } else if (strcmp(c->kind, "emergency-stop") == 0) {
+        rc = jobctl_printer_estop(r->f, c->printer, who, &err);
+    } else {
+        rc = sf_err_set(&err, SF_EINVAL, "no printer command '%.24s'", c->kind);
+    }
+    finish(x, rc, rc ? err.msg : "");
+}
+
+static void take(struct farm_remote *r);
+
+static void
+on_taken(void *ud, const struct storeq_result *res)
+{
+    struct run *t = ud;
+    struct farm_remote *r = t->r;
+    r->inflight--;
+    if (!r->stopped) {
+        r->taking = false;
+        if (res->rc)
+            log_warn("remote", "%s: take the commands for this host: %s", t->host, res->err->msg);
+        for (size_t i = 0; res->rc == SF_OK && i < t->n; i++)
+            run_one(r, &t->rows[i]);
+        if (r->retake) {
+            r->retake = false;
+            take(r);
+        }
+    }
+    free(t->rows);
+    free(t);
+    release(r);
+}
+
+/* Take this host's pending commands (once its last take is back). */
+static void
+take(struct farm_remote *r)
+{
+    if (r->taking) {
+        r->retake = true;
+        return;
+    }
+    struct run *t = mem_calloc(1, sizeof(*t));
+    if (!t || !farm_host_reader(r->f, t->host, sizeof(t->host)) || !t->host[0]) {
+        free(t);
+        return;
+    }
+    t->r = r;
+    t->now_ms = clock_wall_ms();
+    if (storeq_call(r->f->q, take_fn, t, "remote", on_taken, t)) {
+        free(t);
+        return;
+    }
+    r->taking = true;
+    r->inflight++;
+}
+
+/* ---- the listener ---- */
+
+static void
+on_payload(void *ud, const char *host)
+{
+    struct farm_remote *r = ud;
+    char me[STORE_HOST_NAME_MAX];
+    if (!farm_host_reader(r->f, me, sizeof(me)) || strcmp(host, me) != 0)
+        return;
+    take(r);                                            /* a command for this host's printers, */
+    for (struct ask *a = r->asks, *next; a; a = next) { /* or an answer to one it asked */
+        next = a->next;
+        if (a->busy)
+            a->heard = true;
+        else if (a->c.id)
+            post(a, ASK_READ);
+    }
+}
+
+static void arm(struct farm_remote *r);
+
+static void
+drop(struct farm_remote *r)
+{
+    if (r->fd >= 0)
+        loop_del_fd(r->f->l, r->fd);
+    r->fd = -1;
+}
+
+static void
+on_relisten(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm_remote *r = ud;
+    r->retry = 0;
+    arm(r);
+}
+
+static void
+on_readable(struct loop *l, int fd, unsigned events, void *ud)
+{
+    (void)l, (void)fd, (void)events;
+    struct farm_remote *r = ud;
+    int n = store_command_drain(r->ls, on_payload, r);
+    if (n < 0 || store_command_notify_fd(r->ls) != r->fd) {
+        if (n < 0)
+            log_warn("remote", "the commands' wake-up connection was lost; retrying");
+        drop(r);
+        arm(r);
+    }
+}
+
+/* Watch the listener (again): drain first, which reconnects a lost connection; else retry. */
+static void
+arm(struct farm_remote *r)
+{
+    struct sf_err err;
+    int fd = -1;
+    if (store_command_drain(r->ls, on_payload, r) >= 0 &&
+        (fd = store_command_notify_fd(r->ls)) >= 0 &&
+        loop_add_fd(r->f->l, fd, LOOP_READ, on_readable, r, &err) == SF_OK) {
+        r->fd = fd;
+        take(r); /* what was asked while it was away */
+        return;
+    }
+    if (!r->retry)
+        r->retry = loop_timer_add(r->f->l, RELISTEN_MS, on_relisten, r);
+}
+
+int
+farm_remote_start(struct farm *f, struct sf_err *err)
+{
+    struct farm_remote *r = mem_calloc(1, sizeof(*r));
+    if (!r)
+        return sf_err_set(err, SF_ENOMEM, "remote commands: out of memory");
+    r->f = f;
+    r->fd = -1;
+    f->remote = r;
+    if (!(r->ls = store_open_peer(f->s, err)) || store_command_listen(r->ls, err)) {
+        sf_err_prefix(err, "remote commands: wake-up connection");
+        return err->code;
+    }
+    arm(r);
+    return SF_OK;
+}
+
+void
+farm_remote_stop(struct farm *f)
+{
+    struct farm_remote *r = f ? f->remote : NULL;
+    if (!r)
+        return;
+    drop(r);
+    if (r->retry)
+        loop_timer_cancel(f->l, r->retry);
+    store_close(r->ls);
+    while (r->asks)
+        answer(r->asks, SF_ECANCELED, "this host is stopping: the command's answer is not known");
+    r->stopped = true;
+    f->remote = NULL;
+    release(r);
+}
+
+bool
+farm_remote_is(const struct farm *f, const char *name)
+{
+    return f && f->remote && !farm_find(f, name);
+}

@@ -1,0 +1,243 @@
+/*
+ * test_store_command.c - command rows (store_command.h): an action asked of
+ * a printer another host owns is taken by its owner once, answered into
+ * the row, and read back by the asker; a row withdrawn at its deadline, or
+ * whose deadline passed before the owner came, is never taken (never runs
+ * late); a row the owner took is not withdrawn; a printer whose host is
+ * down, or that no host owns, is refused with a clear error; the owner's
+ * listener hears the row's NOTIFY (PostgreSQL).  With SLIMFARM_TEST_STORE
+ * (tstore.h, tests/integ/store_pg.sh) on PostgreSQL, the second host a store
+ * of its own on the same database; on SQLite a second connection.
+ */
+#include <poll.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "../../src/base/clock.h"
+#include "../../src/farm/store_command.h"
+#include "../t.h"
+#include "../tstore.h"
+
+#define LEASE_MS (600 * 1000)
+#define WAIT_MS  10000
+
+/* Two hosts on one database: a owns printer "p1", b asks. */
+struct pair {
+    char dir[512], dir_b[512], url[1024];
+    struct store *a, *b;
+    int64_t ta, tb;
+};
+
+static bool
+pair_open(struct pair *p, const char *name, struct sf_err *err)
+{
+    snprintf(p->dir, sizeof(p->dir), "%s/%s", t_tmpdir(), name);
+    snprintf(p->dir_b, sizeof(p->dir_b), "%s-b", p->dir);
+    const char *db = t_store_db(p->dir);
+    snprintf(p->url, sizeof(p->url), "%s", db ? db : "");
+    p->a = store_open_host(p->dir, db, NULL, err);
+    p->b = !p->a ? NULL
+           : db  ? store_open_host(p->dir_b, p->url, NULL, err)
+                 : store_open_peer(p->a, err);
+    const char *mine[] = { "p1" }, *theirs[] = { "p2" };
+    return p->a && p->b && store_host_join(p->a, "a", LEASE_MS, &p->ta, err) == SF_OK &&
+           store_host_join(p->b, "b", LEASE_MS, &p->tb, err) == SF_OK &&
+           store_host_own(p->a, "a", p->ta, mine, 1, err) == SF_OK &&
+           store_host_own(p->b, "b", p->tb, theirs, 1, err) == SF_OK;
+}
+
+static void
+pair_close(struct pair *p)
+{
+    store_close(p->b);
+    store_close(p->a);
+}
+
+T_CASE(command_is_taken_once_and_answered)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "once", &err));
+    int64_t now = clock_wall_ms();
+    struct store_command c, got, *rows;
+    size_t n;
+    T_OK(store_command_add(p.b, "b", "p1", "pause", NULL, "ops", now, now + WAIT_MS, &c, &err),
+         &err);
+    T_TRUE(c.id > 0);
+    T_EQ_STR(c.host, "a");
+    T_EQ_STR(c.from, "b");
+    T_EQ_INT(c.state, STORE_CMD_PENDING);
+    /* b owns no such command: nothing for it */
+    T_OK(store_command_take(p.b, "b", now, &rows, &n, &err), &err);
+    T_EQ_INT(n, 0);
+    free(rows);
+    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_EQ_INT(rows[0].id, c.id);
+    T_EQ_STR(rows[0].kind, "pause");
+    T_EQ_STR(rows[0].who, "ops");
+    T_EQ_INT(rows[0].state, STORE_CMD_RUNNING);
+    free(rows);
+    /* taken once */
+    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    T_EQ_INT(n, 0);
+    free(rows);
+    /* taken: the asker's withdrawal comes too late, and says so */
+    T_OK(store_command_expire(p.b, c.id, &got, &err), &err);
+    T_EQ_INT(got.state, STORE_CMD_RUNNING);
+    T_OK(store_command_finish(p.a, c.id, SF_EAGAIN, "no job to pause", "idle", &err), &err);
+    T_OK(store_command_get(p.b, c.id, &got, &err), &err);
+    T_EQ_INT(got.state, STORE_CMD_DONE);
+    T_EQ_INT(got.rc, SF_EAGAIN);
+    T_EQ_STR(got.message, "no job to pause");
+    T_EQ_STR(got.printer_state, "idle");
+    /* answered once */
+    T_ERR(store_command_finish(p.a, c.id, SF_OK, NULL, NULL, &err), SF_ENOTFOUND, &err,
+          "not running");
+    T_ERR(store_command_get(p.b, c.id + 100, &got, &err), SF_ENOTFOUND, &err, "no command");
+    pair_close(&p);
+}
+
+T_CASE(command_past_its_deadline_never_runs)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "late", &err));
+    int64_t now = clock_wall_ms();
+    struct store_command c, d, got, *rows;
+    size_t n;
+    /* withdrawn by the asker: never taken */
+    T_OK(store_command_add(p.b, "b", "p1", "resume", NULL, NULL, now, now + WAIT_MS, &c, &err),
+         &err);
+    T_OK(store_command_expire(p.b, c.id, &got, &err), &err);
+    T_EQ_INT(got.state, STORE_CMD_EXPIRED);
+    /* not withdrawn, but the owner comes after its deadline: not taken, expired */
+    T_OK(store_command_add(p.b, "b", "p1", "cancel", NULL, NULL, now, now + 50, &d, &err), &err);
+    T_OK(store_command_take(p.a, "a", now + 50, &rows, &n, &err), &err);
+    T_EQ_INT(n, 0);
+    free(rows);
+    T_OK(store_command_get(p.b, d.id, &got, &err), &err);
+    T_EQ_INT(got.state, STORE_CMD_EXPIRED);
+    T_ERR(store_command_finish(p.a, d.id, SF_OK, NULL, NULL, &err), SF_ENOTFOUND, &err, "");
+    /* a later command is taken alone, in order with nothing stale before it */
+    T_OK(store_command_add(p.b, "b", "p1", "command", "G28", "ops", now, now + WAIT_MS, &c, &err),
+         &err);
+    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_EQ_INT(rows[0].id, c.id);
+    T_EQ_STR(rows[0].line, "G28");
+    free(rows);
+    pair_close(&p);
+}
+
+T_CASE(command_to_a_host_down_or_no_printer_is_refused)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "down", &err));
+    int64_t now = clock_wall_ms();
+    struct store_command c, *rows;
+    size_t n;
+    T_ERR(store_command_add(p.b, "b", "nope", "pause", NULL, NULL, now, now + WAIT_MS, &c, &err),
+          SF_ENOTFOUND, &err, "no printer 'nope' on any host");
+    T_ERR(store_command_add(p.b, "b", "p2", "pause", NULL, NULL, now, now + WAIT_MS, &c, &err),
+          SF_EINVAL, &err, "host b's own");
+    T_ERR(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, now, now, &c, &err), SF_EINVAL,
+          &err, "deadline");
+    /* a's lease runs out: its printer is offline to the others, nothing is written */
+    T_OK(store_host_beat(p.a, "a", p.ta, 1, &err), &err);
+    int64_t later = clock_wall_ms() + 5000;
+    T_ERR(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, later, later + WAIT_MS, &c, &err),
+          SF_ESTALE, &err, "its host a is down");
+    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    T_EQ_INT(n, 0);
+    free(rows);
+    pair_close(&p);
+}
+
+/* What a listener heard: every payload, and how many were want (the host it waits for). */
+struct heard {
+    const char *want;
+    int n, wanted;
+};
+
+static void
+on_heard(void *ud, const char *host)
+{
+    struct heard *h = ud;
+    h->n++;
+    h->wanted += strcmp(host, h->want) == 0;
+}
+
+/* Drain l until want is heard, for up to WAIT_MS (each listener hears every host's). */
+static void
+hear(struct store *l, struct heard *h)
+{
+    for (int64_t end = clock_mono_ms() + WAIT_MS; !h->wanted && clock_mono_ms() < end;) {
+        struct pollfd pfd = { .fd = store_command_notify_fd(l), .events = POLLIN };
+        if (store_command_drain(l, on_heard, h) == 0)
+            (void)poll(&pfd, 1, 100); /* a bound, not a sleep: the NOTIFY ends it */
+    }
+}
+
+T_CASE(owner_and_asker_hear_the_command)
+{
+    T_SKIP_UNLESS(t_store_pg(), "NOTIFY is PostgreSQL's (SQLite has one host)");
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "hear", &err));
+    struct store *la = store_open_peer(p.a, &err), *lb = store_open_peer(p.b, &err);
+    T_TRUE(la && lb);
+    T_OK(store_command_listen(la, &err), &err);
+    T_OK(store_command_listen(lb, &err), &err);
+    T_TRUE(store_command_notify_fd(la) >= 0);
+    int64_t now = clock_wall_ms();
+    struct store_command c, *rows;
+    size_t n;
+    T_OK(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, now, now + WAIT_MS, &c, &err),
+         &err);
+    struct heard ha = { .want = "a" }, hb = { .want = "b" };
+    hear(la, &ha);
+    T_EQ_INT(ha.n, 1);
+    T_EQ_INT(ha.wanted, 1); /* the owner's name: a runs it */
+    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    free(rows);
+    T_OK(store_command_finish(p.a, c.id, SF_OK, NULL, "paused", &err), &err);
+    hear(lb, &hb);
+    T_EQ_INT(hb.wanted, 1); /* the asker's: b reads the answer */
+    store_close(la);
+    store_close(lb);
+    pair_close(&p);
+}
+
+T_CASE(each_host_lists_the_printers_the_others_own)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "list", &err));
+    struct store_command_printer *rows;
+    size_t n;
+    T_OK(store_printer_set(p.a, "p1", PRINTER_PAUSED, &err), &err);
+    T_OK(store_command_printers(p.b, "b", clock_wall_ms(), &rows, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_EQ_STR(rows[0].name, "p1");
+    T_EQ_STR(rows[0].host, "a");
+    T_EQ_STR(rows[0].state, "paused");
+    T_TRUE(rows[0].live);
+    T_EQ_INT(rows[0].job_id, 0);
+    free(rows);
+    T_OK(store_command_printers(p.a, "a", clock_wall_ms(), &rows, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_EQ_STR(rows[0].name, "p2");
+    T_EQ_STR(rows[0].state, ""); /* b never wrote its state */
+    free(rows);
+    /* a's lease runs out: its printer is listed, not live, with how long ago */
+    T_OK(store_host_beat(p.a, "a", p.ta, 1, &err), &err);
+    T_OK(store_command_printers(p.b, "b", clock_wall_ms() + 5000, &rows, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_TRUE(!rows[0].live);
+    T_TRUE(rows[0].down_ms >= 4000);
+    free(rows);
+    pair_close(&p);
+}
