@@ -26,13 +26,16 @@
 # Cost per printer: one host on PostgreSQL with 1, 4 and 12 simulated
 # Marlins (one slimfarm-sim --count process, real time), idle for
 # BENCH_HOSTS_COST_S (15) seconds, then as long with each printing an
-# uploaded G-code longer than that: what the host made PostgreSQL do, from
-# pg_stat_statements over the host's database (BEGIN and COMMIT count as
-# statements): statements a second, rows written (by statements starting
-# INSERT, UPDATE, DELETE or WITH) and WAL kB a minute; per printer = the
-# host's total / its printers, and the slope between the fewest and the
-# most printers (what one more printer adds); then the host's most
-# frequent statements.
+# uploaded G-code of short moves (about 37 lines a second), counted from
+# when every print is past its 100th line: what the host made PostgreSQL
+# do, from pg_stat_statements over the host's database (BEGIN and COMMIT
+# count as statements): statements a second, rows written (by statements
+# starting INSERT, UPDATE, DELETE or WITH) and WAL kB a minute, with the
+# G-code lines a second the stored progress moved (a printing host's cost
+# follows its lines: progress is saved every 16 lines, printer.c); per
+# printer = the host's total / its printers, and the slope between the
+# fewest and the most printers (what one more printer adds); then the
+# host's most frequent statements while printing.
 #
 # Wall figures on a shared machine: the 1-minute load average is printed
 # next to each.  Never fails on time; about 3-4 minutes on 2 shared cores.
@@ -201,10 +204,13 @@ claims_run() {
   rd=$($py "$tmp/reader.py" "${h0##*:}" "$RW" "$win" 20)
   left1=$(queued)
   t1=$(date +%s.%N)
-  local n_req errs p50 p99 slowest
+  local n_req errs p50 p99 slowest spread=-
   read -r n_req errs p50 p99 slowest <<< "$rd"
-  rows+=("$(printf '%-10s %5s %8.1f %7s %8s %8s %8s %7s %6s' "$eng" "$k" \
-    "$(echo "($left0 - $left1) / ($t1 - $t0)" | bc -l)" "$((jobs - left1))" \
+  # the jobs each host holds (claimed), fewest-most: do they all get a share?
+  [ -n "$url" ] && spread=$(psql_q "$url" "SELECT min(n) || '-' || max(n) FROM (SELECT count(*) AS n
+    FROM jobs WHERE claimed_by <> '' GROUP BY claimed_by) c")
+  rows+=("$(printf '%-10s %5s %8.1f %7s %9s %8s %8s %8s %7s %6s' "$eng" "$k" \
+    "$(echo "($left0 - $left1) / ($t1 - $t0)" | bc -l)" "$((jobs - left1))" "${spread:--}" \
     "${p50:--}" "${p99:--}" "${slowest:--}" "${n_req:--}/${errs:--}" "$(load1)")")
   for ((i = 0; i < k; i++)); do stop_host "${p}h$i"; done
   # the store alone, for comparison: bench_claims.c's K claimers draining $sjobs jobs
@@ -231,40 +237,48 @@ claims_run() {
 echo "claims: $jobs queued jobs, a ${win} s window per row once every host is up; $(uptime | sed 's/.*load/load/')"
 claims_run SQLite 1
 for k in $counts; do claims_run PostgreSQL "$k"; done
-printf '%-10s %5s %8s %7s %8s %8s %8s %7s %6s %8s\n' engine hosts claims/s claimed \
-  "API p50" "API p99" "API max" req/err load1 "store/s"
+printf '%-10s %5s %8s %7s %9s %8s %8s %8s %7s %6s %8s\n' engine hosts claims/s claimed \
+  "per host" "API p50" "API p99" "API max" req/err load1 "store/s"
 for r in "${rows[@]}"; do echo "$r"; done
-echo "(claimed: jobs out of the queue at the window's end, the hosts' start-up included;"
-echo " API: ms on host h0, GET /api/jobs and /api/printers at 20/s while the hosts claim;"
+echo "(claimed: jobs out of the queue at the window's end, start-up included; per host: the fewest"
+echo " and most jobs a host held; API: ms on the first host, GET /api/jobs and /api/printers in turn"
+echo " at 20/s while the hosts claim (requests/errors);"
 echo " store/s: claims/s of the store alone, bench_claims.c, K claimers on $sjobs jobs, no daemon)"
-echo "PostgreSQL's most costly statements with $ck hosts (calls, mean ms, rows a call; over the run):"
-echo "$ctop" | sed 's/^/  /'
+if [ -n "${ck:-}" ]; then
+  echo "PostgreSQL's most costly statements with $ck hosts (calls, mean ms, rows a call; over the run):"
+  echo "$ctop" | sed 's/^/  /'
+fi
 
 # ---- the cost a host adds to PostgreSQL per printer ----
-# A G-code of short moves round a circle, at real time ~MOVES / 37 s: longer than the window.
+# A G-code of short moves round a circle (0.8 mm at 30 mm/s: 37 lines a second in real time,
+# the simulator has no acceleration), longer than the wait for its 100th line and the window.
 moves=$(((cwin + 30) * 37))
 $py - "$moves" > "$tmp/long.gcode" <<'PY'
 import math, sys
 n = int(sys.argv[1])
-print("G90\nM83\nG28\nG1 Z0.2 F3000")
+print("G90\nM83\nG28\nG1 Z0.2 F3000\nG1 X90 Y50 F9000")
 for i in range(n):
     a = i * 0.02
-    print("G1 X%.3f Y%.3f E0.02 F1800" % (100 + 40 * math.cos(a), 100 + 40 * math.sin(a)))
+    print("G1 X%.3f Y%.3f E0.02 F1800" % (50 + 40 * math.cos(a), 50 + 40 * math.sin(a)))
 print("M84")
 PY
 # stats DB: "statements rows_written wal_bytes" of database DB so far (pg_stat_statements)
+# and the G-code lines its jobs' stored progress says were printed
 stats() {
-  psql_q "$PG_URL" "SELECT coalesce(sum(calls), 0), coalesce(sum(rows) FILTER (WHERE query ~*
+  echo "$(psql_q "$PG_URL" "SELECT coalesce(sum(calls), 0), coalesce(sum(rows) FILTER (WHERE query ~*
     '^\s*(insert|update|delete|with)'), 0), coalesce(sum(wal_bytes), 0) FROM pg_stat_statements
-    WHERE dbid = (SELECT oid FROM pg_database WHERE datname = '$1')" | tr '|' ' '
+    WHERE dbid = (SELECT oid FROM pg_database WHERE datname = '$1')
+    AND query NOT LIKE '%sum(lines_acked)%'" | tr '|' ' ')" \
+    "$(psql_q "$(pg_url "$1")" 'SELECT coalesce(sum(lines_acked), 0) FROM jobs')"
 }
-# cost_window DB: the window's "statements/s rows/min wal_kB/min"
+# cost_window DB: the window's "statements/s rows/min wal_kB/min lines/s"
 cost_window() {
   local s0 s1
   s0=$(stats "$1")
   sleep "$cwin"
   s1=$(stats "$1")
-  echo "$s0 $s1" | awk -v w="$cwin" '{ printf "%.1f %.0f %.0f\n", ($4 - $1) / w, ($5 - $2) * 60 / w, ($6 - $3) * 60 / w / 1024 }'
+  echo "$s0 $s1" | awk -v w="$cwin" '{ printf "%.1f %.0f %.0f %.1f\n", ($5 - $1) / w,
+    ($6 - $2) * 60 / w, ($7 - $3) * 60 / w / 1024, ($8 - $4) / w }'
 }
 crows=()
 cost_run() {
@@ -291,12 +305,18 @@ cost_run() {
   done
   wait_for 60 sh -c "[ \$('$C' printers | grep -c ' printing ') -ge $n ]" ||
     echo "  ($h: $("$C" printers | grep -c ' printing ') of $n printing)"
+  # past the homing and the first travel: every job's stored progress moving
+  wait_for 60 sh -c "[ \$(psql -qAt '$url' -c \"SELECT count(*) FROM jobs WHERE state = 'printing'
+    AND lines_acked >= 100\") -ge $n ]" || echo "  ($h: not every print past its 100th line)"
+  # from here the counts are the printing window's alone (the top statements below)
+  psql_q "$PG_URL" "SELECT pg_stat_statements_reset(0, (SELECT oid FROM pg_database
+    WHERE datname = '$h'), 0)" > /dev/null
   busy=$(cost_window "$h")
   printing=$("$C" printers | grep -c ' printing ')
-  # where it goes: the host's most frequent statements over its whole run
+  # where it goes: the host's most frequent statements while its printers print
   top=$(psql_q "$PG_URL" "SELECT calls, left(regexp_replace(query, '\s+', ' ', 'g'), 90)
     FROM pg_stat_statements WHERE dbid = (SELECT oid FROM pg_database WHERE datname = '$h')
-    ORDER BY calls DESC LIMIT 6" | tr '|' ' ')
+    AND query NOT LIKE '%sum(lines_acked)%' ORDER BY calls DESC LIMIT 8" | tr '|' ' ')
   crows+=("$n $idle $idle_load $busy $(load1) $printing")
   stop_host "$h"
   kill "$sim" 2> /dev/null
@@ -305,23 +325,25 @@ cost_run() {
 }
 for n in $printers; do cost_run "$n"; done
 echo "the cost a host adds to PostgreSQL, by its printers (simulated Marlins, real time): ${cwin} s idle,"
-echo "then ${cwin} s each printing (per printer: / printers; slope: ($(echo $printers | awk '{ print $NF }') - $(echo $printers | awk '{ print $1 }') printers) / their difference)"
+echo "then ${cwin} s each printing (lines/s: G-code lines the stored progress moved; per printer: the"
+echo "host's figures / printers; slope: (at $(echo $printers | awk '{ print $NF }') - at $(echo $printers | awk '{ print $1 }') printers) / the printers' difference)"
 $py - "${crows[@]}" <<'PY'
 import sys
 rows = [[float(x) for x in r.split()] for r in sys.argv[1:]]
-print("%8s | %8s %9s %9s %5s | %8s %9s %9s %5s %4s" % ("printers", "stmt/s", "rows/min", "WALkB/min",
-      "load1", "stmt/s", "rows/min", "WALkB/min", "load1", "prt"))
-print("%8s | %35s | %40s" % ("", "idle", "printing"))
+# a row: printers, idle (stmt/s rows/min WAL lines/s), load, printing (the same four), load, printing
+print("%8s | %8s %9s %9s %5s | %8s %9s %9s %7s %5s %4s" % ("printers", "stmt/s", "rows/min",
+      "WALkB/min", "load1", "stmt/s", "rows/min", "WALkB/min", "lines/s", "load1", "prt"))
+print("%8s | %35s | %48s" % ("", "idle", "printing"))
+def per(r, d):
+    return "%8.2f %9.1f %9.1f %5s | %8.2f %9.1f %9.1f %7.1f" % (r[1] / d, r[2] / d, r[3] / d, "",
+                                                            r[6] / d, r[7] / d, r[8] / d, r[9] / d)
 for r in rows:
-    n = r[0]
-    print("%8d | %8.1f %9.0f %9.0f %5.2f | %8.1f %9.0f %9.0f %5.2f %4d" % tuple([n] + r[1:5] + r[5:10]))
-    print("%8s | %8.2f %9.1f %9.1f %5s | %8.2f %9.1f %9.1f" % ("/printer", r[1] / n, r[2] / n, r[3] / n, "",
-          r[5] / n, r[6] / n, r[7] / n))
+    print("%8d | %8.1f %9.0f %9.0f %5.2f | %8.1f %9.0f %9.0f %7.1f %5.2f %4d" % (
+        r[0], r[1], r[2], r[3], r[5], r[6], r[7], r[8], r[9], r[10], r[11]))
+    print("%8s | %s" % ("/printer", per(r, r[0])))
 if len(rows) > 1 and rows[-1][0] > rows[0][0]:
     a, b = rows[0], rows[-1]
-    d = b[0] - a[0]
-    print("%8s | %8.2f %9.1f %9.1f %5s | %8.2f %9.1f %9.1f" % ("slope", (b[1] - a[1]) / d,
-          (b[2] - a[2]) / d, (b[3] - a[3]) / d, "", (b[5] - a[5]) / d, (b[6] - a[6]) / d, (b[7] - a[7]) / d))
+    print("%8s | %s" % ("slope", per([0] + [y - x for x, y in zip(a[1:], b[1:])], b[0] - a[0])))
 PY
-echo "the most frequent statements of the host with $(echo $printers | awk '{ print $NF }') printers (calls over its run):"
+echo "the most frequent statements of the host with $(echo $printers | awk '{ print $NF }') printers while they print (calls):"
 echo "$top" | sed 's/^/  /'
