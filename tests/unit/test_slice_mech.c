@@ -17,6 +17,7 @@
 #include "../../slicer/estimate.h"
 #include "../../slicer/preview.h"
 #include "../../slicer/slice.h"
+#include "../../slicer/support.h"
 #include "../../src/geom/supmodel.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
@@ -310,5 +311,49 @@ T_CASE(gusset_is_bridged_along_its_hypotenuse)
     if (sup != 0 || drawn != 0 || contacts != 0)
         t_fail(__FILE__, __LINE__, "gusset: %.1f mm of support, %zu columns drawn, %u contacts",
                sup, drawn, contacts);
+    mesh_release(&m);
+}
+
+T_CASE(support_spilling_across_a_wall_stays_on_its_side)
+{
+    /* mech box_upside without its rounded corners: a 50.8 x 47.1 x 25.2
+       box with 2.1 mm walls printed upside down, the outer half of its wall
+       cut back 3 mm at the rim, so a 1.05 mm ledge hangs outside the inner
+       half.  The ledge's 2.84 mm snap cells reach across the inner half
+       into the box; PrusaSlicer keeps of each layer's snapped support only
+       the islands the contacts' projection reaches (extract_support), so it
+       prints none inside.  Ours printed a ring inside the box too (1.42 g
+       of support where PrusaSlicer prints 1.11). */
+    struct mesh m, lip;
+    struct sf_err err;
+    mesh_init(&m);
+    mesh_init(&lip);
+    T_OK(shape_tray(&m, 50.8, 47.1, 22.2, 2.1, 1.3, true, &err), &err);
+    for (uint32_t v = 0; v < m.n_verts; v++)
+        m.v[v].z += 3;
+    /* the inner half of the wall below the ledge, into the box above */
+    double a = 1.05, b = 2.1, x1 = 50.8 - a, y1 = 47.1 - a;
+    T_TRUE(ts_box(&lip, a, a, 0, x1, b, 3.1) == 0 && ts_box(&lip, a, y1 - a, 0, x1, y1, 3.1) == 0 &&
+           ts_box(&lip, a, a, 0, b, y1, 3.1) == 0 && ts_box(&lip, x1 - a, a, 0, x1, y1, 3.1) == 0);
+    T_OK(ts_merge(&m, &lip), NULL);
+    struct slice_profile p;
+    bare_profile(&p, true);
+    struct support_grid g;
+    struct support_column *cols;
+    size_t n, cap, n_body, inside = 0, outside = 0;
+    T_OK(support_columns(&m, &p, &g, &cols, &n, &cap, &n_body, &err), &err);
+    for (size_t k = 0; k < n_body; k++) {
+        double x = g.x0 + (double)(cols[k].cell % g.nu) * g.pitch;
+        double y = g.y0 + (double)(cols[k].cell / g.nu) * g.pitch;
+        if (x > b + 0.2 && x < 50.8 - b - 0.2 && y > b + 0.2 && y < 47.1 - b - 0.2)
+            inside++;
+        else
+            outside++;
+    }
+    if (inside || !outside)
+        t_fail(__FILE__, __LINE__, "%zu columns inside the box, %zu outside", inside, outside);
+    free(cols);
+    slice_profile_release(&p);
+    mesh_release(&lip);
     mesh_release(&m);
 }
