@@ -419,6 +419,8 @@ plan_layers(struct layer_stack *out, uint32_t n, double first_mm, double layer_m
         out->l[k].z_mm = first_mm + k * layer_mm;
         paths_init(&out->l[k].region);
         paths_init(&out->l[k].inner);
+        for (int e = 0; e < LAYER_MORE_MAX; e++)
+            paths_init(&out->l[k].more[e]);
         paths_init(&out->l[k].skin);
         paths_init(&out->l[k].skin_bottom);
         paths_init(&out->l[k].small);
@@ -588,6 +590,8 @@ layer_stack_release(struct layer_stack *s)
     for (uint32_t k = 0; s->l && k < s->n; k++) {
         paths_release(&s->l[k].region);
         paths_release(&s->l[k].inner);
+        for (int e = 0; e < LAYER_MORE_MAX; e++)
+            paths_release(&s->l[k].more[e]);
         paths_release(&s->l[k].skin);
         paths_release(&s->l[k].skin_bottom);
         paths_release(&s->l[k].small);

@@ -31,11 +31,19 @@
 #include "../src/mesh/mesh.h"
 #include "poly.h"
 
+/* At most this many extra perimeters on an island (extra_perimeters). */
+#define LAYER_MORE_MAX 4
+
 struct layer {
-    double z_mm;              /* top of the layer above the bed */
-    double h_mm;              /* its thickness */
-    struct paths region;      /* part cross-section at z_mm - h_mm / 2 */
-    struct paths inner;       /* inside the perimeters: filled by toolpath_areas() */
+    double z_mm;         /* top of the layer above the bed */
+    double h_mm;         /* its thickness */
+    struct paths region; /* part cross-section at z_mm - h_mm / 2 */
+    struct paths inner;  /* inside the perimeters: filled by toolpath_areas() */
+    /* the islands of region that get more than the profile's perimeters
+       (extra_perimeters): more[e] those with at least e + 1 more; n_more
+       how many sets are not empty (toolpath_areas()) */
+    struct paths more[LAYER_MORE_MAX];
+    uint32_t n_more;
     struct paths skin;        /* the surface open to the air above, and its part in inner
                                  grown skin_margin: toolpath_areas() */
     struct paths skin_bottom; /* the same for the surface open below */

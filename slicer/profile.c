@@ -139,6 +139,9 @@ static const struct popt popts[] = {
       "wider ones infill"),
     R("print", infill_overlap, infill_overlap, 0, 1,
       "infill reaches this fraction of the perimeter line spacing into the perimeters"),
+    B("print", extra_perimeters, extra_perimeters,
+      "an island gets more perimeters while over 30 % of the layer above's outline lies in the "
+      "1.5 spacings just inside its loops (PrusaSlicer's extra_perimeters)"),
     B("print", overhangs, overhangs,
       "perimeters over air (a nozzle width out from the layer below) print with bridge flow, "
       "speed and overhang_fan_speed"),
@@ -269,6 +272,7 @@ slice_profile_default(struct slice_profile *p)
         .min_bead = 0.85,       /* PrusaSlicer 2.5: min_bead_width 85 % */
         .infill_overlap = 0.25, /* PrusaSlicer 2.5: infill_overlap 25 % */
         .overhangs = true,
+        .extra_perimeters = true, /* PrusaSlicer 2.5's default (its G-code's config) */
         .retract_only_crossing = true,
         .support = true,
         .support_angle_deg = 0,

@@ -62,6 +62,8 @@ struct slice_profile {
                                    are gap fill, wider ones infill */
     double infill_overlap;      /* infill reaches this x the loop spacing into the loops */
     bool overhangs;             /* perimeters over air: bridge flow, speed and fan */
+    bool extra_perimeters;      /* PrusaSlicer's: more loops where the layer above's outline
+                                   would stand on the infill just inside them */
     bool retract_only_crossing; /* no retraction for travel inside the part */
     bool support;
     double support_angle_deg; /* 0: the printer's max_overhang_deg */

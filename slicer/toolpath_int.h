@@ -98,6 +98,11 @@ int tp_gap_fill(const struct paths *gap, double h, double nozzle, double sp, dou
  * each stage reads and leaves the sets its comment names; out gets the
  * paths.  SF_ENOMEM / SF_EBUG.
  */
+/* The islands of layer k that get extra perimeters, into its more[] and
+   n_more (extra_perimeters; none without).  SF_ENOMEM / SF_EBUG. */
+int tp_extra_perimeters(struct layer_stack *s, uint32_t k, const struct slice_profile *p);
+/* The area inside L's perimeters, more[] counted (out is reset). */
+int tp_inner(const struct layer *L, const struct slice_profile *p, double sp, struct paths *out);
 /* Perimeter loops of L (external last); the gaps they leave in t[T_GAP]. */
 int tp_perimeters(const struct layer *L, const struct slice_profile *p, double sp, struct paths *t,
                   struct layer_paths *out);

@@ -128,6 +128,129 @@ tp_mark_overhangs(const struct layer_stack *s, uint32_t k, const struct slice_pr
     return rc;
 }
 
+/* Length of the closed outlines of c inside region r (tmp: scratch). */
+static int
+outline_inside(const struct paths *c, const struct paths *r, double *len)
+{
+    struct paths lines, in;
+    paths_init(&lines);
+    paths_init(&in);
+    int rc = SF_OK;
+    for (uint32_t j = 0; j < c->n && rc == SF_OK; j++) {
+        const struct ipt *q = c->pts + c->start[j];
+        uint32_t m = paths_len(c, j);
+        if (m > 1 && !(paths_add(&lines, q, m) && paths_push(&lines, q[0])))
+            rc = SF_ENOMEM;
+    }
+    if (rc == SF_OK)
+        rc = clip_lines(&lines, r, &in);
+    *len = 0;
+    for (uint32_t j = 0; rc == SF_OK && j < in.n; j++)
+        *len += paths_length_k(&in, j, false);
+    paths_release(&lines);
+    paths_release(&in);
+    return rc;
+}
+
+/*
+ * PrusaSlicer 2.5's extra_perimeters (PrintObject::_make_perimeters): an
+ * island of layer k gets one more perimeter while more than 30 % of the
+ * length of the layer above's outlines lies in the critical band just
+ * inside its perimeters (1.5 perimeter spacings deep), where the upper
+ * layer's walls would stand on infill; at most LAYER_MORE_MAX more.  A lid's
+ * plate gets four loops on its last layer under the lip standing 1.35 mm in
+ * (PrusaSlicer's too), so the lip's walls stand on perimeters.  Islands are
+ * an outline and the holes after it (clip_shim's order).
+ */
+int
+tp_extra_perimeters(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
+{
+    struct layer *L = &s->l[k];
+    for (int e = 0; e < LAYER_MORE_MAX; e++)
+        paths_reset(&L->more[e]);
+    L->n_more = 0;
+    if (!p->extra_perimeters || p->perimeters <= 0 || p->infill_density <= 0 || k + 1 >= s->n)
+        return SF_OK;
+    const struct paths *up = &s->l[k + 1].region;
+    double total = 0;
+    for (uint32_t j = 0; j < up->n; j++)
+        total += paths_length_k(up, j, true);
+    if (total <= 0)
+        return SF_OK;
+    double sp = tp_spacing(p->width_mm, L->h_mm);
+    struct paths isl, a, b, band;
+    paths_init(&isl);
+    paths_init(&a);
+    paths_init(&b);
+    paths_init(&band);
+    int rc = SF_OK;
+    const struct paths *r = &L->region;
+    for (uint32_t i = 0, j; i < r->n && rc == SF_OK; i = j) {
+        for (j = i + 1; j < r->n && paths_area_k(r, j) < 0; j++)
+            ;
+        paths_reset(&isl);
+        for (uint32_t h = i; h < j; h++)
+            if (!paths_add(&isl, r->pts + r->start[h], paths_len(r, h)))
+                rc = SF_ENOMEM;
+        int e = 0;
+        while (rc == SF_OK && e < LAYER_MORE_MAX) {
+            double th = p->width_mm / 2 + (p->perimeters - 1 + e) * sp + sp / 2, len = 0;
+            if ((rc = clip_offset(&isl, -th, CLIP_JOIN_MITER, &a)) < 0 ||
+                (rc = clip_offset(&isl, -(th + 1.5 * sp), CLIP_JOIN_MITER, &b)) < 0 ||
+                (rc = clip_bool(CLIP_DIFFERENCE, &a, &b, CLIP_NONZERO, &band)) < 0 ||
+                (rc = outline_inside(up, &band, &len)) < 0)
+                break;
+            if (len <= 0.3 * total)
+                break;
+            if (!paths_append(&L->more[e], &isl))
+                rc = SF_ENOMEM;
+            e++;
+            L->n_more = (uint32_t)e > L->n_more ? (uint32_t)e : L->n_more;
+        }
+    }
+    paths_release(&isl);
+    paths_release(&a);
+    paths_release(&b);
+    paths_release(&band);
+    return rc;
+}
+
+/* The area inside island set r's n perimeters. */
+static int
+shrink_loops(const struct paths *r, const struct slice_profile *p, double sp, int n,
+             struct paths *out)
+{
+    return clip_offset(r, -(p->width_mm / 2 + (n - 1) * sp + sp / 2), CLIP_JOIN_MITER, out);
+}
+
+int
+tp_inner(const struct layer *L, const struct slice_profile *p, double sp, struct paths *out)
+{
+    paths_reset(out);
+    if (!L->n_more)
+        return shrink_loops(&L->region, p, sp, p->perimeters, out);
+    struct paths x, in;
+    paths_init(&x);
+    paths_init(&in);
+    int rc = SF_OK;
+    /* the islands with e more loops: those with at least e less those with e + 1 */
+    for (uint32_t e = 0; e <= L->n_more && rc == SF_OK; e++) {
+        const struct paths *at_least = e ? &L->more[e - 1] : &L->region;
+        if (e < L->n_more)
+            rc = clip_bool(CLIP_DIFFERENCE, at_least, &L->more[e], CLIP_NONZERO, &x);
+        else if (!paths_append(&x, at_least))
+            rc = SF_ENOMEM;
+        if (rc == SF_OK)
+            rc = shrink_loops(&x, p, sp, p->perimeters + (int)e, &in);
+        if (rc == SF_OK && !paths_append(out, &in))
+            rc = SF_ENOMEM;
+        paths_reset(&x);
+    }
+    paths_release(&x);
+    paths_release(&in);
+    return rc;
+}
+
 /*
  * Perimeters, inner loops first, external last.  Loop i's centre line
  * is opened by half a spacing (shrunk by that much more, grown back),
@@ -142,23 +265,32 @@ tp_perimeters(const struct layer *L, const struct slice_profile *p, double sp, s
               struct layer_paths *out)
 {
     double w = p->width_mm;
-    int rc = SF_OK;
-    struct paths *loops = p->perimeters ? mem_calloc((size_t)p->perimeters, sizeof(*loops)) : NULL;
-    if (p->perimeters && !loops)
+    int rc = SF_OK, n = p->perimeters > 0 ? p->perimeters + (int)L->n_more : 0;
+    struct paths *loops = n ? mem_calloc((size_t)n, sizeof(*loops)) : NULL;
+    if (n && !loops)
         return SF_ENOMEM;
+    struct paths pv; /* an extra loop's islands inside the loop before */
+    paths_init(&pv);
     paths_reset(&t[T_GAP]);
-    for (int i = 0; i < p->perimeters && rc == SF_OK; i++) {
+    for (int i = 0; i < n && rc == SF_OK; i++) {
         double d = w / 2 + i * sp;
+        /* the islands with loop i: all, or those with extra perimeters */
+        const struct paths *r = i < p->perimeters ? &L->region : &L->more[i - p->perimeters];
         const struct paths *prev = i ? &t[T_S] : &L->region;
         paths_init(&loops[i]);
+        if (i >= p->perimeters) {
+            if ((rc = clip_offset(r, -(d - sp + sp / 2), CLIP_JOIN_MITER, &pv)) < 0)
+                break;
+            prev = &pv;
+        }
         /* the innermost loop's shrink is the inner area toolpath_areas made */
-        if (i + 1 == p->perimeters) {
+        if (i + 1 == n && !L->n_more) {
             paths_reset(&t[T_TMP]);
             if (!paths_append(&t[T_TMP], &L->inner)) {
                 rc = SF_ENOMEM;
                 break;
             }
-        } else if ((rc = clip_offset(&L->region, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0) {
+        } else if ((rc = clip_offset(r, -(d + sp / 2), CLIP_JOIN_MITER, &t[T_TMP])) < 0) {
             break;
         }
         if ((rc = clip_offset(&t[T_TMP], sp / 2, CLIP_JOIN_MITER, &loops[i])) < 0)
@@ -176,11 +308,12 @@ tp_perimeters(const struct layer *L, const struct slice_profile *p, double sp, s
         }
         paths_move(&t[T_S], &t[T_TMP]);
     }
-    for (int i = p->perimeters - 1; i >= 0; i--) {
+    for (int i = n - 1; i >= 0; i--) {
         if (rc == SF_OK)
             rc = tp_add(out, &loops[i], i ? ROLE_PERIMETER : ROLE_EXT_PERIMETER, true, w);
         paths_release(&loops[i]);
     }
+    paths_release(&pv);
     free(loops);
     return rc;
 }

@@ -111,10 +111,11 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
     paths_reset(&L->small);
     paths_reset(&L->top_in);
     int rc;
-    if (p->perimeters > 0)
-        rc = clip_offset(&L->region, -(p->width_mm / 2 + (p->perimeters - 1) * sp + sp / 2),
-                         CLIP_JOIN_MITER, &L->inner);
-    else
+    if (p->perimeters > 0) {
+        rc = tp_extra_perimeters(s, k, p);
+        if (rc == SF_OK)
+            rc = tp_inner(L, p, sp, &L->inner);
+    } else
         rc = paths_append(&L->inner, &L->region) ? SF_OK : SF_ENOMEM;
     if (rc < 0 || !L->inner.n)
         return rc;

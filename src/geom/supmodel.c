@@ -111,6 +111,7 @@ supmodel_params_check(const struct supmodel_params *p, struct sf_err *err)
 struct frun {
     uint32_t blk;
     float lo, hi;
+    uint32_t cell; /* (snap_columns: the contact's own cell) */
 };
 
 static int
@@ -150,51 +151,173 @@ push_column(struct support_column **v, size_t *n, size_t *cap, struct support_co
 }
 
 /*
+ * Which cells of a snap cell the run's support reaches, layer by layer
+ * (reach[m * w * hh + cell in the block], layer m's middle (m + 1/2) h):
+ * PrusaSlicer's grid support keeps, of each layer's snapped area less the
+ * part, only the islands that hold a sample of the area projected from the
+ * contacts above (SupportGridPattern::extract_support), so a snap cell
+ * spilling across a wall does not print on the wall's far side (a box
+ * printed upside down: the outer half of its wall cut back at the rim
+ * leaves a ledge outside the inner half; the ledge's cells reach inside the
+ * box too), and the support it keeps goes on down to the layers below.
+ * Here, from the run's top down: the cells free at the layer's middle
+ * joined (4 neighbours, within the block) to a contact's own cell whose
+ * column spans that height, or to a cell the layer above reached.
+ */
+struct reach_ctx {
+    const struct ray_grid *g;
+    const struct solids *cs;
+    uint32_t i0, j0, w, hh; /* the block */
+    double h;               /* layer height */
+    uint8_t *reach;         /* layers x w x hh */
+    uint32_t *queue;        /* w x hh */
+};
+
+static void
+reach_layers(struct reach_ctx *rc, const struct frun *seed, size_t n_seed, int32_t n_layers)
+{
+    size_t wb = (size_t)rc->w * rc->hh;
+    memset(rc->reach, 0, (size_t)n_layers * wb);
+    for (int32_t m = n_layers - 1; m >= 0; m--) {
+        float z = (float)((m + 0.5) * rc->h);
+        uint8_t *rm = rc->reach + (size_t)m * wb;
+        size_t nq = 0;
+        /* the layer above's support goes on down where the part leaves room */
+        for (size_t b = 0; m + 1 < n_layers && b < wb; b++) {
+            size_t c = (size_t)(b / rc->w + rc->j0) * rc->g->nu + (b % rc->w + rc->i0);
+            if (rm[wb + b] && !supmodel_solid_at(rc->cs, c, z)) {
+                rm[b] = 1;
+                rc->queue[nq++] = (uint32_t)b;
+            }
+        }
+        for (size_t s = 0; s < n_seed; s++) {
+            uint32_t c = seed[s].cell, bi = c % rc->g->nu - rc->i0, bj = c / rc->g->nu - rc->j0;
+            size_t b = (size_t)bj * rc->w + bi;
+            if (seed[s].lo <= z && z <= seed[s].hi && !rm[b] && !supmodel_solid_at(rc->cs, c, z)) {
+                rm[b] = 1;
+                rc->queue[nq++] = (uint32_t)b;
+            }
+        }
+        for (size_t q = 0; q < nq; q++) {
+            uint32_t bi = rc->queue[q] % rc->w, bj = rc->queue[q] / rc->w;
+            static const int d4[4][2] = { { 1, 0 }, { -1, 0 }, { 0, 1 }, { 0, -1 } };
+            for (int d = 0; d < 4; d++) {
+                long ni = (long)bi + d4[d][0], nj = (long)bj + d4[d][1];
+                if (ni < 0 || nj < 0 || ni >= (long)rc->w || nj >= (long)rc->hh)
+                    continue;
+                size_t b = (size_t)nj * rc->w + (size_t)ni;
+                size_t c = (size_t)(nj + rc->j0) * rc->g->nu + (size_t)(ni + rc->i0);
+                if (!rm[b] && !supmodel_solid_at(rc->cs, c, z)) {
+                    rm[b] = 1;
+                    rc->queue[nq++] = (uint32_t)b;
+                }
+            }
+        }
+    }
+}
+
+/* Push the parts of column piece [lo, hi] of block cell b that the reach
+   holds (its layers' middles), whole where it spans no layer's middle. */
+static bool
+push_reached(const struct reach_ctx *rc, uint32_t c, size_t b, float lo, float hi, int32_t n_layers,
+             struct support_column **v, size_t *nv, size_t *cap)
+{
+    size_t wb = (size_t)rc->w * rc->hh;
+    int32_t m0 = (int32_t)ceil(lo / rc->h - 0.5), m1 = (int32_t)floor(hi / rc->h - 0.5);
+    m1 = m1 < n_layers ? m1 : n_layers - 1;
+    if (m0 > m1)
+        return push_column(v, nv, cap, (struct support_column){ c, lo, hi, 0, false });
+    for (int32_t m = m0; m <= m1;) {
+        if (!rc->reach[(size_t)m * wb + b]) {
+            m++;
+            continue;
+        }
+        int32_t e = m;
+        while (e + 1 <= m1 && rc->reach[(size_t)(e + 1) * wb + b])
+            e++;
+        float a = m == m0 ? lo : (float)(m * rc->h), z = e == m1 ? hi : (float)((e + 1) * rc->h);
+        if (!push_column(v, nv, cap, (struct support_column){ c, a, z, 0, false }))
+            return false;
+        m = e + 1;
+    }
+    return true;
+}
+
+/*
  * Snap the contacts' columns to the grid as PrusaSlicer does (grid style):
  * every cell of a snap cell that a column touches gets the snap cell's
- * merged ranges wherever the part leaves room, and, as the projection goes
- * down until the part stops it, reaches down to its own floor.
+ * merged ranges wherever the part leaves room and the support reaches
+ * (reach_layers), and, as the projection goes down until the part stops
+ * it, reaches down to its own floor.
  */
 static int
 snap_columns(const struct ray_grid *g, const struct solids *cs, const struct contact *ct, size_t n,
-             uint32_t bs, struct support_column **cols, size_t *n_cols, struct sf_err *err)
+             uint32_t bs, double layer_mm, struct support_column **cols, size_t *n_cols,
+             struct sf_err *err)
 {
     struct supmodel_snap sg = supmodel_snap_of(g, bs);
     struct frun *r = mem_array(n ? n : 1, sizeof(*r));
-    if (!r)
+    struct reach_ctx rx = { .g = g, .cs = cs, .h = layer_mm };
+    rx.queue = mem_array((size_t)bs * bs, sizeof(uint32_t));
+    size_t reach_cap = 0;
+    if (!r || !rx.queue) {
+        free(r);
+        free(rx.queue);
         return sf_err_set(err, SF_ENOMEM, "support model: out of memory (columns)");
+    }
     for (size_t k = 0; k < n; k++)
-        r[k] = (struct frun){ supmodel_snap_blk(g, sg, ct[k].cell), ct[k].floor, ct[k].top };
-    size_t m = merge_fruns(r, n);
+        r[k] = (struct frun){ supmodel_snap_blk(g, sg, ct[k].cell), ct[k].floor, ct[k].top,
+                              ct[k].cell };
+    qsort(r, n, sizeof(*r), frun_cmp);
     struct support_column *v = NULL;
     size_t nv = 0, cap = 0;
     int rc = SF_OK;
-    for (size_t k = 0; k < m && rc == SF_OK; k++) {
+    for (size_t k = 0; k < n && rc == SF_OK;) {
+        /* the run: this snap cell's contacts whose ranges overlap */
+        size_t e = k + 1;
+        float lo = r[k].lo, hi = r[k].hi;
+        for (; e < n && r[e].blk == r[k].blk && r[e].lo <= hi; e++)
+            hi = r[e].hi > hi ? r[e].hi : hi;
         uint32_t i0, i1, j0, j1;
         supmodel_snap_cells(g, sg, r[k].blk, &i0, &i1, &j0, &j1);
+        rx.i0 = i0, rx.j0 = j0, rx.w = i1 - i0, rx.hh = j1 - j0;
+        int32_t n_layers = (int32_t)floor(hi / layer_mm - 0.5) + 1;
+        n_layers = n_layers > 0 ? n_layers : 0;
+        size_t need = (size_t)n_layers * rx.w * rx.hh;
+        if (need > reach_cap) {
+            void *o = rx.reach;
+            if (!mem_grow(&o, &reach_cap, need, 1)) {
+                rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (columns)");
+                break;
+            }
+            rx.reach = o;
+        }
+        reach_layers(&rx, r + k, e - k, n_layers);
         for (uint32_t j = j0; j < j1 && rc == SF_OK; j++) {
             for (uint32_t i = i0; i < i1 && rc == SF_OK; i++) {
                 uint32_t c = j * g->nu + i;
+                size_t b = (size_t)(j - j0) * rx.w + (i - i0);
                 /* the cell's free gaps: from the bed or a solid's top to the next bottom */
                 float floor_mm = 0;
                 for (uint32_t q = cs->first[c]; q <= cs->first[c + 1] && rc == SF_OK; q++) {
                     bool last = q == cs->first[c + 1];
                     if (!last && !(cs->iv[q].hi > cs->iv[q].lo))
                         continue;
-                    float top = last ? r[k].hi : cs->iv[q].lo;
-                    if (top > r[k].lo && floor_mm < r[k].hi) {
-                        struct support_column col = { c, floor_mm, top < r[k].hi ? top : r[k].hi, 0,
-                                                      false };
-                        if (col.hi > col.lo && !push_column(&v, &nv, &cap, col))
-                            rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
-                    }
+                    float top = last ? hi : cs->iv[q].lo;
+                    if (top > lo && floor_mm < hi &&
+                        !push_reached(&rx, c, b, floor_mm, top < hi ? top : hi, n_layers, &v, &nv,
+                                      &cap))
+                        rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
                     if (!last)
                         floor_mm = cs->iv[q].hi;
                 }
             }
         }
+        k = e;
     }
     free(r);
+    free(rx.queue);
+    free(rx.reach);
     if (rc) {
         free(v);
         return rc;
@@ -233,7 +356,7 @@ snap_bands(const struct ray_grid *g, const struct supmodel_params *p, const stru
         if (!ct[k].dense || dh <= 0)
             continue;
         r[m++] = (struct frun){ supmodel_snap_blk(g, sg, ct[k].cell), (float)(ct[k].top - gap - dh),
-                                (float)(ct[k].top - gap) };
+                                (float)(ct[k].top - gap), ct[k].cell };
     }
     size_t mm = merge_fruns(r, m);
     /* the column pieces by cell */
@@ -301,7 +424,7 @@ supmodel_columns(const struct ray_grid *g, const struct supmodel_params *p,
     rc = supmodel_find_contacts(g, &cs, p, &ct, &n, err);
     uint32_t bs = p->snap_mm > g->pitch ? (uint32_t)lround(p->snap_mm / g->pitch) : 1;
     if (!rc && bs > 1) {
-        rc = snap_columns(g, &cs, ct, n, bs, cols, n_cols, err);
+        rc = snap_columns(g, &cs, ct, n, bs, p->layer_mm, cols, n_cols, err);
         if (!rc && bands)
             rc = snap_bands(g, p, ct, n, bs, *cols, *n_cols, bands, n_bands, err);
         if (rc) {

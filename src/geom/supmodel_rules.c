@@ -5,6 +5,7 @@
  */
 #include "supmodel_int.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -65,7 +66,11 @@ overhangs(const struct ray_grid *g, const struct solids *cs, uint32_t i, uint32_
  * the bottom fill.  A region is a bridge when some straight line across its
  * fill runs from material of layer L-1 to material of layer L-1 (the
  * detector's anchored lines; 8 lattice directions instead of its 5-degree
- * steps).  The direction with the most anchored fill wins.  Then the fill is
+ * steps, and as its bridge_direction_candidates the directions of the
+ * region's own edges: those of its convex hull at least BRIDGE_EDGE_MM
+ * long, so a gusset's hypotenuse, whose parallels run leg to leg, is a
+ * candidate at its own angle).  The direction with the most anchored fill
+ * wins.  Then the fill is
  * not supported, bar a 1.5 mm band along the edges where lines of that
  * direction end in the air (its unsupported edges; edges parallel to the
  * direction are free), and perimeter cells are not supported where a line of
@@ -76,6 +81,42 @@ overhangs(const struct ray_grid *g, const struct solids *cs, uint32_t i, uint32_
 #define BRIDGE_DIRS 8
 static const int bridge_dir[BRIDGE_DIRS][2] = { { 1, 0 }, { 2, 1 },  { 1, 1 },  { 1, 2 },
                                                 { 0, 1 }, { -1, 2 }, { -1, 1 }, { -2, 1 } };
+
+/* A region's hull edges this long or longer are candidate directions; at
+   most BRIDGE_EDGES of them, none within BRIDGE_EDGE_DEG of another
+   candidate (the raster's staircases make hull edges a little apart). */
+#define BRIDGE_EDGE_MM  3.0
+#define BRIDGE_EDGES    8
+#define BRIDGE_EDGE_DEG 2.0
+
+/*
+ * A line direction on the raster: a lattice step d (the 8 above), or, for an
+ * edge's direction (d = 0), the digital line along its major axis: the cell
+ * after (i, j) is one step on the major axis and round(m x) on the other,
+ * so the lines of one direction partition the cells as the lattice steps do.
+ */
+struct bdir {
+    int d[2];
+    bool xmajor;
+    int s;    /* the major axis' step: 1 or -1 */
+    double m; /* the minor axis' change per major step */
+};
+
+/* The cell k (1 or -1) steps along dir from (i, j). */
+static void
+bdir_step(const struct bdir *dir, long i, long j, int k, long *ni, long *nj)
+{
+    if (dir->d[0] || dir->d[1]) {
+        *ni = i + k * dir->d[0];
+        *nj = j + k * dir->d[1];
+        return;
+    }
+    long a = dir->xmajor ? i : j, b = dir->xmajor ? j : i;
+    long a2 = a + k * dir->s;
+    long b2 = b + (long)floor(dir->m * (double)a2 + 0.5) - (long)floor(dir->m * (double)a + 0.5);
+    *ni = dir->xmajor ? a2 : b2;
+    *nj = dir->xmajor ? b2 : a2;
+}
 
 /* Heights within this of a layer's middle are on its cutting plane: the
    ray hits are floats, and a face modelled at a plane's height (a box's
@@ -96,16 +137,18 @@ struct bridge_ctx {
     const struct ray_grid *g;
     const struct solids *cs;
     double h;
-    int32_t k;         /* the layer being processed */
-    uint32_t ltag;     /* its tag */
-    uint32_t *mtag[2]; /* cells: ltag when mval[0] (layer k) / mval[1] (k - 1) is known */
-    uint8_t *mval[2];  /* cells: solid at the middle of that layer */
-    uint32_t *tag;     /* cells: tag of the layer whose new area holds it */
-    uint32_t *rtag;    /* cells: tag of the region being processed */
-    uint8_t *kind;     /* cells: 1 perimeter, 2 fill, |4 bridged, |8 unsupported edge */
-    uint32_t *queue;   /* region cells */
-    uint32_t *rimtag;  /* cells: tag of the region whose fill this cell of layer L-1 borders */
-    uint32_t *rim;     /* those cells */
+    int32_t k;           /* the layer being processed */
+    uint32_t ltag;       /* its tag */
+    uint32_t *mtag[2];   /* cells: ltag when mval[0] (layer k) / mval[1] (k - 1) is known */
+    uint8_t *mval[2];    /* cells: solid at the middle of that layer */
+    uint32_t *tag;       /* cells: tag of the layer whose new area holds it */
+    uint32_t *rtag;      /* cells: tag of the region being processed */
+    uint8_t *kind;       /* cells: 1 perimeter, 2 fill, |4 bridged, |8 unsupported edge */
+    uint32_t *queue;     /* region cells */
+    uint32_t *rimtag;    /* cells: tag of the region whose fill this cell of layer L-1 borders */
+    uint32_t *rim;       /* those cells */
+    long *rowlo, *rowhi; /* rows (nw): a region's first and last cell in each */
+    long *hull;          /* a region's row ends (2 nw points), then its hull (up to twice that) */
 };
 
 static bool
@@ -164,8 +207,70 @@ bridge_anchor(const struct bridge_ctx *b, long i, long j, int32_t k)
     return solid_layer(b, i, j, k - 1);
 }
 
+/* Is (i, j) a cell of region rt of a kind in mask? */
+static bool
+member(const struct bridge_ctx *b, uint32_t rt, uint8_t mask, long i, long j)
+{
+    if (!in_grid(b->g, i, j))
+        return false;
+    size_t c = (size_t)j * b->g->nu + (size_t)i;
+    return b->rtag[c] == rt && (b->kind[c] & mask);
+}
+
+/* A digital line along the region's edge grazes the perimeter band or the
+   air past the outline and comes back: a run goes on past this many cells
+   that are neither its own nor material of the layer below. */
+#define BRIDGE_GRAZE 2
+
+/* Is (i, j) beside (8 neighbours) a cell of region rt? */
+static bool
+beside(const struct bridge_ctx *b, uint32_t rt, long i, long j)
+{
+    for (int dj = -1; dj <= 1; dj++)
+        for (int di = -1; di <= 1; di++)
+            if (in_grid(b->g, i + di, j + dj) &&
+                b->rtag[(size_t)(j + dj) * b->g->nu + (size_t)(i + di)] == rt)
+                return true;
+    return false;
+}
+
 /*
- * Lines of direction d over the region's cells of a kind in mask, taken
+ * The run's next cell s (1 or -1) steps along dir from (i, j): true and the
+ * cell in (*ni, *nj) when it is a member, or one is past cells that are not
+ * material of the layer below: at most BRIDGE_GRAZE of them, or, with hug
+ * (lines along the outline: its staircase leaves a digital line parallel
+ * to the edge a cell outside now and then), any number beside the region;
+ * else false and (*ni, *nj) the first cell past the run, or the cell of
+ * the layer below that such cells led to.
+ */
+static bool
+run_step(const struct bridge_ctx *b, uint32_t rt, uint8_t mask, bool hug, const struct bdir *dir,
+         int32_t k, long i, long j, int s, long *ni, long *nj)
+{
+    long x, y;
+    bdir_step(dir, i, j, s, &x, &y);
+    *ni = x, *nj = y;
+    if (member(b, rt, mask, x, y))
+        return true;
+    for (int q = 0;; q++) {
+        if (!in_grid(b->g, x, y))
+            return false;
+        if (bridge_anchor(b, x, y, k)) {
+            *ni = x, *nj = y; /* the run reached the layer below past the graze */
+            return false;
+        }
+        if (q >= BRIDGE_GRAZE && !(hug && beside(b, rt, x, y)))
+            return false;
+        bdir_step(dir, x, y, s, &x, &y);
+        if (member(b, rt, mask, x, y)) {
+            *ni = x, *nj = y;
+            return true;
+        }
+    }
+}
+
+/*
+ * Lines of direction dir over the region's cells of a kind in mask, taken
  * run by run.  *cov sums the cells of runs anchored at both ends
  * (*longest the longest).  With mark set, the cells of kind mark_kind on
  * runs anchored at both ends get bit 4; with mark_kind 0, a run's free ends
@@ -173,28 +278,26 @@ bridge_anchor(const struct bridge_ctx *b, long i, long j, int32_t k)
  */
 static void
 bridge_lines(struct bridge_ctx *b, const uint32_t *cells, size_t n, uint32_t rt, int32_t k,
-             const int d[2], uint8_t mask, bool mark, uint8_t mark_kind, size_t *cov,
+             const struct bdir *dir, uint8_t mask, bool mark, uint8_t mark_kind, size_t *cov,
              size_t *longest)
 {
     const struct ray_grid *g = b->g;
-#define MEMBER(ii, jj)                                                                             \
-    (in_grid(g, ii, jj) && b->rtag[(size_t)(jj)*g->nu + (size_t)(ii)] == rt &&                     \
-     (b->kind[(size_t)(jj)*g->nu + (size_t)(ii)] & mask))
+    bool hug = mask & 1; /* lines over the perimeters too: along the outline */
     *cov = 0;
     *longest = 0;
     for (size_t q = 0; q < n; q++) {
-        long i0 = cells[q] % g->nu, j0 = cells[q] / g->nu;
-        if (!MEMBER(i0, j0) || MEMBER(i0 - d[0], j0 - d[1]))
+        long i0 = cells[q] % g->nu, j0 = cells[q] / g->nu, pi, pj, ni, nj;
+        if (!member(b, rt, mask, i0, j0) ||
+            run_step(b, rt, mask, hug, dir, k, i0, j0, -1, &pi, &pj))
             continue; /* not the start of a run */
         long i = i0, j = j0;
-        size_t len = 0;
-        while (MEMBER(i + d[0], j + d[1])) {
-            i += d[0], j += d[1];
+        size_t len = 1;
+        while (run_step(b, rt, mask, hug, dir, k, i, j, 1, &ni, &nj)) {
+            i = ni, j = nj;
             len++;
         }
-        len++;
-        bool a0 = bridge_anchor(b, i0 - d[0], j0 - d[1], k);
-        bool a1 = bridge_anchor(b, i + d[0], j + d[1], k);
+        bool a0 = bridge_anchor(b, pi, pj, k);
+        bool a1 = bridge_anchor(b, ni, nj, k);
         if (a0 && a1) {
             *cov += len;
             if (len > *longest)
@@ -203,9 +306,13 @@ bridge_lines(struct bridge_ctx *b, const uint32_t *cells, size_t n, uint32_t rt,
         if (!mark)
             continue;
         if (a0 && a1) {
-            for (long x = i0, y = j0, s = 0; s < (long)len; s++, x += d[0], y += d[1])
+            long x = i0, y = j0;
+            for (size_t s = 0; s < len; s++) {
                 if (b->kind[(size_t)y * g->nu + (size_t)x] & mark_kind)
                     b->kind[(size_t)y * g->nu + (size_t)x] |= 4;
+                if (s + 1 < len)
+                    run_step(b, rt, mask, hug, dir, k, x, y, 1, &x, &y);
+            }
         } else {
             if (!a0 && !mark_kind)
                 b->kind[(size_t)j0 * g->nu + (size_t)i0] |= 8;
@@ -213,7 +320,6 @@ bridge_lines(struct bridge_ctx *b, const uint32_t *cells, size_t n, uint32_t rt,
                 b->kind[(size_t)j * g->nu + (size_t)i] |= 8;
         }
     }
-#undef MEMBER
 }
 
 /*
@@ -258,6 +364,92 @@ rim_lines(const struct bridge_ctx *b, size_t n_rim, uint32_t rt, int32_t k, cons
 #undef FILL
 }
 
+/* Is the angle (degrees, modulo 180) within BRIDGE_EDGE_DEG of a candidate's? */
+static bool
+dir_near(const struct bdir *dirs, int n, double deg)
+{
+    for (int q = 0; q < n; q++) {
+        double a = dirs[q].d[0] || dirs[q].d[1]
+                       ? atan2(dirs[q].d[1], dirs[q].d[0])
+                       : (dirs[q].xmajor ? atan2(dirs[q].m, 1) : atan2(1, dirs[q].m));
+        double diff = fabs(fmod(deg - a * 180 / M_PI + 360, 180.0));
+        if (fmin(diff, 180 - diff) < BRIDGE_EDGE_DEG)
+            return true;
+    }
+    return false;
+}
+
+/* z of the cross product (a - o) x (c - o) of hull points (row, column) */
+static long
+hull_cross(const long *o, const long *a, const long *c)
+{
+    return (a[0] - o[0]) * (c[1] - o[1]) - (a[1] - o[1]) * (c[0] - o[0]);
+}
+
+/*
+ * The directions of the region's convex hull edges at least BRIDGE_EDGE_MM
+ * long that no lattice direction (dirs[-BRIDGE_DIRS ..]) or earlier edge has
+ * already (PrusaSlicer's bridge_direction_candidates adds the bridge
+ * contour's lines); returns how many went to out.  The hull is that of the
+ * first and last cell of each row (Andrew's monotone chain; rows come sorted).
+ */
+static int
+hull_dirs(struct bridge_ctx *b, const uint32_t *cells, size_t n, struct bdir *out)
+{
+    const struct ray_grid *g = b->g;
+    long jmin = LONG_MAX, jmax = -1;
+    for (size_t q = 0; q < n; q++) {
+        long j = cells[q] / g->nu;
+        jmin = j < jmin ? j : jmin;
+        jmax = j > jmax ? j : jmax;
+    }
+    for (long j = jmin; j <= jmax; j++)
+        b->rowlo[j] = LONG_MAX, b->rowhi[j] = -1;
+    for (size_t q = 0; q < n; q++) {
+        long i = cells[q] % g->nu, j = cells[q] / g->nu;
+        b->rowlo[j] = i < b->rowlo[j] ? i : b->rowlo[j];
+        b->rowhi[j] = i > b->rowhi[j] ? i : b->rowhi[j];
+    }
+    long *pt = b->hull, *h = b->hull + 2 * (2 * (size_t)g->nw + 1);
+    size_t np = 0, nh = 0;
+    for (long j = jmin; j <= jmax; j++) {
+        if (b->rowhi[j] < 0)
+            continue;
+        pt[2 * np] = j, pt[2 * np + 1] = b->rowlo[j], np++;
+        if (b->rowhi[j] != b->rowlo[j])
+            pt[2 * np] = j, pt[2 * np + 1] = b->rowhi[j], np++;
+    }
+    if (np < 3)
+        return 0;
+    for (int pass = 0; pass < 2; pass++) { /* lower hull, then upper */
+        size_t base = nh;
+        for (size_t t = 0; t < np; t++) {
+            const long *p = pt + 2 * (pass ? np - 1 - t : t);
+            while (nh >= base + 2 && hull_cross(h + 2 * (nh - 2), h + 2 * (nh - 1), p) <= 0)
+                nh--;
+            h[2 * nh] = p[0], h[2 * nh + 1] = p[1], nh++;
+        }
+        nh--; /* the last point starts the other half */
+    }
+    int n_out = 0;
+    double min_cells = BRIDGE_EDGE_MM / g->pitch;
+    for (size_t e = 0; e < nh && n_out < BRIDGE_EDGES; e++) {
+        const long *p = h + 2 * e, *r = h + 2 * ((e + 1) % nh);
+        long dj = r[0] - p[0], di = r[1] - p[1];
+        if (hypot((double)di, (double)dj) < min_cells)
+            continue;
+        double deg = atan2((double)dj, (double)di) * 180 / M_PI;
+        if (dir_near(out - BRIDGE_DIRS, BRIDGE_DIRS + n_out, deg))
+            continue;
+        bool xmajor = labs(di) >= labs(dj);
+        out[n_out++] =
+            (struct bdir){ .xmajor = xmajor,
+                           .s = (xmajor ? di : dj) > 0 ? 1 : -1,
+                           .m = xmajor ? (double)dj / (double)di : (double)di / (double)dj };
+    }
+    return n_out;
+}
+
 /* The bridge decision for one region; sets bit 4 on its unsupported cells. */
 static void
 bridge_region(struct bridge_ctx *b, const uint32_t *cells, size_t n, uint32_t rt, int32_t k,
@@ -282,12 +474,17 @@ bridge_region(struct bridge_ctx *b, const uint32_t *cells, size_t n, uint32_t rt
                 }
             }
     }
+    struct bdir dirs[BRIDGE_DIRS + BRIDGE_EDGES];
+    for (int d = 0; d < BRIDGE_DIRS; d++)
+        dirs[d] = (struct bdir){ .d = { bridge_dir[d][0], bridge_dir[d][1] } };
+    int n_dirs = BRIDGE_DIRS + hull_dirs(b, cells, n, dirs + BRIDGE_DIRS);
     int best = -1;
     size_t best_cov = 0, best_long = 0;
-    for (int d = 0; d < BRIDGE_DIRS; d++) {
+    for (int d = 0; d < n_dirs; d++) {
         size_t cov, longest;
-        bridge_lines(b, cells, n, rt, k, bridge_dir[d], 2, false, 0, &cov, &longest);
-        rim_lines(b, n_rim, rt, k, bridge_dir[d], &cov, &longest);
+        bridge_lines(b, cells, n, rt, k, &dirs[d], 2, false, 0, &cov, &longest);
+        if (d < BRIDGE_DIRS)
+            rim_lines(b, n_rim, rt, k, bridge_dir[d], &cov, &longest);
         if (cov > best_cov || (cov == best_cov && cov > 0 && longest < best_long)) {
             best = d;
             best_cov = cov;
@@ -298,9 +495,9 @@ bridge_region(struct bridge_ctx *b, const uint32_t *cells, size_t n, uint32_t rt
         return; /* no anchored line: not a bridge */
     size_t cov, longest;
     /* the fill's free ends (its unsupported edges) ... */
-    bridge_lines(b, cells, n, rt, k, bridge_dir[best], 2, true, 0, &cov, &longest);
+    bridge_lines(b, cells, n, rt, k, &dirs[best], 2, true, 0, &cov, &longest);
     /* ... and straight perimeters anchored at both ends */
-    bridge_lines(b, cells, n, rt, k, bridge_dir[best], 3, true, 1, &cov, &longest);
+    bridge_lines(b, cells, n, rt, k, &dirs[best], 3, true, 1, &cov, &longest);
     /* fill is bridged, bar 1.5 mm (SUPPORT_MATERIAL_MARGIN) from a free edge: a
        cell D centres from an edge cell is (D + 1/2) pitches from the edge */
     double rmax = 1.5 / g->pitch - 0.5;
@@ -369,6 +566,48 @@ by_layer_build(struct by_layer *bl, const int32_t *k, const uint32_t *item, size
     return true;
 }
 
+/* The scratch of b (its grid set): false when out of memory. */
+static bool
+bridge_ctx_alloc(struct bridge_ctx *b)
+{
+    size_t cells = (size_t)b->g->nu * b->g->nw;
+    b->tag = mem_calloc(cells, sizeof(uint32_t));
+    b->rtag = mem_calloc(cells, sizeof(uint32_t));
+    b->kind = mem_calloc(cells, 1);
+    b->queue = mem_array(cells, sizeof(uint32_t));
+    b->rimtag = mem_calloc(cells, sizeof(uint32_t));
+    b->rim = mem_array(cells, sizeof(uint32_t));
+    b->rowlo = mem_array(b->g->nw, sizeof(long));
+    b->rowhi = mem_array(b->g->nw, sizeof(long));
+    b->hull = mem_array(6 * ((size_t)b->g->nw * 2 + 1), sizeof(long));
+    bool ok = b->tag && b->rtag && b->kind && b->queue && b->rimtag && b->rim && b->rowlo &&
+              b->rowhi && b->hull;
+    for (int s = 0; s < 2; s++) {
+        b->mtag[s] = mem_calloc(cells, sizeof(uint32_t));
+        b->mval[s] = mem_array(cells, 1);
+        ok = ok && b->mtag[s] && b->mval[s];
+    }
+    return ok;
+}
+
+static void
+bridge_ctx_release(struct bridge_ctx *b)
+{
+    free(b->tag);
+    free(b->rtag);
+    free(b->kind);
+    free(b->queue);
+    free(b->rimtag);
+    free(b->rim);
+    free(b->rowlo);
+    free(b->rowhi);
+    free(b->hull);
+    for (int s = 0; s < 2; s++) {
+        free(b->mtag[s]);
+        free(b->mval[s]);
+    }
+}
+
 /*
  * Drop the contacts that PrusaSlicer's bridge detection leaves unsupported.
  * Only the layers that have contacts, and of those only the regions that
@@ -388,20 +627,10 @@ remove_bridges(const struct ray_grid *g, const struct solids *cs, const struct s
     size_t n_k = n_b > *n_ct ? n_b : *n_ct;
     int32_t *kk = mem_array(n_k ? n_k : 1, sizeof(*kk));
     uint32_t *it = mem_array(n_k ? n_k : 1, sizeof(*it));
-    b.tag = mem_calloc(cells, sizeof(uint32_t));
-    b.rtag = mem_calloc(cells, sizeof(uint32_t));
-    b.kind = mem_calloc(cells, 1);
-    b.queue = mem_array(cells, sizeof(uint32_t));
-    b.rimtag = mem_calloc(cells, sizeof(uint32_t));
-    b.rim = mem_array(cells, sizeof(uint32_t));
-    for (int s = 0; s < 2; s++) {
-        b.mtag[s] = mem_calloc(cells, sizeof(uint32_t));
-        b.mval[s] = mem_array(cells, 1);
-    }
+    bool ok = bridge_ctx_alloc(&b);
     uint8_t *gone = mem_calloc(*n_ct ? *n_ct : 1, 1);
     int rc = SF_OK;
-    if (!kk || !it || !b.tag || !b.rtag || !b.kind || !b.queue || !b.rimtag || !b.rim ||
-        !b.mtag[0] || !b.mtag[1] || !b.mval[0] || !b.mval[1] || !gone) {
+    if (!kk || !it || !ok || !gone) {
         rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory (bridges)");
         goto done;
     }
@@ -481,16 +710,7 @@ done:
     by_layer_release(&con);
     free(kk);
     free(it);
-    free(b.tag);
-    free(b.rtag);
-    free(b.kind);
-    free(b.queue);
-    free(b.rimtag);
-    free(b.rim);
-    for (int s = 0; s < 2; s++) {
-        free(b.mtag[s]);
-        free(b.mval[s]);
-    }
+    bridge_ctx_release(&b);
     free(gone);
     return rc;
 }
