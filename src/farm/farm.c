@@ -674,6 +674,8 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
     for (size_t i = 0; i < f->n_printers; i++) {
         const struct printer *p = f->printers[i];
         farm_printer_view(p, &sp[i]);
+        if (!farm_host_owns(f, sp[i].name)) /* another live host's: its jobs are that host's */
+            sp[i].enabled = false;
         /* An interrupted part is still on this bed, waiting to be resumed:
            nothing else may start on top of it. */
         for (size_t k = 0; k < n; k++)

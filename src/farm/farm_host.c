@@ -34,6 +34,10 @@ struct farm_host {
     int64_t lease_ms; /* host_lease_s */
     uint64_t timer;   /* the beat */
     int fd;           /* the listener's socket on the loop, -1 if none */
+    /* printers of f's config that another live host owns (store_host_own): the scheduler
+       leaves them alone; tried again at each beat, taken once that host is gone */
+    char (*foreign)[STORE_HOST_NAME_MAX];
+    size_t n_foreign;
 };
 
 static void listen_arm(struct farm_host *h);
@@ -58,20 +62,58 @@ default_name(char *out, size_t n)
             *p = '-';
 }
 
-/* Own f's printers (replacing what the host owned before). */
+/* Was printer p another live host's at the last own()? */
+static bool
+was_foreign(const struct farm_host *h, const char *p)
+{
+    for (size_t i = 0; i < h->n_foreign; i++)
+        if (strcmp(h->foreign[i], p) == 0)
+            return true;
+    return false;
+}
+
+/* Own f's printers (replacing what the host owned before); those another live host owns are
+   left to it, and its scheduler leaves them alone (said once, when it finds one). */
 static void
 own(struct farm_host *h)
 {
     struct farm *f = h->f;
-    const char **names = mem_array(f->n_printers ? f->n_printers : 1, sizeof(*names));
+    size_t n = f->n_printers ? f->n_printers : 1;
+    const char **names = mem_array(n, sizeof(*names));
+    struct store_host_owned *out = mem_array(n, sizeof(*out));
+    char(*foreign)[STORE_HOST_NAME_MAX] = mem_array(n, sizeof(*foreign));
     struct sf_err err;
-    if (!names)
-        return;
+    if (!names || !out || !foreign)
+        goto out;
     for (size_t i = 0; i < f->n_printers; i++)
         names[i] = printer_cfg(f->printers[i])->name;
-    if (store_host_own(f->s, h->name, h->token, names, f->n_printers, &err))
+    if (store_host_own(f->s, h->name, h->token, names, f->n_printers, out, &err)) {
         log_error("host", "%s: %s", h->name, err.msg);
+        goto out;
+    }
+    size_t n_foreign = 0;
+    for (size_t i = 0; i < f->n_printers; i++) {
+        if (out[i].owned) {
+            if (was_foreign(h, names[i]))
+                log_info("host", "%s: printer '%s' is its own now: scheduling on it", h->name,
+                         names[i]);
+            continue;
+        }
+        if (!was_foreign(h, names[i]))
+            log_warn("host",
+                     "%s: printer '%s' belongs to live host '%s': not scheduling on it here (a "
+                     "printer is in one host's config; trying again at each beat)",
+                     h->name, names[i], out[i].other);
+        snprintf(foreign[n_foreign++], STORE_HOST_NAME_MAX, "%s", names[i]);
+    }
+    free(h->foreign);
+    h->foreign = foreign;
+    h->n_foreign = n_foreign;
+    foreign = NULL;
+out:
     free(names);
+    free(out);
+    free(foreign);
 }
 
 /* Join (again): the lease, the printers.  Logs why not. */
@@ -110,6 +152,10 @@ on_beat(struct loop *l, void *ud)
             h->joined = false;
             join(h);
         }
+    } else if (h->n_foreign) { /* their owner may be gone: own them again */
+        own(h);
+        if (!h->n_foreign)
+            farm_kick(h->f);
     }
     struct store_recovery moved;
     int n = store_host_reap(h->f->s, clock_wall_ms(), &moved, &err);
@@ -222,6 +268,7 @@ farm_host_stop(struct farm *f)
         farm_host_wake(f);
     }
     store_close(h->ls);
+    free(h->foreign);
     free(h);
     f->host = NULL;
 }
@@ -286,4 +333,11 @@ farm_host_own(struct farm *f)
 {
     if (f && f->host && f->host->joined)
         own(f->host);
+}
+
+bool
+farm_host_owns(const struct farm *f, const char *printer)
+{
+    const struct farm_host *h = f ? f->host : NULL;
+    return !h || !was_foreign(h, printer);
 }

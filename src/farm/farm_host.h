@@ -18,7 +18,10 @@
  * one a reaped host had prepared), taken first (store_job_take, one
  * statement).  A host's scheduler never sees another host's jobs
  * (store_job_live_host), and writes no wait reason on queued jobs (another
- * host may be about to take them).
+ * host may be about to take them).  A printer of its config that another
+ * live host owns (both configs list that name) stays that host's: this
+ * host schedules nothing on it, says so once with both names, and tries to
+ * own it again at each beat (it is free once that host is gone).
  *
  * Wake-ups: a job added or changed through a host's API, a reap that moved
  * jobs and a host's leave NOTIFY the others; every host LISTENs on a
@@ -76,5 +79,9 @@ bool farm_host_take(struct farm *f, int64_t id);
 void farm_host_wake(struct farm *f);
 /* f's printers changed (a reload): own them again. */
 void farm_host_own(struct farm *f);
+/* May f schedule on its printer named printer?  Always without a shared store; with one,
+   unless another live host owns a printer of that name (its config lists it too): then the
+   job and the printer are that host's (logged once, when found; tried again at each beat). */
+bool farm_host_owns(const struct farm *f, const char *printer);
 
 #endif

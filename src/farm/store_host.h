@@ -85,14 +85,24 @@ int store_host_join(struct store *s, const char *name, int64_t lease_ms, int64_t
 int store_host_beat(struct store *s, const char *name, int64_t token, int64_t lease_ms,
                     struct sf_err *err);
 
+/* What store_host_own found for one printer (plain data). */
+struct store_host_owned {
+    bool owned;                      /* the caller owns it now */
+    char other[STORE_HOST_NAME_MAX]; /* else the live host that owns it */
+};
+
 /*
  * Record the printers of host name's config (n names, each 1..63 bytes) as
- * its own, replacing what it owned before.  A printer another live host
- * owns is refused (SF_EAGAIN naming both): a printer belongs to one config.
- * SF_ESTALE when name's lease is lost.
+ * its own, replacing what it owned before.  A printer belongs to one
+ * config: one that another live host owns stays that host's.  With out (n
+ * entries) each printer's outcome goes there (out[i].owned false and
+ * out[i].other naming the live owner for such a printer; the rest are
+ * owned) and the call succeeds; with out NULL such a printer refuses the
+ * whole call (SF_EAGAIN naming both hosts, nothing recorded).  SF_ESTALE
+ * when name's lease is lost.
  */
 int store_host_own(struct store *s, const char *name, int64_t token, const char *const *printers,
-                   size_t n, struct sf_err *err);
+                   size_t n, struct store_host_owned *out, struct sf_err *err);
 
 /*
  * Reap every host whose lease ran out by now_ms, in one transaction: its

@@ -205,10 +205,19 @@ T_CASE(hosts_expired_host_is_reaped_once)
     T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
     T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
     const char *mine[] = { "p1" };
-    T_OK(store_host_own(p.a, "a", ta, mine, 1, &err), &err);
+    T_OK(store_host_own(p.a, "a", ta, mine, 1, NULL, &err), &err);
     const char *theirs[] = { "p1" };
-    T_ERR(store_host_own(p.b, "b", tb, theirs, 1, &err), SF_EAGAIN, &err,
+    T_ERR(store_host_own(p.b, "b", tb, theirs, 1, NULL, &err), SF_EAGAIN, &err,
           "belongs to live host 'a'");
+    /* asked per printer: a's stays a's, said so, and b owns the rest */
+    const char *both[] = { "p1", "p9" };
+    struct store_host_owned owned[2];
+    T_OK(store_host_own(p.b, "b", tb, both, 2, owned, &err), &err);
+    T_TRUE(!owned[0].owned && owned[1].owned);
+    T_EQ_STR(owned[0].other, "a");
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM host_printers WHERE host = 'a'"
+                                " AND printer = 'p1'"),
+             1);
     T_OK(add_jobs(p.a, 1, &ids[0], &err), &err);
     T_OK(add_jobs(p.a, 1, &ids[2], &err), &err);
     /* ids[0] is claimed (preparing) by a; ids[1] prints on a's p1; ids[2] waits unclaimed */
@@ -346,7 +355,7 @@ T_CASE(hosts_list_shows_lease_printers_and_claims)
     T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
     T_OK(store_host_join(p.b, "b", 60 * 1000, &tb, &err), &err);
     const char *mine[] = { "m2", "m1" };
-    T_OK(store_host_own(p.a, "a", ta, mine, 2, &err), &err);
+    T_OK(store_host_own(p.a, "a", ta, mine, 2, NULL, &err), &err);
     T_OK(add_jobs(p.a, 2, NULL, &err), &err);
     struct job_row j;
     T_OK(store_job_claim(p.a, "a", ta, NULL, &j, &fence, &err), &err);
@@ -501,7 +510,7 @@ T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
     T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
     T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
     const char *mine[] = { "p1" };
-    T_OK(store_host_own(p.a, "a", ta, mine, 1, &err), &err);
+    T_OK(store_host_own(p.a, "a", ta, mine, 1, NULL, &err), &err);
     T_OK(add_ready(p.a, &id, &err), &err);
     T_OK(store_job_attach(p.a, "a", ta, id, &fa, &err), &err);
     T_ERR(store_job_event(p.a, id, JOB_EV_START, &(struct job_event_args){ .printer = "p1" }, NULL,
