@@ -550,3 +550,69 @@ T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
     T_OK(store_job_event(p.a, q, JOB_EV_CANCEL, NULL, NULL, &err), &err);
     pair_close(&p);
 }
+
+/* Whether rows (n) hold job id. */
+static bool
+has_job(const struct job_row *rows, size_t n, int64_t id)
+{
+    for (size_t i = 0; i < n; i++)
+        if (rows[i].id == id)
+            return true;
+    return false;
+}
+
+/* Does b's scheduler see job id (store_job_live_host)?  -1 on an error. */
+static int
+b_sees(struct pair *p, int64_t id)
+{
+    struct job_row *rows;
+    size_t n;
+    struct sf_err err;
+    if (store_job_live_host(p->b, "b", &rows, &n, &err))
+        return -1;
+    int yes = has_job(rows, n, id);
+    free(rows);
+    return yes;
+}
+
+T_CASE(hosts_defer_prepare_failed_and_restart_release_the_claim)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "release", &err));
+    int64_t ta, tb, ids[2], ready, fence;
+    T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    T_OK(add_jobs(p.a, 2, ids, &err), &err);
+    struct job_row j;
+    /* a defers the job it claimed: back in the queue, no host's, so b's scheduler sees it */
+    T_OK(store_job_claim_id(p.a, "a", ta, ids[0], &j, &fence, &err), &err);
+    T_EQ_INT(b_sees(&p, ids[0]), 0);
+    struct job_event_args defer = { .reason = "the pool is full", .fence = fence };
+    T_OK(store_job_event(p.a, ids[0], JOB_EV_DEFER, &defer, NULL, &err), &err);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM jobs WHERE claimed_by != ''"), 0);
+    T_EQ_INT(b_sees(&p, ids[0]), 1);
+    T_OK(store_job_claim_id(p.b, "b", tb, ids[0], &j, NULL, &err), &err);
+    /* a's preparation fails: the failed job is held by no host */
+    T_OK(store_job_claim_id(p.a, "a", ta, ids[1], &j, &fence, &err), &err);
+    struct job_event_args failed = { .reason = "no slicer", .fence = fence };
+    T_OK(store_job_event(p.a, ids[1], JOB_EV_PREPARE_FAILED, &failed, NULL, &err), &err);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM jobs WHERE claimed_by = 'a'"), 0);
+    /* a prints a job and is reaped: interrupted, still a's (its part is on a's printer);
+       the operator's restart gives it to any host, and b takes it */
+    const char *mine[] = { "pa" };
+    T_OK(store_host_own(p.a, "a", ta, mine, 1, NULL, &err), &err);
+    T_OK(add_ready(p.a, &ready, &err), &err);
+    T_OK(store_job_take(p.a, "a", ta, ready, &fence, &err), &err);
+    struct job_event_args start = { .printer = "pa", .fence = fence };
+    T_OK(store_job_event(p.a, ready, JOB_EV_START, &start, NULL, &err), &err);
+    T_EQ_INT(store_host_reap(p.b, clock_wall_ms() + 120 * 1000, NULL, &err), 1);
+    T_OK(store_job_get(p.b, ready, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    T_EQ_INT(store_job_take(p.b, "b", tb, ready, NULL, &err), SF_ENOTFOUND);
+    T_OK(store_job_event(p.b, ready, JOB_EV_RESTART, NULL, NULL, &err), &err);
+    T_EQ_INT(b_sees(&p, ready), 1);
+    T_OK(store_job_take(p.b, "b", tb, ready, &fence, &err), &err);
+    T_OK(store_check(p.b, &err), &err);
+    pair_close(&p);
+}
