@@ -28,19 +28,27 @@ struct farm_host {
     struct farm *f;
     struct store *ls; /* the listener's connection */
     char name[STORE_HOST_NAME_MAX];
-    int64_t token;    /* this process's, once joined */
-    bool joined;      /* the lease is ours */
-    bool waiting;     /* a join was refused: say so once, retry at each beat */
-    int64_t lease_ms; /* host_lease_s */
-    uint64_t timer;   /* the beat */
-    int fd;           /* the listener's socket on the loop, -1 if none */
+    int64_t token;     /* this process's, once joined */
+    bool joined;       /* the lease is ours */
+    bool waiting;      /* a join was refused: say so once, retry at each beat */
+    int64_t lease_ms;  /* host_lease_s */
+    uint64_t timer;    /* the beat */
+    int fd;            /* the listener's socket on the loop, -1 if none */
+    int64_t fd_gen;    /* the listener's reconnects (store_host_reconnects) when fd was added */
+    uint64_t relisten; /* the listener is lost: timer of its next try, 0 if none */
+    bool listen_lost;  /* said so (once until it is back) */
     /* printers of f's config that another live host owns (store_host_own): the scheduler
        leaves them alone; tried again at each beat, taken once that host is gone */
     char (*foreign)[STORE_HOST_NAME_MAX];
     size_t n_foreign;
 };
 
-static void listen_arm(struct farm_host *h);
+static bool listen_arm(struct farm_host *h);
+static void listen_retry(struct farm_host *h);
+
+/* A lost listener is tried again this often: each try advances its connect without waiting
+   (store_open_listener), so a few tries bring it back once the server answers. */
+#define FARM_HOST_RELISTEN_MS 200
 
 bool
 farm_host_on(const struct farm *f)
@@ -169,8 +177,6 @@ on_beat(struct loop *l, void *ud)
         farm_host_wake(h->f);
         farm_kick(h->f);
     }
-    if (h->fd < 0)
-        listen_arm(h);
     h->timer = loop_timer_add(l, h->lease_ms / FARM_HOST_BEATS_PER_LEASE, on_beat, h);
 }
 
@@ -188,35 +194,64 @@ on_note(struct loop *l, int fd, unsigned events, void *ud)
     (void)l, (void)fd, (void)events;
     struct farm_host *h = ud;
     int n = store_host_drain(h->ls);
-    if (n < 0) { /* lost: the beat tries again */
-        log_warn("host", "%s: the wake-up connection was lost; retrying at each beat", h->name);
-        listen_drop(h);
+    if (n >= 0 && store_host_reconnects(h->ls) == h->fd_gen &&
+        store_host_notify_fd(h->ls) == h->fd) {
+        if (n > 0)
+            farm_kick(h->f);
         return;
     }
-    if (store_host_notify_fd(h->ls) != h->fd) { /* it reconnected */
-        listen_drop(h);
-        listen_arm(h);
-    }
-    if (n > 0)
-        farm_kick(h->f);
+    /* lost, or back already on a new session whose socket is a new one (perhaps under the
+       old number, which epoll dropped when the old socket closed): watch it again, or try
+       again shortly.  Dropped at once: the number is still this registration's. */
+    listen_drop(h);
+    if (!listen_arm(h))
+        listen_retry(h);
 }
 
-/* Watch the listener's socket (again): drain first, which reconnects a lost connection. */
 static void
+on_relisten(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm_host *h = ud;
+    h->relisten = 0;
+    if (!listen_arm(h))
+        listen_retry(h);
+}
+
+/* Try the lost listener again in FARM_HOST_RELISTEN_MS (saying so once). */
+static void
+listen_retry(struct farm_host *h)
+{
+    if (!h->listen_lost)
+        log_warn("host", "%s: the wake-up connection is lost; trying again every %d ms", h->name,
+                 FARM_HOST_RELISTEN_MS);
+    h->listen_lost = true;
+    if (!h->relisten)
+        h->relisten = loop_timer_add(h->f->l, FARM_HOST_RELISTEN_MS, on_relisten, h);
+}
+
+/* Watch the listener's socket (again): drain first, which advances the reconnect of a lost
+   connection (never waiting).  False while it is not back. */
+static bool
 listen_arm(struct farm_host *h)
 {
     struct sf_err err;
     if (store_host_drain(h->ls) < 0)
-        return;
+        return false;
     int fd = store_host_notify_fd(h->ls);
     if (fd < 0)
-        return;
+        return false;
     if (loop_add_fd(h->f->l, fd, LOOP_READ, on_note, h, &err)) {
         log_warn("host", "%s: %s", h->name, err.msg);
-        return;
+        return false;
     }
     h->fd = fd;
+    h->fd_gen = store_host_reconnects(h->ls);
+    if (h->listen_lost)
+        log_info("host", "%s: the wake-up connection is back", h->name);
+    h->listen_lost = false;
     farm_kick(h->f); /* what arrived while it was away */
+    return true;
 }
 
 int
@@ -235,11 +270,12 @@ farm_host_start(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     else
         default_name(h->name, sizeof(h->name));
     f->host = h;
-    if (!(h->ls = store_open_peer(f->s, err)) || store_host_listen(h->ls, err)) {
+    if (!(h->ls = store_open_listener(f->s, err)) || store_host_listen(h->ls, err)) {
         sf_err_prefix(err, "host %s: wake-up connection", h->name);
         return err->code;
     }
-    listen_arm(h);
+    if (!listen_arm(h))
+        listen_retry(h);
     join(h);
     h->timer = loop_timer_add(f->l, h->lease_ms / FARM_HOST_BEATS_PER_LEASE, on_beat, h);
     return SF_OK;
@@ -253,6 +289,8 @@ farm_host_stop(struct farm *f)
         return;
     if (h->timer)
         loop_timer_cancel(f->l, h->timer);
+    if (h->relisten)
+        loop_timer_cancel(f->l, h->relisten);
     listen_drop(h);
     struct sf_err err;
     if (h->joined) {

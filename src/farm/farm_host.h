@@ -27,7 +27,10 @@
  * jobs and a host's leave NOTIFY the others; every host LISTENs on a
  * connection of its own, watched on the loop's epoll, and runs a
  * scheduling pass when one arrives (no polling of the queue).  A lost
- * listener is retried at each beat.
+ * listener (the server restarted, the network cut) is tried again every
+ * 200 ms without the loop waiting on its connect, and watched again once
+ * its new session LISTENs, followed by a scheduling pass for what arrived
+ * while it was away.
  *
  * Every call here is a no-op (or store.h's single-host call) when the farm
  * has no shared store.  Thread: the loop thread.

@@ -108,6 +108,12 @@ store_open_peer(const struct store *s, struct sf_err *err)
 }
 
 struct store *
+store_open_listener(const struct store *s, struct sf_err *err)
+{
+    return conn_store(s->dir, s->target, SQLDB_NOWAIT, err);
+}
+
+struct store *
 store_open_view(const char *target, struct sf_err *err)
 {
     if (!target || !target[0] || strlen(target) >= STORE_PATH_MAX - 16) {
@@ -745,6 +751,12 @@ int
 store_host_drain(struct store *s)
 {
     return sqldb_notifications(s->db, count_note, NULL);
+}
+
+int64_t
+store_host_reconnects(struct store *s)
+{
+    return sqldb_reconnects(s->db);
 }
 
 /* store_host_printer_set in the caller's transaction. */

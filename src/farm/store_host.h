@@ -56,6 +56,14 @@ struct store *store_open_host(const char *data_dir, const char *db, struct store
 struct store *store_open_peer(const struct store *s, struct sf_err *err);
 
 /*
+ * As store_open_peer, for the loop thread's wake-ups (store_host_listen): a
+ * reconnect never waits for the network (sqldb.h's SQLDB_NOWAIT), so each
+ * store_host_drain after a loss advances the new connection as far as it
+ * goes without waiting, until its session is up with its LISTENs again.
+ */
+struct store *store_open_listener(const struct store *s, struct sf_err *err);
+
+/*
  * A read-only connection to the store at target (a PostgreSQL URL, or a data
  * dir whose SQLite file is opened beside its daemon), for tools such as
  * `slimfarm hosts`: no lock, migration or recovery.  NULL with err set
@@ -192,6 +200,9 @@ int store_host_listen(struct store *s, struct sf_err *err);
 int store_host_wake(struct store *s, struct sf_err *err);
 int store_host_notify_fd(struct store *s);
 int store_host_drain(struct store *s);
+/* How often s's connection came back after a loss (0 on SQLite): its socket is a new one
+   each time, perhaps under the old one's number, so a watcher of the old one adds it again. */
+int64_t store_host_reconnects(struct store *s);
 
 /*
  * Give job id (ready, printing, paused or interrupted) to host for its

@@ -315,7 +315,8 @@ no_prepare(const struct prepare_req *req, struct prepare_out *out, const atomic_
     return sf_err_set(err, SF_EUNSUPP, "test: no preparing here");
 }
 
-/* What was logged at warn level or above (the sink runs on any thread). */
+/* What was logged at warn level or above, and the hosts' news (the sink runs on any
+   thread). */
 static pthread_mutex_t logged_mu = PTHREAD_MUTEX_INITIALIZER;
 static char logged[8192];
 
@@ -325,7 +326,7 @@ sink(void *ud, enum log_level level, const char *subsys, const char *printer, co
     (void)ud, (void)printer;
     pthread_mutex_lock(&logged_mu);
     size_t n = strlen(logged);
-    if (level <= LOG_WARN && n + 1 < sizeof(logged))
+    if ((level <= LOG_WARN || strcmp(subsys, "host") == 0) && n + 1 < sizeof(logged))
         snprintf(logged + n, sizeof(logged) - n, "%s: %s\n", subsys, msg);
     pthread_mutex_unlock(&logged_mu);
 }
@@ -360,7 +361,7 @@ host_farm(const char *dir, const char *url, const char *name, const char *printe
     memset(hdrvs, 0, sizeof(hdrvs));
     n_hdrvs = 0;
     logged[0] = '\0';
-    log_set_level(LOG_WARN);
+    log_set_level(LOG_INFO);
     log_set_sink(sink, NULL);
     farmcfg_init(&hx.cfg);
     int rc = farmcfg_parse(&hx.cfg, ini, strlen(ini), "farm.ini", err);
@@ -472,6 +473,73 @@ T_CASE(host_leaves_alone_a_printer_another_live_host_owns)
     db_text(url, "SELECT host FROM host_printers WHERE printer = 'y' AND ?1 = 0", 0, text,
             sizeof(text));
     T_EQ_STR(text, "b");
+    host_farm_free();
+    store_close(a);
+}
+
+/* Turn hx's loop until what was logged holds what, or WAIT_LIMIT_MS pass. */
+static bool
+wait_logged(const char *what)
+{
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        if (was_logged(what))
+            return true;
+        loop_run_once(hx.l, 20);
+    }
+    return false;
+}
+
+T_CASE(host_listens_again_after_its_connection_is_cut)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], sql[256];
+    snprintf(dir, sizeof(dir), "%s/relisten", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    char db[64];
+    db_text(url, "SELECT current_database() WHERE ?1 = 0", 0, db, sizeof(db));
+    /* a, a host without printers, adds jobs for b's printers and wakes b (a NOTIFY) */
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer p1]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n"
+                   "[printer p2]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n"
+                   "[printer p3]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n",
+                   &err),
+         &err);
+    int64_t ids[3];
+    T_OK(add_ready_for(a, "p1", &ids[0], &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, ids[0], "printing"));
+    /* the listener's session is cut by the server, and no new one is let in for now (both
+       from the server's own database: a database cannot shut itself) */
+    struct sqldb *cut = sqldb_open(getenv("SLIMFARM_TEST_STORE"), 0, &err);
+    T_TRUE(cut != NULL);
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %s ALLOW_CONNECTIONS false", db);
+    T_OK(sqldb_exec(cut, sql), NULL);
+    snprintf(sql, sizeof(sql),
+             "SELECT count(pg_terminate_backend(pid)) FROM pg_stat_activity"
+             " WHERE datname = '%s' AND query LIKE 'LISTEN%%'",
+             db);
+    struct sqldb_stmt *st;
+    T_OK(sqldb_prepare(cut, sql, &st), NULL);
+    T_EQ_INT(sqldb_step(st), SQLDB_ROW);
+    T_EQ_INT(sqldb_column_int(st, 0), 1);
+    sqldb_finalize(st);
+    T_TRUE(wait_logged("b: the wake-up connection is lost"));
+    /* a job queued (its NOTIFY lost to b) while the listener is away */
+    T_OK(add_ready_for(a, "p2", &ids[1], &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %s ALLOW_CONNECTIONS true", db);
+    T_OK(sqldb_exec(cut, sql), NULL);
+    sqldb_close(cut);
+    /* back: the pass it runs then starts what came meanwhile, and a NOTIFY wakes it again */
+    T_TRUE(wait_logged("b: the wake-up connection is back"));
+    T_TRUE(wait_state(url, ids[1], "printing"));
+    T_OK(add_ready_for(a, "p3", &ids[2], &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, ids[2], "printing"));
     host_farm_free();
     store_close(a);
 }
