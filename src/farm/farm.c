@@ -508,6 +508,10 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
         rc = farm_host_claim(f, j->id, &t->fence);
         if (rc) {
             free(t);
+            /* a database that was away or busy: the next pass tries again (a claim in
+               doubt is read back first, and wakes the farm when settled) */
+            if (rc == SF_EUNREACH || rc == SF_EBUSY)
+                retry_later(f);
             return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
         }
         f->preparing++;

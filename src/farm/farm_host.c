@@ -41,6 +41,20 @@ struct farm_host {
        leaves them alone; tried again at each beat, taken once that host is gone */
     char (*foreign)[STORE_HOST_NAME_MAX];
     size_t n_foreign;
+    /* claims whose COMMIT's answer was lost (SF_EINDOUBT): not claimed again until their
+       read-back (store_job_claim_settle, on the store thread) settled them */
+    struct doubt *doubts;
+    uint64_t resettle; /* a read-back failed: timer of the next round, 0 if none */
+};
+
+/* A claim in doubt, on its way to the store thread's read-back or waiting for another. */
+struct doubt {
+    struct farm_host *h;
+    struct doubt *next;             /* in h->doubts */
+    char host[STORE_HOST_NAME_MAX]; /* h's name, for the store thread */
+    int64_t id;                     /* the job */
+    bool posted;                    /* its read-back is on the store thread */
+    bool released;                  /* the claim had committed and was given back */
 };
 
 static bool listen_arm(struct farm_host *h);
@@ -291,6 +305,16 @@ farm_host_stop(struct farm *f)
         loop_timer_cancel(f->l, h->timer);
     if (h->relisten)
         loop_timer_cancel(f->l, h->relisten);
+    if (h->resettle)
+        loop_timer_cancel(f->l, h->resettle);
+    /* a claim still in doubt: the store thread's queue ran (farm_free), so none is posted;
+       the leave below reaps this host, which gives such a job back */
+    for (struct doubt *d = h->doubts, *next; d; d = next) {
+        next = d->next;
+        log_warn("host", "%s: job %lld: its claim is still in doubt at the stop", h->name,
+                 (long long)d->id);
+        free(d);
+    }
     listen_drop(h);
     struct sf_err err;
     if (h->joined) {
@@ -324,12 +348,83 @@ farm_host_reader(const struct farm *f, char *name, size_t size)
     return true;
 }
 
+static void settle(struct farm_host *h);
+
+static int
+settle_call(struct store *s, void *arg, struct sf_err *err)
+{
+    struct doubt *d = arg;
+    return store_job_claim_settle(s, d->host, d->id, &d->released, err);
+}
+
+static void
+on_resettle(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm_host *h = ud;
+    h->resettle = 0;
+    settle(h);
+}
+
+/* A read-back came back: the job is settled (claimable again), or asked again later. */
+static void
+on_settled(void *ud, const struct storeq_result *r)
+{
+    struct doubt *d = ud;
+    struct farm_host *h = d->h;
+    d->posted = false;
+    if (r->rc) {
+        log_warn("host", "%s: job %lld: reading back its claim: %s (trying again)", h->name,
+                 (long long)d->id, r->err->msg);
+        if (!h->resettle)
+            h->resettle = loop_timer_add(h->f->l, FARM_RETRY_MS, on_resettle, h);
+        return;
+    }
+    log_info("host", "%s: job %lld: its claim in doubt %s", h->name, (long long)d->id,
+             d->released ? "had committed: given back to the queue" : "did not commit");
+    for (struct doubt **pp = &h->doubts; *pp; pp = &(*pp)->next)
+        if (*pp == d) {
+            *pp = d->next;
+            break;
+        }
+    free(d);
+    farm_kick(h->f); /* claimable again, by this host too */
+}
+
+/* Post the read-back of every claim in doubt not on its way yet. */
+static void
+settle(struct farm_host *h)
+{
+    for (struct doubt *d = h->doubts; d; d = d->next) {
+        if (d->posted)
+            continue;
+        if (storeq_call(h->f->q, settle_call, d, NULL, on_settled, d)) {
+            if (!h->resettle) /* out of memory: later */
+                h->resettle = loop_timer_add(h->f->l, FARM_RETRY_MS, on_resettle, h);
+            return;
+        }
+        d->posted = true;
+    }
+}
+
+/* Is the claim of job id in doubt (its read-back not back yet)? */
+static bool
+in_doubt(const struct farm_host *h, int64_t id)
+{
+    for (const struct doubt *d = h->doubts; d; d = d->next)
+        if (d->id == id)
+            return true;
+    return false;
+}
+
 int
 farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
 {
     struct farm_host *h = f->host;
     struct sf_err err;
     struct job_row j;
+    if (in_doubt(h, id))
+        return SF_ENOTFOUND; /* not again until its last claim is settled */
     /* after what the farm queued for the store, as job_event's PREPARE */
     int rc = farm_sync(f, STOREQ_SYNC_MS, &err);
     if (rc == SF_OK)
@@ -338,6 +433,15 @@ farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
         log_info("host", "%s claimed job %lld", h->name, (long long)id);
     else if (rc != SF_ENOTFOUND)
         log_warn("host", "%s: claim job %lld: %s", h->name, (long long)id, err.msg);
+    struct doubt *d = rc == SF_EINDOUBT ? mem_calloc(1, sizeof(*d)) : NULL;
+    if (d) {
+        /* it may have committed: the job would be this host's, preparing, and prepared by
+           no one.  Read back on the store thread, and give it back if so. */
+        *d = (struct doubt){ .h = h, .next = h->doubts, .id = id };
+        snprintf(d->host, sizeof(d->host), "%s", h->name);
+        h->doubts = d;
+        settle(h);
+    }
     if (rc == SF_ESTALE)
         h->joined = false; /* the next beat joins again */
     return rc;

@@ -72,7 +72,11 @@ bool farm_host_reader(const struct farm *f, char *name, size_t size);
 /*
  * Claim queued job id for preparing (store_job_claim_id), its fencing token
  * into *fence: SF_OK, SF_ENOTFOUND (another host has it, or it moved on:
- * not logged), else logged.
+ * not logged), else logged.  A claim whose COMMIT's answer was lost
+ * (SF_EINDOUBT) is read back on the store thread (store_job_claim_settle):
+ * one that committed is given back to the queue, so the job is never left
+ * this host's and prepared by no one; until then job id is not claimed
+ * again (SF_ENOTFOUND).
  */
 int farm_host_claim(struct farm *f, int64_t id, int64_t *fence);
 /* May f start (or prepare again) ready job id?  Always without a shared store; with one,

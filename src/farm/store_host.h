@@ -168,6 +168,21 @@ int store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t
                        struct job_row *out, int64_t *fence, struct sf_err *err);
 
 /*
+ * Settle host's claim of job id whose COMMIT's answer was lost
+ * (store_job_claim_id failed with SF_EINDOUBT: it may have committed).  If
+ * it did (the job is preparing and host's), the claim is given back: the
+ * DEFER event with the claim's fencing token, so the job is queued again
+ * and no host's, and the other hosts are woken (*released true); if it did
+ * not (the job is as it was), nothing is written (*released false).  Both
+ * are SF_OK, and running it again is harmless.  SF_EBUSY while the claim's
+ * own transaction still holds the job's row (its session not ended yet:
+ * ask again), else the store's failure.  Call it before host claims job id
+ * again: a claim of host's made after would be given back too.
+ */
+int store_job_claim_settle(struct store *s, const char *host, int64_t id, bool *released,
+                           struct sf_err *err);
+
+/*
  * Take ready job id for host, for a printer of its own, if no other host
  * holds it (unclaimed, or host's already: an uploaded G-code job, or one a
  * reaped host had prepared): its claim and a new fencing token (*fence, may

@@ -7,13 +7,19 @@
  * owns; a reaped host's jobs come back for the others.  A farm as one of
  * several hosts (PostgreSQL only, as farm.ini's store is a URL; hdrv, a
  * small in-test driver, stands in for its printers) leaves alone a
- * printer of its config that another live host owns.  With
+ * printer of its config that another live host owns, listens again after
+ * its connection is cut, and gives back a claim whose COMMIT's answer was
+ * lost (SLIMFARM_TEST_PROXY, tests/tools/tcpproxy, and SLIMFARM_TEST_PG_PORT,
+ * the server's TCP port, cut the network: store_pg.sh sets them).  With
  * SLIMFARM_TEST_STORE (tstore.h) on PostgreSQL, the second host a store of
  * its own on the same database; on SQLite a second connection.
  */
 #include <pthread.h>
+#include <spawn.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include "../../src/base/clock.h"
 #include "../../src/base/log.h"
@@ -350,6 +356,8 @@ static struct {
 } hx;
 
 /* Build hx: data dir dir, printers the [printer] sections of its farm.ini. */
+static prepare_fn host_prepare; /* the next host_farm's prepare hook (NULL: no_prepare) */
+
 static int
 host_farm(const char *dir, const char *url, const char *name, const char *printers,
           struct sf_err *err)
@@ -370,7 +378,10 @@ host_farm(const char *dir, const char *url, const char *name, const char *printe
     if (!(hx.l = loop_new(err)) || !(hx.s = store_open_host(dir, url, NULL, err)) ||
         !(hx.pool = pool_new(hx.l, 1, err)))
         return SF_EIO;
-    struct farm_hooks hooks = { .driver = hdrv_new, .prepare = no_prepare, .progress_ms = 50 };
+    struct farm_hooks hooks = { .driver = hdrv_new,
+                                .prepare = host_prepare ? host_prepare : no_prepare,
+                                .progress_ms = 50 };
+    host_prepare = NULL;
     hx.f = farm_new(hx.l, hx.s, hx.pool, &hx.cfg, &hooks, err);
     return hx.f ? SF_OK : SF_EIO;
 }
@@ -542,4 +553,187 @@ T_CASE(host_listens_again_after_its_connection_is_cut)
     T_TRUE(wait_state(url, ids[2], "printing"));
     host_farm_free();
     store_close(a);
+}
+
+/* ---- a network cut (tests/tools/tcpproxy) ---- */
+
+extern char **environ;
+
+/* A proxy to the server's TCP port: its pid and command pipes. */
+struct proxy {
+    pid_t pid;
+    FILE *cmd, *out;
+    int port;
+};
+
+static bool
+proxy_start(struct proxy *p)
+{
+    int in[2], out[2];
+    if (pipe(in) || pipe(out))
+        return false;
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_adddup2(&fa, in[0], 0);
+    posix_spawn_file_actions_adddup2(&fa, out[1], 1);
+    posix_spawn_file_actions_addclose(&fa, in[1]);
+    posix_spawn_file_actions_addclose(&fa, out[0]);
+    char *argv[] = { getenv("SLIMFARM_TEST_PROXY"), getenv("SLIMFARM_TEST_PG_PORT"), NULL };
+    int rc = posix_spawn(&p->pid, argv[0], &fa, NULL, argv, environ);
+    posix_spawn_file_actions_destroy(&fa);
+    close(in[0]);
+    close(out[1]);
+    p->cmd = fdopen(in[1], "w");
+    p->out = fdopen(out[0], "r");
+    char line[64];
+    return rc == 0 && p->cmd && p->out && fgets(line, sizeof(line), p->out) &&
+           sscanf(line, "port %d", &p->port) == 1;
+}
+
+/* Send cmd and wait for its "ok" (the cut is made when this returns). */
+static bool
+proxy_cmd(struct proxy *p, const char *cmd)
+{
+    char line[128];
+    fprintf(p->cmd, "%s\n", cmd);
+    fflush(p->cmd);
+    return fgets(line, sizeof(line), p->out) && strncmp(line, "ok ", 3) == 0;
+}
+
+static void
+proxy_stop(struct proxy *p)
+{
+    fclose(p->cmd); /* end of its stdin ends it */
+    fclose(p->out);
+    waitpid(p->pid, NULL, 0);
+}
+
+/* A prepare that writes a tiny G-code for the job's printer. */
+static int
+gcode_prepare(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
+              struct sf_err *err)
+{
+    (void)cancel;
+    FILE *f = fopen(req->out_path, "w");
+    if (!f)
+        return sf_err_sys(err, "cannot write '%s'", req->out_path);
+    fprintf(f, "; for %s\nG28\nG1 X10 Y10 Z10\n", req->printer.name);
+    fclose(f);
+    for (int i = 0; i < 3; i++)
+        out->size_mm[i] = 10;
+    out->nozzle_mm = req->printer.nozzle_mm;
+    return SF_OK;
+}
+
+/* The first column of sql's first row on db as an integer; -1 on any failure. */
+static int64_t
+db_int(struct sqldb *db, const char *sql)
+{
+    struct sqldb_stmt *st;
+    int64_t v = -1;
+    if (sqldb_prepare(db, sql, &st) == SF_OK) {
+        if (sqldb_step(st) == SQLDB_ROW)
+            v = sqldb_column_int64(st, 0);
+        sqldb_finalize(st);
+    }
+    return v;
+}
+
+/* Cuts the claim's COMMIT off while the server holds it (the test's trigger sleeps at
+   COMMIT while hold_claims has a row), then lets the server commit it and heals. */
+struct cutter {
+    const char *url; /* the database, directly */
+    struct proxy *px;
+    bool ok; /* every step was taken */
+};
+
+static void *
+cut_held_commit(void *arg)
+{
+    struct cutter *c = arg;
+    struct sf_err err;
+    struct sqldb *db = sqldb_open(c->url, 0, &err);
+    int64_t pid = 0;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; db && clock_mono_ms() < end && pid <= 0;
+         usleep(20 * 1000))
+        pid = db_int(db, "SELECT coalesce(min(pid), 0) FROM pg_stat_activity WHERE"
+                         " datname = current_database() AND query = 'COMMIT' AND"
+                         " wait_event = 'PgSleep'");
+    if (pid > 0 && proxy_cmd(c->px, "drop") && sqldb_exec(db, "DELETE FROM hold_claims") == 0) {
+        char sql[128];
+        snprintf(sql, sizeof(sql), "SELECT count(*) FROM pg_stat_activity WHERE pid = %lld",
+                 (long long)pid);
+        int64_t end = clock_mono_ms() + WAIT_LIMIT_MS;
+        while (db_int(db, sql) != 0 && clock_mono_ms() < end)
+            usleep(20 * 1000); /* its COMMIT done on the server, the answer nowhere to go */
+        c->ok = db_int(db, sql) == 0 && proxy_cmd(c->px, "heal");
+    }
+    sqldb_close(db);
+    return NULL;
+}
+
+T_CASE(host_claim_in_doubt_is_given_back_not_stranded)
+{
+    T_SKIP_UNLESS(t_store_pg() && getenv("SLIMFARM_TEST_PROXY") && getenv("SLIMFARM_TEST_PG_PORT"),
+                  "needs PostgreSQL on a TCP port and tests/tools/tcpproxy (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], purl[256], db[64];
+    snprintf(dir, sizeof(dir), "%s/doubt", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    db_text(url, "SELECT current_database() WHERE ?1 = 0", 0, db, sizeof(db));
+    struct store *a = store_open_host(dir_a, url, NULL, &err); /* the schema, the job */
+    T_TRUE(a != NULL);
+    /* a claim's COMMIT (the job to preparing) waits in a deferred trigger while
+       hold_claims has a row */
+    struct sqldb *direct = sqldb_open(url, 0, &err);
+    T_TRUE(direct != NULL);
+    T_OK(sqldb_exec(direct,
+                    "CREATE TABLE hold_claims(x INTEGER); INSERT INTO hold_claims VALUES(1);"
+                    " CREATE FUNCTION hold_claim() RETURNS trigger LANGUAGE plpgsql AS $$"
+                    " BEGIN WHILE EXISTS (SELECT 1 FROM hold_claims) LOOP"
+                    " PERFORM pg_sleep(0.02); END LOOP; RETURN NULL; END $$;"
+                    " CREATE CONSTRAINT TRIGGER hold_claim AFTER UPDATE ON jobs"
+                    " DEFERRABLE INITIALLY DEFERRED FOR EACH ROW"
+                    " WHEN (NEW.state = 'preparing') EXECUTE FUNCTION hold_claim()"),
+         NULL);
+    sqldb_close(direct);
+    char sha[STORE_SHA_HEX];
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    snprintf(o.method, sizeof(o.method), "none");
+    int64_t id;
+    T_OK(store_file_put(a, "solid part\n", 11, sha, &err), &err);
+    T_OK(store_job_add(a, &o, sha, &id, &err), &err);
+    /* host b reaches the database through the proxy */
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    snprintf(purl, sizeof(purl), "postgresql://postgres@127.0.0.1:%d/%s", px.port, db);
+    struct cutter c = { .url = url, .px = &px };
+    pthread_t t;
+    T_EQ_INT(pthread_create(&t, NULL, cut_held_commit, &c), 0);
+    host_prepare = gcode_prepare;
+    T_OK(host_farm(dir, purl, "b", "[printer p]\ndriver: marlin\nport: pty:/dev/null\n", &err),
+         &err);
+    /* b's claim committed, its answer lost: read back, given back, claimed again, printed */
+    bool printing = wait_state(url, id, "printing");
+    pthread_join(t, NULL);
+    if (!printing) { /* what happened instead */
+        char ev[2048];
+        db_text(url,
+                "SELECT string_agg(kind || ': ' || detail, E'\\n' ORDER BY id) FROM events"
+                " WHERE job_id = ?1",
+                id, ev, sizeof(ev));
+        fprintf(stderr, "host b logged:\n%sjob %lld's events:\n%s\n", logged, (long long)id, ev);
+    }
+    T_TRUE(c.ok);
+    T_TRUE(printing);
+    T_EQ_INT(t_store_int(dir, "SELECT count(*) FROM events WHERE kind = 'job-defer' AND"
+                              " detail LIKE '%its commit was in doubt'"),
+             1);
+    T_TRUE(was_logged("had committed: given back to the queue"));
+    host_farm_free();
+    store_close(a);
+    proxy_stop(&px);
 }

@@ -616,3 +616,39 @@ T_CASE(hosts_defer_prepare_failed_and_restart_release_the_claim)
     T_OK(store_check(p.b, &err), &err);
     pair_close(&p);
 }
+
+T_CASE(hosts_claim_in_doubt_is_settled_by_reading_it_back)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "settle", &err));
+    int64_t ta, tb, ids[2], fence;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    T_OK(add_jobs(p.a, 2, ids, &err), &err);
+    struct job_row j;
+    /* a's claim committed (its answer lost): given back, no host's, b's scheduler sees it */
+    T_OK(store_job_claim_id(p.a, "a", ta, ids[0], &j, &fence, &err), &err);
+    bool released = false;
+    T_OK(store_job_claim_settle(p.a, "a", ids[0], &released, &err), &err);
+    T_TRUE(released);
+    T_OK(store_job_get(p.a, ids[0], &j, &err), &err);
+    T_EQ_INT(j.state, JOB_QUEUED);
+    T_EQ_INT(b_sees(&p, ids[0]), 1);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM events WHERE kind = 'job-defer' AND"
+                                " detail LIKE '%its commit was in doubt'"),
+             1);
+    /* read back again: nothing more */
+    T_OK(store_job_claim_settle(p.a, "a", ids[0], &released, &err), &err);
+    T_TRUE(!released);
+    /* a claim that did not commit: the job stays queued, another host's claim stays its */
+    T_OK(store_job_claim_settle(p.a, "a", ids[1], &released, &err), &err);
+    T_TRUE(!released);
+    T_OK(store_job_claim_id(p.b, "b", tb, ids[1], &j, NULL, &err), &err);
+    T_OK(store_job_claim_settle(p.a, "a", ids[1], &released, &err), &err);
+    T_TRUE(!released);
+    T_OK(store_job_get(p.a, ids[1], &j, &err), &err);
+    T_EQ_INT(j.state, JOB_PREPARING);
+    T_OK(store_check(p.a, &err), &err);
+    pair_close(&p);
+}
