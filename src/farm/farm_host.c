@@ -160,6 +160,20 @@ join(struct farm_host *h)
     farm_kick(h->f);
 }
 
+/* This host's lease is lost (reaped, or its name taken): the reap bumped the fencing token
+   of every job it held, so each printer lets its fenced job go at once rather than at its
+   next write. */
+static void
+let_go(struct farm_host *h)
+{
+    for (size_t i = 0; i < h->f->n_printers; i++) {
+        struct printer *p = h->f->printers[i];
+        int64_t id = printer_job(p);
+        if (id && printer_fence(p, id))
+            printer_fenced_out(p, id);
+    }
+}
+
 static void
 on_beat(struct loop *l, void *ud)
 {
@@ -172,6 +186,7 @@ on_beat(struct loop *l, void *ud)
         log_error("host", "%s: %s", h->name, err.msg);
         if (err.code == SF_ESTALE) { /* reaped: its jobs moved on; join as a new process */
             h->joined = false;
+            let_go(h);
             join(h);
         }
     } else if (h->n_foreign) { /* their owner may be gone: own them again */
@@ -448,13 +463,14 @@ farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
 }
 
 bool
-farm_host_take(struct farm *f, int64_t id)
+farm_host_take(struct farm *f, int64_t id, int64_t *fence)
 {
     struct farm_host *h = f->host;
+    *fence = 0;
     if (!h)
         return true;
     struct sf_err err;
-    int rc = store_job_take(f->s, h->name, h->token, id, NULL, &err);
+    int rc = store_job_take(f->s, h->name, h->token, id, fence, &err);
     if (rc && rc != SF_ENOTFOUND)
         log_warn("host", "%s: take job %lld: %s", h->name, (long long)id, err.msg);
     if (rc == SF_ESTALE)
@@ -482,4 +498,26 @@ farm_host_owns(const struct farm *f, const char *printer)
 {
     const struct farm_host *h = f ? f->host : NULL;
     return !h || !was_foreign(h, printer);
+}
+
+int
+farm_host_hold(void *ud, int64_t id, int64_t *fence, struct sf_err *err)
+{
+    struct farm *f = ud;
+    struct farm_host *h = f->host;
+    *fence = 0;
+    if (!h)
+        return SF_OK;
+    /* after what the farm queued for the store (the job's CRASHED, say) */
+    int rc = farm_sync(f, STOREQ_SYNC_MS, err);
+    if (rc == SF_OK)
+        rc = store_job_attach(f->s, h->name, h->token, id, fence, err);
+    if (rc == SF_OK)
+        log_info("host", "%s holds job %lld (fencing token %lld)", h->name, (long long)id,
+                 (long long)*fence);
+    else
+        sf_err_prefix(err, "host %s: hold job %lld", h->name, (long long)id);
+    if (rc == SF_ESTALE)
+        h->joined = false;
+    return rc;
 }

@@ -104,7 +104,10 @@ conn_store(const char *dir, const char *target, unsigned flags, struct sf_err *e
 struct store *
 store_open_peer(const struct store *s, struct sf_err *err)
 {
-    return conn_store(s->dir, s->target, 0, err);
+    struct store *r = conn_store(s->dir, s->target, 0, err);
+    if (r) /* one of several hosts: a holder's events without a fence are refused here too */
+        r->host = s->host;
+    return r;
 }
 
 struct store *

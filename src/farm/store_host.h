@@ -50,7 +50,9 @@ struct store *store_open_host(const char *data_dir, const char *db, struct store
 /*
  * A second connection to s's database that may write, for another thread
  * of s's process (a preparation worker claiming jobs): no lock, migration
- * or recovery (s did them).  Open and close it on s's thread; use it on one
+ * or recovery (s did them).  A host's (store_open_host) is a host's too: a
+ * holder's job event without a fencing token is refused there as on s
+ * (store_open_writer's alike).  Open and close it on s's thread; use it on one
  * thread at a time.  NULL with err set.  Free with store_close().
  */
 struct store *store_open_peer(const struct store *s, struct sf_err *err);

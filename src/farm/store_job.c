@@ -609,8 +609,9 @@ store_jobs_progress_tx(struct store *s, struct store_progress *p, size_t n, stru
         return rc;
     int saved = 0;
     for (size_t i = 0; i < n; i++) {
-        rc = save_progress(s, p[i].job_id, p[i].lines_acked, 0, err);
-        if (rc && rc != SF_ENOTFOUND) {
+        /* a job another host holds now (a stale fence) is skipped as one that ended */
+        rc = save_progress(s, p[i].job_id, p[i].lines_acked, p[i].fence, err);
+        if (rc && rc != SF_ENOTFOUND && rc != SF_ESTALE) {
             store_rollback(s);
             return rc;
         }

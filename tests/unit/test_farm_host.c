@@ -10,7 +10,8 @@
  * printer of its config that another live host owns, listens again after
  * its connection is cut, and gives back a claim whose COMMIT's answer was
  * lost (SLIMFARM_TEST_PROXY, tests/tools/tcpproxy, and SLIMFARM_TEST_PG_PORT,
- * the server's TCP port, cut the network: store_pg.sh sets them).  With
+ * the server's TCP port, cut the network: store_pg.sh sets them), and lets
+ * go of a print another host has attached (its fencing token is stale).  With
  * SLIMFARM_TEST_STORE (tstore.h) on PostgreSQL, the second host a store of
  * its own on the same database; on SQLite a second connection.
  */
@@ -215,7 +216,7 @@ T_CASE(farm_ini_selects_a_shared_store)
 /* hdrv: a printer that connects idle and prints what it is given, reporting on the loop. */
 struct hdrv {
     struct drv base; /* first: drv.h's rule */
-    int starts;
+    int starts, cancels;
 };
 
 static struct hdrv *hdrvs[4];
@@ -259,6 +260,15 @@ h_ok(struct drv *d, struct sf_err *err)
 }
 
 static int
+h_cancel(struct drv *d, struct sf_err *err)
+{
+    (void)err;
+    ((struct hdrv *)d)->cancels++;
+    d->status.state = DRV_IDLE;
+    return SF_OK;
+}
+
+static int
 h_command(struct drv *d, const char *line, struct sf_err *err)
 {
     (void)line;
@@ -281,8 +291,8 @@ h_destroy(struct drv *d)
 }
 
 static const struct drv_ops hdrv_ops = {
-    DRV_OPS_VERSION, "hdrv",  h_open,    h_start, h_ok, h_ok, h_ok,
-    h_command,       h_close, h_destroy, NULL,    NULL
+    DRV_OPS_VERSION, "hdrv",    h_open,  h_start,   h_ok, h_ok,
+    h_cancel,        h_command, h_close, h_destroy, NULL, NULL
 };
 
 static struct drv *
@@ -357,14 +367,16 @@ static struct {
 
 /* Build hx: data dir dir, printers the [printer] sections of its farm.ini. */
 static prepare_fn host_prepare; /* the next host_farm's prepare hook (NULL: no_prepare) */
+static int host_lease_s = 600;  /* the next host_farm's lease: far above any stall */
 
 static int
 host_farm(const char *dir, const char *url, const char *name, const char *printers,
           struct sf_err *err)
 {
     char ini[4096];
-    snprintf(ini, sizeof(ini), "[farm]\nstore: %s\nhost: %s\nhost_lease_s: 600\n%s", url, name,
-             printers);
+    snprintf(ini, sizeof(ini), "[farm]\nstore: %s\nhost: %s\nhost_lease_s: %d\n%s", url, name,
+             host_lease_s, printers);
+    host_lease_s = 600;
     memset(&hx, 0, sizeof(hx));
     memset(hdrvs, 0, sizeof(hdrvs));
     n_hdrvs = 0;
@@ -736,4 +748,103 @@ T_CASE(host_claim_in_doubt_is_given_back_not_stranded)
     host_farm_free();
     store_close(a);
     proxy_stop(&px);
+}
+
+T_CASE(host_lets_go_of_a_print_another_host_attached)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/fenced", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta, id, fa;
+    T_OK(store_host_join(a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer p]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    T_OK(add_ready_for(a, "p", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    /* host a attaches the job (as after b's partition): b's fencing token is stale */
+    T_OK(store_job_attach(a, "a", ta, id, &fa, &err), &err);
+    /* b's printer pauses by itself (a runout): b's PAUSE is refused, and b lets the job go */
+    struct hdrv *d = hdrv_named("p");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job (its file judged) */
+    T_EQ_INT(d->starts, 1);
+    d->base.status.state = DRV_PAUSED;
+    loop_timer_add(hx.l, 0, h_deliver, &d->base);
+    bool let_go = wait_logged("another host holds it now");
+    if (!let_go) {
+        char ev[2048];
+        db_text(url,
+                "SELECT string_agg(kind || ': ' || detail, E'\\n' ORDER BY id) FROM events"
+                " WHERE job_id = ?1",
+                id, ev, sizeof(ev));
+        fprintf(stderr, "host b logged:\n%sjob %lld's events:\n%s\n", logged, (long long)id, ev);
+    }
+    T_TRUE(let_go);
+    farm_sync(hx.f, -1, NULL);
+    db_text(url, "SELECT state || ' ' || claimed_by FROM jobs WHERE id = ?1", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "printing a");
+    T_EQ_INT(t_store_int(dir, "SELECT count(*) FROM events WHERE kind = 'job-pause'"), 0);
+    T_EQ_INT(d->cancels, 1); /* streamed from b: b stops streaming it */
+    struct printer_info info;
+    farm_printer_info(hx.f, 0, &info);
+    T_EQ_INT(info.job_id, 0);
+    host_farm_free();
+    store_close(a);
+}
+
+T_CASE(host_reaped_while_away_lets_go_of_its_prints)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/reaped", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    host_lease_s = 5;
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    int64_t id;
+    T_OK(add_ready_for(a, "q", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("q"); /* not p: a printer's repeated log line is held back */
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job (its file judged) */
+    T_EQ_INT(d->starts, 1);
+    /* b's loop stands still (a partition, as far as the database can tell) until its lease
+       runs out and the reap takes its print */
+    int reaped = 0;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; reaped <= 0 && clock_mono_ms() < end;
+         usleep(50 * 1000))
+        reaped = store_host_reap(a, clock_wall_ms(), NULL, &err);
+    T_EQ_INT(reaped, 1);
+    db_text(url, "SELECT state FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_EQ_STR(text, "interrupted");
+    /* back: its next beat finds the lease lost, and the printer stops streaming the print */
+    bool let_go = wait_logged("another host holds it now");
+    if (!let_go)
+        fprintf(stderr, "host b logged:\n%s", logged);
+    T_TRUE(let_go);
+    T_EQ_INT(d->cancels, 1);
+    struct printer_info info;
+    farm_printer_info(hx.f, 0, &info);
+    T_EQ_INT(info.job_id, 0);
+    farm_sync(hx.f, -1, NULL);
+    db_text(url, "SELECT state FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_EQ_STR(text, "interrupted");
+    host_farm_free();
+    store_close(a);
 }

@@ -652,3 +652,34 @@ T_CASE(hosts_claim_in_doubt_is_settled_by_reading_it_back)
     T_OK(store_check(p.a, &err), &err);
     pair_close(&p);
 }
+
+T_CASE(hosts_progress_of_a_job_another_host_holds_is_not_written)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "progress", &err));
+    int64_t ta, tb, ids[2], fa[2], fb;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    for (int i = 0; i < 2; i++) {
+        T_OK(add_ready(p.a, &ids[i], &err), &err);
+        T_OK(store_job_take(p.a, "a", ta, ids[i], &fa[i], &err), &err);
+        struct job_event_args start = { .printer = i ? "p2" : "p1", .fence = fa[i] };
+        T_OK(store_job_event(p.a, ids[i], JOB_EV_START, &start, NULL, &err), &err);
+    }
+    /* b attaches the first: a's progress for it is stale, its other job's still counts */
+    T_OK(store_job_attach(p.b, "b", tb, ids[0], &fb, &err), &err);
+    struct store_progress batch[] = { { ids[0], 5, false, fa[0] }, { ids[1], 6, false, fa[1] } };
+    T_EQ_INT(store_jobs_progress(p.a, batch, 2, &err), 1);
+    T_TRUE(!batch[0].saved && batch[1].saved);
+    struct job_row j;
+    T_OK(store_job_get(p.a, ids[0], &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 0);
+    T_OK(store_job_get(p.a, ids[1], &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 6);
+    /* a stale event is refused, naming the holder */
+    struct job_event_args pause = { .lines_acked = 5, .fence = fa[0] };
+    T_ERR(store_job_event(p.a, ids[0], JOB_EV_PAUSE, &pause, NULL, &err), SF_ESTALE, &err,
+          "host 'b' holds the job now");
+    pair_close(&p);
+}
