@@ -129,6 +129,7 @@ farm_printer_new(struct farm *f, const struct farmcfg_printer *cfg, const struct
         .driver = f->hooks.driver,
         .changed = on_printer_changed,
         .ud = f,
+        .hold = farm_host_hold,
     };
     return printer_new(&env, cfg);
 }
@@ -252,7 +253,7 @@ on_prepared(void *ud, const struct storeq_result *r)
     else
         log_info("farm", "job %lld: %s", (long long)id, r->err->msg);
     if ((r->rc == SF_EIO || r->rc == SF_EBUSY || r->rc == SF_EAGAIN) && !t->reslice && t->f->pool) {
-        struct job_event_args a = { .reason = r->err->msg };
+        struct job_event_args a = { .reason = r->err->msg, .fence = t->fence };
         queue_event(t->f, id, JOB_EV_DEFER, &a);
     }
     if (t->reslice)
@@ -323,7 +324,7 @@ prep_done(struct loop *l, void *ud, int rc)
                 snprintf(f->no[f->n_no++].key, SCHED_KEY_MAX, "%s", t->key);
             }
         } else {
-            struct job_event_args a = { .reason = why };
+            struct job_event_args a = { .reason = why, .fence = t->fence };
             queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
         }
     }
@@ -392,7 +393,7 @@ submit(struct farm *f, struct prep *t)
     struct sf_err err;
     if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
         f->preparing--;
-        struct job_event_args a = { .reason = err.msg };
+        struct job_event_args a = { .reason = err.msg, .fence = t->fence };
         queue_event(f, t->req.job_id, JOB_EV_DEFER, &a);
         free(t);
     }
@@ -441,7 +442,8 @@ on_prepare(void *ud, const struct storeq_result *r)
  * the pass stops there).
  */
 static bool
-prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice)
+prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice,
+        int64_t fence)
 {
     struct sf_err err;
     struct prep *t = mem_calloc(1, sizeof(*t));
@@ -452,6 +454,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     t->f = f;
     t->store = f->s;
     t->reslice = reslice;
+    t->fence = fence; /* a reslice's: its take's (one of several hosts) */
     t->angle_deg = j->opts.overhang_deg > 0 ? j->opts.overhang_deg : printer_cfg(p)->overhang_deg;
     sched_key(&view, j->opts.overhang_deg, t->key);
     t->req.job_id = j->id;
@@ -482,6 +485,11 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
             return false;
         }
         struct job_event_args a = { .reason = err.msg };
+        if (farm_host_on(f)) { /* one of several hosts: it fails the job under its claim */
+            if (farm_host_claim(f, j->id, &a.fence) == SF_OK)
+                queue_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
+            return true;
+        }
         queue_event(f, j->id, JOB_EV_PREPARE, NULL);
         queue_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
         return true;
@@ -509,6 +517,10 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
         rc = farm_host_claim(f, j->id, &t->fence);
         if (rc) {
             free(t);
+            /* a database that was away or busy: the next pass tries again (a claim in
+               doubt is read back first, and wakes the farm when settled) */
+            if (rc == SF_EUNREACH || rc == SF_EBUSY)
+                retry_later(f);
             return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
         }
         f->preparing++;
@@ -694,6 +706,8 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
     for (size_t i = 0; i < f->n_printers; i++) {
         const struct printer *p = f->printers[i];
         farm_printer_view(p, &sp[i]);
+        if (!farm_host_owns(f, sp[i].name)) /* another live host's: its jobs are that host's */
+            sp[i].enabled = false;
         /* An interrupted part is still on this bed, waiting to be resumed:
            nothing else may start on top of it. */
         for (size_t k = 0; k < n; k++)
@@ -715,17 +729,22 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
     for (size_t k = 0; k < n_out; k++) {
         const struct job_row *j = &jobs[out[k].job];
         struct printer *p = f->printers[out[k].printer];
+        int64_t fence = 0;
         if (!out[k].reslice) {
-            if (farm_host_take(f, j->id)) /* another host's printer may have taken it */
+            /* another host's printer may have taken it; p writes for it with the take's
+               fencing token */
+            if (farm_host_take(f, j->id, &fence)) {
+                printer_set_fence(p, j->id, fence);
                 farm_start(f, j, p);
+            }
             continue;
         }
         /* Waiting for a busy printer of its key while p idles: slice it for p. */
         char key[SCHED_KEY_MAX];
         sched_key(&sp[out[k].printer], j->opts.overhang_deg, key);
         if (!reslicing(f, j->id) && !reslice_failed(f, j->id, key) &&
-            f->preparing < pool_size(f->pool) && farm_host_take(f, j->id))
-            prepare(f, j, p, true);
+            f->preparing < pool_size(f->pool) && farm_host_take(f, j->id, &fence))
+            prepare(f, j, p, true, fence);
     }
     /* Prepare queued jobs for a printer that could take them, an idle one first. */
     for (size_t i = 0; i < n; i++) {
@@ -736,7 +755,7 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
             continue;
         }
         size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
-        if (best < f->n_printers && !prepare(f, &jobs[i], f->printers[best], false))
+        if (best < f->n_printers && !prepare(f, &jobs[i], f->printers[best], false, 0))
             break; /* the store is busy: its commit wakes the farm for the rest */
     }
     for (size_t i = 0; i < n; i++)
@@ -763,7 +782,8 @@ on_progress(struct loop *l, void *ud)
     for (size_t i = 0; batch && i < f->n_printers; i++) {
         int64_t id, lines;
         if (printer_progress(f->printers[i], &id, &lines))
-            batch[n++] = (struct store_progress){ id, lines, false };
+            batch[n++] =
+                (struct store_progress){ id, lines, false, printer_fence(f->printers[i], id) };
     }
     if (n && storeq_jobs_progress(f->q, batch, n) == SF_OK) {
         for (size_t i = 0; i < f->n_printers; i++) {

@@ -29,16 +29,42 @@ struct farm_host {
     struct farm *f;
     struct store *ls; /* the listener's connection */
     char name[STORE_HOST_NAME_MAX];
-    int64_t token;    /* this process's, once joined */
-    bool joined;      /* the lease is ours */
-    bool waiting;     /* a join was refused: say so once, retry at each beat */
-    int64_t lease_ms; /* host_lease_s */
-    uint64_t timer;   /* the beat */
-    int fd;           /* the listener's socket on the loop, -1 if none */
-    int peers;        /* other live hosts at the last join or beat; -1 if not known */
+    int64_t token;     /* this process's, once joined */
+    bool joined;       /* the lease is ours */
+    bool waiting;      /* a join was refused: say so once, retry at each beat */
+    int64_t lease_ms;  /* host_lease_s */
+    uint64_t timer;    /* the beat */
+    int fd;            /* the listener's socket on the loop, -1 if none */
+    int64_t fd_gen;    /* the listener's reconnects (store_host_reconnects) when fd was added */
+    uint64_t relisten; /* the listener is lost: timer of its next try, 0 if none */
+    bool listen_lost;  /* said so (once until it is back) */
+    /* printers of f's config that another live host owns (store_host_own): the scheduler
+       leaves them alone; tried again at each beat, taken once that host is gone */
+    char (*foreign)[STORE_HOST_NAME_MAX];
+    size_t n_foreign;
+    /* claims whose COMMIT's answer was lost (SF_EINDOUBT): not claimed again until their
+       read-back (store_job_claim_settle, on the store thread) settled them */
+    struct doubt *doubts;
+    uint64_t resettle; /* a read-back failed: timer of the next round, 0 if none */
+    int peers;         /* other live hosts at the last join or beat; -1 if not known */
 };
 
-static void listen_arm(struct farm_host *h);
+/* A claim in doubt, on its way to the store thread's read-back or waiting for another. */
+struct doubt {
+    struct farm_host *h;
+    struct doubt *next;             /* in h->doubts */
+    char host[STORE_HOST_NAME_MAX]; /* h's name, for the store thread */
+    int64_t id;                     /* the job */
+    bool posted;                    /* its read-back is on the store thread */
+    bool released;                  /* the claim had committed and was given back */
+};
+
+static bool listen_arm(struct farm_host *h);
+static void listen_retry(struct farm_host *h);
+
+/* A lost listener is tried again this often: each try advances its connect without waiting
+   (store_open_listener), so a few tries bring it back once the server answers. */
+#define FARM_HOST_RELISTEN_MS 200
 
 bool
 farm_host_on(const struct farm *f)
@@ -77,20 +103,58 @@ default_name(char *out, size_t n)
             *p = '-';
 }
 
-/* Own f's printers (replacing what the host owned before). */
+/* Was printer p another live host's at the last own()? */
+static bool
+was_foreign(const struct farm_host *h, const char *p)
+{
+    for (size_t i = 0; i < h->n_foreign; i++)
+        if (strcmp(h->foreign[i], p) == 0)
+            return true;
+    return false;
+}
+
+/* Own f's printers (replacing what the host owned before); those another live host owns are
+   left to it, and its scheduler leaves them alone (said once, when it finds one). */
 static void
 own(struct farm_host *h)
 {
     struct farm *f = h->f;
-    const char **names = mem_array(f->n_printers ? f->n_printers : 1, sizeof(*names));
+    size_t n = f->n_printers ? f->n_printers : 1;
+    const char **names = mem_array(n, sizeof(*names));
+    struct store_host_owned *out = mem_array(n, sizeof(*out));
+    char(*foreign)[STORE_HOST_NAME_MAX] = mem_array(n, sizeof(*foreign));
     struct sf_err err;
-    if (!names)
-        return;
+    if (!names || !out || !foreign)
+        goto out;
     for (size_t i = 0; i < f->n_printers; i++)
         names[i] = printer_cfg(f->printers[i])->name;
-    if (store_host_own(f->s, h->name, h->token, names, f->n_printers, &err))
+    if (store_host_own(f->s, h->name, h->token, names, f->n_printers, out, &err)) {
         log_error("host", "%s: %s", h->name, err.msg);
+        goto out;
+    }
+    size_t n_foreign = 0;
+    for (size_t i = 0; i < f->n_printers; i++) {
+        if (out[i].owned) {
+            if (was_foreign(h, names[i]))
+                log_info("host", "%s: printer '%s' is its own now: scheduling on it", h->name,
+                         names[i]);
+            continue;
+        }
+        if (!was_foreign(h, names[i]))
+            log_warn("host",
+                     "%s: printer '%s' belongs to live host '%s': not scheduling on it here (a "
+                     "printer is in one host's config; trying again at each beat)",
+                     h->name, names[i], out[i].other);
+        snprintf(foreign[n_foreign++], STORE_HOST_NAME_MAX, "%s", names[i]);
+    }
+    free(h->foreign);
+    h->foreign = foreign;
+    h->n_foreign = n_foreign;
+    foreign = NULL;
+out:
     free(names);
+    free(out);
+    free(foreign);
 }
 
 /* Join (again): the lease, the printers.  Logs why not. */
@@ -116,6 +180,20 @@ join(struct farm_host *h)
     farm_kick(h->f);
 }
 
+/* This host's lease is lost (reaped, or its name taken): the reap bumped the fencing token
+   of every job it held, so each printer lets its fenced job go at once rather than at its
+   next write. */
+static void
+let_go(struct farm_host *h)
+{
+    for (size_t i = 0; i < h->f->n_printers; i++) {
+        struct printer *p = h->f->printers[i];
+        int64_t id = printer_job(p);
+        if (id && printer_fence(p, id))
+            printer_fenced_out(p, id);
+    }
+}
+
 static void
 on_beat(struct loop *l, void *ud)
 {
@@ -128,8 +206,13 @@ on_beat(struct loop *l, void *ud)
         log_error("host", "%s: %s", h->name, err.msg);
         if (err.code == SF_ESTALE) { /* reaped: its jobs moved on; join as a new process */
             h->joined = false;
+            let_go(h);
             join(h);
         }
+    } else if (h->n_foreign) { /* their owner may be gone: own them again */
+        own(h);
+        if (!h->n_foreign)
+            farm_kick(h->f);
     }
     struct store_recovery moved;
     int n = store_host_reap(h->f->s, clock_wall_ms(), &moved, &err);
@@ -145,8 +228,6 @@ on_beat(struct loop *l, void *ud)
     }
     if (h->joined)
         count_peers(h);
-    if (h->fd < 0)
-        listen_arm(h);
     h->timer = loop_timer_add(l, h->lease_ms / FARM_HOST_BEATS_PER_LEASE, on_beat, h);
 }
 
@@ -164,35 +245,64 @@ on_note(struct loop *l, int fd, unsigned events, void *ud)
     (void)l, (void)fd, (void)events;
     struct farm_host *h = ud;
     int n = store_host_drain(h->ls);
-    if (n < 0) { /* lost: the beat tries again */
-        log_warn("host", "%s: the wake-up connection was lost; retrying at each beat", h->name);
-        listen_drop(h);
+    if (n >= 0 && store_host_reconnects(h->ls) == h->fd_gen &&
+        store_host_notify_fd(h->ls) == h->fd) {
+        if (n > 0)
+            farm_kick(h->f);
         return;
     }
-    if (store_host_notify_fd(h->ls) != h->fd) { /* it reconnected */
-        listen_drop(h);
-        listen_arm(h);
-    }
-    if (n > 0)
-        farm_kick(h->f);
+    /* lost, or back already on a new session whose socket is a new one (perhaps under the
+       old number, which epoll dropped when the old socket closed): watch it again, or try
+       again shortly.  Dropped at once: the number is still this registration's. */
+    listen_drop(h);
+    if (!listen_arm(h))
+        listen_retry(h);
 }
 
-/* Watch the listener's socket (again): drain first, which reconnects a lost connection. */
 static void
+on_relisten(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm_host *h = ud;
+    h->relisten = 0;
+    if (!listen_arm(h))
+        listen_retry(h);
+}
+
+/* Try the lost listener again in FARM_HOST_RELISTEN_MS (saying so once). */
+static void
+listen_retry(struct farm_host *h)
+{
+    if (!h->listen_lost)
+        log_warn("host", "%s: the wake-up connection is lost; trying again every %d ms", h->name,
+                 FARM_HOST_RELISTEN_MS);
+    h->listen_lost = true;
+    if (!h->relisten)
+        h->relisten = loop_timer_add(h->f->l, FARM_HOST_RELISTEN_MS, on_relisten, h);
+}
+
+/* Watch the listener's socket (again): drain first, which advances the reconnect of a lost
+   connection (never waiting).  False while it is not back. */
+static bool
 listen_arm(struct farm_host *h)
 {
     struct sf_err err;
     if (store_host_drain(h->ls) < 0)
-        return;
+        return false;
     int fd = store_host_notify_fd(h->ls);
     if (fd < 0)
-        return;
+        return false;
     if (loop_add_fd(h->f->l, fd, LOOP_READ, on_note, h, &err)) {
         log_warn("host", "%s: %s", h->name, err.msg);
-        return;
+        return false;
     }
     h->fd = fd;
+    h->fd_gen = store_host_reconnects(h->ls);
+    if (h->listen_lost)
+        log_info("host", "%s: the wake-up connection is back", h->name);
+    h->listen_lost = false;
     farm_kick(h->f); /* what arrived while it was away */
+    return true;
 }
 
 int
@@ -212,11 +322,12 @@ farm_host_start(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     else
         default_name(h->name, sizeof(h->name));
     f->host = h;
-    if (!(h->ls = store_open_peer(f->s, err)) || store_host_listen(h->ls, err)) {
+    if (!(h->ls = store_open_listener(f->s, err)) || store_host_listen(h->ls, err)) {
         sf_err_prefix(err, "host %s: wake-up connection", h->name);
         return err->code;
     }
-    listen_arm(h);
+    if (!listen_arm(h))
+        listen_retry(h);
     join(h);
     h->timer = loop_timer_add(f->l, h->lease_ms / FARM_HOST_BEATS_PER_LEASE, on_beat, h);
     return farm_remote_start(f, err); /* actions on printers other hosts own */
@@ -230,6 +341,18 @@ farm_host_stop(struct farm *f)
         return;
     if (h->timer)
         loop_timer_cancel(f->l, h->timer);
+    if (h->relisten)
+        loop_timer_cancel(f->l, h->relisten);
+    if (h->resettle)
+        loop_timer_cancel(f->l, h->resettle);
+    /* a claim still in doubt: the store thread's queue ran (farm_free), so none is posted;
+       the leave below reaps this host, which gives such a job back */
+    for (struct doubt *d = h->doubts, *next; d; d = next) {
+        next = d->next;
+        log_warn("host", "%s: job %lld: its claim is still in doubt at the stop", h->name,
+                 (long long)d->id);
+        free(d);
+    }
     listen_drop(h);
     struct sf_err err;
     if (h->joined) {
@@ -245,6 +368,7 @@ farm_host_stop(struct farm *f)
         farm_host_wake(f);
     }
     store_close(h->ls);
+    free(h->foreign);
     free(h);
     f->host = NULL;
 }
@@ -262,12 +386,83 @@ farm_host_reader(const struct farm *f, char *name, size_t size)
     return true;
 }
 
+static void settle(struct farm_host *h);
+
+static int
+settle_call(struct store *s, void *arg, struct sf_err *err)
+{
+    struct doubt *d = arg;
+    return store_job_claim_settle(s, d->host, d->id, &d->released, err);
+}
+
+static void
+on_resettle(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm_host *h = ud;
+    h->resettle = 0;
+    settle(h);
+}
+
+/* A read-back came back: the job is settled (claimable again), or asked again later. */
+static void
+on_settled(void *ud, const struct storeq_result *r)
+{
+    struct doubt *d = ud;
+    struct farm_host *h = d->h;
+    d->posted = false;
+    if (r->rc) {
+        log_warn("host", "%s: job %lld: reading back its claim: %s (trying again)", h->name,
+                 (long long)d->id, r->err->msg);
+        if (!h->resettle)
+            h->resettle = loop_timer_add(h->f->l, FARM_RETRY_MS, on_resettle, h);
+        return;
+    }
+    log_info("host", "%s: job %lld: its claim in doubt %s", h->name, (long long)d->id,
+             d->released ? "had committed: given back to the queue" : "did not commit");
+    for (struct doubt **pp = &h->doubts; *pp; pp = &(*pp)->next)
+        if (*pp == d) {
+            *pp = d->next;
+            break;
+        }
+    free(d);
+    farm_kick(h->f); /* claimable again, by this host too */
+}
+
+/* Post the read-back of every claim in doubt not on its way yet. */
+static void
+settle(struct farm_host *h)
+{
+    for (struct doubt *d = h->doubts; d; d = d->next) {
+        if (d->posted)
+            continue;
+        if (storeq_call(h->f->q, settle_call, d, NULL, on_settled, d)) {
+            if (!h->resettle) /* out of memory: later */
+                h->resettle = loop_timer_add(h->f->l, FARM_RETRY_MS, on_resettle, h);
+            return;
+        }
+        d->posted = true;
+    }
+}
+
+/* Is the claim of job id in doubt (its read-back not back yet)? */
+static bool
+in_doubt(const struct farm_host *h, int64_t id)
+{
+    for (const struct doubt *d = h->doubts; d; d = d->next)
+        if (d->id == id)
+            return true;
+    return false;
+}
+
 int
 farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
 {
     struct farm_host *h = f->host;
     struct sf_err err;
     struct job_row j;
+    if (in_doubt(h, id))
+        return SF_ENOTFOUND; /* not again until its last claim is settled */
     /* after what the farm queued for the store, as job_event's PREPARE */
     int rc = farm_sync(f, STOREQ_SYNC_MS, &err);
     if (rc == SF_OK)
@@ -276,19 +471,29 @@ farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
         log_info("host", "%s claimed job %lld", h->name, (long long)id);
     else if (rc != SF_ENOTFOUND)
         log_warn("host", "%s: claim job %lld: %s", h->name, (long long)id, err.msg);
+    struct doubt *d = rc == SF_EINDOUBT ? mem_calloc(1, sizeof(*d)) : NULL;
+    if (d) {
+        /* it may have committed: the job would be this host's, preparing, and prepared by
+           no one.  Read back on the store thread, and give it back if so. */
+        *d = (struct doubt){ .h = h, .next = h->doubts, .id = id };
+        snprintf(d->host, sizeof(d->host), "%s", h->name);
+        h->doubts = d;
+        settle(h);
+    }
     if (rc == SF_ESTALE)
         h->joined = false; /* the next beat joins again */
     return rc;
 }
 
 bool
-farm_host_take(struct farm *f, int64_t id)
+farm_host_take(struct farm *f, int64_t id, int64_t *fence)
 {
     struct farm_host *h = f->host;
+    *fence = 0;
     if (!h)
         return true;
     struct sf_err err;
-    int rc = store_job_take(f->s, h->name, h->token, id, NULL, &err);
+    int rc = store_job_take(f->s, h->name, h->token, id, fence, &err);
     if (rc && rc != SF_ENOTFOUND)
         log_warn("host", "%s: take job %lld: %s", h->name, (long long)id, err.msg);
     if (rc == SF_ESTALE)
@@ -309,4 +514,33 @@ farm_host_own(struct farm *f)
 {
     if (f && f->host && f->host->joined)
         own(f->host);
+}
+
+bool
+farm_host_owns(const struct farm *f, const char *printer)
+{
+    const struct farm_host *h = f ? f->host : NULL;
+    return !h || !was_foreign(h, printer);
+}
+
+int
+farm_host_hold(void *ud, int64_t id, int64_t *fence, struct sf_err *err)
+{
+    struct farm *f = ud;
+    struct farm_host *h = f->host;
+    *fence = 0;
+    if (!h)
+        return SF_OK;
+    /* after what the farm queued for the store (the job's CRASHED, say) */
+    int rc = farm_sync(f, STOREQ_SYNC_MS, err);
+    if (rc == SF_OK)
+        rc = store_job_attach(f->s, h->name, h->token, id, fence, err);
+    if (rc == SF_OK)
+        log_info("host", "%s holds job %lld (fencing token %lld)", h->name, (long long)id,
+                 (long long)*fence);
+    else
+        sf_err_prefix(err, "host %s: hold job %lld", h->name, (long long)id);
+    if (rc == SF_ESTALE)
+        h->joined = false;
+    return rc;
 }

@@ -18,13 +18,25 @@
  * one a reaped host had prepared), taken first (store_job_take, one
  * statement).  A host's scheduler never sees another host's jobs
  * (store_job_live_host), and writes no wait reason on queued jobs (another
- * host may be about to take them).
+ * host may be about to take them).  A printer of its config that another
+ * live host owns (both configs list that name) stays that host's: this
+ * host schedules nothing on it, says so once with both names, and tries to
+ * own it again at each beat (it is free once that host is gone).
+ *
+ * Fencing: every write the host makes for a job it holds (the PREPARED of
+ * its claim, a printer's events and progress, a DEFER) carries the fencing
+ * token of its claim, take, or hold (a resume attaches the job first), so
+ * once another host holds the job the store refuses them (SF_ESTALE) and
+ * the printer lets the job go (printer.h printer_set_fence).
  *
  * Wake-ups: a job added or changed through a host's API, a reap that moved
  * jobs and a host's leave NOTIFY the others; every host LISTENs on a
  * connection of its own, watched on the loop's epoll, and runs a
  * scheduling pass when one arrives (no polling of the queue).  A lost
- * listener is retried at each beat.
+ * listener (the server restarted, the network cut) is tried again every
+ * 200 ms without the loop waiting on its connect, and watched again once
+ * its new session LISTENs, followed by a scheduling pass for what arrived
+ * while it was away.
  *
  * Every call here is a no-op (or store.h's single-host call) when the farm
  * has no shared store.  Thread: the loop thread.
@@ -69,15 +81,32 @@ bool farm_host_reader(const struct farm *f, char *name, size_t size);
 /*
  * Claim queued job id for preparing (store_job_claim_id), its fencing token
  * into *fence: SF_OK, SF_ENOTFOUND (another host has it, or it moved on:
- * not logged), else logged.
+ * not logged), else logged.  A claim whose COMMIT's answer was lost
+ * (SF_EINDOUBT) is read back on the store thread (store_job_claim_settle):
+ * one that committed is given back to the queue, so the job is never left
+ * this host's and prepared by no one; until then job id is not claimed
+ * again (SF_ENOTFOUND).
  */
 int farm_host_claim(struct farm *f, int64_t id, int64_t *fence);
-/* May f start (or prepare again) ready job id?  Always without a shared store; with one,
-   once f took it (store_job_take). */
-bool farm_host_take(struct farm *f, int64_t id);
+/* May f start (or prepare again) ready job id?  Always without a shared store (*fence 0);
+   with one, once f took it (store_job_take), its fencing token into *fence: what f writes
+   for the job carries it (printer_set_fence). */
+bool farm_host_take(struct farm *f, int64_t id, int64_t *fence);
+/*
+ * printer_env.hold: before a printer of f resumes job id (an operator's resume, a network
+ * printer found still printing it), f holds the job: store_job_attach, its new fencing
+ * token into *fence, so a host that held it before is fenced off.  Without a shared store
+ * *fence is 0 and it is always SF_OK.  SF_ESTALE (f's lease is lost), SF_EAGAIN (the job
+ * is in no state to attach), the store's failure; err set.
+ */
+int farm_host_hold(void *f, int64_t id, int64_t *fence, struct sf_err *err);
 /* Wake the other hosts: something they may act on changed (a job added through the API). */
 void farm_host_wake(struct farm *f);
 /* f's printers changed (a reload): own them again. */
 void farm_host_own(struct farm *f);
+/* May f schedule on its printer named printer?  Always without a shared store; with one,
+   unless another live host owns a printer of that name (its config lists it too): then the
+   job and the printer are that host's (logged once, when found; tried again at each beat). */
+bool farm_host_owns(const struct farm *f, const char *printer);
 
 #endif

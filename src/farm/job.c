@@ -125,6 +125,12 @@ job_can_transition(enum job_state from, enum job_state to)
 }
 
 bool
+job_event_releases_claim(enum job_event ev)
+{
+    return ev == JOB_EV_DEFER || ev == JOB_EV_PREPARE_FAILED || ev == JOB_EV_RESTART;
+}
+
+bool
 job_state_terminal(enum job_state s)
 {
     return s == JOB_DONE || s == JOB_FAILED || s == JOB_CANCELLED;

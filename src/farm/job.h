@@ -82,6 +82,16 @@ int job_next(enum job_state from, enum job_event ev, struct job_counts *c, enum 
 /* True when some event leads from `from` to `to`. */
 bool job_can_transition(enum job_state from, enum job_state to);
 
+/*
+ * Does ev end the claim of the host that held the job (store_host.h's
+ * claimed_by)?  DEFER (preparing -> queued: it gives the job back),
+ * PREPARE_FAILED (preparing -> failed: nothing left to hold) and RESTART
+ * (interrupted -> ready: the operator prints the copy again, on any host's
+ * printer; the host that held it may be gone).  A host keeps its claim
+ * through every other event.
+ */
+bool job_event_releases_claim(enum job_event ev);
+
 /* done, failed, cancelled: nothing more happens to the job. */
 bool job_state_terminal(enum job_state s);
 

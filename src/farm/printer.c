@@ -138,8 +138,12 @@ printer_job_event(struct printer *p, int64_t id, enum job_event ev, const struct
     if (ev == JOB_EV_PRINT_DONE || ev == JOB_EV_PRINT_FAILED || ev == JOB_EV_CANCEL ||
         ev == JOB_EV_CANCEL_COPY)
         with.filament_mm = printer_filament_mm(p, id, ev, with.lines_acked);
+    if (!with.fence)
+        with.fence = printer_fence(p, id);
     /* a failure is logged when it comes back; its commit wakes the farm (farm.c) */
-    int rc = storeq_job_event(p->env.q, id, ev, a ? &with : NULL, p->cfg.name, NULL, NULL);
+    int rc = with.fence
+                 ? printer_fenced_event(p, id, ev, &with)
+                 : storeq_job_event(p->env.q, id, ev, a ? &with : NULL, p->cfg.name, NULL, NULL);
     printer_changed(p);
     return rc;
 }
@@ -169,7 +173,7 @@ interrupt_job(struct printer *p, const char *why)
     struct job_event_args a = { .reason = reason };
     int64_t id = p->job_id;
     p->job_id = 0;
-    struct store_progress sp = { id, p->lines_acked, false };
+    struct store_progress sp = { id, p->lines_acked, false, printer_fence(p, id) };
     storeq_jobs_progress(p->env.q, &sp, 1);
     log_printer(LOG_WARN, p->cfg.name, "job %lld interrupted: %s", (long long)id, reason);
     printer_job_event(p, id, JOB_EV_CRASHED, &a);
@@ -362,7 +366,8 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
             /* Saved at once, not on the farm's timer: a resume after a crash
                re-runs at most these lines plus what the driver had not yet
                reported (drivers report every 16 lines or 250 ms). */
-            struct store_progress sp = { p->job_id, p->lines_acked, false };
+            struct store_progress sp = { p->job_id, p->lines_acked, false,
+                                         printer_fence(p, p->job_id) };
             if (storeq_jobs_progress(p->env.q, &sp, 1) == SF_OK)
                 p->lines_saved = p->lines_acked;
         }
@@ -488,7 +493,8 @@ printer_stop(struct printer *p)
     if (!p->job_id)
         return;
     /* queued: the farm drains the queue before the store closes (storeq_free) */
-    struct store_progress sp = { p->job_id, p->lines_acked, false };
+    struct store_progress sp = { p->job_id, p->lines_acked, false, printer_fence(p, p->job_id) };
+    a.fence = sp.fence;
     storeq_jobs_progress(p->env.q, &sp, 1);
     storeq_job_event(p->env.q, p->job_id, JOB_EV_CRASHED, &a, p->cfg.name, NULL, NULL);
 }
@@ -514,6 +520,7 @@ printer_free(struct printer *p)
         p->drv->ops->close(p->drv);
         p->drv->ops->destroy(p->drv);
     }
+    printer_fence_release(p);
     if (p->ticket)
         p->ticket->p = NULL; /* its START comes back to no one */
     if (p->rticket)
@@ -712,7 +719,7 @@ printer_start(struct printer *p, const struct job_row *j, const char *path)
     if (!t)
         return SF_ENOMEM;
     *t = (struct start_ticket){ p, j->id, ++p->starts };
-    struct job_event_args a = { .printer = p->cfg.name };
+    struct job_event_args a = { .printer = p->cfg.name, .fence = printer_fence(p, j->id) };
     if (storeq_job_event(p->env.q, j->id, JOB_EV_START, &a, p->cfg.name, on_start, t)) {
         free(t);
         return SF_ENOMEM;
@@ -828,8 +835,18 @@ printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err
     struct start_ticket *t = mem_calloc(1, sizeof(*t));
     if (!t)
         return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
+    int64_t fence = 0;
+    /* one of several hosts: the job is this host's (attached) before it resumes here */
+    if (p->env.hold) {
+        int rc = p->env.hold(p->env.ud, id, &fence, err);
+        if (rc) {
+            free(t);
+            return rc;
+        }
+        printer_set_fence(p, id, fence);
+    }
     *t = (struct start_ticket){ p, id, 0 };
-    struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line };
+    struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line, .fence = fence };
     if (storeq_job_event(p->env.q, id, JOB_EV_RESUME, &a, p->cfg.name, on_resume, t)) {
         free(t);
         return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);

@@ -52,6 +52,10 @@ struct printer_env {
     bool bed_known;            /* bed_full is this printer's bed (it replaces one of the same
                                   name, farm_apply): not read from the store */
     bool bed_full;
+    /* One of several hosts: hold job_id for this printer (store_job_attach) before a resume
+       takes it, its fencing token into *fence (printer_set_fence); SF_ESTALE or another
+       code, err set, when it may not.  NULL: nothing to hold (one host). */
+    int (*hold)(void *ud, int64_t job_id, int64_t *fence, struct sf_err *err);
 };
 
 /* What an operator may ask of a printer (the API's ACTION). */
@@ -137,6 +141,24 @@ bool printer_bed_full(const struct printer *p);
  * nothing was sent, p is idle again with its bed as it was.
  */
 int printer_start(struct printer *p, const struct job_row *j, const char *path);
+/*
+ * One of several hosts: p holds job id by fencing token fence (store_host.h:
+ * the owner's take, or the hold of a resume).  Every job event and progress
+ * p writes for id carries it, so once another host holds the job the store
+ * refuses them (SF_ESTALE), and p lets the job go (printer_fenced_out).
+ * 0: none (one host: nothing is checked).
+ */
+void printer_set_fence(struct printer *p, int64_t id, int64_t fence);
+/* The fencing token p holds job id by (printer_set_fence), 0 if none. */
+int64_t printer_fence(const struct printer *p, int64_t id);
+/*
+ * Another host holds job id now (the store refused a write of p's for it as stale, or this
+ * host was reaped).  p forgets its fence for id and, if it still has the job, lets it go:
+ * a printer whose job is streamed from here (no attach) is told to stop, a network printer
+ * (which prints on for the other host) is left to it, offline here; nothing more is written
+ * for the job.
+ */
+void printer_fenced_out(struct printer *p, int64_t id);
 /* The start printer_start just made (its check is stale once p starts anything else, even the
    same job again after a copy was cancelled). */
 uint64_t printer_start_token(const struct printer *p);

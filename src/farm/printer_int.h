@@ -65,7 +65,20 @@ struct printer {
     struct start_go *go;          /* a start judged before its START committed: its verdict */
     struct start_ticket *rticket; /* the RESUME queued for the store, not yet back; NULL if none */
     struct resume_go *rgo;        /* a resume read before its RESUME committed: its verdict */
+    int64_t fence;                /* fence_job's fencing token (printer_set_fence), 0: none */
+    int64_t fence_job;            /* the job it is for, 0: none */
+    struct fence_watch *watches;  /* fenced job events on their way to the store */
 };
+
+/*
+ * Write job event ev for job id (a, not NULL, carrying p's fence for it) through the store's
+ * queue, and let the job go (printer_fenced_out) if the store refuses it as stale.  SF_OK
+ * or SF_ENOMEM (printer_op.c).
+ */
+int printer_fenced_event(struct printer *p, int64_t id, enum job_event ev,
+                         const struct job_event_args *a);
+/* p is freed: its fenced events come back to no one. */
+void printer_fence_release(struct printer *p);
 
 /* Tell p's owner it changed (printer_env.changed), if it listens. */
 void printer_changed(struct printer *p);

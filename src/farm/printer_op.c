@@ -1,7 +1,9 @@
 /*
  * printer_op.c - what an operator does to a printer (printer.h): pause,
  * resume, cancel and clear its job or bed, send it a manual command, stop
- * it in an emergency; each recorded in the log and the event log.
+ * it in an emergency; each recorded in the log and the event log.  And the
+ * fencing of one of several hosts: the token p holds its job by, carried
+ * by what p writes for it, and letting the job go once it is refused.
  *
  * Thread: the loop thread.
  */
@@ -11,6 +13,7 @@
 #include <string.h>
 
 #include "../base/log.h"
+#include "../base/mem.h"
 
 static const char *const action_names[PRINTER_ACTION_COUNT] = { "pause", "resume", "cancel",
                                                                 "cleared", "cancel-copy" };
@@ -147,7 +150,8 @@ static int
 cancel_judged(struct printer *p, enum job_event jev, storeq_event_fn done, void *ud,
               struct sf_err *err)
 {
-    struct job_event_args a = { .reason = cancel_reason(jev) };
+    struct job_event_args a = { .reason = cancel_reason(jev),
+                                .fence = printer_fence(p, p->job_id) };
     if (storeq_job_event(p->env.q, p->job_id, jev, &a, p->cfg.name, done, ud))
         return sf_err_set(err, SF_ENOMEM, "printer %s: out of memory", p->cfg.name);
     p->job_id = p->judging = 0;
@@ -229,7 +233,8 @@ printer_action_then(struct printer *p, enum printer_action act, storeq_event_fn 
     struct job_event_args a = { .lines_acked = p->lines_acked,
                                 .reason = cancel_reason(jev),
                                 .filament_mm =
-                                    printer_filament_mm(p, p->job_id, jev, p->lines_acked) };
+                                    printer_filament_mm(p, p->job_id, jev, p->lines_acked),
+                                .fence = printer_fence(p, p->job_id) };
     if (ends && !p->cfg.auto_eject)
         printer_set_bed(p, true); /* the cancelled part stays on the bed */
     /* Queued: the loop does not wait for the store (a busy database held every printer's
@@ -247,4 +252,92 @@ printer_action_then(struct printer *p, enum printer_action act, storeq_event_fn 
     }
     printer_move(p, ev);
     return SF_OK;
+}
+
+/* ---- fencing (one of several hosts) ---- */
+
+/* A fenced job event on its way to the store: p, unless p was freed meanwhile. */
+struct fence_watch {
+    struct printer *p;
+    struct fence_watch *next; /* in p->watches */
+    int64_t id;               /* the job */
+};
+
+void
+printer_set_fence(struct printer *p, int64_t id, int64_t fence)
+{
+    p->fence_job = fence > 0 ? id : 0;
+    p->fence = fence > 0 ? fence : 0;
+}
+
+int64_t
+printer_fence(const struct printer *p, int64_t id)
+{
+    return id && p->fence_job == id ? p->fence : 0;
+}
+
+static void
+on_fenced_event(void *ud, const struct storeq_result *r)
+{
+    struct fence_watch *w = ud;
+    struct printer *p = w->p;
+    for (struct fence_watch **pp = p ? &p->watches : NULL; pp && *pp; pp = &(*pp)->next)
+        if (*pp == w) {
+            *pp = w->next;
+            break;
+        }
+    if (r->rc)
+        log_msg(LOG_ERROR, "printer", "%s%s%s", p ? p->cfg.name : "", p ? ": " : "", r->err->msg);
+    if (r->rc == SF_ESTALE && p)
+        printer_fenced_out(p, w->id);
+    free(w);
+}
+
+int
+printer_fenced_event(struct printer *p, int64_t id, enum job_event ev,
+                     const struct job_event_args *a)
+{
+    struct fence_watch *w = mem_calloc(1, sizeof(*w));
+    if (!w)
+        return SF_ENOMEM;
+    *w = (struct fence_watch){ .p = p, .next = p->watches, .id = id };
+    if (storeq_job_event(p->env.q, id, ev, a, p->cfg.name, on_fenced_event, w)) {
+        free(w);
+        return SF_ENOMEM;
+    }
+    p->watches = w;
+    return SF_OK;
+}
+
+void
+printer_fenced_out(struct printer *p, int64_t id)
+{
+    if (p->fence_job == id)
+        printer_set_fence(p, 0, 0);
+    if (p->job_id != id)
+        return; /* it ended here already: nothing more is written for it */
+    log_printer(LOG_WARN, p->cfg.name,
+                "job %lld: another host holds it now (its fencing token here is stale): "
+                "this host lets it go",
+                (long long)id);
+    p->job_id = 0;
+    p->judging = 0;
+    struct sf_err err;
+    if (!p->drv || p->drv->ops->attach) {
+        /* a network printer prints on, for the host that holds the job now */
+        snprintf(p->message, sizeof(p->message), "printing job %lld, which another host holds",
+                 (long long)id);
+        printer_move(p, PRINTER_EV_DISCONNECTED);
+    } else if (p->drv->ops->cancel(p->drv, &err)) { /* streamed from here: stop streaming */
+        log_printer(LOG_ERROR, p->cfg.name, "job %lld: stop: %s", (long long)id, err.msg);
+    }
+    printer_changed(p);
+}
+
+void
+printer_fence_release(struct printer *p)
+{
+    for (struct fence_watch *w = p->watches; w; w = w->next)
+        w->p = NULL;
+    p->watches = NULL;
 }

@@ -303,7 +303,10 @@ int store_job_progress(struct store *s, int64_t id, int64_t lines_acked, struct 
 struct store_progress {
     int64_t job_id;      /* in */
     int64_t lines_acked; /* in */
-    bool saved;          /* out: written (false: the job is no longer printing or paused) */
+    bool saved;          /* out: written (false: the job is no longer printing or paused, or
+                            its fence is stale) */
+    int64_t fence;       /* in: the fencing token the writer holds the job by (store_host.h);
+                            a stale one writes nothing.  0: not checked (one host) */
 };
 /*
  * Record the progress of many jobs in one transaction: with synchronous=FULL

@@ -129,6 +129,53 @@ store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t id,
     return SF_OK;
 }
 
+/* store_job_claim_settle in the caller's transaction. */
+static int
+settle_tx(struct store *s, const char *host, int64_t id, bool *released, struct sf_err *err)
+{
+    char sql[192];
+    /* NOWAIT: a claim whose session the server has not ended yet still holds the row, and
+       its outcome is not known until it ends (SF_EBUSY: ask again) */
+    snprintf(sql, sizeof(sql),
+             "SELECT fence FROM jobs WHERE id = ?1 AND state = '%s' AND claimed_by = ?2%s",
+             job_state_name(JOB_PREPARING), store_is_pg(s) ? " FOR UPDATE NOWAIT" : "");
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st, sql, err);
+    if (rc)
+        return rc;
+    sqldb_bind_int64(st, 1, id);
+    sqldb_bind_text(st, 2, host);
+    rc = sqldb_step(st);
+    int64_t fence = rc == SQLDB_ROW ? sqldb_column_int64(st, 0) : 0;
+    sqldb_finalize(st);
+    if (rc == SQLDB_DONE)
+        return SF_OK; /* the claim did not commit: the job is as it was */
+    if (rc != SQLDB_ROW)
+        return store_db_fail(s, err, "read back a claim");
+    char reason[96];
+    snprintf(reason, sizeof(reason), "host '%s' gave its claim back: its commit was in doubt",
+             host);
+    struct job_event_args a = { .reason = reason, .fence = fence };
+    if ((rc = store_job_event_in(s, id, JOB_EV_DEFER, &a, NULL, err)) ||
+        (rc = store_host_wake(s, err)))
+        return rc;
+    *released = true;
+    return SF_OK;
+}
+
+int
+store_job_claim_settle(struct store *s, const char *host, int64_t id, bool *released,
+                       struct sf_err *err)
+{
+    *released = false;
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    if ((rc = store_end_tx(s, settle_tx(s, host, id, released, err), err)))
+        *released = false;
+    return rc;
+}
+
 int
 store_job_take(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
                struct sf_err *err)

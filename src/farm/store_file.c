@@ -318,8 +318,19 @@ store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct
 {
     if (!store_sha_valid(sha))
         return sf_err_set(err, SF_EINVAL, "store: '%.80s' is not a SHA-256 in hex", sha);
-    if (!store_file_known(s, sha))
+    /* a database that does not answer now (a connection coming back) is its error, not "no
+       such file": the caller tries again later rather than failing the job */
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st, "SELECT 1 FROM files WHERE sha256 = ?1", err);
+    if (rc)
+        return rc;
+    sqldb_bind_text(st, 1, sha);
+    rc = sqldb_step(st);
+    sqldb_finalize(st);
+    if (rc == SQLDB_DONE)
         return sf_err_set(err, SF_ENOTFOUND, "store: no file %s", sha);
+    if (rc != SQLDB_ROW)
+        return store_db_fail(s, err, "look up a file");
     if ((size_t)snprintf(path, cap, "%s/files/%.2s/%s", s->dir, sha, sha) >= cap)
         return sf_err_set(err, SF_ENOMEM, "store: path of file %s is too long", sha);
     /* a host's cache lacks what another host stored: fetch it */

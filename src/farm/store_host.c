@@ -104,7 +104,16 @@ conn_store(const char *dir, const char *target, unsigned flags, struct sf_err *e
 struct store *
 store_open_peer(const struct store *s, struct sf_err *err)
 {
-    return conn_store(s->dir, s->target, 0, err);
+    struct store *r = conn_store(s->dir, s->target, 0, err);
+    if (r) /* one of several hosts: a holder's events without a fence are refused here too */
+        r->host = s->host;
+    return r;
+}
+
+struct store *
+store_open_listener(const struct store *s, struct sf_err *err)
+{
+    return conn_store(s->dir, s->target, SQLDB_NOWAIT, err);
 }
 
 struct store *
@@ -438,9 +447,11 @@ store_host_peers(struct store *s, const char *name, int64_t now_ms, int *n, stru
 
 /* ---- printers ---- */
 
-/* Printer p's owner, if a host other than name whose lease runs at now_ms: SF_EAGAIN. */
+/* Printer p's owner, if a host other than name whose lease runs at now_ms: SF_EAGAIN, its
+   name into other (cap bytes; "" when p is free). */
 static int
-printer_free(struct store *s, const char *name, const char *p, int64_t now_ms, struct sf_err *err)
+printer_free(struct store *s, const char *name, const char *p, int64_t now_ms, char *other,
+             size_t cap, struct sf_err *err)
 {
     struct sqldb_stmt *st;
     int rc = store_prepare(s, &st,
@@ -448,15 +459,15 @@ printer_free(struct store *s, const char *name, const char *p, int64_t now_ms, s
                            " WHERE o.printer = ?1 AND o.host != ?2 AND h.reaped_ms = 0"
                            " AND h.lease_until_ms > ?3",
                            err);
+    other[0] = '\0';
     if (rc)
         return rc;
     sqldb_bind_text(st, 1, p);
     sqldb_bind_text(st, 2, name);
     sqldb_bind_int64(st, 3, now_ms);
     rc = sqldb_step(st);
-    char other[STORE_HOST_NAME_MAX];
     if (rc == SQLDB_ROW)
-        store_copy_text(other, sizeof(other), st, 0);
+        store_copy_text(other, cap, st, 0);
     sqldb_finalize(st);
     if (rc == SQLDB_ROW)
         return sf_err_set(err, SF_EAGAIN,
@@ -466,13 +477,17 @@ printer_free(struct store *s, const char *name, const char *p, int64_t now_ms, s
     return rc == SQLDB_DONE ? SF_OK : store_db_fail(s, err, "printer owner");
 }
 
+/* Own printer p, unless a live host other than name owns it: SF_EAGAIN, that host's name
+   into other (cap bytes). */
 static int
-own_one(struct store *s, const char *name, const char *p, int64_t now_ms, struct sf_err *err)
+own_one(struct store *s, const char *name, const char *p, int64_t now_ms, char *other, size_t cap,
+        struct sf_err *err)
 {
+    other[0] = '\0';
     if (!p || !p[0] || strlen(p) >= 64)
         return sf_err_set(err, SF_EINVAL, "printer: '%.80s' is empty or longer than 63 bytes",
                           p ? p : "");
-    int rc = printer_free(s, name, p, now_ms, err);
+    int rc = printer_free(s, name, p, now_ms, other, cap, err);
     struct sqldb_stmt *st;
     /* the owner's liveness again in the upsert: two hosts that both found the printer free
        above would otherwise both take it (PostgreSQL: the second waits for the first's row,
@@ -493,14 +508,16 @@ own_one(struct store *s, const char *name, const char *p, int64_t now_ms, struct
         return rc;
     if (sqldb_changes(s->db) == 1)
         return SF_OK;
-    rc = printer_free(s, name, p, now_ms, err); /* the message naming the live owner */
+    rc = printer_free(s, name, p, now_ms, other, cap, err); /* the message naming the owner */
+    if (rc == SF_OK)
+        snprintf(other, cap, "(unknown)");
     return rc ? rc : sf_err_set(err, SF_EAGAIN, "printer '%s' was taken by a live host", p);
 }
 
 /* store_host_own in the caller's transaction. */
 static int
 own_tx(struct store *s, const char *name, int64_t token, const char *const *printers, size_t n,
-       struct sf_err *err)
+       struct store_host_owned *out, struct sf_err *err)
 {
     int64_t now = clock_wall_ms();
     struct sqldb_stmt *st;
@@ -510,20 +527,39 @@ own_tx(struct store *s, const char *name, int64_t token, const char *const *prin
     sqldb_bind_text(st, 1, name);
     if ((rc = store_step_done(s, st, err, "disown printers")))
         return rc;
-    for (size_t i = 0; i < n; i++)
-        if ((rc = own_one(s, name, printers[i], now, err)))
+    size_t n_other = 0;
+    char other[STORE_HOST_NAME_MAX];
+    for (size_t i = 0; i < n; i++) {
+        rc = own_one(s, name, printers[i], now, other, sizeof(other), err);
+        /* another live host's: left to it, and said so, when the caller asked per printer */
+        if (rc == SF_EAGAIN && out && other[0]) {
+            out[i].owned = false;
+            snprintf(out[i].other, sizeof(out[i].other), "%s", other);
+            n_other++;
+            continue;
+        }
+        if (rc)
             return rc;
-    char detail[96];
-    snprintf(detail, sizeof(detail), "host '%s' owns %zu printer%s", name, n, n == 1 ? "" : "s");
+        if (out) {
+            out[i].owned = true;
+            out[i].other[0] = '\0';
+        }
+    }
+    char detail[128];
+    snprintf(detail, sizeof(detail), "host '%s' owns %zu printer%s", name, n - n_other,
+             n - n_other == 1 ? "" : "s");
+    if (n_other)
+        snprintf(detail + strlen(detail), sizeof(detail) - strlen(detail),
+                 " (%zu of its config live hosts own)", n_other);
     return store_log_event(s, 0, NULL, "host-printers", detail, err);
 }
 
 int
 store_host_own(struct store *s, const char *name, int64_t token, const char *const *printers,
-               size_t n, struct sf_err *err)
+               size_t n, struct store_host_owned *out, struct sf_err *err)
 {
     int rc = store_begin(s, err);
-    return rc ? rc : store_end_tx(s, own_tx(s, name, token, printers, n, err), err);
+    return rc ? rc : store_end_tx(s, own_tx(s, name, token, printers, n, out, err), err);
 }
 
 /* ---- reaping ---- */
@@ -737,6 +773,12 @@ int
 store_host_drain(struct store *s)
 {
     return sqldb_notifications(s->db, count_note, NULL);
+}
+
+int64_t
+store_host_reconnects(struct store *s)
+{
+    return sqldb_reconnects(s->db);
 }
 
 /* store_host_printer_set in the caller's transaction. */

@@ -50,10 +50,20 @@ struct store *store_open_host(const char *data_dir, const char *db, struct store
 /*
  * A second connection to s's database that may write, for another thread
  * of s's process (a preparation worker claiming jobs): no lock, migration
- * or recovery (s did them).  Open and close it on s's thread; use it on one
+ * or recovery (s did them).  A host's (store_open_host) is a host's too: a
+ * holder's job event without a fencing token is refused there as on s
+ * (store_open_writer's alike).  Open and close it on s's thread; use it on one
  * thread at a time.  NULL with err set.  Free with store_close().
  */
 struct store *store_open_peer(const struct store *s, struct sf_err *err);
+
+/*
+ * As store_open_peer, for the loop thread's wake-ups (store_host_listen): a
+ * reconnect never waits for the network (sqldb.h's SQLDB_NOWAIT), so each
+ * store_host_drain after a loss advances the new connection as far as it
+ * goes without waiting, until its session is up with its LISTENs again.
+ */
+struct store *store_open_listener(const struct store *s, struct sf_err *err);
 
 /*
  * A read-only connection to the store at target (a PostgreSQL URL, or a data
@@ -85,14 +95,24 @@ int store_host_join(struct store *s, const char *name, int64_t lease_ms, int64_t
 int store_host_beat(struct store *s, const char *name, int64_t token, int64_t lease_ms,
                     struct sf_err *err);
 
+/* What store_host_own found for one printer (plain data). */
+struct store_host_owned {
+    bool owned;                      /* the caller owns it now */
+    char other[STORE_HOST_NAME_MAX]; /* else the live host that owns it */
+};
+
 /*
  * Record the printers of host name's config (n names, each 1..63 bytes) as
- * its own, replacing what it owned before.  A printer another live host
- * owns is refused (SF_EAGAIN naming both): a printer belongs to one config.
- * SF_ESTALE when name's lease is lost.
+ * its own, replacing what it owned before.  A printer belongs to one
+ * config: one that another live host owns stays that host's.  With out (n
+ * entries) each printer's outcome goes there (out[i].owned false and
+ * out[i].other naming the live owner for such a printer; the rest are
+ * owned) and the call succeeds; with out NULL such a printer refuses the
+ * whole call (SF_EAGAIN naming both hosts, nothing recorded).  SF_ESTALE
+ * when name's lease is lost.
  */
 int store_host_own(struct store *s, const char *name, int64_t token, const char *const *printers,
-                   size_t n, struct sf_err *err);
+                   size_t n, struct store_host_owned *out, struct sf_err *err);
 
 /*
  * Reap every host whose lease ran out by now_ms, in one transaction: its
@@ -152,6 +172,21 @@ int store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t
                        struct job_row *out, int64_t *fence, struct sf_err *err);
 
 /*
+ * Settle host's claim of job id whose COMMIT's answer was lost
+ * (store_job_claim_id failed with SF_EINDOUBT: it may have committed).  If
+ * it did (the job is preparing and host's), the claim is given back: the
+ * DEFER event with the claim's fencing token, so the job is queued again
+ * and no host's, and the other hosts are woken (*released true); if it did
+ * not (the job is as it was), nothing is written (*released false).  Both
+ * are SF_OK, and running it again is harmless.  SF_EBUSY while the claim's
+ * own transaction still holds the job's row (its session not ended yet:
+ * ask again), else the store's failure.  Call it before host claims job id
+ * again: a claim of host's made after would be given back too.
+ */
+int store_job_claim_settle(struct store *s, const char *host, int64_t id, bool *released,
+                           struct sf_err *err);
+
+/*
  * Take ready job id for host, for a printer of its own, if no other host
  * holds it (unclaimed, or host's already: an uploaded G-code job, or one a
  * reaped host had prepared): its claim and a new fencing token (*fence, may
@@ -184,6 +219,9 @@ int store_host_listen(struct store *s, struct sf_err *err);
 int store_host_wake(struct store *s, struct sf_err *err);
 int store_host_notify_fd(struct store *s);
 int store_host_drain(struct store *s);
+/* How often s's connection came back after a loss (0 on SQLite): its socket is a new one
+   each time, perhaps under the old one's number, so a watcher of the old one adds it again. */
+int64_t store_host_reconnects(struct store *s);
 
 /*
  * Give job id (ready, printing, paused or interrupted) to host for its

@@ -486,7 +486,8 @@ store_job_event_in(struct store *s, int64_t id, enum job_event ev, const struct 
              " reason = ?, updated_ms = ?, nozzle_mm = ?, gcode_lines = ?, prep_key = ?,"
              " mesh_sha = ?, mesh_angle_deg = ?, filament_g = ?, support_g = ?,"
              " support_saved_g = ?, prepare_ms = ?, slice_ms = ?, ready_ms = ?,"
-             " mndr = ?, andr = ?, shape_changed = ?, est_s = ? WHERE id = ?",
+             " mndr = ?, andr = ?, shape_changed = ?, est_s = ?,"
+             " claimed_by = CASE WHEN ?28 = 1 THEN '' ELSE claimed_by END WHERE id = ?27",
              err)))
         return rc;
     sqldb_bind_text(st, 1, job_state_name(j.state));
@@ -523,6 +524,8 @@ store_job_event_in(struct store *s, int64_t id, enum job_event ev, const struct 
     sqldb_bind_int64(st, 25, j.shape_changed);
     bind_est(st, 26, j.est_known, j.est_s);
     sqldb_bind_int64(st, 27, id);
+    /* the host that held the job gave it up: any host may take it (store_job_live_host) */
+    sqldb_bind_int64(st, 28, job_event_releases_claim(ev));
     char kind[24], detail[192];
     const char *why = j.reason[0] ? j.reason : ev == JOB_EV_PREPARED && a->note ? a->note : "";
     snprintf(kind, sizeof(kind), "job-%s", job_event_name(ev));
@@ -606,8 +609,9 @@ store_jobs_progress_tx(struct store *s, struct store_progress *p, size_t n, stru
         return rc;
     int saved = 0;
     for (size_t i = 0; i < n; i++) {
-        rc = save_progress(s, p[i].job_id, p[i].lines_acked, 0, err);
-        if (rc && rc != SF_ENOTFOUND) {
+        /* a job another host holds now (a stale fence) is skipped as one that ended */
+        rc = save_progress(s, p[i].job_id, p[i].lines_acked, p[i].fence, err);
+        if (rc && rc != SF_ENOTFOUND && rc != SF_ESTALE) {
             store_rollback(s);
             return rc;
         }

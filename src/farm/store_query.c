@@ -260,7 +260,8 @@ open_peer(const struct store *s, unsigned flags, struct sf_err *err)
     }
     snprintf(r->dir, sizeof(r->dir), "%s", s->dir);
     snprintf(r->target, sizeof(r->target), "%s", s->target);
-    r->lock_fd = -1; /* the writer holds the data dir */
+    r->lock_fd = -1;   /* the writer holds the data dir */
+    r->host = s->host; /* one of several hosts: a holder's events without a fence are refused */
     if (!(r->db = sqldb_open(r->target, flags, err))) {
         store_close(r);
         return NULL;

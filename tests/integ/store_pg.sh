@@ -3,18 +3,22 @@
 # (lib/pg.sh: a temp dir, a Unix socket, removed at exit) runs the unit
 # tests that open a store with SLIMFARM_TEST_STORE set, each data dir in a
 # fresh database (tests/tstore.h), so the store, farm and API cases run on
-# both engines (the suite runs them on SQLite).  Then slimfarmd
+# both engines (the suite runs them on SQLite); test_farm_host also cuts a
+# host's connection through a loopback proxy.  Then slimfarmd
 # --init-store creates, finds up to date and refuses a newer schema on
 # PostgreSQL, and never prints a URL's password.
 . "$(dirname "$0")/lib/pg.sh"
 set -u
 : "${BUILD:=build/san}"
 TMP=$(mktemp -d)
-pg_start fsync=off || exit 1 # a throw-away server: its disk flushes prove nothing here
+# a throw-away server (its disk flushes prove nothing here), with a loopback port besides its
+# socket: test_farm_host cuts a host's network there (tests/tools/tcpproxy)
+PG_TCP=1 pg_start fsync=off || exit 1
 trap 'pg_stop; rm -rf "$TMP"' EXIT
 fail=0
 for t in test_sqldb test_store test_store_file test_store_query test_store_host test_store_command test_storeq test_farm_host test_history test_metrics test_web test_api test_farm; do
-  SLIMFARM_TEST_STORE=$PG_URL "$BUILD/tests/$t" > "$TMP/$t.log" 2>&1
+  SLIMFARM_TEST_STORE=$PG_URL SLIMFARM_TEST_PG_PORT=$PG_PORT \
+    SLIMFARM_TEST_PROXY=$BUILD/tests/tools/tcpproxy "$BUILD/tests/$t" > "$TMP/$t.log" 2>&1
   last=$(tail -n 1 "$TMP/$t.log")
   echo "   $t on PostgreSQL: $last"
   if ! [[ "$last" =~ ^[0-9]+\ passed,\ 0\ failed ]]; then

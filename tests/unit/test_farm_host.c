@@ -4,14 +4,28 @@
  * is taken once (a second host, or the same job again, gets SF_ENOTFOUND);
  * a ready job no host holds is taken by one host only; each host's live
  * jobs leave out the other hosts' claims but keep a job on a printer it
- * owns; a reaped host's jobs come back for the others.  With
+ * owns; a reaped host's jobs come back for the others.  A farm as one of
+ * several hosts (PostgreSQL only, as farm.ini's store is a URL; hdrv, a
+ * small in-test driver, stands in for its printers) leaves alone a
+ * printer of its config that another live host owns, listens again after
+ * its connection is cut, and gives back a claim whose COMMIT's answer was
+ * lost (SLIMFARM_TEST_PROXY, tests/tools/tcpproxy, and SLIMFARM_TEST_PG_PORT,
+ * the server's TCP port, cut the network: store_pg.sh sets them), and lets
+ * go of a print another host has attached (its fencing token is stale).  With
  * SLIMFARM_TEST_STORE (tstore.h) on PostgreSQL, the second host a store of
  * its own on the same database; on SQLite a second connection.
  */
+#include <pthread.h>
+#include <spawn.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include "../../src/base/clock.h"
+#include "../../src/base/log.h"
+#include "../../src/base/mem.h"
+#include "../../src/farm/farm.h"
 #include "../../src/farm/farmcfg.h"
 #include "../../src/farm/store_host.h"
 #include "../t.h"
@@ -130,7 +144,7 @@ T_CASE(live_jobs_of_a_host_leave_out_the_others_claims)
     struct pair p;
     T_TRUE(pair_open(&p, "live", &err));
     const char *pa[] = { "pa" };
-    T_OK(store_host_own(p.a, "a", p.ta, pa, 1, &err), &err);
+    T_OK(store_host_own(p.a, "a", p.ta, pa, 1, NULL, &err), &err);
     int64_t free_q, by_a, by_b, ready_free;
     T_OK(add_job(p.a, &free_q, &err), &err);
     T_OK(add_job(p.a, &by_a, &err), &err);
@@ -195,4 +209,642 @@ T_CASE(farm_ini_selects_a_shared_store)
     const char *lease = "[farm]\nhost_lease_s: 1\n";
     T_ERR(farmcfg_parse(&c, lease, strlen(lease), "farm.ini", &err), SF_EINVAL, &err,
           "host_lease_s");
+}
+
+/* ---- a farm as one host (PostgreSQL: farm.ini's store is a URL) ---- */
+
+/* hdrv: a printer that connects idle and prints what it is given, reporting on the loop. */
+struct hdrv {
+    struct drv base; /* first: drv.h's rule */
+    int starts, cancels;
+};
+
+static struct hdrv *hdrvs[4];
+static int n_hdrvs;
+
+static void
+h_deliver(struct loop *l, void *ud)
+{
+    (void)l;
+    struct drv *d = ud;
+    d->on_event(d, DRV_EV_STATE, d->ud);
+}
+
+static int
+h_open(struct drv *d, struct sf_err *err)
+{
+    (void)err;
+    d->status.state = DRV_IDLE;
+    loop_timer_add(d->loop, 0, h_deliver, d);
+    return SF_OK;
+}
+
+static int
+h_start(struct drv *d, const char *path, uint64_t first_line, const struct drv_job_scan *scan,
+        struct sf_err *err)
+{
+    (void)path, (void)err;
+    ((struct hdrv *)d)->starts++;
+    d->status.lines_acked = first_line;
+    d->status.lines_total = scan ? scan->lines_total : 2;
+    d->status.state = DRV_PRINTING;
+    loop_timer_add(d->loop, 0, h_deliver, d);
+    return SF_OK;
+}
+
+static int
+h_ok(struct drv *d, struct sf_err *err)
+{
+    (void)d, (void)err;
+    return SF_OK;
+}
+
+static int
+h_cancel(struct drv *d, struct sf_err *err)
+{
+    (void)err;
+    ((struct hdrv *)d)->cancels++;
+    d->status.state = DRV_IDLE;
+    return SF_OK;
+}
+
+static int
+h_command(struct drv *d, const char *line, struct sf_err *err)
+{
+    (void)line;
+    return sf_err_set(err, SF_EUNSUPP, "printer '%s': hdrv: no console", d->name);
+}
+
+static void
+h_close(struct drv *d)
+{
+    d->status.state = DRV_OFFLINE;
+}
+
+static void
+h_destroy(struct drv *d)
+{
+    for (int i = 0; i < n_hdrvs; i++)
+        if (hdrvs[i] == (struct hdrv *)d)
+            hdrvs[i] = NULL;
+    free(d);
+}
+
+static const struct drv_ops hdrv_ops = {
+    DRV_OPS_VERSION, "hdrv",    h_open,  h_start,   h_ok, h_ok,
+    h_cancel,        h_command, h_close, h_destroy, NULL, NULL
+};
+
+static struct drv *
+hdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
+         struct sf_err *err)
+{
+    struct hdrv *t = mem_calloc(1, sizeof(*t));
+    if (!t) {
+        sf_err_set(err, SF_ENOMEM, "hdrv: out of memory");
+        return NULL;
+    }
+    t->base.ops = &hdrv_ops;
+    t->base.loop = l;
+    snprintf(t->base.name, sizeof(t->base.name), "%s", cfg->name);
+    t->base.on_event = on_event;
+    t->base.ud = ud;
+    if (n_hdrvs < 4)
+        hdrvs[n_hdrvs++] = t;
+    return &t->base;
+}
+
+static struct hdrv *
+hdrv_named(const char *name)
+{
+    for (int i = n_hdrvs - 1; i >= 0; i--)
+        if (hdrvs[i] && strcmp(hdrvs[i]->base.name, name) == 0)
+            return hdrvs[i];
+    return NULL;
+}
+
+static int
+no_prepare(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
+           struct sf_err *err)
+{
+    (void)req, (void)out, (void)cancel;
+    return sf_err_set(err, SF_EUNSUPP, "test: no preparing here");
+}
+
+/* What was logged at warn level or above, and the hosts' news (the sink runs on any
+   thread). */
+static pthread_mutex_t logged_mu = PTHREAD_MUTEX_INITIALIZER;
+static char logged[8192];
+
+static void
+sink(void *ud, enum log_level level, const char *subsys, const char *printer, const char *msg)
+{
+    (void)ud, (void)printer;
+    pthread_mutex_lock(&logged_mu);
+    size_t n = strlen(logged);
+    if ((level <= LOG_WARN || strcmp(subsys, "host") == 0) && n + 1 < sizeof(logged))
+        snprintf(logged + n, sizeof(logged) - n, "%s: %s\n", subsys, msg);
+    pthread_mutex_unlock(&logged_mu);
+}
+
+static bool
+was_logged(const char *what)
+{
+    pthread_mutex_lock(&logged_mu);
+    bool yes = strstr(logged, what) != NULL;
+    pthread_mutex_unlock(&logged_mu);
+    return yes;
+}
+
+/* The farm of host name on url's database: its loop, store, pool and config. */
+static struct {
+    struct loop *l;
+    struct store *s;
+    struct pool *pool;
+    struct farm *f;
+    struct farmcfg cfg;
+} hx;
+
+/* Build hx: data dir dir, printers the [printer] sections of its farm.ini. */
+static prepare_fn host_prepare; /* the next host_farm's prepare hook (NULL: no_prepare) */
+static int host_lease_s = 600;  /* the next host_farm's lease: far above any stall */
+
+static int
+host_farm(const char *dir, const char *url, const char *name, const char *printers,
+          struct sf_err *err)
+{
+    char ini[4096];
+    snprintf(ini, sizeof(ini), "[farm]\nstore: %s\nhost: %s\nhost_lease_s: %d\n%s", url, name,
+             host_lease_s, printers);
+    host_lease_s = 600;
+    memset(&hx, 0, sizeof(hx));
+    memset(hdrvs, 0, sizeof(hdrvs));
+    n_hdrvs = 0;
+    logged[0] = '\0';
+    log_set_level(LOG_INFO);
+    log_set_sink(sink, NULL);
+    farmcfg_init(&hx.cfg);
+    int rc = farmcfg_parse(&hx.cfg, ini, strlen(ini), "farm.ini", err);
+    if (rc)
+        return rc;
+    if (!(hx.l = loop_new(err)) || !(hx.s = store_open_host(dir, url, NULL, err)) ||
+        !(hx.pool = pool_new(hx.l, 1, err)))
+        return SF_EIO;
+    struct farm_hooks hooks = { .driver = hdrv_new,
+                                .prepare = host_prepare ? host_prepare : no_prepare,
+                                .progress_ms = 50 };
+    host_prepare = NULL;
+    hx.f = farm_new(hx.l, hx.s, hx.pool, &hx.cfg, &hooks, err);
+    return hx.f ? SF_OK : SF_EIO;
+}
+
+static void
+host_farm_free(void)
+{
+    farm_drop_pool(hx.f);
+    pool_free(hx.pool);
+    if (hx.l)
+        loop_run_once(hx.l, 0);
+    farm_free(hx.f);
+    store_close(hx.s);
+    loop_free(hx.l);
+    farmcfg_release(&hx.cfg);
+    log_set_sink(NULL, NULL);
+}
+
+/* A ready G-code job for printer (any G-code printer runs it), added through s. */
+static int
+add_ready_for(struct store *s, const char *printer, int64_t *id, struct sf_err *err)
+{
+    char sha[STORE_SHA_HEX];
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.gcode");
+    snprintf(o.printer, sizeof(o.printer), "%s", printer);
+    struct job_event_args g = { .prep_key = GCJOB_KEY_PREFIX "n0/", .gcode_lines = 2 };
+    int rc = store_file_put(s, "G28\nG1 X1\n", 10, sha, err);
+    return rc ? rc : store_job_add_gcode(s, &o, sha, &g, id, err);
+}
+
+/* The first column of sql's first row (its ?1 bound to id) on url's database, as text. */
+static void
+db_text(const char *url, const char *sql, int64_t id, char *out, size_t cap)
+{
+    struct sf_err err;
+    struct sqldb *db = sqldb_open(url, 0, &err);
+    struct sqldb_stmt *st;
+    snprintf(out, cap, "(no row)");
+    if (db && sqldb_prepare(db, sql, &st) == SF_OK) {
+        sqldb_bind_int64(st, 1, id);
+        if (sqldb_step(st) == SQLDB_ROW)
+            snprintf(out, cap, "%s", sqldb_column_text(st, 0));
+        sqldb_finalize(st);
+    }
+    sqldb_close(db);
+}
+
+#define WAIT_LIMIT_MS 120000
+
+/* Turn hx's loop until job id's state (its name) is want, or WAIT_LIMIT_MS pass. */
+static bool
+wait_state(const char *url, int64_t id, const char *want)
+{
+    char st[32];
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        farm_sync(hx.f, -1, NULL);
+        db_text(url, "SELECT state FROM jobs WHERE id = ?1", id, st, sizeof(st));
+        if (strcmp(st, want) == 0)
+            return true;
+        loop_run_once(hx.l, 20);
+    }
+    return false;
+}
+
+T_CASE(host_leaves_alone_a_printer_another_live_host_owns)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/foreign", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    /* host a, live, owns printer x; b's config lists an x too, and a y */
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta, jx, jy;
+    T_OK(store_host_join(a, "a", LEASE_MS, &ta, &err), &err);
+    const char *xs[] = { "x" };
+    T_OK(store_host_own(a, "a", ta, xs, 1, NULL, &err), &err);
+    T_OK(add_ready_for(a, "x", &jx, &err), &err);
+    T_OK(add_ready_for(a, "y", &jy, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer x]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n"
+                   "[printer y]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n",
+                   &err),
+         &err);
+    /* y's job prints on b; x's, seen in the same scheduling pass, is left to a */
+    T_TRUE(wait_state(url, jy, "printing"));
+    db_text(url, "SELECT state FROM jobs WHERE id = ?1", jx, text, sizeof(text));
+    T_EQ_STR(text, "ready");
+    db_text(url, "SELECT 'by ' || claimed_by FROM jobs WHERE id = ?1", jx, text, sizeof(text));
+    T_EQ_STR(text, "by ");
+    T_TRUE(hdrv_named("x") && hdrv_named("x")->starts == 0);
+    T_TRUE(was_logged("printer 'x' belongs to live host 'a'"));
+    db_text(url, "SELECT host FROM host_printers WHERE printer = 'x' AND ?1 = 0", 0, text,
+            sizeof(text));
+    T_EQ_STR(text, "a");
+    db_text(url, "SELECT host FROM host_printers WHERE printer = 'y' AND ?1 = 0", 0, text,
+            sizeof(text));
+    T_EQ_STR(text, "b");
+    host_farm_free();
+    store_close(a);
+}
+
+/* Turn hx's loop until what was logged holds what, or WAIT_LIMIT_MS pass. */
+static bool
+wait_logged(const char *what)
+{
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        if (was_logged(what))
+            return true;
+        loop_run_once(hx.l, 20);
+    }
+    return false;
+}
+
+T_CASE(host_listens_again_after_its_connection_is_cut)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], sql[256];
+    snprintf(dir, sizeof(dir), "%s/relisten", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    char db[64];
+    db_text(url, "SELECT current_database() WHERE ?1 = 0", 0, db, sizeof(db));
+    /* a, a host without printers, adds jobs for b's printers and wakes b (a NOTIFY) */
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer p1]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n"
+                   "[printer p2]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n"
+                   "[printer p3]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n",
+                   &err),
+         &err);
+    int64_t ids[3];
+    T_OK(add_ready_for(a, "p1", &ids[0], &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, ids[0], "printing"));
+    /* the listener's session is cut by the server, and no new one is let in for now (both
+       from the server's own database: a database cannot shut itself) */
+    struct sqldb *cut = sqldb_open(getenv("SLIMFARM_TEST_STORE"), 0, &err);
+    T_TRUE(cut != NULL);
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %s ALLOW_CONNECTIONS false", db);
+    T_OK(sqldb_exec(cut, sql), NULL);
+    snprintf(sql, sizeof(sql),
+             "SELECT count(pg_terminate_backend(pid)) FROM pg_stat_activity"
+             " WHERE datname = '%s' AND query LIKE 'LISTEN%%'",
+             db);
+    struct sqldb_stmt *st;
+    T_OK(sqldb_prepare(cut, sql, &st), NULL);
+    T_EQ_INT(sqldb_step(st), SQLDB_ROW);
+    T_EQ_INT(sqldb_column_int(st, 0), 1);
+    sqldb_finalize(st);
+    T_TRUE(wait_logged("b: the wake-up connection is lost"));
+    /* a job queued (its NOTIFY lost to b) while the listener is away */
+    T_OK(add_ready_for(a, "p2", &ids[1], &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %s ALLOW_CONNECTIONS true", db);
+    T_OK(sqldb_exec(cut, sql), NULL);
+    sqldb_close(cut);
+    /* back: the pass it runs then starts what came meanwhile, and a NOTIFY wakes it again */
+    T_TRUE(wait_logged("b: the wake-up connection is back"));
+    T_TRUE(wait_state(url, ids[1], "printing"));
+    T_OK(add_ready_for(a, "p3", &ids[2], &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, ids[2], "printing"));
+    host_farm_free();
+    store_close(a);
+}
+
+/* ---- a network cut (tests/tools/tcpproxy) ---- */
+
+extern char **environ;
+
+/* A proxy to the server's TCP port: its pid and command pipes. */
+struct proxy {
+    pid_t pid;
+    FILE *cmd, *out;
+    int port;
+};
+
+static bool
+proxy_start(struct proxy *p)
+{
+    int in[2], out[2];
+    if (pipe(in) || pipe(out))
+        return false;
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_adddup2(&fa, in[0], 0);
+    posix_spawn_file_actions_adddup2(&fa, out[1], 1);
+    posix_spawn_file_actions_addclose(&fa, in[1]);
+    posix_spawn_file_actions_addclose(&fa, out[0]);
+    char *argv[] = { getenv("SLIMFARM_TEST_PROXY"), getenv("SLIMFARM_TEST_PG_PORT"), NULL };
+    int rc = posix_spawn(&p->pid, argv[0], &fa, NULL, argv, environ);
+    posix_spawn_file_actions_destroy(&fa);
+    close(in[0]);
+    close(out[1]);
+    p->cmd = fdopen(in[1], "w");
+    p->out = fdopen(out[0], "r");
+    char line[64];
+    return rc == 0 && p->cmd && p->out && fgets(line, sizeof(line), p->out) &&
+           sscanf(line, "port %d", &p->port) == 1;
+}
+
+/* Send cmd and wait for its "ok" (the cut is made when this returns). */
+static bool
+proxy_cmd(struct proxy *p, const char *cmd)
+{
+    char line[128];
+    fprintf(p->cmd, "%s\n", cmd);
+    fflush(p->cmd);
+    return fgets(line, sizeof(line), p->out) && strncmp(line, "ok ", 3) == 0;
+}
+
+static void
+proxy_stop(struct proxy *p)
+{
+    fclose(p->cmd); /* end of its stdin ends it */
+    fclose(p->out);
+    waitpid(p->pid, NULL, 0);
+}
+
+/* A prepare that writes a tiny G-code for the job's printer. */
+static int
+gcode_prepare(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
+              struct sf_err *err)
+{
+    (void)cancel;
+    FILE *f = fopen(req->out_path, "w");
+    if (!f)
+        return sf_err_sys(err, "cannot write '%s'", req->out_path);
+    fprintf(f, "; for %s\nG28\nG1 X10 Y10 Z10\n", req->printer.name);
+    fclose(f);
+    for (int i = 0; i < 3; i++)
+        out->size_mm[i] = 10;
+    out->nozzle_mm = req->printer.nozzle_mm;
+    return SF_OK;
+}
+
+/* The first column of sql's first row on db as an integer; -1 on any failure. */
+static int64_t
+db_int(struct sqldb *db, const char *sql)
+{
+    struct sqldb_stmt *st;
+    int64_t v = -1;
+    if (sqldb_prepare(db, sql, &st) == SF_OK) {
+        if (sqldb_step(st) == SQLDB_ROW)
+            v = sqldb_column_int64(st, 0);
+        sqldb_finalize(st);
+    }
+    return v;
+}
+
+/* Cuts the claim's COMMIT off while the server holds it (the test's trigger sleeps at
+   COMMIT while hold_claims has a row), then lets the server commit it and heals. */
+struct cutter {
+    const char *url; /* the database, directly */
+    struct proxy *px;
+    bool ok; /* every step was taken */
+};
+
+static void *
+cut_held_commit(void *arg)
+{
+    struct cutter *c = arg;
+    struct sf_err err;
+    struct sqldb *db = sqldb_open(c->url, 0, &err);
+    int64_t pid = 0;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; db && clock_mono_ms() < end && pid <= 0;
+         usleep(20 * 1000))
+        pid = db_int(db, "SELECT coalesce(min(pid), 0) FROM pg_stat_activity WHERE"
+                         " datname = current_database() AND query = 'COMMIT' AND"
+                         " wait_event = 'PgSleep'");
+    if (pid > 0 && proxy_cmd(c->px, "drop") && sqldb_exec(db, "DELETE FROM hold_claims") == 0) {
+        char sql[128];
+        snprintf(sql, sizeof(sql), "SELECT count(*) FROM pg_stat_activity WHERE pid = %lld",
+                 (long long)pid);
+        int64_t end = clock_mono_ms() + WAIT_LIMIT_MS;
+        while (db_int(db, sql) != 0 && clock_mono_ms() < end)
+            usleep(20 * 1000); /* its COMMIT done on the server, the answer nowhere to go */
+        c->ok = db_int(db, sql) == 0 && proxy_cmd(c->px, "heal");
+    }
+    sqldb_close(db);
+    return NULL;
+}
+
+T_CASE(host_claim_in_doubt_is_given_back_not_stranded)
+{
+    T_SKIP_UNLESS(t_store_pg() && getenv("SLIMFARM_TEST_PROXY") && getenv("SLIMFARM_TEST_PG_PORT"),
+                  "needs PostgreSQL on a TCP port and tests/tools/tcpproxy (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], purl[256], db[64];
+    snprintf(dir, sizeof(dir), "%s/doubt", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    db_text(url, "SELECT current_database() WHERE ?1 = 0", 0, db, sizeof(db));
+    struct store *a = store_open_host(dir_a, url, NULL, &err); /* the schema, the job */
+    T_TRUE(a != NULL);
+    /* a claim's COMMIT (the job to preparing) waits in a deferred trigger while
+       hold_claims has a row */
+    struct sqldb *direct = sqldb_open(url, 0, &err);
+    T_TRUE(direct != NULL);
+    T_OK(sqldb_exec(direct,
+                    "CREATE TABLE hold_claims(x INTEGER); INSERT INTO hold_claims VALUES(1);"
+                    " CREATE FUNCTION hold_claim() RETURNS trigger LANGUAGE plpgsql AS $$"
+                    " BEGIN WHILE EXISTS (SELECT 1 FROM hold_claims) LOOP"
+                    " PERFORM pg_sleep(0.02); END LOOP; RETURN NULL; END $$;"
+                    " CREATE CONSTRAINT TRIGGER hold_claim AFTER UPDATE ON jobs"
+                    " DEFERRABLE INITIALLY DEFERRED FOR EACH ROW"
+                    " WHEN (NEW.state = 'preparing') EXECUTE FUNCTION hold_claim()"),
+         NULL);
+    sqldb_close(direct);
+    char sha[STORE_SHA_HEX];
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    snprintf(o.method, sizeof(o.method), "none");
+    int64_t id;
+    T_OK(store_file_put(a, "solid part\n", 11, sha, &err), &err);
+    T_OK(store_job_add(a, &o, sha, &id, &err), &err);
+    /* host b reaches the database through the proxy */
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    snprintf(purl, sizeof(purl), "postgresql://postgres@127.0.0.1:%d/%s", px.port, db);
+    struct cutter c = { .url = url, .px = &px };
+    pthread_t t;
+    T_EQ_INT(pthread_create(&t, NULL, cut_held_commit, &c), 0);
+    host_prepare = gcode_prepare;
+    T_OK(host_farm(dir, purl, "b", "[printer p]\ndriver: marlin\nport: pty:/dev/null\n", &err),
+         &err);
+    /* b's claim committed, its answer lost: read back, given back, claimed again, printed */
+    bool printing = wait_state(url, id, "printing");
+    pthread_join(t, NULL);
+    if (!printing) { /* what happened instead */
+        char ev[2048];
+        db_text(url,
+                "SELECT string_agg(kind || ': ' || detail, E'\\n' ORDER BY id) FROM events"
+                " WHERE job_id = ?1",
+                id, ev, sizeof(ev));
+        fprintf(stderr, "host b logged:\n%sjob %lld's events:\n%s\n", logged, (long long)id, ev);
+    }
+    T_TRUE(c.ok);
+    T_TRUE(printing);
+    T_EQ_INT(t_store_int(dir, "SELECT count(*) FROM events WHERE kind = 'job-defer' AND"
+                              " detail LIKE '%its commit was in doubt'"),
+             1);
+    T_TRUE(was_logged("had committed: given back to the queue"));
+    host_farm_free();
+    store_close(a);
+    proxy_stop(&px);
+}
+
+T_CASE(host_lets_go_of_a_print_another_host_attached)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/fenced", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta, id, fa;
+    T_OK(store_host_join(a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer p]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    T_OK(add_ready_for(a, "p", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    /* host a attaches the job (as after b's partition): b's fencing token is stale */
+    T_OK(store_job_attach(a, "a", ta, id, &fa, &err), &err);
+    /* b's printer pauses by itself (a runout): b's PAUSE is refused, and b lets the job go */
+    struct hdrv *d = hdrv_named("p");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job (its file judged) */
+    T_EQ_INT(d->starts, 1);
+    d->base.status.state = DRV_PAUSED;
+    loop_timer_add(hx.l, 0, h_deliver, &d->base);
+    bool let_go = wait_logged("another host holds it now");
+    if (!let_go) {
+        char ev[2048];
+        db_text(url,
+                "SELECT string_agg(kind || ': ' || detail, E'\\n' ORDER BY id) FROM events"
+                " WHERE job_id = ?1",
+                id, ev, sizeof(ev));
+        fprintf(stderr, "host b logged:\n%sjob %lld's events:\n%s\n", logged, (long long)id, ev);
+    }
+    T_TRUE(let_go);
+    farm_sync(hx.f, -1, NULL);
+    db_text(url, "SELECT state || ' ' || claimed_by FROM jobs WHERE id = ?1", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "printing a");
+    T_EQ_INT(t_store_int(dir, "SELECT count(*) FROM events WHERE kind = 'job-pause'"), 0);
+    T_EQ_INT(d->cancels, 1); /* streamed from b: b stops streaming it */
+    struct printer_info info;
+    farm_printer_info(hx.f, 0, &info);
+    T_EQ_INT(info.job_id, 0);
+    host_farm_free();
+    store_close(a);
+}
+
+T_CASE(host_reaped_while_away_lets_go_of_its_prints)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/reaped", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    host_lease_s = 5;
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    int64_t id;
+    T_OK(add_ready_for(a, "q", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("q"); /* not p: a printer's repeated log line is held back */
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job (its file judged) */
+    T_EQ_INT(d->starts, 1);
+    /* b's loop stands still (a partition, as far as the database can tell) until its lease
+       runs out and the reap takes its print */
+    int reaped = 0;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; reaped <= 0 && clock_mono_ms() < end;
+         usleep(50 * 1000))
+        reaped = store_host_reap(a, clock_wall_ms(), NULL, &err);
+    T_EQ_INT(reaped, 1);
+    db_text(url, "SELECT state FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_EQ_STR(text, "interrupted");
+    /* back: its next beat finds the lease lost, and the printer stops streaming the print */
+    bool let_go = wait_logged("another host holds it now");
+    if (!let_go)
+        fprintf(stderr, "host b logged:\n%s", logged);
+    T_TRUE(let_go);
+    T_EQ_INT(d->cancels, 1);
+    struct printer_info info;
+    farm_printer_info(hx.f, 0, &info);
+    T_EQ_INT(info.job_id, 0);
+    farm_sync(hx.f, -1, NULL);
+    db_text(url, "SELECT state FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_EQ_STR(text, "interrupted");
+    host_farm_free();
+    store_close(a);
 }

@@ -272,3 +272,17 @@ T_CASE(job_names_reject_traversal)
     T_TRUE(!job_name_valid("bad\xc3.stl"));
     T_TRUE(!job_name_valid("over\xc0\xaf.stl")); /* overlong '/' */
 }
+
+T_CASE(job_defer_prepare_failed_and_restart_end_a_hosts_claim)
+{
+    int n = 0;
+    for (int ev = 0; ev < JOB_EVENT_COUNT; ev++)
+        n += job_event_releases_claim((enum job_event)ev);
+    T_EQ_INT(n, 3);
+    T_TRUE(job_event_releases_claim(JOB_EV_DEFER));
+    T_TRUE(job_event_releases_claim(JOB_EV_PREPARE_FAILED));
+    T_TRUE(job_event_releases_claim(JOB_EV_RESTART));
+    /* a host holds its job through a print and its copies */
+    T_TRUE(!job_event_releases_claim(JOB_EV_PREPARED));
+    T_TRUE(!job_event_releases_claim(JOB_EV_PRINT_DONE));
+}

@@ -1102,7 +1102,7 @@ T_CASE(store_jobs_progress_saves_printing_jobs_in_one_go)
     T_OK(store_job_event(s, b, JOB_EV_START, &start, NULL, &err), &err);
     T_OK(store_job_event(s, b, JOB_EV_PAUSE, NULL, NULL, &err), &err);
     T_OK(make_ready(s, idle, &err), &err);
-    struct store_progress p[] = { { a, 120, false }, { idle, 7, true }, { b, 45, false } };
+    struct store_progress p[] = { { a, 120, false, 0 }, { idle, 7, true, 0 }, { b, 45, false, 0 } };
     T_EQ_INT(store_jobs_progress(s, p, 3, &err), 2);
     T_TRUE(p[0].saved && !p[1].saved && p[2].saved);
     struct job_row j;

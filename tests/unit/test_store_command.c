@@ -43,8 +43,8 @@ pair_open(struct pair *p, const char *name, struct sf_err *err)
     const char *mine[] = { "p1" }, *theirs[] = { "p2" };
     return p->a && p->b && store_host_join(p->a, "a", LEASE_MS, &p->ta, err) == SF_OK &&
            store_host_join(p->b, "b", LEASE_MS, &p->tb, err) == SF_OK &&
-           store_host_own(p->a, "a", p->ta, mine, 1, err) == SF_OK &&
-           store_host_own(p->b, "b", p->tb, theirs, 1, err) == SF_OK;
+           store_host_own(p->a, "a", p->ta, mine, 1, NULL, err) == SF_OK &&
+           store_host_own(p->b, "b", p->tb, theirs, 1, NULL, err) == SF_OK;
 }
 
 static void

@@ -205,10 +205,19 @@ T_CASE(hosts_expired_host_is_reaped_once)
     T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
     T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
     const char *mine[] = { "p1" };
-    T_OK(store_host_own(p.a, "a", ta, mine, 1, &err), &err);
+    T_OK(store_host_own(p.a, "a", ta, mine, 1, NULL, &err), &err);
     const char *theirs[] = { "p1" };
-    T_ERR(store_host_own(p.b, "b", tb, theirs, 1, &err), SF_EAGAIN, &err,
+    T_ERR(store_host_own(p.b, "b", tb, theirs, 1, NULL, &err), SF_EAGAIN, &err,
           "belongs to live host 'a'");
+    /* asked per printer: a's stays a's, said so, and b owns the rest */
+    const char *both[] = { "p1", "p9" };
+    struct store_host_owned owned[2];
+    T_OK(store_host_own(p.b, "b", tb, both, 2, owned, &err), &err);
+    T_TRUE(!owned[0].owned && owned[1].owned);
+    T_EQ_STR(owned[0].other, "a");
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM host_printers WHERE host = 'a'"
+                                " AND printer = 'p1'"),
+             1);
     T_OK(add_jobs(p.a, 1, &ids[0], &err), &err);
     T_OK(add_jobs(p.a, 1, &ids[2], &err), &err);
     /* ids[0] is claimed (preparing) by a; ids[1] prints on a's p1; ids[2] waits unclaimed */
@@ -346,7 +355,7 @@ T_CASE(hosts_list_shows_lease_printers_and_claims)
     T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
     T_OK(store_host_join(p.b, "b", 60 * 1000, &tb, &err), &err);
     const char *mine[] = { "m2", "m1" };
-    T_OK(store_host_own(p.a, "a", ta, mine, 2, &err), &err);
+    T_OK(store_host_own(p.a, "a", ta, mine, 2, NULL, &err), &err);
     T_OK(add_jobs(p.a, 2, NULL, &err), &err);
     struct job_row j;
     T_OK(store_job_claim(p.a, "a", ta, NULL, &j, &fence, &err), &err);
@@ -501,7 +510,7 @@ T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
     T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
     T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
     const char *mine[] = { "p1" };
-    T_OK(store_host_own(p.a, "a", ta, mine, 1, &err), &err);
+    T_OK(store_host_own(p.a, "a", ta, mine, 1, NULL, &err), &err);
     T_OK(add_ready(p.a, &id, &err), &err);
     T_OK(store_job_attach(p.a, "a", ta, id, &fa, &err), &err);
     T_ERR(store_job_event(p.a, id, JOB_EV_START, &(struct job_event_args){ .printer = "p1" }, NULL,
@@ -539,5 +548,138 @@ T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
     T_EQ_INT(j.state, JOB_QUEUED);
     /* the operator's events need no token */
     T_OK(store_job_event(p.a, q, JOB_EV_CANCEL, NULL, NULL, &err), &err);
+    pair_close(&p);
+}
+
+/* Whether rows (n) hold job id. */
+static bool
+has_job(const struct job_row *rows, size_t n, int64_t id)
+{
+    for (size_t i = 0; i < n; i++)
+        if (rows[i].id == id)
+            return true;
+    return false;
+}
+
+/* Does b's scheduler see job id (store_job_live_host)?  -1 on an error. */
+static int
+b_sees(struct pair *p, int64_t id)
+{
+    struct job_row *rows;
+    size_t n;
+    struct sf_err err;
+    if (store_job_live_host(p->b, "b", &rows, &n, &err))
+        return -1;
+    int yes = has_job(rows, n, id);
+    free(rows);
+    return yes;
+}
+
+T_CASE(hosts_defer_prepare_failed_and_restart_release_the_claim)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "release", &err));
+    int64_t ta, tb, ids[2], ready, fence;
+    T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    T_OK(add_jobs(p.a, 2, ids, &err), &err);
+    struct job_row j;
+    /* a defers the job it claimed: back in the queue, no host's, so b's scheduler sees it */
+    T_OK(store_job_claim_id(p.a, "a", ta, ids[0], &j, &fence, &err), &err);
+    T_EQ_INT(b_sees(&p, ids[0]), 0);
+    struct job_event_args defer = { .reason = "the pool is full", .fence = fence };
+    T_OK(store_job_event(p.a, ids[0], JOB_EV_DEFER, &defer, NULL, &err), &err);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM jobs WHERE claimed_by != ''"), 0);
+    T_EQ_INT(b_sees(&p, ids[0]), 1);
+    T_OK(store_job_claim_id(p.b, "b", tb, ids[0], &j, NULL, &err), &err);
+    /* a's preparation fails: the failed job is held by no host */
+    T_OK(store_job_claim_id(p.a, "a", ta, ids[1], &j, &fence, &err), &err);
+    struct job_event_args failed = { .reason = "no slicer", .fence = fence };
+    T_OK(store_job_event(p.a, ids[1], JOB_EV_PREPARE_FAILED, &failed, NULL, &err), &err);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM jobs WHERE claimed_by = 'a'"), 0);
+    /* a prints a job and is reaped: interrupted, still a's (its part is on a's printer);
+       the operator's restart gives it to any host, and b takes it */
+    const char *mine[] = { "pa" };
+    T_OK(store_host_own(p.a, "a", ta, mine, 1, NULL, &err), &err);
+    T_OK(add_ready(p.a, &ready, &err), &err);
+    T_OK(store_job_take(p.a, "a", ta, ready, &fence, &err), &err);
+    struct job_event_args start = { .printer = "pa", .fence = fence };
+    T_OK(store_job_event(p.a, ready, JOB_EV_START, &start, NULL, &err), &err);
+    T_EQ_INT(store_host_reap(p.b, clock_wall_ms() + 120 * 1000, NULL, &err), 1);
+    T_OK(store_job_get(p.b, ready, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_INTERRUPTED);
+    T_EQ_INT(store_job_take(p.b, "b", tb, ready, NULL, &err), SF_ENOTFOUND);
+    T_OK(store_job_event(p.b, ready, JOB_EV_RESTART, NULL, NULL, &err), &err);
+    T_EQ_INT(b_sees(&p, ready), 1);
+    T_OK(store_job_take(p.b, "b", tb, ready, &fence, &err), &err);
+    T_OK(store_check(p.b, &err), &err);
+    pair_close(&p);
+}
+
+T_CASE(hosts_claim_in_doubt_is_settled_by_reading_it_back)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "settle", &err));
+    int64_t ta, tb, ids[2], fence;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    T_OK(add_jobs(p.a, 2, ids, &err), &err);
+    struct job_row j;
+    /* a's claim committed (its answer lost): given back, no host's, b's scheduler sees it */
+    T_OK(store_job_claim_id(p.a, "a", ta, ids[0], &j, &fence, &err), &err);
+    bool released = false;
+    T_OK(store_job_claim_settle(p.a, "a", ids[0], &released, &err), &err);
+    T_TRUE(released);
+    T_OK(store_job_get(p.a, ids[0], &j, &err), &err);
+    T_EQ_INT(j.state, JOB_QUEUED);
+    T_EQ_INT(b_sees(&p, ids[0]), 1);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM events WHERE kind = 'job-defer' AND"
+                                " detail LIKE '%its commit was in doubt'"),
+             1);
+    /* read back again: nothing more */
+    T_OK(store_job_claim_settle(p.a, "a", ids[0], &released, &err), &err);
+    T_TRUE(!released);
+    /* a claim that did not commit: the job stays queued, another host's claim stays its */
+    T_OK(store_job_claim_settle(p.a, "a", ids[1], &released, &err), &err);
+    T_TRUE(!released);
+    T_OK(store_job_claim_id(p.b, "b", tb, ids[1], &j, NULL, &err), &err);
+    T_OK(store_job_claim_settle(p.a, "a", ids[1], &released, &err), &err);
+    T_TRUE(!released);
+    T_OK(store_job_get(p.a, ids[1], &j, &err), &err);
+    T_EQ_INT(j.state, JOB_PREPARING);
+    T_OK(store_check(p.a, &err), &err);
+    pair_close(&p);
+}
+
+T_CASE(hosts_progress_of_a_job_another_host_holds_is_not_written)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "progress", &err));
+    int64_t ta, tb, ids[2], fa[2], fb;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    for (int i = 0; i < 2; i++) {
+        T_OK(add_ready(p.a, &ids[i], &err), &err);
+        T_OK(store_job_take(p.a, "a", ta, ids[i], &fa[i], &err), &err);
+        struct job_event_args start = { .printer = i ? "p2" : "p1", .fence = fa[i] };
+        T_OK(store_job_event(p.a, ids[i], JOB_EV_START, &start, NULL, &err), &err);
+    }
+    /* b attaches the first: a's progress for it is stale, its other job's still counts */
+    T_OK(store_job_attach(p.b, "b", tb, ids[0], &fb, &err), &err);
+    struct store_progress batch[] = { { ids[0], 5, false, fa[0] }, { ids[1], 6, false, fa[1] } };
+    T_EQ_INT(store_jobs_progress(p.a, batch, 2, &err), 1);
+    T_TRUE(!batch[0].saved && batch[1].saved);
+    struct job_row j;
+    T_OK(store_job_get(p.a, ids[0], &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 0);
+    T_OK(store_job_get(p.a, ids[1], &j, &err), &err);
+    T_EQ_INT(j.lines_acked, 6);
+    /* a stale event is refused, naming the holder */
+    struct job_event_args pause = { .lines_acked = 5, .fence = fa[0] };
+    T_ERR(store_job_event(p.a, ids[0], JOB_EV_PAUSE, &pause, NULL, &err), SF_ESTALE, &err,
+          "host 'b' holds the job now");
     pair_close(&p);
 }

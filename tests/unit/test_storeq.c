@@ -127,7 +127,7 @@ T_CASE(storeq_writes_in_the_order_posted)
         char what[16];
         snprintf(what, sizeof(what), "n%d", i);
         T_OK(storeq_printer_note(fx.q, "mk3", "printer-command", what), NULL);
-        struct store_progress p = { id, i * 10, false };
+        struct store_progress p = { id, i * 10, false, 0 };
         T_OK(storeq_jobs_progress(fx.q, &p, 1), NULL);
     }
     /* legal only after the START: it is written after it */
@@ -228,7 +228,7 @@ T_CASE(storeq_free_writes_what_is_queued)
     T_OK(storeq_job_event(fx.q, id, JOB_EV_START, &sa, "mk3", on_event, &start), NULL);
     for (int i = 0; i < 200; i++)
         T_OK(storeq_printer_note(fx.q, "mk3", "printer-heat", "off"), NULL);
-    struct store_progress p = { id, 777, false };
+    struct store_progress p = { id, 777, false, 0 };
     T_OK(storeq_jobs_progress(fx.q, &p, 1), NULL);
     struct job_event_args ca = { .reason = "the daemon stopped" };
     T_OK(storeq_job_event(fx.q, id, JOB_EV_CRASHED, &ca, "mk3", NULL, NULL), NULL);
@@ -274,7 +274,7 @@ T_CASE(storeq_waits_out_a_locked_database_without_the_loop)
     struct job_event_args pa = { .lines_acked = 5 };
     /* posts return at once: the first write now waits for the lock on the thread */
     for (int i = 1; i <= 500; i++) {
-        struct store_progress p = { id, i, false };
+        struct store_progress p = { id, i, false, 0 };
         T_OK(storeq_jobs_progress(fx.q, &p, 1), NULL);
     }
     struct storeq_stats st;
