@@ -115,6 +115,12 @@ on_printer_changed(void *ud)
     farm_kick(f);
 }
 
+static int
+on_printer_hold(void *ud, int64_t id, struct sf_err *err)
+{
+    return farm_host_hold(ud, id, err);
+}
+
 /* A printer for cfg; old (NULL: none) the one it replaces, whose bed it keeps. */
 struct printer *
 farm_printer_new(struct farm *f, const struct farmcfg_printer *cfg, const struct printer *old)
@@ -127,6 +133,7 @@ farm_printer_new(struct farm *f, const struct farmcfg_printer *cfg, const struct
         .q = f->q,
         .driver = f->hooks.driver,
         .changed = on_printer_changed,
+        .hold = on_printer_hold,
         .ud = f,
     };
     return printer_new(&env, cfg);

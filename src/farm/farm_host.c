@@ -113,6 +113,8 @@ join(struct farm_host *h)
              (long long)h->token, (double)h->lease_ms / 1000, h->f->n_printers);
     farm_host_wake(h->f); /* the others see the printers; this one schedules */
     farm_kick(h->f);
+    for (size_t i = 0; i < h->f->n_printers; i++) /* what waited for the lease (a restart) */
+        printer_attach_again(h->f->printers[i]);
 }
 
 static void
@@ -301,6 +303,22 @@ farm_host_wake(struct farm *f)
     struct sf_err err;
     if (f && f->host && store_host_wake(f->s, &err))
         log_warn("host", "%s: wake the other hosts: %s", f->host->name, err.msg);
+}
+
+int
+farm_host_hold(struct farm *f, int64_t id, struct sf_err *err)
+{
+    struct farm_host *h = f->host;
+    if (!h)
+        return SF_OK;
+    if (!h->joined)
+        return sf_err_set(err, SF_EAGAIN, "host %s has no lease yet", h->name);
+    if (id <= 0)
+        return SF_OK;
+    int rc = store_job_attach(f->s, h->name, h->token, id, NULL, err);
+    if (rc == SF_ESTALE)
+        h->joined = false; /* the next beat joins again */
+    return rc;
 }
 
 void

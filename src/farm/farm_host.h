@@ -77,6 +77,16 @@ int farm_host_claim(struct farm *f, int64_t id, int64_t *fence);
 bool farm_host_take(struct farm *f, int64_t id);
 /* Wake the other hosts: something they may act on changed (a job added through the API). */
 void farm_host_wake(struct farm *f);
+/*
+ * May f drive an interrupted job of its network printer (printer_env.hold)?
+ * Without a shared store always (SF_OK); with one SF_EAGAIN until f joined
+ * (a restarted host waits out its predecessor's lease, whose reap at the
+ * join interrupts the predecessor's prints: a print re-attached before
+ * would be interrupted under the printer that runs it), and then, for id
+ * > 0, the job becomes f's under its lease (store_job_attach: a new fencing
+ * token; SF_ESTALE if the lease is lost).
+ */
+int farm_host_hold(struct farm *f, int64_t id, struct sf_err *err);
 /* f's printers changed (a reload): own them again. */
 void farm_host_own(struct farm *f);
 

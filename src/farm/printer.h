@@ -48,9 +48,14 @@ struct printer_env {
     struct storeq *q;          /* its queue (storeq.h): the writes nothing waits for */
     printer_driver_fn driver;  /* NULL: the printer stays offline (prepare-only tests) */
     void (*changed)(void *ud); /* a job or the printer moved: schedule, wake streams */
-    void *ud;                  /* its argument */
-    bool bed_known;            /* bed_full is this printer's bed (it replaces one of the same
-                                  name, farm_apply): not read from the store */
+    /* one of several hosts on a shared store (farm_host.h): may this host drive a network
+       printer's interrupted job id now?  id 0: does it hold a lease at all.  SF_OK (for an
+       id: the job is now this host's, farm_host_hold), SF_EAGAIN while it has no lease
+       (printer_attach_again once it has), else why not.  NULL: always */
+    int (*hold)(void *ud, int64_t id, struct sf_err *err);
+    void *ud;       /* their argument */
+    bool bed_known; /* bed_full is this printer's bed (it replaces one of the same
+                       name, farm_apply): not read from the store */
     bool bed_full;
 };
 
@@ -95,6 +100,9 @@ void printer_free(struct printer *p);
  * its driver no more (printer_free follows).
  */
 void printer_stop(struct printer *p);
+/* The host holds its lease now (env.hold): offer the job the store holds as interrupted
+   on p again if p waited for that (a restarted host waits out its predecessor's lease). */
+void printer_attach_again(struct printer *p);
 
 const struct farmcfg_printer *printer_cfg(const struct printer *p);
 /* Take a new config whose link (driver, its link options, enabled) is p's own. */
