@@ -178,6 +178,8 @@ join(struct farm_host *h)
              (long long)h->token, (double)h->lease_ms / 1000, h->f->n_printers);
     farm_host_wake(h->f); /* the others see the printers; this one schedules */
     farm_kick(h->f);
+    for (size_t i = 0; i < h->f->n_printers; i++) /* what waited for the lease (a restart) */
+        printer_attach_again(h->f->printers[i]);
 }
 
 /* This host's lease is lost (reaped, or its name taken): the reap bumped the fencing token
@@ -530,6 +532,10 @@ farm_host_hold(void *ud, int64_t id, int64_t *fence, struct sf_err *err)
     struct farm_host *h = f->host;
     *fence = 0;
     if (!h)
+        return SF_OK;
+    if (!h->joined)
+        return sf_err_set(err, SF_EAGAIN, "host %s has no lease yet", h->name);
+    if (id <= 0)
         return SF_OK;
     /* after what the farm queued for the store (the job's CRASHED, say) */
     int rc = farm_sync(f, STOREQ_SYNC_MS, err);

@@ -96,8 +96,11 @@ bool farm_host_take(struct farm *f, int64_t id, int64_t *fence);
  * printer_env.hold: before a printer of f resumes job id (an operator's resume, a network
  * printer found still printing it), f holds the job: store_job_attach, its new fencing
  * token into *fence, so a host that held it before is fenced off.  Without a shared store
- * *fence is 0 and it is always SF_OK.  SF_ESTALE (f's lease is lost), SF_EAGAIN (the job
- * is in no state to attach), the store's failure; err set.
+ * *fence is 0 and it is always SF_OK.  SF_EAGAIN until f joined (a restarted host waits out
+ * its predecessor's lease, whose reap at the join interrupts the predecessor's prints: a
+ * print re-attached before would be interrupted under the printer that runs it); id 0 asks
+ * only that.  SF_ESTALE (f's lease is lost), SF_EAGAIN (the job is in no state to attach),
+ * the store's failure; err set.
  */
 int farm_host_hold(void *f, int64_t id, int64_t *fence, struct sf_err *err);
 /* Wake the other hosts: something they may act on changed (a job added through the API). */

@@ -207,6 +207,7 @@ try_attach(struct printer *p)
     if (j && store_file_path(p->env.s, j->gcode_sha, path, sizeof(path), &err) == SF_OK) {
         struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
         int rc = p->drv->ops->attach(p->drv, path, j->gcode_lines > 0 ? &scan : NULL, &err);
+        /* (fencing: printer_resume_commit holds the job under the host's current lease) */
         if (rc == SF_OK) {
             p->est_s = printer_estimate_s(j, path);
             p->attempts = 0;
@@ -277,10 +278,30 @@ on_attach_retry(struct loop *l, void *ud)
     (void)l;
     struct printer *p = ud;
     p->attach_retry = 0;
-    enum drv_state ds = p->drv->status.state;
+    printer_attach_again(p);
+}
+
+void
+printer_attach_again(struct printer *p)
+{
+    enum drv_state ds = p->drv ? p->drv->status.state : DRV_OFFLINE;
     if (!p->deaf && p->state == PRINTER_OFFLINE && !p->attach_tried &&
         (ds == DRV_IDLE || ds == DRV_PRINTING || ds == DRV_PAUSED))
         apply(p, DRV_EV_STATE, &p->drv->status);
+}
+
+/* May p's host drive a print now (env.hold)?  If not, p says why and waits offline. */
+static bool
+attach_held(struct printer *p)
+{
+    struct sf_err err;
+    int64_t fence;
+    if (!p->env.hold || p->env.hold(p->env.ud, 0, &fence, &err) != SF_EAGAIN)
+        return false;
+    if (strcmp(p->message, err.msg) != 0)
+        log_printer(LOG_INFO, p->cfg.name, "waits to re-attach its job: %s", err.msg);
+    snprintf(p->message, sizeof(p->message), "%s", err.msg);
+    return true;
 }
 
 static void
@@ -298,6 +319,11 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
     case DRV_EV_STATE:
         if (p->state == PRINTER_OFFLINE && p->drv->ops->attach && !p->attach_tried &&
             (st->state == DRV_IDLE || st->state == DRV_PRINTING || st->state == DRV_PAUSED)) {
+            /* a host without its lease yet (a restart waits out its predecessor's, whose
+               reap at the join interrupts the job) attaches nothing: p waits offline and is
+               offered the job once the host joined (printer_attach_again) */
+            if (attach_held(p))
+                break;
             /* tried only once the driver could answer: "not yet" (SF_EAGAIN)
                keeps p offline and asks again, so the job is not left
                interrupted until the next reconnect */

@@ -48,13 +48,15 @@ struct printer_env {
     struct storeq *q;          /* its queue (storeq.h): the writes nothing waits for */
     printer_driver_fn driver;  /* NULL: the printer stays offline (prepare-only tests) */
     void (*changed)(void *ud); /* a job or the printer moved: schedule, wake streams */
-    void *ud;                  /* its argument */
+    void *ud;                  /* their argument */
     bool bed_known;            /* bed_full is this printer's bed (it replaces one of the same
                                   name, farm_apply): not read from the store */
     bool bed_full;
-    /* One of several hosts: hold job_id for this printer (store_job_attach) before a resume
-       takes it, its fencing token into *fence (printer_set_fence); SF_ESTALE or another
-       code, err set, when it may not.  NULL: nothing to hold (one host). */
+    /* One of several hosts (farm_host_hold): hold job_id for this printer (store_job_attach)
+       before a resume takes it, its fencing token into *fence (printer_set_fence); job_id 0:
+       only whether the host holds a lease at all.  SF_EAGAIN while it has none (a restarted
+       host waits out its predecessor's: printer_attach_again once it joined), SF_ESTALE or
+       another code, err set, when it may not.  NULL: nothing to hold (one host). */
     int (*hold)(void *ud, int64_t job_id, int64_t *fence, struct sf_err *err);
 };
 
@@ -101,6 +103,9 @@ void printer_free(struct printer *p);
  * its driver no more (printer_free follows).
  */
 void printer_stop(struct printer *p);
+/* The host holds its lease now (env.hold): offer the job the store holds as interrupted
+   on p again if p waited for that (a restarted host waits out its predecessor's lease). */
+void printer_attach_again(struct printer *p);
 
 const struct farmcfg_printer *printer_cfg(const struct printer *p);
 /* Take a new config whose link (driver, its link options, enabled) is p's own. */

@@ -5,7 +5,9 @@
 # lib/daemon.sh gives each daemon's config `store:` on a database of its own
 # (the daemon then runs as the one host of that store).  The scenarios:
 # the API's jobs, reasons, events and reloads (farmd), the printers managed at
-# run time and their jobs (farmd_printers).  The ones that
+# run time and their jobs (farmd_printers), the network printers and a kill -9
+# mid-print whose restart takes the print back once it joined (farmd_net: the
+# restart waits out its predecessor's lease, 30 s).  The ones that
 # read or check SQLite's file itself (farmd_crash's --fsck, farmd_lock,
 # farmd_store_busy) stay SQLite's.
 . "$(dirname "$0")/lib/pg.sh"
@@ -18,7 +20,7 @@ trap pg_stop EXIT
 export SLIMFARM_TEST_STORE=$PG_URL
 fail=0
 dir=$(dirname "$0")
-for t in ${FARMD_PG_TESTS:-farmd farmd_printers}; do # (a few, to look into one)
+for t in ${FARMD_PG_TESTS:-farmd farmd_printers farmd_net}; do # (a few, to look into one)
   t0=$SECONDS
   out=$(bash "$dir/$t.sh" 2>&1)
   rc=$?

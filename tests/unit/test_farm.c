@@ -27,8 +27,10 @@
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
 #include "../../src/farm/farm.h"
+#include "../../src/farm/farm_host.h"
 #include "../../src/farm/jobctl.h"
 #include "../../src/farm/sqldb.h"
+#include "../../src/farm/store_host.h"
 #include "../t.h"
 #include "../tstore.h"
 
@@ -781,6 +783,72 @@ T_CASE(farm_attach_not_yet_is_asked_again)
     report(t, DRV_IDLE, DRV_EV_JOB_DONE);
     T_TRUE(wait_job(id, JOB_DONE));
     T_OK(store_check(synced(), &err), &err);
+    teardown();
+}
+
+/*
+ * A host restarted on a shared store (issue 32): its predecessor died
+ * printing on a network printer and its lease runs on, so the new process
+ * cannot join yet, while the printer connects at once, still printing.
+ * The join reaps the predecessor, which interrupts its prints: a job
+ * re-attached before the join was interrupted under the printer that ran
+ * it ("host h lost its lease", farmd_net on PostgreSQL).  The printer now
+ * waits offline for the lease, and re-attaches the job after the join,
+ * under the new process's lease (store_job_attach).
+ */
+T_CASE(farm_restarted_host_reattaches_after_its_join)
+{
+    static const char ini[] = "[farm]\nstore: postgresql:///unused\nhost: h\nhost_lease_s: 2\n"
+                              "[printer n]\ndriver: octoprint\nurl: http://127.0.0.1:9\n"
+                              "api_key: k\nmaterial: PLA\nbed_size: 200, 200, 200\n";
+    struct sf_err err;
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/rejoin", t_tmpdir());
+    /* the predecessor: joined as h, printing job id on n, then gone (no beat) */
+    struct store *s = t_store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    int64_t tok, id, fence;
+    T_OK(store_host_join(s, "h", 1500, &tok, &err), &err);
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.gcode");
+    snprintf(o.material, sizeof(o.material), "PLA");
+    char sha[STORE_SHA_HEX];
+    struct job_event_args g = { .prep_key = "k", .gcode_lines = 2 };
+    T_OK(store_file_put(s, "G28\nG1 X1\n", 10, sha, &err), &err);
+    T_OK(store_job_add_gcode(s, &o, sha, &g, &id, &err), &err);
+    T_OK(store_job_take(s, "h", tok, id, &fence, &err), &err);
+    struct job_event_args a = { .printer = "n", .fence = fence };
+    T_OK(store_job_event(s, id, JOB_EV_START, &a, NULL, &err), &err);
+    store_close(s);
+    T_OK(setup("rejoin", ini, tdrv_new, test_prepare, &err), &err);
+    open_state = DRV_PRINTING; /* the printer still runs it */
+    report(tdrv_named("n"), DRV_PRINTING, DRV_EV_STATE);
+    char host[64];
+    /* before the join: the printer waits, nothing attached */
+    struct printer_info info;
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end;) {
+        farm_printer_info(fx.f, 0, &info);
+        if (attaches > 0 || strstr(info.message, "no lease yet") ||
+            farm_host_reader(fx.f, host, sizeof(host)))
+            break;
+        loop_run_once(fx.l, 10);
+    }
+    T_TRUE(!farm_host_reader(fx.f, host, sizeof(host))); /* 1.5 s: the lease still runs */
+    T_EQ_INT(attaches, 0);
+    T_EQ_INT(pstate(0), PRINTER_OFFLINE);
+    /* the join reaps the predecessor; then the printer takes the job back */
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end;) {
+        if (farm_host_reader(fx.f, host, sizeof(host)))
+            break;
+        loop_run_once(fx.l, 10);
+    }
+    T_EQ_STR(host, "h");
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_EQ_INT(attaches, 1);
+    T_EQ_INT(pstate(0), PRINTER_PRINTING);
+    report(tdrv_named("n"), DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(id, JOB_DONE));
     teardown();
 }
 
