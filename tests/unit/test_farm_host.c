@@ -543,8 +543,8 @@ T_CASE(host_listens_again_after_its_connection_is_cut)
     T_OK(sqldb_exec(cut, sql), NULL);
     snprintf(sql, sizeof(sql),
              "SELECT count(pg_terminate_backend(pid)) FROM pg_stat_activity"
-             " WHERE datname = '%s' AND query LIKE 'LISTEN%%'",
-             db);
+             " WHERE datname = '%s' AND query = 'LISTEN \"%s\"'",
+             db, STORE_HOST_CHANNEL); /* (not the commands' listener, farm_remote.c) */
     struct sqldb_stmt *st;
     T_OK(sqldb_prepare(cut, sql, &st), NULL);
     T_EQ_INT(sqldb_step(st), SQLDB_ROW);
