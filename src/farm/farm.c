@@ -508,7 +508,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
         rc = farm_host_claim(f, j->id, &t->fence);
         if (rc) {
             free(t);
-            return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
+            return rc != SF_EBUSY || storeq_depth(f->q) == 0;
         }
         f->preparing++;
         submit(f, t);

@@ -600,7 +600,7 @@ storeq_sync(struct storeq *q, int64_t max_ms, struct sf_err *err)
         q->refused = true;
     pthread_mutex_unlock(&q->mu);
     if (left)
-        return sf_err_set(err, SF_EAGAIN, "the store is busy: %zu writes wait for the database",
+        return sf_err_set(err, SF_EBUSY, "the store is busy: %zu writes wait for the database",
                           left);
     return SF_OK;
 }

@@ -118,8 +118,9 @@ int storeq_job_event(struct storeq *q, int64_t id, enum job_event ev,
  * Wait (blocking the loop) until every request posted so far has run, for
  * up to max_ms (< 0: as long as it takes): then the loop's own connection
  * sees what they wrote.  Their results are delivered on a later loop turn,
- * as always.  SF_EAGAIN when the queue did not empty in time ("the store is
- * busy: N writes wait for the database"): the caller acts later, and the
+ * as always.  SF_EBUSY when the queue did not empty in time ("the store is
+ * busy: N writes wait for the database"; not SF_EAGAIN, the job rules'
+ * refusal): the caller tries again later (the API answers 503), and the
  * commit callback (storeq_set_commit) runs once the queue has emptied.
  */
 int storeq_sync(struct storeq *q, int64_t max_ms, struct sf_err *err);
