@@ -301,16 +301,19 @@ store_file_put(struct store *s, const void *data, size_t len, char sha[STORE_SHA
     return store_file_commit(f, sha, err);
 }
 
-bool
-store_file_known(struct store *s, const char *sha)
+int
+store_file_known(struct store *s, const char *sha, struct sf_err *err)
 {
     struct sqldb_stmt *st;
-    if (sqldb_prepare(s->db, "SELECT 1 FROM files WHERE sha256 = ?", &st))
-        return false;
+    int rc = store_prepare(s, &st, "SELECT 1 FROM files WHERE sha256 = ?", err);
+    if (rc)
+        return rc;
     sqldb_bind_text(st, 1, sha);
-    bool found = sqldb_step(st) == SQLDB_ROW;
+    rc = sqldb_step(st);
+    if (rc < 0) /* before the finalize, which would take the message with it */
+        rc = store_db_fail(s, err, "look up file");
     sqldb_finalize(st);
-    return found;
+    return rc == SQLDB_ROW ? 1 : rc;
 }
 
 int
@@ -318,7 +321,10 @@ store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct
 {
     if (!store_sha_valid(sha))
         return sf_err_set(err, SF_EINVAL, "store: '%.80s' is not a SHA-256 in hex", sha);
-    if (!store_file_known(s, sha))
+    int rc = store_file_known(s, sha, err);
+    if (rc < 0)
+        return rc; /* not known now (busy, unreachable): not "no file" */
+    if (!rc)
         return sf_err_set(err, SF_ENOTFOUND, "store: no file %s", sha);
     if ((size_t)snprintf(path, cap, "%s/files/%.2s/%s", s->dir, sha, sha) >= cap)
         return sf_err_set(err, SF_ENOMEM, "store: path of file %s is too long", sha);
