@@ -276,6 +276,14 @@ prepared_write(struct store *s, void *ud, struct sf_err *err)
     return rc;
 }
 
+/* Whether a worker's failure was the store's database not answering now (busy, unreachable,
+   an upload's commit in doubt: sqldb.h), a failure of the moment, not of the job. */
+static bool
+db_passing(int rc)
+{
+    return rc == SF_EBUSY || rc == SF_EUNREACH || rc == SF_EINDOUBT;
+}
+
 static void
 prep_done(struct loop *l, void *ud, int rc)
 {
@@ -321,8 +329,14 @@ prep_done(struct loop *l, void *ud, int rc)
                 f->no[f->n_no].job_id = id;
                 snprintf(f->no[f->n_no++].key, SCHED_KEY_MAX, "%s", t->key);
             }
+        } else if (db_passing(rc)) {
+            /* The store's database, not the job: its G-code could not be adopted (PostgreSQL
+               down a moment).  Back to the queue, prepared again, not failed for a blip. */
+            log_warn("farm", "job %lld goes back to the queue: %s", (long long)id, why);
+            struct job_event_args a = { .reason = why, .fence = t->fence };
+            queue_event(f, id, JOB_EV_DEFER, &a);
         } else {
-            struct job_event_args a = { .reason = why };
+            struct job_event_args a = { .reason = why, .fence = t->fence };
             queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
         }
     }

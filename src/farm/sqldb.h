@@ -88,8 +88,11 @@ bool sqldb_is_url(const char *target);
  * foreign keys on, synchronous FULL and a 5 s busy timeout (a read-only
  * connection: the timeout alone); PostgreSQL connections get a quiet
  * notice channel, and default_transaction_read_only if read-only.  NULL with err
- * set (SF_EIO naming the target, the password part of a URL left out) on
- * failure.  Free with sqldb_close.
+ * set on failure, naming the target (the password part of a URL left out):
+ * SF_EUNREACH when the server cannot be reached or says "not now" (starting,
+ * stopping, no connection slot left: try again later), SF_EIO when it
+ * refuses (a password, an unknown role or database) or the file cannot be
+ * opened.  Free with sqldb_close.
  */
 struct sqldb *sqldb_open(const char *target, unsigned flags, struct sf_err *err);
 void sqldb_close(struct sqldb *db);

@@ -853,6 +853,23 @@ show_url(const char *url, char *out, size_t cap)
     }
 }
 
+/* A failed connect's code: SF_EIO when the server answered and refused (a password, a role
+   or database that does not exist: libpq's "FATAL:"), which trying again does not mend;
+   SF_EUNREACH when it could not be reached (refused, timed out, no socket, no host) or said
+   "not now" (starting up, shutting down, out of connection slots). */
+static int
+connect_code(const char *msg)
+{
+    static const char *const passing[] = { "starting up", "shutting down", "in recovery",
+                                           "too many", "connection slots are" };
+    if (!strstr(msg, "FATAL:"))
+        return SF_EUNREACH;
+    for (size_t i = 0; i < sizeof(passing) / sizeof(passing[0]); i++)
+        if (strstr(msg, passing[i]))
+            return SF_EUNREACH;
+    return SF_EIO;
+}
+
 struct sqldb *
 sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err)
 {
@@ -879,13 +896,15 @@ sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err)
     p->conn = PQconnectdbParams(keys, vals, 1);
     if (!p->conn || PQstatus(p->conn) != CONNECTION_OK) {
         sqldb_fail(&p->base, p->conn ? PQerrorMessage(p->conn) : "out of memory");
-        sf_err_set(err, SF_EIO, "store: cannot connect to '%s': %s", shown, p->base.msg);
+        sf_err_set(err, p->conn ? connect_code(p->base.msg) : SF_ENOMEM,
+                   "store: cannot connect to '%s': %s", shown, p->base.msg);
         pg_close(&p->base);
         return NULL;
     }
     p->connect_timeout_ms = connect_timeout_ms(p->conn);
-    if (session(p)) {
-        sf_err_set(err, SF_EIO, "store: '%s': %s", shown, p->base.msg);
+    int rc = session(p);
+    if (rc) {
+        sf_err_set(err, rc, "store: '%s': %s", shown, p->base.msg);
         pg_close(&p->base);
         return NULL;
     }

@@ -1906,6 +1906,46 @@ T_CASE(farm_prepare_waits_out_a_locked_store_instead_of_failing_the_job)
     teardown();
 }
 
+/* The first prepare's worker cannot adopt its G-code into the store: the database is not
+   reachable that moment (sqldb_open's SF_EUNREACH, PostgreSQL restarting). */
+static atomic_int unreachable_calls;
+
+static int
+unreachable_prepare(const struct prepare_req *req, struct prepare_out *out,
+                    const atomic_bool *cancel, struct sf_err *err)
+{
+    int rc = test_prepare(req, out, cancel, err);
+    if (rc == SF_OK && atomic_fetch_add(&unreachable_calls, 1) == 0)
+        return sf_err_set(err, SF_EUNREACH,
+                          "store: cannot connect to 'postgresql:///farm': Connection refused");
+    return rc;
+}
+
+/*
+ * A worker that finds the store's database unreachable fails nothing: the
+ * job goes back to the queue (DEFER) and is prepared again.  Before, the
+ * blip failed the job for good (PREPARE_FAILED).
+ */
+T_CASE(farm_prepare_defers_when_the_database_is_unreachable)
+{
+    struct sf_err err;
+    atomic_store(&unreachable_calls, 0);
+    int before = atomic_load(&prepares);
+    T_OK(setup("unreach", farm_ini, tdrv_new, unreachable_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    enum job_state st = JOB_QUEUED;
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
+         wall_ms() < end && (st = state_of(id)) != JOB_PRINTING && st != JOB_FAILED;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(st, JOB_PRINTING);
+    T_EQ_INT(atomic_load(&prepares) - before, 2); /* prepared again, once */
+    struct job_row j;
+    T_OK(job_get(id, &j, &err), &err);
+    T_EQ_INT(j.counts.failures, 0);
+    teardown();
+}
+
 /*
  * An operator resumes an interrupted job while another process holds the
  * store's write lock: the printer takes the job at once (printing), the
