@@ -90,6 +90,10 @@ struct storeq *storeq_new(struct loop *l, const struct store *s, struct sf_err *
  */
 void storeq_free(struct storeq *q);
 
+/* How long a request that fails with nothing applied is tried again from now on (default
+   STOREQ_RETRY_MS): tests that must see the retries run out in seconds shorten it. */
+void storeq_set_retry_ms(struct storeq *q, int64_t ms);
+
 /* Call fn(ud) after requests that log an event commit (the farm's wake); NULL: none. */
 void storeq_set_commit(struct storeq *q, storeq_commit_fn fn, void *ud);
 
