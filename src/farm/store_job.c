@@ -104,7 +104,8 @@ bind_opts(struct sqldb_stmt *st, int first, const struct job_opts *o, int64_t no
 }
 
 /* Finish a job add begun by store_write_begin: run the INSERT ... RETURNING id st, log "job-add"
-   with detail and commit, or roll back; the new job's id into *id (may be NULL). */
+   with detail and commit, or roll back; the new job's id into *id (may be NULL), set before
+   the COMMIT, so that it names the job when the COMMIT is in doubt. */
 static int
 insert_job(struct store *s, struct sqldb_stmt *st, const char *what, const char *detail,
            int64_t *id, struct sf_err *err)
@@ -122,11 +123,14 @@ insert_job(struct store *s, struct sqldb_stmt *st, const char *what, const char 
         goto fail;
     sqldb_bind_int64(st, 1, new_id);
     if ((rc = store_step_done(s, st, err, "queue place")) ||
-        (rc = store_log_event(s, new_id, NULL, "job-add", detail, err)) ||
-        (rc = store_commit(s, err)))
+        (rc = store_log_event(s, new_id, NULL, "job-add", detail, err)))
         goto fail;
+    /* before the COMMIT: one in doubt (SF_EINDOUBT) that the caller reads back as committed
+       has added this job, which it must not lose, nor add again */
     if (id)
         *id = new_id;
+    if ((rc = store_commit(s, err)))
+        goto fail;
     return SF_OK;
 fail:
     store_rollback(s);

@@ -679,3 +679,75 @@ T_CASE(sqldb_pg_host_name_lock_is_taken_again_after_a_cut)
     sqldb_close(direct);
     proxy_stop(&px);
 }
+
+/* A job add on the store thread, as the API posts one (storeq_call). */
+struct adder {
+    const char *sha;
+    int64_t id; /* the new job's, as store_job_add gives it */
+    int runs;
+};
+
+static int
+add_fn(struct store *s, void *arg, struct sf_err *err)
+{
+    struct adder *a = arg;
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "doubt.stl");
+    a->runs++;
+    return store_job_add(s, &o, a->sha, &a->id, err);
+}
+
+/* A job add whose COMMIT's answer is lost, read back as committed, gives the job's id: it
+   was 0 (set only after a COMMIT that answered), so the caller lost the job it had added
+   (or, run again, would add it twice).  The COMMIT held on the server as above. */
+T_CASE(storeq_job_add_in_doubt_keeps_its_id)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(direct != NULL);
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/added", t_tmpdir());
+    struct sf_err err;
+    struct loop *l = loop_new(&err);
+    T_TRUE(l != NULL);
+    struct store *s = store_open_db(dir, proxy_url(&px), NULL, &err);
+    T_OK(s ? SF_OK : err.code, &err);
+    struct storeq *q = storeq_new(l, s, &err);
+    T_OK(q ? SF_OK : err.code, &err);
+    char sha[STORE_SHA_HEX];
+    T_OK(store_file_put(s, "solid doubt", 11, sha, &err), &err);
+    T_DB_OK(sqldb_exec(direct, "ALTER SYSTEM SET synchronous_standby_names = 'nobody'"), direct);
+    T_EQ_INT(one(direct, "SELECT count(*) FROM (SELECT pg_reload_conf()) r"), 1);
+    T_TRUE(await_count(direct, "SELECT count(*) FROM pg_settings WHERE"
+                               " name = 'synchronous_standby_names' AND setting = 'nobody'"));
+    struct started st = { 0 };
+    struct adder a = { .sha = sha };
+    T_OK(storeq_call(q, add_fn, &a, NULL, on_started, &st), NULL);
+    T_TRUE(await_count(direct, "SELECT count(*) FROM pg_stat_activity WHERE"
+                               " wait_event = 'SyncRep'"));
+    T_TRUE(proxy_cmd(&px, "drop"));
+    T_TRUE(proxy_cmd(&px, "heal"));
+    for (int64_t t0 = clock_mono_ms(); !st.calls && clock_mono_ms() - t0 < DEADLINE_MS;)
+        loop_run_once(l, 20);
+    T_DB_OK(sqldb_exec(direct, "ALTER SYSTEM RESET synchronous_standby_names"), direct);
+    T_EQ_INT(one(direct, "SELECT count(*) FROM (SELECT pg_reload_conf()) r"), 1);
+    T_EQ_INT(st.calls, 1);
+    T_EQ_INT(st.rc, SF_OK);
+    T_EQ_INT(a.runs, 1); /* read back, not run again */
+    storeq_free(q);
+    struct job_row j;
+    int rc;
+    for (int64_t t0 = clock_mono_ms(); (rc = store_job_get(s, a.id, &j, &err)) == SF_EUNREACH &&
+                                       clock_mono_ms() - t0 < DEADLINE_MS;)
+        nap_ms(20);
+    T_OK(rc, &err); /* the id names the job added */
+    T_EQ_STR(j.opts.name, "doubt.stl");
+    T_EQ_INT(one(direct, "SELECT count(*) FROM jobs WHERE name = 'doubt.stl'"), 1); /* once */
+    store_close(s);
+    loop_free(l);
+    sqldb_close(direct);
+    proxy_stop(&px);
+}
