@@ -856,12 +856,15 @@ show_url(const char *url, char *out, size_t cap)
 /* A failed connect's code: SF_EIO when the server answered and refused (a password, a role
    or database that does not exist: libpq's "FATAL:"), which trying again does not mend;
    SF_EUNREACH when it could not be reached (refused, timed out, no socket, no host) or said
-   "not now" (starting up, shutting down, out of connection slots). */
+   "not now" (starting up, shutting down, out of connection slots, the database closed to
+   connections for an operator's maintenance: ALLOW_CONNECTIONS false). */
 static int
 connect_code(const char *msg)
 {
-    static const char *const passing[] = { "starting up", "shutting down", "in recovery",
-                                           "too many", "connection slots are" };
+    static const char *const passing[] = {
+        "starting up", "shutting down",        "in recovery",
+        "too many",    "connection slots are", "not currently accepting connections"
+    };
     if (!strstr(msg, "FATAL:"))
         return SF_EUNREACH;
     for (size_t i = 0; i < sizeof(passing) / sizeof(passing[0]); i++)

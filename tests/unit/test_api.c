@@ -866,6 +866,57 @@ T_CASE(api_command_while_the_store_is_busy_is_503)
     stop();
 }
 
+/* On the server thread: the store queue's retries so far. */
+static void
+read_retries(void *arg)
+{
+    struct farm_health h;
+    farm_health(srv.farm, &h);
+    *(uint64_t *)arg = h.store.retries;
+}
+
+/* A part whose adoption cannot reach the database (PostgreSQL: the upload's own connection
+   refused "not now") answers 503 at once, saying so, and holds no write behind it: the
+   queue does not retry it (it waited out its 60 s, every farm write queued behind it). */
+T_CASE(api_submit_whose_part_cannot_be_stored_is_503_at_once)
+{
+    if (!t_store_pg()) {
+        t_skip("the part's own database connection is PostgreSQL's");
+        return;
+    }
+    struct sf_err err;
+    T_OK(start("adoptfail", &err), &err);
+    char dir[600];
+    snprintf(dir, sizeof(dir), "%s/adoptfail", t_tmpdir());
+    /* from the server's postgres database: not the one it closes */
+    const char *url = t_store_db(dir), *auth = strstr(url, "://") + 3; /* AUTH/NAME?QUERY */
+    const char *name = auth + strcspn(auth, "/?") + 1;
+    int name_len = (int)strcspn(name, "?");
+    struct sqldb *db = sqldb_open(getenv("SLIMFARM_TEST_STORE"), 0, &err);
+    T_TRUE(db != NULL);
+    char sql[200];
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %.*s ALLOW_CONNECTIONS false", name_len, name);
+    T_TRUE(sqldb_exec(db, sql) == SF_OK || !printf("%s: %s\n", sql, sqldb_errmsg(db)));
+    uint64_t before = 0, after = 0;
+    on_server(read_retries, &before);
+    struct buf b;
+    buf_init(&b, 0);
+    const char part[] = "solid cube\nendsolid cube\n";
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "held.stl", part, sizeof(part) - 1, NULL, &b),
+             503);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "the part could not be stored") != NULL);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "cannot connect") != NULL);
+    on_server(read_retries, &after);
+    T_EQ_INT(after - before, 0); /* answered on its first run */
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %.*s ALLOW_CONNECTIONS true", name_len, name);
+    T_OK(sqldb_exec(db, sql), NULL);
+    sqldb_close(db);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "held.stl", part, sizeof(part) - 1, NULL, &b),
+             201);
+    buf_release(&b);
+    stop();
+}
+
 /* POST /api/jobs/ID/resume: an optional {"line": N}, checked; refusals are 409. */
 T_CASE(api_resume_job_body_and_refusal)
 {
