@@ -148,7 +148,12 @@ int64_t sqldb_changes(const struct sqldb *db);
  * server's side of each session gets the same keepalives and user timeout
  * (SET per session), so a backend whose client vanished in a partition
  * ends within about 25 s and frees its session's advisory locks, instead
- * of after the kernel's two hours.
+ * of after the kernel's two hours.  A writing session (not SQLDB_READONLY)
+ * also gets idle_in_transaction_session_timeout and lock_timeout of 5 s:
+ * one cut off inside a transaction (a partition whose packets are still
+ * answered) is ended by the server after 5 s, freeing its locks (the event
+ * log's lock, which every event's transaction takes); a statement that
+ * waits 5 s for a lock fails SF_EBUSY ("lock timeout"), to be tried again.
  *
  * SQLDB_NOWAIT (a connection on the loop): no call waits for a connect.
  * The call that finds the loss starts one (PQresetStart) and it and every

@@ -53,6 +53,12 @@
 
 #define PG_BACKOFF_MIN_MS 200  /* the wait after a first failed reconnect */
 #define PG_BACKOFF_MAX_MS 5000 /* the longest: a server back is used within 5 s */
+/* A writing session's bounds (session()), as SQL literals: a transaction idle that long has
+   lost its client (the store's transactions send their statements back to back), and a lock
+   not had in that long is busy (retried by the caller) rather than waited for, so a host
+   partitioned while holding the event log's lock holds up the others 5 s, not ~25 s. */
+#define PG_IDLE_TX_MS   "5000"
+#define PG_LOCK_WAIT_MS "5000"
 
 struct pg {
     struct sqldb base;
@@ -606,6 +612,13 @@ session(struct pg *p)
         rc = end_old_session(p);
     if (rc == SF_OK && p->flags & SQLDB_READONLY)
         rc = pg_exec(db, "SET default_transaction_read_only = on");
+    /* A writer cut off inside a transaction (a partition: no close reaches the server, and
+       its keepalives are answered) held its locks, the event log's among them, for as long
+       as the partition lasted: the server now ends it after PG_IDLE_TX_MS, and a writer
+       waits PG_LOCK_WAIT_MS for a lock before failing busy (retried: sqldb.h). */
+    if (rc == SF_OK && !(p->flags & SQLDB_READONLY))
+        rc = pg_exec(db, "SET lock_timeout = " PG_LOCK_WAIT_MS ";"
+                         " SET idle_in_transaction_session_timeout = " PG_IDLE_TX_MS);
     if (rc == SF_OK && p->async_commit)
         rc = pg_exec(db, "SET synchronous_commit = off");
     for (int i = 0; rc == SF_OK && i < p->n_listens; i++)

@@ -751,3 +751,54 @@ T_CASE(storeq_job_add_in_doubt_keeps_its_id)
     sqldb_close(direct);
     proxy_stop(&px);
 }
+
+/* The event log's lock (store_event.c: every transaction that logs an event takes it). */
+#define EVENT_LOCK_KEY 0x736c696d6576656eLL
+
+/* A host cut off from the database while it holds the event log's lock holds up no one for
+   long: the partition answers nothing but closes nothing (the proxy's freeze), the server
+   ends the session once its transaction has idled past idle_in_transaction_session_timeout,
+   and another writer, failing busy on lock_timeout meanwhile, takes the lock.  It was held
+   for as long as the partition lasted (the proxy's socket answers the server's keepalives). */
+T_CASE(sqldb_pg_partitioned_event_lock_is_cut_by_the_server)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sf_err err;
+    struct sqldb *held = sqldb_open(proxy_url(&px), 0, &err);
+    T_OK(held ? SF_OK : err.code, &err);
+    struct sqldb *other = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(other != NULL);
+    char v[64];
+    T_EQ_STR(text1(other, "SHOW lock_timeout", v, sizeof(v)), "5s");
+    T_EQ_STR(text1(other, "SHOW idle_in_transaction_session_timeout", v, sizeof(v)), "5s");
+    /* a guard for a run without the server's cut: a wait ends, failing, after 20 s */
+    T_DB_OK(sqldb_exec(other, "SET statement_timeout = 20000"), other);
+    T_DB_OK(sqldb_begin(held), held);
+    T_DB_OK(run1(held, "SELECT pg_advisory_xact_lock(?)", EVENT_LOCK_KEY), held);
+    T_TRUE(proxy_cmd(&px, "freeze"));
+    int rc = SF_EBUSY, busy = 0;
+    int64_t t0 = clock_mono_ms();
+    while (rc == SF_EBUSY && clock_mono_ms() - t0 < DEADLINE_MS) {
+        T_DB_OK(sqldb_begin(other), other);
+        rc = run1(other, "SELECT pg_advisory_xact_lock(?)", EVENT_LOCK_KEY);
+        busy += rc == SF_EBUSY && strstr(sqldb_errmsg(other), "lock timeout") != NULL;
+        if (rc == SF_OK)
+            rc = sqldb_commit(other);
+        else
+            sqldb_rollback(other);
+    }
+    printf("# a writer waited %lld ms for a partitioned holder of the event lock (%d lock "
+           "timeouts)\n",
+           (long long)(clock_mono_ms() - t0), busy);
+    T_DB_OK(rc, other);
+    T_TRUE(proxy_cmd(&px, "heal"));
+    /* the holder's session was ended by the server, which said why */
+    T_TRUE(sqldb_exec(held, "SELECT 1") != SF_OK);
+    T_TRUE(strstr(sqldb_errmsg(held), "idle-in-transaction") != NULL);
+    sqldb_rollback(held);
+    sqldb_close(held);
+    sqldb_close(other);
+    proxy_stop(&px);
+}
