@@ -507,7 +507,8 @@ printer_act(void *ctx, const struct route_args *args, const struct http_req *req
  * line for an idle printer with a clear bed.  400 a bad body or a refused
  * command (M110, M111, control bytes), 404 no such printer, 409 the
  * printer cannot take one now (printing, busy, awaiting clear, in error,
- * holding an interrupted job: SF_EAGAIN), 503 it is offline, 501 its kind
+ * holding an interrupted job: SF_EAGAIN), 503 it is offline or the store
+ * is busy (whether it holds an interrupted job is not known), 501 its kind
  * has no way to send one (PrusaLink); 200 with the printer.
  */
 static void

@@ -92,6 +92,10 @@ on_written(void *ud, const struct storeq_result *r)
         int rc = r->rc;
         if (rc == SF_EINVAL && w->not_now)
             rc = err.code = SF_EAGAIN;
+        if (rc && w->adopted && w->adopt_rc) { /* submit_write: the part was not stored */
+            rc = w->adopt_rc;
+            sf_err_set(&err, rc, "the part could not be stored, try again: %s", w->adopt_err.msg);
+        }
         struct job_row j;
         if (rc) {
             if (w->printer[0]) /* the printer has acted: the store refused the write */
@@ -171,8 +175,12 @@ submit_write(struct store *s, void *ud, struct sf_err *err)
         w->adopt_rc = store_file_adopt(w->store, w->tmp, w->sha, &w->size, &w->adopt_err);
     }
     if (w->adopt_rc) {
+        /* Not the queue's to retry: the adoption is not tried again (its temporary has
+           moved), so waiting out STOREQ_RETRY_MS on its busy or unreachable answer held
+           every write behind it for a minute, then said the same.  Reported at once (a
+           code the queue does not retry); on_written answers with adopt_rc (503). */
         *err = w->adopt_err;
-        return w->adopt_rc;
+        return SF_ECANCELED;
     }
     int rc = store_file_record(s, w->sha, w->size, err);
     if (rc == SF_OK && !w->added && (rc = store_job_add(s, &w->o, w->sha, &w->id, err)) == SF_OK)

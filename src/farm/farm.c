@@ -234,41 +234,24 @@ reslice_failed_any(const struct farm *f, int64_t id)
     return false;
 }
 
-/*
- * Task t's PREPARED came back from the store thread (its commit wakes the
- * farm: on_store_commit).  A re-slice stays in f->reslices until now, so
- * no scheduling pass in between, still reading the old G-code's key,
- * slices the job once more.  A store that stayed unreachable through the
- * queue's retries (SF_EIO, SF_EBUSY, SF_EAGAIN) wrote nothing: the job goes back to
- * the queue (DEFER) and is prepared again, not failed.
- */
-static void
-on_prepared(void *ud, const struct storeq_result *r)
-{
-    struct prep *t = ud;
-    int64_t id = t->req.job_id;
-    if (r->rc == SF_OK)
-        log_info("farm", "job %lld: %s for %s", (long long)id,
-                 t->reslice ? "prepared again" : "prepared", t->key);
-    else
-        log_info("farm", "job %lld: %s", (long long)id, r->err->msg);
-    if ((r->rc == SF_EIO || r->rc == SF_EBUSY || r->rc == SF_EAGAIN) && !t->reslice && t->f->pool) {
-        struct job_event_args a = { .reason = r->err->msg, .fence = t->fence };
-        queue_event(t->f, id, JOB_EV_DEFER, &a);
-    }
-    if (t->reslice)
-        unlink_reslice(t->f, t);
-    farm_kick(t->f);
-    free(t);
-}
-
 /* On the store thread: record the files task ud made, then its PREPARED (store_file_record
-   is idempotent: a retry after a failure half-way records nothing twice). */
+   is idempotent: a retry after a failure half-way records nothing twice).  Read back first:
+   a PREPARED written again after a commit nobody could settle (SF_EINDOUBT) finds itself
+   there (the job holds this G-code for this key, out of preparing) and is not applied
+   twice. */
 static int
 prepared_write(struct store *s, void *ud, struct sf_err *err)
 {
     struct prep *t = ud;
-    int rc = store_file_record(s, t->gcode_sha, t->gcode_size, err);
+    struct job_row j;
+    int rc = store_job_get(s, t->req.job_id, &j, err);
+    if (rc == SF_OK && strcmp(j.gcode_sha, t->gcode_sha) == 0 && strcmp(j.prep_key, t->key) == 0 &&
+        (t->reslice || j.state != JOB_PREPARING)) {
+        t->to = j.state;
+        return SF_OK;
+    }
+    if (rc == SF_OK)
+        rc = store_file_record(s, t->gcode_sha, t->gcode_size, err);
     if (rc == SF_OK && t->mesh_sha[0])
         rc = store_file_record(s, t->mesh_sha, t->mesh_size, err);
     if (rc == SF_OK)
@@ -276,6 +259,82 @@ prepared_write(struct store *s, void *ud, struct sf_err *err)
     if (rc)
         sf_err_prefix(err, "job %lld", (long long)t->req.job_id);
     return rc;
+}
+
+/*
+ * Task t's PREPARED came back from the store thread (its commit wakes the
+ * farm: on_store_commit).  A re-slice stays in f->reslices until now, so
+ * no scheduling pass in between, still reading the old G-code's key,
+ * slices the job once more.  Every answer has its course:
+ *   SF_OK: the job is ready.
+ *   SF_EBUSY, SF_EUNREACH: nothing written though the store thread tried
+ *     for STOREQ_RETRY_MS; SF_EINDOUBT: whether it was, nobody could tell.
+ *     Written again (prepared_write reads back first): the job stays
+ *     preparing meanwhile, not stuck (a DEFER would meet the same store).
+ *   SF_EINVAL, SF_EAGAIN, SF_ENOTFOUND, SF_ESTALE: the store refused the
+ *     event: the job moved on meanwhile (cancelled, removed, another host's).
+ *   Anything else (SF_EIO: a constraint, a trigger, a damaged file): the
+ *     same every time, so the job fails, once, saying why.  It was sent
+ *     back to the queue (DEFER), prepared, refused again, for ever.
+ * At shutdown nothing is written again: the next start's recovery requeues
+ * a job left preparing.
+ */
+static void
+on_prepared(void *ud, const struct storeq_result *r)
+{
+    struct prep *t = ud;
+    struct farm *f = t->f;
+    int64_t id = t->req.job_id;
+    const char *msg = r->rc ? r->err->msg : "";
+    switch (r->rc) {
+    case SF_OK:
+        log_info("farm", "job %lld: %s for %s", (long long)id,
+                 t->reslice ? "prepared again" : "prepared", t->key);
+        break;
+    case SF_EBUSY:
+    case SF_EUNREACH:
+    case SF_EINDOUBT:
+        if (f->pool && !f->stopping &&
+            storeq_call(f->q, prepared_write, t, NULL, on_prepared, t) == SF_OK) {
+            log_warn("farm", "job %lld: its G-code is not recorded yet, trying again: %s",
+                     (long long)id, msg);
+            return; /* t waits again */
+        }
+        log_warn("farm", "job %lld: not recorded as prepared: %s", (long long)id, msg);
+        break;
+    case SF_EINVAL:
+    case SF_EAGAIN:
+    case SF_ENOTFOUND:
+    case SF_ESTALE:
+        log_info("farm", "job %lld: %s", (long long)id, msg);
+        break;
+    default:
+        log_warn("farm", "job %lld: the store refused its prepared G-code: %s", (long long)id, msg);
+        if (t->reslice) { /* the job keeps its G-code; this key is not tried again */
+            if (mem_grow((void **)&f->no, &f->cap_no, f->n_no + 1, sizeof(*f->no))) {
+                f->no[f->n_no].job_id = id;
+                snprintf(f->no[f->n_no++].key, SCHED_KEY_MAX, "%s", t->key);
+            }
+        } else {
+            char why[SF_ERR_MSG_MAX + 64];
+            snprintf(why, sizeof(why), "the store refused its prepared G-code: %s", msg);
+            struct job_event_args a = { .reason = why, .fence = t->fence };
+            queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
+        }
+        break;
+    }
+    if (t->reslice)
+        unlink_reslice(f, t);
+    farm_kick(f);
+    free(t);
+}
+
+/* Whether a worker's failure was the store's database not answering now (busy, unreachable,
+   an upload's commit in doubt: sqldb.h), a failure of the moment, not of the job. */
+static bool
+db_passing(int rc)
+{
+    return rc == SF_EBUSY || rc == SF_EUNREACH || rc == SF_EINDOUBT;
 }
 
 static void
@@ -323,6 +382,12 @@ prep_done(struct loop *l, void *ud, int rc)
                 f->no[f->n_no].job_id = id;
                 snprintf(f->no[f->n_no++].key, SCHED_KEY_MAX, "%s", t->key);
             }
+        } else if (db_passing(rc)) {
+            /* The store's database, not the job: its G-code could not be adopted (PostgreSQL
+               down a moment).  Back to the queue, prepared again, not failed for a blip. */
+            log_warn("farm", "job %lld goes back to the queue: %s", (long long)id, why);
+            struct job_event_args a = { .reason = why, .fence = t->fence };
+            queue_event(f, id, JOB_EV_DEFER, &a);
         } else {
             struct job_event_args a = { .reason = why, .fence = t->fence };
             queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
@@ -521,7 +586,7 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
                doubt is read back first, and wakes the farm when settled) */
             if (rc == SF_EUNREACH || rc == SF_EBUSY)
                 retry_later(f);
-            return rc != SF_EAGAIN || storeq_depth(f->q) == 0;
+            return rc != SF_EBUSY || storeq_depth(f->q) == 0;
         }
         f->preparing++;
         submit(f, t);

@@ -108,7 +108,7 @@ void farm_kick(struct farm *f);
 /*
  * Return once every store write the farm queued (storeq.h) is committed,
  * waiting up to max_ms (< 0: as long as it takes; tests): for a direct
- * store call that must see them (a job's cancel).  SF_EAGAIN (the store
+ * store call that must see them (a job's cancel).  SF_EBUSY (the store
  * is busy, err says so) when they were not.  NULL is SF_OK.
  */
 int farm_sync(struct farm *f, int64_t max_ms, struct sf_err *err);

@@ -219,7 +219,9 @@ int printer_action_then(struct printer *p, enum printer_action a, storeq_event_f
  * SF_EAGAIN otherwise ("printer a is awaiting-clear: ..."), and while p is
  * offline, prints or the driver cannot take it now; SF_EUNSUPP when the
  * driver has no way to send one (PrusaLink: its API has no console
- * endpoint); SF_EINVAL for a line that is not one command.
+ * endpoint); SF_EINVAL for a line that is not one command; the store's
+ * error (SF_EBUSY: its queue is not written yet) when whether p holds an
+ * interrupted job is not known.
  */
 int printer_command(struct printer *p, const char *line, const char *who, struct sf_err *err);
 

@@ -35,19 +35,19 @@ printer_action_parse(const char *s, enum printer_action *out)
     return false;
 }
 
-/* The job the store holds as interrupted on p (its part may be on the bed), or 0. */
-static int64_t
-interrupted_here(struct printer *p)
+/* The job the store holds as interrupted on p (its part may be on the bed) in *id, 0 if none:
+   SF_OK, or the store's error in err (SF_EBUSY while a CRASHED may still be queued). */
+static int
+interrupted_here(struct printer *p, int64_t *id, struct sf_err *err)
 {
-    struct sf_err err;
     struct job_row j;
-    /* a CRASHED may still be queued: with the store busy, unknown */
-    int rc = storeq_sync(p->env.q, STOREQ_SYNC_MS, &err);
+    *id = 0;
+    int rc = storeq_sync(p->env.q, STOREQ_SYNC_MS, err);
     if (rc == SF_OK)
-        rc = store_job_interrupted(p->env.s, p->cfg.name, &j, &err);
-    if (rc == SF_ENOTFOUND)
-        return 0;
-    return rc ? -1 : j.id; /* unknown: treated as held */
+        rc = store_job_interrupted(p->env.s, p->cfg.name, &j, err);
+    if (rc == SF_OK)
+        *id = j.id;
+    return rc == SF_ENOTFOUND ? SF_OK : rc;
 }
 
 /* Record what an operator did to p in the log and the event log. */
@@ -90,18 +90,20 @@ printer_command(struct printer *p, const char *line, const char *who, struct sf_
                           "clear bed (clear it first)",
                           p->cfg.name, printer_state_name(p->state),
                           p->bed_full && p->state == PRINTER_IDLE ? " with a part on its bed" : "");
-    int64_t held = interrupted_here(p);
-    if (held < 0)
-        return sf_err_set(err, SF_EAGAIN,
-                          "printer %s: the store is busy, whether it holds an interrupted job is "
-                          "not known: try again",
-                          p->cfg.name);
+    /* unknown is not "none": the store's code (busy, unreachable: the API's 503) says when */
+    int64_t held;
+    int rc = interrupted_here(p, &held, err);
+    if (rc) {
+        sf_err_prefix(err, "printer %s: whether it holds an interrupted job is not known",
+                      p->cfg.name);
+        return rc;
+    }
     if (held)
         return sf_err_set(err, SF_EAGAIN,
                           "printer %s holds interrupted job %lld: resume, restart or cancel it "
                           "before manual commands",
                           p->cfg.name, (long long)held);
-    int rc = p->drv->ops->command(p->drv, line, err);
+    rc = p->drv->ops->command(p->drv, line, err);
     if (rc == SF_OK)
         note(p, "printer-command", "manual command from %s: %s", who && who[0] ? who : "?", line);
     return rc;

@@ -88,8 +88,11 @@ bool sqldb_is_url(const char *target);
  * foreign keys on, synchronous FULL and a 5 s busy timeout (a read-only
  * connection: the timeout alone); PostgreSQL connections get a quiet
  * notice channel, and default_transaction_read_only if read-only.  NULL with err
- * set (SF_EIO naming the target, the password part of a URL left out) on
- * failure.  Free with sqldb_close.
+ * set on failure, naming the target (the password part of a URL left out):
+ * SF_EUNREACH when the server cannot be reached or says "not now" (starting,
+ * stopping, no connection slot left: try again later), SF_EIO when it
+ * refuses (a password, an unknown role or database) or the file cannot be
+ * opened.  Free with sqldb_close.
  */
 struct sqldb *sqldb_open(const char *target, unsigned flags, struct sf_err *err);
 void sqldb_close(struct sqldb *db);
@@ -145,7 +148,12 @@ int64_t sqldb_changes(const struct sqldb *db);
  * server's side of each session gets the same keepalives and user timeout
  * (SET per session), so a backend whose client vanished in a partition
  * ends within about 25 s and frees its session's advisory locks, instead
- * of after the kernel's two hours.
+ * of after the kernel's two hours.  A writing session (not SQLDB_READONLY)
+ * also gets idle_in_transaction_session_timeout and lock_timeout of 5 s:
+ * one cut off inside a transaction (a partition whose packets are still
+ * answered) is ended by the server after 5 s, freeing its locks (the event
+ * log's lock, which every event's transaction takes); a statement that
+ * waits 5 s for a lock fails SF_EBUSY ("lock timeout"), to be tried again.
  *
  * SQLDB_NOWAIT (a connection on the loop): no call waits for a connect.
  * The call that finds the loss starts one (PQresetStart) and it and every

@@ -53,6 +53,12 @@
 
 #define PG_BACKOFF_MIN_MS 200  /* the wait after a first failed reconnect */
 #define PG_BACKOFF_MAX_MS 5000 /* the longest: a server back is used within 5 s */
+/* A writing session's bounds (session()), as SQL literals: a transaction idle that long has
+   lost its client (the store's transactions send their statements back to back), and a lock
+   not had in that long is busy (retried by the caller) rather than waited for, so a host
+   partitioned while holding the event log's lock holds up the others 5 s, not ~25 s. */
+#define PG_IDLE_TX_MS   "5000"
+#define PG_LOCK_WAIT_MS "5000"
 
 struct pg {
     struct sqldb base;
@@ -606,6 +612,13 @@ session(struct pg *p)
         rc = end_old_session(p);
     if (rc == SF_OK && p->flags & SQLDB_READONLY)
         rc = pg_exec(db, "SET default_transaction_read_only = on");
+    /* A writer cut off inside a transaction (a partition: no close reaches the server, and
+       its keepalives are answered) held its locks, the event log's among them, for as long
+       as the partition lasted: the server now ends it after PG_IDLE_TX_MS, and a writer
+       waits PG_LOCK_WAIT_MS for a lock before failing busy (retried: sqldb.h). */
+    if (rc == SF_OK && !(p->flags & SQLDB_READONLY))
+        rc = pg_exec(db, "SET lock_timeout = " PG_LOCK_WAIT_MS ";"
+                         " SET idle_in_transaction_session_timeout = " PG_IDLE_TX_MS);
     if (rc == SF_OK && p->async_commit)
         rc = pg_exec(db, "SET synchronous_commit = off");
     for (int i = 0; rc == SF_OK && i < p->n_listens; i++)
@@ -853,6 +866,26 @@ show_url(const char *url, char *out, size_t cap)
     }
 }
 
+/* A failed connect's code: SF_EIO when the server answered and refused (a password, a role
+   or database that does not exist: libpq's "FATAL:"), which trying again does not mend;
+   SF_EUNREACH when it could not be reached (refused, timed out, no socket, no host) or said
+   "not now" (starting up, shutting down, out of connection slots, the database closed to
+   connections for an operator's maintenance: ALLOW_CONNECTIONS false). */
+static int
+connect_code(const char *msg)
+{
+    static const char *const passing[] = {
+        "starting up", "shutting down",        "in recovery",
+        "too many",    "connection slots are", "not currently accepting connections"
+    };
+    if (!strstr(msg, "FATAL:"))
+        return SF_EUNREACH;
+    for (size_t i = 0; i < sizeof(passing) / sizeof(passing[0]); i++)
+        if (strstr(msg, passing[i]))
+            return SF_EUNREACH;
+    return SF_EIO;
+}
+
 struct sqldb *
 sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err)
 {
@@ -879,13 +912,15 @@ sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err)
     p->conn = PQconnectdbParams(keys, vals, 1);
     if (!p->conn || PQstatus(p->conn) != CONNECTION_OK) {
         sqldb_fail(&p->base, p->conn ? PQerrorMessage(p->conn) : "out of memory");
-        sf_err_set(err, SF_EIO, "store: cannot connect to '%s': %s", shown, p->base.msg);
+        sf_err_set(err, p->conn ? connect_code(p->base.msg) : SF_ENOMEM,
+                   "store: cannot connect to '%s': %s", shown, p->base.msg);
         pg_close(&p->base);
         return NULL;
     }
     p->connect_timeout_ms = connect_timeout_ms(p->conn);
-    if (session(p)) {
-        sf_err_set(err, SF_EIO, "store: '%s': %s", shown, p->base.msg);
+    int rc = session(p);
+    if (rc) {
+        sf_err_set(err, rc, "store: '%s': %s", shown, p->base.msg);
         pg_close(&p->base);
         return NULL;
     }

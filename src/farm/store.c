@@ -565,7 +565,7 @@ connect(struct store *s, unsigned flags, int *from, struct sf_err *err)
 {
     int rc = sqldb_is_url(s->target) ? SF_OK : create_private(s->target, err);
     if (rc == SF_OK && !(s->db = sqldb_open(s->target, flags, err)))
-        rc = SF_EIO;
+        rc = err ? err->code : SF_EIO; /* SF_EUNREACH: try again later */
     return rc ? rc : migrate(s, from, err);
 }
 

@@ -230,7 +230,8 @@ int store_file_record(struct store *s, const char *sha, int64_t size, struct sf_
  */
 int store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct sf_err *err);
 
-/* Add a queued job for a stored part file; o is validated (SF_EINVAL). */
+/* Add a queued job for a stored part file; o is validated (SF_EINVAL).  *id is the new job's,
+   set before the COMMIT: on SF_EINDOUBT it names the job a read-back may find committed. */
 int store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, int64_t *id,
                   struct sf_err *err);
 /*

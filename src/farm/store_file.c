@@ -301,16 +301,19 @@ store_file_put(struct store *s, const void *data, size_t len, char sha[STORE_SHA
     return store_file_commit(f, sha, err);
 }
 
-bool
-store_file_known(struct store *s, const char *sha)
+int
+store_file_known(struct store *s, const char *sha, struct sf_err *err)
 {
     struct sqldb_stmt *st;
-    if (sqldb_prepare(s->db, "SELECT 1 FROM files WHERE sha256 = ?", &st))
-        return false;
+    int rc = store_prepare(s, &st, "SELECT 1 FROM files WHERE sha256 = ?", err);
+    if (rc)
+        return rc;
     sqldb_bind_text(st, 1, sha);
-    bool found = sqldb_step(st) == SQLDB_ROW;
+    rc = sqldb_step(st);
+    if (rc < 0) /* before the finalize, which would take the message with it */
+        rc = store_db_fail(s, err, "look up file");
     sqldb_finalize(st);
-    return found;
+    return rc == SQLDB_ROW ? 1 : rc;
 }
 
 int
@@ -318,19 +321,11 @@ store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct
 {
     if (!store_sha_valid(sha))
         return sf_err_set(err, SF_EINVAL, "store: '%.80s' is not a SHA-256 in hex", sha);
-    /* a database that does not answer now (a connection coming back) is its error, not "no
-       such file": the caller tries again later rather than failing the job */
-    struct sqldb_stmt *st;
-    int rc = store_prepare(s, &st, "SELECT 1 FROM files WHERE sha256 = ?1", err);
-    if (rc)
-        return rc;
-    sqldb_bind_text(st, 1, sha);
-    rc = sqldb_step(st);
-    sqldb_finalize(st);
-    if (rc == SQLDB_DONE)
+    int rc = store_file_known(s, sha, err);
+    if (rc < 0)
+        return rc; /* not known now (busy, unreachable): not "no file" */
+    if (!rc)
         return sf_err_set(err, SF_ENOTFOUND, "store: no file %s", sha);
-    if (rc != SQLDB_ROW)
-        return store_db_fail(s, err, "look up a file");
     if ((size_t)snprintf(path, cap, "%s/files/%.2s/%s", s->dir, sha, sha) >= cap)
         return sf_err_set(err, SF_ENOMEM, "store: path of file %s is too long", sha);
     /* a host's cache lacks what another host stored: fetch it */

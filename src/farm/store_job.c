@@ -104,7 +104,8 @@ bind_opts(struct sqldb_stmt *st, int first, const struct job_opts *o, int64_t no
 }
 
 /* Finish a job add begun by store_write_begin: run the INSERT ... RETURNING id st, log "job-add"
-   with detail and commit, or roll back; the new job's id into *id (may be NULL). */
+   with detail and commit, or roll back; the new job's id into *id (may be NULL), set before
+   the COMMIT, so that it names the job when the COMMIT is in doubt. */
 static int
 insert_job(struct store *s, struct sqldb_stmt *st, const char *what, const char *detail,
            int64_t *id, struct sf_err *err)
@@ -122,11 +123,14 @@ insert_job(struct store *s, struct sqldb_stmt *st, const char *what, const char 
         goto fail;
     sqldb_bind_int64(st, 1, new_id);
     if ((rc = store_step_done(s, st, err, "queue place")) ||
-        (rc = store_log_event(s, new_id, NULL, "job-add", detail, err)) ||
-        (rc = store_commit(s, err)))
+        (rc = store_log_event(s, new_id, NULL, "job-add", detail, err)))
         goto fail;
+    /* before the COMMIT: one in doubt (SF_EINDOUBT) that the caller reads back as committed
+       has added this job, which it must not lose, nor add again */
     if (id)
         *id = new_id;
+    if ((rc = store_commit(s, err)))
+        goto fail;
     return SF_OK;
 fail:
     store_rollback(s);
@@ -140,8 +144,10 @@ store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, i
     int rc = job_opts_validate(o, err);
     if (rc)
         return rc;
-    if (!store_sha_valid(file_sha) || !store_file_known(s, file_sha))
+    if (!store_sha_valid(file_sha) || !(rc = store_file_known(s, file_sha, err)))
         return sf_err_set(err, SF_ENOTFOUND, "store: part file '%.80s' is not stored", file_sha);
+    if (rc < 0)
+        return rc;
     struct sqldb_stmt *st;
     if ((rc = store_write_begin(
              s, &st,
@@ -170,8 +176,10 @@ store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
     int rc = job_opts_validate(&v, err);
     if (rc)
         return rc;
-    if (!store_sha_valid(sha) || !store_file_known(s, sha))
+    if (!store_sha_valid(sha) || !(rc = store_file_known(s, sha, err)))
         return sf_err_set(err, SF_ENOTFOUND, "store: G-code file '%.80s' is not stored", sha);
+    if (rc < 0)
+        return rc;
     if (!g->prep_key || !g->prep_key[0])
         return sf_err_set(err, SF_EINVAL, "store: G-code job '%s' has no key", o->name);
     struct sqldb_stmt *st;
@@ -302,9 +310,13 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
     snprintf(printer, sizeof(printer), "%s", a->printer && a->printer[0] ? a->printer : j->printer);
     switch (ev) {
     case JOB_EV_PREPARED:
-        if (!a->gcode_sha || !store_sha_valid(a->gcode_sha) || !store_file_known(s, a->gcode_sha))
+        if (!a->gcode_sha || !store_sha_valid(a->gcode_sha) ||
+            !(rc = store_file_known(s, a->gcode_sha, err)))
             return sf_err_set(err, SF_EINVAL, "job %lld: prepared without stored G-code",
                               (long long)j->id);
+        if (rc < 0)
+            return rc;
+        rc = SF_OK;
         snprintf(j->gcode_sha, sizeof(j->gcode_sha), "%s", a->gcode_sha);
         for (int i = 0; i < 3; i++)
             j->size_mm[i] = a->size_mm[i];
@@ -312,9 +324,12 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
         j->gcode_lines = a->gcode_lines > 0 ? a->gcode_lines : 0;
         snprintf(j->prep_key, sizeof(j->prep_key), "%s", a->prep_key ? a->prep_key : "");
         if (a->mesh_sha && a->mesh_sha[0]) {
-            if (!store_sha_valid(a->mesh_sha) || !store_file_known(s, a->mesh_sha))
+            if (!store_sha_valid(a->mesh_sha) || !(rc = store_file_known(s, a->mesh_sha, err)))
                 return sf_err_set(err, SF_EINVAL, "job %lld: optimized part is not stored",
                                   (long long)j->id);
+            if (rc < 0)
+                return rc;
+            rc = SF_OK;
             snprintf(j->mesh_sha, sizeof(j->mesh_sha), "%s", a->mesh_sha);
             j->mesh_angle_deg = a->mesh_angle_deg;
         }

@@ -105,6 +105,7 @@ struct storeq {
     bool gave_up;                    /* a request ran out of retries during a stop: the rest
                                         fail at once instead of each waiting its turn */
     uint64_t retries;                /* stats.retries */
+    int64_t retry_ms;                /* how long a failing request is tried: STOREQ_RETRY_MS */
     /* loop thread only */
     storeq_commit_fn commit; /* the wake after events were logged */
     void *commit_ud;
@@ -169,7 +170,7 @@ transient(int rc)
 static int64_t
 retry_end(const struct storeq *q, int64_t t0)
 {
-    int64_t end = t0 + STOREQ_RETRY_MS;
+    int64_t end = t0 + q->retry_ms;
     if (q->stop && q->stop_ms + STOREQ_STOP_MS < end)
         end = q->stop_ms + STOREQ_STOP_MS;
     return end;
@@ -392,6 +393,7 @@ storeq_new(struct loop *l, const struct store *s, struct sf_err *err)
     }
     q->l = l;
     q->evfd = -1;
+    q->retry_ms = STOREQ_RETRY_MS;
     pthread_mutex_init(&q->mu, NULL);
     pthread_condattr_t ca;
     pthread_condattr_init(&ca);
@@ -447,6 +449,14 @@ storeq_free(struct storeq *q)
     pthread_cond_destroy(&q->cond);
     pthread_mutex_destroy(&q->mu);
     free(q);
+}
+
+void
+storeq_set_retry_ms(struct storeq *q, int64_t ms)
+{
+    pthread_mutex_lock(&q->mu);
+    q->retry_ms = ms;
+    pthread_mutex_unlock(&q->mu);
 }
 
 void
@@ -600,7 +610,7 @@ storeq_sync(struct storeq *q, int64_t max_ms, struct sf_err *err)
         q->refused = true;
     pthread_mutex_unlock(&q->mu);
     if (left)
-        return sf_err_set(err, SF_EAGAIN, "the store is busy: %zu writes wait for the database",
+        return sf_err_set(err, SF_EBUSY, "the store is busy: %zu writes wait for the database",
                           left);
     return SF_OK;
 }

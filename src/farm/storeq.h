@@ -90,6 +90,10 @@ struct storeq *storeq_new(struct loop *l, const struct store *s, struct sf_err *
  */
 void storeq_free(struct storeq *q);
 
+/* How long a request that fails with nothing applied is tried again from now on (default
+   STOREQ_RETRY_MS): tests that must see the retries run out in seconds shorten it. */
+void storeq_set_retry_ms(struct storeq *q, int64_t ms);
+
 /* Call fn(ud) after requests that log an event commit (the farm's wake); NULL: none. */
 void storeq_set_commit(struct storeq *q, storeq_commit_fn fn, void *ud);
 
@@ -118,8 +122,9 @@ int storeq_job_event(struct storeq *q, int64_t id, enum job_event ev,
  * Wait (blocking the loop) until every request posted so far has run, for
  * up to max_ms (< 0: as long as it takes): then the loop's own connection
  * sees what they wrote.  Their results are delivered on a later loop turn,
- * as always.  SF_EAGAIN when the queue did not empty in time ("the store is
- * busy: N writes wait for the database"): the caller acts later, and the
+ * as always.  SF_EBUSY when the queue did not empty in time ("the store is
+ * busy: N writes wait for the database"; not SF_EAGAIN, the job rules'
+ * refusal): the caller tries again later (the API answers 503), and the
  * commit callback (storeq_set_commit) runs once the queue has emptied.
  */
 int storeq_sync(struct storeq *q, int64_t max_ms, struct sf_err *err);

@@ -14,7 +14,10 @@
  *   blackhole  close every connection, and hold each new one open without
  *              forwarding a byte (a silent network: the client's timeouts
  *              decide)
- *   heal       forward new connections again
+ *   freeze     keep every connection open but forward nothing either way, and
+ *              hold each new one (a partition: neither end sees a close; the
+ *              server's session waits as if its client were silent)
+ *   heal       forward again (frozen connections go on where they stood)
  *   count      "ok count N": connections forwarded now
  * End of stdin ends it, so it never outlives the test that started it.
  *
@@ -37,7 +40,7 @@
 #define PAIRS_MAX 64 /* connections at once: a test opens a few */
 #define HELD_MAX  64 /* blackholed connections held open */
 
-enum mode { FORWARD, DROP, BLACKHOLE };
+enum mode { FORWARD, DROP, BLACKHOLE, FREEZE };
 
 static int pairs[PAIRS_MAX][2]; /* client, server; -1 when free */
 static int held[HELD_MAX];      /* blackholed clients; -1 when free */
@@ -94,7 +97,7 @@ take(int lfd, enum mode mode, int target)
         close(c);
         return;
     }
-    if (mode == BLACKHOLE) {
+    if (mode == BLACKHOLE || mode == FREEZE) {
         keep(held, HELD_MAX, c);
         return;
     }
@@ -135,6 +138,8 @@ command(const char *line, enum mode *mode)
     if (strcmp(line, "drop") == 0 || strcmp(line, "blackhole") == 0) {
         close_all();
         *mode = line[0] == 'd' ? DROP : BLACKHOLE;
+    } else if (strcmp(line, "freeze") == 0) {
+        *mode = FREEZE;
     } else if (strcmp(line, "heal") == 0) {
         *mode = FORWARD;
     } else if (strcmp(line, "count") == 0) {
@@ -162,7 +167,7 @@ commands(enum mode *mode)
     for (char *nl; (nl = memchr(line, '\n', len));) {
         *nl = '\0';
         if (!command(line, mode))
-            printf("error: unknown command '%s' (drop, blackhole, heal, count)\n", line);
+            printf("error: unknown command '%s' (drop, blackhole, freeze, heal, count)\n", line);
         len -= (size_t)(nl + 1 - line);
         memmove(line, nl + 1, len);
     }
@@ -211,7 +216,8 @@ main(int argc, char **argv)
                                                  { .fd = lfd, .events = POLLIN } };
         for (int i = 0; i < PAIRS_MAX; i++)
             for (int k = 0; k < 2; k++)
-                pfd[2 + 2 * i + k] = (struct pollfd){ .fd = pairs[i][k], .events = POLLIN };
+                pfd[2 + 2 * i + k] =
+                    (struct pollfd){ .fd = mode == FREEZE ? -1 : pairs[i][k], .events = POLLIN };
         if (poll(pfd, 2 + 2 * PAIRS_MAX, -1) < 0 && errno != EINTR)
             return 1;
         if (pfd[0].revents && !commands(&mode))

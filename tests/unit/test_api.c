@@ -28,6 +28,7 @@
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
 #include "../../src/farm/farm.h"
+#include "../../src/farm/sqldb.h"
 #include "../../src/farm/store.h"
 #include "../t.h"
 #include "../tstore.h"
@@ -820,6 +821,98 @@ T_CASE(api_busy_printer_is_409_unreachable_is_503)
     T_EQ_INT(call("POST", "/api/printers/b", KEY_RW, NULL, NULL, NULL, 0, NULL, &b), 405);
     T_EQ_STR(jstr(&b, NULL, "error"), "method POST is not allowed on /api/printers/b");
     atomic_store(&adrv_unplugged, false);
+    buf_release(&b);
+    stop();
+}
+
+/* On the server thread: a printer note for the farm's store queue (it waits under a lock). */
+static void
+queue_note(void *arg)
+{
+    (void)arg;
+    storeq_printer_note(farm_storeq(srv.farm), "b", "printer-command", "queued under a lock");
+}
+
+/* A manual command while the store's queue cannot be written (another process holds SQLite's
+   write lock) is 503, the store busy: whether the printer holds an interrupted job is not
+   known yet.  It was 409, "not now", as if the printer's state refused it. */
+T_CASE(api_command_while_the_store_is_busy_is_503)
+{
+    if (t_store_pg()) {
+        t_skip("holds SQLite's write lock from a second connection");
+        return;
+    }
+    struct sf_err err;
+    T_OK(start("cmdbusy", &err), &err);
+    char path[600];
+    snprintf(path, sizeof(path), "%s/cmdbusy/slimfarm.db", t_tmpdir());
+    struct sqldb *other = sqldb_open(path, 0, &err);
+    T_TRUE(other != NULL);
+    T_OK(sqldb_begin(other), NULL);
+    on_server(queue_note, NULL);
+    struct buf b;
+    buf_init(&b, 0);
+    T_EQ_INT(call("POST", "/api/printers/b/command", KEY_RW, "{\"command\": \"G28\"}", NULL, NULL,
+                  0, NULL, &b),
+             503);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "the store is busy") != NULL);
+    sqldb_rollback(other);
+    sqldb_close(other);
+    /* the queue written: the command reaches the driver, which has no console */
+    T_EQ_INT(call("POST", "/api/printers/b/command", KEY_RW, "{\"command\": \"G28\"}", NULL, NULL,
+                  0, NULL, &b),
+             501);
+    buf_release(&b);
+    stop();
+}
+
+/* On the server thread: the store queue's retries so far. */
+static void
+read_retries(void *arg)
+{
+    struct farm_health h;
+    farm_health(srv.farm, &h);
+    *(uint64_t *)arg = h.store.retries;
+}
+
+/* A part whose adoption cannot reach the database (PostgreSQL: the upload's own connection
+   refused "not now") answers 503 at once, saying so, and holds no write behind it: the
+   queue does not retry it (it waited out its 60 s, every farm write queued behind it). */
+T_CASE(api_submit_whose_part_cannot_be_stored_is_503_at_once)
+{
+    if (!t_store_pg()) {
+        t_skip("the part's own database connection is PostgreSQL's");
+        return;
+    }
+    struct sf_err err;
+    T_OK(start("adoptfail", &err), &err);
+    char dir[600];
+    snprintf(dir, sizeof(dir), "%s/adoptfail", t_tmpdir());
+    /* from the server's postgres database: not the one it closes */
+    const char *url = t_store_db(dir), *auth = strstr(url, "://") + 3; /* AUTH/NAME?QUERY */
+    const char *name = auth + strcspn(auth, "/?") + 1;
+    int name_len = (int)strcspn(name, "?");
+    struct sqldb *db = sqldb_open(getenv("SLIMFARM_TEST_STORE"), 0, &err);
+    T_TRUE(db != NULL);
+    char sql[200];
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %.*s ALLOW_CONNECTIONS false", name_len, name);
+    T_TRUE(sqldb_exec(db, sql) == SF_OK || !printf("%s: %s\n", sql, sqldb_errmsg(db)));
+    uint64_t before = 0, after = 0;
+    on_server(read_retries, &before);
+    struct buf b;
+    buf_init(&b, 0);
+    const char part[] = "solid cube\nendsolid cube\n";
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "held.stl", part, sizeof(part) - 1, NULL, &b),
+             503);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "the part could not be stored") != NULL);
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "cannot connect") != NULL);
+    on_server(read_retries, &after);
+    T_EQ_INT(after - before, 0); /* answered on its first run */
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %.*s ALLOW_CONNECTIONS true", name_len, name);
+    T_OK(sqldb_exec(db, sql), NULL);
+    sqldb_close(db);
+    T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "held.stl", part, sizeof(part) - 1, NULL, &b),
+             201);
     buf_release(&b);
     stop();
 }

@@ -2001,6 +2001,134 @@ T_CASE(farm_prepare_waits_out_a_locked_store_instead_of_failing_the_job)
     teardown();
 }
 
+/* The first prepare's worker cannot adopt its G-code into the store: the database is not
+   reachable that moment (sqldb_open's SF_EUNREACH, PostgreSQL restarting). */
+static atomic_int unreachable_calls;
+
+static int
+unreachable_prepare(const struct prepare_req *req, struct prepare_out *out,
+                    const atomic_bool *cancel, struct sf_err *err)
+{
+    int rc = test_prepare(req, out, cancel, err);
+    if (rc == SF_OK && atomic_fetch_add(&unreachable_calls, 1) == 0)
+        return sf_err_set(err, SF_EUNREACH,
+                          "store: cannot connect to 'postgresql:///farm': Connection refused");
+    return rc;
+}
+
+/*
+ * A worker that finds the store's database unreachable fails nothing: the
+ * job goes back to the queue (DEFER) and is prepared again.  Before, the
+ * blip failed the job for good (PREPARE_FAILED).
+ */
+T_CASE(farm_prepare_defers_when_the_database_is_unreachable)
+{
+    struct sf_err err;
+    atomic_store(&unreachable_calls, 0);
+    int before = atomic_load(&prepares);
+    T_OK(setup("unreach", farm_ini, tdrv_new, unreachable_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    enum job_state st = JOB_QUEUED;
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
+         wall_ms() < end && (st = state_of(id)) != JOB_PRINTING && st != JOB_FAILED;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(st, JOB_PRINTING);
+    T_EQ_INT(atomic_load(&prepares) - before, 2); /* prepared again, once */
+    struct job_row j;
+    T_OK(job_get(id, &j, &err), &err);
+    T_EQ_INT(j.counts.failures, 0);
+    teardown();
+}
+
+/* The prepare hook takes the store's write lock as it ends, as locking_prepare, on "rewrite". */
+static int
+locking_prepare_rewrite(const struct prepare_req *req, struct prepare_out *out,
+                        const atomic_bool *cancel, struct sf_err *err)
+{
+    int rc = test_prepare(req, out, cancel, err);
+    if (!atomic_load(&prep_lock))
+        atomic_store(&prep_lock, lock_store("rewrite"));
+    return rc;
+}
+
+/*
+ * A PREPARED the store thread could not write in its retry window (the
+ * lock held past it: SF_EBUSY, as SF_EUNREACH or SF_EINDOUBT would come
+ * back) is written again, and the job is ready once the lock goes.
+ * Before, it was answered with a DEFER, which met the same lock and was
+ * lost too: the job stayed preparing until the next restart.
+ */
+T_CASE(farm_prepared_is_written_again_after_the_store_gave_up)
+{
+    if (t_store_pg()) {
+        t_skip("holds SQLite's write lock from a second connection");
+        return;
+    }
+    struct sf_err err;
+    atomic_store(&prep_lock, NULL);
+    setup_held = "a"; /* the job is prepared for a, not started */
+    T_OK(setup("rewrite", farm_ini, tdrv_new, locking_prepare_rewrite, &err), &err);
+    T_TRUE(wait_printer(1, PRINTER_IDLE));
+    synced();
+    storeq_set_retry_ms(farm_storeq(fx.f), 200);
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    struct farm_health h = { 0 };
+    /* two writes given up: the PREPARED and what followed it */
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && h.store.failed < 2;) {
+        loop_run_once(fx.l, 10);
+        farm_health(fx.f, &h);
+    }
+    T_TRUE(h.store.failed >= 2);
+    struct sqldb *other = atomic_load(&prep_lock);
+    T_TRUE(other != NULL);
+    unlock_store(other);
+    enum job_state st = JOB_QUEUED;
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
+         wall_ms() < end && (st = state_of(id)) != JOB_READY && st != JOB_FAILED;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(st, JOB_READY);
+    teardown();
+}
+
+/* A PREPARED the store refuses for good (here a trigger, as a constraint would) fails the
+   job once, saying why.  It was sent back to the queue, prepared and refused again, on and
+   on. */
+T_CASE(farm_prepared_refused_for_good_fails_the_job_once)
+{
+    struct sf_err err;
+    int before = atomic_load(&prepares);
+    T_OK(setup("refusedprep", farm_ini, tdrv_new, test_prepare, &err), &err);
+    char dir[600];
+    snprintf(dir, sizeof(dir), "%s/refusedprep", t_tmpdir());
+    const char *trigger =
+        t_store_pg()
+            ? "CREATE FUNCTION refuse_ready() RETURNS trigger AS $$ BEGIN IF NEW.state = 'ready'"
+              " THEN RAISE EXCEPTION 'ready refused (test)' USING ERRCODE = 'check_violation';"
+              " END IF; RETURN NEW; END $$ LANGUAGE plpgsql;"
+              " CREATE TRIGGER refuse_ready BEFORE UPDATE ON jobs FOR EACH ROW EXECUTE FUNCTION"
+              " refuse_ready()"
+            : "CREATE TRIGGER refuse_ready BEFORE UPDATE OF state ON jobs WHEN NEW.state ="
+              " 'ready' BEGIN SELECT RAISE(ABORT, 'ready refused (test)'); END";
+    T_OK(t_store_exec(dir, trigger), NULL);
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    enum job_state st = JOB_QUEUED;
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end &&
+                                                  (st = state_of(id)) != JOB_FAILED &&
+                                                  atomic_load(&prepares) - before < 3;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(st, JOB_FAILED);
+    for (int i = 0; i < 50; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(atomic_load(&prepares) - before, 1);
+    struct job_row j;
+    T_OK(job_get(id, &j, &err), &err);
+    T_EQ_INT(j.state, JOB_FAILED);
+    T_TRUE(strstr(j.reason, "the store refused its prepared G-code") != NULL);
+    T_TRUE(strstr(j.reason, "ready refused (test)") != NULL);
+    teardown();
+}
+
 /*
  * An operator resumes an interrupted job while another process holds the
  * store's write lock: the printer takes the job at once (printing), the

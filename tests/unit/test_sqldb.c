@@ -227,3 +227,29 @@ T_CASE(sqldb_busy_and_permanent_failures_differ)
     }
     sqldb_close(db);
 }
+
+/* A PostgreSQL server that cannot be reached is SF_EUNREACH (try again later: a worker then
+   defers its job instead of failing it); one that answers and refuses is SF_EIO, which
+   trying again does not mend.  Both were SF_EIO. */
+T_CASE(sqldb_pg_open_unreachable_differs_from_refused)
+{
+    struct sf_err err;
+    /* nothing listens on the loopback's port 1: refused at once, no server needed */
+    T_TRUE(sqldb_open("postgresql://127.0.0.1:1/farm?connect_timeout=5", 0, &err) == NULL);
+    T_EQ_INT(err.code, SF_EUNREACH);
+    T_TRUE(strstr(err.msg, "cannot connect to 'postgresql://127.0.0.1:1/farm") != NULL);
+    if (!t_store_pg())
+        return;
+    /* the run's server, a database it does not have: postgresql://AUTH/DB?Q -> AUTH/none?Q */
+    const char *base = getenv("SLIMFARM_TEST_STORE");
+    const char *auth = strstr(base, "://");
+    auth = auth ? auth + 3 : base;
+    size_t a = strcspn(auth, "/?");
+    const char *query = strchr(auth + a, '?');
+    char url[1024];
+    snprintf(url, sizeof(url), "%.*s/sft_no_such_db%s", (int)(auth + a - base), base,
+             query ? query : "");
+    T_TRUE(sqldb_open(url, 0, &err) == NULL);
+    T_EQ_INT(err.code, SF_EIO);
+    T_TRUE(strstr(err.msg, "sft_no_such_db") != NULL);
+}

@@ -679,3 +679,134 @@ T_CASE(sqldb_pg_host_name_lock_is_taken_again_after_a_cut)
     sqldb_close(direct);
     proxy_stop(&px);
 }
+
+/* A job add on the store thread, as the API posts one (storeq_call). */
+struct adder {
+    const char *sha;
+    int64_t id; /* the new job's, as store_job_add gives it */
+    int runs;
+};
+
+static int
+add_fn(struct store *s, void *arg, struct sf_err *err)
+{
+    struct adder *a = arg;
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "doubt.stl");
+    a->runs++;
+    return store_job_add(s, &o, a->sha, &a->id, err);
+}
+
+/* A job add whose COMMIT's answer is lost, read back as committed, gives the job's id: it
+   was 0 (set only after a COMMIT that answered), so the caller lost the job it had added
+   (or, run again, would add it twice).  The COMMIT held on the server as above. */
+T_CASE(storeq_job_add_in_doubt_keeps_its_id)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(direct != NULL);
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/added", t_tmpdir());
+    struct sf_err err;
+    struct loop *l = loop_new(&err);
+    T_TRUE(l != NULL);
+    struct store *s = store_open_db(dir, proxy_url(&px), NULL, &err);
+    T_OK(s ? SF_OK : err.code, &err);
+    struct storeq *q = storeq_new(l, s, &err);
+    T_OK(q ? SF_OK : err.code, &err);
+    char sha[STORE_SHA_HEX];
+    T_OK(store_file_put(s, "solid doubt", 11, sha, &err), &err);
+    T_DB_OK(sqldb_exec(direct, "ALTER SYSTEM SET synchronous_standby_names = 'nobody'"), direct);
+    T_EQ_INT(one(direct, "SELECT count(*) FROM (SELECT pg_reload_conf()) r"), 1);
+    T_TRUE(await_count(direct, "SELECT count(*) FROM pg_settings WHERE"
+                               " name = 'synchronous_standby_names' AND setting = 'nobody'"));
+    struct started st = { 0 };
+    struct adder a = { .sha = sha };
+    T_OK(storeq_call(q, add_fn, &a, NULL, on_started, &st), NULL);
+    T_TRUE(await_count(direct, "SELECT count(*) FROM pg_stat_activity WHERE"
+                               " wait_event = 'SyncRep'"));
+    T_TRUE(proxy_cmd(&px, "drop"));
+    T_TRUE(proxy_cmd(&px, "heal"));
+    for (int64_t t0 = clock_mono_ms(); !st.calls && clock_mono_ms() - t0 < DEADLINE_MS;)
+        loop_run_once(l, 20);
+    T_DB_OK(sqldb_exec(direct, "ALTER SYSTEM RESET synchronous_standby_names"), direct);
+    T_EQ_INT(one(direct, "SELECT count(*) FROM (SELECT pg_reload_conf()) r"), 1);
+    T_EQ_INT(st.calls, 1);
+    T_EQ_INT(st.rc, SF_OK);
+    T_EQ_INT(a.runs, 1); /* read back, not run again */
+    storeq_free(q);
+    struct job_row j;
+    int rc;
+    for (int64_t t0 = clock_mono_ms(); (rc = store_job_get(s, a.id, &j, &err)) == SF_EUNREACH &&
+                                       clock_mono_ms() - t0 < DEADLINE_MS;)
+        nap_ms(20);
+    T_OK(rc, &err); /* the id names the job added */
+    T_EQ_STR(j.opts.name, "doubt.stl");
+    T_EQ_INT(one(direct, "SELECT count(*) FROM jobs WHERE name = 'doubt.stl'"), 1); /* once */
+    store_close(s);
+    loop_free(l);
+    sqldb_close(direct);
+    proxy_stop(&px);
+}
+
+/* The event log's lock (store_event.c: every transaction that logs an event takes it). */
+#define EVENT_LOCK_KEY 0x736c696d6576656eLL
+
+/* A host cut off from the database while it holds the event log's lock holds up no one for
+   long: the partition answers nothing but closes nothing (the proxy's freeze), the server
+   ends the session once its transaction has idled past idle_in_transaction_session_timeout,
+   and another writer, failing busy on lock_timeout meanwhile, takes the lock.  It was held
+   for as long as the partition lasted (the proxy's socket answers the server's keepalives). */
+T_CASE(sqldb_pg_partitioned_event_lock_is_cut_by_the_server)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(proxy_start(&px));
+    struct sf_err err;
+    struct sqldb *held = sqldb_open(proxy_url(&px), 0, &err);
+    T_OK(held ? SF_OK : err.code, &err);
+    struct sqldb *other = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(other != NULL);
+    char v[64];
+    T_EQ_STR(text1(other, "SHOW lock_timeout", v, sizeof(v)), "5s");
+    T_EQ_STR(text1(other, "SHOW idle_in_transaction_session_timeout", v, sizeof(v)), "5s");
+    /* a guard for a run without the server's cut: a wait ends, failing, after 20 s */
+    T_DB_OK(sqldb_exec(other, "SET statement_timeout = 20000"), other);
+    int64_t pid = one(held, "SELECT pg_backend_pid()");
+    T_TRUE(pid > 0);
+    T_DB_OK(sqldb_begin(held), held);
+    T_DB_OK(run1(held, "SELECT pg_advisory_xact_lock(?)", EVENT_LOCK_KEY), held);
+    T_TRUE(proxy_cmd(&px, "freeze"));
+    int rc = SF_EBUSY, busy = 0;
+    int64_t t0 = clock_mono_ms();
+    while (rc == SF_EBUSY && clock_mono_ms() - t0 < DEADLINE_MS) {
+        T_DB_OK(sqldb_begin(other), other);
+        rc = run1(other, "SELECT pg_advisory_xact_lock(?)", EVENT_LOCK_KEY);
+        busy += rc == SF_EBUSY && strstr(sqldb_errmsg(other), "lock timeout") != NULL;
+        if (rc == SF_OK)
+            rc = sqldb_commit(other);
+        else
+            sqldb_rollback(other);
+    }
+    printf("# a writer waited %lld ms for a partitioned holder of the event lock (%d lock "
+           "timeouts)\n",
+           (long long)(clock_mono_ms() - t0), busy);
+    T_DB_OK(rc, other);
+    /* the holder's session was ended by the server (its lock went with it; its entry goes
+       as the process exits) */
+    char sql[128];
+    snprintf(sql, sizeof(sql),
+             "SELECT CASE WHEN count(*) = 0 THEN 1 ELSE 0 END FROM pg_stat_activity"
+             " WHERE pid = %lld",
+             (long long)pid);
+    T_TRUE(await_count(other, sql));
+    T_TRUE(proxy_cmd(&px, "heal"));
+    T_TRUE(sqldb_exec(held, "SELECT 1") != SF_OK); /* its transaction is gone, not resumed */
+    sqldb_rollback(held);
+    sqldb_close(held);
+    sqldb_close(other);
+    proxy_stop(&px);
+}

@@ -322,3 +322,27 @@ T_CASE(store_file_over_the_size_limit_is_refused)
     unlink(path);
     store_close(s);
 }
+
+/* A database that does not answer whether a file is stored (here its table is gone, as a lost
+   connection or a busy server would leave it) gives its error, not "no such file": a job was
+   failed as missing its part, a file sent again, for a failure that may pass. */
+T_CASE(store_file_lookup_failure_is_not_a_missing_file)
+{
+    FIRST_HOST(s, dir, "lookup", true);
+    char sha[STORE_SHA_HEX], path[1200];
+    T_OK(store_file_put(s, "solid x", 7, sha, &err), &err);
+    T_OK(t_store_exec(dir, "ALTER TABLE files RENAME TO files_away"), NULL);
+    T_ERR(store_file_path(s, sha, path, sizeof(path), &err), SF_EIO, &err, "files");
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    int64_t id = 0;
+    T_ERR(store_job_add(s, &o, sha, &id, &err), SF_EIO, &err, "files");
+    struct job_event_args g = { .prep_key = "any", .nozzle_mm = 0.4 };
+    T_ERR(store_job_add_gcode(s, &o, sha, &g, &id, &err), SF_EIO, &err, "files");
+    T_OK(t_store_exec(dir, "ALTER TABLE files_away RENAME TO files"), NULL);
+    T_OK(store_file_path(s, sha, path, sizeof(path), &err), &err);
+    T_OK(store_job_add(s, &o, sha, &id, &err), &err);
+    T_TRUE(id > 0);
+    store_close(s);
+}

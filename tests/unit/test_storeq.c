@@ -291,7 +291,7 @@ T_CASE(storeq_waits_out_a_locked_database_without_the_loop)
     /* a caller that must see the queue written is told "busy", not held */
     int commits = 0;
     storeq_set_commit(fx.q, count_commit, &commits);
-    T_EQ_INT(storeq_sync(fx.q, 50, &err), SF_EAGAIN);
+    T_EQ_INT(storeq_sync(fx.q, 50, &err), SF_EBUSY); /* busy: try again (503), not a refusal */
     T_TRUE(strstr(err.msg, "the store is busy") != NULL);
     sqldb_rollback(other);
     sqldb_close(other);
