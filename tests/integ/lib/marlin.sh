@@ -24,6 +24,9 @@ commands() { sed -e 's/;.*//' -e 's/[[:space:]]*$//' -e 's/^[[:space:]]*//' "$1"
 
 # start_sim ARGS...: run slimfarm-sim marlin ARGS in the background; sets $PORT.
 start_sim() {
+  # the last run's file goes first: the shell truncates it in the background job, so the
+  # wait below could see the old address and then read the file emptied (061 failed so)
+  rm -f "$TMP/sim.out"
   "$BUILD/bin/slimfarm-sim" marlin "$@" > "$TMP/sim.out" 2> "$TMP/sim.err" &
   SIM_PID=$!
   # up to 30 s: a sanitizer build starting on a loaded machine can take seconds
