@@ -131,13 +131,13 @@ int storeq_sync(struct storeq *q, int64_t max_ms, struct sf_err *err);
 
 /*
  * Run fn(s, arg, err) on the queue's thread with its connection s, after
- * every request posted before it (retried while it fails with SF_EIO, as
- * any request: fn must leave nothing behind when it fails, one store
- * transaction), then done(ud, r) on the loop with r->rc and r->err (r->id
- * 0; NULL done: a failure is logged with who in front).  arg is the
- * caller's until done runs: the thread reads and writes it, the loop must
- * not touch it meanwhile.  A successful call wakes the farm as an event
- * does (storeq_set_commit).  SF_OK, or SF_ENOMEM (done is not called).
+ * every request posted before it (retried while it fails with SF_EBUSY or
+ * SF_EUNREACH, read back on SF_EINDOUBT, as any request: fn must leave
+ * nothing behind when it fails, one store transaction), then done(ud, r) on the loop with r->rc and
+ * r->err (r->id 0; NULL done: a failure is logged with who in front).  arg is the caller's until
+ * done runs: the thread reads and writes it, the loop must not touch it meanwhile.  A successful
+ * call wakes the farm as an event does (storeq_set_commit).  SF_OK, or SF_ENOMEM (done is not
+ * called).
  */
 typedef int (*storeq_call_fn)(struct store *s, void *arg, struct sf_err *err);
 int storeq_call(struct storeq *q, storeq_call_fn fn, void *arg, const char *who,
