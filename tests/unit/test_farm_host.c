@@ -29,6 +29,7 @@
 #include "../../src/farm/farmcfg.h"
 #include "../../src/farm/store_host.h"
 #include "../t.h"
+#include "../tproxy.h"
 #include "../tstore.h"
 
 #define LEASE_MS (600 * 1000)
@@ -569,57 +570,6 @@ T_CASE(host_listens_again_after_its_connection_is_cut)
 
 /* ---- a network cut (tests/tools/tcpproxy) ---- */
 
-extern char **environ;
-
-/* A proxy to the server's TCP port: its pid and command pipes. */
-struct proxy {
-    pid_t pid;
-    FILE *cmd, *out;
-    int port;
-};
-
-static bool
-proxy_start(struct proxy *p)
-{
-    int in[2], out[2];
-    if (pipe(in) || pipe(out))
-        return false;
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_adddup2(&fa, in[0], 0);
-    posix_spawn_file_actions_adddup2(&fa, out[1], 1);
-    posix_spawn_file_actions_addclose(&fa, in[1]);
-    posix_spawn_file_actions_addclose(&fa, out[0]);
-    char *argv[] = { getenv("SLIMFARM_TEST_PROXY"), getenv("SLIMFARM_TEST_PG_PORT"), NULL };
-    int rc = posix_spawn(&p->pid, argv[0], &fa, NULL, argv, environ);
-    posix_spawn_file_actions_destroy(&fa);
-    close(in[0]);
-    close(out[1]);
-    p->cmd = fdopen(in[1], "w");
-    p->out = fdopen(out[0], "r");
-    char line[64];
-    return rc == 0 && p->cmd && p->out && fgets(line, sizeof(line), p->out) &&
-           sscanf(line, "port %d", &p->port) == 1;
-}
-
-/* Send cmd and wait for its "ok" (the cut is made when this returns). */
-static bool
-proxy_cmd(struct proxy *p, const char *cmd)
-{
-    char line[128];
-    fprintf(p->cmd, "%s\n", cmd);
-    fflush(p->cmd);
-    return fgets(line, sizeof(line), p->out) && strncmp(line, "ok ", 3) == 0;
-}
-
-static void
-proxy_stop(struct proxy *p)
-{
-    fclose(p->cmd); /* end of its stdin ends it */
-    fclose(p->out);
-    waitpid(p->pid, NULL, 0);
-}
-
 /* A prepare that writes a tiny G-code for the job's printer. */
 static int
 gcode_prepare(const struct prepare_req *req, struct prepare_out *out, const atomic_bool *cancel,
@@ -720,7 +670,7 @@ T_CASE(host_claim_in_doubt_is_given_back_not_stranded)
     T_OK(store_job_add(a, &o, sha, &id, &err), &err);
     /* host b reaches the database through the proxy */
     struct proxy px;
-    T_TRUE(proxy_start(&px));
+    T_TRUE(proxy_start(&px, getenv("SLIMFARM_TEST_PROXY"), getenv("SLIMFARM_TEST_PG_PORT")));
     snprintf(purl, sizeof(purl), "postgresql://postgres@127.0.0.1:%d/%s", px.port, db);
     struct cutter c = { .url = url, .px = &px };
     pthread_t t;

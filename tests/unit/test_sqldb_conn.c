@@ -29,8 +29,7 @@
 #include "../../src/farm/store_host.h"
 #include "../../src/farm/storeq.h"
 #include "../t.h"
-
-extern char **environ;
+#include "../tproxy.h"
 
 #define DEADLINE_MS 60000 /* a condition that must come: generous for a loaded machine */
 
@@ -61,53 +60,11 @@ nap_ms(int ms)
     nanosleep(&(struct timespec){ .tv_sec = ms / 1000, .tv_nsec = (ms % 1000) * 1000000L }, NULL);
 }
 
-/* A proxy (tests/tools/tcpproxy) to the server's port: its pid and command pipes. */
-struct proxy {
-    pid_t pid;
-    FILE *cmd, *out;
-    int port;
-};
-
+/* A proxy to the test server's port (tproxy.h). */
 static bool
-proxy_start(struct proxy *p)
+conn_proxy(struct proxy *p)
 {
-    int in[2], out[2];
-    if (pipe(in) || pipe(out))
-        return false;
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_adddup2(&fa, in[0], 0);
-    posix_spawn_file_actions_adddup2(&fa, out[1], 1);
-    posix_spawn_file_actions_addclose(&fa, in[1]);
-    posix_spawn_file_actions_addclose(&fa, out[0]);
-    char *argv[] = { getenv("SQLDB_CONN_PROXY"), getenv("SQLDB_CONN_PORT"), NULL };
-    int rc = posix_spawn(&p->pid, argv[0], &fa, NULL, argv, environ);
-    posix_spawn_file_actions_destroy(&fa);
-    close(in[0]);
-    close(out[1]);
-    p->cmd = fdopen(in[1], "w");
-    p->out = fdopen(out[0], "r");
-    char line[64];
-    return rc == 0 && p->cmd && p->out && fgets(line, sizeof(line), p->out) &&
-           sscanf(line, "port %d", &p->port) == 1;
-}
-
-/* Send cmd and wait for its "ok" (the cut is made when this returns). */
-static bool
-proxy_cmd(struct proxy *p, const char *cmd)
-{
-    char line[128];
-    fprintf(p->cmd, "%s\n", cmd);
-    fflush(p->cmd);
-    return fgets(line, sizeof(line), p->out) && strncmp(line, "ok ", 3) == 0;
-}
-
-static void
-proxy_stop(struct proxy *p)
-{
-    fclose(p->cmd); /* end of its stdin ends it */
-    fclose(p->out);
-    waitpid(p->pid, NULL, 0);
+    return proxy_start(p, getenv("SQLDB_CONN_PROXY"), getenv("SQLDB_CONN_PORT"));
 }
 
 /* The test database through the proxy. */
@@ -134,7 +91,7 @@ open_url(const char *url)
 static bool
 cut_setup(struct proxy *px, struct sqldb **via, struct sqldb **direct)
 {
-    if (!proxy_start(px))
+    if (!conn_proxy(px))
         return false;
     *via = open_url(proxy_url(px));
     *direct = open_url(getenv("SQLDB_CONN_URL"));
@@ -382,7 +339,7 @@ T_CASE(sqldb_pg_reconnect_is_bounded_and_keeps_the_session)
 {
     T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
     struct proxy px;
-    T_TRUE(proxy_start(&px));
+    T_TRUE(conn_proxy(&px));
     struct sf_err err;
     struct sqldb *db = sqldb_open(proxy_url(&px), SQLDB_READONLY, &err);
     T_OK(db ? SF_OK : err.code, &err);
@@ -417,7 +374,7 @@ T_CASE(sqldb_pg_store_holds_its_lock_after_a_cut)
 {
     T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
     struct proxy px;
-    T_TRUE(proxy_start(&px));
+    T_TRUE(conn_proxy(&px));
     struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
     T_TRUE(direct != NULL);
     char dir[512], dir2[512];
@@ -458,7 +415,7 @@ T_CASE(sqldb_pg_nowait_reconnect_never_waits_on_connect)
 {
     T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
     struct proxy px;
-    T_TRUE(proxy_start(&px));
+    T_TRUE(conn_proxy(&px));
     struct sf_err err;
     struct sqldb *db = sqldb_open(proxy_url(&px), SQLDB_NOWAIT, &err);
     T_OK(db ? SF_OK : err.code, &err);
@@ -587,7 +544,7 @@ T_CASE(storeq_start_in_doubt_is_read_back_not_refused)
 {
     T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
     struct proxy px;
-    T_TRUE(proxy_start(&px));
+    T_TRUE(conn_proxy(&px));
     struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
     T_TRUE(direct != NULL);
     char dir[512];
@@ -649,7 +606,7 @@ T_CASE(sqldb_pg_host_name_lock_is_taken_again_after_a_cut)
 {
     T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
     struct proxy px;
-    T_TRUE(proxy_start(&px));
+    T_TRUE(conn_proxy(&px));
     struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
     T_TRUE(direct != NULL);
     char dir[512], dir2[512];
@@ -705,7 +662,7 @@ T_CASE(storeq_job_add_in_doubt_keeps_its_id)
 {
     T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
     struct proxy px;
-    T_TRUE(proxy_start(&px));
+    T_TRUE(conn_proxy(&px));
     struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
     T_TRUE(direct != NULL);
     char dir[512];
@@ -764,7 +721,7 @@ T_CASE(sqldb_pg_partitioned_event_lock_is_cut_by_the_server)
 {
     T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
     struct proxy px;
-    T_TRUE(proxy_start(&px));
+    T_TRUE(conn_proxy(&px));
     struct sf_err err;
     struct sqldb *held = sqldb_open(proxy_url(&px), 0, &err);
     T_OK(held ? SF_OK : err.code, &err);
