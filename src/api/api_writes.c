@@ -24,6 +24,7 @@
 
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "../farm/farm_remote.h"
 #include "../farm/jobctl.h"
 #include "api_compat.h"
 #include "api_json.h"
@@ -83,8 +84,12 @@ on_written(void *ud, const struct storeq_result *r)
                 *pp = w->next;
                 break;
             }
-        /* a cancel of a job on another host's printer: that host stops it, and answers */
-        if (r->rc == SF_EAGAIN && w->on[0] && api_remote_answer(ws->farm, w->on, "cancel", w->d)) {
+        /* a cancel of a job on another host's printer: that host stops it, and answers; by
+           the job's id, so that it refuses once its printer prints another job */
+        char id[24];
+        snprintf(id, sizeof(id), "%lld", (long long)w->id);
+        if (r->rc == SF_EAGAIN && w->on[0] &&
+            api_remote_answer(ws->farm, w->on, FARM_REMOTE_CANCEL_JOB, id, w->d)) {
             free(w);
             return;
         }

@@ -409,6 +409,18 @@ run_one(struct farm_remote *r, const struct store_command *c)
             r->inflight++;
             return;
         }
+    } else if (strcmp(c->kind, FARM_REMOTE_CANCEL_JOB) == 0) {
+        char *end = NULL;
+        long long id = strtoll(c->line, &end, 10);
+        if (!c->line[0] || *end || id <= 0) {
+            rc = sf_err_set(&err, SF_EINVAL, "cancel-job: job id '%.32s' is not a job id", c->line);
+        } else {
+            rc = jobctl_cancel_job_on(r->f, c->printer, id, on_acted, x, &err);
+            if (rc == SF_OK) {
+                r->inflight++;
+                return;
+            }
+        }
     } else if (strcmp(c->kind, "command") == 0) {
         rc = jobctl_printer_command(r->f, c->printer, c->line, who, &err);
     } else if (strcmp(c->kind, "emergency-stop") == 0) {
