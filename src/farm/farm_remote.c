@@ -54,7 +54,7 @@ struct ask {
     struct ask *next;
     /* the store thread's while busy */
     struct store_command c; /* in: printer, from, kind, line, who; out: the row */
-    int64_t now_ms, deadline_ms;
+    int64_t now_ms;         /* the wall clock at the ask: judges the owner's lease */
     enum ask_op op;
     /* the loop's */
     char printer[64]; /* c.printer's copy: the answer at a stop reads it while c may change */
@@ -63,6 +63,7 @@ struct ask {
     bool heard;       /* a NOTIFY came while busy: read again */
     bool late;        /* the deadline passed while busy: withdraw next */
     uint64_t timer;   /* the deadline */
+    int64_t end_ms;   /* its monotonic time (the row's deadline is the database's clock) */
     farm_remote_fn done;
     void *ud;
 };
@@ -129,7 +130,7 @@ add_fn(struct store *s, void *arg, struct sf_err *err)
 {
     struct ask *a = arg;
     return store_command_add(s, a->c.from, a->c.printer, a->c.kind, a->c.line, a->c.who, a->now_ms,
-                             a->deadline_ms, &a->c, err);
+                             FARM_REMOTE_WAIT_MS, &a->c, err);
 }
 
 static int
@@ -242,7 +243,7 @@ on_ask(void *ud, const struct storeq_result *res)
         return;
     }
     if (a->op == ASK_ADD) {
-        int64_t left = a->deadline_ms - clock_wall_ms();
+        int64_t left = a->end_ms - clock_mono_ms();
         a->timer = loop_timer_add(r->f->l, left > 0 ? left : 0, on_deadline, a);
         a->heard = true; /* the answer may have come before the row's id was known */
     }
@@ -281,7 +282,7 @@ farm_remote_send(struct farm *f, const char *name, const char *kind, const char 
     snprintf(a->c.line, sizeof(a->c.line), "%s", line ? line : "");
     snprintf(a->c.who, sizeof(a->c.who), "%s", who ? who : "");
     a->now_ms = clock_wall_ms();
-    a->deadline_ms = a->now_ms + FARM_REMOTE_WAIT_MS;
+    a->end_ms = clock_mono_ms() + FARM_REMOTE_WAIT_MS;
     a->r = r;
     a->done = done;
     a->ud = ud;
@@ -304,7 +305,7 @@ farm_remote_send(struct farm *f, const char *name, const char *kind, const char 
 struct run {
     struct farm_remote *r;
     char host[STORE_HOST_NAME_MAX];
-    int64_t now_ms;
+    int64_t taken_ms;           /* the monotonic clock once taken: with each row's left_ms, */
     struct store_command *rows; /* the take's */
     size_t n;
     /* one command's */
@@ -320,7 +321,9 @@ take_fn(struct store *s, void *arg, struct sf_err *err)
     struct run *t = arg;
     free(t->rows); /* a retry's */
     t->rows = NULL;
-    return store_command_take(s, t->host, t->now_ms, &t->rows, &t->n, err);
+    int rc = store_command_take(s, t->host, &t->rows, &t->n, err);
+    t->taken_ms = clock_mono_ms();
+    return rc;
 }
 
 static int
@@ -381,9 +384,9 @@ on_acted(void *ud, const struct storeq_result *res)
     finish(x, res->rc, res->rc ? res->err->msg : "");
 }
 
-/* Run command c through this host's own action path. */
+/* Run command c, taken at taken_ms (monotonic), through this host's own action path. */
 static void
-run_one(struct farm_remote *r, const struct store_command *c)
+run_one(struct farm_remote *r, const struct store_command *c, int64_t taken_ms)
 {
     struct run *x = mem_calloc(1, sizeof(*x));
     struct sf_err err = { 0 };
@@ -401,7 +404,7 @@ run_one(struct farm_remote *r, const struct store_command *c)
     char who[96];
     snprintf(who, sizeof(who), "%s@%s", c->who[0] ? c->who : "?", c->from);
     int rc;
-    if (clock_wall_ms() >= c->deadline_ms) {
+    if (clock_mono_ms() - taken_ms >= c->left_ms) { /* the loop came late to it */
         rc = sf_err_set(&err, SF_ETIMEDOUT, "came after its deadline: not run");
     } else if (printer_action_parse(c->kind, &act)) {
         rc = jobctl_printer_action_then(r->f, c->printer, act, on_acted, x, &err);
@@ -444,7 +447,7 @@ on_taken(void *ud, const struct storeq_result *res)
         if (res->rc)
             log_warn("remote", "%s: take the commands for this host: %s", t->host, res->err->msg);
         for (size_t i = 0; res->rc == SF_OK && i < t->n; i++)
-            run_one(r, &t->rows[i]);
+            run_one(r, &t->rows[i], t->taken_ms);
         if (r->retake) {
             r->retake = false;
             take(r);
@@ -469,7 +472,6 @@ take(struct farm_remote *r)
         return;
     }
     t->r = r;
-    t->now_ms = clock_wall_ms();
     if (storeq_call(r->f->q, take_fn, t, "remote", on_taken, t)) {
         free(t);
         return;
