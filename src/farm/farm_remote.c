@@ -9,7 +9,8 @@
  * handled when the request is back.  The listener is a connection of its
  * own, as farm_host.c's (a notification that arrives during another call
  * does not wake the fd), drained on the loop: reading a socket, never
- * waiting.
+ * waiting; a lost one reconnects a step at a time (store_open_listener's
+ * SQLDB_NOWAIT), never with a blocking PQreset on the loop.
  *
  * Stopping: the store queue is freed after this (farm_free), and delivers
  * what is in flight then; so the state outlives farm_remote_stop until
@@ -32,13 +33,17 @@
 #include "store_command.h"
 #include "storeq.h"
 
-#define RELISTEN_MS 1000 /* a lost listener is tried again this often */
+/* A lost listener is tried again this often: each try advances its connect without waiting
+   (store_open_listener), so a few tries bring it back once the server answers. */
+#define RELISTEN_MS 200
 
 struct farm_remote {
     struct farm *f;
     struct store *ls; /* the listener's connection */
     int fd;           /* its socket on the loop, -1 if none */
+    int64_t fd_gen;   /* the listener's reconnects (store_host_reconnects) when fd was added */
     uint64_t retry;   /* timer: listen again */
+    bool lost;        /* the listener is lost: said so (once until it is back) */
     int inflight;     /* requests on the store queue that point here */
     bool stopped;     /* farm_remote_stop ran: free once inflight is 0 */
     bool taking;      /* a take is on its way */
@@ -499,7 +504,8 @@ on_payload(void *ud, const char *host)
     }
 }
 
-static void arm(struct farm_remote *r);
+static bool arm(struct farm_remote *r);
+static void retry(struct farm_remote *r);
 
 static void
 drop(struct farm_remote *r)
@@ -515,7 +521,20 @@ on_relisten(struct loop *l, void *ud)
     (void)l;
     struct farm_remote *r = ud;
     r->retry = 0;
-    arm(r);
+    if (!arm(r))
+        retry(r);
+}
+
+/* Try the lost listener again in RELISTEN_MS (saying so once). */
+static void
+retry(struct farm_remote *r)
+{
+    if (!r->lost)
+        log_warn("remote", "the commands' wake-up connection is lost; trying again every %d ms",
+                 RELISTEN_MS);
+    r->lost = true;
+    if (!r->retry)
+        r->retry = loop_timer_add(r->f->l, RELISTEN_MS, on_relisten, r);
 }
 
 static void
@@ -524,29 +543,39 @@ on_readable(struct loop *l, int fd, unsigned events, void *ud)
     (void)l, (void)fd, (void)events;
     struct farm_remote *r = ud;
     int n = store_command_drain(r->ls, on_payload, r);
-    if (n < 0 || store_command_notify_fd(r->ls) != r->fd) {
-        if (n < 0)
-            log_warn("remote", "the commands' wake-up connection was lost; retrying");
-        drop(r);
-        arm(r);
-    }
+    if (n >= 0 && store_host_reconnects(r->ls) == r->fd_gen &&
+        store_command_notify_fd(r->ls) == r->fd)
+        return;
+    /* lost, or back already on a new session whose socket is a new one (perhaps under the old
+       number, which epoll dropped when the old socket closed): watch it again, or retry */
+    drop(r);
+    if (!arm(r))
+        retry(r);
 }
 
-/* Watch the listener (again): drain first, which reconnects a lost connection; else retry. */
-static void
+/* Watch the listener (again): drain first, which advances the reconnect of a lost connection
+   without waiting (store_open_listener: the loop never blocks on the database).  False while
+   it is not back. */
+static bool
 arm(struct farm_remote *r)
 {
     struct sf_err err;
-    int fd = -1;
-    if (store_command_drain(r->ls, on_payload, r) >= 0 &&
-        (fd = store_command_notify_fd(r->ls)) >= 0 &&
-        loop_add_fd(r->f->l, fd, LOOP_READ, on_readable, r, &err) == SF_OK) {
-        r->fd = fd;
-        take(r); /* what was asked while it was away */
-        return;
+    if (store_command_drain(r->ls, on_payload, r) < 0)
+        return false;
+    int fd = store_command_notify_fd(r->ls);
+    if (fd < 0)
+        return false;
+    if (loop_add_fd(r->f->l, fd, LOOP_READ, on_readable, r, &err)) {
+        log_warn("remote", "%s", err.msg);
+        return false;
     }
-    if (!r->retry)
-        r->retry = loop_timer_add(r->f->l, RELISTEN_MS, on_relisten, r);
+    r->fd = fd;
+    r->fd_gen = store_host_reconnects(r->ls);
+    if (r->lost)
+        log_info("remote", "the commands' wake-up connection is back");
+    r->lost = false;
+    take(r); /* what was asked while it was away */
+    return true;
 }
 
 int
@@ -562,7 +591,8 @@ farm_remote_start(struct farm *f, struct sf_err *err)
         sf_err_prefix(err, "remote commands: wake-up connection");
         return err->code;
     }
-    arm(r);
+    if (!arm(r))
+        retry(r);
     return SF_OK;
 }
 

@@ -10,8 +10,10 @@
  * pending rows and runs each through its own action path (jobctl.h: the
  * same checks and refusals as its own API), then writes the result.
  *
- * Each host listens on a connection of its own (store_command_listen),
- * watched on the loop's epoll; a lost one is retried every second.  Every
+ * Each host listens on a connection of its own (store_command_listen on a
+ * store_open_listener: its reconnect never waits for the network), watched
+ * on the loop's epoll; a lost one is tried again every 200 ms, each try a
+ * step of its connect.  Every
  * call is a no-op, or refuses, on a farm that is not one of several hosts.
  * Thread: the loop thread.
  */
