@@ -15,11 +15,16 @@
  * Stopping: the store queue is freed after this (farm_free), and delivers
  * what is in flight then; so the state outlives farm_remote_stop until
  * the last request in flight is back (inflight), and answers nothing more.
+ * Nothing is left running that nobody runs: a take still queued at the stop
+ * takes nothing (stopping), and a row taken, or an action that ran, whose
+ * answer comes back only while the queue closes (its thread gone) has its
+ * result written on the loop's own connection (finish_now).
  *
  * Thread: the loop thread; the *_fn functions on the store's.
  */
 #include "farm_remote.h"
 
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -39,16 +44,17 @@
 
 struct farm_remote {
     struct farm *f;
-    struct store *ls; /* the listener's connection */
-    int fd;           /* its socket on the loop, -1 if none */
-    int64_t fd_gen;   /* the listener's reconnects (store_host_reconnects) when fd was added */
-    uint64_t retry;   /* timer: listen again */
-    bool lost;        /* the listener is lost: said so (once until it is back) */
-    int inflight;     /* requests on the store queue that point here */
-    bool stopped;     /* farm_remote_stop ran: free once inflight is 0 */
-    bool taking;      /* a take is on its way */
-    bool retake;      /* woken meanwhile: take again once it is back */
-    struct ask *asks; /* this host's commands waiting for their answer */
+    struct store *ls;     /* the listener's connection */
+    int fd;               /* its socket on the loop, -1 if none */
+    int64_t fd_gen;       /* the listener's reconnects (store_host_reconnects) when fd was added */
+    uint64_t retry;       /* timer: listen again */
+    bool lost;            /* the listener is lost: said so (once until it is back) */
+    int inflight;         /* requests on the store queue that point here */
+    bool stopped;         /* farm_remote_stop ran: free once inflight is 0 */
+    atomic_bool stopping; /* the same, for the store thread: a take queued then takes nothing */
+    bool taking;          /* a take is on its way */
+    bool retake;          /* woken meanwhile: take again once it is back */
+    struct ask *asks;     /* this host's commands waiting for their answer */
 };
 
 enum ask_op { ASK_ADD, ASK_READ, ASK_EXPIRE };
@@ -326,6 +332,9 @@ take_fn(struct store *s, void *arg, struct sf_err *err)
     struct run *t = arg;
     free(t->rows); /* a retry's */
     t->rows = NULL;
+    t->n = 0;
+    if (atomic_load(&t->r->stopping))
+        return SF_OK; /* nobody would run what it takes: left pending, for its deadline */
     int rc = store_command_take(s, t->host, &t->rows, &t->n, err);
     t->taken_ms = clock_mono_ms();
     return rc;
@@ -374,6 +383,19 @@ finish(struct run *x, int rc, const char *msg)
     r->inflight++;
 }
 
+/* Write command id's result (rc, msg) now on the loop's connection, at a stop: the store
+   queue's thread is gone, and the row must not stay running. */
+static void
+finish_now(struct farm_remote *r, int64_t id, const char *printer, int rc, const char *msg)
+{
+    struct sf_err err;
+    struct printer *p = farm_find(r->f, printer);
+    if (store_command_finish(r->f->s, id, rc, msg, p ? printer_state_name(printer_state(p)) : "",
+                             &err))
+        log_warn("remote", "printer %s: command %lld's result at the stop: %s", printer,
+                 (long long)id, err.msg);
+}
+
 /* An action's write is back (jobctl_printer_action_then): its result. */
 static void
 on_acted(void *ud, const struct storeq_result *res)
@@ -381,7 +403,8 @@ on_acted(void *ud, const struct storeq_result *res)
     struct run *x = ud;
     struct farm_remote *r = x->r;
     r->inflight--;
-    if (r->stopped) {
+    if (r->stopped) { /* it ran: its result, written before the queue's connection closes */
+        finish_now(r, x->id, x->printer, res->rc, res->rc ? res->err->msg : "");
         free(x);
         release(r);
         return;
@@ -457,6 +480,10 @@ on_taken(void *ud, const struct storeq_result *res)
             r->retake = false;
             take(r);
         }
+    } else {
+        for (size_t i = 0; res->rc == SF_OK && i < t->n; i++) /* taken, and nobody runs it */
+            finish_now(r, t->rows[i].id, t->rows[i].printer, SF_ECANCELED,
+                       "its host stopped before it ran: not run");
     }
     free(t->rows);
     free(t);
@@ -586,8 +613,9 @@ farm_remote_start(struct farm *f, struct sf_err *err)
         return sf_err_set(err, SF_ENOMEM, "remote commands: out of memory");
     r->f = f;
     r->fd = -1;
+    atomic_init(&r->stopping, false);
     f->remote = r;
-    if (!(r->ls = store_open_peer(f->s, err)) || store_command_listen(r->ls, err)) {
+    if (!(r->ls = store_open_listener(f->s, err)) || store_command_listen(r->ls, err)) {
         sf_err_prefix(err, "remote commands: wake-up connection");
         return err->code;
     }
@@ -602,6 +630,7 @@ farm_remote_stop(struct farm *f)
     struct farm_remote *r = f ? f->remote : NULL;
     if (!r)
         return;
+    atomic_store(&r->stopping, true);
     drop(r);
     if (r->retry)
         loop_timer_cancel(f->l, r->retry);
