@@ -545,7 +545,7 @@ T_CASE(host_listens_again_after_its_connection_is_cut)
     T_OK(sqldb_exec(cut, sql), NULL);
     snprintf(sql, sizeof(sql),
              "SELECT count(pg_terminate_backend(pid)) FROM pg_stat_activity"
-             " WHERE datname = '%s' AND query LIKE 'LISTEN%%'",
+             " WHERE datname = '%s' AND query LIKE 'LISTEN%%" STORE_HOST_CHANNEL "%%'",
              db);
     struct sqldb_stmt *st;
     T_OK(sqldb_prepare(cut, sql, &st), NULL);
