@@ -514,13 +514,10 @@ take(struct farm_remote *r)
 
 /* ---- the listener ---- */
 
+/* Take this host's commands, and read the answers to the ones it asked again. */
 static void
-on_payload(void *ud, const char *host)
+wake(struct farm_remote *r)
 {
-    struct farm_remote *r = ud;
-    char me[STORE_HOST_NAME_MAX];
-    if (!farm_host_reader(r->f, me, sizeof(me)) || strcmp(host, me) != 0)
-        return;
     take(r);                                            /* a command for this host's printers, */
     for (struct ask *a = r->asks, *next; a; a = next) { /* or an answer to one it asked */
         next = a->next;
@@ -529,6 +526,15 @@ on_payload(void *ud, const char *host)
         else if (a->c.id)
             post(a, ASK_READ);
     }
+}
+
+static void
+on_payload(void *ud, const char *host)
+{
+    struct farm_remote *r = ud;
+    char me[STORE_HOST_NAME_MAX];
+    if (farm_host_reader(r->f, me, sizeof(me)) && strcmp(host, me) == 0)
+        wake(r);
 }
 
 static bool arm(struct farm_remote *r);
@@ -601,7 +607,7 @@ arm(struct farm_remote *r)
     if (r->lost)
         log_info("remote", "the commands' wake-up connection is back");
     r->lost = false;
-    take(r); /* what was asked while it was away */
+    wake(r); /* what was asked, or answered, while it was away (its NOTIFY lost) */
     return true;
 }
 
