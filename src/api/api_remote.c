@@ -23,7 +23,7 @@
 
 struct remote_wait {
     struct http_defer *d;
-    char line[256]; /* a manual command's line, echoed in the answer ("": none) */
+    char line[SF_COMMAND_MAX + 1]; /* a manual command's line, echoed in the answer ("": none) */
 };
 
 static void

@@ -267,6 +267,16 @@ on_ask(void *ud, const struct storeq_result *res)
     }
 }
 
+/* SF_EINVAL naming printer's field and its limit when v (may be NULL) is longer than cap - 1. */
+static int
+fits(const char *printer, const char *field, const char *v, size_t cap, struct sf_err *err)
+{
+    if (v && strlen(v) >= cap)
+        return sf_err_set(err, SF_EINVAL, "printer %.64s: %s is longer than %zu bytes", printer,
+                          field, cap - 1);
+    return SF_OK;
+}
+
 int
 farm_remote_send(struct farm *f, const char *name, const char *kind, const char *line,
                  const char *who, farm_remote_fn done, void *ud, struct sf_err *err)
@@ -281,10 +291,13 @@ farm_remote_send(struct farm *f, const char *name, const char *kind, const char 
     struct ask *a = mem_calloc(1, sizeof(*a));
     if (!a)
         return sf_err_set(err, SF_ENOMEM, "remote command: out of memory");
-    if (strlen(name) >= sizeof(a->c.printer) || strlen(kind) >= sizeof(a->c.kind) ||
-        (line && strlen(line) >= sizeof(a->c.line)) || (who && strlen(who) >= sizeof(a->c.who))) {
+    int rc;
+    if ((rc = fits(name, "printer", name, sizeof(a->c.printer), err)) ||
+        (rc = fits(name, "kind", kind, sizeof(a->c.kind), err)) ||
+        (rc = fits(name, "command", line, sizeof(a->c.line), err)) ||
+        (rc = fits(name, "who", who, sizeof(a->c.who), err))) {
         free(a);
-        return sf_err_set(err, SF_EINVAL, "printer %.64s: command too long", name);
+        return rc;
     }
     snprintf(a->c.printer, sizeof(a->c.printer), "%s", name);
     snprintf(a->printer, sizeof(a->printer), "%s", name);

@@ -29,12 +29,13 @@
 #include <stdint.h>
 
 #include "../base/err.h"
+#include "../base/limits.h"
 #include "store.h"
 #include "store_host.h"
 
 #define STORE_COMMAND_CHANNEL  "slimfarm_commands"
-#define STORE_COMMAND_LINE_MAX 256     /* a manual G-code line (SF_COMMAND_MAX is below it) */
-#define STORE_COMMAND_KEEP_MS  3600000 /* finished rows are deleted after an hour */
+#define STORE_COMMAND_LINE_MAX (SF_COMMAND_MAX + 1) /* a manual G-code line and its NUL */
+#define STORE_COMMAND_KEEP_MS  3600000              /* finished rows are deleted after an hour */
 
 enum store_command_state {
     STORE_CMD_PENDING = 0, /* written, the owner has not taken it */

@@ -170,6 +170,17 @@ T_CASE(command_to_a_host_down_or_no_printer_is_refused)
           SF_ENOTFOUND, &err, "no printer 'nope' on any host");
     T_ERR(store_command_add(p.b, "b", "p2", "pause", NULL, NULL, now, WAIT_MS, &c, &err), SF_EINVAL,
           &err, "host b's own");
+    /* a manual line as long as the API takes (SF_COMMAND_MAX) is carried; one more is named */
+    char line[SF_COMMAND_MAX + 2];
+    memset(line, 'M', SF_COMMAND_MAX);
+    line[SF_COMMAND_MAX] = '\0';
+    T_OK(store_command_add(p.b, "b", "p1", "command", line, NULL, now, WAIT_MS, &c, &err), &err);
+    T_EQ_INT(strlen(c.line), SF_COMMAND_MAX);
+    T_OK(store_command_expire(p.b, c.id, &c, &err), &err); /* not for the take below */
+    line[SF_COMMAND_MAX] = 'M';
+    line[SF_COMMAND_MAX + 1] = '\0';
+    T_ERR(store_command_add(p.b, "b", "p1", "command", line, NULL, now, WAIT_MS, &c, &err),
+          SF_EINVAL, &err, "line is longer than 256 bytes");
     T_ERR(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, now, 0, &c, &err), SF_EINVAL, &err,
           "not after now");
     /* a's lease runs out: its printer is offline to the others, nothing is written */
