@@ -47,7 +47,7 @@ on_answer(void *ud, const struct farm_remote_result *r)
 
 bool
 api_remote_answer(struct farm *f, const char *name, const char *kind, const char *line,
-                  struct http_defer *d)
+                  const char *who, struct http_defer *d)
 {
     if (!farm_remote_is(f, name))
         return false;
@@ -55,7 +55,7 @@ api_remote_answer(struct farm *f, const char *name, const char *kind, const char
     struct remote_wait *w = mem_calloc(1, sizeof(*w));
     if (w)
         w->d = d;
-    int rc = w ? farm_remote_send(f, name, kind, line, NULL, on_answer, w, &err)
+    int rc = w ? farm_remote_send(f, name, kind, line, who, on_answer, w, &err)
                : sf_err_set(&err, SF_ENOMEM, "printer %.64s: out of memory", name);
     if (rc == SF_OK)
         return true;

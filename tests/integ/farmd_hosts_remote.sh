@@ -99,6 +99,9 @@ listed() { on a api /api/printers | json '" ".join(p["name"] + ":" + p["host"] +
 farm_is() { [ "$(listed)" = "$1" ]; }
 wait_for 30 farm_is "a_mk:a:idle b_mk:b:paused c_mk:c:idle" || fail "a lists: $(listed)"
 grep -q "printer b_mk: pause from host a done" "$tmp/b.log" || fail "b's log: $(grep remote "$tmp/b.log")"
+# the operator goes with it, as with a G-code line (the key's label, never the key)
+[[ "$(psql_q "SELECT who FROM commands WHERE kind = 'pause' ORDER BY id LIMIT 1")" == "key "* ]] ||
+  fail "the pause's operator: $(psql_q 'SELECT id, kind, who FROM commands ORDER BY id')"
 act a b_mk resume
 took_resume=$took
 [ "$code" = 200 ] && [ "$(body 'd["printer"]["state"]')" = printing ] ||
@@ -166,7 +169,7 @@ code=$(curl -s -o "$tmp/act.body" -w '%{http_code}' -X POST -H "X-Api-Key: $RW" 
 [ "$code" = 200 ] || fail "cancel job $job through a: $code $(cat "$tmp/act.body")"
 cancelled() { [ "$(on a job_state "$job")" = cancelled ]; }
 wait_for 60 cancelled || fail "job $job after the cancel: $(on a job_state "$job")"
-[ "$(psql_q "SELECT kind || ' ' || line FROM commands ORDER BY id DESC LIMIT 1")" = "cancel-job $job" ] ||
+[[ "$(psql_q "SELECT kind || ' ' || line || ' ' || who FROM commands ORDER BY id DESC LIMIT 1")" == "cancel-job $job key "* ]] ||
   fail "the cancel's row: $(psql_q 'SELECT id, kind, line, state FROM commands ORDER BY id')"
 for h in a b; do kill -TERM "${hpid[$h]}"; wait "${hpid[$h]}"; unset "hpid[$h]"; done
 echo "farmd_hosts_remote: ok (pause ${took_pause} s, resume ${took_resume} s through a; refusal, G-code, 504 after ${waited} s, host down; $(($(date +%s) - t0)) s)"
