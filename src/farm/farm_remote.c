@@ -73,6 +73,7 @@ struct ask {
     bool answered;    /* done was called: freed once no request is on its way */
     bool heard;       /* a NOTIFY came while busy: read again */
     bool late;        /* the deadline passed while busy: withdraw next */
+    bool no_timer;    /* its deadline's timer could not be added: withdrawn at once */
     uint64_t timer;   /* the deadline */
     int64_t end_ms;   /* its monotonic time (the row's deadline is the database's clock) */
     farm_remote_fn done;
@@ -196,6 +197,16 @@ static void
 withdrawn(struct ask *a)
 {
     char msg[256];
+    if (a->c.state != STORE_CMD_DONE && a->no_timer) {
+        snprintf(msg, sizeof(msg), "printer %s: out of memory for the %s's deadline: %s",
+                 a->c.printer, a->c.kind,
+                 a->c.state == STORE_CMD_RUNNING ? "host took it and may still act (see the "
+                                                   "printer's state)"
+                                                 : "withdrawn, it will not run");
+        log_error("remote", "%s", msg);
+        answer(a, SF_ENOMEM, msg);
+        return;
+    }
     switch (a->c.state) {
     case STORE_CMD_DONE:
         answer_row(a);
@@ -257,6 +268,9 @@ on_ask(void *ud, const struct storeq_result *res)
         int64_t left = a->end_ms - clock_mono_ms();
         a->timer = loop_timer_add(r->f->l, left > 0 ? left : 0, on_deadline, a);
         a->heard = true; /* the answer may have come before the row's id was known */
+        if (!a->timer) { /* no deadline would answer it: withdraw it now, SF_ENOMEM */
+            a->no_timer = a->late = true;
+        }
     }
     if (a->late) {
         a->late = false;
