@@ -208,15 +208,20 @@ on_heard(void *ud, const char *host)
     h->wanted += strcmp(host, h->want) == 0;
 }
 
-/* Drain l until want is heard, for up to WAIT_MS (each listener hears every host's). */
-static void
+/* Drain l until want is heard, for up to WAIT_MS (each listener hears every host's); false
+   when a drain fails (the connection lost: the case fails, it does not spin). */
+static bool
 hear(struct store *l, struct heard *h)
 {
     for (int64_t end = clock_mono_ms() + WAIT_MS; !h->wanted && clock_mono_ms() < end;) {
         struct pollfd pfd = { .fd = store_command_notify_fd(l), .events = POLLIN };
-        if (store_command_drain(l, on_heard, h) == 0)
+        int n = store_command_drain(l, on_heard, h);
+        if (n < 0)
+            return false;
+        if (n == 0)
             (void)poll(&pfd, 1, 100); /* a bound, not a sleep: the NOTIFY ends it */
     }
+    return true;
 }
 
 T_CASE(owner_and_asker_hear_the_command)
@@ -235,13 +240,13 @@ T_CASE(owner_and_asker_hear_the_command)
     size_t n;
     T_OK(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, now, WAIT_MS, &c, &err), &err);
     struct heard ha = { .want = "a" }, hb = { .want = "b" };
-    hear(la, &ha);
+    T_TRUE(hear(la, &ha));
     T_EQ_INT(ha.n, 1);
     T_EQ_INT(ha.wanted, 1); /* the owner's name: a runs it */
     T_OK(store_command_take(p.a, "a", &rows, &n, &err), &err);
     free(rows);
     T_OK(store_command_finish(p.a, c.id, SF_OK, NULL, "paused", &err), &err);
-    hear(lb, &hb);
+    T_TRUE(hear(lb, &hb));
     T_EQ_INT(hb.wanted, 1); /* the asker's: b reads the answer */
     store_close(la);
     store_close(lb);
