@@ -51,9 +51,10 @@ struct store_command {
     char printer[64];
     char host[STORE_HOST_NAME_MAX];    /* the owner, who runs it */
     char from[STORE_HOST_NAME_MAX];    /* the host that asked */
-    char kind[24];                     /* a printer action ("pause"...), "command" or
-                                          "emergency-stop" */
-    char line[STORE_COMMAND_LINE_MAX]; /* kind "command": the G-code line */
+    char kind[24];                     /* a printer action ("pause"...), "cancel-job",
+                                          "command" or "emergency-stop" */
+    char line[STORE_COMMAND_LINE_MAX]; /* kind "command": the G-code line; "cancel-job": the
+                                          job's id (decimal) */
     char who[64];                      /* the operator (an API key's label) */
     enum store_command_state state;
     int rc;                          /* once done: SF_OK or the owner's error code, */
