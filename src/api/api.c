@@ -490,16 +490,17 @@ static void
 printer_act(void *ctx, const struct route_args *args, const struct http_req *req,
             struct http_resp *resp)
 {
-    (void)req;
     struct api *a = ctx;
     enum printer_action act;
+    char who[16];
     if (!printer_action_parse(args->action, &act)) {
         http_error(resp, 404,
                    "no printer action '%.32s' (pause, resume, cancel, cancel-copy, cleared)",
                    args->action);
         return;
     }
-    api_writes_printer_act(&a->writes, args->name, act, resp);
+    route_key_label(req, who, sizeof(who));
+    api_writes_printer_act(&a->writes, args->name, act, who, resp);
 }
 
 /*

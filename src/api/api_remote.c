@@ -23,7 +23,7 @@
 
 struct remote_wait {
     struct http_defer *d;
-    char line[256]; /* a manual command's line, echoed in the answer ("": none) */
+    char line[SF_COMMAND_MAX + 1]; /* a manual command's line, echoed in the answer ("": none) */
 };
 
 static void
@@ -46,7 +46,8 @@ on_answer(void *ud, const struct farm_remote_result *r)
 }
 
 bool
-api_remote_answer(struct farm *f, const char *name, const char *kind, struct http_defer *d)
+api_remote_answer(struct farm *f, const char *name, const char *kind, const char *line,
+                  const char *who, struct http_defer *d)
 {
     if (!farm_remote_is(f, name))
         return false;
@@ -54,7 +55,7 @@ api_remote_answer(struct farm *f, const char *name, const char *kind, struct htt
     struct remote_wait *w = mem_calloc(1, sizeof(*w));
     if (w)
         w->d = d;
-    int rc = w ? farm_remote_send(f, name, kind, NULL, NULL, on_answer, w, &err)
+    int rc = w ? farm_remote_send(f, name, kind, line, who, on_answer, w, &err)
                : sf_err_set(&err, SF_ENOMEM, "printer %.64s: out of memory", name);
     if (rc == SF_OK)
         return true;

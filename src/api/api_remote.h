@@ -31,9 +31,11 @@ bool api_remote_try(struct farm *f, const char *name, const char *kind, const ch
 
 /*
  * As api_remote_try, for a request deferred already (d): true when name is
- * another host's (d is answered later, or now with a refusal).
+ * another host's (d is answered later, or now with a refusal).  line: as
+ * farm_remote_send's (a cancel-job's id), may be NULL; who: the operator, may be NULL.
  */
-bool api_remote_answer(struct farm *f, const char *name, const char *kind, struct http_defer *d);
+bool api_remote_answer(struct farm *f, const char *name, const char *kind, const char *line,
+                       const char *who, struct http_defer *d);
 
 /* The API's own printers (NULL name: all, as {"printers": [...]}; else {"printer": ...}). */
 typedef void (*api_remote_local_fn)(void *ud, const char *name, struct http_resp *resp);

@@ -24,6 +24,7 @@
 
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "../farm/farm_remote.h"
 #include "../farm/jobctl.h"
 #include "api_compat.h"
 #include "api_json.h"
@@ -52,6 +53,7 @@ struct api_write {
     struct api_writes *ws;  /* NULL once the API is freed */
     struct http_defer *d;   /* the request's answer to come */
     char printer[64];       /* an action on this printer: answered with it; "": with the job */
+    char who[16];           /* the operator (route_key_label): a cancel another host carries */
     int status;             /* 201 (a new job: {"job"}) or 200 */
     bool not_now;           /* a refusal of the job rules (SF_EINVAL) is "not now" (409) */
     struct api_write *next; /* in ws->pending */
@@ -83,8 +85,12 @@ on_written(void *ud, const struct storeq_result *r)
                 *pp = w->next;
                 break;
             }
-        /* a cancel of a job on another host's printer: that host stops it, and answers */
-        if (r->rc == SF_EAGAIN && w->on[0] && api_remote_answer(ws->farm, w->on, "cancel", w->d)) {
+        /* a cancel of a job on another host's printer: that host stops it, and answers; by
+           the job's id, so that it refuses once its printer prints another job */
+        char id[24];
+        snprintf(id, sizeof(id), "%lld", (long long)w->id);
+        if (r->rc == SF_EAGAIN && w->on[0] &&
+            api_remote_answer(ws->farm, w->on, FARM_REMOTE_CANCEL_JOB, id, w->who, w->d)) {
             free(w);
             return;
         }
@@ -336,6 +342,7 @@ job_cancel_restart(void *ctx, const struct route_args *args, const struct http_r
     struct api_write *w = mem_calloc(1, sizeof(*w));
     if (w && !on) {
         *w = (struct api_write){ .id = args->id, .status = 200, .not_now = true };
+        route_key_label(req, w->who, sizeof(w->who));
         if (post(ws, resp, w, cancel ? cancel_write : restart_write))
             return;
     }
@@ -415,10 +422,10 @@ job_resume(void *ctx, const struct route_args *args, const struct http_req *req,
 
 void
 api_writes_printer_act(struct api_writes *ws, const char *name, enum printer_action act,
-                       struct http_resp *resp)
+                       const char *who, struct http_resp *resp)
 {
     struct sf_err err;
-    if (api_remote_try(ws->farm, name, printer_action_name(act), NULL, NULL, resp))
+    if (api_remote_try(ws->farm, name, printer_action_name(act), NULL, who, resp))
         return; /* another host's printer: carried to it */
     struct api_write *w = mem_calloc(1, sizeof(*w));
     if (w && defer(ws, resp, w)) {

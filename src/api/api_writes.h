@@ -60,10 +60,11 @@ const struct route *api_writes_routes(size_t *n);
 
 /*
  * POST /api/printers/NAME/ACTION: act on printer name (jobctl_printer_action_then), answered
- * once its writes committed with the printer as it is.
+ * once its writes committed with the printer as it is; who: the operator (route_key_label),
+ * carried with the command to another host's printer.
  */
 void api_writes_printer_act(struct api_writes *ws, const char *name, enum printer_action act,
-                            struct http_resp *resp);
+                            const char *who, struct http_resp *resp);
 
 /* The API is freed: the answers still to come (the farm's queue calls back later, when the
    daemon stops) go to no one. */

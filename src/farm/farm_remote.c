@@ -9,16 +9,22 @@
  * handled when the request is back.  The listener is a connection of its
  * own, as farm_host.c's (a notification that arrives during another call
  * does not wake the fd), drained on the loop: reading a socket, never
- * waiting.
+ * waiting; a lost one reconnects a step at a time (store_open_listener's
+ * SQLDB_NOWAIT), never with a blocking PQreset on the loop.
  *
  * Stopping: the store queue is freed after this (farm_free), and delivers
  * what is in flight then; so the state outlives farm_remote_stop until
  * the last request in flight is back (inflight), and answers nothing more.
+ * Nothing is left running that nobody runs: a take still queued at the stop
+ * takes nothing (stopping), and a row taken, or an action that ran, whose
+ * answer comes back only while the queue closes (its thread gone) has its
+ * result written on the loop's own connection (finish_now).
  *
  * Thread: the loop thread; the *_fn functions on the store's.
  */
 #include "farm_remote.h"
 
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -32,18 +38,23 @@
 #include "store_command.h"
 #include "storeq.h"
 
-#define RELISTEN_MS 1000 /* a lost listener is tried again this often */
+/* A lost listener is tried again this often: each try advances its connect without waiting
+   (store_open_listener), so a few tries bring it back once the server answers. */
+#define RELISTEN_MS 200
 
 struct farm_remote {
     struct farm *f;
-    struct store *ls; /* the listener's connection */
-    int fd;           /* its socket on the loop, -1 if none */
-    uint64_t retry;   /* timer: listen again */
-    int inflight;     /* requests on the store queue that point here */
-    bool stopped;     /* farm_remote_stop ran: free once inflight is 0 */
-    bool taking;      /* a take is on its way */
-    bool retake;      /* woken meanwhile: take again once it is back */
-    struct ask *asks; /* this host's commands waiting for their answer */
+    struct store *ls;     /* the listener's connection */
+    int fd;               /* its socket on the loop, -1 if none */
+    int64_t fd_gen;       /* the listener's reconnects (store_host_reconnects) when fd was added */
+    uint64_t retry;       /* timer: listen again */
+    bool lost;            /* the listener is lost: said so (once until it is back) */
+    int inflight;         /* requests on the store queue that point here */
+    bool stopped;         /* farm_remote_stop ran: free once inflight is 0 */
+    atomic_bool stopping; /* the same, for the store thread: a take queued then takes nothing */
+    bool taking;          /* a take is on its way */
+    bool retake;          /* woken meanwhile: take again once it is back */
+    struct ask *asks;     /* this host's commands waiting for their answer */
 };
 
 enum ask_op { ASK_ADD, ASK_READ, ASK_EXPIRE };
@@ -54,7 +65,7 @@ struct ask {
     struct ask *next;
     /* the store thread's while busy */
     struct store_command c; /* in: printer, from, kind, line, who; out: the row */
-    int64_t now_ms, deadline_ms;
+    int64_t now_ms;         /* the wall clock at the ask: judges the owner's lease */
     enum ask_op op;
     /* the loop's */
     char printer[64]; /* c.printer's copy: the answer at a stop reads it while c may change */
@@ -62,7 +73,9 @@ struct ask {
     bool answered;    /* done was called: freed once no request is on its way */
     bool heard;       /* a NOTIFY came while busy: read again */
     bool late;        /* the deadline passed while busy: withdraw next */
+    bool no_timer;    /* its deadline's timer could not be added: withdrawn at once */
     uint64_t timer;   /* the deadline */
+    int64_t end_ms;   /* its monotonic time (the row's deadline is the database's clock) */
     farm_remote_fn done;
     void *ud;
 };
@@ -129,7 +142,7 @@ add_fn(struct store *s, void *arg, struct sf_err *err)
 {
     struct ask *a = arg;
     return store_command_add(s, a->c.from, a->c.printer, a->c.kind, a->c.line, a->c.who, a->now_ms,
-                             a->deadline_ms, &a->c, err);
+                             FARM_REMOTE_WAIT_MS, &a->c, err);
 }
 
 static int
@@ -184,6 +197,16 @@ static void
 withdrawn(struct ask *a)
 {
     char msg[256];
+    if (a->c.state != STORE_CMD_DONE && a->no_timer) {
+        snprintf(msg, sizeof(msg), "printer %s: out of memory for the %s's deadline: %s",
+                 a->c.printer, a->c.kind,
+                 a->c.state == STORE_CMD_RUNNING ? "host took it and may still act (see the "
+                                                   "printer's state)"
+                                                 : "withdrawn, it will not run");
+        log_error("remote", "%s", msg);
+        answer(a, SF_ENOMEM, msg);
+        return;
+    }
     switch (a->c.state) {
     case STORE_CMD_DONE:
         answer_row(a);
@@ -242,9 +265,12 @@ on_ask(void *ud, const struct storeq_result *res)
         return;
     }
     if (a->op == ASK_ADD) {
-        int64_t left = a->deadline_ms - clock_wall_ms();
+        int64_t left = a->end_ms - clock_mono_ms();
         a->timer = loop_timer_add(r->f->l, left > 0 ? left : 0, on_deadline, a);
         a->heard = true; /* the answer may have come before the row's id was known */
+        if (!a->timer) { /* no deadline would answer it: withdraw it now, SF_ENOMEM */
+            a->no_timer = a->late = true;
+        }
     }
     if (a->late) {
         a->late = false;
@@ -253,6 +279,16 @@ on_ask(void *ud, const struct storeq_result *res)
         a->heard = false;
         post(a, ASK_READ);
     }
+}
+
+/* SF_EINVAL naming printer's field and its limit when v (may be NULL) is longer than cap - 1. */
+static int
+fits(const char *printer, const char *field, const char *v, size_t cap, struct sf_err *err)
+{
+    if (v && strlen(v) >= cap)
+        return sf_err_set(err, SF_EINVAL, "printer %.64s: %s is longer than %zu bytes", printer,
+                          field, cap - 1);
+    return SF_OK;
 }
 
 int
@@ -269,10 +305,13 @@ farm_remote_send(struct farm *f, const char *name, const char *kind, const char 
     struct ask *a = mem_calloc(1, sizeof(*a));
     if (!a)
         return sf_err_set(err, SF_ENOMEM, "remote command: out of memory");
-    if (strlen(name) >= sizeof(a->c.printer) || strlen(kind) >= sizeof(a->c.kind) ||
-        (line && strlen(line) >= sizeof(a->c.line)) || (who && strlen(who) >= sizeof(a->c.who))) {
+    int rc;
+    if ((rc = fits(name, "printer", name, sizeof(a->c.printer), err)) ||
+        (rc = fits(name, "kind", kind, sizeof(a->c.kind), err)) ||
+        (rc = fits(name, "command", line, sizeof(a->c.line), err)) ||
+        (rc = fits(name, "who", who, sizeof(a->c.who), err))) {
         free(a);
-        return sf_err_set(err, SF_EINVAL, "printer %.64s: command too long", name);
+        return rc;
     }
     snprintf(a->c.printer, sizeof(a->c.printer), "%s", name);
     snprintf(a->printer, sizeof(a->printer), "%s", name);
@@ -281,7 +320,7 @@ farm_remote_send(struct farm *f, const char *name, const char *kind, const char 
     snprintf(a->c.line, sizeof(a->c.line), "%s", line ? line : "");
     snprintf(a->c.who, sizeof(a->c.who), "%s", who ? who : "");
     a->now_ms = clock_wall_ms();
-    a->deadline_ms = a->now_ms + FARM_REMOTE_WAIT_MS;
+    a->end_ms = clock_mono_ms() + FARM_REMOTE_WAIT_MS;
     a->r = r;
     a->done = done;
     a->ud = ud;
@@ -304,7 +343,7 @@ farm_remote_send(struct farm *f, const char *name, const char *kind, const char 
 struct run {
     struct farm_remote *r;
     char host[STORE_HOST_NAME_MAX];
-    int64_t now_ms;
+    int64_t taken_ms;           /* the monotonic clock once taken: with each row's left_ms, */
     struct store_command *rows; /* the take's */
     size_t n;
     /* one command's */
@@ -320,7 +359,12 @@ take_fn(struct store *s, void *arg, struct sf_err *err)
     struct run *t = arg;
     free(t->rows); /* a retry's */
     t->rows = NULL;
-    return store_command_take(s, t->host, t->now_ms, &t->rows, &t->n, err);
+    t->n = 0;
+    if (atomic_load(&t->r->stopping))
+        return SF_OK; /* nobody would run what it takes: left pending, for its deadline */
+    int rc = store_command_take(s, t->host, &t->rows, &t->n, err);
+    t->taken_ms = clock_mono_ms();
+    return rc;
 }
 
 static int
@@ -366,6 +410,19 @@ finish(struct run *x, int rc, const char *msg)
     r->inflight++;
 }
 
+/* Write command id's result (rc, msg) now on the loop's connection, at a stop: the store
+   queue's thread is gone, and the row must not stay running. */
+static void
+finish_now(struct farm_remote *r, int64_t id, const char *printer, int rc, const char *msg)
+{
+    struct sf_err err;
+    struct printer *p = farm_find(r->f, printer);
+    if (store_command_finish(r->f->s, id, rc, msg, p ? printer_state_name(printer_state(p)) : "",
+                             &err))
+        log_warn("remote", "printer %s: command %lld's result at the stop: %s", printer,
+                 (long long)id, err.msg);
+}
+
 /* An action's write is back (jobctl_printer_action_then): its result. */
 static void
 on_acted(void *ud, const struct storeq_result *res)
@@ -373,7 +430,8 @@ on_acted(void *ud, const struct storeq_result *res)
     struct run *x = ud;
     struct farm_remote *r = x->r;
     r->inflight--;
-    if (r->stopped) {
+    if (r->stopped) { /* it ran: its result, written before the queue's connection closes */
+        finish_now(r, x->id, x->printer, res->rc, res->rc ? res->err->msg : "");
         free(x);
         release(r);
         return;
@@ -381,9 +439,9 @@ on_acted(void *ud, const struct storeq_result *res)
     finish(x, res->rc, res->rc ? res->err->msg : "");
 }
 
-/* Run command c through this host's own action path. */
+/* Run command c, taken at taken_ms (monotonic), through this host's own action path. */
 static void
-run_one(struct farm_remote *r, const struct store_command *c)
+run_one(struct farm_remote *r, const struct store_command *c, int64_t taken_ms)
 {
     struct run *x = mem_calloc(1, sizeof(*x));
     struct sf_err err = { 0 };
@@ -401,13 +459,25 @@ run_one(struct farm_remote *r, const struct store_command *c)
     char who[96];
     snprintf(who, sizeof(who), "%s@%s", c->who[0] ? c->who : "?", c->from);
     int rc;
-    if (clock_wall_ms() >= c->deadline_ms) {
+    if (clock_mono_ms() - taken_ms >= c->left_ms) { /* the loop came late to it */
         rc = sf_err_set(&err, SF_ETIMEDOUT, "came after its deadline: not run");
     } else if (printer_action_parse(c->kind, &act)) {
         rc = jobctl_printer_action_then(r->f, c->printer, act, on_acted, x, &err);
         if (rc == SF_OK) {
             r->inflight++;
             return;
+        }
+    } else if (strcmp(c->kind, FARM_REMOTE_CANCEL_JOB) == 0) {
+        char *end = NULL;
+        long long id = strtoll(c->line, &end, 10);
+        if (!c->line[0] || *end || id <= 0) {
+            rc = sf_err_set(&err, SF_EINVAL, "cancel-job: job id '%.32s' is not a job id", c->line);
+        } else {
+            rc = jobctl_cancel_job_on(r->f, c->printer, id, on_acted, x, &err);
+            if (rc == SF_OK) {
+                r->inflight++;
+                return;
+            }
         }
     } else if (strcmp(c->kind, "command") == 0) {
         rc = jobctl_printer_command(r->f, c->printer, c->line, who, &err);
@@ -432,11 +502,15 @@ on_taken(void *ud, const struct storeq_result *res)
         if (res->rc)
             log_warn("remote", "%s: take the commands for this host: %s", t->host, res->err->msg);
         for (size_t i = 0; res->rc == SF_OK && i < t->n; i++)
-            run_one(r, &t->rows[i]);
+            run_one(r, &t->rows[i], t->taken_ms);
         if (r->retake) {
             r->retake = false;
             take(r);
         }
+    } else {
+        for (size_t i = 0; res->rc == SF_OK && i < t->n; i++) /* taken, and nobody runs it */
+            finish_now(r, t->rows[i].id, t->rows[i].printer, SF_ECANCELED,
+                       "its host stopped before it ran: not run");
     }
     free(t->rows);
     free(t);
@@ -457,7 +531,6 @@ take(struct farm_remote *r)
         return;
     }
     t->r = r;
-    t->now_ms = clock_wall_ms();
     if (storeq_call(r->f->q, take_fn, t, "remote", on_taken, t)) {
         free(t);
         return;
@@ -468,13 +541,10 @@ take(struct farm_remote *r)
 
 /* ---- the listener ---- */
 
+/* Take this host's commands, and read the answers to the ones it asked again. */
 static void
-on_payload(void *ud, const char *host)
+wake(struct farm_remote *r)
 {
-    struct farm_remote *r = ud;
-    char me[STORE_HOST_NAME_MAX];
-    if (!farm_host_reader(r->f, me, sizeof(me)) || strcmp(host, me) != 0)
-        return;
     take(r);                                            /* a command for this host's printers, */
     for (struct ask *a = r->asks, *next; a; a = next) { /* or an answer to one it asked */
         next = a->next;
@@ -485,7 +555,17 @@ on_payload(void *ud, const char *host)
     }
 }
 
-static void arm(struct farm_remote *r);
+static void
+on_payload(void *ud, const char *host)
+{
+    struct farm_remote *r = ud;
+    char me[STORE_HOST_NAME_MAX];
+    if (farm_host_reader(r->f, me, sizeof(me)) && strcmp(host, me) == 0)
+        wake(r);
+}
+
+static bool arm(struct farm_remote *r);
+static void retry(struct farm_remote *r);
 
 static void
 drop(struct farm_remote *r)
@@ -501,7 +581,20 @@ on_relisten(struct loop *l, void *ud)
     (void)l;
     struct farm_remote *r = ud;
     r->retry = 0;
-    arm(r);
+    if (!arm(r))
+        retry(r);
+}
+
+/* Try the lost listener again in RELISTEN_MS (saying so once). */
+static void
+retry(struct farm_remote *r)
+{
+    if (!r->lost)
+        log_warn("remote", "the commands' wake-up connection is lost; trying again every %d ms",
+                 RELISTEN_MS);
+    r->lost = true;
+    if (!r->retry)
+        r->retry = loop_timer_add(r->f->l, RELISTEN_MS, on_relisten, r);
 }
 
 static void
@@ -510,29 +603,39 @@ on_readable(struct loop *l, int fd, unsigned events, void *ud)
     (void)l, (void)fd, (void)events;
     struct farm_remote *r = ud;
     int n = store_command_drain(r->ls, on_payload, r);
-    if (n < 0 || store_command_notify_fd(r->ls) != r->fd) {
-        if (n < 0)
-            log_warn("remote", "the commands' wake-up connection was lost; retrying");
-        drop(r);
-        arm(r);
-    }
+    if (n >= 0 && store_host_reconnects(r->ls) == r->fd_gen &&
+        store_command_notify_fd(r->ls) == r->fd)
+        return;
+    /* lost, or back already on a new session whose socket is a new one (perhaps under the old
+       number, which epoll dropped when the old socket closed): watch it again, or retry */
+    drop(r);
+    if (!arm(r))
+        retry(r);
 }
 
-/* Watch the listener (again): drain first, which reconnects a lost connection; else retry. */
-static void
+/* Watch the listener (again): drain first, which advances the reconnect of a lost connection
+   without waiting (store_open_listener: the loop never blocks on the database).  False while
+   it is not back. */
+static bool
 arm(struct farm_remote *r)
 {
     struct sf_err err;
-    int fd = -1;
-    if (store_command_drain(r->ls, on_payload, r) >= 0 &&
-        (fd = store_command_notify_fd(r->ls)) >= 0 &&
-        loop_add_fd(r->f->l, fd, LOOP_READ, on_readable, r, &err) == SF_OK) {
-        r->fd = fd;
-        take(r); /* what was asked while it was away */
-        return;
+    if (store_command_drain(r->ls, on_payload, r) < 0)
+        return false;
+    int fd = store_command_notify_fd(r->ls);
+    if (fd < 0)
+        return false;
+    if (loop_add_fd(r->f->l, fd, LOOP_READ, on_readable, r, &err)) {
+        log_warn("remote", "%s", err.msg);
+        return false;
     }
-    if (!r->retry)
-        r->retry = loop_timer_add(r->f->l, RELISTEN_MS, on_relisten, r);
+    r->fd = fd;
+    r->fd_gen = store_host_reconnects(r->ls);
+    if (r->lost)
+        log_info("remote", "the commands' wake-up connection is back");
+    r->lost = false;
+    wake(r); /* what was asked, or answered, while it was away (its NOTIFY lost) */
+    return true;
 }
 
 int
@@ -543,12 +646,14 @@ farm_remote_start(struct farm *f, struct sf_err *err)
         return sf_err_set(err, SF_ENOMEM, "remote commands: out of memory");
     r->f = f;
     r->fd = -1;
+    atomic_init(&r->stopping, false);
     f->remote = r;
-    if (!(r->ls = store_open_peer(f->s, err)) || store_command_listen(r->ls, err)) {
+    if (!(r->ls = store_open_listener(f->s, err)) || store_command_listen(r->ls, err)) {
         sf_err_prefix(err, "remote commands: wake-up connection");
         return err->code;
     }
-    arm(r);
+    if (!arm(r))
+        retry(r);
     return SF_OK;
 }
 
@@ -558,6 +663,7 @@ farm_remote_stop(struct farm *f)
     struct farm_remote *r = f ? f->remote : NULL;
     if (!r)
         return;
+    atomic_store(&r->stopping, true);
     drop(r);
     if (r->retry)
         loop_timer_cancel(f->l, r->retry);

@@ -10,8 +10,10 @@
  * pending rows and runs each through its own action path (jobctl.h: the
  * same checks and refusals as its own API), then writes the result.
  *
- * Each host listens on a connection of its own (store_command_listen),
- * watched on the loop's epoll; a lost one is retried every second.  Every
+ * Each host listens on a connection of its own (store_command_listen on a
+ * store_open_listener: its reconnect never waits for the network), watched
+ * on the loop's epoll; a lost one is tried again every 200 ms, each try a
+ * step of its connect.  Every
  * call is a no-op, or refuses, on a farm that is not one of several hosts.
  * Thread: the loop thread.
  */
@@ -47,10 +49,16 @@ void farm_remote_stop(struct farm *f);
 /* Is printer name another host's (f is one of several hosts and has no printer of that name)? */
 bool farm_remote_is(const struct farm *f, const char *name);
 
+/* The kind of a job's cancel by its id (line: the id, in decimal). */
+#define FARM_REMOTE_CANCEL_JOB "cancel-job"
+
 /*
  * Ask name's owner to run kind: a printer action ("pause", "resume",
- * "cancel", "cleared", "cancel-copy"), "command" (line, a manual G-code
- * line, from who) or "emergency-stop" (from who).  SF_OK, then done(ud, r)
+ * "cancel", "cleared", "cancel-copy"), FARM_REMOTE_CANCEL_JOB (line, the
+ * job's id: the owner cancels only while that job is the printer's, else
+ * refuses SF_EAGAIN; a plain "cancel" stops whatever the printer prints
+ * when it runs), "command" (line, a manual G-code line, from who) or
+ * "emergency-stop" (from who).  SF_OK, then done(ud, r)
  * on the loop once answered (always, within about FARM_REMOTE_WAIT_MS plus
  * the store's time); or an error now (done not called): SF_EAGAIN (this
  * host has not joined yet), SF_EINVAL, SF_ENOMEM.

@@ -115,6 +115,30 @@ jobctl_cancel_stored_on(struct store *s, int64_t id, char *printer, size_t n, st
     return not_now(store_job_event(s, id, JOB_EV_CANCEL, &args, NULL, err), err);
 }
 
+int
+jobctl_cancel_job_on(struct farm *f, const char *name, int64_t id, storeq_event_fn done, void *ud,
+                     struct sf_err *err)
+{
+    int rc = reachable(f, name, err);
+    if (rc)
+        return rc;
+    int64_t now = 0;
+    for (size_t i = 0; i < farm_printer_count(f); i++) {
+        struct printer_info p;
+        farm_printer_info(f, i, &p);
+        if (strcmp(p.cfg->name, name) == 0)
+            now = p.job_id;
+    }
+    if (now != id && now)
+        return sf_err_set(err, SF_EAGAIN,
+                          "job %lld is not on printer %s now (job %lld is): not cancelled",
+                          (long long)id, name, (long long)now);
+    if (now != id)
+        return sf_err_set(err, SF_EAGAIN, "job %lld is not on printer %s now: not cancelled",
+                          (long long)id, name);
+    return not_now(farm_printer_action_then(f, name, PRINTER_ACT_CANCEL, done, ud, err), err);
+}
+
 const char *
 jobctl_printer_of(struct farm *f, int64_t id)
 {

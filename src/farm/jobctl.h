@@ -51,6 +51,14 @@ int jobctl_cancel_stored(struct store *s, int64_t id, struct sf_err *err);
    printer (n bytes; NULL: not wanted): another host's, whose owner must stop it. */
 int jobctl_cancel_stored_on(struct store *s, int64_t id, char *printer, size_t n,
                             struct sf_err *err);
+/*
+ * Cancel job id on printer name, answered as jobctl_printer_action_then:
+ * only while id is the printer's job (another host asked by the job's id,
+ * and by the time its command runs here the printer may print another
+ * job): SF_EAGAIN, nothing done, when the printer holds no job or another.
+ */
+int jobctl_cancel_job_on(struct farm *f, const char *name, int64_t id, storeq_event_fn done,
+                         void *ud, struct sf_err *err);
 /* The printer of f that holds job id now (its name, f's), or NULL. */
 const char *jobctl_printer_of(struct farm *f, int64_t id);
 

@@ -38,6 +38,18 @@ state_parse(const char *s)
     "id, printer, host, from_host, kind, line, who, state, rc, message, printer_state,"            \
     " created_ms, deadline_ms"
 
+/*
+ * The database's clock in ms since the epoch, as an SQL expression: a
+ * command's deadline is set and judged by it alone.  Why not the hosts'
+ * clocks: the asker set the deadline from its own and the owner compared
+ * it with its own, so two hosts' clocks a few seconds apart ran a command
+ * late or expired it at once.  PostgreSQL's clock_timestamp() is the time
+ * of the call (now() is the transaction's start); SQLite is one host.
+ */
+#define PG_NOW    "CAST(extract(epoch FROM clock_timestamp()) * 1000 AS BIGINT)"
+#define LITE_NOW  "CAST((julianday('now') - 2440587.5) * 86400000 AS INTEGER)"
+#define DB_NOW(s) (store_is_pg(s) ? PG_NOW : LITE_NOW)
+
 /* A store_row_fn: a struct store_command from a row of COLS. */
 static void
 read_row(struct sqldb_stmt *st, void *row)
@@ -59,6 +71,15 @@ read_row(struct sqldb_stmt *st, void *row)
     store_copy_text(c->printer_state, sizeof(c->printer_state), st, 10);
     c->created_ms = sqldb_column_int64(st, 11);
     c->deadline_ms = sqldb_column_int64(st, 12);
+}
+
+/* A store_row_fn: read_row, then how long its deadline is away (the take's last column). */
+static void
+read_taken(struct sqldb_stmt *st, void *row)
+{
+    struct store_command *c = row;
+    read_row(st, row);
+    c->left_ms = sqldb_column_int64(st, 13);
 }
 
 /* One row of st (a statement returning COLS) into *out, st finalized: SF_ENOTFOUND (err not set).
@@ -116,7 +137,7 @@ owner_of(struct store *s, const char *printer, int64_t now_ms, char *owner, bool
 /* store_command_add in the caller's transaction. */
 static int
 add_tx(struct store *s, const char *from, const char *printer, const char *kind, const char *line,
-       const char *who, int64_t now_ms, int64_t deadline_ms, struct store_command *out,
+       const char *who, int64_t now_ms, int64_t wait_ms, struct store_command *out,
        struct sf_err *err)
 {
     char owner[STORE_HOST_NAME_MAX] = "";
@@ -134,16 +155,18 @@ add_tx(struct store *s, const char *from, const char *printer, const char *kind,
                           "%.0f s ago); nothing was sent",
                           printer, owner, (double)(down_ms > 0 ? down_ms : 0) / 1000);
     struct sqldb_stmt *st;
-    if ((rc = store_prepare(s, &st, "DELETE FROM commands WHERE created_ms < ?1", err)))
+    char sql[512];
+    snprintf(sql, sizeof(sql), "DELETE FROM commands WHERE created_ms < %s - ?1", DB_NOW(s));
+    if ((rc = store_prepare(s, &st, sql, err)))
         return rc;
-    sqldb_bind_int64(st, 1, now_ms - STORE_COMMAND_KEEP_MS);
+    sqldb_bind_int64(st, 1, STORE_COMMAND_KEEP_MS);
     if ((rc = store_step_done(s, st, err, "command: delete old rows")))
         return rc;
-    if ((rc = store_prepare(s, &st,
-                            "INSERT INTO commands(printer, host, from_host, kind, line, who, state,"
-                            " created_ms, deadline_ms) VALUES(?1, ?2, ?3, ?4, ?5, ?6, 'pending',"
-                            " ?7, ?8) RETURNING " COLS,
-                            err)))
+    snprintf(sql, sizeof(sql),
+             "INSERT INTO commands(printer, host, from_host, kind, line, who, state, created_ms,"
+             " deadline_ms) VALUES(?1, ?2, ?3, ?4, ?5, ?6, 'pending', %s, %s + ?7) RETURNING " COLS,
+             DB_NOW(s), DB_NOW(s));
+    if ((rc = store_prepare(s, &st, sql, err)))
         return rc;
     sqldb_bind_text(st, 1, printer);
     sqldb_bind_text(st, 2, owner);
@@ -151,8 +174,7 @@ add_tx(struct store *s, const char *from, const char *printer, const char *kind,
     sqldb_bind_text(st, 4, kind);
     sqldb_bind_text(st, 5, line ? line : "");
     sqldb_bind_text(st, 6, who ? who : "");
-    sqldb_bind_int64(st, 7, now_ms);
-    sqldb_bind_int64(st, 8, deadline_ms);
+    sqldb_bind_int64(st, 7, wait_ms);
     if ((rc = one_row(s, st, out, "command: add", err)))
         return rc == SF_ENOTFOUND ? store_db_fail(s, err, "command: add") : rc;
     return sqldb_notify(s->db, STORE_COMMAND_CHANNEL, owner) ? store_db_fail(s, err, "notify")
@@ -161,7 +183,7 @@ add_tx(struct store *s, const char *from, const char *printer, const char *kind,
 
 int
 store_command_add(struct store *s, const char *from, const char *printer, const char *kind,
-                  const char *line, const char *who, int64_t now_ms, int64_t deadline_ms,
+                  const char *line, const char *who, int64_t now_ms, int64_t wait_ms,
                   struct store_command *out, struct sf_err *err)
 {
     int rc = check_text("from", from, STORE_HOST_NAME_MAX, true, err);
@@ -170,12 +192,12 @@ store_command_add(struct store *s, const char *from, const char *printer, const 
         (rc = check_text("line", line, sizeof(out->line), false, err)) ||
         (rc = check_text("who", who, sizeof(out->who), false, err)))
         return rc;
-    if (deadline_ms <= now_ms)
-        return sf_err_set(err, SF_EINVAL, "command: deadline %lld is not after now (%lld)",
-                          (long long)deadline_ms, (long long)now_ms);
+    if (wait_ms <= 0)
+        return sf_err_set(err, SF_EINVAL, "command: wait %lld ms is not after now",
+                          (long long)wait_ms);
     if ((rc = store_begin(s, err)))
         return rc;
-    rc = add_tx(s, from, printer, kind, line, who, now_ms, deadline_ms, out, err);
+    rc = add_tx(s, from, printer, kind, line, who, now_ms, wait_ms, out, err);
     return store_end_tx(s, rc, err);
 }
 
@@ -187,33 +209,33 @@ by_id(const void *a, const void *b)
 }
 
 int
-store_command_take(struct store *s, const char *host, int64_t now_ms, struct store_command **rows,
-                   size_t *n, struct sf_err *err)
+store_command_take(struct store *s, const char *host, struct store_command **rows, size_t *n,
+                   struct sf_err *err)
 {
     *rows = NULL;
     *n = 0;
     int rc = check_text("host", host, STORE_HOST_NAME_MAX, true, err);
     struct sqldb_stmt *st;
+    char sql[512];
     if (rc || (rc = store_begin(s, err)))
         return rc;
     /* the overdue ones first: they never run, and their askers read why */
-    if ((rc = store_prepare(s, &st,
-                            "UPDATE commands SET state = 'expired' WHERE host = ?1"
-                            " AND state = 'pending' AND deadline_ms <= ?2",
-                            err)) == SF_OK) {
+    snprintf(sql, sizeof(sql),
+             "UPDATE commands SET state = 'expired' WHERE host = ?1 AND state = 'pending'"
+             " AND deadline_ms <= %s",
+             DB_NOW(s));
+    if ((rc = store_prepare(s, &st, sql, err)) == SF_OK) {
         sqldb_bind_text(st, 1, host);
-        sqldb_bind_int64(st, 2, now_ms);
         rc = store_step_done(s, st, err, "command: expire overdue");
     }
     void *out = NULL;
-    if (rc == SF_OK &&
-        (rc = store_prepare(s, &st,
-                            "UPDATE commands SET state = 'running' WHERE host = ?1"
-                            " AND state = 'pending' AND deadline_ms > ?2 RETURNING " COLS,
-                            err)) == SF_OK) {
+    snprintf(sql, sizeof(sql),
+             "UPDATE commands SET state = 'running' WHERE host = ?1 AND state = 'pending'"
+             " AND deadline_ms > %s RETURNING " COLS ", deadline_ms - %s",
+             DB_NOW(s), DB_NOW(s));
+    if (rc == SF_OK && (rc = store_prepare(s, &st, sql, err)) == SF_OK) {
         sqldb_bind_text(st, 1, host);
-        sqldb_bind_int64(st, 2, now_ms);
-        rc = store_read_rows(s, st, sizeof(struct store_command), read_row, &out, n,
+        rc = store_read_rows(s, st, sizeof(struct store_command), read_taken, &out, n,
                              "command: take", err);
     }
     if ((rc = store_end_tx(s, rc, err))) {

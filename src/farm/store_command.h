@@ -3,7 +3,8 @@
  * carried through the database (issue 32, "one farm from every host").
  *
  * The asking host writes a command row for the printer's owner (the host
- * whose config lists it: host_printers) with a deadline, and NOTIFYs
+ * whose config lists it: host_printers) with a deadline (the database's
+ * clock: the hosts' clocks never judge it), and NOTIFYs
  * STORE_COMMAND_CHANNEL with the owner's name.  The owner takes its
  * pending rows (store_command_take: pending -> running, only those whose
  * deadline has not passed), runs each through its own printer action path
@@ -28,12 +29,13 @@
 #include <stdint.h>
 
 #include "../base/err.h"
+#include "../base/limits.h"
 #include "store.h"
 #include "store_host.h"
 
 #define STORE_COMMAND_CHANNEL  "slimfarm_commands"
-#define STORE_COMMAND_LINE_MAX 256     /* a manual G-code line (SF_COMMAND_MAX is below it) */
-#define STORE_COMMAND_KEEP_MS  3600000 /* finished rows are deleted after an hour */
+#define STORE_COMMAND_LINE_MAX (SF_COMMAND_MAX + 1) /* a manual G-code line and its NUL */
+#define STORE_COMMAND_KEEP_MS  3600000              /* finished rows are deleted after an hour */
 
 enum store_command_state {
     STORE_CMD_PENDING = 0, /* written, the owner has not taken it */
@@ -49,38 +51,42 @@ struct store_command {
     char printer[64];
     char host[STORE_HOST_NAME_MAX];    /* the owner, who runs it */
     char from[STORE_HOST_NAME_MAX];    /* the host that asked */
-    char kind[24];                     /* a printer action ("pause"...), "command" or
-                                          "emergency-stop" */
-    char line[STORE_COMMAND_LINE_MAX]; /* kind "command": the G-code line */
+    char kind[24];                     /* a printer action ("pause"...), "cancel-job",
+                                          "command" or "emergency-stop" */
+    char line[STORE_COMMAND_LINE_MAX]; /* kind "command": the G-code line; "cancel-job": the
+                                          job's id (decimal) */
     char who[64];                      /* the operator (an API key's label) */
     enum store_command_state state;
-    int rc;                 /* once done: SF_OK or the owner's error code, */
-    char message[256];      /* its message, */
-    char printer_state[16]; /* and the printer's state after it */
-    int64_t created_ms, deadline_ms;
+    int rc;                          /* once done: SF_OK or the owner's error code, */
+    char message[256];               /* its message, */
+    char printer_state[16];          /* and the printer's state after it */
+    int64_t created_ms, deadline_ms; /* the database's clock (ms since the epoch) */
+    int64_t left_ms; /* store_command_take's: its deadline's distance from the take (> 0) */
 };
 
 /*
  * Ask printer's owner to run kind (line, who: may be NULL) for host from,
- * by deadline_ms (wall clock): the row into *out, and a NOTIFY to the
- * owner, in one transaction.  SF_ENOTFOUND: no live or dead host owns
- * printer; SF_ESTALE: its owner's lease ran out (the message names the
- * host and how long ago: "host down"; not SF_EUNREACH, which the store
- * queue takes for its connection lost and tries again); SF_EINVAL: from owns printer itself,
- * or a bad argument.  Rows finished over STORE_COMMAND_KEEP_MS ago are
- * deleted on the way.
+ * within wait_ms (> 0) of the database's clock now (the row's deadline_ms:
+ * the database's clock judges it, never a host's): the row into *out, and
+ * a NOTIFY to the owner, in one transaction.  now_ms: this host's wall
+ * clock, which judges the owner's lease (as the leases are written).  SF_ENOTFOUND: no live or dead
+ * host owns printer; SF_ESTALE: its owner's lease ran out (the message names the host and how long
+ * ago: "host down"; not SF_EUNREACH, which the store queue takes for its connection lost and tries
+ * again); SF_EINVAL: from owns printer itself, or a bad argument.  Rows finished over
+ * STORE_COMMAND_KEEP_MS ago are deleted on the way.
  */
 int store_command_add(struct store *s, const char *from, const char *printer, const char *kind,
-                      const char *line, const char *who, int64_t now_ms, int64_t deadline_ms,
+                      const char *line, const char *who, int64_t now_ms, int64_t wait_ms,
                       struct store_command *out, struct sf_err *err);
 
 /*
- * Host's pending commands whose deadline is after now_ms, moved to running
- * in one statement, into *rows (free() it; oldest first); its pending ones
- * past their deadline become expired on the way.
+ * Host's pending commands whose deadline is after the database's clock
+ * now, moved to running in one statement, into *rows (free() it; oldest
+ * first; each with left_ms); its pending ones past their deadline become
+ * expired on the way.
  */
-int store_command_take(struct store *s, const char *host, int64_t now_ms,
-                       struct store_command **rows, size_t *n, struct sf_err *err);
+int store_command_take(struct store *s, const char *host, struct store_command **rows, size_t *n,
+                       struct sf_err *err);
 
 /*
  * The result of running command id: rc, message (may be NULL), the

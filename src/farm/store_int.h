@@ -120,8 +120,9 @@ int store_host_relock(struct store *s, struct sf_err *err);
 /*
  * Migration 14 (store_command.c): commands, an operator's action on a
  * printer another host owns.  host: the printer's owner, who runs it;
- * from_host: who asked; kind: a printer action, "command" (line: the
- * G-code) or "emergency-stop"; who: the operator; state: pending (written),
+ * from_host: who asked; kind: a printer action, "cancel-job" (line: the
+ * job's id), "command" (line: the G-code) or "emergency-stop"; who: the
+ * operator; state: pending (written),
  * running (the owner took it), done (rc, message and the printer's state
  * after written), expired (withdrawn at its deadline: never run).
  * commands_pending finds a host's pending rows in one index step.

@@ -62,17 +62,16 @@ T_CASE(command_is_taken_once_and_answered)
     int64_t now = clock_wall_ms();
     struct store_command c, got, *rows;
     size_t n;
-    T_OK(store_command_add(p.b, "b", "p1", "pause", NULL, "ops", now, now + WAIT_MS, &c, &err),
-         &err);
+    T_OK(store_command_add(p.b, "b", "p1", "pause", NULL, "ops", now, WAIT_MS, &c, &err), &err);
     T_TRUE(c.id > 0);
     T_EQ_STR(c.host, "a");
     T_EQ_STR(c.from, "b");
     T_EQ_INT(c.state, STORE_CMD_PENDING);
     /* b owns no such command: nothing for it */
-    T_OK(store_command_take(p.b, "b", now, &rows, &n, &err), &err);
+    T_OK(store_command_take(p.b, "b", &rows, &n, &err), &err);
     T_EQ_INT(n, 0);
     free(rows);
-    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    T_OK(store_command_take(p.a, "a", &rows, &n, &err), &err);
     T_EQ_INT(n, 1);
     T_EQ_INT(rows[0].id, c.id);
     T_EQ_STR(rows[0].kind, "pause");
@@ -80,7 +79,7 @@ T_CASE(command_is_taken_once_and_answered)
     T_EQ_INT(rows[0].state, STORE_CMD_RUNNING);
     free(rows);
     /* taken once */
-    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    T_OK(store_command_take(p.a, "a", &rows, &n, &err), &err);
     T_EQ_INT(n, 0);
     free(rows);
     /* taken: the asker's withdrawal comes too late, and says so */
@@ -108,25 +107,53 @@ T_CASE(command_past_its_deadline_never_runs)
     struct store_command c, d, got, *rows;
     size_t n;
     /* withdrawn by the asker: never taken */
-    T_OK(store_command_add(p.b, "b", "p1", "resume", NULL, NULL, now, now + WAIT_MS, &c, &err),
-         &err);
+    T_OK(store_command_add(p.b, "b", "p1", "resume", NULL, NULL, now, WAIT_MS, &c, &err), &err);
     T_OK(store_command_expire(p.b, c.id, &got, &err), &err);
     T_EQ_INT(got.state, STORE_CMD_EXPIRED);
-    /* not withdrawn, but the owner comes after its deadline: not taken, expired */
-    T_OK(store_command_add(p.b, "b", "p1", "cancel", NULL, NULL, now, now + 50, &d, &err), &err);
-    T_OK(store_command_take(p.a, "a", now + 50, &rows, &n, &err), &err);
+    /* not withdrawn, but the owner comes after its deadline (the database's clock; the test's
+       is the same machine's): not taken, expired */
+    T_OK(store_command_add(p.b, "b", "p1", "cancel", NULL, NULL, now, 1, &d, &err), &err);
+    T_EQ_INT(d.deadline_ms - d.created_ms, 1);
+    for (int64_t end = clock_mono_ms() + WAIT_MS;
+         clock_wall_ms() <= d.deadline_ms + 1 && clock_mono_ms() < end;)
+        (void)poll(NULL, 0, 5); /* a bound, not a sleep: ends once the deadline is past */
+    T_OK(store_command_take(p.a, "a", &rows, &n, &err), &err);
     T_EQ_INT(n, 0);
     free(rows);
     T_OK(store_command_get(p.b, d.id, &got, &err), &err);
     T_EQ_INT(got.state, STORE_CMD_EXPIRED);
     T_ERR(store_command_finish(p.a, d.id, SF_OK, NULL, NULL, &err), SF_ENOTFOUND, &err, "");
     /* a later command is taken alone, in order with nothing stale before it */
-    T_OK(store_command_add(p.b, "b", "p1", "command", "G28", "ops", now, now + WAIT_MS, &c, &err),
-         &err);
-    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    T_OK(store_command_add(p.b, "b", "p1", "command", "G28", "ops", now, WAIT_MS, &c, &err), &err);
+    T_OK(store_command_take(p.a, "a", &rows, &n, &err), &err);
     T_EQ_INT(n, 1);
     T_EQ_INT(rows[0].id, c.id);
     T_EQ_STR(rows[0].line, "G28");
+    free(rows);
+    pair_close(&p);
+}
+
+/* The deadline is the database's clock's: an asker whose clock runs a minute behind (or
+   ahead) asks for WAIT_MS, and the owner takes it with that much left. */
+T_CASE(command_deadline_is_the_databases_clock)
+{
+    struct sf_err err;
+    struct pair p;
+    T_TRUE(pair_open(&p, "clock", &err));
+    struct store_command c, *rows;
+    size_t n;
+    int64_t before = clock_wall_ms();
+    T_OK(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, before - 60000, WAIT_MS, &c, &err),
+         &err);
+    T_EQ_INT(c.deadline_ms - c.created_ms, WAIT_MS);
+    /* the database runs on this machine here: its clock is this one's */
+    T_TRUE(c.created_ms >= before - 1000 && c.created_ms <= clock_wall_ms() + 1000);
+    T_OK(store_command_add(p.b, "b", "p1", "resume", NULL, NULL, before + 60000, WAIT_MS, &c, &err),
+         &err);
+    T_OK(store_command_take(p.a, "a", &rows, &n, &err), &err);
+    T_EQ_INT(n, 2);
+    for (size_t i = 0; i < n; i++)
+        T_TRUE(rows[i].left_ms > 0 && rows[i].left_ms <= WAIT_MS);
     free(rows);
     pair_close(&p);
 }
@@ -139,18 +166,29 @@ T_CASE(command_to_a_host_down_or_no_printer_is_refused)
     int64_t now = clock_wall_ms();
     struct store_command c, *rows;
     size_t n;
-    T_ERR(store_command_add(p.b, "b", "nope", "pause", NULL, NULL, now, now + WAIT_MS, &c, &err),
+    T_ERR(store_command_add(p.b, "b", "nope", "pause", NULL, NULL, now, WAIT_MS, &c, &err),
           SF_ENOTFOUND, &err, "no printer 'nope' on any host");
-    T_ERR(store_command_add(p.b, "b", "p2", "pause", NULL, NULL, now, now + WAIT_MS, &c, &err),
-          SF_EINVAL, &err, "host b's own");
-    T_ERR(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, now, now, &c, &err), SF_EINVAL,
-          &err, "deadline");
+    T_ERR(store_command_add(p.b, "b", "p2", "pause", NULL, NULL, now, WAIT_MS, &c, &err), SF_EINVAL,
+          &err, "host b's own");
+    /* a manual line as long as the API takes (SF_COMMAND_MAX) is carried; one more is named */
+    char line[SF_COMMAND_MAX + 2];
+    memset(line, 'M', SF_COMMAND_MAX);
+    line[SF_COMMAND_MAX] = '\0';
+    T_OK(store_command_add(p.b, "b", "p1", "command", line, NULL, now, WAIT_MS, &c, &err), &err);
+    T_EQ_INT(strlen(c.line), SF_COMMAND_MAX);
+    T_OK(store_command_expire(p.b, c.id, &c, &err), &err); /* not for the take below */
+    line[SF_COMMAND_MAX] = 'M';
+    line[SF_COMMAND_MAX + 1] = '\0';
+    T_ERR(store_command_add(p.b, "b", "p1", "command", line, NULL, now, WAIT_MS, &c, &err),
+          SF_EINVAL, &err, "line is longer than 256 bytes");
+    T_ERR(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, now, 0, &c, &err), SF_EINVAL, &err,
+          "not after now");
     /* a's lease runs out: its printer is offline to the others, nothing is written */
     T_OK(store_host_beat(p.a, "a", p.ta, 1, &err), &err);
     int64_t later = clock_wall_ms() + 5000;
-    T_ERR(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, later, later + WAIT_MS, &c, &err),
+    T_ERR(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, later, WAIT_MS, &c, &err),
           SF_ESTALE, &err, "its host a is down");
-    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    T_OK(store_command_take(p.a, "a", &rows, &n, &err), &err);
     T_EQ_INT(n, 0);
     free(rows);
     pair_close(&p);
@@ -170,15 +208,20 @@ on_heard(void *ud, const char *host)
     h->wanted += strcmp(host, h->want) == 0;
 }
 
-/* Drain l until want is heard, for up to WAIT_MS (each listener hears every host's). */
-static void
+/* Drain l until want is heard, for up to WAIT_MS (each listener hears every host's); false
+   when a drain fails (the connection lost: the case fails, it does not spin). */
+static bool
 hear(struct store *l, struct heard *h)
 {
     for (int64_t end = clock_mono_ms() + WAIT_MS; !h->wanted && clock_mono_ms() < end;) {
         struct pollfd pfd = { .fd = store_command_notify_fd(l), .events = POLLIN };
-        if (store_command_drain(l, on_heard, h) == 0)
+        int n = store_command_drain(l, on_heard, h);
+        if (n < 0)
+            return false;
+        if (n == 0)
             (void)poll(&pfd, 1, 100); /* a bound, not a sleep: the NOTIFY ends it */
     }
+    return true;
 }
 
 T_CASE(owner_and_asker_hear_the_command)
@@ -195,16 +238,15 @@ T_CASE(owner_and_asker_hear_the_command)
     int64_t now = clock_wall_ms();
     struct store_command c, *rows;
     size_t n;
-    T_OK(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, now, now + WAIT_MS, &c, &err),
-         &err);
+    T_OK(store_command_add(p.b, "b", "p1", "pause", NULL, NULL, now, WAIT_MS, &c, &err), &err);
     struct heard ha = { .want = "a" }, hb = { .want = "b" };
-    hear(la, &ha);
+    T_TRUE(hear(la, &ha));
     T_EQ_INT(ha.n, 1);
     T_EQ_INT(ha.wanted, 1); /* the owner's name: a runs it */
-    T_OK(store_command_take(p.a, "a", now, &rows, &n, &err), &err);
+    T_OK(store_command_take(p.a, "a", &rows, &n, &err), &err);
     free(rows);
     T_OK(store_command_finish(p.a, c.id, SF_OK, NULL, "paused", &err), &err);
-    hear(lb, &hb);
+    T_TRUE(hear(lb, &hb));
     T_EQ_INT(hb.wanted, 1); /* the asker's: b reads the answer */
     store_close(la);
     store_close(lb);
