@@ -249,8 +249,9 @@ check: deps
 # The store on both engines: its unit tests on SQLite, and tests/integ/store_pg.sh,
 # which starts a PostgreSQL server of its own (initdb into a temp dir, a Unix
 # socket) and runs the store, farm and API tests on it; then the daemon as three hosts on
-# one PostgreSQL (tests/integ/farmd_hosts.sh) and the farm's own scenarios on it
-# (tests/integ/farmd_pg.sh).  `make check` runs them all.
+# one PostgreSQL (tests/integ/farmd_hosts*.sh: farmd_hosts_chaos.sh is issue 32's
+# acceptance run, a host killed, a host cut off, the server stopped for 30 s) and the
+# farm's own scenarios on it (tests/integ/farmd_pg.sh).  `make check` runs them all.
 check-pg: deps
 	$(MAKE) --no-print-directory SAN=1 tests
 	tests/run.sh build/san store
