@@ -284,6 +284,7 @@ on_attach_retry(struct loop *l, void *ud)
 void
 printer_attach_again(struct printer *p)
 {
+    printer_settle_orphan(p);
     enum drv_state ds = p->drv ? p->drv->status.state : DRV_OFFLINE;
     if (!p->deaf && p->state == PRINTER_OFFLINE && !p->attach_tried &&
         (ds == DRV_IDLE || ds == DRV_PRINTING || ds == DRV_PAUSED))

@@ -164,6 +164,13 @@ int64_t printer_fence(const struct printer *p, int64_t id);
  * for the job.
  */
 void printer_fenced_out(struct printer *p, int64_t id);
+/*
+ * A print that ended whole on p while its host was away from the store had its end refused
+ * as stale (the host was reaped: the job interrupted).  Once the host joined again: if the
+ * job is still interrupted on p, hold it (env.hold) and record the end, so it is not printed
+ * a second time.  On the loop; reads the store.
+ */
+void printer_settle_orphan(struct printer *p);
 /* The start printer_start just made (its check is stale once p starts anything else, even the
    same job again after a copy was cancelled). */
 uint64_t printer_start_token(const struct printer *p);

@@ -68,6 +68,13 @@ struct printer {
     int64_t fence;                /* fence_job's fencing token (printer_set_fence), 0: none */
     int64_t fence_job;            /* the job it is for, 0: none */
     struct fence_watch *watches;  /* fenced job events on their way to the store */
+    /* a print that ended whole here while this host was away from the store, its end refused
+       as stale (the host was reaped meanwhile: the job is interrupted): recorded once the host
+       joined again and holds the job (printer_settle_orphan); id 0: none */
+    struct {
+        int64_t id;
+        int64_t lines_acked;
+    } orphan;
 };
 
 /*

@@ -263,6 +263,8 @@ struct fence_watch {
     struct printer *p;
     struct fence_watch *next; /* in p->watches */
     int64_t id;               /* the job */
+    enum job_event ev;        /* the event */
+    int64_t lines_acked;      /* its lines */
 };
 
 void
@@ -290,8 +292,14 @@ on_fenced_event(void *ud, const struct storeq_result *r)
         }
     if (r->rc)
         log_msg(LOG_ERROR, "printer", "%s%s%s", p ? p->cfg.name : "", p ? ": " : "", r->err->msg);
-    if (r->rc == SF_ESTALE && p)
+    if (r->rc == SF_ESTALE && p) {
+        if (w->ev == JOB_EV_PRINT_DONE) { /* whole here: said once the host holds it again */
+            p->orphan.id = w->id;
+            p->orphan.lines_acked = w->lines_acked;
+        }
         printer_fenced_out(p, w->id);
+        printer_settle_orphan(p);
+    }
     free(w);
 }
 
@@ -302,7 +310,9 @@ printer_fenced_event(struct printer *p, int64_t id, enum job_event ev,
     struct fence_watch *w = mem_calloc(1, sizeof(*w));
     if (!w)
         return SF_ENOMEM;
-    *w = (struct fence_watch){ .p = p, .next = p->watches, .id = id };
+    *w = (struct fence_watch){
+        .p = p, .next = p->watches, .id = id, .ev = ev, .lines_acked = a ? a->lines_acked : 0
+    };
     if (storeq_job_event(p->env.q, id, ev, a, p->cfg.name, on_fenced_event, w)) {
         free(w);
         return SF_ENOMEM;
@@ -334,6 +344,36 @@ printer_fenced_out(struct printer *p, int64_t id)
         log_printer(LOG_ERROR, p->cfg.name, "job %lld: stop: %s", (long long)id, err.msg);
     }
     printer_changed(p);
+}
+
+void
+printer_settle_orphan(struct printer *p)
+{
+    int64_t id = p->orphan.id;
+    if (!id || !p->env.hold)
+        return;
+    struct sf_err err;
+    struct job_row j;
+    if (store_job_get(p->env.s, id, &j, &err))
+        return; /* the store away: at the next join or attach */
+    /* only while nobody took it on since: interrupted, on this printer */
+    if (j.state != JOB_INTERRUPTED || strcmp(j.printer, p->cfg.name) != 0) {
+        p->orphan.id = 0;
+        return;
+    }
+    int64_t fence = 0;
+    if (p->env.hold(p->env.ud, id, &fence, &err))
+        return; /* no lease yet (reaped: the host joins again, then asks again) */
+    p->orphan.id = 0;
+    log_printer(LOG_INFO, p->cfg.name,
+                "job %lld: its print ended whole while this host was away from the store: "
+                "recorded done",
+                (long long)id);
+    struct job_event_args a = { .printer = p->cfg.name,
+                                .lines_acked = p->orphan.lines_acked,
+                                .fence = fence };
+    storeq_job_event(p->env.q, id, JOB_EV_RESUME, &a, p->cfg.name, NULL, NULL);
+    printer_job_event(p, id, JOB_EV_PRINT_DONE, &a);
 }
 
 void

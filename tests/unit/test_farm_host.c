@@ -920,3 +920,46 @@ T_CASE(host_reaped_while_away_lets_go_of_its_prints)
     host_farm_free();
     store_close(a);
 }
+
+/* A print that ran to its end while its host was away from the database: its end, written
+   late, is refused as stale (the host was reaped: the job interrupted), and an operator would
+   print it again.  Once the host joined again it holds the job and records it done. */
+T_CASE(host_records_a_print_that_ended_while_it_was_away)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/orphan", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    host_lease_s = 5;
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    int64_t id;
+    T_OK(add_ready_for(a, "q", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("q");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20);
+    T_EQ_INT(d->starts, 1);
+    /* b's loop stands still until its lease runs out and the reap interrupts its print */
+    int reaped = 0;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; reaped <= 0 && clock_mono_ms() < end;
+         usleep(50 * 1000))
+        reaped = store_host_reap(a, clock_wall_ms(), NULL, &err);
+    T_EQ_INT(reaped, 1);
+    db_text(url, "SELECT state FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_EQ_STR(text, "interrupted");
+    /* meanwhile the printer ran it to its end: b hears it once its loop runs again */
+    d->base.status.state = DRV_IDLE;
+    d->base.status.lines_acked = 2;
+    d->base.on_event(&d->base, DRV_EV_JOB_DONE, d->base.ud);
+    T_TRUE(wait_state(url, id, "done"));
+    host_farm_free();
+    store_close(a);
+}
