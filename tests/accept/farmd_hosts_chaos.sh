@@ -108,11 +108,15 @@ for h in a b c; do wait_for 90 idle4 "$h" || fail "$h's printers: $(on "$h" "$C"
 for s in 8 9 10 11 12; do tetra "$tmp/t$s.stl" "$s"; done
 jobs=
 k=0
+# submit_batch N [HOST]: N jobs through the three APIs in turn, or all for HOST's printers
+# (through its API, one printer after the other: its four print at once, several jobs each)
 submit_batch() {
-  local n h id
+  local n h id pin
   for n in $(seq "$1"); do
-    h=$(echo a b c | cut -d' ' -f$((k % 3 + 1)))
-    id=$(SLIMFARM_URL=${hurl[$h]} submit "$tmp/t$((8 + k % 5)).stl" --material PLA --method none)
+    h=${2:-$(echo a b c | cut -d' ' -f$((k % 3 + 1)))}
+    pin=()
+    [ -n "${2:-}" ] && pin=(--printer "${2}_$(echo mk1 mk2 mr pl | cut -d' ' -f$((n % 4 + 1)))")
+    id=$(SLIMFARM_URL=${hurl[$h]} submit "$tmp/t$((8 + k % 5)).stl" --material PLA --method none "${pin[@]}")
     [ -n "$id" ] || fail "submit $k on $h"
     jobs="$jobs $id"
     k=$((k + 1))
@@ -153,7 +157,7 @@ wait_for 90 c_back || fail "c did not join again: $(tail -5 "$tmp/c.log")"
 note "c joined again"
 
 # ---- 2. b cut off from the database while printing, until reaped; then reconnected ----
-submit_batch 13
+submit_batch 13 b
 # a Marlin's print and a network printer's under way on b
 b_both() { usb_printing b && net_printing b; }
 wait_for 120 b_both || fail "no print on b's Marlins and network printers: $(psql_q 'SELECT id, state, printer FROM jobs ORDER BY id')"
