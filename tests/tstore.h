@@ -20,6 +20,7 @@
 
 #include "../src/farm/sqldb.h"
 #include "../src/farm/store.h"
+#include "../src/farm/store_host.h"
 
 /* Whether the stores of this run are PostgreSQL. */
 static inline bool
@@ -113,6 +114,36 @@ t_store_exec(const char *dir, const char *sql)
     int rc = db ? sqldb_exec(db, sql) : SF_EIO;
     sqldb_close(db);
     return rc;
+}
+
+/* Two hosts' stores on one database: a on dir, b on dir-b (on SQLite b is a peer of a: one
+   process holds the data dir).  ta, tb: their join tokens, for the tests that join. */
+struct t_pair {
+    char dir[512], dir_b[512], url[1024];
+    struct store *a, *b;
+    int64_t ta, tb;
+};
+
+/* Open p's two stores on dir (its database: t_store_db); false with err set if not. */
+static inline bool
+t_pair_open(struct t_pair *p, const char *dir, struct sf_err *err)
+{
+    snprintf(p->dir, sizeof(p->dir), "%s", dir);
+    snprintf(p->dir_b, sizeof(p->dir_b), "%.500s-b", p->dir);
+    const char *db = t_store_db(p->dir);
+    snprintf(p->url, sizeof(p->url), "%s", db ? db : "");
+    p->a = store_open_host(p->dir, db, NULL, err);
+    p->b = !p->a ? NULL
+           : db  ? store_open_host(p->dir_b, p->url, NULL, err)
+                 : store_open_peer(p->a, err);
+    return p->a && p->b;
+}
+
+static inline void
+t_pair_close(struct t_pair *p)
+{
+    store_close(p->b);
+    store_close(p->a);
 }
 
 #endif

@@ -31,24 +31,22 @@ BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/../integ/lib/farm.sh"
 . "$(dirname "$0")/../integ/lib/netprint.sh"
 . "$(dirname "$0")/../integ/lib/pg.sh"
+. "$(dirname "$0")/../integ/lib/hosts.sh"
 t0=$(date +%s)
-declare -A hpid hurl lease
-all_cleanup() {
-  for h in "${!hpid[@]}"; do kill -9 "${hpid[$h]}" 2> /dev/null; done
+declare -A lease
+chaos_cleanup() {
   [ -n "${PX_PID:-}" ] && kill "$PX_PID" 2> /dev/null
-  cleanup
-  pg_stop
+  hosts_cleanup
 }
 PG_TCP=1 pg_start fsync=off > "$tmp/pg.out" 2>&1 || {
   cat "$tmp/pg.out"
   echo "farmd_hosts_chaos: SKIP (no PostgreSQL)"
   exit 0
 }
-trap all_cleanup EXIT
+trap chaos_cleanup EXIT
 URL=$(pg_url postgres)
 "$D" --init-store "$URL" > /dev/null || fail "--init-store $URL"
 cp -r config/printers config/materials "$tmp/"
-psql_q() { psql -qAt "$URL" -c "$1"; }
 note() { echo "   $(($(date +%s) - t0)) s: $*"; }
 
 # host b's way to the database: a proxy to the server's port (commands on its stdin)
@@ -78,13 +76,6 @@ host_ini() {
       "$h" "$(cat "$tmp/${h}_pl.addr")" "$h"
   } > "$tmp/$h.ini"
 }
-start_host() {
-  daemon_start "$tmp/$1.ini" "$tmp/$1.log" || { tail -20 "$tmp/$1.log"; fail "host $1 did not come up"; }
-  hpid[$1]=$pid
-  hurl[$1]=$SLIMFARM_URL
-  pid=
-}
-on() { local h=$1; shift; SLIMFARM_URL=${hurl[$h]} "$@"; }
 joins() { grep -c "$1 joined (token" "$tmp/$1.log"; }
 
 # A print lasts seconds (a few thousand lines), so the events find prints under way

@@ -24,15 +24,10 @@ BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
 . "$(dirname "$0")/lib/netprint.sh"
 . "$(dirname "$0")/lib/pg.sh"
+. "$(dirname "$0")/lib/hosts.sh"
 t0=$(date +%s)
-declare -A hpid hurl
-all_cleanup() {
-  for h in "${!hpid[@]}"; do kill -9 "${hpid[$h]}" 2> /dev/null; done
-  cleanup
-  pg_stop
-}
 pg_start > "$tmp/pg.out" 2>&1 || { cat "$tmp/pg.out"; echo "farmd_hosts: SKIP (no PostgreSQL)"; exit 0; }
-trap all_cleanup EXIT
+trap hosts_cleanup EXIT
 URL=$(pg_url postgres)
 "$D" --init-store "$URL" > /dev/null || fail "--init-store $URL"
 cp -r config/printers config/materials "$tmp/"
@@ -50,16 +45,6 @@ host_ini() {
       "$h" "$kind" "$(cat "$tmp/${h}_net.addr")" "$h"
   } > "$tmp/$h.ini"
 }
-# start_host NAME: slimfarmd on $tmp/NAME.ini, logging to $tmp/NAME.log
-start_host() {
-  daemon_start "$tmp/$1.ini" "$tmp/$1.log" || { tail -20 "$tmp/$1.log"; fail "host $1 did not come up"; }
-  hpid[$1]=$pid
-  hurl[$1]=$SLIMFARM_URL
-  pid=
-}
-# on HOST CMD...: run CMD against HOST's API
-on() { local h=$1; shift; SLIMFARM_URL=${hurl[$h]} "$@"; }
-psql_q() { psql -qAt "$URL" -c "$1"; }
 
 # c's Marlin is the slow one: a print on it lasts long enough to kill c in the middle
 start_sim a_mk --speed 3000

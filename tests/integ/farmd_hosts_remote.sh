@@ -20,15 +20,10 @@ set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
 . "$(dirname "$0")/lib/pg.sh"
+. "$(dirname "$0")/lib/hosts.sh"
 t0=$(date +%s)
-declare -A hpid hurl
-all_cleanup() {
-  for h in "${!hpid[@]}"; do kill -CONT "${hpid[$h]}" 2> /dev/null; kill -9 "${hpid[$h]}" 2> /dev/null; done
-  cleanup
-  pg_stop
-}
 pg_start > "$tmp/pg.out" 2>&1 || { cat "$tmp/pg.out"; echo "farmd_hosts_remote: SKIP (no PostgreSQL)"; exit 0; }
-trap all_cleanup EXIT
+trap hosts_cleanup EXIT
 URL=$(pg_url postgres)
 "$D" --init-store "$URL" > /dev/null || fail "--init-store $URL"
 cp -r config/printers config/materials "$tmp/"
@@ -43,14 +38,6 @@ host_ini() {
       "$1" "$(cat "$tmp/${1}_mk.addr")"
   } > "$tmp/$1.ini"
 }
-start_host() {
-  daemon_start "$tmp/$1.ini" "$tmp/$1.log" || { tail -20 "$tmp/$1.log"; fail "host $1 did not come up"; }
-  hpid[$1]=$pid
-  hurl[$1]=$SLIMFARM_URL
-  pid=
-}
-on() { local h=$1; shift; SLIMFARM_URL=${hurl[$h]} "$@"; }
-psql_q() { psql -qAt "$URL" -c "$1"; }
 # act HOST PRINTER ACTION [BODY]: POST through HOST's API; the status into $code, the body
 # into $tmp/act.body, the time it took (s) into $took
 act() {

@@ -23,41 +23,22 @@
 #define WAIT_MS  10000
 
 /* Two hosts on one database: a owns printer "p1", b asks. */
-struct pair {
-    char dir[512], dir_b[512], url[1024];
-    struct store *a, *b;
-    int64_t ta, tb;
-};
-
 static bool
-pair_open(struct pair *p, const char *name, struct sf_err *err)
+pair_open(struct t_pair *p, const char *name, struct sf_err *err)
 {
-    snprintf(p->dir, sizeof(p->dir), "%s/%s", t_tmpdir(), name);
-    snprintf(p->dir_b, sizeof(p->dir_b), "%s-b", p->dir);
-    const char *db = t_store_db(p->dir);
-    snprintf(p->url, sizeof(p->url), "%s", db ? db : "");
-    p->a = store_open_host(p->dir, db, NULL, err);
-    p->b = !p->a ? NULL
-           : db  ? store_open_host(p->dir_b, p->url, NULL, err)
-                 : store_open_peer(p->a, err);
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/%s", t_tmpdir(), name);
     const char *mine[] = { "p1" }, *theirs[] = { "p2" };
-    return p->a && p->b && store_host_join(p->a, "a", LEASE_MS, &p->ta, err) == SF_OK &&
+    return t_pair_open(p, dir, err) && store_host_join(p->a, "a", LEASE_MS, &p->ta, err) == SF_OK &&
            store_host_join(p->b, "b", LEASE_MS, &p->tb, err) == SF_OK &&
            store_host_own(p->a, "a", p->ta, mine, 1, NULL, err) == SF_OK &&
            store_host_own(p->b, "b", p->tb, theirs, 1, NULL, err) == SF_OK;
 }
 
-static void
-pair_close(struct pair *p)
-{
-    store_close(p->b);
-    store_close(p->a);
-}
-
 T_CASE(command_is_taken_once_and_answered)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "once", &err));
     int64_t now = clock_wall_ms();
     struct store_command c, got, *rows;
@@ -95,13 +76,13 @@ T_CASE(command_is_taken_once_and_answered)
     T_ERR(store_command_finish(p.a, c.id, SF_OK, NULL, NULL, &err), SF_ENOTFOUND, &err,
           "not running");
     T_ERR(store_command_get(p.b, c.id + 100, &got, &err), SF_ENOTFOUND, &err, "no command");
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 T_CASE(command_past_its_deadline_never_runs)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "late", &err));
     int64_t now = clock_wall_ms();
     struct store_command c, d, got, *rows;
@@ -130,7 +111,7 @@ T_CASE(command_past_its_deadline_never_runs)
     T_EQ_INT(rows[0].id, c.id);
     T_EQ_STR(rows[0].line, "G28");
     free(rows);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 /* The deadline is the database's clock's: an asker whose clock runs a minute behind (or
@@ -138,7 +119,7 @@ T_CASE(command_past_its_deadline_never_runs)
 T_CASE(command_deadline_is_the_databases_clock)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "clock", &err));
     struct store_command c, *rows;
     size_t n;
@@ -155,13 +136,13 @@ T_CASE(command_deadline_is_the_databases_clock)
     for (size_t i = 0; i < n; i++)
         T_TRUE(rows[i].left_ms > 0 && rows[i].left_ms <= WAIT_MS);
     free(rows);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 T_CASE(command_to_a_host_down_or_no_printer_is_refused)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "down", &err));
     int64_t now = clock_wall_ms();
     struct store_command c, *rows;
@@ -191,7 +172,7 @@ T_CASE(command_to_a_host_down_or_no_printer_is_refused)
     T_OK(store_command_take(p.a, "a", &rows, &n, &err), &err);
     T_EQ_INT(n, 0);
     free(rows);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 /* What a listener heard: every payload, and how many were want (the host it waits for). */
@@ -228,7 +209,7 @@ T_CASE(owner_and_asker_hear_the_command)
 {
     T_SKIP_UNLESS(t_store_pg(), "NOTIFY is PostgreSQL's (SQLite has one host)");
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "hear", &err));
     struct store *la = store_open_peer(p.a, &err), *lb = store_open_peer(p.b, &err);
     T_TRUE(la && lb);
@@ -250,13 +231,13 @@ T_CASE(owner_and_asker_hear_the_command)
     T_EQ_INT(hb.wanted, 1); /* the asker's: b reads the answer */
     store_close(la);
     store_close(lb);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 T_CASE(each_host_lists_the_printers_the_others_own)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "list", &err));
     struct store_command_printer *rows;
     size_t n;
@@ -281,5 +262,5 @@ T_CASE(each_host_lists_the_printers_the_others_own)
     T_TRUE(!rows[0].live);
     T_TRUE(rows[0].down_ms >= 4000);
     free(rows);
-    pair_close(&p);
+    t_pair_close(&p);
 }

@@ -31,31 +31,11 @@ fresh_dir(const char *name)
     return path;
 }
 
-/* Two hosts' stores on one database: *a on dir, *b beside it (see the top comment). */
-struct pair {
-    char dir[512], dir_b[512], url[1024];
-    struct store *a, *b;
-};
-
+/* Two hosts' stores on one database (see the top comment), in a fresh dir. */
 static bool
-pair_open(struct pair *p, const char *name, struct sf_err *err)
+pair_open(struct t_pair *p, const char *name, struct sf_err *err)
 {
-    snprintf(p->dir, sizeof(p->dir), "%s", fresh_dir(name));
-    snprintf(p->dir_b, sizeof(p->dir_b), "%s-b", p->dir);
-    const char *db = t_store_db(p->dir);
-    snprintf(p->url, sizeof(p->url), "%s", db ? db : "");
-    p->a = store_open_host(p->dir, db, NULL, err);
-    p->b = !p->a ? NULL
-           : db  ? store_open_host(p->dir_b, p->url, NULL, err)
-                 : store_open_peer(p->a, err);
-    return p->a && p->b;
-}
-
-static void
-pair_close(struct pair *p)
-{
-    store_close(p->b);
-    store_close(p->a);
+    return t_pair_open(p, fresh_dir(name), err);
 }
 
 /* n queued jobs of one part, into ids (may be NULL). */
@@ -134,7 +114,7 @@ cmp_id(const void *a, const void *b)
 T_CASE(hosts_claim_500_jobs_from_two_threads_never_twice)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "claims", &err));
     static struct claimer c[2];
     c[0] = (struct claimer){ .s = p.a, .host = "a" };
@@ -163,14 +143,14 @@ T_CASE(hosts_claim_500_jobs_from_two_threads_never_twice)
     snprintf(sql, sizeof(sql), "SELECT count(*) FROM jobs WHERE claimed_by = 'a'");
     T_EQ_INT(t_store_int(p.dir, sql), c[0].n);
     T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM events WHERE kind = 'job-prepare'"), N_CLAIM);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 /* The claim takes the scheduler's order and only the methods the host runs. */
 T_CASE(hosts_claim_follows_queue_order_and_methods)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "claim-order", &err));
     int64_t ids[3], token, fence = 0;
     struct job_row j;
@@ -191,13 +171,13 @@ T_CASE(hosts_claim_follows_queue_order_and_methods)
     T_OK(store_job_claim(p.a, "a", token, NULL, &j, &fence, &err), &err);
     T_EQ_INT(j.id, ids[1]);
     T_EQ_INT(store_job_claim(p.a, "a", token, NULL, &j, &fence, &err), SF_ENOTFOUND);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 T_CASE(hosts_expired_host_is_reaped_once)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "reap", &err));
     int64_t ids[3], ta, tb, fence;
     struct job_row j;
@@ -255,13 +235,13 @@ T_CASE(hosts_expired_host_is_reaped_once)
     T_OK(store_job_claim(p.b, "b", tb, NULL, &j, &fence, &err), &err);
     T_EQ_INT(j.id, ids[0]);
     T_OK(store_check(p.b, &err), &err);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 T_CASE(hosts_stale_fencing_token_refused_at_start)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "fence", &err));
     int64_t id, ta, tb, fa, fb;
     T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
@@ -290,13 +270,13 @@ T_CASE(hosts_stale_fencing_token_refused_at_start)
     T_OK(store_job_get(p.a, id, &j, &err), &err);
     T_EQ_INT(j.state, JOB_PAUSED);
     T_EQ_INT(store_job_fence(p.a, id + 100, fb, &err), SF_ENOTFOUND);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 T_CASE(hosts_join_refused_while_another_lease_holds_the_name)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "join", &err));
     int64_t t1, t2;
     T_ERR(store_host_join(p.a, "a b", LEASE_MS, &t1, &err), SF_EINVAL, &err, "not a host name");
@@ -343,13 +323,13 @@ T_CASE(hosts_join_refused_while_another_lease_holds_the_name)
     T_EQ_INT(t2, t1 + 1);
     T_ERR(store_host_beat(p.a, "a", t1, LEASE_MS, &err), SF_ESTALE, &err, "another process");
     T_OK(store_host_beat(p.a, "a", t2, LEASE_MS, &err), &err);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 T_CASE(hosts_list_shows_lease_printers_and_claims)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "list", &err));
     int64_t ta, tb, fence;
     T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
@@ -373,7 +353,7 @@ T_CASE(hosts_list_shows_lease_printers_and_claims)
     T_TRUE(!rows[1].live); /* 2 min on, its 1-min lease has run out */
     T_EQ_INT(rows[1].n_claimed, 0);
     free(rows);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 /* A store call on another thread: a note logged (an event in its own transaction), or the
@@ -445,7 +425,7 @@ T_CASE(hosts_events_commit_in_id_order_across_connections)
         return;
     }
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "evorder", &err));
     int64_t ta, tb, fence;
     T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
@@ -494,7 +474,7 @@ T_CASE(hosts_events_commit_in_id_order_across_connections)
     sqldb_close(lock);
     sqldb_close(look);
     store_close(w);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 /* Fencing cannot be bypassed: a reap makes the reaped host's tokens stale (its RESUME of the
@@ -503,7 +483,7 @@ T_CASE(hosts_events_commit_in_id_order_across_connections)
 T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "fence2", &err));
     int64_t ta, tb, fa, fc, id, q;
     struct job_row j;
@@ -548,7 +528,7 @@ T_CASE(hosts_reap_bumps_fences_and_unfenced_writes_are_refused)
     T_EQ_INT(j.state, JOB_QUEUED);
     /* the operator's events need no token */
     T_OK(store_job_event(p.a, q, JOB_EV_CANCEL, NULL, NULL, &err), &err);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 /* Whether rows (n) hold job id. */
@@ -563,7 +543,7 @@ has_job(const struct job_row *rows, size_t n, int64_t id)
 
 /* Does b's scheduler see job id (store_job_live_host)?  -1 on an error. */
 static int
-b_sees(struct pair *p, int64_t id)
+b_sees(struct t_pair *p, int64_t id)
 {
     struct job_row *rows;
     size_t n;
@@ -578,7 +558,7 @@ b_sees(struct pair *p, int64_t id)
 T_CASE(hosts_defer_prepare_failed_and_restart_release_the_claim)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "release", &err));
     int64_t ta, tb, ids[2], ready, fence;
     T_OK(store_host_join(p.a, "a", 60 * 1000, &ta, &err), &err);
@@ -614,13 +594,13 @@ T_CASE(hosts_defer_prepare_failed_and_restart_release_the_claim)
     T_EQ_INT(b_sees(&p, ready), 1);
     T_OK(store_job_take(p.b, "b", tb, ready, &fence, &err), &err);
     T_OK(store_check(p.b, &err), &err);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 T_CASE(hosts_claim_in_doubt_is_settled_by_reading_it_back)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "settle", &err));
     int64_t ta, tb, ids[2], fence;
     T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
@@ -650,13 +630,13 @@ T_CASE(hosts_claim_in_doubt_is_settled_by_reading_it_back)
     T_OK(store_job_get(p.a, ids[1], &j, &err), &err);
     T_EQ_INT(j.state, JOB_PREPARING);
     T_OK(store_check(p.a, &err), &err);
-    pair_close(&p);
+    t_pair_close(&p);
 }
 
 T_CASE(hosts_progress_of_a_job_another_host_holds_is_not_written)
 {
     struct sf_err err;
-    struct pair p;
+    struct t_pair p;
     T_TRUE(pair_open(&p, "progress", &err));
     int64_t ta, tb, ids[2], fa[2], fb;
     T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
@@ -681,5 +661,5 @@ T_CASE(hosts_progress_of_a_job_another_host_holds_is_not_written)
     struct job_event_args pause = { .lines_acked = 5, .fence = fa[0] };
     T_ERR(store_job_event(p.a, ids[0], JOB_EV_PAUSE, &pause, NULL, &err), SF_ESTALE, &err,
           "host 'b' holds the job now");
-    pair_close(&p);
+    t_pair_close(&p);
 }
