@@ -47,6 +47,11 @@ struct farm_host {
     struct doubt *doubts;
     uint64_t resettle; /* a read-back failed: timer of the next round, 0 if none */
     int peers;         /* other live hosts at the last join or beat; -1 if not known */
+    /* the reap's grace (on_beat): when this host's current run of renewals began (monotonic
+       ms; 0: not renewing, as after a failed beat), its last renewal, and the store
+       connection's reconnects then */
+    int64_t renewing_since, renewed_at, renew_gen;
+    bool doubted; /* a claim, take or hold found the lease not current: the beat decides */
 };
 
 /* A claim in doubt, on its way to the store thread's read-back or waiting for another. */
@@ -157,6 +162,38 @@ out:
     free(foreign);
 }
 
+/*
+ * The reap's grace.  A host whose lease ran out is reaped by the first
+ * other host to notice, but after an outage of the database (a restart,
+ * the network to it cut) longer than the lease every lease ran out at
+ * once, though no host died: the first host back would reap all the
+ * others and end every USB print in the farm.  So a host reaps others only
+ * once it has itself renewed its lease without a break for a whole lease
+ * (FARM_HOST_BEATS_PER_LEASE beats): every live peer had as long to come
+ * back and renew as this host had, and one that did not is dead or cut
+ * off.  The run breaks at a failed beat, at a reconnect of the store's
+ * connection, and at a gap between two renewals of more than half a lease
+ * (a loop stall, or a beat that hung on the network); a new run starts at
+ * the join and at the next renewal.  Hosts judge leases by their own wall
+ * clocks (store_host.h: NTP); the grace is this host's monotonic clock.
+ */
+static void
+renewed(struct farm_host *h)
+{
+    int64_t now = clock_mono_ms(), gen = store_host_reconnects(h->f->s);
+    if (!h->renewing_since || gen != h->renew_gen || now - h->renewed_at > h->lease_ms / 2)
+        h->renewing_since = now;
+    h->renewed_at = now;
+    h->renew_gen = gen;
+}
+
+/* May this host reap the others now (the grace above)? */
+static bool
+may_reap(const struct farm_host *h)
+{
+    return h->joined && h->renewing_since && clock_mono_ms() - h->renewing_since >= h->lease_ms;
+}
+
 /* Join (again): the lease, the printers.  Logs why not. */
 static void
 join(struct farm_host *h)
@@ -172,6 +209,7 @@ join(struct farm_host *h)
     }
     h->joined = true;
     h->waiting = false;
+    renewed(h);
     own(h);
     count_peers(h);
     log_info("host", "%s joined (token %lld, lease %.1f s, %zu printers)", h->name,
@@ -202,22 +240,35 @@ on_beat(struct loop *l, void *ud)
     struct farm_host *h = ud;
     struct sf_err err;
     h->timer = 0;
+    bool doubted = h->doubted;
+    h->doubted = false;
     if (!h->joined) {
         join(h);
     } else if (store_host_beat(h->f->s, h->name, h->token, h->lease_ms, &err)) {
         log_error("host", "%s: %s", h->name, err.msg);
+        h->renewing_since = 0;       /* the grace starts again at the next renewal */
         if (err.code == SF_ESTALE) { /* reaped: its jobs moved on; join as a new process */
             h->joined = false;
             let_go(h);
             join(h);
         }
-    } else if (h->n_foreign) { /* their owner may be gone: own them again */
-        own(h);
-        if (!h->n_foreign)
+    } else {
+        renewed(h);
+        if (doubted) { /* the lease had only run out, and is renewed: carry on */
+            log_info("host", "%s: its lease is renewed (it had run out, nobody reaped it)",
+                     h->name);
             farm_kick(h->f);
+            for (size_t i = 0; i < h->f->n_printers; i++)
+                printer_attach_again(h->f->printers[i]);
+        }
+        if (h->n_foreign) { /* their owner may be gone: own them again */
+            own(h);
+            if (!h->n_foreign)
+                farm_kick(h->f);
+        }
     }
     struct store_recovery moved;
-    int n = store_host_reap(h->f->s, clock_wall_ms(), &moved, &err);
+    int n = may_reap(h) ? store_host_reap(h->f->s, clock_wall_ms(), &moved, &err) : 0;
     if (n < 0) {
         log_warn("host", "reap: %s", err.msg);
     } else if (n > 0) {
@@ -231,6 +282,22 @@ on_beat(struct loop *l, void *ud)
     if (h->joined)
         count_peers(h);
     h->timer = loop_timer_add(l, h->lease_ms / FARM_HOST_BEATS_PER_LEASE, on_beat, h);
+}
+
+/* A claim, take or hold found this host's lease not current (SF_ESTALE).  That is not yet a
+   reap: a lease that only ran out (the database away longer than the lease, a stalled loop)
+   and that nobody reaped is renewed by the beat, and the host carries on, its prints
+   untouched; only a beat that finds the lease lost (reaped: its token moved on, or the name
+   another process's) lets go of them and joins again.  So beat now, and let it decide. */
+static void
+lease_doubted(struct farm_host *h)
+{
+    if (!h->joined || h->doubted)
+        return;
+    h->doubted = true;
+    if (h->timer)
+        loop_timer_cancel(h->f->l, h->timer);
+    h->timer = loop_timer_add(h->f->l, 0, on_beat, h);
 }
 
 static void
@@ -483,7 +550,7 @@ farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
         settle(h);
     }
     if (rc == SF_ESTALE)
-        h->joined = false; /* the next beat joins again */
+        lease_doubted(h); /* the beat renews it, or joins again if it was reaped */
     return rc;
 }
 
@@ -499,7 +566,7 @@ farm_host_take(struct farm *f, int64_t id, int64_t *fence)
     if (rc && rc != SF_ENOTFOUND)
         log_warn("host", "%s: take job %lld: %s", h->name, (long long)id, err.msg);
     if (rc == SF_ESTALE)
-        h->joined = false;
+        lease_doubted(h);
     return rc == SF_OK;
 }
 
@@ -547,6 +614,6 @@ farm_host_hold(void *ud, int64_t id, int64_t *fence, struct sf_err *err)
     else
         sf_err_prefix(err, "host %s: hold job %lld", h->name, (long long)id);
     if (rc == SF_ESTALE)
-        h->joined = false;
+        lease_doubted(h);
     return rc;
 }

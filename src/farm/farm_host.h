@@ -7,8 +7,14 @@
  * printers of its config, renews the lease every third of it, and at the
  * same beat reaps every host whose lease ran out (store_host_reap: their
  * queued and preparing jobs go back to the queue, their printing ones
- * become interrupted).  A stop leaves: the lease ends at once and the host
- * reaps itself, so its waiting work moves on without waiting the lease out.
+ * become interrupted), once it has itself renewed without a break for a
+ * whole lease (farm_host.c: after a database outage every lease ran out,
+ * and the first host back must not reap the others).  A claim, take or
+ * hold that finds its own lease run out makes the host beat at once: a
+ * lease nobody reaped is renewed and the host carries on, its prints
+ * untouched; only a host really reaped lets go of them and joins again.  A stop leaves: the lease
+ * ends at once and the host reaps itself, so its waiting work moves on without waiting the lease
+ * out.
  *
  * Which host does what (the rule, simplest first): a host prepares only a
  * queued job its scheduler chose for a printer of its own, after claiming

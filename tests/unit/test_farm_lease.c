@@ -1,0 +1,188 @@
+/*
+ * test_farm_lease.c - a host's lease through a database outage (farm_host.h,
+ * PostgreSQL only: farm.ini's store is a URL; tests/tfarmhost.h runs the
+ * farm).  A host whose lease ran out while nobody reaped it renews it and
+ * carries on, its prints untouched, when a claim or take finds it lapsed
+ * (it used to join again, reaping itself); the first host back after an
+ * outage longer than the leases waits a lease before it reaps the others,
+ * so the hosts that come back as it did are not reaped, and reaps a host
+ * that did not.  With SLIMFARM_TEST_STORE (tstore.h; store_pg.sh sets it).
+ */
+#include <stdint.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#include "../../src/base/clock.h"
+#include "../../src/farm/farm.h"
+#include "../../src/farm/store_host.h"
+#include "../t.h"
+#include "../tfarmhost.h"
+#include "../tstore.h"
+
+#define SKIP_UNLESS_PG()                                                                           \
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)")
+
+/* The first column of sql (its ?1 bound to id) on url's database, as an integer (-1: none). */
+static int64_t
+db_int(const char *url, const char *sql, int64_t id)
+{
+    char text[64];
+    db_text(url, sql, id, text, sizeof(text));
+    return strcmp(text, "(no row)") == 0 ? -1 : strtoll(text, NULL, 10);
+}
+
+/* Run sql on url's database; SF_OK or the engine's failure. */
+static int
+db_exec(const char *url, const char *sql)
+{
+    struct sf_err err;
+    struct sqldb *db = sqldb_open(url, 0, &err);
+    int rc = db ? sqldb_exec(db, sql) : SF_EIO;
+    sqldb_close(db);
+    return rc;
+}
+
+T_CASE(host_renews_a_lease_that_ran_out_unreaped_and_prints_on)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64], sql[256];
+    snprintf(dir, sizeof(dir), "%s/renew", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err); /* adds the jobs */
+    T_TRUE(a != NULL);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n"
+                   "[printer r]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n",
+                   &err),
+         &err);
+    int64_t first, second;
+    T_OK(add_ready_for(a, "q", &first, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, first, "printing"));
+    struct hdrv *d = hdrv_named("q");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20);
+    T_EQ_INT(d->starts, 1);
+    int64_t fence = db_int(url, "SELECT fence FROM jobs WHERE id = ?1", first);
+    int64_t token = db_int(url, "SELECT token FROM hosts WHERE name = 'b' AND ?1 = 0", 0);
+    T_TRUE(fence > 0 && token > 0);
+    /* b's lease ran out, as after the database was away longer than it (b's beat, a third of
+       a 600 s lease, is far off), and nobody reaped b */
+    snprintf(sql, sizeof(sql), "UPDATE hosts SET lease_until_ms = %lld WHERE name = 'b'",
+             (long long)(clock_wall_ms() - 1000));
+    T_OK(db_exec(url, sql), NULL);
+    /* the next take finds the lease lapsed: b renews it and takes the job */
+    T_OK(add_ready_for(a, "r", &second, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    bool printing = wait_state(url, second, "printing");
+    if (!printing)
+        fprintf(stderr, "host b logged:\n%s", logged);
+    T_TRUE(printing);
+    T_TRUE(was_logged("its lease ran out")); /* the take did find it lapsed */
+    /* the first print is untouched: the same host process, fencing token and printer */
+    T_EQ_INT(db_int(url, "SELECT token FROM hosts WHERE name = 'b' AND ?1 = 0", 0), token);
+    T_EQ_INT(db_int(url, "SELECT fence FROM jobs WHERE id = ?1", first), fence);
+    db_text(url, "SELECT state || ' ' || claimed_by FROM jobs WHERE id = ?1", first, text,
+            sizeof(text));
+    T_EQ_STR(text, "printing b");
+    T_EQ_INT(t_store_int(dir, "SELECT count(*) FROM events WHERE kind = 'host-reaped'"), 0);
+    T_EQ_INT(d->cancels, 0);
+    struct printer_info info;
+    farm_printer_info(hx.f, 0, &info);
+    T_EQ_INT(info.job_id, first);
+    host_farm_free();
+    store_close(a);
+}
+
+/* Turn hx's loop (and beat host a's lease every few turns, if ta) until the wall clock
+   passes until_ms. */
+static void
+turn_until(int64_t until_ms, struct store *a, int64_t ta, int *a_rc)
+{
+    struct sf_err err;
+    for (int i = 0; clock_wall_ms() < until_ms; i++) {
+        loop_run_once(hx.l, 20);
+        if (ta && i % 10 == 0) {
+            int rc = store_host_beat(a, "a", ta, 3000, &err);
+            if (rc && *a_rc == SF_OK)
+                *a_rc = rc;
+        }
+    }
+}
+
+T_CASE(host_back_from_an_outage_reaps_no_host_that_came_back_too)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], db[64], sql[256], text[64];
+    snprintf(dir, sizeof(dir), "%s/outage", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    db_text(url, "SELECT current_database() WHERE ?1 = 0", 0, db, sizeof(db));
+    /* host a (a store here, beating from the test) prints job id on its printer x */
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta, id, fence;
+    const char *xs[] = { "x" };
+    T_OK(store_host_join(a, "a", 3000, &ta, &err), &err);
+    T_OK(store_host_own(a, "a", ta, xs, 1, NULL, &err), &err);
+    T_OK(add_ready_for(a, "x", &id, &err), &err);
+    T_OK(store_job_take(a, "a", ta, id, &fence, &err), &err);
+    snprintf(sql, sizeof(sql), "UPDATE jobs SET state = 'printing' WHERE id = %lld",
+             (long long)id);
+    T_OK(db_exec(url, sql), NULL);
+    /* host b, a farm with a 2 s lease, runs a while beside a: a stays live */
+    host_lease_s = 2;
+    T_OK(host_farm(dir, url, "b", "[printer y]\ndriver: marlin\nport: pty:/dev/null\n", &err),
+         &err);
+    T_TRUE(wait_logged("b joined"));
+    int a_rc = SF_OK;
+    turn_until(clock_wall_ms() + 2500, a, ta, &a_rc);
+    T_OK(a_rc, NULL);
+    /* the database goes away for longer than both leases: every session of the farm's
+       database is cut and no new one let in (from the server's own database) */
+    struct sqldb *cut = sqldb_open(getenv("SLIMFARM_TEST_STORE"), 0, &err);
+    T_TRUE(cut != NULL);
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %s ALLOW_CONNECTIONS false", db);
+    T_OK(sqldb_exec(cut, sql), NULL);
+    snprintf(sql, sizeof(sql),
+             "SELECT count(pg_terminate_backend(pid)) FROM pg_stat_activity WHERE datname = '%s'",
+             db);
+    T_OK(sqldb_exec(cut, sql), NULL);
+    int64_t cut_ms = clock_wall_ms();
+    turn_until(cut_ms + 3500, NULL, 0, &a_rc);
+    snprintf(sql, sizeof(sql), "ALTER DATABASE %s ALLOW_CONNECTIONS true", db);
+    T_OK(sqldb_exec(cut, sql), NULL);
+    sqldb_close(cut);
+    /* back: b renews first (its beat), then a; b must not have reaped a meanwhile */
+    bool renewed = false;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !renewed && clock_mono_ms() < end;) {
+        loop_run_once(hx.l, 20);
+        renewed = db_int(url, "SELECT heartbeat_ms FROM hosts WHERE name = 'b' AND ?1 = 0", 0) >
+                  cut_ms;
+    }
+    T_TRUE(renewed);
+    int rc = SF_EUNREACH; /* a's connection comes back after its reconnect's back-off */
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; rc == SF_EUNREACH && clock_mono_ms() < end;)
+        if ((rc = store_host_beat(a, "a", ta, 3000, &err)) == SF_EUNREACH)
+            loop_run_once(hx.l, 20);
+    T_OK(rc, &err);
+    /* a lease later, with both renewing, a and its print are still live */
+    turn_until(clock_wall_ms() + 3000, a, ta, &a_rc);
+    T_OK(a_rc, NULL);
+    db_text(url, "SELECT state || ' ' || claimed_by FROM jobs WHERE id = ?1", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "printing a");
+    T_EQ_INT(t_store_int(dir, "SELECT count(*) FROM events WHERE kind = 'host-reaped'"), 0);
+    /* a host that does not come back is still reaped: a stops renewing */
+    bool reaped = wait_state(url, id, "interrupted");
+    if (!reaped)
+        fprintf(stderr, "host b logged:\n%s", logged);
+    T_TRUE(reaped);
+    T_EQ_INT(store_host_beat(a, "a", ta, 3000, &err), SF_ESTALE);
+    host_farm_free();
+    store_close(a);
+}
