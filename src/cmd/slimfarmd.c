@@ -448,6 +448,8 @@ main(int argc, char **argv)
     if (!(d.farm = farm_new(d.l, d.s, d.pool, &d.cfg, &hooks, &err)) ||
         !(d.notify = notify_new(d.l, d.s, d.cfg.notify, d.cfg.n_notify, &err)))
         goto out;
+    /* one of several hosts: each event of the farm told once */
+    notify_set_host(d.notify, farm_host_name(d.farm));
     raise_nofile(farm_printer_count(d.farm)); /* with those managed at run time (farm.h) */
     struct api_config ac = { .store = d.s,
                              .farm = d.farm,

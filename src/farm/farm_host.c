@@ -442,6 +442,12 @@ farm_host_stop(struct farm *f)
     f->host = NULL;
 }
 
+const char *
+farm_host_name(const struct farm *f)
+{
+    return f && f->host ? f->host->name : "";
+}
+
 bool
 farm_host_reader(const struct farm *f, char *name, size_t size)
 {

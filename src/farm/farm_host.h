@@ -80,6 +80,9 @@ bool farm_host_on(const struct farm *f);
    beat (what it says of a waiting job is then the whole farm's word). */
 bool farm_host_alone(const struct farm *f);
 
+/* This host's name (farm.ini host, default the machine's), "" for a single host. */
+const char *farm_host_name(const struct farm *f);
+
 /* Whose live jobs f's scheduler reads (on the store thread): name "" for a single host
    (store_job_live), the host's name for store_job_live_host; false before the host joined
    (none of the queue is its own then). */

@@ -30,9 +30,11 @@
 #include <string.h>
 
 #include "../../drivers/net/httpc.h"
+#include "../base/clock.h"
 #include "../base/log.h"
 #include "../base/mem.h"
 #include "notify_int.h"
+#include "store_host.h"
 
 #define PRINTERS_TRACKED 1000 /* printers whose last state is remembered (farmcfg's cap) */
 
@@ -57,6 +59,10 @@ struct notify {
     size_t n_seen, cap_seen;   /* count and room */
     struct delivery *pending;  /* deliveries waiting or in flight (doubly linked) */
     size_t n_pending;          /* their count */
+    /* one of several hosts (notify_set_host), "" if alone; the last store_host_teller
+       failed (warned once) */
+    char host[STORE_HOST_NAME_MAX];
+    bool teller_failed;
 };
 
 /* ---- deliveries ---- */
@@ -220,22 +226,44 @@ job_moved_to(const char *detail, char to[24])
         snprintf(to, 24, "%.*s", (int)strcspn(arrow + 4, ":"), arrow + 4);
 }
 
-/* After a job started or ended: tell once that no job waits any more. */
+/* Does this host tell of an event about job job_id and printer?  Alone, yes; one of several
+   hosts reads the whole farm's log, and each event is told by one of them
+   (store_host_teller): the job's holder, the printer's owner, else the first live host.
+   When that cannot be read, yes (told twice rather than not at all). */
+static bool
+tells(struct notify *n, int64_t job_id, const char *printer)
+{
+    if (!n->host[0])
+        return true;
+    char who[STORE_HOST_NAME_MAX];
+    struct sf_err err;
+    if (store_host_teller(n->s, job_id, printer, clock_wall_ms(), who, sizeof(who), &err)) {
+        if (!n->teller_failed)
+            log_warn("notify", "which host tells: %s", err.msg);
+        n->teller_failed = true;
+        return true;
+    }
+    n->teller_failed = false;
+    return !who[0] || strcmp(who, n->host) == 0;
+}
+
+/* After a job started or ended: tell once that no job waits any more (only if a target asks,
+   and on one host of several: the first live one, tells(0, "")). */
 static void
 check_queue(struct notify *n, const struct event_row *e)
 {
-    struct job_row *jobs;
-    size_t k;
+    bool asked = false;
+    for (size_t i = 0; i < n->n_targets; i++)
+        asked |= (n->targets[i].events & NOTIFY_QUEUE_EMPTY) != 0;
+    if (!asked || !tells(n, 0, ""))
+        return;
+    uint64_t by_state[JOB_STATE_COUNT];
     struct sf_err err;
-    if (store_job_live(n->s, &jobs, &k, &err)) {
+    if (store_job_counts(n->s, by_state, &err)) { /* counted by the database: no rows read */
         log_warn("notify", "queue: %s", err.msg);
         return;
     }
-    size_t waiting = 0;
-    for (size_t i = 0; i < k; i++)
-        waiting += jobs[i].state == JOB_QUEUED || jobs[i].state == JOB_PREPARING ||
-                   jobs[i].state == JOB_READY;
-    free(jobs);
+    uint64_t waiting = by_state[JOB_QUEUED] + by_state[JOB_PREPARING] + by_state[JOB_READY];
     if (waiting) {
         n->queue_armed = true;
         return;
@@ -291,7 +319,7 @@ handle(struct notify *n, const struct event_row *e)
     bool wanted = false;
     for (size_t i = 0; i < n->n_targets; i++)
         wanted |= (n->targets[i].events & ev) != 0;
-    if (ev && wanted) {
+    if (ev && wanted && tells(n, e->job_id, e->printer)) {
         struct job_row job;
         bool have_job = e->job_id > 0 && store_job_get(n->s, e->job_id, &job, NULL) == SF_OK;
         struct notify_msg m = { .ev = ev, .e = e };
@@ -357,6 +385,13 @@ notify_kick(struct notify *n)
 {
     if (n && !n->kick)
         n->kick = loop_timer_add(n->l, 0, read_log, n);
+}
+
+void
+notify_set_host(struct notify *n, const char *host)
+{
+    if (n)
+        snprintf(n->host, sizeof(n->host), "%s", host ? host : "");
 }
 
 size_t

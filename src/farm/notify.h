@@ -56,6 +56,16 @@ void notify_free(struct notify *n);
 int notify_reload(struct notify *n, const struct notifycfg *targets, size_t n_targets,
                   struct sf_err *err);
 
+/*
+ * One of several hosts on a shared store (farm_host.h), named host: every
+ * host reads the whole farm's log, and tells the operator only of the
+ * events it is the teller of (store_host_teller: the job's holder, the
+ * printer's owner, else the first live host by name; the queue running
+ * empty by that first host), so each event is told once per farm.  ""
+ * (the default): one host, which tells of every event.
+ */
+void notify_set_host(struct notify *n, const char *host);
+
 /* New events may be in the log: read them on the next loop turn. */
 void notify_kick(struct notify *n);
 

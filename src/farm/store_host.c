@@ -445,6 +445,37 @@ store_host_peers(struct store *s, const char *name, int64_t now_ms, int *n, stru
     return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "count the live hosts");
 }
 
+/* ---- who tells the operator ---- */
+
+int
+store_host_teller(struct store *s, int64_t job_id, const char *printer, int64_t now_ms, char *host,
+                  size_t cap, struct sf_err *err)
+{
+    struct sqldb_stmt *st;
+    /* the job's live holder; else the live owner of the event's printer, or of the job's;
+       else the live host first by name (the same for every host: one database's order) */
+    int rc = store_prepare(
+        s, &st,
+        "SELECT coalesce((SELECT j.claimed_by FROM jobs j JOIN hosts h ON h.name = j.claimed_by"
+        " WHERE j.id = ?1 AND h.reaped_ms = 0 AND h.lease_until_ms > ?3),"
+        " (SELECT o.host FROM host_printers o JOIN hosts h ON h.name = o.host"
+        " WHERE o.printer = coalesce(nullif(?2, ''), (SELECT printer FROM jobs WHERE id = ?1))"
+        " AND h.reaped_ms = 0 AND h.lease_until_ms > ?3),"
+        " (SELECT min(name) FROM hosts WHERE reaped_ms = 0 AND lease_until_ms > ?3), '')",
+        err);
+    host[0] = '\0';
+    if (rc)
+        return rc;
+    sqldb_bind_int64(st, 1, job_id);
+    sqldb_bind_text(st, 2, printer ? printer : "");
+    sqldb_bind_int64(st, 3, now_ms);
+    rc = sqldb_step(st);
+    if (rc == SQLDB_ROW)
+        store_copy_text(host, cap, st, 0);
+    sqldb_finalize(st);
+    return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "who tells of an event");
+}
+
 /* ---- printers ---- */
 
 /* Printer p's owner, if a host other than name whose lease runs at now_ms: SF_EAGAIN, its

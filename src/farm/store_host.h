@@ -142,6 +142,17 @@ struct store_host_row {
     int n_claimed;          /* jobs it holds: preparing, ready, printing, paused, interrupted */
 };
 
+/*
+ * Which host tells the operator of an event (notify.h) about job job_id (0:
+ * none) and printer (NULL or "": none), as of now_ms, into host (cap
+ * bytes): the job's holder, if live; else the live owner of the printer
+ * (the event's, else the job's); else the live host first by name; "" if
+ * no host is live.  Every host reads every event of the shared log, and
+ * each event is told once per farm, by that host.
+ */
+int store_host_teller(struct store *s, int64_t job_id, const char *printer, int64_t now_ms,
+                      char *host, size_t cap, struct sf_err *err);
+
 /* How many hosts other than name hold a lease running at now_ms (*n). */
 int store_host_peers(struct store *s, const char *name, int64_t now_ms, int *n, struct sf_err *err);
 /* Every host, by name, as of now_ms, into *rows (free() it). */

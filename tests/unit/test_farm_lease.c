@@ -131,8 +131,7 @@ T_CASE(host_back_from_an_outage_reaps_no_host_that_came_back_too)
     T_OK(store_host_own(a, "a", ta, xs, 1, NULL, &err), &err);
     T_OK(add_ready_for(a, "x", &id, &err), &err);
     T_OK(store_job_take(a, "a", ta, id, &fence, &err), &err);
-    snprintf(sql, sizeof(sql), "UPDATE jobs SET state = 'printing' WHERE id = %lld",
-             (long long)id);
+    snprintf(sql, sizeof(sql), "UPDATE jobs SET state = 'printing' WHERE id = %lld", (long long)id);
     T_OK(db_exec(url, sql), NULL);
     /* host b, a farm with a 2 s lease, runs a while beside a: a stays live */
     host_lease_s = 2;
@@ -161,8 +160,8 @@ T_CASE(host_back_from_an_outage_reaps_no_host_that_came_back_too)
     bool renewed = false;
     for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !renewed && clock_mono_ms() < end;) {
         loop_run_once(hx.l, 20);
-        renewed = db_int(url, "SELECT heartbeat_ms FROM hosts WHERE name = 'b' AND ?1 = 0", 0) >
-                  cut_ms;
+        renewed =
+            db_int(url, "SELECT heartbeat_ms FROM hosts WHERE name = 'b' AND ?1 = 0", 0) > cut_ms;
     }
     T_TRUE(renewed);
     int rc = SF_EUNREACH; /* a's connection comes back after its reconnect's back-off */

@@ -3,14 +3,18 @@
  * the one-line text of each event, our JSON, the chat formats, a template
  * filled JSON-escaped (a job name with quotes must not break the
  * service's JSON) or as is, and the mail's headers and envelope.  Delivery
- * over real HTTP and SMTP is tests/integ/farmd_notify.sh.
+ * over real HTTP and SMTP is tests/integ/farmd_notify.sh.  On PostgreSQL
+ * (tstore.h), hosts that share a store tell of each event of the farm once.
  */
 #include <jansson.h>
 #include <stdio.h>
 #include <string.h>
 
+#include "../../src/base/loop.h"
+#include "../../src/farm/notify.h"
 #include "../../src/farm/notify_int.h"
 #include "../t.h"
+#include "../tstore.h"
 
 static struct event_row ev = { .id = 7,
                                .at_ms = 1796495737000,
@@ -135,4 +139,70 @@ T_CASE(notify_mail_message_and_envelope)
     T_TRUE(strstr(d->body, "\r\n\r\njob #3 bracket.stl done") != NULL);
     T_TRUE(strstr(d->body, "Date: Sat, 05 Dec 2026 18:35:37 +0000\r\n") != NULL);
     notify_delivery_free(d);
+}
+
+/* ---- several hosts on one store (PostgreSQL: tests/integ/store_pg.sh) ---- */
+
+/* Host a's notifications over s, named host, to an address that refuses: each delivery
+   waits for its retry, so notify_pending counts what the host told. */
+static struct notify *
+host_notify(struct loop *l, struct store *s, const char *host, struct sf_err *err)
+{
+    struct notifycfg t;
+    notifycfg_init(&t, "hook", 1);
+    snprintf(t.url, sizeof(t.url), "http://127.0.0.1:9/hook");
+    t.events = NOTIFY_JOB_DONE | NOTIFY_PRINTER_ERROR | NOTIFY_QUEUE_EMPTY;
+    t.retries = 4;
+    struct notify *n = notify_new(l, s, &t, 1, err);
+    notify_set_host(n, host);
+    return n;
+}
+
+T_CASE(notify_each_event_of_a_farm_once_among_its_hosts)
+{
+    T_SKIP_UNLESS(t_store_pg(), "several hosts share a store on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    struct t_pair p;
+    char dir[512], sql[256];
+    snprintf(dir, sizeof(dir), "%s/hosts", t_tmpdir());
+    T_TRUE(t_pair_open(&p, dir, &err));
+    T_OK(store_host_join(p.a, "a", 600000, &p.ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", 600000, &p.tb, &err), &err);
+    const char *pa[] = { "pa" };
+    T_OK(store_host_own(p.a, "a", p.ta, pa, 1, NULL, &err), &err);
+    /* a job host b holds, printed */
+    char sha[STORE_SHA_HEX];
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.gcode");
+    struct job_event_args g = { .prep_key = "k", .gcode_lines = 2 };
+    int64_t id, fence;
+    T_OK(store_file_put(p.a, "G28\nG1 X1\n", 10, sha, &err), &err);
+    T_OK(store_job_add_gcode(p.a, &o, sha, &g, &id, &err), &err);
+    T_OK(store_job_take(p.b, "b", p.tb, id, &fence, &err), &err);
+    snprintf(sql, sizeof(sql), "UPDATE jobs SET state = 'done' WHERE id = %lld", (long long)id);
+    T_OK(t_store_exec(p.dir, sql), NULL);
+    struct loop *l = loop_new(&err);
+    T_TRUE(l != NULL);
+    struct notify *na = host_notify(l, p.a, "a", &err), *nb = host_notify(l, p.b, "b", &err);
+    T_TRUE(na && nb);
+    /* the farm's log: b's job done, a's printer in error */
+    snprintf(sql, sizeof(sql),
+             "INSERT INTO events(at_ms, job_id, printer, kind, detail) VALUES"
+             " (1, %lld, '', 'job-print-done', 'printing -> done'),"
+             " (2, NULL, 'pa', 'printer-state', 'error')",
+             (long long)id);
+    T_OK(t_store_exec(p.dir, sql), NULL);
+    notify_kick(na);
+    notify_kick(nb);
+    for (int i = 0; i < 3; i++)
+        loop_run_once(l, 0);
+    /* a tells of its printer and of the queue run empty (the first live host by name), b of
+       its job: each once in the farm */
+    T_EQ_INT(notify_pending(na), 2);
+    T_EQ_INT(notify_pending(nb), 1);
+    notify_free(na);
+    notify_free(nb);
+    loop_free(l);
+    t_pair_close(&p);
 }
