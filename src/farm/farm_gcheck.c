@@ -16,6 +16,7 @@
 #include "../../drivers/gpolicy.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "farm_host.h"
 
 /*
  * A start judged again by the G-code policy of the printer it starts on.
@@ -79,6 +80,12 @@ farm_start(struct farm *f, const struct job_row *j, struct printer *p)
     if (store_file_path(f->s, j->gcode_sha, t->path, sizeof(t->path), &err)) {
         log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
         free(t);
+        /* one of several hosts: this one took the job, and another may fetch its G-code
+           (the host that stored it before files were shared, one with room in its cache) */
+        int64_t fence = printer_fence(p, j->id);
+        printer_set_fence(p, 0, 0);
+        if (fence)
+            farm_host_give_back(f, j->id, fence, err.msg);
         return;
     }
     t->f = f;

@@ -52,6 +52,13 @@ struct farm_host {
        connection's reconnects then */
     int64_t renewing_since, renewed_at, renew_gen;
     bool doubted; /* a claim, take or hold found the lease not current: the beat decides */
+    /* ready jobs this host gave back (farm_host_give_back): not taken here again until
+       their time (monotonic ms), so the other hosts have them first */
+    struct given {
+        int64_t id, until;
+    } * given;
+    size_t n_given, cap_given;
+    uint64_t given_timer; /* a kick when the first of them may be taken here again */
 };
 
 /* A claim in doubt, on its way to the store thread's read-back or waiting for another. */
@@ -414,6 +421,8 @@ farm_host_stop(struct farm *f)
         loop_timer_cancel(f->l, h->relisten);
     if (h->resettle)
         loop_timer_cancel(f->l, h->resettle);
+    if (h->given_timer)
+        loop_timer_cancel(f->l, h->given_timer);
     /* a claim still in doubt: the store thread's queue ran (farm_free), so none is posted;
        the leave below reaps this host, which gives such a job back */
     for (struct doubt *d = h->doubts, *next; d; d = next) {
@@ -438,6 +447,7 @@ farm_host_stop(struct farm *f)
     }
     store_close(h->ls);
     free(h->foreign);
+    free(h->given);
     free(h);
     f->host = NULL;
 }
@@ -560,6 +570,55 @@ farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
     return rc;
 }
 
+/* Did this host give job id back lately (forgetting those whose time passed)? */
+static bool
+given_back(struct farm_host *h, int64_t id)
+{
+    int64_t now = clock_mono_ms();
+    bool found = false;
+    for (size_t i = 0; i < h->n_given;) {
+        if (h->given[i].until <= now) {
+            h->given[i] = h->given[--h->n_given];
+            continue;
+        }
+        found |= h->given[i].id == id;
+        i++;
+    }
+    return found;
+}
+
+static void
+on_given_timer(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm_host *h = ud;
+    h->given_timer = 0;
+    farm_kick(h->f); /* what it gave back may be taken here again, if no other host took it */
+}
+
+void
+farm_host_give_back(struct farm *f, int64_t id, int64_t fence, const char *why)
+{
+    struct farm_host *h = f ? f->host : NULL;
+    if (!h)
+        return;
+    struct sf_err err;
+    if (store_job_give_back(f->s, h->name, id, fence, why, &err)) {
+        log_warn("host", "%s: job %lld: %s", h->name, (long long)id, err.msg);
+        if (err.code == SF_ESTALE)
+            lease_doubted(h);
+        return;
+    }
+    log_warn("host",
+             "%s gave job %lld back for the other hosts (it cannot start it here: %s); taken "
+             "here again in %.1f s at the earliest",
+             h->name, (long long)id, why, (double)h->lease_ms / 1000);
+    if (mem_grow((void **)&h->given, &h->cap_given, h->n_given + 1, sizeof(*h->given)))
+        h->given[h->n_given++] = (struct given){ id, clock_mono_ms() + h->lease_ms };
+    if (!h->given_timer)
+        h->given_timer = loop_timer_add(f->l, h->lease_ms, on_given_timer, h);
+}
+
 bool
 farm_host_take(struct farm *f, int64_t id, int64_t *fence)
 {
@@ -567,6 +626,8 @@ farm_host_take(struct farm *f, int64_t id, int64_t *fence)
     *fence = 0;
     if (!h)
         return true;
+    if (given_back(h, id))
+        return false; /* the other hosts first */
     struct sf_err err;
     int rc = store_job_take(f->s, h->name, h->token, id, fence, &err);
     if (rc && rc != SF_ENOTFOUND)

@@ -101,6 +101,10 @@ int farm_host_claim(struct farm *f, int64_t id, int64_t *fence);
    with one, once f took it (store_job_take), its fencing token into *fence: what f writes
    for the job carries it (printer_set_fence). */
 bool farm_host_take(struct farm *f, int64_t id, int64_t *fence);
+/* f took ready job id (under fencing token fence) but cannot start it (why: its G-code cannot
+   be fetched here): give it back for the other hosts (store_job_give_back, which wakes them);
+   f does not take it again for a lease.  Logged.  Nothing without a shared store. */
+void farm_host_give_back(struct farm *f, int64_t id, int64_t fence, const char *why);
 /*
  * printer_env.hold: before a printer of f resumes job id (an operator's resume, a network
  * printer found still printing it), f holds the job: store_job_attach, its new fencing

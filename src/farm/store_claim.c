@@ -209,6 +209,45 @@ store_job_take(struct store *s, const char *host, int64_t token, int64_t id, int
     return SF_OK;
 }
 
+/* store_job_give_back in the caller's transaction. */
+static int
+give_back_tx(struct store *s, const char *host, int64_t id, int64_t fence, const char *why,
+             struct sf_err *err)
+{
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st,
+                           "UPDATE jobs SET claimed_by = '', fence = fence + 1, updated_ms = ?1"
+                           " WHERE id = ?2 AND claimed_by = ?3 AND fence = ?4 AND state = 'ready'",
+                           err);
+    if (rc)
+        return rc;
+    sqldb_bind_int64(st, 1, clock_wall_ms());
+    sqldb_bind_int64(st, 2, id);
+    sqldb_bind_text(st, 3, host);
+    sqldb_bind_int64(st, 4, fence);
+    if ((rc = store_step_done(s, st, err, "give a job back")))
+        return rc;
+    if (sqldb_changes(s->db) != 1)
+        return sf_err_set(err, SF_ESTALE,
+                          "job %lld: not given back: host '%s' no longer holds it ready under "
+                          "fencing token %lld",
+                          (long long)id, host, (long long)fence);
+    char detail[192];
+    snprintf(detail, sizeof(detail), "ready -> ready: host '%s' gave it back: %.120s", host,
+             why ? why : "");
+    if ((rc = store_log_event(s, id, NULL, "job-give-back", detail, err)))
+        return rc;
+    return store_is_pg(s) ? store_host_wake(s, err) : SF_OK; /* at the commit */
+}
+
+int
+store_job_give_back(struct store *s, const char *host, int64_t id, int64_t fence, const char *why,
+                    struct sf_err *err)
+{
+    int rc = store_begin(s, err);
+    return rc ? rc : store_end_tx(s, give_back_tx(s, host, id, fence, why, err), err);
+}
+
 int
 store_job_live_host(struct store *s, const char *host, struct job_row **rows, size_t *n,
                     struct sf_err *err)

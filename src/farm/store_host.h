@@ -209,6 +209,16 @@ int store_job_take(struct store *s, const char *host, int64_t token, int64_t id,
                    struct sf_err *err);
 
 /*
+ * Give back a ready job host took (store_job_take) under fencing token
+ * fence but cannot start (its G-code cannot be fetched here, why): no host
+ * holds it any more, its token moves on, a "job-give-back" event says why,
+ * and the other hosts are woken (a NOTIFY at the commit) to take it.
+ * SF_ESTALE when host no longer holds it so.
+ */
+int store_job_give_back(struct store *s, const char *host, int64_t id, int64_t fence,
+                        const char *why, struct sf_err *err);
+
+/*
  * The live jobs host's scheduler works from (store_job_live's order): those
  * no host holds, host's own, and any on a printer host owns (a part on its
  * bed).  *rows: free() it.

@@ -415,7 +415,12 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
     int rc = store_begin(s, err);
     if (rc)
         return rc;
-    if ((rc = store_job_event_in(s, id, ev, a, to, err)) || (rc = store_commit(s, err)))
+    /* one of several hosts: a job a DEFER gives back to the queue is the others' to take
+       too, so wake them (a NOTIFY, sent at the commit) */
+    if ((rc = store_job_event_in(s, id, ev, a, to, err)) ||
+        (ev == JOB_EV_DEFER && s->host && sqldb_engine(s->db) == SQLDB_PG &&
+         (rc = store_host_wake(s, err))) ||
+        (rc = store_commit(s, err)))
         store_rollback(s);
     return rc;
 }

@@ -6,8 +6,11 @@
  * (it used to join again, reaping itself); the first host back after an
  * outage longer than the leases waits a lease before it reaps the others,
  * so the hosts that come back as it did are not reaped, and reaps a host
- * that did not.  With SLIMFARM_TEST_STORE (tstore.h; store_pg.sh sets it).
+ * that did not.  A ready job a host took but whose G-code it cannot fetch is
+ * given back for the others (not taken there again at once), and a DEFER
+ * wakes the other hosts.  With SLIMFARM_TEST_STORE (tstore.h; store_pg.sh sets it).
  */
+#include <poll.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -184,4 +187,95 @@ T_CASE(host_back_from_an_outage_reaps_no_host_that_came_back_too)
     T_EQ_INT(store_host_beat(a, "a", ta, 3000, &err), SF_ESTALE);
     host_farm_free();
     store_close(a);
+}
+
+T_CASE(host_gives_back_a_ready_job_whose_gcode_it_cannot_fetch)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[96], sql[256];
+    snprintf(dir, sizeof(dir), "%s/giveback", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    /* host a stored the job's G-code in its own data dir, and the database lost its chunks:
+       a has it, b cannot fetch it */
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta, id, fence = 0;
+    T_OK(store_host_join(a, "a", 600000, &ta, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    T_OK(add_ready_for(a, "q", &id, &err), &err);
+    snprintf(sql, sizeof(sql),
+             "DELETE FROM file_chunks WHERE sha256 = (SELECT gcode_sha FROM jobs WHERE id = %lld)",
+             (long long)id);
+    T_OK(db_exec(url, sql), NULL);
+    T_OK(store_host_wake(a, &err), &err);
+    /* b takes it, cannot start it, and gives it back: a takes it */
+    bool back = false;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !back && clock_mono_ms() < end;) {
+        loop_run_once(hx.l, 20);
+        back =
+            db_int(url, "SELECT count(*) FROM events WHERE job_id = ?1 AND kind = 'job-give-back'",
+                   id) == 1;
+    }
+    if (!back)
+        fprintf(stderr, "host b logged:\n%s", logged);
+    T_TRUE(back);
+    db_text(url, "SELECT state || ' by ' || claimed_by FROM jobs WHERE id = ?1", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "ready by ");
+    T_TRUE(was_logged("b gave job"));
+    /* b leaves it to the others for now, however often it is woken */
+    for (int i = 0; i < 5; i++) {
+        T_OK(store_host_wake(a, &err), &err);
+        for (int k = 0; k < 10; k++)
+            loop_run_once(hx.l, 10);
+    }
+    T_EQ_INT(
+        db_int(url, "SELECT count(*) FROM events WHERE job_id = ?1 AND kind = 'job-give-back'", id),
+        1);
+    T_OK(store_job_take(a, "a", ta, id, &fence, &err), &err);
+    host_farm_free();
+    store_close(a);
+}
+
+T_CASE(defer_wakes_the_other_hosts)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/defer", t_tmpdir());
+    struct t_pair p;
+    T_TRUE(t_pair_open(&p, dir, &err));
+    T_OK(store_host_join(p.a, "a", 600000, &p.ta, &err), &err);
+    struct store *ls = store_open_listener(p.b, &err);
+    T_TRUE(ls != NULL);
+    T_OK(store_host_listen(ls, &err), &err);
+    char sha[STORE_SHA_HEX];
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    int64_t id, fence = 0;
+    struct job_row j;
+    T_OK(store_file_put(p.a, "solid part\n", 11, sha, &err), &err);
+    T_OK(store_job_add(p.a, &o, sha, &id, &err), &err);
+    T_OK(store_job_claim_id(p.a, "a", p.ta, id, &j, &fence, &err), &err);
+    while (store_host_drain(ls) > 0) /* what came before */
+        ;
+    /* a gives its claim back (a stage unavailable): b hears of it */
+    struct job_event_args d = { .reason = "slicer busy", .fence = fence };
+    enum job_state to;
+    T_OK(store_job_event(p.a, id, JOB_EV_DEFER, &d, &to, &err), &err);
+    T_EQ_INT(to, JOB_QUEUED);
+    int heard = 0;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; heard <= 0 && clock_mono_ms() < end;) {
+        struct pollfd pfd = { .fd = store_host_notify_fd(ls), .events = POLLIN };
+        (void)poll(&pfd, 1, 100);
+        heard = store_host_drain(ls);
+    }
+    T_TRUE(heard > 0);
+    store_close(ls);
+    t_pair_close(&p);
 }
