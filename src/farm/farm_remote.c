@@ -678,5 +678,7 @@ farm_remote_stop(struct farm *f)
 bool
 farm_remote_is(const struct farm *f, const char *name)
 {
-    return f && f->remote && !farm_find(f, name);
+    /* a printer of f's config that a live host owns (both configs list it) is that host's
+       too: its owner acts on it, not a copy of it here (farm_host_owns) */
+    return f && f->remote && (!farm_find(f, name) || !farm_host_owns(f, name));
 }

@@ -46,7 +46,8 @@ int farm_remote_start(struct farm *f, struct sf_err *err);
 /* Stop: every waiting ask is answered SF_ECANCELED now; before f's store queue is freed. */
 void farm_remote_stop(struct farm *f);
 
-/* Is printer name another host's (f is one of several hosts and has no printer of that name)? */
+/* Is printer name another host's (f is one of several hosts, and has no printer of that name
+   or another live host owns it: store_host_own)? */
 bool farm_remote_is(const struct farm *f, const char *name);
 
 /* The kind of a job's cancel by its id (line: the id, in decimal). */

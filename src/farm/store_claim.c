@@ -282,6 +282,38 @@ not_attachable(struct store *s, int64_t id, struct sf_err *err)
                       (long long)id, job_state_name(j.state));
 }
 
+/* SF_EAGAIN if job id is on a printer a live host other than host owns: the owner wins (both
+   configs may list a network printer; only its owner drives its prints while it lives). */
+static int
+owner_elsewhere(struct store *s, const char *host, int64_t id, int64_t now_ms, struct sf_err *err)
+{
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st,
+                           "SELECT o.host, j.printer FROM jobs j JOIN host_printers o"
+                           " ON o.printer = j.printer JOIN hosts h ON h.name = o.host"
+                           " WHERE j.id = ?1 AND o.host != ?2 AND h.reaped_ms = 0"
+                           " AND h.lease_until_ms > ?3",
+                           err);
+    if (rc)
+        return rc;
+    sqldb_bind_int64(st, 1, id);
+    sqldb_bind_text(st, 2, host);
+    sqldb_bind_int64(st, 3, now_ms);
+    char owner[STORE_HOST_NAME_MAX] = "", printer[64] = "";
+    rc = sqldb_step(st);
+    if (rc == SQLDB_ROW) {
+        store_copy_text(owner, sizeof(owner), st, 0);
+        store_copy_text(printer, sizeof(printer), st, 1);
+    }
+    sqldb_finalize(st);
+    if (rc == SQLDB_ROW)
+        return sf_err_set(err, SF_EAGAIN,
+                          "job %lld is on printer '%s', which live host '%s' owns: not attached "
+                          "by '%s'",
+                          (long long)id, printer, owner, host);
+    return rc == SQLDB_DONE ? SF_OK : store_db_fail(s, err, "printer owner");
+}
+
 /* store_job_attach in the caller's transaction, the new token into *fence. */
 static int
 attach_tx(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
@@ -290,11 +322,12 @@ attach_tx(struct store *s, const char *host, int64_t token, int64_t id, int64_t 
     int64_t now = clock_wall_ms();
     struct sqldb_stmt *st;
     int rc = store_host_hold(s, host, token, now, err);
-    if (rc || (rc = store_prepare(s, &st,
-                                  "UPDATE jobs SET claimed_by = ?1, fence = fence + 1,"
-                                  " updated_ms = ?2 WHERE id = ?3 AND state IN ('ready',"
-                                  "'printing','paused','interrupted') RETURNING fence, state",
-                                  err)))
+    if (rc || (rc = owner_elsewhere(s, host, id, now, err)) ||
+        (rc = store_prepare(s, &st,
+                            "UPDATE jobs SET claimed_by = ?1, fence = fence + 1,"
+                            " updated_ms = ?2 WHERE id = ?3 AND state IN ('ready',"
+                            "'printing','paused','interrupted') RETURNING fence, state",
+                            err)))
         return rc;
     sqldb_bind_text(st, 1, host);
     sqldb_bind_int64(st, 2, now);

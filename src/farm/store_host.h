@@ -248,8 +248,10 @@ int64_t store_host_reconnects(struct store *s);
  * Give job id (ready, printing, paused or interrupted) to host for its
  * printer: its claim and a new fencing token (*fence), logged as
  * "job-attach"; whoever held the job before holds a stale token.
- * SF_ENOTFOUND: no such job; SF_EAGAIN: not in one of those states;
- * SF_ESTALE: host's lease is lost or run out.
+ * SF_ENOTFOUND: no such job; SF_EAGAIN: not in one of those states, or on
+ * a printer a live host other than host owns (store_host_own: the owner
+ * drives its prints while it lives; another host attaches them only once
+ * the owner's lease ran out); SF_ESTALE: host's lease is lost or run out.
  */
 int store_job_attach(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
                      struct sf_err *err);

@@ -565,7 +565,12 @@ T_CASE(host_lets_go_of_a_print_another_host_attached)
     T_OK(add_ready_for(a, "p", &id, &err), &err);
     T_OK(store_host_wake(a, &err), &err);
     T_TRUE(wait_state(url, id, "printing"));
-    /* host a attaches the job (as after b's partition): b's fencing token is stale */
+    /* b is cut off from the database until its lease ran out (p is b's: while b lives, a may
+       not attach its print), and host a attaches the job: b's fencing token is stale */
+    char sql[128];
+    snprintf(sql, sizeof(sql), "UPDATE hosts SET lease_until_ms = %lld WHERE name = 'b'",
+             (long long)(clock_wall_ms() - 1000));
+    T_OK(t_store_exec(dir, sql), NULL);
     T_OK(store_job_attach(a, "a", ta, id, &fa, &err), &err);
     /* b's printer pauses by itself (a runout): b's PAUSE is refused, and b lets the job go */
     struct hdrv *d = hdrv_named("p");

@@ -17,6 +17,7 @@
 
 #include "../../src/base/clock.h"
 #include "../../src/farm/farm.h"
+#include "../../src/farm/farm_remote.h"
 #include "../../src/farm/store_host.h"
 #include "../t.h"
 #include "../tfarmhost.h"
@@ -278,4 +279,33 @@ T_CASE(defer_wakes_the_other_hosts)
     T_TRUE(heard > 0);
     store_close(ls);
     t_pair_close(&p);
+}
+
+/* Both configs list printer x, and live host a owns it: an action on x at b is a's to carry
+   out (routed to it as a command), not b's on its copy; y is b's own. */
+T_CASE(host_routes_an_action_on_a_printer_its_live_owner_holds)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024];
+    snprintf(dir, sizeof(dir), "%s/route", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta;
+    const char *xs[] = { "x" };
+    T_OK(store_host_join(a, "a", 600000, &ta, &err), &err);
+    T_OK(store_host_own(a, "a", ta, xs, 1, NULL, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer x]\ndriver: marlin\nport: pty:/dev/null\n"
+                   "[printer y]\ndriver: marlin\nport: pty:/dev/null\n",
+                   &err),
+         &err);
+    T_TRUE(wait_logged("printer 'x' belongs to live host 'a'"));
+    T_TRUE(farm_remote_is(hx.f, "x"));
+    T_TRUE(!farm_remote_is(hx.f, "y"));
+    T_TRUE(farm_remote_is(hx.f, "z")); /* in no config of b's */
+    host_farm_free();
+    store_close(a);
 }

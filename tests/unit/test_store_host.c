@@ -10,6 +10,7 @@
  * same database; on SQLite it is a second connection of the same process
  * (store_open_peer), as the data dir's flock allows one process.
  */
+#include <poll.h>
 #include <pthread.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -661,5 +662,35 @@ T_CASE(hosts_progress_of_a_job_another_host_holds_is_not_written)
     struct job_event_args pause = { .lines_acked = 5, .fence = fa[0] };
     T_ERR(store_job_event(p.a, ids[0], JOB_EV_PAUSE, &pause, NULL, &err), SF_ESTALE, &err,
           "host 'b' holds the job now");
+    t_pair_close(&p);
+}
+
+/* Both configs may list one network printer: while its owner lives, only the owner attaches
+   the job on it; once the owner's lease ran out, another host may (issue 32). */
+T_CASE(hosts_attach_on_a_printer_its_live_owner_holds_is_refused)
+{
+    struct sf_err err;
+    struct t_pair p;
+    T_TRUE(pair_open(&p, "owner", &err));
+    int64_t ta, tb, id, fa, fb;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    const char *net[] = { "net1" };
+    T_OK(store_host_own(p.a, "a", ta, net, 1, NULL, &err), &err);
+    T_OK(add_ready(p.a, &id, &err), &err);
+    T_OK(store_job_take(p.a, "a", ta, id, &fa, &err), &err);
+    struct job_event_args start = { .printer = "net1", .fence = fa };
+    T_OK(store_job_event(p.a, id, JOB_EV_START, &start, NULL, &err), &err);
+    T_ERR(store_job_attach(p.b, "b", tb, id, &fb, &err), SF_EAGAIN, &err,
+          "which live host 'a' owns");
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM jobs WHERE claimed_by = 'a'"), 1);
+    /* the owner attaches its own print again; a's lease runs out: b may take it over */
+    T_OK(store_job_attach(p.a, "a", ta, id, &fa, &err), &err);
+    T_OK(store_host_beat(p.a, "a", ta, 1, &err), &err);
+    for (int64_t end = clock_mono_ms() + 60000, gone = clock_wall_ms() + 5;
+         clock_wall_ms() <= gone && clock_mono_ms() < end;)
+        (void)poll(NULL, 0, 2); /* a bound, not a sleep: a's lease is past */
+    T_OK(store_job_attach(p.b, "b", tb, id, &fb, &err), &err);
+    T_TRUE(fb > fa);
     t_pair_close(&p);
 }
