@@ -654,6 +654,9 @@ sse_progress(struct sse *s)
     struct farm *f = s->a->cfg.farm;
     size_t n = f ? farm_printer_count(f) : 0;
     json_t *arr = json_array();
+    char me[STORE_HOST_NAME_MAX] = ""; /* one of several hosts: each print names its host */
+    if (f && !farm_host_reader(f, me, sizeof(me)))
+        me[0] = '\0';
     for (size_t i = 0; arr && i < n; i++) {
         struct printer_info p;
         farm_printer_info(f, i, &p);
@@ -663,6 +666,8 @@ sse_progress(struct sse *s)
                           "state", printer_state_name(p.state), "progress", p.progress);
             if (o)
                 time_left_json(o, &p);
+            if (o && me[0])
+                json_object_set_new(o, "host", json_string(me));
             json_array_append_new(arr, o);
         }
     }

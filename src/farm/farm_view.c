@@ -158,8 +158,7 @@ farm_view_publish(struct farm *f, const char *text)
     if (!v || v->stopped)
         return;
     if ((v->next && strcmp(v->next, text) == 0) ||
-        (!v->next && v->last && strcmp(v->last, text) == 0 &&
-         v->last_token == farm_host_token(f)))
+        (!v->next && v->last && strcmp(v->last, text) == 0 && v->last_token == farm_host_token(f)))
         return; /* nothing new */
     char *copy = strdup(text);
     if (!copy)

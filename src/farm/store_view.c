@@ -14,7 +14,7 @@
     "INSERT INTO host_views(host, token, view, updated_ms)"                                        \
     " SELECT CAST(?1 AS TEXT), CAST(?2 AS BIGINT), CAST(?3 AS TEXT), CAST(?4 AS BIGINT)"           \
     " WHERE EXISTS (SELECT 1 FROM hosts WHERE name = ?1 AND token = ?2 AND reaped_ms = 0)"         \
-    " ON CONFLICT(host) DO UPDATE SET token = excluded.token, view = excluded.view,"                \
+    " ON CONFLICT(host) DO UPDATE SET token = excluded.token, view = excluded.view,"               \
     " updated_ms = excluded.updated_ms RETURNING host"
 
 int

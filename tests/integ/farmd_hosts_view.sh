@@ -36,7 +36,7 @@ host_ini() {
   } > "$tmp/$1.ini"
 }
 start_sim a_mk --speed 3000
-start_sim b_mk --speed 20
+start_sim b_mk --speed 5
 host_ini a 20
 host_ini b 20
 for h in a b; do start_host "$h"; done
