@@ -32,6 +32,7 @@ struct farm_view {
     int64_t last_ms;    /* loop time of the last publish's post */
     uint64_t pub_timer; /* the publish held back by FARM_VIEW_MIN_MS, 0 if none */
     bool posting;       /* a publish is on the store thread */
+    bool pub_failing;   /* the last publish failed: said so (once until one is written) */
     /* reading */
     struct store_command_printer *rows; /* the cache, n_rows */
     size_t n_rows;
@@ -94,8 +95,12 @@ on_published(void *ud, const struct storeq_result *res)
         v->last = p->text;
         v->last_token = p->token;
         p->text = NULL;
-    } else if (res->rc && !v->stopped) {
+        if (v->pub_failing)
+            log_info("view", "this host's printers are published again");
+        v->pub_failing = false;
+    } else if (res->rc && !v->stopped && !v->pub_failing) { /* tried again at the next look */
         log_warn("view", "this host's printers not published: %s", res->err->msg);
+        v->pub_failing = true;
     }
     free(p->text);
     free(p);
