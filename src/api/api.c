@@ -21,6 +21,7 @@
 #include "api.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <string.h>
 #include <strings.h>
@@ -30,6 +31,8 @@
 #include "../base/limits.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "../farm/farm_host.h"
+#include "../farm/farm_view.h"
 #include "../farm/jobctl.h"
 #include "api_compat.h"
 #include "api_csv.h"
@@ -395,6 +398,56 @@ printer_json(const struct store_bed *beds, size_t n_beds, const struct printer_i
     return o;
 }
 
+/* Round o[key], a number, to the nearest multiple of step (what a published view keeps). */
+static void
+round_key(json_t *o, const char *key, double step)
+{
+    json_t *v = json_object_get(o, key);
+    if (json_is_number(v))
+        json_object_set_new(o, key, json_real(floor(json_number_value(v) / step + 0.5) * step));
+}
+
+/*
+ * One of several hosts: this host's printers as the others show them
+ * (farm_view.h), each as GET /api/printers shows it, less its bed (the
+ * store's) and with what moves by the sample rounded (temperatures to a
+ * degree, progress to a percent, time left to a minute), so the text
+ * changes, and is written, only when the dashboard would show a change.
+ */
+static void
+view_publish(struct api *a)
+{
+    struct farm *f = a->cfg.farm;
+    if (!f || !farm_host_on(f))
+        return;
+    json_t *all = json_object();
+    size_t n = farm_printer_count(f);
+    for (size_t i = 0; all && i < n; i++) {
+        struct printer_info p;
+        farm_printer_info(f, i, &p);
+        json_t *o = printer_json(NULL, 0, &p);
+        if (!o)
+            continue;
+        json_t *t = json_object_get(o, "temps");
+        const char *keys[] = { "nozzle_c", "nozzle_target_c", "bed_c", "bed_target_c" };
+        for (size_t k = 0; k < sizeof(keys) / sizeof(keys[0]); k++)
+            round_key(t, keys[k], 1);
+        round_key(o, "progress", 0.01);
+        json_t *left = json_object_get(o, "time_left_s");
+        if (json_is_integer(left))
+            json_object_set_new(o, "time_left_s", json_integer(json_integer_value(left) / 60 * 60));
+        const char *drop[] = { "name", "bed_full", "interrupted_job", "last_print" };
+        for (size_t k = 0; k < sizeof(drop) / sizeof(drop[0]); k++)
+            json_object_del(o, drop[k]);
+        json_object_set_new(all, p.cfg->name, o);
+    }
+    char *text = all ? json_dumps(all, JSON_COMPACT | JSON_SORT_KEYS) : NULL;
+    json_decref(all);
+    if (text)
+        farm_view_publish(f, text);
+    free(text);
+}
+
 /* Every printer, or the one called name (NULL: all). */
 static void
 printers_answer(struct api *a, const char *name, struct http_resp *resp)
@@ -557,6 +610,40 @@ printer_estop_route(void *ctx, const struct route_args *args, const struct http_
 /* ---- events ---- */
 
 /*
+ * One of several hosts: the other hosts' printers with a job, into arr
+ * (sse_progress), as farm_view.h last read them: progress from the job's
+ * stored lines (its owner saves them as it prints), time left as the owner
+ * published it; each with its host.  A host down shows none.
+ */
+static void
+remote_progress(struct farm *f, json_t *arr)
+{
+    const struct store_command_printer *r;
+    size_t n = farm_view_printers(f, &r);
+    for (size_t i = 0; arr && i < n; i++) {
+        if (!r[i].job_id || !r[i].live)
+            continue;
+        double pr = r[i].gcode_lines > 0 ? (double)r[i].lines_acked / r[i].gcode_lines : 0;
+        json_t *o =
+            json_pack("{ss sI ss sf ss}", "printer", r[i].name, "job_id", (json_int_t)r[i].job_id,
+                      "state", r[i].state[0] ? r[i].state : "unknown", "progress",
+                      pr > 1 ? 1.0 : pr, "host", r[i].host);
+        json_t *v = r[i].view[0] ? json_loads(r[i].view, 0, NULL) : NULL;
+        json_t *left = json_object_get(v, "time_left_s");
+        if (o)
+            json_object_set_new(o, "time_left_s",
+                                json_is_integer(left) ? json_incref(left) : json_null());
+        if (o)
+            json_object_set(o, "time_left_from",
+                            json_is_string(json_object_get(v, "time_left_from"))
+                                ? json_object_get(v, "time_left_from")
+                                : json_null());
+        json_decref(v);
+        json_array_append_new(arr, o);
+    }
+}
+
+/*
  * On each tick: the progress of every printer with a job, as an event
  * without id (a snapshot, not part of the log), or a comment line that
  * keeps proxies from closing a quiet stream.
@@ -567,6 +654,9 @@ sse_progress(struct sse *s)
     struct farm *f = s->a->cfg.farm;
     size_t n = f ? farm_printer_count(f) : 0;
     json_t *arr = json_array();
+    char me[STORE_HOST_NAME_MAX] = ""; /* one of several hosts: each print names its host */
+    if (f && !farm_host_reader(f, me, sizeof(me)))
+        me[0] = '\0';
     for (size_t i = 0; arr && i < n; i++) {
         struct printer_info p;
         farm_printer_info(f, i, &p);
@@ -576,9 +666,12 @@ sse_progress(struct sse *s)
                           "state", printer_state_name(p.state), "progress", p.progress);
             if (o)
                 time_left_json(o, &p);
+            if (o && me[0])
+                json_object_set_new(o, "host", json_string(me));
             json_array_append_new(arr, o);
         }
     }
+    remote_progress(f, arr);
     char *text = json_array_size(arr) ? json_dumps(arr, JSON_COMPACT) : NULL;
     json_decref(arr);
     if (text)
@@ -851,6 +944,7 @@ void
 api_notify(struct api *a)
 {
     http_wake_streams(a->http);
+    view_publish(a); /* a printer's state may have changed: the other hosts see it */
 }
 
 void
@@ -858,6 +952,7 @@ api_tick(struct api *a)
 {
     a->tick++;
     http_wake_streams(a->http);
+    view_publish(a);
     /* a sample a printer each tick: the chart's history (temps.h) */
     size_t np = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
     int64_t now = clock_wall_ms();

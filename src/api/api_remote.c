@@ -115,6 +115,26 @@ remote_json(const struct store_command_printer *p)
         snprintf(msg, sizeof(msg), "host %s is down: its lease ran out %.0f s ago", p->host,
                  (double)(p->down_ms > 0 ? p->down_ms : 0) / 1000);
     double progress = p->job_id && p->gcode_lines > 0 ? (double)p->lines_acked / p->gcode_lines : 0;
+    json_t *v = p->view[0] ? json_loads(p->view, 0, NULL) : NULL;
+    if (json_is_object(v)) { /* as its owner published it: its temperatures, enabled, ... */
+        const char *state = !p->live ? "offline" : p->state[0] ? p->state : "unknown";
+        const char *own = json_string_value(json_object_get(v, "message"));
+        json_object_update_new(v, json_pack("{ss ss sb ss sI sf ss sb sn sn}", "name", p->name,
+                                            "host", p->host, "remote", true, "state", state,
+                                            "job_id", (json_int_t)p->job_id, "progress",
+                                            progress > 1 ? 1.0 : progress, "message",
+                                            p->live && own && own[0] ? own : msg, "bed_full",
+                                            p->bed_full, "interrupted_job", "last_print"));
+        if (!p->live) { /* its host is down: nothing it published is current */
+            json_object_set_new(v, "temps",
+                                json_pack("{sfsfsfsf}", "nozzle_c", 0.0, "nozzle_target_c", 0.0,
+                                          "bed_c", 0.0, "bed_target_c", 0.0));
+            json_object_set_new(v, "time_left_s", json_null());
+            json_object_set_new(v, "time_left_from", json_null());
+        }
+        return v;
+    }
+    json_decref(v);
     return json_pack("{ss ss sb ss sb ss sf s[fff] ss s{sfsfsfsf} sI sf ss sn sn sn sb sn sn}",
                      "name", p->name, "host", p->host, "remote", true, "state",
                      !p->live      ? "offline"

@@ -16,8 +16,12 @@
 #include <stdio.h>
 #include <string.h>
 
+#include <jansson.h>
+
 #include "../base/buf.h"
 #include "../base/mem.h"
+#include "../farm/farm_host.h"
+#include "../farm/farm_view.h"
 
 #define METRICS_TEXT_MAX (16 << 20) /* 1000 printers x 6 series fit many times over */
 
@@ -131,20 +135,98 @@ per_find(struct per **arr, size_t *n, size_t *cap, const char *name)
     return p;
 }
 
+/* Another host's printer r as a scrape reports it: offline while its host is down. */
+static void
+remote_printer(const struct store_command_printer *r, struct metrics_printer *o)
+{
+    snprintf(o->name, sizeof(o->name), "%s", r->name);
+    snprintf(o->host, sizeof(o->host), "%s", r->host);
+    if (!r->live || !printer_state_parse(r->state, &o->state))
+        o->state = PRINTER_OFFLINE;
+    json_t *v = r->live && r->view[0] ? json_loads(r->view, 0, NULL) : NULL;
+    json_t *t = json_object_get(v, "temps");
+    o->temps = o->state != PRINTER_OFFLINE && json_is_object(t);
+    o->nozzle_c = json_number_value(json_object_get(t, "nozzle_c"));
+    o->bed_c = json_number_value(json_object_get(t, "bed_c"));
+    json_decref(v);
+}
+
 int
 metrics_printers(struct farm *f, struct metrics_printer **out, size_t *n)
 {
-    *n = f ? farm_printer_count(f) : 0;
-    *out = mem_array(*n ? *n : 1, sizeof(**out));
+    size_t own = f ? farm_printer_count(f) : 0;
+    const struct store_command_printer *rem = NULL;
+    size_t n_rem = farm_view_printers(f, &rem);
+    char me[STORE_HOST_NAME_MAX] = "";
+    if (f && !farm_host_reader(f, me, sizeof(me)))
+        me[0] = '\0';
+    *n = own + n_rem;
+    *out = mem_calloc(*n ? *n : 1, sizeof(**out));
     if (!*out)
         return SF_ENOMEM;
-    for (size_t i = 0; i < *n; i++) {
+    for (size_t i = 0; i < own; i++) {
         struct printer_info pi;
+        struct metrics_printer *o = &(*out)[i];
         farm_printer_info(f, i, &pi);
-        snprintf((*out)[i].name, sizeof((*out)[i].name), "%s", pi.cfg->name);
-        (*out)[i].state = pi.state;
+        snprintf(o->name, sizeof(o->name), "%s", pi.cfg->name);
+        snprintf(o->host, sizeof(o->host), "%s", me);
+        o->state = pi.state;
+        o->temps = pi.state != PRINTER_OFFLINE;
+        o->nozzle_c = pi.nozzle_c;
+        o->bed_c = pi.bed_c;
     }
+    for (size_t i = 0; i < n_rem; i++)
+        remote_printer(&rem[i], &(*out)[own + i]);
     return SF_OK;
+}
+
+/* A per-printer series' labels: printer="NAME" and, on one of several hosts, host="HOST". */
+static void
+printer_labels(struct out *b, const char *name, const char *host)
+{
+    put(b, "printer=\"");
+    label(b, name);
+    put(b, "\"");
+    if (host && host[0]) {
+        put(b, ",host=\"");
+        label(b, host);
+        put(b, "\"");
+    }
+}
+
+/* The host of printer name among pr (n_pr), "" if none. */
+static const char *
+host_of(const struct metrics_printer *pr, size_t n_pr, const char *name)
+{
+    for (size_t i = 0; i < n_pr; i++)
+        if (strcmp(pr[i].name, name) == 0)
+            return pr[i].host;
+    return "";
+}
+
+/* Each printer's state (1 for the one it is in) and temperatures. */
+static void
+printer_series(struct out *b, const struct metrics_printer *pr, size_t n_pr)
+{
+    family(b, "slimfarm_printer_state", "gauge", "Each printer of the farm, 1 in its state.");
+    for (size_t i = 0; i < n_pr; i++) {
+        put(b, "slimfarm_printer_state{");
+        printer_labels(b, pr[i].name, pr[i].host);
+        put(b, ",state=\"%s\"} 1\n", printer_state_name(pr[i].state));
+    }
+    family(b, "slimfarm_printer_temperature_celsius", "gauge",
+           "Each printer's nozzle and bed temperature, when not offline.");
+    for (size_t i = 0; i < n_pr; i++) {
+        if (!pr[i].temps)
+            continue;
+        const char *sensor[] = { "nozzle", "bed" };
+        const double v[] = { pr[i].nozzle_c, pr[i].bed_c };
+        for (size_t k = 0; k < 2; k++) {
+            put(b, "slimfarm_printer_temperature_celsius{");
+            printer_labels(b, pr[i].name, pr[i].host);
+            put(b, ",sensor=\"%s\"} %.1f\n", sensor[k], v[k]);
+        }
+    }
 }
 
 /* The printers' counters: every configured printer, then every other that printed. */
@@ -246,10 +328,12 @@ metrics_render(struct store *s, const struct metrics_printer *pr, size_t n_pr,
     for (size_t i = 0; i < n_pr; i++)
         if ((unsigned)pr[i].state < PRINTER_STATE_COUNT)
             pstate[pr[i].state]++;
-    family(&b, "slimfarm_printers", "gauge", "Configured printers by state.");
+    family(&b, "slimfarm_printers", "gauge",
+           "Configured printers by state (on one of several hosts: every host's).");
     for (int st = 0; st < PRINTER_STATE_COUNT; st++)
         put(&b, "slimfarm_printers{state=\"%s\"} %llu\n",
             printer_state_name((enum printer_state)st), pstate[st]);
+    printer_series(&b, pr, n_pr);
 
     family(&b, "slimfarm_prints_total", "counter", "Prints ended, by printer and outcome.");
     for (size_t i = 0; i < n_per; i++) {
@@ -257,24 +341,24 @@ metrics_render(struct store *s, const struct metrics_printer *pr, size_t n_pr,
         unsigned long long v[] = { per[i].done, per[i].failed, per[i].cancelled, per[i].refused,
                                    per[i].interrupted };
         for (size_t k = 0; k < sizeof(oc) / sizeof(oc[0]); k++) {
-            put(&b, "slimfarm_prints_total{printer=\"");
-            label(&b, per[i].name);
-            put(&b, "\",outcome=\"%s\"} %llu\n", oc[k], v[k]);
+            put(&b, "slimfarm_prints_total{");
+            printer_labels(&b, per[i].name, host_of(pr, n_pr, per[i].name));
+            put(&b, ",outcome=\"%s\"} %llu\n", oc[k], v[k]);
         }
     }
     family(&b, "slimfarm_filament_used_grams_total", "counter",
            "Filament of the prints done, grams, from their G-code's estimate.");
     for (size_t i = 0; i < n_per; i++) {
-        put(&b, "slimfarm_filament_used_grams_total{printer=\"");
-        label(&b, per[i].name);
-        put(&b, "\"} %.3f\n", per[i].filament_g);
+        put(&b, "slimfarm_filament_used_grams_total{");
+        printer_labels(&b, per[i].name, host_of(pr, n_pr, per[i].name));
+        put(&b, "} %.3f\n", per[i].filament_g);
     }
     family(&b, "slimfarm_support_saved_grams_total", "counter",
            "Support material the optimization saved on the prints done, grams, as estimated.");
     for (size_t i = 0; i < n_per; i++) {
-        put(&b, "slimfarm_support_saved_grams_total{printer=\"");
-        label(&b, per[i].name);
-        put(&b, "\"} %.3f\n", per[i].saved_g);
+        put(&b, "slimfarm_support_saved_grams_total{");
+        printer_labels(&b, per[i].name, host_of(pr, n_pr, per[i].name));
+        put(&b, "} %.3f\n", per[i].saved_g);
     }
     family(
         &b, "slimfarm_stage_duration_seconds", "histogram",

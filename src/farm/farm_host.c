@@ -471,6 +471,12 @@ farm_host_reader(const struct farm *f, char *name, size_t size)
     return true;
 }
 
+int64_t
+farm_host_token(const struct farm *f)
+{
+    return f->host && f->host->joined ? f->host->token : 0;
+}
+
 static void settle(struct farm_host *h);
 
 static int

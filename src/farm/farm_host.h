@@ -87,6 +87,8 @@ const char *farm_host_name(const struct farm *f);
    (store_job_live), the host's name for store_job_live_host; false before the host joined
    (none of the queue is its own then). */
 bool farm_host_reader(const struct farm *f, char *name, size_t size);
+/* f's join's token (its claim on its host name), 0 before it joined or without a shared store. */
+int64_t farm_host_token(const struct farm *f);
 /*
  * Claim queued job id for preparing (store_job_claim_id), its fencing token
  * into *fence: SF_OK, SF_ENOTFOUND (another host has it, or it moved on:

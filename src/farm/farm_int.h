@@ -53,6 +53,7 @@ struct farm {
     size_t n_seed;
     struct farm_host *host;     /* one of several hosts on a shared store (farm_host.h), or NULL */
     struct farm_remote *remote; /* actions on other hosts' printers (farm_remote.h), or NULL */
+    struct farm_view *view;     /* the other hosts' printers, and ours for them (farm_view.h) */
 };
 
 /* Wake the event streams (the notify hook), if any. */

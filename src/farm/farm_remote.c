@@ -34,6 +34,7 @@
 #include "../base/mem.h"
 #include "farm_host.h"
 #include "farm_int.h"
+#include "farm_view.h"
 #include "jobctl.h"
 #include "store_command.h"
 #include "storeq.h"
@@ -555,13 +556,21 @@ wake(struct farm_remote *r)
     }
 }
 
+/* A notification: a command or answer for this host, another host's view (farm_view.h), or
+   an event logged (by any host: this host's event streams look). */
 static void
-on_payload(void *ud, const char *host)
+on_payload(void *ud, const char *channel, const char *payload)
 {
     struct farm_remote *r = ud;
     char me[STORE_HOST_NAME_MAX];
-    if (farm_host_reader(r->f, me, sizeof(me)) && strcmp(host, me) == 0)
+    if (strcmp(channel, STORE_VIEW_CHANNEL) == 0) {
+        if (!farm_host_reader(r->f, me, sizeof(me)) || strcmp(payload, me) != 0)
+            farm_view_heard(r->f);
+    } else if (strcmp(channel, STORE_EVENT_CHANNEL) == 0) {
+        farm_notify(r->f);
+    } else if (farm_host_reader(r->f, me, sizeof(me)) && strcmp(payload, me) == 0) {
         wake(r);
+    }
 }
 
 static bool arm(struct farm_remote *r);
@@ -635,6 +644,7 @@ arm(struct farm_remote *r)
         log_info("remote", "the commands' wake-up connection is back");
     r->lost = false;
     wake(r); /* what was asked, or answered, while it was away (its NOTIFY lost) */
+    farm_view_heard(r->f);
     return true;
 }
 
@@ -648,6 +658,8 @@ farm_remote_start(struct farm *f, struct sf_err *err)
     r->fd = -1;
     atomic_init(&r->stopping, false);
     f->remote = r;
+    if (farm_view_start(f, err))
+        return err->code;
     if (!(r->ls = store_open_listener(f->s, err)) || store_command_listen(r->ls, err)) {
         sf_err_prefix(err, "remote commands: wake-up connection");
         return err->code;
@@ -664,6 +676,7 @@ farm_remote_stop(struct farm *f)
     if (!r)
         return;
     atomic_store(&r->stopping, true);
+    farm_view_stop(f);
     drop(r);
     if (r->retry)
         loop_timer_cancel(f->l, r->retry);

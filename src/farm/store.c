@@ -201,6 +201,8 @@ static const char *const migrations[] = {
     /* 14: an action on a printer another host owns, carried through the database
        (store_command.c) */
     STORE_COMMAND_SCHEMA,
+    /* 15: each host's view of its own printers, for the others (store_view.c) */
+    STORE_VIEW_SCHEMA,
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

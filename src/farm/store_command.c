@@ -320,7 +320,24 @@ read_printer(struct sqldb_stmt *st, void *row)
     p->job_id = sqldb_column_int64(st, 6);
     p->lines_acked = sqldb_column_int64(st, 7);
     p->gcode_lines = sqldb_column_int64(st, 8);
+    store_copy_text(p->view, sizeof(p->view), st, 9);
 }
+
+/* The printer's object in its host's view (a JSON object by printer name), if its current
+   process published it: one engine's JSON operator each. */
+#define VIEW_PG  "coalesce(CAST(CAST(v.view AS json) -> hp.printer AS TEXT), '')"
+#define VIEW_SQL "coalesce(json_extract(v.view, '$.' || json_quote(hp.printer)), '')"
+#define PRINTERS_SQL(VIEW)                                                                         \
+    "SELECT hp.printer, hp.host, coalesce(p.state, ''),"                                           \
+    " CASE WHEN h.reaped_ms = 0 AND h.lease_until_ms > ?2 THEN 1 ELSE 0 END,"                      \
+    " ?2 - h.lease_until_ms, coalesce(p.bed_full, 0), coalesce(j.id, 0),"                          \
+    " coalesce(j.lines_acked, 0), coalesce(j.gcode_lines, 0), " VIEW                               \
+    " FROM host_printers hp JOIN hosts h ON h.name = hp.host"                                      \
+    " LEFT JOIN printers p ON p.name = hp.printer"                                                 \
+    " LEFT JOIN host_views v ON v.host = hp.host AND v.token = h.token"                            \
+    " LEFT JOIN jobs j ON j.id = (SELECT max(id) FROM jobs WHERE printer = hp.printer"             \
+    " AND state IN ('printing','paused'))"                                                         \
+    " WHERE hp.host != ?1 ORDER BY hp.printer"
 
 int
 store_command_printers(struct store *s, const char *me, int64_t now_ms,
@@ -329,16 +346,7 @@ store_command_printers(struct store *s, const char *me, int64_t now_ms,
     struct sqldb_stmt *st;
     void *out = NULL;
     int rc = store_select(
-        s, &st,
-        "SELECT hp.printer, hp.host, coalesce(p.state, ''),"
-        " CASE WHEN h.reaped_ms = 0 AND h.lease_until_ms > ?2 THEN 1 ELSE 0 END,"
-        " ?2 - h.lease_until_ms, coalesce(p.bed_full, 0), coalesce(j.id, 0),"
-        " coalesce(j.lines_acked, 0), coalesce(j.gcode_lines, 0)"
-        " FROM host_printers hp JOIN hosts h ON h.name = hp.host"
-        " LEFT JOIN printers p ON p.name = hp.printer"
-        " LEFT JOIN jobs j ON j.id = (SELECT max(id) FROM jobs WHERE printer = hp.printer"
-        " AND state IN ('printing','paused'))"
-        " WHERE hp.host != ?1 ORDER BY hp.printer",
+        s, &st, sqldb_engine(s->db) == SQLDB_PG ? PRINTERS_SQL(VIEW_PG) : PRINTERS_SQL(VIEW_SQL),
         &out, n, err);
     *rows = NULL;
     if (rc)
@@ -354,7 +362,10 @@ store_command_printers(struct store *s, const char *me, int64_t now_ms,
 int
 store_command_listen(struct store *s, struct sf_err *err)
 {
-    return sqldb_listen(s->db, STORE_COMMAND_CHANNEL) ? store_db_fail(s, err, "listen") : SF_OK;
+    if (sqldb_listen(s->db, STORE_COMMAND_CHANNEL) || sqldb_listen(s->db, STORE_VIEW_CHANNEL) ||
+        sqldb_listen(s->db, STORE_EVENT_CHANNEL))
+        return store_db_fail(s, err, "listen");
+    return SF_OK;
 }
 
 struct drain {
@@ -366,8 +377,8 @@ static void
 on_note(void *arg, const char *channel, const char *payload)
 {
     const struct drain *d = arg;
-    if (strcmp(channel, STORE_COMMAND_CHANNEL) == 0 && d->fn)
-        d->fn(d->ud, payload ? payload : "");
+    if (d->fn)
+        d->fn(d->ud, channel, payload ? payload : "");
 }
 
 int

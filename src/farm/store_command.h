@@ -32,6 +32,7 @@
 #include "../base/limits.h"
 #include "store.h"
 #include "store_host.h"
+#include "store_view.h"
 
 #define STORE_COMMAND_CHANNEL  "slimfarm_commands"
 #define STORE_COMMAND_LINE_MAX (SF_COMMAND_MAX + 1) /* a manual G-code line and its NUL */
@@ -117,6 +118,8 @@ struct store_command_printer {
     bool bed_full;
     int64_t job_id;                   /* the job printing or paused on it, 0 if none, */
     int64_t lines_acked, gcode_lines; /* and how far it is */
+    char view[STORE_VIEW_MAX];        /* the printer as its owner last published it (store_view.h: a
+                                         JSON object), "" when not published by its current process */
 };
 
 /*
@@ -127,13 +130,14 @@ int store_command_printers(struct store *s, const char *me, int64_t now_ms,
                            struct store_command_printer **rows, size_t *n, struct sf_err *err);
 
 /*
- * The wake-ups: LISTEN on STORE_COMMAND_CHANNEL on a connection kept for
- * it; drain hands each notification's payload (a host name) to fn and
- * returns how many (>= 0), or SF_EIO when the connection is lost (call it
- * again later: it reconnects); notify_fd is the socket to watch (-1: none).
- * No-ops on SQLite.
+ * The wake-ups: LISTEN on STORE_COMMAND_CHANNEL, STORE_VIEW_CHANNEL and
+ * STORE_EVENT_CHANNEL (store_view.h) on a connection kept for it; drain
+ * hands each notification's channel and payload (a host name; "" for an
+ * event) to fn and returns how many (>= 0), or SF_EIO when the connection
+ * is lost (call it again later: it reconnects); notify_fd is the socket to
+ * watch (-1: none).  No-ops on SQLite.
  */
-typedef void (*store_command_note_fn)(void *ud, const char *host);
+typedef void (*store_command_note_fn)(void *ud, const char *channel, const char *payload);
 int store_command_listen(struct store *s, struct sf_err *err);
 int store_command_drain(struct store *s, store_command_note_fn fn, void *ud);
 int store_command_notify_fd(struct store *s);

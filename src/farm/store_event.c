@@ -12,6 +12,7 @@
 
 #include "../base/clock.h"
 #include "store_int.h"
+#include "store_view.h"
 
 /*
  * Event ids commit in their order, so a reader paging `WHERE id > last` never
@@ -24,7 +25,9 @@
  * oldest open transaction, which would need each row's transaction id and a
  * cursor of (xid, id) in every reader (the API's stream, notify.c).  Cost:
  * transactions that log events commit one after another (no group commit
- * between them); measured in tests/bench/bench_store.sh's claims.
+ * between them); measured in tests/bench/bench_store.sh's claims.  The same
+ * statement NOTIFYs STORE_EVENT_CHANNEL (store_view.h): the other hosts'
+ * event streams wake when it commits (PostgreSQL sends one per transaction).
  */
 #define STORE_EVENT_LOCK_KEY 0x736c696d6576656eLL /* "slimeven" in ASCII */
 
@@ -33,12 +36,13 @@ store_log_event(struct store *s, int64_t job_id, const char *printer, const char
                 const char *detail, struct sf_err *err)
 {
     struct sqldb_stmt *st;
-    char pg_sql[320];
+    char pg_sql[512];
     snprintf(pg_sql, sizeof(pg_sql),
-             "WITH l AS (SELECT pg_advisory_xact_lock(%lld))"
+             "WITH l AS (SELECT pg_advisory_xact_lock(%lld)),"
+             " n AS (SELECT pg_notify('" STORE_EVENT_CHANNEL "', ''))"
              " INSERT INTO events(at_ms, job_id, printer, kind, detail)"
              " SELECT CAST(?1 AS BIGINT), CAST(?2 AS BIGINT), CAST(?3 AS TEXT), CAST(?4 AS TEXT),"
-             " CAST(?5 AS TEXT) FROM l",
+             " CAST(?5 AS TEXT) FROM l, n",
              (long long)STORE_EVENT_LOCK_KEY);
     int rc = store_prepare(s, &st,
                            sqldb_engine(s->db) == SQLDB_PG

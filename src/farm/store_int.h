@@ -145,6 +145,19 @@ int store_host_relock(struct store *s, struct sf_err *err);
     "CREATE INDEX commands_pending ON commands(host) WHERE state = 'pending';"                     \
     "CREATE INDEX commands_created ON commands(created_ms);"
 
+/*
+ * Migration 15 (store_view.c): each host's view of its own printers, as the
+ * other hosts show them (store_view.h).  host: the publisher; token: its
+ * join's (a view is read only while it is the host's current token); view:
+ * a JSON object, printer name -> the printer as the host's API shows it.
+ */
+#define STORE_VIEW_SCHEMA                                                                          \
+    "CREATE TABLE host_views("                                                                     \
+    "  host TEXT PRIMARY KEY REFERENCES hosts(name),"                                              \
+    "  token INTEGER NOT NULL,"                                                                    \
+    "  view TEXT NOT NULL,"                                                                        \
+    "  updated_ms INTEGER NOT NULL);"
+
 /* SF_EIO with what and SQLite's message. */
 int store_db_fail(struct store *s, struct sf_err *err, const char *what);
 /* Run sql (no rows, no parameters). */

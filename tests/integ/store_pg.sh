@@ -16,7 +16,7 @@ TMP=$(mktemp -d)
 PG_TCP=1 pg_start fsync=off || exit 1
 trap 'pg_stop; rm -rf "$TMP"' EXIT
 fail=0
-for t in test_sqldb test_store test_store_file test_store_query test_store_host test_store_command test_storeq test_farm_host test_farm_lease test_notify test_history test_metrics test_web test_api test_farm; do
+for t in test_sqldb test_store test_store_file test_store_query test_store_host test_store_command test_storeq test_farm_host test_farm_lease test_farm_view test_notify test_history test_metrics test_web test_api test_farm; do
   SLIMFARM_TEST_STORE=$PG_URL SLIMFARM_TEST_PG_PORT=$PG_PORT \
     SLIMFARM_TEST_PROXY=$BUILD/tests/tools/tcpproxy "$BUILD/tests/$t" > "$TMP/$t.log" 2>&1
   last=$(tail -n 1 "$TMP/$t.log")

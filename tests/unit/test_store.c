@@ -201,7 +201,8 @@ T_CASE(store_migrates_schema_1_to_gcode_lines)
     T_EQ_INT(sqlite3_open(path, &db), SQLITE_OK);
     T_EQ_INT(sqlite3_exec(
                  db,
-                 "DROP TABLE host_printers; DROP TABLE hosts; DROP INDEX jobs_claimed;"
+                 "DROP TABLE host_views; DROP TABLE host_printers; DROP TABLE hosts;"
+                 "DROP INDEX jobs_claimed;"
                  "DROP INDEX jobs_claim_order; ALTER TABLE jobs DROP COLUMN claimed_by;"
                  "ALTER TABLE jobs DROP COLUMN fence;"
                  "ALTER TABLE jobs DROP COLUMN prep_key; ALTER TABLE jobs DROP COLUMN "

@@ -5,9 +5,11 @@
  * whose deadline passed before the owner came, is never taken (never runs
  * late); a row the owner took is not withdrawn; a printer whose host is
  * down, or that no host owns, is refused with a clear error; the owner's
- * listener hears the row's NOTIFY (PostgreSQL).  With SLIMFARM_TEST_STORE
- * (tstore.h, tests/integ/store_pg.sh) on PostgreSQL, the second host a store
- * of its own on the same database; on SQLite a second connection.
+ * listener hears the row's NOTIFY (PostgreSQL).  Each host's published view
+ * of its printers (store_view.h) is what the others list with them, only
+ * under the publisher's current token, and wakes them, as every event does.  With
+ * SLIMFARM_TEST_STORE (tstore.h, tests/integ/store_pg.sh) on PostgreSQL, the second host a store of
+ * its own on the same database; on SQLite a second connection.
  */
 #include <poll.h>
 #include <stdint.h>
@@ -178,13 +180,16 @@ T_CASE(command_to_a_host_down_or_no_printer_is_refused)
 /* What a listener heard: every payload, and how many were want (the host it waits for). */
 struct heard {
     const char *want;
+    const char *channel; /* the channel heard (NULL: STORE_COMMAND_CHANNEL) */
     int n, wanted;
 };
 
 static void
-on_heard(void *ud, const char *host)
+on_heard(void *ud, const char *channel, const char *host)
 {
     struct heard *h = ud;
+    if (strcmp(channel, h->channel ? h->channel : STORE_COMMAND_CHANNEL) != 0)
+        return; /* the events' and views' wake-ups (store_view.h) */
     h->n++;
     h->wanted += strcmp(host, h->want) == 0;
 }
@@ -262,5 +267,69 @@ T_CASE(each_host_lists_the_printers_the_others_own)
     T_TRUE(!rows[0].live);
     T_TRUE(rows[0].down_ms >= 4000);
     free(rows);
+    t_pair_close(&p);
+}
+
+/* The view b lists a's printer p1 with ("" when none). */
+static void
+view_of_p1(struct t_pair *p, char *out, size_t cap)
+{
+    struct sf_err err;
+    struct store_command_printer *rows;
+    size_t n;
+    out[0] = '\0';
+    if (store_command_printers(p->b, "b", clock_wall_ms(), &rows, &n, &err) == SF_OK && n == 1)
+        snprintf(out, cap, "%s", rows[0].view);
+    free(rows);
+}
+
+T_CASE(each_host_lists_the_others_printers_as_they_published_them)
+{
+    struct sf_err err;
+    struct t_pair p;
+    T_TRUE(pair_open(&p, "view", &err));
+    char v[STORE_VIEW_MAX];
+    view_of_p1(&p, v, sizeof(v));
+    T_EQ_STR(v, ""); /* never published */
+    T_OK(store_view_publish(p.a, "a", p.ta,
+                            "{\"p1\":{\"enabled\":false,\"temps\":{\"nozzle_c\":211}},"
+                            "\"p9\":{\"enabled\":true}}",
+                            &err),
+         &err);
+    view_of_p1(&p, v, sizeof(v));
+    /* p1's object alone (the engines space JSON differently) */
+    T_TRUE(strstr(v, "\"enabled\"") && strstr(v, "false") && strstr(v, "211"));
+    T_TRUE(!strstr(v, "p9"));
+    /* a stale token (another process holds the name, or a was reaped) writes nothing */
+    T_EQ_INT(store_view_publish(p.a, "a", p.ta + 1, "{\"p1\":{\"enabled\":true}}", &err),
+             SF_ESTALE);
+    T_TRUE(strstr(err.msg, "no longer"));
+    view_of_p1(&p, v, sizeof(v));
+    T_TRUE(strstr(v, "211"));
+    /* a newer view replaces it */
+    T_OK(store_view_publish(p.a, "a", p.ta, "{\"p1\":{\"enabled\":true}}", &err), &err);
+    view_of_p1(&p, v, sizeof(v));
+    T_TRUE(strstr(v, "true") && !strstr(v, "211"));
+    t_pair_close(&p);
+}
+
+T_CASE(hosts_hear_a_view_published_and_an_event_logged)
+{
+    T_SKIP_UNLESS(t_store_pg(), "NOTIFY is PostgreSQL's (SQLite has one host)");
+    struct sf_err err;
+    struct t_pair p;
+    T_TRUE(pair_open(&p, "hearview", &err));
+    struct store *lb = store_open_peer(p.b, &err);
+    T_TRUE(lb != NULL);
+    T_OK(store_command_listen(lb, &err), &err);
+    T_OK(store_view_publish(p.a, "a", p.ta, "{}", &err), &err);
+    struct heard hv = { .want = "a", .channel = STORE_VIEW_CHANNEL };
+    T_TRUE(hear(lb, &hv));
+    T_EQ_INT(hv.wanted, 1);                                       /* the publisher's name */
+    T_OK(store_printer_set(p.a, "p1", PRINTER_IDLE, &err), &err); /* logs printer-state */
+    struct heard he = { .want = "", .channel = STORE_EVENT_CHANNEL };
+    T_TRUE(hear(lb, &he));
+    T_EQ_INT(he.wanted, 1);
+    store_close(lb);
     t_pair_close(&p);
 }
