@@ -30,8 +30,8 @@
 # joined again; one that ran to its end while its host was cut off and
 # reaped must end done, not interrupted (an operator would print it again).
 # No timing asserts: every wait polls with a generous bound; the outage's
-# 30 s is the scenario.  About 80 s (a Marlin's print lasts a few seconds at
-# --speed 60, CHAOS_SPEED).  Env: BUILD.
+# 30 s is the scenario.  100-140 s at load 20-40 on 2 cores (a Marlin's print
+# lasts a few seconds at --speed 60, CHAOS_SPEED).  Env: BUILD.
 set -u
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
@@ -84,7 +84,8 @@ host_ini() {
 }
 joins() { grep -c "$1 joined (token" "$tmp/$1.log"; }
 
-# A print lasts seconds (a few thousand lines), so the events find prints under way
+# A print lasts seconds (a few thousand lines): the farm prints through each event once
+# its held prints go on
 SPEED=${CHAOS_SPEED:-60}
 hold() { echo "--fault hold=$tmp/$1.hold"; }
 for h in a b c; do
