@@ -487,20 +487,20 @@ farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
     return rc;
 }
 
-bool
+int
 farm_host_take(struct farm *f, int64_t id, int64_t *fence)
 {
     struct farm_host *h = f->host;
     *fence = 0;
     if (!h)
-        return true;
+        return SF_OK;
     struct sf_err err;
     int rc = store_job_take(f->s, h->name, h->token, id, fence, &err);
     if (rc && rc != SF_ENOTFOUND)
         log_warn("host", "%s: take job %lld: %s", h->name, (long long)id, err.msg);
     if (rc == SF_ESTALE)
         h->joined = false;
-    return rc == SF_OK;
+    return rc;
 }
 
 void

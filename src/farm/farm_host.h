@@ -88,10 +88,11 @@ bool farm_host_reader(const struct farm *f, char *name, size_t size);
  * again (SF_ENOTFOUND).
  */
 int farm_host_claim(struct farm *f, int64_t id, int64_t *fence);
-/* May f start (or prepare again) ready job id?  Always without a shared store (*fence 0);
-   with one, once f took it (store_job_take), its fencing token into *fence: what f writes
-   for the job carries it (printer_set_fence). */
-bool farm_host_take(struct farm *f, int64_t id, int64_t *fence);
+/* May f start (or prepare again) ready job id?  SF_OK always without a shared store (*fence
+   0); with one, once f took it (store_job_take), its fencing token into *fence: what f writes
+   for the job carries it (printer_set_fence).  SF_ENOTFOUND: another host holds it, or it is
+   no longer ready; another error (the database away or busy) is passing: try again later. */
+int farm_host_take(struct farm *f, int64_t id, int64_t *fence);
 /*
  * printer_env.hold: before a printer of f resumes job id (an operator's resume, a network
  * printer found still printing it), f holds the job: store_job_attach, its new fencing
