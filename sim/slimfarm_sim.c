@@ -46,7 +46,7 @@ static const char usage_text[] =
     "  --uart  bytes reaching a full RX buffer are lost (else the host waits, as on USB)\n"
     "faults: corrupt=RATE corrupt-rx=RATE corrupt-tx=RATE drop-ok=RATE garbage=RATE\n"
     "        drop-oks=LINE:N dup=RATE merge=RATE bad-line=N hit=KIND:LINE:POS:BYTE\n"
-    "        slow=MS reset=N disconnect=N runaway=N stuck=N okt=plain seed=N\n"
+    "        slow=MS reset=N disconnect=N runaway=N stuck=N hold=PATH okt=plain seed=N\n"
     "        (hit KIND: ok okn okt resend error busy temp; see sim/marlin/faults.h)\n";
 
 /* Printers one process may serve: each holds a pty or socket and a log file. */

@@ -197,6 +197,13 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
         f->hit_rx_byte = (int)num[2];
         return SF_OK;
     }
+    if (NAME_IS("hold")) {
+        if (!*v || strlen(v) >= sizeof(f->hold_path))
+            return sf_err_set(err, SF_EINVAL, "fault '%s': expected hold=PATH (1-%zu bytes)", spec,
+                              sizeof(f->hold_path) - 1);
+        memcpy(f->hold_path, v, strlen(v) + 1);
+        return SF_OK;
+    }
     if (NAME_IS("seed")) {
         rc = parse_count(spec, v, 1L << 40, &c, err);
         f->rng = (uint64_t)c * 0x9E3779B97F4A7C15ull + 1;
@@ -206,7 +213,7 @@ faults_parse(struct faults *f, const char *spec, struct sf_err *err)
     return sf_err_set(err, SF_EINVAL,
                       "fault '%s': unknown; expected corrupt, corrupt-rx, corrupt-tx, drop-ok, "
                       "drop-oks, garbage, dup, merge, bad-line, hit, hit-rx, okt, slow, reset, "
-                      "disconnect, runaway, stuck or "
+                      "disconnect, runaway, stuck, hold or "
                       "seed",
                       spec);
 }

@@ -28,6 +28,14 @@
  * okt (M105's "ok T:.."), resend, error, busy or temp (an M109/M190 wait report)
  *   okt=plain         M105 is answered with a plain "ok", no temperatures (a firmware or
  *                     bridge that reports them elsewhere, or not at all)
+ *   hold=PATH         while the file PATH exists, the firmware starts no printing move (a G0-G3
+ *                     with E and X or Y): it holds at it as at a long dwell (no ok, nothing read
+ *                     past its command buffer, "echo:busy: processing" every 2 s), a slow
+ *                     printer to any host; it goes on within 50 ms of PATH's removal.  On
+ *                     holding it appends "held: COMMAND" to PATH (never creating it), so a test
+ *                     arms the hold (creates PATH), sees a print held under way (PATH not
+ *                     empty), places its fault and releases (removes PATH).  A network
+ *                     printer's firmware holds so too: its job stands, printing
  *   hit-rx=LINE:POS:BYTE  once, the first line the host sends numbered LINE has its byte POS
  *                     (0-based, from its N) replaced by BYTE as it arrives: the emergency
  *                     parser reads it so, and the checksum refuses it
@@ -70,6 +78,7 @@ struct faults {
     int hit_rx_pos;        /* ... its byte position */
     int hit_rx_byte;       /* ... the byte written there */
     bool okt_plain;        /* M105 answers a plain "ok" (okt=plain) */
+    char hold_path[256];   /* hold=PATH: printing moves wait while it exists; "" none */
     uint64_t rng;          /* xorshift state; never 0 */
 };
 

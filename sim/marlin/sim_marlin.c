@@ -351,6 +351,7 @@ sim_firmware_reset(struct sim_marlin *s, bool banner)
 {
     s->halted = false;
     s->stuck = false;
+    s->held = false;
     s->last_n = 0;
     s->q_len = 0;
     s->q_head = 0;

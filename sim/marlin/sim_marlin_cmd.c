@@ -13,13 +13,16 @@
  */
 #include "sim_marlin_int.h"
 
+#include <fcntl.h>
 #include <math.h>
 #include <stdio.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "../../src/base/gcode.h"
 
 #define KEEPALIVE_MS   2000 /* Marlin's DEFAULT_KEEPALIVE_INTERVAL */
+#define HOLD_LOOK_MS   50   /* faults.hold_path: how often its file is looked at */
 #define WAIT_REPORT_MS 1000 /* M109/M190 print temperatures every second */
 #define G29_S          45.0 /* bed levelling: a 3x3 probe grid, simulated seconds */
 
@@ -515,14 +518,56 @@ check_fault_triggers(struct sim_marlin *s)
     }
 }
 
+/* faults.hold_path exists (looked at every HOLD_LOOK_MS at most). */
+static bool
+hold_armed(struct sim_marlin *s, int64_t now)
+{
+    if (!s->faults.hold_path[0])
+        return false;
+    if (now >= s->hold_look_ms) {
+        s->hold_on = access(s->faults.hold_path, F_OK) == 0;
+        s->hold_look_ms = now + HOLD_LOOK_MS;
+    }
+    return s->hold_on;
+}
+
+/* A move that prints: G0-G3 with E and X or Y (not a travel, a retraction or a park). */
+static bool
+printing_move(const struct gcode_line *g)
+{
+    double v;
+    return g->letter == 'G' && g->code >= 0 && g->code <= 3 && gcode_get(g, 'E', &v) &&
+           (gcode_get(g, 'X', &v) || gcode_get(g, 'Y', &v));
+}
+
+/* Hold the head (a printing move, not yet run): tell the hold's file what waits. */
+static void
+hold(struct sim_marlin *s, const char *cmd, int64_t now)
+{
+    s->held = true;
+    s->head_started = false; /* it starts, fresh, once released */
+    s->keepalive_ms = now + KEEPALIVE_MS;
+    int fd = open(s->faults.hold_path, O_WRONLY | O_APPEND | O_CLOEXEC); /* never created */
+    if (fd < 0)
+        return; /* removed meanwhile: the next look releases it */
+    char note[MAX_CMD_SIZE + 16];
+    int n = snprintf(note, sizeof(note), "held: %s\n", cmd);
+    if (write(fd, note, (size_t)n) < 0) {
+        /* a note lost: the hold itself stands */
+    }
+    close(fd);
+}
+
 void
 sim_run_queue(struct sim_marlin *s)
 {
-    if (s->stuck) { /* the command at the head never ends: keepalives only */
-        int64_t now = loop_now_ms(s->loop);
-        if (s->q_len > 0 && !s->cfg.no_keepalive && now >= s->keepalive_ms) {
+    int64_t now0 = loop_now_ms(s->loop);
+    if (s->held && !hold_armed(s, now0))
+        s->held = false;
+    if (s->stuck || s->held) { /* the command at the head does not end: keepalives only */
+        if (s->q_len > 0 && !s->cfg.no_keepalive && now0 >= s->keepalive_ms) {
             sim_emit(s, "echo:busy: processing");
-            s->keepalive_ms = now + KEEPALIVE_MS;
+            s->keepalive_ms = now0 + KEEPALIVE_MS;
         }
         return;
     }
@@ -546,6 +591,10 @@ sim_run_queue(struct sim_marlin *s)
             sim_send_ok(s, raw);
             done = true;
         } else {
+            if (fresh && printing_move(&g) && hold_armed(s, now)) {
+                hold(s, cmd, now);
+                return;
+            }
             if (fresh && known(&g)) {
                 s->st.executed++;
                 /* the command as Marlin reads it: "M00105" runs as M105 */

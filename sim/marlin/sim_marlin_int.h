@@ -87,6 +87,9 @@ struct sim_marlin {
     int64_t boot_until_ms; /* > now: booting, input dropped */
     bool hung;             /* cfg.hang_after reached: silent for good */
     bool stuck;            /* faults.stuck_after reached: busy for good */
+    bool held;             /* the head is a printing move held by faults.hold_path */
+    bool hold_on;          /* faults.hold_path existed at the last look */
+    int64_t hold_look_ms;  /* when to look at it again */
     bool halted;           /* killed */
     long last_n;           /* last good line number */
     char line[MAX_CMD_SIZE];

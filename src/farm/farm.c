@@ -795,21 +795,29 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
         const struct job_row *j = &jobs[out[k].job];
         struct printer *p = f->printers[out[k].printer];
         int64_t fence = 0;
+        int rc;
         if (!out[k].reslice) {
             /* another host's printer may have taken it; p writes for it with the take's
-               fencing token */
-            if (farm_host_take(f, j->id, &fence)) {
+               fencing token.  A take the database did not answer is tried again: nothing
+               else may come to wake this host (its printers idle, the job ready for good). */
+            if ((rc = farm_host_take(f, j->id, &fence)) == SF_OK) {
                 printer_set_fence(p, j->id, fence);
                 farm_start(f, j, p);
+            } else if (rc != SF_ENOTFOUND) {
+                retry_later(f);
             }
             continue;
         }
         /* Waiting for a busy printer of its key while p idles: slice it for p. */
         char key[SCHED_KEY_MAX];
         sched_key(&sp[out[k].printer], j->opts.overhang_deg, key);
-        if (!reslicing(f, j->id) && !reslice_failed(f, j->id, key) &&
-            f->preparing < pool_size(f->pool) && farm_host_take(f, j->id, &fence))
+        if (reslicing(f, j->id) || reslice_failed(f, j->id, key) ||
+            f->preparing >= pool_size(f->pool))
+            continue;
+        if ((rc = farm_host_take(f, j->id, &fence)) == SF_OK)
             prepare(f, j, p, true, fence);
+        else if (rc != SF_ENOTFOUND)
+            retry_later(f);
     }
     /* Prepare queued jobs for a printer that could take them, an idle one first. */
     for (size_t i = 0; i < n; i++) {

@@ -625,22 +625,22 @@ farm_host_give_back(struct farm *f, int64_t id, int64_t fence, const char *why)
         h->given_timer = loop_timer_add(f->l, h->lease_ms, on_given_timer, h);
 }
 
-bool
+int
 farm_host_take(struct farm *f, int64_t id, int64_t *fence)
 {
     struct farm_host *h = f->host;
     *fence = 0;
     if (!h)
-        return true;
+        return SF_OK;
     if (given_back(h, id))
-        return false; /* the other hosts first */
+        return SF_ENOTFOUND; /* the other hosts first; on_given_timer kicks the farm */
     struct sf_err err;
     int rc = store_job_take(f->s, h->name, h->token, id, fence, &err);
     if (rc && rc != SF_ENOTFOUND)
         log_warn("host", "%s: take job %lld: %s", h->name, (long long)id, err.msg);
     if (rc == SF_ESTALE)
         lease_doubted(h);
-    return rc == SF_OK;
+    return rc;
 }
 
 void

@@ -99,10 +99,11 @@ int64_t farm_host_token(const struct farm *f);
  * again (SF_ENOTFOUND).
  */
 int farm_host_claim(struct farm *f, int64_t id, int64_t *fence);
-/* May f start (or prepare again) ready job id?  Always without a shared store (*fence 0);
-   with one, once f took it (store_job_take), its fencing token into *fence: what f writes
-   for the job carries it (printer_set_fence). */
-bool farm_host_take(struct farm *f, int64_t id, int64_t *fence);
+/* May f start (or prepare again) ready job id?  SF_OK always without a shared store (*fence
+   0); with one, once f took it (store_job_take), its fencing token into *fence: what f writes
+   for the job carries it (printer_set_fence).  SF_ENOTFOUND: another host holds it, or it is
+   no longer ready; another error (the database away or busy) is passing: try again later. */
+int farm_host_take(struct farm *f, int64_t id, int64_t *fence);
 /* f took ready job id (under fencing token fence) but cannot start it (why: its G-code cannot
    be fetched here): give it back for the other hosts (store_job_give_back, which wakes them);
    f does not take it again for a lease.  Logged.  Nothing without a shared store. */

@@ -11,7 +11,8 @@
  * its connection is cut, and gives back a claim whose COMMIT's answer was
  * lost (SLIMFARM_TEST_PROXY, tests/tools/tcpproxy, and SLIMFARM_TEST_PG_PORT,
  * the server's TCP port, cut the network: store_pg.sh sets them), and lets
- * go of a print another host has attached (its fencing token is stale).  With
+ * go of a print another host has attached (its fencing token is stale), and
+ * takes a ready job again after the database refused its take.  With
  * SLIMFARM_TEST_STORE (tstore.h) on PostgreSQL, the second host a store of
  * its own on the same database; on SQLite a second connection.
  */
@@ -237,6 +238,53 @@ T_CASE(host_leaves_alone_a_printer_another_live_host_owns)
     db_text(url, "SELECT host FROM host_printers WHERE printer = 'y' AND ?1 = 0", 0, text,
             sizeof(text));
     T_EQ_STR(text, "b");
+    host_farm_free();
+    store_close(a);
+}
+
+/*
+ * A take the database did not answer (busy, or away as at an outage) is tried again: the
+ * job stayed ready, this host's printer idle, and nothing else came to wake the host (issue
+ * 32's acceptance run: after PostgreSQL's restart a host's four printers stood idle beside
+ * the job it had prepared, for good).  Here a trigger ends the take's own session (the
+ * database gone under it) while hold_takes has a row; fails without the retry: the job
+ * stays ready.
+ */
+T_CASE(host_takes_a_ready_job_again_after_the_database_refused)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024];
+    snprintf(dir, sizeof(dir), "%s/retake", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err); /* the schema, the job */
+    T_TRUE(a != NULL);
+    struct sqldb *direct = sqldb_open(url, 0, &err);
+    T_TRUE(direct != NULL);
+    T_OK(sqldb_exec(direct, "CREATE TABLE hold_takes(x INTEGER); INSERT INTO hold_takes VALUES(1);"
+                            " CREATE FUNCTION hold_take() RETURNS trigger LANGUAGE plpgsql AS $$"
+                            " BEGIN IF EXISTS (SELECT 1 FROM hold_takes) THEN"
+                            " PERFORM pg_terminate_backend(pg_backend_pid()); PERFORM pg_sleep(5);"
+                            " END IF; RETURN NEW; END $$;"
+                            " CREATE TRIGGER hold_take BEFORE UPDATE ON jobs FOR EACH ROW"
+                            " WHEN (OLD.state = 'ready' AND NEW.fence <> OLD.fence)"
+                            " EXECUTE FUNCTION hold_take()"),
+         NULL);
+    int64_t id;
+    T_OK(add_ready_for(a, "p", &id, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer p]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    bool refused = false;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !refused && clock_mono_ms() < end;) {
+        loop_run_once(hx.l, 20);
+        refused = was_logged("take job");
+    }
+    T_TRUE(refused);
+    T_OK(sqldb_exec(direct, "DELETE FROM hold_takes"), NULL);
+    sqldb_close(direct);
+    T_TRUE(wait_state(url, id, "printing"));
     host_farm_free();
     store_close(a);
 }

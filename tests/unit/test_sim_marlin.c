@@ -7,8 +7,12 @@
  * unnumbered too); M118 without E1 prints its text raw ("Resend: 1" looks
  * like a reply), with E1 as echo:; M0 and M600 wait for the user until
  * M108; M999 asks for a resend; M111 S1 echoes every command; M997 reboots.
+ * The hold fault (faults.h hold=PATH) holds printing moves while its file
+ * exists, as a slow printer.
  */
+#include <fcntl.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -80,6 +84,9 @@ say(struct host *h, long n, const char *line)
     T_TRUE(write(h->fd, b, strlen(b)) == (ssize_t)strlen(b));
 }
 
+/* A fault spec the next open_host gives its printer, or NULL. */
+static const char *host_fault;
+
 static bool
 open_host(struct host *h)
 {
@@ -99,6 +106,8 @@ open_host(struct host *h)
     c.virtual_time = true;
     c.speed = 100;
     c.boot_hold = true;
+    if (host_fault && faults_parse(&c.faults, host_fault, &err) < 0)
+        return false;
     h->fd = sv[1];
     h->sim = sim_marlin_new(h->loop, &c, &err);
     if (!h->sim)
@@ -191,4 +200,85 @@ T_CASE(sim_m999_m111_m997)
     T_TRUE(ask(&h, 3, "G1 X3", "echo:G1 X3", 2000));
     T_TRUE(ask(&h, 4, "M997", "start", 10000));
     close_host(&h);
+}
+
+/* The whole of file path ("" when it cannot be read), in a static buffer. */
+static const char *
+slurp(const char *path)
+{
+    static char b[512];
+    b[0] = '\0';
+    FILE *f = fopen(path, "r");
+    if (f) {
+        size_t n = fread(b, 1, sizeof(b) - 1, f);
+        b[n] = '\0';
+        fclose(f);
+    }
+    return b;
+}
+
+/*
+ * hold=PATH: while PATH exists a printing move (G0-G3 with E and X or Y)
+ * does not start: no ok, the lines behind it wait, "echo:busy: processing"
+ * keeps the host patient, and "held: CMD" is appended to PATH; travels and
+ * retractions run.  Removing PATH lets it go on (its ok, then the lines
+ * behind); a new PATH holds the next printing move.  A missing PATH never
+ * holds, and is never made.
+ */
+T_CASE(sim_hold_holds_printing_moves_while_its_file_exists)
+{
+    char path[] = "/tmp/sf-sim-hold-XXXXXX";
+    int fd = mkstemp(path);
+    T_TRUE(fd >= 0);
+    if (fd < 0)
+        return;
+    close(fd);
+    char spec[64];
+    snprintf(spec, sizeof(spec), "hold=%s", path);
+    host_fault = spec;
+    struct host h;
+    bool up = open_numbered(&h);
+    host_fault = NULL;
+    T_TRUE(up);
+    if (!up) {
+        unlink(path);
+        return;
+    }
+    T_TRUE(ask(&h, 1, "G1 X5 Y5 F3000", "ok", 2000)); /* a travel */
+    T_TRUE(ask(&h, 2, "G1 E-1 F2400", "ok", 2000));   /* a retraction */
+    T_EQ_STR(slurp(path), "");
+    clear(&h);
+    say(&h, 3, "G1 X10 Y10 E0.5");
+    say(&h, 4, "M105");
+    T_TRUE(heard(&h, "echo:busy: processing", 5000));
+    pump(&h, 5000);
+    T_TRUE(strstr(h.in, "ok") == NULL);
+    T_EQ_STR(slurp(path), "held: G1 X10 Y10 E0.5\n");
+    unlink(path);
+    clear(&h);
+    T_TRUE(heard(&h, "ok T:", 1000)); /* the move's ok, then M105's */
+    T_TRUE(strncmp(h.in, "ok", 2) == 0);
+    T_TRUE(ask(&h, 5, "G1 X20 Y20 E1", "ok", 2000)); /* no file: no hold */
+    /* armed again: the next printing move holds */
+    fd = open(path, O_WRONLY | O_CREAT | O_EXCL, 0600);
+    T_TRUE(fd >= 0);
+    close(fd);
+    pump(&h, 100);
+    clear(&h);
+    say(&h, 6, "G2 X30 Y20 I5 J0 E1.5");
+    pump(&h, 3000);
+    T_TRUE(strstr(h.in, "ok") == NULL);
+    T_EQ_STR(slurp(path), "held: G2 X30 Y20 I5 J0 E1.5\n");
+    close_host(&h);
+    unlink(path);
+    /* a PATH that does not exist holds nothing, and is not made */
+    host_fault = spec;
+    up = open_numbered(&h);
+    host_fault = NULL;
+    T_TRUE(up);
+    if (up) {
+        T_TRUE(ask(&h, 1, "G1 X10 Y10 E0.5", "ok", 2000));
+        T_TRUE(access(path, F_OK) != 0);
+        close_host(&h);
+    }
 }

@@ -3,7 +3,8 @@
  * sim_netprinter streams an uploaded file to its simulated Marlin so that
  * the executed log holds the file's commands once each, in order; pause,
  * resume and cancel (the cancel script after the prefix), busy refusals,
- * file name checks, a printer fault.  sim_http serves routes on the loop
+ * file name checks, a printer fault, a job held by its firmware's hold
+ * fault (printing, standing) until released.  sim_http serves routes on the loop
  * to our own HTTP client (httpc): JSON, a multipart upload kept byte for
  * byte, a wrong key, the 5xx, slow and drop-upload faults.
  */
@@ -122,6 +123,83 @@ T_CASE(job_runs_every_line_once_in_order)
     T_EQ_STR(st.file, "a.gcode");
     sim_netprinter_free(np);
 
+    struct buf got;
+    read_log(log, &got);
+    struct buf want;
+    buf_init(&want, 0);
+    buf_printf(&want, "M104 S200\nM140 S60\nG28\nG90\nM82\nG92 E0\n");
+    for (int i = 0; i < 200; i++)
+        buf_printf(&want, "G1 X%d.5 Y%d E%d.1 F3000\n", 10 + i % 50, 20 + i % 40, i);
+    buf_printf(&want, "M104 S0\nM140 S0\nM84\n");
+    T_EQ_STR(got.data, want.data);
+    buf_release(&got);
+    buf_release(&want);
+    loop_free(l);
+}
+
+/* The whole of file path ("" when it cannot be read), in a static buffer. */
+static const char *
+slurp(const char *path)
+{
+    static char b[512];
+    b[0] = '\0';
+    FILE *f = fopen(path, "r");
+    if (f) {
+        size_t n = fread(b, 1, sizeof(b) - 1, f);
+        b[n] = '\0';
+        fclose(f);
+    }
+    return b;
+}
+
+/*
+ * A network printer's firmware with the hold fault (faults.h hold=PATH):
+ * while PATH exists the job stands at its first printing move, printing,
+ * lines_done standing (the firmware's busy keeps its host patient); once
+ * PATH is removed it runs to its end, every line once, in order.
+ */
+T_CASE(hold_fault_holds_a_job_until_released)
+{
+    struct sf_err err;
+    struct loop *l = loop_new(&err);
+    char log[512], hold[512], spec[600];
+    snprintf(log, sizeof(log), "%s/hold.log", t_tmpdir());
+    snprintf(hold, sizeof(hold), "%s/hold", t_tmpdir());
+    snprintf(spec, sizeof(spec), "hold=%s", hold);
+    FILE *f = fopen(hold, "w");
+    T_TRUE(f != NULL);
+    if (f)
+        fclose(f);
+    struct sim_netprinter_config c;
+    sim_netprinter_config_init(&c);
+    c.speed = 1000;
+    c.log_path = log;
+    T_OK(faults_parse(&c.faults, spec, &err), &err);
+    struct sim_netprinter *np = sim_netprinter_new(l, &c, &err);
+    T_TRUE(np != NULL);
+    if (!np)
+        return;
+    write_job(np, "h.gcode", 200);
+    T_OK(sim_netprinter_start(np, "h.gcode", &err), &err);
+    double end = wall_s() + 60;
+    while (!slurp(hold)[0] && wall_s() < end)
+        loop_run_once(l, 20);
+    T_EQ_STR(slurp(hold), "held: G1 X10.5 Y20 E0.1 F3000\n");
+    struct sim_np_status st;
+    sim_netprinter_status(np, &st);
+    uint64_t done = st.lines_done;
+    T_TRUE(done >= 6 && done < 10);
+    end = wall_s() + 3;
+    while (wall_s() < end)
+        loop_run_once(l, 20);
+    sim_netprinter_status(np, &st);
+    T_EQ_INT(st.state, SIM_NP_PRINTING);
+    T_EQ_INT(st.lines_done, done);
+    unlink(hold);
+    T_TRUE(wait_state(l, np, SIM_NP_COMPLETE));
+    sim_netprinter_status(np, &st);
+    T_EQ_INT(st.lines_done, 209);
+    sim_netprinter_free(np);
     struct buf got;
     read_log(log, &got);
     struct buf want;

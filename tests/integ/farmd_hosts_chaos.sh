@@ -1,14 +1,23 @@
 #!/usr/bin/env bash
-# tests/accept/farmd_hosts_chaos.sh - issue 32's acceptance run: three
+# tests/integ/farmd_hosts_chaos.sh - issue 32's acceptance run: three
 # slimfarmd hosts on one PostgreSQL (lib/pg.sh, with a loopback port), twelve
 # simulated printers, four a host (two Marlins, a Moonraker, a PrusaLink),
 # forty jobs submitted through the three APIs, and while they print:
-#   1. kill -9 of host c while a Marlin of its prints, then its restart;
+#   1. kill -9 of host c while both its Marlins print, then its restart;
 #   2. host b, whose store URL goes through a loopback proxy
 #      (tests/tools/tcpproxy), cut off from the database while a Marlin and
 #      a network printer of its print (the proxy drops every connection and
-#      refuses new ones) until another host reaped it, then reconnected;
-#   3. PostgreSQL stopped (pg_ctl stop -m fast) for 30 s, then started again.
+#      refuses new ones) until another host reaped it; b's network prints
+#      then run to their end while it is still cut off; then reconnected;
+#   3. PostgreSQL stopped (pg_ctl stop -m fast) for 30 s while at least
+#      eight printers print, then started again.
+# Each fault is placed while the prints it needs are provably under way,
+# whatever this machine's pace: every simulator runs with the hold fault
+# (slimfarm-sim --fault hold=$tmp/NAME.hold, sim/marlin/faults.h): while that
+# file exists the printer holds at its next printing move, a slow printer to
+# its host, and writes "held: ..." into the file.  The run arms the printers
+# an event needs (creates their files), waits until they hold prints,
+# places the fault, and releases them (removes the files).
 # Leases: a's (60 s) outlives the outage, b's and c's (6 s) do not, so b and
 # c may be reaped at the outage too (by whichever host is back first).
 # Afterwards: the jobs table holds the forty jobs, each once; no job ran to
@@ -21,17 +30,14 @@
 # joined again; one that ran to its end while its host was cut off and
 # reaped must end done, not interrupted (an operator would print it again).
 # No timing asserts: every wait polls with a generous bound; the outage's
-# 30 s is the scenario.  About 75 s (a Marlin's print lasts a few seconds at
-# --speed 60, CHAOS_SPEED).  Not in make check: each fault must find prints
-# under way on the host it hits, which depends on how fast this machine
-# prints (it stops with "no print on b's ..." when the queue ran dry first);
-# `make check-chaos` runs it.  Env: BUILD.
+# 30 s is the scenario.  100-140 s at load 20-40 on 2 cores (a Marlin's print
+# lasts a few seconds at --speed 60, CHAOS_SPEED).  Env: BUILD.
 set -u
 BUILD=${BUILD:-build/san}
-. "$(dirname "$0")/../integ/lib/farm.sh"
-. "$(dirname "$0")/../integ/lib/netprint.sh"
-. "$(dirname "$0")/../integ/lib/pg.sh"
-. "$(dirname "$0")/../integ/lib/hosts.sh"
+. "$(dirname "$0")/lib/farm.sh"
+. "$(dirname "$0")/lib/netprint.sh"
+. "$(dirname "$0")/lib/pg.sh"
+. "$(dirname "$0")/lib/hosts.sh"
 t0=$(date +%s)
 declare -A lease
 chaos_cleanup() {
@@ -78,15 +84,24 @@ host_ini() {
 }
 joins() { grep -c "$1 joined (token" "$tmp/$1.log"; }
 
-# A print lasts seconds (a few thousand lines), so the events find prints under way
+# A print lasts seconds (a few thousand lines): the farm prints through each event once
+# its held prints go on
 SPEED=${CHAOS_SPEED:-60}
+hold() { echo "--fault hold=$tmp/$1.hold"; }
 for h in a b c; do
-  start_sim "${h}_mk1" --speed "$SPEED"
-  start_sim "${h}_mk2" --speed "$SPEED"
-  start_net "${h}_mr" moonraker --speed "$SPEED" --api-key "$h-key"
-  start_net "${h}_pl" prusalink --speed "$SPEED" --api-key "$h-key"
+  start_sim "${h}_mk1" --speed "$SPEED" $(hold "${h}_mk1")
+  start_sim "${h}_mk2" --speed "$SPEED" $(hold "${h}_mk2")
+  start_net "${h}_mr" moonraker --speed "$SPEED" --api-key "$h-key" $(hold "${h}_mr")
+  start_net "${h}_pl" prusalink --speed "$SPEED" --api-key "$h-key" $(hold "${h}_pl")
   PRINTERS="$PRINTERS ${h}_mk1 ${h}_mk2 ${h}_mr ${h}_pl"
 done
+# arm PRINTER...: each holds at its next printing move; release PRINTER...: they go on;
+# held PRINTER: it holds a print now (armed, and it reached a printing move)
+arm() { for p in "$@"; do : > "$tmp/$p.hold"; done; }
+release() { for p in "$@"; do rm -f "$tmp/$p.hold"; done; }
+held() { [ -s "$tmp/$1.hold" ]; }
+# held_list: the printers holding a print now
+held_list() { for p in $PRINTERS; do held "$p" && echo "$p"; done | paste -sd' '; }
 host_ini a "$URL" 60
 host_ini b "$(pg_tcp_url postgres "$px_port")" 6
 host_ini c "$URL" 6
@@ -115,6 +130,16 @@ submit_batch() {
   note "$k jobs submitted"
 }
 
+# submit_to PRINTER: one job pinned to PRINTER, through its host's API
+submit_to() {
+  local id
+  id=$(SLIMFARM_URL=${hurl[${1%%_*}]} submit "$tmp/t$((8 + k % 5)).stl" --material PLA --method none --printer "$1")
+  [ -n "$id" ] || fail "submit $k to $1"
+  jobs="$jobs $id"
+  k=$((k + 1))
+}
+jobs_now() { psql_q 'SELECT id, state, printer FROM jobs ORDER BY id' | paste -sd' '; }
+
 # usb_printing HOST: a job printing on one of HOST's Marlins (its id into $usb)
 usb=
 usb_printing() {
@@ -133,13 +158,25 @@ inflight() {
 reaped_hosts() { cat "$tmp"/[abc].log | grep -c "reaped [0-9]* hosts"; }
 errs=() # what fails after the run, each said in full before the test fails
 
-# ---- 1. kill -9 of host c mid-print, then its restart ----
-submit_batch 14
-wait_for 120 usb_printing c || fail "no print on c's Marlins: $(psql_q 'SELECT id, state, printer FROM jobs ORDER BY id')"
+# ---- 1. kill -9 of host c while both its Marlins print, then its restart ----
+# A job pinned to each of c's Marlins first, held there, then twelve for any printer (held
+# too: no printer runs ahead).  c's Marlins take no other job: a job that waited for one
+# of them would wait on its interrupted print for good.
+arm $PRINTERS
+submit_to c_mk1
+submit_to c_mk2
+c_held() { held c_mk1 && held c_mk2 && [ "$(inflight c | grep -o '@c_mk' | wc -l)" = 2 ]; }
+wait_for 300 c_held || fail "c's Marlins do not hold prints (held: $(held_list)): $(jobs_now)"
+submit_batch 12
+# (whichever hosts took them: at least two more printers hold prints)
+n_held() { held_list | wc -w; }
+c_mid_run() { [ "$(n_held)" -ge 4 ]; }
+wait_for 300 c_mid_run || fail "no other printer holds a print (held: $(held_list)): $(jobs_now)"
 c_jobs=$(inflight c)
 kill -9 "${hpid[c]}"
 wait "${hpid[c]}" 2> /dev/null
 unset 'hpid[c]'
+release $PRINTERS
 note "killed c, printing $c_jobs"
 c_joins=$(joins c)
 start_host c
@@ -148,33 +185,54 @@ wait_for 90 c_back || fail "c did not join again: $(tail -5 "$tmp/c.log")"
 note "c joined again"
 
 # ---- 2. b cut off from the database while printing, until reaped; then reconnected ----
+arm b_mk1 b_mk2 b_mr b_pl
 submit_batch 13 b
-# a Marlin's print and a network printer's under way on b
-b_both() { usb_printing b && net_printing b; }
-wait_for 120 b_both || fail "no print on b's Marlins and network printers: $(psql_q 'SELECT id, state, printer FROM jobs ORDER BY id')"
+# a Marlin's print and a network printer's held under way on b
+b_both() { { held b_mk1 || held b_mk2; } && { held b_mr || held b_pl; } && usb_printing b && net_printing b; }
+wait_for 300 b_both || fail "b's Marlins and network printers do not hold prints (held: $(held_list)): $(jobs_now)"
+b_net=$(for p in b_mr b_pl; do held "$p" && echo "$p"; done | paste -sd' ')
 b_joins=$(joins b)
 b_jobs=$(inflight b)
 proxy drop || fail "proxy drop"
 note "b cut off from the database, printing $b_jobs"
 b_reaped() { [ "$(psql_q "SELECT reaped_ms > 0 FROM hosts WHERE name = 'b'")" = t ]; }
 wait_for 90 b_reaped || fail "b was never reaped while cut off: $(psql_q 'SELECT * FROM hosts')"
+note "b reaped"
+# b's held prints go on, cut off and reaped: its network ones run to their end so
+release b_mk1 b_mk2 b_mr b_pl
+# net_idle PRINTER: the simulator's own API says it prints nothing
+net_idle() {
+  local u st
+  u=$(cat "$tmp/$1.addr")
+  case $1 in
+    *_mr) st=$(curl -sf -H "X-Api-Key: ${1%%_*}-key" "$u/printer/objects/query?print_stats" |
+      json 'd["result"]["status"]["print_stats"]["state"]') ;;
+    *_pl) st=$(curl -sf -H "X-Api-Key: ${1%%_*}-key" "$u/api/v1/status" | json 'd["printer"]["state"]') ;;
+  esac
+  [ -n "$st" ] && ! [[ $st =~ ^(printing|paused|PRINTING|PAUSED|BUSY|ATTENTION)$ ]]
+}
+b_net_done() { for p in $b_net; do net_idle "$p" || return 1; done; }
+wait_for 300 b_net_done || fail "b's network prints did not end while it was cut off ($b_net)"
 proxy heal || fail "proxy heal"
-note "b reaped; reconnected"
+note "b's network prints ended ($b_net); b reconnected"
 b_back() { [ "$(joins b)" -gt "$b_joins" ]; }
 wait_for 90 b_back || fail "b did not join again: $(tail -5 "$tmp/b.log")"
 note "b joined again"
 
 # ---- 3. PostgreSQL away for 30 s while the farm prints ----
-submit_batch 13
-# most printers busy (or nothing left waiting)
-under_way() {
-  [ "$(psql_q "SELECT count(*) FROM jobs WHERE state = 'printing'")" -ge 8 ] ||
-    [ "$(psql_q "SELECT count(*) FROM jobs WHERE state IN ('queued', 'preparing', 'ready')")" = 0 ]
-}
-wait_for 120 under_way || fail "not printing before the outage: $(psql_q 'SELECT id, state, printer FROM jobs ORDER BY id')"
+# a job pinned to each printer that can print (not c's Marlins: their prints were
+# interrupted with c), three for any: at least eight hold prints, whichever host prepared
+# the others (a host takes all the queued jobs its printers may print, busy or not)
+arm $PRINTERS
+for p in a_mk1 a_mk2 a_mr a_pl b_mk1 b_mk2 b_mr b_pl c_mr c_pl; do submit_to "$p"; done
+submit_batch 3
+under_way() { [ "$(n_held)" -ge 8 ]; }
+wait_for 300 under_way || fail "not printing before the outage (held: $(held_list)): $(jobs_now)"
+held_out=$(held_list)
 out_jobs="$(inflight a) $(inflight b) $(inflight c)"
-note "PostgreSQL stops, printing $out_jobs"
+note "PostgreSQL stops, printing $out_jobs; held: $held_out"
 pg_ctl_as stop -m fast > /dev/null || fail "pg_ctl stop"
+release $PRINTERS # the held prints go on (and end) while the database is away
 sleep 30 # the scenario: the database away for 30 s
 pg_ctl_as start > /dev/null || fail "pg_ctl start"
 note "PostgreSQL back"
