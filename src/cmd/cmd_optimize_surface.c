@@ -36,7 +36,7 @@ report_json(const char *in, const char *out, const struct surfopt_params *p,
 {
     json_t *o = json_pack(
         "{s:s, s:s, s:s, s:f, s:o, s:o, s:o, s:o, s:{s:f, s:f, s:f, s:f}, s:b, s:i, s:i, s:i, "
-        "s:{s:i, s:i}, s:{s:f, s:f, s:f, s:f, s:f, s:f}, s:{s:f, s:f}}",
+        "s:{s:i, s:i}, s:{s:f, s:f, s:f, s:f, s:f, s:f, s:f, s:f}, s:{s:f, s:f}}",
         "file", in, "output", out, "method", "surface", "angle_deg", p->angle_deg, "input",
         cmd_metrics_json(&r->input), "oriented", cmd_metrics_json(&r->oriented), "after",
         cmd_metrics_json(&r->after), "risky_per_iteration", cmd_curve_json(r->curve, r->n_curve),
@@ -46,7 +46,8 @@ report_json(const char *in, const char *out, const struct surfopt_params *p,
         "self_intersections", "input", (json_int_t)r->selfx_input, "output",
         (json_int_t)r->selfx_out, "seconds", "saliency", r->saliency_s, "orient", r->orient_s,
         "factor", r->factor_s, "iterate", r->iterate_s, "check", r->check_s, "total", r->total_s,
-        "model_support_g", "oriented", r->model_oriented_g, "after", r->model_after_g);
+        "self_intersection", r->selfx_s, "support_model", r->model_s, "model_support_g", "oriented",
+        r->model_oriented_g, "after", r->model_after_g);
     if (o && r->unchanged_why)
         json_object_set_new(o, "unchanged_why", json_string(r->unchanged_why));
     if (o && search)
@@ -60,9 +61,10 @@ static void
 report_text(const char *in, const char *out, const struct surfopt_result *r)
 {
     printf("%s -> %s: surface optimization, %d round%s, %d iterations, %.2f s (saliency %.2f, "
-           "orientation %.2f, factor %.2f, iterations %.2f, checks %.2f)\n",
+           "orientation %.2f, factor %.2f, iterations %.2f, checks %.2f; self-intersection "
+           "%.2f, support model %.2f)\n",
            in, out, r->n_rounds, r->n_rounds == 1 ? "" : "s", r->n_iters, r->total_s, r->saliency_s,
-           r->orient_s, r->factor_s, r->iterate_s, r->check_s);
+           r->orient_s, r->factor_s, r->iterate_s, r->check_s, r->selfx_s, r->model_s);
     cmd_print_metrics("as given", &r->input);
     cmd_print_metrics("oriented", &r->oriented);
     cmd_print_metrics("after", &r->after);
@@ -164,12 +166,33 @@ search_json(const struct dirsearch_result *ds)
                                               ds->model_g[i], "print_s", ds->print_s[i],
                                               "shape_changed", ds->shape_changed[i]));
     }
-    return json_pack("{s:o, s:b, s:{s:f, s:f}, s:{s:f, s:f}, s:{s:f, s:f, s:f, s:o, s:f}}",
+    const struct dirsearch_stages *st = &ds->stages;
+    json_t *stages =
+        json_pack("{s:f, s:f, s:f, s:f, s:f, s:f, s:f}", "orientation", st->orient_s, "saliency",
+                  st->saliency_s, "surface", st->surface_s, "self_intersection", st->selfx_s,
+                  "support_model", st->model_s, "print_time", st->print_s, "other", st->other_s);
+    return json_pack("{s:o, s:b, s:{s:f, s:f}, s:{s:f, s:f}, s:{s:f, s:f, s:f, s:o, s:f, s:o}}",
                      "directions", dirs, "kept_input", ds->kept_input, "input", "model_support_g",
                      ds->input_cost.support_g, "print_s", ds->input_cost.print_s, "result",
                      "model_support_g", ds->cost.support_g, "print_s", ds->cost.print_s, "seconds",
                      "total", ds->seconds, "orient", ds->orient_s, "input", ds->input_s, "shape",
-                     shape, "check", ds->check_s);
+                     shape, "check", ds->check_s, "stages", stages);
+}
+
+/* The direction search's lines of the text report. */
+static void
+print_search(const struct dirsearch_result *ds, const struct surfopt_result *r)
+{
+    const struct dirsearch_stages *st = &ds->stages;
+    printf("direction search: %d directions reshaped, model grams as given %.2f, best %.2f, "
+           "estimated print time %.0f -> %.0f s%s\n",
+           ds->n_tried, ds->model_input_g, r->model_after_g, ds->input_cost.print_s,
+           ds->cost.print_s, ds->kept_input ? " (input kept)" : "");
+    printf("  %.2f s; by stage, summed over the directions: orientation %.2f, saliency %.2f, "
+           "surface steps %.2f, self-intersection %.2f, support model %.2f, print time %.2f, "
+           "other %.2f\n",
+           ds->seconds, st->orient_s, st->saliency_s, st->surface_s, st->selfx_s, st->model_s,
+           st->print_s, st->other_s);
 }
 
 int
@@ -209,10 +232,7 @@ cmd_optimize_surface(int argc, char **argv)
             if (json)
                 sj = search_json(&ds);
             else
-                printf("direction search: %d directions reshaped, model grams as given %.2f, "
-                       "best %.2f, estimated print time %.0f -> %.0f s%s\n",
-                       ds.n_tried, ds.model_input_g, r.model_after_g, ds.input_cost.print_s,
-                       ds.cost.print_s, ds.kept_input ? " (input kept)" : "");
+                print_search(&ds, &r);
         }
     } else {
         rc = surfopt_optimize(&m, &p, &r, &err);

@@ -36,16 +36,21 @@ dirsearch_result_release(struct dirsearch_result *res)
    support) in *c, the support's own seconds in *support_s. */
 static int
 input_cost(const struct mesh *m, const struct dirsearch_params *p, struct printtime_cost *c,
-           double *support_s, struct sf_err *err)
+           double *support_s, struct dirsearch_stages *st, struct sf_err *err)
 {
     struct supmodel_params mp;
     supmodel_params_steer(&mp, p->sp.angle_deg);
     struct supmodel_result mr;
+    double t0 = clock_mono_s();
     int rc = supmodel_of_mesh(m, v3(0, 0, 1), &mp, &mr, err);
+    double t1 = clock_mono_s();
+    st->model_s += t1 - t0;
     if (rc < 0)
         return rc;
     struct printtime_result pr;
-    if ((rc = printtime_eval(m, v3(0, 0, 1), &p->pt, &pr, err)) < 0)
+    rc = printtime_eval(m, v3(0, 0, 1), &p->pt, &pr, err);
+    st->print_s += clock_mono_s() - t1;
+    if (rc < 0)
         return rc;
     c->support_g = mr.grams;
     c->print_s = printtime_total_s(&p->pt, &pr, mr.time_s);
@@ -97,7 +102,8 @@ struct shapes {
     struct surfopt_result r[DIRSEARCH_K_MAX];
     struct printtime_cost c[DIRSEARCH_K_MAX];
     double seconds[DIRSEARCH_K_MAX];
-    bool done[DIRSEARCH_K_MAX]; /* r[i] holds a result to release */
+    double print_s[DIRSEARCH_K_MAX]; /* of seconds: the print-time estimate */
+    bool done[DIRSEARCH_K_MAX];      /* r[i] holds a result to release */
     struct sf_err err[DIRSEARCH_K_MAX];
 };
 
@@ -112,9 +118,11 @@ shape_task(void *ud, uint32_t begin, uint32_t end, int worker)
         if (rc < 0)
             return rc;
         s->done[i] = true;
+        double t1 = clock_mono_s();
         if ((rc = result_cost(&s->r[i], s->p, &s->c[i], &s->err[i])) < 0)
             return rc;
         s->seconds[i] = clock_mono_s() - t0;
+        s->print_s[i] = clock_mono_s() - t1;
     }
     return SF_OK;
 }
@@ -142,6 +150,22 @@ shape_all(const struct mesh *m, const struct dirsearch_params *p, const struct s
         if (s->done[i])
             surfopt_result_release(&s->r[i]);
     return rc;
+}
+
+/* Add direction i's stages to st (the search's own are there already). */
+static void
+stages_add(struct dirsearch_stages *st, const struct shapes *s, int i)
+{
+    const struct surfopt_result *r = &s->r[i];
+    double known = r->orient_s + r->saliency_s + r->factor_s + r->iterate_s + r->selfx_s +
+                   r->model_s + s->print_s[i];
+    st->orient_s += r->orient_s;
+    st->saliency_s += r->saliency_s;
+    st->surface_s += r->factor_s + r->iterate_s;
+    st->selfx_s += r->selfx_s;
+    st->model_s += r->model_s;
+    st->print_s += s->print_s[i];
+    st->other_s += fmax(0, s->seconds[i] - known);
 }
 
 /* May c replace the input: no more support, no slower unless asked. */
@@ -205,8 +229,9 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
     if ((rc = orient_find(m, &op, &found, err)) < 0)
         return rc;
     res->orient_s = (t1 = clock_mono_s()) - t0;
+    res->stages.orient_s = res->orient_s;
     double in_support_s;
-    if ((rc = input_cost(m, p, &res->input_cost, &in_support_s, err)) < 0)
+    if ((rc = input_cost(m, p, &res->input_cost, &in_support_s, &res->stages, err)) < 0)
         return rc;
     res->model_input_g = res->input_cost.support_g;
     res->input_s = clock_mono_s() - t1;
@@ -231,6 +256,7 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
         res->print_s[i] = sh->c[i].print_s;
         res->shape_changed[i] = sh->r[i].shape_changed;
         res->shape_s[i] = sh->seconds[i];
+        stages_add(&res->stages, sh, i);
     }
     bool best_ok;
     int best = dirsearch_pick(&p->policy, &res->input_cost, sh->c, res->shape_changed, res->n_tried,
@@ -250,6 +276,7 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
         return rc;
     }
     res->check_s = clock_mono_s() - t1;
+    res->stages.model_s += res->check_s;
     if (!gain || rises) {
         /* not worth it: the input as given, resting on z = 0 */
         surfopt_result_release(&res->best);

@@ -39,6 +39,20 @@ struct dirsearch_params {
 
 void dirsearch_params_default(struct dirsearch_params *p);
 
+/*
+ * Where a search's time went, by what ran (issue 36), in wall seconds
+ * summed over the directions, which run on two threads at once (so the
+ * sum is up to twice the search's own wall time): the orientation
+ * candidates (the search's orient_find and each direction's orientation
+ * step), the saliency, the surface steps (factorizing and iterating), the
+ * self-intersection checks, the support model's evaluations and the
+ * print-time estimates; other_s is the rest (loading copies, the ray
+ * metrics, choosing).
+ */
+struct dirsearch_stages {
+    double orient_s, saliency_s, surface_s, selfx_s, model_s, print_s, other_s;
+};
+
 struct dirsearch_result {
     struct surfopt_result best;       /* the winner (best.out on z = 0); the input when kept */
     struct vec3 up;                   /* its up-direction in the input frame */
@@ -54,6 +68,7 @@ struct dirsearch_result {
     /* wall seconds: in all, the orientation search, the input's model and
        time, each direction's shape step and cost, the peers' check */
     double seconds, orient_s, input_s, shape_s[DIRSEARCH_K_MAX], check_s;
+    struct dirsearch_stages stages;
 };
 
 /*

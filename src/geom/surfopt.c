@@ -584,6 +584,22 @@ pace_step(struct pace *pc, bool improved, double proxy, int patience, bool *craw
     }
 }
 
+/* check: selfx_ref_count of cur (marks in fold), timed into res->selfx_s
+   and moving *t0 on by as much; else 0. */
+static int
+new_folds(struct selfx_ref *sxr, const struct mesh *cur, bool check, uint8_t *fold,
+          struct surfopt_result *res, double *t0, struct sf_err *err)
+{
+    if (!check)
+        return 0;
+    double t = clock_mono_s();
+    int folds = selfx_ref_count(sxr, cur, fold, err);
+    t = clock_mono_s() - t;
+    res->selfx_s += t;
+    *t0 += t;
+    return folds;
+}
+
 /* One geometry round in the current frame.  cur ends as the round's best. */
 static int
 geometry_round(struct mesh *cur, const struct mesh *ref, struct selfx_ref *sxr, const double *sal,
@@ -629,10 +645,10 @@ geometry_round(struct mesh *cur, const struct mesh *ref, struct selfx_ref *sxr, 
         measure_deviation(ref, cur, &dev, NULL);
         note_iterate(p, round, it, &sm, &dev, res);
         bool improved = sm.proxy_mm3 < pc.best_proxy * (1 - 1e-6);
-        /* new self-intersections, checked only where the shape would be kept */
-        int folds = improved && dev.mndr <= p->max_mndr && dev.andr <= p->max_andr
-                        ? selfx_ref_count(sxr, cur, rb.fold, err)
-                        : 0;
+        /* new self-intersections, checked only where the shape would be kept
+           (iterate_s leaves their seconds to selfx_s) */
+        bool check = improved && dev.mndr <= p->max_mndr && dev.andr <= p->max_andr;
+        int folds = new_folds(sxr, cur, check, rb.fold, res, &t0, err);
         if ((rc = folds) < 0)
             goto out;
         res->n_folded += folds > 0;
@@ -693,8 +709,10 @@ geometry_round(struct mesh *cur, const struct mesh *ref, struct selfx_ref *sxr, 
             beta /= 4;
             anchor /= 4;
             memcpy(cur->v, rb.best, (size_t)n * sizeof(*rb.best));
+            double factor_s = res->factor_s;
             if ((rc = refactor(&s, cur, ref, p, beta, anchor, res, err)) < 0)
                 goto out;
+            t0 += res->factor_s - factor_s; /* in factor_s, not iterate_s */
             pc.since_best = 0;
             pc.stall_ref = pc.best_proxy;
         }
@@ -763,7 +781,7 @@ struct prep {
     struct selfx_ref *sxr;
     struct support_metrics input, oriented_m;
     double model_g, model_s; /* the model of the oriented part: grams, seconds */
-    double saliency_s, orient_s;
+    double saliency_s, orient_s, selfx_s, model_eval_s; /* wall seconds of each */
 };
 
 static void
@@ -800,8 +818,10 @@ prep_make(const struct mesh *m, const struct surfopt_params *p, struct prep *pr,
     pr->saliency_s = clock_mono_s() - t0;
     /* the input's crossings, noted once: the orientation steps move ref
        rigidly, which keeps its shells, crossings and distances */
+    t0 = clock_mono_s();
     if (!(pr->sxr = selfx_ref_new(&pr->ref, SELFX_TOUCH * mesh_diag(&pr->ref), err)))
         return err->code;
+    pr->selfx_s = clock_mono_s() - t0;
     t0 = clock_mono_s();
     if ((rc = orientation_step(&pr->oriented, &pr->ref, NULL, 0, p, p->orient && !p->keep_start_up,
                                err)) < 0)
@@ -812,8 +832,10 @@ prep_make(const struct mesh *m, const struct surfopt_params *p, struct prep *pr,
     struct supmodel_params mp;
     supmodel_params_steer(&mp, p->angle_deg);
     struct supmodel_result mr;
+    t0 = clock_mono_s();
     if ((rc = supmodel_of_mesh(&pr->oriented, v3(0, 0, 1), &mp, &mr, err)) < 0)
         return rc;
+    pr->model_eval_s = clock_mono_s() - t0;
     pr->model_g = mr.grams;
     pr->model_s = mr.time_s;
     return SF_OK;
@@ -834,6 +856,8 @@ optimize_once(const struct mesh *m, const struct surfopt_params *p, const struct
     res->model_oriented_g = pr->model_g;
     res->saliency_s = pr->saliency_s;
     res->orient_s = pr->orient_s;
+    res->selfx_s = pr->selfx_s;
+    res->model_s = pr->model_eval_s;
     struct mesh cur, ref;
     mesh_init(&cur);
     mesh_init(&ref);
@@ -902,6 +926,18 @@ out:
     return rc;
 }
 
+/* Add the seconds of run b, beyond what both runs share from pr, to a's. */
+static void
+seconds_add(struct surfopt_result *a, const struct surfopt_result *b, const struct prep *pr)
+{
+    a->factor_s += b->factor_s;
+    a->iterate_s += b->iterate_s;
+    a->check_s += b->check_s;
+    a->orient_s += b->orient_s - pr->orient_s;
+    a->selfx_s += b->selfx_s - pr->selfx_s;
+    a->model_s += b->model_s - pr->model_eval_s;
+}
+
 int
 surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct surfopt_result *res,
                  struct sf_err *err)
@@ -929,11 +965,12 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
         goto out;
     }
     if (alt.model_after_g < res->model_after_g) {
-        surfopt_result_release(res);
+        struct surfopt_result t = *res;
         *res = alt;
-    } else {
-        surfopt_result_release(&alt);
+        alt = t;
     }
+    seconds_add(res, &alt, &pr);
+    surfopt_result_release(&alt);
 out:
     res->total_s = clock_mono_s() - t0;
     prep_release(&pr);

@@ -150,7 +150,13 @@ struct surfopt_result {
     double model_oriented_g, model_after_g;
     double model_after_s;      /* the model's seconds of support for out (supmodel_result.time_s) */
     const char *unchanged_why; /* shape kept: why, in words (static); NULL when changed */
+    /* wall seconds: the saliency, factorizing, the iterations (their
+       self-intersection checks aside), the orientation steps, choosing among
+       the kept shapes, in all; and by what they ran, wherever it ran: the
+       self-intersection checks and the support model's evaluations.  When
+       the freezing run is made too, they count both runs. */
     double saliency_s, factor_s, iterate_s, orient_s, check_s, total_s;
+    double selfx_s, model_s;
 };
 
 /*

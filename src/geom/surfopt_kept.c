@@ -4,6 +4,7 @@
  */
 #include <string.h>
 
+#include "../base/clock.h"
 #include "supmodel.h"
 #include "surfopt_int.h"
 
@@ -45,20 +46,25 @@ surfopt_choose_kept(const struct mesh *m, struct mesh *cur, double oriented_s,
         memcpy(cur->v, keep[k].v, (size_t)n * sizeof(struct vec3));
         /* a check of the same positions says the same: only the iterates an
            orientation step moved since (float casts) are checked again */
-        if ((rc = keep[k].checked ? 0 : selfx_ref_count(sxr, cur, NULL, err)) < 0)
+        double t0 = clock_mono_s();
+        rc = keep[k].checked ? 0 : selfx_ref_count(sxr, cur, NULL, err);
+        res->selfx_s += clock_mono_s() - t0;
+        if (rc < 0)
             return rc;
         if (rc > 0) {
             res->n_rejected++;
             n_selfx++;
             continue;
         }
-        if ((rc = supmodel_of_mesh(cur, v3(0, 0, 1), &mp, &mr, err)) < 0)
-            return rc;
+        t0 = clock_mono_s();
+        rc = supmodel_of_mesh(cur, v3(0, 0, 1), &mp, &mr, err);
         /* nor may it cost the part as given more in a slicer that drops what
            open rims leave open (supmodel_peers_rise; closed parts: no) */
         bool rises = false;
-        if (mr.grams < best_g &&
-            (rc = supmodel_peers_rise(m, cur, p->angle_deg, &rises, NULL, err)) < 0)
+        if (rc >= 0 && mr.grams < best_g)
+            rc = supmodel_peers_rise(m, cur, p->angle_deg, &rises, NULL, err);
+        res->model_s += clock_mono_s() - t0;
+        if (rc < 0)
             return rc;
         if (mr.grams < best_g && !rises) {
             best_g = mr.grams;
@@ -75,7 +81,10 @@ surfopt_choose_kept(const struct mesh *m, struct mesh *cur, double oriented_s,
         best_k = -1;
     if (best_k >= 0) {
         memcpy(cur->v, keep[best_k].v, (size_t)n * sizeof(struct vec3));
-        if ((rc = selfx_count(cur, err)) < 0)
+        double t0 = clock_mono_s();
+        rc = selfx_count(cur, err);
+        res->selfx_s += clock_mono_s() - t0;
+        if (rc < 0)
             return rc;
         res->selfx_out = rc;
         if ((rc = surfopt_ray_metrics(cur, p->angle_deg, sm, err)) < 0)

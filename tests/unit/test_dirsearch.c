@@ -64,6 +64,17 @@ T_CASE(dirsearch_does_not_stand_a_long_bar_up_to_save_a_little_support)
     for (int i = 0; i < r.n_tried; i++)
         T_TRUE(r.print_s[i] > 0);
     T_TRUE(r.seconds >= r.orient_s + r.input_s);
+    /* the stages (issue 36) each ran, and account for the search's parts:
+       the orientation search, the input's cost, each direction, the check */
+    const struct dirsearch_stages *st = &r.stages;
+    T_TRUE(st->orient_s >= r.orient_s && st->saliency_s > 0 && st->surface_s > 0);
+    T_TRUE(st->selfx_s > 0 && st->model_s > 0 && st->print_s > 0 && st->other_s >= 0);
+    double parts = r.orient_s + r.input_s + r.check_s,
+           sum = st->orient_s + st->saliency_s + st->surface_s + st->selfx_s + st->model_s +
+                 st->print_s + st->other_s;
+    for (int i = 0; i < r.n_tried; i++)
+        parts += r.shape_s[i];
+    T_EQ_DBL(sum, parts, 1e-3 * parts + 1e-4);
     dirsearch_result_release(&r);
 }
 

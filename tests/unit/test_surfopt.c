@@ -111,6 +111,10 @@ T_CASE(mushroom_upright_loses_support_within_limits)
     T_TRUE(r.dev.mndr <= p.max_mndr && r.dev.andr <= p.max_andr && r.dev.max_mm > 0);
     T_TRUE(r.selfx_out <= r.selfx_input);
     T_EQ_INT(r.curve[0], r.oriented.n_risky);
+    /* the seconds by stage (issue 36): the checks and the model ran, and
+       the stages fit in the whole */
+    T_TRUE(r.selfx_s > 0 && r.model_s > 0 && r.iterate_s > 0 && r.factor_s > 0);
+    T_TRUE(r.saliency_s + r.orient_s + r.factor_s + r.iterate_s + r.selfx_s <= r.total_s);
     /* the figures describe the returned mesh */
     T_EQ_DBL(support_volume(&r.out), r.after.volume_mm3, 1e-6);
     /* it rests on the bed, and the vertices on the bed kept their places
