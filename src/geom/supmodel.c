@@ -256,7 +256,7 @@ snap_columns(const struct ray_grid *g, const struct solids *cs, const struct con
              struct sf_err *err)
 {
     struct supmodel_snap sg = supmodel_snap_of(g, bs);
-    struct frun *r = mem_array(n ? n : 1, sizeof(*r));
+    struct frun *r = mem_array(n ? 4 * n : 1, sizeof(*r));
     struct reach_ctx rx = { .g = g, .cs = cs, .h = layer_mm };
     rx.queue = mem_array((size_t)bs * bs, sizeof(uint32_t));
     size_t reach_cap = 0;
@@ -265,9 +265,14 @@ snap_columns(const struct ray_grid *g, const struct solids *cs, const struct con
         free(rx.queue);
         return sf_err_set(err, SF_ENOMEM, "support model: out of memory (columns)");
     }
-    for (size_t k = 0; k < n; k++)
-        r[k] = (struct frun){ supmodel_snap_blk(g, sg, ct[k].cell), ct[k].floor, ct[k].top,
-                              ct[k].cell };
+    size_t nr = 0;
+    for (size_t k = 0; k < n; k++) {
+        uint32_t blk[4], seed[4];
+        int nt = supmodel_snap_touch(g, sg, ct[k].cell, blk, seed);
+        for (int t = 0; t < nt; t++)
+            r[nr++] = (struct frun){ blk[t], ct[k].floor, ct[k].top, seed[t] };
+    }
+    n = nr;
     qsort(r, n, sizeof(*r), frun_cmp);
     struct support_column *v = NULL;
     size_t nv = 0, cap = 0;
@@ -342,7 +347,7 @@ snap_bands(const struct ray_grid *g, const struct supmodel_params *p, const stru
     size_t cells = (size_t)g->nu * g->nw;
     struct supmodel_snap sg = supmodel_snap_of(g, bs);
     double gap = p->gap_z_mm, dh = p->interface_layers * p->layer_mm;
-    struct frun *r = mem_array(n ? n : 1, sizeof(*r));
+    struct frun *r = mem_array(n ? 4 * n : 1, sizeof(*r));
     uint32_t *cfirst = mem_calloc(cells + 1, sizeof(uint32_t));
     uint32_t *cidx = mem_array(n_cols ? n_cols : 1, sizeof(uint32_t));
     struct support_column *v = NULL;
@@ -355,8 +360,11 @@ snap_bands(const struct ray_grid *g, const struct supmodel_params *p, const stru
     for (size_t k = 0; k < n; k++) {
         if (!ct[k].dense || dh <= 0)
             continue;
-        r[m++] = (struct frun){ supmodel_snap_blk(g, sg, ct[k].cell), (float)(ct[k].top - gap - dh),
-                                (float)(ct[k].top - gap), ct[k].cell };
+        uint32_t blk[4], seed[4];
+        int nt = supmodel_snap_touch(g, sg, ct[k].cell, blk, seed);
+        for (int t = 0; t < nt; t++)
+            r[m++] = (struct frun){ blk[t], (float)(ct[k].top - gap - dh), (float)(ct[k].top - gap),
+                                    seed[t] };
     }
     size_t mm = merge_fruns(r, m);
     /* the column pieces by cell */

@@ -122,12 +122,15 @@ contact_runs(const struct ray_grid *g, const struct supmodel_params *p, const st
         out->contact_area_mm2 += cell_a;
         out->shadow_mm3 += (top - bot) * cell_a;
         int32_t nif = k1 - k0 < p->interface_layers ? k1 - k0 : p->interface_layers;
-        uint32_t blk = supmodel_snap_blk(g, sn, ct[k].cell);
-        /* PrusaSlicer snaps contacts to the grid too (fill_contact_layer): the dense
-           layers under a contact fill its whole snap cell */
-        if (ct[k].dense)
-            iruns[(*n_iruns)++] = (struct run){ blk, k1 - nif, k1 };
-        runs[n_runs++] = (struct run){ blk, k0, k1 };
+        uint32_t blk[4], seed[4];
+        int nt = supmodel_snap_touch(g, sn, ct[k].cell, blk, seed);
+        for (int t = 0; t < nt; t++) {
+            /* PrusaSlicer snaps contacts to the grid too (fill_contact_layer): the
+               dense layers under a contact fill its whole snap cell */
+            if (ct[k].dense)
+                iruns[(*n_iruns)++] = (struct run){ blk[t], k1 - nif, k1 };
+            runs[n_runs++] = (struct run){ blk[t], k0, k1 };
+        }
     }
     return n_runs;
 }
@@ -260,10 +263,11 @@ eval_cut(const struct ray_grid *g, const struct supmodel_params *p, struct open_
     uint32_t bs = p->snap_mm > px ? (uint32_t)lround(p->snap_mm / px) : 1;
     struct supmodel_snap sn = supmodel_snap_of(g, bs);
     size_t n_blk = (size_t)sn.nbu * sn.nbw;
-    struct run *runs = mem_array(n_ct ? n_ct : 1, sizeof(*runs));
-    struct run *iruns = mem_array(n_ct ? n_ct : 1, sizeof(*iruns));
+    /* a contact touches up to 4 snap cells (supmodel_snap_touch) */
+    struct run *runs = mem_array(n_ct ? 4 * n_ct : 1, sizeof(*runs));
+    struct run *iruns = mem_array(n_ct ? 4 * n_ct : 1, sizeof(*iruns));
     uint32_t *bfirst = mem_array(n_blk + 1, sizeof(uint32_t));
-    struct run *tmp = mem_array(n_ct ? n_ct : 1, sizeof(*tmp));
+    struct run *tmp = mem_array(n_ct ? 4 * n_ct : 1, sizeof(*tmp));
     if (!runs || !iruns || !bfirst || !tmp) {
         rc = sf_err_set(err, SF_ENOMEM, "support model: out of memory");
         goto done;

@@ -102,6 +102,22 @@ struct supmodel_snap supmodel_snap_of(const struct ray_grid *g, uint32_t bs);
 /* The snap cell of raster cell c. */
 uint32_t supmodel_snap_blk(const struct ray_grid *g, struct supmodel_snap s, uint32_t c);
 
+/*
+ * The snap cells a contact in raster cell c touches, into blk[] (up to 4),
+ * each with the raster cell of it nearest c (the column's seed) in seed[];
+ * returns how many.  PrusaSlicer's grid takes every cell the contact area
+ * overlaps at all (SupportGridPattern: its raster is anti-aliased, a pixel
+ * with any coverage is set and fills its cell), so an area that reaches a
+ * hair across a grid line takes the cell past it.  Along an axis with an odd
+ * number of raster cells, the raster's centres lie on the grid's lines (a
+ * snap cell's first row or column): a contact there reaches across the line,
+ * and touches the snap cell on the other side too.  (Along an even axis the
+ * lines run between centres: a contact reaching less than half a raster cell
+ * across one is not seen.)
+ */
+int supmodel_snap_touch(const struct ray_grid *g, struct supmodel_snap s, uint32_t c,
+                        uint32_t blk[4], uint32_t seed[4]);
+
 /* The raster cells of snap cell blk: [*i0, *i1) x [*j0, *j1). */
 void supmodel_snap_cells(const struct ray_grid *g, struct supmodel_snap s, uint32_t blk,
                          uint32_t *i0, uint32_t *i1, uint32_t *j0, uint32_t *j1);

@@ -149,6 +149,24 @@ supmodel_snap_blk(const struct ray_grid *g, struct supmodel_snap s, uint32_t c)
     return ((j + s.ow) / s.bs) * s.nbu + (i + s.ou) / s.bs;
 }
 
+int
+supmodel_snap_touch(const struct ray_grid *g, struct supmodel_snap s, uint32_t c, uint32_t blk[4],
+                    uint32_t seed[4])
+{
+    uint32_t i = c % g->nu, j = c / g->nu;
+    /* across the line at the cell's own centre: one cell back along that axis */
+    bool au = g->nu % 2 && (i + s.ou) % s.bs == 0 && i > 0;
+    bool aw = g->nw % 2 && (j + s.ow) % s.bs == 0 && j > 0;
+    int n = 0;
+    for (int dw = 0; dw <= (int)aw; dw++)
+        for (int du = 0; du <= (int)au; du++) {
+            seed[n] = (j - (uint32_t)dw) * g->nu + (i - (uint32_t)du);
+            blk[n] = supmodel_snap_blk(g, s, seed[n]);
+            n++;
+        }
+    return n;
+}
+
 void
 supmodel_snap_cells(const struct ray_grid *g, struct supmodel_snap s, uint32_t blk, uint32_t *i0,
                     uint32_t *i1, uint32_t *j0, uint32_t *j1)

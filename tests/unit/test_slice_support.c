@@ -135,6 +135,39 @@ T_CASE(support_reaches_past_the_parts_outline)
                w.sup_lo, w.sup_hi, w.ext_lo, w.ext_hi, w.sup_hi - cx);
 }
 
+T_CASE(support_takes_the_grid_cell_an_overhang_reaches_a_hair_into)
+{
+    /* a wall 3 mm thick with a ledge 2.772 mm long out of its top 5 mm:
+       the part is 5.772 mm wide, 25 raster cells (an odd count: the cells'
+       centres lie on PrusaSlicer's grid lines, the first one at the ledge's
+       far end, 0.05 mm in), so the ledge reaches 0.05 mm into the grid cell
+       past that line.  PrusaSlicer's grid takes every cell the contact
+       area overlaps (anti-aliased: any coverage fills the cell), and
+       prints a column there, its lines to about 2.7 mm past the ledge's
+       end (the mech set's boss_block: its horizontal boss ends 0.044 mm
+       past a line, PrusaSlicer's support a row longer than ours, 1.02 g
+       against 0.80).  Before, the contact on the line counted only in the
+       cell on its own side: the support stopped 0.07 mm past the end */
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    double l = 2 * (SNAP_MM + 0.05) - 3;
+    double x[6] = { l, l + 3, l + 3, 0, 0, l }, z[6] = { 0, 0, 20, 20, 15, 15 };
+    T_OK(shape_extrude_xz(&m, x, z, 6, 30, &err), &err);
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    p.skirts = 0;
+    p.brim_auto = false;
+    struct sup_walk w = { INFINITY, -INFINITY, INFINITY, -INFINITY, 0, 0, 0, 0 };
+    T_OK(ts_slice_walk(&m, &p, "ledge_line", NULL, on_move, &w, &err), &err);
+    slice_profile_release(&p);
+    mesh_release(&m);
+    T_TRUE(w.sup_hi > w.sup_lo);
+    if (!(w.ext_lo - w.sup_lo > 2.0 && w.ext_lo - w.sup_lo < 3.0))
+        t_fail(__FILE__, __LINE__, "support %.3f..%.3f, part %.3f..%.3f: %.3f mm past its end",
+               w.sup_lo, w.sup_hi, w.ext_lo, w.ext_hi, w.ext_lo - w.sup_lo);
+}
+
 /* Support moves of a part (the tee: stem 10 x 20 x 30 under a 50 x 20 x 5
    bar), layer by layer (the walk's: 0 is the bed layer): body segments
    along x and along y, the y of the body's x-parallel segments over 1.5 mm

@@ -19,10 +19,19 @@ Prints one line of key=value pairs:
   top bottom  the solid skin's thickness in mm over and under sparse infill:
       the parts are rastered on a 1 mm grid, each layer's cells marked by what
       is extruded there (solid, sparse infill, anything else); in every
-      column, a run of solid layers with sparse infill on one side and
-      nothing on the other is a top (nothing above) or bottom (nothing below)
-      skin; the median run, in layers times the layer height.  "-" without
-      sparse infill.
+      column, a run of solid layers with the part's sparse interior on one
+      side and the outside of the part on the other is a top (outside above)
+      or bottom (outside below) skin; the median run, in layers times the
+      layer height.  Outside is where the cell's centre lies outside the
+      layer's external perimeter loops (even-odd), or past the first or last
+      layer: air, or support.  The sparse interior is a cell of sparse infill,
+      or an empty cell inside those loops (15 % infill leaves most 1 mm cells
+      between its lines empty).  Judged by the cell below being empty
+      instead, as this once did, a solid run over a gap between sparse lines
+      counted as a bottom (dino: the solid under its head's sloping top, 4
+      to 8 layers depending on which slicer's infill lines crossed the cell)
+      and a bottom over support never counted (support marks the cell).
+      "-" without such runs.
   layers  the part's layer count (distinct z of extrusion other than support,
       which PrusaSlicer may print between the part's layers)
 Extrusion follows M82/M83 and G92 E; G2/G3 arcs are measured along the arc.
@@ -73,6 +82,9 @@ def main():
 
     run_from = run_to = (0.0, 0.0)
     run_len = 0.0
+    run_pts = []
+    run_z = 0.0
+    outlines = {}  # layer z -> the external perimeter loops' points
 
     def end_run():
         nonlocal run, loops, ext_loops
@@ -81,6 +93,7 @@ def main():
             loops += run_len
             if "External perimeter" in run or run == {"Overhang perimeter"}:
                 ext_loops += run_len
+                outlines.setdefault(run_z, []).append(run_pts)
         run = None
 
     def mark(pts, zk):
@@ -133,8 +146,9 @@ def main():
                 mark(pts, zk)
                 if role in ("perim", "ext"):
                     if not run:
-                        run, run_from, run_len = set(), (x, y), 0.0
+                        run, run_from, run_len, run_pts, run_z = set(), (x, y), 0.0, [(x, y)], zk
                     run.add(roleword)
+                    run_pts.extend(pts[1:] if head in ("G0", "G1") else pts)
                     run_to = (nx, ny)
                     run_len += arc_len if head in ("G2", "G3") else math.hypot(nx - x, ny - y)
                 else:
@@ -151,8 +165,26 @@ def main():
     for (zk, cx, cy), kind in cells.items():
         if zk in index:
             cols.setdefault((cx, cy), {})[index[zk]] = kind
+    rows = {}  # (layer, cell row) -> the outlines' crossings of the row's centre line
+
+    def inside(k, cx, cy):
+        """is the centre of cell (cx, cy) inside layer k's outlines?"""
+        if k < 0 or k >= len(layers):
+            return False
+        key = (k, cy)
+        if key not in rows:
+            yc = (cy + 0.5) * CELL
+            xs = []
+            for loop in outlines.get(layers[k], []):
+                for (ax, ay), (bx, by) in zip(loop, loop[1:] + loop[:1]):
+                    if (ay > yc) != (by > yc):
+                        xs.append(ax + (bx - ax) * (yc - ay) / (by - ay))
+            rows[key] = sorted(xs)
+        xc = (cx + 0.5) * CELL
+        return sum(1 for x in rows[key] if x < xc) % 2 == 1
+
     top, bottom = [], []
-    for col in cols.values():
+    for (cx, cy), col in cols.items():
         k = 0
         last = max(col)
         while k <= last:
@@ -163,9 +195,11 @@ def main():
             while col.get(k) == "s":
                 k += 1
             below, above = col.get(s - 1), col.get(k)
-            if below == "i" and above is None:
+            sparse_below = below == "i" or (below is None and inside(s - 1, cx, cy))
+            sparse_above = above == "i" or (above is None and inside(k, cx, cy))
+            if sparse_below and not inside(k, cx, cy):
                 top.append(k - s)
-            elif above == "i" and below is None:
+            elif sparse_above and not inside(s - 1, cx, cy):
                 bottom.append(k - s)
     walls = "%.2f" % (loops / ext_loops) if ext_loops else "-"
     th = [("%.2f" % (statistics.median(v) * height)) if v else "-" for v in (top, bottom)]
