@@ -67,3 +67,13 @@ daemon_store() {
     '{ print } !done && /^\[farm\]/ { print line; print lease; done = 1 }' "$cfg" > "$cfg.store" &&
     cat "$cfg.store" > "$cfg" && rm -f "$cfg.store" # (cat: the config keeps its mode)
 }
+
+# daemon_db CONFIG: the database of CONFIG's daemon, for a test that reads or writes it
+# straight (a stopped daemon's): its store: URL, or else SQLite's file in its data_dir.
+daemon_db() {
+  local url dir
+  url=$(sed -n 's/^store: *//p' "$1" | head -n 1)
+  [ -n "$url" ] && { echo "$url"; return; }
+  dir=$(sed -n 's/^data_dir: *//p' "$1" | head -n 1)
+  echo "$dir/slimfarm.db"
+}
