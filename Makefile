@@ -251,7 +251,7 @@ check: deps
 # starts a PostgreSQL server of its own (initdb into a temp dir, a Unix socket) and runs
 # them on it; the daemon as three hosts on one PostgreSQL (tests/integ/farmd_hosts*.sh);
 # then every daemon scenario on PostgreSQL (tests/integ/farmd_pg.sh, FARMD_PG_TESTS=all,
-# JOBS at a time: 20-30 min on two cores).  On SQLite the scenarios are make check's,
+# JOBS at a time: 29 scenarios in 25 min one at a time, load 20-40 on two cores).  On SQLite the scenarios are make check's,
 # which runs farmd_pg's three of them on PostgreSQL too.  Not in check: its time.
 PG_UNITS := test_sqldb test_store test_farm test_api test_history test_metrics test_web
 check-pg: deps
