@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # tests/run.sh BUILD_DIR [FILTER]
 # Runs every unit test program in BUILD_DIR/tests, the libFuzzer smoke runs
-# and the integration tests (those whose names contain FILTER), JOBS at a
-# time, and ends with the line CI reads:
+# and the integration tests (those whose names contain FILTER, or one of its
+# words: "test_farm store_pg"), JOBS at a time, and ends with the line CI reads:
 #   total: N passed, N failed
 # A program that crashes counts all its cases as failed.
 #
@@ -25,6 +25,13 @@ jobs=${JOBS:-$(nproc)}
 res=$(mktemp -d)
 trap 'rm -rf "$res"' EXIT
 t_all=$(date +%s%N)
+# whether name $1 is one FILTER selects
+selected() {
+  local w
+  [ -z "$filter" ] && return 0
+  for w in $filter; do [[ "$1" == *"$w"* ]] && return 0; done
+  return 1
+}
 
 # The body of each test runs in a subshell of its own, writing its output
 # to $res/K.out and then its result, "PASS FAIL SKIP WALL_MS CPU_MS LABEL",
@@ -93,7 +100,7 @@ queue=()
 for script in tests/browser/*.sh tests/integ/*.sh; do
   [ -f "$script" ] || continue
   name=$(basename "$script" .sh)
-  [ -n "$filter" ] && [[ "$name" != *"$filter"* ]] && continue
+  selected "$name" || continue
   queue+=("integ $script $name")
 done
 for prog in "$build"/tests/test_*; do
@@ -103,7 +110,7 @@ for prog in "$build"/tests/test_*; do
   src=tests/unit/$name.c
   [[ $name == test_fuzz_* ]] && src=tests/fuzz/fuzz_${name#test_fuzz_}.c
   [ -f "$src" ] || continue
-  [ -n "$filter" ] && [[ "$name" != *"$filter"* ]] && continue
+  selected "$name" || continue
   queue+=("unit $prog $name")
 done
 for fz in build/fuzz/fuzz_*; do
@@ -111,7 +118,7 @@ for fz in build/fuzz/fuzz_*; do
   name=$(basename "$fz")
   name=${name#fuzz_}
   [ -f "tests/fuzz/fuzz_$name.c" ] || continue
-  [ -n "$filter" ] && [[ "fuzz_$name" != *"$filter"* ]] && continue
+  selected "fuzz_$name" || continue
   queue+=("fuzz $fz $name")
 done
 

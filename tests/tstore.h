@@ -116,6 +116,42 @@ t_store_exec(const char *dir, const char *sql)
     return rc;
 }
 
+/*
+ * Another process's hold on dir's store, either engine: a second connection with its write
+ * lock taken (NULL when it cannot).  SQLite: BEGIN IMMEDIATE on the file.  PostgreSQL: every
+ * table of the store locked EXCLUSIVE in one transaction, as SQLite's write lock holds the
+ * whole file: reads go on, a write waits out the store's lock_timeout and fails busy.
+ * t_store_unlock lets it go.
+ */
+static inline struct sqldb *
+t_store_lock(const char *dir)
+{
+    struct sqldb *db = t_store_sqldb(dir);
+    /* (held idle: the store's sessions end an idle transaction after 5 s, sqldb_pg.c) */
+    if (db && ((t_store_pg() && sqldb_exec(db, "SET idle_in_transaction_session_timeout = 0")) ||
+               sqldb_begin(db) ||
+               (t_store_pg() &&
+                sqldb_exec(db, "DO $$ DECLARE t text; BEGIN"
+                               " FOR t IN SELECT tablename FROM pg_tables WHERE schemaname ="
+                               " current_schema() LOOP"
+                               " EXECUTE format('LOCK TABLE %I IN EXCLUSIVE MODE', t);"
+                               " END LOOP; END $$")))) {
+        fprintf(stderr, "tstore: cannot lock %s: %s\n", dir, sqldb_errmsg(db));
+        sqldb_close(db);
+        return NULL;
+    }
+    return db;
+}
+
+static inline void
+t_store_unlock(struct sqldb *db)
+{
+    if (!db)
+        return;
+    sqldb_rollback(db);
+    sqldb_close(db);
+}
+
 /* Two hosts' stores on one database: a on dir, b on dir-b (on SQLite b is a peer of a: one
    process holds the data dir).  ta, tb: their join tokens, for the tests that join. */
 struct t_pair {

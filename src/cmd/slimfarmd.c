@@ -179,28 +179,36 @@ on_reload(struct loop *l, int signo, void *ud)
              d->config_path, d->cfg.n_printers, d->cfg.n_keys, d->cfg.n_notify);
 }
 
-/* --fsck: crash recovery plus every store check; prints a summary. */
+/* --fsck: crash recovery plus every store check; prints a summary.  A shared store
+   (store:) is checked as one of its hosts, without recovery: that would take every
+   host's work for this one's, and each host recovers its own when it joins. */
 static int
 run_fsck(struct farmcfg *cfg)
 {
     struct sf_err err;
     struct store_recovery rec;
-    if (cfg->store[0]) { /* its recovery would take every host's jobs for this one's */
-        fprintf(stderr, "slimfarmd: --fsck checks an SQLite store; this config's is shared "
-                        "(store:), which the hosts recover themselves\n");
-        farmcfg_release(cfg);
-        return 1;
-    }
-    struct store *s = store_open(cfg->data_dir, &rec, &err);
+    bool shared = cfg->store[0] != '\0';
+    char shown[sizeof(cfg->store)];
+    if (shared)
+        farmcfg_store_shown(cfg->store, shown, sizeof(shown));
+    else
+        snprintf(shown, sizeof(shown), "%s", cfg->data_dir);
+    struct store *s = shared ? store_open_host(cfg->data_dir, cfg->store, &rec, &err)
+                             : store_open(cfg->data_dir, &rec, &err);
     int status = 1;
     struct job_row *jobs = NULL;
     size_t n = 0;
     if (s && store_check(s, &err) == SF_OK && store_job_list(s, &jobs, &n, &err) == SF_OK) {
-        printf("store %s: ok, %zu jobs, %d interrupted and %d requeued by recovery\n",
-               cfg->data_dir, n, rec.interrupted, rec.requeued);
+        if (shared)
+            printf("store %s: ok, %zu jobs, not recovered (each host recovers its own work "
+                   "when it joins)\n",
+                   shown, n);
+        else
+            printf("store %s: ok, %zu jobs, %d interrupted and %d requeued by recovery\n", shown, n,
+                   rec.interrupted, rec.requeued);
         status = 0;
     } else {
-        fprintf(stderr, "slimfarmd: store %s: %s\n", cfg->data_dir, err.msg);
+        fprintf(stderr, "slimfarmd: store %s: %s\n", shown, err.msg);
     }
     free(jobs);
     store_close(s);
@@ -315,7 +323,8 @@ usage(FILE *f)
                "       slimfarmd --init-store DATA_DIR|postgresql://...\n"
                "  -c CONFIG  farm config (default config/farm.ini)\n"
                "  --check    validate the config and exit\n"
-               "  --fsck     recover and check the job store, then exit\n"
+               "  --fsck     recover and check the job store, then exit (a shared store:\n"
+               "             checked only; its hosts recover their own work)\n"
                "  --init-store DATA_DIR|postgresql://...\n"
                "             create or migrate the store's schema (SQLite in DATA_DIR, or a\n"
                "             PostgreSQL database by libpq URL) and exit; no config needed,\n"

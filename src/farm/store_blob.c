@@ -54,7 +54,8 @@ read_full(int fd, unsigned char *buf, size_t cap)
     return (ssize_t)n;
 }
 
-/* Whether db holds sha's bytes (file_blobs), with their size and chunk size; SF_OK or SF_EIO. */
+/* Whether db holds sha's bytes (file_blobs), with their size and chunk size; SF_OK or the
+   database's failure (sqldb_errcode). */
 static int
 blob_find(struct sqldb *db, const char *sha, bool *found, int64_t *size, int64_t *chunk,
           struct sf_err *err)
@@ -62,7 +63,7 @@ blob_find(struct sqldb *db, const char *sha, bool *found, int64_t *size, int64_t
     struct sqldb_stmt *st;
     *found = false;
     if (sqldb_prepare(db, "SELECT size, chunk_bytes FROM file_blobs WHERE sha256 = ?", &st))
-        return sf_err_set(err, SF_EIO, "store: file %s: %s", sha, sqldb_errmsg(db));
+        return sf_err_set(err, sqldb_errcode(db), "store: file %s: %s", sha, sqldb_errmsg(db));
     sqldb_bind_text(st, 1, sha);
     int rc = sqldb_step(st);
     if (rc == SQLDB_ROW) {
@@ -71,7 +72,8 @@ blob_find(struct sqldb *db, const char *sha, bool *found, int64_t *size, int64_t
         *chunk = sqldb_column_int64(st, 1);
     }
     sqldb_finalize(st);
-    return rc < 0 ? sf_err_set(err, SF_EIO, "store: file %s: %s", sha, sqldb_errmsg(db)) : SF_OK;
+    return rc < 0 ? sf_err_set(err, sqldb_errcode(db), "store: file %s: %s", sha, sqldb_errmsg(db))
+                  : SF_OK;
 }
 
 /* Claim sha for this upload: its file_blobs row, in the open transaction; *mine false when
@@ -109,7 +111,8 @@ send_chunks(struct sqldb *db, int fd, const char *path, const char *sha, int64_t
     int rc = buf && md ? SF_OK : sf_err_set(err, SF_ENOMEM, "store: out of memory");
     if (rc == SF_OK &&
         sqldb_prepare(db, "INSERT INTO file_chunks(sha256, seq, data) VALUES(?,?,?)", &st))
-        rc = sf_err_set(err, SF_EIO, "store: sending file %s: %s", sha, sqldb_errmsg(db));
+        rc =
+            sf_err_set(err, sqldb_errcode(db), "store: sending file %s: %s", sha, sqldb_errmsg(db));
     int64_t sent = 0;
     for (int64_t seq = 0; rc == SF_OK; seq++) {
         ssize_t n = read_full(fd, buf, STORE_CHUNK_BYTES);
@@ -123,8 +126,8 @@ send_chunks(struct sqldb *db, int fd, const char *path, const char *sha, int64_t
             sqldb_bind_int64(st, 2, seq);
             sqldb_bind_blob(st, 3, buf, (size_t)n);
             if (sqldb_step(st) < 0)
-                rc = sf_err_set(err, SF_EIO, "store: sending file %s, chunk %lld: %s", sha,
-                                (long long)seq, sqldb_errmsg(db));
+                rc = sf_err_set(err, sqldb_errcode(db), "store: sending file %s, chunk %lld: %s",
+                                sha, (long long)seq, sqldb_errmsg(db));
             sent += n;
             if (n < STORE_CHUNK_BYTES)
                 break;
@@ -167,7 +170,8 @@ store_blob_upload(struct sqldb *db, const char *path, const char *sha, struct sf
         goto out_close;
     }
     if (sqldb_begin(db) || blob_claim(db, sha, size, &mine)) {
-        rc = sf_err_set(err, SF_EIO, "store: sending file %s: %s", sha, sqldb_errmsg(db));
+        rc =
+            sf_err_set(err, sqldb_errcode(db), "store: sending file %s: %s", sha, sqldb_errmsg(db));
         goto out_rollback;
     }
     if (mine && (rc = send_chunks(db, fd, path, sha, size, got, err)) == SF_OK &&
@@ -175,7 +179,8 @@ store_blob_upload(struct sqldb *db, const char *path, const char *sha, struct sf
         rc =
             sf_err_set(err, SF_EIO, "store: '%s' has SHA-256 %s, not %s: not sent", path, got, sha);
     if (rc == SF_OK && sqldb_commit(db))
-        rc = sf_err_set(err, SF_EIO, "store: sending file %s: %s", sha, sqldb_errmsg(db));
+        rc =
+            sf_err_set(err, sqldb_errcode(db), "store: sending file %s: %s", sha, sqldb_errmsg(db));
     if (rc == SF_OK)
         goto out_close;
 out_rollback:
@@ -193,7 +198,8 @@ recv_chunks(struct sqldb *db, struct store_file *f, const char *sha, int64_t siz
     struct sqldb_stmt *st = NULL;
     int rc = SF_OK;
     if (sqldb_prepare(db, "SELECT data FROM file_chunks WHERE sha256 = ? AND seq = ?", &st))
-        rc = sf_err_set(err, SF_EIO, "store: fetching file %s: %s", sha, sqldb_errmsg(db));
+        rc = sf_err_set(err, sqldb_errcode(db), "store: fetching file %s: %s", sha,
+                        sqldb_errmsg(db));
     int64_t n_chunks = size == 0 ? 1 : (size + chunk - 1) / chunk;
     for (int64_t seq = 0; rc == SF_OK && seq < n_chunks; seq++) {
         int64_t want = seq + 1 < n_chunks ? chunk : size - seq * chunk;
@@ -206,7 +212,7 @@ recv_chunks(struct sqldb *db, struct store_file *f, const char *sha, int64_t siz
         if (r == SQLDB_ROW)
             data = sqldb_column_blob(st, 0, &len);
         if (r < 0)
-            rc = sf_err_set(err, SF_EIO, "store: fetching file %s, chunk %lld: %s", sha,
+            rc = sf_err_set(err, sqldb_errcode(db), "store: fetching file %s, chunk %lld: %s", sha,
                             (long long)seq, sqldb_errmsg(db));
         else if (r != SQLDB_ROW)
             rc =

@@ -268,12 +268,16 @@ int store_file_keep_as(struct store_file *f, const char *sha, struct sf_err *err
  * commit is waited for).  SF_EINVAL for a file over SF_STORE_BLOB_MAX,
  * SF_EIO for the file, the database, or bytes that do not hash to sha;
  * on error nothing is left in db.  Not inside a transaction of db's.
+ * The database's failures keep its code (sqldb_errcode): SF_EBUSY (a lock
+ * not had within the lock timeout), SF_EUNREACH, SF_EINDOUBT are of the
+ * moment, and the callers try again rather than fail the file's job.
  *
  * store_blob_fetch: copy sha from db into dir's files, at its address:
  * streamed into a temporary file, SHA-256 checked, then renamed, so a torn
  * or corrupt copy is never taken for the file.  SF_ENOTFOUND when db does
  * not hold sha's bytes, SF_EIO for a missing or damaged chunk, bytes that
- * do not hash to sha, or the file system.
+ * do not hash to sha, or the file system; the database's own failures as
+ * store_blob_upload's.
  */
 int store_blob_upload(struct sqldb *db, const char *path, const char *sha, struct sf_err *err);
 int store_blob_fetch(struct sqldb *db, const char *dir, const char *sha, struct sf_err *err);

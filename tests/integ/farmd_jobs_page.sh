@@ -5,7 +5,8 @@
 # bounded pages, and jobs submitted during the walk at its end; filters by
 # state, printer and time and order=desc agree with the store; bad
 # parameters get 400 naming the parameter; `slimfarm jobs` lists them all
-# and /metrics counts them.  Real daemon over loopback, real SQLite.
+# and /metrics counts them.  Real daemon over loopback, real SQLite (or PostgreSQL:
+# make check-pg).
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
 N=1500
@@ -17,7 +18,7 @@ printf '[farm]\nlisten: 127.0.0.1:%s\ndata_dir: %s/data\napi_keys: %s\napi_keys_
 printf 'driver: marlin\nport: pty:/dev/null\nmaterial: PLA\n' >> "$tmp/farm.ini"
 start_daemon
 kill -TERM $pid; wait $pid; pid=
-fill_jobs "$tmp/data/slimfarm.db" $N || fail "fill the store"
+fill_jobs "$(daemon_db "$tmp/farm.ini")" $N || fail "fill the store"
 out=$("$D" -c "$tmp/farm.ini" --fsck 2>&1) || fail "--fsck of the filled store: $out"
 start_daemon
 tetra "$tmp/t.stl" 10

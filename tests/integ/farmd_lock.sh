@@ -3,7 +3,7 @@
 # daemon running, a second daemon and `slimfarmd --fsck` on the same data
 # dir refuse, naming the dir and the running daemon's pid, and touch
 # nothing (--fsck used to run crash recovery on the live database); once
-# the daemon stops, --fsck runs.
+# the daemon stops, --fsck runs (on a PostgreSQL store: checks, make check-pg).
 BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/farm.sh"
 
@@ -28,5 +28,7 @@ out=$("$D" -c "$tmp/farm.ini" --fsck 2>&1) && fail "--fsck ran beside a live dae
 kill -TERM $pid; wait $pid; rc=$?; pid=
 [ $rc -eq 0 ] || fail "SIGTERM exit status $rc"
 out=$("$D" -c "$tmp/farm.ini" --fsck 2>&1) || fail "--fsck after the stop: $out"
-[[ "$out" == *"store $tmp/data: ok"* ]] || fail "--fsck output: $out"
+store=$tmp/data # the store it names: SQLite's data dir, or the test's PostgreSQL database
+[ -n "${SLIMFARM_TEST_STORE:-}" ] && store=$(daemon_db "$tmp/farm.ini")
+[[ "$out" == *"store $store: ok"* ]] || fail "--fsck output: $out"
 echo "farmd_lock: ok"

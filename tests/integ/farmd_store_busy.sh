@@ -3,18 +3,19 @@
 # process holds the store's database busy (issue 32: the loop never waits
 # on the store).  A real slimfarmd prints a long G-code job on a simulated
 # Marlin; mid-print a Python process takes SQLite's write lock (BEGIN
-# EXCLUSIVE) and holds it until the simulator has executed LINES more
-# lines.  Before the store thread, every progress write (one each 16
-# lines) waited out the 5 s busy timeout on the loop, so the stream
-# crawled at about 16 lines per 5 s and the wait ran out.  While locked
-# the API answers too.  After the lock goes the job ends done, its print
-# record has every line, and the printer's executed log is the job's
-# commands once each, in order (check_farm_logs).  Under the lock an
-# operator pauses and resumes the print and adds a job through the API: the
-# printer pauses and resumes at once, the answers come only once the lock
-# goes (200, 201, 200), the added job exists once.  /metrics shows a write
-# was held up and retried, none failed; the loop's longest turn is printed
-# for the record, not asserted.
+# EXCLUSIVE; on PostgreSQL, make check-pg, psql locks the jobs and prints
+# tables) and holds it until the simulator has executed LINES more lines.
+# Before the store thread, every progress write (one each 16 lines) waited
+# out the 5 s busy timeout on the loop, so the stream crawled at about 16
+# lines per 5 s and the wait ran out.  While locked the API answers too.
+# After the lock goes the job ends done, its print record has every line,
+# and the printer's executed log is the job's commands once each, in order
+# (check_farm_logs).  Under the lock an operator pauses and resumes the
+# print and adds a job through the API: the printer pauses and resumes at
+# once, the answers come only once the lock goes (200, 201, 200), the
+# added job exists once.  /metrics shows a write was held up and retried,
+# none failed; the loop's longest turn is printed for the record, not
+# asserted.
 set -u
 BUILD=${BUILD:-build/san}
 LINES=${LINES:-2000}
@@ -53,7 +54,19 @@ wait_for 120 past 500 || fail "the print did not start: $("$C" jobs)"
 
 # the lock: held from "locked" until "release" appears (or 300 s)
 [ "$LOCK" = 1 ] || touch "$tmp/locked"
-[ "$LOCK" = 1 ] && /usr/bin/python3 - "$tmp/data/slimfarm.db" "$tmp" <<'PY' > "$tmp/locker.out" 2>&1 &
+# (on PostgreSQL, make check-pg: a psql session's lock on the tables a print writes, which
+# the daemon's writes wait for as long as its lock_timeout, then retry)
+pg_lock() {
+  echo "BEGIN; LOCK TABLE jobs, prints IN EXCLUSIVE MODE;"
+  echo "\\! touch '$tmp/locked'" # run once the lock is held
+  local end=$((SECONDS + 300))
+  while [ ! -e "$tmp/release" ] && [ $SECONDS -lt $end ]; do sleep 0.05; done
+  echo "ROLLBACK;"
+}
+if [ "$LOCK" = 1 ] && [ -n "${SLIMFARM_TEST_STORE:-}" ]; then
+  pg_lock | psql -q -v ON_ERROR_STOP=1 "$(daemon_db "$tmp/farm.ini")" > "$tmp/locker.out" 2>&1 &
+elif [ "$LOCK" = 1 ]; then
+  /usr/bin/python3 - "$tmp/data/slimfarm.db" "$tmp" <<'PY' > "$tmp/locker.out" 2>&1 &
 import os, sqlite3, sys, time
 db = sqlite3.connect(sys.argv[1], timeout=60, isolation_level=None)
 db.execute("BEGIN EXCLUSIVE")
@@ -63,6 +76,7 @@ while not os.path.exists(os.path.join(sys.argv[2], "release")) and time.time() <
     time.sleep(0.05)
 db.execute("ROLLBACK")
 PY
+fi
 locker=$!
 wait_for 120 test -e "$tmp/locked" || fail "no lock: $(cat "$tmp/locker.out")"
 from=$(executed)

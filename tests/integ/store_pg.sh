@@ -40,6 +40,31 @@ out=$("$D" --init-store "$url") && [[ "$out" == *"up to date"* ]] || { echo "aga
 psql -q "$url" -c 'UPDATE schema_version SET version = version + 1' || exit 1
 "$D" --init-store "$url" > "$TMP/out" 2>&1 && { echo "a newer schema was accepted"; exit 1; }
 grep -q "is newer than this slimfarm" "$TMP/out" || { cat "$TMP/out"; exit 1; }
+psql -q "$url" -c 'UPDATE schema_version SET version = version - 1' || exit 1
+# --fsck of a shared store: its checks, and no recovery (each host recovers its own work
+# when it joins): a printing job stays printing, a broken one is named
+printf '[farm]\ndata_dir: %s/data\nstore: %s\n' "$TMP" "$url" > "$TMP/farm.ini"
+out=$("$D" -c "$TMP/farm.ini" --fsck 2>&1) && [[ "$out" == "store "*": ok, 0 jobs, not recovered"* ]] ||
+  { echo "--fsck of an empty shared store: $out"; exit 1; }
+sha=$(printf x | sha256sum | cut -c1-64)
+job() { # STATE PRINTER: a job in STATE on PRINTER with its open print
+  psql -qtA "$url" -c "WITH j AS (INSERT INTO jobs(name, file_sha, gcode_sha, state, method,
+    deviation_mm, overhang_deg, copies, max_retries, material, target_printer, target_group,
+    priority, printer, created_ms, updated_ms) VALUES('p.stl', '$sha', '$sha', '$1', 'none', 0, 45,
+    1, 2, 'PLA', '', '', 0, '$2', 1, 1) RETURNING id) INSERT INTO prints(job_id, copy, printer,
+    material, start_line, lines_acked, started_ms, ended_ms, outcome)
+    SELECT id, 1, '$2', 'PLA', 1, 0, 1, 0, '' FROM j RETURNING job_id"
+}
+psql -q "$url" -c "INSERT INTO files(sha256, size, created_ms) VALUES('$sha', 1, 1)" || exit 1
+id=$(job printing mk3) || exit 1
+out=$("$D" -c "$TMP/farm.ini" --fsck 2>&1) && [[ "$out" == *": ok, 1 jobs, not recovered"* ]] ||
+  { echo "--fsck of a shared store with a print: $out"; exit 1; }
+[ "$(psql -qtA "$url" -c "SELECT state FROM jobs WHERE id = $id")" = printing ] ||
+  { echo "--fsck recovered a shared store's print"; exit 1; }
+id=$(job printing '') || exit 1
+out=$("$D" -c "$TMP/farm.ini" --fsck 2>&1) && { echo "--fsck passed a broken store: $out"; exit 1; }
+[[ "$out" == *"job on a printer without printer name: job $id"* ]] || { echo "--fsck: $out"; exit 1; }
+[[ "$out" == *"farm?host="* ]] || { echo "--fsck does not name the store: $out"; exit 1; }
 "$D" --init-store "postgresql://nobody:hunter2@/farm?host=$PG_DIR" > "$TMP/out" 2>&1 &&
   { echo "an unknown role connected"; exit 1; }
 grep -q "nobody:\*\*\*@" "$TMP/out" && ! grep -q hunter2 "$TMP/out" || { cat "$TMP/out"; exit 1; }

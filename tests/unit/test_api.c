@@ -833,22 +833,17 @@ queue_note(void *arg)
     storeq_printer_note(farm_storeq(srv.farm), "b", "printer-command", "queued under a lock");
 }
 
-/* A manual command while the store's queue cannot be written (another process holds SQLite's
+/* A manual command while the store's queue cannot be written (another process holds its
    write lock) is 503, the store busy: whether the printer holds an interrupted job is not
    known yet.  It was 409, "not now", as if the printer's state refused it. */
 T_CASE(api_command_while_the_store_is_busy_is_503)
 {
-    if (t_store_pg()) {
-        t_skip("holds SQLite's write lock from a second connection");
-        return;
-    }
     struct sf_err err;
     T_OK(start("cmdbusy", &err), &err);
-    char path[600];
-    snprintf(path, sizeof(path), "%s/cmdbusy/slimfarm.db", t_tmpdir());
-    struct sqldb *other = sqldb_open(path, 0, &err);
+    char dir[600];
+    snprintf(dir, sizeof(dir), "%s/cmdbusy", t_tmpdir());
+    struct sqldb *other = t_store_lock(dir);
     T_TRUE(other != NULL);
-    T_OK(sqldb_begin(other), NULL);
     on_server(queue_note, NULL);
     struct buf b;
     buf_init(&b, 0);
@@ -856,8 +851,7 @@ T_CASE(api_command_while_the_store_is_busy_is_503)
                   0, NULL, &b),
              503);
     T_TRUE(strstr(jstr(&b, NULL, "error"), "the store is busy") != NULL);
-    sqldb_rollback(other);
-    sqldb_close(other);
+    t_store_unlock(other);
     /* the queue written: the command reaches the driver, which has no console */
     T_EQ_INT(call("POST", "/api/printers/b/command", KEY_RW, "{\"command\": \"G28\"}", NULL, NULL,
                   0, NULL, &b),

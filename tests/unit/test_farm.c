@@ -1805,6 +1805,22 @@ T_CASE(farm_cancel_while_the_start_is_judged)
     teardown();
 }
 
+/* Another process's hold on fixture `name`'s store (t_store_lock: SQLite's write lock, or
+   its every table locked on PostgreSQL); NULL if it cannot. */
+static struct sqldb *
+lock_store(const char *name)
+{
+    char dir[600];
+    snprintf(dir, sizeof(dir), "%s/%s", t_tmpdir(), name);
+    return t_store_lock(dir);
+}
+
+static void
+unlock_store(struct sqldb *other)
+{
+    t_store_unlock(other);
+}
+
 /*
  * The store is held busy by another process when a printer takes a job:
  * the printer takes it at once (the START waits on the store thread, the
@@ -1814,20 +1830,13 @@ T_CASE(farm_cancel_while_the_start_is_judged)
  */
 T_CASE(farm_start_commits_on_the_store_thread_before_the_driver_has_it)
 {
-    if (t_store_pg()) {
-        t_skip("holds SQLite's write lock from a second connection");
-        return;
-    }
     struct sf_err err;
     setup_held = "a";
     T_OK(setup("busystart", farm_ini, tdrv_new, test_prepare, &err), &err);
     int64_t id = add("size 20 20 20", "PLA", 1);
     T_TRUE(wait_job(id, JOB_READY)); /* a is not connected yet */
-    char path[600];
-    snprintf(path, sizeof(path), "%s/busystart/slimfarm.db", t_tmpdir());
-    struct sqldb *other = sqldb_open(path, 0, &err);
+    struct sqldb *other = lock_store("busystart");
     T_TRUE(other != NULL);
-    T_OK(sqldb_begin(other), NULL);
     watch_job = id;
     start_saw = -1;
     struct tdrv *a = tdrv_named("a");
@@ -1839,8 +1848,7 @@ T_CASE(farm_start_commits_on_the_store_thread_before_the_driver_has_it)
     struct job_row j;
     T_OK(store_job_get(fx.s, id, &j, &err), &err); /* a read: WAL lets it through */
     T_EQ_INT(j.state, JOB_READY);                  /* its START waits on the store thread */
-    sqldb_rollback(other);
-    sqldb_close(other);
+    unlock_store(other);
     for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && a->starts == 0;)
         loop_run_once(fx.l, 10);
     T_EQ_INT(a->starts, 1);
@@ -1852,28 +1860,6 @@ T_CASE(farm_start_commits_on_the_store_thread_before_the_driver_has_it)
 }
 
 /* ---- the loop does not wait for a locked store (issue 32) ---- */
-
-/* A second connection holding SQLite's write lock on fixture `name`'s database; NULL on
-   PostgreSQL (the caller skips). */
-static struct sqldb *
-lock_store(const char *name)
-{
-    char path[600];
-    snprintf(path, sizeof(path), "%s/%s/slimfarm.db", t_tmpdir(), name);
-    struct sqldb *other = sqldb_open(path, 0, NULL);
-    if (other && sqldb_begin(other)) {
-        sqldb_close(other);
-        return NULL;
-    }
-    return other;
-}
-
-static void
-unlock_store(struct sqldb *other)
-{
-    sqldb_rollback(other);
-    sqldb_close(other);
-}
 
 /* Answers to operator actions, in the order they came. */
 static struct {
@@ -1902,10 +1888,6 @@ on_answer(void *ud, const struct storeq_result *r)
  */
 T_CASE(farm_operator_actions_go_on_while_the_store_is_locked)
 {
-    if (t_store_pg()) {
-        t_skip("holds SQLite's write lock from a second connection");
-        return;
-    }
     struct sf_err err;
     T_OK(setup("busyop", farm_ini, tdrv_new, test_prepare, &err), &err);
     T_TRUE(wait_printer(0, PRINTER_IDLE));
@@ -1967,14 +1949,12 @@ locking_prepare(const struct prepare_req *req, struct prepare_out *out, const at
  * waits for it on the store thread and the job is ready once the lock
  * goes.  Before, the G-code's record (store_file_record on the loop) waited
  * out SQLite's busy timeout on the loop, then failed the job for good
- * (PREPARE_FAILED) for a lock that was only passing.
+ * (PREPARE_FAILED) for a lock that was only passing.  On PostgreSQL the
+ * worker's upload of the G-code meets the lock (its lock timeout): it was
+ * SF_EIO, the job failed; busy now, the job goes back to the queue.
  */
 T_CASE(farm_prepare_waits_out_a_locked_store_instead_of_failing_the_job)
 {
-    if (t_store_pg()) {
-        t_skip("holds SQLite's write lock from a second connection");
-        return;
-    }
     struct sf_err err;
     atomic_store(&prep_lock, NULL);
     setup_held = "a"; /* the job is prepared for a, not started */
@@ -2061,8 +2041,9 @@ locking_prepare_rewrite(const struct prepare_req *req, struct prepare_out *out,
  */
 T_CASE(farm_prepared_is_written_again_after_the_store_gave_up)
 {
-    if (t_store_pg()) {
-        t_skip("holds SQLite's write lock from a second connection");
+    if (t_store_pg()) { /* open: a DEFER given up is lost as the PREPARED was */
+        t_skip("on PostgreSQL the G-code's upload meets the lock before the PREPARED does: the "
+               "job's DEFER, given up under the lock, leaves it preparing until a restart");
         return;
     }
     struct sf_err err;
@@ -2138,10 +2119,6 @@ T_CASE(farm_prepared_refused_for_good_fails_the_job_once)
  */
 T_CASE(farm_resume_commits_on_the_store_thread_before_the_driver_has_it)
 {
-    if (t_store_pg()) {
-        t_skip("holds SQLite's write lock from a second connection");
-        return;
-    }
     struct sf_err err;
     T_OK(setup("busyresume", farm_ini, tdrv_new, test_prepare, &err), &err);
     T_TRUE(wait_printer(0, PRINTER_IDLE));

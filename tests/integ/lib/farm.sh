@@ -102,28 +102,44 @@ PY
 
 # fill_jobs DB N: N finished jobs (two in three done on printer "mk3" with
 # their print, the others cancelled) written straight into a stopped
-# daemon's database DB, as its schema wants them: a farm's history, in
-# seconds rather than hours.
+# daemon's database DB (SQLite's file, or a postgresql:// URL: daemon_db), as
+# its schema wants them: a farm's history, in seconds rather than hours.
 fill_jobs() {
   /usr/bin/python3 - "$1" "$2" <<'PY'
-import hashlib, sqlite3, sys, time
-db, n = sqlite3.connect(sys.argv[1]), int(sys.argv[2])
+import hashlib, sqlite3, subprocess, sys, time
+target, n = sys.argv[1], int(sys.argv[2])
 now = int(time.time() * 1000)
 sha = hashlib.sha256(b"history").hexdigest()
+JOB = ("INSERT INTO jobs(name, file_sha, gcode_sha, state, method, deviation_mm, overhang_deg,"
+       " copies, copies_done, max_retries, material, target_printer, target_group, priority,"
+       " reason, created_ms, updated_ms, gcode_lines, filament_g)"
+       " VALUES(%s,%s,%s,%s,'orient',0.5,45,1,%s,2,'PLA','','',0,%s,%s,%s,5000,3.5)")
+PRINT = ("INSERT INTO prints(job_id, copy, printer, material, start_line, lines_acked,"
+         " started_ms, ended_ms, outcome) %s 1,'mk3','PLA',1,5000,%s,%s,'done'")
+def rows():
+    for i in range(n):
+        done = i % 3 != 2
+        t = now - (n - i) * 60000
+        yield done, t, ("bracket-%05d.stl" % i, sha, sha, "done" if done else "cancelled",
+                        1 if done else 0, "" if done else "cancelled by an operator", t, t)
+if target.startswith("postgresql://"): # one transaction through psql; a print names its job
+    q = lambda v: str(v) if isinstance(v, int) else "'" + v.replace("'", "''") + "'"
+    sql = ["BEGIN;", "INSERT INTO files(sha256, size, created_ms) VALUES(%s, 7, %d)"
+           " ON CONFLICT DO NOTHING;" % (q(sha), now)]
+    for done, t, r in rows():
+        job = JOB % tuple(q(v) for v in r)
+        sql.append("WITH j AS (%s RETURNING id) %s FROM j;" % (job, PRINT % ("SELECT id,", t, t + 30000))
+                   if done else job + ";")
+    sql.append("COMMIT;")
+    subprocess.run(["psql", "-q", "-v", "ON_ERROR_STOP=1", target], input="\n".join(sql),
+                   text=True, check=True, stdout=subprocess.DEVNULL)
+    sys.exit(0)
+db = sqlite3.connect(target)
 db.execute("INSERT OR IGNORE INTO files(sha256, size, created_ms) VALUES(?, 7, ?)", (sha, now))
-for i in range(n):
-    done = i % 3 != 2
-    cur = db.execute(
-        "INSERT INTO jobs(name, file_sha, gcode_sha, state, method, deviation_mm, overhang_deg,"
-        " copies, copies_done, max_retries, material, target_printer, target_group, priority,"
-        " reason, created_ms, updated_ms, gcode_lines, filament_g)"
-        " VALUES(?,?,?,?,'orient',0.5,45,1,?,2,'PLA','','',0,?,?,?,5000,3.5)",
-        ("bracket-%05d.stl" % i, sha, sha, "done" if done else "cancelled", 1 if done else 0,
-         "" if done else "cancelled by an operator", now - (n - i) * 60000, now - (n - i) * 60000))
+for done, t, r in rows():
+    cur = db.execute(JOB % tuple("?" * 8), r)
     if done:
-        db.execute("INSERT INTO prints(job_id, copy, printer, material, start_line, lines_acked,"
-                   " started_ms, ended_ms, outcome) VALUES(?,1,'mk3','PLA',1,5000,?,?,'done')",
-                   (cur.lastrowid, now - (n - i) * 60000, now - (n - i) * 60000 + 30000))
+        db.execute(PRINT % ("VALUES(?,", "?", "?") + ")", (cur.lastrowid, t, t + 30000))
 db.commit()
 PY
 }
