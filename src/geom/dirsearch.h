@@ -89,7 +89,8 @@ void dirsearch_result_release(struct dirsearch_result *res);
  * pol->min_gain of each other (the estimate's noise) the one with less
  * support.  A reshaped winner gives way to the best result
  * of unchanged shape unless it is worth it against that (printtime_worth),
- * as a reshape must be worth it against its own orientation (surfopt.h): a
+ * as a reshape must be worth it against its own orientation (surfopt.h), or
+ * faster beyond min_gain with support within the noise of that one's: a
  * flat lid bent into a shallow roof saved the model 0.01 g over the lid
  * turned over and printed 33 % slower in PrusaSlicer (mech lid_down).
  * Returns the index (n >= 1).
