@@ -7,13 +7,16 @@
 # the figure (so a missing peer row leaves the part out of that column only).
 # worse: either peer's support rose beyond 2 % + 0.05 g (slicer noise);
 # slower: PrusaSlicer's estimate rose over 2 %; same: the same STL, or
-# grams within 0.5 % + 0.02 g of the part as given in both peers (the
-# optimizer handed the part back, perhaps rewritten), not counting the
+# grams within 0.5 % + 0.02 g of the part as given in every peer with both
+# figures (the optimizer handed the part back, perhaps rewritten; a run of
+# PrusaSlicer alone counted only identical files), not counting the
 # parts that need no support as given (none: at most 0.05 g, slicer noise,
 # in every peer with a figure), which are rightly handed back: they are
 # counted apart, and "same" is what the one-in-ten rule of issue 36 reads.
 function num(x) { return x ~ /^-?[0-9.]+$/ }
 function near(a, b) { return num(a) && num(b) && (a - b <= 0.005 * b + 0.02) && (b - a <= 0.005 * b + 0.02) }
+# a peer without both figures says nothing; at least one must say near
+function near2(a, b, c, d) { return (near(a, b) || !num(a) || !num(b)) && (near(c, d) || !num(c) || !num(d)) && (near(a, b) || near(c, d)) }
 function nosup(g, c) { return (num(g) || num(c)) && (!num(g) || g <= 0.05) && (!num(c) || c <= 0.05) }
 function pct(a, b) { return b > 0 ? sprintf("%+.1f%%", 100 * (a - b) / b) : "-" }
 {
@@ -35,7 +38,7 @@ END {
     if ((num(ps[i]) && num(gps[key]) && ps[i] > 1.02 * gps[key] + 0.05) ||
         (num(ce[i]) && num(gce[key]) && ce[i] > 1.02 * gce[key] + 0.05)) worse[t]++
     if (v[i] != "given" && nosup(gps[key], gce[key])) none[t]++
-    else if (v[i] != "given" && (md5[i] == gmd5[key] || (near(ps[i], gps[key]) && near(ce[i], gce[key])))) same[t]++
+    else if (v[i] != "given" && (md5[i] == gmd5[key] || near2(ps[i], gps[key], ce[i], gce[key]))) same[t]++
     if (num(mndr[i]) && mndr[i] > mx_m[t]) mx_m[t] = mndr[i]
     if (num(andr[i]) && andr[i] > mx_a[t]) mx_a[t] = andr[i]
   }
