@@ -26,6 +26,9 @@
    FREEZE_MAX freezes in a round, folds halve the turns everywhere. */
 #define FREEZE_RINGS 2
 #define FREEZE_MAX   16
+/* The runs: halving only; freezing (frozen vertices ask for no turn);
+   freezing and holding (frozen vertices also stay where they are). */
+enum { FREEZE_NONE, FREEZE_SOFT, FREEZE_HOLD };
 /* A round that lowers its proxy by less than this share in `patience`
    iterates is crawling: the adaptive weights loosen as when it stalls. */
 #define CRAWL 0.01
@@ -128,8 +131,9 @@ struct system {
     double *rhs; /* 3n */
     double *x;   /* 3n */
     bool *fixed;
-    double *w_face; /* per face: its input area over the mean (constant) */
-    double anchor;  /* the pull toward the input's positions in this factor */
+    double *w_face;      /* per face: its input area over the mean (constant) */
+    double anchor;       /* the pull toward the input's positions in this factor */
+    const uint8_t *hold; /* NULL, or per vertex: held where it stands (FREEZE_HOLD) */
 };
 
 /* A light pull toward the current shape: keeps the system definite when
@@ -274,7 +278,7 @@ system_build(struct system *s, const struct mesh *cur, const struct mesh *ref,
     struct vec3 lo, hi;
     mesh_bbox(cur, &lo, &hi);
     for (uint32_t i = 0; i < n; i++)
-        s->fixed[i] = cur->v[i].z <= lo.z + p->fix_bottom_mm;
+        s->fixed[i] = cur->v[i].z <= lo.z + p->fix_bottom_mm || (s->hold && s->hold[i]);
 
     size_t t = 0;
     if (beta > 0)
@@ -512,7 +516,7 @@ struct round_buf {
     double *acc;
     struct vec3 *best;
     double *share;
-    uint8_t *fold, *grow;
+    uint8_t *fold, *grow, *held;
 };
 
 static void
@@ -523,6 +527,7 @@ round_buf_release(struct round_buf *rb)
     free(rb->share);
     free(rb->fold);
     free(rb->grow);
+    free(rb->held);
 }
 
 /* rb's buffers and s's face weights for cur, the shares from the saliency
@@ -535,9 +540,9 @@ round_buf_alloc(struct round_buf *rb, struct system *s, const struct mesh *cur, 
     rb->acc = mem_array(3 * (size_t)n, sizeof(double));
     rb->best = mem_array(n, sizeof(*rb->best));
     rb->share = mem_array(n, sizeof(double));
-    rb->fold = mem_array(n, 1), rb->grow = mem_array(n, 1);
+    rb->fold = mem_array(n, 1), rb->grow = mem_array(n, 1), rb->held = mem_calloc(n, 1);
     s->w_face = mem_array(cur->n_tris, sizeof(double));
-    if (!rb->acc || !rb->best || !rb->share || !rb->fold || !rb->grow || !s->w_face)
+    if (!rb->acc || !rb->best || !rb->share || !rb->fold || !rb->grow || !rb->held || !s->w_face)
         return sf_err_set(err, SF_ENOMEM, "surface optimizer: out of memory for %u vertices", n);
     memcpy(rb->share, sal, (size_t)n * sizeof(*rb->share));
     return SF_OK;
@@ -556,6 +561,40 @@ system_start(struct system *s, struct mesh *cur, const struct mesh *ref,
         return rc;
     res->factor_s += clock_mono_s() - t0;
     return SF_OK;
+}
+
+/*
+ * Freezing: a fold is local (a thin fin, a tight crease), and so is a move
+ * past the largest allowed one (a flange, a ledge): the vertices where it
+ * crossed or moved too far (rb->fold) and two rings around them keep their
+ * shape from now on (their faces ask for no turn), and the round goes on
+ * from the best shape at the same step, so the rest of the part still
+ * turns; with FREEZE_HOLD they are also held where the best shape has them
+ * (a frozen vertex still moved with its neighbours' turns, which dragged a
+ * fold back: scad example006's dimples).  Returns 1 when it froze (cur is
+ * the best shape again), 0 when nothing new can be frozen or after
+ * FREEZE_MAX freezes (the caller halves the turns everywhere), or an error.
+ */
+static int
+freeze_step(struct mesh *cur, const struct mesh *ref, struct system *s, struct round_buf *rb,
+            int freeze, int *n_freezes, double beta, double anchor, const struct surfopt_params *p,
+            struct surfopt_result *res, struct sf_err *err)
+{
+    uint32_t n = cur->n_verts;
+    if (!(freeze_folds(ref, rb->fold, rb->grow, rb->share) > 0 && *n_freezes < FREEZE_MAX))
+        return 0;
+    (*n_freezes)++;
+    res->n_frozen++;
+    memcpy(cur->v, rb->best, (size_t)n * sizeof(*rb->best));
+    if (freeze == FREEZE_HOLD) {
+        for (uint32_t v = 0; v < n; v++)
+            rb->held[v] |= rb->fold[v];
+        s->hold = rb->held;
+        int rc = refactor(s, cur, ref, p, beta, anchor, res, err);
+        if (rc < 0)
+            return rc;
+    }
+    return 1;
 }
 
 /* How a round is getting on: the best proxy, and the iterations since it
@@ -603,7 +642,7 @@ new_folds(struct selfx_ref *sxr, const struct mesh *cur, bool check, uint8_t *fo
 /* One geometry round in the current frame.  cur ends as the round's best. */
 static int
 geometry_round(struct mesh *cur, const struct mesh *ref, struct selfx_ref *sxr, const double *sal,
-               const struct surfopt_params *p, int round, bool freeze, struct surfopt_result *res,
+               const struct surfopt_params *p, int round, int freeze, struct surfopt_result *res,
                struct snapshot *keep, int *n_keep, int *n_improved, struct sf_err *err)
 {
     uint32_t n = cur->n_verts;
@@ -656,17 +695,10 @@ geometry_round(struct mesh *cur, const struct mesh *ref, struct selfx_ref *sxr, 
         if (freeze && folds == 0 && dev.mndr > p->max_mndr && dev.andr <= p->max_andr)
             far = mark_far(cur, ref, p->max_mndr * diag, rb.fold);
         if ((folds > 0 || far > 0) && freeze) {
-            /* Freezing: a fold is local (a thin fin, a tight crease), and so
-             * is a move past the largest allowed one (a flange, a ledge):
-             * the vertices where it crossed or moved too far and two rings
-             * around them keep their shape from now on (their faces ask for
-             * no turn), and the round goes on from the best shape at the
-             * same step, so the rest of the part still turns.  Only when
-             * nothing new can be frozen, or after FREEZE_MAX freezes, are
-             * the turns halved everywhere. */
-            if (freeze_folds(ref, rb.fold, rb.grow, rb.share) > 0 && n_freezes < FREEZE_MAX) {
-                n_freezes++;
-                memcpy(cur->v, rb.best, (size_t)n * sizeof(*rb.best));
+            if ((rc = freeze_step(cur, ref, &s, &rb, freeze, &n_freezes, beta, anchor, p, res,
+                                  err)) < 0)
+                goto out;
+            if (rc > 0) {
                 pc.since_best = 0;
                 continue;
             }
@@ -845,7 +877,7 @@ prep_make(const struct mesh *m, const struct surfopt_params *p, struct prep *pr,
    freezes where it folded (geometry_round). */
 static int
 optimize_once(const struct mesh *m, const struct surfopt_params *p, const struct prep *pr,
-              bool freeze, struct surfopt_result *res, struct sf_err *err)
+              int freeze, struct surfopt_result *res, struct sf_err *err)
 {
     memset(res, 0, sizeof(*res));
     mesh_init(&res->out);
@@ -952,25 +984,31 @@ surfopt_optimize(const struct mesh *m, const struct surfopt_params *p, struct su
     double t0 = clock_mono_s();
     struct prep pr;
     if ((rc = prep_make(m, p, &pr, err)) < 0 ||
-        (rc = optimize_once(m, p, &pr, false, res, err)) < 0 || res->n_halved == 0)
+        (rc = optimize_once(m, p, &pr, FREEZE_NONE, res, err)) < 0 || res->n_halved == 0)
         goto out;
     /* Some iterate folded or moved too far, and halving the turns
      * everywhere held the whole part back for it: run again freezing only
      * where it folded or moved too far, and the model picks (anchor's 4 searched directions:
      * one 10.84 -> 6.83 model g halving, 9.01 freezing; cow's best 3.67 -> 2.60 halving, 2.96 ->
-     * 1.37 freezing). */
-    struct surfopt_result alt;
-    if ((rc = optimize_once(m, p, &pr, true, &alt, err)) < 0) {
-        surfopt_result_release(res);
-        goto out;
+     * 1.37 freezing); when it froze any, once more holding the frozen
+     * vertices in place (surfopt.h).  The kept run's seconds count every run. */
+    for (int mode = FREEZE_SOFT; mode <= FREEZE_HOLD; mode++) {
+        struct surfopt_result alt;
+        if ((rc = optimize_once(m, p, &pr, mode, &alt, err)) < 0) {
+            surfopt_result_release(res);
+            goto out;
+        }
+        bool froze = alt.n_frozen > 0;
+        if (alt.model_after_g < res->model_after_g) {
+            struct surfopt_result t = *res;
+            *res = alt;
+            alt = t;
+        }
+        seconds_add(res, &alt, &pr);
+        surfopt_result_release(&alt);
+        if (!froze)
+            break; /* holding nothing frozen is the same run */
     }
-    if (alt.model_after_g < res->model_after_g) {
-        struct surfopt_result t = *res;
-        *res = alt;
-        alt = t;
-    }
-    seconds_add(res, &alt, &pr);
-    surfopt_result_release(&alt);
 out:
     res->total_s = clock_mono_s() - t0;
     prep_release(&pr);

@@ -17,7 +17,8 @@
 # CuraEngine support grams, PrusaSlicer's estimated time, ours, each with its
 # % change; the parts whose support rose in either peer beyond 2 % + 0.05 g
 # of slicer noise, those printing over 2 % slower, those unchanged (the same
-# STL, or grams within 0.5 % + 0.02 g in both peers), the largest MNDR and
+# STL, or grams within 0.5 % + 0.02 g in both peers; a part that needs no
+# support as given is counted apart, as none), the largest MNDR and
 # ANDR), over the parts where both rows have figures
 # (tests/bench/valsets/totals.awk); with more than one set a last table puts
 # the sets' % changes side by side.
