@@ -154,9 +154,10 @@ supmodel_snap_touch(const struct ray_grid *g, struct supmodel_snap s, uint32_t c
                     uint32_t seed[4])
 {
     uint32_t i = c % g->nu, j = c / g->nu;
-    /* across the line at the cell's own centre: one cell back along that axis */
-    bool au = g->nu % 2 && (i + s.ou) % s.bs == 0 && i > 0;
-    bool aw = g->nw % 2 && (j + s.ow) % s.bs == 0 && j > 0;
+    /* across the line at the cell's own centre: one cell back along that axis (a snap cell of
+       one raster cell has no line through a centre) */
+    bool au = s.bs > 1 && g->nu % 2 && (i + s.ou) % s.bs == 0 && i > 0;
+    bool aw = s.bs > 1 && g->nw % 2 && (j + s.ow) % s.bs == 0 && j > 0;
     int n = 0;
     for (int dw = 0; dw <= (int)aw; dw++)
         for (int du = 0; du <= (int)au; du++) {

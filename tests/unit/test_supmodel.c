@@ -11,6 +11,7 @@
 #include "../../src/geom/measure.h"
 #include "../../src/geom/rims.h"
 #include "../../src/geom/supmodel.h"
+#include "../../src/geom/supmodel_int.h"
 #include "../../src/mesh/shapes.h"
 #include "../../src/mesh/subdiv.h"
 #include "../t.h"
@@ -654,4 +655,20 @@ T_CASE(supmodel_prusa_takes_a_triangle_soup)
     T_EQ_DBL(a.grams, b.grams, 0.1 * b.grams + 0.05);
     mesh_release(&s);
     mesh_release(&m);
+}
+
+/* A snap cell of one raster cell (snap 0) has no grid line through a raster centre: a contact
+   touches its own cell only.  Without the guard every contact on an odd raster also took the
+   cell before it, doubling the support's area. */
+T_CASE(supmodel_snap_of_one_cell_touches_only_its_own)
+{
+    struct ray_grid g = { .nu = 5, .nw = 5 };
+    struct supmodel_snap s = supmodel_snap_of(&g, 1);
+    uint32_t blk[4], seed[4];
+    for (uint32_t c = 0; c < g.nu * g.nw; c++) {
+        T_EQ_INT(supmodel_snap_touch(&g, s, c, blk, seed), 1);
+        T_EQ_INT((long long)seed[0], (long long)c);
+    }
+    struct supmodel_snap s3 = supmodel_snap_of(&g, 3);
+    T_EQ_INT(supmodel_snap_touch(&g, s3, 2 * g.nu + 2, blk, seed), 4); /* the centre line */
 }
