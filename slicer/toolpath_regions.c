@@ -231,7 +231,10 @@ projected_skins(const struct layer_stack *s, uint32_t k, const struct slice_prof
            narrow" regularization in discover_horizontal_shells) */
         double mg = 3 * p->solid_width_mm;
         TP_TRY(clip_offset(&t[T_SOLID], -mg, CLIP_JOIN_MITER, &t[T_TMP]));
-        TP_TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_KEEP]));
+        /* grown back a grid unit more (PrusaSlicer's ClipperSafetyOffset,
+           the same 10 nm): the offsets' rounding leaves hairlines along
+           slanted edges, and a hairline is not a band too narrow */
+        TP_TRY(clip_offset(&t[T_TMP], mg + 1 / POLY_SCALE, CLIP_JOIN_MITER, &t[T_KEEP]));
         TP_TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
         if (t[T_TMP].n) {
             TP_TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_LINES]));

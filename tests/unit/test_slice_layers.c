@@ -404,6 +404,44 @@ T_CASE(steep_slope_gets_a_band_of_solid)
     ts_free(&m);
 }
 
+/* An octahedron whose faces move w in (above its equator, z 5) or out
+   (below) per 0.2 mm layer: each layer's top or bottom surface is a band
+   w wide at its outline.  Layers 12 (z 2.5) and 37 (z 7.5) are squares of
+   side 25 w (turned 45 degrees); their solid is a band to n w + skin_margin
+   in, n the bottom or top layers: the surfaces of the n layers, the
+   farthest grown skin_margin into its infill (top: layer 37 too; faces
+   receding faster than 0.9 mm a layer get an extra loop there). */
+static void
+expect_slope_skins(double w, bool top)
+{
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    double inset = p.width_mm / 2 + 1.5 * tp_spacing(p.width_mm, 0.2);
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_octahedron(&m, 5 * w / 0.2 * sqrt(2), 5) == 0);
+    struct layer_stack s;
+    T_OK(slice_areas(&m, &p, &s, &err), &err);
+    double inner = 25 * w - 2 * inset; /* 12.5 layers from the tips */
+    expect_solid_band(&s, 12, &p, inner, p.bottom_layers * w + p.skin_margin_mm - inset);
+    if (top)
+        expect_solid_band(&s, 37, &p, inner, p.top_layers * w + p.skin_margin_mm - inset);
+    slice_profile_release(&p);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+T_CASE(slanted_skin_wide_enough_is_not_widened)
+{
+    /* faces moving 1 mm a layer under the equator: the bands reach the
+       inner area (0.84 mm in) and the skin is 5 mm wide, past the 3 solid lines
+       (1.35 mm) that "too narrow" asks for.  Along slanted edges the
+       opening's rounding left hairlines, each taken for a band too
+       narrow: the skin grew 3 lines wider all round (PrusaSlicer's
+       opening regrows ClipperSafetyOffset more, as ours now does) */
+    expect_slope_skins(1.0, false);
+}
+
 T_CASE(skins_leave_small_pieces_of_big_islands_sparse)
 {
     /* a 30 mm block under a 14 mm post: the block's top surface, grown
