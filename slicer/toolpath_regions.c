@@ -42,7 +42,9 @@ intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
  * side; a is used up): without slivers under a tenth of a line wide, as
  * PrusaSlicer 2.5 finds top and bottom surfaces (detect_surfaces_type:
  * opening by the external perimeter width / 10), then kept where it
- * reaches the inner area, grown skin_margin into it.  The skin is that
+ * reaches fill (the inner area grown infill_overlap into the loops:
+ * PrusaSlicer's fill_expolygons, to which slices_to_fill_surfaces_clipped
+ * trims its surfaces), grown skin_margin into the inner area.  The skin is that
  * grown part and the surface itself, perimeter zone included: projected
  * onto the layers within reach, a sloping surface's band lands inside
  * their inner areas (PrusaSlicer's discover_horizontal_shells projects
@@ -50,8 +52,9 @@ intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
  * surface's part in the inner area appended.
  */
 static int
-skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *p, struct paths *b,
-        struct paths *c, struct paths *out, struct paths *reach)
+skin_of(struct paths *a, const struct paths *inner, const struct paths *fill,
+        const struct slice_profile *p, struct paths *b, struct paths *c, struct paths *out,
+        struct paths *reach)
 {
     paths_reset(out);
     paths_reset(c);
@@ -63,7 +66,7 @@ skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *
         return rc;
     if ((rc = clip_offset(b, open, CLIP_JOIN_MITER, a)) < 0)
         return rc;
-    if ((rc = clip_bool(CLIP_INTERSECTION, a, inner, CLIP_NONZERO, b)) < 0)
+    if ((rc = clip_bool(CLIP_INTERSECTION, a, fill, CLIP_NONZERO, b)) < 0)
         return rc;
     if (reach && !paths_append(reach, b))
         return SF_ENOMEM;
@@ -124,7 +127,12 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
        thickens the layers under it and a bottom surface those over it,
        never the other way (PrusaSlicer's discover_horizontal_shells; one
        skin for both put solid under every overhang and over every top) */
-    struct paths a, b, c, seeds;
+    struct paths a, b, c, seeds, fill;
+    paths_init(&fill);
+    if (p->infill_overlap > 0)
+        rc = clip_offset(&L->inner, p->infill_overlap * sp, CLIP_JOIN_MITER, &fill);
+    else if (!paths_append(&fill, &L->inner))
+        rc = SF_ENOMEM;
     paths_init(&a);
     paths_init(&b);
     paths_init(&c);
@@ -137,7 +145,7 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
         else
             rc = paths_append(&a, &L->region) ? SF_OK : SF_ENOMEM;
         if (rc == SF_OK)
-            rc = skin_of(&a, &L->inner, p, &b, &c, out, side ? &seeds : &L->top_in);
+            rc = skin_of(&a, &L->inner, &fill, p, &b, &c, out, side ? &seeds : &L->top_in);
         paths_reset(&a);
     }
     if (rc == SF_OK && !paths_append(&seeds, &L->top_in))
@@ -163,6 +171,7 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
     paths_release(&b);
     paths_release(&c);
     paths_release(&seeds);
+    paths_release(&fill);
     return rc;
 }
 

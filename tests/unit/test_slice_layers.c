@@ -442,6 +442,24 @@ T_CASE(slanted_skin_wide_enough_is_not_widened)
     expect_slope_skins(1.0, false);
 }
 
+T_CASE(gentle_slope_skin_reaches_in_from_the_overlap)
+{
+    /* faces moving 0.8 mm a layer: each top or bottom surface stops short
+       of the inner area (0.84 mm in) but reaches PrusaSlicer's infill
+       area, which reaches infill_overlap into the loops (its
+       fill_expolygons, 0.73 mm in).  PrusaSlicer grows that sliver 3 mm
+       (process_external_surfaces) and projects it: solid to n x 0.8 + 3 mm
+       in.  Ours grew only what reached the inner area: n x 0.8 mm (widened
+       3 lines as too narrow), a skin a layer thinner along gentle slopes
+       (shared dino's belly 0.80 mm against PrusaSlicer's 1.00) */
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    double sp = tp_spacing(p.width_mm, 0.2), inset = p.width_mm / 2 + 1.5 * sp;
+    T_TRUE(0.8 <= inset && 0.8 > inset - p.infill_overlap * sp); /* the sliver exists */
+    slice_profile_release(&p);
+    expect_slope_skins(0.8, true);
+}
+
 T_CASE(skins_leave_small_pieces_of_big_islands_sparse)
 {
     /* a 30 mm block under a 14 mm post: the block's top surface, grown
