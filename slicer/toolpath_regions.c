@@ -261,6 +261,70 @@ out:
     return rc;
 }
 
+/*
+ * Without vertical shells, t[T_SOLID] = this layer's own skins and each
+ * other layer's within reach projected onto t[T_AREA], as PrusaSlicer
+ * 2.5's discover_horizontal_shells projects them: one layer's surfaces at
+ * a time, onto the infill area (reaching infill_overlap into the loops)
+ * less this layer's own surfaces, and a projection with bands narrower
+ * than 3 solid lines grows 3 lines there.  On a slope every layer's
+ * projection is such a band beyond the ones before: PrusaSlicer's skin
+ * reaches 3 lines past the farthest.  Regularizing the union instead (a
+ * wide band on a slope) left ours short by those 3 lines.
+ */
+static int
+projected_skins_each(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                     struct paths *t)
+{
+    const struct layer *L = &s->l[k];
+    int rc = SF_OK;
+    struct paths *own = &t[T_LINES], *internal = &t[T_TOPI], *piece = &t[T_S];
+    paths_reset(own);
+    if (!paths_append(own, &L->skin) || !paths_append(own, &L->skin_bottom))
+        TP_TRY(SF_ENOMEM);
+    if (p->infill_overlap > 0)
+        TP_TRY(clip_offset(&t[T_AREA], p->infill_overlap * tp_spacing(p->width_mm, L->h_mm),
+                           CLIP_JOIN_MITER, &t[T_BELOW]));
+    else if (!paths_append(&t[T_BELOW], &t[T_AREA]))
+        TP_TRY(SF_ENOMEM);
+    TP_TRY(clip_bool(CLIP_DIFFERENCE, &t[T_BELOW], own, CLIP_NONZERO, internal));
+    double mg = 3 * p->solid_width_mm;
+    for (int side = 0; side < 2 && internal->n; side++) {
+        long n = side ? p->bottom_layers : p->top_layers;
+        for (long d = 1; d < n; d++) {
+            long j = side ? (long)k - d : (long)k + d;
+            if (j < 0 || j >= (long)s->n)
+                break;
+            const struct paths *sk = side ? &s->l[j].skin_bottom : &s->l[j].skin;
+            if (!sk->n)
+                continue;
+            TP_TRY(clip_bool(CLIP_INTERSECTION, sk, internal, CLIP_NONZERO, piece));
+            if (!piece->n)
+                continue;
+            /* its bands too narrow: what an opening by 3 lines (regrown
+               ClipperSafetyOffset more) leaves out */
+            TP_TRY(clip_offset(piece, -mg, CLIP_JOIN_MITER, &t[T_TMP]));
+            TP_TRY(clip_offset(&t[T_TMP], mg + 1 / POLY_SCALE, CLIP_JOIN_MITER, &t[T_KEEP]));
+            TP_TRY(clip_bool(CLIP_DIFFERENCE, piece, &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
+            if (t[T_TMP].n) {
+                TP_TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_C]));
+                TP_TRY(clip_bool(CLIP_INTERSECTION, &t[T_C], internal, CLIP_NONZERO, &t[T_KEEP]));
+                if (!paths_append(own, &t[T_KEEP]))
+                    TP_TRY(SF_ENOMEM);
+            }
+            if (!paths_append(own, piece))
+                TP_TRY(SF_ENOMEM);
+        }
+    }
+    /* one pass: under the nonzero rule the pieces are their union */
+    paths_reset(&t[T_SOLID]);
+    if (own->n)
+        TP_TRY(clip_bool(CLIP_INTERSECTION, own, &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+    paths_reset(&t[T_KEEP]);
+out:
+    return rc;
+}
+
 int
 toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
                  struct paths *solid, struct paths *top, struct paths *sparse)
@@ -283,7 +347,10 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
        default and in the peers' runs) */
     if (p->vertical_shells)
         TP_TRY(vertical_shells(s, k, p, t));
-    TP_TRY(projected_skins(s, k, p, t));
+    if (p->vertical_shells)
+        TP_TRY(projected_skins(s, k, p, t));
+    else
+        TP_TRY(projected_skins_each(s, k, p, t));
     if (t[T_SOLID].n && t[T_KEEP].n) {
         /* solid narrower than a line is a sliver along a slope, not a
            skin: drop it and grow the rest a little, as PrusaSlicer 2.5
