@@ -304,12 +304,17 @@ projected_skins_each(const struct layer_stack *s, uint32_t k, const struct slice
             /* its bands too narrow: what an opening by 3 lines (regrown
                ClipperSafetyOffset more) leaves out */
             TP_TRY(clip_offset(piece, -mg, CLIP_JOIN_MITER, &t[T_TMP]));
-            TP_TRY(clip_offset(&t[T_TMP], mg + 1 / POLY_SCALE, CLIP_JOIN_MITER, &t[T_KEEP]));
-            TP_TRY(clip_bool(CLIP_DIFFERENCE, piece, &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
+            struct paths *narrow = piece; /* all of it, mostly: a band along a slope */
             if (t[T_TMP].n) {
-                TP_TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_C]));
-                TP_TRY(clip_bool(CLIP_INTERSECTION, &t[T_C], internal, CLIP_NONZERO, &t[T_KEEP]));
-                if (!paths_append(own, &t[T_KEEP]))
+                TP_TRY(clip_offset(&t[T_TMP], mg + 1 / POLY_SCALE, CLIP_JOIN_MITER, &t[T_KEEP]));
+                TP_TRY(clip_bool(CLIP_DIFFERENCE, piece, &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
+                narrow = &t[T_TMP];
+            }
+            /* grown, they are kept in the internal area: the final clip
+               to the area does it, since own is all the rest there */
+            if (narrow->n) {
+                TP_TRY(clip_offset(narrow, mg, CLIP_JOIN_MITER, &t[T_C]));
+                if (!paths_append(own, &t[T_C]))
                     TP_TRY(SF_ENOMEM);
             }
             if (!paths_append(own, piece))
