@@ -42,7 +42,9 @@ intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
  * side; a is used up): without slivers under a tenth of a line wide, as
  * PrusaSlicer 2.5 finds top and bottom surfaces (detect_surfaces_type:
  * opening by the external perimeter width / 10), then kept where it
- * reaches the inner area, grown skin_margin into it.  The skin is that
+ * reaches fill (the inner area grown infill_overlap into the loops:
+ * PrusaSlicer's fill_expolygons, to which slices_to_fill_surfaces_clipped
+ * trims its surfaces), grown skin_margin into the inner area.  The skin is that
  * grown part and the surface itself, perimeter zone included: projected
  * onto the layers within reach, a sloping surface's band lands inside
  * their inner areas (PrusaSlicer's discover_horizontal_shells projects
@@ -50,8 +52,9 @@ intersect_range(const struct layer_stack *s, long a, long b, struct paths *out)
  * surface's part in the inner area appended.
  */
 static int
-skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *p, struct paths *b,
-        struct paths *c, struct paths *out, struct paths *reach)
+skin_of(struct paths *a, const struct paths *inner, const struct paths *fill,
+        const struct slice_profile *p, struct paths *b, struct paths *c, struct paths *out,
+        struct paths *reach)
 {
     paths_reset(out);
     paths_reset(c);
@@ -63,7 +66,7 @@ skin_of(struct paths *a, const struct paths *inner, const struct slice_profile *
         return rc;
     if ((rc = clip_offset(b, open, CLIP_JOIN_MITER, a)) < 0)
         return rc;
-    if ((rc = clip_bool(CLIP_INTERSECTION, a, inner, CLIP_NONZERO, b)) < 0)
+    if ((rc = clip_bool(CLIP_INTERSECTION, a, fill, CLIP_NONZERO, b)) < 0)
         return rc;
     if (reach && !paths_append(reach, b))
         return SF_ENOMEM;
@@ -124,7 +127,12 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
        thickens the layers under it and a bottom surface those over it,
        never the other way (PrusaSlicer's discover_horizontal_shells; one
        skin for both put solid under every overhang and over every top) */
-    struct paths a, b, c, seeds;
+    struct paths a, b, c, seeds, fill;
+    paths_init(&fill);
+    if (p->infill_overlap > 0)
+        rc = clip_offset(&L->inner, p->infill_overlap * sp, CLIP_JOIN_MITER, &fill);
+    else if (!paths_append(&fill, &L->inner))
+        rc = SF_ENOMEM;
     paths_init(&a);
     paths_init(&b);
     paths_init(&c);
@@ -137,7 +145,7 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
         else
             rc = paths_append(&a, &L->region) ? SF_OK : SF_ENOMEM;
         if (rc == SF_OK)
-            rc = skin_of(&a, &L->inner, p, &b, &c, out, side ? &seeds : &L->top_in);
+            rc = skin_of(&a, &L->inner, &fill, p, &b, &c, out, side ? &seeds : &L->top_in);
         paths_reset(&a);
     }
     if (rc == SF_OK && !paths_append(&seeds, &L->top_in))
@@ -163,6 +171,7 @@ toolpath_areas(struct layer_stack *s, uint32_t k, const struct slice_profile *p)
     paths_release(&b);
     paths_release(&c);
     paths_release(&seeds);
+    paths_release(&fill);
     return rc;
 }
 
@@ -231,7 +240,10 @@ projected_skins(const struct layer_stack *s, uint32_t k, const struct slice_prof
            narrow" regularization in discover_horizontal_shells) */
         double mg = 3 * p->solid_width_mm;
         TP_TRY(clip_offset(&t[T_SOLID], -mg, CLIP_JOIN_MITER, &t[T_TMP]));
-        TP_TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_KEEP]));
+        /* grown back a grid unit more (PrusaSlicer's ClipperSafetyOffset,
+           the same 10 nm): the offsets' rounding leaves hairlines along
+           slanted edges, and a hairline is not a band too narrow */
+        TP_TRY(clip_offset(&t[T_TMP], mg + 1 / POLY_SCALE, CLIP_JOIN_MITER, &t[T_KEEP]));
         TP_TRY(clip_bool(CLIP_DIFFERENCE, &t[T_SOLID], &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
         if (t[T_TMP].n) {
             TP_TRY(clip_offset(&t[T_TMP], mg, CLIP_JOIN_MITER, &t[T_LINES]));
@@ -245,6 +257,75 @@ projected_skins(const struct layer_stack *s, uint32_t k, const struct slice_prof
         }
         paths_reset(&t[T_KEEP]);
     }
+out:
+    return rc;
+}
+
+/*
+ * Without vertical shells, t[T_SOLID] = this layer's own skins and each
+ * other layer's within reach projected onto t[T_AREA], as PrusaSlicer
+ * 2.5's discover_horizontal_shells projects them: one layer's surfaces at
+ * a time, onto the infill area (reaching infill_overlap into the loops)
+ * less this layer's own surfaces, and a projection with bands narrower
+ * than 3 solid lines grows 3 lines there.  On a slope every layer's
+ * projection is such a band beyond the ones before: PrusaSlicer's skin
+ * reaches 3 lines past the farthest.  Regularizing the union instead (a
+ * wide band on a slope) left ours short by those 3 lines.
+ */
+static int
+projected_skins_each(const struct layer_stack *s, uint32_t k, const struct slice_profile *p,
+                     struct paths *t)
+{
+    const struct layer *L = &s->l[k];
+    int rc = SF_OK;
+    struct paths *own = &t[T_LINES], *internal = &t[T_TOPI], *piece = &t[T_S];
+    paths_reset(own);
+    if (!paths_append(own, &L->skin) || !paths_append(own, &L->skin_bottom))
+        TP_TRY(SF_ENOMEM);
+    if (p->infill_overlap > 0)
+        TP_TRY(clip_offset(&t[T_AREA], p->infill_overlap * tp_spacing(p->width_mm, L->h_mm),
+                           CLIP_JOIN_MITER, &t[T_BELOW]));
+    else if (!paths_append(&t[T_BELOW], &t[T_AREA]))
+        TP_TRY(SF_ENOMEM);
+    TP_TRY(clip_bool(CLIP_DIFFERENCE, &t[T_BELOW], own, CLIP_NONZERO, internal));
+    double mg = 3 * p->solid_width_mm;
+    for (int side = 0; side < 2 && internal->n; side++) {
+        long n = side ? p->bottom_layers : p->top_layers;
+        for (long d = 1; d < n; d++) {
+            long j = side ? (long)k - d : (long)k + d;
+            if (j < 0 || j >= (long)s->n)
+                break;
+            const struct paths *sk = side ? &s->l[j].skin_bottom : &s->l[j].skin;
+            if (!sk->n)
+                continue;
+            TP_TRY(clip_bool(CLIP_INTERSECTION, sk, internal, CLIP_NONZERO, piece));
+            if (!piece->n)
+                continue;
+            /* its bands too narrow: what an opening by 3 lines (regrown
+               ClipperSafetyOffset more) leaves out */
+            TP_TRY(clip_offset(piece, -mg, CLIP_JOIN_MITER, &t[T_TMP]));
+            struct paths *narrow = piece; /* all of it, mostly: a band along a slope */
+            if (t[T_TMP].n) {
+                TP_TRY(clip_offset(&t[T_TMP], mg + 1 / POLY_SCALE, CLIP_JOIN_MITER, &t[T_KEEP]));
+                TP_TRY(clip_bool(CLIP_DIFFERENCE, piece, &t[T_KEEP], CLIP_NONZERO, &t[T_TMP]));
+                narrow = &t[T_TMP];
+            }
+            /* grown, they are kept in the internal area: the final clip
+               to the area does it, since own is all the rest there */
+            if (narrow->n) {
+                TP_TRY(clip_offset(narrow, mg, CLIP_JOIN_MITER, &t[T_C]));
+                if (!paths_append(own, &t[T_C]))
+                    TP_TRY(SF_ENOMEM);
+            }
+            if (!paths_append(own, piece))
+                TP_TRY(SF_ENOMEM);
+        }
+    }
+    /* one pass: under the nonzero rule the pieces are their union */
+    paths_reset(&t[T_SOLID]);
+    if (own->n)
+        TP_TRY(clip_bool(CLIP_INTERSECTION, own, &t[T_AREA], CLIP_NONZERO, &t[T_SOLID]));
+    paths_reset(&t[T_KEEP]);
 out:
     return rc;
 }
@@ -271,7 +352,10 @@ toolpath_regions(const struct layer_stack *s, uint32_t k, const struct slice_pro
        default and in the peers' runs) */
     if (p->vertical_shells)
         TP_TRY(vertical_shells(s, k, p, t));
-    TP_TRY(projected_skins(s, k, p, t));
+    if (p->vertical_shells)
+        TP_TRY(projected_skins(s, k, p, t));
+    else
+        TP_TRY(projected_skins_each(s, k, p, t));
     if (t[T_SOLID].n && t[T_KEEP].n) {
         /* solid narrower than a line is a sliver along a slope, not a
            skin: drop it and grow the rest a little, as PrusaSlicer 2.5

@@ -404,6 +404,75 @@ T_CASE(steep_slope_gets_a_band_of_solid)
     ts_free(&m);
 }
 
+/* An octahedron whose faces move w in (above its equator, z 5) or out
+   (below) per 0.2 mm layer: each layer's top or bottom surface is a band
+   w wide at its outline.  Layers 12 (z 2.5) and 37 (z 7.5) are squares of
+   side 25 w (turned 45 degrees).  Their solid (PrusaSlicer 2.5's
+   discover_horizontal_shells): the layer's own surface, grown skin_margin
+   into the infill (w + 3 mm in), and each of the n - 1 other layers' within
+   reach (n the bottom or top layers) projected onto the infill beyond it,
+   a band out to (d + 1) w + 3 mm for the layer d away; bands narrower than
+   3 solid lines grow 3 lines.  So the solid reaches n w + 3 mm in, 3 lines
+   more if the farthest band is narrower than 3 lines.  top: layer 37 too
+   (faces receding faster than 0.9 mm a layer get an extra loop there). */
+static void
+expect_slope_skins(double w, bool top)
+{
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    double inset = p.width_mm / 2 + 1.5 * tp_spacing(p.width_mm, 0.2);
+    struct mesh m = { 0 };
+    struct sf_err err;
+    T_TRUE(ts_octahedron(&m, 5 * w / 0.2 * sqrt(2), 5) == 0);
+    struct layer_stack s;
+    T_OK(slice_areas(&m, &p, &s, &err), &err);
+    double inner = 25 * w - 2 * inset; /* 12.5 layers from the tips */
+    for (int side = 0; side < 2; side++) {
+        int n = side ? p.top_layers : p.bottom_layers;
+        double reach = n * w + p.skin_margin_mm;
+        if ((n - 1) * w < 2 * 3 * p.solid_width_mm)
+            reach += 3 * p.solid_width_mm;
+        if (side == 0 || top)
+            expect_solid_band(&s, side ? 37 : 12, &p, inner, reach - inset);
+    }
+    slice_profile_release(&p);
+    layer_stack_release(&s);
+    ts_free(&m);
+}
+
+T_CASE(slanted_skin_wide_enough_is_not_widened)
+{
+    /* faces moving 1.5 mm a layer under the equator: the bottom surfaces
+       reach the inner area, and the 2 layers' above project 3 mm wide
+       bands past this layer's own skin, wider than the 3 solid lines
+       (1.35 mm) that "too narrow" asks for.  Along slanted edges the
+       opening's rounding left hairlines, each taken for a band too
+       narrow: the skin grew 3 lines wider all round (PrusaSlicer's
+       opening regrows ClipperSafetyOffset more, as ours now does) */
+    expect_slope_skins(1.5, false);
+}
+
+T_CASE(gentle_slope_skin_reaches_in_from_the_overlap)
+{
+    /* faces moving 0.8 mm a layer: each top or bottom surface stops short
+       of the inner area (0.84 mm in) but reaches PrusaSlicer's infill
+       area, which reaches infill_overlap into the loops (its
+       fill_expolygons, 0.73 mm in).  PrusaSlicer grows that sliver 3 mm
+       (process_external_surfaces) and projects it layer by layer, each
+       band narrower than 3 lines growing 3 lines: solid to n x 0.8 + 3 mm
+       + 3 lines in.  Ours grew only what reached the inner area (n x 0.8
+       mm, widened 3 lines), then regularized the union of the projections
+       (a wide band: n x 0.8 + 3 mm), a skin a layer or two thinner along
+       gentle slopes than PrusaSlicer's (shared dino's belly 0.80 mm
+       against its 1.00) */
+    struct slice_profile p;
+    T_OK(slice_profile_default(&p), NULL);
+    double sp = tp_spacing(p.width_mm, 0.2), inset = p.width_mm / 2 + 1.5 * sp;
+    T_TRUE(0.8 <= inset && 0.8 > inset - p.infill_overlap * sp); /* the sliver exists */
+    slice_profile_release(&p);
+    expect_slope_skins(0.8, true);
+}
+
 T_CASE(skins_leave_small_pieces_of_big_islands_sparse)
 {
     /* a 30 mm block under a 14 mm post: the block's top surface, grown
