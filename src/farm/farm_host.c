@@ -596,10 +596,20 @@ given_back(struct farm_host *h, int64_t id)
 static void
 on_given_timer(struct loop *l, void *ud)
 {
-    (void)l;
     struct farm_host *h = ud;
     h->given_timer = 0;
     farm_kick(h->f); /* what it gave back may be taken here again, if no other host took it */
+    /* and again when the next of those still barred may be: one given back after the first
+       would otherwise wait for some other kick, perhaps forever */
+    (void)given_back(h, 0); /* forgets those whose time passed */
+    int64_t next = 0;
+    for (size_t i = 0; i < h->n_given; i++)
+        if (!next || h->given[i].until < next)
+            next = h->given[i].until;
+    if (next) {
+        int64_t wait = next - clock_mono_ms();
+        h->given_timer = loop_timer_add(l, wait > 0 ? wait : 0, on_given_timer, h);
+    }
 }
 
 void

@@ -242,6 +242,53 @@ T_CASE(host_gives_back_a_ready_job_whose_gcode_it_cannot_fetch)
     store_close(a);
 }
 
+/* Two jobs given back one after the other are each taken here again in their time: the kick
+   at the first one's time comes again for the second (it used to come once, and the second
+   sat ready for good while nothing else woke the host). */
+T_CASE(host_takes_again_every_job_it_gave_back)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], sql[256];
+    snprintf(dir, sizeof(dir), "%s/givetwo", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta, ids[2], fence = 0;
+    T_OK(store_host_join(a, "a", 600000, &ta, &err), &err);
+    /* both G-codes only in a's data dir (one file): b gives each back when it takes it */
+    T_OK(add_ready_for(a, "q", &ids[0], &err), &err);
+    T_OK(add_ready_for(a, "q", &ids[1], &err), &err);
+    snprintf(sql, sizeof(sql),
+             "DELETE FROM file_blobs WHERE sha256 = (SELECT gcode_sha FROM jobs WHERE id = %lld)",
+             (long long)ids[0]);
+    T_OK(db_exec(url, sql), NULL);
+    host_lease_s = 2; /* b takes them again 2 s after it gave them back */
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    const char *given = "SELECT count(*) FROM events WHERE kind = 'job-give-back' AND ?1 = 0";
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS;
+         db_int(url, given, 0) < 2 && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20);
+    T_EQ_INT(db_int(url, given, 0), 2);
+    /* a takes the first one given back; b takes the second again in its time, unwoken */
+    int64_t first = db_int(url,
+                           "SELECT job_id FROM events WHERE kind = 'job-give-back' AND ?1 = 0"
+                           " ORDER BY id LIMIT 1",
+                           0);
+    int64_t second = first == ids[0] ? ids[1] : ids[0];
+    T_OK(store_job_take(a, "a", ta, first, &fence, &err), &err);
+    const char *again = "SELECT count(*) FROM events WHERE kind = 'job-give-back' AND job_id = ?1";
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS;
+         db_int(url, again, second) < 2 && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20);
+    T_EQ_INT(db_int(url, again, second), 2);
+    host_farm_free();
+    store_close(a);
+}
+
 T_CASE(defer_wakes_the_other_hosts)
 {
     SKIP_UNLESS_PG();
