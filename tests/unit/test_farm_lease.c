@@ -198,8 +198,8 @@ T_CASE(host_gives_back_a_ready_job_whose_gcode_it_cannot_fetch)
     snprintf(dir, sizeof(dir), "%s/giveback", t_tmpdir());
     snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
     snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    /* host a stored the job's G-code in its own data dir, and the database lost its chunks:
-       a has it, b cannot fetch it */
+    /* host a stored the job's G-code in its own data dir before files were shared: the
+       database knows the file but has none of its bytes; a has it, b cannot fetch it */
     struct store *a = store_open_host(dir_a, url, NULL, &err);
     T_TRUE(a != NULL);
     int64_t ta, id, fence = 0;
@@ -209,7 +209,7 @@ T_CASE(host_gives_back_a_ready_job_whose_gcode_it_cannot_fetch)
          &err);
     T_OK(add_ready_for(a, "q", &id, &err), &err);
     snprintf(sql, sizeof(sql),
-             "DELETE FROM file_chunks WHERE sha256 = (SELECT gcode_sha FROM jobs WHERE id = %lld)",
+             "DELETE FROM file_blobs WHERE sha256 = (SELECT gcode_sha FROM jobs WHERE id = %lld)",
              (long long)id);
     T_OK(db_exec(url, sql), NULL);
     T_OK(store_host_wake(a, &err), &err);
@@ -285,6 +285,40 @@ T_CASE(host_takes_again_every_job_it_gave_back)
          db_int(url, again, second) < 2 && clock_mono_ms() < end;)
         loop_run_once(hx.l, 20);
     T_EQ_INT(db_int(url, again, second), 2);
+    host_farm_free();
+    store_close(a);
+}
+
+/* A G-code file whose bytes in the database are damaged (a chunk gone) can be had by no host:
+   the start fails the job, naming the file, rather than passing it between hosts for good. */
+T_CASE(host_fails_a_ready_job_whose_gcode_the_store_lost)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[256], sql[256], sha[STORE_SHA_HEX];
+    snprintf(dir, sizeof(dir), "%s/lostchunk", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    int64_t id;
+    T_OK(add_ready_for(a, "q", &id, &err), &err);
+    db_text(url, "SELECT gcode_sha FROM jobs WHERE id = ?1", id, sha, sizeof(sha));
+    snprintf(sql, sizeof(sql), "DELETE FROM file_chunks WHERE sha256 = '%s'", sha);
+    T_OK(db_exec(url, sql), NULL);
+    T_OK(store_host_wake(a, &err), &err);
+    bool failed = wait_state(url, id, "failed");
+    if (!failed)
+        fprintf(stderr, "host b logged:\n%s", logged);
+    T_TRUE(failed);
+    db_text(url, "SELECT reason FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_TRUE(strstr(text, sha) != NULL);
+    T_EQ_INT(
+        db_int(url, "SELECT count(*) FROM events WHERE job_id = ?1 AND kind = 'job-give-back'", id),
+        0);
     host_farm_free();
     store_close(a);
 }
