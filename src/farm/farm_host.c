@@ -434,12 +434,11 @@ farm_host_stop(struct farm *f)
     listen_drop(h);
     struct sf_err err;
     if (h->joined) {
-        /* leave: the lease ends now and this host reaps itself, so its waiting work moves on
-           at once (its prints are interrupted already: farm_free) */
+        /* leave: the lease ends now and this host reaps itself (itself only: the others'
+           leases are the reap's, after its grace), so its waiting work moves on at once (its
+           prints are interrupted already: farm_free) */
         struct store_recovery moved;
-        int64_t now = clock_wall_ms();
-        if (store_host_beat(f->s, h->name, h->token, 1, &err) ||
-            store_host_reap(f->s, now + 2, &moved, &err) < 0)
+        if (store_host_leave(f->s, h->name, h->token, &moved, &err))
             log_warn("host", "%s: leave: %s", h->name, err.msg);
         else
             log_info("host", "%s left: %d jobs back in the queue", h->name, moved.requeued);

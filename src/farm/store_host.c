@@ -709,6 +709,37 @@ store_host_reap(struct store *s, int64_t now_ms, struct store_recovery *moved, s
     return rc ? rc : (int)n;
 }
 
+int
+store_host_leave(struct store *s, const char *name, int64_t token, struct store_recovery *moved,
+                 struct sf_err *err)
+{
+    if (moved)
+        *moved = (struct store_recovery){ 0, 0 };
+    struct sqldb_stmt *st;
+    struct reaped *rows = NULL;
+    size_t n = 0;
+    int64_t now = clock_wall_ms();
+    int rc = check_name(name, err);
+    if (rc || (rc = store_begin(s, err)))
+        return rc;
+    /* this process's lease alone: the other hosts' are the reap's, after its grace */
+    if ((rc = store_prepare(s, &st,
+                            "UPDATE hosts SET reaped_ms = ?1, lease_until_ms = ?1 WHERE name = ?2"
+                            " AND token = ?3 AND reaped_ms = 0 RETURNING name, heartbeat_ms",
+                            err)))
+        return store_end_tx(s, rc, err);
+    sqldb_bind_int64(st, 1, now);
+    sqldb_bind_text(st, 2, name);
+    sqldb_bind_int64(st, 3, token);
+    rc = store_read_rows(s, st, sizeof(*rows), read_reaped, (void **)&rows, &n, "leave", err);
+    for (size_t i = 0; i < n && rc == SF_OK; i++)
+        rc = reap_host(s, rows[i].name, now, rows[i].heartbeat_ms, moved, err);
+    free(rows);
+    if ((rc = store_end_tx(s, rc, err)) && moved)
+        *moved = (struct store_recovery){ 0, 0 };
+    return rc;
+}
+
 /* ---- listing ---- */
 
 static void

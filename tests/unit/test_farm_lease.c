@@ -323,6 +323,41 @@ T_CASE(host_fails_a_ready_job_whose_gcode_the_store_lost)
     store_close(a);
 }
 
+/* A host that stops leaves by its own name: a peer whose lease ran out (back from an outage,
+   not renewed yet) is the reap's, after its grace, not reaped by the leave. */
+T_CASE(host_leaving_reaps_itself_only)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], sql[256];
+    snprintf(dir, sizeof(dir), "%s/leave", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta;
+    T_OK(store_host_join(a, "a", 600000, &ta, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    snprintf(sql, sizeof(sql), "UPDATE hosts SET lease_until_ms = %lld WHERE name = 'a'",
+             (long long)(clock_wall_ms() - 1000));
+    T_OK(db_exec(url, sql), NULL);
+    host_farm_free();
+    T_EQ_INT(db_int(url,
+                    "SELECT count(*) FROM hosts WHERE reaped_ms = 0 AND name = 'a'"
+                    " AND ?1 = 0",
+                    0),
+             1);
+    T_EQ_INT(db_int(url,
+                    "SELECT count(*) FROM hosts WHERE reaped_ms > 0 AND name = 'b'"
+                    " AND ?1 = 0",
+                    0),
+             1);
+    T_OK(store_host_beat(a, "a", ta, 600000, &err), &err); /* a renews and carries on */
+    store_close(a);
+}
+
 T_CASE(defer_wakes_the_other_hosts)
 {
     SKIP_UNLESS_PG();
