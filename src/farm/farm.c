@@ -443,6 +443,12 @@ retry_later(struct farm *f)
         f->retry = loop_timer_add(f->l, FARM_RETRY_MS, on_retry, f);
 }
 
+void
+farm_retry_later(struct farm *f)
+{
+    retry_later(f);
+}
+
 /* Is a store error one that a later try may not have (busy, unreachable), not a verdict? */
 static bool
 passing(int rc)

@@ -70,6 +70,33 @@ startcheck_done(struct loop *l, void *ud, int rc)
     free(t);
 }
 
+/* What a start does with G-code store_file_path could not give (err): */
+enum fetch_verdict {
+    FETCH_RETRY,     /* a passing error (busy, unreachable, in doubt, memory): here, later */
+    FETCH_GIVE_BACK, /* this host cannot have it, another may: the host that stored it
+                        before files were shared, one whose disk did not fail */
+    FETCH_FAIL,      /* no host can: the file is gone from the store, or its bytes there are
+                        damaged (a missing or short chunk, the wrong SHA-256) */
+};
+
+static enum fetch_verdict
+fetch_verdict(struct farm *f, const char *sha, const struct sf_err *err)
+{
+    struct sf_err e;
+    switch (err->code) {
+    case SF_ENOTFOUND: { /* gone, or its bytes only in another host's data dir */
+        int known = store_file_known(f->s, sha, &e);
+        return known < 0 ? FETCH_RETRY : known ? FETCH_GIVE_BACK : FETCH_FAIL;
+    }
+    case SF_EIO: /* this host's file system (errno), else the store's bytes */
+        return err->sys_errno ? FETCH_GIVE_BACK : FETCH_FAIL;
+    case SF_EINVAL:
+        return FETCH_FAIL;
+    default:
+        return FETCH_RETRY;
+    }
+}
+
 void
 farm_start(struct farm *f, const struct job_row *j, struct printer *p)
 {
@@ -77,14 +104,16 @@ farm_start(struct farm *f, const struct job_row *j, struct printer *p)
     struct startcheck *t = mem_calloc(1, sizeof(*t));
     if (!t)
         return; /* the next kick tries again */
-    if (store_file_path(f->s, j->gcode_sha, t->path, sizeof(t->path), &err)) {
+    int rc = store_file_path(f->s, j->gcode_sha, t->path, sizeof(t->path), &err);
+    enum fetch_verdict v = rc ? fetch_verdict(f, j->gcode_sha, &err) : FETCH_FAIL;
+    if (rc && v != FETCH_FAIL) {
         log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
         free(t);
-        /* one of several hosts: this one took the job, and another may fetch its G-code
-           (the host that stored it before files were shared, one with room in its cache) */
         int64_t fence = printer_fence(p, j->id);
         printer_set_fence(p, 0, 0);
-        if (fence)
+        if (v == FETCH_RETRY)
+            farm_retry_later(f); /* the job stays this host's take, taken again then */
+        else if (fence)
             farm_host_give_back(f, j->id, fence, err.msg);
         return;
     }
@@ -97,12 +126,20 @@ farm_start(struct farm *f, const struct job_row *j, struct printer *p)
     t->scan = (struct drv_job_scan){ .lines_total = (uint64_t)j->gcode_lines };
     t->counted = j->gcode_lines > 0;
     farmcfg_policy(printer_cfg(p), &t->policy);
+    if (rc)
+        t->path[0] = '\0'; /* no file to estimate from */
     /* p is printing j from here: the scheduler picks neither again */
     if (printer_start(p, j, t->path)) {
         free(t);
         return;
     }
     t->token = printer_start_token(p);
+    if (rc) { /* no host can have its G-code: the start fails the job, naming the file */
+        sf_err_set(&t->err, rc, "its G-code (file %s) cannot be had from the store: %s",
+                   j->gcode_sha, err.msg);
+        startcheck_done(f->l, t, rc);
+        return;
+    }
     if (!pool_submit(f->io, startcheck_work, startcheck_done, t, &err))
         startcheck_done(f->l, t, startcheck_work(t, NULL)); /* no worker: judged here */
 }

@@ -434,12 +434,11 @@ farm_host_stop(struct farm *f)
     listen_drop(h);
     struct sf_err err;
     if (h->joined) {
-        /* leave: the lease ends now and this host reaps itself, so its waiting work moves on
-           at once (its prints are interrupted already: farm_free) */
+        /* leave: the lease ends now and this host reaps itself (itself only: the others'
+           leases are the reap's, after its grace), so its waiting work moves on at once (its
+           prints are interrupted already: farm_free) */
         struct store_recovery moved;
-        int64_t now = clock_wall_ms();
-        if (store_host_beat(f->s, h->name, h->token, 1, &err) ||
-            store_host_reap(f->s, now + 2, &moved, &err) < 0)
+        if (store_host_leave(f->s, h->name, h->token, &moved, &err))
             log_warn("host", "%s: leave: %s", h->name, err.msg);
         else
             log_info("host", "%s left: %d jobs back in the queue", h->name, moved.requeued);
@@ -596,10 +595,20 @@ given_back(struct farm_host *h, int64_t id)
 static void
 on_given_timer(struct loop *l, void *ud)
 {
-    (void)l;
     struct farm_host *h = ud;
     h->given_timer = 0;
     farm_kick(h->f); /* what it gave back may be taken here again, if no other host took it */
+    /* and again when the next of those still barred may be: one given back after the first
+       would otherwise wait for some other kick, perhaps forever */
+    (void)given_back(h, 0); /* forgets those whose time passed */
+    int64_t next = 0;
+    for (size_t i = 0; i < h->n_given; i++)
+        if (!next || h->given[i].until < next)
+            next = h->given[i].until;
+    if (next) {
+        int64_t wait = next - clock_mono_ms();
+        h->given_timer = loop_timer_add(l, wait > 0 ? wait : 0, on_given_timer, h);
+    }
 }
 
 void

@@ -77,6 +77,8 @@ void farm_printer_view(const struct printer *p, struct sched_printer *out);
  * scheduling pass tries again when nothing was committed.
  */
 void farm_start(struct farm *f, const struct job_row *j, struct printer *p);
+/* Kick the farm again in FARM_RETRY_MS (a passing store error). */
+void farm_retry_later(struct farm *f);
 
 /*
  * Printer c's config into the farm (c->name's printer is added if new):

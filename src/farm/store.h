@@ -229,6 +229,10 @@ int store_file_record(struct store *s, const char *sha, int64_t size, struct sf_
  * has them), SF_EIO for a missing or damaged chunk or the file system; nothing is cached.
  */
 int store_file_path(struct store *s, const char *sha, char *path, size_t cap, struct sf_err *err);
+/* Whether sha is in the files table: 1 it is, 0 it is not, or the database's error (SF_EBUSY,
+   SF_EUNREACH, SF_EIO: err says so), which is no answer: never taken for "not stored".  Tells
+   store_file_path's two SF_ENOTFOUND apart: gone (0), or only not fetchable here (1). */
+int store_file_known(struct store *s, const char *sha, struct sf_err *err);
 
 /* Add a queued job for a stored part file; o is validated (SF_EINVAL).  *id is the new job's,
    set before the COMMIT: on SF_EINDOUBT it names the job a read-back may find committed. */

@@ -478,24 +478,32 @@ store_host_teller(struct store *s, int64_t job_id, const char *printer, int64_t 
 
 /* ---- printers ---- */
 
-/* Printer p's owner, if a host other than name whose lease runs at now_ms: SF_EAGAIN, its
-   name into other (cap bytes; "" when p is free). */
+/*
+ * Printer p's owner, if a host other than name that was not reaped: SF_EAGAIN, its name into
+ * other (cap bytes; "" when p is free).
+ *
+ * Why unreaped rather than "its lease runs": a printer has one owner at a time.  After an
+ * outage of the database longer than the lease every lease ran out though no host died; a
+ * host that took the printers of an owner whose lease had only run out would schedule on them
+ * beside that owner, which renews and carries on (it calls own() again only for printers it
+ * found foreign).  A reap is final (the reaped process joins again as a new one, and own()s
+ * then), and it comes only after the reap's grace (farm_host.c may_reap): so a printer moves
+ * only from a reaped or absent owner.
+ */
 static int
-printer_free(struct store *s, const char *name, const char *p, int64_t now_ms, char *other,
-             size_t cap, struct sf_err *err)
+printer_free(struct store *s, const char *name, const char *p, char *other, size_t cap,
+             struct sf_err *err)
 {
     struct sqldb_stmt *st;
     int rc = store_prepare(s, &st,
                            "SELECT o.host FROM host_printers o JOIN hosts h ON h.name = o.host"
-                           " WHERE o.printer = ?1 AND o.host != ?2 AND h.reaped_ms = 0"
-                           " AND h.lease_until_ms > ?3",
+                           " WHERE o.printer = ?1 AND o.host != ?2 AND h.reaped_ms = 0",
                            err);
     other[0] = '\0';
     if (rc)
         return rc;
     sqldb_bind_text(st, 1, p);
     sqldb_bind_text(st, 2, name);
-    sqldb_bind_int64(st, 3, now_ms);
     rc = sqldb_step(st);
     if (rc == SQLDB_ROW)
         store_copy_text(other, cap, st, 0);
@@ -508,8 +516,8 @@ printer_free(struct store *s, const char *name, const char *p, int64_t now_ms, c
     return rc == SQLDB_DONE ? SF_OK : store_db_fail(s, err, "printer owner");
 }
 
-/* Own printer p, unless a live host other than name owns it: SF_EAGAIN, that host's name
-   into other (cap bytes). */
+/* Own printer p, unless an unreaped host other than name owns it (printer_free): SF_EAGAIN,
+   that host's name into other (cap bytes). */
 static int
 own_one(struct store *s, const char *name, const char *p, int64_t now_ms, char *other, size_t cap,
         struct sf_err *err)
@@ -518,18 +526,18 @@ own_one(struct store *s, const char *name, const char *p, int64_t now_ms, char *
     if (!p || !p[0] || strlen(p) >= 64)
         return sf_err_set(err, SF_EINVAL, "printer: '%.80s' is empty or longer than 63 bytes",
                           p ? p : "");
-    int rc = printer_free(s, name, p, now_ms, other, cap, err);
+    int rc = printer_free(s, name, p, other, cap, err);
     struct sqldb_stmt *st;
-    /* the owner's liveness again in the upsert: two hosts that both found the printer free
+    /* the owner's reap again in the upsert: two hosts that both found the printer free
        above would otherwise both take it (PostgreSQL: the second waits for the first's row,
-       then finds it live) */
+       then finds it unreaped) */
     if (rc || (rc = store_prepare(s, &st,
                                   "INSERT INTO host_printers(printer, host, since_ms)"
                                   " VALUES(?1, ?2, ?3) ON CONFLICT(printer) DO UPDATE SET"
                                   " host = excluded.host, since_ms = excluded.since_ms"
                                   " WHERE host_printers.host = excluded.host OR NOT EXISTS"
                                   " (SELECT 1 FROM hosts h WHERE h.name = host_printers.host"
-                                  " AND h.reaped_ms = 0 AND h.lease_until_ms > ?3)",
+                                  " AND h.reaped_ms = 0)",
                                   err)))
         return rc;
     sqldb_bind_text(st, 1, p);
@@ -539,7 +547,7 @@ own_one(struct store *s, const char *name, const char *p, int64_t now_ms, char *
         return rc;
     if (sqldb_changes(s->db) == 1)
         return SF_OK;
-    rc = printer_free(s, name, p, now_ms, other, cap, err); /* the message naming the owner */
+    rc = printer_free(s, name, p, other, cap, err); /* the message naming the owner */
     if (rc == SF_OK)
         snprintf(other, cap, "(unknown)");
     return rc ? rc : sf_err_set(err, SF_EAGAIN, "printer '%s' was taken by a live host", p);
@@ -699,6 +707,37 @@ store_host_reap(struct store *s, int64_t now_ms, struct store_recovery *moved, s
     if ((rc = store_end_tx(s, rc, err)) && moved)
         *moved = (struct store_recovery){ 0, 0 };
     return rc ? rc : (int)n;
+}
+
+int
+store_host_leave(struct store *s, const char *name, int64_t token, struct store_recovery *moved,
+                 struct sf_err *err)
+{
+    if (moved)
+        *moved = (struct store_recovery){ 0, 0 };
+    struct sqldb_stmt *st;
+    struct reaped *rows = NULL;
+    size_t n = 0;
+    int64_t now = clock_wall_ms();
+    int rc = check_name(name, err);
+    if (rc || (rc = store_begin(s, err)))
+        return rc;
+    /* this process's lease alone: the other hosts' are the reap's, after its grace */
+    if ((rc = store_prepare(s, &st,
+                            "UPDATE hosts SET reaped_ms = ?1, lease_until_ms = ?1 WHERE name = ?2"
+                            " AND token = ?3 AND reaped_ms = 0 RETURNING name, heartbeat_ms",
+                            err)))
+        return store_end_tx(s, rc, err);
+    sqldb_bind_int64(st, 1, now);
+    sqldb_bind_text(st, 2, name);
+    sqldb_bind_int64(st, 3, token);
+    rc = store_read_rows(s, st, sizeof(*rows), read_reaped, (void **)&rows, &n, "leave", err);
+    for (size_t i = 0; i < n && rc == SF_OK; i++)
+        rc = reap_host(s, rows[i].name, now, rows[i].heartbeat_ms, moved, err);
+    free(rows);
+    if ((rc = store_end_tx(s, rc, err)) && moved)
+        *moved = (struct store_recovery){ 0, 0 };
+    return rc;
 }
 
 /* ---- listing ---- */

@@ -104,7 +104,9 @@ struct store_host_owned {
 /*
  * Record the printers of host name's config (n names, each 1..63 bytes) as
  * its own, replacing what it owned before.  A printer belongs to one
- * config: one that another live host owns stays that host's.  With out (n
+ * config: one that another unreaped host owns stays that host's (even if its
+ * lease ran out: it may renew after an outage; the printer moves once it is
+ * reaped).  With out (n
  * entries) each printer's outcome goes there (out[i].owned false and
  * out[i].other naming the live owner for such a printer; the rest are
  * owned) and the call succeeds; with out NULL such a printer refuses the
@@ -126,6 +128,17 @@ int store_host_own(struct store *s, const char *name, int64_t token, const char 
  */
 int store_host_reap(struct store *s, int64_t now_ms, struct store_recovery *moved,
                     struct sf_err *err);
+
+/*
+ * Host name leaves (its process, token, stops): its lease ends now and it is
+ * reaped as store_host_reap reaps, in one transaction, so its waiting work
+ * moves on at once.  Only this host: the others' leases are the reap's (a
+ * host that reaped every lease about to end would undo the reap's grace
+ * after an outage).  Nothing to do (SF_OK, nothing moved) if it was reaped
+ * already or the name is another process's.
+ */
+int store_host_leave(struct store *s, const char *name, int64_t token, struct store_recovery *moved,
+                     struct sf_err *err);
 
 /* A host as `slimfarm hosts` shows it (plain data). */
 struct store_host_row {

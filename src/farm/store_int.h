@@ -230,9 +230,6 @@ int store_log_event(struct store *s, int64_t job_id, const char *printer, const 
 
 /* Whether sha is 64 lowercase hex digits. */
 bool store_sha_valid(const char *sha);
-/* Whether sha is in the files table: 1 it is, 0 it is not, or the database's error (SF_EBUSY,
-   SF_EUNREACH, SF_EIO: err says so), which is no answer: never taken for "not stored". */
-int store_file_known(struct store *s, const char *sha, struct sf_err *err);
 
 /* A running SHA-256 (store_file.c, over libcrypto): new, update with the bytes, final into
    hex (SF_EBUG if the library fails), free (NULL allowed).  new: NULL with err set. */

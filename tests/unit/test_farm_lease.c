@@ -198,8 +198,8 @@ T_CASE(host_gives_back_a_ready_job_whose_gcode_it_cannot_fetch)
     snprintf(dir, sizeof(dir), "%s/giveback", t_tmpdir());
     snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
     snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    /* host a stored the job's G-code in its own data dir, and the database lost its chunks:
-       a has it, b cannot fetch it */
+    /* host a stored the job's G-code in its own data dir before files were shared: the
+       database knows the file but has none of its bytes; a has it, b cannot fetch it */
     struct store *a = store_open_host(dir_a, url, NULL, &err);
     T_TRUE(a != NULL);
     int64_t ta, id, fence = 0;
@@ -209,7 +209,7 @@ T_CASE(host_gives_back_a_ready_job_whose_gcode_it_cannot_fetch)
          &err);
     T_OK(add_ready_for(a, "q", &id, &err), &err);
     snprintf(sql, sizeof(sql),
-             "DELETE FROM file_chunks WHERE sha256 = (SELECT gcode_sha FROM jobs WHERE id = %lld)",
+             "DELETE FROM file_blobs WHERE sha256 = (SELECT gcode_sha FROM jobs WHERE id = %lld)",
              (long long)id);
     T_OK(db_exec(url, sql), NULL);
     T_OK(store_host_wake(a, &err), &err);
@@ -239,6 +239,122 @@ T_CASE(host_gives_back_a_ready_job_whose_gcode_it_cannot_fetch)
         1);
     T_OK(store_job_take(a, "a", ta, id, &fence, &err), &err);
     host_farm_free();
+    store_close(a);
+}
+
+/* Two jobs given back one after the other are each taken here again in their time: the kick
+   at the first one's time comes again for the second (it used to come once, and the second
+   sat ready for good while nothing else woke the host). */
+T_CASE(host_takes_again_every_job_it_gave_back)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], sql[256];
+    snprintf(dir, sizeof(dir), "%s/givetwo", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta, ids[2], fence = 0;
+    T_OK(store_host_join(a, "a", 600000, &ta, &err), &err);
+    /* both G-codes only in a's data dir (one file): b gives each back when it takes it */
+    T_OK(add_ready_for(a, "q", &ids[0], &err), &err);
+    T_OK(add_ready_for(a, "q", &ids[1], &err), &err);
+    snprintf(sql, sizeof(sql),
+             "DELETE FROM file_blobs WHERE sha256 = (SELECT gcode_sha FROM jobs WHERE id = %lld)",
+             (long long)ids[0]);
+    T_OK(db_exec(url, sql), NULL);
+    host_lease_s = 2; /* b takes them again 2 s after it gave them back */
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    const char *given = "SELECT count(*) FROM events WHERE kind = 'job-give-back' AND ?1 = 0";
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS;
+         db_int(url, given, 0) < 2 && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20);
+    T_EQ_INT(db_int(url, given, 0), 2);
+    /* a takes the first one given back; b takes the second again in its time, unwoken */
+    int64_t first = db_int(url,
+                           "SELECT job_id FROM events WHERE kind = 'job-give-back' AND ?1 = 0"
+                           " ORDER BY id LIMIT 1",
+                           0);
+    int64_t second = first == ids[0] ? ids[1] : ids[0];
+    T_OK(store_job_take(a, "a", ta, first, &fence, &err), &err);
+    const char *again = "SELECT count(*) FROM events WHERE kind = 'job-give-back' AND job_id = ?1";
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS;
+         db_int(url, again, second) < 2 && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20);
+    T_EQ_INT(db_int(url, again, second), 2);
+    host_farm_free();
+    store_close(a);
+}
+
+/* A G-code file whose bytes in the database are damaged (a chunk gone) can be had by no host:
+   the start fails the job, naming the file, rather than passing it between hosts for good. */
+T_CASE(host_fails_a_ready_job_whose_gcode_the_store_lost)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[256], sql[256], sha[STORE_SHA_HEX];
+    snprintf(dir, sizeof(dir), "%s/lostchunk", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    int64_t id;
+    T_OK(add_ready_for(a, "q", &id, &err), &err);
+    db_text(url, "SELECT gcode_sha FROM jobs WHERE id = ?1", id, sha, sizeof(sha));
+    snprintf(sql, sizeof(sql), "DELETE FROM file_chunks WHERE sha256 = '%s'", sha);
+    T_OK(db_exec(url, sql), NULL);
+    T_OK(store_host_wake(a, &err), &err);
+    bool failed = wait_state(url, id, "failed");
+    if (!failed)
+        fprintf(stderr, "host b logged:\n%s", logged);
+    T_TRUE(failed);
+    db_text(url, "SELECT reason FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_TRUE(strstr(text, sha) != NULL);
+    T_EQ_INT(
+        db_int(url, "SELECT count(*) FROM events WHERE job_id = ?1 AND kind = 'job-give-back'", id),
+        0);
+    host_farm_free();
+    store_close(a);
+}
+
+/* A host that stops leaves by its own name: a peer whose lease ran out (back from an outage,
+   not renewed yet) is the reap's, after its grace, not reaped by the leave. */
+T_CASE(host_leaving_reaps_itself_only)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], sql[256];
+    snprintf(dir, sizeof(dir), "%s/leave", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta;
+    T_OK(store_host_join(a, "a", 600000, &ta, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    snprintf(sql, sizeof(sql), "UPDATE hosts SET lease_until_ms = %lld WHERE name = 'a'",
+             (long long)(clock_wall_ms() - 1000));
+    T_OK(db_exec(url, sql), NULL);
+    host_farm_free();
+    T_EQ_INT(db_int(url,
+                    "SELECT count(*) FROM hosts WHERE reaped_ms = 0 AND name = 'a'"
+                    " AND ?1 = 0",
+                    0),
+             1);
+    T_EQ_INT(db_int(url,
+                    "SELECT count(*) FROM hosts WHERE reaped_ms > 0 AND name = 'b'"
+                    " AND ?1 = 0",
+                    0),
+             1);
+    T_OK(store_host_beat(a, "a", ta, 600000, &err), &err); /* a renews and carries on */
     store_close(a);
 }
 

@@ -694,3 +694,38 @@ T_CASE(hosts_attach_on_a_printer_its_live_owner_holds_is_refused)
     T_TRUE(fb > fa);
     t_pair_close(&p);
 }
+
+/* A printer has one owner: after an outage of the database longer than the lease every lease
+   ran out, and the first host back must not take the printers of an owner that nobody reaped
+   (it renews and carries on); once that owner is reaped, the printer is free (issue 32). */
+T_CASE(hosts_own_no_printer_of_an_owner_whose_lease_only_ran_out)
+{
+    struct sf_err err;
+    struct t_pair p;
+    T_TRUE(pair_open(&p, "lapse", &err));
+    int64_t ta, tb;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    const char *net[] = { "net1" };
+    T_OK(store_host_own(p.a, "a", ta, net, 1, NULL, &err), &err);
+    T_OK(store_host_beat(p.a, "a", ta, 1, &err), &err);
+    for (int64_t end = clock_mono_ms() + 60000, gone = clock_wall_ms() + 5;
+         clock_wall_ms() <= gone && clock_mono_ms() < end;)
+        (void)poll(NULL, 0, 2); /* a bound, not a sleep: a's lease is past */
+    T_ERR(store_host_own(p.b, "b", tb, net, 1, NULL, &err), SF_EAGAIN, &err,
+          "belongs to live host 'a'");
+    /* a renews (the database is back): net1 is still a's alone */
+    T_OK(store_host_beat(p.a, "a", ta, LEASE_MS, &err), &err);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM host_printers WHERE printer = 'net1'"
+                                " AND host = 'a'"),
+             1);
+    /* a's lease runs out again, and b reaps it: now b may own net1 */
+    T_OK(store_host_beat(p.a, "a", ta, 1, &err), &err);
+    struct store_recovery moved;
+    T_EQ_INT(store_host_reap(p.b, clock_wall_ms() + 60 * 1000, &moved, &err), 1);
+    T_OK(store_host_own(p.b, "b", tb, net, 1, NULL, &err), &err);
+    T_EQ_INT(t_store_int(p.dir, "SELECT count(*) FROM host_printers WHERE printer = 'net1'"
+                                " AND host = 'b'"),
+             1);
+    t_pair_close(&p);
+}
