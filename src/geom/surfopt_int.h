@@ -43,4 +43,7 @@ int surfopt_choose_kept(const struct mesh *m, struct mesh *cur, double oriented_
                         const struct surfopt_params *p, struct surfopt_result *res,
                         struct support_metrics *sm, struct sf_err *err);
 
+/* SF_OK when p's values are in range, else SF_EINVAL naming the field (surfopt_params.c). */
+int surfopt_check_params(const struct surfopt_params *p, struct sf_err *err);
+
 #endif
