@@ -286,6 +286,9 @@ health_out(struct out *b, const struct farm_health *h)
     family(b, "slimfarm_loop_turn_max_seconds", "gauge",
            "Longest turn of the event loop since the start: every printer waited that long.");
     put(b, "slimfarm_loop_turn_max_seconds %.3f\n", h->loop_turn_max_ms / 1000.0);
+    family(b, "slimfarm_store_loop_round_trips_total", "counter",
+           "Statements the event loop sent to a PostgreSQL store and waited for (0 on SQLite).");
+    put(b, "slimfarm_store_loop_round_trips_total %lld\n", (long long)h->loop_round_trips);
     family(b, "slimfarm_store_queue_depth", "gauge", "Store writes queued on the store thread.");
     put(b, "slimfarm_store_queue_depth %zu\n", q->depth);
     family(b, "slimfarm_store_queue_depth_max", "gauge", "The most store writes queued at once.");

@@ -153,6 +153,7 @@ void
 farm_health(struct farm *f, struct farm_health *out)
 {
     out->loop_turn_max_ms = loop_turn_max_ms(f->l);
+    out->loop_round_trips = store_round_trips(f->s);
     storeq_stats(f->q, &out->store);
 }
 

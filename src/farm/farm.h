@@ -115,6 +115,7 @@ int farm_sync(struct farm *f, int64_t max_ms, struct sf_err *err);
 /* How the farm's loop and its store thread fare, for /metrics. */
 struct farm_health {
     int64_t loop_turn_max_ms;  /* loop_turn_max_ms of the farm's loop */
+    int64_t loop_round_trips;  /* statements the loop's own store connection sent to a server */
     struct storeq_stats store; /* the store thread's counters (storeq_stats) */
 };
 void farm_health(struct farm *f, struct farm_health *out);

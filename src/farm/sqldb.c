@@ -261,6 +261,12 @@ sqldb_reconnects(const struct sqldb *db)
     return db->reconnects;
 }
 
+int64_t
+sqldb_round_trips(const struct sqldb *db)
+{
+    return db->round_trips;
+}
+
 /* SF_OK if channel is a name LISTEN and pg_notify read alike (sqldb.h), else SF_EINVAL. */
 static int
 check_channel(struct sqldb *db, const char *channel)

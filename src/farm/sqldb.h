@@ -187,6 +187,10 @@ typedef int (*sqldb_reconnect_fn)(struct sqldb *db, void *arg, struct sf_err *er
 void sqldb_on_reconnect(struct sqldb *db, sqldb_reconnect_fn fn, void *arg);
 /* Successful reconnects of db so far (0 on SQLite). */
 int64_t sqldb_reconnects(const struct sqldb *db);
+/* Round trips to the server on db so far (statements sent, a session's restoring included;
+   0 on SQLite, whose statements never leave the process): what a caller waited on the
+   network for. */
+int64_t sqldb_round_trips(const struct sqldb *db);
 
 /*
  * LISTEN/NOTIFY.  A channel name is a-z, 0-9 and _, starting with a letter

@@ -54,6 +54,7 @@ struct sqldb {
     int64_t changes;                 /* rows the last write changed */
     bool in_tx;                      /* between a sqldb_begin and its commit or rollback */
     int64_t reconnects;              /* successful reconnects (sqldb_reconnects) */
+    int64_t round_trips;             /* statements sent to a server (sqldb_round_trips) */
     sqldb_reconnect_fn on_reconnect; /* sqldb_on_reconnect's; NULL if none */
     void *on_reconnect_arg;
 };

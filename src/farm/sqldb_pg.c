@@ -204,6 +204,7 @@ pg_exec(struct sqldb *db, const char *sql)
     /* a writer's transaction learns its id in BEGIN's round trip: a COMMIT lost on the way
        can then be looked up (pg_commit_outcome) */
     bool begin = strcmp(sql, "BEGIN") == 0 && !(p->flags & SQLDB_READONLY);
+    db->round_trips++;
     PGresult *res = PQexec(conn(db), begin ? "BEGIN; SELECT txid_current()" : sql);
     ExecStatusType es = PQresultStatus(res);
     if (es != PGRES_COMMAND_OK && es != PGRES_TUPLES_OK) {
@@ -399,6 +400,7 @@ pg_step(struct sqldb_stmt *base)
         int rc = ready((struct pg *)base->db);
         if (rc)
             return rc;
+        base->db->round_trips++;
         st->res = PQexecParams(conn(base->db), st->sql, st->n_params, st->types,
                                (const char *const *)st->vals, st->lens, st->fmts, 0);
         ExecStatusType es = PQresultStatus(st->res);
@@ -547,6 +549,7 @@ run_listen(struct pg *p, const char *channel)
 static int
 one_text(struct pg *p, const char *sql, int n, const char *const *params, char *out, size_t cap)
 {
+    p->base.round_trips++;
     PGresult *res = PQexecParams(p->conn, sql, n, NULL, params, NULL, NULL, 0);
     int rc = SF_OK;
     if (PQresultStatus(res) != PGRES_TUPLES_OK)
@@ -790,6 +793,7 @@ pg_notify(struct sqldb *db, const char *channel, const char *payload)
     if (rc)
         return rc;
     const char *vals[2] = { channel, payload };
+    db->round_trips++;
     PGresult *res =
         PQexecParams(conn(db), "SELECT pg_notify($1, $2)", 2, NULL, vals, NULL, NULL, 0);
     rc = PQresultStatus(res) == PGRES_TUPLES_OK ? SF_OK : fail_res(db, res, "SELECT pg_notify");

@@ -851,6 +851,12 @@ store_host_reconnects(struct store *s)
     return sqldb_reconnects(s->db);
 }
 
+int64_t
+store_round_trips(const struct store *s)
+{
+    return sqldb_round_trips(s->db);
+}
+
 /* store_host_printer_set in the caller's transaction. */
 static int
 printer_set_tx(struct store *s, const char *host, int64_t token, const char *printer,

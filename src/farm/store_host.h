@@ -256,6 +256,8 @@ int store_host_drain(struct store *s);
 /* How often s's connection came back after a loss (0 on SQLite): its socket is a new one
    each time, perhaps under the old one's number, so a watcher of the old one adds it again. */
 int64_t store_host_reconnects(struct store *s);
+/* Round trips s's connection made to the server so far (sqldb_round_trips; 0 on SQLite). */
+int64_t store_round_trips(const struct store *s);
 
 /*
  * Give job id (ready, printing, paused or interrupted) to host for its

@@ -253,3 +253,24 @@ T_CASE(sqldb_pg_open_unreachable_differs_from_refused)
     T_EQ_INT(err.code, SF_EIO);
     T_TRUE(strstr(err.msg, "sft_no_such_db") != NULL);
 }
+
+/* Every statement sent to a server is a round trip counted on its connection (what the loop
+   waited for: /metrics slimfarm_store_loop_round_trips_total); SQLite's never leave the
+   process and count none. */
+T_CASE(sqldb_counts_the_round_trips_a_server_was_asked)
+{
+    struct sqldb *db = fresh("trips");
+    T_TRUE(db != NULL);
+    int64_t before = sqldb_round_trips(db);
+    T_OK(sqldb_exec(db, "CREATE TABLE t(k TEXT)"), NULL);
+    struct sqldb_stmt *st;
+    T_OK(sqldb_prepare(db, "SELECT k FROM t WHERE k = ?", &st), NULL);
+    sqldb_bind_text(st, 1, "a");
+    T_STEP(st, SQLDB_DONE);
+    T_STEP(st, SQLDB_DONE); /* the rows are read: no second trip */
+    sqldb_finalize(st);
+    T_OK(sqldb_begin(db), NULL);
+    T_OK(sqldb_commit(db), NULL);
+    T_EQ_INT(sqldb_round_trips(db) - before, t_store_pg() ? 4 : 0);
+    sqldb_close(db);
+}
