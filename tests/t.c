@@ -124,3 +124,17 @@ main(int argc, char **argv)
     printf("%d passed, %d failed, %d skipped\n", passed, failed, skipped);
     return failed ? 1 : 0;
 }
+
+const char *
+t_slurp(const char *path)
+{
+    static char b[512];
+    b[0] = '\0';
+    FILE *f = fopen(path, "r");
+    if (f) {
+        size_t n = fread(b, 1, sizeof(b) - 1, f);
+        b[n] = '\0';
+        fclose(f);
+    }
+    return b;
+}

@@ -24,6 +24,8 @@ void t_register(const char *name, t_fn fn);
 void t_fail(const char *file, int line, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 /* Directory for scratch files of this test program (created, removed at exit). */
 const char *t_tmpdir(void);
+/* The first 511 bytes of file path ("" when it cannot be read), in a static buffer. */
+const char *t_slurp(const char *path);
 /* Path of ../shared/meshes/NAME if ../shared exists, else NULL (caller skips). */
 const char *t_shared_mesh(const char *name);
 /* Mark the running case skipped with a reason. */

@@ -202,21 +202,6 @@ T_CASE(sim_m999_m111_m997)
     close_host(&h);
 }
 
-/* The whole of file path ("" when it cannot be read), in a static buffer. */
-static const char *
-slurp(const char *path)
-{
-    static char b[512];
-    b[0] = '\0';
-    FILE *f = fopen(path, "r");
-    if (f) {
-        size_t n = fread(b, 1, sizeof(b) - 1, f);
-        b[n] = '\0';
-        fclose(f);
-    }
-    return b;
-}
-
 /*
  * hold=PATH: while PATH exists a printing move (G0-G3 with E and X or Y)
  * does not start: no ok, the lines behind it wait, "echo:busy: processing"
@@ -227,13 +212,14 @@ slurp(const char *path)
  */
 T_CASE(sim_hold_holds_printing_moves_while_its_file_exists)
 {
-    char path[] = "/tmp/sf-sim-hold-XXXXXX";
-    int fd = mkstemp(path);
+    char path[512];
+    snprintf(path, sizeof(path), "%s/marlin.hold", t_tmpdir());
+    int fd = open(path, O_WRONLY | O_CREAT | O_EXCL, 0600);
     T_TRUE(fd >= 0);
     if (fd < 0)
         return;
     close(fd);
-    char spec[64];
+    char spec[600];
     snprintf(spec, sizeof(spec), "hold=%s", path);
     host_fault = spec;
     struct host h;
@@ -246,14 +232,14 @@ T_CASE(sim_hold_holds_printing_moves_while_its_file_exists)
     }
     T_TRUE(ask(&h, 1, "G1 X5 Y5 F3000", "ok", 2000)); /* a travel */
     T_TRUE(ask(&h, 2, "G1 E-1 F2400", "ok", 2000));   /* a retraction */
-    T_EQ_STR(slurp(path), "");
+    T_EQ_STR(t_slurp(path), "");
     clear(&h);
     say(&h, 3, "G1 X10 Y10 E0.5");
     say(&h, 4, "M105");
     T_TRUE(heard(&h, "echo:busy: processing", 5000));
     pump(&h, 5000);
     T_TRUE(strstr(h.in, "ok") == NULL);
-    T_EQ_STR(slurp(path), "held: G1 X10 Y10 E0.5\n");
+    T_EQ_STR(t_slurp(path), "held: G1 X10 Y10 E0.5\n");
     unlink(path);
     clear(&h);
     T_TRUE(heard(&h, "ok T:", 1000)); /* the move's ok, then M105's */
@@ -268,7 +254,7 @@ T_CASE(sim_hold_holds_printing_moves_while_its_file_exists)
     say(&h, 6, "G2 X30 Y20 I5 J0 E1.5");
     pump(&h, 3000);
     T_TRUE(strstr(h.in, "ok") == NULL);
-    T_EQ_STR(slurp(path), "held: G2 X30 Y20 I5 J0 E1.5\n");
+    T_EQ_STR(t_slurp(path), "held: G2 X30 Y20 I5 J0 E1.5\n");
     close_host(&h);
     unlink(path);
     /* a PATH that does not exist holds nothing, and is not made */

@@ -137,21 +137,6 @@ T_CASE(job_runs_every_line_once_in_order)
     loop_free(l);
 }
 
-/* The whole of file path ("" when it cannot be read), in a static buffer. */
-static const char *
-slurp(const char *path)
-{
-    static char b[512];
-    b[0] = '\0';
-    FILE *f = fopen(path, "r");
-    if (f) {
-        size_t n = fread(b, 1, sizeof(b) - 1, f);
-        b[n] = '\0';
-        fclose(f);
-    }
-    return b;
-}
-
 /*
  * A network printer's firmware with the hold fault (faults.h hold=PATH):
  * while PATH exists the job stands at its first printing move, printing,
@@ -182,9 +167,9 @@ T_CASE(hold_fault_holds_a_job_until_released)
     write_job(np, "h.gcode", 200);
     T_OK(sim_netprinter_start(np, "h.gcode", &err), &err);
     double end = wall_s() + 60;
-    while (!slurp(hold)[0] && wall_s() < end)
+    while (!t_slurp(hold)[0] && wall_s() < end)
         loop_run_once(l, 20);
-    T_EQ_STR(slurp(hold), "held: G1 X10.5 Y20 E0.1 F3000\n");
+    T_EQ_STR(t_slurp(hold), "held: G1 X10.5 Y20 E0.1 F3000\n");
     struct sim_np_status st;
     sim_netprinter_status(np, &st);
     uint64_t done = st.lines_done;
