@@ -46,6 +46,10 @@
  */
 struct store *store_open_host(const char *data_dir, const char *db, struct store_recovery *rec,
                               struct sf_err *err);
+/* As store_open_host for a check of a shared store (slimfarmd --fsck): a schema older than
+   this program's is refused (SF_EUNSUPP, naming --init-store), not migrated under the hosts
+   that run on it. */
+struct store *store_open_check(const char *data_dir, const char *db, struct sf_err *err);
 
 /*
  * A second connection to s's database that may write, for another thread

@@ -729,3 +729,37 @@ T_CASE(hosts_own_no_printer_of_an_owner_whose_lease_only_ran_out)
              1);
     t_pair_close(&p);
 }
+
+/* A check of a shared store (slimfarmd --fsck) migrates nothing: a schema older than this
+   program's is refused, naming --init-store, and left as it was, since hosts of the older
+   version run on it (it was migrated, as a host's start would). */
+T_CASE(hosts_check_refuses_an_older_schema_and_leaves_it)
+{
+    struct sf_err err;
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/checkold", t_tmpdir());
+    const char *db = t_store_db(dir);
+    char target[1100];
+    snprintf(target, sizeof(target), "%s", db ? db : dir);
+    T_OK(store_init(target, NULL, &err), &err);
+    int v = store_schema_version();
+    char back[128];
+    snprintf(back, sizeof(back),
+             t_store_pg() ? "UPDATE schema_version SET version = %d" : "PRAGMA user_version = %d",
+             v - 1);
+    T_OK(t_store_exec(dir, back), NULL);
+    const char *read = t_store_pg() ? "SELECT version FROM schema_version" : "PRAGMA user_version";
+    T_TRUE(store_open_check(dir, t_store_db(dir), &err) == NULL);
+    T_EQ_INT(err.code, SF_EUNSUPP);
+    T_TRUE(strstr(err.msg, "older") && strstr(err.msg, "--init-store"));
+    T_EQ_INT(t_store_int(dir, read), v - 1);
+    /* the same store at this program's schema is checked */
+    snprintf(back, sizeof(back),
+             t_store_pg() ? "UPDATE schema_version SET version = %d" : "PRAGMA user_version = %d",
+             v);
+    T_OK(t_store_exec(dir, back), NULL);
+    struct store *s = store_open_check(dir, t_store_db(dir), &err);
+    T_TRUE(s != NULL);
+    T_OK(store_check(s, &err), &err);
+    store_close(s);
+}
