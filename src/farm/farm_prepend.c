@@ -54,8 +54,8 @@ on_end(void *ud, const struct storeq_result *r)
         if (post(e) == SF_OK)
             return;
     } else if (r->rc && r->rc != SF_EINVAL && r->rc != SF_ESTALE && r->rc != SF_ENOTFOUND) {
-        log_error("farm", "job %lld: %s not written: %s", (long long)e->id,
-                  job_event_name(e->ev), r->err->msg);
+        log_error("farm", "job %lld: %s not written: %s", (long long)e->id, job_event_name(e->ev),
+                  r->err->msg);
     }
     free(e);
 }

@@ -15,6 +15,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "../base/clock.h"
+
+#include "store_host.h"
 #include "store_int.h"
 
 static const char *const state_names[] = { "pending", "running", "done", "expired" };
@@ -195,6 +198,7 @@ store_command_add(struct store *s, const char *from, const char *printer, const 
     if (wait_ms <= 0)
         return sf_err_set(err, SF_EINVAL, "command: wait %lld ms is not after now",
                           (long long)wait_ms);
+    now_ms += store_clock_ms(s) - clock_wall_ms(); /* onto the database's clock */
     if ((rc = store_begin(s, err)))
         return rc;
     rc = add_tx(s, from, printer, kind, line, who, now_ms, wait_ms, out, err);
@@ -354,6 +358,7 @@ int
 store_command_printers(struct store *s, const char *me, int64_t now_ms,
                        struct store_command_printer **rows, size_t *n, struct sf_err *err)
 {
+    now_ms += store_clock_ms(s) - clock_wall_ms(); /* onto the database's clock */
     struct sqldb_stmt *st;
     void *out = NULL;
     int rc = store_select(

@@ -763,3 +763,41 @@ T_CASE(hosts_check_refuses_an_older_schema_and_leaves_it)
     T_OK(store_check(s, &err), &err);
     store_close(s);
 }
+
+/* Leases run on the database's clock, not each host's: a host whose clock runs a minute
+   ahead (SLIMFARM_TEST_CLOCK_SKEW_MS) reaps no live host, and one whose clock runs a minute
+   behind is not reaped as it joins.  Before, a's lease came out a minute short or long on
+   its peers' clocks, and the fast host reaped a peer within its 10 s lease. */
+T_CASE(hosts_leases_hold_across_hosts_whose_clocks_differ)
+{
+    T_SKIP_UNLESS(t_store_pg(), "hosts with clocks of their own share a PostgreSQL store");
+    struct sf_err err;
+    const char *dir = fresh_dir("skew");
+    char url[1024], dir_fast[600], dir_slow[600];
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    snprintf(dir_fast, sizeof(dir_fast), "%s-fast", dir);
+    snprintf(dir_slow, sizeof(dir_slow), "%s-slow", dir);
+    struct store *b = store_open_host(dir, url, NULL, &err);
+    T_TRUE(b != NULL);
+    setenv("SLIMFARM_TEST_CLOCK_SKEW_MS", "60000", 1);
+    struct store *fast = store_open_host(dir_fast, url, NULL, &err);
+    setenv("SLIMFARM_TEST_CLOCK_SKEW_MS", "-60000", 1);
+    struct store *slow = store_open_host(dir_slow, url, NULL, &err);
+    unsetenv("SLIMFARM_TEST_CLOCK_SKEW_MS");
+    T_TRUE(fast != NULL && slow != NULL);
+    int64_t tb, tf, ts;
+    T_OK(store_host_join(b, "b", 10000, &tb, &err), &err);
+    T_OK(store_host_join(fast, "fast", 10000, &tf, &err), &err);
+    struct store_recovery moved;
+    T_EQ_INT(store_host_reap(fast, clock_wall_ms(), &moved, &err), 0); /* b lives */
+    T_OK(store_host_join(slow, "slow", 10000, &ts, &err), &err);
+    T_EQ_INT(store_host_reap(b, clock_wall_ms(), &moved, &err), 0); /* slow lives */
+    int peers = -1;
+    T_OK(store_host_peers(fast, "fast", clock_wall_ms(), &peers, &err), &err);
+    T_EQ_INT(peers, 2);
+    T_OK(store_host_beat(slow, "slow", ts, 10000, &err), &err);
+    T_OK(store_host_beat(b, "b", tb, 10000, &err), &err);
+    store_close(slow);
+    store_close(fast);
+    store_close(b);
+}
