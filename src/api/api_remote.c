@@ -188,6 +188,16 @@ listing_finish(void *ud, struct http_resp *resp)
     }
     q->local(q->ud, NULL, resp);
     json_t *arr = json_object_get(resp->json, "printers");
+    /* a printer this host's config lists but another live host owns is that host's row
+       (this host never schedules on it, farm_host.h): listed once, as its owner shows it */
+    for (size_t i = json_array_size(arr); i-- > 0;) {
+        const char *name = json_string_value(json_object_get(json_array_get(arr, i), "name"));
+        for (size_t k = 0; name && k < q->n; k++)
+            if (strcmp(q->rows[k].name, name) == 0) {
+                json_array_remove(arr, i);
+                break;
+            }
+    }
     own_host(arr, q->me);
     for (size_t i = 0; arr && i < q->n; i++)
         json_array_append_new(arr, remote_json(&q->rows[i]));

@@ -151,6 +151,17 @@ remote_printer(const struct store_command_printer *r, struct metrics_printer *o)
     json_decref(v);
 }
 
+/* Is name among the other hosts' printers rem (n)?  A printer two hosts' configs list is
+   the owner's: the other's copy (never scheduled, farm_host.h) would count it twice. */
+static bool
+remote_named(const struct store_command_printer *rem, size_t n, const char *name)
+{
+    for (size_t i = 0; i < n; i++)
+        if (strcmp(rem[i].name, name) == 0)
+            return true;
+    return false;
+}
+
 int
 metrics_printers(struct farm *f, struct metrics_printer **out, size_t *n)
 {
@@ -160,14 +171,16 @@ metrics_printers(struct farm *f, struct metrics_printer **out, size_t *n)
     char me[STORE_HOST_NAME_MAX] = "";
     if (f && !farm_host_reader(f, me, sizeof(me)))
         me[0] = '\0';
-    *n = own + n_rem;
-    *out = mem_calloc(*n ? *n : 1, sizeof(**out));
+    *out = mem_calloc(own + n_rem ? own + n_rem : 1, sizeof(**out));
     if (!*out)
         return SF_ENOMEM;
+    *n = 0;
     for (size_t i = 0; i < own; i++) {
         struct printer_info pi;
-        struct metrics_printer *o = &(*out)[i];
         farm_printer_info(f, i, &pi);
+        if (remote_named(rem, n_rem, pi.cfg->name))
+            continue; /* in this host's config too, but another live host owns it: its row */
+        struct metrics_printer *o = &(*out)[(*n)++];
         snprintf(o->name, sizeof(o->name), "%s", pi.cfg->name);
         snprintf(o->host, sizeof(o->host), "%s", me);
         o->state = pi.state;
@@ -176,7 +189,7 @@ metrics_printers(struct farm *f, struct metrics_printer **out, size_t *n)
         o->bed_c = pi.bed_c;
     }
     for (size_t i = 0; i < n_rem; i++)
-        remote_printer(&rem[i], &(*out)[own + i]);
+        remote_printer(&rem[i], &(*out)[(*n)++]);
     return SF_OK;
 }
 

@@ -120,8 +120,8 @@ run_hosts(int argc, char **argv)
     struct store *s = store_open_view(target, &err);
     struct store_host_row *rows = NULL;
     size_t n = 0;
-    int64_t now = clock_wall_ms();
-    if (!s || store_host_list(s, now, &rows, &n, &err)) {
+    int64_t now = 0; /* the database's clock: the leases' (store_clock_ms) */
+    if (!s || store_host_list(s, clock_wall_ms(), &rows, &n, &err) || !(now = store_clock_ms(s))) {
         fprintf(stderr, "slimfarm hosts: %s\n", err.msg);
         store_close(s);
         return 1;

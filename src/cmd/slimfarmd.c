@@ -180,8 +180,9 @@ on_reload(struct loop *l, int signo, void *ud)
 }
 
 /* --fsck: crash recovery plus every store check; prints a summary.  A shared store
-   (store:) is checked as one of its hosts, without recovery: that would take every
-   host's work for this one's, and each host recovers its own when it joins. */
+   (store:) is checked as one of its hosts, without recovery (that would take every
+   host's work for this one's, and each host recovers its own when it joins) and without
+   migrating it (an older schema is refused: the other hosts run on it). */
 static int
 run_fsck(struct farmcfg *cfg)
 {
@@ -193,7 +194,7 @@ run_fsck(struct farmcfg *cfg)
         farmcfg_store_shown(cfg->store, shown, sizeof(shown));
     else
         snprintf(shown, sizeof(shown), "%s", cfg->data_dir);
-    struct store *s = shared ? store_open_host(cfg->data_dir, cfg->store, &rec, &err)
+    struct store *s = shared ? store_open_check(cfg->data_dir, cfg->store, &err)
                              : store_open(cfg->data_dir, &rec, &err);
     int status = 1;
     struct job_row *jobs = NULL;
@@ -324,7 +325,7 @@ usage(FILE *f)
                "  -c CONFIG  farm config (default config/farm.ini)\n"
                "  --check    validate the config and exit\n"
                "  --fsck     recover and check the job store, then exit (a shared store:\n"
-               "             checked only; its hosts recover their own work)\n"
+               "             checked only, never migrated; its hosts recover their own work)\n"
                "  --init-store DATA_DIR|postgresql://...\n"
                "             create or migrate the store's schema (SQLite in DATA_DIR, or a\n"
                "             PostgreSQL database by libpq URL) and exit; no config needed,\n"

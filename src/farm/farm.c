@@ -320,7 +320,7 @@ on_prepared(void *ud, const struct storeq_result *r)
             char why[SF_ERR_MSG_MAX + 64];
             snprintf(why, sizeof(why), "the store refused its prepared G-code: %s", msg);
             struct job_event_args a = { .reason = why, .fence = t->fence };
-            queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
+            farm_prep_end(f, id, JOB_EV_PREPARE_FAILED, &a);
         }
         break;
     }
@@ -388,10 +388,10 @@ prep_done(struct loop *l, void *ud, int rc)
                down a moment).  Back to the queue, prepared again, not failed for a blip. */
             log_warn("farm", "job %lld goes back to the queue: %s", (long long)id, why);
             struct job_event_args a = { .reason = why, .fence = t->fence };
-            queue_event(f, id, JOB_EV_DEFER, &a);
+            farm_prep_end(f, id, JOB_EV_DEFER, &a);
         } else {
             struct job_event_args a = { .reason = why, .fence = t->fence };
-            queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
+            farm_prep_end(f, id, JOB_EV_PREPARE_FAILED, &a);
         }
     }
     unlink(t->req.out_path); /* gone when adopted */
@@ -466,7 +466,7 @@ submit(struct farm *f, struct prep *t)
     if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
         f->preparing--;
         struct job_event_args a = { .reason = err.msg, .fence = t->fence };
-        queue_event(f, t->req.job_id, JOB_EV_DEFER, &a);
+        farm_prep_end(f, t->req.job_id, JOB_EV_DEFER, &a);
         free(t);
     }
 }

@@ -1,6 +1,6 @@
 /*
  * farm_int.h - internal to the farm module (farm.c, farm_gcheck.c,
- * farm_resume.c), not a contract for anyone else: nothing outside
+ * farm_resume.c, farm_prepend.c), not a contract for anyone else: nothing outside
  * src/farm/farm*.c includes it; farm.h is the module's contract.
  *
  * What the parts share: the farm itself (struct farm), finding a printer
@@ -55,6 +55,11 @@ struct farm {
     struct farm_remote *remote; /* actions on other hosts' printers (farm_remote.h), or NULL */
     struct farm_view *view;     /* the other hosts' printers, and ours for them (farm_view.h) */
 };
+
+/* Write job id's DEFER or PREPARE_FAILED (its preparation ended without a G-code) through the
+   store thread, posted again while the store fails with nothing applied, so the job never
+   stays preparing (farm_prepend.c). */
+void farm_prep_end(struct farm *f, int64_t id, enum job_event ev, const struct job_event_args *a);
 
 /* Wake the event streams (the notify hook), if any. */
 void farm_notify(struct farm *f);

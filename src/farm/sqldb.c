@@ -8,8 +8,10 @@
 
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
+#include "../base/clock.h"
 #include "sqldb_int.h"
 
 bool
@@ -18,11 +20,22 @@ sqldb_is_url(const char *target)
     return strncmp(target, "postgresql://", 13) == 0 || strncmp(target, "postgres://", 11) == 0;
 }
 
+int64_t
+sqldb_test_skew_ms(void)
+{
+    const char *skew = getenv("SLIMFARM_TEST_CLOCK_SKEW_MS");
+    return skew ? strtoll(skew, NULL, 10) : 0;
+}
+
 struct sqldb *
 sqldb_open(const char *target, unsigned flags, struct sf_err *err)
 {
-    return sqldb_is_url(target) ? sqldb_pg_open(target, flags, err)
-                                : sqldb_sqlite_open(target, flags, err);
+    if (sqldb_is_url(target))
+        return sqldb_pg_open(target, flags, err);
+    struct sqldb *db = sqldb_sqlite_open(target, flags, err);
+    if (db)
+        db->clock_skew_ms = sqldb_test_skew_ms();
+    return db;
 }
 
 /* One line: libpq's messages span several ("...failed: No such file\n\tIs the server
@@ -265,6 +278,12 @@ int64_t
 sqldb_round_trips(const struct sqldb *db)
 {
     return db->round_trips;
+}
+
+int64_t
+sqldb_clock_ms(const struct sqldb *db)
+{
+    return clock_wall_ms() + db->clock_skew_ms + db->clock_offset_ms;
 }
 
 /* SF_OK if channel is a name LISTEN and pg_notify read alike (sqldb.h), else SF_EINVAL. */

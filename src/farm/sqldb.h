@@ -191,6 +191,15 @@ int64_t sqldb_reconnects(const struct sqldb *db);
    0 on SQLite, whose statements never leave the process): what a caller waited on the
    network for. */
 int64_t sqldb_round_trips(const struct sqldb *db);
+/*
+ * The time on the database's clock, in ms since the epoch: leases that hosts compare must
+ * be on one clock, not each host's own (a host whose clock ran ahead reaped the others
+ * early).  PostgreSQL: this process's wall clock plus the offset to the server's
+ * (clock_timestamp()), measured when each session starts (half its round trip's error);
+ * SQLite: this process's wall clock, its only host's.  SLIMFARM_TEST_CLOCK_SKEW_MS, read at
+ * open, shifts the process's clock as a host's wrong clock would (tests only).
+ */
+int64_t sqldb_clock_ms(const struct sqldb *db);
 
 /*
  * LISTEN/NOTIFY.  A channel name is a-z, 0-9 and _, starting with a letter

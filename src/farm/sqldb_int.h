@@ -55,6 +55,8 @@ struct sqldb {
     bool in_tx;                      /* between a sqldb_begin and its commit or rollback */
     int64_t reconnects;              /* successful reconnects (sqldb_reconnects) */
     int64_t round_trips;             /* statements sent to a server (sqldb_round_trips) */
+    int64_t clock_offset_ms;         /* the server's clock less this process's (sqldb_clock_ms) */
+    int64_t clock_skew_ms;           /* SLIMFARM_TEST_CLOCK_SKEW_MS at open: tests only */
     sqldb_reconnect_fn on_reconnect; /* sqldb_on_reconnect's; NULL if none */
     void *on_reconnect_arg;
 };
@@ -62,6 +64,9 @@ struct sqldb {
 struct sqldb_stmt {
     struct sqldb *db;
 };
+
+/* SLIMFARM_TEST_CLOCK_SKEW_MS (0 unset): a connection's clock_skew_ms (sqldb_clock_ms). */
+int64_t sqldb_test_skew_ms(void);
 
 /* The drivers' open functions (sqldb_open picks one); NULL with err set. */
 struct sqldb *sqldb_sqlite_open(const char *path, unsigned flags, struct sf_err *err);

@@ -605,12 +605,19 @@ session(struct pg *p)
                                " SET tcp_keepalives_count = 3; SET tcp_user_timeout = 10000"
                              : "SET tcp_keepalives_idle = 10; SET tcp_keepalives_interval = 5;"
                                " SET tcp_keepalives_count = 3");
-    char ident[96] = "";
+    char ident[128] = "";
+    int64_t sent = clock_wall_ms();
     if (rc == SF_OK)
         rc = one_text(p,
-                      "SELECT pg_backend_pid() || ' ' || backend_start::text FROM"
-                      " pg_stat_activity WHERE pid = pg_backend_pid()",
+                      "SELECT pg_backend_pid() || ' ' || CAST(extract(epoch FROM"
+                      " clock_timestamp()) * 1000 AS BIGINT) || ' ' || backend_start::text"
+                      " FROM pg_stat_activity WHERE pid = pg_backend_pid()",
                       0, NULL, ident, sizeof(ident));
+    /* the server's clock, read halfway through the round trip (sqldb_clock_ms) */
+    char *at = strchr(ident, ' ');
+    if (rc == SF_OK && at)
+        db->clock_offset_ms =
+            strtoll(at + 1, NULL, 10) - (sent + clock_wall_ms()) / 2 - db->clock_skew_ms;
     if (rc == SF_OK)
         rc = end_old_session(p);
     if (rc == SF_OK && p->flags & SQLDB_READONLY)
@@ -631,7 +638,7 @@ session(struct pg *p)
         if (db->on_reconnect(db, db->on_reconnect_arg, &err) != SF_OK)
             rc = sqldb_failf(db, SF_EUNREACH, "%s", err.msg[0] ? err.msg : "reconnect hook failed");
     }
-    char *sp = strchr(ident, ' ');
+    char *sp = at ? strchr(at + 1, ' ') : NULL;
     if (rc == SF_OK && sp) { /* this session, to end should it be lost */
         p->pid = (int)strtol(ident, NULL, 10);
         snprintf(p->started, sizeof(p->started), "%s", sp + 1);
@@ -902,6 +909,7 @@ sqldb_pg_open(const char *url, unsigned flags, struct sf_err *err)
     }
     p->base.ops = &pg_ops;
     p->flags = flags;
+    p->base.clock_skew_ms = sqldb_test_skew_ms(); /* before the session reads the server's */
     /* Bounds on waiting for the network (sqldb.h), before the URL so that its own
        settings win (libpq: later keywords override earlier; dbname expands the URL).
        keepalives and tcp_user_timeout apply to TCP only. */

@@ -419,6 +419,14 @@ migrate(struct store *s, int *from, struct sf_err *err)
         }
         if (version == N_MIGRATIONS)
             return store_commit(s, err);
+        if (s->no_migrate) {
+            rc = sf_err_set(err, SF_EUNSUPP,
+                            "store: database schema %d is older than this slimfarm's (%d): a "
+                            "check changes nothing (hosts that run the older version share "
+                            "it); migrate it with slimfarmd --init-store",
+                            version, N_MIGRATIONS);
+            goto fail;
+        }
         if ((rc = migrate_one(s, version, err))) {
             sf_err_prefix(err, "store: migration to schema %d", version + 1);
             goto fail;
@@ -666,8 +674,8 @@ store_open(const char *data_dir, struct store_recovery *rec, struct sf_err *err)
 /* store_open_db, or as one of several hosts (store_open_host): a shared database lock, and
    on PostgreSQL no crash recovery at open (each host recovers its own work). */
 static struct store *
-open_store(const char *data_dir, const char *db, bool host, struct store_recovery *rec,
-           struct sf_err *err)
+open_store(const char *data_dir, const char *db, bool host, bool no_migrate,
+           struct store_recovery *rec, struct sf_err *err)
 {
     if (rec)
         *rec = (struct store_recovery){ 0, 0 };
@@ -675,6 +683,7 @@ open_store(const char *data_dir, const char *db, bool host, struct store_recover
     if (!s)
         return NULL;
     s->host = host;
+    s->no_migrate = no_migrate;
     char path[STORE_PATH_MAX + 32];
     snprintf(path, sizeof(path), "%s/files", data_dir);
     if (mkdir_p(path, err) || lock_dir(s, err))
@@ -697,14 +706,20 @@ fail:
 struct store *
 store_open_db(const char *data_dir, const char *db, struct store_recovery *rec, struct sf_err *err)
 {
-    return open_store(data_dir, db, false, rec, err);
+    return open_store(data_dir, db, false, false, rec, err);
 }
 
 struct store *
 store_open_host(const char *data_dir, const char *db, struct store_recovery *rec,
                 struct sf_err *err)
 {
-    return open_store(data_dir, db, true, rec, err);
+    return open_store(data_dir, db, true, false, rec, err);
+}
+
+struct store *
+store_open_check(const char *data_dir, const char *db, struct sf_err *err)
+{
+    return open_store(data_dir, db, true, true, NULL, err);
 }
 
 int

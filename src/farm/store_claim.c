@@ -97,7 +97,7 @@ store_job_claim(struct store *s, const char *host, int64_t token, const char *me
                 struct job_row *out, int64_t *fence, struct sf_err *err)
 {
     char list[128];
-    int64_t f = 0, now = clock_wall_ms();
+    int64_t f = 0, now = store_clock_ms(s);
     int rc = method_list(methods, list, sizeof(list), err);
     if (rc || (rc = store_begin(s, err)))
         return rc;
@@ -114,7 +114,7 @@ int
 store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t id,
                    struct job_row *out, int64_t *fence, struct sf_err *err)
 {
-    int64_t f = 0, now = clock_wall_ms();
+    int64_t f = 0, now = store_clock_ms(s);
     if (id <= 0)
         return sf_err_set(err, SF_EINVAL, "claim: job id %lld", (long long)id);
     int rc = store_begin(s, err);
@@ -180,7 +180,7 @@ int
 store_job_take(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
                struct sf_err *err)
 {
-    int64_t now = clock_wall_ms(), f = 0;
+    int64_t now = store_clock_ms(s), f = 0;
     struct sqldb_stmt *st;
     int rc = store_begin(s, err);
     if (rc)
@@ -319,7 +319,7 @@ static int
 attach_tx(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
           struct sf_err *err)
 {
-    int64_t now = clock_wall_ms();
+    int64_t now = store_clock_ms(s);
     struct sqldb_stmt *st;
     int rc = store_host_hold(s, host, token, now, err);
     if (rc || (rc = owner_elsewhere(s, host, id, now, err)) ||

@@ -350,7 +350,7 @@ store_host_join(struct store *s, const char *name, int64_t lease_ms, int64_t *to
     if ((rc = check_name(name, err)) || (rc = check_lease(lease_ms, err)) ||
         (rc = lock_name(s, name, &got, err)))
         return rc;
-    int64_t now = clock_wall_ms();
+    int64_t now = store_clock_ms(s);
     struct holder h;
     if (!got) {
         if ((rc = read_holder(s, name, &h, err)))
@@ -411,7 +411,7 @@ store_host_beat(struct store *s, const char *name, int64_t token, int64_t lease_
                             " WHERE name = ?3 AND token = ?4 AND reaped_ms = 0",
                             err)))
         return rc;
-    int64_t now = clock_wall_ms();
+    int64_t now = store_clock_ms(s);
     sqldb_bind_int64(st, 1, now);
     sqldb_bind_int64(st, 2, now + lease_ms);
     sqldb_bind_text(st, 3, name);
@@ -430,6 +430,7 @@ store_host_beat(struct store *s, const char *name, int64_t token, int64_t lease_
 int
 store_host_peers(struct store *s, const char *name, int64_t now_ms, int *n, struct sf_err *err)
 {
+    now_ms += store_clock_ms(s) - clock_wall_ms(); /* onto the database's clock */
     struct sqldb_stmt *st;
     int rc = store_prepare(s, &st,
                            "SELECT count(*) FROM hosts WHERE name != ?1 AND reaped_ms = 0"
@@ -451,6 +452,7 @@ int
 store_host_teller(struct store *s, int64_t job_id, const char *printer, int64_t now_ms, char *host,
                   size_t cap, struct sf_err *err)
 {
+    now_ms += store_clock_ms(s) - clock_wall_ms(); /* onto the database's clock */
     struct sqldb_stmt *st;
     /* the job's live holder; else the live owner of the event's printer, or of the job's;
        else the live host first by name (the same for every host: one database's order) */
@@ -558,7 +560,7 @@ static int
 own_tx(struct store *s, const char *name, int64_t token, const char *const *printers, size_t n,
        struct store_host_owned *out, struct sf_err *err)
 {
-    int64_t now = clock_wall_ms();
+    int64_t now = store_clock_ms(s);
     struct sqldb_stmt *st;
     int rc = store_host_hold(s, name, token, now, err);
     if (rc || (rc = store_prepare(s, &st, "DELETE FROM host_printers WHERE host = ?1", err)))
@@ -684,6 +686,7 @@ read_reaped(struct sqldb_stmt *st, void *row)
 int
 store_host_reap(struct store *s, int64_t now_ms, struct store_recovery *moved, struct sf_err *err)
 {
+    now_ms += store_clock_ms(s) - clock_wall_ms(); /* onto the database's clock */
     if (moved)
         *moved = (struct store_recovery){ 0, 0 };
     struct sqldb_stmt *st;
@@ -718,7 +721,7 @@ store_host_leave(struct store *s, const char *name, int64_t token, struct store_
     struct sqldb_stmt *st;
     struct reaped *rows = NULL;
     size_t n = 0;
-    int64_t now = clock_wall_ms();
+    int64_t now = store_clock_ms(s);
     int rc = check_name(name, err);
     if (rc || (rc = store_begin(s, err)))
         return rc;
@@ -790,6 +793,7 @@ int
 store_host_list(struct store *s, int64_t now_ms, struct store_host_row **rows, size_t *n,
                 struct sf_err *err)
 {
+    now_ms += store_clock_ms(s) - clock_wall_ms(); /* onto the database's clock */
     struct sqldb_stmt *st;
     /* ORDER BY in the bytes' order on both engines, as add_printers merges by strcmp */
     int rc = store_select(
@@ -852,6 +856,12 @@ store_host_reconnects(struct store *s)
 }
 
 int64_t
+store_clock_ms(const struct store *s)
+{
+    return sqldb_clock_ms(s->db);
+}
+
+int64_t
 store_round_trips(const struct store *s)
 {
     return sqldb_round_trips(s->db);
@@ -862,7 +872,7 @@ static int
 printer_set_tx(struct store *s, const char *host, int64_t token, const char *printer,
                enum printer_state state, struct sf_err *err)
 {
-    int64_t now = clock_wall_ms();
+    int64_t now = store_clock_ms(s);
     struct sqldb_stmt *st;
     int rc = store_host_hold(s, host, token, now, err);
     if (rc ||

@@ -46,6 +46,10 @@
  */
 struct store *store_open_host(const char *data_dir, const char *db, struct store_recovery *rec,
                               struct sf_err *err);
+/* As store_open_host for a check of a shared store (slimfarmd --fsck): a schema older than
+   this program's is refused (SF_EUNSUPP, naming --init-store), not migrated under the hosts
+   that run on it. */
+struct store *store_open_check(const char *data_dir, const char *db, struct sf_err *err);
 
 /*
  * A second connection to s's database that may write, for another thread
@@ -256,6 +260,10 @@ int store_host_drain(struct store *s);
 /* How often s's connection came back after a loss (0 on SQLite): its socket is a new one
    each time, perhaps under the old one's number, so a watcher of the old one adds it again. */
 int64_t store_host_reconnects(struct store *s);
+/* The time on s's database's clock (sqldb_clock_ms): every lease, reap and liveness test
+   of the store runs on it; a now_ms a caller passes to a store_host or store_command
+   function is its own wall clock (clock_wall_ms), moved onto the database's inside. */
+int64_t store_clock_ms(const struct store *s);
 /* Round trips s's connection made to the server so far (sqldb_round_trips; 0 on SQLite). */
 int64_t store_round_trips(const struct store *s);
 

@@ -38,6 +38,8 @@ struct store {
     int64_t host_token;          /* its token */
     bool name_lost;              /* another process took the name while the connection was
                                     away: the lease is lost (store_host_beat refuses) */
+    bool no_migrate;             /* a check (store_open_check): an older schema is refused,
+                                    not migrated */
 };
 
 /* After a reconnect (store.c's hook): lock s's host name again, if it joined one.  SF_OK

@@ -24,6 +24,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "../../src/api/metrics.h"
 #include "../../src/base/clock.h"
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
@@ -238,6 +239,25 @@ T_CASE(host_leaves_alone_a_printer_another_live_host_owns)
     db_text(url, "SELECT host FROM host_printers WHERE printer = 'y' AND ?1 = 0", 0, text,
             sizeof(text));
     T_EQ_STR(text, "b");
+    /* the whole farm's printers (/metrics) list x once, as a's: b's copy of it is not one */
+    struct metrics_printer *mp = NULL;
+    size_t n_mp = 0;
+    int x_rows = 0;
+    bool from_a = false;
+    for (int64_t end = clock_mono_ms() + 60000; clock_mono_ms() < end && !from_a;) {
+        loop_run_once(hx.l, 50);
+        free(mp);
+        T_OK(metrics_printers(hx.f, &mp, &n_mp), NULL);
+        x_rows = 0;
+        for (size_t i = 0; i < n_mp; i++)
+            if (strcmp(mp[i].name, "x") == 0) {
+                x_rows++;
+                from_a = from_a || strcmp(mp[i].host, "a") == 0;
+            }
+    }
+    free(mp);
+    T_TRUE(from_a);
+    T_EQ_INT(x_rows, 1);
     host_farm_free();
     store_close(a);
 }

@@ -310,6 +310,10 @@ T_CASE(each_host_lists_the_others_printers_as_they_published_them)
     T_OK(store_view_publish(p.a, "a", p.ta, "{\"p1\":{\"enabled\":true}}", &err), &err);
     view_of_p1(&p, v, sizeof(v));
     T_TRUE(strstr(v, "true") && !strstr(v, "211"));
+    /* a view that is not an object (another version's) lists its printers without one */
+    T_OK(store_view_publish(p.a, "a", p.ta, "[{\"p1\":1}]", &err), &err);
+    view_of_p1(&p, v, sizeof(v));
+    T_EQ_STR(v, "");
     t_pair_close(&p);
 }
 

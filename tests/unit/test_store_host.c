@@ -729,3 +729,75 @@ T_CASE(hosts_own_no_printer_of_an_owner_whose_lease_only_ran_out)
              1);
     t_pair_close(&p);
 }
+
+/* A check of a shared store (slimfarmd --fsck) migrates nothing: a schema older than this
+   program's is refused, naming --init-store, and left as it was, since hosts of the older
+   version run on it (it was migrated, as a host's start would). */
+T_CASE(hosts_check_refuses_an_older_schema_and_leaves_it)
+{
+    struct sf_err err;
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/checkold", t_tmpdir());
+    const char *db = t_store_db(dir);
+    char target[1100];
+    snprintf(target, sizeof(target), "%s", db ? db : dir);
+    T_OK(store_init(target, NULL, &err), &err);
+    int v = store_schema_version();
+    char back[128];
+    snprintf(back, sizeof(back),
+             t_store_pg() ? "UPDATE schema_version SET version = %d" : "PRAGMA user_version = %d",
+             v - 1);
+    T_OK(t_store_exec(dir, back), NULL);
+    const char *read = t_store_pg() ? "SELECT version FROM schema_version" : "PRAGMA user_version";
+    T_TRUE(store_open_check(dir, t_store_db(dir), &err) == NULL);
+    T_EQ_INT(err.code, SF_EUNSUPP);
+    T_TRUE(strstr(err.msg, "older") && strstr(err.msg, "--init-store"));
+    T_EQ_INT(t_store_int(dir, read), v - 1);
+    /* the same store at this program's schema is checked */
+    snprintf(back, sizeof(back),
+             t_store_pg() ? "UPDATE schema_version SET version = %d" : "PRAGMA user_version = %d",
+             v);
+    T_OK(t_store_exec(dir, back), NULL);
+    struct store *s = store_open_check(dir, t_store_db(dir), &err);
+    T_TRUE(s != NULL);
+    T_OK(store_check(s, &err), &err);
+    store_close(s);
+}
+
+/* Leases run on the database's clock, not each host's: a host whose clock runs a minute
+   ahead (SLIMFARM_TEST_CLOCK_SKEW_MS) reaps no live host, and one whose clock runs a minute
+   behind is not reaped as it joins.  Before, a's lease came out a minute short or long on
+   its peers' clocks, and the fast host reaped a peer within its 10 s lease. */
+T_CASE(hosts_leases_hold_across_hosts_whose_clocks_differ)
+{
+    T_SKIP_UNLESS(t_store_pg(), "hosts with clocks of their own share a PostgreSQL store");
+    struct sf_err err;
+    const char *dir = fresh_dir("skew");
+    char url[1024], dir_fast[600], dir_slow[600];
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    snprintf(dir_fast, sizeof(dir_fast), "%s-fast", dir);
+    snprintf(dir_slow, sizeof(dir_slow), "%s-slow", dir);
+    struct store *b = store_open_host(dir, url, NULL, &err);
+    T_TRUE(b != NULL);
+    setenv("SLIMFARM_TEST_CLOCK_SKEW_MS", "60000", 1);
+    struct store *fast = store_open_host(dir_fast, url, NULL, &err);
+    setenv("SLIMFARM_TEST_CLOCK_SKEW_MS", "-60000", 1);
+    struct store *slow = store_open_host(dir_slow, url, NULL, &err);
+    unsetenv("SLIMFARM_TEST_CLOCK_SKEW_MS");
+    T_TRUE(fast != NULL && slow != NULL);
+    int64_t tb, tf, ts;
+    T_OK(store_host_join(b, "b", 10000, &tb, &err), &err);
+    T_OK(store_host_join(fast, "fast", 10000, &tf, &err), &err);
+    struct store_recovery moved;
+    T_EQ_INT(store_host_reap(fast, clock_wall_ms(), &moved, &err), 0); /* b lives */
+    T_OK(store_host_join(slow, "slow", 10000, &ts, &err), &err);
+    T_EQ_INT(store_host_reap(b, clock_wall_ms(), &moved, &err), 0); /* slow lives */
+    int peers = -1;
+    T_OK(store_host_peers(fast, "fast", clock_wall_ms(), &peers, &err), &err);
+    T_EQ_INT(peers, 2);
+    T_OK(store_host_beat(slow, "slow", ts, 10000, &err), &err);
+    T_OK(store_host_beat(b, "b", tb, 10000, &err), &err);
+    store_close(slow);
+    store_close(fast);
+    store_close(b);
+}
