@@ -90,6 +90,11 @@ claim_next(struct store *s, const char *host, const char *list, int64_t id, int6
         *fence = sqldb_column_int64(st, 40);
     }
     sqldb_finalize(st);
+    if (rc != SQLDB_ROW && rc != SQLDB_DONE && id > 0 && sqldb_errcode(s->db) == SF_EBUSY)
+        return sf_err_set(err, SF_EBUSY,
+                          "store: job %lld is held by another transaction (another host's claim "
+                          "on its way, or a write to the job): %s",
+                          (long long)id, sqldb_errmsg(s->db));
     if (rc != SQLDB_ROW)
         return rc == SQLDB_DONE ? SF_ENOTFOUND : store_db_fail(s, err, "claim job");
     char detail[192];

@@ -150,7 +150,8 @@ T_CASE(claim_of_a_chosen_job_another_write_holds_is_busy)
     T_TRUE(other != NULL);
     T_OK(exec_id(other, "UPDATE jobs SET reason = 'fits no printer' WHERE id = %lld", reasoned),
          NULL);
-    T_EQ_INT(store_job_claim_id(p.b, "b", p.tb, reasoned, &j, NULL, &err), SF_EBUSY);
+    T_ERR(store_job_claim_id(p.b, "b", p.tb, reasoned, &j, NULL, &err), SF_EBUSY, &err,
+          "is held by another transaction");
     T_OK(sqldb_commit(other), NULL);
     T_OK(store_job_claim_id(p.b, "b", p.tb, reasoned, &j, NULL, &err), &err);
     T_EQ_INT(j.id, reasoned);
