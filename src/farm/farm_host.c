@@ -559,6 +559,8 @@ farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
         rc = store_job_claim_id(f->s, h->name, h->token, id, &j, fence, &err);
     if (rc == SF_OK)
         log_info("host", "%s claimed job %lld", h->name, (long long)id);
+    else if (rc == SF_EBUSY) /* its row held, as by another host's claim: the pass retries */
+        log_info("host", "%s: claim job %lld: %s; trying again", h->name, (long long)id, err.msg);
     else if (rc != SF_ENOTFOUND)
         log_warn("host", "%s: claim job %lld: %s", h->name, (long long)id, err.msg);
     struct doubt *d = rc == SF_EINDOUBT ? mem_calloc(1, sizeof(*d)) : NULL;

@@ -59,7 +59,14 @@ claim_next(struct store *s, const char *host, const char *list, int64_t id, int6
         return rc;
     /* the queued state as a literal, so both engines may read the claim order's partial index;
        SQLite is told to (INDEXED BY): without statistics it took jobs_state and sorted every
-       queued job at each claim */
+       queued job at each claim.  On PostgreSQL the next job skips a row another transaction
+       holds (claimers never wait on each other); one chosen job (id) does not: a row held is
+       another host's claim on its way or any other write to the job (a waiting reason another
+       host's pass writes, which wakes nobody when it commits), and the job may still be
+       queued after it, so the claim is busy (NOWAIT: SF_EBUSY, try again), not gone */
+    const char *lock = !store_is_pg(s) ? ""
+                       : id > 0        ? " FOR UPDATE NOWAIT"
+                                       : " FOR UPDATE SKIP LOCKED";
     char sql[sizeof(STORE_JOB_COLS) + 512];
     snprintf(sql, sizeof(sql),
              "UPDATE jobs SET state = ?1, claimed_by = ?2, fence = fence + 1, updated_ms = ?3"
@@ -67,9 +74,8 @@ claim_next(struct store *s, const char *host, const char *list, int64_t id, int6
              " AND (?4 = '' OR instr(?4, ',' || method || ',') > 0) AND (?5 = 0 OR id = ?5)"
              " ORDER BY priority DESC, queue_pos, id LIMIT 1%s) AND state = '%s'"
              " RETURNING %s, fence",
-             store_is_pg(s) ? "" : " INDEXED BY jobs_claim_order", job_state_name(JOB_QUEUED),
-             store_is_pg(s) ? " FOR UPDATE SKIP LOCKED" : "", job_state_name(JOB_QUEUED),
-             STORE_JOB_COLS);
+             store_is_pg(s) ? "" : " INDEXED BY jobs_claim_order", job_state_name(JOB_QUEUED), lock,
+             job_state_name(JOB_QUEUED), STORE_JOB_COLS);
     struct sqldb_stmt *st;
     if ((rc = store_prepare(s, &st, sql, err)))
         return rc;
@@ -84,6 +90,11 @@ claim_next(struct store *s, const char *host, const char *list, int64_t id, int6
         *fence = sqldb_column_int64(st, 40);
     }
     sqldb_finalize(st);
+    if (rc != SQLDB_ROW && rc != SQLDB_DONE && id > 0 && sqldb_errcode(s->db) == SF_EBUSY)
+        return sf_err_set(err, SF_EBUSY,
+                          "store: job %lld is held by another transaction (another host's claim "
+                          "on its way, or a write to the job): %s",
+                          (long long)id, sqldb_errmsg(s->db));
     if (rc != SQLDB_ROW)
         return rc == SQLDB_DONE ? SF_ENOTFOUND : store_db_fail(s, err, "claim job");
     char detail[192];

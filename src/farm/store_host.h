@@ -194,7 +194,11 @@ int store_job_claim(struct store *s, const char *host, int64_t token, const char
 /*
  * As store_job_claim, for queued job id only (the one a host's scheduler
  * chose for a printer of its own), in the same statement: SF_ENOTFOUND (err
- * not set) when id is not queued or another host's claim holds its row.
+ * not set) when id is not queued (another host claimed it, or it moved on);
+ * SF_EBUSY when another transaction holds its row (PostgreSQL: another
+ * host's claim not yet committed, or another write to the job such as a
+ * waiting reason): whether it stays queued is not known yet, so try again
+ * (a write that leaves it queued wakes no host when it commits).
  */
 int store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t id,
                        struct job_row *out, int64_t *fence, struct sf_err *err);

@@ -137,12 +137,15 @@ freeze_c() {
   return 1
 }
 wait_for 150 freeze_c || fail "c never held a claimed job waiting while its Marlin printed: $(psql_q 'SELECT id, state, claimed_by, printer FROM jobs ORDER BY id')"
-c_usb=$(psql_q "SELECT id FROM jobs WHERE printer = 'c_mk' AND state IN ('printing','paused')")
-c_held=$(psql_q "SELECT id FROM jobs WHERE claimed_by = 'c' AND state IN ('queued','preparing','ready')" | tr '\n' ' ')
+# c's prints at the kill: stopped, c renews no lease, so a or b may reap it before these reads
+# (a loaded machine: c's print then reads interrupted; part 1 left none so)
+c_usb=$(psql_q "SELECT id FROM jobs WHERE printer = 'c_mk' AND state IN ('printing','paused','interrupted')")
+held=$(psql_q "SELECT id FROM jobs WHERE claimed_by = 'c' AND state IN ('queued','preparing','ready')" | tr '\n' ' ')
+[ -n "${held// /}" ] && c_held=$held # (a reap gave c's claims back: the frozen c's list stands)
 kill -9 "${hpid[c]}"
 wait "${hpid[c]}" 2> /dev/null
 unset 'hpid[c]'
-c_net=$(psql_q "SELECT id FROM jobs WHERE printer = 'c_net' AND state IN ('printing','paused')" | tr '\n' ' ')
+c_net=$(psql_q "SELECT id FROM jobs WHERE printer = 'c_net' AND state IN ('printing','paused','interrupted')" | tr '\n' ' ')
 echo "   killed c: its Marlin job ${c_usb:-none}, network job ${c_net:-none}, claimed and waiting: ${c_held:-none}"
 [ -n "$c_usb" ] || fail "no job on c_mk at the kill"
 reaped() { grep -q "reaped 1 hosts" "$tmp/a.log" "$tmp/b.log"; }

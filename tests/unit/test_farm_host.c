@@ -107,6 +107,69 @@ T_CASE(claim_of_a_chosen_job_is_taken_once)
     t_pair_close(&p);
 }
 
+/* A connection of its own to url's database with a transaction open (held idle as long as
+   the test needs: no idle timeout), NULL if not. */
+static struct sqldb *
+open_tx(const char *url)
+{
+    struct sf_err err;
+    struct sqldb *db = sqldb_open(url, 0, &err);
+    if (db && (sqldb_exec(db, "SET idle_in_transaction_session_timeout = 0") || sqldb_begin(db))) {
+        sqldb_close(db);
+        return NULL;
+    }
+    return db;
+}
+
+/* Run sql (its %lld job id) in db's open transaction. */
+static int
+exec_id(struct sqldb *db, const char *sql, int64_t id)
+{
+    char q[256];
+    snprintf(q, sizeof(q), sql, (long long)id);
+    return sqldb_exec(db, q);
+}
+
+/*
+ * A chosen job whose row another transaction holds is busy, not gone (issue 32, a flake of
+ * farmd_hosts.sh: a host's claim skipped the row while another host wrote the job's waiting
+ * reason, took it for claimed elsewhere, and nothing woke it again: the job stayed queued
+ * for good).  Held by a write that leaves it queued, the claim passes once it commits; held
+ * by another host's claim, the job is gone once that commits.  PostgreSQL's row locks.
+ */
+T_CASE(claim_of_a_chosen_job_another_write_holds_is_busy)
+{
+    T_SKIP_UNLESS(t_store_pg(), "row locks of other transactions: PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    struct t_pair p;
+    T_TRUE(pair_open(&p, "claimheld", &err));
+    int64_t reasoned, claimed;
+    T_OK(add_job(p.a, &reasoned, &err), &err);
+    T_OK(add_job(p.a, &claimed, &err), &err);
+    struct job_row j;
+    struct sqldb *other = open_tx(p.url);
+    T_TRUE(other != NULL);
+    T_OK(exec_id(other, "UPDATE jobs SET reason = 'fits no printer' WHERE id = %lld", reasoned),
+         NULL);
+    T_ERR(store_job_claim_id(p.b, "b", p.tb, reasoned, &j, NULL, &err), SF_EBUSY, &err,
+          "is held by another transaction");
+    T_OK(sqldb_commit(other), NULL);
+    T_OK(store_job_claim_id(p.b, "b", p.tb, reasoned, &j, NULL, &err), &err);
+    T_EQ_INT(j.id, reasoned);
+    /* a's claim, not committed yet */
+    T_OK(sqldb_begin(other), NULL);
+    T_OK(exec_id(other,
+                 "UPDATE jobs SET state = 'preparing', claimed_by = 'a', fence = fence + 1"
+                 " WHERE id = %lld",
+                 claimed),
+         NULL);
+    T_EQ_INT(store_job_claim_id(p.b, "b", p.tb, claimed, &j, NULL, &err), SF_EBUSY);
+    T_OK(sqldb_commit(other), NULL);
+    T_EQ_INT(store_job_claim_id(p.b, "b", p.tb, claimed, &j, NULL, &err), SF_ENOTFOUND);
+    sqldb_close(other);
+    t_pair_close(&p);
+}
+
 T_CASE(ready_job_no_host_holds_is_taken_by_one)
 {
     struct sf_err err;
@@ -747,6 +810,65 @@ T_CASE(host_records_a_print_that_ended_while_it_was_away)
         d->base.on_event(&d->base, DRV_EV_JOB_DONE, d->base.ud);
     }
     T_TRUE(wait_state(url, id, "done"));
+    host_farm_free();
+    store_close(a);
+}
+
+/*
+ * The farmd_hosts.sh flake (issue 32): a job for host b's printer, queued through another
+ * host's API, stayed queued for good.  b's claim, woken by the NOTIFY, found the job's row
+ * held by another host's write that leaves it queued (its waiting reason) and took the job
+ * for claimed elsewhere; that write's commit wakes nobody.  Here the write is held open
+ * while b claims, and committed after; b must claim the job then, with nothing more to wake
+ * it.  Fails without the fix: the job stays queued.
+ */
+T_CASE(host_claims_a_job_another_write_held_at_its_claim)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/heldrow", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    host_prepare = gcode_prepare;
+    T_OK(host_farm(dir, url, "b", "[printer p]\ndriver: marlin\nport: pty:/dev/null\n", &err),
+         &err);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        farm_sync(hx.f, -1, NULL);
+        db_text(url, "SELECT state FROM printers WHERE name = 'p' AND ?1 = 0", 0, text,
+                sizeof(text));
+        if (strcmp(text, "idle") == 0)
+            break;
+        loop_run_once(hx.l, 20);
+    }
+    T_EQ_STR(text, "idle");
+    /* b's loop stands still from here until the job is queued and its row held: what b's
+       loop connection sends after is its claim (its beat is a lease away) */
+    int64_t sent = store_round_trips(hx.s), id;
+    char sha[STORE_SHA_HEX];
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    snprintf(o.method, sizeof(o.method), "none");
+    snprintf(o.printer, sizeof(o.printer), "p");
+    T_OK(store_file_put(a, "solid part\n", 11, sha, &err), &err);
+    T_OK(store_job_add(a, &o, sha, &id, &err), &err);
+    struct sqldb *other = open_tx(url);
+    T_TRUE(other != NULL);
+    T_OK(exec_id(other, "UPDATE jobs SET reason = 'fits no printer' WHERE id = %lld", id), NULL);
+    T_OK(store_host_wake(a, &err), &err);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS;
+         store_round_trips(hx.s) == sent && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20);
+    T_TRUE(store_round_trips(hx.s) > sent);
+    db_text(url, "SELECT state FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_EQ_STR(text, "queued");
+    T_OK(sqldb_commit(other), NULL); /* no NOTIFY */
+    sqldb_close(other);
+    T_TRUE(wait_state(url, id, "printing"));
+    T_TRUE(was_logged("b claimed job"));
     host_farm_free();
     store_close(a);
 }
