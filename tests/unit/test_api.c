@@ -164,7 +164,7 @@ api_prepare(const struct prepare_req *req, struct prepare_out *out, const atomic
 }
 
 static const char farm_ini[] = "[printer a]\ndriver: marlin\nport: x\n"
-                               "[printer b]\ndriver: marlin\nport: x\n";
+                               "[printer b]\ndriver: marlin\nport: x\ngcode_models: *\n";
 
 /* The server side: the farm and the api on a thread of their own (the loop's). */
 static struct {
@@ -988,6 +988,9 @@ T_CASE(api_job_writes_send_nothing_on_the_loops_connection)
     /* the slicers' uploads (OctoPrint's, Moonraker's) */
     T_TRUE(write_off_loop("POST", "/api/files/local", NULL, "slicer.stl", part, 201, &b));
     T_TRUE(strstr(b.data, "\"job_id\"") != NULL);
+    T_TRUE(write_off_loop("POST", "/api/files/local", NULL, "sliced.gcode",
+                          "; sliced\nG28\nG1 X10 E1\n", 201, &b));
+    T_TRUE(strstr(b.data, "sliced.gcode") != NULL);
     T_TRUE(write_off_loop("POST", "/server/files/upload", NULL, "moon.stl", part, 201, &b));
     T_TRUE(strstr(b.data, "\"modified\"") != NULL);
     buf_release(&b);
