@@ -311,6 +311,13 @@ job_answer(void *ud, int64_t id, struct http_resp *resp)
     job_time_left(a, id, resp);
 }
 
+/* The loop's part of a job's answer to a write, read on the store's thread (api_writes.h). */
+static void
+job_answer_more(void *ud, int64_t id, struct http_resp *resp)
+{
+    job_time_left(ud, id, resp);
+}
+
 static void
 api_changed(void *ud)
 {
@@ -871,6 +878,7 @@ api_new(const struct api_config *cfg, struct sf_err *err)
     a->writes = (struct api_writes){ .store = cfg->store,
                                      .farm = cfg->farm,
                                      .job = job_answer,
+                                     .job_more = job_answer_more,
                                      .printer = printer_answer,
                                      .changed = api_changed,
                                      .ud = a };

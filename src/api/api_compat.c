@@ -89,10 +89,10 @@ api_compat_url_escape(const char *name, char *out, size_t cap)
 
 enum flavor { OCTOPRINT, MOONRAKER };
 
-/* The answer to an upload that made job id. */
+/* The answer to an upload that made job id, j (NULL: not read) as it is. */
 static void
 answer(enum flavor fl, const char *base, const char *name, int64_t id, struct http_resp *resp,
-       struct store *s)
+       const struct job_row *j)
 {
     char esc[3 * JOB_NAME_MAX + 1], shown[JOB_NAME_MAX + 32], clean[JOB_NAME_MAX + 4];
     api_compat_url_escape(name, esc, sizeof(esc));
@@ -103,8 +103,7 @@ answer(enum flavor fl, const char *base, const char *name, int64_t id, struct ht
     if (fl == MOONRAKER) {
         http_resp_header(resp, "Location", "%s/server/files/gcodes/job-%lld/%s", base,
                          (long long)id, esc);
-        struct job_row j;
-        double modified = store_job_get(s, id, &j, NULL) == SF_OK ? j.created_ms / 1000.0 : 0;
+        double modified = j ? j->created_ms / 1000.0 : 0;
         /* queued, never started at once: the farm starts it when a printer is free */
         resp->json = json_pack("{s{s{ss ss sf ss} sb sb ss}}", "result", "item", "path", shown,
                                "root", "gcodes", "modified", modified, "permissions", "rw",
@@ -125,14 +124,45 @@ answer(enum flavor fl, const char *base, const char *name, int64_t id, struct ht
                            1, "slimfarm", "job_id", (json_int_t)id);
 }
 
-/* An uploaded G-code file under check on the farm's io thread. */
+/* An upload under check on the farm's io thread (G-code), then written on its store thread. */
 struct pending {
     const struct api_compat_env *env; /* valid while d is alive (api_free ends both) */
     struct http_defer *d;             /* the waiting request; NULL if deferring failed */
     enum flavor fl;
     struct job_opts o;
-    char base[256]; /* scheme and host for Location, "" for a relative one */
+    char base[256];      /* scheme and host for Location, "" for a relative one */
+    struct farm_add add; /* the job's write (farm.h); the store thread's until added() */
 };
+
+/* The upload's job is written (store thread, farm_add_post): answer with it, or refuse. */
+static void
+added(void *ud, const struct storeq_result *r)
+{
+    struct pending *p = ud;
+    struct http_defer *d = p->d;
+    struct http_resp resp = { .status = 200 };
+    if (http_defer_alive(d)) {
+        const struct api_compat_env *env = p->env;
+        int rc = r->rc;
+        const char *msg = r->err->msg;
+        if (rc && p->add.adopted && p->add.adopt_rc) { /* the file was not stored */
+            rc = p->add.adopt_rc;
+            msg = p->add.adopt_err.msg;
+        }
+        if (rc) {
+            /* a file the job names that is not stored: the upload's fault */
+            http_fail(&resp, rc == SF_ENOTFOUND ? SF_EINVAL : rc, msg);
+        } else {
+            log_info("api", "job %lld: '%s' uploaded through the %s API", (long long)p->add.id,
+                     p->o.name, p->fl == MOONRAKER ? "Moonraker" : "OctoPrint");
+            answer(p->fl, p->base, p->o.name, p->add.id, &resp, &p->add.j);
+            if (env->changed)
+                env->changed(env->ud);
+        }
+    }
+    http_defer_answer(d, &resp); /* frees the answer if the client left */
+    free(p);
+}
 
 /* The check is done (loop thread): store the file and queue it, or refuse. */
 static void
@@ -148,20 +178,17 @@ checked(void *ud, int rc, const struct farm_gcode *g, const char *msg)
         return;
     }
     const struct api_compat_env *env = p->env;
-    char sha[STORE_SHA_HEX];
     struct sf_err err;
-    int64_t id;
-    if (rc)
+    if (rc) {
         http_fail(&resp, rc, msg); /* SF_ECANCELED: the daemon is stopping, 503 */
-    else if ((rc = env->upload_commit(http_defer_upload(d), sha, &err)) ||
-             (rc = farm_gcode_add(env->farm, &p->o, sha, g, &id, &err)))
+    } else {
+        /* stored and queued on the store's thread (its bytes, on PostgreSQL, too): answered
+           by added() */
+        p->add.o = p->o;
+        snprintf(p->add.tmp, sizeof(p->add.tmp), "%s", env->upload_path(http_defer_upload(d)));
+        if ((rc = farm_gcode_add(env->farm, &p->add, g, added, p, &err)) == SF_OK)
+            return;
         http_fail(&resp, rc, err.msg);
-    else {
-        log_info("api", "job %lld: '%s' uploaded through the %s API", (long long)id, p->o.name,
-                 p->fl == MOONRAKER ? "Moonraker" : "OctoPrint");
-        answer(p->fl, p->base, p->o.name, id, &resp, env->store);
-        if (env->changed)
-            env->changed(env->ud);
     }
     http_defer_answer(d, &resp);
     free(p);
@@ -220,7 +247,26 @@ upload(const struct api_compat_env *env, enum flavor fl, const struct http_req *
     char sha[STORE_SHA_HEX];
     int64_t id;
     int rc;
-    if ((rc = job_opts_validate(&o, &err)) || (rc = env->upload_commit(req->upload, sha, &err)) ||
+    if ((rc = job_opts_validate(&o, &err))) {
+        http_fail(resp, rc, err.msg);
+        return;
+    }
+    /* With a farm: stored and queued on its store thread while the request waits (added) */
+    struct pending *p = env->farm ? mem_calloc(1, sizeof(*p)) : NULL;
+    if (p && (p->d = http_defer(resp))) {
+        *p = (struct pending){ .env = env, .d = p->d, .fl = fl, .o = o };
+        snprintf(p->base, sizeof(p->base), "%s", base);
+        p->add.o = o;
+        snprintf(p->add.tmp, sizeof(p->add.tmp), "%s", env->upload_path(req->upload));
+        if (farm_add_post(env->farm, &p->add, added, p, &err) == SF_OK)
+            return;
+        free(resp->defer); /* not queued: written now (http_defer's handle is a plain
+                              allocation until the route returns) */
+        resp->defer = NULL;
+    }
+    free(p);
+    struct job_row j;
+    if ((rc = env->upload_commit(req->upload, sha, &err)) ||
         (rc = store_job_add(env->store, &o, sha, &id, &err))) {
         /* a file the job names that is not stored: the upload's fault */
         http_fail(resp, rc == SF_ENOTFOUND ? SF_EINVAL : rc, err.msg);
@@ -228,7 +274,8 @@ upload(const struct api_compat_env *env, enum flavor fl, const struct http_req *
     }
     log_info("api", "job %lld: '%s' uploaded through the %s API", (long long)id, o.name,
              fl == MOONRAKER ? "Moonraker" : "OctoPrint");
-    answer(fl, base, o.name, id, resp, env->store);
+    answer(fl, base, o.name, id, resp,
+           store_job_get(env->store, id, &j, NULL) == SF_OK ? &j : NULL);
     if (env->changed)
         env->changed(env->ud);
 }

@@ -48,6 +48,10 @@ struct api_write {
     struct sf_err adopt_err;
     char sha[STORE_SHA_HEX];
     char on[64]; /* a cancel found the job on this printer (jobctl_cancel_stored_on) */
+    /* the answer, read on the store's thread after the write (answer_read) */
+    struct job_row j;
+    struct print_row *prints; /* with a 200's job */
+    size_t n_prints;
     int64_t size;
     /* the loop's */
     struct api_writes *ws;  /* NULL once the API is freed */
@@ -56,6 +60,7 @@ struct api_write {
     char who[16];           /* the operator (route_key_label): a cancel another host carries */
     int status;             /* 201 (a new job: {"job"}) or 200 */
     bool not_now;           /* a refusal of the job rules (SF_EINVAL) is "not now" (409) */
+    bool answering;         /* the answer's read follows the write on the store's thread */
     struct api_write *next; /* in ws->pending */
 };
 
@@ -72,7 +77,62 @@ job_changed(struct api_writes *ws, int64_t id, int rc, const struct sf_err *err,
     ws->changed(ws->ud);
 }
 
-/* A write came back from the store's thread: answer it with the job or printer as it is. */
+static void link_pending(struct api_writes *ws, struct api_write *w);
+
+/* On the store's thread, after the write: the job as it is now for the answer (a 201's: the job
+   alone; a 200's: with its prints), so the loop's connection reads nothing. */
+static int
+answer_read(struct store *s, void *ud, struct sf_err *err)
+{
+    struct api_write *w = ud;
+    free(w->prints); /* a retry reads again */
+    w->prints = NULL;
+    w->n_prints = 0;
+    int rc = store_job_get(s, w->id, &w->j, err);
+    if (rc == SF_OK && w->status != 201)
+        rc = store_prints(s, w->id, &w->prints, &w->n_prints, err);
+    return rc;
+}
+
+static void on_written(void *ud, const struct storeq_result *r);
+
+/* The write of w committed: read its answer behind it on the store's thread (true), or false
+   (no queue, no memory): the loop reads it now, as before. */
+static bool
+answer_later(struct api_writes *ws, struct api_write *w)
+{
+    struct storeq *q = farm_storeq(ws->farm);
+    w->answering = true;
+    if (q && storeq_read(q, answer_read, w, on_written, w) == SF_OK) {
+        link_pending(ws, w);
+        return true;
+    }
+    w->answering = false;
+    return false;
+}
+
+/* The answer read on the store's thread (answer_read) as the API gives it. */
+static void
+answer_json(struct api_writes *ws, struct api_write *w, struct http_resp *resp)
+{
+    if (w->status == 201) {
+        log_info("api", "job %lld: '%s' submitted, %d copies", (long long)w->id, w->j.opts.name,
+                 w->j.opts.copies);
+        resp->status = 201;
+        resp->json = json_pack("{so}", "job", api_job_json(&w->j));
+    } else {
+        json_t *prints = json_array();
+        for (size_t i = 0; prints && i < w->n_prints; i++)
+            json_array_append_new(prints, api_print_json(&w->prints[i]));
+        resp->json = json_pack("{soso}", "job", api_job_json(&w->j), "prints", prints);
+        if (ws->job_more)
+            ws->job_more(ws->ud, w->id, resp);
+    }
+    ws->changed(ws->ud);
+}
+
+/* A write came back from the store's thread (then its answer's read, answer_read): answer it
+   with the job or printer as it is. */
 static void
 on_written(void *ud, const struct storeq_result *r)
 {
@@ -89,7 +149,7 @@ on_written(void *ud, const struct storeq_result *r)
            the job's id, so that it refuses once its printer prints another job */
         char id[24];
         snprintf(id, sizeof(id), "%lld", (long long)w->id);
-        if (r->rc == SF_EAGAIN && w->on[0] &&
+        if (r->rc == SF_EAGAIN && w->on[0] && !w->answering &&
             api_remote_answer(ws->farm, w->on, FARM_REMOTE_CANCEL_JOB, id, w->who, w->d)) {
             free(w);
             return;
@@ -103,10 +163,14 @@ on_written(void *ud, const struct storeq_result *r)
             sf_err_set(&err, rc, "the part could not be stored, try again: %s", w->adopt_err.msg);
         }
         struct job_row j;
+        if (rc == SF_OK && !w->printer[0] && !w->answering && answer_later(ws, w))
+            return; /* answered once the job is read */
         if (rc) {
             if (w->printer[0]) /* the printer has acted: the store refused the write */
                 log_warn("api", "printer %s: %s", w->printer, err.msg);
             http_fail(&resp, rc, err.msg);
+        } else if (w->answering) {
+            answer_json(ws, w, &resp);
         } else if (w->printer[0]) {
             ws->printer(ws->ud, w->printer, &resp);
             ws->changed(ws->ud);
@@ -123,6 +187,7 @@ on_written(void *ud, const struct storeq_result *r)
         }
     }
     http_defer_answer(w->d, &resp);
+    free(w->prints);
     free(w);
 }
 

@@ -48,6 +48,8 @@ struct api_writes {
     struct farm *farm;   /* NULL: no store queue, writes on the loop */
     /* the job id as it is now (with its prints and time left), or the failure */
     void (*job)(void *ud, int64_t id, struct http_resp *resp);
+    /* what only the loop knows of job id, added to its answer read off the loop (time left) */
+    void (*job_more)(void *ud, int64_t id, struct http_resp *resp);
     /* the printer called name as it is now */
     void (*printer)(void *ud, const char *name, struct http_resp *resp);
     void (*changed)(void *ud); /* something changed: wake the streams */

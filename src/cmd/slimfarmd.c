@@ -378,6 +378,7 @@ teardown(struct daemon *d)
         pool_free(d->pool);
         loop_run_once(d->l, 0); /* deliver cancelled prepares */
     }
+    notify_set_queue(d->notify, NULL); /* its read in flight is delivered by farm_free */
     farm_free(d->farm); /* may log events: a kick for the notifier, which cancels it */
     notify_free(d->notify);
     d->notify = NULL;
@@ -460,7 +461,8 @@ main(int argc, char **argv)
         goto out;
     /* one of several hosts: each event of the farm told once */
     notify_set_host(d.notify, farm_host_name(d.farm));
-    raise_nofile(farm_printer_count(d.farm)); /* with those managed at run time (farm.h) */
+    notify_set_queue(d.notify, farm_storeq(d.farm)); /* its reads off the loop */
+    raise_nofile(farm_printer_count(d.farm));        /* with those managed at run time (farm.h) */
     struct api_config ac = { .store = d.s,
                              .farm = d.farm,
                              .host = d.cfg.listen_host,

@@ -188,11 +188,46 @@ int farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o,
                      void *ud, struct sf_err *err);
 
 /*
- * Queue stored file sha, checked by farm_gcode_check into g, as a job
- * printed as is (store_job_add_gcode): ready at once, its material the
- * file's unless o names one.  *id (may be NULL) the new job.
+ * A new job from an upload, written on the farm's store thread
+ * (farm_add_post) while the upload's request waits: its temporary file
+ * adopted into the store (store_file_adopt: on PostgreSQL its bytes sent
+ * on a connection of the thread's own, not the loop's), recorded, the job
+ * added, and the job read back for the answer.  Each half once: a retry
+ * of the queue (the store busy) goes on from what is done.
  */
-int farm_gcode_add(struct farm *f, const struct job_opts *o, const char *sha,
-                   const struct farm_gcode *g, int64_t *id, struct sf_err *err);
+struct farm_add {
+    char tmp[1200];    /* the upload's temporary file (the caller's) */
+    struct job_opts o; /* the job */
+    bool gcode;        /* G-code printed as is, g what its check found (farm_gcode_add) */
+    struct farm_gcode g;
+    /* the store thread's, read by done */
+    const struct store *store; /* whose data dir (read only) */
+    bool adopted, added;
+    int adopt_rc; /* the adoption's failure (not retried: its temporary has moved) */
+    struct sf_err adopt_err;
+    char sha[STORE_SHA_HEX];
+    int64_t size;
+    int64_t id;       /* the new job */
+    struct job_row j; /* as read back after its commit */
+};
+
+/*
+ * Write a's job on the farm's store thread, then done(ud, r) on the loop:
+ * r->rc SF_OK (a->id, a->j the new job), or the failure in r->err; a
+ * failed adoption (a->adopted with a->adopt_rc) is reported as
+ * SF_ECANCELED with the adoption's error (the part was not stored).  a is
+ * the caller's again once done runs.  SF_OK, or SF_ENOMEM (done is not
+ * called).
+ */
+int farm_add_post(struct farm *f, struct farm_add *a, storeq_event_fn done, void *ud,
+                  struct sf_err *err);
+
+/*
+ * farm_add_post for an uploaded G-code file, checked by farm_gcode_check
+ * into g: a job printed as is (store_job_add_gcode), ready at once, its
+ * material the file's unless a->o names one.
+ */
+int farm_gcode_add(struct farm *f, struct farm_add *a, const struct farm_gcode *g,
+                   storeq_event_fn done, void *ud, struct sf_err *err);
 
 #endif

@@ -264,29 +264,57 @@ farm_gcode_check(struct farm *f, const char *path, const struct job_opts *o, far
     return SF_OK;
 }
 
-int
-farm_gcode_add(struct farm *f, const struct job_opts *o, const char *sha,
-               const struct farm_gcode *g, int64_t *id, struct sf_err *err)
+/* On the store's thread: a's upload adopted, recorded, its job added and read back. */
+static int
+add_write(struct store *s, void *ud, struct sf_err *err)
 {
-    struct job_opts jo = *o;
-    if (!jo.material[0] && g->info.material[0])
-        snprintf(jo.material, sizeof(jo.material), "%s", g->info.material);
-    struct job_event_args a = { .prep_key = g->key,
-                                .nozzle_mm = g->info.nozzle_mm,
-                                .gcode_lines = g->lines,
-                                .filament_g = g->info.filament_g,
-                                .support_g = g->info.support_g,
-                                .est_known = true,
-                                .est_s = g->est_s };
-    int64_t new_id;
-    int rc = store_job_add_gcode(f->s, &jo, sha, &a, &new_id, err);
-    if (rc)
-        return rc;
-    log_info("farm", "job %lld: G-code '%s' queued as is (%lld lines, %s)", (long long)new_id,
-             o->name, (long long)g->lines, g->key);
-    if (id)
-        *id = new_id;
-    farm_notify(f);
-    farm_kick(f);
-    return SF_OK;
+    struct farm_add *a = ud;
+    if (!a->adopted) { /* the file system's half: not tried again (its temporary is moved) */
+        a->adopted = true;
+        a->adopt_rc = store_file_adopt(a->store, a->tmp, a->sha, &a->size, &a->adopt_err);
+    }
+    if (a->adopt_rc) { /* reported at once: a code the queue does not retry */
+        *err = a->adopt_err;
+        return SF_ECANCELED;
+    }
+    int rc = store_file_record(s, a->sha, a->size, err);
+    if (rc == SF_OK && !a->added) {
+        struct job_event_args g = { .prep_key = a->g.key,
+                                    .nozzle_mm = a->g.info.nozzle_mm,
+                                    .gcode_lines = a->g.lines,
+                                    .filament_g = a->g.info.filament_g,
+                                    .support_g = a->g.info.support_g,
+                                    .est_known = true,
+                                    .est_s = a->g.est_s };
+        rc = a->gcode ? store_job_add_gcode(s, &a->o, a->sha, &g, &a->id, err)
+                      : store_job_add(s, &a->o, a->sha, &a->id, err);
+        if (rc == SF_OK) {
+            a->added = true; /* a retry after this adds nothing twice */
+            if (a->gcode)
+                log_info("farm", "job %lld: G-code '%s' queued as is (%lld lines, %s)",
+                         (long long)a->id, a->o.name, (long long)a->g.lines, a->g.key);
+        }
+    }
+    return rc ? rc : store_job_get(s, a->id, &a->j, err);
+}
+
+int
+farm_add_post(struct farm *f, struct farm_add *a, storeq_event_fn done, void *ud,
+              struct sf_err *err)
+{
+    a->store = f->s;
+    if (storeq_call(f->q, add_write, a, NULL, done, ud))
+        return sf_err_set(err, SF_ENOMEM, "farm: out of memory");
+    return SF_OK; /* its commit wakes the farm (on_store_commit) */
+}
+
+int
+farm_gcode_add(struct farm *f, struct farm_add *a, const struct farm_gcode *g, storeq_event_fn done,
+               void *ud, struct sf_err *err)
+{
+    if (!a->o.material[0] && g->info.material[0])
+        snprintf(a->o.material, sizeof(a->o.material), "%s", g->info.material);
+    a->gcode = true;
+    a->g = *g;
+    return farm_add_post(f, a, done, ud, err);
 }

@@ -78,6 +78,11 @@ jobctl_printer_estop(struct farm *f, const char *name, const char *who, struct s
 int
 jobctl_cancel(struct farm *f, struct store *s, int64_t id, struct sf_err *err)
 {
+    /* A job on a printer (the loop knows it): stop the printer, whose registry records the
+       cancel, without waiting for the store. */
+    const char *on = jobctl_printer_of(f, id);
+    if (on)
+        return jobctl_printer_action(f, on, PRINTER_ACT_CANCEL, err);
     struct job_row j;
     /* the job's end may still be queued, or a reason that a cancel overrides */
     int rc = farm_sync(f, STOREQ_SYNC_MS, err);

@@ -20,7 +20,14 @@
  * job is queued, being prepared or ready; told once until a job waits
  * again).  Bodies are built by notify_body.c.
  *
- * Thread: the loop thread.
+ * Where the log is read: on the farm's store thread (notify_set_queue,
+ * storeq_read), one read at a time so events are told in order: a batch
+ * of events with what telling each needs (its teller, its job, the queue's
+ * counts), so the loop's own connection sends nothing for them (issue 32:
+ * each was a round trip every printer waited for on PostgreSQL).  Without
+ * a queue the same read runs on the loop's store.
+ *
+ * Thread: the loop thread; log_read on the store's thread.
  */
 #include "notify.h"
 
@@ -35,6 +42,7 @@
 #include "../base/mem.h"
 #include "notify_int.h"
 #include "store_host.h"
+#include "storeq.h"
 
 #define PRINTERS_TRACKED 1000 /* printers whose last state is remembered (farmcfg's cap) */
 
@@ -42,6 +50,40 @@
 struct seen_printer {
     char name[64];
     char state[24];
+};
+
+/* What telling of one event needs, read with it on the store's thread (log_read). */
+struct ev_more {
+    bool teller_read; /* the event's teller was asked (one of several hosts) */
+    int teller_rc;    /* its answer: SF_OK (who) or the failure */
+    struct sf_err teller_err;
+    char who[STORE_HOST_NAME_MAX];
+    bool have_job; /* the event's job, read because this host tells of it */
+    struct job_row job;
+    char last_printer[64]; /* the printer of the job's last print, "" if none */
+    bool queue_read;       /* the queue's counts were read (a job started or ended) */
+    bool q_teller_read;    /* the queue's teller was asked */
+    int q_teller_rc;
+    struct sf_err q_teller_err;
+    char q_who[STORE_HOST_NAME_MAX];
+    int counts_rc;
+    struct sf_err counts_err;
+    uint64_t by_state[JOB_STATE_COUNT];
+};
+
+/* One read of the log, on the store's thread: its batch and what telling each needs. */
+struct log_read {
+    struct notify *n; /* NULL once notify_free left it (the answer comes later) */
+    /* the loop's, copied at the post */
+    int64_t after;                  /* the newest event read before */
+    char host[STORE_HOST_NAME_MAX]; /* notify_set_host's */
+    unsigned events;                /* what any target asks for */
+    /* the thread's */
+    int rc; /* store_events' failure (warned, read again at the next poll) */
+    struct sf_err err;
+    struct event_row *ev;
+    size_t k;
+    struct ev_more *more;
 };
 
 struct notify {
@@ -63,6 +105,9 @@ struct notify {
        failed (warned once) */
     char host[STORE_HOST_NAME_MAX];
     bool teller_failed;
+    struct storeq *q;         /* where the log is read (notify_set_queue); NULL: on s */
+    struct log_read *reading; /* the read in flight, NULL if none */
+    bool reread;              /* kicked while it ran: read again after it */
 };
 
 /* ---- deliveries ---- */
@@ -226,20 +271,18 @@ job_moved_to(const char *detail, char to[24])
         snprintf(to, 24, "%.*s", (int)strcspn(arrow + 4, ":"), arrow + 4);
 }
 
-/* Does this host tell of an event about job job_id and printer?  Alone, yes; one of several
-   hosts reads the whole farm's log, and each event is told by one of them
-   (store_host_teller): the job's holder, the printer's owner, else the first live host.
-   When that cannot be read, yes (told twice rather than not at all). */
+/* Does this host tell of an event, the teller read (read) with rc into who?  Alone, yes; one of
+   several hosts reads the whole farm's log, and each event is told by one of them
+   (store_host_teller): the job's holder, the printer's owner, else the first live host.  When
+   that cannot be read, yes (told twice rather than not at all). */
 static bool
-tells(struct notify *n, int64_t job_id, const char *printer)
+tells(struct notify *n, bool read, int rc, const struct sf_err *err, const char *who)
 {
-    if (!n->host[0])
+    if (!n->host[0] || !read)
         return true;
-    char who[STORE_HOST_NAME_MAX];
-    struct sf_err err;
-    if (store_host_teller(n->s, job_id, printer, clock_wall_ms(), who, sizeof(who), &err)) {
+    if (rc) {
         if (!n->teller_failed)
-            log_warn("notify", "which host tells: %s", err.msg);
+            log_warn("notify", "which host tells: %s", err->msg);
         n->teller_failed = true;
         return true;
     }
@@ -248,21 +291,22 @@ tells(struct notify *n, int64_t job_id, const char *printer)
 }
 
 /* After a job started or ended: tell once that no job waits any more (only if a target asks,
-   and on one host of several: the first live one, tells(0, "")). */
+   and on one host of several: the first live one, the teller of (0, "")), from the counts m
+   read with the event. */
 static void
-check_queue(struct notify *n, const struct event_row *e)
+check_queue(struct notify *n, const struct event_row *e, const struct ev_more *m)
 {
     bool asked = false;
     for (size_t i = 0; i < n->n_targets; i++)
         asked |= (n->targets[i].events & NOTIFY_QUEUE_EMPTY) != 0;
-    if (!asked || !tells(n, 0, ""))
+    if (!asked || !m->queue_read ||
+        !tells(n, m->q_teller_read, m->q_teller_rc, &m->q_teller_err, m->q_who))
         return;
-    uint64_t by_state[JOB_STATE_COUNT];
-    struct sf_err err;
-    if (store_job_counts(n->s, by_state, &err)) { /* counted by the database: no rows read */
-        log_warn("notify", "queue: %s", err.msg);
+    if (m->counts_rc) { /* counted by the database: no rows read */
+        log_warn("notify", "queue: %s", m->counts_err.msg);
         return;
     }
+    const uint64_t *by_state = m->by_state;
     uint64_t waiting = by_state[JOB_QUEUED] + by_state[JOB_PREPARING] + by_state[JOB_READY];
     if (waiting) {
         n->queue_armed = true;
@@ -271,11 +315,11 @@ check_queue(struct notify *n, const struct event_row *e)
     if (!n->queue_armed)
         return;
     n->queue_armed = false;
-    struct notify_msg m = { .ev = NOTIFY_QUEUE_EMPTY, .e = e };
-    notify_msg_text(&m, NULL);
+    struct notify_msg msg = { .ev = NOTIFY_QUEUE_EMPTY, .e = e };
+    notify_msg_text(&msg, NULL);
     for (size_t i = 0; i < n->n_targets; i++)
         if (n->targets[i].events & NOTIFY_QUEUE_EMPTY)
-            deliver(n, &n->targets[i], &m);
+            deliver(n, &n->targets[i], &msg);
 }
 
 /* Which notify_event e is, 0 for none. */
@@ -312,34 +356,146 @@ classify(struct notify *n, const struct event_row *e, bool *queue_check)
 }
 
 static void
-handle(struct notify *n, const struct event_row *e)
+handle(struct notify *n, const struct event_row *e, const struct ev_more *more)
 {
     bool queue_check;
     enum notify_event ev = classify(n, e, &queue_check);
     bool wanted = false;
     for (size_t i = 0; i < n->n_targets; i++)
         wanted |= (n->targets[i].events & ev) != 0;
-    if (ev && wanted && tells(n, e->job_id, e->printer)) {
-        struct job_row job;
-        bool have_job = e->job_id > 0 && store_job_get(n->s, e->job_id, &job, NULL) == SF_OK;
+    if (ev && wanted &&
+        tells(n, more->teller_read, more->teller_rc, &more->teller_err, more->who)) {
         struct notify_msg m = { .ev = ev, .e = e };
-        snprintf(m.printer, sizeof(m.printer), "%s", e->printer);
-        struct print_row *prints;
-        size_t k;
         /* a job that ended is on no printer: say the one its last print ran on */
-        if (have_job && !m.printer[0] &&
-            store_prints(n->s, e->job_id, &prints, &k, NULL) == SF_OK) {
-            if (k)
-                snprintf(m.printer, sizeof(m.printer), "%s", prints[k - 1].printer);
-            free(prints);
-        }
-        notify_msg_text(&m, have_job ? &job : NULL);
+        snprintf(m.printer, sizeof(m.printer), "%s",
+                 e->printer[0] ? e->printer : more->last_printer);
+        notify_msg_text(&m, more->have_job ? &more->job : NULL);
         for (size_t i = 0; i < n->n_targets; i++)
             if (n->targets[i].events & ev)
                 deliver(n, &n->targets[i], &m);
     }
     if (queue_check)
-        check_queue(n, e);
+        check_queue(n, e, more);
+}
+
+/* Which notify_event e may be from itself alone (classify's, without what the loop
+   remembers), and whether it asks for the queue's counts; 0 for none. */
+static enum notify_event
+may_be(const struct event_row *e, bool *queue_check)
+{
+    *queue_check = false;
+    char to[24];
+    if (strncmp(e->kind, "job-", 4) == 0 && strcmp(e->kind, "job-add") != 0) {
+        job_moved_to(e->detail, to);
+        *queue_check = strcmp(to, "printing") == 0 || strcmp(to, "done") == 0 ||
+                       strcmp(to, "failed") == 0 || strcmp(to, "cancelled") == 0;
+        return strcmp(to, "done") == 0     ? NOTIFY_JOB_DONE
+               : strcmp(to, "failed") == 0 ? NOTIFY_JOB_FAILED
+                                           : 0;
+    }
+    if (strcmp(e->kind, "printer-state") != 0 || !e->printer[0])
+        return 0;
+    return strcmp(e->detail, "awaiting-clear") == 0 ? NOTIFY_BED_CLEAR
+           : strcmp(e->detail, "error") == 0        ? NOTIFY_PRINTER_ERROR
+           : strcmp(e->detail, "offline") == 0      ? NOTIFY_PRINTER_OFFLINE
+                                                    : 0;
+}
+
+/* On the store's thread: the teller of (job_id, printer) for r's host into who, rc into *rc;
+   whether this host tells (yes when alone, or when it cannot be read). */
+static bool
+read_teller(struct store *s, const struct log_read *r, int64_t job_id, const char *printer,
+            bool *read, int *rc, struct sf_err *err, char *who, size_t cap)
+{
+    if (!r->host[0])
+        return true;
+    *read = true;
+    *rc = store_host_teller(s, job_id, printer, clock_wall_ms(), who, cap, err);
+    return *rc || !who[0] || strcmp(who, r->host) == 0;
+}
+
+/* On the store's thread: what telling of event e needs, into m. */
+static void
+read_more(struct store *s, const struct log_read *r, const struct event_row *e, struct ev_more *m)
+{
+    bool queue_check;
+    enum notify_event ev = may_be(e, &queue_check);
+    if ((ev & r->events) && read_teller(s, r, e->job_id, e->printer, &m->teller_read, &m->teller_rc,
+                                        &m->teller_err, m->who, sizeof(m->who))) {
+        m->have_job = e->job_id > 0 && store_job_get(s, e->job_id, &m->job, NULL) == SF_OK;
+        struct print_row *prints;
+        size_t k;
+        if (m->have_job && !e->printer[0] &&
+            store_prints(s, e->job_id, &prints, &k, NULL) == SF_OK) {
+            if (k)
+                snprintf(m->last_printer, sizeof(m->last_printer), "%s", prints[k - 1].printer);
+            free(prints);
+        }
+    }
+    if (!queue_check || !(r->events & NOTIFY_QUEUE_EMPTY))
+        return;
+    m->queue_read = true;
+    if (read_teller(s, r, 0, "", &m->q_teller_read, &m->q_teller_rc, &m->q_teller_err, m->q_who,
+                    sizeof(m->q_who)))
+        m->counts_rc = store_job_counts(s, m->by_state, &m->counts_err);
+}
+
+/* On the store's thread: a batch of events after r->after, and what telling each needs.  A
+   failure is kept in r (warned on the loop, read again at the next poll), not retried. */
+static int
+log_read(struct store *s, void *arg, struct sf_err *err)
+{
+    (void)err;
+    struct log_read *r = arg;
+    if ((r->rc = store_events(s, r->after, NOTIFY_BATCH, &r->ev, &r->k, &r->err)))
+        return SF_OK;
+    if (r->k && !(r->more = mem_calloc(r->k, sizeof(*r->more)))) {
+        free(r->ev);
+        r->ev = NULL;
+        r->k = 0;
+        r->rc = sf_err_set(&r->err, SF_ENOMEM, "out of memory");
+        return SF_OK;
+    }
+    for (size_t i = 0; i < r->k; i++)
+        read_more(s, r, &r->ev[i], &r->more[i]);
+    return SF_OK;
+}
+
+static void
+log_read_free(struct log_read *r)
+{
+    free(r->ev);
+    free(r->more);
+    free(r);
+}
+
+/* The read came back (on the loop): tell of its events, in order. */
+static void
+on_read(void *ud, const struct storeq_result *res)
+{
+    (void)res;
+    struct log_read *r = ud;
+    struct notify *n = r->n;
+    if (!n) { /* notify_free came first */
+        log_read_free(r);
+        return;
+    }
+    n->reading = NULL;
+    if (r->rc) {
+        if (!n->log_failed)
+            log_warn("notify", "reading the event log: %s", r->err.msg);
+        n->log_failed = true;
+    } else {
+        n->log_failed = false;
+        for (size_t i = 0; i < r->k; i++) {
+            n->last_id = r->ev[i].id;
+            handle(n, &r->ev[i], &r->more[i]);
+        }
+    }
+    if (n->reread || (!r->rc && r->k == NOTIFY_BATCH))
+        notify_kick(n); /* kicked meanwhile, or more than a batch: the rest on the next turn */
+    n->reread = false;
+    log_read_free(r);
 }
 
 static void
@@ -348,26 +504,25 @@ read_log(struct loop *l, void *ud)
     (void)l;
     struct notify *n = ud;
     n->kick = 0;
-    for (int round = 0; round < 4; round++) {
-        struct event_row *ev;
-        size_t k;
-        struct sf_err err;
-        if (store_events(n->s, n->last_id, NOTIFY_BATCH, &ev, &k, &err)) {
-            if (!n->log_failed)
-                log_warn("notify", "reading the event log: %s", err.msg);
-            n->log_failed = true;
-            return;
-        }
-        n->log_failed = false;
-        for (size_t i = 0; i < k; i++) {
-            n->last_id = ev[i].id;
-            handle(n, &ev[i]);
-        }
-        free(ev);
-        if (k < NOTIFY_BATCH)
-            return;
+    if (n->reading) { /* one read at a time: the events in order */
+        n->reread = true;
+        return;
     }
-    notify_kick(n); /* more than a turn's worth: the rest on the next turn */
+    struct log_read *r = mem_calloc(1, sizeof(*r));
+    if (!r)
+        return; /* read at the next poll */
+    r->n = n;
+    r->after = n->last_id;
+    snprintf(r->host, sizeof(r->host), "%s", n->host);
+    for (size_t i = 0; i < n->n_targets; i++)
+        r->events |= n->targets[i].events;
+    n->reading = r;
+    if (n->q && storeq_read(n->q, log_read, r, on_read, r) == SF_OK)
+        return;
+    /* no queue (or no memory for its request): on the loop's store */
+    struct sf_err err = { 0 };
+    struct storeq_result res = { .rc = log_read(n->s, r, &err), .err = &err };
+    on_read(r, &res);
 }
 
 static void
@@ -385,6 +540,13 @@ notify_kick(struct notify *n)
 {
     if (n && !n->kick)
         n->kick = loop_timer_add(n->l, 0, read_log, n);
+}
+
+void
+notify_set_queue(struct notify *n, struct storeq *q)
+{
+    if (n)
+        n->q = q;
 }
 
 void
@@ -453,6 +615,8 @@ notify_free(struct notify *n)
             loop_timer_cancel(n->l, d->timer);
         unlink_free(d);
     }
+    if (n->reading)
+        n->reading->n = NULL; /* its answer comes later: freed then */
     if (n->kick)
         loop_timer_cancel(n->l, n->kick);
     if (n->poll)

@@ -66,6 +66,16 @@ int notify_reload(struct notify *n, const struct notifycfg *targets, size_t n_ta
  */
 void notify_set_host(struct notify *n, const char *host);
 
+/*
+ * Read the log on q's thread (the farm's store queue, storeq_read), so the
+ * loop's own connection sends nothing for it; NULL (the default): on the
+ * store notify_new was given, on the loop.  q must outlive the reads
+ * posted to it: set NULL before freeing it (storeq_free delivers what is
+ * in flight).
+ */
+struct storeq;
+void notify_set_queue(struct notify *n, struct storeq *q);
+
 /* New events may be in the log: read them on the next loop turn. */
 void notify_kick(struct notify *n);
 

@@ -4,7 +4,8 @@
  * filled JSON-escaped (a job name with quotes must not break the
  * service's JSON) or as is, and the mail's headers and envelope.  Delivery
  * over real HTTP and SMTP is tests/integ/farmd_notify.sh.  On PostgreSQL
- * (tstore.h), hosts that share a store tell of each event of the farm once.
+ * (tstore.h), hosts that share a store tell of each event of the farm once, reading the log
+ * on their store threads (nothing on the loop's own connection).
  */
 #include <jansson.h>
 #include <stdio.h>
@@ -13,6 +14,8 @@
 #include "../../src/base/loop.h"
 #include "../../src/farm/notify.h"
 #include "../../src/farm/notify_int.h"
+#include "../../src/farm/store_host.h"
+#include "../../src/farm/storeq.h"
 #include "../t.h"
 #include "../tstore.h"
 
@@ -186,6 +189,12 @@ T_CASE(notify_each_event_of_a_farm_once_among_its_hosts)
     T_TRUE(l != NULL);
     struct notify *na = host_notify(l, p.a, "a", &err), *nb = host_notify(l, p.b, "b", &err);
     T_TRUE(na && nb);
+    /* each host reads its log on its store's thread, as the daemon does (farm_storeq) */
+    struct storeq *qa = storeq_new(l, p.a, &err), *qb = storeq_new(l, p.b, &err);
+    T_TRUE(qa && qb);
+    notify_set_queue(na, qa);
+    notify_set_queue(nb, qb);
+    uint64_t trips_a = store_round_trips(p.a), trips_b = store_round_trips(p.b);
     /* the farm's log: b's job done, a's printer in error */
     snprintf(sql, sizeof(sql),
              "INSERT INTO events(at_ms, job_id, printer, kind, detail) VALUES"
@@ -195,12 +204,20 @@ T_CASE(notify_each_event_of_a_farm_once_among_its_hosts)
     T_OK(t_store_exec(p.dir, sql), NULL);
     notify_kick(na);
     notify_kick(nb);
-    for (int i = 0; i < 3; i++)
-        loop_run_once(l, 0);
+    for (int i = 0; i < 2000 && (notify_pending(na) < 2 || notify_pending(nb) < 1); i++)
+        loop_run_once(l, 10);
+    /* both logs read to the end (each notifier's read answered, none after) */
+    storeq_free(qa);
+    storeq_free(qb);
+    notify_set_queue(na, NULL);
+    notify_set_queue(nb, NULL);
     /* a tells of its printer and of the queue run empty (the first live host by name), b of
        its job: each once in the farm */
     T_EQ_INT(notify_pending(na), 2);
     T_EQ_INT(notify_pending(nb), 1);
+    /* the tellers, the job and the counts were read on the store threads (issue 32) */
+    T_EQ_INT(store_round_trips(p.a) - trips_a, 0);
+    T_EQ_INT(store_round_trips(p.b) - trips_b, 0);
     notify_free(na);
     notify_free(nb);
     loop_free(l);
