@@ -161,10 +161,17 @@ search_json(const struct dirsearch_result *ds)
     json_t *shape = json_array(), *dirs = json_array();
     for (int i = 0; i < ds->n_tried; i++) {
         json_array_append_new(shape, json_real(ds->shape_s[i]));
-        json_array_append_new(dirs, json_pack("{s:[f, f, f], s:f, s:f, s:b}", "up", ds->ups[i].x,
-                                              ds->ups[i].y, ds->ups[i].z, "model_support_g",
-                                              ds->model_g[i], "print_s", ds->print_s[i],
-                                              "shape_changed", ds->shape_changed[i]));
+        const struct dirsearch_step *st = &ds->steps[i];
+        json_t *d =
+            json_pack("{s:[f, f, f], s:f, s:f, s:b, s:f, s:i, s:i, s:i, s:i, s:i}", "up",
+                      ds->ups[i].x, ds->ups[i].y, ds->ups[i].z, "model_support_g", ds->model_g[i],
+                      "print_s", ds->print_s[i], "shape_changed", ds->shape_changed[i],
+                      "start_model_g", st->start_g, "iterations", (json_int_t)st->iters, "rejected",
+                      (json_int_t)st->rejected, "folded", (json_int_t)st->folded, "halved",
+                      (json_int_t)st->halved, "frozen", (json_int_t)st->frozen);
+        if (st->unchanged_why)
+            json_object_set_new(d, "unchanged_why", json_string(st->unchanged_why));
+        json_array_append_new(dirs, d);
     }
     const struct dirsearch_stages *st = &ds->stages;
     json_t *stages =

@@ -273,6 +273,10 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
         res->model_g[i] = sh->c[i].support_g;
         res->print_s[i] = sh->c[i].print_s;
         res->shape_changed[i] = sh->r[i].shape_changed;
+        const struct surfopt_result *r = &sh->r[i];
+        res->steps[i] = (struct dirsearch_step){ r->model_oriented_g, r->unchanged_why, r->n_iters,
+                                                 r->n_rejected,       r->n_folded,      r->n_halved,
+                                                 r->n_frozen };
         res->shape_s[i] = sh->seconds[i];
         stages_add(&res->stages, sh, i);
     }

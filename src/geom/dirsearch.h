@@ -65,6 +65,15 @@ struct dirsearch_result {
     double model_g[DIRSEARCH_K_MAX]; /* each direction's result, by the model */
     double print_s[DIRSEARCH_K_MAX]; /* and its estimated print seconds */
     bool shape_changed[DIRSEARCH_K_MAX];
+    /* each direction's shape step, for the reports: the model's grams of the
+       direction before its reshape, why its shape was kept (NULL: changed),
+       its iterations and the iterates refused (surfopt_result) */
+    struct dirsearch_step {
+        double start_g;
+        const char *unchanged_why;
+        int iters;
+        uint32_t rejected, folded, halved, frozen;
+    } steps[DIRSEARCH_K_MAX];
     /* wall seconds: in all, the orientation search, the input's model and
        time, each direction's shape step and cost, the peers' check */
     double seconds, orient_s, input_s, shape_s[DIRSEARCH_K_MAX], check_s;

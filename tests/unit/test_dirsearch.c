@@ -75,6 +75,16 @@ T_CASE(dirsearch_does_not_stand_a_long_bar_up_to_save_a_little_support)
     for (int i = 0; i < r.n_tried; i++)
         parts += r.shape_s[i];
     T_EQ_DBL(sum, parts, 1e-3 * parts + 1e-4);
+    /* each direction's shape step is reported (issue 36: why a part comes
+       back unchanged): its start by the model, which its result never
+       exceeds, its iterations, and a reason exactly when it kept its shape */
+    for (int i = 0; i < r.n_tried; i++) {
+        const struct dirsearch_step *ds = &r.steps[i];
+        T_TRUE(ds->start_g >= 0 && r.model_g[i] <= ds->start_g + 1e-9);
+        T_TRUE(ds->iters >= 1);
+        T_TRUE((ds->unchanged_why == NULL) == r.shape_changed[i]);
+        T_TRUE(r.shape_changed[i] || r.model_g[i] == ds->start_g);
+    }
     dirsearch_result_release(&r);
 }
 
