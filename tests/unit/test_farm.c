@@ -2243,3 +2243,43 @@ T_CASE(farm_start_looks_its_gcode_up_off_the_loop)
     store_close(r);
     teardown();
 }
+
+/*
+ * A queued job whose part is lost (PostgreSQL: neither in this host's cache
+ * nor in the database; SQLite: gone from the data dir) fails at its
+ * preparation, naming the file: the worker's lookup (farm_prep_files) keeps
+ * prepare()'s verdict, a file that is not there is no passing error.
+ */
+T_CASE(farm_prepare_of_a_lost_part_fails_the_job_naming_it)
+{
+    struct sf_err err;
+    setup_held = "a";
+    T_OK(setup("lostpart", farm_ini, tdrv_new, test_prepare, &err), &err);
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    snprintf(o.material, sizeof(o.material), "PLA");
+    char sha[STORE_SHA_HEX], path[1200];
+    int64_t id = 0;
+    T_OK(store_file_put(fx.s, "size 20 20 20", 13, sha, &err), &err);
+    T_OK(store_file_path(fx.s, sha, path, sizeof(path), &err), &err);
+    T_EQ_INT(unlink(path), 0);
+    if (t_store_pg()) { /* its bytes gone from the database too */
+        char dir[600], sql[256];
+        snprintf(dir, sizeof(dir), "%s/lostpart", t_tmpdir());
+        struct sqldb *db = sqldb_open(t_store_db(dir), 0, &err);
+        T_TRUE(db != NULL);
+        snprintf(sql, sizeof(sql), "DELETE FROM file_chunks WHERE sha256 = '%s'", sha);
+        T_EQ_INT(sqldb_exec(db, sql), 0);
+        snprintf(sql, sizeof(sql), "DELETE FROM file_blobs WHERE sha256 = '%s'", sha);
+        T_EQ_INT(sqldb_exec(db, sql), 0);
+        sqldb_close(db);
+    }
+    T_OK(store_job_add(fx.s, &o, sha, &id, &err), &err);
+    farm_kick(fx.f);
+    T_TRUE(wait_job(id, JOB_FAILED));
+    struct job_row j;
+    T_OK(job_get(id, &j, &err), &err);
+    T_TRUE(strstr(j.reason, sha) != NULL);
+    teardown();
+}
