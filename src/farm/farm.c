@@ -960,13 +960,14 @@ farm_free(struct farm *f)
 {
     if (!f)
         return;
+    if (f->files) { /* first: a lookup's answer may still hand its start to io */
+        pool_free(f->files);
+        f->files = NULL;        /* farm_start starts nothing from here */
+        loop_run_once(f->l, 0); /* deliver a start's lookup cut short */
+    }
     if (f->io) {
         pool_free(f->io);
         loop_run_once(f->l, 0); /* deliver a resume read cut short (pool.h) */
-    }
-    if (f->files) {
-        pool_free(f->files);
-        loop_run_once(f->l, 0); /* deliver a start's lookup cut short */
     }
     if (f->kick)
         loop_timer_cancel(f->l, f->kick);

@@ -195,9 +195,10 @@ startlook_done(struct loop *l, void *ud, int rc)
             *pp = t->next;
             break;
         }
-    struct printer *p = rc == SF_ECANCELED ? NULL : farm_find(f, t->printer);
+    bool stop = rc == SF_ECANCELED || !f->pool;
+    struct printer *p = stop ? NULL : farm_find(f, t->printer);
     int64_t id = t->j.id;
-    if (rc == SF_ECANCELED) { /* shutting down: the job stays ready */
+    if (stop) { /* shutting down: the job stays ready */
     } else if (rc && t->v != FETCH_FAIL) {
         log_warn("farm", "job %lld: %s", (long long)id, t->err.msg);
         if (p && printer_fence(p, id))
@@ -224,6 +225,8 @@ void
 farm_start(struct farm *f, const struct job_row *j, struct printer *p)
 {
     struct sf_err err;
+    if (!f->files) /* stopping */
+        return;
     if (farm_start_looking(f, j->id, printer_cfg(p)->name))
         return; /* its lookup's answer starts it (the pass should not have picked it) */
     struct startlook *t = mem_calloc(1, sizeof(*t));
