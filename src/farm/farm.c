@@ -57,7 +57,10 @@ struct prep {
     struct prepare_out out;        /* output */
     struct drv_job_scan scan;      /* the G-code's scan, made on the worker too */
     double est_s;                  /* and its print time estimate (gcjob_estimate_s) */
-    const struct store *store;     /* for store_file_adopt on the worker */
+    const struct store *store;     /* for store_file_adopt, farm_prep_files on the worker */
+    char part_sha[STORE_SHA_HEX];  /* the part, and the optimized one reused ("" if none): */
+    char reuse_sha[STORE_SHA_HEX]; /* their paths looked up by the worker (farm_prep_files) */
+    bool files_failed;             /* ... which failed (err says why) */
     char gcode_sha[STORE_SHA_HEX]; /* the G-code, adopted into the store by the worker */
     int64_t gcode_size;
     char mesh_sha[STORE_SHA_HEX]; /* the optimized part, adopted by the worker; "" if none */
@@ -171,8 +174,13 @@ static int
 prep_work(void *ud, const atomic_bool *cancel)
 {
     struct prep *t = ud;
+    int rc = farm_prep_files(t->store, &t->req, t->part_sha, t->reuse_sha, t->reslice, &t->err);
+    if (rc) {
+        t->files_failed = true;
+        return rc;
+    }
     int64_t t0 = clock_mono_ms();
-    int rc = t->f->hooks.prepare(&t->req, &t->out, cancel, &t->err);
+    rc = t->f->hooks.prepare(&t->req, &t->out, cancel, &t->err);
     t->prepare_ms = clock_mono_ms() - t0;
     if (rc == SF_OK) /* kept with the job: a start reads it from there, not the file */
         t->est_s = gcjob_estimate_s(t->req.out_path);
@@ -338,6 +346,36 @@ db_passing(int rc)
     return rc == SF_EBUSY || rc == SF_EUNREACH || rc == SF_EINDOUBT;
 }
 
+static bool passing(int rc);
+
+/* Task t's part (or the optimized one it reuses) could not be had (rc): only a file that is
+   not there, or not valid, fails the job; a database that does not answer now (another host's
+   upload not fetched yet) may later: the job goes back to the queue (farm_cool).  A re-slice
+   leaves its job ready: a file gone is not tried again for this key, a passing error is. */
+static void
+files_failed(struct farm *f, struct prep *t, int rc)
+{
+    int64_t id = t->req.job_id;
+    const char *why = t->err.msg;
+    if (passing(rc))
+        farm_cool(f, id);
+    if (t->reslice) {
+        log_warn("farm", "job %lld: %s", (long long)id, why);
+        if (!passing(rc) && mem_grow((void **)&f->no, &f->cap_no, f->n_no + 1, sizeof(*f->no))) {
+            f->no[f->n_no].job_id = id;
+            snprintf(f->no[f->n_no++].key, SCHED_KEY_MAX, "%s", t->key);
+        }
+        return;
+    }
+    struct job_event_args a = { .reason = why, .fence = t->fence };
+    if (passing(rc)) {
+        log_warn("farm", "job %lld goes back to the queue: %s", (long long)id, why);
+        queue_event(f, id, JOB_EV_DEFER, &a);
+    } else {
+        queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
+    }
+}
+
 static void
 prep_done(struct loop *l, void *ud, int rc)
 {
@@ -374,6 +412,8 @@ prep_done(struct loop *l, void *ud, int rc)
            Out of memory, the job stays preparing until the next start's recovery. */
         t->prepared = a; /* its strings are t's: t waits, untouched, until on_prepared */
         queued = storeq_call(f->q, prepared_write, t, NULL, on_prepared, t) == SF_OK;
+    } else if (rc != SF_ECANCELED && t->files_failed) {
+        files_failed(f, t, rc);
     } else if (rc != SF_ECANCELED) {
         const char *why = t->err.msg;
         if (t->reslice) {
@@ -394,7 +434,8 @@ prep_done(struct loop *l, void *ud, int rc)
             farm_prep_end(f, id, JOB_EV_PREPARE_FAILED, &a);
         }
     }
-    unlink(t->req.out_path); /* gone when adopted */
+    if (t->req.out_path[0])
+        unlink(t->req.out_path); /* gone when adopted */
     if (t->req.mesh_out[0])
         unlink(t->req.mesh_out);
     if (!queued) {
@@ -518,6 +559,10 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
         int64_t fence)
 {
     struct sf_err err;
+    if (farm_cooling(f, j->id)) { /* its files could not be had a moment ago */
+        retry_later(f);
+        return true;
+    }
     struct prep *t = mem_calloc(1, sizeof(*t));
     if (!t)
         return true; /* retried on the next kick */
@@ -538,39 +583,10 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     snprintf(t->req.part_name, sizeof(t->req.part_name), "%s", j->opts.name);
     bool reuse = j->mesh_sha[0] && j->mesh_angle_deg == t->angle_deg;
     int rc;
-    if ((rc = store_file_path(f->s, j->file_sha, t->req.part_path, sizeof(t->req.part_path),
-                              &err)) ||
-        (rc = store_file_path(f->s, j->file_sha, t->req.out_path, sizeof(t->req.out_path) - 32,
-                              &err)) ||
-        (reuse &&
-         (rc = store_file_path(f->s, j->mesh_sha, t->req.mesh_in, sizeof(t->req.mesh_in), &err)))) {
-        free(t);
-        if (reslice) {
-            log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
-            return true;
-        }
-        /* Only a file that is not there, or not valid, fails the job: a database that does
-           not answer now (another host's upload not fetched yet) may answer later. */
-        if (passing(rc)) {
-            log_warn("farm", "job %lld stays queued: %s", (long long)j->id, err.msg);
-            retry_later(f);
-            return false;
-        }
-        struct job_event_args a = { .reason = err.msg };
-        if (farm_host_on(f)) { /* one of several hosts: it fails the job under its claim */
-            if (farm_host_claim(f, j->id, &a.fence) == SF_OK)
-                queue_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
-            return true;
-        }
-        queue_event(f, j->id, JOB_EV_PREPARE, NULL);
-        queue_event(f, j->id, JOB_EV_PREPARE_FAILED, &a);
-        return true;
-    }
-    /* out: beside the stored files, named for the job and the task */
-    char *slash = strrchr(t->req.out_path, '/');
-    snprintf(slash + 1, 32, "job-%lld%s.gcode", (long long)j->id, reslice ? "-re" : "");
-    if (!reuse)
-        snprintf(t->req.mesh_out, sizeof(t->req.mesh_out), "%s.stl", t->req.out_path);
+    /* the files' paths: on the worker (farm_prep_files), which may fetch them from the database */
+    snprintf(t->part_sha, sizeof(t->part_sha), "%s", j->file_sha);
+    if (reuse)
+        snprintf(t->reuse_sha, sizeof(t->reuse_sha), "%s", j->mesh_sha);
     if (reslice) { /* the job stays ready: nothing to write before the worker has it */
         if (!pool_submit(f->pool, prep_work, prep_done, t, &err)) {
             free(t);
@@ -636,8 +652,9 @@ cmp_id(const void *a, const void *b)
 
 /*
  * A job a printer took reads ready in the store until its START, queued
- * (printer_start), commits: mark it printing in jobs so no pass starts it
- * again elsewhere meanwhile.  SF_ENOMEM.
+ * (printer_start), commits, or, before that, while its G-code is looked up
+ * (farm_start): mark it printing in jobs so no pass starts it again
+ * elsewhere meanwhile.  SF_ENOMEM.
  */
 static int
 mark_taken(const struct farm *f, struct job_row *jobs, size_t n)
@@ -652,6 +669,9 @@ mark_taken(const struct farm *f, struct job_row *jobs, size_t n)
     qsort(held, n_held, sizeof(*held), cmp_id);
     for (size_t i = 0; n_held && i < n; i++)
         if (jobs[i].state == JOB_READY && bsearch(&jobs[i].id, held, n_held, sizeof(*held), cmp_id))
+            jobs[i].state = JOB_PRINTING;
+    for (size_t i = 0; f->looking && i < n; i++) /* its start's G-code is being looked up */
+        if (jobs[i].state == JOB_READY && farm_start_looking(f, jobs[i].id, NULL))
             jobs[i].state = JOB_PRINTING;
     free(held);
     return SF_OK;
@@ -780,6 +800,8 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
         farm_printer_view(p, &sp[i]);
         if (!farm_host_owns(f, sp[i].name)) /* another live host's: its jobs are that host's */
             sp[i].enabled = false;
+        if (sp[i].state == PRINTER_IDLE && farm_start_looking(f, 0, sp[i].name))
+            sp[i].state = PRINTER_PRINTING; /* a start's G-code is being looked up for it */
         /* An interrupted part is still on this bed, waiting to be resumed:
            nothing else may start on top of it. */
         for (size_t k = 0; k < n; k++)
@@ -904,7 +926,8 @@ farm_new(struct loop *l, struct store *s, struct pool *pool, const struct farmcf
     snprintf(f->profiles_dir, sizeof(f->profiles_dir), "%s", cfg->profiles_dir);
     f->gram_s = cfg->gram_s;
     f->material_first = cfg->material_first;
-    if (!(f->io = pool_new(l, 1, err)) || !(f->q = storeq_new(l, s, err))) {
+    if (!(f->io = pool_new(l, 1, err)) || !(f->files = pool_new(l, 1, err)) ||
+        !(f->q = storeq_new(l, s, err))) {
         farm_free(f);
         return NULL;
     }
@@ -937,6 +960,11 @@ farm_free(struct farm *f)
 {
     if (!f)
         return;
+    if (f->files) { /* first: a lookup's answer may still hand its start to io */
+        pool_free(f->files);
+        f->files = NULL;        /* farm_start starts nothing from here */
+        loop_run_once(f->l, 0); /* deliver a start's lookup cut short */
+    }
     if (f->io) {
         pool_free(f->io);
         loop_run_once(f->l, 0); /* deliver a resume read cut short (pool.h) */
@@ -965,5 +993,6 @@ farm_free(struct farm *f)
     free(f->printers);
     free(f->seed);
     free(f->no);
+    free(f->cool);
     free(f);
 }

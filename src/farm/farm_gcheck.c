@@ -79,13 +79,14 @@ enum fetch_verdict {
                         damaged (a missing or short chunk, the wrong SHA-256) */
 };
 
+/* On the io thread: what a start does with G-code the store could not give (err), r a reader. */
 static enum fetch_verdict
-fetch_verdict(struct farm *f, const char *sha, const struct sf_err *err)
+fetch_verdict(struct store *r, const char *sha, const struct sf_err *err)
 {
     struct sf_err e;
     switch (err->code) {
     case SF_ENOTFOUND: { /* gone, or its bytes only in another host's data dir */
-        int known = store_file_known(f->s, sha, &e);
+        int known = store_file_known(r, sha, &e);
         return known < 0 ? FETCH_RETRY : known ? FETCH_GIVE_BACK : FETCH_FAIL;
     }
     case SF_EIO: /* this host's file system (errno), else the store's bytes */
@@ -97,30 +98,64 @@ fetch_verdict(struct farm *f, const char *sha, const struct sf_err *err)
     }
 }
 
-void
-farm_start(struct farm *f, const struct job_row *j, struct printer *p)
+/*
+ * A start whose G-code is looked up on the io thread: on a shared store a
+ * file this host's cache lacks is fetched from the database first (a
+ * 100 MB job: 1-2 s), which the loop must not wait for.  Until the answer
+ * is back the job and its printer are in f->looking: no pass starts
+ * either again (farm_start_looking).
+ */
+struct startlook {
+    struct farm *f;
+    struct startlook *next;    /* in f->looking */
+    const struct store *store; /* for the io thread's reader (store_open_reader) */
+    struct job_row j;          /* the job as the pass read it */
+    char printer[64];          /* the printer it starts on */
+    int64_t fence;             /* the take's fencing token (0: one host) */
+    char path[1200];           /* the G-code, local once found */
+    enum fetch_verdict v;      /* when it was not */
+    struct sf_err err;
+};
+
+static int
+startlook_work(void *ud, const atomic_bool *cancel)
 {
+    (void)cancel;
+    struct startlook *t = ud;
+    struct store *r = store_open_reader(t->store, &t->err);
+    int rc =
+        r ? store_file_path(r, t->j.gcode_sha, t->path, sizeof(t->path), &t->err) : t->err.code;
+    if (rc)
+        t->v = r ? fetch_verdict(r, t->j.gcode_sha, &t->err) : FETCH_RETRY;
+    store_close(r);
+    return rc;
+}
+
+bool
+farm_start_looking(const struct farm *f, int64_t job_id, const char *printer)
+{
+    for (const struct startlook *t = f->looking; t; t = t->next)
+        if ((job_id && t->j.id == job_id) || (printer && strcmp(t->printer, printer) == 0))
+            return true;
+    return false;
+}
+
+/* Start t's job on p, its G-code looked up: rc (t->err, t->v) when it was not found. */
+static void
+start_on(struct farm *f, struct startlook *l, struct printer *p, int rc)
+{
+    const struct job_row *j = &l->j;
     struct sf_err err;
     struct startcheck *t = mem_calloc(1, sizeof(*t));
-    if (!t)
-        return; /* the next kick tries again */
-    int rc = store_file_path(f->s, j->gcode_sha, t->path, sizeof(t->path), &err);
-    enum fetch_verdict v = rc ? fetch_verdict(f, j->gcode_sha, &err) : FETCH_FAIL;
-    if (rc && v != FETCH_FAIL) {
-        log_warn("farm", "job %lld: %s", (long long)j->id, err.msg);
-        free(t);
-        int64_t fence = printer_fence(p, j->id);
-        printer_set_fence(p, 0, 0);
-        if (v == FETCH_RETRY)
-            farm_retry_later(f); /* the job stays this host's take, taken again then */
-        else if (fence)
-            farm_host_give_back(f, j->id, fence, err.msg);
+    if (!t) {
+        farm_retry_later(f); /* the job stays this host's take, taken again then */
         return;
     }
     t->f = f;
     t->job_id = j->id;
     snprintf(t->printer, sizeof(t->printer), "%s", printer_cfg(p)->name);
     snprintf(t->name, sizeof(t->name), "%s", j->opts.name);
+    snprintf(t->path, sizeof(t->path), "%s", l->path);
     /* The scan prepare made; G-code prepared before the count was stored
        (gcode_lines 0) is read by the driver itself, once. */
     t->scan = (struct drv_job_scan){ .lines_total = (uint64_t)j->gcode_lines };
@@ -136,12 +171,79 @@ farm_start(struct farm *f, const struct job_row *j, struct printer *p)
     t->token = printer_start_token(p);
     if (rc) { /* no host can have its G-code: the start fails the job, naming the file */
         sf_err_set(&t->err, rc, "its G-code (file %s) cannot be had from the store: %s",
-                   j->gcode_sha, err.msg);
+                   j->gcode_sha, l->err.msg);
         startcheck_done(f->l, t, rc);
         return;
     }
     if (!pool_submit(f->io, startcheck_work, startcheck_done, t, &err))
         startcheck_done(f->l, t, startcheck_work(t, NULL)); /* no worker: judged here */
+}
+
+/*
+ * The loop: t's G-code lookup is back (rc).  The printer may have gone,
+ * been replaced, or taken something else meanwhile (an operator's resume):
+ * then the job stays ready, this host's take, and is taken again later.
+ */
+static void
+startlook_done(struct loop *l, void *ud, int rc)
+{
+    (void)l;
+    struct startlook *t = ud;
+    struct farm *f = t->f;
+    for (struct startlook **pp = &f->looking; *pp; pp = &(*pp)->next)
+        if (*pp == t) {
+            *pp = t->next;
+            break;
+        }
+    bool stop = rc == SF_ECANCELED || !f->pool;
+    struct printer *p = stop ? NULL : farm_find(f, t->printer);
+    int64_t id = t->j.id;
+    if (stop) { /* shutting down: the job stays ready */
+    } else if (rc && t->v != FETCH_FAIL) {
+        log_warn("farm", "job %lld: %s", (long long)id, t->err.msg);
+        if (p && printer_fence(p, id))
+            printer_set_fence(p, 0, 0);
+        if (t->v == FETCH_RETRY)
+            farm_retry_later(f); /* the job stays this host's take, taken again then */
+        else if (t->fence)
+            farm_host_give_back(f, id, t->fence, t->err.msg);
+    } else if (!p || printer_removed(p) || printer_state(p) != PRINTER_IDLE ||
+               !printer_connected(p) || printer_job(p) || printer_fence(p, id) != t->fence) {
+        log_info("farm", "job %lld: printer %s changed while its G-code was looked up: later",
+                 (long long)id, t->printer);
+        if (p && printer_fence(p, id))
+            printer_set_fence(p, 0, 0);
+        farm_retry_later(f);
+    } else {
+        start_on(f, t, p, rc);
+    }
+    free(t);
+    farm_kick(f);
+}
+
+void
+farm_start(struct farm *f, const struct job_row *j, struct printer *p)
+{
+    struct sf_err err;
+    if (!f->files) /* stopping */
+        return;
+    if (farm_start_looking(f, j->id, printer_cfg(p)->name))
+        return; /* its lookup's answer starts it (the pass should not have picked it) */
+    struct startlook *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return; /* the next kick tries again */
+    t->f = f;
+    t->store = f->s;
+    t->j = *j;
+    snprintf(t->printer, sizeof(t->printer), "%s", printer_cfg(p)->name);
+    t->fence = printer_fence(p, j->id);
+    if (!pool_submit(f->files, startlook_work, startlook_done, t, &err)) {
+        free(t);
+        farm_retry_later(f);
+        return;
+    }
+    t->next = f->looking;
+    f->looking = t;
 }
 
 /* An uploaded G-code file being checked on the io thread. */

@@ -1,6 +1,6 @@
 /*
  * farm_int.h - internal to the farm module (farm.c, farm_gcheck.c,
- * farm_resume.c, farm_prepend.c), not a contract for anyone else: nothing outside
+ * farm_files.c, farm_prepend.c, farm_resume.c), not a contract for anyone else: nothing outside
  * src/farm/farm*.c includes it; farm.h is the module's contract.
  *
  * What the parts share: the farm itself (struct farm), finding a printer
@@ -24,6 +24,12 @@
 
 struct prep;      /* farm.c: a prepare task */
 struct noreslice; /* farm.c: a re-slice that failed */
+struct startlook; /* farm_gcheck.c: a start whose G-code is looked up */
+/* A job not prepared again before until_ms (clock_mono_ms): farm_files.c. */
+struct farm_cool {
+    int64_t job_id;
+    int64_t until_ms;
+};
 
 struct farm {
     struct loop *l;            /* the loop */
@@ -32,6 +38,8 @@ struct farm {
     struct pool *pool;         /* prepare workers */
     struct pool *io;           /* one thread for resume reads and G-code checks: not queued
                                   behind slicing */
+    struct pool *files;        /* one thread for starts' G-code lookups (a fetch from a shared
+                                  store's database: seconds): not queued behind either */
     struct farm_hooks hooks;   /* drivers, prepare, notify */
     char profiles_dir[512];    /* slicing profiles (farmcfg profiles_dir) */
     struct printer **printers; /* n_printers, config order */
@@ -49,6 +57,9 @@ struct farm {
     struct prep *reslices; /* re-slices in flight (their jobs stay ready), linked by next */
     struct noreslice *no;  /* re-slices that failed: not tried again until a reload */
     size_t n_no, cap_no;
+    struct startlook *looking;    /* starts whose G-code is being looked up (farm_gcheck.c) */
+    struct farm_cool *cool;       /* jobs whose files could not be had in passing: not prepared */
+    size_t n_cool, cap_cool;      /* again before until_ms (farm.c cool) */
     struct farmcfg_printer *seed; /* farm.ini's printers as last given (farm_seed), n_seed */
     size_t n_seed;
     struct farm_host *host;     /* one of several hosts on a shared store (farm_host.h), or NULL */
@@ -76,12 +87,32 @@ int farm_add_printer(struct farm *f, const struct farmcfg_printer *cfg, struct s
 void farm_printer_view(const struct printer *p, struct sched_printer *out);
 
 /*
- * Start job j (ready) on printer p (idle): p takes it at once (committed
- * in the store), and the driver gets it once the file passed p's G-code
- * policy on the io thread (farm_gcheck.c).  Failures are logged; the next
+ * Start job j (ready) on printer p (idle): its G-code is looked up (on a
+ * shared store, fetched) on the io thread, then p takes it (committed in
+ * the store), and the driver gets it once the file passed p's G-code
+ * policy on the io thread too (farm_gcheck.c).  Failures are logged; the next
  * scheduling pass tries again when nothing was committed.
  */
 void farm_start(struct farm *f, const struct job_row *j, struct printer *p);
+/* Is a start's G-code lookup in flight for job job_id (0: any) or printer (NULL: any)?  The
+   scheduling pass starts neither again meanwhile. */
+bool farm_start_looking(const struct farm *f, int64_t job_id, const char *printer);
+/*
+ * farm_files.c, on a prepare worker: the paths of a preparation's part
+ * (part_sha) and of the optimized part it reuses (reuse_sha, "" if none)
+ * into req, and where its G-code (and the optimized part, when not reused)
+ * go, beside the stored files; looked up (on a shared store, fetched) on a
+ * reader of the worker's own opened on s.  store_file_path's errors, and
+ * the reader's (SF_EIO, SF_EUNREACH); req's out_path and mesh_in are then
+ * "".
+ */
+int farm_prep_files(const struct store *s, struct prepare_req *req, const char *part_sha,
+                    const char *reuse_sha, bool reslice, struct sf_err *err);
+/* Job id's files could not be had in passing: it is not prepared again for FARM_RETRY_MS (a
+   pass at every commit would write PREPARE and DEFER again and again meanwhile). */
+void farm_cool(struct farm *f, int64_t id);
+/* Is job id cooling (farm_cool)?  Drops the entries that are over. */
+bool farm_cooling(struct farm *f, int64_t id);
 /* Kick the farm again in FARM_RETRY_MS (a passing store error). */
 void farm_retry_later(struct farm *f);
 

@@ -465,8 +465,11 @@ int store_hist(struct store *s, enum store_hist which, const double *bounds_s, s
  * client's read never waits for the loop and the loop never waits for it.
  * It takes no lock, migrates nothing and recovers nothing (s did); only
  * the read functions may be called on it (a write fails: SQLITE_READONLY).
- * Open and close it on s's thread, use it on one thread at a time.  NULL
- * with err set (SF_EIO).  Free with store_close().
+ * Use it on one thread at a time.  It may be opened on any thread while s
+ * works (it reads only what s's open fixed: its data dir, target and host
+ * flag), as the farm's workers do for a file lookup that may fetch a blob
+ * (farm.c prep_files, farm_gcheck.c).  NULL with err set (SF_EIO,
+ * SF_EUNREACH).  Free with store_close().
  */
 struct store *store_open_reader(const struct store *s, struct sf_err *err);
 /*

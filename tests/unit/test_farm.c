@@ -2151,3 +2151,133 @@ T_CASE(farm_resume_commits_on_the_store_thread_before_the_driver_has_it)
     T_OK(store_check(synced(), &err), &err);
     teardown();
 }
+
+/* Job id's state read on a connection of the test's own (r), not the loop's: a test that counts
+   the loop's round trips must not add its own. */
+static enum job_state
+state_on(struct store *r, int64_t id)
+{
+    struct job_row j;
+    return store_job_get(r, id, &j, NULL) ? (enum job_state) - 1 : j.state;
+}
+
+/* On PostgreSQL, the stored file sha's copy in this host's cache removed: the next
+   store_file_path fetches it from the database, as on a host other than the one that stored
+   it.  (On SQLite the data dir's copy is the only one: kept.) */
+static void
+uncache(const char *sha)
+{
+    if (!t_store_pg())
+        return;
+    char path[1200];
+    T_OK(store_file_path(fx.s, sha, path, sizeof(path), NULL), NULL);
+    T_EQ_INT(unlink(path), 0);
+}
+
+/*
+ * Preparing a queued job looks its part up (on PostgreSQL: fetched from the
+ * database when this host's cache lacks it, 1-2 s per 100 MB) on the
+ * worker, not on the loop's connection: the loop's round trips stay as
+ * they were from the job's add to its G-code ready.  Before, prepare()
+ * called store_file_path on the loop, twice.
+ */
+T_CASE(farm_prepare_looks_its_part_up_off_the_loop)
+{
+    struct sf_err err;
+    setup_held = "a"; /* the job is prepared for a and waits for it: nothing starts */
+    T_OK(setup("preplook", farm_ini, tdrv_new, test_prepare, &err), &err);
+    struct store *r = store_open_reader(fx.s, &err);
+    T_TRUE(r != NULL);
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    snprintf(o.material, sizeof(o.material), "PLA");
+    char sha[STORE_SHA_HEX];
+    int64_t id = 0;
+    T_OK(store_file_put(fx.s, "size 20 20 20", 13, sha, &err), &err);
+    uncache(sha);
+    T_OK(store_job_add(fx.s, &o, sha, &id, &err), &err);
+    uint64_t before = store_round_trips(fx.s);
+    farm_kick(fx.f);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end && state_on(r, id) != JOB_READY;)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(state_on(r, id), JOB_READY);
+    T_EQ_INT((long long)(store_round_trips(fx.s) - before), 0);
+    store_close(r);
+    teardown();
+}
+
+/*
+ * A ready job's G-code stored by another host (not in this host's cache)
+ * starts without the loop's connection: the G-code is looked up (fetched)
+ * on the io thread, and the driver has it once it is local.  Before,
+ * farm_start called store_file_path on the loop.
+ */
+T_CASE(farm_start_looks_its_gcode_up_off_the_loop)
+{
+    struct sf_err err;
+    setup_held = "a";
+    T_OK(setup("startlook", farm_ini, tdrv_new, test_prepare, &err), &err);
+    struct store *r = store_open_reader(fx.s, &err);
+    T_TRUE(r != NULL);
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_READY)); /* a is not connected yet */
+    struct job_row j;
+    T_OK(store_job_get(r, id, &j, &err), &err);
+    uncache(j.gcode_sha);
+    uint64_t before = store_round_trips(fx.s);
+    struct tdrv *a = tdrv_named("a");
+    report(a, DRV_IDLE, DRV_EV_STATE);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
+         wall_ms() < end && (a->starts == 0 || state_on(r, id) != JOB_PRINTING);)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(a->starts, 1);
+    T_EQ_INT(state_on(r, id), JOB_PRINTING);
+    T_EQ_INT((long long)(store_round_trips(fx.s) - before), 0);
+    char path[1200];
+    T_OK(store_file_path(r, j.gcode_sha, path, sizeof(path), &err), &err);
+    T_EQ_STR(a->path, path); /* the driver had the file, local */
+    T_EQ_INT(access(path, R_OK), 0);
+    store_close(r);
+    teardown();
+}
+
+/*
+ * A queued job whose part is lost (PostgreSQL: neither in this host's cache
+ * nor in the database; SQLite: gone from the data dir) fails at its
+ * preparation, naming the file: the worker's lookup (farm_prep_files) keeps
+ * prepare()'s verdict, a file that is not there is no passing error.
+ */
+T_CASE(farm_prepare_of_a_lost_part_fails_the_job_naming_it)
+{
+    struct sf_err err;
+    setup_held = "a";
+    T_OK(setup("lostpart", farm_ini, tdrv_new, test_prepare, &err), &err);
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    snprintf(o.material, sizeof(o.material), "PLA");
+    char sha[STORE_SHA_HEX], path[1200];
+    int64_t id = 0;
+    T_OK(store_file_put(fx.s, "size 20 20 20", 13, sha, &err), &err);
+    T_OK(store_file_path(fx.s, sha, path, sizeof(path), &err), &err);
+    T_EQ_INT(unlink(path), 0);
+    if (t_store_pg()) { /* its bytes gone from the database too */
+        char dir[600], sql[256];
+        snprintf(dir, sizeof(dir), "%s/lostpart", t_tmpdir());
+        struct sqldb *db = sqldb_open(t_store_db(dir), 0, &err);
+        T_TRUE(db != NULL);
+        snprintf(sql, sizeof(sql), "DELETE FROM file_chunks WHERE sha256 = '%s'", sha);
+        T_EQ_INT(sqldb_exec(db, sql), 0);
+        snprintf(sql, sizeof(sql), "DELETE FROM file_blobs WHERE sha256 = '%s'", sha);
+        T_EQ_INT(sqldb_exec(db, sql), 0);
+        sqldb_close(db);
+    }
+    T_OK(store_job_add(fx.s, &o, sha, &id, &err), &err);
+    farm_kick(fx.f);
+    T_TRUE(wait_job(id, JOB_FAILED));
+    struct job_row j;
+    T_OK(job_get(id, &j, &err), &err);
+    T_TRUE(strstr(j.reason, sha) != NULL);
+    teardown();
+}
