@@ -370,9 +370,9 @@ files_failed(struct farm *f, struct prep *t, int rc)
     struct job_event_args a = { .reason = why, .fence = t->fence };
     if (passing(rc)) {
         log_warn("farm", "job %lld goes back to the queue: %s", (long long)id, why);
-        queue_event(f, id, JOB_EV_DEFER, &a);
+        farm_prep_end(f, id, JOB_EV_DEFER, &a);
     } else {
-        queue_event(f, id, JOB_EV_PREPARE_FAILED, &a);
+        farm_prep_end(f, id, JOB_EV_PREPARE_FAILED, &a);
     }
 }
 
