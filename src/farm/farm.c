@@ -160,14 +160,6 @@ farm_health(struct farm *f, struct farm_health *out)
     storeq_stats(f->q, &out->store);
 }
 
-/* Queue a job event nothing waits for; a failure is logged when it comes back, its commit
-   wakes the farm (on_store_commit). */
-static void
-queue_event(struct farm *f, int64_t id, enum job_event ev, const struct job_event_args *a)
-{
-    storeq_job_event(f->q, id, ev, a, NULL, NULL, NULL);
-}
-
 /* ---- prepare ---- */
 
 static int
