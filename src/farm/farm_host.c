@@ -69,6 +69,7 @@ struct farm_host {
     bool stopping;     /* farm_host_stop: an answer still in flight only records the lease */
     bool reown;        /* the printers changed (a reload): the next beat owns them again */
     bool owning;       /* ... and until its answer, only those in mine are scheduled on */
+    uint64_t reoffer;  /* the printers wait for the loop's connection: timer of its next try */
     /* the printers this host owns, as of the last own that came back */
     char (*mine)[STORE_HOST_NAME_MAX];
     size_t n_mine;
@@ -332,6 +333,42 @@ let_go(struct farm_host *h)
     }
 }
 
+static bool reoffer(struct farm_host *h);
+
+static void
+on_reoffer(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm_host *h = ud;
+    h->reoffer = 0;
+    (void)reoffer(h);
+}
+
+/* After a join, or a doubted lease renewed: offer each printer its job again (what waited
+   for the lease; a print that ended while this host was away is recorded), once the loop's
+   connection answers.  The printers' re-attach reads and writes on it (printer.c), and
+   after an outage it reconnects only as it is used (store_open_host: never waiting), so it
+   may still be away when the beat's connection is back; a re-attach that found it away
+   would leave its job interrupted.  Tried again every FARM_HOST_RELISTEN_MS meanwhile.
+   False while it waits. */
+static bool
+reoffer(struct farm_host *h)
+{
+    struct sf_err err;
+    if (h->reoffer)
+        loop_timer_cancel(h->f->l, h->reoffer);
+    h->reoffer = 0;
+    if (!h->joined)
+        return true; /* lost again: the next join offers them */
+    if (store_ping(h->f->s, &err)) {
+        h->reoffer = loop_timer_add(h->f->l, FARM_HOST_RELISTEN_MS, on_reoffer, h);
+        return false;
+    }
+    for (size_t i = 0; i < h->f->n_printers; i++)
+        printer_attach_again(h->f->printers[i]);
+    return true;
+}
+
 /* b came back: the loop's view of the lease follows what the beat's thread found. */
 static void
 on_beat_done(void *ud, const struct storeq_result *r)
@@ -370,9 +407,10 @@ on_beat_done(void *ud, const struct storeq_result *r)
         log_info("host", "%s: its lease is renewed (it had run out, nobody reaped it)", h->name);
     }
     if ((b->join && b->join_rc == SF_OK) || (b->doubted && b->beat && b->beat_rc == SF_OK)) {
-        farm_kick(h->f);                              /* this one schedules */
-        for (size_t i = 0; i < h->f->n_printers; i++) /* what waited for the lease */
-            printer_attach_again(h->f->printers[i]);
+        farm_kick(h->f); /* this one schedules */
+        if (!reoffer(h)) /* what waited for the lease */
+            log_info("host", "%s: the printers re-attach once the loop's connection is back",
+                     h->name);
     }
     if (b->reaped < 0) {
         log_warn("host", "reap: %s", b->reap_err.msg);
@@ -581,6 +619,8 @@ farm_host_stop(struct farm *f)
     h->bq = NULL;
     if (h->relisten)
         loop_timer_cancel(f->l, h->relisten);
+    if (h->reoffer)
+        loop_timer_cancel(f->l, h->reoffer);
     if (h->resettle)
         loop_timer_cancel(f->l, h->resettle);
     if (h->given_timer)
