@@ -3,13 +3,24 @@
  * the join, the beat and the reap on a loop timer, the claims the
  * scheduling pass makes, and the LISTEN connection on the loop's epoll.
  *
- * Why the beat and the reap share one timer on the loop's connection: both
- * are one short statement each a few seconds, and the reap is idempotent,
- * so every host running it is harmless (the first one in moves the work).
+ * Why the beat and the reap share one timer: both are one short statement
+ * each a few seconds, and the reap is idempotent, so every host running it
+ * is harmless (the first one in moves the work).  They run, with the join
+ * and the printers' own, on a store thread and connection of the beat's
+ * own (h->bq, a storeq of its own), never on the loop's: the loop must not
+ * wait on the network, and the farm's store thread is no place for them
+ * either, since a request there that fails with nothing applied holds its
+ * queue for up to STOREQ_RETRY_MS (60 s, two leases) and a silent partition
+ * holds each request for the connection's tcp_user_timeout (10 s): a beat
+ * behind a queue of progress writes could miss its lease and have this host
+ * reaped by the others.  The join locks the host's name to the connection
+ * it runs on (store_host_join), so the beat's connection is also the one
+ * that holds the name.  One beat is in flight at a time; what it found is
+ * applied on the loop when it comes back (on_beat_done).
  * The listener has a connection of its own (sqldb.h: a notification that
  * arrives while another call runs on a connection does not wake its fd).
  *
- * Thread: the loop thread.
+ * Thread: the loop thread (beat_call on the beat's store thread).
  */
 #include "farm_host.h"
 
@@ -47,11 +58,21 @@ struct farm_host {
     struct doubt *doubts;
     uint64_t resettle; /* a read-back failed: timer of the next round, 0 if none */
     int peers;         /* other live hosts at the last join or beat; -1 if not known */
-    /* the reap's grace (on_beat): when this host's current run of renewals began (monotonic
-       ms; 0: not renewing, as after a failed beat), its last renewal, and the store
-       connection's reconnects then */
+    /* the reap's grace (renewed): when this host's current run of renewals began (monotonic
+       ms; 0: not renewing, as after a failed beat), its last renewal, and the beat
+       connection's reconnects then; the beat in flight carries them and brings them back */
     int64_t renewing_since, renewed_at, renew_gen;
-    bool doubted; /* a claim, take or hold found the lease not current: the beat decides */
+    bool doubted;      /* a claim, take or hold found the lease not current: the beat decides */
+    struct storeq *bq; /* the beat's own store thread and connection (see the top) */
+    bool beating;      /* a beat is on bq: its answer applies it (on_beat_done) */
+    bool beat_due;     /* a beat was asked for while one was in flight: beat at its answer */
+    bool stopping;     /* farm_host_stop: an answer still in flight only records the lease */
+    bool reown;        /* the printers changed (a reload): the next beat owns them again */
+    bool owning;       /* ... and until its answer, only those in mine are scheduled on */
+    uint64_t reoffer;  /* the printers wait for the loop's connection: timer of its next try */
+    /* the printers this host owns, as of the last own that came back */
+    char (*mine)[STORE_HOST_NAME_MAX];
+    size_t n_mine;
     /* ready jobs this host gave back (farm_host_give_back): not taken here again until
        their time (monotonic ms), so the other hosts have them first */
     struct given {
@@ -90,17 +111,6 @@ farm_host_alone(const struct farm *f)
     return !farm_host_on(f) || (f->host->joined && f->host->peers == 0);
 }
 
-/* Count the other live hosts (farm_host_alone). */
-static void
-count_peers(struct farm_host *h)
-{
-    struct sf_err err;
-    if (store_host_peers(h->f->s, h->name, clock_wall_ms(), &h->peers, &err)) {
-        log_warn("host", "%s: %s", h->name, err.msg);
-        h->peers = -1;
-    }
-}
-
 /* The machine's hostname as a host name: letters, digits, '.', '-', '_' (others as '-'). */
 static void
 default_name(char *out, size_t n)
@@ -125,48 +135,39 @@ was_foreign(const struct farm_host *h, const char *p)
     return false;
 }
 
-/* Own f's printers (replacing what the host owned before); those another live host owns are
-   left to it, and its scheduler leaves them alone (said once, when it finds one). */
+/* One beat on the beat's store thread: what it needs, copied (nothing points into the loop's
+   state), and what it found, applied on the loop by on_beat_done. */
+struct beat {
+    struct farm_host *h;
+    /* in */
+    char name[STORE_HOST_NAME_MAX];
+    int64_t lease_ms;
+    bool doubted;                       /* h->doubted when it was posted */
+    bool own;                           /* own the printers (names), after a renewal too */
+    char (*names)[STORE_HOST_NAME_MAX]; /* f's printers when it was posted */
+    const char **ptrs;                  /* into names, for store_host_own */
+    size_t n;
+    /* in and out: the lease, and the reap's grace (renewed) */
+    int64_t token;
+    bool joined;
+    int64_t since, at, gen;
+    /* out */
+    bool beat, lost, join; /* renewed (or tried to), found the lease lost, joined (or tried) */
+    int beat_rc, join_rc, own_rc, reaped, wake_rc, peers_rc, peers;
+    struct sf_err beat_err, join_err, own_err, reap_err, wake_err, peers_err;
+    struct store_host_owned *out; /* n: what own found */
+    struct store_recovery moved;
+};
+
 static void
-own(struct farm_host *h)
+beat_free(struct beat *b)
 {
-    struct farm *f = h->f;
-    size_t n = f->n_printers ? f->n_printers : 1;
-    const char **names = mem_array(n, sizeof(*names));
-    struct store_host_owned *out = mem_array(n, sizeof(*out));
-    char(*foreign)[STORE_HOST_NAME_MAX] = mem_array(n, sizeof(*foreign));
-    struct sf_err err;
-    if (!names || !out || !foreign)
-        goto out;
-    for (size_t i = 0; i < f->n_printers; i++)
-        names[i] = printer_cfg(f->printers[i])->name;
-    if (store_host_own(f->s, h->name, h->token, names, f->n_printers, out, &err)) {
-        log_error("host", "%s: %s", h->name, err.msg);
-        goto out;
-    }
-    size_t n_foreign = 0;
-    for (size_t i = 0; i < f->n_printers; i++) {
-        if (out[i].owned) {
-            if (was_foreign(h, names[i]))
-                log_info("host", "%s: printer '%s' is its own now: scheduling on it", h->name,
-                         names[i]);
-            continue;
-        }
-        if (!was_foreign(h, names[i]))
-            log_warn("host",
-                     "%s: printer '%s' belongs to live host '%s': not scheduling on it here (a "
-                     "printer is in one host's config; trying again at each beat)",
-                     h->name, names[i], out[i].other);
-        snprintf(foreign[n_foreign++], STORE_HOST_NAME_MAX, "%s", names[i]);
-    }
-    free(h->foreign);
-    h->foreign = foreign;
-    h->n_foreign = n_foreign;
-    foreign = NULL;
-out:
-    free(names);
-    free(out);
-    free(foreign);
+    if (!b)
+        return;
+    free(b->names);
+    free(b->ptrs);
+    free(b->out);
+    free(b);
 }
 
 /*
@@ -178,53 +179,144 @@ out:
  * once it has itself renewed its lease without a break for a whole lease
  * (FARM_HOST_BEATS_PER_LEASE beats): every live peer had as long to come
  * back and renew as this host had, and one that did not is dead or cut
- * off.  The run breaks at a failed beat, at a reconnect of the store's
+ * off.  The run breaks at a failed beat, at a reconnect of the beat's
  * connection, and at a gap between two renewals of more than half a lease
  * (a loop stall, or a beat that hung on the network); a new run starts at
  * the join and at the next renewal.  Hosts judge leases by their own wall
  * clocks (store_host.h: NTP); the grace is this host's monotonic clock.
+ * Kept in the beat (b) on the beat's thread: it is the thread's renewal that
+ * starts or continues a run, and its reap that the grace allows.
  */
 static void
-renewed(struct farm_host *h)
+renewed(struct beat *b, int64_t gen)
 {
-    int64_t now = clock_mono_ms(), gen = store_host_reconnects(h->f->s);
-    if (!h->renewing_since || gen != h->renew_gen || now - h->renewed_at > h->lease_ms / 2)
-        h->renewing_since = now;
-    h->renewed_at = now;
-    h->renew_gen = gen;
+    int64_t now = clock_mono_ms();
+    if (!b->since || gen != b->gen || now - b->at > b->lease_ms / 2)
+        b->since = now;
+    b->at = now;
+    b->gen = gen;
 }
 
 /* May this host reap the others now (the grace above)? */
 static bool
-may_reap(const struct farm_host *h)
+may_reap(const struct beat *b)
 {
-    return h->joined && h->renewing_since && clock_mono_ms() - h->renewing_since >= h->lease_ms;
+    return b->joined && b->since && clock_mono_ms() - b->since >= b->lease_ms;
 }
 
-/* Join (again): the lease, the printers.  Logs why not. */
-static void
-join(struct farm_host *h)
+/* The beat, on the beat's thread with its connection s: renew the lease (join if there is none,
+   or it was lost), own the printers if asked (always after a join), reap once the grace
+   allows, wake the other hosts if that moved anything, count them.  Each step's outcome goes
+   into b for the loop; the call itself always succeeds (nothing is retried: the next beat
+   is the retry). */
+static int
+beat_call(struct store *s, void *arg, struct sf_err *err)
 {
-    struct sf_err err;
-    int rc = store_host_join(h->f->s, h->name, h->lease_ms, &h->token, &err);
-    if (rc) {
-        if (!h->waiting || rc != SF_EAGAIN)
-            log_warn("host", "%s: cannot join yet: %s (trying again every %lld ms)", h->name,
-                     err.msg, (long long)(h->lease_ms / FARM_HOST_BEATS_PER_LEASE));
-        h->waiting = true;
+    (void)err;
+    struct beat *b = arg;
+    if (b->joined) {
+        b->beat = true;
+        b->beat_rc = store_host_beat(s, b->name, b->token, b->lease_ms, &b->beat_err);
+        if (b->beat_rc == SF_OK) {
+            renewed(b, store_host_reconnects(s));
+        } else {
+            b->since = 0;                /* the grace starts again at the next renewal */
+            if (b->beat_rc == SF_ESTALE) /* reaped: its jobs moved on; join as a new process */
+                b->lost = true, b->joined = false;
+        }
+    }
+    if (!b->joined) {
+        b->join = true;
+        b->join_rc = store_host_join(s, b->name, b->lease_ms, &b->token, &b->join_err);
+        if (b->join_rc == SF_OK) {
+            b->joined = true;
+            b->own = true;
+            renewed(b, store_host_reconnects(s));
+        }
+    }
+    if (b->joined && b->own)
+        b->own_rc = store_host_own(s, b->name, b->token, b->ptrs, b->n, b->out, &b->own_err);
+    b->reaped = may_reap(b) ? store_host_reap(s, clock_wall_ms(), &b->moved, &b->reap_err) : 0;
+    /* the others see the printers of a join, and the jobs a reap moved */
+    if ((b->join && b->join_rc == SF_OK) || b->reaped > 0)
+        b->wake_rc = store_host_wake(s, &b->wake_err);
+    if (b->joined)
+        b->peers_rc = store_host_peers(s, b->name, clock_wall_ms(), &b->peers, &b->peers_err);
+    return SF_OK;
+}
+
+/* Is printer p one this host owned at the last own that came back? */
+static bool
+is_mine(const struct farm_host *h, const char *p)
+{
+    for (size_t i = 0; i < h->n_mine; i++)
+        if (strcmp(h->mine[i], p) == 0)
+            return true;
+    return false;
+}
+
+/* What b's own found: the printers another live host owns are left to it, and the scheduler
+   leaves them alone (said once, when it finds one). */
+static void
+owned(struct farm_host *h, struct beat *b)
+{
+    if (b->own_rc) {
+        log_error("host", "%s: %s", h->name, b->own_err.msg);
+        h->reown = true; /* the next beat tries again */
         return;
     }
-    h->joined = true;
-    h->waiting = false;
-    renewed(h);
-    own(h);
-    count_peers(h);
-    log_info("host", "%s joined (token %lld, lease %.1f s, %zu printers)", h->name,
-             (long long)h->token, (double)h->lease_ms / 1000, h->f->n_printers);
-    farm_host_wake(h->f); /* the others see the printers; this one schedules */
-    farm_kick(h->f);
-    for (size_t i = 0; i < h->f->n_printers; i++) /* what waited for the lease (a restart) */
-        printer_attach_again(h->f->printers[i]);
+    size_t n = b->n ? b->n : 1;
+    char(*foreign)[STORE_HOST_NAME_MAX] = mem_array(n, sizeof(*foreign));
+    char(*mine)[STORE_HOST_NAME_MAX] = mem_array(n, sizeof(*mine));
+    if (!foreign || !mine) {
+        free(foreign);
+        free(mine);
+        h->reown = true;
+        return;
+    }
+    size_t n_foreign = 0, n_mine = 0;
+    for (size_t i = 0; i < b->n; i++) {
+        const char *name = b->names[i];
+        if (b->out[i].owned) {
+            if (was_foreign(h, name))
+                log_info("host", "%s: printer '%s' is its own now: scheduling on it", h->name,
+                         name);
+            snprintf(mine[n_mine++], STORE_HOST_NAME_MAX, "%s", name);
+            continue;
+        }
+        if (!was_foreign(h, name))
+            log_warn("host",
+                     "%s: printer '%s' belongs to live host '%s': not scheduling on it here (a "
+                     "printer is in one host's config; trying again at each beat)",
+                     h->name, name, b->out[i].other);
+        snprintf(foreign[n_foreign++], STORE_HOST_NAME_MAX, "%s", name);
+    }
+    bool freed = h->n_foreign && !n_foreign;
+    free(h->foreign);
+    h->foreign = foreign;
+    h->n_foreign = n_foreign;
+    free(h->mine);
+    h->mine = mine;
+    h->n_mine = n_mine;
+    if (!h->reown)
+        h->owning = false; /* no reload since: its printers are known */
+    if (freed)
+        farm_kick(h->f);
+}
+
+static void on_beat(struct loop *l, void *ud);
+
+/* Beat again now (or as soon as the beat in flight is back). */
+static void
+beat_now(struct farm_host *h)
+{
+    if (h->beating) {
+        h->beat_due = true;
+        return;
+    }
+    if (h->timer)
+        loop_timer_cancel(h->f->l, h->timer);
+    h->timer = loop_timer_add(h->f->l, 0, on_beat, h);
 }
 
 /* This host's lease is lost (reaped, or its name taken): the reap bumped the fencing token
@@ -241,53 +333,155 @@ let_go(struct farm_host *h)
     }
 }
 
+static bool reoffer(struct farm_host *h);
+
+static void
+on_reoffer(struct loop *l, void *ud)
+{
+    (void)l;
+    struct farm_host *h = ud;
+    h->reoffer = 0;
+    (void)reoffer(h);
+}
+
+/* After a join, or a doubted lease renewed: offer each printer its job again (what waited
+   for the lease; a print that ended while this host was away is recorded), once the loop's
+   connection answers.  The printers' re-attach reads and writes on it (printer.c), and
+   after an outage it reconnects only as it is used (store_open_host: never waiting), so it
+   may still be away when the beat's connection is back; a re-attach that found it away
+   would leave its job interrupted.  Tried again every FARM_HOST_RELISTEN_MS meanwhile.
+   False while it waits. */
+static bool
+reoffer(struct farm_host *h)
+{
+    struct sf_err err;
+    if (h->reoffer)
+        loop_timer_cancel(h->f->l, h->reoffer);
+    h->reoffer = 0;
+    if (!h->joined)
+        return true; /* lost again: the next join offers them */
+    if (store_ping(h->f->s, &err)) {
+        h->reoffer = loop_timer_add(h->f->l, FARM_HOST_RELISTEN_MS, on_reoffer, h);
+        return false;
+    }
+    for (size_t i = 0; i < h->f->n_printers; i++)
+        printer_attach_again(h->f->printers[i]);
+    return true;
+}
+
+/* b came back: the loop's view of the lease follows what the beat's thread found. */
+static void
+on_beat_done(void *ud, const struct storeq_result *r)
+{
+    (void)r; /* beat_call always succeeds: each step's outcome is in b */
+    struct beat *b = ud;
+    struct farm_host *h = b->h;
+    h->beating = false;
+    h->joined = b->joined;
+    h->token = b->token;
+    h->renewing_since = b->since;
+    h->renewed_at = b->at;
+    h->renew_gen = b->gen;
+    if (h->stopping) { /* farm_host_stop: the leave needs the lease, nothing else */
+        beat_free(b);
+        return;
+    }
+    if (b->beat && b->beat_rc)
+        log_error("host", "%s: %s", h->name, b->beat_err.msg);
+    if (b->lost)
+        let_go(h);
+    if (b->join && b->join_rc) {
+        if (!h->waiting || b->join_rc != SF_EAGAIN)
+            log_warn("host", "%s: cannot join yet: %s (trying again every %lld ms)", h->name,
+                     b->join_err.msg, (long long)(h->lease_ms / FARM_HOST_BEATS_PER_LEASE));
+        h->waiting = true;
+    }
+    if (b->joined && b->own)
+        owned(h, b);
+    if (b->join && b->join_rc == SF_OK) {
+        h->waiting = false;
+        log_info("host", "%s joined (token %lld, lease %.1f s, %zu printers)", h->name,
+                 (long long)h->token, (double)h->lease_ms / 1000, h->f->n_printers);
+    } else if (b->doubted && b->beat && b->beat_rc == SF_OK) {
+        /* the lease had only run out, and is renewed: carry on */
+        log_info("host", "%s: its lease is renewed (it had run out, nobody reaped it)", h->name);
+    }
+    if ((b->join && b->join_rc == SF_OK) || (b->doubted && b->beat && b->beat_rc == SF_OK)) {
+        farm_kick(h->f); /* this one schedules */
+        if (!reoffer(h)) /* what waited for the lease */
+            log_info("host", "%s: the printers re-attach once the loop's connection is back",
+                     h->name);
+    }
+    if (b->reaped < 0) {
+        log_warn("host", "reap: %s", b->reap_err.msg);
+    } else if (b->reaped > 0) {
+        log_warn("host",
+                 "reaped %d hosts whose lease ran out: %d jobs back in the queue, %d "
+                 "interrupted",
+                 b->reaped, b->moved.requeued, b->moved.interrupted);
+        farm_kick(h->f);
+    }
+    if (b->wake_rc)
+        log_warn("host", "%s: wake the other hosts: %s", h->name, b->wake_err.msg);
+    if (b->joined && b->peers_rc)
+        log_warn("host", "%s: %s", h->name, b->peers_err.msg);
+    if (b->joined)
+        h->peers = b->peers_rc ? -1 : b->peers;
+    beat_free(b);
+    if (h->beat_due) {
+        h->beat_due = false;
+        beat_now(h);
+    }
+}
+
+/* Post a beat of h (its lease, printers and grace copied) to the beat's thread. */
+static int
+beat_post(struct farm_host *h)
+{
+    struct farm *f = h->f;
+    struct beat *b = mem_calloc(1, sizeof(*b));
+    size_t n = f->n_printers ? f->n_printers : 1;
+    if (!b || !(b->names = mem_array(n, sizeof(*b->names))) ||
+        !(b->ptrs = mem_array(n, sizeof(*b->ptrs))) || !(b->out = mem_array(n, sizeof(*b->out))))
+        goto fail;
+    b->h = h;
+    b->lease_ms = h->lease_ms;
+    b->doubted = h->doubted;
+    b->own = h->reown || h->n_foreign; /* a reload; or their owner may be gone */
+    b->n = f->n_printers;
+    b->token = h->token;
+    b->joined = h->joined;
+    b->since = h->renewing_since;
+    b->at = h->renewed_at;
+    b->gen = h->renew_gen;
+    snprintf(b->name, sizeof(b->name), "%s", h->name);
+    for (size_t i = 0; i < f->n_printers; i++) {
+        snprintf(b->names[i], STORE_HOST_NAME_MAX, "%s", printer_cfg(f->printers[i])->name);
+        b->ptrs[i] = b->names[i];
+    }
+    if (storeq_read(h->bq, beat_call, b, on_beat_done, b))
+        goto fail;
+    h->beating = true;
+    h->doubted = false;
+    h->reown = false;
+    return SF_OK;
+fail:
+    beat_free(b);
+    log_error("host", "%s: out of memory: beating again later", h->name);
+    return SF_ENOMEM;
+}
+
+/* The beat's timer: a beat every third of the lease, one at a time (one still in flight, a
+   call that hangs on the network, is followed by the next at once when it comes back). */
 static void
 on_beat(struct loop *l, void *ud)
 {
     struct farm_host *h = ud;
-    struct sf_err err;
     h->timer = 0;
-    bool doubted = h->doubted;
-    h->doubted = false;
-    if (!h->joined) {
-        join(h);
-    } else if (store_host_beat(h->f->s, h->name, h->token, h->lease_ms, &err)) {
-        log_error("host", "%s: %s", h->name, err.msg);
-        h->renewing_since = 0;       /* the grace starts again at the next renewal */
-        if (err.code == SF_ESTALE) { /* reaped: its jobs moved on; join as a new process */
-            h->joined = false;
-            let_go(h);
-            join(h);
-        }
-    } else {
-        renewed(h);
-        if (doubted) { /* the lease had only run out, and is renewed: carry on */
-            log_info("host", "%s: its lease is renewed (it had run out, nobody reaped it)",
-                     h->name);
-            farm_kick(h->f);
-            for (size_t i = 0; i < h->f->n_printers; i++)
-                printer_attach_again(h->f->printers[i]);
-        }
-        if (h->n_foreign) { /* their owner may be gone: own them again */
-            own(h);
-            if (!h->n_foreign)
-                farm_kick(h->f);
-        }
-    }
-    struct store_recovery moved;
-    int n = may_reap(h) ? store_host_reap(h->f->s, clock_wall_ms(), &moved, &err) : 0;
-    if (n < 0) {
-        log_warn("host", "reap: %s", err.msg);
-    } else if (n > 0) {
-        log_warn("host",
-                 "reaped %d hosts whose lease ran out: %d jobs back in the queue, %d "
-                 "interrupted",
-                 n, moved.requeued, moved.interrupted);
-        farm_host_wake(h->f);
-        farm_kick(h->f);
-    }
-    if (h->joined)
-        count_peers(h);
+    if (h->beating)
+        h->beat_due = true;
+    else
+        beat_post(h);
     h->timer = loop_timer_add(l, h->lease_ms / FARM_HOST_BEATS_PER_LEASE, on_beat, h);
 }
 
@@ -302,9 +496,7 @@ lease_doubted(struct farm_host *h)
     if (!h->joined || h->doubted)
         return;
     h->doubted = true;
-    if (h->timer)
-        loop_timer_cancel(h->f->l, h->timer);
-    h->timer = loop_timer_add(h->f->l, 0, on_beat, h);
+    beat_now(h);
 }
 
 static void
@@ -404,8 +596,11 @@ farm_host_start(struct farm *f, const struct farmcfg *cfg, struct sf_err *err)
     }
     if (!listen_arm(h))
         listen_retry(h);
-    join(h);
-    h->timer = loop_timer_add(f->l, h->lease_ms / FARM_HOST_BEATS_PER_LEASE, on_beat, h);
+    if (!(h->bq = storeq_new(f->l, f->s, err))) {
+        sf_err_prefix(err, "host %s: the beat's connection", h->name);
+        return err->code;
+    }
+    on_beat(f->l, h); /* the join, on the beat's thread; the loop goes on meanwhile */
     return farm_remote_start(f, err); /* actions on printers other hosts own */
 }
 
@@ -417,8 +612,15 @@ farm_host_stop(struct farm *f)
         return;
     if (h->timer)
         loop_timer_cancel(f->l, h->timer);
+    /* a beat still in flight comes back here (on_beat_done records the lease only), and the
+       beat's connection closes: the name's lock goes with it, while its lease still runs */
+    h->stopping = true;
+    storeq_free(h->bq);
+    h->bq = NULL;
     if (h->relisten)
         loop_timer_cancel(f->l, h->relisten);
+    if (h->reoffer)
+        loop_timer_cancel(f->l, h->reoffer);
     if (h->resettle)
         loop_timer_cancel(f->l, h->resettle);
     if (h->given_timer)
@@ -436,7 +638,9 @@ farm_host_stop(struct farm *f)
     if (h->joined) {
         /* leave: the lease ends now and this host reaps itself (itself only: the others'
            leases are the reap's, after its grace), so its waiting work moves on at once (its
-           prints are interrupted already: farm_free) */
+           prints are interrupted already: farm_free).  On the loop's connection, waiting:
+           at the stop the printers are stopped and the store thread's queue has run, so
+           nothing waits behind it. */
         struct store_recovery moved;
         if (store_host_leave(f->s, h->name, h->token, &moved, &err))
             log_warn("host", "%s: leave: %s", h->name, err.msg);
@@ -446,6 +650,7 @@ farm_host_stop(struct farm *f)
     }
     store_close(h->ls);
     free(h->foreign);
+    free(h->mine);
     free(h->given);
     free(h);
     f->host = NULL;
@@ -665,15 +870,22 @@ farm_host_wake(struct farm *f)
 void
 farm_host_own(struct farm *f)
 {
-    if (f && f->host && f->host->joined)
-        own(f->host);
+    struct farm_host *h = f ? f->host : NULL;
+    if (!h)
+        return;
+    /* on the beat's thread (a join owns them anyway); a printer new to this host is not
+       scheduled on until the answer says it is its own */
+    h->reown = true;
+    h->owning = true;
+    if (h->joined)
+        beat_now(h);
 }
 
 bool
 farm_host_owns(const struct farm *f, const char *printer)
 {
     const struct farm_host *h = f ? f->host : NULL;
-    return !h || !was_foreign(h, printer);
+    return !h || (!was_foreign(h, printer) && (!h->owning || is_mine(h, printer)));
 }
 
 int

@@ -44,6 +44,10 @@
  * its new session LISTENs, followed by a scheduling pass for what arrived
  * while it was away.
  *
+ * The beat, its join and reap, and the printers' own run on a thread and
+ * connection of the beat's own, never on the loop's (farm_host.c says why
+ * not on the farm's store thread either).
+ *
  * Every call here is a no-op (or store.h's single-host call) when the farm
  * has no shared store.  Thread: the loop thread.
  */
@@ -66,10 +70,14 @@ struct farm_host;
 
 /*
  * Join f's store as a host when cfg names a shared store (else nothing):
- * join, own f's printers, listen, start the beat.  A name whose earlier
- * lease still runs (a restart after a crash) is logged and joined at a
- * later beat, once that lease ran out.  SF_ENOMEM, SF_EINVAL (a bad host
- * name), SF_EIO (the listener's connection).
+ * listen, start the beat, whose first round joins and owns f's printers on
+ * the beat's own thread and connection (farm_host.c), so the host has
+ * joined once that comes back, on a later loop turn ("NAME joined" is
+ * logged; until then farm_host_reader is false and farm_host_hold says
+ * SF_EAGAIN).  A name whose earlier lease still runs (a restart after a
+ * crash) is logged and joined at a later beat, once that lease ran out.
+ * SF_ENOMEM, SF_EINVAL (a bad host name), SF_EIO (the listener's or the
+ * beat's connection).
  */
 int farm_host_start(struct farm *f, const struct farmcfg *cfg, struct sf_err *err);
 /* Leave (see above) and free; after the farm's store thread wrote what it held. */
@@ -121,7 +129,8 @@ void farm_host_give_back(struct farm *f, int64_t id, int64_t fence, const char *
 int farm_host_hold(void *f, int64_t id, int64_t *fence, struct sf_err *err);
 /* Wake the other hosts: something they may act on changed (a job added through the API). */
 void farm_host_wake(struct farm *f);
-/* f's printers changed (a reload): own them again. */
+/* f's printers changed (a reload): own them again (on the beat's thread: until that comes
+   back, a printer new to f is not scheduled on here). */
 void farm_host_own(struct farm *f);
 /* May f schedule on its printer named printer?  Always without a shared store; with one,
    unless another live host owns a printer of that name (its config lists it too): then the

@@ -476,7 +476,9 @@ struct store *store_open_reader(const struct store *s, struct sf_err *err);
  * As store_open_reader, but the connection may write: for the store's own
  * thread (storeq.h), whose writes leave the loop.  Two writers on one
  * SQLite file take turns (its busy timeout); s keeps the data dir's lock,
- * the migrations and the recovery.
+ * the migrations and the recovery.  A host name joined on it
+ * (store_host_join: a host's beat thread) is locked again after a
+ * reconnect, as on s.
  */
 struct store *store_open_writer(const struct store *s, struct sf_err *err);
 

@@ -446,6 +446,18 @@ store_host_peers(struct store *s, const char *name, int64_t now_ms, int *n, stru
     return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "count the live hosts");
 }
 
+int
+store_ping(struct store *s, struct sf_err *err)
+{
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st, "SELECT 1", err);
+    if (rc)
+        return rc;
+    rc = sqldb_step(st);
+    sqldb_finalize(st);
+    return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "ping");
+}
+
 /* ---- who tells the operator ---- */
 
 int

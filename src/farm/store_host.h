@@ -172,6 +172,10 @@ int store_host_teller(struct store *s, int64_t job_id, const char *printer, int6
 
 /* How many hosts other than name hold a lease running at now_ms (*n). */
 int store_host_peers(struct store *s, const char *name, int64_t now_ms, int *n, struct sf_err *err);
+/* One trivial statement: whether s's connection answers.  On the loop's connection (a
+   reconnect never waits: store_open_host) a lost one advances its reconnect and fails
+   (SF_EUNREACH) until it is back, without waiting. */
+int store_ping(struct store *s, struct sf_err *err);
 /* Every host, by name, as of now_ms, into *rows (free() it). */
 int store_host_list(struct store *s, int64_t now_ms, struct store_host_row **rows, size_t *n,
                     struct sf_err *err);

@@ -249,6 +249,15 @@ store_hist(struct store *s, enum store_hist which, const double *bounds_s, size_
     return rc == SQLDB_ROW ? SF_OK : store_db_fail(s, err, "histogram");
 }
 
+/* A writer's new session after a lost connection holds no lock: take the host name it joined
+   again, if any (store_host_relock; a refusal fails the reconnect, tried again later). */
+static int
+relock_name(struct sqldb *db, void *arg, struct sf_err *err)
+{
+    (void)db;
+    return store_host_relock(arg, err);
+}
+
 /* A second connection to s's database: read-only (flags SQLDB_READONLY) or a writer. */
 static struct store *
 open_peer(const struct store *s, unsigned flags, struct sf_err *err)
@@ -266,6 +275,8 @@ open_peer(const struct store *s, unsigned flags, struct sf_err *err)
         store_close(r);
         return NULL;
     }
+    if (!(flags & SQLDB_READONLY))
+        sqldb_on_reconnect(r->db, relock_name, r);
     return r;
 }
 

@@ -455,6 +455,7 @@ T_CASE(host_reads_an_answer_that_came_while_its_listener_was_away)
     T_OK(store_host_own(a, "a", ta, xs, 1, NULL, &err), &err);
     T_OK(host_farm(dir, url, "b", "[printer y]\ndriver: marlin\nport: pty:/dev/null\n", &err),
          &err);
+    T_TRUE(wait_logged("b joined")); /* the join comes back from the beat's thread */
     remote_rc = 1;
     int64_t t0 = clock_mono_ms();
     T_OK(farm_remote_send(hx.f, "x", "pause", NULL, "ops", on_remote, NULL, &err), &err);

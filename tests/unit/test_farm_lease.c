@@ -11,12 +11,14 @@
  * wakes the other hosts.  With SLIMFARM_TEST_STORE (tstore.h; store_pg.sh sets it).
  */
 #include <poll.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <unistd.h>
 
 #include "../../src/base/clock.h"
 #include "../../src/farm/farm.h"
+#include "../../src/farm/farm_host.h"
 #include "../../src/farm/farm_remote.h"
 #include "../../src/farm/store_host.h"
 #include "../t.h"
@@ -422,6 +424,87 @@ T_CASE(host_routes_an_action_on_a_printer_its_live_owner_holds)
     T_TRUE(farm_remote_is(hx.f, "x"));
     T_TRUE(!farm_remote_is(hx.f, "y"));
     T_TRUE(farm_remote_is(hx.f, "z")); /* in no config of b's */
+    host_farm_free();
+    store_close(a);
+}
+
+/* The farm's store thread, held by hold_queue until *arg is set. */
+static int
+hold_queue(struct store *s, void *arg, struct sf_err *err)
+{
+    (void)s, (void)err;
+    atomic_bool *release = arg;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !atomic_load(release);)
+        if (clock_mono_ms() > end || poll(NULL, 0, 10) < 0)
+            break;
+    return SF_OK;
+}
+
+/* b's renewal, as the database has it (its heartbeat, wall ms). */
+static int64_t
+b_heartbeat(const char *url)
+{
+    return db_int(url, "SELECT heartbeat_ms FROM hosts WHERE name = 'b' AND ?1 = 0", 0);
+}
+
+/* Turn hx's loop until b renews its lease after since_ms; false if it did not in
+   WAIT_LIMIT_MS. */
+static bool
+wait_renewed(const char *url, int64_t since_ms)
+{
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        if (b_heartbeat(url) > since_ms)
+            return true;
+        loop_run_once(hx.l, 20);
+    }
+    return false;
+}
+
+/* The beat (its join, renewals, the reap of a dead peer, the own of that peer's printer)
+   sends nothing on the loop's connection, so a slow or silent database never holds the
+   printers' loop; and it runs beside the farm's store thread, not behind it, so writes
+   queued for a slow database do not hold the lease either. */
+T_CASE(host_beats_reaps_and_owns_off_the_loops_connection)
+{
+    SKIP_UNLESS_PG();
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024];
+    snprintf(dir, sizeof(dir), "%s/beatconn", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    /* host c owns printer r, and dies: its 1 s lease runs out, renewed by nobody */
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t tc;
+    const char *rs[] = { "r" };
+    T_OK(store_host_join(a, "c", 1000, &tc, &err), &err);
+    T_OK(store_host_own(a, "c", tc, rs, 1, NULL, &err), &err);
+    host_lease_s = 3; /* a beat a second; b reaps after renewing for 3 s */
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\n"
+                   "[printer r]\ndriver: marlin\nport: pty:/dev/null\n",
+                   &err),
+         &err);
+    T_TRUE(wait_logged("b joined"));
+    T_TRUE(wait_logged("printer 'r' belongs to live host 'c'"));
+    T_TRUE(!farm_host_owns(hx.f, "r"));
+    int64_t rt = store_round_trips(hx.s);
+    /* b renews, reaps c once its grace is over, and owns r at its next beat */
+    T_TRUE(wait_logged("reaped 1 hosts"));
+    T_TRUE(wait_logged("printer 'r' is its own now"));
+    T_TRUE(farm_host_owns(hx.f, "r"));
+    T_TRUE(wait_renewed(url, b_heartbeat(url)));
+    T_TRUE(db_int(url, "SELECT reaped_ms FROM hosts WHERE name = 'c' AND ?1 = 0", 0) > 0);
+    T_EQ_INT(store_round_trips(hx.s), rt);
+    /* the farm's store thread held (as by a slow database): b renews all the same */
+    atomic_bool release = false;
+    T_OK(storeq_call(farm_storeq(hx.f), hold_queue, &release, NULL, NULL, NULL), NULL);
+    int64_t held_ms = clock_wall_ms();
+    T_TRUE(wait_renewed(url, held_ms));
+    T_TRUE(wait_renewed(url, b_heartbeat(url)));
+    T_TRUE(storeq_depth(farm_storeq(hx.f)) > 0); /* still held */
+    atomic_store(&release, true);
+    T_EQ_INT(store_round_trips(hx.s), rt);
     host_farm_free();
     store_close(a);
 }

@@ -637,6 +637,45 @@ T_CASE(sqldb_pg_host_name_lock_is_taken_again_after_a_cut)
     proxy_stop(&px);
 }
 
+/* The same on a writer (store_open_writer): the connection a host's beat thread joins on
+   (farm_host.c) takes its name again after a cut, as the loop's connection does. */
+T_CASE(sqldb_pg_host_name_lock_on_a_writer_is_taken_again_after_a_cut)
+{
+    T_SKIP_UNLESS(have_server(), "no server (tests/integ/sqldb_conn.sh runs this)");
+    struct proxy px;
+    T_TRUE(conn_proxy(&px));
+    struct sqldb *direct = open_url(getenv("SQLDB_CONN_URL"));
+    T_TRUE(direct != NULL);
+    char dir[512], dir2[512];
+    snprintf(dir, sizeof(dir), "%s/hostw", t_tmpdir());
+    snprintf(dir2, sizeof(dir2), "%s/hostw2", t_tmpdir());
+    struct sf_err err;
+    struct store *s = store_open_host(dir, proxy_url(&px), NULL, &err);
+    T_OK(s ? SF_OK : err.code, &err);
+    struct store *w = store_open_writer(s, &err);
+    T_OK(w ? SF_OK : err.code, &err);
+    int64_t token, t2;
+    T_OK(store_host_join(w, "h2", 600 * 1000, &token, &err), &err);
+    T_TRUE(proxy_cmd(&px, "drop"));
+    T_TRUE(proxy_cmd(&px, "heal"));
+    int rc;
+    for (int64_t t0 = clock_mono_ms();
+         (rc = store_host_beat(w, "h2", token, 600 * 1000, &err)) != SF_OK &&
+         clock_mono_ms() - t0 < DEADLINE_MS;)
+        nap_ms(20);
+    T_OK(rc, &err);
+    T_DB_OK(sqldb_exec(direct, "UPDATE hosts SET lease_until_ms = 1 WHERE name = 'h2'"), direct);
+    struct store *s2 = store_open_host(dir2, getenv("SQLDB_CONN_URL"), NULL, &err);
+    T_OK(s2 ? SF_OK : err.code, &err);
+    T_ERR(store_host_join(s2, "h2", 600 * 1000, &t2, &err), SF_EAGAIN, &err,
+          "its connection holds the name");
+    store_close(s2);
+    store_close(w);
+    store_close(s);
+    sqldb_close(direct);
+    proxy_stop(&px);
+}
+
 /* A job add on the store thread, as the API posts one (storeq_call). */
 struct adder {
     const char *sha;
