@@ -29,15 +29,14 @@
 /* One event stream client. */
 struct sse {
     struct api_sse_env *env; /* the API's (lives as long as the API) */
-    int64_t last_id;    /* last event id sent */
-    unsigned tick_seen; /* last api tick answered with progress or a keepalive */
-    struct buf out;     /* formatted, not yet sent */
-    bool reading;       /* the events after last_id are being read (the reader thread) */
-    bool again;         /* woken while they were: there may be more, read again */
-    bool gone;          /* the stream ended while they were: the read's end frees it */
-    bool failed;        /* the store refused them: the stream ends */
+    int64_t last_id;         /* last event id sent */
+    unsigned tick_seen;      /* last api tick answered with progress or a keepalive */
+    struct buf out;          /* formatted, not yet sent */
+    bool reading;            /* the events after last_id are being read (the reader thread) */
+    bool again;              /* woken while they were: there may be more, read again */
+    bool gone;               /* the stream ended while they were: the read's end frees it */
+    bool failed;             /* the store refused them: the stream ends */
 };
-
 
 /*
  * One of several hosts: the other hosts' printers with a job, into arr
@@ -227,9 +226,9 @@ sse_free(void *ud)
    stream. */
 struct sse_open {
     struct api_sse_env *env;
-    bool resume;     /* the client gave Last-Event-ID */
-    int64_t id;      /* its value */
-    int64_t newest;  /* the newest event's id (the reader's) */
+    bool resume;    /* the client gave Last-Event-ID */
+    int64_t id;     /* its value */
+    int64_t newest; /* the newest event's id (the reader's) */
 };
 
 static void
@@ -283,7 +282,7 @@ api_sse_open(struct api_sse_env *env, const struct http_req *req, struct http_re
         return;
     }
     q->env = env;
-    q->resume = req->last_event_id &&
-                route_num(req->last_event_id, strlen(req->last_event_id), &q->id);
+    q->resume =
+        req->last_event_id && route_num(req->last_event_id, strlen(req->last_event_id), &q->id);
     api_read_run(env->reads, resp, sse_open_read, sse_open_finish, q, free);
 }
