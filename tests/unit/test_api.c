@@ -1612,3 +1612,24 @@ T_CASE(api_reads_send_nothing_on_the_loops_connection)
     store_close(w);
     stop();
 }
+
+/* Issue 32: GET /api/job (OctoPrint's) reads the one job printing on the API's reader: on
+   PostgreSQL the loop's own connection sends nothing for it, while the job prints. */
+T_CASE(api_octoprint_job_reads_off_the_loop)
+{
+    T_SKIP_UNLESS(t_store_pg(), "only a PostgreSQL connection counts its round trips");
+    struct sf_err err;
+    T_OK(start("octojob", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    int64_t before = 0, after = 0;
+    on_server(read_loop_trips, &before);
+    for (int i = 0; i < 5; i++) {
+        T_EQ_INT(get("/api/job", KEY_RO, &b), 200);
+        T_TRUE(strstr(b.data, "\"name\":\"seed.stl\"") != NULL);
+    }
+    on_server(read_loop_trips, &after);
+    T_EQ_INT(after - before, 0);
+    buf_release(&b);
+    stop();
+}
