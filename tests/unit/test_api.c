@@ -1613,8 +1613,9 @@ T_CASE(api_reads_send_nothing_on_the_loops_connection)
     stop();
 }
 
-/* Issue 32: GET /api/job (OctoPrint's) reads the one job printing on the API's reader: on
-   PostgreSQL the loop's own connection sends nothing for it, while the job prints. */
+/* Issue 32: GET /api/job (OctoPrint's) reads the one job printing, and a select the job
+   selected, on the API's reader: on PostgreSQL the loop's own connection sends nothing for
+   them, while the job prints. */
 T_CASE(api_octoprint_job_reads_off_the_loop)
 {
     T_SKIP_UNLESS(t_store_pg(), "only a PostgreSQL connection counts its round trips");
@@ -1628,6 +1629,13 @@ T_CASE(api_octoprint_job_reads_off_the_loop)
         T_EQ_INT(get("/api/job", KEY_RO, &b), 200);
         T_TRUE(strstr(b.data, "\"name\":\"seed.stl\"") != NULL);
     }
+    /* a slicer's select of what it uploaded: the job is read, nothing written */
+    T_EQ_INT(call("POST", "/api/files/local/job-1/seed.stl", KEY_RW, "{\"command\":\"select\"}",
+                  NULL, NULL, 0, NULL, &b),
+             204);
+    T_EQ_INT(call("POST", "/api/files/local/job-99/x.gcode", KEY_RW, "{\"command\":\"select\"}",
+                  NULL, NULL, 0, NULL, &b),
+             404);
     on_server(read_loop_trips, &after);
     T_EQ_INT(after - before, 0);
     buf_release(&b);
