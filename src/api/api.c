@@ -42,6 +42,7 @@
 #include "api_printers.h"
 #include "api_read.h"
 #include "api_remote.h"
+#include "api_sse.h"
 #include "api_stats.h"
 #include "api_writes.h"
 #include "partcheck.h"
@@ -49,28 +50,19 @@
 #include "temps.h"
 #include "web.h"
 
-#define SSE_BATCH  64 /* events read from the store per stream refill */
-#define API_GROUPS 5  /* route groups: api_compat's, web's, api_printers', api_writes', api.c's */
+#define API_GROUPS 5 /* route groups: api_compat's, web's, api_printers', api_writes', api.c's */
 
 struct api {
-    struct api_config cfg;         /* as given */
-    struct api_compat_env slicers; /* the slicer-upload routes' view (api_compat.h) */
-    struct http *http;             /* the server */
-    struct web *web;               /* the dashboard's files, sessions and pictures */
-    struct api_read *reads;        /* store reads off the loop (api_read.h) */
-    struct api_octopush *push;     /* OctoPrint's push sockets (api_octopush.h) */
-    unsigned tick;                 /* api_tick() count: streams send progress when it moves */
-    struct temps *temps;           /* each printer's last hour of temperatures (temps.h) */
+    struct api_config cfg;                 /* as given */
+    struct api_compat_env slicers;         /* the slicer-upload routes' view (api_compat.h) */
+    struct http *http;                     /* the server */
+    struct web *web;                       /* the dashboard's files, sessions and pictures */
+    struct api_read *reads;                /* store reads off the loop (api_read.h) */
+    struct api_octopush *push;             /* OctoPrint's push sockets (api_octopush.h) */
+    struct api_sse_env sse;                /* the event streams' view (api_sse.h) */
+    struct temps *temps;                   /* each printer's last hour of temperatures (temps.h) */
     struct route_group groups[API_GROUPS]; /* the route table: api_compat's, web's, ours */
     struct api_writes writes; /* job writes and printer actions answered once committed */
-};
-
-/* One event stream client. */
-struct sse {
-    struct api *a;      /* owner */
-    int64_t last_id;    /* last event id sent */
-    unsigned tick_seen; /* last api tick answered with progress or a keepalive */
-    struct buf out;     /* formatted, not yet sent */
 };
 
 /* ---- upload sink ---- */
@@ -228,8 +220,6 @@ jobs_list(void *ctx, const struct route_args *args, const struct http_req *req,
     api_read_run(a->reads, resp, read_page, NULL, q, free);
 }
 
-static void time_left_json(json_t *o, const struct printer_info *p);
-
 /* Job id with its print history from s, or the failure (any thread with its s). */
 static void
 job_read(struct store *s, int64_t id, struct http_resp *resp)
@@ -261,7 +251,7 @@ job_time_left(struct api *a, int64_t id, struct http_resp *resp)
         struct printer_info pi;
         farm_printer_info(a->cfg.farm, i, &pi);
         if (pi.job_id == id) {
-            time_left_json(job, &pi);
+            api_time_left_json(job, &pi);
             break;
         }
     }
@@ -348,14 +338,6 @@ stats_get(void *ctx, const struct route_args *args, const struct http_req *req,
 /* ---- printers ---- */
 
 /* The job's time left, s, and whose estimate it is ("printer" or "farm"); nulls if none. */
-static void
-time_left_json(json_t *o, const struct printer_info *p)
-{
-    bool known = p->time_left_s >= 0 && p->time_left_from && p->time_left_from[0];
-    json_object_set_new(o, "time_left_s",
-                        known ? json_integer((json_int_t)p->time_left_s) : json_null());
-    json_object_set_new(o, "time_left_from", known ? json_string(p->time_left_from) : json_null());
-}
 
 /*
  * What is on a printer's bed (b from store_beds, NULL: the store has not
@@ -393,7 +375,7 @@ printer_json(const struct store_bed *beds, size_t n_beds, const struct printer_i
                           "bed_target_c", p->bed_target_c, "job_id", (json_int_t)p->job_id,
                           "progress", p->progress, "message", p->message ? p->message : "");
     if (o) {
-        time_left_json(o, p);
+        api_time_left_json(o, p);
         json_object_set_new(o, "disabled_reason", /* farm.h: an operator's, with why */
                             c->disabled[0] ? json_string(c->disabled) : json_null());
     }
@@ -455,17 +437,13 @@ view_publish(struct api *a)
     free(text);
 }
 
-/* Every printer, or the one called name (NULL: all). */
+/* Every printer, or the one called name (NULL: all), with the beds' state beds[n_beds]. */
 static void
-printers_answer(struct api *a, const char *name, struct http_resp *resp)
+printers_json(struct api *a, const char *name, const struct store_bed *beds, size_t n_beds,
+              struct http_resp *resp)
 {
     json_t *arr = json_array();
     size_t n = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
-    struct store_bed *beds = NULL;
-    size_t n_beds = 0;
-    struct sf_err err;
-    if (n && store_beds(a->cfg.store, &beds, &n_beds, &err)) /* the cards go without */
-        log_warn("api", "printers: %s", err.msg);
     for (size_t i = 0; arr && i < n; i++) {
         struct printer_info p;
         farm_printer_info(a->cfg.farm, i, &p);
@@ -474,11 +452,9 @@ printers_answer(struct api *a, const char *name, struct http_resp *resp)
         } else if (strcmp(p.cfg->name, name) == 0) {
             json_decref(arr);
             resp->json = json_pack("{so}", "printer", printer_json(beds, n_beds, &p));
-            free(beds);
             return;
         }
     }
-    free(beds);
     if (name) {
         json_decref(arr);
         http_error(resp, 404, "no printer '%.64s'", name);
@@ -487,10 +463,66 @@ printers_answer(struct api *a, const char *name, struct http_resp *resp)
     resp->json = json_pack("{so}", "printers", arr);
 }
 
+/* As printers_json, the beds read now with the loop's store (a write's answer). */
+static void
+printers_answer(struct api *a, const char *name, struct http_resp *resp)
+{
+    size_t n = a->cfg.farm ? farm_printer_count(a->cfg.farm) : 0;
+    struct store_bed *beds = NULL;
+    size_t n_beds = 0;
+    struct sf_err err;
+    if (n && store_beds(a->cfg.store, &beds, &n_beds, &err)) /* the cards go without */
+        log_warn("api", "printers: %s", err.msg);
+    printers_json(a, name, beds, n_beds, resp);
+    free(beds);
+}
+
 static void
 printer_answer(void *ud, const char *name, struct http_resp *resp)
 {
     printers_answer(ud, name, resp);
+}
+
+static void
+printer_local(void *ud, const char *name, const struct store_bed *beds, size_t n_beds,
+              struct http_resp *resp)
+{
+    printers_json(ud, name, beds, n_beds, resp);
+}
+
+/* A GET /api/printers on its way: the reader reads the beds, the loop adds the printers. */
+struct printers_ask {
+    struct api *a;
+    char name[64]; /* "": all */
+    struct store_bed *beds;
+    size_t n_beds;
+    int rc;
+    struct sf_err err;
+};
+
+static void
+printers_ask_read(struct store *s, void *ud, struct http_resp *resp)
+{
+    (void)resp;
+    struct printers_ask *q = ud;
+    q->rc = store_beds(s, &q->beds, &q->n_beds, &q->err);
+}
+
+static void
+printers_ask_finish(void *ud, struct http_resp *resp)
+{
+    struct printers_ask *q = ud;
+    if (q->rc) /* the cards go without */
+        log_warn("api", "printers: %s", q->err.msg);
+    printers_json(q->a, q->name[0] ? q->name : NULL, q->beds, q->n_beds, resp);
+}
+
+static void
+printers_ask_free(void *ud)
+{
+    struct printers_ask *q = ud;
+    free(q->beds);
+    free(q);
 }
 
 /* GET /api/printers (args->name ""), or /api/printers/NAME. */
@@ -502,8 +534,20 @@ printers_get(void *ctx, const struct route_args *args, const struct http_req *re
     struct api *a = ctx;
     const char *name = args->name[0] ? args->name : NULL;
     /* one of several hosts: the other hosts' printers too, read off the loop */
-    if (!api_remote_printers(a->reads, a->cfg.farm, name, printer_answer, a, resp))
-        printers_answer(a, name, resp);
+    if (api_remote_printers(a->reads, a->cfg.farm, name, printer_local, a, resp))
+        return;
+    if (!a->cfg.farm || !farm_printer_count(a->cfg.farm)) { /* no printers: nothing to read */
+        printers_json(a, name, NULL, 0, resp);
+        return;
+    }
+    struct printers_ask *q = mem_calloc(1, sizeof(*q));
+    if (!q) {
+        http_error(resp, 500, "out of memory");
+        return;
+    }
+    q->a = a;
+    snprintf(q->name, sizeof(q->name), "%s", name ? name : "");
+    api_read_run(a->reads, resp, printers_ask_read, printers_ask_finish, q, printers_ask_free);
 }
 
 /* The end of an action on printer name: its refusal (rc, err), or the printer as it is now. */
@@ -616,155 +660,13 @@ printer_estop_route(void *ctx, const struct route_args *args, const struct http_
 
 /* ---- events ---- */
 
-/*
- * One of several hosts: the other hosts' printers with a job, into arr
- * (sse_progress), as farm_view.h last read them: progress from the job's
- * stored lines (its owner saves them as it prints), time left as the owner
- * published it; each with its host.  A host down shows none.
- */
-static void
-remote_progress(struct farm *f, json_t *arr)
-{
-    const struct store_command_printer *r;
-    size_t n = farm_view_printers(f, &r);
-    for (size_t i = 0; arr && i < n; i++) {
-        if (!r[i].job_id || !r[i].live)
-            continue;
-        double pr = r[i].gcode_lines > 0 ? (double)r[i].lines_acked / r[i].gcode_lines : 0;
-        json_t *o =
-            json_pack("{ss sI ss sf ss}", "printer", r[i].name, "job_id", (json_int_t)r[i].job_id,
-                      "state", r[i].state[0] ? r[i].state : "unknown", "progress",
-                      pr > 1 ? 1.0 : pr, "host", r[i].host);
-        json_t *v = r[i].view[0] ? json_loads(r[i].view, 0, NULL) : NULL;
-        json_t *left = json_object_get(v, "time_left_s");
-        if (o)
-            json_object_set_new(o, "time_left_s",
-                                json_is_integer(left) ? json_incref(left) : json_null());
-        if (o)
-            json_object_set(o, "time_left_from",
-                            json_is_string(json_object_get(v, "time_left_from"))
-                                ? json_object_get(v, "time_left_from")
-                                : json_null());
-        json_decref(v);
-        json_array_append_new(arr, o);
-    }
-}
-
-/*
- * On each tick: the progress of every printer with a job, as an event
- * without id (a snapshot, not part of the log), or a comment line that
- * keeps proxies from closing a quiet stream.
- */
-static void
-sse_progress(struct sse *s)
-{
-    struct farm *f = s->a->cfg.farm;
-    size_t n = f ? farm_printer_count(f) : 0;
-    json_t *arr = json_array();
-    char me[STORE_HOST_NAME_MAX] = ""; /* one of several hosts: each print names its host */
-    if (f && !farm_host_reader(f, me, sizeof(me)))
-        me[0] = '\0';
-    for (size_t i = 0; arr && i < n; i++) {
-        struct printer_info p;
-        farm_printer_info(f, i, &p);
-        if (p.job_id) {
-            json_t *o =
-                json_pack("{ss sI ss sf}", "printer", p.cfg->name, "job_id", (json_int_t)p.job_id,
-                          "state", printer_state_name(p.state), "progress", p.progress);
-            if (o)
-                time_left_json(o, &p);
-            if (o && me[0])
-                json_object_set_new(o, "host", json_string(me));
-            json_array_append_new(arr, o);
-        }
-    }
-    remote_progress(f, arr);
-    char *text = json_array_size(arr) ? json_dumps(arr, JSON_COMPACT) : NULL;
-    json_decref(arr);
-    if (text)
-        buf_printf(&s->out, "event: progress\ndata: %s\n\n", text);
-    else
-        buf_printf(&s->out, ": keepalive\n\n");
-    free(text);
-}
-
-static ssize_t
-sse_read(void *ud, char *buf, size_t max)
-{
-    struct sse *s = ud;
-    if (s->out.len == 0) {
-        struct event_row *ev;
-        size_t n;
-        if (store_events(s->a->cfg.store, s->last_id, SSE_BATCH, &ev, &n, NULL))
-            return -1;
-        for (size_t i = 0; i < n; i++) {
-            json_t *j = api_event_json(&ev[i]);
-            char *text = j ? json_dumps(j, JSON_COMPACT) : NULL;
-            json_decref(j);
-            if (!text || buf_printf(&s->out, "id: %lld\nevent: %s\ndata: %s\n\n",
-                                    (long long)ev[i].id, ev[i].kind, text)) {
-                free(text);
-                break;
-            }
-            free(text);
-            s->last_id = ev[i].id;
-        }
-        free(ev);
-    }
-    if (s->out.len == 0 && s->tick_seen != s->a->tick) {
-        s->tick_seen = s->a->tick;
-        sse_progress(s);
-    }
-    size_t n = s->out.len < max ? s->out.len : max;
-    if (n == 0)
-        return 0; /* nothing new: http.c suspends the stream until woken */
-    memcpy(buf, s->out.data, n);
-    buf_consume(&s->out, n);
-    return (ssize_t)n;
-}
-
-static void
-sse_free(void *ud)
-{
-    struct sse *s = ud;
-    buf_release(&s->out);
-    free(s);
-}
-
 static void
 events_stream(void *ctx, const struct route_args *args, const struct http_req *req,
               struct http_resp *resp)
 {
     (void)args;
     struct api *a = ctx;
-    struct sse *s = mem_calloc(1, sizeof(*s));
-    if (!s) {
-        http_error(resp, 500, "out of memory");
-        return;
-    }
-    s->a = a;
-    buf_init(&s->out, 1 << 20);
-    int64_t id, newest = store_event_last(a->cfg.store);
-    /* Resume after the client's last event, or start live.  An id above the
-       newest is from another (restored or reset) event log: the client is
-       told so and gets this log from its start, rather than silence until
-       the log catches up with a number that means nothing here. */
-    if (req->last_event_id && route_num(req->last_event_id, strlen(req->last_event_id), &id)) {
-        s->last_id = id;
-        if (id > newest) {
-            s->last_id = 0;
-            buf_printf(&s->out,
-                       "event: reset\ndata: {\"last_event_id\":%lld,\"newest\":%lld,"
-                       "\"reason\":\"the event log was reset; replaying it from the start\"}\n\n",
-                       (long long)id, (long long)newest);
-        }
-    } else {
-        s->last_id = newest;
-    }
-    s->tick_seen = a->tick;
-    resp->stream = sse_read;
-    resp->stream_ud = s;
-    resp->stream_free = sse_free;
+    api_sse_open(&a->sse, req, resp);
 }
 
 /* ---- dispatch ---- */
@@ -863,6 +765,7 @@ api_new(const struct api_config *cfg, struct sf_err *err)
                              .session_max_ms = cfg->session_max_ms };
     a->reads = api_read_new(cfg->loop, cfg->store, err);
     a->slicers.reads = a->reads;
+    wc.reads = a->reads;
     a->push = a->reads ? api_octopush_new(cfg->loop, cfg->store, cfg->farm, cfg->session_idle_ms,
                                           cfg->session_max_ms, err)
                        : NULL;
@@ -888,6 +791,7 @@ api_new(const struct api_config *cfg, struct sf_err *err)
     a->groups[4] = (struct route_group){ rows, sizeof(rows) / sizeof(rows[0]), a };
     a->temps = temps_new();
     a->http = a->web && a->temps ? http_new(&hc, err) : NULL;
+    a->sse = (struct api_sse_env){ .reads = a->reads, .http = a->http, .farm = cfg->farm };
     if (!a->http) {
         if (!a->temps)
             sf_err_set(err, SF_ENOMEM, "api: out of memory");
@@ -958,7 +862,7 @@ api_notify(struct api *a)
 void
 api_tick(struct api *a)
 {
-    a->tick++;
+    a->sse.tick++;
     http_wake_streams(a->http);
     view_publish(a);
     /* a sample a printer each tick: the chart's history (temps.h) */

@@ -311,12 +311,19 @@ job_of(const char *p)
    it is queued already.  A job already done did what the select asks for
    (a slicer's select can arrive after a fast printer finished the upload);
    one that failed or was cancelled can no longer print: 409. */
+/* A select on its way: the job read on the API's reader, which answers it too. */
+struct select_ask {
+    int64_t id;
+    bool moonraker;
+};
+
 static void
-select_job(const struct api_compat_env *env, int64_t id, struct http_resp *resp, bool moonraker)
+select_read(struct store *s, void *ud, struct http_resp *resp)
 {
+    const struct select_ask *q = ud;
     struct job_row j;
     struct sf_err err;
-    int rc = id ? store_job_get(env->store, id, &j, &err) : SF_ENOTFOUND;
+    int rc = q->id ? store_job_get(s, q->id, &j, &err) : SF_ENOTFOUND;
     if (rc == SF_ENOTFOUND) {
         http_error(resp, 404, "no uploaded file there (paths are job-ID/NAME, as uploads answer)");
         return;
@@ -326,14 +333,26 @@ select_job(const struct api_compat_env *env, int64_t id, struct http_resp *resp,
         return;
     }
     if (job_state_terminal(j.state) && j.state != JOB_DONE) {
-        http_error(resp, 409, "job %lld is %s; upload it again to print it again", (long long)id,
+        http_error(resp, 409, "job %lld is %s; upload it again to print it again", (long long)q->id,
                    job_state_name(j.state));
         return;
     }
-    if (moonraker)
+    if (q->moonraker)
         resp->json = json_pack("{ss}", "result", "ok");
     else
         resp->status = 204;
+}
+
+static void
+select_job(const struct api_compat_env *env, int64_t id, struct http_resp *resp, bool moonraker)
+{
+    struct select_ask *q = mem_calloc(1, sizeof(*q));
+    if (!q) {
+        http_error(resp, 500, "out of memory");
+        return;
+    }
+    *q = (struct select_ask){ id, moonraker };
+    api_read_run(env->reads, resp, select_read, NULL, q, free);
 }
 
 static void

@@ -21,6 +21,7 @@
 
 #include "../base/gcode.h"
 #include "../base/limits.h"
+#include "../farm/farm.h"
 
 enum ftype { F_STR, F_DBL, F_INT };
 
@@ -262,4 +263,13 @@ api_event_json(const struct event_row *e)
     return json_pack("{sI sI sI ss ss ss}", "id", (json_int_t)e->id, "at_ms", (json_int_t)e->at_ms,
                      "job_id", (json_int_t)e->job_id, "printer", e->printer, "kind", e->kind,
                      "detail", e->detail);
+}
+
+void
+api_time_left_json(json_t *o, const struct printer_info *p)
+{
+    bool known = p->time_left_s >= 0 && p->time_left_from && p->time_left_from[0];
+    json_object_set_new(o, "time_left_s",
+                        known ? json_integer((json_int_t)p->time_left_s) : json_null());
+    json_object_set_new(o, "time_left_from", known ? json_string(p->time_left_from) : json_null());
 }

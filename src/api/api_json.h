@@ -48,4 +48,8 @@ json_t *api_job_json(const struct job_row *j);
 json_t *api_print_json(const struct print_row *p);
 json_t *api_event_json(const struct event_row *e);
 
+struct printer_info;
+/* Set o's "time_left_s" and "time_left_from" from printer p (null when not known). */
+void api_time_left_json(json_t *o, const struct printer_info *p);
+
 #endif

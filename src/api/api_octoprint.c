@@ -218,21 +218,12 @@ api_octoprint_state_json(const struct api_octoprint_summary *s)
                      "sdReady", 0, "finishing", 0);
 }
 
+/* GET /api/job's answer, with s's one job j (NULL: none, or not read). */
 static json_t *
-printer_json(const struct api_octoprint_summary *s)
+job_json(const struct job_row *jr, const struct api_octoprint_summary *s)
 {
-    return json_pack("{so s{} s{sb} s{si si si si si}}", "state", api_octoprint_state_json(s),
-                     "temperature", "sd", "ready", 0, "slimfarm", "printers", (int)s->n, "printing",
-                     (int)s->printing, "paused", (int)s->paused, "offline", (int)s->offline,
-                     "error", (int)s->error);
-}
-
-/* The one job printing is read from the loop's store: one row by its key. */
-json_t *
-api_octoprint_job_json(struct store *store, const struct api_octoprint_summary *s)
-{
-    struct job_row j;
-    bool one = s->job && store_job_get(store, s->job, &j, NULL) == SF_OK;
+    bool one = jr != NULL;
+    struct job_row j = one ? *jr : (struct job_row){ 0 };
     json_t *name = one ? json_string(j.opts.name) : json_null();
     json_t *path = json_null();
     if (one) {
@@ -249,6 +240,47 @@ api_octoprint_job_json(struct store *store, const struct api_octoprint_summary *
                      completion, "printTime", "printTimeLeft", left, "state", s->text);
 }
 
+static json_t *
+printer_json(const struct api_octoprint_summary *s)
+{
+    return json_pack("{so s{} s{sb} s{si si si si si}}", "state", api_octoprint_state_json(s),
+                     "temperature", "sd", "ready", 0, "slimfarm", "printers", (int)s->n, "printing",
+                     (int)s->printing, "paused", (int)s->paused, "offline", (int)s->offline,
+                     "error", (int)s->error);
+}
+
+/* The one job printing is read from the loop's store: one row by its key. */
+json_t *
+api_octoprint_job_json(struct store *store, const struct api_octoprint_summary *s)
+{
+    struct job_row j;
+    bool one = s->job && store_job_get(store, s->job, &j, NULL) == SF_OK;
+    return job_json(one ? &j : NULL, s);
+}
+
+/* A GET /api/job on its way: the one job's row read on the API's reader (the farm's
+   summary taken when it came). */
+struct job_ask {
+    struct api_octoprint_summary s;
+    bool one; /* j was read */
+    struct job_row j;
+};
+
+static void
+job_ask_read(struct store *st, void *ud, struct http_resp *resp)
+{
+    (void)resp;
+    struct job_ask *q = ud;
+    q->one = store_job_get(st, q->s.job, &q->j, NULL) == SF_OK;
+}
+
+static void
+job_ask_finish(void *ud, struct http_resp *resp)
+{
+    struct job_ask *q = ud;
+    resp->json = job_json(q->one ? &q->j : NULL, &q->s);
+}
+
 void
 api_octoprint_state(void *ctx, const struct route_args *args, const struct http_req *req,
                     struct http_resp *resp)
@@ -261,8 +293,17 @@ api_octoprint_state(void *ctx, const struct route_args *args, const struct http_
         http_error(resp, 404, "printer '%.64s' (query 'printer') is not in the farm", printer);
         return;
     }
-    resp->json = strcmp(req->path, "/api/printer") == 0 ? printer_json(&s)
-                                                        : api_octoprint_job_json(env->store, &s);
+    if (strcmp(req->path, "/api/printer") == 0 || !s.job) {
+        resp->json = strcmp(req->path, "/api/printer") == 0 ? printer_json(&s) : job_json(NULL, &s);
+        return;
+    }
+    struct job_ask *q = mem_calloc(1, sizeof(*q));
+    if (!q) {
+        http_error(resp, 500, "out of memory");
+        return;
+    }
+    q->s = s;
+    api_read_run(env->reads, resp, job_ask_read, job_ask_finish, q, free);
 }
 
 void

@@ -22,7 +22,9 @@ struct api_read {
 
 struct task {
     struct api_read *r;
-    struct http_defer *d; /* the waiting request */
+    api_read_job_fn job;    /* api_read_post's read, or NULL */
+    api_read_done_fn jdone; /* and its done */
+    struct http_defer *d;   /* the waiting request */
     api_read_fn read;
     api_read_finish_fn finish;
     void *ud;
@@ -67,6 +69,10 @@ work(void *ud, const atomic_bool *cancel)
     struct task *t = ud;
     if (atomic_load(cancel))
         return SF_ECANCELED;
+    if (t->job) {
+        t->job(t->r->reader, t->ud);
+        return SF_OK;
+    }
     t->read(t->r->reader, t->ud, &t->resp);
     return SF_OK;
 }
@@ -81,10 +87,15 @@ resp_drop(struct http_resp *resp)
 }
 
 static void
-done(struct loop *l, void *ud, int rc)
+done_task(struct loop *l, void *ud, int rc)
 {
     (void)l;
     struct task *t = ud;
+    if (t->job) {
+        t->jdone(t->ud, rc == SF_OK);
+        free(t);
+        return;
+    }
     if (rc != SF_OK) {
         resp_drop(&t->resp);
         http_error(&t->resp, 503, "the daemon is stopping");
@@ -111,7 +122,7 @@ api_read_run(struct api_read *r, struct http_resp *resp, api_read_fn read,
                             .ud = ud,
                             .ud_free = ud_free,
                             .resp = { .status = 200 } };
-        if (pool_submit(r->pool, work, done, t, NULL))
+        if (pool_submit(r->pool, work, done_task, t, NULL))
             return;
         /* not queued: answer now after all (http_defer's handle is a plain
            allocation until the route returns it) */
@@ -124,4 +135,22 @@ api_read_run(struct api_read *r, struct http_resp *resp, api_read_fn read,
         finish(ud, resp);
     if (ud_free)
         ud_free(ud);
+}
+
+bool
+api_read_post(struct api_read *r, api_read_job_fn read, api_read_done_fn done, void *ud)
+{
+    if (!r->pool) {
+        read(r->s, ud);
+        done(ud, true);
+        return true;
+    }
+    struct task *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return false;
+    *t = (struct task){ .r = r, .job = read, .jdone = done, .ud = ud };
+    if (pool_submit(r->pool, work, done_task, t, NULL))
+        return true;
+    free(t);
+    return false;
 }

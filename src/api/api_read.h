@@ -52,4 +52,22 @@ typedef void (*api_read_finish_fn)(void *ud, struct http_resp *resp);
 void api_read_run(struct api_read *r, struct http_resp *resp, api_read_fn read,
                   api_read_finish_fn finish, void *ud, void (*ud_free)(void *ud));
 
+/* A read of the reader's store s into ud (the reader's thread). */
+typedef void (*api_read_job_fn)(struct store *s, void *ud);
+/* On the loop after it: ran false when the read never ran (the daemon stopping). */
+typedef void (*api_read_done_fn)(void *ud, bool ran);
+
+/*
+ * A read that answers no request of its own (an event stream's next
+ * events): read(ud) on the reader's thread, in order with the other
+ * reads, then done(ud, ran) on the loop, exactly once; done owns ud
+ * (what ud stands for may be gone meanwhile: done must check, as
+ * nothing else tells it).  Without a reader thread both run now, on the
+ * caller's thread with the loop's store.  false (out of memory):
+ * neither runs.  A read in flight when api_read_free runs calls done
+ * later on the loop (pool.h): ud must not point into what the caller
+ * frees after api_read_free.
+ */
+bool api_read_post(struct api_read *r, api_read_job_fn read, api_read_done_fn done, void *ud);
+
 #endif

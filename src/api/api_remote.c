@@ -97,11 +97,16 @@ struct listing {
     char me[STORE_HOST_NAME_MAX];
     char name[64]; /* one printer ("": all) */
     int64_t now_ms;
+    bool own; /* name is this host's: only the beds to read */
     /* the reader's */
     struct store_command_printer *rows;
     size_t n;
     int rc;
     struct sf_err err;
+    struct store_bed *beds;
+    size_t n_beds;
+    int beds_rc;
+    struct sf_err beds_err;
 };
 
 /* Another host's printer p as GET /api/printers shows a printer. */
@@ -153,7 +158,9 @@ listing_read(struct store *s, void *ud, struct http_resp *resp)
 {
     (void)resp;
     struct listing *q = ud;
-    q->rc = store_command_printers(s, q->me, q->now_ms, &q->rows, &q->n, &q->err);
+    q->beds_rc = store_beds(s, &q->beds, &q->n_beds, &q->beds_err);
+    if (!q->own)
+        q->rc = store_command_printers(s, q->me, q->now_ms, &q->rows, &q->n, &q->err);
 }
 
 /* Set "host" on the printer objects of arr (an array, or one object). */
@@ -172,6 +179,13 @@ static void
 listing_finish(void *ud, struct http_resp *resp)
 {
     struct listing *q = ud;
+    if (q->beds_rc) /* the cards go without */
+        log_warn("api", "printers: %s", q->beds_err.msg);
+    if (q->own) {
+        q->local(q->ud, q->name, q->beds, q->n_beds, resp);
+        own_host(json_object_get(resp->json, "printer"), q->me);
+        return;
+    }
     if (q->rc)
         log_warn("api", "printers of the other hosts: %s", q->err.msg);
     if (q->name[0]) {
@@ -186,7 +200,7 @@ listing_finish(void *ud, struct http_resp *resp)
             http_error(resp, 404, "no printer '%.64s'", q->name);
         return;
     }
-    q->local(q->ud, NULL, resp);
+    q->local(q->ud, NULL, q->beds, q->n_beds, resp);
     json_t *arr = json_object_get(resp->json, "printers");
     /* a printer this host's config lists but another live host owns is that host's row
        (this host never schedules on it, farm_host.h): listed once, as its owner shows it */
@@ -208,6 +222,7 @@ listing_free(void *ud)
 {
     struct listing *q = ud;
     free(q->rows);
+    free(q->beds);
     free(q);
 }
 
@@ -218,11 +233,6 @@ api_remote_printers(struct api_read *reads, struct farm *f, const char *name,
     char me[STORE_HOST_NAME_MAX];
     if (!f || !farm_host_on(f) || !farm_host_reader(f, me, sizeof(me)) || !me[0])
         return false; /* not a host (or not joined yet: nothing of the farm is known) */
-    if (name && !farm_remote_is(f, name)) { /* this host's own: as before, with its name */
-        local(ud, name, resp);
-        own_host(json_object_get(resp->json, "printer"), me);
-        return true;
-    }
     struct listing *q = mem_calloc(1, sizeof(*q));
     if (!q) {
         http_error(resp, 500, "printers: out of memory");
@@ -230,6 +240,7 @@ api_remote_printers(struct api_read *reads, struct farm *f, const char *name,
     }
     q->local = local;
     q->ud = ud;
+    q->own = name && !farm_remote_is(f, name); /* this host's own: as before, with its name */
     snprintf(q->me, sizeof(q->me), "%s", me);
     snprintf(q->name, sizeof(q->name), "%s", name ? name : "");
     q->now_ms = clock_wall_ms();

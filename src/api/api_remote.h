@@ -37,8 +37,10 @@ bool api_remote_try(struct farm *f, const char *name, const char *kind, const ch
 bool api_remote_answer(struct farm *f, const char *name, const char *kind, const char *line,
                        const char *who, struct http_defer *d);
 
-/* The API's own printers (NULL name: all, as {"printers": [...]}; else {"printer": ...}). */
-typedef void (*api_remote_local_fn)(void *ud, const char *name, struct http_resp *resp);
+/* The API's own printers (NULL name: all, as {"printers": [...]}; else {"printer": ...}),
+   with the beds' state beds[n_beds] (read on reads' thread with the rest; none if unread). */
+typedef void (*api_remote_local_fn)(void *ud, const char *name, const struct store_bed *beds,
+                                    size_t n_beds, struct http_resp *resp);
 
 /*
  * GET /api/printers (name NULL) or /api/printers/NAME on one of several

@@ -281,6 +281,8 @@ int64_t http_timeout_ms(struct http *h);
 int http_run(struct http *h);
 /* Resume suspended streams (there is news for them). */
 void http_wake_streams(struct http *h);
+/* Resume the one stream whose stream_ud is ud, if it is suspended (its own news came). */
+void http_wake_stream(struct http *h, void *ud);
 /*
  * The owner's hook for a connection resumed outside http_run() (a stream
  * woken, a deferred answer given): MHD only sends it when it runs again,

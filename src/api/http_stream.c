@@ -74,6 +74,19 @@ http_wake_streams(struct http *h)
 }
 
 void
+http_wake_stream(struct http *h, void *ud)
+{
+    for (struct stream *st = h->streams; st; st = st->next)
+        if (st->ud == ud && st->suspended) {
+            st->suspended = false;
+            MHD_resume_connection(st->conn);
+            if (h->wake)
+                h->wake(h->wake_ud);
+            return;
+        }
+}
+
+void
 http_set_wake(struct http *h, void (*wake)(void *ud), void *ud)
 {
     h->wake = wake;

@@ -249,15 +249,10 @@ preview_refused(const struct job_row *j, enum pictures_state st, const struct sf
     }
 }
 
+/* Job j's picture (after: of the part as optimized); inm: the request's If-None-Match or "". */
 static void
-preview(struct web *w, const struct job_row *j, const struct http_req *req, struct http_resp *resp)
+preview(struct web *w, const struct job_row *j, bool after, const char *inm, struct http_resp *resp)
 {
-    const char *stage = http_req_arg(req, "stage");
-    bool after = stage && strcmp(stage, "after") == 0;
-    if (stage && !after && strcmp(stage, "before") != 0) {
-        http_error(resp, 400, "stage: '%.16s' is not 'before' or 'after'", stage);
-        return;
-    }
     const char *sha;
     double angle;
     char etag[112];
@@ -266,7 +261,7 @@ preview(struct web *w, const struct job_row *j, const struct http_req *req, stru
     http_resp_header(resp, "ETag", "%s", etag);
     http_resp_header(resp, "Cache-Control", "private, no-cache");
     resp->content_type = "image/png";
-    if (etag_matches(req, etag)) {
+    if (inm[0] && (strstr(inm, etag) != NULL || strcmp(inm, "*") == 0)) {
         resp->status = 304;
         return;
     }
@@ -306,8 +301,10 @@ preview(struct web *w, const struct job_row *j, const struct http_req *req, stru
 
 /* ---- G-code ---- */
 
+/* Job j's G-code from store s as an open file (the reader's thread: the file may come
+   whole from the database first). */
 static void
-gcode(struct web *w, const struct job_row *j, struct http_resp *resp)
+gcode(struct store *s, const struct job_row *j, struct http_resp *resp)
 {
     struct sf_err err;
     char path[1100];
@@ -316,7 +313,7 @@ gcode(struct web *w, const struct job_row *j, struct http_resp *resp)
                    job_state_name(j->state));
         return;
     }
-    if (store_file_path(w->cfg.store, j->gcode_sha, path, sizeof(path), &err)) {
+    if (store_file_path(s, j->gcode_sha, path, sizeof(path), &err)) {
         http_error(resp, 500, "%s", err.msg);
         return;
     }
@@ -360,14 +357,14 @@ model_json(struct web *w, const struct job_row *j, bool after)
     return json_pack("{sf sf}", "support_g", g, "support_s", sec);
 }
 
-static void
-report(struct web *w, const struct job_row *j, struct http_resp *resp)
+/* The numbers of job j's G-code header from store s (the reader's thread), or null. */
+static json_t *
+report_gcode(struct store *s, const struct job_row *j)
 {
     json_t *g = json_null();
     char path[1100], head[WEB_GCODE_HEAD_MAX + 1];
     struct sf_err err;
-    if (j->gcode_sha[0] &&
-        store_file_path(w->cfg.store, j->gcode_sha, path, sizeof(path), &err) == SF_OK) {
+    if (j->gcode_sha[0] && store_file_path(s, j->gcode_sha, path, sizeof(path), &err) == SF_OK) {
         int fd = open(path, O_RDONLY | O_CLOEXEC);
         ssize_t n = fd >= 0 ? read(fd, head + 1, sizeof(head) - 2) : -1;
         if (fd >= 0)
@@ -375,6 +372,7 @@ report(struct web *w, const struct job_row *j, struct http_resp *resp)
         if (n > 0) {
             head[0] = '\n';
             head[n + 1] = '\0';
+            json_decref(g);
             g = json_pack("{sf sf sf sf sf}", "time_s",
                           head_num(head, "estimated printing time [s]"), "filament_g",
                           head_num(head, "filament used [g]"), "support_g",
@@ -383,6 +381,13 @@ report(struct web *w, const struct job_row *j, struct http_resp *resp)
                           head_num(head, "filament used [mm]"));
         }
     }
+    return g;
+}
+
+/* On the loop: job j's report, with g (report_gcode's; taken). */
+static void
+report(struct web *w, const struct job_row *j, json_t *g, struct http_resp *resp)
+{
     resp->json =
         json_pack("{sI ss sb so so so so so sb sf}", "job_id", (json_int_t)j->id, "method",
                   j->opts.method, "optimized", j->mesh_sha[0] != '\0', "gcode", g, "model_before",
@@ -417,26 +422,79 @@ logout_route(void *ctx, const struct route_args *args, const struct http_req *re
     logout(ctx, req, resp);
 }
 
-/* GET /api/jobs/ID/preview.png, /gcode or /report. */
+/* A GET /api/jobs/ID/preview.png, /gcode or /report on its way: the job (and the G-code's
+   file) read on the API's reader, the picture and the report's models added on the loop. */
+struct job_ask {
+    struct web *w;
+    int64_t id;
+    char what;      /* 'g' gcode, 'r' report, 'p' preview */
+    char stage[24]; /* preview's ?stage= ("" none) */
+    bool has_stage;
+    char inm[512];    /* its If-None-Match ("" none) */
+    int rc;           /* the reader's: the job's read */
+    struct job_row j; /* the job */
+    json_t *g;        /* report's G-code numbers */
+};
+
+static void
+job_ask_read(struct store *s, void *ud, struct http_resp *resp)
+{
+    struct job_ask *q = ud;
+    struct sf_err err;
+    if ((q->rc = store_job_get(s, q->id, &q->j, &err))) {
+        http_fail(resp, q->rc, err.msg);
+        return;
+    }
+    if (q->what == 'g')
+        gcode(s, &q->j, resp);
+    else if (q->what == 'r')
+        q->g = report_gcode(s, &q->j);
+}
+
+static void
+job_ask_finish(void *ud, struct http_resp *resp)
+{
+    struct job_ask *q = ud;
+    if (q->rc || q->what == 'g')
+        return;
+    if (q->what == 'r') {
+        report(q->w, &q->j, q->g, resp);
+        q->g = NULL;
+        return;
+    }
+    bool after = q->has_stage && strcmp(q->stage, "after") == 0;
+    if (q->has_stage && !after && strcmp(q->stage, "before") != 0)
+        http_error(resp, 400, "stage: '%.16s' is not 'before' or 'after'", q->stage);
+    else
+        preview(q->w, &q->j, after, q->inm, resp);
+}
+
+static void
+job_ask_free(void *ud)
+{
+    struct job_ask *q = ud;
+    json_decref(q->g);
+    free(q);
+}
+
 static void
 job_route(void *ctx, const struct route_args *args, const struct http_req *req,
           struct http_resp *resp)
 {
-    struct web *w = ctx;
-    struct job_row j;
-    struct sf_err err;
-    int rc = store_job_get(w->cfg.store, args->id, &j, &err);
-    if (rc) {
-        http_fail(resp, rc, err.msg);
+    struct job_ask *q = mem_calloc(1, sizeof(*q));
+    if (!q) {
+        http_error(resp, 500, "out of memory");
         return;
     }
+    q->w = ctx;
+    q->id = args->id;
     const char *what = strrchr(req->path, '/') + 1;
-    if (strcmp(what, "gcode") == 0)
-        gcode(w, &j, resp);
-    else if (strcmp(what, "report") == 0)
-        report(w, &j, resp);
-    else
-        preview(w, &j, req, resp);
+    q->what = strcmp(what, "gcode") == 0 ? 'g' : strcmp(what, "report") == 0 ? 'r' : 'p';
+    const char *stage = http_req_arg(req, "stage"), *inm = http_req_header(req, "If-None-Match");
+    q->has_stage = stage != NULL;
+    snprintf(q->stage, sizeof(q->stage), "%s", stage ? stage : "");
+    snprintf(q->inm, sizeof(q->inm), "%s", inm ? inm : "");
+    api_read_run(q->w->cfg.reads, resp, job_ask_read, job_ask_finish, q, job_ask_free);
 }
 
 #define GET_HEAD (ROUTE_GET | ROUTE_HEAD)

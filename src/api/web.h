@@ -44,6 +44,7 @@
 #include "../base/pool.h"
 #include "../farm/pictures.h"
 #include "../farm/store.h"
+#include "api_read.h"
 #include "http.h"
 #include "route.h"
 
@@ -63,6 +64,7 @@ const struct web_asset *web_assets(size_t *n);
 
 struct web_config {
     struct store *store;    /* jobs and files (not owned) */
+    struct api_read *reads; /* the job routes' reads (api_read.h; not owned) */
     struct pool *pool;      /* renders (not owned); NULL: previews answer 503 */
     void (*wake)(void *ud); /* a render finished: wake the streams waiting for it */
     void *ud;

@@ -30,6 +30,8 @@
 #include "../../src/farm/farm.h"
 #include "../../src/farm/sqldb.h"
 #include "../../src/farm/store.h"
+#include "../../src/farm/store_host.h"
+#include "../../src/farm/store_int.h" /* store_log_event: an event without a job */
 #include "../t.h"
 #include "../tstore.h"
 
@@ -1608,6 +1610,120 @@ T_CASE(api_multipart_part_without_name_is_400)
     T_EQ_INT(raw(req, (size_t)n, &b), 400);
     T_TRUE(strstr(raw_error(&b), "has no name") != NULL);
     T_EQ_INT(n_jobs(), 1);
+    buf_release(&b);
+    stop();
+}
+
+/* ---- issue 32: the API's reads send nothing on the loop's own connection ---- */
+
+static void
+read_loop_trips(void *arg)
+{
+    *(int64_t *)arg = store_round_trips(srv.store);
+}
+
+/* Hold a stream open until its text has want (the server thread writes events meanwhile
+   only when note is set: a second connection's event, logged once the stream is open). */
+static bool
+sse_until(const char *last_id, const char *want, struct store *note)
+{
+    char url[128];
+    snprintf(url, sizeof(url), "%s/api/events", srv.base);
+    struct curl_slist *h = curl_slist_append(NULL, "X-Api-Key: " KEY_RO);
+    if (last_id)
+        h = curl_slist_append(h, last_id);
+    struct sse_client s = { .want = want };
+    buf_init(&s.got, 0);
+    CURLM *m = curl_multi_init();
+    CURL *c = curl_easy_init();
+    curl_easy_setopt(c, CURLOPT_URL, url);
+    curl_easy_setopt(c, CURLOPT_HTTPHEADER, h);
+    curl_easy_setopt(c, CURLOPT_WRITEFUNCTION, on_sse);
+    curl_easy_setopt(c, CURLOPT_WRITEDATA, &s);
+    curl_multi_add_handle(m, c);
+    int running = 1;
+    bool noted = !note;
+    for (int i = 0; running && i < 1000; i++) { /* 20 s at most */
+        curl_multi_perform(m, &running);
+        curl_multi_poll(m, NULL, 0, 20, NULL);
+        if (!noted && s.got.len) { /* the stream is open (a keepalive came): now the event */
+            noted = true;
+            struct sf_err err;
+            if (store_log_event(note, 0, "a", "note-live", "{}", &err))
+                printf("    log event: %s\n", err.msg);
+        }
+    }
+    bool got = s.got.data && strstr(s.got.data, want);
+    curl_multi_remove_handle(m, c);
+    curl_easy_cleanup(c);
+    curl_multi_cleanup(m);
+    curl_slist_free_all(h);
+    buf_release(&s.got);
+    return got;
+}
+
+/* Issue 32: GET /api/printers (the beds) and the event stream (the newest id, each wake's
+   events) read on the reader's connection: on PostgreSQL the loop's own connection, which
+   every printer waits on, sends nothing for them (store_round_trips unchanged). */
+T_CASE(api_reads_send_nothing_on_the_loops_connection)
+{
+    T_SKIP_UNLESS(t_store_pg(), "only a PostgreSQL connection counts its round trips");
+    struct sf_err err;
+    if (srv.api)
+        stop();
+    memset(&srv, 0, sizeof(srv));
+    log_set_level(LOG_WARN);
+    T_OK(open_farm("looptrips", &err), &err);
+    struct store *w = store_open_writer(srv.store, &err); /* another host's events */
+    T_TRUE(w != NULL);
+    T_OK(store_log_event(w, 0, "a", "note-old", "{}", &err), &err);
+    T_OK(start_api(0, &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    T_EQ_INT(get("/api/printers", KEY_RO, &b), 200); /* the first of each opens what it needs */
+    int64_t before = 0, after = 0, idle = 0;
+    on_server(read_loop_trips, &before);
+    T_EQ_INT(get("/api/printers", KEY_RO, &b), 200);
+    T_TRUE(strstr(b.data, "\"name\":\"b\"") != NULL);
+    T_EQ_INT(get("/api/printers/a", KEY_RO, &b), 200);
+    T_TRUE(strstr(b.data, "\"printer\":{") != NULL);
+    on_server(read_loop_trips, &after);
+    T_EQ_INT(after - before, 0);
+    /* the backlog from the start, and an event committed while the stream is open */
+    T_TRUE(sse_until("Last-Event-ID: 0", "event: note-old", NULL));
+    T_TRUE(sse_until(NULL, "event: note-live", w));
+    on_server(read_loop_trips, &idle);
+    T_EQ_INT(idle - after, 0);
+    buf_release(&b);
+    store_close(w);
+    stop();
+}
+
+/* Issue 32: GET /api/job (OctoPrint's) reads the one job printing, and a select the job
+   selected, on the API's reader: on PostgreSQL the loop's own connection sends nothing for
+   them, while the job prints. */
+T_CASE(api_octoprint_job_reads_off_the_loop)
+{
+    T_SKIP_UNLESS(t_store_pg(), "only a PostgreSQL connection counts its round trips");
+    struct sf_err err;
+    T_OK(start("octojob", &err), &err);
+    struct buf b;
+    buf_init(&b, 0);
+    int64_t before = 0, after = 0;
+    on_server(read_loop_trips, &before);
+    for (int i = 0; i < 5; i++) {
+        T_EQ_INT(get("/api/job", KEY_RO, &b), 200);
+        T_TRUE(strstr(b.data, "\"name\":\"seed.stl\"") != NULL);
+    }
+    /* a slicer's select of what it uploaded: the job is read, nothing written */
+    T_EQ_INT(call("POST", "/api/files/local/job-1/seed.stl", KEY_RW, "{\"command\":\"select\"}",
+                  NULL, NULL, 0, NULL, &b),
+             204);
+    T_EQ_INT(call("POST", "/api/files/local/job-99/x.gcode", KEY_RW, "{\"command\":\"select\"}",
+                  NULL, NULL, 0, NULL, &b),
+             404);
+    on_server(read_loop_trips, &after);
+    T_EQ_INT(after - before, 0);
     buf_release(&b);
     stop();
 }

@@ -18,6 +18,7 @@
 #include "../../src/base/buf.h"
 #include "../../src/base/log.h"
 #include "../../src/farm/store.h"
+#include "../../src/farm/store_host.h"
 #include "../t.h"
 #include "../tstore.h"
 
@@ -89,7 +90,8 @@ start(const char *name, struct sf_err *err)
                               .port = 0,
                               .keys = keys,
                               .n_keys = 2,
-                              .upload_max = 1 << 20 };
+                              .upload_max = 1 << 20,
+                              .loop = srv.l }; /* reads on the reader's thread, as the daemon's */
     if (!(srv.api = api_new(&cfg, err)))
         return err->code;
     snprintf(srv.base, sizeof(srv.base), "http://127.0.0.1:%d", http_port(api_http(srv.api)));
@@ -395,6 +397,19 @@ T_CASE(web_part_pictures_render_on_the_pool_and_revalidate)
     stop();
 }
 
+/* The loop's own connection's round trips so far (store_round_trips), read with the server
+   thread (the loop) stopped. */
+static int64_t
+loop_trips(void)
+{
+    atomic_store(&srv.stop, true);
+    pthread_join(srv.thread, NULL);
+    int64_t n = store_round_trips(srv.store);
+    atomic_store(&srv.stop, false);
+    pthread_create(&srv.thread, NULL, serve, NULL);
+    return n;
+}
+
 T_CASE(web_gcode_is_served_from_the_store)
 {
     struct sf_err err;
@@ -416,6 +431,7 @@ T_CASE(web_gcode_is_served_from_the_store)
     T_OK(store_job_event(srv.store, srv.job, JOB_EV_PREPARED, &a, NULL, &err), &err);
     atomic_store(&srv.stop, false);
     pthread_create(&srv.thread, NULL, serve, NULL);
+    int64_t trips = loop_trips();
     snprintf(path, sizeof(path), "/api/jobs/%lld/gcode", (long long)srv.job);
     T_EQ_INT(call("GET", path, KEY_RO, NULL, NULL, &b, &h), 200);
     T_EQ_INT(b.len, sizeof(gc) - 1);
@@ -432,6 +448,9 @@ T_CASE(web_gcode_is_served_from_the_store)
     snprintf(path, sizeof(path), "/api/jobs/%lld", (long long)srv.job);
     T_EQ_INT(call("GET", path, KEY_RO, NULL, NULL, &b, &h), 200);
     T_TRUE(strstr(b.data, "\"mndr\":null") != NULL && strstr(b.data, "\"andr\":null") != NULL);
+    /* issue 32: the job, its G-code file (which may come whole from the database) and its
+       report's numbers were read on the API's reader: the loop's connection sent nothing */
+    T_EQ_INT(loop_trips() - trips, 0);
     /* a slim job's is: the fractions of the diagonal the farm recorded */
     struct job_opts o;
     job_opts_init(&o);
