@@ -545,34 +545,147 @@ in_doubt(const struct farm_host *h, int64_t id)
     return false;
 }
 
-int
-farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
-{
-    struct farm_host *h = f->host;
+/* A claim, take or give-back on its way to the store thread (farm_host_claim, farm_host_take,
+   give_back): what the thread needs, copied; what it answers; whom to tell. */
+struct hask {
+    struct farm_host *h;
+    enum { ASK_CLAIM, ASK_TAKE, ASK_GIVE } op;
+    char host[STORE_HOST_NAME_MAX]; /* h's name and token when posted */
+    int64_t token, id, fence;       /* the job; a give-back's token, a claim's or take's answer */
+    bool bar;                       /* a give-back: not taken here again for a lease */
+    bool ran;                       /* a claim or take ran: rc and err are its answer */
+    int rc;
     struct sf_err err;
-    struct job_row j;
-    if (in_doubt(h, id))
-        return SF_ENOTFOUND; /* not again until its last claim is settled */
-    /* after what the farm queued for the store, as job_event's PREPARE */
-    int rc = farm_sync(f, STOREQ_SYNC_MS, &err);
+    char why[256];      /* a give-back's */
+    struct job_row job; /* a claim's: the job as claimed */
+    farm_host_answer_fn done;
+    void *ud;
+};
+
+/* On the store thread.  A claim or take that failed in passing (busy, unreachable) or whose
+   commit is in doubt is answered as it is, not tried again or read back here: the loop does
+   what it did with the synchronous call's answer (a claim in doubt is settled, a take in
+   doubt taken again by a later pass, whose new token it needs; busy: a later pass).  A
+   give-back is an ordinary write: retried, and read back when in doubt. */
+static int
+ask_call(struct store *s, void *arg, struct sf_err *err)
+{
+    struct hask *a = arg;
+    a->err = (struct sf_err){ 0 };
+    if (a->op == ASK_GIVE)
+        return store_job_give_back(s, a->host, a->id, a->fence, a->why, err);
+    a->rc = a->op == ASK_CLAIM
+                ? store_job_claim_id(s, a->host, a->token, a->id, &a->job, &a->fence, &a->err)
+                : store_job_take(s, a->host, a->token, a->id, &a->fence, &a->err);
+    a->ran = true;
+    *err = a->err;
+    if (a->rc == SF_EBUSY || a->rc == SF_EUNREACH || a->rc == SF_EINDOUBT)
+        return sf_err_set(err, SF_EAGAIN, "%s", a->err.msg); /* the loop's to handle */
+    return a->rc;
+}
+
+static void settle(struct farm_host *h);
+
+/* Drop job id from the ones given back (a give-back that failed: it is still this host's). */
+static void
+given_drop(struct farm_host *h, int64_t id)
+{
+    for (size_t i = 0; i < h->n_given; i++)
+        if (h->given[i].id == id) {
+            h->given[i] = h->given[--h->n_given];
+            return;
+        }
+}
+
+/* A claim of a's came back: logged; one in doubt is read back (settle); a lost lease makes the
+   host beat.  Not at the stop: the leave reaps this host, giving such a job back. */
+static void
+claim_answered(struct farm_host *h, struct hask *a, int rc, const char *msg)
+{
     if (rc == SF_OK)
-        rc = store_job_claim_id(f->s, h->name, h->token, id, &j, fence, &err);
-    if (rc == SF_OK)
-        log_info("host", "%s claimed job %lld", h->name, (long long)id);
+        log_info("host", "%s claimed job %lld", h->name, (long long)a->id);
     else if (rc != SF_ENOTFOUND)
-        log_warn("host", "%s: claim job %lld: %s", h->name, (long long)id, err.msg);
+        log_warn("host", "%s: claim job %lld: %s", h->name, (long long)a->id, msg);
+    if (h->f->stopping)
+        return;
     struct doubt *d = rc == SF_EINDOUBT ? mem_calloc(1, sizeof(*d)) : NULL;
     if (d) {
         /* it may have committed: the job would be this host's, preparing, and prepared by
            no one.  Read back on the store thread, and give it back if so. */
-        *d = (struct doubt){ .h = h, .next = h->doubts, .id = id };
+        *d = (struct doubt){ .h = h, .next = h->doubts, .id = a->id };
         snprintf(d->host, sizeof(d->host), "%s", h->name);
         h->doubts = d;
         settle(h);
     }
     if (rc == SF_ESTALE)
         lease_doubted(h); /* the beat renews it, or joins again if it was reaped */
+}
+
+static void
+on_asked(void *ud, const struct storeq_result *r)
+{
+    struct hask *a = ud;
+    struct farm_host *h = a->h;
+    /* a claim's or take's own answer, unless it never ran (the stop's window spent) */
+    int rc = a->ran ? a->rc : r->rc;
+    const char *msg = a->ran ? a->err.msg : r->rc ? r->err->msg : "";
+    if (rc)
+        a->fence = 0;
+    if (a->op == ASK_CLAIM) {
+        claim_answered(h, a, rc, msg);
+    } else if (a->op == ASK_TAKE) {
+        if (rc && rc != SF_ENOTFOUND)
+            log_warn("host", "%s: take job %lld: %s", h->name, (long long)a->id, msg);
+        if (rc == SF_ESTALE && !h->f->stopping)
+            lease_doubted(h);
+    } else if (rc) {
+        log_warn("host", "%s: job %lld: %s", h->name, (long long)a->id, msg);
+        if (a->bar)
+            given_drop(h, a->id); /* still this host's: taken here again, as before */
+        if (rc == SF_ESTALE && !h->f->stopping)
+            lease_doubted(h);
+    } else if (a->bar) {
+        log_warn("host",
+                 "%s gave job %lld back for the other hosts (it cannot start it here: %s); taken "
+                 "here again in %.1f s at the earliest",
+                 h->name, (long long)a->id, a->why, (double)h->lease_ms / 1000);
+    } else {
+        log_warn("host", "%s gave job %lld back (not started: %s)", h->name, (long long)a->id,
+                 a->why);
+    }
+    if (a->done)
+        a->done(a->ud, rc, a->fence, a->op == ASK_CLAIM && rc == SF_OK ? &a->job : NULL);
+    free(a);
+}
+
+/* Post a (its op, id and fence set) with h's name and token; SF_OK, or SF_ENOMEM (a freed). */
+static int
+ask_post(struct farm_host *h, struct hask *a, farm_host_answer_fn done, void *ud)
+{
+    a->h = h;
+    snprintf(a->host, sizeof(a->host), "%s", h->name);
+    a->token = h->token;
+    a->done = done;
+    a->ud = ud;
+    int rc = storeq_call(h->f->q, ask_call, a, NULL, on_asked, a);
+    if (rc)
+        free(a);
     return rc;
+}
+
+int
+farm_host_claim(struct farm *f, int64_t id, farm_host_answer_fn done, void *ud)
+{
+    struct farm_host *h = f->host;
+    if (in_doubt(h, id))
+        return SF_ENOTFOUND; /* not again until its last claim is settled */
+    struct hask *a = mem_calloc(1, sizeof(*a));
+    if (!a)
+        return SF_ENOMEM;
+    /* on the store thread after what the farm queued before it (its events) */
+    a->op = ASK_CLAIM;
+    a->id = id;
+    return ask_post(h, a, done, ud);
 }
 
 /* Did this host give job id back lately (forgetting those whose time passed)? */
@@ -611,45 +724,58 @@ on_given_timer(struct loop *l, void *ud)
     }
 }
 
-void
-farm_host_give_back(struct farm *f, int64_t id, int64_t fence, const char *why)
+/* Give back job id (taken under fence) on the store thread; bar: f does not take it again for
+   a lease (from now: a pass meanwhile must not take it again; dropped if it fails). */
+static int
+give_back(struct farm *f, int64_t id, int64_t fence, const char *why, bool bar,
+          farm_host_answer_fn done, void *ud)
 {
-    struct farm_host *h = f ? f->host : NULL;
-    if (!h)
-        return;
-    struct sf_err err;
-    if (store_job_give_back(f->s, h->name, id, fence, why, &err)) {
-        log_warn("host", "%s: job %lld: %s", h->name, (long long)id, err.msg);
-        if (err.code == SF_ESTALE)
-            lease_doubted(h);
-        return;
-    }
-    log_warn("host",
-             "%s gave job %lld back for the other hosts (it cannot start it here: %s); taken "
-             "here again in %.1f s at the earliest",
-             h->name, (long long)id, why, (double)h->lease_ms / 1000);
+    struct farm_host *h = f->host;
+    struct hask *a = mem_calloc(1, sizeof(*a));
+    if (!a)
+        return SF_ENOMEM;
+    a->op = ASK_GIVE;
+    a->id = id;
+    a->fence = fence;
+    a->bar = bar;
+    snprintf(a->why, sizeof(a->why), "%s", why ? why : "");
+    int rc = ask_post(h, a, done, ud);
+    if (rc || !bar)
+        return rc;
     if (mem_grow((void **)&h->given, &h->cap_given, h->n_given + 1, sizeof(*h->given)))
         h->given[h->n_given++] = (struct given){ id, clock_mono_ms() + h->lease_ms };
     if (!h->given_timer)
         h->given_timer = loop_timer_add(f->l, h->lease_ms, on_given_timer, h);
+    return SF_OK;
+}
+
+void
+farm_host_give_back(struct farm *f, int64_t id, int64_t fence, const char *why)
+{
+    if (f && f->host && give_back(f, id, fence, why, true, NULL, NULL))
+        log_warn("host", "%s: job %lld: not given back: out of memory", f->host->name,
+                 (long long)id);
 }
 
 int
-farm_host_take(struct farm *f, int64_t id, int64_t *fence)
+farm_host_release(struct farm *f, int64_t id, int64_t fence, const char *why,
+                  farm_host_answer_fn done, void *ud)
+{
+    return give_back(f, id, fence, why, false, done, ud);
+}
+
+int
+farm_host_take(struct farm *f, int64_t id, farm_host_answer_fn done, void *ud)
 {
     struct farm_host *h = f->host;
-    *fence = 0;
-    if (!h)
-        return SF_OK;
     if (given_back(h, id))
         return SF_ENOTFOUND; /* the other hosts first; on_given_timer kicks the farm */
-    struct sf_err err;
-    int rc = store_job_take(f->s, h->name, h->token, id, fence, &err);
-    if (rc && rc != SF_ENOTFOUND)
-        log_warn("host", "%s: take job %lld: %s", h->name, (long long)id, err.msg);
-    if (rc == SF_ESTALE)
-        lease_doubted(h);
-    return rc;
+    struct hask *a = mem_calloc(1, sizeof(*a));
+    if (!a)
+        return SF_ENOMEM;
+    a->op = ASK_TAKE;
+    a->id = id;
+    return ask_post(h, a, done, ud);
 }
 
 void
