@@ -11,8 +11,8 @@
  * places include claims on their way), as a reslice's take does.
  *
  * The printer may have changed before the answer comes (removed, disabled,
- * another host's, its key changed, busy with an operator's job, gone
- * offline): a job taken for it is given back (farm_host_release; the ask
+ * another host's, its key changed; for a print, busy with an operator's
+ * job or gone offline): a job taken for it is given back (farm_host_release; the ask
  * stays in f->asks until that is answered, so no pass takes the job again
  * under the token being given back), and a job claimed for it goes back to
  * the queue (DEFER), rather than a print started on a changed printer.  At
@@ -68,7 +68,8 @@ ask_new(struct farm *f, const struct job_row *j, const struct printer *p, bool t
     return a;
 }
 
-/* The printer a was for, if it is still what it was (else NULL and why it is not). */
+/* The printer a was for, if it is still what it was (else NULL and why it is not); one a job
+   was taken for to print must still be idle (a job is prepared for any printer, busy or not). */
 static struct printer *
 ask_printer(struct farm *f, const struct farm_ask *a, char *why, size_t cap)
 {
@@ -85,7 +86,7 @@ ask_printer(struct farm *f, const struct farm_ask *a, char *why, size_t cap)
         snprintf(why, cap, "printer %s is another host's now", a->printer);
     else if (sched_key(&v, a->job.opts.overhang_deg, key), strcmp(key, a->key) != 0)
         snprintf(why, cap, "printer %s changed meanwhile (%s, was %s)", a->printer, key, a->key);
-    else if (!a->reslice && (v.state != PRINTER_IDLE || printer_job(p)))
+    else if (a->take && !a->reslice && (v.state != PRINTER_IDLE || printer_job(p)))
         snprintf(why, cap, "printer %s is %s now", a->printer,
                  printer_job(p) ? "busy with another job" : printer_state_name(v.state));
     else
