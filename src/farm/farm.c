@@ -574,7 +574,6 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     t->req.material_first = f->material_first;
     snprintf(t->req.part_name, sizeof(t->req.part_name), "%s", j->opts.name);
     bool reuse = j->mesh_sha[0] && j->mesh_angle_deg == t->angle_deg;
-    int rc;
     /* the files' paths: on the worker (farm_prep_files), which may fetch them from the database */
     snprintf(t->part_sha, sizeof(t->part_sha), "%s", j->file_sha);
     if (reuse)
@@ -592,17 +591,8 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
         return true;
     }
     if (farm_host_on(f)) {
-        /* One of several hosts: the claim (its PREPARE, one statement that no two hosts
-           both win) is the host's own call, on the loop's connection for now. */
-        rc = farm_host_claim(f, j->id, &t->fence);
-        if (rc) {
-            free(t);
-            /* a database that was away or busy: the next pass tries again (a claim in
-               doubt is read back first, and wakes the farm when settled) */
-            if (rc == SF_EUNREACH || rc == SF_EBUSY)
-                retry_later(f);
-            return rc != SF_EBUSY || storeq_depth(f->q) == 0;
-        }
+        /* One of several hosts: the job is claimed (its PREPARE, one statement that no two
+           hosts both win) under fence already, on the store thread (farm_ask_claim). */
         f->preparing++;
         submit(f, t);
         return true;
@@ -616,6 +606,13 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
     t->next = f->posted;
     f->posted = t;
     return true;
+}
+
+bool
+farm_prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice,
+             int64_t fence)
+{
+    return prepare(f, j, p, reslice, fence);
 }
 
 /* ---- scheduling ---- */
@@ -801,6 +798,7 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
                 sp[i].state == PRINTER_IDLE)
                 sp[i].state = PRINTER_AWAITING_CLEAR;
     }
+    farm_ask_mark(f, jobs, n, sp); /* claims and takes on their way */
     bool pool_full = f->preparing >= pool_size(f->pool);
     for (size_t i = 0; i < n; i++) {
         sched_view(&jobs[i], &sj[i]);
@@ -815,18 +813,11 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
     for (size_t k = 0; k < n_out; k++) {
         const struct job_row *j = &jobs[out[k].job];
         struct printer *p = f->printers[out[k].printer];
-        int64_t fence = 0;
-        int rc;
         if (!out[k].reslice) {
             /* another host's printer may have taken it; p writes for it with the take's
-               fencing token.  A take the database did not answer is tried again: nothing
-               else may come to wake this host (its printers idle, the job ready for good). */
-            if ((rc = farm_host_take(f, j->id, &fence)) == SF_OK) {
-                printer_set_fence(p, j->id, fence);
-                farm_start(f, j, p);
-            } else if (rc != SF_ENOTFOUND) {
-                retry_later(f);
-            }
+               fencing token (farm_ask.c: the take on the store thread, the start once it
+               is back; one the database did not answer is tried again) */
+            farm_ask_take(f, j, p, false);
             continue;
         }
         /* Waiting for a busy printer of its key while p idles: slice it for p. */
@@ -835,10 +826,7 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
         if (reslicing(f, j->id) || reslice_failed(f, j->id, key) ||
             f->preparing >= pool_size(f->pool))
             continue;
-        if ((rc = farm_host_take(f, j->id, &fence)) == SF_OK)
-            prepare(f, j, p, true, fence);
-        else if (rc != SF_ENOTFOUND)
-            retry_later(f);
+        farm_ask_take(f, j, p, true);
     }
     /* Prepare queued jobs for a printer that could take them, an idle one first. */
     for (size_t i = 0; i < n; i++) {
@@ -849,7 +837,9 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
             continue;
         }
         size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
-        if (best < f->n_printers && !prepare(f, &jobs[i], f->printers[best], false, 0))
+        if (best < f->n_printers && farm_host_on(f)) /* claimed first, on the store thread */
+            farm_ask_claim(f, &jobs[i], f->printers[best]);
+        else if (best < f->n_printers && !prepare(f, &jobs[i], f->printers[best], false, 0))
             break; /* the store is busy: its commit wakes the farm for the rest */
     }
     for (size_t i = 0; i < n; i++)

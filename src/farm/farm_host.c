@@ -1,7 +1,8 @@
 /*
  * farm_host.c - the farm as one of several hosts on one store (farm_host.h):
- * the join, the beat and the reap on a loop timer, the claims the
- * scheduling pass makes, and the LISTEN connection on the loop's epoll.
+ * the join, the beat and the reap on a loop timer, and the LISTEN
+ * connection on the loop's epoll (the claims the scheduling pass makes:
+ * farm_host_ask.c; the state both share: farm_host_int.h).
  *
  * Why the beat and the reap share one timer: both are one short statement
  * each a few seconds, and the reap is idempotent, so every host running it
@@ -23,6 +24,7 @@
  * Thread: the loop thread (beat_call on the beat's store thread).
  */
 #include "farm_host.h"
+#include "farm_host_int.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -35,62 +37,6 @@
 #include "farm_int.h"
 #include "farm_remote.h"
 #include "store_host.h"
-
-struct farm_host {
-    struct farm *f;
-    struct store *ls; /* the listener's connection */
-    char name[STORE_HOST_NAME_MAX];
-    int64_t token;     /* this process's, once joined */
-    bool joined;       /* the lease is ours */
-    bool waiting;      /* a join was refused: say so once, retry at each beat */
-    int64_t lease_ms;  /* host_lease_s */
-    uint64_t timer;    /* the beat */
-    int fd;            /* the listener's socket on the loop, -1 if none */
-    int64_t fd_gen;    /* the listener's reconnects (store_host_reconnects) when fd was added */
-    uint64_t relisten; /* the listener is lost: timer of its next try, 0 if none */
-    bool listen_lost;  /* said so (once until it is back) */
-    /* printers of f's config that another live host owns (store_host_own): the scheduler
-       leaves them alone; tried again at each beat, taken once that host is gone */
-    char (*foreign)[STORE_HOST_NAME_MAX];
-    size_t n_foreign;
-    /* claims whose COMMIT's answer was lost (SF_EINDOUBT): not claimed again until their
-       read-back (store_job_claim_settle, on the store thread) settled them */
-    struct doubt *doubts;
-    uint64_t resettle; /* a read-back failed: timer of the next round, 0 if none */
-    int peers;         /* other live hosts at the last join or beat; -1 if not known */
-    /* the reap's grace (renewed): when this host's current run of renewals began (monotonic
-       ms; 0: not renewing, as after a failed beat), its last renewal, and the beat
-       connection's reconnects then; the beat in flight carries them and brings them back */
-    int64_t renewing_since, renewed_at, renew_gen;
-    bool doubted;      /* a claim, take or hold found the lease not current: the beat decides */
-    struct storeq *bq; /* the beat's own store thread and connection (see the top) */
-    bool beating;      /* a beat is on bq: its answer applies it (on_beat_done) */
-    bool beat_due;     /* a beat was asked for while one was in flight: beat at its answer */
-    bool stopping;     /* farm_host_stop: an answer still in flight only records the lease */
-    bool reown;        /* the printers changed (a reload): the next beat owns them again */
-    bool owning;       /* ... and until its answer, only those in mine are scheduled on */
-    uint64_t reoffer;  /* the printers wait for the loop's connection: timer of its next try */
-    /* the printers this host owns, as of the last own that came back */
-    char (*mine)[STORE_HOST_NAME_MAX];
-    size_t n_mine;
-    /* ready jobs this host gave back (farm_host_give_back): not taken here again until
-       their time (monotonic ms), so the other hosts have them first */
-    struct given {
-        int64_t id, until;
-    } * given;
-    size_t n_given, cap_given;
-    uint64_t given_timer; /* a kick when the first of them may be taken here again */
-};
-
-/* A claim in doubt, on its way to the store thread's read-back or waiting for another. */
-struct doubt {
-    struct farm_host *h;
-    struct doubt *next;             /* in h->doubts */
-    char host[STORE_HOST_NAME_MAX]; /* h's name, for the store thread */
-    int64_t id;                     /* the job */
-    bool posted;                    /* its read-back is on the store thread */
-    bool released;                  /* the claim had committed and was given back */
-};
 
 static bool listen_arm(struct farm_host *h);
 static void listen_retry(struct farm_host *h);
@@ -490,8 +436,8 @@ on_beat(struct loop *l, void *ud)
    and that nobody reaped is renewed by the beat, and the host carries on, its prints
    untouched; only a beat that finds the lease lost (reaped: its token moved on, or the name
    another process's) lets go of them and joins again.  So beat now, and let it decide. */
-static void
-lease_doubted(struct farm_host *h)
+void
+farm_host_lease_doubted(struct farm_host *h)
 {
     if (!h->joined || h->doubted)
         return;
@@ -621,18 +567,7 @@ farm_host_stop(struct farm *f)
         loop_timer_cancel(f->l, h->relisten);
     if (h->reoffer)
         loop_timer_cancel(f->l, h->reoffer);
-    if (h->resettle)
-        loop_timer_cancel(f->l, h->resettle);
-    if (h->given_timer)
-        loop_timer_cancel(f->l, h->given_timer);
-    /* a claim still in doubt: the store thread's queue ran (farm_free), so none is posted;
-       the leave below reaps this host, which gives such a job back */
-    for (struct doubt *d = h->doubts, *next; d; d = next) {
-        next = d->next;
-        log_warn("host", "%s: job %lld: its claim is still in doubt at the stop", h->name,
-                 (long long)d->id);
-        free(d);
-    }
+    farm_host_ask_stop(h); /* its timers, and the claims still in doubt */
     listen_drop(h);
     struct sf_err err;
     if (h->joined) {
@@ -679,184 +614,6 @@ int64_t
 farm_host_token(const struct farm *f)
 {
     return f->host && f->host->joined ? f->host->token : 0;
-}
-
-static void settle(struct farm_host *h);
-
-static int
-settle_call(struct store *s, void *arg, struct sf_err *err)
-{
-    struct doubt *d = arg;
-    return store_job_claim_settle(s, d->host, d->id, &d->released, err);
-}
-
-static void
-on_resettle(struct loop *l, void *ud)
-{
-    (void)l;
-    struct farm_host *h = ud;
-    h->resettle = 0;
-    settle(h);
-}
-
-/* A read-back came back: the job is settled (claimable again), or asked again later. */
-static void
-on_settled(void *ud, const struct storeq_result *r)
-{
-    struct doubt *d = ud;
-    struct farm_host *h = d->h;
-    d->posted = false;
-    if (r->rc) {
-        log_warn("host", "%s: job %lld: reading back its claim: %s (trying again)", h->name,
-                 (long long)d->id, r->err->msg);
-        if (!h->resettle)
-            h->resettle = loop_timer_add(h->f->l, FARM_RETRY_MS, on_resettle, h);
-        return;
-    }
-    log_info("host", "%s: job %lld: its claim in doubt %s", h->name, (long long)d->id,
-             d->released ? "had committed: given back to the queue" : "did not commit");
-    for (struct doubt **pp = &h->doubts; *pp; pp = &(*pp)->next)
-        if (*pp == d) {
-            *pp = d->next;
-            break;
-        }
-    free(d);
-    farm_kick(h->f); /* claimable again, by this host too */
-}
-
-/* Post the read-back of every claim in doubt not on its way yet. */
-static void
-settle(struct farm_host *h)
-{
-    for (struct doubt *d = h->doubts; d; d = d->next) {
-        if (d->posted)
-            continue;
-        if (storeq_call(h->f->q, settle_call, d, NULL, on_settled, d)) {
-            if (!h->resettle) /* out of memory: later */
-                h->resettle = loop_timer_add(h->f->l, FARM_RETRY_MS, on_resettle, h);
-            return;
-        }
-        d->posted = true;
-    }
-}
-
-/* Is the claim of job id in doubt (its read-back not back yet)? */
-static bool
-in_doubt(const struct farm_host *h, int64_t id)
-{
-    for (const struct doubt *d = h->doubts; d; d = d->next)
-        if (d->id == id)
-            return true;
-    return false;
-}
-
-int
-farm_host_claim(struct farm *f, int64_t id, int64_t *fence)
-{
-    struct farm_host *h = f->host;
-    struct sf_err err;
-    struct job_row j;
-    if (in_doubt(h, id))
-        return SF_ENOTFOUND; /* not again until its last claim is settled */
-    /* after what the farm queued for the store, as job_event's PREPARE */
-    int rc = farm_sync(f, STOREQ_SYNC_MS, &err);
-    if (rc == SF_OK)
-        rc = store_job_claim_id(f->s, h->name, h->token, id, &j, fence, &err);
-    if (rc == SF_OK)
-        log_info("host", "%s claimed job %lld", h->name, (long long)id);
-    else if (rc == SF_EBUSY) /* its row held, as by another host's claim: the pass retries */
-        log_info("host", "%s: claim job %lld: %s; trying again", h->name, (long long)id, err.msg);
-    else if (rc != SF_ENOTFOUND)
-        log_warn("host", "%s: claim job %lld: %s", h->name, (long long)id, err.msg);
-    struct doubt *d = rc == SF_EINDOUBT ? mem_calloc(1, sizeof(*d)) : NULL;
-    if (d) {
-        /* it may have committed: the job would be this host's, preparing, and prepared by
-           no one.  Read back on the store thread, and give it back if so. */
-        *d = (struct doubt){ .h = h, .next = h->doubts, .id = id };
-        snprintf(d->host, sizeof(d->host), "%s", h->name);
-        h->doubts = d;
-        settle(h);
-    }
-    if (rc == SF_ESTALE)
-        lease_doubted(h); /* the beat renews it, or joins again if it was reaped */
-    return rc;
-}
-
-/* Did this host give job id back lately (forgetting those whose time passed)? */
-static bool
-given_back(struct farm_host *h, int64_t id)
-{
-    int64_t now = clock_mono_ms();
-    bool found = false;
-    for (size_t i = 0; i < h->n_given;) {
-        if (h->given[i].until <= now) {
-            h->given[i] = h->given[--h->n_given];
-            continue;
-        }
-        found |= h->given[i].id == id;
-        i++;
-    }
-    return found;
-}
-
-static void
-on_given_timer(struct loop *l, void *ud)
-{
-    struct farm_host *h = ud;
-    h->given_timer = 0;
-    farm_kick(h->f); /* what it gave back may be taken here again, if no other host took it */
-    /* and again when the next of those still barred may be: one given back after the first
-       would otherwise wait for some other kick, perhaps forever */
-    (void)given_back(h, 0); /* forgets those whose time passed */
-    int64_t next = 0;
-    for (size_t i = 0; i < h->n_given; i++)
-        if (!next || h->given[i].until < next)
-            next = h->given[i].until;
-    if (next) {
-        int64_t wait = next - clock_mono_ms();
-        h->given_timer = loop_timer_add(l, wait > 0 ? wait : 0, on_given_timer, h);
-    }
-}
-
-void
-farm_host_give_back(struct farm *f, int64_t id, int64_t fence, const char *why)
-{
-    struct farm_host *h = f ? f->host : NULL;
-    if (!h)
-        return;
-    struct sf_err err;
-    if (store_job_give_back(f->s, h->name, id, fence, why, &err)) {
-        log_warn("host", "%s: job %lld: %s", h->name, (long long)id, err.msg);
-        if (err.code == SF_ESTALE)
-            lease_doubted(h);
-        return;
-    }
-    log_warn("host",
-             "%s gave job %lld back for the other hosts (it cannot start it here: %s); taken "
-             "here again in %.1f s at the earliest",
-             h->name, (long long)id, why, (double)h->lease_ms / 1000);
-    if (mem_grow((void **)&h->given, &h->cap_given, h->n_given + 1, sizeof(*h->given)))
-        h->given[h->n_given++] = (struct given){ id, clock_mono_ms() + h->lease_ms };
-    if (!h->given_timer)
-        h->given_timer = loop_timer_add(f->l, h->lease_ms, on_given_timer, h);
-}
-
-int
-farm_host_take(struct farm *f, int64_t id, int64_t *fence)
-{
-    struct farm_host *h = f->host;
-    *fence = 0;
-    if (!h)
-        return SF_OK;
-    if (given_back(h, id))
-        return SF_ENOTFOUND; /* the other hosts first; on_given_timer kicks the farm */
-    struct sf_err err;
-    int rc = store_job_take(f->s, h->name, h->token, id, fence, &err);
-    if (rc && rc != SF_ENOTFOUND)
-        log_warn("host", "%s: take job %lld: %s", h->name, (long long)id, err.msg);
-    if (rc == SF_ESTALE)
-        lease_doubted(h);
-    return rc;
 }
 
 void
@@ -910,6 +667,6 @@ farm_host_hold(void *ud, int64_t id, int64_t *fence, struct sf_err *err)
     else
         sf_err_prefix(err, "host %s: hold job %lld", h->name, (long long)id);
     if (rc == SF_ESTALE)
-        lease_doubted(h);
+        farm_host_lease_doubted(h);
     return rc;
 }

@@ -97,25 +97,40 @@ const char *farm_host_name(const struct farm *f);
 bool farm_host_reader(const struct farm *f, char *name, size_t size);
 /* f's join's token (its claim on its host name), 0 before it joined or without a shared store. */
 int64_t farm_host_token(const struct farm *f);
+/* The answer of a claim, take or give-back posted on the store thread, on the loop: rc as
+   below, fence the claim's or take's fencing token (rc SF_OK; else 0), job the job as claimed
+   (a claim's, rc SF_OK; else NULL).  Called at the stop too (storeq_free delivers what is in
+   flight): the farm is stopping then. */
+typedef void (*farm_host_answer_fn)(void *ud, int rc, int64_t fence, const struct job_row *job);
 /*
- * Claim queued job id for preparing (store_job_claim_id), its fencing token
- * into *fence: SF_OK, SF_ENOTFOUND (another host has it, or it moved on:
- * not logged), else logged.  A claim whose COMMIT's answer was lost
- * (SF_EINDOUBT) is read back on the store thread (store_job_claim_settle):
- * one that committed is given back to the queue, so the job is never left
- * this host's and prepared by no one; until then job id is not claimed
- * again (SF_ENOTFOUND).
+ * Claim queued job id for preparing (store_job_claim_id) on the store thread, after what the
+ * farm queued before; done(ud, ...) on the loop with its answer: SF_OK, SF_ENOTFOUND (another
+ * host has it, or it moved on: not logged), else logged: SF_EBUSY, SF_EUNREACH (passing: not
+ * retried on the thread), SF_ESTALE (the lease not current: the host beats at once).  A claim
+ * whose COMMIT's answer was lost (SF_EINDOUBT) is read back on the store thread
+ * (store_job_claim_settle): one that committed is given back to the queue, so the job is never
+ * left this host's and prepared by no one; until then job id is not claimed again.  SF_OK
+ * (posted), SF_ENOTFOUND (its last claim is in doubt still) or SF_ENOMEM: done is not called
+ * then.
  */
-int farm_host_claim(struct farm *f, int64_t id, int64_t *fence);
-/* May f start (or prepare again) ready job id?  SF_OK always without a shared store (*fence
-   0); with one, once f took it (store_job_take), its fencing token into *fence: what f writes
-   for the job carries it (printer_set_fence).  SF_ENOTFOUND: another host holds it, or it is
-   no longer ready; another error (the database away or busy) is passing: try again later. */
-int farm_host_take(struct farm *f, int64_t id, int64_t *fence);
+int farm_host_claim(struct farm *f, int64_t id, farm_host_answer_fn done, void *ud);
+/* Take ready job id for a printer of f's (store_job_take) on the store thread; done(ud, ...)
+   on the loop with its answer: SF_OK with its fencing token (what f writes for the job carries
+   it: printer_set_fence), SF_ENOTFOUND (another host holds it, or it is no longer ready), or
+   another error (the database away or busy, in doubt: passing, try again later; SF_ESTALE as
+   a claim's), logged.  SF_OK (posted), SF_ENOTFOUND (f gave it back lately: the other hosts
+   first), SF_ENOMEM: done not called.  One of several hosts only (else nothing to take). */
+int farm_host_take(struct farm *f, int64_t id, farm_host_answer_fn done, void *ud);
 /* f took ready job id (under fencing token fence) but cannot start it (why: its G-code cannot
-   be fetched here): give it back for the other hosts (store_job_give_back, which wakes them);
-   f does not take it again for a lease.  Logged.  Nothing without a shared store. */
+   be fetched here): give it back for the other hosts (store_job_give_back on the store thread,
+   which wakes them); f does not take it again for a lease.  Logged.  Nothing without a shared
+   store. */
 void farm_host_give_back(struct farm *f, int64_t id, int64_t fence, const char *why);
+/* The same for a job f took for a printer that changed before the take's answer came (why):
+   f may take it again at once, for another printer.  done(ud, rc, 0, NULL) once the store
+   answered (rc SF_OK, or its failure, logged).  SF_OK or SF_ENOMEM (done not called). */
+int farm_host_release(struct farm *f, int64_t id, int64_t fence, const char *why,
+                      farm_host_answer_fn done, void *ud);
 /*
  * printer_env.hold: before a printer of f resumes job id (an operator's resume, a network
  * printer found still printing it), f holds the job: store_job_attach, its new fencing

@@ -30,6 +30,7 @@ struct farm_cool {
     int64_t job_id;
     int64_t until_ms;
 };
+struct farm_ask; /* farm_ask.c: a claim or take of the scheduling pass on its way */
 
 struct farm {
     struct loop *l;            /* the loop */
@@ -65,6 +66,7 @@ struct farm {
     struct farm_host *host;     /* one of several hosts on a shared store (farm_host.h), or NULL */
     struct farm_remote *remote; /* actions on other hosts' printers (farm_remote.h), or NULL */
     struct farm_view *view;     /* the other hosts' printers, and ours for them (farm_view.h) */
+    struct farm_ask *asks;      /* claims and takes on the store thread (farm_ask.c) */
 };
 
 /* Write job id's DEFER or PREPARE_FAILED (its preparation ended without a G-code) through the
@@ -115,6 +117,29 @@ void farm_cool(struct farm *f, int64_t id);
 bool farm_cooling(struct farm *f, int64_t id);
 /* Kick the farm again in FARM_RETRY_MS (a passing store error). */
 void farm_retry_later(struct farm *f);
+/*
+ * farm.c: prepare job j for printer p: a ready job again for p's key
+ * (reslice; one of several hosts: taken under fence), else a queued one
+ * (one of several hosts: claimed under fence, farm_ask_claim).  False when
+ * the store failed in passing (tried again later).
+ */
+bool farm_prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice,
+                  int64_t fence);
+
+/*
+ * farm_ask.c, one of several hosts: the scheduling pass's claims and takes
+ * on the store thread; their answers on the loop act.  farm_ask_claim:
+ * claim queued job j, then prepare it for p (counted in f->preparing from
+ * now).  farm_ask_take: take ready job j, then start it on p (reslice:
+ * prepare it again for p; counted in f->preparing from now); a single host
+ * starts (or prepares) at once.  farm_ask_mark, in a pass: the jobs with a
+ * claim or take on its way as the store will have them (queued ->
+ * preparing, ready -> printing), and the printers (sp, f's order) a job is
+ * being taken for, busy.
+ */
+void farm_ask_claim(struct farm *f, const struct job_row *j, const struct printer *p);
+void farm_ask_take(struct farm *f, const struct job_row *j, struct printer *p, bool reslice);
+void farm_ask_mark(const struct farm *f, struct job_row *jobs, size_t n, struct sched_printer *sp);
 
 /*
  * Printer c's config into the farm (c->name's printer is added if new):

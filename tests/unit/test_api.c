@@ -1616,12 +1616,6 @@ T_CASE(api_multipart_part_without_name_is_400)
 
 /* ---- issue 32: the API's reads send nothing on the loop's own connection ---- */
 
-static void
-read_loop_trips(void *arg)
-{
-    *(int64_t *)arg = store_round_trips(srv.store);
-}
-
 /* Hold a stream open until its text has want (the server thread writes events meanwhile
    only when note is set: a second connection's event, logged once the stream is open). */
 static bool
@@ -1681,7 +1675,7 @@ T_CASE(api_reads_send_nothing_on_the_loops_connection)
     struct buf b;
     buf_init(&b, 0);
     T_EQ_INT(get("/api/printers", KEY_RO, &b), 200); /* the first of each opens what it needs */
-    int64_t before = 0, after = 0, idle = 0;
+    uint64_t before = 0, after = 0, idle = 0;
     on_server(read_loop_trips, &before);
     T_EQ_INT(get("/api/printers", KEY_RO, &b), 200);
     T_TRUE(strstr(b.data, "\"name\":\"b\"") != NULL);
@@ -1709,7 +1703,7 @@ T_CASE(api_octoprint_job_reads_off_the_loop)
     T_OK(start("octojob", &err), &err);
     struct buf b;
     buf_init(&b, 0);
-    int64_t before = 0, after = 0;
+    uint64_t before = 0, after = 0;
     on_server(read_loop_trips, &before);
     for (int i = 0; i < 5; i++) {
         T_EQ_INT(get("/api/job", KEY_RO, &b), 200);
