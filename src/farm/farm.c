@@ -483,6 +483,17 @@ farm_retry_later(struct farm *f)
     retry_later(f);
 }
 
+void
+farm_retry_soon(struct farm *f)
+{
+    if (!f->pool)
+        return;
+    if (f->retry)
+        loop_timer_cancel(f->l, f->retry);
+    int64_t jitter = (clock_mono_ms() * 7919) % FARM_BUSY_RETRY_MS; /* hosts apart */
+    f->retry = loop_timer_add(f->l, FARM_BUSY_RETRY_MS + jitter, on_retry, f);
+}
+
 /* Is a store error one that a later try may not have (busy, unreachable), not a verdict? */
 static bool
 passing(int rc)

@@ -160,7 +160,9 @@ on_claimed(void *ud, int rc, int64_t fence, const struct job_row *job)
         /* a database that was away or busy: a later pass tries again (a claim in doubt is
            read back first, and wakes the farm when settled); another host's: its place in
            the pool is free for another job */
-        if (rc == SF_EUNREACH || rc == SF_EBUSY)
+        if (rc == SF_EBUSY)
+            farm_retry_soon(f);
+        else if (rc == SF_EUNREACH)
             farm_retry_later(f);
         else if (rc == SF_ENOTFOUND)
             farm_kick(f);
