@@ -322,7 +322,6 @@ farm_host_take(struct farm *f, int64_t id, farm_host_answer_fn done, void *ud)
     return ask_post(h, a, done, ud);
 }
 
-
 void
 farm_host_ask_stop(struct farm_host *h)
 {
