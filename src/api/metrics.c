@@ -168,9 +168,10 @@ metrics_printers(struct farm *f, struct metrics_printer **out, size_t *n)
     size_t own = f ? farm_printer_count(f) : 0;
     const struct store_command_printer *rem = NULL;
     size_t n_rem = farm_view_printers(f, &rem);
-    char me[STORE_HOST_NAME_MAX] = "";
-    if (f && !farm_host_reader(f, me, sizeof(me)))
-        me[0] = '\0';
+    /* this host's name, joined or not yet (a restart waits out its predecessor's lease): a
+       series keeps its labels when the host joins */
+    char me[STORE_HOST_NAME_MAX];
+    snprintf(me, sizeof(me), "%s", farm_host_name(f));
     *out = mem_calloc(own + n_rem ? own + n_rem : 1, sizeof(**out));
     if (!*out)
         return SF_ENOMEM;

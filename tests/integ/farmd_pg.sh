@@ -77,6 +77,8 @@ done
 wait
 report
 n=$(psql -qtA "$PG_URL" -c "SELECT count(*) FROM pg_database WHERE datname LIKE 't\_%'")
-[ "$n" -ge 2 ] || { echo "only $n scenario databases: the daemons did not run on PostgreSQL"; fail=$((fail + 1)); }
+set -- $tests # a database of its own for each scenario's daemon: two of the three, one of one
+want=$(($# < 2 ? $# : 2))
+[ "$n" -ge "$want" ] || { echo "only $n scenario databases: the daemons did not run on PostgreSQL"; fail=$((fail + 1)); }
 echo "farmd_pg: $pass scenarios passed on PostgreSQL, $fail failed${failed[*]:+: ${failed[*]}}"
 [ $fail = 0 ]

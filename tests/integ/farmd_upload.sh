@@ -36,6 +36,8 @@ import glob, hashlib, json, os, sys, time
 sys.path.insert(0, sys.argv[1])
 from slicers import *
 port, rw, ro, mk, tmp = int(os.environ["PORT"]), os.environ["RW"], os.environ["RO"], os.environ["MK"], os.environ["TMP"]
+# a store host (PostgreSQL) labels its printers' series with its host too, a single host not
+own = {"host": os.environ["DAEMON_HOST"]} if os.environ.get("DAEMON_HOST") else {}
 
 def body(moves, tail="", head=""):
     g = head + "G90\nM83\nG28\n"
@@ -73,7 +75,7 @@ def metrics(key=ro):
 
 m0 = metrics()
 check(metric(m0, "slimfarm_printers", state="idle") == 2, "two idle printers in /metrics")
-check(metric(m0, "slimfarm_prints_total", printer="mk3", outcome="done") == 0, "no prints yet")
+check(metric(m0, "slimfarm_prints_total", printer="mk3", outcome="done", **own) == 0, "no prints yet")
 jobs = []
 
 # PrusaSlicer: test, then upload with print=true; a long job so the farm is busy
@@ -171,11 +173,11 @@ st, h, b = request(port, ("POST /api/files/local/job-%d/x.gcode HTTP/1.1\r\nHost
                           "Content-Type: application/json\r\nContent-Length: 20\r\n\r\n{\"command\":\"select\"}" % (jobs[0], rw)).encode())
 check(st == 204, "select of an upload already printed: %d %s" % (st, b[:200]))
 m1 = metrics()
-done = sum(metric(m1, "slimfarm_prints_total", printer=p, outcome="done") for p in ("mk3", "ender"))
+done = sum(metric(m1, "slimfarm_prints_total", printer=p, outcome="done", **own) for p in ("mk3", "ender"))
 check(done == len(jobs), "prints_total done %s, want %d" % (done, len(jobs)))
 check(metric(m1, "slimfarm_jobs", state="done") == len(jobs), "jobs done in metrics")
 # the estimates of the files that state grams: 1.23 (PrusaSlicer) + 2.50 (Orca) + 1.23 (Moonraker)
-grams = sum(metric(m1, "slimfarm_filament_used_grams_total", printer=p) for p in ("mk3", "ender"))
+grams = sum(metric(m1, "slimfarm_filament_used_grams_total", printer=p, **own) for p in ("mk3", "ender"))
 check(grams >= 1.23 + 2.50 + 1.23 - 1e-6, "filament grams %s" % grams)
 check(metric(m1, "slimfarm_queue_wait_seconds_count") >= 1, "queue wait observed")
 check(metric(m1, "slimfarm_stage_duration_seconds_count", stage="print") == len(jobs), "print durations")

@@ -12,7 +12,8 @@
  * lost (SLIMFARM_TEST_PROXY, tests/tools/tcpproxy, and SLIMFARM_TEST_PG_PORT,
  * the server's TCP port, cut the network: store_pg.sh sets them), and lets
  * go of a print another host has attached (its fencing token is stale), and
- * takes a ready job again after the database refused its take.  With
+ * takes a ready job again after the database refused its take, and names
+ * its printers with its host (/metrics) before it joined.  With
  * SLIMFARM_TEST_STORE (tstore.h) on PostgreSQL, the second host a store of
  * its own on the same database; on SQLite a second connection.
  */
@@ -323,6 +324,41 @@ T_CASE(host_leaves_alone_a_printer_another_live_host_owns)
     T_EQ_INT(x_rows, 1);
     host_farm_free();
     store_close(a);
+}
+
+/*
+ * A host that has not joined yet (a restart waits out its predecessor's lease) names its own
+ * printers with its host already, as once it joined: /metrics' series of them keep their
+ * labels across the join.  Fails without it: host "" until the join, then "b" (to Prometheus
+ * another series, its counters starting again).
+ */
+T_CASE(host_names_its_printers_before_it_joined)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_p[600], url[1024];
+    snprintf(dir, sizeof(dir), "%s/prejoin", t_tmpdir());
+    snprintf(dir_p, sizeof(dir_p), "%s-p", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    /* b's predecessor (killed): its lease still runs */
+    struct store *p = store_open_host(dir_p, url, NULL, &err);
+    T_TRUE(p != NULL);
+    int64_t tp;
+    T_OK(store_host_join(p, "b", LEASE_MS, &tp, &err), &err);
+    T_OK(host_farm(dir, url, "b", "[printer y]\ndriver: marlin\nport: pty:/dev/null\n", &err),
+         &err);
+    for (int64_t end = clock_mono_ms() + 60000;
+         clock_mono_ms() < end && !was_logged("b: cannot join yet");)
+        loop_run_once(hx.l, 50);
+    T_TRUE(was_logged("b: cannot join yet"));
+    struct metrics_printer *mp = NULL;
+    size_t n_mp = 0;
+    T_OK(metrics_printers(hx.f, &mp, &n_mp), NULL);
+    T_EQ_INT(n_mp, 1);
+    T_EQ_STR(n_mp ? mp[0].host : "(none)", "b");
+    free(mp);
+    host_farm_free();
+    store_close(p);
 }
 
 /*

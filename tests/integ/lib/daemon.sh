@@ -12,9 +12,12 @@
 # joined as its store's host, as an SQLite daemon is at once: a restart after
 # kill -9 waits out its predecessor's lease first, and only then takes back
 # its prints and claims jobs (a scenario written for SQLite checks that
-# right after the start).
+# right after the start).  It exports DAEMON_HOST, the host name it joined
+# as ("" on SQLite): a store host's /metrics labels its printers' series
+# host="NAME" (stable as other hosts join or leave), a single host's not.
 daemon_start() {
   local cfg=$1 log=$2 from line end=$((SECONDS + 60)) joined=
+  export DAEMON_HOST=
   daemon_store "$cfg" || return 1
   grep -q '^store: postgresql://[^?]*/t_[0-9a-f]\{16\}' "$cfg" && joined=1
   touch "$log"
@@ -30,7 +33,12 @@ daemon_start() {
       [ -z "$joined" ] && return 0
       end=$((SECONDS + DAEMON_LEASE_S + 120))
       while [ $SECONDS -lt $end ]; do
-        tail -c +"$from" "$log" | grep -q '^[^ ]* info host: [^ ]* joined (token' && return 0
+        line=$(tail -c +"$from" "$log" | grep -m 1 -o '^[^ ]* info host: [^ ]* joined (token')
+        if [ -n "$line" ]; then
+          line=${line#* info host: }
+          DAEMON_HOST=${line% joined (token}
+          return 0
+        fi
         kill -0 "$pid" 2> /dev/null || return 1
         sleep 0.1
       done
