@@ -211,7 +211,11 @@ ask_post(struct farm_host *h, struct hask *a, farm_host_answer_fn done, void *ud
     a->token = h->token;
     a->done = done;
     a->ud = ud;
-    int rc = storeq_call(h->f->q, ask_call, a, NULL, on_asked, a);
+    /* a claim or take wakes nobody at its commit (storeq_read): its answer acts (prepares,
+       starts, or kicks a pass when refused), and a pass per commit re-read every live job
+       for nothing (bench_hosts, 10 hosts on 10,000 jobs: one claim per five 0.25 s reads) */
+    int rc = a->op == ASK_GIVE ? storeq_call(h->f->q, ask_call, a, NULL, on_asked, a)
+                               : storeq_read(h->f->q, ask_call, a, on_asked, a);
     if (rc)
         free(a);
     return rc;
