@@ -1,6 +1,6 @@
 /*
- * printer_int.h - internal to the printer module (printer.c, printer_heat.c,
- * printer_op.c), not a contract for anyone else: nothing outside
+ * printer_int.h - internal to the printer module (printer.c, printer_attach.c,
+ * printer_heat.c, printer_op.c), not a contract for anyone else: nothing outside
  * src/farm/printer*.c includes it; printer.h is the module's contract.
  *
  * What the parts share: the printer itself (struct printer), its moves on
@@ -75,6 +75,9 @@ struct printer {
         int64_t id;
         int64_t lines_acked;
     } orphan;
+    /* the interrupted job's read on the store's thread (printer_attach_offer), not yet back;
+       NULL if none */
+    struct attach_ticket *aticket;
 };
 
 /*
@@ -111,6 +114,20 @@ int printer_job_event(struct printer *p, int64_t id, enum job_event ev,
 /* The filament job id's print on p used by command line `lines` (all of its file's when ev is
    JOB_EV_PRINT_DONE); 0 when p did not read the file (a resumed or re-attached print). */
 double printer_filament_mm(const struct printer *p, int64_t id, enum job_event ev, int64_t lines);
+
+/* Apply the driver's status now as a DRV_EV_STATE (printer.c). */
+void printer_apply_status(struct printer *p);
+
+/*
+ * A network printer came up offline (its driver idle, printing or paused) and was not offered
+ * its interrupted job on this connection: read the job on the store's thread and offer it to
+ * the driver when the answer comes (printer_attach.c).  true: p waits offline (for its host's
+ * lease, the read, or the driver's "not yet"); false: there is nothing to offer
+ * (attach_tried set), p connects as its driver says.
+ */
+bool printer_attach_offer(struct printer *p);
+/* p is freed: its read comes back to no one. */
+void printer_attach_release(struct printer *p);
 
 /*
  * Arm the heaters' timer when p is hot with no print on it (turned off
