@@ -86,8 +86,7 @@ attach_job(struct printer *p, const struct job_row *j, const char *path)
                  err.msg);
         return SF_EAGAIN;
     }
-    log_printer(LOG_INFO, p->cfg.name, "job %lld stays interrupted: %s", (long long)j->id,
-                err.msg);
+    log_printer(LOG_INFO, p->cfg.name, "job %lld stays interrupted: %s", (long long)j->id, err.msg);
     return SF_ENOTFOUND;
 }
 
@@ -172,8 +171,10 @@ printer_attach_offer(struct printer *p)
        the host joined (printer_attach_again) */
     if (attach_held(p))
         return true;
-    if (p->aticket)
-        return true; /* a read on its way: it acts on the driver's status then */
+    /* a read on its way: it acts on the driver's status then; the orphan's first
+       (printer_settle_orphan), whose end the offer's read must see */
+    if (p->aticket || p->oticket)
+        return true;
     if (p->bed_full) {
         p->attach_tried = true;
         return false;
@@ -208,6 +209,12 @@ void
 printer_attach_again(struct printer *p)
 {
     printer_settle_orphan(p);
+    printer_attach_wake(p);
+}
+
+void
+printer_attach_wake(struct printer *p)
+{
     enum drv_state ds = p->drv ? p->drv->status.state : DRV_OFFLINE;
     if (!p->deaf && p->state == PRINTER_OFFLINE && !p->attach_tried &&
         (ds == DRV_IDLE || ds == DRV_PRINTING || ds == DRV_PAUSED))

@@ -78,6 +78,9 @@ struct printer {
     /* the interrupted job's read on the store's thread (printer_attach_offer), not yet back;
        NULL if none */
     struct attach_ticket *aticket;
+    /* the orphan's read on the store's thread (printer_settle_orphan), not yet back; NULL if
+       none */
+    struct orphan_ticket *oticket;
 };
 
 /*
@@ -87,7 +90,7 @@ struct printer {
  */
 int printer_fenced_event(struct printer *p, int64_t id, enum job_event ev,
                          const struct job_event_args *a);
-/* p is freed: its fenced events come back to no one. */
+/* p is freed: its fenced events and its orphan's read come back to no one. */
 void printer_fence_release(struct printer *p);
 
 /* Tell p's owner it changed (printer_env.changed), if it listens. */
@@ -128,6 +131,9 @@ void printer_apply_status(struct printer *p);
 bool printer_attach_offer(struct printer *p);
 /* p is freed: its read comes back to no one. */
 void printer_attach_release(struct printer *p);
+/* Offer p its interrupted job now if it waits offline for that (printer_attach_again without
+   the orphan's settling: its read's answer). */
+void printer_attach_wake(struct printer *p);
 
 /*
  * Arm the heaters' timer when p is hot with no print on it (turned off

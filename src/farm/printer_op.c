@@ -346,21 +346,50 @@ printer_fenced_out(struct printer *p, int64_t id)
     printer_changed(p);
 }
 
-void
-printer_settle_orphan(struct printer *p)
+/* The orphan's read on the store's thread: for p (NULL once p is freed), of job id. */
+struct orphan_ticket {
+    struct printer *p; /* NULL: freed meanwhile */
+    int64_t id;
+    struct job_row j; /* the job as the store holds it */
+};
+
+static int
+orphan_read(struct store *s, void *arg, struct sf_err *err)
 {
-    int64_t id = p->orphan.id;
-    if (!id || !p->env.hold)
+    struct orphan_ticket *t = arg;
+    return store_job_get(s, t->id, &t->j, err);
+}
+
+static void settle(struct printer *p, int64_t id, const struct job_row *j);
+
+/* The orphan's job came back: settle it, then offer p its interrupted job if it waited. */
+static void
+on_orphan_read(void *ud, const struct storeq_result *r)
+{
+    struct orphan_ticket *t = ud;
+    struct printer *p = t->p;
+    int64_t id = t->id;
+    struct job_row j = t->j;
+    free(t);
+    if (!p)
         return;
-    struct sf_err err;
-    struct job_row j;
-    if (store_job_get(p->env.s, id, &j, &err))
-        return; /* the store away: at the next join or attach */
+    p->oticket = NULL;
+    if (!p->deaf && p->orphan.id == id && !r->rc) /* r->rc: the store away: at the next join */
+        settle(p, id, &j);
+    printer_attach_wake(p); /* an offer waited for this read (printer_attach_offer) */
+}
+
+/* Record the orphan's end (job j, read from the store) if nobody took it on since and p's host
+   holds it. */
+static void
+settle(struct printer *p, int64_t id, const struct job_row *j)
+{
     /* only while nobody took it on since: interrupted, on this printer */
-    if (j.state != JOB_INTERRUPTED || strcmp(j.printer, p->cfg.name) != 0) {
+    if (j->state != JOB_INTERRUPTED || strcmp(j->printer, p->cfg.name) != 0) {
         p->orphan.id = 0;
         return;
     }
+    struct sf_err err;
     int64_t fence = 0;
     if (p->env.hold(p->env.ud, id, &fence, &err))
         return; /* no lease yet (reaped: the host joins again, then asks again) */
@@ -377,9 +406,31 @@ printer_settle_orphan(struct printer *p)
 }
 
 void
+printer_settle_orphan(struct printer *p)
+{
+    int64_t id = p->orphan.id;
+    /* the job is read on the store's thread (after what p queued before); one read at a time:
+       the one on its way settles it, or the next join or attach asks again */
+    if (!id || !p->env.hold || p->oticket)
+        return;
+    struct orphan_ticket *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return; /* at the next join or attach */
+    *t = (struct orphan_ticket){ .p = p, .id = id };
+    if (storeq_read(p->env.q, orphan_read, t, on_orphan_read, t)) {
+        free(t);
+        return;
+    }
+    p->oticket = t;
+}
+
+void
 printer_fence_release(struct printer *p)
 {
     for (struct fence_watch *w = p->watches; w; w = w->next)
         w->p = NULL;
     p->watches = NULL;
+    if (p->oticket)
+        p->oticket->p = NULL; /* its orphan's read too */
+    p->oticket = NULL;
 }
