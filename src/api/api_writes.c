@@ -58,6 +58,7 @@ struct api_write {
     struct http_defer *d;   /* the request's answer to come */
     char printer[64];       /* an action on this printer: answered with it; "": with the job */
     char who[16];           /* the operator (route_key_label): a cancel another host carries */
+    char *command;          /* a manual command's line: the printer's answer carries it */
     int status;             /* 201 (a new job: {"job"}) or 200 */
     bool not_now;           /* a refusal of the job rules (SF_EINVAL) is "not now" (409) */
     bool answering;         /* the answer's read follows the write on the store's thread */
@@ -166,13 +167,15 @@ on_written(void *ud, const struct storeq_result *r)
         if (rc == SF_OK && !w->printer[0] && !w->answering && answer_later(ws, w))
             return; /* answered once the job is read */
         if (rc) {
-            if (w->printer[0]) /* the printer has acted: the store refused the write */
+            if (w->printer[0] && !w->command) /* acted: the store refused the write */
                 log_warn("api", "printer %s: %s", w->printer, err.msg);
             http_fail(&resp, rc, err.msg);
         } else if (w->answering) {
             answer_json(ws, w, &resp);
         } else if (w->printer[0]) {
             ws->printer(ws->ud, w->printer, &resp);
+            if (w->command && resp.json)
+                json_object_set_new(resp.json, "command", json_string(w->command));
             ws->changed(ws->ud);
         } else if (w->status != 201) {
             job_changed(ws, w->id, SF_OK, NULL, &resp);
@@ -188,6 +191,7 @@ on_written(void *ud, const struct storeq_result *r)
     }
     http_defer_answer(w->d, &resp);
     free(w->prints);
+    free(w->command);
     free(w);
 }
 
@@ -513,6 +517,38 @@ api_writes_printer_act(struct api_writes *ws, const char *name, enum printer_act
     }
     ws->printer(ws->ud, name, resp);
     ws->changed(ws->ud);
+}
+
+void
+api_writes_printer_cmd(struct api_writes *ws, const char *name, const char *line, const char *who,
+                       struct http_resp *resp)
+{
+    struct sf_err err;
+    struct api_write *w = mem_calloc(1, sizeof(*w));
+    if (w && (w->command = mem_strdup(line)) && defer(ws, resp, w)) {
+        snprintf(w->printer, sizeof(w->printer), "%s", name);
+        int rc = jobctl_printer_command_then(ws->farm, name, line, who, on_written, w, &err);
+        if (rc == SF_OK) {
+            link_pending(ws, w);
+            return;
+        }
+        undefer(resp); /* refused now: answered now */
+        free(w->command);
+        free(w);
+        http_fail(resp, rc, err.msg);
+        return;
+    }
+    if (w)
+        free(w->command);
+    free(w); /* out of memory: sent with the loop's read */
+    int rc = jobctl_printer_command(ws->farm, name, line, who, &err);
+    if (rc) {
+        http_fail(resp, rc, err.msg);
+        return;
+    }
+    ws->printer(ws->ud, name, resp);
+    if (resp->json)
+        json_object_set_new(resp->json, "command", json_string(line));
 }
 
 void

@@ -147,6 +147,9 @@ int farm_printer_action_then(struct farm *f, const char *name, enum printer_acti
  */
 int farm_printer_command(struct farm *f, const char *name, const char *line, const char *who,
                          struct sf_err *err);
+/* The same, done(ud, r) once sent or refused (printer.h printer_command_then). */
+int farm_printer_command_then(struct farm *f, const char *name, const char *line, const char *who,
+                              storeq_event_fn done, void *ud, struct sf_err *err);
 
 /* An operator's emergency stop of printer name (printer_estop), as above. */
 int farm_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err);

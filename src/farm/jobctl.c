@@ -69,6 +69,14 @@ jobctl_printer_command(struct farm *f, const char *name, const char *line, const
 }
 
 int
+jobctl_printer_command_then(struct farm *f, const char *name, const char *line, const char *who,
+                            storeq_event_fn done, void *ud, struct sf_err *err)
+{
+    int rc = reachable(f, name, err);
+    return rc ? rc : farm_printer_command_then(f, name, line, who, done, ud, err);
+}
+
+int
 jobctl_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err)
 {
     int rc = reachable(f, name, err);

@@ -103,6 +103,10 @@ int jobctl_printer_action_then(struct farm *f, const char *name, enum printer_ac
  */
 int jobctl_printer_command(struct farm *f, const char *name, const char *line, const char *who,
                            struct sf_err *err);
+/* The same, answered once sent or refused (farm_printer_command_then): SF_OK, then done(ud, r)
+   on the loop later; a refusal now as above (done not called). */
+int jobctl_printer_command_then(struct farm *f, const char *name, const char *line, const char *who,
+                                storeq_event_fn done, void *ud, struct sf_err *err);
 
 /* An operator's (who's) emergency stop of printer name (farm_printer_estop). */
 int jobctl_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err);

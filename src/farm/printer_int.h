@@ -81,6 +81,7 @@ struct printer {
     /* the orphan's read on the store's thread (printer_settle_orphan), not yet back; NULL if
        none */
     struct orphan_ticket *oticket;
+    struct cmd_ticket *cmds; /* manual commands waiting for the store (printer_command_then) */
 };
 
 /*
@@ -90,7 +91,7 @@ struct printer {
  */
 int printer_fenced_event(struct printer *p, int64_t id, enum job_event ev,
                          const struct job_event_args *a);
-/* p is freed: its fenced events and its orphan's read come back to no one. */
+/* p is freed: its fenced events, its orphan's read and its commands' come back to no one. */
 void printer_fence_release(struct printer *p);
 
 /* Tell p's owner it changed (printer_env.changed), if it listens. */

@@ -10,6 +10,7 @@
 #include "printer_int.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "../base/log.h"
@@ -63,8 +64,9 @@ note(struct printer *p, const char *kind, const char *fmt, const char *a, const 
     storeq_printer_note(p->env.q, p->cfg.name, kind, what);
 }
 
-int
-printer_command(struct printer *p, const char *line, const char *who, struct sf_err *err)
+/* Whether p takes a manual command now, as far as the loop knows (printer_command). */
+static int
+command_checks(struct printer *p, const char *line, struct sf_err *err)
 {
     if (!line[0] || strpbrk(line, "\r\n"))
         return sf_err_set(err, SF_EINVAL, "printer %s: a command is one non-empty line",
@@ -90,9 +92,15 @@ printer_command(struct printer *p, const char *line, const char *who, struct sf_
                           "clear bed (clear it first)",
                           p->cfg.name, printer_state_name(p->state),
                           p->bed_full && p->state == PRINTER_IDLE ? " with a part on its bed" : "");
-    /* unknown is not "none": the store's code (busy, unreachable: the API's 503) says when */
-    int64_t held;
-    int rc = interrupted_here(p, &held, err);
+    return SF_OK;
+}
+
+/* Send the command once the store said whether p holds an interrupted job (held; rc its
+   read's code: unknown is not "none", the store's code, busy or unreachable, says when). */
+static int
+command_send(struct printer *p, const char *line, const char *who, int64_t held, int rc,
+             struct sf_err *err)
+{
     if (rc) {
         sf_err_prefix(err, "printer %s: whether it holds an interrupted job is not known",
                       p->cfg.name);
@@ -107,6 +115,131 @@ printer_command(struct printer *p, const char *line, const char *who, struct sf_
     if (rc == SF_OK)
         note(p, "printer-command", "manual command from %s: %s", who && who[0] ? who : "?", line);
     return rc;
+}
+
+int
+printer_command(struct printer *p, const char *line, const char *who, struct sf_err *err)
+{
+    int rc = command_checks(p, line, err);
+    if (rc)
+        return rc;
+    int64_t held;
+    rc = interrupted_here(p, &held, err);
+    return command_send(p, line, who, held, rc, err);
+}
+
+/* How long a manual command waits for the store's answer before it is answered "the store is
+   busy" (the API's 503) and not sent: an operator at the console should not wait a minute. */
+#define PRINTER_COMMAND_WAIT_MS 2000
+
+/* A manual command waiting for the store's answer (printer_command_then). */
+struct cmd_ticket {
+    struct printer *p;       /* NULL: freed meanwhile */
+    struct cmd_ticket *next; /* in p->cmds */
+    struct loop *l;          /* p's */
+    uint64_t timer;          /* PRINTER_COMMAND_WAIT_MS, 0 once fired or cancelled */
+    bool answered;           /* the timer answered it: the read's answer is dropped */
+    char name[sizeof(((struct farmcfg_printer *)0)->name)];
+    int64_t held; /* the interrupted job the store holds on it, 0 if none (the thread's) */
+    storeq_event_fn done;
+    void *ud;
+    char *line, *who;
+};
+
+/* On the store's thread: the job interrupted on t->name, if any. */
+static int
+held_read(struct store *s, void *arg, struct sf_err *err)
+{
+    struct cmd_ticket *t = arg;
+    struct job_row j;
+    t->held = 0;
+    int rc = store_job_interrupted(s, t->name, &j, err);
+    if (rc == SF_OK)
+        t->held = j.id;
+    return rc == SF_ENOTFOUND ? SF_OK : rc;
+}
+
+/* The store answered: send the command if p still takes it, and answer. */
+static void
+on_held_read(void *ud, const struct storeq_result *r)
+{
+    struct cmd_ticket *t = ud;
+    struct printer *p = t->p;
+    for (struct cmd_ticket **pp = p ? &p->cmds : NULL; pp && *pp; pp = &(*pp)->next)
+        if (*pp == t) {
+            *pp = t->next;
+            break;
+        }
+    if (t->timer)
+        loop_timer_cancel(t->l, t->timer);
+    if (t->answered) { /* too late: answered busy, not sent */
+        free(t->line);
+        free(t->who);
+        free(t);
+        return;
+    }
+    struct sf_err err = { 0 };
+    int rc;
+    if (!p || p->deaf) {
+        rc = sf_err_set(&err, SF_EAGAIN, "printer %s went away: the command was not sent", t->name);
+    } else if (r->rc) {
+        err = *r->err;
+        rc = command_send(p, t->line, t->who, 0, r->rc, &err);
+    } else if (!(rc = command_checks(p, t->line, &err))) { /* as p is now */
+        rc = command_send(p, t->line, t->who, t->held, SF_OK, &err);
+    }
+    struct storeq_result res = { .rc = rc, .err = &err };
+    t->done(t->ud, &res);
+    free(t->line);
+    free(t->who);
+    free(t);
+}
+
+/* The store did not answer in time: answer "busy", and send nothing when it does. */
+static void
+on_command_wait(struct loop *l, void *ud)
+{
+    (void)l;
+    struct cmd_ticket *t = ud;
+    t->timer = 0;
+    t->answered = true;
+    struct sf_err err = { 0 };
+    int rc = sf_err_set(&err, SF_EBUSY,
+                        "printer %s: whether it holds an interrupted job is not known: the store "
+                        "is busy (its queue waits for the database): the command was not sent",
+                        t->name);
+    struct storeq_result res = { .rc = rc, .err = &err };
+    t->done(t->ud, &res);
+}
+
+int
+printer_command_then(struct printer *p, const char *line, const char *who, storeq_event_fn done,
+                     void *ud, struct sf_err *err)
+{
+    int rc = command_checks(p, line, err);
+    if (rc)
+        return rc;
+    struct cmd_ticket *t = mem_calloc(1, sizeof(*t));
+    if (t) {
+        *t = (struct cmd_ticket){ .p = p, .done = done, .ud = ud };
+        snprintf(t->name, sizeof(t->name), "%s", p->cfg.name);
+        t->line = mem_strdup(line);
+        t->who = mem_strdup(who ? who : "");
+    }
+    /* after what p queued before it: a CRASHED still queued is seen */
+    if (!t || !t->line || !t->who || storeq_read(p->env.q, held_read, t, on_held_read, t)) {
+        if (t) {
+            free(t->line);
+            free(t->who);
+        }
+        free(t);
+        return sf_err_set(err, SF_ENOMEM, "printer %s: out of memory", p->cfg.name);
+    }
+    t->next = p->cmds;
+    p->cmds = t;
+    t->l = p->env.l;
+    t->timer = loop_timer_add(t->l, PRINTER_COMMAND_WAIT_MS, on_command_wait, t);
+    return SF_OK;
 }
 
 int
@@ -433,4 +566,7 @@ printer_fence_release(struct printer *p)
     if (p->oticket)
         p->oticket->p = NULL; /* its orphan's read too */
     p->oticket = NULL;
+    for (struct cmd_ticket *t = p->cmds; t; t = t->next)
+        t->p = NULL; /* and its commands' */
+    p->cmds = NULL;
 }

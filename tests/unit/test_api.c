@@ -997,6 +997,29 @@ T_CASE(api_job_writes_send_nothing_on_the_loops_connection)
     stop();
 }
 
+/* A manual command reads whether its printer holds an interrupted job on the store's thread,
+   and is sent when the answer comes: the loop's connection sends nothing for it (before:
+   store_job_interrupted on the loop, printer_command's interrupted_here). */
+T_CASE(api_command_reads_off_the_loops_connection)
+{
+    if (!t_store_pg()) {
+        t_skip("round trips are PostgreSQL's");
+        return;
+    }
+    struct sf_err err;
+    T_OK(start("cmdoffloop", &err), &err);
+    on_server(farm_quiet, NULL);
+    struct buf b;
+    buf_init(&b, 0);
+    /* b is idle with a clear bed and no interrupted job: the read lets the command through to
+       its driver, which has no console */
+    T_TRUE(write_off_loop("POST", "/api/printers/b/command", "{\"command\": \"G28\"}", NULL, NULL,
+                          501, &b));
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "no console") != NULL);
+    buf_release(&b);
+    stop();
+}
+
 /* POST /api/jobs/ID/resume: an optional {"line": N}, checked; refusals are 409. */
 T_CASE(api_resume_job_body_and_refusal)
 {
