@@ -477,15 +477,24 @@ job_resume(void *ctx, const struct route_args *args, const struct http_req *req,
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    int rc = jobctl_resume(ws->farm, args->id, line, &err);
-    /* its RESUME is queued: answered once it committed (a barrier behind it) */
-    struct api_write *w = rc == SF_OK ? mem_calloc(1, sizeof(*w)) : NULL;
-    if (w) {
-        *w = (struct api_write){ .id = args->id, .status = 200 };
-        if (post(ws, resp, w, NULL))
+    /* the job read on the store's thread, resumed when it comes back, answered once its
+       RESUME committed; a refusal of the job rules is "not now" */
+    struct api_write *w = ws->farm ? mem_calloc(1, sizeof(*w)) : NULL;
+    if (w)
+        *w = (struct api_write){ .id = args->id, .status = 200, .not_now = true };
+    if (w && defer(ws, resp, w)) {
+        int rc = jobctl_resume_then(ws->farm, args->id, line, on_written, w, &err);
+        if (rc == SF_OK) {
+            link_pending(ws, w);
             return;
+        }
+        undefer(resp);
         free(w);
+        http_fail(resp, rc, err.msg);
+        return;
     }
+    free(w); /* no queue, out of memory: read on the loop */
+    int rc = jobctl_resume(ws->farm, args->id, line, &err);
     job_changed(ws, args->id, rc, &err, resp);
 }
 

@@ -198,3 +198,12 @@ jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
         return sf_err_set(err, SF_EAGAIN, "resuming jobs is not available here");
     return not_now(farm_job_resume(f, id, line, err), err);
 }
+
+int
+jobctl_resume_then(struct farm *f, int64_t id, int64_t line, storeq_event_fn done, void *ud,
+                   struct sf_err *err)
+{
+    if (!f)
+        return sf_err_set(err, SF_EAGAIN, "resuming jobs is not available here");
+    return farm_job_resume_then(f, id, line, done, ud, err);
+}
