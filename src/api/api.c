@@ -630,13 +630,7 @@ printer_cmd(void *ctx, const struct route_args *args, const struct http_req *req
     route_key_label(req, who, sizeof(who));
     if (api_remote_try(a->cfg.farm, args->name, "command", line, who, resp))
         return; /* another host's printer: carried to it */
-    int rc = jobctl_printer_command(a->cfg.farm, args->name, line, who, &err);
-    if (rc) {
-        http_fail(resp, rc, err.msg);
-        return;
-    }
-    printers_answer(a, args->name, resp);
-    json_object_set_new(resp->json, "command", json_string(line));
+    api_writes_printer_cmd(&a->writes, args->name, line, who, resp);
 }
 
 /*

@@ -58,6 +58,7 @@ struct api_write {
     struct http_defer *d;   /* the request's answer to come */
     char printer[64];       /* an action on this printer: answered with it; "": with the job */
     char who[16];           /* the operator (route_key_label): a cancel another host carries */
+    char *command;          /* a manual command's line: the printer's answer carries it */
     int status;             /* 201 (a new job: {"job"}) or 200 */
     bool not_now;           /* a refusal of the job rules (SF_EINVAL) is "not now" (409) */
     bool answering;         /* the answer's read follows the write on the store's thread */
@@ -166,13 +167,15 @@ on_written(void *ud, const struct storeq_result *r)
         if (rc == SF_OK && !w->printer[0] && !w->answering && answer_later(ws, w))
             return; /* answered once the job is read */
         if (rc) {
-            if (w->printer[0]) /* the printer has acted: the store refused the write */
+            if (w->printer[0] && !w->command) /* acted: the store refused the write */
                 log_warn("api", "printer %s: %s", w->printer, err.msg);
             http_fail(&resp, rc, err.msg);
         } else if (w->answering) {
             answer_json(ws, w, &resp);
         } else if (w->printer[0]) {
             ws->printer(ws->ud, w->printer, &resp);
+            if (w->command && resp.json)
+                json_object_set_new(resp.json, "command", json_string(w->command));
             ws->changed(ws->ud);
         } else if (w->status != 201) {
             job_changed(ws, w->id, SF_OK, NULL, &resp);
@@ -188,6 +191,7 @@ on_written(void *ud, const struct storeq_result *r)
     }
     http_defer_answer(w->d, &resp);
     free(w->prints);
+    free(w->command);
     free(w);
 }
 
@@ -473,15 +477,24 @@ job_resume(void *ctx, const struct route_args *args, const struct http_req *req,
         http_error(resp, 400, "%s", err.msg);
         return;
     }
-    int rc = jobctl_resume(ws->farm, args->id, line, &err);
-    /* its RESUME is queued: answered once it committed (a barrier behind it) */
-    struct api_write *w = rc == SF_OK ? mem_calloc(1, sizeof(*w)) : NULL;
-    if (w) {
-        *w = (struct api_write){ .id = args->id, .status = 200 };
-        if (post(ws, resp, w, NULL))
+    /* the job read on the store's thread, resumed when it comes back, answered once its
+       RESUME committed; a refusal of the job rules is "not now" */
+    struct api_write *w = ws->farm ? mem_calloc(1, sizeof(*w)) : NULL;
+    if (w)
+        *w = (struct api_write){ .id = args->id, .status = 200, .not_now = true };
+    if (w && defer(ws, resp, w)) {
+        int rc = jobctl_resume_then(ws->farm, args->id, line, on_written, w, &err);
+        if (rc == SF_OK) {
+            link_pending(ws, w);
             return;
+        }
+        undefer(resp);
         free(w);
+        http_fail(resp, rc, err.msg);
+        return;
     }
+    free(w); /* no queue, out of memory: read on the loop */
+    int rc = jobctl_resume(ws->farm, args->id, line, &err);
     job_changed(ws, args->id, rc, &err, resp);
 }
 
@@ -513,6 +526,38 @@ api_writes_printer_act(struct api_writes *ws, const char *name, enum printer_act
     }
     ws->printer(ws->ud, name, resp);
     ws->changed(ws->ud);
+}
+
+void
+api_writes_printer_cmd(struct api_writes *ws, const char *name, const char *line, const char *who,
+                       struct http_resp *resp)
+{
+    struct sf_err err;
+    struct api_write *w = mem_calloc(1, sizeof(*w));
+    if (w && (w->command = mem_strdup(line)) && defer(ws, resp, w)) {
+        snprintf(w->printer, sizeof(w->printer), "%s", name);
+        int rc = jobctl_printer_command_then(ws->farm, name, line, who, on_written, w, &err);
+        if (rc == SF_OK) {
+            link_pending(ws, w);
+            return;
+        }
+        undefer(resp); /* refused now: answered now */
+        free(w->command);
+        free(w);
+        http_fail(resp, rc, err.msg);
+        return;
+    }
+    if (w)
+        free(w->command);
+    free(w); /* out of memory: sent with the loop's read */
+    int rc = jobctl_printer_command(ws->farm, name, line, who, &err);
+    if (rc) {
+        http_fail(resp, rc, err.msg);
+        return;
+    }
+    ws->printer(ws->ud, name, resp);
+    if (resp->json)
+        json_object_set_new(resp->json, "command", json_string(line));
 }
 
 void

@@ -68,6 +68,14 @@ const struct route *api_writes_routes(size_t *n);
 void api_writes_printer_act(struct api_writes *ws, const char *name, enum printer_action act,
                             const char *who, struct http_resp *resp);
 
+/*
+ * POST /api/printers/NAME/command: printer name's manual command (jobctl_printer_command_then),
+ * answered once sent (the store read whether it holds an interrupted job) with the printer as
+ * it is and the command; a refusal as jobctl.h maps it.
+ */
+void api_writes_printer_cmd(struct api_writes *ws, const char *name, const char *line,
+                            const char *who, struct http_resp *resp);
+
 /* The API is freed: the answers still to come (the farm's queue calls back later, when the
    daemon stops) go to no one. */
 void api_writes_orphan(struct api_writes *ws);

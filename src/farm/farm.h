@@ -147,6 +147,9 @@ int farm_printer_action_then(struct farm *f, const char *name, enum printer_acti
  */
 int farm_printer_command(struct farm *f, const char *name, const char *line, const char *who,
                          struct sf_err *err);
+/* The same, done(ud, r) once sent or refused (printer.h printer_command_then). */
+int farm_printer_command_then(struct farm *f, const char *name, const char *line, const char *who,
+                              storeq_event_fn done, void *ud, struct sf_err *err);
 
 /* An operator's emergency stop of printer name (printer_estop), as above. */
 int farm_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err);
@@ -159,6 +162,11 @@ int farm_printer_estop(struct farm *f, const char *name, const char *who, struct
  * which and the range).
  */
 int farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err);
+/* The same without the loop's connection: the job is read on the store's thread, resumed when
+   it comes back, and done(ud, r) answers once its RESUME committed, or with the refusal.  SF_OK
+   (done called later) or SF_ENOMEM. */
+int farm_job_resume_then(struct farm *f, int64_t id, int64_t line, storeq_event_fn done, void *ud,
+                         struct sf_err *err);
 
 /* What farm_gcode_check learnt of an uploaded G-code file. */
 struct farm_gcode {

@@ -159,9 +159,11 @@ farm_printer_action_then(struct farm *f, const char *name, enum printer_action a
     return printer_action_then(p, act, done, ud, err);
 }
 
-int
-farm_printer_command(struct farm *f, const char *name, const char *line, const char *who,
-                     struct sf_err *err)
+/* printer_command (done NULL) or printer_command_then for the line name's G-code policy lets
+   through. */
+static int
+command(struct farm *f, const char *name, const char *line, const char *who, storeq_event_fn done,
+        void *ud, struct sf_err *err)
 {
     struct printer *p = farm_find(f, name);
     if (!p)
@@ -179,11 +181,27 @@ farm_printer_command(struct farm *f, const char *name, const char *line, const c
     case GPOLICY_REWRITE:
         log_printer_each(LOG_INFO, name, "manual command '%.80s' from %s sent as '%.80s' (%s)",
                          line, who && who[0] ? who : "?", v.line, v.why);
-        return printer_command(p, v.line, who, err);
+        return done ? printer_command_then(p, v.line, who, done, ud, err)
+                    : printer_command(p, v.line, who, err);
     case GPOLICY_PASS:
         break;
     }
-    return printer_command(p, line, who, err);
+    return done ? printer_command_then(p, line, who, done, ud, err)
+                : printer_command(p, line, who, err);
+}
+
+int
+farm_printer_command(struct farm *f, const char *name, const char *line, const char *who,
+                     struct sf_err *err)
+{
+    return command(f, name, line, who, NULL, NULL, err);
+}
+
+int
+farm_printer_command_then(struct farm *f, const char *name, const char *line, const char *who,
+                          storeq_event_fn done, void *ud, struct sf_err *err)
+{
+    return command(f, name, line, who, done, ud, err);
 }
 
 int

@@ -424,7 +424,8 @@ finish_now(struct farm_remote *r, int64_t id, const char *printer, int rc, const
                  (long long)id, err.msg);
 }
 
-/* An action's write is back (jobctl_printer_action_then): its result. */
+/* An action's write is back (jobctl_printer_action_then), or a command sent
+   (jobctl_printer_command_then): its result. */
 static void
 on_acted(void *ud, const struct storeq_result *res)
 {
@@ -481,7 +482,11 @@ run_one(struct farm_remote *r, const struct store_command *c, int64_t taken_ms)
             }
         }
     } else if (strcmp(c->kind, "command") == 0) {
-        rc = jobctl_printer_command(r->f, c->printer, c->line, who, &err);
+        rc = jobctl_printer_command_then(r->f, c->printer, c->line, who, on_acted, x, &err);
+        if (rc == SF_OK) {
+            r->inflight++;
+            return;
+        }
     } else if (strcmp(c->kind, "emergency-stop") == 0) {
         rc = jobctl_printer_estop(r->f, c->printer, who, &err);
     } else {

@@ -53,33 +53,54 @@ resume_done(struct loop *l, void *ud, int rc)
     free(r);
 }
 
-int
-farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
-{
+/* What a resume reads from the store (resume_read): on the loop, or on the store's thread. */
+struct resume_ask {
+    struct farm *f;
+    int64_t id, line;
     struct job_row j;
-    int rc = store_job_get(f->s, id, &j, err);
-    if (rc)
+    char path[1200];
+    struct drv_job_scan scan;
+    storeq_event_fn done; /* the answer (farm_job_resume_then) */
+    void *ud;
+};
+
+/* Job a->id and, when it is interrupted, its G-code's path and line count. */
+static int
+resume_read(struct store *s, void *arg, struct sf_err *err)
+{
+    struct resume_ask *a = arg;
+    int rc = store_job_get(s, a->id, &a->j, err);
+    if (rc || a->j.state != JOB_INTERRUPTED)
+        return rc; /* refused by resume_go */
+    /* G-code prepared before its count was kept (gcode_lines 0) is scanned here */
+    a->scan = (struct drv_job_scan){ .lines_total = (uint64_t)a->j.gcode_lines };
+    if ((rc = store_file_path(s, a->j.gcode_sha, a->path, sizeof(a->path), err)) ||
+        (a->j.gcode_lines == 0 && (rc = drv_job_scan(a->path, &a->scan, err))))
         return rc;
-    if (j.state != JOB_INTERRUPTED)
+    return SF_OK;
+}
+
+/* The resume of a's job, read (resume_read): its checks, the commit, the read up to the line. */
+static int
+resume_go(struct farm *f, struct resume_ask *a, struct sf_err *err)
+{
+    struct job_row *jr = &a->j;
+    int64_t id = a->id, line = a->line;
+    int rc;
+    if (jr->state != JOB_INTERRUPTED)
         return sf_err_set(err, SF_EINVAL, "job %lld is %s: only an interrupted job can be resumed",
-                          (long long)id, job_state_name(j.state));
-    struct printer *p = farm_find(f, j.printer);
+                          (long long)id, job_state_name(jr->state));
+    struct printer *p = farm_find(f, jr->printer);
     if (!p || printer_removed(p))
         return sf_err_set(err, SF_EINVAL,
                           "job %lld: its part is on printer '%s', which is no longer configured",
-                          (long long)id, j.printer);
+                          (long long)id, jr->printer);
     if (printer_state(p) != PRINTER_IDLE || !printer_connected(p) || printer_job(p))
         return sf_err_set(err, SF_EINVAL, "job %lld: printer %s is %s; resume when it is idle",
-                          (long long)id, j.printer, printer_state_name(printer_state(p)));
+                          (long long)id, jr->printer, printer_state_name(printer_state(p)));
     if (line < 0)
-        line = j.lines_acked;
-    char path[1200];
-    /* G-code prepared before its count was kept (gcode_lines 0) is scanned here */
-    struct drv_job_scan scan = { .lines_total = (uint64_t)j.gcode_lines };
-    if ((rc = store_file_path(f->s, j.gcode_sha, path, sizeof(path), err)) ||
-        (j.gcode_lines == 0 && (rc = drv_job_scan(path, &scan, err))))
-        return rc;
-    uint64_t total = scan.lines_total;
+        line = jr->lines_acked;
+    uint64_t total = a->scan.lines_total;
     /* Line 0 would run the job's own start: its G28 homes Z into the part. */
     if (line < 1 || (uint64_t)line >= total)
         return sf_err_set(err, SF_EINVAL,
@@ -98,19 +119,75 @@ farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
     /* The machine state at `line` comes from reading the file up to it
        (0.5 s for 2/3 of a 112 MB job): on the io thread, so the other
        printers' streams do not wait; the driver starts when it is read. */
-    log_printer(LOG_INFO, j.printer, "job %lld: resumed at line %lld of %llu", (long long)id,
+    log_printer(LOG_INFO, jr->printer, "job %lld: resumed at line %lld of %llu", (long long)id,
                 (long long)line, (unsigned long long)total);
-    double est_s = printer_estimate_s(&j, path);
+    double est_s = printer_estimate_s(jr, a->path);
     struct sf_err perr;
     *r = (struct resume){
-        .f = f, .job_id = id, .line = (uint64_t)line, .scan = scan, .est_s = est_s
+        .f = f, .job_id = id, .line = (uint64_t)line, .scan = a->scan, .est_s = est_s
     };
-    snprintf(r->printer, sizeof(r->printer), "%s", j.printer);
-    snprintf(r->path, sizeof(r->path), "%s", path);
-    snprintf(r->name, sizeof(r->name), "%s", j.opts.name);
+    snprintf(r->printer, sizeof(r->printer), "%s", jr->printer);
+    snprintf(r->path, sizeof(r->path), "%s", a->path);
+    snprintf(r->name, sizeof(r->name), "%s", jr->opts.name);
     farmcfg_policy(printer_cfg(p), &r->policy);
     if (!pool_submit(f->io, resume_work, resume_done, r, &perr))
         resume_done(f->l, r, resume_work(r, NULL)); /* no worker: judged and read here */
     farm_kick(f);
+    return SF_OK;
+}
+
+int
+farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
+{
+    struct resume_ask *a = mem_calloc(1, sizeof(*a));
+    if (!a)
+        return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
+    a->id = id;
+    a->line = line;
+    int rc = resume_read(f->s, a, err);
+    if (rc == SF_OK)
+        rc = resume_go(f, a, err);
+    free(a);
+    return rc;
+}
+
+/* The job came back from the store's thread: resume it; answered once its RESUME committed. */
+static void
+on_resume_read(void *ud, const struct storeq_result *r)
+{
+    struct resume_ask *a = ud;
+    struct farm *f = a->f;
+    struct sf_err err = { 0 };
+    int rc = r->rc;
+    if (rc)
+        err = *r->err;
+    else if (f->stopping)
+        rc = sf_err_set(&err, SF_ECANCELED, "job %lld: the daemon stops: not resumed",
+                        (long long)a->id);
+    else
+        rc = resume_go(f, a, &err);
+    /* its RESUME is queued: the answer follows it */
+    if (rc || storeq_barrier(f->q, a->done, a->ud)) {
+        if (!rc)
+            rc = sf_err_set(&err, SF_ENOMEM, "job %lld: out of memory: resumed, its answer is lost",
+                            (long long)a->id);
+        struct storeq_result res = { .id = a->id, .rc = rc, .err = &err };
+        a->done(a->ud, &res);
+    }
+    free(a);
+}
+
+int
+farm_job_resume_then(struct farm *f, int64_t id, int64_t line, storeq_event_fn done, void *ud,
+                     struct sf_err *err)
+{
+    struct resume_ask *a = mem_calloc(1, sizeof(*a));
+    if (!a)
+        return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
+    *a = (struct resume_ask){ .f = f, .id = id, .line = line, .done = done, .ud = ud };
+    if (storeq_read(f->q, resume_read, a, on_resume_read, a)) {
+        free(a);
+        return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
+    }
     return SF_OK;
 }

@@ -69,6 +69,14 @@ jobctl_printer_command(struct farm *f, const char *name, const char *line, const
 }
 
 int
+jobctl_printer_command_then(struct farm *f, const char *name, const char *line, const char *who,
+                            storeq_event_fn done, void *ud, struct sf_err *err)
+{
+    int rc = reachable(f, name, err);
+    return rc ? rc : farm_printer_command_then(f, name, line, who, done, ud, err);
+}
+
+int
 jobctl_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err)
 {
     int rc = reachable(f, name, err);
@@ -189,4 +197,13 @@ jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
     if (!f)
         return sf_err_set(err, SF_EAGAIN, "resuming jobs is not available here");
     return not_now(farm_job_resume(f, id, line, err), err);
+}
+
+int
+jobctl_resume_then(struct farm *f, int64_t id, int64_t line, storeq_event_fn done, void *ud,
+                   struct sf_err *err)
+{
+    if (!f)
+        return sf_err_set(err, SF_EAGAIN, "resuming jobs is not available here");
+    return farm_job_resume_then(f, id, line, done, ud, err);
 }

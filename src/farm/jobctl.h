@@ -82,6 +82,11 @@ int jobctl_again(struct store *s, int64_t id, int64_t *new_id, struct sf_err *er
  * after SF_OK answers once it committed.
  */
 int jobctl_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err);
+/* The same, the job read on the store's thread (farm_job_resume_then): SF_OK, then done(ud, r)
+   once its RESUME committed or with the refusal (SF_EINVAL for what is SF_EAGAIN above); a
+   refusal now (done not called). */
+int jobctl_resume_then(struct farm *f, int64_t id, int64_t line, storeq_event_fn done, void *ud,
+                       struct sf_err *err);
 
 /* Act on printer name (farm_printer_action). */
 int jobctl_printer_action(struct farm *f, const char *name, enum printer_action act,
@@ -103,6 +108,10 @@ int jobctl_printer_action_then(struct farm *f, const char *name, enum printer_ac
  */
 int jobctl_printer_command(struct farm *f, const char *name, const char *line, const char *who,
                            struct sf_err *err);
+/* The same, answered once sent or refused (farm_printer_command_then): SF_OK, then done(ud, r)
+   on the loop later; a refusal now as above (done not called). */
+int jobctl_printer_command_then(struct farm *f, const char *name, const char *line, const char *who,
+                                storeq_event_fn done, void *ud, struct sf_err *err);
 
 /* An operator's (who's) emergency stop of printer name (farm_printer_estop). */
 int jobctl_printer_estop(struct farm *f, const char *name, const char *who, struct sf_err *err);

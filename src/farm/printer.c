@@ -17,7 +17,8 @@
  * DRV_EV_JOB_CANCELLED.
  *
  * Files: this one holds the state machine, the link, the driver events and
- * the jobs' start and resume; printer_heat.c the heaters' hold after an
+ * the jobs' start and resume; printer_attach.c the offer of an interrupted
+ * job to a network printer that comes back; printer_heat.c the heaters' hold after an
  * interruption (hold_heat_min), printer_op.c the operator's actions (pause,
  * resume, cancel, clear, manual command, emergency stop); printer_int.h
  * what they share (struct printer), internal to these files.
@@ -37,9 +38,6 @@
 #include "gcjob.h"
 
 #define PRINTER_SAVE_LINES 16 /* progress this far ahead of the store is saved at once */
-/* attach() answers "not yet" taken on one connection before the job stays interrupted
-   (backoff 0.5, 1, 2, ... s: about two minutes in all) */
-#define PRINTER_ATTACH_WAITS 10
 
 /*
  * A START on its way to the store: the printer it is for (NULL once that
@@ -179,62 +177,6 @@ interrupt_job(struct printer *p, const char *why)
     printer_job_event(p, id, JOB_EV_CRASHED, &a);
 }
 
-/*
- * The driver of a network printer just connected: offer it the job the
- * store holds as interrupted on this printer (a daemon restart, or the
- * printer unreachable for a while).  If the printer still prints that
- * file (or finished it meanwhile) the job is printing again and ends as
- * the printer says; otherwise it stays interrupted, as it would on Marlin.
- * SF_OK when the job was re-attached; SF_EAGAIN when the driver cannot tell
- * yet (its first poll, PrusaLink's job details still on the way: ask again);
- * SF_ENOTFOUND otherwise (no such job, or the printer does not know it).
- */
-static int
-try_attach(struct printer *p)
-{
-    struct sf_err err;
-    struct job_row row;
-    if (p->bed_full)
-        return SF_ENOTFOUND;
-    /* the job's CRASHED may still be queued: with the store busy, ask again later */
-    if (storeq_sync(p->env.q, STOREQ_SYNC_MS, &err))
-        return SF_EAGAIN;
-    if (store_job_interrupted(p->env.s, p->cfg.name, &row, &err))
-        return SF_ENOTFOUND;
-    const struct job_row *j = row.gcode_sha[0] ? &row : NULL;
-    int ok = SF_ENOTFOUND;
-    char path[1024];
-    if (j && store_file_path(p->env.s, j->gcode_sha, path, sizeof(path), &err) == SF_OK) {
-        struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
-        int rc = p->drv->ops->attach(p->drv, path, j->gcode_lines > 0 ? &scan : NULL, &err);
-        /* (fencing: printer_resume_commit holds the job under the host's current lease) */
-        if (rc == SF_OK) {
-            p->est_s = printer_estimate_s(j, path);
-            p->attempts = 0;
-            p->message[0] = '\0';
-            printer_move(p, PRINTER_EV_CONNECTED);
-            int64_t line = (int64_t)p->drv->status.lines_acked;
-            if (printer_resume_commit(p, j->id, line > 0 ? line : 0, &err) == SF_OK) {
-                log_printer(LOG_INFO, p->cfg.name, "job %lld re-attached: the printer still has it",
-                            (long long)j->id);
-                ok = SF_OK;
-            } else {
-                log_printer(LOG_ERROR, p->cfg.name, "job %lld: %s", (long long)j->id, err.msg);
-            }
-        } else if (rc == SF_EAGAIN && p->attach_waits < PRINTER_ATTACH_WAITS) {
-            log_printer(LOG_INFO, p->cfg.name, "job %lld: re-attach waits: %s", (long long)j->id,
-                        err.msg);
-            snprintf(p->message, sizeof(p->message), "re-attaching job %lld: %s", (long long)j->id,
-                     err.msg);
-            ok = SF_EAGAIN;
-        } else {
-            log_printer(LOG_INFO, p->cfg.name, "job %lld stays interrupted: %s", (long long)j->id,
-                        err.msg);
-        }
-    }
-    return ok;
-}
-
 /* ---- link ---- */
 
 static void connect_printer(struct printer *p);
@@ -271,46 +213,10 @@ connect_printer(struct printer *p)
 
 static void apply(struct printer *p, enum drv_event ev, const struct drv_status *st);
 
-/* The driver answered "not yet" to attach: offer the job again with its status now. */
-static void
-on_attach_retry(struct loop *l, void *ud)
-{
-    (void)l;
-    struct printer *p = ud;
-    p->attach_retry = 0;
-    printer_attach_again(p);
-}
-
 void
-printer_attach_again(struct printer *p)
+printer_apply_status(struct printer *p)
 {
-    printer_settle_orphan(p);
-    enum drv_state ds = p->drv ? p->drv->status.state : DRV_OFFLINE;
-    if (!p->deaf && p->state == PRINTER_OFFLINE && !p->attach_tried &&
-        (ds == DRV_IDLE || ds == DRV_PRINTING || ds == DRV_PAUSED))
-        apply(p, DRV_EV_STATE, &p->drv->status);
-}
-
-/* May p's host drive a print now (env.hold)?  If not, p says why and waits offline. */
-static bool
-attach_held(struct printer *p)
-{
-    struct sf_err err;
-    int64_t fence;
-    if (!p->env.hold || p->env.hold(p->env.ud, 0, &fence, &err) != SF_EAGAIN)
-        return false;
-    if (strcmp(p->message, err.msg) != 0)
-        log_printer(LOG_INFO, p->cfg.name, "waits to re-attach its job: %s", err.msg);
-    snprintf(p->message, sizeof(p->message), "%s", err.msg);
-    return true;
-}
-
-static void
-schedule_attach_retry(struct printer *p)
-{
-    if (!p->attach_retry)
-        p->attach_retry =
-            loop_timer_add(p->env.l, drv_backoff_ms(p->attach_waits++), on_attach_retry, p);
+    apply(p, DRV_EV_STATE, &p->drv->status);
 }
 
 static void
@@ -320,21 +226,10 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
     case DRV_EV_STATE:
         if (p->state == PRINTER_OFFLINE && p->drv->ops->attach && !p->attach_tried &&
             (st->state == DRV_IDLE || st->state == DRV_PRINTING || st->state == DRV_PAUSED)) {
-            /* a host without its lease yet (a restart waits out its predecessor's, whose
-               reap at the join interrupts the job) attaches nothing: p waits offline and is
-               offered the job once the host joined (printer_attach_again) */
-            if (attach_held(p))
-                break;
-            /* tried only once the driver could answer: "not yet" (SF_EAGAIN)
-               keeps p offline and asks again, so the job is not left
-               interrupted until the next reconnect */
-            int rc = try_attach(p);
-            if (rc == SF_EAGAIN) {
-                schedule_attach_retry(p);
-                break;
-            }
-            p->attach_tried = true;
-            if (rc == SF_OK)
+            /* tried only once the driver could answer: p waits offline for the store's
+               answer, and "not yet" (SF_EAGAIN) asks again, so the job is not left
+               interrupted until the next reconnect (printer_attach.c) */
+            if (printer_attach_offer(p))
                 break;
         }
         if (st->state == DRV_IDLE && p->state == PRINTER_OFFLINE) {
@@ -551,7 +446,8 @@ printer_free(struct printer *p)
     if (p->ticket)
         p->ticket->p = NULL; /* its START comes back to no one */
     if (p->rticket)
-        p->rticket->p = NULL; /* its RESUME too */
+        p->rticket->p = NULL;  /* its RESUME too */
+    printer_attach_release(p); /* its interrupted job's read too */
     free(p->go);
     free(p->rgo);
     free(p->queue);

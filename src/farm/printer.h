@@ -231,6 +231,14 @@ int printer_action_then(struct printer *p, enum printer_action a, storeq_event_f
  * interrupted job is not known.
  */
 int printer_command(struct printer *p, const char *line, const char *who, struct sf_err *err);
+/*
+ * The same, without the loop's connection: whether p holds an interrupted job is read on the
+ * store's thread, and the command sent (p as it is then) when the answer comes; done(ud, r)
+ * on the loop with r->rc and r->err as printer_command's.  A refusal now (done not called) as
+ * printer_command's, or SF_ENOMEM.
+ */
+int printer_command_then(struct printer *p, const char *line, const char *who, storeq_event_fn done,
+                         void *ud, struct sf_err *err);
 
 /*
  * An operator's (who's) emergency stop: the driver's own (drv.h estop;

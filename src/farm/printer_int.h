@@ -1,6 +1,6 @@
 /*
- * printer_int.h - internal to the printer module (printer.c, printer_heat.c,
- * printer_op.c), not a contract for anyone else: nothing outside
+ * printer_int.h - internal to the printer module (printer.c, printer_attach.c,
+ * printer_heat.c, printer_op.c), not a contract for anyone else: nothing outside
  * src/farm/printer*.c includes it; printer.h is the module's contract.
  *
  * What the parts share: the printer itself (struct printer), its moves on
@@ -75,6 +75,13 @@ struct printer {
         int64_t id;
         int64_t lines_acked;
     } orphan;
+    /* the interrupted job's read on the store's thread (printer_attach_offer), not yet back;
+       NULL if none */
+    struct attach_ticket *aticket;
+    /* the orphan's read on the store's thread (printer_settle_orphan), not yet back; NULL if
+       none */
+    struct orphan_ticket *oticket;
+    struct cmd_ticket *cmds; /* manual commands waiting for the store (printer_command_then) */
 };
 
 /*
@@ -84,7 +91,7 @@ struct printer {
  */
 int printer_fenced_event(struct printer *p, int64_t id, enum job_event ev,
                          const struct job_event_args *a);
-/* p is freed: its fenced events come back to no one. */
+/* p is freed: its fenced events, its orphan's read and its commands' come back to no one. */
 void printer_fence_release(struct printer *p);
 
 /* Tell p's owner it changed (printer_env.changed), if it listens. */
@@ -111,6 +118,23 @@ int printer_job_event(struct printer *p, int64_t id, enum job_event ev,
 /* The filament job id's print on p used by command line `lines` (all of its file's when ev is
    JOB_EV_PRINT_DONE); 0 when p did not read the file (a resumed or re-attached print). */
 double printer_filament_mm(const struct printer *p, int64_t id, enum job_event ev, int64_t lines);
+
+/* Apply the driver's status now as a DRV_EV_STATE (printer.c). */
+void printer_apply_status(struct printer *p);
+
+/*
+ * A network printer came up offline (its driver idle, printing or paused) and was not offered
+ * its interrupted job on this connection: read the job on the store's thread and offer it to
+ * the driver when the answer comes (printer_attach.c).  true: p waits offline (for its host's
+ * lease, the read, or the driver's "not yet"); false: there is nothing to offer
+ * (attach_tried set), p connects as its driver says.
+ */
+bool printer_attach_offer(struct printer *p);
+/* p is freed: its read comes back to no one. */
+void printer_attach_release(struct printer *p);
+/* Offer p its interrupted job now if it waits offline for that (printer_attach_again without
+   the orphan's settling: its read's answer). */
+void printer_attach_wake(struct printer *p);
 
 /*
  * Arm the heaters' timer when p is hot with no print on it (turned off

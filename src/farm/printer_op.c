@@ -10,6 +10,7 @@
 #include "printer_int.h"
 
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "../base/log.h"
@@ -63,8 +64,9 @@ note(struct printer *p, const char *kind, const char *fmt, const char *a, const 
     storeq_printer_note(p->env.q, p->cfg.name, kind, what);
 }
 
-int
-printer_command(struct printer *p, const char *line, const char *who, struct sf_err *err)
+/* Whether p takes a manual command now, as far as the loop knows (printer_command). */
+static int
+command_checks(struct printer *p, const char *line, struct sf_err *err)
 {
     if (!line[0] || strpbrk(line, "\r\n"))
         return sf_err_set(err, SF_EINVAL, "printer %s: a command is one non-empty line",
@@ -90,9 +92,15 @@ printer_command(struct printer *p, const char *line, const char *who, struct sf_
                           "clear bed (clear it first)",
                           p->cfg.name, printer_state_name(p->state),
                           p->bed_full && p->state == PRINTER_IDLE ? " with a part on its bed" : "");
-    /* unknown is not "none": the store's code (busy, unreachable: the API's 503) says when */
-    int64_t held;
-    int rc = interrupted_here(p, &held, err);
+    return SF_OK;
+}
+
+/* Send the command once the store said whether p holds an interrupted job (held; rc its
+   read's code: unknown is not "none", the store's code, busy or unreachable, says when). */
+static int
+command_send(struct printer *p, const char *line, const char *who, int64_t held, int rc,
+             struct sf_err *err)
+{
     if (rc) {
         sf_err_prefix(err, "printer %s: whether it holds an interrupted job is not known",
                       p->cfg.name);
@@ -107,6 +115,131 @@ printer_command(struct printer *p, const char *line, const char *who, struct sf_
     if (rc == SF_OK)
         note(p, "printer-command", "manual command from %s: %s", who && who[0] ? who : "?", line);
     return rc;
+}
+
+int
+printer_command(struct printer *p, const char *line, const char *who, struct sf_err *err)
+{
+    int rc = command_checks(p, line, err);
+    if (rc)
+        return rc;
+    int64_t held;
+    rc = interrupted_here(p, &held, err);
+    return command_send(p, line, who, held, rc, err);
+}
+
+/* How long a manual command waits for the store's answer before it is answered "the store is
+   busy" (the API's 503) and not sent: an operator at the console should not wait a minute. */
+#define PRINTER_COMMAND_WAIT_MS 2000
+
+/* A manual command waiting for the store's answer (printer_command_then). */
+struct cmd_ticket {
+    struct printer *p;       /* NULL: freed meanwhile */
+    struct cmd_ticket *next; /* in p->cmds */
+    struct loop *l;          /* p's */
+    uint64_t timer;          /* PRINTER_COMMAND_WAIT_MS, 0 once fired or cancelled */
+    bool answered;           /* the timer answered it: the read's answer is dropped */
+    char name[sizeof(((struct farmcfg_printer *)0)->name)];
+    int64_t held; /* the interrupted job the store holds on it, 0 if none (the thread's) */
+    storeq_event_fn done;
+    void *ud;
+    char *line, *who;
+};
+
+/* On the store's thread: the job interrupted on t->name, if any. */
+static int
+held_read(struct store *s, void *arg, struct sf_err *err)
+{
+    struct cmd_ticket *t = arg;
+    struct job_row j;
+    t->held = 0;
+    int rc = store_job_interrupted(s, t->name, &j, err);
+    if (rc == SF_OK)
+        t->held = j.id;
+    return rc == SF_ENOTFOUND ? SF_OK : rc;
+}
+
+/* The store answered: send the command if p still takes it, and answer. */
+static void
+on_held_read(void *ud, const struct storeq_result *r)
+{
+    struct cmd_ticket *t = ud;
+    struct printer *p = t->p;
+    for (struct cmd_ticket **pp = p ? &p->cmds : NULL; pp && *pp; pp = &(*pp)->next)
+        if (*pp == t) {
+            *pp = t->next;
+            break;
+        }
+    if (t->timer)
+        loop_timer_cancel(t->l, t->timer);
+    if (t->answered) { /* too late: answered busy, not sent */
+        free(t->line);
+        free(t->who);
+        free(t);
+        return;
+    }
+    struct sf_err err = { 0 };
+    int rc;
+    if (!p || p->deaf) {
+        rc = sf_err_set(&err, SF_EAGAIN, "printer %s went away: the command was not sent", t->name);
+    } else if (r->rc) {
+        err = *r->err;
+        rc = command_send(p, t->line, t->who, 0, r->rc, &err);
+    } else if (!(rc = command_checks(p, t->line, &err))) { /* as p is now */
+        rc = command_send(p, t->line, t->who, t->held, SF_OK, &err);
+    }
+    struct storeq_result res = { .rc = rc, .err = &err };
+    t->done(t->ud, &res);
+    free(t->line);
+    free(t->who);
+    free(t);
+}
+
+/* The store did not answer in time: answer "busy", and send nothing when it does. */
+static void
+on_command_wait(struct loop *l, void *ud)
+{
+    (void)l;
+    struct cmd_ticket *t = ud;
+    t->timer = 0;
+    t->answered = true;
+    struct sf_err err = { 0 };
+    int rc = sf_err_set(&err, SF_EBUSY,
+                        "printer %s: whether it holds an interrupted job is not known: the store "
+                        "is busy (its queue waits for the database): the command was not sent",
+                        t->name);
+    struct storeq_result res = { .rc = rc, .err = &err };
+    t->done(t->ud, &res);
+}
+
+int
+printer_command_then(struct printer *p, const char *line, const char *who, storeq_event_fn done,
+                     void *ud, struct sf_err *err)
+{
+    int rc = command_checks(p, line, err);
+    if (rc)
+        return rc;
+    struct cmd_ticket *t = mem_calloc(1, sizeof(*t));
+    if (t) {
+        *t = (struct cmd_ticket){ .p = p, .done = done, .ud = ud };
+        snprintf(t->name, sizeof(t->name), "%s", p->cfg.name);
+        t->line = mem_strdup(line);
+        t->who = mem_strdup(who ? who : "");
+    }
+    /* after what p queued before it: a CRASHED still queued is seen */
+    if (!t || !t->line || !t->who || storeq_read(p->env.q, held_read, t, on_held_read, t)) {
+        if (t) {
+            free(t->line);
+            free(t->who);
+        }
+        free(t);
+        return sf_err_set(err, SF_ENOMEM, "printer %s: out of memory", p->cfg.name);
+    }
+    t->next = p->cmds;
+    p->cmds = t;
+    t->l = p->env.l;
+    t->timer = loop_timer_add(t->l, PRINTER_COMMAND_WAIT_MS, on_command_wait, t);
+    return SF_OK;
 }
 
 int
@@ -346,21 +479,50 @@ printer_fenced_out(struct printer *p, int64_t id)
     printer_changed(p);
 }
 
-void
-printer_settle_orphan(struct printer *p)
+/* The orphan's read on the store's thread: for p (NULL once p is freed), of job id. */
+struct orphan_ticket {
+    struct printer *p; /* NULL: freed meanwhile */
+    int64_t id;
+    struct job_row j; /* the job as the store holds it */
+};
+
+static int
+orphan_read(struct store *s, void *arg, struct sf_err *err)
 {
-    int64_t id = p->orphan.id;
-    if (!id || !p->env.hold)
+    struct orphan_ticket *t = arg;
+    return store_job_get(s, t->id, &t->j, err);
+}
+
+static void settle(struct printer *p, int64_t id, const struct job_row *j);
+
+/* The orphan's job came back: settle it, then offer p its interrupted job if it waited. */
+static void
+on_orphan_read(void *ud, const struct storeq_result *r)
+{
+    struct orphan_ticket *t = ud;
+    struct printer *p = t->p;
+    int64_t id = t->id;
+    struct job_row j = t->j;
+    free(t);
+    if (!p)
         return;
-    struct sf_err err;
-    struct job_row j;
-    if (store_job_get(p->env.s, id, &j, &err))
-        return; /* the store away: at the next join or attach */
+    p->oticket = NULL;
+    if (!p->deaf && p->orphan.id == id && !r->rc) /* r->rc: the store away: at the next join */
+        settle(p, id, &j);
+    printer_attach_wake(p); /* an offer waited for this read (printer_attach_offer) */
+}
+
+/* Record the orphan's end (job j, read from the store) if nobody took it on since and p's host
+   holds it. */
+static void
+settle(struct printer *p, int64_t id, const struct job_row *j)
+{
     /* only while nobody took it on since: interrupted, on this printer */
-    if (j.state != JOB_INTERRUPTED || strcmp(j.printer, p->cfg.name) != 0) {
+    if (j->state != JOB_INTERRUPTED || strcmp(j->printer, p->cfg.name) != 0) {
         p->orphan.id = 0;
         return;
     }
+    struct sf_err err;
     int64_t fence = 0;
     if (p->env.hold(p->env.ud, id, &fence, &err))
         return; /* no lease yet (reaped: the host joins again, then asks again) */
@@ -377,9 +539,34 @@ printer_settle_orphan(struct printer *p)
 }
 
 void
+printer_settle_orphan(struct printer *p)
+{
+    int64_t id = p->orphan.id;
+    /* the job is read on the store's thread (after what p queued before); one read at a time:
+       the one on its way settles it, or the next join or attach asks again */
+    if (!id || !p->env.hold || p->oticket)
+        return;
+    struct orphan_ticket *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return; /* at the next join or attach */
+    *t = (struct orphan_ticket){ .p = p, .id = id };
+    if (storeq_read(p->env.q, orphan_read, t, on_orphan_read, t)) {
+        free(t);
+        return;
+    }
+    p->oticket = t;
+}
+
+void
 printer_fence_release(struct printer *p)
 {
     for (struct fence_watch *w = p->watches; w; w = w->next)
         w->p = NULL;
     p->watches = NULL;
+    if (p->oticket)
+        p->oticket->p = NULL; /* its orphan's read too */
+    p->oticket = NULL;
+    for (struct cmd_ticket *t = p->cmds; t; t = t->next)
+        t->p = NULL; /* and its commands' */
+    p->cmds = NULL;
 }

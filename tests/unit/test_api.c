@@ -999,6 +999,29 @@ T_CASE(api_job_writes_send_nothing_on_the_loops_connection)
     stop();
 }
 
+/* A manual command reads whether its printer holds an interrupted job on the store's thread,
+   and is sent when the answer comes: the loop's connection sends nothing for it (before:
+   store_job_interrupted on the loop, printer_command's interrupted_here). */
+T_CASE(api_command_reads_off_the_loops_connection)
+{
+    if (!t_store_pg()) {
+        t_skip("round trips are PostgreSQL's");
+        return;
+    }
+    struct sf_err err;
+    T_OK(start("cmdoffloop", &err), &err);
+    on_server(farm_quiet, NULL);
+    struct buf b;
+    buf_init(&b, 0);
+    /* b is idle with a clear bed and no interrupted job: the read lets the command through to
+       its driver, which has no console */
+    T_TRUE(write_off_loop("POST", "/api/printers/b/command", "{\"command\": \"G28\"}", NULL, NULL,
+                          501, &b));
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "no console") != NULL);
+    buf_release(&b);
+    stop();
+}
+
 /* POST /api/jobs/ID/resume: an optional {"line": N}, checked; refusals are 409. */
 T_CASE(api_resume_job_body_and_refusal)
 {
@@ -1031,6 +1054,32 @@ T_CASE(api_resume_job_body_and_refusal)
         200);
     T_EQ_STR(jstr(&b, "job", "state"), "printing");
     T_EQ_STR(jstr(&b, "job", "printer"), "a");
+    T_EQ_STR(jstr(&b, "job", "lines_acked"), "1234");
+    buf_release(&b);
+    stop();
+}
+
+/* POST /api/jobs/ID/resume reads the job (and its G-code's path) on the store's thread and
+   answers deferred: the loop's connection sends nothing for a refusal or a resume (before:
+   farm_job_resume's store_job_get and store_file_path on the loop). */
+T_CASE(api_resume_reads_off_the_loops_connection)
+{
+    if (!t_store_pg()) {
+        t_skip("round trips are PostgreSQL's");
+        return;
+    }
+    struct sf_err err;
+    T_OK(start("resumeoff", &err), &err);
+    stop(); /* stopped mid-print: job 1 interrupted on a */
+    T_OK(open_farm("resumeoff", &err), &err);
+    T_OK(start_api(0, &err), &err);
+    on_server(farm_quiet, NULL);
+    struct buf b;
+    buf_init(&b, 0);
+    T_TRUE(write_off_loop("POST", "/api/jobs/1/resume", NULL, NULL, NULL, 409, &b));
+    T_TRUE(strstr(jstr(&b, NULL, "error"), "line 0 is out of range") != NULL);
+    T_TRUE(write_off_loop("POST", "/api/jobs/1/resume", "{\"line\": 1234}", NULL, NULL, 200, &b));
+    T_EQ_STR(jstr(&b, "job", "state"), "printing");
     T_EQ_STR(jstr(&b, "job", "lines_acked"), "1234");
     buf_release(&b);
     stop();

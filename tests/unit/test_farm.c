@@ -2281,3 +2281,45 @@ T_CASE(farm_prepare_of_a_lost_part_fails_the_job_naming_it)
     T_TRUE(strstr(j.reason, sha) != NULL);
     teardown();
 }
+
+/*
+ * A network printer that comes back while its job is interrupted is offered
+ * the job without the loop's connection: the interrupted job and its G-code
+ * (fetched from the database when this host's cache lacks it) are read on
+ * the store's thread, the printer waiting offline for the answer.  Before,
+ * try_attach called store_job_interrupted and store_file_path on the loop.
+ */
+T_CASE(farm_reattach_reads_its_job_off_the_loop)
+{
+    static const char ini[] = "[printer n]\ndriver: octoprint\nurl: http://127.0.0.1:9\n"
+                              "api_key: k\nmaterial: PLA\nbed_size: 200, 200, 200\n";
+    struct sf_err err;
+    T_OK(setup("attachlook", ini, tdrv_new, test_prepare, &err), &err);
+    struct store *r = store_open_reader(fx.s, &err);
+    T_TRUE(r != NULL);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PLA", 1);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct job_row j;
+    T_OK(job_get(id, &j, &err), &err);
+    uncache(j.gcode_sha);
+    struct tdrv *t = tdrv_named("n");
+    open_state = DRV_PRINTING; /* the printer prints on */
+    uint64_t before = store_round_trips(fx.s);
+    snprintf(t->base.status.message, sizeof(t->base.status.message), "timed out");
+    report(t, DRV_OFFLINE, DRV_EV_STATE);
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
+         wall_ms() < end && (attaches == 0 || state_on(r, id) != JOB_PRINTING);)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(attaches, 1);
+    T_EQ_INT(state_on(r, id), JOB_PRINTING);
+    T_EQ_INT(pstate(0), PRINTER_PRINTING);
+    T_EQ_INT((long long)(store_round_trips(fx.s) - before), 0);
+    char path[1200];
+    T_OK(store_file_path(r, j.gcode_sha, path, sizeof(path), &err), &err);
+    T_EQ_STR(t->path, path); /* the driver was offered the file, local */
+    report(t, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(id, JOB_DONE));
+    store_close(r);
+    teardown();
+}

@@ -852,6 +852,64 @@ T_CASE(host_records_a_print_that_ended_while_it_was_away)
 }
 
 /*
+ * A print that ended whole on b while another host holds its job (b's end refused as stale):
+ * b reads the job back (printer_settle_orphan) on the store's thread, not on its loop's
+ * connection, and leaves the job to the host that holds it.  Before, the read was a
+ * store_job_get on the loop.
+ */
+T_CASE(host_reads_a_refused_end_back_off_the_loop)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64], sql[128];
+    snprintf(dir, sizeof(dir), "%s/endback", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t ta, id, fa;
+    T_OK(store_host_join(a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err),
+         &err);
+    T_OK(add_ready_for(a, "q", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("q");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job (its file judged) */
+    /* b's lease runs out (as in a partition) and a attaches the job: b's token is stale */
+    snprintf(sql, sizeof(sql), "UPDATE hosts SET lease_until_ms = %lld WHERE name = 'b'",
+             (long long)(clock_wall_ms() - 1000));
+    T_OK(t_store_exec(dir, sql), NULL);
+    T_OK(store_job_attach(a, "a", ta, id, &fa, &err), &err);
+    int64_t sent = store_round_trips(hx.s);
+    if (d) { /* the print ends on b's printer: b's PRINT_DONE is refused, then read back */
+        d->base.status.state = DRV_IDLE;
+        d->base.status.lines_acked = 2;
+        d->base.on_event(&d->base, DRV_EV_JOB_DONE, d->base.ud);
+    }
+    /* the refusal's answer reads the job back (before: at once, on the loop's connection) */
+    T_TRUE(wait_logged("is stale: host 'a' holds the job now"));
+    struct farm_health h = { 0 };
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        farm_health(hx.f, &h);
+        if (h.store.depth == 0 && h.store.done == h.store.posted)
+            break;
+        loop_run_once(hx.l, 20);
+    }
+    T_EQ_INT(h.store.depth, 0);
+    loop_run_once(hx.l, 20); /* the read's answer, if still on its way to the loop */
+    T_EQ_INT(store_round_trips(hx.s) - sent, 0);
+    db_text(url, "SELECT state || ' ' || claimed_by FROM jobs WHERE id = ?1", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "printing a"); /* a's now: b records nothing for it */
+    host_farm_free();
+    store_close(a);
+}
+
+/*
  * The farmd_hosts.sh flake (issue 32): a job for host b's printer, queued through another
  * host's API, stayed queued for good.  b's claim, woken by the NOTIFY, found the job's row
  * held by another host's write that leaves it queued (its waiting reason) and took the job
