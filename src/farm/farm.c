@@ -562,13 +562,17 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
         int64_t fence)
 {
     struct sf_err err;
-    if (farm_cooling(f, j->id)) { /* its files could not be had a moment ago */
+    struct prep *t = NULL;
+    /* cooling: its files could not be had a moment ago; no memory: the next kick */
+    if (farm_cooling(f, j->id) || !(t = mem_calloc(1, sizeof(*t)))) {
+        if (fence && !reslice) { /* claimed for it (several hosts): back to the queue */
+            struct job_event_args d = { .reason = "not prepared now: tried again shortly",
+                                        .fence = fence };
+            farm_prep_end(f, j->id, JOB_EV_DEFER, &d);
+        }
         retry_later(f);
         return true;
     }
-    struct prep *t = mem_calloc(1, sizeof(*t));
-    if (!t)
-        return true; /* retried on the next kick */
     struct sched_printer view;
     farm_printer_view(p, &view);
     t->f = f;
@@ -848,7 +852,9 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
             continue;
         }
         size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
-        if (best < f->n_printers && farm_host_on(f)) /* claimed first, on the store thread */
+        if (best < f->n_printers && farm_host_on(f) && farm_cooling(f, jobs[i].id))
+            retry_later(f); /* not claimed while its files cool (prepare would decline) */
+        else if (best < f->n_printers && farm_host_on(f)) /* claimed first, on the store thread */
             farm_ask_claim(f, &jobs[i], f->printers[best]);
         else if (best < f->n_printers && !prepare(f, &jobs[i], f->printers[best], false, 0))
             break; /* the store is busy: its commit wakes the farm for the rest */

@@ -177,7 +177,7 @@ on_claimed(void *ud, int rc, int64_t fence, const struct job_row *job)
     } else {
         log_info("farm", "job %lld goes back to the queue: %s", (long long)a->job.id, why);
         struct job_event_args e = { .reason = why, .fence = fence };
-        storeq_job_event(f->q, a->job.id, JOB_EV_DEFER, &e, NULL, NULL, NULL);
+        farm_prep_end(f, a->job.id, JOB_EV_DEFER, &e); /* written until the store takes it */
         farm_kick(f);
     }
     unlink_ask(f, a);

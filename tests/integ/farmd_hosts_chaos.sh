@@ -213,14 +213,16 @@ net_idle() {
 }
 b_net_done() { for p in $b_net; do net_idle "$p" || return 1; done; }
 wait_for 300 b_net_done || fail "b's network prints did not end while it was cut off ($b_net)"
-# and its Marlins' (b still drives them, cut off): one still running when b joins again is
-# interrupted there (a USB print cannot move hosts), its printer left for an operator to
-# clear, and part 3's job pinned to it would wait for good.  b joins again at once now (its
-# beat has a connection of its own), so the run waits for them as for the network prints.
-b_usb_done() { ! on b "$C" printers | grep -qE '^b_mk[12] .* (printing|paused) '; }
-wait_for 300 b_usb_done || fail "b's Marlin prints did not end while it was cut off: $(on b "$C" printers)"
+# and until b itself saw every print of its end (b still drives its printers, cut off): a
+# Marlin print still running when b joins again is interrupted there (a USB print cannot move
+# hosts), its printer left for an operator, and part 3's job pinned to it would wait for good;
+# a network print whose end b's driver sees only after b joined again is not recorded (left
+# for next: the issue's notes).  b joins again at once now (its beat has a connection of its
+# own), so the run waits for b's own view of its printers.
+b_all_done() { ! on b "$C" printers | grep -qE '^b_(mk1|mk2|mr|pl) .* (printing|paused) '; }
+wait_for 300 b_all_done || fail "b's prints did not end while it was cut off: $(on b "$C" printers)"
 proxy heal || fail "proxy heal"
-note "b's network and Marlin prints ended ($b_net b_mk*); b reconnected"
+note "b's prints ended ($b_net and its Marlins, as b saw them); b reconnected"
 b_back() { [ "$(joins b)" -gt "$b_joins" ]; }
 wait_for 90 b_back || fail "b did not join again: $(tail -5 "$tmp/b.log")"
 note "b joined again"
