@@ -95,6 +95,7 @@ struct http_defer {
     struct MHD_Connection *conn; /* its connection, suspended; NULL once gone */
     bool ready;                  /* resp holds the answer; the connection was resumed */
     struct http_resp resp;       /* the answer */
+    char audit[192];             /* http_defer_audit's line, "" if none */
     struct http_defer *next;     /* in h->defers */
 };
 
@@ -624,8 +625,17 @@ http_defer_upload(struct http_defer *d)
 }
 
 void
+http_defer_audit(struct http_defer *d, const char *line)
+{
+    if (d)
+        snprintf(d->audit, sizeof(d->audit), "%s", line);
+}
+
+void
 http_defer_answer(struct http_defer *d, struct http_resp *resp)
 {
+    if (d->audit[0]) /* what came of it, whether the client waited for it or not */
+        log_info("api", "%s: %d%s", d->audit, resp->status, d->conn ? "" : " (the client left)");
     if (!d->conn) {
         http_resp_discard(resp);
         free(d);

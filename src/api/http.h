@@ -315,6 +315,10 @@ bool http_defer_alive(const struct http_defer *d);
 /* The request's upload (the sink's context), NULL once the client is gone. */
 void *http_defer_upload(struct http_defer *d);
 void http_defer_answer(struct http_defer *d, struct http_resp *resp);
+/* The line that logs the deferred answer's status when it goes out ("METHOD PATH by WHO":
+   ": STATUS" follows): an operator's change is logged with what came of it, deferred or not.
+   NULL d is ignored. */
+void http_defer_audit(struct http_defer *d, const char *line);
 
 /* The API key u's request came with ("" for a public path). */
 const char *http_upgraded_key(const struct http_upgraded *u);

@@ -177,9 +177,11 @@ route_dispatch(const struct route_group *groups, size_t n_groups, const struct h
     char label[32], clipped[101];
     route_key_label(req, label, sizeof(label));
     route_clip(clipped, sizeof(clipped), req->path);
-    if (resp->defer)
-        log_info("api", "%s %s by %s: answer deferred", req->method, clipped, label);
-    else
+    if (resp->defer) { /* its status is logged when it goes out */
+        char line[192];
+        snprintf(line, sizeof(line), "%s %s by %s", req->method, clipped, label);
+        http_defer_audit(resp->defer, line);
+    } else
         log_info("api", "%s %s by %s: %d", req->method, clipped, label, resp->status);
 }
 
