@@ -322,6 +322,20 @@ check_queue(struct notify *n, const struct event_row *e, const struct ev_more *m
             deliver(n, &n->targets[i], &msg);
 }
 
+/* A job's move e (job-*, not job-add): done or failed, 0 for another; whether it asks for
+   the queue's counts (a job left the queue or ended). */
+static enum notify_event
+job_event(const struct event_row *e, bool *queue_check)
+{
+    char to[24];
+    job_moved_to(e->detail, to);
+    *queue_check = strcmp(to, "printing") == 0 || strcmp(to, "done") == 0 ||
+                   strcmp(to, "failed") == 0 || strcmp(to, "cancelled") == 0;
+    return strcmp(to, "done") == 0     ? NOTIFY_JOB_DONE
+           : strcmp(to, "failed") == 0 ? NOTIFY_JOB_FAILED
+                                       : 0;
+}
+
 /* Which notify_event e is, 0 for none. */
 static enum notify_event
 classify(struct notify *n, const struct event_row *e, bool *queue_check)
@@ -331,15 +345,8 @@ classify(struct notify *n, const struct event_row *e, bool *queue_check)
         n->queue_armed = true;
         return 0;
     }
-    if (strncmp(e->kind, "job-", 4) == 0) {
-        char to[24];
-        job_moved_to(e->detail, to);
-        *queue_check = strcmp(to, "printing") == 0 || strcmp(to, "done") == 0 ||
-                       strcmp(to, "failed") == 0 || strcmp(to, "cancelled") == 0;
-        return strcmp(to, "done") == 0     ? NOTIFY_JOB_DONE
-               : strcmp(to, "failed") == 0 ? NOTIFY_JOB_FAILED
-                                           : 0;
-    }
+    if (strncmp(e->kind, "job-", 4) == 0)
+        return job_event(e, queue_check);
     if (strcmp(e->kind, "printer-state") != 0 || !e->printer[0])
         return 0;
     char prev[24];
@@ -384,15 +391,8 @@ static enum notify_event
 may_be(const struct event_row *e, bool *queue_check)
 {
     *queue_check = false;
-    char to[24];
-    if (strncmp(e->kind, "job-", 4) == 0 && strcmp(e->kind, "job-add") != 0) {
-        job_moved_to(e->detail, to);
-        *queue_check = strcmp(to, "printing") == 0 || strcmp(to, "done") == 0 ||
-                       strcmp(to, "failed") == 0 || strcmp(to, "cancelled") == 0;
-        return strcmp(to, "done") == 0     ? NOTIFY_JOB_DONE
-               : strcmp(to, "failed") == 0 ? NOTIFY_JOB_FAILED
-                                           : 0;
-    }
+    if (strncmp(e->kind, "job-", 4) == 0 && strcmp(e->kind, "job-add") != 0)
+        return job_event(e, queue_check);
     if (strcmp(e->kind, "printer-state") != 0 || !e->printer[0])
         return 0;
     return strcmp(e->detail, "awaiting-clear") == 0 ? NOTIFY_BED_CLEAR
