@@ -2,8 +2,10 @@
 // by playwright-core; started by history.sh (one fast simulated printer).
 // A job printed to the end and one cancelled, then on the page: both
 // listed with their outcome and printer, the outcome filter, the name
-// search, the CSV link (its rows follow the filters), "Print again"
-// creating a job, and axe-core.  Fails on any page error.
+// search (the list answers the last search, whatever order the answers
+// come in; a list on its way does not show the last one's note), the CSV
+// link (its rows follow the filters), "Print again" creating a job, and
+// axe-core.  Fails on any page error.
 import fs from "node:fs";
 import path from "node:path";
 import { accessible, apiGet, call, check, env, log, runChromium, submit, until } from "./lib.mjs";
@@ -18,9 +20,44 @@ function rows(page) {
   return page.evaluate(() => [...document.querySelectorAll("#jobs tbody tr")].map((tr) => Number(tr.cells[0].textContent)));
 }
 
+// The table's answer is in: the page empties the table when Show is pressed,
+// so an empty table alone is no answer.
+async function settled(page) {
+  return (await page.locator("#jobs").getAttribute("aria-busy")) !== "true";
+}
+
+function note(page) {
+  return page.locator("#jobs-note").innerText();
+}
+
 async function show(page, want, what) {
   await page.getByRole("button", { name: "Show" }).click();
-  await until(async () => (await rows(page)).join() === want.join(), `${what}: rows ${want} (shown: ${await rows(page)})`);
+  await until(async () => (await rows(page)).join() === want.join() && (await settled(page)),
+    `${what}: rows ${want} (shown: ${await rows(page)}, note: ${await note(page)})`);
+}
+
+// Hold the page's requests of the jobs whose name filter is name until
+// release(); asked: the first one held, once the page has sent it.
+async function hold(page, name) {
+  let release, seen;
+  const gate = new Promise((w) => (release = w));
+  const asked = new Promise((w) => (seen = w));
+  const match = (u) => u.pathname === "/api/jobs" && u.searchParams.get("name") === name;
+  await page.route(match, async (route) => {
+    seen(route.request());
+    await gate;
+    await route.continue();
+  });
+  return { asked, release, end: () => page.unroute(match) };
+}
+
+// Press Show for a name search whose answer is held.
+async function search(page, name) {
+  const h = await hold(page, name);
+  await page.fill("#f-name", name);
+  await page.getByRole("button", { name: "Show" }).click();
+  h.request = await h.asked;
+  return h;
 }
 
 async function run(page) {
@@ -59,9 +96,27 @@ async function run(page) {
   await page.selectOption("#f-state", "done,failed,cancelled");
   await page.fill("#f-name", "alpha");
   await show(page, [done], "name alpha");
-  await page.fill("#f-name", "no such part");
-  await show(page, [], "a name nothing has");
-  check((await page.locator("#jobs-note").innerText()) === "No finished job matches.", "empty note");
+  // its answer held: the emptied table does not keep the last list's note
+  const none = await search(page, "no such part");
+  check((await rows(page)).length === 0 && !(await settled(page)) && (await note(page)) === "Loading…",
+    `a search on its way: rows ${await rows(page)}, note: ${await note(page)}`);
+  none.release();
+  await until(async () => settled(page), "the answer to 'no such part'");
+  await none.end();
+  check((await rows(page)).length === 0, `a name nothing has: rows ${await rows(page)}`);
+  check((await note(page)) === "No finished job matches.", "empty note: " + (await note(page)));
+
+  log("two searches in a row: the list answers the later one, the earlier answer dropped");
+  const first = await search(page, "alpha");
+  const second = await search(page, "beta");
+  first.release(); // the earlier answer comes in first, then the later one
+  await (await first.request.response()).finished();
+  second.release();
+  await until(async () => (await rows(page)).includes(cut) && (await settled(page)), `job ${cut} listed`);
+  await first.end();
+  await second.end();
+  check((await rows(page)).join() === [cut].join() && (await note(page)) === "1 jobs shown.",
+    `after 'alpha' then 'beta': rows ${await rows(page)}, note: ${await note(page)}`);
 
   log("the CSV link follows the filters");
   await page.fill("#f-name", "alpha");

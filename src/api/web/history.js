@@ -8,7 +8,8 @@
 "use strict";
 
 const PAGE = 50;
-const st = { csrf: "", readOnly: true, cursor: "", query: "" };
+// seq: the number of the latest loadJobs; an answer to an earlier one is dropped
+const st = { csrf: "", readOnly: true, cursor: "", query: "", seq: 0 };
 const $ = (id) => document.getElementById(id);
 
 function showError(msg) {
@@ -108,26 +109,40 @@ function addRow(j) {
   $("jobs").tBodies[0].appendChild(tr);
 }
 
+// Show the finished jobs the filters select (more: the next page of them).
+// Each answer is for the latest request only: a Show pressed while an
+// earlier one (or Older jobs) is on its way drops that earlier answer, which
+// would otherwise land in the new list, whichever of the two came last.
+// While a list is on its way the table is aria-busy and the note says so,
+// not what the last list held.
 async function loadJobs(more) {
+  const seq = ++st.seq;
   showError("");
   if (!more) {
     st.query = query().toString();
     st.cursor = "";
     $("jobs").tBodies[0].textContent = "";
     $("csv").href = `/api/jobs?${st.query}&format=csv`;
+    $("more").hidden = true;
+    $("jobs-note").textContent = "Loading…";
   }
+  $("jobs").setAttribute("aria-busy", "true");
   const cursor = st.cursor ? `&cursor=${encodeURIComponent(st.cursor)}` : "";
   try {
     const r = await get(`/api/jobs?${st.query}&format=csv&limit=${PAGE}${cursor}`);
     const jobs = parseCsv(await r.text());
+    if (seq !== st.seq) return;
     jobs.forEach(addRow);
     st.cursor = r.headers.get("X-Next-Cursor") || "";
     $("more").hidden = !st.cursor;
     const n = $("jobs").tBodies[0].rows.length;
     $("jobs-note").textContent = n ? `${n} jobs shown.` : "No finished job matches.";
   } catch (e) {
+    if (seq !== st.seq) return;
+    $("jobs-note").textContent = "";
     showError(`Jobs: ${e.message}`);
   }
+  $("jobs").setAttribute("aria-busy", "false");
 }
 
 function useBars(values) {
