@@ -181,8 +181,8 @@ none_free(struct store *s, const int64_t *ids, size_t n, struct sf_err *err)
         return rc ? rc : SF_ENOTFOUND;
     return sf_err_set(err, SF_EBUSY,
                       "store: job %lld is held by another transaction (another host's claim on "
-                      "its way, or a write to the job), and none of the other %zu chosen is free",
-                      (long long)held, n - 1);
+                      "its way, or a write to the job)%s",
+                      (long long)held, n > 1 ? ", and no other job chosen with it is free" : "");
 }
 
 int
