@@ -2,6 +2,9 @@
  * test_farm_host.c - what a host's scheduler reads and claims on a shared
  * store (farm_host.h over store_host.h): a claim of one chosen queued job
  * is taken once (a second host, or the same job again, gets SF_ENOTFOUND);
+ * a claim among a pass's chosen jobs takes the first free (a held row is
+ * passed over, never lost), and a host whose first choice another host's
+ * claim holds prepares the next;
  * a ready job no host holds is taken by one host only; each host's live
  * jobs leave out the other hosts' claims but keep a job on a printer it
  * owns; a reaped host's jobs come back for the others.  A farm as one of
