@@ -855,7 +855,7 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
         if (best < f->n_printers && farm_host_on(f) && farm_cooling(f, jobs[i].id))
             retry_later(f); /* not claimed while its files cool (prepare would decline) */
         else if (best < f->n_printers && farm_host_on(f)) /* claimed first, on the store thread */
-            farm_ask_claim(f, &jobs[i], f->printers[best]);
+            farm_ask_claim(f, jobs, sj, n, i, sp, best, why);
         else if (best < f->n_printers && !prepare(f, &jobs[i], f->printers[best], false, 0))
             break; /* the store is busy: its commit wakes the farm for the rest */
     }

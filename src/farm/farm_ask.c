@@ -31,6 +31,7 @@
 #include "farm_int.h"
 #include "printer.h"
 #include "sched.h"
+#include "store_host.h"
 #include "storeq.h"
 
 struct farm_ask {
@@ -183,13 +184,42 @@ on_claimed(void *ud, int rc, int64_t fence, const struct job_row *job)
     unlink_ask(f, a);
 }
 
-void
-farm_ask_claim(struct farm *f, const struct job_row *j, const struct printer *p)
+/* The queued jobs the pass would prepare for printer best as it would jobs[i] (not waiting for
+   a reason, files not cooling, the same overhang: the printer's key is the ask's), jobs[i]
+   first, then those after it in the pass's order, into ids (STORE_CLAIM_IDS_MAX); how many.
+   Hosts whose passes read the same queue choose the same first job: the claim takes the
+   first of these still free, so all but one do not come back empty for a pass again (each a
+   read of the whole live queue: bench_hosts, 10 hosts, 5 passes a claim). */
+static size_t
+claim_choices(struct farm *f, const struct job_row *jobs, const struct sched_job *sj, size_t n,
+              size_t i, const struct sched_printer *sp, size_t best, char (*why)[SCHED_REASON_MAX],
+              int64_t *ids)
 {
-    struct farm_ask *a = ask_new(f, j, p, false, false);
+    size_t m = 0, seen = 0;
+    ids[m++] = jobs[i].id;
+    /* a few more queued jobs looked at than taken: each look is a walk of the live jobs */
+    for (size_t k = i + 1; k < n && m < STORE_CLAIM_IDS_MAX && seen < 4 * STORE_CLAIM_IDS_MAX;
+         k++) {
+        if (jobs[k].state != JOB_QUEUED)
+            continue;
+        seen++;
+        if (!why[k][0] && jobs[k].opts.overhang_deg == jobs[i].opts.overhang_deg &&
+            !farm_cooling(f, jobs[k].id) && sched_prepare_for(sj, n, k, sp, f->n_printers) == best)
+            ids[m++] = jobs[k].id;
+    }
+    return m;
+}
+
+void
+farm_ask_claim(struct farm *f, const struct job_row *jobs, const struct sched_job *sj, size_t n,
+               size_t i, const struct sched_printer *sp, size_t best, char (*why)[SCHED_REASON_MAX])
+{
+    int64_t ids[STORE_CLAIM_IDS_MAX];
+    size_t n_ids = claim_choices(f, jobs, sj, n, i, sp, best, why, ids);
+    struct farm_ask *a = ask_new(f, &jobs[i], f->printers[best], false, false);
     if (!a)
         return; /* the next kick tries again */
-    if (farm_host_claim(f, j->id, on_claimed, a)) {
+    if (farm_host_claim(f, ids, n_ids, on_claimed, a)) {
         free(a); /* its last claim in doubt still (settled, it kicks), or out of memory */
         return;
     }

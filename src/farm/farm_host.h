@@ -18,7 +18,7 @@
  *
  * Which host does what (the rule, simplest first): a host prepares only a
  * queued job its scheduler chose for a printer of its own, after claiming
- * it (store_job_claim_id: the claim's statement with SKIP LOCKED, so two
+ * it (store_job_claim_first: the claim's statement with SKIP LOCKED, so two
  * hosts never prepare one job), and starts only jobs on printers it owns:
  * its own prepared jobs, or a ready job no host holds (an uploaded G-code,
  * one a reaped host had prepared), taken first (store_job_take, one
@@ -103,17 +103,20 @@ int64_t farm_host_token(const struct farm *f);
    flight): the farm is stopping then. */
 typedef void (*farm_host_answer_fn)(void *ud, int rc, int64_t fence, const struct job_row *job);
 /*
- * Claim queued job id for preparing (store_job_claim_id) on the store thread, after what the
- * farm queued before; done(ud, ...) on the loop with its answer: SF_OK, SF_ENOTFOUND (another
- * host has it, or it moved on: not logged), else logged: SF_EBUSY, SF_EUNREACH (passing: not
+ * Claim for preparing the first free of queued jobs ids[0..n) (the pass's choices for one
+ * printer, best first; those past STORE_CLAIM_IDS_MAX are left out), on the store thread
+ * (store_job_claim_first), after what the farm queued before; done(ud, ...) on the loop with
+ * its answer (job: the one claimed): SF_OK, SF_ENOTFOUND (other hosts have them, or they moved
+ * on: not logged), else logged: SF_EBUSY, SF_EUNREACH (passing: not
  * retried on the thread), SF_ESTALE (the lease not current: the host beats at once).  A claim
  * whose COMMIT's answer was lost (SF_EINDOUBT) is read back on the store thread
  * (store_job_claim_settle): one that committed is given back to the queue, so the job is never
- * left this host's and prepared by no one; until then job id is not claimed again.  SF_OK
- * (posted), SF_ENOTFOUND (its last claim is in doubt still) or SF_ENOMEM: done is not called
- * then.
+ * left this host's and prepared by no one; until then that job is not claimed again (left out
+ * of the ids).  SF_OK (posted), SF_ENOTFOUND (the last claim of every one is in doubt still) or
+ * SF_ENOMEM: done is not called then.
  */
-int farm_host_claim(struct farm *f, int64_t id, farm_host_answer_fn done, void *ud);
+int farm_host_claim(struct farm *f, const int64_t *ids, size_t n, farm_host_answer_fn done,
+                    void *ud);
 /* Take ready job id for a printer of f's (store_job_take) on the store thread; done(ud, ...)
    on the loop with its answer: SF_OK with its fencing token (what f writes for the job carries
    it: printer_set_fence), SF_ENOTFOUND (another host holds it, or it is no longer ready), or

@@ -92,10 +92,12 @@ in_doubt(const struct farm_host *h, int64_t id)
 struct hask {
     struct farm_host *h;
     enum { ASK_CLAIM, ASK_TAKE, ASK_GIVE } op;
-    char host[STORE_HOST_NAME_MAX]; /* h's name and token when posted */
-    int64_t token, id, fence;       /* the job; a give-back's token, a claim's or take's answer */
-    bool bar;                       /* a give-back: not taken here again for a lease */
-    bool ran;                       /* a claim or take ran: rc and err are its answer */
+    char host[STORE_HOST_NAME_MAX];   /* h's name and token when posted */
+    int64_t token, id, fence;         /* the job; a give-back's token, a claim's or take's answer */
+    int64_t ids[STORE_CLAIM_IDS_MAX]; /* a claim's: the jobs it chooses from (id: the one tried) */
+    size_t n_ids;
+    bool bar; /* a give-back: not taken here again for a lease */
+    bool ran; /* a claim or take ran: rc and err are its answer */
     int rc;
     struct sf_err err;
     char why[256];      /* a give-back's */
@@ -116,9 +118,17 @@ ask_call(struct store *s, void *arg, struct sf_err *err)
     a->err = (struct sf_err){ 0 };
     if (a->op == ASK_GIVE)
         return store_job_give_back(s, a->host, a->id, a->fence, a->why, err);
-    a->rc = a->op == ASK_CLAIM
-                ? store_job_claim_id(s, a->host, a->token, a->id, &a->job, &a->fence, &a->err)
-                : store_job_take(s, a->host, a->token, a->id, &a->fence, &a->err);
+    if (a->op == ASK_CLAIM) {
+        int64_t tried = 0;
+        a->rc = store_job_claim_first(s, a->host, a->token, a->ids, a->n_ids, &tried, &a->job,
+                                      &a->fence, &a->err);
+        if (tried)
+            a->id = tried; /* the job claimed, or the one to read back */
+        else if (a->rc == SF_EINDOUBT)
+            a->rc = SF_EUNREACH; /* no claim was made: nothing to read back */
+    } else {
+        a->rc = store_job_take(s, a->host, a->token, a->id, &a->fence, &a->err);
+    }
     a->ran = true;
     *err = a->err;
     if (a->rc == SF_EBUSY || a->rc == SF_EUNREACH || a->rc == SF_EINDOUBT)
@@ -222,17 +232,22 @@ ask_post(struct farm_host *h, struct hask *a, farm_host_answer_fn done, void *ud
 }
 
 int
-farm_host_claim(struct farm *f, int64_t id, farm_host_answer_fn done, void *ud)
+farm_host_claim(struct farm *f, const int64_t *ids, size_t n, farm_host_answer_fn done, void *ud)
 {
     struct farm_host *h = f->host;
-    if (in_doubt(h, id))
-        return SF_ENOTFOUND; /* not again until its last claim is settled */
     struct hask *a = mem_calloc(1, sizeof(*a));
     if (!a)
         return SF_ENOMEM;
+    for (size_t k = 0; k < n && a->n_ids < STORE_CLAIM_IDS_MAX; k++)
+        if (!in_doubt(h, ids[k])) /* not again until its last claim is settled */
+            a->ids[a->n_ids++] = ids[k];
+    if (!a->n_ids) {
+        free(a);
+        return SF_ENOTFOUND;
+    }
     /* on the store thread after what the farm queued before it (its events) */
     a->op = ASK_CLAIM;
-    a->id = id;
+    a->id = a->ids[0];
     return ask_post(h, a, done, ud);
 }
 

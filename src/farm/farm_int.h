@@ -136,15 +136,18 @@ bool farm_prepare(struct farm *f, const struct job_row *j, const struct printer 
 /*
  * farm_ask.c, one of several hosts: the scheduling pass's claims and takes
  * on the store thread; their answers on the loop act.  farm_ask_claim:
- * claim queued job j, then prepare it for p (counted in f->preparing from
- * now).  farm_ask_take: take ready job j, then start it on p (reslice:
- * prepare it again for p; counted in f->preparing from now); a single host
- * starts (or prepares) at once.  farm_ask_mark, in a pass: the jobs with a
- * claim or take on its way as the store will have them (queued ->
- * preparing, ready -> printing), and the printers (sp, f's order) a job is
- * being taken for, busy.
+ * claim queued job jobs[i] (of the pass's n, sj their view, sp the
+ * printers' in f's order, why their reasons), or if another host has it
+ * one of the next the pass would prepare for printer best as well, then
+ * prepare it for printers[best] (counted in f->preparing from now).  farm_ask_take: take ready job
+ * j, then start it on p (reslice: prepare it again for p; counted in f->preparing from now); a
+ * single host starts (or prepares) at once.  farm_ask_mark, in a pass: the jobs with a claim or
+ * take on its way as the store will have them (queued -> preparing, ready -> printing), and the
+ * printers (sp, f's order) a job is being taken for, busy.
  */
-void farm_ask_claim(struct farm *f, const struct job_row *j, const struct printer *p);
+void farm_ask_claim(struct farm *f, const struct job_row *jobs, const struct sched_job *sj,
+                    size_t n, size_t i, const struct sched_printer *sp, size_t best,
+                    char (*why)[SCHED_REASON_MAX]);
 void farm_ask_take(struct farm *f, const struct job_row *j, struct printer *p, bool reslice);
 void farm_ask_mark(const struct farm *f, struct job_row *jobs, size_t n, struct sched_printer *sp);
 

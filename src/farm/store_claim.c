@@ -140,6 +140,77 @@ store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t id,
     return SF_OK;
 }
 
+/* The first of ids[0..n) (their order) still queued, into *id (0 if none); lock: only one
+   whose row no other transaction holds, locked until the caller's transaction ends
+   (PostgreSQL: SKIP LOCKED), else as committed writes left it. */
+static int
+pick_first(struct store *s, const int64_t *ids, size_t n, bool lock, int64_t *id,
+           struct sf_err *err)
+{
+    char sql[1024];
+    int len = snprintf(sql, sizeof(sql), "SELECT id FROM jobs WHERE state = '%s' AND id IN (",
+                       job_state_name(JOB_QUEUED));
+    for (int k = 1; k <= STORE_CLAIM_IDS_MAX; k++)
+        len += snprintf(sql + len, sizeof(sql) - (size_t)len, "%s?%d", k > 1 ? "," : "", k);
+    len += snprintf(sql + len, sizeof(sql) - (size_t)len, ") ORDER BY CASE id");
+    for (int k = 1; k <= STORE_CLAIM_IDS_MAX; k++)
+        len += snprintf(sql + len, sizeof(sql) - (size_t)len, " WHEN ?%d THEN %d", k, k);
+    snprintf(sql + len, sizeof(sql) - (size_t)len, " END LIMIT 1%s",
+             lock && store_is_pg(s) ? " FOR UPDATE SKIP LOCKED" : "");
+    struct sqldb_stmt *st;
+    int rc = store_prepare(s, &st, sql, err);
+    if (rc)
+        return rc;
+    for (size_t k = 0; k < STORE_CLAIM_IDS_MAX; k++) /* the rest: the last again */
+        sqldb_bind_int64(st, (int)k + 1, ids[k < n ? k : n - 1]);
+    rc = sqldb_step(st);
+    *id = rc == SQLDB_ROW ? sqldb_column_int64(st, 0) : 0;
+    sqldb_finalize(st);
+    return rc == SQLDB_ROW || rc == SQLDB_DONE ? SF_OK : store_db_fail(s, err, "pick a job");
+}
+
+/* None of ids[0..n) was free to claim: SF_EBUSY if one is still queued as far as committed
+   writes say (its row held by a write that may leave it queued, or by a claim on its way:
+   the flake SKIP LOCKED alone made, claim_next), else SF_ENOTFOUND (err not set). */
+static int
+none_free(struct store *s, const int64_t *ids, size_t n, struct sf_err *err)
+{
+    int64_t held;
+    int rc = pick_first(s, ids, n, false, &held, err);
+    if (rc || !held)
+        return rc ? rc : SF_ENOTFOUND;
+    return sf_err_set(err, SF_EBUSY,
+                      "store: job %lld is held by another transaction (another host's claim on "
+                      "its way, or a write to the job)%s",
+                      (long long)held, n > 1 ? ", and no other job chosen with it is free" : "");
+}
+
+int
+store_job_claim_first(struct store *s, const char *host, int64_t token, const int64_t *ids,
+                      size_t n, int64_t *tried, struct job_row *out, int64_t *fence,
+                      struct sf_err *err)
+{
+    int64_t f = 0, id = 0, now = store_clock_ms(s);
+    *tried = 0;
+    if (n == 0 || n > STORE_CLAIM_IDS_MAX)
+        return sf_err_set(err, SF_EINVAL, "claim: %zu jobs to choose from (1 to %d)", n,
+                          STORE_CLAIM_IDS_MAX);
+    int rc = store_begin(s, err);
+    if (rc)
+        return rc;
+    if ((rc = store_host_hold(s, host, token, now, err)) == SF_OK &&
+        (rc = pick_first(s, ids, n, true, &id, err)) == SF_OK) {
+        /* the row is this transaction's now: the claim's NOWAIT passes */
+        *tried = id;
+        rc = id ? claim_next(s, host, "", id, now, out, &f, err) : none_free(s, ids, n, err);
+    }
+    if ((rc = store_end_tx(s, rc, err)))
+        return rc;
+    if (fence)
+        *fence = f;
+    return SF_OK;
+}
+
 /* store_job_claim_settle in the caller's transaction. */
 static int
 settle_tx(struct store *s, const char *host, int64_t id, bool *released, struct sf_err *err)

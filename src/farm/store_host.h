@@ -208,6 +208,25 @@ int store_job_claim_id(struct store *s, const char *host, int64_t token, int64_t
                        struct job_row *out, int64_t *fence, struct sf_err *err);
 
 /*
+ * As store_job_claim_id, for the first of queued jobs ids[0..n) (n at most
+ * STORE_CLAIM_IDS_MAX, in the order given: a host's scheduler's choices for
+ * one printer, the best first) that is still queued and whose row no other
+ * transaction holds (PostgreSQL: SKIP LOCKED, so hosts whose passes chose
+ * the same jobs each claim the next one instead of failing on the first).
+ * *tried: the job whose claim was made (0 if none; the one to read back,
+ * store_job_claim_settle, when the claim is in doubt).  SF_ENOTFOUND (err
+ * not set) when none of them is queued; SF_EBUSY when none was free but
+ * one is still queued as far as committed writes say (its row held by a
+ * write that may leave it queued, or another host's claim on its way: try
+ * again; such a write wakes no host when it commits); SF_EINVAL when n is 0
+ * or too many.
+ */
+#define STORE_CLAIM_IDS_MAX 16 /* the jobs a claim chooses from: more than hosts race for one */
+int store_job_claim_first(struct store *s, const char *host, int64_t token, const int64_t *ids,
+                          size_t n, int64_t *tried, struct job_row *out, int64_t *fence,
+                          struct sf_err *err);
+
+/*
  * Settle host's claim of job id whose COMMIT's answer was lost
  * (store_job_claim_id failed with SF_EINDOUBT: it may have committed).  If
  * it did (the job is preparing and host's), the claim is given back: the
