@@ -7,7 +7,9 @@
  * Prints where to connect on its first line of output (the pty path or
  * tcp://127.0.0.1:PORT), then serves until SIGINT/SIGTERM, when it flushes
  * its log and prints one "stats:" line on stderr (executed commands,
- * resends, planner starvation, bytes), which the benchmarks read.
+ * resends, planner starvation, bytes; and where the host's last bytes sit:
+ * the last line number taken, the queue, the RX ring, the wire), which the
+ * benchmarks and a failing scenario's report (tests/integ/lib/farm.sh) read.
  *
  * --count N runs N printers in this one process, for farm benchmarks where
  * 50 simulator processes would cost more CPU (and scheduler noise) than the
@@ -60,12 +62,12 @@ print_stats(const struct sim_marlin *s, int index, int count)
     fprintf(stderr,
             "%sexecuted=%llu resends=%llu starved=%llu starved_s=%.3f rx_bytes=%llu "
             "tx_bytes=%llu rx_dropped=%llu connects=%llu halted=%d x=%.3f y=%.3f z=%.3f "
-            "e=%.5f\n",
+            "e=%.5f last_n=%ld queued=%d rx=%d stage=%d\n",
             simopt_stats_head(index, count), (unsigned long long)st.executed,
             (unsigned long long)st.resends, (unsigned long long)st.starved, st.starved_s,
             (unsigned long long)st.rx_bytes, (unsigned long long)st.tx_bytes,
             (unsigned long long)st.rx_dropped, (unsigned long long)st.connects, st.halted, st.x,
-            st.y, st.z, st.e);
+            st.y, st.z, st.e, st.last_n, st.queued, st.rx_len, st.stage_len);
 }
 
 struct farm_of_sims {

@@ -316,12 +316,17 @@ marlin_deadline(struct marlin *m, int64_t now)
         m->probes = 0;
         return;
     }
+    /* Which side stopped: bytes still waiting to be written (the link
+       takes nothing), or the printer's last words and when (it talks, but
+       not of these lines). */
     log_printer(LOG_INFO, m->base.name,
                 "no reply for %lld ms (lines %ld-%ld in flight, window %d, high %ld, tag %ld, "
-                "swallow %d stale %ld settling %d): probing",
+                "swallow %d stale %ld settling %d, %zu bytes unsent, last byte %lld ms ago, "
+                "last reply '%s'): probing",
                 (long long)(now - m->progress_ms), m->win.acked + 1, m->win.next - 1, m->win.window,
                 m->win.high, linewin_tag(&m->win, m->win.acked + 1), m->win.swallow, m->win.stale,
-                m->settling);
+                m->settling, transport_pending(m->t), (long long)(now - m->last_rx_ms),
+                m->last_reply);
     m->st.deadlines++;
     m->st.lost_ms += m->margin_ms; /* what the wait cost past the printer's own time */
     m->progress_ms = now;

@@ -487,6 +487,10 @@ sim_marlin_stats(const struct sim_marlin *s, struct sim_marlin_stats *out)
 {
     *out = s->st;
     out->halted = s->halted;
+    out->last_n = s->last_n;
+    out->queued = s->q_len;
+    out->rx_len = s->rx_len;
+    out->stage_len = s->stage_len;
     out->x = s->pos[0];
     out->y = s->pos[1];
     out->z = s->pos[2];

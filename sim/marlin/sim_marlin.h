@@ -64,6 +64,10 @@ struct sim_marlin_stats {
     uint64_t ep_near;  /* lines numbered from 1 one byte from the emergency parser acting */
     uint64_t ep_acted; /* lines the emergency parser acted on (M108, M112, M410) */
     bool halted;       /* killed (M112, thermal runaway); needs a reset */
+    long last_n;       /* the last line number taken (a line's N, or M110's) */
+    int queued;        /* commands in the BUFSIZE queue, the one running included */
+    int rx_len;        /* bytes in the RX ring, not yet made into a line */
+    int stage_len;     /* bytes taken from the link, still on the wire to the printer */
     double x, y, z, e; /* current logical position, mm */
     double nozzle_c, nozzle_target_c, bed_c, bed_target_c;
 };

@@ -536,6 +536,57 @@ T_CASE(marlin_probe_answer_stands_for_lost_ones)
     faulty_stream(true, "drop-oks=4:10", 0);
 }
 
+/* The first "no reply" line the driver logged. */
+struct no_reply {
+    int n;
+    char first[600];
+};
+
+static void
+catch_no_reply(void *ud, enum log_level level, const char *subsys, const char *printer,
+               const char *msg)
+{
+    (void)level;
+    (void)subsys;
+    (void)printer;
+    struct no_reply *nr = ud;
+    if (strstr(msg, "no reply for") && nr->n++ == 0)
+        snprintf(nr->first, sizeof(nr->first), "%s", msg);
+}
+
+/*
+ * A time-out's log line says which side stopped: the bytes the link has
+ * not taken yet (a write side that stalls), when the printer last sent
+ * anything and what (a printer that talks, but not of these lines).
+ * integ/farmd_notify once ended with 230 probes, one every 1.3 s, and the
+ * line could not tell whether they ever left the host.
+ */
+T_CASE(marlin_deadline_names_the_silent_side)
+{
+    sim_time = true;
+    struct sim_marlin_config sc;
+    sim_config(&sc, true, false, "drop-oks=4:10");
+    struct run r = { 0 };
+    if (!setup(&r, &sc, 0)) {
+        sim_time = false;
+        return;
+    }
+    struct no_reply nr = { 0 };
+    log_set_level(LOG_INFO);
+    log_set_sink(catch_no_reply, &nr);
+    write_job(&r, 200, NULL);
+    struct outcome o;
+    run_job(&r, 60000, &o);
+    log_set_sink(NULL, NULL);
+    quiet_logs();
+    ran_exactly(&r, &o, "job");
+    T_TRUE(nr.n >= 1);
+    if (!strstr(nr.first, ", 0 bytes unsent, last byte ") || !strstr(nr.first, "last reply '"))
+        t_fail(__FILE__, __LINE__, "time-out line: %s", nr.first);
+    teardown(&r);
+    sim_time = false;
+}
+
 /* drop-oks takes LINE:N; a typo is an error, not a run without the fault. */
 T_CASE(marlin_sim_drop_oks_spec)
 {

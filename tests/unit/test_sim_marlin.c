@@ -268,3 +268,30 @@ T_CASE(sim_hold_holds_printing_moves_while_its_file_exists)
         close_host(&h);
     }
 }
+
+/*
+ * The counters say where the host's last lines sit (slimfarm-sim prints
+ * them on exit, and a failing scenario shows them): the last number taken,
+ * the commands queued, the bytes waiting in the RX ring and on the wire.
+ * A dwell blocks the queue: lines 2-4 wait in it, 5 and 6 before it.
+ */
+T_CASE(sim_stats_say_where_the_hosts_lines_sit)
+{
+    struct host h;
+    T_TRUE(open_numbered(&h));
+    say(&h, 1, "G4 S100"); /* 1 s at speed 100 */
+    for (long n = 2; n <= 6; n++)
+        say(&h, n, "G1 X5");
+    pump(&h, 50);
+    struct sim_marlin_stats st;
+    sim_marlin_stats(h.sim, &st);
+    T_EQ_INT(st.last_n, 4);
+    T_EQ_INT(st.queued, 4);
+    T_TRUE(st.rx_len + st.stage_len > 0);
+    pump(&h, 3000);
+    sim_marlin_stats(h.sim, &st);
+    T_EQ_INT(st.last_n, 6);
+    T_EQ_INT(st.queued, 0);
+    T_EQ_INT(st.rx_len + st.stage_len, 0);
+    close_host(&h);
+}

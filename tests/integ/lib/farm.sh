@@ -21,7 +21,26 @@ cleanup() {
   [ -n "${KEEP_TMP:-}" ] && echo "kept $tmp" || rm -rf "$tmp"
 }
 trap cleanup EXIT
-fail() { echo "FAIL: $*"; echo "--- daemon log (tail)"; tail -30 "$tmp/log" 2>/dev/null; exit 1; }
+fail() {
+  echo "FAIL: $*"; echo "--- daemon log (tail)"; tail -30 "$tmp/log" 2>/dev/null
+  sim_tails
+  exit 1
+}
+
+# sim_tails: each simulated Marlin's side of a failure, after a SIGTERM (a sim
+# prints its counters on exit): how many bytes it took from the host and how
+# many commands it ran, and the last commands it ran.  A stream that stalls
+# shows here whether the host's lines ever reached the printer.
+sim_tails() {
+  local a n v
+  for a in "$tmp"/*.addr; do
+    [ -e "$a" ] || return 0
+    n=$(basename "$a" .addr) v=sim_$n
+    [ -n "${!v:-}" ] && { kill "${!v}" && wait "${!v}"; } 2>/dev/null
+    echo "--- sim $n: $(tail -n 2 "$tmp/$n.err" 2>/dev/null | tr '\n' ' ')"
+    echo "    last commands run: $(tail -n 3 "$tmp/$n.log" 2>/dev/null | tr '\n' '|')"
+  done
+}
 
 port=0
 http_port=
