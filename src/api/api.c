@@ -760,7 +760,7 @@ api_new(const struct api_config *cfg, struct sf_err *err)
     a->reads = api_read_new(cfg->loop, cfg->store, err);
     a->slicers.reads = a->reads;
     wc.reads = a->reads;
-    a->push = a->reads ? api_octopush_new(cfg->loop, cfg->store, cfg->farm, cfg->session_idle_ms,
+    a->push = a->reads ? api_octopush_new(cfg->loop, a->reads, cfg->farm, cfg->session_idle_ms,
                                           cfg->session_max_ms, err)
                        : NULL;
     a->slicers.push = a->push;

@@ -249,13 +249,10 @@ printer_json(const struct api_octoprint_summary *s)
                      "error", (int)s->error);
 }
 
-/* The one job printing is read from the loop's store: one row by its key. */
 json_t *
-api_octoprint_job_json(struct store *store, const struct api_octoprint_summary *s)
+api_octoprint_job_json(const struct job_row *j, const struct api_octoprint_summary *s)
 {
-    struct job_row j;
-    bool one = s->job && store_job_get(store, s->job, &j, NULL) == SF_OK;
-    return job_json(one ? &j : NULL, s);
+    return job_json(j, s);
 }
 
 /* A GET /api/job on its way: the one job's row read on the API's reader (the farm's

@@ -57,8 +57,9 @@ struct api_octoprint_summary {
 bool api_octoprint_summarize(struct farm *f, const char *printer, struct api_octoprint_summary *s);
 /* {"text", "flags"} of OctoPrint's state (new reference). */
 json_t *api_octoprint_state_json(const struct api_octoprint_summary *s);
-/* GET /api/job's {"job", "progress", "state"}, the one job read from store (new reference). */
-json_t *api_octoprint_job_json(struct store *store, const struct api_octoprint_summary *s);
+/* GET /api/job's {"job", "progress", "state"} with s's one job j (NULL: none, or not read; the
+   caller reads it off the loop, api_read.h) (new reference). */
+json_t *api_octoprint_job_json(const struct job_row *j, const struct api_octoprint_summary *s);
 
 /* Route handlers; ctx is the struct api_compat_env (api_compat.h). */
 void api_octoprint_login(void *ctx, const struct route_args *args, const struct http_req *req,

@@ -8,12 +8,18 @@
  * and both frame through src/base/wsconn.h and sockjs.h.
  *
  * One timer (API_OCTOPUSH_TICK_MS, while a socket is open) drives every
- * socket: the event log's new rows (an indexed range, as the SSE streams
- * read it) become `event`s, each socket's session is checked, and
- * `current` goes out where its time has come.  The summary is
- * api_octoprint.c's, the one GET /api/printer answers.
+ * socket: each socket's session is checked, and one read on the API's
+ * reader (api_read_post: the loop's own connection sends nothing, issue
+ * 32) brings the event log's new rows (an indexed range, as the SSE
+ * streams read it), which become `event`s, and the one job of each socket
+ * whose `history` or `current` is due (its summary taken when the read
+ * was posted).  One read at a time: a tick while one runs posts none, and
+ * what came due meanwhile goes with the next.  The summary is
+ * api_octoprint.c's, the one GET /api/printer answers.  A socket gets
+ * nothing after its auth but its `history`, then events and `current`, as
+ * OctoPrint sends them.
  *
- * Thread: the loop thread.
+ * Thread: the loop thread; the reads on the reader's.
  */
 #include "api_octopush.h"
 
@@ -30,10 +36,14 @@
 #include "../base/wsconn.h"
 #include "api_compat.h"
 #include "api_octoprint.h"
+#include "api_read.h"
 
 #define MSG_MAX    ((size_t)64 << 10) /* a client's message: auth, throttle, subscribe */
 #define OUT_MAX    ((size_t)4 << 20)  /* queued to a client that reads slowly */
 #define EVENTS_MAX 64                 /* event log rows read a tick */
+
+/* What the read in flight answers for a socket. */
+enum ask { ASK_NONE, ASK_HISTORY, ASK_CURRENT };
 
 struct op_conn {
     struct api_octopush *p;
@@ -46,6 +56,10 @@ struct op_conn {
     int64_t next_ms;         /* when the next current is due */
     int64_t beat_ms;         /* ... and the next heartbeat */
     const char *text;        /* the state text last sent (a static string) */
+    bool history;            /* history is due (auth, or asked): the next read's */
+    bool told;               /* history went out (or none was due): events and current follow */
+    enum ask ask;            /* what the read in flight answers for it */
+    struct api_octoprint_summary s; /* ... with this summary (taken when it was posted) */
     char session[SESSION_TOKEN_LEN + 1];
     char key[FARMCFG_KEY_MAX + 1];
     char printer[64]; /* "" for the whole farm */
@@ -54,12 +68,36 @@ struct op_conn {
 
 struct api_octopush {
     struct loop *l;
-    struct store *store;
+    struct api_read *reads; /* the API's reader */
     struct farm *farm;
     struct sessions *sessions;
     struct op_conn *conns;
-    uint64_t timer;  /* the tick, while a socket is open */
-    int64_t last_id; /* the event log's newest row seen */
+    uint64_t timer;            /* the tick, while a socket is open */
+    int64_t last_id;           /* the event log's newest row seen */
+    bool known;                /* last_id was read since the sockets opened */
+    struct push_read *reading; /* the read in flight, or NULL */
+};
+
+/* What the reader found for one event row: its print event's printer (in the row) and job. */
+struct push_event {
+    bool print;              /* a print event: the row's printer is the print's */
+    char name[JOB_NAME_MAX]; /* the job's name; "" if not read */
+};
+
+/* One tick's read on the API's reader (api_read_post): the jobs the due sockets show, and
+   the log's newest id (sockets just opened) or its rows after last_id. */
+struct push_read {
+    struct api_octopush *p; /* NULL once p is freed: the read's end frees the read alone */
+    bool newest;            /* the newest id only */
+    int64_t after;          /* the rows after this id; the newest id (newest) */
+    int rc;                 /* the rows' read */
+    struct event_row *ev;
+    struct push_event *pe;
+    size_t n;
+    int64_t *jobs; /* the jobs to read ... */
+    struct job_row *rows;
+    bool *found; /* ... what was read of them */
+    size_t n_jobs;
 };
 
 /* What a route hands to the upgrade (owned by it until taken). */
@@ -89,10 +127,9 @@ key_label(const char *key, char *out, size_t n)
 
 /* current's and history's payload (push.rst's data model). */
 static json_t *
-state_payload(struct op_conn *c, struct api_octoprint_summary *s)
+state_payload(const struct api_octoprint_summary *s, const struct job_row *j)
 {
-    api_octoprint_summarize(c->p->farm, c->printer, s);
-    json_t *p = api_octoprint_job_json(c->p->store, s);
+    json_t *p = api_octoprint_job_json(j, s);
     json_t *state = api_octoprint_state_json(s);
     json_object_set_new(state, "error", json_string(""));
     json_object_set_new(p, "state", state);
@@ -115,12 +152,11 @@ state_payload(struct op_conn *c, struct api_octoprint_summary *s)
     return p;
 }
 
+/* history or current with the summary c's read was posted with and its job j (NULL: none). */
 static void
-send_state(struct op_conn *c, const char *type, int64_t now)
+send_state(struct op_conn *c, const char *type, const struct job_row *j, int64_t now)
 {
-    struct api_octoprint_summary s;
-    emit(c, type, state_payload(c, &s));
-    c->text = s.text;
+    emit(c, type, state_payload(&c->s, j));
     c->next_ms = now + (int64_t)OCTOPUSH_CURRENT_MS * c->sub.throttle;
 }
 
@@ -130,7 +166,7 @@ send_state(struct op_conn *c, const char *type, int64_t now)
 static void
 refuse(struct op_conn *c, const char *reason, uint16_t code, const char *text)
 {
-    c->authed = false;
+    c->authed = c->told = c->history = false;
     emit(c, "reauthRequired", json_pack("{s:s}", "reason", reason));
     if (code)
         wsconn_close(c->wc, code, text ? text : reason);
@@ -171,10 +207,10 @@ on_auth(struct op_conn *c, const char *a)
     }
     snprintf(c->session, sizeof(c->session), "%s", colon + 1);
     snprintf(c->key, sizeof(c->key), "%s", key);
-    if (!c->authed) {
+    if (!c->authed) { /* history after the next read; nothing before it */
         c->authed = true;
-        if (c->sub.state)
-            send_state(c, "history", now);
+        c->history = c->sub.state;
+        c->told = !c->sub.state;
     }
 }
 
@@ -188,7 +224,7 @@ on_message(void *arg, const char *text, size_t len)
     if (m == OCTOPUSH_AUTH)
         on_auth(c, auth);
     else if (history && c->authed)
-        send_state(c, "history", clock_mono_ms());
+        c->history = true; /* after the next read */
 }
 
 static void
@@ -224,7 +260,7 @@ static void
 fire(struct api_octopush *p, const char *printer, const char *name, json_t *payload)
 {
     for (struct op_conn *c = p->conns; c; c = c->next)
-        if (c->authed && !wsconn_closing(c->wc) && octopush_wants(&c->sub, name) &&
+        if (c->told && !wsconn_closing(c->wc) && octopush_wants(&c->sub, name) &&
             (!c->printer[0] || strcmp(c->printer, printer) == 0))
             emit(c, "event", json_pack("{s:s,s:O}", "type", name, "payload", payload));
     json_decref(payload);
@@ -232,15 +268,13 @@ fire(struct api_octopush *p, const char *printer, const char *name, json_t *payl
 
 /* The payload keys OctoPrint's print events share, for the job of ev. */
 static json_t *
-job_payload(struct api_octopush *p, const struct event_row *ev, const char *reason)
+job_payload(const struct event_row *ev, const struct push_event *pe, const char *reason)
 {
-    struct job_row j;
-    bool known = store_job_get(p->store, ev->job_id, &j, NULL) == SF_OK;
     char path[JOB_NAME_MAX + 32];
-    snprintf(path, sizeof(path), "job-%lld/%s", (long long)ev->job_id, known ? j.opts.name : "");
-    json_t *o = json_pack("{s:s,s:s,s:s,s:{s:s,s:I}}", "name", known ? j.opts.name : "", "path",
-                          path, "origin", "local", "slimfarm", "printer", ev->printer, "job_id",
-                          (json_int_t)ev->job_id);
+    snprintf(path, sizeof(path), "job-%lld/%s", (long long)ev->job_id, pe->name);
+    json_t *o =
+        json_pack("{s:s,s:s,s:s,s:{s:s,s:I}}", "name", pe->name, "path", path, "origin", "local",
+                  "slimfarm", "printer", ev->printer, "job_id", (json_int_t)ev->job_id);
     if (reason)
         json_object_set_new(o, "reason", json_string(reason));
     return o;
@@ -248,13 +282,14 @@ job_payload(struct api_octopush *p, const struct event_row *ev, const char *reas
 
 /* A job that left its printer (done, failed, cancelled) is logged without
    it: ev gets the printer of the job's last print; false if it has none, or
-   ev is a cancel and the last print did not end by it (a queued job's). */
+   ev is a cancel and the last print did not end by it (a queued job's).
+   The reader's thread, with its store st. */
 static bool
-print_printer(struct api_octopush *p, struct event_row *ev)
+print_printer(struct store *st, struct event_row *ev)
 {
     struct print_row *pr;
     size_t n;
-    if (store_prints(p->store, ev->job_id, &pr, &n, NULL) || !n)
+    if (store_prints(st, ev->job_id, &pr, &n, NULL) || !n)
         return false;
     const struct print_row *last = &pr[n - 1];
     bool ok = strcmp(ev->kind, "job-cancel") != 0 || !last->outcome[0] ||
@@ -265,9 +300,9 @@ print_printer(struct api_octopush *p, struct event_row *ev)
     return ok;
 }
 
-/* The farm's job events as OctoPrint's print events. */
+/* The farm's job events as OctoPrint's print events (the rows r read). */
 static void
-log_events(struct api_octopush *p)
+log_events(struct api_octopush *p, const struct push_read *r)
 {
     static const char *const map[][3] = {
         /* the log's kind, OctoPrint's event, a second event with reason */
@@ -278,24 +313,20 @@ log_events(struct api_octopush *p)
         { "job-print-failed", "PrintFailed", "error" },
         { "job-cancel", "PrintCancelled", "cancelled" },
     };
-    struct event_row *ev;
-    size_t n;
-    if (store_events(p->store, p->last_id, EVENTS_MAX, &ev, &n, NULL))
-        return;
-    for (size_t i = 0; i < n; i++) {
-        p->last_id = ev[i].id;
-        if (!ev[i].job_id || (!ev[i].printer[0] && !print_printer(p, &ev[i])))
+    for (size_t i = 0; i < r->n; i++) {
+        const struct event_row *ev = &r->ev[i];
+        p->last_id = ev->id;
+        if (!r->pe[i].print)
             continue; /* a job that was on no printer: no print event */
         for (size_t k = 0; k < sizeof(map) / sizeof(map[0]); k++) {
-            if (strcmp(ev[i].kind, map[k][0]) != 0)
+            if (strcmp(ev->kind, map[k][0]) != 0)
                 continue;
             bool failed = strcmp(map[k][1], "PrintFailed") == 0;
-            fire(p, ev[i].printer, map[k][1], job_payload(p, &ev[i], failed ? map[k][2] : NULL));
+            fire(p, ev->printer, map[k][1], job_payload(ev, &r->pe[i], failed ? map[k][2] : NULL));
             if (map[k][2] && !failed)
-                fire(p, ev[i].printer, "PrintFailed", job_payload(p, &ev[i], map[k][2]));
+                fire(p, ev->printer, "PrintFailed", job_payload(ev, &r->pe[i], map[k][2]));
         }
     }
-    free(ev);
 }
 
 static const char *
@@ -336,6 +367,8 @@ tick_one(struct op_conn *c, int64_t now)
         refuse(c, "logout", 1008, NULL);
         return;
     }
+    if (!c->told)
+        return; /* its history first (push_post) */
     struct api_octoprint_summary s;
     api_octoprint_summarize(c->p->farm, c->printer, &s);
     if (c->text && strcmp(s.text, c->text) != 0 && octopush_wants(&c->sub, "PrinterStateChanged"))
@@ -343,8 +376,141 @@ tick_one(struct op_conn *c, int64_t now)
              json_pack("{s:s,s:{s:s,s:s}}", "type", "PrinterStateChanged", "payload", "state_id",
                        state_id(s.text), "state_string", s.text));
     c->text = s.text;
-    if (c->sub.state && now >= c->next_ms)
-        send_state(c, "current", now);
+}
+
+/* ---- the tick's read ---- */
+
+static void
+push_read_free(struct push_read *r)
+{
+    free(r->ev);
+    free(r->pe);
+    free(r->jobs);
+    free(r->rows);
+    free(r->found);
+    free(r);
+}
+
+/* The reader's thread, with its connection st: the jobs, then the newest id or the rows. */
+static void
+push_read(struct store *st, void *ud)
+{
+    struct push_read *r = ud;
+    for (size_t i = 0; i < r->n_jobs; i++)
+        r->found[i] = store_job_get(st, r->jobs[i], &r->rows[i], NULL) == SF_OK;
+    if (r->newest) {
+        r->after = store_event_last(st);
+        return;
+    }
+    if ((r->rc = store_events(st, r->after, EVENTS_MAX, &r->ev, &r->n, NULL)) || !r->n)
+        return;
+    if (!(r->pe = mem_calloc(r->n, sizeof(*r->pe)))) {
+        r->rc = SF_ENOMEM; /* read again on a later tick */
+        return;
+    }
+    for (size_t i = 0; i < r->n; i++) {
+        struct event_row *ev = &r->ev[i];
+        r->pe[i].print = ev->job_id && (ev->printer[0] || print_printer(st, ev));
+        struct job_row j;
+        if (r->pe[i].print && store_job_get(st, ev->job_id, &j, NULL) == SF_OK)
+            snprintf(r->pe[i].name, sizeof(r->pe[i].name), "%s", j.opts.name);
+    }
+}
+
+/* The sockets' asks back to none; what was due stays due (the next read's). */
+static void
+asks_drop(struct api_octopush *p)
+{
+    for (struct op_conn *c = p->conns; c; c = c->next) {
+        c->history |= c->ask == ASK_HISTORY;
+        c->ask = ASK_NONE;
+    }
+}
+
+/* On the loop: the events go out, then each socket's history or current it asked for (the
+   sockets that left meanwhile are not in the list; one refused meanwhile gets none). */
+static void
+push_done(void *ud, bool ran)
+{
+    struct push_read *r = ud;
+    struct api_octopush *p = r->p;
+    if (!p) {
+        push_read_free(r);
+        return;
+    }
+    p->reading = NULL;
+    if (!ran) {
+        asks_drop(p);
+        push_read_free(r);
+        return;
+    }
+    if (r->newest) {
+        p->last_id = r->after;
+        p->known = true;
+    } else if (p->known && r->rc == SF_OK) { /* not when the sockets all left and came again */
+        log_events(p, r);
+    }
+    int64_t now = clock_mono_ms();
+    for (struct op_conn *c = p->conns; c; c = c->next) {
+        enum ask a = c->ask;
+        c->ask = ASK_NONE;
+        if (a == ASK_NONE || !c->authed || wsconn_closing(c->wc) || (a == ASK_CURRENT && !c->told))
+            continue;
+        const struct job_row *j = NULL;
+        for (size_t i = 0; c->s.job && i < r->n_jobs; i++)
+            if (r->jobs[i] == c->s.job && r->found[i])
+                j = &r->rows[i];
+        send_state(c, a == ASK_HISTORY ? "history" : "current", j, now);
+        if (a == ASK_HISTORY) {
+            c->told = true;
+            if (!c->text)
+                c->text = c->s.text;
+        }
+    }
+    push_read_free(r);
+}
+
+/* Post the tick's read: the sockets whose history or current is due ask with the summary of
+   now.  Out of memory: nothing is posted, the next tick tries again. */
+static void
+push_post(struct api_octopush *p, int64_t now)
+{
+    size_t n = 0;
+    for (struct op_conn *c = p->conns; c; c = c->next)
+        n++;
+    struct push_read *r = mem_calloc(1, sizeof(*r));
+    if (!r)
+        return;
+    *r = (struct push_read){ .p = p, .newest = !p->known, .after = p->last_id };
+    if (n && (!(r->jobs = mem_calloc(n, sizeof(*r->jobs))) ||
+              !(r->rows = mem_calloc(n, sizeof(*r->rows))) ||
+              !(r->found = mem_calloc(n, sizeof(*r->found))))) {
+        push_read_free(r);
+        return;
+    }
+    for (struct op_conn *c = p->conns; c; c = c->next) {
+        if (!c->authed || wsconn_closing(c->wc))
+            continue;
+        if (c->history)
+            c->ask = ASK_HISTORY;
+        else if (c->told && c->sub.state && now >= c->next_ms)
+            c->ask = ASK_CURRENT;
+        else
+            continue;
+        c->history = false;
+        api_octoprint_summarize(p->farm, c->printer, &c->s);
+        bool have = false;
+        for (size_t i = 0; i < r->n_jobs; i++)
+            have |= r->jobs[i] == c->s.job;
+        if (c->s.job && !have)
+            r->jobs[r->n_jobs++] = c->s.job;
+    }
+    p->reading = r; /* without a reader thread, push_done runs before this returns */
+    if (!api_read_post(p->reads, push_read, push_done, r)) {
+        p->reading = NULL;
+        asks_drop(p);
+        push_read_free(r);
+    }
 }
 
 static void
@@ -355,11 +521,12 @@ tick(struct loop *l, void *ud)
     p->timer = 0;
     if (!p->conns)
         return;
-    log_events(p);
     int64_t now = clock_mono_ms();
     for (struct op_conn *c = p->conns; c; c = c->next)
         if (!wsconn_closing(c->wc))
             tick_one(c, now);
+    if (!p->reading)
+        push_post(p, now);
     p->timer = loop_timer_add(p->l, API_OCTOPUSH_TICK_MS, tick, p);
 }
 
@@ -391,7 +558,7 @@ on_upgraded(void *ud, struct http_upgraded *u, int fd, const char *extra, size_t
     snprintf(c->printer, sizeof(c->printer), "%s", pd->printer);
     free(pd);
     if (!p->conns && !p->timer) {
-        p->last_id = store_event_last(p->store);
+        p->known = false; /* the next read reads the newest row's id */
         p->timer = loop_timer_add(p->l, API_OCTOPUSH_TICK_MS, tick, p);
     }
     p->conns = c;
@@ -474,7 +641,7 @@ api_octopush_route(void *ctx, const struct route_args *args, const struct http_r
 /* ---- lifecycle ---- */
 
 struct api_octopush *
-api_octopush_new(struct loop *l, struct store *store, struct farm *f, int64_t idle_ms,
+api_octopush_new(struct loop *l, struct api_read *reads, struct farm *f, int64_t idle_ms,
                  int64_t max_ms, struct sf_err *err)
 {
     struct api_octopush *p = mem_calloc(1, sizeof(*p));
@@ -482,7 +649,7 @@ api_octopush_new(struct loop *l, struct store *store, struct farm *f, int64_t id
         sf_err_set(err, SF_ENOMEM, "api: out of memory");
         return NULL;
     }
-    *p = (struct api_octopush){ .l = l, .store = store, .farm = f };
+    *p = (struct api_octopush){ .l = l, .reads = reads, .farm = f };
     if (!(p->sessions = sessions_new(idle_ms, max_ms, err))) {
         free(p);
         return NULL;
@@ -499,6 +666,8 @@ api_octopush_free(struct api_octopush *p)
         wsconn_free(p->conns->wc, WS_CLOSE_AWAY);
     if (p->timer)
         loop_timer_cancel(p->l, p->timer);
+    if (p->reading) /* its end comes later (api_read_free): it frees the read alone */
+        p->reading->p = NULL;
     sessions_free(p->sessions);
     free(p);
 }

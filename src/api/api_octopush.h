@@ -58,6 +58,7 @@
 #include "../farm/farm.h"
 #include "../farm/farmcfg.h"
 #include "../farm/store.h"
+#include "api_read.h"
 #include "http.h"
 #include "route.h"
 #include "session.h"
@@ -69,9 +70,10 @@
 
 struct api_octopush;
 
-/* Sockets on loop l watching farm f and store's event log; sessions with
-   idle_ms and max_ms (<= 0: session.h's defaults).  NULL with err set. */
-struct api_octopush *api_octopush_new(struct loop *l, struct store *store, struct farm *f,
+/* Sockets on loop l watching farm f and the store's event log, read on the API's reader
+   reads (freed after p: a read in flight ends there); sessions with idle_ms and max_ms (<= 0:
+   session.h's defaults).  NULL with err set. */
+struct api_octopush *api_octopush_new(struct loop *l, struct api_read *reads, struct farm *f,
                                       int64_t idle_ms, int64_t max_ms, struct sf_err *err);
 /* Close every socket (1001) and free; before http_free.  NULL is fine. */
 void api_octopush_free(struct api_octopush *p);

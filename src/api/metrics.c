@@ -318,6 +318,29 @@ health_out(struct out *b, const struct farm_health *h)
     family(b, "slimfarm_store_write_retries_total", "counter",
            "Queued store writes tried again (the store was busy or unreachable).");
     put(b, "slimfarm_store_write_retries_total %llu\n", (unsigned long long)q->retries);
+    if (!h->has_beat)
+        return;
+    /* one of several hosts: the beat's own store thread (its lease, the peers, the claims and
+       takes), whose wait is the lease's risk */
+    q = &h->beat;
+    family(b, "slimfarm_store_beat_queue_depth", "gauge",
+           "Requests queued on the host beat's store thread.");
+    put(b, "slimfarm_store_beat_queue_depth %zu\n", q->depth);
+    family(b, "slimfarm_store_beat_queue_depth_max", "gauge",
+           "The most requests queued at once on the host beat's store thread.");
+    put(b, "slimfarm_store_beat_queue_depth_max %zu\n", q->depth_max);
+    family(b, "slimfarm_store_beat_queue_wait_max_seconds", "gauge",
+           "Longest a request on the host beat's store thread took from its post to its end.");
+    put(b, "slimfarm_store_beat_queue_wait_max_seconds %.3f\n", q->wait_max_ms / 1000.0);
+    family(b, "slimfarm_store_beat_requests_total", "counter",
+           "Requests on the host beat's store thread run to their end.");
+    put(b, "slimfarm_store_beat_requests_total %llu\n", (unsigned long long)q->done);
+    family(b, "slimfarm_store_beat_failures_total", "counter",
+           "Requests on the host beat's store thread that failed after their retries.");
+    put(b, "slimfarm_store_beat_failures_total %llu\n", (unsigned long long)q->failed);
+    family(b, "slimfarm_store_beat_retries_total", "counter",
+           "Requests on the host beat's store thread tried again (busy or unreachable).");
+    put(b, "slimfarm_store_beat_retries_total %llu\n", (unsigned long long)q->retries);
 }
 
 char *

@@ -457,12 +457,12 @@ main(int argc, char **argv)
         .driver = drv_new, .prepare = prepare_part, .notify = on_farm_event, .notify_ud = &d
     };
     if (!(d.farm = farm_new(d.l, d.s, d.pool, &d.cfg, &hooks, &err)) ||
-        !(d.notify = notify_new(d.l, d.s, d.cfg.notify, d.cfg.n_notify, &err)))
+        !(d.notify = notify_new(d.l, d.s, farm_storeq(d.farm), d.cfg.notify, d.cfg.n_notify,
+                                &err))) /* its reads off the loop */
         goto out;
     /* one of several hosts: each event of the farm told once */
     notify_set_host(d.notify, farm_host_name(d.farm));
-    notify_set_queue(d.notify, farm_storeq(d.farm)); /* its reads off the loop */
-    raise_nofile(farm_printer_count(d.farm));        /* with those managed at run time (farm.h) */
+    raise_nofile(farm_printer_count(d.farm)); /* with those managed at run time (farm.h) */
     struct api_config ac = { .store = d.s,
                              .farm = d.farm,
                              .host = d.cfg.listen_host,

@@ -158,6 +158,7 @@ farm_health(struct farm *f, struct farm_health *out)
     out->loop_turn_max_ms = loop_turn_max_ms(f->l);
     out->loop_round_trips = store_round_trips(f->s);
     storeq_stats(f->q, &out->store);
+    out->has_beat = farm_host_beat_stats(f, &out->beat);
 }
 
 /* ---- prepare ---- */

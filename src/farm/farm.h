@@ -117,6 +117,8 @@ struct farm_health {
     int64_t loop_turn_max_ms;  /* loop_turn_max_ms of the farm's loop */
     int64_t loop_round_trips;  /* statements the loop's own store connection sent to a server */
     struct storeq_stats store; /* the store thread's counters (storeq_stats) */
+    bool has_beat;             /* one of several hosts: ... */
+    struct storeq_stats beat;  /* ... its beat's own store thread's (farm_host_beat_stats) */
 };
 void farm_health(struct farm *f, struct farm_health *out);
 

@@ -52,6 +52,15 @@ farm_host_on(const struct farm *f)
 }
 
 bool
+farm_host_beat_stats(const struct farm *f, struct storeq_stats *out)
+{
+    if (!farm_host_on(f) || !f->host->bq)
+        return false;
+    storeq_stats(f->host->bq, out);
+    return true;
+}
+
+bool
 farm_host_alone(const struct farm *f)
 {
     return !farm_host_on(f) || (f->host->joined && f->host->peers == 0);

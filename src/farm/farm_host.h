@@ -154,5 +154,9 @@ void farm_host_own(struct farm *f);
    unless another live host owns a printer of that name (its config lists it too): then the
    job and the printer are that host's (logged once, when found; tried again at each beat). */
 bool farm_host_owns(const struct farm *f, const char *printer);
+/* The beat's own store queue's counters (storeq_stats, for /metrics) into out; false when f is
+   not one of several hosts, or its host stopped (out untouched). */
+struct storeq_stats;
+bool farm_host_beat_stats(const struct farm *f, struct storeq_stats *out);
 
 #endif

@@ -24,8 +24,10 @@
  * storeq_read), one read at a time so events are told in order: a batch
  * of events with what telling each needs (its teller, its job, the queue's
  * counts), so the loop's own connection sends nothing for them (issue 32:
- * each was a round trip every printer waited for on PostgreSQL).  Without
- * a queue the same read runs on the loop's store.
+ * each was a round trip every printer waited for on PostgreSQL).  The
+ * first read is of the newest event's id only (where telling starts), so
+ * notify_new sends nothing on the loop's connection either.  Without a
+ * queue the same reads run on the loop's store.
  *
  * Thread: the loop thread; log_read on the store's thread.
  */
@@ -75,6 +77,7 @@ struct ev_more {
 struct log_read {
     struct notify *n; /* NULL once notify_free left it (the answer comes later) */
     /* the loop's, copied at the post */
+    bool newest;                    /* the newest event's id only, into after (the first read) */
     int64_t after;                  /* the newest event read before */
     char host[STORE_HOST_NAME_MAX]; /* notify_set_host's */
     unsigned events;                /* what any target asks for */
@@ -93,6 +96,7 @@ struct notify {
     struct notifycfg *targets; /* n_targets, copied */
     size_t n_targets;          /* their count */
     int64_t last_id;           /* newest event read */
+    bool known;                /* last_id was read (the first read: the log's newest) */
     uint64_t kick;             /* pending zero-delay read, 0 if none */
     uint64_t poll;             /* the slow poll timer */
     bool queue_armed;          /* a job waited since the last queue-empty */
@@ -440,13 +444,31 @@ read_more(struct store *s, const struct log_read *r, const struct event_row *e, 
         m->counts_rc = store_job_counts(s, m->by_state, &m->counts_err);
 }
 
+/* On the store's thread: the newest event's id into r->after, where telling starts.  A
+   failure is the request's (the queue tries it again): store_event_last says 0 for one, so
+   a 0 is checked against the log, lest all of it be told. */
+static int
+read_newest(struct store *s, struct log_read *r, struct sf_err *err)
+{
+    if ((r->after = store_event_last(s)))
+        return SF_OK;
+    struct event_row *ev = NULL;
+    size_t k = 0;
+    int rc = store_events(s, 0, 1, &ev, &k, err);
+    free(ev);
+    if (rc == SF_OK && k)
+        rc = sf_err_set(err, SF_EBUSY, "the event log's newest id could not be read");
+    return rc;
+}
+
 /* On the store's thread: a batch of events after r->after, and what telling each needs.  A
    failure is kept in r (warned on the loop, read again at the next poll), not retried. */
 static int
 log_read(struct store *s, void *arg, struct sf_err *err)
 {
-    (void)err;
     struct log_read *r = arg;
+    if (r->newest)
+        return read_newest(s, r, err);
     if ((r->rc = store_events(s, r->after, NOTIFY_BATCH, &r->ev, &r->k, &r->err)))
         return SF_OK;
     if (r->k && !(r->more = mem_calloc(r->k, sizeof(*r->more)))) {
@@ -473,7 +495,6 @@ log_read_free(struct log_read *r)
 static void
 on_read(void *ud, const struct storeq_result *res)
 {
-    (void)res;
     struct log_read *r = ud;
     struct notify *n = r->n;
     if (!n) { /* notify_free came first */
@@ -481,7 +502,16 @@ on_read(void *ud, const struct storeq_result *res)
         return;
     }
     n->reading = NULL;
-    if (r->rc) {
+    if (r->newest && res->rc) { /* nothing told until it is read: tried at the next poll */
+        if (!n->log_failed)
+            log_warn("notify", "reading the event log's newest id: %s",
+                     res->err ? res->err->msg : "failed");
+        n->log_failed = true;
+    } else if (r->newest) {
+        n->log_failed = false;
+        n->last_id = r->after;
+        n->known = true;
+    } else if (r->rc) {
         if (!n->log_failed)
             log_warn("notify", "reading the event log: %s", r->err.msg);
         n->log_failed = true;
@@ -512,6 +542,7 @@ read_log(struct loop *l, void *ud)
     if (!r)
         return; /* read at the next poll */
     r->n = n;
+    r->newest = !n->known;
     r->after = n->last_id;
     snprintf(r->host, sizeof(r->host), "%s", n->host);
     for (size_t i = 0; i < n->n_targets; i++)
@@ -580,8 +611,8 @@ notify_reload(struct notify *n, const struct notifycfg *targets, size_t n_target
 }
 
 struct notify *
-notify_new(struct loop *l, struct store *s, const struct notifycfg *targets, size_t n_targets,
-           struct sf_err *err)
+notify_new(struct loop *l, struct store *s, struct storeq *q, const struct notifycfg *targets,
+           size_t n_targets, struct sf_err *err)
 {
     struct notify *n = mem_calloc(1, sizeof(*n));
     if (!n) {
@@ -591,7 +622,7 @@ notify_new(struct loop *l, struct store *s, const struct notifycfg *targets, siz
     n->l = l;
     n->s = s;
     n->queue_armed = true;
-    n->last_id = store_event_last(s); /* from now on: see notify.h on restarts */
+    n->q = q;
     if (notify_reload(n, targets, n_targets, err) || !(n->h = httpc_get(l, err)) ||
         !(n->poll = loop_timer_add(l, NOTIFY_POLL_MS, on_poll, n))) {
         if (!n->poll && n->h)
@@ -599,6 +630,7 @@ notify_new(struct loop *l, struct store *s, const struct notifycfg *targets, siz
         notify_free(n);
         return NULL;
     }
+    read_log(l, n); /* the newest event: from now on (see notify.h on restarts) */
     return n;
 }
 

@@ -42,12 +42,16 @@
 struct notify;
 
 /*
- * Start sending the events logged from now on to targets (copied).  s and
- * l must outlive it.  NULL with err set (SF_ENOMEM, or the curl client's
- * error).
+ * Start sending the events logged from now on to targets (copied): from
+ * the newest event when its read runs, on q's thread (as notify_set_queue;
+ * so after every request posted to q before) or, q NULL, now on s.  Until
+ * it has run nothing is told (a read that fails is tried again at the next
+ * poll).  s and l must outlive it.  NULL with err set (SF_ENOMEM, or the
+ * curl client's error).
  */
-struct notify *notify_new(struct loop *l, struct store *s, const struct notifycfg *targets,
-                          size_t n_targets, struct sf_err *err);
+struct storeq;
+struct notify *notify_new(struct loop *l, struct store *s, struct storeq *q,
+                          const struct notifycfg *targets, size_t n_targets, struct sf_err *err);
 
 /* Cancel every pending delivery (not sent) and free.  NULL is fine. */
 void notify_free(struct notify *n);
@@ -68,12 +72,10 @@ void notify_set_host(struct notify *n, const char *host);
 
 /*
  * Read the log on q's thread (the farm's store queue, storeq_read), so the
- * loop's own connection sends nothing for it; NULL (the default): on the
- * store notify_new was given, on the loop.  q must outlive the reads
- * posted to it: set NULL before freeing it (storeq_free delivers what is
- * in flight).
+ * loop's own connection sends nothing for it; NULL: on the store
+ * notify_new was given, on the loop.  q must outlive the reads posted to
+ * it: set NULL before freeing it (storeq_free delivers what is in flight).
  */
-struct storeq;
 void notify_set_queue(struct notify *n, struct storeq *q);
 
 /* New events may be in the log: read them on the next loop turn. */

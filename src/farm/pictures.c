@@ -8,6 +8,13 @@
  * serves what this returns.  A task owns its own data; pictures_free cuts
  * its link to us, and done() of a task whose cache is gone only frees it.
  *
+ * The part's path is looked up on the worker, on a reader of its own
+ * (store_open_reader, as a preparation's files are: farm_files.c): on a
+ * shared store a part this host's cache lacks comes whole from the
+ * database first, and even a cached one is a round trip the loop's own
+ * connection must not make (issue 32).  A lookup that fails fails the
+ * render (its why logged and given to the next ask).
+ *
  * Thread: the loop thread; render_work() on a pool worker.
  */
 #include "pictures.h"
@@ -40,9 +47,12 @@ struct render {
 
 /* A render on the pool: its own copies of everything. */
 struct task {
-    struct pictures *p; /* NULL once pictures_free ran */
+    struct pictures *p;        /* NULL once pictures_free ran */
+    const struct store *store; /* for the worker's reader (store_open_reader) */
+    int64_t job_id;            /* the job whose part it is (its lookup's errors) */
+    char sha[STORE_SHA_HEX];   /* the part */
     char key[PICTURES_KEY_MAX];
-    char path[1100]; /* the stored part */
+    char path[1100]; /* the stored part, once looked up */
     double angle_deg;
     unsigned char *png;
     size_t len;
@@ -87,6 +97,18 @@ render_slot(struct pictures *p)
     return best;
 }
 
+/* The part's path into t->path, on the worker's own reader. */
+static int
+render_lookup(struct task *t)
+{
+    struct store *r = store_open_reader(t->store, &t->err);
+    int rc = r ? store_file_path(r, t->sha, t->path, sizeof(t->path), &t->err) : t->err.code;
+    store_close(r);
+    if (rc)
+        sf_err_prefix(&t->err, "job %lld", (long long)t->job_id);
+    return rc;
+}
+
 static int
 render_work(void *ud, const atomic_bool *cancel)
 {
@@ -94,7 +116,9 @@ render_work(void *ud, const atomic_bool *cancel)
     struct mesh m;
     mesh_init(&m);
     char png[64] = "";
-    int rc = mesh_load(t->path, &m, NULL, &t->err);
+    int rc = render_lookup(t);
+    if (rc == SF_OK)
+        rc = mesh_load(t->path, &m, NULL, &t->err);
     if (rc == SF_OK && atomic_load(cancel))
         rc = sf_err_set(&t->err, SF_ECANCELED, "cancelled");
     if (rc == SF_OK) {
@@ -217,16 +241,16 @@ render_start(struct pictures *p, const struct job_row *j, const char *key, const
         *state = PICTURES_NONE;
         return SF_OK;
     }
-    int rc = store_file_path(p->cfg.store, sha, t->path, sizeof(t->path), err);
-    if (rc)
-        sf_err_prefix(err, "job %lld", (long long)j->id);
-    struct render *r = rc ? NULL : render_slot(p);
+    struct render *r = render_slot(p);
     if (!r) {
         free(t);
         *state = PICTURES_BUSY;
-        return rc;
+        return SF_OK;
     }
     t->p = p;
+    t->store = p->cfg.store;
+    t->job_id = j->id;
+    snprintf(t->sha, sizeof(t->sha), "%s", sha);
     snprintf(t->key, sizeof(t->key), "%s", key);
     t->angle_deg = angle;
     if (!pool_submit(p->cfg.pool, render_work, render_done, t, err)) {

@@ -30,7 +30,7 @@
 #define PICTURES_KEY_MAX 96
 
 struct pictures_config {
-    struct store *store;     /* the parts (not owned) */
+    struct store *store;     /* the parts (not owned): looked up on a worker's reader of it */
     struct pool *pool;       /* renders (not owned); NULL: no pictures */
     void (*ready)(void *ud); /* a render ended: ask again */
     void *ud;
@@ -57,8 +57,9 @@ enum pictures_state {
 
 /*
  * Job j's picture (after: as it prints); starts its render when it is not
- * kept.  Returns SF_OK with *state, or a failure (SF_ENOMEM, the store's
- * codes for the part's path, the pool's) with err set.
+ * kept (the part's path is looked up on the worker: a lookup that fails
+ * fails the render).  Returns SF_OK with *state, or a failure (SF_ENOMEM,
+ * the pool's) with err set.
  */
 int pictures_get(struct pictures *p, const struct job_row *j, bool after,
                  enum pictures_state *state, unsigned char **png, size_t *len, struct sf_err *err);

@@ -27,6 +27,7 @@
 #include "../../src/base/buf.h"
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
+#include "../../src/base/ws.h"
 #include "../../src/farm/farm.h"
 #include "../../src/farm/sqldb.h"
 #include "../../src/farm/store.h"
@@ -1768,5 +1769,149 @@ T_CASE(api_octoprint_job_reads_off_the_loop)
     on_server(read_loop_trips, &after);
     T_EQ_INT(after - before, 0);
     buf_release(&b);
+    stop();
+}
+
+/* ---- OctoPrint's push socket (api_octopush.h) ---- */
+
+/* A blocking websocket client of the server (its waits bounded): the socket and its frames. */
+struct wsclient {
+    int fd;
+    struct ws_parser p;
+};
+
+/* Open path's websocket: true once the server answered 101 (w is wsclient_close's either way). */
+static bool
+wsclient_open(struct wsclient *w, const char *path)
+{
+    ws_parser_init(&w->p, false, 1 << 20);
+    if ((w->fd = connect_from(NULL)) < 0)
+        return false;
+    char req[512];
+    int n = snprintf(req, sizeof(req),
+                     "GET %s HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                     "Sec-WebSocket-Version: 13\r\nSec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\n"
+                     "\r\n",
+                     path);
+    if (send(w->fd, req, (size_t)n, MSG_NOSIGNAL) != n)
+        return false;
+    /* the answer's head byte by byte: what follows it is frames */
+    char head[2048];
+    size_t len = 0;
+    struct pollfd pf = { .fd = w->fd, .events = POLLIN };
+    while (len < sizeof(head) - 1 && poll(&pf, 1, 30000) == 1 &&
+           recv(w->fd, head + len, 1, 0) == 1) {
+        head[++len] = '\0';
+        if (len >= 4 && memcmp(head + len - 4, "\r\n\r\n", 4) == 0)
+            return strncmp(head, "HTTP/1.1 101", 12) == 0;
+    }
+    return false;
+}
+
+static void
+wsclient_close(struct wsclient *w)
+{
+    if (w->fd >= 0)
+        close(w->fd);
+    ws_parser_release(&w->p);
+}
+
+/* Send text in a masked frame, as a client must. */
+static bool
+wsclient_send(struct wsclient *w, const char *text)
+{
+    static const uint8_t mask[4] = { 0x12, 0x34, 0x56, 0x78 };
+    struct buf b;
+    buf_init(&b, 0);
+    bool ok = ws_frame(&b, WS_TEXT, text, strlen(text), mask) == SF_OK &&
+              send(w->fd, b.data, b.len, MSG_NOSIGNAL) == (ssize_t)b.len;
+    buf_release(&b);
+    return ok;
+}
+
+/* The next text message into out within 30 s; false when the socket closed or nothing came. */
+static bool
+wsclient_next(struct wsclient *w, struct buf *out)
+{
+    for (int waits = 0; waits < 30;) {
+        struct ws_msg m;
+        int rc = ws_parser_next(&w->p, &m, NULL);
+        if (rc < 0 || (rc == 1 && m.op == WS_CLOSE))
+            return false;
+        if (rc == 1 && m.op == WS_TEXT) {
+            buf_reset(out);
+            return buf_append(out, m.data, m.len) == SF_OK;
+        }
+        if (rc == 1)
+            continue; /* a ping */
+        struct pollfd pf = { .fd = w->fd, .events = POLLIN };
+        if (poll(&pf, 1, 1000) != 1) {
+            waits++;
+            continue;
+        }
+        char chunk[4096];
+        ssize_t n = recv(w->fd, chunk, sizeof(chunk), 0);
+        if (n <= 0 || ws_parser_feed(&w->p, chunk, (size_t)n, NULL))
+            return false;
+    }
+    return false;
+}
+
+/* Read messages (into out) until one holds both want and also (NULL: want alone); at most
+   200 (the socket's `current`s come every half second). */
+static bool
+wsclient_until(struct wsclient *w, const char *want, const char *also, struct buf *out)
+{
+    for (int i = 0; i < 200 && wsclient_next(w, out);)
+        if (strstr(out->data, want) && (!also || strstr(out->data, also)))
+            return true;
+        else
+            i++;
+    printf("    no message with %s%s%s (last: %.300s)\n", want, also ? " and " : "",
+           also ? also : "", out->data ? out->data : "");
+    return false;
+}
+
+/* Issue 32: the push socket's reads (the log's newest id when it opens, its events, each
+   print event's job and printer, the job history and current show) are the API reader's:
+   on PostgreSQL the loop's own connection sends nothing for a socket.  Both engines: the
+   socket's messages, in order (history before anything else after the auth). */
+T_CASE(api_octopush_reads_off_the_loop)
+{
+    struct sf_err err;
+    T_OK(start("octopush", &err), &err);
+    struct store *w = store_open_writer(srv.store, &err); /* another host's events */
+    T_TRUE(w != NULL);
+    struct buf b;
+    buf_init(&b, 0);
+    long st = call("POST", "/api/login?passive=true", KEY_RW, "{}", NULL, NULL, 0, NULL, &b);
+    T_TRUE(st == 200 || !printf("    %ld: %s\n", st, b.data));
+    char name[64], auth[160];
+    snprintf(name, sizeof(name), "%s", jstr(&b, NULL, "name")); /* jstr's value is static */
+    snprintf(auth, sizeof(auth), "{\"auth\":\"%s:%s\"}", name, jstr(&b, NULL, "session"));
+    uint64_t before = 0, after = 0;
+    on_server(read_loop_trips, &before);
+    struct wsclient ws;
+    T_TRUE(wsclient_open(&ws, "/sockjs/websocket"));
+    T_TRUE(wsclient_next(&ws, &b) && strstr(b.data, "\"connected\"") != NULL);
+    T_TRUE(wsclient_send(&ws, auth));
+    T_TRUE(wsclient_next(&ws, &b));
+    T_TRUE(strncmp(b.data, "{\"history\":", 11) == 0 || !printf("    %.300s\n", b.data));
+    T_TRUE(strstr(b.data, "\"name\":\"seed.stl\"") != NULL);
+    T_TRUE(wsclient_until(&ws, "{\"current\":", "\"name\":\"seed.stl\"", &b));
+    /* a pause logged with its printer; a print's end without it (its last print's) */
+    T_OK(store_log_event(w, 1, "a", "job-pause", "{}", &err), &err);
+    T_TRUE(wsclient_until(&ws, "\"PrintPaused\"", "\"name\":\"seed.stl\"", &b));
+    T_TRUE(strstr(b.data, "\"printer\":\"a\"") != NULL);
+    T_OK(store_log_event(w, 1, NULL, "job-print-done", "{}", &err), &err);
+    T_TRUE(wsclient_until(&ws, "\"PrintDone\"", "\"path\":\"job-1/seed.stl\"", &b));
+    T_TRUE(strstr(b.data, "\"printer\":\"a\"") != NULL);
+    T_TRUE(wsclient_until(&ws, "{\"current\":", "\"name\":\"seed.stl\"", &b));
+    on_server(read_loop_trips, &after);
+    if (t_store_pg())
+        T_EQ_INT(after - before, 0);
+    wsclient_close(&ws);
+    buf_release(&b);
+    store_close(w);
     stop();
 }

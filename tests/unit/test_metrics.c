@@ -88,3 +88,42 @@ T_CASE(metrics_count_each_print_outcome)
     T_EQ_INT(failed, 1);
     T_EQ_INT(cancelled, 1);
 }
+
+/* One of several hosts: the beat's own store queue's counters beside the farm queue's; one
+   host alone has no beat and shows none. */
+T_CASE(metrics_show_the_beat_queue_of_a_host)
+{
+    struct sf_err err;
+    char dir[512];
+    snprintf(dir, sizeof(dir), "%s/beat", t_tmpdir());
+    struct store *s = t_store_open(dir, NULL, &err);
+    T_TRUE(s != NULL);
+    struct farm_health h = { .store = { .posted = 9, .done = 7, .depth = 2, .depth_max = 3 },
+                             .has_beat = true,
+                             .beat = { .posted = 12,
+                                       .done = 11,
+                                       .failed = 1,
+                                       .retries = 4,
+                                       .depth = 1,
+                                       .depth_max = 5,
+                                       .wait_max_ms = 2500 } };
+    char *text = metrics_render(s, NULL, 0, &h, &err);
+    T_TRUE(text != NULL);
+    T_EQ_INT(value_of(text, "slimfarm_store_queue_depth"), 2); /* the farm queue's, as before */
+    T_EQ_INT(value_of(text, "slimfarm_store_writes_total"), 7);
+    T_EQ_INT(value_of(text, "slimfarm_store_beat_queue_depth"), 1);
+    T_EQ_INT(value_of(text, "slimfarm_store_beat_queue_depth_max"), 5);
+    T_TRUE(strstr(text, "\nslimfarm_store_beat_queue_wait_max_seconds 2.500\n") != NULL);
+    T_EQ_INT(value_of(text, "slimfarm_store_beat_requests_total"), 11);
+    T_EQ_INT(value_of(text, "slimfarm_store_beat_failures_total"), 1);
+    T_EQ_INT(value_of(text, "slimfarm_store_beat_retries_total"), 4);
+    T_TRUE(strstr(text, "# TYPE slimfarm_store_beat_requests_total counter") != NULL);
+    free(text);
+    h.has_beat = false;
+    text = metrics_render(s, NULL, 0, &h, &err);
+    T_TRUE(text != NULL);
+    T_EQ_INT(value_of(text, "slimfarm_store_queue_depth"), 2);
+    T_TRUE(strstr(text, "slimfarm_store_beat") == NULL);
+    free(text);
+    store_close(s);
+}

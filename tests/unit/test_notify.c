@@ -146,17 +146,17 @@ T_CASE(notify_mail_message_and_envelope)
 
 /* ---- several hosts on one store (PostgreSQL: tests/integ/store_pg.sh) ---- */
 
-/* Host a's notifications over s, named host, to an address that refuses: each delivery
-   waits for its retry, so notify_pending counts what the host told. */
+/* Host a's notifications over s (its log read on q's thread), named host, to an address that
+   refuses: each delivery waits for its retry, so notify_pending counts what the host told. */
 static struct notify *
-host_notify(struct loop *l, struct store *s, const char *host, struct sf_err *err)
+host_notify(struct loop *l, struct store *s, struct storeq *q, const char *host, struct sf_err *err)
 {
     struct notifycfg t;
     notifycfg_init(&t, "hook", 1);
     snprintf(t.url, sizeof(t.url), "http://127.0.0.1:9/hook");
     t.events = NOTIFY_JOB_DONE | NOTIFY_PRINTER_ERROR | NOTIFY_QUEUE_EMPTY;
     t.retries = 4;
-    struct notify *n = notify_new(l, s, &t, 1, err);
+    struct notify *n = notify_new(l, s, q, &t, 1, err);
     notify_set_host(n, host);
     return n;
 }
@@ -187,14 +187,16 @@ T_CASE(notify_each_event_of_a_farm_once_among_its_hosts)
     T_OK(t_store_exec(p.dir, sql), NULL);
     struct loop *l = loop_new(&err);
     T_TRUE(l != NULL);
-    struct notify *na = host_notify(l, p.a, "a", &err), *nb = host_notify(l, p.b, "b", &err);
-    T_TRUE(na && nb);
     /* each host reads its log on its store's thread, as the daemon does (farm_storeq) */
     struct storeq *qa = storeq_new(l, p.a, &err), *qb = storeq_new(l, p.b, &err);
     T_TRUE(qa && qb);
-    notify_set_queue(na, qa);
-    notify_set_queue(nb, qb);
     uint64_t trips_a = store_round_trips(p.a), trips_b = store_round_trips(p.b);
+    struct notify *na = host_notify(l, p.a, qa, "a", &err);
+    struct notify *nb = host_notify(l, p.b, qb, "b", &err);
+    T_TRUE(na && nb);
+    /* telling starts at the newest event, read on the store's thread: wait for it */
+    T_OK(storeq_sync(qa, 30000, &err), &err);
+    T_OK(storeq_sync(qb, 30000, &err), &err);
     /* the farm's log: b's job done, a's printer in error */
     snprintf(sql, sizeof(sql),
              "INSERT INTO events(at_ms, job_id, printer, kind, detail) VALUES"
@@ -215,7 +217,8 @@ T_CASE(notify_each_event_of_a_farm_once_among_its_hosts)
        its job: each once in the farm */
     T_EQ_INT(notify_pending(na), 2);
     T_EQ_INT(notify_pending(nb), 1);
-    /* the tellers, the job and the counts were read on the store threads (issue 32) */
+    /* the newest id, the tellers, the job and the counts were read on the store threads
+       (issue 32) */
     T_EQ_INT(store_round_trips(p.a) - trips_a, 0);
     T_EQ_INT(store_round_trips(p.b) - trips_b, 0);
     notify_free(na);

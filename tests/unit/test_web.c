@@ -482,3 +482,26 @@ T_CASE(web_gcode_is_served_from_the_store)
     buf_release(&h);
     stop();
 }
+
+/* Issue 32: a picture's render looks its part up on the worker's own reader (a part this
+   host's cache lacks comes whole from the database first): the loop's connection sends
+   nothing for a picture, rendered or kept. */
+T_CASE(web_picture_looks_its_part_up_off_the_loop)
+{
+    struct sf_err err;
+    T_OK(start("picture-trips", &err), &err);
+    struct buf b, h;
+    buf_init(&b, 0);
+    buf_init(&h, 0);
+    char path[96];
+    snprintf(path, sizeof(path), "/api/jobs/%lld/preview.png?stage=before", (long long)srv.job);
+    int64_t trips = loop_trips();
+    T_EQ_INT(call("GET", path, KEY_RO, NULL, NULL, &b, &h), 200); /* rendered */
+    T_TRUE(b.len > 1000 && memcmp(b.data, "\x89PNG\r\n\x1a\n", 8) == 0);
+    T_EQ_INT(call("GET", path, KEY_RO, NULL, NULL, &b, &h), 200); /* kept */
+    T_TRUE(b.len > 1000 && memcmp(b.data, "\x89PNG", 4) == 0);
+    T_EQ_INT(loop_trips() - trips, 0);
+    buf_release(&b);
+    buf_release(&h);
+    stop();
+}
