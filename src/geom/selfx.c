@@ -10,13 +10,13 @@
  * so each segment is trimmed by a relative 1e-5 at both ends.
  *
  * Thread: any; selfx_count owns its device and scene, a selfx_ref holds
- * one for its reference's connectivity (built for refitting) and refits it
- * to each mesh it counts (rtcCommitScene on the moved vertices with
- * RTC_BUILD_QUALITY_REFIT): the deformation's iterates keep the
- * reference's triangles.  Measured on cow's surface step, Embree 3.13.5's
- * refitting commit costs as much as the build it replaces (4.9 G of 21.1 G
- * instructions, 4.6 G before); what the kept scene buys is one device and
- * scene per handle, not per check.
+ * one of the reference's triangles with no corner near its crossings (the
+ * only ones a new crossing can have) and recommits it with each mesh it
+ * counts, casting only the edges with no end near.  Embree 3.13.5 rebuilds
+ * the BVH of robust triangles (BVH8<triangle4v>, two-level builder) at
+ * every commit: RTC_BUILD_QUALITY_REFIT is not honoured (callgrind: the
+ * same instructions with and without it, 50 M a commit for cow's 23 k
+ * triangles, beside 40 M for the edges' casts).
  */
 #include "selfx.h"
 
@@ -36,7 +36,9 @@ struct edge_ctx {
        triangle the edge pierces, whatever order the BVH finds them in */
     bool (*judge)(void *ud, uint32_t a, uint32_t b, uint32_t tri);
     void *ud;
-    bool crossed; /* the judge said yes on this edge */
+    bool crossed;         /* the judge said yes on this edge */
+    const uint32_t *prim; /* optional: the scene's triangle i is the mesh's prim[i] */
+    const uint8_t *skip;  /* optional: per vertex, cast no edge from or to it */
 };
 
 static void
@@ -47,6 +49,8 @@ skip_touching(const struct RTCFilterFunctionNArguments *args)
         if (!args->valid[i])
             continue;
         unsigned prim = ((const unsigned *)args->hit)[5 * args->N + i];
+        if (ec->prim)
+            prim = ec->prim[prim];
         const uint32_t *t = ec->m->t[prim];
         for (int k = 0; k < 3; k++)
             if (t[k] == ec->a || t[k] == ec->b)
@@ -97,9 +101,12 @@ scene_load(struct scene *sc, const struct mesh *m)
     }
 }
 
-/* Build the scene of m; refit says it will be refitted (RTC_BUILD_QUALITY_REFIT). */
+/* Build the scene of m's triangles (with prim, only its n_prim: the
+   scene's triangle i is m's prim[i]); refit says it will be refitted
+   (RTC_BUILD_QUALITY_REFIT). */
 static int
-scene_init(struct scene *sc, const struct mesh *m, bool refit, struct sf_err *err)
+scene_init_some(struct scene *sc, const struct mesh *m, const uint32_t *prim, uint32_t n_prim,
+                bool refit, struct sf_err *err)
 {
     memset(sc, 0, sizeof(*sc));
     sc->dev = rtcNewDevice("threads=1");
@@ -110,7 +117,7 @@ scene_init(struct scene *sc, const struct mesh *m, bool refit, struct sf_err *er
                    : NULL;
     unsigned *ib = sc->g
                        ? rtcSetNewGeometryBuffer(sc->g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                 3 * sizeof(unsigned), m->n_tris)
+                                                 3 * sizeof(unsigned), prim ? n_prim : m->n_tris)
                        : NULL;
     if (!sc->s || !sc->vb || !ib) {
         scene_release(sc);
@@ -118,9 +125,9 @@ scene_init(struct scene *sc, const struct mesh *m, bool refit, struct sf_err *er
     }
     sc->n_verts = m->n_verts;
     scene_load(sc, m);
-    for (uint32_t i = 0; i < m->n_tris; i++)
+    for (uint32_t i = 0; i < (prim ? n_prim : m->n_tris); i++)
         for (int k = 0; k < 3; k++)
-            ib[3 * i + (uint32_t)k] = m->t[i][k];
+            ib[3 * i + (uint32_t)k] = m->t[prim ? prim[i] : i][k];
     rtcSetGeometryOccludedFilterFunction(sc->g, skip_touching);
     if (refit) { /* Embree heeds a geometry's REFIT only in a LOW quality scene */
         rtcSetSceneBuildQuality(sc->s, RTC_BUILD_QUALITY_LOW);
@@ -133,6 +140,12 @@ scene_init(struct scene *sc, const struct mesh *m, bool refit, struct sf_err *er
     return SF_OK;
 }
 
+static int
+scene_init(struct scene *sc, const struct mesh *m, bool refit, struct sf_err *err)
+{
+    return scene_init_some(sc, m, NULL, 0, refit, err);
+}
+
 /* Move the scene's vertices to m's (same connectivity) and refit its BVH. */
 static void
 scene_refit(struct scene *sc, const struct mesh *m)
@@ -143,24 +156,23 @@ scene_refit(struct scene *sc, const struct mesh *m)
     rtcCommitScene(sc->s);
 }
 
-/* Cast every edge of m (whose positions sc holds) once: the count of edges
-   that pierce a triangle not touching them (with judge: that the judge
-   calls a crossing). */
+/* Cast every edge of ec->m (whose positions sc holds; but those with an
+   end ec->skip names) once: the count of edges that pierce a triangle not
+   touching them (with a judge: that the judge calls a crossing). */
 static int
-cast_edges(const struct scene *sc, const struct mesh *m,
-           bool (*judge)(void *, uint32_t, uint32_t, uint32_t), void *ud)
+cast_some(const struct scene *sc, const struct edge_ctx *ec0)
 {
-    struct edge_ctx ec;
+    struct edge_ctx ec = *ec0;
+    const struct mesh *m = ec.m;
     rtcInitIntersectContext(&ec.ctx);
-    ec.m = m;
-    ec.judge = judge;
-    ec.ud = ud;
     int count = 0;
     for (uint32_t i = 0; i < m->n_tris; i++) {
         for (int k = 0; k < 3; k++) {
             uint32_t a = m->t[i][k], b = m->t[i][(k + 1) % 3];
             if (a > b)
                 continue; /* each edge once (closed meshes list it both ways) */
+            if (ec.skip && (ec.skip[a] || ec.skip[b]))
+                continue;
             struct vec3 pa = m->v[a], d = v3_sub(m->v[b], pa);
             double len = v3_len(d);
             if (!(len > 0))
@@ -180,10 +192,19 @@ cast_edges(const struct scene *sc, const struct mesh *m,
             ray.mask = 0xffffffffu;
             rtcOccluded1(sc->s, &ec.ctx, &ray);
             /* Embree marks an occluded ray with tfar = -inf */
-            count += judge ? ec.crossed : ray.tfar < 0;
+            count += ec.judge ? ec.crossed : ray.tfar < 0;
         }
     }
     return count;
+}
+
+/* Cast every edge of m through sc, which holds all of m's triangles. */
+static int
+cast_edges(const struct scene *sc, const struct mesh *m,
+           bool (*judge)(void *, uint32_t, uint32_t, uint32_t), void *ud)
+{
+    struct edge_ctx ec = { .m = m, .judge = judge, .ud = ud };
+    return cast_some(sc, &ec);
 }
 
 static int
@@ -265,7 +286,12 @@ struct selfx_ref {
     size_t n_pairs, cap_pairs;
     int n_input; /* edges of ref crossing it (selfx_count) */
     bool oom;
-    struct scene sc; /* ref's triangles, refitted to each mesh counted */
+    /* the triangles with no corner near: a crossing needs one of them, and
+       an edge with no end near (apart_in_ref); refitted to each mesh
+       counted (none: sc is empty, nothing can be new) */
+    struct scene sc;
+    uint32_t *prim; /* the scene's triangle i is ref's prim[i] */
+    uint32_t n_prim;
 };
 
 /* One check of a deformed mesh against a prepared reference. */
@@ -345,6 +371,7 @@ selfx_ref_free(struct selfx_ref *sr)
     if (!sr)
         return;
     scene_release(&sr->sc);
+    free(sr->prim);
     free(sr->comp);
     free(sr->near);
     free(sr->pairs);
@@ -399,6 +426,20 @@ selfx_ref_new(const struct mesh *ref, double tol, struct sf_err *err)
             nc->near[v] |= grow[v];
     }
     free(grow);
+    grow = NULL;
+    /* the counts' scene: only the triangles that can cross anew */
+    scene_release(&nc->sc);
+    if (!(nc->prim = mem_array(ref->n_tris ? ref->n_tris : 1, sizeof(uint32_t)))) {
+        sf_err_set(err, SF_ENOMEM, "selfx: out of memory for %u triangles", ref->n_tris);
+        goto fail;
+    }
+    for (uint32_t f = 0; f < ref->n_tris; f++) {
+        const uint32_t *t = ref->t[f];
+        if (!nc->near[t[0]] && !nc->near[t[1]] && !nc->near[t[2]])
+            nc->prim[nc->n_prim++] = f;
+    }
+    if (nc->n_prim && scene_init_some(&nc->sc, ref, nc->prim, nc->n_prim, true, err) < 0)
+        goto fail;
     return nc;
 fail:
     free(grow);
@@ -435,9 +476,36 @@ selfx_ref_count(struct selfx_ref *sr, const struct mesh *m, uint8_t *mark, struc
         memset(mark, 0, m->n_verts);
     if (!m->n_tris)
         return 0;
+    if (!sr->n_prim)
+        return 0;
     struct new_ctx ctx = { .sr = sr, .mark = mark };
     scene_refit(&sr->sc, m);
-    return cast_edges(&sr->sc, m, apart_in_ref, &ctx);
+    struct edge_ctx ec = {
+        .m = m, .judge = apart_in_ref, .ud = &ctx, .prim = sr->prim, .skip = sr->near
+    };
+    return cast_some(&sr->sc, &ec);
+}
+
+int
+selfx_ref_count_all(struct selfx_ref *sr, const struct mesh *m, uint8_t *mark, struct sf_err *err)
+{
+    const struct mesh *ref = sr->ref;
+    if (ref->n_verts != m->n_verts || ref->n_tris != m->n_tris)
+        return sf_err_set(err, SF_EINVAL,
+                          "selfx: the reference has %u/%u vertices/triangles, the mesh %u/%u",
+                          ref->n_verts, ref->n_tris, m->n_verts, m->n_tris);
+    if (mark)
+        memset(mark, 0, m->n_verts);
+    if (!m->n_tris)
+        return 0;
+    struct new_ctx ctx = { .sr = sr, .mark = mark };
+    struct scene sc;
+    int rc = scene_init(&sc, m, true, err);
+    if (rc < 0)
+        return rc;
+    rc = cast_edges(&sc, m, apart_in_ref, &ctx);
+    scene_release(&sc);
+    return rc;
 }
 
 int

@@ -4,8 +4,8 @@
  * never returned (slim.c falls back to an earlier iterate).
  *
  * Thread-safe: selfx_count and selfx_count_new build their own Embree
- * scene; a selfx_ref keeps one, refitted by each selfx_ref_count: one
- * thread at a time on a handle.
+ * scene; a selfx_ref keeps one of the triangles that can cross anew,
+ * refitted by each selfx_ref_count: one thread at a time on a handle.
  */
 #ifndef SF_GEOM_SELFX_H
 #define SF_GEOM_SELFX_H
@@ -50,6 +50,17 @@ struct selfx_ref;
 struct selfx_ref *selfx_ref_new(const struct mesh *ref, double tol, struct sf_err *err);
 int selfx_ref_count(struct selfx_ref *sr, const struct mesh *m, uint8_t *mark, struct sf_err *err);
 void selfx_ref_free(struct selfx_ref *sr);
+
+/*
+ * selfx_ref_count casts only the edges with no end near the input's
+ * crossings, through a scene of only the triangles with no corner there
+ * (a crossing there is not new: it could only be judged no).  Embree's
+ * verdict on an edge and a triangle depends on the two alone, so this is
+ * the count, and the marks, of every edge through every triangle, which
+ * selfx_ref_count_all still does (for the tests that hold the two equal).
+ */
+int selfx_ref_count_all(struct selfx_ref *sr, const struct mesh *m, uint8_t *mark,
+                        struct sf_err *err);
 
 /* The reference's own crossings: what selfx_count(ref) returns (the same
    edge casts, done once by selfx_ref_new). */

@@ -505,6 +505,74 @@ T_CASE(selfx_ref_marks_every_triangle_an_edge_pierces)
     mesh_release(&m);
 }
 
+/* The same crossings and marks from the check that leaves out what is near
+   the input's crossings (selfx_ref_count) as from every edge through every
+   triangle (selfx_ref_count_all). */
+static void
+same_as_full_check(struct selfx_ref *sr, const struct mesh *moved, uint8_t *mark, uint8_t *all,
+                   int *total)
+{
+    struct sf_err err;
+    int n = selfx_ref_count(sr, moved, mark, &err);
+    T_EQ_INT(n, selfx_ref_count_all(sr, moved, all, &err));
+    T_TRUE(memcmp(mark, all, moved->n_verts) == 0);
+    *total += n;
+}
+
+T_CASE(selfx_ref_finds_what_every_edge_finds_on_randomly_moved_parts)
+{
+    /* a refined torus (no crossings) and two overlapping boxes beside two
+       apart (crossings as given, so shells and rings are ruled out too),
+       every vertex moved at random by up to half, one or two edge lengths:
+       from a few new crossings to thousands, the counts and marks agree */
+    struct mesh parts[2], b, moved;
+    struct sf_err err;
+    mesh_init(&parts[0]);
+    mesh_init(&parts[1]);
+    mesh_init(&b);
+    mesh_init(&moved);
+    T_OK(shape_torus(&parts[0], 20, 6, 48, 24, &err), &err);
+    T_TRUE(mesh_refine(&parts[0], 6000, 0, 1u << 16, &err) >= 0);
+    uint32_t third, fourth;
+    T_OK(four_boxes(&parts[1], &b, &third, &fourth, &err), &err);
+    T_TRUE(mesh_refine(&parts[1], 6000, 0, 1u << 16, &err) >= 0);
+    uint64_t seed = 36;
+    for (int p = 0; p < 2; p++) {
+        const struct mesh *m = &parts[p];
+        double edge = sqrt(4 * mesh_area(m) / (sqrt(3) * m->n_tris)); /* a mean edge */
+        struct selfx_ref *sr = selfx_ref_new(m, 1e-6 * mesh_diag(m), &err);
+        T_TRUE(sr != NULL);
+        uint8_t *mark = malloc(m->n_verts), *all = malloc(m->n_verts);
+        T_TRUE(mark && all);
+        int total = 0, crossed = 0;
+        for (int trial = 0; trial < 9; trial++) {
+            T_OK(mesh_copy(&moved, m, &err), &err);
+            double amp = edge * (0.5 + 0.75 * (trial % 3));
+            for (uint32_t v = 0; v < moved.n_verts; v++) {
+                double d[3];
+                for (int k = 0; k < 3; k++) {
+                    seed = seed * 6364136223846793005u + 1442695040888963407u;
+                    d[k] = amp * ((double)(seed >> 11) / 9007199254740992.0 - 0.5);
+                }
+                moved.v[v] = v3_add(moved.v[v], v3(d[0], d[1], d[2]));
+            }
+            int before = total;
+            same_as_full_check(sr, &moved, mark, all, &total);
+            crossed += total > before;
+            mesh_release(&moved);
+            mesh_init(&moved);
+        }
+        same_as_full_check(sr, m, mark, all, &total); /* the reference itself: none new */
+        T_TRUE(crossed >= 6); /* most trials crossed: the comparison saw crossings */
+        free(mark);
+        free(all);
+        selfx_ref_free(sr);
+    }
+    mesh_release(&b);
+    mesh_release(&parts[0]);
+    mesh_release(&parts[1]);
+}
+
 T_CASE(selfx_ref_knows_the_input_count_and_reads_a_moved_reference)
 {
     /* two overlapping boxes (the input's crossings) and two apart */
