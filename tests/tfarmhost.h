@@ -29,6 +29,8 @@
 struct hdrv {
     struct drv base; /* first: drv.h's rule */
     int starts, cancels, attaches;
+    bool ended; /* a network printer's print ended while the farm was away: attach adopts it
+                   and reports the end at once, as a network driver does */
 };
 
 static struct hdrv *hdrvs[4];
@@ -108,7 +110,13 @@ static int
 h_attach(struct drv *d, const char *path, const struct drv_job_scan *scan, struct sf_err *err)
 {
     (void)path, (void)scan;
-    ((struct hdrv *)d)->attaches++;
+    struct hdrv *h = (struct hdrv *)d;
+    h->attaches++;
+    if (h->ended) {
+        h->ended = false;
+        d->on_event(d, DRV_EV_JOB_DONE, d->ud);
+        return SF_OK;
+    }
     if (d->status.state != DRV_PRINTING && d->status.state != DRV_PAUSED)
         return sf_err_set(err, SF_ENOTFOUND, "printer '%s': hdrv: no job", d->name);
     return SF_OK;

@@ -224,11 +224,13 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
 {
     switch (ev) {
     case DRV_EV_STATE:
-        if (p->state == PRINTER_OFFLINE && p->drv->ops->attach && !p->attach_tried &&
+        if (p->state == PRINTER_OFFLINE && p->drv->ops->attach &&
+            (!p->attach_tried || p->away_id) &&
             (st->state == DRV_IDLE || st->state == DRV_PRINTING || st->state == DRV_PAUSED)) {
             /* tried only once the driver could answer: p waits offline for the store's
                answer, and "not yet" (SF_EAGAIN) asks again, so the job is not left
-               interrupted until the next reconnect (printer_attach.c) */
+               interrupted until the next reconnect (printer_attach.c); a print it runs for
+               this host, not held now (away_id), keeps it offline until held or ended */
             if (printer_attach_offer(p))
                 break;
         }

@@ -181,8 +181,11 @@ printer_attach_offer(struct printer *p)
         return true;
     /* a job the driver runs on for this host, not held now: held and taken back, or its end
        recorded (printer_op.c), not offered to the driver again (it has it) */
-    if (p->away_id || p->hticket)
+    if (p->away_id || p->hticket) {
+        if (!p->attach_retry)
+            printer_settle_orphan(p); /* (one read and one hold at a time) */
         return true;
+    }
     if (p->bed_full) {
         p->attach_tried = true;
         return false;

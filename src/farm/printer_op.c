@@ -681,6 +681,9 @@ printer_away_ended(struct printer *p, enum job_event ev, int64_t lines, const ch
                 "once it does",
                 (long long)id, ev == JOB_EV_PRINT_FAILED ? "failed" : "done");
     printer_settle_orphan(p);
+    if (p->drv) /* it waited offline for the job (printer.c apply): it connects now, as its
+                   driver says (its bed full first) */
+        printer_apply_status(p);
     printer_changed(p);
 }
 

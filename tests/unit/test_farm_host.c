@@ -1155,7 +1155,7 @@ T_CASE(host_starts_nothing_on_a_printer_removed_while_its_take_was_out)
    printer's repeated log line is held back. */
 #define NET_PRINTER(name)                                                                          \
     "[printer " name "]\ndriver: octoprint\nurl: http://127.0.0.1:9\napi_key: k\n"                 \
-    "gcode_models: *\nauto_eject: true\n"
+    "gcode_models: *\n"
 
 /* A gate on db's database: a hold of an interrupted job (its fence moves on) waits on the
    server while gate has a row (30 s at most).  Closed at first. */
@@ -1171,14 +1171,15 @@ gate_interrupted(struct sqldb *db)
                           " EXECUTE FUNCTION gate_wait()") == 0;
 }
 
-/* d's print ended: the driver says idle and reports the end. */
+/* d's print ended: the driver says idle, then reports the end (a network driver's order:
+   netjob_report). */
 static void
 net_print_ends(struct hdrv *d)
 {
     d->base.status.state = DRV_IDLE;
     d->base.status.lines_acked = 2;
-    d->base.on_event(&d->base, DRV_EV_JOB_DONE, d->base.ud);
     d->base.on_event(&d->base, DRV_EV_STATE, d->base.ud);
+    d->base.on_event(&d->base, DRV_EV_JOB_DONE, d->base.ud);
 }
 
 /* Turn hx's loop until its printer 0 is in state want with no job; false after
@@ -1214,7 +1215,8 @@ T_CASE(host_takes_back_a_network_print_it_let_go)
     struct store *a = NULL;
     int64_t id = 0;
     struct hdrv *d = NULL;
-    T_TRUE(reaped_print_on("netback", NET_PRINTER("n1"), "n1", url, sizeof(url), &a, &id, &d));
+    T_TRUE(reaped_print_on("netback", NET_PRINTER("n1") "auto_eject: true\n", "n1", url,
+                           sizeof(url), &a, &id, &d));
     T_TRUE(d != NULL);
     /* back: lost, let go, joined again, held again: printing on n for b */
     T_TRUE(wait_state(url, id, "printing"));
@@ -1239,8 +1241,9 @@ T_CASE(host_takes_back_a_network_print_it_let_go)
 /*
  * The same, but the print ends while b's hold of the job is on its way (held here at a gate
  * on the server; the print's end reaches b's driver only after b joined again): the end is
- * recorded once the hold is back, the job done once, the printer free.  Failed before as
- * above (nothing held the job again: the gate never saw a hold).
+ * recorded once the hold is back, the job done once, and the printer, which keeps its part
+ * (no auto_eject), awaits its clear: it waited offline for the job, not idle with a part on
+ * its bed.  Failed before as above (nothing held the job again: the gate never saw a hold).
  */
 T_CASE(host_records_a_network_print_that_ended_after_it_joined_again)
 {
@@ -1265,7 +1268,7 @@ T_CASE(host_records_a_network_print_that_ended_after_it_joined_again)
         loop_run_once(hx.l, 10);
     T_OK(sqldb_exec(direct, "DELETE FROM gate"), NULL);
     T_TRUE(wait_state(url, id, "done"));
-    T_TRUE(wait_printer_free(PRINTER_IDLE));
+    T_TRUE(wait_printer_free(PRINTER_AWAITING_CLEAR));
     db_text(url, "SELECT count(*) FROM prints WHERE job_id = ?1 AND outcome = 'done'", id, text,
             sizeof(text));
     T_EQ_STR(text, "1");
@@ -1296,7 +1299,7 @@ T_CASE(host_holds_a_reattached_print_off_the_loop)
     struct store *a = store_open_host(dir_a, url, NULL, &err);
     T_TRUE(a != NULL);
     int64_t id;
-    T_OK(host_farm(dir, url, "b", NET_PRINTER("n3"), &err), &err);
+    T_OK(host_farm(dir, url, "b", NET_PRINTER("n3") "auto_eject: true\n", &err), &err);
     T_OK(add_ready_for(a, "n3", &id, &err), &err);
     T_OK(store_host_wake(a, &err), &err);
     T_TRUE(wait_state(url, id, "printing"));
@@ -1330,6 +1333,123 @@ T_CASE(host_holds_a_reattached_print_off_the_loop)
     T_TRUE(wait_state(url, id, "done"));
     T_EQ_INT(d ? d->starts : -1, 1);
     sqldb_close(direct);
+    host_farm_free();
+    store_close(a);
+}
+
+/*
+ * The re-attach of a network printer while the farm's store queue is busy (here: the
+ * printer's own state write waits at a gate on the server): the printer takes its job back
+ * at once in the loop's view, and the store has it once the queue moves.  Failed before: the
+ * hold waited for the queue on the loop (farm_sync, 250 ms), found it busy (SF_EBUSY), and
+ * that was final: the job stayed interrupted while the printer printed it.
+ */
+T_CASE(host_reattaches_while_its_store_queue_is_busy)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024];
+    snprintf(dir, sizeof(dir), "%s/netbusy", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t id;
+    T_OK(host_farm(dir, url, "b", NET_PRINTER("n4") "auto_eject: true\n", &err), &err);
+    T_OK(add_ready_for(a, "n4", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("n4");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job */
+    /* the gate: the printer's move from offline to idle waits on the server (30 s at most) */
+    struct sqldb *direct = sqldb_open(url, 0, &err);
+    T_TRUE(direct != NULL);
+    T_EQ_INT(sqldb_exec(direct,
+                        "CREATE TABLE gate(x INTEGER); INSERT INTO gate VALUES(1);"
+                        " CREATE FUNCTION gate_wait() RETURNS trigger LANGUAGE plpgsql AS $$"
+                        " BEGIN FOR i IN 1..1500 LOOP EXIT WHEN NOT EXISTS (SELECT 1 FROM gate);"
+                        " PERFORM pg_sleep(0.02); END LOOP; RETURN NEW; END $$;"
+                        " CREATE TRIGGER gate_wait BEFORE UPDATE ON printers FOR EACH ROW"
+                        " WHEN (OLD.state = 'offline' AND NEW.state = 'idle')"
+                        " EXECUTE FUNCTION gate_wait()"),
+             0);
+    if (d) { /* the link drops; the printer prints on, and the driver connects again */
+        d->base.status.state = DRV_OFFLINE;
+        snprintf(d->base.status.message, sizeof(d->base.status.message), "timed out");
+        d->base.on_event(&d->base, DRV_EV_STATE, d->base.ud);
+        d->base.status.state = DRV_PRINTING;
+        d->base.status.message[0] = '\0';
+    }
+    /* the printer prints its job again while its state write waits at the gate */
+    struct printer_info info = { 0 };
+    bool gated = false;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        farm_printer_info(hx.f, 0, &info);
+        gated = gated || db_int(direct, "SELECT count(*) FROM pg_stat_activity WHERE datname ="
+                                        " current_database() AND wait_event = 'PgSleep' AND"
+                                        " query LIKE 'INSERT INTO printers%'") > 0;
+        if (gated && info.state == PRINTER_PRINTING && info.job_id == id)
+            break;
+        loop_run_once(hx.l, 10);
+    }
+    T_TRUE(gated);
+    T_EQ_INT(info.state, PRINTER_PRINTING);
+    T_EQ_INT(info.job_id, id);
+    T_OK(sqldb_exec(direct, "DELETE FROM gate"), NULL);
+    T_TRUE(wait_state(url, id, "printing"));
+    if (d)
+        net_print_ends(d);
+    T_TRUE(wait_state(url, id, "done"));
+    T_EQ_INT(d ? d->starts : -1, 1);
+    T_EQ_INT(d ? d->attaches : -1, 1);
+    sqldb_close(direct);
+    host_farm_free();
+    store_close(a);
+}
+
+/*
+ * A network printer whose link dropped while printing comes back idle: the print ended while
+ * the farm was away, and the driver, adopting the job, reports its end at once (no change of
+ * state to report).  The end is recorded once the host holds the job, and the printer, which
+ * waited offline for that, connects: idle (auto_eject), taking the next job.
+ */
+T_CASE(host_records_a_reattached_print_that_ended_while_away)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/netgone", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t id;
+    T_OK(host_farm(dir, url, "b", NET_PRINTER("n5") "auto_eject: true\n", &err), &err);
+    T_OK(add_ready_for(a, "n5", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("n5");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job */
+    if (d) { /* the link drops; the print ends meanwhile; the driver connects again, idle */
+        d->base.status.state = DRV_OFFLINE;
+        snprintf(d->base.status.message, sizeof(d->base.status.message), "timed out");
+        d->base.on_event(&d->base, DRV_EV_STATE, d->base.ud);
+        d->base.status.state = DRV_IDLE;
+        d->base.status.message[0] = '\0';
+        d->base.status.lines_acked = 2;
+        d->ended = true;
+    }
+    T_TRUE(wait_state(url, id, "done"));
+    T_TRUE(wait_printer_free(PRINTER_IDLE));
+    T_EQ_INT(d ? d->attaches : -1, 1);
+    T_EQ_INT(d ? d->starts : -1, 1);
+    db_text(url, "SELECT count(*) FROM prints WHERE job_id = ?1 AND outcome = 'done'", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "1");
     host_farm_free();
     store_close(a);
 }
