@@ -23,10 +23,14 @@
 #include "../src/farm/store_host.h"
 #include "tstore.h"
 
-/* hdrv: a printer that connects idle and prints what it is given, reporting on the loop. */
+/* hdrv: a printer that connects idle and prints what it is given, reporting on the loop.  A
+   network kind (octoprint, moonraker, prusalink) re-attaches: it connects again in the state it
+   had (a link drop: the printer prints on), and attach adopts the job it still prints. */
 struct hdrv {
     struct drv base; /* first: drv.h's rule */
-    int starts, cancels;
+    int starts, cancels, attaches;
+    bool ended; /* a network printer's print ended while the farm was away: attach adopts it
+                   and reports the end at once, as a network driver does */
 };
 
 static struct hdrv *hdrvs[4];
@@ -44,7 +48,9 @@ static int
 h_open(struct drv *d, struct sf_err *err)
 {
     (void)err;
-    d->status.state = DRV_IDLE;
+    bool prints = d->status.state == DRV_PRINTING || d->status.state == DRV_PAUSED;
+    if (!d->ops->attach || !prints)
+        d->status.state = DRV_IDLE;
     loop_timer_add(d->loop, 0, h_deliver, d);
     return SF_OK;
 }
@@ -100,10 +106,30 @@ h_destroy(struct drv *d)
     free(d);
 }
 
+static int
+h_attach(struct drv *d, const char *path, const struct drv_job_scan *scan, struct sf_err *err)
+{
+    (void)path, (void)scan;
+    struct hdrv *h = (struct hdrv *)d;
+    h->attaches++;
+    if (h->ended) {
+        h->ended = false;
+        d->on_event(d, DRV_EV_JOB_DONE, d->ud);
+        return SF_OK;
+    }
+    if (d->status.state != DRV_PRINTING && d->status.state != DRV_PAUSED)
+        return sf_err_set(err, SF_ENOTFOUND, "printer '%s': hdrv: no job", d->name);
+    return SF_OK;
+}
+
 static const struct drv_ops hdrv_ops = {
     DRV_OPS_VERSION, "hdrv",    h_open,  h_start,   h_ok, h_ok,
     h_cancel,        h_command, h_close, h_destroy, NULL, NULL
 };
+static const struct drv_ops hdrv_net_ops = { DRV_OPS_VERSION, "hdrv-net", h_open,
+                                             h_start,         h_ok,       h_ok,
+                                             h_cancel,        h_command,  h_close,
+                                             h_destroy,       h_attach,   NULL };
 
 static inline struct drv *
 hdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, void *ud,
@@ -114,7 +140,10 @@ hdrv_new(struct loop *l, const struct drv_config *cfg, drv_event_fn on_event, vo
         sf_err_set(err, SF_ENOMEM, "hdrv: out of memory");
         return NULL;
     }
-    t->base.ops = &hdrv_ops;
+    bool net =
+        cfg->kind && (strcmp(cfg->kind, "octoprint") == 0 || strcmp(cfg->kind, "moonraker") == 0 ||
+                      strcmp(cfg->kind, "prusalink") == 0);
+    t->base.ops = net ? &hdrv_net_ops : &hdrv_ops;
     t->base.loop = l;
     snprintf(t->base.name, sizeof(t->base.name), "%s", cfg->name);
     t->base.on_event = on_event;

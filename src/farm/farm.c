@@ -133,6 +133,7 @@ farm_printer_new(struct farm *f, const struct farmcfg_printer *cfg, const struct
         .changed = on_printer_changed,
         .ud = f,
         .hold = farm_host_hold,
+        .hold_ask = farm_host_hold_ask,
     };
     return printer_new(&env, cfg);
 }

@@ -288,40 +288,18 @@ let_go(struct farm_host *h)
     }
 }
 
-static bool reoffer(struct farm_host *h);
-
-static void
-on_reoffer(struct loop *l, void *ud)
-{
-    (void)l;
-    struct farm_host *h = ud;
-    h->reoffer = 0;
-    (void)reoffer(h);
-}
-
 /* After a join, or a doubted lease renewed: offer each printer its job again (what waited
-   for the lease; a print that ended while this host was away is recorded), once the loop's
-   connection answers.  The printers' re-attach reads and writes on it (printer.c), and
-   after an outage it reconnects only as it is used (store_open_host: never waiting), so it
-   may still be away when the beat's connection is back; a re-attach that found it away
-   would leave its job interrupted.  Tried again every FARM_HOST_RELISTEN_MS meanwhile.
-   False while it waits. */
-static bool
+   for the lease; a print that ended while this host was away is recorded).  The offers read
+   and hold on the farm's store thread (printer_attach.c, printer_op.c), never on the loop's
+   connection, which after an outage reconnects only as it is used: nothing here waits for
+   it. */
+static void
 reoffer(struct farm_host *h)
 {
-    struct sf_err err;
-    if (h->reoffer)
-        loop_timer_cancel(h->f->l, h->reoffer);
-    h->reoffer = 0;
     if (!h->joined)
-        return true; /* lost again: the next join offers them */
-    if (store_ping(h->f->s, &err)) {
-        h->reoffer = loop_timer_add(h->f->l, FARM_HOST_RELISTEN_MS, on_reoffer, h);
-        return false;
-    }
+        return; /* lost again: the next join offers them */
     for (size_t i = 0; i < h->f->n_printers; i++)
         printer_attach_again(h->f->printers[i]);
-    return true;
 }
 
 /* b came back: the loop's view of the lease follows what the beat's thread found. */
@@ -363,9 +341,7 @@ on_beat_done(void *ud, const struct storeq_result *r)
     }
     if ((b->join && b->join_rc == SF_OK) || (b->doubted && b->beat && b->beat_rc == SF_OK)) {
         farm_kick(h->f); /* this one schedules */
-        if (!reoffer(h)) /* what waited for the lease */
-            log_info("host", "%s: the printers re-attach once the loop's connection is back",
-                     h->name);
+        reoffer(h);      /* what waited for the lease */
     }
     if (b->reaped < 0) {
         log_warn("host", "reap: %s", b->reap_err.msg);
@@ -574,8 +550,6 @@ farm_host_stop(struct farm *f)
     h->bq = NULL;
     if (h->relisten)
         loop_timer_cancel(f->l, h->relisten);
-    if (h->reoffer)
-        loop_timer_cancel(f->l, h->reoffer);
     farm_host_ask_stop(h); /* its timers, and the claims still in doubt */
     listen_drop(h);
     struct sf_err err;
@@ -678,4 +652,70 @@ farm_host_hold(void *ud, int64_t id, int64_t *fence, struct sf_err *err)
     if (rc == SF_ESTALE)
         farm_host_lease_doubted(h);
     return rc;
+}
+
+/* A hold on the farm's store thread (farm_host_hold_ask): what it needs, copied. */
+struct hold_ask {
+    struct farm *f;
+    char name[STORE_HOST_NAME_MAX];
+    int64_t token, id, fence;
+    void (*done)(void *ud, int rc, int64_t fence, const struct sf_err *err);
+    void *ud;
+};
+
+static int
+hold_call(struct store *s, void *arg, struct sf_err *err)
+{
+    struct hold_ask *a = arg;
+    return store_job_attach(s, a->name, a->token, a->id, &a->fence, err);
+}
+
+static void
+on_held(void *ud, const struct storeq_result *r)
+{
+    struct hold_ask *a = ud;
+    struct farm_host *h = a->f->host; /* alive: the farm's queue is freed before the host */
+    struct sf_err err = { 0 };
+    if (r->rc && r->err)
+        err = *r->err;
+    if (r->rc == SF_OK) {
+        log_info("host", "%s holds job %lld (fencing token %lld)", a->name, (long long)a->id,
+                 (long long)a->fence);
+    } else {
+        sf_err_prefix(&err, "host %s: hold job %lld", a->name, (long long)a->id);
+        /* a lease this host held when it asked (not one it lost and joined again since) */
+        if (r->rc == SF_ESTALE && h && h->joined && h->token == a->token)
+            farm_host_lease_doubted(h);
+    }
+    a->done(a->ud, r->rc, r->rc ? 0 : a->fence, &err);
+    free(a);
+}
+
+int
+farm_host_hold_ask(void *ud, int64_t id, bool *posted,
+                   void (*done)(void *ud, int rc, int64_t fence, const struct sf_err *err),
+                   void *dud, struct sf_err *err)
+{
+    struct farm *f = ud;
+    struct farm_host *h = f->host;
+    *posted = false;
+    if (!h)
+        return SF_OK;
+    if (!h->joined)
+        return sf_err_set(err, SF_EAGAIN, "host %s has no lease yet", h->name);
+    if (id <= 0)
+        return SF_OK;
+    struct hold_ask *a = mem_calloc(1, sizeof(*a));
+    if (!a)
+        return sf_err_set(err, SF_ENOMEM, "host %s: hold job %lld: out of memory", h->name,
+                          (long long)id);
+    *a = (struct hold_ask){ .f = f, .token = h->token, .id = id, .done = done, .ud = dud };
+    snprintf(a->name, sizeof(a->name), "%s", h->name);
+    if (storeq_call(f->q, hold_call, a, h->name, on_held, a)) {
+        free(a);
+        return sf_err_set(err, SF_ENOMEM, "host %s: hold job %lld: out of memory", h->name,
+                          (long long)id);
+    }
+    *posted = true;
+    return SF_OK;
 }

@@ -49,7 +49,6 @@ struct farm_host {
     bool stopping;     /* farm_host_stop: an answer still in flight only records the lease */
     bool reown;        /* the printers changed (a reload): the next beat owns them again */
     bool owning;       /* ... and until its answer, only those in mine are scheduled on */
-    uint64_t reoffer;  /* the printers wait for the loop's connection: timer of its next try */
     /* the printers this host owns, as of the last own that came back */
     char (*mine)[STORE_HOST_NAME_MAX];
     size_t n_mine;

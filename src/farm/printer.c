@@ -224,11 +224,13 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
 {
     switch (ev) {
     case DRV_EV_STATE:
-        if (p->state == PRINTER_OFFLINE && p->drv->ops->attach && !p->attach_tried &&
+        if (p->state == PRINTER_OFFLINE && p->drv->ops->attach &&
+            (!p->attach_tried || p->away_id) &&
             (st->state == DRV_IDLE || st->state == DRV_PRINTING || st->state == DRV_PAUSED)) {
             /* tried only once the driver could answer: p waits offline for the store's
                answer, and "not yet" (SF_EAGAIN) asks again, so the job is not left
-               interrupted until the next reconnect (printer_attach.c) */
+               interrupted until the next reconnect (printer_attach.c); a print it runs for
+               this host, not held now (away_id), keeps it offline until held or ended */
             if (printer_attach_offer(p))
                 break;
         }
@@ -297,6 +299,10 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
     case DRV_EV_TEMPS:
         break; /* read from the driver's status when asked */
     case DRV_EV_JOB_DONE: {
+        if (!p->job_id && p->away_id) { /* a print this host does not hold now */
+            printer_away_ended(p, JOB_EV_PRINT_DONE, (int64_t)st->lines_acked, NULL);
+            break;
+        }
         /* the bed first: a crash between the two leaves the job interrupted */
         struct job_event_args a = { .lines_acked = (int64_t)st->lines_acked };
         int64_t id = p->job_id;
@@ -313,6 +319,11 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
             printer_move(p, PRINTER_EV_FINISHED);
         break;
     case DRV_EV_JOB_FAILED:
+        if (!p->job_id && p->away_id) {
+            printer_away_ended(p, JOB_EV_PRINT_FAILED, (int64_t)st->lines_acked,
+                               st->message[0] ? st->message : "the print stopped");
+            break;
+        }
         p->lines_acked = (int64_t)st->lines_acked;
         if (st->state == DRV_ERROR && st->message[0] && p->state != PRINTER_ERROR)
             snprintf(p->message, sizeof(p->message), "%s", st->message); /* why it halted */
@@ -755,19 +766,25 @@ printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err
     /* Queued (the loop does not wait for the store): p takes the job at once and the driver
        gets it only once the RESUME has committed (on_resume), so a crash before that leaves
        it interrupted, with nothing sent. */
-    struct start_ticket *t = mem_calloc(1, sizeof(*t));
-    if (!t)
-        return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
     int64_t fence = 0;
     /* one of several hosts: the job is this host's (attached) before it resumes here */
     if (p->env.hold) {
         int rc = p->env.hold(p->env.ud, id, &fence, err);
-        if (rc) {
-            free(t);
+        if (rc)
             return rc;
-        }
-        printer_set_fence(p, id, fence);
     }
+    return printer_resume_fenced(p, id, line, fence, err);
+}
+
+int
+printer_resume_fenced(struct printer *p, int64_t id, int64_t line, int64_t fence,
+                      struct sf_err *err)
+{
+    struct start_ticket *t = mem_calloc(1, sizeof(*t));
+    if (!t)
+        return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
+    if (p->env.hold)
+        printer_set_fence(p, id, fence);
     *t = (struct start_ticket){ p, id, 0 };
     struct job_event_args a = { .printer = p->cfg.name, .lines_acked = line, .fence = fence };
     if (storeq_job_event(p->env.q, id, JOB_EV_RESUME, &a, p->cfg.name, on_resume, t)) {

@@ -41,6 +41,10 @@
 typedef struct drv *(*printer_driver_fn)(struct loop *l, const struct drv_config *cfg,
                                          drv_event_fn on_event, void *ud, struct sf_err *err);
 
+/* A hold's answer on the loop (printer_env.hold_ask): rc SF_OK with the job's new fencing
+   token, or the store's refusal or failure in err. */
+typedef void (*printer_held_fn)(void *ud, int rc, int64_t fence, const struct sf_err *err);
+
 /* What a printer needs from its owner; copied by printer_new. */
 struct printer_env {
     struct loop *l;            /* the loop */
@@ -58,6 +62,12 @@ struct printer_env {
        host waits out its predecessor's: printer_attach_again once it joined), SF_ESTALE or
        another code, err set, when it may not.  NULL: nothing to hold (one host). */
     int (*hold)(void *ud, int64_t job_id, int64_t *fence, struct sf_err *err);
+    /* The same hold on the store's thread (farm_host_hold_ask), after what was queued before
+       it: the loop does not wait.  SF_OK with *posted: done(dud, ...) comes on the loop;
+       SF_OK without: nothing to hold (one host), fence 0; SF_EAGAIN while the host has no
+       lease, SF_ENOMEM (err set, done not called).  NULL: as hold. */
+    int (*hold_ask)(void *ud, int64_t job_id, bool *posted, printer_held_fn done, void *dud,
+                    struct sf_err *err);
 };
 
 /* What an operator may ask of a printer (the API's ACTION). */

@@ -64,20 +64,15 @@ attach_job(struct printer *p, const struct job_row *j, const char *path)
     struct sf_err err;
     struct drv_job_scan scan = { .lines_total = (uint64_t)j->gcode_lines };
     int rc = p->drv->ops->attach(p->drv, path, j->gcode_lines > 0 ? &scan : NULL, &err);
-    /* (fencing: printer_resume_commit holds the job under the host's current lease) */
     if (rc == SF_OK) {
+        /* the driver runs it for this host now: the host holds the job (its fencing token, on
+           the store's thread: the loop waits neither for the queue nor for the statement),
+           then p takes it back, or records its end if the driver saw that first
+           (printer_op.c) */
         p->est_s = printer_estimate_s(j, path);
-        p->attempts = 0;
-        p->message[0] = '\0';
-        printer_move(p, PRINTER_EV_CONNECTED);
-        int64_t line = (int64_t)p->drv->status.lines_acked;
-        if (printer_resume_commit(p, j->id, line > 0 ? line : 0, &err) == SF_OK) {
-            log_printer(LOG_INFO, p->cfg.name, "job %lld re-attached: the printer still has it",
-                        (long long)j->id);
-            return SF_OK;
-        }
-        log_printer(LOG_ERROR, p->cfg.name, "job %lld: %s", (long long)j->id, err.msg);
-        return SF_ENOTFOUND;
+        p->away_id = j->id;
+        printer_away_hold(p);
+        return SF_OK;
     }
     if (rc == SF_EAGAIN && p->attach_waits < PRINTER_ATTACH_WAITS) {
         log_printer(LOG_INFO, p->cfg.name, "job %lld: re-attach waits: %s", (long long)j->id,
@@ -108,6 +103,15 @@ schedule_attach_retry(struct printer *p)
             loop_timer_add(p->env.l, drv_backoff_ms(p->attach_waits++), on_attach_retry, p);
 }
 
+bool
+printer_attach_later(struct printer *p)
+{
+    if (p->attach_waits >= PRINTER_ATTACH_WAITS)
+        return false;
+    schedule_attach_retry(p);
+    return true;
+}
+
 /* Whether p still waits for its offer: offline, not offered yet, its driver able to answer. */
 static bool
 attach_wanted(const struct printer *p)
@@ -136,8 +140,8 @@ on_attach_read(void *ud, const struct storeq_result *r)
     int rc = SF_ENOTFOUND;
     if (r->rc)
         log_printer(LOG_WARN, p->cfg.name, "its interrupted job is not known: %s", r->err->msg);
-    else if (t->found)
-        rc = attach_job(p, &t->row, t->path);
+    else if (t->found && t->row.id != p->orphan.id && t->row.id != p->away_id)
+        rc = attach_job(p, &t->row, t->path); /* (those two are printer_op.c's to settle) */
     free(t);
     if (rc == SF_EAGAIN) {
         schedule_attach_retry(p);
@@ -175,6 +179,13 @@ printer_attach_offer(struct printer *p)
        (printer_settle_orphan), whose end the offer's read must see */
     if (p->aticket || p->oticket)
         return true;
+    /* a job the driver runs on for this host, not held now: held and taken back, or its end
+       recorded (printer_op.c), not offered to the driver again (it has it) */
+    if (p->away_id || p->hticket) {
+        if (!p->attach_retry)
+            printer_settle_orphan(p); /* (one read and one hold at a time) */
+        return true;
+    }
     if (p->bed_full) {
         p->attach_tried = true;
         return false;

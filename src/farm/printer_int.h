@@ -74,7 +74,18 @@ struct printer {
     struct {
         int64_t id;
         int64_t lines_acked;
+        enum job_event ev; /* how it ended: JOB_EV_PRINT_DONE, or JOB_EV_PRINT_FAILED (why) */
+        char why[160];
     } orphan;
+    /* a network print its driver runs on, which this host does not hold now: let go
+       (printer_fenced_out: the host was reaped, or another host held the job), or adopted by
+       the driver at a re-attach whose hold is not back yet.  p waits offline; the host holds
+       it (printer_settle_orphan: at once, or at the next join) and p takes it back, or, once
+       the driver saw its end, it is recorded as the orphan above; 0: none */
+    int64_t away_id;
+    /* the hold of the orphan's or the away job (env.hold_ask) on the store's thread, not yet
+       back; NULL if none */
+    struct hold_ticket *hticket;
     /* the interrupted job's read on the store's thread (printer_attach_offer), not yet back;
        NULL if none */
     struct attach_ticket *aticket;
@@ -93,6 +104,23 @@ int printer_fenced_event(struct printer *p, int64_t id, enum job_event ev,
                          const struct job_event_args *a);
 /* p is freed: its fenced events, its orphan's read and its commands' come back to no one. */
 void printer_fence_release(struct printer *p);
+
+/*
+ * The driver of p saw the end (ev: JOB_EV_PRINT_DONE, or JOB_EV_PRINT_FAILED with why) of the
+ * network print p->away_id, which this host does not hold: it becomes the orphan, recorded
+ * once the host holds the job again (printer_op.c).
+ */
+void printer_away_ended(struct printer *p, enum job_event ev, int64_t lines, const char *why);
+/* Hold p->away_id (env.hold_ask) and take it back once held (printer_op.c): the driver has
+   just adopted it (printer_attach.c). */
+void printer_away_hold(struct printer *p);
+/* The hold's answer, or the read's, asks again later (printer_attach.c: bounded, with the
+   driver's "not yet"); false once the tries are spent. */
+bool printer_attach_later(struct printer *p);
+/* printer_resume_commit with the job held already under fence (0: one host): p takes job id
+   at line (printer.c). */
+int printer_resume_fenced(struct printer *p, int64_t id, int64_t line, int64_t fence,
+                          struct sf_err *err);
 
 /* Tell p's owner it changed (printer_env.changed), if it listens. */
 void printer_changed(struct printer *p);

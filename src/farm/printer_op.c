@@ -429,6 +429,8 @@ on_fenced_event(void *ud, const struct storeq_result *r)
         if (w->ev == JOB_EV_PRINT_DONE) { /* whole here: said once the host holds it again */
             p->orphan.id = w->id;
             p->orphan.lines_acked = w->lines_acked;
+            p->orphan.ev = JOB_EV_PRINT_DONE;
+            p->orphan.why[0] = '\0';
         }
         printer_fenced_out(p, w->id);
         printer_settle_orphan(p);
@@ -469,9 +471,16 @@ printer_fenced_out(struct printer *p, int64_t id)
     p->judging = 0;
     struct sf_err err;
     if (!p->drv || p->drv->ops->attach) {
-        /* a network printer prints on, for the host that holds the job now */
+        /* a network printer prints on: for the host that holds the job now, or, when it is
+           interrupted (this host was reaped), for this one again once it holds it
+           (printer_settle_orphan: now, or at the next join); its end, if the driver sees it
+           first, is recorded then */
         snprintf(p->message, sizeof(p->message), "printing job %lld, which another host holds",
                  (long long)id);
+        if (p->drv) {
+            p->away_id = id;
+            p->attach_waits = 0;
+        }
         printer_move(p, PRINTER_EV_DISCONNECTED);
     } else if (p->drv->ops->cancel(p->drv, &err)) { /* streamed from here: stop streaming */
         log_printer(LOG_ERROR, p->cfg.name, "job %lld: stop: %s", (long long)id, err.msg);
@@ -479,11 +488,18 @@ printer_fenced_out(struct printer *p, int64_t id)
     printer_changed(p);
 }
 
-/* The orphan's read on the store's thread: for p (NULL once p is freed), of job id. */
+/* The orphan's (or the away job's) read on the store's thread: for p (NULL once p is freed),
+   of job id. */
 struct orphan_ticket {
     struct printer *p; /* NULL: freed meanwhile */
     int64_t id;
     struct job_row j; /* the job as the store holds it */
+};
+
+/* The hold of the orphan's or the away job on the store's thread (env.hold_ask). */
+struct hold_ticket {
+    struct printer *p; /* NULL: freed meanwhile */
+    int64_t id;
 };
 
 static int
@@ -493,9 +509,185 @@ orphan_read(struct store *s, void *arg, struct sf_err *err)
     return store_job_get(s, t->id, &t->j, err);
 }
 
-static void settle(struct printer *p, int64_t id, const struct job_row *j);
+/* The away job is not this printer's to take back: p connects as its driver says. */
+static void
+away_drop(struct printer *p)
+{
+    p->away_id = 0;
+    p->attach_tried = true;
+    if (p->drv)
+        printer_apply_status(p);
+}
 
-/* The orphan's job came back: settle it, then offer p its interrupted job if it waited. */
+/* Record the orphan's end: the host holds the job under fence (0: one host). */
+static void
+record(struct printer *p, int64_t id, int64_t fence)
+{
+    bool done = p->orphan.ev != JOB_EV_PRINT_FAILED;
+    p->orphan.id = 0;
+    if (done)
+        log_printer(LOG_INFO, p->cfg.name,
+                    "job %lld: its print ended whole while this host was away from the store: "
+                    "recorded done",
+                    (long long)id);
+    else
+        log_printer(LOG_INFO, p->cfg.name,
+                    "job %lld: its print failed while this host did not hold it (%s): recorded "
+                    "failed",
+                    (long long)id, p->orphan.why);
+    struct job_event_args a = { .printer = p->cfg.name,
+                                .lines_acked = p->orphan.lines_acked,
+                                .reason = done ? NULL : p->orphan.why,
+                                .fence = fence };
+    storeq_job_event(p->env.q, id, JOB_EV_RESUME, &a, p->cfg.name, NULL, NULL);
+    printer_job_event(p, id, done ? JOB_EV_PRINT_DONE : JOB_EV_PRINT_FAILED, &a);
+}
+
+/* The away job is held under fence: p takes it back, printing as its driver says.  A driver
+   that no longer prints it has its end on the way (the orphan's then) or lost the printer
+   (the job stays interrupted: the next connection offers it). */
+static void
+take(struct printer *p, int64_t id, int64_t fence)
+{
+    enum drv_state ds = p->drv ? p->drv->status.state : DRV_OFFLINE;
+    bool ended = false;
+    for (size_t i = 0; i < p->n_queue; i++)
+        ended = ended || p->queue[i].ev == DRV_EV_JOB_DONE || p->queue[i].ev == DRV_EV_JOB_FAILED;
+    p->attach_tried = true;
+    if (p->state != PRINTER_OFFLINE || ended || (ds != DRV_PRINTING && ds != DRV_PAUSED)) {
+        if (!ended)
+            away_drop(p);
+        return;
+    }
+    p->away_id = 0;
+    p->attempts = 0;
+    p->attach_waits = 0;
+    p->message[0] = '\0';
+    printer_move(p, PRINTER_EV_CONNECTED);
+    int64_t line = (int64_t)p->drv->status.lines_acked;
+    struct sf_err err;
+    if (printer_resume_fenced(p, id, line > 0 ? line : 0, fence, &err) == SF_OK)
+        log_printer(LOG_INFO, p->cfg.name, "job %lld re-attached: the printer still has it",
+                    (long long)id);
+    else
+        log_printer(LOG_ERROR, p->cfg.name, "job %lld: %s", (long long)id, err.msg);
+}
+
+/* The hold of job id came back (rc, fence): record the orphan's end, or take the away job
+   back; a refusal that may pass (the store busy or away, the lease in doubt, the job's
+   printer another live host's for now) asks again later, a few times. */
+static void
+held(struct printer *p, int64_t id, int rc, int64_t fence, const struct sf_err *err)
+{
+    bool orphan = p->orphan.id == id, away = !orphan && p->away_id == id && !p->job_id;
+    if (!orphan && !away)
+        return; /* p took another course meanwhile */
+    if (rc == SF_OK) {
+        if (orphan)
+            record(p, id, fence);
+        else
+            take(p, id, fence);
+        return;
+    }
+    const char *why = err && err->msg[0] ? err->msg : "the store refused";
+    bool passing = rc == SF_EBUSY || rc == SF_EUNREACH || rc == SF_EAGAIN || rc == SF_ESTALE ||
+                   rc == SF_EINDOUBT || rc == SF_ENOMEM;
+    if (passing && printer_attach_later(p)) {
+        log_printer(LOG_INFO, p->cfg.name, "job %lld: the hold waits: %s (asking again)",
+                    (long long)id, why);
+        snprintf(p->message, sizeof(p->message), "re-attaching job %lld: %s", (long long)id, why);
+        return;
+    }
+    if (orphan) { /* kept when it may pass: the next join asks again */
+        log_printer(LOG_WARN, p->cfg.name, "job %lld: its end is not recorded: %s", (long long)id,
+                    why);
+        if (!passing)
+            p->orphan.id = 0;
+        return;
+    }
+    log_printer(LOG_INFO, p->cfg.name, "job %lld stays interrupted: %s", (long long)id, why);
+    away_drop(p);
+}
+
+static void
+on_held(void *ud, int rc, int64_t fence, const struct sf_err *err)
+{
+    struct hold_ticket *t = ud;
+    struct printer *p = t->p;
+    int64_t id = t->id;
+    free(t);
+    if (!p)
+        return;
+    p->hticket = NULL;
+    if (!p->deaf) {
+        held(p, id, rc, fence, err);
+        printer_attach_wake(p); /* an offer waited for this hold */
+    }
+    printer_changed(p);
+}
+
+/* Hold job id for p on the store's thread (env.hold_ask); held() acts on the answer.  One hold
+   at a time: the one on its way answers for the orphan or the away job, whichever p has then. */
+static void
+hold(struct printer *p, int64_t id)
+{
+    if (p->hticket)
+        return;
+    struct sf_err err = { 0 };
+    int64_t fence = 0;
+    bool posted = false;
+    struct hold_ticket *t = mem_calloc(1, sizeof(*t));
+    int rc = !t                ? sf_err_set(&err, SF_ENOMEM, "out of memory")
+             : p->env.hold_ask ? p->env.hold_ask(p->env.ud, id, &posted, on_held, t, &err)
+             : p->env.hold     ? p->env.hold(p->env.ud, id, &fence, &err)
+                               : SF_OK;
+    if (posted) {
+        *t = (struct hold_ticket){ .p = p, .id = id };
+        p->hticket = t;
+        return;
+    }
+    free(t);
+    if (rc == SF_EAGAIN && p->env.hold_ask) { /* no lease yet: the join asks again */
+        if (p->away_id == id)
+            snprintf(p->message, sizeof(p->message), "%s", err.msg);
+        return;
+    }
+    held(p, id, rc, fence, &err);
+}
+
+void
+printer_away_hold(struct printer *p)
+{
+    if (!p->away_id)
+        return;
+    snprintf(p->message, sizeof(p->message), "re-attaching job %lld: holding it",
+             (long long)p->away_id);
+    hold(p, p->away_id);
+}
+
+void
+printer_away_ended(struct printer *p, enum job_event ev, int64_t lines, const char *why)
+{
+    int64_t id = p->away_id;
+    p->away_id = 0;
+    p->orphan.id = id;
+    p->orphan.lines_acked = lines;
+    p->orphan.ev = ev;
+    snprintf(p->orphan.why, sizeof(p->orphan.why), "%s", why ? why : "");
+    if (!p->cfg.auto_eject)
+        printer_set_bed(p, true); /* its part is on the bed */
+    log_printer(LOG_INFO, p->cfg.name,
+                "job %lld: the printer ended it (%s) while this host did not hold it: recorded "
+                "once it does",
+                (long long)id, ev == JOB_EV_PRINT_FAILED ? "failed" : "done");
+    printer_settle_orphan(p);
+    if (p->drv) /* it waited offline for the job (printer.c apply): it connects now, as its
+                   driver says (its bed full first) */
+        printer_apply_status(p);
+    printer_changed(p);
+}
+
+/* The orphan's (or away job's) job came back: hold it if it is still interrupted on p. */
 static void
 on_orphan_read(void *ud, const struct storeq_result *r)
 {
@@ -507,44 +699,41 @@ on_orphan_read(void *ud, const struct storeq_result *r)
     if (!p)
         return;
     p->oticket = NULL;
-    if (!p->deaf && p->orphan.id == id && !r->rc) /* r->rc: the store away: at the next join */
-        settle(p, id, &j);
-    printer_attach_wake(p); /* an offer waited for this read (printer_attach_offer) */
-}
-
-/* Record the orphan's end (job j, read from the store) if nobody took it on since and p's host
-   holds it. */
-static void
-settle(struct printer *p, int64_t id, const struct job_row *j)
-{
+    bool orphan = p->orphan.id == id, away = !orphan && p->away_id == id && !p->job_id;
     /* only while nobody took it on since: interrupted, on this printer */
-    if (j->state != JOB_INTERRUPTED || strcmp(j->printer, p->cfg.name) != 0) {
-        p->orphan.id = 0;
-        return;
+    bool mine = !r->rc && j.state == JOB_INTERRUPTED && strcmp(j.printer, p->cfg.name) == 0;
+    if (p->deaf || (!orphan && !away)) {
+        /* p took another course meanwhile */
+    } else if (r->rc) { /* the store away: an orphan at the next join; the away job later */
+        if (away && !printer_attach_later(p)) {
+            log_printer(LOG_INFO, p->cfg.name, "job %lld stays interrupted: %s", (long long)id,
+                        r->err ? r->err->msg : "the store did not answer");
+            away_drop(p);
+        }
+    } else if (!mine) {
+        if (away)
+            log_printer(LOG_INFO, p->cfg.name,
+                        "job %lld is %s (on printer '%s'): not taken back here", (long long)id,
+                        job_state_name(j.state), j.printer);
+        if (orphan)
+            p->orphan.id = 0;
+        else
+            away_drop(p);
+    } else {
+        hold(p, id); /* and record its end, or take it back, once held */
     }
-    struct sf_err err;
-    int64_t fence = 0;
-    if (p->env.hold(p->env.ud, id, &fence, &err))
-        return; /* no lease yet (reaped: the host joins again, then asks again) */
-    p->orphan.id = 0;
-    log_printer(LOG_INFO, p->cfg.name,
-                "job %lld: its print ended whole while this host was away from the store: "
-                "recorded done",
-                (long long)id);
-    struct job_event_args a = { .printer = p->cfg.name,
-                                .lines_acked = p->orphan.lines_acked,
-                                .fence = fence };
-    storeq_job_event(p->env.q, id, JOB_EV_RESUME, &a, p->cfg.name, NULL, NULL);
-    printer_job_event(p, id, JOB_EV_PRINT_DONE, &a);
+    if (!p->deaf)
+        printer_attach_wake(p); /* an offer waited for this read (printer_attach_offer) */
 }
 
 void
 printer_settle_orphan(struct printer *p)
 {
-    int64_t id = p->orphan.id;
-    /* the job is read on the store's thread (after what p queued before); one read at a time:
-       the one on its way settles it, or the next join or attach asks again */
-    if (!id || !p->env.hold || p->oticket)
+    int64_t id = p->orphan.id ? p->orphan.id : p->away_id;
+    /* the job is read on the store's thread (after what p queued before), then held; one
+       read and one hold at a time: the one on its way settles it, or the next join or attach
+       asks again */
+    if (!id || !p->env.hold || p->oticket || p->hticket)
         return;
     struct orphan_ticket *t = mem_calloc(1, sizeof(*t));
     if (!t)
@@ -566,6 +755,9 @@ printer_fence_release(struct printer *p)
     if (p->oticket)
         p->oticket->p = NULL; /* its orphan's read too */
     p->oticket = NULL;
+    if (p->hticket)
+        p->hticket->p = NULL; /* and its hold */
+    p->hticket = NULL;
     for (struct cmd_ticket *t = p->cmds; t; t = t->next)
         t->p = NULL; /* and its commands' */
     p->cmds = NULL;

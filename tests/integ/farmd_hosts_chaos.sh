@@ -213,16 +213,17 @@ net_idle() {
 }
 b_net_done() { for p in $b_net; do net_idle "$p" || return 1; done; }
 wait_for 300 b_net_done || fail "b's network prints did not end while it was cut off ($b_net)"
-# and until b itself saw every print of its end (b still drives its printers, cut off): a
+# and until b itself saw its Marlin prints end (b still drives its printers, cut off): a
 # Marlin print still running when b joins again is interrupted there (a USB print cannot move
-# hosts), its printer left for an operator, and part 3's job pinned to it would wait for good;
-# a network print whose end b's driver sees only after b joined again is not recorded (left
-# for next: the issue's notes).  b joins again at once now (its beat has a connection of its
-# own), so the run waits for b's own view of its printers.
-b_all_done() { ! on b "$C" printers | grep -qE '^b_(mk1|mk2|mr|pl) .* (printing|paused) '; }
+# hosts), its printer left for an operator, and part 3's job pinned to it would wait for good.
+# b joins again at once now (its beat has a connection of its own), so the run waits for b's
+# own view of its Marlins.  Not of its network printers: an end b's driver sees only after b
+# joined again (b let the job go when its beat found the lease lost) must be recorded too:
+# b holds the job again and takes the print back, or records its end.
+b_all_done() { ! on b "$C" printers | grep -qE '^b_(mk1|mk2) .* (printing|paused) '; }
 wait_for 300 b_all_done || fail "b's prints did not end while it was cut off: $(on b "$C" printers)"
 proxy heal || fail "proxy heal"
-note "b's prints ended ($b_net and its Marlins, as b saw them); b reconnected"
+note "b's prints ended ($b_net as the printers say, its Marlins as b saw them; b's view: $(on b "$C" printers | grep -E '^b_(mr|pl) ' | tr -s ' ' | cut -c1-50 | paste -sd';')); b reconnected"
 b_back() { [ "$(joins b)" -gt "$b_joins" ]; }
 wait_for 90 b_back || fail "b did not join again: $(tail -5 "$tmp/b.log")"
 note "b joined again"

@@ -841,9 +841,22 @@ T_CASE(host_lets_go_of_a_print_another_host_attached)
 /* A reaped host's print: host b prints job *id on its Marlin q (driver *d) for a, its loop
    standing still (a partition, as far as the database can tell) until its lease ran out and a's
    reap interrupted the print.  False if any step did not come. */
+static bool reaped_print_on(const char *name, const char *section, const char *printer, char *url,
+                            size_t url_cap, struct store **a, int64_t *id, struct hdrv **d);
+
 static bool
 reaped_print(const char *name, char *url, size_t url_cap, struct store **a, int64_t *id,
              struct hdrv **d)
+{
+    return reaped_print_on(name,
+                           "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n",
+                           "q", url, url_cap, a, id, d);
+}
+
+/* The same on printer `printer`, the [printer] section `section` of b's farm.ini. */
+static bool
+reaped_print_on(const char *name, const char *section, const char *printer, char *url,
+                size_t url_cap, struct store **a, int64_t *id, struct hdrv **d)
 {
     struct sf_err err;
     char dir[512], dir_a[600], text[64];
@@ -853,12 +866,10 @@ reaped_print(const char *name, char *url, size_t url_cap, struct store **a, int6
     if (!(*a = store_open_host(dir_a, url, NULL, &err)))
         return false;
     host_lease_s = 5;
-    if (host_farm(dir, url, "b",
-                  "[printer q]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n", &err) ||
-        add_ready_for(*a, "q", id, &err) || store_host_wake(*a, &err) ||
-        !wait_state(url, *id, "printing"))
+    if (host_farm(dir, url, "b", section, &err) || add_ready_for(*a, printer, id, &err) ||
+        store_host_wake(*a, &err) || !wait_state(url, *id, "printing"))
         return false;
-    if (!(*d = hdrv_named("q"))) /* not p: a printer's repeated log line is held back */
+    if (!(*d = hdrv_named(printer))) /* not p: a printer's repeated log line is held back */
         return false;
     for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !(*d)->starts && clock_mono_ms() < end;)
         loop_run_once(hx.l, 20); /* the driver has the job (its file judged) */
@@ -1260,6 +1271,311 @@ T_CASE(host_starts_nothing_on_a_printer_removed_while_its_take_was_out)
             sizeof(text));
     T_EQ_STR(text, "ready by ");
     sqldb_close(direct);
+    host_farm_free();
+    store_close(a);
+}
+
+/* ---- a network print re-attached: held on the store thread, its end recorded ---- */
+
+/* Host b's network printer NAME (hdrv re-attaches it).  A name of each test's own: a
+   printer's repeated log line is held back. */
+#define NET_PRINTER(name)                                                                          \
+    "[printer " name "]\ndriver: octoprint\nurl: http://127.0.0.1:9\napi_key: k\n"                 \
+    "gcode_models: *\n"
+
+/* A gate on db's database: a hold of an interrupted job (its fence moves on) waits on the
+   server while gate has a row (30 s at most).  Closed at first. */
+static bool
+gate_interrupted(struct sqldb *db)
+{
+    return sqldb_exec(db, "CREATE TABLE gate(x INTEGER); INSERT INTO gate VALUES(1);"
+                          " CREATE FUNCTION gate_wait() RETURNS trigger LANGUAGE plpgsql AS $$"
+                          " BEGIN FOR i IN 1..1500 LOOP EXIT WHEN NOT EXISTS (SELECT 1 FROM gate);"
+                          " PERFORM pg_sleep(0.02); END LOOP; RETURN NEW; END $$;"
+                          " CREATE TRIGGER gate_wait BEFORE UPDATE ON jobs FOR EACH ROW"
+                          " WHEN (OLD.state = 'interrupted' AND NEW.fence <> OLD.fence)"
+                          " EXECUTE FUNCTION gate_wait()") == 0;
+}
+
+/* d's print ended: the driver says idle, then reports the end (a network driver's order:
+   netjob_report). */
+static void
+net_print_ends(struct hdrv *d)
+{
+    d->base.status.state = DRV_IDLE;
+    d->base.status.lines_acked = 2;
+    d->base.on_event(&d->base, DRV_EV_STATE, d->base.ud);
+    d->base.on_event(&d->base, DRV_EV_JOB_DONE, d->base.ud);
+}
+
+/* Turn hx's loop until its printer 0 is in state want with no job; false after
+   WAIT_LIMIT_MS. */
+static bool
+wait_printer_free(enum printer_state want)
+{
+    struct printer_info info = { 0 };
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        farm_printer_info(hx.f, 0, &info);
+        if (info.state == want && info.job_id == 0)
+            return true;
+        loop_run_once(hx.l, 20);
+    }
+    fprintf(stderr, "printer: %s, job %lld: %s\n", printer_state_name(info.state),
+            (long long)info.job_id, info.message ? info.message : "");
+    return false;
+}
+
+/*
+ * Issue 32 (farmd_hosts_chaos part 2, b_pl): host b, cut off from the database while its
+ * network printer prints, is reaped (the job interrupted); when b is back its beat finds the
+ * lease lost and lets the job go (the printer prints on), and b joins again.  b then holds
+ * the job again and takes the print back.  Failed before: the printer, offered its
+ * interrupted job once on this connection already, was never offered it again: the job
+ * stayed interrupted while the printer printed it, and its end was refused ("cannot finish
+ * a printer that is idle").
+ */
+T_CASE(host_takes_back_a_network_print_it_let_go)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    char url[1024], text[64];
+    struct store *a = NULL;
+    int64_t id = 0;
+    struct hdrv *d = NULL;
+    T_TRUE(reaped_print_on("netback", NET_PRINTER("n1") "auto_eject: true\n", "n1", url,
+                           sizeof(url), &a, &id, &d));
+    T_TRUE(d != NULL);
+    /* back: lost, let go, joined again, held again: printing on n for b */
+    T_TRUE(wait_state(url, id, "printing"));
+    T_TRUE(was_logged("another host holds it now"));
+    db_text(url, "SELECT claimed_by FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_EQ_STR(text, "b");
+    if (d) {
+        T_EQ_INT(d->starts, 1);
+        T_EQ_INT(d->attaches, 0); /* the driver had it all along: not offered again */
+        net_print_ends(d);
+    }
+    T_TRUE(wait_state(url, id, "done"));
+    T_TRUE(wait_printer_free(PRINTER_IDLE));
+    db_text(url, "SELECT count(*) FROM prints WHERE job_id = ?1 AND outcome = 'done'", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "1");
+    T_TRUE(!was_logged("cannot finish"));
+    host_farm_free();
+    store_close(a);
+}
+
+/*
+ * The same, but the print ends while b's hold of the job is on its way (held here at a gate
+ * on the server; the print's end reaches b's driver only after b joined again): the end is
+ * recorded once the hold is back, the job done once, and the printer, which keeps its part
+ * (no auto_eject), awaits its clear: it waited offline for the job, not idle with a part on
+ * its bed.  Failed before as above (nothing held the job again: the gate never saw a hold).
+ */
+T_CASE(host_records_a_network_print_that_ended_after_it_joined_again)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char url[1024], text[64];
+    struct store *a = NULL;
+    int64_t id = 0;
+    struct hdrv *d = NULL;
+    T_TRUE(reaped_print_on("netend", NET_PRINTER("n2"), "n2", url, sizeof(url), &a, &id, &d));
+    struct sqldb *direct = sqldb_open(url, 0, &err);
+    T_TRUE(direct != NULL && gate_interrupted(direct));
+    /* b's loop runs again: its beat finds the lease lost, lets the job go, joins, holds it */
+    T_TRUE(gate_waited(direct));
+    bool let_go = was_logged("another host holds it now");
+    if (!let_go)
+        fprintf(stderr, "host b logged:\n%s", logged);
+    T_TRUE(let_go);
+    if (d)
+        net_print_ends(d);
+    for (int i = 0; i < 10; i++) /* its end reaches the printer while the hold waits */
+        loop_run_once(hx.l, 10);
+    T_OK(sqldb_exec(direct, "DELETE FROM gate"), NULL);
+    T_TRUE(wait_state(url, id, "done"));
+    T_TRUE(wait_printer_free(PRINTER_AWAITING_CLEAR));
+    db_text(url, "SELECT count(*) FROM prints WHERE job_id = ?1 AND outcome = 'done'", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "1");
+    T_EQ_INT(d ? d->starts : -1, 1);
+    T_TRUE(!was_logged("cannot finish"));
+    sqldb_close(direct);
+    host_farm_free();
+    store_close(a);
+}
+
+/*
+ * A network printer whose link dropped while printing comes back still printing its job (now
+ * interrupted): the host holds the job (store_job_attach, its new fencing token) on the farm's
+ * store thread, and nothing on the loop's connection; the loop turns while the hold waits
+ * (here at a gate on the server), and the printer takes the job back once it is held.  Before,
+ * the hold waited on the loop for the store's queue (farm_sync, 250 ms: a busy queue gave the
+ * re-attach up for good, the job left interrupted under a printer that printed it) and then
+ * ran on the loop's connection, the loop standing still meanwhile.
+ */
+T_CASE(host_holds_a_reattached_print_off_the_loop)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/netgate", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t id;
+    T_OK(host_farm(dir, url, "b", NET_PRINTER("n3") "auto_eject: true\n", &err), &err);
+    T_OK(add_ready_for(a, "n3", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("n3");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job */
+    struct sqldb *direct = sqldb_open(url, 0, &err);
+    T_TRUE(direct != NULL && gate_interrupted(direct));
+    int64_t rt = store_round_trips(hx.s);
+    if (d) { /* the link drops; the printer prints on, and the driver connects again */
+        d->base.status.state = DRV_OFFLINE;
+        snprintf(d->base.status.message, sizeof(d->base.status.message), "timed out");
+        d->base.on_event(&d->base, DRV_EV_STATE, d->base.ud);
+        d->base.status.state = DRV_PRINTING;
+        d->base.status.message[0] = '\0';
+    }
+    T_TRUE(gate_waited(direct)); /* the hold, on the store thread; the loop turns */
+    T_EQ_INT(d ? d->attaches : -1, 1);
+    T_EQ_INT(store_round_trips(hx.s) - rt, 0);
+    db_text(url, "SELECT state FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    T_EQ_STR(text, "interrupted");
+    T_OK(sqldb_exec(direct, "DELETE FROM gate"), NULL);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct printer_info info;
+    farm_printer_info(hx.f, 0, &info);
+    T_EQ_INT(info.state, PRINTER_PRINTING);
+    T_EQ_INT(info.job_id, id);
+    if (d)
+        net_print_ends(d);
+    T_TRUE(wait_state(url, id, "done"));
+    T_EQ_INT(d ? d->starts : -1, 1);
+    sqldb_close(direct);
+    host_farm_free();
+    store_close(a);
+}
+
+/*
+ * The re-attach of a network printer while the farm's store queue is busy (here: the
+ * printer's own state write waits at a gate on the server): the printer takes its job back
+ * at once in the loop's view, and the store has it once the queue moves.  Failed before: the
+ * hold waited for the queue on the loop (farm_sync, 250 ms), found it busy (SF_EBUSY), and
+ * that was final: the job stayed interrupted while the printer printed it.
+ */
+T_CASE(host_reattaches_while_its_store_queue_is_busy)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024];
+    snprintf(dir, sizeof(dir), "%s/netbusy", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t id;
+    T_OK(host_farm(dir, url, "b", NET_PRINTER("n4") "auto_eject: true\n", &err), &err);
+    T_OK(add_ready_for(a, "n4", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("n4");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job */
+    /* the gate: the printer's move from offline to idle waits on the server (30 s at most) */
+    struct sqldb *direct = sqldb_open(url, 0, &err);
+    T_TRUE(direct != NULL);
+    T_EQ_INT(sqldb_exec(direct,
+                        "CREATE TABLE gate(x INTEGER); INSERT INTO gate VALUES(1);"
+                        " CREATE FUNCTION gate_wait() RETURNS trigger LANGUAGE plpgsql AS $$"
+                        " BEGIN FOR i IN 1..1500 LOOP EXIT WHEN NOT EXISTS (SELECT 1 FROM gate);"
+                        " PERFORM pg_sleep(0.02); END LOOP; RETURN NEW; END $$;"
+                        " CREATE TRIGGER gate_wait BEFORE UPDATE ON printers FOR EACH ROW"
+                        " WHEN (OLD.state = 'offline' AND NEW.state = 'idle')"
+                        " EXECUTE FUNCTION gate_wait()"),
+             0);
+    if (d) { /* the link drops; the printer prints on, and the driver connects again */
+        d->base.status.state = DRV_OFFLINE;
+        snprintf(d->base.status.message, sizeof(d->base.status.message), "timed out");
+        d->base.on_event(&d->base, DRV_EV_STATE, d->base.ud);
+        d->base.status.state = DRV_PRINTING;
+        d->base.status.message[0] = '\0';
+    }
+    /* the printer prints its job again while its state write waits at the gate */
+    struct printer_info info = { 0 };
+    bool gated = false;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        farm_printer_info(hx.f, 0, &info);
+        gated = gated || db_int(direct, "SELECT count(*) FROM pg_stat_activity WHERE datname ="
+                                        " current_database() AND wait_event = 'PgSleep' AND"
+                                        " query LIKE 'INSERT INTO printers%'") > 0;
+        if (gated && info.state == PRINTER_PRINTING && info.job_id == id)
+            break;
+        loop_run_once(hx.l, 10);
+    }
+    T_TRUE(gated);
+    T_EQ_INT(info.state, PRINTER_PRINTING);
+    T_EQ_INT(info.job_id, id);
+    T_OK(sqldb_exec(direct, "DELETE FROM gate"), NULL);
+    T_TRUE(wait_state(url, id, "printing"));
+    if (d)
+        net_print_ends(d);
+    T_TRUE(wait_state(url, id, "done"));
+    T_EQ_INT(d ? d->starts : -1, 1);
+    T_EQ_INT(d ? d->attaches : -1, 1);
+    sqldb_close(direct);
+    host_farm_free();
+    store_close(a);
+}
+
+/*
+ * A network printer whose link dropped while printing comes back idle: the print ended while
+ * the farm was away, and the driver, adopting the job, reports its end at once (no change of
+ * state to report).  The end is recorded once the host holds the job, and the printer, which
+ * waited offline for that, connects: idle (auto_eject), taking the next job.
+ */
+T_CASE(host_records_a_reattached_print_that_ended_while_away)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64];
+    snprintf(dir, sizeof(dir), "%s/netgone", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t id;
+    T_OK(host_farm(dir, url, "b", NET_PRINTER("n5") "auto_eject: true\n", &err), &err);
+    T_OK(add_ready_for(a, "n5", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("n5");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job */
+    if (d) { /* the link drops; the print ends meanwhile; the driver connects again, idle */
+        d->base.status.state = DRV_OFFLINE;
+        snprintf(d->base.status.message, sizeof(d->base.status.message), "timed out");
+        d->base.on_event(&d->base, DRV_EV_STATE, d->base.ud);
+        d->base.status.state = DRV_IDLE;
+        d->base.status.message[0] = '\0';
+        d->base.status.lines_acked = 2;
+        d->ended = true;
+    }
+    T_TRUE(wait_state(url, id, "done"));
+    T_TRUE(wait_printer_free(PRINTER_IDLE));
+    T_EQ_INT(d ? d->attaches : -1, 1);
+    T_EQ_INT(d ? d->starts : -1, 1);
+    db_text(url, "SELECT count(*) FROM prints WHERE job_id = ?1 AND outcome = 'done'", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "1");
     host_farm_free();
     store_close(a);
 }
