@@ -217,8 +217,7 @@ void
 farm_spare_claim(struct farm *f, const struct sched_job *sj, size_t n, size_t i,
                  const struct job_row *j)
 {
-    if (!farm_host_on(f) || farm_host_alone(f) || j->state != JOB_QUEUED ||
-        farm_cooling(f, j->id))
+    if (!farm_host_on(f) || farm_host_alone(f) || j->state != JOB_QUEUED || farm_cooling(f, j->id))
         return;
     if (!f->spare && !(f->spare = mem_calloc(1, sizeof(*f->spare))))
         return;
