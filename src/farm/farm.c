@@ -67,6 +67,7 @@ struct prep {
     int64_t mesh_size;
     int64_t prepare_ms; /* the prepare function's wall time */
     int64_t fence;      /* the claim's fencing token (farm_host.h); 0 on a single host */
+    bool hand_over;     /* for another host's printer: its PREPARED gives the claim up */
     struct sf_err err;  /* why it failed */
     struct job_event_args prepared; /* its PREPARED, written on the store thread */
     enum job_state to;              /* the job's state after it */
@@ -258,7 +259,9 @@ prepared_write(struct store *s, void *ud, struct sf_err *err)
     if (rc == SF_OK && t->mesh_sha[0])
         rc = store_file_record(s, t->mesh_sha, t->mesh_size, err);
     if (rc == SF_OK)
-        rc = store_job_event(s, t->req.job_id, JOB_EV_PREPARED, &t->prepared, &t->to, err);
+        rc = t->hand_over
+                 ? store_job_prepared_release(s, t->req.job_id, &t->prepared, &t->to, err)
+                 : store_job_event(s, t->req.job_id, JOB_EV_PREPARED, &t->prepared, &t->to, err);
     if (rc)
         sf_err_prefix(err, "job %lld", (long long)t->req.job_id);
     return rc;
@@ -440,28 +443,6 @@ prep_done(struct loop *l, void *ud, int rc)
     farm_kick(f);
 }
 
-/* The printer as the scheduler sees it; its strings live in p. */
-void
-farm_printer_view(const struct printer *p, struct sched_printer *out)
-{
-    const struct farmcfg_printer *c = printer_cfg(p);
-    enum printer_state st = printer_state(p);
-    /* Idle here but not yet in its driver's eyes (its report is on the way):
-       a start now would be refused and fail the print. */
-    if (st == PRINTER_IDLE && !printer_connected(p))
-        st = PRINTER_OFFLINE;
-    *out = (struct sched_printer){ .name = c->name,
-                                   .state = st,
-                                   .enabled = c->enabled && !printer_removed(p),
-                                   .material = c->material,
-                                   .nozzle_mm = c->nozzle_mm,
-                                   .group = c->group,
-                                   .profile = c->profile,
-                                   .overhang_deg = c->overhang_deg,
-                                   .gcode_models = c->gcode_models };
-    memcpy(out->bed_mm, c->bed_mm, sizeof(out->bed_mm));
-}
-
 /* Run the scheduler again later: a passing store failure left a job queued. */
 static void
 on_retry(struct loop *l, void *ud)
@@ -560,8 +541,8 @@ on_prepare(void *ud, const struct storeq_result *r)
  * the pass stops there).
  */
 static bool
-prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice,
-        int64_t fence)
+prepare(struct farm *f, const struct job_row *j, const struct farmcfg_printer *c, bool reslice,
+        int64_t fence, bool hand_over)
 {
     struct sf_err err;
     struct prep *t = NULL;
@@ -576,16 +557,17 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
         return true;
     }
     struct sched_printer view;
-    farm_printer_view(p, &view);
+    farm_cfg_view(c, &view);
     t->f = f;
     t->store = f->s;
     t->reslice = reslice;
     t->fence = fence; /* a reslice's: its take's (one of several hosts) */
-    t->angle_deg = j->opts.overhang_deg > 0 ? j->opts.overhang_deg : printer_cfg(p)->overhang_deg;
+    t->hand_over = hand_over;
+    t->angle_deg = j->opts.overhang_deg > 0 ? j->opts.overhang_deg : c->overhang_deg;
     sched_key(&view, j->opts.overhang_deg, t->key);
     t->req.job_id = j->id;
     t->req.opts = j->opts;
-    t->req.printer = *printer_cfg(p);
+    t->req.printer = *c;
     snprintf(t->req.profiles_dir, sizeof(t->req.profiles_dir), "%s", f->profiles_dir);
     t->req.gram_s = f->gram_s;
     t->req.material_first = f->material_first;
@@ -600,8 +582,8 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
             free(t);
             return true;
         }
-        log_info("farm", "job %lld: preparing it again for %s (%s)%s", (long long)j->id,
-                 printer_cfg(p)->name, t->key, reuse ? ", reusing the optimized part" : "");
+        log_info("farm", "job %lld: preparing it again for %s (%s)%s", (long long)j->id, c->name,
+                 t->key, reuse ? ", reusing the optimized part" : "");
         t->next = f->reslices;
         f->reslices = t;
         f->preparing++;
@@ -626,10 +608,10 @@ prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool r
 }
 
 bool
-farm_prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice,
-             int64_t fence)
+farm_prepare(struct farm *f, const struct job_row *j, const struct farmcfg_printer *c, bool reslice,
+             int64_t fence, bool hand_over)
 {
-    return prepare(f, j, p, reslice, fence);
+    return prepare(f, j, c, reslice, fence, hand_over);
 }
 
 /* ---- scheduling ---- */
@@ -851,6 +833,8 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
             continue;
         if (why[i][0] || f->preparing >= pool_size(f->pool)) {
             post_reason(f, &jobs[i], why[i]);
+            if (why[i][0] && f->preparing < pool_size(f->pool)) /* spare cores: another host's */
+                farm_spare_claim(f, sj, n, i, &jobs[i]);
             continue;
         }
         size_t best = sched_prepare_for(sj, n, i, sp, f->n_printers);
@@ -858,7 +842,8 @@ schedule(struct farm *f, struct job_row *jobs, size_t n)
             retry_later(f); /* not claimed while its files cool (prepare would decline) */
         else if (best < f->n_printers && farm_host_on(f)) /* claimed first, on the store thread */
             farm_ask_claim(f, jobs, sj, n, i, sp, best, why);
-        else if (best < f->n_printers && !prepare(f, &jobs[i], f->printers[best], false, 0))
+        else if (best < f->n_printers &&
+                 !prepare(f, &jobs[i], printer_cfg(f->printers[best]), false, 0, false))
             break; /* the store is busy: its commit wakes the farm for the rest */
     }
     for (size_t i = 0; i < n; i++)
@@ -988,6 +973,7 @@ farm_free(struct farm *f)
         storeq_set_commit(f->q, NULL, NULL);
         storeq_free(f->q);
     }
+    farm_spare_free(f);
     farm_host_stop(f); /* leave, once the store holds what the stop wrote */
     for (size_t i = 0; i < f->n_printers; i++)
         printer_free(f->printers[i]);

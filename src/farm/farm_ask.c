@@ -37,11 +37,12 @@
 struct farm_ask {
     struct farm_ask *next; /* in f->asks */
     struct farm *f;
-    bool take;               /* a take (else a claim) */
-    bool reslice;            /* a take to prepare the job again for the printer */
-    struct job_row job;      /* as the pass read it (a claim's: as claimed) */
-    char printer[64];        /* what for */
-    char key[SCHED_KEY_MAX]; /* the printer's key then */
+    bool take;                     /* a take (else a claim) */
+    bool reslice;                  /* a take to prepare the job again for the printer */
+    struct job_row job;            /* as the pass read it (a claim's: as claimed) */
+    char printer[64];              /* what for */
+    char key[SCHED_KEY_MAX];       /* the printer's key then */
+    struct farmcfg_printer *spare; /* a claim for another host's printer: its settings */
 };
 
 static void
@@ -52,6 +53,7 @@ unlink_ask(struct farm *f, struct farm_ask *a)
             *pp = a->next;
             break;
         }
+    free(a->spare);
     free(a);
 }
 
@@ -139,7 +141,7 @@ on_taken(void *ud, int rc, int64_t fence, const struct job_row *job)
         return;
     }
     if (a->reslice) {
-        farm_prepare(f, &a->job, p, true, fence);
+        farm_prepare(f, &a->job, printer_cfg(p), true, fence, false);
     } else {
         printer_set_fence(p, a->job.id, fence);
         farm_start(f, &a->job, p);
@@ -172,9 +174,11 @@ on_claimed(void *ud, int rc, int64_t fence, const struct job_row *job)
     }
     a->job = *job;
     char why[160];
-    struct printer *p = ask_printer(f, a, why, sizeof(why));
-    if (p) {
-        farm_prepare(f, &a->job, p, false, fence);
+    struct printer *p = a->spare ? NULL : ask_printer(f, a, why, sizeof(why));
+    if (a->spare) { /* another host's printer, as published: its owner takes the job ready */
+        farm_prepare(f, &a->job, a->spare, false, fence, true);
+    } else if (p) {
+        farm_prepare(f, &a->job, printer_cfg(p), false, fence, false);
     } else {
         log_info("farm", "job %lld goes back to the queue: %s", (long long)a->job.id, why);
         struct job_event_args e = { .reason = why, .fence = fence };
@@ -229,11 +233,36 @@ farm_ask_claim(struct farm *f, const struct job_row *jobs, const struct sched_jo
 }
 
 void
+farm_ask_spare(struct farm *f, const struct job_row *j, const struct farmcfg_printer *c)
+{
+    struct farm_ask *a = mem_calloc(1, sizeof(*a));
+    if (!a || !(a->spare = mem_calloc(1, sizeof(*a->spare)))) {
+        free(a);
+        return; /* the next kick tries again */
+    }
+    struct sched_printer v;
+    *a->spare = *c;
+    farm_cfg_view(a->spare, &v);
+    a->f = f;
+    a->job = *j;
+    snprintf(a->printer, sizeof(a->printer), "%s", c->name);
+    sched_key(&v, j->opts.overhang_deg, a->key);
+    if (farm_host_claim(f, &j->id, 1, on_claimed, a)) {
+        free(a->spare);
+        free(a);
+        return;
+    }
+    f->preparing++;
+    a->next = f->asks;
+    f->asks = a;
+}
+
+void
 farm_ask_take(struct farm *f, const struct job_row *j, struct printer *p, bool reslice)
 {
     if (!farm_host_on(f)) { /* a single host: nothing to take */
         if (reslice) {
-            farm_prepare(f, j, p, true, 0);
+            farm_prepare(f, j, printer_cfg(p), true, 0, false);
         } else {
             printer_set_fence(p, j->id, 0);
             farm_start(f, j, p);

@@ -101,6 +101,7 @@ struct beat {
     bool own;                           /* own the printers (names), after a renewal too */
     char (*names)[STORE_HOST_NAME_MAX]; /* f's printers when it was posted */
     const char **ptrs;                  /* into names, for store_host_own */
+    struct store_printer_prep *preps;   /* n: what preparing for them needs, published */
     size_t n;
     /* in and out: the lease, and the reap's grace (renewed) */
     int64_t token;
@@ -121,6 +122,7 @@ beat_free(struct beat *b)
         return;
     free(b->names);
     free(b->ptrs);
+    free(b->preps);
     free(b->out);
     free(b);
 }
@@ -191,6 +193,9 @@ beat_call(struct store *s, void *arg, struct sf_err *err)
     }
     if (b->joined && b->own)
         b->own_rc = store_host_own(s, b->name, b->token, b->ptrs, b->n, b->out, &b->own_err);
+    /* and publish what preparing for them needs, for the hosts with spare cores */
+    if (b->joined && b->own && b->own_rc == SF_OK)
+        b->own_rc = store_host_publish(s, b->name, b->token, b->preps, b->n, &b->own_err);
     b->reaped = may_reap(b) ? store_host_reap(s, clock_wall_ms(), &b->moved, &b->reap_err) : 0;
     /* the others see the printers of a join, and the jobs a reap moved */
     if ((b->join && b->join_rc == SF_OK) || b->reaped > 0)
@@ -373,7 +378,8 @@ beat_post(struct farm_host *h)
     struct beat *b = mem_calloc(1, sizeof(*b));
     size_t n = f->n_printers ? f->n_printers : 1;
     if (!b || !(b->names = mem_array(n, sizeof(*b->names))) ||
-        !(b->ptrs = mem_array(n, sizeof(*b->ptrs))) || !(b->out = mem_array(n, sizeof(*b->out))))
+        !(b->ptrs = mem_array(n, sizeof(*b->ptrs))) || !(b->out = mem_array(n, sizeof(*b->out))) ||
+        !(b->preps = mem_array(n, sizeof(*b->preps))))
         goto fail;
     b->h = h;
     b->lease_ms = h->lease_ms;
@@ -389,6 +395,7 @@ beat_post(struct farm_host *h)
     for (size_t i = 0; i < f->n_printers; i++) {
         snprintf(b->names[i], STORE_HOST_NAME_MAX, "%s", printer_cfg(f->printers[i])->name);
         b->ptrs[i] = b->names[i];
+        farm_spare_publish(printer_cfg(f->printers[i]), &b->preps[i]);
     }
     if (storeq_read(h->bq, beat_call, b, on_beat_done, b))
         goto fail;

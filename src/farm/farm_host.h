@@ -17,12 +17,15 @@
  * out.
  *
  * Which host does what (the rule, simplest first): a host prepares only a
- * queued job its scheduler chose for a printer of its own, after claiming
- * it (store_job_claim_first: the claim's statement with SKIP LOCKED, so two
- * hosts never prepare one job), and starts only jobs on printers it owns:
+ * queued job its scheduler chose for a printer of its own, or, with a free
+ * place in its pool, one that fits only another live host's printer and has
+ * waited (farm_spare.c), after claiming it (store_job_claim_first: the claim's
+ * statement with SKIP LOCKED, so two hosts never prepare one job); a job it
+ * prepared for another host's printer is ready and no host's at once
+ * (store_job_prepared_release).  It starts only jobs on printers it owns:
  * its own prepared jobs, or a ready job no host holds (an uploaded G-code,
- * one a reaped host had prepared), taken first (store_job_take, one
- * statement).  A host's scheduler never sees another host's jobs
+ * one a reaped host or a host with spare cores prepared), taken first
+ * (store_job_take, one statement).  A host's scheduler never sees another host's jobs
  * (store_job_live_host), and writes no wait reason on queued jobs (another
  * host may be about to take them).  A printer of its config that another
  * live host owns (both configs list that name) stays that host's: this

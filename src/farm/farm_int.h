@@ -33,7 +33,14 @@ struct farm_cool {
     int64_t job_id;
     int64_t until_ms;
 };
-struct farm_ask; /* farm_ask.c: a claim or take of the scheduling pass on its way */
+struct farm_ask;   /* farm_ask.c: a claim or take of the scheduling pass on its way */
+struct farm_spare; /* farm_spare.c: the other hosts' printers this host may prepare for */
+struct store_printer_prep;
+/* A queued job that fits only other hosts' printers is prepared here once it waited this long
+   since its last change (farm_spare.c says why), */
+#define FARM_SPARE_WAIT_MS 1000
+/* for their settings as read again when older than this. */
+#define FARM_SPARE_READ_MS 2000
 
 struct farm {
     struct loop *l;            /* the loop */
@@ -70,6 +77,7 @@ struct farm {
     struct farm_remote *remote; /* actions on other hosts' printers (farm_remote.h), or NULL */
     struct farm_view *view;     /* the other hosts' printers, and ours for them (farm_view.h) */
     struct farm_ask *asks;      /* claims and takes on the store thread (farm_ask.c) */
+    struct farm_spare *spare;   /* other hosts' printers to prepare for (farm_spare.c), or NULL */
 };
 
 /* Write job id's DEFER or PREPARE_FAILED (its preparation ended without a G-code) through the
@@ -88,8 +96,24 @@ struct printer *farm_printer_new(struct farm *f, const struct farmcfg_printer *c
 /* Append a printer for cfg to f's list. */
 int farm_add_printer(struct farm *f, const struct farmcfg_printer *cfg, struct sf_err *err);
 
-/* The printer as the scheduler sees it; its strings live in p. */
+/* The printer as the scheduler sees it; its strings live in p (farm_spare.c). */
 void farm_printer_view(const struct printer *p, struct sched_printer *out);
+/* A printer's config as the scheduler sees it (idle); its strings live in c. */
+void farm_cfg_view(const struct farmcfg_printer *c, struct sched_printer *out);
+
+/*
+ * farm_spare.c, one of several hosts with other live hosts: queued job j (sj[i] of the n in
+ * the pass), which fits none of this host's printers, is claimed to prepare here for another
+ * live host's printer it fits once it waited FARM_SPARE_WAIT_MS (else a pass then); the
+ * caller checked the pool has a free place.  The other hosts' printers are read on the
+ * store thread when needed (the answer kicks the farm).
+ */
+void farm_spare_claim(struct farm *f, const struct sched_job *sj, size_t n, size_t i,
+                      const struct job_row *j);
+/* What preparing for printer c needs, to publish for the other hosts (store_host_publish). */
+void farm_spare_publish(const struct farmcfg_printer *c, struct store_printer_prep *out);
+/* Free f's spare state (after the store thread delivered what was in flight). */
+void farm_spare_free(struct farm *f);
 
 /*
  * Start job j (ready) on printer p (idle): its G-code is looked up (on a
@@ -125,13 +149,14 @@ void farm_retry_later(struct farm *f);
    the first queued job; each waiting FARM_RETRY_MS, ten hosts claimed a third as fast). */
 void farm_retry_soon(struct farm *f);
 /*
- * farm.c: prepare job j for printer p: a ready job again for p's key
+ * farm.c: prepare job j for printer c (a printer's config): a ready job again for its key
  * (reslice; one of several hosts: taken under fence), else a queued one
- * (one of several hosts: claimed under fence, farm_ask_claim).  False when
- * the store failed in passing (tried again later).
+ * (one of several hosts: claimed under fence, farm_ask_claim).  hand_over: c is another
+ * host's printer (farm_ask_spare): the PREPARED gives the claim up with it
+ * (store_job_prepared_release).  False when the store failed in passing (tried again later).
  */
-bool farm_prepare(struct farm *f, const struct job_row *j, const struct printer *p, bool reslice,
-                  int64_t fence);
+bool farm_prepare(struct farm *f, const struct job_row *j, const struct farmcfg_printer *c,
+                  bool reslice, int64_t fence, bool hand_over);
 
 /*
  * farm_ask.c, one of several hosts: the scheduling pass's claims and takes
@@ -148,6 +173,8 @@ bool farm_prepare(struct farm *f, const struct job_row *j, const struct printer 
 void farm_ask_claim(struct farm *f, const struct job_row *jobs, const struct sched_job *sj,
                     size_t n, size_t i, const struct sched_printer *sp, size_t best,
                     char (*why)[SCHED_REASON_MAX]);
+/* As farm_ask_claim, to prepare j for another host's printer c (copied): farm_spare.c. */
+void farm_ask_spare(struct farm *f, const struct job_row *j, const struct farmcfg_printer *c);
 void farm_ask_take(struct farm *f, const struct job_row *j, struct printer *p, bool reslice);
 void farm_ask_mark(const struct farm *f, struct job_row *jobs, size_t n, struct sched_printer *sp);
 

@@ -203,6 +203,9 @@ static const char *const migrations[] = {
     STORE_COMMAND_SCHEMA,
     /* 15: each host's view of its own printers, for the others (store_view.c) */
     STORE_VIEW_SCHEMA,
+    /* 16: what preparing for each host's printers needs, for the hosts with spare cores
+       (store_spare.c) */
+    STORE_SPARE_SCHEMA,
 };
 #define N_MIGRATIONS ((int)(sizeof(migrations) / sizeof(migrations[0])))
 

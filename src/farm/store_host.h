@@ -323,4 +323,53 @@ int store_job_fence(struct store *s, int64_t id, int64_t fence, struct sf_err *e
 int store_host_printer_set(struct store *s, const char *host, int64_t token, const char *printer,
                            enum printer_state state, struct sf_err *err);
 
+/*
+ * What preparing a job for a printer needs (prepare.h's req.printer, sched.h's key and
+ * compatibility), as the host that owns the printer publishes it (store_spare.c): so a
+ * host with spare cores prepares a queued job for another host's printer (farm_spare.c).
+ * Plain data.
+ */
+struct store_printer_prep {
+    char name[64];                  /* the printer */
+    char host[STORE_HOST_NAME_MAX]; /* its owner */
+    char profile[64];               /* slicing profile */
+    char material[32];              /* loaded material */
+    double nozzle_mm;
+    double bed_mm[3];
+    double overhang_deg;
+    char group[64];
+    char gcode_models[256];
+    bool attended;
+    char allow_gcode[256];
+    bool enabled;
+};
+
+/*
+ * Publish what preparing for host name's printers needs (n entries, each a printer it owns,
+ * store_host_own): written on their host_printers rows in one transaction; a printer name
+ * owns no longer is left alone.  SF_ESTALE when name's lease is lost, SF_EINVAL for an
+ * empty profile.
+ */
+int store_host_publish(struct store *s, const char *name, int64_t token,
+                       const struct store_printer_prep *p, size_t n, struct sf_err *err);
+
+/*
+ * The printers other live hosts than name (lease running at now_ms, not reaped) own and
+ * published (store_host_publish), by printer, into *rows (free() it).
+ */
+int store_host_printers_prep(struct store *s, const char *name, int64_t now_ms,
+                             struct store_printer_prep **rows, size_t *n, struct sf_err *err);
+
+/*
+ * A job a host prepared for another host's printer (a spare-cores preparation): its PREPARED
+ * event (a, with the claim's fencing token) and, in the same transaction, the claim given
+ * up (no host holds it, its token moves on, a "job-hand-over" event naming the host that
+ * prepared it), so the printer's own host takes it (store_job_take) as it takes a ready job
+ * no host holds; the others are woken at the commit.  Never left held by the host that
+ * prepared it.  *to: the job's state after.
+ * store_job_event's errors (SF_ESTALE for a stale token).
+ */
+int store_job_prepared_release(struct store *s, int64_t id, const struct job_event_args *a,
+                               enum job_state *to, struct sf_err *err);
+
 #endif

@@ -160,6 +160,26 @@ int store_host_relock(struct store *s, struct sf_err *err);
     "  view TEXT NOT NULL,"                                                                        \
     "  updated_ms INTEGER NOT NULL);"
 
+/*
+ * Migration 16 (store_spare.c): what preparing a job for a printer needs, as its owner
+ * publishes it beside its claim on the printer (host_printers), so a host with spare cores
+ * may prepare for another host's printer (farm_spare.c).  profile '' until the owner
+ * published it (a host of an older program): not prepared for by others.
+ */
+#define STORE_SPARE_SCHEMA                                                                         \
+    "ALTER TABLE host_printers ADD COLUMN profile TEXT NOT NULL DEFAULT '';"                       \
+    "ALTER TABLE host_printers ADD COLUMN material TEXT NOT NULL DEFAULT '';"                      \
+    "ALTER TABLE host_printers ADD COLUMN nozzle_mm REAL NOT NULL DEFAULT 0;"                      \
+    "ALTER TABLE host_printers ADD COLUMN bed_x REAL NOT NULL DEFAULT 0;"                          \
+    "ALTER TABLE host_printers ADD COLUMN bed_y REAL NOT NULL DEFAULT 0;"                          \
+    "ALTER TABLE host_printers ADD COLUMN bed_z REAL NOT NULL DEFAULT 0;"                          \
+    "ALTER TABLE host_printers ADD COLUMN overhang_deg REAL NOT NULL DEFAULT 0;"                   \
+    "ALTER TABLE host_printers ADD COLUMN printer_group TEXT NOT NULL DEFAULT '';"                 \
+    "ALTER TABLE host_printers ADD COLUMN gcode_models TEXT NOT NULL DEFAULT '';"                  \
+    "ALTER TABLE host_printers ADD COLUMN attended INTEGER NOT NULL DEFAULT 0;"                    \
+    "ALTER TABLE host_printers ADD COLUMN allow_gcode TEXT NOT NULL DEFAULT '';"                   \
+    "ALTER TABLE host_printers ADD COLUMN enabled INTEGER NOT NULL DEFAULT 0;"
+
 /* SF_EIO with what and SQLite's message. */
 int store_db_fail(struct store *s, struct sf_err *err, const char *what);
 /* Run sql (no rows, no parameters). */

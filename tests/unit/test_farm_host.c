@@ -1579,3 +1579,75 @@ T_CASE(host_records_a_reattached_print_that_ended_while_away)
     host_farm_free();
     store_close(a);
 }
+
+/*
+ * Spare cores (issue 32: "any host with spare cores may prepare any queued job"): host a,
+ * with no printers, prepares a job for host b's printer with b's settings as b published
+ * them (store_host_publish), on the store thread and workers (none of it on the loop's own
+ * connection), and gives the prepared job up in the same commit: no host holds it, so b
+ * takes it (store_job_take) and prints it.  Fails without the rule: no host prepares the job
+ * (a prepared only for a printer of its own, and b here has no preparation of its own).
+ */
+T_CASE(host_with_spare_cores_prepares_for_another_hosts_printer)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_b[600], url[1024], text[256];
+    snprintf(dir, sizeof(dir), "%s/spare", t_tmpdir());
+    snprintf(dir_b, sizeof(dir_b), "%s-b", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    /* b: live, owns pb (PETG, a 0.6 mm nozzle, a big bed) and published it */
+    struct store *b = store_open_host(dir_b, url, NULL, &err);
+    T_TRUE(b != NULL);
+    int64_t tb, id, fence = 0;
+    T_OK(store_host_join(b, "b", LEASE_MS, &tb, &err), &err);
+    const char *pbs[] = { "pb" };
+    T_OK(store_host_own(b, "b", tb, pbs, 1, NULL, &err), &err);
+    struct store_printer_prep pb = { .name = "pb",
+                                     .profile = "generic-marlin",
+                                     .material = "PETG",
+                                     .nozzle_mm = 0.6,
+                                     .bed_mm = { 300, 300, 300 },
+                                     .overhang_deg = 50,
+                                     .enabled = true };
+    T_OK(store_host_publish(b, "b", tb, &pb, 1, &err), &err);
+    /* a PETG job: a's printer has PLA */
+    char sha[STORE_SHA_HEX];
+    struct job_opts o;
+    job_opts_init(&o);
+    snprintf(o.name, sizeof(o.name), "part.stl");
+    snprintf(o.method, sizeof(o.method), "none");
+    snprintf(o.material, sizeof(o.material), "PETG");
+    T_OK(store_file_put(b, "solid part\n", 11, sha, &err), &err);
+    T_OK(store_job_add(b, &o, sha, &id, &err), &err);
+    T_OK(store_host_wake(b, &err), &err);
+    host_prepare = gcode_prepare;
+    T_OK(host_farm(dir, url, "a", "", &err), &err);
+    T_TRUE(wait_logged("a joined"));         /* (its join checks the loop's connection once) */
+    int64_t trips = store_round_trips(hx.s); /* the loop's own connection */
+    bool ready = wait_state(url, id, "ready");
+    if (!ready)
+        fprintf(stderr, "host a logged:\n%s\n", logged);
+    T_TRUE(ready);
+    farm_sync(hx.f, -1, NULL);
+    /* prepared for pb's key, and no host's: a gave it up in the same commit */
+    db_text(url, "SELECT prep_key || ' by ' || claimed_by FROM jobs WHERE id = ?1", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "generic-marlin/PETG/n0.6/bed300x300x300/a50 by ");
+    T_EQ_INT(t_store_int(dir, "SELECT count(*) FROM events WHERE kind = 'job-hand-over' AND"
+                              " detail LIKE '%host ''a'' prepared it%'"),
+             1);
+    T_TRUE(was_logged("a claimed job"));
+    /* b's printers read, the claim, the preparation's files and PREPARED: none on the loop's
+       connection */
+    T_EQ_INT(store_round_trips(hx.s), trips);
+    /* b takes it as any ready job no host holds, and prints it */
+    T_OK(store_job_take(b, "b", tb, id, &fence, &err), &err);
+    struct job_event_args st = { .printer = "pb", .fence = fence };
+    T_OK(store_job_event(b, id, JOB_EV_START, &st, NULL, &err), &err);
+    db_text(url, "SELECT state || ' on ' || printer FROM jobs WHERE id = ?1", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "printing on pb");
+    host_farm_free();
+    store_close(b);
+}
