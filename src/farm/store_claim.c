@@ -195,6 +195,9 @@ store_job_claim_first(struct store *s, const char *host, int64_t token, const in
     if (n == 0 || n > STORE_CLAIM_IDS_MAX)
         return sf_err_set(err, SF_EINVAL, "claim: %zu jobs to choose from (1 to %d)", n,
                           STORE_CLAIM_IDS_MAX);
+    for (size_t k = 0; k < n; k++)
+        if (ids[k] <= 0)
+            return sf_err_set(err, SF_EINVAL, "claim: job id %lld", (long long)ids[k]);
     int rc = store_begin(s, err);
     if (rc)
         return rc;

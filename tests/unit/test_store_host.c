@@ -801,3 +801,17 @@ T_CASE(hosts_leases_hold_across_hosts_whose_clocks_differ)
     store_close(fast);
     store_close(b);
 }
+
+/* A claim among chosen jobs refuses a job id that is no id, as a claim of one does. */
+T_CASE(hosts_claim_among_chosen_jobs_refuses_a_bad_id)
+{
+    struct sf_err err;
+    struct t_pair p;
+    T_TRUE(pair_open(&p, "badid", &err));
+    int64_t tb, ids[] = { 0 }, tried = 0;
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    struct job_row j;
+    T_ERR(store_job_claim_first(p.b, "b", tb, ids, 1, &tried, &j, NULL, &err), SF_EINVAL, &err,
+          "job id 0");
+    t_pair_close(&p);
+}
