@@ -99,6 +99,7 @@ struct beat {
     int64_t lease_ms;
     bool doubted;                       /* h->doubted when it was posted */
     bool own;                           /* own the printers (names), after a renewal too */
+    bool publish;                       /* publish preps (after an own that came back too) */
     char (*names)[STORE_HOST_NAME_MAX]; /* f's printers when it was posted */
     const char **ptrs;                  /* into names, for store_host_own */
     struct store_printer_prep *preps;   /* n: what preparing for them needs, published */
@@ -109,8 +110,8 @@ struct beat {
     int64_t since, at, gen;
     /* out */
     bool beat, lost, join; /* renewed (or tried to), found the lease lost, joined (or tried) */
-    int beat_rc, join_rc, own_rc, reaped, wake_rc, peers_rc, peers;
-    struct sf_err beat_err, join_err, own_err, reap_err, wake_err, peers_err;
+    int beat_rc, join_rc, own_rc, publish_rc, reaped, wake_rc, peers_rc, peers;
+    struct sf_err beat_err, join_err, own_err, publish_err, reap_err, wake_err, peers_err;
     struct store_host_owned *out; /* n: what own found */
     struct store_recovery moved;
 };
@@ -193,9 +194,11 @@ beat_call(struct store *s, void *arg, struct sf_err *err)
     }
     if (b->joined && b->own)
         b->own_rc = store_host_own(s, b->name, b->token, b->ptrs, b->n, b->out, &b->own_err);
-    /* and publish what preparing for them needs, for the hosts with spare cores */
-    if (b->joined && b->own && b->own_rc == SF_OK)
-        b->own_rc = store_host_publish(s, b->name, b->token, b->preps, b->n, &b->own_err);
+    /* and publish what preparing for them needs, for the hosts with spare cores (its own
+       outcome: a failed publish is tried again, and never undoes the own) */
+    b->publish = b->joined && (b->own || b->publish) && b->own_rc == SF_OK;
+    if (b->publish)
+        b->publish_rc = store_host_publish(s, b->name, b->token, b->preps, b->n, &b->publish_err);
     b->reaped = may_reap(b) ? store_host_reap(s, clock_wall_ms(), &b->moved, &b->reap_err) : 0;
     /* the others see the printers of a join, and the jobs a reap moved */
     if ((b->join && b->join_rc == SF_OK) || b->reaped > 0)
@@ -336,6 +339,10 @@ on_beat_done(void *ud, const struct storeq_result *r)
     }
     if (b->joined && b->own)
         owned(h, b);
+    if (b->publish && b->publish_rc) {
+        log_warn("host", "%s: %s (publishing again at the next beat)", h->name, b->publish_err.msg);
+        h->republish = true;
+    }
     if (b->join && b->join_rc == SF_OK) {
         h->waiting = false;
         log_info("host", "%s joined (token %lld, lease %.1f s, %zu printers)", h->name,
@@ -385,6 +392,7 @@ beat_post(struct farm_host *h)
     b->lease_ms = h->lease_ms;
     b->doubted = h->doubted;
     b->own = h->reown || h->n_foreign; /* a reload; or their owner may be gone */
+    b->publish = h->republish;         /* the last publish failed */
     b->n = f->n_printers;
     b->token = h->token;
     b->joined = h->joined;
@@ -402,6 +410,7 @@ beat_post(struct farm_host *h)
     h->beating = true;
     h->doubted = false;
     h->reown = false;
+    h->republish = false;
     return SF_OK;
 fail:
     beat_free(b);

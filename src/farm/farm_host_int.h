@@ -48,6 +48,7 @@ struct farm_host {
     bool beat_due;     /* a beat was asked for while one was in flight: beat at its answer */
     bool stopping;     /* farm_host_stop: an answer still in flight only records the lease */
     bool reown;        /* the printers changed (a reload): the next beat owns them again */
+    bool republish;    /* the last publish failed: the next beat publishes again */
     bool owning;       /* ... and until its answer, only those in mine are scheduled on */
     /* the printers this host owns, as of the last own that came back */
     char (*mine)[STORE_HOST_NAME_MAX];

@@ -347,8 +347,8 @@ struct store_printer_prep {
 /*
  * Publish what preparing for host name's printers needs (n entries, each a printer it owns,
  * store_host_own): written on their host_printers rows in one transaction; a printer name
- * owns no longer is left alone.  SF_ESTALE when name's lease is lost, SF_EINVAL for an
- * empty profile.
+ * owns no longer is left alone, one with an empty profile written as is (the read leaves it
+ * out).  SF_ESTALE when name's lease is lost.
  */
 int store_host_publish(struct store *s, const char *name, int64_t token,
                        const struct store_printer_prep *p, size_t n, struct sf_err *err);

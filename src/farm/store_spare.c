@@ -18,13 +18,13 @@
 
 #include "../base/clock.h"
 
-/* Write p onto name's row of its printer, in the caller's transaction. */
+/* Write p onto name's row of its printer, in the caller's transaction.  A printer with no
+   profile (farmcfg accepts an empty one) is written as is: store_host_printers_prep leaves it
+   out, and the publish of the others goes on. */
 static int
 publish_one(struct store *s, const char *name, const struct store_printer_prep *p,
             struct sf_err *err)
 {
-    if (!p->profile[0])
-        return sf_err_set(err, SF_EINVAL, "printer '%s': publish: no profile", p->name);
     struct sqldb_stmt *st;
     int rc = store_prepare(s, &st,
                            "UPDATE host_printers SET profile = ?3, material = ?4, nozzle_mm = ?5,"

@@ -1651,3 +1651,30 @@ T_CASE(host_with_spare_cores_prepares_for_another_hosts_printer)
     host_farm_free();
     store_close(b);
 }
+
+/* A printer with an empty profile (farm.ini takes `profile:` empty) is owned and scheduled: its
+   publish failed the beat's own, so the host never learnt it owned its printers. */
+T_CASE(host_with_a_printer_with_no_profile_owns_and_prints)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024];
+    snprintf(dir, sizeof(dir), "%s/noprofile", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err); /* the schema, the job */
+    T_TRUE(a != NULL);
+    int64_t id;
+    T_OK(add_ready_for(a, "p", &id, &err), &err);
+    T_OK(host_farm(dir, url, "b",
+                   "[printer p]\ndriver: marlin\nport: pty:/dev/null\nprofile:\ngcode_models: *\n",
+                   &err),
+         &err);
+    bool printing = wait_state(url, id, "printing");
+    if (!printing)
+        fprintf(stderr, "host b logged:\n%s\n", logged);
+    T_TRUE(printing);
+    T_TRUE(!was_logged("publish"));
+    host_farm_free();
+    store_close(a);
+}

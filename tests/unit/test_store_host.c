@@ -802,6 +802,37 @@ T_CASE(hosts_leases_hold_across_hosts_whose_clocks_differ)
     store_close(b);
 }
 
+/* A printer with an empty profile (farm.ini takes `profile:` empty) does not fail the publish
+   of its host's others (it failed the whole beat's own: the host scheduled nothing); the
+   other hosts' read leaves it out. */
+T_CASE(hosts_publish_a_printer_with_no_profile)
+{
+    struct sf_err err;
+    struct t_pair p;
+    T_TRUE(pair_open(&p, "publish", &err));
+    int64_t ta, tb;
+    T_OK(store_host_join(p.a, "a", LEASE_MS, &ta, &err), &err);
+    T_OK(store_host_join(p.b, "b", LEASE_MS, &tb, &err), &err);
+    const char *names[] = { "bare", "full" };
+    T_OK(store_host_own(p.a, "a", ta, names, 2, NULL, &err), &err);
+    struct store_printer_prep preps[2] = {
+        { .name = "bare", .material = "PLA", .nozzle_mm = 0.4, .bed_mm = { 220, 220, 250 } },
+        { .name = "full",
+          .profile = "generic-marlin",
+          .material = "PLA",
+          .nozzle_mm = 0.4,
+          .bed_mm = { 220, 220, 250 } },
+    };
+    T_OK(store_host_publish(p.a, "a", ta, preps, 2, &err), &err);
+    struct store_printer_prep *rows = NULL;
+    size_t n = 0;
+    T_OK(store_host_printers_prep(p.b, "b", clock_wall_ms(), &rows, &n, &err), &err);
+    T_EQ_INT(n, 1);
+    T_EQ_STR(rows[0].name, "full");
+    free(rows);
+    t_pair_close(&p);
+}
+
 /* A claim among chosen jobs refuses a job id that is no id, as a claim of one does. */
 T_CASE(hosts_claim_among_chosen_jobs_refuses_a_bad_id)
 {
