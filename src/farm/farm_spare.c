@@ -31,6 +31,7 @@
  *
  * Thread: the loop thread (the read on the farm's store thread).
  */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -50,9 +51,10 @@ struct farm_spare {
     struct farmcfg_printer *cfgs;        /* each as what preparing for it needs */
     struct sched_printer *views;         /* and as the scheduler sees it (strings in cfgs) */
     size_t n;
-    int64_t read_at; /* clock_mono_ms when that read came back; 0: none yet */
-    bool reading;    /* a read is on the store thread */
-    uint64_t timer;  /* a pass when the next waiting job may be prepared here, 0 if none */
+    int64_t read_at;   /* clock_mono_ms when that read came back; 0: none yet */
+    int64_t db_offset; /* the database's clock less this host's wall clock, at that read */
+    bool reading;      /* a read is on the store thread */
+    uint64_t timer;    /* a pass when the next waiting job may be prepared here, 0 if none */
     int64_t timer_at;
 };
 
@@ -62,6 +64,7 @@ struct spare_read {
     char host[STORE_HOST_NAME_MAX];
     struct store_printer_prep *rows;
     size_t n;
+    int64_t db_offset; /* store_clock_ms - clock_wall_ms on the store thread */
 };
 
 void
@@ -127,6 +130,30 @@ spare_cfg(const struct store_printer_prep *p, struct farmcfg_printer *c)
     c->enabled = p->enabled;
 }
 
+/* Is published printer p fit to prepare for, as farmcfg would take it (its profile and material
+   name files under profiles_dir)?  If not, why in why. */
+static bool
+spare_ok(const struct store_printer_prep *p, char *why, size_t size)
+{
+    const char *bad = NULL;
+    if (!farmcfg_ident_ok(p->profile))
+        bad = "profile";
+    else if (!farmcfg_ident_ok(p->material))
+        bad = "material";
+    else if (p->group[0] && !farmcfg_ident_ok(p->group))
+        bad = "group";
+    else if (!isfinite(p->nozzle_mm) || p->nozzle_mm <= 0)
+        bad = "nozzle_mm";
+    else if (!isfinite(p->overhang_deg) || p->overhang_deg <= 0 || p->overhang_deg >= 90)
+        bad = "overhang_deg";
+    for (int i = 0; !bad && i < 3; i++)
+        if (!isfinite(p->bed_mm[i]) || p->bed_mm[i] <= 0)
+            bad = "bed_size";
+    if (bad)
+        snprintf(why, size, "host %s's printer %s: bad %s", p->host, p->name, bad);
+    return !bad;
+}
+
 static int
 read_call(struct store *s, void *arg, struct sf_err *err)
 {
@@ -134,6 +161,7 @@ read_call(struct store *s, void *arg, struct sf_err *err)
     free(r->rows); /* a retry's */
     r->rows = NULL;
     r->n = 0;
+    r->db_offset = store_clock_ms(s) - clock_wall_ms();
     return store_host_printers_prep(s, r->host, clock_wall_ms(), &r->rows, &r->n, err);
 }
 
@@ -156,14 +184,26 @@ on_read(void *ud, const struct storeq_result *res)
         free(sp->printers);
         free(sp->cfgs);
         free(sp->views);
+        size_t n = 0, skipped = 0;
+        char why[256];
         for (size_t k = 0; k < r->n; k++) {
-            spare_cfg(&r->rows[k], &c[k]);
-            farm_cfg_view(&c[k], &v[k]);
+            if (!spare_ok(&r->rows[k], why, sizeof(why))) { /* never prepared for */
+                if (!skipped++)
+                    log_warn("farm", "the other hosts' printers: %s: skipped", why);
+                continue;
+            }
+            r->rows[n] = r->rows[k];
+            spare_cfg(&r->rows[n], &c[n]);
+            farm_cfg_view(&c[n], &v[n]);
+            n++;
         }
+        if (skipped > 1)
+            log_warn("farm", "the other hosts' printers: %zu more skipped", skipped - 1);
         sp->printers = r->rows;
         sp->cfgs = c;
         sp->views = v;
-        sp->n = r->n;
+        sp->n = n;
+        sp->db_offset = r->db_offset;
     }
     sp->read_at = clock_mono_ms(); /* a failure too: read again in FARM_SPARE_READ_MS */
     free(r);
@@ -226,7 +266,8 @@ farm_spare_claim(struct farm *f, const struct sched_job *sj, size_t n, size_t i,
     if (!sp->n)
         return;
     size_t best = sched_prepare_for(sj, n, i, sp->views, sp->n);
-    int64_t waited = clock_wall_ms() - j->updated_ms; /* another host's clock: NTP's skew */
+    /* on the database's clock, as the claims and release_tx stamp updated_ms */
+    int64_t waited = clock_wall_ms() + sp->db_offset - j->updated_ms;
     if (best == sp->n)
         return;
     if (waited < 0)

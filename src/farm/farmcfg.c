@@ -126,6 +126,12 @@ ident_ok(const char *s)
     return true;
 }
 
+bool
+farmcfg_ident_ok(const char *s)
+{
+    return ident_ok(s);
+}
+
 void
 farmcfg_printer_init(struct farmcfg_printer *p)
 {

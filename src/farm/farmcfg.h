@@ -119,6 +119,9 @@ int farmcfg_load(struct farmcfg *c, const char *path, struct sf_err *err);
 const char *farmcfg_option_name(size_t i, bool *printer);
 
 /* Set every option of printer p to its default (no name, no driver, no link option). */
+/* Is s an identifier as farm.ini's K_IDENT keys take it (1..n letters, digits, '-', '_',
+   '.')?  Also for a printer's settings another host published (farm_spare.c). */
+bool farmcfg_ident_ok(const char *s);
 void farmcfg_printer_init(struct farmcfg_printer *p);
 
 /*

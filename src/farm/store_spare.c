@@ -127,7 +127,7 @@ release_tx(struct store *s, int64_t id, int64_t fence, struct sf_err *err)
                             " WHERE id = ?2 AND fence = ?3 AND state = 'ready'",
                             err)))
         return rc;
-    sqldb_bind_int64(st, 1, clock_wall_ms());
+    sqldb_bind_int64(st, 1, store_clock_ms(s)); /* the claims' clock */
     sqldb_bind_int64(st, 2, id);
     sqldb_bind_int64(st, 3, fence);
     if ((rc = store_step_done(s, st, err, "hand a job over")))

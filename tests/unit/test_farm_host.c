@@ -1601,8 +1601,8 @@ T_CASE(host_with_spare_cores_prepares_for_another_hosts_printer)
     T_TRUE(b != NULL);
     int64_t tb, id, fence = 0;
     T_OK(store_host_join(b, "b", LEASE_MS, &tb, &err), &err);
-    const char *pbs[] = { "pb" };
-    T_OK(store_host_own(b, "b", tb, pbs, 1, NULL, &err), &err);
+    const char *pbs[] = { "pb", "pc" };
+    T_OK(store_host_own(b, "b", tb, pbs, 2, NULL, &err), &err);
     struct store_printer_prep pb = { .name = "pb",
                                      .profile = "generic-marlin",
                                      .material = "PETG",
@@ -1611,6 +1611,11 @@ T_CASE(host_with_spare_cores_prepares_for_another_hosts_printer)
                                      .overhang_deg = 50,
                                      .enabled = true };
     T_OK(store_host_publish(b, "b", tb, &pb, 1, &err), &err);
+    /* and pc, with settings farm.ini would refuse (a profile that is a path): never prepared for */
+    struct store_printer_prep pc = pb;
+    snprintf(pc.name, sizeof(pc.name), "pc");
+    snprintf(pc.profile, sizeof(pc.profile), "../../etc/x");
+    T_OK(store_host_publish(b, "b", tb, &pc, 1, &err), &err);
     /* a PETG job: a's printer has PLA */
     char sha[STORE_SHA_HEX];
     struct job_opts o;
@@ -1638,6 +1643,7 @@ T_CASE(host_with_spare_cores_prepares_for_another_hosts_printer)
                               " detail LIKE '%host ''a'' prepared it%'"),
              1);
     T_TRUE(was_logged("a claimed job"));
+    T_TRUE(was_logged("host b's printer pc: bad profile: skipped"));
     /* b's printers read, the claim, the preparation's files and PREPARED: none on the loop's
        connection */
     T_EQ_INT(store_round_trips(hx.s), trips);
