@@ -674,6 +674,7 @@ farm_host_hold(void *ud, int64_t id, int64_t *fence, struct sf_err *err)
 struct hold_ask {
     struct farm *f;
     char name[STORE_HOST_NAME_MAX];
+    char printer[64];
     int64_t token, id, fence;
     void (*done)(void *ud, int rc, int64_t fence, const struct sf_err *err);
     void *ud;
@@ -683,7 +684,7 @@ static int
 hold_call(struct store *s, void *arg, struct sf_err *err)
 {
     struct hold_ask *a = arg;
-    return store_job_attach(s, a->name, a->token, a->id, &a->fence, err);
+    return store_job_reattach(s, a->name, a->token, a->id, a->printer, &a->fence, err);
 }
 
 static void
@@ -708,7 +709,7 @@ on_held(void *ud, const struct storeq_result *r)
 }
 
 int
-farm_host_hold_ask(void *ud, int64_t id, bool *posted,
+farm_host_hold_ask(void *ud, int64_t id, const char *printer, bool *posted,
                    void (*done)(void *ud, int rc, int64_t fence, const struct sf_err *err),
                    void *dud, struct sf_err *err)
 {
@@ -727,6 +728,7 @@ farm_host_hold_ask(void *ud, int64_t id, bool *posted,
                           (long long)id);
     *a = (struct hold_ask){ .f = f, .token = h->token, .id = id, .done = done, .ud = dud };
     snprintf(a->name, sizeof(a->name), "%s", h->name);
+    snprintf(a->printer, sizeof(a->printer), "%s", printer);
     if (storeq_call(f->q, hold_call, a, h->name, on_held, a)) {
         free(a);
         return sf_err_set(err, SF_ENOMEM, "host %s: hold job %lld: out of memory", h->name,

@@ -149,14 +149,15 @@ int farm_host_release(struct farm *f, int64_t id, int64_t fence, const char *why
  */
 int farm_host_hold(void *f, int64_t id, int64_t *fence, struct sf_err *err);
 /*
- * printer_env.hold_ask: farm_host_hold on the farm's store thread (storeq_call, after what the
- * farm queued before it: the job's CRASHED, say; SF_EBUSY and SF_EUNREACH tried again there),
- * so the loop waits neither for the queue nor for the statement; done(ud, rc, fence, err) on
- * the loop with its outcome (SF_ESTALE makes the host beat at once, as farm_host_hold).
- * SF_OK with *posted true: done comes; SF_OK with *posted false: nothing to hold (no shared
- * store, or id 0); SF_EAGAIN until f joined, SF_ENOMEM: err set, done not called.
+ * printer_env.hold_ask: farm_host_hold of id, only while it is interrupted on printer (checked
+ * in the hold's transaction: store_job_reattach, SF_ENOTFOUND when not), on the farm's store thread
+ * (storeq_call, after what the farm queued before it: the job's CRASHED, say; SF_EBUSY and
+ * SF_EUNREACH tried again there), so the loop waits neither for the queue nor for the statement;
+ * done(ud, rc, fence, err) on the loop with its outcome (SF_ESTALE makes the host beat at once, as
+ * farm_host_hold). SF_OK with *posted true: done comes; SF_OK with *posted false: nothing to hold
+ * (no shared store, or id 0); SF_EAGAIN until f joined, SF_ENOMEM: err set, done not called.
  */
-int farm_host_hold_ask(void *f, int64_t id, bool *posted,
+int farm_host_hold_ask(void *f, int64_t id, const char *printer, bool *posted,
                        void (*done)(void *ud, int rc, int64_t fence, const struct sf_err *err),
                        void *ud, struct sf_err *err);
 /* Wake the other hosts: something they may act on changed (a job added through the API). */

@@ -63,11 +63,12 @@ struct printer_env {
        another code, err set, when it may not.  NULL: nothing to hold (one host). */
     int (*hold)(void *ud, int64_t job_id, int64_t *fence, struct sf_err *err);
     /* The same hold on the store's thread (farm_host_hold_ask), after what was queued before
-       it: the loop does not wait.  SF_OK with *posted: done(dud, ...) comes on the loop;
-       SF_OK without: nothing to hold (one host), fence 0; SF_EAGAIN while the host has no
-       lease, SF_ENOMEM (err set, done not called).  NULL: as hold. */
-    int (*hold_ask)(void *ud, int64_t job_id, bool *posted, printer_held_fn done, void *dud,
-                    struct sf_err *err);
+       it: the loop does not wait; only while job_id is interrupted on printer, in the hold's
+       transaction (store_job_reattach: SF_ENOTFOUND when not).  SF_OK with *posted: done(dud, ...)
+       comes on the loop; SF_OK without: nothing to hold (one host), fence 0; SF_EAGAIN while the
+       host has no lease, SF_ENOMEM (err set, done not called).  NULL: as hold. */
+    int (*hold_ask)(void *ud, int64_t job_id, const char *printer, bool *posted,
+                    printer_held_fn done, void *dud, struct sf_err *err);
 };
 
 /* What an operator may ask of a printer (the API's ACTION). */

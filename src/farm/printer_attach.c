@@ -219,6 +219,7 @@ printer_attach_release(struct printer *p)
 void
 printer_attach_again(struct printer *p)
 {
+    p->hold_join = false; /* the host joined (or the offer's timer): the hold may be asked */
     printer_settle_orphan(p);
     printer_attach_wake(p);
 }

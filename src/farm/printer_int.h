@@ -86,6 +86,9 @@ struct printer {
     /* the hold of the orphan's or the away job (env.hold_ask) on the store's thread, not yet
        back; NULL if none */
     struct hold_ticket *hticket;
+    /* the hold was refused for want of a lease (SF_EAGAIN): no orphan read nor hold until the
+       host joined (printer_attach_again) */
+    bool hold_join;
     /* the interrupted job's read on the store's thread (printer_attach_offer), not yet back;
        NULL if none */
     struct attach_ticket *aticket;

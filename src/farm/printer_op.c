@@ -509,10 +509,14 @@ orphan_read(struct store *s, void *arg, struct sf_err *err)
     return store_job_get(s, t->id, &t->j, err);
 }
 
-/* The away job is not this printer's to take back: p connects as its driver says. */
+/* The away job is not this printer's to take back: p connects as its driver says.  A driver
+   that still prints it ends it with no job to record it on: its part stays on the bed. */
 static void
 away_drop(struct printer *p)
 {
+    enum drv_state ds = p->drv ? p->drv->status.state : DRV_OFFLINE;
+    if (!p->cfg.auto_eject && (ds == DRV_PRINTING || ds == DRV_PAUSED))
+        printer_set_bed(p, true);
     p->away_id = 0;
     p->attach_tried = true;
     if (p->drv)
@@ -637,10 +641,11 @@ hold(struct printer *p, int64_t id)
     int64_t fence = 0;
     bool posted = false;
     struct hold_ticket *t = mem_calloc(1, sizeof(*t));
-    int rc = !t                ? sf_err_set(&err, SF_ENOMEM, "out of memory")
-             : p->env.hold_ask ? p->env.hold_ask(p->env.ud, id, &posted, on_held, t, &err)
-             : p->env.hold     ? p->env.hold(p->env.ud, id, &fence, &err)
-                               : SF_OK;
+    int rc = !t ? sf_err_set(&err, SF_ENOMEM, "out of memory")
+             : p->env.hold_ask
+                 ? p->env.hold_ask(p->env.ud, id, p->cfg.name, &posted, on_held, t, &err)
+             : p->env.hold ? p->env.hold(p->env.ud, id, &fence, &err)
+                           : SF_OK;
     if (posted) {
         *t = (struct hold_ticket){ .p = p, .id = id };
         p->hticket = t;
@@ -648,6 +653,7 @@ hold(struct printer *p, int64_t id)
     }
     free(t);
     if (rc == SF_EAGAIN && p->env.hold_ask) { /* no lease yet: the join asks again */
+        p->hold_join = true;                  /* (no read till then: printer_settle_orphan) */
         if (p->away_id == id)
             snprintf(p->message, sizeof(p->message), "%s", err.msg);
         return;
@@ -733,7 +739,7 @@ printer_settle_orphan(struct printer *p)
     /* the job is read on the store's thread (after what p queued before), then held; one
        read and one hold at a time: the one on its way settles it, or the next join or attach
        asks again */
-    if (!id || !p->env.hold || p->oticket || p->hticket)
+    if (!id || !p->env.hold || p->oticket || p->hticket || p->hold_join)
         return;
     struct orphan_ticket *t = mem_calloc(1, sizeof(*t));
     if (!t)

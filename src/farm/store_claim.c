@@ -399,24 +399,43 @@ owner_elsewhere(struct store *s, const char *host, int64_t id, int64_t now_ms, s
     return rc == SQLDB_DONE ? SF_OK : store_db_fail(s, err, "printer owner");
 }
 
-/* store_job_attach in the caller's transaction, the new token into *fence. */
+/* Job id is not interrupted on printer: SF_ENOTFOUND (a refusal that does not pass). */
 static int
-attach_tx(struct store *s, const char *host, int64_t token, int64_t id, int64_t *fence,
-          struct sf_err *err)
+not_reattachable(struct store *s, int64_t id, const char *printer, struct sf_err *err)
+{
+    struct job_row j;
+    int rc = store_job_get(s, id, &j, err);
+    if (rc)
+        return rc;
+    return sf_err_set(err, SF_ENOTFOUND,
+                      "job %lld is %s on printer '%s': not re-attached to printer '%s'",
+                      (long long)id, job_state_name(j.state), j.printer, printer);
+}
+
+/* store_job_attach (printer NULL) or store_job_reattach in the caller's transaction, the new
+   token into *fence. */
+static int
+attach_tx(struct store *s, const char *host, int64_t token, int64_t id, const char *printer,
+          int64_t *fence, struct sf_err *err)
 {
     int64_t now = store_clock_ms(s);
     struct sqldb_stmt *st;
     int rc = store_host_hold(s, host, token, now, err);
     if (rc || (rc = owner_elsewhere(s, host, id, now, err)) ||
         (rc = store_prepare(s, &st,
-                            "UPDATE jobs SET claimed_by = ?1, fence = fence + 1,"
-                            " updated_ms = ?2 WHERE id = ?3 AND state IN ('ready',"
-                            "'printing','paused','interrupted') RETURNING fence, state",
+                            printer ? "UPDATE jobs SET claimed_by = ?1, fence = fence + 1,"
+                                      " updated_ms = ?2 WHERE id = ?3 AND state = 'interrupted'"
+                                      " AND printer = ?4 RETURNING fence, state"
+                                    : "UPDATE jobs SET claimed_by = ?1, fence = fence + 1,"
+                                      " updated_ms = ?2 WHERE id = ?3 AND state IN ('ready',"
+                                      "'printing','paused','interrupted') RETURNING fence, state",
                             err)))
         return rc;
     sqldb_bind_text(st, 1, host);
     sqldb_bind_int64(st, 2, now);
     sqldb_bind_int64(st, 3, id);
+    if (printer)
+        sqldb_bind_text(st, 4, printer);
     char state[16] = "";
     rc = sqldb_step(st);
     if (rc == SQLDB_ROW) {
@@ -425,7 +444,9 @@ attach_tx(struct store *s, const char *host, int64_t token, int64_t id, int64_t 
     }
     sqldb_finalize(st);
     if (rc != SQLDB_ROW)
-        return rc == SQLDB_DONE ? not_attachable(s, id, err) : store_db_fail(s, err, "attach job");
+        return rc != SQLDB_DONE ? store_db_fail(s, err, "attach job")
+               : printer        ? not_reattachable(s, id, printer, err)
+                                : not_attachable(s, id, err);
     char detail[160];
     snprintf(detail, sizeof(detail), "host '%s' holds it (%s), fencing token %lld", host, state,
              (long long)*fence);
@@ -438,7 +459,20 @@ store_job_attach(struct store *s, const char *host, int64_t token, int64_t id, i
 {
     int64_t f = 0;
     int rc = store_begin(s, err);
-    if (rc || (rc = store_end_tx(s, attach_tx(s, host, token, id, &f, err), err)))
+    if (rc || (rc = store_end_tx(s, attach_tx(s, host, token, id, NULL, &f, err), err)))
+        return rc;
+    if (fence)
+        *fence = f;
+    return SF_OK;
+}
+
+int
+store_job_reattach(struct store *s, const char *host, int64_t token, int64_t id,
+                   const char *printer, int64_t *fence, struct sf_err *err)
+{
+    int64_t f = 0;
+    int rc = store_begin(s, err);
+    if (rc || (rc = store_end_tx(s, attach_tx(s, host, token, id, printer, &f, err), err)))
         return rc;
     if (fence)
         *fence = f;

@@ -307,6 +307,14 @@ int store_job_attach(struct store *s, const char *host, int64_t token, int64_t i
                      struct sf_err *err);
 
 /*
+ * store_job_attach of job id only while it is interrupted on printer, checked in the same
+ * transaction (a job an operator restarted, or another printer took on, since the caller read
+ * it is not held): SF_ENOTFOUND, err naming its state and printer, when it is not.
+ */
+int store_job_reattach(struct store *s, const char *host, int64_t token, int64_t id,
+                       const char *printer, int64_t *fence, struct sf_err *err);
+
+/*
  * Whether fence is job id's current fencing token, in the caller's
  * transaction (PostgreSQL: the job's row stays locked to it): SF_OK, or
  * SF_ESTALE naming the host that holds the job now, SF_ENOTFOUND.

@@ -1581,6 +1581,84 @@ T_CASE(host_records_a_reattached_print_that_ended_while_away)
 }
 
 /*
+ * A network printer (no auto_eject) whose link dropped while printing comes back still
+ * printing its job, but an operator restarted the job (interrupted -> ready) after the
+ * re-attach read it and before the hold (here: the restart's transaction holds the job's row
+ * while the hold waits for it).  The hold checks "interrupted, on this printer" in its own
+ * transaction, so the ready job is not held by this host; and the print the printer finishes
+ * leaves its part on the bed: the printer awaits a clear, not offered the ready job on top of
+ * it.  Failed before: the hold took the ready job (store_job_attach accepts ready), RESUME was
+ * refused, and the job was left held by b; and a dropped away job left the bed "clear".
+ */
+T_CASE(host_does_not_hold_an_away_job_restarted_before_its_hold)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    struct sf_err err;
+    char dir[512], dir_a[600], url[1024], text[64], sql[160];
+    snprintf(dir, sizeof(dir), "%s/netrestart", t_tmpdir());
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    T_TRUE(a != NULL);
+    int64_t id;
+    T_OK(host_farm(dir, url, "b", NET_PRINTER("n6"), &err), &err);
+    T_OK(add_ready_for(a, "n6", &id, &err), &err);
+    T_OK(store_host_wake(a, &err), &err);
+    T_TRUE(wait_state(url, id, "printing"));
+    struct hdrv *d = hdrv_named("n6");
+    T_TRUE(d != NULL);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job */
+    if (d) {                     /* the link drops; the printer prints on */
+        d->base.status.state = DRV_OFFLINE;
+        snprintf(d->base.status.message, sizeof(d->base.status.message), "timed out");
+        d->base.on_event(&d->base, DRV_EV_STATE, d->base.ud);
+    }
+    T_TRUE(wait_state(url, id, "interrupted"));
+    farm_sync(hx.f, -1, NULL);
+    /* the operator's restart, its transaction open: reads see the job interrupted still */
+    struct sqldb *direct = sqldb_open(url, 0, &err);
+    T_TRUE(direct != NULL);
+    snprintf(sql, sizeof(sql),
+             "BEGIN; UPDATE jobs SET state = 'ready', claimed_by = '' WHERE id = %lld",
+             (long long)id);
+    T_OK(sqldb_exec(direct, sql), NULL);
+    if (d) { /* the driver connects again, printing */
+        d->base.status.state = DRV_PRINTING;
+        d->base.status.message[0] = '\0';
+        d->base.on_event(&d->base, DRV_EV_STATE, d->base.ud);
+    }
+    struct sqldb *watch = sqldb_open(url, 0, &err);
+    T_TRUE(watch != NULL);
+    bool waited = false; /* the hold waits for the restart's row lock */
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !waited && clock_mono_ms() < end;) {
+        waited = db_int(watch, "SELECT count(*) FROM pg_stat_activity WHERE datname ="
+                               " current_database() AND wait_event_type = 'Lock' AND"
+                               " query LIKE 'UPDATE jobs SET claimed_by%'") > 0;
+        loop_run_once(hx.l, 10);
+    }
+    T_TRUE(waited);
+    T_OK(sqldb_exec(direct, "COMMIT"), NULL);
+    /* refused (the hold's answer, on the loop, then p's bed written through the queue) */
+    bool full = false;
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !full && clock_mono_ms() < end;) {
+        farm_sync(hx.f, -1, NULL);
+        full =
+            db_int(watch, "SELECT count(*) FROM printers WHERE name = 'n6' AND bed_full = 1") == 1;
+        loop_run_once(hx.l, 20);
+    }
+    db_text(url, "SELECT state || ' by ' || claimed_by FROM jobs WHERE id = ?1", id, text,
+            sizeof(text));
+    T_EQ_STR(text, "ready by ");
+    T_TRUE(full); /* its part stays on the bed once the print ends */
+    T_EQ_INT(d ? d->starts : -1, 1);
+    sqldb_close(watch);
+    sqldb_close(direct);
+    host_farm_free();
+    store_close(a);
+}
+
+/*
  * Spare cores (issue 32: "any host with spare cores may prepare any queued job"): host a,
  * with no printers, prepares a job for host b's printer with b's settings as b published
  * them (store_host_publish), on the store thread and workers (none of it on the loop's own
