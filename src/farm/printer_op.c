@@ -531,13 +531,13 @@ record(struct printer *p, int64_t id, int64_t fence)
     p->orphan.id = 0;
     if (done)
         log_printer(LOG_INFO, p->cfg.name,
-                    "job %lld: its print ended whole while this host was away from the store: "
-                    "recorded done",
+                    "job %lld re-attached: its print ended whole while this host did not hold "
+                    "it: recorded done",
                     (long long)id);
     else
         log_printer(LOG_INFO, p->cfg.name,
-                    "job %lld: its print failed while this host did not hold it (%s): recorded "
-                    "failed",
+                    "job %lld re-attached: its print failed while this host did not hold it "
+                    "(%s): recorded failed",
                     (long long)id, p->orphan.why);
     struct job_event_args a = { .printer = p->cfg.name,
                                 .lines_acked = p->orphan.lines_acked,
