@@ -21,8 +21,8 @@ fail() { echo "   FAIL: $*"; fails=$((fails + 1)); }
 now=$(($(date +%s%N) / 1000000))
 rows="INSERT INTO hosts VALUES('a', 3, 4242, 11, $((now - 60000)), $((now - 3000)), $((now + 600000)), 0);
 INSERT INTO hosts VALUES('b', 1, 4343, 11, $((now - 90000)), $((now - 70000)), $((now - 60000)), 0);
-INSERT INTO host_printers VALUES('m2', 'a', $now);
-INSERT INTO host_printers VALUES('m1', 'a', $now);
+INSERT INTO host_printers(printer, host, since_ms) VALUES('m2', 'a', $now);
+INSERT INTO host_printers(printer, host, since_ms) VALUES('m1', 'a', $now);
 INSERT INTO files VALUES('$(printf '%064d' 1)', 1, $now);
 INSERT INTO jobs(name, file_sha, state, method, deviation_mm, overhang_deg, copies, max_retries,
   material, target_printer, target_group, priority, created_ms, updated_ms, claimed_by)
