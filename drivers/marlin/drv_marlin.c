@@ -50,6 +50,7 @@
 #define HELLO_TRIES     5    /* handshake attempts before giving up */
 #define MARGIN_MS       1000 /* default margin beyond the expected execution time */
 #define POLL_MS         2000 /* M105 polling / M155 interval */
+#define RELINK_MS       1000 /* port closed this long before marlin_relink opens it again */
 
 void
 marlin_emit_event(struct marlin *m, enum drv_event ev)
@@ -223,6 +224,8 @@ marlin_hello(struct marlin *m)
     marlin_send_raw(m, text);
 }
 
+static void relink(struct marlin *m);
+
 static void
 on_timer(struct loop *l, void *ud)
 {
@@ -234,6 +237,8 @@ on_timer(struct loop *l, void *ud)
         transport_free(m->t_dead);
         m->t_dead = NULL;
     }
+    if (!m->t && m->relink_ms && now >= m->relink_ms && m->base.status.state != DRV_OFFLINE)
+        relink(m);
     if (!m->t)
         return;
     if (m->phase == PH_HELLO) {
@@ -274,12 +279,11 @@ on_timer(struct loop *l, void *ud)
     marlin_check_job_progress(m);
 }
 
+/* Open the port and start the handshake; the state is the caller's. */
 static int
-m_open(struct drv *d, struct sf_err *err)
+link_open(struct marlin *m, struct sf_err *err)
 {
-    struct marlin *m = marlin_of(d);
-    if (m->t)
-        return sf_err_set(err, SF_EINVAL, "printer '%s': already open", d->name);
+    struct drv *d = &m->base;
     m->t = transport_open(d->loop, m->port, m->baud, on_data, on_close, m, err);
     if (!m->t) {
         marlin_message(m, "%s", err ? err->msg : "cannot open port");
@@ -299,14 +303,56 @@ m_open(struct drv *d, struct sf_err *err)
     m->win.rx_bytes = m->cfg_rx;
     m->settling = false;
     memset(&d->caps, 0, sizeof(d->caps));
-    d->status.message[0] = '\0';
     m->hello_tries = 0;
     m->progress_ms = m->last_rx_ms = loop_now_ms(d->loop);
+    return SF_OK;
+}
+
+static int
+m_open(struct drv *d, struct sf_err *err)
+{
+    struct marlin *m = marlin_of(d);
+    if (m->t)
+        return sf_err_set(err, SF_EINVAL, "printer '%s': already open", d->name);
+    m->relink_ms = 0;
+    int rc = link_open(m, err);
+    if (rc)
+        return rc;
+    d->status.message[0] = '\0';
     marlin_set_state(m, DRV_CONNECTING);
     marlin_hello(m);
     if (!m->timer)
         m->timer = loop_timer_add(d->loop, 10, on_timer, m);
     return SF_OK;
+}
+
+void
+marlin_relink(struct marlin *m)
+{
+    if (m->t) {
+        m->t_dead = m->t;
+        m->t = NULL;
+    }
+    m->phase = PH_OFF;
+    m->relink_ms = loop_now_ms(m->base.loop) + RELINK_MS;
+}
+
+/* marlin_relink's second half, once the old link has been closed a while. */
+static void
+relink(struct marlin *m)
+{
+    m->relink_ms = 0;
+    struct sf_err err;
+    char why[sizeof(m->base.status.message)];
+    snprintf(why, sizeof(why), "%s", m->base.status.message);
+    if (link_open(m, &err)) {
+        marlin_message(m, "%.120s; reconnect: %.120s", why, err.msg);
+        marlin_set_state(m, DRV_OFFLINE);
+        return;
+    }
+    snprintf(m->base.status.message, sizeof(m->base.status.message), "%s", why);
+    log_printer(LOG_INFO, m->base.name, "link dropped and opened again: a new handshake");
+    marlin_hello(m);
 }
 
 /* Emergency stop: straight to the wire, past the queue (drv.h estop). */
@@ -369,6 +415,7 @@ m_close(struct drv *d)
     transport_free(m->t_dead);
     m->t_dead = NULL;
     m->phase = PH_OFF;
+    m->relink_ms = 0;
     if (m->timer)
         loop_timer_cancel(d->loop, m->timer);
     m->timer = 0;

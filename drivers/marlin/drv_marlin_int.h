@@ -37,6 +37,7 @@ struct marlin {
     int cfg_rx;               /* the firmware's RX ring, bytes (0: no byte limit) */
     struct transport *t;      /* NULL when offline */
     struct transport *t_dead; /* closed inside its callback; freed on the next tick */
+    int64_t relink_ms;        /* open the port again at this time (marlin_relink; 0: no) */
     uint64_t timer;           /* periodic housekeeping */
     enum phase phase;
     int hello_tries, hello_oks;
@@ -128,6 +129,14 @@ void marlin_handshake_done(struct marlin *m);
 /* Send a hello (M110 N0 and M115), starting or continuing the handshake. */
 void marlin_hello(struct marlin *m);
 
+/*
+ * Drop the link (nothing more is sent on it) and open the port again a
+ * moment later (a USB board sees its port closed: opened again, it
+ * resets) for a new handshake; the state stays as it is until the
+ * handshake ends (DRV_IDLE) or fails (DRV_OFFLINE).
+ */
+void marlin_relink(struct marlin *m);
+
 /* ---- drv_marlin_send.c ---- */
 
 /* A numbered M105 is in flight. */
@@ -209,7 +218,9 @@ void marlin_on_resend(struct marlin *m, long k);
  * the full window: refused with a Resend if the printer misses a line,
  * else answered after everything before it.  The job fails only when the
  * printer truly says nothing: PROBES_MAX deadlines in a row and no byte at
- * all for SILENCE_MS, or only unreadable bytes for GARBLED_MAX deadlines.
+ * all for SILENCE_MS (offline: the link is dropped), or only unreadable
+ * bytes for GARBLED_MAX deadlines (in error: the link is dropped and opened
+ * again, marlin_relink).
  */
 void marlin_deadline(struct marlin *m, int64_t now);
 

@@ -242,7 +242,9 @@ marlin_on_resend(struct marlin *m, long k)
  * the full window: refused with a Resend if the printer misses a line,
  * else answered after everything before it.  The job fails only when the
  * printer truly says nothing: PROBES_MAX deadlines in a row and no byte at
- * all for SILENCE_MS, or only unreadable bytes for GARBLED_MAX deadlines.
+ * all for SILENCE_MS (offline: the link is dropped), or only unreadable
+ * bytes for GARBLED_MAX deadlines (in error: the link is dropped and opened
+ * again, marlin_relink).
  */
 /*
  * A stream that stops moving fails, never crawls (issue 29).  The printer
@@ -307,13 +309,23 @@ marlin_deadline(struct marlin *m, int64_t now)
     m->probes++;
     bool silent = now - m->last_rx_ms >= SILENCE_MS;
     if ((m->probes >= PROBES_MAX && silent) || m->probes >= GARBLED_MAX) {
-        marlin_job_fail(m, silent ? DRV_OFFLINE : DRV_ERROR, "printer stopped answering");
+        m->probes = 0;
         if (silent) {
+            marlin_job_fail(m, DRV_OFFLINE, "printer stopped answering");
             m->t_dead = m->t;
             m->t = NULL;
             m->phase = PH_OFF;
+            return;
         }
-        m->probes = 0;
+        /* It talks (temperature reports) but takes no line: the job fails
+           in error, for an operator's look (offline would count it ejected
+           with auto_eject), and the link is dropped and opened again, a new
+           handshake: probing on, one more M105 in flight each time, wedged
+           the printer in error with no way back (opening a USB port again
+           resets most boards).  A handshake that fails leaves it offline,
+           and the farm connects it again. */
+        marlin_job_fail(m, DRV_ERROR, "printer stopped answering: it talks, but takes no line");
+        marlin_relink(m);
         return;
     }
     /* Which side stopped: bytes still waiting to be written (the link

@@ -297,9 +297,11 @@ sim_step(struct sim_marlin *s)
         sim_emit(s, "echo: Last Updated: 2023-08-06 | Author: (slimfarm-sim)");
         sim_emit(s, "echo: Free Memory: 4096  PlannerBufferBytes: 1792");
     }
-    sim_take_input(s, now_us);
-    sim_deliver_input(s, now_us);
-    sim_take_input(s, now_us); /* the stage made room: keep the wire busy */
+    if (!s->deaf) {
+        sim_take_input(s, now_us);
+        sim_deliver_input(s, now_us);
+        sim_take_input(s, now_us); /* the stage made room: keep the wire busy */
+    }
     if (!s->halted) {
         for (int round = 0; round < 8 && !s->hung; round++) {
             int before = s->q_len;
@@ -328,7 +330,7 @@ sim_step(struct sim_marlin *s)
         host_back(s);
     if (sim_linked(s)) {
         bool held = s->boot_until_ms && s->cfg.boot_hold;
-        unsigned ev = !held && s->stage_len < s->stage_cap ? LOOP_READ : 0;
+        unsigned ev = !held && !s->deaf && s->stage_len < s->stage_cap ? LOOP_READ : 0;
         if (ev != s->fd_events && loop_mod_fd(s->loop, s->fd, ev, NULL) == 0)
             s->fd_events = ev;
     }
@@ -350,6 +352,7 @@ void
 sim_firmware_reset(struct sim_marlin *s, bool banner)
 {
     s->halted = false;
+    s->deaf = false;
     s->stuck = false;
     s->held = false;
     s->last_n = 0;
@@ -382,7 +385,7 @@ sim_marlin_new(struct loop *l, const struct sim_marlin_config *c, struct sf_err 
 {
     if (c->baud < 0 || c->baud > 4000000 || !(c->speed >= 0) || c->speed > 1e6 || c->bufsize < 0 ||
         c->bufsize > 64 || c->planner_blocks < 0 || c->planner_blocks > 256 || c->rx_size < 0 ||
-        c->rx_size > 65536 || c->tcp_port > 65535 || c->hang_after < 0) {
+        c->rx_size > 65536 || c->tcp_port > 65535 || c->hang_after < 0 || c->deaf_after < 0) {
         sf_err_set(err, SF_EINVAL,
                    "sim: config out of range (baud %d, speed %g, bufsize %d, "
                    "planner %d, rx %d, port %d)",

@@ -40,6 +40,9 @@ struct sim_marlin_config {
     const char *log_path; /* every executed command, one per line, or NULL */
     long hang_after;      /* the firmware hangs after executing this many commands: nothing
                              more is read, run or sent, the link stays up; 0: never */
+    long deaf_after;      /* after executing this many commands the firmware reads nothing
+                             more (its USB input wedged) but runs on and sends its
+                             autoreports; a firmware reset clears it; 0: never */
     bool no_keepalive;    /* HOST_KEEPALIVE_FEATURE off: no "busy" lines while G28/G29 run */
     bool boot_hold;       /* bytes the host sends while the firmware boots wait in the link
                              and are read after "start" (a USB bridge that holds them while

@@ -511,6 +511,8 @@ check_fault_triggers(struct sim_marlin *s)
         s->stuck = true;
     if (s->faults.disconnect_after && n == (uint64_t)s->faults.disconnect_after)
         sim_drop_link(s);
+    if (s->cfg.deaf_after && n == (uint64_t)s->cfg.deaf_after)
+        s->deaf = true;
     if (s->cfg.hang_after && n == (uint64_t)s->cfg.hang_after) {
         s->hung = true; /* what it was about to send is lost with it */
         sim_free_out(s);

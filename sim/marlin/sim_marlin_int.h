@@ -86,6 +86,7 @@ struct sim_marlin {
     /* firmware */
     int64_t boot_until_ms; /* > now: booting, input dropped */
     bool hung;             /* cfg.hang_after reached: silent for good */
+    bool deaf;             /* cfg.deaf_after reached: reads nothing until a reset */
     bool stuck;            /* faults.stuck_after reached: busy for good */
     bool held;             /* the head is a printing move held by faults.hold_path */
     bool hold_on;          /* faults.hold_path existed at the last look */

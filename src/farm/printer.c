@@ -246,6 +246,9 @@ apply(struct printer *p, enum drv_event ev, const struct drv_status *st)
             p->attach_tried = false;
             p->attach_waits = 0;
             snprintf(p->message, sizeof(p->message), "%s", st->message);
+            if (p->state == PRINTER_ERROR && !p->error_cleared)
+                printer_set_bed(p, true); /* the error's look is owed: it comes back awaiting
+                                             clear, never idle (a wedged Marlin's new link) */
             printer_move(p, PRINTER_EV_DISCONNECTED);
             schedule_reconnect(p);
         } else if (st->state == DRV_ERROR && p->state != PRINTER_ERROR) {

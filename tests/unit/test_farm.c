@@ -912,6 +912,48 @@ T_CASE(farm_printer_takes_jobs_only_when_its_driver_is_idle)
 }
 
 /*
+ * A Marlin that talks but takes no line fails its job in error; its driver
+ * drops the link and opens it again, and if the printer does not answer
+ * that handshake the driver goes offline and the farm connects it again.
+ * On auto-eject printer b the error's look is still owed: it comes back
+ * awaiting clear, and the retry waits for the operator.  Before, the
+ * reconnect made it idle and the retry started with nobody having looked.
+ */
+T_CASE(farm_error_printer_that_goes_offline_comes_back_awaiting_clear)
+{
+    struct sf_err err;
+    T_OK(setup("errofl", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(1, PRINTER_IDLE));
+    int64_t id = add("size 20 20 20", "PETG", 1); /* max_retries defaults to 1 */
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    struct tdrv *b = tdrv_named("b");
+    T_EQ_INT(b->starts, 1);
+    snprintf(b->base.status.message, sizeof(b->base.status.message),
+             "printer stopped answering: it talks, but takes no line");
+    report(b, DRV_ERROR, DRV_EV_JOB_FAILED);
+    T_TRUE(wait_printer(1, PRINTER_ERROR));
+    T_EQ_INT(state_of(id), JOB_READY);
+    /* the new handshake goes unanswered: offline, and the farm connects it again */
+    int opens = b->opens;
+    snprintf(b->base.status.message, sizeof(b->base.status.message), "no reply");
+    report(b, DRV_OFFLINE, DRV_EV_STATE);
+    T_TRUE(wait_printer(1, PRINTER_AWAITING_CLEAR));
+    T_EQ_INT(b->opens, opens + 1);
+    for (int i = 0; i < 10; i++)
+        loop_run_once(fx.l, 10);
+    T_EQ_INT(pstate(1), PRINTER_AWAITING_CLEAR);
+    T_EQ_INT(b->starts, 1);
+    T_EQ_INT(state_of(id), JOB_READY);
+    /* the operator looks: the retry starts */
+    T_OK(farm_printer_action(fx.f, "b", PRINTER_ACT_CLEARED, &err), &err);
+    T_TRUE(wait_job(id, JOB_PRINTING));
+    T_EQ_INT(b->starts, 2);
+    report(b, DRV_IDLE, DRV_EV_JOB_DONE);
+    T_TRUE(wait_job(id, JOB_DONE));
+    teardown();
+}
+
+/*
  * A job whose G-code holds a command no printer can take fails when it is
  * prepared, naming the file and line, and never reaches a printer: the
  * check that used to run in start_job on the loop thread now runs on the

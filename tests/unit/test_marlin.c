@@ -45,6 +45,9 @@ struct run {
     double end_x, end_y, end_e; /* where the file leaves the head */
     size_t *fragments;          /* if set: count line heads cut off by corruption here */
     int min_window, max_window; /* the driver's window seen at progress events (0: none yet) */
+    int peer;                   /* sim_time and keep_peer: the driver's socket end, kept + 1 */
+    char fail_msg[200];         /* the driver's message when the job failed */
+    int fail_state;             /* ... and its state */
 };
 
 static void
@@ -53,9 +56,11 @@ on_event(struct drv *d, enum drv_event ev, void *ud)
     struct run *r = ud;
     if (ev == DRV_EV_JOB_DONE)
         r->done++;
-    else if (ev == DRV_EV_JOB_FAILED)
+    else if (ev == DRV_EV_JOB_FAILED) {
         r->failed++;
-    else if (ev == DRV_EV_JOB_CANCELLED)
+        snprintf(r->fail_msg, sizeof(r->fail_msg), "%s", d->status.message);
+        r->fail_state = d->status.state;
+    } else if (ev == DRV_EV_JOB_CANCELLED)
         r->cancelled++;
     else if (ev == DRV_EV_STATE && r->n_states < 16)
         r->states[r->n_states++] = d->status.state;
@@ -224,6 +229,13 @@ quiet_logs(void)
 static bool sim_time;
 
 /*
+ * With sim_time: setup() keeps the driver's end of the socketpair open
+ * (closed at teardown), so "fd:N" stays that socket when the driver opens
+ * its port again (marlin_relink).  Set by a case before setup().
+ */
+static bool keep_peer;
+
+/*
  * Budgets of until(): simulated time is cheap.  On real time (the pty and
  * TCP cases: the kernel moves their bytes on its own schedule, a pty's
  * through a work queue, loopback TCP's through softirqs that a busy
@@ -245,6 +257,9 @@ teardown(struct run *r)
     drv_free(r->drv);
     sim_marlin_free(r->sim);
     loop_free(r->loop);
+    if (r->peer > 0)
+        close(r->peer - 1);
+    r->peer = 0;
     r->drv = NULL;
     r->sim = NULL;
     r->loop = NULL;
@@ -292,7 +307,9 @@ setup(struct run *r, struct sim_marlin_config *sc, int buffer_lines)
                              .buffer_lines = buffer_lines };
     r->drv = drv_new(r->loop, &dc, on_event, r, &err);
     int rc = r->drv ? r->drv->ops->open(r->drv, &err) : -1;
-    if (sv[1] >= 0)
+    if (sv[1] >= 0 && keep_peer)
+        r->peer = sv[1] + 1;
+    else if (sv[1] >= 0)
         close(sv[1]); /* the transport holds its own copy */
     if (rc < 0) {
         t_fail(__FILE__, __LINE__, "driver: %s", err.msg);
@@ -840,6 +857,104 @@ T_CASE(marlin_printer_that_stops_answering_fails_the_job)
     sim_time = false;
 }
 
+static bool
+is_offline(struct run *r)
+{
+    return r->drv->status.state == DRV_OFFLINE;
+}
+
+static bool
+saw_state(struct run *r, enum drv_state s)
+{
+    for (int i = 0; i < r->n_states; i++)
+        if (r->states[i] == (int)s)
+            return true;
+    return false;
+}
+
+/*
+ * A firmware whose input wedges mid-job (it reads nothing more but runs
+ * on and sends its temperature reports): the job fails in error (an
+ * operator's look), saying the printer talks but takes no line, and the
+ * driver stops probing: it drops the link and opens it again for a new
+ * handshake, which the deaf printer does not answer either, so it ends
+ * offline (the farm connects it again).  Before, it stayed in error with
+ * the link kept, one more probe in flight every 1.3 s, for ever.
+ */
+T_CASE(marlin_printer_that_talks_but_takes_no_line_stops_probing)
+{
+    sim_time = true;
+    keep_peer = true;
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_config(&sc, false, true, NULL);
+    sc.deaf_after = 1500;
+    if (setup(&r, &sc, 0)) {
+        write_job(&r, JOB_LINES, NULL);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over, budget_ms(0)));
+        T_EQ_INT(r.failed, 1);
+        T_EQ_INT(r.fail_state, DRV_ERROR);
+        T_TRUE(strstr(r.fail_msg, "takes no line") != NULL);
+        T_TRUE(r.drv->status.lines_acked <= 1500);
+        T_TRUE(r.drv->status.lines_acked >= 1400);
+        T_TRUE(until(&r, is_offline, budget_ms(0)));
+        T_TRUE(saw_state(&r, DRV_ERROR));
+        struct drv_marlin_stats a, b;
+        drv_marlin_stats(r.drv, &a);
+        int64_t end = loop_now_ms(r.loop) + 600000; /* ten minutes on: nothing more sent */
+        while (loop_now_ms(r.loop) < end)
+            loop_run_once(r.loop, 50);
+        drv_marlin_stats(r.drv, &b);
+        T_EQ_INT(b.lines_sent, a.lines_sent);
+        T_EQ_INT(b.bytes_sent, a.bytes_sent);
+        T_EQ_INT(b.probes, a.probes);
+        T_EQ_INT(r.drv->status.state, DRV_OFFLINE);
+    }
+    teardown(&r);
+    keep_peer = false;
+    sim_time = false;
+}
+
+/*
+ * The same wedged firmware on a USB port (a pty): the driver's new link
+ * resets the board (the port opened again), the handshake passes and the
+ * driver reports idle on its own, so an operator's clear of the farm's
+ * error completes.  Before, it probed on in error until someone
+ * reconnected it by hand.
+ */
+T_CASE(marlin_printer_that_talks_but_takes_no_line_comes_back_after_a_reset)
+{
+    struct run r = { 0 };
+    struct sim_marlin_config sc;
+    sim_config(&sc, false, true, NULL);
+    sc.deaf_after = 1500;
+    if (setup(&r, &sc, 0)) {
+        write_job(&r, JOB_LINES, NULL);
+        T_OK(r.drv->ops->start_job(r.drv, r.gcode_path, 0, NULL, NULL), NULL);
+        T_TRUE(until(&r, job_over, budget_ms(30000)));
+        T_EQ_INT(r.failed, 1);
+        T_EQ_INT(r.fail_state, DRV_ERROR);
+        T_TRUE(strstr(r.fail_msg, "takes no line") != NULL);
+        T_TRUE(until(&r, is_idle, budget_ms(10000)));
+        T_TRUE(saw_state(&r, DRV_ERROR));
+        T_TRUE(!saw_state(&r, DRV_OFFLINE));
+        struct sim_marlin_stats st;
+        sim_marlin_stats(r.sim, &st);
+        T_EQ_INT(st.connects, 2);
+        /* it takes lines again */
+        T_OK(r.drv->ops->command(r.drv, "G28", NULL), NULL);
+        uint64_t before = st.executed;
+        int64_t end = loop_now_ms(r.loop) + budget_ms(5000);
+        while (st.executed == before && loop_now_ms(r.loop) < end) {
+            loop_run_once(r.loop, 50);
+            sim_marlin_stats(r.sim, &st);
+        }
+        T_TRUE(st.executed > before);
+    }
+    teardown(&r);
+}
+
 /*
  * Marlin's emergency parser acts on M108/M112/M410 after a line's N and
  * digits, before any checksum: "N2112 G1..." is one garbled byte from
@@ -1037,12 +1152,6 @@ T_CASE(marlin_reset_mid_print_fails_at_last_ack)
 T_CASE(marlin_reset_mid_print_over_tcp)
 {
     reset_mid_print(true);
-}
-
-static bool
-is_offline(struct run *r)
-{
-    return r->drv->status.state == DRV_OFFLINE;
 }
 
 T_CASE(marlin_disconnect_then_reconnect_with_backoff)
