@@ -140,6 +140,9 @@ void printer_set_removed(struct printer *p, bool removed);
 bool printer_removed(const struct printer *p);
 /* Does p's bed hold a part (what the farm knows; the store keeps it for a restart)? */
 bool printer_bed_full(const struct printer *p);
+/* Whether p's bed is known (false while printer_new's read of it is on its way: bed_full is
+   true until then). */
+bool printer_bed_known(const struct printer *p);
 
 /*
  * Start job j (ready; its G-code at path) from line 0, in two steps like a

@@ -22,10 +22,6 @@
 #include "job.h"
 #include "printer.h"
 
-/* How long a new printer waits for the store queue before it reads its bed (printer_new):
-   longer than STOREQ_SYNC_MS, since a bed read too early could miss a part on it. */
-#define PRINTER_BED_SYNC_MS 2000
-
 /* One driver event as it happened. */
 struct queued {
     enum drv_event ev;    /* what */
@@ -95,7 +91,8 @@ struct printer {
     /* the orphan's read on the store's thread (printer_settle_orphan), not yet back; NULL if
        none */
     struct orphan_ticket *oticket;
-    struct cmd_ticket *cmds; /* manual commands waiting for the store (printer_command_then) */
+    struct cmd_ticket *cmds;    /* manual commands waiting for the store (printer_command_then) */
+    struct bed_ticket *bticket; /* its bed's read (printer_new), not yet back; NULL if none */
 };
 
 /*
