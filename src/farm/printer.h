@@ -204,6 +204,11 @@ void printer_start_go(struct printer *p, int64_t id, uint64_t token, const char 
  * with why.
  */
 int printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err *err);
+/* printer_resume_commit with the job held already under fence (0: one host), the hold done
+   on the store's thread (printer_env.hold_ask: an operator's resume, farm_resume.c; the
+   re-attach, printer_op.c): p takes job id at line. */
+int printer_resume_fenced(struct printer *p, int64_t id, int64_t line, int64_t fence,
+                          struct sf_err *err);
 void printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
                        const struct drv_job_scan *scan, double est_s, int rc, const char *why);
 

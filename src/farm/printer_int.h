@@ -117,10 +117,6 @@ void printer_away_hold(struct printer *p);
 /* The hold's answer, or the read's, asks again later (printer_attach.c: bounded, with the
    driver's "not yet"); false once the tries are spent. */
 bool printer_attach_later(struct printer *p);
-/* printer_resume_commit with the job held already under fence (0: one host): p takes job id
-   at line (printer.c). */
-int printer_resume_fenced(struct printer *p, int64_t id, int64_t line, int64_t fence,
-                          struct sf_err *err);
 
 /* Tell p's owner it changed (printer_env.changed), if it listens. */
 void printer_changed(struct printer *p);
