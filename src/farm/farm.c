@@ -125,7 +125,7 @@ struct printer *
 farm_printer_new(struct farm *f, const struct farmcfg_printer *cfg, const struct printer *old)
 {
     struct printer_env env = {
-        .bed_known = old != NULL,
+        .bed_known = old && printer_bed_known(old), /* not while its read is on its way */
         .bed_full = old && printer_bed_full(old),
         .l = f->l,
         .s = f->s,

@@ -34,6 +34,7 @@ struct farm_cool {
     int64_t until_ms;
 };
 struct farm_ask;   /* farm_ask.c: a claim or take of the scheduling pass on its way */
+struct resume_ask; /* farm_resume.c: a resume whose hold is on its way */
 struct farm_spare; /* farm_spare.c: the other hosts' printers this host may prepare for */
 struct store_printer_prep;
 /* A queued job that fits only other hosts' printers is prepared here once it waited this long
@@ -78,6 +79,8 @@ struct farm {
     struct farm_view *view;     /* the other hosts' printers, and ours for them (farm_view.h) */
     struct farm_ask *asks;      /* claims and takes on the store thread (farm_ask.c) */
     struct farm_spare *spare;   /* other hosts' printers to prepare for (farm_spare.c), or NULL */
+    /* resumes whose hold is on the store thread (farm_resume.c), linked by next */
+    struct resume_ask *resuming;
 };
 
 /* Write job id's DEFER or PREPARE_FAILED (its preparation ended without a G-code) through the

@@ -10,10 +10,12 @@
 #include "farm_int.h"
 
 #include <stdio.h>
+#include <string.h>
 
 #include "../../drivers/gpolicy.h"
 #include "../base/log.h"
 #include "../base/mem.h"
+#include "farm_host.h"
 
 /* A resume waiting for its read (drv_job_scan_to) on the io thread. */
 struct resume {
@@ -62,6 +64,9 @@ struct resume_ask {
     struct drv_job_scan scan;
     storeq_event_fn done; /* the answer (farm_job_resume_then) */
     void *ud;
+    bool held;               /* one of several hosts: the job is held, under fence */
+    int64_t fence;           /* (farm_host_hold_ask, on the store's thread) */
+    struct resume_ask *next; /* in f->resuming while its hold is on its way */
 };
 
 /* Job a->id and, when it is interrupted, its G-code's path and line count. */
@@ -80,13 +85,13 @@ resume_read(struct store *s, void *arg, struct sf_err *err)
     return SF_OK;
 }
 
-/* The resume of a's job, read (resume_read): its checks, the commit, the read up to the line. */
+/* May a's job, read (resume_read), resume now?  Its printer in *pp, its line in *linep. */
 static int
-resume_go(struct farm *f, struct resume_ask *a, struct sf_err *err)
+resume_check(struct farm *f, struct resume_ask *a, struct printer **pp, int64_t *linep,
+             struct sf_err *err)
 {
     struct job_row *jr = &a->j;
     int64_t id = a->id, line = a->line;
-    int rc;
     if (jr->state != JOB_INTERRUPTED)
         return sf_err_set(err, SF_EINVAL, "job %lld is %s: only an interrupted job can be resumed",
                           (long long)id, job_state_name(jr->state));
@@ -109,10 +114,27 @@ resume_go(struct farm *f, struct resume_ask *a, struct sf_err *err)
                           (long long)id, (long long)line,
                           (unsigned long long)(total > 1 ? total - 1 : 1),
                           (unsigned long long)total);
+    *pp = p;
+    *linep = line;
+    return SF_OK;
+}
+
+/* The resume of a's job, read (resume_read): its checks, the commit, the read up to the line. */
+static int
+resume_go(struct farm *f, struct resume_ask *a, struct sf_err *err)
+{
+    struct job_row *jr = &a->j;
+    int64_t id = a->id, line = 0;
+    struct printer *p = NULL;
+    int rc = resume_check(f, a, &p, &line, err);
+    if (rc)
+        return rc;
+    uint64_t total = a->scan.lines_total;
     struct resume *r = mem_calloc(1, sizeof(*r));
     if (!r)
         return sf_err_set(err, SF_ENOMEM, "job %lld: out of memory", (long long)id);
-    if ((rc = printer_resume_commit(p, id, line, err))) {
+    if ((rc = a->held ? printer_resume_fenced(p, id, line, a->fence, err)
+                      : printer_resume_commit(p, id, line, err))) {
         free(r);
         return rc;
     }
@@ -151,21 +173,12 @@ farm_job_resume(struct farm *f, int64_t id, int64_t line, struct sf_err *err)
     return rc;
 }
 
-/* The job came back from the store's thread: resume it; answered once its RESUME committed. */
+/* Answer a's resume (rc, err): a refusal now; once its RESUME (queued) committed otherwise. */
 static void
-on_resume_read(void *ud, const struct storeq_result *r)
+resume_answer(struct resume_ask *a, int rc, struct sf_err *errp)
 {
-    struct resume_ask *a = ud;
     struct farm *f = a->f;
-    struct sf_err err = { 0 };
-    int rc = r->rc;
-    if (rc)
-        err = *r->err;
-    else if (f->stopping)
-        rc = sf_err_set(&err, SF_ECANCELED, "job %lld: the daemon stops: not resumed",
-                        (long long)a->id);
-    else
-        rc = resume_go(f, a, &err);
+    struct sf_err err = *errp;
     /* its RESUME is queued: the answer follows it */
     if (rc || storeq_barrier(f->q, a->done, a->ud)) {
         if (!rc)
@@ -175,6 +188,79 @@ on_resume_read(void *ud, const struct storeq_result *r)
         a->done(a->ud, &res);
     }
     free(a);
+}
+
+/* The hold of a's job came back (rc, fence): resume it, its state checked again (the printer
+   may have moved meanwhile), and answer. */
+static void
+on_resume_held(void *ud, int rc, int64_t fence, const struct sf_err *herr)
+{
+    struct resume_ask *a = ud;
+    struct farm *f = a->f;
+    for (struct resume_ask **pp = &f->resuming; *pp; pp = &(*pp)->next)
+        if (*pp == a) {
+            *pp = a->next;
+            break;
+        }
+    struct sf_err err = { 0 };
+    if (rc)
+        err = herr ? *herr : err;
+    else if (f->stopping)
+        rc = sf_err_set(&err, SF_ECANCELED, "job %lld: the daemon stops: not resumed",
+                        (long long)a->id);
+    else {
+        a->held = true;
+        a->fence = fence;
+        rc = resume_go(f, a, &err);
+    }
+    resume_answer(a, rc, &err);
+}
+
+/* One of several hosts: hold a's job on the store's thread (farm_host_hold_ask) before the
+   resume (on_resume_held); one resume per job and per printer at a time.  SF_OK with *posted
+   false: nothing to hold (one host). */
+static int
+resume_hold(struct farm *f, struct resume_ask *a, bool *posted, struct sf_err *err)
+{
+    *posted = false;
+    if (!f->host)
+        return SF_OK;
+    for (const struct resume_ask *o = f->resuming; o; o = o->next)
+        if (o->id == a->id || !strcmp(o->j.printer, a->j.printer))
+            return sf_err_set(err, SF_EINVAL,
+                              "job %lld: printer %s has a resume on its way; try again once it "
+                              "is answered",
+                              (long long)a->id, a->j.printer);
+    int rc = farm_host_hold_ask(f, a->id, a->j.printer, posted, on_resume_held, a, err);
+    if (rc == SF_OK && *posted) {
+        a->next = f->resuming;
+        f->resuming = a;
+    }
+    return rc;
+}
+
+/* The job came back from the store's thread: resume it (held first on the store's thread by
+   one of several hosts); answered once its RESUME committed. */
+static void
+on_resume_read(void *ud, const struct storeq_result *r)
+{
+    struct resume_ask *a = ud;
+    struct farm *f = a->f;
+    struct sf_err err = { 0 };
+    int rc = r->rc;
+    bool posted = false;
+    struct printer *p = NULL;
+    int64_t line = 0;
+    if (rc)
+        err = *r->err;
+    else if (f->stopping)
+        rc = sf_err_set(&err, SF_ECANCELED, "job %lld: the daemon stops: not resumed",
+                        (long long)a->id);
+    else if ((rc = resume_check(f, a, &p, &line, &err)) == SF_OK &&
+             (rc = resume_hold(f, a, &posted, &err)) == SF_OK && !posted)
+        rc = resume_go(f, a, &err);
+    if (!posted)
+        resume_answer(a, rc, &err);
 }
 
 int

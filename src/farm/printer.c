@@ -343,6 +343,8 @@ deliver(struct loop *l, void *ud)
     (void)l;
     struct printer *p = ud;
     p->deliver = 0;
+    if (p->bticket)
+        return; /* its bed is not known yet: the events wait for it (printer_bed_read) */
     /* apply() never calls the driver back into this queue synchronously,
        but a reconnect's open() may queue more: those wait for the next timer */
     size_t n = p->n_queue;
@@ -373,6 +375,69 @@ on_drv_event(struct drv *d, enum drv_event ev, void *ud)
 
 /* ---- lifecycle ---- */
 
+/* A new printer's bed on its way from the store's thread (printer_bed_read). */
+struct bed_ticket {
+    struct printer *p; /* NULL: freed meanwhile */
+    char name[sizeof(((struct farmcfg_printer *)0)->name)];
+    bool full;
+};
+
+static int
+bed_read(struct store *s, void *arg, struct sf_err *err)
+{
+    struct bed_ticket *t = arg;
+    return store_printer_bed_get(s, t->name, &t->full, err);
+}
+
+/* The bed came back: the gate is known, and the driver's events that waited are applied. */
+static void
+on_bed_read(void *ud, const struct storeq_result *r)
+{
+    struct bed_ticket *t = ud;
+    struct printer *p = t->p;
+    bool full = t->full;
+    free(t);
+    if (!p)
+        return;
+    p->bticket = NULL;
+    /* a bed it cannot read is taken as holding a part: nothing starts on it until cleared */
+    if (r->rc)
+        log_printer(LOG_ERROR, p->cfg.name, "%s: its bed is taken as holding a part", r->err->msg);
+    p->bed_full = r->rc ? true : full;
+    if (p->bed_full)
+        log_printer(LOG_INFO, p->cfg.name, "its bed holds a part: clear it before the next job");
+    if (p->n_queue && !p->deliver && !p->deaf)
+        p->deliver = loop_timer_add(p->env.l, 0, deliver, p);
+    printer_changed(p);
+}
+
+/* Read p's bed on the store's thread, after what was queued before (a bed set by the printer
+   p replaces); until it comes back p takes its bed as full and its driver's events wait. */
+static void
+printer_bed_read(struct printer *p)
+{
+    p->bed_full = true;
+    struct bed_ticket *t = mem_calloc(1, sizeof(*t));
+    if (t) {
+        t->p = p;
+        snprintf(t->name, sizeof(t->name), "%s", p->cfg.name);
+    }
+    if (!t || storeq_read(p->env.q, bed_read, t, on_bed_read, t)) {
+        free(t);
+        log_printer(LOG_ERROR, p->cfg.name, "out of memory: its bed is taken as holding a part");
+        return;
+    }
+    p->bticket = t;
+}
+
+static void
+printer_bed_release(struct printer *p)
+{
+    if (p->bticket)
+        p->bticket->p = NULL;
+    p->bticket = NULL;
+}
+
 struct printer *
 printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
 {
@@ -385,19 +450,16 @@ printer_new(const struct printer_env *env, const struct farmcfg_printer *cfg)
     p->state = PRINTER_OFFLINE;
     struct sf_err err;
     storeq_printer_set(env->q, cfg->name, PRINTER_OFFLINE);
-    /* The bed a printer of this name just had (farm_apply replaces printers), once the queue
-       is written; the loop waits PRINTER_BED_SYNC_MS at most (a reload or an API add while
-       the database is held busy must not stop the other printers' streams), and a bed it
-       cannot read is taken as holding a part: nothing starts on it until it is cleared. */
-    if (env->bed_known) /* the printer it replaces knew it (a reload): nothing to read */
+    /* The bed a printer of this name just had (farm_apply replaces printers), read on the
+       store's thread after what was queued (printer_bed_read): until it is known the bed
+       is taken as holding a part and the driver's events wait, so nothing starts on it. */
+    if (env->bed_known) { /* the printer it replaces knew it (a reload): nothing to read */
         p->bed_full = env->bed_full;
-    else if (storeq_sync(env->q, PRINTER_BED_SYNC_MS, &err) ||
-             store_printer_bed_get(env->s, cfg->name, &p->bed_full, &err)) {
-        p->bed_full = true;
-        log_printer(LOG_ERROR, cfg->name, "%s: its bed is taken as holding a part", err.msg);
+        if (p->bed_full)
+            log_printer(LOG_INFO, cfg->name, "its bed holds a part: clear it before the next job");
+    } else {
+        printer_bed_read(p);
     }
-    if (p->bed_full)
-        log_printer(LOG_INFO, cfg->name, "its bed holds a part: clear it before the next job");
     if (!cfg->enabled) {
         if (cfg->disabled[0]) /* by an operator, at run time (farm.h) */
             snprintf(p->message, sizeof(p->message), "disabled: %s", cfg->disabled);
@@ -462,6 +524,7 @@ printer_free(struct printer *p)
     if (p->rticket)
         p->rticket->p = NULL;  /* its RESUME too */
     printer_attach_release(p); /* its interrupted job's read too */
+    printer_bed_release(p);    /* and its bed's */
     free(p->go);
     free(p->rgo);
     free(p->queue);
@@ -516,6 +579,12 @@ bool
 printer_bed_full(const struct printer *p)
 {
     return p->bed_full;
+}
+
+bool
+printer_bed_known(const struct printer *p)
+{
+    return !p->bticket;
 }
 
 void

@@ -140,6 +140,9 @@ void printer_set_removed(struct printer *p, bool removed);
 bool printer_removed(const struct printer *p);
 /* Does p's bed hold a part (what the farm knows; the store keeps it for a restart)? */
 bool printer_bed_full(const struct printer *p);
+/* Whether p's bed is known (false while printer_new's read of it is on its way: bed_full is
+   true until then). */
+bool printer_bed_known(const struct printer *p);
 
 /*
  * Start job j (ready; its G-code at path) from line 0, in two steps like a
@@ -201,6 +204,11 @@ void printer_start_go(struct printer *p, int64_t id, uint64_t token, const char 
  * with why.
  */
 int printer_resume_commit(struct printer *p, int64_t id, int64_t line, struct sf_err *err);
+/* printer_resume_commit with the job held already under fence (0: one host), the hold done
+   on the store's thread (printer_env.hold_ask: an operator's resume, farm_resume.c; the
+   re-attach, printer_op.c): p takes job id at line. */
+int printer_resume_fenced(struct printer *p, int64_t id, int64_t line, int64_t fence,
+                          struct sf_err *err);
 void printer_resume_go(struct printer *p, int64_t id, const char *path, uint64_t line,
                        const struct drv_job_scan *scan, double est_s, int rc, const char *why);
 

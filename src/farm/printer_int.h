@@ -22,10 +22,6 @@
 #include "job.h"
 #include "printer.h"
 
-/* How long a new printer waits for the store queue before it reads its bed (printer_new):
-   longer than STOREQ_SYNC_MS, since a bed read too early could miss a part on it. */
-#define PRINTER_BED_SYNC_MS 2000
-
 /* One driver event as it happened. */
 struct queued {
     enum drv_event ev;    /* what */
@@ -95,7 +91,8 @@ struct printer {
     /* the orphan's read on the store's thread (printer_settle_orphan), not yet back; NULL if
        none */
     struct orphan_ticket *oticket;
-    struct cmd_ticket *cmds; /* manual commands waiting for the store (printer_command_then) */
+    struct cmd_ticket *cmds;    /* manual commands waiting for the store (printer_command_then) */
+    struct bed_ticket *bticket; /* its bed's read (printer_new), not yet back; NULL if none */
 };
 
 /*
@@ -120,10 +117,6 @@ void printer_away_hold(struct printer *p);
 /* The hold's answer, or the read's, asks again later (printer_attach.c: bounded, with the
    driver's "not yet"); false once the tries are spent. */
 bool printer_attach_later(struct printer *p);
-/* printer_resume_commit with the job held already under fence (0: one host): p takes job id
-   at line (printer.c). */
-int printer_resume_fenced(struct printer *p, int64_t id, int64_t line, int64_t fence,
-                          struct sf_err *err);
 
 /* Tell p's owner it changed (printer_env.changed), if it listens. */
 void printer_changed(struct printer *p);

@@ -2365,3 +2365,47 @@ T_CASE(farm_reattach_reads_its_job_off_the_loop)
     store_close(r);
     teardown();
 }
+
+/*
+ * A printer added by a reload reads its bed (a part left on it under that name) on the
+ * store's thread, not on the loop's connection; its driver, connected first, waits for the
+ * bed gate's decision: the printer awaits clear, not idle.  Before, printer_new called
+ * store_printer_bed_get on the loop.
+ */
+T_CASE(farm_new_printer_reads_its_bed_off_the_loop)
+{
+    struct sf_err err;
+    T_OK(setup("bedlook", farm_ini, tdrv_new, test_prepare, &err), &err);
+    T_TRUE(wait_printer(0, PRINTER_IDLE));
+    /* c's part, from an earlier run */
+    T_OK(store_printer_bed_set(synced(), "c", true, &err), &err);
+    /* the reload's own reads (the run-time printers) are measured by one that adds none */
+    static const char same[] = "[printer a]\ndriver: marlin\nport: pty:/dev/null\n"
+                               "[printer b]\ndriver: marlin\nport: pty:/dev/null\n";
+    static const char next[] = "[printer a]\ndriver: marlin\nport: pty:/dev/null\n"
+                               "[printer b]\ndriver: marlin\nport: pty:/dev/null\n"
+                               "[printer c]\ndriver: marlin\nport: pty:/dev/null\n";
+    struct farmcfg c1, c2;
+    farmcfg_init(&c1);
+    farmcfg_init(&c2);
+    T_OK(farmcfg_parse(&c1, same, strlen(same), "same.ini", &err), &err);
+    T_OK(farmcfg_parse(&c2, next, strlen(next), "next.ini", &err), &err);
+    T_OK(farm_reload(fx.f, &c1, &err), &err);
+    uint64_t before = store_round_trips(fx.s);
+    T_OK(farm_reload(fx.f, &c1, &err), &err);
+    uint64_t reload = store_round_trips(fx.s) - before;
+    before = store_round_trips(fx.s);
+    T_OK(farm_reload(fx.f, &c2, &err), &err);
+    struct printer_info info;
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS; wall_ms() < end;) {
+        if (info_of("c", &info) && info.state == PRINTER_AWAITING_CLEAR)
+            break;
+        loop_run_once(fx.l, 10);
+    }
+    T_TRUE(info_of("c", &info));
+    T_EQ_INT(info.state, PRINTER_AWAITING_CLEAR);
+    T_EQ_INT((long long)(store_round_trips(fx.s) - before), (long long)reload);
+    farmcfg_release(&c1);
+    farmcfg_release(&c2);
+    teardown();
+}

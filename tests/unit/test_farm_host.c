@@ -33,6 +33,7 @@
 #include "../../src/base/log.h"
 #include "../../src/base/mem.h"
 #include "../../src/farm/farm.h"
+#include "../../src/farm/farm_host.h"
 #include "../../src/farm/farm_remote.h"
 #include "../../src/farm/farmcfg.h"
 #include "../../src/farm/store_command.h"
@@ -1323,6 +1324,86 @@ wait_printer_free(enum printer_state want)
     fprintf(stderr, "printer: %s, job %lld: %s\n", printer_state_name(info.state),
             (long long)info.job_id, info.message ? info.message : "");
     return false;
+}
+
+/* An operator's resume's answer (farm_job_resume_then): its rc, once it came. */
+struct resumed {
+    bool came;
+    int rc;
+    char msg[256];
+};
+
+static void
+on_resumed(void *ud, const struct storeq_result *r)
+{
+    struct resumed *x = ud;
+    x->came = true;
+    x->rc = r->rc;
+    snprintf(x->msg, sizeof(x->msg), "%s", r->rc && r->err ? r->err->msg : "");
+}
+
+/*
+ * An operator's resume on one of several hosts holds the job (its new fencing token) on the
+ * store's thread (farm_host_hold_ask), not on the loop's connection, and answers once the hold
+ * and its RESUME came back: the print goes on on its printer under this host's token.  Before,
+ * printer_resume_commit held it with farm_host_hold: farm_sync and store_job_attach on the
+ * loop's connection.
+ */
+T_CASE(host_holds_an_operators_resume_off_the_loop)
+{
+    T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
+    char url[1024], text[64];
+    struct store *a = NULL;
+    int64_t id = 0;
+    struct hdrv *d = NULL;
+    struct sf_err err;
+    T_TRUE(reaped_print("resumehold", url, sizeof(url), &a, &id, &d));
+    T_TRUE(d != NULL);
+    T_TRUE(wait_logged("another host holds it now")); /* b let it go, and joins again */
+    if (d) /* its driver stopped the print (the cancel): its part is left on the bed */
+        d->base.on_event(&d->base, DRV_EV_JOB_CANCELLED, d->base.ud);
+    struct printer_info info = { 0 };
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; clock_mono_ms() < end;) {
+        farm_printer_info(hx.f, 0, &info);
+        if (info.job_id == 0 && info.state != PRINTER_PRINTING && info.state != PRINTER_OFFLINE)
+            break;
+        loop_run_once(hx.l, 20);
+    }
+    if (info.state == PRINTER_AWAITING_CLEAR) /* the operator cleared what was left */
+        T_OK(farm_printer_action(hx.f, "q", PRINTER_ACT_CLEARED, &err), &err);
+    T_TRUE(wait_printer_free(PRINTER_IDLE));
+    char reader[64];
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS;
+         !farm_host_reader(hx.f, reader, sizeof(reader)) && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* b joined again: it may hold */
+    farm_sync(hx.f, -1, NULL);
+    int64_t fence_before = 0, fence_after = 0;
+    db_text(url, "SELECT fence FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    fence_before = atoll(text);
+    int starts = d ? d->starts : -1;
+    int64_t rt = store_round_trips(hx.s);
+    struct resumed x = { 0 };
+    T_OK(farm_job_resume_then(hx.f, id, 1, on_resumed, &x, &err), &err);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !x.came && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20);
+    T_TRUE(x.came);
+    if (x.rc)
+        fprintf(stderr, "resume: %s\n", x.msg);
+    T_EQ_INT(x.rc, SF_OK);
+    T_EQ_INT(store_round_trips(hx.s) - rt, 0);
+    T_TRUE(wait_state(url, id, "printing"));
+    db_text(url, "SELECT fence FROM jobs WHERE id = ?1", id, text, sizeof(text));
+    fence_after = atoll(text);
+    T_TRUE(fence_after > fence_before); /* held: the token moved on */
+    farm_printer_info(hx.f, 0, &info);
+    T_EQ_INT(info.state, PRINTER_PRINTING);
+    T_EQ_INT(info.job_id, id);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS;
+         d && d->starts == starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* its driver has it again */
+    T_EQ_INT(d ? d->starts : -1, starts + 1);
+    host_farm_free();
+    store_close(a);
 }
 
 /*
