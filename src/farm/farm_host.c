@@ -644,20 +644,32 @@ farm_host_owns(const struct farm *f, const char *printer)
     return !h || (!was_foreign(h, printer) && (!h->owning || is_mine(h, printer)));
 }
 
+/* Whether a hold must go to the store (*go): not on one host (nothing to hold against) nor for
+   no job; SF_EAGAIN before this host has a lease. */
+static int
+hold_gate(const struct farm_host *h, int64_t id, bool *go, struct sf_err *err)
+{
+    *go = false;
+    if (!h)
+        return SF_OK;
+    if (!h->joined)
+        return sf_err_set(err, SF_EAGAIN, "host %s has no lease yet", h->name);
+    *go = id > 0;
+    return SF_OK;
+}
+
 int
 farm_host_hold(void *ud, int64_t id, int64_t *fence, struct sf_err *err)
 {
     struct farm *f = ud;
     struct farm_host *h = f->host;
     *fence = 0;
-    if (!h)
-        return SF_OK;
-    if (!h->joined)
-        return sf_err_set(err, SF_EAGAIN, "host %s has no lease yet", h->name);
-    if (id <= 0)
-        return SF_OK;
+    bool go;
+    int rc = hold_gate(h, id, &go, err);
+    if (rc || !go)
+        return rc;
     /* after what the farm queued for the store (the job's CRASHED, say) */
-    int rc = farm_sync(f, STOREQ_SYNC_MS, err);
+    rc = farm_sync(f, STOREQ_SYNC_MS, err);
     if (rc == SF_OK)
         rc = store_job_attach(f->s, h->name, h->token, id, fence, err);
     if (rc == SF_OK)
@@ -716,12 +728,10 @@ farm_host_hold_ask(void *ud, int64_t id, const char *printer, bool *posted,
     struct farm *f = ud;
     struct farm_host *h = f->host;
     *posted = false;
-    if (!h)
-        return SF_OK;
-    if (!h->joined)
-        return sf_err_set(err, SF_EAGAIN, "host %s has no lease yet", h->name);
-    if (id <= 0)
-        return SF_OK;
+    bool go;
+    int rc = hold_gate(h, id, &go, err);
+    if (rc || !go)
+        return rc;
     struct hold_ask *a = mem_calloc(1, sizeof(*a));
     if (!a)
         return sf_err_set(err, SF_ENOMEM, "host %s: hold job %lld: out of memory", h->name,
