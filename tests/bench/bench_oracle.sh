@@ -28,6 +28,12 @@
 #            figures (least model grams among those whose model seconds are
 #            within 2 % of given), judged by PrusaSlicer
 #   mod_t    our model's fastest, judged by PrusaSlicer
+#   mod_v    (totals only) what the search's own rule would take among these
+#            candidates unreshaped: no more model grams nor seconds than given,
+#            then the least seconds + 60 s a gram (printtime.h's gram_s)
+#   srch_v   (totals only) the search's result or mod_v, whichever the
+#            model values less: a search that also weighed these candidates
+#   ps_gx    (totals only) PrusaSlicer's least grams, however slow
 # and "agree" flags: our pick is PrusaSlicer's, or PrusaSlicer puts them
 # within its noise (2 % + 0.05 g of grams and 2 % of time for _g, 2 % of
 # time for _t).  Each set ends with totals per choice (grams, hours, %

@@ -47,7 +47,17 @@ def fastest(c, ti, gi):
     return min(ok, key=lambda t: (c[t][ti], c[t][gi])) if ok else None
 
 
-choices = ("given", "search", "ps_g", "ps_t", "mod_g", "mod_t")
+choices = ("given", "search", "ps_g", "ps_t", "mod_g", "mod_t", "mod_v", "srch_v", "ps_gx")
+GRAM_S = 60  # printtime_policy_default: a gram of support is worth 60 print seconds
+
+
+def best_value(c):
+    """The search's own rule without reshaping (dirsearch_pick): among the
+    candidates that need no more model grams and no more model seconds than
+    given, the least seconds + GRAM_S * grams."""
+    g0, s0 = c["+z"][2], c["+z"][3]
+    ok = [t for t in c if c[t][2] <= g0 and c[t][3] <= s0]
+    return min(ok, key=lambda t: c[t][3] + GRAM_S * c[t][2])
 by_set, mis = {}, []
 print("\n%-14s | %-16s | %-16s | %-19s | %-19s | %-19s | %-19s" %
       ("part", "given g/h", "search g/h", "ps_g dir g/h", "ps_t dir g/h", "mod_g dir g/h ok", "mod_t dir g/h ok"))
@@ -60,12 +70,19 @@ for key in order:
         print("%-14s | no PrusaSlicer row as given" % p)
         continue
     g0, t0 = c["+z"][0], c["+z"][1]
-    pick = {"given": "+z", "ps_g": best_g(c, 0, 1, (1 + SLOW) * t0), "ps_t": fastest(c, 1, 0)}
+    pick = {"given": "+z", "ps_g": best_g(c, 0, 1, (1 + SLOW) * t0), "ps_t": fastest(c, 1, 0),
+            "ps_gx": best_g(c, 0, 1, float("inf"))}
     if "search" in all_c and all_c["search"][0] is not None and all_c["search"][1] is not None:
         pick["search"] = "search"
     if all(v[2] is not None and v[3] is not None for v in c.values()):
         pick["mod_g"] = best_g(c, 2, 3, (1 + SLOW) * c["+z"][3])
         pick["mod_t"] = fastest(c, 3, 2)
+        pick["mod_v"] = best_value(c)
+        # the search with these candidates among its results: the lesser value by the model
+        sr = all_c.get("search")
+        if pick.get("search") and sr[2] is not None and sr[3] is not None:
+            v = c[pick["mod_v"]]
+            pick["srch_v"] = "search" if sr[3] + GRAM_S * sr[2] <= v[3] + GRAM_S * v[2] else pick["mod_v"]
     ok_g = ok_t = None
     if pick.get("mod_g"):
         a, b = c[pick["mod_g"]], c[pick["ps_g"]]
@@ -84,6 +101,9 @@ for key in order:
             continue
         v = all_c[pick[ch]]
         row[ch] = [row[ch][0] + 1, row[ch][1] + v[0], row[ch][2] + v[1], row[ch][3] + g0, row[ch][4] + t0]
+        # worse than given by PrusaSlicer: more grams beyond its noise, or over 2 % slower
+        if v[0] > g0 * (1 + NOISE_REL) + NOISE_G or v[1] > (1 + SLOW) * t0:
+            row.setdefault("worse_" + ch, []).append(p)
     row["mis_g"] += ok_g is False
     row["mis_t"] += ok_t is False
 
@@ -116,12 +136,13 @@ for s, row in by_set.items():
     print("\n== set %s: totals over %d parts by PrusaSlicer, each choice against given over the parts it has "
           "figures on%s" % (s, row["n"], "".join("; no %s: %s" % (ch, " ".join(ps) if len(ps) <= 4 else "%d parts" % len(ps))
                                                  for ch, ps in miss.items())))
-    print("  %-7s %5s %9s %8s %9s %8s" % ("choice", "parts", "grams", "%", "hours", "%"))
+    print("  %-7s %5s %9s %8s %9s %8s  %s" % ("choice", "parts", "grams", "%", "hours", "%", "worse than given"))
     for ch in choices:
         n, g, t, g0, t0 = row[ch]
         if n:
-            print("  %-7s %5d %9.2f %+8.1f %9.2f %+8.1f" %
-                  (ch, n, g, 100 * (g / g0 - 1) if g0 else 0, t / 3600, 100 * (t / t0 - 1) if t0 else 0))
+            print("  %-7s %5d %9.2f %+8.1f %9.2f %+8.1f  %s" %
+                  (ch, n, g, 100 * (g / g0 - 1) if g0 else 0, t / 3600, 100 * (t / t0 - 1) if t0 else 0,
+                   " ".join(row.get("worse_" + ch, []))))
     print("  the oracle by grams keeps the part as given on %d of %d; our model mis-ranks %d by grams, %d by time" %
           (row["unchanged"], row["n"], row["mis_g"], row["mis_t"]))
 if mis:
