@@ -8,8 +8,11 @@
  * DIRS has one "i ux uy uz" a line (tests/bench/peer_dirs.sh writes it).
  * Prints one line a direction: i, PrusaSlicer-model grams, CuraEngine-model
  * grams, ray-cast volume mm3 at 45 and at 40 degrees (orient's scoring
- * margin), model shadow mm3, then the median milliseconds of one model
- * evaluation (cast included) and of one measure_support on a "# " line.
+ * margin), model shadow mm3, then the direction search's own objective
+ * (dirsearch.c's input_cost at 45 degrees): the steering model's grams
+ * (supmodel_params_steer) and the estimated print seconds, part and support
+ * (printtime.h); then the median milliseconds of one model evaluation
+ * (cast included) and of one measure_support on a "# " line.
  * SUPMODEL_BRIDGES=0 turns the PrusaSlicer model's bridge rule off.
  */
 #include <stdio.h>
@@ -18,6 +21,7 @@
 #include <time.h>
 
 #include "../../src/geom/measure.h"
+#include "../../src/geom/printtime.h"
 #include "../../src/geom/supmodel.h"
 
 #define DIRS_MAX 4096
@@ -71,8 +75,11 @@ main(int argc, char **argv)
         dirs[n++] = v3(x, y, z);
     }
     fclose(f);
-    struct supmodel_params ps, ce;
+    struct supmodel_params ps, ce, steer;
     supmodel_params_default(&ps, SUPMODEL_PRUSA);
+    supmodel_params_steer(&steer, 45);
+    struct printtime_params pt;
+    printtime_params_default(&pt);
     supmodel_params_default(&ce, SUPMODEL_CURA);
     if (argc > 3)
         ps.pitch_mm = ce.pitch_mm = strtod(argv[3], NULL);
@@ -105,8 +112,14 @@ main(int argc, char **argv)
         double t3 = now_ms();
         t_model[k] = t1 - t0;
         t_ray[k] = t3 - t2;
-        printf("%d %.3f %.3f %.1f %.1f %.1f\n", ids[k], a.grams, b.grams, sm[0].volume_mm3,
-               sm[1].volume_mm3, a.shadow_mm3);
+        struct supmodel_result st;
+        struct printtime_result pr;
+        if (supmodel_eval(rc, dirs[k], &steer, &st, &err) ||
+            printtime_eval(&m, dirs[k], &pt, &pr, &err))
+            goto fail;
+        printf("%d %.3f %.3f %.1f %.1f %.1f %.3f %.1f\n", ids[k], a.grams, b.grams,
+               sm[0].volume_mm3, sm[1].volume_mm3, a.shadow_mm3, st.grams,
+               printtime_total_s(&pt, &pr, st.time_s));
     }
     qsort(t_model, (size_t)n, sizeof(double), cmp_d);
     qsort(t_ray, (size_t)n, sizeof(double), cmp_d);
