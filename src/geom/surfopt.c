@@ -637,9 +637,11 @@ geometry_round(struct mesh *cur, const struct mesh *ref, struct selfx_ref *sxr, 
         if (freeze && folds == 0 && dev.mndr > p->max_mndr && dev.andr <= p->max_andr)
             far = mark_far(cur, ref, p->max_mndr * diag, rb.fold);
         if ((folds > 0 || far > 0) && freeze) {
+            double factor_s = res->factor_s;
             if ((rc = freeze_step(cur, ref, &s, &rb, freeze, &n_freezes, beta, anchor, p, res,
                                   err)) < 0)
                 goto out;
+            t0 += res->factor_s - factor_s; /* a hold's refactor: in factor_s only */
             if (rc > 0) {
                 pc.since_best = 0;
                 continue;
