@@ -26,7 +26,20 @@
 #include <string.h>
 
 #include "../base/mem.h"
-#include "selfx_int.h"
+
+struct edge_ctx {
+    struct RTCIntersectContext ctx; /* first: Embree hands the filter this pointer */
+    const struct mesh *m;
+    uint32_t a, b; /* the edge's vertices */
+    /* optional: a pierced triangle is judged here (true: a crossing); the
+       search goes on along the edge past every hit, so the judge sees each
+       triangle the edge pierces, whatever order the BVH finds them in */
+    bool (*judge)(void *ud, uint32_t a, uint32_t b, uint32_t tri);
+    void *ud;
+    bool crossed;         /* the judge said yes on this edge */
+    const uint32_t *prim; /* optional: the scene's triangle i is the mesh's prim[i] */
+    const uint8_t *skip;  /* optional: per vertex, cast no edge from or to it */
+};
 
 static void
 skip_touching(const struct RTCFilterFunctionNArguments *args)
@@ -56,6 +69,16 @@ skip_touching(const struct RTCFilterFunctionNArguments *args)
     }
 }
 
+/* An Embree scene of one mesh's triangles, kept to be refitted when the
+   vertices move (the same connectivity: a deformation's iterates). */
+struct scene {
+    RTCDevice dev;
+    RTCScene s;
+    RTCGeometry g;
+    float *vb;
+    uint32_t n_verts;
+};
+
 static void
 scene_release(struct scene *sc)
 {
@@ -79,17 +102,14 @@ scene_load(struct scene *sc, const struct mesh *m)
 }
 
 /* Build the scene of m's triangles (with prim, only its n_prim: the
-   scene's triangle i is m's prim[i]) on dev (retained), or on a device of
-   its own when dev is NULL (a device costs more to make than a small
-   scene); refit says it will be refitted (RTC_BUILD_QUALITY_REFIT). */
+   scene's triangle i is m's prim[i]); refit says it will be refitted
+   (RTC_BUILD_QUALITY_REFIT). */
 static int
 scene_init_some(struct scene *sc, const struct mesh *m, const uint32_t *prim, uint32_t n_prim,
-                bool refit, RTCDevice dev, struct sf_err *err)
+                bool refit, struct sf_err *err)
 {
     memset(sc, 0, sizeof(*sc));
-    if (dev)
-        rtcRetainDevice(dev);
-    sc->dev = dev ? dev : rtcNewDevice("threads=1");
+    sc->dev = rtcNewDevice("threads=1");
     sc->s = sc->dev ? rtcNewScene(sc->dev) : NULL;
     sc->g = sc->dev ? rtcNewGeometry(sc->dev, RTC_GEOMETRY_TYPE_TRIANGLE) : NULL;
     sc->vb = sc->g ? rtcSetNewGeometryBuffer(sc->g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
@@ -123,7 +143,7 @@ scene_init_some(struct scene *sc, const struct mesh *m, const uint32_t *prim, ui
 static int
 scene_init(struct scene *sc, const struct mesh *m, bool refit, struct sf_err *err)
 {
-    return scene_init_some(sc, m, NULL, 0, refit, NULL, err);
+    return scene_init_some(sc, m, NULL, 0, refit, err);
 }
 
 /* Move the scene's vertices to m's (same connectivity) and refit its BVH. */
@@ -134,35 +154,6 @@ scene_refit(struct scene *sc, const struct mesh *m)
     rtcUpdateGeometryBuffer(sc->g, RTC_BUFFER_TYPE_VERTEX, 0);
     rtcCommitGeometry(sc->g);
     rtcCommitScene(sc->s);
-}
-
-/* Cast edge ab of ec->m through sc (ec->ctx initialised): 1 when it
-   pierces a triangle not touching it (with a judge: that the judge calls a
-   crossing), else 0. */
-static int
-cast_one(const struct scene *sc, struct edge_ctx *ec, uint32_t a, uint32_t b)
-{
-    const struct mesh *m = ec->m;
-    struct vec3 pa = m->v[a], d = v3_sub(m->v[b], pa);
-    double len = v3_len(d);
-    if (!(len > 0))
-        return 0;
-    ec->a = a;
-    ec->b = b;
-    ec->crossed = false;
-    struct RTCRay ray = { 0 };
-    ray.org_x = (float)pa.x;
-    ray.org_y = (float)pa.y;
-    ray.org_z = (float)pa.z;
-    ray.dir_x = (float)(d.x / len);
-    ray.dir_y = (float)(d.y / len);
-    ray.dir_z = (float)(d.z / len);
-    ray.tnear = (float)(1e-5 * len);
-    ray.tfar = (float)(len * (1 - 1e-5));
-    ray.mask = 0xffffffffu;
-    rtcOccluded1(sc->s, &ec->ctx, &ray);
-    /* Embree marks an occluded ray with tfar = -inf */
-    return ec->judge ? ec->crossed : ray.tfar < 0;
 }
 
 /* Cast every edge of ec->m (whose positions sc holds; but those with an
@@ -182,7 +173,26 @@ cast_some(const struct scene *sc, const struct edge_ctx *ec0)
                 continue; /* each edge once (closed meshes list it both ways) */
             if (ec.skip && (ec.skip[a] || ec.skip[b]))
                 continue;
-            count += cast_one(sc, &ec, a, b);
+            struct vec3 pa = m->v[a], d = v3_sub(m->v[b], pa);
+            double len = v3_len(d);
+            if (!(len > 0))
+                continue;
+            ec.a = a;
+            ec.b = b;
+            ec.crossed = false;
+            struct RTCRay ray = { 0 };
+            ray.org_x = (float)pa.x;
+            ray.org_y = (float)pa.y;
+            ray.org_z = (float)pa.z;
+            ray.dir_x = (float)(d.x / len);
+            ray.dir_y = (float)(d.y / len);
+            ray.dir_z = (float)(d.z / len);
+            ray.tnear = (float)(1e-5 * len);
+            ray.tfar = (float)(len * (1 - 1e-5));
+            ray.mask = 0xffffffffu;
+            rtcOccluded1(sc->s, &ec.ctx, &ray);
+            /* Embree marks an occluded ray with tfar = -inf */
+            count += ec.judge ? ec.crossed : ray.tfar < 0;
         }
     }
     return count;
@@ -267,6 +277,29 @@ seg_tri(struct vec3 p, struct vec3 q, struct vec3 a, struct vec3 b, struct vec3 
     return fmin(d, seg_seg(p, q, c, a));
 }
 
+struct selfx_ref {
+    const struct mesh *ref;
+    double tol;
+    uint32_t *comp;       /* per vertex: its connected shell (a representative vertex) */
+    uint8_t *near;        /* per vertex: within two rings of a crossing the input has */
+    uint32_t (*pairs)[2]; /* shells that cross each other in the input */
+    size_t n_pairs, cap_pairs;
+    int n_input; /* edges of ref crossing it (selfx_count) */
+    bool oom;
+    /* the triangles with no corner near: a crossing needs one of them, and
+       an edge with no end near (apart_in_ref); refitted to each mesh
+       counted (none: sc is empty, nothing can be new) */
+    struct scene sc;
+    uint32_t *prim; /* the scene's triangle i is ref's prim[i] */
+    uint32_t n_prim;
+};
+
+/* One check of a deformed mesh against a prepared reference. */
+struct new_ctx {
+    const struct selfx_ref *sr;
+    uint8_t *mark; /* optional: vertices of new crossings are set to 1 */
+};
+
 static uint32_t
 find(uint32_t *up, uint32_t v)
 {
@@ -337,7 +370,6 @@ selfx_ref_free(struct selfx_ref *sr)
 {
     if (!sr)
         return;
-    selfx_moved_free(sr->inc);
     scene_release(&sr->sc);
     free(sr->prim);
     free(sr->comp);
@@ -406,7 +438,7 @@ selfx_ref_new(const struct mesh *ref, double tol, struct sf_err *err)
         if (!nc->near[t[0]] && !nc->near[t[1]] && !nc->near[t[2]])
             nc->prim[nc->n_prim++] = f;
     }
-    if (nc->n_prim && scene_init_some(&nc->sc, ref, nc->prim, nc->n_prim, true, NULL, err) < 0)
+    if (nc->n_prim && scene_init_some(&nc->sc, ref, nc->prim, nc->n_prim, true, err) < 0)
         goto fail;
     return nc;
 fail:
@@ -446,7 +478,12 @@ selfx_ref_count(struct selfx_ref *sr, const struct mesh *m, uint8_t *mark, struc
         return 0;
     if (!sr->n_prim)
         return 0;
-    return selfx_moved_count(sr, m, mark, err);
+    struct new_ctx ctx = { .sr = sr, .mark = mark };
+    scene_refit(&sr->sc, m);
+    struct edge_ctx ec = {
+        .m = m, .judge = apart_in_ref, .ud = &ctx, .prim = sr->prim, .skip = sr->near
+    };
+    return cast_some(&sr->sc, &ec);
 }
 
 int
@@ -484,43 +521,4 @@ selfx_count_new(const struct mesh *ref, const struct mesh *m, double tol, struct
     int rc = selfx_ref_count(sr, m, NULL, err);
     selfx_ref_free(sr);
     return rc;
-}
-
-/* ---- for selfx_moved.c (selfx_int.h) ---- */
-
-int
-selfx_scene_init(struct scene *sc, const struct mesh *m, const uint32_t *prim, uint32_t n_prim,
-                 bool refit, RTCDevice dev, struct sf_err *err)
-{
-    return scene_init_some(sc, m, prim, n_prim, refit, dev, err);
-}
-
-void
-selfx_scene_release(struct scene *sc)
-{
-    scene_release(sc);
-}
-
-void
-selfx_scene_refit(struct scene *sc, const struct mesh *m)
-{
-    scene_refit(sc, m);
-}
-
-int
-selfx_cast_one(const struct scene *sc, struct edge_ctx *ec, uint32_t a, uint32_t b)
-{
-    return cast_one(sc, ec, a, b);
-}
-
-double
-selfx_seg_tri(struct vec3 p, struct vec3 q, struct vec3 a, struct vec3 b, struct vec3 c)
-{
-    return seg_tri(p, q, a, b, c);
-}
-
-bool
-selfx_apart_in_ref(void *ud, uint32_t a, uint32_t b, uint32_t tri)
-{
-    return apart_in_ref(ud, a, b, tri);
 }

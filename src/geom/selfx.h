@@ -54,9 +54,7 @@ void selfx_ref_free(struct selfx_ref *sr);
 /*
  * selfx_ref_count casts only the edges with no end near the input's
  * crossings, through a scene of only the triangles with no corner there
- * (a crossing there is not new: it could only be judged no), and of those
- * only the pairs that moved near each other since the last mesh it cast in
- * full (selfx_moved.c; the others keep that mesh's verdict).  Embree's
+ * (a crossing there is not new: it could only be judged no).  Embree's
  * verdict on an edge and a triangle depends on the two alone, so this is
  * the count, and the marks, of every edge through every triangle, which
  * selfx_ref_count_all still does (for the tests that hold the two equal).
