@@ -573,6 +573,86 @@ T_CASE(selfx_ref_finds_what_every_edge_finds_on_randomly_moved_parts)
     mesh_release(&parts[1]);
 }
 
+/* A random step of up to amp mm on each axis. */
+static struct vec3
+random_step(uint64_t *seed, double amp)
+{
+    double d[3];
+    for (int k = 0; k < 3; k++) {
+        *seed = *seed * 6364136223846793005u + 1442695040888963407u;
+        d[k] = amp * ((double)(*seed >> 11) / 9007199254740992.0 - 0.5);
+    }
+    return v3(d[0], d[1], d[2]);
+}
+
+T_CASE(selfx_ref_counts_successive_moves_as_every_edge_finds)
+{
+    /* a deformation's checks, each iterate moved on from the last: every
+       vertex by a small random step (1 to 10 % of an edge), or one or three
+       vertices pushed two edges through their neighbours, or a step back to
+       an earlier shape, or the same shape again.  From no crossing to
+       many, selfx_ref_count's counts and marks are every edge's through
+       every triangle (the same parts as above: a refined torus, and two
+       overlapping boxes beside two apart); a check that reuses what it
+       cast for earlier shapes must hold this */
+    struct mesh parts[2], b, cur, saved;
+    struct sf_err err;
+    mesh_init(&parts[0]);
+    mesh_init(&parts[1]);
+    mesh_init(&b);
+    T_OK(shape_torus(&parts[0], 20, 6, 48, 24, &err), &err);
+    T_TRUE(mesh_refine(&parts[0], 6000, 0, 1u << 16, &err) >= 0);
+    uint32_t third, fourth;
+    T_OK(four_boxes(&parts[1], &b, &third, &fourth, &err), &err);
+    T_TRUE(mesh_refine(&parts[1], 6000, 0, 1u << 16, &err) >= 0);
+    uint64_t seed = 3636;
+    for (int p = 0; p < 2; p++) {
+        const struct mesh *m = &parts[p];
+        double edge = sqrt(4 * mesh_area(m) / (sqrt(3) * m->n_tris)); /* a mean edge */
+        struct selfx_ref *sr = selfx_ref_new(m, 1e-6 * mesh_diag(m), &err);
+        T_TRUE(sr != NULL);
+        uint8_t *mark = malloc(m->n_verts), *all = malloc(m->n_verts);
+        T_TRUE(mark && all);
+        mesh_init(&cur);
+        mesh_init(&saved);
+        T_OK(mesh_copy(&cur, m, &err), &err);
+        T_OK(mesh_copy(&saved, m, &err), &err);
+        int total = 0, crossed = 0;
+        for (int step = 0; step < 60; step++) {
+            int kind = step % 8;
+            if (kind == 7) {
+                /* the same shape again */
+            } else if (kind == 6 || kind == 3) {
+                for (int k = 0; k < (step % 16 == 6 ? 3 : 1); k++) {
+                    seed = seed * 6364136223846793005u + 1442695040888963407u;
+                    uint32_t v = (uint32_t)((seed >> 33) % cur.n_verts);
+                    cur.v[v] = v3_add(cur.v[v], random_step(&seed, 4 * edge));
+                }
+            } else if (kind == 5 && step % 16 == 13) {
+                memcpy(cur.v, saved.v, cur.n_verts * sizeof(*cur.v)); /* back */
+            } else {
+                if (kind == 0)
+                    memcpy(saved.v, cur.v, cur.n_verts * sizeof(*cur.v));
+                double amp = edge * (step % 3 == 0 ? 0.02 : step % 3 == 1 ? 0.08 : 0.2);
+                for (uint32_t v = 0; v < cur.n_verts; v++)
+                    cur.v[v] = v3_add(cur.v[v], random_step(&seed, amp));
+            }
+            int before = total;
+            same_as_full_check(sr, &cur, mark, all, &total);
+            crossed += total > before;
+        }
+        T_TRUE(crossed >= 20); /* most checks saw crossings */
+        mesh_release(&cur);
+        mesh_release(&saved);
+        free(mark);
+        free(all);
+        selfx_ref_free(sr);
+    }
+    mesh_release(&b);
+    mesh_release(&parts[0]);
+    mesh_release(&parts[1]);
+}
+
 T_CASE(selfx_ref_knows_the_input_count_and_reads_a_moved_reference)
 {
     /* two overlapping boxes (the input's crossings) and two apart */
