@@ -621,10 +621,10 @@ T_CASE(host_stopping_leaves_no_command_running)
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
     char dir[512], dir_b[600], url[1024], text[64];
-    snprintf(dir_b, sizeof(dir_b), "%s-b", dir);
     /* b's last process owned x and died; a asked it for a pause meanwhile */
     struct store *a = host_a_open("stopcmd", dir, sizeof(dir), url, sizeof(url), &err), *pb = NULL;
     T_TRUE(a != NULL);
+    snprintf(dir_b, sizeof(dir_b), "%s-b", dir);
     T_TRUE((pb = store_open_host(dir_b, url, NULL, &err)) != NULL);
     int64_t ta, tb;
     const char *xs[] = { "x" };
