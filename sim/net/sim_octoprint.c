@@ -129,17 +129,25 @@ h_connection(struct sim_http_req *r, void *ud)
                   "VIRTUAL", "baudratePreference", 250000, "printerProfilePreference", "_default"));
 }
 
+/* The request's JSON body (json_decref), or NULL after a 400 that says what is wrong with it. */
+static json_t *
+body_json(struct sim_http_req *r)
+{
+    struct sf_err err;
+    json_t *j = sim_http_json(r, &err);
+    if (!j)
+        sim_http_reply_error(r, 400, err.msg);
+    return j;
+}
+
 /* POST /api/connection: "connect" brings a printer out of Error, as reconnecting does. */
 static void
 h_connect(struct sim_http_req *r, void *ud)
 {
     struct octo_sim *o = ud;
-    struct sf_err err;
-    json_t *j = sim_http_json(r, &err);
-    if (!j) {
-        sim_http_reply_error(r, 400, err.msg);
+    json_t *j = body_json(r);
+    if (!j)
         return;
-    }
     const char *cmd = json_string_value(json_object_get(j, "command"));
     if (cmd && strcmp(cmd, "connect") == 0) {
         sim_netprinter_reset(o->np);
@@ -323,12 +331,9 @@ h_file(struct sim_http_req *r, void *ud)
         sim_http_reply_empty(r, 204);
         return;
     }
-    struct sf_err err;
-    json_t *j = sim_http_json(r, &err);
-    if (!j) {
-        sim_http_reply_error(r, 400, err.msg);
+    json_t *j = body_json(r);
+    if (!j)
         return;
-    }
     const char *cmd = json_string_value(json_object_get(j, "command"));
     bool print = json_is_true(json_object_get(j, "print"));
     struct sim_np_status st;
@@ -352,11 +357,9 @@ h_job_command(struct sim_http_req *r, void *ud)
 {
     struct octo_sim *o = ud;
     struct sf_err err;
-    json_t *j = sim_http_json(r, &err);
-    if (!j) {
-        sim_http_reply_error(r, 400, err.msg);
+    json_t *j = body_json(r);
+    if (!j)
         return;
-    }
     const char *cmd = json_string_value(json_object_get(j, "command"));
     const char *action = json_string_value(json_object_get(j, "action"));
     struct sim_np_status st;
@@ -415,11 +418,9 @@ h_command(struct sim_http_req *r, void *ud)
 {
     struct octo_sim *o = ud;
     struct sf_err err;
-    json_t *j = sim_http_json(r, &err);
-    if (!j) {
-        sim_http_reply_error(r, 400, err.msg);
+    json_t *j = body_json(r);
+    if (!j)
         return;
-    }
     struct sim_np_status st;
     sim_netprinter_status(o->np, &st);
     if (st.state == SIM_NP_ERROR) {

@@ -80,14 +80,21 @@ default_name(char *out, size_t n)
             *p = '-';
 }
 
+/* Is printer p one of the n names (a list the last own() left: foreign or mine)? */
+static bool
+listed(char (*names)[STORE_HOST_NAME_MAX], size_t n, const char *p)
+{
+    for (size_t i = 0; i < n; i++)
+        if (strcmp(names[i], p) == 0)
+            return true;
+    return false;
+}
+
 /* Was printer p another live host's at the last own()? */
 static bool
 was_foreign(const struct farm_host *h, const char *p)
 {
-    for (size_t i = 0; i < h->n_foreign; i++)
-        if (strcmp(h->foreign[i], p) == 0)
-            return true;
-    return false;
+    return listed(h->foreign, h->n_foreign, p);
 }
 
 /* One beat on the beat's store thread: what it needs, copied (nothing points into the loop's
@@ -212,10 +219,7 @@ beat_call(struct store *s, void *arg, struct sf_err *err)
 static bool
 is_mine(const struct farm_host *h, const char *p)
 {
-    for (size_t i = 0; i < h->n_mine; i++)
-        if (strcmp(h->mine[i], p) == 0)
-            return true;
-    return false;
+    return listed(h->mine, h->n_mine, p);
 }
 
 /* What b's own found: the printers another live host owns are left to it, and the scheduler

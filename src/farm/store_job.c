@@ -103,6 +103,14 @@ bind_opts(struct sqldb_stmt *st, int first, const struct job_opts *o, int64_t no
     sqldb_bind_int64(st, first + 7, now_ms);
 }
 
+/* 1 if sha is a SHA-256 in hex that names a stored file, 0 if it is not (NULL, malformed or
+   not stored), or a negative status with err set when the store could not tell. */
+static int
+file_stored(struct store *s, const char *sha, struct sf_err *err)
+{
+    return sha && store_sha_valid(sha) ? store_file_known(s, sha, err) : 0;
+}
+
 /* Finish a job add begun by store_write_begin: run the INSERT ... RETURNING id st, log "job-add"
    with detail and commit, or roll back; the new job's id into *id (may be NULL), set before
    the COMMIT, so that it names the job when the COMMIT is in doubt. */
@@ -114,27 +122,23 @@ insert_job(struct store *s, struct sqldb_stmt *st, const char *what, const char 
     int64_t new_id = rc ? 0 : sqldb_column_int64(st, 0);
     sqldb_finalize(st);
     if (rc)
-        goto fail;
+        goto end_tx;
     /* a new job goes last in the queue of its priority (schema 9) */
     if ((rc = store_prepare(
              s, &st,
              "UPDATE jobs SET queue_pos = (SELECT max(queue_pos) FROM jobs) + 1 WHERE id = ?",
              err)))
-        goto fail;
+        goto end_tx;
     sqldb_bind_int64(st, 1, new_id);
     if ((rc = store_step_done(s, st, err, "queue place")) ||
         (rc = store_log_event(s, new_id, NULL, "job-add", detail, err)))
-        goto fail;
+        goto end_tx;
     /* before the COMMIT: one in doubt (SF_EINDOUBT) that the caller reads back as committed
        has added this job, which it must not lose, nor add again */
     if (id)
         *id = new_id;
-    if ((rc = store_commit(s, err)))
-        goto fail;
-    return SF_OK;
-fail:
-    store_rollback(s);
-    return rc;
+end_tx:
+    return store_end_tx(s, rc, err);
 }
 
 int
@@ -144,10 +148,10 @@ store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, i
     int rc = job_opts_validate(o, err);
     if (rc)
         return rc;
-    if (!store_sha_valid(file_sha) || !(rc = store_file_known(s, file_sha, err)))
-        return sf_err_set(err, SF_ENOTFOUND, "store: part file '%.80s' is not stored", file_sha);
-    if (rc < 0)
-        return rc;
+    if ((rc = file_stored(s, file_sha, err)) <= 0)
+        return rc ? rc
+                  : sf_err_set(err, SF_ENOTFOUND, "store: part file '%.80s' is not stored",
+                               file_sha);
     struct sqldb_stmt *st;
     if ((rc = store_write_begin(
              s, &st,
@@ -176,10 +180,9 @@ store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
     int rc = job_opts_validate(&v, err);
     if (rc)
         return rc;
-    if (!store_sha_valid(sha) || !(rc = store_file_known(s, sha, err)))
-        return sf_err_set(err, SF_ENOTFOUND, "store: G-code file '%.80s' is not stored", sha);
-    if (rc < 0)
-        return rc;
+    if ((rc = file_stored(s, sha, err)) <= 0)
+        return rc ? rc
+                  : sf_err_set(err, SF_ENOTFOUND, "store: G-code file '%.80s' is not stored", sha);
     if (!g->prep_key || !g->prep_key[0])
         return sf_err_set(err, SF_EINVAL, "store: G-code job '%s' has no key", o->name);
     struct sqldb_stmt *st;
@@ -310,12 +313,10 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
     snprintf(printer, sizeof(printer), "%s", a->printer && a->printer[0] ? a->printer : j->printer);
     switch (ev) {
     case JOB_EV_PREPARED:
-        if (!a->gcode_sha || !store_sha_valid(a->gcode_sha) ||
-            !(rc = store_file_known(s, a->gcode_sha, err)))
-            return sf_err_set(err, SF_EINVAL, "job %lld: prepared without stored G-code",
-                              (long long)j->id);
-        if (rc < 0)
-            return rc;
+        if ((rc = file_stored(s, a->gcode_sha, err)) <= 0)
+            return rc ? rc
+                      : sf_err_set(err, SF_EINVAL, "job %lld: prepared without stored G-code",
+                                   (long long)j->id);
         rc = SF_OK;
         snprintf(j->gcode_sha, sizeof(j->gcode_sha), "%s", a->gcode_sha);
         for (int i = 0; i < 3; i++)
@@ -324,11 +325,10 @@ apply_event(struct store *s, struct job_row *j, enum job_event ev, const struct 
         j->gcode_lines = a->gcode_lines > 0 ? a->gcode_lines : 0;
         snprintf(j->prep_key, sizeof(j->prep_key), "%s", a->prep_key ? a->prep_key : "");
         if (a->mesh_sha && a->mesh_sha[0]) {
-            if (!store_sha_valid(a->mesh_sha) || !(rc = store_file_known(s, a->mesh_sha, err)))
-                return sf_err_set(err, SF_EINVAL, "job %lld: optimized part is not stored",
-                                  (long long)j->id);
-            if (rc < 0)
-                return rc;
+            if ((rc = file_stored(s, a->mesh_sha, err)) <= 0)
+                return rc ? rc
+                          : sf_err_set(err, SF_EINVAL, "job %lld: optimized part is not stored",
+                                       (long long)j->id);
             rc = SF_OK;
             snprintf(j->mesh_sha, sizeof(j->mesh_sha), "%s", a->mesh_sha);
             j->mesh_angle_deg = a->mesh_angle_deg;
@@ -417,12 +417,10 @@ store_job_event(struct store *s, int64_t id, enum job_event ev, const struct job
         return rc;
     /* one of several hosts: a job a DEFER gives back to the queue is the others' to take
        too, so wake them (a NOTIFY, sent at the commit) */
-    if ((rc = store_job_event_in(s, id, ev, a, to, err)) ||
-        (ev == JOB_EV_DEFER && s->host && sqldb_engine(s->db) == SQLDB_PG &&
-         (rc = store_host_wake(s, err))) ||
-        (rc = store_commit(s, err)))
-        store_rollback(s);
-    return rc;
+    if ((rc = store_job_event_in(s, id, ev, a, to, err)) == SF_OK && ev == JOB_EV_DEFER &&
+        s->host && sqldb_engine(s->db) == SQLDB_PG)
+        rc = store_host_wake(s, err);
+    return store_end_tx(s, rc, err);
 }
 
 /*
@@ -677,13 +675,9 @@ store_job_set_priority(struct store *s, int64_t id, int priority, struct sf_err 
     char detail[64];
     snprintf(detail, sizeof(detail), "priority %d", priority);
     if ((rc = update_job_field(s, id, "UPDATE jobs SET priority = ?, updated_ms = ? WHERE id = ?",
-                               priority, NULL, err)) ||
-        (rc = store_log_event(s, id, NULL, "job-priority", detail, err)) ||
-        (rc = store_commit(s, err))) {
-        store_rollback(s);
-        return rc;
-    }
-    return SF_OK;
+                               priority, NULL, err)) == SF_OK)
+        rc = store_log_event(s, id, NULL, "job-priority", detail, err);
+    return store_end_tx(s, rc, err);
 }
 
 /* A job's place in the scheduler's order. */
@@ -808,30 +802,27 @@ store_job_move(struct store *s, int64_t id, int by, struct sf_err *err)
     if (rc)
         return rc;
     if ((rc = queue_self(s, &me, state, err)))
-        goto fail;
+        goto end_tx;
     if (strcmp(state, "queued") != 0 && strcmp(state, "preparing") != 0 &&
         strcmp(state, "ready") != 0) {
         rc = sf_err_set(err, SF_EAGAIN,
                         "job %lld is %s: only a waiting job (queued, preparing, ready) moves in "
                         "the queue",
                         (long long)id, state);
-        goto fail;
+        goto end_tx;
     }
     if ((rc = queue_neighbour(s, &me, by, &nb, err)) == SF_ENOTFOUND)
         rc = sf_err_set(err, SF_EAGAIN, "job %lld is already %s of the waiting jobs", (long long)id,
                         by < 0 ? "first" : "last");
     if (rc)
-        goto fail;
+        goto end_tx;
     char detail[96];
     snprintf(detail, sizeof(detail), "moved %s job %lld, priority %d", by < 0 ? "above" : "below",
              (long long)nb.id, nb.priority);
-    if ((rc = queue_swap(s, me, nb, by, err)) ||
-        (rc = store_log_event(s, id, NULL, "job-move", detail, err)) || (rc = store_commit(s, err)))
-        goto fail;
-    return SF_OK;
-fail:
-    store_rollback(s);
-    return rc;
+    if ((rc = queue_swap(s, me, nb, by, err)) == SF_OK)
+        rc = store_log_event(s, id, NULL, "job-move", detail, err);
+end_tx:
+    return store_end_tx(s, rc, err);
 }
 
 int

@@ -634,18 +634,28 @@ storeq_stats(struct storeq *q, struct storeq_stats *out)
     pthread_mutex_unlock(&q->mu);
 }
 
-int
-storeq_call(struct storeq *q, storeq_call_fn fn, void *arg, const char *who, storeq_event_fn done,
-            void *ud)
+/* A new OP_CALL request: fn(arg) on the store thread, then done(ud); NULL if out of memory. */
+static struct req *
+call_new(struct storeq *q, storeq_call_fn fn, void *arg, storeq_event_fn done, void *ud)
 {
     struct req *r = req_new(q, OP_CALL);
     if (!r)
-        return SF_ENOMEM;
+        return NULL;
     r->call = fn;
     r->arg = arg;
     r->done = done;
     r->ud = ud;
     r->ev = (enum job_event) - 1;
+    return r;
+}
+
+int
+storeq_call(struct storeq *q, storeq_call_fn fn, void *arg, const char *who, storeq_event_fn done,
+            void *ud)
+{
+    struct req *r = call_new(q, fn, arg, done, ud);
+    if (!r)
+        return SF_ENOMEM;
     if (who)
         snprintf(r->name, sizeof(r->name), "%s", who);
     return post(q, r);
@@ -660,14 +670,9 @@ storeq_barrier(struct storeq *q, storeq_event_fn done, void *ud)
 int
 storeq_read(struct storeq *q, storeq_call_fn fn, void *arg, storeq_event_fn done, void *ud)
 {
-    struct req *r = req_new(q, OP_CALL);
+    struct req *r = call_new(q, fn, arg, done, ud);
     if (!r)
         return SF_ENOMEM;
-    r->call = fn;
-    r->arg = arg;
-    r->done = done;
-    r->ud = ud;
-    r->ev = (enum job_event) - 1;
     r->value = 1; /* wakes no one */
     return post(q, r);
 }

@@ -50,22 +50,14 @@ api "/api/jobs/$j_kill" > "$tmp/job-a.json"
 api "/api/jobs/$j_broker" > "$tmp/job-b.json"
 sleep 0.5
 stop_sims
-/usr/bin/python3 - "$tmp" <<'PY' || fail "x1's log does not hold the jobs' G-code exactly once"
-import glob, json, os, re, sys
+PYTHONPATH="$(dirname "$0")/lib" /usr/bin/python3 -B - "$tmp" <<'PY' || fail "x1's log does not hold the jobs' G-code exactly once"
+import os, sys
+from gcodelog import commands, job_gcode
 tmp = sys.argv[1]
-def commands(path):
-    out = []
-    for line in open(path, errors="replace"):
-        c = re.sub(r"\s+", " ", re.sub(r";.*", "", line).strip())
-        if c and not re.match(r"^(M105|M110( N-?\d+)?|M400)$", c):
-            out.append(c)
-    return out
 want = []
 for name in ("job-a.json", "job-b.json"):
-    if not os.path.exists(os.path.join(tmp, name)):
-        continue
-    d = json.load(open(os.path.join(tmp, name)))
-    want += commands(glob.glob(os.path.join(tmp, "data", "**", d["job"]["gcode_sha"] + "*"), recursive=True)[0])
+    if os.path.exists(os.path.join(tmp, name)):
+        want += job_gcode(tmp, name)[1]
 got = commands(os.path.join(tmp, "x1.log"))
 if got != want:
     i = next((k for k in range(min(len(got), len(want))) if got[k] != want[k]), min(len(got), len(want)))

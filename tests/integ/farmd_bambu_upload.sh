@@ -51,18 +51,11 @@ sleep 0.5
 kill "$sim_x1"; wait "$sim_x1" 2>/dev/null; sims=()
 grep -q "uploads=1 " "$tmp/x1.err" || fail "the printer stored other than one package: $(grep stats: "$tmp/x1.err")"
 grep -q "jobs_started=1 " "$tmp/x1.err" || fail "the printer started other than one job: $(grep stats: "$tmp/x1.err")"
-/usr/bin/python3 - "$tmp" <<'PY' || fail "x1's log is not the job's G-code exactly once"
-import glob, json, os, re, sys
+PYTHONPATH="$(dirname "$0")/lib" /usr/bin/python3 -B - "$tmp" <<'PY' || fail "x1's log is not the job's G-code exactly once"
+import os, sys
+from gcodelog import commands, job_gcode
 tmp = sys.argv[1]
-def commands(path):
-    out = []
-    for line in open(path, errors="replace"):
-        c = re.sub(r"\s+", " ", re.sub(r";.*", "", line).strip())
-        if c and not re.match(r"^(M105|M110( N-?\d+)?|M400)$", c):
-            out.append(c)
-    return out
-d = json.load(open(os.path.join(tmp, "job.json")))
-want = commands(glob.glob(os.path.join(tmp, "data", "**", d["job"]["gcode_sha"] + "*"), recursive=True)[0])
+want = job_gcode(tmp, "job.json")[1]
 got = commands(os.path.join(tmp, "x1.log"))
 if got != want:
     print("log: %d lines, G-code: %d" % (len(got), len(want)))

@@ -26,19 +26,13 @@ BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/pg.sh"
 . "$(dirname "$0")/lib/hosts.sh"
 t0=$(date +%s)
-pg_start > "$tmp/pg.out" 2>&1 || { cat "$tmp/pg.out"; echo "farmd_hosts: SKIP (no PostgreSQL)"; exit 0; }
-trap hosts_cleanup EXIT
-URL=$(pg_url postgres)
-"$D" --init-store "$URL" > /dev/null || fail "--init-store $URL"
-cp -r config/printers config/materials "$tmp/"
+hosts_store
 
 # host_ini NAME NETKIND: $tmp/NAME.ini, host NAME with a Marlin NAME_mk and a network NAME_net
 host_ini() {
   local h=$1 kind=$2
   {
-    printf '[farm]\nlisten: 127.0.0.1:0\ndata_dir: %s/data/%s\napi_keys: %s\nprofiles_dir: %s\n' \
-      "$tmp" "$h" "$RW" "$tmp"
-    printf 'store: %s\nhost: %s\nhost_lease_s: 5\n' "$URL" "$h"
+    host_farm_ini "$h" 5
     printf '[printer %s_mk]\ndriver: marlin\nport: %s\nbaud: 1000000\nauto_eject: true\n' \
       "$h" "$(cat "$tmp/${h}_mk.addr")"
     printf '[printer %s_net]\ndriver: %s\nurl: %s\napi_key: %s-key\nauto_eject: true\n' \

@@ -44,15 +44,8 @@ chaos_cleanup() {
   [ -n "${PX_PID:-}" ] && kill "$PX_PID" 2> /dev/null
   hosts_cleanup
 }
-PG_TCP=1 pg_start fsync=off > "$tmp/pg.out" 2>&1 || {
-  cat "$tmp/pg.out"
-  echo "farmd_hosts_chaos: SKIP (no PostgreSQL)"
-  exit 0
-}
+PG_TCP=1 hosts_store fsync=off
 trap chaos_cleanup EXIT
-URL=$(pg_url postgres)
-"$D" --init-store "$URL" > /dev/null || fail "--init-store $URL"
-cp -r config/printers config/materials "$tmp/"
 note() { echo "   $(($(date +%s) - t0)) s: $*"; }
 
 # host b's way to the database: a proxy to the server's port (commands on its stdin)
@@ -69,9 +62,7 @@ host_ini() {
   local h=$1 p
   lease[$h]=$3
   {
-    printf '[farm]\nlisten: 127.0.0.1:0\ndata_dir: %s/data/%s\napi_keys: %s\nprofiles_dir: %s\n' \
-      "$tmp" "$h" "$RW" "$tmp"
-    printf 'store: %s\nhost: %s\nhost_lease_s: %s\n' "$2" "$h" "$3"
+    host_farm_ini "$h" "$3" "$2"
     for p in mk1 mk2; do
       printf '[printer %s_%s]\ndriver: marlin\nport: %s\nbaud: 1000000\nauto_eject: true\n' \
         "$h" "$p" "$(cat "$tmp/${h}_$p.addr")"

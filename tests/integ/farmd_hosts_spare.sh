@@ -20,17 +20,11 @@ BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/pg.sh"
 . "$(dirname "$0")/lib/hosts.sh"
 t0=$(date +%s)
-pg_start > "$tmp/pg.out" 2>&1 || { cat "$tmp/pg.out"; echo "farmd_hosts_spare: SKIP (no PostgreSQL)"; exit 0; }
-trap hosts_cleanup EXIT
-URL=$(pg_url postgres)
-"$D" --init-store "$URL" > /dev/null || fail "--init-store $URL"
-cp -r config/printers config/materials "$tmp/"
+hosts_store
 
 # host_ini NAME: $tmp/NAME.ini, host NAME (a lease far above the test's stop of rack)
 host_ini() {
-  printf '[farm]\nlisten: 127.0.0.1:0\ndata_dir: %s/data/%s\napi_keys: %s\nprofiles_dir: %s\n' \
-    "$tmp" "$1" "$RW" "$tmp" > "$tmp/$1.ini"
-  printf 'store: %s\nhost: %s\nhost_lease_s: 300\n' "$URL" "$1" >> "$tmp/$1.ini"
+  host_farm_ini "$1" 300 > "$tmp/$1.ini"
 }
 start_sim rack_mk --speed 3000
 host_ini rack

@@ -17,20 +17,15 @@ BUILD=${BUILD:-build/san}
 . "$(dirname "$0")/lib/pg.sh"
 . "$(dirname "$0")/lib/hosts.sh"
 t0=$(date +%s)
-pg_start > "$tmp/pg.out" 2>&1 || { cat "$tmp/pg.out"; echo "farmd_hosts_view: SKIP (no PostgreSQL)"; exit 0; }
+hosts_store
 sse=
 view_cleanup() { [ -n "$sse" ] && kill "$sse" 2> /dev/null; hosts_cleanup; }
 trap view_cleanup EXIT
-URL=$(pg_url postgres)
-"$D" --init-store "$URL" > /dev/null || fail "--init-store $URL"
-cp -r config/printers config/materials "$tmp/"
 
 # host_ini NAME LEASE_S: $tmp/NAME.ini, host NAME with a Marlin NAME_mk
 host_ini() {
   {
-    printf '[farm]\nlisten: 127.0.0.1:0\ndata_dir: %s/data/%s\napi_keys: %s\nprofiles_dir: %s\n' \
-      "$tmp" "$1" "$RW" "$tmp"
-    printf 'store: %s\nhost: %s\nhost_lease_s: %s\n' "$URL" "$1" "$2"
+    host_farm_ini "$1" "$2"
     printf '[printer %s_mk]\ndriver: marlin\nport: %s\nbaud: 1000000\nauto_eject: true\n' \
       "$1" "$(cat "$tmp/${1}_mk.addr")"
   } > "$tmp/$1.ini"

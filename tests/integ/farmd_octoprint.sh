@@ -153,22 +153,12 @@ api "/api/jobs/$j_stop" > "$tmp/job-stop.json"
 api "/api/jobs/$j_kill" > "$tmp/job-kill.json"
 sleep 0.5
 stop_sims
-/usr/bin/python3 - "$tmp" <<'PY' || fail "op's log does not hold the re-attached jobs' G-code exactly once"
-import glob, json, os, re, subprocess, sys
+PYTHONPATH="$(dirname "$0")/lib" /usr/bin/python3 -B - "$tmp" <<'PY' || fail "op's log does not hold the re-attached jobs' G-code exactly once"
+import os, sys
+from gcodelog import commands, job_gcode
 tmp = sys.argv[1]
-def commands(path):
-    out = []
-    for line in open(path, errors="replace"):
-        c = re.sub(r"\s+", " ", re.sub(r";.*", "", line).strip())
-        if c and not re.match(r"^(M105|M110( N-?\d+)?|M400)$", c):
-            out.append(c)
-    return out
-def gcode(name):
-    d = json.load(open(os.path.join(tmp, name)))
-    f = glob.glob(os.path.join(tmp, "data", "**", d["job"]["gcode_sha"] + "*"), recursive=True)
-    return d["job"]["id"], commands(f[0])
 got = commands(os.path.join(tmp, "op.log"))
-(ks, ws), (kk, wk) = gcode("job-stop.json"), gcode("job-kill.json")
+(ks, ws), (kk, wk) = job_gcode(tmp, "job-stop.json"), job_gcode(tmp, "job-kill.json")
 # the two were op's last prints, in this order, each whole and once
 want = ws + wk
 ok = len(got) >= len(want) and got[-len(want):] == want

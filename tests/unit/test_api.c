@@ -406,6 +406,22 @@ get(const char *path, const char *key, struct buf *out)
     return call("GET", path, key, NULL, NULL, NULL, 0, NULL, out);
 }
 
+/* How many jobs GET /api/jobs lists; -1 if it does not answer 200. */
+static int
+n_jobs(void)
+{
+    struct buf b;
+    buf_init(&b, 0);
+    int n = -1;
+    if (get("/api/jobs", KEY_RW, &b) == 200) {
+        json_t *root = json_loads(b.data, 0, NULL);
+        n = (int)json_array_size(json_object_get(root, "jobs"));
+        json_decref(root);
+    }
+    buf_release(&b);
+    return n;
+}
+
 /* Field of the JSON object at "job"/"printer" etc. in a reply, as text. */
 static const char *
 jstr(struct buf *b, const char *outer, const char *name)
@@ -473,10 +489,7 @@ T_CASE(api_submit_get_list_and_reprioritize)
     T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, "plain.3mf", "PK\3\4", 4, NULL, &b), 201);
     T_EQ_STR(jstr(&b, "job", "copies"), "1");
     T_EQ_STR(jstr(&b, "job", "method"), "orient");
-    T_EQ_INT(get("/api/jobs", KEY_RW, &b), 200);
-    json_t *root = json_loads(b.data, 0, NULL);
-    T_EQ_INT(json_array_size(json_object_get(root, "jobs")), 3);
-    json_decref(root);
+    T_EQ_INT(n_jobs(), 3);
     T_EQ_INT(get("/api/jobs/2", KEY_RW, &b), 200);
     T_EQ_STR(jstr(&b, "job", "priority"), "2");
     T_EQ_INT(call("PATCH", "/api/jobs/2", KEY_RW, "{\"priority\": -5}", NULL, NULL, 0, NULL, &b),
@@ -540,8 +553,6 @@ T_CASE(api_move_a_waiting_job_one_place)
     buf_release(&b);
     stop();
 }
-
-static int n_jobs(void);
 
 /* An upload is judged by its content before it is queued, the reason
    naming the file (issue 31: a text file renamed .stl was queued). */
@@ -610,10 +621,7 @@ T_CASE(api_malformed_json_is_400_with_message)
                   "{\"copies\": 1, \"copies\": 2}", &b),
              400);
     /* nothing was added by the refusals */
-    T_EQ_INT(get("/api/jobs", KEY_RW, &b), 200);
-    json_t *root = json_loads(b.data, 0, NULL);
-    T_EQ_INT(json_array_size(json_object_get(root, "jobs")), 1);
-    json_decref(root);
+    T_EQ_INT(n_jobs(), 1);
     buf_release(&b);
     stop();
 }
@@ -714,10 +722,7 @@ T_CASE(api_path_traversal_in_file_names_is_refused)
     T_EQ_INT(call("POST", "/api/jobs", KEY_RW, NULL, long_name, "x", 1, NULL, &b), 400);
     T_TRUE(strstr(jstr(&b, NULL, "error"), "is 199 bytes: at most 127 bytes") != NULL);
     /* no file of theirs landed outside the data dir, and no job was added */
-    T_EQ_INT(get("/api/jobs", KEY_RW, &b), 200);
-    json_t *root = json_loads(b.data, 0, NULL);
-    T_EQ_INT(json_array_size(json_object_get(root, "jobs")), 1);
-    json_decref(root);
+    T_EQ_INT(n_jobs(), 1);
     buf_release(&b);
     stop();
 }
@@ -1217,21 +1222,6 @@ store_files(const char *name)
     n_files_seen = 0;
     nftw(dir, count_one, 16, FTW_PHYS);
     return n_files_seen;
-}
-
-static int
-n_jobs(void)
-{
-    struct buf b;
-    buf_init(&b, 0);
-    int n = -1;
-    if (get("/api/jobs", KEY_RW, &b) == 200) {
-        json_t *root = json_loads(b.data, 0, NULL);
-        n = (int)json_array_size(json_object_get(root, "jobs"));
-        json_decref(root);
-    }
-    buf_release(&b);
-    return n;
 }
 
 static int

@@ -435,6 +435,18 @@ wait_job(int64_t id, enum job_state want)
     return state_of(id) == want;
 }
 
+/* Turn the loop until job id is in state want or failed (or WAIT_LIMIT_MS pass): its state
+   then, so that a case's check shows which state it ended in. */
+static enum job_state
+wait_job_or_failure(int64_t id, enum job_state want)
+{
+    enum job_state st = JOB_QUEUED;
+    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
+         wall_ms() < end && (st = state_of(id)) != want && st != JOB_FAILED;)
+        loop_run_once(fx.l, 10);
+    return st;
+}
+
 /* Turn the loop until printer i is in state want (or WAIT_LIMIT_MS pass). */
 static bool
 wait_printer(size_t i, enum printer_state want)
@@ -2014,11 +2026,7 @@ T_CASE(farm_prepare_waits_out_a_locked_store_instead_of_failing_the_job)
     T_TRUE(other != NULL);
     T_TRUE(h.store.depth > 0); /* the prepare's end waits for the store */
     unlock_store(other);
-    enum job_state st = JOB_QUEUED;
-    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
-         wall_ms() < end && (st = state_of(id)) != JOB_READY && st != JOB_FAILED;)
-        loop_run_once(fx.l, 10);
-    T_EQ_INT(st, JOB_READY);
+    T_EQ_INT(wait_job_or_failure(id, JOB_READY), JOB_READY);
     T_OK(store_check(synced(), &err), &err);
     teardown();
 }
@@ -2051,11 +2059,7 @@ T_CASE(farm_prepare_defers_when_the_database_is_unreachable)
     T_OK(setup("unreach", farm_ini, tdrv_new, unreachable_prepare, &err), &err);
     T_TRUE(wait_printer(0, PRINTER_IDLE));
     int64_t id = add("size 20 20 20", "PLA", 1);
-    enum job_state st = JOB_QUEUED;
-    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
-         wall_ms() < end && (st = state_of(id)) != JOB_PRINTING && st != JOB_FAILED;)
-        loop_run_once(fx.l, 10);
-    T_EQ_INT(st, JOB_PRINTING);
+    T_EQ_INT(wait_job_or_failure(id, JOB_PRINTING), JOB_PRINTING);
     T_EQ_INT(atomic_load(&prepares) - before, 2); /* prepared again, once */
     struct job_row j;
     T_OK(job_get(id, &j, &err), &err);
@@ -2104,11 +2108,7 @@ T_CASE(farm_prepared_is_written_again_after_the_store_gave_up)
     struct sqldb *other = atomic_load(&prep_lock);
     T_TRUE(other != NULL);
     unlock_store(other);
-    enum job_state st = JOB_QUEUED;
-    for (int64_t end = wall_ms() + WAIT_LIMIT_MS;
-         wall_ms() < end && (st = state_of(id)) != JOB_READY && st != JOB_FAILED;)
-        loop_run_once(fx.l, 10);
-    T_EQ_INT(st, JOB_READY);
+    T_EQ_INT(wait_job_or_failure(id, JOB_READY), JOB_READY);
     teardown();
 }
 

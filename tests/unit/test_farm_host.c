@@ -334,16 +334,27 @@ T_CASE(farm_ini_selects_a_shared_store)
 
 #include "../tfarmhost.h"
 
+/* A case's store of several hosts (PostgreSQL): dir, TMP/NAME (host b's farm, host_farm), url,
+   the store's database (t_store_db), and host a's store in dir-a (store_close); NULL with err
+   set if that did not open. */
+static struct store *
+host_a_open(const char *name, char *dir, size_t dir_cap, char *url, size_t url_cap,
+            struct sf_err *err)
+{
+    char dir_a[600];
+    snprintf(dir, dir_cap, "%s/%s", t_tmpdir(), name);
+    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
+    snprintf(url, url_cap, "%s", t_store_db(dir));
+    return store_open_host(dir_a, url, NULL, err);
+}
+
 T_CASE(host_leaves_alone_a_printer_another_live_host_owns)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024], text[64];
-    snprintf(dir, sizeof(dir), "%s/foreign", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    char dir[512], url[1024], text[64];
     /* host a, live, owns printer x; b's config lists an x too, and a y */
-    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    struct store *a = host_a_open("foreign", dir, sizeof(dir), url, sizeof(url), &err);
     T_TRUE(a != NULL);
     int64_t ta, jx, jy;
     T_OK(store_host_join(a, "a", LEASE_MS, &ta, &err), &err);
@@ -440,11 +451,9 @@ T_CASE(host_takes_a_ready_job_again_after_the_database_refused)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024];
-    snprintf(dir, sizeof(dir), "%s/retake", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err); /* the schema, the job */
+    char dir[512], url[1024];
+    struct store *a =
+        host_a_open("retake", dir, sizeof(dir), url, sizeof(url), &err); /* the schema, the job */
     T_TRUE(a != NULL);
     struct sqldb *direct = sqldb_open(url, 0, &err);
     T_TRUE(direct != NULL);
@@ -611,14 +620,11 @@ T_CASE(host_stopping_leaves_no_command_running)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], dir_b[600], url[1024], text[64];
-    snprintf(dir, sizeof(dir), "%s/stopcmd", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(dir_b, sizeof(dir_b), "%s-b", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
+    char dir[512], dir_b[600], url[1024], text[64];
     /* b's last process owned x and died; a asked it for a pause meanwhile */
-    struct store *a = store_open_host(dir_a, url, NULL, &err), *pb = NULL;
+    struct store *a = host_a_open("stopcmd", dir, sizeof(dir), url, sizeof(url), &err), *pb = NULL;
     T_TRUE(a != NULL);
+    snprintf(dir_b, sizeof(dir_b), "%s-b", dir);
     T_TRUE((pb = store_open_host(dir_b, url, NULL, &err)) != NULL);
     int64_t ta, tb;
     const char *xs[] = { "x" };
@@ -787,11 +793,8 @@ T_CASE(host_lets_go_of_a_print_another_host_attached)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024], text[64];
-    snprintf(dir, sizeof(dir), "%s/fenced", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    char dir[512], url[1024], text[64];
+    struct store *a = host_a_open("fenced", dir, sizeof(dir), url, sizeof(url), &err);
     T_TRUE(a != NULL);
     int64_t ta, id, fa;
     T_OK(store_host_join(a, "a", LEASE_MS, &ta, &err), &err);
@@ -860,11 +863,8 @@ reaped_print_on(const char *name, const char *section, const char *printer, char
                 size_t url_cap, struct store **a, int64_t *id, struct hdrv **d)
 {
     struct sf_err err;
-    char dir[512], dir_a[600], text[64];
-    snprintf(dir, sizeof(dir), "%s/%s", t_tmpdir(), name);
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, url_cap, "%s", t_store_db(dir));
-    if (!(*a = store_open_host(dir_a, url, NULL, &err)))
+    char dir[512], text[64];
+    if (!(*a = host_a_open(name, dir, sizeof(dir), url, url_cap, &err)))
         return false;
     host_lease_s = 5;
     if (host_farm(dir, url, "b", section, &err) || add_ready_for(*a, printer, id, &err) ||
@@ -939,11 +939,8 @@ T_CASE(host_reads_a_refused_end_back_off_the_loop)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024], text[64], sql[128];
-    snprintf(dir, sizeof(dir), "%s/endback", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    char dir[512], url[1024], text[64], sql[128];
+    struct store *a = host_a_open("endback", dir, sizeof(dir), url, sizeof(url), &err);
     T_TRUE(a != NULL);
     int64_t ta, id, fa;
     T_OK(store_host_join(a, "a", LEASE_MS, &ta, &err), &err);
@@ -1000,11 +997,8 @@ T_CASE(host_claims_a_job_another_write_held_at_its_claim)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024], text[64];
-    snprintf(dir, sizeof(dir), "%s/heldrow", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    char dir[512], url[1024], text[64];
+    struct store *a = host_a_open("heldrow", dir, sizeof(dir), url, sizeof(url), &err);
     T_TRUE(a != NULL);
     host_prepare = gcode_prepare;
     T_OK(host_farm(dir, url, "b", "[printer p]\ndriver: marlin\nport: pty:/dev/null\n", &err),
@@ -1055,11 +1049,8 @@ T_CASE(host_claims_the_next_job_while_another_hosts_claim_holds_the_first)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024], text[64];
-    snprintf(dir, sizeof(dir), "%s/nextfree", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    char dir[512], url[1024], text[64];
+    struct store *a = host_a_open("nextfree", dir, sizeof(dir), url, sizeof(url), &err);
     T_TRUE(a != NULL);
     int64_t first, second;
     char sha[STORE_SHA_HEX];
@@ -1138,13 +1129,10 @@ static bool
 gated_host(const char *name, char *url, size_t cap, struct store **a, struct sqldb **direct)
 {
     struct sf_err err;
-    char dir[512], dir_a[600];
+    char dir[512];
     int64_t warm;
-    snprintf(dir, sizeof(dir), "%s/%s", t_tmpdir(), name);
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, cap, "%s", t_store_db(dir));
     host_prepare = gcode_prepare;
-    return (*a = store_open_host(dir_a, url, NULL, &err)) != NULL &&
+    return (*a = host_a_open(name, dir, sizeof(dir), url, cap, &err)) != NULL &&
            (*direct = sqldb_open(url, 0, &err)) != NULL && gate_make(*direct) &&
            host_farm(dir, url, "b",
                      "[printer p]\ndriver: marlin\nport: pty:/dev/null\ngcode_models: *\n"
@@ -1486,6 +1474,29 @@ T_CASE(host_records_a_network_print_that_ended_after_it_joined_again)
     store_close(a);
 }
 
+/* Host b's farm (host_farm in dir) with network printer `printer` (auto_eject), printing job
+   *id that a added ready for it; *d, its driver, once that has the job (or the wait for it
+   ran out).  SF_ETIMEDOUT if the job never printed, SF_ENOTFOUND if the printer has no
+   driver, else host_farm's, add_ready_for's or store_host_wake's status; err says which. */
+static int
+net_printing(struct store *a, const char *dir, const char *url, const char *printer, int64_t *id,
+             struct hdrv **d, struct sf_err *err)
+{
+    char section[256];
+    snprintf(section, sizeof(section), NET_PRINTER("%s") "auto_eject: true\n", printer);
+    int rc;
+    if ((rc = host_farm(dir, url, "b", section, err)) < 0 ||
+        (rc = add_ready_for(a, printer, id, err)) < 0 || (rc = store_host_wake(a, err)) < 0)
+        return rc;
+    if (!wait_state(url, *id, "printing"))
+        return sf_err_set(err, SF_ETIMEDOUT, "job %lld never printing", (long long)*id);
+    if (!(*d = hdrv_named(printer)))
+        return sf_err_set(err, SF_ENOTFOUND, "printer %s has no driver", printer);
+    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; !(*d)->starts && clock_mono_ms() < end;)
+        loop_run_once(hx.l, 20); /* the driver has the job */
+    return SF_OK;
+}
+
 /*
  * A network printer whose link dropped while printing comes back still printing its job (now
  * interrupted): the host holds the job (store_job_attach, its new fencing token) on the farm's
@@ -1499,21 +1510,12 @@ T_CASE(host_holds_a_reattached_print_off_the_loop)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024], text[64];
-    snprintf(dir, sizeof(dir), "%s/netgate", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    char dir[512], url[1024], text[64];
+    struct store *a = host_a_open("netgate", dir, sizeof(dir), url, sizeof(url), &err);
     T_TRUE(a != NULL);
     int64_t id;
-    T_OK(host_farm(dir, url, "b", NET_PRINTER("n3") "auto_eject: true\n", &err), &err);
-    T_OK(add_ready_for(a, "n3", &id, &err), &err);
-    T_OK(store_host_wake(a, &err), &err);
-    T_TRUE(wait_state(url, id, "printing"));
-    struct hdrv *d = hdrv_named("n3");
-    T_TRUE(d != NULL);
-    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
-        loop_run_once(hx.l, 20); /* the driver has the job */
+    struct hdrv *d = NULL;
+    T_OK(net_printing(a, dir, url, "n3", &id, &d, &err), &err);
     struct sqldb *direct = sqldb_open(url, 0, &err);
     T_TRUE(direct != NULL && gate_interrupted(direct));
     int64_t rt = store_round_trips(hx.s);
@@ -1555,21 +1557,12 @@ T_CASE(host_reattaches_while_its_store_queue_is_busy)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024];
-    snprintf(dir, sizeof(dir), "%s/netbusy", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    char dir[512], url[1024];
+    struct store *a = host_a_open("netbusy", dir, sizeof(dir), url, sizeof(url), &err);
     T_TRUE(a != NULL);
     int64_t id;
-    T_OK(host_farm(dir, url, "b", NET_PRINTER("n4") "auto_eject: true\n", &err), &err);
-    T_OK(add_ready_for(a, "n4", &id, &err), &err);
-    T_OK(store_host_wake(a, &err), &err);
-    T_TRUE(wait_state(url, id, "printing"));
-    struct hdrv *d = hdrv_named("n4");
-    T_TRUE(d != NULL);
-    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
-        loop_run_once(hx.l, 20); /* the driver has the job */
+    struct hdrv *d = NULL;
+    T_OK(net_printing(a, dir, url, "n4", &id, &d, &err), &err);
     /* the gate: the printer's move from offline to idle waits on the server (30 s at most) */
     struct sqldb *direct = sqldb_open(url, 0, &err);
     T_TRUE(direct != NULL);
@@ -1626,21 +1619,12 @@ T_CASE(host_records_a_reattached_print_that_ended_while_away)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024], text[64];
-    snprintf(dir, sizeof(dir), "%s/netgone", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    char dir[512], url[1024], text[64];
+    struct store *a = host_a_open("netgone", dir, sizeof(dir), url, sizeof(url), &err);
     T_TRUE(a != NULL);
     int64_t id;
-    T_OK(host_farm(dir, url, "b", NET_PRINTER("n5") "auto_eject: true\n", &err), &err);
-    T_OK(add_ready_for(a, "n5", &id, &err), &err);
-    T_OK(store_host_wake(a, &err), &err);
-    T_TRUE(wait_state(url, id, "printing"));
-    struct hdrv *d = hdrv_named("n5");
-    T_TRUE(d != NULL);
-    for (int64_t end = clock_mono_ms() + WAIT_LIMIT_MS; d && !d->starts && clock_mono_ms() < end;)
-        loop_run_once(hx.l, 20); /* the driver has the job */
+    struct hdrv *d = NULL;
+    T_OK(net_printing(a, dir, url, "n5", &id, &d, &err), &err);
     if (d) { /* the link drops; the print ends meanwhile; the driver connects again, idle */
         d->base.status.state = DRV_OFFLINE;
         snprintf(d->base.status.message, sizeof(d->base.status.message), "timed out");
@@ -1675,11 +1659,8 @@ T_CASE(host_does_not_hold_an_away_job_restarted_before_its_hold)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024], text[64], sql[160];
-    snprintf(dir, sizeof(dir), "%s/netrestart", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err);
+    char dir[512], url[1024], text[64], sql[160];
+    struct store *a = host_a_open("netrestart", dir, sizeof(dir), url, sizeof(url), &err);
     T_TRUE(a != NULL);
     int64_t id;
     T_OK(host_farm(dir, url, "b", NET_PRINTER("n6"), &err), &err);
@@ -1823,11 +1804,9 @@ T_CASE(host_with_a_printer_with_no_profile_owns_and_prints)
 {
     T_SKIP_UNLESS(t_store_pg(), "a farm of several hosts runs on PostgreSQL (store_pg.sh)");
     struct sf_err err;
-    char dir[512], dir_a[600], url[1024];
-    snprintf(dir, sizeof(dir), "%s/noprofile", t_tmpdir());
-    snprintf(dir_a, sizeof(dir_a), "%s-a", dir);
-    snprintf(url, sizeof(url), "%s", t_store_db(dir));
-    struct store *a = store_open_host(dir_a, url, NULL, &err); /* the schema, the job */
+    char dir[512], url[1024];
+    struct store *a = host_a_open("noprofile", dir, sizeof(dir), url, sizeof(url),
+                                  &err); /* the schema, the job */
     T_TRUE(a != NULL);
     int64_t id;
     T_OK(add_ready_for(a, "p", &id, &err), &err);

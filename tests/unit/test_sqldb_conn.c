@@ -600,6 +600,23 @@ T_CASE(storeq_start_in_doubt_is_read_back_not_refused)
     proxy_stop(&px);
 }
 
+/* Cut host store s's connection through px and let it through again, then beat host name's
+   lease (token) until a beat succeeds or DEADLINE_MS pass: the last beat's status, or SF_EIO
+   if the proxy did not cut or heal. */
+static int
+beat_after_a_cut(struct proxy *px, struct store *s, const char *name, int64_t token,
+                 struct sf_err *err)
+{
+    if (!proxy_cmd(px, "drop") || !proxy_cmd(px, "heal"))
+        return sf_err_set(err, SF_EIO, "the proxy did not cut and heal the connection");
+    int rc;
+    for (int64_t t0 = clock_mono_ms();
+         (rc = store_host_beat(s, name, token, 600 * 1000, err)) != SF_OK &&
+         clock_mono_ms() - t0 < DEADLINE_MS;)
+        nap_ms(20);
+    return rc;
+}
+
 /* A host's name is its connection's lock: after a cut the reconnect takes it again, so a
    second process cannot join under the name once the lease is gone. */
 T_CASE(sqldb_pg_host_name_lock_is_taken_again_after_a_cut)
@@ -617,14 +634,7 @@ T_CASE(sqldb_pg_host_name_lock_is_taken_again_after_a_cut)
     T_OK(s ? SF_OK : err.code, &err);
     int64_t token, t2;
     T_OK(store_host_join(s, "h1", 600 * 1000, &token, &err), &err);
-    T_TRUE(proxy_cmd(&px, "drop"));
-    T_TRUE(proxy_cmd(&px, "heal"));
-    int rc;
-    for (int64_t t0 = clock_mono_ms();
-         (rc = store_host_beat(s, "h1", token, 600 * 1000, &err)) != SF_OK &&
-         clock_mono_ms() - t0 < DEADLINE_MS;)
-        nap_ms(20);
-    T_OK(rc, &err);
+    T_OK(beat_after_a_cut(&px, s, "h1", token, &err), &err);
     /* the lease gone, only the lock holds the name */
     T_DB_OK(sqldb_exec(direct, "UPDATE hosts SET lease_until_ms = 1"), direct);
     struct store *s2 = store_open_host(dir2, getenv("SQLDB_CONN_URL"), NULL, &err);
@@ -656,14 +666,7 @@ T_CASE(sqldb_pg_host_name_lock_on_a_writer_is_taken_again_after_a_cut)
     T_OK(w ? SF_OK : err.code, &err);
     int64_t token, t2;
     T_OK(store_host_join(w, "h2", 600 * 1000, &token, &err), &err);
-    T_TRUE(proxy_cmd(&px, "drop"));
-    T_TRUE(proxy_cmd(&px, "heal"));
-    int rc;
-    for (int64_t t0 = clock_mono_ms();
-         (rc = store_host_beat(w, "h2", token, 600 * 1000, &err)) != SF_OK &&
-         clock_mono_ms() - t0 < DEADLINE_MS;)
-        nap_ms(20);
-    T_OK(rc, &err);
+    T_OK(beat_after_a_cut(&px, w, "h2", token, &err), &err);
     T_DB_OK(sqldb_exec(direct, "UPDATE hosts SET lease_until_ms = 1 WHERE name = 'h2'"), direct);
     struct store *s2 = store_open_host(dir2, getenv("SQLDB_CONN_URL"), NULL, &err);
     T_OK(s2 ? SF_OK : err.code, &err);
