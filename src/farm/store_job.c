@@ -151,7 +151,7 @@ store_job_add(struct store *s, const struct job_opts *o, const char *file_sha, i
     if ((rc = file_stored(s, file_sha, err)) <= 0)
         return rc ? rc
                   : sf_err_set(err, SF_ENOTFOUND, "store: part file '%.80s' is not stored",
-                               file_sha);
+                               file_sha ? file_sha : "");
     struct sqldb_stmt *st;
     if ((rc = store_write_begin(
              s, &st,
@@ -182,7 +182,8 @@ store_job_add_gcode(struct store *s, const struct job_opts *o, const char *sha,
         return rc;
     if ((rc = file_stored(s, sha, err)) <= 0)
         return rc ? rc
-                  : sf_err_set(err, SF_ENOTFOUND, "store: G-code file '%.80s' is not stored", sha);
+                  : sf_err_set(err, SF_ENOTFOUND, "store: G-code file '%.80s' is not stored",
+                               sha ? sha : "");
     if (!g->prep_key || !g->prep_key[0])
         return sf_err_set(err, SF_EINVAL, "store: G-code job '%s' has no key", o->name);
     struct sqldb_stmt *st;

@@ -28,9 +28,11 @@
 #            figures (least model grams among those whose model seconds are
 #            within 2 % of given), judged by PrusaSlicer
 #   mod_t    our model's fastest, judged by PrusaSlicer
-#   mod_v    (totals only) what the search's own rule would take among these
+#   mod_v    (totals only) an approximation of the search's own rule over these
 #            candidates unreshaped: no more model grams nor seconds than given,
-#            then the least seconds + 60 s a gram (printtime.h's gram_s)
+#            then the least seconds + 60 s a gram (printtime.h's gram_s); it
+#            leaves out dirsearch_pick's tie rule (within 2 % of time the fewer
+#            grams), its reshape-must-pay rule and printtime_worth's margin
 #   srch_v   (totals only) the search's result or mod_v, whichever the
 #            model values less: a search that also weighed these candidates
 #   ps_gx    (totals only) PrusaSlicer's least grams, however slow
@@ -51,6 +53,10 @@ shared=${SLIMFARM_SHARED:-../shared}
 [ -d "$shared/peers" ] || { echo "bench_oracle: $shared/peers absent, skipped"; exit 0; }
 peers="$(cd "$shared" && pwd)/peers/slice-peers.sh"
 py=/usr/bin/python3
+for need in "$build/bin/slimfarm" "$build/bench/bench_supmodel"; do
+  [ -x "$need" ] || { echo "bench_oracle: $need missing (make -j2 all), skipped"; exit 0; }
+done
+command -v prusa-slicer > /dev/null || { echo "bench_oracle: prusa-slicer missing (make bench installs it), skipped"; exit 0; }
 "$py" -c 'import numpy' 2> /dev/null || { echo "bench_oracle: $py has no numpy (apt-get install python3-numpy), skipped"; exit 0; }
 # shellcheck disable=SC2086
 meshes=$("$here/valsets.sh" ${ORACLE_SET:-mech scad})
@@ -115,10 +121,11 @@ while IFS=$'\t' read -r set f; do
   md5=$(md5sum < "$f" | cut -c1-32)
   d="$out/$name-${md5:0:8}"; mkdir -p "$d"
   printf '%s 0 0 1\n%s 0 0 -1\n%s 1 0 0\n%s -1 0 0\n%s 0 1 0\n%s 0 -1 0\n' +z -z +x -x +y -y > "$work/dirs"
-  js="$sdir/$name.json" res="$sdir/$name.stl"
+  # keyed by the part's content too: a changed template or seed makes a new part of the same name
+  js="$sdir/$name-${md5:0:8}.json" res="$sdir/$name-${md5:0:8}.stl"
   if [ "${ORACLE_DIRS:-all}" != axes ]; then
     [ -s "$js" ] || nice "$sf" optimize "$f" -o "$res" --method surface --search-direction 4 --json > "$js" ||
-      { echo "bench_oracle: $name: the search failed" >&2; rm -f "$js"; }
+      { echo "bench_oracle: $name: the search failed" >&2; rm -f "$js" "$res"; }
     # the search's directions, those not within 2 degrees of an axis (nor of each other)
     [ -s "$js" ] && "$py" - "$js" >> "$work/dirs" << 'PYEOF'
 import json, math, sys
@@ -149,7 +156,7 @@ PYEOF
     read -r mg ms < <(awk -v n="$n" '$1 == n { print $7, $8 }' "$work/model")
     echo "$set $name $tag $ux $uy $uz $g $t ${mg:--} ${ms:--}" >> "$rows"
   done < "$work/dirs"
-  if [ -s "$res" ]; then
+  if [ -s "$res" ] && [ -s "$js" ]; then
     read -r g t < <(peer "$res")
     mg=$("$py" -c 'import json,sys; r=json.load(open(sys.argv[1]))["search"]["result"]; print("%.3f %.1f" % (r["model_support_g"], r["print_s"]))' "$js" 2> /dev/null || echo "- -")
     echo "$set $name search 0 0 0 $g $t $mg" >> "$rows"
