@@ -27,6 +27,10 @@
 #include "surfopt.h"
 
 #define DIRSEARCH_K_MAX 5
+/* the axis directions of the input's frame weighed beside them, unreshaped
+   (+x, -x, +y, -y, -z; +z is the input as given, weighed by the keep rule) */
+#define DIRSEARCH_AXES 5
+#define DIRSEARCH_DIRS_MAX (DIRSEARCH_K_MAX + DIRSEARCH_AXES)
 
 struct dirsearch_params {
     int k;                          /* directions reshaped (4; at most DIRSEARCH_K_MAX) */
@@ -60,11 +64,17 @@ struct dirsearch_result {
     double model_input_g;             /* the model's grams for the input as given */
     struct printtime_cost input_cost; /* the input as given: model grams, print seconds */
     struct printtime_cost cost;       /* the result handed back (the input's when kept) */
-    int n_tried;
-    struct vec3 ups[DIRSEARCH_K_MAX];
-    double model_g[DIRSEARCH_K_MAX]; /* each direction's result, by the model */
-    double print_s[DIRSEARCH_K_MAX]; /* and its estimated print seconds */
-    bool shape_changed[DIRSEARCH_K_MAX];
+    int n_tried; /* directions reshaped: [0, n_tried) */
+    /* the axis directions weighed unreshaped, [n_tried, n_tried + n_axes) in
+       the arrays below (issue 36: the orientation search ranks by support
+       alone and left out axis poses as good by value: scad example008 -y,
+       mech shelf +x); those within a few degrees of a reshaped one are left
+       out */
+    int n_axes;
+    struct vec3 ups[DIRSEARCH_DIRS_MAX];
+    double model_g[DIRSEARCH_DIRS_MAX]; /* each direction's result, by the model */
+    double print_s[DIRSEARCH_DIRS_MAX]; /* and its estimated print seconds */
+    bool shape_changed[DIRSEARCH_DIRS_MAX];
     /* each direction's shape step, for the reports: the model's grams of the
        direction before its reshape, why its shape was kept (NULL: changed),
        its iterations and the iterates refused (surfopt_result) */
@@ -73,10 +83,11 @@ struct dirsearch_result {
         const char *unchanged_why;
         int iters;
         uint32_t rejected, folded, halved, frozen;
-    } steps[DIRSEARCH_K_MAX];
+    } steps[DIRSEARCH_DIRS_MAX]; /* an axis's: start_g its grams, iters 0 */
     /* wall seconds: in all, the orientation search, the input's model and
-       time, each direction's shape step and cost, the peers' check */
-    double seconds, orient_s, input_s, shape_s[DIRSEARCH_K_MAX], check_s;
+       time, each direction's shape step and cost, the axes' costs, the
+       peers' check */
+    double seconds, orient_s, input_s, shape_s[DIRSEARCH_K_MAX], axes_s, check_s;
     struct dirsearch_stages stages;
 };
 
