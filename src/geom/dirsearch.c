@@ -248,7 +248,7 @@ struct axes {
     int n;
     struct vec3 up[DIRSEARCH_AXES];
     struct printtime_cost c[DIRSEARCH_AXES];
-    double support_s[DIRSEARCH_AXES];                   /* the model's support seconds */
+    double support_s[DIRSEARCH_AXES]; /* the model's support seconds */
     double seconds[DIRSEARCH_AXES], model_s[DIRSEARCH_AXES], print_s[DIRSEARCH_AXES];
     struct sf_err err[DIRSEARCH_AXES];
 };

@@ -3,7 +3,10 @@
  * search, Jayakody 2025's alternation of orientation and shape): the
  * orientation search's best K distinct directions are each turned up and
  * surface-optimized (surfopt.h, one geometry round, no re-orientation),
- * and the winner is the one of least value in seconds (printtime.h: the
+ * and weighed beside the axis directions of the input's frame turned up
+ * unreshaped (CAD parts come axis-aligned: the orientation search, ranking
+ * by support alone, left out axis poses as good by value), and the winner
+ * is the one of least value in seconds (printtime.h: the
  * estimated print time, part and the support model's support, plus
  * gram_s per gram of support by the model, supmodel.h).  The input is
  * returned unchanged unless printtime_worth says the winner is worth it:
@@ -29,7 +32,7 @@
 #define DIRSEARCH_K_MAX 5
 /* the axis directions of the input's frame weighed beside them, unreshaped
    (+x, -x, +y, -y, -z; +z is the input as given, weighed by the keep rule) */
-#define DIRSEARCH_AXES 5
+#define DIRSEARCH_AXES     5
 #define DIRSEARCH_DIRS_MAX (DIRSEARCH_K_MAX + DIRSEARCH_AXES)
 
 struct dirsearch_params {
@@ -64,7 +67,7 @@ struct dirsearch_result {
     double model_input_g;             /* the model's grams for the input as given */
     struct printtime_cost input_cost; /* the input as given: model grams, print seconds */
     struct printtime_cost cost;       /* the result handed back (the input's when kept) */
-    int n_tried; /* directions reshaped: [0, n_tried) */
+    int n_tried;                      /* directions reshaped: [0, n_tried) */
     /* the axis directions weighed unreshaped, [n_tried, n_tried + n_axes) in
        the arrays below (issue 36: the orientation search ranks by support
        alone and left out axis poses as good by value: scad example008 -y,
