@@ -180,9 +180,10 @@ search_json(const struct dirsearch_result *ds)
         json_pack("{s:f, s:f, s:f, s:f, s:f, s:f, s:f}", "orientation", st->orient_s, "saliency",
                   st->saliency_s, "surface", st->surface_s, "self_intersection", st->selfx_s,
                   "support_model", st->model_s, "print_time", st->print_s, "other", st->other_s);
-    return json_pack("{s:o, s:b, s:{s:f, s:f}, s:{s:f, s:f}, s:{s:f, s:f, s:f, s:o, s:f, s:f, "
+    return json_pack("{s:o, s:i, s:b, s:{s:f, s:f}, s:{s:f, s:f}, s:{s:f, s:f, s:f, s:o, s:f, s:f, "
                      "s:o}}",
-                     "directions", dirs, "kept_input", ds->kept_input, "input", "model_support_g",
+                     "directions", dirs, "axes_left_out_cura", (json_int_t)ds->n_axes_cura,
+                     "kept_input", ds->kept_input, "input", "model_support_g",
                      ds->input_cost.support_g, "print_s", ds->input_cost.print_s, "result",
                      "model_support_g", ds->cost.support_g, "print_s", ds->cost.print_s, "seconds",
                      "total", ds->seconds, "orient", ds->orient_s, "input", ds->input_s, "shape",

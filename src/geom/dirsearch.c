@@ -233,7 +233,11 @@ dirsearch_pick(const struct printtime_policy *pol, const struct printtime_cost *
    the orientation search ranks its K by support alone and left out scad
    example008 -y, 12.0 g / 3.01 h in PrusaSlicer against the search's
    17.9 g / 3.55 h, and mech shelf +x, 0.72 g against 8.75 g).  +z is the
-   input as given, which the keep rule weighs already. */
+   input as given, which the keep rule weighs already.  An axis CuraEngine's
+   rules give more support than the input is left out: the orientation
+   search's ray measure counts every ceiling, as CuraEngine supports
+   bridges, and the axes skip it (mech enclosure turned over: PrusaSlicer
+   3.85 -> 3.84 g, CuraEngine 1.41 -> 30.8 g, its cavity's ceiling). */
 static const struct vec3 axis_dirs[DIRSEARCH_AXES] = {
     { 1, 0, 0 }, { -1, 0, 0 }, { 0, 1, 0 }, { 0, -1, 0 }, { 0, 0, -1 },
 };
@@ -248,9 +252,10 @@ struct axes {
     int n;
     struct vec3 up[DIRSEARCH_AXES];
     struct printtime_cost c[DIRSEARCH_AXES];
-    double support_s[DIRSEARCH_AXES]; /* the model's support seconds */
-    double seconds[DIRSEARCH_AXES], model_s[DIRSEARCH_AXES], print_s[DIRSEARCH_AXES];
-    struct sf_err err[DIRSEARCH_AXES];
+    double support_s[DIRSEARCH_AXES];  /* the model's support seconds */
+    double cura_g[DIRSEARCH_AXES + 1]; /* CuraEngine's rules; [n]: the input's */
+    double seconds[DIRSEARCH_AXES + 1], model_s[DIRSEARCH_AXES + 1], print_s[DIRSEARCH_AXES + 1];
+    struct sf_err err[DIRSEARCH_AXES + 1];
 };
 
 static int
@@ -258,12 +263,23 @@ axis_task(void *ud, uint32_t begin, uint32_t end, int worker)
 {
     struct axes *a = ud;
     (void)worker;
-    struct supmodel_params mp;
+    struct supmodel_params mp, cp;
     supmodel_params_steer(&mp, a->p->sp.angle_deg);
+    supmodel_params_default(&cp, SUPMODEL_CURA);
+    cp.angle_deg = a->p->sp.angle_deg;
     for (uint32_t i = begin; i < end; i++) {
         double t0 = clock_mono_s();
+        struct vec3 up = (int)i < a->n ? a->up[i] : v3(0, 0, 1);
         struct supmodel_result mr;
-        int rc = supmodel_of_mesh(a->m, a->up[i], &mp, &mr, &a->err[i]);
+        int rc = supmodel_of_mesh(a->m, up, &cp, &mr, &a->err[i]);
+        a->cura_g[i] = mr.grams;
+        if (rc < 0 || (int)i == a->n) {
+            a->model_s[i] = a->seconds[i] = clock_mono_s() - t0;
+            if (rc < 0)
+                return rc;
+            continue;
+        }
+        rc = supmodel_of_mesh(a->m, up, &mp, &mr, &a->err[i]);
         double t1 = clock_mono_s();
         if (rc < 0)
             return rc;
@@ -283,8 +299,9 @@ axis_task(void *ud, uint32_t begin, uint32_t end, int worker)
 
 /* Cost the axes not within AXIS_SAME_COS of res's reshaped directions (the
    model's grams and the print-time estimate, as the reshaped results are
-   costed) and list them after those in res (n_axes, ups, model_g, print_s,
-   steps, axes_s, stages). */
+   costed) and list those CuraEngine's rules give no more support than the
+   input after those in res (n_axes, ups, model_g, print_s, steps; the
+   others in n_axes_cura; axes_s, stages); a holds the listed ones. */
 static int
 axes_cost(const struct mesh *m, const struct dirsearch_params *p, struct dirsearch_result *res,
           struct axes *a, struct sf_err *err)
@@ -299,9 +316,9 @@ axes_cost(const struct mesh *m, const struct dirsearch_params *p, struct dirsear
         if (!same)
             a->up[a->n++] = axis_dirs[j];
     }
-    int rc = a->n ? par_for((uint32_t)a->n, 1, 0, axis_task, a) : SF_OK;
+    int rc = a->n ? par_for((uint32_t)a->n + 1, 1, 0, axis_task, a) : SF_OK;
     if (rc < 0) {
-        for (int i = 0; i < a->n; i++) {
+        for (int i = 0; i <= a->n; i++) {
             if (a->err[i].code < 0 && err) {
                 *err = a->err[i];
                 break;
@@ -309,8 +326,22 @@ axes_cost(const struct mesh *m, const struct dirsearch_params *p, struct dirsear
         }
         return rc;
     }
+    for (int i = 0; i <= a->n; i++) {
+        res->axes_s += a->seconds[i];
+        res->stages.model_s += a->model_s[i];
+        res->stages.print_s += a->print_s[i];
+        res->stages.other_s += fmax(0, a->seconds[i] - a->model_s[i] - a->print_s[i]);
+    }
+    int n = 0;
     for (int i = 0; i < a->n; i++) {
-        int k = res->n_tried + i;
+        if (a->cura_g[i] > a->cura_g[a->n]) {
+            res->n_axes_cura++;
+            continue;
+        }
+        a->up[n] = a->up[i];
+        a->c[n] = a->c[i];
+        a->support_s[n] = a->support_s[i];
+        int k = res->n_tried + n++;
         res->ups[k] = a->up[i];
         res->model_g[k] = a->c[i].support_g;
         res->print_s[k] = a->c[i].print_s;
@@ -318,12 +349,8 @@ axes_cost(const struct mesh *m, const struct dirsearch_params *p, struct dirsear
         res->steps[k] = (struct dirsearch_step){ .start_g = a->c[i].support_g,
                                                  .unchanged_why = "an axis direction of the "
                                                                   "input's frame, not reshaped" };
-        res->axes_s += a->seconds[i];
-        res->stages.model_s += a->model_s[i];
-        res->stages.print_s += a->print_s[i];
-        res->stages.other_s += fmax(0, a->seconds[i] - a->model_s[i] - a->print_s[i]);
     }
-    res->n_axes = a->n;
+    res->n_axes = a->n = n;
     return SF_OK;
 }
 

@@ -74,6 +74,7 @@ struct dirsearch_result {
        mech shelf +x); those within a few degrees of a reshaped one are left
        out */
     int n_axes;
+    int n_axes_cura; /* axes left out: CuraEngine's rules give more support than given */
     struct vec3 ups[DIRSEARCH_DIRS_MAX];
     double model_g[DIRSEARCH_DIRS_MAX]; /* each direction's result, by the model */
     double print_s[DIRSEARCH_DIRS_MAX]; /* and its estimated print seconds */
