@@ -301,15 +301,16 @@ axis_task(void *ud, uint32_t begin, uint32_t end, int worker)
    model's grams and the print-time estimate, as the reshaped results are
    costed) and list those CuraEngine's rules give no more support than the
    input after those in res (n_axes, ups, model_g, print_s, steps; the
-   others in n_axes_cura; axes_s, stages); a holds the listed ones. */
+   others in n_axes_cura; axes_s, stages); a holds the listed ones.  A part
+   that is no closed solid (!solid) keeps its up, as its reshaped ones do. */
 static int
-axes_cost(const struct mesh *m, const struct dirsearch_params *p, struct dirsearch_result *res,
-          struct axes *a, struct sf_err *err)
+axes_cost(const struct mesh *m, const struct dirsearch_params *p, bool solid,
+          struct dirsearch_result *res, struct axes *a, struct sf_err *err)
 {
     memset(a, 0, sizeof(*a));
     a->m = m;
     a->p = p;
-    for (int j = 0; j < DIRSEARCH_AXES; j++) {
+    for (int j = 0; solid && j < DIRSEARCH_AXES; j++) {
         bool same = false;
         for (int i = 0; i < res->n_tried; i++)
             same = same || v3_dot(axis_dirs[j], v3_normalize(res->ups[i])) > AXIS_SAME_COS;
@@ -429,7 +430,7 @@ dirsearch_surface(const struct mesh *m, const struct dirsearch_params *p,
         stages_add(&res->stages, sh, i);
     }
     struct axes *ax = mem_alloc(sizeof(*ax));
-    if (!ax || (rc = axes_cost(m, p, res, ax, err)) < 0) {
+    if (!ax || (rc = axes_cost(m, p, !found.not_solid, res, ax, err)) < 0) {
         if (!ax)
             rc = sf_err_set(err, SF_ENOMEM, "direction search: out of memory");
         for (int i = 0; i < res->n_tried; i++)
