@@ -159,8 +159,9 @@ static json_t *
 search_json(const struct dirsearch_result *ds)
 {
     json_t *shape = json_array(), *dirs = json_array();
-    for (int i = 0; i < ds->n_tried; i++) {
-        json_array_append_new(shape, json_real(ds->shape_s[i]));
+    for (int i = 0; i < ds->n_tried + ds->n_axes; i++) {
+        if (i < ds->n_tried)
+            json_array_append_new(shape, json_real(ds->shape_s[i]));
         const struct dirsearch_step *st = &ds->steps[i];
         json_t *d =
             json_pack("{s:[f, f, f], s:f, s:f, s:b, s:f, s:i, s:i, s:i, s:i, s:i}", "up",
@@ -171,6 +172,7 @@ search_json(const struct dirsearch_result *ds)
                       (json_int_t)st->halved, "frozen", (json_int_t)st->frozen);
         if (st->unchanged_why)
             json_object_set_new(d, "unchanged_why", json_string(st->unchanged_why));
+        json_object_set_new(d, "axis", json_boolean(i >= ds->n_tried));
         json_array_append_new(dirs, d);
     }
     const struct dirsearch_stages *st = &ds->stages;
@@ -178,12 +180,14 @@ search_json(const struct dirsearch_result *ds)
         json_pack("{s:f, s:f, s:f, s:f, s:f, s:f, s:f}", "orientation", st->orient_s, "saliency",
                   st->saliency_s, "surface", st->surface_s, "self_intersection", st->selfx_s,
                   "support_model", st->model_s, "print_time", st->print_s, "other", st->other_s);
-    return json_pack("{s:o, s:b, s:{s:f, s:f}, s:{s:f, s:f}, s:{s:f, s:f, s:f, s:o, s:f, s:o}}",
-                     "directions", dirs, "kept_input", ds->kept_input, "input", "model_support_g",
+    return json_pack("{s:o, s:i, s:b, s:{s:f, s:f}, s:{s:f, s:f}, s:{s:f, s:f, s:f, s:o, s:f, s:f, "
+                     "s:o}}",
+                     "directions", dirs, "axes_left_out_cura", (json_int_t)ds->n_axes_cura,
+                     "kept_input", ds->kept_input, "input", "model_support_g",
                      ds->input_cost.support_g, "print_s", ds->input_cost.print_s, "result",
                      "model_support_g", ds->cost.support_g, "print_s", ds->cost.print_s, "seconds",
                      "total", ds->seconds, "orient", ds->orient_s, "input", ds->input_s, "shape",
-                     shape, "check", ds->check_s, "stages", stages);
+                     shape, "axes", ds->axes_s, "check", ds->check_s, "stages", stages);
 }
 
 /* The direction search's lines of the text report. */
@@ -191,9 +195,9 @@ static void
 print_search(const struct dirsearch_result *ds, const struct surfopt_result *r)
 {
     const struct dirsearch_stages *st = &ds->stages;
-    printf("direction search: %d directions reshaped, model grams as given %.2f, best %.2f, "
-           "estimated print time %.0f -> %.0f s%s\n",
-           ds->n_tried, ds->model_input_g, r->model_after_g, ds->input_cost.print_s,
+    printf("direction search: %d directions reshaped, %d axes weighed, model grams as given "
+           "%.2f, best %.2f, estimated print time %.0f -> %.0f s%s\n",
+           ds->n_tried, ds->n_axes, ds->model_input_g, r->model_after_g, ds->input_cost.print_s,
            ds->cost.print_s, ds->kept_input ? " (input kept)" : "");
     printf("  %.2f s; by stage, summed over the directions: orientation %.2f, saliency %.2f, "
            "surface steps %.2f, self-intersection %.2f, support model %.2f, print time %.2f, "

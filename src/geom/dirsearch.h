@@ -3,7 +3,10 @@
  * search, Jayakody 2025's alternation of orientation and shape): the
  * orientation search's best K distinct directions are each turned up and
  * surface-optimized (surfopt.h, one geometry round, no re-orientation),
- * and the winner is the one of least value in seconds (printtime.h: the
+ * and weighed beside the axis directions of the input's frame turned up
+ * unreshaped (CAD parts come axis-aligned: the orientation search, ranking
+ * by support alone, left out axis poses as good by value), and the winner
+ * is the one of least value in seconds (printtime.h: the
  * estimated print time, part and the support model's support, plus
  * gram_s per gram of support by the model, supmodel.h).  The input is
  * returned unchanged unless printtime_worth says the winner is worth it:
@@ -27,6 +30,10 @@
 #include "surfopt.h"
 
 #define DIRSEARCH_K_MAX 5
+/* the axis directions of the input's frame weighed beside them, unreshaped
+   (+x, -x, +y, -y, -z; +z is the input as given, weighed by the keep rule) */
+#define DIRSEARCH_AXES     5
+#define DIRSEARCH_DIRS_MAX (DIRSEARCH_K_MAX + DIRSEARCH_AXES)
 
 struct dirsearch_params {
     int k;                          /* directions reshaped (4; at most DIRSEARCH_K_MAX) */
@@ -60,11 +67,18 @@ struct dirsearch_result {
     double model_input_g;             /* the model's grams for the input as given */
     struct printtime_cost input_cost; /* the input as given: model grams, print seconds */
     struct printtime_cost cost;       /* the result handed back (the input's when kept) */
-    int n_tried;
-    struct vec3 ups[DIRSEARCH_K_MAX];
-    double model_g[DIRSEARCH_K_MAX]; /* each direction's result, by the model */
-    double print_s[DIRSEARCH_K_MAX]; /* and its estimated print seconds */
-    bool shape_changed[DIRSEARCH_K_MAX];
+    int n_tried;                      /* directions reshaped: [0, n_tried) */
+    /* the axis directions weighed unreshaped, [n_tried, n_tried + n_axes) in
+       the arrays below (issue 36: the orientation search ranks by support
+       alone and left out axis poses as good by value: scad example008 -y,
+       mech shelf +x); those within a few degrees of a reshaped one are left
+       out */
+    int n_axes;
+    int n_axes_cura; /* axes left out: CuraEngine's rules give more support than given */
+    struct vec3 ups[DIRSEARCH_DIRS_MAX];
+    double model_g[DIRSEARCH_DIRS_MAX]; /* each direction's result, by the model */
+    double print_s[DIRSEARCH_DIRS_MAX]; /* and its estimated print seconds */
+    bool shape_changed[DIRSEARCH_DIRS_MAX];
     /* each direction's shape step, for the reports: the model's grams of the
        direction before its reshape, why its shape was kept (NULL: changed),
        its iterations and the iterates refused (surfopt_result) */
@@ -73,10 +87,11 @@ struct dirsearch_result {
         const char *unchanged_why;
         int iters;
         uint32_t rejected, folded, halved, frozen;
-    } steps[DIRSEARCH_K_MAX];
+    } steps[DIRSEARCH_DIRS_MAX]; /* an axis's: start_g its grams, iters 0 */
     /* wall seconds: in all, the orientation search, the input's model and
-       time, each direction's shape step and cost, the peers' check */
-    double seconds, orient_s, input_s, shape_s[DIRSEARCH_K_MAX], check_s;
+       time, each direction's shape step and cost, the axes' costs, the
+       peers' check */
+    double seconds, orient_s, input_s, shape_s[DIRSEARCH_K_MAX], axes_s, check_s;
     struct dirsearch_stages stages;
 };
 

@@ -230,6 +230,8 @@ work_free(struct work *w)
 static int
 work_reserve(struct work *w, uint32_t cap)
 {
+    if (cap < 1) /* a first layer no triangle crosses still needs the hash */
+        cap = 1;
     if (cap <= w->cap)
         return SF_OK;
     uint32_t hc = 16;

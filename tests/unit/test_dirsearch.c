@@ -74,6 +74,7 @@ T_CASE(dirsearch_does_not_stand_a_long_bar_up_to_save_a_little_support)
                  st->print_s + st->other_s;
     for (int i = 0; i < r.n_tried; i++)
         parts += r.shape_s[i];
+    parts += r.axes_s;
     T_EQ_DBL(sum, parts, 1e-3 * parts + 1e-4);
     /* each direction's shape step is reported (issue 36: why a part comes
        back unchanged): its start by the model, which its result never
@@ -99,6 +100,66 @@ T_CASE(dirsearch_stands_the_bar_up_when_material_comes_first)
     T_TRUE(r.cost.support_g < 0.05);
     T_TRUE(r.cost.print_s > r.input_cost.print_s);
     T_TRUE(height > 90);
+    dirsearch_result_release(&r);
+}
+
+/* A "T" 100 mm long along y, upright as given: its bar (20 x 4 mm) over a
+   stem 4 mm wide on a foot 8 mm wide and 2 mm tall.  As given the bar's
+   undersides overhang 8 mm a side; lying on its side (+-x) or turned over
+   (-z) less overhangs; on its end (+-y) nothing does, but it prints 100 mm
+   of layers. */
+static int
+tee_bar(struct mesh *m, struct sf_err *err)
+{
+    const double x[] = { -4, 4, 4, 2, 2, 10, 10, -10, -10, -2, -2, -4 };
+    const double z[] = { 0, 0, 2, 2, 8, 8, 12, 12, 8, 8, 2, 2 };
+    return shape_extrude_xz(m, x, z, 12, 100, err);
+}
+
+T_CASE(dirsearch_weighs_the_axes_the_orientation_ranking_leaves_out)
+{
+    /* issue 36 (scad example008 -y, mech shelf +x): the orientation search
+       ranks by support alone and puts the T on its end first; the one
+       direction reshaped (k = 1) prints slower than the T as given, so the
+       search kept the input.  Lying on its side, an axis of its frame, it
+       needs about half the support and prints faster: that is the answer. */
+    struct sf_err err;
+    struct mesh m;
+    mesh_init(&m);
+    T_OK(tee_bar(&m, &err), &err);
+    struct dirsearch_params p;
+    dirsearch_params_default(&p);
+    p.sp.rounds = 1;
+    p.sp.max_iters = 10;
+    p.op.samples = 200;
+    p.k = 1;
+    struct dirsearch_result r;
+    T_OK(dirsearch_surface(&m, &p, &r, &err), &err);
+    mesh_release(&m);
+    /* the one reshaped direction is an end */
+    T_EQ_INT(r.n_tried, 1);
+    T_TRUE(fabs(r.ups[0].y) > 0.9);
+    T_TRUE(r.n_axes >= 1 && r.n_tried + r.n_axes <= DIRSEARCH_DIRS_MAX);
+    T_TRUE(!r.kept_input);
+    T_TRUE(fabs(r.up.y) < 1e-9);
+    T_TRUE(!r.best.shape_changed);
+    T_TRUE(r.cost.support_g < 0.6 * r.input_cost.support_g);
+    T_TRUE(r.cost.print_s < r.input_cost.print_s);
+    /* the axis is listed with its figures, and they are the result's */
+    bool listed = false;
+    for (int i = r.n_tried; i < r.n_tried + r.n_axes; i++) {
+        T_TRUE(!r.shape_changed[i] && r.print_s[i] > 0 && r.steps[i].iters == 0);
+        if (v3_dot(r.ups[i], r.up) > 1 - 1e-12) {
+            listed = true;
+            T_EQ_DBL(r.model_g[i], r.cost.support_g, 1e-12);
+            T_EQ_DBL(r.print_s[i], r.cost.print_s, 1e-9);
+        }
+    }
+    T_TRUE(listed);
+    struct vec3 lo, hi;
+    mesh_bbox(&r.best.out, &lo, &hi);
+    T_TRUE(hi.z - lo.z <= 20 + 1e-6);
+    T_EQ_DBL(lo.z, 0, 1e-9);
     dirsearch_result_release(&r);
 }
 

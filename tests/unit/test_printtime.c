@@ -3,6 +3,7 @@
  * by hand, and the keep-the-input rule that weighs it beside support grams.
  */
 #include <math.h>
+#include <string.h>
 
 #include "../../src/geom/printtime.h"
 #include "../../src/mesh/shapes.h"
@@ -313,5 +314,31 @@ T_CASE(printtime_bad_parameters_are_refused)
     printtime_policy_default(&pol);
     pol.gram_s = NAN;
     T_ERR(printtime_policy_check(&pol, &err), SF_EINVAL, &err, "gram-seconds");
+    mesh_release(&m);
+}
+
+T_CASE(printtime_open_shell_on_its_rim)
+{
+    /* a sphere on a stem, its top cut away, turned over onto its open rim:
+       no triangle crosses the first layer's plane, whose chaining read a
+       hash never allocated (the direction search's axes, issue 36) */
+    struct mesh m;
+    struct sf_err err;
+    mesh_init(&m);
+    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    struct vec3 lo, hi;
+    mesh_bbox(&m, &lo, &hi);
+    uint32_t k = 0;
+    for (uint32_t f = 0; f < m.n_tris; f++) {
+        double z = fmin(fmin(m.v[m.t[f][0]].z, m.v[m.t[f][1]].z), m.v[m.t[f][2]].z);
+        if (z < hi.z - 0.05 * (hi.z - lo.z))
+            memcpy(m.t[k++], m.t[f], sizeof(m.t[f]));
+    }
+    m.n_tris = k;
+    struct printtime_params p;
+    printtime_params_default(&p);
+    struct printtime_result r;
+    T_OK(printtime_eval(&m, v3(0, 0, -1), &p, &r, &err), &err);
+    T_TRUE(printtime_total_s(&p, &r, 0) > 0);
     mesh_release(&m);
 }
