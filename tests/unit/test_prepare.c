@@ -147,17 +147,21 @@ prepare_with(const char *part_path, const char *method, struct prepare_out *out,
 
 /*
  * The deviation a shape method leaves (MNDR / ANDR, measure.h) comes out of
- * prepare_part for the farm to record: the surface method reshapes the
- * sphere on its stem (its ball overhangs whichever way it stands) within
- * the 2 mm budget; slimming measures too (after orientation it keeps the
- * shape here: 0, not reshaped); orientation alone measures nothing.
+ * prepare_part for the farm to record: the surface method reshapes a
+ * torus standing upright (its tube's underside overhangs whichever way it
+ * stands or lies, so no axis pose turned up unreshaped beats a reshape; the
+ * sphere on its stem lying on its side now does) within the 2 mm budget;
+ * slimming measures too (0 where it keeps the shape); orientation alone
+ * measures nothing.
  */
 T_CASE(prepare_reports_the_deviation_of_a_reshaped_part)
 {
     struct sf_err err;
     struct mesh m;
     mesh_init(&m);
-    T_OK(shape_sphere_on_stem(&m, &err), &err);
+    T_OK(shape_torus(&m, 30, 10, 64, 32, &err), &err);
+    mesh_transform(&m, m3_axis_angle(v3(1, 0, 0), M_PI / 2), v3(0, 0, 0));
+    mesh_place_on_bed(&m, 0, 0);
     double diag = mesh_diag(&m);
     char part[512];
     snprintf(part, sizeof(part), "%s/part.stl", t_tmpdir());
