@@ -8,6 +8,7 @@
 #include "../../src/geom/printtime.h"
 #include "../../src/mesh/shapes.h"
 #include "../t.h"
+#include "../tshapes.h"
 
 T_CASE(printtime_tall_bar_standing_prints_slower_than_lying)
 {
@@ -325,16 +326,7 @@ T_CASE(printtime_open_shell_on_its_rim)
     struct mesh m;
     struct sf_err err;
     mesh_init(&m);
-    T_OK(shape_sphere_on_stem(&m, &err), &err);
-    struct vec3 lo, hi;
-    mesh_bbox(&m, &lo, &hi);
-    uint32_t k = 0;
-    for (uint32_t f = 0; f < m.n_tris; f++) {
-        double z = fmin(fmin(m.v[m.t[f][0]].z, m.v[m.t[f][1]].z), m.v[m.t[f][2]].z);
-        if (z < hi.z - 0.05 * (hi.z - lo.z))
-            memcpy(m.t[k++], m.t[f], sizeof(m.t[f]));
-    }
-    m.n_tris = k;
+    T_OK(t_open_sphere_on_stem(&m, &err), &err);
     struct printtime_params p;
     printtime_params_default(&p);
     struct printtime_result r;

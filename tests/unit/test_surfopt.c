@@ -18,6 +18,7 @@
 #include "../../src/mesh/shapes.h"
 #include "../../src/mesh/subdiv.h"
 #include "../t.h"
+#include "../tshapes.h"
 
 static double
 support_volume(const struct mesh *m)
@@ -850,16 +851,7 @@ T_CASE(direction_search_keeps_the_up_of_an_open_shell)
     struct mesh m;
     struct sf_err err;
     mesh_init(&m);
-    T_OK(shape_sphere_on_stem(&m, &err), &err);
-    struct vec3 lo, hi;
-    mesh_bbox(&m, &lo, &hi);
-    uint32_t k = 0;
-    for (uint32_t f = 0; f < m.n_tris; f++) {
-        double z = fmin(fmin(m.v[m.t[f][0]].z, m.v[m.t[f][1]].z), m.v[m.t[f][2]].z);
-        if (z < hi.z - 0.05 * (hi.z - lo.z))
-            memcpy(m.t[k++], m.t[f], sizeof(m.t[f]));
-    }
-    m.n_tris = k;
+    T_OK(t_open_sphere_on_stem(&m, &err), &err);
     struct dirsearch_params p;
     dirsearch_params_default(&p);
     p.k = 3;
